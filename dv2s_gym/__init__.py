@@ -1,0 +1,19 @@
+"""dv2s-gym: driving videos to simulatable Scenic scenarios, served as Gymnasium envs.
+
+``import dv2s_gym`` registers ``DV2S-v0``::
+
+    import gymnasium as gym
+    import dv2s_gym
+    env = gym.make("DV2S-v0", scenario="lead_vehicle_brakes")
+"""
+
+from envs import register_envs
+from envs.dv2s_env import DV2SEnv
+from envs.recording import VideoWriter, record_episode
+from envs.trace import EpisodeTrace, replay_trace
+
+register_envs()
+
+__version__ = "0.1.0"
+
+__all__ = ["DV2SEnv", "EpisodeTrace", "VideoWriter", "record_episode", "replay_trace", "register_envs"]

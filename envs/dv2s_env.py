@@ -1,0 +1,506 @@
+"""``DV2S-v0``: a Scenic scenario sampled into a highway-env episode.
+
+Each ``reset`` samples a scene from a Scenic script (seeded), builds the
+highway-env road from the script's OpenDRIVE map, and starts the Scenic
+simulation; each ``step`` applies the agent's action to the ego through a
+highway-env action type while every other actor runs its Scenic behaviour.
+
+The configuration follows highway-env: :meth:`DV2SEnv.default_config` documents
+every key, and ``config=`` overrides any of them.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence, Union
+
+import numpy as np
+from highway_env import utils as hw_utils
+from highway_env.envs.common.abstract import AbstractEnv
+
+from envs.errors import InvalidActionError
+from envs.hw_road import EventRoad
+from envs.safety_metrics import time_to_collision
+from envs.scenarios import CompiledScenario, compile_scenario, looks_like_source, read_scenario_file
+from envs.scenic_highway.simulator import ActorEvent, HighwayEnvSimulator
+from envs.scenic_highway.stepping import ExternalStepper, StepOutcome
+from envs.trace import EpisodeTrace, actor_state
+
+__all__ = ["DV2SEnv", "ScenarioRef"]
+
+ScenarioSpec = Union[None, str, os.PathLike, Sequence[str]]
+
+
+@dataclass(frozen=True)
+class ScenarioRef:
+    """One scenario the env can run: its name and either a file path or source text."""
+
+    name: str
+    path: Optional[str] = None
+    source: Optional[str] = None
+
+    def text(self) -> str:
+        return self.source if self.source is not None else read_scenario_file(self.path)
+
+
+def resolve_scenarios(spec: ScenarioSpec, bank_dir: Optional[str] = None) -> List[ScenarioRef]:
+    """Turn the ``scenario=`` argument into the list of scenarios episodes sample from.
+
+    ``None`` is the whole bank; a string is a bank name, ``tag:<tag>``, a path to a
+    ``.scenic`` file or Scenic source text; a list combines names and tags.
+    """
+    from scenario_bank import scenario_path, select_scenarios
+
+    if isinstance(spec, os.PathLike):
+        spec = os.fspath(spec)
+    if isinstance(spec, str):
+        if looks_like_source(spec):
+            return [ScenarioRef(name="<string>", source=spec)]
+        if spec.endswith(".scenic") or os.sep in spec:
+            path = Path(spec)
+            if not path.is_file():
+                raise FileNotFoundError(
+                    f"scenario file {spec!r} does not exist; pass an existing .scenic path, "
+                    "a bank name or Scenic source text"
+                )
+            return [ScenarioRef(name=path.stem, path=str(path.resolve()))]
+    names = select_scenarios(spec, bank_dir)
+    return [ScenarioRef(name=n, path=str(scenario_path(n, bank_dir))) for n in names]
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, (bool, int, str)) or value is None:
+        return value
+    if isinstance(value, float):
+        return value if math.isfinite(value) else str(value)
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, (np.floating,)):
+        return float(value)
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return str(value)
+
+
+class DV2SEnv(AbstractEnv):
+    """Gymnasium environment running Scenic scenarios in highway-env.
+
+    Args:
+        scenario: a bank name, ``tag:<tag>``, a path to a ``.scenic`` file, Scenic
+            source text, or a list of bank names/tags (one is sampled per episode).
+            ``None`` samples the whole bank.
+        config: overrides of :meth:`default_config`.
+        render_mode: ``"rgb_array"`` (headless) or ``"human"``.
+        bank_dir: a bank folder other than the shipped one.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 15}
+
+    def __init__(
+        self,
+        scenario: ScenarioSpec = None,
+        config: Optional[dict] = None,
+        render_mode: Optional[str] = None,
+        bank_dir: Optional[str] = None,
+    ) -> None:
+        self._scenario_refs = resolve_scenarios(scenario, bank_dir)
+        self._compiled: Dict[ScenarioRef, CompiledScenario] = {}
+        self._stepper: Optional[ExternalStepper] = None
+        self._simulation = None
+        self._outcome: Optional[StepOutcome] = None
+        self._trace: Optional[EpisodeTrace] = None
+        self._episode: Dict[str, Any] = {}
+        self._lane_of: Dict[int, Any] = {}
+        self._step_events: List[Dict[str, Any]] = []
+        self._reset_seed: Optional[int] = None
+        super().__init__(config, render_mode)
+
+    # ------------------------------------------------------------------ config
+    @classmethod
+    def default_config(cls) -> dict:
+        """Default configuration; every key can be overridden with ``config=``.
+
+        - ``observation``: highway-env observation config; ``Kinematics`` (default),
+          ``OccupancyGrid``, ``TimeToCollision`` and ``GrayscaleObservation`` work.
+        - ``action``: highway-env action config; ``DiscreteMetaAction`` (default,
+          target speeds 0-30 m/s), ``ContinuousAction`` or ``DiscreteAction``.
+        - ``simulation_frequency`` / ``policy_frequency`` [Hz]: physics steps and
+          agent decisions per second; Scenic behaviours run at the policy frequency.
+        - ``duration`` [s]: episode length before truncation.
+        - ``ego_policy``: ``"agent"`` (the action drives the ego) or ``"scenic"``
+          (the script's ego behaviour drives; actions are ignored).
+        - ``map``: override the script's map (a shipped map name or an .xodr path).
+        - ``max_sample_iterations``: Scenic rejection-sampling budget per scene.
+        - ``reward_weights``: weight of each reward term (``collision``, ``off_road``,
+          ``high_speed``, ``lane_change``, ``low_ttc``); ``reward_speed_range`` [m/s]
+          maps speed to ``high_speed``; ``ttc_threshold`` [s] triggers ``low_ttc``;
+          ``normalize_reward`` maps the sum to [0, 1].
+        - ``terminate_on_collision``, ``terminate_off_road``, ``off_road_margin`` [m].
+        - rendering: ``screen_width``, ``screen_height``, ``scaling`` [px/m],
+          ``centering_position``, ``offscreen_rendering``, ``show_trajectories``.
+        """
+        config = super().default_config()
+        config.update(
+            {
+                "observation": {
+                    "type": "Kinematics",
+                    "vehicles_count": 8,
+                    "features": ["presence", "x", "y", "vx", "vy", "cos_h", "sin_h"],
+                    "absolute": False,
+                    "normalize": True,
+                    "see_behind": True,
+                },
+                "action": {
+                    "type": "DiscreteMetaAction",
+                    "target_speeds": [0.0, 5.0, 10.0, 15.0, 20.0, 25.0, 30.0],
+                },
+                "simulation_frequency": 15,
+                "policy_frequency": 5,
+                "duration": 20.0,
+                "ego_policy": "agent",
+                "map": None,
+                "max_sample_iterations": 2000,
+                "reward_weights": {
+                    "collision": -1.0,
+                    "off_road": -1.0,
+                    "high_speed": 0.4,
+                    "lane_change": -0.05,
+                    "low_ttc": -0.1,
+                },
+                "reward_speed_range": [10.0, 30.0],
+                "ttc_threshold": 2.0,
+                "normalize_reward": True,
+                "terminate_on_collision": True,
+                "terminate_off_road": True,
+                "off_road_margin": 1.0,
+                "screen_width": 600,
+                "screen_height": 600,
+                "scaling": 5.5,
+                "centering_position": [0.5, 0.5],
+                "offscreen_rendering": None,
+            }
+        )
+        return config
+
+    # ------------------------------------------------------------------- reset
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        """Sample a new scene and start its simulation.
+
+        ``seed`` fixes the scenario choice, the Scenic sample and highway-env's
+        randomness. ``options={"scene_seed": s, "scenario": name}`` replays a
+        specific scene (used by traces).
+        """
+        self._reset_seed = seed
+        self._reset_options = dict(options or {})
+        return super().reset(seed=seed, options=options)
+
+    def _reset(self) -> None:
+        self._close_simulation()
+        options = getattr(self, "_reset_options", {}) or {}
+        ref = self._choose_scenario(options.get("scenario"))
+        compiled = self._compile(ref)
+        scene_seed = int(options.get("scene_seed", self.np_random.integers(0, 2**31 - 1)))
+        timestep = 1.0 / self.config["policy_frequency"]
+        for attempt in range(20):
+            scene = compiled.sample(scene_seed, self.config["max_sample_iterations"])
+            road = EventRoad(
+                network=self._network_for(compiled),
+                np_random=np.random.default_rng(scene_seed),
+                record_history=self.config["show_trajectories"],
+            )
+            simulator = HighwayEnvSimulator(
+                simulation_frequency=self.config["simulation_frequency"],
+                road_factory=lambda _scene, road=road: road,
+                ego_driver=self,
+            )
+            self.road = road
+            stepper = ExternalStepper(
+                lambda st, scene=scene: simulator.createSimulation(
+                    scene,
+                    maxSteps=None,
+                    name=ref.name,
+                    verbosity=0,
+                    timestep=timestep,
+                    replay=None,
+                    enableReplay=False,
+                    enableDivergenceCheck=False,
+                    divergenceTolerance=0,
+                    continueAfterDivergence=False,
+                    allowPickle=False,
+                )
+            )
+            self._stepper = stepper
+            outcome = stepper.start()
+            if outcome.status != "rejected":
+                break
+            # A requirement failed at time 0: this scene is invalid, draw another.
+            scene_seed = int(np.random.default_rng(scene_seed).integers(0, 2**31 - 1))
+        else:
+            raise RuntimeError(
+                f"scenario {ref.name!r}: 20 sampled scenes were all rejected when the simulation "
+                f"started ({outcome.reason}); check the script's `require` statements"
+            )
+        self._outcome = outcome
+        self._simulation = stepper.simulation or self._simulation
+        sim = self._current_simulation()
+        self.controlled_vehicles = [sim.ego_vehicle]
+        self._lane_of = {id(v): v.lane_index for v in self.road.vehicles}
+        params = {k: _jsonable(v) for k, v in scene.params.items()}
+        self._episode = {
+            "scenario": ref.name,
+            "seed": self._reset_seed,
+            "scene_seed": scene_seed,
+            "params": params,
+            "collisions": [],
+            "lane_changes": 0,
+            "min_ttc": math.inf,
+            "off_road": False,
+        }
+        self._step_events = []
+        self._trace = EpisodeTrace(
+            scenario=ref.name,
+            source=compiled.source,
+            scenario_path=ref.path,
+            seed=self._reset_seed,
+            scene_seed=scene_seed,
+            params=params,
+            config=_jsonable({k: v for k, v in self.config.items()}),
+        )
+        self._record_state()
+
+    def _choose_scenario(self, name: Optional[str]) -> ScenarioRef:
+        if name is not None:
+            for ref in self._scenario_refs:
+                if ref.name == name:
+                    return ref
+            from scenario_bank import scenario_path
+
+            return ScenarioRef(name=name, path=str(scenario_path(name)))
+        if len(self._scenario_refs) == 1:
+            return self._scenario_refs[0]
+        return self._scenario_refs[int(self.np_random.integers(len(self._scenario_refs)))]
+
+    def _compile(self, ref: ScenarioRef) -> CompiledScenario:
+        if ref not in self._compiled:
+            self._compiled[ref] = compile_scenario(
+                ref.text(), name=ref.name, path=ref.path, map_override=self.config["map"]
+            )
+        return self._compiled[ref]
+
+    def _network_for(self, compiled: CompiledScenario):
+        from envs.road_network import load_road_network
+
+        return load_road_network(compiled.map_path).hw_network
+
+    def _current_simulation(self):
+        if self._stepper is not None and self._stepper.simulation is not None:
+            return self._stepper.simulation
+        return self._simulation
+
+    # ------------------------------------------------------------- EgoDriver
+    def create_ego(self, road, position, heading, speed, obj):
+        """Create the agent's vehicle with the action type's vehicle class (EgoDriver protocol)."""
+        if self.config["ego_policy"] == "scenic":
+            return None
+        vehicle = self.action_type.vehicle_class(road, position, heading, speed)
+        vehicle.LENGTH, vehicle.WIDTH = float(obj.length), float(obj.width)
+        vehicle.diagonal = math.hypot(vehicle.LENGTH, vehicle.WIDTH)
+        return vehicle
+
+    def before_physics(self, simulation) -> None:
+        """Wait for the agent's action and apply it to the ego (EgoDriver protocol)."""
+        self._simulation = simulation
+        action = self._stepper.handoff()
+        if action is not None and self.config["ego_policy"] != "scenic":
+            self.action_type.act(action)
+
+    # -------------------------------------------------------------------- step
+    def step(self, action):
+        """Apply ``action`` for one policy period; Gymnasium's 5-tuple."""
+        if self._stepper is None:
+            raise RuntimeError("call reset() before step()")
+        if not self.action_space.contains(self._as_space_action(action)):
+            raise InvalidActionError(
+                f"action {action!r} is outside the action space {self.action_space} "
+                f"of {self.config['action']['type']}; sample from env.action_space"
+            )
+        return super().step(action)
+
+    def _as_space_action(self, action):
+        if isinstance(action, np.ndarray) and action.shape == () and np.issubdtype(action.dtype, np.integer):
+            return int(action)
+        if isinstance(action, (list, tuple)):
+            return np.asarray(action, dtype=np.float32)
+        if isinstance(action, np.ndarray) and np.issubdtype(action.dtype, np.floating):
+            return action.astype(np.float32)
+        return action
+
+    def _simulate(self, action=None) -> None:
+        self._step_events = []
+        if self._stepper.done:
+            return
+        simulation = self._current_simulation()
+        n_events = len(simulation.events)
+        self._outcome = self._stepper.advance(action)
+        self.steps += simulation.frames
+        new = [e.as_dict() for e in simulation.events[n_events:]]
+        self._detect_lane_changes(new)
+        ego = self.vehicle
+        for event in new:
+            if event["kind"] == "collision" and "ego" in event["actors"]:
+                other = [a for a in event["actors"] if a != "ego"]
+                for name in other:
+                    if name not in self._episode["collisions"]:
+                        self._episode["collisions"].append(name)
+        for a, b in self.road.new_collisions:
+            for v in (a, b):
+                v.color = (220, 30, 30)
+        off_road = self._is_off_road(ego)
+        if off_road and not self._episode["off_road"]:
+            new.append({"time": round(self.time, 6), "kind": "off_road", "actors": ["ego"]})
+        self._episode["off_road"] = off_road
+        ttc, _ = time_to_collision(ego, self.road.vehicles + self.road.objects)
+        self._ttc = ttc
+        self._episode["min_ttc"] = min(self._episode["min_ttc"], ttc)
+        if self._outcome.status != "running":
+            new.append({"time": round(self.time, 6), "kind": f"scenic_{self._outcome.status}",
+                        "actors": [], "reason": self._outcome.reason})
+        self._step_events = new
+        self._trace.actions.append(_jsonable(action))
+        self._trace.events.extend(new)
+        self._record_state()
+
+    def _detect_lane_changes(self, events: List[Dict[str, Any]]) -> None:
+        for v in self.road.vehicles:
+            before = self._lane_of.get(id(v))
+            now = v.lane_index
+            self._lane_of[id(v)] = now
+            if before is None or now is None or before == now:
+                continue
+            if before[:2] == now[:2]:
+                direction = "right" if now[2] > before[2] else "left"
+                name = getattr(v, "name", "")
+                events.append({"time": round(self.time, 6), "kind": "lane_change",
+                               "actors": [name], "direction": direction})
+                if name == "ego":
+                    self._episode["lane_changes"] += 1
+
+    def _is_off_road(self, vehicle) -> bool:
+        lane = vehicle.lane
+        if lane is None:
+            return True
+        s, lat = lane.local_coordinates(vehicle.position)
+        width = lane.width_at(s)
+        return abs(lat) > width / 2 + self.config["off_road_margin"] or not (-vehicle.LENGTH <= s <= lane.length + vehicle.LENGTH)
+
+    def _record_state(self) -> None:
+        states = {getattr(v, "name", str(i)): actor_state(v) for i, v in enumerate(self.road.vehicles)}
+        self._trace.states.append(states)
+
+    # ----------------------------------------------------------------- rewards
+    def _rewards(self, action) -> Dict[str, float]:
+        ego = self.vehicle
+        forward = ego.speed * math.cos(ego.heading - ego.lane.heading_at(ego.lane.local_coordinates(ego.position)[0])) if ego.lane else ego.speed
+        low, high = self.config["reward_speed_range"]
+        return {
+            "collision": float(ego.crashed),
+            "off_road": float(self._episode.get("off_road", False)),
+            "high_speed": float(np.clip(hw_utils.lmap(forward, [low, high], [0, 1]), 0, 1)),
+            "lane_change": float(any(e["kind"] == "lane_change" and e["actors"] == ["ego"] for e in self._step_events)),
+            "low_ttc": float(getattr(self, "_ttc", math.inf) < self.config["ttc_threshold"]),
+        }
+
+    def _reward(self, action) -> float:
+        weights = self.config["reward_weights"]
+        terms = self._rewards(action)
+        reward = sum(weights.get(name, 0.0) * value for name, value in terms.items())
+        if self.config["normalize_reward"]:
+            worst = sum(w for w in weights.values() if w < 0)
+            best = sum(w for w in weights.values() if w > 0)
+            if best > worst:
+                reward = hw_utils.lmap(reward, [worst, best], [0, 1])
+        return float(reward)
+
+    def _is_terminated(self) -> bool:
+        ego = self.vehicle
+        return bool(
+            (self.config["terminate_on_collision"] and ego.crashed)
+            or (self.config["terminate_off_road"] and self._episode.get("off_road", False))
+            or (self._outcome is not None and self._outcome.status == "finished")
+        )
+
+    def _is_truncated(self) -> bool:
+        return bool(
+            self.time >= self.config["duration"]
+            or (self._outcome is not None and self._outcome.status == "rejected")
+        )
+
+    def _info(self, obs, action=None) -> dict:
+        ego = self.vehicle
+        episode = self._episode
+        return {
+            "scenario": episode.get("scenario"),
+            "seed": episode.get("seed"),
+            "scene_seed": episode.get("scene_seed"),
+            "params": episode.get("params", {}),
+            "speed": float(ego.speed),
+            "crashed": bool(ego.crashed),
+            "collisions": list(episode.get("collisions", [])),
+            "lane_changes": int(episode.get("lane_changes", 0)),
+            "min_ttc": float(episode.get("min_ttc", math.inf)),
+            "off_road": bool(episode.get("off_road", False)),
+            "events": list(self._step_events),
+            "scenic_status": self._outcome.status if self._outcome else "running",
+            "scenic_reason": self._outcome.reason if self._outcome else "",
+            "rewards": self._rewards(action),
+            "action": _jsonable(action),
+        }
+
+    # --------------------------------------------------------------- rendering
+    def render(self):
+        """Render a frame (``rgb_array``) or draw the window (``human``)."""
+        if self.render_mode is None:
+            return super().render()
+        if self.viewer is None:
+            from envs.rendering import DV2SViewer
+
+            self.viewer = DV2SViewer(self)
+        return super().render()
+
+    # ------------------------------------------------------------------ traces
+    @property
+    def trace(self) -> Optional[EpisodeTrace]:
+        """The trace of the current episode (seed, scene, per-step states, events)."""
+        return self._trace
+
+    def save_trace(self, path: Union[str, os.PathLike]) -> Path:
+        """Write the current episode's trace to ``path`` (JSON, ``.gz`` compresses)."""
+        if self._trace is None:
+            raise RuntimeError("no episode to save; call reset() first")
+        return self._trace.save(path)
+
+    # ---------------------------------------------------------------- cleanup
+    def _close_simulation(self) -> None:
+        if self._stepper is not None:
+            self._stepper.close()
+        self._stepper = None
+        self._simulation = None
+
+    def close(self) -> None:
+        """Stop the running simulation and close the viewer."""
+        self._close_simulation()
+        super().close()
+
+    def __del__(self):
+        try:
+            self._close_simulation()
+        except Exception:
+            pass

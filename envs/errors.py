@@ -1,0 +1,36 @@
+"""Errors the environment raises on bad input, each naming the problem and the fix."""
+
+from __future__ import annotations
+
+__all__ = [
+    "DV2SError",
+    "ScenarioCompileError",
+    "UnsupportedConstructError",
+    "SceneSamplingError",
+    "InvalidActionError",
+]
+
+
+class DV2SError(Exception):
+    """Base class of dv2s-gym errors."""
+
+
+class ScenarioCompileError(DV2SError, ValueError):
+    """A Scenic script does not compile; carries Scenic's message, file and line."""
+
+    def __init__(self, message: str, *, path: str | None = None, line: int | None = None) -> None:
+        super().__init__(message)
+        self.path = path
+        self.line = line
+
+
+class UnsupportedConstructError(ScenarioCompileError):
+    """A script uses something our highway-env model does not provide."""
+
+
+class SceneSamplingError(DV2SError, RuntimeError):
+    """No scene satisfying the script's requirements was found in the iteration budget."""
+
+
+class InvalidActionError(DV2SError, ValueError):
+    """An action outside the environment's action space."""

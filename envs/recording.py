@@ -1,0 +1,114 @@
+"""Record episodes to video files that browsers play."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Callable, Iterable, Optional, Union
+
+import numpy as np
+
+__all__ = ["VideoWriter", "record_episode", "video_codecs"]
+
+_CODECS = {".webm": "VP80", ".mp4": "avc1", ".avi": "MJPG", ".mkv": "VP80"}
+
+
+def video_codecs() -> dict:
+    """File extension -> FourCC used when writing that container."""
+    return dict(_CODECS)
+
+
+class VideoWriter:
+    """Write RGB frames to a video file (VP8 ``.webm`` by default; written atomically).
+
+    ``.mp4`` is tried with H.264 and falls back to ``mp4v`` when OpenCV has no
+    H.264 encoder (mp4v plays in desktop players, not all browsers).
+    """
+
+    def __init__(self, path: Union[str, os.PathLike], fps: float = 15.0) -> None:
+        self.path = Path(path)
+        self.fps = float(fps)
+        self._writer = None
+        self._tmp = self.path.with_name(f".{self.path.stem}.tmp{os.getpid()}{self.path.suffix}")
+        self.frames = 0
+
+    def _open(self, width: int, height: int):
+        import cv2
+
+        suffix = self.path.suffix.lower()
+        if suffix not in _CODECS:
+            raise ValueError(f"unsupported video extension {suffix!r}; use one of {sorted(_CODECS)}")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        for fourcc in ([_CODECS[suffix], "mp4v"] if suffix == ".mp4" else [_CODECS[suffix]]):
+            writer = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter_fourcc(*fourcc), self.fps, (width, height))
+            if writer.isOpened():
+                return writer
+        raise RuntimeError(f"OpenCV cannot encode {suffix} here; write .webm (VP8) instead")
+
+    def write(self, frame: np.ndarray) -> None:
+        """Append one ``HxWx3`` uint8 RGB frame."""
+        import cv2
+
+        frame = np.ascontiguousarray(frame[..., :3], dtype=np.uint8)
+        if self._writer is None:
+            self._writer = self._open(frame.shape[1], frame.shape[0])
+        self._writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+        self.frames += 1
+
+    def close(self) -> Path:
+        """Finish the file and move it into place."""
+        if self._writer is not None:
+            self._writer.release()
+            self._writer = None
+            os.replace(self._tmp, self.path)
+        return self.path
+
+    def __enter__(self) -> "VideoWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            if self._writer is not None:
+                self._writer.release()
+            if self._tmp.exists():
+                self._tmp.unlink()
+
+
+def record_episode(
+    env,
+    path: Union[str, os.PathLike],
+    policy: Optional[Callable[[np.ndarray, dict], object]] = None,
+    *,
+    seed: Optional[int] = None,
+    max_steps: Optional[int] = None,
+) -> dict:
+    """Run one episode of an ``rgb_array`` env and write it to ``path``.
+
+    ``policy(obs, info) -> action``; default samples the action space. Frames are
+    captured at the simulation frequency for smooth video. Returns a summary
+    (steps, return, termination, info of the last step, frames written).
+    """
+    base = env.unwrapped
+    if getattr(base, "render_mode", None) != "rgb_array":
+        raise ValueError("record_episode needs an env made with render_mode='rgb_array'")
+    fps = base.config.get("policy_frequency", 5)
+    obs, info = env.reset(seed=seed)
+    total, steps, terminated, truncated = 0.0, 0, False, False
+    with VideoWriter(path, fps=fps) as video:
+        video.write(env.render())
+        while not (terminated or truncated):
+            action = policy(obs, info) if policy else env.action_space.sample()
+            obs, reward, terminated, truncated, info = env.step(action)
+            total += float(reward)
+            steps += 1
+            video.write(env.render())
+            if max_steps is not None and steps >= max_steps:
+                break
+    return {"steps": steps, "return": total, "terminated": terminated, "truncated": truncated,
+            "info": info, "frames": video.frames, "path": str(path)}
+
+
+def _frames(frames: Iterable[np.ndarray]) -> int:
+    return sum(1 for _ in frames)

@@ -1,0 +1,205 @@
+"""Compile Scenic scenarios for highway-env, once per process, with clear errors.
+
+A scenario can be given as a bank name, a path to a ``.scenic`` file or Scenic
+source text. Whatever the ``model`` line of the script says, it is compiled
+against our highway-env world model (as Scenic's ``--model`` option does), in
+2D mode, so scripts written for CARLA or MetaDrive run as long as they only use
+driving-domain features.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import random
+import re
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, Optional, Tuple
+
+import numpy as np
+
+from envs.errors import ScenarioCompileError, SceneSamplingError, UnsupportedConstructError
+
+__all__ = ["MODEL", "CompiledScenario", "compile_scenario", "looks_like_source"]
+
+MODEL = "envs.scenic_highway.model"
+"""The Scenic world model every scenario is compiled against."""
+
+_OTHER_SIMULATORS = ("carla", "metadrive", "lgsvl", "webots", "airsim", "gta", "newtonian")
+
+
+def looks_like_source(text: str) -> bool:
+    """True when a scenario argument is Scenic source text rather than a name or path."""
+    return "\n" in text or bool(re.search(r"\b(new|ego|param|model)\b.*[=\s]", text)) and " " in text
+
+
+@dataclass
+class CompiledScenario:
+    """A compiled Scenic scenario and where it came from."""
+
+    name: str
+    source: str
+    scenario: Any
+    path: Optional[str] = None
+    map_override: Optional[str] = None
+    digest: str = ""
+    _diagnosis_cache: Dict[str, int] = field(default_factory=dict)
+
+    @property
+    def map_path(self) -> str:
+        """Path of the OpenDRIVE map the scenario uses."""
+        return str(self.scenario.params["map"])
+
+    def sample(self, seed: int, max_iterations: int = 2000):
+        """Sample a scene with Scenic's rejection sampler, seeded; raises :class:`SceneSamplingError`."""
+        from scenic.core.distributions import RejectionException
+
+        random.seed(seed)
+        np.random.seed(seed % (2**32))
+        try:
+            scene, _ = self.scenario.generate(maxIterations=max_iterations, verbosity=0)
+        except RejectionException:
+            reasons = self.diagnose_rejections(seed)
+            top = ", ".join(f"{r!r} ({n}x)" for r, n in reasons.most_common(3)) or "unknown"
+            raise SceneSamplingError(
+                f"scenario {self.name!r}: no scene satisfied its requirements in {max_iterations} "
+                f"sampling iterations. Most frequent rejections: {top}. Loosen that requirement, "
+                "widen the ranges it depends on, or raise config['max_sample_iterations']."
+            ) from None
+        return scene
+
+    def diagnose_rejections(self, seed: int, trials: int = 200) -> Counter:
+        """Sample ``trials`` times without the requirements and count which one rejects."""
+        from scenic.core.distributions import RejectionException, Samplable
+
+        random.seed(seed)
+        np.random.seed(seed % (2**32))
+        reasons: Counter = Counter()
+        scenario = self.scenario
+        for _ in range(trials):
+            try:
+                if scenario.externalSampler is not None:
+                    scenario.externalSampler.sample(None)
+                sample = Samplable.sampleAll(scenario.dependencies)
+            except RejectionException as error:
+                reasons[_short(str(error))] += 1
+                continue
+            rejection = scenario.checker.checkRequirements(sample)
+            if rejection is not None:
+                reasons[_short(str(rejection))] += 1
+        return reasons
+
+
+def _short(text: str, limit: int = 160) -> str:
+    text = " ".join(text.split())
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+_CACHE: Dict[Tuple[str, Optional[str]], CompiledScenario] = {}
+
+
+def compile_scenario(
+    source: str,
+    *,
+    name: str = "<string>",
+    path: Optional[str] = None,
+    map_override: Optional[str] = None,
+    params: Optional[Dict[str, Any]] = None,
+) -> CompiledScenario:
+    """Compile Scenic ``source`` against the highway-env model (cached per process).
+
+    Raises :class:`ScenarioCompileError` with Scenic's message, the file and the
+    line, or :class:`UnsupportedConstructError` when the script relies on
+    something only another simulator provides.
+    """
+    import scenic
+    from scenario_bank.maps import resolve_map
+
+    from envs.scenic_highway.stepping import release_veneer
+
+    overrides = dict(params or {})
+    if map_override is not None:
+        overrides["map"] = str(resolve_map(map_override))
+    digest = hashlib.sha256(
+        (source + repr(sorted(overrides.items(), key=lambda kv: kv[0]))).encode()
+    ).hexdigest()
+    key = (digest, path)
+    if key in _CACHE:
+        return _CACHE[key]
+    release_veneer()
+    label = path or name
+    try:
+        if path is not None:
+            scenario = scenic.scenarioFromFile(path, params=overrides, model=MODEL, mode2D=True)
+        else:
+            scenario = scenic.scenarioFromString(
+                source, params=overrides, model=MODEL, mode2D=True, filename=name
+            )
+    except Exception as error:  # Scenic raises many kinds; all become one clear error
+        raise _compile_error(error, source, label) from None
+    compiled = CompiledScenario(
+        name=name, source=source, scenario=scenario, path=path, map_override=map_override, digest=digest
+    )
+    _CACHE[key] = compiled
+    return compiled
+
+
+def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompileError:
+    from envs.scenic_highway.model_support import MissingMapError
+
+    message = str(error).strip() or type(error).__name__
+    line = getattr(error, "lineno", None)
+    if line is None:
+        tb = error.__traceback__
+        while tb is not None:
+            if tb.tb_frame.f_code.co_filename in (label, os.path.realpath(label)):
+                line = tb.tb_lineno
+            tb = tb.tb_next
+    where = f"{label}, line {line}" if line else label
+    if isinstance(error, MissingMapError):
+        return ScenarioCompileError(f"{where}: {message}", path=label, line=line)
+    if isinstance(error, FileNotFoundError) or type(error).__name__ == "UnknownMapError":
+        return ScenarioCompileError(f"{where}: map not found: {message}", path=label, line=line)
+    undefined = re.search(r"name '([^']+)' is not defined", message)
+    if undefined:
+        construct = undefined.group(1)
+        other = _mentions_other_simulator(source)
+        hint = (
+            f" The script targets {other}; `{construct}` is specific to that simulator and has no "
+            "highway-env equivalent. Use driving-domain constructs (scenic.domains.driving) instead."
+            if other
+            else f" `{construct}` is not defined by Scenic's driving domain or the highway-env model; "
+            "check its spelling or define it in the script."
+        )
+        return UnsupportedConstructError(
+            f"{where}: unsupported construct `{construct}`.{hint}", path=label, line=line
+        )
+    if "Map" in type(error).__name__ or "xodr" in message.lower() or "opendrive" in message.lower():
+        return ScenarioCompileError(
+            f"{where}: the map failed to load: {message}. Check that `param map` names a valid "
+            "OpenDRIVE file or a shipped map.",
+            path=label,
+            line=line,
+        )
+    return ScenarioCompileError(
+        f"{where}: Scenic could not compile the scenario: {type(error).__name__}: {message}",
+        path=label,
+        line=line,
+    )
+
+
+def _mentions_other_simulator(source: str) -> Optional[str]:
+    match = re.search(r"^\s*model\s+scenic\.simulators\.(\w+)", source, re.M)
+    if match and match.group(1) in _OTHER_SIMULATORS:
+        return f"scenic.simulators.{match.group(1)}"
+    return None
+
+
+def read_scenario_file(path: str | os.PathLike) -> str:
+    """Read a ``.scenic`` file, with a clear error when it is missing."""
+    file = Path(path)
+    if not file.is_file():
+        raise FileNotFoundError(f"scenario file {str(file)!r} does not exist")
+    return file.read_text(encoding="utf-8")

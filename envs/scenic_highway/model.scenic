@@ -1,0 +1,90 @@
+"""Scenic world model for highway-env (dv2s-gym).
+
+It extends the simulator-agnostic driving domain (``scenic.domains.driving.model``),
+so a script written for that domain runs here unchanged, and the same script runs
+in CARLA or MetaDrive by changing its ``model`` line.
+
+Global parameters:
+    map: a shipped map name (``highway_straight``, ``highway_onramp``,
+        ``urban_two_way``, ``urban_crossroads``, ``urban_t_junction``) or a path
+        to an OpenDRIVE file.
+
+Classes: ``Car``, ``NPCCar``, ``Truck`` (drawn longer), ``Pedestrian``, ``Obstacle``
+(a static prop on the road).
+"""
+
+from envs.scenic_highway.model_support import resolve_map_parameter as _resolve_map_parameter
+_resolve_map_parameter()
+
+from scenic.domains.driving.model import *
+
+from envs.scenic_highway.model_support import WalkTowardsAction, install_driving_behavior_support as _install_support
+from envs.scenic_highway.simulator import HighwayEnvSimulator
+_install_support()
+
+simulator HighwayEnvSimulator(network)
+
+class HighwayEnvActor(DrivingObject):
+    """An object whose state highway-env simulates."""
+    throttle: 0
+    steer: 0
+    brake: 0
+    hand_brake: 0
+    reverse: 0
+
+    def setPosition(self, pos, elevation):
+        simulation().set_actor_position(self, pos)
+
+    def setVelocity(self, vel):
+        simulation().set_actor_velocity(self, vel)
+
+    def setThrottle(self, throttle):
+        self.throttle = throttle
+
+    def setSteering(self, steering):
+        self.steer = steering
+
+    def setBraking(self, braking):
+        self.brake = braking
+
+    def setHandbrake(self, handbrake):
+        self.hand_brake = handbrake
+
+    def setReverse(self, reverse):
+        self.reverse = reverse
+
+class Vehicle(Vehicle, HighwayEnvActor):
+    pass
+
+class Car(Vehicle, Steers):
+    """A car."""
+    @property
+    def isCar(self):
+        return True
+
+class NPCCar(Car):
+    """A car for which accurate physics is not required."""
+    pass
+
+class Truck(Car):
+    """A truck: drawn and simulated longer and wider than a car."""
+    width: 2.5
+    length: 9
+
+class Pedestrian(Pedestrian, HighwayEnvActor, Walks):
+    """A pedestrian; walks with SetWalkingDirectionAction / SetWalkingSpeedAction."""
+
+    def setWalkingDirection(self, heading):
+        simulation().set_walking(self, heading=heading)
+
+    def setWalkingSpeed(self, speed):
+        simulation().set_walking(self, speed=speed)
+
+class Obstacle(DrivingObject):
+    """A static obstacle on the road (a box, a broken-down load, a barrier)."""
+    regionContainedIn: roadOrShoulder
+    position: new Point on road
+    parentOrientation: (roadDirection at self.position)
+    width: 1
+    length: 1
+    color: [0.5, 0.5, 0.5]
