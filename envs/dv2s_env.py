@@ -11,6 +11,7 @@ every key, and ``config=`` overrides any of them.
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 from dataclasses import dataclass
@@ -298,7 +299,8 @@ class DV2SEnv(AbstractEnv):
     def _network_for(self, compiled: CompiledScenario):
         from envs.road_network import load_road_network
 
-        return load_road_network(compiled.map_path).hw_network
+        self._converted = load_road_network(compiled.map_path)
+        return self._converted.hw_network
 
     def _current_simulation(self):
         if self._stepper is not None and self._stepper.simulation is not None:
@@ -313,6 +315,10 @@ class DV2SEnv(AbstractEnv):
         vehicle = self.action_type.vehicle_class(road, position, heading, speed)
         vehicle.LENGTH, vehicle.WIDTH = float(obj.length), float(obj.width)
         vehicle.diagonal = math.hypot(vehicle.LENGTH, vehicle.WIDTH)
+        route = getattr(obj, "route", None)
+        if route and hasattr(vehicle, "route"):
+            # `with route [lane, ...]` in the script: the agent's vehicle follows it through junctions.
+            vehicle.route = self._converted.route_for(route)
         return vehicle
 
     def before_physics(self, simulation) -> None:
@@ -439,7 +445,7 @@ class DV2SEnv(AbstractEnv):
 
     def _is_truncated(self) -> bool:
         return bool(
-            self.time >= self.config["duration"]
+            self.time >= self.config["duration"] - 1e-6
             or (self._outcome is not None and self._outcome.status == "rejected")
         )
 
@@ -450,7 +456,7 @@ class DV2SEnv(AbstractEnv):
             "scenario": episode.get("scenario"),
             "seed": episode.get("seed"),
             "scene_seed": episode.get("scene_seed"),
-            "params": episode.get("params", {}),
+            "params": copy.deepcopy(episode.get("params", {})),
             "speed": float(ego.speed),
             "crashed": bool(ego.crashed),
             "collisions": list(episode.get("collisions", [])),

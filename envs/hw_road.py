@@ -65,4 +65,7 @@ class EventRoad(Road):
                 a.hit = True
             if not b.solid:
                 b.hit = True
+        # highway-env separates solid bodies one step before they would overlap
+        # (``impact``) and marks them crashed then; that is the collision.
+        if intersecting or (will_intersect and both_solid):
             self.new_collisions.append((a, b))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Callable, Iterable, Optional, Union
+from typing import Callable, Optional, Union
 
 import numpy as np
 
@@ -39,10 +39,15 @@ class VideoWriter:
         if suffix not in _CODECS:
             raise ValueError(f"unsupported video extension {suffix!r}; use one of {sorted(_CODECS)}")
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        for fourcc in ([_CODECS[suffix], "mp4v"] if suffix == ".mp4" else [_CODECS[suffix]]):
-            writer = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter_fourcc(*fourcc), self.fps, (width, height))
-            if writer.isOpened():
-                return writer
+        previous = cv2.utils.logging.getLogLevel()
+        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)  # FFmpeg's tag notices
+        try:
+            for fourcc in ([_CODECS[suffix], "mp4v"] if suffix == ".mp4" else [_CODECS[suffix]]):
+                writer = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter_fourcc(*fourcc), self.fps, (width, height))
+                if writer.isOpened():
+                    return writer
+        finally:
+            cv2.utils.logging.setLogLevel(previous)
         raise RuntimeError(f"OpenCV cannot encode {suffix} here; write .webm (VP8) instead")
 
     def write(self, frame: np.ndarray) -> None:
@@ -108,7 +113,3 @@ def record_episode(
                 break
     return {"steps": steps, "return": total, "terminated": terminated, "truncated": truncated,
             "info": info, "frames": video.frames, "path": str(path)}
-
-
-def _frames(frames: Iterable[np.ndarray]) -> int:
-    return sum(1 for _ in frames)

@@ -14,6 +14,10 @@ from typing import Dict, List, Tuple
 import numpy as np
 
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+if "XDG_RUNTIME_DIR" not in os.environ:  # silences SDL's warning on headless machines
+    import tempfile
+
+    os.environ["XDG_RUNTIME_DIR"] = tempfile.gettempdir()
 if os.environ.get("SDL_VIDEODRIVER") == "dummy":
     # highway-env disables its viewer (black frames) under the dummy driver.
     os.environ["SDL_VIDEODRIVER"] = "offscreen"

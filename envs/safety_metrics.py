@@ -10,12 +10,15 @@ import numpy as np
 __all__ = ["time_to_collision"]
 
 
-def time_to_collision(ego, others: Iterable, horizon: float = 10.0) -> Tuple[float, str]:
+def time_to_collision(
+    ego, others: Iterable, horizon: float = 10.0, ahead_only: bool = False
+) -> Tuple[float, str]:
     """Smallest time until ``ego``'s footprint overlaps another object's, at constant velocities.
 
     Footprints are boxes aligned with the ego's heading (exact for traffic in the
     ego's direction, conservative for crossing traffic). Returns ``(inf, "")`` when
     nothing closes in within ``horizon`` seconds, else ``(ttc, name_of_other)``.
+    With ``ahead_only``, objects behind the ego's front are ignored.
     """
     others = [o for o in others if o is not ego]
     if not others:
@@ -26,6 +29,12 @@ def time_to_collision(ego, others: Iterable, horizon: float = 10.0) -> Tuple[flo
     vel = np.array([o.velocity for o in others]) - ego.velocity
     p = pos @ rot.T
     v = vel @ rot.T
+    if ahead_only:
+        keep = p[:, 0] > 0
+        if not keep.any():
+            return math.inf, ""
+        others = [o for o, k in zip(others, keep) if k]
+        p, v = p[keep], v[keep]
     half_l = np.array([(o.LENGTH + ego.LENGTH) / 2 for o in others])
     half_w = np.array([(o.WIDTH + ego.WIDTH) / 2 for o in others])
     enter = np.zeros(len(others))

@@ -24,16 +24,20 @@ class CautiousDriver:
 
     Args:
         env: the DV2S env (wrapped or not) this driver controls.
-        cruise_speed: speed to hold on a free road [m/s].
+        cruise_speed: speed to hold on a free road [m/s]; ``None`` keeps the speed
+            the scenario gave the ego at the start of the episode.
         ttc_brake: slow down when time-to-collision falls below this [s].
         headway: slow down when the gap ahead is shorter than this many seconds of travel.
     """
 
-    def __init__(self, env, cruise_speed: float = 20.0, ttc_brake: float = 4.0, headway: float = 1.5) -> None:
+    def __init__(
+        self, env, cruise_speed: Optional[float] = None, ttc_brake: float = 4.0, headway: float = 1.5
+    ) -> None:
         self.env = env
         self.cruise_speed = cruise_speed
         self.ttc_brake = ttc_brake
         self.headway = headway
+        self._cruise: Optional[float] = None
         action_type = env.unwrapped.config["action"]["type"]
         if action_type != "DiscreteMetaAction":
             raise ValueError(f"CautiousDriver drives with DiscreteMetaAction, not {action_type}")
@@ -43,13 +47,15 @@ class CautiousDriver:
         base = self.env.unwrapped
         ego = base.vehicle
         others = base.road.vehicles + base.road.objects
-        ttc, _ = time_to_collision(ego, others, horizon=10.0)
+        if base.steps == 0 or self._cruise is None:
+            self._cruise = self.cruise_speed if self.cruise_speed is not None else max(ego.speed, 5.0)
+        ttc, _ = time_to_collision(ego, others, horizon=10.0, ahead_only=True)
         gap = self._gap_ahead(ego, others)
         if ttc < self.ttc_brake or gap < max(6.0, self.headway * ego.speed):
             return SLOWER
-        if ego.speed < self.cruise_speed - 2.0:
+        if ego.speed < self._cruise - 2.0:
             return FASTER
-        if ego.speed > self.cruise_speed + 2.0:
+        if ego.speed > self._cruise + 2.0:
             return SLOWER
         return IDLE
 

@@ -104,6 +104,11 @@ class HighwayEnvSimulator(DrivingSimulator):
         return HighwayEnvSimulation(scene, self, **kwargs)
 
 
+def _key(obj) -> int:
+    """Identity of a Scenic object shared by it and its dynamic proxy (behaviours see the proxy)."""
+    return id(object.__getattribute__(obj, "_dynamicProxy"))
+
+
 def _object_label(obj) -> str:
     return type(obj).__name__
 
@@ -119,6 +124,9 @@ class HighwayEnvSimulation(DrivingSimulation):
         self.names: Dict[int, str] = {}
         self.events: List[ActorEvent] = []
         self.ego_vehicle = None
+        self._agent_drives = False
+        self._collided_pairs = set()
+        self._ego_behavior_set_aside = False
         self._last_heading: Dict[int, float] = {}
         self._angular_speed: Dict[int, float] = {}
         timestep = kwargs["timestep"]
@@ -143,19 +151,21 @@ class HighwayEnvSimulation(DrivingSimulation):
         heading = scenic_to_hw_heading(obj.heading)
         velocity = obj.velocity
         speed = max(math.hypot(velocity[0], velocity[1]), float(getattr(obj, "speed", 0.0) or 0.0))
-        name = self.names.get(id(obj)) or f"{_object_label(obj)}{len(self.hw_of) + 1}"
-        self.names[id(obj)] = name
+        name = self.names.pop(id(obj), None) or f"{_object_label(obj)}{len(self.hw_of) + 1}"
+        key = _key(obj)
+        self.names[key] = name
         is_ego = obj is self.scene.egoObject
+        hw = None
         if is_ego and self.ego_driver is not None:
-            if not isinstance(obj, Steers):
+            hw = self.ego_driver.create_ego(self.road, position, heading, speed, obj)
+            if hw is not None and not isinstance(obj, Steers):
                 raise SimulationCreationError(
                     f"the ego is a {_object_label(obj)}, but an agent can only drive a vehicle; "
                     "make the ego a Car (or run with ego_policy='scenic')"
                 )
-            hw = self.ego_driver.create_ego(self.road, position, heading, speed, obj)
+        if hw is not None:
             hw.name = "ego"
-            # The agent drives; the script's ego behaviour is set aside for this run.
-            obj.behavior = None
+            self._agent_drives = True
             self.road.vehicles.append(hw)
         elif isinstance(obj, Walks):
             hw = Pedestrian(self.road, position, heading, speed, length=obj.length, width=obj.width, name=name)
@@ -171,37 +181,49 @@ class HighwayEnvSimulation(DrivingSimulation):
         hw.color = _hw_color(obj, is_ego)
         if is_ego:
             self.ego_vehicle = hw
-        self.hw_of[id(obj)] = hw
-        self._last_heading[id(obj)] = hw.heading
-        self._angular_speed[id(obj)] = 0.0
+        self.hw_of[key] = hw
+        self._last_heading[key] = hw.heading
+        self._angular_speed[key] = 0.0
         if getattr(obj, "elevation", None) is None:
             obj.elevation = 0.0
+
+    def updateObjects(self) -> None:
+        super().updateObjects()
+        if self._agent_drives and not self._ego_behavior_set_aside:
+            # Scenic starts every behaviour before the first step; once started, the
+            # agent-driven ego's own behaviour is stopped and never stepped.
+            self._ego_behavior_set_aside = True
+            ego = self.scene.egoObject
+            if ego.behavior is not None:
+                if ego.behavior._isRunning:
+                    ego.behavior._stop()
+                ego.behavior = None
 
     # ------------------------------------------------------------------ actions
     def executeActions(self, allActions) -> None:
         super().executeActions(allActions)
         for agent in allActions:
-            hw = self.hw_of.get(id(agent))
+            hw = self.hw_of.get(_key(agent))
             if isinstance(hw, ScenicVehicle) and isinstance(agent, Steers):
                 hw.set_controls(agent.throttle, agent.brake, agent.steer, agent.hand_brake, agent.reverse)
 
     def set_actor_position(self, obj, pos) -> None:
         """Teleport an actor (``SetPositionAction``)."""
-        hw = self.hw_of[id(obj)]
+        hw = self.hw_of[_key(obj)]
         hw.position = scenic_to_hw_position(pos[0], pos[1])
         if hasattr(hw, "on_state_update"):
             hw.on_state_update()
 
     def set_actor_velocity(self, obj, vel) -> None:
         """Set an actor's velocity (``SetVelocityAction``, ``SetSpeedAction``)."""
-        hw = self.hw_of[id(obj)]
+        hw = self.hw_of[_key(obj)]
         if hasattr(hw, "set_velocity"):
             vx, vy = scenic_to_hw_velocity(vel[0], vel[1])
             hw.set_velocity(vx, vy)
 
     def set_walking(self, obj, heading=None, speed=None) -> None:
         """Set a pedestrian's walking direction (Scenic heading) and/or speed."""
-        hw = self.hw_of[id(obj)]
+        hw = self.hw_of[_key(obj)]
         hw.set_walking(None if heading is None else scenic_to_hw_heading(heading), speed)
 
     # --------------------------------------------------------------------- step
@@ -214,6 +236,10 @@ class HighwayEnvSimulation(DrivingSimulation):
             road.act()
             road.step(self.dt)
             for a, b in road.new_collisions:
+                pair = frozenset((id(a), id(b)))
+                if pair in self._collided_pairs:
+                    continue
+                self._collided_pairs.add(pair)
                 self.events.append(
                     ActorEvent(t0 + (frame + 1) * self.dt, "collision", [_hw_name(a), _hw_name(b)])
                 )
@@ -223,12 +249,12 @@ class HighwayEnvSimulation(DrivingSimulation):
             self._last_heading[key] = hw.heading
 
     def getProperties(self, obj, properties) -> Dict[str, Any]:
-        hw = self.hw_of[id(obj)]
+        hw = self.hw_of[_key(obj)]
         x, y = hw_to_scenic_position(hw.position[0], hw.position[1])
         heading = hw_to_scenic_heading(hw.heading)
         yaw, _, _ = obj.parentOrientation.globalToLocalAngles(heading, 0, 0)
         vx, vy = hw_to_scenic_velocity(*hw.velocity)
-        angular = self._angular_speed[id(obj)]
+        angular = self._angular_speed[_key(obj)]
         values = dict(
             position=Vector(x, y, 0.0),
             yaw=yaw,
@@ -274,11 +300,11 @@ class HighwayEnvSimulation(DrivingSimulation):
     # ------------------------------------------------------------------ state
     def actor_name(self, obj) -> str:
         """The name events and traces use for a Scenic object (``ego``, ``Car1``, ...)."""
-        return self.names[id(obj)]
+        return self.names[_key(obj)]
 
     def hw_object(self, obj):
         """The highway-env object standing for a Scenic object."""
-        return self.hw_of[id(obj)]
+        return self.hw_of[_key(obj)]
 
 
 _KIND_COLORS = {

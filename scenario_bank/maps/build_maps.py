@@ -1,0 +1,987 @@
+"""Deterministic generator for the OpenDRIVE maps shipped in this folder.
+
+Run ``python -m scenario_bank.maps.build_maps [--out DIR]`` to (re)write every
+map as ``<name>.xodr``; the default output folder is the one this file lives in.
+The output is byte-identical on every run: there are no timestamps, floats are
+printed with a fixed format, and elements and attributes are always written in
+the same order.
+
+All maps use a local metric frame (x east, y north, metres; OpenDRIVE headings
+in radians counter-clockwise from +x) and right-hand traffic: lanes with
+negative ids (right of the reference line) drive along increasing ``s``.
+
+The maps are written for Scenic's OpenDRIVE parser
+(``scenic.formats.opendrive.xodr_parser``), so they stick to what it handles:
+
+* the plan view uses only ``line`` and ``arc`` geometries;
+* roads that meet a junction carry no lane links at that end; the junction's
+  ``laneLink`` entries and the connecting roads' own lane links connect them;
+* every connecting road starts at its incoming road (``contactPoint="start"``)
+  and has a single right lane (-1), so Scenic turns it into one maneuver;
+* junction ids are non-zero (Scenic treats a junction id of 0 as "no junction").
+
+Maps:
+
+``highway_straight``
+    2000 m, one direction, 4 driving lanes (-1..-4) along +x, with a median
+    strip on the left and a shoulder and border on the right.
+``highway_onramp``
+    1500 m, one direction, 3 driving lanes. Road 1 (before) and the ramp
+    (road 4) meet in junction 10; both continue into road 2 (merge), whose first
+    lane section has a 4th, acceleration lane (-4) for 250 m, which then tapers
+    to zero width and ends. Road 3 (after) continues with 3 lanes.
+``urban_two_way``
+    600 m two-way road, one 3.5 m driving lane per direction and a 2 m sidewalk
+    on each side.
+``urban_crossroads``
+    Four 150 m two-way arms with sidewalks meeting in junction 100, which holds
+    12 connecting roads (left, straight and right from every incoming lane).
+``urban_t_junction``
+    Three 150 m two-way arms with sidewalks meeting in junction 100, which holds
+    6 connecting roads (every movement except U-turns).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import pathlib
+import sys
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
+
+__all__ = [
+    "LANE_WIDTH",
+    "MAP_BUILDERS",
+    "Line",
+    "Arc",
+    "RoadMark",
+    "Lane",
+    "LaneSection",
+    "Link",
+    "Road",
+    "Connection",
+    "Junction",
+    "OpenDriveMap",
+    "format_float",
+    "map_to_xml",
+    "write_maps",
+    "main",
+]
+
+LANE_WIDTH = 3.5
+"""Default driving-lane width in metres."""
+
+SIDEWALK_WIDTH = 2.0
+MARK_WIDTH = 0.15
+DEFAULT_OUT_DIR = pathlib.Path(__file__).resolve().parent
+
+Pose = Tuple[float, float, float]  # x, y, heading (rad, CCW from +x)
+WidthPoly = Tuple[float, float, float, float]  # OpenDRIVE cubic a, b, c, d
+
+
+# ---------------------------------------------------------------------------
+# Number formatting
+# ---------------------------------------------------------------------------
+
+
+def format_float(value: float) -> str:
+    """Format a number the same way on every run and platform.
+
+    Twelve significant digits absorb last-bit differences between math
+    libraries; values within 1e-9 of zero are written as ``0`` (no ``-0``).
+    """
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"cannot write non-finite number {value!r} to OpenDRIVE")
+    if abs(value) < 1e-9:
+        return "0"
+    text = f"{value:.12g}"
+    return "0" if text in ("0", "-0") else text
+
+
+# ---------------------------------------------------------------------------
+# Data model
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Line:
+    """A straight plan-view segment."""
+
+    length: float
+
+
+@dataclass(frozen=True)
+class Arc:
+    """A constant-curvature plan-view segment (curvature > 0 turns left)."""
+
+    length: float
+    curvature: float
+
+
+Segment = Union[Line, Arc]
+
+
+@dataclass(frozen=True)
+class RoadMark:
+    """Marking on a lane's outer border (the border away from the centre lane)."""
+
+    type: str = "solid"  # solid, broken, solid solid, curb, none, ...
+    color: str = "standard"  # standard (white), yellow, ...
+    lane_change: str = "none"  # none, both, increase, decrease
+    width: float = MARK_WIDTH
+
+
+NO_MARK = RoadMark(type="none", lane_change="both", width=0.0)
+SOLID = RoadMark(type="solid", lane_change="none")
+BROKEN = RoadMark(type="broken", lane_change="both")
+
+
+@dataclass(frozen=True)
+class Lane:
+    """One lane of a lane section.
+
+    ``width`` is a constant in metres or an OpenDRIVE cubic ``(a, b, c, d)`` in
+    the distance from the start of the lane section. ``predecessor`` and
+    ``successor`` are lane ids in the neighbouring lane section or road.
+    """
+
+    id: int
+    type: str = "driving"
+    width: Union[float, WidthPoly] = LANE_WIDTH
+    mark: RoadMark = NO_MARK
+    predecessor: Optional[int] = None
+    successor: Optional[int] = None
+
+
+@dataclass(frozen=True)
+class LaneSection:
+    """Lanes from ``s`` to the next section (or the road's end)."""
+
+    s: float
+    left: Tuple[Lane, ...] = ()  # ids 1, 2, ... (inner to outer)
+    right: Tuple[Lane, ...] = ()  # ids -1, -2, ... (inner to outer)
+    center_mark: RoadMark = NO_MARK
+
+
+@dataclass(frozen=True)
+class Link:
+    """A road's predecessor or successor: another road (with the contact point
+    ``start``/``end`` on it) or a junction."""
+
+    element_type: str  # "road" or "junction"
+    element_id: int
+    contact_point: Optional[str] = None  # only for roads
+
+
+@dataclass
+class Road:
+    """An OpenDRIVE road: reference line from ``start`` plus lane sections."""
+
+    id: int
+    name: str
+    start: Pose
+    segments: Sequence[Segment]
+    sections: Sequence[LaneSection]
+    predecessor: Optional[Link] = None
+    successor: Optional[Link] = None
+    junction: int = -1
+    road_type: str = "town"
+    speed_kmh: Optional[float] = None
+
+    @property
+    def length(self) -> float:
+        return sum(seg.length for seg in self.segments)
+
+    def geometries(self) -> List[Tuple[float, Pose, Segment]]:
+        """``(s, start pose, segment)`` of every plan-view segment."""
+        out = []
+        s = 0.0
+        pose = self.start
+        for seg in self.segments:
+            out.append((s, pose, seg))
+            pose = advance(pose, seg, seg.length)
+            s += seg.length
+        return out
+
+    def end_pose(self) -> Pose:
+        """Pose (x, y, heading) at the end of the reference line."""
+        pose = self.start
+        for seg in self.segments:
+            pose = advance(pose, seg, seg.length)
+        return pose
+
+
+@dataclass(frozen=True)
+class Connection:
+    """A junction connection: ``incoming`` road enters ``connecting`` road at its
+    ``contact`` end; ``lane_links`` maps incoming lane ids to connecting ones."""
+
+    incoming: int
+    connecting: int
+    lane_links: Tuple[Tuple[int, int], ...]
+    contact: str = "start"
+
+
+@dataclass
+class Junction:
+    """A junction and its connections."""
+
+    id: int
+    name: str
+    connections: List[Connection] = field(default_factory=list)
+
+
+@dataclass
+class OpenDriveMap:
+    """A whole map: roads and junctions, written in list order."""
+
+    name: str
+    roads: List[Road]
+    junctions: List[Junction] = field(default_factory=list)
+
+
+# ---------------------------------------------------------------------------
+# Geometry
+# ---------------------------------------------------------------------------
+
+
+def wrap_angle(angle: float) -> float:
+    """Wrap an angle to [-pi, pi)."""
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def advance(pose: Pose, seg: Segment, ds: float) -> Pose:
+    """Pose reached after driving ``ds`` metres along ``seg`` from ``pose``."""
+    x, y, hdg = pose
+    if isinstance(seg, Line) or seg.curvature == 0:
+        return (x + ds * math.cos(hdg), y + ds * math.sin(hdg), hdg)
+    k = seg.curvature
+    new_hdg = hdg + k * ds
+    return (
+        x + (math.sin(new_hdg) - math.sin(hdg)) / k,
+        y - (math.cos(new_hdg) - math.cos(hdg)) / k,
+        new_hdg,
+    )
+
+
+def offset_point(pose: Pose, lateral: float) -> Tuple[float, float]:
+    """Point ``lateral`` metres to the left (negative: right) of ``pose``."""
+    x, y, hdg = pose
+    return (x - lateral * math.sin(hdg), y + lateral * math.cos(hdg))
+
+
+def assert_poses_meet(a: Pose, b: Pose, what: str, tol: float = 1e-6) -> None:
+    """Fail loudly if two poses that should coincide do not (generator bug)."""
+    if math.hypot(a[0] - b[0], a[1] - b[1]) > tol or abs(wrap_angle(a[2] - b[2])) > tol:
+        raise AssertionError(f"{what}: poses {a} and {b} do not meet")
+
+
+def turn_segment(turn: float, radius: float, straight_length: float) -> Segment:
+    """Segment for a movement turning by ``turn`` radians (0 = straight)."""
+    if abs(turn) < 1e-9:
+        return Line(straight_length)
+    return Arc(length=abs(turn) * radius, curvature=math.copysign(1.0 / radius, turn))
+
+
+def _section_half_widths(section: LaneSection) -> Tuple[float, float]:
+    def max_width(lane: Lane) -> float:
+        if isinstance(lane.width, tuple):
+            return abs(lane.width[0])  # our cubic widths only shrink from ``a``
+        return lane.width
+
+    return (
+        sum(max_width(lane) for lane in section.left),
+        sum(max_width(lane) for lane in section.right),
+    )
+
+
+def map_bounds(roads: Iterable[Road]) -> Tuple[float, float, float, float]:
+    """Approximate (north, south, east, west) of all roads, lanes included."""
+    xs: List[float] = []
+    ys: List[float] = []
+    for road in roads:
+        pad = max(max(_section_half_widths(sec)) for sec in road.sections)
+        for _, pose, seg in road.geometries():
+            for i in range(17):
+                px, py, _ = advance(pose, seg, seg.length * i / 16)
+                xs.extend((px - pad, px + pad))
+                ys.extend((py - pad, py + pad))
+    return max(ys), min(ys), max(xs), min(xs)
+
+
+# ---------------------------------------------------------------------------
+# XML writing
+# ---------------------------------------------------------------------------
+
+
+def _sub(parent: ET.Element, tag: str, **attrs) -> ET.Element:
+    """Append a child element; ``None`` attributes are left out, numbers formatted."""
+    elem = ET.SubElement(parent, tag)
+    for key, value in attrs.items():
+        if value is None:
+            continue
+        key = key.rstrip("_")
+        if isinstance(value, bool) or isinstance(value, str):
+            elem.set(key, str(value).lower() if isinstance(value, bool) else value)
+        elif isinstance(value, int):
+            elem.set(key, str(value))
+        else:
+            elem.set(key, format_float(value))
+    return elem
+
+
+def _poly(parent: ET.Element, tag: str, s_key: str, s: float, coeffs: WidthPoly) -> None:
+    a, b, c, d = coeffs
+    _sub(parent, tag, **{s_key: float(s)}, a=float(a), b=float(b), c=float(c), d=float(d))
+
+
+def _link_xml(parent: ET.Element, road: Road) -> None:
+    if road.predecessor is None and road.successor is None:
+        return
+    link = _sub(parent, "link")
+    for tag, target in (("predecessor", road.predecessor), ("successor", road.successor)):
+        if target is None:
+            continue
+        _sub(
+            link,
+            tag,
+            elementType=target.element_type,
+            elementId=str(target.element_id),
+            contactPoint=target.contact_point,
+        )
+
+
+def _plan_view_xml(parent: ET.Element, road: Road) -> None:
+    plan_view = _sub(parent, "planView")
+    for s, (x, y, hdg), seg in road.geometries():
+        geom = _sub(plan_view, "geometry", s=s, x=x, y=y, hdg=hdg, length=seg.length)
+        if isinstance(seg, Line):
+            _sub(geom, "line")
+        else:
+            _sub(geom, "arc", curvature=seg.curvature)
+
+
+def _road_mark_xml(parent: ET.Element, mark: RoadMark) -> None:
+    _sub(
+        parent,
+        "roadMark",
+        sOffset=0.0,
+        type_=mark.type,
+        weight="standard",
+        color=mark.color,
+        material="standard",
+        width=mark.width,
+        laneChange=mark.lane_change,
+    )
+
+
+def _lane_xml(parent: ET.Element, lane: Lane) -> None:
+    elem = _sub(parent, "lane", id=str(lane.id), type_=lane.type, level=False)
+    if lane.predecessor is not None or lane.successor is not None:
+        link = _sub(elem, "link")
+        if lane.predecessor is not None:
+            _sub(link, "predecessor", id=str(lane.predecessor))
+        if lane.successor is not None:
+            _sub(link, "successor", id=str(lane.successor))
+    width = lane.width if isinstance(lane.width, tuple) else (lane.width, 0.0, 0.0, 0.0)
+    _poly(elem, "width", "sOffset", 0.0, width)
+    _road_mark_xml(elem, lane.mark)
+
+
+def _check_section(road: Road, section: LaneSection) -> None:
+    left_ids = [lane.id for lane in section.left]
+    right_ids = [lane.id for lane in section.right]
+    if left_ids != list(range(1, len(left_ids) + 1)):
+        raise AssertionError(f"road {road.id}: left lane ids must be 1..n, got {left_ids}")
+    if right_ids != list(range(-1, -len(right_ids) - 1, -1)):
+        raise AssertionError(f"road {road.id}: right lane ids must be -1..-n, got {right_ids}")
+
+
+def _lanes_xml(parent: ET.Element, road: Road) -> None:
+    lanes = _sub(parent, "lanes")
+    _poly(lanes, "laneOffset", "s", 0.0, (0.0, 0.0, 0.0, 0.0))
+    for section in road.sections:
+        _check_section(road, section)
+        sec = _sub(lanes, "laneSection", s=float(section.s))
+        if section.left:
+            left = _sub(sec, "left")
+            for lane in reversed(section.left):  # outermost first, as in the spec
+                _lane_xml(left, lane)
+        center = _sub(sec, "center")
+        center_lane = _sub(center, "lane", id="0", type_="none", level=False)
+        _road_mark_xml(center_lane, section.center_mark)
+        if section.right:
+            right = _sub(sec, "right")
+            for lane in section.right:
+                _lane_xml(right, lane)
+
+
+def road_to_xml(parent: ET.Element, road: Road) -> ET.Element:
+    """Append the ``<road>`` element for ``road`` to ``parent``."""
+    elem = _sub(
+        parent,
+        "road",
+        name=road.name,
+        length=road.length,
+        id=str(road.id),
+        junction=str(road.junction),
+    )
+    _link_xml(elem, road)
+    road_type = _sub(elem, "type", s=0.0, type_=road.road_type)
+    if road.speed_kmh is not None:
+        _sub(road_type, "speed", max=road.speed_kmh, unit="km/h")
+    _plan_view_xml(elem, road)
+    elevation = _sub(elem, "elevationProfile")
+    _poly(elevation, "elevation", "s", 0.0, (0.0, 0.0, 0.0, 0.0))
+    lateral = _sub(elem, "lateralProfile")
+    _poly(lateral, "superelevation", "s", 0.0, (0.0, 0.0, 0.0, 0.0))
+    _lanes_xml(elem, road)
+    return elem
+
+
+def junction_to_xml(parent: ET.Element, junction: Junction) -> ET.Element:
+    """Append the ``<junction>`` element for ``junction`` to ``parent``."""
+    elem = _sub(parent, "junction", id=str(junction.id), name=junction.name)
+    for index, conn in enumerate(junction.connections):
+        c = _sub(
+            elem,
+            "connection",
+            id=str(index),
+            incomingRoad=str(conn.incoming),
+            connectingRoad=str(conn.connecting),
+            contactPoint=conn.contact,
+        )
+        for from_id, to_id in conn.lane_links:
+            _sub(c, "laneLink", from_=str(from_id), to=str(to_id))
+    return elem
+
+
+def _check_map(odr: OpenDriveMap) -> None:
+    road_ids = [road.id for road in odr.roads]
+    if len(set(road_ids)) != len(road_ids):
+        raise AssertionError(f"{odr.name}: duplicate road ids {road_ids}")
+    roads = {road.id: road for road in odr.roads}
+    for junction in odr.junctions:
+        if junction.id == 0:
+            raise AssertionError("junction id 0 is read as 'no junction' by Scenic")
+        for conn in junction.connections:
+            if roads[conn.connecting].junction != junction.id:
+                raise AssertionError(
+                    f"{odr.name}: road {conn.connecting} is not inside junction {junction.id}"
+                )
+            if conn.incoming not in roads:
+                raise AssertionError(f"{odr.name}: unknown incoming road {conn.incoming}")
+
+
+def map_to_xml(odr: OpenDriveMap) -> str:
+    """Serialise a map to OpenDRIVE 1.4 XML text (deterministic)."""
+    _check_map(odr)
+    root = ET.Element("OpenDRIVE")
+    north, south, east, west = map_bounds(odr.roads)
+    _sub(
+        root,
+        "header",
+        revMajor="1",
+        revMinor="4",
+        name=odr.name,
+        version="1.0",
+        north=north,
+        south=south,
+        east=east,
+        west=west,
+        vendor="dv2s-gym scenario_bank.maps.build_maps",
+    )
+    for road in odr.roads:
+        road_to_xml(root, road)
+    for junction in odr.junctions:
+        junction_to_xml(root, junction)
+    ET.indent(root, space="  ")
+    body = ET.tostring(root, encoding="unicode", short_empty_elements=True)
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + body + "\n"
+
+
+# ---------------------------------------------------------------------------
+# Lane helpers
+# ---------------------------------------------------------------------------
+
+
+def taper_width(width: float, length: float) -> WidthPoly:
+    """Cubic that shrinks smoothly from ``width`` to 0 over ``length`` metres
+    (zero slope at both ends)."""
+    return (width, 0.0, -3.0 * width / length**2, 2.0 * width / length**3)
+
+
+def highway_right_lanes(
+    n_driving: int,
+    *,
+    links: Optional[Dict[int, Tuple[Optional[int], Optional[int]]]] = None,
+    last_mark: RoadMark = SOLID,
+    shoulder_width: float = 3.0,
+    border_width: float = 0.5,
+) -> Tuple[Lane, ...]:
+    """Right side of a one-way carriageway: driving lanes -1..-n (broken marks
+    between them, ``last_mark`` on the outer edge), then a shoulder and a border.
+
+    ``links`` maps a lane id to its ``(predecessor, successor)`` lane ids.
+    """
+    links = links or {}
+    lanes = []
+    for i in range(1, n_driving + 1):
+        lane_id = -i
+        pred, succ = links.get(lane_id, (None, None))
+        mark = last_mark if i == n_driving else BROKEN
+        lanes.append(Lane(lane_id, "driving", LANE_WIDTH, mark, pred, succ))
+    for offset, (lane_type, width) in enumerate(
+        (("shoulder", shoulder_width), ("border", border_width)), start=1
+    ):
+        lane_id = -(n_driving + offset)
+        pred, succ = links.get(lane_id, (None, None))
+        lanes.append(Lane(lane_id, lane_type, width, NO_MARK, pred, succ))
+    return tuple(lanes)
+
+
+def highway_left_lanes(
+    links: Optional[Dict[int, Tuple[Optional[int], Optional[int]]]] = None,
+) -> Tuple[Lane, ...]:
+    """Left side of a one-way carriageway: a 2 m strip of central reservation.
+
+    Its type is ``median`` rather than ``shoulder``: Scenic only models the
+    shoulder on the right of a lane group, and a left-hand shoulder on a road
+    without backward lanes would become a stray element outside
+    ``network.shoulders``. Scenic ignores ``median`` lanes.
+    """
+    links = links or {}
+    return (Lane(1, "median", 2.0, NO_MARK, *links.get(1, (None, None))),)
+
+
+def identity_links(ids: Iterable[int], pred: bool = True, succ: bool = True):
+    """``{id: (id or None, id or None)}`` for lanes that continue unchanged."""
+    return {i: (i if pred else None, i if succ else None) for i in ids}
+
+
+def urban_two_way_section(center_mark: RoadMark) -> LaneSection:
+    """One driving lane per direction plus a sidewalk on each side."""
+    return LaneSection(
+        s=0.0,
+        left=(
+            Lane(1, "driving", LANE_WIDTH, SOLID),
+            Lane(2, "sidewalk", SIDEWALK_WIDTH, NO_MARK),
+        ),
+        right=(
+            Lane(-1, "driving", LANE_WIDTH, SOLID),
+            Lane(-2, "sidewalk", SIDEWALK_WIDTH, NO_MARK),
+        ),
+        center_mark=center_mark,
+    )
+
+
+def connecting_road(
+    road_id: int,
+    name: str,
+    junction_id: int,
+    start: Pose,
+    segment: Segment,
+    *,
+    from_road: int,
+    from_contact: str,
+    from_lane: int,
+    to_road: int,
+    to_contact: str,
+    to_lane: int,
+    lanes: int = 1,
+    road_type: str = "town",
+    speed_kmh: Optional[float] = None,
+) -> Road:
+    """Road inside a junction whose right lanes -1..-``lanes`` link lane
+    ``from_lane - k`` of ``from_road`` to lane ``to_lane - k`` of ``to_road``
+    (k = 0, 1, ...; lane ids count outward so this keeps lanes side by side)."""
+    right = []
+    for k in range(lanes):
+        sign_from = -1 if from_lane < 0 else 1
+        sign_to = -1 if to_lane < 0 else 1
+        right.append(
+            Lane(
+                -(k + 1),
+                "driving",
+                LANE_WIDTH,
+                NO_MARK,
+                predecessor=from_lane + sign_from * k,
+                successor=to_lane + sign_to * k,
+            )
+        )
+    return Road(
+        id=road_id,
+        name=name,
+        start=start,
+        segments=(segment,),
+        sections=(LaneSection(s=0.0, right=tuple(right)),),
+        predecessor=Link("road", from_road, from_contact),
+        successor=Link("road", to_road, to_contact),
+        junction=junction_id,
+        road_type=road_type,
+        speed_kmh=speed_kmh,
+    )
+
+
+# ---------------------------------------------------------------------------
+# Maps
+# ---------------------------------------------------------------------------
+
+
+HIGHWAY_SPEED = 120.0
+URBAN_SPEED = 50.0
+
+
+def build_highway_straight() -> OpenDriveMap:
+    """One-way 4-lane motorway, 2000 m along +x."""
+    road = Road(
+        id=1,
+        name="highway",
+        start=(0.0, 0.0, 0.0),
+        segments=(Line(2000.0),),
+        sections=(
+            LaneSection(
+                s=0.0,
+                left=highway_left_lanes(),
+                right=highway_right_lanes(4),
+                center_mark=SOLID,
+            ),
+        ),
+        road_type="motorway",
+        speed_kmh=HIGHWAY_SPEED,
+    )
+    return OpenDriveMap("highway_straight", [road])
+
+
+def build_highway_onramp() -> OpenDriveMap:
+    """One-way 3-lane motorway (1500 m) with an on-ramp and acceleration lane.
+
+    Layout along +x (reference line on y = 0, driving lanes -1..-3 below it)::
+
+        road 1 "before"  x    0 .. 500   3 lanes
+        junction 10      x  500 .. 580   road 101 (3 lanes, straight) and
+                                         road 102 (ramp lane, gentle right arc)
+        road 2 "merge"   x  580 .. 910   section 0 (250 m): 3 lanes + accel lane -4
+                                         section 1 (80 m): lane -4 tapers to 0 and ends
+        road 3 "after"   x  910 .. 1500  3 lanes
+        road 4 "ramp"    a 250 m straight approaching from the south-west at 6 deg
+    """
+    before_len, junction_len, accel_len, taper_len = 500.0, 80.0, 250.0, 80.0
+    total_len = 1500.0
+    after_len = total_len - before_len - junction_len - accel_len - taper_len
+    ramp_angle = math.radians(6.0)
+    ramp_len = 250.0
+    junction_id = 10
+    motorway = dict(road_type="motorway", speed_kmh=HIGHWAY_SPEED)
+
+    before = Road(
+        id=1,
+        name="highway_before",
+        start=(0.0, 0.0, 0.0),
+        segments=(Line(before_len),),
+        sections=(
+            LaneSection(0.0, highway_left_lanes(), highway_right_lanes(3), SOLID),
+        ),
+        successor=Link("junction", junction_id),
+        **motorway,
+    )
+    merge_start = (before_len + junction_len, 0.0, 0.0)
+    main_link = connecting_road(
+        101,
+        "highway_through_junction",
+        junction_id,
+        before.end_pose(),
+        Line(junction_len),
+        from_road=1,
+        from_contact="end",
+        from_lane=-1,
+        to_road=2,
+        to_contact="start",
+        to_lane=-1,
+        lanes=3,
+        **motorway,
+    )
+    assert_poses_meet(main_link.end_pose(), merge_start, "junction 10 main line")
+
+    # The accel lane (-4 of road 2) starts at y = -10.5 (its left edge). The ramp's
+    # connecting road ends there, heading +x, and its reference line (the ramp
+    # lane's left edge) is an arc that turns right by ``ramp_angle`` over the
+    # junction length.
+    accel_left_edge = offset_point(merge_start, -3 * LANE_WIDTH)
+    radius = junction_len / math.sin(ramp_angle)
+    ramp_conn_start = (
+        accel_left_edge[0] - radius * math.sin(ramp_angle),
+        accel_left_edge[1] - radius * (1.0 - math.cos(ramp_angle)),
+        ramp_angle,
+    )
+    ramp_link = connecting_road(
+        102,
+        "ramp_into_acceleration_lane",
+        junction_id,
+        ramp_conn_start,
+        Arc(length=radius * ramp_angle, curvature=-1.0 / radius),
+        from_road=4,
+        from_contact="end",
+        from_lane=-1,
+        to_road=2,
+        to_contact="start",
+        to_lane=-4,
+        **motorway,
+    )
+    assert_poses_meet(
+        ramp_link.end_pose(), (*accel_left_edge, 0.0), "junction 10 ramp into accel lane"
+    )
+    ramp_start = (
+        ramp_conn_start[0] - ramp_len * math.cos(ramp_angle),
+        ramp_conn_start[1] - ramp_len * math.sin(ramp_angle),
+        ramp_angle,
+    )
+    ramp = Road(
+        id=4,
+        name="onramp",
+        start=ramp_start,
+        segments=(Line(ramp_len),),
+        sections=(
+            LaneSection(
+                0.0,
+                right=(
+                    Lane(-1, "driving", LANE_WIDTH, SOLID),
+                    Lane(-2, "shoulder", 1.5, NO_MARK),
+                    Lane(-3, "border", 0.5, NO_MARK),
+                ),
+                center_mark=SOLID,
+            ),
+        ),
+        successor=Link("junction", junction_id),
+        **motorway,
+    )
+    assert_poses_meet(ramp.end_pose(), ramp_conn_start, "ramp end")
+
+    # Road 2: accel lane -4 alongside -3 (broken mark between them), then taper.
+    # Lane -4 has no predecessor link in the road (it is reached through the
+    # junction) and no successor (it ends at the end of the taper).
+    merge_links_0 = identity_links([-1, -2, -3, -4, -5, -6], pred=False)
+    merge_links_0.update(identity_links([1], pred=False))
+    merge_sec0 = LaneSection(
+        0.0,
+        left=highway_left_lanes(merge_links_0),
+        right=highway_right_lanes(4, links=merge_links_0),
+        center_mark=SOLID,
+    )
+    # In the taper section the shoulder/border (-5/-6) continue as -4/-5 of road 3.
+    taper_links = {
+        -1: (-1, -1),
+        -2: (-2, -2),
+        -3: (-3, -3),
+        -4: (-4, None),
+        -5: (-5, -4),
+        -6: (-6, -5),
+        1: (1, 1),
+    }
+    taper_right = list(highway_right_lanes(4, links=taper_links))
+    taper_right[3] = Lane(
+        -4, "driving", taper_width(LANE_WIDTH, taper_len), SOLID, predecessor=-4
+    )
+    merge_sec1 = LaneSection(
+        accel_len,
+        left=highway_left_lanes(taper_links),
+        right=tuple(taper_right),
+        center_mark=SOLID,
+    )
+    merge = Road(
+        id=2,
+        name="highway_merge",
+        start=merge_start,
+        # two geometries so Scenic samples the short taper densely
+        segments=(Line(accel_len), Line(taper_len)),
+        sections=(merge_sec0, merge_sec1),
+        predecessor=Link("junction", junction_id),
+        successor=Link("road", 3, "start"),
+        **motorway,
+    )
+    after = Road(
+        id=3,
+        name="highway_after",
+        start=merge.end_pose(),
+        segments=(Line(after_len),),
+        sections=(
+            LaneSection(
+                0.0,
+                left=highway_left_lanes(identity_links([1], succ=False)),
+                # road 2's shoulder/border are -5/-6 (the accel lane was -4)
+                right=highway_right_lanes(
+                    3,
+                    links={-1: (-1, None), -2: (-2, None), -3: (-3, None),
+                           -4: (-5, None), -5: (-6, None)},
+                ),
+                center_mark=SOLID,
+            ),
+        ),
+        predecessor=Link("road", 2, "end"),
+        **motorway,
+    )
+    junction = Junction(
+        junction_id,
+        "onramp_merge",
+        [
+            Connection(1, 101, ((-1, -1), (-2, -2), (-3, -3))),
+            Connection(4, 102, ((-1, -1),)),
+        ],
+    )
+    return OpenDriveMap(
+        "highway_onramp", [before, merge, after, ramp, main_link, ramp_link], [junction]
+    )
+
+
+def build_urban_two_way() -> OpenDriveMap:
+    """Straight 600 m two-way street with sidewalks, along +x."""
+    road = Road(
+        id=1,
+        name="street",
+        start=(0.0, 0.0, 0.0),
+        segments=(Line(600.0),),
+        sections=(urban_two_way_section(RoadMark("broken", "yellow", "both")),),
+        road_type="town",
+        speed_kmh=URBAN_SPEED,
+    )
+    return OpenDriveMap("urban_two_way", [road])
+
+
+ARM_NAMES = {0: "east", 90: "north", 180: "west", 270: "south"}
+
+
+def build_intersection(
+    name: str,
+    arm_angles_deg: Sequence[int],
+    *,
+    arm_length: float = 150.0,
+    junction_half_size: float = 12.0,
+    junction_id: int = 100,
+) -> OpenDriveMap:
+    """Two-way arms (one lane each way, sidewalks) meeting in one junction.
+
+    Every arm starts ``junction_half_size`` metres from the centre (its
+    predecessor is the junction) and runs outward, so lane 1 drives towards the
+    junction and lane -1 away from it. For every ordered pair of distinct arms
+    there is one connecting road from lane 1 of the first to lane -1 of the
+    second. Its reference line (the left edge of its single lane) runs from the
+    first arm's start to the second's: a line for straight movements, a
+    quarter circle of radius ``junction_half_size`` for turns.
+    """
+    d = junction_half_size
+    roads: List[Road] = []
+    starts: Dict[int, Pose] = {}
+    for index, angle_deg in enumerate(arm_angles_deg):
+        if angle_deg % 90:
+            raise ValueError("arms must be multiples of 90 degrees apart")
+        road_id = index + 1
+        hdg = math.radians(angle_deg)
+        start = (d * math.cos(hdg), d * math.sin(hdg), hdg)
+        starts[road_id] = start
+        roads.append(
+            Road(
+                id=road_id,
+                name=f"arm_{ARM_NAMES[angle_deg % 360]}",
+                start=start,
+                segments=(Line(arm_length),),
+                sections=(urban_two_way_section(RoadMark("solid", "yellow")),),
+                predecessor=Link("junction", junction_id),
+                road_type="town",
+                speed_kmh=URBAN_SPEED,
+            )
+        )
+    arm_names = {road.id: road.name[len("arm_") :] for road in roads}
+
+    junction = Junction(junction_id, f"{name}_junction")
+    next_id = 101
+    for from_id, from_start in starts.items():
+        for to_id, to_start in starts.items():
+            if from_id == to_id:
+                continue
+            entry = (from_start[0], from_start[1], wrap_angle(from_start[2] + math.pi))
+            turn = wrap_angle(to_start[2] - entry[2])
+            kind = {0: "straight", 90: "left", -90: "right"}[round(math.degrees(turn))]
+            conn = connecting_road(
+                next_id,
+                f"{arm_names[from_id]}_to_{arm_names[to_id]}_{kind}",
+                junction_id,
+                entry,
+                turn_segment(turn, radius=d, straight_length=2 * d),
+                from_road=from_id,
+                from_contact="start",
+                from_lane=1,
+                to_road=to_id,
+                to_contact="start",
+                to_lane=-1,
+                speed_kmh=URBAN_SPEED,
+            )
+            assert_poses_meet(conn.end_pose(), to_start, f"{name} {conn.name}")
+            roads.append(conn)
+            junction.connections.append(Connection(from_id, next_id, ((1, -1),)))
+            next_id += 1
+    return OpenDriveMap(name, roads, [junction])
+
+
+def build_urban_crossroads() -> OpenDriveMap:
+    """Four-way intersection, 150 m arms, 12 connecting roads."""
+    return build_intersection("urban_crossroads", (0, 90, 180, 270))
+
+
+def build_urban_t_junction() -> OpenDriveMap:
+    """T-junction (east, west and south arms), 150 m arms, 6 connecting roads."""
+    return build_intersection("urban_t_junction", (0, 180, 270))
+
+
+MAP_BUILDERS: Dict[str, Callable[[], OpenDriveMap]] = {
+    "highway_straight": build_highway_straight,
+    "highway_onramp": build_highway_onramp,
+    "urban_two_way": build_urban_two_way,
+    "urban_crossroads": build_urban_crossroads,
+    "urban_t_junction": build_urban_t_junction,
+}
+"""Map name -> builder, in the order the maps are written."""
+
+
+# ---------------------------------------------------------------------------
+# Entry point
+# ---------------------------------------------------------------------------
+
+
+def write_maps(out_dir: Union[str, pathlib.Path] = DEFAULT_OUT_DIR) -> List[pathlib.Path]:
+    """Write every map to ``out_dir/<name>.xodr`` and return the paths."""
+    out = pathlib.Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for name, builder in MAP_BUILDERS.items():
+        odr = builder()
+        assert odr.name == name, (odr.name, name)
+        path = out / f"{name}.xodr"
+        with open(path, "w", encoding="utf-8", newline="\n") as f:
+            f.write(map_to_xml(odr))
+        paths.append(path)
+    return paths
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Command-line entry point."""
+    parser = argparse.ArgumentParser(
+        prog="python -m scenario_bank.maps.build_maps",
+        description="Write the shipped OpenDRIVE maps (deterministic output).",
+    )
+    parser.add_argument(
+        "--out",
+        type=pathlib.Path,
+        default=DEFAULT_OUT_DIR,
+        help=f"output folder (default: {DEFAULT_OUT_DIR})",
+    )
+    args = parser.parse_args(argv)
+    for path in write_maps(args.out):
+        print(path)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
