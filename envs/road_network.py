@@ -29,12 +29,15 @@ or drop lanes, e.g. an acceleration lane). We still keep them in the group's
 edge, each with its own true extent, so the lane count and side-lane relations
 match Scenic one to one. highway-env copes with that: a lane change is only
 possible where the target lane exists (``is_reachable_from`` requires a
-longitudinal coordinate inside the lane), and a lane that ends without a
-successor hands over, at its end, to the closest lane of the next edge. What it
-cannot express is a lane that *merges into a neighbour half-way along the group*
-(a Scenic successor inside the same group): that link is recorded in
-:attr:`ConvertedNetwork.successors_of` but not in the graph, so a highway-env
-vehicle reaching such a lane end picks the closest lane of the next edge.
+longitudinal coordinate inside the lane), and a lane that runs to the group's
+end without a successor (a tapering acceleration lane) hands over, at its end,
+to the closest lane of the next edge, like highway-env's own merge road. What
+the graph cannot express is a lane that *ends half-way along its group* (e.g.
+merging into its neighbour: a Scenic successor inside the same group). That
+link is kept in :attr:`ConvertedNetwork.successors_of` but not in the graph; a
+highway-env vehicle still on such a lane at its end is handed to the closest
+lane of the edges after the group's end node, so vehicles should change lanes
+before (MOBIL/IDM vehicles do, as the ending lane's neighbour is a side lane).
 
 If two different lane groups (e.g. two connecting roads of a junction joining
 the same pair of roads) end up between the same pair of nodes, they share that
@@ -49,7 +52,13 @@ look-ups); every other lane becomes a :class:`PolylineLane`, a
 :class:`~highway_env.road.lane.PolyLaneFixedWidth` that follows the Scenic
 polyline exactly (same vertices, hence the same length) and projects positions
 onto its nearest segment with numpy, which is faster than highway-env's
-1 m-resampled spline and stays correct on U-turns.
+1 m-resampled spline and stays correct on U-turns. Scenic centerlines carry
+centimetre-long seam segments (some pointing backwards) where lane sections or
+plan-view geometries were chained; they are kept for the length but take the
+local direction of the lane as their heading (see :class:`_Polyline`).
+Widths are measured from the Scenic lane edges; lanes whose width varies by more
+than :data:`WIDTH_TOLERANCE` (e.g. a tapering acceleration lane) keep the
+sampled width profile (``width_at``), others get their mean width.
 
 Line types: ``STRIPED`` between same-direction neighbours, ``CONTINUOUS_LINE`` on
 the outer edges of a group (curb side and next to opposing traffic), ``NONE``
@@ -99,9 +108,10 @@ from envs.coordinates import (
     hw_to_scenic_position,
     scenic_to_hw_heading,
 )
+from envs.errors import DV2SError
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
-    from scenic.domains.driving.roads import Lane, LaneGroup, Network
+    from scenic.domains.driving.roads import Lane, Network
 
 __all__ = [
     "LaneIndex",
@@ -138,8 +148,8 @@ DEFAULT_SPEED_LIMIT = 20.0
 _MIN_LENGTH = 1e-3
 
 
-class MapLoadError(ValueError):
-    """A road network map could not be loaded (parse error, unreadable file...)."""
+class MapLoadError(DV2SError, ValueError):
+    """A road network map could not be loaded (parse error, no drivable lanes...)."""
 
 
 class MapNotFoundError(MapLoadError, FileNotFoundError):
@@ -494,9 +504,9 @@ class ConvertedNetwork:
 def scenic_successors(lane: "Lane") -> List["Lane"]:
     """Lanes a vehicle can drive onto at the end of a Scenic lane.
 
-    Through an intersection these are the maneuvers' connecting lanes; otherwise
-    the maneuvers' end lanes and the lane's ``successor``. Order is stable and
-    without duplicates.
+    These are, for each maneuver, its connecting lane through an intersection or
+    else its end lane; a lane without maneuvers falls back to its ``successor``.
+    Order is stable (Scenic's maneuver order) and without duplicates.
     """
     out: List[Any] = []
     seen = set()
@@ -756,7 +766,10 @@ def convert_network(
     for edge in sorted(edges, key=lambda e: (int(e[0]), int(e[1]))):
         uids = edges[edge]
         reference = max((infos[u].polyline for u in uids), key=lambda pl: pl.length)
-        placement = {u: _lateral_offset(reference, infos[u].polyline) for u in uids}
+        if len(uids) == 1:
+            placement = {uids[0]: (0.0, 0.0, reference.length)}
+        else:
+            placement = {u: _lateral_offset(reference, infos[u].polyline) for u in uids}
         ordered = sorted(uids, key=lambda u: (placement[u][0], u))
         for i, uid in enumerate(ordered):
             info = infos[uid]

@@ -4,26 +4,21 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from highway_env.road.lane import LineType, StraightLane
+from highway_env.road.road import Road, RoadNetwork
+from highway_env.vehicle.controller import ControlledVehicle
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:  # allow running without installing the project
-    sys.path.insert(0, str(ROOT))
-
-from highway_env.road.lane import LineType, StraightLane  # noqa: E402
-from highway_env.road.road import Road, RoadNetwork  # noqa: E402
-from highway_env.vehicle.controller import ControlledVehicle  # noqa: E402
-
-from envs.coordinates import (  # noqa: E402
+from envs.coordinates import (
     scenic_to_hw_heading,
     scenic_to_hw_position,
     wrap_angle,
 )
-from envs.road_network import (  # noqa: E402
+from envs.errors import DV2SError
+from envs.road_network import (
     ConvertedNetwork,
     IndexedRoadNetwork,
     MapLoadError,
@@ -33,6 +28,7 @@ from envs.road_network import (  # noqa: E402
     load_road_network,
 )
 
+ROOT = Path(__file__).resolve().parents[1]
 CARLA = ROOT / "tests" / "data" / "maps" / "CARLA"
 BANK = ROOT / "scenario_bank" / "maps"
 DT = 1.0 / 15.0
@@ -164,6 +160,7 @@ def test_group_lanes_are_side_lanes_left_to_right(converted: ConvertedNetwork):
         edges = {converted.index_of(lane)[:2] for lane in lanes}
         assert edges == {converted.edge_of_group[group.uid]}
         ids = sorted(converted.index_of(lane)[2] for lane in lanes)
+        assert ids == list(range(ids[0], ids[0] + len(ids)))  # contiguous in the edge
         edge = converted.edge_of_group[group.uid]
         for i in ids:
             index = (*edge, i)
@@ -186,11 +183,11 @@ def _assert_right_of(conv: ConvertedNetwork, left: tuple, right: tuple) -> None:
         if not 0.0 <= lon <= left_hw.length:
             continue
         lats.append(lat)
-        # Independent check in Scenic's own frame: right of the heading vector.
-        nearest = left_sc.centerline.lineString.interpolate(
-            left_sc.centerline.lineString.project(point_sc)
-        )
-        yaw = left_sc.orientation[(nearest.x, nearest.y)].yaw
+        # Independent check in Scenic's own frame: right of the lane's direction.
+        left_line = left_sc.centerline.lineString
+        along = left_line.project(point_sc)
+        nearest = left_line.interpolate(along)
+        yaw = _chord_heading(left_line, along)
         forward = np.array([-math.sin(yaw), math.cos(yaw)])
         delta = np.array([point_sc.x - nearest.x, point_sc.y - nearest.y])
         assert forward[0] * delta[1] - forward[1] * delta[0] < 0.0  # cross < 0: to the right
@@ -286,6 +283,16 @@ def test_centerline_samples_map_onto_hw_lane(converted: ConvertedNetwork):
     assert worst_lat < 0.1
     assert worst_heading < math.radians(3)
     assert artifacts <= 0.02 * samples
+
+
+def test_lane_lookup_inside_intersections_uses_heading(converted: ConvertedNetwork):
+    for uid in converted.connecting_lanes:
+        lane = converted.hw_lane(uid)
+        mid = lane.position(lane.length / 2, 0.0)
+        heading = lane.heading_at(lane.length / 2)
+        assert hw_lane_index_at(converted, mid, heading) == converted.index_of(uid)
+    far = np.array([1e6, 1e6])  # off the map: falls back to the closest lane
+    assert hw_lane_index_at(converted, far) == converted.hw_network.get_closest_lane_index(far)
 
 
 def test_closest_lane_index_matches_highway_env(converted: ConvertedNetwork):
@@ -492,7 +499,7 @@ def test_corrupt_map_raises_map_load_error(tmp_path, content):
     message = str(info.value)
     assert "corrupt.xodr" in message
     assert "OpenDRIVE" in message  # suggests what to check
-    assert isinstance(info.value, ValueError)
+    assert isinstance(info.value, ValueError) and isinstance(info.value, DV2SError)
 
 
 def test_unknown_extension_raises_map_load_error(tmp_path):

@@ -25,7 +25,7 @@ ego = new Car at egoLane.centerline.pointAlongBy(Range(50, 1200)),
 lead = new Car following roadDirection from ego for globalParameters.lead_gap,
     with speed globalParameters.ego_speed,
     with behavior SuddenBrake(globalParameters.ego_speed, globalParameters.brake_after, globalParameters.brake_strength)
-traffic1 = new Car offset by (Uniform(-3.5, 3.5), Range(-30, 50)),
+traffic1 = new Car offset by (Uniform(-3.5, 3.5), Range(-30, 50)), with regionContainedIn road,
     with speed Range(20, 26), with behavior FollowLaneBehavior(target_speed=Range(20, 26))
-traffic2 = new Car offset by (Uniform(-7, 7), Range(-30, 50)),
+traffic2 = new Car offset by (Uniform(-7, 7), Range(-30, 50)), with regionContainedIn road,
     with speed Range(20, 26), with behavior FollowLaneBehavior(target_speed=Range(20, 26))

@@ -29,5 +29,5 @@ overtaker = new Car following roadDirection from ego for -globalParameters.start
     with speed globalParameters.ego_speed + globalParameters.overtaker_extra_speed,
     with behavior OvertakeAndPullBackIn(globalParameters.ego_speed + globalParameters.overtaker_extra_speed,
                                         ego, globalParameters.return_gap, globalParameters.slow_down_to)
-traffic = new Car offset by (Uniform(-3.5, 3.5), Range(30, 70)),
+traffic = new Car offset by (Uniform(-3.5, 3.5), Range(30, 70)), with regionContainedIn road,
     with speed Range(14, 18), with behavior FollowLaneBehavior(target_speed=Range(14, 18))

@@ -1,0 +1,134 @@
+"""Speed and memory of DV2S-v0, measured against native highway-env in one run.
+
+    python -m bench.bench_env            # full run (about a minute)
+    python -m bench.bench_env --quick    # smaller counts
+
+Baseline: highway-env's ``highway-v0`` on the same kind of road (4 straight lanes),
+the same number of actors (ego + 5 cars), the same frequencies (15 Hz physics,
+5 Hz policy), the same observation (Kinematics) and action (DiscreteMetaAction,
+IDLE). Native NPCs are IDMVehicles; ours run Scenic's FollowLaneBehavior.
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import gc
+import pstats
+import statistics
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import highway_env  # noqa: F401  (registers highway-v0)
+import numpy as np
+
+import dv2s_gym  # noqa: F401  (registers DV2S-v0)
+
+SCENE = Path(__file__).with_name("six_cars_highway.scenic")
+FREQ = {"simulation_frequency": 15, "policy_frequency": 5}
+OBS = {"type": "Kinematics", "vehicles_count": 8, "features": ["presence", "x", "y", "vx", "vy", "cos_h", "sin_h"]}
+
+
+def make_native():
+    return gym.make(
+        "highway-v0",
+        config={**FREQ, "lanes_count": 4, "vehicles_count": 5, "controlled_vehicles": 1,
+                "duration": 1000, "observation": OBS, "action": {"type": "DiscreteMetaAction"}},
+    ).unwrapped
+
+
+def make_dv2s():
+    return gym.make("DV2S-v0", scenario=str(SCENE),
+                    config={**FREQ, "duration": 1000, "observation": OBS,
+                            "terminate_on_collision": False, "terminate_off_road": False}).unwrapped
+
+
+def steps_per_second(env, steps: int, seed: int = 0) -> float:
+    env.reset(seed=seed)
+    done = 0
+    start = time.perf_counter()
+    while done < steps:
+        _, _, terminated, truncated, _ = env.step(1)
+        done += 1
+        if terminated or truncated:
+            env.reset(seed=seed + done)
+    return steps / (time.perf_counter() - start)
+
+
+def rss_mb() -> float:
+    with open("/proc/self/statm") as f:
+        pages = int(f.read().split()[1])
+    import os
+
+    return pages * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def where_time_goes(env, steps: int) -> list:
+    profile = cProfile.Profile()
+    env.reset(seed=123)
+    profile.enable()
+    for _ in range(steps):
+        env.step(1)
+    profile.disable()
+    stats = pstats.Stats(profile)
+    total = sum(v[2] for v in stats.stats.values())
+    buckets = {
+        "Scenic behaviours & requirements": ("scenic/core/dynamics", "scenic/domains/driving/behaviors", "controllers.py"),
+        "Scenic property read-back": ("simulators.py:updateObjects", "getProperties"),
+        "highway-env vehicle physics": ("kinematics.py", "controller.py", "actors.py"),
+        "lane look-up": ("road_network.py", "lane.py"),
+        "collisions": ("hw_road.py", "utils.py"),
+        "observation": ("observation.py",),
+        "time-to-collision & events": ("safety_metrics.py",),
+    }
+    rows = []
+    for label, keys in buckets.items():
+        cum = 0.0
+        for (file, _line, func), (_cc, _nc, tt, ct, _callers) in stats.stats.items():
+            tag = f"{file}:{func}"
+            if any(k in tag for k in keys):
+                cum += tt
+        rows.append((label, 100.0 * cum / total))
+    return rows
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true")
+    args = parser.parse_args(argv)
+    steps = 150 if args.quick else 600
+    resets = 300 if args.quick else 1000
+
+    native, ours = make_native(), make_dv2s()
+    steps_per_second(native, 20)
+    steps_per_second(ours, 20)
+    native_runs, our_runs = [], []
+    for round_ in range(3):
+        native_runs.append(steps_per_second(native, steps, seed=round_))
+        our_runs.append(steps_per_second(ours, steps, seed=round_))
+    n, o = statistics.median(native_runs), statistics.median(our_runs)
+    print(f"env steps/s   native highway-v0: {n:7.1f}   DV2S-v0: {o:7.1f}   ratio DV2S/native: {o / n:.2f}x")
+    print("where DV2S-v0 step time goes (self time, % of profiled step):")
+    for label, pct in where_time_goes(ours, steps // 2):
+        print(f"    {label:<36} {pct:5.1f}%")
+
+    times = []
+    for i in range(60):
+        t = time.perf_counter()
+        ours.reset(seed=1000 + i)
+        times.append(time.perf_counter() - t)
+    print(f"reset() after first compile, six actors: median {1000 * statistics.median(times):.1f} ms, "
+          f"p90 {1000 * float(np.percentile(times, 90)):.1f} ms")
+
+    gc.collect()
+    before = rss_mb()
+    for i in range(resets):
+        ours.reset(seed=5000 + i)
+    gc.collect()
+    after = rss_mb()
+    print(f"{resets} resets: resident memory {before:.0f} MB -> {after:.0f} MB (growth {after - before:+.1f} MB)")
+
+
+if __name__ == "__main__":
+    main()

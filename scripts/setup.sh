@@ -1,0 +1,21 @@
+#!/usr/bin/env bash
+# Create .venv and install dv2s-gym with its test tools. Idempotent.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3.11}
+command -v "$PY" >/dev/null 2>&1 || PY=python3
+[ -x .venv/bin/python ] || "$PY" -m venv .venv
+. .venv/bin/activate
+python -m pip install -q --upgrade pip
+# torch first, pinned: an unpinned torch pulls a multi-GB CUDA build.
+python -m pip install -q "torch==2.13.0"
+python -m pip install -q -e ".[test]"
+# Scenic needs opencv-python; a second OpenCV distribution (e.g. -headless, pulled by
+# some extras) would share the cv2/ folder. Keep exactly one.
+for other in opencv-python-headless opencv-contrib-python opencv-contrib-python-headless; do
+    if python -m pip show -q "$other" >/dev/null 2>&1; then
+        python -m pip uninstall -q -y "$other"
+        python -m pip install -q --force-reinstall --no-deps opencv-python
+    fi
+done
+python -c "import cv2, scenic, highway_env, stable_baselines3, torch; print('dv2s-gym environment ready: cv2', cv2.__version__, 'torch', torch.__version__)"
