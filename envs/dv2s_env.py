@@ -21,12 +21,15 @@ from typing import Any, Dict, List, Optional, Sequence, Union
 import numpy as np
 from highway_env import utils as hw_utils
 from highway_env.envs.common.abstract import AbstractEnv
+from highway_env.envs.common.observation import KinematicObservation
 
 from envs.errors import InvalidActionError
 from envs.hw_road import EventRoad
+from envs.observations import FastKinematicObservation
 from envs.safety_metrics import time_to_collision
 from envs.scenarios import CompiledScenario, compile_scenario, looks_like_source, read_scenario_file
 from envs.scenic_highway.simulator import ActorEvent, HighwayEnvSimulator
+from envs.scenic_highway import stepping
 from envs.scenic_highway.stepping import ExternalStepper, StepOutcome
 from envs.trace import EpisodeTrace, actor_state
 
@@ -70,6 +73,50 @@ def resolve_scenarios(spec: ScenarioSpec, bank_dir: Optional[str] = None) -> Lis
             return [ScenarioRef(name=path.stem, path=str(path.resolve()))]
     names = select_scenarios(spec, bank_dir)
     return [ScenarioRef(name=n, path=str(scenario_path(n, bank_dir))) for n in names]
+
+
+def _copy_state(state: Dict[str, Any]) -> Dict[str, Any]:
+    """Copy of an object's ``__dict__`` whose containers are not shared with the original."""
+    return {k: (v.copy() if isinstance(v, (list, dict, set)) else v) for k, v in state.items()}
+
+
+class _SceneStepper(ExternalStepper):
+    """An :class:`ExternalStepper` that also sets aside the running state of the scenario.
+
+    Every scene sampled from one compiled scenario shares the scenario's single
+    ``DynamicScenario`` object, which holds the state of the running simulation
+    (running flag, bound objects, requirement monitors, elapsed time). Several
+    envs of the same scenario in one process (``SyncVectorEnv``, ``DummyVecEnv``)
+    each keep a suspended simulation, so that state is swapped with the rest of
+    Scenic's globals: saved when another simulation takes over, restored when this
+    one resumes.
+    """
+
+    def __init__(self, make_simulation, dynamic_scenario) -> None:
+        super().__init__(make_simulation)
+        self._dynamic = dynamic_scenario
+        self._idle_state: Optional[Dict[str, Any]] = None
+        self._running_state: Optional[Dict[str, Any]] = None
+
+    def _run(self) -> StepOutcome:
+        stepping.release_veneer()  # any other simulation of this scenario is set aside: it is idle
+        self._idle_state = _copy_state(self._dynamic.__dict__)
+        return super()._run()
+
+    def _install(self) -> None:
+        resuming = stepping._installed is not self
+        super()._install()
+        if resuming and self._running_state is not None:
+            self._dynamic.__dict__.clear()
+            self._dynamic.__dict__.update(self._running_state)
+            self._running_state = None
+
+    def _save_globals(self) -> None:
+        super()._save_globals()
+        if self._idle_state is not None:
+            self._running_state = dict(self._dynamic.__dict__)
+            self._dynamic.__dict__.clear()
+            self._dynamic.__dict__.update(_copy_state(self._idle_state))
 
 
 def _jsonable(value: Any) -> Any:
@@ -191,6 +238,12 @@ class DV2SEnv(AbstractEnv):
         )
         return config
 
+    def define_spaces(self) -> None:
+        """Observation and action types from the config (Kinematics is computed without pandas)."""
+        super().define_spaces()
+        if type(self.observation_type) is KinematicObservation:
+            self.observation_type.__class__ = FastKinematicObservation
+
     # ------------------------------------------------------------------- reset
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
         """Sample a new scene and start its simulation.
@@ -201,7 +254,11 @@ class DV2SEnv(AbstractEnv):
         """
         self._reset_seed = seed
         self._reset_options = dict(options or {})
-        return super().reset(seed=seed, options=options)
+        obs, info = super().reset(seed=seed, options=options)
+        # highway-env fills the reset info with an (unseeded) sample of the action
+        # space; no action was taken, and a random value would break reproducibility.
+        info["action"] = None
+        return obs, info
 
     def _reset(self) -> None:
         self._close_simulation()
@@ -223,7 +280,7 @@ class DV2SEnv(AbstractEnv):
                 ego_driver=self,
             )
             self.road = road
-            stepper = ExternalStepper(
+            stepper = _SceneStepper(
                 lambda st, scene=scene: simulator.createSimulation(
                     scene,
                     maxSteps=None,
@@ -236,7 +293,8 @@ class DV2SEnv(AbstractEnv):
                     divergenceTolerance=0,
                     continueAfterDivergence=False,
                     allowPickle=False,
-                )
+                ),
+                scene.dynamicScenario,
             )
             self._stepper = stepper
             outcome = stepper.start()
