@@ -1,0 +1,79 @@
+"""The installed environment: one OpenCV, the CLI, registration without import."""
+
+import importlib.metadata as md
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+OPENCV_DISTS = ("opencv-python", "opencv-python-headless", "opencv-contrib-python", "opencv-contrib-python-headless")
+
+
+def test_exactly_one_opencv_distribution_and_it_works(tmp_path):
+    installed = []
+    for name in OPENCV_DISTS:
+        try:
+            md.distribution(name)
+            installed.append(name)
+        except md.PackageNotFoundError:
+            pass
+    assert installed == ["opencv-python"], f"OpenCV distributions installed: {installed}"
+    import cv2
+
+    path = str(tmp_path / "probe.webm")
+    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"VP80"), 10, (64, 48))
+    assert writer.isOpened()
+    for i in range(5):
+        writer.write(np.full((48, 64, 3), 40 * i, np.uint8))
+    writer.release()
+    capture = cv2.VideoCapture(path)
+    frames = 0
+    while capture.read()[0]:
+        frames += 1
+    assert frames == 5
+
+
+def test_cli_help_for_every_subcommand():
+    from dv2s_gym.cli import build_parser
+
+    parser = build_parser()
+    commands = [["--help"], ["demo", "--help"], ["run", "--help"], ["replay", "--help"], ["maps", "--help"],
+                ["bank", "--help"], ["bank", "list", "--help"]]
+    for argv in commands:
+        with pytest.raises(SystemExit) as exit_info:
+            parser.parse_args(argv)
+        assert exit_info.value.code == 0, argv
+
+
+def test_cli_reports_unknown_scenario_cleanly(capsys):
+    from dv2s_gym.cli import main
+
+    assert main(["run", "highway_lead_vehicle_brake", "--video", os.devnull + ".webm"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown scenario" in err and "highway_lead_vehicle_brakes" in err
+
+
+def _installed() -> bool:
+    try:
+        md.distribution("dv2s-gym")
+    except md.PackageNotFoundError:
+        return False
+    return True
+
+
+@pytest.mark.skipif(not _installed(), reason="dv2s-gym is not pip-installed in this environment")
+def test_env_registered_after_installation_without_import(tmp_path):
+    code = (
+        "import gymnasium as gym, sys\n"
+        "env = gym.make('DV2S-v0', scenario='urban_pull_back_in', config={'duration': 1})\n"
+        "obs, info = env.reset(seed=0)\n"
+        "assert 'dv2s_gym' not in sys.modules\n"
+        "print(info['scenario'])\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().endswith("urban_pull_back_in")
