@@ -70,15 +70,101 @@ def _cmd_maps(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_bank_list(args: argparse.Namespace) -> int:
-    from scenario_bank import list_scenarios, scenario_metadata
+def _bank(args: argparse.Namespace):
+    from scenario_bank.bank import Bank
 
-    rows = [{"name": n, **scenario_metadata(n)} for n in list_scenarios(tag=args.tag)]
-    if args.json:
-        print(json.dumps(rows, indent=2))
-    else:
-        for row in rows:
-            print(f"{row['name']:<34} {row.get('map', ''):<18} {', '.join(row.get('tags', []))}")
+    return Bank(args.bank)
+
+
+def _print(args: argparse.Namespace, data, human: str) -> None:
+    print(json.dumps(data, indent=2, default=str) if args.json else human)
+
+
+def _cmd_bank_list(args: argparse.Namespace) -> int:
+    bank = _bank(args)
+    entries = bank.list(tag=args.tag, text=args.text, element=args.element, map=args.map, source=args.source)
+    lines = [f"{e.name:<40} {e.map or '':<18} {e.source.get('kind', ''):<13} {', '.join(e.tags)}" for e in entries]
+    lines += [f"! {name}: {message}" for name, message in sorted(bank.problems.items())]
+    _print(args, {"scenarios": [e.summary() for e in entries], "problems": bank.problems},
+           "\n".join(lines) + f"\n{len(entries)} scenario(s)")
+    return 0
+
+
+def _cmd_bank_show(args: argparse.Namespace) -> int:
+    entry = _bank(args).get(args.name)
+    data = {**entry.meta, "path": str(entry.script_path), "script": entry.script}
+    human = (f"{entry.name}  ({entry.map}, {entry.source.get('kind')})\n{entry.description}\n"
+             f"tags: {', '.join(entry.tags)}\nelements: {json.dumps(entry.elements)}\n"
+             f"source: {json.dumps(entry.source)}\npath: {entry.script_path}\n\n{entry.script}")
+    _print(args, data, human)
+    return 0
+
+
+def _cmd_bank_add(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    script = Path(args.script).read_text(encoding="utf-8")
+    elements = json.loads(Path(args.elements).read_text()) if args.elements else None
+    provenance = {"kind": args.kind, "video": args.video, "parent": args.parent}
+    entry = _bank(args).add(script, args.description, name=args.name, elements=elements, tags=args.tag or [],
+                            map=args.map, provenance=provenance)
+    _print(args, entry.summary(), f"added {entry.name} ({entry.script_path})")
+    return 0
+
+
+def _cmd_bank_rm(args: argparse.Namespace) -> int:
+    bank = _bank(args)
+    for name in args.name:
+        bank.remove(name)
+    _print(args, {"removed": args.name}, f"removed {', '.join(args.name)}")
+    return 0
+
+
+def _cmd_bank_validate(args: argparse.Namespace) -> int:
+    from dv2s_gym.bank_validate import validate_bank
+
+    reports = validate_bank(args.bank, args.name or None, samples=args.samples, seconds=args.seconds,
+                            jobs=args.jobs, progress=not args.json)
+    lines = []
+    for r in reports:
+        rate = f"{r.acceptance_rate:.2f}" if r.acceptance_rate is not None else "-"
+        compile_s = f"{r.compile_seconds:.2f}s" if r.compile_seconds is not None else "-"
+        outcomes = ",".join(e["outcome"] for e in r.episodes) or "-"
+        lines.append(f"{'ok  ' if r.ok else 'FAIL'} {r.name:<40} compile {compile_s:>7}  accept {rate:>5}  "
+                     f"runs {outcomes}" + (f"\n     {r.error}" if r.error else ""))
+    broken = [r.name for r in reports if not r.ok]
+    lines.append(f"{len(reports) - len(broken)}/{len(reports)} scenarios valid" +
+                 (f"; broken: {', '.join(broken)}" if broken else ""))
+    _print(args, [r.as_dict() for r in reports], "\n".join(lines))
+    return 1 if broken else 0
+
+
+def _cmd_bank_sample(args: argparse.Namespace) -> int:
+    bank = _bank(args)
+    candidates = [e.name for e in bank.list(tag=args.tag)] if args.tag else None
+    weights = json.loads(args.weights) if args.weights else None
+    picks = [bank.sample(args.seed + k, weights=weights, candidates=candidates).name for k in range(args.count)]
+    _print(args, picks, "\n".join(picks))
+    return 0
+
+
+def _cmd_bank_export(args: argparse.Namespace) -> int:
+    path = _bank(args).export(args.archive, names=args.name or None)
+    _print(args, {"archive": str(path)}, f"wrote {path}")
+    return 0
+
+
+def _cmd_bank_import(args: argparse.Namespace) -> int:
+    result = _bank(args).import_archive(args.archive, on_duplicate=args.on_duplicate)
+    _print(args, result, f"added {len(result['added'])}: {', '.join(result['added']) or '-'}; "
+           f"skipped {len(result['skipped'])} duplicate(s): {', '.join(result['skipped']) or '-'}")
+    return 0
+
+
+def _cmd_bank_stats(args: argparse.Namespace) -> int:
+    stats = _bank(args).stats()
+    human = "\n".join(f"{k}: {v}" for k, v in stats.items())
+    _print(args, stats, human)
     return 0
 
 
@@ -124,12 +210,55 @@ def build_parser() -> argparse.ArgumentParser:
     maps.add_argument("--build", action="store_true", help="regenerate the .xodr files first")
     maps.set_defaults(func=_cmd_maps)
 
-    bank = sub.add_parser("bank", help="scenario bank commands", description="Inspect the scenario bank.")
+    bank = sub.add_parser("bank", help="list, add, validate, sample, export and import bank scenarios",
+                          description="The scenario bank: versioned, validated, searchable Scenic scenarios.")
+    bank.add_argument("--bank", default=None, help="bank folder (default: the bank shipped with dv2s-gym)")
     bank_sub = bank.add_subparsers(dest="bank_command", required=True, metavar="BANK_COMMAND")
-    bank_list = bank_sub.add_parser("list", help="list scenarios", description="List bank scenarios.")
-    bank_list.add_argument("--tag", default=None, help="only scenarios with this tag")
-    bank_list.add_argument("--json", action="store_true", help="print JSON")
-    bank_list.set_defaults(func=_cmd_bank_list)
+
+    def bank_cmd(name, help_text, func):
+        p = bank_sub.add_parser(name, help=help_text, description=help_text)
+        p.add_argument("--json", action="store_true", help="print JSON instead of text")
+        p.set_defaults(func=func)
+        return p
+
+    p = bank_cmd("list", "list scenarios, optionally filtered", _cmd_bank_list)
+    p.add_argument("--tag", help="only scenarios with this tag")
+    p.add_argument("--text", help="substring of the name or description")
+    p.add_argument("--element", action="append", help="participant, action (car:cut_in), relation or road type")
+    p.add_argument("--map", help="only scenarios on this map")
+    p.add_argument("--source", choices=["hand-written", "generated", "mined"], help="only this source kind")
+    p = bank_cmd("show", "show one scenario: metadata and script", _cmd_bank_show)
+    p.add_argument("name")
+    p = bank_cmd("add", "add a Scenic script with its description (atomic; duplicates refused)", _cmd_bank_add)
+    p.add_argument("script", help="path to the .scenic file")
+    p.add_argument("--description", required=True, help="natural-language description")
+    p.add_argument("--name", help="entry name (default: from the description)")
+    p.add_argument("--elements", help="JSON file with the semantic elements")
+    p.add_argument("--tag", action="append", help="tag (repeatable)")
+    p.add_argument("--map", help="map name (default: read from `param map`)")
+    p.add_argument("--kind", default="hand-written", choices=["hand-written", "generated", "mined"])
+    p.add_argument("--video", help="source video (provenance)")
+    p.add_argument("--parent", help="parent scenario (provenance)")
+    p = bank_cmd("rm", "remove scenarios", _cmd_bank_rm)
+    p.add_argument("name", nargs="+")
+    p = bank_cmd("validate", "safety-check, compile, sample and run every scenario; exit 1 if any is broken",
+                 _cmd_bank_validate)
+    p.add_argument("name", nargs="*", help="only these scenarios")
+    p.add_argument("--samples", type=int, default=3, help="scenes sampled and run per scenario (default 3)")
+    p.add_argument("--seconds", type=float, default=3.0, help="simulated seconds per run (default 3)")
+    p.add_argument("--jobs", type=int, default=1, help="parallel processes")
+    p = bank_cmd("sample", "draw scenarios by weight", _cmd_bank_sample)
+    p.add_argument("--count", type=int, default=1)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--tag", help="draw among scenarios with this tag")
+    p.add_argument("--weights", help='JSON object name -> weight, e.g. \'{"a": 2, "b": 1}\'')
+    p = bank_cmd("export", "write scenarios to one .tar.gz archive", _cmd_bank_export)
+    p.add_argument("archive")
+    p.add_argument("--name", action="append", help="only this scenario (repeatable)")
+    p = bank_cmd("import", "import an archive (all or nothing)", _cmd_bank_import)
+    p.add_argument("archive")
+    p.add_argument("--on-duplicate", choices=["skip", "error"], default="skip")
+    bank_cmd("stats", "counts by map, source, road type, tag and participant", _cmd_bank_stats)
     return parser
 
 
@@ -138,11 +267,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     from envs.errors import DV2SError
-    from scenario_bank import UnknownScenarioError
+    from scenario_bank.bank import BankError
 
     try:
         return int(args.func(args) or 0)
-    except (DV2SError, UnknownScenarioError, FileNotFoundError, ValueError) as error:
+    except (DV2SError, BankError, FileNotFoundError, ValueError) as error:
         print(f"dv2s: error: {error}", file=sys.stderr)
         return 2
 

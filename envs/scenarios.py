@@ -22,7 +22,7 @@ import numpy as np
 
 from envs.errors import ScenarioCompileError, SceneSamplingError, UnsupportedConstructError
 
-__all__ = ["MODEL", "CompiledScenario", "compile_scenario", "looks_like_source"]
+__all__ = ["MODEL", "CompiledScenario", "compile_scenario", "looks_like_source", "runtime_construct_error"]
 
 MODEL = "envs.scenic_highway.model"
 """The Scenic world model every scenario is compiled against."""
@@ -46,6 +46,8 @@ class CompiledScenario:
     map_override: Optional[str] = None
     digest: str = ""
     _diagnosis_cache: Dict[str, int] = field(default_factory=dict)
+    last_iterations: int = 0
+    """Rejection-sampling iterations the last :meth:`sample` needed (1 = accepted at once)."""
 
     @property
     def map_path(self) -> str:
@@ -59,7 +61,7 @@ class CompiledScenario:
         random.seed(seed)
         np.random.seed(seed % (2**32))
         try:
-            scene, _ = self.scenario.generate(maxIterations=max_iterations, verbosity=0)
+            scene, self.last_iterations = self.scenario.generate(maxIterations=max_iterations, verbosity=0)
         except RejectionException:
             reasons = self.diagnose_rejections(seed)
             top = ", ".join(f"{r!r} ({n}x)" for r, n in reasons.most_common(3)) or "unknown"
@@ -146,6 +148,16 @@ def compile_scenario(
     return compiled
 
 
+def runtime_construct_error(error: NameError, compiled: CompiledScenario) -> ScenarioCompileError:
+    """The error to raise when a running behaviour uses a name nothing defines.
+
+    Names inside behaviours are only looked up when the simulation runs, so a
+    CARLA-only action (``SetAutopilotAction``...) surfaces at ``reset``/``step``;
+    it gets the same :class:`UnsupportedConstructError` as at compile time.
+    """
+    return _compile_error(error, compiled.source, compiled.path or compiled.name)
+
+
 def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompileError:
     from envs.scenic_highway.model_support import MissingMapError
 
@@ -162,6 +174,14 @@ def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompile
         return ScenarioCompileError(f"{where}: {message}", path=label, line=line)
     if isinstance(error, FileNotFoundError) or type(error).__name__ == "UnknownMapError":
         return ScenarioCompileError(f"{where}: map not found: {message}", path=label, line=line)
+    map_file = _map_being_loaded(error)
+    if map_file is not None:
+        return ScenarioCompileError(
+            f"{where}: the map {map_file!r} failed to load: {type(error).__name__}: {message}. "
+            "Check that it is a valid OpenDRIVE file, or set `param map` to a shipped map.",
+            path=label,
+            line=line,
+        )
     undefined = re.search(r"name '([^']+)' is not defined", message)
     if undefined:
         construct = undefined.group(1)
@@ -188,6 +208,18 @@ def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompile
         path=label,
         line=line,
     )
+
+
+def _map_being_loaded(error: Exception) -> Optional[str]:
+    """The map file Scenic was reading when ``error`` was raised, if it was reading one."""
+    tb = error.__traceback__
+    found = None
+    while tb is not None:
+        code = tb.tb_frame.f_code
+        if code.co_name == "fromFile" and code.co_filename.endswith(os.path.join("driving", "roads.py")):
+            found = tb.tb_frame.f_locals.get("path", found)
+        tb = tb.tb_next
+    return None if found is None else str(found)
 
 
 def _mentions_other_simulator(source: str) -> Optional[str]:

@@ -1,0 +1,721 @@
+"""The scenario bank: a versioned, validated, searchable folder of Scenic scenarios.
+
+Layout of a bank folder::
+
+    bank.json                 version + index (a cache of every entry's metadata)
+    <name>/scenario.scenic    the Scenic script
+    <name>/meta.json          its sidecar (description, elements, tags, map, source, hash)
+    .lock                     writers take an exclusive flock on it
+
+Writes are atomic: an entry is assembled in a hidden staging folder and renamed
+into place in one step, so a crash or a full disk leaves either the whole entry
+or nothing. Imports of several entries keep a journal and are rolled back if
+they did not finish. Concurrent writers serialise on the lock; readers never
+block. The index is rebuilt from the sidecars whenever it is stale, and a
+missing, corrupt or hand-edited sidecar is reported for that entry while the
+rest of the bank stays usable.
+
+This module imports nothing else of dv2s-gym.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import difflib
+import errno
+import fcntl
+import hashlib
+import io
+import json
+import os
+import random
+import re
+import shutil
+import tarfile
+import tempfile
+import uuid
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
+
+from scenario_bank.elements import ElementError, element_set, normalize_elements
+from scenario_bank.safety import UnsafeScenarioError, check_script
+
+__all__ = [
+    "BANK_VERSION",
+    "SIDECAR_VERSION",
+    "Bank",
+    "ScenarioEntry",
+    "BankDiff",
+    "BankError",
+    "BankVersionError",
+    "DuplicateScenarioError",
+    "UnknownScenarioError",
+    "content_hash",
+    "semantic_key",
+    "SOURCE_KINDS",
+]
+
+BANK_VERSION = 1
+"""Version of the bank folder format written by this code."""
+SIDECAR_VERSION = 1
+"""Version of the ``meta.json`` sidecar format written by this code."""
+SOURCE_KINDS = ("hand-written", "generated", "mined")
+SCRIPT = "scenario.scenic"
+SIDECAR = "meta.json"
+INDEX = "bank.json"
+_NAME = re.compile(r"^[a-z0-9][a-z0-9_\-]{0,99}$")
+_PROVENANCE_FIELDS = ("kind", "video", "parent", "seed", "generator", "model", "context_hash", "date")
+
+PathLike = Union[str, os.PathLike]
+
+
+class BankError(Exception):
+    """A bank operation failed; the bank is unchanged."""
+
+
+class BankVersionError(BankError):
+    """The bank (or an entry) was written by a newer dv2s-gym."""
+
+
+class DuplicateScenarioError(BankError):
+    """The script is already in the bank (byte for byte or semantically)."""
+
+    def __init__(self, message: str, existing: str) -> None:
+        super().__init__(message)
+        self.existing = existing
+
+
+class UnknownScenarioError(BankError, ValueError):
+    """A scenario name or tag that the bank does not hold."""
+
+
+def content_hash(script: str) -> str:
+    """SHA-256 of a script's UTF-8 bytes (the sidecar's ``content_hash``)."""
+    return hashlib.sha256(script.encode("utf-8")).hexdigest()
+
+
+_PARAM = re.compile(r"^\s*param\s+(\w+)\s*=\s*(.+?)\s*$", re.M)
+_RANDOM = re.compile(r"\b(Range|DiscreteRange|Uniform|Discrete|Normal|TruncatedNormal|Options|VerifaiRange|"
+                     r"VerifaiDiscreteRange|VerifaiOptions)\s*\(")
+
+
+def semantic_key(elements: Mapping[str, Any], map_name: Optional[str], script: str) -> str:
+    """What makes two scenarios the same: elements, map and the multiset of parameter ranges."""
+    ranges = sorted(re.sub(r"\s+", "", value) for name, value in _PARAM.findall(script)
+                    if name not in ("map", "weather") and _RANDOM.search(value))
+    payload = json.dumps([normalize_elements(elements), map_name, ranges], sort_keys=True)
+    return hashlib.sha256(payload.encode()).hexdigest()
+
+
+@dataclass
+class ScenarioEntry:
+    """One scenario of a bank: its script path and its sidecar."""
+
+    name: str
+    folder: Path
+    meta: Dict[str, Any]
+
+    @property
+    def script_path(self) -> Path:
+        return self.folder / SCRIPT
+
+    @property
+    def script(self) -> str:
+        """The Scenic source."""
+        return self.script_path.read_text(encoding="utf-8")
+
+    @property
+    def description(self) -> str:
+        return self.meta.get("description", "")
+
+    @property
+    def elements(self) -> Dict[str, Any]:
+        return self.meta.get("elements") or {"road": None, "participants": [], "actions": [], "relations": []}
+
+    @property
+    def tags(self) -> List[str]:
+        return list(self.meta.get("tags", []))
+
+    @property
+    def map(self) -> Optional[str]:
+        return self.meta.get("map")
+
+    @property
+    def source(self) -> Dict[str, Any]:
+        return dict(self.meta.get("source") or {})
+
+    @property
+    def content_hash(self) -> str:
+        return self.meta.get("content_hash", "")
+
+    def summary(self) -> Dict[str, Any]:
+        """A JSON-ready record for listings."""
+        return {"name": self.name, "description": self.description, "tags": self.tags, "map": self.map,
+                "source": self.source.get("kind"), "elements": self.elements, "content_hash": self.content_hash,
+                "path": str(self.script_path)}
+
+
+@dataclass
+class BankDiff:
+    """Differences between two banks, by entry name."""
+
+    only_in_first: List[str] = field(default_factory=list)
+    only_in_second: List[str] = field(default_factory=list)
+    changed: List[str] = field(default_factory=list)
+    same: List[str] = field(default_factory=list)
+
+    @property
+    def identical(self) -> bool:
+        return not (self.only_in_first or self.only_in_second or self.changed)
+
+
+def _validate_sidecar(meta: Any, folder: Path) -> Dict[str, Any]:
+    """Check a sidecar; return it or raise ``ValueError`` saying what is wrong."""
+    if not isinstance(meta, dict):
+        raise ValueError("sidecar is not a JSON object")
+    version = meta.get("schema_version", 1)
+    if not isinstance(version, int) or version > SIDECAR_VERSION:
+        raise BankVersionError(
+            f"sidecar schema_version {version!r} is newer than this dv2s-gym supports ({SIDECAR_VERSION}); upgrade"
+        )
+    for key in ("description", "map"):
+        if not isinstance(meta.get(key), str) or not meta.get(key):
+            raise ValueError(f"sidecar field {key!r} is missing or not a non-empty string")
+    if not isinstance(meta.get("tags", []), list) or not all(isinstance(t, str) for t in meta.get("tags", [])):
+        raise ValueError("sidecar field 'tags' must be a list of strings")
+    try:
+        meta["elements"] = normalize_elements(meta.get("elements") or {})
+    except ElementError as error:
+        raise ValueError(f"sidecar elements: {error}") from None
+    source = meta.get("source") or {}
+    if source.get("kind") not in SOURCE_KINDS:
+        raise ValueError(f"sidecar source.kind must be one of {SOURCE_KINDS}, got {source.get('kind')!r}")
+    script = folder / SCRIPT
+    if not script.is_file():
+        raise ValueError(f"the script {SCRIPT} is missing")
+    return meta
+
+
+class Bank:
+    """A scenario bank folder. ``Bank()`` opens the bank shipped with dv2s-gym.
+
+    Args:
+        root: the bank folder (created on first write if it does not exist).
+    """
+
+    def __init__(self, root: Optional[PathLike] = None) -> None:
+        from scenario_bank.catalog import BANK_DIR
+
+        self.root = Path(root) if root is not None else BANK_DIR
+        self._entries: Dict[str, ScenarioEntry] = {}
+        self.problems: Dict[str, str] = {}
+        """Entries that could not be loaded, with the reason (name -> message)."""
+        self._load()
+
+    @classmethod
+    def open(cls, root: Optional[PathLike] = None) -> "Bank":
+        """Open a bank folder (the shipped bank by default)."""
+        return cls(root)
+
+    # ------------------------------------------------------------- loading
+    def _read_index(self) -> Dict[str, Any]:
+        index_path = self.root / INDEX
+        if not index_path.is_file():
+            return {"version": BANK_VERSION, "entries": {}}
+        try:
+            index = json.loads(index_path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return {"version": BANK_VERSION, "entries": {}}  # rebuilt from sidecars below
+        version = index.get("version", 0)
+        if not isinstance(version, int) or version > BANK_VERSION:
+            raise BankVersionError(
+                f"the bank at {self.root} has format version {version!r}, newer than this dv2s-gym "
+                f"supports ({BANK_VERSION}); upgrade dv2s-gym to read it"
+            )
+        return index
+
+    def _load(self, locked: bool = False) -> None:
+        index = self._read_index()
+        if locked:
+            self._clean_up()
+        elif self.root.is_dir() and any(self.root.glob(".journal-*.json")) and os.access(self.root, os.W_OK):
+            with self._lock():
+                self._clean_up()
+        cached: Dict[str, Any] = index.get("entries", {})
+        entries: Dict[str, ScenarioEntry] = {}
+        problems: Dict[str, str] = {}
+        fresh: Dict[str, Any] = {}
+        if self.root.is_dir():
+            with os.scandir(self.root) as it:
+                folders = sorted((d.name for d in it if d.is_dir() and not d.name.startswith(".")))
+            for name in folders:
+                folder = self.root / name
+                try:
+                    st = os.stat(folder / SIDECAR)
+                except FileNotFoundError:
+                    problems[name] = f"missing sidecar {name}/{SIDECAR}: re-add the scenario or restore the file"
+                    continue
+                stamp = [st.st_mtime_ns, st.st_size]
+                hit = cached.get(name)
+                if hit is not None and hit.get("stamp") == stamp:
+                    meta = hit["meta"]
+                else:
+                    try:
+                        meta = _validate_sidecar(json.loads((folder / SIDECAR).read_text(encoding="utf-8")), folder)
+                    except (ValueError, BankVersionError) as error:
+                        problems[name] = f"bad sidecar {name}/{SIDECAR}: {error}"
+                        continue
+                fresh[name] = {"stamp": stamp, "meta": meta}
+                entries[name] = ScenarioEntry(name, folder, meta)
+        self._entries, self.problems = entries, problems
+        if fresh != cached and self.root.is_dir() and os.access(self.root, os.W_OK):
+            try:
+                self._write_json_atomic(self.root / INDEX, {"version": BANK_VERSION, "entries": fresh})
+            except OSError:
+                pass  # the index is only a cache
+
+    def reload(self) -> None:
+        """Re-read the folder (other processes may have written)."""
+        self._load()
+
+    # ------------------------------------------------------------- reading
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def __contains__(self, name: str) -> bool:
+        return name in self._entries
+
+    def __iter__(self) -> Iterator[ScenarioEntry]:
+        return iter(self._entries.values())
+
+    def names(self) -> List[str]:
+        """Entry names, sorted."""
+        return sorted(self._entries)
+
+    def get(self, name: str) -> ScenarioEntry:
+        """One entry; :class:`UnknownScenarioError` with near matches if absent."""
+        if name in self._entries:
+            return self._entries[name]
+        if name in self.problems:
+            raise UnknownScenarioError(f"scenario {name!r} is unusable: {self.problems[name]}")
+        near = difflib.get_close_matches(name, self._entries, n=3, cutoff=0.5)
+        hint = f" Did you mean {', '.join(repr(n) for n in near)}?" if near else ""
+        raise UnknownScenarioError(
+            f"unknown scenario {name!r}.{hint} The bank at {self.root} holds {len(self)} scenarios "
+            "(`dv2s bank list`). Pass a bank name, a path to a .scenic file, Scenic source text, or 'tag:<tag>'."
+        )
+
+    def list(
+        self,
+        tag: Optional[str] = None,
+        text: Optional[str] = None,
+        element: Optional[Union[str, Sequence[str]]] = None,
+        map: Optional[str] = None,
+        source: Optional[str] = None,
+    ) -> List[ScenarioEntry]:
+        """Entries matching every given filter, sorted by name.
+
+        ``text`` is a case-insensitive substring of the name or description;
+        ``element`` a participant (``"pedestrian"``), an action (``"cut_in"`` or
+        ``"car:cut_in"``), a relation (``"oncoming"``) or a road type.
+        """
+        wanted = [element] if isinstance(element, str) else list(element or [])
+        needle = text.lower() if text else None
+        out = []
+        for name in sorted(self._entries):
+            entry = self._entries[name]
+            if tag is not None and tag not in entry.meta.get("tags", ()):
+                continue
+            if map is not None and entry.meta.get("map") != map:
+                continue
+            if source is not None and (entry.meta.get("source") or {}).get("kind") != source:
+                continue
+            if needle is not None and needle not in name.lower() and needle not in entry.meta.get("description", "").lower():
+                continue
+            if wanted and not all(_has_element(entry.meta.get("elements") or {}, w) for w in wanted):
+                continue
+            out.append(entry)
+        return out
+
+    def tags(self) -> List[str]:
+        """Every tag in the bank."""
+        return sorted({t for e in self._entries.values() for t in e.meta.get("tags", ())})
+
+    def sample(
+        self,
+        rng: Union[None, int, random.Random] = None,
+        weights: Union[None, Mapping[str, float], Callable[[ScenarioEntry], float]] = None,
+        candidates: Optional[Iterable[str]] = None,
+    ) -> ScenarioEntry:
+        """Draw one entry, uniformly or by ``weights`` (a name->weight map or a function of the entry)."""
+        names = sorted(candidates) if candidates is not None else self.names()
+        if not names:
+            raise BankError(f"the bank at {self.root} holds no scenarios to sample")
+        if not isinstance(rng, random.Random):
+            rng = random.Random(rng)
+        if weights is None:
+            w = [1.0] * len(names)
+        elif callable(weights):
+            w = [float(weights(self.get(n))) for n in names]
+        else:
+            w = [float(weights.get(n, 0.0)) for n in names]
+        if any(x < 0 for x in w) or sum(w) <= 0:
+            raise BankError("sampling weights must be non-negative with a positive sum")
+        return self.get(rng.choices(names, weights=w, k=1)[0])
+
+    def stats(self) -> Dict[str, Any]:
+        """Counts by map, tag, source kind, road type and participant."""
+        def count(values: Iterable[str]) -> Dict[str, int]:
+            out: Dict[str, int] = {}
+            for v in values:
+                out[v] = out.get(v, 0) + 1
+            return dict(sorted(out.items()))
+
+        entries = list(self._entries.values())
+        return {
+            "root": str(self.root),
+            "version": BANK_VERSION,
+            "scenarios": len(entries),
+            "problems": len(self.problems),
+            "by_map": count(e.map or "?" for e in entries),
+            "by_source": count(e.source.get("kind", "?") for e in entries),
+            "by_road": count(e.elements.get("road") or "?" for e in entries),
+            "by_tag": count(t for e in entries for t in e.tags),
+            "by_participant": count(p for e in entries for p in set(e.elements.get("participants", []))),
+        }
+
+    def find_duplicate(self, script: str, elements: Optional[Mapping[str, Any]], map_name: Optional[str]) -> Optional[Tuple[str, str]]:
+        """``(name, how)`` of an entry identical to this script, or ``None``."""
+        digest = content_hash(script)
+        for entry in self._entries.values():
+            if entry.content_hash == digest:
+                return entry.name, "byte-for-byte identical"
+        if elements is not None:
+            key = semantic_key(elements, map_name, script)
+            for entry in self._entries.values():
+                if entry.map == map_name and element_set(entry.elements) == element_set(elements):
+                    if semantic_key(entry.elements, entry.map, entry.script) == key:
+                        return entry.name, "semantically identical (same elements, map and parameter ranges)"
+        return None
+
+    # ------------------------------------------------------------- writing
+    @contextmanager
+    def _lock(self) -> Iterator[None]:
+        self.root.mkdir(parents=True, exist_ok=True)
+        with open(self.root / ".lock", "a+") as handle:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
+            try:
+                yield
+            finally:
+                fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
+
+    @staticmethod
+    def _write_json_atomic(path: Path, data: Any) -> None:
+        tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
+        try:
+            with open(tmp, "w", encoding="utf-8") as handle:
+                json.dump(data, handle, indent=1, sort_keys=True)
+                handle.flush()
+                os.fsync(handle.fileno())
+            os.replace(tmp, path)
+        finally:
+            if tmp.exists():
+                tmp.unlink()
+
+    def _stage_entry(self, name: str, script: str, meta: Dict[str, Any]) -> Path:
+        staging = self.root / f".staging-{name}-{uuid.uuid4().hex[:12]}"
+        staging.mkdir(parents=True)
+        try:
+            for file, text in ((SCRIPT, script), (SIDECAR, json.dumps(meta, indent=2, sort_keys=True) + "\n")):
+                with open(staging / file, "w", encoding="utf-8") as handle:
+                    handle.write(text)
+                    handle.flush()
+                    os.fsync(handle.fileno())
+        except OSError as error:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise _write_error(error, self.root) from None
+        return staging
+
+    def add(
+        self,
+        script: str,
+        description: str,
+        *,
+        name: Optional[str] = None,
+        elements: Optional[Mapping[str, Any]] = None,
+        tags: Sequence[str] = (),
+        map: Optional[str] = None,
+        provenance: Optional[Mapping[str, Any]] = None,
+        use_case: Optional[str] = None,
+    ) -> ScenarioEntry:
+        """Add a scenario atomically; returns the new entry.
+
+        Refuses (:class:`DuplicateScenarioError`, naming the existing entry) a
+        script that is byte-for-byte or semantically identical to one in the
+        bank, and (:class:`~scenario_bank.safety.UnsafeScenarioError`) a script
+        failing the safety check. ``provenance`` keys: kind (hand-written, generated, mined), video,
+        parent, seed, generator, model, context_hash, date.
+        """
+        meta = self._make_meta(script, description, name, elements, tags, map, provenance, use_case)
+        findings = check_script(script)
+        if findings:
+            raise UnsafeScenarioError(findings, f"scenario {meta['name']!r}")
+        with self._lock():
+            self._load(locked=True)
+            name = meta["name"] = self._free_name(meta["name"], explicit=name is not None)
+            duplicate = self.find_duplicate(script, meta["elements"], meta["map"])
+            if duplicate is not None:
+                existing, how = duplicate
+                raise DuplicateScenarioError(
+                    f"not added: the script is {how} to bank entry {existing!r}; use that entry or change the script",
+                    existing,
+                )
+            staging = self._stage_entry(name, script, meta)
+            self._commit(staging, name)
+            self._load(locked=True)
+        return self._entries[name]
+
+    def _commit(self, staging: Path, name: str) -> None:
+        try:
+            os.rename(staging, self.root / name)
+        except OSError as error:
+            shutil.rmtree(staging, ignore_errors=True)
+            if error.errno in (errno.EEXIST, errno.ENOTEMPTY):
+                raise BankError(f"an entry named {name!r} appeared while adding; retry with another name") from None
+            raise _write_error(error, self.root) from None
+
+    def _free_name(self, name: str, explicit: bool) -> str:
+        if name not in self._entries and not (self.root / name).exists():
+            return name
+        if explicit:
+            raise BankError(f"the bank already has an entry named {name!r}; choose another name or remove it first")
+        k = 2
+        while f"{name}_{k}" in self._entries or (self.root / f"{name}_{k}").exists():
+            k += 1
+        return f"{name}_{k}"
+
+    def _make_meta(self, script, description, name, elements, tags, map_name, provenance, use_case) -> Dict[str, Any]:
+        if not isinstance(script, str) or not script.strip():
+            raise BankError("the script is empty")
+        if not description or not description.strip():
+            raise BankError("a scenario needs a natural-language description")
+        if map_name is None:
+            match = re.search(r"^\s*param\s+map\s*=\s*['\"]([^'\"]+)['\"]", script, re.M)
+            map_name = Path(match.group(1)).stem if match else None
+        if not map_name:
+            raise BankError("could not tell the scenario's map: pass map=... or set `param map = '<name>'`")
+        name = name or _slug(description)
+        if not _NAME.match(name):
+            raise BankError(f"invalid scenario name {name!r}: use lowercase letters, digits, '_' or '-'")
+        try:
+            elements = normalize_elements(elements or {})
+        except ElementError as error:
+            raise BankError(f"invalid elements: {error}") from None
+        source = {key: None for key in _PROVENANCE_FIELDS}
+        source.update(dict(provenance or {}))
+        source["kind"] = source.get("kind") or "hand-written"
+        if source["kind"] not in SOURCE_KINDS:
+            raise BankError(f"provenance kind must be one of {SOURCE_KINDS}, got {source['kind']!r}")
+        source["date"] = source.get("date") or _dt.date.today().isoformat()
+        return {
+            "schema_version": SIDECAR_VERSION,
+            "name": name,
+            "description": description.strip(),
+            "elements": elements,
+            "tags": sorted(set(tags)),
+            "map": map_name,
+            "use_case": use_case,
+            "source": source,
+            "content_hash": content_hash(script),
+        }
+
+    def remove(self, name: str) -> None:
+        """Remove an entry atomically."""
+        with self._lock():
+            self._load(locked=True)
+            if name not in self._entries and name not in self.problems:
+                self.get(name)  # raises with near matches
+            trash = self.root / f".trash-{name}-{uuid.uuid4().hex[:12]}"
+            os.rename(self.root / name, trash)
+            shutil.rmtree(trash, ignore_errors=True)
+            self._load(locked=True)
+
+    # ------------------------------------------------------- export/import
+    def export(self, archive: PathLike, names: Optional[Iterable[str]] = None) -> Path:
+        """Write entries (all by default) to one ``.tar.gz`` archive; returns its path."""
+        archive = Path(archive)
+        chosen = sorted(names) if names is not None else self.names()
+        for n in chosen:
+            self.get(n)
+        archive.parent.mkdir(parents=True, exist_ok=True)
+        tmp = archive.with_name(f".{archive.name}.{uuid.uuid4().hex}.tmp")
+        try:
+            with tarfile.open(tmp, "w:gz") as tar:
+                header = json.dumps({"dv2s_bank_archive": BANK_VERSION, "entries": chosen}).encode()
+                _add_bytes(tar, "bank-archive.json", header)
+                for n in chosen:
+                    entry = self._entries[n]
+                    _add_bytes(tar, f"{n}/{SCRIPT}", entry.script_path.read_bytes())
+                    _add_bytes(tar, f"{n}/{SIDECAR}", (entry.folder / SIDECAR).read_bytes())
+            os.replace(tmp, archive)
+        except OSError as error:
+            raise _write_error(error, archive.parent) from None
+        finally:
+            if tmp.exists():
+                tmp.unlink()
+        return archive
+
+    def import_archive(self, archive: PathLike, on_duplicate: str = "skip") -> Dict[str, List[str]]:
+        """Import an archive written by :meth:`export`; all or nothing.
+
+        Entries identical to existing ones are skipped (``on_duplicate="skip"``)
+        or abort the import (``"error"``). Returns ``{"added": [...], "skipped": [...]}``.
+        """
+        if on_duplicate not in ("skip", "error"):
+            raise ValueError("on_duplicate must be 'skip' or 'error'")
+        staged: List[Tuple[str, Path]] = []
+        added: List[str] = []
+        skipped: List[str] = []
+        with self._lock():
+            self._load(locked=True)
+            with tempfile.TemporaryDirectory(dir=self.root, prefix=".import-") as unpack:
+                members = _safe_extract(Path(archive), Path(unpack))
+                header = json.loads(members.get("bank-archive.json", b"{}") or b"{}")
+                version = header.get("dv2s_bank_archive")
+                if not isinstance(version, int):
+                    raise BankError(f"{archive} is not a dv2s bank archive (no bank-archive.json header)")
+                if version > BANK_VERSION:
+                    raise BankVersionError(f"{archive} was written by a newer dv2s-gym (format {version}); upgrade")
+                journal = self.root / f".journal-{uuid.uuid4().hex[:12]}.json"
+                try:
+                    for n in header.get("entries", []):
+                        folder = Path(unpack) / n
+                        try:
+                            meta = _validate_sidecar(json.loads((folder / SIDECAR).read_text(encoding="utf-8")), folder)
+                        except (OSError, ValueError) as error:
+                            raise BankError(f"archive entry {n!r} is broken: {error}; nothing was imported") from None
+                        script = (folder / SCRIPT).read_text(encoding="utf-8")
+                        if meta.get("content_hash") != content_hash(script):
+                            raise BankError(f"archive entry {n!r}: script does not match its content_hash; nothing was imported")
+                        duplicate = self.find_duplicate(script, meta["elements"], meta["map"])
+                        if duplicate is None:
+                            duplicate = next(((a, "identical to another archive entry") for a, s in staged
+                                              if content_hash((s / SCRIPT).read_text(encoding="utf-8")) == meta["content_hash"]), None)
+                        if duplicate is not None:
+                            if on_duplicate == "error":
+                                raise DuplicateScenarioError(
+                                    f"archive entry {n!r} is {duplicate[1]} to {duplicate[0]!r}; nothing was imported",
+                                    duplicate[0])
+                            skipped.append(n)
+                            continue
+                        target = self._free_name(n, explicit=False)
+                        while target in [t for t, _ in staged]:
+                            target = f"{target}_i"
+                        meta["name"] = target
+                        staged.append((target, self._stage_entry(target, script, meta)))
+                    self._write_json_atomic(journal, {"adding": [t for t, _ in staged]})
+                    for target, staging in staged:
+                        self._commit(staging, target)
+                        added.append(target)
+                    journal.unlink()
+                except BaseException:
+                    for target in added:  # roll back what was renamed in
+                        shutil.rmtree(self.root / target, ignore_errors=True)
+                    for _, staging in staged:
+                        shutil.rmtree(staging, ignore_errors=True)
+                    if journal.exists():
+                        journal.unlink()
+                    raise
+            self._load(locked=True)
+        return {"added": added, "skipped": skipped}
+
+    def _clean_up(self) -> None:
+        """Roll back imports a crash interrupted and drop leftovers of crashed writers.
+
+        Runs under the writer lock only: then no other writer is mid-way.
+        """
+        if not self.root.is_dir():
+            return
+        for journal in self.root.glob(".journal-*.json"):
+            try:
+                names = json.loads(journal.read_text(encoding="utf-8")).get("adding", [])
+            except (OSError, ValueError):
+                names = []
+            for n in names:
+                if _NAME.match(n):
+                    shutil.rmtree(self.root / n, ignore_errors=True)
+            journal.unlink(missing_ok=True)
+        for pattern in (".staging-*", ".trash-*", ".import-*"):
+            for stale in self.root.glob(pattern):
+                shutil.rmtree(stale, ignore_errors=True)
+
+    # ---------------------------------------------------------------- diff
+    def diff(self, other: "Bank") -> BankDiff:
+        """Entries only here, only there, changed (different content hash or metadata), same."""
+        out = BankDiff()
+        for n in sorted(set(self._entries) | set(other._entries)):
+            if n not in other._entries:
+                out.only_in_first.append(n)
+            elif n not in self._entries:
+                out.only_in_second.append(n)
+            else:
+                a, b = self._entries[n].meta, other._entries[n].meta
+                strip = lambda m: {k: v for k, v in m.items() if k != "name"}  # noqa: E731
+                (out.same if strip(a) == strip(b) else out.changed).append(n)
+        return out
+
+
+def _has_element(elements: Mapping[str, Any], wanted: str) -> bool:
+    if ":" in wanted:
+        who, what = wanted.split(":", 1)
+        return [who, what] in elements.get("actions", [])
+    return (
+        wanted == elements.get("road")
+        or wanted in elements.get("participants", [])
+        or any(a[1] == wanted for a in elements.get("actions", []))
+        or any(r[1] == wanted for r in elements.get("relations", []))
+    )
+
+
+def _slug(text: str) -> str:
+    words = re.findall(r"[a-z0-9]+", text.lower())
+    stop = {"the", "a", "an", "of", "and", "in", "on", "is", "it", "its", "to", "car", "ego"}
+    slug = "_".join([w for w in words if w not in stop][:6]) or "scenario"
+    return slug[:60]
+
+
+def _write_error(error: OSError, where: Path) -> BankError:
+    if error.errno == errno.ENOSPC:
+        return BankError(f"the disk is full while writing to {where}; free some space and retry (the bank is unchanged)")
+    return BankError(f"could not write to {where}: {error.strerror or error}; the bank is unchanged")
+
+
+def _add_bytes(tar: tarfile.TarFile, name: str, data: bytes) -> None:
+    info = tarfile.TarInfo(name)
+    info.size = len(data)
+    info.mtime = 0
+    tar.addfile(info, io.BytesIO(data))
+
+
+def _safe_extract(archive: Path, dest: Path) -> Dict[str, bytes]:
+    """Extract regular files of a tar archive under ``dest`` (no links, no escaping paths)."""
+    if not archive.is_file():
+        raise FileNotFoundError(f"archive {str(archive)!r} does not exist")
+    members: Dict[str, bytes] = {}
+    try:
+        with tarfile.open(archive, "r:*") as tar:
+            for member in tar.getmembers():
+                path = Path(member.name)
+                if not member.isfile() or path.is_absolute() or ".." in path.parts:
+                    raise BankError(f"{archive} holds an unsafe member {member.name!r}; refusing to import it")
+                data = tar.extractfile(member).read()
+                members[member.name] = data
+                (dest / path).parent.mkdir(parents=True, exist_ok=True)
+                (dest / path).write_bytes(data)
+    except (tarfile.TarError, EOFError, OSError) as error:
+        if isinstance(error, OSError) and error.errno == errno.ENOSPC:
+            raise _write_error(error, dest) from None
+        raise BankError(f"{archive} is not a readable bank archive: {error}") from None
+    return members

@@ -1,0 +1,109 @@
+"""The semantic-element vocabulary of dv2s-gym and its JSON format.
+
+Every stage speaks it: the video analyzer writes it, the scenario generator reads
+it, bank sidecars store it, labels of the evaluation set use it, and the metrics
+(SCS, HR, SP, E2E-SC) compare sets of it. A label looks like::
+
+    {"road": "highway",
+     "participants": ["ego", "car"],
+     "actions": [["car", "brake"]],
+     "relations": [["car", "ahead_of", "ego"]]}
+
+* ``road``: one of :data:`ROADS`.
+* ``participants``: a multiset (list with repeats) of :data:`PARTICIPANTS`;
+  ``["ego", "pedestrian", "pedestrian"]`` is an ego and two pedestrians.
+* ``actions``: ``[participant type, action]`` pairs, action from :data:`ACTIONS`.
+* ``relations``: ``[participant type, relation, participant type]`` triples,
+  relation from :data:`RELATIONS`.
+
+For the metrics a label becomes a set of hashable elements (:func:`element_set`):
+``("road", r)``, ``("participant", type, k)`` for the k-th of a type (so counts
+matter), ``("action", type, action)`` and ``("relation", a, rel, b)``.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Dict, FrozenSet, Iterable, List, Mapping, Tuple
+
+__all__ = [
+    "ROADS",
+    "PARTICIPANTS",
+    "ACTIONS",
+    "RELATIONS",
+    "ElementError",
+    "normalize_elements",
+    "element_set",
+    "empty_elements",
+]
+
+ROADS = ("highway", "straight_road", "intersection", "t_junction", "three_way", "roundabout", "merge")
+PARTICIPANTS = ("ego", "car", "truck", "pedestrian", "obstacle")
+ACTIONS = (
+    "brake", "stop", "accelerate", "lane_change_left", "lane_change_right", "cut_in", "merge",
+    "turn_left", "turn_right", "cross", "collide", "keep_lane", "go_straight", "overtake", "drift",
+)
+RELATIONS = ("ahead_of", "behind", "left_of", "right_of", "oncoming", "same_lane", "crossing_path")
+
+Element = Tuple[Any, ...]
+
+
+class ElementError(ValueError):
+    """Elements that do not follow the vocabulary."""
+
+
+def empty_elements() -> Dict[str, Any]:
+    """An element record with nothing in it."""
+    return {"road": None, "participants": [], "actions": [], "relations": []}
+
+
+def _check(value: str, allowed: Iterable[str], what: str) -> str:
+    if value not in allowed:
+        raise ElementError(f"unknown {what} {value!r}; use one of: {', '.join(allowed)}")
+    return value
+
+
+def normalize_elements(data: Mapping[str, Any]) -> Dict[str, Any]:
+    """Validate an element record and return it in canonical form (sorted, de-duplicated).
+
+    Raises :class:`ElementError` naming the offending entry.
+    """
+    if not isinstance(data, Mapping):
+        raise ElementError(f"elements must be a JSON object, got {type(data).__name__}")
+    unknown = set(data) - {"road", "participants", "actions", "relations"}
+    if unknown:
+        raise ElementError(f"unknown element fields {sorted(unknown)}; allowed: road, participants, actions, relations")
+    road = data.get("road")
+    if road is not None:
+        _check(road, ROADS, "road type")
+    participants = sorted(_check(p, PARTICIPANTS, "participant") for p in data.get("participants", []))
+    actions = sorted({(_check(a[0], PARTICIPANTS, "participant"), _check(a[1], ACTIONS, "action"))
+                      for a in _pairs(data.get("actions", []), 2, "action")})
+    relations = sorted({(_check(r[0], PARTICIPANTS, "participant"), _check(r[1], RELATIONS, "relation"),
+                         _check(r[2], PARTICIPANTS, "participant"))
+                        for r in _pairs(data.get("relations", []), 3, "relation")})
+    return {"road": road, "participants": participants, "actions": [list(a) for a in actions],
+            "relations": [list(r) for r in relations]}
+
+
+def _pairs(items: Iterable, size: int, what: str) -> List[Tuple[str, ...]]:
+    out = []
+    for item in items:
+        if not isinstance(item, (list, tuple)) or len(item) != size:
+            raise ElementError(f"each {what} must be a list of {size} strings, got {item!r}")
+        out.append(tuple(item))
+    return out
+
+
+def element_set(data: Mapping[str, Any]) -> FrozenSet[Element]:
+    """The set of semantic elements of a record, as the metrics compare them."""
+    data = normalize_elements(data)
+    elements = set()
+    if data["road"] is not None:
+        elements.add(("road", data["road"]))
+    counts: Dict[str, int] = {}
+    for p in data["participants"]:
+        counts[p] = counts.get(p, 0) + 1
+        elements.add(("participant", p, counts[p]))
+    elements.update(("action", a, b) for a, b in data["actions"])
+    elements.update(("relation", a, r, b) for a, r, b in data["relations"])
+    return frozenset(elements)

@@ -1,0 +1,261 @@
+"""The scenario bank as a product: API, dedup, atomic writes, concurrency, bad sidecars, versions."""
+
+import errno
+import json
+import multiprocessing as mp
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from scenario_bank.bank import (
+    BANK_VERSION,
+    Bank,
+    BankError,
+    BankVersionError,
+    DuplicateScenarioError,
+    UnknownScenarioError,
+    content_hash,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+
+SCRIPT = textwrap.dedent(
+    """\
+    param map = 'highway_straight'
+    model scenic.domains.driving.model
+    param gap = Range(10, 30)
+    lane = Uniform(*network.lanes)
+    ego = new Car at lane.centerline.pointAlongBy(Range(100, 500)), with speed 20
+    lead = new Car following roadDirection from ego for globalParameters.gap,
+        with behavior FollowLaneBehavior(target_speed={speed})
+    """
+)
+ELEMENTS = {"road": "highway", "participants": ["ego", "car"], "actions": [["car", "keep_lane"]],
+            "relations": [["car", "ahead_of", "ego"]]}
+
+
+def script(speed: int = 15, extra: str = "") -> str:
+    return SCRIPT.format(speed=speed) + extra
+
+
+def add(bank: Bank, name: str, speed: int = 15, **kw) -> object:
+    kw.setdefault("elements", ELEMENTS)
+    kw.setdefault("tags", ["highway", "test"])
+    return bank.add(script(speed, kw.pop("extra", "")), f"A car ahead of the ego ({name}).", name=name, **kw)
+
+
+@pytest.fixture
+def bank(tmp_path):
+    return Bank(tmp_path / "bank")
+
+
+def test_add_get_list_filter_remove(bank):
+    entry = add(bank, "lead_slow", provenance={"kind": "generated", "video": "v.mp4", "generator": "rules",
+                                               "model": None, "context_hash": "abc", "seed": 3})
+    assert entry.name == "lead_slow" and entry.map == "highway_straight"
+    assert entry.content_hash == content_hash(entry.script)
+    assert entry.source["kind"] == "generated" and entry.source["video"] == "v.mp4" and entry.source["date"]
+    add(bank, "lead_fast", speed=30, tags=["highway", "fast"],
+        elements={**ELEMENTS, "actions": [["car", "brake"]]})
+    reopened = Bank(bank.root)
+    assert reopened.names() == ["lead_fast", "lead_slow"]
+    assert [e.name for e in reopened.list(tag="fast")] == ["lead_fast"]
+    assert [e.name for e in reopened.list(element="car:brake")] == ["lead_fast"]
+    assert [e.name for e in reopened.list(element="brake")] == ["lead_fast"]
+    assert [e.name for e in reopened.list(text="LEAD_SLOW")] == ["lead_slow"]
+    assert [e.name for e in reopened.list(source="generated")] == ["lead_slow"]
+    assert len(reopened.list(element=["highway", "ahead_of"])) == 2
+    reopened.remove("lead_slow")
+    assert Bank(bank.root).names() == ["lead_fast"]
+    with pytest.raises(UnknownScenarioError, match="lead_fast"):
+        Bank(bank.root).get("lead_fas")
+
+
+def test_duplicates_are_refused_with_the_existing_name(bank):
+    add(bank, "original")
+    with pytest.raises(DuplicateScenarioError, match="original") as exc:
+        bank.add(script(), "same bytes", name="copy", elements=ELEMENTS)
+    assert exc.value.existing == "original"
+    # Same elements and same parameter ranges, different text (speed literal, comment): semantic duplicate.
+    with pytest.raises(DuplicateScenarioError, match="semantically identical.*original"):
+        bank.add(script(16, "# another comment\n"), "reworded", name="reworded", elements=ELEMENTS)
+    # Different parameter range: a new scenario.
+    other = script().replace("Range(10, 30)", "Range(5, 12)")
+    assert bank.add(other, "closer lead", name="closer", elements=ELEMENTS).name == "closer"
+
+
+def test_bad_input_to_add(bank):
+    with pytest.raises(BankError, match="description"):
+        bank.add(script(), " ", name="x")
+    with pytest.raises(BankError, match="unknown action"):
+        bank.add(script(), "d", name="x", elements={"actions": [["car", "fly"]]})
+    with pytest.raises(BankError, match="invalid scenario name"):
+        bank.add(script(), "d", name="Bad Name!")
+    with pytest.raises(BankError, match="provenance kind"):
+        bank.add(script(), "d", name="x", provenance={"kind": "stolen"})
+    with pytest.raises(ValueError, match="safety check.*import os"):
+        bank.add(script(extra="import os\n"), "d", name="x")
+    assert len(Bank(bank.root)) == 0
+
+
+def test_sample_by_weights_and_stats(bank):
+    for k in range(3):
+        add(bank, f"s{k}", speed=10 + k, extra=f"param p{k} = Range({k}, {k + 1})\n")
+    counts = {n: 0 for n in bank.names()}
+    for seed in range(300):
+        counts[bank.sample(seed, weights={"s0": 0.0, "s1": 1.0, "s2": 3.0}).name] += 1
+    assert counts["s0"] == 0 and counts["s2"] > 2 * counts["s1"] > 0
+    assert bank.sample(1).name == bank.sample(1).name
+    with pytest.raises(BankError, match="weights"):
+        bank.sample(0, weights={"s0": 0.0})
+    stats = bank.stats()
+    assert stats["scenarios"] == 3 and stats["by_map"] == {"highway_straight": 3}
+
+
+def test_export_import_and_diff(bank, tmp_path):
+    add(bank, "a", speed=11)
+    add(bank, "b", speed=12, extra="param q = Range(1, 2)\n")
+    archive = bank.export(tmp_path / "bank.tar.gz")
+    other = Bank(tmp_path / "other")
+    result = other.import_archive(archive)
+    assert sorted(result["added"]) == ["a", "b"] and result["skipped"] == []
+    assert bank.diff(other).identical
+    again = other.import_archive(archive)
+    assert again == {"added": [], "skipped": ["a", "b"]}
+    with pytest.raises(DuplicateScenarioError):
+        other.import_archive(archive, on_duplicate="error")
+    other.remove("a")
+    add(other, "c", speed=13, extra="param r = Range(3, 4)\n")
+    diff = bank.diff(other)
+    assert diff.only_in_first == ["a"] and diff.only_in_second == ["c"] and diff.same == ["b"]
+
+
+def test_import_of_a_corrupt_or_foreign_archive_changes_nothing(bank, tmp_path):
+    add(bank, "keep")
+    garbage = tmp_path / "garbage.tar.gz"
+    garbage.write_bytes(b"not an archive at all")
+    with pytest.raises(BankError, match="not a readable bank archive"):
+        bank.import_archive(garbage)
+    assert Bank(bank.root).names() == ["keep"]
+    assert not [p for p in bank.root.iterdir() if p.name.startswith(".") and p.name not in (".lock", ".bank.json")]
+
+
+def test_bad_sidecars_are_reported_and_the_rest_stays_usable(bank):
+    for k, name in enumerate(("good", "corrupt", "edited", "missing")):
+        add(bank, name, speed=k, extra=f"param {name} = Range(0, {k + 1})\n")
+    (bank.root / "corrupt" / "meta.json").write_text("{ not json")
+    meta = json.loads((bank.root / "edited" / "meta.json").read_text())
+    meta["elements"]["actions"] = [["car", "teleport"]]
+    (bank.root / "edited" / "meta.json").write_text(json.dumps(meta))
+    (bank.root / "missing" / "meta.json").unlink()
+    reopened = Bank(bank.root)
+    assert reopened.names() == ["good"]
+    assert set(reopened.problems) == {"corrupt", "edited", "missing"}
+    assert "teleport" in reopened.problems["edited"] and "missing sidecar" in reopened.problems["missing"]
+    with pytest.raises(UnknownScenarioError, match="unusable"):
+        reopened.get("corrupt")
+
+
+def test_newer_versions_are_refused(bank):
+    add(bank, "x")
+    index = json.loads((bank.root / "bank.json").read_text())
+    index["version"] = BANK_VERSION + 1
+    (bank.root / "bank.json").write_text(json.dumps(index))
+    with pytest.raises(BankVersionError, match="newer"):
+        Bank(bank.root)
+    index["version"] = BANK_VERSION
+    (bank.root / "bank.json").write_text(json.dumps(index))
+    meta = json.loads((bank.root / "x" / "meta.json").read_text())
+    meta["schema_version"] = 99
+    (bank.root / "x" / "meta.json").write_text(json.dumps(meta))
+    assert "newer" in Bank(bank.root).problems["x"]
+
+
+def test_full_disk_mid_write_leaves_the_bank_unchanged(bank, monkeypatch):
+    add(bank, "before")
+    real_fsync = os.fsync
+    calls = {"n": 0}
+
+    def failing_fsync(fd):
+        calls["n"] += 1
+        if calls["n"] == 2:  # the sidecar of the new entry
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", failing_fsync)
+    with pytest.raises(BankError, match="disk is full.*unchanged"):
+        add(bank, "during", speed=40, extra="param z = Range(7, 8)\n")
+    monkeypatch.setattr(os, "fsync", real_fsync)
+    reopened = Bank(bank.root)
+    assert reopened.names() == ["before"] and not reopened.problems
+    assert not list(bank.root.glob(".staging-*"))
+
+
+_WRITER = textwrap.dedent(
+    """
+    import sys, time
+    sys.path.insert(0, {root!r})
+    from scenario_bank.bank import Bank
+    import scenario_bank.bank as bank_module
+    bank = Bank({bank!r})
+    real_commit = bank_module.Bank._commit
+    def slow_commit(self, staging, name):
+        print("staged", flush=True)
+        time.sleep(30)  # killed here, between writing the entry and renaming it in
+        real_commit(self, staging, name)
+    bank_module.Bank._commit = slow_commit
+    bank.add({script!r}, "killed while adding", name="victim")
+    """
+)
+
+
+def test_killed_writer_leaves_the_bank_as_it_was(bank):
+    add(bank, "before")
+    code = _WRITER.format(root=str(ROOT), bank=str(bank.root), script=script(33, "param k = Range(1, 9)\n"))
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "staged"
+    assert list(bank.root.glob(".staging-victim-*"))  # it really was mid-write
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    reopened = Bank(bank.root)
+    assert reopened.names() == ["before"] and not reopened.problems
+    add(reopened, "after", speed=44, extra="param a2 = Range(2, 3)\n")  # a later writer cleans up
+    assert not list(bank.root.glob(".staging-*"))
+    assert Bank(bank.root).names() == ["after", "before"]
+
+
+def _parallel_writer(root: str, worker: int, count: int) -> None:
+    bank = Bank(root)
+    for k in range(count):
+        text = script(worker * 100 + k, f"param w{worker}_{k} = Range({worker}, {k + worker + 1})\n")
+        bank.add(text, f"worker {worker} entry {k}", name=f"w{worker}_{k}", elements=ELEMENTS)
+
+
+def test_parallel_writers_never_lose_or_corrupt_entries(bank):
+    bank.root.mkdir(parents=True)
+    ctx = mp.get_context("spawn")
+    workers = [ctx.Process(target=_parallel_writer, args=(str(bank.root), w, 8)) for w in range(4)]
+    for p in workers:
+        p.start()
+    for p in workers:
+        p.join(120)
+        assert p.exitcode == 0
+    reopened = Bank(bank.root)
+    assert len(reopened) == 32 and not reopened.problems
+    index = json.loads((bank.root / "bank.json").read_text())
+    assert sorted(index["entries"]) == reopened.names()
+    for entry in reopened:
+        assert entry.content_hash == content_hash(entry.script)
+
+
+def test_stale_index_is_rebuilt_from_sidecars(bank):
+    add(bank, "one")
+    (bank.root / "bank.json").write_text("garbage")
+    assert Bank(bank.root).names() == ["one"]
+    assert json.loads((bank.root / "bank.json").read_text())["version"] == BANK_VERSION
