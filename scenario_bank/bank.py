@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
 
-from scenario_bank.elements import ElementError, element_set, normalize_elements
+from scenario_bank.elements import ElementError, normalize_elements
 from scenario_bank.safety import UnsafeScenarioError, check_script
 
 __all__ = [
@@ -247,6 +247,7 @@ class Bank:
         entries: Dict[str, ScenarioEntry] = {}
         problems: Dict[str, str] = {}
         fresh: Dict[str, Any] = {}
+        self._semantic_keys: Dict[str, str] = {}
         if self.root.is_dir():
             with os.scandir(self.root) as it:
                 folders = sorted((d.name for d in it if d.is_dir() and not d.name.startswith(".")))
@@ -259,16 +260,18 @@ class Bank:
                     continue
                 stamp = [st.st_mtime_ns, st.st_size]
                 hit = cached.get(name)
-                if hit is not None and hit.get("stamp") == stamp:
-                    meta = hit["meta"]
+                if hit is not None and hit.get("stamp") == stamp and "semantic_key" in hit:
+                    meta, key = hit["meta"], hit["semantic_key"]
                 else:
                     try:
                         meta = _validate_sidecar(json.loads((folder / SIDECAR).read_text(encoding="utf-8")), folder)
-                    except (ValueError, BankVersionError) as error:
+                        key = semantic_key(meta["elements"], meta["map"], (folder / SCRIPT).read_text(encoding="utf-8"))
+                    except (ValueError, BankVersionError, OSError) as error:
                         problems[name] = f"bad sidecar {name}/{SIDECAR}: {error}"
                         continue
-                fresh[name] = {"stamp": stamp, "meta": meta}
+                fresh[name] = {"stamp": stamp, "meta": meta, "semantic_key": key}
                 entries[name] = ScenarioEntry(name, folder, meta)
+                self._semantic_keys[name] = key
         self._entries, self.problems = entries, problems
         if fresh != cached and self.root.is_dir() and os.access(self.root, os.W_OK):
             try:
@@ -394,10 +397,9 @@ class Bank:
                 return entry.name, "byte-for-byte identical"
         if elements is not None:
             key = semantic_key(elements, map_name, script)
-            for entry in self._entries.values():
-                if entry.map == map_name and element_set(entry.elements) == element_set(elements):
-                    if semantic_key(entry.elements, entry.map, entry.script) == key:
-                        return entry.name, "semantically identical (same elements, map and parameter ranges)"
+            for name, other in self._semantic_keys.items():
+                if other == key:
+                    return name, "semantically identical (same elements, map and parameter ranges)"
         return None
 
     # ------------------------------------------------------------- writing
