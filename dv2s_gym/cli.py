@@ -168,10 +168,144 @@ def _cmd_bank_stats(args: argparse.Namespace) -> int:
     return 0
 
 
+def _llm_config(args: argparse.Namespace):
+    config = {k: getattr(args, k, None) for k in ("base_url", "model", "api_key")}
+    return {k: v for k, v in config.items() if v} or None
+
+
+def _cmd_describe(args: argparse.Namespace) -> int:
+    from dv2s_gym.pipeline.stages import describe
+
+    result = describe(args.video, backend=args.dra, camera=args.camera, question=args.question, fps=args.fps,
+                      max_frames=args.max_frames, max_pixels=args.max_pixels, llm_config=_llm_config(args))
+    _print(args, result.as_dict(), f"{result.text}\n\nelements: {json.dumps(result.elements)}")
+    return 0
+
+
+def _cmd_generate(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from dv2s_gym.pipeline.convert import generate_to_folder
+    from dv2s_gym.pipeline.semantics import elements_from_text
+    from dv2s_gym.pipeline.stages import Description
+
+    if args.from_file:
+        text = Path(args.from_file).read_text(encoding="utf-8")
+    elif args.description:
+        text = args.description
+    else:
+        raise ValueError("give a description in quotes or --from FILE")
+    description = Description(text.strip(), elements_from_text(text), backend="user")
+    report = generate_to_folder(description, Path(args.out), sg=args.sg, seed=args.seed,
+                                llm_config=_llm_config(args), seconds=args.seconds)
+    _print(args, report, _report_text(report, args.out))
+    return 0 if report.get("check", {}).get("ok") else 1
+
+
+def _report_text(report, out) -> str:
+    generation = report.get("generation", {})
+    check = report.get("check", {})
+    lines = [f"description: {report['description']['text']}"]
+    if generation.get("warnings"):
+        lines.append("could not place: " + "; ".join(generation["warnings"]))
+    if "error" in generation:
+        lines.append(f"generation failed: {generation['error']}")
+    if check:
+        stages = " ".join(f"{k}={'ok' if check.get(k) else 'FAIL'}" for k in ("safe", "compiled", "sampled", "ran"))
+        lines.append(f"checks: {stages}" + (f" ({check['error']})" if check.get("error") else ""))
+    for key in ("sp", "e2e_sc"):
+        if key in report:
+            lines.append(f"{key.upper().replace('_', '-')}: {report[key]:.2f}")
+    lines.append(f"written to {out}/ (description.txt, elements.json, scenario.scenic, preview.webm, report.json)")
+    return "\n".join(lines)
+
+
+def _convert_one(video: str, out: str, args_dict: dict) -> dict:
+    from dv2s_gym.pipeline.convert import convert_video
+
+    return convert_video(video, out, dra=args_dict["dra"], sg=args_dict["sg"], camera=args_dict["camera"],
+                         question=args_dict["question"], seed=args_dict["seed"], llm_config=args_dict["llm"],
+                         seconds=args_dict["seconds"])
+
+
+def _cmd_convert(args: argparse.Namespace) -> int:
+    from concurrent.futures import ProcessPoolExecutor
+    from pathlib import Path
+
+    from tqdm import tqdm
+
+    from dv2s_gym.pipeline.evaluate import VIDEO_SUFFIXES
+
+    source = Path(args.video)
+    if source.is_dir():
+        videos = sorted(p for p in source.iterdir() if p.suffix.lower() in VIDEO_SUFFIXES)
+        if not videos:
+            raise FileNotFoundError(f"no videos ({', '.join(VIDEO_SUFFIXES)}) in {source}")
+        outs = [Path(args.out) / v.stem for v in videos]
+    else:
+        videos, outs = [source], [Path(args.out)]
+    options = {"dra": args.dra, "sg": args.sg, "camera": args.camera, "question": args.question,
+               "seed": args.seed, "llm": _llm_config(args), "seconds": args.seconds}
+    reports = []
+    with tqdm(total=len(videos), desc="converting", unit="video", disable=args.json or len(videos) == 1) as bar:
+        if args.jobs > 1 and len(videos) > 1:
+            with ProcessPoolExecutor(max_workers=args.jobs) as pool:
+                futures = [pool.submit(_convert_one, str(v), str(o), options) for v, o in zip(videos, outs)]
+                for future in futures:
+                    reports.append(future.result())
+                    bar.update()
+        else:
+            for v, o in zip(videos, outs):
+                reports.append(_convert_one(str(v), str(o), options))
+                bar.update()
+    added = []
+    if args.add_to_bank:
+        added = [_add_converted(v, o, r, args) for v, o, r in zip(videos, outs, reports)]
+    if args.json:
+        print(json.dumps({"reports": reports, "added": added}, indent=2, default=str))
+    else:
+        for v, o, r in zip(videos, outs, reports):
+            print(f"== {v}\n{_report_text(r, o)}")
+        for name in added:
+            print(f"added to bank: {name}")
+    return 0 if all(r.get("check", {}).get("ok") for r in reports) else 1
+
+
+def _add_converted(video, out, report, args) -> str:
+    import datetime
+
+    from scenario_bank.bank import Bank
+
+    if not report.get("check", {}).get("ok"):
+        return f"(not added: {video} failed validation)"
+    generation = report["generation"]
+    description = report["description"]
+    provenance = {"kind": "generated", "video": str(video), "seed": args.seed,
+                  "generator": f"dra={args.dra},sg={args.sg}",
+                  "model": generation.get("model") or description.get("model"),
+                  "context_hash": generation.get("context_hash") or description.get("prompt_hash"),
+                  "date": datetime.date.today().isoformat()}
+    script = (out / "scenario.scenic").read_text(encoding="utf-8")
+    entry = Bank(args.bank).add(script, description["text"], elements=description["elements"],
+                                tags=["generated"], provenance=provenance, name=None)
+    return entry.name
+
+
+def _cmd_eval(args: argparse.Namespace) -> int:
+    from dv2s_gym.pipeline.evaluate import evaluate, format_results
+
+    from dv2s_gym.pipeline.evaluate import EVALSET_DIR
+
+    report = evaluate(args.stage, args.folder or EVALSET_DIR, dra=args.dra, sg=args.sg, llm_config=_llm_config(args),
+                      jobs=args.jobs, seconds=args.seconds, progress=not args.json)
+    _print(args, report, format_results(report))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``dv2s`` (every subcommand has ``--help``)."""
-    parser = argparse.ArgumentParser(prog="dv2s", description=__doc__.splitlines()[0] + " Turn driving videos "
-                                     "into Scenic scenarios and run them as Gymnasium episodes in highway-env.")
+    parser = argparse.ArgumentParser(prog="dv2s", description="dv2s-gym: turn driving videos into Scenic "
+                                     "scenarios and run them as Gymnasium episodes in highway-env.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     demo = sub.add_parser("demo", help="run every bank scenario with a rule-based ego; one video each and a table",
@@ -259,6 +393,69 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("archive")
     p.add_argument("--on-duplicate", choices=["skip", "error"], default="skip")
     bank_cmd("stats", "counts by map, source, road type, tag and participant", _cmd_bank_stats)
+    def llm_options(p):
+        p.add_argument("--base-url", help="OpenAI-compatible endpoint (default: $DV2S_LLM_BASE_URL)")
+        p.add_argument("--model", help="model name (default: $DV2S_LLM_MODEL)")
+        p.add_argument("--api-key", help="API key (default: $OPENAI_API_KEY)")
+
+    def video_options(p):
+        p.add_argument("--dra", choices=["bev", "openai"], default="bev",
+                       help="Driving Record Analyzer: bev (offline, bird's-eye renders) or openai (any VLM endpoint)")
+        p.add_argument("--camera", choices=["bev", "front", "rear", "chase"], default="bev", help="camera viewpoint")
+        p.add_argument("--question", help='video-specific question, e.g. "Why did the ego vehicle brake?"')
+
+    p = sub.add_parser("describe", help="describe a driving video (DRA)",
+                       description="Sample frames from a video and describe it in three sentences, with elements.")
+    p.add_argument("video")
+    video_options(p)
+    p.add_argument("--fps", type=float, default=2.0, help="frames sampled per second (default 2)")
+    p.add_argument("--max-frames", type=int, default=16, help="frame cap, spread over the whole video (default 16)")
+    p.add_argument("--max-pixels", type=int, default=448 * 448, help="pixel budget per frame (default 448*448)")
+    p.add_argument("--json", action="store_true")
+    llm_options(p)
+    p.set_defaults(func=_cmd_describe)
+
+    p = sub.add_parser("generate", help="turn a description into a validated Scenic scenario (SG)",
+                       description="Generate a Scenic script from a description (in quotes or --from FILE), "
+                       "check it (safety, compile, sample, run) and render a preview.")
+    p.add_argument("description", nargs="?")
+    p.add_argument("--from", dest="from_file", help="read the description from this file (e.g. an edited description.txt)")
+    p.add_argument("--sg", choices=["rules", "openai"], default="rules")
+    p.add_argument("--out", default="out/generated", help="output folder")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seconds", type=float, default=10.0, help="simulated seconds of the check run")
+    p.add_argument("--json", action="store_true")
+    llm_options(p)
+    p.set_defaults(func=_cmd_generate)
+
+    p = sub.add_parser("convert", help="video -> description -> Scenic scenario (D-V2S end to end)",
+                       description="Convert a video (or every video of a folder, in parallel) into a described, "
+                       "generated and validated Scenic scenario; optionally add it to the bank.")
+    p.add_argument("video", help="a video file or a folder of videos")
+    video_options(p)
+    p.add_argument("--sg", choices=["rules", "openai"], default="rules")
+    p.add_argument("--out", default="out/convert", help="output folder (one subfolder per video in batch mode)")
+    p.add_argument("--add-to-bank", action="store_true", help="add validated scenarios to the bank with provenance")
+    p.add_argument("--bank", default=None, help="bank folder for --add-to-bank (default: the shipped bank)")
+    p.add_argument("--jobs", type=int, default=1, help="parallel processes in batch mode")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seconds", type=float, default=10.0)
+    p.add_argument("--json", action="store_true")
+    llm_options(p)
+    p.set_defaults(func=_cmd_convert)
+
+    p = sub.add_parser("eval", help="SCS/HR (dra), SP (sg) or E2E-SC (e2e) over a labeled folder",
+                       description="Evaluate a stage over a folder of videos/descriptions with <name>.label.json "
+                       "files; prints mean ± sd per use case and overall.")
+    p.add_argument("stage", choices=["dra", "sg", "e2e"])
+    p.add_argument("folder", nargs="?", default=None, help="labeled folder (default: the shipped evaluation set)")
+    p.add_argument("--dra", choices=["bev", "openai"], default="bev")
+    p.add_argument("--sg", choices=["rules", "openai"], default="rules")
+    p.add_argument("--jobs", type=int, default=1)
+    p.add_argument("--seconds", type=float, default=10.0)
+    p.add_argument("--json", action="store_true")
+    llm_options(p)
+    p.set_defaults(func=_cmd_eval)
     return parser
 
 

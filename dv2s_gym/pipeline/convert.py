@@ -1,0 +1,168 @@
+"""``dv2s convert``: video -> description -> Scenic script -> validated scenario (-> bank).
+
+The output folder of one conversion holds, side by side::
+
+    description.txt    the DRA's description (edit it and run `dv2s generate --from` to regenerate)
+    elements.json      its semantic elements
+    scenario.scenic    the generated script
+    preview.webm       a rendered episode of the generated scenario
+    report.json        safety, compile, sample and run checks, SP (and E2E-SC when labels exist),
+                       warnings and provenance
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+from dv2s_gym.pipeline.stages import Description, Generation, describe, generate
+
+__all__ = ["ScenarioCheck", "check_scenario", "convert_video", "generate_to_folder", "label_for"]
+
+
+@dataclass
+class ScenarioCheck:
+    """Validation of a generated script: each stage and what the simulation showed."""
+
+    safe: bool = False
+    safety_findings: List[str] = field(default_factory=list)
+    compiled: bool = False
+    sampled: bool = False
+    ran: bool = False
+    error: Optional[str] = None
+    failure_category: Optional[str] = None
+    simulated_elements: Dict[str, Any] = field(default_factory=dict)
+    episode: Dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.safe and self.compiled and self.sampled and self.ran
+
+
+def classify_failure(error: BaseException) -> str:
+    """The paper's taxonomy of generation failures (plus unsafe code)."""
+    from envs.errors import SceneSamplingError, UnsupportedConstructError
+    from scenario_bank.safety import UnsafeScenarioError
+
+    text = f"{type(error).__name__}: {error}"
+    if isinstance(error, UnsafeScenarioError):
+        return "unsafe_code"
+    if isinstance(error, SceneSamplingError) or "not in a lane" in text or "Rejection" in text:
+        return "geometric_infeasibility"
+    if isinstance(error, UnsupportedConstructError) or "is not defined" in text:
+        return "undefined_symbol"
+    if "AttributeError" in text or "has no attribute" in text or "unknown specifier" in text.lower():
+        return "api_hallucination"
+    return "function_misuse"
+
+
+def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview: Optional[Path] = None,
+                   name: str = "generated") -> ScenarioCheck:
+    """Safety check, compile, sample, run (ego driven by its Scenic behaviour), optionally record a preview."""
+    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from envs.dv2s_env import DV2SEnv
+    from envs.recording import VideoWriter
+    from envs.scenarios import compile_scenario
+    from scenario_bank.safety import UnsafeScenarioError, check_script
+
+    check = ScenarioCheck()
+    findings = check_script(script)
+    check.safety_findings = [str(f) for f in findings]
+    if findings:
+        check.error = UnsafeScenarioError(findings).args[0]
+        check.failure_category = "unsafe_code"
+        return check
+    check.safe = True
+    try:
+        compiled = compile_scenario(script, name=name)
+        check.compiled = True
+        compiled.sample(seed)
+        check.sampled = True
+        env = DV2SEnv(scenario=script, config={"duration": seconds, "ego_policy": "scenic",
+                                               "terminate_on_collision": False, "terminate_off_road": False},
+                      render_mode="rgb_array" if preview else None)
+        obs, info = env.reset(seed=seed)
+        writer = VideoWriter(preview, fps=env.config["policy_frequency"]) if preview else None
+        if writer:
+            writer.write(env.render())
+        done, steps = False, 0
+        while not done:
+            obs, reward, terminated, truncated, info = env.step(1)
+            done = terminated or truncated
+            steps += 1
+            if writer:
+                writer.write(env.render())
+        if writer:
+            writer.close()
+        check.ran = True
+        check.simulated_elements = elements_from_trace(env.trace)
+        check.episode = {"steps": steps, "collisions": info["collisions"], "scenic_status": info["scenic_status"],
+                         "min_ttc": info["min_ttc"]}
+        env.close()
+    except Exception as error:  # any failure is reported and classified, never raised
+        check.error = f"{type(error).__name__}: {error}"
+        check.failure_category = classify_failure(error)
+    return check
+
+
+def label_for(video: Path) -> Optional[Dict[str, Any]]:
+    """Ground-truth elements stored beside a video as ``<video stem>.label.json``, if any."""
+    path = video.with_name(video.stem + ".label.json")
+    if not path.is_file():
+        return None
+    data = json.loads(path.read_text(encoding="utf-8"))
+    return data.get("elements", data)
+
+
+def _write(folder: Path, name: str, text: str) -> None:
+    tmp = folder / f".{name}.tmp"
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, folder / name)
+
+
+def generate_to_folder(description: Description, out: Path, *, sg: str = "rules", seed: int = 0,
+                       llm_config: Optional[Dict[str, Any]] = None, labels: Optional[Dict[str, Any]] = None,
+                       seconds: float = 10.0) -> Dict[str, Any]:
+    """SG + validation for a description; writes the folder's files and returns the report."""
+    from dv2s_gym.pipeline.metrics import e2e_sc, semantic_preservation
+
+    out.mkdir(parents=True, exist_ok=True)
+    _write(out, "description.txt", description.text.strip() + "\n")
+    _write(out, "elements.json", json.dumps(description.elements, indent=2) + "\n")
+    start = time.perf_counter()
+    report: Dict[str, Any] = {"description": description.as_dict()}
+    try:
+        generation: Optional[Generation] = generate(description.text, backend=sg, seed=seed, llm_config=llm_config)
+    except Exception as error:
+        report["generation"] = {"error": f"{type(error).__name__}: {error}", "category": classify_failure(error)}
+        generation = None
+    if generation is not None:
+        _write(out, "scenario.scenic", generation.script)
+        report["generation"] = generation.as_dict()
+        check = check_scenario(generation.script, seed=seed, seconds=seconds, preview=out / "preview.webm")
+        report["check"] = {**asdict(check), "ok": check.ok}
+        if check.ran:
+            report["sp"] = semantic_preservation(description.elements, check.simulated_elements)
+            if labels is not None:
+                report["e2e_sc"] = e2e_sc(labels, check.simulated_elements)
+    report["seconds"] = round(time.perf_counter() - start, 3)
+    _write(out, "report.json", json.dumps(report, indent=2, default=str) + "\n")
+    return report
+
+
+def convert_video(video: str | os.PathLike, out: str | os.PathLike, *, dra: str = "bev", sg: str = "rules",
+                  camera: str = "bev", question: Optional[str] = None, seed: int = 0,
+                  llm_config: Optional[Dict[str, Any]] = None, seconds: float = 10.0) -> Dict[str, Any]:
+    """The whole pipeline for one video; returns the report written to ``out/report.json``."""
+    start = time.perf_counter()
+    video = Path(video)
+    description = describe(video, backend=dra, camera=camera, question=question, llm_config=llm_config)
+    report = generate_to_folder(description, Path(out), sg=sg, seed=seed, llm_config=llm_config,
+                                labels=label_for(video), seconds=seconds)
+    report["seconds_total"] = round(time.perf_counter() - start, 3)
+    _write(Path(out), "report.json", json.dumps(report, indent=2, default=str) + "\n")
+    return report

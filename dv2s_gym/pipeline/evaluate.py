@@ -1,0 +1,168 @@
+"""``dv2s eval dra|sg|e2e``: the paper's metrics over a labeled folder.
+
+A labeled folder holds videos (``.mp4 .webm .avi .mkv .gif``) and/or description
+files (``.txt``), each with ``<stem>.label.json``::
+
+    {"use_case": "collision_risk_avoidance_highway",
+     "description": "optional reference description (used by `eval sg` when no .txt)",
+     "elements": {"road": "highway", "participants": [...], "actions": [...], "relations": [...]}}
+
+Results are printed per use case and overall as mean ± sd, like the paper's tables.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections import defaultdict
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence
+
+from dv2s_gym.pipeline.metrics import e2e_sc, hallucination_rate, mean_sd, scs, semantic_preservation
+
+__all__ = ["EvalItem", "EVALSET_DIR", "collect_items", "evaluate", "format_results"]
+
+VIDEO_SUFFIXES = (".mp4", ".webm", ".avi", ".mkv", ".gif")
+EVALSET_DIR = Path(__file__).resolve().parents[1] / "evalset"
+"""The labeled evaluation set shipped with dv2s-gym (bird's-eye clips of every bank use case)."""
+
+
+@dataclass
+class EvalItem:
+    """One labeled input: a video or a description, with its ground truth."""
+
+    stem: str
+    use_case: str
+    elements: Dict[str, Any]
+    video: Optional[str] = None
+    description: Optional[str] = None
+
+
+@dataclass
+class ItemResult:
+    stem: str
+    use_case: str
+    metrics: Dict[str, float] = field(default_factory=dict)
+    ok: bool = True
+    seconds: float = 0.0
+    error: Optional[str] = None
+    detail: Dict[str, Any] = field(default_factory=dict)
+
+
+def collect_items(folder: str | Path) -> List[EvalItem]:
+    """Every labeled video/description in ``folder``."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileNotFoundError(f"evaluation folder {str(folder)!r} does not exist")
+    items = []
+    for label_path in sorted(folder.glob("*.label.json")):
+        stem = label_path.name[: -len(".label.json")]
+        label = json.loads(label_path.read_text(encoding="utf-8"))
+        video = next((str(folder / f"{stem}{s}") for s in VIDEO_SUFFIXES if (folder / f"{stem}{s}").is_file()), None)
+        text_file = folder / f"{stem}.txt"
+        description = text_file.read_text(encoding="utf-8") if text_file.is_file() else label.get("description")
+        items.append(EvalItem(stem, label.get("use_case") or "unlabeled", label["elements"], video, description))
+    if not items:
+        raise FileNotFoundError(f"no <name>.label.json files in {folder}; see `dv2s eval --help` for the format")
+    return items
+
+
+def _evaluate_item(stage: str, item: EvalItem, dra: str, sg: str, llm_config: Optional[Dict[str, Any]],
+                   seconds: float) -> ItemResult:
+    from dv2s_gym.pipeline.convert import check_scenario
+    from dv2s_gym.pipeline.semantics import elements_from_text
+    from dv2s_gym.pipeline.stages import describe, generate
+
+    result = ItemResult(item.stem, item.use_case)
+    start = time.perf_counter()
+    try:
+        if stage in ("dra", "e2e"):
+            if item.video is None:
+                raise FileNotFoundError(f"{item.stem}: no video beside its label")
+            description = describe(item.video, backend=dra, llm_config=llm_config)
+            text, described = description.text, description.elements
+            result.detail["description"] = text
+            if stage == "dra":
+                result.metrics = {"SCS": scs(item.elements, described), "HR": hallucination_rate(item.elements, described)}
+        else:
+            if not item.description:
+                raise FileNotFoundError(f"{item.stem}: no description (.txt or label 'description')")
+            text = item.description
+            described = elements_from_text(text)
+        if stage in ("sg", "e2e"):
+            generation = generate(text, backend=sg, llm_config=llm_config)
+            check = check_scenario(generation.script, seconds=seconds, name=item.stem)
+            result.ok = check.ok
+            result.detail.update({"warnings": generation.warnings, "failures": generation.failure_counts(),
+                                  "check_error": check.error, "simulated": check.simulated_elements})
+            simulated = check.simulated_elements if check.ran else {}
+            if stage == "sg":
+                result.metrics = {"SP": semantic_preservation(described, simulated)}
+            else:
+                result.metrics = {"E2E-SC": e2e_sc(item.elements, simulated)}
+    except Exception as error:  # a failed item scores what it scored and is reported
+        result.ok = False
+        result.error = f"{type(error).__name__}: {error}"
+        result.metrics = {"dra": {"SCS": 0.0, "HR": 1.0}, "sg": {"SP": 0.0}, "e2e": {"E2E-SC": 0.0}}[stage]
+    result.seconds = round(time.perf_counter() - start, 3)
+    return result
+
+
+def evaluate(stage: str, folder: str | Path, *, dra: str = "bev", sg: str = "rules",
+             llm_config: Optional[Dict[str, Any]] = None, jobs: int = 1, seconds: float = 10.0,
+             progress: bool = True) -> Dict[str, Any]:
+    """Run one evaluation; returns per-item results and the per-use-case / overall summary."""
+    from tqdm import tqdm
+
+    if stage not in ("dra", "sg", "e2e"):
+        raise ValueError(f"unknown evaluation {stage!r}; use dra, sg or e2e")
+    items = collect_items(folder)
+    bar = tqdm(total=len(items), desc=f"eval {stage}", unit="item", disable=not progress)
+    results: List[ItemResult] = []
+    if jobs <= 1:
+        for item in items:
+            results.append(_evaluate_item(stage, item, dra, sg, llm_config, seconds))
+            bar.update()
+    else:
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            futures = [pool.submit(_evaluate_item, stage, item, dra, sg, llm_config, seconds) for item in items]
+            for future in futures:
+                results.append(future.result())
+                bar.update()
+    bar.close()
+    return {"stage": stage, "backends": {"dra": dra, "sg": sg}, "items": [r.__dict__ for r in results],
+            "summary": summarize(results)}
+
+
+def summarize(results: Sequence[ItemResult]) -> Dict[str, Any]:
+    groups: Dict[str, List[ItemResult]] = defaultdict(list)
+    for r in results:
+        groups[r.use_case].append(r)
+    names = sorted({m for r in results for m in r.metrics})
+
+    def block(rs: Sequence[ItemResult]) -> Dict[str, Any]:
+        out = {m: mean_sd(r.metrics[m] for r in rs if m in r.metrics) for m in names}
+        out["ok_rate"] = sum(r.ok for r in rs) / len(rs)
+        out["seconds_mean"] = sum(r.seconds for r in rs) / len(rs)
+        return out
+
+    return {"per_use_case": {u: block(rs) for u, rs in sorted(groups.items())}, "overall": block(results)}
+
+
+def format_results(report: Dict[str, Any]) -> str:
+    """A table like the paper's: rows per use case and overall, columns mean ± sd per metric."""
+    summary = report["summary"]
+    metrics = [m for m in summary["overall"] if m not in ("ok_rate", "seconds_mean")]
+    header = ["use case", *metrics, "n", "ran ok", "s/item"]
+    rows = []
+    for name, block in [*summary["per_use_case"].items(), ("overall", summary["overall"])]:
+        n = next((block[m]["n"] for m in metrics), 0)
+        rows.append([name, *(f"{block[m]['mean']:.2f} ± {block[m]['sd']:.2f}" for m in metrics), str(n),
+                     f"{100 * block['ok_rate']:.0f}%", f"{block['seconds_mean']:.2f}"])
+    widths = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
+    line = lambda cells: "  ".join(c.ljust(w) for c, w in zip(cells, widths))  # noqa: E731
+    failed = [f"  {i['stem']}: {i['error']}" for i in report["items"] if i.get("error")]
+    return "\n".join([line(header), line(["-" * w for w in widths]), *map(line, rows),
+                      *(["failed items:"] + failed if failed else [])])
