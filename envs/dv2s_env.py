@@ -27,7 +27,13 @@ from envs.errors import InvalidActionError
 from envs.hw_road import EventRoad
 from envs.observations import FastKinematicObservation
 from envs.safety_metrics import time_to_collision
-from envs.scenarios import CompiledScenario, compile_scenario, looks_like_source, read_scenario_file
+from envs.scenarios import (
+    CompiledScenario,
+    compile_scenario,
+    looks_like_source,
+    read_scenario_file,
+    runtime_construct_error,
+)
 from envs.scenic_highway.simulator import ActorEvent, HighwayEnvSimulator
 from envs.scenic_highway import stepping
 from envs.scenic_highway.stepping import ExternalStepper, StepOutcome
@@ -71,6 +77,13 @@ def resolve_scenarios(spec: ScenarioSpec, bank_dir: Optional[str] = None) -> Lis
                     "a bank name or Scenic source text"
                 )
             return [ScenarioRef(name=path.stem, path=str(path.resolve()))]
+    elif spec is not None and (
+        not isinstance(spec, Sequence) or not all(isinstance(item, str) for item in spec)
+    ):
+        raise TypeError(
+            f"scenario must be None, a bank name, 'tag:<tag>', a .scenic path, Scenic source text "
+            f"or a list of bank names/tags, not {spec!r}"
+        )
     names = select_scenarios(spec, bank_dir)
     return [ScenarioRef(name=n, path=str(scenario_path(n, bank_dir))) for n in names]
 
@@ -81,42 +94,47 @@ def _copy_state(state: Dict[str, Any]) -> Dict[str, Any]:
 
 
 class _SceneStepper(ExternalStepper):
-    """An :class:`ExternalStepper` that also sets aside the running state of the scenario.
+    """An :class:`ExternalStepper` that also sets aside the running state of the scene's
+    shared Scenic objects.
 
-    Every scene sampled from one compiled scenario shares the scenario's single
-    ``DynamicScenario`` object, which holds the state of the running simulation
-    (running flag, bound objects, requirement monitors, elapsed time). Several
-    envs of the same scenario in one process (``SyncVectorEnv``, ``DummyVecEnv``)
-    each keep a suspended simulation, so that state is swapped with the rest of
-    Scenic's globals: saved when another simulation takes over, restored when this
-    one resumes.
+    Scenes sampled from one compiled scenario share objects that hold the state of
+    a running simulation: the scenario's single ``DynamicScenario`` (running flag,
+    bound objects, requirement monitors, elapsed time), every behaviour whose
+    arguments are not random (``with behavior FollowLaneBehavior(target_speed=10)``
+    is one object for all scenes) and the monitors. Several envs of the same
+    scenario in one process (``SyncVectorEnv``, ``DummyVecEnv``) each keep a
+    suspended simulation, so that state is swapped with the rest of Scenic's
+    globals: saved when another simulation takes over, restored when this one resumes.
     """
 
-    def __init__(self, make_simulation, dynamic_scenario) -> None:
+    def __init__(self, make_simulation, scene) -> None:
         super().__init__(make_simulation)
-        self._dynamic = dynamic_scenario
-        self._idle_state: Optional[Dict[str, Any]] = None
-        self._running_state: Optional[Dict[str, Any]] = None
+        shared = [scene.dynamicScenario, *(o.behavior for o in scene.objects), *scene.monitors]
+        self._shared = list({id(x): x for x in shared if x is not None}.values())
+        self._idle_states: Optional[List[Dict[str, Any]]] = None
+        self._running_states: Optional[List[Dict[str, Any]]] = None
 
     def _run(self) -> StepOutcome:
-        stepping.release_veneer()  # any other simulation of this scenario is set aside: it is idle
-        self._idle_state = _copy_state(self._dynamic.__dict__)
+        stepping.release_veneer()  # any other simulation of this scenario is set aside: all is idle
+        self._idle_states = [_copy_state(x.__dict__) for x in self._shared]
         return super()._run()
 
     def _install(self) -> None:
         resuming = stepping._installed is not self
         super()._install()
-        if resuming and self._running_state is not None:
-            self._dynamic.__dict__.clear()
-            self._dynamic.__dict__.update(self._running_state)
-            self._running_state = None
+        if resuming and self._running_states is not None:
+            for x, state in zip(self._shared, self._running_states):
+                x.__dict__.clear()
+                x.__dict__.update(state)
+            self._running_states = None
 
     def _save_globals(self) -> None:
         super()._save_globals()
-        if self._idle_state is not None:
-            self._running_state = dict(self._dynamic.__dict__)
-            self._dynamic.__dict__.clear()
-            self._dynamic.__dict__.update(_copy_state(self._idle_state))
+        if self._idle_states is not None:
+            self._running_states = [dict(x.__dict__) for x in self._shared]
+            for x, state in zip(self._shared, self._idle_states):
+                x.__dict__.clear()
+                x.__dict__.update(_copy_state(state))
 
 
 def _jsonable(value: Any) -> Any:
@@ -128,6 +146,8 @@ def _jsonable(value: Any) -> Any:
         return int(value)
     if isinstance(value, (np.floating,)):
         return float(value)
+    if isinstance(value, np.ndarray):  # e.g. a ContinuousAction action
+        return _jsonable(value.tolist())
     if isinstance(value, dict):
         return {str(k): _jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -169,6 +189,7 @@ class DV2SEnv(AbstractEnv):
         self._lane_of: Dict[int, Any] = {}
         self._step_events: List[Dict[str, Any]] = []
         self._reset_seed: Optional[int] = None
+        self._running_compiled: Optional[CompiledScenario] = None
         super().__init__(config, render_mode)
 
     # ------------------------------------------------------------------ config
@@ -265,6 +286,7 @@ class DV2SEnv(AbstractEnv):
         options = getattr(self, "_reset_options", {}) or {}
         ref = self._choose_scenario(options.get("scenario"))
         compiled = self._compile(ref)
+        self._running_compiled = compiled
         scene_seed = int(options.get("scene_seed", self.np_random.integers(0, 2**31 - 1)))
         timestep = 1.0 / self.config["policy_frequency"]
         for attempt in range(20):
@@ -294,10 +316,10 @@ class DV2SEnv(AbstractEnv):
                     continueAfterDivergence=False,
                     allowPickle=False,
                 ),
-                scene.dynamicScenario,
+                scene,
             )
             self._stepper = stepper
-            outcome = stepper.start()
+            outcome = self._run_scenic(stepper.start)
             if outcome.status != "rejected":
                 break
             # A requirement failed at time 0: this scene is invalid, draw another.
@@ -334,6 +356,15 @@ class DV2SEnv(AbstractEnv):
             config=_jsonable({k: v for k, v in self.config.items()}),
         )
         self._record_state()
+
+    def _run_scenic(self, call, *args) -> StepOutcome:
+        """Start or advance the simulation; a name a behaviour uses but nothing defines
+        (e.g. a CARLA-only action) becomes an :class:`UnsupportedConstructError`."""
+        try:
+            return call(*args)
+        except NameError as error:
+            self._close_simulation()
+            raise runtime_construct_error(error, self._running_compiled) from None
 
     def _choose_scenario(self, name: Optional[str]) -> ScenarioRef:
         if name is not None:
@@ -413,7 +444,7 @@ class DV2SEnv(AbstractEnv):
             return
         simulation = self._current_simulation()
         n_events = len(simulation.events)
-        self._outcome = self._stepper.advance(action)
+        self._outcome = self._run_scenic(self._stepper.advance, action)
         self.steps += simulation.frames
         new = [e.as_dict() for e in simulation.events[n_events:]]
         self._detect_lane_changes(new)
@@ -466,7 +497,10 @@ class DV2SEnv(AbstractEnv):
         return abs(lat) > width / 2 + self.config["off_road_margin"] or not (-vehicle.LENGTH <= s <= lane.length + vehicle.LENGTH)
 
     def _record_state(self) -> None:
-        states = {getattr(v, "name", str(i)): actor_state(v) for i, v in enumerate(self.road.vehicles)}
+        actors = self.road.vehicles + self.road.objects
+        states = {getattr(v, "name", str(i)): actor_state(v) for i, v in enumerate(actors)}
+        if not self._trace.kinds:
+            self._trace.kinds = {getattr(v, "name", str(i)): getattr(v, "kind", "car") for i, v in enumerate(actors)}
         self._trace.states.append(states)
 
     # ----------------------------------------------------------------- rewards
