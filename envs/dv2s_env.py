@@ -23,6 +23,7 @@ from highway_env import utils as hw_utils
 from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.envs.common.observation import KinematicObservation
 
+import envs.rendering  # noqa: F401  (sets SDL/XDG variables before any viewer starts pygame)
 from envs.errors import InvalidActionError
 from envs.hw_road import EventRoad
 from envs.observations import FastKinematicObservation

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, Optional, Union
 
@@ -16,6 +17,23 @@ _CODECS = {".webm": "VP80", ".mp4": "avc1", ".avi": "MJPG", ".mkv": "VP80"}
 def video_codecs() -> dict:
     """File extension -> FourCC used when writing that container."""
     return dict(_CODECS)
+
+
+@contextmanager
+def _quiet_stderr():
+    """Silence the process's stderr file descriptor (C libraries write there directly)."""
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 class VideoWriter:
@@ -39,15 +57,11 @@ class VideoWriter:
         if suffix not in _CODECS:
             raise ValueError(f"unsupported video extension {suffix!r}; use one of {sorted(_CODECS)}")
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        previous = cv2.utils.logging.getLogLevel()
-        cv2.utils.logging.setLogLevel(cv2.utils.logging.LOG_LEVEL_ERROR)  # FFmpeg's tag notices
-        try:
-            for fourcc in ([_CODECS[suffix], "mp4v"] if suffix == ".mp4" else [_CODECS[suffix]]):
+        for fourcc in ([_CODECS[suffix], "mp4v"] if suffix == ".mp4" else [_CODECS[suffix]]):
+            with _quiet_stderr():  # FFmpeg prints a harmless "tag not supported" notice for VP80
                 writer = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter_fourcc(*fourcc), self.fps, (width, height))
-                if writer.isOpened():
-                    return writer
-        finally:
-            cv2.utils.logging.setLogLevel(previous)
+            if writer.isOpened():
+                return writer
         raise RuntimeError(f"OpenCV cannot encode {suffix} here; write .webm (VP8) instead")
 
     def write(self, frame: np.ndarray) -> None:
