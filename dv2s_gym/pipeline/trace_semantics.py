@@ -34,7 +34,7 @@ BRAKE_DROP = 3.0          # m/s lost ...
 BRAKE_WINDOW = 2.0        # ... within this many seconds
 STOP_SPEED = 0.5
 TURN_ANGLE = math.radians(55)
-NEAR = 60.0               # m: actors farther than this from the ego are not related to it
+NEAR = 80.0               # m: actors never closer than this to the ego are background traffic
 
 
 def _kind(name: str, kinds: Dict[str, str]) -> str:
@@ -120,6 +120,8 @@ def elements_from_trace(trace) -> Dict[str, Any]:
         if name == "ego":
             continue
         relations.update((kind, r, "ego") for r in _relations(ego, track))
+        if _paths_cross(ego, track):
+            relations.add((kind, "crossing_path", "ego"))
         actions.update((kind, a) for a in _interactions(ego, track, kind, lane_changes.get(name, []), road, dt))
     return normalize_elements({
         "road": road,
@@ -175,13 +177,40 @@ def _relations(ego: np.ndarray, track: np.ndarray) -> Set[str]:
         out.add("oncoming")
     if abs(left) <= LANE_HALF_WIDTH:
         out.add("same_lane")
-        out.add("ahead_of" if lon > 0 else "behind")
-    elif abs(lon) < 6.0:
-        out.add("left_of" if left > 0 else "right_of")
     else:
-        out.add("ahead_of" if lon > 0 else "behind")
         out.add("left_of" if left > 0 else "right_of")
+    if lon > 2.0:
+        out.add("ahead_of")
+    elif lon < -2.0:
+        out.add("behind")
     return out
+
+
+def _paths_cross(ego: np.ndarray, track: np.ndarray, samples: int = 40) -> bool:
+    """Whether the other's path crosses the ego's at an angle (30-150 degrees), at any times."""
+    def thin(t: np.ndarray) -> np.ndarray:
+        step = max(1, len(t) // samples)
+        return t[::step]
+
+    a, b = thin(ego), thin(track)
+    if len(a) < 2 or len(b) < 2 or np.hypot(*(b[-1, :2] - b[0, :2])) < 1.0:
+        return False
+    for i in range(len(a) - 1):
+        p, r = a[i, :2], a[i + 1, :2] - a[i, :2]
+        if not r.any():
+            continue
+        for j in range(len(b) - 1):
+            q, t = b[j, :2], b[j + 1, :2] - b[j, :2]
+            denom = r[0] * t[1] - r[1] * t[0]
+            if abs(denom) < 1e-9:
+                continue
+            u = ((q[0] - p[0]) * t[1] - (q[1] - p[1]) * t[0]) / denom
+            v = ((q[0] - p[0]) * r[1] - (q[1] - p[1]) * r[0]) / denom
+            if 0 <= u <= 1 and 0 <= v <= 1:
+                angle = abs(math.atan2(denom, r[0] * t[0] + r[1] * t[1]))
+                if math.radians(30) <= angle <= math.radians(150):
+                    return True
+    return False
 
 
 def _interactions(
