@@ -11,7 +11,7 @@ python -m pip install -q --upgrade pip
 python -m pip install -q "torch==2.13.0"
 # A regular (not editable) install: it also ships the .pth that registers DV2S-v0
 # whenever Gymnasium is imported (setuptools cannot add it to editable installs).
-python -m pip install -q ".[test]"
+python -m pip install -q ".[test,llm]"
 # Scenic needs opencv-python; a second OpenCV distribution (e.g. -headless, pulled by
 # some extras) would share the cv2/ folder. Keep exactly one.
 for other in opencv-python-headless opencv-contrib-python opencv-contrib-python-headless; do

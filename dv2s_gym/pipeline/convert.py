@@ -19,9 +19,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional
 
+from dv2s_gym.pipeline.sg_openai import classify_failure
 from dv2s_gym.pipeline.stages import Description, Generation, describe, generate
 
-__all__ = ["ScenarioCheck", "check_scenario", "convert_video", "generate_to_folder", "label_for"]
+__all__ = ["ScenarioCheck", "check_scenario", "classify_failure", "convert_video", "generate_to_folder", "label_for"]
 
 
 @dataclass
@@ -41,23 +42,6 @@ class ScenarioCheck:
     @property
     def ok(self) -> bool:
         return self.safe and self.compiled and self.sampled and self.ran
-
-
-def classify_failure(error: BaseException) -> str:
-    """The paper's taxonomy of generation failures (plus unsafe code)."""
-    from envs.errors import SceneSamplingError, UnsupportedConstructError
-    from scenario_bank.safety import UnsafeScenarioError
-
-    text = f"{type(error).__name__}: {error}"
-    if isinstance(error, UnsafeScenarioError):
-        return "unsafe_code"
-    if isinstance(error, SceneSamplingError) or "not in a lane" in text or "Rejection" in text:
-        return "geometric_infeasibility"
-    if isinstance(error, UnsupportedConstructError) or "is not defined" in text:
-        return "undefined_symbol"
-    if "AttributeError" in text or "has no attribute" in text or "unknown specifier" in text.lower():
-        return "api_hallucination"
-    return "function_misuse"
 
 
 def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview: Optional[Path] = None,

@@ -87,18 +87,10 @@ def describe(
     from dv2s_gym.pipeline.dra_openai import describe_with_vlm
     from dv2s_gym.pipeline.llm_client import ChatClient
 
-    client = ChatClient.from_config(llm_config, kind="vlm") if _accepts_kind() else ChatClient.from_config(llm_config)
+    client = ChatClient.from_config(llm_config, kind="vlm")
     text, provenance = describe_with_vlm(clip.frames, client, camera=camera, question=question)
     return Description(text, elements_from_text(text), "openai", model=provenance.get("model"),
                        prompt_hash=provenance.get("prompt_hash"), video=str(video))
-
-
-def _accepts_kind() -> bool:
-    import inspect
-
-    from dv2s_gym.pipeline.llm_client import ChatClient
-
-    return "kind" in inspect.signature(ChatClient.from_config).parameters
 
 
 def generate(

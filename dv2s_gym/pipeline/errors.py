@@ -1,0 +1,76 @@
+"""Errors of the D-V2S pipeline's model backends.
+
+Every error raised while talking to a chat endpoint names the endpoint it was
+talking to and says what to change to make it work.
+
+Hierarchy::
+
+    PipelineError
+    ├── EndpointError                    (has .endpoint)
+    │   ├── EndpointUnreachableError     connection refused / DNS / reset
+    │   ├── EndpointTimeoutError         no answer within the timeout
+    │   ├── EndpointHTTPError            non-2xx answer (has .status and .body)
+    │   └── MalformedResponseError       2xx answer that is not a chat completion
+    ├── MissingAPIKeyError               api.openai.com without a key
+    └── GenerationFailedError            no generated script passed the checks (has .result)
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional
+
+__all__ = [
+    "PipelineError",
+    "EndpointError",
+    "EndpointUnreachableError",
+    "EndpointTimeoutError",
+    "EndpointHTTPError",
+    "MalformedResponseError",
+    "MissingAPIKeyError",
+    "GenerationFailedError",
+]
+
+
+class PipelineError(Exception):
+    """Base class of the pipeline's errors."""
+
+
+class EndpointError(PipelineError):
+    """A chat endpoint could not be used; ``endpoint`` is the URL that was called."""
+
+    def __init__(self, message: str, *, endpoint: str) -> None:
+        super().__init__(message)
+        self.endpoint = endpoint
+
+
+class EndpointUnreachableError(EndpointError):
+    """No connection could be made to the endpoint (refused, unknown host, reset)."""
+
+
+class EndpointTimeoutError(EndpointError):
+    """The endpoint did not answer within the client's timeout."""
+
+
+class EndpointHTTPError(EndpointError):
+    """The endpoint answered with an HTTP error status."""
+
+    def __init__(self, message: str, *, endpoint: str, status: int, body: str = "") -> None:
+        super().__init__(message, endpoint=endpoint)
+        self.status = status
+        self.body = body
+
+
+class MalformedResponseError(EndpointError):
+    """The endpoint answered 2xx, but not with a usable chat completion."""
+
+
+class MissingAPIKeyError(PipelineError):
+    """An endpoint that needs an API key (api.openai.com) was configured without one."""
+
+
+class GenerationFailedError(PipelineError):
+    """The Scenario Generator's attempts all failed; ``result`` holds every failure."""
+
+    def __init__(self, message: str, result: Optional[Any] = None) -> None:
+        super().__init__(message)
+        self.result = result
