@@ -22,8 +22,8 @@ MAX_ACCELERATION = 5.0
 """Acceleration at full throttle [m/s²]."""
 MAX_BRAKING = 8.0
 """Deceleration at full brake [m/s²]."""
-MAX_STEERING_ANGLE = math.radians(50)
-"""Front-wheel angle at full steer [rad]."""
+MAX_STEERING_ANGLE = math.radians(70)
+"""Front-wheel angle at full steer [rad] (CARLA's cars steer up to about 70 degrees)."""
 
 
 class ScenicVehicle(Vehicle):

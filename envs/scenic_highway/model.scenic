@@ -11,6 +11,13 @@ Global parameters:
 
 Classes: ``Car``, ``NPCCar``, ``Truck`` (drawn longer), ``Pedestrian``, ``Obstacle``
 (a static prop on the road).
+
+The driving domain's behaviour library is used as is, with three repairs (see
+``model_support``): ``WalkTowardsAction`` is provided, ``RegulatedControlAction``
+brakes and rate-limits steering per second, and backward-pointing seam segments
+are removed from the lane centerlines the behaviours steer along.
+CARLA-only object attributes (``blueprint``, ``carlaActor``) raise
+``envs.errors.UnsupportedConstructError``.
 """
 
 from envs.scenic_highway.model_support import resolve_map_parameter as _resolve_map_parameter
@@ -18,13 +25,16 @@ _resolve_map_parameter()
 
 from scenic.domains.driving.model import *
 
-from envs.scenic_highway.model_support import WalkTowardsAction, install_driving_behavior_support as _install_support
+from envs.scenic_highway.model_support import (WalkTowardsAction, RegulatedControlAction,
+    NoCarlaActor as _NoCarlaActor, install_driving_behavior_support as _install_support,
+    remove_backward_seams as _remove_backward_seams)
 from envs.scenic_highway.simulator import HighwayEnvSimulator
 _install_support()
+_remove_backward_seams(network)
 
 simulator HighwayEnvSimulator(network)
 
-class HighwayEnvActor(DrivingObject):
+class HighwayEnvActor(DrivingObject, _NoCarlaActor):
     """An object whose state highway-env simulates."""
     throttle: 0
     steer: 0
@@ -80,7 +90,7 @@ class Pedestrian(Pedestrian, HighwayEnvActor, Walks):
     def setWalkingSpeed(self, speed):
         simulation().set_walking(self, speed=speed)
 
-class Obstacle(DrivingObject):
+class Obstacle(DrivingObject, _NoCarlaActor):
     """A static obstacle on the road (a box, a broken-down load, a barrier)."""
     regionContainedIn: roadOrShoulder
     position: new Point on road

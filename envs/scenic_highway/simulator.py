@@ -40,7 +40,13 @@ from envs.coordinates import (
 from envs.hw_road import EventRoad
 from envs.scenic_highway.actors import Pedestrian, Prop, ScenicVehicle
 
-__all__ = ["EgoDriver", "HighwayEnvSimulator", "HighwayEnvSimulation", "ActorEvent"]
+__all__ = [
+    "EgoDriver",
+    "HighwayEnvSimulator",
+    "HighwayEnvSimulation",
+    "ActorEvent",
+    "SpeedScheduledLateralController",
+]
 
 
 class EgoDriver(Protocol):
@@ -163,6 +169,7 @@ class HighwayEnvSimulation(DrivingSimulation):
         obj.startDynamicSimulation()
 
     def createObjectInSimulator(self, obj) -> None:
+        _reject_carla_only_properties(obj)
         position = scenic_to_hw_position(obj.position[0], obj.position[1])
         heading = scenic_to_hw_heading(obj.heading)
         velocity = obj.velocity
@@ -194,6 +201,7 @@ class HighwayEnvSimulation(DrivingSimulation):
             hw = Prop(self.road, position, heading, length=obj.length, width=obj.width, name=name)
             self.road.objects.append(hw)
         hw.scenic_kind = _object_label(obj)
+        hw.kind = "ego" if is_ego else _vocabulary_kind(obj)
         hw.color = _hw_color(obj, is_ego)
         if is_ego:
             self.ego_vehicle = hw
@@ -233,6 +241,11 @@ class HighwayEnvSimulation(DrivingSimulation):
     def set_actor_velocity(self, obj, vel) -> None:
         """Set an actor's velocity (``SetVelocityAction``, ``SetSpeedAction``)."""
         hw = self.hw_of[_key(obj)]
+        if isinstance(hw, Pedestrian) and _along_heading(vel, obj.heading):
+            # ``SetSpeedAction`` builds its velocity from the heading at the start
+            # of the step; a walking direction set in the same step must survive.
+            hw.set_walking(None, math.hypot(vel[0], vel[1]))
+            return
         if hasattr(hw, "set_velocity"):
             vx, vy = scenic_to_hw_velocity(vel[0], vel[1])
             hw.set_velocity(vx, vy)
@@ -297,12 +310,19 @@ class HighwayEnvSimulation(DrivingSimulation):
         return values
 
     # ---------------------------------------------------------- controllers
+    # Lateral gains are those at SpeedScheduledLateralController.REFERENCE_SPEED
+    # (10 m/s); tuned on highway_straight (10-40 m/s, starting off-centre), the
+    # CARLA towns (FollowLaneBehavior through junctions and corners) and the
+    # urban_crossroads turns. The longitudinal controllers are Scenic's without
+    # the integral term: throttle maps straight to acceleration here and nothing
+    # (drag, slope) needs a steady throttle, so the integral only made the speed
+    # overshoot its target by 10% and oscillate.
     def getLaneFollowingControllers(self, agent):
         dt = self.timestep
         if agent.isCar:
             return (
-                PIDLongitudinalController(K_P=0.5, K_D=0.1, K_I=0.7, dt=dt),
-                PIDLateralController(K_P=0.3, K_D=0.2, K_I=0.0, dt=dt),
+                PIDLongitudinalController(K_P=0.5, K_D=0.1, K_I=0.0, dt=dt),
+                SpeedScheduledLateralController(agent, K_P=0.3, K_D=0.06, K_I=0.0, dt=dt),
             )
         return super().getLaneFollowingControllers(agent)
 
@@ -310,17 +330,19 @@ class HighwayEnvSimulation(DrivingSimulation):
         dt = self.timestep
         if agent.isCar:
             return (
-                PIDLongitudinalController(K_P=0.5, K_D=0.1, K_I=0.7, dt=dt),
-                PIDLateralController(K_P=0.6, K_D=0.2, K_I=0.0, dt=dt),
+                PIDLongitudinalController(K_P=0.5, K_D=0.1, K_I=0.0, dt=dt),
+                SpeedScheduledLateralController(agent, K_P=0.5, K_D=0.06, K_I=0.0, dt=dt),
             )
         return super().getTurningControllers(agent)
 
     def getLaneChangingControllers(self, agent):
         dt = self.timestep
         if agent.isCar:
+            # Gains stop growing below 10 m/s: a slow car changes lanes at a
+            # moderate angle instead of in the same time as a fast one.
             return (
-                PIDLongitudinalController(K_P=0.5, K_D=0.1, K_I=0.7, dt=dt),
-                PIDLateralController(K_P=0.2, K_D=0.2, K_I=0.0, dt=dt),
+                PIDLongitudinalController(K_P=0.5, K_D=0.1, K_I=0.0, dt=dt),
+                SpeedScheduledLateralController(agent, K_P=0.1, K_D=0.06, K_I=0.0, dt=dt, min_speed=10.0),
             )
         return super().getLaneChangingControllers(agent)
 
@@ -332,6 +354,76 @@ class HighwayEnvSimulation(DrivingSimulation):
     def hw_object(self, obj):
         """The highway-env object standing for a Scenic object."""
         return self.hw_of[_key(obj)]
+
+
+class SpeedScheduledLateralController(PIDLateralController):
+    """Scenic's PID on the cross-track error, with gains scheduled by speed.
+
+    In highway-env's kinematic bicycle model the lateral acceleration a steering
+    angle produces grows with the square of the speed, so fixed gains that track
+    well at town speeds oscillate and diverge at highway speeds (Scenic's
+    behaviours run at 5 Hz). The gains given are those at :attr:`REFERENCE_SPEED`;
+    the proportional and integral gains are scaled by ``(REFERENCE_SPEED / v) ** 2``,
+    which keeps the closed loop's bandwidth the same at every speed ``v``, and the
+    derivative gain by ``REFERENCE_SPEED / v``: the sideslip makes the measured
+    cross-track rate respond to the steering within one step, in proportion to
+    ``v``, and a larger derivative gain makes that loop ring at 2.5 Hz. The speed
+    is floored at :attr:`MIN_SPEED`.
+
+    The derivative term starts at zero instead of kicking on the first step. As a
+    safety net for path glitches (``signedDistanceTo`` returns the right distance
+    with the wrong sign on a segment pointing backwards, as Scenic's CARLA-town
+    centerlines had at geometry seams, see
+    :func:`~envs.scenic_highway.model_support.remove_backward_seams`), a sign flip
+    of the error larger than the car could have moved sideways in one step is
+    undone, for at most :attr:`MAX_SIGN_CORRECTIONS` steps in a row.
+    """
+
+    REFERENCE_SPEED = 10.0
+    MIN_SPEED = 3.0
+    MAX_SIGN_CORRECTIONS = 2
+
+    def __init__(self, agent, K_P=0.3, K_D=0.2, K_I=0.0, dt=0.1, min_speed=None):
+        super().__init__(K_P=K_P, K_D=K_D, K_I=K_I, dt=dt)
+        self.agent = agent
+        if min_speed is not None:
+            self.MIN_SPEED = float(min_speed)
+        self.base_gains = (K_P, K_D, K_I)
+        self._previous: Optional[float] = None
+        self._corrections = 0
+
+    def _speed(self) -> float:
+        try:
+            speed = float(self.agent.speed or 0.0)
+        except (AttributeError, TypeError):
+            speed = 0.0
+        return max(abs(speed), self.MIN_SPEED)
+
+    def _deglitch(self, cte: float, speed: float) -> float:
+        previous = self._previous
+        if previous is None:
+            # Scenic's controller starts from a previous error of 0, so a lane
+            # change (starting 3.5 m off) would begin with a derivative kick.
+            self.last_error = cte
+        elif (
+            cte * previous < 0
+            and abs(cte) + abs(previous) > 1.5 * speed * self.dt + 0.2
+            and self._corrections < self.MAX_SIGN_CORRECTIONS
+        ):
+            cte = -cte
+            self._corrections += 1
+        else:
+            self._corrections = 0
+        self._previous = cte
+        return cte
+
+    def run_step(self, cte):
+        speed = self._speed()
+        cte = self._deglitch(float(cte), speed)
+        ratio = self.REFERENCE_SPEED / speed
+        k_p, k_d, k_i = self.base_gains
+        self.Kp, self.Kd, self.Ki = k_p * ratio**2, k_d * ratio, k_i * ratio**2
+        return super().run_step(cte)
 
 
 _KIND_COLORS = {
@@ -352,6 +444,48 @@ def _hw_color(obj, is_ego: bool):
     if isinstance(obj, (Steers,)) or getattr(obj, "isVehicle", False):
         return _CAR_COLOR
     return _PROP_COLOR
+
+
+_CARLA_ONLY_PROPERTIES = {
+    "blueprint": "the CARLA blueprint of an actor",
+    "rolename": "the CARLA role name of an actor",
+}
+
+
+def _reject_carla_only_properties(obj) -> None:
+    """Fail clearly on properties only Scenic's CARLA interface understands (``with blueprint ...``)."""
+    from envs.errors import UnsupportedConstructError
+
+    for name, meaning in _CARLA_ONLY_PROPERTIES.items():
+        value = getattr(obj, name, None)
+        if value is not None:
+            raise UnsupportedConstructError(
+                f"unsupported construct `{name}` ({_object_label(obj)} with {name} {value!r}): "
+                f"`{name}` is {meaning} in Scenic's CARLA interface (scenic.simulators.carla) "
+                "and has no highway-env equivalent. Remove it; set width and length to size "
+                "an object."
+            )
+
+
+def _along_heading(vel, heading: float) -> bool:
+    """True when a (Scenic) velocity points along a (Scenic) heading."""
+    vx, vy = float(vel[0]), float(vel[1])
+    speed = math.hypot(vx, vy)
+    if speed < 1e-9:
+        return True
+    return abs(wrap_angle(math.atan2(-vx, vy) - heading)) < 1e-6
+
+
+def _vocabulary_kind(obj) -> str:
+    """The element-vocabulary type of a Scenic object: car, truck, pedestrian or obstacle."""
+    names = {cls.__name__ for cls in type(obj).__mro__}
+    if isinstance(obj, Walks) or "Pedestrian" in names:
+        return "pedestrian"
+    if "Truck" in names:
+        return "truck"
+    if isinstance(obj, Steers) or getattr(obj, "isVehicle", False):
+        return "car"
+    return "obstacle"
 
 
 def _hw_name(hw) -> str:

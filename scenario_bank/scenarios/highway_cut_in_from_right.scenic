@@ -1,0 +1,60 @@
+"""Cut-in from the right on a highway: a faster car in the lane to the ego's right passes it and
+changes into the ego's lane just ahead of it."""
+
+# 1. Map and global parameters
+param map = 'highway_straight'
+param weather = Uniform('ClearNoon', 'CloudyNoon', 'WetNoon', 'CloudySunset', 'MidRainyNoon')
+model scenic.domains.driving.model
+
+param ego_speed = Range(18, 25)
+param cutter_extra_speed = Range(4, 8)
+param start_offset = Range(-12, -2)
+param cut_in_gap = Range(5, 11)
+param speed_after_cut_in = Range(-3, 1)
+param lane_change_duration = Range(1.8, 3.0)
+
+# 2. Adversarial behaviours
+behavior SlideToLane(section, speed, duration):
+    # change lanes by tracking a reference that slides smoothly from the current lateral offset
+    # to the centre of the target lane section within `duration` seconds
+    line = section.centerline
+    lonControl, latControl = simulation().getLaneFollowingControllers(self)
+    startOffset = line.signedDistanceTo(self.position)
+    steps = max(1, int(duration / simulation().timestep))
+    pastSteer = 0
+    for i in range(steps):
+        u = (i + 1) / steps
+        reference = startOffset * (1 - u * u * (3 - 2 * u))
+        throttle = lonControl.run_step(speed - self.speed)
+        steer = latControl.run_step(line.signedDistanceTo(self.position) - reference)
+        take RegulatedControlAction(throttle, steer, pastSteer)
+        pastSteer = steer
+
+behavior CutInToTheLeft(speed, gap, speedAfter, duration):
+    # pass the ego in the next lane, then change into its lane once `gap` metres ahead of it
+    # (distance past ego of self: how far self is ahead of the ego along self's heading)
+    do FollowLaneBehavior(target_speed=speed) until (distance past ego of self) > gap
+    do SlideToLane(self.laneSection.laneToLeft, speed, duration)
+    do FollowLaneBehavior(target_speed=speedAfter)
+
+# 3. Road geometry: a straight multi-lane highway; the ego's lane and the lane to its right
+lanePairs = [(lane, lane.sections[0]._laneToRight.lane) for lane in network.lanes
+             if lane.sections[0]._laneToRight is not None]
+lanePair = Uniform(*lanePairs)
+egoLane = lanePair[0]
+cutterLane = lanePair[1]
+egoS = Range(50, 1100)
+
+# 4. Spawn positions
+ego = new Car at egoLane.centerline.pointAlongBy(egoS),
+    with speed globalParameters.ego_speed,
+    with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed)
+cutter = new Car at cutterLane.centerline.pointAlongBy(egoS + globalParameters.start_offset),
+    with speed globalParameters.ego_speed + globalParameters.cutter_extra_speed,
+    with behavior CutInToTheLeft(globalParameters.ego_speed + globalParameters.cutter_extra_speed,
+                                 globalParameters.cut_in_gap,
+                                 globalParameters.ego_speed + globalParameters.speed_after_cut_in,
+                                 globalParameters.lane_change_duration)
+traffic = new Car at egoLane.centerline.pointAlongBy(egoS + Range(45, 80)),
+    with speed globalParameters.ego_speed + 2,
+    with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed + 2)

@@ -1,0 +1,55 @@
+"""Pedestrian crossing at a crossroads: while the ego turns right or goes straight through the
+junction, a pedestrian crosses the arm the ego is driving into."""
+
+# 1. Map and global parameters
+param map = 'urban_crossroads'
+param weather = Uniform('ClearNoon', 'CloudyNoon', 'WetNoon', 'ClearSunset', 'SoftRainSunset')
+model scenic.domains.driving.model
+
+param ego_speed = Range(7, 10)
+param ego_distance = Range(15, 30)
+param crossing_position = Range(3, 7)
+param trigger_time = Range(2.5, 4.0)
+param walking_speed = Range(1.2, 2.0)
+
+# 2. Adversarial behaviours
+behavior CrossWhenEgoNear(speed, triggerTime):
+    # step off the kerb once the ego is about triggerTime seconds away, cross the arm and stop
+    # on the other sidewalk
+    while (distance from self to ego) > max(10, triggerTime * ego.speed):
+        wait
+    take SetWalkingSpeedAction(speed)
+    while self.position in network.sidewalkRegion:
+        wait
+    while not (self.position in network.sidewalkRegion):
+        wait
+    do Idle() for 0.6 seconds
+    take SetWalkingSpeedAction(0)
+
+behavior Idle():
+    while True:
+        wait
+
+behavior DriveRoute(speed, route):
+    do FollowTrajectoryBehavior(target_speed=speed, trajectory=route, turn_speed=0.7 * speed)
+    do FollowLaneBehavior(target_speed=speed)
+
+# 3. Road geometry: a four-way junction; the ego turns right or goes straight, and the pedestrian
+# crosses the arm it drives into, just past the junction, from either sidewalk
+egoManeuvers = [m for junction in network.intersections for m in junction.maneuvers
+                if m.type is ManeuverType.RIGHT_TURN or m.type is ManeuverType.STRAIGHT]
+egoManeuver = Uniform(*egoManeuvers)
+egoRoute = [egoManeuver.startLane, egoManeuver.connectingLane, egoManeuver.endLane]
+# (a negative distance to the right puts the pedestrian on the left sidewalk)
+pedestrianSide = Uniform(Range(2.0, 2.7), -Range(6.2, 6.9))
+
+# 4. Spawn positions
+ego = new Car at egoManeuver.startLane.centerline.pointAlongBy(-globalParameters.ego_distance),
+    with speed globalParameters.ego_speed,
+    with route egoRoute,
+    with behavior DriveRoute(globalParameters.ego_speed, egoRoute)
+crossSpot = new OrientedPoint at egoManeuver.endLane.centerline.pointAlongBy(globalParameters.crossing_position),
+    facing roadDirection
+pedestrian = new Pedestrian right of crossSpot by pedestrianSide,
+    facing toward crossSpot,
+    with behavior CrossWhenEgoNear(globalParameters.walking_speed, globalParameters.trigger_time)

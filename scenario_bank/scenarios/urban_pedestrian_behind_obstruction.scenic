@@ -1,0 +1,49 @@
+"""Pedestrian behind an obstruction on an urban street: a pedestrian steps out from behind a truck
+parked at the far curb and crosses in front of the ego."""
+
+# 1. Map and global parameters
+param map = 'urban_two_way'
+param weather = Uniform('ClearNoon', 'CloudyNoon', 'WetNoon', 'ClearSunset', 'SoftRainSunset')
+model scenic.domains.driving.model
+
+param ego_speed = Range(8, 12)
+param crossing_distance = Range(35, 55)
+param hidden_gap = Range(0.8, 2.0)
+param trigger_time = Range(2.3, 3.2)
+param walking_speed = Range(1.6, 2.4)
+
+# 2. Adversarial behaviours
+behavior StepOutWhenEgoNear(speed, triggerTime):
+    # wait hidden on the sidewalk, step out once the ego is about triggerTime seconds away,
+    # cross the street and stop on the other sidewalk
+    while (distance from self to ego) > max(8, triggerTime * ego.speed):
+        wait
+    take SetWalkingSpeedAction(speed)
+    while self.position in network.sidewalkRegion:
+        wait
+    while not (self.position in network.sidewalkRegion):
+        wait
+    do Idle() for 0.6 seconds
+    take SetWalkingSpeedAction(0)
+
+behavior Idle():
+    while True:
+        wait
+
+# 3. Road geometry: a two-way urban street with sidewalks; the truck parks in the oncoming lane
+egoLane = Uniform(*network.lanes)
+egoS = Range(60, 450)
+crossS = egoS + globalParameters.crossing_distance
+
+# 4. Spawn positions
+ego = new Car at egoLane.centerline.pointAlongBy(egoS),
+    with speed globalParameters.ego_speed,
+    with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed)
+# the truck (9 m long) ends just before the crossing point, seen from the ego
+truckSpot = new OrientedPoint at egoLane.centerline.pointAlongBy(crossS - 4.5 - globalParameters.hidden_gap),
+    facing roadDirection
+parked = new Truck left of truckSpot by Range(2.5, 2.7), facing roadDirection, with speed 0
+crossSpot = new OrientedPoint at egoLane.centerline.pointAlongBy(crossS), facing roadDirection
+pedestrian = new Pedestrian left of crossSpot by Range(5.5, 6.2),
+    facing crossSpot.heading - 90 deg,
+    with behavior StepOutWhenEgoNear(globalParameters.walking_speed, globalParameters.trigger_time)

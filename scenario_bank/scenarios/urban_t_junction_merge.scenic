@@ -1,0 +1,43 @@
+"""Merge at a T-junction: a car from the side road turns into the ego's road and merges into the
+ego's lane in front of it while the ego goes straight through the junction."""
+
+# 1. Map and global parameters
+param map = 'urban_t_junction'
+param weather = Uniform('ClearNoon', 'CloudyNoon', 'WetNoon', 'ClearSunset', 'CloudySunset')
+model scenic.domains.driving.model
+
+param ego_speed = Range(8, 11)
+param merger_speed = Range(5, 8)
+param merger_distance = Range(6, 15)
+param merge_lead_time = Range(2.0, 3.0)
+
+# 2. Adversarial behaviours
+behavior DriveRoute(speed, route):
+    # drive the route (start lane, junction, end lane) without slowing down in the junction;
+    # the merger uses it to turn out of the side road, the ego to go straight on
+    do FollowTrajectoryBehavior(target_speed=speed, trajectory=route, turn_speed=speed)
+    do FollowLaneBehavior(target_speed=speed)
+
+# 3. Road geometry: a T-junction; the ego goes straight along the main road, the merger turns
+# from the side road into the lane the ego ends in
+mergePairs = [(m, s) for junction in network.intersections for m in junction.maneuvers
+              if m.type is ManeuverType.STRAIGHT
+              for s in junction.maneuvers
+              if s.type is not ManeuverType.STRAIGHT and s.endLane is m.endLane]
+mergePair = Uniform(*mergePairs)
+egoManeuver = mergePair[0]
+mergerManeuver = mergePair[1]
+egoRoute = [egoManeuver.startLane, egoManeuver.connectingLane, egoManeuver.endLane]
+mergerRoute = [mergerManeuver.startLane, mergerManeuver.connectingLane, mergerManeuver.endLane]
+# the ego reaches the junction merge_lead_time seconds after the merger
+mergerTime = globalParameters.merger_distance / globalParameters.merger_speed
+egoDistance = globalParameters.ego_speed * (mergerTime + globalParameters.merge_lead_time)
+
+# 4. Spawn positions
+ego = new Car at egoManeuver.startLane.centerline.pointAlongBy(-egoDistance),
+    with speed globalParameters.ego_speed,
+    with route egoRoute,
+    with behavior DriveRoute(globalParameters.ego_speed, egoRoute)
+merger = new Car at mergerManeuver.startLane.centerline.pointAlongBy(-globalParameters.merger_distance),
+    with speed globalParameters.merger_speed,
+    with behavior DriveRoute(globalParameters.merger_speed, mergerRoute)
