@@ -1,16 +1,16 @@
-"""Find scenarios in a bank folder by name or tag."""
+"""Find scenarios in a bank by name or tag (thin functions over :class:`scenario_bank.bank.Bank`)."""
 
 from __future__ import annotations
 
 import difflib
-import json
 import os
 from pathlib import Path
-from typing import Dict, Iterable, List, Optional, Sequence, Union
+from typing import Dict, List, Optional, Sequence, Union
 
 __all__ = [
     "BANK_DIR",
     "UnknownScenarioError",
+    "open_bank",
     "list_scenarios",
     "scenario_metadata",
     "scenario_path",
@@ -20,77 +20,52 @@ __all__ = [
 BANK_DIR = Path(__file__).resolve().parent / "scenarios"
 """Folder of the bank shipped with dv2s-gym."""
 
+from scenario_bank.bank import Bank, UnknownScenarioError  # noqa: E402
 
-class UnknownScenarioError(ValueError):
-    """A scenario name or tag that the bank does not hold."""
-
-
-def _bank(bank_dir: Optional[Union[str, os.PathLike]]) -> Path:
-    return Path(bank_dir) if bank_dir is not None else BANK_DIR
+PathLike = Union[str, os.PathLike]
 
 
-def list_scenarios(tag: Optional[str] = None, bank_dir: Optional[Union[str, os.PathLike]] = None) -> List[str]:
+def open_bank(bank_dir: Optional[PathLike] = None) -> Bank:
+    """Open a bank (the shipped one by default), re-reading it from disk."""
+    return Bank(bank_dir)
+
+
+def list_scenarios(tag: Optional[str] = None, bank_dir: Optional[PathLike] = None) -> List[str]:
     """Names of the bank's scenarios, sorted; only those carrying ``tag`` if given."""
-    names = sorted(p.stem for p in _bank(bank_dir).glob("*.scenic"))
-    if tag is None:
-        return names
-    return [n for n in names if tag in scenario_metadata(n, bank_dir).get("tags", [])]
+    return [e.name for e in open_bank(bank_dir).list(tag=tag)]
 
 
-def scenario_path(name: str, bank_dir: Optional[Union[str, os.PathLike]] = None) -> Path:
+def scenario_path(name: str, bank_dir: Optional[PathLike] = None) -> Path:
     """Path of a bank scenario's script; :class:`UnknownScenarioError` with near matches otherwise."""
-    path = _bank(bank_dir) / f"{name}.scenic"
-    if path.is_file():
-        return path
-    known = list_scenarios(bank_dir=bank_dir)
-    near = difflib.get_close_matches(name, known, n=3, cutoff=0.5)
-    hint = f" Did you mean {', '.join(repr(n) for n in near)}?" if near else ""
-    raise UnknownScenarioError(
-        f"unknown scenario {name!r}.{hint} Known scenarios: {', '.join(known) or '(none)'}. "
-        "Pass a bank name, a path to a .scenic file, Scenic source text, or 'tag:<tag>'."
-    )
+    return open_bank(bank_dir).get(name).script_path
 
 
-def scenario_metadata(name: str, bank_dir: Optional[Union[str, os.PathLike]] = None) -> Dict:
-    """The metadata sidecar of a scenario (empty dict if it has none)."""
-    sidecar = scenario_path(name, bank_dir).with_suffix(".json")
-    if not sidecar.is_file():
-        return {}
-    return json.loads(sidecar.read_text(encoding="utf-8"))
+def scenario_metadata(name: str, bank_dir: Optional[PathLike] = None) -> Dict:
+    """The metadata sidecar of a scenario."""
+    return dict(open_bank(bank_dir).get(name).meta)
 
 
-def all_tags(bank_dir: Optional[Union[str, os.PathLike]] = None) -> List[str]:
-    """Every tag used in the bank."""
-    tags = set()
-    for name in list_scenarios(bank_dir=bank_dir):
-        tags.update(scenario_metadata(name, bank_dir).get("tags", []))
-    return sorted(tags)
-
-
-def select_scenarios(
-    selector: Union[None, str, Sequence[str]], bank_dir: Optional[Union[str, os.PathLike]] = None
-) -> List[str]:
+def select_scenarios(selector: Union[None, str, Sequence[str]], bank_dir: Optional[PathLike] = None) -> List[str]:
     """Bank names selected by ``None`` (all), a name, ``'tag:<tag>'`` or a list of those."""
+    bank = open_bank(bank_dir)
     if selector is None:
-        names = list_scenarios(bank_dir=bank_dir)
-        if not names:
-            raise UnknownScenarioError(f"the bank at {_bank(bank_dir)} holds no scenarios")
-        return names
-    items: Iterable[str] = [selector] if isinstance(selector, str) else selector
+        if not len(bank):
+            raise UnknownScenarioError(f"the bank at {bank.root} holds no scenarios")
+        return bank.names()
+    items = [selector] if isinstance(selector, str) else list(selector)
     selected: List[str] = []
     for item in items:
         if item.startswith("tag:"):
             tag = item[4:]
-            tagged = list_scenarios(tag=tag, bank_dir=bank_dir)
+            tagged = [e.name for e in bank.list(tag=tag)]
             if not tagged:
-                tags = all_tags(bank_dir)
-                near = difflib.get_close_matches(tag, tags, n=3, cutoff=0.5)
+                near = difflib.get_close_matches(tag, bank.tags(), n=3, cutoff=0.5)
                 hint = f" Did you mean {', '.join(repr(t) for t in near)}?" if near else ""
                 raise UnknownScenarioError(
-                    f"no scenario carries tag {tag!r}.{hint} Tags in the bank: {', '.join(tags) or '(none)'}."
+                    f"no scenario carries tag {tag!r}.{hint} Tags in the bank: {', '.join(bank.tags()) or '(none)'}."
                 )
             selected.extend(tagged)
         else:
-            scenario_path(item, bank_dir)
+            bank.get(item)
             selected.append(item)
     return list(dict.fromkeys(selected))

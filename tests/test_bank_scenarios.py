@@ -57,11 +57,11 @@ IDLE = 1  # DiscreteMetaAction
 
 
 def script_path(name: str) -> Path:
-    return BANK_DIR / f"{name}.scenic"
+    return BANK_DIR / name / "scenario.scenic"
 
 
 def sidecar(name: str) -> dict:
-    return json.loads((BANK_DIR / f"{name}.json").read_text(encoding="utf-8"))
+    return json.loads((BANK_DIR / name / "meta.json").read_text(encoding="utf-8"))
 
 
 _COMPILED: Dict[str, object] = {}
@@ -87,8 +87,8 @@ def test_bank_holds_at_least_20_scenarios():
 
 
 def test_every_script_has_a_sidecar_and_vice_versa():
-    scripts = {p.stem for p in BANK_DIR.glob("*.scenic")}
-    sidecars = {p.stem for p in BANK_DIR.glob("*.json")}
+    scripts = {p.parent.name for p in BANK_DIR.glob("*/scenario.scenic")}
+    sidecars = {p.parent.name for p in BANK_DIR.glob("*/meta.json")}
     assert scripts == sidecars
 
 

@@ -117,7 +117,7 @@ def bank_examples(bank: Any = None) -> List[Example]:
                                  dict(entry.elements or {})))
     else:
         root = Path(getattr(bank, "root", bank))
-        for path in sorted(root.glob("*.scenic")):
+        for path in sorted(root.glob("*.scenic")):  # a loose folder of scripts with <name>.json sidecars
             script = path.read_text(encoding="utf-8")
             meta: Dict[str, Any] = {}
             sidecar = path.with_suffix(".json")
