@@ -1,0 +1,299 @@
+"""Scenic building blocks of the rule-based Scenario Generator (``sg_rules``).
+
+Each block is a piece of Scenic text: behaviours (section 2 of a script), helper
+functions for road geometry (section 3) and the header (section 1). The
+composer in :mod:`dv2s_gym.pipeline.sg_rules` picks the blocks a description
+needs, fills their parameters and glues them into one script.
+
+Conventions every block follows (they were measured on the highway-env model):
+
+* lateral offsets are metres to the left of a centreline
+  (``line.signedDistanceTo(point)`` is positive on the left);
+* lane changes slide the car sideways relative to the centreline of the lane it
+  starts in, so they also work into an opposite-direction lane (overtaking on a
+  two-way street) where following that lane would turn the car around;
+* conditions on other actors wait 0.4 s first, so nothing fires on the
+  simulator's very first step;
+* behaviours read only their arguments, ``self``, ``ego`` and the simulation.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from typing import Dict, Iterable, List, Tuple
+
+__all__ = ["BEHAVIORS", "HELPERS", "WEATHERS", "LANE_WIDTH", "behavior_text", "helper_text", "context_hash"]
+
+LANE_WIDTH = 3.5
+"""Lane width of every shipped map [m]."""
+
+WEATHERS = {
+    "clear": ["'ClearNoon'", "'ClearSunset'", "'CloudyNoon'"],
+    "rain": ["'WetNoon'", "'SoftRainNoon'", "'MidRainyNoon'", "'HardRainNoon'"],
+    "night": ["'ClearNight'", "'CloudyNight'", "'WetNight'"],
+    "fog": ["'CloudyNoon'", "'WetCloudyNoon'", "'CloudySunset'"],
+    "any": ["'ClearNoon'", "'CloudyNoon'", "'WetNoon'", "'ClearSunset'", "'WetCloudySunset'", "'SoftRainNoon'"],
+}
+
+# --------------------------------------------------------------------------- helpers (functions)
+HELPERS: Dict[str, str] = {
+    "pathBlocked": '''\
+def pathBlocked(car, margin):
+    # something (vehicle, pedestrian, prop) in the car's own corridor that it is closing in on
+    for obj in simulation().objects:
+        if obj is car:
+            continue
+        rel = (obj.position - car.position).rotatedBy(-car.heading)
+        # where it will be in 1.2 s: someone about to step into the corridor counts already
+        soon = (obj.position + obj.velocity * 1.2 - car.position).rotatedBy(-car.heading)
+        entering = abs(soon.x) <= 2.3 or rel.x * soon.x < 0
+        if rel.y <= 0 or (abs(rel.x) > 2.3 and not entering):
+            continue
+        closing = (car.velocity - obj.velocity).rotatedBy(-car.heading).y
+        if rel.y < margin + 0.35 * car.speed + max(0, closing) * 1.6:
+            return True
+        if obj.speed < 0.5 and rel.y < margin + 8:
+            return True  # stay stopped behind something that stands still
+    return False
+''',
+    "laneSides": '''\
+def laneLeftOf(lane):
+    section = None if lane is None else lane.sections[0]._laneToLeft
+    return None if section is None or section.isForward != lane.sections[0].isForward else section.lane
+
+def laneRightOf(lane):
+    section = None if lane is None else lane.sections[0]._laneToRight
+    return None if section is None else section.lane
+
+def lanesLeftOf(lane):
+    found = []
+    lane = laneLeftOf(lane)
+    while lane is not None:
+        found.append(lane)
+        lane = laneLeftOf(lane)
+    return found
+
+def lanesRightOf(lane):
+    found = []
+    lane = laneRightOf(lane)
+    while lane is not None:
+        found.append(lane)
+        lane = laneRightOf(lane)
+    return found
+''',
+    "approach": '''\
+def approachDir(lane):
+    # direction in which traffic on `lane` drives as it reaches its end (the junction)
+    return lane.centerline[-1] - lane.centerline[-2]
+
+def sideOf(a, b):
+    # > 0: a car arriving on lane b comes from the right of a driver arriving on lane a
+    da = approachDir(a)
+    db = approachDir(b)
+    return da.x * db.y - da.y * db.x
+
+def opposite(a, b):
+    da = approachDir(a)
+    db = approachDir(b)
+    return da.x * db.x + da.y * db.y < -0.7 * da.norm() * db.norm()
+''',
+}
+
+# --------------------------------------------------------------------------- behaviours
+# name -> (scenic text, names of blocks it needs)
+BEHAVIORS: Dict[str, Tuple[str, Tuple[str, ...]]] = {
+    "CautiousCruise": ('''\
+behavior CautiousCruise(speed):
+    # keep the lane at `speed` and brake for anything in the path
+    try:
+        do FollowLaneBehavior(target_speed=speed)
+    interrupt when pathBlocked(self, 5):
+        take SetThrottleAction(0), SetBrakeAction(1)
+''', ("pathBlocked",)),
+    "Cruise": ('''\
+behavior Cruise(speed):
+    do FollowLaneBehavior(target_speed=speed)
+''', ()),
+    "HoldStill": ('''\
+behavior HoldStill():
+    while True:
+        take SetThrottleAction(0), SetBrakeAction(1)
+''', ()),
+    "BrakeLater": ('''\
+behavior BrakeLater(speed, after, lowSpeed, strength):
+    # drive on for `after` seconds, then brake with `strength` down to lowSpeed (0: stop and stay)
+    do FollowLaneBehavior(target_speed=speed) for after seconds
+    while self.speed > lowSpeed + 0.3:
+        take SetThrottleAction(0), SetBrakeAction(strength)
+    if lowSpeed < 0.5:
+        do HoldStill()
+    do FollowLaneBehavior(target_speed=lowSpeed)
+''', ("HoldStill",)),
+    "CautiousBrakeLater": ('''\
+behavior CautiousBrakeLater(speed, after, lowSpeed, strength):
+    try:
+        do BrakeLater(speed, after, lowSpeed, strength)
+    interrupt when pathBlocked(self, 5):
+        take SetThrottleAction(0), SetBrakeAction(1)
+''', ("BrakeLater", "pathBlocked")),
+    "SpeedUpLater": ('''\
+behavior SpeedUpLater(speed, after, fastSpeed):
+    do FollowLaneBehavior(target_speed=speed) for after seconds
+    do FollowLaneBehavior(target_speed=fastSpeed)
+''', ()),
+    "SlideOffset": ('''\
+behavior SlideOffset(line, fromOffset, toOffset, speed, duration):
+    # track `line` at a lateral offset (m, left positive) that moves smoothly from fromOffset
+    # to toOffset within `duration` seconds, then stays there
+    lonControl, latControl = simulation().getLaneFollowingControllers(self)
+    steps = max(1, int(duration / simulation().timestep))
+    pastSteer = 0
+    i = 0
+    while True:
+        i = min(i + 1, steps)
+        u = i / steps
+        offset = fromOffset + (toOffset - fromOffset) * u * u * (3 - 2 * u)
+        throttle = lonControl.run_step(speed - self.speed)
+        steer = latControl.run_step(line.signedDistanceTo(self.position) - offset)
+        take RegulatedControlAction(throttle, steer, pastSteer)
+        pastSteer = steer
+''', ()),
+    "ChangeLanes": ('''\
+behavior ChangeLanes(side, speed, duration):
+    # one lane to the left (side 1) or to the right (side -1), then follow the new lane
+    line = self.laneSection.centerline
+    start = line.signedDistanceTo(self.position)
+    do SlideOffset(line, start, side * 3.5, speed, duration) for duration + 0.3 seconds
+    do FollowLaneBehavior(target_speed=speed)
+''', ("SlideOffset",)),
+    "ChangeLanesLater": ('''\
+behavior ChangeLanesLater(side, speed, after, duration):
+    do FollowLaneBehavior(target_speed=speed) for after seconds
+    do ChangeLanes(side, speed, duration)
+''', ("ChangeLanes",)),
+    "CutInWhenAhead": ('''\
+behavior CutInWhenAhead(side, speed, gap, duration, speedAfter):
+    # drive past the ego in the next lane, move into its lane once `gap` metres ahead of it
+    do FollowLaneBehavior(target_speed=speed) for 0.4 seconds
+    do FollowLaneBehavior(target_speed=speed) until (distance past ego of self) > gap
+    do ChangeLanes(side, speedAfter, duration)
+''', ("ChangeLanes",)),
+    "PullInWhenClose": ('''\
+behavior PullInWhenClose(side, speed, trigger, duration):
+    # a slower vehicle ahead in the next lane moves into the ego's lane once the ego is within `trigger` m
+    do FollowLaneBehavior(target_speed=speed) for 0.4 seconds
+    do FollowLaneBehavior(target_speed=speed) until (distance past ego of self) < trigger
+    do ChangeLanes(side, speed, duration)
+''', ("ChangeLanes",)),
+    "OvertakeAndReturn": ('''\
+behavior OvertakeAndReturn(target, side, speed, pullOut, returnGap, duration, speedAfter):
+    # close up on `target` from behind, pull out to `side`, pass it and pull back in returnGap m ahead
+    do FollowLaneBehavior(target_speed=speed) for 0.4 seconds
+    do FollowLaneBehavior(target_speed=speed) until (distance past target of self) > -pullOut
+    homeLine = self.laneSection.centerline
+    start = homeLine.signedDistanceTo(self.position)
+    do SlideOffset(homeLine, start, side * 3.5, speed, duration) until (distance past target of self) > returnGap
+    now = homeLine.signedDistanceTo(self.position)
+    do SlideOffset(homeLine, now, 0, speedAfter, duration) for duration + 0.3 seconds
+    do FollowLaneBehavior(target_speed=speedAfter)
+''', ("SlideOffset",)),
+    "DriftAndReturn": ('''\
+behavior DriftAndReturn(speed, trigger, depth, duration, returnTrigger, returnDuration):
+    # drift `depth` m sideways (left positive) once near the ego, steer back when closer still
+    do FollowLaneBehavior(target_speed=speed) for 0.4 seconds
+    do FollowLaneBehavior(target_speed=speed) until (distance from self to ego) < trigger
+    homeLine = self.laneSection.centerline
+    do SlideOffset(homeLine, 0, depth, speed, duration) until (distance from self to ego) < returnTrigger
+    now = homeLine.signedDistanceTo(self.position)
+    do SlideOffset(homeLine, now, 0, speed, returnDuration) for returnDuration + 0.3 seconds
+    do FollowLaneBehavior(target_speed=speed)
+''', ("SlideOffset",)),
+    "MergeFromRamp": ('''\
+behavior MergeFromRamp(speed, accelLane, delay, duration):
+    # drive down the ramp, then leave the acceleration lane for the main carriageway
+    do FollowLaneBehavior(target_speed=speed) until self.lane is accelLane
+    do FollowLaneBehavior(target_speed=speed) for delay seconds
+    do ChangeLanes(1, speed, duration)
+''', ("ChangeLanes",)),
+    "DriveRoute": ('''\
+behavior DriveRoute(speed, route):
+    do FollowTrajectoryBehavior(target_speed=speed, trajectory=route, turn_speed=speed)
+    do FollowLaneBehavior(target_speed=speed)
+''', ()),
+    "CautiousRoute": ('''\
+behavior CautiousRoute(speed, route):
+    try:
+        do DriveRoute(speed, route)
+    interrupt when pathBlocked(self, 3):
+        take SetThrottleAction(0), SetBrakeAction(1)
+''', ("DriveRoute", "pathBlocked")),
+    "RouteThenBrake": ('''\
+behavior RouteThenBrake(speed, route, after, lowSpeed, strength):
+    try:
+        do DriveRoute(speed, route)
+    interrupt when simulation().currentTime * simulation().timestep > after:
+        while self.speed > lowSpeed + 0.3:
+            take SetThrottleAction(0), SetBrakeAction(strength)
+        if lowSpeed < 0.5:
+            do HoldStill()
+        do FollowLaneBehavior(target_speed=lowSpeed)
+''', ("DriveRoute", "HoldStill")),
+    "PullOutWhenEgoNear": ('''\
+behavior PullOutWhenEgoNear(speed, route, egoEntry, triggerTime):
+    # wait at the give-way line until the ego is about triggerTime seconds from the junction
+    while (distance from ego to egoEntry) > triggerTime * max(ego.speed, 1):
+        take SetThrottleAction(0), SetBrakeAction(1)
+    do DriveRoute(speed, route)
+''', ("DriveRoute",)),
+    "CrossWhenEgoNear": ('''\
+behavior CrossWhenEgoNear(speed, triggerTime):
+    # step off the kerb once the ego is about triggerTime seconds away, then keep walking
+    while (distance from self to ego) > max(7, triggerTime * ego.speed):
+        wait
+    while True:
+        take SetWalkingSpeedAction(speed)
+''', ()),
+    "StandStill": ('''\
+behavior StandStill():
+    while True:
+        take SetWalkingSpeedAction(0)
+''', ()),
+}
+
+
+def _closure(names: Iterable[str]) -> List[str]:
+    """Block names with everything they need, dependencies first, each once."""
+    ordered: List[str] = []
+
+    def visit(name: str) -> None:
+        if name in ordered:
+            return
+        deps = BEHAVIORS[name][1] if name in BEHAVIORS else ()
+        for dep in deps:
+            visit(dep)
+        ordered.append(name)
+
+    for name in names:
+        visit(name)
+    return ordered
+
+
+def helper_text(names: Iterable[str]) -> str:
+    """Scenic text of the helper functions among ``names`` (and their dependencies)."""
+    return "\n".join(HELPERS[n] for n in _closure(names) if n in HELPERS)
+
+
+def behavior_text(names: Iterable[str]) -> str:
+    """Scenic text of the behaviours ``names`` with every block they need."""
+    blocks = _closure(names)
+    return "\n".join([HELPERS[n] for n in blocks if n in HELPERS] + [BEHAVIORS[n][0] for n in blocks if n in BEHAVIORS])
+
+
+def context_hash() -> str:
+    """Hash of every block: changes whenever the generator's building blocks change."""
+    digest = hashlib.sha256()
+    for table in (HELPERS, {k: v[0] for k, v in BEHAVIORS.items()}):
+        for name in sorted(table):
+            digest.update(name.encode())
+            digest.update(table[name].encode())
+    return digest.hexdigest()[:16]

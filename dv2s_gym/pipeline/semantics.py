@@ -1,0 +1,1002 @@
+"""Semantic elements from free text: a rule-based parser of driving-scene descriptions.
+
+:func:`elements_from_text` reads any description of a driving scene (a VLM's
+three-sentence answer, a bank sidecar's description, a user's one-liner) and
+returns its semantic elements in the vocabulary of :mod:`scenario_bank.elements`:
+the road type, the participants (a multiset), the actions of each participant
+type and the relations between participant types.
+
+How it works (no model, no network):
+
+1. The text is lower-cased and split into sentences, then into clauses at
+   punctuation and at conjunctions (``and``, ``while``, ``but``, ``whereas``,
+   ``as``, ``when``, ``then``, ...).
+2. Actor mentions are found with synonym lists (vehicle/sedan/SUV/van -> car,
+   lorry/bus -> truck, person/walker/cyclist -> pedestrian, signboard/cone/
+   barrier/debris -> obstacle, "ego vehicle"/"our car" -> ego), with counts
+   ("three pedestrians", "two others", plurals) and a small coreference model
+   ("the car" refers back to "a car"; "another car" is a new one; "one" and
+   "the two others" are parts of the last group; "it"/"its" resolve to the
+   previous subject or the last other actor).
+3. Each action phrase (brakes, slows down, cuts in, switches to the middle lane,
+   turns left, crosses, collides, ...) is attributed to the subject of its
+   clause: the last actor mention before it that is not the object of a
+   preposition; a clause without a subject (``... and merges``) inherits the
+   previous one; a clause whose subject is not an actor (``the traffic dynamics
+   cause a halt``) attributes nothing. Negated phrases (``avoids hitting``,
+   ``does not stop``) are skipped.
+4. Relation phrases (in front of / ahead of, behind, on the left / right,
+   oncoming, in the same lane, across the ego's path) attach to the actor right
+   before them (or the clause subject) and point to their object (the ego when
+   left implicit).
+
+:func:`parse_description` returns the richer :class:`ParsedDescription` (entities
+with counts, lanes, crossing directions, "suddenly" flags, unknown actors) that
+the rule-based scenario generator builds its scenario frame from.
+
+Precision is preferred over recall: what is not said is not emitted.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+from scenario_bank.elements import normalize_elements
+
+__all__ = ["Entity", "ParsedDescription", "parse_description", "elements_from_text", "ROAD_PATTERNS"]
+
+# --------------------------------------------------------------------------- lexicon
+
+_NUMBERS = {
+    "a": 1, "an": 1, "one": 1, "single": 1, "two": 2, "three": 3, "four": 4, "five": 5, "six": 6,
+    "seven": 7, "eight": 8, "nine": 9, "ten": 10, "both": 2, "several": 3, "multiple": 2,
+    "couple": 2, "pair": 2, "few": 3, "some": 2, "many": 3,
+}
+
+# head nouns of each participant type: (singular/plural regex, is_plural)
+_NOUNS: Dict[str, List[Tuple[str, bool]]] = {
+    "car": [
+        (r"cars", True), (r"vehicles", True), (r"sedans", True), (r"suvs", True), (r"vans", True),
+        (r"taxis", True), (r"motorcycles", True), (r"motorbikes", True),
+        (r"car", False), (r"vehicle", False), (r"sedan", False), (r"suv", False), (r"van", False),
+        (r"minivan", False), (r"hatchback", False), (r"coupe", False), (r"taxi", False), (r"cab", False),
+        (r"jeep", False), (r"pickup(?: truck)?", False), (r"ambulance", False), (r"motorcycle", False),
+        (r"motorbike", False), (r"scooter", False), (r"convertible", False), (r"wagon", False),
+    ],
+    "truck": [
+        (r"trucks", True), (r"lorries", True), (r"buses", True), (r"semis", True),
+        (r"truck", False), (r"lorry", False), (r"bus", False), (r"semi(?: truck| trailer)?", False),
+        (r"tractor trailer", False), (r"trailer", False), (r"18 wheeler", False), (r"coach", False),
+        (r"tanker", False),
+    ],
+    "pedestrian": [
+        (r"pedestrians", True), (r"people", True), (r"persons", True), (r"walkers", True), (r"men", True),
+        (r"women", True), (r"children", True), (r"kids", True), (r"cyclists", True), (r"bicyclists", True),
+        (r"joggers", True), (r"passers by", True),
+        (r"pedestrian", False), (r"person", False), (r"walker", False), (r"man", False), (r"woman", False),
+        (r"child", False), (r"kid", False), (r"boy", False), (r"girl", False), (r"jogger", False),
+        (r"cyclist", False), (r"bicyclist", False), (r"passer by", False), (r"individual", False),
+    ],
+    "obstacle": [
+        (r"obstacles", True), (r"cones", True), (r"traffic cones", True), (r"barriers", True),
+        (r"boxes", True), (r"barrels", True), (r"rocks", True), (r"tyres", True), (r"tires", True),
+        (r"objects", True), (r"signboards", True), (r"barricades", True),
+        (r"obstacle", False), (r"(?:digital |electronic |message |warning |construction |road ?works )?signboard",
+                               False), (r"sign board", False),
+        (r"(?:digital|electronic|message|warning|construction|road ?works) sign", False),
+        (r"(?:traffic )?cone", False), (r"barrier", False), (r"debris", False), (r"box", False),
+        (r"barrel", False), (r"rock", False), (r"boulder", False), (r"tyre", False), (r"tire", False),
+        (r"object", False), (r"(?:lost |fallen |spilled )?load", False), (r"roadblock", False),
+        (r"barricade", False), (r"crate", False), (r"pallet", False), (r"road works", False),
+    ],
+}
+_EGO = (r"(?:the |an |our |my )?(?:ego(?:[ ](?:car|vehicle|agent|driver|truck))?(?:'s)?|"
+        r"(?:our|my|host|subject) (?:car|vehicle)(?:'s)?|(?:the )?(?:autonomous|self driving) (?:car|vehicle)(?:'s)?)")
+# actor-like things the vocabulary has no type for (reported, never emitted)
+UNKNOWN_ACTORS = (
+    "helicopter", "airplane", "aeroplane", "plane", "drone", "tram", "streetcar", "train", "boat", "horse",
+    "deer", "animal", "dog", "cat", "cow", "bird", "moose", "elephant", "sheep", "carriage", "ufo", "rocket",
+    "tank",
+)
+_NOT_ACTOR_AFTER = r"(?! (?:lane|lanes|stop|park|parks|light|lights|wash|seat|door|line|crossings)\b)"
+
+_COLORS = ("red", "blue", "white", "black", "silver", "grey", "gray", "green", "yellow", "orange", "brown",
+           "purple", "dark", "gold")
+_ORDINALS = ("first", "second", "third", "fourth", "last", "lead", "leading", "front", "rear", "following",
+             "other", "parked", "oncoming", "merging", "overtaking")
+
+# --------------------------------------------------------------------------- roads
+
+ROAD_PATTERNS: Sequence[Tuple[str, str]] = (
+    ("roundabout", r"\b(?:roundabout|traffic circle|rotary)\b"),
+    ("t_junction", r"\bt (?:junction|intersection|shaped (?:junction|intersection)|crossing)\b"),
+    ("three_way", r"\b(?:three|3) way\b|\by (?:junction|intersection)\b"),
+    ("intersection", r"\b(?:intersection|crossroads?|four way|4 way|junction)\b"),
+    ("merge", r"\b(?:on ramp|onramp|slip road|entry ramp|entrance ramp|acceleration lane|merg(?:e|ing) "
+              r"(?:lane|area|section|zone|point)|ramp)\b"),
+    ("highway", r"\b(?:highway|motorway|freeway|expressway|interstate|autobahn|dual carriageway)\b"),
+    ("straight_road", r"\b(?:straight (?:road|street|stretch|section)|street|avenue|boulevard|"
+                      r"(?:urban|city|residential|two way|country|rural|suburban|local) road)\b"),
+    ("straight_road", r"\b(?:road|roadway|carriageway)\b(?! (?:sign|works|side|user)s?\b)"),
+)
+
+# --------------------------------------------------------------------------- actions
+# (action, regex, detail) ; detail names a group that refines the action later
+_A = r"(?:s|es|ed|d|ing)?"
+_ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
+    # braking / slowing
+    ("brake", r"\b(?:slam(?:s|med|ming)? on|hit(?:s|ting)?|step(?:s|ped|ping)? on|appl(?:y|ies|ied|ying)) "
+              r"(?:the |its |his |her )?brakes?\b"),
+    ("brake", r"\bbrak(?:e|es|ed|ing)\b(?! lights?)"),
+    ("brake", r"\bdecelerat(?:e|es|ed|ing)\b"),
+    ("brake", r"\bslow(?:s|ed|ing)?(?: (?:down|sharply|abruptly|suddenly|quickly))?\b(?! (?:car|vehicle|truck|lane|traffic|moving|speed))"),
+    ("brake", r"\b(?:reduc(?:e|es|ed|ing)|drop(?:s|ped|ping)?|cut(?:s|ting)?) (?:its |his |her |their )?speed\b"),
+    # stopping
+    ("stop", r"\b(?:come|comes|came|coming|brought|bring|brings) to a (?:\w+ )?(?:stop|halt|standstill)\b"),
+    ("stop", r"\b(?:remain|remains|remained|remaining|stand|stands|stood|standing|stay|stays|stayed|is|was|are|were"
+             r"|sits|sat) (?:completely |fully )?(?:stationary|stopped|still|motionless|immobile|"
+             r"at a standstill|stalled|broken down)\b"),
+    ("stop", r"\bstop(?:s|ped|ping)?\b(?! (?:sign|line|light|lights|bar)s?\b)"),
+    ("stop", r"\bhalt(?:s|ed|ing)\b"),
+    # accelerating
+    ("accelerate", r"\baccelerat(?:e|es|ed|ing)\b(?! lane)"),
+    ("accelerate", r"\b(?:speed(?:s|ing)? up|sped up|pick(?:s|ed|ing)? up speed|gain(?:s|ed|ing)? speed|"
+                   r"increas(?:e|es|ed|ing) (?:its |his |her |their )?speed)\b"),
+    # lane changes, cut-ins, merges
+    ("cut_in", r"\bcut(?:s|ting)? (?:back )?in(?:to)?\b|\bcut in\b|\bsqueez(?:e|es|ed|ing) in\b"),
+    ("cut_in", r"\bpull(?:s|ed|ing)? (?:back |right )?(?:in|into (?:the ego's|its|the) lane|out in front)\b"),
+    ("cut_in", r"\b(?:chang(?:e|es|ed|ing)|mov(?:e|es|ed|ing)|swerv(?:e|es|ed|ing)|steer(?:s|ed|ing)?|"
+               r"switch(?:es|ed|ing)?|veer(?:s|ed|ing)?|return(?:s|ed|ing)?) (?:lanes? |back )?(?:in)?to "
+               r"(?:the ego(?: vehicle| car)?'s|its|the same|our|my) lane\b"),
+    ("merge", r"\bmerg(?:e|es|ed|ing)\b(?! (?:lane|area|section|zone|point|ramp)s?\b)(?! (?:in)?to the "
+              r"(?:left|right|middle|center|centre) lane)"),
+    ("merge", r"\bjoin(?:s|ed|ing)? the (?:highway|motorway|freeway|main road|traffic)\b"),
+    ("lane_change", r"\b(?:chang(?:e|es|ed|ing)|switch(?:es|ed|ing)?|mov(?:e|es|ed|ing)|shift(?:s|ed|ing)?|"
+                    r"steer(?:s|ed|ing)?|swerv(?:e|es|ed|ing)|merg(?:e|es|ed|ing)|pull(?:s|ed|ing)?|"
+                    r"veer(?:s|ed|ing)?|go(?:es)?|went) (?:also |back |over |quickly |suddenly |abruptly )?"
+                    r"(?:lanes? )?(?:(?:in)?to|towards?) the (?P<dir>left|right|middle|center|centre|inner|outer|"
+                    r"fast|slow|passing)(?: lane|most lane| side)?\b"),
+    ("lane_change", r"\b(?:chang(?:e|es|ed|ing)|switch(?:es|ed|ing)?) lanes? (?:to the )?(?P<dir>left|right)\b"),
+    ("lane_change", r"\b(?P<dir>left|right)(?:ward)? lane change\b|\blane change to the (?P<dir2>left|right)\b"),
+    # turns
+    ("turn", r"\bturn(?:s|ed|ing)? (?:to the )?(?P<dir>left|right)\b"),
+    ("turn", r"\b(?:make|makes|made|making|perform|performs|performed|performing|execute|executes|executed|"
+             r"attempt|attempts|attempted|attempting|initiate|initiates|initiated|initiating|"
+             r"executing|take|takes|took|taking|complete|completes|completed|completing|do|does|did|doing)"
+             r" a (?:\w+ )?(?P<dir>left|right)(?: hand)? turn\b"),
+    ("turn", r"\b(?P<dir>left|right)(?: hand)? turning\b"),
+    # crossing, straight
+    ("go_straight", r"\b(?:go|goes|going|went|gone|drive|drives|driving|drove|driven|continu(?:e|es|ed|ing)|"
+                    r"proceed(?:s|ed|ing)?|head(?:s|ed|ing)?|keep(?:s|ing)?|kept|travel(?:s|ed|led|ing|ling)?|"
+                    r"mov(?:e|es|ed|ing)|pass(?:es|ed|ing)?) (?:on |straight on |directly )?straight\b"),
+    ("go_straight", r"\bstraight (?:through|across) (?:the |a )?(?:intersection|junction|crossroads?)\b"),
+    ("go_straight", r"\b(?:cross(?:es|ed|ing)?|pass(?:es|ed|ing)? through|driv(?:e|es|ing) through|"
+                    r"go(?:es|ing)? through|went through) (?:the |a )(?:intersection|junction|crossroads?)\b"),
+    ("drift", r"\b(?:drift(?:s|ed|ing)?|wander(?:s|ed|ing)?|encroach(?:es|ed|ing)?|invad(?:e|es|ed|ing))\b"),
+    ("drift", r"\b(?:cross(?:es|ed|ing)?|over) (?:the )?(?:centre|center|middle|dividing|median|double|"
+              r"solid|lane) (?:line|marking)s?\b"),
+    ("drift", r"\b(?:veer|veers|veered|veering|swerv(?:e|es|ed|ing)|stray(?:s|ed|ing)?) (?:in)?to "
+              r"(?:the )?(?:oncoming|opposite|opposing|wrong)\b"),
+    ("cross", r"\bcross(?:es|ed|ing)?\b(?! (?:the |a )?(?:centre|center|middle|dividing|median|lane) line)"
+              r"(?! (?:the |a )(?:intersection|junction|crossroads?))(?! (?:the ego(?: vehicle| car)?'s|its|their|"
+              r"his|her|our|the) path)"),
+    ("cross", r"\b(?:walk(?:s|ed|ing)?|run(?:s|ning)?|ran|dash(?:es|ed|ing)?|dart(?:s|ed|ing)?|rush(?:es|ed|ing)?|"
+              r"hurr(?:y|ies|ied|ying)|go(?:es|ing)?|went) (?:out )?(?:across|into the (?:road|street))\b"),
+    ("cross", r"\bstep(?:s|ped|ping)? (?:out|off|onto|into|down)\b"),
+    ("cross", r"\bjaywalk(?:s|ed|ing)?\b"),
+    ("cross", r"\bgo(?:es|ing)? from (?:the )?(?P<from>left|right) to (?:the )?(?:left|right)\b"),
+    # collisions
+    ("collide", r"\bcollid(?:e|es|ed|ing)\b|\bcollision with\b"),
+    ("collide", r"\bcrash(?:es|ed|ing)?\b|\bsmash(?:es|ed|ing)? into\b|\bslam(?:s|med|ming)? into\b|"
+                r"\bbump(?:s|ed|ing)? into\b|\bplow(?:s|ed|ing)? into\b"),
+    ("collide", r"\b(?:hit|hits|hitting)\b(?! (?:the |its |his |her )?brakes?\b)|\bstrik(?:e|es|ing)\b|\bstruck\b|"
+                r"\brear ?end(?:s|ed|ing)?\b|\b(?:run|runs|ran|running) over\b"),
+    # lane keeping
+    ("keep_lane", r"\b(?:keep(?:s|ing)?|kept|stay(?:s|ed|ing)?|remain(?:s|ed|ing)?|maintain(?:s|ed|ing)?|"
+                  r"hold(?:s|ing)?|held|continu(?:e|es|ed|ing)(?: driving)?|follow(?:s|ed|ing)?) "
+                  r"(?:in |to )?(?:its|his|her|their|the same|the|its own|their own) lanes?\b"),
+    ("keep_lane", r"\blane keeping\b|\bdriv(?:e|es|ing) alongside\b"),
+    # overtaking
+    ("overtake", r"\bovert(?:ake|akes|aking|aken|ook)\b"),
+    ("overtake", r"\b(?:manoeuvr|maneuver)(?:e|es|ed|s|ing)? around\b|\b(?:steer(?:s|ed|ing)?|swerv(?:e|es|ed|ing)|"
+                 r"go(?:es)?|went|drive|drives|drove|driving|mov(?:e|es|ed|ing)|weav(?:e|es|ed|ing)|"
+                 r"navigat(?:e|es|ed|ing)) around\b(?! (?:a |the )?(?:roundabout|corner|bend|curve|block|city|town|"
+                 r"circle|traffic circle|rotary|loop)\b)"),
+    ("overtake", r"\bpass(?:es|ed|ing)?\b(?= (?:the |a |an |another |it\b|him\b|them\b|ego\b|our |slower |"
+                 r"stopped |stationary ))(?! (?:the |a |an )?(?:intersection|junction|crossroads?|road|street))"),
+)
+_COMPILED_ACTIONS = [(a, re.compile(p)) for a, p in _ACTION_PATTERNS]
+_NEGATION = re.compile(
+    r"\b(?:not|never|no|avoid|avoids|avoided|avoiding|without|nearly|almost|narrowly|prevent|prevents|"
+    r"prevented|preventing|fail|fails|failed|failing|instead of|rather than|refus\w+|unable to|doesn't|didn't|"
+    r"don't|isn't|wasn't|can't|cannot|risk of|about to|would have)\b(?:\s+\w+){0,2}\s*$")
+_SUDDEN = re.compile(r"\b(?:sudden(?:ly)?|abrupt(?:ly)?|hard|harsh(?:ly)?|sharp(?:ly)?|emergency|quick(?:ly)?|"
+                     r"unexpected(?:ly)?|without warning|aggressive(?:ly)?|rapid(?:ly)?|heavily|violently)\b")
+_PASSIVE_HIT = re.compile(r"\b(?:is|was|were|are|gets?|got|being|been) (?:\w+ )?(?:hit|struck|rear ?ended|run over|"
+                          r"crashed into|collided with) by\b")
+
+# --------------------------------------------------------------------------- relations
+_REL_PATTERNS: Sequence[Tuple[str, str]] = (
+    ("ahead_of", r"\b(?:in front of|ahead of|just ahead of|right in front of|in the path of|before) "),
+    ("behind", r"\b(?:behind|in the back of|to the rear of|at the rear of) "),
+    ("left_of", r"\b(?:to|on|at|in) the left (?:side )?of |\bleft of "),
+    ("right_of", r"\b(?:to|on|at|in) the right (?:side )?of |\bright of "),
+)
+_REL_IMPLICIT: Sequence[Tuple[str, str]] = (
+    ("ahead_of", r"\b(?:in front|ahead|up ahead|further ahead)\b(?! of)"),
+    ("ahead_of", r"\b(?:lead|leading|preceding|front) (?=(?:\w+ )?(?:car|vehicle|truck|sedan|suv|van|lorry|bus))"),
+    ("behind", r"\b(?:from behind|behind)\b(?! (?:it|the|a|an|him|her|them|us|me|ego|our)\b)"),
+    ("behind", r"\b(?:following|trailing|rear|tailgating) (?=(?:\w+ )?(?:car|vehicle|truck|sedan|suv|van|lorry|bus))"),
+    ("left_of", r"\b(?:on|to|from|at) (?:its|the ego(?: vehicle| car)?'s|his|her|our|my|the) left\b(?! lane)(?! of)"
+                r"|\b(?:in|on|from) the (?:lane|lanes) (?:to|on) (?:its|the ego(?: vehicle| car)?'s|the) left\b"
+                r"|\b(?:in|on|from) the (?:adjacent|neighbou?ring|next) left lane\b"
+                r"|\bfrom the left\b(?! (?:to|sidewalk|side|curb|kerb|pavement))"),
+    ("right_of", r"\b(?:on|to|from|at) (?:its|the ego(?: vehicle| car)?'s|his|her|our|my|the) right\b(?! lane)(?! of)"
+                 r"|\b(?:in|on|from) the (?:lane|lanes) (?:to|on) (?:its|the ego(?: vehicle| car)?'s|the) right\b"
+                 r"|\b(?:in|on|from) the (?:adjacent|neighbou?ring|next) right lane\b"
+                 r"|\bfrom the right\b(?! (?:to|sidewalk|side|curb|kerb|pavement))"),
+    ("left_of", r"\bat the far (?:curb|kerb|side)\b"),
+    ("ahead_of", r"\bbefore (?:the ego(?: car| vehicle)?|it) (?:reaches|catches up with|gets to) (?:it|them)\b"),
+    ("crossing_path", r"\bacross the path of\b"),
+    ("oncoming", r"\b(?:oncoming|on coming|opposing|opposite direction|other direction|opposite lane|"
+                 r"head on|wrong way|facing traffic|coming towards?|approaching from the front|"
+                 r"from the other side|(?:comes|coming|came|drives|driving|goes|going|travels|travelling|traveling)"
+                 r" the other way|the other way)\b"),
+    ("same_lane", r"\b(?:in|on|within|occupying|blocking) (?:the same lane|the ego(?: vehicle| car)?'s (?:own )?lane|"
+                  r"its lane|our lane|my lane)\b|\bsame lane\b"),
+    ("crossing_path", r"\b(?:cross(?:es|ed|ing)?|cut(?:s|ting)? across|into|in|through|block(?:s|ed|ing)?) "
+                      r"(?:the ego(?: vehicle| car)?'s|its|our|my) (?:path|way|trajectory)\b|\bcrossing paths\b"),
+)
+_LANE_POS = re.compile(r"\b(?:on|in|from|of|at|along|using|occupying) the (?P<pos>left|leftmost|middle|center|centre|"
+                       r"right|rightmost|fast|slow|passing|inner|outer)(?:most)? lane\b")
+_LANE_WORD = {"left": "left", "leftmost": "left", "fast": "left", "passing": "left", "inner": "left",
+              "middle": "middle", "center": "middle", "centre": "middle",
+              "right": "right", "rightmost": "right", "slow": "right", "outer": "right"}
+_CROSS_DIR = re.compile(r"\bfrom (?:the )?(?P<from>left|right)(?: side| sidewalk| curb| kerb| pavement)?"
+                        r"(?: of the (?:road|street))? to (?:the )?(?P<to>left|right)\b")
+_CROSS_FROM = re.compile(r"\bfrom the (?P<from>left|right|far|near|other|opposite) (?:side|sidewalk|curb|kerb|"
+                         r"pavement)\b|\bfrom (?:the )?(?P<from2>left|right)\b")
+
+_CLAUSE_SPLIT = re.compile(
+    r"\s*(?:,|;|:|\(|\))\s*|\s+(?=(?:and|while|whilst|whereas|but|as|when|then|so|after|before|until|"
+    r"because|although|though|where|meanwhile|which|who)\b)")
+_SENTENCE_SPLIT = re.compile(r"(?<=[.!?])\s+|\n+")
+_DETERMINER_OR_NOUN = re.compile(r"\b(?:the|a|an|this|that|these|those|another|its|their|his|her|some|each|"
+                                 r"[a-z]+s)\b")
+_PREPOSITIONS = ("of", "by", "to", "around", "with", "past", "from", "into", "toward", "towards", "than", "behind",
+                 "beside", "for", "at", "near", "onto", "between", "like", "alongside", "overtakes", "passes",
+                 "hits", "follows", "over", "under", "in", "on", "avoid", "approaches", "approaching", "reaches",
+                 "reaching", "overtaking", "passing", "hitting", "following")
+
+
+@dataclass
+class Entity:
+    """One participant (or a group of same-type participants) of the described scene."""
+
+    kind: str
+    count: int = 1
+    descriptors: set = field(default_factory=set)
+    actions: List[Tuple[str, Dict[str, Any]]] = field(default_factory=list)
+    relations: List[Tuple[str, "Entity"]] = field(default_factory=list)
+    lane: Optional[str] = None
+    attrs: Dict[str, Any] = field(default_factory=dict)
+
+    def add_action(self, action: str, **detail: Any) -> None:
+        for existing, d in self.actions:
+            if existing == action:
+                for k, v in detail.items():
+                    if v and not d.get(k):
+                        d[k] = v
+                    elif k == "directions" and v:
+                        d.setdefault("directions", [])
+                return
+        self.actions.append((action, dict(detail)))
+
+    def has(self, action: str) -> bool:
+        return any(a == action for a, _ in self.actions)
+
+    def detail(self, action: str) -> Dict[str, Any]:
+        for a, d in self.actions:
+            if a == action:
+                return d
+        return {}
+
+
+@dataclass
+class ParsedDescription:
+    """What a description says: road, entities (ego first when mentioned), unknowns."""
+
+    text: str
+    road: Optional[str] = None
+    road_words: List[str] = field(default_factory=list)
+    entities: List[Entity] = field(default_factory=list)
+    unknown_actors: List[str] = field(default_factory=list)
+    unresolved: List[str] = field(default_factory=list)
+
+    @property
+    def ego(self) -> Optional[Entity]:
+        for e in self.entities:
+            if e.kind == "ego":
+                return e
+        return None
+
+    def index(self, entity: Entity) -> int:
+        for i, e in enumerate(self.entities):
+            if e is entity:
+                return i
+        raise ValueError("entity not in description")
+
+    def elements(self) -> Dict[str, Any]:
+        """The semantic elements (vocabulary canonical form)."""
+        participants: List[str] = []
+        for e in self.entities:
+            participants.extend([e.kind] * e.count)
+        actions = sorted({(e.kind, a) for e in self.entities for a, _ in e.actions})
+        relations = set()
+        for e in self.entities:
+            for rel, other in e.relations:
+                if other is e:
+                    continue
+                relations.add((e.kind, rel, other.kind))
+        return normalize_elements({"road": self.road, "participants": participants,
+                                   "actions": [list(a) for a in actions],
+                                   "relations": [list(r) for r in sorted(relations)]})
+
+
+# --------------------------------------------------------------------------- parsing
+
+@dataclass
+class _Mention:
+    start: int
+    end: int
+    entity: Entity
+    prep_object: bool
+    possessive: bool
+    pronoun: bool = False
+    size: Optional[int] = None
+
+
+def _normalize(text: str) -> str:
+    text = text.replace("\u2019", "'").replace("\u2018", "'").replace("\u201c", '"').replace("\u201d", '"')
+    text = text.lower()
+    text = re.sub(r"(?<=\w)-(?=\w)", " ", text)
+    text = re.sub(r"[\u2013\u2014]", ", ", text)
+    text = re.sub(r"\s+", " ", text)
+    # "a pedestrian crossing" as a place is a crosswalk, not a pedestrian
+    text = re.sub(r"\b((?:at|near|approach\w*|to|towards?|over|through|before|reach\w*|on) (?:a|the) )"
+                  r"(?:zebra|pedestrian) crossing\b", r"\1crosswalk", text)
+    return text.strip()
+
+
+def _noun_regex() -> re.Pattern:
+    parts = []
+    for kind, nouns in _NOUNS.items():
+        for noun, plural in nouns:
+            parts.append(f"(?P<{kind}_{'p' if plural else 's'}_{len(parts)}>{noun})")
+    return re.compile(r"\b(?:" + "|".join(parts) + r")(?:'s|s')?\b" + _NOT_ACTOR_AFTER)
+
+
+_NOUN_RE = _noun_regex()
+_EGO_RE = re.compile(r"\b" + _EGO + r"\b")
+_PRONOUN_RE = re.compile(r"\b(?:it|its|they|them|their|him|his|her|he|she)\b")
+_GROUP_REF = re.compile(r"\b(?:the (?:other|remaining) (?P<n1>two|three|four|\d+)|(?:the )?(?P<n2>two|three|four|\d+) "
+                        r"others?|the others|the other one|one of them|(?:the )?(?:first|second|third) one|"
+                        r"(?<![\w'])one(?= (?:going|walking|running|moving|crossing|from|of|is|was|heading|who|"
+                        r"that|coming)\b)|each of them|both of them|all of them|all three|all two|both)\b")
+
+
+class _Parser:
+    def __init__(self, text: str) -> None:
+        self.raw = text
+        self.text = _normalize(text)
+        self.out = ParsedDescription(text=text)
+        self.last_subject: Optional[Entity] = None
+        self.last_group: Optional[Entity] = None
+        self.recent: List[Entity] = []  # most recent last
+
+    # ---------------------------------------------------------------- helpers
+    def _entity_for(self, kind: str, count: int, definite: bool, descriptors: set, new: bool) -> Entity:
+        if kind == "ego":
+            ego = self.out.ego
+            if ego is None:
+                ego = Entity("ego")
+                self.out.entities.insert(0, ego)
+            return ego
+        same = [e for e in self.out.entities if e.kind == kind]
+        if not new and same:
+            if definite or count == 1 and not descriptors:
+                candidates = same
+                colors = descriptors & set(_COLORS)
+                roles = descriptors & set(_ORDINALS)
+                if "other" in descriptors:
+                    last = next((e for e in reversed(self.recent) if e.kind == kind), None)
+                    others = [e for e in same if e is not last]
+                    if others:
+                        return others[-1]
+                    if last is not None and len(same) == 1:
+                        return last
+                if colors:
+                    match = [e for e in same if e.descriptors & colors]
+                    if match:
+                        return match[-1]
+                    if all(e.descriptors & set(_COLORS) for e in same):
+                        return self._new(kind, count, descriptors)
+                    candidates = [e for e in same if not (e.descriptors & set(_COLORS))]
+                if roles - {"other"}:
+                    match = [e for e in candidates if e.descriptors & (roles - {"other"})]
+                    if match:
+                        return match[-1]
+                for e in reversed(self.recent):
+                    if e in candidates:
+                        e.descriptors |= descriptors
+                        return e
+                candidates[-1].descriptors |= descriptors
+                return candidates[-1]
+        return self._new(kind, count, descriptors)
+
+    def _new(self, kind: str, count: int, descriptors: set) -> Entity:
+        entity = Entity(kind, count=max(1, count), descriptors=set(descriptors))
+        self.out.entities.append(entity)
+        return entity
+
+    def _touch(self, entity: Entity) -> None:
+        if entity in self.recent:
+            self.recent.remove(entity)
+        self.recent.append(entity)
+        if entity.count > 1:
+            self.last_group = entity
+
+    # ---------------------------------------------------------------- mentions
+    def _mentions(self, clause: str, base_subject: Optional[Entity]) -> List[_Mention]:
+        mentions: List[_Mention] = []
+        taken: List[Tuple[int, int]] = []
+
+        def free(a: int, b: int) -> bool:
+            return all(b <= s or a >= e for s, e in taken)
+
+        def prep_before(start: int) -> bool:
+            before = clause[:start].split()
+            # skip determiners/adjectives/numbers back to the governing word
+            i = len(before) - 1
+            while i >= 0 and (before[i] in _NUMBERS or before[i] in ("the", "a", "an", "another", "other", "its",
+                                                                     "their", "his", "her", "this", "that")
+                              or before[i] in _COLORS or before[i] in _ORDINALS
+                              or re.fullmatch(r"\w+(?:er|ed|ing|ary|ant|ing|ive|y|ow|ast|ig|all|ed)", before[i])
+                              and before[i] not in _PREPOSITIONS):
+                i -= 1
+            return i >= 0 and before[i] in _PREPOSITIONS
+
+        for m in _EGO_RE.finditer(clause):
+            if not free(m.start(), m.end()):
+                continue
+            possessive = m.group(0).endswith("'s") or clause[m.end():m.end() + 2] == "'s"
+            taken.append((m.start(), m.end()))
+            mentions.append(_Mention(m.start(), m.end(), self._entity_for("ego", 1, True, set(), False),
+                                     prep_before(m.start()), possessive))
+        for m in _NOUN_RE.finditer(clause):
+            if not free(m.start(), m.end()):
+                continue
+            group = next(k for k, v in m.groupdict().items() if v)
+            kind, number = group.split("_")[0], group.split("_")[1]
+            plural = number == "p"
+            before = clause[:m.start()].split()
+            window = before[-4:]
+            count = None
+            definite = False
+            descriptors = set()
+            new = False
+            for w in window:
+                if w in _NUMBERS and w not in ("a", "an"):
+                    count = _NUMBERS[w]
+                elif w.isdigit():
+                    count = int(w)
+                if w in ("the", "this", "that", "these", "those", "its", "their"):
+                    definite = True
+                if w in ("a", "an"):
+                    definite = False
+                    count = count or 1
+                    new = True
+                if w in ("another", "second", "third", "fourth"):
+                    new = True
+                if w in _COLORS or w in _ORDINALS:
+                    descriptors.add(w)
+            # words right before the noun only: descriptors that follow "the"/"a"
+            if window and window[-1] in ("another",):
+                new = True
+            if plural and count is None:
+                count = 2
+            if count is None:
+                count = 1
+            if kind == "car" and self._is_ego_alias(clause, m.start()):
+                entity = self._entity_for("ego", 1, True, set(), False)
+            elif plural and definite and self.last_group is not None and self.last_group.kind == kind:
+                entity = self.last_group
+            else:
+                entity = self._entity_for(kind, count, definite, descriptors, new)
+                if plural and entity.count < count:
+                    entity.count = count
+            possessive = m.group(0).endswith("'s") or m.group(0).endswith("s'")
+            taken.append((m.start(), m.end()))
+            mentions.append(_Mention(m.start(), m.end(), entity, prep_before(m.start()), possessive))
+            # adjectives of state before the noun: stopped car, parked truck, broken down car
+            if entity.kind not in ("ego", "obstacle") and re.search(
+                    r"\b(?:stopped|stationary|broken down|stalled|standing|disabled|idle|halted)\s+"
+                    r"(?:\w+\s+)?$", clause[:m.start()]):
+                if not _NEGATION.search(clause[:m.start()]):
+                    entity.add_action("stop")
+        for m in _GROUP_REF.finditer(clause):
+            if not free(m.start(), m.end()) or self.last_group is None:
+                continue
+            taken.append((m.start(), m.end()))
+            word = m.group(0)
+            number = m.group("n1") or m.group("n2")
+            if number:
+                size = _NUMBERS.get(number) or (int(number) if number.isdigit() else None)
+            elif re.search(r"\bone\b", word) and "them" not in word or word.startswith("one"):
+                size = 1
+            elif word in ("both", "both of them") or word.startswith("all") or word.startswith("each"):
+                size = self.last_group.count
+            else:
+                size = None  # "the others": whoever is left
+            mentions.append(_Mention(m.start(), m.end(), self.last_group, False, False, pronoun=True, size=size))
+        for m in _PRONOUN_RE.finditer(clause):
+            if not free(m.start(), m.end()):
+                continue
+            word = m.group(0)
+            entity = None
+            possessive = word in ("its", "their", "his")
+            objective = word in ("them", "him") or possessive or prep_before(m.start())
+            if word in ("it", "they", "he", "she") and not prep_before(m.start()) and not possessive:
+                entity = base_subject or self.last_subject
+                objective = False
+                # "it" right after a verb is an object
+                prev = clause[:m.start()].split()[-1:] or [""]
+                if prev[0] and prev[0] not in ("and", "then", "while", "as", "when", "but", "so", "where",
+                                               "after", "before", "until", "because", "that", "which"):
+                    objective = True
+                    entity = None
+            if entity is None:
+                entity = ("pending", m.start())  # resolved by the caller with the clause subject
+            taken.append((m.start(), m.end()))
+            mentions.append(_Mention(m.start(), m.end(), entity, objective, possessive, pronoun=True))
+        mentions.sort(key=lambda mm: mm.start)
+        return mentions
+
+    def _is_ego_alias(self, clause: str, start: int) -> bool:
+        return bool(re.search(r"\b(?:ego|our|my|host|subject)\s+$", clause[:start]))
+
+    # ---------------------------------------------------------------- main
+    def parse(self) -> ParsedDescription:
+        text = self.text
+        for road, pattern in ROAD_PATTERNS:
+            m = re.search(pattern, text)
+            if m:
+                self.out.road = road
+                self.out.road_words.append(m.group(0))
+                break
+        for word in UNKNOWN_ACTORS:
+            if re.search(rf"\b{word}s?\b", text):
+                self.out.unknown_actors.append(word)
+        for sentence in _SENTENCE_SPLIT.split(text):
+            sentence = sentence.strip(" .!?")
+            if sentence:
+                self._sentence(sentence)
+        self._finish()
+        return self.out
+
+    def _sentence(self, sentence: str) -> None:
+        clauses = [c.strip() for c in _CLAUSE_SPLIT.split(sentence) if c and c.strip()]
+        previous_subject = self.last_subject
+        for clause in clauses:
+            subject = self._clause(clause, previous_subject)
+            if subject is not None:
+                previous_subject = subject
+                self.last_subject = subject
+
+    def _clause(self, clause: str, inherited: Optional[Entity]) -> Optional[Entity]:
+        lead = re.match(r"(?:and|while|whilst|whereas|but|as|when|then|so|after|before|until|because|although|"
+                        r"though|where|meanwhile|which|who|also|suddenly|finally|eventually|later|"
+                        r"immediately|quickly)\b\s*", clause)
+        body_start = lead.end() if lead else 0
+        subordinate = bool(lead) and lead.group(0).strip() in ("which", "who")
+        mentions = self._mentions(clause, inherited)
+        # clause subject: first actor mention that is not a prepositional object / possessive
+        subject = None
+        explicit = False
+        first_verb = min((m.start() for _, rx in _COMPILED_ACTIONS for m in rx.finditer(clause)
+                          if m.start() >= body_start), default=len(clause))
+        for mm in mentions:
+            if mm.start < body_start:
+                continue
+            if mm.start > first_verb:
+                break  # an actor after the verb is its object, not the subject
+            if isinstance(mm.entity, tuple):
+                continue
+            if not mm.prep_object and not mm.possessive:
+                subject = mm.entity
+                explicit = True
+                break
+            break
+        if subject is None:
+            first_action = min((m.start() for _, rx in _COMPILED_ACTIONS for m in rx.finditer(clause)),
+                               default=len(clause))
+            head = clause[body_start:first_action]
+            first = (clause[body_start:].split() or [""])[0]
+            verb_first = bool(re.fullmatch(r"[a-z]+(?:s|ed|ing)", first)) and not _NOUN_RE.fullmatch(first) \
+                and first not in ("this", "his", "its", "as", "is", "was", "has", "does", "thus", "always")
+            if subordinate or verb_first or not _DETERMINER_OR_NOUN.search(head) or \
+                    re.match(r"\s*(?:it|they|he|she)\b", head):
+                subject = inherited
+            else:
+                subject = None  # a non-actor subject ("the traffic dynamics cause ...")
+        # resolve pending pronouns: objects -> last other actor mentioned
+        for mm in mentions:
+            if isinstance(mm.entity, tuple):
+                mm.entity = self._other_than(subject)
+        mentions = [mm for mm in mentions if mm.entity is not None]
+        for mm in mentions:
+            self._touch(mm.entity)
+        if subject is not None:
+            self._touch(subject)
+        if lead and lead.group(0).strip() == "before" and inherited is not None and inherited.kind != "ego" and \
+                re.match(r"before (?:the ego(?: car| vehicle)?|it) (?:reaches|catches up with|gets to) (?:it|them)\b",
+                         clause):
+            ego = self.out.ego
+            if ego is not None:
+                self._relate(inherited, "ahead_of", ego)
+        self._lanes(clause, mentions, subject)
+        self._relations(clause, mentions, subject)
+        self._actions(clause, mentions, subject)
+        self._crossing_directions(clause, mentions, subject)
+        return subject if (explicit or subject is not None) else None
+
+    def _crossing_directions(self, clause: str, mentions: List[_Mention], subject: Optional[Entity]) -> None:
+        """"one going from left to right and the two others from right to left": sizes and directions."""
+        for m in _CROSS_DIR.finditer(clause):
+            direction = f"{m.group('from')}_to_{m.group('to')}"
+            if m.group("from") == m.group("to"):
+                continue
+            ref = next((mm for mm in reversed(mentions) if mm.end <= m.start() and mm.size is not None), None)
+            owner = ref.entity if ref is not None else subject
+            if owner is None or owner.kind != "pedestrian":
+                continue
+            dirs = owner.attrs.setdefault("cross_dirs", [])
+            if ref is not None:
+                size = ref.size
+            else:
+                others = [mm for mm in mentions if mm.end <= m.start() and mm.pronoun and mm.entity is owner]
+                size = owner.count - sum(n for _, n in dirs) if others else (owner.count if not dirs else 0)
+            if size and size > 0:
+                dirs.append((direction, size))
+            if not owner.has("cross"):
+                owner.add_action("cross", sudden=False, directions=[])
+
+    def _other_than(self, subject: Optional[Entity]) -> Optional[Entity]:
+        """An object pronoun: the most recently mentioned actor other than the clause subject."""
+        for e in reversed(self.recent):
+            if e is not subject:
+                return e
+        ego = self.out.ego
+        return ego if ego is not subject else None
+
+    def _attach(self, pos: int, mentions: List[_Mention], subject: Optional[Entity],
+                exclude: Optional[Entity] = None, allow_ego: bool = True) -> Optional[Entity]:
+        """The actor a phrase at ``pos`` describes: the mention right before it, else the subject."""
+        before = [mm for mm in mentions if mm.end <= pos and not mm.possessive]
+        for mm in reversed(before):
+            if mm.entity is exclude or (not allow_ego and mm.entity.kind == "ego"):
+                continue
+            if pos - mm.end <= 40:
+                if mm.prep_object and subject is not None and subject is not exclude and (
+                        allow_ego or subject.kind != "ego"):
+                    # "the car in front of the ego ... on the left": prefer the actor, not the object
+                    if pos - mm.end > 12:
+                        return subject
+                return mm.entity
+            break
+        if subject is not None and subject is not exclude and (allow_ego or subject.kind != "ego"):
+            return subject
+        return None
+
+    def _object_at(self, clause: str, pos: int, mentions: List[_Mention]) -> Optional[Entity]:
+        for mm in mentions:
+            if mm.start >= pos and mm.start - pos <= 22:
+                return mm.entity
+        return None
+
+    def _lanes(self, clause: str, mentions: List[_Mention], subject: Optional[Entity]) -> None:
+        for m in _LANE_POS.finditer(clause):
+            preceding = clause[:m.start()]
+            if re.search(r"\b(?:to|into|towards?)\s*$", preceding):
+                continue
+            owner = self._attach(m.start(), mentions, subject)
+            if owner is not None and owner.lane is None:
+                owner.lane = _LANE_WORD[m.group("pos")]
+        for m in re.finditer(r"\b(?:in|on|along|using) (?:the |a |an )?(?:neighbou?ring|adjacent|next|other|nearby|"
+                             r"side) lanes?\b", clause):
+            owner = self._attach(m.start(), mentions, subject, allow_ego=False)
+            if owner is not None and owner.lane is None:
+                owner.lane = "adjacent"  # a lane next to the ego's, side not said
+        for m in re.finditer(r"\b(?:from|on|in) the (?:on ramp|onramp|ramp|slip road|acceleration lane|"
+                             r"entrance ramp|merging lane|merge lane)\b", clause):
+            owner = self._attach(m.start(), mentions, subject)
+            if owner is not None:
+                owner.lane = owner.lane or "ramp"
+        for m in re.finditer(r"\b(?:from|on|in|out of) the (?:side road|side street|minor road|cross street|"
+                             r"crossing road|perpendicular road)\b", clause):
+            owner = self._attach(m.start(), mentions, subject)
+            if owner is not None:
+                owner.attrs["side_road"] = True
+
+    def _relations(self, clause: str, mentions: List[_Mention], subject: Optional[Entity]) -> None:
+        ego = self.out.ego
+        for rel, pattern in _REL_PATTERNS:
+            for m in re.finditer(pattern, clause):
+                target = self._object_at(clause, m.end(), mentions)
+                if target is None:
+                    continue
+                owner = self._attach(m.start(), mentions, subject, exclude=target)
+                if owner is None or owner is target:
+                    continue
+                if rel == "ahead_of" and m.group(0).strip() == "before":
+                    continue
+                if owner.kind == "ego" and target.kind != "ego" and rel in ("behind", "ahead_of"):
+                    # "the ego drives behind a truck": the truck is ahead of the ego
+                    self._relate(target, "ahead_of" if rel == "behind" else "behind", owner)
+                    continue
+                self._relate(owner, rel, target)
+        for rel, pattern in _REL_IMPLICIT:
+            for m in re.finditer(pattern, clause):
+                if rel == "oncoming":
+                    owner = self._attach_forward(m, clause, mentions, subject)
+                elif rel in ("ahead_of", "behind") and m.group(0).startswith(("lead", "leading", "preceding",
+                                                                              "front", "following", "trailing",
+                                                                              "rear", "tailgating")):
+                    owner = self._attach_forward(m, clause, mentions, subject)
+                else:
+                    owner = self._attach(m.start(), mentions, subject, allow_ego=False)
+                if owner is None or owner.kind == "ego":
+                    continue
+                if rel in ("left_of", "right_of") and re.search(
+                        r"\b(?:chang\w*|switch\w*|mov\w*|steer\w*|swerv\w*|turn\w*|veer\w*|shift\w*|lanes?|"
+                        r"pull\w*|merg\w*)\s+(?:\w+\s+)?$", clause[:m.start()]) and m.group(0).startswith("to"):
+                    continue
+                if rel in ("left_of", "right_of") and m.group(0).startswith("from the") and not (
+                        owner.has("cut_in") or re.search(r"\bcut|pull|merg|swerv|mov|chang|approach|come|overt",
+                                                          clause)):
+                    if owner.kind == "pedestrian":
+                        continue
+                if rel == "same_lane" and re.search(r"\binto\s+(?:the ego|its|our|my)", clause[max(0, m.start() - 8):m.end()]):
+                    continue
+                if rel == "behind" and "from behind" in m.group(0) and owner.kind == "pedestrian":
+                    continue
+                if ego is not None:
+                    self._relate(owner, rel, ego)
+                else:
+                    owner.attrs.setdefault("pending_relations", []).append(rel)
+
+    def _attach_forward(self, m: re.Match, clause: str, mentions: List[_Mention],
+                        subject: Optional[Entity]) -> Optional[Entity]:
+        """Adjectives ("oncoming cars", "the lead vehicle") describe the noun right after them."""
+        for mm in mentions:
+            if mm.start >= m.end() and mm.start - m.end() <= 25 and mm.entity.kind != "ego":
+                return mm.entity
+        return self._attach(m.start(), mentions, subject, allow_ego=False)
+
+    def _relate(self, owner: Entity, rel: str, target: Entity) -> None:
+        if owner is target:
+            return
+        if not any(r == rel and t is target for r, t in owner.relations):
+            owner.relations.append((rel, target))
+
+    def _actions(self, clause: str, mentions: List[_Mention], subject: Optional[Entity]) -> None:
+        spans: List[Tuple[int, int]] = []
+        for action, rx in _COMPILED_ACTIONS:
+            for m in rx.finditer(clause):
+                if any(not (m.end() <= s or m.start() >= e) for s, e in spans):
+                    continue
+                before = clause[:m.start()]
+                if _NEGATION.search(before[-45:]):
+                    spans.append((m.start(), m.end()))
+                    continue
+                owner = self._action_subject(m.start(), mentions, subject, clause)
+                if re.search(r"\bor\s+(?:\w+\s+)?$", before) or re.match(r"\s*(?:\w+\s+){0,3}or\b", clause[m.end():]):
+                    spans.append((m.start(), m.end()))
+                    continue  # "turns right or goes straight": neither is stated
+                if action == "collide":
+                    passive = _PASSIVE_HIT.search(clause[max(0, m.start() - 25):m.end() + 4])
+                    if passive:
+                        agent = self._object_at(clause, m.end(), mentions)
+                        if agent is not None:
+                            owner = agent
+                spans.append((m.start(), m.end()))
+                if owner is None:
+                    continue
+                self._record(owner, action, m, clause)
+
+    def _action_subject(self, pos: int, mentions: List[_Mention], subject: Optional[Entity],
+                        clause: str = "") -> Optional[Entity]:
+        rel = re.search(r"\b(?:that|which|who)\s+(?:\w+ly\s+|also\s+|then\s+)?$", clause[:pos])
+        if rel:
+            before = [mm for mm in mentions if mm.end <= rel.start() and rel.start() - mm.end <= 2]
+            if before and not before[-1].possessive:
+                return before[-1].entity
+        candidates = [mm for mm in mentions if mm.end <= pos and not mm.prep_object and not mm.possessive]
+        if candidates:
+            # the nearest subject-like mention, unless a verb (an action) sits between: then the clause subject
+            return candidates[-1].entity if subject is None or candidates[-1].entity is subject or \
+                self._is_subject_like(candidates[-1], subject) else subject
+        return subject
+
+    @staticmethod
+    def _is_subject_like(mention: _Mention, subject: Optional[Entity]) -> bool:
+        # a non-prepositional mention after the clause subject is usually a verb object ("overtakes the ego")
+        return subject is None
+
+    def _record(self, owner: Entity, action: str, m: re.Match, clause: str) -> None:
+        window = clause[max(0, m.start() - 30):m.end() + 25]
+        sudden = bool(_SUDDEN.search(window))
+        kind = owner.kind
+        if kind == "obstacle":
+            return
+        groups = m.groupdict()
+        if action == "lane_change":
+            d = groups.get("dir") or groups.get("dir2")
+            side = _LANE_WORD.get(d, d) if d in _LANE_WORD else d
+            if d in ("left", "right") and "side" not in m.group(0):
+                owner.add_action(f"lane_change_{d}", sudden=sudden, target=d)
+            elif side == "middle":
+                owner.add_action("lane_change_pending", sudden=sudden, target="middle")
+            elif side in ("left", "right"):
+                owner.add_action(f"lane_change_{side}", sudden=sudden, target=side)
+            return
+        if action == "turn":
+            d = groups.get("dir")
+            if kind in ("pedestrian",):
+                return
+            owner.add_action(f"turn_{d}", sudden=sudden)
+            return
+        if action == "cross":
+            if kind == "pedestrian":
+                direction = None
+                dm = _CROSS_DIR.search(clause)
+                if dm:
+                    direction = f"{dm.group('from')}_to_{dm.group('to')}"
+                elif groups.get("from"):
+                    direction = f"{groups['from']}_to_{'right' if groups['from'] == 'left' else 'left'}"
+                else:
+                    fm = _CROSS_FROM.search(clause)
+                    if fm and (fm.group("from") or fm.group("from2")) in ("left", "right"):
+                        f = fm.group("from") or fm.group("from2")
+                        direction = f"{f}_to_{'right' if f == 'left' else 'left'}"
+                    elif fm and (fm.group("from") in ("far", "other", "opposite")):
+                        direction = "far_side"
+                d = owner.detail("cross")
+                if owner.has("cross") and direction:
+                    d.setdefault("directions", []).append(direction)
+                else:
+                    owner.add_action("cross", sudden=sudden, directions=[direction] if direction else [])
+                return
+            if kind in ("car", "truck", "ego"):
+                if re.match(r"cross(?:es|ed|ing)? (?:the |a )?(?:road|street|lanes?|highway)\b", m.group(0) +
+                            clause[m.end():m.end() + 20].lstrip().join([" ", ""])):
+                    owner.add_action("cross", sudden=sudden)
+                return
+        if action == "cut_in":
+            side = None
+            sm = re.search(r"\bfrom the (left|right)\b|\bfrom (?:its|the) (left|right)\b", clause)
+            if sm:
+                side = sm.group(1) or sm.group(2)
+            owner.add_action("cut_in", sudden=sudden, side=side, back="back" in m.group(0))
+            return
+        if action == "overtake":
+            side = None
+            sm = re.search(r"\bon the (left|right)\b|\bvia the (left|right)\b|\bon (?:its|the ego's) (left|right)\b",
+                           clause)
+            if sm:
+                side = next(g for g in sm.groups() if g)
+            owner.add_action("overtake", sudden=sudden, side=side,
+                             around=" around" in m.group(0), via_pass=m.group(0).startswith("pass"))
+            return
+        if action == "stop" and re.match(r"park", m.group(0)) and kind == "ego":
+            return
+        if action == "merge" and kind == "pedestrian":
+            return
+        if action == "collide":
+            owner.add_action("collide", sudden=sudden)
+            return
+        owner.add_action(action, sudden=sudden)
+
+    def _finish(self) -> None:
+        ego = self.out.ego
+        for e in self.out.entities:
+            # "switches to the middle lane": direction from the lane it is on
+            for i, (a, d) in enumerate(list(e.actions)):
+                if a == "lane_change_pending":
+                    direction = {"left": "right", "right": "left"}.get(e.lane or "")
+                    if direction is None and ego is not None and e is not ego:
+                        for rel, j in e.relations:
+                            if rel in ("left_of", "right_of") and j is ego:
+                                direction = "right" if rel == "left_of" else "left"
+                    e.actions.pop(i)
+                    if direction:
+                        e.add_action(f"lane_change_{direction}", **d)
+                    else:
+                        self.out.unresolved.append(f"{e.kind}: lane change to the middle lane from an unknown lane")
+                    break
+            if e.kind == "pedestrian" and e.has("cross"):
+                e.actions = [(a, d) for a, d in e.actions if a not in ("stop",) or d.get("keep")]
+            # cut-in side from the relation
+            if e.has("cut_in") and not e.detail("cut_in").get("side"):
+                for rel, j in e.relations:
+                    if rel in ("left_of", "right_of"):
+                        e.detail("cut_in")["side"] = rel.split("_")[0]
+        for e in self.out.entities:
+            if e.kind == "ego" or ego is None:
+                continue
+            for rel in e.attrs.pop("pending_relations", []):
+                self._relate(e, rel, ego)
+            rels = {r for r, j in e.relations if j is ego}
+            if e.lane == "ramp" and not rels & {"left_of", "right_of"}:
+                self._relate(e, "right_of", ego)
+                rels.add("right_of")
+            if e.has("merge") and "ahead_of" in rels and not e.has("cut_in"):
+                e.add_action("cut_in")
+            if e.has("cut_in") and e.has("overtake") and e.detail("overtake").get("via_pass") \
+                    and not e.detail("cut_in").get("back"):
+                e.actions = [(a, d) for a, d in e.actions if a != "overtake"]
+            if e.has("cut_in"):
+                side = e.detail("cut_in").get("side") or ("left" if "left_of" in rels else
+                                                          "right" if "right_of" in rels else None)
+                if e.has("overtake") and e.detail("cut_in").get("back"):
+                    out_side = e.detail("overtake").get("side") or "left"
+                    back_side = "right" if out_side == "left" else "left"
+                    e.add_action(f"lane_change_{out_side}")
+                    e.add_action(f"lane_change_{back_side}")
+                elif side in ("left", "right") and not e.has("merge"):
+                    e.add_action(f"lane_change_{'right' if side == 'left' else 'left'}")
+            if e.kind in ("car", "truck") and "ahead_of" in rels and not rels & {"left_of", "right_of", "oncoming"} \
+                    and not (e.has("cut_in") and not e.detail("cut_in").get("back")) and not e.has("merge"):
+                self._relate(e, "same_lane", ego)
+            if e.kind == "obstacle" and "same_lane" in rels:
+                self._relate(e, "ahead_of", ego)
+            if e.kind == "pedestrian" and e.has("cross"):
+                self._relate(e, "ahead_of", ego)
+                self._relate(e, "crossing_path", ego)
+            if e.kind in ("car", "truck") and "oncoming" in rels and ego.has("turn_left"):
+                self._relate(e, "crossing_path", ego)
+        # absolute lanes of two actors give a relation
+        if ego is not None and ego.lane in ("left", "middle", "right"):
+            order = {"left": 0, "middle": 1, "right": 2}
+            for e in self.out.entities:
+                if e is ego or e.lane not in order or e.kind == "pedestrian":
+                    continue
+                if order[e.lane] < order[ego.lane]:
+                    self._relate(e, "left_of", ego)
+                elif order[e.lane] > order[ego.lane]:
+                    self._relate(e, "right_of", ego)
+        # a pedestrian crossing in front of the ego; "one ... and the two others" count directions
+        for e in self.out.entities:
+            if e.kind == "pedestrian" and e.has("cross"):
+                dirs = e.detail("cross").get("directions") or []
+                e.detail("cross")["directions"] = dirs
+
+
+def parse_description(text: str) -> ParsedDescription:
+    """Parse a description into entities with actions, relations, lanes and counts."""
+    if not isinstance(text, str):
+        raise TypeError(f"description must be a string, got {type(text).__name__}")
+    return _Parser(text).parse()
+
+
+def elements_from_text(text: str) -> Dict[str, Any]:
+    """The semantic elements a description states, in canonical vocabulary form.
+
+    >>> elements_from_text("The ego car is on the highway and the car in front of it suddenly decelerates.")
+    ... # doctest: +NORMALIZE_WHITESPACE
+    {'road': 'highway', 'participants': ['car', 'ego'], 'actions': [['car', 'brake']],
+     'relations': [['car', 'ahead_of', 'ego']]}
+    """
+    return parse_description(text).elements()

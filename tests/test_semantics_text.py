@@ -1,0 +1,149 @@
+"""Semantic elements from description text (dv2s_gym.pipeline.semantics).
+
+Labelling conventions follow the bank sidecars: a vehicle "in front of" the ego with no side is also in
+its lane (same_lane); a cut-in also counts as a lane change toward the ego; a crossing pedestrian is
+ahead of the ego and crosses its path; an oncoming vehicle crosses the path of an ego turning left; a
+bare "road" is a straight road.
+"""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from dv2s_gym.pipeline.semantics import elements_from_text, parse_description
+from scenario_bank.elements import element_set, normalize_elements
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = ROOT / "scenario_bank" / "scenarios"
+
+PAPER = {
+    "The ego car is on the highway and the car in front of it suddenly decelerates.": {
+        "road": "highway", "participants": ["ego", "car"], "actions": [["car", "brake"]],
+        "relations": [["car", "ahead_of", "ego"], ["car", "same_lane", "ego"]]},
+    "The ego car that is on the left lane switches to the middle lane and another car on the right lane switches "
+    "also to the middle lane.": {
+        "road": None, "participants": ["ego", "car"],
+        "actions": [["ego", "lane_change_right"], ["car", "lane_change_left"]],
+        "relations": [["car", "right_of", "ego"]]},
+    "Three pedestrians crossing in the middle of the road, one going from left to right and the two others from "
+    "right to left.": {
+        "road": "straight_road", "participants": ["pedestrian"] * 3, "actions": [["pedestrian", "cross"]],
+        "relations": []},
+    "The ego vehicle was blocked by a stationary digital signboard placed on the right lane, obstructing its path. "
+    "The red car ahead of the ego vehicle quickly maneuvered around the signboard to continue on its way, while the "
+    "ego vehicle remained stationary. This scene takes place on a straight road where the traffic dynamics cause a "
+    "temporary halt in movement.": {
+        "road": "straight_road", "participants": ["ego", "car", "obstacle"],
+        "actions": [["car", "overtake"], ["ego", "stop"]],
+        "relations": [["car", "ahead_of", "ego"], ["car", "same_lane", "ego"]]},
+}
+
+# Varied phrasings (synonyms, counts, passive voice, negation, pronouns) with what they state.
+VARIED = [
+    ("A white SUV suddenly cuts in from the left lane just in front of the ego vehicle on the freeway.",
+     {"road": "highway", "participants": ["ego", "car"], "actions": [["car", "cut_in"], ["car", "lane_change_right"]],
+      "relations": [["car", "ahead_of", "ego"], ["car", "left_of", "ego"]]}),
+    ("A lorry in the lane to the right of the ego pulls into the ego's lane.",
+     {"road": None, "participants": ["ego", "truck"], "actions": [["truck", "cut_in"], ["truck", "lane_change_left"]],
+      "relations": [["truck", "right_of", "ego"]]}),
+    ("Two people walk across the street while the ego car slows down.",
+     {"road": "straight_road", "participants": ["ego", "pedestrian", "pedestrian"],
+      "actions": [["ego", "brake"], ["pedestrian", "cross"]],
+      "relations": [["pedestrian", "ahead_of", "ego"], ["pedestrian", "crossing_path", "ego"]]}),
+    ("The ego car narrowly avoids hitting a cyclist at the crossroads.",
+     {"road": "intersection", "participants": ["ego", "pedestrian"], "actions": [], "relations": []}),
+    ("The ego vehicle was rear-ended by a van at the T-junction.",
+     {"road": "t_junction", "participants": ["ego", "car"], "actions": [["car", "collide"]], "relations": []}),
+    ("The ego car turns left at the intersection while an oncoming bus goes straight.",
+     {"road": "intersection", "participants": ["ego", "truck"],
+      "actions": [["ego", "turn_left"], ["truck", "go_straight"]],
+      "relations": [["truck", "oncoming", "ego"], ["truck", "crossing_path", "ego"]]}),
+    ("An oncoming sedan drifts into the ego's lane on a country road.",
+     {"road": "straight_road", "participants": ["ego", "car"], "actions": [["car", "drift"]],
+      "relations": [["car", "oncoming", "ego"]]}),
+    ("Debris lies in the ego's lane on the motorway and the ego car changes lanes to the left.",
+     {"road": "highway", "participants": ["ego", "obstacle"], "actions": [["ego", "lane_change_left"]],
+      "relations": [["obstacle", "same_lane", "ego"], ["obstacle", "ahead_of", "ego"]]}),
+    ("The car behind the ego accelerates and overtakes it.",
+     {"road": None, "participants": ["ego", "car"], "actions": [["car", "accelerate"], ["car", "overtake"]],
+      "relations": [["car", "behind", "ego"]]}),
+    ("The ego vehicle merges onto the highway from the on-ramp.",
+     {"road": "merge", "participants": ["ego"], "actions": [["ego", "merge"]], "relations": []}),
+    ("The ego car keeps its lane at a three-way junction while a truck turns right.",
+     {"road": "three_way", "participants": ["ego", "truck"],
+      "actions": [["ego", "keep_lane"], ["truck", "turn_right"]], "relations": []}),
+]
+
+NONSENSE = ["", "Lorem ipsum dolor sit amet.", "The quick brown fox jumps over the lazy dog.",
+            "12345 !!! ???", "Colourless green ideas sleep furiously."]
+
+
+@pytest.mark.parametrize("text", list(PAPER))
+def test_paper_descriptions_give_the_expected_elements(text):
+    assert elements_from_text(text) == normalize_elements(PAPER[text])
+
+
+@pytest.mark.parametrize("text,expected", VARIED, ids=[t[:40] for t, _ in VARIED])
+def test_varied_phrasings(text, expected):
+    assert elements_from_text(text) == normalize_elements(expected)
+
+
+@pytest.mark.parametrize("text", NONSENSE)
+def test_nonsense_gives_nothing(text):
+    assert element_set(elements_from_text(text)) == frozenset()
+
+
+def test_counts_and_groups():
+    parsed = parse_description("Three pedestrians crossing in the middle of the road, one going from left to right "
+                               "and the two others from right to left.")
+    (group,) = parsed.entities
+    assert group.count == 3
+    assert sorted(group.attrs["cross_dirs"]) == [("left_to_right", 1), ("right_to_left", 2)]
+    assert elements_from_text("Two cars ahead of the ego brake.")["participants"] == ["car", "car", "ego"]
+    assert elements_from_text("A car and another car drive ahead.")["participants"] == ["car", "car"]
+
+
+def test_negation_and_nominal_forms_are_not_actions():
+    assert elements_from_text("The ego car does not stop.")["actions"] == []
+    assert elements_from_text("There is a stop sign at the junction.")["actions"] == []
+    assert elements_from_text("The car ahead of the ego avoids a collision.")["actions"] == []
+
+
+def _bank_entries():
+    """(name, description, elements) of every bank scenario whose sidecar has both; flat or folder layout."""
+    out = []
+    for path in sorted(SCENARIOS.glob("*.json")) + sorted(SCENARIOS.glob("*/meta.json")):
+        try:
+            meta = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+        if meta.get("description") and meta.get("elements"):
+            name = path.stem if path.name != "meta.json" else path.parent.name
+            out.append((name, meta["description"], meta["elements"]))
+    return out
+
+
+def bank_recall_precision():
+    """Aggregate (micro) recall and precision of elements_from_text over the bank's sidecars."""
+    hit = said = found = 0
+    rows = []
+    for name, description, elements in _bank_entries():
+        truth = element_set(elements)
+        got = element_set(elements_from_text(description))
+        hit += len(truth & got)
+        said += len(truth)
+        found += len(got)
+        rows.append((name, sorted(truth - got), sorted(got - truth)))
+    recall = hit / said if said else 1.0
+    precision = hit / found if found else 1.0
+    return recall, precision, rows
+
+
+def test_bank_descriptions_recall_and_precision():
+    entries = _bank_entries()
+    if len(entries) < 5:
+        pytest.skip(f"only {len(entries)} bank sidecars have elements yet")
+    recall, precision, rows = bank_recall_precision()
+    misses = [r for r in rows if r[1] or r[2]]
+    assert recall >= 0.9 and precision >= 0.9, (recall, precision, misses)
