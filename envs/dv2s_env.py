@@ -77,7 +77,8 @@ def resolve_scenarios(spec: ScenarioSpec, bank_dir: Optional[str] = None) -> Lis
                     f"scenario file {spec!r} does not exist; pass an existing .scenic path, "
                     "a bank name or Scenic source text"
                 )
-            return [ScenarioRef(name=path.stem, path=str(path.resolve()))]
+            name = path.parent.name if path.name == "scenario.scenic" else path.stem  # bank entry folder
+            return [ScenarioRef(name=name, path=str(path.resolve()))]
     elif spec is not None and (
         not isinstance(spec, Sequence) or not all(isinstance(item, str) for item in spec)
     ):

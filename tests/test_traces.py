@@ -65,7 +65,7 @@ def test_trace_records_the_episode(discrete_episode):
     env, paths = discrete_episode
     trace = EpisodeTrace.load(paths["json"])
     assert trace.scenario == PULL_BACK_IN
-    assert trace.source == (BANK_DIR / f"{PULL_BACK_IN}.scenic").read_text()
+    assert trace.source == (BANK_DIR / PULL_BACK_IN / "scenario.scenic").read_text()
     assert trace.seed == 5 and trace.scene_seed == env.trace.scene_seed
     assert trace.params["map"].endswith("highway_straight.xodr")
     assert trace.config["duration"] == 3.0
