@@ -226,10 +226,21 @@ def test_unsupported_container(tmp_path, clips, name):
     assert "unsupported container" in message and "ffmpeg" in message
 
 
-def test_corrupt_gif(tmp_path):
+@pytest.mark.parametrize("seed", range(20))
+def test_corrupt_gif(tmp_path, seed):
     path = tmp_path / "bad.gif"
-    path.write_bytes(b"GIF89a" + os.urandom(64))
+    path.write_bytes(b"GIF89a" + np.random.default_rng(seed).bytes(64))
     assert "gif" in _error(path)
+
+
+def test_gif_header_with_impossible_size(tmp_path):
+    # 60000 x 60000 pixels declared: Pillow's decompression-bomb guard fires before any decoding.
+    path = tmp_path / "huge.gif"
+    size = (60000).to_bytes(2, "little") * 2
+    screen = size + bytes(3)  # no global colour table
+    descriptor = b"\x2c" + bytes(4) + size + bytes(1)
+    path.write_bytes(b"GIF89a" + screen + descriptor + bytes(32))
+    assert "impossible size" in _error(path)
 
 
 def test_errors_are_value_errors():

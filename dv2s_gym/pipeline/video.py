@@ -233,7 +233,11 @@ def _read_gif(path: Path, fps, max_frames, max_pixels) -> VideoClip:
 
     try:
         image = Image.open(path)
-    except (UnidentifiedImageError, OSError) as error:
+    except Image.DecompressionBombError as error:
+        # A corrupt header often declares an absurd canvas; Pillow refuses it before decoding.
+        raise _fail(path, f"the gif is corrupt: its header declares an impossible size ({error})",
+                    _REENCODE.format(path=path)) from None
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError) as error:
         raise _fail(path, f"the gif is corrupt or not a gif ({error})", _REENCODE.format(path=path)) from None
     frames: List[np.ndarray] = []
     durations: List[float] = []
@@ -243,7 +247,7 @@ def _read_gif(path: Path, fps, max_frames, max_pixels) -> VideoClip:
                 ms = frame.info.get("duration") or 0
                 durations.append((ms if ms > 10 else 100) / 1000.0)  # browsers show 0-10 ms frames for 100 ms
                 frames.append(np.asarray(frame.convert("RGB")))
-    except (OSError, ValueError, EOFError) as error:
+    except (OSError, ValueError, EOFError, SyntaxError, Image.DecompressionBombError) as error:
         if not frames:
             raise _fail(path, f"the gif is corrupt: no frame decodes ({error})", _REENCODE.format(path=path)) from None
     if not frames:
