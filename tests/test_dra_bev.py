@@ -252,11 +252,6 @@ USE_CASES = {
     "urban_pull_back_in": (3, 9, 320),
     "highway_onramp_insertion": (12, 16, 400),
 }
-# urban_pull_back_in's script waits for `(distance past self of target) > returnGap`, which never holds
-# once the car has passed the ego (the operands are swapped), so the car never pulls back in. Until the
-# bank script is fixed, the clip is rendered from a copy with the operands in the right order.
-_PULL_BACK_BUG = "(distance past self of target) > returnGap"
-_PULL_BACK_FIX = "(distance past target of self) > returnGap"
 
 
 def _bank_file(name: str, *candidates: str) -> Optional[Path]:
@@ -296,19 +291,11 @@ def bank_clips(tmp_path_factory):
     from dv2s_gym.pipeline.make_bev_clips import render_clip
 
     videos = tmp_path_factory.mktemp("bank_videos")        # holds the .webm files only
-    scripts = tmp_path_factory.mktemp("scripts")
     clips = {}
     started = time.perf_counter()
     for name, (seed, seconds, size) in USE_CASES.items():
-        scenario = name
-        script = _bank_file(name, "{name}/scenario.scenic", "{name}.scenic")
-        if name == "urban_pull_back_in" and script and _PULL_BACK_BUG in script.read_text(encoding="utf-8"):
-            fixed = scripts / f"{name}.scenic"
-            fixed.write_text(script.read_text(encoding="utf-8").replace(_PULL_BACK_BUG, _PULL_BACK_FIX),
-                             encoding="utf-8")
-            scenario = str(fixed)
         path = videos / f"{name}_seed{seed}.webm"
-        summary = render_clip(scenario, seed, path, seconds=seconds, size=size)
+        summary = render_clip(name, seed, path, seconds=seconds, size=size)
         problem = _episode_plays_its_story(name, summary, int(seconds * summary["fps"]) + 1)
         clips[name] = (path, problem)
     clips["_render_seconds"] = time.perf_counter() - started

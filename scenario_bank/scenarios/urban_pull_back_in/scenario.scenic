@@ -15,7 +15,7 @@ param slow_down_to = Range(10, 14)
 behavior OvertakeAndPullBackIn(speed, target, returnGap, slowSpeed):
     do FollowLaneBehavior(target_speed=speed) until (distance from self to target) < 12
     do LaneChangeBehavior(laneSectionToSwitch=self.laneSection.laneToLeft, target_speed=speed)
-    do FollowLaneBehavior(target_speed=speed) until (distance past self of target) > returnGap
+    do FollowLaneBehavior(target_speed=speed) until (distance past target of self) > returnGap
     do LaneChangeBehavior(laneSectionToSwitch=self.laneSection.laneToRight, target_speed=speed)
     do FollowLaneBehavior(target_speed=slowSpeed)
 
