@@ -36,10 +36,13 @@ def render_clip(
     path: Union[str, os.PathLike],
     seconds: float = 10,
     size: int = 400,
+    ego_policy: str = "agent",
 ) -> dict:
     """Render one episode of ``scenario`` (a bank name or .scenic path) to ``path`` (.webm).
 
-    The episode lasts ``seconds`` of simulated time (less if the ego crashes or
+    ``ego_policy="agent"`` drives the ego with :class:`policies.CautiousDriver`;
+    ``"scenic"`` lets the script's own ego behaviour drive it. The episode lasts
+    ``seconds`` of simulated time (less if the ego crashes or
     leaves the road); the frames are ``size`` x ``size`` pixels with the ego at
     the centre, north up, at highway-env's default scale (5.5 px/m). Returns a
     summary: scenario, seed, frames, steps, fps, path, collisions, off_road,
@@ -55,6 +58,7 @@ def render_clip(
         "screen_height": int(size),
         "offscreen_rendering": True,
         "show_trajectories": False,
+        "ego_policy": ego_policy,
     }
     env = DV2SEnv(scenario=scenario, config=config, render_mode="rgb_array")
     try:
@@ -88,6 +92,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--seconds", type=float, default=10)
     parser.add_argument("--size", type=int, default=400)
+    parser.add_argument("--ego-policy", choices=("agent", "scenic"), default="agent",
+                        help="agent: the rule-based driver; scenic: the script's ego behaviour")
     args = parser.parse_args(argv)
     from scenario_bank import list_scenarios
 
@@ -96,7 +102,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     for name in names:
         for seed in args.seeds:
-            result = render_clip(name, seed, out / f"{name}_seed{seed}.webm", args.seconds, args.size)
+            result = render_clip(name, seed, out / f"{name}_seed{seed}.webm", args.seconds, args.size,
+                                 args.ego_policy)
             print(f"{result['path']}: {result['frames']} frames")
     return 0
 

@@ -34,6 +34,8 @@ BRAKE_DROP = 3.0          # m/s lost ...
 BRAKE_WINDOW = 2.0        # ... within this many seconds
 STOP_SPEED = 0.5
 TURN_ANGLE = math.radians(55)
+MERGE_FROM = (math.radians(45), math.radians(135))   # heading gap to the ego's at the start ...
+MERGE_ALIGNED = math.radians(20)                      # ... and at the end, for a merge
 NEAR = 80.0               # m: actors never closer than this to the ego are background traffic
 
 
@@ -213,6 +215,15 @@ def _paths_cross(ego: np.ndarray, track: np.ndarray, samples: int = 40) -> bool:
     return False
 
 
+def _joins_ego_lane_ahead(ego_end: np.ndarray, first: np.ndarray, last: np.ndarray, rel_end) -> bool:
+    """A car that came from a crossing road (a side road, a ramp) and ends in the ego's lane, ahead of
+    it, driving its way: it merged into the ego's traffic (lane changes are judged separately)."""
+    start_gap = abs(float(_wrap(np.array([first[2] - ego_end[2]]))[0]))
+    end_gap = abs(float(_wrap(np.array([last[2] - ego_end[2]]))[0]))
+    return (MERGE_FROM[0] <= start_gap <= MERGE_FROM[1] and end_gap <= MERGE_ALIGNED
+            and abs(rel_end[1]) <= LANE_HALF_WIDTH and rel_end[0] > 0)
+
+
 def _interactions(
     ego: np.ndarray, track: np.ndarray, kind: str, changes: List[Dict[str, Any]], road, dt: float
 ) -> Set[str]:
@@ -236,6 +247,8 @@ def _interactions(
                 out.add("merge")
     if rel[0, 0] < -2 and rel[-1, 0] > 2 and changes:
         out.add("overtake")
+    if n and _joins_ego_lane_ahead(ego[n - 1], track[0], track[n - 1], rel[-1]):
+        out.add("merge")
     started_opposite = abs(float(_wrap(np.array([track[0, 2] - ego[0, 2]]))[0])) > math.radians(135)
     if started_opposite and n:
         inside = np.abs(rel[:, 1]) < LANE_HALF_WIDTH * 0.9
