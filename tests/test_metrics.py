@@ -67,3 +67,38 @@ def test_trace_semantics_collisions_and_lane_changes_come_from_events():
     elements = elements_from_trace(_trace(states, events))
     assert ["car", "lane_change_right"] in elements["actions"] and ["car", "cut_in"] in elements["actions"]
     assert ["ego", "collide"] in elements["actions"] and ["car", "collide"] in elements["actions"]
+
+
+def test_trace_semantics_pedestrian_crossing_ahead_of_a_stopped_ego():
+    # The ego brakes to a stop 8 m before the pedestrian's line: the pedestrian still crossed its path.
+    ego, x, v = [], 0.0, 10.0
+    for _ in range(40):
+        v = max(0.0, v - 0.6)
+        x += v * 0.2
+        ego.append([x, 0.0, 0.0, v])
+
+    def states(line_x):
+        return [{"ego": e, "Pedestrian1": [line_x, 5.0 - 0.3 * k, -math.pi / 2, 1.5]} for k, e in enumerate(ego)]
+
+    kinds = {"ego": "ego", "Pedestrian1": "pedestrian"}
+    elements = elements_from_trace(_trace(states(x + 8.0), kinds=kinds, map_name="urban_two_way"))
+    assert ["pedestrian", "crossing_path", "ego"] in elements["relations"]
+    # ... but one crossing 60 m beyond where the ego stopped did not.
+    elements = elements_from_trace(_trace(states(x + 60.0), kinds=kinds, map_name="urban_two_way"))
+    assert ["pedestrian", "crossing_path", "ego"] not in elements["relations"]
+
+
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_trace_semantics_car_merging_from_a_side_road(side):
+    # A car comes down a side road (heading +-90 degrees to the ego's), turns into the ego's lane ahead of it.
+    states = []
+    for step in range(40):
+        t = step * 0.2
+        turn = min(1.0, t / 4.0)
+        car = [30.0 + 8.0 * max(0.0, t - 2.0), side * 15.0 * (1.0 - turn), -side * (math.pi / 2) * (1 - turn), 6.0]
+        states.append({"ego": [6.0 * t, 0.0, 0.0, 6.0], "Car1": car})
+    elements = elements_from_trace(_trace(states, map_name="urban_t_junction"))
+    assert ["car", "merge"] in elements["actions"]
+    # A car that stays on the side road does not merge.
+    stays = [{**s, "Car1": [30.0, side * 15.0, -side * math.pi / 2, 0.0]} for s in states]
+    assert ["car", "merge"] not in elements_from_trace(_trace(stays, map_name="urban_t_junction"))["actions"]

@@ -52,6 +52,7 @@ VARIED = [
     "The lead vehicle slows down and stops, and the ego vehicle brakes behind it on a straight road.",
     "The car on the left of the ego speeds up and changes lanes to the right in front of it.",
     "It is raining at night on the freeway; two trucks ahead of the ego brake hard.",
+    "The ego car drives in the right lane of a highway with an on-ramp. No other road user comes near the ego car.",
 ]
 UNPLACEABLE = {
     "A helicopter lands on the road in front of the ego car.": "helicopter",

@@ -476,7 +476,8 @@ def _compose_lanes(s: _Script) -> None:
         if ego_lane_word == "left" and max_left == 0:
             conds.append("t[1] is None")
         elif ego_lane_word == "right" and max_right == 0:
-            conds.append("t[3] is None")
+            # next to an on-ramp the acceleration lane is the right neighbour of the rightmost main lane
+            conds.append("t[0] is mainLanes[0]" if onramp else "t[3] is None")
         elif ego_lane_word == "middle":
             conds += ["t[1] is not None", "t[3] is not None"] if "t[1] is not None" not in conds or \
                 "t[3] is not None" not in conds else []

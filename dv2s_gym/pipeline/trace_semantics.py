@@ -36,6 +36,8 @@ STOP_SPEED = 0.5
 TURN_ANGLE = math.radians(55)
 MERGE_FROM = (math.radians(45), math.radians(135))   # heading gap to the ego's at the start ...
 MERGE_ALIGNED = math.radians(20)                      # ... and at the end, for a merge
+PATH_LOOKAHEAD_M = 12.0  # the ego's path is extended this far ...
+PATH_LOOKAHEAD_S = 1.5   # ... or this many seconds at its last speed, whichever is longer
 NEAR = 80.0               # m: actors never closer than this to the ego are background traffic
 
 
@@ -195,6 +197,11 @@ def _paths_cross(ego: np.ndarray, track: np.ndarray, samples: int = 40) -> bool:
         return t[::step]
 
     a, b = thin(ego), thin(track)
+    # The ego's path runs on past where the episode ends (a car that stopped for a pedestrian still had
+    # the pedestrian cross its path): extend it along its last heading.
+    x, y, heading, speed = ego[-1][:4]
+    reach = max(PATH_LOOKAHEAD_M, PATH_LOOKAHEAD_S * speed)
+    a = np.vstack([a, [x + reach * math.cos(heading), y + reach * math.sin(heading), heading, speed]])
     if len(a) < 2 or len(b) < 2 or np.hypot(*(b[-1, :2] - b[0, :2])) < 1.0:
         return False
     for i in range(len(a) - 1):
