@@ -16,7 +16,7 @@ would drop a clip that does not show the event.
 Command line::
 
     python -m dv2s_gym.pipeline.make_evalset OUT_DIR [--scenario NAME ...] [--per-scenario 3]
-        [--seconds 10] [--size 320] [--max-seed 40]
+        [--seconds 10] [--size 480] [--max-seed 40]
 
 writes ``OUT_DIR/<scenario>_seed<seed>.webm`` and ``<scenario>_seed<seed>.label.json``
 (``{"use_case", "scenario", "seed", "description", "elements"}``, the format
@@ -56,7 +56,7 @@ def story_problem(label: Dict[str, Any], shown: Dict[str, Any]) -> Optional[str]
 
 
 def build_evalset(out: str | os.PathLike, scenarios: Optional[Sequence[str]] = None, *,
-                  per_scenario: int = 3, seconds: float = 10.0, size: int = 320, max_seed: int = 40,
+                  per_scenario: int = 3, seconds: float = 10.0, size: int = 480, max_seed: int = 40,
                   progress: bool = True) -> Dict[str, Any]:
     """Render and label ``per_scenario`` clips of each scenario into ``out``; returns what was kept/skipped."""
     from tqdm import tqdm
@@ -143,7 +143,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     parser.add_argument("--scenario", action="append", help="bank scenario (repeatable; default: the whole bank)")
     parser.add_argument("--per-scenario", type=int, default=3)
     parser.add_argument("--seconds", type=float, default=10.0)
-    parser.add_argument("--size", type=int, default=320)
+    parser.add_argument("--size", type=int, default=480)
     parser.add_argument("--max-seed", type=int, default=40)
     args = parser.parse_args(argv)
     result = build_evalset(args.out, args.scenario, per_scenario=args.per_scenario, seconds=args.seconds,

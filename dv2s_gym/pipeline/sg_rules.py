@@ -816,6 +816,10 @@ def _spawn_lane_pedestrians(s: _Script, actor: ActorFrame, ego_speed: str, two_w
     crossing = actor.role == "crosser"
     hit_any = actor.has("collide") or reckless and s.frame.ego.has("collide")
     dist = s.param(f"{n}_distance", "Range(55, 65)" if hit_any and crossing else "Range(30, 42)")
+    parked = next((a for a in s.frame.actors if a.role == "far_side"), None)
+    if crossing and parked is not None:
+        # a parked vehicle on the far kerb: the pedestrian steps out just in front of it, not through it
+        dist = s.param(f"{parked.name}_gap", "Range(25, 40)") + " + Range(6.5, 8.0)"
     if crossing:
         walk = s.param(f"{n}_walking_speed", "Range(1.7, 2.3)" if actor.sudden else "Range(1.2, 1.8)")
         hit = actor.has("collide") or reckless and s.frame.ego.has("collide")
