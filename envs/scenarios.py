@@ -21,6 +21,7 @@ from typing import Any, Dict, Optional, Tuple
 import numpy as np
 
 from envs.errors import ScenarioCompileError, SceneSamplingError, UnsupportedConstructError
+from scenario_bank.scenic_parse import install_parse_cache
 
 __all__ = ["MODEL", "CompiledScenario", "compile_scenario", "looks_like_source", "runtime_construct_error"]
 
@@ -102,6 +103,7 @@ def _short(text: str, limit: int = 160) -> str:
 _CACHE: Dict[Tuple[str, Optional[str]], CompiledScenario] = {}
 
 
+
 def compile_scenario(
     source: str,
     *,
@@ -131,6 +133,7 @@ def compile_scenario(
     if key in _CACHE:
         return _CACHE[key]
     release_veneer()
+    install_parse_cache()
     label = path or name
     try:
         if path is not None:
