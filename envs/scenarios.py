@@ -103,7 +103,6 @@ def _short(text: str, limit: int = 160) -> str:
 _CACHE: Dict[Tuple[str, Optional[str]], CompiledScenario] = {}
 
 
-
 def compile_scenario(
     source: str,
     *,

@@ -18,9 +18,8 @@ Every finding names the line and the construct.
 from __future__ import annotations
 
 import ast
-import functools
 from dataclasses import dataclass
-from typing import List, Tuple
+from typing import List
 
 __all__ = ["SafetyFinding", "UnsafeScenarioError", "check_script", "assert_safe"]
 
@@ -67,22 +66,16 @@ def _module_allowed(module: str) -> bool:
 
 def check_script(source: str) -> List[SafetyFinding]:
     """All safety findings of a Scenic script (empty list: safe to compile)."""
-    return list(_findings(source))
-
-
-@functools.lru_cache(maxsize=256)
-def _findings(source: str) -> Tuple[SafetyFinding, ...]:
-    # A generated script is checked by the generator and again before it runs; findings are
-    # immutable, so each text is checked once.
+    # The parse (the costly part) is shared with the compiler and with repeated checks of one text.
     from scenario_bank.scenic_parse import parse_scenic
 
     try:
         tree = parse_scenic(source)
     except SyntaxError as error:
         # A syntax error is not unsafe by itself; Scenic's compiler reports it with its line.
-        return () if error.lineno else (SafetyFinding(0, "syntax", str(error)),)
+        return [] if error.lineno else [SafetyFinding(0, "syntax", str(error))]
     except Exception as error:  # the parser raises its own error types on some inputs
-        return (SafetyFinding(0, "syntax", f"unparsable script: {error}"),)
+        return [SafetyFinding(0, "syntax", f"unparsable script: {error}")]
     findings: List[SafetyFinding] = []
 
     def flag(node: ast.AST, construct: str, reason: str) -> None:
@@ -116,7 +109,7 @@ def _findings(source: str) -> Tuple[SafetyFinding, ...]:
             for param in getattr(node, "elts", []):
                 if getattr(param, "identifier", None) == "map":
                     _check_map_value(param.value, flag)
-    return tuple(findings)
+    return findings
 
 
 def _check_map_value(value: ast.AST, flag) -> None:

@@ -58,6 +58,11 @@ def _wrap(a: np.ndarray) -> np.ndarray:
     return (a + np.pi) % (2 * np.pi) - np.pi
 
 
+def _heading_gap(a: float, b: float) -> float:
+    """Absolute angle between two headings, in [0, pi]."""
+    return abs(float(_wrap(np.array([a - b]))[0]))
+
+
 def _ego_frame(ego: np.ndarray, other: np.ndarray) -> Tuple[float, float]:
     """(longitudinal, leftward) position of ``other`` relative to ``ego`` = [x, y, heading, speed]."""
     dx, dy = other[0] - ego[0], other[1] - ego[1]
@@ -176,7 +181,7 @@ def _relations(ego: np.ndarray, track: np.ndarray) -> Set[str]:
     """Relations to the ego at the start of the episode (the set-up the scenario describes)."""
     out: Set[str] = set()
     lon, left = _ego_frame(ego[0], track[0])
-    heading_gap = abs(float(_wrap(np.array([track[0, 2] - ego[0, 2]]))[0]))
+    heading_gap = _heading_gap(track[0, 2], ego[0, 2])
     if heading_gap > math.radians(135) and track[:, 3].max() > 0.5:
         out.add("oncoming")
     if abs(left) <= LANE_HALF_WIDTH:
@@ -225,9 +230,8 @@ def _paths_cross(ego: np.ndarray, track: np.ndarray, samples: int = 40) -> bool:
 def _joins_ego_lane_ahead(ego_end: np.ndarray, first: np.ndarray, last: np.ndarray, rel_end) -> bool:
     """A car that came from a crossing road (a side road, a ramp) and ends in the ego's lane, ahead of
     it, driving its way: it merged into the ego's traffic (lane changes are judged separately)."""
-    start_gap = abs(float(_wrap(np.array([first[2] - ego_end[2]]))[0]))
-    end_gap = abs(float(_wrap(np.array([last[2] - ego_end[2]]))[0]))
-    return (MERGE_FROM[0] <= start_gap <= MERGE_FROM[1] and end_gap <= MERGE_ALIGNED
+    return (MERGE_FROM[0] <= _heading_gap(first[2], ego_end[2]) <= MERGE_FROM[1]
+            and _heading_gap(last[2], ego_end[2]) <= MERGE_ALIGNED
             and abs(rel_end[1]) <= LANE_HALF_WIDTH and rel_end[0] > 0)
 
 
@@ -256,7 +260,7 @@ def _interactions(
         out.add("overtake")
     if n and _joins_ego_lane_ahead(ego[n - 1], track[0], track[n - 1], rel[-1]):
         out.add("merge")
-    started_opposite = abs(float(_wrap(np.array([track[0, 2] - ego[0, 2]]))[0])) > math.radians(135)
+    started_opposite = _heading_gap(track[0, 2], ego[0, 2]) > math.radians(135)
     if started_opposite and n:
         inside = np.abs(rel[:, 1]) < LANE_HALF_WIDTH * 0.9
         if inside.any() and not inside[0]:
