@@ -94,12 +94,14 @@ def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview
 
 
 def label_for(video: Path) -> Optional[Dict[str, Any]]:
-    """Ground-truth elements stored beside a video as ``<video stem>.label.json``, if any."""
-    path = video.with_name(video.stem + ".label.json")
+    """Ground-truth elements stored beside a video as ``<video stem>.label.json`` (either label
+    format, see :mod:`dv2s_gym.pipeline.labels`), if any; a malformed label raises ``LabelError``."""
+    from dv2s_gym.pipeline.labels import label_path_for, read_label
+
+    path = label_path_for(video)
     if not path.is_file():
         return None
-    data = json.loads(path.read_text(encoding="utf-8"))
-    return data.get("elements", data)
+    return read_label(path).elements
 
 
 def _write(folder: Path, name: str, text: str) -> None:
