@@ -446,7 +446,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("eval", help="SCS/HR (dra), SP (sg) or E2E-SC (e2e) over a labeled folder",
                        description="Evaluate a stage over a folder of videos/descriptions with <name>.label.json "
-                       "files; prints mean ± sd per use case and overall.")
+                       "files (the elements nested under 'elements' or flat at the top level); prints mean ± sd per "
+                       "use case and overall. `sg` scores SP against the label's elements, and against the parsed "
+                       "text only for a <name>.txt without a label; the table says which.")
     p.add_argument("stage", choices=["dra", "sg", "e2e"])
     p.add_argument("folder", nargs="?", default=None, help="labeled folder (default: the shipped evaluation set)")
     p.add_argument("--dra", choices=["bev", "openai"], default="bev")
