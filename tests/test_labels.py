@@ -111,6 +111,7 @@ def test_eval_sg_falls_back_to_the_text_without_a_label(sg_report):
     table = format_results(report)
     assert "S_de from" in table
     assert "2 item(s) scored against their label file, 1 against the parse of their description" in table
+    assert "scored against the parsed description: free" in table
 
 
 def test_eval_dra_and_e2e_still_need_labels(tmp_path):

@@ -209,5 +209,8 @@ def format_results(report: Dict[str, Any]) -> str:
         counts = summary["overall"]["reference"]
         notes.append(f"SP reference S_de: {counts['label']} item(s) scored against their label file, "
                      f"{counts['text']} against the parse of their description (no label).")
+        unlabeled = [i["stem"] for i in report["items"] if i.get("reference") == "text"]
+        if unlabeled:
+            notes.append(f"  scored against the parsed description: {', '.join(unlabeled)}")
     return "\n".join([line(header), line(["-" * w for w in widths]), *map(line, rows), *notes,
                       *(["failed items:"] + failed if failed else [])])
