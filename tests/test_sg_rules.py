@@ -1,7 +1,6 @@
 """The rule-based Scenario Generator (dv2s_gym.pipeline.sg_rules): safe, compilable, runnable scripts."""
 
 import json
-import time
 from pathlib import Path
 
 import pytest
@@ -101,13 +100,8 @@ def test_generated_script_is_safe_compiles_samples_and_runs(description):
         assert section in result.script
     normalize_elements(result.elements)
     compiled = compile_scenario(result.script, name="sg_rules_test")
-    compiled.sample(0)  # warm caches
-    times = []
-    for seed in range(1, 6):
-        start = time.perf_counter()
-        compiled.sample(seed)
-        times.append(time.perf_counter() - start)
-    assert sorted(times)[2] < 0.05, times  # median sampling time
+    for seed in range(6):
+        compiled.sample(seed)  # every seed samples a scene (sampling speed is in bench/)
     trace, steps = _run(result.script, seconds=5.0)
     assert steps >= 1 and "ego" in trace.states[0]
 
