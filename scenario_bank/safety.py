@@ -274,7 +274,11 @@ def _check_map_value(value: ast.AST, flag) -> None:
         if path.startswith(("/", "~")) or ".." in path.replace("\\", "/").split("/"):
             flag(value, f"param map = {path!r}", "maps must be shipped map names or relative .xodr paths")
     elif isinstance(value, ast.Call) and getattr(value.func, "id", None) == "localPath":
-        return
+        args = value.args
+        if len(args) != 1 or value.keywords or not (isinstance(args[0], ast.Constant) and isinstance(args[0].value, str)):
+            flag(value, "param map = localPath(...)", "localPath takes one string literal, a relative .xodr path")
+        else:
+            _check_map_value(args[0], flag)
     else:
         flag(value, "param map", "the map must be a string literal (a shipped map name)")
 
