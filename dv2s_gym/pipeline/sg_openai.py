@@ -373,8 +373,9 @@ def validate_script(
     if unsafe:
         message = "; ".join(str(f) for f in unsafe[:5])
         return ScriptFailure("safety", "unsafe_code", f"the safety check rejected the script: {message}")
-    if findings:  # the safety parser failed but gave no line: never run such a script
-        return ScriptFailure("safety", "function_misuse", "; ".join(str(f) for f in findings[:5]))
+    if findings:  # Scenic's parser could not read it (nothing ran): the compile error it would be
+        message = "; ".join(f.reason for f in findings[:5])
+        return ScriptFailure("compile", classify_failure(message, "compile"), message)
     try:
         verify_script(script, name=name, seeds=sample_seeds, run_seconds=run_seconds,
                       max_sample_iterations=max_sample_iterations)
