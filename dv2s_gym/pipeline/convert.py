@@ -46,12 +46,16 @@ class ScenarioCheck:
 
 def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview: Optional[Path] = None,
                    name: str = "generated") -> ScenarioCheck:
-    """Safety check, compile, sample, run (ego driven by its Scenic behaviour), optionally record a preview."""
+    """Safety check, compile, sample, run (ego driven by its Scenic behaviour), optionally record a preview.
+
+    The script is compiled, sampled and run once in the sandbox (:mod:`scenario_bank.sandbox`) before
+    it runs in this process."""
     from dv2s_gym.pipeline.trace_semantics import elements_from_trace
     from envs.dv2s_env import DV2SEnv
     from envs.recording import VideoWriter
     from envs.scenarios import compile_scenario
     from scenario_bank.safety import UnsafeScenarioError, check_script
+    from scenario_bank.sandbox import SandboxError, verify_script
 
     check = ScenarioCheck()
     findings = check_script(script)
@@ -61,6 +65,15 @@ def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview
         check.failure_category = "unsafe_code"
         return check
     check.safe = True
+    try:  # first in the sandbox (limits, minimal environment; cached when the SG already did it)
+        verify_script(script, name=name)
+    except SandboxError as error:
+        check.compiled = error.stage in ("sample", "run")
+        check.sampled = error.stage == "run"
+        check.error = f"sandboxed check: {error.result.message}"
+        check.failure_category = ("other" if error.limit in ("cpu", "memory", "wall")
+                                  else classify_failure(error.result.message, error.stage))
+        return check
     try:
         compiled = compile_scenario(script, name=name)
         check.compiled = True
