@@ -267,7 +267,8 @@ def _ix_ego_right_turn(env, k: int) -> Scene:
 
 # ----------------------------------------------------------------------------- roundabout-v0
 def _exits_north(rec: Record) -> bool:
-    return rec.lanes("ego")[-1][:2] in (("nx", "nxs"), ("nxs", "nxr"))
+    """The ego left by the opposite (north) exit and drives straight again by the clip's end."""
+    return rec.lanes("ego")[-1][:2] in (("nx", "nxs"), ("nxs", "nxr")) and abs(_turn_deg(rec, "ego")) < 15
 
 
 def _rb_enters_ahead(env, k: int) -> Scene:
@@ -394,12 +395,12 @@ _script("rb_car_circling_ahead", "roundabout-v0", "roundabout",
         "and drives straight through to the opposite exit.",
         _el("roundabout", ["ego", "car"], [["ego", "go_straight"]],
             [["car", "ahead_of", "ego"], ["car", "crossing_path", "ego"]]),
-        _rb_enters_ahead, seconds=14.0)
+        _rb_enters_ahead, seconds=16.0)
 _script("rb_car_enters_ahead", "roundabout-v0", "roundabout",
         "The ego drives straight through a roundabout; a car from the next entry merges into the ring in front "
         "of it.",
         _el("roundabout", ["ego", "car"], [["ego", "go_straight"], ["car", "merge"]], [["car", "ahead_of", "ego"]]),
-        _rb_car_enters, seconds=14.0)
+        _rb_car_enters, seconds=16.0)
 _script("rb_ego_first_exit", "roundabout-v0", "ego_turn",
         "The ego enters a roundabout behind another car and both take the first exit, turning right.",
         _el("roundabout", ["ego", "car"], [["ego", "turn_right"], ["car", "turn_right"]],

@@ -22,7 +22,7 @@ from dv2s_gym.pipeline.dra_bev.tracking import (
 )
 from dv2s_gym.pipeline.dra_bev.road import LANE_WIDTH_M, _lane_of, _lines_lat, _road_type
 from dv2s_gym.pipeline.dra_bev.events import (
-    _Ctx, _actor, _ego_actions, _facing, _kinematics, _orient_by_motion,
+    _Ctx, _actor, _ego_actions, _facing, _kinematics, _orient_by_motion, ego_overtaken,
 )
 from dv2s_gym.pipeline.dra_bev.language import _answer, _describe
 
@@ -251,6 +251,12 @@ def analyze_bev(clip, question: Optional[str] = None) -> BevAnalysis:
             crashed[0]["role"] = "key"
             crashed[0]["actions"].add("collide")
             crashed[0]["hits_ego"] = True
+    overtaken = ego_overtaken(ego_acts, actors)
+    if overtaken is not None:
+        # the car the ego passes is part of the story: where it started, what the ego did to it
+        ego_acts.add("overtake")
+        overtaken["role"] = "key"
+        overtaken["relations"] = {"ahead_of", "same_lane"}
     # ---- elements
     participants = ["ego"] + [a["kind"] for a in actors]
     actions = [["ego", x] for x in sorted(ego_acts)]

@@ -26,6 +26,22 @@ NEAR = 45.0                 # m: actors never closer than this are left out
 TRAFFIC_NEAR = 25.0         # m: vehicles this close for a while are counted as traffic around the ego
 
 
+def _quick_reversals_dropped(changes: List[Tuple[int, int, int]], t: np.ndarray,
+                             min_gap: float = 1.2) -> List[Tuple[int, int, int]]:
+    """Lane changes without the pairs a->b, b->a less than ``min_gap`` s apart (no car changes lanes
+    and back that fast: such a pair is a lane line lost for a moment, e.g. while the ego crosses lines)."""
+    out = list(changes)
+    i = 0
+    while i + 1 < len(out):
+        (k1, a1, b1), (k2, a2, b2) = out[i], out[i + 1]
+        if a1 == b2 and b1 == a2 and float(t[k2] - t[k1]) < min_gap:
+            del out[i:i + 2]
+            i = max(0, i - 1)
+        else:
+            i += 1
+    return out
+
+
 def _speed_events(t: np.ndarray, sp: np.ndarray) -> Tuple[bool, bool, float]:
     """(braked, accelerated, share of measured time below STOP_SPEED)."""
     ok = np.isfinite(sp)
@@ -167,12 +183,13 @@ def _actor(ctx: _Ctx, trk: Track, ego_turn: Optional[str]) -> Optional[Dict[str,
         diffs = np.array([abs(_wrap(float(hd[k]) - r)) for k, r in zip(sel, ref)])
         first = diffs[: max(3, len(diffs) // 3)]
         oncoming = bool(np.median(diffs) > math.radians(135))
+        came_towards = len(diffs) >= 3 and bool(np.median(diffs[:3]) > math.radians(135))
         crossing = not oncoming and bool(np.median(first) > math.radians(50))
         if oncoming and np.isfinite(speed).sum() >= 3 and float(np.nanmedian(speed)) < 1.5:
             oncoming = False   # parked facing the ego: not coming towards it
         notes["facing_diff_deg"] = round(math.degrees(float(np.median(diffs))), 1)
     else:
-        crossing = False
+        crossing = came_towards = False
     notes.update(oncoming=oncoming, crossing=crossing)
     in_lane = np.array([(lanes[k] is not None and ego_lanes[k] is not None and lanes[k] == ego_lanes[k]) or
                         ((lanes[k] is None or ego_lanes[k] is None) and abs(lat[k]) < 0.5 * lane_w)
@@ -218,12 +235,16 @@ def _actor(ctx: _Ctx, trk: Track, ego_turn: Optional[str]) -> Optional[Dict[str,
             notes["turn_deg"] = round(math.degrees(turn), 1)
             if abs(turn) >= TURN_ANGLE and moving:
                 acts.add("turn_left" if turn > 0 else "turn_right")
+                if came_towards and not oncoming:
+                    # it came towards the ego and then turned: an oncoming car turning, not a crossing one
+                    oncoming, crossing = True, False
+                    notes.update(oncoming=True, crossing=False, turned_from_oncoming=True)
     # ---- lane changes, cut-in, merge, overtake
     cut_in = False
     start_lane = lanes[k0]
     start_in_lane = bool(in_lane[k0])
     if vehicle and not oncoming and not ctx.junction and not crossing:
-        changes = _lane_changes(lanes)
+        changes = _quick_reversals_dropped(_lane_changes(lanes), t)
         for k, a, b in changes:
             acts.add("lane_change_right" if b > a else "lane_change_left")
             later = range(k, min(n, k + 8))
@@ -303,8 +324,8 @@ def _actor(ctx: _Ctx, trk: Track, ego_turn: Optional[str]) -> Optional[Dict[str,
                 rels.add(side)
     elif vehicle and oncoming:
         rels.add("oncoming")
-        if ego_turn == "turn_left":
-            rels.add("crossing_path")
+        if ego_turn == "turn_left" or (ego_turn is None and "turn_left" in acts):
+            rels.add("crossing_path")   # a left turn across the oncoming lane (the ego's or the other's)
     elif "cut_in" in acts or "merge" in acts:
         rels.add("ahead_of")
         if start_in_lane and not ("merge" in acts):
@@ -377,9 +398,15 @@ def _actor(ctx: _Ctx, trk: Track, ego_turn: Optional[str]) -> Optional[Dict[str,
         acts, rels = set(), set()
     if "merge" in acts:
         acts -= {"lane_change_left", "lane_change_right"}   # merging is the lane change
-        if "ahead_of" in rels:
-            acts.add("cut_in")   # merging into the lane in front of the ego
+        if "ahead_of" in rels and bool(np.any(in_lane[k0:] & (lon[k0:] > -2.0))):
+            acts.add("cut_in")   # merging into the ego's lane, in front of it
+        elif "ahead_of" in rels:
+            # merging into the lane beside the ego's: the text says "into the lane next to it" (a merge
+            # "ahead of" the ego reads back as a cut-in), so the relation kept is the side
+            rels = {"right_of" if float(lat[k0]) <= 0 else "left_of"}
+            notes["merged_beside"] = True
     return {"track": trk, "kind": kind, "role": role, "actions": acts, "relations": rels, "lead": lead,
+            "started_ahead_in_lane": bool(in_lane[k0] and lon[k0] > 3.0),
             "oncoming": oncoming, "notes": notes, "min_dist": float(dist.min()), "first_t": float(t[0])}
 
 
@@ -415,3 +442,18 @@ def _ego_actions(ctx: _Ctx, ego_speed: np.ndarray, crashed: bool) -> Tuple[set, 
                      speed_end=round(float(np.nanmedian(ego_speed[fin][-3:])), 1))
     notes["reactions"] = sorted(reactions)
     return acts, reactions, notes
+
+
+def ego_overtaken(ego_acts: set, actors: List[Dict[str, Any]]) -> Optional[Dict[str, Any]]:
+    """The vehicle the ego passes after changing lanes (it drove ahead of the ego in its lane and ends
+    behind it), or None."""
+    if not ego_acts & {"lane_change_left", "lane_change_right"}:
+        return None
+    for a in actors:
+        if a["kind"] not in ("car", "truck") or a["oncoming"] or not a.get("started_ahead_in_lane"):
+            continue
+        lon, valid = a["track"].info["lon"], a["track"].info["valid"]
+        seen = np.nonzero(valid)[0]
+        if len(seen) >= 3 and float(lon[seen[-1]]) < -3.0:
+            return a
+    return None

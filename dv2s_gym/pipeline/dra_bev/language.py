@@ -84,6 +84,9 @@ def _clause(actor: Dict[str, Any], count: int, ref: str) -> str:
             return f"{art} {noun} {verb('crosses', 'cross')} the road in front of {ref}"
         return f"{art} {noun} {verb('waits', 'wait')}{at}"
     if "merge" in acts:
+        if side and "ahead_of" not in rels and "behind" not in rels:
+            return join(f"{art} {noun} from the on-ramp {verb('merges', 'merge')} into the lane next to {ref} "
+                        f"on {poss} {side}", extra)
         if "ahead_of" in rels:
             return join(f"{art} {noun} from the on-ramp {verb('merges', 'merge')} into the lane in front of {ref}",
                         extra)
@@ -102,12 +105,15 @@ def _clause(actor: Dict[str, Any], count: int, ref: str) -> str:
             main = f"{verb('goes', 'go')} straight on"
         elif "turn_left" in acts or "turn_right" in acts:
             main = f"{verb('turns', 'turn')} {'left' if 'turn_left' in acts else 'right'}"
+            if "crossing_path" in rels:
+                main += f" and {verb('crosses', 'cross')} the ego's path"
         else:
             main = f"{verb('passes', 'pass')} by in the other lane"
         return join(f"{head} {main}", extra)
     if "crossing_path" in rels:
-        return join(f"{art} {noun} {verb('crosses', 'cross')} the ego's path and {verb('goes', 'go')} straight on",
-                    extra)
+        then = (f"{verb('turns', 'turn')} {'left' if 'turn_left' in acts else 'right'}"
+                if {"turn_left", "turn_right"} & acts else f"{verb('goes', 'go')} straight on")
+        return join(f"{art} {noun} {verb('crosses', 'cross')} the ego's path and {then}", extra)
     if "turn_left" in acts or "turn_right" in acts:
         d = "left" if "turn_left" in acts else "right"
         origin = f" from the side road on {poss} {side}" if side else ""
@@ -174,6 +180,8 @@ def _describe(road: Optional[str], ego_acts: set, actors: List[Dict[str, Any]], 
         first = f"The ego car goes straight through {place}"
     elif "lane_change_left" in ego_acts or "lane_change_right" in ego_acts:
         first = f"The ego car changes to the {'left' if 'lane_change_left' in ego_acts else 'right'} lane of {place}"
+        if "overtake" in ego_acts:
+            first += " and overtakes"
     else:
         where = ""
         if n_lanes >= 2 and ego_lane is not None:
