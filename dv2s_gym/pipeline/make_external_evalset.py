@@ -28,7 +28,9 @@ Command line::
 
     python -m dv2s_gym.pipeline.make_external_evalset OUT_DIR [--only NAME ...]
 
-writes ``OUT_DIR/<script>_v<k>.webm`` and ``<script>_v<k>.label.json`` and ``README.md``.
+writes ``OUT_DIR/<script>_v<k>.webm`` and ``<script>_v<k>.label.json`` (the format ``dv2s eval``
+reads). The shipped set lives in ``dv2s_gym/evalset_highway_env/`` (:data:`EXTERNAL_EVALSET_DIR`), whose
+README (written by hand) lists the scripts and the measured results.
 Deterministic: fixed seeds, fixed variants; no randomness beyond highway-env's seeded reset.
 """
 
@@ -47,7 +49,10 @@ if os.environ.get("SDL_VIDEODRIVER", "dummy") == "dummy":
     os.environ["SDL_VIDEODRIVER"] = "offscreen"
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 
-__all__ = ["SCRIPTS", "Script", "render_script", "build", "main"]
+__all__ = ["EXTERNAL_EVALSET_DIR", "SCRIPTS", "Script", "Scene", "render_script", "build", "main"]
+
+EXTERNAL_EVALSET_DIR = Path(__file__).resolve().parents[1] / "evalset_highway_env"
+"""The shipped external evaluation set (stock highway-env clips, labelled by hand)."""
 
 FPS = 5
 SIZE = 480
@@ -482,7 +487,7 @@ def render_script(script: Script, variant: int, path: Optional[str | os.PathLike
 
 
 def build(out: str | os.PathLike, only: Optional[Sequence[str]] = None) -> List[Dict[str, Any]]:
-    """Render every script's variants into ``out`` with their labels and a README; returns one row per clip.
+    """Render every script's variants into ``out`` with their labels; returns one row per clip.
 
     Raises RuntimeError naming the clip when a scripted event did not happen.
     """
