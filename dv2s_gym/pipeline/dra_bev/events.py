@@ -398,8 +398,8 @@ def _actor(ctx: _Ctx, trk: Track, ego_turn: Optional[str]) -> Optional[Dict[str,
         acts, rels = set(), set()
     if "merge" in acts:
         acts -= {"lane_change_left", "lane_change_right"}   # merging is the lane change
-        if "ahead_of" in rels and bool(np.any(in_lane[k0:] & (lon[k0:] > -2.0))):
-            acts.add("cut_in")   # merging into the ego's lane, in front of it
+        if "ahead_of" in rels and bool(np.any(in_lane[k0:])):
+            acts.add("cut_in")   # merging into the ego's lane
         elif "ahead_of" in rels:
             # merging into the lane beside the ego's: the text says "into the lane next to it" (a merge
             # "ahead of" the ego reads back as a cut-in), so the relation kept is the side
