@@ -16,8 +16,9 @@ and walks the tree against an allowlist. A script may use:
   ``import math``; every other import form is refused, wherever it appears.
 
 Nothing may start with ``_`` (but the driving domain's documented accessors
-that return a road element or ``None``, :data:`SCENIC_OPTIONAL_ATTRIBUTES`): no name, attribute, argument, keyword, property
-or string constant naming a private attribute (``"_os"``, ``"__class__"``), so
+that return a road element or ``None``, :data:`SCENIC_OPTIONAL_ATTRIBUTES`): no name, attribute, argument, keyword,
+property, class-pattern attribute (``case Cls(attr=x)`` reads ``subject.attr``) or string constant naming a private
+attribute (``"_os"``, ``"__class__"``), so
 no module, frame, code object or builtin is reached through an object's
 private state. Frame and code attributes without an underscore (``gi_frame``,
 ``f_globals``, ``tb_frame``...), string formatting that walks attributes
@@ -36,7 +37,7 @@ import ast
 import builtins
 import re
 from dataclasses import dataclass
-from typing import Callable, Iterator, List
+from typing import Callable, Iterator, List, Tuple
 
 __all__ = [
     "SAFE_BUILTINS",
@@ -135,7 +136,17 @@ _REFUSED_NODES = {
 }
 # Fields of Scenic's nodes that hold identifiers (Python's own are covered by _IDENTIFIER_FIELDS too).
 _IDENTIFIER_FIELDS = frozenset({"id", "attr", "name", "arg", "asname", "identifier", "property", "names",
-                                "vararg", "kwarg", "rest", "prop", "className"})
+                                "vararg", "kwarg", "rest", "prop", "className", "kwd_attrs"})
+# Fields whose strings are attribute names read from an object (judged like ``obj.attr``):
+# ``case Cls(attr=pattern)`` reads ``subject.attr`` as ``getattr`` would.
+_ATTRIBUTE_FIELDS = frozenset({("Attribute", "attr"), ("MatchClass", "kwd_attrs")})
+# Fields holding free text rather than identifiers (string constants are judged by _PRIVATE_STRING).
+# Any other field that holds a string is refused: a new node type must be reviewed before it is allowed.
+_TEXT_FIELDS = frozenset({("Constant", "value"), ("Constant", "kind"), ("ImportFrom", "module"), ("Model", "name"),
+                          ("BehaviorDef", "docstring"), ("MonitorDef", "docstring"), ("ScenarioDef", "docstring"),
+                          ("Require", "name"), ("RequireMonitor", "name"), ("Record", "name"),
+                          ("RecordInitial", "name"), ("RecordFinal", "name"), ("TerminateWhen", "name"),
+                          ("TerminateSimulationWhen", "name")})
 
 
 @dataclass(frozen=True)
@@ -164,15 +175,23 @@ class UnsafeScenarioError(ValueError):
         )
 
 
-def _identifiers(node: ast.AST) -> Iterator[str]:
-    """Identifier strings held by a node's fields (names, attributes, arguments, properties)."""
+def _identifiers(node: ast.AST, flag: Callable[[ast.AST, str, str], None]) -> Iterator[Tuple[str, bool]]:
+    """Identifier strings held by a node's fields, each with whether it is an attribute read.
+
+    A string in a field that is neither an identifier field nor a known free-text
+    field is flagged (an unreviewed construct), not silently passed.
+    """
+    kind = type(node).__name__
     for field_name, value in ast.iter_fields(node):
-        if field_name not in _IDENTIFIER_FIELDS:
+        strings = [value] if isinstance(value, str) else [v for v in value if isinstance(v, str)] \
+            if isinstance(value, list) else []
+        if not strings:
             continue
-        if isinstance(value, str):
-            yield value
-        elif isinstance(value, list):
-            yield from (item for item in value if isinstance(item, str))
+        if field_name in _IDENTIFIER_FIELDS:
+            yield from ((text, (kind, field_name) in _ATTRIBUTE_FIELDS) for text in strings)
+        elif (kind, field_name) not in _TEXT_FIELDS:
+            flag(node, f"{kind}.{field_name}", "this construct names something the safety check does not "
+                                               "review; it is not allowed in a scenario")
 
 
 def _check_import(node: ast.AST, kind: str, flag: Callable[[ast.AST, str, str], None]) -> None:
@@ -191,9 +210,10 @@ def _check_import(node: ast.AST, kind: str, flag: Callable[[ast.AST, str, str], 
                 flag(node, f"from {module} import *", "star imports are not allowed")
 
 
-def _check_identifier(node: ast.AST, ident: str, flag: Callable[[ast.AST, str, str], None]) -> None:
-    is_attribute = isinstance(node, ast.Attribute)
-    shown = f".{ident}" if is_attribute else ident
+def _check_identifier(node: ast.AST, ident: str, is_attribute: bool,
+                      flag: Callable[[ast.AST, str, str], None]) -> None:
+    shown = (f"case {_pattern_class(node)}({ident}=...)" if isinstance(node, ast.MatchClass)
+             else f".{ident}") if is_attribute else ident
     if is_attribute and ident in SCENIC_OPTIONAL_ATTRIBUTES:
         return
     if ident.startswith("_"):
@@ -262,10 +282,15 @@ def check_script(source: str) -> List[SafetyFinding]:
             for param in getattr(node, "elts", []):
                 if getattr(param, "identifier", None) == "map":
                     _check_map_value(param.value, flag)
-        for ident in _identifiers(node):
-            _check_identifier(node, ident, flag)
+        for ident, is_attribute in _identifiers(node, flag):
+            _check_identifier(node, ident, is_attribute, flag)
     findings.sort(key=lambda f: f.line)
     return findings
+
+
+def _pattern_class(node: ast.MatchClass) -> str:
+    cls = node.cls
+    return cls.id if isinstance(cls, ast.Name) else getattr(cls, "attr", "...")
 
 
 def _check_map_value(value: ast.AST, flag) -> None:
