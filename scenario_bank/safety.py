@@ -23,8 +23,10 @@ no module, frame, code object or builtin is reached through an object's
 private state. Frame and code attributes without an underscore (``gi_frame``,
 ``f_globals``, ``tb_frame``...), string formatting that walks attributes
 (``.format``/``.format_map``), and methods that read or write files
-(``fromFile``, ``dumpPickle``, ``show``...) are refused too. ``param map`` is a
-shipped map name or a relative ``.xodr`` path.
+(``fromFile``, ``dumpPickle``, ``show``...) or change the file system (``touch``,
+``mkdir``, ``unlink``...) are refused too. ``param map`` is a shipped map name or a
+relative ``.xodr`` path, set before the ``model`` line; ``localPath`` (it returns a
+``pathlib.Path``) may only be such a line's whole value.
 
 Every finding names the line, the construct and the reason. The check is the
 first layer; :mod:`scenario_bank.sandbox` runs what passes it in a child
@@ -43,6 +45,7 @@ __all__ = [
     "SAFE_BUILTINS",
     "DENIED_NAMES",
     "SCENIC_OPTIONAL_ATTRIBUTES",
+    "FILESYSTEM_ATTRIBUTES",
     "WORLD_MODELS",
     "SafetyFinding",
     "UnsafeScenarioError",
@@ -101,6 +104,14 @@ FRAME_ATTRIBUTES = frozenset({
     "im_self", "im_class", "cell_contents", "mro", "with_traceback", "format", "format_map",
 })
 """Attributes refused though they have no underscore: frames, code objects, formatting that walks attributes."""
+
+FILESYSTEM_ATTRIBUTES = frozenset({
+    "touch", "mkdir", "makedirs", "unlink", "rmdir", "rmtree", "removedirs", "rename", "renames", "symlink_to",
+    "hardlink_to", "link_to", "symlink", "link", "chmod", "lchmod", "chown", "lchown", "iterdir", "glob", "rglob",
+    "readlink", "truncate", "mkfifo", "mknod", "chdir", "chroot", "putenv", "unsetenv", "environ", "kill",
+    "killpg", "fork", "listdir", "scandir", "utime", "expanduser", "home", "cwd",
+})
+"""``pathlib.Path``/``os`` methods that change or list the file system; refused should a path object be reachable."""
 
 _IO_ATTRIBUTE = re.compile(r"file|pickle|dump|load|save|write|read|show|plot|export|replay|serial|stream|"
                            r"open|exec|eval|system|spawn|popen|import|module|global|builtin|frame|code|"
@@ -221,6 +232,8 @@ def _check_identifier(node: ast.AST, ident: str, is_attribute: bool,
     elif is_attribute:
         if ident in FRAME_ATTRIBUTES:
             flag(node, shown, "frame, code-object and attribute-formatting attributes are not allowed")
+        elif ident in FILESYSTEM_ATTRIBUTES:
+            flag(node, shown, "file-system methods (of paths or os) are not allowed")
         elif _IO_ATTRIBUTE.search(ident):
             flag(node, shown, "methods that read or write files or reach interpreter internals are not allowed")
     elif isinstance(node, (ast.alias, ast.ImportFrom, ast.Import)):
@@ -256,8 +269,13 @@ def check_script(source: str) -> List[SafetyFinding]:
         if finding not in findings:
             findings.append(finding)
 
+    map_calls = _map_local_paths(tree, flag)
     for node in ast.walk(tree):
         kind = type(node).__name__
+        if kind == "Name" and node.id == "localPath" and id(node) not in map_calls:
+            flag(node, "localPath", "localPath returns a file-system path object; it may only be the whole "
+                                    "value of a `param map = localPath('my_map.xodr')` line before the `model` line")
+            continue
         scenic_node = type(node).__module__.startswith("scenic.")
         if kind in _REFUSED_NODES:
             flag(node, kind.lower(), _REFUSED_NODES[kind])
@@ -278,10 +296,6 @@ def check_script(source: str) -> List[SafetyFinding]:
                 flag(node, repr(text[:40]), "strings naming private or dunder attributes are not allowed")
         elif kind == "Record" and getattr(node, "recorder", None) is not None:
             flag(node, "record ... to ...", "records may not be written to files or recorders")
-        elif kind == "Param":
-            for param in getattr(node, "elts", []):
-                if getattr(param, "identifier", None) == "map":
-                    _check_map_value(param.value, flag)
         for ident, is_attribute in _identifiers(node, flag):
             _check_identifier(node, ident, is_attribute, flag)
     findings.sort(key=lambda f: f.line)
@@ -293,11 +307,39 @@ def _pattern_class(node: ast.MatchClass) -> str:
     return cls.id if isinstance(cls, ast.Name) else getattr(cls, "attr", "...")
 
 
+def _map_local_paths(tree: ast.AST, flag) -> set:
+    """Check every ``param map`` line; the ids of the ``localPath`` names allowed as a map's whole value.
+
+    A map set after the ``model`` line would not be the map loaded, and would leave a path object in
+    ``globalParameters``, so it is refused.
+    """
+    allowed, model_seen = set(), False
+    for statement in getattr(tree, "body", []):
+        kind = type(statement).__name__
+        if kind == "Model":
+            model_seen = True
+        for node in ast.walk(statement):
+            if type(node).__name__ != "Param":
+                continue
+            for param in getattr(node, "elts", []):
+                if getattr(param, "identifier", None) != "map":
+                    continue
+                if model_seen or node is not statement:
+                    flag(param.value, "param map", "the map must be set at top level before the `model` line")
+                _check_map_value(param.value, flag)
+                value = param.value
+                if isinstance(value, ast.Call) and isinstance(value.func, ast.Name) and value.func.id == "localPath":
+                    allowed.add(id(value.func))
+    return allowed
+
+
 def _check_map_value(value: ast.AST, flag) -> None:
     if isinstance(value, ast.Constant) and isinstance(value.value, str):
         path = value.value
         if path.startswith(("/", "~")) or ".." in path.replace("\\", "/").split("/"):
             flag(value, f"param map = {path!r}", "maps must be shipped map names or relative .xodr paths")
+        elif ("/" in path or "\\" in path or "." in path) and not path.endswith(".xodr"):
+            flag(value, f"param map = {path!r}", "a map path must name an OpenDRIVE .xodr file")
     elif isinstance(value, ast.Call) and getattr(value.func, "id", None) == "localPath":
         args = value.args
         if len(args) != 1 or value.keywords or not (isinstance(args[0], ast.Constant) and isinstance(args[0].value, str)):
