@@ -16,14 +16,17 @@ and walks the tree against an allowlist. A script may use:
   ``import math``; every other import form is refused, wherever it appears.
 
 Nothing may start with ``_`` (but the driving domain's documented accessors
-that return a road element or ``None``, :data:`SCENIC_OPTIONAL_ATTRIBUTES`): no name, attribute, argument, keyword, property
-or string constant naming a private attribute (``"_os"``, ``"__class__"``), so
+that return a road element or ``None``, :data:`SCENIC_OPTIONAL_ATTRIBUTES`): no name, attribute, argument, keyword,
+property, class-pattern attribute (``case Cls(attr=x)`` reads ``subject.attr``) or string constant naming a private
+attribute (``"_os"``, ``"__class__"``), so
 no module, frame, code object or builtin is reached through an object's
 private state. Frame and code attributes without an underscore (``gi_frame``,
 ``f_globals``, ``tb_frame``...), string formatting that walks attributes
 (``.format``/``.format_map``), and methods that read or write files
-(``fromFile``, ``dumpPickle``, ``show``...) are refused too. ``param map`` is a
-shipped map name or a relative ``.xodr`` path.
+(``fromFile``, ``dumpPickle``, ``show``...) or change the file system (``touch``,
+``mkdir``, ``unlink``...) are refused too. ``param map`` is a shipped map name or a
+relative ``.xodr`` path, set before the ``model`` line; ``localPath`` (it returns a
+``pathlib.Path``) may only be such a line's whole value.
 
 Every finding names the line, the construct and the reason. The check is the
 first layer; :mod:`scenario_bank.sandbox` runs what passes it in a child
@@ -36,12 +39,13 @@ import ast
 import builtins
 import re
 from dataclasses import dataclass
-from typing import Callable, Iterator, List
+from typing import Callable, Iterator, List, Tuple
 
 __all__ = [
     "SAFE_BUILTINS",
     "DENIED_NAMES",
     "SCENIC_OPTIONAL_ATTRIBUTES",
+    "FILESYSTEM_ATTRIBUTES",
     "WORLD_MODELS",
     "SafetyFinding",
     "UnsafeScenarioError",
@@ -101,6 +105,14 @@ FRAME_ATTRIBUTES = frozenset({
 })
 """Attributes refused though they have no underscore: frames, code objects, formatting that walks attributes."""
 
+FILESYSTEM_ATTRIBUTES = frozenset({
+    "touch", "mkdir", "makedirs", "unlink", "rmdir", "rmtree", "removedirs", "rename", "renames", "symlink_to",
+    "hardlink_to", "link_to", "symlink", "link", "chmod", "lchmod", "chown", "lchown", "iterdir", "glob", "rglob",
+    "readlink", "truncate", "mkfifo", "mknod", "chdir", "chroot", "putenv", "unsetenv", "environ", "kill",
+    "killpg", "fork", "listdir", "scandir", "utime", "expanduser", "home", "cwd",
+})
+"""``pathlib.Path``/``os`` methods that change or list the file system; refused should a path object be reachable."""
+
 _IO_ATTRIBUTE = re.compile(r"file|pickle|dump|load|save|write|read|show|plot|export|replay|serial|stream|"
                            r"open|exec|eval|system|spawn|popen|import|module|global|builtin|frame|code|"
                            r"subclass|getattr|setattr|delattr", re.I)
@@ -135,7 +147,17 @@ _REFUSED_NODES = {
 }
 # Fields of Scenic's nodes that hold identifiers (Python's own are covered by _IDENTIFIER_FIELDS too).
 _IDENTIFIER_FIELDS = frozenset({"id", "attr", "name", "arg", "asname", "identifier", "property", "names",
-                                "vararg", "kwarg", "rest", "prop", "className"})
+                                "vararg", "kwarg", "rest", "prop", "className", "kwd_attrs"})
+# Fields whose strings are attribute names read from an object (judged like ``obj.attr``):
+# ``case Cls(attr=pattern)`` reads ``subject.attr`` as ``getattr`` would.
+_ATTRIBUTE_FIELDS = frozenset({("Attribute", "attr"), ("MatchClass", "kwd_attrs")})
+# Fields holding free text rather than identifiers (string constants are judged by _PRIVATE_STRING).
+# Any other field that holds a string is refused: a new node type must be reviewed before it is allowed.
+_TEXT_FIELDS = frozenset({("Constant", "value"), ("Constant", "kind"), ("ImportFrom", "module"), ("Model", "name"),
+                          ("BehaviorDef", "docstring"), ("MonitorDef", "docstring"), ("ScenarioDef", "docstring"),
+                          ("Require", "name"), ("RequireMonitor", "name"), ("Record", "name"),
+                          ("RecordInitial", "name"), ("RecordFinal", "name"), ("TerminateWhen", "name"),
+                          ("TerminateSimulationWhen", "name")})
 
 
 @dataclass(frozen=True)
@@ -164,15 +186,23 @@ class UnsafeScenarioError(ValueError):
         )
 
 
-def _identifiers(node: ast.AST) -> Iterator[str]:
-    """Identifier strings held by a node's fields (names, attributes, arguments, properties)."""
+def _identifiers(node: ast.AST, flag: Callable[[ast.AST, str, str], None]) -> Iterator[Tuple[str, bool]]:
+    """Identifier strings held by a node's fields, each with whether it is an attribute read.
+
+    A string in a field that is neither an identifier field nor a known free-text
+    field is flagged (an unreviewed construct), not silently passed.
+    """
+    kind = type(node).__name__
     for field_name, value in ast.iter_fields(node):
-        if field_name not in _IDENTIFIER_FIELDS:
+        strings = [value] if isinstance(value, str) else [v for v in value if isinstance(v, str)] \
+            if isinstance(value, list) else []
+        if not strings:
             continue
-        if isinstance(value, str):
-            yield value
-        elif isinstance(value, list):
-            yield from (item for item in value if isinstance(item, str))
+        if field_name in _IDENTIFIER_FIELDS:
+            yield from ((text, (kind, field_name) in _ATTRIBUTE_FIELDS) for text in strings)
+        elif (kind, field_name) not in _TEXT_FIELDS:
+            flag(node, f"{kind}.{field_name}", "this construct names something the safety check does not "
+                                               "review; it is not allowed in a scenario")
 
 
 def _check_import(node: ast.AST, kind: str, flag: Callable[[ast.AST, str, str], None]) -> None:
@@ -191,9 +221,10 @@ def _check_import(node: ast.AST, kind: str, flag: Callable[[ast.AST, str, str], 
                 flag(node, f"from {module} import *", "star imports are not allowed")
 
 
-def _check_identifier(node: ast.AST, ident: str, flag: Callable[[ast.AST, str, str], None]) -> None:
-    is_attribute = isinstance(node, ast.Attribute)
-    shown = f".{ident}" if is_attribute else ident
+def _check_identifier(node: ast.AST, ident: str, is_attribute: bool,
+                      flag: Callable[[ast.AST, str, str], None]) -> None:
+    shown = (f"case {_pattern_class(node)}({ident}=...)" if isinstance(node, ast.MatchClass)
+             else f".{ident}") if is_attribute else ident
     if is_attribute and ident in SCENIC_OPTIONAL_ATTRIBUTES:
         return
     if ident.startswith("_"):
@@ -201,6 +232,8 @@ def _check_identifier(node: ast.AST, ident: str, flag: Callable[[ast.AST, str, s
     elif is_attribute:
         if ident in FRAME_ATTRIBUTES:
             flag(node, shown, "frame, code-object and attribute-formatting attributes are not allowed")
+        elif ident in FILESYSTEM_ATTRIBUTES:
+            flag(node, shown, "file-system methods (of paths or os) are not allowed")
         elif _IO_ATTRIBUTE.search(ident):
             flag(node, shown, "methods that read or write files or reach interpreter internals are not allowed")
     elif isinstance(node, (ast.alias, ast.ImportFrom, ast.Import)):
@@ -236,8 +269,13 @@ def check_script(source: str) -> List[SafetyFinding]:
         if finding not in findings:
             findings.append(finding)
 
+    map_calls = _map_local_paths(tree, flag)
     for node in ast.walk(tree):
         kind = type(node).__name__
+        if kind == "Name" and node.id == "localPath" and id(node) not in map_calls:
+            flag(node, "localPath", "localPath returns a file-system path object; it may only be the whole "
+                                    "value of a `param map = localPath('my_map.xodr')` line before the `model` line")
+            continue
         scenic_node = type(node).__module__.startswith("scenic.")
         if kind in _REFUSED_NODES:
             flag(node, kind.lower(), _REFUSED_NODES[kind])
@@ -258,14 +296,41 @@ def check_script(source: str) -> List[SafetyFinding]:
                 flag(node, repr(text[:40]), "strings naming private or dunder attributes are not allowed")
         elif kind == "Record" and getattr(node, "recorder", None) is not None:
             flag(node, "record ... to ...", "records may not be written to files or recorders")
-        elif kind == "Param":
-            for param in getattr(node, "elts", []):
-                if getattr(param, "identifier", None) == "map":
-                    _check_map_value(param.value, flag)
-        for ident in _identifiers(node):
-            _check_identifier(node, ident, flag)
+        for ident, is_attribute in _identifiers(node, flag):
+            _check_identifier(node, ident, is_attribute, flag)
     findings.sort(key=lambda f: f.line)
     return findings
+
+
+def _pattern_class(node: ast.MatchClass) -> str:
+    cls = node.cls
+    return cls.id if isinstance(cls, ast.Name) else getattr(cls, "attr", "...")
+
+
+def _map_local_paths(tree: ast.AST, flag) -> set:
+    """Check every ``param map`` line; the ids of the ``localPath`` names allowed as a map's whole value.
+
+    A map set after the ``model`` line would not be the map loaded, and would leave a path object in
+    ``globalParameters``, so it is refused.
+    """
+    allowed, model_seen = set(), False
+    for statement in getattr(tree, "body", []):
+        kind = type(statement).__name__
+        if kind == "Model":
+            model_seen = True
+        for node in ast.walk(statement):
+            if type(node).__name__ != "Param":
+                continue
+            for param in getattr(node, "elts", []):
+                if getattr(param, "identifier", None) != "map":
+                    continue
+                if model_seen or node is not statement:
+                    flag(param.value, "param map", "the map must be set at top level before the `model` line")
+                _check_map_value(param.value, flag)
+                value = param.value
+                if isinstance(value, ast.Call) and isinstance(value.func, ast.Name) and value.func.id == "localPath":
+                    allowed.add(id(value.func))
+    return allowed
 
 
 def _check_map_value(value: ast.AST, flag) -> None:
@@ -273,6 +338,8 @@ def _check_map_value(value: ast.AST, flag) -> None:
         path = value.value
         if path.startswith(("/", "~")) or ".." in path.replace("\\", "/").split("/"):
             flag(value, f"param map = {path!r}", "maps must be shipped map names or relative .xodr paths")
+        elif ("/" in path or "\\" in path or "." in path) and not path.endswith(".xodr"):
+            flag(value, f"param map = {path!r}", "a map path must name an OpenDRIVE .xodr file")
     elif isinstance(value, ast.Call) and getattr(value.func, "id", None) == "localPath":
         args = value.args
         if len(args) != 1 or value.keywords or not (isinstance(args[0], ast.Constant) and isinstance(args[0].value, str)):

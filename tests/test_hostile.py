@@ -11,6 +11,7 @@ prove the limits hold.
 """
 
 import re
+import shutil
 from pathlib import Path
 
 import pytest
@@ -142,3 +143,24 @@ def test_a_script_that_fails_to_compile_is_a_clear_sandbox_error():
     with pytest.raises(SandboxError, match="while compiling.*UndefinedThing") as caught:
         verify_script(text, name="broken", limits=TEST_LIMITS)
     assert caught.value.stage == "compile" and caught.value.limit is None
+
+
+def test_a_local_path_map_reaches_the_script_as_a_plain_string(tmp_path):
+    # Legal Scenic (it passes the check): with the map a pathlib.Path, `replace` would move the map file anywhere.
+    shutil.copy(Path(__file__).resolve().parents[1] / "scenario_bank" / "maps" / "highway_straight.xodr",
+                tmp_path / "road.xodr")
+    marker = tmp_path / "moved"
+    script = tmp_path / "local_map.scenic"
+    script.write_text(
+        "param map = localPath('road.xodr')\nmodel scenic.domains.driving.model\n"
+        f"moved = globalParameters.map.replace({str(marker)!r})\n"
+        "lane = Uniform(*network.lanes)\nego = new Car at lane.centerline.pointAlongBy(Range(100, 500))\n",
+        encoding="utf-8")
+    text = script.read_text(encoding="utf-8")
+    assert check_script(text) == []
+    from envs.errors import ScenarioCompileError
+    from envs.scenarios import compile_scenario
+
+    with pytest.raises(ScenarioCompileError, match="replace expected at least 2 arguments"):
+        compile_scenario(text, path=str(script))  # str.replace, not Path.replace
+    assert (tmp_path / "road.xodr").is_file() and not marker.exists()
