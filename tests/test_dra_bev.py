@@ -245,7 +245,7 @@ def test_recorded_clips_are_there():
 USE_CASE_CLIPS = {
     "highway_lead_vehicle_brakes": (8, 320),
     "urban_pedestrian_crossing": (6, 320),
-    "urban_left_turn_oncoming": (8, 320),
+    "urban_left_turn_oncoming": (10, 320),  # a yielding ego needs more than 8 s to complete its turn
     "urban_pull_back_in": (9, 320),
     "highway_onramp_insertion": (16, 400),
 }
