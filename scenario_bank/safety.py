@@ -227,6 +227,11 @@ def _check_identifier(node: ast.AST, ident: str, is_attribute: bool,
              else f".{ident}") if is_attribute else ident
     if is_attribute and ident in SCENIC_OPTIONAL_ATTRIBUTES:
         return
+    if not ident.isascii():
+        # Python's own parser folds identifiers by NFKC (``ｅval`` is ``eval``, ``＿`` is ``_``); Scenic's
+        # does not today, but the check must not depend on which parser compiles the script.
+        flag(node, shown, "identifiers must be ASCII (Unicode look-alikes can normalise to other names)")
+        return
     if ident.startswith("_"):
         flag(node, shown, "names and attributes starting with '_' are not allowed (private or dunder access)")
     elif is_attribute:
