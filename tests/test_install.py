@@ -1,6 +1,7 @@
-"""The installed environment: one OpenCV, the CLI, registration without import."""
+"""The installed environment: an editable install, one OpenCV, the CLI, Gymnasium registration."""
 
 import importlib.metadata as md
+import json
 import os
 import subprocess
 import sys
@@ -55,21 +56,26 @@ def test_cli_reports_unknown_scenario_cleanly(capsys):
     assert "unknown scenario" in err and "highway_lead_vehicle_brakes" in err
 
 
-def _installed() -> bool:
-    try:
-        md.distribution("dv2s-gym")
-    except md.PackageNotFoundError:
-        return False
-    return True
+def test_editable_install_points_at_this_checkout():
+    from pathlib import Path
+
+    dist = md.distribution("dv2s-gym")
+    direct = json.loads(dist.read_text("direct_url.json") or "{}")
+    assert direct.get("dir_info", {}).get("editable") is True, direct
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run([sys.executable, "-c", "import envs, dv2s_gym; print(dv2s_gym.__file__)"],
+                         cwd="/", env={k: v for k, v in os.environ.items() if k != "PYTHONPATH"},
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert Path(out.stdout.strip()).resolve().is_relative_to(root)
 
 
-@pytest.mark.skipif(not _installed(), reason="dv2s-gym is not pip-installed in this environment")
-def test_env_registered_after_installation_without_import(tmp_path):
+def test_gym_make_with_the_module_prefix_needs_no_import(tmp_path):
     code = (
         "import gymnasium as gym, sys\n"
-        "env = gym.make('DV2S-v0', scenario='urban_pull_back_in', config={'duration': 1})\n"
-        "obs, info = env.reset(seed=0)\n"
         "assert 'dv2s_gym' not in sys.modules\n"
+        "env = gym.make('dv2s_gym:DV2S-v0', scenario='urban_pull_back_in', config={'duration': 1})\n"
+        "obs, info = env.reset(seed=0)\n"
         "print(info['scenario'])\n"
     )
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
@@ -77,3 +83,12 @@ def test_env_registered_after_installation_without_import(tmp_path):
                          timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().endswith("urban_pull_back_in")
+
+
+def test_import_registers_the_env():
+    import gymnasium as gym
+
+    import dv2s_gym  # noqa: F401
+
+    assert "DV2S-v0" in gym.registry
+    assert gym.registry["DV2S-v0"].entry_point == "envs.dv2s_env:DV2SEnv"
