@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from dataclasses import asdict
+from pathlib import Path
 from typing import List, Optional
 
 __all__ = ["main", "build_parser"]
@@ -196,13 +198,14 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     else:
         raise ValueError("give a description in quotes or --from FILE")
     description = Description(text.strip(), elements_from_text(text), backend="user")
+    started = time.time()
     report = generate_to_folder(description, Path(args.out), sg=args.sg, seed=args.seed,
                                 llm_config=_llm_config(args), seconds=args.seconds)
-    _print(args, report, _report_text(report, args.out))
+    _print(args, report, _report_text(report, args.out, since=started))
     return 0 if report.get("check", {}).get("ok") else 1
 
 
-def _report_text(report, out) -> str:
+def _report_text(report, out, since: float = 0.0) -> str:
     generation = report.get("generation", {})
     check = report.get("check", {})
     lines = [f"description: {report['description']['text']}"]
@@ -216,7 +219,10 @@ def _report_text(report, out) -> str:
     for key in ("sp", "e2e_sc"):
         if key in report:
             lines.append(f"{key.upper().replace('_', '-')}: {report[key]:.2f}")
-    lines.append(f"written to {out}/ (description.txt, elements.json, scenario.scenic, preview.webm, report.json)")
+    names = ("description.txt", "elements.json", "scenario.scenic", "preview.webm", "report.json")
+    # only what this run wrote: a failed generation leaves no script or preview
+    written = [name for name in names if (Path(out) / name).is_file() and (Path(out) / name).stat().st_mtime >= since - 1]
+    lines.append(f"written to {out}/ ({', '.join(written)})" if written else f"nothing written to {out}/")
     return "\n".join(lines)
 
 
@@ -306,6 +312,11 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``dv2s`` (every subcommand has ``--help``)."""
     parser = argparse.ArgumentParser(prog="dv2s", description="dv2s-gym: turn driving videos into Scenic "
                                      "scenarios and run them as Gymnasium episodes in highway-env.")
+    parser.add_argument("--debug", action="store_true",
+                        help="show the full traceback of an error (accepted anywhere on the line)")
+    parser.add_argument("--bank", default=None,
+                        help="bank folder (default: the bank shipped with dv2s-gym); also accepted after "
+                        "the bank subcommand")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     demo = sub.add_parser("demo", help="run every bank scenario with a rule-based ego; one video each and a table",
@@ -346,12 +357,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     bank = sub.add_parser("bank", help="list, add, validate, sample, export and import bank scenarios",
                           description="The scenario bank: versioned, validated, searchable Scenic scenarios.")
-    bank.add_argument("--bank", default=None, help="bank folder (default: the bank shipped with dv2s-gym)")
+    # SUPPRESS: a --bank given before the subcommand is kept when none is given after it
+    bank.add_argument("--bank", default=argparse.SUPPRESS, help="bank folder (default: the bank shipped with dv2s-gym)")
     bank_sub = bank.add_subparsers(dest="bank_command", required=True, metavar="BANK_COMMAND")
 
     def bank_cmd(name, help_text, func):
         p = bank_sub.add_parser(name, help=help_text, description=help_text)
         p.add_argument("--json", action="store_true", help="print JSON instead of text")
+        p.add_argument("--bank", default=argparse.SUPPRESS, help="bank folder (default: the shipped bank)")
         p.set_defaults(func=func)
         return p
 
@@ -436,7 +449,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sg", choices=["rules", "openai"], default="rules")
     p.add_argument("--out", default="out/convert", help="output folder (one subfolder per video in batch mode)")
     p.add_argument("--add-to-bank", action="store_true", help="add validated scenarios to the bank with provenance")
-    p.add_argument("--bank", default=None, help="bank folder for --add-to-bank (default: the shipped bank)")
+    p.add_argument("--bank", default=argparse.SUPPRESS,
+                   help="bank folder for --add-to-bank (default: the shipped bank)")
     p.add_argument("--jobs", type=int, default=1, help="parallel processes in batch mode")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--seconds", type=float, default=10.0)
@@ -461,18 +475,43 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line(error: BaseException) -> str:
+    text = " ".join(line.strip() for line in str(error).splitlines() if line.strip())
+    return text or type(error).__name__
+
+
 def main(argv: Optional[List[str]] = None) -> int:
-    """Entry point of the ``dv2s`` console command."""
+    """Entry point of the ``dv2s`` console command.
+
+    Exit codes: 0 success, 1 a check failed or an unexpected internal error, 2 bad input
+    (an unknown scenario, a corrupt video, an unsafe script, an unreachable endpoint, ...),
+    reported as one line on stderr; ``--debug`` shows the traceback instead.
+    """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv
+    argv = [a for a in argv if a != "--debug"]
     parser = build_parser()
     args = parser.parse_args(argv)
+    from dv2s_gym.pipeline.errors import PipelineError
     from envs.errors import DV2SError
     from scenario_bank.bank import BankError
 
     try:
         return int(args.func(args) or 0)
-    except (DV2SError, BankError, FileNotFoundError, ValueError) as error:
-        print(f"dv2s: error: {error}", file=sys.stderr)
+    except (DV2SError, BankError, PipelineError, OSError, ValueError) as error:
+        if debug:
+            raise
+        print(f"dv2s: error: {_one_line(error)}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("dv2s: interrupted", file=sys.stderr)
+        return 130
+    except Exception as error:  # noqa: BLE001 - the last line of defence: one line, not a traceback
+        if debug:
+            raise
+        print(f"dv2s: internal error: {type(error).__name__}: {_one_line(error)} (run with --debug for the "
+              "traceback, and please report it)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":
