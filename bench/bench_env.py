@@ -7,6 +7,10 @@ Baseline: highway-env's ``highway-v0`` on the same kind of road (4 straight lane
 the same number of actors (ego + 5 cars), the same frequencies (15 Hz physics,
 5 Hz policy), the same observation (Kinematics) and action (DiscreteMetaAction,
 IDLE). Native NPCs are IDMVehicles; ours run Scenic's FollowLaneBehavior.
+
+Measured twice, like with like: (a) both envs with highway-env's stock pandas
+``KinematicObservation``, (b) both with the project's NumPy ``FastKinematicObservation``
+(same array). The observation class is set on both envs by the same helper.
 """
 
 from __future__ import annotations
@@ -23,11 +27,28 @@ import gymnasium as gym
 import highway_env  # noqa: F401  (registers highway-v0)
 import numpy as np
 
+from highway_env.envs.common.observation import KinematicObservation
+
 import dv2s_gym  # noqa: F401  (registers DV2S-v0)
+from envs.observations import FastKinematicObservation
 
 SCENE = Path(__file__).with_name("six_cars_highway.scenic")
 FREQ = {"simulation_frequency": 15, "policy_frequency": 5}
 OBS = {"type": "Kinematics", "vehicles_count": 8, "features": ["presence", "x", "y", "vx", "vy", "cos_h", "sin_h"]}
+
+
+def with_observation(env, cls):
+    """Make ``env`` (either kind) observe Kinematics with ``cls``, now and after every reset."""
+    define = env.define_spaces
+
+    def define_with_cls():
+        define()
+        if isinstance(env.observation_type, KinematicObservation):
+            env.observation_type.__class__ = cls
+
+    env.define_spaces = define_with_cls
+    define_with_cls()
+    return env
 
 
 def make_native():
@@ -98,15 +119,20 @@ def main(argv=None) -> None:
     steps = 150 if args.quick else 600
     resets = 300 if args.quick else 1000
 
-    native, ours = make_native(), make_dv2s()
-    steps_per_second(native, 20)
-    steps_per_second(ours, 20)
-    native_runs, our_runs = [], []
-    for round_ in range(3):
-        native_runs.append(steps_per_second(native, steps, seed=round_))
-        our_runs.append(steps_per_second(ours, steps, seed=round_))
-    n, o = statistics.median(native_runs), statistics.median(our_runs)
-    print(f"env steps/s   native highway-v0: {n:7.1f}   DV2S-v0: {o:7.1f}   ratio DV2S/native: {o / n:.2f}x")
+    for label, cls in (("stock pandas Kinematics", KinematicObservation),
+                       ("same fast Kinematics", FastKinematicObservation)):
+        native, ours = with_observation(make_native(), cls), with_observation(make_dv2s(), cls)
+        assert type(native.observation_type) is cls and type(ours.observation_type) is cls
+        steps_per_second(native, 20)
+        steps_per_second(ours, 20)
+        native_runs, our_runs = [], []
+        for round_ in range(3):
+            native_runs.append(steps_per_second(native, steps, seed=round_))
+            our_runs.append(steps_per_second(ours, steps, seed=round_))
+        n, o = statistics.median(native_runs), statistics.median(our_runs)
+        print(f"env steps/s, {label:<24} native highway-v0: {n:7.1f}   DV2S-v0: {o:7.1f}   "
+              f"ratio DV2S/native: {o / n:.2f}x")
+        native.close()
     print("where DV2S-v0 step time goes (% of env.step, cumulative; rows may nest):")
     for label, pct in where_time_goes(ours, steps // 2):
         print(f"    {label:<36} {pct:5.1f}%")
