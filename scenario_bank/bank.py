@@ -52,6 +52,7 @@ __all__ = [
     "BankError",
     "BankVersionError",
     "DuplicateScenarioError",
+    "NotABankError",
     "ScenarioRejectedError",
     "UnknownScenarioError",
     "content_hash",
@@ -79,6 +80,10 @@ class BankError(Exception):
 
 class BankVersionError(BankError):
     """The bank (or an entry) was written by a newer dv2s-gym."""
+
+
+class NotABankError(BankError, ValueError):
+    """The folder holds other things than scenario entries."""
 
 
 class DuplicateScenarioError(BankError):
@@ -273,6 +278,12 @@ class Bank:
         if self.root.is_dir():
             with os.scandir(self.root) as it:
                 folders = sorted((d.name for d in it if d.is_dir() and not d.name.startswith(".")))
+            if folders and not (self.root / INDEX).is_file() and not any(
+                    (self.root / name / SIDECAR).exists() or (self.root / name / SCRIPT).exists() for name in folders):
+                raise NotABankError(
+                    f"{self.root} is not a scenario bank: none of its {len(folders)} subfolders holds a "
+                    f"{SCRIPT} or {SIDECAR}. Point --bank at a bank folder (one subfolder per scenario), or "
+                    "at an empty or new folder to start a bank")
             for name in folders:
                 folder = self.root / name
                 try:

@@ -67,3 +67,17 @@ def test_a_failed_generation_lists_only_what_it_wrote(tmp_path, capsys):
     listed = text.rsplit("written to", 1)[1]
     for name in ("scenario.scenic", "preview.webm"):
         assert not (out / name).exists() and name not in listed
+
+
+def test_a_folder_that_is_not_a_bank_is_refused_as_such(tmp_path, capsys):
+    from scenario_bank.bank import Bank, NotABankError
+
+    for name in ("src", "docs", "build"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "notes.txt").write_text("not a scenario")
+    with pytest.raises(NotABankError, match="not a scenario bank"):
+        Bank(tmp_path)
+    assert cli.main(["bank", "list", "--bank", str(tmp_path)]) == 2
+    line = _one_line(capsys)
+    assert "is not a scenario bank" in line and "broken" not in line
+    assert len(Bank(tmp_path / "new")) == 0  # a new or empty folder starts a bank
