@@ -11,7 +11,6 @@ from __future__ import annotations
 import base64
 import logging
 import sys
-import time
 
 import cv2
 import numpy as np
@@ -100,11 +99,9 @@ def test_retries_429_then_success():
 
 def test_5xx_gives_up_after_retries():
     with ChatServer(mode="status", fail_status=503) as server:
-        started = time.monotonic()
         with pytest.raises(errors.EndpointHTTPError) as caught:
             fast_client(server, retries=2).chat(HELLO)
     assert server.request_count == 3
-    assert time.monotonic() - started < 2
     error = caught.value
     assert error.status == 503 and error.endpoint == f"{server.base_url}/chat/completions"
     assert server.base_url in str(error) and "3 attempts" in str(error) and "server" in str(error)
@@ -132,23 +129,19 @@ def test_404_is_not_retried_and_names_model_and_path():
 
 def test_timeout_is_retried_then_raised_fast():
     with ChatServer(mode="slow", delay=3.0, default="dra_lead_vehicle_brakes.json") as server:
-        started = time.monotonic()
+        # the server answers after 3 s: a client without the 0.2 s timeout would get the reply
         with pytest.raises(errors.EndpointTimeoutError) as caught:
             fast_client(server, timeout=0.2, retries=1).chat(HELLO)
-        elapsed = time.monotonic() - started
         count = server.request_count
     assert count == 2
-    assert elapsed < 1.5
     message = str(caught.value)
     assert "0.2 s" in message and server.base_url in message and "timeout" in message
 
 
 def test_connection_refused_is_retried_then_raised():
     url = closed_port_url()
-    started = time.monotonic()
     with pytest.raises(errors.EndpointUnreachableError) as caught:
         fast_client(url, retries=2, backoff=0.01).chat(HELLO)
-    assert time.monotonic() - started < 2
     message = str(caught.value)
     assert url in message and "3 attempts" in message and "DV2S_LLM_BASE_URL" in message
     assert isinstance(caught.value, errors.PipelineError)
