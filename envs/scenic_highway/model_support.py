@@ -35,7 +35,10 @@ def resolve_map_parameter() -> None:
     loads ``globalParameters.map`` at import time. Paths are left as they are.
     """
     import scenic.syntax.veneer as veneer
+    from scenario_bank.map_cache import install_network_cache
     from scenario_bank.maps import resolve_map
+
+    install_network_cache()  # the driving model's Network.fromFile caches outside the package
 
     params = veneer._globalParameters
     if "map" not in params:
