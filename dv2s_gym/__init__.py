@@ -10,7 +10,8 @@
 from envs import register_envs
 from envs.dv2s_env import DV2SEnv
 from envs.recording import VideoWriter, record_episode
-from envs.trace import EpisodeTrace, replay_trace
+from envs.replay import replay_trace
+from envs.trace import EpisodeTrace
 
 register_envs()
 

@@ -49,7 +49,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from envs.trace import EpisodeTrace, replay_trace
+    from envs.replay import replay_trace
+    from envs.trace import EpisodeTrace
 
     trace = EpisodeTrace.load(args.trace)
     env, replayed = replay_trace(trace)

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional
 
 from dv2s_gym.pipeline.sg_openai import classify_failure
+from scenario_bank.atomic import atomic_write_text
 from dv2s_gym.pipeline.stages import Description, Generation, describe, generate
 
 __all__ = ["ScenarioCheck", "check_scenario", "classify_failure", "convert_video", "generate_to_folder", "label_for"]
@@ -103,9 +104,7 @@ def label_for(video: Path) -> Optional[Dict[str, Any]]:
 
 
 def _write(folder: Path, name: str, text: str) -> None:
-    tmp = folder / f".{name}.tmp"
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, folder / name)
+    atomic_write_text(folder / name, text, fsync=False)
 
 
 def generate_to_folder(description: Description, out: Path, *, sg: str = "rules", seed: int = 0,
