@@ -721,7 +721,7 @@ def _check_is_bank(root: Path, visible: Sequence[os.DirEntry]) -> None:
     for d in visible:
         if d.is_dir() and ((Path(d.path) / SCRIPT).exists() or (Path(d.path) / SIDECAR).exists()):
             return
-    shown = ", ".join(sorted(d.name for d in visible)[:5]) + (", ..." if len(visible) > 5 else "")
+    shown = ", ".join(sorted(d.name for d in visible)[:3]) + (", ..." if len(visible) > 3 else "")
     raise NotABankError(
         f"{root} is not a scenario bank: none of its subfolders holds a {SCRIPT} or {SIDECAR} "
         f"(it holds {shown}). Pass a bank folder (its entries are <name>/{SCRIPT} + <name>/{SIDECAR}), "

@@ -103,6 +103,10 @@ def label_for(video: Path) -> Optional[Dict[str, Any]]:
     return data.get("elements", data)
 
 
+OUTPUT_FILES = ("description.txt", "elements.json", "scenario.scenic", "preview.webm", "report.json")
+"""Files :func:`generate_to_folder` may write; the report's ``files`` lists those it did write."""
+
+
 def _write(folder: Path, name: str, text: str) -> None:
     atomic_write_text(folder / name, text, fsync=False)
 
@@ -114,6 +118,8 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
     from dv2s_gym.pipeline.metrics import e2e_sc, semantic_preservation
 
     out.mkdir(parents=True, exist_ok=True)
+    for stale in ("scenario.scenic", "preview.webm"):  # a failed run must not leave an earlier run's result
+        (out / stale).unlink(missing_ok=True)
     _write(out, "description.txt", description.text.strip() + "\n")
     _write(out, "elements.json", json.dumps(description.elements, indent=2) + "\n")
     start = time.perf_counter()
@@ -133,6 +139,7 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
             if labels is not None:
                 report["e2e_sc"] = e2e_sc(labels, check.simulated_elements)
     report["seconds"] = round(time.perf_counter() - start, 3)
+    report["files"] = [name for name in OUTPUT_FILES if name == "report.json" or (out / name).is_file()]
     _write(out, "report.json", json.dumps(report, indent=2, default=str) + "\n")
     return report
 
