@@ -35,7 +35,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         config["duration"] = args.duration
     if args.map:
         config["map"] = args.map
-    env = gym.make("DV2S-v0", scenario=args.scenario, config=config, render_mode="rgb_array")
+    env = gym.make("dv2s_gym:DV2S-v0", scenario=args.scenario, config=config, render_mode="rgb_array")
     policy = None if args.ego_policy == "scenic" or args.random else CautiousDriver(env)
     result = record_episode(env, args.video, policy, seed=args.seed)
     if args.trace:
