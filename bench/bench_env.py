@@ -60,7 +60,7 @@ def make_native():
 
 
 def make_dv2s():
-    return gym.make("DV2S-v0", scenario=str(SCENE),
+    return gym.make("dv2s_gym:DV2S-v0", scenario=str(SCENE),
                     config={**FREQ, "duration": 1000, "observation": OBS,
                             "terminate_on_collision": False, "terminate_off_road": False}).unwrapped
 

@@ -5,9 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from dataclasses import asdict
-from pathlib import Path
 from typing import List, Optional
 
 __all__ = ["main", "build_parser"]
@@ -37,7 +35,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         config["duration"] = args.duration
     if args.map:
         config["map"] = args.map
-    env = gym.make("DV2S-v0", scenario=args.scenario, config=config, render_mode="rgb_array")
+    env = gym.make("dv2s_gym:DV2S-v0", scenario=args.scenario, config=config, render_mode="rgb_array")
     policy = None if args.ego_policy == "scenic" or args.random else CautiousDriver(env)
     result = record_episode(env, args.video, policy, seed=args.seed)
     if args.trace:
@@ -51,7 +49,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from envs.trace import EpisodeTrace, replay_trace
+    from envs.replay import replay_trace
+    from envs.trace import EpisodeTrace
 
     trace = EpisodeTrace.load(args.trace)
     env, replayed = replay_trace(trace)
@@ -73,8 +72,14 @@ def _cmd_maps(args: argparse.Namespace) -> int:
 
 
 def _bank(args: argparse.Namespace):
-    from scenario_bank.bank import Bank
+    from pathlib import Path
 
+    from scenario_bank.bank import Bank, BankError
+
+    writes = getattr(args, "bank_command", None) in ("add", "import") or getattr(args, "add_to_bank", False)
+    if args.bank is not None and not writes and not Path(args.bank).exists():
+        raise BankError(f"there is no bank at {args.bank} (the folder does not exist); check the path, or create "
+                        "a bank there with `dv2s bank add` or `dv2s bank import`")
     return Bank(args.bank)
 
 
@@ -198,14 +203,13 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     else:
         raise ValueError("give a description in quotes or --from FILE")
     description = Description(text.strip(), elements_from_text(text), backend="user")
-    started = time.time()
     report = generate_to_folder(description, Path(args.out), sg=args.sg, seed=args.seed,
                                 llm_config=_llm_config(args), seconds=args.seconds)
-    _print(args, report, _report_text(report, args.out, since=started))
+    _print(args, report, _report_text(report, args.out))
     return 0 if report.get("check", {}).get("ok") else 1
 
 
-def _report_text(report, out, since: float = 0.0) -> str:
+def _report_text(report, out) -> str:
     generation = report.get("generation", {})
     check = report.get("check", {})
     lines = [f"description: {report['description']['text']}"]
@@ -219,10 +223,8 @@ def _report_text(report, out, since: float = 0.0) -> str:
     for key in ("sp", "e2e_sc"):
         if key in report:
             lines.append(f"{key.upper().replace('_', '-')}: {report[key]:.2f}")
-    names = ("description.txt", "elements.json", "scenario.scenic", "preview.webm", "report.json")
-    # only what this run wrote: a failed generation leaves no script or preview
-    written = [name for name in names if (Path(out) / name).is_file() and (Path(out) / name).stat().st_mtime >= since - 1]
-    lines.append(f"written to {out}/ ({', '.join(written)})" if written else f"nothing written to {out}/")
+    files = report.get("files") or []
+    lines.append(f"written to {out}/ ({', '.join(files)})" if files else f"nothing written to {out}/")
     return "\n".join(lines)
 
 
@@ -280,8 +282,6 @@ def _cmd_convert(args: argparse.Namespace) -> int:
 def _add_converted(video, out, report, args) -> str:
     import datetime
 
-    from scenario_bank.bank import Bank
-
     if not report.get("check", {}).get("ok"):
         return f"(not added: {video} failed validation)"
     generation = report["generation"]
@@ -292,7 +292,7 @@ def _add_converted(video, out, report, args) -> str:
                   "context_hash": generation.get("context_hash") or description.get("prompt_hash"),
                   "date": datetime.date.today().isoformat()}
     script = (out / "scenario.scenic").read_text(encoding="utf-8")
-    entry = Bank(args.bank).add(script, description["text"], elements=description["elements"],
+    entry = _bank(args).add(script, description["text"], elements=description["elements"],
                                 tags=["generated"], provenance=provenance, name=None)
     return entry.name
 
@@ -312,12 +312,14 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``dv2s`` (every subcommand has ``--help``)."""
     parser = argparse.ArgumentParser(prog="dv2s", description="dv2s-gym: turn driving videos into Scenic "
                                      "scenarios and run them as Gymnasium episodes in highway-env.")
-    parser.add_argument("--debug", action="store_true",
-                        help="show the full traceback of an error (accepted anywhere on the line)")
-    parser.add_argument("--bank", default=None,
-                        help="bank folder (default: the bank shipped with dv2s-gym); also accepted after "
-                        "the bank subcommand")
+    parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
+    parser.add_argument("--bank", default=None, help="bank folder (default: the bank shipped with dv2s-gym); "
+                        "also accepted after `bank` and after its subcommand")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def bank_option(p):
+        # SUPPRESS: given at several levels, the one the user wrote wins; not given, the top level's None stays
+        p.add_argument("--bank", default=argparse.SUPPRESS, help="bank folder (default: the bank shipped with dv2s-gym)")
 
     demo = sub.add_parser("demo", help="run every bank scenario with a rule-based ego; one video each and a table",
                           description="Run DV2S-v0 episodes of every bank scenario with the rule-based "
@@ -357,14 +359,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     bank = sub.add_parser("bank", help="list, add, validate, sample, export and import bank scenarios",
                           description="The scenario bank: versioned, validated, searchable Scenic scenarios.")
-    # SUPPRESS: a --bank given before the subcommand is kept when none is given after it
-    bank.add_argument("--bank", default=argparse.SUPPRESS, help="bank folder (default: the bank shipped with dv2s-gym)")
+    bank_option(bank)
     bank_sub = bank.add_subparsers(dest="bank_command", required=True, metavar="BANK_COMMAND")
 
     def bank_cmd(name, help_text, func):
         p = bank_sub.add_parser(name, help=help_text, description=help_text)
+        bank_option(p)
         p.add_argument("--json", action="store_true", help="print JSON instead of text")
-        p.add_argument("--bank", default=argparse.SUPPRESS, help="bank folder (default: the shipped bank)")
         p.set_defaults(func=func)
         return p
 
@@ -376,7 +377,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--source", choices=["hand-written", "generated", "mined"], help="only this source kind")
     p = bank_cmd("show", "show one scenario: metadata and script", _cmd_bank_show)
     p.add_argument("name")
-    p = bank_cmd("add", "add a Scenic script with its description: safety-checked, then compiled, sampled and run once in the sandbox (atomic; duplicates and failures refused)", _cmd_bank_add)
+    p = bank_cmd("add", "add a Scenic script with its description (atomic; duplicates refused)", _cmd_bank_add)
     p.add_argument("script", help="path to the .scenic file")
     p.add_argument("--description", required=True, help="natural-language description")
     p.add_argument("--name", help="entry name (default: from the description)")
@@ -402,7 +403,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = bank_cmd("export", "write scenarios to one .tar.gz archive", _cmd_bank_export)
     p.add_argument("archive")
     p.add_argument("--name", action="append", help="only this scenario (repeatable)")
-    p = bank_cmd("import", "import an archive (all or nothing; every new script verified in the sandbox like add)", _cmd_bank_import)
+    p = bank_cmd("import", "import an archive (all or nothing)", _cmd_bank_import)
     p.add_argument("archive")
     p.add_argument("--on-duplicate", choices=["skip", "error"], default="skip")
     bank_cmd("stats", "counts by map, source, road type, tag and participant", _cmd_bank_stats)
@@ -449,8 +450,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sg", choices=["rules", "openai"], default="rules")
     p.add_argument("--out", default="out/convert", help="output folder (one subfolder per video in batch mode)")
     p.add_argument("--add-to-bank", action="store_true", help="add validated scenarios to the bank with provenance")
-    p.add_argument("--bank", default=argparse.SUPPRESS,
-                   help="bank folder for --add-to-bank (default: the shipped bank)")
+    bank_option(p)
     p.add_argument("--jobs", type=int, default=1, help="parallel processes in batch mode")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--seconds", type=float, default=10.0)
@@ -460,9 +460,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("eval", help="SCS/HR (dra), SP (sg) or E2E-SC (e2e) over a labeled folder",
                        description="Evaluate a stage over a folder of videos/descriptions with <name>.label.json "
-                       "files (the elements nested under 'elements' or flat at the top level); prints mean ± sd per "
-                       "use case and overall. `sg` scores SP against the label's elements, and against the parsed "
-                       "text only for a <name>.txt without a label; the table says which.")
+                       "files; prints mean ± sd per use case and overall.")
     p.add_argument("stage", choices=["dra", "sg", "e2e"])
     p.add_argument("folder", nargs="?", default=None, help="labeled folder (default: the shipped evaluation set)")
     p.add_argument("--dra", choices=["bev", "openai"], default="bev")
@@ -475,43 +473,51 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _one_line(error: BaseException) -> str:
-    text = " ".join(line.strip() for line in str(error).splitlines() if line.strip())
-    return text or type(error).__name__
+def _error_line(error: BaseException) -> str:
+    """One line for the user: the project's errors say what is wrong and the fix; others get their type."""
+    from dv2s_gym.pipeline.errors import PipelineError
+    from envs.errors import DV2SError
+    from scenario_bank.bank import BankError
+
+    message = " ".join(str(error).split())
+    if isinstance(error, (PipelineError, DV2SError, BankError, ValueError)) and message:
+        return message
+    if isinstance(error, OSError) and error.strerror:
+        where = f": {error.filename}" if error.filename and str(error.filename) not in message else ""
+        return f"{message}{where}"
+    return f"{type(error).__name__}: {message}" if message else type(error).__name__
 
 
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of the ``dv2s`` console command.
 
-    Exit codes: 0 success, 1 a check failed or an unexpected internal error, 2 bad input
-    (an unknown scenario, a corrupt video, an unsafe script, an unreachable endpoint, ...),
-    reported as one line on stderr; ``--debug`` shows the traceback instead.
+    Exit status: 0 success, 1 a check failed (validation, generation), 2 an error
+    (one line on stderr; ``--debug`` prints the traceback), 130 interrupted.
     """
-    argv = list(sys.argv[1:] if argv is None else argv)
-    debug = "--debug" in argv
-    argv = [a for a in argv if a != "--debug"]
     parser = build_parser()
     args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print("dv2s: interrupted", file=sys.stderr)
+        return 130
+    except Exception as error:  # every error reaches the user as one line, never a raw traceback
+        if args.debug:
+            import traceback
+
+            traceback.print_exc()
+        known = _is_project_error(error)
+        hint = "" if known or args.debug else " (an unexpected error: rerun with --debug for the traceback)"
+        print(f"dv2s: error: {_error_line(error)}{hint}", file=sys.stderr)
+        return 2
+
+
+def _is_project_error(error: BaseException) -> bool:
     from dv2s_gym.pipeline.errors import PipelineError
     from envs.errors import DV2SError
     from scenario_bank.bank import BankError
 
-    try:
-        return int(args.func(args) or 0)
-    except (DV2SError, BankError, PipelineError, OSError, ValueError) as error:
-        if debug:
-            raise
-        print(f"dv2s: error: {_one_line(error)}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("dv2s: interrupted", file=sys.stderr)
-        return 130
-    except Exception as error:  # noqa: BLE001 - the last line of defence: one line, not a traceback
-        if debug:
-            raise
-        print(f"dv2s: internal error: {type(error).__name__}: {_one_line(error)} (run with --debug for the "
-              "traceback, and please report it)", file=sys.stderr)
-        return 1
+    return isinstance(error, (PipelineError, DV2SError, BankError, ValueError, OSError))
 
 
 if __name__ == "__main__":

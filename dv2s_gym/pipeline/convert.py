@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional
 
 from dv2s_gym.pipeline.sg_openai import classify_failure
+from scenario_bank.atomic import atomic_write_text
 from dv2s_gym.pipeline.stages import Description, Generation, describe, generate
 
 __all__ = ["ScenarioCheck", "check_scenario", "classify_failure", "convert_video", "generate_to_folder", "label_for"]
@@ -117,10 +118,12 @@ def label_for(video: Path) -> Optional[Dict[str, Any]]:
     return read_label(path).elements
 
 
+OUTPUT_FILES = ("description.txt", "elements.json", "scenario.scenic", "preview.webm", "report.json")
+"""Files :func:`generate_to_folder` may write; the report's ``files`` lists those it did write."""
+
+
 def _write(folder: Path, name: str, text: str) -> None:
-    tmp = folder / f".{name}.tmp"
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, folder / name)
+    atomic_write_text(folder / name, text, fsync=False)
 
 
 def generate_to_folder(description: Description, out: Path, *, sg: str = "rules", seed: int = 0,
@@ -130,6 +133,8 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
     from dv2s_gym.pipeline.metrics import e2e_sc, semantic_preservation
 
     out.mkdir(parents=True, exist_ok=True)
+    for stale in ("scenario.scenic", "preview.webm"):  # a failed run must not leave an earlier run's result
+        (out / stale).unlink(missing_ok=True)
     _write(out, "description.txt", description.text.strip() + "\n")
     _write(out, "elements.json", json.dumps(description.elements, indent=2) + "\n")
     start = time.perf_counter()
@@ -149,6 +154,7 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
             if labels is not None:
                 report["e2e_sc"] = e2e_sc(labels, check.simulated_elements)
     report["seconds"] = round(time.perf_counter() - start, 3)
+    report["files"] = [name for name in OUTPUT_FILES if name == "report.json" or (out / name).is_file()]
     _write(out, "report.json", json.dumps(report, indent=2, default=str) + "\n")
     return report
 

@@ -882,10 +882,10 @@ class _Maneuvers:
 
     def __init__(self, map_name: str) -> None:
         if map_name not in self._cache:
+            from scenario_bank.map_cache import load_network
             from scenario_bank.maps import resolve_map
-            from scenic.domains.driving.roads import Network
 
-            self._cache[map_name] = Network.fromFile(str(resolve_map(map_name)))
+            self._cache[map_name] = load_network(resolve_map(map_name))
         self.network = self._cache[map_name]
         self.maneuvers = [m for j in self.network.intersections for m in j.maneuvers]
 

@@ -38,7 +38,10 @@ def resolve_map_parameter() -> None:
     script file-system methods (``globalParameters.map.replace(...)`` moves the file).
     """
     import scenic.syntax.veneer as veneer
+    from scenario_bank.map_cache import install_network_cache
     from scenario_bank.maps import resolve_map
+
+    install_network_cache()  # the driving model's Network.fromFile caches outside the package
 
     params = veneer._globalParameters
     if "map" not in params:
