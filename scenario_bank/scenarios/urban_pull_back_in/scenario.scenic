@@ -7,8 +7,8 @@ model scenic.domains.driving.model
 
 param ego_speed = Range(14, 18)
 param overtaker_extra_speed = Range(5, 8)
-param start_gap = Range(15, 25)
-param pull_out_gap = Range(6, 10)
+param start_gap = Range(30, 40)
+param pull_out_gap = Range(22, 27)
 param return_gap = Range(5, 10)
 param slow_down_to = Range(10, 14)
 param lane_change_duration = Range(1.8, 2.6)
@@ -34,7 +34,7 @@ behavior OvertakeAndPullBackIn(extraSpeed, pullOutGap, returnGap, slowSpeed, dur
     # triggers on the ego: close in behind it, pull out to the left when `pullOutGap` metres
     # behind, pass at `extraSpeed` above the ego's speed, pull back in `returnGap` metres ahead
     # (distance past ego of self: how far self is ahead of the ego)
-    do FollowLaneBehavior(target_speed=ego.speed + extraSpeed) until (distance past ego of self) > -pullOutGap - 5
+    do FollowLaneBehavior(target_speed=ego.speed + extraSpeed) until (distance past ego of self) > -pullOutGap
     do SlideToLane(self.laneSection.laneToLeft, ego.speed + extraSpeed, duration)
     do FollowLaneBehavior(target_speed=ego.speed + extraSpeed) until (distance past ego of self) > returnGap + 5
     do SlideToLane(self.laneSection.laneToRight, ego.speed + extraSpeed / 2, duration)
