@@ -128,6 +128,8 @@ def _cmd_bank_rm(args: argparse.Namespace) -> int:
 
 
 def _cmd_bank_validate(args: argparse.Namespace) -> int:
+    if args.story:
+        return _cmd_bank_story(args)
     from dv2s_gym.bank_validate import validate_bank
 
     reports = validate_bank(args.bank, args.name or None, samples=args.samples, seconds=args.seconds,
@@ -144,6 +146,31 @@ def _cmd_bank_validate(args: argparse.Namespace) -> int:
                  (f"; broken: {', '.join(broken)}" if broken else ""))
     _print(args, [r.as_dict() for r in reports], "\n".join(lines))
     return 1 if broken else 0
+
+
+def _cmd_bank_story(args: argparse.Namespace) -> int:
+    from dv2s_gym.story import EGOS, story_table
+
+    names = args.name or _bank(args).names()
+    egos = args.egos or list(EGOS)
+    table = story_table(names, egos, range(args.seeds), bank_root=args.bank, jobs=args.jobs,
+                        progress=not args.json)
+    under = sorted(n for n, row in table.items() if any(cell["rate"] < args.threshold for cell in row.values()))
+    width = max(len(n) for n in names)
+    lines = [f"story rate over {args.seeds} seeds (threshold {args.threshold:.2f})",
+             f"{'scenario':<{width}}  " + "  ".join(f"{e:>9}" for e in egos)]
+    for name, row in table.items():
+        cells = [f"{row[e]['rate']:>8.2f}" + ("*" if row[e]["rate"] < args.threshold else " ") for e in egos]
+        lines.append(f"{name:<{width}}  " + "  ".join(cells))
+    for name in under:
+        for ego in egos:
+            for seed, problem in table[name][ego]["failures"][:3]:
+                lines.append(f"  {name} / {ego} seed {seed}: {problem}")
+    lines.append(f"{len(names) - len(under)}/{len(names)} scenarios play their story in at least "
+                 f"{args.threshold:.0%} of seeds with every ego" + (f"; under: {', '.join(under)}" if under else ""))
+    _print(args, {"seeds": args.seeds, "threshold": args.threshold, "egos": egos, "table": table,
+                  "under_threshold": under}, "\n".join(lines))
+    return 1 if under else 0
 
 
 def _cmd_bank_sample(args: argparse.Namespace) -> int:
@@ -395,6 +422,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--samples", type=int, default=3, help="scenes sampled and run per scenario (default 3)")
     p.add_argument("--seconds", type=float, default=3.0, help="simulated seconds per run (default 3)")
     p.add_argument("--jobs", type=int, default=1, help="parallel processes")
+    p.add_argument("--story", action="store_true",
+                   help="instead: measure how often each scenario plays its story (see dv2s_gym/story.py)")
+    p.add_argument("--seeds", type=int, default=20, help="with --story: seeds per scenario and ego (default 20)")
+    p.add_argument("--threshold", type=float, default=0.9,
+                   help="with --story: lowest acceptable story rate (default 0.9); exit 1 below it")
+    p.add_argument("--egos", nargs="+", choices=["scenic", "rule", "keep_lane", "idm"],
+                   help="with --story: egos to drive (default: all four)")
     p = bank_cmd("sample", "draw scenarios by weight", _cmd_bank_sample)
     p.add_argument("--count", type=int, default=1)
     p.add_argument("--seed", type=int, default=0)
