@@ -50,7 +50,8 @@ from typing import Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optio
 from scenario_bank.atomic import atomic_path, atomic_write_json
 from scenario_bank.cache import keyed_cache_dir
 from scenario_bank.elements import ElementError, normalize_elements
-from scenario_bank.safety import UnsafeScenarioError, check_script
+from scenario_bank.safety import UnsafeScenarioError
+from scenario_bank.sandbox import SandboxError, verify_script
 
 BANK_DIR = Path(__file__).resolve().parent / "scenarios"
 """Folder of the bank shipped with dv2s-gym."""
@@ -66,6 +67,7 @@ __all__ = [
     "BankVersionError",
     "DuplicateScenarioError",
     "NotABankError",
+    "ScenarioRejectedError",
     "UnknownScenarioError",
     "content_hash",
     "semantic_key",
@@ -95,6 +97,10 @@ class BankVersionError(BankError):
     """The bank (or an entry) was written by a newer dv2s-gym."""
 
 
+class NotABankError(BankError, ValueError):
+    """The folder holds other things than scenario entries."""
+
+
 class DuplicateScenarioError(BankError):
     """The script is already in the bank (byte for byte or semantically)."""
 
@@ -103,8 +109,24 @@ class DuplicateScenarioError(BankError):
         self.existing = existing
 
 
-class NotABankError(BankError):
-    """The folder exists but holds no bank entries (and is not empty)."""
+class ScenarioRejectedError(BankError, ValueError):
+    """The script failed verification: the safety check (``stage == "safety"``, ``findings``) or its
+    compile, sample and run in the sandbox (``stage``; ``limit`` when a resource limit stopped it)."""
+
+    def __init__(self, message: str, stage: str, findings: Sequence[Any] = (), limit: Optional[str] = None) -> None:
+        super().__init__(message)
+        self.stage, self.findings, self.limit = stage, list(findings), limit
+
+
+def verify(script: str, label: str) -> None:
+    """Safety-check, compile, sample and run ``script`` once in the sandbox; raise
+    :class:`ScenarioRejectedError` naming the problem. Passes are cached by content and code version."""
+    try:
+        verify_script(script, name=label)
+    except UnsafeScenarioError as error:
+        raise ScenarioRejectedError(f"not added: {error}", "safety", findings=error.findings) from None
+    except SandboxError as error:
+        raise ScenarioRejectedError(f"not added: {error}", error.stage, limit=error.limit) from None
 
 
 class UnknownScenarioError(BankError, ValueError):
@@ -487,14 +509,13 @@ class Bank:
 
         Refuses (:class:`DuplicateScenarioError`, naming the existing entry) a
         script that is byte-for-byte or semantically identical to one in the
-        bank, and (:class:`~scenario_bank.safety.UnsafeScenarioError`) a script
-        failing the safety check. ``provenance`` keys: kind (hand-written, generated, mined), video,
+        bank, and (:class:`ScenarioRejectedError`) a script failing the safety check
+        or its compile, sample and short run in the sandbox (:mod:`scenario_bank.sandbox`,
+        with CPU, memory and wall-clock limits). ``provenance`` keys: kind (hand-written, generated, mined), video,
         parent, seed, generator, model, context_hash, date.
         """
         meta = self._make_meta(script, description, name, elements, tags, map, provenance, use_case)
-        findings = check_script(script)
-        if findings:
-            raise UnsafeScenarioError(findings, f"scenario {meta['name']!r}")
+        verify(script, f"scenario {meta['name']!r}")  # before the lock: other writers do not wait for it
         with self._lock():
             self._load(locked=True)
             name = meta["name"] = self._free_name(meta["name"], explicit=name is not None)
@@ -599,7 +620,9 @@ class Bank:
         """Import an archive written by :meth:`export`; all or nothing.
 
         Entries identical to existing ones are skipped (``on_duplicate="skip"``)
-        or abort the import (``"error"``). Returns ``{"added": [...], "skipped": [...]}``.
+        or abort the import (``"error"``). Every new entry is verified like
+        :meth:`add` (safety check, compile, sample and run in the sandbox); one
+        failure (:class:`ScenarioRejectedError`) imports nothing. Returns ``{"added": [...], "skipped": [...]}``.
         """
         if on_duplicate not in ("skip", "error"):
             raise ValueError("on_duplicate must be 'skip' or 'error'")
@@ -638,6 +661,11 @@ class Bank:
                                     duplicate[0])
                             skipped.append(n)
                             continue
+                        try:
+                            verify(script, f"archive entry {n!r}")
+                        except ScenarioRejectedError as error:
+                            error.args = (f"{error}; nothing was imported",)
+                            raise
                         target = self._free_name(n, explicit=False)
                         while target in [t for t, _ in staged]:
                             target = f"{target}_i"
