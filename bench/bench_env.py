@@ -6,9 +6,10 @@
 Baseline: highway-env's ``highway-v0`` with the same scene size as
 ``six_cars_highway.scenic``: 4 straight lanes, the ego and 5 other cars, 15 Hz
 physics, 5 Hz policy, the same action (DiscreteMetaAction, IDLE) and the same
-Kinematics observation config. Native NPCs are IDMVehicles; ours run Scenic's
-FollowLaneBehavior. Neither env terminates the timing: steps are timed, resets
-after a native crash are not.
+Kinematics observation config, and the same episode end: both terminate when the
+ego crashes (highway-v0's rule) and neither when it leaves the road. Native NPCs
+are IDMVehicles; ours run Scenic's FollowLaneBehavior. Only steps are timed, not
+the resets after a crash.
 
 Four envs run interleaved in the same process, so their ratios share the
 machine's load:
@@ -78,7 +79,7 @@ def make_dv2s(observation=FastKinematicObservation):
     """DV2S-v0 on ``six_cars_highway.scenic``; ``observation`` is the Kinematics class."""
     env = gym.make("DV2S-v0", scenario=str(SCENE),
                    config={**FREQ, "duration": 1000, "observation": OBS,
-                           "terminate_on_collision": False, "terminate_off_road": False}).unwrapped
+                           "terminate_on_collision": True, "terminate_off_road": False}).unwrapped
     return with_observation(env, observation)
 
 
