@@ -127,3 +127,27 @@ def test_lazy_dynamic_finals_equal_scenic_recomputation():
             changed += abs(math.remainder(lazy_heading - sampled, math.tau)) > 1e-3
     assert changed > 0  # headings moved away from the sampled ones
     env.close()
+
+
+# --------------------------------------------------------------------------- time-to-collision
+
+
+def test_time_to_collision_cases():
+    from envs.safety_metrics import time_to_collision
+
+    def car(x, y, heading, speed, name):
+        v = Vehicle(None, np.array([x, y]), heading, speed)
+        v.LENGTH, v.WIDTH, v.name = 4.0, 2.0, name
+        return v
+
+    ego = car(0, 0, 0.0, 10.0, "ego")
+    ahead = car(30, 0, 0.0, 0.0, "ahead")
+    beside = car(0, 4, 0.0, 10.0, "beside")  # same speed, next lane: never meets
+    behind = car(-20, 0, 0.0, 20.0, "behind")  # closes 10 m/s from 16 m: 1.6 s
+    assert time_to_collision(ego, [ego, ahead, beside]) == pytest.approx((2.6, "ahead"))
+    assert time_to_collision(ego, [ego, beside]) == (math.inf, "")
+    assert time_to_collision(ego, [ahead, behind]) == pytest.approx((1.6, "behind"))
+    assert time_to_collision(ego, [ahead, behind], ahead_only=True) == pytest.approx((2.6, "ahead"))
+    assert time_to_collision(ego, [ahead], horizon=2.0) == (math.inf, "")
+    overlapping = car(3, 0.5, 0.3, 0.0, "overlapping")
+    assert time_to_collision(ego, [ahead, overlapping]) == (0.0, "overlapping")
