@@ -12,9 +12,10 @@ would find neither intersecting nor about to intersect, so the outcome is the sa
 from __future__ import annotations
 
 import math
-from typing import List, Tuple
+from typing import List, Optional, Tuple
 
 import numpy as np
+from highway_env import utils
 from highway_env.road.road import Road
 from highway_env.vehicle.objects import Obstacle, RoadObject
 
@@ -32,6 +33,22 @@ _PYTHON_BROAD_PHASE = 16
 def _is_plain_box(obj) -> bool:
     cls = type(obj)
     return cls.polygon is RoadObject.polygon and cls._is_colliding is RoadObject._is_colliding
+
+
+def _shape(obj, dt: float, shapes: dict):
+    """``(polygon, displacement)`` of ``obj`` in this collision pass (nothing moves during a pass)."""
+    shape = shapes.get(id(obj))
+    if shape is None:
+        shape = shapes[id(obj)] = (obj.polygon(), obj.velocity * dt)
+    return shape
+
+
+def _is_colliding(a, b, dt: float, shapes: dict):
+    """highway-env's ``RoadObject._is_colliding(a, b, dt)``, with each polygon built once per pass."""
+    if np.linalg.norm(b.position - a.position) > (a.diagonal + b.diagonal) / 2 + a.speed * dt:
+        return False, False, np.zeros(2)
+    (poly_a, move_a), (poly_b, move_b) = _shape(a, dt, shapes), _shape(b, dt, shapes)
+    return utils.are_polygons_intersecting(poly_a, poly_b, move_a, move_b)
 
 
 def clearly_apart(a: RoadObject, b: RoadObject, dt: float) -> bool:
@@ -80,8 +97,9 @@ class EventRoad(Road):
         n_movers, n = len(movers), len(everything)
         if n_movers == 0 or n < 2:
             return
+        shapes: dict = {}
         for i, j in self._candidate_pairs(everything, n_movers, dt):
-            self._collide(everything[i], everything[j], dt)
+            self._collide(everything[i], everything[j], dt, shapes)
 
     @staticmethod
     def _candidate_pairs(everything, n_movers: int, dt: float):
@@ -109,14 +127,17 @@ class EventRoad(Road):
         close[np.tril_indices(n_movers, 0, n)] = False
         return zip(*np.nonzero(close))
 
-    def _collide(self, a: RoadObject, b: RoadObject, dt: float) -> None:
+    def _collide(self, a: RoadObject, b: RoadObject, dt: float, shapes: Optional[dict] = None) -> None:
         if not (a.check_collisions or b.check_collisions):
             return
         if not (a.collidable and b.collidable):
             return
         if clearly_apart(a, b, dt):
             return
-        intersecting, will_intersect, transition = a._is_colliding(b, dt)
+        if shapes is not None and _is_plain_box(a) and _is_plain_box(b):
+            intersecting, will_intersect, transition = _is_colliding(a, b, dt, shapes)
+        else:
+            intersecting, will_intersect, transition = a._is_colliding(b, dt)
         both_solid = a.solid and b.solid
         if will_intersect and both_solid:
             if isinstance(b, Obstacle):

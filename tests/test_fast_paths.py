@@ -45,6 +45,11 @@ def test_clearly_apart_never_drops_a_collision(spread):
     for _ in range(3000):
         a, b = _random_pair(rng, spread)
         exact = a._is_colliding(b, 1 / 15)
+        shapes = {}
+        for _ in range(2):  # computed, then from the per-pass cache: highway-env's answer both times
+            mine = hw_road._is_colliding(a, b, 1 / 15, shapes)
+            assert mine[:2] == exact[:2]
+            assert (mine[2] is None and exact[2] is None) or np.array_equal(mine[2], exact[2])
         if clearly_apart(a, b, 1 / 15):
             dropped += 1
             assert not exact[0] and not exact[1], (a.position, b.position, a.heading, b.heading)
