@@ -97,17 +97,38 @@ def check_same_scene(envs: dict) -> None:
             raise RuntimeError(f"{name}: frequencies differ from 15 Hz / 5 Hz")
 
 
-def steps_per_second(env, steps: int, seed: int = 0) -> float:
-    """Steps per second of ``env`` under the IDLE action; resets (after a crash) are not timed."""
-    env.reset(seed=seed)
-    elapsed = 0.0
-    for done in range(steps):
-        start = time.perf_counter()
-        _, _, terminated, truncated, _ = env.step(IDLE)
-        elapsed += time.perf_counter() - start
-        if terminated or truncated:
-            env.reset(seed=seed + done + 1)
-    return steps / elapsed
+class Runner:
+    """Steps one env under the IDLE action, timing steps only (resets after an episode ends are not timed)."""
+
+    def __init__(self, env, seed: int) -> None:
+        self.env, self.seed = env, seed
+        self.elapsed, self.steps, self.resets, self.crashed_steps = 0.0, 0, 0, 0
+        env.reset(seed=seed)
+
+    def run(self, steps: int) -> None:
+        env = self.env
+        for _ in range(steps):
+            start = time.perf_counter()
+            _, _, terminated, truncated, _ = env.step(IDLE)
+            self.elapsed += time.perf_counter() - start
+            self.steps += 1
+            self.crashed_steps += any(v.crashed for v in env.road.vehicles)
+            if terminated or truncated:
+                self.resets += 1
+                env.reset(seed=self.seed * 100_003 + self.steps)
+
+    @property
+    def rate(self) -> float:
+        return self.steps / self.elapsed
+
+
+def interleaved_rates(envs: dict, steps: int, seed: int, chunk: int = 25) -> dict:
+    """Run every env ``steps`` steps from ``seed``, alternating every ``chunk`` steps so they share the load."""
+    runners = {name: Runner(env, seed) for name, env in envs.items()}
+    for _ in range(0, steps, chunk):
+        for runner in runners.values():
+            runner.run(chunk)
+    return runners
 
 
 def rss_mb() -> float:
@@ -159,22 +180,26 @@ def main(argv=None) -> None:
         "dv2s/fast": make_dv2s(FastKinematicObservation),
     }
     check_same_scene(envs)
-    for env in envs.values():
-        steps_per_second(env, 20)
+    interleaved_rates(envs, 25, seed=99)  # warm-up
     runs = {name: [] for name in envs}
+    crashed = {name: 0 for name in envs}
+    ended = {name: 0 for name in envs}
     for round_ in range(3):
-        for name, env in envs.items():
-            runs[name].append(steps_per_second(env, steps, seed=round_))
+        for name, runner in interleaved_rates(envs, steps, seed=round_).items():
+            runs[name].append(runner.rate)
+            crashed[name] += runner.crashed_steps
+            ended[name] += runner.resets
     rate = {name: statistics.median(r) for name, r in runs.items()}
     print(f"load average at the end of the speed runs: {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
-    print("env steps/s (median of 3 interleaved rounds of", steps, "steps):")
+    print(f"env steps/s (median of 3 rounds, seeds 0-2, {steps} steps each; the four envs alternate every 25 steps):")
     for name, value in rate.items():
-        print(f"    {name:<14} {value:8.1f}")
+        print(f"    {name:<14} {value:8.1f}   (episodes ended {ended[name]:3d}x, "
+              f"{100 * crashed[name] / (3 * steps):4.1f}% of steps with a crashed car on the road)")
     print("ratios DV2S-v0 / native highway-v0:")
     print(f"    same stock (pandas) Kinematics on both : {rate['dv2s/stock'] / rate['native/stock']:.2f}x")
     print(f"    same fast (NumPy) Kinematics on both   : {rate['dv2s/fast'] / rate['native/fast']:.2f}x   (target >= 1.0x)")
     print(f"    as shipped (DV2S fast vs native stock) : {rate['dv2s/fast'] / rate['native/stock']:.2f}x   (target >= 2.0x)")
-    print("    per round (same-obs fast ratio):",
+    print("    per round (seeds 0, 1, 2), same fast observation:",
           ", ".join(f"{o / n:.2f}x" for o, n in zip(runs["dv2s/fast"], runs["native/fast"])))
 
     ours = envs["dv2s/fast"]
