@@ -156,3 +156,36 @@ def test_time_to_collision_cases():
     assert time_to_collision(ego, [ahead], horizon=2.0) == (math.inf, "")
     overlapping = car(3, 0.5, 0.3, 0.0, "overlapping")
     assert time_to_collision(ego, [ahead, overlapping]) == (0.0, "overlapping")
+
+
+# --------------------------------------------------------------------------- observation
+
+
+@pytest.mark.parametrize("env_id", ["DV2S-v0", "highway-v0"])
+def test_fast_kinematics_equals_highway_env_kinematics(env_id):
+    """The NumPy Kinematics gives highway-env's pandas Kinematics array, step by step."""
+    import gymnasium as gym
+    import highway_env  # noqa: F401
+    from highway_env.envs.common.observation import KinematicObservation
+
+    import dv2s_gym  # noqa: F401
+    from envs.observations import FastKinematicObservation
+
+    kwargs = {"scenario": "highway_cut_in_from_left"} if env_id == "DV2S-v0" else {}
+    config = {"observation": {"type": "Kinematics", "vehicles_count": 6, "see_behind": True,
+                              "features": ["presence", "x", "y", "vx", "vy", "cos_h", "sin_h"]}}
+    env = gym.make(env_id, config=config, **kwargs).unwrapped
+    env.reset(seed=3)
+    compared = 0
+    for step in range(15):
+        obs_type = env.observation_type
+        obs_type.__class__ = FastKinematicObservation  # DV2S-v0 already uses it; native gets it here
+        fast = obs_type.observe()
+        stock = KinematicObservation.observe(obs_type)
+        assert fast.dtype == stock.dtype and np.array_equal(fast, stock), step
+        compared += int(stock[1:, 0].sum())  # other vehicles present in the observation
+        _, _, terminated, truncated, _ = env.step(1)
+        if terminated or truncated:
+            break
+    assert compared > 0
+    env.close()
