@@ -43,7 +43,9 @@ class _LazyFinal:
     def __get__(self, instance, owner=None):
         if instance is None:
             return self
-        recomputer = type(instance)._dynamicFinalProperties[self.name]
+        recomputer = getattr(type(instance), "_dynamicFinalProperties", {}).get(self.name)
+        if recomputer is None:
+            raise AttributeError(f"{type(instance).__name__} object has no attribute {self.name!r}")
         value = valueInContext(recomputer(instance), instance)
         type(instance)._specify(instance, self.name, value)
         return object.__getattribute__(instance, "__dict__")[self.name]
