@@ -35,7 +35,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         config["duration"] = args.duration
     if args.map:
         config["map"] = args.map
-    env = gym.make("DV2S-v0", scenario=args.scenario, config=config, render_mode="rgb_array")
+    env = gym.make("dv2s_gym:DV2S-v0", scenario=args.scenario, config=config, render_mode="rgb_array")
     policy = None if args.ego_policy == "scenic" or args.random else CautiousDriver(env)
     result = record_episode(env, args.video, policy, seed=args.seed)
     if args.trace:
@@ -49,7 +49,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from envs.trace import EpisodeTrace, replay_trace
+    from envs.replay import replay_trace
+    from envs.trace import EpisodeTrace
 
     trace = EpisodeTrace.load(args.trace)
     env, replayed = replay_trace(trace)
@@ -71,8 +72,14 @@ def _cmd_maps(args: argparse.Namespace) -> int:
 
 
 def _bank(args: argparse.Namespace):
-    from scenario_bank.bank import Bank
+    from pathlib import Path
 
+    from scenario_bank.bank import Bank, BankError
+
+    writes = getattr(args, "bank_command", None) in ("add", "import") or getattr(args, "add_to_bank", False)
+    if args.bank is not None and not writes and not Path(args.bank).exists():
+        raise BankError(f"there is no bank at {args.bank} (the folder does not exist); check the path, or create "
+                        "a bank there with `dv2s bank add` or `dv2s bank import`")
     return Bank(args.bank)
 
 
@@ -121,6 +128,8 @@ def _cmd_bank_rm(args: argparse.Namespace) -> int:
 
 
 def _cmd_bank_validate(args: argparse.Namespace) -> int:
+    if args.story:
+        return _cmd_bank_story(args)
     from dv2s_gym.bank_validate import validate_bank
 
     reports = validate_bank(args.bank, args.name or None, samples=args.samples, seconds=args.seconds,
@@ -137,6 +146,31 @@ def _cmd_bank_validate(args: argparse.Namespace) -> int:
                  (f"; broken: {', '.join(broken)}" if broken else ""))
     _print(args, [r.as_dict() for r in reports], "\n".join(lines))
     return 1 if broken else 0
+
+
+def _cmd_bank_story(args: argparse.Namespace) -> int:
+    from dv2s_gym.story import EGOS, story_table
+
+    names = args.name or _bank(args).names()
+    egos = args.egos or list(EGOS)
+    table = story_table(names, egos, range(args.seeds), bank_root=args.bank, jobs=args.jobs,
+                        progress=not args.json)
+    under = sorted(n for n, row in table.items() if any(cell["rate"] < args.threshold for cell in row.values()))
+    width = max(len(n) for n in names)
+    lines = [f"story rate over {args.seeds} seeds (threshold {args.threshold:.2f})",
+             f"{'scenario':<{width}}  " + "  ".join(f"{e:>9}" for e in egos)]
+    for name, row in table.items():
+        cells = [f"{row[e]['rate']:>8.2f}" + ("*" if row[e]["rate"] < args.threshold else " ") for e in egos]
+        lines.append(f"{name:<{width}}  " + "  ".join(cells))
+    for name in under:
+        for ego in egos:
+            for seed, problem in table[name][ego]["failures"][:3]:
+                lines.append(f"  {name} / {ego} seed {seed}: {problem}")
+    lines.append(f"{len(names) - len(under)}/{len(names)} scenarios play their story in at least "
+                 f"{args.threshold:.0%} of seeds with every ego" + (f"; under: {', '.join(under)}" if under else ""))
+    _print(args, {"seeds": args.seeds, "threshold": args.threshold, "egos": egos, "table": table,
+                  "under_threshold": under}, "\n".join(lines))
+    return 1 if under else 0
 
 
 def _cmd_bank_sample(args: argparse.Namespace) -> int:
@@ -216,7 +250,8 @@ def _report_text(report, out) -> str:
     for key in ("sp", "e2e_sc"):
         if key in report:
             lines.append(f"{key.upper().replace('_', '-')}: {report[key]:.2f}")
-    lines.append(f"written to {out}/ (description.txt, elements.json, scenario.scenic, preview.webm, report.json)")
+    files = report.get("files") or []
+    lines.append(f"written to {out}/ ({', '.join(files)})" if files else f"nothing written to {out}/")
     return "\n".join(lines)
 
 
@@ -274,8 +309,6 @@ def _cmd_convert(args: argparse.Namespace) -> int:
 def _add_converted(video, out, report, args) -> str:
     import datetime
 
-    from scenario_bank.bank import Bank
-
     if not report.get("check", {}).get("ok"):
         return f"(not added: {video} failed validation)"
     generation = report["generation"]
@@ -286,7 +319,7 @@ def _add_converted(video, out, report, args) -> str:
                   "context_hash": generation.get("context_hash") or description.get("prompt_hash"),
                   "date": datetime.date.today().isoformat()}
     script = (out / "scenario.scenic").read_text(encoding="utf-8")
-    entry = Bank(args.bank).add(script, description["text"], elements=description["elements"],
+    entry = _bank(args).add(script, description["text"], elements=description["elements"],
                                 tags=["generated"], provenance=provenance, name=None)
     return entry.name
 
@@ -306,7 +339,14 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``dv2s`` (every subcommand has ``--help``)."""
     parser = argparse.ArgumentParser(prog="dv2s", description="dv2s-gym: turn driving videos into Scenic "
                                      "scenarios and run them as Gymnasium episodes in highway-env.")
+    parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
+    parser.add_argument("--bank", default=None, help="bank folder (default: the bank shipped with dv2s-gym); "
+                        "also accepted after `bank` and after its subcommand")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def bank_option(p):
+        # SUPPRESS: given at several levels, the one the user wrote wins; not given, the top level's None stays
+        p.add_argument("--bank", default=argparse.SUPPRESS, help="bank folder (default: the bank shipped with dv2s-gym)")
 
     demo = sub.add_parser("demo", help="run every bank scenario with a rule-based ego; one video each and a table",
                           description="Run DV2S-v0 episodes of every bank scenario with the rule-based "
@@ -346,11 +386,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     bank = sub.add_parser("bank", help="list, add, validate, sample, export and import bank scenarios",
                           description="The scenario bank: versioned, validated, searchable Scenic scenarios.")
-    bank.add_argument("--bank", default=None, help="bank folder (default: the bank shipped with dv2s-gym)")
+    bank_option(bank)
     bank_sub = bank.add_subparsers(dest="bank_command", required=True, metavar="BANK_COMMAND")
 
     def bank_cmd(name, help_text, func):
         p = bank_sub.add_parser(name, help=help_text, description=help_text)
+        bank_option(p)
         p.add_argument("--json", action="store_true", help="print JSON instead of text")
         p.set_defaults(func=func)
         return p
@@ -381,6 +422,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--samples", type=int, default=3, help="scenes sampled and run per scenario (default 3)")
     p.add_argument("--seconds", type=float, default=3.0, help="simulated seconds per run (default 3)")
     p.add_argument("--jobs", type=int, default=1, help="parallel processes")
+    p.add_argument("--story", action="store_true",
+                   help="instead: measure how often each scenario plays its story (see dv2s_gym/story.py)")
+    p.add_argument("--seeds", type=int, default=20, help="with --story: seeds per scenario and ego (default 20)")
+    p.add_argument("--threshold", type=float, default=0.9,
+                   help="with --story: lowest acceptable story rate (default 0.9); exit 1 below it")
+    p.add_argument("--egos", nargs="+", choices=["scenic", "rule", "keep_lane", "idm"],
+                   help="with --story: egos to drive (default: all four)")
     p = bank_cmd("sample", "draw scenarios by weight", _cmd_bank_sample)
     p.add_argument("--count", type=int, default=1)
     p.add_argument("--seed", type=int, default=0)
@@ -436,7 +484,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sg", choices=["rules", "openai"], default="rules")
     p.add_argument("--out", default="out/convert", help="output folder (one subfolder per video in batch mode)")
     p.add_argument("--add-to-bank", action="store_true", help="add validated scenarios to the bank with provenance")
-    p.add_argument("--bank", default=None, help="bank folder for --add-to-bank (default: the shipped bank)")
+    bank_option(p)
     p.add_argument("--jobs", type=int, default=1, help="parallel processes in batch mode")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--seconds", type=float, default=10.0)
@@ -459,18 +507,51 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Optional[List[str]] = None) -> int:
-    """Entry point of the ``dv2s`` console command."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+def _error_line(error: BaseException) -> str:
+    """One line for the user: the project's errors say what is wrong and the fix; others get their type."""
+    from dv2s_gym.pipeline.errors import PipelineError
     from envs.errors import DV2SError
     from scenario_bank.bank import BankError
 
+    message = " ".join(str(error).split())
+    if isinstance(error, (PipelineError, DV2SError, BankError, ValueError)) and message:
+        return message
+    if isinstance(error, OSError) and error.strerror:
+        where = f": {error.filename}" if error.filename and str(error.filename) not in message else ""
+        return f"{message}{where}"
+    return f"{type(error).__name__}: {message}" if message else type(error).__name__
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Entry point of the ``dv2s`` console command.
+
+    Exit status: 0 success, 1 a check failed (validation, generation), 2 an error
+    (one line on stderr; ``--debug`` prints the traceback), 130 interrupted.
+    """
+    parser = build_parser()
+    args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (DV2SError, BankError, FileNotFoundError, ValueError) as error:
-        print(f"dv2s: error: {error}", file=sys.stderr)
+    except KeyboardInterrupt:
+        print("dv2s: interrupted", file=sys.stderr)
+        return 130
+    except Exception as error:  # every error reaches the user as one line, never a raw traceback
+        if args.debug:
+            import traceback
+
+            traceback.print_exc()
+        known = _is_project_error(error)
+        hint = "" if known or args.debug else " (an unexpected error: rerun with --debug for the traceback)"
+        print(f"dv2s: error: {_error_line(error)}{hint}", file=sys.stderr)
         return 2
+
+
+def _is_project_error(error: BaseException) -> bool:
+    from dv2s_gym.pipeline.errors import PipelineError
+    from envs.errors import DV2SError
+    from scenario_bank.bank import BankError
+
+    return isinstance(error, (PipelineError, DV2SError, BankError, ValueError, OSError))
 
 
 if __name__ == "__main__":

@@ -66,7 +66,7 @@ def run_demo(
     summaries: List[EpisodeSummary] = []
     jobs = [(name, seed + k) for name in names for k in range(episodes)]
     for name, episode_seed in tqdm(jobs, desc="episodes", unit="ep"):
-        env = gym.make("DV2S-v0", scenario=name, config=config, render_mode="rgb_array")
+        env = gym.make("dv2s_gym:DV2S-v0", scenario=name, config=config, render_mode="rgb_array")
         driver = CautiousDriver(env)
         video = out / f"{name}_seed{episode_seed}.webm"
         result = record_episode(env, video, driver, seed=episode_seed)

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import os
-from contextlib import contextmanager
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Callable, Optional, Union
 
 import numpy as np
+
+from scenario_bank.atomic import atomic_path
 
 __all__ = ["VideoWriter", "record_episode", "video_codecs"]
 
@@ -47,7 +49,7 @@ class VideoWriter:
         self.path = Path(path)
         self.fps = float(fps)
         self._writer = None
-        self._tmp = self.path.with_name(f".{self.path.stem}.tmp{os.getpid()}{self.path.suffix}")
+        self._target: Optional[ExitStack] = None  # the atomic write of the file, open while frames come
         self.frames = 0
 
     def _open(self, width: int, height: int):
@@ -56,12 +58,14 @@ class VideoWriter:
         suffix = self.path.suffix.lower()
         if suffix not in _CODECS:
             raise ValueError(f"unsupported video extension {suffix!r}; use one of {sorted(_CODECS)}")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._target = ExitStack()
+        tmp = self._target.enter_context(atomic_path(self.path, keep_suffix=True))
         for fourcc in ([_CODECS[suffix], "mp4v"] if suffix == ".mp4" else [_CODECS[suffix]]):
             with _quiet_stderr():  # FFmpeg prints a harmless "tag not supported" notice for VP80
-                writer = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter_fourcc(*fourcc), self.fps, (width, height))
+                writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*fourcc), self.fps, (width, height))
             if writer.isOpened():
                 return writer
+        self._abandon()
         raise RuntimeError(f"OpenCV cannot encode {suffix} here; write .webm (VP8) instead")
 
     def write(self, frame: np.ndarray) -> None:
@@ -79,8 +83,18 @@ class VideoWriter:
         if self._writer is not None:
             self._writer.release()
             self._writer = None
-            os.replace(self._tmp, self.path)
+            target, self._target = self._target, None
+            target.close()  # renames the finished file into place
         return self.path
+
+    def _abandon(self) -> None:
+        """Drop the unfinished file; the target path is left as it was."""
+        if self._writer is not None:
+            self._writer.release()
+            self._writer = None
+        if self._target is not None:
+            target, self._target = self._target, None
+            target.__exit__(RuntimeError, RuntimeError("video abandoned"), None)
 
     def __enter__(self) -> "VideoWriter":
         return self
@@ -89,10 +103,7 @@ class VideoWriter:
         if exc_type is None:
             self.close()
         else:
-            if self._writer is not None:
-                self._writer.release()
-            if self._tmp.exists():
-                self._tmp.unlink()
+            self._abandon()
 
 
 def record_episode(

@@ -14,7 +14,3 @@ def register_envs() -> None:
     if ENV_ID not in gymnasium.registry:
         gymnasium.register(id=ENV_ID, entry_point="envs.dv2s_env:DV2SEnv", disable_env_checker=False)
 
-
-def register_gymnasium_envs() -> None:
-    """Entry point for Gymnasium's ``gymnasium.envs`` plugin group."""
-    register_envs()

@@ -925,26 +925,16 @@ def _read_speed_limits(path: Path) -> Dict[str, float]:
 
 
 def _load_scenic_network(path: Path) -> "Network":
-    from scenic.domains.driving.roads import Network
+    from scenario_bank.map_cache import load_network
 
-    write_cache = os.access(path.parent, os.W_OK)
-    try:
-        return Network.fromFile(path, writeCache=write_cache)
-    except FileNotFoundError:
-        raise
-    except Exception:
-        # A stale or half-written .snet cache (e.g. written concurrently by
-        # another process) must not break loading: retry from the map itself.
-        if not path.with_suffix(Network.pickledExt).exists():
-            raise
-    return Network.fromFile(path, useCache=False, writeCache=write_cache)
+    return load_network(path)
 
 
 def load_road_network(map_path: Union[str, Path]) -> ConvertedNetwork:
     """Load a map through Scenic and convert it, caching the result in-process.
 
-    Scenic's own ``.snet`` cache next to the map is used (and written when the
-    folder is writable). The conversion is cached by resolved path, modification
+    Scenic's parsed network is cached in the user cache directory
+    (:mod:`scenario_bank.map_cache`), never beside the map. The conversion is cached by resolved path, modification
     time and size, so resetting an environment does not reconvert; the same
     :class:`ConvertedNetwork` object is returned each time.
 

@@ -218,7 +218,9 @@ def _map_being_loaded(error: Exception) -> Optional[str]:
     found = None
     while tb is not None:
         code = tb.tb_frame.f_code
-        if code.co_name == "fromFile" and code.co_filename.endswith(os.path.join("driving", "roads.py")):
+        if (code.co_name == "fromFile" and code.co_filename.endswith(os.path.join("driving", "roads.py"))) or (
+            code.co_name == "load_network" and code.co_filename.endswith(os.path.join("scenario_bank", "map_cache.py"))
+        ):
             found = tb.tb_frame.f_locals.get("path", found)
         tb = tb.tb_next
     return None if found is None else str(found)

@@ -3,8 +3,8 @@
 A trace holds the scenario (name, source text), the seeds, the sampled scene
 parameters, the env config, the agent's actions, the state of every actor after
 every step (highway-env frame: x, y, heading, speed) and the events.
-Replaying re-runs the same scene with the same actions and checks that every
-state matches.
+Replaying (:mod:`envs.replay`) re-runs the same scene with the same actions and
+checks that every state matches.
 """
 
 from __future__ import annotations
@@ -17,7 +17,9 @@ from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Union
 
-__all__ = ["EpisodeTrace", "actor_state", "replay_trace", "TraceMismatchError"]
+from scenario_bank.atomic import atomic_write_bytes
+
+__all__ = ["EpisodeTrace", "actor_state", "TraceMismatchError", "TRACE_VERSION"]
 
 TRACE_VERSION = 1
 
@@ -56,17 +58,7 @@ class EpisodeTrace:
         data = json.dumps(asdict(self)).encode("utf-8")
         if path.suffix == ".gz":
             data = gzip.compress(data, mtime=0)
-        tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-        try:
-            with open(tmp, "wb") as handle:
-                handle.write(data)
-                handle.flush()
-                os.fsync(handle.fileno())
-            os.replace(tmp, path)
-        finally:
-            if tmp.exists():
-                tmp.unlink()
-        return path
+        return atomic_write_bytes(path, data)
 
     @classmethod
     def load(cls, path: Union[str, os.PathLike]) -> "EpisodeTrace":
@@ -95,52 +87,3 @@ class EpisodeTrace:
                 f"{path} was written by a newer dv2s-gym (trace version {version} > {TRACE_VERSION}); upgrade"
             )
         return cls(**{k: v for k, v in data.items() if k in names})
-
-
-def replay_trace(trace: EpisodeTrace, *, render_mode: Optional[str] = None, check: bool = True):
-    """Re-run a traced episode with its actions; returns ``(env, replayed_trace)``.
-
-    With ``check`` (default), raises :class:`TraceMismatchError` at the first step
-    whose actor states differ from the trace.
-    """
-    from envs.dv2s_env import DV2SEnv
-
-    config = {k: v for k, v in trace.config.items() if k in DV2SEnv.default_config()}
-    path = Path(trace.scenario_path) if trace.scenario_path else None
-    if path is not None and path.is_file() and path.read_text(encoding="utf-8") == trace.source:
-        # The script is still where it was: compile it from there, so that paths in it
-        # (`localPath(...)` maps) resolve as they did and the scenario keeps its name.
-        env = DV2SEnv(scenario=str(path), config=config, render_mode=render_mode)
-    else:
-        recorded_map = trace.params.get("map")
-        if config.get("map") is None and isinstance(recorded_map, str) and Path(recorded_map).is_file():
-            config["map"] = recorded_map  # the map the script resolved, wherever it was relative to
-        env = DV2SEnv(scenario=trace.source, config=config, render_mode=render_mode)
-    try:
-        env.reset(seed=trace.seed, options={"scene_seed": trace.scene_seed})
-        _compare(trace, env.trace, 0, check)
-        for i, action in enumerate(trace.actions):
-            env.step(_action_from_json(action))
-            _compare(trace, env.trace, i + 1, check)
-    except BaseException:
-        env.close()  # an env left open keeps its suspended simulation, and itself, alive
-        raise
-    return env, env.trace
-
-
-def _action_from_json(action):
-    import numpy as np
-
-    if isinstance(action, list):
-        return np.asarray(action, dtype=np.float32)
-    return action
-
-
-def _compare(expected: EpisodeTrace, actual: EpisodeTrace, step: int, check: bool) -> None:
-    if not check:
-        return
-    if expected.states[step] != actual.states[step]:
-        raise TraceMismatchError(
-            f"replay of {expected.scenario!r} diverged at step {step}: "
-            f"expected {expected.states[step]}, got {actual.states[step]}"
-        )

@@ -2,15 +2,23 @@
 
 Layout of a bank folder::
 
-    bank.json                 version + index (a cache of every entry's metadata)
     <name>/scenario.scenic    the Scenic script
     <name>/meta.json          its sidecar (description, elements, tags, map, source, hash)
-    .lock                     writers take an exclusive flock on it
+
+A folder is a bank when at least one of its subfolders holds a ``scenario.scenic``
+or a ``meta.json``; a missing or empty folder is a new, empty bank. Any other
+folder is refused (:class:`NotABankError`) rather than read as broken entries.
+
+Nothing but entries is written into the bank folder: the index (a cache of every
+entry's metadata) and the lock writers take live in the user cache directory
+(:mod:`scenario_bank.cache`, one folder per bank, keyed by its path), so a
+read-only bank (e.g. the one shipped inside an installed package) is fully usable
+for reading.
 
 Writes are atomic: an entry is assembled in a hidden staging folder and renamed
 into place in one step, so a crash or a full disk leaves either the whole entry
 or nothing. Imports of several entries keep a journal and are rolled back if
-they did not finish. Concurrent writers serialise on the lock; readers never
+they did not finish. Concurrent writers (sharing a cache directory) serialise on the lock; readers never
 block. The index is rebuilt from the sidecars whenever it is stale, and a
 missing, corrupt or hand-edited sidecar is reported for that entry while the
 rest of the bank stays usable.
@@ -39,10 +47,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
 
+from scenario_bank.atomic import atomic_path, atomic_write_json
+from scenario_bank.cache import keyed_cache_dir
 from scenario_bank.elements import ElementError, normalize_elements
 from scenario_bank.safety import UnsafeScenarioError, check_script
 
+BANK_DIR = Path(__file__).resolve().parent / "scenarios"
+"""Folder of the bank shipped with dv2s-gym."""
+
 __all__ = [
+    "BANK_DIR",
     "BANK_VERSION",
     "SIDECAR_VERSION",
     "Bank",
@@ -51,6 +65,7 @@ __all__ = [
     "BankError",
     "BankVersionError",
     "DuplicateScenarioError",
+    "NotABankError",
     "UnknownScenarioError",
     "content_hash",
     "semantic_key",
@@ -64,7 +79,8 @@ SIDECAR_VERSION = 1
 SOURCE_KINDS = ("hand-written", "generated", "mined")
 SCRIPT = "scenario.scenic"
 SIDECAR = "meta.json"
-INDEX = "bank.json"
+INDEX = "index.json"
+LEGACY_INDEX = "bank.json"  # written into the bank folder by dv2s-gym <= 0.1.0; still marks a bank
 _NAME = re.compile(r"^[a-z0-9][a-z0-9_\-]{0,99}$")
 _PROVENANCE_FIELDS = ("kind", "video", "parent", "seed", "generator", "model", "context_hash", "date")
 
@@ -85,6 +101,10 @@ class DuplicateScenarioError(BankError):
     def __init__(self, message: str, existing: str) -> None:
         super().__init__(message)
         self.existing = existing
+
+
+class NotABankError(BankError):
+    """The folder exists but holds no bank entries (and is not empty)."""
 
 
 class UnknownScenarioError(BankError, ValueError):
@@ -206,8 +226,6 @@ class Bank:
     """
 
     def __init__(self, root: Optional[PathLike] = None) -> None:
-        from scenario_bank.catalog import BANK_DIR
-
         self.root = Path(root) if root is not None else BANK_DIR
         self._entries: Dict[str, ScenarioEntry] = {}
         self.problems: Dict[str, str] = {}
@@ -220,20 +238,34 @@ class Bank:
         return cls(root)
 
     # ------------------------------------------------------------- loading
+    def _cache_folder(self) -> Path:
+        """This bank's folder in the user cache (index and lock)."""
+        return keyed_cache_dir("banks", self.root)
+
     def _read_index(self) -> Dict[str, Any]:
-        index_path = self.root / INDEX
+        legacy = self.root / LEGACY_INDEX
+        if legacy.is_file():  # the folder's own format version, as written by dv2s-gym <= 0.1.0
+            try:
+                version = json.loads(legacy.read_text(encoding="utf-8")).get("version", 0)
+            except (OSError, ValueError, AttributeError):
+                version = 0
+            if not isinstance(version, int) or version > BANK_VERSION:
+                raise BankVersionError(
+                    f"the bank at {self.root} has format version {version!r}, newer than this dv2s-gym "
+                    f"supports ({BANK_VERSION}); upgrade dv2s-gym to read it"
+                )
+        try:
+            index_path = self._cache_folder() / INDEX
+        except OSError:
+            return {"version": BANK_VERSION, "entries": {}}  # no usable cache: read the sidecars
         if not index_path.is_file():
             return {"version": BANK_VERSION, "entries": {}}
         try:
             index = json.loads(index_path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
             return {"version": BANK_VERSION, "entries": {}}  # rebuilt from sidecars below
-        version = index.get("version", 0)
-        if not isinstance(version, int) or version > BANK_VERSION:
-            raise BankVersionError(
-                f"the bank at {self.root} has format version {version!r}, newer than this dv2s-gym "
-                f"supports ({BANK_VERSION}); upgrade dv2s-gym to read it"
-            )
+        if not isinstance(index, dict) or index.get("version") != BANK_VERSION:
+            return {"version": BANK_VERSION, "entries": {}}  # another dv2s-gym's cache: rebuilt below
         return index
 
     def _load(self, locked: bool = False) -> None:
@@ -250,7 +282,9 @@ class Bank:
         self._semantic_keys: Dict[str, str] = {}
         if self.root.is_dir():
             with os.scandir(self.root) as it:
-                folders = sorted((d.name for d in it if d.is_dir() and not d.name.startswith(".")))
+                visible = [d for d in it if not d.name.startswith(".")]
+            folders = sorted(d.name for d in visible if d.is_dir())
+            _check_is_bank(self.root, visible)
             for name in folders:
                 folder = self.root / name
                 try:
@@ -273,9 +307,10 @@ class Bank:
                 entries[name] = ScenarioEntry(name, folder, meta)
                 self._semantic_keys[name] = key
         self._entries, self.problems = entries, problems
-        if fresh != cached and self.root.is_dir() and os.access(self.root, os.W_OK):
+        if fresh != cached and self.root.is_dir():
             try:
-                self._write_json_atomic(self.root / INDEX, {"version": BANK_VERSION, "entries": fresh})
+                self._write_json_atomic(self._cache_folder() / INDEX,
+                                        {"version": BANK_VERSION, "root": str(self.root.resolve()), "entries": fresh})
             except OSError:
                 pass  # the index is only a cache
 
@@ -405,8 +440,13 @@ class Bank:
     # ------------------------------------------------------------- writing
     @contextmanager
     def _lock(self) -> Iterator[None]:
-        self.root.mkdir(parents=True, exist_ok=True)
-        with open(self.root / ".lock", "a+") as handle:
+        try:
+            self.root.mkdir(parents=True, exist_ok=True)
+            lock = self._cache_folder() / "lock"
+            handle = open(lock, "a+")
+        except OSError as error:
+            raise _write_error(error, self.root) from None
+        with handle:
             fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
             try:
                 yield
@@ -415,16 +455,7 @@ class Bank:
 
     @staticmethod
     def _write_json_atomic(path: Path, data: Any) -> None:
-        tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-        try:
-            with open(tmp, "w", encoding="utf-8") as handle:
-                json.dump(data, handle, indent=1, sort_keys=True)
-                handle.flush()
-                os.fsync(handle.fileno())
-            os.replace(tmp, path)
-        finally:
-            if tmp.exists():
-                tmp.unlink()
+        atomic_write_json(path, data)
 
     def _stage_entry(self, name: str, script: str, meta: Dict[str, Any]) -> Path:
         staging = self.root / f".staging-{name}-{uuid.uuid4().hex[:12]}"
@@ -551,22 +582,17 @@ class Bank:
         chosen = sorted(names) if names is not None else self.names()
         for n in chosen:
             self.get(n)
-        archive.parent.mkdir(parents=True, exist_ok=True)
-        tmp = archive.with_name(f".{archive.name}.{uuid.uuid4().hex}.tmp")
         try:
-            with tarfile.open(tmp, "w:gz") as tar:
-                header = json.dumps({"dv2s_bank_archive": BANK_VERSION, "entries": chosen}).encode()
-                _add_bytes(tar, "bank-archive.json", header)
-                for n in chosen:
-                    entry = self._entries[n]
-                    _add_bytes(tar, f"{n}/{SCRIPT}", entry.script_path.read_bytes())
-                    _add_bytes(tar, f"{n}/{SIDECAR}", (entry.folder / SIDECAR).read_bytes())
-            os.replace(tmp, archive)
+            with atomic_path(archive) as tmp:
+                with tarfile.open(tmp, "w:gz") as tar:
+                    header = json.dumps({"dv2s_bank_archive": BANK_VERSION, "entries": chosen}).encode()
+                    _add_bytes(tar, "bank-archive.json", header)
+                    for n in chosen:
+                        entry = self._entries[n]
+                        _add_bytes(tar, f"{n}/{SCRIPT}", entry.script_path.read_bytes())
+                        _add_bytes(tar, f"{n}/{SIDECAR}", (entry.folder / SIDECAR).read_bytes())
         except OSError as error:
             raise _write_error(error, archive.parent) from None
-        finally:
-            if tmp.exists():
-                tmp.unlink()
         return archive
 
     def import_archive(self, archive: PathLike, on_duplicate: str = "skip") -> Dict[str, List[str]]:
@@ -686,6 +712,21 @@ def _slug(text: str) -> str:
     stop = {"the", "a", "an", "of", "and", "in", "on", "is", "it", "its", "to", "car", "ego"}
     slug = "_".join([w for w in words if w not in stop][:6]) or "scenario"
     return slug[:60]
+
+
+def _check_is_bank(root: Path, visible: Sequence[os.DirEntry]) -> None:
+    """Raise :class:`NotABankError` unless ``root`` is empty or holds a bank entry (or the legacy index)."""
+    if not visible or any(d.name == LEGACY_INDEX for d in visible):
+        return
+    for d in visible:
+        if d.is_dir() and ((Path(d.path) / SCRIPT).exists() or (Path(d.path) / SIDECAR).exists()):
+            return
+    shown = ", ".join(sorted(d.name for d in visible)[:3]) + (", ..." if len(visible) > 3 else "")
+    raise NotABankError(
+        f"{root} is not a scenario bank: none of its subfolders holds a {SCRIPT} or {SIDECAR} "
+        f"(it holds {shown}). Pass a bank folder (its entries are <name>/{SCRIPT} + <name>/{SIDECAR}), "
+        "or a new or empty folder to start a bank there."
+    )
 
 
 def _write_error(error: OSError, where: Path) -> BankError:

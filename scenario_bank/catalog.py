@@ -17,10 +17,7 @@ __all__ = [
     "select_scenarios",
 ]
 
-BANK_DIR = Path(__file__).resolve().parent / "scenarios"
-"""Folder of the bank shipped with dv2s-gym."""
-
-from scenario_bank.bank import Bank, UnknownScenarioError  # noqa: E402
+from scenario_bank.bank import BANK_DIR, Bank, UnknownScenarioError
 
 PathLike = Union[str, os.PathLike]
 

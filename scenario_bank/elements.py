@@ -16,6 +16,12 @@ it, bank sidecars store it, labels of the evaluation set use it, and the metrics
 * ``relations``: ``[participant type, relation, participant type]`` triples,
   relation from :data:`RELATIONS`.
 
+Collisions: every participant of a collision has ``collide`` and one collision type,
+``collide_rear_end`` (front to back, same direction), ``collide_head_on`` (front to
+front, opposite directions) or ``collide_side`` (anything else: angle, T-bone,
+sideswipe). A description saying "a rear-end collision" states ``collide`` and
+``collide_rear_end`` for the colliding participants.
+
 For the metrics a label becomes a set of hashable elements (:func:`element_set`):
 ``("road", r)``, ``("participant", type, k)`` for the k-th of a type (so counts
 matter), ``("action", type, action)`` and ``("relation", a, rel, b)``.
@@ -29,6 +35,7 @@ __all__ = [
     "ROADS",
     "PARTICIPANTS",
     "ACTIONS",
+    "COLLISION_TYPES",
     "RELATIONS",
     "ElementError",
     "normalize_elements",
@@ -41,7 +48,10 @@ PARTICIPANTS = ("ego", "car", "truck", "pedestrian", "obstacle")
 ACTIONS = (
     "brake", "stop", "accelerate", "lane_change_left", "lane_change_right", "cut_in", "merge",
     "turn_left", "turn_right", "cross", "collide", "keep_lane", "go_straight", "overtake", "drift",
+    "collide_rear_end", "collide_side", "collide_head_on",
 )
+COLLISION_TYPES = ("collide_rear_end", "collide_side", "collide_head_on")
+"""The collision-type actions (each comes with ``collide``)."""
 RELATIONS = ("ahead_of", "behind", "left_of", "right_of", "oncoming", "same_lane", "crossing_path")
 
 Element = Tuple[Any, ...]

@@ -2,41 +2,167 @@
 
 Scenic is Python with extra syntax, so a generated script could do anything
 Python can. The check parses the script with Scenic's own parser (no code runs)
-and walks the tree against an allowlist:
+and walks the tree against an allowlist. A script may use:
 
-* imports and ``model`` lines only of Scenic world models and a few pure modules
-  (``math``, ``random``, ``scenic.*`` driving/simulator models);
-* no file, process or network access: no ``open``/``exec``/``eval``/``compile``/
-  ``__import__``/``getattr``-style builtins, no names of OS-level modules;
-* no dunder names or attributes (``__class__``, ``__subclasses__``, ...);
-* ``param map`` is a shipped map name or a relative ``.xodr`` path, not an
-  absolute path or one climbing out with ``..``.
+* Scenic's language (every Scenic statement, specifier and operator except
+  ``simulator``) and Python's expression and statement syntax, minus imports,
+  ``global``/``nonlocal``, ``async``/``await`` and generators;
+* names it defines itself, the names of Scenic's driving domain and our world
+  model (except the few that load modules, files or simulators:
+  :data:`DENIED_NAMES`), a fixed set of safe builtins (:data:`SAFE_BUILTINS`)
+  and ``math``; every other Python builtin is refused;
+* ``model`` lines naming a Scenic world model (:data:`WORLD_MODELS`; every
+  script is compiled against the highway-env model whatever its line says) and
+  ``import math``; every other import form is refused, wherever it appears.
 
-Every finding names the line and the construct.
+Nothing may start with ``_`` (but the driving domain's documented accessors
+that return a road element or ``None``, :data:`SCENIC_OPTIONAL_ATTRIBUTES`): no name, attribute, argument, keyword,
+property, class-pattern attribute (``case Cls(attr=x)`` reads ``subject.attr``) or string constant naming a private
+attribute (``"_os"``, ``"__class__"``), so
+no module, frame, code object or builtin is reached through an object's
+private state. Frame and code attributes without an underscore (``gi_frame``,
+``f_globals``, ``tb_frame``...), string formatting that walks attributes
+(``.format``/``.format_map``), and methods that read or write files
+(``fromFile``, ``dumpPickle``, ``show``...) or change the file system (``touch``,
+``mkdir``, ``unlink``...) are refused too. ``param map`` is a shipped map name or a
+relative ``.xodr`` path, set before the ``model`` line; ``localPath`` (it returns a
+``pathlib.Path``) may only be such a line's whole value.
+
+Every finding names the line, the construct and the reason. The check is the
+first layer; :mod:`scenario_bank.sandbox` runs what passes it in a child
+process with CPU, memory and wall-clock limits.
 """
 
 from __future__ import annotations
 
 import ast
+import builtins
+import re
 from dataclasses import dataclass
-from typing import List
+from typing import Callable, Iterator, List, Tuple
 
-__all__ = ["SafetyFinding", "UnsafeScenarioError", "check_script", "assert_safe"]
+__all__ = [
+    "SAFE_BUILTINS",
+    "DENIED_NAMES",
+    "SCENIC_OPTIONAL_ATTRIBUTES",
+    "FILESYSTEM_ATTRIBUTES",
+    "WORLD_MODELS",
+    "SafetyFinding",
+    "UnsafeScenarioError",
+    "check_script",
+    "assert_safe",
+]
 
-ALLOWED_MODULE_PREFIXES = ("scenic.domains.", "scenic.simulators.", "scenic.core.external_params")
-ALLOWED_MODULES = {"math", "random", "scenic.domains.driving.model", "envs.scenic_highway.model"}
-FORBIDDEN_NAMES = {
-    "open", "exec", "eval", "compile", "__import__", "globals", "locals", "vars", "getattr", "setattr",
-    "delattr", "input", "breakpoint", "exit", "quit", "memoryview", "help", "dir", "type", "super",
+WORLD_MODELS = frozenset({
+    "envs.scenic_highway.model",
+    "scenic.domains.driving.model",
+    "scenic.simulators.carla.model",
+    "scenic.simulators.metadrive.model",
+    "scenic.simulators.newtonian.driving_model",
+    "scenic.simulators.newtonian.model",
+})
+"""World models a ``model`` line may name (all are replaced by the highway-env model at compile time)."""
+
+ALLOWED_IMPORTS = frozenset({"math"})
+"""The only Python modules a script may import."""
+
+SAFE_BUILTINS = frozenset({
+    "True", "False", "None", "abs", "all", "any", "bool", "chr", "dict", "divmod", "enumerate", "filter",
+    "float", "frozenset", "int", "isinstance", "iter", "len", "list", "map", "max", "min", "next", "ord",
+    "pow", "print", "range", "repr", "reversed", "round", "set", "slice", "sorted", "str", "sum", "tuple",
+    "zip", "Exception", "ArithmeticError", "AssertionError", "IndexError", "KeyError", "LookupError",
+    "NotImplementedError", "RuntimeError", "StopIteration", "TypeError", "ValueError", "ZeroDivisionError",
+})
+"""Python builtins a script may use; every other builtin name is refused."""
+
+DENIED_NAMES = frozenset({
+    # Scenic's namespace: these import modules, set the simulator or write files
+    "model", "simulator", "File", "Files", "runTryInterrupt", "HighwayEnvSimulator", "Simulator",
+    # modules, should any ever be in scope
     "os", "sys", "subprocess", "socket", "shutil", "pathlib", "importlib", "pickle", "marshal", "ctypes",
     "builtins", "io", "urllib", "requests", "http", "threading", "multiprocessing", "signal", "tempfile",
-    "glob", "inspect", "gc", "code", "codeop", "pty", "fcntl", "resource", "asyncio",
+    "glob", "inspect", "gc", "code", "codeop", "pty", "fcntl", "resource", "asyncio", "random", "posix",
+    "nt", "operator", "functools", "types", "typing", "weakref", "scenic", "envs", "numpy", "np",
+    "highway_env", "gymnasium", "dv2s_gym", "scenario_bank", "policies", "webbrowser", "ssl", "ftplib",
+})
+"""Names refused even though Scenic or Python defines them."""
+
+SCENIC_OPTIONAL_ATTRIBUTES = frozenset({
+    "_laneToLeft", "_laneToRight", "_fasterLane", "_slowerLane",  # LaneSection
+    "_lane", "_laneSection", "_laneGroup", "_road", "_intersection", "_crossing", "_element",  # DrivingObject
+})
+"""The only attributes starting with ``_`` a script may use: the driving domain's documented accessors
+that give a road-network element or ``None`` where their public twin (``laneToLeft``, ``lane``...)
+would reject the sample (Scenic's docs name them for exactly that use)."""
+
+_UNSAFE_BUILTINS = frozenset(name for name in dir(builtins) if name not in SAFE_BUILTINS)
+
+FRAME_ATTRIBUTES = frozenset({
+    "gi_frame", "gi_code", "gi_yieldfrom", "gi_running", "cr_frame", "cr_code", "cr_await", "cr_origin",
+    "ag_frame", "ag_code", "ag_await", "f_back", "f_globals", "f_locals", "f_builtins", "f_code", "f_trace",
+    "f_lasti", "tb_frame", "tb_next", "tb_lasti", "func_globals", "func_code", "func_closure", "im_func",
+    "im_self", "im_class", "cell_contents", "mro", "with_traceback", "format", "format_map",
+})
+"""Attributes refused though they have no underscore: frames, code objects, formatting that walks attributes."""
+
+FILESYSTEM_ATTRIBUTES = frozenset({
+    "touch", "mkdir", "makedirs", "unlink", "rmdir", "rmtree", "removedirs", "rename", "renames", "symlink_to",
+    "hardlink_to", "link_to", "symlink", "link", "chmod", "lchmod", "chown", "lchown", "iterdir", "glob", "rglob",
+    "readlink", "truncate", "mkfifo", "mknod", "chdir", "chroot", "putenv", "unsetenv", "environ", "kill",
+    "killpg", "fork", "listdir", "scandir", "utime", "expanduser", "home", "cwd",
+})
+"""``pathlib.Path``/``os`` methods that change or list the file system; refused should a path object be reachable."""
+
+_IO_ATTRIBUTE = re.compile(r"file|pickle|dump|load|save|write|read|show|plot|export|replay|serial|stream|"
+                           r"open|exec|eval|system|spawn|popen|import|module|global|builtin|frame|code|"
+                           r"subclass|getattr|setattr|delattr", re.I)
+"""Attribute names that read or write files or reach interpreter internals (``fromFile``, ``dumpPickle``...)."""
+
+_PRIVATE_STRING = re.compile(r"^_\w*$|__\w+__|\{[^{}]*[.\[]\s*_")
+"""String constants that name private attributes or format fields walking into them."""
+
+# Python node types a Scenic script may contain; Scenic's own nodes are allowed but for `simulator`.
+_PYTHON_NODES = frozenset({
+    "Module", "Expr", "Assign", "AugAssign", "AnnAssign", "Pass", "Break", "Continue", "If", "For", "While",
+    "Try", "TryStar", "ExceptHandler", "Raise", "Assert", "Delete", "Return", "FunctionDef", "ClassDef",
+    "Lambda", "With", "withitem", "Match", "match_case", "MatchValue", "MatchSingleton", "MatchSequence",
+    "MatchMapping", "MatchClass", "MatchStar", "MatchAs", "MatchOr",
+    "arguments", "arg", "keyword", "alias", "Name", "Attribute", "Subscript", "Starred", "Slice", "Constant",
+    "JoinedStr", "FormattedValue", "List", "Tuple", "Set", "Dict", "ListComp", "SetComp", "DictComp",
+    "GeneratorExp", "comprehension", "BoolOp", "BinOp", "UnaryOp", "Compare", "Call", "IfExp", "NamedExpr",
+    "Load", "Store", "Del", "And", "Or", "Add", "Sub", "Mult", "MatMult", "Div", "Mod", "Pow", "LShift",
+    "RShift", "BitOr", "BitXor", "BitAnd", "FloorDiv", "Invert", "Not", "UAdd", "USub", "Eq", "NotEq", "Lt",
+    "LtE", "Gt", "GtE", "Is", "IsNot", "In", "NotIn", "Import", "ImportFrom",
+})
+_REFUSED_NODES = {
+    "Global": "rebinding module globals is not allowed",
+    "Nonlocal": "rebinding enclosing variables is not allowed",
+    "AsyncFunctionDef": "async code is not part of a Scenic script",
+    "AsyncFor": "async code is not part of a Scenic script",
+    "AsyncWith": "async code is not part of a Scenic script",
+    "Await": "async code is not part of a Scenic script",
+    "Yield": "generators are not part of a Scenic script (their frames reach the interpreter)",
+    "YieldFrom": "generators are not part of a Scenic script (their frames reach the interpreter)",
+    "Simulator": "the simulator is fixed by dv2s-gym; a script may not choose one",
 }
+# Fields of Scenic's nodes that hold identifiers (Python's own are covered by _IDENTIFIER_FIELDS too).
+_IDENTIFIER_FIELDS = frozenset({"id", "attr", "name", "arg", "asname", "identifier", "property", "names",
+                                "vararg", "kwarg", "rest", "prop", "className", "kwd_attrs"})
+# Fields whose strings are attribute names read from an object (judged like ``obj.attr``):
+# ``case Cls(attr=pattern)`` reads ``subject.attr`` as ``getattr`` would.
+_ATTRIBUTE_FIELDS = frozenset({("Attribute", "attr"), ("MatchClass", "kwd_attrs")})
+# Fields holding free text rather than identifiers (string constants are judged by _PRIVATE_STRING).
+# Any other field that holds a string is refused: a new node type must be reviewed before it is allowed.
+_TEXT_FIELDS = frozenset({("Constant", "value"), ("Constant", "kind"), ("ImportFrom", "module"), ("Model", "name"),
+                          ("BehaviorDef", "docstring"), ("MonitorDef", "docstring"), ("ScenarioDef", "docstring"),
+                          ("Require", "name"), ("RequireMonitor", "name"), ("Record", "name"),
+                          ("RecordInitial", "name"), ("RecordFinal", "name"), ("TerminateWhen", "name"),
+                          ("TerminateSimulationWhen", "name")})
 
 
 @dataclass(frozen=True)
 class SafetyFinding:
-    """One reason a script is unsafe."""
+    """One reason a script is unsafe: where, what and why."""
 
     line: int
     construct: str
@@ -55,17 +181,82 @@ class UnsafeScenarioError(ValueError):
         more = f" (and {len(findings) - 5} more)" if len(findings) > 5 else ""
         super().__init__(
             f"{label} failed the safety check: {lines}{more}. Generated Scenic may only use Scenic's driving "
-            "domain and world models: no imports beyond Scenic models, no file/process/network access, no "
-            "exec/eval, no dunder access."
+            "domain and world models, math and a few safe builtins: no imports beyond Scenic models and math, "
+            "no file/process/network access, no exec/eval/getattr, no names or attributes starting with '_'."
         )
 
 
-def _module_allowed(module: str) -> bool:
-    return module in ALLOWED_MODULES or module.startswith(ALLOWED_MODULE_PREFIXES)
+def _identifiers(node: ast.AST, flag: Callable[[ast.AST, str, str], None]) -> Iterator[Tuple[str, bool]]:
+    """Identifier strings held by a node's fields, each with whether it is an attribute read.
+
+    A string in a field that is neither an identifier field nor a known free-text
+    field is flagged (an unreviewed construct), not silently passed.
+    """
+    kind = type(node).__name__
+    for field_name, value in ast.iter_fields(node):
+        strings = [value] if isinstance(value, str) else [v for v in value if isinstance(v, str)] \
+            if isinstance(value, list) else []
+        if not strings:
+            continue
+        if field_name in _IDENTIFIER_FIELDS:
+            yield from ((text, (kind, field_name) in _ATTRIBUTE_FIELDS) for text in strings)
+        elif (kind, field_name) not in _TEXT_FIELDS:
+            flag(node, f"{kind}.{field_name}", "this construct names something the safety check does not "
+                                               "review; it is not allowed in a scenario")
+
+
+def _check_import(node: ast.AST, kind: str, flag: Callable[[ast.AST, str, str], None]) -> None:
+    if kind == "Import":
+        for alias in node.names:
+            if alias.name not in ALLOWED_IMPORTS:
+                flag(node, f"import {alias.name}",
+                     "only `import math` is allowed; Scenic world models come in through a `model` line")
+    else:
+        module = node.module or ""
+        if node.level or module not in ALLOWED_IMPORTS:
+            flag(node, f"from {'.' * node.level}{module} import ...",
+                 "only `math` may be imported; Scenic world models come in through a `model` line")
+        for alias in node.names:
+            if alias.name == "*":
+                flag(node, f"from {module} import *", "star imports are not allowed")
+
+
+def _check_identifier(node: ast.AST, ident: str, is_attribute: bool,
+                      flag: Callable[[ast.AST, str, str], None]) -> None:
+    shown = (f"case {_pattern_class(node)}({ident}=...)" if isinstance(node, ast.MatchClass)
+             else f".{ident}") if is_attribute else ident
+    if is_attribute and ident in SCENIC_OPTIONAL_ATTRIBUTES:
+        return
+    if not ident.isascii():
+        # Python's own parser folds identifiers by NFKC (``ｅval`` is ``eval``, ``＿`` is ``_``); Scenic's
+        # does not today, but the check must not depend on which parser compiles the script.
+        flag(node, shown, "identifiers must be ASCII (Unicode look-alikes can normalise to other names)")
+        return
+    if ident.startswith("_"):
+        flag(node, shown, "names and attributes starting with '_' are not allowed (private or dunder access)")
+    elif is_attribute:
+        if ident in FRAME_ATTRIBUTES:
+            flag(node, shown, "frame, code-object and attribute-formatting attributes are not allowed")
+        elif ident in FILESYSTEM_ATTRIBUTES:
+            flag(node, shown, "file-system methods (of paths or os) are not allowed")
+        elif _IO_ATTRIBUTE.search(ident):
+            flag(node, shown, "methods that read or write files or reach interpreter internals are not allowed")
+    elif isinstance(node, (ast.alias, ast.ImportFrom, ast.Import)):
+        return  # the import itself is judged by _check_import
+    elif ident in DENIED_NAMES:
+        flag(node, ident, "this name loads modules, files or simulators; it is not allowed in a scenario")
+    elif ident in _UNSAFE_BUILTINS:
+        flag(node, ident, "this Python builtin is not in the safe set (file, process, introspection or "
+                          "code-execution access)")
 
 
 def check_script(source: str) -> List[SafetyFinding]:
-    """All safety findings of a Scenic script (empty list: safe to compile)."""
+    """All safety findings of a Scenic script (empty list: safe to compile).
+
+    A script Scenic's parser cannot read yields no finding when the parser
+    gives a line (the compiler reports it then, before anything runs), else one
+    ``syntax`` finding.
+    """
     # The parse (the costly part) is shared with the compiler and with repeated checks of one text.
     from scenario_bank.scenic_parse import parse_scenic
 
@@ -79,37 +270,72 @@ def check_script(source: str) -> List[SafetyFinding]:
     findings: List[SafetyFinding] = []
 
     def flag(node: ast.AST, construct: str, reason: str) -> None:
-        findings.append(SafetyFinding(getattr(node, "lineno", 0), construct, reason))
+        finding = SafetyFinding(getattr(node, "lineno", 0), construct, reason)
+        if finding not in findings:
+            findings.append(finding)
 
+    map_calls = _map_local_paths(tree, flag)
     for node in ast.walk(tree):
         kind = type(node).__name__
-        if isinstance(node, ast.Import):
-            for alias in node.names:
-                if not _module_allowed(alias.name):
-                    flag(node, f"import {alias.name}", "only Scenic world models may be imported")
-        elif isinstance(node, ast.ImportFrom):
-            module = node.module or ""
-            if node.level or not _module_allowed(module):
-                flag(node, f"from {module} import ...", "only Scenic world models may be imported")
+        if kind == "Name" and node.id == "localPath" and id(node) not in map_calls:
+            flag(node, "localPath", "localPath returns a file-system path object; it may only be the whole "
+                                    "value of a `param map = localPath('my_map.xodr')` line before the `model` line")
+            continue
+        scenic_node = type(node).__module__.startswith("scenic.")
+        if kind in _REFUSED_NODES:
+            flag(node, kind.lower(), _REFUSED_NODES[kind])
+        elif not scenic_node and kind not in _PYTHON_NODES:
+            flag(node, kind, "this Python construct is not part of the Scenic scripts dv2s-gym accepts")
+        if kind in ("Import", "ImportFrom"):
+            _check_import(node, kind, flag)
         elif kind == "Model":
             name = getattr(node, "name", "")
-            if not _module_allowed(name):
-                flag(node, f"model {name}", "not a Scenic world model")
-        elif isinstance(node, ast.Name):
-            if node.id in FORBIDDEN_NAMES:
-                flag(node, node.id, "file, process, network or introspection access is not allowed")
-            elif node.id.startswith("__"):
-                flag(node, node.id, "dunder names are not allowed")
-        elif isinstance(node, ast.Attribute):
-            if node.attr.startswith("__") or node.attr.startswith("_sa"):
-                flag(node, f".{node.attr}", "dunder attributes are not allowed")
-        elif isinstance(node, (ast.Global, ast.Nonlocal)):
-            flag(node, kind.lower(), "rebinding module globals is not allowed")
-        elif kind == "Param":
-            for param in getattr(node, "elts", []):
-                if getattr(param, "identifier", None) == "map":
-                    _check_map_value(param.value, flag)
+            if name not in WORLD_MODELS:
+                flag(node, f"model {name}", f"not a Scenic world model (use one of {', '.join(sorted(WORLD_MODELS))})")
+            continue
+        elif kind == "ClassDef" and node.keywords:
+            flag(node, f"class {node.name}(...{node.keywords[0].arg}=...)", "class keywords (metaclasses) are not allowed")
+        elif kind == "Constant" and isinstance(node.value, (str, bytes)):
+            text = node.value.decode("latin-1") if isinstance(node.value, bytes) else node.value
+            if _PRIVATE_STRING.search(text):
+                flag(node, repr(text[:40]), "strings naming private or dunder attributes are not allowed")
+        elif kind == "Record" and getattr(node, "recorder", None) is not None:
+            flag(node, "record ... to ...", "records may not be written to files or recorders")
+        for ident, is_attribute in _identifiers(node, flag):
+            _check_identifier(node, ident, is_attribute, flag)
+    findings.sort(key=lambda f: f.line)
     return findings
+
+
+def _pattern_class(node: ast.MatchClass) -> str:
+    cls = node.cls
+    return cls.id if isinstance(cls, ast.Name) else getattr(cls, "attr", "...")
+
+
+def _map_local_paths(tree: ast.AST, flag) -> set:
+    """Check every ``param map`` line; the ids of the ``localPath`` names allowed as a map's whole value.
+
+    A map set after the ``model`` line would not be the map loaded, and would leave a path object in
+    ``globalParameters``, so it is refused.
+    """
+    allowed, model_seen = set(), False
+    for statement in getattr(tree, "body", []):
+        kind = type(statement).__name__
+        if kind == "Model":
+            model_seen = True
+        for node in ast.walk(statement):
+            if type(node).__name__ != "Param":
+                continue
+            for param in getattr(node, "elts", []):
+                if getattr(param, "identifier", None) != "map":
+                    continue
+                if model_seen or node is not statement:
+                    flag(param.value, "param map", "the map must be set at top level before the `model` line")
+                _check_map_value(param.value, flag)
+                value = param.value
+                if isinstance(value, ast.Call) and isinstance(value.func, ast.Name) and value.func.id == "localPath":
+                    allowed.add(id(value.func))
+    return allowed
 
 
 def _check_map_value(value: ast.AST, flag) -> None:
@@ -117,8 +343,14 @@ def _check_map_value(value: ast.AST, flag) -> None:
         path = value.value
         if path.startswith(("/", "~")) or ".." in path.replace("\\", "/").split("/"):
             flag(value, f"param map = {path!r}", "maps must be shipped map names or relative .xodr paths")
+        elif ("/" in path or "\\" in path or "." in path) and not path.endswith(".xodr"):
+            flag(value, f"param map = {path!r}", "a map path must name an OpenDRIVE .xodr file")
     elif isinstance(value, ast.Call) and getattr(value.func, "id", None) == "localPath":
-        return
+        args = value.args
+        if len(args) != 1 or value.keywords or not (isinstance(args[0], ast.Constant) and isinstance(args[0].value, str)):
+            flag(value, "param map = localPath(...)", "localPath takes one string literal, a relative .xodr path")
+        else:
+            _check_map_value(args[0], flag)
     else:
         flag(value, "param map", "the map must be a string literal (a shipped map name)")
 
@@ -128,3 +360,4 @@ def assert_safe(source: str, label: str = "<script>") -> None:
     findings = check_script(source)
     if findings:
         raise UnsafeScenarioError(findings, label)
+

@@ -9,9 +9,9 @@ command -v "$PY" >/dev/null 2>&1 || PY=python3
 python -m pip install -q --upgrade pip
 # torch first, pinned: an unpinned torch pulls a multi-GB CUDA build.
 python -m pip install -q "torch==2.13.0"
-# A regular (not editable) install: it also ships the .pth that registers DV2S-v0
-# whenever Gymnasium is imported (setuptools cannot add it to editable installs).
-python -m pip install -q ".[test,llm]"
+# Editable: edits to the checkout take effect without reinstalling. rl and mining hold the
+# training and falsification libraries the next issues build on.
+python -m pip install -q -e ".[test,llm,rl,mining]"
 # Scenic needs opencv-python; a second OpenCV distribution (e.g. -headless, pulled by
 # some extras) would share the cv2/ folder. Keep exactly one.
 for other in opencv-python-headless opencv-contrib-python opencv-contrib-python-headless; do

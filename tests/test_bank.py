@@ -143,7 +143,7 @@ def test_import_of_a_corrupt_or_foreign_archive_changes_nothing(bank, tmp_path):
     with pytest.raises(BankError, match="not a readable bank archive"):
         bank.import_archive(garbage)
     assert Bank(bank.root).names() == ["keep"]
-    assert not [p for p in bank.root.iterdir() if p.name.startswith(".") and p.name not in (".lock", ".bank.json")]
+    assert not [p for p in bank.root.iterdir() if p.name.startswith(".")]
 
 
 def test_bad_sidecars_are_reported_and_the_rest_stays_usable(bank):
@@ -162,15 +162,23 @@ def test_bad_sidecars_are_reported_and_the_rest_stays_usable(bank):
         reopened.get("corrupt")
 
 
+def index_path(bank):
+    """The bank's index in the user cache directory."""
+    return bank._cache_folder() / "index.json"
+
+
 def test_newer_versions_are_refused(bank):
     add(bank, "x")
-    index = json.loads((bank.root / "bank.json").read_text())
-    index["version"] = BANK_VERSION + 1
-    (bank.root / "bank.json").write_text(json.dumps(index))
+    legacy = bank.root / "bank.json"  # a folder marked by a newer dv2s-gym
+    legacy.write_text(json.dumps({"version": BANK_VERSION + 1}))
     with pytest.raises(BankVersionError, match="newer"):
         Bank(bank.root)
-    index["version"] = BANK_VERSION
-    (bank.root / "bank.json").write_text(json.dumps(index))
+    legacy.unlink()
+    index = json.loads(index_path(bank).read_text())
+    index["version"] = BANK_VERSION + 1  # a newer dv2s-gym's cache is only a cache: rebuilt
+    index_path(bank).write_text(json.dumps(index))
+    assert Bank(bank.root).names() == ["x"]
+    assert json.loads(index_path(bank).read_text())["version"] == BANK_VERSION
     meta = json.loads((bank.root / "x" / "meta.json").read_text())
     meta["schema_version"] = 99
     (bank.root / "x" / "meta.json").write_text(json.dumps(meta))
@@ -248,7 +256,7 @@ def test_parallel_writers_never_lose_or_corrupt_entries(bank):
         assert p.exitcode == 0
     reopened = Bank(bank.root)
     assert len(reopened) == 32 and not reopened.problems
-    index = json.loads((bank.root / "bank.json").read_text())
+    index = json.loads(index_path(reopened).read_text())
     assert sorted(index["entries"]) == reopened.names()
     for entry in reopened:
         assert entry.content_hash == content_hash(entry.script)
@@ -256,6 +264,6 @@ def test_parallel_writers_never_lose_or_corrupt_entries(bank):
 
 def test_stale_index_is_rebuilt_from_sidecars(bank):
     add(bank, "one")
-    (bank.root / "bank.json").write_text("garbage")
+    index_path(bank).write_text("garbage")
     assert Bank(bank.root).names() == ["one"]
-    assert json.loads((bank.root / "bank.json").read_text())["version"] == BANK_VERSION
+    assert json.loads(index_path(bank).read_text())["version"] == BANK_VERSION

@@ -1,6 +1,7 @@
 """`dv2s bank` subcommands on a temporary bank: human and --json output, exit codes."""
 
 import json
+import shutil
 import textwrap
 
 import pytest
@@ -66,12 +67,27 @@ def test_export_import_and_validate_exit_codes(bank, tmp_path, capsys):
     assert run(capsys, "bank", "--bank", bank, "add", str(script), "--description", "A car ahead.", "--name", "good")[0] == 0
     broken = tmp_path / "broken.scenic"
     broken.write_text(SCRIPT.format(lo=14).replace("FollowLaneBehavior", "FollowLaneBehaviour"))
-    assert run(capsys, "bank", "--bank", bank, "add", str(broken), "--description", "Broken.", "--name", "broken")[0] == 0
+    code, _, err = run(capsys, "bank", "--bank", bank, "add", str(broken), "--description", "Broken.", "--name", "broken")
+    assert code == 2 and "sandboxed check" in err and "FollowLaneBehaviour" in err  # add runs what it accepts
     archive = tmp_path / "a.tar.gz"
     assert run(capsys, "bank", "--bank", bank, "export", str(archive))[0] == 0
     other = str(tmp_path / "other")
     code, out, _ = run(capsys, "bank", "--bank", other, "import", str(archive), "--json")
-    assert code == 0 and sorted(json.loads(out)["added"]) == ["broken", "good"]
+    assert code == 0 and sorted(json.loads(out)["added"]) == ["good"]
+    # a broken entry left by hand (or by an older dv2s-gym) is what validate reports
+    from pathlib import Path
+
+    from scenario_bank.bank import content_hash
+
+    planted = Path(bank) / "broken"
+    shutil.copytree(Path(bank) / "good", planted)
+    (planted / "scenario.scenic").write_text(broken.read_text())
+    meta = json.loads((planted / "meta.json").read_text())
+    meta.update(name="broken", content_hash=content_hash(broken.read_text()), description="Broken.")
+    (planted / "meta.json").write_text(json.dumps(meta))
+    assert run(capsys, "bank", "--bank", bank, "export", str(archive))[0] == 0
+    code, _, err = run(capsys, "bank", "--bank", str(tmp_path / "third"), "import", str(archive))
+    assert code == 2 and "archive entry 'broken'" in err and "nothing was imported" in err
     code, out, _ = run(capsys, "bank", "--bank", bank, "validate", "--samples", "1", "--seconds", "1", "--json")
     reports = {r["name"]: r for r in json.loads(out)}
     assert code == 1

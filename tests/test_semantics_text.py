@@ -54,7 +54,8 @@ VARIED = [
     ("The ego car narrowly avoids hitting a cyclist at the crossroads.",
      {"road": "intersection", "participants": ["ego", "pedestrian"], "actions": [], "relations": []}),
     ("The ego vehicle was rear-ended by a van at the T-junction.",
-     {"road": "t_junction", "participants": ["ego", "car"], "actions": [["car", "collide"]], "relations": []}),
+     {"road": "t_junction", "participants": ["ego", "car"],
+      "actions": [["car", "collide"], ["car", "collide_rear_end"]], "relations": []}),
     ("The ego car turns left at the intersection while an oncoming bus goes straight.",
      {"road": "intersection", "participants": ["ego", "truck"],
       "actions": [["ego", "turn_left"], ["truck", "go_straight"]],
@@ -147,3 +148,30 @@ def test_bank_descriptions_recall_and_precision():
     recall, precision, rows = bank_recall_precision()
     misses = [r for r in rows if r[1] or r[2]]
     assert recall >= 0.9 and precision >= 0.9, (recall, precision, misses)
+
+
+@pytest.mark.parametrize("text, owner, kind", [
+    ("The ego car rear-ends the car ahead of it.", "ego", "collide_rear_end"),
+    ("A car ahead of the ego suddenly brakes and the ego car crashes into the back of it.", "ego", "collide_rear_end"),
+    ("The ego car is rear-ended by a truck.", "truck", "collide_rear_end"),
+    ("The ego car has a rear-end collision with the car in front of it.", "ego", "collide_rear_end"),
+    ("An oncoming car drifts into the ego's lane and collides head-on with the ego car.", "car", "collide_head_on"),
+    ("The ego car has a head-on collision with an oncoming car.", "ego", "collide_head_on"),
+    ("The car runs the red light and T-bones the ego vehicle at the intersection.", "car", "collide_side"),
+    ("The car sideswipes the ego car while changing lanes.", "car", "collide_side"),
+])
+def test_collision_types_from_text(text, owner, kind):
+    """A typed collision states collide and its type, the same elements trace semantics give."""
+    actions = elements_from_text(text)["actions"]
+    assert [owner, "collide"] in actions and [owner, kind] in actions
+    assert [a for a in actions if a[1].startswith("collide_")] == [[owner, kind]]
+
+
+@pytest.mark.parametrize("text", [
+    "The ego car narrowly avoids a rear-end collision with the car in front of it.",
+    "The ego car collides with the car in front of it.",
+    "A car pulls into the side of the road ahead of the ego car.",
+    "The oncoming car drifts toward the ego car but does not hit it head-on.",
+])
+def test_no_collision_type_from_text(text):
+    assert not [a for a in elements_from_text(text)["actions"] if a[1].startswith("collide_")]

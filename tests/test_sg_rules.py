@@ -1,7 +1,6 @@
 """The rule-based Scenario Generator (dv2s_gym.pipeline.sg_rules): safe, compilable, runnable scripts."""
 
 import json
-import time
 from pathlib import Path
 
 import pytest
@@ -101,13 +100,8 @@ def test_generated_script_is_safe_compiles_samples_and_runs(description):
         assert section in result.script
     normalize_elements(result.elements)
     compiled = compile_scenario(result.script, name="sg_rules_test")
-    compiled.sample(0)  # warm caches
-    times = []
-    for seed in range(1, 6):
-        start = time.perf_counter()
-        compiled.sample(seed)
-        times.append(time.perf_counter() - start)
-    assert sorted(times)[2] < 0.05, times  # median sampling time
+    for seed in range(6):
+        compiled.sample(seed)  # every seed samples a scene (sampling speed is in bench/)
     trace, steps = _run(result.script, seconds=5.0)
     assert steps >= 1 and "ego" in trace.states[0]
 
@@ -164,3 +158,35 @@ def test_described_elements_happen_in_simulation(description):
         simulated = element_set(elements_from_trace(trace))
         scores.append(len(described & simulated) / len(described))
     assert sum(scores) / len(scores) >= 0.8, scores
+
+
+@pytest.mark.parametrize("description, map_name", [
+    ("A pedestrian stands on the side of the road.", "urban_two_way"),
+    ("A pedestrian stands on the side of the highway.", "highway_straight"),
+])
+def test_standing_pedestrian_on_a_map_without_a_junction(description, map_name):
+    """Before: UnboundLocalError in _spawn_lane_pedestrians for any pedestrian who does not cross."""
+    import math
+
+    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+
+    result = generate_rules(description, seed=0)
+    assert result.frame.map == map_name
+    assert check_script(result.script) == []
+    assert "StandStill()" in result.script and "CrossWhenEgoNear" not in result.script
+    for seed in range(3):
+        trace, steps = _run(result.script, seconds=4.0, seed=seed)
+        names = [n for n in trace.states[0] if trace.kinds.get(n) == "pedestrian"]
+        assert len(names) == 1 and steps >= 19
+        ego0 = trace.states[0]["ego"]
+        first = trace.states[0][names[0]]
+        for states in trace.states:
+            x, y = states[names[0]][:2]
+            assert math.hypot(x - first[0], y - first[1]) < 0.2  # stands still
+            # beside the ego's lane, never in it (ego frame: lateral offset of the pedestrian)
+            lateral = (x - ego0[0]) * math.sin(ego0[2]) - (y - ego0[1]) * math.cos(ego0[2])
+            assert abs(lateral) > 1.75
+        elements = elements_from_trace(trace)
+        assert "pedestrian" in elements["participants"]
+        assert ["pedestrian", "cross"] not in elements["actions"]
+        assert ["pedestrian", "crossing_path", "ego"] not in elements["relations"]

@@ -17,7 +17,8 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from envs.dv2s_env import DV2SEnv  # noqa: E402
-from envs.trace import TRACE_VERSION, EpisodeTrace, TraceMismatchError, replay_trace  # noqa: E402
+from envs.replay import replay_trace  # noqa: E402
+from envs.trace import TRACE_VERSION, EpisodeTrace, TraceMismatchError  # noqa: E402
 from scenario_bank import BANK_DIR  # noqa: E402
 from scenario_bank.maps import MAPS_DIR  # noqa: E402
 

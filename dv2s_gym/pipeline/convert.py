@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional
 
 from dv2s_gym.pipeline.sg_openai import classify_failure
+from scenario_bank.atomic import atomic_write_text
 from dv2s_gym.pipeline.stages import Description, Generation, describe, generate
 
 __all__ = ["ScenarioCheck", "check_scenario", "classify_failure", "convert_video", "generate_to_folder", "label_for"]
@@ -46,12 +47,16 @@ class ScenarioCheck:
 
 def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview: Optional[Path] = None,
                    name: str = "generated") -> ScenarioCheck:
-    """Safety check, compile, sample, run (ego driven by its Scenic behaviour), optionally record a preview."""
+    """Safety check, compile, sample, run (ego driven by its Scenic behaviour), optionally record a preview.
+
+    The script is compiled, sampled and run once in the sandbox (:mod:`scenario_bank.sandbox`) before
+    it runs in this process."""
     from dv2s_gym.pipeline.trace_semantics import elements_from_trace
     from envs.dv2s_env import DV2SEnv
     from envs.recording import VideoWriter
     from envs.scenarios import compile_scenario
     from scenario_bank.safety import UnsafeScenarioError, check_script
+    from scenario_bank.sandbox import SandboxError, verify_script
 
     check = ScenarioCheck()
     findings = check_script(script)
@@ -61,6 +66,15 @@ def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview
         check.failure_category = "unsafe_code"
         return check
     check.safe = True
+    try:  # first in the sandbox (limits, minimal environment; cached when the SG already did it)
+        verify_script(script, name=name)
+    except SandboxError as error:
+        check.compiled = error.stage in ("sample", "run")
+        check.sampled = error.stage == "run"
+        check.error = f"sandboxed check: {error.result.message}"
+        check.failure_category = ("other" if error.limit in ("cpu", "memory", "wall")
+                                  else classify_failure(error.result.message, error.stage))
+        return check
     try:
         compiled = compile_scenario(script, name=name)
         check.compiled = True
@@ -94,18 +108,22 @@ def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview
 
 
 def label_for(video: Path) -> Optional[Dict[str, Any]]:
-    """Ground-truth elements stored beside a video as ``<video stem>.label.json``, if any."""
-    path = video.with_name(video.stem + ".label.json")
+    """Ground-truth elements stored beside a video as ``<video stem>.label.json`` (either label
+    format, see :mod:`dv2s_gym.pipeline.labels`), if any; a malformed label raises ``LabelError``."""
+    from dv2s_gym.pipeline.labels import label_path_for, read_label
+
+    path = label_path_for(video)
     if not path.is_file():
         return None
-    data = json.loads(path.read_text(encoding="utf-8"))
-    return data.get("elements", data)
+    return read_label(path).elements
+
+
+OUTPUT_FILES = ("description.txt", "elements.json", "scenario.scenic", "preview.webm", "report.json")
+"""Files :func:`generate_to_folder` may write; the report's ``files`` lists those it did write."""
 
 
 def _write(folder: Path, name: str, text: str) -> None:
-    tmp = folder / f".{name}.tmp"
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, folder / name)
+    atomic_write_text(folder / name, text, fsync=False)
 
 
 def generate_to_folder(description: Description, out: Path, *, sg: str = "rules", seed: int = 0,
@@ -115,6 +133,8 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
     from dv2s_gym.pipeline.metrics import e2e_sc, semantic_preservation
 
     out.mkdir(parents=True, exist_ok=True)
+    for stale in ("scenario.scenic", "preview.webm"):  # a failed run must not leave an earlier run's result
+        (out / stale).unlink(missing_ok=True)
     _write(out, "description.txt", description.text.strip() + "\n")
     _write(out, "elements.json", json.dumps(description.elements, indent=2) + "\n")
     start = time.perf_counter()
@@ -134,6 +154,7 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
             if labels is not None:
                 report["e2e_sc"] = e2e_sc(labels, check.simulated_elements)
     report["seconds"] = round(time.perf_counter() - start, 3)
+    report["files"] = [name for name in OUTPUT_FILES if name == "report.json" or (out / name).is_file()]
     _write(out, "report.json", json.dumps(report, indent=2, default=str) + "\n")
     return report
 

@@ -1,4 +1,4 @@
-"""A small client for OpenAI-compatible chat-completion endpoints (stdlib HTTP only).
+"""A client for OpenAI-compatible chat-completion endpoints, on the ``openai`` package.
 
 It speaks ``POST <base_url>/chat/completions`` as served by OpenAI (GPT-4o),
 vLLM, Ollama, llama.cpp's server and most other local model servers::
@@ -10,35 +10,36 @@ vLLM, Ollama, llama.cpp's server and most other local model servers::
 Messages may carry images as content parts
 (``{"type": "image_url", "image_url": {"url": "data:image/jpeg;base64,..."}}``).
 
-Connection errors, timeouts, HTTP 429 and 5xx answers are retried with
-exponential backoff (``backoff * 2**i`` seconds, honouring a numeric
-``Retry-After``); other 4xx answers fail at once. Every failure raises a
-:class:`~dv2s_gym.pipeline.errors.PipelineError` subclass whose message names
-the endpoint and the fix.
+Transport, timeouts and retries are the ``openai`` package's: connection errors,
+timeouts, HTTP 408/409/429 and 5xx answers are retried with its exponential
+backoff (0.5 s doubling, at most 8 s, honouring ``Retry-After``); other 4xx
+answers fail at once. This module keeps the project's contract on top of it:
+every failure raises a :class:`~dv2s_gym.pipeline.errors.PipelineError`
+subclass whose message names the endpoint and the fix, and a 2xx answer that is
+not a chat completion is a :class:`MalformedResponseError`. The client makes no
+request of its own (no telemetry, nothing at construction): only ``chat()`` talks
+to the configured endpoint.
 
 Configuration (:meth:`ChatClient.from_config`): keys ``base_url``, ``model``,
-``api_key``, ``timeout``, ``retries``, ``backoff`` of a dict, else environment
-variables ``DV2S_LLM_BASE_URL``, ``DV2S_LLM_MODEL``, ``DV2S_LLM_API_KEY`` /
-``OPENAI_API_KEY``, ``DV2S_LLM_TIMEOUT``, ``DV2S_LLM_RETRIES``,
-``DV2S_LLM_BACKOFF`` (``kind="vlm"`` reads ``DV2S_VLM_*`` first and falls back
-to ``DV2S_LLM_*``), else GPT-4o on api.openai.com.
+``api_key``, ``timeout``, ``retries`` of a dict, else environment variables
+``DV2S_LLM_BASE_URL``, ``DV2S_LLM_MODEL``, ``DV2S_LLM_API_KEY`` /
+``OPENAI_API_KEY``, ``DV2S_LLM_TIMEOUT``, ``DV2S_LLM_RETRIES`` (``kind="vlm"``
+reads ``DV2S_VLM_*`` first and falls back to ``DV2S_LLM_*``), else GPT-4o on
+api.openai.com.
 """
 
 from __future__ import annotations
 
-import http.client
 import ipaddress
 import json
 import logging
 import os
-import socket
 import ssl
-import time
-import urllib.error
 import urllib.parse
-import urllib.request
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Mapping, Optional, Sequence
+
+import openai
 
 from dv2s_gym.pipeline.errors import (
     EndpointHTTPError,
@@ -56,11 +57,13 @@ DEFAULT_BASE_URL = "https://api.openai.com/v1"
 """Endpoint used when neither the config nor the environment names one."""
 DEFAULT_MODEL = "gpt-4o"
 """Model used when neither the config nor the environment names one (the paper's choice)."""
-CONFIG_KEYS = ("base_url", "model", "api_key", "timeout", "retries", "backoff")
+CONFIG_KEYS = ("base_url", "model", "api_key", "timeout", "retries")
 """Keys :meth:`ChatClient.from_config` reads."""
 
 _KEY_HOSTS = ("api.openai.com",)
+_NO_KEY = "no-key"  # sent to servers that need none: the openai package always sends a bearer token
 _EXCERPT = 300
+_COMPLETIONS = "/chat/completions"
 
 
 @dataclass
@@ -74,15 +77,6 @@ class ChatReply:
     finish_reason: Optional[str] = None
 
 
-class _Retryable(Exception):
-    """Internal: an attempt failed in a way worth retrying; ``error`` is what to raise at the end."""
-
-    def __init__(self, error: Exception, retry_after: Optional[float] = None) -> None:
-        super().__init__(str(error))
-        self.error = error
-        self.retry_after = retry_after
-
-
 def _excerpt(text: str, limit: int = _EXCERPT) -> str:
     text = " ".join(text.split())
     return text if len(text) <= limit else text[: limit - 3] + "..."
@@ -90,11 +84,11 @@ def _excerpt(text: str, limit: int = _EXCERPT) -> str:
 
 def _endpoint_url(base_url: str) -> str:
     url = base_url.strip().rstrip("/")
-    if url.endswith("/chat/completions"):
+    if url.endswith(_COMPLETIONS):
         return url
     if url.endswith("/v1") or "/v1/" in url + "/" or url.endswith("/openai"):
-        return url + "/chat/completions"
-    return url + "/v1/chat/completions"
+        return url + _COMPLETIONS
+    return url + "/v1" + _COMPLETIONS
 
 
 def _is_loopback(host: str) -> bool:
@@ -118,8 +112,7 @@ class ChatClient:
         api_key: sent as ``Authorization: Bearer``; required for api.openai.com,
             optional for local servers.
         timeout: seconds to wait for the connection and for each read.
-        retries: extra attempts after the first on connection errors, timeouts, 429 and 5xx.
-        backoff: seconds before the first retry; doubles each time (capped at ``max_backoff``).
+        retries: extra attempts after the first on connection errors, timeouts, 408/409/429 and 5xx.
     """
 
     def __init__(
@@ -129,9 +122,7 @@ class ChatClient:
         api_key: Optional[str] = None,
         timeout: float = 60,
         retries: int = 3,
-        backoff: float = 1.0,
         *,
-        max_backoff: float = 30.0,
         kind: str = "llm",
     ) -> None:
         if not base_url or not isinstance(base_url, str):
@@ -146,28 +137,31 @@ class ChatClient:
             raise ValueError(f"model must name a model served at {base_url} (e.g. 'gpt-4o')")
         if timeout <= 0:
             raise ValueError("timeout must be a positive number of seconds")
-        if retries < 0 or backoff < 0:
-            raise ValueError("retries and backoff must not be negative")
+        if retries < 0:
+            raise ValueError("retries must not be negative")
         self.base_url = base_url.strip()
         self.endpoint = _endpoint_url(self.base_url)
         self.model = model
         self.api_key = api_key or None
         self.timeout = float(timeout)
         self.retries = int(retries)
-        self.backoff = float(backoff)
-        self.max_backoff = float(max_backoff)
         self.kind = kind
         self.host = parsed.hostname
         if self.api_key is None and any(self.host == h or self.host.endswith("." + h) for h in _KEY_HOSTS):
-            prefix = "DV2S_VLM" if kind == "vlm" else "DV2S_LLM"
+            prefix = self._prefix()
             raise MissingAPIKeyError(
                 f"the endpoint {self.endpoint} needs an API key and none was given. Set OPENAI_API_KEY "
                 f"(or {prefix}_API_KEY, or config['api_key']), or point {prefix}_BASE_URL / "
                 "config['base_url'] at a local OpenAI-compatible server (vLLM, Ollama, llama.cpp) that needs none."
             )
-        handlers: List[Any] = [urllib.request.ProxyHandler({})] if _is_loopback(self.host) else []
-        self._opener = urllib.request.build_opener(*handlers)
-        self._sleep = time.sleep
+        self._client = openai.OpenAI(
+            base_url=self.endpoint[: -len(_COMPLETIONS)],
+            api_key=self.api_key or _NO_KEY,
+            timeout=self.timeout,
+            max_retries=self.retries,
+            # a local server is reached directly, whatever proxy the environment names
+            http_client=openai.DefaultHttpxClient(trust_env=False) if _is_loopback(self.host) else None,
+        )
 
     # ------------------------------------------------------------ configuration
     @classmethod
@@ -204,18 +198,10 @@ class ChatClient:
         try:
             timeout = float(pick("timeout", 60))
             retries = int(pick("retries", 3))
-            backoff = float(pick("backoff", 1.0))
         except (TypeError, ValueError) as error:
-            raise ValueError(f"timeout, retries and backoff must be numbers: {error}") from None
-        return cls(
-            pick("base_url", DEFAULT_BASE_URL),
-            pick("model", DEFAULT_MODEL),
-            api_key=api_key,
-            timeout=timeout,
-            retries=retries,
-            backoff=backoff,
-            kind=kind,
-        )
+            raise ValueError(f"timeout and retries must be numbers: {error}") from None
+        return cls(pick("base_url", DEFAULT_BASE_URL), pick("model", DEFAULT_MODEL), api_key=api_key,
+                   timeout=timeout, retries=retries, kind=kind)
 
     def __repr__(self) -> str:
         key = "set" if self.api_key else "none"
@@ -234,70 +220,23 @@ class ChatClient:
         Extra keyword arguments (``seed``, ``stop``, ``top_p``...) are added to the request body.
         """
         _check_messages(messages)
-        payload: Dict[str, Any] = {
-            "model": self.model,
-            "messages": list(messages),
-            "temperature": temperature,
-            "max_tokens": int(max_tokens),
-            "stream": False,
-        }
-        payload.update(params)
-        body = json.dumps(payload).encode("utf-8")
-        attempts = self.retries + 1
-        for attempt in range(1, attempts + 1):
-            try:
-                status, raw = self._post(body, attempts)
-                return self._parse(raw, status)
-            except _Retryable as failure:
-                if attempt == attempts:
-                    raise failure.error from None
-                delay = min(self.backoff * (2 ** (attempt - 1)), self.max_backoff)
-                if failure.retry_after is not None:
-                    delay = min(max(delay, failure.retry_after), self.max_backoff)
-                log.warning(
-                    "chat endpoint %s: attempt %d/%d failed (%s); retrying in %.2f s",
-                    self.endpoint, attempt, attempts, failure, delay,
-                )
-                self._sleep(delay)
-        raise AssertionError("unreachable")  # pragma: no cover
-
-    def _headers(self) -> Dict[str, str]:
-        headers = {
-            "Content-Type": "application/json",
-            "Accept": "application/json",
-            "User-Agent": "dv2s-gym/0.1 (stdlib urllib)",
-        }
-        if self.api_key:
-            headers["Authorization"] = f"Bearer {self.api_key}"
-        return headers
-
-    def _post(self, body: bytes, attempts: int) -> tuple:
-        request = urllib.request.Request(self.endpoint, data=body, headers=self._headers(), method="POST")
-        tries = f"{attempts} attempt{'s' if attempts != 1 else ''}"
+        tries = f"{self.retries + 1} attempt{'s' if self.retries else ''}"
         try:
-            with self._opener.open(request, timeout=self.timeout) as response:
-                return response.status, response.read()
-        except urllib.error.HTTPError as error:
-            try:
-                text = error.read().decode("utf-8", "replace")
-            except Exception:  # the body may be cut off; the status says enough
-                text = ""
-            raise self._http_error(error.code, text, error.headers, tries) from None
-        except urllib.error.URLError as error:
-            reason = error.reason
-            if isinstance(reason, (socket.timeout, TimeoutError)):
-                raise _Retryable(self._timeout_error(tries)) from None
-            if isinstance(reason, ssl.SSLCertVerificationError):
-                raise EndpointUnreachableError(
-                    f"TLS certificate check failed for {self.endpoint}: {reason}. Use the server's correct "
-                    "https URL, or http:// for a local server without TLS.",
-                    endpoint=self.endpoint,
-                ) from None
-            raise _Retryable(self._unreachable_error(reason, tries)) from None
-        except (socket.timeout, TimeoutError):
-            raise _Retryable(self._timeout_error(tries)) from None
-        except (ConnectionError, http.client.HTTPException, OSError) as error:
-            raise _Retryable(self._unreachable_error(error, tries)) from None
+            raw = self._client.chat.completions.with_raw_response.create(
+                model=self.model,
+                messages=list(messages),
+                temperature=temperature,
+                max_tokens=int(max_tokens),
+                stream=False,
+                extra_body=params or None,
+            )
+        except openai.APITimeoutError:
+            raise self._timeout_error(tries) from None
+        except openai.APIConnectionError as error:
+            raise self._connection_error(error, tries) from None
+        except openai.APIStatusError as error:
+            raise self._http_error(error.status_code, error.response.text, tries) from None
+        return self._parse(raw.content, raw.status_code)
 
     # ---------------------------------------------------------------- errors
     def _prefix(self) -> str:
@@ -311,7 +250,18 @@ class ChatClient:
             endpoint=self.endpoint,
         )
 
-    def _unreachable_error(self, reason: Any, tries: str) -> EndpointUnreachableError:
+    def _connection_error(self, error: Exception, tries: str) -> EndpointUnreachableError:
+        reason = error.__cause__ or error.__context__ or error
+        while reason.__cause__ is not None or reason.__context__ is not None:
+            if isinstance(reason, ssl.SSLCertVerificationError):
+                break
+            reason = reason.__cause__ or reason.__context__
+        if isinstance(reason, ssl.SSLCertVerificationError) or "CERTIFICATE_VERIFY_FAILED" in str(reason):
+            return EndpointUnreachableError(
+                f"TLS certificate check failed for {self.endpoint}: {reason}. Use the server's correct "
+                "https URL, or http:// for a local server without TLS.",
+                endpoint=self.endpoint,
+            )
         what = getattr(reason, "strerror", None) or str(reason) or type(reason).__name__
         return EndpointUnreachableError(
             f"could not connect to the chat endpoint {self.endpoint} ({what}; {tries}). Start the model "
@@ -320,7 +270,7 @@ class ChatClient:
             endpoint=self.endpoint,
         )
 
-    def _http_error(self, status: int, text: str, headers: Any, tries: str) -> Exception:
+    def _http_error(self, status: int, text: str, tries: str) -> EndpointHTTPError:
         detail = _error_detail(text)
         where = f"the chat endpoint {self.endpoint} answered HTTP {status}"
         if status in (401, 403):
@@ -334,21 +284,18 @@ class ChatClient:
             fix = "the request is too large. Send fewer or smaller frames, or a shorter prompt"
         elif status == 429:
             fix = (f"it is rate-limiting ({tries}). Wait and retry, lower the request rate, or raise "
-                   "retries/backoff")
+                   "retries")
         elif status >= 500:
             fix = f"the server failed ({tries}). Check the model server's log; it may be overloaded or still loading"
         else:
             fix = (f"it rejected the request. Check that model {self.model!r} exists and accepts this input "
                    "(image parts need a vision model), and lower max_tokens if it is above the model's limit")
-        error = EndpointHTTPError(
+        return EndpointHTTPError(
             f"{where}: {fix}. Server said: {_excerpt(detail) or '(empty body)'}",
             endpoint=self.endpoint,
             status=status,
             body=_excerpt(text, 2000),
         )
-        if status == 429 or status >= 500:
-            return _Retryable(error, retry_after=_retry_after(headers))
-        return error
 
     def _malformed(self, what: str, raw: bytes | str) -> MalformedResponseError:
         text = raw.decode("utf-8", "replace") if isinstance(raw, bytes) else raw
@@ -421,11 +368,3 @@ def _error_detail(text: str) -> str:
         if error:
             return str(error)
     return text
-
-
-def _retry_after(headers: Any) -> Optional[float]:
-    try:
-        value = headers.get("Retry-After") if headers is not None else None
-        return max(0.0, float(value)) if value is not None else None
-    except (TypeError, ValueError):
-        return None

@@ -125,6 +125,10 @@ ROAD_PATTERNS: Sequence[Tuple[str, str]] = (
 # --------------------------------------------------------------------------- actions
 # (action, regex, detail) ; detail names a group that refines the action later
 _A = r"(?:s|es|ed|d|ing)?"
+_CRASH_INTO = (r"(?:crash(?:es|ed|ing)?|slam(?:s|med|ming)?|smash(?:es|ed|ing)?|plow(?:s|ed|ing)?|"
+               r"bump(?:s|ed|ing)?|ram(?:s|med|ming)?) into|hit(?:s|ting)?|strik(?:e|es|ing)|struck|"
+               r"collid(?:e|es|ed|ing) with")
+"""Verb phrases of a collision followed by the part of the vehicle hit ("hits the side of")."""
 _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
     # braking / slowing
     ("brake", r"\b(?:slam(?:s|med|ming)? on|hit(?:s|ting)?|step(?:s|ped|ping)? on|appl(?:y|ies|ied|ying)) "
@@ -187,6 +191,14 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
     ("cross", r"\bstep(?:s|ped|ping)? (?:out|off|onto|into|down)\b"),
     ("cross", r"\bjaywalk(?:s|ed|ing)?\b"),
     ("cross", r"\bgo(?:es|ing)? from (?:the )?(?P<from>left|right) to (?:the )?(?:left|right)\b"),
+    # collisions with their type (scenario_bank.elements.COLLISION_TYPES); each also states "collide"
+    ("collide_rear_end", r"\brear ?end(?:s|ed|ing)?\b(?: (?:collision|crash|impact)s?\b)?|"
+                         r"\b(?:" + _CRASH_INTO + r") the (?:back|rear|tail) of\b"),
+    ("collide_head_on", r"\bhead ?on (?:collision|crash|impact)s?\b|\b(?:collid(?:e|es|ed|ing)|crash(?:es|ed|ing)?|"
+                        r"hit(?:s|ting)?|strik(?:e|es|ing)|struck|smash(?:es|ed|ing)?) (?:\w+ ){0,3}head ?on\b"),
+    ("collide_side", r"\bside (?:on )?(?:collision|crash|impact)s?\b|\bt ?bon(?:e|es|ed|ing)\b|"
+                     r"\bsideswip(?:e|es|ed|ing)\b|\bbroadsid(?:e|es|ed|ing)\b|"
+                     r"\b(?:" + _CRASH_INTO + r") the (?:\w+ )?side of\b(?! the (?:road|street|highway|lane))"),
     # collisions
     ("collide", r"\bcollid(?:e|es|ed|ing)\b|\bcollision with\b"),
     ("collide", r"\bcrash(?:es|ed|ing)?\b|\bsmash(?:es|ed|ing)? into\b|\bslam(?:s|med|ming)? into\b|"
@@ -215,7 +227,7 @@ _NEGATION = re.compile(
 _SUDDEN = re.compile(r"\b(?:sudden(?:ly)?|abrupt(?:ly)?|hard|harsh(?:ly)?|sharp(?:ly)?|emergency|quick(?:ly)?|"
                      r"unexpected(?:ly)?|without warning|aggressive(?:ly)?|rapid(?:ly)?|heavily|violently)\b")
 _PASSIVE_HIT = re.compile(r"\b(?:is|was|were|are|gets?|got|being|been) (?:\w+ )?(?:hit|struck|rear ?ended|run over|"
-                          r"crashed into|collided with) by\b")
+                          r"crashed into|collided with|t ?boned|sideswiped|broadsided) by\b")
 
 # --------------------------------------------------------------------------- relations
 _REL_PATTERNS: Sequence[Tuple[str, str]] = (
@@ -805,7 +817,7 @@ class _Parser:
                 if re.search(r"\bor\s+(?:\w+\s+)?$", before) or re.match(r"\s*(?:\w+\s+){0,3}or\b", clause[m.end():]):
                     spans.append((m.start(), m.end()))
                     continue  # "turns right or goes straight": neither is stated
-                if action == "collide":
+                if action.startswith("collide"):
                     passive = _PASSIVE_HIT.search(clause[max(0, m.start() - 25):m.end() + 4])
                     if passive:
                         agent = self._object_at(clause, m.end(), mentions)
@@ -904,8 +916,10 @@ class _Parser:
             return
         if action == "merge" and kind == "pedestrian":
             return
-        if action == "collide":
+        if action.startswith("collide"):
             owner.add_action("collide", sudden=sudden)
+            if action != "collide":
+                owner.add_action(action)
             return
         owner.add_action(action, sudden=sudden)
 

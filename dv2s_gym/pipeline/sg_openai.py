@@ -351,17 +351,6 @@ class ScriptFailure:
     message: str
 
 
-def _idle_action(env: Any) -> Any:
-    action_type = getattr(env.unwrapped, "action_type", None)
-    indexes = getattr(action_type, "actions_indexes", None)
-    if isinstance(indexes, dict) and "IDLE" in indexes:
-        return indexes["IDLE"]
-    space = env.action_space
-    if hasattr(space, "shape") and space.shape:
-        return np.zeros(space.shape, dtype=getattr(space, "dtype", np.float32))
-    return space.sample()
-
-
 def validate_script(
     script: str,
     *,
@@ -370,61 +359,33 @@ def validate_script(
     run_seconds: float = 3.0,
     max_sample_iterations: int = 2000,
 ) -> Optional[ScriptFailure]:
-    """Run a script through safety, compile, sampling and a short episode; None when it passes all."""
-    from envs.scenarios import compile_scenario
-    from scenario_bank.safety import check_script
+    """Run a script through safety, compile, sampling and a short episode; None when it passes all.
+
+    Everything after the safety check happens in the sandbox (:mod:`scenario_bank.sandbox`): a child
+    process with CPU, memory and wall-clock limits, so a reply that loops or allocates without end
+    fails with the limit it hit instead of hanging the generator. Passes are cached by content.
+    """
+    from scenario_bank.safety import UnsafeScenarioError, check_script
+    from scenario_bank.sandbox import SandboxError, verify_script
 
     findings = check_script(script)
     unsafe = [f for f in findings if f.construct != "syntax"]
     if unsafe:
         message = "; ".join(str(f) for f in unsafe[:5])
         return ScriptFailure("safety", "unsafe_code", f"the safety check rejected the script: {message}")
+    if findings:  # Scenic's parser could not read it (nothing ran): the compile error it would be
+        message = "; ".join(f.reason for f in findings[:5])
+        return ScriptFailure("compile", classify_failure(message, "compile"), message)
     try:
-        # a script Scenic's parser cannot read is not unsafe, only malformed: compiling it stops at
-        # the same parser before anything runs, and its error carries the line for the repair
-        compiled = compile_scenario(script, name=name)
-    except Exception as error:
-        return ScriptFailure("compile", classify_failure(error, "compile"), str(error))
-    if findings:  # the safety parser failed but the compiler did not: never run such a script
-        return ScriptFailure("safety", "function_misuse", "; ".join(str(f) for f in findings[:5]))
-    for seed in sample_seeds:
-        try:
-            compiled.sample(seed, max_iterations=max_sample_iterations)
-        except Exception as error:
-            from envs.errors import SceneSamplingError
-
-            message = str(error) if isinstance(error, SceneSamplingError) else (
-                f"sampling a scene (seed {seed}) failed: {type(error).__name__}: {error}")
-            return ScriptFailure("sample", classify_failure(error, "sample"), message)
-    if run_seconds and run_seconds > 0:
-        failure = _run_episode(script, run_seconds, max_sample_iterations)
-        if failure is not None:
-            return failure
-    return None
-
-
-def _run_episode(script: str, seconds: float, max_sample_iterations: int) -> Optional[ScriptFailure]:
-    from envs.dv2s_env import DV2SEnv
-
-    env = None
-    try:
-        env = DV2SEnv(scenario=script, config={"duration": seconds, "max_sample_iterations": max_sample_iterations})
-        env.reset(seed=0)
-        action = _idle_action(env)
-        limit = int(math.ceil(seconds * env.config["policy_frequency"])) + 5
-        for _ in range(limit):
-            _, _, terminated, truncated, _ = env.step(action)
-            if terminated or truncated:
-                break
-    except Exception as error:
-        return ScriptFailure("run", classify_failure(error, "run"),
-                             f"running the scenario for {seconds:g} s failed: {type(error).__name__}: {error}")
-    finally:
-        if env is not None:
-            try:
-                env.close()
-            except Exception:  # closing a half-built env must not hide the real outcome
-                pass
+        verify_script(script, name=name, seeds=sample_seeds, run_seconds=run_seconds,
+                      max_sample_iterations=max_sample_iterations)
+    except UnsafeScenarioError as error:
+        return ScriptFailure("safety", "unsafe_code", str(error))
+    except SandboxError as error:
+        stage = error.stage if error.stage in ("compile", "sample", "run") else "compile"
+        message = error.result.message
+        category = "other" if error.limit in ("cpu", "memory", "wall") else classify_failure(message, stage)
+        return ScriptFailure(stage, category, message)
     return None
 
 

@@ -847,14 +847,16 @@ def _spawn_lane_pedestrians(s: _Script, actor: ActorFrame, ego_speed: str, two_w
             place, facing = f"left of {var}Spot by {left}", f"{var}Spot.heading - 90 deg"
         else:
             place, facing = f"right of {var}Spot by {right}", f"{var}Spot.heading + 90 deg"
-        jitter = "" if i == 0 else " + Range(-0.4, 0.4)"
-        if d == "left_to_right":
-            jitter += " + Range(1.2, 1.8)"  # the far side is a lane further away: start earlier
-        when = f"{trigger}{jitter}"
-        if crossing and hit_any:
-            # step out so as to reach the middle of the ego's lane when the ego gets there
-            when = f"{'3.3' if d != 'left_to_right' else '6.0'} / {walk} + Range(-0.2, 0.2)"
-        behavior = (f"CrossWhenEgoNear({walk}, {when})" if crossing else "StandStill()")
+        behavior = "StandStill()"  # a pedestrian who does not cross stands where placed
+        if crossing:
+            jitter = "" if i == 0 else " + Range(-0.4, 0.4)"
+            if d == "left_to_right":
+                jitter += " + Range(1.2, 1.8)"  # the far side is a lane further away: start earlier
+            when = f"{trigger}{jitter}"
+            if hit_any:
+                # step out so as to reach the middle of the ego's lane when the ego gets there
+                when = f"{'3.3' if d != 'left_to_right' else '6.0'} / {walk} + Range(-0.2, 0.2)"
+            behavior = f"CrossWhenEgoNear({walk}, {when})"
         contained = "" if two_way else ",\n    with regionContainedIn everywhere"
         s.spawn += [f"{var} = new Pedestrian {place},", f"    facing {facing}{contained},",
                     f"    with behavior {behavior}"]
@@ -880,10 +882,10 @@ class _Maneuvers:
 
     def __init__(self, map_name: str) -> None:
         if map_name not in self._cache:
+            from scenario_bank.map_cache import load_network
             from scenario_bank.maps import resolve_map
-            from scenic.domains.driving.roads import Network
 
-            self._cache[map_name] = Network.fromFile(str(resolve_map(map_name)))
+            self._cache[map_name] = load_network(resolve_map(map_name))
         self.network = self._cache[map_name]
         self.maneuvers = [m for j in self.network.intersections for m in j.maneuvers]
 

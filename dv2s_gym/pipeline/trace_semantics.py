@@ -6,6 +6,29 @@ elements are read off the per-step actor states and events of an
 
 Frames: trace states are in highway-env's frame (y drawn downward; heading from
 +x toward +y, so a growing heading is a clockwise, i.e. right, turn seen from above).
+
+Every vehicle (the ego included) is judged by the same rules:
+
+* ``brake`` / ``accelerate``: speed falls / rises by 3 m/s within 2 s; ``stop``: it
+  ends below 0.5 m/s after moving, or never moves.
+* ``lane_change_left|right``: a lane-change event of the env for that actor.
+* ``turn_left|right``: net heading change of at least 55 degrees while moving.
+* ``go_straight``: on a junction road (intersection, T-junction, three-way,
+  roundabout) the vehicle drives through the junction area of the map (the Scenic
+  intersection polygons): it is outside the junction, then inside, then outside
+  again, and does not turn. A vehicle that stops before the junction, or stays in
+  it, does not go straight. Without a loadable map nothing goes straight.
+* ``keep_lane``: the vehicle travels at least :data:`KEEP_LANE_MIN_M` metres along
+  its path, has no lane-change event, does not turn, drift, cut in, merge or
+  overtake, and (when the map can be loaded) its centre stays inside the lane it is
+  on at every sampled step, never jumping to a parallel lane of the same road.
+  A stopped or parked vehicle does not keep its lane.
+* ``cut_in``, ``overtake``, ``merge``, ``drift``: judged pairwise. A non-ego actor is
+  judged against the ego; the ego is judged against every nearby car and truck
+  (and, for ``overtake``, obstacle), with the same rules.
+* ``collide`` for both actors of every collision event, plus its type
+  (:func:`collision_type`): ``collide_rear_end``, ``collide_head_on`` or
+  ``collide_side``.
 """
 
 from __future__ import annotations
@@ -18,7 +41,7 @@ import numpy as np
 
 from scenario_bank.elements import normalize_elements
 
-__all__ = ["elements_from_trace", "MAP_ROAD_TYPES"]
+__all__ = ["elements_from_trace", "collision_type", "MAP_ROAD_TYPES", "KEEP_LANE_MIN_M"]
 
 MAP_ROAD_TYPES = {
     "highway_straight": "highway",
@@ -39,6 +62,13 @@ MERGE_ALIGNED = math.radians(20)                      # ... and at the end, for 
 PATH_LOOKAHEAD_M = 12.0  # the ego's path is extended this far ...
 PATH_LOOKAHEAD_S = 1.5   # ... or this many seconds at its last speed, whichever is longer
 NEAR = 80.0               # m: actors never closer than this to the ego are background traffic
+KEEP_LANE_MIN_M = 20.0    # m travelled along its path before a vehicle counts as keeping its lane
+JUNCTION_ROADS = ("intersection", "t_junction", "three_way", "roundabout")
+VEHICLE_LENGTH, VEHICLE_WIDTH = 5.0, 2.0   # m, highway-env's vehicle box (collision faces)
+FRONTAL_GAP = math.radians(45)   # heading gap up to which a front/back contact is rear-end ...
+HEAD_ON_GAP = math.radians(135)  # ... and from which it is head-on
+_LEAVES_LANE = {"drift", "cut_in", "merge", "overtake", "lane_change_left", "lane_change_right",
+                "turn_left", "turn_right"}
 
 
 def _kind(name: str, kinds: Dict[str, str]) -> str:
@@ -94,6 +124,114 @@ def _road_type(trace, ego_track: np.ndarray) -> Optional[str]:
     return "highway" if widest >= 3 else "straight_road"
 
 
+class _MapView:
+    """The bits of a map the semantics need: the lane network and the junction area (highway-env frame)."""
+
+    def __init__(self, converted) -> None:
+        import shapely
+        from shapely.affinity import scale
+
+        self.network = converted.hw_network
+        polygons = [scale(i.polygon, 1.0, -1.0, origin=(0, 0)) for i in converted.scenic_network.intersections]
+        self.junction = shapely.union_all(polygons) if polygons else None
+        if self.junction is not None:
+            shapely.prepare(self.junction)
+
+    def in_junction(self, track: np.ndarray) -> np.ndarray:
+        """Per row of ``track``: whether the actor's centre is inside the junction area."""
+        import shapely
+
+        if self.junction is None:
+            return np.zeros(len(track), dtype=bool)
+        return shapely.contains_xy(self.junction, track[:, 0], track[:, 1])
+
+
+_MAP_VIEWS: Dict[str, Optional[_MapView]] = {}
+
+
+def _map_view(trace) -> Optional[_MapView]:
+    """The map of a trace (its recorded path, else the shipped map of that name); None if it cannot be loaded."""
+    map_path = str((trace.params or {}).get("map", "") or "")
+    if not map_path:
+        return None
+    if map_path not in _MAP_VIEWS:
+        from envs.road_network import load_road_network
+        from scenario_bank.maps import MAPS_DIR
+
+        candidates = [Path(map_path), MAPS_DIR / Path(map_path).name]
+        view = None
+        for candidate in candidates:
+            if candidate.is_file():
+                try:
+                    view = _MapView(load_road_network(candidate))
+                except Exception:  # an unreadable map: the map-based rules do not fire
+                    view = None
+                break
+        _MAP_VIEWS[map_path] = view
+    return _MAP_VIEWS[map_path]
+
+
+def _crosses_junction(track: np.ndarray, view: Optional[_MapView]) -> bool:
+    """Outside the junction area, then inside it, then outside again."""
+    if view is None or len(track) < 3:
+        return False
+    inside = np.flatnonzero(view.in_junction(track))
+    return inside.size > 0 and inside[0] > 0 and inside[-1] < len(track) - 1
+
+
+def _stays_in_lane(track: np.ndarray, view: Optional[_MapView], samples: int = 40) -> bool:
+    """The actor's centre stays inside a lane that runs its way and never jumps to a parallel lane of the
+    same road.
+
+    Without a map: it stays within half a lane of the line it started on (straight roads)."""
+    if view is None:
+        return all(abs(_ego_frame(track[0], row)[1]) <= LANE_HALF_WIDTH for row in track)
+    network = view.network
+    previous = None
+    for x, y, heading, _ in track[:: max(1, len(track) // samples)]:
+        position = np.array([x, y])
+        index = network.get_closest_lane_index(position, heading)
+        lane = network.get_lane(index)
+        s, lateral = lane.local_coordinates(position)
+        if abs(lateral) > lane.width_at(s) / 2 or _heading_gap(lane.heading_at(s), heading) > math.pi / 2:
+            return False
+        if previous is not None and previous[:2] == index[:2] and previous[2] != index[2]:
+            return False
+        previous = index
+    return True
+
+
+def collision_type(a: Any, b: Any) -> str:
+    """The type of a collision between two actors in states ``[x, y, heading, speed]`` at contact.
+
+    Contact on a front/back face (the other's offset, scaled by the vehicle's length and width, is
+    more longitudinal than lateral) is ``collide_rear_end`` when the headings differ by at most 45
+    degrees and ``collide_head_on`` when they differ by at least 135; every other contact is
+    ``collide_side`` (angle, T-bone, sideswipe). Pedestrians and obstacles are judged by the same rule.
+    """
+    lon, left = _ego_frame(np.asarray(a, dtype=float), np.asarray(b, dtype=float))
+    frontal = abs(lon) / VEHICLE_LENGTH > abs(left) / VEHICLE_WIDTH
+    gap = _heading_gap(float(a[2]), float(b[2]))
+    if frontal and gap <= FRONTAL_GAP:
+        return "collide_rear_end"
+    if frontal and gap >= HEAD_ON_GAP:
+        return "collide_head_on"
+    return "collide_side"
+
+
+def _collision_actions(trace, event: Dict[str, Any], dt: float) -> Optional[str]:
+    """The collision type of a two-actor collision event, from the states at its step."""
+    actors = list(event.get("actors", []))
+    if len(actors) != 2 or not trace.states:
+        return None
+    step = min(len(trace.states) - 1, max(0, int(round(float(event.get("time", 0.0)) / dt))))
+    for k in range(step, -1, -1):
+        states = trace.states[k]
+        if all(name in states for name in actors):
+            return collision_type(states[actors[0]], states[actors[1]])
+    return None
+
+
 def elements_from_trace(trace) -> Dict[str, Any]:
     """Elements (vocabulary canonical form) of an episode: road, participants, actions, relations."""
     names = list(trace.states[0].keys()) if trace.states else []
@@ -114,24 +252,40 @@ def elements_from_trace(trace) -> Dict[str, Any]:
         if event.get("kind") == "lane_change" and event.get("actors"):
             lane_changes.setdefault(event["actors"][0], []).append(event)
         if event.get("kind") == "collision":
+            typed = _collision_actions(trace, event, dt)
             for actor in event.get("actors", []):
                 actions.add((_kind(actor, kinds), "collide"))
+                if typed:
+                    actions.add((_kind(actor, kinds), typed))
     road = _road_type(trace, ego)
+    view = _map_view(trace)
 
+    near: Dict[str, str] = {}
     for name, track in tracks.items():
-        kind = _kind(name, kinds)
         if name != "ego":
             distances = [math.hypot(*_ego_frame(ego[min(i, len(ego) - 1)], track[i])) for i in range(len(track))]
             if min(distances) > NEAR:
                 continue  # background traffic that never came near the ego
+        near[name] = _kind(name, kinds)
+
+    ego_changes = lane_changes.get("ego", [])
+    for name, kind in near.items():
+        track = tracks[name]
         participants.append(kind)
-        actions.update((kind, a) for a in _motion_actions(track, dt, kind, lane_changes.get(name, []), road))
+        own = _motion_actions(track, dt, kind, lane_changes.get(name, []), road, view)
         if name == "ego":
-            continue
-        relations.update((kind, r, "ego") for r in _relations(ego, track))
-        if _paths_cross(ego, track):
-            relations.add((kind, "crossing_path", "ego"))
-        actions.update((kind, a) for a in _interactions(ego, track, kind, lane_changes.get(name, []), road, dt))
+            for other, other_kind in near.items():
+                if other != "ego" and other_kind in ("car", "truck", "obstacle"):
+                    found = _interactions(tracks[other], ego, "ego", ego_changes, road, dt, view)
+                    own |= found if other_kind != "obstacle" else found & {"overtake"}
+        else:
+            relations.update((kind, r, "ego") for r in _relations(ego, track))
+            if _paths_cross(ego, track):
+                relations.add((kind, "crossing_path", "ego"))
+            own |= _interactions(ego, track, kind, lane_changes.get(name, []), road, dt, view)
+        if own & _LEAVES_LANE:
+            own.discard("keep_lane")
+        actions.update((kind, a) for a in own)
     return normalize_elements({
         "road": road,
         "participants": participants,
@@ -145,7 +299,8 @@ def _step_seconds(trace) -> float:
     return 1.0 / float(config.get("policy_frequency", 5) or 5)
 
 
-def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[str, Any]], road) -> Set[str]:
+def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[str, Any]], road,
+                    view: Optional[_MapView] = None) -> Set[str]:
     out: Set[str] = set()
     if len(track) < 2:
         return out
@@ -170,9 +325,10 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
     if abs(turn) >= TURN_ANGLE and speed.max() > 1.0:
         out.add("turn_right" if turn > 0 else "turn_left")
     elif speed.max() > 1.0:
-        if not changes:
+        travelled = float(np.hypot(*np.diff(track[:, :2], axis=0).T).sum())
+        if not changes and travelled >= KEEP_LANE_MIN_M and _stays_in_lane(track, view):
             out.add("keep_lane")
-        if road in ("intersection", "t_junction", "three_way"):
+        if road in JUNCTION_ROADS and _crosses_junction(track, view):
             out.add("go_straight")
     return out
 
@@ -236,8 +392,13 @@ def _joins_ego_lane_ahead(ego_end: np.ndarray, first: np.ndarray, last: np.ndarr
 
 
 def _interactions(
-    ego: np.ndarray, track: np.ndarray, kind: str, changes: List[Dict[str, Any]], road, dt: float
+    ego: np.ndarray, track: np.ndarray, kind: str, changes: List[Dict[str, Any]], road, dt: float,
+    view: Optional[_MapView] = None,
 ) -> Set[str]:
+    """Actions of the actor moving along ``track`` judged against the reference actor ``ego``.
+
+    ``ego`` is the reference (the ego for every other actor; another vehicle when the ego's own
+    cut-in, overtake, merge or drift are judged), ``kind`` and ``changes`` belong to ``track``."""
     out: Set[str] = set()
     n = min(len(ego), len(track))
     rel = np.array([_ego_frame(ego[i], track[i]) for i in range(n)])
@@ -263,7 +424,8 @@ def _interactions(
     started_opposite = _heading_gap(track[0, 2], ego[0, 2]) > math.radians(135)
     if started_opposite and n:
         inside = np.abs(rel[:, 1]) < LANE_HALF_WIDTH * 0.9
-        if inside.any() and not inside[0]:
+        # ... and it is the one that left its lane (the reference staying put is not drifting)
+        if inside.any() and not inside[0] and not _stays_in_lane(track, view):
             out.add("drift")
     return out
 

@@ -8,6 +8,7 @@ Kept in Python so they can be tested without compiling a scenario.
 from __future__ import annotations
 
 import math
+import os
 
 from scenic.core.simulators import Action
 from scenic.core.vectors import Vector
@@ -32,10 +33,15 @@ def resolve_map_parameter() -> None:
     """Turn a short map name in ``param map`` into the path of a shipped map.
 
     Must run before the driving domain is imported, because the driving model
-    loads ``globalParameters.map`` at import time. Paths are left as they are.
+    loads ``globalParameters.map`` at import time. Paths (``localPath(...)``) become
+    plain strings: a ``pathlib.Path`` left in ``globalParameters`` would hand the
+    script file-system methods (``globalParameters.map.replace(...)`` moves the file).
     """
     import scenic.syntax.veneer as veneer
+    from scenario_bank.map_cache import install_network_cache
     from scenario_bank.maps import resolve_map
+
+    install_network_cache()  # the driving model's Network.fromFile caches outside the package
 
     params = veneer._globalParameters
     if "map" not in params:
@@ -47,6 +53,8 @@ def resolve_map_parameter() -> None:
     value = params["map"]
     if isinstance(value, str):
         params["map"] = str(resolve_map(value))
+    elif isinstance(value, os.PathLike):
+        params["map"] = os.fspath(value)
 
 
 def remove_backward_seams(network) -> int:

@@ -6,28 +6,50 @@ param weather = Uniform('ClearNoon', 'CloudyNoon', 'WetNoon')
 model scenic.domains.driving.model
 
 param ego_speed = Range(14, 18)
-param overtaker_extra_speed = Range(4, 8)
-param start_gap = Range(12, 22)
-param return_gap = Range(4, 10)
+param overtaker_extra_speed = Range(5, 8)
+param start_gap = Range(30, 40)
+param pull_out_gap = Range(22, 27)
+param return_gap = Range(5, 10)
 param slow_down_to = Range(10, 14)
+param lane_change_duration = Range(1.8, 2.6)
 
 # 2. Adversarial behaviours
-behavior OvertakeAndPullBackIn(speed, target, returnGap, slowSpeed):
-    do FollowLaneBehavior(target_speed=speed) until (distance from self to target) < 12
-    do LaneChangeBehavior(laneSectionToSwitch=self.laneSection.laneToLeft, target_speed=speed)
-    do FollowLaneBehavior(target_speed=speed) until (distance past target of self) > returnGap
-    do LaneChangeBehavior(laneSectionToSwitch=self.laneSection.laneToRight, target_speed=speed)
+behavior SlideToLane(section, speed, duration):
+    # change lanes by tracking a reference that slides smoothly from the current lateral offset
+    # to the centre of the target lane section within `duration` seconds
+    line = section.centerline
+    lonControl, latControl = simulation().getLaneFollowingControllers(self)
+    startOffset = line.signedDistanceTo(self.position)
+    steps = max(1, int(duration / simulation().timestep))
+    pastSteer = 0
+    for i in range(steps):
+        u = (i + 1) / steps
+        reference = startOffset * (1 - u * u * (3 - 2 * u))
+        throttle = lonControl.run_step(speed - self.speed)
+        steer = latControl.run_step(line.signedDistanceTo(self.position) - reference)
+        take RegulatedControlAction(throttle, steer, pastSteer)
+        pastSteer = steer
+
+behavior OvertakeAndPullBackIn(extraSpeed, pullOutGap, returnGap, slowSpeed, duration):
+    # triggers on the ego: close in behind it, pull out to the left when `pullOutGap` metres
+    # behind, pass at `extraSpeed` above the ego's speed, pull back in `returnGap` metres ahead
+    # (distance past ego of self: how far self is ahead of the ego)
+    do FollowLaneBehavior(target_speed=ego.speed + extraSpeed) until (distance past ego of self) > -pullOutGap
+    do SlideToLane(self.laneSection.laneToLeft, ego.speed + extraSpeed, duration)
+    do FollowLaneBehavior(target_speed=ego.speed + extraSpeed) until (distance past ego of self) > returnGap + 5
+    do SlideToLane(self.laneSection.laneToRight, ego.speed + extraSpeed / 2, duration)
     do FollowLaneBehavior(target_speed=slowSpeed)
 
 # 3. Road geometry: a straight multi-lane road; the ego keeps a lane that has a lane to its left
 egoLane = Uniform(*filter(lambda l: l.sections[0]._laneToLeft is not None, network.lanes))
 
 # 4. Spawn positions
-ego = new Car at egoLane.centerline.pointAlongBy(Range(100, 1200)),
+ego = new Car at egoLane.centerline.pointAlongBy(Range(100, 1100)),
     with speed globalParameters.ego_speed
 overtaker = new Car following roadDirection from ego for -globalParameters.start_gap,
     with speed globalParameters.ego_speed + globalParameters.overtaker_extra_speed,
-    with behavior OvertakeAndPullBackIn(globalParameters.ego_speed + globalParameters.overtaker_extra_speed,
-                                        ego, globalParameters.return_gap, globalParameters.slow_down_to)
-traffic = new Car offset by (Uniform(-3.5, 3.5), Range(30, 70)), with regionContainedIn road,
-    with speed Range(14, 18), with behavior FollowLaneBehavior(target_speed=Range(14, 18))
+    with behavior OvertakeAndPullBackIn(globalParameters.overtaker_extra_speed, globalParameters.pull_out_gap,
+                                        globalParameters.return_gap, globalParameters.slow_down_to,
+                                        globalParameters.lane_change_duration)
+traffic = new Car following roadDirection from ego for Range(40, 65),
+    with speed Range(16, 19), with behavior FollowLaneBehavior(target_speed=Range(16, 19))

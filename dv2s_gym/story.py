@@ -1,0 +1,168 @@
+"""Story rate: how often a bank scenario plays its adversarial story, whatever the ego does.
+
+An episode *plays its story* when the elements read off its trace
+(:func:`dv2s_gym.pipeline.trace_semantics.elements_from_trace`) contain every
+action and every relation of the scenario's sidecar whose subject is not the ego:
+the adversaries' story relative to the ego (the cut-in car cuts in, the oncoming
+car goes straight and crosses the ego's path, the pedestrian crosses...). The
+ego's own sidecar actions (``ego turn_left``...) are required only for the
+``scenic`` ego, which drives the script's own ego behaviour; the other egos drive
+their own way and cannot be asked to play the ego's part. Participants and road
+type are not checked (they hold by construction). A collision of the ego with an
+actor of a kind that has a part in the story (a car when ``car go_straight`` is
+required) counts as the story played: the encounter happened and the crash ended
+it before the rest could be seen (the episode ends on a collision).
+
+Egos (:data:`EGOS`): ``scenic`` (the script's ego behaviour), ``rule``
+(:class:`policies.rule_based.CautiousDriver`), ``keep_lane``
+(:class:`policies.baselines.KeepLaneEgo`, constant speed) and ``idm``
+(:class:`policies.baselines.IDMEgo`). Episodes use the env's default duration
+unless the scenario needs longer (:data:`STORY_SECONDS`).
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ProcessPoolExecutor
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+__all__ = ["EGOS", "STORY_SECONDS", "required_elements", "story_problem", "ego_collisions", "run_episode", "story_rate",
+           "story_table"]
+
+EGOS = ("scenic", "rule", "keep_lane", "idm")
+"""Ego drivers a story is checked against."""
+
+STORY_SECONDS: Dict[str, float] = {}
+"""Episode lengths that differ from the env's default duration, per scenario."""
+
+
+def required_elements(elements: Dict[str, Any], ego: str) -> set:
+    """The ``(kind, action)`` and ``(kind, relation, other)`` tuples an episode with ``ego`` must show."""
+    required = {tuple(a) for a in elements.get("actions", []) if ego == "scenic" or a[0] != "ego"}
+    required |= {tuple(r) for r in elements.get("relations", []) if r[0] != "ego"}
+    return required
+
+
+def story_problem(elements: Dict[str, Any], shown: Dict[str, Any], ego: str,
+                  ego_hit: Sequence[str] = ()) -> Optional[str]:
+    """What of the story an episode that shows ``shown`` misses; None when it plays the story.
+
+    ``ego_hit``: kinds of the actors the ego collided with.
+    """
+    required = required_elements(elements, ego)
+    if set(ego_hit) & {r[0] for r in required if r[0] != "ego"}:
+        return None
+    have = {tuple(a) for a in shown.get("actions", [])} | {tuple(r) for r in shown.get("relations", [])}
+    missing = sorted(required - have)
+    return ("missing " + ", ".join(" ".join(map(str, m)) for m in missing)) if missing else None
+
+
+def ego_collisions(trace) -> List[str]:
+    """Kinds (car, truck, pedestrian, obstacle...) of the actors the ego collided with in ``trace``."""
+    kinds = dict(getattr(trace, "kinds", {}) or {})
+    hit = []
+    for event in trace.events:
+        actors = event.get("actors") or []
+        if event.get("kind") == "collision" and "ego" in actors:
+            for actor in actors:
+                if actor != "ego":
+                    hit.append(kinds.get(actor) or _kind_of(actor))
+    return hit
+
+
+def _kind_of(name: str) -> str:
+    lowered = name.lower()
+    for word, kind in (("pedestrian", "pedestrian"), ("truck", "truck"), ("obstacle", "obstacle"),
+                       ("prop", "obstacle")):
+        if word in lowered:
+            return kind
+    return "car"
+
+
+def _driver(ego: str, env) -> Callable[[], int]:
+    from policies.baselines import IDMEgo, KeepLaneEgo
+    from policies.rule_based import IDLE, CautiousDriver
+
+    if ego == "scenic":
+        return lambda: IDLE  # ignored: the script's behaviour drives the ego
+    drivers = {"rule": CautiousDriver, "keep_lane": KeepLaneEgo, "idm": IDMEgo}
+    if ego not in drivers:
+        raise ValueError(f"unknown ego {ego!r}; choose from {', '.join(EGOS)}")
+    return drivers[ego](env).act
+
+
+def run_episode(script_path: str, ego: str, seed: int, seconds: Optional[float] = None):
+    """One DV2S-v0 episode of a scenario with the given ego; returns its trace."""
+    from envs.dv2s_env import DV2SEnv
+
+    config: Dict[str, Any] = {"ego_policy": "scenic" if ego == "scenic" else "agent"}
+    if seconds is not None:
+        config["duration"] = seconds
+    env = DV2SEnv(scenario=script_path, config=config)
+    try:
+        env.reset(seed=seed)
+        act = _driver(ego, env)
+        done = False
+        while not done:
+            _, _, terminated, truncated, _ = env.step(act())
+            done = terminated or truncated
+        return env.trace
+    finally:
+        env.close()
+
+
+def story_rate(name: str, ego: str, seeds: Sequence[int], bank_root: Optional[str] = None
+               ) -> Tuple[float, List[Tuple[int, str]]]:
+    """Share of ``seeds`` whose episode plays the story of bank scenario ``name`` with ``ego``.
+
+    Returns ``(rate, failures)``, ``failures`` a list of ``(seed, what was missing)``.
+    """
+    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from scenario_bank.bank import Bank
+    from scenario_bank.elements import normalize_elements
+
+    entry = Bank(bank_root).get(name)
+    elements = normalize_elements(entry.elements)
+    seconds = STORY_SECONDS.get(name)
+    failures: List[Tuple[int, str]] = []
+    for seed in seeds:
+        trace = run_episode(str(entry.script_path), ego, seed, seconds)
+        problem = story_problem(elements, elements_from_trace(trace), ego, ego_collisions(trace))
+        if problem:
+            failures.append((seed, problem))
+    seeds = list(seeds)
+    return (1.0 - len(failures) / len(seeds)) if seeds else 0.0, failures
+
+
+def _rate_job(args) -> Tuple[str, str, float, List[Tuple[int, str]]]:
+    name, ego, seeds, bank_root = args
+    try:
+        rate, failures = story_rate(name, ego, seeds, bank_root)
+    except Exception as error:  # a scenario that does not run has no story
+        rate, failures = 0.0, [(-1, f"{type(error).__name__}: {error}")]
+    return name, ego, rate, failures
+
+
+def story_table(names: Sequence[str], egos: Sequence[str] = EGOS, seeds: Sequence[int] = range(20),
+                bank_root: Optional[str] = None, jobs: int = 1, progress: bool = True
+                ) -> Dict[str, Dict[str, Dict[str, Any]]]:
+    """``{scenario: {ego: {"rate", "failures"}}}`` over ``seeds``, in ``jobs`` processes."""
+    from tqdm import tqdm
+
+    unknown = [e for e in egos if e not in EGOS]
+    if unknown:
+        raise ValueError(f"unknown ego(s) {', '.join(unknown)}; choose from {', '.join(EGOS)}")
+    tasks = [(n, e, list(seeds), bank_root) for n in names for e in egos]
+    table: Dict[str, Dict[str, Dict[str, Any]]] = {n: {} for n in names}
+    bar = tqdm(total=len(tasks), desc="story rate", unit="run", disable=not progress)
+    if jobs <= 1:
+        results = map(_rate_job, tasks)
+    else:
+        pool = ProcessPoolExecutor(max_workers=jobs)
+        results = pool.map(_rate_job, tasks)
+    for name, ego, rate, failures in results:
+        table[name][ego] = {"rate": rate, "failures": failures}
+        bar.update()
+    if jobs > 1:
+        pool.shutdown()
+    bar.close()
+    return table

@@ -1,0 +1,62 @@
+"""Replaying a saved episode trace: the same scene, the same actions, every actor state checked.
+
+Kept apart from :mod:`envs.trace` (which the env itself writes to) so that the
+env and the trace format do not import each other.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+from envs.dv2s_env import DV2SEnv
+from envs.trace import EpisodeTrace, TraceMismatchError
+
+__all__ = ["replay_trace", "TraceMismatchError"]
+
+
+def replay_trace(trace: EpisodeTrace, *, render_mode: Optional[str] = None, check: bool = True):
+    """Re-run a traced episode with its actions; returns ``(env, replayed_trace)``.
+
+    With ``check`` (default), raises :class:`TraceMismatchError` at the first step
+    whose actor states differ from the trace.
+    """
+    config = {k: v for k, v in trace.config.items() if k in DV2SEnv.default_config()}
+    path = Path(trace.scenario_path) if trace.scenario_path else None
+    if path is not None and path.is_file() and path.read_text(encoding="utf-8") == trace.source:
+        # The script is still where it was: compile it from there, so that paths in it
+        # (`localPath(...)` maps) resolve as they did and the scenario keeps its name.
+        env = DV2SEnv(scenario=str(path), config=config, render_mode=render_mode)
+    else:
+        recorded_map = trace.params.get("map")
+        if config.get("map") is None and isinstance(recorded_map, str) and Path(recorded_map).is_file():
+            config["map"] = recorded_map  # the map the script resolved, wherever it was relative to
+        env = DV2SEnv(scenario=trace.source, config=config, render_mode=render_mode)
+    try:
+        env.reset(seed=trace.seed, options={"scene_seed": trace.scene_seed})
+        _compare(trace, env.trace, 0, check)
+        for i, action in enumerate(trace.actions):
+            env.step(_action_from_json(action))
+            _compare(trace, env.trace, i + 1, check)
+    except BaseException:
+        env.close()  # an env left open keeps its suspended simulation, and itself, alive
+        raise
+    return env, env.trace
+
+
+def _action_from_json(action):
+    if isinstance(action, list):
+        return np.asarray(action, dtype=np.float32)
+    return action
+
+
+def _compare(expected: EpisodeTrace, actual: EpisodeTrace, step: int, check: bool) -> None:
+    if not check:
+        return
+    if expected.states[step] != actual.states[step]:
+        raise TraceMismatchError(
+            f"replay of {expected.scenario!r} diverged at step {step}: "
+            f"expected {expected.states[step]}, got {actual.states[step]}"
+        )

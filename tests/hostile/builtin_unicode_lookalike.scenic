@@ -1,0 +1,11 @@
+# class: builtins
+# caught-by: safety
+# a fullwidth look-alike of eval: NFKC-normalising parsers read it as the builtin eval
+param map = 'highway_straight'
+model scenic.domains.driving.model
+ｅval("print('/tmp/dv2s-hostile-marker')")
+
+lane = Uniform(*network.lanes)
+ego = new Car at lane.centerline.pointAlongBy(Range(100, 500)), with speed 20
+lead = new Car following roadDirection from ego for Range(15, 30),
+    with behavior None

@@ -1,0 +1,12 @@
+# class: resource-exhaustion
+# caught-by: sandbox
+# limit: iterations
+# a scene that never samples
+param map = 'highway_straight'
+model scenic.domains.driving.model
+require False
+
+lane = Uniform(*network.lanes)
+ego = new Car at lane.centerline.pointAlongBy(Range(100, 500)), with speed 20
+lead = new Car following roadDirection from ego for Range(15, 30),
+    with behavior None

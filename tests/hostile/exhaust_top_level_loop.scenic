@@ -1,0 +1,14 @@
+# class: resource-exhaustion
+# caught-by: sandbox
+# limit: cpu
+# an infinite loop at top level
+param map = 'highway_straight'
+model scenic.domains.driving.model
+counter = 0
+while True:
+    counter += 1
+
+lane = Uniform(*network.lanes)
+ego = new Car at lane.centerline.pointAlongBy(Range(100, 500)), with speed 20
+lead = new Car following roadDirection from ego for Range(15, 30),
+    with behavior None

@@ -1,0 +1,11 @@
+# class: private-attribute
+# caught-by: safety
+# a Scenic class's function globals reach builtins
+param map = 'highway_straight'
+model scenic.domains.driving.model
+Car.__init__.__globals__["__builtins__"]["__import__"]("os").system("touch /tmp/dv2s-hostile-marker")
+
+lane = Uniform(*network.lanes)
+ego = new Car at lane.centerline.pointAlongBy(Range(100, 500)), with speed 20
+lead = new Car following roadDirection from ego for Range(15, 30),
+    with behavior None

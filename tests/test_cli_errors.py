@@ -1,0 +1,148 @@
+"""The `dv2s` command's error contract: one clear line on stderr and a non-zero exit for every
+error the project raises (``--debug`` adds the traceback); ``--bank`` anywhere; a folder that is
+not a bank refused; file lists that name only what was written."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from llm_server import closed_port_url
+
+from dv2s_gym.cli import main
+from scenario_bank.bank import BANK_DIR
+
+EVALSET = Path(__file__).resolve().parents[1] / "dv2s_gym" / "evalset"
+VIDEO = sorted(EVALSET.glob("*.webm"))[0]
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def one_line_error(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("dv2s: error: ") and "Traceback" not in err
+    return lines[0]
+
+
+@pytest.fixture
+def no_llm_env(monkeypatch):
+    for name in ("OPENAI_API_KEY", "DV2S_LLM_API_KEY", "DV2S_VLM_API_KEY", "DV2S_LLM_BASE_URL",
+                 "DV2S_VLM_BASE_URL", "DV2S_LLM_MODEL", "DV2S_VLM_MODEL"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("DV2S_LLM_RETRIES", "0")
+
+
+def test_describe_openai_without_api_key_is_one_line(capsys, no_llm_env):
+    code, out, err = run(capsys, "describe", VIDEO, "--dra", "openai")
+    line = one_line_error(err)
+    assert code == 2 and out == ""
+    assert "needs an API key" in line and "OPENAI_API_KEY" in line
+
+
+def test_describe_openai_unreachable_endpoint_is_one_line(capsys, no_llm_env):
+    url = closed_port_url()
+    code, out, err = run(capsys, "describe", VIDEO, "--dra", "openai", "--base-url", url)
+    line = one_line_error(err)
+    assert code == 2 and "could not connect" in line and url in line
+
+
+def test_debug_shows_the_traceback(capsys, no_llm_env):
+    code, _, err = run(capsys, "--debug", "describe", VIDEO, "--dra", "openai")
+    assert code == 2
+    assert "Traceback (most recent call last)" in err and "MissingAPIKeyError" in err
+    assert err.strip().splitlines()[-1].startswith("dv2s: error: ")
+
+
+def test_missing_video_and_bad_trace_are_one_line(capsys, tmp_path):
+    code, _, err = run(capsys, "describe", tmp_path / "nope.webm")
+    assert code == 2 and "nope.webm" in one_line_error(err)
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}")
+    code, _, err = run(capsys, "replay", bad)
+    assert code == 2 and "not a dv2s episode trace" in one_line_error(err)
+
+
+def test_failed_generate_lists_only_what_it_wrote(capsys, tmp_path, no_llm_env):
+    out_dir = tmp_path / "gen"
+    out_dir.mkdir()
+    (out_dir / "scenario.scenic").write_text("# an earlier run's result\n")
+    code, out, err = run(capsys, "generate", "The lead car brakes hard.", "--sg", "openai",
+                         "--base-url", closed_port_url(), "--out", out_dir)
+    assert code == 1
+    assert "generation failed" in out and "could not connect" in out
+    written = sorted(p.name for p in out_dir.iterdir())
+    assert written == ["description.txt", "elements.json", "report.json"]
+    assert f"written to {out_dir}/ (description.txt, elements.json, report.json)" in out
+    assert json.loads((out_dir / "report.json").read_text())["files"] == written
+
+
+@pytest.fixture
+def small_bank(tmp_path):
+    root = tmp_path / "bank"
+    root.mkdir()
+    for name in ("highway_lead_vehicle_brakes", "urban_pedestrian_crossing"):
+        shutil.copytree(BANK_DIR / name, root / name)
+    return root
+
+
+@pytest.mark.parametrize("order", ["before", "between", "after"])
+def test_bank_option_before_or_after_the_subcommand(capsys, small_bank, order):
+    argv = {"before": ["--bank", small_bank, "bank", "list"],
+            "between": ["bank", "--bank", small_bank, "list"],
+            "after": ["bank", "list", "--bank", small_bank]}[order]
+    code, out, err = run(capsys, *argv, "--json")
+    assert code == 0, err
+    names = [s["name"] for s in json.loads(out)["scenarios"]]
+    assert names == ["highway_lead_vehicle_brakes", "urban_pedestrian_crossing"]
+
+
+def test_convert_takes_bank_before_the_subcommand_too():
+    from dv2s_gym.cli import build_parser
+
+    args = build_parser().parse_args(["--bank", "B", "convert", "v.webm", "--add-to-bank"])
+    assert args.bank == "B"
+    args = build_parser().parse_args(["convert", "v.webm", "--add-to-bank", "--bank", "C"])
+    assert args.bank == "C"
+
+
+def test_a_folder_that_is_not_a_bank_is_refused(capsys, tmp_path):
+    folder = tmp_path / "photos"
+    (folder / "2024").mkdir(parents=True)
+    (folder / "2025").mkdir()
+    (folder / "notes.txt").write_text("x")
+    for argv in (["bank", "list", "--bank", folder], ["bank", "stats", "--bank", folder],
+                 ["bank", "add", tmp_path / "x.scenic", "--description", "d", "--bank", folder]):
+        (tmp_path / "x.scenic").write_text("param map = 'highway_straight'\n")
+        code, out, err = run(capsys, *argv)
+        line = one_line_error(err)
+        assert code == 2 and "is not a scenario bank" in line and str(folder) in line, argv
+        assert "2024" not in out and "broken" not in out
+
+
+def test_what_marks_a_bank(tmp_path, small_bank):
+    from scenario_bank.bank import Bank, NotABankError
+
+    assert len(Bank(tmp_path / "new")) == 0  # a folder that does not exist yet: a new bank
+    (tmp_path / "empty").mkdir()
+    assert len(Bank(tmp_path / "empty")) == 0  # an empty folder: a new bank
+    broken = small_bank / "half_written"
+    broken.mkdir()
+    (broken / "scenario.scenic").write_text("x")  # an entry without its sidecar still marks a bank
+    bank = Bank(small_bank)
+    assert len(bank) == 2 and "half_written" in bank.problems
+    (tmp_path / "other" / "sub").mkdir(parents=True)
+    with pytest.raises(NotABankError, match="not a scenario bank"):
+        Bank(tmp_path / "other")
+
+
+def test_a_bank_that_does_not_exist_is_refused_for_reading(capsys, tmp_path):
+    code, _, err = run(capsys, "bank", "list", "--bank", tmp_path / "typo")
+    assert code == 2 and "there is no bank at" in one_line_error(err)

@@ -1,0 +1,119 @@
+"""The external evaluation set: stock highway-env clips, scripted and labelled by hand.
+
+Checks that every clip has its hand-written label (the one in the builder's script table), that the
+builder refuses a script whose event does not happen, and that the offline backends keep the figures
+measured on the set (floors a little below the measured values, which dv2s_gym/evalset_highway_env/README.md
+states).
+"""
+
+import json
+
+import pytest
+
+from dv2s_gym.pipeline.evaluate import VIDEO_SUFFIXES, collect_items, evaluate
+from dv2s_gym.pipeline.make_external_evalset import EXTERNAL_EVALSET_DIR, SCRIPTS, VARIANTS, Scene, Script, \
+    render_script
+from scenario_bank.elements import normalize_elements
+
+# measured on 2026-11-23 (bev DRA, rules SG): per use case (SCS, HR) and E2E-SC
+DRA_MEASURED = {
+    "crossing_paths": (1.000, 0.000), "cut_in": (1.000, 0.000), "ego_lane_change": (1.000, 0.000),
+    "ego_turn": (1.000, 0.000), "lead_vehicle_brakes": (1.000, 0.000), "lead_vehicle_stopped": (0.667, 0.000),
+    "left_turn_oncoming": (1.000, 0.000), "obstacle_in_lane": (1.000, 0.048), "on_ramp_merge": (0.917, 0.000),
+    "overtake": (0.500, 0.000), "roundabout": (0.750, 0.250), "turn_into_path": (1.000, 0.000),
+}
+DRA_OVERALL = (0.912, 0.032)
+E2E_MEASURED = {
+    "crossing_paths": 1.000, "cut_in": 1.000, "ego_lane_change": 0.857, "ego_turn": 0.929,
+    "lead_vehicle_brakes": 1.000, "lead_vehicle_stopped": 0.889, "left_turn_oncoming": 1.000,
+    "obstacle_in_lane": 1.000, "on_ramp_merge": 0.500, "overtake": 0.500, "roundabout": 0.750,
+    "turn_into_path": 1.000,
+}
+E2E_OVERALL = 0.859
+MARGIN = 0.03
+
+
+def test_every_clip_has_its_hand_written_label():
+    items = collect_items(EXTERNAL_EVALSET_DIR)
+    assert len(items) >= 40
+    by_stem = {item.stem: item for item in items}
+    expected = {f"{s.name}_v{k}": s for s in SCRIPTS for k in VARIANTS}
+    assert set(by_stem) == set(expected)
+    for stem, script in expected.items():
+        item = by_stem[stem]
+        assert item.video and item.video.endswith(".webm"), stem
+        label = json.loads((EXTERNAL_EVALSET_DIR / f"{stem}.label.json").read_text(encoding="utf-8"))
+        assert label["elements"] == normalize_elements(script.elements), stem
+        assert label["description"] == script.description and label["use_case"] == script.use_case
+        assert label["env"] == script.env_id in ("highway-v0", "merge-v0", "intersection-v0", "roundabout-v0")
+    # every video has a label, and the folder holds nothing but videos, labels and the README
+    videos = {p.name.rsplit(".", 1)[0] for p in EXTERNAL_EVALSET_DIR.iterdir() if p.suffix in VIDEO_SUFFIXES}
+    assert videos == set(expected)
+    assert {p.suffix for p in EXTERNAL_EVALSET_DIR.iterdir()} == {".webm", ".json", ".md"}
+    assert {s.env_id for s in SCRIPTS} == {"highway-v0", "merge-v0", "intersection-v0", "roundabout-v0"}
+
+
+def test_shipped_clip_is_what_the_builder_renders(tmp_path):
+    from dv2s_gym.pipeline.video import read_video
+    import numpy as np
+
+    script = next(s for s in SCRIPTS if s.name == "hw_cut_in_from_left")
+    path = tmp_path / "clip.webm"
+    result = render_script(script, 1, path)
+    assert result["problem"] is None
+    fresh = read_video(path, fps=None, max_frames=200).frames
+    shipped = read_video(EXTERNAL_EVALSET_DIR / "hw_cut_in_from_left_v1.webm", fps=None, max_frames=200).frames
+    assert len(fresh) == len(shipped) == result["frames"]
+    assert all(np.array_equal(a, b) for a, b in zip(fresh, shipped))
+
+
+def test_builder_refuses_a_script_whose_event_does_not_happen():
+    from dv2s_gym.pipeline import make_external_evalset as m
+
+    def no_cut_in(env, k):
+        ego = m._car(env.road, ("0", "1", 1), 200.0, 22.0, ego=True)
+        car = m._car(env.road, ("0", "1", 0), 206.0, 27.0)   # never told to change lanes
+        return Scene(ego, {"cutter": car}, [],
+                     lambda r: m._require(m._lane_ids(r, "cutter")[-1] == 1, "the car did not cut in"))
+
+    script = Script("broken", "highway-v0", "cut_in", "", {"road": "highway"}, no_cut_in, seconds=2.0)
+    assert render_script(script, 0)["problem"] == "the car did not cut in"
+
+    def rear_end(env, k):
+        ego = m._car(env.road, ("0", "1", 1), 200.0, 30.0, ego=True)
+        ego.enable_lane_change, ego.DISTANCE_WANTED, ego.TIME_WANTED = False, 0.0, 0.0
+        m._car(env.road, ("0", "1", 1), 204.0, 0.0, target_speed=0.0)
+        return Scene(ego, {}, [], lambda r: None)
+
+    crash = Script("crash", "highway-v0", "x", "", {"road": "highway"}, rear_end, seconds=2.0)
+    assert render_script(crash, 0)["problem"].startswith("unscripted crash")
+
+
+@pytest.fixture(scope="module")
+def dra_report():
+    return evaluate("dra", EXTERNAL_EVALSET_DIR, jobs=2, progress=False)
+
+
+@pytest.fixture(scope="module")
+def e2e_report():
+    return evaluate("e2e", EXTERNAL_EVALSET_DIR, jobs=2, progress=False)
+
+
+def test_bev_dra_on_the_external_set(dra_report):
+    summary = dra_report["summary"]
+    assert summary["overall"]["ok_rate"] == 1.0
+    assert summary["overall"]["SCS"]["mean"] >= DRA_OVERALL[0] - MARGIN, summary["overall"]
+    assert summary["overall"]["HR"]["mean"] <= DRA_OVERALL[1] + MARGIN, summary["overall"]
+    assert set(summary["per_use_case"]) == set(DRA_MEASURED)
+    for name, (scs, hr) in DRA_MEASURED.items():
+        block = summary["per_use_case"][name]
+        assert block["SCS"]["mean"] >= scs - MARGIN, (name, block)
+        assert block["HR"]["mean"] <= hr + MARGIN, (name, block)
+
+
+def test_end_to_end_on_the_external_set(e2e_report):
+    summary = e2e_report["summary"]
+    assert summary["overall"]["E2E-SC"]["mean"] >= E2E_OVERALL - MARGIN, summary["overall"]
+    assert set(summary["per_use_case"]) == set(E2E_MEASURED)
+    for name, value in E2E_MEASURED.items():
+        assert summary["per_use_case"][name]["E2E-SC"]["mean"] >= value - MARGIN, name
