@@ -3,7 +3,7 @@
 highway-env's ``KinematicObservation`` builds several pandas DataFrames on every
 step; with a handful of vehicles that costs more than the physics. This class
 produces the same array (same rows, order, normalisation, clipping, padding and
-dtype; a test compares both on live scenes) without pandas.
+dtype; ``tests/test_fast_paths.py`` compares both on live scenes) without pandas.
 """
 
 from __future__ import annotations
@@ -59,4 +59,7 @@ class FastKinematicObservation(KinematicObservation):
             table = np.vstack([table, np.zeros((self.vehicles_count - table.shape[0], len(self.features)))])
         if self.order == "shuffled":
             self.env.np_random.shuffle(table[1:])
-        return table.astype(self.space().dtype)
+        dtype = self.__dict__.get("_dtype")
+        if dtype is None:  # building the space (a gymnasium Box) on every step cost more than the table
+            dtype = self._dtype = self.space().dtype
+        return table.astype(dtype)

@@ -389,6 +389,29 @@ class _ClosestLaneIndex:
         self.lo = np.array(lo, dtype=float).reshape(-1, 2)
         self.hi = np.array(hi, dtype=float).reshape(-1, 2)
         self.factor = np.array(factor, dtype=float)
+        # The same boxes as plain floats: on small networks a Python loop is cheaper than NumPy calls.
+        self.boxes = [(float(a[0]), float(a[1]), float(b[0]), float(b[1]), float(f))
+                      for a, b, f in zip(self.lo, self.hi, self.factor)]
+
+    def lower_bounds(self, x: float, y: float):
+        """Lower bound of each lane's ``distance_with_heading`` at ``(x, y)``, as ``[(bound, k), ...]``."""
+        if len(self.boxes) > _SMALL_NETWORK:
+            dx = np.maximum(np.maximum(self.lo[:, 0] - x, x - self.hi[:, 0]), 0.0)
+            dy = np.maximum(np.maximum(self.lo[:, 1] - y, y - self.hi[:, 1]), 0.0)
+            # 0.25 m slack covers the centimetre-scale seam artifacts of Scenic centerlines
+            bound = np.maximum(np.hypot(dx, dy) - 0.25, 0.0) * self.factor
+            return [(bound[k], int(k)) for k in np.argsort(bound, kind="stable")]
+        bounds = []
+        for k, (lox, loy, hix, hiy, factor) in enumerate(self.boxes):
+            dx = max(lox - x, x - hix, 0.0)
+            dy = max(loy - y, y - hiy, 0.0)
+            bounds.append((max(math.hypot(dx, dy) - 0.25, 0.0) * factor, k))
+        bounds.sort()
+        return bounds
+
+
+_SMALL_NETWORK = 32
+"""Up to this many lanes, closest-lane bounds are computed in plain Python."""
 
 
 class IndexedRoadNetwork(RoadNetwork):
@@ -417,17 +440,13 @@ class IndexedRoadNetwork(RoadNetwork):
         if index is None:
             index = self._closest_index = _ClosestLaneIndex(self)
         p = np.asarray(position, dtype=float)[:2]
-        dx = np.maximum(np.maximum(index.lo[:, 0] - p[0], p[0] - index.hi[:, 0]), 0.0)
-        dy = np.maximum(np.maximum(index.lo[:, 1] - p[1], p[1] - index.hi[:, 1]), 0.0)
-        # 0.25 m slack covers the centimetre-scale seam artifacts of Scenic centerlines
-        bound = np.maximum(np.hypot(dx, dy) - 0.25, 0.0) * index.factor
         best_d, best_k = math.inf, -1
-        for k in np.argsort(bound, kind="stable"):
-            if bound[k] > best_d:
+        for bound, k in index.lower_bounds(float(p[0]), float(p[1])):
+            if bound > best_d:
                 break
             d = index.lanes[k].distance_with_heading(p, heading)
             if d < best_d or (d == best_d and k < best_k):
-                best_d, best_k = d, int(k)
+                best_d, best_k = d, k
         if best_k < 0:  # empty network or NaN position: defer to highway-env
             return super().get_closest_lane_index(position, heading)
         return index.indexes[best_k]

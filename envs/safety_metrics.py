@@ -27,33 +27,28 @@ def time_to_collision(
     rot = np.array([[c, s], [-s, c]])  # world -> ego frame
     pos = np.array([o.position for o in others]) - ego.position
     vel = np.array([o.velocity for o in others]) - ego.velocity
-    p = pos @ rot.T
-    v = vel @ rot.T
-    if ahead_only:
-        keep = p[:, 0] > 0
-        if not keep.any():
-            return math.inf, ""
-        others = [o for o, k in zip(others, keep) if k]
-        p, v = p[keep], v[keep]
-    half_l = np.array([(o.LENGTH + ego.LENGTH) / 2 for o in others])
-    half_w = np.array([(o.WIDTH + ego.WIDTH) / 2 for o in others])
-    enter = np.zeros(len(others))
-    leave = np.full(len(others), np.inf)
-    for axis, half in ((0, half_l), (1, half_w)):
-        pa, va = p[:, axis], v[:, axis]
-        moving = np.abs(va) > 1e-9
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t1 = np.where(moving, (-half - pa) / va, -np.inf)
-            t2 = np.where(moving, (half - pa) / va, np.inf)
-        lo, hi = np.minimum(t1, t2), np.maximum(t1, t2)
-        inside = np.abs(pa) <= half
-        lo = np.where(moving, lo, np.where(inside, -np.inf, np.inf))
-        hi = np.where(moving, hi, np.where(inside, np.inf, -np.inf))
-        enter = np.maximum(enter, lo)
-        leave = np.minimum(leave, hi)
-    hit = (enter <= leave) & (leave >= 0) & (enter <= horizon)
-    if not hit.any():
+    # The frame change stays in NumPy (its BLAS rounding is part of the result); the
+    # interval arithmetic on a handful of objects is cheaper in plain Python.
+    p = (pos @ rot.T).tolist()
+    v = (vel @ rot.T).tolist()
+    best, best_other = math.inf, None
+    for other, (px, py), (vx, vy) in zip(others, p, v):
+        if ahead_only and not px > 0:
+            continue
+        enter, leave = 0.0, math.inf
+        for pa, va, half in ((px, vx, (other.LENGTH + ego.LENGTH) / 2), (py, vy, (other.WIDTH + ego.WIDTH) / 2)):
+            if abs(va) > 1e-9:
+                t1, t2 = (-half - pa) / va, (half - pa) / va
+                lo, hi = min(t1, t2), max(t1, t2)
+            elif abs(pa) <= half:
+                lo, hi = -math.inf, math.inf
+            else:
+                lo, hi = math.inf, -math.inf
+            enter, leave = max(enter, lo), min(leave, hi)
+        if enter <= leave and leave >= 0 and enter <= horizon:
+            time = max(enter, 0.0)
+            if time < best or best_other is None:
+                best, best_other = time, other
+    if best_other is None:
         return math.inf, ""
-    times = np.where(hit, np.maximum(enter, 0.0), np.inf)
-    i = int(np.argmin(times))
-    return float(times[i]), getattr(others[i], "name", type(others[i]).__name__)
+    return float(best), getattr(best_other, "name", type(best_other).__name__)

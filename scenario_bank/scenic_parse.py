@@ -6,16 +6,28 @@ compiler then parses again, and Scenic purges its compiled modules after every
 scenario, so each new compile re-parses the world model and the driving domain.
 Parsing is a pure function of the text, so trees are kept (a bounded LRU) and
 handed out as copies where the caller rewrites them.
+
+Trees of the *library* modules every compile needs (Scenic's own ``.scenic``
+files, i.e. the driving domain, and the project's world model) are also kept on
+disk, in the user cache directory, so a fresh process (``dv2s convert`` of one
+clip) does not parse them again (about 0.35 s). Scripts from anywhere else
+(generated, user or bank scripts) are never written there. The files are
+pickles that may only rebuild AST nodes (a restricted unpickler); a file that
+does not load is ignored and the text parsed.
 """
 
 from __future__ import annotations
 
 import ast
 import hashlib
+import io
+import os
+import pickle
 from collections import OrderedDict
-from typing import Any
+from pathlib import Path
+from typing import Any, Optional
 
-__all__ = ["parse_scenic", "install_parse_cache"]
+__all__ = ["parse_scenic", "install_parse_cache", "cache_dir"]
 
 _PARSED: "OrderedDict[str, Any]" = OrderedDict()
 _MAX_TREES = 64
@@ -35,13 +47,107 @@ def _copy_tree(node: Any) -> Any:
     return node
 
 
+def _rebuild(cls, state):
+    node = cls.__new__(cls)
+    node.__dict__.update(state)
+    return node
+
+
+class _TreePickler(pickle.Pickler):
+    def reducer_override(self, obj):
+        if isinstance(obj, ast.AST):  # Scenic's node classes take required __init__ arguments
+            return _rebuild, (type(obj), dict(vars(obj)))
+        return NotImplemented
+
+
+class _TreeUnpickler(pickle.Unpickler):
+    _BUILTINS = {"Ellipsis", "complex", "frozenset", "set", "slice"}
+
+    def find_class(self, module, name):
+        if module == __name__ and name == "_rebuild":
+            return _rebuild
+        if module == "builtins" and name in self._BUILTINS:
+            return super().find_class(module, name)
+        if module in ("ast", "_ast", "scenic.syntax.ast"):
+            cls = super().find_class(module, name)
+            if isinstance(cls, type) and issubclass(cls, ast.AST):
+                return cls
+        raise pickle.UnpicklingError(f"{module}.{name} is not an AST node")
+
+
+def cache_dir() -> Path:
+    """Folder of the on-disk parse cache: ``$DV2S_CACHE_DIR/scenic-parse`` or the user cache dir."""
+    root = os.environ.get("DV2S_CACHE_DIR")
+    if not root:
+        try:
+            from platformdirs import user_cache_dir
+
+            root = user_cache_dir("dv2s-gym")
+        except ImportError:  # pragma: no cover - platformdirs is a dependency of the install
+            root = os.path.join(os.path.expanduser("~"), ".cache", "dv2s-gym")
+    return Path(root) / "scenic-parse"
+
+
+def _library_roots():
+    import scenic
+
+    here = Path(__file__).resolve().parents[1]
+    return (Path(scenic.__file__).resolve().parent, here / "envs" / "scenic_highway")
+
+
+def _is_library_file(filename: str) -> bool:
+    """True for a ``.scenic`` file of Scenic itself or of the project's world model."""
+    if not filename.endswith(".scenic") or not os.path.isfile(filename):
+        return False
+    path = Path(filename).resolve()
+    return any(root in path.parents for root in _library_roots())
+
+
+def _disk_key(source: str) -> str:
+    from importlib.metadata import version
+
+    try:
+        scenic_version = version("scenic")
+    except Exception:  # pragma: no cover - scenic installed without metadata
+        scenic_version = "unknown"
+    return hashlib.sha256(f"{scenic_version}\0{source}".encode("utf-8")).hexdigest()
+
+
+def _load_from_disk(key: str) -> Optional[Any]:
+    try:
+        data = (cache_dir() / f"{key}.pickle").read_bytes()
+        tree = _TreeUnpickler(io.BytesIO(data)).load()
+    except Exception:  # missing, unreadable, truncated or foreign: parse instead
+        return None
+    return tree if isinstance(tree, ast.AST) else None
+
+
+def _save_to_disk(key: str, tree: Any) -> None:
+    folder = cache_dir()
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        buffer = io.BytesIO()
+        _TreePickler(buffer, protocol=pickle.HIGHEST_PROTOCOL).dump(tree)
+        tmp = folder / f".{key}.{os.getpid()}.tmp"
+        tmp.write_bytes(buffer.getvalue())
+        os.replace(tmp, folder / f"{key}.pickle")
+    except (OSError, pickle.PicklingError, RecursionError):
+        pass  # a read-only or full cache only costs the parse next time
+
+
 def _parsed(source: str, filename: str, parse) -> Any:
     # A tree holds positions, not the file name (only errors name the file, and errors are not
     # kept), so the text alone is the key: the safety check's tree serves the compiler too.
     key = hashlib.sha256(source.encode("utf-8")).hexdigest()
     tree = _PARSED.get(key)
     if tree is None:
-        tree = parse(source, "exec", filename=filename)
+        library = _is_library_file(filename)
+        disk_key = _disk_key(source) if library else None
+        tree = _load_from_disk(disk_key) if library else None
+        if tree is None:
+            tree = parse(source, "exec", filename=filename)
+            if library:
+                _save_to_disk(disk_key, tree)
         _PARSED[key] = tree
         if len(_PARSED) > _MAX_TREES:
             _PARSED.popitem(last=False)

@@ -312,6 +312,31 @@ def test_closest_lane_index_matches_highway_env(converted: ConvertedNetwork):
             assert d_fast == pytest.approx(d_slow, abs=1e-9)
 
 
+def test_closest_lane_bounds_same_in_python_and_numpy(converted: ConvertedNetwork, monkeypatch):
+    """Small networks bound lanes in plain Python, large ones with NumPy: the same bounds and lane."""
+    import envs.road_network as road_network
+
+    hw = converted.hw_network
+    lanes = hw.lanes_list()
+    rng = np.random.default_rng(2)
+    points = []
+    for _ in range(100):
+        lane = lanes[rng.integers(len(lanes))]
+        pos = lane.position(rng.uniform(-10, lane.length + 10), rng.normal(0, 6))
+        points.append((pos, rng.uniform(-math.pi, math.pi)))
+    hw.get_closest_lane_index(points[0][0])  # builds the index
+    index = hw._closest_index
+    monkeypatch.setattr(road_network, "_SMALL_NETWORK", 10**6)
+    python = [(index.lower_bounds(*pos), hw.get_closest_lane_index(pos, h)) for pos, h in points]
+    monkeypatch.setattr(road_network, "_SMALL_NETWORK", -1)
+    numpy = [(index.lower_bounds(*pos), hw.get_closest_lane_index(pos, h)) for pos, h in points]
+    for (b_py, lane_py), (b_np, lane_np) in zip(python, numpy):
+        assert lane_py == lane_np
+        assert sorted(k for _, k in b_py) == list(range(len(lanes)))
+        by_lane = dict((k, b) for b, k in b_np)
+        assert all(b == pytest.approx(by_lane[k], abs=1e-9) for b, k in b_py)
+
+
 def test_polyline_lane_coordinates_round_trip():
     pts = [(0.0, 0.0), (10.0, 0.0), (17.0, 7.0), (17.0, 20.0), (5.0, 25.0)]
     lane = PolylineLane(pts, width=3.0)

@@ -26,6 +26,11 @@ MAX_STEERING_ANGLE = math.radians(70)
 """Front-wheel angle at full steer [rad] (CARLA's cars steer up to about 70 degrees)."""
 
 
+def _clip(value: float, low: float, high: float) -> float:
+    """``np.clip`` for one float (a NumPy call costs more than the controls it clips)."""
+    return min(max(value, low), high)
+
+
 class ScenicVehicle(Vehicle):
     """A vehicle whose low-level controls are set by a Scenic behaviour.
 
@@ -65,9 +70,9 @@ class ScenicVehicle(Vehicle):
         reverse: bool = False,
     ) -> None:
         """Store Scenic controls; they take effect at the next :meth:`step`."""
-        self.throttle = float(np.clip(throttle, 0.0, 1.0))
-        self.brake = float(np.clip(brake, 0.0, 1.0))
-        self.steer = float(np.clip(steer, -1.0, 1.0))
+        self.throttle = _clip(float(throttle), 0.0, 1.0)
+        self.brake = _clip(float(brake), 0.0, 1.0)
+        self.steer = _clip(float(steer), -1.0, 1.0)
         self.hand_brake = bool(hand_brake)
         self.reverse = bool(reverse)
         self._hold_speed = False

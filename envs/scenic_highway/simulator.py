@@ -39,6 +39,7 @@ from envs.coordinates import (
 )
 from envs.hw_road import EventRoad
 from envs.scenic_highway.actors import Pedestrian, Prop, ScenicVehicle
+from envs.scenic_highway.readback import update_objects
 
 __all__ = [
     "EgoDriver",
@@ -212,7 +213,10 @@ class HighwayEnvSimulation(DrivingSimulation):
             obj.elevation = 0.0
 
     def updateObjects(self) -> None:
-        super().updateObjects()
+        if self._replayOut or self.replaying:
+            super().updateObjects()  # Scenic's replay recording and divergence checks
+        else:
+            update_objects(self, self.getProperties)
         if self._agent_drives and not self._ego_behavior_set_aside:
             # Scenic starts every behaviour before the first step; once started, the
             # agent-driven ego's own behaviour is stopped and never stepped.
