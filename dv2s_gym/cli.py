@@ -155,6 +155,9 @@ def _cmd_bank_story(args: argparse.Namespace) -> int:
     for name, row in table.items():
         cells = [f"{row[e]['rate']:>8.2f}" + ("*" if row[e]["rate"] < args.threshold else " ") for e in egos]
         lines.append(f"{name:<{width}}  " + "  ".join(cells))
+    crashes = sum(cell["by_collision"] for row in table.values() for cell in row.values())
+    lines.append(f"({crashes} of {len(names) * len(egos) * args.seeds} episodes count because the ego hit an "
+                 "actor of the story before the trace showed all of it)")
     for name in under:
         for ego in egos:
             for seed, problem in table[name][ego]["failures"][:3]:
