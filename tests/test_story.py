@@ -77,3 +77,31 @@ def test_baselines_refuse_other_action_types():
     env.config["action"]["type"] = "ContinuousAction"
     with pytest.raises(ValueError, match="DiscreteMetaAction"):
         IDMEgo(env)
+
+
+def test_cli_story_table_and_exit_code(tmp_path, capsys):
+    """`dv2s bank validate --story`: 0 when every scenario plays its story, 1 (naming it) when one does not."""
+    import json
+    import shutil
+
+    from dv2s_gym.cli import main
+    from scenario_bank import BANK_DIR
+
+    bank = tmp_path / "bank"
+    shutil.copytree(BANK_DIR / "highway_lead_vehicle_stopped", bank / "stopped")
+    shutil.copytree(BANK_DIR / "highway_lead_vehicle_stopped", bank / "untold")
+    for name in ("stopped", "untold"):
+        meta = json.loads((bank / name / "meta.json").read_text())
+        meta["name"] = name
+        if name == "untold":  # a story this script never plays
+            meta["elements"]["actions"].append(["car", "turn_left"])
+        (bank / name / "meta.json").write_text(json.dumps(meta))
+    argv = ["bank", "--bank", str(bank), "validate", "--story", "--seeds", "2", "--egos", "keep_lane", "idm", "--"]
+    assert main(argv[:-1] + ["--json", "--", "stopped"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["table"]["stopped"]["idm"]["rate"] == 1.0 and data["under_threshold"] == []
+    assert main(argv) == 1
+    out = capsys.readouterr().out
+    assert "under: untold" in out and "missing car turn_left" in out
+    assert main(argv + ["nosuch"]) == 2
+    assert "unknown scenario 'nosuch'" in capsys.readouterr().err
