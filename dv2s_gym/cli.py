@@ -151,7 +151,13 @@ def _cmd_bank_validate(args: argparse.Namespace) -> int:
 def _cmd_bank_story(args: argparse.Namespace) -> int:
     from dv2s_gym.story import EGOS, story_table
 
-    names = args.name or _bank(args).names()
+    known = _bank(args).names()
+    unknown = [n for n in args.name if n not in known]
+    if unknown:
+        print(f"dv2s: unknown scenario {unknown[0]!r} in the bank; `dv2s bank list` shows its scenarios",
+              file=sys.stderr)
+        return 2
+    names = args.name or known
     egos = args.egos or list(EGOS)
     table = story_table(names, egos, range(args.seeds), bank_root=args.bank, jobs=args.jobs,
                         progress=not args.json)
@@ -162,6 +168,9 @@ def _cmd_bank_story(args: argparse.Namespace) -> int:
     for name, row in table.items():
         cells = [f"{row[e]['rate']:>8.2f}" + ("*" if row[e]["rate"] < args.threshold else " ") for e in egos]
         lines.append(f"{name:<{width}}  " + "  ".join(cells))
+    crashes = sum(cell["by_collision"] for row in table.values() for cell in row.values())
+    lines.append(f"({crashes} of {len(names) * len(egos) * args.seeds} episodes count because the ego hit an "
+                 "actor of the story before the trace showed all of it)")
     for name in under:
         for ego in egos:
             for seed, problem in table[name][ego]["failures"][:3]:

@@ -25,8 +25,8 @@ from __future__ import annotations
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
-__all__ = ["EGOS", "STORY_SECONDS", "required_elements", "story_problem", "ego_collisions", "run_episode", "story_rate",
-           "story_table"]
+__all__ = ["EGOS", "STORY_SECONDS", "required_elements", "story_problem", "ego_collisions", "run_episode",
+           "story_episodes", "story_rate", "story_table"]
 
 EGOS = ("scenic", "rule", "keep_lane", "idm")
 """Ego drivers a story is checked against."""
@@ -110,11 +110,12 @@ def run_episode(script_path: str, ego: str, seed: int, seconds: Optional[float] 
         env.close()
 
 
-def story_rate(name: str, ego: str, seeds: Sequence[int], bank_root: Optional[str] = None
-               ) -> Tuple[float, List[Tuple[int, str]]]:
-    """Share of ``seeds`` whose episode plays the story of bank scenario ``name`` with ``ego``.
+def story_episodes(name: str, ego: str, seeds: Sequence[int], bank_root: Optional[str] = None
+                   ) -> List[Dict[str, Any]]:
+    """Per seed: ``{"seed", "problem", "missing", "ego_hit"}`` for bank scenario ``name`` with ``ego``.
 
-    Returns ``(rate, failures)``, ``failures`` a list of ``(seed, what was missing)``.
+    ``problem`` is None when the episode plays the story; ``missing`` is what its trace lacks when a
+    collision is not counted as the story (None when nothing is missing); ``ego_hit`` the kinds the ego hit.
     """
     from dv2s_gym.pipeline.trace_semantics import elements_from_trace
     from scenario_bank.bank import Bank
@@ -123,29 +124,47 @@ def story_rate(name: str, ego: str, seeds: Sequence[int], bank_root: Optional[st
     entry = Bank(bank_root).get(name)
     elements = normalize_elements(entry.elements)
     seconds = STORY_SECONDS.get(name)
-    failures: List[Tuple[int, str]] = []
+    records = []
     for seed in seeds:
         trace = run_episode(str(entry.script_path), ego, seed, seconds)
-        problem = story_problem(elements, elements_from_trace(trace), ego, ego_collisions(trace))
-        if problem:
-            failures.append((seed, problem))
-    seeds = list(seeds)
-    return (1.0 - len(failures) / len(seeds)) if seeds else 0.0, failures
+        shown, hit = elements_from_trace(trace), ego_collisions(trace)
+        records.append({"seed": seed, "problem": story_problem(elements, shown, ego, hit),
+                        "missing": story_problem(elements, shown, ego), "ego_hit": hit})
+    return records
 
 
-def _rate_job(args) -> Tuple[str, str, float, List[Tuple[int, str]]]:
+def story_rate(name: str, ego: str, seeds: Sequence[int], bank_root: Optional[str] = None
+               ) -> Tuple[float, List[Tuple[int, str]]]:
+    """Share of ``seeds`` whose episode plays the story of bank scenario ``name`` with ``ego``.
+
+    Returns ``(rate, failures)``, ``failures`` a list of ``(seed, what was missing)``.
+    """
+    records = story_episodes(name, ego, seeds, bank_root)
+    failures = [(r["seed"], r["problem"]) for r in records if r["problem"]]
+    return (1.0 - len(failures) / len(records)) if records else 0.0, failures
+
+
+def _rate_job(args) -> Tuple[str, str, Dict[str, Any]]:
     name, ego, seeds, bank_root = args
     try:
-        rate, failures = story_rate(name, ego, seeds, bank_root)
+        records = story_episodes(name, ego, seeds, bank_root)
     except Exception as error:  # a scenario that does not run has no story
-        rate, failures = 0.0, [(-1, f"{type(error).__name__}: {error}")]
-    return name, ego, rate, failures
+        return name, ego, {"rate": 0.0, "failures": [(-1, f"{type(error).__name__}: {error}")],
+                           "by_collision": 0}
+    failures = [(r["seed"], r["problem"]) for r in records if r["problem"]]
+    by_collision = sum(1 for r in records if r["problem"] is None and r["missing"])
+    return name, ego, {"rate": 1.0 - len(failures) / len(records) if records else 0.0, "failures": failures,
+                       "by_collision": by_collision}
 
 
 def story_table(names: Sequence[str], egos: Sequence[str] = EGOS, seeds: Sequence[int] = range(20),
                 bank_root: Optional[str] = None, jobs: int = 1, progress: bool = True
                 ) -> Dict[str, Dict[str, Dict[str, Any]]]:
-    """``{scenario: {ego: {"rate", "failures"}}}`` over ``seeds``, in ``jobs`` processes."""
+    """``{scenario: {ego: {"rate", "failures", "by_collision"}}}`` over ``seeds``, in ``jobs`` processes.
+
+    ``by_collision``: episodes counted as playing the story because the ego hit a story actor
+    before the trace showed all of it.
+    """
     from tqdm import tqdm
 
     unknown = [e for e in egos if e not in EGOS]
@@ -159,8 +178,8 @@ def story_table(names: Sequence[str], egos: Sequence[str] = EGOS, seeds: Sequenc
     else:
         pool = ProcessPoolExecutor(max_workers=jobs)
         results = pool.map(_rate_job, tasks)
-    for name, ego, rate, failures in results:
-        table[name][ego] = {"rate": rate, "failures": failures}
+    for name, ego, cell in results:
+        table[name][ego] = cell
         bar.update()
     if jobs > 1:
         pool.shutdown()

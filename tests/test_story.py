@@ -1,0 +1,107 @@
+"""The story rule (dv2s_gym/story.py) and the baseline egos (policies/baselines.py)."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from dv2s_gym.story import ego_collisions, required_elements, story_problem
+from policies.baselines import IDMEgo, KeepLaneEgo
+from policies.rule_based import FASTER, IDLE, SLOWER
+
+STORY = {
+    "actions": [["car", "go_straight"], ["ego", "turn_left"]],
+    "relations": [["car", "crossing_path", "ego"], ["car", "oncoming", "ego"]],
+}
+
+
+def test_ego_actions_are_required_only_of_the_scripts_own_ego():
+    assert ("ego", "turn_left") in required_elements(STORY, "scenic")
+    for ego in ("rule", "keep_lane", "idm"):
+        assert required_elements(STORY, ego) == {("car", "go_straight"), ("car", "crossing_path", "ego"),
+                                                 ("car", "oncoming", "ego")}
+
+
+def test_story_problem_names_what_is_missing():
+    shown = {"actions": [["car", "go_straight"]], "relations": [["car", "oncoming", "ego"]]}
+    assert story_problem(STORY, shown, "idm") == "missing car crossing_path ego"
+    shown["relations"].append(["car", "crossing_path", "ego"])
+    assert story_problem(STORY, shown, "idm") is None
+    assert story_problem(STORY, shown, "scenic") == "missing ego turn_left"
+
+
+def test_a_collision_with_a_story_actor_counts_but_not_with_a_bystander():
+    assert story_problem(STORY, {}, "rule", ego_hit=["car"]) is None
+    assert story_problem(STORY, {}, "rule", ego_hit=["pedestrian"]) is not None
+
+
+def test_ego_collisions_reads_the_kinds_of_what_the_ego_hit():
+    trace = SimpleNamespace(kinds={}, events=[
+        {"kind": "collision", "actors": ["ego", "Pedestrian1"]},
+        {"kind": "collision", "actors": ["Car1", "Car2"]},
+        {"kind": "lane_change", "actors": ["ego"]},
+    ])
+    assert ego_collisions(trace) == ["pedestrian"]
+
+
+def _fake_env(ego_speed: float, leader_gap: float = None, leader_speed: float = 0.0, lateral: float = 0.0):
+    ego = SimpleNamespace(position=np.array([0.0, 0.0]), heading=0.0, speed=ego_speed, LENGTH=5.0, WIDTH=2.0)
+    others = [ego]
+    if leader_gap is not None:
+        others.append(SimpleNamespace(position=np.array([leader_gap + 5.0, lateral]), WIDTH=2.0, LENGTH=5.0,
+                                      velocity=np.array([leader_speed, 0.0])))
+    base = SimpleNamespace(vehicle=ego, steps=0, config={"action": {"type": "DiscreteMetaAction"}},
+                           road=SimpleNamespace(vehicles=others, objects=[]))
+    base.unwrapped = base
+    return base
+
+
+def test_keep_lane_ego_always_idles():
+    driver = KeepLaneEgo(_fake_env(20.0, leader_gap=3.0))
+    assert [driver() for _ in range(5)] == [IDLE] * 5
+
+
+def test_idm_ego_brakes_for_a_close_slow_leader_and_ignores_the_next_lane():
+    assert IDMEgo(_fake_env(20.0, leader_gap=8.0, leader_speed=5.0)).act() == SLOWER
+    assert IDMEgo(_fake_env(20.0, leader_gap=8.0, leader_speed=5.0, lateral=3.5)).act() == IDLE
+    assert IDMEgo(_fake_env(20.0)).act() == IDLE  # free road at its own desired speed
+    assert IDMEgo(_fake_env(10.0), desired_speed=20.0).act() == FASTER
+    assert math.isinf(IDMEgo._leader(_fake_env(20.0).vehicle, [])[0])
+
+
+def test_baselines_refuse_other_action_types():
+    env = _fake_env(20.0)
+    env.config["action"]["type"] = "ContinuousAction"
+    with pytest.raises(ValueError, match="DiscreteMetaAction"):
+        IDMEgo(env)
+
+
+def test_cli_story_table_and_exit_code(tmp_path, capsys):
+    """`dv2s bank validate --story`: 0 when every scenario plays its story, 1 (naming it) when one does not."""
+    import json
+    import shutil
+
+    from dv2s_gym.cli import main
+    from scenario_bank import BANK_DIR
+
+    bank = tmp_path / "bank"
+    shutil.copytree(BANK_DIR / "highway_lead_vehicle_stopped", bank / "stopped")
+    shutil.copytree(BANK_DIR / "highway_lead_vehicle_stopped", bank / "untold")
+    for name in ("stopped", "untold"):
+        meta = json.loads((bank / name / "meta.json").read_text())
+        meta["name"] = name
+        if name == "untold":  # a story this script never plays
+            meta["elements"]["actions"].append(["car", "turn_left"])
+        (bank / name / "meta.json").write_text(json.dumps(meta))
+    argv = ["bank", "--bank", str(bank), "validate", "--story", "--seeds", "2", "--egos", "keep_lane", "idm", "--"]
+    assert main(argv[:-1] + ["--json", "--", "stopped"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["table"]["stopped"]["idm"]["rate"] == 1.0 and data["under_threshold"] == []
+    assert main(argv) == 1
+    out = capsys.readouterr().out
+    assert "under: untold" in out and "missing car turn_left" in out
+    assert main(argv + ["nosuch"]) == 2
+    assert "unknown scenario 'nosuch'" in capsys.readouterr().err
