@@ -8,40 +8,16 @@ share :class:`policies.rule_based.CautiousDriver`'s call interface (``act()``,
 from __future__ import annotations
 
 import math
-from typing import Any, Optional, Tuple
+from typing import Optional, Tuple
 
 import numpy as np
 
-from policies.rule_based import FASTER, IDLE, SLOWER
+from policies.state_driver import FASTER, IDLE, SLOWER, StateDriver
 
 __all__ = ["KeepLaneEgo", "IDMEgo"]
 
 
-class _Baseline:
-    """Shared plumbing: action-type check and the SB3 / callable interfaces."""
-
-    def __init__(self, env) -> None:
-        self.env = env
-        action_type = env.unwrapped.config["action"]["type"]
-        if action_type != "DiscreteMetaAction":
-            raise ValueError(f"{type(self).__name__} drives with DiscreteMetaAction, not {action_type}; "
-                             "set config['action'] = {'type': 'DiscreteMetaAction'}")
-
-    def act(self) -> int:  # pragma: no cover - overridden
-        raise NotImplementedError
-
-    def predict(
-        self, observation: Any, state: Optional[Any] = None, episode_start: Optional[Any] = None,
-        deterministic: bool = True,
-    ) -> Tuple[np.ndarray, Optional[Any]]:
-        """SB3-compatible: ``(action, state)`` for the env's current state."""
-        return np.array(self.act()), state
-
-    def __call__(self, observation: Any = None, info: Optional[dict] = None) -> int:
-        return self.act()
-
-
-class KeepLaneEgo(_Baseline):
+class KeepLaneEgo(StateDriver):
     """Holds its lane at the speed it starts with: ``IDLE`` every step, whatever happens."""
 
     def act(self) -> int:
@@ -49,7 +25,7 @@ class KeepLaneEgo(_Baseline):
         return IDLE
 
 
-class IDMEgo(_Baseline):
+class IDMEgo(StateDriver):
     """Stays in its lane; speeds up, slows down or holds from an IDM acceleration.
 
     The Intelligent Driver Model acceleration

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Optional, Tuple
+from typing import Optional
 
 import numpy as np
 
 from envs.safety_metrics import time_to_collision
+from policies.state_driver import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER, StateDriver
 
-__all__ = ["CautiousDriver"]
+__all__ = ["CautiousDriver", "LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER"]
 
 
 def _planned_path(ego, times: np.ndarray, speed: float) -> Optional[np.ndarray]:
@@ -49,11 +50,7 @@ def _planned_path(ego, times: np.ndarray, speed: float) -> Optional[np.ndarray]:
             points.append(lane.position(lane.length, 0.0) + (s - lane.length) * np.array([math.cos(end), math.sin(end)]))
     return np.asarray(points, dtype=float)
 
-# highway-env DiscreteMetaAction indices
-LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = 0, 1, 2, 3, 4
-
-
-class CautiousDriver:
+class CautiousDriver(StateDriver):
     """Keep lane, hold a cruise speed, slow down whenever something closes in or will cross its path.
 
     Reads the simulator state (privileged), so it works on any scenario without
@@ -78,16 +75,13 @@ class CautiousDriver:
         self, env, cruise_speed: Optional[float] = None, ttc_brake: float = 4.0, headway: float = 1.5,
         yield_horizon: float = 3.0, conflict_radius: float = 2.8,
     ) -> None:
-        self.env = env
+        super().__init__(env)
         self.cruise_speed = cruise_speed
         self.ttc_brake = ttc_brake
         self.headway = headway
         self.yield_horizon = yield_horizon
         self.conflict_radius = conflict_radius
         self._cruise: Optional[float] = None
-        action_type = env.unwrapped.config["action"]["type"]
-        if action_type != "DiscreteMetaAction":
-            raise ValueError(f"CautiousDriver drives with DiscreteMetaAction, not {action_type}")
 
     def act(self) -> int:
         """The next action for the current state of the env."""
@@ -139,13 +133,3 @@ class CautiousDriver:
             if np.min(np.linalg.norm(future - path, axis=1)) < self.conflict_radius:
                 return True
         return False
-
-    def predict(
-        self, observation: Any, state: Optional[Any] = None, episode_start: Optional[Any] = None,
-        deterministic: bool = True,
-    ) -> Tuple[np.ndarray, Optional[Any]]:
-        """SB3-compatible: ``(action, state)`` for the env's current state."""
-        return np.array(self.act()), state
-
-    def __call__(self, observation: Any = None, info: Optional[dict] = None) -> int:
-        return self.act()
