@@ -1,0 +1,416 @@
+"""Load a driving policy by name or path behind one batched interface.
+
+Every policy is a :class:`Policy`: ``act(observations) -> actions`` over a batch
+(one row per env). A *spec* names it:
+
+- a registered name: ``rule`` (:class:`~policies.rule_based.CautiousDriver`),
+  ``idm`` (:class:`~policies.baselines.IDMEgo`), ``keep_lane``
+  (:class:`~policies.baselines.KeepLaneEgo`), ``random``, the shipped checkpoint
+  ``dv2s-ppo``, or anything added with :func:`register_policy`;
+- a stable-baselines3 checkpoint: ``path/to/model.zip`` (the algorithm is read from
+  the model card beside it, ``model_card.json``, or found by trying PPO, DQN, SAC,
+  A2C and TD3), or ``ppo:path/to/model.zip`` to name it;
+- a Python object: ``package.module:attribute`` (a :class:`Policy`, a factory
+  returning one, or a plain callable ``obs -> action``).
+
+Options follow a ``?`` as ``key=value`` pairs and are passed to the factory, e.g.
+``idm?time_headway=2.0``. ``action_noise=p`` works on every policy: with probability
+``p`` per step the action is replaced by a uniformly random one (a deliberately
+degraded copy, used to check that regression tests catch a worse policy).
+
+Policies that read the simulator state instead of the observation
+(``privileged = True``) must be bound to their envs with :meth:`Policy.bind`
+before acting (the regression runner does this).
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+
+import gymnasium as gym
+import numpy as np
+
+from envs.errors import DV2SError
+
+__all__ = [
+    "Policy",
+    "PolicyError",
+    "PolicySpaceError",
+    "StateDriverPolicy",
+    "CallablePolicy",
+    "RandomPolicy",
+    "SB3Policy",
+    "ActionNoise",
+    "register_policy",
+    "registered_policies",
+    "load_policy",
+    "parse_spec",
+    "SHIPPED_CHECKPOINT",
+]
+
+SHIPPED_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "dv2s_ppo" / "model.zip"
+"""The PPO checkpoint shipped with the package (``dv2s-ppo``)."""
+
+SB3_ALGORITHMS = ("ppo", "dqn", "sac", "a2c", "td3")
+
+
+class PolicyError(DV2SError, ValueError):
+    """A policy spec that names nothing loadable, or a checkpoint that does not load."""
+
+
+class PolicySpaceError(PolicyError):
+    """A policy whose observation or action space does not match the env's."""
+
+
+class Policy:
+    """A driving policy: batched ``act(observations) -> actions``.
+
+    Attributes:
+        name: the spec it was loaded from (shown in reports).
+        privileged: ``True`` when it reads the simulator state and needs :meth:`bind`.
+        observation_space / action_space: the spaces it was made for, or ``None`` when
+            it adapts to any env (checked by :meth:`check_spaces`).
+    """
+
+    name: str = "policy"
+    privileged: bool = False
+    observation_space: Optional[gym.Space] = None
+    action_space: Optional[gym.Space] = None
+
+    def bind(self, envs: Sequence[gym.Env]) -> None:
+        """Attach the envs this policy acts in, one per batch row (checks their spaces)."""
+        if not envs:
+            raise PolicyError(f"policy {self.name!r}: bind() needs at least one env")
+        for env in envs:
+            self.check_spaces(env.observation_space, env.action_space)
+        self.envs = list(envs)
+
+    def reset(self, index: Optional[int] = None) -> None:
+        """Forget per-episode state for batch row ``index`` (all rows when ``None``)."""
+
+    def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        """Actions for a batch of observations (first axis = env)."""
+        raise NotImplementedError
+
+    def act_one(self, observation: np.ndarray, deterministic: bool = True):
+        """The action for a single (unbatched) observation from env 0."""
+        return self.act(np.asarray(observation)[None], deterministic=deterministic)[0]
+
+    def check_spaces(self, observation_space: gym.Space, action_space: gym.Space) -> None:
+        """Raise :class:`PolicySpaceError` naming the space that does not match."""
+        for label, mine, theirs in (("observation", self.observation_space, observation_space),
+                                    ("action", self.action_space, action_space)):
+            if mine is None:
+                continue
+            if not _spaces_match(mine, theirs):
+                raise PolicySpaceError(
+                    f"policy {self.name!r} was made for the {label} space {mine}, but the env has {theirs}; "
+                    f"configure the env's {label} like the one the policy was trained on "
+                    f"(see its model card) or use another policy")
+
+    # SB3-style entry point so a Policy can stand where a model is expected
+    def predict(self, observation: Any, state: Any = None, episode_start: Any = None,
+                deterministic: bool = True) -> Tuple[np.ndarray, Any]:
+        """``(action, state)`` like a stable-baselines3 model; batched when ``observation`` is."""
+        observation = np.asarray(observation)
+        space = self.observation_space
+        batched = space is not None and observation.ndim == len(space.shape) + 1
+        if batched:
+            return self.act(observation, deterministic), state
+        return np.asarray(self.act_one(observation, deterministic)), state
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.name!r})"
+
+
+def _spaces_match(a: gym.Space, b: gym.Space) -> bool:
+    if type(a) is not type(b):
+        return False
+    if isinstance(a, gym.spaces.Discrete):
+        return int(a.n) == int(b.n)
+    if isinstance(a, gym.spaces.Box):
+        return a.shape == b.shape
+    return a == b
+
+
+class StateDriverPolicy(Policy):
+    """A privileged driver (:class:`~policies.state_driver.StateDriver`) per bound env."""
+
+    privileged = True
+    action_space = gym.spaces.Discrete(5)
+
+    def __init__(self, name: str, driver_class: type, **kwargs: Any) -> None:
+        self.name = name
+        self.driver_class = driver_class
+        self.kwargs = kwargs
+        self.drivers: List[Any] = []
+
+    def bind(self, envs: Sequence[gym.Env]) -> None:
+        super().bind(envs)
+        self.drivers = [self.driver_class(env, **self.kwargs) for env in envs]
+
+    def reset(self, index: Optional[int] = None) -> None:
+        if not self.drivers:
+            return
+        rows = range(len(self.drivers)) if index is None else [index]
+        for row in rows:
+            self.drivers[row] = self.driver_class(self.envs[row], **self.kwargs)
+
+    def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        if not self.drivers:
+            raise PolicyError(f"policy {self.name!r} reads the simulator state: call bind(envs) before act()")
+        if len(observations) != len(self.drivers):
+            raise PolicyError(f"policy {self.name!r}: {len(observations)} observations for "
+                              f"{len(self.drivers)} bound envs")
+        return np.array([driver.act() for driver in self.drivers], dtype=np.int64)
+
+
+class CallablePolicy(Policy):
+    """A plain function ``obs -> action`` (``batched=True``: ``obs batch -> actions``)."""
+
+    def __init__(self, name: str, function: Callable, batched: bool = False,
+                 observation_space: Optional[gym.Space] = None, action_space: Optional[gym.Space] = None) -> None:
+        self.name = name
+        self.function = function
+        self.batched = batched
+        self.observation_space = observation_space
+        self.action_space = action_space
+
+    def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        if self.batched:
+            return np.asarray(self.function(observations))
+        return np.asarray([self.function(obs) for obs in observations])
+
+
+class RandomPolicy(Policy):
+    """Uniformly random actions from the bound env's action space (seeded)."""
+
+    def __init__(self, name: str = "random", seed: int = 0) -> None:
+        self.name = name
+        self.rng = np.random.default_rng(int(seed))
+        self.space: Optional[gym.Space] = None
+
+    def bind(self, envs: Sequence[gym.Env]) -> None:
+        super().bind(envs)
+        self.space = envs[0].action_space
+
+    def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        space = self.space or gym.spaces.Discrete(5)
+        return np.asarray([_sample(space, self.rng) for _ in range(len(observations))])
+
+
+def _sample(space: gym.Space, rng: np.random.Generator):
+    if isinstance(space, gym.spaces.Discrete):
+        return int(space.start + rng.integers(space.n))
+    if isinstance(space, gym.spaces.Box):
+        return rng.uniform(space.low, space.high).astype(space.dtype)
+    raise PolicyError(f"random actions for {space} are not supported")
+
+
+class SB3Policy(Policy):
+    """A stable-baselines3 model (PPO, DQN, SAC, ...)."""
+
+    def __init__(self, name: str, model: Any, card: Optional[Mapping[str, Any]] = None) -> None:
+        self.name = name
+        self.model = model
+        self.card = dict(card or {})
+        self.observation_space = model.observation_space
+        self.action_space = model.action_space
+
+    def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        actions, _ = self.model.predict(np.asarray(observations, dtype=np.float32), deterministic=deterministic)
+        return np.asarray(actions)
+
+
+class ActionNoise(Policy):
+    """Wraps a policy: with probability ``probability`` an action is replaced by a random one."""
+
+    def __init__(self, inner: Policy, probability: float, seed: int = 0) -> None:
+        if not 0.0 <= probability <= 1.0:
+            raise PolicyError(f"action_noise must be a probability in [0, 1], not {probability}")
+        self.inner = inner
+        self.probability = float(probability)
+        self.rng = np.random.default_rng(int(seed))
+        self.name = f"{inner.name}?action_noise={probability:g}"
+        self.privileged = inner.privileged
+        self.observation_space = inner.observation_space
+        self.action_space = inner.action_space
+        self.space: Optional[gym.Space] = inner.action_space
+
+    def bind(self, envs: Sequence[gym.Env]) -> None:
+        self.inner.bind(envs)
+        self.envs = list(envs)
+        self.space = envs[0].action_space
+
+    def reset(self, index: Optional[int] = None) -> None:
+        self.inner.reset(index)
+
+    def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        actions = np.array(self.inner.act(observations, deterministic), copy=True)
+        space = self.space or gym.spaces.Discrete(5)
+        for row in range(len(actions)):
+            if self.rng.random() < self.probability:
+                actions[row] = _sample(space, self.rng)
+        return actions
+
+
+# --------------------------------------------------------------------------- registry
+_REGISTRY: Dict[str, Callable[..., Any]] = {}
+
+
+def register_policy(name: str, factory: Callable[..., Any], overwrite: bool = False) -> None:
+    """Make ``load_policy(name)`` call ``factory(**options)``.
+
+    The factory returns a :class:`Policy` or a plain callable ``obs -> action``
+    (wrapped in :class:`CallablePolicy`).
+    """
+    if not name or any(ch in name for ch in "?:/\\") or name.endswith(".zip"):
+        raise PolicyError(f"policy name {name!r} must not be empty or contain '?', ':', '/' or end in .zip")
+    if name in _REGISTRY and not overwrite:
+        raise PolicyError(f"a policy named {name!r} is already registered; pass overwrite=True to replace it")
+    _REGISTRY[name] = factory
+
+
+def registered_policies() -> List[str]:
+    """The names :func:`load_policy` knows, sorted."""
+    return sorted(_REGISTRY)
+
+
+def _state_driver(name: str, class_path: str) -> Callable[..., Policy]:
+    def factory(**options: Any) -> Policy:
+        module, attribute = class_path.split(":")
+        return StateDriverPolicy(name, getattr(importlib.import_module(module), attribute), **options)
+
+    return factory
+
+
+def _shipped(**options: Any) -> Policy:
+    if not SHIPPED_CHECKPOINT.is_file():
+        raise PolicyError(f"the shipped checkpoint {SHIPPED_CHECKPOINT} is missing; reinstall dv2s-gym")
+    return _load_sb3(str(SHIPPED_CHECKPOINT), algorithm=None, name="dv2s-ppo", **options)
+
+
+register_policy("rule", _state_driver("rule", "policies.rule_based:CautiousDriver"))
+register_policy("idm", _state_driver("idm", "policies.baselines:IDMEgo"))
+register_policy("keep_lane", _state_driver("keep_lane", "policies.baselines:KeepLaneEgo"))
+register_policy("random", lambda seed=0: RandomPolicy("random", seed=int(seed)))
+register_policy("dv2s-ppo", _shipped)
+
+
+def parse_spec(spec: str) -> Tuple[str, Dict[str, Any]]:
+    """Split ``"name?key=value&key2=value2"`` into the name and typed options."""
+    base, _, query = str(spec).partition("?")
+    options: Dict[str, Any] = {}
+    for pair in filter(None, query.split("&")):
+        key, sep, value = pair.partition("=")
+        if not sep or not key:
+            raise PolicyError(f"policy option {pair!r} in {spec!r} is not key=value")
+        options[key] = _typed(value)
+    return base, options
+
+
+def _typed(value: str) -> Any:
+    for cast in (int, float):
+        try:
+            return cast(value)
+        except ValueError:
+            pass
+    return {"true": True, "false": False, "none": None}.get(value.lower(), value)
+
+
+def load_policy(spec: Union[str, os.PathLike, Policy, Callable], **options: Any) -> Policy:
+    """The :class:`Policy` a spec names (see the module docstring); options override the spec's."""
+    if isinstance(spec, Policy):
+        policy = spec
+        noise = options.pop("action_noise", None)
+    elif callable(spec) and not isinstance(spec, (str, os.PathLike)):
+        noise = options.pop("action_noise", None)
+        policy = CallablePolicy(getattr(spec, "__name__", "callable"), spec, **options)
+    else:
+        base, parsed = parse_spec(os.fspath(spec))
+        parsed.update(options)
+        noise = parsed.pop("action_noise", None)
+        noise_seed = parsed.pop("noise_seed", 0)
+        policy = _load_base(base, parsed)
+        if noise:
+            return ActionNoise(policy, float(noise), seed=noise_seed)
+        return policy
+    return ActionNoise(policy, float(noise)) if noise else policy
+
+
+def _load_base(base: str, options: Dict[str, Any]) -> Policy:
+    if base in _REGISTRY:
+        made = _REGISTRY[base](**options)
+        return made if isinstance(made, Policy) else CallablePolicy(base, made)
+    prefix, sep, rest = base.partition(":")
+    if sep and prefix.lower() in SB3_ALGORITHMS:
+        return _load_sb3(rest, algorithm=prefix.lower(), name=base, **options)
+    path = Path(base)
+    if path.suffix == ".zip" or path.is_dir():
+        return _load_sb3(base, algorithm=None, name=base, **options)
+    if sep and "/" not in prefix and "\\" not in prefix:
+        return _load_object(prefix, rest, base, options)
+    raise PolicyError(
+        f"unknown policy {base!r}: use one of {', '.join(registered_policies())}, an SB3 checkpoint "
+        f"(model.zip, or ppo:/dqn:/sac:PATH), or module:attribute")
+
+
+def _load_object(module_name: str, attribute: str, spec: str, options: Dict[str, Any]) -> Policy:
+    try:
+        target = getattr(importlib.import_module(module_name), attribute)
+    except (ImportError, AttributeError) as error:
+        raise PolicyError(f"policy {spec!r}: cannot import {attribute!r} from {module_name!r} ({error})") from error
+    if isinstance(target, Policy):
+        return target
+    if isinstance(target, type) and issubclass(target, Policy):
+        return target(**options)
+    if callable(target):
+        made = target(**options) if options else target
+        if isinstance(made, Policy):
+            return made
+        return CallablePolicy(spec, made)
+    raise PolicyError(f"policy {spec!r} is a {type(target).__name__}, not a Policy or a callable")
+
+
+def read_model_card(checkpoint: Union[str, os.PathLike]) -> Dict[str, Any]:
+    """The model card (``model_card.json``) beside a checkpoint, or ``{}``."""
+    path = Path(checkpoint)
+    card = (path if path.is_dir() else path.parent) / "model_card.json"
+    if not card.is_file():
+        return {}
+    try:
+        return json.loads(card.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as error:
+        raise PolicyError(f"model card {card} is not readable JSON ({error}); fix or delete it") from error
+
+
+def _load_sb3(path: str, algorithm: Optional[str], name: str, **options: Any) -> Policy:
+    checkpoint = Path(path)
+    if checkpoint.is_dir():
+        checkpoint = checkpoint / "model.zip"
+    if not checkpoint.is_file():
+        raise PolicyError(f"checkpoint {checkpoint} does not exist; train one with `dv2s train` or check the path")
+    card = read_model_card(checkpoint)
+    algorithm = (algorithm or card.get("algorithm") or "").lower() or None
+    try:
+        import stable_baselines3 as sb3
+    except ImportError as error:  # pragma: no cover - the rl extra is part of the install
+        raise PolicyError("loading SB3 checkpoints needs stable-baselines3: pip install 'dv2s-gym[rl]'") from error
+    candidates = [algorithm] if algorithm else list(SB3_ALGORITHMS)
+    errors = []
+    for candidate in candidates:
+        if candidate not in SB3_ALGORITHMS:
+            raise PolicyError(f"checkpoint {checkpoint}: unknown algorithm {candidate!r}; use one of {SB3_ALGORITHMS}")
+        try:
+            model = getattr(sb3, candidate.upper()).load(str(checkpoint), device="cpu", **options)
+        except Exception as error:  # SB3 raises many types on a file of another algorithm or a corrupt zip
+            errors.append(f"{candidate}: {type(error).__name__}: {error}")
+            continue
+        card.setdefault("algorithm", candidate)
+        return SB3Policy(name, model, card)
+    raise PolicyError(f"checkpoint {checkpoint} does not load as an SB3 model ({'; '.join(errors)[:500]}); "
+                      "is it a stable-baselines3 .zip saved by model.save()?")
