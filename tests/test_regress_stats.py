@@ -457,6 +457,29 @@ def test_sequential_stops_early_on_a_flagrant_regression_and_refuses_misuse():
         test.update(PairedTable(1, 4, 3, 152))
 
 
+@pytest.mark.parametrize("spending", ["obrien-fleming", "pocock"])
+def test_sequential_fail_error_is_exact_given_the_discordant_counts(spending):
+    # every sign sequence of 10 discordant pairs, seen at looks with 2, 5, 7, 10 of them: the
+    # probability of a FAIL (fair coins) is the alpha the test says it spent, and at most alpha
+    discordant, episodes = [2, 5, 7, 10], [40, 80, 120, 160]
+    alpha = 0.25  # large, so that small counts can cross
+    fails = 0
+    for code in range(2**10):
+        signs = [(code >> i) & 1 for i in range(10)]
+        test = SequentialTest(margin=0.0, alpha=alpha, max_episodes=160, spending=spending)
+        for m, n in zip(discordant, episodes):
+            b = sum(signs[:m])
+            verdict = test.update(PairedTable(0, b, m - b, n - m))
+            if verdict is not None:
+                break
+        fails += verdict is Verdict.FAIL
+        if len(test.looks) == 4:
+            spent = test.looks[-1].fail_alpha_spent
+    # PASS needs the interval's upper end below 0, which these counts never reach at margin 0
+    assert fails / 2**10 == pytest.approx(spent, abs=1e-12)
+    assert 0.5 * alpha < spent <= alpha
+
+
 def run_sequential(p_candidate: float, repetitions: int, seed: int, looks: int = 5,
                    episodes: int = DOCUMENTED_EPISODES, spending: str = "obrien-fleming") -> dict:
     """Verdict counts and mean episodes used, batches of episodes / looks, shared-difficulty model."""
