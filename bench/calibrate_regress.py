@@ -44,7 +44,6 @@ from dv2s_gym.regress.stats import (
     paired_sample_size,
     simulate_false_alarm,
     simulate_paired_outcomes,
-    simulate_power,
     simulate_tables,
     simulate_unpaired_power,
     simulate_verdict_rates,
