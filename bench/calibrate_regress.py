@@ -149,7 +149,7 @@ def scenarios(reps: int, rng: np.random.Generator) -> None:
             default = family = 0
             for r in range(reps):
                 tables = {f"s{i}": PairedTable(*map(int, sims[i][r])) for i in range(len(rates))}
-                default += compare_scenarios(tables, DEFAULT_MARGIN)[1].verdict is Verdict.FAIL
+                default += compare_scenarios(tables, DEFAULT_MARGIN, pooled_weight=None)[1].verdict is Verdict.FAIL
                 family += compare_scenarios(tables, DEFAULT_MARGIN, pooled_weight=0.8)[1].verdict is Verdict.FAIL
             print(f"    {name:<30} {label:<30} default: {MonteCarloRate(default, reps)}")
             print(f"    {'':<30} {'':<30} pooled_weight=0.8: {MonteCarloRate(family, reps)}")
