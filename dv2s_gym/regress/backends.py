@@ -22,7 +22,7 @@ import os
 import time
 from collections import deque
 from multiprocessing.connection import wait
-from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Tuple
+from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Set, Tuple
 
 from dv2s_gym.regress.errors import RegressError
 
@@ -118,6 +118,7 @@ class _Worker:
                 os.environ["OMP_NUM_THREADS"] = saved
         child.close()
         self.ready = False  # set when the process has imported everything and waits for tasks
+        self.seen: Set[Tuple[Any, ...]] = set()  # (bank, config, scenario) it has run: compiled, cached
         self.busy: Optional[Tuple[int, float]] = None  # (task index, start time)
 
     def kill(self) -> None:
@@ -136,6 +137,45 @@ class _Worker:
             self.process.kill()
             self.process.join(5)
         self.connection.close()
+
+
+class _ScenarioQueue:
+    """Pending task indices grouped by scenario (and bank and env config), in submission order.
+
+    Compiling a scenario is the slow part of a worker's first episode of it, so a worker
+    takes tasks of scenarios it has already run, then of scenarios no worker has run yet,
+    and only then shares another worker's (the one with the most left): each scenario is
+    compiled by as few workers as possible.
+    """
+
+    def __init__(self, tasks: List[Dict[str, Any]]) -> None:
+        self._groups: Dict[Tuple[Any, ...], Deque[int]] = {}
+        self._group_of: List[Tuple[Any, ...]] = []
+        for index, task in enumerate(tasks):
+            key = (task.get("bank_dir"), repr(sorted((task.get("env_config") or {}).items())), task["scenario"])
+            self._group_of.append(key)
+            self._groups.setdefault(key, deque()).append(index)
+
+    def __bool__(self) -> bool:
+        return any(self._groups.values())
+
+    def group(self, index: int) -> Tuple[Any, ...]:
+        return self._group_of[index]
+
+    def push_front(self, index: int) -> None:
+        self._groups[self._group_of[index]].appendleft(index)
+
+    def pop_for(self, seen: Set[Tuple[Any, ...]], others: List[Set[Tuple[Any, ...]]]) -> int:
+        pending = [key for key, queue in self._groups.items() if queue]
+        own = [key for key in pending if key in seen]
+        fresh = [key for key in pending if not any(key in other for other in others)]
+        if own:
+            key = own[0]
+        elif fresh:
+            key = fresh[0]
+        else:
+            key = max(pending, key=lambda k: len(self._groups[k]))
+        return self._groups[key].popleft()
 
 
 class LocalBackend(Backend):
@@ -185,7 +225,7 @@ class LocalBackend(Backend):
         tasks = list(tasks)
         if not tasks:
             return
-        queue: Deque[int] = deque(range(len(tasks)))
+        queue = _ScenarioQueue(tasks)
         attempts: Dict[int, int] = {}
         failures: Dict[int, List[str]] = {}
         remaining = len(tasks)
@@ -195,10 +235,14 @@ class LocalBackend(Backend):
             while remaining:
                 for worker in self._pool:
                     if worker.ready and worker.busy is None and queue:
-                        index = queue.popleft()
+                        index = queue.pop_for(worker.seen, [w.seen for w in self._pool if w is not worker])
+                        worker.seen.add(queue.group(index))
                         attempts[index] = attempts.get(index, 0) + 1
                         worker.busy = (index, time.monotonic())
-                        worker.connection.send((index, tasks[index]))
+                        try:
+                            worker.connection.send((index, tasks[index]))
+                        except OSError:  # the worker just died: its sentinel reports it below
+                            pass
                 deadlines = [w.busy[1] + self.timeout for w in self._pool if w.busy is not None]
                 wait_for = max(0.0, min(deadlines) - time.monotonic()) if deadlines else None
                 ready = wait([x for w in self._pool for x in (w.connection, w.process.sentinel)], timeout=wait_for)
@@ -232,16 +276,17 @@ class LocalBackend(Backend):
                     if worker.busy is None:  # died before taking a task: the process cannot start
                         failed_starts += 1
                         if failed_starts > 2 * self.workers:
-                            raise RegressError(f"regression worker processes exit while starting (exit code "
-                                               f"{code}); run `python -c 'import dv2s_gym.regress.worker'` to "
-                                               "see why")
+                            raise RegressError(
+                                f"regression worker processes exit while starting (exit code {code}); a script "
+                                "that starts a run must do so under `if __name__ == '__main__':`, and "
+                                "`python -c 'import dv2s_gym.regress.worker'` must work")
                         continue
                     index = worker.busy[0]
                     failures.setdefault(index, []).append(
                         f"the worker hung (no result after {self.timeout:g} s)" if problem == "hung"
                         else f"the worker crashed (exit code {code})")
                     if attempts[index] <= self.retries:
-                        queue.appendleft(index)
+                        queue.push_front(index)
                     else:
                         remaining -= 1
                         task = tasks[index]

@@ -267,6 +267,7 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
     ran_seeds: List[int] = list(seeds)
     try:
         runner = get_backend(backend, workers=workers, address=address, timeout=timeout)
+        settings["workers"] = getattr(runner, "workers", workers)
         if not sequential:
             pending = [t for t in all_tasks if task_key(t) not in results]
             if pending:
