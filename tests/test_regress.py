@@ -178,12 +178,12 @@ def test_a_worker_that_crashes_or_hangs_is_retried_once_then_reported(tmp_path):
     log = tmp_path / "attempts.log"
     spec = f"regress_helpers:FaultyPolicy?crash_seed=0&hang_seed=1&log={log}"
     report = run_regression(spec, scenarios=["highway_lead_vehicle_brakes"], episodes=3, workers=2,
-                            out_dir=tmp_path / "out", env_config={"duration": 2}, timeout=5, progress=False)
+                            out_dir=tmp_path / "out", env_config={"duration": 2}, timeout=8, progress=False)
     assert sorted(log.read_text().split()) == ["0", "0", "1", "1"]  # each tried twice
     errors = {e["id"]: e for e in report["errors"]}
     assert set(errors) == {"highway_lead_vehicle_brakes/0", "highway_lead_vehicle_brakes/1"}
     assert "crashed (exit code 3)" in errors["highway_lead_vehicle_brakes/0"]["error"]
-    assert "hung (no result after 5 s)" in errors["highway_lead_vehicle_brakes/1"]["error"]
+    assert "hung (no result after 8 s)" in errors["highway_lead_vehicle_brakes/1"]["error"]
     assert all(e["role"] == "candidate" and "2 attempts" in e["error"] for e in errors.values())
     episodes = {e["id"]: e for e in report["episodes"]}
     assert len(episodes) == 3 and not episodes["highway_lead_vehicle_brakes/2"]["candidate"].get("error")
@@ -343,3 +343,21 @@ def test_a_degraded_copy_fails_and_names_the_scenarios_that_regressed(tmp_path):
     swapped = run_regression("rule", "rule?action_noise=0.3", scenarios=report["regressed"][:1], workers=2,
                              out_dir=tmp_path / "swapped", progress=False)
     assert swapped["verdict"] != "FAIL"
+
+
+def test_a_changed_scenario_script_makes_an_old_report_another_bank_version(tmp_path):
+    import shutil
+
+    from scenario_bank import scenario_path
+
+    bank = tmp_path / "bank"
+    entry = bank / "highway_lead_vehicle_brakes"
+    shutil.copytree(scenario_path("highway_lead_vehicle_brakes").parent, entry)
+    old = run_regression("rule", bank_dir=bank, episodes=1, workers=1, out_dir=tmp_path / "old",
+                         env_config={"duration": 2}, progress=False)
+    assert old["bank"]["path"] == str(bank.resolve()) and old["bank"]["scenarios"] == ["highway_lead_vehicle_brakes"]
+    script = entry / "scenario.scenic"
+    script.write_text(script.read_text() + "\n# tuned\n")
+    with pytest.raises(ReportMismatchError, match="another bank version .*changed scenario highway_lead_vehicle_brakes"):
+        run_regression("rule", baseline_report=tmp_path / "old" / "report.json", bank_dir=bank, episodes=1,
+                       out_dir=tmp_path / "new", progress=False)
