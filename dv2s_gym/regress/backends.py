@@ -1,0 +1,329 @@
+"""Where regression episodes run: a pool of local processes, or Ray.
+
+A :class:`Backend` takes task dicts (see :mod:`dv2s_gym.regress.worker`) and hands each
+result to a callback as soon as it finishes. :class:`LocalBackend` runs one process per
+worker (``forkserver`` context where available, else ``spawn``; ``OMP_NUM_THREADS=1``), each calling
+:func:`~dv2s_gym.regress.worker.run_task` and keeping its envs and policies between
+tasks. A worker that dies mid-episode (segfault, ``os._exit``, out of memory) or gives no
+result within the per-episode timeout is killed and replaced; its task is retried once
+(``retries``), then reported as an error result ``{"error": ..., "id", "role", ...}`` -
+never silently dropped.
+
+:func:`get_backend` picks one by name (``"local"`` or ``"ray"``; the Ray backend lives in
+:mod:`dv2s_gym.regress.ray_backend`).
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import multiprocessing
+import os
+import time
+from collections import deque
+from multiprocessing.connection import wait
+from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Set, Tuple
+
+from dv2s_gym.regress.errors import RegressError
+
+__all__ = ["Backend", "LocalBackend", "get_backend", "default_workers", "DEFAULT_TIMEOUT"]
+
+DEFAULT_TIMEOUT = 600.0
+"""Seconds a worker may spend on one episode (scenario compilation included) before it counts as hung."""
+
+OnResult = Callable[[Dict[str, Any]], None]
+_READY = "ready"
+_PRELOAD = ("dv2s_gym.regress.worker", "envs.dv2s_env", "policies.evaluation")
+
+
+def default_workers() -> int:
+    """The cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+class Backend:
+    """Runs tasks and delivers their results as they finish.
+
+    Subclasses implement :meth:`run`; :meth:`close` releases workers (also on ``with``).
+    ``run`` may be called several times (the runner does so once per batch of a
+    sequential run); workers stay up in between.
+    """
+
+    name = "backend"
+    workers = 1
+
+    def run(self, tasks: Iterable[Dict[str, Any]], on_result: OnResult) -> None:
+        """Run every task; call ``on_result(result)`` in this process for each, as it finishes."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Stop the workers."""
+
+    def __enter__(self) -> "Backend":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+
+def _worker_main(connection) -> None:
+    """A pool process: receive ``(index, task)``, send ``(index, result)``; ``None`` stops it."""
+    os.environ["OMP_NUM_THREADS"] = "1"
+    from dv2s_gym.regress.worker import error_result, run_task
+
+    try:
+        import envs.dv2s_env  # noqa: F401  (the slow imports happen before the first episode's clock starts)
+        import policies.evaluation  # noqa: F401
+    except Exception:  # reported by the first task instead
+        pass
+    try:
+        connection.send(_READY)  # imports done: episode timeouts count from here
+    except (OSError, KeyboardInterrupt):
+        return
+    while True:
+        try:
+            message = connection.recv()
+        except (EOFError, OSError, KeyboardInterrupt):
+            return
+        if message is None:
+            return
+        index, task = message
+        try:
+            result = run_task(task)
+        except BaseException as error:  # run_task reports episode errors itself; this is the last net
+            result = error_result(task, f"{type(error).__name__}: {error}")
+        try:
+            connection.send((index, result))
+        except (OSError, KeyboardInterrupt):
+            return
+
+
+class _Worker:
+    def __init__(self, context) -> None:
+        parent, child = context.Pipe()
+        self.connection = parent
+        self.process = context.Process(target=_worker_main, args=(child,), daemon=True,
+                                       name="dv2s-regress-worker")
+        saved = os.environ.get("OMP_NUM_THREADS")
+        os.environ["OMP_NUM_THREADS"] = "1"  # set before the child imports numpy
+        try:
+            self.process.start()
+        finally:
+            if saved is None:
+                os.environ.pop("OMP_NUM_THREADS", None)
+            else:
+                os.environ["OMP_NUM_THREADS"] = saved
+        child.close()
+        self.ready = False  # set when the process has imported everything and waits for tasks
+        self.seen: Set[Tuple[Any, ...]] = set()  # (bank, config, scenario) it has run: compiled, cached
+        self.busy: Optional[Tuple[int, float]] = None  # (task index, start time)
+
+    def kill(self) -> None:
+        if self.process.is_alive():
+            self.process.kill()
+        self.process.join(5)
+        self.connection.close()
+
+    def stop(self) -> None:
+        try:
+            self.connection.send(None)
+        except OSError:
+            pass
+        self.process.join(5)
+        if self.process.is_alive():
+            self.process.kill()
+            self.process.join(5)
+        self.connection.close()
+
+
+class _ScenarioQueue:
+    """Pending task indices grouped by scenario (and bank and env config), in submission order.
+
+    Compiling a scenario is the slow part of a worker's first episode of it, so a worker
+    takes tasks of scenarios it has already run, then of scenarios no worker has run yet,
+    and only then shares another worker's (the one with the most left): each scenario is
+    compiled by as few workers as possible.
+    """
+
+    def __init__(self, tasks: List[Dict[str, Any]]) -> None:
+        self._groups: Dict[Tuple[Any, ...], Deque[int]] = {}
+        self._group_of: List[Tuple[Any, ...]] = []
+        for index, task in enumerate(tasks):
+            key = (task.get("bank_dir"), repr(sorted((task.get("env_config") or {}).items())), task["scenario"])
+            self._group_of.append(key)
+            self._groups.setdefault(key, deque()).append(index)
+
+    def __bool__(self) -> bool:
+        return any(self._groups.values())
+
+    def group(self, index: int) -> Tuple[Any, ...]:
+        return self._group_of[index]
+
+    def push_front(self, index: int) -> None:
+        self._groups[self._group_of[index]].appendleft(index)
+
+    def pop_for(self, seen: Set[Tuple[Any, ...]], others: List[Set[Tuple[Any, ...]]]) -> int:
+        pending = [key for key, queue in self._groups.items() if queue]
+        own = [key for key in pending if key in seen]
+        fresh = [key for key in pending if not any(key in other for other in others)]
+        if own:
+            key = own[0]
+        elif fresh:
+            key = fresh[0]
+        else:
+            key = max(pending, key=lambda k: len(self._groups[k]))
+        return self._groups[key].popleft()
+
+
+class LocalBackend(Backend):
+    """A pool of local worker processes (spawn or forkserver context; never a plain fork of the caller).
+
+    Args:
+        workers: processes (default: every core this process may use).
+        timeout: seconds one episode may take before its worker counts as hung and is
+            killed (default :data:`DEFAULT_TIMEOUT`; the first episode of a scenario in a
+            worker includes compiling it).
+        retries: how often a task whose worker crashed or hung is run again before it is
+            reported as an error (default 1).
+        start_method: ``"forkserver"`` (default where the platform has it: a server process
+            imports the simulator once and every worker is forked from it, so starting or
+            replacing a worker is quick) or ``"spawn"`` (each worker imports everything).
+    """
+
+    name = "local"
+
+    def __init__(self, workers: Optional[int] = None, timeout: Optional[float] = None, retries: int = 1,
+                 start_method: Optional[str] = None) -> None:
+        if workers is not None and int(workers) < 1:
+            raise RegressError(f"--workers must be at least 1, not {workers}")
+        if timeout is not None and not float(timeout) > 0:
+            raise RegressError(f"the per-episode timeout must be positive, not {timeout}")
+        if start_method is None:
+            start_method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+        if start_method not in ("spawn", "forkserver"):
+            raise RegressError(f"start_method must be 'spawn' or 'forkserver', not {start_method!r}")
+        self.workers = int(workers) if workers is not None else default_workers()
+        self.timeout = float(timeout) if timeout is not None else DEFAULT_TIMEOUT
+        self.retries = int(retries)
+        self._context = multiprocessing.get_context(start_method)
+        if start_method == "forkserver":
+            # imported once by the server (it starts with the first worker), inherited by every fork
+            self._context.set_forkserver_preload(list(_PRELOAD))
+        self._pool: List[_Worker] = []
+
+    def _ensure(self, count: int) -> None:
+        self._pool = [w for w in self._pool if w.process.is_alive()]
+        while len(self._pool) < count:
+            self._pool.append(_Worker(self._context))
+
+    def run(self, tasks: Iterable[Dict[str, Any]], on_result: OnResult) -> None:
+        from dv2s_gym.regress.worker import error_result
+
+        tasks = list(tasks)
+        if not tasks:
+            return
+        queue = _ScenarioQueue(tasks)
+        attempts: Dict[int, int] = {}
+        failures: Dict[int, List[str]] = {}
+        remaining = len(tasks)
+        failed_starts = 0
+        self._ensure(min(self.workers, len(tasks)))
+        try:
+            while remaining:
+                for worker in self._pool:
+                    if worker.ready and worker.busy is None and queue:
+                        index = queue.pop_for(worker.seen, [w.seen for w in self._pool if w is not worker])
+                        worker.seen.add(queue.group(index))
+                        attempts[index] = attempts.get(index, 0) + 1
+                        worker.busy = (index, time.monotonic())
+                        try:
+                            worker.connection.send((index, tasks[index]))
+                        except OSError:  # the worker just died: its sentinel reports it below
+                            pass
+                deadlines = [w.busy[1] + self.timeout for w in self._pool if w.busy is not None]
+                wait_for = max(0.0, min(deadlines) - time.monotonic()) if deadlines else None
+                ready = wait([x for w in self._pool for x in (w.connection, w.process.sentinel)], timeout=wait_for)
+                for worker in list(self._pool):
+                    problem = None
+                    if worker.connection in ready:
+                        try:
+                            message = worker.connection.recv()
+                        except (EOFError, OSError):
+                            problem = "crashed"
+                        else:
+                            if message == _READY:
+                                worker.ready = True
+                                continue
+                            _, result = message
+                            worker.busy = None
+                            remaining -= 1
+                            on_result(result)
+                            continue
+                    elif worker.process.sentinel in ready:
+                        problem = "crashed"
+                    elif worker.busy is not None and time.monotonic() - worker.busy[1] >= self.timeout:
+                        problem = "hung"
+                    if problem is None:
+                        continue
+                    worker.process.join(0.5)
+                    code = worker.process.exitcode
+                    worker.kill()
+                    self._pool.remove(worker)
+                    self._pool.append(_Worker(self._context))
+                    if worker.busy is None:  # died before taking a task: the process cannot start
+                        failed_starts += 1
+                        if failed_starts > 2 * self.workers:
+                            raise RegressError(
+                                f"regression worker processes exit while starting (exit code {code}); a script "
+                                "that starts a run must do so under `if __name__ == '__main__':`, and "
+                                "`python -c 'import dv2s_gym.regress.worker'` must work")
+                        continue
+                    index = worker.busy[0]
+                    failures.setdefault(index, []).append(
+                        f"the worker hung (no result after {self.timeout:g} s)" if problem == "hung"
+                        else f"the worker crashed (exit code {code})")
+                    if attempts[index] <= self.retries:
+                        queue.push_front(index)
+                    else:
+                        remaining -= 1
+                        task = tasks[index]
+                        on_result(error_result(task, f"{'; then '.join(failures[index])} running {task['role']} "
+                                                     f"{task['policy']!r} on {task['scenario']} seed {task['seed']}"
+                                                     f" ({attempts[index]} attempts)"))
+        except BaseException:
+            self.close()  # an interrupted run leaves no worker behind
+            raise
+
+    def close(self) -> None:
+        pool, self._pool = self._pool, []
+        for worker in pool:
+            if worker.busy is not None:
+                worker.kill()
+            else:
+                worker.stop()
+
+
+def get_backend(name: str, workers: Optional[int] = None, address: Optional[str] = None,
+                timeout: Optional[float] = None) -> Backend:
+    """The backend called ``name``: ``"local"`` (process pool) or ``"ray"`` (a Ray cluster at ``address``)."""
+    if name == "local":
+        if address:
+            raise RegressError("--address is for --backend ray; the local backend runs on this machine")
+        return LocalBackend(workers, timeout=timeout)
+    if name == "ray":
+        try:
+            module = importlib.import_module("dv2s_gym.regress.ray_backend")
+        except ModuleNotFoundError as error:
+            if error.name not in ("dv2s_gym.regress.ray_backend", "ray"):
+                raise
+            missing = "the ray package" if error.name == "ray" else "dv2s_gym.regress.ray_backend"
+            raise RegressError(f"--backend ray needs {missing}, which is not installed; "
+                               "install ray (pip install 'ray[default]') or use --backend local") from None
+        options: Dict[str, Any] = {"workers": workers, "address": address}
+        if timeout is not None and "timeout" in inspect.signature(module.RayBackend).parameters:
+            options["timeout"] = timeout
+        return module.RayBackend(**options)
+    raise RegressError(f"unknown backend {name!r}: use 'local' or 'ray'")
