@@ -49,14 +49,96 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
+    from dv2s_gym.regress.report import SCHEMA
+
+    if _json_schema(args.trace) == SCHEMA:
+        return _cmd_replay_report(args)
+    if args.episode:
+        raise ValueError(f"--episode picks an episode of a regression report; {args.trace} is an episode trace "
+                         "(replay it without --episode)")
     from envs.replay import replay_trace
     from envs.trace import EpisodeTrace
 
     trace = EpisodeTrace.load(args.trace)
-    env, replayed = replay_trace(trace)
+    frames = [] if args.video else None
+    env, replayed = replay_trace(trace, render_mode="rgb_array" if args.video else None, frames=frames)
+    fps = env.unwrapped.config["policy_frequency"]
     env.close()
-    print(f"replayed {len(replayed.actions)} steps of {trace.scenario!r}: every actor state matches the trace")
+    if args.video:
+        from envs.recording import VideoWriter
+
+        with VideoWriter(args.video, fps=fps) as video:
+            for frame in frames:
+                video.write(frame)
+    print(f"replayed {len(replayed.actions)} steps of {trace.scenario!r}: every actor state matches the trace"
+          + (f"; video {args.video}" if args.video else ""))
     return 0
+
+
+def _json_schema(path: str):
+    """The ``schema`` of a JSON file (None for anything else: a gzip trace, not JSON, no schema)."""
+    from pathlib import Path
+
+    try:
+        with open(path, "rb") as handle:
+            if handle.read(2) == b"\x1f\x8b":
+                return None
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    return data.get("schema") if isinstance(data, dict) else None
+
+
+def _cmd_replay_report(args: argparse.Namespace) -> int:
+    from dv2s_gym.regress.replay import replay_episode
+
+    if not args.episode:
+        raise ValueError(f"{args.trace} is a regression report: name the episode with --episode SCENARIO/SEED "
+                         "(its newly_failing list and report.md show the failed ones)")
+    result = replay_episode(args.trace, args.episode, role=args.policy, video=args.video,
+                            from_policy=args.from_policy)
+    how = "trace replayed, every actor state matches" if result["source"] == "trace" else "policy re-run"
+    verdict = "matches the report" if result["matches"] else (
+        f"DIFFERS from the report ({result['expected_hash']})")
+    print(f"{result['id']} ({result['role']}): {how}; {result['steps']} steps; trajectory hash "
+          f"{result['trajectory_hash'][:16]} {verdict}" + (f"; video {result['video']}" if result["video"] else ""))
+    return 0 if result["matches"] else 1
+
+
+def _cmd_regress(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from dv2s_gym.regress.report import exit_code, format_summary
+    from dv2s_gym.regress.runner import DEFAULT_OUT, run_regression
+
+    env_config = None
+    if args.config:
+        text = Path(args.config).read_text(encoding="utf-8") if args.config.endswith(".json") else args.config
+        try:
+            env_config = json.loads(text)
+        except ValueError as error:
+            raise ValueError(f"--config must be a JSON object of DV2S-v0 config overrides (or a .json file), e.g. "
+                             f"'{{\"duration\": 10}}'; {error}") from None
+        if not isinstance(env_config, dict):
+            raise ValueError("--config must be a JSON object of DV2S-v0 config overrides, e.g. '{\"duration\": 10}'")
+    out = args.out or DEFAULT_OUT
+    try:
+        report = run_regression(
+            args.policy, args.baseline, baseline_report=args.baseline_report, bank_dir=args.bank,
+            scenarios=args.scenarios, episodes=args.episodes, seed=args.seed, margin=args.margin, alpha=args.alpha,
+            backend=args.backend, workers=args.workers, address=args.address, out_dir=out,
+            sequential=args.sequential, env_config=env_config, progress=not args.no_progress and not args.json,
+            timeout=args.timeout, batch=args.batch, baseline_role=args.baseline_role)
+    except KeyboardInterrupt:
+        print(f"dv2s: finished episodes are saved in {Path(out) / 'results.jsonl'}; rerun the same command to resume",
+              file=sys.stderr)
+        raise
+    if args.json:
+        print(json.dumps(report, indent=1))
+    else:
+        print(format_summary(report))
+        print(f"reports: {', '.join(str(Path(out) / f) for f in ('report.json', 'junit.xml', 'report.md'))}")
+    return exit_code(report["verdict"])
 
 
 def _cmd_maps(args: argparse.Namespace) -> int:
@@ -382,10 +464,19 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--random", action="store_true", help="drive with random actions")
     run.set_defaults(func=_cmd_run)
 
-    replay = sub.add_parser("replay", help="replay a saved episode trace and check it matches",
+    replay = sub.add_parser("replay", help="replay a saved episode trace (or an episode of a regress report)",
                             description="Re-run a saved trace with its seeds and actions; fails if any actor "
-                            "state differs.")
-    replay.add_argument("trace", help="trace file written by `dv2s run --trace` or env.save_trace()")
+                            "state differs. Given a `dv2s regress` report.json and --episode SCENARIO/SEED, "
+                            "re-runs that episode (from its stored trace when it failed, else by re-running the "
+                            "policy), checks its trajectory hash (exit 1 if it differs) and can write its video.")
+    replay.add_argument("trace", help="trace file written by `dv2s run --trace` or env.save_trace(), or a "
+                        "report.json written by `dv2s regress`")
+    replay.add_argument("--episode", help="with a report: the episode id, SCENARIO/SEED")
+    replay.add_argument("--policy", choices=["candidate", "baseline"], default="candidate",
+                        help="with a report: whose episode (default: candidate)")
+    replay.add_argument("--video", help="also write the replayed episode as a video (.webm)")
+    replay.add_argument("--from-policy", action="store_true",
+                        help="with a report: re-run the policy even when a trace is stored")
     replay.set_defaults(func=_cmd_replay)
 
     maps = sub.add_parser("maps", help="list the shipped OpenDRIVE maps (or rebuild them)",
@@ -501,6 +592,54 @@ def build_parser() -> argparse.ArgumentParser:
     llm_options(p)
     p.set_defaults(func=_cmd_convert)
 
+    p = sub.add_parser(
+        "regress", help="regression-test a policy against a baseline on paired episodes (PASS/FAIL/INCONCLUSIVE)",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Run the candidate policy (and the baseline, on the same scenario x seed pairs: episode k "
+        "uses seed S+k for both) over bank scenarios, in a local process pool or on Ray. Reports per scenario "
+        "and overall collision, off-road and success rates (Wilson intervals), minimum TTC, mean speed and "
+        "return (bootstrap intervals), and the paired difference in failure rate (Newcombe interval, exact "
+        "McNemar test, Holm over scenarios) with a non-inferiority verdict against --margin. Writes "
+        "report.json (schema dv2s-regress v1), junit.xml, report.md, results.jsonl and traces/ of failed "
+        "episodes to --out; rerunning with the same --out and settings resumes.",
+        epilog="exit status: 0 PASS (or no baseline: measures only), 1 FAIL, 3 INCONCLUSIVE (too few episodes "
+        "to tell, or episodes ended in errors), 2 bad input.\n"
+        "examples:\n"
+        "  dv2s regress --policy ppo:model.zip --baseline rule --scenarios tag:highway --episodes 50\n"
+        "  dv2s regress --policy rule --out out/main          # measures only, keep report.json\n"
+        "  dv2s regress --policy new.zip --baseline-report out/main/report.json\n"
+        "  dv2s replay out/regress/report.json --episode highway_cut_in_from_left/3 --video ep.webm")
+    p.add_argument("--policy", required=True, help="candidate policy spec: rule, idm, keep_lane, random, dv2s-ppo, "
+                   "model.zip, ppo:PATH, module:attr, with ?key=value options (e.g. rule?action_noise=0.3)")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--baseline", help="baseline policy spec, run on the same episodes")
+    group.add_argument("--baseline-report", help="report.json of an earlier run: its episodes are the baseline "
+                       "(refused if its schema version, bank scenarios or env config differ)")
+    p.add_argument("--baseline-role", choices=["candidate", "baseline"], default="candidate",
+                   help="with --baseline-report: which of its policies is the baseline (default: the one it tested)")
+    bank_option(p)
+    p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank, or the "
+                   "baseline report's scenarios)")
+    p.add_argument("--episodes", type=int, default=20, help="seeds per scenario (default 20)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
+    p.add_argument("--margin", type=float, default=0.05,
+                   help="non-inferiority margin on the failure rate (default 0.05: 5 points)")
+    p.add_argument("--alpha", type=float, default=0.05, help="level of the FAIL test (default 0.05)")
+    p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
+    p.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
+    p.add_argument("--address", default=None, help="with --backend ray: the cluster address")
+    p.add_argument("--timeout", type=float, default=None,
+                   help="seconds one episode may take before its worker counts as hung (default 600)")
+    p.add_argument("--sequential", action="store_true",
+                   help="stop as soon as a group-sequential test settles PASS or FAIL")
+    p.add_argument("--batch", type=int, default=None,
+                   help="with --sequential: seeds per look (default: a fifth of --episodes)")
+    p.add_argument("--config", help="DV2S-v0 config overrides as JSON (or a .json file), e.g. '{\"duration\": 10}'")
+    p.add_argument("--out", default=None, help="output folder (default out/regress)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="print the report JSON instead of the table")
+    p.set_defaults(func=_cmd_regress)
+
     p = sub.add_parser("eval", help="SCS/HR (dra), SP (sg) or E2E-SC (e2e) over a labeled folder",
                        description="Evaluate a stage over a folder of videos/descriptions with <name>.label.json "
                        "files; prints mean ± sd per use case and overall.")
@@ -534,8 +673,9 @@ def _error_line(error: BaseException) -> str:
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of the ``dv2s`` console command.
 
-    Exit status: 0 success, 1 a check failed (validation, generation), 2 an error
-    (one line on stderr; ``--debug`` prints the traceback), 130 interrupted.
+    Exit status: 0 success, 1 a check failed (validation, generation; ``regress``: FAIL),
+    2 an error (one line on stderr; ``--debug`` prints the traceback), 3 ``regress``
+    INCONCLUSIVE, 130 interrupted.
     """
     parser = build_parser()
     args = parser.parse_args(argv)

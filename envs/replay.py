@@ -7,7 +7,7 @@ env and the trace format do not import each other.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Callable, Optional
+from typing import List, Optional
 
 import numpy as np
 
@@ -18,12 +18,12 @@ __all__ = ["replay_trace", "TraceMismatchError"]
 
 
 def replay_trace(trace: EpisodeTrace, *, render_mode: Optional[str] = None, check: bool = True,
-                 on_step: Optional[Callable[[DV2SEnv, int], None]] = None):
+                 frames: Optional[List[np.ndarray]] = None):
     """Re-run a traced episode with its actions; returns ``(env, replayed_trace)``.
 
     With ``check`` (default), raises :class:`TraceMismatchError` at the first step
-    whose actor states differ from the trace. ``on_step(env, step)`` is called after
-    the reset (step 0) and after every replayed step (e.g. to render frames).
+    whose actor states differ from the trace. When ``frames`` is a list, a rendered
+    frame is appended after the reset and after every step (needs ``render_mode="rgb_array"``).
     """
     config = {k: v for k, v in trace.config.items() if k in DV2SEnv.default_config()}
     path = Path(trace.scenario_path) if trace.scenario_path else None
@@ -39,13 +39,13 @@ def replay_trace(trace: EpisodeTrace, *, render_mode: Optional[str] = None, chec
     try:
         env.reset(seed=trace.seed, options={"scene_seed": trace.scene_seed})
         _compare(trace, env.trace, 0, check)
-        if on_step is not None:
-            on_step(env, 0)
+        if frames is not None:
+            frames.append(env.render())
         for i, action in enumerate(trace.actions):
             env.step(_action_from_json(action))
             _compare(trace, env.trace, i + 1, check)
-            if on_step is not None:
-                on_step(env, i + 1)
+            if frames is not None:
+                frames.append(env.render())
     except BaseException:
         env.close()  # an env left open keeps its suspended simulation, and itself, alive
         raise

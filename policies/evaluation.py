@@ -98,6 +98,8 @@ def run_episode(env: gym.Env, policy: Policy, scenario: str, seed: int, determin
     base = env.unwrapped
     observation, info = env.reset(seed=int(seed), options={"scenario": scenario})
     policy.reset(0)
+    if isinstance(policy, Policy):  # a stochastic policy acts alike on the same episode, whatever ran before
+        policy.seed(int(seed))
     total, speeds, steps = 0.0, [], 0
     start = np.array(base.vehicle.position, dtype=float)  # a copy: highway-env moves it in place
     travelled = 0.0

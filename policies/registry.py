@@ -92,6 +92,15 @@ class Policy:
     def reset(self, index: Optional[int] = None) -> None:
         """Forget per-episode state for batch row ``index`` (all rows when ``None``)."""
 
+    def seed(self, seed: int) -> None:
+        """Seed the policy's own randomness for the episode run with env seed ``seed``.
+
+        :func:`~policies.evaluation.run_episode` calls it at every reset, so a stochastic
+        policy (random actions, :class:`ActionNoise`) acts the same on the same episode
+        whatever ran before it in the process: paired and replayed episodes stay identical.
+        Deterministic policies ignore it.
+        """
+
     def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
         """Actions for a batch of observations (first axis = env)."""
         raise NotImplementedError
@@ -191,8 +200,12 @@ class RandomPolicy(Policy):
 
     def __init__(self, name: str = "random", seed: int = 0) -> None:
         self.name = name
-        self.rng = np.random.default_rng(int(seed))
+        self.base_seed = int(seed)
+        self.rng = np.random.default_rng(self.base_seed)
         self.space: Optional[gym.Space] = None
+
+    def seed(self, seed: int) -> None:
+        self.rng = np.random.default_rng([self.base_seed, int(seed)])
 
     def bind(self, envs: Sequence[gym.Env]) -> None:
         super().bind(envs)
@@ -234,7 +247,8 @@ class ActionNoise(Policy):
             raise PolicyError(f"action_noise must be a probability in [0, 1], not {probability}")
         self.inner = inner
         self.probability = float(probability)
-        self.rng = np.random.default_rng(int(seed))
+        self.base_seed = int(seed)
+        self.rng = np.random.default_rng(self.base_seed)
         self.name = f"{inner.name}?action_noise={probability:g}"
         self.privileged = inner.privileged
         self.observation_space = inner.observation_space
@@ -248,6 +262,10 @@ class ActionNoise(Policy):
 
     def reset(self, index: Optional[int] = None) -> None:
         self.inner.reset(index)
+
+    def seed(self, seed: int) -> None:
+        self.inner.seed(seed)
+        self.rng = np.random.default_rng([self.base_seed, int(seed)])
 
     def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
         actions = np.array(self.inner.act(observations, deterministic), copy=True)

@@ -1,0 +1,136 @@
+"""Reproduce one episode of a regression report: ``dv2s replay REPORT --episode ID``.
+
+A failed episode's trace is stored in the run's ``traces/`` folder: replaying it re-runs
+the same scene with the recorded actions, checks every actor state step by step and the
+trajectory hash the report holds. An episode without a stored trace (one that did not
+fail), or any episode with ``from_policy=True``, is re-run from scratch instead: the same
+policy spec, scenario, seed and env config, and its trajectory hash must match the
+report's. Either way a video can be written.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Union
+
+from dv2s_gym.regress.errors import RegressError
+from dv2s_gym.regress.report import load_report
+
+__all__ = ["find_episode", "replay_episode"]
+
+
+def find_episode(report: Dict[str, Any], episode_id: str, role: str = "candidate") -> Dict[str, Any]:
+    """The result of ``role`` in episode ``episode_id`` of a report (clear errors otherwise)."""
+    if role not in ("candidate", "baseline"):
+        raise RegressError(f"--policy must be 'candidate' or 'baseline', not {role!r}")
+    episodes = {e["id"]: e for e in report.get("episodes") or []}
+    if episode_id not in episodes:
+        import difflib
+
+        near = difflib.get_close_matches(episode_id, list(episodes), n=3, cutoff=0.6)
+        hint = f" Did you mean {', '.join(near)}?" if near else ""
+        failing = report.get("newly_failing") or [e for e in episodes if (episodes[e]["candidate"] or {}).get("failed")]
+        examples = f" Failed episodes: {', '.join(failing[:5])}." if failing else ""
+        raise RegressError(f"the report has no episode {episode_id!r} (ids are scenario/seed).{hint}{examples}")
+    result = episodes[episode_id].get(role)
+    if result is None:
+        raise RegressError(f"episode {episode_id} has no {role} result (the run had no baseline); "
+                           "use --policy candidate")
+    if result.get("error"):
+        raise RegressError(f"episode {episode_id} ({role}) ended in an error and has nothing to replay: "
+                           f"{result['error'].splitlines()[0]}")
+    return result
+
+
+def replay_episode(report_path: Union[str, os.PathLike], episode_id: str, role: str = "candidate",
+                   video: Optional[Union[str, os.PathLike]] = None, from_policy: bool = False) -> Dict[str, Any]:
+    """Re-run one episode of a report and check its trajectory hash.
+
+    Returns ``{"id", "role", "source": "trace" | "policy", "steps", "trajectory_hash",
+    "expected_hash", "matches", "video"}``; ``matches`` is False when the hash differs (a
+    diverging actor state in a trace replay raises
+    :class:`~envs.trace.TraceMismatchError` instead).
+    """
+    report_path = Path(report_path)
+    report = load_report(report_path)
+    result = find_episode(report, episode_id, role)
+    frames: Optional[List[Any]] = [] if video else None
+    trace_path = result.get("trace")
+    if trace_path and not Path(trace_path).is_absolute():
+        trace_path = str(report_path.parent / trace_path)
+    if trace_path and not from_policy:
+        if not Path(trace_path).is_file():
+            raise RegressError(f"the trace of {episode_id} ({role}) is missing at {trace_path}; keep the run's "
+                               "traces/ folder beside report.json, or re-run the policy with --from-policy")
+        steps, digest, fps = _from_trace(trace_path, frames)
+        source = "trace"
+    else:
+        steps, digest, fps = _from_policy(report, result, role, frames)
+        source = "policy"
+    written = None
+    if video:
+        from envs.recording import VideoWriter
+
+        with VideoWriter(video, fps=fps) as writer:
+            for frame in frames or []:
+                writer.write(frame)
+        written = str(video)
+    expected = result.get("trajectory_hash")
+    return {"id": episode_id, "role": role, "source": source, "steps": steps, "trajectory_hash": digest,
+            "expected_hash": expected, "matches": digest == expected, "video": written}
+
+
+def _from_trace(path: str, frames: Optional[List[Any]]):
+    from envs.replay import replay_trace
+    from envs.trace import EpisodeTrace
+    from policies.evaluation import trajectory_hash
+
+    trace = EpisodeTrace.load(path)
+    env, replayed = replay_trace(trace, render_mode="rgb_array" if frames is not None else None, frames=frames)
+    try:
+        return len(replayed.actions), trajectory_hash(replayed), env.unwrapped.config["policy_frequency"]
+    finally:
+        env.close()
+
+
+def _from_policy(report: Dict[str, Any], result: Dict[str, Any], role: str, frames: Optional[List[Any]]):
+    from policies.evaluation import make_eval_env, run_episode
+    from policies.registry import load_policy
+
+    spec = (report.get(role) or {}).get("spec")
+    if not spec:
+        raise RegressError(f"the report names no {role} policy to re-run")
+    bank = report.get("bank") or {}
+    scenario = result["scenario"]
+    bank_dir = _bank_for(bank, scenario)
+    config = dict((report.get("settings") or {}).get("env_config") or {})
+    env = make_eval_env(None, config=config, bank_dir=bank_dir,
+                        render_mode="rgb_array" if frames is not None else None)
+    try:
+        policy = load_policy(spec)
+        policy.bind([env])
+        rerun, _ = run_episode(env, policy, scenario, int(result["seed"]), frames=frames)
+        return rerun.steps, rerun.trajectory_hash, env.unwrapped.config["policy_frequency"]
+    finally:
+        env.close()
+
+
+def _bank_for(bank: Dict[str, Any], scenario: str) -> Optional[str]:
+    """The report's bank folder, or the shipped bank when that folder is not on this machine, as long as
+    the scenario's script is the one the report ran."""
+    from dv2s_gym.regress.runner import bank_info
+
+    expected = (bank.get("hashes") or {}).get(scenario)
+    path = bank.get("path")
+    here = None
+    for folder in ([path] if path and Path(path).is_dir() else []) + [None]:
+        try:
+            here = bank_info([scenario], folder)["hashes"][scenario]
+        except Exception:  # not in that bank
+            continue
+        if here == expected:
+            return folder
+    raise RegressError(f"scenario {scenario} is not in the bank the report used ({path}) with the same script "
+                       f"({str(expected)[:12]} in the report{f', {here[:12]} here' if here else ''}); "
+                       "the episode cannot be reproduced")

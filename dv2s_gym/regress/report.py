@@ -1,0 +1,551 @@
+"""The regression report: built from paired episode results, written as JSON, JUnit XML and Markdown.
+
+JSON schema ``dv2s-regress``, version 1 (:data:`SCHEMA_VERSION`; a change to any key below
+bumps it, and ``--baseline-report`` refuses a report of another version)::
+
+    {
+      "schema": "dv2s-regress", "schema_version": 1,
+      "created": ISO-8601 time (UTC), "dv2s_version": "0.1.0",
+      "bank": {"path": bank folder, "version": SHA-256 over the scenarios used (name + script),
+               "scenarios": [names], "hashes": {name: SHA-256 of its script}},
+      "settings": {"episodes", "seed", "margin", "alpha", "sequential", "env_config", "backend",
+                   "workers", "timeout"},
+      "candidate": {"spec": policy spec, "card": model card dict or null},
+      "baseline": {"spec", "card"} | {"report": path, "spec", "card"} | null,
+      "episodes": [{"id": "scenario/seed", "scenario", "seed",
+                    "candidate": Episode, "baseline": Episode | null}],
+      "scenarios": {name: {"candidate": Summary, "baseline": Summary | null,
+                           "comparison": Comparison | null}},
+      "overall": {"candidate": Summary, "baseline": Summary | null, "comparison": Comparison | null},
+      "verdict": "PASS" | "FAIL" | "INCONCLUSIVE" | null (no baseline),
+      "regressed": [scenario names whose verdict is FAIL],
+      "newly_failing": [episode ids where the candidate failed and the baseline did not],
+      "errors": [{"id", "role", "error"}],
+      "stopped_early": bool,
+      "sequential": {"looks", "episodes", "max_episodes", "verdict"} | null
+    }
+
+``Episode`` is :meth:`policies.evaluation.EpisodeResult.to_json` (scenario, seed, scene_seed,
+sampled ``params``, collided, collisions, off_road, success, failed, min_ttc (null when no
+vehicle was ever on a collision course), mean_speed, distance, episode_return, steps,
+trajectory_hash, error, extra) plus ``role``, ``id`` and ``trace`` (path of the saved trace,
+relative to the report's folder, for failed episodes; else null). An episode that produced no
+result (an exception, or a worker that crashed or hung twice) is
+``{"id", "role", "scenario", "seed", "error", "trace": null}``.
+
+``Summary`` (one policy, one scenario or all)::
+
+    {"episodes": n (without errors), "errors": count,
+     "collision_rate" | "off_road_rate" | "failure_rate" | "success_rate":
+         {"value", "low", "high", "count"}          Wilson 95 % interval,
+     "min_ttc" | "mean_speed" | "return": {"value", "low", "high", "n"}   bootstrap 95 % interval}
+
+A failure is a collision or leaving the road. ``min_ttc`` is the mean over episodes of each
+episode's minimum time-to-collision [s], over the ``n`` episodes where it was finite. The
+means' intervals resample episodes within a scenario and whole scenarios for the overall
+figure (``cluster_bootstrap_mean``), since episodes of one scenario are not independent.
+
+``Comparison`` (candidate against baseline on the same scenario x seed pairs; pairs with an
+error on either side are left out)::
+
+    {"n": pairs, "table": {"both_fail", "candidate_only", "baseline_only", "neither"},
+     "candidate_rate", "baseline_rate",
+     "difference": {"value", "low", "high"}     failure-rate difference, Newcombe interval,
+     "p_value": one-sided exact McNemar, "p_adjusted": Holm over scenarios,
+     "verdict": "PASS" | "FAIL" | "INCONCLUSIVE", "reason": one line}
+
+Verdicts follow :mod:`dv2s_gym.regress.stats` (non-inferiority within ``margin``). The
+overall verdict is FAIL when any scenario or the pooled table FAILs, PASS when the pooled
+table PASSes and no scenario FAILs. Episodes that ended in errors never let a verdict be
+PASS: it becomes INCONCLUSIVE, saying how many are missing.
+"""
+
+from __future__ import annotations
+
+import datetime
+import importlib
+import json
+import math
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Union
+
+from dv2s_gym.regress import stats
+from dv2s_gym.regress.errors import ReportMismatchError, RegressError
+from dv2s_gym.regress.store import describe_differences
+from scenario_bank.atomic import atomic_write_json, atomic_write_text
+
+__all__ = [
+    "SCHEMA",
+    "SCHEMA_VERSION",
+    "EXIT_CODES",
+    "exit_code",
+    "summarize",
+    "summarize_groups",
+    "comparison_json",
+    "build_report",
+    "load_report",
+    "check_baseline_report",
+    "write_json",
+    "write_junit",
+    "write_markdown",
+    "write_reports",
+    "format_summary",
+]
+
+SCHEMA = "dv2s-regress"
+SCHEMA_VERSION = 1
+CONFIDENCE = 0.95
+RATES = (("collision_rate", "collided"), ("off_road_rate", "off_road"), ("failure_rate", "failed"),
+         ("success_rate", "success"))
+MEANS = (("min_ttc", "min_ttc"), ("mean_speed", "mean_speed"), ("return", "episode_return"))
+
+EXIT_CODES = {"PASS": 0, "FAIL": 1, "INCONCLUSIVE": 3, None: 0}
+"""Exit status of ``dv2s regress`` per verdict (2 stays "bad input"); no baseline: 0."""
+
+
+def exit_code(verdict: Optional[str]) -> int:
+    """The exit status for a report's verdict: 0 PASS (or no baseline), 1 FAIL, 3 INCONCLUSIVE."""
+    return EXIT_CODES[verdict]
+
+
+def _verdict(value: Any) -> str:
+    """``Verdict.FAIL`` or ``"fail"`` -> ``"FAIL"``."""
+    return str(getattr(value, "name", value)).upper()
+
+
+# ------------------------------------------------------------------------------ summaries
+def _ok(results: Sequence[Mapping[str, Any]]) -> List[Mapping[str, Any]]:
+    return [r for r in results if r is not None and not r.get("error")]
+
+
+def _rate(values: Sequence[bool]) -> Dict[str, Any]:
+    n, k = len(values), int(sum(bool(v) for v in values))
+    if n == 0:
+        return {"value": None, "low": None, "high": None, "count": 0}
+    low, high = stats.wilson_interval(k, n, CONFIDENCE)
+    return {"value": k / n, "low": low, "high": high, "count": k}
+
+
+def _mean(groups: Sequence[Sequence[float]]) -> Dict[str, Any]:
+    groups = [list(g) for g in groups if len(g)]
+    n = sum(len(g) for g in groups)
+    if n == 0:
+        return {"value": None, "low": None, "high": None, "n": 0}
+    value, low, high = stats.cluster_bootstrap_mean(groups, CONFIDENCE, n_resamples=2000, seed=0)
+    return {"value": value, "low": low, "high": high, "n": n}
+
+
+def _finite(value: Any) -> Optional[float]:
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def summarize_groups(groups: Mapping[str, Sequence[Mapping[str, Any]]], *, episode_groups: bool = False
+                     ) -> Dict[str, Any]:
+    """Summary over several scenarios: rates over all episodes, means resampling whole scenarios.
+
+    With ``episode_groups`` every episode is its own group (the within-scenario interval).
+    """
+    every = [r for results in groups.values() for r in results if r is not None]
+    ok = _ok(every)
+    summary: Dict[str, Any] = {"episodes": len(ok), "errors": len(every) - len(ok)}
+    for key, field in RATES:
+        summary[key] = _rate([bool(r.get(field)) for r in ok])
+    for key, field in MEANS:
+        per_group = [[v for v in (_finite(r.get(field)) for r in _ok(results)) if v is not None]
+                     for results in groups.values()]
+        if episode_groups:
+            per_group = [[v] for values in per_group for v in values]
+        summary[key] = _mean(per_group)
+    return summary
+
+
+def summarize(results: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
+    """Summary of one policy on one scenario (episodes resampled for the means' intervals)."""
+    return summarize_groups({"": results}, episode_groups=True)
+
+
+# ----------------------------------------------------------------------------- comparisons
+def comparison_json(comparison: "stats.Comparison", *, verdict: Optional[str] = None,
+                    reason: Optional[str] = None) -> Dict[str, Any]:
+    """A :class:`~dv2s_gym.regress.stats.Comparison` as the report's ``Comparison`` dict."""
+    table = comparison.table
+    low, high = comparison.interval
+    return {
+        "n": table.n,
+        "table": {"both_fail": table.both_fail, "candidate_only": table.candidate_only,
+                  "baseline_only": table.baseline_only, "neither": table.neither},
+        "candidate_rate": table.candidate_rate,
+        "baseline_rate": table.baseline_rate,
+        "difference": {"value": comparison.difference, "low": low, "high": high},
+        "p_value": comparison.p_value,
+        "p_adjusted": getattr(comparison, "p_adjusted", getattr(comparison, "adjusted_p", comparison.p_value)),
+        "verdict": verdict or _verdict(comparison.verdict),
+        "reason": reason or comparison.reason,
+    }
+
+
+def _paired_table(pairs: Sequence[Dict[str, Any]]) -> "stats.PairedTable":
+    complete = [p for p in pairs if p["baseline"] is not None and not p["candidate"].get("error")
+                and not p["baseline"].get("error")]
+    return stats.PairedTable.from_outcomes([bool(p["candidate"]["failed"]) for p in complete],
+                                           [bool(p["baseline"]["failed"]) for p in complete])
+
+
+def paired_tables(episodes: Sequence[Dict[str, Any]], scenarios: Sequence[str]) -> Dict[str, "stats.PairedTable"]:
+    """The paired table of each scenario (pairs with an error on either side left out)."""
+    by_scenario: Dict[str, List[Dict[str, Any]]] = {name: [] for name in scenarios}
+    for episode in episodes:
+        by_scenario.setdefault(episode["scenario"], []).append(episode)
+    return {name: _paired_table(pairs) for name, pairs in by_scenario.items()}
+
+
+def _errors_note(count: int) -> str:
+    return f"{count} episode{'s' if count != 1 else ''} ended in an error, so it cannot PASS"
+
+
+# ---------------------------------------------------------------------------------- report
+def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: Dict[str, Any],
+                 baseline: Optional[Dict[str, Any]], episodes: Sequence[Dict[str, Any]],
+                 stopped_early: bool = False, sequential: Optional[Dict[str, Any]] = None,
+                 dv2s_version: Optional[str] = None, created: Optional[str] = None) -> Dict[str, Any]:
+    """The report dict (schema in the module docstring) from the paired episodes.
+
+    Args:
+        bank: ``{"path", "version", "scenarios", "hashes"}``.
+        settings: the run's settings (``margin`` and ``alpha`` decide the verdicts).
+        candidate / baseline: ``{"spec", "card", ...}``; ``baseline`` None for a run without one.
+        episodes: ``{"id", "scenario", "seed", "candidate": result, "baseline": result | None}``
+            (results as returned by :func:`~dv2s_gym.regress.worker.run_task`).
+        stopped_early / sequential: the sequential test's outcome (``sequential["verdict"]``,
+            when set, is the overall verdict of a sequential run; a scenario FAIL still FAILs).
+    """
+    scenarios = list(bank["scenarios"])
+    episodes = sorted(episodes, key=lambda e: (scenarios.index(e["scenario"]) if e["scenario"] in scenarios
+                                               else len(scenarios), e["scenario"], int(e["seed"])))
+    margin, alpha = float(settings["margin"]), float(settings["alpha"])
+    has_baseline = baseline is not None
+    by_scenario: Dict[str, List[Dict[str, Any]]] = {name: [] for name in scenarios}
+    for episode in episodes:
+        by_scenario.setdefault(episode["scenario"], []).append(episode)
+
+    def results(name: str, role: str) -> List[Dict[str, Any]]:
+        return [e[role] for e in by_scenario[name] if e.get(role) is not None]
+
+    errors = [{"id": e["id"], "role": role, "error": e[role]["error"]} for e in episodes
+              for role in ("candidate", "baseline") if e.get(role) is not None and e[role].get("error")]
+    errors_in = {name: sum(1 for e in by_scenario[name] for role in ("candidate", "baseline")
+                           if e.get(role) is not None and e[role].get("error")) for name in by_scenario}
+
+    report_scenarios: Dict[str, Any] = {}
+    overall_comparison = None
+    verdict = None
+    regressed: List[str] = []
+    newly_failing: List[str] = []
+    comparisons: Dict[str, Any] = {}
+    if has_baseline:
+        tables = paired_tables(episodes, list(by_scenario))
+        per_scenario, overall = stats.compare_scenarios(tables, margin, alpha)
+        for name, comparison in per_scenario.items():
+            scenario_verdict, reason = _verdict(comparison.verdict), comparison.reason
+            if scenario_verdict == "PASS" and errors_in[name]:
+                scenario_verdict, reason = "INCONCLUSIVE", f"{_errors_note(errors_in[name])}; {reason}"
+            comparisons[name] = comparison_json(comparison, verdict=scenario_verdict, reason=reason)
+        regressed = [name for name, c in comparisons.items() if c["verdict"] == "FAIL"]
+        verdict, reason = _verdict(overall.verdict), overall.reason
+        if sequential and sequential.get("verdict"):
+            sequential_verdict = sequential["verdict"]
+            looks = (f"sequential test ({sequential.get('looks')} looks, {sequential.get('episodes')} of "
+                     f"{sequential.get('max_episodes')} paired episodes)")
+            if regressed or sequential_verdict == "FAIL":
+                verdict = "FAIL"
+                reason = (f"{looks}: FAIL; " if sequential_verdict == "FAIL" else "") + reason
+            else:
+                verdict, reason = sequential_verdict, f"{looks}: {sequential_verdict}; pooled: {overall.reason}"
+        if verdict == "PASS" and errors:
+            verdict, reason = "INCONCLUSIVE", f"{_errors_note(len(errors))}; {reason}"
+        overall_comparison = comparison_json(overall, verdict=verdict, reason=reason)
+        newly_failing = [e["id"] for e in episodes if e.get("baseline") is not None
+                         and not e["candidate"].get("error") and not e["baseline"].get("error")
+                         and e["candidate"].get("failed") and not e["baseline"].get("failed")]
+
+    for name in by_scenario:
+        report_scenarios[name] = {
+            "candidate": summarize(results(name, "candidate")),
+            "baseline": summarize(results(name, "baseline")) if has_baseline else None,
+            "comparison": comparisons.get(name),
+        }
+    overall_summary = {
+        "candidate": summarize_groups({n: results(n, "candidate") for n in by_scenario}),
+        "baseline": summarize_groups({n: results(n, "baseline") for n in by_scenario}) if has_baseline else None,
+        "comparison": overall_comparison,
+    }
+    return {
+        "schema": SCHEMA,
+        "schema_version": SCHEMA_VERSION,
+        "created": created or datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "dv2s_version": dv2s_version or _dv2s_version(),
+        "bank": dict(bank),
+        "settings": dict(settings),
+        "candidate": dict(candidate),
+        "baseline": dict(baseline) if baseline is not None else None,
+        "episodes": list(episodes),
+        "scenarios": report_scenarios,
+        "overall": overall_summary,
+        "verdict": verdict,
+        "regressed": regressed,
+        "newly_failing": newly_failing,
+        "errors": errors,
+        "stopped_early": bool(stopped_early),
+        "sequential": dict(sequential) if sequential else None,
+    }
+
+
+def _dv2s_version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("dv2s-gym")
+    except metadata.PackageNotFoundError:  # pragma: no cover - running from a source tree
+        return "unknown"
+
+
+# ---------------------------------------------------------------------- baseline reports
+def load_report(path: Union[str, os.PathLike]) -> Dict[str, Any]:
+    """Read a report written by ``dv2s regress`` and check its schema and version."""
+    path = Path(path)
+    if not path.is_file():
+        raise RegressError(f"baseline report {path} does not exist; give the report.json of an earlier "
+                           "`dv2s regress` run")
+    try:
+        report = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise RegressError(f"baseline report {path} is not readable JSON ({error}); give the report.json "
+                           "of an earlier `dv2s regress` run") from None
+    if not isinstance(report, dict) or report.get("schema") != SCHEMA:
+        found = report.get("schema") if isinstance(report, dict) else type(report).__name__
+        raise ReportMismatchError(f"{path} is not a dv2s regress report (schema {found!r}, expected "
+                                  f"{SCHEMA!r}); give the report.json of an earlier `dv2s regress` run")
+    version = report.get("schema_version")
+    if version != SCHEMA_VERSION:
+        raise ReportMismatchError(
+            f"baseline report {path} has schema version {version}, this dv2s-gym reads version "
+            f"{SCHEMA_VERSION}; rerun the baseline with this version (dv2s regress --policy BASELINE) "
+            "and compare against that report")
+    return report
+
+
+def check_baseline_report(report: Mapping[str, Any], *, path: Union[str, os.PathLike], bank: Mapping[str, Any],
+                          env_config: Mapping[str, Any]) -> None:
+    """Refuse a baseline report whose bank scenarios or env config differ from this run's, saying what differs."""
+    theirs = report.get("bank") or {}
+    their_hashes = theirs.get("hashes") or {}
+    missing = [n for n in bank["scenarios"] if n not in their_hashes]
+    if missing:
+        raise ReportMismatchError(
+            f"baseline report {path} has no episodes of {', '.join(missing[:5])}"
+            f"{' and more' if len(missing) > 5 else ''} (it covers {', '.join(theirs.get('scenarios') or []) or 'nothing'}); "
+            "select scenarios it covers with --scenarios, or rerun the baseline on these")
+    changed = [n for n in bank["scenarios"] if their_hashes[n] != bank["hashes"][n]]
+    if changed:
+        details = ", ".join(f"{n} (script {their_hashes[n][:12]} there, {bank['hashes'][n][:12]} here)"
+                            for n in changed[:3])
+        raise ReportMismatchError(
+            f"baseline report {path} was made with another bank version (bank version {str(theirs.get('version'))[:12]}"
+            f" there, {str(bank['version'])[:12]} here): changed scenario{'s' if len(changed) > 1 else ''} "
+            f"{details}{' and more' if len(changed) > 3 else ''}; rerun the baseline on this bank "
+            "(--baseline POLICY instead of --baseline-report)")
+    their_config = (report.get("settings") or {}).get("env_config") or {}
+    if dict(their_config) != dict(env_config):
+        raise ReportMismatchError(
+            f"baseline report {path} used another env config ({describe_differences(dict(env_config), dict(their_config))});"
+            " run with the same --config, or rerun the baseline")
+
+
+# ----------------------------------------------------------------------------------- text
+def _pct(value: Optional[float]) -> str:
+    return "-" if value is None else f"{100 * value:.1f}%"
+
+
+def _interval(entry: Optional[Mapping[str, Any]], percent: bool = True, digits: int = 2) -> str:
+    if not entry or entry.get("value") is None:
+        return "-"
+    if percent:
+        return f"{_pct(entry['value'])} [{_pct(entry['low'])}, {_pct(entry['high'])}]"
+    return f"{entry['value']:.{digits}f} [{entry['low']:.{digits}f}, {entry['high']:.{digits}f}]"
+
+
+def _pp(entry: Mapping[str, Any]) -> str:
+    return (f"{100 * entry['value']:+.1f} pp [{100 * entry['low']:+.1f}, {100 * entry['high']:+.1f}]")
+
+
+def _failures(summary: Optional[Mapping[str, Any]]) -> str:
+    if not summary:
+        return "-"
+    rate = summary["failure_rate"]
+    return f"{rate['count']}/{summary['episodes']} ({_pct(rate['value'])})"
+
+
+def _headline(report: Mapping[str, Any]) -> str:
+    settings = report["settings"]
+    baseline = report.get("baseline")
+    against = ("" if baseline is None else
+               f" vs baseline `{baseline.get('spec')}`" + (f" (from {baseline['report']})" if baseline.get("report") else ""))
+    return (f"candidate `{report['candidate']['spec']}`{against}; {len(report['scenarios'])} scenario(s) x "
+            f"{settings['episodes']} episode(s) from seed {settings['seed']}; margin {100 * settings['margin']:g} pp, "
+            f"alpha {settings['alpha']:g}; bank version {str(report['bank']['version'])[:12]}")
+
+
+def format_summary(report: Mapping[str, Any]) -> str:
+    """The plain-text table ``dv2s regress`` prints."""
+    rows = [("scenario", "n", "candidate fails", "baseline fails", "difference [95% CI]", "p (Holm)", "verdict")]
+    for name, entry in list(report["scenarios"].items()) + [("OVERALL", report["overall"])]:
+        comparison = entry.get("comparison")
+        rows.append((name, str(entry["candidate"]["episodes"]), _failures(entry["candidate"]),
+                     _failures(entry.get("baseline")),
+                     _pp(comparison["difference"]) if comparison else "-",
+                     f"{comparison['p_adjusted']:.3g}" if comparison else "-",
+                     comparison["verdict"] if comparison else "-"))
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    lines = [_headline(report)]
+    lines += ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
+    if report["verdict"] is not None:
+        lines.append(f"verdict: {report['verdict']} ({report['overall']['comparison']['reason']})")
+        if report["regressed"]:
+            lines.append(f"regressed: {', '.join(report['regressed'])}")
+    else:
+        lines.append("no baseline: measures only, no verdict")
+    if report["errors"]:
+        lines.append(f"{len(report['errors'])} error(s): " + "; ".join(
+            f"{e['id']} ({e['role']}): {e['error']}" for e in report["errors"][:3]))
+    if report.get("stopped_early"):
+        lines.append("stopped early: the sequential test settled the verdict")
+    return "\n".join(lines)
+
+
+def _markdown(report: Mapping[str, Any], report_path: str = "report.json") -> str:
+    verdict = report["verdict"]
+    lines = [f"## dv2s regress: {verdict if verdict else 'measures (no baseline)'}", "", _headline(report), ""]
+    if verdict is not None:
+        lines += [f"**{verdict}**: {report['overall']['comparison']['reason']}", ""]
+        if report["regressed"]:
+            lines += ["Regressed: " + ", ".join(f"`{n}`" for n in report["regressed"]), ""]
+        if report.get("stopped_early"):
+            lines += ["Stopped early: the sequential test settled the verdict.", ""]
+        lines += ["| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (Holm) | verdict |",
+                  "|---|---:|---:|---:|---|---:|---|"]
+        for name, entry in list(report["scenarios"].items()) + [("**overall**", report["overall"])]:
+            c = entry["comparison"]
+            lines.append(f"| {name if name.startswith('**') else f'`{name}`'} | {c['n']} | "
+                         f"{_failures(entry['candidate'])} | {_failures(entry['baseline'])} | {_pp(c['difference'])} | "
+                         f"{c['p_adjusted']:.3g} | {c['verdict']} |")
+        lines.append("")
+    lines += ["### Measures", "",
+              "| scenario | policy | episodes | collision | off-road | success | min TTC [s] | mean speed [m/s] | return |",
+              "|---|---|---:|---|---|---|---|---|---|"]
+    for name, entry in list(report["scenarios"].items()) + [("**overall**", report["overall"])]:
+        for role in ("candidate", "baseline"):
+            s = entry.get(role)
+            if not s:
+                continue
+            label = name if name.startswith("**") else f"`{name}`"
+            lines.append(f"| {label} | {role} | {s['episodes']} | {_interval(s['collision_rate'])} | "
+                         f"{_interval(s['off_road_rate'])} | {_interval(s['success_rate'])} | "
+                         f"{_interval(s['min_ttc'], False)} | {_interval(s['mean_speed'], False, 1)} | "
+                         f"{_interval(s['return'], False)} |")
+    lines.append("")
+    if report["newly_failing"]:
+        shown = report["newly_failing"][:20]
+        lines += [f"### Newly failing episodes ({len(report['newly_failing'])})", "",
+                  "The candidate failed, the baseline did not. Reproduce one with "
+                  f"`dv2s replay {report_path} --episode ID --video out.webm`.", ""]
+        lines += [f"- `{episode_id}`" for episode_id in shown]
+        if len(report["newly_failing"]) > len(shown):
+            lines.append(f"- ... and {len(report['newly_failing']) - len(shown)} more (see {report_path})")
+        lines.append("")
+    if report["errors"]:
+        lines += [f"### Errors ({len(report['errors'])})", ""]
+        lines += [f"- `{e['id']}` ({e['role']}): {e['error'].splitlines()[0]}" for e in report["errors"][:20]]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _junit(report: Mapping[str, Any]) -> ET.ElementTree:
+    cases = []
+    for name, entry in report["scenarios"].items():
+        case = ET.Element("testcase", {"classname": "dv2s.regress", "name": name})
+        comparison = entry.get("comparison")
+        errors = [e for e in report["errors"] if e["id"].rsplit("/", 1)[0] == name]
+        if comparison and comparison["verdict"] == "FAIL":
+            failure = ET.SubElement(case, "failure", {"type": "regression", "message": comparison["reason"]})
+            failing = [i for i in report["newly_failing"] if i.rsplit("/", 1)[0] == name]
+            failure.text = comparison["reason"] + ("\nnewly failing: " + ", ".join(failing) if failing else "")
+        elif errors:
+            error = ET.SubElement(case, "error", {"type": "episode error",
+                                                  "message": f"{len(errors)} episode(s) ended in an error"})
+            error.text = "\n".join(f"{e['id']} ({e['role']}): {e['error']}" for e in errors)
+        elif comparison and comparison["verdict"] == "INCONCLUSIVE":
+            ET.SubElement(case, "skipped", {"message": f"INCONCLUSIVE: {comparison['reason']}"})
+        out = ET.SubElement(case, "system-out")
+        out.text = (f"candidate failures {_failures(entry['candidate'])}, baseline failures "
+                    f"{_failures(entry.get('baseline'))}" + (f"; {comparison['reason']}" if comparison else ""))
+        cases.append(case)
+    suite = ET.Element("testsuite", {
+        "name": "dv2s regress",
+        "tests": str(len(cases)),
+        "failures": str(sum(1 for c in cases if c.find("failure") is not None)),
+        "errors": str(sum(1 for c in cases if c.find("error") is not None)),
+        "skipped": str(sum(1 for c in cases if c.find("skipped") is not None)),
+        "timestamp": str(report.get("created", "")),
+    })
+    properties = ET.SubElement(suite, "properties")
+    for key, value in (("candidate", report["candidate"]["spec"]),
+                       ("baseline", (report.get("baseline") or {}).get("spec")),
+                       ("verdict", report["verdict"]), ("bank_version", report["bank"]["version"])):
+        ET.SubElement(properties, "property", {"name": key, "value": str(value)})
+    suite.extend(cases)
+    root = ET.Element("testsuites", {"name": "dv2s regress"})
+    root.append(suite)
+    ET.indent(root)
+    return ET.ElementTree(root)
+
+
+def write_json(report: Mapping[str, Any], path: Union[str, os.PathLike]) -> Path:
+    """Write the report as JSON (atomic)."""
+    return atomic_write_json(path, report)
+
+
+def write_junit(report: Mapping[str, Any], path: Union[str, os.PathLike]) -> Path:
+    """Write JUnit XML: one test case per scenario, a failure for FAIL, skipped for INCONCLUSIVE, an error
+    for a scenario whose episodes ended in errors."""
+    tree = _junit(report)
+    text = ET.tostring(tree.getroot(), encoding="unicode", xml_declaration=False)
+    return atomic_write_text(path, '<?xml version="1.0" encoding="utf-8"?>\n' + text + "\n")
+
+
+def write_markdown(report: Mapping[str, Any], path: Union[str, os.PathLike], report_path: str = "report.json") -> Path:
+    """Write the Markdown summary (for a pull-request comment)."""
+    return atomic_write_text(path, _markdown(report, report_path))
+
+
+def write_reports(report: Mapping[str, Any], out_dir: Union[str, os.PathLike]) -> Dict[str, Path]:
+    """Write ``report.json``, ``junit.xml``, ``report.md`` (and ``report.html`` when
+    :mod:`dv2s_gym.regress.html` exists) into ``out_dir``; returns format -> path."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = {"json": write_json(report, out_dir / "report.json"),
+             "junit": write_junit(report, out_dir / "junit.xml"),
+             "markdown": write_markdown(report, out_dir / "report.md", str(out_dir / "report.json"))}
+    try:
+        html = importlib.import_module("dv2s_gym.regress.html")
+    except ModuleNotFoundError as error:
+        if error.name != "dv2s_gym.regress.html":
+            raise
+    else:
+        written = html.write_html(report, out_dir / "report.html")
+        paths["html"] = Path(written) if written is not None else out_dir / "report.html"
+    return paths

@@ -1,0 +1,307 @@
+"""``run_regression``: a candidate policy against a baseline on paired scenario x seed episodes.
+
+Episode ``k`` of a scenario uses env seed ``seed + k`` for both policies, so each
+candidate episode has a twin baseline episode on the identical scene (the env is
+deterministic given the seed). Tasks go to a backend (:mod:`dv2s_gym.regress.backends`)
+round by round (seed ``k`` of every scenario before seed ``k + 1``); results stream into
+``results.jsonl`` as they finish (:mod:`dv2s_gym.regress.store`), and the report
+(:mod:`dv2s_gym.regress.report`) is built from them at the end.
+
+With ``sequential=True`` the pooled paired table is examined after every batch of
+seeds by :class:`~dv2s_gym.regress.stats.SequentialTest` (group-sequential, alpha
+spending), and the run stops as soon as it reaches PASS or FAIL.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+import sys
+from pathlib import Path
+from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
+
+from dv2s_gym.regress import stats
+from dv2s_gym.regress.backends import get_backend
+from dv2s_gym.regress.errors import RegressError, ReportMismatchError
+from dv2s_gym.regress.report import (
+    build_report,
+    check_baseline_report,
+    load_report,
+    paired_tables,
+    write_reports,
+)
+from dv2s_gym.regress.store import RunStore
+from dv2s_gym.regress.worker import task_id
+
+__all__ = ["run_regression", "bank_info", "plan_tasks", "DEFAULT_OUT", "ROLES"]
+
+DEFAULT_OUT = "out/regress"
+ROLES = ("candidate", "baseline")
+Scenarios = Union[None, str, Sequence[str]]
+
+
+def bank_info(scenarios: Sequence[str], bank_dir: Optional[Union[str, os.PathLike]] = None) -> Dict[str, Any]:
+    """``{"path", "version", "scenarios", "hashes"}``: the version is a SHA-256 over the scenarios' names and scripts."""
+    from scenario_bank.bank import Bank, content_hash
+
+    bank = Bank(bank_dir)
+    hashes = {name: content_hash(bank.get(name).script) for name in scenarios}
+    payload = "\n".join(f"{name}:{hashes[name]}" for name in sorted(hashes))
+    return {"path": str(Path(bank.root).resolve()), "version": hashlib.sha256(payload.encode()).hexdigest(),
+            "scenarios": list(scenarios), "hashes": hashes}
+
+
+def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterable[int], *,
+               env_config: Dict[str, Any], bank_dir: Optional[str], trace_dir: Optional[str]) -> List[Dict[str, Any]]:
+    """Task dicts, seed by seed (every scenario, then the next seed), each role in turn."""
+    return [{"policy": spec, "role": role, "scenario": scenario, "seed": int(seed), "env_config": dict(env_config),
+             "bank_dir": bank_dir, "trace_dir": trace_dir}
+            for seed in seeds for scenario in scenarios for role, spec in policies.items()]
+
+
+def _policy_info(spec: str) -> Dict[str, Any]:
+    """Load the policy here once: a bad spec fails before any worker starts; the model card goes in the report."""
+    from policies.registry import load_policy
+
+    policy = load_policy(spec)
+    card = None
+    while policy is not None and card is None:
+        card = getattr(policy, "card", None) or None
+        policy = getattr(policy, "inner", None)
+    return {"spec": spec, "card": card}
+
+
+def _check_settings(episodes: int, seed: int, margin: float, alpha: float, batch: Optional[int]) -> None:
+    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+        raise RegressError(f"--episodes must be a positive integer, not {episodes!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise RegressError(f"--seed must be a non-negative integer, not {seed!r}")
+    if not 0.0 <= float(margin) < 1.0:
+        raise RegressError(f"--margin is a failure-rate difference in [0, 1), e.g. 0.05 for 5 points; not {margin}")
+    if not 0.0 < float(alpha) < 1.0:
+        raise RegressError(f"--alpha must be strictly between 0 and 1, e.g. 0.05; not {alpha}")
+    if batch is not None and (not isinstance(batch, int) or batch < 1):
+        raise RegressError(f"the sequential batch must be a positive number of seeds, not {batch!r}")
+
+
+def _select(scenarios: Scenarios, bank_dir: Optional[str], fallback: Optional[Sequence[str]]) -> List[str]:
+    from scenario_bank import select_scenarios
+
+    if isinstance(scenarios, str):
+        scenarios = [scenarios]
+    if scenarios is not None:
+        scenarios = [s.strip() for s in scenarios if s and s.strip()]
+        if not scenarios:
+            raise RegressError("the scenario selection is empty; give bank names or tag:<tag> with --scenarios, "
+                               "or leave --scenarios out to use the whole bank")
+    names = select_scenarios(scenarios if scenarios is not None else fallback, bank_dir)
+    if not names:
+        raise RegressError("the scenario selection is empty; `dv2s bank list` shows the bank's scenarios and tags")
+    return names
+
+
+def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Sequence[str], seeds: Sequence[int],
+                          bank: Dict[str, Any], env_config: Dict[str, Any]
+                          ) -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]], str]:
+    """The baseline info, the baseline result per episode id, and the report file's SHA-256."""
+    path = Path(path)
+    old = load_report(path)
+    check_baseline_report(old, path=path, bank=bank, env_config=env_config)
+    if role not in ROLES:
+        raise RegressError(f"--baseline-role must be 'candidate' or 'baseline', not {role!r}")
+    if old.get(role) is None:
+        raise RegressError(f"baseline report {path} has no {role} policy (it ran without a baseline); "
+                           "use --baseline-role candidate")
+    results: Dict[str, Dict[str, Any]] = {}
+    for episode in old.get("episodes") or []:
+        result = episode.get(role)
+        if result is None:
+            continue
+        result = dict(result)
+        trace = result.get("trace")
+        if trace and not Path(trace).is_absolute():
+            result["trace"] = str((path.parent / trace).resolve())  # the old folder's traces, wherever this run is
+        results[episode["id"]] = result
+    missing = [task_id(n, s) for s in seeds for n in names if task_id(n, s) not in results]
+    if missing:
+        settings = old.get("settings") or {}
+        more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
+        raise ReportMismatchError(
+            f"baseline report {path} has no episode {missing[0]}{more}; it ran {settings.get('episodes')} "
+            f"episode(s) per scenario from seed {settings.get('seed')}: use --episodes and --seed within those, "
+            "or rerun the baseline with more episodes")
+    info = {"report": str(path.resolve()), "role": role, "spec": old[role].get("spec"), "card": old[role].get("card")}
+    return info, results, hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def run_regression(candidate: str, baseline: Optional[str] = None, *,
+                   baseline_report: Optional[Union[str, os.PathLike]] = None,
+                   bank_dir: Optional[Union[str, os.PathLike]] = None, scenarios: Scenarios = None,
+                   episodes: int = 20, seed: int = 0, margin: float = 0.05, alpha: float = 0.05,
+                   backend: str = "local", workers: Optional[int] = None, address: Optional[str] = None,
+                   out_dir: Optional[Union[str, os.PathLike]] = None, sequential: bool = False,
+                   env_config: Optional[Dict[str, Any]] = None, progress: bool = True,
+                   timeout: Optional[float] = None, batch: Optional[int] = None,
+                   baseline_role: str = "candidate",
+                   on_result: Optional[Callable[[Dict[str, Any]], None]] = None) -> Dict[str, Any]:
+    """Run ``candidate`` (and ``baseline``) on scenario x seed pairs and write the reports.
+
+    Args:
+        candidate: policy spec of the policy under test (:func:`policies.registry.load_policy`).
+        baseline: policy spec to compare against, run on the same episodes; or
+        baseline_report: an earlier ``report.json`` whose episodes (of its ``baseline_role``
+            policy, by default the one it tested) are the baseline: only the candidate runs.
+            Refused when its schema version, the bank scenarios' scripts or the env config differ.
+        bank_dir: bank folder (default: the shipped bank).
+        scenarios: bank names and/or ``tag:<tag>`` (default: the whole bank, or the baseline
+            report's scenarios); an empty selection is an error.
+        episodes: seeds per scenario; episode ``k`` uses env seed ``seed + k``.
+        margin: non-inferiority margin on the failure-rate difference (0.05 = 5 points).
+        alpha: level of the FAIL test (PASS is tested at ``alpha / 2``).
+        backend / workers / address: ``"local"`` process pool (``workers`` processes, default
+            every core) or ``"ray"`` (cluster ``address``).
+        out_dir: output folder (default ``out/regress``): ``run.json``, ``results.jsonl``,
+            ``traces/``, ``report.json``, ``junit.xml``, ``report.md``. Rerunning with the same
+            folder and settings resumes: finished episodes are not run again.
+        sequential: stop as soon as a group-sequential test settles PASS or FAIL, looking after
+            every ``batch`` seeds (default: a fifth of ``episodes``). Needs a baseline.
+        env_config: ``DV2S-v0`` config overrides for every episode.
+        progress: a progress bar on stderr.
+        timeout: seconds one episode may take before its worker counts as hung (local backend).
+        on_result: called in this process with each finished episode's result (after it is saved).
+
+    Returns:
+        The report dict (schema: :mod:`dv2s_gym.regress.report`).
+    """
+    _check_settings(episodes, seed, margin, alpha, batch)
+    if baseline is not None and baseline_report is not None:
+        raise RegressError("give --baseline POLICY or --baseline-report REPORT, not both")
+    if sequential and baseline is None and baseline_report is None:
+        raise RegressError("--sequential stops when the comparison is settled: it needs --baseline or "
+                           "--baseline-report")
+    bank_dir = None if bank_dir is None else str(bank_dir)
+    env_config = dict(env_config or {})
+    fallback = None
+    if baseline_report is not None:
+        fallback = (load_report(baseline_report).get("bank") or {}).get("scenarios") or None
+    names = _select(scenarios, bank_dir, fallback)
+    bank = bank_info(names, bank_dir)
+    seeds = [seed + k for k in range(episodes)]
+
+    candidate_info = _policy_info(candidate)
+    old_results: Dict[str, Dict[str, Any]] = {}
+    report_hash = None
+    if baseline_report is not None:
+        baseline_info, old_results, report_hash = _baseline_from_report(baseline_report, baseline_role, names, seeds,
+                                                                        bank, env_config)
+    elif baseline is not None:
+        baseline_info = _policy_info(baseline)
+    else:
+        baseline_info = None
+    has_baseline = baseline_info is not None
+
+    out = Path(out_dir if out_dir is not None else DEFAULT_OUT)
+    batch = batch or max(1, math.ceil(episodes / 5))
+    identity: Dict[str, Any] = {
+        "candidate": candidate, "baseline": baseline, "baseline_report": report_hash,
+        "baseline_role": baseline_role if baseline_report is not None else None,
+        "bank_version": bank["version"], "scenarios": names, "episodes": episodes, "seed": seed,
+        "env_config": env_config, "sequential": bool(sequential),
+    }
+    if sequential:  # the stopping point depends on these
+        identity.update(margin=float(margin), alpha=float(alpha), batch=batch)
+    settings = {"episodes": episodes, "seed": seed, "margin": float(margin), "alpha": float(alpha),
+                "sequential": bool(sequential), "env_config": env_config, "backend": backend,
+                "workers": workers, "timeout": timeout}
+    if sequential:
+        settings["batch"] = batch
+
+    store = RunStore(out, identity)
+    done = store.open()
+    done = {key: result for key, result in done.items() if not result.get("error")}  # errors run again
+    policies = {"candidate": candidate}
+    if baseline is not None:
+        policies["baseline"] = baseline
+    trace_dir = str(store.traces_dir.resolve())
+
+    def task_key(task: Dict[str, Any]) -> Tuple[str, str]:
+        return task_id(task["scenario"], task["seed"]), task["role"]
+
+    all_tasks = plan_tasks(policies, names, seeds, env_config=env_config, bank_dir=bank_dir, trace_dir=trace_dir)
+    results: Dict[Tuple[str, str], Dict[str, Any]] = {task_key(t): done[task_key(t)] for t in all_tasks
+                                                      if task_key(t) in done}
+    bar = _progress(progress, total=len(all_tasks), initial=len(results))
+
+    def handle(result: Dict[str, Any]) -> None:
+        result = dict(result)
+        result["trace"] = store.relative(result.get("trace"))
+        store.append(result)
+        results[(result["id"], result["role"])] = result
+        if bar is not None:
+            bar.update(1)
+        if on_result is not None:
+            on_result(result)
+
+    def paired(seed_list: Sequence[int]) -> List[Dict[str, Any]]:
+        episodes_out = []
+        for k in seed_list:
+            for name in names:
+                episode_id = task_id(name, k)
+                candidate_result = results.get((episode_id, "candidate"))
+                if candidate_result is None:
+                    continue
+                baseline_result = (old_results.get(episode_id) if baseline_report is not None
+                                   else results.get((episode_id, "baseline")))
+                episodes_out.append({"id": episode_id, "scenario": name, "seed": k, "candidate": candidate_result,
+                                     "baseline": baseline_result if has_baseline else None})
+        return episodes_out
+
+    runner = None
+    sequential_info = None
+    stopped_early = False
+    ran_seeds: List[int] = list(seeds)
+    try:
+        runner = get_backend(backend, workers=workers, address=address, timeout=timeout)
+        if not sequential:
+            pending = [t for t in all_tasks if task_key(t) not in results]
+            if pending:
+                runner.run(pending, handle)
+        else:
+            test = stats.SequentialTest(float(margin), float(alpha), max_episodes=episodes * len(names))
+            looks, last_n, verdict = 0, 0, None
+            for start in range(0, episodes, batch):
+                chunk = seeds[start:start + batch]
+                pending = [t for t in all_tasks if t["seed"] in chunk and task_key(t) not in results]
+                if pending:
+                    runner.run(pending, handle)
+                pooled = stats.PairedTable.pooled(list(paired_tables(paired(seeds[:start + batch]), names).values()))
+                if pooled.n > last_n:
+                    verdict = test.update(pooled)
+                    looks, last_n = looks + 1, pooled.n
+                if verdict is not None:
+                    ran_seeds = seeds[:start + batch]
+                    stopped_early = len(ran_seeds) < len(seeds)
+                    break
+            sequential_info = {"looks": looks, "episodes": last_n, "max_episodes": episodes * len(names),
+                               "batch": batch, "spending": test.spending,
+                               "verdict": None if verdict is None else verdict.name}
+    finally:
+        if bar is not None:
+            bar.close()
+        store.close()
+        if runner is not None:
+            runner.close()
+
+    report = build_report(bank=bank, settings=settings, candidate=candidate_info, baseline=baseline_info,
+                          episodes=paired(ran_seeds), stopped_early=stopped_early, sequential=sequential_info)
+    write_reports(report, out)
+    return report
+
+
+def _progress(enabled: bool, total: int, initial: int):
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, initial=initial, desc="regress", unit="episode", file=sys.stderr, dynamic_ncols=True)

@@ -1,0 +1,159 @@
+"""The run's output folder as a resumable log: settings in ``run.json``, episodes in ``results.jsonl``.
+
+Every finished episode is appended to ``results.jsonl`` as one JSON line (flushed and
+synced before the next one), so a run that is interrupted - Ctrl-C, a killed process, a
+lost machine - keeps every episode that finished. Rerunning with the same output folder
+and settings reads the log and runs only what is missing; an episode is never run twice
+and never counted twice (a line cut short by the interruption is dropped and rewritten).
+Episodes that ended in an error are run again on resume (the error may have been
+transient); the newer line replaces the older one.
+
+``run.json`` holds the settings that decide which episodes the run has and what they
+produce (policies, bank version, scenarios, episodes, seed, env config, ...). A folder
+holding another run's settings is refused, naming what differs.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, Dict, Optional, Tuple, Union
+
+from dv2s_gym.regress.errors import RegressError, ResumeMismatchError
+from scenario_bank.atomic import atomic_write_json
+
+__all__ = ["RunStore", "RUN_FILE", "RESULTS_FILE", "TRACES_DIR", "describe_differences"]
+
+RUN_FILE = "run.json"
+RESULTS_FILE = "results.jsonl"
+TRACES_DIR = "traces"
+_RUN_SCHEMA = "dv2s-regress-run"
+_RUN_VERSION = 1
+
+Key = Tuple[str, str]  # (episode id, role)
+
+
+def describe_differences(here: Dict[str, Any], there: Dict[str, Any], limit: int = 4) -> str:
+    """``"episodes: 20 here, 10 there; seed: ..."`` for the keys whose values differ."""
+    parts = []
+    for key in sorted(set(here) | set(there)):
+        if here.get(key) != there.get(key):
+            parts.append(f"{key}: {_short(here.get(key))} here, {_short(there.get(key))} there")
+    more = f"; and {len(parts) - limit} more" if len(parts) > limit else ""
+    return "; ".join(parts[:limit]) + more
+
+
+def _short(value: Any) -> str:
+    text = json.dumps(value, sort_keys=True, default=str)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+class RunStore:
+    """The output folder of one regression run.
+
+    Args:
+        out_dir: the folder (created when missing).
+        settings: the run's identity (JSON-safe dict); compared with ``run.json`` when the
+            folder already holds a run.
+        fsync: sync every appended line to disk (default), so not even a power loss loses
+            a finished episode.
+    """
+
+    def __init__(self, out_dir: Union[str, os.PathLike], settings: Dict[str, Any], fsync: bool = True) -> None:
+        self.root = Path(out_dir)
+        self.settings = json.loads(json.dumps(settings, sort_keys=True, default=str))
+        self.fsync = fsync
+        self.results_path = self.root / RESULTS_FILE
+        self.traces_dir = self.root / TRACES_DIR
+        self._handle = None
+
+    # ------------------------------------------------------------------ open
+    def open(self) -> Dict[Key, Dict[str, Any]]:
+        """Check or write ``run.json`` and return the episodes already finished, by (id, role)."""
+        if self.root.exists() and not self.root.is_dir():
+            raise RegressError(f"--out {self.root} is a file; give a folder for the run's reports")
+        self.root.mkdir(parents=True, exist_ok=True)
+        run_file = self.root / RUN_FILE
+        if run_file.is_file():
+            try:
+                stored = json.loads(run_file.read_text(encoding="utf-8"))
+            except ValueError as error:
+                raise RegressError(f"{run_file} is not readable JSON ({error}); delete the folder {self.root} "
+                                   "or choose another --out") from None
+            there = stored.get("settings") if isinstance(stored, dict) else None
+            if not isinstance(there, dict) or stored.get("schema") != _RUN_SCHEMA:
+                raise RegressError(f"{run_file} was not written by dv2s regress; choose another --out")
+            if there != self.settings:
+                raise ResumeMismatchError(
+                    f"{self.root} holds a regression run with other settings "
+                    f"({describe_differences(self.settings, there)}); rerun with the same settings to resume "
+                    f"it, or choose another --out (or delete {self.root}) for a new run")
+        elif self.results_path.exists():
+            raise RegressError(f"{self.results_path} exists without {RUN_FILE}; choose another --out or delete it")
+        else:
+            atomic_write_json(run_file, {"schema": _RUN_SCHEMA, "version": _RUN_VERSION, "settings": self.settings})
+        return self._read()
+
+    def _read(self) -> Dict[Key, Dict[str, Any]]:
+        done: Dict[Key, Dict[str, Any]] = {}
+        if not self.results_path.is_file():
+            return done
+        raw = self.results_path.read_bytes()
+        good = 0  # bytes of whole, parseable lines
+        lines = raw.split(b"\n")
+        for number, line in enumerate(lines, 1):
+            last = number == len(lines)
+            if not line.strip():
+                if not last:
+                    good += len(line) + 1
+                continue
+            try:
+                record = json.loads(line)
+                key = (record["id"], record["role"])
+            except (ValueError, KeyError, TypeError):
+                if last:
+                    break  # the line being written when the run was interrupted
+                raise RegressError(f"{self.results_path} line {number} is not a result record; the file is "
+                                   f"damaged: delete {self.root} and run again") from None
+            if last:
+                break  # no newline yet: the write was cut short
+            done[key] = record
+            good += len(line) + 1
+        if good < len(raw):
+            with open(self.results_path, "r+b") as handle:  # drop the cut-short tail before appending
+                handle.truncate(good)
+        return done
+
+    # ---------------------------------------------------------------- append
+    def append(self, result: Dict[str, Any]) -> None:
+        """Append one finished episode (one JSON line, flushed and synced)."""
+        if self._handle is None:
+            self._handle = open(self.results_path, "a", encoding="utf-8")
+        self._handle.write(json.dumps(result, sort_keys=True, default=str) + "\n")
+        self._handle.flush()
+        if self.fsync:
+            os.fsync(self._handle.fileno())
+
+    def close(self) -> None:
+        """Close the log."""
+        if self._handle is not None:
+            self._handle.close()
+            self._handle = None
+
+    def __enter__(self) -> "RunStore":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # ----------------------------------------------------------------- paths
+    def relative(self, path: Optional[str]) -> Optional[str]:
+        """``path`` relative to the folder when inside it (reports stay valid when the folder moves)."""
+        if not path:
+            return None
+        try:
+            return Path(path).resolve().relative_to(self.root.resolve()).as_posix()
+        except ValueError:
+            return str(path)
+

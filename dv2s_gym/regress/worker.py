@@ -1,0 +1,125 @@
+"""One regression episode in a worker process: :func:`run_task`.
+
+A *task* is a plain dict, so any backend (the local process pool, Ray) can ship it:
+
+- ``policy``: policy spec (:func:`policies.registry.load_policy`), e.g. ``"rule"``;
+- ``role``: ``"candidate"`` or ``"baseline"``;
+- ``scenario``: bank name; ``seed``: the episode's env seed;
+- ``env_config``: ``DV2S-v0`` config overrides (dict, may be empty);
+- ``bank_dir``: bank folder (``None``: the shipped bank);
+- ``trace_dir``: folder for the trace of a failed episode (``None``: keep no trace).
+
+:func:`run_task` returns ``EpisodeResult.to_json()`` plus ``role``, ``id``
+(``"<scenario>/<seed>"``) and ``trace`` (the saved trace's path or ``None``). An
+exception inside the episode comes back as an error result (``{"id", "role",
+"scenario", "seed", "error", "trace": None}``) instead of propagating: it is kept in
+the report, never dropped.
+
+Envs and loaded policies are cached per process between tasks (making an env and
+compiling a scenario is the slow part); the caches are keyed by bank, env config and
+spec, so a worker serves any mix of tasks.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import traceback
+from pathlib import Path
+from typing import Any, Dict, Optional, Tuple
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+__all__ = ["run_task", "task_id", "trace_filename", "error_result", "clear_caches"]
+
+_ENVS: Dict[Tuple[Optional[str], str], Any] = {}
+_POLICIES: Dict[Tuple[str, Optional[str], str], Any] = {}
+
+
+def task_id(scenario: str, seed: int) -> str:
+    """The episode id used in reports: ``"<scenario>/<seed>"``."""
+    return f"{scenario}/{int(seed)}"
+
+
+def trace_filename(role: str, scenario: str, seed: int) -> str:
+    """File name of a failed episode's trace inside the run's ``traces/`` folder."""
+    return f"{scenario}__{int(seed)}__{role}.json.gz"
+
+
+def error_result(task: Dict[str, Any], error: str) -> Dict[str, Any]:
+    """The result standing for a task that produced no episode (exception, crash, hang)."""
+    return {"id": task_id(task["scenario"], task["seed"]), "role": task["role"], "scenario": task["scenario"],
+            "seed": int(task["seed"]), "error": str(error), "trace": None}
+
+
+def _config_key(config: Optional[Dict[str, Any]]) -> str:
+    return json.dumps(config or {}, sort_keys=True, default=str)
+
+
+def _env_for(bank_dir: Optional[str], config: Optional[Dict[str, Any]]):
+    key = (bank_dir, _config_key(config))
+    env = _ENVS.get(key)
+    if env is None:
+        from policies.evaluation import make_eval_env
+
+        # the whole bank: reset(options={"scenario": name}) picks the episode's scenario,
+        # and each scenario is compiled once, the first time it runs here
+        env = make_eval_env(None, config=dict(config or {}), bank_dir=bank_dir)
+        _ENVS[key] = env
+    return key, env
+
+
+def _policy_for(spec: str, env_key: Tuple[Optional[str], str], env):
+    key = (spec, *env_key)
+    policy = _POLICIES.get(key)
+    if policy is None:
+        from policies.registry import load_policy
+
+        policy = load_policy(spec)
+        policy.bind([env])
+        _POLICIES[key] = policy
+    return policy
+
+
+def _drop(env_key: Tuple[Optional[str], str]) -> None:
+    """Forget an env (and the policies bound to it) after an exception left it in an unknown state."""
+    env = _ENVS.pop(env_key, None)
+    for key in [k for k in _POLICIES if k[1:] == env_key]:
+        del _POLICIES[key]
+    if env is not None:
+        try:
+            env.close()
+        except Exception:  # closing a broken env must not hide the episode's error
+            pass
+
+
+def clear_caches() -> None:
+    """Close every cached env and forget the loaded policies."""
+    for key in list(_ENVS):
+        _drop(key)
+
+
+def run_task(task: Dict[str, Any]) -> Dict[str, Any]:
+    """Run one episode described by ``task`` (see the module docstring) and return its result dict."""
+    from policies.evaluation import run_episode
+
+    env_key = None
+    try:
+        env_key, env = _env_for(task.get("bank_dir"), task.get("env_config"))
+        policy = _policy_for(task["policy"], env_key, env)
+        result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
+    except Exception as error:  # reported as an error episode, never dropped
+        if env_key is not None:
+            _drop(env_key)
+        message = " ".join(f"{type(error).__name__}: {error}".split())
+        if os.environ.get("DV2S_DEBUG"):
+            message += "\n" + traceback.format_exc()
+        return error_result(task, message)
+    data = result.to_json()
+    data.update(role=task["role"], id=task_id(task["scenario"], task["seed"]), trace=None)
+    trace_dir = task.get("trace_dir")
+    if result.failed and trace_dir:
+        path = Path(trace_dir) / trace_filename(task["role"], task["scenario"], task["seed"])
+        trace.save(path)
+        data["trace"] = str(path)
+    return data
