@@ -67,16 +67,10 @@ def render_episode_video(trace_path: Union[str, os.PathLike], out_path: Union[st
         scaling=float(config.get("scaling") or 5.5) * zoom * size / width,
         offscreen_rendering=True,
     )
-    steps = len(trace.actions)
-    first = max(0, steps - int(round(seconds * frequency)))
     frames: List[np.ndarray] = []
-
-    def capture(env, step: int) -> None:
-        if step >= first:
-            frames.append(np.asarray(env.render()))
-
-    env, _ = replay_trace(dataclasses.replace(trace, config=config), render_mode="rgb_array", on_step=capture)
+    env, _ = replay_trace(dataclasses.replace(trace, config=config), render_mode="rgb_array", frames=frames)
     env.close()
+    frames = frames[-max(1, int(round(seconds * frequency))):]
     if not frames:
         raise ClipError(f"episode trace {trace_path} rendered no frames")
     with VideoWriter(out_path, fps=frequency) as video:
