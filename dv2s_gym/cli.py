@@ -122,10 +122,19 @@ def _cmd_regress(args: argparse.Namespace) -> int:
         if not isinstance(env_config, dict):
             raise ValueError("--config must be a JSON object of DV2S-v0 config overrides, e.g. '{\"duration\": 10}'")
     out = args.out or DEFAULT_OUT
+    episodes, seed = args.episodes, args.seed
+    if args.baseline_report and (episodes is None or seed is None or env_config is None):
+        from dv2s_gym.regress.report import load_report
+
+        old = load_report(args.baseline_report).get("settings") or {}  # by default: the episodes it ran
+        episodes = old.get("episodes") if episodes is None else episodes
+        seed = old.get("seed") if seed is None else seed
+        env_config = old.get("env_config") if env_config is None else env_config
     try:
         report = run_regression(
             args.policy, args.baseline, baseline_report=args.baseline_report, bank_dir=args.bank,
-            scenarios=args.scenarios, episodes=args.episodes, seed=args.seed, margin=args.margin, alpha=args.alpha,
+            scenarios=args.scenarios, episodes=20 if episodes is None else episodes, seed=seed or 0,
+            margin=args.margin, alpha=args.alpha,
             backend=args.backend, workers=args.workers, address=args.address, out_dir=out,
             sequential=args.sequential, env_config=env_config, progress=not args.no_progress and not args.json,
             timeout=args.timeout, batch=args.batch, baseline_role=args.baseline_role)
@@ -620,8 +629,10 @@ def build_parser() -> argparse.ArgumentParser:
     bank_option(p)
     p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank, or the "
                    "baseline report's scenarios)")
-    p.add_argument("--episodes", type=int, default=20, help="seeds per scenario (default 20)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the first episode (default 0)")
+    p.add_argument("--episodes", type=int, default=None,
+                   help="seeds per scenario (default 20, or those of the baseline report)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="seed of the first episode (default 0, or the baseline report's)")
     p.add_argument("--margin", type=float, default=0.05,
                    help="non-inferiority margin on the failure rate (default 0.05: 5 points)")
     p.add_argument("--alpha", type=float, default=0.05, help="level of the FAIL test (default 0.05)")
@@ -634,7 +645,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="stop as soon as a group-sequential test settles PASS or FAIL")
     p.add_argument("--batch", type=int, default=None,
                    help="with --sequential: seeds per look (default: a fifth of --episodes)")
-    p.add_argument("--config", help="DV2S-v0 config overrides as JSON (or a .json file), e.g. '{\"duration\": 10}'")
+    p.add_argument("--config", help="DV2S-v0 config overrides as JSON (or a .json file), e.g. '{\"duration\": 10}' "
+                   "(default: none, or the baseline report's)")
     p.add_argument("--out", default=None, help="output folder (default out/regress)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the report JSON instead of the table")

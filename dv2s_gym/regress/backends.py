@@ -2,7 +2,7 @@
 
 A :class:`Backend` takes task dicts (see :mod:`dv2s_gym.regress.worker`) and hands each
 result to a callback as soon as it finishes. :class:`LocalBackend` runs one process per
-worker (``spawn`` context, ``OMP_NUM_THREADS=1``), each calling
+worker (``forkserver`` context where available, else ``spawn``; ``OMP_NUM_THREADS=1``), each calling
 :func:`~dv2s_gym.regress.worker.run_task` and keeping its envs and policies between
 tasks. A worker that dies mid-episode (segfault, ``os._exit``, out of memory) or gives no
 result within the per-episode timeout is killed and replaced; its task is retried once
@@ -32,6 +32,8 @@ DEFAULT_TIMEOUT = 600.0
 """Seconds a worker may spend on one episode (scenario compilation included) before it counts as hung."""
 
 OnResult = Callable[[Dict[str, Any]], None]
+_READY = "ready"
+_PRELOAD = ("dv2s_gym.regress.worker", "envs.dv2s_env", "policies.evaluation")
 
 
 def default_workers() -> int:
@@ -72,6 +74,15 @@ def _worker_main(connection) -> None:
     os.environ["OMP_NUM_THREADS"] = "1"
     from dv2s_gym.regress.worker import error_result, run_task
 
+    try:
+        import envs.dv2s_env  # noqa: F401  (the slow imports happen before the first episode's clock starts)
+        import policies.evaluation  # noqa: F401
+    except Exception:  # reported by the first task instead
+        pass
+    try:
+        connection.send(_READY)  # imports done: episode timeouts count from here
+    except (OSError, KeyboardInterrupt):
+        return
     while True:
         try:
             message = connection.recv()
@@ -106,6 +117,7 @@ class _Worker:
             else:
                 os.environ["OMP_NUM_THREADS"] = saved
         child.close()
+        self.ready = False  # set when the process has imported everything and waits for tasks
         self.busy: Optional[Tuple[int, float]] = None  # (task index, start time)
 
     def kill(self) -> None:
@@ -127,7 +139,7 @@ class _Worker:
 
 
 class LocalBackend(Backend):
-    """A pool of local worker processes.
+    """A pool of local worker processes (spawn or forkserver context; never a plain fork of the caller).
 
     Args:
         workers: processes (default: every core this process may use).
@@ -136,23 +148,30 @@ class LocalBackend(Backend):
             worker includes compiling it).
         retries: how often a task whose worker crashed or hung is run again before it is
             reported as an error (default 1).
-        start_method: ``"spawn"`` (default) or ``"forkserver"``.
+        start_method: ``"forkserver"`` (default where the platform has it: a server process
+            imports the simulator once and every worker is forked from it, so starting or
+            replacing a worker is quick) or ``"spawn"`` (each worker imports everything).
     """
 
     name = "local"
 
     def __init__(self, workers: Optional[int] = None, timeout: Optional[float] = None, retries: int = 1,
-                 start_method: str = "spawn") -> None:
+                 start_method: Optional[str] = None) -> None:
         if workers is not None and int(workers) < 1:
             raise RegressError(f"--workers must be at least 1, not {workers}")
         if timeout is not None and not float(timeout) > 0:
             raise RegressError(f"the per-episode timeout must be positive, not {timeout}")
+        if start_method is None:
+            start_method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
         if start_method not in ("spawn", "forkserver"):
             raise RegressError(f"start_method must be 'spawn' or 'forkserver', not {start_method!r}")
         self.workers = int(workers) if workers is not None else default_workers()
         self.timeout = float(timeout) if timeout is not None else DEFAULT_TIMEOUT
         self.retries = int(retries)
         self._context = multiprocessing.get_context(start_method)
+        if start_method == "forkserver":
+            # imported once by the server (it starts with the first worker), inherited by every fork
+            self._context.set_forkserver_preload(list(_PRELOAD))
         self._pool: List[_Worker] = []
 
     def _ensure(self, count: int) -> None:
@@ -170,35 +189,38 @@ class LocalBackend(Backend):
         attempts: Dict[int, int] = {}
         failures: Dict[int, List[str]] = {}
         remaining = len(tasks)
+        failed_starts = 0
         self._ensure(min(self.workers, len(tasks)))
         try:
             while remaining:
                 for worker in self._pool:
-                    if worker.busy is None and queue:
+                    if worker.ready and worker.busy is None and queue:
                         index = queue.popleft()
                         attempts[index] = attempts.get(index, 0) + 1
                         worker.busy = (index, time.monotonic())
                         worker.connection.send((index, tasks[index]))
-                busy = [w for w in self._pool if w.busy is not None]
-                now = time.monotonic()
-                wait_for = max(0.0, min(w.busy[1] + self.timeout for w in busy) - now)
-                ready = wait([x for w in busy for x in (w.connection, w.process.sentinel)], timeout=wait_for)
-                for worker in busy:
-                    index, started = worker.busy
+                deadlines = [w.busy[1] + self.timeout for w in self._pool if w.busy is not None]
+                wait_for = max(0.0, min(deadlines) - time.monotonic()) if deadlines else None
+                ready = wait([x for w in self._pool for x in (w.connection, w.process.sentinel)], timeout=wait_for)
+                for worker in list(self._pool):
                     problem = None
                     if worker.connection in ready:
                         try:
-                            got, result = worker.connection.recv()
+                            message = worker.connection.recv()
                         except (EOFError, OSError):
                             problem = "crashed"
                         else:
+                            if message == _READY:
+                                worker.ready = True
+                                continue
+                            _, result = message
                             worker.busy = None
                             remaining -= 1
                             on_result(result)
                             continue
                     elif worker.process.sentinel in ready:
                         problem = "crashed"
-                    elif time.monotonic() - started >= self.timeout:
+                    elif worker.busy is not None and time.monotonic() - worker.busy[1] >= self.timeout:
                         problem = "hung"
                     if problem is None:
                         continue
@@ -207,6 +229,14 @@ class LocalBackend(Backend):
                     worker.kill()
                     self._pool.remove(worker)
                     self._pool.append(_Worker(self._context))
+                    if worker.busy is None:  # died before taking a task: the process cannot start
+                        failed_starts += 1
+                        if failed_starts > 2 * self.workers:
+                            raise RegressError(f"regression worker processes exit while starting (exit code "
+                                               f"{code}); run `python -c 'import dv2s_gym.regress.worker'` to "
+                                               "see why")
+                        continue
+                    index = worker.busy[0]
                     failures.setdefault(index, []).append(
                         f"the worker hung (no result after {self.timeout:g} s)" if problem == "hung"
                         else f"the worker crashed (exit code {code})")

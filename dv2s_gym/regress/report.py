@@ -268,6 +268,8 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
                 verdict, reason = sequential_verdict, f"{looks}: {sequential_verdict}; pooled: {overall.reason}"
         if verdict == "PASS" and errors:
             verdict, reason = "INCONCLUSIVE", f"{_errors_note(len(errors))}; {reason}"
+        elif errors:
+            reason = f"{reason}; {len(errors)} episode{'s' if len(errors) != 1 else ''} ended in an error"
         overall_comparison = comparison_json(overall, verdict=verdict, reason=reason)
         newly_failing = [e["id"] for e in episodes if e.get("baseline") is not None
                          and not e["candidate"].get("error") and not e["baseline"].get("error")

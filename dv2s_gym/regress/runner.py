@@ -166,7 +166,8 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
             folder and settings resumes: finished episodes are not run again.
         sequential: stop as soon as a group-sequential test settles PASS or FAIL, looking after
             every ``batch`` seeds (default: a fifth of ``episodes``). Needs a baseline.
-        env_config: ``DV2S-v0`` config overrides for every episode.
+        env_config: ``DV2S-v0`` config overrides for every episode (default: none, or the
+            baseline report's).
         progress: a progress bar on stderr.
         timeout: seconds one episode may take before its worker counts as hung (local backend).
         on_result: called in this process with each finished episode's result (after it is saved).
@@ -181,10 +182,13 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         raise RegressError("--sequential stops when the comparison is settled: it needs --baseline or "
                            "--baseline-report")
     bank_dir = None if bank_dir is None else str(bank_dir)
-    env_config = dict(env_config or {})
     fallback = None
     if baseline_report is not None:
-        fallback = (load_report(baseline_report).get("bank") or {}).get("scenarios") or None
+        old = load_report(baseline_report)
+        fallback = (old.get("bank") or {}).get("scenarios") or None
+        if env_config is None:
+            env_config = (old.get("settings") or {}).get("env_config")
+    env_config = dict(env_config or {})
     names = _select(scenarios, bank_dir, fallback)
     bank = bank_info(names, bank_dir)
     seeds = [seed + k for k in range(episodes)]

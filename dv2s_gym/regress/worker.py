@@ -24,11 +24,13 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import traceback
 from pathlib import Path
 from typing import Any, Dict, Optional, Tuple
 
-os.environ.setdefault("OMP_NUM_THREADS", "1")
+if "numpy" not in sys.modules:  # a fresh worker process (e.g. Ray's): one BLAS/OpenMP thread per worker
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 __all__ = ["run_task", "task_id", "trace_filename", "error_result", "clear_caches"]
 

@@ -1,0 +1,39 @@
+"""Policies for the regression-runner tests, loaded by spec (``regress_helpers:FaultyPolicy?...``).
+
+:class:`FaultyPolicy` keeps the lane (action 1, IDLE) and misbehaves on chosen seeds: the
+worker process dies (``os._exit``), hangs (sleeps far past any test timeout) or raises. Every
+start of an episode on a chosen seed appends a line to ``log`` so a test can count attempts.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+import numpy as np
+
+from policies.registry import Policy
+
+
+class FaultyPolicy(Policy):
+    """IDLE every step; on ``crash_seed`` the process exits, on ``hang_seed`` it sleeps, on ``raise_seed`` it raises."""
+
+    name = "faulty"
+
+    def __init__(self, crash_seed: int = -1, hang_seed: int = -1, raise_seed: int = -1, log: str = "") -> None:
+        self.crash_seed, self.hang_seed, self.raise_seed = int(crash_seed), int(hang_seed), int(raise_seed)
+        self.log = log
+
+    def seed(self, seed: int) -> None:
+        if seed in (self.crash_seed, self.hang_seed, self.raise_seed) and self.log:
+            with open(self.log, "a", encoding="utf-8") as handle:
+                handle.write(f"{seed}\n")
+        if seed == self.crash_seed:
+            os._exit(3)
+        if seed == self.hang_seed:
+            time.sleep(3600)
+        if seed == self.raise_seed:
+            raise RuntimeError(f"deliberate failure on seed {seed}")
+
+    def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        return np.ones(len(observations), dtype=np.int64)

@@ -1,0 +1,345 @@
+"""dv2s regress: paired runs, report schema, verdicts, reports, resume, crashes and hangs, baseline reports."""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from dv2s_gym.regress import (
+    LocalBackend,
+    RegressError,
+    ReportMismatchError,
+    ResumeMismatchError,
+    get_backend,
+    load_report,
+    run_regression,
+)
+from dv2s_gym.regress.report import SCHEMA, SCHEMA_VERSION
+from dv2s_gym.regress.replay import replay_episode
+
+NOISY = "rule?action_noise=0.5"
+PAIR = ["highway_obstacle_in_lane", "urban_lead_vehicle_stopped"]
+SHORT = {"duration": 8}
+SUMMARY_KEYS = {"episodes", "collision_rate", "off_road_rate", "failure_rate", "success_rate", "min_ttc",
+                "mean_speed", "return"}
+COMPARISON_KEYS = {"table", "difference", "p_value", "p_adjusted", "verdict", "reason"}
+
+
+@pytest.fixture(scope="module")
+def noisy_run(tmp_path_factory):
+    """A degraded copy of the rule-based driver against the original: 2 scenarios x 4 seeds."""
+    out = tmp_path_factory.mktemp("noisy")
+    report = run_regression(NOISY, "rule", scenarios=PAIR, episodes=4, workers=2, out_dir=out, env_config=SHORT,
+                            progress=False)
+    return out, report
+
+
+def test_report_has_the_documented_schema(noisy_run):
+    out, report = noisy_run
+    assert report == json.loads((out / "report.json").read_text())
+    assert report["schema"] == SCHEMA == "dv2s-regress" and report["schema_version"] == SCHEMA_VERSION == 1
+    assert {"created", "dv2s_version", "bank", "settings", "candidate", "baseline", "episodes", "scenarios",
+            "overall", "verdict", "regressed", "newly_failing", "errors", "stopped_early"} <= report.keys()
+    assert report["bank"]["scenarios"] == PAIR and len(report["bank"]["version"]) == 64
+    assert {"path", "version", "scenarios"} <= report["bank"].keys()
+    assert {"episodes", "seed", "margin", "alpha", "sequential", "env_config", "backend", "workers"} <= \
+        report["settings"].keys()
+    assert report["settings"]["env_config"] == SHORT
+    assert report["candidate"] == {"spec": NOISY, "card": None}
+    assert report["baseline"]["spec"] == "rule"
+    assert [e["id"] for e in report["episodes"]] == [f"{s}/{k}" for s in PAIR for k in range(4)]
+    for name in PAIR:
+        entry = report["scenarios"][name]
+        assert SUMMARY_KEYS <= entry["candidate"].keys() and SUMMARY_KEYS <= entry["baseline"].keys()
+        assert COMPARISON_KEYS <= entry["comparison"].keys()
+        for key in ("collision_rate", "failure_rate", "mean_speed"):
+            value = entry["candidate"][key]
+            assert value["low"] <= value["value"] <= value["high"]
+        table = entry["comparison"]["table"]
+        assert sum(table.values()) == 4
+        assert set(table) == {"both_fail", "candidate_only", "baseline_only", "neither"}
+    assert SUMMARY_KEYS <= report["overall"]["candidate"].keys()
+    assert report["overall"]["comparison"]["verdict"] == report["verdict"]
+    assert report["verdict"] in ("PASS", "FAIL", "INCONCLUSIVE")
+    assert report["regressed"] == [n for n in PAIR if report["scenarios"][n]["comparison"]["verdict"] == "FAIL"]
+
+
+def test_paired_episodes_run_identical_scenes(noisy_run):
+    _, report = noisy_run
+    for episode in report["episodes"]:
+        candidate, baseline = episode["candidate"], episode["baseline"]
+        assert candidate["seed"] == baseline["seed"] == episode["seed"]
+        assert candidate["scene_seed"] == baseline["scene_seed"]
+        assert candidate["params"] == baseline["params"]
+
+
+def test_newly_failing_and_traces_of_failed_episodes(noisy_run):
+    out, report = noisy_run
+    for episode in report["episodes"]:
+        for role in ("candidate", "baseline"):
+            result = episode[role]
+            if result["failed"]:
+                assert result["trace"] and (out / result["trace"]).is_file()
+            else:
+                assert result["trace"] is None
+    expected = [e["id"] for e in report["episodes"] if e["candidate"]["failed"] and not e["baseline"]["failed"]]
+    assert report["newly_failing"] == expected and expected  # the noisy copy crashes somewhere in 8 episodes
+
+
+def test_junit_xml_has_one_case_per_scenario_and_failures_for_fail(noisy_run):
+    out, report = noisy_run
+    root = ET.parse(out / "junit.xml").getroot()
+    cases = root.findall(".//testcase")
+    assert [c.get("name") for c in cases] == PAIR
+    for case in cases:
+        verdict = report["scenarios"][case.get("name")]["comparison"]["verdict"]
+        assert (case.find("failure") is not None) == (verdict == "FAIL")
+        assert (case.find("skipped") is not None) == (verdict == "INCONCLUSIVE")
+    suite = root.find("testsuite")
+    assert int(suite.get("failures")) == len(report["regressed"])
+
+
+def test_markdown_has_the_comparison_table(noisy_run):
+    out, report = noisy_run
+    text = (out / "report.md").read_text()
+    assert text.startswith(f"## dv2s regress: {report['verdict']}")
+    assert "| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (Holm) | verdict |" \
+        in text
+    for name in PAIR:
+        row = next(line for line in text.splitlines() if line.startswith(f"| `{name}` | 4 |"))
+        assert row.endswith(f"| {report['scenarios'][name]['comparison']['verdict']} |")
+
+
+def test_replay_reproduces_failed_and_passed_episodes(noisy_run, tmp_path):
+    out, report = noisy_run
+    failed = report["newly_failing"][0]
+    video = tmp_path / "failed.webm"
+    result = replay_episode(out / "report.json", failed, video=video)
+    assert result["source"] == "trace" and result["matches"] and video.stat().st_size > 0
+    assert replay_episode(out / "report.json", failed, from_policy=True)["matches"]  # the noisy policy too
+    passed = next(e["id"] for e in report["episodes"] if not e["baseline"]["failed"])
+    again = replay_episode(out / "report.json", passed, role="baseline")
+    assert again["source"] == "policy" and again["matches"]
+    with pytest.raises(RegressError, match="no episode 'nowhere/1'"):
+        replay_episode(out / "report.json", "nowhere/1")
+
+
+def test_too_few_episodes_is_inconclusive_never_pass(tmp_path):
+    report = run_regression("rule", "rule", scenarios=["highway_lead_vehicle_brakes"], episodes=2, workers=1,
+                            out_dir=tmp_path, env_config={"duration": 3}, progress=False)
+    assert report["verdict"] == "INCONCLUSIVE"
+    assert report["scenarios"]["highway_lead_vehicle_brakes"]["comparison"]["verdict"] == "INCONCLUSIVE"
+    assert report["regressed"] == []
+
+
+def test_without_a_baseline_measures_only(tmp_path):
+    report = run_regression("rule", scenarios=["highway_lead_vehicle_brakes"], episodes=2, workers=1,
+                            out_dir=tmp_path, env_config={"duration": 3}, progress=False)
+    assert report["verdict"] is None and report["baseline"] is None
+    entry = report["scenarios"]["highway_lead_vehicle_brakes"]
+    assert entry["baseline"] is None and entry["comparison"] is None and entry["candidate"]["episodes"] == 2
+    assert all(e["baseline"] is None for e in report["episodes"])
+
+
+def test_resume_after_an_interruption_loses_and_duplicates_nothing(tmp_path):
+    options = dict(scenarios=["highway_lead_vehicle_brakes", "highway_cut_in_from_left"], episodes=4, workers=2,
+                   out_dir=tmp_path, env_config={"duration": 3}, progress=False)
+    seen = []
+
+    def interrupt(result):
+        seen.append((result["id"], result["role"]))
+        if len(seen) == 5:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_regression("rule", "keep_lane", on_result=interrupt, **options)
+    lines = [json.loads(line) for line in (tmp_path / "results.jsonl").read_text().splitlines()]
+    assert [(r["id"], r["role"]) for r in lines] == seen  # every finished episode is on disk
+    with open(tmp_path / "results.jsonl", "a") as handle:
+        handle.write('{"id": "highway_cut_in_from_left/3", "role": "cand')  # a line cut short by the kill
+
+    with pytest.raises(ResumeMismatchError, match="episodes: 5 here, 4 there"):
+        run_regression("rule", "keep_lane", **{**options, "episodes": 5})
+    rerun = []
+    report = run_regression("rule", "keep_lane", on_result=lambda r: rerun.append((r["id"], r["role"])), **options)
+    assert len(seen) + len(rerun) == 16 and not set(seen) & set(rerun)
+    keys = [(r["id"], r["role"]) for r in map(json.loads, (tmp_path / "results.jsonl").read_text().splitlines())]
+    assert len(keys) == len(set(keys)) == 16
+    assert len(report["episodes"]) == 8 and not report["errors"]
+    again = []
+    run_regression("rule", "keep_lane", on_result=again.append, **options)
+    assert again == []  # a finished run resumes to the same report without running anything
+
+
+def test_a_worker_that_crashes_or_hangs_is_retried_once_then_reported(tmp_path):
+    log = tmp_path / "attempts.log"
+    spec = f"regress_helpers:FaultyPolicy?crash_seed=0&hang_seed=1&log={log}"
+    report = run_regression(spec, scenarios=["highway_lead_vehicle_brakes"], episodes=3, workers=2,
+                            out_dir=tmp_path / "out", env_config={"duration": 2}, timeout=5, progress=False)
+    assert sorted(log.read_text().split()) == ["0", "0", "1", "1"]  # each tried twice
+    errors = {e["id"]: e for e in report["errors"]}
+    assert set(errors) == {"highway_lead_vehicle_brakes/0", "highway_lead_vehicle_brakes/1"}
+    assert "crashed (exit code 3)" in errors["highway_lead_vehicle_brakes/0"]["error"]
+    assert "hung (no result after 5 s)" in errors["highway_lead_vehicle_brakes/1"]["error"]
+    assert all(e["role"] == "candidate" and "2 attempts" in e["error"] for e in errors.values())
+    episodes = {e["id"]: e for e in report["episodes"]}
+    assert len(episodes) == 3 and not episodes["highway_lead_vehicle_brakes/2"]["candidate"].get("error")
+    assert report["scenarios"]["highway_lead_vehicle_brakes"]["candidate"]["errors"] == 2
+    junit = ET.parse(tmp_path / "out" / "junit.xml").getroot()
+    assert junit.find(".//testcase/error") is not None
+
+
+def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp_path):
+    from dv2s_gym.regress.report import build_report
+
+    backend = LocalBackend(workers=1, timeout=60)
+    results = []
+    task = {"policy": "regress_helpers:FaultyPolicy?raise_seed=4", "role": "candidate",
+            "scenario": "highway_lead_vehicle_brakes", "seed": 4, "env_config": {"duration": 2}, "bank_dir": None,
+            "trace_dir": None}
+    with backend:
+        backend.run([task, {**task, "seed": 5}], results.append)
+    by_seed = {r["seed"]: r for r in results}
+    assert by_seed[4]["error"] == "RuntimeError: deliberate failure on seed 4" and by_seed[4]["id"].endswith("/4")
+    assert not by_seed[5].get("error") and by_seed[5]["steps"] == 10
+
+    # a PASS on the remaining pairs becomes INCONCLUSIVE when an episode is missing
+    ok = dict(by_seed[5], failed=False)
+    episodes = [{"id": f"s/{k}", "scenario": "s", "seed": k, "candidate": ok, "baseline": ok} for k in range(200)]
+    bank = {"path": "x", "version": "v", "scenarios": ["s"], "hashes": {"s": "h"}}
+    settings = {"episodes": 200, "seed": 0, "margin": 0.05, "alpha": 0.05}
+    clean = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
+                         episodes=episodes)
+    assert clean["verdict"] == "PASS"
+    episodes[0] = dict(episodes[0], candidate=by_seed[4])
+    broken = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
+                          episodes=episodes)
+    assert broken["verdict"] == "INCONCLUSIVE" and "ended in an error" in broken["overall"]["comparison"]["reason"]
+    assert broken["errors"] == [{"id": "s/0", "role": "candidate", "error": by_seed[4]["error"]}]
+
+
+def test_baseline_report_runs_only_the_candidate(noisy_run, tmp_path):
+    out, old = noisy_run
+    roles = []
+    report = run_regression(NOISY, baseline_report=out / "report.json", episodes=4, workers=2, out_dir=tmp_path,
+                            on_result=lambda r: roles.append(r["role"]), progress=False)
+    # the old report's candidate (the noisy copy) is the baseline: the same policy on the same episodes
+    assert roles == ["candidate"] * 8
+    assert report["baseline"]["spec"] == NOISY and report["baseline"]["report"] == str((out / "report.json").resolve())
+    assert report["settings"]["env_config"] == SHORT and report["settings"]["episodes"] == 4
+    for episode in report["episodes"]:
+        assert episode["candidate"]["trajectory_hash"] == episode["baseline"]["trajectory_hash"]
+    assert report["verdict"] != "FAIL" and report["newly_failing"] == []
+
+
+def test_baseline_report_of_another_schema_bank_or_config_is_refused(noisy_run, tmp_path):
+    out, old = noisy_run
+
+    def variant(name, change):
+        data = json.loads(json.dumps(old))
+        change(data)
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps(data))
+        return path
+
+    other_schema = variant("schema", lambda d: d.update(schema_version=2))
+    with pytest.raises(ReportMismatchError, match="schema version 2, this dv2s-gym reads version 1"):
+        run_regression("rule", baseline_report=other_schema, episodes=4, out_dir=tmp_path / "a", progress=False)
+    other_bank = variant("bank", lambda d: d["bank"]["hashes"].update({PAIR[1]: "0" * 64}))
+    with pytest.raises(ReportMismatchError, match=f"another bank version.*changed scenario {PAIR[1]}"):
+        run_regression("rule", baseline_report=other_bank, episodes=4, out_dir=tmp_path / "b", progress=False)
+    with pytest.raises(ReportMismatchError, match="another env config .*duration: 3 here, 8 there"):
+        run_regression("rule", baseline_report=out / "report.json", episodes=4, env_config={"duration": 3},
+                       out_dir=tmp_path / "c", progress=False)
+    with pytest.raises(ReportMismatchError, match="no episodes of highway_cut_in_from_left"):
+        run_regression("rule", baseline_report=out / "report.json", scenarios=["highway_cut_in_from_left"],
+                       episodes=4, out_dir=tmp_path / "d", progress=False)
+    with pytest.raises(ReportMismatchError, match="no episode highway_obstacle_in_lane/4"):
+        run_regression("rule", baseline_report=out / "report.json", episodes=5,
+                       out_dir=tmp_path / "e", progress=False)
+    not_a_report = tmp_path / "other.json"
+    not_a_report.write_text('{"schema": "something-else"}')
+    with pytest.raises(ReportMismatchError, match="not a dv2s regress report"):
+        load_report(not_a_report)
+
+
+def test_empty_scenario_selection_and_bad_settings_are_refused(tmp_path):
+    with pytest.raises(RegressError, match="scenario selection is empty"):
+        run_regression("rule", "rule", scenarios=[], out_dir=tmp_path, progress=False)
+    with pytest.raises(RegressError, match="scenario selection is empty"):
+        run_regression("rule", "rule", scenarios=["", " "], out_dir=tmp_path, progress=False)
+    with pytest.raises(ValueError, match="no scenario carries tag 'nothing-has-this'"):
+        run_regression("rule", "rule", scenarios=["tag:nothing-has-this"], out_dir=tmp_path, progress=False)
+    with pytest.raises(RegressError, match="--episodes must be a positive integer"):
+        run_regression("rule", "rule", episodes=0, out_dir=tmp_path, progress=False)
+    with pytest.raises(RegressError, match="--margin"):
+        run_regression("rule", "rule", margin=1.5, out_dir=tmp_path, progress=False)
+    with pytest.raises(RegressError, match="not both"):
+        run_regression("rule", "rule", baseline_report="x.json", out_dir=tmp_path, progress=False)
+    with pytest.raises(RegressError, match="--sequential .* needs --baseline"):
+        run_regression("rule", sequential=True, out_dir=tmp_path, progress=False)
+    with pytest.raises(ValueError, match="unknown policy 'no-such-policy'"):
+        run_regression("no-such-policy", "rule", out_dir=tmp_path, progress=False)
+    assert not (tmp_path / "results.jsonl").exists()
+
+
+def test_ray_backend_missing_is_a_clear_error(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "dv2s_gym.regress.ray_backend", None)
+    with pytest.raises(RegressError, match="--backend ray needs dv2s_gym.regress.ray_backend"):
+        get_backend("ray", workers=2)
+    with pytest.raises(RegressError, match="unknown backend 'slurm'"):
+        get_backend("slurm")
+
+
+def test_noisy_policies_act_alike_on_the_same_episode_whatever_ran_before():
+    from policies.evaluation import make_eval_env, run_episode
+    from policies.registry import load_policy
+
+    env = make_eval_env(["highway_lead_vehicle_brakes"], config={"duration": 3})
+    try:
+        policy = load_policy("rule?action_noise=0.5")
+        policy.bind([env])
+        first = run_episode(env, policy, "highway_lead_vehicle_brakes", 7)[0].trajectory_hash
+        run_episode(env, policy, "highway_lead_vehicle_brakes", 8)
+        assert run_episode(env, policy, "highway_lead_vehicle_brakes", 7)[0].trajectory_hash == first
+    finally:
+        env.close()
+
+
+def test_sequential_run_stops_as_soon_as_the_verdict_is_settled(tmp_path):
+    report = run_regression(NOISY, "rule", scenarios=PAIR, episodes=30, batch=5, sequential=True, workers=2,
+                            out_dir=tmp_path, progress=False)
+    assert report["verdict"] == "FAIL" and report["stopped_early"]
+    assert report["sequential"]["verdict"] == "FAIL"
+    assert len(report["episodes"]) < 2 * 30 and len(report["episodes"]) % (2 * 5) == 0
+    assert report["sequential"]["episodes"] == len(report["episodes"])
+
+
+@pytest.mark.slow
+def test_a_policy_against_itself_never_fails_on_the_bank(tmp_path):
+    report = run_regression("rule", "rule", scenarios=["tag:highway"], workers=2, out_dir=tmp_path, progress=False)
+    assert report["verdict"] in ("PASS", "INCONCLUSIVE") and report["regressed"] == []
+    assert all(c["comparison"]["verdict"] != "FAIL" for c in report["scenarios"].values())
+    for episode in report["episodes"]:  # identical scenes and a deterministic policy: identical episodes
+        assert episode["candidate"]["trajectory_hash"] == episode["baseline"]["trajectory_hash"]
+    assert report["newly_failing"] == [] and len(report["episodes"]) == 20 * len(report["scenarios"])
+
+
+@pytest.mark.slow
+def test_a_degraded_copy_fails_and_names_the_scenarios_that_regressed(tmp_path):
+    report = run_regression("rule?action_noise=0.3", "rule", scenarios=["tag:highway"], workers=2,
+                            out_dir=tmp_path, progress=False)
+    assert report["verdict"] == "FAIL"
+    assert report["regressed"]
+    for name in report["regressed"]:
+        table = report["scenarios"][name]["comparison"]["table"]
+        assert table["candidate_only"] > table["baseline_only"]
+    # the other way round the degraded copy is the baseline: never a FAIL of the candidate
+    swapped = run_regression("rule", "rule?action_noise=0.3", scenarios=report["regressed"][:1], workers=2,
+                             out_dir=tmp_path / "swapped", progress=False)
+    assert swapped["verdict"] != "FAIL"
