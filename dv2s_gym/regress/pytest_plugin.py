@@ -50,7 +50,7 @@ _ALLOW = pytest.StashKey[bool]()
 
 def regression_arguments(policy: str, baseline: Optional[str] = None, *, baseline_report: Optional[str] = None,
                          scenarios: Union[str, Sequence[str], None] = None, episodes: int = 20, seed: int = 0,
-                         margin: float = 0.05, alpha: float = 0.05, sequential: bool = False,
+                         margin: float = 0.02, alpha: float = 0.05, sequential: bool = False,
                          env_config: Optional[Dict[str, Any]] = None, bank_dir: Optional[str] = None,
                          timeout: Optional[float] = None) -> Dict[str, Any]:
     """The keyword arguments of :func:`~dv2s_gym.regress.runner.run_regression` for one check."""
@@ -81,7 +81,7 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
         "markers",
         f"{MARKER}(policy, baseline=None, *, baseline_report=None, scenarios=None, episodes=20, seed=0, "
-        "margin=0.05, alpha=0.05, sequential=False, env_config=None, bank_dir=None, timeout=None, "
+        "margin=0.02, alpha=0.05, sequential=False, env_config=None, bank_dir=None, timeout=None, "
         "allow_inconclusive=True): run a dv2s regression of policy against baseline for this test and fail "
         "it on a FAIL verdict (and on INCONCLUSIVE unless allowed)")
 
