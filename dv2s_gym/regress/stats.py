@@ -1,0 +1,1226 @@
+"""Statistics of ``dv2s regress``: did the candidate policy get worse than the baseline?
+
+``dv2s regress`` runs a candidate and a baseline policy on the same scenario x seed pairs, so
+every episode of the candidate has a twin episode of the baseline on the identical scene. An
+episode either fails (crash, off-road, ... as ``dv2s regress`` defines it) or not. This module
+turns those paired outcomes into a verdict; it knows nothing about the simulator.
+
+The paired 2x2 table
+--------------------
+:class:`PairedTable` counts the pairs: ``both_fail``, ``candidate_only`` (the candidate failed,
+the baseline did not), ``baseline_only`` and ``neither``. The failure rates are
+``(both_fail + candidate_only) / n`` and ``(both_fail + baseline_only) / n``; their difference
+(candidate - baseline) is ``(candidate_only - baseline_only) / n``: only the discordant pairs
+carry information about it, which is why pairing pays when both policies tend to fail on the
+same hard scenes.
+
+Decision rule (:func:`compare`): non-inferiority on the failure rate
+-------------------------------------------------------------------
+With a margin ``m`` (e.g. 0.02: the candidate may fail at most 2 percentage points more often)
+and a level ``alpha`` (default 0.05):
+
+1. **PASS** when the upper end of the two-sided ``1 - alpha`` confidence interval of the
+   difference (Newcombe's hybrid score interval, :func:`paired_difference_interval`) is below
+   ``m``: the candidate is shown not to be worse by ``m`` or more. This is a one-sided test of
+   ``H0: difference >= m`` at level ``alpha / 2`` (the ICH E9 convention for non-inferiority:
+   the two-sided 95 % interval), so ``P(PASS) <= alpha / 2`` nominally when the true difference
+   equals the margin; the Monte Carlo calibration checks ``P(PASS) <= alpha``.
+2. Otherwise **FAIL** when the candidate fails significantly more often: the one-sided exact
+   McNemar p-value (:func:`mcnemar_exact`, ``alternative="greater"``), Holm-adjusted over the
+   scenarios when ``adjusted_p`` is given, is below ``alpha``, and the difference is positive.
+   The exact conditional test never exceeds its level, so ``P(FAIL) <= alpha`` when the two
+   policies fail alike.
+3. Otherwise **INCONCLUSIVE**. A run too small to tell is INCONCLUSIVE, never PASS: with 3
+   paired episodes and no failure at all, the interval's upper end is about 0.56.
+
+PASS is checked first: a candidate that is significantly worse, but provably by less than the
+margin, passes (that is what a non-inferiority margin means).
+
+Scenarios (:func:`compare_scenarios`)
+-------------------------------------
+Each scenario gets its own comparison, with its one-sided McNemar p-value Holm-adjusted over
+the scenarios; the pooled table (all scenarios together) gets an unadjusted comparison. The
+overall verdict is FAIL if any scenario FAILs or the pooled comparison FAILs; PASS if the pooled
+comparison PASSes and no scenario FAILs; INCONCLUSIVE otherwise. Holm bounds the chance that
+any scenario falsely FAILs by ``alpha`` and the pooled test adds at most ``alpha``, so the
+overall false-alarm rate is only bounded by ``2 * alpha``; the two are dependent (the pooled
+table is the sum of the scenarios'), and the measured overall rate is a little above ``alpha``
+with a few scenarios (``bench/RESULTS.md``). ``pooled_weight=`` puts the pooled test and the
+scenarios in one weighted-Holm family instead, which keeps the overall rate at most ``alpha``
+at the price of less power per scenario.
+
+Early stopping (:class:`SequentialTest`)
+----------------------------------------
+A group-sequential version of the same rule for batches of paired episodes, with an
+alpha-spending function (Lan-DeMets O'Brien-Fleming by default) over the information fraction
+``episodes / max_episodes``. The FAIL boundary is exact: under "the policies fail alike" the
+signs of the discordant pairs are fair coin flips whatever their number, so the boundary at each
+look is computed by exact recursion on that coin sequence, conditional on the discordant counts
+seen so far, spending ``alpha`` in total. The PASS boundary spends ``alpha / 2`` (the level of
+:func:`compare`'s PASS) by Bonferroni over the looks: at a look that is allotted ``a_k`` of it,
+PASS needs the upper end of the two-sided ``1 - 2 a_k`` interval below the margin.
+
+Power and the paired-outcome model
+----------------------------------
+:func:`paired_sample_size` is Connor's (1987) normal approximation for McNemar's test,
+:func:`unpaired_sample_size` the usual two-proportion one (Fleiss, without continuity
+correction), both one-sided. The simulations (:func:`simulate_power`,
+:func:`simulate_false_alarm`) draw paired episodes from a shared-difficulty model: every episode
+(scene) has a latent difficulty ``D ~ N(0, 1)``, shared by both policies, and policy ``j`` fails
+when ``sqrt(rho) * D + sqrt(1 - rho) * E_j > Phi^-1(1 - p_j)`` with its own noise
+``E_j ~ N(0, 1)``. Each policy keeps its failure rate ``p_j``; ``rho`` (the latent, tetrachoric
+correlation) makes failures cluster on the same scenes. The default ``rho = 0.5``
+(:data:`DEFAULT_CORRELATION`) is a moderate choice: at 5 % vs 8 % failure rates it gives a phi
+correlation of about 0.22 between the paired outcomes and 9.6 % discordant pairs (12.2 % for
+independent policies). :data:`DOCUMENTED_EPISODES` paired episodes give at least 80 % power to
+FAIL a candidate at 8 % against a 5 % baseline under that model.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import functools
+import math
+import operator
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import integrate, stats
+
+DEFAULT_ALPHA = 0.05
+"""Level of the FAIL test (one-sided); PASS is tested at ``alpha / 2``."""
+
+DEFAULT_MARGIN = 0.02
+"""Non-inferiority margin on the failure rate: the candidate may fail 2 percentage points more."""
+
+DEFAULT_CORRELATION = 0.5
+"""Latent correlation ``rho`` of the shared-difficulty model used for power and sample sizes."""
+
+DOCUMENTED_BASELINE_RATE = 0.05
+"""Baseline failure rate of the documented power target."""
+
+DOCUMENTED_DELTA = 0.03
+"""Increase in the failure rate the documented episode count detects (+3 percentage points)."""
+
+DOCUMENTED_POWER = 0.8
+"""Power the documented episode count reaches."""
+
+DOCUMENTED_EPISODES = 800
+"""Paired episodes per policy for 80 % power to FAIL +3 pp from a 5 % baseline (rho = 0.5).
+
+Connor's formula gives 661; the exact McNemar test is conservative, and by simulation of
+:func:`compare` it needs about 740 (power 0.84 at 800, see ``bench/RESULTS.md``).
+"""
+
+_FAIL, _PASS, _INCONCLUSIVE = 0, 1, 2
+
+
+class Verdict(str, enum.Enum):
+    """Outcome of a regression comparison."""
+
+    PASS = "pass"
+    FAIL = "fail"
+    INCONCLUSIVE = "inconclusive"
+
+
+_VERDICT_OF_CODE = {_FAIL: Verdict.FAIL, _PASS: Verdict.PASS, _INCONCLUSIVE: Verdict.INCONCLUSIVE}
+
+
+# ---------------------------------------------------------------------------------------------
+# Intervals for one proportion
+
+
+def _check_level(value: float, name: str) -> float:
+    value = float(value)
+    if not 0.0 < value < 1.0:
+        raise ValueError(f"{name} must be strictly between 0 and 1, got {value}")
+    return value
+
+
+def _two_sided_z(confidence: float) -> float:
+    """Normal quantile for a two-sided interval of the given confidence."""
+    return float(stats.norm.ppf(0.5 + _check_level(confidence, "confidence") / 2.0))
+
+
+def _check_count(k: int, n: int) -> tuple[int, int]:
+    k, n = operator.index(k), operator.index(n)
+    if n < 0 or not 0 <= k <= n:
+        raise ValueError(f"need 0 <= k <= n, got k={k}, n={n}")
+    return k, n
+
+
+def _wilson_bounds(k: np.ndarray, n: np.ndarray, z: float) -> tuple[np.ndarray, np.ndarray]:
+    """Vectorised Wilson score bounds; ``(0, 1)`` where ``n == 0``."""
+    k = np.asarray(k, dtype=float)
+    n = np.asarray(n, dtype=float)
+    size = np.where(n > 0, n, 1.0)
+    p = k / size
+    z2 = z * z
+    denominator = 1.0 + z2 / size
+    centre = (p + z2 / (2.0 * size)) / denominator
+    half = z * np.sqrt(np.maximum(p * (1.0 - p), 0.0) / size + z2 / (4.0 * size * size)) / denominator
+    low = np.where((n > 0) & (k > 0), np.clip(centre - half, 0.0, 1.0), 0.0)
+    high = np.where((n > 0) & (k < n), np.clip(centre + half, 0.0, 1.0), 1.0)
+    return low, high
+
+
+def wilson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval for a binomial proportion.
+
+    Args:
+        k: Number of successes (here: failed episodes).
+        n: Number of trials.
+        confidence: Two-sided confidence level.
+
+    Returns:
+        ``(low, high)``; ``(0.0, 1.0)`` when ``n == 0``.
+    """
+    k, n = _check_count(k, n)
+    low, high = _wilson_bounds(np.array(k), np.array(n), _two_sided_z(confidence))
+    return float(low), float(high)
+
+
+def clopper_pearson_interval(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Clopper-Pearson ("exact") interval for a binomial proportion, from beta quantiles.
+
+    Args:
+        k: Number of successes.
+        n: Number of trials.
+        confidence: Two-sided confidence level.
+
+    Returns:
+        ``(low, high)``; ``(0.0, 1.0)`` when ``n == 0``.
+    """
+    k, n = _check_count(k, n)
+    tail = (1.0 - _check_level(confidence, "confidence")) / 2.0
+    if n == 0:
+        return 0.0, 1.0
+    low = 0.0 if k == 0 else float(stats.beta.ppf(tail, k, n - k + 1))
+    high = 1.0 if k == n else float(stats.beta.ppf(1.0 - tail, k + 1, n - k))
+    return low, high
+
+
+# ---------------------------------------------------------------------------------------------
+# Cluster bootstrap
+
+
+def cluster_bootstrap_mean(
+    groups: Sequence[Sequence[float]],
+    confidence: float = 0.95,
+    n_resamples: int = 2000,
+    seed: int = 0,
+) -> tuple[float, float, float]:
+    """Mean of all values with a bootstrap interval that resamples whole groups.
+
+    Episodes of one scenario are not independent (same map, same actors), so the interval
+    resamples scenarios (groups) with replacement, keeping each one's values together, and
+    recomputes the pooled mean (sum of the drawn groups' values over their total count).
+    The interval is the percentile interval of those means. With a single group it collapses
+    to the estimate: one scenario says nothing about variation between scenarios.
+
+    Args:
+        groups: One sequence of values per group; empty groups are ignored.
+        confidence: Two-sided confidence level.
+        n_resamples: Number of bootstrap resamples.
+        seed: Seed of the numpy Generator, for a reproducible interval.
+
+    Returns:
+        ``(estimate, low, high)``.
+
+    Raises:
+        ValueError: If there are no values at all.
+    """
+    tail = (1.0 - _check_level(confidence, "confidence")) / 2.0
+    sums = np.array([float(np.sum(np.asarray(g, dtype=float))) for g in groups if len(g) > 0])
+    sizes = np.array([len(g) for g in groups if len(g) > 0], dtype=float)
+    if sizes.size == 0:
+        raise ValueError("cluster_bootstrap_mean needs at least one value")
+    if n_resamples < 1:
+        raise ValueError(f"n_resamples must be positive, got {n_resamples}")
+    estimate = float(sums.sum() / sizes.sum())
+    rng = np.random.default_rng(seed)
+    picks = rng.integers(0, sizes.size, size=(n_resamples, sizes.size))
+    means = sums[picks].sum(axis=1) / sizes[picks].sum(axis=1)
+    low, high = np.quantile(means, [tail, 1.0 - tail])
+    return estimate, float(low), float(high)
+
+
+def cluster_bootstrap_rate(
+    groups: Sequence[Sequence[bool]],
+    confidence: float = 0.95,
+    n_resamples: int = 2000,
+    seed: int = 0,
+) -> tuple[float, float, float]:
+    """Failure rate over all episodes, with a bootstrap interval resampling whole scenarios.
+
+    :func:`cluster_bootstrap_mean` applied to the outcomes as 0/1.
+
+    Returns:
+        ``(rate, low, high)``.
+    """
+    as_floats = [[1.0 if outcome else 0.0 for outcome in group] for group in groups]
+    return cluster_bootstrap_mean(as_floats, confidence, n_resamples, seed)
+
+
+# ---------------------------------------------------------------------------------------------
+# Paired table
+
+
+@dataclass(frozen=True)
+class PairedTable:
+    """Counts of paired episodes (candidate vs baseline on the same scene and seed).
+
+    Attributes:
+        both_fail: Pairs where both policies failed.
+        candidate_only: Pairs where the candidate failed and the baseline did not.
+        baseline_only: Pairs where the baseline failed and the candidate did not.
+        neither: Pairs where neither failed.
+    """
+
+    both_fail: int = 0
+    candidate_only: int = 0
+    baseline_only: int = 0
+    neither: int = 0
+
+    def __post_init__(self) -> None:
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            try:
+                count = operator.index(value)
+            except TypeError:
+                raise TypeError(f"{field.name} must be an integer count, got {value!r}") from None
+            if count < 0:
+                raise ValueError(f"{field.name} must not be negative, got {count}")
+            object.__setattr__(self, field.name, int(count))
+
+    @classmethod
+    def from_outcomes(cls, candidate: Sequence[bool], baseline: Sequence[bool]) -> PairedTable:
+        """Count paired outcomes; ``True`` means the episode failed.
+
+        Args:
+            candidate: The candidate's outcome per episode.
+            baseline: The baseline's outcome on the same episodes, paired by index.
+
+        Raises:
+            ValueError: If the lengths differ or an outcome is not a boolean (or 0/1).
+        """
+        if len(candidate) != len(baseline):
+            raise ValueError(
+                f"paired outcomes need the same length: candidate has {len(candidate)} episodes, "
+                f"baseline has {len(baseline)}"
+            )
+        cand = _as_bool_array(candidate, "candidate")
+        base = _as_bool_array(baseline, "baseline")
+        return cls(
+            both_fail=int(np.sum(cand & base)),
+            candidate_only=int(np.sum(cand & ~base)),
+            baseline_only=int(np.sum(~cand & base)),
+            neither=int(np.sum(~cand & ~base)),
+        )
+
+    @classmethod
+    def pooled(cls, tables: Sequence[PairedTable]) -> PairedTable:
+        """Sum of several tables (e.g. all scenarios)."""
+        total = cls()
+        for table in tables:
+            total = total + table
+        return total
+
+    def __add__(self, other: PairedTable) -> PairedTable:
+        if not isinstance(other, PairedTable):
+            return NotImplemented
+        return PairedTable(
+            self.both_fail + other.both_fail,
+            self.candidate_only + other.candidate_only,
+            self.baseline_only + other.baseline_only,
+            self.neither + other.neither,
+        )
+
+    @property
+    def n(self) -> int:
+        """Number of paired episodes."""
+        return self.both_fail + self.candidate_only + self.baseline_only + self.neither
+
+    @property
+    def discordant(self) -> int:
+        """Pairs where exactly one policy failed."""
+        return self.candidate_only + self.baseline_only
+
+    @property
+    def candidate_rate(self) -> float:
+        """Candidate's failure rate (0.0 for an empty table)."""
+        return (self.both_fail + self.candidate_only) / self.n if self.n else 0.0
+
+    @property
+    def baseline_rate(self) -> float:
+        """Baseline's failure rate (0.0 for an empty table)."""
+        return (self.both_fail + self.baseline_only) / self.n if self.n else 0.0
+
+    @property
+    def difference(self) -> float:
+        """Candidate minus baseline failure rate (0.0 for an empty table)."""
+        return (self.candidate_only - self.baseline_only) / self.n if self.n else 0.0
+
+    def swapped(self) -> PairedTable:
+        """The same pairs with the roles of candidate and baseline exchanged."""
+        return PairedTable(self.both_fail, self.baseline_only, self.candidate_only, self.neither)
+
+
+def _as_bool_array(values: Sequence[bool], name: str) -> np.ndarray:
+    array = np.asarray(values)
+    if array.ndim != 1:
+        raise ValueError(f"{name} outcomes must be a flat sequence, got shape {array.shape}")
+    if array.dtype != bool:
+        if array.size and not np.isin(array, (0, 1)).all():
+            raise ValueError(f"{name} outcomes must be booleans (True = failed) or 0/1")
+        array = array.astype(bool)
+    return array
+
+
+# ---------------------------------------------------------------------------------------------
+# Difference of paired proportions and McNemar
+
+
+def _newcombe_bounds(
+    a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray, z: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Vectorised Newcombe (1998) method 10 interval for ``(a + b) / n - (a + c) / n``."""
+    a, b, c, d = (np.asarray(x, dtype=float) for x in (a, b, c, d))
+    n = a + b + c + d
+    size = np.where(n > 0, n, 1.0)
+    p1, p2 = (a + b) / size, (a + c) / size
+    l1, u1 = _wilson_bounds(a + b, n, z)
+    l2, u2 = _wilson_bounds(a + c, n, z)
+    # correlation of the two margins, with Newcombe's correction: a positive ad - bc is reduced
+    # by n/2 (floored at 0); zero if a margin is empty (a rate of 0 or 1)
+    margins = (a + b) * (c + d) * (a + c) * (b + d)
+    cross = a * d - b * c
+    cross = np.where(cross > n / 2.0, cross - n / 2.0, np.where(cross >= 0.0, 0.0, cross))
+    phi = np.where(margins > 0, cross / np.sqrt(np.where(margins > 0, margins, 1.0)), 0.0)
+    down1, up2 = p1 - l1, u2 - p2
+    up1, down2 = u1 - p1, p2 - l2
+    estimate = p1 - p2
+    low = estimate - np.sqrt(np.maximum(down1**2 - 2.0 * phi * down1 * up2 + up2**2, 0.0))
+    high = estimate + np.sqrt(np.maximum(up1**2 - 2.0 * phi * up1 * down2 + down2**2, 0.0))
+    low = np.where(n > 0, np.clip(low, -1.0, 1.0), -1.0)
+    high = np.where(n > 0, np.clip(high, -1.0, 1.0), 1.0)
+    return low, high
+
+
+def paired_difference_interval(table: PairedTable, confidence: float = 0.95) -> tuple[float, float]:
+    """Confidence interval for candidate minus baseline failure rate on paired episodes.
+
+    Newcombe's hybrid score interval for paired proportions (Newcombe 1998, Stat. Med.
+    17:2635, method 10): the Wilson intervals ``(l1, u1)`` and ``(l2, u2)`` of the two failure
+    rates are combined by "square and add", corrected for the correlation ``phi`` of the paired
+    outcomes::
+
+        low  = d - sqrt((p1 - l1)^2 - 2 phi (p1 - l1)(u2 - p2) + (u2 - p2)^2)
+        high = d + sqrt((u1 - p1)^2 - 2 phi (u1 - p1)(p2 - l2) + (p2 - l2)^2)
+
+    where ``phi = (ad - bc) / sqrt(efgh)`` over the margins ``e, f, g, h``, with Newcombe's
+    correction (``ad - bc`` above ``n/2`` is reduced by ``n/2``, between 0 and ``n/2`` it counts
+    as 0) and ``phi = 0`` when a margin is empty.
+
+    Why this one rather than Tango's score interval: it has a closed form (no root finding, so
+    it vectorises over thousands of Monte Carlo tables), Newcombe found its coverage close to
+    nominal with few aberrations for small ``n`` and rates near 0 (ours: failure rates of a
+    few percent), it inherits the Wilson intervals' behaviour at zero counts, so it is finite
+    and non-degenerate for any table (all zeros included), and it always contains the
+    estimate.
+
+    Args:
+        table: The paired counts.
+        confidence: Two-sided confidence level.
+
+    Returns:
+        ``(low, high)`` within ``[-1, 1]``; ``(-1.0, 1.0)`` for an empty table.
+    """
+    z = _two_sided_z(confidence)
+    low, high = _newcombe_bounds(
+        np.array(table.both_fail), np.array(table.candidate_only),
+        np.array(table.baseline_only), np.array(table.neither), z,
+    )
+    return float(low), float(high)
+
+
+def mcnemar_exact(table: PairedTable, alternative: str = "two-sided") -> float:
+    """Exact McNemar p-value: a binomial test of the discordant pairs.
+
+    Given ``m`` discordant pairs, the number where the candidate failed is Binomial(m, 1/2)
+    when the policies fail alike.
+
+    Args:
+        table: The paired counts.
+        alternative: ``"two-sided"``; ``"greater"`` (the candidate fails more often: the one
+            the regression gate uses); or ``"less"``.
+
+    Returns:
+        The p-value; 1.0 when there are no discordant pairs.
+    """
+    if alternative not in ("two-sided", "greater", "less"):
+        raise ValueError(f"alternative must be 'two-sided', 'greater' or 'less', got {alternative!r}")
+    if table.discordant == 0:
+        return 1.0
+    result = stats.binomtest(table.candidate_only, table.discordant, 0.5, alternative=alternative)
+    return float(min(1.0, result.pvalue))
+
+
+def _mcnemar_greater(candidate_only: np.ndarray, baseline_only: np.ndarray) -> np.ndarray:
+    """Vectorised one-sided exact McNemar p-value, ``P(X >= candidate_only)``, X ~ Bin(m, 1/2)."""
+    b = np.asarray(candidate_only)
+    m = b + np.asarray(baseline_only)
+    return np.where(m > 0, stats.binom.sf(b - 1, m, 0.5), 1.0)
+
+
+def holm(p_values: Sequence[float]) -> list[float]:
+    """Holm's step-down adjusted p-values.
+
+    The ``i``-th smallest of ``m`` p-values (counting from 0) is multiplied by ``m - i``, then a
+    running maximum keeps the adjusted values in the order of the raw ones, and they are capped
+    at 1. Rejecting every hypothesis whose adjusted p-value is below ``alpha`` controls the
+    family-wise error rate at ``alpha``.
+
+    Args:
+        p_values: Raw p-values, each in ``[0, 1]``.
+
+    Returns:
+        Adjusted p-values in the input order (empty for no p-values).
+    """
+    count = len(p_values)
+    return weighted_holm(p_values, [1.0] * count) if count else []
+
+
+def weighted_holm(p_values: Sequence[float], weights: Sequence[float]) -> list[float]:
+    """Weighted Holm step-down adjusted p-values (Holm 1979).
+
+    Hypothesis ``i`` is first tested at ``alpha * w_i`` (weights normalised to sum to 1); each
+    rejection hands its weight on to the hypotheses still standing. Sorted by ``p_i / w_i``,
+    the ``k``-th adjusted p-value is the running maximum of ``p_(k) * W_k / w_(k)``, where
+    ``W_k`` is the total weight of the hypotheses from the ``k``-th on, capped at 1. Equal
+    weights give :func:`holm`.
+
+    Args:
+        p_values: Raw p-values, each in ``[0, 1]``.
+        weights: Positive weight per hypothesis (any scale).
+
+    Returns:
+        Adjusted p-values in the input order.
+    """
+    p = np.asarray(p_values, dtype=float)
+    w = np.asarray(weights, dtype=float)
+    if p.ndim != 1 or p.shape != w.shape:
+        raise ValueError(f"need one weight per p-value: {p.size} p-values, {w.size} weights")
+    if np.isnan(p).any() or (p < 0).any() or (p > 1).any():
+        raise ValueError("p-values must lie in [0, 1]")
+    if not (w > 0).all():
+        raise ValueError("weights must be positive")
+    w = w / w.sum()
+    order = np.argsort(p / w, kind="stable")
+    remaining = np.cumsum(w[order][::-1])[::-1]  # weight of the hypotheses from k on
+    stepped = np.maximum.accumulate(p[order] * remaining / w[order])
+    adjusted = np.empty(p.size)
+    adjusted[order] = np.minimum(stepped, 1.0)
+    return adjusted.tolist()
+
+
+# ---------------------------------------------------------------------------------------------
+# Verdicts
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """The verdict on one paired table, with the numbers behind it.
+
+    Attributes:
+        table: The paired counts.
+        margin: Non-inferiority margin on the failure-rate difference.
+        alpha: Level of the FAIL test; the interval is two-sided ``1 - alpha``.
+        difference: Candidate minus baseline failure rate.
+        interval: Newcombe interval of the difference at ``1 - alpha``.
+        p_value: One-sided exact McNemar p-value (candidate fails more).
+        adjusted_p: Holm-adjusted p-value used for the decision (``p_value`` if unadjusted).
+        verdict: PASS, FAIL or INCONCLUSIVE.
+        reason: One line for humans.
+    """
+
+    table: PairedTable
+    margin: float
+    alpha: float
+    difference: float
+    interval: tuple[float, float]
+    p_value: float
+    adjusted_p: float
+    verdict: Verdict
+    reason: str
+
+
+def _decide(
+    upper: np.ndarray, difference: np.ndarray, p_value: np.ndarray, margin: float, alpha: float
+) -> np.ndarray:
+    """The decision rule, vectorised: PASS, else FAIL, else INCONCLUSIVE (integer codes)."""
+    upper, difference, p_value = np.asarray(upper), np.asarray(difference), np.asarray(p_value)
+    return np.where(
+        upper < margin,
+        _PASS,
+        np.where((p_value < alpha) & (difference > 0), _FAIL, _INCONCLUSIVE),
+    )
+
+
+def _pp(value: float) -> str:
+    return f"{100 * value:+.1f} pp"
+
+
+def _reason(table: PairedTable, verdict: Verdict, interval: tuple[float, float], p_value: float,
+            adjusted_p: float, margin: float, alpha: float) -> str:
+    rates = (f"{table.n} paired episodes, failure rate {100 * table.candidate_rate:.1f}% vs "
+             f"{100 * table.baseline_rate:.1f}% ({_pp(table.difference)}, "
+             f"{100 * (1 - alpha):g}% CI {_pp(interval[0])} to {_pp(interval[1])})")
+    p_text = f"one-sided exact McNemar p = {p_value:.3g}"
+    if adjusted_p != p_value:
+        p_text += f" (Holm {adjusted_p:.3g})"
+    if verdict is Verdict.PASS:
+        return f"not worse by {_pp(margin)} or more: {rates}; CI upper end below the margin"
+    if verdict is Verdict.FAIL:
+        return f"candidate fails more often: {rates}; {p_text} < {alpha:g}"
+    return (f"cannot tell: {rates}; CI upper end reaches the {_pp(margin)} margin and "
+            f"{p_text} is not below {alpha:g}")
+
+
+def compare(
+    table: PairedTable, margin: float, alpha: float = DEFAULT_ALPHA, adjusted_p: float | None = None
+) -> Comparison:
+    """Verdict on one paired table (see the module docstring for the rule).
+
+    PASS when the upper end of the two-sided ``1 - alpha`` Newcombe interval of the difference
+    is below ``margin``; else FAIL when the one-sided exact McNemar p-value (``adjusted_p`` if
+    given) is below ``alpha`` and the difference is positive; else INCONCLUSIVE.
+
+    Args:
+        table: The paired counts.
+        margin: Non-inferiority margin on the failure-rate difference, in ``[0, 1)``.
+        alpha: Level of the FAIL test.
+        adjusted_p: The table's p-value after a multiplicity adjustment (Holm over scenarios);
+            must not be below the raw one-sided p-value.
+
+    Returns:
+        The :class:`Comparison`.
+    """
+    alpha = _check_level(alpha, "alpha")
+    if not 0.0 <= margin < 1.0:
+        raise ValueError(f"margin must be in [0, 1), got {margin}")
+    interval = paired_difference_interval(table, 1.0 - alpha)
+    p_value = mcnemar_exact(table, "greater")
+    if adjusted_p is None:
+        adjusted_p = p_value
+    elif not p_value - 1e-12 <= adjusted_p <= 1.0:
+        raise ValueError(f"adjusted_p={adjusted_p} must lie between the raw p-value {p_value:.6g} and 1")
+    verdict = _VERDICT_OF_CODE[int(_decide(interval[1], table.difference, adjusted_p, margin, alpha))]
+    return Comparison(
+        table=table, margin=margin, alpha=alpha, difference=table.difference, interval=interval,
+        p_value=p_value, adjusted_p=float(adjusted_p), verdict=verdict,
+        reason=_reason(table, verdict, interval, p_value, float(adjusted_p), margin, alpha),
+    )
+
+
+def compare_scenarios(
+    tables: Mapping[str, PairedTable],
+    margin: float,
+    alpha: float = DEFAULT_ALPHA,
+    pooled_weight: float | None = None,
+) -> tuple[dict[str, Comparison], Comparison]:
+    """Per-scenario verdicts (Holm over scenarios) and the overall verdict on the pooled table.
+
+    By default each scenario is compared with its one-sided McNemar p-value Holm-adjusted over
+    all the scenarios, and the pooled table (all scenarios together) with its unadjusted one.
+    The overall comparison is :func:`compare` on the pooled table, with its verdict replaced by
+    the overall rule: FAIL if any scenario FAILs or the pooled comparison FAILs; PASS if the
+    pooled comparison PASSes and no scenario FAILs; else INCONCLUSIVE.
+
+    That default tests the pooled table and the scenarios each at ``alpha``, so the overall
+    false-alarm rate can exceed ``alpha`` (at most ``2 * alpha``; ``bench/RESULTS.md`` has
+    measured rates). With ``pooled_weight`` the pooled hypothesis and the scenarios form one
+    family tested by :func:`weighted_holm`: the pooled test gets weight ``pooled_weight`` and the
+    scenarios share the rest equally, which keeps the overall false-alarm rate at most
+    ``alpha`` (e.g. ``pooled_weight=0.8``: the pooled test at ``0.8 alpha`` at worst, the full
+    ``alpha`` once a scenario is rejected).
+
+    Args:
+        tables: Paired table per scenario name (at least one).
+        margin: Non-inferiority margin, for the scenarios and the pooled table alike.
+        alpha: Level of the FAIL tests.
+        pooled_weight: Share of ``alpha`` for the pooled test in a single weighted-Holm family
+            with the scenarios, in ``(0, 1)``; None for the default described above.
+
+    Returns:
+        ``(per_scenario, overall)``.
+    """
+    if not tables:
+        raise ValueError("compare_scenarios needs at least one scenario")
+    names = list(tables)
+    pooled_table = PairedTable.pooled([tables[name] for name in names])
+    raw = [mcnemar_exact(tables[name], "greater") for name in names]
+    pooled_raw = mcnemar_exact(pooled_table, "greater")
+    if pooled_weight is None:
+        adjusted, pooled_adjusted = holm(raw), pooled_raw
+    else:
+        if not 0.0 < pooled_weight < 1.0:
+            raise ValueError(f"pooled_weight must be strictly between 0 and 1, got {pooled_weight}")
+        share = (1.0 - pooled_weight) / len(names)
+        *adjusted, pooled_adjusted = weighted_holm(raw + [pooled_raw], [share] * len(names) + [pooled_weight])
+    per_scenario = {
+        name: compare(tables[name], margin, alpha, adjusted_p=max(p_adj, p_raw))
+        for name, p_raw, p_adj in zip(names, raw, adjusted)
+    }
+    pooled = compare(pooled_table, margin, alpha, adjusted_p=max(pooled_adjusted, pooled_raw))
+    failed = [name for name in names if per_scenario[name].verdict is Verdict.FAIL]
+    if failed or pooled.verdict is Verdict.FAIL:
+        verdict = Verdict.FAIL
+        which = []
+        if pooled.verdict is Verdict.FAIL:
+            which.append("all scenarios pooled")
+        if failed:
+            which.append("scenario" + ("s " if len(failed) > 1 else " ") + ", ".join(failed)
+                         + " (Holm-adjusted)")
+        reason = f"candidate fails more often in {' and in '.join(which)}; pooled: {pooled.reason}"
+    elif pooled.verdict is Verdict.PASS:
+        verdict, reason = Verdict.PASS, f"no scenario fails; pooled: {pooled.reason}"
+    else:
+        verdict, reason = Verdict.INCONCLUSIVE, f"no scenario fails; pooled: {pooled.reason}"
+    overall = dataclasses.replace(pooled, verdict=verdict, reason=reason)
+    return per_scenario, overall
+
+
+# ---------------------------------------------------------------------------------------------
+# Sequential stopping
+
+
+def obrien_fleming_spending(fraction: float, alpha: float) -> float:
+    """Lan-DeMets O'Brien-Fleming-type spending: ``2 (1 - Phi(z_{1-alpha/2} / sqrt(t)))``.
+
+    Spends almost nothing at early looks and nearly all of ``alpha`` at the end, so the final
+    look is almost as powerful as a fixed-size test.
+    """
+    if fraction <= 0.0:
+        return 0.0
+    if fraction >= 1.0:
+        return alpha
+    return float(2.0 * stats.norm.sf(stats.norm.isf(alpha / 2.0) / math.sqrt(fraction)))
+
+
+def pocock_spending(fraction: float, alpha: float) -> float:
+    """Lan-DeMets Pocock-type spending: ``alpha * ln(1 + (e - 1) t)``; spends early looks more."""
+    if fraction <= 0.0:
+        return 0.0
+    return float(alpha * math.log1p((math.e - 1.0) * min(fraction, 1.0)))
+
+
+SPENDING_FUNCTIONS: dict[str, Callable[[float, float], float]] = {
+    "obrien-fleming": obrien_fleming_spending,
+    "pocock": pocock_spending,
+}
+
+
+@functools.lru_cache(maxsize=512)
+def _fair_coin_pmf(flips: int) -> np.ndarray:
+    return stats.binom.pmf(np.arange(flips + 1), flips, 0.5)
+
+
+@dataclass(frozen=True)
+class Look:
+    """One interim analysis of a :class:`SequentialTest`.
+
+    Attributes:
+        table: The cumulative paired counts at this look.
+        fraction: Information fraction ``episodes / max_episodes`` (at most 1).
+        fail_critical: FAIL needs ``candidate_only >= fail_critical`` (above the discordant
+            count: FAIL impossible at this look).
+        fail_alpha_spent: Type I error of FAIL spent up to and including this look (exact).
+        pass_level: One-sided level given to PASS at this look (Bonferroni share).
+        pass_upper: Upper end of the two-sided ``1 - 2 pass_level`` interval (None if no level).
+        verdict: The verdict reached at this look, or None to keep going.
+    """
+
+    table: PairedTable
+    fraction: float
+    fail_critical: int
+    fail_alpha_spent: float
+    pass_level: float
+    pass_upper: float | None
+    verdict: Verdict | None
+
+
+class SequentialTest:
+    """Group-sequential regression test: decide after each batch, stop once settled.
+
+    Call :meth:`update` with the cumulative paired table after each batch of episodes. It
+    returns FAIL or PASS as soon as a boundary is crossed, INCONCLUSIVE at the last look
+    (``max_episodes`` reached) if neither was, and None in between (keep going).
+
+    FAIL boundary (level ``alpha``, exact): with the policies failing alike, the discordant
+    pairs' signs (candidate or baseline failed) are fair coin flips whatever their number. At
+    each look the critical count is the smallest ``c`` whose exact probability of first
+    crossing now - computed by recursion over the coin sequence, given the discordant counts
+    at this and the earlier looks, and ignoring stops for PASS (non-binding) - is below the
+    alpha allotted so far by the spending function minus what the earlier looks spent. So the
+    probability of a false FAIL is at most ``alpha`` for any discordance and any look schedule
+    that does not depend on the outcomes. The last look spends all that is left; with a single
+    look this is exactly :func:`compare`'s FAIL test.
+
+    PASS boundary (level ``alpha / 2``, like :func:`compare`): the same spending function
+    shares ``alpha / 2`` between the looks; a look allotted ``a_k`` PASSes when the upper end of
+    the two-sided ``1 - 2 a_k`` Newcombe interval is below the margin. By Bonferroni the chance
+    of a false PASS over all looks is at most ``alpha / 2`` (as far as the interval's coverage is
+    nominal), a conservative choice that needs no joint distribution of the looks.
+
+    Args:
+        margin: Non-inferiority margin on the failure-rate difference.
+        alpha: Level of the FAIL test (PASS gets ``alpha / 2``).
+        max_episodes: Paired episodes at the last look (the information fraction's unit).
+        spending: ``"obrien-fleming"`` (default) or ``"pocock"``.
+    """
+
+    def __init__(
+        self,
+        margin: float,
+        alpha: float = DEFAULT_ALPHA,
+        max_episodes: int = DOCUMENTED_EPISODES,
+        spending: str = "obrien-fleming",
+    ) -> None:
+        if spending not in SPENDING_FUNCTIONS:
+            raise ValueError(f"spending must be one of {sorted(SPENDING_FUNCTIONS)}, got {spending!r}")
+        if not 0.0 <= margin < 1.0:
+            raise ValueError(f"margin must be in [0, 1), got {margin}")
+        if operator.index(max_episodes) < 1:
+            raise ValueError(f"max_episodes must be positive, got {max_episodes}")
+        self.margin = float(margin)
+        self.alpha = _check_level(alpha, "alpha")
+        self.max_episodes = int(max_episodes)
+        self.spending = spending
+        self._spend = SPENDING_FUNCTIONS[spending]
+        self._continuing = np.ones(1)  # P(S = s and no FAIL yet) for s candidate-only of m discordant
+        self._fail_spent = 0.0
+        self._pass_spent = 0.0
+        self._last = PairedTable()
+        self.looks: list[Look] = []
+        self.verdict: Verdict | None = None
+
+    def _check_cumulative(self, table: PairedTable) -> None:
+        last = self._last
+        counts = ("both_fail", "candidate_only", "baseline_only", "neither")
+        shrunk = [name for name in counts if getattr(table, name) < getattr(last, name)]
+        if shrunk:
+            raise ValueError(f"update needs the cumulative table: {', '.join(shrunk)} went down "
+                             f"since the last look")
+        if table.n <= last.n:
+            raise ValueError(f"update needs new episodes: {table.n} paired episodes, {last.n} at the last look")
+
+    def _fail_boundary(self, table: PairedTable, final: bool, fraction: float) -> int:
+        """Critical candidate-only count at this look; updates the exact FAIL bookkeeping."""
+        new_pairs = table.discordant - self._last.discordant
+        continuing = np.convolve(self._continuing, _fair_coin_pmf(new_pairs))
+        budget = (self.alpha if final else self._spend(fraction, self.alpha)) - self._fail_spent
+        tail = np.append(np.cumsum(continuing[::-1])[::-1], 0.0)  # tail[s] = P(S >= s, continuing)
+        below = np.flatnonzero(tail < budget)
+        critical = int(below[0]) if below.size else table.discordant + 1
+        self._fail_spent += float(tail[critical]) if critical <= table.discordant else 0.0
+        continuing[critical:] = 0.0
+        self._continuing = continuing
+        return critical
+
+    def update(self, table: PairedTable) -> Verdict | None:
+        """Analyse the cumulative table after a batch.
+
+        Args:
+            table: All paired episodes so far (counts never go down between looks).
+
+        Returns:
+            PASS or FAIL when a boundary is crossed, INCONCLUSIVE at the last look otherwise,
+            None to keep going.
+
+        Raises:
+            RuntimeError: If the test already stopped.
+            ValueError: If the table is not cumulative or has no new episodes.
+        """
+        if self.verdict is not None:
+            raise RuntimeError(f"the test already stopped with {self.verdict.value.upper()}")
+        self._check_cumulative(table)
+        final = table.n >= self.max_episodes
+        fraction = min(1.0, table.n / self.max_episodes)
+        critical = self._fail_boundary(table, final, fraction)
+        pass_total = self.alpha / 2.0
+        pass_level = (pass_total if final else self._spend(fraction, pass_total)) - self._pass_spent
+        self._pass_spent += pass_level
+        upper = None
+        if pass_level > 0.0:
+            upper = paired_difference_interval(table, 1.0 - 2.0 * pass_level)[1]
+        verdict: Verdict | None = None
+        if upper is not None and upper < self.margin:
+            verdict = Verdict.PASS
+        elif table.candidate_only >= critical and table.difference > 0:
+            verdict = Verdict.FAIL
+        elif final:
+            verdict = Verdict.INCONCLUSIVE
+        self.looks.append(Look(table, fraction, critical, self._fail_spent, pass_level, upper, verdict))
+        self._last = table
+        self.verdict = verdict
+        return verdict
+
+
+# ---------------------------------------------------------------------------------------------
+# Power, sample size and the paired-outcome model
+
+
+def _check_rates(p_baseline: float, p_candidate: float) -> None:
+    for name, value in (("p_baseline", p_baseline), ("p_candidate", p_candidate)):
+        if not 0.0 < value < 1.0:
+            raise ValueError(f"{name} must be strictly between 0 and 1, got {value}")
+
+
+def _check_correlation(correlation: float) -> float:
+    correlation = float(correlation)
+    if not 0.0 <= correlation <= 1.0:
+        raise ValueError(f"correlation (latent, shared difficulty) must be in [0, 1], got {correlation}")
+    return correlation
+
+
+def paired_cell_probabilities(
+    p_baseline: float, p_candidate: float, correlation: float = DEFAULT_CORRELATION
+) -> tuple[float, float, float, float]:
+    """Cell probabilities of the paired table under the shared-difficulty model.
+
+    Policy ``j`` fails when ``sqrt(rho) D + sqrt(1 - rho) E_j > Phi^-1(1 - p_j)``, with the
+    scene's difficulty ``D`` shared and ``D, E_1, E_2`` independent standard normals. The
+    probability that both fail is integrated over ``D``.
+
+    Args:
+        p_baseline: Baseline failure rate.
+        p_candidate: Candidate failure rate.
+        correlation: Latent correlation ``rho`` in ``[0, 1]``.
+
+    Returns:
+        ``(both_fail, candidate_only, baseline_only, neither)`` probabilities.
+    """
+    _check_rates(p_baseline, p_candidate)
+    rho = _check_correlation(correlation)
+    if rho == 0.0:
+        both = p_baseline * p_candidate
+    elif rho == 1.0:
+        both = min(p_baseline, p_candidate)
+    else:
+        shared, own = math.sqrt(rho), math.sqrt(1.0 - rho)
+        t_base, t_cand = stats.norm.isf(p_baseline), stats.norm.isf(p_candidate)
+
+        def integrand(difficulty: float) -> float:
+            return float(stats.norm.pdf(difficulty)
+                         * stats.norm.sf((t_base - shared * difficulty) / own)
+                         * stats.norm.sf((t_cand - shared * difficulty) / own))
+
+        both = integrate.quad(integrand, -np.inf, np.inf, epsabs=1e-12, epsrel=1e-10)[0]
+    return both, p_candidate - both, p_baseline - both, 1.0 - p_baseline - p_candidate + both
+
+
+def discordant_probability(
+    p_baseline: float, p_candidate: float, correlation: float = DEFAULT_CORRELATION
+) -> float:
+    """Probability that exactly one policy fails an episode, under the shared-difficulty model."""
+    _, candidate_only, baseline_only, _ = paired_cell_probabilities(p_baseline, p_candidate, correlation)
+    return candidate_only + baseline_only
+
+
+def _check_design(p_baseline: float, delta: float, alpha: float, power: float) -> tuple[float, float]:
+    _check_rates(p_baseline, p_baseline + delta)
+    if delta <= 0:
+        raise ValueError(f"delta (the increase in failure rate to detect) must be positive, got {delta}")
+    return float(stats.norm.isf(_check_level(alpha, "alpha"))), float(stats.norm.ppf(_check_level(power, "power")))
+
+
+def paired_sample_size(
+    p_baseline: float,
+    delta: float,
+    alpha: float = DEFAULT_ALPHA,
+    power: float = DOCUMENTED_POWER,
+    discordance: float | None = None,
+    correlation: float | None = None,
+) -> int:
+    """Paired episodes (per policy) for a one-sided McNemar test, Connor's (1987) formula.
+
+    ``n = (z_{1-alpha} sqrt(psi) + z_{power} sqrt(psi - delta^2))^2 / delta^2``, with ``psi`` the
+    probability of a discordant pair. Give ``psi`` directly as ``discordance``, or a latent
+    ``correlation`` for the shared-difficulty model (default :data:`DEFAULT_CORRELATION`).
+
+    Args:
+        p_baseline: Baseline failure rate.
+        delta: Increase of the candidate's failure rate to detect.
+        alpha: One-sided level.
+        power: Power to reach.
+        discordance: Probability of a discordant pair (at least ``delta``).
+        correlation: Latent correlation of the shared-difficulty model (if no discordance).
+
+    Returns:
+        Episodes needed, rounded up.
+    """
+    z_alpha, z_power = _check_design(p_baseline, delta, alpha, power)
+    if discordance is not None and correlation is not None:
+        raise ValueError("give either discordance or correlation, not both")
+    if discordance is None:
+        rho = DEFAULT_CORRELATION if correlation is None else correlation
+        psi = discordant_probability(p_baseline, p_baseline + delta, rho)
+    else:
+        psi = float(discordance)
+    if not delta <= psi <= 1.0:
+        raise ValueError(f"discordance must lie between delta={delta} and 1, got {psi}")
+    n = (z_alpha * math.sqrt(psi) + z_power * math.sqrt(psi - delta**2)) ** 2 / delta**2
+    return math.ceil(n - 1e-9)
+
+
+def unpaired_sample_size(
+    p_baseline: float, delta: float, alpha: float = DEFAULT_ALPHA, power: float = DOCUMENTED_POWER
+) -> int:
+    """Episodes per policy for a one-sided test of two independent proportions.
+
+    ``n = (z_{1-alpha} sqrt(2 pbar qbar) + z_{power} sqrt(p1 q1 + p2 q2))^2 / delta^2``
+    (normal approximation, pooled variance under H0, no continuity correction), i.e. what the
+    same detection needs when the two policies run on different scenes.
+
+    Args:
+        p_baseline: Baseline failure rate.
+        delta: Increase of the candidate's failure rate to detect.
+        alpha: One-sided level.
+        power: Power to reach.
+
+    Returns:
+        Episodes per policy, rounded up.
+    """
+    z_alpha, z_power = _check_design(p_baseline, delta, alpha, power)
+    p1, p2 = p_baseline, p_baseline + delta
+    mean = (p1 + p2) / 2.0
+    n = (z_alpha * math.sqrt(2.0 * mean * (1.0 - mean))
+         + z_power * math.sqrt(p1 * (1.0 - p1) + p2 * (1.0 - p2))) ** 2 / delta**2
+    return math.ceil(n - 1e-9)
+
+
+def simulate_paired_outcomes(
+    n_episodes: int,
+    p_baseline: float,
+    p_candidate: float,
+    correlation: float = DEFAULT_CORRELATION,
+    repetitions: int = 1,
+    rng: np.random.Generator | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Draw paired episode outcomes from the shared-difficulty model.
+
+    Args:
+        n_episodes: Paired episodes per repetition.
+        p_baseline: Baseline failure rate.
+        p_candidate: Candidate failure rate.
+        correlation: Latent correlation ``rho`` (shared difficulty of the scene).
+        repetitions: Independent runs to draw.
+        rng: numpy Generator (a fresh unseeded one if None).
+
+    Returns:
+        ``(candidate_failed, baseline_failed)``, boolean arrays of shape
+        ``(repetitions, n_episodes)``, paired along the last axis.
+    """
+    _check_rates(p_baseline, p_candidate)
+    rho = _check_correlation(correlation)
+    rng = np.random.default_rng() if rng is None else rng
+    shape = (repetitions, n_episodes)
+    difficulty = rng.standard_normal(shape)
+    shared, own = math.sqrt(rho), math.sqrt(1.0 - rho)
+    candidate = shared * difficulty + own * rng.standard_normal(shape) > stats.norm.isf(p_candidate)
+    baseline = shared * difficulty + own * rng.standard_normal(shape) > stats.norm.isf(p_baseline)
+    return candidate, baseline
+
+
+def simulate_tables(
+    n_episodes: int,
+    p_baseline: float,
+    p_candidate: float,
+    correlation: float = DEFAULT_CORRELATION,
+    repetitions: int = 1,
+    rng: np.random.Generator | None = None,
+    chunk: int = 500,
+) -> np.ndarray:
+    """Paired tables of simulated runs (episodes drawn by :func:`simulate_paired_outcomes`).
+
+    Returns:
+        Integer array ``(repetitions, 4)``: both_fail, candidate_only, baseline_only, neither.
+    """
+    rng = np.random.default_rng() if rng is None else rng
+    tables = np.empty((repetitions, 4), dtype=np.int64)
+    for start in range(0, repetitions, chunk):
+        size = min(chunk, repetitions - start)
+        cand, base = simulate_paired_outcomes(n_episodes, p_baseline, p_candidate, correlation, size, rng)
+        tables[start:start + size] = np.stack(
+            [(cand & base).sum(1), (cand & ~base).sum(1), (~cand & base).sum(1), (~cand & ~base).sum(1)],
+            axis=1,
+        )
+    return tables
+
+
+def verdicts_of_tables(tables: np.ndarray, margin: float, alpha: float = DEFAULT_ALPHA) -> list[Verdict]:
+    """:func:`compare`'s verdicts for many tables at once (rows of counts, as from :func:`simulate_tables`)."""
+    return [_VERDICT_OF_CODE[int(code)] for code in _verdict_codes(np.asarray(tables), margin, alpha)]
+
+
+def _verdict_codes(tables: np.ndarray, margin: float, alpha: float) -> np.ndarray:
+    a, b, c, d = tables.T
+    n = tables.sum(axis=1)
+    _, upper = _newcombe_bounds(a, b, c, d, _two_sided_z(1.0 - alpha))
+    difference = (b - c) / np.where(n > 0, n, 1)
+    return _decide(upper, difference, _mcnemar_greater(b, c), margin, alpha)
+
+
+@dataclass(frozen=True)
+class MonteCarloRate:
+    """How often an event happened in simulated runs.
+
+    Attributes:
+        count: Runs where it happened.
+        repetitions: Runs simulated.
+    """
+
+    count: int
+    repetitions: int
+
+    @property
+    def rate(self) -> float:
+        """Observed rate."""
+        return self.count / self.repetitions
+
+    def interval(self, confidence: float = 0.95) -> tuple[float, float]:
+        """Wilson interval of the rate."""
+        return wilson_interval(self.count, self.repetitions, confidence)
+
+    def __float__(self) -> float:
+        return self.rate
+
+    def __str__(self) -> str:
+        low, high = self.interval()
+        return f"{self.rate:.4f} (95% CI {low:.4f}-{high:.4f}, {self.count}/{self.repetitions})"
+
+
+def simulate_verdict_rates(
+    n_episodes: int,
+    p_baseline: float,
+    p_candidate: float,
+    margin: float = DEFAULT_MARGIN,
+    alpha: float = DEFAULT_ALPHA,
+    correlation: float = DEFAULT_CORRELATION,
+    repetitions: int = 2000,
+    rng: np.random.Generator | None = None,
+) -> dict[Verdict, MonteCarloRate]:
+    """How often :func:`compare` says PASS, FAIL and INCONCLUSIVE on simulated paired runs.
+
+    Each repetition draws ``n_episodes`` paired episodes from the shared-difficulty model
+    (:func:`simulate_paired_outcomes`) and applies the decision rule to their table.
+
+    Returns:
+        A :class:`MonteCarloRate` per verdict.
+    """
+    tables = simulate_tables(n_episodes, p_baseline, p_candidate, correlation, repetitions, rng)
+    codes = _verdict_codes(tables, margin, _check_level(alpha, "alpha"))
+    return {verdict: MonteCarloRate(int(np.sum(codes == code)), repetitions)
+            for code, verdict in _VERDICT_OF_CODE.items()}
+
+
+def simulate_power(
+    n_episodes: int = DOCUMENTED_EPISODES,
+    p_baseline: float = DOCUMENTED_BASELINE_RATE,
+    delta: float = DOCUMENTED_DELTA,
+    margin: float = DEFAULT_MARGIN,
+    alpha: float = DEFAULT_ALPHA,
+    correlation: float = DEFAULT_CORRELATION,
+    repetitions: int = 2000,
+    rng: np.random.Generator | None = None,
+) -> MonteCarloRate:
+    """Rate of FAIL verdicts when the candidate fails ``delta`` more often than the baseline."""
+    return simulate_verdict_rates(n_episodes, p_baseline, p_baseline + delta, margin, alpha, correlation,
+                                  repetitions, rng)[Verdict.FAIL]
+
+
+def simulate_false_alarm(
+    n_episodes: int = DOCUMENTED_EPISODES,
+    p_baseline: float = DOCUMENTED_BASELINE_RATE,
+    margin: float = DEFAULT_MARGIN,
+    alpha: float = DEFAULT_ALPHA,
+    correlation: float = DEFAULT_CORRELATION,
+    repetitions: int = 2000,
+    rng: np.random.Generator | None = None,
+) -> MonteCarloRate:
+    """Rate of FAIL verdicts when both policies have the same failure rate (a false alarm)."""
+    return simulate_verdict_rates(n_episodes, p_baseline, p_baseline, margin, alpha, correlation,
+                                  repetitions, rng)[Verdict.FAIL]
+
+
+def simulate_unpaired_power(
+    n_episodes: int,
+    p_baseline: float = DOCUMENTED_BASELINE_RATE,
+    delta: float = DOCUMENTED_DELTA,
+    alpha: float = DEFAULT_ALPHA,
+    repetitions: int = 2000,
+    rng: np.random.Generator | None = None,
+) -> MonteCarloRate:
+    """Power of the unpaired counterpart: each policy on its own ``n_episodes`` scenes.
+
+    The failure counts are independent binomials, tested by the one-sided Fisher exact test
+    (the unpaired exact analogue of the exact McNemar test).
+    """
+    _check_rates(p_baseline, p_baseline + delta)
+    rng = np.random.default_rng() if rng is None else rng
+    candidate = rng.binomial(n_episodes, p_baseline + delta, repetitions)
+    baseline = rng.binomial(n_episodes, p_baseline, repetitions)
+    # P(candidate failures >= observed | total failures), hypergeometric under H0
+    p_value = stats.hypergeom.sf(candidate - 1, 2 * n_episodes, candidate + baseline, n_episodes)
+    detected = (p_value < alpha) & (candidate > baseline)
+    return MonteCarloRate(int(detected.sum()), repetitions)
+
+
+def simulated_sample_size(
+    p_baseline: float = DOCUMENTED_BASELINE_RATE,
+    delta: float = DOCUMENTED_DELTA,
+    alpha: float = DEFAULT_ALPHA,
+    power: float = DOCUMENTED_POWER,
+    correlation: float | None = DEFAULT_CORRELATION,
+    margin: float = DEFAULT_MARGIN,
+    repetitions: int = 2000,
+    step: int = 10,
+    seed: int = 0,
+) -> int:
+    """Smallest episode count (a multiple of ``step``) whose simulated power reaches ``power``.
+
+    Bisection between half and twice the analytic size, assuming power grows with the
+    episode count; every candidate count is simulated with the same seed (common random
+    numbers), so the answer moves by about ``step`` from seed to seed, more when the power
+    curve is flat. Paired (``correlation`` given): FAIL rate of :func:`compare` under the
+    shared-difficulty model. Unpaired (``correlation=None``): one-sided Fisher exact test on
+    independent samples (:func:`simulate_unpaired_power`).
+    """
+    def reached(n: int) -> bool:
+        rng = np.random.default_rng(seed)
+        if correlation is None:
+            rate = simulate_unpaired_power(n, p_baseline, delta, alpha, repetitions, rng)
+        else:
+            rate = simulate_power(n, p_baseline, delta, margin, alpha, correlation, repetitions, rng)
+        return rate.rate >= power
+
+    if correlation is None:
+        analytic = unpaired_sample_size(p_baseline, delta, alpha, power)
+    else:
+        analytic = paired_sample_size(p_baseline, delta, alpha, power, correlation=correlation)
+    # in units of step; invariant: power not reached at low (0 episodes: never), reached at high
+    low, high = analytic // (2 * step), -(-2 * analytic // step)
+    if low > 0 and reached(low * step):
+        low = 0
+    while not reached(high * step):
+        low, high = high, high * 2
+    while high - low > 1:
+        middle = (low + high) // 2
+        if reached(middle * step):
+            high = middle
+        else:
+            low = middle
+    return high * step
