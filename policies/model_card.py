@@ -1,0 +1,413 @@
+"""Model cards: what a trained checkpoint is, how it was made and how it scores.
+
+A card is ``model_card.json`` beside the checkpoint's ``model.zip`` (the registry reads
+its ``algorithm`` to load the zip), with a human-readable ``README.md`` rendered from it.
+It records the algorithm, hyperparameters, env config, the bank version (a content
+hash of the scenarios trained on) and scenario list, steps, seed, wall time, the
+command that reproduces it, and an evaluation on held-out episodes:
+
+- ``evaluation.episodes``: the ``(scenario, seed)`` pairs, every scenario with the
+  seeds ``seed_base .. seed_base + seeds - 1`` (never used in training, see
+  :data:`policies.training.EVAL_SEED_BASE`);
+- ``evaluation.policies[label]``: for the trained policy (label ``"policy"``) and each
+  baseline, overall and per-scenario collision, success, off-road and failure rates,
+  each ``{"k", "n", "rate", "lo", "hi"}`` with a Wilson interval, and the outcome of
+  every episode as one character (:func:`outcome_code`), so the paired comparisons can
+  be recomputed and a re-run can be checked episode by episode;
+- ``evaluation.comparisons[baseline][measure]``: the paired table against a baseline
+  and exact McNemar p-values (two-sided and one-sided "the policy is lower");
+- ``evaluation.summary``: plain sentences saying where the policy beats each baseline
+  and where it does not.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from pathlib import Path
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+
+from envs.errors import DV2SError
+from policies.evaluation import EpisodeResult
+
+__all__ = [
+    "CARD_NAME",
+    "README_NAME",
+    "CARD_VERSION",
+    "MEASURES",
+    "ModelCardError",
+    "bank_version",
+    "outcome_code",
+    "rate",
+    "summarize_results",
+    "compare_paired",
+    "evaluation_section",
+    "summary_sentences",
+    "write_card",
+    "read_card",
+    "render_markdown",
+    "iter_card_episodes",
+    "evaluate_parallel",
+    "evaluate_for_card",
+]
+
+CARD_NAME = "model_card.json"
+README_NAME = "README.md"
+CARD_VERSION = 1
+
+MEASURES = ("collision", "success", "off_road", "failure")
+"""Per-episode events a card reports a rate for (``failure`` = collision or off-road)."""
+
+_LOWER_IS_BETTER = {"collision": True, "off_road": True, "failure": True, "success": False}
+
+
+class ModelCardError(DV2SError, ValueError):
+    """A model card that is missing, unreadable or not a dv2s-gym card."""
+
+
+# --------------------------------------------------------------------------- bank version
+def bank_version(names: Sequence[str], bank_dir: Optional[Union[str, os.PathLike]] = None) -> Dict[str, Any]:
+    """The content hash of the scenarios ``names``: SHA-256 over their sorted names and script hashes.
+
+    Returns ``{"version": hex, "scenarios": {name: content_hash}}``; the version changes
+    when a scenario is added, removed or its script edited.
+    """
+    from scenario_bank.catalog import open_bank
+
+    bank = open_bank(bank_dir)
+    hashes = {name: bank.get(name).content_hash for name in sorted(set(names))}
+    payload = json.dumps(sorted(hashes.items()), separators=(",", ":"))
+    return {"version": hashlib.sha256(payload.encode("utf-8")).hexdigest(), "scenarios": hashes}
+
+
+# --------------------------------------------------------------------------- rates
+# The statistics are scipy's: ``policies`` sits below ``dv2s_gym`` in the layering
+# (tests/test_structure.py), so it cannot import ``dv2s_gym.regress.stats``; scipy's Wilson
+# interval and binomial test are the same computations (tests/test_shipped_policy.py checks
+# the card's numbers against that module).
+def _wilson(k: int, n: int, confidence: float) -> Tuple[float, float]:
+    if n == 0:
+        return 0.0, 1.0
+    from scipy.stats import binomtest
+
+    interval = binomtest(int(k), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
+    return float(interval.low), float(interval.high)
+
+
+def _mcnemar(candidate_only: int, baseline_only: int, alternative: str) -> float:
+    """Exact McNemar p-value: the candidate's share of the discordant pairs against Binomial(m, 1/2);
+    ``alternative="less"``: the candidate has the event less often; ``"greater"``: more often."""
+    discordant = candidate_only + baseline_only
+    if discordant == 0:
+        return 1.0
+    from scipy.stats import binomtest
+
+    return float(min(1.0, binomtest(candidate_only, discordant, 0.5, alternative=alternative).pvalue))
+
+
+def rate(k: int, n: int, confidence: float = 0.95) -> Dict[str, Any]:
+    """``{"k", "n", "rate", "lo", "hi"}``: ``k`` events in ``n`` episodes with a Wilson interval."""
+    lo, hi = _wilson(int(k), int(n), confidence)
+    return {"k": int(k), "n": int(n), "rate": (k / n) if n else 0.0, "lo": float(lo), "hi": float(hi)}
+
+
+def outcome_code(result: EpisodeResult) -> str:
+    """One character per episode: ``C`` collision, ``O`` off the road (no collision),
+    ``S`` success, ``-`` neither (the ego stalled short of the success distance), ``E`` error."""
+    if result.error is not None:
+        return "E"
+    if result.collided:
+        return "C"
+    if result.off_road:
+        return "O"
+    return "S" if result.success else "-"
+
+
+def _events(code: str) -> Dict[str, bool]:
+    return {"collision": code == "C", "off_road": code == "O", "failure": code in "CO", "success": code == "S"}
+
+
+def _rates_of(codes: str, confidence: float) -> Dict[str, Any]:
+    valid = [c for c in codes if c != "E"]
+    return {measure: rate(sum(_events(c)[measure] for c in valid), len(valid), confidence) for measure in MEASURES}
+
+
+def summarize_results(results: Sequence[EpisodeResult], confidence: float = 0.95) -> Dict[str, Any]:
+    """Overall and per-scenario rates of ``results`` plus every episode's outcome code.
+
+    Episodes that ended in an error are excluded from the rates and counted under ``errors``.
+    """
+    outcomes: Dict[str, str] = {}
+    for result in results:
+        outcomes[result.scenario] = outcomes.get(result.scenario, "") + outcome_code(result)
+    every = "".join(outcomes[name] for name in sorted(outcomes))
+    valid = [r for r in results if r.error is None]
+    return {
+        "overall": {
+            **_rates_of(every, confidence),
+            "episodes": len(results),
+            "errors": every.count("E"),
+            "mean_return": sum(r.episode_return for r in valid) / len(valid) if valid else 0.0,
+            "mean_speed": sum(r.mean_speed for r in valid) / len(valid) if valid else 0.0,
+        },
+        "per_scenario": {name: _rates_of(outcomes[name], confidence) for name in sorted(outcomes)},
+        "outcomes": {name: outcomes[name] for name in sorted(outcomes)},
+    }
+
+
+def compare_paired(candidate_codes: str, baseline_codes: str, measure: str = "collision") -> Dict[str, Any]:
+    """Paired comparison of two policies' outcome codes on the same episodes for one measure.
+
+    Returns the table of the measure's event (``both``, ``candidate_only``,
+    ``baseline_only``, ``neither``), both rates and exact McNemar p-values:
+    ``p_two_sided`` and ``p_candidate_better`` (one-sided: the candidate has the event less
+    often, or for ``success`` more often). Episodes where either policy hit an error are
+    left out.
+    """
+    if len(candidate_codes) != len(baseline_codes):
+        raise ModelCardError(f"paired comparison needs the same episodes: {len(candidate_codes)} outcomes "
+                             f"against {len(baseline_codes)}")
+    pairs = [(a, b) for a, b in zip(candidate_codes, baseline_codes) if a != "E" and b != "E"]
+    candidate = [_events(a)[measure] for a, _ in pairs]
+    baseline = [_events(b)[measure] for _, b in pairs]
+    lower_better = _LOWER_IS_BETTER[measure]
+    n = len(pairs)
+    both = sum(a and b for a, b in zip(candidate, baseline))
+    candidate_only = sum(a and not b for a, b in zip(candidate, baseline))
+    baseline_only = sum(b and not a for a, b in zip(candidate, baseline))
+    return {
+        "measure": measure,
+        "n": n,
+        "candidate_rate": sum(candidate) / n if n else 0.0,
+        "baseline_rate": sum(baseline) / n if n else 0.0,
+        "table": {"both": both, "candidate_only": candidate_only, "baseline_only": baseline_only,
+                  "neither": n - both - candidate_only - baseline_only},
+        "p_two_sided": _mcnemar(candidate_only, baseline_only, "two-sided"),
+        # better: fewer collisions / off-road / failures, or more successes
+        "p_candidate_better": _mcnemar(candidate_only, baseline_only, "less" if lower_better else "greater"),
+        "p_candidate_worse": _mcnemar(candidate_only, baseline_only, "greater" if lower_better else "less"),
+    }
+
+
+def evaluation_section(results: Mapping[str, Sequence[EpisodeResult]], episodes: Sequence[Tuple[str, int]],
+                       candidate: str = "policy", confidence: float = 0.95, alpha: float = 0.05,
+                       seed_base: Optional[int] = None, seeds: Optional[int] = None,
+                       specs: Optional[Mapping[str, str]] = None) -> Dict[str, Any]:
+    """The card's ``evaluation``: rates per policy, paired comparisons of ``candidate``
+    against every other label, and the summary sentences."""
+    episodes = [(str(s), int(seed)) for s, seed in episodes]
+    for label, rows in results.items():
+        if [(r.scenario, r.seed) for r in rows] != episodes:
+            raise ModelCardError(f"results of {label!r} are not the card's episodes in order")
+    section: Dict[str, Any] = {
+        "confidence": confidence,
+        "interval": "wilson",
+        "alpha": alpha,
+        "candidate": candidate,
+        "episodes_total": len(episodes),
+        "scenarios": sorted({s for s, _ in episodes}),
+        "seed_base": seed_base,
+        "seeds_per_scenario": seeds,
+        "specs": dict(specs or {}),
+        "policies": {label: summarize_results(rows, confidence) for label, rows in results.items()},
+    }
+    codes = {label: "".join(data["outcomes"][name] for name in sorted(data["outcomes"]))
+             for label, data in section["policies"].items()}
+    section["comparisons"] = {
+        label: {measure: compare_paired(codes[candidate], codes[label], measure) for measure in MEASURES}
+        for label in results if label != candidate
+    }
+    section["summary"] = summary_sentences(section)
+    return section
+
+
+def _fmt(r: Mapping[str, Any]) -> str:
+    return f"{r['rate']:.3f} [{r['lo']:.3f}, {r['hi']:.3f}]"
+
+
+def summary_sentences(section: Mapping[str, Any]) -> List[str]:
+    """Plain sentences: for each baseline and measure whether the candidate is significantly
+    better, significantly worse, or not distinguishable, and the scenarios where it is worse."""
+    candidate = section["candidate"]
+    alpha = section.get("alpha", 0.05)
+    mine = section["policies"][candidate]
+    sentences = []
+    for label, comparisons in section["comparisons"].items():
+        theirs = section["policies"][label]
+        for measure in ("collision", "success", "failure"):
+            c = comparisons[measure]
+            lower_better = _LOWER_IS_BETTER[measure]
+            ours, base = _fmt(mine["overall"][measure]), _fmt(theirs["overall"][measure])
+            p_better = c["p_candidate_better"]
+            worse_count = c["table"]["candidate_only"] if lower_better else c["table"]["baseline_only"]
+            better_count = c["table"]["baseline_only"] if lower_better else c["table"]["candidate_only"]
+            if p_better < alpha:
+                verdict = "beats"
+            elif c["p_candidate_worse"] < alpha:
+                verdict = "does NOT beat (it is significantly worse than)"
+            else:
+                verdict = "is not distinguishable from"
+            sentences.append(
+                f"On {measure} rate the {candidate} {verdict} {label}: {ours} against {base} "
+                f"(paired exact McNemar, {better_count} episodes better, {worse_count} worse, "
+                f"one-sided p={p_better:.3g}, two-sided p={c['p_two_sided']:.3g}).")
+        worse = []
+        for name, rates in mine["per_scenario"].items():
+            base_rates = theirs["per_scenario"][name]
+            if rates["collision"]["k"] > base_rates["collision"]["k"]:
+                worse.append(f"{name} ({rates['collision']['k']}/{rates['collision']['n']} collisions "
+                             f"against {base_rates['collision']['k']}/{base_rates['collision']['n']})")
+        if worse:
+            sentences.append(f"The {candidate} collides more often than {label} on {len(worse)} scenario(s): "
+                             + "; ".join(worse) + ".")
+        else:
+            sentences.append(f"The {candidate} collides no more often than {label} on any scenario.")
+    return sentences
+
+
+# --------------------------------------------------------------------------- files
+def _card_path(location: Union[str, os.PathLike]) -> Path:
+    path = Path(location)
+    if path.suffix == ".json":
+        return path
+    return (path.parent if path.suffix == ".zip" else path) / CARD_NAME
+
+
+def write_card(directory: Union[str, os.PathLike], card: Mapping[str, Any]) -> Path:
+    """Write ``card`` as ``model_card.json`` and its rendering as ``README.md`` in
+    ``directory`` (both atomic); returns the JSON path."""
+    from scenario_bank.atomic import atomic_write_json, atomic_write_text
+
+    directory = Path(directory)
+    data = {"card_version": CARD_VERSION, **dict(card)}
+    path = atomic_write_json(directory / CARD_NAME, json.loads(json.dumps(data, default=str)), indent=1)
+    atomic_write_text(directory / README_NAME, render_markdown(data))
+    return path
+
+
+def read_card(location: Union[str, os.PathLike]) -> Dict[str, Any]:
+    """The card at ``location``: a card file, the folder holding it, or the ``model.zip`` beside it."""
+    path = _card_path(location)
+    if not path.is_file():
+        raise ModelCardError(f"no model card at {path}; train with `dv2s train`, which writes one beside model.zip")
+    try:
+        card = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as error:
+        raise ModelCardError(f"model card {path} is not readable JSON ({error}); fix it or re-run `dv2s train`") from error
+    if not isinstance(card, dict) or "algorithm" not in card:
+        raise ModelCardError(f"{path} is not a dv2s-gym model card (no 'algorithm'); re-run `dv2s train`")
+    if int(card.get("card_version", 0)) > CARD_VERSION:
+        raise ModelCardError(f"model card {path} has version {card.get('card_version')}, newer than this "
+                             f"dv2s-gym reads ({CARD_VERSION}); upgrade dv2s-gym")
+    return card
+
+
+def _rate_cell(r: Mapping[str, Any]) -> str:
+    return f"{r['k']}/{r['n']} = {r['rate']:.2f} [{r['lo']:.2f}, {r['hi']:.2f}]"
+
+
+def render_markdown(card: Mapping[str, Any]) -> str:
+    """A human-readable rendering of a card (the ``README.md`` beside it)."""
+    training = card.get("training", {})
+    lines = [f"# {card.get('name', 'model')} — {str(card.get('algorithm', '')).upper()} on DV2S-v0", ""]
+    if card.get("description"):
+        lines += [card["description"], ""]
+    lines += [
+        "Written by `dv2s train` from `model_card.json` (the data; this file is its rendering).", "",
+        "## Training", "",
+        f"- command: `{training.get('command', '')}`",
+        f"- steps: {training.get('steps')} ({training.get('n_envs')} subprocess envs), seed {training.get('seed')}",
+        f"- wall time: {training.get('wall_time_s', 0):.0f} s ({training.get('steps_per_s', 0):.0f} env steps/s)",
+        f"- scenario sampling: {card.get('sampler', {}).get('mode')}",
+        f"- bank version: `{card.get('bank', {}).get('version', '')}` "
+        f"({len(card.get('bank', {}).get('scenarios', {}))} scenarios)",
+        f"- hyperparameters: `{json.dumps(card.get('hyperparameters', {}), sort_keys=True)}`",
+        f"- env config overrides: `{json.dumps(card.get('env_config', {}), sort_keys=True)}`",
+        f"- spaces: observation {card.get('observation_space')}, action {card.get('action_space')}",
+        "",
+    ]
+    evaluation = card.get("evaluation")
+    if evaluation:
+        confidence = evaluation.get("confidence", 0.95)
+        lines += [
+            "## Evaluation", "",
+            f"{evaluation['episodes_total']} held-out episodes: {len(evaluation['scenarios'])} scenarios x "
+            f"seeds {evaluation.get('seed_base')}..{(evaluation.get('seed_base') or 0) + (evaluation.get('seeds_per_scenario') or 0) - 1}"
+            f" (never used in training). Rates with Wilson {confidence:.0%} intervals.", "",
+            "| policy | collision | success | off-road | failure |", "|---|---|---|---|---|",
+        ]
+        for label, data in evaluation["policies"].items():
+            o = data["overall"]
+            lines.append(f"| {label} | {_rate_cell(o['collision'])} | {_rate_cell(o['success'])} | "
+                         f"{_rate_cell(o['off_road'])} | {_rate_cell(o['failure'])} |")
+        lines += ["", "### Summary", ""] + [f"- {s}" for s in evaluation.get("summary", [])]
+        labels = list(evaluation["policies"])
+        lines += ["", "### Per scenario (collision rate)", "",
+                  "| scenario | " + " | ".join(labels) + " |", "|---" * (len(labels) + 1) + "|"]
+        for name in evaluation["scenarios"]:
+            cells = [_rate_cell(evaluation["policies"][label]["per_scenario"][name]["collision"]) for label in labels]
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines += ["", "### Per scenario (success rate)", "",
+                  "| scenario | " + " | ".join(labels) + " |", "|---" * (len(labels) + 1) + "|"]
+        for name in evaluation["scenarios"]:
+            cells = [_rate_cell(evaluation["policies"][label]["per_scenario"][name]["success"]) for label in labels]
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def iter_card_episodes(card: Mapping[str, Any]) -> Iterable[Tuple[str, int]]:
+    """The ``(scenario, seed)`` episodes a card's evaluation ran, in order."""
+    evaluation = card["evaluation"]
+    base, seeds = int(evaluation["seed_base"]), int(evaluation["seeds_per_scenario"])
+    for name in evaluation["scenarios"]:
+        for offset in range(seeds):
+            yield name, base + offset
+
+
+def _evaluate_chunk(spec: str, episodes: List[Tuple[str, int]], config: Optional[Dict[str, Any]],
+                    bank_dir: Optional[str]) -> List[EpisodeResult]:
+    os.environ["OMP_NUM_THREADS"] = "1"
+    import torch
+
+    from policies.evaluation import evaluate
+
+    torch.set_num_threads(1)
+    return evaluate(spec, episodes, config=config, bank_dir=bank_dir)
+
+
+def evaluate_parallel(spec: str, episodes: Sequence[Tuple[str, int]], config: Optional[Dict[str, Any]] = None,
+                      bank_dir: Optional[str] = None, jobs: int = 2) -> List[EpisodeResult]:
+    """:func:`policies.evaluation.evaluate` of a policy spec over ``episodes`` in ``jobs`` processes.
+
+    Episodes are dealt round-robin to the processes and the results come back in the
+    order of ``episodes``; an episode's result does not depend on the process it ran in.
+    """
+    episodes = [(str(s), int(seed)) for s, seed in episodes]
+    jobs = max(1, min(int(jobs), len(episodes)))
+    if jobs == 1:
+        return _evaluate_chunk(spec, episodes, config, bank_dir)
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    chunks = [episodes[j::jobs] for j in range(jobs)]
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("forkserver")) as pool:
+        parts = list(pool.map(_evaluate_chunk, [spec] * jobs, chunks, [config] * jobs, [bank_dir] * jobs))
+    results: List[Optional[EpisodeResult]] = [None] * len(episodes)
+    for j, part in enumerate(parts):
+        for offset, result in enumerate(part):
+            results[j + offset * jobs] = result
+    return results  # type: ignore[return-value]
+
+
+def evaluate_for_card(specs: Mapping[str, str], episodes: Sequence[Tuple[str, int]],
+                      configs: Mapping[str, Optional[Dict[str, Any]]], bank_dir: Optional[str] = None,
+                      candidate: str = "policy", seed_base: Optional[int] = None, seeds: Optional[int] = None,
+                      jobs: int = 2, confidence: float = 0.95) -> Dict[str, Any]:
+    """Run every policy of ``specs`` (label -> spec) on the same ``episodes`` and build the
+    card's ``evaluation`` section (:func:`evaluation_section`); ``configs`` gives each
+    label's env config (a baseline driving ``DiscreteMetaAction`` next to a continuous policy)."""
+    results = {label: evaluate_parallel(spec, episodes, configs.get(label), bank_dir, jobs)
+               for label, spec in specs.items()}
+    return evaluation_section(results, episodes, candidate=candidate, confidence=confidence, seed_base=seed_base,
+                              seeds=seeds, specs=specs)

@@ -1,0 +1,807 @@
+"""Training driving policies on the scenario bank with stable-baselines3 (``dv2s train``).
+
+A run lives in one folder (``out``)::
+
+    run.json                        the run's settings (TrainConfig) and its segments (one per invocation)
+    checkpoints/step_<n>.zip        periodic checkpoints, the last ``keep_checkpoints`` kept
+    checkpoints/step_<n>.sampler.json   the scenario sampler's state at that step
+    checkpoints/step_<n>.replay.pkl     the replay buffer (DQN, SAC) at that step
+    tb/<ALGO>_1/events.out.tfevents.*   TensorBoard logs, one curve continued across resumes
+    evaluations.jsonl               one line per periodic held-out evaluation
+    model.zip, model_card.json, README.md   the final model and its card (:mod:`policies.model_card`)
+
+**Environments.** ``n_envs`` DV2S-v0 envs run in ``SubprocVecEnv`` worker processes
+(``OMP_NUM_THREADS=1``). Each is wrapped in a :class:`ScenarioSchedule`, which chooses
+every training episode's scenario and reset seed from its own random stream: the
+scenario from the probabilities the main process last sent it, the seed uniformly from
+``[TRAIN_SEED_LOW, 2**31 - 1)``.
+
+**Held-out seeds.** Evaluation episodes (periodic and for the card) are
+``(scenario, EVAL_SEED_BASE + i)``; training reset seeds are never below
+:data:`TRAIN_SEED_LOW`, so no training episode replays an evaluation scene (nor one of
+the small seeds other tests use).
+
+**Scenario sampling** (:class:`ScenarioSampler`, in the main process): ``uniform``;
+``weighted`` (fixed weights); ``curriculum``, which mixes a uniform floor with each
+scenario's failure rate (collision or off-road) over its last ``window`` training
+episodes, so scenarios the policy fails are drawn more. :class:`CurriculumCallback`
+reads each finished episode's outcome from the vectorized env's infos, updates the
+sampler and sends the new probabilities to every worker with
+``env_method("set_scenario_probabilities", ...)`` every ``update_every`` steps; the
+probabilities are logged to TensorBoard (``curriculum/p_<scenario>``).
+
+**Resume.** ``train(config, resume=True)`` loads the newest checkpoint in ``out``
+through the policy registry (a checkpoint that does not load, or whose observation or
+action space does not match the env, is refused naming which), restores the sampler
+and replay buffer, and continues with ``reset_num_timesteps=False`` until the model has
+``config.steps`` steps in total; the TensorBoard curve and the step counter continue.
+An interrupted run (Ctrl-C) saves a checkpoint before it stops.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import os
+import re
+import shlex
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any, Callable, Deque, Dict, List, Mapping, Optional, Sequence, Tuple
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
+
+from envs.errors import DV2SError
+
+__all__ = [
+    "ALGORITHMS",
+    "SAMPLERS",
+    "EVAL_SEED_BASE",
+    "TRAIN_SEED_LOW",
+    "DEFAULT_HYPERPARAMETERS",
+    "TrainingError",
+    "TrainConfig",
+    "ScenarioSampler",
+    "ScenarioSchedule",
+    "CurriculumCallback",
+    "HeldOutEvaluationCallback",
+    "CheckpointSaver",
+    "ProgressCallback",
+    "make_train_env",
+    "make_vec_env",
+    "evaluation_episodes",
+    "latest_checkpoint",
+    "load_run_config",
+    "train",
+]
+
+ALGORITHMS = ("ppo", "dqn", "sac")
+SAMPLERS = ("uniform", "weighted", "curriculum")
+EVAL_SEED_BASE = 10_000
+"""Evaluation episodes use reset seeds ``EVAL_SEED_BASE + i`` (i < 1000) for every scenario."""
+TRAIN_SEED_LOW = 1_000_000
+"""Training episodes draw reset seeds from ``[TRAIN_SEED_LOW, 2**31 - 1)``: never an evaluation seed."""
+TRAIN_SEED_HIGH = 2**31 - 1
+
+DEFAULT_HYPERPARAMETERS: Dict[str, Dict[str, Any]] = {
+    # highway-env's documented PPO settings for highway (batch 64, 10 epochs, lr 5e-4), with a
+    # longer horizon (gamma 0.9: 2 s at 5 Hz) because the bank's hazards need braking seconds ahead,
+    # and [128, 128] layers so the checkpoint stays under 2 MB.
+    "ppo": {"policy": "MlpPolicy", "net_arch": [128, 128], "n_steps": 256, "batch_size": 64, "n_epochs": 10,
+            "learning_rate": 5e-4, "gamma": 0.9, "gae_lambda": 0.95, "clip_range": 0.2, "ent_coef": 0.0},
+    # highway-env's documented DQN settings for highway
+    "dqn": {"policy": "MlpPolicy", "net_arch": [256, 256], "learning_rate": 5e-4, "buffer_size": 15_000,
+            "learning_starts": 200, "batch_size": 32, "gamma": 0.8, "train_freq": 1, "gradient_steps": 1,
+            "target_update_interval": 50, "exploration_fraction": 0.7},
+    "sac": {"policy": "MlpPolicy", "net_arch": [256, 256], "learning_rate": 3e-4, "buffer_size": 50_000,
+            "learning_starts": 1000, "batch_size": 256, "gamma": 0.9},
+}
+
+_ACTION_TYPES = {"ppo": None, "dqn": ("DiscreteMetaAction", "DiscreteAction"), "sac": ("ContinuousAction",)}
+
+
+class TrainingError(DV2SError, ValueError):
+    """Bad training input: names the problem and the fix."""
+
+
+# --------------------------------------------------------------------------- configuration
+@dataclasses.dataclass
+class TrainConfig:
+    """Everything a training run is made of (recorded in ``run.json`` and the model card).
+
+    Args:
+        out: the run folder.
+        algo: ``ppo``, ``dqn`` or ``sac``.
+        scenarios: bank names or ``tag:<tag>`` selectors; ``None`` is the whole bank.
+        bank_dir: a bank folder other than the shipped one.
+        steps: total env steps the model is trained to (across resumes).
+        n_envs: environments in parallel worker processes.
+        seed: seeds the model, the workers' scenario/seed streams and nothing else.
+        sampler: ``uniform``, ``weighted`` (needs ``weights``) or ``curriculum``.
+        weights: scenario -> weight for ``weighted`` (missing scenarios weigh 0).
+        curriculum_floor / curriculum_window / curriculum_update: share of the uniform
+            floor, episodes remembered per scenario, env steps between probability updates.
+        env_config: DV2S-v0 config overrides (SAC gets ``ContinuousAction`` by default).
+        hyperparameters: overrides of :data:`DEFAULT_HYPERPARAMETERS` (``net_arch`` goes to
+            ``policy_kwargs``).
+        eval_freq / eval_seeds: periodic held-out evaluation every ``eval_freq`` steps over
+            ``eval_seeds`` seeds per scenario (0 turns it off).
+        card_seeds / baselines / eval_jobs: the card's final evaluation: seeds per scenario,
+            baseline policies evaluated on the same episodes, parallel processes.
+        checkpoint_freq / keep_checkpoints: checkpoint every that many steps, keep the newest.
+        progress_bar: show a tqdm progress bar on stderr.
+        vec_env: ``subproc`` (worker processes) or ``dummy`` (in this process).
+    """
+
+    out: str
+    algo: str = "ppo"
+    scenarios: Optional[List[str]] = None
+    bank_dir: Optional[str] = None
+    steps: int = 100_000
+    n_envs: int = 2
+    seed: int = 0
+    sampler: str = "uniform"
+    weights: Optional[Dict[str, float]] = None
+    curriculum_floor: float = 0.25
+    curriculum_window: int = 20
+    curriculum_update: int = 1_000
+    env_config: Dict[str, Any] = dataclasses.field(default_factory=dict)
+    hyperparameters: Dict[str, Any] = dataclasses.field(default_factory=dict)
+    eval_freq: int = 10_000
+    eval_seeds: int = 2
+    card_seeds: int = 20
+    baselines: List[str] = dataclasses.field(default_factory=lambda: ["keep_lane", "rule"])
+    eval_jobs: int = 2
+    checkpoint_freq: int = 10_000
+    keep_checkpoints: int = 3
+    progress_bar: bool = True
+    vec_env: str = "subproc"
+
+    # settings a resumed run must share with the run it continues
+    IDENTITY = ("algo", "scenarios", "bank_dir", "seed", "sampler", "weights", "curriculum_floor",
+                "curriculum_window", "env_config", "hyperparameters")
+
+    def validate(self) -> None:
+        """Raise :class:`TrainingError` for settings that cannot train."""
+        if self.algo not in ALGORITHMS:
+            raise TrainingError(f"unknown algorithm {self.algo!r}; use one of {', '.join(ALGORITHMS)}")
+        if self.scenarios is not None and not [s for s in self.scenarios if str(s).strip()]:
+            raise TrainingError("the scenario selection is empty; name bank scenarios or tag:<tag> after "
+                                "--scenarios, or leave --scenarios out to train on the whole bank")
+        for name, value, low in (("steps", self.steps, 1), ("envs", self.n_envs, 1), ("eval-seeds", self.eval_seeds, 0),
+                                 ("card-seeds", self.card_seeds, 0), ("eval-freq", self.eval_freq, 0),
+                                 ("checkpoint-freq", self.checkpoint_freq, 0), ("eval-jobs", self.eval_jobs, 1),
+                                 ("keep-checkpoints", self.keep_checkpoints, 1),
+                                 ("curriculum-window", self.curriculum_window, 1),
+                                 ("curriculum-update", self.curriculum_update, 1)):
+            if not isinstance(value, int) or value < low:
+                raise TrainingError(f"--{name} must be an integer >= {low}, not {value!r}")
+        if self.eval_seeds > 1000 or self.card_seeds > 1000:
+            raise TrainingError("at most 1000 evaluation seeds per scenario (seeds 10000..10999 are the held-out range)")
+        if self.sampler not in SAMPLERS:
+            raise TrainingError(f"unknown sampler {self.sampler!r}; use one of {', '.join(SAMPLERS)}")
+        if self.sampler == "weighted" and not self.weights:
+            raise TrainingError("--sampler weighted needs --weights '{\"scenario\": weight, ...}'")
+        if not 0.0 <= self.curriculum_floor <= 1.0:
+            raise TrainingError(f"the curriculum floor must be in [0, 1], not {self.curriculum_floor}")
+        if self.vec_env not in ("subproc", "dummy"):
+            raise TrainingError(f"vec_env must be 'subproc' or 'dummy', not {self.vec_env!r}")
+        if not isinstance(self.env_config, dict):
+            raise TrainingError("the env config must be a JSON object of DV2S-v0 config overrides")
+        action = (self.env_config.get("action") or {}).get("type")
+        allowed = _ACTION_TYPES[self.algo]
+        if action is not None and allowed is not None and action not in allowed:
+            raise TrainingError(f"{self.algo.upper()} needs a {' or '.join(allowed)} action space, not {action}; "
+                                "change 'action' in --config or leave it out")
+        unknown = set(self.hyperparameters) - _known_hyperparameters(self.algo)
+        if unknown:
+            raise TrainingError(f"unknown {self.algo.upper()} hyperparameter(s) {', '.join(sorted(unknown))}; "
+                                f"see stable-baselines3's {self.algo.upper()} arguments")
+
+    def effective_env_config(self) -> Dict[str, Any]:
+        """The env config the policy trains on: ``env_config``, with ``ContinuousAction`` for SAC."""
+        config = json.loads(json.dumps(self.env_config))
+        if self.algo == "sac" and "action" not in config:
+            config["action"] = {"type": "ContinuousAction"}
+        return config
+
+    def effective_hyperparameters(self) -> Dict[str, Any]:
+        """Defaults of the algorithm updated with ``hyperparameters``."""
+        merged = dict(DEFAULT_HYPERPARAMETERS[self.algo])
+        merged.update(self.hyperparameters)
+        return merged
+
+    def command(self) -> str:
+        """The ``dv2s train`` command line that makes this run."""
+        default = TrainConfig(out=self.out)
+        parts = ["dv2s", "train", "--algo", self.algo, "--steps", str(self.steps), "--envs", str(self.n_envs),
+                 "--seed", str(self.seed)]
+        if self.bank_dir:
+            parts += ["--bank", self.bank_dir]
+        if self.scenarios is not None:
+            parts += ["--scenarios", *self.scenarios]
+        if self.sampler != default.sampler:
+            parts += ["--sampler", self.sampler]
+        if self.weights:
+            parts += ["--weights", json.dumps(self.weights, sort_keys=True)]
+        if self.env_config:
+            parts += ["--config", json.dumps(self.env_config, sort_keys=True)]
+        for key in sorted(self.hyperparameters):
+            parts += ["--hp", f"{key}={json.dumps(self.hyperparameters[key])}"]
+        for flag, field in (("--eval-freq", "eval_freq"), ("--eval-seeds", "eval_seeds"), ("--card-seeds", "card_seeds"),
+                            ("--checkpoint-freq", "checkpoint_freq"), ("--curriculum-floor", "curriculum_floor"),
+                            ("--curriculum-window", "curriculum_window"), ("--curriculum-update", "curriculum_update")):
+            if getattr(self, field) != getattr(default, field):
+                parts += [flag, str(getattr(self, field))]
+        if self.baselines != default.baselines:
+            parts += ["--baselines", *self.baselines] if self.baselines else ["--baselines"]
+        parts += ["--out", self.out]
+        return shlex.join(parts)
+
+    def to_json(self) -> Dict[str, Any]:
+        """A JSON-safe dict of every field."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> "TrainConfig":
+        """Inverse of :meth:`to_json` (unknown keys are refused)."""
+        fields = {f.name for f in dataclasses.fields(cls)}
+        unknown = set(data) - fields
+        if unknown:
+            raise TrainingError(f"run settings name unknown field(s) {', '.join(sorted(unknown))}; "
+                                "was the run made by a newer dv2s-gym?")
+        return cls(**dict(data))
+
+
+def _known_hyperparameters(algo: str) -> set:
+    import inspect
+
+    import stable_baselines3 as sb3
+
+    parameters = set(inspect.signature(getattr(sb3, algo.upper()).__init__).parameters)
+    return (parameters - {"self", "env", "tensorboard_log", "verbose", "seed", "device", "_init_setup_model"}) | {"net_arch"}
+
+
+# --------------------------------------------------------------------------- scenario sampling
+class ScenarioSampler:
+    """The probability of each scenario being a training episode's scenario.
+
+    Args:
+        names: the scenarios trained on.
+        mode: ``uniform``; ``weighted`` (``weights``, scenario -> weight, absent = 0);
+            ``curriculum``: ``p_i = floor / K + (1 - floor) * f_i / sum(f)`` where ``f_i``
+            is scenario ``i``'s failure rate over its last ``window`` training episodes,
+            smoothed as ``(failures + 1) / (episodes + 2)`` so an unseen scenario counts as
+            0.5 and none ever drops to zero.
+    """
+
+    def __init__(self, names: Sequence[str], mode: str = "uniform", weights: Optional[Mapping[str, float]] = None,
+                 floor: float = 0.25, window: int = 20) -> None:
+        self.names = list(dict.fromkeys(names))
+        if not self.names:
+            raise TrainingError("the scenario selection is empty; name at least one bank scenario")
+        if mode not in SAMPLERS:
+            raise TrainingError(f"unknown sampler {mode!r}; use one of {', '.join(SAMPLERS)}")
+        self.mode = mode
+        self.floor = float(floor)
+        self.window = int(window)
+        self.weights = None
+        if mode == "weighted":
+            weights = dict(weights or {})
+            stray = sorted(set(weights) - set(self.names))
+            if stray:
+                raise TrainingError(f"--weights names scenario(s) not trained on: {', '.join(stray)}; "
+                                    f"weights are for {', '.join(self.names)}")
+            values = [float(weights.get(name, 0.0)) for name in self.names]
+            if any(v < 0 or not np.isfinite(v) for v in values) or sum(values) <= 0:
+                raise TrainingError("--weights must be non-negative with a positive sum")
+            self.weights = dict(zip(self.names, values))
+        self.history: Dict[str, Deque[bool]] = {name: deque(maxlen=self.window) for name in self.names}
+        self.episodes: Dict[str, int] = {name: 0 for name in self.names}
+
+    def record(self, scenario: str, failed: bool) -> None:
+        """Remember one finished training episode of ``scenario`` (others are ignored)."""
+        if scenario in self.history:
+            self.history[scenario].append(bool(failed))
+            self.episodes[scenario] += 1
+
+    def failure_rates(self) -> Dict[str, float]:
+        """Smoothed failure rate of each scenario over its remembered episodes."""
+        return {name: (sum(h) + 1.0) / (len(h) + 2.0) for name, h in self.history.items()}
+
+    def probabilities(self) -> Dict[str, float]:
+        """Scenario -> probability of being drawn next (sums to 1)."""
+        k = len(self.names)
+        if self.mode == "weighted":
+            total = sum(self.weights.values())
+            return {name: w / total for name, w in self.weights.items()}
+        if self.mode == "uniform":
+            return {name: 1.0 / k for name in self.names}
+        rates = self.failure_rates()
+        total = sum(rates.values())
+        return {name: self.floor / k + (1.0 - self.floor) * rates[name] / total for name in self.names}
+
+    def state_dict(self) -> Dict[str, Any]:
+        """JSON-safe state (saved beside every checkpoint)."""
+        return {"mode": self.mode, "history": {n: [bool(x) for x in h] for n, h in self.history.items()},
+                "episodes": dict(self.episodes)}
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Restore :meth:`state_dict` (scenarios no longer trained on are dropped)."""
+        for name, outcomes in state.get("history", {}).items():
+            if name in self.history:
+                self.history[name].clear()
+                self.history[name].extend(bool(x) for x in outcomes)
+        for name, count in state.get("episodes", {}).items():
+            if name in self.episodes:
+                self.episodes[name] = int(count)
+
+
+class ScenarioSchedule(gym.Wrapper):
+    """Chooses each episode's scenario and reset seed (training envs; see the module docstring).
+
+    ``reset(seed=s)`` restarts the wrapper's stream from ``(s, stream)``; every reset then
+    draws a scenario by the current probabilities and a reset seed in
+    ``[TRAIN_SEED_LOW, 2**31 - 1)``, unless ``options`` names the scenario.
+    """
+
+    def __init__(self, env: gym.Env, probabilities: Mapping[str, float], seed: int = 0, stream: int = 0) -> None:
+        super().__init__(env)
+        self.stream = int(stream)
+        self.rng = np.random.default_rng([int(seed), self.stream])
+        self.set_scenario_probabilities(probabilities)
+
+    def set_scenario_probabilities(self, probabilities: Mapping[str, float]) -> None:
+        """Use these scenario -> probability weights from the next episode on."""
+        names = list(probabilities)
+        values = np.array([float(probabilities[n]) for n in names], dtype=float)
+        if not names or np.any(values < 0) or values.sum() <= 0:
+            raise TrainingError("scenario probabilities must be non-negative with a positive sum")
+        self.names, self.probabilities = names, values / values.sum()
+
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        if seed is not None:
+            self.rng = np.random.default_rng([int(seed), self.stream])
+        options = dict(options or {})
+        if "scenario" not in options:
+            options["scenario"] = self.names[int(self.rng.choice(len(self.names), p=self.probabilities))]
+        episode_seed = int(self.rng.integers(TRAIN_SEED_LOW, TRAIN_SEED_HIGH))
+        return self.env.reset(seed=episode_seed, options=options)
+
+
+def _build_train_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Optional[str],
+                     probabilities: Mapping[str, float], seed: int, stream: int) -> gym.Env:
+    os.environ["OMP_NUM_THREADS"] = "1"
+    from stable_baselines3.common.monitor import Monitor
+
+    from envs.dv2s_env import DV2SEnv
+
+    env = DV2SEnv(scenario=list(names), config=dict(config), bank_dir=bank_dir)
+    return Monitor(ScenarioSchedule(env, probabilities, seed=seed, stream=stream))
+
+
+def make_train_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Optional[str],
+                   probabilities: Mapping[str, float], seed: int, stream: int = 0) -> Callable[[], gym.Env]:
+    """A picklable factory of one training env (DV2S-v0 in a :class:`ScenarioSchedule` and SB3's Monitor)."""
+    return functools.partial(_build_train_env, list(names), dict(config), bank_dir, dict(probabilities), int(seed),
+                             int(stream))
+
+
+def make_vec_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Optional[str],
+                 probabilities: Mapping[str, float], n_envs: int, seed: int, stream: int = 0,
+                 vec_env: str = "subproc"):
+    """``n_envs`` training envs in a ``SubprocVecEnv`` (or ``DummyVecEnv``); env ``i`` is seeded ``seed + i``."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    os.environ["OMP_NUM_THREADS"] = "1"  # inherited by the worker processes
+    factories = [make_train_env(names, config, bank_dir, probabilities, seed + rank, stream) for rank in range(n_envs)]
+    if vec_env == "dummy":
+        return DummyVecEnv(factories)
+    return SubprocVecEnv(factories)
+
+
+def evaluation_episodes(names: Sequence[str], seeds: int) -> List[Tuple[str, int]]:
+    """The held-out episodes: every scenario with seeds ``EVAL_SEED_BASE .. EVAL_SEED_BASE + seeds - 1``."""
+    return [(name, EVAL_SEED_BASE + offset) for name in sorted(names) for offset in range(seeds)]
+
+
+# --------------------------------------------------------------------------- callbacks
+def _episode_failed(info: Mapping[str, Any]) -> bool:
+    return bool(info.get("crashed") or info.get("collisions") or info.get("off_road"))
+
+
+class CurriculumCallback(BaseCallback):
+    """Feeds finished training episodes to the sampler and sends its probabilities to the workers.
+
+    Every ``update_every`` env steps: ``env_method("set_scenario_probabilities", p)``
+    (curriculum only) and TensorBoard scalars ``curriculum/p_<scenario>`` and
+    ``train/failure_rate`` (over the episodes finished since the last update).
+    """
+
+    def __init__(self, sampler: ScenarioSampler, update_every: int = 1000) -> None:
+        super().__init__()
+        self.sampler = sampler
+        self.update_every = int(update_every)
+        self._last = 0
+        self._finished: List[bool] = []
+
+    def _on_training_start(self) -> None:
+        self._last = self.num_timesteps
+
+    def _on_step(self) -> bool:
+        for done, info in zip(self.locals.get("dones", []), self.locals.get("infos", [])):
+            if done and "scenario" in info:
+                failed = _episode_failed(info)
+                self.sampler.record(str(info["scenario"]), failed)
+                self._finished.append(failed)
+        if self.num_timesteps - self._last >= self.update_every:
+            self.update()
+        return True
+
+    def update(self) -> Dict[str, float]:
+        """Send the current probabilities to the workers and log them."""
+        self._last = self.num_timesteps
+        probabilities = self.sampler.probabilities()
+        if self.sampler.mode == "curriculum":
+            self.training_env.env_method("set_scenario_probabilities", probabilities)
+        for name, p in probabilities.items():
+            self.logger.record(f"curriculum/p_{name}", p)
+        if self._finished:
+            self.logger.record("train/failure_rate", float(np.mean(self._finished)))
+            self._finished = []
+        return probabilities
+
+class HeldOutEvaluationCallback(BaseCallback):
+    """Every ``every`` env steps, runs the model deterministically on held-out episodes.
+
+    Logs ``eval/collision_rate``, ``eval/success_rate``, ``eval/off_road_rate``,
+    ``eval/mean_return`` to TensorBoard and appends a line to ``log_path`` (JSON lines).
+    """
+
+    def __init__(self, episodes: Sequence[Tuple[str, int]], env_config: Mapping[str, Any],
+                 bank_dir: Optional[str], every: int, log_path: Path) -> None:
+        super().__init__()
+        self.episodes = list(episodes)
+        self.env_config = dict(env_config)
+        self.bank_dir = bank_dir
+        self.every = int(every)
+        self.log_path = Path(log_path)
+        self._last = 0
+        self._env = None
+        self.latest: Optional[Dict[str, Any]] = None
+
+    def _on_training_start(self) -> None:
+        self._last = self.num_timesteps
+
+    def _on_step(self) -> bool:
+        if self.every > 0 and self.episodes and self.num_timesteps - self._last >= self.every:
+            self.run()
+        return True
+
+    def run(self) -> Dict[str, Any]:
+        """Evaluate now; returns the overall rates."""
+        from policies.evaluation import make_eval_env, run_episode
+        from policies.model_card import summarize_results
+        from policies.registry import SB3Policy
+
+        self._last = self.num_timesteps
+        if self._env is None:
+            self._env = make_eval_env(sorted({s for s, _ in self.episodes}), config=self.env_config,
+                                      bank_dir=self.bank_dir)
+        policy = SB3Policy("training", self.model)
+        policy.bind([self._env])
+        results = [run_episode(self._env, policy, scenario, seed)[0] for scenario, seed in self.episodes]
+        overall = summarize_results(results)["overall"]
+        for measure in ("collision", "success", "off_road"):
+            self.logger.record(f"eval/{measure}_rate", overall[measure]["rate"])
+        self.logger.record("eval/mean_return", overall["mean_return"])
+        self.latest = {"step": int(self.num_timesteps), "episodes": len(results),
+                       **{m: overall[m] for m in ("collision", "success", "off_road", "failure")},
+                       "mean_return": overall["mean_return"]}
+        self.log_path.parent.mkdir(parents=True, exist_ok=True)
+        with open(self.log_path, "a", encoding="utf-8") as handle:
+            handle.write(json.dumps(self.latest, sort_keys=True) + "\n")
+        return self.latest
+
+    def _on_training_end(self) -> None:
+        if self._env is not None:
+            self._env.close()
+            self._env = None
+
+class CheckpointSaver(BaseCallback):
+    """Saves ``checkpoints/step_<n>.zip`` (atomic) every ``every`` env steps with the sampler's
+    state and, for off-policy algorithms, the replay buffer; keeps the newest ``keep``."""
+
+    def __init__(self, directory: Path, every: int, sampler: ScenarioSampler, keep: int = 3) -> None:
+        super().__init__()
+        self.directory = Path(directory)
+        self.every = int(every)
+        self.sampler = sampler
+        self.keep = int(keep)
+        self._last = 0
+
+    def _on_training_start(self) -> None:
+        self._last = self.num_timesteps
+
+    def _on_step(self) -> bool:
+        if self.every > 0 and self.num_timesteps - self._last >= self.every:
+            self.save()
+        return True
+
+    def save(self) -> Path:
+        """Write a checkpoint at the current step now; returns its path."""
+        from scenario_bank.atomic import atomic_path, atomic_write_json
+
+        self._last = self.num_timesteps
+        path = self.directory / f"step_{self.num_timesteps:09d}.zip"
+        with atomic_path(path, keep_suffix=True) as tmp:
+            self.model.save(tmp)
+        atomic_write_json(path.with_suffix(".sampler.json"), self.sampler.state_dict())
+        if getattr(self.model, "replay_buffer", None) is not None:
+            with atomic_path(path.with_suffix(".replay.pkl"), keep_suffix=True) as tmp:
+                self.model.save_replay_buffer(tmp)
+        for old in _checkpoints(self.directory)[:-self.keep]:
+            for companion in (old, old.with_suffix(".sampler.json"), old.with_suffix(".replay.pkl")):
+                companion.unlink(missing_ok=True)
+        return path
+
+class ProgressCallback(BaseCallback):
+    """A tqdm bar over the run's whole step budget (a resumed run starts where it stopped)."""
+
+    def __init__(self, total: int, description: str, evaluation: Optional[Any] = None) -> None:
+        super().__init__()
+        self.total = int(total)
+        self.description = description
+        self.evaluation = evaluation
+        self.bar = None
+        self._shown = None
+
+    def _on_training_start(self) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=self.total, initial=self.num_timesteps, unit="step", desc=self.description,
+                        dynamic_ncols=True, smoothing=0.05)
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps > self.bar.total:  # the last rollout may overshoot the budget
+            self.bar.total = self.num_timesteps
+        self.bar.update(self.num_timesteps - self.bar.n)
+        latest = getattr(self.evaluation, "latest", None)
+        if latest is not None and latest is not self._shown:
+            self._shown = latest
+            self.bar.set_postfix(collision=f"{latest['collision']['rate']:.2f}",
+                                 success=f"{latest['success']['rate']:.2f}")
+        return True
+
+    def _on_training_end(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+# --------------------------------------------------------------------------- run folder
+_CHECKPOINT = re.compile(r"^step_(\d+)\.zip$")
+
+
+def _checkpoints(directory: Path) -> List[Path]:
+    if not directory.is_dir():
+        return []
+    found = [(int(m.group(1)), p) for p in directory.iterdir() if (m := _CHECKPOINT.match(p.name))]
+    return [p for _, p in sorted(found)]
+
+
+def latest_checkpoint(out: os.PathLike | str) -> Optional[Path]:
+    """The newest ``checkpoints/step_<n>.zip`` in a run folder, or ``None``."""
+    found = _checkpoints(Path(out) / "checkpoints")
+    return found[-1] if found else None
+
+
+def load_run_config(out: os.PathLike | str) -> Tuple[TrainConfig, Dict[str, Any]]:
+    """The settings and the ``run.json`` record of the run in ``out``."""
+    path = Path(out) / "run.json"
+    if not path.is_file():
+        raise TrainingError(f"{out} holds no training run (no run.json); start one without --resume")
+    try:
+        record = json.loads(path.read_text(encoding="utf-8"))
+        return TrainConfig.from_json(record["config"]), record
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise TrainingError(f"{path} is not a readable run record ({error}); start a new run in another --out") from error
+
+
+def _resolve_names(config: TrainConfig) -> List[str]:
+    from scenario_bank import select_scenarios
+
+    names = select_scenarios(config.scenarios, config.bank_dir)
+    if not names:
+        raise TrainingError("the scenario selection is empty; name bank scenarios or tag:<tag> after --scenarios")
+    return sorted(names)
+
+
+def _check_resume(config: TrainConfig, recorded: TrainConfig) -> None:
+    for field in TrainConfig.IDENTITY:
+        mine, theirs = getattr(config, field), getattr(recorded, field)
+        if json.dumps(mine, sort_keys=True) != json.dumps(theirs, sort_keys=True):
+            raise TrainingError(f"{field} {mine!r} differs from the run being resumed ({theirs!r}); resume with the "
+                                f"run's own settings (omit the option) or start a new run in another --out")
+
+
+def _new_model(config: TrainConfig, venv, tensorboard_log: str):
+    import stable_baselines3 as sb3
+
+    hyperparameters = config.effective_hyperparameters()
+    policy = hyperparameters.pop("policy", "MlpPolicy")
+    policy_kwargs = dict(hyperparameters.pop("policy_kwargs", None) or {})
+    if "net_arch" in hyperparameters:
+        policy_kwargs["net_arch"] = list(hyperparameters.pop("net_arch"))
+    cls = getattr(sb3, config.algo.upper())
+    try:
+        return cls(policy, venv, policy_kwargs=policy_kwargs, tensorboard_log=tensorboard_log, seed=config.seed,
+                   device="cpu", verbose=0, **hyperparameters)
+    except (TypeError, ValueError, AssertionError) as error:
+        raise TrainingError(f"{config.algo.upper()} does not accept these hyperparameters ({error}); "
+                            "fix the --hp values") from error
+
+
+def _resume_model(config: TrainConfig, checkpoint: Path, venv, tensorboard_log: str):
+    import stable_baselines3 as sb3
+
+    from policies.registry import load_policy
+
+    # The registry gives the clear errors: a checkpoint that does not load, or mismatched spaces.
+    policy = load_policy(f"{config.algo}:{checkpoint}")
+    policy.check_spaces(venv.observation_space, venv.action_space)
+    model = getattr(sb3, config.algo.upper()).load(str(checkpoint), env=venv, device="cpu",
+                                                     tensorboard_log=tensorboard_log)
+    replay = checkpoint.with_suffix(".replay.pkl")
+    if getattr(model, "replay_buffer", None) is not None and replay.is_file():
+        model.load_replay_buffer(str(replay))
+    model.set_random_seed(config.seed + int(model.num_timesteps))
+    return model
+
+
+def _versions() -> Dict[str, str]:
+    from importlib import metadata
+
+    versions = {}
+    for package in ("dv2s-gym", "stable-baselines3", "torch", "highway-env", "gymnasium", "scenic"):
+        try:
+            versions[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            versions[package] = "unknown"
+    return versions
+
+
+def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] = print) -> Dict[str, Any]:
+    """Train (or resume) a run as described in the module docstring; returns the model card.
+
+    Raises :class:`TrainingError` (and the registry's/bank's errors) for bad input.
+    """
+    config.validate()
+    out = Path(config.out)
+    if out.exists() and not out.is_dir():
+        raise TrainingError(f"--out {out} is a file; choose a folder for the run")
+    names = _resolve_names(config)
+    run_path = out / "run.json"
+    checkpoint = latest_checkpoint(out)
+    record: Dict[str, Any] = {"config": config.to_json(), "segments": []}
+    if resume:
+        recorded, record = load_run_config(out)
+        _check_resume(config, recorded)
+        if checkpoint is None:
+            raise TrainingError(f"{out} holds no checkpoint to resume from (checkpoints/step_<n>.zip); "
+                                "start the run again without --resume in an empty --out")
+        record["config"] = config.to_json()
+    elif checkpoint is not None or run_path.exists():
+        at = f" (checkpoint at step {int(_CHECKPOINT.match(checkpoint.name).group(1))})" if checkpoint else ""
+        raise TrainingError(f"{out} already holds a training run{at}; pass --resume to continue it, "
+                            "or choose another --out")
+
+    from stable_baselines3.common.callbacks import CallbackList
+
+    from policies.model_card import bank_version, write_card
+    from scenario_bank.atomic import atomic_path, atomic_write_json
+
+    import torch
+
+    torch.set_num_threads(1)
+    env_config = config.effective_env_config()
+    sampler = ScenarioSampler(names, config.sampler, config.weights, config.curriculum_floor, config.curriculum_window)
+    stream = 0
+    if resume:
+        sampler_state = checkpoint.with_suffix(".sampler.json")
+        if sampler_state.is_file():
+            sampler.load_state_dict(json.loads(sampler_state.read_text(encoding="utf-8")))
+        stream = int(_CHECKPOINT.match(checkpoint.name).group(1))
+    out.mkdir(parents=True, exist_ok=True)
+    tensorboard_log = str(out / "tb")
+    venv = make_vec_env(names, env_config, config.bank_dir, sampler.probabilities(), config.n_envs, config.seed,
+                        stream=stream, vec_env=config.vec_env)
+    try:
+        if resume:
+            model = _resume_model(config, checkpoint, venv, tensorboard_log)
+            log(f"resuming {checkpoint} at step {model.num_timesteps}")
+        else:
+            model = _new_model(config, venv, tensorboard_log)
+        start = int(model.num_timesteps)
+        atomic_write_json(run_path, record)
+        curriculum = CurriculumCallback(sampler, config.curriculum_update)
+        evaluation = HeldOutEvaluationCallback(evaluation_episodes(names, config.eval_seeds), env_config,
+                                               config.bank_dir, config.eval_freq, out / "evaluations.jsonl")
+        saver = CheckpointSaver(out / "checkpoints", config.checkpoint_freq, sampler, config.keep_checkpoints)
+        callbacks = [curriculum, evaluation, saver]
+        if config.progress_bar:
+            callbacks.append(ProgressCallback(config.steps, f"{config.algo} {out.name}", evaluation))
+        began = time.perf_counter()
+        remaining = config.steps - start
+
+        def close_segment(status: str) -> Dict[str, Any]:
+            segment = {"start_step": start, "end_step": int(model.num_timesteps), "status": status,
+                       "wall_time_s": round(time.perf_counter() - began, 3),
+                       "resumed_from": checkpoint.name if resume else None}
+            record["segments"].append(segment)
+            atomic_write_json(run_path, record)
+            return segment
+
+        if remaining > 0:
+            try:
+                model.learn(remaining, callback=CallbackList(callbacks), reset_num_timesteps=not resume,
+                            tb_log_name=config.algo.upper(), progress_bar=False)
+            except KeyboardInterrupt:
+                saved = saver.save()
+                close_segment("interrupted")
+                log(f"interrupted at step {model.num_timesteps}: saved {saved}; resume with --resume")
+                raise
+        else:
+            log(f"the model already has {start} steps (>= --steps {config.steps}); nothing to train")
+        saver.save()
+        segment = close_segment("finished")
+    finally:
+        venv.close()
+    model_path = out / "model.zip"
+    with atomic_path(model_path, keep_suffix=True) as tmp:
+        model.save(tmp)
+    wall = sum(s["wall_time_s"] for s in record["segments"])
+    trained = sum(s["end_step"] - s["start_step"] for s in record["segments"])
+    card: Dict[str, Any] = {
+        "name": out.name,
+        "algorithm": config.algo,
+        "policy": config.effective_hyperparameters()["policy"],
+        "hyperparameters": config.effective_hyperparameters(),
+        "env_id": "DV2S-v0",
+        "env_config": env_config,
+        "observation_space": str(model.observation_space),
+        "action_space": str(model.action_space),
+        "bank": {**bank_version(names, config.bank_dir), "dir": config.bank_dir},
+        "sampler": {"mode": config.sampler, "weights": config.weights, "final_probabilities": sampler.probabilities(),
+                    "training_episodes": dict(sampler.episodes)},
+        "training": {
+            "command": config.command(),
+            "steps": int(model.num_timesteps),
+            "n_envs": config.n_envs,
+            "seed": config.seed,
+            "wall_time_s": round(wall, 1),
+            "steps_per_s": round(trained / wall, 1) if wall > 0 else 0.0,
+            "segments": record["segments"],
+            "train_seed_range": [TRAIN_SEED_LOW, TRAIN_SEED_HIGH],
+        },
+        "versions": _versions(),
+    }
+    if config.card_seeds > 0:
+        from policies.model_card import evaluate_for_card
+
+        log(f"evaluating on {len(names)} scenarios x {config.card_seeds} held-out seeds "
+            f"({', '.join([config.algo] + list(config.baselines))})")
+        specs = {config.algo: f"{config.algo}:{model_path.resolve()}", **{b: b for b in config.baselines}}
+        baseline_config = {k: v for k, v in env_config.items() if k != "action"}
+        configs = {label: (env_config if label == config.algo else baseline_config) for label in specs}
+        card["evaluation"] = evaluate_for_card(specs, evaluation_episodes(names, config.card_seeds), configs,
+                                               bank_dir=config.bank_dir, candidate=config.algo,
+                                               seed_base=EVAL_SEED_BASE, seeds=config.card_seeds, jobs=config.eval_jobs)
+        card["evaluation"]["specs"][config.algo] = f"{config.algo}:model.zip (beside this card)"
+    write_card(out, card)
+    log(f"wrote {model_path} and {out / 'model_card.json'} (step {model.num_timesteps}, last segment "
+        f"{segment['wall_time_s']:.0f} s)")
+    return card
