@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
 import time
 from typing import Any, Dict
@@ -26,10 +25,9 @@ __all__ = ["main"]
 
 
 def _write(path: str, data: Dict[str, Any]) -> None:
-    tmp = f"{path}.tmp"
-    with open(tmp, "w", encoding="utf-8") as handle:
-        json.dump(data, handle)
-    os.replace(tmp, path)
+    from scenario_bank.atomic import atomic_write_json
+
+    atomic_write_json(path, data, fsync=False)
 
 
 def _idle_action(env: Any) -> Any:

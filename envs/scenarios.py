@@ -21,6 +21,7 @@ from typing import Any, Dict, Optional, Tuple
 import numpy as np
 
 from envs.errors import ScenarioCompileError, SceneSamplingError, UnsupportedConstructError
+from scenario_bank.safety import UnsafeScenarioError, check_script
 from scenario_bank.scenic_parse import install_parse_cache
 
 __all__ = ["MODEL", "CompiledScenario", "compile_scenario", "looks_like_source", "runtime_construct_error"]
@@ -131,9 +132,15 @@ def compile_scenario(
     key = (digest, path)
     if key in _CACHE:
         return _CACHE[key]
+    label = path or name
+    # Every script is untrusted until the allowlist has read it, bank scenarios included (they passed it
+    # when added, but the folder may have been edited since); the check shares the compiler's parse.
+    # A script the parser cannot read is left to the compiler, whose error names the line.
+    findings = [f for f in check_script(source, absolute_maps=True) if f.construct != "syntax"]
+    if findings:
+        raise UnsafeScenarioError(findings, label)
     release_veneer()
     install_parse_cache()
-    label = path or name
     try:
         if path is not None:
             scenario = scenic.scenarioFromFile(path, params=overrides, model=MODEL, mode2D=True)

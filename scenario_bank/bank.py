@@ -249,6 +249,8 @@ class Bank:
 
     def __init__(self, root: Optional[PathLike] = None) -> None:
         self.root = Path(root) if root is not None else BANK_DIR
+        self.read_only = root is None
+        """The shipped bank (opened without a folder) is part of the installed package: never written."""
         self._entries: Dict[str, ScenarioEntry] = {}
         self.problems: Dict[str, str] = {}
         """Entries that could not be loaded, with the reason (name -> message)."""
@@ -493,6 +495,13 @@ class Bank:
             raise _write_error(error, self.root) from None
         return staging
 
+    def _check_writable(self, what: str) -> None:
+        if self.read_only:
+            raise BankError(
+                f"cannot {what}: the shipped bank ({self.root}) is part of the installed package and read-only; "
+                "use a bank folder of your own: `dv2s bank ... --bank DIR` (created on the first add or import), "
+                "Bank(DIR) in Python, DV2S-v0 with bank_dir=DIR")
+
     def add(
         self,
         script: str,
@@ -514,6 +523,7 @@ class Bank:
         with CPU, memory and wall-clock limits). ``provenance`` keys: kind (hand-written, generated, mined), video,
         parent, seed, generator, model, context_hash, date.
         """
+        self._check_writable("add a scenario")
         meta = self._make_meta(script, description, name, elements, tags, map, provenance, use_case)
         verify(script, f"scenario {meta['name']!r}")  # before the lock: other writers do not wait for it
         with self._lock():
@@ -587,6 +597,7 @@ class Bank:
 
     def remove(self, name: str) -> None:
         """Remove an entry atomically."""
+        self._check_writable("remove a scenario")
         with self._lock():
             self._load(locked=True)
             if name not in self._entries and name not in self.problems:
@@ -626,6 +637,7 @@ class Bank:
         """
         if on_duplicate not in ("skip", "error"):
             raise ValueError("on_duplicate must be 'skip' or 'error'")
+        self._check_writable("import scenarios")
         staged: List[Tuple[str, Path]] = []
         added: List[str] = []
         skipped: List[str] = []

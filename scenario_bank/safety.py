@@ -66,6 +66,11 @@ WORLD_MODELS = frozenset({
 ALLOWED_IMPORTS = frozenset({"math"})
 """The only Python modules a script may import."""
 
+ALLOWED_FROM_IMPORTS = {"scenic.core.external_params": frozenset({"VerifaiRange", "VerifaiDiscreteRange",
+                                                                   "VerifaiOptions"})}
+"""Names a ``from MODULE import NAME`` may bring in: VerifAI-sampled parameters (Scenic's external
+parameters), which the failure miner drives."""
+
 SAFE_BUILTINS = frozenset({
     "True", "False", "None", "abs", "all", "any", "bool", "chr", "dict", "divmod", "enumerate", "filter",
     "float", "frozenset", "int", "isinstance", "iter", "len", "list", "map", "max", "min", "next", "ord",
@@ -213,9 +218,17 @@ def _check_import(node: ast.AST, kind: str, flag: Callable[[ast.AST, str, str], 
                      "only `import math` is allowed; Scenic world models come in through a `model` line")
     else:
         module = node.module or ""
+        allowed_names = ALLOWED_FROM_IMPORTS.get(module)
+        if not node.level and allowed_names is not None:
+            for alias in node.names:
+                if alias.name not in allowed_names or (alias.asname and alias.asname.startswith("_")):
+                    flag(node, f"from {module} import {alias.name}",
+                         f"only {', '.join(sorted(allowed_names))} may be imported from {module}")
+            return
         if node.level or module not in ALLOWED_IMPORTS:
             flag(node, f"from {'.' * node.level}{module} import ...",
-                 "only `math` may be imported; Scenic world models come in through a `model` line")
+                 "only `math` (and VerifAI ranges from scenic.core.external_params) may be imported; Scenic "
+                 "world models come in through a `model` line")
         for alias in node.names:
             if alias.name == "*":
                 flag(node, f"from {module} import *", "star imports are not allowed")
@@ -250,8 +263,12 @@ def _check_identifier(node: ast.AST, ident: str, is_attribute: bool,
                           "code-execution access)")
 
 
-def check_script(source: str) -> List[SafetyFinding]:
+def check_script(source: str, *, absolute_maps: bool = False) -> List[SafetyFinding]:
     """All safety findings of a Scenic script (empty list: safe to compile).
+
+    ``absolute_maps`` allows ``param map`` to be an absolute ``.xodr`` path (a script the
+    user runs from their own disk); scripts kept in a bank must name shipped maps or
+    paths relative to themselves, so that the bank can be moved.
 
     A script Scenic's parser cannot read yields no finding when the parser
     gives a line (the compiler reports it then, before anything runs), else one
@@ -274,7 +291,7 @@ def check_script(source: str) -> List[SafetyFinding]:
         if finding not in findings:
             findings.append(finding)
 
-    map_calls = _map_local_paths(tree, flag)
+    map_calls = _map_local_paths(tree, flag, absolute_maps)
     for node in ast.walk(tree):
         kind = type(node).__name__
         if kind == "Name" and node.id == "localPath" and id(node) not in map_calls:
@@ -312,7 +329,7 @@ def _pattern_class(node: ast.MatchClass) -> str:
     return cls.id if isinstance(cls, ast.Name) else getattr(cls, "attr", "...")
 
 
-def _map_local_paths(tree: ast.AST, flag) -> set:
+def _map_local_paths(tree: ast.AST, flag, absolute_maps: bool = False) -> set:
     """Check every ``param map`` line; the ids of the ``localPath`` names allowed as a map's whole value.
 
     A map set after the ``model`` line would not be the map loaded, and would leave a path object in
@@ -331,16 +348,18 @@ def _map_local_paths(tree: ast.AST, flag) -> set:
                     continue
                 if model_seen or node is not statement:
                     flag(param.value, "param map", "the map must be set at top level before the `model` line")
-                _check_map_value(param.value, flag)
+                _check_map_value(param.value, flag, absolute_maps)
                 value = param.value
                 if isinstance(value, ast.Call) and isinstance(value.func, ast.Name) and value.func.id == "localPath":
                     allowed.add(id(value.func))
     return allowed
 
 
-def _check_map_value(value: ast.AST, flag) -> None:
+def _check_map_value(value: ast.AST, flag, absolute_maps: bool = False) -> None:
     if isinstance(value, ast.Constant) and isinstance(value.value, str):
         path = value.value
+        if absolute_maps and path.startswith("/") and path.endswith(".xodr"):
+            return
         if path.startswith(("/", "~")) or ".." in path.replace("\\", "/").split("/"):
             flag(value, f"param map = {path!r}", "maps must be shipped map names or relative .xodr paths")
         elif ("/" in path or "\\" in path or "." in path) and not path.endswith(".xodr"):
@@ -350,14 +369,14 @@ def _check_map_value(value: ast.AST, flag) -> None:
         if len(args) != 1 or value.keywords or not (isinstance(args[0], ast.Constant) and isinstance(args[0].value, str)):
             flag(value, "param map = localPath(...)", "localPath takes one string literal, a relative .xodr path")
         else:
-            _check_map_value(args[0], flag)
+            _check_map_value(args[0], flag, absolute_maps)
     else:
         flag(value, "param map", "the map must be a string literal (a shipped map name)")
 
 
-def assert_safe(source: str, label: str = "<script>") -> None:
-    """Raise :class:`UnsafeScenarioError` if the script fails the check."""
-    findings = check_script(source)
+def assert_safe(source: str, label: str = "<script>", *, absolute_maps: bool = False) -> None:
+    """Raise :class:`UnsafeScenarioError` if the script fails the check (see :func:`check_script`)."""
+    findings = check_script(source, absolute_maps=absolute_maps)
     if findings:
         raise UnsafeScenarioError(findings, label)
 

@@ -34,6 +34,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Dict, Optional, Sequence
 
+from scenario_bank.atomic import atomic_write_text
 from scenario_bank.safety import UnsafeScenarioError, check_script
 
 __all__ = ["SandboxLimits", "SandboxResult", "SandboxError", "run_in_sandbox", "verify_script", "cache_dir"]
@@ -240,16 +241,10 @@ def _interpret(data: Dict[str, Any], returncode: int, timed_out: bool, stderr: s
 
 # ---------------------------------------------------------------- verification with a cache
 def cache_dir() -> Path:
-    """Where verified-script records live: ``$DV2S_CACHE_DIR`` or the user cache directory."""
-    if os.environ.get("DV2S_CACHE_DIR"):
-        return Path(os.environ["DV2S_CACHE_DIR"]) / "sandbox"
-    try:
-        import platformdirs
+    """Where verified-script records live: ``sandbox/`` in :func:`scenario_bank.cache.cache_dir`."""
+    from scenario_bank.cache import cache_dir as root
 
-        return Path(platformdirs.user_cache_dir("dv2s-gym")) / "sandbox"
-    except ImportError:
-        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-        return Path(base) / "dv2s-gym" / "sandbox"
+    return root() / "sandbox"
 
 
 _CODE_VERSION: Optional[str] = None
@@ -313,9 +308,7 @@ def verify_script(
     if record is not None:
         try:
             record.parent.mkdir(parents=True, exist_ok=True)
-            tmp = record.with_name(f".{record.name}.{os.getpid()}.tmp")
-            tmp.write_text(json.dumps(result.as_dict()), encoding="utf-8")
-            os.replace(tmp, record)
+            atomic_write_text(record, json.dumps(result.as_dict()), fsync=False)
         except OSError:
             pass  # the cache is only an optimisation
     return result

@@ -27,6 +27,8 @@ from collections import OrderedDict
 from pathlib import Path
 from typing import Any, Optional
 
+from scenario_bank.atomic import atomic_write_bytes
+
 __all__ = ["parse_scenic", "install_parse_cache", "cache_dir"]
 
 _PARSED: "OrderedDict[str, Any]" = OrderedDict()
@@ -76,16 +78,10 @@ class _TreeUnpickler(pickle.Unpickler):
 
 
 def cache_dir() -> Path:
-    """Folder of the on-disk parse cache: ``$DV2S_CACHE_DIR/scenic-parse`` or the user cache dir."""
-    root = os.environ.get("DV2S_CACHE_DIR")
-    if not root:
-        try:
-            from platformdirs import user_cache_dir
+    """Folder of the on-disk parse cache: ``scenic-parse/`` in :func:`scenario_bank.cache.cache_dir`."""
+    from scenario_bank.cache import cache_dir as root
 
-            root = user_cache_dir("dv2s-gym")
-        except ImportError:  # pragma: no cover - platformdirs is a dependency of the install
-            root = os.path.join(os.path.expanduser("~"), ".cache", "dv2s-gym")
-    return Path(root) / "scenic-parse"
+    return root() / "scenic-parse"
 
 
 def _library_roots():
@@ -128,9 +124,7 @@ def _save_to_disk(key: str, tree: Any) -> None:
         folder.mkdir(parents=True, exist_ok=True)
         buffer = io.BytesIO()
         _TreePickler(buffer, protocol=pickle.HIGHEST_PROTOCOL).dump(tree)
-        tmp = folder / f".{key}.{os.getpid()}.tmp"
-        tmp.write_bytes(buffer.getvalue())
-        os.replace(tmp, folder / f"{key}.pickle")
+        atomic_write_bytes(folder / f"{key}.pickle", buffer.getvalue(), fsync=False)
     except (OSError, pickle.PicklingError, RecursionError):
         pass  # a read-only or full cache only costs the parse next time
 

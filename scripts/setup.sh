@@ -11,7 +11,7 @@ python -m pip install -q --upgrade pip
 python -m pip install -q "torch==2.13.0"
 # Editable: edits to the checkout take effect without reinstalling. rl and mining hold the
 # training and falsification libraries the next issues build on.
-python -m pip install -q -e ".[test,llm,rl,mining]"
+python -m pip install -q -e ".[test,llm,rl,mining,ray]"
 # Scenic needs opencv-python; a second OpenCV distribution (e.g. -headless, pulled by
 # some extras) would share the cv2/ folder. Keep exactly one.
 for other in opencv-python-headless opencv-contrib-python opencv-contrib-python-headless; do
@@ -20,4 +20,12 @@ for other in opencv-python-headless opencv-contrib-python opencv-contrib-python-
         python -m pip install -q --force-reinstall --no-deps opencv-python
     fi
 done
+# Headless Chromium from the system packages: the HTML regression report's browser test runs in it.
+if ! command -v chromium >/dev/null 2>&1 && ! command -v chromium-browser >/dev/null 2>&1; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        apt-get update -q && apt-get install -y -q --no-install-recommends chromium
+    else
+        echo "Chromium is missing (needed by tests/test_regress_html.py): sudo apt-get update && sudo apt-get install -y --no-install-recommends chromium" >&2
+    fi
+fi
 python -c "import cv2, scenic, highway_env, stable_baselines3, torch; print('dv2s-gym environment ready: cv2', cv2.__version__, 'torch', torch.__version__)"

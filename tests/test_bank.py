@@ -267,3 +267,15 @@ def test_stale_index_is_rebuilt_from_sidecars(bank):
     index_path(bank).write_text("garbage")
     assert Bank(bank.root).names() == ["one"]
     assert json.loads(index_path(bank).read_text())["version"] == BANK_VERSION
+
+
+def test_the_shipped_bank_is_read_only(tmp_path):
+    from scenario_bank.bank import Bank, BankError
+
+    shipped = Bank()
+    before = sorted(p.name for p in shipped.root.iterdir())
+    with pytest.raises(BankError, match="shipped bank .* read-only.*--bank DIR"):
+        shipped.add("param map = 'highway_straight'\nmodel scenic.domains.driving.model\nego = new Car\n", "x")
+    with pytest.raises(BankError, match="read-only"):
+        shipped.remove(shipped.list()[0].name)
+    assert sorted(p.name for p in shipped.root.iterdir()) == before

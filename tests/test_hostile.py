@@ -167,3 +167,17 @@ def test_a_local_path_map_reaches_the_script_as_a_plain_string(tmp_path):
     with pytest.raises(ScenarioCompileError, match="replace expected at least 2 arguments"):
         compile_scenario(text, path=str(script))  # str.replace, not Path.replace
     assert (tmp_path / "road.xodr").is_file() and not marker.exists()
+
+
+@pytest.mark.parametrize("path", corpus("safety"), ids=lambda p: p.stem)
+def test_the_env_refuses_unsafe_scripts_before_compiling(path, tmp_path):
+    # a user's own file or text given to gym.make / `dv2s run` is checked too, not only bank additions
+    from envs.dv2s_env import DV2SEnv
+
+    marker = tmp_path / "marker"
+    script = tmp_path / "hostile.scenic"
+    script.write_text(hostile_text(path, marker), encoding="utf-8")
+    for scenario in (str(script), script.read_text(encoding="utf-8")):
+        with pytest.raises(UnsafeScenarioError, match="failed the safety check"):
+            DV2SEnv(scenario=scenario).reset(seed=0)
+    assert not marker.exists()

@@ -373,7 +373,7 @@ def test_compare_scenarios_holm_over_scenarios_and_pooled_overall():
         "lead_brakes": PairedTable(1, 3, 2, 94),
         "merge": PairedTable(0, 2, 2, 96),
     }
-    per, overall = compare_scenarios(tables, margin=0.02)
+    per, overall = compare_scenarios(tables, margin=0.02, pooled_weight=None)
     raw = [mcnemar_exact(t, "greater") for t in tables.values()]
     assert [c.adjusted_p for c in per.values()] == pytest.approx(holm(raw))
     assert per["cut_in"].verdict is Verdict.FAIL
@@ -396,11 +396,11 @@ def test_compare_scenarios_pass_and_inconclusive_overall():
 def test_compare_scenarios_pooled_regression_spread_over_scenarios_fails():
     # +3 pp in every scenario, none significant alone, clearly significant pooled
     tables = {f"s{i}": PairedTable(3, 7, 3, 187) for i in range(5)}
-    per, overall = compare_scenarios(tables, 0.02)
+    per, overall = compare_scenarios(tables, 0.02, pooled_weight=None)
     assert all(c.verdict is not Verdict.FAIL for c in per.values())
     assert overall.verdict is Verdict.FAIL and "all scenarios pooled" in overall.reason
-    # the weighted-Holm family: pooled test at 0.8 alpha still catches it
-    assert compare_scenarios(tables, 0.02, pooled_weight=0.8)[1].verdict is Verdict.FAIL
+    # the weighted-Holm family (the default): pooled test at 0.8 alpha still catches it
+    assert compare_scenarios(tables, 0.02)[1].verdict is Verdict.FAIL
 
 
 def test_compare_scenarios_overall_false_alarm():
@@ -414,7 +414,7 @@ def test_compare_scenarios_overall_false_alarm():
     for r in range(reps):
         tables = {f"s{i}": PairedTable(*map(int, sims[i][r])) for i in range(len(rates))}
         family += compare_scenarios(tables, DEFAULT_MARGIN, pooled_weight=0.8)[1].verdict is Verdict.FAIL
-        default += compare_scenarios(tables, DEFAULT_MARGIN)[1].verdict is Verdict.FAIL
+        default += compare_scenarios(tables, DEFAULT_MARGIN, pooled_weight=None)[1].verdict is Verdict.FAIL
     assert MonteCarloRate(family, reps).interval()[0] <= DEFAULT_ALPHA
     assert MonteCarloRate(default, reps).interval()[0] <= 2 * DEFAULT_ALPHA
     assert family <= default
@@ -455,6 +455,29 @@ def test_sequential_stops_early_on_a_flagrant_regression_and_refuses_misuse():
         test.update(PairedTable(1, 3, 3, 200))
     with pytest.raises(ValueError, match="new episodes"):
         test.update(PairedTable(1, 4, 3, 152))
+
+
+@pytest.mark.parametrize("spending", ["obrien-fleming", "pocock"])
+def test_sequential_fail_error_is_exact_given_the_discordant_counts(spending):
+    # every sign sequence of 10 discordant pairs, seen at looks with 2, 5, 7, 10 of them: the
+    # probability of a FAIL (fair coins) is the alpha the test says it spent, and at most alpha
+    discordant, episodes = [2, 5, 7, 10], [40, 80, 120, 160]
+    alpha = 0.25  # large, so that small counts can cross
+    fails = 0
+    for code in range(2**10):
+        signs = [(code >> i) & 1 for i in range(10)]
+        test = SequentialTest(margin=0.0, alpha=alpha, max_episodes=160, spending=spending)
+        for m, n in zip(discordant, episodes):
+            b = sum(signs[:m])
+            verdict = test.update(PairedTable(0, b, m - b, n - m))
+            if verdict is not None:
+                break
+        fails += verdict is Verdict.FAIL
+        if len(test.looks) == 4:
+            spent = test.looks[-1].fail_alpha_spent
+    # PASS needs the interval's upper end below 0, which these counts never reach at margin 0
+    assert fails / 2**10 == pytest.approx(spent, abs=1e-12)
+    assert 0.5 * alpha < spent <= alpha
 
 
 def run_sequential(p_candidate: float, repetitions: int, seed: int, looks: int = 5,

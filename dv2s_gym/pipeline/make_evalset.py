@@ -2,8 +2,8 @@
 
 For every chosen bank scenario, seeds ``0 .. per_scenario - 1`` are rendered, one
 ``DV2S-v0`` episode each (:func:`dv2s_gym.pipeline.make_bev_clips.render_clip`),
-the ego driven by the script's own ego behaviour when it has one (the scenario as
-written, ego actions included) and otherwise by the rule-based driver; and labeled
+the ego driven by the rule-based driver, or by the script's own ego behaviour where
+the label asks the ego for a manoeuvre (a turn, a lane change), chosen per scenario; and labeled
 with the scenario's semantic elements from its bank sidecar. Every seed drawn is
 kept: no seed is skipped for not playing its story (the bank's scenarios play
 their story in at least 90% of seeds whatever the ego does, checked by
@@ -80,7 +80,7 @@ def build_evalset(out: str | os.PathLike, scenarios: Optional[Sequence[str]] = N
         label = normalize_elements(entry.elements)
         kept[name], differs[name] = [], []
         length = CLIP_SECONDS.get(name, seconds)
-        policy = "scenic" if _ego_has_behavior(entry) else "agent"
+        policy = _ego_driver(entry, label)
         for seed in range(per_scenario):
             stem = f"{name}_seed{seed}"
             summary = render_clip(name, seed, out / f"{stem}.webm", seconds=length, size=size, ego_policy=policy)
@@ -99,10 +99,24 @@ def build_evalset(out: str | os.PathLike, scenarios: Optional[Sequence[str]] = N
     return {"kept": kept, "differs": differs}
 
 
-def _ego_has_behavior(entry) -> bool:
+EGO_MANEUVERS = frozenset({"turn_left", "turn_right", "lane_change_left", "lane_change_right", "u_turn",
+                           "overtake", "merge", "cut_in"})
+"""Labeled ego actions the rule-based driver does not perform (it keeps its lane and follows its route)."""
+
+
+def _ego_driver(entry, label: Dict[str, Any]) -> str:
+    """Who drives the ego in a scenario's clips, decided per scenario (never per seed).
+
+    The script's own ego behaviour (``"scenic"``) when the label asks the ego for a manoeuvre
+    the rule-based driver does not make and the script has an ego behaviour; otherwise the
+    rule-based driver (``"agent"``), which drives like a careful human and does not run into
+    the scene's adversary the way a script's lane-following ego at constant speed does.
+    """
     from envs.scenarios import compile_scenario
 
-    return compile_scenario(entry.script, name=entry.name).scenario.egoObject.behavior is not None
+    wants_maneuver = any(actor == "ego" and action in EGO_MANEUVERS for actor, action in label.get("actions", []))
+    has_behavior = compile_scenario(entry.script, name=entry.name).scenario.egoObject.behavior is not None
+    return "scenic" if wants_maneuver and has_behavior else "agent"
 
 
 def _write_readme(out: Path, kept: Dict[str, List[int]], differs: Dict[str, List[str]], size: int) -> None:
@@ -111,7 +125,8 @@ def _write_readme(out: Path, kept: Dict[str, List[int]], differs: Dict[str, List
         "",
         "Bird's-eye clips (VP8 `.webm`, 5 fps, {0}x{0} px) of bank scenarios, each one `DV2S-v0` episode (the ego"
         .format(size),
-        "driven by the script's ego behaviour, or by the rule-based driver: `ego_policy` in the label), and",
+        "driven by the rule-based driver, or by the script's ego behaviour where the label asks the ego for a",
+        "manoeuvre such as a turn or a lane change: `ego_policy` in the label; chosen per scenario, never per seed), and",
         "`<clip>.label.json` holding the ground-truth semantic elements (the scenario's sidecar elements) and",
         "reference description. Seeds 0 .. N-1 of every scenario (N clips each), none skipped; episodes whose trace",
         "misses a labeled element or shows an unlabeled collision are listed below.",

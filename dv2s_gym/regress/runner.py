@@ -138,7 +138,7 @@ def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Seque
 def run_regression(candidate: str, baseline: Optional[str] = None, *,
                    baseline_report: Optional[Union[str, os.PathLike]] = None,
                    bank_dir: Optional[Union[str, os.PathLike]] = None, scenarios: Scenarios = None,
-                   episodes: int = 20, seed: int = 0, margin: float = 0.05, alpha: float = 0.05,
+                   episodes: int = 20, seed: int = 0, margin: float = stats.DEFAULT_MARGIN, alpha: float = 0.05,
                    backend: str = "local", workers: Optional[int] = None, address: Optional[str] = None,
                    out_dir: Optional[Union[str, os.PathLike]] = None, sequential: bool = False,
                    env_config: Optional[Dict[str, Any]] = None, progress: bool = True,
@@ -157,7 +157,8 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         scenarios: bank names and/or ``tag:<tag>`` (default: the whole bank, or the baseline
             report's scenarios); an empty selection is an error.
         episodes: seeds per scenario; episode ``k`` uses env seed ``seed + k``.
-        margin: non-inferiority margin on the failure-rate difference (0.05 = 5 points).
+        margin: non-inferiority margin on the failure-rate difference (default 0.02 = 2 points, the margin the
+            statistics are calibrated at: bench/calibrate_regress.py).
         alpha: level of the FAIL test (PASS is tested at ``alpha / 2``).
         backend / workers / address: ``"local"`` process pool (``workers`` processes, default
             every core) or ``"ray"`` (cluster ``address``).

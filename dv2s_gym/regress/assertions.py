@@ -1,0 +1,147 @@
+"""A regression report to assert on: ``report.assert_no_regression()`` in a user's own tests.
+
+:class:`RegressionReport` wraps the report dict :func:`~dv2s_gym.regress.runner.run_regression`
+returns with the folder it was written to; :meth:`RegressionReport.failure_message` says, in a
+few lines, why a verdict is not acceptable (which scenarios regressed, by how much, with which
+p-values, which episodes newly fail, where the report is). The pytest plugin
+(:mod:`dv2s_gym.regress.pytest_plugin`) fails tests with that message.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Dict, Iterator, List, Mapping, Optional, Union
+
+__all__ = ["RegressionReport", "RegressionFailed"]
+
+SHOWN_EPISODES = 8
+"""Newly failing episode ids named in a failure message; the rest are counted."""
+
+
+class RegressionFailed(AssertionError):
+    """A regression verdict that the caller did not accept (FAIL, or INCONCLUSIVE when not allowed)."""
+
+
+def _pp(value: Any) -> str:
+    return "?" if value is None else f"{100 * float(value):+.1f} pp"
+
+
+def _pct(value: Any) -> str:
+    return "?" if value is None else f"{100 * float(value):.0f}%"
+
+
+def _fails_more(entry: Any) -> bool:
+    """The candidate fails more often than the baseline in this scenario entry."""
+    table = (((entry or {}).get("comparison") or {}).get("table")) or {}
+    return table.get("candidate_only", 0) > table.get("baseline_only", 0)
+
+
+class RegressionReport(Mapping[str, Any]):
+    """A ``dv2s-regress`` report (read it like the dict) plus where it was written.
+
+    Attributes:
+        data: the report dict.
+        out_dir: the run's folder (``report.json``, ``report.md``, ``report.html``, traces).
+    """
+
+    def __init__(self, data: Mapping[str, Any], out_dir: Union[str, os.PathLike, None] = None) -> None:
+        self.data: Dict[str, Any] = dict(data)
+        self.out_dir = None if out_dir is None else Path(out_dir)
+
+    # Mapping interface: report["scenarios"], report.get("errors"), ...
+    def __getitem__(self, key: str) -> Any:
+        return self.data[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.data)
+
+    def __len__(self) -> int:
+        return len(self.data)
+
+    @property
+    def verdict(self) -> Optional[str]:
+        """``"PASS"``, ``"FAIL"``, ``"INCONCLUSIVE"``, or ``None`` without a baseline."""
+        return self.data.get("verdict")
+
+    @property
+    def regressed(self) -> List[str]:
+        """Scenarios whose verdict is FAIL."""
+        return list(self.data.get("regressed") or [])
+
+    @property
+    def newly_failing(self) -> List[str]:
+        """Episode ids (``"<scenario>/<seed>"``) the candidate fails and the baseline does not."""
+        return list(self.data.get("newly_failing") or [])
+
+    @property
+    def path(self) -> Optional[Path]:
+        """The report to read first: ``report.html`` if written, else ``report.md`` or ``report.json``."""
+        if self.out_dir is None:
+            return None
+        for name in ("report.html", "report.md", "report.json"):
+            if (self.out_dir / name).is_file():
+                return self.out_dir / name
+        return self.out_dir / "report.json"
+
+    def failure_message(self, allow_inconclusive: bool = True) -> Optional[str]:
+        """Why this report's verdict is not acceptable, or ``None`` when it is.
+
+        FAIL is never acceptable; INCONCLUSIVE only with ``allow_inconclusive``; a report
+        without a verdict (no baseline) is not acceptable, since nothing was compared.
+        """
+        verdict = self.verdict
+        if verdict == "PASS" or (verdict == "INCONCLUSIVE" and allow_inconclusive):
+            return None
+        candidate = (self.data.get("candidate") or {}).get("spec", "?")
+        baseline = (self.data.get("baseline") or {}).get("spec") if self.data.get("baseline") else None
+        where = f"report: {self.path}" if self.path is not None else ""
+        if verdict is None:
+            return f"dv2s regression: {candidate!r} was run without a baseline, so there is no verdict; {where}"
+        lines = [f"dv2s regression {verdict}: {candidate!r} against {baseline!r}"]
+        scenarios = self.data.get("scenarios") or {}
+        if verdict == "FAIL":
+            named = self.regressed or [name for name, entry in scenarios.items() if _fails_more(entry)]
+            label = "regressed on" if self.regressed else "failing more often (pooled FAIL) on"
+            lines[0] += f" {label} {', '.join(named) if named else 'the pooled scenarios'}"
+            for name in named:
+                lines.append("  " + self._scenario_line(name, scenarios.get(name) or {}))
+        overall = (self.data.get("overall") or {}).get("comparison") or {}
+        if overall.get("reason"):
+            lines.append(f"  overall: {overall['reason']}")
+        if verdict == "INCONCLUSIVE":
+            lines.append("  the runs cannot tell within the margin: run more episodes, widen the margin, or allow "
+                         "INCONCLUSIVE (allow_inconclusive=True)")
+        newly = self.newly_failing
+        if newly:
+            shown = ", ".join(newly[:SHOWN_EPISODES])
+            more = f" and {len(newly) - SHOWN_EPISODES} more" if len(newly) > SHOWN_EPISODES else ""
+            lines.append(f"  newly failing episodes: {shown}{more}")
+        errors = self.data.get("errors") or []
+        if errors:
+            lines.append(f"  {len(errors)} episode(s) ended in errors")
+        if where:
+            lines.append(f"  {where}")
+        return "\n".join(lines)
+
+    @staticmethod
+    def _scenario_line(name: str, entry: Mapping[str, Any]) -> str:
+        comparison = entry.get("comparison") or {}
+        difference = comparison.get("difference") or {}
+        candidate = ((entry.get("candidate") or {}).get("failure_rate") or {}).get("value")
+        baseline = ((entry.get("baseline") or {}).get("failure_rate") or {}).get("value")
+        p_value, p_adjusted = comparison.get("p_value"), comparison.get("p_adjusted")
+        p_text = "" if p_value is None else f", p = {p_value:.3g}" + (
+            "" if p_adjusted is None else f" (Holm {p_adjusted:.3g})")
+        return (f"{name}: failure rate {_pct(candidate)} vs {_pct(baseline)}, difference {_pp(difference.get('value'))} "
+                f"[{_pp(difference.get('low'))}, {_pp(difference.get('high'))}]{p_text}")
+
+    def assert_no_regression(self, allow_inconclusive: bool = True) -> "RegressionReport":
+        """Raise :class:`RegressionFailed` (an ``AssertionError``) unless the verdict is acceptable."""
+        message = self.failure_message(allow_inconclusive)
+        if message is not None:
+            raise RegressionFailed(message)
+        return self
+
+    def __repr__(self) -> str:
+        return f"RegressionReport(verdict={self.verdict!r}, regressed={self.regressed!r}, out_dir={str(self.out_dir)!r})"

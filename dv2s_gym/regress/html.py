@@ -1,0 +1,547 @@
+"""The regression report as one self-contained HTML page.
+
+:func:`write_html` turns a report dict (the ``dv2s-regress`` schema written by the
+runner) into a single file with no external resources: inline CSS, plots drawn as
+inline SVG by the small functions below (per-scenario failure and collision rates
+with their intervals, the paired difference per scenario against the margin,
+distributions of minimum time-to-collision and return), a verdict banner, tables,
+and the newly failing episodes as embedded ``data:video/webm`` clips rendered from
+their traces (:func:`~dv2s_gym.regress.clips.render_episode_video`).
+
+Every string taken from the report is escaped. A small inline script records, on
+load, how many plots have a non-empty box (``data-plots-rendered`` on ``<body>``);
+opened as ``report.html#selftest`` it also plays the first clip and records whether
+it played (``data-video-played``) — the browser test reads these attributes.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+
+from dv2s_gym.regress.clips import ClipError, render_episode_video
+
+__all__ = ["write_html", "render_html", "render_episode_video", "MAX_VIDEOS"]
+
+MAX_VIDEOS = 12
+"""Newly failing episodes shown as clips; the rest are listed."""
+
+VideoSource = Union[str, os.PathLike, bytes]
+
+COLOURS = {"candidate": "#0b63c5", "baseline": "#8a8f98", "PASS": "#1a7f37", "FAIL": "#cf222e",
+           "INCONCLUSIVE": "#b07800", None: "#57606a"}
+
+
+def _e(value: Any) -> str:
+    """Escape anything for HTML text or a double-quoted attribute."""
+    return html.escape("" if value is None else str(value), quote=True)
+
+
+def _num(value: Any) -> Optional[float]:
+    """A finite float, or ``None``."""
+    if isinstance(value, bool) or value is None:
+        return None
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        return None
+    return number if math.isfinite(number) else None
+
+
+def _fmt(value: Any, digits: int = 2) -> str:
+    number = _num(value)
+    return "–" if number is None else f"{number:.{digits}f}"
+
+
+def _interval(stat: Optional[Mapping[str, Any]], digits: int = 2) -> str:
+    if not isinstance(stat, Mapping):
+        return "–"
+    text = _fmt(stat.get("value"), digits)
+    low, high = _num(stat.get("low")), _num(stat.get("high"))
+    if low is not None and high is not None:
+        text += f" [{low:.{digits}f}, {high:.{digits}f}]"
+    return text
+
+
+# --------------------------------------------------------------------------- SVG plots
+ROW, TOP, BOTTOM, LABEL, RIGHT, WIDTH = 22, 44, 34, 240, 24, 760
+
+
+def _x_scale(low: float, high: float) -> Tuple[float, float, Any]:
+    span = (high - low) or 1.0
+    plot = WIDTH - LABEL - RIGHT
+    return low, high, (lambda v: LABEL + (min(max(v, low), high) - low) / span * plot)
+
+
+def _ticks(low: float, high: float, count: int = 5) -> List[float]:
+    step = (high - low) / (count - 1)
+    return [low + i * step for i in range(count)]
+
+
+def _axis(x, low: float, high: float, height: float, title: str, signed: bool = False) -> List[str]:
+    parts = [f'<line class="axis" x1="{LABEL}" y1="{height - BOTTOM}" x2="{WIDTH - RIGHT}" y2="{height - BOTTOM}"/>']
+    for tick in _ticks(low, high):
+        px = x(tick)
+        label = f"{tick:+.2f}" if signed and abs(tick) > 1e-12 else f"{tick:.2f}"
+        parts.append(f'<line class="grid" x1="{px:.1f}" y1="{TOP - 6}" x2="{px:.1f}" y2="{height - BOTTOM}"/>'
+                     f'<text class="tick" x="{px:.1f}" y="{height - BOTTOM + 14}">{_e(label)}</text>')
+    parts.append(f'<text class="axis-title" x="{(LABEL + WIDTH - RIGHT) / 2:.1f}" y="{height - 6}">{_e(title)}</text>')
+    return parts
+
+
+def _svg(height: float, title: str, body: Iterable[str]) -> str:
+    return (f'<svg class="plot" xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{height:.0f}" '
+            f'viewBox="0 0 {WIDTH} {height:.0f}" role="img" aria-label="{_e(title)}"><title>{_e(title)}</title>'
+            + "".join(body) + "</svg>")
+
+
+def _legend(entries: Sequence[Tuple[str, str, str]]) -> str:
+    """``(label, colour, shape)`` entries in the top right corner."""
+    parts, x = [], WIDTH - RIGHT
+    for label, colour, shape in reversed(entries):
+        x -= 8 + 7 * len(label) + 16
+        mark = (f'<rect x="{x}" y="6" width="9" height="9" fill="{colour}"/>' if shape == "square"
+                else f'<circle cx="{x + 4.5}" cy="10.5" r="4.5" fill="{colour}"/>')
+        parts.append(f'{mark}<text class="legend" x="{x + 13}" y="14">{_e(label)}</text>')
+    return "".join(parts)
+
+
+def _interval_mark(x, y: float, stat: Mapping[str, Any], colour: str, shape: str, tooltip: str) -> str:
+    value, low, high = _num(stat.get("value")), _num(stat.get("low")), _num(stat.get("high"))
+    if value is None:
+        return ""
+    parts = [f'<g class="mark"><title>{_e(tooltip)}</title>']
+    if low is not None and high is not None:
+        parts.append(f'<line x1="{x(low):.1f}" y1="{y:.1f}" x2="{x(high):.1f}" y2="{y:.1f}" stroke="{colour}" '
+                     f'stroke-width="2"/>')
+    if shape == "square":
+        parts.append(f'<rect x="{x(value) - 4:.1f}" y="{y - 4:.1f}" width="8" height="8" fill="{colour}"/>')
+    else:
+        parts.append(f'<circle cx="{x(value):.1f}" cy="{y:.1f}" r="4.5" fill="{colour}"/>')
+    return "".join(parts) + "</g>"
+
+
+def _row_label(y: float, label: str, bold: bool = False) -> str:
+    weight = ' font-weight="bold"' if bold else ""
+    short = label if len(label) <= 36 else label[:34] + "…"
+    return f'<text class="row-label" x="{LABEL - 8}" y="{y + 4:.1f}"{weight}>{_e(short)}<title>{_e(label)}</title></text>'
+
+
+def rate_plot(report: Mapping[str, Any], metric: str, title: str) -> str:
+    """Forest plot: ``metric`` (a rate) per scenario and overall, with intervals, for both policies."""
+    rows = _scenario_rows(report)
+    has_baseline = report.get("baseline") is not None
+    height = TOP + ROW * len(rows) + BOTTOM
+    x = _x_scale(0.0, 1.0)[2]
+    body = _axis(x, 0.0, 1.0, height, title)
+    legend = [("candidate", COLOURS["candidate"], "circle")]
+    if has_baseline:
+        legend.append(("baseline", COLOURS["baseline"], "square"))
+    body.append(_legend(legend))
+    for i, (name, entry, overall) in enumerate(rows):
+        y = TOP + ROW * i + ROW / 2
+        body.append(_row_label(y, name, bold=overall))
+        for role, offset, shape in (("candidate", -4 if has_baseline else 0, "circle"), ("baseline", 4, "square")):
+            summary = entry.get(role) if isinstance(entry, Mapping) else None
+            stat = summary.get(metric) if isinstance(summary, Mapping) else None
+            if isinstance(stat, Mapping):
+                tip = f"{name}, {role}: {metric.replace('_', ' ')} {_interval(stat)}"
+                body.append(_interval_mark(x, y + offset, stat, COLOURS[role], shape, tip))
+    return _svg(height, title, body)
+
+
+def difference_plot(report: Mapping[str, Any]) -> str:
+    """Paired difference (candidate − baseline failure rate) per scenario, with the margin line."""
+    rows = [(n, e, o) for n, e, o in _scenario_rows(report) if isinstance(e.get("comparison"), Mapping)]
+    margin = _num((report.get("settings") or {}).get("margin")) or 0.0
+    values = [margin, 0.0]
+    for _, entry, _ in rows:
+        diff = entry["comparison"].get("difference") or {}
+        values += [v for v in (_num(diff.get(k)) for k in ("value", "low", "high")) if v is not None]
+    bound = min(1.0, max(0.1, max(abs(v) for v in values) * 1.1))
+    low, high = -bound, bound
+    height = TOP + ROW * len(rows) + BOTTOM
+    x = _x_scale(low, high)[2]
+    title = "Paired difference in failure rate (candidate − baseline)"
+    body = _axis(x, low, high, height, title, signed=True)
+    body.append(f'<line class="zero" x1="{x(0):.1f}" y1="{TOP - 6}" x2="{x(0):.1f}" y2="{height - BOTTOM}"/>')
+    body.append(f'<line class="margin" x1="{x(margin):.1f}" y1="{TOP - 6}" x2="{x(margin):.1f}" '
+                f'y2="{height - BOTTOM}"/><text class="margin-label" x="{x(margin) + 3:.1f}" y="{TOP - 12}">'
+                f'margin {margin:+.2f}</text>')
+    body.append(_legend([(v.lower(), COLOURS[v], "circle") for v in ("PASS", "FAIL", "INCONCLUSIVE")]))
+    for i, (name, entry, overall) in enumerate(rows):
+        y = TOP + ROW * i + ROW / 2
+        comparison = entry["comparison"]
+        verdict = comparison.get("verdict")
+        colour = COLOURS.get(verdict, COLOURS[None])
+        body.append(_row_label(y, name, bold=overall))
+        tip = f"{name}: difference {_interval(comparison.get('difference'))}, {verdict or 'no verdict'}"
+        if comparison.get("reason"):
+            tip += f" ({comparison['reason']})"
+        body.append(_interval_mark(x, y, comparison.get("difference") or {}, colour, "circle", tip))
+    return _svg(height, title, body)
+
+
+def histogram_plot(groups: Mapping[str, Sequence[float]], title: str, bins: Sequence[float],
+                   extra: Optional[Mapping[str, int]] = None, extra_label: str = "") -> str:
+    """Grouped histogram of per-episode values for each policy (``extra``: a last bar of counts)."""
+    roles = list(groups)
+    counts = {role: [0] * (len(bins) - 1) for role in roles}
+    for role in roles:
+        for value in groups[role]:
+            index = next((i for i in range(len(bins) - 1) if value < bins[i + 1]), len(bins) - 2)
+            counts[role][max(0, index) if value >= bins[0] else 0] += 1
+    labels = [_bin_label(bins[i], bins[i + 1]) for i in range(len(bins) - 1)]
+    if extra is not None:
+        labels.append(extra_label)
+        for role in roles:
+            counts[role].append(int(extra.get(role, 0)))
+    top = max([1] + [c for role in roles for c in counts[role]])
+    height, plot_top, plot_bottom, left = 230, 26, 190, 50
+    slot = (WIDTH - left - RIGHT) / len(labels)
+    bar = slot * 0.8 / max(1, len(roles))
+    body = [f'<line class="axis" x1="{left}" y1="{plot_bottom}" x2="{WIDTH - RIGHT}" y2="{plot_bottom}"/>',
+            f'<line class="axis" x1="{left}" y1="{plot_top}" x2="{left}" y2="{plot_bottom}"/>',
+            f'<text class="tick" x="{left - 6}" y="{plot_top + 4}" text-anchor="end">{top}</text>',
+            f'<text class="tick" x="{left - 6}" y="{plot_bottom + 4}" text-anchor="end">0</text>',
+            f'<text class="axis-title" x="{(left + WIDTH - RIGHT) / 2:.1f}" y="{height - 6}">{_e(title)}</text>',
+            _legend([(role, COLOURS.get(role, "#444"), "square") for role in roles])]
+    for i, label in enumerate(labels):
+        x0 = left + slot * i + slot * 0.1
+        body.append(f'<text class="tick" x="{left + slot * (i + 0.5):.1f}" y="{plot_bottom + 14}">{_e(label)}</text>')
+        for j, role in enumerate(roles):
+            count = counts[role][i]
+            h = (plot_bottom - plot_top) * count / top
+            body.append(f'<rect class="mark" x="{x0 + bar * j:.1f}" y="{plot_bottom - h:.1f}" width="{bar:.1f}" '
+                        f'height="{h:.1f}" fill="{COLOURS.get(role, "#444")}"><title>{_e(role)}, {_e(label)}: '
+                        f'{count} episodes</title></rect>')
+    return _svg(height, title, body)
+
+
+def _bin_label(low: float, high: float) -> str:
+    if math.isinf(high):
+        return f"≥{low:g}"
+    return f"{low:.3g}–{high:.3g}"
+
+
+def _scenario_rows(report: Mapping[str, Any]) -> List[Tuple[str, Mapping[str, Any], bool]]:
+    scenarios = report.get("scenarios") or {}
+    rows = [(str(name), entry, False) for name, entry in sorted(scenarios.items()) if isinstance(entry, Mapping)]
+    overall = report.get("overall")
+    if isinstance(overall, Mapping):
+        rows.append(("overall", overall, True))
+    return rows
+
+
+def _episode_values(report: Mapping[str, Any], role: str, key: str) -> List[Optional[float]]:
+    values = []
+    for episode in report.get("episodes") or []:
+        result = episode.get(role) if isinstance(episode, Mapping) else None
+        if isinstance(result, Mapping) and not result.get("error"):
+            values.append(_num(result.get(key)))
+    return values
+
+
+def distribution_plots(report: Mapping[str, Any]) -> List[str]:
+    """Histograms of minimum time-to-collision and episode return per policy."""
+    roles = ["candidate"] + (["baseline"] if report.get("baseline") is not None else [])
+    ttc = {role: _episode_values(report, role, "min_ttc") for role in roles}
+    finite = {role: [v for v in ttc[role] if v is not None] for role in roles}
+    no_conflict = {role: sum(v is None for v in ttc[role]) for role in roles}
+    plots = [histogram_plot(finite, "Minimum time-to-collision per episode [s]",
+                            [0, 1, 2, 3, 4, 5, 6, 8, 10, math.inf], no_conflict, "none")]
+    returns = {role: [v for v in _episode_values(report, role, "episode_return") if v is not None] for role in roles}
+    every = [v for values in returns.values() for v in values]
+    if every:
+        low, high = min(every), max(every)
+        if high - low < 1e-9:
+            low, high = low - 0.5, high + 0.5
+        step = (high - low) / 8
+        bins = [low + i * step for i in range(8)] + [high + 1e-9]
+        plots.append(histogram_plot(returns, "Episode return", bins))
+    return plots
+
+
+# --------------------------------------------------------------------------- page
+CSS = """
+body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",sans-serif;margin:0 auto;max-width:1100px;padding:16px 24px;color:#1f2328}
+h1{font-size:22px;margin:8px 0}h2{font-size:18px;margin:28px 0 8px;border-bottom:1px solid #d0d7de;padding-bottom:4px}
+.banner{padding:14px 18px;border-radius:6px;color:#fff;font-size:18px;margin:12px 0}
+.banner small{display:block;font-size:13px;opacity:.95;margin-top:4px}
+.PASS{background:#1a7f37}.FAIL{background:#cf222e}.INCONCLUSIVE{background:#b07800}.NONE{background:#57606a}
+table{border-collapse:collapse;margin:6px 0;font-size:13px}th,td{border:1px solid #d0d7de;padding:3px 8px;text-align:left;vertical-align:top}
+th{background:#f6f8fa}td.num{text-align:right;font-variant-numeric:tabular-nums}
+.v-PASS{color:#1a7f37;font-weight:600}.v-FAIL{color:#cf222e;font-weight:600}.v-INCONCLUSIVE{color:#b07800;font-weight:600}
+figure{margin:10px 0}figcaption{font-size:12px;color:#57606a}
+svg.plot{display:block;background:#fff}
+svg .axis{stroke:#57606a}svg .grid{stroke:#eaeef2}svg .zero{stroke:#57606a}
+svg .margin{stroke:#cf222e;stroke-dasharray:5 4}svg text{font:11px system-ui,sans-serif;fill:#1f2328}
+svg .tick,svg .axis-title{text-anchor:middle}svg .row-label{text-anchor:end}svg .margin-label{fill:#cf222e}
+.clips{display:flex;flex-wrap:wrap;gap:14px}.clip{border:1px solid #d0d7de;border-radius:6px;padding:8px;width:360px}
+.clip video{width:360px;height:360px;background:#000;display:block}.clip p{margin:6px 0 0;font-size:12px}
+.muted{color:#57606a}code{font-size:12px}
+"""
+
+SELFTEST = """
+(function () {
+  function check() {
+    var body = document.body, plots = document.querySelectorAll("svg.plot"), rendered = 0, marks = 0;
+    plots.forEach(function (svg) {
+      var box = svg.getBoundingClientRect();
+      if (box.width > 0 && box.height > 0) { rendered += 1; }
+      svg.querySelectorAll(".mark").forEach(function (mark) {
+        var b = mark.getBBox(); if (b.width > 0 || b.height > 0) { marks += 1; }
+      });
+    });
+    body.setAttribute("data-plots", String(plots.length));
+    body.setAttribute("data-plots-rendered", String(rendered));
+    body.setAttribute("data-plot-marks", String(marks));
+    var videos = document.querySelectorAll("video");
+    body.setAttribute("data-videos", String(videos.length));
+    if (!videos.length || location.hash !== "#selftest") { return; }
+    var video = videos[0];
+    body.setAttribute("data-video-played", "false");
+    video.addEventListener("error", function () {
+      body.setAttribute("data-video-error", "media error " + (video.error ? video.error.code : "?"));
+    });
+    video.addEventListener("timeupdate", function () {
+      if (video.currentTime <= 0 || video.videoWidth <= 0) { return; }
+      body.setAttribute("data-video-played", "true");
+      body.setAttribute("data-video-size", video.videoWidth + "x" + video.videoHeight);
+      try {
+        var canvas = document.createElement("canvas"); canvas.width = 32; canvas.height = 32;
+        var ctx = canvas.getContext("2d"); ctx.drawImage(video, 0, 0, 32, 32);
+        var px = ctx.getImageData(0, 0, 32, 32).data, lo = 255, hi = 0;
+        for (var i = 0; i < px.length; i += 4) { var g = (px[i] + px[i + 1] + px[i + 2]) / 3; lo = Math.min(lo, g); hi = Math.max(hi, g); }
+        body.setAttribute("data-video-contrast", String(Math.round(hi - lo)));
+      } catch (e) { body.setAttribute("data-video-contrast", "unreadable: " + e.name); }
+    });
+    video.muted = true;
+    var played = video.play();
+    if (played && played.catch) {
+      played.catch(function (e) { body.setAttribute("data-video-error", e.name + ": " + e.message); });
+    }
+  }
+  window.addEventListener("load", check);
+})();
+"""
+
+
+def _banner(report: Mapping[str, Any]) -> str:
+    verdict = report.get("verdict")
+    candidate = (report.get("candidate") or {}).get("spec")
+    baseline = (report.get("baseline") or {}).get("spec") if report.get("baseline") else None
+    css = verdict if verdict in ("PASS", "FAIL", "INCONCLUSIVE") else "NONE"
+    if verdict is None:
+        head = f"No verdict: {_e(candidate)} was run without a baseline"
+    else:
+        head = f"{_e(verdict)}: {_e(candidate)} against {_e(baseline)}"
+    detail = []
+    regressed = report.get("regressed") or []
+    if regressed:
+        detail.append(f"regressed on {len(regressed)} scenario(s): {_e(', '.join(map(str, regressed)))}")
+    comparison = (report.get("overall") or {}).get("comparison")
+    if isinstance(comparison, Mapping) and comparison.get("reason"):
+        detail.append(f"overall: {_e(comparison['reason'])}")
+    if report.get("newly_failing"):
+        detail.append(f"{len(report['newly_failing'])} newly failing episode(s)")
+    if report.get("errors"):
+        detail.append(f"{len(report['errors'])} error(s)")
+    if report.get("stopped_early"):
+        detail.append("stopped early (sequential test)")
+    small = f"<small>{'; '.join(detail)}</small>" if detail else ""
+    return f'<div class="banner {css}" id="verdict">{head}{small}</div>'
+
+
+def _settings_table(report: Mapping[str, Any]) -> str:
+    settings = report.get("settings") or {}
+    bank = report.get("bank") or {}
+    rows = [("candidate", (report.get("candidate") or {}).get("spec")),
+            ("baseline", (report.get("baseline") or {}).get("spec") if report.get("baseline") else "none")]
+    rows += [(key, settings.get(key)) for key in ("episodes", "seed", "margin", "alpha", "sequential", "backend",
+                                                  "workers") if key in settings]
+    rows += [("bank", f"{bank.get('path', '')} (version {bank.get('version', '?')})"),
+             ("created", report.get("created")), ("dv2s version", report.get("dv2s_version"))]
+    return "<table>" + "".join(f"<tr><th>{_e(k)}</th><td>{_e(v)}</td></tr>" for k, v in rows) + "</table>"
+
+
+def _scenario_table(report: Mapping[str, Any]) -> str:
+    has_baseline = report.get("baseline") is not None
+    head = ["scenario", "episodes", "candidate failure rate"]
+    if has_baseline:
+        head += ["baseline failure rate", "both fail / cand. only / base. only / neither", "difference",
+                 "p", "p (Holm)", "verdict", "reason"]
+    out = ["<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in head) + "</tr>"]
+    for name, entry, overall in _scenario_rows(report):
+        candidate = entry.get("candidate") or {}
+        cells = [f"<td>{'<b>' if overall else ''}{_e(name)}{'</b>' if overall else ''}</td>",
+                 f'<td class="num">{_e(candidate.get("episodes", ""))}</td>',
+                 f'<td class="num">{_e(_interval(candidate.get("failure_rate")))}</td>']
+        if has_baseline:
+            baseline = entry.get("baseline") or {}
+            comparison = entry.get("comparison") or {}
+            table = comparison.get("table") or {}
+            counts = " / ".join(str(table.get(k, "–")) for k in ("both_fail", "candidate_only", "baseline_only",
+                                                                  "neither"))
+            verdict = comparison.get("verdict")
+            cells += [f'<td class="num">{_e(_interval(baseline.get("failure_rate")))}</td>',
+                      f'<td class="num">{_e(counts)}</td>',
+                      f'<td class="num">{_e(_interval(comparison.get("difference"), 3))}</td>',
+                      f'<td class="num">{_e(_fmt(comparison.get("p_value"), 4))}</td>',
+                      f'<td class="num">{_e(_fmt(comparison.get("p_adjusted"), 4))}</td>',
+                      f'<td class="v-{_e(verdict)}">{_e(verdict or "–")}</td>',
+                      f"<td>{_e(comparison.get('reason', ''))}</td>"]
+        out.append("<tr>" + "".join(cells) + "</tr>")
+    return "".join(out) + "</table>"
+
+
+def _outcome(result: Any) -> str:
+    if not isinstance(result, Mapping):
+        return "not run"
+    if result.get("error"):
+        return f"error: {result['error']}"
+    parts = []
+    if result.get("collided"):
+        parts.append("collision" + (f" with {', '.join(map(str, result.get('collisions') or []))}"
+                                    if result.get("collisions") else ""))
+    if result.get("off_road"):
+        parts.append("off road")
+    if not parts:
+        parts.append("success" if result.get("success") else "no failure")
+    ttc = _num(result.get("min_ttc"))
+    parts.append(f"min TTC {'none' if ttc is None else f'{ttc:.2f} s'}")
+    parts.append(f"{result.get('steps', '?')} steps")
+    return ", ".join(parts)
+
+
+def _resolve_trace(trace: Any, base: Path) -> Optional[Path]:
+    if not trace:
+        return None
+    path = Path(str(trace))
+    for candidate in ([path] if path.is_absolute() else [base / path, Path.cwd() / path]):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def _video_bytes(source: VideoSource) -> bytes:
+    if isinstance(source, (bytes, bytearray)):
+        return bytes(source)
+    return Path(source).read_bytes()
+
+
+def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, VideoSource]],
+           render_videos: bool, max_videos: int) -> str:
+    newly = [str(i) for i in report.get("newly_failing") or []]
+    if not newly:
+        return '<p class="muted">No episode fails for the candidate that the baseline passes.</p>'
+    episodes = {str(e.get("id")): e for e in report.get("episodes") or [] if isinstance(e, Mapping)}
+    videos = dict(videos or {})
+    out = ['<div class="clips">']
+    with tempfile.TemporaryDirectory(prefix="dv2s-clips-") as scratch:
+        for index, episode_id in enumerate(newly[:max_videos]):
+            episode = episodes.get(episode_id, {})
+            candidate = episode.get("candidate")
+            note, data = "", None
+            try:
+                if episode_id in videos:
+                    data = _video_bytes(videos[episode_id])
+                elif render_videos:
+                    trace = _resolve_trace((candidate or {}).get("trace"), base)
+                    if trace is None:
+                        note = "no trace was recorded for this episode"
+                    else:
+                        data = render_episode_video(trace, Path(scratch) / f"clip{index}.webm").read_bytes()
+                else:
+                    note = "clips were not rendered"
+            except (ClipError, OSError, AssertionError, ValueError) as error:
+                note = f"clip not available: {error}"
+            if data is not None:
+                media = (f'<video controls loop muted playsinline preload="auto" '
+                         f'src="data:video/webm;base64,{base64.b64encode(data).decode("ascii")}"></video>')
+            else:
+                media = f'<p class="muted">{_e(note)}</p>'
+            seed = episode.get("seed", "")
+            out.append(f'<div class="clip" id="clip-{index}">{media}<p><b>{_e(episode_id)}</b> (seed {_e(seed)})<br>'
+                       f"candidate: {_e(_outcome(candidate))}<br>baseline: {_e(_outcome(episode.get('baseline')))}"
+                       f"</p></div>")
+    out.append("</div>")
+    if len(newly) > max_videos:
+        rest = ", ".join(newly[max_videos:])
+        out.append(f'<p class="muted">{len(newly) - max_videos} more not shown as clips: {_e(rest)}</p>')
+    return "".join(out)
+
+
+def _errors(report: Mapping[str, Any]) -> str:
+    errors = report.get("errors") or []
+    if not errors:
+        return '<p class="muted">None.</p>'
+    items = []
+    for error in errors:
+        if isinstance(error, Mapping):
+            label = " ".join(str(error.get(k)) for k in ("role", "id") if error.get(k))
+            items.append(f"<li><b>{_e(label)}</b>: {_e(error.get('error', error))}</li>")
+        else:
+            items.append(f"<li>{_e(error)}</li>")
+    return "<ul>" + "".join(items) + "</ul>"
+
+
+def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".",
+                videos: Optional[Mapping[str, VideoSource]] = None, render_videos: bool = True,
+                max_videos: int = MAX_VIDEOS) -> str:
+    """The report page as a string (see :func:`write_html`); relative trace paths resolve against ``base``."""
+    title = f"dv2s regress: {(report.get('candidate') or {}).get('spec', '?')}"
+    has_baseline = report.get("baseline") is not None
+    plots = [("Failure (collision or off road) rate per scenario, 95% intervals",
+              rate_plot(report, "failure_rate", "Failure rate")),
+             ("Collision rate per scenario, 95% intervals", rate_plot(report, "collision_rate", "Collision rate"))]
+    if has_baseline:
+        plots.append(("Paired difference per scenario with its interval; the dashed line is the non-inferiority "
+                      "margin, colours are the verdicts", difference_plot(report)))
+    captions = ["Minimum time-to-collision over each episode (none: no vehicle ever on a collision course)",
+                "Return of each episode"]
+    for caption, plot in zip(captions, distribution_plots(report)):
+        plots.append((caption, plot))
+    figures = "".join(f"<figure>{svg}<figcaption>{_e(caption)}</figcaption></figure>" for caption, svg in plots)
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        '<meta name="viewport" content="width=device-width, initial-scale=1">',
+        f"<title>{_e(title)}</title><style>{CSS}</style></head><body>",
+        f"<h1>{_e(title)}</h1>",
+        _banner(report),
+        "<h2>Settings</h2>", _settings_table(report),
+        "<h2>Scenarios</h2>", _scenario_table(report),
+        "<h2>Plots</h2>", figures,
+        f"<h2>Newly failing episodes ({len(report.get('newly_failing') or [])})</h2>",
+        _clips(report, Path(base), videos, render_videos, max_videos),
+        "<h2>Errors</h2>", _errors(report),
+        f"<script>{SELFTEST}</script></body></html>",
+    ]
+    return "\n".join(parts)
+
+
+def write_html(report: Mapping[str, Any], path: Union[str, os.PathLike], *,
+               videos: Optional[Mapping[str, VideoSource]] = None, render_videos: bool = True,
+               max_videos: int = MAX_VIDEOS) -> Path:
+    """Write the report as one self-contained HTML file at ``path`` (atomically); returns the path.
+
+    Args:
+        report: a ``dv2s-regress`` report dict.
+        path: the ``.html`` file to write; relative trace paths in the report resolve against its folder.
+        videos: clips to embed, by episode id (``"<scenario>/<seed>"``): a ``.webm`` path or its bytes.
+        render_videos: render the newly failing episodes that ``videos`` lacks from their traces.
+        max_videos: at most this many clips; the other newly failing episodes are listed.
+    """
+    from scenario_bank.atomic import atomic_write_text
+
+    path = Path(path)
+    page = render_html(report, base=path.parent, videos=videos, render_videos=render_videos,
+                       max_videos=max_videos)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return atomic_write_text(path, page)

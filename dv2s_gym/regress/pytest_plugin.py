@@ -1,0 +1,168 @@
+"""pytest plugin: "this policy must not regress on these scenarios" in a user's own test suite.
+
+Installed with dv2s-gym (entry point ``pytest11: dv2s``; or ``-p dv2s_gym.regress.pytest_plugin``).
+A marker runs a regression once for the test and fails it on a FAIL verdict (and on
+INCONCLUSIVE when ``allow_inconclusive=False``)::
+
+    import pytest
+
+    @pytest.mark.dv2s_regression(policy="ppo:models/new.zip", baseline="rule",
+                                 scenarios=["tag:highway"], episodes=20, margin=0.05)
+    def test_new_policy_does_not_regress(dv2s_report):   # the fixture is optional
+        assert dv2s_report["overall"]["candidate"]["collision_rate"]["value"] < 0.2
+
+or, in code, the ``dv2s_regress`` fixture takes the same arguments and returns a
+:class:`~dv2s_gym.regress.assertions.RegressionReport`::
+
+    def test_no_regression(dv2s_regress):
+        report = dv2s_regress(policy="ppo:models/new.zip", baseline="rule", scenarios=["tag:urban"])
+        report.assert_no_regression()          # or: assert report.verdict != "FAIL"
+
+Arguments (both forms): ``policy`` (the candidate spec), ``baseline`` (a spec) or
+``baseline_report`` (an earlier ``report.json``), ``scenarios``, ``episodes``, ``seed``,
+``margin``, ``alpha``, ``sequential``, ``env_config``, ``bank_dir``, ``timeout``; the marker
+also takes ``allow_inconclusive`` (default ``True``: only a significant regression fails).
+The statistics and verdicts are those of ``dv2s regress``.
+
+Options: ``--dv2s-workers N`` (processes per regression; default every core),
+``--dv2s-report-dir DIR`` (reports in ``DIR/<test>/``; default pytest's temporary folder),
+``--dv2s-backend local|ray`` and ``--dv2s-address`` (a Ray cluster).
+"""
+
+from __future__ import annotations
+
+import inspect
+import re
+import shutil
+from pathlib import Path
+from typing import Any, Callable, Dict, Optional, Sequence, Union
+
+import pytest
+
+from dv2s_gym.regress.assertions import RegressionFailed, RegressionReport
+
+__all__ = ["RegressionReport", "RegressionFailed", "MARKER"]
+
+MARKER = "dv2s_regression"
+_REPORT = pytest.StashKey[RegressionReport]()
+_ALLOW = pytest.StashKey[bool]()
+
+
+def regression_arguments(policy: str, baseline: Optional[str] = None, *, baseline_report: Optional[str] = None,
+                         scenarios: Union[str, Sequence[str], None] = None, episodes: int = 20, seed: int = 0,
+                         margin: float = 0.02, alpha: float = 0.05, sequential: bool = False,
+                         env_config: Optional[Dict[str, Any]] = None, bank_dir: Optional[str] = None,
+                         timeout: Optional[float] = None) -> Dict[str, Any]:
+    """The keyword arguments of :func:`~dv2s_gym.regress.runner.run_regression` for one check."""
+    if baseline is None and baseline_report is None:
+        raise pytest.UsageError(f"{MARKER}: give baseline= (a policy spec) or baseline_report= (a report.json) "
+                                f"to compare {policy!r} against")
+    if isinstance(scenarios, str):
+        scenarios = [scenarios]
+    return dict(candidate=policy, baseline=baseline, baseline_report=baseline_report,
+                scenarios=None if scenarios is None else list(scenarios), episodes=episodes, seed=seed,
+                margin=margin, alpha=alpha, sequential=sequential, env_config=env_config, bank_dir=bank_dir,
+                timeout=timeout)
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    group = parser.getgroup("dv2s", "dv2s-gym policy regression tests")
+    group.addoption("--dv2s-workers", type=int, default=None, metavar="N",
+                    help="worker processes per regression (default: every core)")
+    group.addoption("--dv2s-report-dir", default=None, metavar="DIR",
+                    help="write each test's regression report to DIR/<test>/ (default: pytest's temporary folder)")
+    group.addoption("--dv2s-backend", choices=["local", "ray"], default="local",
+                    help="where regression episodes run (default: local processes)")
+    group.addoption("--dv2s-address", default=None, metavar="HOST:PORT",
+                    help="with --dv2s-backend ray: the Ray cluster's address")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.addinivalue_line(
+        "markers",
+        f"{MARKER}(policy, baseline=None, *, baseline_report=None, scenarios=None, episodes=20, seed=0, "
+        "margin=0.02, alpha=0.05, sequential=False, env_config=None, bank_dir=None, timeout=None, "
+        "allow_inconclusive=True): run a dv2s regression of policy against baseline for this test and fail "
+        "it on a FAIL verdict (and on INCONCLUSIVE unless allowed)")
+
+
+def _folder_name(nodeid: str) -> str:
+    name = re.sub(r"[^A-Za-z0-9_.-]+", "_", nodeid).strip("_.")
+    return name[-120:] or "test"
+
+
+def _out_dir(request: pytest.FixtureRequest, factory: pytest.TempPathFactory, suffix: str = "") -> Path:
+    name = _folder_name(request.node.nodeid) + suffix
+    root = request.config.getoption("--dv2s-report-dir")
+    if root is None:
+        return factory.mktemp(f"dv2s-{name[-40:]}", numbered=True)
+    out = Path(root) / name
+    if out.exists():
+        shutil.rmtree(out)  # a fresh run: a policy file may have changed under the same spec
+    out.mkdir(parents=True)
+    return out
+
+
+def _run(request: pytest.FixtureRequest, out: Path, arguments: Dict[str, Any]) -> RegressionReport:
+    from dv2s_gym.regress.runner import run_regression
+
+    config = request.config
+    data = run_regression(**arguments, out_dir=out, workers=config.getoption("--dv2s-workers"),
+                          backend=config.getoption("--dv2s-backend"), address=config.getoption("--dv2s-address"),
+                          progress=False)
+    return RegressionReport(data, out)
+
+
+@pytest.fixture(autouse=True)
+def _dv2s_regression_marker(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Run the regression of a test marked ``dv2s_regression`` before it (its verdict is checked in the call)."""
+    marker = request.node.get_closest_marker(MARKER)
+    if marker is None:
+        return
+    kwargs = dict(marker.kwargs)
+    allow = bool(kwargs.pop("allow_inconclusive", True))
+    try:
+        inspect.signature(regression_arguments).bind(*marker.args, **kwargs)
+    except TypeError as error:
+        raise pytest.UsageError(f"@pytest.mark.{MARKER} on {request.node.nodeid}: {error}") from None
+    arguments = regression_arguments(*marker.args, **kwargs)
+    request.node.stash[_REPORT] = _run(request, _out_dir(request, tmp_path_factory), arguments)
+    request.node.stash[_ALLOW] = allow
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_call(item: pytest.Item) -> None:
+    """Fail a marked test whose regression verdict is not acceptable, before its body runs."""
+    report = item.stash.get(_REPORT, None)
+    if report is None:
+        return
+    message = report.failure_message(item.stash.get(_ALLOW, True))
+    if message is not None:
+        pytest.fail(message, pytrace=False)
+
+
+@pytest.fixture
+def dv2s_report(request: pytest.FixtureRequest, _dv2s_regression_marker: None) -> RegressionReport:
+    """The report of this test's ``@pytest.mark.dv2s_regression`` run."""
+    report = request.node.stash.get(_REPORT, None)
+    if report is None:
+        raise pytest.UsageError(f"the dv2s_report fixture needs @pytest.mark.{MARKER}(...) on {request.node.nodeid}; "
+                                "for a regression in code use the dv2s_regress fixture")
+    return report
+
+
+@pytest.fixture
+def dv2s_regress(request: pytest.FixtureRequest,
+                 tmp_path_factory: pytest.TempPathFactory) -> Callable[..., RegressionReport]:
+    """``dv2s_regress(policy=..., baseline=..., scenarios=..., episodes=..., margin=...)`` runs a
+    regression and returns its :class:`RegressionReport` (``.verdict``, ``.regressed``,
+    ``.assert_no_regression()``); each call gets its own report folder."""
+    calls = [0]
+
+    def run(*args: Any, **kwargs: Any) -> RegressionReport:
+        arguments = regression_arguments(*args, **kwargs)
+        calls[0] += 1
+        out = _out_dir(request, tmp_path_factory, suffix="" if calls[0] == 1 else f"-{calls[0]}")
+        return _run(request, out, arguments)
+
+    return run

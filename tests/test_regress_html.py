@@ -1,0 +1,175 @@
+"""The HTML regression report: one self-contained file, escaped, and checked in a real headless
+Chromium (it loads, the SVG plots have boxes, the first clip decodes and plays; a corrupt clip does
+not). Chromium comes from the system packages: scripts/setup.sh installs it; without it these tests
+fail and say how to install it."""
+
+from __future__ import annotations
+
+import copy
+import json
+import re
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import pytest
+
+from dv2s_gym.regress.clips import ClipError, render_episode_video
+from dv2s_gym.regress.html import write_html
+
+from regress_report_data import make_report
+
+INSTALL_HINT = ("Chromium is needed for the HTML report's browser test: run scripts/setup.sh as root, or "
+                "`sudo apt-get update && sudo apt-get install -y --no-install-recommends chromium`")
+
+
+def _chromium() -> str:
+    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
+        found = shutil.which(name)
+        if found:
+            return found
+    pytest.fail(INSTALL_HINT, pytrace=False)
+
+
+def _body_attributes(page: Path, fragment: str = "#selftest") -> dict:
+    """Load ``page`` in headless Chromium, let it run 8 s of virtual time, and read <body>'s data- attributes."""
+    with tempfile.TemporaryDirectory(prefix="dv2s-chromium-") as profile:
+        out = subprocess.run(
+            [_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", f"--user-data-dir={profile}",
+             "--autoplay-policy=no-user-gesture-required", "--virtual-time-budget=8000", "--dump-dom",
+             page.resolve().as_uri() + fragment],
+            capture_output=True, text=True, timeout=180)
+    match = re.search(r"<body([^>]*)>", out.stdout)
+    assert match, f"Chromium dumped no page (exit {out.returncode}): {out.stderr[-2000:]}"
+    return dict(re.findall(r'(data-[\w-]+)="([^"]*)"', match.group(1)))
+
+
+@pytest.fixture(scope="module")
+def report_dir(tmp_path_factory) -> Path:
+    """A real report: rule?action_noise=0.3 against rule on two scenarios x 4 seeds, traces on disk."""
+    out = tmp_path_factory.mktemp("report")
+    report = make_report(out)
+    (out / "report.json").write_text(json.dumps(report))
+    return out
+
+
+@pytest.fixture()
+def report(report_dir) -> dict:
+    return json.loads((report_dir / "report.json").read_text())
+
+
+def test_the_page_is_one_file_with_no_external_resource(report_dir, report, tmp_path):
+    page = write_html(report, report_dir / "report.html").read_text()
+    assert page.startswith("<!DOCTYPE html>")
+    assert not re.search(r"<(link|iframe|img|object|embed)\b", page)
+    assert not re.search(r"""\b(src|href)\s*=\s*["'](?!data:|#)""", page), "a resource loaded from outside the page"
+    assert "url(" not in page and "@import" not in page
+    assert page.count('<svg class="plot"') == 5  # two rate plots, the differences, two distributions
+    assert page.count("<video ") == len(report["newly_failing"]) > 0
+    assert page.count('src="data:video/webm;base64,') == len(report["newly_failing"])
+    for scenario in report["scenarios"]:
+        assert scenario in page
+
+
+def test_a_report_without_baseline_has_no_difference_plot(report, tmp_path):
+    report = copy.deepcopy(report)
+    report.update(baseline=None, verdict=None, regressed=[], newly_failing=[])
+    for episode in report["episodes"]:
+        episode["baseline"] = None
+    for entry in [*report["scenarios"].values(), report["overall"]]:
+        entry.update(baseline=None, comparison=None)
+    page = write_html(report, tmp_path / "r.html").read_text()
+    assert page.count('<svg class="plot"') == 4
+    assert "No verdict" in page and "<video" not in page
+
+
+def test_strings_from_the_report_are_escaped(report, tmp_path):
+    hostile = '<script>alert("x")</script>&<img src=x onerror=alert(1)>'
+    report = copy.deepcopy(report)
+    name = next(iter(report["scenarios"]))
+    report["scenarios"][hostile] = report["scenarios"].pop(name)
+    report["scenarios"][hostile]["comparison"]["reason"] = hostile
+    report["candidate"]["spec"] = hostile
+    report["regressed"] = [hostile]
+    report["errors"] = [{"id": hostile, "role": "candidate", "error": hostile}]
+    page = write_html(report, tmp_path / "r.html", render_videos=False).read_text()
+    assert "<script>alert" not in page
+    assert "<img" not in page
+    assert "&lt;script&gt;alert(&quot;x&quot;)&lt;/script&gt;&amp;&lt;img src=x onerror=alert(1)&gt;" in page
+    assert page.count("<script>") == 1  # only the page's own self-check
+
+
+def test_chromium_loads_the_page_renders_the_plots_and_plays_a_clip(report_dir, report):
+    page = write_html(report, report_dir / "report.html")
+    attributes = _body_attributes(page)
+    assert attributes.get("data-plots") == "5", attributes
+    assert attributes.get("data-plots-rendered") == "5", attributes  # every SVG has a non-empty box
+    assert int(attributes.get("data-plot-marks", 0)) >= 10, attributes  # points, intervals and bars drawn
+    assert attributes.get("data-videos") == str(len(report["newly_failing"]))
+    assert attributes.get("data-video-played") == "true", attributes  # currentTime advanced past 0
+    assert attributes.get("data-video-size") == "360x360", attributes
+    assert int(attributes.get("data-video-contrast", "0")) >= 10, attributes  # a decoded picture, not a blank
+
+
+def test_chromium_reports_a_corrupt_clip_as_not_played(report, tmp_path):
+    first = report["newly_failing"][0]
+    corrupt = b"\x1a\x45\xdf\xa3" + bytes(range(256)) * 40  # an EBML magic number, then garbage
+    page = write_html(report, tmp_path / "r.html", videos={first: corrupt}, render_videos=False, max_videos=1)
+    attributes = _body_attributes(page)
+    assert attributes.get("data-plots-rendered") == "5", attributes
+    assert attributes.get("data-video-played") == "false", attributes
+    assert attributes.get("data-video-error"), attributes
+
+
+def test_given_clips_are_embedded_as_they_are(report, tmp_path):
+    clip = tmp_path / "given.webm"
+    clip.write_bytes(b"not really a video, embedded as given")
+    first = report["newly_failing"][0]
+    page = write_html(report, tmp_path / "r.html", videos={first: clip}, render_videos=False).read_text()
+    assert page.count("<video ") == 1
+    assert "bm90IHJlYWxseSBhIHZpZGVv" in page  # base64 of the bytes
+    assert "clips were not rendered" in page
+
+
+def test_a_missing_trace_is_noted_instead_of_a_clip(report, tmp_path):
+    report = copy.deepcopy(report)
+    for episode in report["episodes"]:
+        episode["candidate"]["trace"] = None
+    page = write_html(report, tmp_path / "r.html").read_text()
+    assert "<video" not in page and "no trace was recorded" in page
+
+
+def test_clips_are_capped(report, tmp_path):
+    page = write_html(report, tmp_path / "r.html", render_videos=False, max_videos=1).read_text()
+    more = len(report["newly_failing"]) - 1
+    assert f"{more} more not shown as clips" in page
+
+
+def test_render_episode_video_writes_the_last_seconds_of_the_replayed_episode(report_dir, report, tmp_path):
+    import cv2
+
+    episode = next(e for e in report["episodes"] if e["id"] == report["newly_failing"][0])
+    steps = episode["candidate"]["steps"]
+    out = render_episode_video(report_dir / episode["candidate"]["trace"], tmp_path / "clip.webm", seconds=2.0,
+                               size=160)
+    capture = cv2.VideoCapture(str(out))
+    frames = []
+    while True:
+        ok, frame = capture.read()
+        if not ok:
+            break
+        frames.append(frame)
+    capture.release()
+    assert len(frames) == min(steps + 1, 10)  # 2 s at the policy frequency (5 Hz), reset frame included
+    assert frames[0].shape == (160, 160, 3)
+    assert frames[-1].std() > 5  # a picture of the road, not a blank
+
+
+def test_render_episode_video_errors_name_the_trace(tmp_path):
+    with pytest.raises(ClipError, match="does not exist"):
+        render_episode_video(tmp_path / "missing.json.gz", tmp_path / "x.webm")
+    broken = tmp_path / "broken.json.gz"
+    broken.write_bytes(b"\x1f\x8bnot gzip")
+    with pytest.raises(ClipError, match="broken.json.gz"):
+        render_episode_video(broken, tmp_path / "x.webm")

@@ -1,0 +1,158 @@
+"""``--backend ray``: the test starts a local Ray head (``ray start --head --block`` in its own
+process group, loopback only, 2 CPUs, no dashboard), the backend connects to it by address, the
+episodes equal the local backend's (same trajectory hashes), traces come back to the driver, a
+crashed or hung actor is retried once then reported, and an address where nothing listens fails
+at once with the fix. The head is stopped by terminating the `ray start` process this module
+started (not `ray stop`, which would stop every Ray instance on the machine)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import pytest
+
+import ray  # the ray extra (scripts/setup.sh installs it): pip install -e '.[ray]'
+
+from dv2s_gym.regress.errors import RegressError
+from dv2s_gym.regress.ray_backend import RayBackend, RayUnavailableError
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = ["highway_cut_in_from_left", "urban_pedestrian_crossing"]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _ray_executable() -> str:
+    found = Path(sys.executable).with_name("ray")
+    return str(found) if found.exists() else shutil.which("ray") or "ray"
+
+
+@pytest.fixture(scope="module")
+def ray_address():
+    """A Ray head on 127.0.0.1 for this module; stopped (its process group killed) at the end."""
+    port = _free_port()
+    temp = tempfile.mkdtemp(prefix="ray", dir="/tmp")  # short: Ray's socket paths must fit 107 bytes
+    env = dict(os.environ, RAY_DISABLE_USAGE_STATS="1", OMP_NUM_THREADS="1",
+               PYTHONPATH=os.pathsep.join([str(ROOT), str(ROOT / "tests"), os.environ.get("PYTHONPATH", "")]))
+    command = [_ray_executable(), "start", "--head", "--block", "--node-ip-address=127.0.0.1", f"--port={port}",
+               "--num-cpus=2", "--include-dashboard=false", "--disable-usage-stats",
+               "--object-store-memory=100000000", f"--temp-dir={temp}",
+               f"--ray-client-server-port={_free_port()}", f"--dashboard-agent-listen-port={_free_port()}",
+               f"--dashboard-agent-grpc-port={_free_port()}", f"--metrics-export-port={_free_port()}",
+               f"--runtime-env-agent-port={_free_port()}"]
+    head = subprocess.Popen(command, env=env, cwd=temp, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    address = f"127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                break
+            except OSError:
+                if head.poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError(f"ray start failed: {head.stderr.read().decode()[-2000:]}")
+                time.sleep(0.5)
+        yield address
+    finally:
+        if ray.is_initialized():
+            ray.shutdown()
+        head.terminate()  # `ray start --block` drains and stops the processes it started
+        try:
+            head.wait(60)
+        except subprocess.TimeoutExpired:
+            pass
+        try:
+            os.killpg(head.pid, signal.SIGKILL)  # anything of this cluster still there (its own process group)
+        except ProcessLookupError:
+            pass
+        head.wait(10)
+        shutil.rmtree(temp, ignore_errors=True)
+
+
+def _task(policy: str, scenario: str, seed: int, trace_dir=None, role: str = "candidate") -> dict:
+    return {"policy": policy, "role": role, "scenario": scenario, "seed": seed, "env_config": {"duration": 8},
+            "bank_dir": None, "trace_dir": None if trace_dir is None else str(trace_dir)}
+
+
+def test_an_address_where_nothing_listens_fails_at_once_with_the_fix():
+    port = _free_port()
+    started = time.monotonic()
+    with pytest.raises(RayUnavailableError) as error:
+        RayBackend(address=f"127.0.0.1:{port}", connect_timeout=2)
+    message = str(error.value)
+    assert f"127.0.0.1:{port}" in message and "ray start --head" in message
+    assert "\n" not in message
+    assert isinstance(error.value, RegressError)
+    assert time.monotonic() - started < 60  # not Ray's own minutes of retrying
+    with pytest.raises(RayUnavailableError, match="is not HOST:PORT"):
+        RayBackend(address="no-port-here")
+
+
+@pytest.mark.slow
+def test_a_crashed_or_hung_actor_is_retried_once_then_reported(ray_address):
+    """An actor that dies (os._exit on the first action) or hangs (no result within the timeout) is
+    replaced and its task run once more; the second failure becomes an error result, and the backend
+    goes on with the next task."""
+    got = []
+    with RayBackend(address=ray_address, workers=1, timeout=300) as backend:
+        backend.run([_task("regress_misbehaving_policies:crash", SCENARIOS[0], 0)], got.append)
+        backend.timeout = 4
+        backend.run([_task("regress_misbehaving_policies:hang?at=load", SCENARIOS[0], 1)], got.append)
+    crashed, hung = got
+    assert crashed["id"] == f"{SCENARIOS[0]}/0" and hung["id"] == f"{SCENARIOS[0]}/1"
+    assert "died" in crashed["error"] and "2 attempts" in crashed["error"], crashed
+    assert "hung (no result after 4 s)" in hung["error"] and "2 attempts" in hung["error"], hung
+    assert crashed["role"] == hung["role"] == "candidate"
+
+
+def test_the_command_names_an_unreachable_address_and_how_to_start_a_cluster(tmp_path):
+    port = _free_port()
+    out = subprocess.run([sys.executable, "-m", "dv2s_gym.cli", "regress", "--policy", "rule", "--baseline", "idm",
+                          "--scenario", SCENARIOS[0], "--episodes", "2", "--backend", "ray",
+                          "--address", f"127.0.0.1:{port}", "--out", str(tmp_path / "out")],
+                         capture_output=True, text=True, timeout=300, cwd=ROOT,
+                         env=dict(os.environ, PYTHONPATH=str(ROOT), RAY_DISABLE_USAGE_STATS="1"))
+    assert out.returncode == 2, out.stderr
+    last = out.stderr.strip().splitlines()[-1]
+    assert last.startswith("dv2s: error: Ray is not reachable at 127.0.0.1:") and "ray start --head" in last, out.stderr
+
+
+@pytest.mark.slow
+def test_run_regression_on_the_cluster_equals_the_local_run(ray_address, tmp_path):
+    """`run_regression(..., backend="ray", address=...)`: the same episodes, verdicts and trajectory
+    hashes as the local process pool."""
+    from dv2s_gym.regress.runner import run_regression
+
+    common = dict(baseline="rule", scenarios=SCENARIOS, episodes=3, seed=0, env_config={"duration": 8},
+                  workers=2, progress=False)
+    on_ray = run_regression("rule?action_noise=0.5", backend="ray", address=ray_address,
+                            out_dir=tmp_path / "ray", **common)
+    local = run_regression("rule?action_noise=0.5", backend="local", out_dir=tmp_path / "local", **common)
+    assert on_ray["settings"]["backend"] == "ray" and not on_ray["errors"]
+    assert not ray.is_initialized()  # the backend disconnected when the run ended
+
+    def hashes(report):
+        return {(e["id"], role): e[role]["trajectory_hash"] for e in report["episodes"] for role in ("candidate", "baseline")}
+
+    assert hashes(on_ray) == hashes(local) and len(hashes(local)) == 12
+    assert on_ray["verdict"] == local["verdict"] and on_ray["newly_failing"] == local["newly_failing"]
+    assert on_ray["scenarios"] == local["scenarios"]
+    for episode in on_ray["episodes"]:  # traces of failed episodes came back into the run's folder
+        trace = episode["candidate"]["trace"]
+        assert bool(trace) == episode["candidate"]["failed"]
+        if trace:
+            assert (tmp_path / "ray" / trace).read_bytes() == (tmp_path / "local" / trace).read_bytes()
+    assert on_ray["newly_failing"], "no failed episode: the trace transfer went untested"
