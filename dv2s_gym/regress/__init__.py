@@ -4,14 +4,27 @@
 process pool or Ray), streams results to disk (resumable), and writes a versioned JSON
 report, JUnit XML and Markdown with a PASS / FAIL / INCONCLUSIVE verdict per scenario
 and overall; :mod:`dv2s_gym.regress.stats` holds the statistics.
+
+The names below are re-exported lazily, so a worker process that imports
+:mod:`dv2s_gym.regress.worker` does not load the statistics and reporting modules.
 """
 
-from dv2s_gym.regress.backends import Backend, LocalBackend, get_backend
-from dv2s_gym.regress.errors import RegressError, ReportMismatchError, ResumeMismatchError
-from dv2s_gym.regress.report import EXIT_CODES, SCHEMA, SCHEMA_VERSION, exit_code, load_report, write_reports
-from dv2s_gym.regress.runner import run_regression
-from dv2s_gym.regress.worker import run_task
+from importlib import import_module
+from typing import Any
 
-__all__ = ["Backend", "EXIT_CODES", "LocalBackend", "RegressError", "ReportMismatchError", "ResumeMismatchError",
-           "SCHEMA", "SCHEMA_VERSION", "exit_code", "get_backend", "load_report", "run_regression", "run_task",
-           "write_reports"]
+_EXPORTS = {
+    "Backend": "backends", "LocalBackend": "backends", "get_backend": "backends",
+    "RegressError": "errors", "ReportMismatchError": "errors", "ResumeMismatchError": "errors",
+    "EXIT_CODES": "report", "SCHEMA": "report", "SCHEMA_VERSION": "report", "exit_code": "report",
+    "load_report": "report", "write_reports": "report",
+    "run_regression": "runner",
+    "run_task": "worker",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        return getattr(import_module(f"dv2s_gym.regress.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module 'dv2s_gym.regress' has no attribute {name!r}")

@@ -233,16 +233,8 @@ class LocalBackend(Backend):
         self._ensure(min(self.workers, len(tasks)))
         try:
             while remaining:
-                for worker in self._pool:
-                    if worker.ready and worker.busy is None and queue:
-                        index = queue.pop_for(worker.seen, [w.seen for w in self._pool if w is not worker])
-                        worker.seen.add(queue.group(index))
-                        attempts[index] = attempts.get(index, 0) + 1
-                        worker.busy = (index, time.monotonic())
-                        try:
-                            worker.connection.send((index, tasks[index]))
-                        except OSError:  # the worker just died: its sentinel reports it below
-                            pass
+                finished: List[Dict[str, Any]] = []
+                self._dispatch(queue, tasks, attempts)
                 deadlines = [w.busy[1] + self.timeout for w in self._pool if w.busy is not None]
                 wait_for = max(0.0, min(deadlines) - time.monotonic()) if deadlines else None
                 ready = wait([x for w in self._pool for x in (w.connection, w.process.sentinel)], timeout=wait_for)
@@ -260,7 +252,7 @@ class LocalBackend(Backend):
                             _, result = message
                             worker.busy = None
                             remaining -= 1
-                            on_result(result)
+                            finished.append(result)
                             continue
                     elif worker.process.sentinel in ready:
                         problem = "crashed"
@@ -290,12 +282,30 @@ class LocalBackend(Backend):
                     else:
                         remaining -= 1
                         task = tasks[index]
-                        on_result(error_result(task, f"{'; then '.join(failures[index])} running {task['role']} "
-                                                     f"{task['policy']!r} on {task['scenario']} seed {task['seed']}"
-                                                     f" ({attempts[index]} attempts)"))
+                        finished.append(error_result(task, f"{'; then '.join(failures[index])} running {task['role']} "
+                                                           f"{task['policy']!r} on {task['scenario']} seed "
+                                                           f"{task['seed']} ({attempts[index]} attempts)"))
+                # idle workers get their next task before the results are handled (saved, reported),
+                # so they do not wait for that
+                self._dispatch(queue, tasks, attempts)
+                for result in finished:
+                    on_result(result)
         except BaseException:
             self.close()  # an interrupted run leaves no worker behind
             raise
+
+    def _dispatch(self, queue: "_ScenarioQueue", tasks: List[Dict[str, Any]], attempts: Dict[int, int]) -> None:
+        """Send a task to every started, idle worker while tasks are left."""
+        for worker in self._pool:
+            if worker.ready and worker.busy is None and queue:
+                index = queue.pop_for(worker.seen, [w.seen for w in self._pool if w is not worker])
+                worker.seen.add(queue.group(index))
+                attempts[index] = attempts.get(index, 0) + 1
+                worker.busy = (index, time.monotonic())
+                try:
+                    worker.connection.send((index, tasks[index]))
+                except OSError:  # the worker just died: its sentinel reports it on the next wait
+                    pass
 
     def close(self) -> None:
         pool, self._pool = self._pool, []

@@ -182,7 +182,7 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
     if sequential and baseline is None and baseline_report is None:
         raise RegressError("--sequential stops when the comparison is settled: it needs --baseline or "
                            "--baseline-report")
-    bank_dir = None if bank_dir is None else str(bank_dir)
+    bank_dir = None if bank_dir is None else str(Path(bank_dir).resolve())  # workers may run elsewhere
     fallback = None
     if baseline_report is not None:
         old = load_report(baseline_report)
