@@ -178,12 +178,12 @@ def test_a_worker_that_crashes_or_hangs_is_retried_once_then_reported(tmp_path):
     log = tmp_path / "attempts.log"
     spec = f"regress_helpers:FaultyPolicy?crash_seed=0&hang_seed=1&log={log}"
     report = run_regression(spec, scenarios=["highway_lead_vehicle_brakes"], episodes=3, workers=2,
-                            out_dir=tmp_path / "out", env_config={"duration": 2}, timeout=8, progress=False)
+                            out_dir=tmp_path / "out", env_config={"duration": 2}, timeout=20, progress=False)
     assert sorted(log.read_text().split()) == ["0", "0", "1", "1"]  # each tried twice
     errors = {e["id"]: e for e in report["errors"]}
     assert set(errors) == {"highway_lead_vehicle_brakes/0", "highway_lead_vehicle_brakes/1"}
     assert "crashed (exit code 3)" in errors["highway_lead_vehicle_brakes/0"]["error"]
-    assert "hung (no result after 8 s)" in errors["highway_lead_vehicle_brakes/1"]["error"]
+    assert "hung (no result after 20 s)" in errors["highway_lead_vehicle_brakes/1"]["error"]
     assert all(e["role"] == "candidate" and "2 attempts" in e["error"] for e in errors.values())
     episodes = {e["id"]: e for e in report["episodes"]}
     assert len(episodes) == 3 and not episodes["highway_lead_vehicle_brakes/2"]["candidate"].get("error")
