@@ -307,6 +307,15 @@ def _rate_cell(r: Mapping[str, Any]) -> str:
     return f"{r['k']}/{r['n']} = {r['rate']:.2f} [{r['lo']:.2f}, {r['hi']:.2f}]"
 
 
+def _policy_order(evaluation: Dict[str, Any]) -> List[str]:
+    """The candidate first, then the baselines in the order they were evaluated (JSON may sort keys)."""
+    labels = list(evaluation["policies"])
+    candidate = evaluation.get("candidate")
+    baselines = [label for label in evaluation.get("baselines", labels) if label in labels and label != candidate]
+    rest = [label for label in labels if label != candidate and label not in baselines]
+    return ([candidate] if candidate in labels else []) + baselines + rest
+
+
 def render_markdown(card: Mapping[str, Any]) -> str:
     """A human-readable rendering of a card (the ``README.md`` beside it)."""
     training = card.get("training", {})
@@ -337,12 +346,13 @@ def render_markdown(card: Mapping[str, Any]) -> str:
             f" (never used in training). Rates with Wilson {confidence:.0%} intervals.", "",
             "| policy | collision | success | off-road | failure |", "|---|---|---|---|---|",
         ]
-        for label, data in evaluation["policies"].items():
+        for label in _policy_order(evaluation):
+            data = evaluation["policies"][label]
             o = data["overall"]
             lines.append(f"| {label} | {_rate_cell(o['collision'])} | {_rate_cell(o['success'])} | "
                          f"{_rate_cell(o['off_road'])} | {_rate_cell(o['failure'])} |")
         lines += ["", "### Summary", ""] + [f"- {s}" for s in evaluation.get("summary", [])]
-        labels = list(evaluation["policies"])
+        labels = _policy_order(evaluation)
         lines += ["", "### Per scenario (collision rate)", "",
                   "| scenario | " + " | ".join(labels) + " |", "|---" * (len(labels) + 1) + "|"]
         for name in evaluation["scenarios"]:
