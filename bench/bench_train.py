@@ -4,7 +4,7 @@
     python -m bench.bench_train --quick    # 2 rounds of 512 steps
 
 Settings, all PPO with ``dv2s train``'s default hyperparameters
-(:data:`policies.training.DEFAULT_HYPERPARAMETERS`: MlpPolicy [128, 128], n_steps 256 per env,
+(:data:`policies.training.DEFAULT_HYPERPARAMETERS`: MlpPolicy [128, 128], n_steps 512 per env,
 batch 64, 10 epochs), on the CPU with one torch thread, envs in ``SubprocVecEnv`` workers:
 
 * ``dv2s x1`` - DV2S-v0 over the whole bank (uniform scenarios), 1 subprocess env

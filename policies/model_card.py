@@ -280,9 +280,9 @@ def write_card(directory: Union[str, os.PathLike], card: Mapping[str, Any]) -> P
     from scenario_bank.atomic import atomic_write_json, atomic_write_text
 
     directory = Path(directory)
-    data = {"card_version": CARD_VERSION, **dict(card)}
-    path = atomic_write_json(directory / CARD_NAME, json.loads(json.dumps(data, default=str)), indent=1)
-    atomic_write_text(directory / README_NAME, render_markdown(data))
+    data = json.loads(json.dumps({"card_version": CARD_VERSION, **dict(card)}, default=str, sort_keys=True))
+    path = atomic_write_json(directory / CARD_NAME, data, indent=1)
+    atomic_write_text(directory / README_NAME, render_markdown(data))  # the same text read_card + render gives
     return path
 
 
@@ -307,15 +307,6 @@ def _rate_cell(r: Mapping[str, Any]) -> str:
     return f"{r['k']}/{r['n']} = {r['rate']:.2f} [{r['lo']:.2f}, {r['hi']:.2f}]"
 
 
-def _policy_order(evaluation: Dict[str, Any]) -> List[str]:
-    """The candidate first, then the baselines in the order they were evaluated (JSON may sort keys)."""
-    labels = list(evaluation["policies"])
-    candidate = evaluation.get("candidate")
-    baselines = [label for label in evaluation.get("baselines", labels) if label in labels and label != candidate]
-    rest = [label for label in labels if label != candidate and label not in baselines]
-    return ([candidate] if candidate in labels else []) + baselines + rest
-
-
 def render_markdown(card: Mapping[str, Any]) -> str:
     """A human-readable rendering of a card (the ``README.md`` beside it)."""
     training = card.get("training", {})
@@ -325,7 +316,7 @@ def render_markdown(card: Mapping[str, Any]) -> str:
     lines += [
         "Written by `dv2s train` from `model_card.json` (the data; this file is its rendering).", "",
         "## Training", "",
-        f"- command: `{training.get('command', '')}`",
+        f"- command: `{training.get('command', '')}` (its `--out` folder then holds model.zip and this card)",
         f"- steps: {training.get('steps')} ({training.get('n_envs')} subprocess envs), seed {training.get('seed')}",
         f"- wall time: {training.get('wall_time_s', 0):.0f} s ({training.get('steps_per_s', 0):.0f} env steps/s)",
         f"- scenario sampling: {card.get('sampler', {}).get('mode')}",
@@ -346,13 +337,12 @@ def render_markdown(card: Mapping[str, Any]) -> str:
             f" (never used in training). Rates with Wilson {confidence:.0%} intervals.", "",
             "| policy | collision | success | off-road | failure |", "|---|---|---|---|---|",
         ]
-        for label in _policy_order(evaluation):
-            data = evaluation["policies"][label]
-            o = data["overall"]
+        labels = [evaluation["candidate"]] + sorted(set(evaluation["policies"]) - {evaluation["candidate"]})
+        for label in labels:
+            o = evaluation["policies"][label]["overall"]
             lines.append(f"| {label} | {_rate_cell(o['collision'])} | {_rate_cell(o['success'])} | "
                          f"{_rate_cell(o['off_road'])} | {_rate_cell(o['failure'])} |")
         lines += ["", "### Summary", ""] + [f"- {s}" for s in evaluation.get("summary", [])]
-        labels = _policy_order(evaluation)
         lines += ["", "### Per scenario (collision rate)", "",
                   "| scenario | " + " | ".join(labels) + " |", "|---" * (len(labels) + 1) + "|"]
         for name in evaluation["scenarios"]:

@@ -87,9 +87,12 @@ def test_ppo_collides_significantly_less_than_keep_lane_per_the_card():
 
 @pytest.mark.slow
 def test_rerunning_the_card_evaluation_reproduces_it_within_its_intervals():
+    """PPO and keep-lane on every card episode (the rule-based driver's figures are checked for
+    consistency above; re-running it too would add minutes). Episodes are deterministic, so the
+    rates match exactly; the assertion is the issue's: inside the card's intervals."""
     episodes = list(iter_card_episodes(CARD))
     measured = {}
-    for label in (CANDIDATE, "keep_lane", "rule"):
+    for label in (CANDIDATE, "keep_lane"):
         spec = "dv2s-ppo" if label == CANDIDATE else label
         config = CARD["env_config"] if label == CANDIDATE else {k: v for k, v in CARD["env_config"].items()
                                                                  if k != "action"}

@@ -303,3 +303,19 @@ def test_card_summary_says_where_the_policy_is_worse():
     text = " ".join(section["summary"])
     assert "On collision rate the ppo does NOT beat (it is significantly worse than) rule" in text
     assert "collides more often than rule on 1 scenario(s): a (8/10 collisions against 0/10)" in text
+
+
+def test_the_same_settings_train_the_same_model(tmp_path):
+    """What makes a card reproducible from its command: same seed, same settings, same weights
+    (two subprocess envs, as `dv2s train` runs them)."""
+    import torch
+
+    weights = []
+    for run_name in ("first", "second"):
+        config = TrainConfig(out=str(tmp_path / run_name), scenarios=SCENARIOS, steps=128, n_envs=2, seed=3,
+                             sampler="curriculum", curriculum_update=32, hyperparameters={"n_steps": 64},
+                             eval_freq=0, card_seeds=0, checkpoint_freq=0, progress_bar=False)
+        train(config, log=lambda line: None)
+        weights.append(load_policy(tmp_path / run_name / "model.zip").model.policy.state_dict())
+    assert weights[0].keys() == weights[1].keys()
+    assert all(torch.equal(weights[0][key], weights[1][key]) for key in weights[0])
