@@ -146,7 +146,8 @@ def _cmd_regress(args: argparse.Namespace) -> int:
         print(json.dumps(report, indent=1))
     else:
         print(format_summary(report))
-        print(f"reports: {', '.join(str(Path(out) / f) for f in ('report.json', 'junit.xml', 'report.md'))}")
+        names = ("report.json", "junit.xml", "report.md", "report.html")
+        print(f"reports: {', '.join(str(Path(out) / f) for f in names if (Path(out) / f).is_file())}")
     return exit_code(report["verdict"])
 
 
