@@ -6,7 +6,7 @@ import textwrap
 
 import pytest
 
-from dv2s_gym.cli import main
+from cli_helpers import run
 
 SCRIPT = textwrap.dedent(
     """\
@@ -23,12 +23,6 @@ SCRIPT = textwrap.dedent(
         with behavior FollowLaneBehavior(target_speed=15)
     """
 )
-
-
-def run(capsys, *argv):
-    code = main(list(argv))
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 @pytest.fixture

@@ -12,24 +12,11 @@ import pytest
 
 from llm_server import closed_port_url
 
-from dv2s_gym.cli import main
+from cli_helpers import one_line_error, run
 from scenario_bank.bank import BANK_DIR
 
 EVALSET = Path(__file__).resolve().parents[1] / "dv2s_gym" / "evalset"
 VIDEO = sorted(EVALSET.glob("*.webm"))[0]
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
-def one_line_error(err: str) -> str:
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    assert lines[0].startswith("dv2s: error: ") and "Traceback" not in err
-    return lines[0]
 
 
 @pytest.fixture

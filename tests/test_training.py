@@ -11,7 +11,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from dv2s_gym.cli import main
+from cli_helpers import one_line_error, run
 from policies.model_card import bank_version, read_card
 from policies.registry import SB3Policy, load_policy
 from policies.training import (
@@ -29,18 +29,6 @@ from policies.training import (
 SCENARIOS = ["highway_lead_vehicle_brakes", "urban_pedestrian_crossing"]
 TINY = ["--hp", "n_steps=64", "--eval-freq", "128", "--eval-seeds", "1", "--card-seeds", "1", "--baselines",
         "keep_lane", "--eval-jobs", "1", "--checkpoint-freq", "128", "--no-progress"]
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
-
-
-def one_line_error(err: str) -> str:
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("dv2s: error: ") and "Traceback" not in err, err
-    return lines[0]
 
 
 # --------------------------------------------------------------------------- sampler
