@@ -16,6 +16,7 @@ regression report (:mod:`dv2s_gym.report_page`); every string from the report is
 
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence, Tuple, Union
@@ -40,7 +41,7 @@ EXTRA_CSS = """
 border-left:4px solid #0b63c5;background:#f6f8fa;white-space:pre-wrap}
 pre{background:#f6f8fa;padding:8px;overflow:auto;max-height:420px;font-size:12px}
 .s-kept{color:#1a7f37;font-weight:600}.s-merged{color:#8250df;font-weight:600}.s-rejected{color:#cf222e;font-weight:600}
-svg .line{fill:none;stroke-width:2}
+svg .line{fill:none;stroke-width:2}.wide{overflow-x:auto;max-width:100%}
 """
 
 
@@ -66,7 +67,8 @@ def sampler_plot(report: Mapping[str, Any]) -> str:
     samplers = report.get("samplers") or {}
     highs = [finite((s.get(key) or {}).get("high")) for s in samplers.values()
              for key in ("failures_per_100", "avoidable_failures_per_100")]
-    top = min(100.0, max([10.0] + [h * 1.1 for h in highs if h is not None]))
+    widest = max([10.0] + [h * 1.05 for h in highs if h is not None])
+    top = min(100.0, 20.0 * math.ceil(widest / 20.0))  # quarter ticks at whole numbers
     rows = []
     for name, s in samplers.items():
         every, avoidable = s.get("failures_per_100") or {}, s.get("avoidable_failures_per_100") or {}
@@ -150,18 +152,18 @@ def _banner(report: Mapping[str, Any]) -> str:
 
 def _table(head: Sequence[str], rows: Sequence[Sequence[Tuple[str, bool]]]) -> str:
     """A table; each cell is ``(escaped html, numeric)``."""
-    out = ["<table><tr>" + "".join(f"<th>{escape(h)}</th>" for h in head) + "</tr>"]
+    out = ['<div class="wide"><table><tr>' + "".join(f"<th>{escape(h)}</th>" for h in head) + "</tr>"]
     for row in rows:
         out.append("<tr>" + "".join(f'<td class="num">{cell}</td>' if numeric else f"<td>{cell}</td>"
                                     for cell, numeric in row) + "</tr>")
-    return "".join(out) + "</table>"
+    return "".join(out) + "</table></div>"
 
 
 def _settings_table(report: Mapping[str, Any]) -> str:
     settings = report.get("settings") or {}
     keys = [k for k in ("policy", "sampler", "seed", "budget", "scenarios", "bank_dir", "reference", "backend",
                         "workers", "convert") if k in settings]
-    rows = [(k, settings[k]) for k in keys]
+    rows = [(k, ", ".join(map(str, settings[k])) if isinstance(settings[k], list) else settings[k]) for k in keys]
     rows += [("run folder", report.get("run_dir")), ("created", report.get("created")),
              ("dv2s version", report.get("dv2s_version"))]
     return "<table>" + "".join(f"<tr><th>{escape(k)}</th><td>{escape(v)}</td></tr>" for k, v in rows) + "</table>"

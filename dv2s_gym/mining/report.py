@@ -8,10 +8,10 @@ self-contained ``report.html`` (:mod:`dv2s_gym.mining.html`). Nothing here impor
 or highway-env, so a report is rebuilt in well under a second from any run folder, also
 from one whose run was killed (a truncated last line of a ``.jsonl`` file is left out).
 
-JSON schema ``dv2s-mine``, version 1 (:data:`SCHEMA_VERSION`; a change to any key bumps it)::
+JSON schema ``dv2s-mine-report``, version 1 (:data:`SCHEMA_VERSION`; a change to any key bumps it)::
 
     {
-      "schema": "dv2s-mine", "schema_version": 1, "created": ISO-8601 (UTC), "dv2s_version",
+      "schema": "dv2s-mine-report", "schema_version": 1, "created": ISO-8601 (UTC), "dv2s_version",
       "run_dir": the run folder, "settings": settings.json as written by the miner,
       "counts": {
         "episodes": finished episodes without an error, "errors": episodes that ended in an error,
@@ -46,7 +46,7 @@ so its interval is a guide, not an exact guarantee.
 "failure_rate": {"value", "low", "high", "count"} (Wilson 95 %), "failures_by_type",
 "clusters", "avoidable_clusters", "converted", "kept"}``.
 
-``Cluster``: ``{"id", "scenario", "type", "region", "size", "avoidable", "unavoidable",
+``Cluster``: ``{"id", "scenario", "type", "kind", "region", "size", "avoidable", "unavoidable",
 "unknown", "samplers": {name: n}, "first_index", "params": {name: {"min", "max"} |
 {"values"}}`` (the parameter region its failures cover), ``"collision_types", "with_kinds",
 "representative": Failure, "video": path relative to the run folder | null, "status":
@@ -55,7 +55,8 @@ so its interval is a guide, not an exact guarantee.
 "script", "conversion": the conversion record | null}``. A conversion belongs to the cluster
 of its representative episode (``index``); its own ``cluster`` id is kept in the record.
 
-``Failure``: ``{"index", "sampler", "scenario", "seed", "params", "type", "time", "with",
+``Failure``: ``{"index", "sampler", "scenario", "seed", "params", "type", "kind" (the type refined by the
+collision type, e.g. ``collision:rear_end``), "time", "with",
 "with_kind", "collision_type", "min_ttc", "rho", "avoidable", "reference", "cluster",
 "trace"}``; replay one exactly with ``dv2s replay RUN/TRACE``.
 """
@@ -72,7 +73,7 @@ from pathlib import Path
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.regress.stats import wilson_interval
-from envs.errors import DV2SError
+from dv2s_gym.mining.errors import MiningError
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 
 __all__ = [
@@ -80,7 +81,7 @@ __all__ = [
     "build_report", "build_report_from_records", "format_summary", "markdown", "write_reports",
 ]
 
-SCHEMA = "dv2s-mine"
+SCHEMA = "dv2s-mine-report"
 SCHEMA_VERSION = 1
 CONFIDENCE = 0.95
 FAILURE_ORDER = ("collision", "off_road", "low_ttc", "stall")
@@ -91,7 +92,7 @@ NOT_CONVERTED = "not converted"
 PathLike = Union[str, os.PathLike]
 
 
-class MiningReportError(DV2SError, ValueError):
+class MiningReportError(MiningError):
     """A run folder that cannot be reported on (missing, not a mining run, unreadable records)."""
 
 
@@ -246,6 +247,7 @@ def _failure_entry(record: Mapping[str, Any], cluster: Optional[str], settings: 
         "seed": record.get("seed"),
         "params": dict(record.get("params") or {}),
         "type": str(failure.get("type")),
+        "kind": str(failure.get("kind") or failure.get("type")),
         "time": failure.get("time"),
         "with": failure.get("with"),
         "with_kind": failure.get("with_kind"),
@@ -260,19 +262,20 @@ def _failure_entry(record: Mapping[str, Any], cluster: Optional[str], settings: 
 
 
 def _representative(members: Sequence[Dict[str, Any]], conversion: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
-    """The converted episode, else an avoidable one before others, the most violated (lowest rho), the first."""
+    """The converted episode, else the one the miner would convert: among failures not known to be
+    unavoidable (all, when every one is), the most violated (lowest rho), then the first."""
     if conversion is not None:
         for member in members:
             if member["index"] == conversion.get("index"):
                 return member
-    rank = {True: 0, None: 1, False: 2}
+    pool = [m for m in members if m.get("avoidable") is not False] or list(members)
 
-    def key(member: Mapping[str, Any]) -> Tuple[int, float, int]:
+    def key(member: Mapping[str, Any]) -> Tuple[float, int]:
         rho = member.get("rho")
         rho = float(rho) if isinstance(rho, (int, float)) and math.isfinite(float(rho)) else 0.0
-        return rank.get(member.get("avoidable"), 1), rho, member["index"]
+        return rho, member["index"]
 
-    return min(members, key=key)
+    return min(pool, key=key)
 
 
 def _cluster_of(records: Sequence[Dict[str, Any]]) -> Dict[int, str]:
@@ -345,6 +348,7 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
             "id": cluster_id,
             "scenario": representative["scenario"],
             "type": representative["type"],
+            "kind": parts[1] if len(parts) == 3 else representative["kind"],
             "region": parts[2] if len(parts) == 3 else cluster_id,
             "size": len(members),
             "avoidable": sum(m["avoidable"] is True for m in members),
