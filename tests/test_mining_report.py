@@ -104,7 +104,8 @@ def make_run(out: Path, *, clips: bool = True) -> Path:
     (out / "settings.json").write_text(json.dumps({
         "schema": "dv2s-mine", "version": 1, "policy": POLICY, "sampler": "cross-entropy", "seed": 7, "batch": 4,
         "scenarios": ["A", "B", "C"], "bank_dir": None, "env_config": {}, "reference": "rule",
-        "ttc_threshold": 1.0, "stall_seconds": 3.0, "budget": 20}))
+        "ttc_threshold": 1.0, "stall_seconds": 3.0, "budget": 20,
+        "space": {name: {"ego_speed": {"kind": "continuous", "low": 20.0, "high": 35.0}} for name in "ABC"}}))
     lines = [json.dumps(_record(i, *row)) for i, row in enumerate(EPISODES)]
     lines[2] = lines[2].replace('"rho": 1.0', '"rho": NaN')  # a non-finite number must not reach report.json
     (out / "episodes.jsonl").write_text("\n".join(lines) + '\n{"index": 20, "sampler": "cross-ent')
@@ -198,6 +199,8 @@ def test_clusters_carry_their_conversion(report):
         "A", "collision", "collision:rear_end", "r0", 4, 4)
     assert a["samplers"] == {"cross-entropy": 3, "random": 1}
     assert a["params"]["ego_speed"]["min"] == pytest.approx(20.75) and a["params"]["ego_speed"]["max"] == pytest.approx(24.5)
+    assert a["cell"] == {"ego_speed": {"low": 20.0, "high": 25.0}}  # the first third of 20..35
+    assert clusters[B_STALL]["cell"] == {"ego_speed": {"low": 30.0, "high": 35.0}}
     assert a["collision_types"] == {"rear_end": 4} and a["with_kinds"] == {"car": 4}
     assert a["representative"]["index"] == 0 and a["representative"]["seed"] == 1000
     assert (a["status"], a["bank_entry"], a["reproduction_rate"], a["e2e_sc"]) == ("kept", "mined_a_rear_end", 0.6, 0.712)
@@ -313,6 +316,7 @@ def test_the_page_embeds_videos_descriptions_and_scripts(run_dir, report, tmp_pa
     assert page.count('src="data:video/webm;base64,') == 2  # the kept and the merged cluster's clips
     assert "is missing from the run folder" in page  # the rejected stall cluster's clip was never written
     assert "The ego drives in the right lane; a car ahead brakes hard and the ego &lt;hits&gt; it from behind." in page
+    assert "its grid cell: ego_speed 20.000–25.000" in page
     assert "<details><summary>Generated Scenic script" in page and "FollowLaneBehavior()" in page
     assert "compile: unknown name &#x27;Lanee&#x27; (line 3)" in page
     kept, rejected = page.index('id="card-' + A_COLLISION), page.index('id="card-' + B_STALL)
@@ -392,3 +396,29 @@ def test_chromium_reports_a_corrupt_failure_video_as_not_played(tmp_path):
     assert attributes.get("data-plots-rendered") == "3", attributes
     assert attributes.get("data-video-played") == "false", attributes
     assert attributes.get("data-video-error"), attributes
+
+
+def test_the_report_of_a_real_mining_run_matches_its_records(tmp_path):
+    """``mine`` writes the three reports at its end; their numbers are those of its episodes.jsonl."""
+    from dv2s_gym.mining.cluster import cluster_failures
+    from dv2s_gym.mining.miner import mine, read_records
+
+    out = tmp_path / "mine"
+    run = mine("rule?action_noise=0.5", out=out, budget=8, sampler="random", workers=1, progress=False,
+               scenarios=["highway_lead_vehicle_brakes"])
+    assert set(run.reports) == {"json", "markdown", "html"}
+    report = json.loads((out / "report.json").read_text())
+    records = read_records(out / "episodes.jsonl")
+    failed = [r for r in records if r["failure"] and not r["error"]]
+    clusters = cluster_failures(records)
+    assert report["counts"]["episodes"] == sum(not r["error"] for r in records) == 8 - report["counts"]["errors"]
+    assert report["counts"]["failures"] == len(failed)
+    assert report["counts"]["avoidable"] == sum(r["avoidable"] is True for r in failed)
+    assert report["counts"]["clusters"] == len(set(clusters.values()))
+    entry = report["samplers"]["random"]["failures_per_100"]
+    assert (entry["count"], entry["n"]) == (len(failed), report["counts"]["episodes"])
+    page = (out / "report.html").read_text()
+    for cluster in set(clusters.values()):
+        assert cluster in page
+    for name, params in report["scenarios"].items():
+        assert name == "highway_lead_vehicle_brakes" and params["failures"] == len(failed)

@@ -226,6 +226,12 @@ def _region(params: Mapping[str, Any]) -> str:
     return "; ".join(parts) or "–"
 
 
+def _cell_text(cell: Mapping[str, Any]) -> str:
+    parts = [f"{name} {fmt(bounds.get('low'), 3)}–{fmt(bounds.get('high'), 3)}" for name, bounds in cell.items()
+             if isinstance(bounds, Mapping)]
+    return "; ".join(parts) or "–"
+
+
 def _reproduction(cluster: Mapping[str, Any]) -> str:
     reproduction = cluster.get("reproduction")
     if not isinstance(reproduction, Mapping) or finite(reproduction.get("rate")) is None:
@@ -313,7 +319,8 @@ def _cards(clusters: Sequence[Mapping[str, Any]], videos: _Videos, base: Path) -
                  f"representative: episode #{escape(rep.get('index'))}, seed {escape(rep.get('seed'))}"
                  + (f", {escape(rep.get('collision_type'))}" if rep.get("collision_type") else "")
                  + (f" with {escape(rep.get('with'))}" if rep.get("with") else ""),
-                 f"parameter region: {escape(_region(c.get('params') or {}))}",
+                 f"parameters of its failures: {escape(_region(c.get('params') or {}))}",
+                 f"its grid cell: {escape(_cell_text(c.get('cell') or {}))}",
                  f"conversion: {_status(c)}" + (f", bank entry <code>{escape(c['bank_entry'])}</code>"
                                                 if c.get("bank_entry") else ""),
                  f"reproduction: {escape(_reproduction(c))}; E2E-SC {escape(fmt(c.get('e2e_sc'), 3))}"]

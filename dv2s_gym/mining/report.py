@@ -48,7 +48,8 @@ so its interval is a guide, not an exact guarantee.
 
 ``Cluster``: ``{"id", "scenario", "type", "kind", "region", "size", "avoidable", "unavoidable",
 "unknown", "samplers": {name: n}, "first_index", "params": {name: {"min", "max"} |
-{"values"}}`` (the parameter region its failures cover), ``"collision_types", "with_kinds",
+{"values"}}`` (the parameter region its failures cover), ``"cell": {name: {"low", "high"}}``
+(the bounds of its grid cell for the continuous parameters, from ``settings["space"]``), ``"collision_types", "with_kinds",
 "representative": Failure, "video": path relative to the run folder | null, "status":
 "kept" | "merged" | "rejected" | "not converted", "reason", "bank_entry", "merged_into",
 "reproduction": the conversion's record | null, "reproduction_rate", "e2e_sc", "description",
@@ -238,6 +239,31 @@ def _param_region(members: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
     return region
 
 
+def _grid_cell(region: str, ranges: Any) -> Dict[str, Dict[str, float]]:
+    """The bounds of a cluster's grid cell (``"r2.0.1"``) in parameter units, for its continuous parameters.
+
+    ``ranges`` is the scenario's entry of ``settings["space"]`` (``{name: {"kind", "low", "high"}}``,
+    sorted by name, one cell index per parameter); anything else gives ``{}``.
+    """
+    from dv2s_gym.mining.cluster import REGION_BINS
+
+    if not isinstance(ranges, Mapping) or not region.startswith("r"):
+        return {}
+    try:
+        cells = [int(c) for c in region[1:].split(".")] if len(region) > 1 else []
+    except ValueError:
+        return {}
+    if len(cells) != len(ranges):
+        return {}
+    bounds: Dict[str, Dict[str, float]] = {}
+    for (name, spec), cell in zip(sorted(ranges.items()), cells):
+        if isinstance(spec, Mapping) and spec.get("kind") == "continuous":
+            low, high = float(spec["low"]), float(spec["high"])
+            step = (high - low) / REGION_BINS
+            bounds[str(name)] = {"low": low + cell * step, "high": low + (cell + 1) * step}
+    return bounds
+
+
 def _failure_entry(record: Mapping[str, Any], cluster: Optional[str], settings: Mapping[str, Any]) -> Dict[str, Any]:
     failure = record.get("failure") or {}
     return {
@@ -357,6 +383,8 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
             "samplers": dict(sorted(Counter(m["sampler"] for m in members).items())),
             "first_index": min(m["index"] for m in members),
             "params": _param_region(members),
+            "cell": _grid_cell(parts[2] if len(parts) == 3 else "", (settings.get("space") or {}).get(
+                representative["scenario"])),
             "collision_types": dict(sorted(Counter(str(m["collision_type"]) for m in members
                                                    if m["collision_type"]).items())),
             "with_kinds": dict(sorted(Counter(str(m["with_kind"]) for m in members if m["with_kind"]).items())),
