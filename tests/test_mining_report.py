@@ -114,13 +114,15 @@ def make_run(out: Path, *, clips: bool = True) -> Path:
         {"cluster": A_COLLISION, "index": 0, "status": "kept", "reason": None, "video": f"{a_dir}/failure.webm",
          "description": DESCRIPTION, "script": f"{a_dir}/conversion/scenario.scenic",
          "reproduction": {"k": 10, "reproduced": 6, "rate": 0.6, "interval": [0.31, 0.83], "threshold": 0.3},
-         "e2e_sc": 0.712, "bank_entry": "mined_a_rear_end", "merged_into": None, "seconds": 2.5},
+         "e2e_sc": 0.712, "bank_entry": "mined_a_rear_end", "merged_into": None, "seconds": 2.5,
+         "timings": {"video": 0.75, "describe": 0.25, "generate": 0.25, "check": 0.5, "reproduction": 0.5}},
         {"cluster": B_COLLISION, "index": 4, "status": "rejected",
          "reason": "reproduction: reproduced 1 of 10 (0.10 < threshold 0.30)", "video": None,
          "description": "A car cuts in.", "script": None,
          "reproduction": {"k": 10, "reproduced": 1, "rate": 0.1, "interval": [0.02, 0.4], "threshold": 0.3},
          "e2e_sc": 0.4, "bank_entry": None, "merged_into": None, "seconds": 4.5},
-        {"cluster": B_STALL, "index": 8, "status": "rejected", "reason": "compile: unknown name 'Lanee' (line 3)",
+        {"cluster": B_STALL, "index": 8, "status": "rejected", "reason": "check: compile failed: unknown name 'Lanee'",
+         "stage": "check", "timings": {"video": 0.5, "describe": 0.25, "generate": 0.25, "check": 0.5},
          "video": "failures/B__stall__r2/failure.webm", "description": None, "script": None, "reproduction": None,
          "e2e_sc": None, "bank_entry": None, "merged_into": None, "seconds": 1.5},
         {"cluster": A_TTC, "index": 6, "status": "merged", "reason": None, "video": f"{merged_dir}/failure.webm",
@@ -157,7 +159,9 @@ def test_counts(report):
     assert (counts["avoidable"], counts["unavoidable"], counts["avoidability_unknown"]) == (6, 3, 1)
     assert counts["clusters"] == 5 and counts["avoidable_clusters"] == 3 and counts["unavoidable_clusters"] == 1
     assert (counts["converted"], counts["kept"], counts["merged"], counts["rejected"]) == (4, 1, 1, 2)
-    assert counts["rejected_by_stage"] == {"compile": 1, "reproduction": 1}
+    assert counts["rejected_by_stage"] == {"check": 1, "reproduction": 1}  # the record's stage, else the reason's
+    assert counts["conversion_stage_seconds"] == {"video": 0.625, "describe": 0.25, "generate": 0.25, "check": 0.5,
+                                                  "reproduction": 0.5}
     assert counts["conversion_seconds"] == {"n": 4, "median": 2.75, "max": 4.5, "total": 11.5}
 
 
@@ -207,7 +211,7 @@ def test_clusters_carry_their_conversion(report):
     assert a["video"].endswith("failure.webm") and a["description"] == DESCRIPTION
     assert clusters[A_TTC]["status"] == "merged" and clusters[A_TTC]["merged_into"] == "mined_a_rear_end"
     assert clusters[A_TTC]["unknown"] == 1
-    assert clusters[B_STALL]["status"] == "rejected" and clusters[B_STALL]["reason"].startswith("compile:")
+    assert clusters[B_STALL]["status"] == "rejected" and clusters[B_STALL]["reason"].startswith("check: compile")
     [off_road] = report["unavoidable_clusters"]
     assert (off_road["id"], off_road["size"], off_road["unavoidable"], off_road["status"]) == (
         B_OFF_ROAD, 3, 3, "not converted")
@@ -221,7 +225,7 @@ def test_failures_and_unavoidable_are_listed_apart(report):
     assert report["errors"] == [{"index": 7, "sampler": "cross-entropy", "scenario": "B", "seed": 1007,
                                  "error": "worker crashed (exit code -9); restarted"}]
     assert {(r["cluster"], r["stage"]) for r in report["rejected"]} == {(B_COLLISION, "reproduction"),
-                                                                        (B_STALL, "compile")}
+                                                                        (B_STALL, "check")}
 
 
 def test_report_json_is_strict_schema_json(run_dir, tmp_path):
@@ -250,9 +254,10 @@ def test_markdown_has_the_tables(report):
     assert "| `A` | 11 | 5 | 45.5% [" in text
     assert f"| `{A_COLLISION}` | `A` | collision | 4 | 4 |" in text
     assert "ego_speed 20.8..24.5" in text and "mined_a_rear_end" in text and "0.60 (6/10) [0.31, 0.83]" in text
-    assert f"| `{B_STALL}` | 8 | compile | compile: unknown name 'Lanee' (line 3) |" in text
+    assert f"| `{B_STALL}` | 8 | check | check: compile failed: unknown name 'Lanee' |" in text
     assert "### Unavoidable failures (3)" in text and f"| `{B_OFF_ROAD}` | `B` | off_road | 3 | 0 |" in text
-    assert "By stage: compile 1, reproduction 1" in text
+    assert "By stage: check 1, reproduction 1" in text
+    assert "median per stage: video 0.62 s" in text
     assert "worker crashed (exit code -9)" in text
     assert DESCRIPTION.replace("|", "\\|") in text
     summary = format_summary(report)
@@ -318,7 +323,7 @@ def test_the_page_embeds_videos_descriptions_and_scripts(run_dir, report, tmp_pa
     assert "The ego drives in the right lane; a car ahead brakes hard and the ego &lt;hits&gt; it from behind." in page
     assert "its grid cell: ego_speed 20.000–25.000" in page
     assert "<details><summary>Generated Scenic script" in page and "FollowLaneBehavior()" in page
-    assert "compile: unknown name &#x27;Lanee&#x27; (line 3)" in page
+    assert "check: compile failed: unknown name &#x27;Lanee&#x27;" in page
     kept, rejected = page.index('id="card-' + A_COLLISION), page.index('id="card-' + B_STALL)
     assert kept < rejected  # kept before rejected
     unavoidable = page.index("<h2>Unavoidable failures (3)</h2>")

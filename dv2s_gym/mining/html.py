@@ -182,8 +182,10 @@ def _counts_table(report: Mapping[str, Any]) -> str:
     if by_type:
         notes.append("Failures by type: " + ", ".join(f"{escape(t)} {escape(n)}" for t, n in by_type.items()))
     if seconds.get("n"):
+        stages = c.get("conversion_stage_seconds") or {}
         notes.append(f"Conversion time: median {fmt(seconds.get('median'))} s, max {fmt(seconds.get('max'))} s over "
-                     f"{escape(seconds['n'])} conversion(s)")
+                     f"{escape(seconds['n'])} conversion(s)" + ("; median per stage: " + ", ".join(
+                         f"{escape(stage)} {fmt(value)} s" for stage, value in stages.items()) if stages else ""))
     return table + "".join(f"<p>{n}.</p>" for n in notes)
 
 
@@ -326,6 +328,9 @@ def _cards(clusters: Sequence[Mapping[str, Any]], videos: _Videos, base: Path) -
                  f"reproduction: {escape(_reproduction(c))}; E2E-SC {escape(fmt(c.get('e2e_sc'), 3))}"]
         if c.get("reason"):
             facts.append(f"reason: {escape(c['reason'])}")
+        merge_reason = (c.get("conversion") or {}).get("merge_reason")
+        if merge_reason:
+            facts.append(f"merged because: {escape(merge_reason)}")
         description = c.get("description")
         text = (f"<blockquote>{escape(description)}</blockquote>" if description
                 else '<p class="muted">No description was generated.</p>')

@@ -22,7 +22,8 @@ JSON schema ``dv2s-mine-report``, version 1 (:data:`SCHEMA_VERSION`; a change to
         "unavoidable_clusters": clusters whose failures are all unavoidable,
         "converted": conversion records (one per converted cluster representative),
         "kept", "merged", "rejected": by conversion status, "rejected_by_stage": {stage: n},
-        "conversion_seconds": {"n", "median", "max", "total"}},
+        "conversion_seconds": {"n", "median", "max", "total"},
+        "conversion_stage_seconds": {stage: median seconds} (from the conversions' ``timings``)},
       "samplers": {name: Sampler},
       "scenarios": {name: Scenario},
       "clusters": [Cluster]               clusters with at least one failure not known to be unavoidable,
@@ -213,7 +214,7 @@ def _avoidability(value: Any) -> str:
 
 
 def _stage(reason: Any) -> str:
-    """The stage a rejection reason names (``"stage: message"``), or ``"unknown"``."""
+    """The stage a rejection reason names (``"stage: message"``), or ``"unknown"`` (for records without ``stage``)."""
     text = str(reason or "").strip()
     if ":" in text:
         stage = text.split(":", 1)[0].strip()
@@ -406,10 +407,15 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
 
     # counts
     statuses = Counter(str(c.get("status")) for c in conversions)
-    rejected = [{"cluster": c.get("cluster"), "index": c.get("index"), "stage": _stage(c.get("reason")),
+    rejected = [{"cluster": c.get("cluster"), "index": c.get("index"), "stage": c.get("stage") or _stage(c.get("reason")),
                  "reason": c.get("reason")} for c in conversions if c.get("status") == "rejected"]
     seconds = [float(c["seconds"]) for c in conversions
                if isinstance(c.get("seconds"), (int, float)) and math.isfinite(float(c["seconds"]))]
+    stage_seconds: Dict[str, List[float]] = {}
+    for conversion in conversions:
+        for stage, value in (conversion.get("timings") or {}).items():
+            if isinstance(value, (int, float)) and math.isfinite(float(value)):
+                stage_seconds.setdefault(str(stage), []).append(float(value))
     counts = {
         "episodes": len(ok),
         "errors": len(errors),
@@ -428,6 +434,7 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
         "rejected_by_stage": dict(sorted(Counter(r["stage"] for r in rejected).items())),
         "conversion_seconds": {"n": len(seconds), "median": statistics.median(seconds) if seconds else None,
                                "max": max(seconds) if seconds else None, "total": sum(seconds)},
+        "conversion_stage_seconds": {stage: statistics.median(values) for stage, values in stage_seconds.items()},
     }
 
     # per sampler
@@ -629,8 +636,10 @@ def markdown(report: Mapping[str, Any]) -> str:
         lines += ["Failures by type: " + ", ".join(f"{t} {n}" for t, n in counts["failures_by_type"].items()), ""]
     seconds = counts["conversion_seconds"]
     if seconds["n"]:
+        stages = counts.get("conversion_stage_seconds") or {}
         lines += [f"Conversion time: median {seconds['median']:.2f} s, max {seconds['max']:.2f} s over "
-                  f"{seconds['n']} conversion(s).", ""]
+                  f"{seconds['n']} conversion(s)" + ("; median per stage: " + ", ".join(
+                      f"{stage} {value:.2f} s" for stage, value in stages.items()) if stages else "") + ".", ""]
     lines += ["### Per sampler", "",
               "Failures per 100 episodes with Wilson 95% intervals (an adaptive sampler's episodes are not "
               "independent, so the interval is a guide).", "",
