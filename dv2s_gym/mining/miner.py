@@ -71,6 +71,27 @@ class MineRun:
         """Distinct failure clusters."""
         return len(set(self.clusters.values()))
 
+    def summary(self) -> str:
+        """A few lines for the terminal: episodes, failures, clusters, conversions."""
+        from collections import Counter
+
+        errors = sum(1 for r in self.records if r.get("error"))
+        failures = self.failures
+        kinds = Counter(r["failure"]["kind"] for r in failures)
+        avoidable_clusters = {self.clusters[int(r["index"])] for r in self.avoidable}
+        status = Counter(c.get("status") for c in self.conversions)
+        lines = [
+            f"{len(self.records)} episodes of {self.settings['policy']} ({self.settings['sampler']} sampler), "
+            f"{errors} errors, {self.seconds:.0f} s",
+            f"{len(failures)} failures ({', '.join(f'{k} {n}' for k, n in kinds.most_common()) or 'none'}); "
+            f"{len(self.avoidable)} avoidable by {self.settings['reference'] or 'no reference'}",
+            f"{self.distinct_clusters} distinct clusters, {len(avoidable_clusters)} with avoidable failures",
+        ]
+        if self.conversions:
+            lines.append(f"converted {len(self.conversions)}: kept {status.get('kept', 0)}, merged "
+                         f"{status.get('merged', 0)}, rejected {status.get('rejected', 0)}")
+        return "\n".join(lines)
+
 
 def episode_seed(seed: int, index: int) -> int:
     """The env seed of episode ``index`` of a run seeded ``seed`` (distinct per index, below 2**31)."""
