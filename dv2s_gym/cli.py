@@ -755,8 +755,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--reference", default="rule",
                    help="driver deciding avoidability (default rule; 'none' skips the check)")
     p.add_argument("--ttc-threshold", type=float, default=1.0, help="low-TTC failure threshold [s] (default 1)")
-    p.add_argument("--stall-seconds", type=float, default=3.0,
-                   help="seconds standing with a free path that count as a stall (default 3)")
+    p.add_argument("--stall-seconds", type=float, default=5.0,
+                   help="seconds standing with nothing in the lane 40 m ahead that count as a stall (default 5)")
     p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
     p.add_argument("--address", default=None, help="with --backend ray: the cluster address")

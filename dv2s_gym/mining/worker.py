@@ -59,7 +59,7 @@ def run_mine_task(task: Dict[str, Any]) -> Dict[str, Any]:
         "reference": None, "avoidable": None, "trace": None, "error": None,
     }
     monitor = {"ttc_threshold": float(task.get("ttc_threshold", 1.0)),
-               "stall_seconds": float(task.get("stall_seconds", 3.0))}
+               "stall_seconds": float(task.get("stall_seconds", 5.0))}
     try:
         result, trace = _episode(task, task["policy"])
         failure = detect_failure(result, trace, **monitor)
