@@ -168,7 +168,8 @@ def _cmd_mine(args: argparse.Namespace) -> int:
                    seed=args.seed, reference=None if args.reference == "none" else args.reference,
                    batch=args.batch, timeout=args.timeout, progress=not args.no_progress, env_config=env_config,
                    ttc_threshold=args.ttc_threshold, stall_seconds=args.stall_seconds,
-                   convert=not args.no_convert, convert_options=convert_options)
+                   convert=not args.no_convert, convert_options=convert_options,
+                   max_conversions=args.max_conversions)
     except KeyboardInterrupt:
         print(f"dv2s: finished episodes are saved in {out / 'episodes.jsonl'}; rerun the same command to resume",
               file=sys.stderr)
@@ -766,6 +767,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="scenes drawn before outcomes are fed back to the sampler (default 4 per worker)")
     p.add_argument("--config", help="DV2S-v0 config overrides as JSON (or a .json file)")
     p.add_argument("--no-convert", action="store_true", help="only find and cluster failures; add nothing to a bank")
+    p.add_argument("--max-conversions", type=int, default=None,
+                   help="convert at most this many clusters, those with most avoidable failures first (default: all)")
     p.add_argument("--dra", choices=["bev", "openai"], default="bev", help="DRA backend for failure videos")
     p.add_argument("--sg", choices=["rules", "openai"], default="rules", help="SG backend")
     llm_options(p)

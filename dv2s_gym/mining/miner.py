@@ -210,7 +210,7 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
          progress: bool = True, env_config: Optional[Dict[str, Any]] = None,
          ttc_threshold: float = DEFAULT_TTC_THRESHOLD, stall_seconds: float = DEFAULT_STALL_SECONDS,
          convert: bool = False, convert_options: Optional[Dict[str, Any]] = None,
-         reports: bool = True) -> MineRun:
+         max_conversions: Optional[int] = None, reports: bool = True) -> MineRun:
     """Mine ``policy``'s failures over ``budget`` episodes; resumable (same ``out``).
 
     Args:
@@ -231,7 +231,7 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         ttc_threshold, stall_seconds: monitor settings (:mod:`dv2s_gym.mining.monitors`).
         convert: turn one failure per avoidable cluster into a bank scenario
             (:mod:`dv2s_gym.mining.convert`; ``convert_options`` are passed on, ``bank_dir``
-            must be a writable bank).
+            must be a writable bank); at most ``max_conversions`` clusters, largest first.
         reports: write report.json, report.md and report.html at the end.
     """
     from dv2s_gym.mining.space import SceneSpace
@@ -315,7 +315,7 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         run = MineRun(out=out, settings=settings, records=records, clusters=cluster_failures(records))
         if convert:
             run.conversions = convert_clusters(run, bank_dir=bank_dir, options=convert_options or {},
-                                               progress=progress)
+                                               progress=progress, max_conversions=max_conversions)
         else:
             run.conversions = _read_jsonl(out / "conversions.jsonl")
         run.seconds = time.perf_counter() - started
@@ -365,11 +365,12 @@ def _read_jsonl(path: Path) -> List[Dict[str, Any]]:
 
 
 def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str, Any],
-                     progress: bool = True) -> List[Dict[str, Any]]:
+                     progress: bool = True, max_conversions: Optional[int] = None) -> List[Dict[str, Any]]:
     """Convert one representative failure per avoidable cluster not converted yet; the conversion records.
 
     The representative is the cluster's most severe failure (lowest robustness, then
-    lowest index). Each conversion is appended to ``conversions.jsonl`` when it ends, so a
+    lowest index). Clusters with more avoidable failures go first; at most
+    ``max_conversions`` conversions are made in the run (``None``: every cluster). Each conversion is appended to ``conversions.jsonl`` when it ends, so a
     resumed run converts the remaining clusters only.
     """
     from dv2s_gym.mining.convert import convert_failure
@@ -381,12 +382,16 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
     path = run.out / "conversions.jsonl"
     existing = _read_jsonl(path)
     converted = {row["cluster"] for row in existing}
-    todo = []
+    candidates = []
     for cluster, members in sorted(group(run.records).items()):
         avoidable = [r for r in members if r.get("avoidable") is not False]
         if cluster in converted or not avoidable:
             continue
-        todo.append((cluster, min(avoidable, key=lambda r: (float(r.get("rho") or 0.0), int(r["index"])))))
+        representative = min(avoidable, key=lambda r: (float(r.get("rho") or 0.0), int(r["index"])))
+        candidates.append((-len(avoidable), cluster, representative))
+    candidates.sort(key=lambda c: (c[0], c[1]))  # the clusters with most avoidable failures first
+    room = None if max_conversions is None else max(0, int(max_conversions) - len(existing))
+    todo = [(cluster, record) for _, cluster, record in candidates][:room]
     bank = Bank(bank_dir)
     appender = _Appender(path)
     bar = _progress(progress, len(todo), 0, desc="converting")
