@@ -230,8 +230,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         env_config: DV2S-v0 config overrides.
         ttc_threshold, stall_seconds: monitor settings (:mod:`dv2s_gym.mining.monitors`).
         convert: turn one failure per avoidable cluster into a bank scenario
-            (:mod:`dv2s_gym.mining.convert`; ``convert_options`` are passed on, ``bank_dir``
-            must be a writable bank); at most ``max_conversions`` clusters, largest first.
+            (:mod:`dv2s_gym.mining.convert`; ``convert_options`` are passed on). ``bank_dir``
+            must then be a writable bank; a new or empty folder starts as a copy of the shipped bank; at most ``max_conversions`` clusters, largest first.
         reports: write report.json, report.md and report.html at the end.
     """
     from dv2s_gym.mining.space import SceneSpace
@@ -254,7 +254,14 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         (out / "traces").mkdir(exist_ok=True)
     except OSError as error:
         raise MiningError(f"cannot create the run folder {out}: {error.strerror}; pass a writable --out") from None
+    if convert and not bank_dir:
+        raise MiningError("converting failures adds scenarios to a bank, and the shipped bank is read-only: pass "
+                          "--bank DIR (a new folder starts as a copy of the shipped bank), or --no-convert")
     bank_dir = str(Path(bank_dir).resolve()) if bank_dir else None
+    if convert and not _has_entries(Path(bank_dir)):
+        from scenario_bank.bank import Bank
+
+        Bank().copy_to(bank_dir)  # a bank of one's own starts as the shipped one
     env_config = dict(env_config or {})
     n_workers = int(workers) if workers else (1 if backend == "local" and default_workers() < 2 else
                                               default_workers())
@@ -350,6 +357,10 @@ def _complete(result: Dict[str, Any], task: Dict[str, Any], spec, sampler: str, 
     if record.get("trace"):
         record["trace"] = os.path.relpath(record["trace"], out)
     return record
+
+
+def _has_entries(folder: Path) -> bool:
+    return folder.is_dir() and any(not p.name.startswith(".") for p in folder.iterdir())
 
 
 def _read_jsonl(path: Path) -> List[Dict[str, Any]]:
