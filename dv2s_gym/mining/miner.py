@@ -338,7 +338,7 @@ def _task(index: int, spec, policy: str, reference: Optional[str], settings: Dic
         "kind": "mine", "role": "mine", "index": index, "id": f"{spec.scenario}/{seed}", "policy": policy,
         "reference": reference, "scenario": spec.scenario, "seed": seed, "params": spec.params,
         "env_config": settings["env_config"], "bank_dir": settings["bank_dir"],
-        "trace_path": str(out / "traces" / f"{index:06d}.json.gz"),
+        "trace_dir": str(out / "traces"),
         "ttc_threshold": settings["ttc_threshold"], "stall_seconds": settings["stall_seconds"],
     }
 
