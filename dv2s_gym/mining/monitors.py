@@ -30,10 +30,10 @@ FAILURE_TYPES = ("collision", "off_road", "low_ttc", "stall")
 COLLISION_TYPES = ("rear_end", "struck_from_behind", "side", "head_on", "pedestrian", "obstacle")
 STALL_SPEED = 0.5
 """m/s under which the ego counts as standing."""
-FREE_PATH = 30.0
+FREE_PATH = 40.0
 """Metres ahead of a standing ego that must be empty for it to count as a stall."""
 DEFAULT_TTC_THRESHOLD = 1.0
-DEFAULT_STALL_SECONDS = 3.0
+DEFAULT_STALL_SECONDS = 5.0
 _LANE_HALF_WIDTH = 2.0
 
 
