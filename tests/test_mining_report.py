@@ -260,6 +260,8 @@ def test_markdown_has_the_tables(report):
     assert "median per stage: video 0.62 s" in text
     assert "worker crashed (exit code -9)" in text
     assert DESCRIPTION.replace("|", "\\|") in text
+    converted = text[text.index("### Converted failures"):text.index("### Rejected conversions")]
+    assert converted.index("bank entry `mined_a_rear_end`") < converted.index("merged into `mined_a_rear_end`")
     summary = format_summary(report)
     assert "cross-entropy" in summary and "random" in summary and "10 failure(s) in 19 episode(s)" in summary
 
@@ -321,7 +323,7 @@ def test_the_page_embeds_videos_descriptions_and_scripts(run_dir, report, tmp_pa
     assert page.count('src="data:video/webm;base64,') == 2  # the kept and the merged cluster's clips
     assert "is missing from the run folder" in page  # the rejected stall cluster's clip was never written
     assert "The ego drives in the right lane; a car ahead brakes hard and the ego &lt;hits&gt; it from behind." in page
-    assert "its grid cell: ego_speed 20.000–25.000" in page
+    assert "its grid cell: ego_speed 20 to 25" in page
     assert "<details><summary>Generated Scenic script" in page and "FollowLaneBehavior()" in page
     assert "check: compile failed: unknown name &#x27;Lanee&#x27;" in page
     kept, rejected = page.index('id="card-' + A_COLLISION), page.index('id="card-' + B_STALL)

@@ -42,6 +42,7 @@ border-left:4px solid #0b63c5;background:#f6f8fa;white-space:pre-wrap}
 pre{background:#f6f8fa;padding:8px;overflow:auto;max-height:420px;font-size:12px}
 .s-kept{color:#1a7f37;font-weight:600}.s-merged{color:#8250df;font-weight:600}.s-rejected{color:#cf222e;font-weight:600}
 svg .line{fill:none;stroke-width:2}.wide{overflow-x:auto;max-width:100%}
+code.id{word-break:break-all;display:inline-block;max-width:260px}span.region{font-size:12px;display:inline-block;min-width:200px}
 """
 
 
@@ -229,8 +230,9 @@ def _region(params: Mapping[str, Any]) -> str:
 
 
 def _cell_text(cell: Mapping[str, Any]) -> str:
-    parts = [f"{name} {fmt(bounds.get('low'), 3)}–{fmt(bounds.get('high'), 3)}" for name, bounds in cell.items()
-             if isinstance(bounds, Mapping)]
+    parts = [f"{name} {bounds['low']:.3g} to {bounds['high']:.3g}" for name, bounds in cell.items()
+             if isinstance(bounds, Mapping) and finite(bounds.get("low")) is not None
+             and finite(bounds.get("high")) is not None]
     return "; ".join(parts) or "–"
 
 
@@ -264,9 +266,9 @@ def _cluster_table(clusters: Sequence[Mapping[str, Any]]) -> str:
     for c in clusters:
         rep = c.get("representative") or {}
         link = f' <a href="#card-{escape(c["id"])}">video</a>' if c.get("conversion") else ""
-        rows.append([(f"<code>{escape(c.get('id'))}</code>", False), (escape(c.get("scenario")), False),
+        rows.append([(f'<code class="id">{escape(c.get("id"))}</code>', False), (escape(c.get("scenario")), False),
                      (escape(c.get("type")), False), (escape(c.get("size")), True), (escape(c.get("avoidable")), True),
-                     (escape(_region(c.get("params") or {})), False),
+                     ('<span class="region">' + escape(_region(c.get("params") or {})) + "</span>", False),
                      (f"#{escape(rep.get('index'))} seed {escape(rep.get('seed'))}{link}", False),
                      (_status(c), False), (escape(c.get("bank_entry") or "–"), False),
                      (escape(_reproduction(c)), True), (escape(fmt(c.get("e2e_sc"), 3)), True)])

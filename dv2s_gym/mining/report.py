@@ -660,7 +660,7 @@ def markdown(report: Mapping[str, Any]) -> str:
     lines += ["", f"### Failure clusters ({len(report['clusters'])})", ""]
     lines += _cluster_rows(report["clusters"]) if report["clusters"] else ["None."]
     converted = [c for c in report["clusters"] + report["unavoidable_clusters"] if c.get("conversion")]
-    described = [c for c in converted if c["status"] in ("kept", "merged")]
+    described = sorted((c for c in converted if c["status"] in ("kept", "merged")), key=lambda c: c["status"] != "kept")
     if described:
         lines += ["", "### Converted failures", ""]
         for c in described:
