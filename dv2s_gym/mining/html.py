@@ -42,7 +42,7 @@ border-left:4px solid #0b63c5;background:#f6f8fa;white-space:pre-wrap}
 pre{background:#f6f8fa;padding:8px;overflow:auto;max-height:420px;font-size:12px}
 .s-kept{color:#1a7f37;font-weight:600}.s-merged{color:#8250df;font-weight:600}.s-rejected{color:#cf222e;font-weight:600}
 svg .line{fill:none;stroke-width:2}.wide{overflow-x:auto;max-width:100%}
-code.id{word-break:break-all;display:inline-block;max-width:260px}span.region{font-size:12px;display:inline-block;min-width:200px}
+code.id{white-space:nowrap}span.region{font-size:12px;display:inline-block;min-width:200px}
 """
 
 
@@ -266,13 +266,16 @@ def _cluster_table(clusters: Sequence[Mapping[str, Any]]) -> str:
     for c in clusters:
         rep = c.get("representative") or {}
         link = f' <a href="#card-{escape(c["id"])}">video</a>' if c.get("conversion") else ""
-        rows.append([(f'<code class="id">{escape(c.get("id"))}</code>', False), (escape(c.get("scenario")), False),
+        short = str(c.get("id") or "").split("/", 1)[-1]  # the scenario has its own column
+        rows.append([(f'<code class="id" title="{escape(c.get("id"))}">{escape(short)}</code>', False),
+                     (escape(c.get("scenario")), False),
                      (escape(c.get("type")), False), (escape(c.get("size")), True), (escape(c.get("avoidable")), True),
                      ('<span class="region">' + escape(_region(c.get("params") or {})) + "</span>", False),
                      (f"#{escape(rep.get('index'))} seed {escape(rep.get('seed'))}{link}", False),
                      (_status(c), False), (escape(c.get("bank_entry") or "–"), False),
                      (escape(_reproduction(c)), True), (escape(fmt(c.get("e2e_sc"), 3)), True)])
-    return _table(["cluster", "scenario", "type", "failures", "avoidable", "parameter region", "representative",
+    return _table(["cluster (class/cell)", "scenario", "type", "failures", "avoidable", "parameter region",
+                   "representative",
                    "conversion", "bank entry", "reproduction", "E2E-SC"], rows)
 
 

@@ -8,7 +8,8 @@ distributions of minimum time-to-collision and return), a verdict banner, tables
 and the newly failing episodes as embedded ``data:video/webm`` clips rendered from
 their traces (:func:`~dv2s_gym.regress.clips.render_episode_video`).
 
-Every string taken from the report is escaped. A small inline script records, on
+The CSS, plot primitives and self-check script are shared with the mining report
+(:mod:`dv2s_gym.report_page`). Every string taken from the report is escaped. A small inline script records, on
 load, how many plots have a non-empty box (``data-plots-rendered`` on ``<body>``);
 opened as ``report.html#selftest`` it also plays the first clip and records whether
 it played (``data-video-played``) — the browser test reads these attributes.
