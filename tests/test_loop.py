@@ -12,6 +12,7 @@ import pytest
 from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, paired_summary
 from dv2s_gym.mining.loop import LoopError, fine_tune_weights, run_loop
 from dv2s_gym.mining.split import cluster_groups, split_by_cluster
+from cli_helpers import one_line_error, run
 from loop_helpers import FakeMiner
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT, load_policy
@@ -192,3 +193,14 @@ def test_loop_resumes_without_redoing_steps_and_reports_every_field(tmp_path, mo
 def test_loop_refuses_a_policy_it_cannot_fine_tune(tmp_path):
     with pytest.raises(LoopError, match="stable-baselines3 checkpoint"):
         run_loop("rule", out=tmp_path / "loop", miner=FakeMiner(SOURCES), **TINY)
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["--policy", "rule"], "stable-baselines3 checkpoint"),
+    (["--budget", "0"], "--budget must be an integer >= 1"),
+    (["--holdout-fraction", "2"], "--holdout-fraction must be in [0, 1]"),
+])
+def test_cli_refuses_bad_input_in_one_line(tmp_path, capsys, argv, needle):
+    code, _, err = run(capsys, "loop", "--out", tmp_path / "loop", "--no-progress", *argv)
+    assert code == 2 and needle in one_line_error(err)
+    assert not (tmp_path / "loop").exists()  # refused before anything is written

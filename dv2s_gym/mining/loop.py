@@ -369,8 +369,9 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                 excluded = set(held_out)
                 for earlier in state.data["rounds"][:number - 1]:
                     excluded.update((earlier.get("steps", {}).get("split") or {}).get("held_out", []))
-                names = [n for n in Bank(bank).names() if n not in excluded]
-                mined = [n for n in names if n not in start_names]
+                entries = [e for e in Bank(bank) if e.name not in excluded]
+                names = sorted(e.name for e in entries)
+                mined = [e.name for e in entries if e.source.get("kind") == "mined"]
                 weights = fine_tune_weights(names, mined, mined_share)
                 from policies.training import fine_tune
 

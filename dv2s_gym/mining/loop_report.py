@@ -41,8 +41,12 @@ def _summary_rate(r: Optional[Mapping[str, Any]]) -> str:
     return f"{r.get('value', 0):.3f} [{r.get('low', 0):.3f}, {r.get('high', 0):.3f}]"
 
 
+_ORDER = ("mine", "split", "before", "fine_tune", "after", "regress")
+
+
 def _seconds(timings: Mapping[str, Any]) -> str:
-    return ", ".join(f"{step} {float(seconds):.0f} s" for step, seconds in timings.items()) or "-"
+    steps = sorted(timings, key=lambda s: _ORDER.index(s) if s in _ORDER else len(_ORDER))
+    return ", ".join(f"{step} {float(timings[step]):.0f} s" for step in steps) or "-"
 
 
 def render_markdown(report: Mapping[str, Any]) -> str:
