@@ -31,21 +31,10 @@ _POLICIES: Dict[Tuple[str, Optional[str], str], Any] = {}
 
 
 def _detect(result, trace, ttc_threshold: float) -> Optional[Dict[str, Any]]:
-    try:
-        from dv2s_gym.mining.monitors import detect_failure
-    except ImportError:  # TEMPORARY until the miner's monitors land: collision or off road only
-        if not result.failed:
-            return None
-        return {"type": "collision" if result.collided else "off_road"}
-    failure = detect_failure(result, trace, ttc_threshold=ttc_threshold)
-    if failure is None:
-        return None
-    for method in ("to_json", "to_dict"):
-        if hasattr(failure, method):
-            return dict(getattr(failure, method)())
-    import dataclasses
+    from dv2s_gym.mining.monitors import detect_failure
 
-    return dataclasses.asdict(failure) if dataclasses.is_dataclass(failure) else dict(failure)
+    failure = detect_failure(result, trace, ttc_threshold=ttc_threshold)
+    return None if failure is None else failure.to_json()
 
 
 def heldout_task(task: Mapping[str, Any]) -> Dict[str, Any]:

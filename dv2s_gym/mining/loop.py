@@ -128,15 +128,8 @@ def _working_bank(out: Path, bank_dir: Optional[str]) -> str:
     from scenario_bank.bank import Bank
 
     target = out / "bank"
-    if not target.is_dir():
-        staging = out / "bank.partial"
-        shutil.rmtree(staging, ignore_errors=True)
-        staging.mkdir(parents=True)
-        shipped = Path(Bank().root)
-        for entry in sorted(shipped.iterdir()):
-            if (entry / "scenario.scenic").is_file() and (entry / "meta.json").is_file():
-                shutil.copytree(entry, staging / entry.name)
-        os.rename(staging, target)
+    if not target.is_dir() or not any(target.iterdir()):
+        Bank().copy_to(target)  # atomic: a killed copy leaves no half bank behind
     return str(target.resolve())
 
 
@@ -146,15 +139,23 @@ def mined_entries(mine_out: os.PathLike | str) -> List[Dict[str, Any]]:
     path = Path(mine_out) / "conversions.jsonl"
     if not path.is_file():
         return []
-    entries: Dict[str, Dict[str, Any]] = {}
+    records = []
     for line in path.read_text(encoding="utf-8").splitlines():
         try:
-            record = json.loads(line)
+            records.append(json.loads(line))
         except ValueError:
             continue
+    entries: Dict[str, Dict[str, Any]] = {}
+    for record in records:
         if record.get("status") == "kept" and record.get("bank_entry"):
             entries[str(record["cluster"])] = {"cluster": str(record["cluster"]), "scenario": record["bank_entry"],
                                                "reproduction": (record.get("reproduction") or {}).get("rate")}
+    kept = {entry["scenario"] for entry in entries.values()}
+    for record in records:  # a cluster merged into a scenario kept in this run is tied to it
+        if record.get("status") == "merged" and record.get("merged_into") in kept:
+            entries.setdefault(str(record["cluster"]), {"cluster": str(record["cluster"]),
+                                                        "scenario": record["merged_into"],
+                                                        "reproduction": (record.get("reproduction") or {}).get("rate")})
     return [entries[key] for key in sorted(entries)]
 
 
@@ -174,7 +175,7 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
             errors += bool(record.get("error"))
             if record.get("failure"):
                 failures += 1
-                counted += record.get("avoidable") is True
+                counted += record.get("avoidable") is not False  # as MineRun.avoidable
     clusters = None
     try:
         from dv2s_gym.mining.cluster import cluster_failures
