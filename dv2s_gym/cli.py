@@ -858,7 +858,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "on the held-out scenarios (seeds 10000+), fine-tune it on the grown bank minus the held-out "
                        "scenarios (mined ones upweighted), evaluate again on the same episodes (paired: relative "
                        "drop, exact McNemar) and regression-test new against old on the starting bank (dv2s "
-                       "regress statistics). Writes report.json, report.md to --out; rerunning with the same "
+                       "regress statistics). Writes report.json, report.md, report.html to --out; rerunning with the same "
                        "--out and settings resumes (raise --rounds to add rounds).",
                        epilog="examples:\n"
                        "  dv2s loop                                   # one round on dv2s-ppo, out/loop\n"

@@ -22,7 +22,7 @@ g. the next round starts from the new policy.
 
 Everything lives under ``out``: ``loop.json`` (settings and every finished step, written
 atomically after each), ``bank/``, ``round_<r>/{mine,heldout.jsonl,policy,regress}`` and the
-report (``report.json``, ``report.md``, ``report.html`` when the HTML renderer is present).
+report (``report.json``, ``report.md``, ``report.html``).
 Restarted with the same ``out`` and settings, the loop skips finished steps and resumes the
 unfinished one (the miner, the held-out store, training and the regression run are each
 resumable); ``rounds`` may be raised to add rounds to a finished loop.

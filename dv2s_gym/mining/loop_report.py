@@ -1,4 +1,4 @@
-"""The ``dv2s loop`` report: ``report.json`` (schema ``dv2s-loop`` version 1) and ``report.md``.
+"""The ``dv2s loop`` report: ``report.json`` (schema ``dv2s-loop`` version 1), ``report.md`` and ``report.html``.
 
 ``report.json`` is :meth:`dv2s_gym.mining.loop.LoopReport.to_json`::
 
@@ -26,7 +26,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional
 
-__all__ = ["write_loop_reports", "render_markdown"]
+__all__ = ["write_loop_reports", "render_markdown", "render_html"]
 
 
 def _rate(r: Optional[Mapping[str, Any]]) -> str:
@@ -123,14 +123,51 @@ def render_markdown(report: Mapping[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _html(report: Mapping[str, Any], markdown: str) -> Optional[str]:
-    """An HTML page when a renderer for loop reports exists (the mining report's module), else ``None``."""
-    try:
-        from dv2s_gym.mining import html as mining_html  # type: ignore[attr-defined]
-    except ImportError:
-        return None
-    render = getattr(mining_html, "render_loop_html", None)
-    return render(report) if render is not None else None
+_CSS = ("body{font-family:system-ui,sans-serif;margin:2em;max-width:1100px}table{border-collapse:collapse;margin:1em 0}"
+        "td,th{border:1px solid #ccc;padding:4px 8px;text-align:left}th{background:#f3f3f3}"
+        ".PASS{color:#186a1f;font-weight:bold}.FAIL{color:#a11;font-weight:bold}.INCONCLUSIVE{color:#a60}"
+        "code{background:#f5f5f5;padding:1px 3px}")
+
+
+def render_html(report: Mapping[str, Any]) -> str:
+    """A self-contained HTML page (inline CSS, nothing fetched) of the loop report."""
+    from html import escape
+
+    settings = report.get("settings", {})
+    rows = []
+    for record in report.get("rounds", []):
+        steps = record.get("steps", {})
+        mine, split, after, regress = (steps.get(k) or {} for k in ("mine", "split", "after", "regress"))
+        drop = after.get("relative_drop")
+        interval = after.get("relative_drop_interval") or [None, None]
+        drop_text = "-" if drop is None else f"{drop:.0%}" + (
+            f" [{interval[0]:.0%}, {interval[1]:.0%}]" if interval[0] is not None else "")
+        verdict = regress.get("verdict") or steps.get("skipped") or "-"
+        p_value = after.get("mcnemar_p")
+        cells = [record.get("round"), f"{mine.get('failures', '-')} / {mine.get('episodes', '-')}",
+                 mine.get("clusters", "-"), len(mine.get("kept", [])),
+                 f"{len(split.get('fine_tune', []))} / {len(split.get('held_out', []))}",
+                 _rate(after.get("before")), _rate(after.get("after")), drop_text,
+                 "-" if p_value is None else f"{p_value:.3g}"]
+        row = "".join(f"<td>{escape(str(c))}</td>" for c in cells)
+        rows.append(f"<tr>{row}<td class=\"{escape(str(verdict))}\">{escape(str(verdict))}</td></tr>")
+        details = []
+        for name, per in (after.get("per_scenario") or {}).items():
+            details.append(f"<tr><td>{escape(name)}</td><td>{per['n']}</td><td>{per['before']}</td>"
+                           f"<td>{per['after']}</td></tr>")
+        if details:
+            rows.append(f"<tr><td></td><td colspan=\"9\"><table><tr><th>held-out scenario</th><th>episodes</th>"
+                        f"<th>failed before</th><th>failed after</th></tr>{''.join(details)}</table>"
+                        f"regression test: {escape(str(regress.get('reason')))}</td></tr>")
+    head = ("<tr><th>round</th><th>failures / episodes mined</th><th>clusters</th><th>kept</th>"
+            "<th>fine-tune / held-out</th><th>held-out failure rate before</th><th>after</th><th>relative drop</th>"
+            "<th>McNemar p</th><th>rest of the bank</th></tr>")
+    return (f"<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>dv2s loop</title><style>{_CSS}</style>"
+            f"</head><body><h1>dv2s loop</h1><p>Started from <code>{escape(str(settings.get('policy')))}</code>; "
+            f"final policy <code>{escape(str(report.get('policy')))}</code>. Mining budget {settings.get('budget')} "
+            f"episodes per round, fine-tuning {settings.get('fine_tune_steps')} steps, {settings.get('k_eval')} "
+            f"evaluation seeds per held-out scenario (Wilson 95 % intervals; the drop's interval resamples "
+            f"scenarios).</p><table>{head}{''.join(rows)}</table></body></html>\n")
 
 
 def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
@@ -143,8 +180,6 @@ def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
     markdown = render_markdown(report)
     atomic_write_text(out / "report.md", markdown)
     paths["md"] = out / "report.md"
-    page = _html(report, markdown)
-    if page is not None:
-        atomic_write_text(out / "report.html", page)
-        paths["html"] = out / "report.html"
+    atomic_write_text(out / "report.html", render_html(report))
+    paths["html"] = out / "report.html"
     return {key: Path(value) for key, value in paths.items()}
