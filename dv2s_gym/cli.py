@@ -518,7 +518,7 @@ def _cmd_loop(args: argparse.Namespace) -> int:
 
     from dv2s_gym.mining.loop import DEFAULT_OUT, run_loop
 
-    options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps",
+    options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr",
                                                     "holdout_fraction", "k_eval", "regress_episodes", "mined_share",
                                                     "margin", "seed", "workers", "scenarios")}
     out = args.out or DEFAULT_OUT
@@ -873,6 +873,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sampler", default=LOOP["sampler"], help=f"the miner's sampler (default {LOOP['sampler']})")
     p.add_argument("--fine-tune-steps", type=int, default=LOOP["fine_tune_steps"],
                    help=f"env steps of fine-tuning per round (default {LOOP['fine_tune_steps']})")
+    p.add_argument("--fine-tune-lr", type=float, default=LOOP["fine_tune_lr"],
+                   help=f"learning rate of the fine-tuning (default {LOOP['fine_tune_lr']})")
     p.add_argument("--holdout-fraction", type=float, default=LOOP["holdout_fraction"],
                    help=f"share of the mined clusters held out (default {LOOP['holdout_fraction']})")
     p.add_argument("--k-eval", type=int, default=LOOP["k_eval"],

@@ -852,7 +852,8 @@ def fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathL
               scenarios: Optional[Sequence[str]] = None, env_config: Optional[Dict[str, Any]] = None,
               eval_freq: int = 0, eval_seeds: int = 1, card_seeds: int = 0, baselines: Sequence[str] = (),
               eval_jobs: int = 2, checkpoint_freq: int = 10_000, progress_bar: bool = True,
-              vec_env: str = "subproc", log: Callable[[str], None] = print) -> Path:
+              vec_env: str = "subproc", learning_rate: Optional[float] = None,
+              log: Callable[[str], None] = print) -> Path:
     """Continue training an SB3 checkpoint on a bank with weighted scenario sampling; returns ``out/model.zip``.
 
     The checkpoint is copied into ``out/checkpoints/step_<n>.zip`` (``n``: its own step
@@ -864,6 +865,7 @@ def fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathL
     out (held-out ones) are never drawn. The env config defaults to the one on the
     checkpoint's model card (same reward). The card (``model_card.json``, ``README.md``)
     gets a ``fine_tune`` section naming the source checkpoint and its step.
+    ``learning_rate`` (constant) replaces the checkpoint's own for the fine-tuning.
 
     Restartable: called again with the same ``out`` it resumes from the newest checkpoint
     there, and returns at once when ``out/model.zip`` and its card are already written.
@@ -903,12 +905,18 @@ def fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathL
         first = out / "checkpoints" / f"step_{start_step:09d}.zip"
         first.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(first, keep_suffix=True) as tmp:
-            Path(tmp).write_bytes(source.read_bytes())
+            if learning_rate is None:
+                Path(tmp).write_bytes(source.read_bytes())
+            else:  # saved with the model: every resume of this run keeps it
+                model = getattr(sb3, algorithm.upper()).load(str(source), device="cpu")
+                model.learning_rate = float(learning_rate)
+                model._setup_lr_schedule()
+                model.save(tmp)
         atomic_write_json(out / "run.json", {"config": config.to_json(), "segments": []})
     card = train(config, resume=True, log=log)
     card["fine_tune"] = {"source": str(checkpoint_or_spec), "source_checkpoint": str(source),
                          "source_steps": start_step, "steps": int(card["training"]["steps"]) - start_step,
-                         "weights": config.weights}
+                         "weights": config.weights, "learning_rate": learning_rate}
     card["description"] = (f"Fine-tuned from {checkpoint_or_spec} (step {start_step}) for "
                            f"{card['fine_tune']['steps']} steps on {len(config.scenarios)} scenarios with weighted "
                            "sampling (see sampler.weights).")

@@ -51,6 +51,7 @@ DEFAULTS: Dict[str, Any] = {
     "budget": 80,
     "sampler": "cross-entropy",
     "fine_tune_steps": 30_000,
+    "fine_tune_lr": 1e-4,
     "holdout_fraction": 0.5,
     "k_eval": 6,
     "regress_episodes": 4,
@@ -61,7 +62,7 @@ DEFAULTS: Dict[str, Any] = {
 """Embedded defaults: one round finishes in a few minutes on 2 cores (a small mining budget,
 a short fine-tune, a small evaluation). The measurement in bench/RESULTS.md uses larger ones."""
 
-IDENTITY = ("policy", "bank_dir", "budget", "sampler", "fine_tune_steps", "holdout_fraction", "k_eval",
+IDENTITY = ("policy", "bank_dir", "budget", "sampler", "fine_tune_steps", "fine_tune_lr", "holdout_fraction", "k_eval",
             "regress_episodes", "mined_share", "margin", "seed", "scenarios")
 
 
@@ -250,6 +251,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
              holdout_fraction: float = DEFAULTS["holdout_fraction"], k_eval: int = DEFAULTS["k_eval"],
              regress_episodes: int = DEFAULTS["regress_episodes"], mined_share: float = DEFAULTS["mined_share"],
              margin: float = DEFAULTS["margin"], seed: int = DEFAULTS["seed"], workers: Optional[int] = None,
+             fine_tune_lr: Optional[float] = DEFAULTS["fine_tune_lr"],
              scenarios: Optional[Sequence[str]] = None, n_envs: int = 2, progress: bool = True,
              mine_options: Optional[Mapping[str, Any]] = None, miner: Optional[Callable[..., Any]] = None,
              log: Callable[[str], None] = _log_default) -> LoopReport:
@@ -262,6 +264,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         bank_dir: a writable bank to grow (default: a copy of the shipped bank in ``out/bank``).
         budget / sampler: the miner's episodes per round and its sampler.
         fine_tune_steps: env steps of fine-tuning per round.
+        fine_tune_lr: the fine-tuning's (constant) learning rate (``None``: the checkpoint's own).
         holdout_fraction: share of the round's mined clusters held out from fine-tuning.
         k_eval: evaluation seeds per held-out scenario.
         regress_episodes: seeds per starting-bank scenario in the regression test.
@@ -293,7 +296,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         raise LoopError(f"--out {out} is a file; choose a folder for the loop")
     env_config = _policy_env_config(policy)
     settings = {"policy": policy, "bank_dir": None if bank_dir is None else str(Path(bank_dir).resolve()),
-                "budget": budget, "sampler": sampler, "fine_tune_steps": fine_tune_steps,
+                "budget": budget, "sampler": sampler, "fine_tune_steps": fine_tune_steps, "fine_tune_lr": fine_tune_lr,
                 "holdout_fraction": float(holdout_fraction), "k_eval": k_eval, "regress_episodes": regress_episodes,
                 "mined_share": float(mined_share), "margin": float(margin), "seed": seed,
                 "scenarios": list(scenarios) if scenarios is not None else None, "rounds": rounds,
@@ -342,7 +345,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
 
             timed("mine", do_mine)
             log(f"round {number}: mined {steps['mine']['failures']} failures in {steps['mine']['episodes']} episodes, "
-                f"{len(steps['mine']['kept'])} scenarios kept")
+                f"{len({e['scenario'] for e in steps['mine']['kept']})} scenarios kept")
         if "split" not in steps:
             timed("split", lambda: _split(steps["mine"]["kept"], holdout_fraction, seed * 1000 + number))
         split = steps["split"]
@@ -378,7 +381,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
 
                 path = fine_tune(current, bank_dir=bank, out=round_dir / "policy", steps=fine_tune_steps,
                                  weights=weights, seed=seed * 1000 + number, n_envs=n_envs, env_config=env_config,
-                                 progress_bar=progress, log=log)
+                                 progress_bar=progress, learning_rate=fine_tune_lr, log=log)
                 return {"model": str(path.resolve()), "scenarios": len(names), "mined_upweighted": len(mined),
                         "steps": fine_tune_steps}
 

@@ -74,7 +74,7 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         p_value = after.get("mcnemar_p")
         lines.append(
             f"| {record.get('round')} | {mine.get('failures', '-')} ({mine.get('failures_against_policy', '-')}) / "
-            f"{mine.get('episodes', '-')} | {mine.get('clusters', '-')} | {len(mine.get('kept', []))} | "
+            f"{mine.get('episodes', '-')} | {mine.get('clusters', '-')} | {len({e['scenario'] for e in mine.get('kept', [])})} | "
             f"{len(split.get('fine_tune', []))} / {len(split.get('held_out', []))} | {_rate(after.get('before'))} | "
             f"{_rate(after.get('after'))} | {drop_text} | {'-' if p_value is None else f'{p_value:.3g}'} | "
             f"{regress.get('verdict') or steps.get('skipped') or '-'} |")
@@ -145,7 +145,7 @@ def render_html(report: Mapping[str, Any]) -> str:
         verdict = regress.get("verdict") or steps.get("skipped") or "-"
         p_value = after.get("mcnemar_p")
         cells = [record.get("round"), f"{mine.get('failures', '-')} / {mine.get('episodes', '-')}",
-                 mine.get("clusters", "-"), len(mine.get("kept", [])),
+                 mine.get("clusters", "-"), len({e["scenario"] for e in mine.get("kept", [])}),
                  f"{len(split.get('fine_tune', []))} / {len(split.get('held_out', []))}",
                  _rate(after.get("before")), _rate(after.get("after")), drop_text,
                  "-" if p_value is None else f"{p_value:.3g}"]
