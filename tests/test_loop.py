@@ -96,6 +96,11 @@ def test_fine_tune_continues_the_checkpoint_and_writes_a_card(tmp_path):
     assert fine_tune("dv2s-ppo", bank_dir=None, out=out, steps=200, weights={SOURCES[0]: 3.0, SOURCES[1]: 1.0},
                      n_envs=1, vec_env="dummy", progress_bar=False, log=lambda _: None) == path
     assert path.stat().st_mtime_ns == stamp  # finished: not trained again
+    slow = fine_tune("dv2s-ppo", bank_dir=None, out=tmp_path / "lr", steps=10, weights={SOURCES[0]: 1.0}, n_envs=1,
+                     vec_env="dummy", progress_bar=False, learning_rate=1e-5, log=lambda _: None)
+    model = load_policy(f"ppo:{slow}").model
+    assert model.learning_rate == 1e-5 and model.lr_schedule(0.5) == 1e-5
+    assert read_card(slow)["fine_tune"]["learning_rate"] == 1e-5
     with pytest.raises(TrainingError, match="stable-baselines3 checkpoint"):
         fine_tune("rule", bank_dir=None, out=tmp_path / "x", steps=10, weights={SOURCES[0]: 1})
 
