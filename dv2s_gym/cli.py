@@ -151,6 +151,35 @@ def _cmd_regress(args: argparse.Namespace) -> int:
     return exit_code(report["verdict"])
 
 
+def _cmd_mine(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from dv2s_gym.mining.miner import mine
+
+    env_config = _json_option(args.config, "--config")
+    if env_config is not None and not isinstance(env_config, dict):
+        raise ValueError("--config must be a JSON object of DV2S-v0 config overrides, e.g. '{\"duration\": 10}'")
+    out = Path(args.out or "out/mine")
+    convert_options = {"dra": args.dra, "sg": args.sg, "k": args.k, "threshold": args.threshold,
+                       "llm_config": _llm_config(args)}
+    try:
+        run = mine(args.policy, out=out, budget=args.budget, sampler=args.sampler, scenarios=args.scenarios,
+                   bank_dir=args.bank, backend=args.backend, workers=args.workers, address=args.address,
+                   seed=args.seed, reference=None if args.reference == "none" else args.reference,
+                   batch=args.batch, timeout=args.timeout, progress=not args.no_progress, env_config=env_config,
+                   ttc_threshold=args.ttc_threshold, stall_seconds=args.stall_seconds,
+                   convert=not args.no_convert, convert_options=convert_options,
+                   max_conversions=args.max_conversions)
+    except KeyboardInterrupt:
+        print(f"dv2s: finished episodes are saved in {out / 'episodes.jsonl'}; rerun the same command to resume",
+              file=sys.stderr)
+        raise
+    print(run.summary())
+    if run.reports:
+        print(f"reports: {', '.join(str(p) for p in run.reports.values())}")
+    return 0
+
+
 def _cmd_maps(args: argparse.Namespace) -> int:
     from scenario_bank.maps import MAPS_DIR, list_maps
 
@@ -700,6 +729,56 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the report JSON instead of the table")
     p.set_defaults(func=_cmd_regress)
+
+    p = sub.add_parser(
+        "mine", help="mine a policy's failures: sample scenes, cluster failures, turn them into bank scenarios",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Sample scenes (a bank scenario and values of its Scenic parameters, drawn by a VerifAI "
+        "sampler that learns from the outcomes), run the policy on each in a local process pool or on Ray, and "
+        "detect failures: collision (with whom, and how), off road, time-to-collision under a threshold, stall. "
+        "Failures are clustered by scenario, failure class and region of parameter space; a failure counts "
+        "against the policy only if the reference driver avoids it in the same scene. With a writable --bank, "
+        "one failure per cluster is recorded as a bird's-eye video, turned into a Scenic scenario by the D-V2S "
+        "pipeline, checked in the sandbox, kept if it reproduces the failure, and added to the bank with its "
+        "provenance. Rerunning with the same --out resumes (a larger --budget continues the run).",
+        epilog="examples:\n"
+        "  dv2s mine --policy dv2s-ppo --budget 200 --bank my_bank --out out/mine\n"
+        "  dv2s mine --policy rule --sampler halton --scenarios tag:highway --budget 500 --no-convert\n"
+        "  dv2s mine --policy dv2s-ppo --backend ray --address HEAD:6379 --budget 5000 --bank /shared/bank")
+    p.add_argument("--policy", required=True, help="policy spec: rule, idm, keep_lane, random, dv2s-ppo, model.zip, "
+                   "ppo:PATH, module:attr, with ?key=value options")
+    bank_option(p)
+    p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank)")
+    p.add_argument("--budget", type=int, default=200, help="episodes to run (default 200)")
+    p.add_argument("--sampler", default="cross-entropy", choices=["random", "halton", "cross-entropy", "bandit"],
+                   help="VerifAI sampler (default cross-entropy)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sampler and the episodes (default 0)")
+    p.add_argument("--reference", default="rule",
+                   help="driver deciding avoidability (default rule; 'none' skips the check)")
+    p.add_argument("--ttc-threshold", type=float, default=1.0, help="low-TTC failure threshold [s] (default 1)")
+    p.add_argument("--stall-seconds", type=float, default=5.0,
+                   help="seconds standing with nothing in the lane 40 m ahead that count as a stall (default 5)")
+    p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
+    p.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
+    p.add_argument("--address", default=None, help="with --backend ray: the cluster address")
+    p.add_argument("--timeout", type=float, default=None,
+                   help="seconds one episode may take before its worker counts as hung (default 600)")
+    p.add_argument("--batch", type=int, default=None,
+                   help="scenes drawn before outcomes are fed back to the sampler (default 4 per worker)")
+    p.add_argument("--config", help="DV2S-v0 config overrides as JSON (or a .json file)")
+    p.add_argument("--no-convert", action="store_true", help="only find and cluster failures; add nothing to a bank")
+    p.add_argument("--max-conversions", type=int, default=None,
+                   help="convert at most this many clusters, those with most avoidable failures first (default: all)")
+    p.add_argument("--dra", choices=["bev", "openai"], default="bev", help="DRA backend for failure videos")
+    p.add_argument("--sg", choices=["rules", "openai"], default="rules", help="SG backend")
+    llm_options(p)
+    p.add_argument("-k", type=int, default=10, dest="k",
+                   help="scenes the new scenario is run on to check it reproduces the failure (default 10)")
+    p.add_argument("--threshold", type=float, default=0.3,
+                   help="reproduction rate a new scenario needs to be kept (default 0.3)")
+    p.add_argument("--out", default=None, help="run folder (default out/mine)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=_cmd_mine)
 
     p = sub.add_parser("eval", help="SCS/HR (dra), SP (sg) or E2E-SC (e2e) over a labeled folder",
                        description="Evaluate a stage over a folder of videos/descriptions with <name>.label.json "

@@ -182,6 +182,7 @@ class DV2SEnv(AbstractEnv):
         bank_dir: Optional[str] = None,
     ) -> None:
         self._scenario_refs = resolve_scenarios(scenario, bank_dir)
+        self._bank_dir = bank_dir
         self._compiled: Dict[ScenarioRef, CompiledScenario] = {}
         self._stepper: Optional[ExternalStepper] = None
         self._simulation = None
@@ -273,7 +274,9 @@ class DV2SEnv(AbstractEnv):
 
         ``seed`` fixes the scenario choice, the Scenic sample and highway-env's
         randomness. ``options={"scene_seed": s, "scenario": name}`` replays a
-        specific scene (used by traces).
+        specific scene (used by traces); ``options={"params": {name: value}}`` fixes
+        the script's random global parameters (``param x = Range(a, b)``) for this
+        scene (used by failure mining; see ``CompiledScenario.parameter_ranges``).
         """
         self._reset_seed = seed
         self._reset_options = dict(options or {})
@@ -292,7 +295,7 @@ class DV2SEnv(AbstractEnv):
         scene_seed = int(options.get("scene_seed", self.np_random.integers(0, 2**31 - 1)))
         timestep = 1.0 / self.config["policy_frequency"]
         for attempt in range(20):
-            scene = compiled.sample(scene_seed, self.config["max_sample_iterations"])
+            scene = compiled.sample(scene_seed, self.config["max_sample_iterations"], params=options.get("params"))
             road = EventRoad(
                 network=self._network_for(compiled),
                 np_random=np.random.default_rng(scene_seed),
@@ -345,6 +348,8 @@ class DV2SEnv(AbstractEnv):
             "collisions": [],
             "lane_changes": 0,
             "min_ttc": math.inf,
+            "min_ttc_time": None,
+            "min_ttc_with": None,
             "off_road": False,
         }
         self._step_events = []
@@ -375,7 +380,7 @@ class DV2SEnv(AbstractEnv):
                     return ref
             from scenario_bank import scenario_path
 
-            return ScenarioRef(name=name, path=str(scenario_path(name)))
+            return ScenarioRef(name=name, path=str(scenario_path(name, self._bank_dir)))
         if len(self._scenario_refs) == 1:
             return self._scenario_refs[0]
         return self._scenario_refs[int(self.np_random.integers(len(self._scenario_refs)))]
@@ -464,9 +469,10 @@ class DV2SEnv(AbstractEnv):
         if off_road and not self._episode["off_road"]:
             new.append({"time": round(self.time, 6), "kind": "off_road", "actors": ["ego"]})
         self._episode["off_road"] = off_road
-        ttc, _ = time_to_collision(ego, self.road.vehicles + self.road.objects)
+        ttc, other = time_to_collision(ego, self.road.vehicles + self.road.objects)
         self._ttc = ttc
-        self._episode["min_ttc"] = min(self._episode["min_ttc"], ttc)
+        if ttc < self._episode["min_ttc"]:
+            self._episode.update(min_ttc=ttc, min_ttc_time=round(self.time, 6), min_ttc_with=other)
         if self._outcome.status != "running":
             new.append({"time": round(self.time, 6), "kind": f"scenic_{self._outcome.status}",
                         "actors": [], "reason": self._outcome.reason})
@@ -556,6 +562,8 @@ class DV2SEnv(AbstractEnv):
             "collisions": list(episode.get("collisions", [])),
             "lane_changes": int(episode.get("lane_changes", 0)),
             "min_ttc": float(episode.get("min_ttc", math.inf)),
+            "min_ttc_time": episode.get("min_ttc_time"),
+            "min_ttc_with": episode.get("min_ttc_with"),
             "off_road": bool(episode.get("off_road", False)),
             "events": list(self._step_events),
             "scenic_status": self._outcome.status if self._outcome else "running",

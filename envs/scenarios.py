@@ -24,7 +24,7 @@ from envs.errors import ScenarioCompileError, SceneSamplingError, UnsupportedCon
 from scenario_bank.safety import UnsafeScenarioError, check_script
 from scenario_bank.scenic_parse import install_parse_cache
 
-__all__ = ["MODEL", "CompiledScenario", "compile_scenario", "looks_like_source", "runtime_construct_error"]
+__all__ = ["MODEL", "CompiledScenario", "ParamRange", "parameter_ranges", "compile_scenario", "looks_like_source", "runtime_construct_error"]
 
 MODEL = "envs.scenic_highway.model"
 """The Scenic world model every scenario is compiled against."""
@@ -56,12 +56,26 @@ class CompiledScenario:
         """Path of the OpenDRIVE map the scenario uses."""
         return str(self.scenario.params["map"])
 
-    def sample(self, seed: int, max_iterations: int = 2000):
-        """Sample a scene with Scenic's rejection sampler, seeded; raises :class:`SceneSamplingError`."""
+    def parameter_ranges(self) -> Dict[str, "ParamRange"]:
+        """The script's random global parameters that :meth:`sample` can fix, by name.
+
+        ``param x = Range(a, b)`` gives a continuous range, ``DiscreteRange(a, b)`` an
+        integer one, ``Uniform(...)`` over constants a choice. Other distributions
+        (``Normal``, expressions of other random values) are left to the seed.
+        """
+        return parameter_ranges(self.scenario.params)
+
+    def sample(self, seed: int, max_iterations: int = 2000, params: Optional[Dict[str, Any]] = None):
+        """Sample a scene with Scenic's rejection sampler, seeded; raises :class:`SceneSamplingError`.
+
+        ``params`` fixes global parameters (see :meth:`parameter_ranges`) to the given
+        values for this sample only: every object and behaviour that depends on them sees the value.
+        """
         from scenic.core.distributions import RejectionException
 
         random.seed(seed)
         np.random.seed(seed % (2**32))
+        restore = self._condition(params or {})
         try:
             scene, self.last_iterations = self.scenario.generate(maxIterations=max_iterations, verbosity=0)
         except RejectionException:
@@ -72,7 +86,35 @@ class CompiledScenario:
                 f"sampling iterations. Most frequent rejections: {top}. Loosen that requirement, "
                 "widen the ranges it depends on, or raise config['max_sample_iterations']."
             ) from None
+        finally:
+            restore()
         return scene
+
+    def _condition(self, params: Dict[str, Any]):
+        """Condition global parameters to constants; returns the function that undoes it."""
+        from scenic.core.distributions import ConstantSamplable
+
+        if not params:
+            return lambda: None
+        ranges = self.parameter_ranges()
+        unknown = sorted(set(params) - set(ranges))
+        if unknown:
+            raise SceneSamplingError(
+                f"scenario {self.name!r} has no random global parameter {', '.join(map(repr, unknown))}; "
+                f"the parameters that can be fixed are: {', '.join(sorted(ranges)) or 'none'}"
+            )
+        saved = []
+        for key, value in params.items():
+            distribution = self.scenario.params[key]
+            ranges[key].check(key, value, self.name)
+            saved.append((distribution, distribution._conditioned))
+            distribution.conditionTo(ConstantSamplable(value))
+
+        def restore() -> None:
+            for distribution, previous in saved:
+                distribution._conditioned = previous
+
+        return restore
 
     def diagnose_rejections(self, seed: int, trials: int = 200) -> Counter:
         """Sample ``trials`` times without the requirements and count which one rejects."""
@@ -94,6 +136,80 @@ class CompiledScenario:
             if rejection is not None:
                 reasons[_short(str(rejection))] += 1
         return reasons
+
+
+@dataclass(frozen=True)
+class ParamRange:
+    """The values a random global parameter can take.
+
+    ``kind`` is ``"continuous"`` (``low``..``high``), ``"integer"`` (``low``..``high``,
+    whole numbers) or ``"choice"`` (one of ``values``).
+    """
+
+    kind: str
+    low: float = 0.0
+    high: float = 0.0
+    values: Tuple[Any, ...] = ()
+
+    def from_unit(self, u: float) -> Any:
+        """The value at position ``u`` in [0, 1] of the range (samplers work on a unit box)."""
+        u = min(max(float(u), 0.0), 1.0)
+        if self.kind == "continuous":
+            return self.low + u * (self.high - self.low)
+        if self.kind == "integer":
+            return int(min(self.high, self.low + int(u * (self.high - self.low + 1))))
+        return self.values[min(len(self.values) - 1, int(u * len(self.values)))]
+
+    def to_unit(self, value: Any) -> float:
+        """Inverse of :meth:`from_unit` (the centre of the value's cell for discrete kinds)."""
+        if self.kind == "continuous":
+            return 0.0 if self.high == self.low else (float(value) - self.low) / (self.high - self.low)
+        if self.kind == "integer":
+            return (float(value) - self.low + 0.5) / (self.high - self.low + 1)
+        return (self.values.index(value) + 0.5) / len(self.values)
+
+    def check(self, name: str, value: Any, scenario: str) -> None:
+        """Raise :class:`SceneSamplingError` when ``value`` is outside the range."""
+        if self.kind == "choice":
+            ok = value in self.values
+        else:
+            try:
+                ok = self.low - 1e-9 <= float(value) <= self.high + 1e-9
+            except (TypeError, ValueError):
+                ok = False
+        if not ok:
+            allowed = (", ".join(map(repr, self.values)) if self.kind == "choice"
+                       else f"{self.low:g}..{self.high:g}")
+            raise SceneSamplingError(
+                f"scenario {scenario!r}: parameter {name!r} = {value!r} is outside its range ({allowed}); "
+                "pass a value inside it"
+            )
+
+    def as_dict(self) -> Dict[str, Any]:
+        """JSON-safe form."""
+        if self.kind == "choice":
+            return {"kind": self.kind, "values": list(self.values)}
+        return {"kind": self.kind, "low": self.low, "high": self.high}
+
+
+def parameter_ranges(params: Dict[str, Any]) -> Dict[str, ParamRange]:
+    """The :class:`ParamRange` of every global parameter in ``params`` that has one."""
+    from scenic.core.distributions import DiscreteRange, Options, Range
+
+    ranges: Dict[str, ParamRange] = {}
+    for key, value in params.items():
+        kind = type(value)
+        if kind is Range and _constant(value.low) and _constant(value.high):
+            ranges[key] = ParamRange("continuous", float(value.low), float(value.high))
+        elif kind is DiscreteRange and value.weights is None and _constant(value.low) and _constant(value.high):
+            ranges[key] = ParamRange("integer", int(value.low), int(value.high))
+        elif kind is Options and value.options and all(_constant(o) for o in value.options):
+            ranges[key] = ParamRange("choice", values=tuple(value.options))
+    return ranges
+
+
+def _constant(value: Any) -> bool:
+    return isinstance(value, (int, float, str, bool))
 
 
 def _short(text: str, limit: int = 160) -> str:

@@ -89,14 +89,19 @@ def make_eval_env(scenarios: Optional[Sequence[str]] = None, config: Optional[Di
 
 
 def run_episode(env: gym.Env, policy: Policy, scenario: str, seed: int, deterministic: bool = True,
-                frames: Optional[List[np.ndarray]] = None) -> Tuple[EpisodeResult, Any]:
+                frames: Optional[List[np.ndarray]] = None,
+                params: Optional[Dict[str, Any]] = None) -> Tuple[EpisodeResult, Any]:
     """Run ``policy`` (bound to ``env``) for one episode of ``scenario`` with ``seed``.
 
     Returns the result and the episode's :class:`~envs.trace.EpisodeTrace`. When
     ``frames`` is a list, rendered frames are appended to it (the env needs a render mode).
+    ``params`` fixes the script's random global parameters (failure mining's scene features).
     """
     base = env.unwrapped
-    observation, info = env.reset(seed=int(seed), options={"scenario": scenario})
+    options: Dict[str, Any] = {"scenario": scenario}
+    if params:
+        options["params"] = dict(params)
+    observation, info = env.reset(seed=int(seed), options=options)
     policy.reset(0)
     if isinstance(policy, Policy):  # a stochastic policy acts alike on the same episode, whatever ran before
         policy.seed(int(seed))
@@ -128,6 +133,7 @@ def run_episode(env: gym.Env, policy: Policy, scenario: str, seed: int, determin
         off_road=off_road, success=not collided and not off_road and travelled >= SUCCESS_MIN_DISTANCE,
         min_ttc=float(info["min_ttc"]), mean_speed=float(np.mean(speeds)) if speeds else 0.0,
         distance=travelled, episode_return=total, steps=steps, trajectory_hash=trajectory_hash(trace),
+        extra={"min_ttc_time": info.get("min_ttc_time"), "min_ttc_with": info.get("min_ttc_with")},
     )
     return result, trace
 

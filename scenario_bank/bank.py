@@ -743,6 +743,31 @@ class Bank:
             "content_hash": content_hash(script),
         }
 
+    def copy_to(self, dest: PathLike) -> "Bank":
+        """A writable copy of every entry in ``dest`` (a new or empty folder), made atomically.
+
+        This is how a run starts a bank of its own from the read-only shipped bank.
+        """
+        dest = Path(dest)
+        if dest.exists() and (not dest.is_dir() or any(dest.iterdir())):
+            raise BankError(f"cannot copy the bank into {dest}: it exists and is not an empty folder; "
+                            "pass a new folder, or use that bank as it is")
+        staging = dest.parent / f".{dest.name}.copy-{uuid.uuid4().hex[:12]}"
+        try:
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            staging.mkdir()
+            for entry in self:
+                shutil.copytree(entry.script_path.parent, staging / entry.name)
+            if (self.root / LEGACY_INDEX).is_file():
+                shutil.copy2(self.root / LEGACY_INDEX, staging / LEGACY_INDEX)
+            if dest.exists():
+                dest.rmdir()
+            os.rename(staging, dest)
+        except OSError as error:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise _write_error(error, dest) from None
+        return Bank(dest)
+
     def remove(self, name: str) -> None:
         """Remove an entry atomically."""
         self._check_writable("remove a scenario")

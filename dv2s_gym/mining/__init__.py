@@ -1,1 +1,2 @@
-"""Closed-loop failure mining: find a policy's failures, turn them into bank scenarios."""
+"""Closed-loop failure mining: sample scenes, run a policy, find and cluster its failures,
+turn them into new bank scenarios (``dv2s mine``), and fine-tune on them (``dv2s loop``)."""

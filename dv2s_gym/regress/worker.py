@@ -32,7 +32,7 @@ from typing import Any, Dict, Optional, Tuple
 if "numpy" not in sys.modules:  # a fresh worker process (e.g. Ray's): one BLAS/OpenMP thread per worker
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-__all__ = ["run_task", "task_id", "trace_filename", "error_result", "clear_caches"]
+__all__ = ["run_task", "task_id", "trace_filename", "error_result", "clear_caches", "env_for", "policy_for", "drop_env"]
 
 _ENVS: Dict[Tuple[Optional[str], str], Any] = {}
 _POLICIES: Dict[Tuple[str, Optional[str], str], Any] = {}
@@ -58,7 +58,8 @@ def _config_key(config: Optional[Dict[str, Any]]) -> str:
     return json.dumps(config or {}, sort_keys=True, default=str)
 
 
-def _env_for(bank_dir: Optional[str], config: Optional[Dict[str, Any]]):
+def env_for(bank_dir: Optional[str], config: Optional[Dict[str, Any]]):
+    """This process's cached env for a bank and env config: ``(cache key, env)``."""
     key = (bank_dir, _config_key(config))
     env = _ENVS.get(key)
     if env is None:
@@ -71,7 +72,8 @@ def _env_for(bank_dir: Optional[str], config: Optional[Dict[str, Any]]):
     return key, env
 
 
-def _policy_for(spec: str, env_key: Tuple[Optional[str], str], env):
+def policy_for(spec: str, env_key: Tuple[Optional[str], str], env):
+    """This process's cached policy ``spec``, bound to the env cached under ``env_key``."""
     key = (spec, *env_key)
     policy = _POLICIES.get(key)
     if policy is None:
@@ -83,7 +85,7 @@ def _policy_for(spec: str, env_key: Tuple[Optional[str], str], env):
     return policy
 
 
-def _drop(env_key: Tuple[Optional[str], str]) -> None:
+def drop_env(env_key: Tuple[Optional[str], str]) -> None:
     """Forget an env (and the policies bound to it) after an exception left it in an unknown state."""
     env = _ENVS.pop(env_key, None)
     for key in [k for k in _POLICIES if k[1:] == env_key]:
@@ -98,21 +100,30 @@ def _drop(env_key: Tuple[Optional[str], str]) -> None:
 def clear_caches() -> None:
     """Close every cached env and forget the loaded policies."""
     for key in list(_ENVS):
-        _drop(key)
+        drop_env(key)
 
 
 def run_task(task: Dict[str, Any]) -> Dict[str, Any]:
-    """Run one episode described by ``task`` (see the module docstring) and return its result dict."""
+    """Run one episode described by ``task`` (see the module docstring) and return its result dict.
+
+    A task with ``"kind": "mine"`` is a failure-mining episode
+    (:func:`dv2s_gym.mining.worker.run_mine_task`); the pools serve both kinds.
+    """
     from policies.evaluation import run_episode
+
+    if task.get("kind") == "mine":
+        from dv2s_gym.mining.worker import run_mine_task
+
+        return run_mine_task(task)
 
     env_key = None
     try:
-        env_key, env = _env_for(task.get("bank_dir"), task.get("env_config"))
-        policy = _policy_for(task["policy"], env_key, env)
+        env_key, env = env_for(task.get("bank_dir"), task.get("env_config"))
+        policy = policy_for(task["policy"], env_key, env)
         result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
     except Exception as error:  # reported as an error episode, never dropped
         if env_key is not None:
-            _drop(env_key)
+            drop_env(env_key)
         message = " ".join(f"{type(error).__name__}: {error}".split())
         if os.environ.get("DV2S_DEBUG"):
             message += "\n" + traceback.format_exc()

@@ -1,0 +1,438 @@
+"""``dv2s mine``: sample scenes, run a policy on them, keep and cluster its failures.
+
+The run is a folder (``out``)::
+
+    settings.json     what the run mines (policy, sampler, seed, scenarios, bank, env config, monitors)
+    episodes.jsonl    one record per finished episode, appended and fsynced as it arrives
+    sampler.pkl       the sampler's state after the last chunk whose outcomes it was fed
+    traces/           the trace of every failed episode
+    failures/         per converted cluster: failure video, trace and the D-V2S conversion
+    conversions.jsonl one record per converted cluster
+    report.json/.md/.html
+
+Episodes run in chunks of ``batch`` scenes: the sampler draws a chunk, the backend
+runs it on its workers, and the outcomes are fed back (in index order, so a run is
+deterministic for a given seed and batch) before the next chunk is drawn. A run killed
+at any point and started again with the same ``out`` loses no finished episode: the
+sampler is restored from its checkpoint (or rebuilt by feeding it the recorded outcomes),
+the chunk in progress is drawn again, and only its missing episodes run.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, Iterator, List, Optional, Sequence
+
+import numpy as np
+
+from dv2s_gym.mining.cluster import cluster_failures, group
+from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
+from dv2s_gym.mining.samplers import SAMPLERS, SceneSampler, make_sampler
+from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
+
+__all__ = ["MineRun", "mine", "read_records", "episode_seed", "SETTINGS_VERSION"]
+
+SETTINGS_VERSION = 1
+_RESUME_KEYS = ("policy", "sampler", "seed", "batch", "scenarios", "bank_dir", "env_config", "reference",
+                "ttc_threshold", "stall_seconds")
+
+
+@dataclass
+class MineRun:
+    """What a mining run found (the run folder holds everything, this is a summary)."""
+
+    out: Path
+    settings: Dict[str, Any]
+    records: List[Dict[str, Any]]
+    clusters: Dict[int, str]
+    conversions: List[Dict[str, Any]] = field(default_factory=list)
+    reports: Dict[str, Path] = field(default_factory=dict)
+    seconds: float = 0.0
+
+    @property
+    def failures(self) -> List[Dict[str, Any]]:
+        """Records of failed episodes."""
+        return [r for r in self.records if r.get("failure") and not r.get("error")]
+
+    @property
+    def avoidable(self) -> List[Dict[str, Any]]:
+        """Failures the reference driver avoided in the same scene (they count against the policy)."""
+        return [r for r in self.failures if r.get("avoidable") is not False]
+
+    @property
+    def distinct_clusters(self) -> int:
+        """Distinct failure clusters."""
+        return len(set(self.clusters.values()))
+
+    def summary(self) -> str:
+        """A few lines for the terminal: episodes, failures, clusters, conversions."""
+        from collections import Counter
+
+        errors = sum(1 for r in self.records if r.get("error"))
+        failures = self.failures
+        kinds = Counter(r["failure"]["kind"] for r in failures)
+        avoidable_clusters = {self.clusters[int(r["index"])] for r in self.avoidable}
+        status = Counter(c.get("status") for c in self.conversions)
+        lines = [
+            f"{len(self.records)} episodes of {self.settings['policy']} ({self.settings['sampler']} sampler), "
+            f"{errors} errors, {self.seconds:.0f} s",
+            f"{len(failures)} failures ({', '.join(f'{k} {n}' for k, n in kinds.most_common()) or 'none'}); "
+            f"{len(self.avoidable)} avoidable by {self.settings['reference'] or 'no reference'}",
+            f"{self.distinct_clusters} distinct clusters, {len(avoidable_clusters)} with avoidable failures",
+        ]
+        if self.conversions:
+            lines.append(f"converted {len(self.conversions)}: kept {status.get('kept', 0)}, merged "
+                         f"{status.get('merged', 0)}, rejected {status.get('rejected', 0)}")
+        return "\n".join(lines)
+
+
+def episode_seed(seed: int, index: int) -> int:
+    """The env seed of episode ``index`` of a run seeded ``seed`` (distinct per index, below 2**31)."""
+    return int(np.random.SeedSequence([int(seed), int(index), 0x6D696E65]).generate_state(1)[0] % (2**31 - 1))
+
+
+def read_records(path: Path) -> List[Dict[str, Any]]:
+    """The records of an ``episodes.jsonl`` (a torn last line, left by a kill mid-write, is dropped)."""
+    records: Dict[int, Dict[str, Any]] = {}
+    if not path.is_file():
+        return []
+    lines = path.read_bytes().split(b"\n")
+    for number, line in enumerate(lines):
+        if not line.strip():
+            continue
+        try:
+            record = json.loads(line)
+        except json.JSONDecodeError:
+            if number >= len(lines) - 2:  # the last line: an interrupted append
+                continue
+            raise MiningError(f"{path}, line {number + 1} is corrupt; remove that line to resume the run") from None
+        records[int(record["index"])] = record
+    return [records[i] for i in sorted(records)]
+
+
+@contextmanager
+def _run_lock(out: Path) -> Iterator[None]:
+    handle = open(out / ".lock", "a+")
+    try:
+        try:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise MiningError(f"another miner is running in {out}; wait for it or pass another --out") from None
+        yield
+    finally:
+        handle.close()
+
+
+class _Appender:
+    """Appends JSON lines to a file, each flushed and fsynced before it counts as written."""
+
+    def __init__(self, path: Path) -> None:
+        self._path = path
+        if path.is_file() and path.stat().st_size:
+            with open(path, "rb+") as handle:  # drop a torn last line so the next record starts clean
+                data = handle.read()
+                if not data.endswith(b"\n"):
+                    handle.truncate(data.rfind(b"\n") + 1)
+        self._handle = open(path, "ab")
+
+    def append(self, record: Dict[str, Any]) -> None:
+        self._handle.write(json.dumps(record, sort_keys=True, default=str).encode("utf-8") + b"\n")
+        self._handle.flush()
+        os.fsync(self._handle.fileno())
+
+    def close(self) -> None:
+        self._handle.close()
+
+
+def _settings(policy: str, sampler: str, seed: int, batch: int, scenarios: List[str], bank_dir: Optional[str],
+              env_config: Dict[str, Any], reference: Optional[str], ttc_threshold: float, stall_seconds: float,
+              budget: int, space_description: Dict[str, Any]) -> Dict[str, Any]:
+    return {
+        "schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, "sampler": sampler, "seed": int(seed),
+        "batch": int(batch), "scenarios": scenarios, "bank_dir": bank_dir, "env_config": env_config,
+        "reference": reference, "ttc_threshold": float(ttc_threshold), "stall_seconds": float(stall_seconds),
+        "budget": int(budget), "space": space_description,
+    }
+
+
+def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path) -> None:
+    different = [k for k in _RESUME_KEYS if saved.get(k) != settings.get(k)]
+    if different:
+        detail = "; ".join(f"{k}: run has {saved.get(k)!r}, asked {settings.get(k)!r}" for k in different[:3])
+        raise MiningError(f"{out} holds a mining run with other settings ({detail}); resume it with the same "
+                          "settings or pass another --out")
+
+
+def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[int, Dict[str, Any]],
+                     batch: int) -> SceneSampler:
+    """The sampler after every complete chunk already in ``records``: from its checkpoint when that is
+    current, else rebuilt by drawing the chunks again and feeding their recorded outcomes."""
+    complete = 0
+    while all(i in records for i in range(complete * batch, (complete + 1) * batch)):
+        complete += 1
+    checkpoint = out / "sampler.pkl"
+    if checkpoint.is_file():
+        try:
+            sampler = SceneSampler.loads(checkpoint.read_bytes())
+        except Exception:
+            sampler = None
+        if sampler is not None and sampler.fed == complete * batch:
+            return sampler
+    sampler = make_sampler(settings["sampler"], space.feature_space, settings["seed"])
+    for chunk in range(complete):
+        drawn = sampler.draw(batch)
+        for offset, (point, info) in enumerate(drawn):
+            index = chunk * batch + offset
+            spec = space.decode(point)
+            if spec.scenario != records[index]["scenario"] or spec.params != records[index]["params"]:
+                raise MiningError(f"{out}: episode {index} in episodes.jsonl does not match the sampler's draw "
+                                  "(the run was made by another version); pass another --out")
+            sampler.feed(point, info, _rho(records[index]))
+    return sampler
+
+
+def _rho(record: Dict[str, Any]) -> float:
+    rho = record.get("rho")
+    return 1.0 if rho is None or record.get("error") else float(rho)
+
+
+def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cross-entropy",
+         scenarios: Optional[Sequence[str]] = None, bank_dir: Optional[str] = None, backend: str = "local",
+         workers: Optional[int] = None, address: Optional[str] = None, seed: int = 0,
+         reference: Optional[str] = "rule", batch: Optional[int] = None, timeout: Optional[float] = None,
+         progress: bool = True, env_config: Optional[Dict[str, Any]] = None,
+         ttc_threshold: float = DEFAULT_TTC_THRESHOLD, stall_seconds: float = DEFAULT_STALL_SECONDS,
+         convert: bool = False, convert_options: Optional[Dict[str, Any]] = None,
+         max_conversions: Optional[int] = None, reports: bool = True) -> MineRun:
+    """Mine ``policy``'s failures over ``budget`` episodes; resumable (same ``out``).
+
+    Args:
+        policy: the policy spec (:func:`policies.registry.load_policy`).
+        out: the run folder (created; an existing run with the same settings is resumed
+            and may be given a larger budget).
+        budget: episodes to run in total.
+        sampler: one of :data:`~dv2s_gym.mining.samplers.SAMPLERS`.
+        scenarios: bank names or ``tag:<tag>`` (``None``: the whole bank).
+        bank_dir: the bank folder (``None``: the shipped bank).
+        backend, workers, address, timeout: where episodes run (as ``dv2s regress``:
+            a local process pool or Ray); a worker that crashes or hangs longer than
+            ``timeout`` seconds on one episode is replaced and the episode retried once.
+        seed: seeds the sampler and every episode.
+        reference: the driver that decides avoidability (``None``: skip the check).
+        batch: scenes drawn per chunk before outcomes are fed back (default 4 per worker).
+        env_config: DV2S-v0 config overrides.
+        ttc_threshold, stall_seconds: monitor settings (:mod:`dv2s_gym.mining.monitors`).
+        convert: turn one failure per avoidable cluster into a bank scenario
+            (:mod:`dv2s_gym.mining.convert`; ``convert_options`` are passed on). ``bank_dir``
+            must then be a writable bank; a new or empty folder starts as a copy of the shipped bank; at most ``max_conversions`` clusters, largest first.
+        reports: write report.json, report.md and report.html at the end.
+    """
+    from dv2s_gym.mining.space import SceneSpace
+    from dv2s_gym.regress.backends import default_workers, get_backend
+    from dv2s_gym.regress.errors import RegressError
+
+    started = time.perf_counter()
+    if int(budget) < 1:
+        raise MiningError(f"--budget must be at least 1 episode, not {budget}")
+    if sampler not in SAMPLERS:
+        raise MiningError(f"unknown sampler {sampler!r}: use one of {', '.join(SAMPLERS)}")
+    from policies.registry import load_policy
+
+    load_policy(policy)  # an unknown spec or broken checkpoint fails here, in one line, before any worker starts
+    if reference:
+        load_policy(reference)
+    out = Path(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "traces").mkdir(exist_ok=True)
+    except OSError as error:
+        raise MiningError(f"cannot create the run folder {out}: {error.strerror}; pass a writable --out") from None
+    if convert and not bank_dir:
+        raise MiningError("converting failures adds scenarios to a bank, and the shipped bank is read-only: pass "
+                          "--bank DIR (a new folder starts as a copy of the shipped bank), or --no-convert")
+    bank_dir = str(Path(bank_dir).resolve()) if bank_dir else None
+    if convert and not _has_entries(Path(bank_dir)):
+        from scenario_bank.bank import Bank
+
+        Bank().copy_to(bank_dir)  # a bank of one's own starts as the shipped one
+    env_config = dict(env_config or {})
+    n_workers = int(workers) if workers else (1 if backend == "local" and default_workers() < 2 else
+                                              default_workers())
+    with _run_lock(out):
+        settings_path = out / "settings.json"
+        saved = json.loads(settings_path.read_text()) if settings_path.is_file() else None
+        names = saved["scenarios"] if saved and scenarios is None else None
+        space = SceneSpace(names or scenarios, bank_dir)
+        batch = int(batch) if batch else (saved["batch"] if saved else 4 * n_workers)
+        if batch < 1:
+            raise MiningError(f"--batch must be at least 1, not {batch}")
+        settings = _settings(policy, sampler, seed, batch, space.scenarios, bank_dir, env_config, reference,
+                             ttc_threshold, stall_seconds, budget, space.describe())
+        if saved is not None:
+            _check_resume(saved, settings, out)
+        atomic_write_json(settings_path, settings)
+        done = {int(r["index"]): r for r in read_records(out / "episodes.jsonl")}
+        scene_sampler = _restore_sampler(out, settings, space, done, batch)
+        appender = _Appender(out / "episodes.jsonl")
+        bar = _progress(progress, budget, len([i for i in done if i < budget]))
+        try:
+            pool = get_backend(backend, workers=n_workers, address=address, timeout=timeout)
+        except RegressError as error:
+            appender.close()
+            raise MiningError(str(error)) from None
+        try:
+            with pool:
+                chunk = scene_sampler.fed // batch
+                while chunk * batch < budget:
+                    drawn = scene_sampler.draw(batch)
+                    indices = range(chunk * batch, chunk * batch + batch)
+                    specs = {i: space.decode(point) for i, (point, _) in zip(indices, drawn)}
+                    tasks = [_task(i, specs[i], policy, reference, settings, out) for i in indices
+                             if i not in done and i < budget]
+                    by_id = {t["id"]: t for t in tasks}
+
+                    def handle(result: Dict[str, Any]) -> None:
+                        task = by_id[result["id"]]
+                        record = _complete(result, task, specs[task["index"]], sampler, out)
+                        appender.append(record)
+                        done[record["index"]] = record
+                        if bar is not None:
+                            bar.update(1)
+                            failures = [r for r in done.values() if r.get("failure") and not r.get("error")]
+                            bar.set_postfix(failures=len(failures), clusters=len(set(cluster_failures(failures).values())))
+
+                    pool.run(tasks, handle)
+                    if all(i in done for i in indices):
+                        for i, (point, info) in zip(indices, drawn):
+                            scene_sampler.feed(point, info, _rho(done[i]))
+                        atomic_write_bytes(out / "sampler.pkl", scene_sampler.dumps())
+                    chunk += 1
+        finally:
+            appender.close()
+            if bar is not None:
+                bar.close()
+        records = [done[i] for i in sorted(done) if i < budget]
+        run = MineRun(out=out, settings=settings, records=records, clusters=cluster_failures(records))
+        if convert:
+            run.conversions = convert_clusters(run, bank_dir=bank_dir, options=convert_options or {},
+                                               progress=progress, max_conversions=max_conversions)
+        else:
+            run.conversions = _read_jsonl(out / "conversions.jsonl")
+        run.seconds = time.perf_counter() - started
+        if reports:
+            run.reports = _write_reports(out)
+    return run
+
+
+def _task(index: int, spec, policy: str, reference: Optional[str], settings: Dict[str, Any],
+          out: Path) -> Dict[str, Any]:
+    seed = episode_seed(settings["seed"], index)
+    return {
+        "kind": "mine", "role": "mine", "index": index, "id": f"{spec.scenario}/{seed}", "policy": policy,
+        "reference": reference, "scenario": spec.scenario, "seed": seed, "params": spec.params,
+        "env_config": settings["env_config"], "bank_dir": settings["bank_dir"],
+        "trace_dir": str(out / "traces"),
+        "ttc_threshold": settings["ttc_threshold"], "stall_seconds": settings["stall_seconds"],
+    }
+
+
+def _complete(result: Dict[str, Any], task: Dict[str, Any], spec, sampler: str, out: Path) -> Dict[str, Any]:
+    """The episode record from a worker's result (or a backend's error result for a crashed or hung worker)."""
+    record = {
+        "index": task["index"], "policy": task["policy"], "scenario": task["scenario"], "seed": task["seed"],
+        "params": task["params"], "result": None, "failure": None, "rho": None, "reference": None,
+        "avoidable": None, "trace": None, "error": None,
+    }
+    record.update({k: v for k, v in result.items() if k in record and k not in ("index", "params")})
+    record.pop("role", None)
+    record["sampler"] = sampler
+    record["point"] = spec.point
+    if record.get("trace"):
+        record["trace"] = os.path.relpath(record["trace"], out)
+    return record
+
+
+def _has_entries(folder: Path) -> bool:
+    return folder.is_dir() and any(not p.name.startswith(".") for p in folder.iterdir())
+
+
+def _read_jsonl(path: Path) -> List[Dict[str, Any]]:
+    if not path.is_file():
+        return []
+    rows = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            rows.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue  # a torn last line
+    return rows
+
+
+def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str, Any],
+                     progress: bool = True, max_conversions: Optional[int] = None) -> List[Dict[str, Any]]:
+    """Convert one representative failure per avoidable cluster not converted yet; the conversion records.
+
+    The representative is the cluster's most severe failure (lowest robustness, then
+    lowest index). Clusters with more avoidable failures go first; at most
+    ``max_conversions`` conversions are made in the run (``None``: every cluster). Each conversion is appended to ``conversions.jsonl`` when it ends, so a
+    resumed run converts the remaining clusters only.
+    """
+    from dv2s_gym.mining.convert import convert_failure
+    from scenario_bank.bank import Bank
+
+    if bank_dir is None:
+        raise MiningError("converting failures adds scenarios to a bank: pass a writable bank folder "
+                          "(--bank DIR); the shipped bank is read-only")
+    path = run.out / "conversions.jsonl"
+    existing = _read_jsonl(path)
+    converted = {row["cluster"] for row in existing}
+    candidates = []
+    for cluster, members in sorted(group(run.records).items()):
+        avoidable = [r for r in members if r.get("avoidable") is not False]
+        if cluster in converted or not avoidable:
+            continue
+        representative = min(avoidable, key=lambda r: (float(r.get("rho") or 0.0), int(r["index"])))
+        candidates.append((-len(avoidable), cluster, representative))
+    candidates.sort(key=lambda c: (c[0], c[1]))  # the clusters with most avoidable failures first
+    room = None if max_conversions is None else max(0, int(max_conversions) - len(existing))
+    todo = [(cluster, record) for _, cluster, record in candidates][:room]
+    bank = Bank(bank_dir)
+    appender = _Appender(path)
+    bar = _progress(progress, len(todo), 0, desc="converting")
+    try:
+        for cluster, record in todo:
+            row = convert_failure(dict(record, cluster=cluster), run.out, policy=run.settings["policy"], bank=bank,
+                                  env_config=run.settings["env_config"], **options)
+            row["cluster"] = cluster
+            appender.append(row)
+            existing.append(row)
+            if bar is not None:
+                bar.update(1)
+    finally:
+        appender.close()
+        if bar is not None:
+            bar.close()
+    return existing
+
+
+def _write_reports(out: Path) -> Dict[str, Path]:
+    try:
+        from dv2s_gym.mining.report import write_reports
+    except ImportError:  # the report module is optional while it is being built
+        return {}
+    return write_reports(out)
+
+
+def _progress(enabled: bool, total: int, initial: int, desc: str = "mining"):
+    if not enabled:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, initial=initial, desc=desc, unit="ep", dynamic_ncols=True)

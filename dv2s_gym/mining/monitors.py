@@ -1,0 +1,192 @@
+"""Failure monitors: what went wrong in an episode, when, and with whom.
+
+:func:`detect_failure` reads an episode's :class:`~policies.evaluation.EpisodeResult` and
+its :class:`~envs.trace.EpisodeTrace` and returns the first failure by severity:
+
+- ``collision``: the ego touched another actor; ``with`` names it, ``with_kind`` says what
+  it is, ``collision_type`` how they met (from their headings and positions at impact):
+  ``rear_end`` (the ego ran into the back of an actor going its way), ``struck_from_behind``,
+  ``side``, ``head_on``, ``pedestrian`` or ``obstacle``;
+- ``off_road``: the ego left the road;
+- ``low_ttc``: time-to-collision fell below ``ttc_threshold`` without a collision;
+- ``stall``: the ego stood (speed below :data:`STALL_SPEED`) for ``stall_seconds`` with
+  nothing ahead of it in its lane for :data:`FREE_PATH` metres.
+
+:func:`robustness` turns the outcome into one number for VerifAI's adaptive samplers:
+negative for a failure (the more negative, the worse), positive otherwise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any, Dict, List, Optional
+
+__all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "detect_failure", "robustness",
+           "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
+
+FAILURE_TYPES = ("collision", "off_road", "low_ttc", "stall")
+"""Failure types, most severe first."""
+COLLISION_TYPES = ("rear_end", "struck_from_behind", "side", "head_on", "pedestrian", "obstacle")
+STALL_SPEED = 0.5
+"""m/s under which the ego counts as standing."""
+FREE_PATH = 40.0
+"""Metres ahead of a standing ego that must be empty for it to count as a stall."""
+DEFAULT_TTC_THRESHOLD = 1.0
+DEFAULT_STALL_SECONDS = 5.0
+_LANE_HALF_WIDTH = 2.0
+
+
+@dataclass
+class Failure:
+    """One failure of an episode (see the module docstring for the fields' meaning)."""
+
+    type: str
+    time: float
+    step: int
+    with_: Optional[str] = None
+    with_kind: Optional[str] = None
+    collision_type: Optional[str] = None
+    min_ttc: Optional[float] = None
+    speed: Optional[float] = None
+    """The ego's speed [m/s] at the failure."""
+
+    @property
+    def kind(self) -> str:
+        """``type`` refined by the collision type: the failure class a reproduction must show."""
+        return f"{self.type}:{self.collision_type}" if self.collision_type else self.type
+
+    def to_json(self) -> Dict[str, Any]:
+        """JSON-safe dict; ``with_`` is stored as ``with``."""
+        data = asdict(self)
+        data["with"] = data.pop("with_")
+        data["kind"] = self.kind
+        return data
+
+    @classmethod
+    def from_json(cls, data: Dict[str, Any]) -> "Failure":
+        """Inverse of :meth:`to_json`."""
+        data = dict(data)
+        data["with_"] = data.pop("with", None)
+        data.pop("kind", None)
+        return cls(**data)
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def collision_type(ego: List[float], other: List[float], other_kind: Optional[str]) -> str:
+    """How two actors met, from their ``[x, y, heading, speed]`` states at impact."""
+    if other_kind == "pedestrian":
+        return "pedestrian"
+    if other_kind == "obstacle" or (other_kind not in ("car", "truck", "bicycle", "motorcycle", None)):
+        return "obstacle"
+    relative = abs(_wrap(other[2] - ego[2]))
+    if relative > 3 * math.pi / 4:
+        return "head_on"
+    if relative < math.pi / 4:
+        dx, dy = other[0] - ego[0], other[1] - ego[1]
+        ahead = dx * math.cos(ego[2]) + dy * math.sin(ego[2])
+        lateral = -dx * math.sin(ego[2]) + dy * math.cos(ego[2])
+        if abs(lateral) < abs(ahead):
+            return "rear_end" if ahead > 0 else "struck_from_behind"
+    return "side"
+
+
+def _step_at(trace, time: float) -> int:
+    period = 1.0 / float(trace.config.get("policy_frequency", 5))
+    return max(0, min(len(trace.states) - 1, int(round(time / period))))
+
+
+def detect_failure(result, trace, *, ttc_threshold: float = DEFAULT_TTC_THRESHOLD,
+                   stall_seconds: float = DEFAULT_STALL_SECONDS) -> Optional[Failure]:
+    """The episode's failure (see the module docstring), or ``None``."""
+    if result.error is not None:
+        return None
+    if result.collided:
+        for event in trace.events:
+            if event.get("kind") == "collision" and "ego" in event.get("actors", []):
+                others = [a for a in event["actors"] if a != "ego"]
+                other = others[0] if others else None
+                step = _step_at(trace, float(event["time"]))
+                kind = trace.kinds.get(other) if other else None
+                states = trace.states[step]
+                ctype = (collision_type(states["ego"], states[other], kind)
+                         if other in states and "ego" in states else None)
+                return Failure("collision", float(event["time"]), step, other, kind, ctype,
+                               _finite(result.min_ttc), _ego_speed(states))
+        step = len(trace.states) - 1
+        return Failure("collision", step / float(trace.config.get("policy_frequency", 5)), step,
+                       result.collisions[0] if result.collisions else None)
+    if result.off_road:
+        for event in trace.events:
+            if event.get("kind") == "off_road":
+                return Failure("off_road", float(event["time"]), _step_at(trace, float(event["time"])))
+        step = len(trace.states) - 1
+        return Failure("off_road", step / float(trace.config.get("policy_frequency", 5)), step)
+    if result.min_ttc < ttc_threshold:
+        time = result.extra.get("min_ttc_time")
+        time = float(time) if time is not None else 0.0
+        other = result.extra.get("min_ttc_with") or None
+        return Failure("low_ttc", time, _step_at(trace, time), other, trace.kinds.get(other) if other else None,
+                       None, float(result.min_ttc))
+    return _stall(trace, stall_seconds)
+
+
+def _stall(trace, stall_seconds: float) -> Optional[Failure]:
+    period = 1.0 / float(trace.config.get("policy_frequency", 5))
+    needed = max(1, int(math.ceil(stall_seconds / period)))
+    run = 0
+    for step, states in enumerate(trace.states):
+        ego = states.get("ego")
+        if ego is None or ego[3] >= STALL_SPEED or not _path_free(ego, states):
+            run = 0
+            continue
+        run += 1
+        if run >= needed:
+            start = step - needed + 1
+            return Failure("stall", start * period, start)
+    return None
+
+
+def _path_free(ego: List[float], states: Dict[str, List[float]]) -> bool:
+    c, s = math.cos(ego[2]), math.sin(ego[2])
+    for name, other in states.items():
+        if name == "ego":
+            continue
+        dx, dy = other[0] - ego[0], other[1] - ego[1]
+        ahead, lateral = dx * c + dy * s, -dx * s + dy * c
+        if 0 < ahead < FREE_PATH and abs(lateral) < _LANE_HALF_WIDTH:
+            return False
+    return True
+
+
+def _ego_speed(states: Dict[str, List[float]]) -> Optional[float]:
+    return float(states["ego"][3]) if "ego" in states else None
+
+
+def _finite(value: float) -> Optional[float]:
+    return float(value) if math.isfinite(value) else None
+
+
+def robustness(result, failure: Optional[Failure], ttc_threshold: float = DEFAULT_TTC_THRESHOLD) -> float:
+    """One number per episode for the adaptive samplers: below 0 exactly when ``failure`` is set.
+
+    A collision scores ``-1 - (ego speed at impact) / 10``, leaving the road ``-1``, a stall ``-0.5``,
+    a low TTC ``ttc - threshold``; an episode without failure scores its smallest TTC above
+    the threshold (capped at 10 s), so near misses rank before easy scenes.
+    """
+    if result.error is not None:
+        return 0.0
+    if failure is not None:
+        if failure.type == "collision":
+            speed = failure.speed if failure.speed is not None else result.mean_speed
+            return -1.0 - float(speed) / 10.0
+        if failure.type == "off_road":
+            return -1.0
+        if failure.type == "stall":
+            return -0.5
+        return min(-1e-3, float(result.min_ttc) - ttc_threshold)
+    ttc = result.min_ttc if math.isfinite(result.min_ttc) else 10.0
+    return max(1e-3, min(ttc, 10.0) - ttc_threshold)

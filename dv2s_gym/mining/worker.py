@@ -1,0 +1,94 @@
+"""One failure-mining episode in a worker process: :func:`run_mine_task`.
+
+A mining task is a plain dict (shipped to the regression process pool or Ray, whose
+``run_task`` hands ``"kind": "mine"`` tasks here):
+
+- ``kind``: ``"mine"``; ``role``: ``"mine"``; ``index``: the episode's index in the run;
+- ``policy``: policy spec; ``reference``: the reference driver's spec (``None``: no
+  avoidability check);
+- ``scenario``, ``seed``, ``params``: the scene (see :mod:`dv2s_gym.mining.space`);
+- ``env_config``, ``bank_dir``; ``trace_dir``: the folder for a failed episode's trace
+  (``<index>.json.gz``; the Ray backend swaps in a local folder and ships the file back);
+- ``ttc_threshold``, ``stall_seconds``: monitor settings.
+
+The result is the episode record of the run's ``episodes.jsonl`` without the sampler
+fields (the miner adds those). The policy's episode and, when it failed, the reference
+driver's episode on the same scene run here, so a record is complete when it arrives.
+"""
+
+from __future__ import annotations
+
+import os
+import traceback
+from typing import Any, Dict, Optional
+
+from dv2s_gym.mining.monitors import FAILURE_TYPES, detect_failure, robustness
+
+__all__ = ["run_mine_task", "reference_avoids", "trace_name"]
+
+
+def trace_name(index: int) -> str:
+    """File name of the trace of failed episode ``index`` in a run's ``traces/`` folder."""
+    return f"{index:06d}.json.gz"
+
+
+def reference_avoids(failure: Optional[Dict[str, Any]], reference_failure: Optional[Dict[str, Any]]) -> bool:
+    """True when the reference driver's outcome is less severe than the policy's failure."""
+    if failure is None:
+        return True
+    if reference_failure is None:
+        return True
+    return FAILURE_TYPES.index(reference_failure["type"]) > FAILURE_TYPES.index(failure["type"])
+
+
+def _episode(task: Dict[str, Any], spec: str):
+    from dv2s_gym.regress.worker import drop_env, env_for, policy_for
+    from policies.evaluation import run_episode
+
+    env_key = None
+    try:
+        env_key, env = env_for(task.get("bank_dir"), task.get("env_config"))
+        policy = policy_for(spec, env_key, env)
+        return run_episode(env, policy, task["scenario"], int(task["seed"]), params=task.get("params") or None)
+    except Exception:
+        if env_key is not None:
+            drop_env(env_key)
+        raise
+
+
+def run_mine_task(task: Dict[str, Any]) -> Dict[str, Any]:
+    """Run the policy (and, if it failed, the reference driver) on the task's scene; the episode record."""
+    record: Dict[str, Any] = {
+        "index": int(task["index"]), "role": "mine", "id": f"{task['scenario']}/{int(task['seed'])}",
+        "policy": task["policy"], "scenario": task["scenario"], "seed": int(task["seed"]),
+        "params": dict(task.get("params") or {}), "result": None, "failure": None, "rho": None,
+        "reference": None, "avoidable": None, "trace": None, "error": None,
+    }
+    monitor = {"ttc_threshold": float(task.get("ttc_threshold", 1.0)),
+               "stall_seconds": float(task.get("stall_seconds", 5.0))}
+    try:
+        result, trace = _episode(task, task["policy"])
+        failure = detect_failure(result, trace, **monitor)
+        record["result"] = result.to_json()
+        record["failure"] = failure.to_json() if failure else None
+        record["rho"] = robustness(result, failure, monitor["ttc_threshold"])
+        if failure is not None:
+            if task.get("trace_dir"):
+                path = os.path.join(task["trace_dir"], trace_name(int(task["index"])))
+                trace.save(path)
+                record["trace"] = path
+            if task.get("reference"):
+                ref_result, ref_trace = _episode(task, task["reference"])
+                ref_failure = detect_failure(ref_result, ref_trace, **monitor)
+                record["reference"] = {
+                    "policy": task["reference"], "failure": ref_failure.to_json() if ref_failure else None,
+                    "trajectory_hash": ref_result.trajectory_hash, "collided": ref_result.collided,
+                    "min_ttc": ref_result.to_json()["min_ttc"],
+                }
+                record["avoidable"] = reference_avoids(record["failure"], record["reference"]["failure"])
+    except Exception as error:  # reported in the record, never dropped
+        message = " ".join(f"{type(error).__name__}: {error}".split())
+        if os.environ.get("DV2S_DEBUG"):
+            message += "\n" + traceback.format_exc()
+        record["error"] = message
+    return record
