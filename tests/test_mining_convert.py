@@ -1,7 +1,7 @@
 """From a mined failure to a bank entry: the failure video, the conversion, its rejections and merges.
 
-Failure records are made here the way the miner writes them (an episode of the ``keep_lane`` policy,
-which drives at constant speed and runs into what stands in its lane), with a minimal failure dict.
+Failure records come from the miner's worker (an episode of the ``keep_lane`` policy, which drives at
+constant speed and runs into what stands in its lane, on a scene with fixed Scenic parameters).
 """
 
 from __future__ import annotations
@@ -15,31 +15,29 @@ from dv2s_gym.mining.convert import convert_failure, reproduction_seeds, same_fa
 from dv2s_gym.mining.failure_video import FailureReplayError, record_failure_video, write_failure_video
 from dv2s_gym.pipeline.video import read_video
 from envs.trace import EpisodeTrace
-from policies.evaluation import make_eval_env, run_episode, trajectory_hash
-from policies.registry import load_policy
+from policies.evaluation import trajectory_hash
 from scenario_bank.bank import Bank
 
 SCENARIO = "highway_lead_vehicle_stopped"
 
 
-def make_record(scenario: str, seed: int, policy: str = "keep_lane", index: int = 0) -> dict:
-    """An episode record of the mining contract for one failed episode (failure: its first ego collision)."""
-    env = make_eval_env([scenario])
-    try:
-        bound = load_policy(policy)
-        bound.bind([env])
-        result, trace = run_episode(env, bound, scenario, seed)
-    finally:
-        env.close()
-    event = next(e for e in trace.events if e["kind"] == "collision" and "ego" in e["actors"])
-    return {"index": index, "sampler": "random", "policy": policy, "scenario": scenario, "seed": seed, "params": {},
-            "result": result.to_json(), "failure": {"type": "collision", "time": event["time"]},
-            "rho": -1.0, "reference": None, "avoidable": None, "trace": None, "error": None}
+PARAMS = {"ego_speed": 25.0, "stopped_gap": 90.0, "traffic_speed": 23.0}
+
+
+def make_record(scenario: str, seed: int, params: dict, policy: str = "keep_lane", index: int = 0) -> dict:
+    """The miner's episode record of one scene (its worker runs the episode and the failure monitors)."""
+    from dv2s_gym.mining.worker import run_mine_task
+
+    record = run_mine_task({"kind": "mine", "role": "mine", "index": index, "policy": policy, "reference": None,
+                            "scenario": scenario, "seed": seed, "params": params, "env_config": {},
+                            "bank_dir": None, "trace_dir": None, "ttc_threshold": 1.0, "stall_seconds": 5.0})
+    assert record["error"] is None and record["failure"]["type"] == "collision", record
+    return record
 
 
 @pytest.fixture(scope="module")
 def record() -> dict:
-    return make_record(SCENARIO, 0)
+    return make_record(SCENARIO, 0, PARAMS)
 
 
 def _red_pixels(frame: np.ndarray) -> int:
@@ -51,7 +49,8 @@ def _red_pixels(frame: np.ndarray) -> int:
 def test_failure_video_holds_the_window_before_and_through_the_failure(record, tmp_path):
     written = write_failure_video(record, tmp_path / "failure.webm", policy="keep_lane", before=2.0, after=1.0)
     fps = 5  # the env's default policy frequency
-    k = int(np.ceil(record["failure"]["time"] * fps - 1e-6))
+    k = record["failure"]["step"]
+    assert abs(k / fps - record["failure"]["time"]) <= 0.5 / fps
     assert (written.first, written.failure_frame, written.last) == (k - 2 * fps, k, k + fps)
     # the episode ended at the collision: the last second was driven past its end
     assert written.last > record["result"]["steps"]
@@ -124,11 +123,11 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     entry = fresh.get(out["bank_entry"])
     source = entry.source
     assert source["kind"] == "mined" and source["parent"] == SCENARIO and source["seed"] == 0
-    assert source["params"] == record["result"]["params"] and source["params"]["ego_speed"]
+    assert source["params"] == record["result"]["params"] and source["params"]["ego_speed"] == PARAMS["ego_speed"]
     assert source["video"].endswith("failure.webm") and source["policy"] == "keep_lane"
     assert source["backends"] == {"dra": "bev", "sg": "rules"}
     assert source["reproduction"] == repro and source["e2e_sc"] == out["e2e_sc"]
-    assert source["failure"]["type"] == "collision" and source["failure"]["with_kind"] == "car"
+    assert source["failure"] == record["failure"] and source["failure"]["collision_type"] == "rear_end"
     assert source["cluster"] == f"{SCENARIO}/collision/0"
     assert entry.description == out["description"] and "mined" in entry.tags
     assert entry.script == (folder / "conversion" / "scenario.scenic").read_text()
@@ -182,3 +181,14 @@ def test_a_record_without_a_failure_is_rejected_not_raised(record, tmp_path):
     assert out["status"] == "rejected" and out["stage"] == "input"
     out = convert_failure({**record, "seed": 1}, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "video" and "diverged" in out["reason"]
+    out = convert_failure({**record, "params": {"no_such_param": 1}}, tmp_path / "run", policy="keep_lane",
+                          bank=tmp_path / "bank")
+    assert out["status"] == "rejected" and out["stage"] == "video"
+
+
+def test_a_minimal_failure_record_is_completed_from_the_monitors(record, tmp_path):
+    minimal = {**record, "failure": {"type": "collision", "time": record["failure"]["time"]}}
+    out = convert_failure(minimal, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    assert out["status"] == "kept", out["reason"]
+    failure = Bank(tmp_path / "bank").get(out["bank_entry"]).source["failure"]
+    assert failure["with_kind"] == "car" and failure["collision_type"] == "rear_end"

@@ -32,12 +32,11 @@ Nothing raises out of :func:`convert_failure` for a bad failure: every rejection
 from __future__ import annotations
 
 import json
-import math
 import os
 import re
 import time
 from pathlib import Path
-from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple, Union
+from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
 
 import numpy as np
 
@@ -77,47 +76,24 @@ def cluster_slug(cluster: Optional[str], index: Any) -> str:
     return re.sub(r"[^A-Za-z0-9_.\-]+", "_", str(cluster).replace("/", "__")).strip("._")[:120] or "failure"
 
 
-def _fallback_detect(result, trace, **_: Any) -> Optional[Dict[str, Any]]:
-    """Collisions and leaving the road, read off the trace (used until the miner's monitors are installed)."""
-    from dv2s_gym.pipeline.trace_semantics import collision_type
+def _detect(result, trace, options: Mapping[str, Any]) -> Optional[Dict[str, Any]]:
+    """The episode's failure as a dict (the miner's monitors, :func:`dv2s_gym.mining.monitors.detect_failure`)."""
+    from dv2s_gym.mining.monitors import detect_failure
 
-    dt = 1.0 / float((trace.config or {}).get("policy_frequency") or 5)
-    kinds = dict(trace.kinds or {})
-    for event in trace.events:
-        if event.get("kind") == "collision" and "ego" in event.get("actors", []):
-            other = next((a for a in event["actors"] if a != "ego"), None)
-            step = min(len(trace.states) - 1, max(0, int(math.ceil(float(event["time"]) / dt - 1e-6))))
-            typed = None
-            if other is not None and other in trace.states[step]:
-                typed = collision_type(trace.states[step]["ego"], trace.states[step][other])
-                typed = typed.replace("collide_", "")
-            return {"type": "collision", "time": float(event["time"]), "step": step, "with": other,
-                    "with_kind": kinds.get(other), "collision_type": typed, "min_ttc": None}
-        if event.get("kind") == "off_road":
-            return {"type": "off_road", "time": float(event["time"]), "step": None, "with": None,
-                    "with_kind": None, "collision_type": None, "min_ttc": None}
-    return None
+    found = detect_failure(result, trace, **dict(options))
+    return None if found is None else found.to_json()
 
 
-def _detector() -> Callable[..., Any]:
+def _monitor_options(run_dir: Path, monitor: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
+    """The monitor settings: ``monitor`` when given, else the mining run's (``settings.json``), else the defaults."""
+    if monitor is not None:
+        return dict(monitor)
     try:
-        from dv2s_gym.mining.monitors import detect_failure
-    except ImportError:
-        return _fallback_detect
-    return detect_failure
-
-
-def _detect(detector: Callable[..., Any], result, trace, options: Mapping[str, Any]) -> Optional[Dict[str, Any]]:
-    found = detector(result, trace, **dict(options))
-    if found is None:
-        return None
-    if hasattr(found, "to_dict"):
-        return found.to_dict()
-    if isinstance(found, Mapping):
-        return dict(found)
-    from dataclasses import asdict
-
-    return asdict(found)
+        settings = json.loads((run_dir / "settings.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return {key: settings[key] for key in ("ttc_threshold", "stall_seconds")
+            if isinstance(settings, dict) and settings.get(key) is not None}
 
 
 def _policy_name(policy: Any) -> str:
@@ -141,7 +117,7 @@ def _rel(path: Path, root: Path) -> str:
 
 def _reproduce(script_path: Path, *, policy: Any, record_seed: int, k: int, seed: int,
                env_config: Optional[Mapping[str, Any]], source_failure: Mapping[str, Any],
-               detector: Callable[..., Any], monitor: Mapping[str, Any]) -> Tuple[List[Dict[str, Any]], List[Any]]:
+               monitor: Mapping[str, Any]) -> Tuple[List[Dict[str, Any]], List[Any]]:
     """Run ``policy`` on the new scenario over ``k`` derived seeds; per episode its seed, failure and match."""
     from envs.dv2s_env import DV2SEnv
     from policies.evaluation import run_episode
@@ -155,7 +131,7 @@ def _reproduce(script_path: Path, *, policy: Any, record_seed: int, k: int, seed
         episodes, traces = [], []
         for scene_seed in reproduction_seeds(record_seed, k, seed):
             result, trace = run_episode(env, bound, name, scene_seed)
-            failure = _detect(detector, result, trace, monitor)
+            failure = _detect(result, trace, monitor)
             episodes.append({"seed": scene_seed, "failure": failure, "steps": result.steps,
                              "trajectory_hash": result.trajectory_hash,
                              "reproduced": same_failure_class(source_failure, failure)})
@@ -190,7 +166,8 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         env_config: the mining run's env config (the re-run and the reproduction use it).
         bank_dir: the bank holding the record's scenario (default: ``bank`` when it holds it, else the shipped bank).
         cluster: the failure's cluster id (default ``record["cluster"]``).
-        monitor: keyword options of the failure detector (``ttc_threshold``, ``stall_seconds``).
+        monitor: options of the failure monitors (``ttc_threshold``, ``stall_seconds``); default: those in
+            ``run_dir/settings.json``, else the monitors' defaults.
         before, after: seconds of video before and after the failure.
 
     Returns ``{"cluster", "index", "status": "kept"|"merged"|"rejected", "reason", "stage", "video",
@@ -236,8 +213,8 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
                                       before=before, after=after)
         out["video"] = _rel(video, run_dir)
         source_trace = written.trace
-        detector = _detector()
-        detected = _detect(detector, written.result, source_trace, monitor or {})
+        monitor = _monitor_options(run_dir, monitor)
+        detected = _detect(written.result, source_trace, monitor)
         details["source_failure_detected"] = detected
         if detected and detected.get("type") == source_failure["type"]:
             for key, value in detected.items():  # fill what a minimal failure record leaves out
@@ -283,7 +260,7 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
 
         episodes, traces = _reproduce(script_path, policy=policy, record_seed=int(record["seed"]), k=int(k),
                                       seed=seed, env_config=env_config, source_failure=source_failure,
-                                      detector=detector, monitor=monitor or {})
+                                      monitor=monitor)
         reproduced = sum(e["reproduced"] for e in episodes)
         low, high = wilson_interval(reproduced, len(episodes))
         out["reproduction"] = {"k": len(episodes), "reproduced": reproduced, "rate": reproduced / len(episodes),

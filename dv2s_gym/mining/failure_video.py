@@ -17,8 +17,6 @@ are not part of the episode: the trajectory hash is taken, and the trace saved, 
 from __future__ import annotations
 
 import dataclasses
-import inspect
-import math
 import os
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
@@ -48,12 +46,13 @@ def _frequency(config: Mapping[str, Any]) -> float:
 
 def failure_step(failure: Optional[Mapping[str, Any]], steps: int, frequency: float) -> int:
     """The frame index (0 = the reset) showing the failure: the failure's ``step`` when given, else the
-    first frame at or after its ``time``; the last frame when neither is known. Clipped to ``[0, steps]``."""
+    frame nearest its ``time`` (as the miner's monitors count steps); the last frame when neither is
+    known. Clipped to ``[0, steps]``."""
     failure = failure or {}
     if failure.get("step") is not None:
         k = int(failure["step"])
     elif failure.get("time") is not None:
-        k = int(math.ceil(float(failure["time"]) * frequency - 1e-6))
+        k = int(round(float(failure["time"]) * frequency))
     else:
         k = steps
     return max(0, min(steps, k))
@@ -81,12 +80,7 @@ def _check_record(record: Mapping[str, Any]) -> None:
 def _run_episode(env, policy, scenario: str, seed: int, params: Mapping[str, Any], frames):
     from policies.evaluation import run_episode
 
-    if params:
-        if "params" not in inspect.signature(run_episode).parameters:
-            raise FailureReplayError("the record fixes scene parameters but this dv2s-gym's run_episode cannot "
-                                     "condition on them; update dv2s-gym")
-        return run_episode(env, policy, scenario, seed, params=dict(params), frames=frames)
-    return run_episode(env, policy, scenario, seed, frames=frames)
+    return run_episode(env, policy, scenario, seed, frames=frames, params=dict(params) or None)
 
 
 def rerun_failure(record: Mapping[str, Any], *, policy: Any, bank_dir: Optional[PathLike] = None,
