@@ -18,10 +18,16 @@ from envs.trace import EpisodeTrace
 from policies.evaluation import trajectory_hash
 from scenario_bank.bank import Bank
 
-SCENARIO = "highway_lead_vehicle_stopped"
+SCENARIO = "urban_lead_vehicle_stopped"
 
 
-PARAMS = {"ego_speed": 25.0, "stopped_gap": 90.0, "traffic_speed": 23.0}
+
+
+def midpoint(scenario: str) -> dict:
+    """The centre of a scenario's mined parameter space (the miner's scene features)."""
+    from dv2s_gym.mining.space import SceneSpace
+
+    return {name: r.from_unit(0.5) for name, r in SceneSpace([scenario]).param_ranges(scenario).items()}
 
 
 def make_record(scenario: str, seed: int, params: dict, policy: str = "keep_lane", index: int = 0) -> dict:
@@ -37,7 +43,7 @@ def make_record(scenario: str, seed: int, params: dict, policy: str = "keep_lane
 
 @pytest.fixture(scope="module")
 def record() -> dict:
-    return make_record(SCENARIO, 0, PARAMS)
+    return make_record(SCENARIO, 0, midpoint(SCENARIO))
 
 
 def _red_pixels(frame: np.ndarray) -> int:
@@ -123,7 +129,7 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     entry = fresh.get(out["bank_entry"])
     source = entry.source
     assert source["kind"] == "mined" and source["parent"] == SCENARIO and source["seed"] == 0
-    assert source["params"] == record["result"]["params"] and source["params"]["ego_speed"] == PARAMS["ego_speed"]
+    assert source["params"] == record["result"]["params"] and source["params"]["ego_speed"] == record["params"]["ego_speed"]
     assert source["video"].endswith("failure.webm") and source["policy"] == "keep_lane"
     assert source["backends"] == {"dra": "bev", "sg": "rules"}
     assert source["reproduction"] == repro and source["e2e_sc"] == out["e2e_sc"]
