@@ -198,3 +198,27 @@ def test_a_minimal_failure_record_is_completed_from_the_monitors(record, tmp_pat
     assert out["status"] == "kept", out["reason"]
     failure = Bank(tmp_path / "bank").get(out["bank_entry"]).source["failure"]
     assert failure["with_kind"] == "car" and failure["collision_type"] == "rear_end"
+
+
+CONTRACT_KEYS = {"cluster", "index", "status", "reason", "video", "description", "script", "reproduction", "e2e_sc",
+                 "bank_entry", "merged_into", "seconds"}
+
+
+@pytest.mark.slow
+def test_the_miner_converts_a_cluster_into_the_bank(tmp_path):
+    from dv2s_gym.mining.miner import mine
+
+    run = mine("keep_lane", out=tmp_path / "run", budget=4, sampler="random", scenarios=[SCENARIO],
+               bank_dir=str(tmp_path / "bank"), workers=1, reference=None, progress=False, convert=True,
+               max_conversions=1, reports=False)
+    rows = [json.loads(line) for line in (tmp_path / "run" / "conversions.jsonl").read_text().splitlines()]
+    assert len(rows) == 1 and rows[0] == run.conversions[0]
+    row = rows[0]
+    assert CONTRACT_KEYS <= set(row) and row["status"] == "kept", row
+    assert (tmp_path / "run" / row["video"]).is_file() and (tmp_path / "run" / row["script"]).is_file()
+    entry = Bank(tmp_path / "bank").get(row["bank_entry"])
+    assert entry.source["cluster"] == row["cluster"] and entry.source["index"] == row["index"]
+    assert entry.source["run"] == str((tmp_path / "run").resolve())
+    settings = json.loads((tmp_path / "run" / "settings.json").read_text())
+    report = json.loads((tmp_path / "run" / row["script"]).with_name("report.json").read_text())
+    assert report["reproduction"] == row["reproduction"] and settings["ttc_threshold"] == 1.0
