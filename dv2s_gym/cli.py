@@ -513,6 +513,25 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_loop(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from dv2s_gym.mining.loop import DEFAULT_OUT, run_loop
+
+    options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr",
+                                                    "holdout_fraction", "k_eval", "regress_episodes", "mined_share",
+                                                    "margin", "seed", "workers", "scenarios")}
+    out = args.out or DEFAULT_OUT
+    report = run_loop(args.policy, out=out, bank_dir=getattr(args, "bank", None), n_envs=args.envs,
+                      progress=not args.no_progress, **options)
+    print((Path(out) / "report.md").read_text(encoding="utf-8") if (Path(out) / "report.md").is_file() else "")
+    print(f"final policy: {report.policy}")
+    for kind in ("json", "md", "html"):
+        if kind in report.paths:
+            print(f"report ({kind}): {report.paths[kind]}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``dv2s`` (every subcommand has ``--help``)."""
     parser = argparse.ArgumentParser(prog="dv2s", description="dv2s-gym: turn driving videos into Scenic "
@@ -827,6 +846,51 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--vec-env", choices=["subproc", "dummy"], default="subproc",
                    help="subproc: envs in worker processes (default); dummy: in this process")
     p.set_defaults(func=_cmd_train)
+
+    from dv2s_gym.mining.loop import DEFAULTS as LOOP
+
+    p = sub.add_parser("loop", help="mine a policy's failures, add them to the bank, fine-tune, measure (one round "
+                       "on embedded defaults takes a few minutes)",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       description="Closed-loop failure mining. Each round: mine the policy's failures (dv2s mine) "
+                       "into new bank scenarios in a working bank (out/bank, a copy of the shipped bank, or --bank), "
+                       "split them by failure cluster into a fine-tuning and a held-out part, evaluate the policy "
+                       "on the held-out scenarios (seeds 10000+), fine-tune it on the grown bank minus the held-out "
+                       "scenarios (mined ones upweighted), evaluate again on the same episodes (paired: relative "
+                       "drop, exact McNemar) and regression-test new against old on the starting bank (dv2s "
+                       "regress statistics). Writes report.json, report.md, report.html to --out; rerunning with the same "
+                       "--out and settings resumes (raise --rounds to add rounds).",
+                       epilog="examples:\n"
+                       "  dv2s loop                                   # one round on dv2s-ppo, out/loop\n"
+                       "  dv2s loop --budget 400 --fine-tune-steps 100000 --k-eval 10 --out out/loop-big\n"
+                       "  dv2s loop --policy ppo:out/train/my_ppo/model.zip --rounds 3")
+    p.add_argument("--policy", default="dv2s-ppo", help="starting policy: an SB3 checkpoint spec (default dv2s-ppo)")
+    p.add_argument("--rounds", type=int, default=LOOP["rounds"], help=f"rounds (default {LOOP['rounds']})")
+    bank_option(p)
+    p.add_argument("--scenarios", nargs="+", help="scenarios mined and regression-tested (default: the whole bank)")
+    p.add_argument("--budget", type=int, default=LOOP["budget"],
+                   help=f"mining episodes per round (default {LOOP['budget']})")
+    p.add_argument("--sampler", default=LOOP["sampler"], help=f"the miner's sampler (default {LOOP['sampler']})")
+    p.add_argument("--fine-tune-steps", type=int, default=LOOP["fine_tune_steps"],
+                   help=f"env steps of fine-tuning per round (default {LOOP['fine_tune_steps']})")
+    p.add_argument("--fine-tune-lr", type=float, default=LOOP["fine_tune_lr"],
+                   help=f"learning rate of the fine-tuning (default {LOOP['fine_tune_lr']})")
+    p.add_argument("--holdout-fraction", type=float, default=LOOP["holdout_fraction"],
+                   help=f"share of the mined clusters held out (default {LOOP['holdout_fraction']})")
+    p.add_argument("--k-eval", type=int, default=LOOP["k_eval"],
+                   help=f"evaluation seeds per held-out scenario (default {LOOP['k_eval']})")
+    p.add_argument("--regress-episodes", type=int, default=LOOP["regress_episodes"],
+                   help=f"seeds per scenario of the regression test (default {LOOP['regress_episodes']})")
+    p.add_argument("--mined-share", type=float, default=LOOP["mined_share"],
+                   help=f"probability of a mined scenario in fine-tuning (default {LOOP['mined_share']})")
+    p.add_argument("--margin", type=float, default=LOOP["margin"],
+                   help=f"the regression test's non-inferiority margin (default {LOOP['margin']})")
+    p.add_argument("--seed", type=int, default=LOOP["seed"], help=f"seed (default {LOOP['seed']})")
+    p.add_argument("--workers", type=int, default=None, help="processes for mining and evaluation (default: every core)")
+    p.add_argument("--envs", type=int, default=2, help="training environments (default 2)")
+    p.add_argument("--out", default=None, help="loop folder (default out/loop; rerunning resumes it)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=_cmd_loop)
     return parser
 
 
