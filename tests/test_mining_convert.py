@@ -185,6 +185,8 @@ def test_a_script_failing_in_the_sandbox_is_rejected_with_its_stage(record, tmp_
 def test_a_record_without_a_failure_is_rejected_not_raised(record, tmp_path):
     out = convert_failure({**record, "failure": None}, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "input"
+    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank", k=0)
+    assert out["status"] == "rejected" and out["stage"] == "input" and "k >= 1" in out["reason"]
     out = convert_failure({**record, "seed": 1}, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "video" and "diverged" in out["reason"]
     out = convert_failure({**record, "params": {"no_such_param": 1}}, tmp_path / "run", policy="keep_lane",

@@ -199,6 +199,9 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         source_failure = dict(record.get("failure") or {})
         if not source_failure.get("type"):
             raise _Rejected("input", "the record holds no failure (record['failure'] is empty)")
+        if int(k) < 1 or not 0.0 <= float(threshold) <= 1.0:
+            raise _Rejected("input", f"the reproduction check needs k >= 1 and 0 <= threshold <= 1, not k={k}, "
+                                     f"threshold={threshold}")
         if isinstance(bank, (str, os.PathLike)):
             bank = Bank(bank)
         if bank_dir is None and getattr(bank, "root", None) is not None and record.get("scenario") in bank:
