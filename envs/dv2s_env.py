@@ -369,6 +369,7 @@ class DV2SEnv(AbstractEnv):
             scene_seed=scene_seed,
             params=params,
             config=_jsonable({k: v for k, v in self.config.items()}),
+            fixed_params=_jsonable(dict(options.get("params") or {})),
         )
         self._record_state()
 
