@@ -26,10 +26,6 @@ __all__ = ["HeldOutStore", "heldout_task", "evaluate_heldout", "paired_summary",
 
 Episode = Tuple[str, int]
 
-_ENVS: Dict[Tuple[Optional[str], str], Any] = {}
-_POLICIES: Dict[Tuple[str, Optional[str], str], Any] = {}
-
-
 def _detect(result, trace, ttc_threshold: float) -> Optional[Dict[str, Any]]:
     from dv2s_gym.mining.monitors import detect_failure
 
@@ -45,25 +41,18 @@ def heldout_task(task: Mapping[str, Any]) -> Dict[str, Any]:
     record: Dict[str, Any] = {"role": task["role"], "scenario": task["scenario"], "seed": int(task["seed"]),
                               "policy": task["policy"], "failed": None, "failure": None, "result": None,
                               "error": None}
+    env_key = None
     try:
-        from policies.evaluation import make_eval_env, run_episode
-        from policies.registry import load_policy
+        from policies.evaluation import run_episode
+        from policies.worker_cache import drop_env, env_for, policy_for
 
-        env_key = (task.get("bank_dir"), json.dumps(task.get("env_config") or {}, sort_keys=True))
-        env = _ENVS.get(env_key)
-        if env is None:
-            env = _ENVS[env_key] = make_eval_env(None, config=dict(task.get("env_config") or {}),
-                                                 bank_dir=task.get("bank_dir"))
-        policy_key = (task["policy"], *env_key)
-        policy = _POLICIES.get(policy_key)
-        if policy is None:
-            policy = load_policy(task["policy"])
-            policy.bind([env])
-            _POLICIES[policy_key] = policy
+        env_key, env = env_for(task.get("bank_dir"), task.get("env_config"))
+        policy = policy_for(task["policy"], env_key, env)
         result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
         failure = _detect(result, trace, float(task.get("ttc_threshold", 1.0)))
     except Exception as error:  # reported, never counted as a failure of the policy
-        _ENVS.pop(env_key, None) if "env_key" in locals() else None
+        if env_key is not None:
+            drop_env(env_key)
         record["error"] = " ".join(f"{type(error).__name__}: {error}".split())
         return record
     record.update(failed=failure is not None, failure=failure, result=result.to_json())

@@ -42,7 +42,7 @@ def reference_avoids(failure: Optional[Dict[str, Any]], reference_failure: Optio
 
 
 def _episode(task: Dict[str, Any], spec: str):
-    from dv2s_gym.regress.worker import drop_env, env_for, policy_for
+    from policies.worker_cache import drop_env, env_for, policy_for
     from policies.evaluation import run_episode
 
     env_key = None
