@@ -8,10 +8,8 @@ from __future__ import annotations
 import json
 import math
 import re
-import shutil
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +19,7 @@ from dv2s_gym.mining.html import write_html
 from dv2s_gym.mining.report import (SCHEMA, SCHEMA_VERSION, MiningReportError, build_report, format_summary,
                                     markdown, write_reports)
 from envs.errors import DV2SError
+from browser_helpers import body_attributes
 
 POLICY = "rule?action_noise=0.3"
 # (sampler, scenario, u, failure type, avoidable, error); u is the one unit-box coordinate of the scene, the
@@ -357,34 +356,9 @@ def test_strings_from_records_are_escaped(run_dir, tmp_path):
     assert page.count("<script>") == 1
 
 
-INSTALL_HINT = ("Chromium is needed for the HTML report's browser test: run scripts/setup.sh as root, or "
-                "`sudo apt-get update && sudo apt-get install -y --no-install-recommends chromium`")
-
-
-def _chromium() -> str:
-    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
-        found = shutil.which(name)
-        if found:
-            return found
-    pytest.fail(INSTALL_HINT, pytrace=False)
-
-
-def _body_attributes(page: Path, fragment: str = "#selftest") -> dict:
-    """Load ``page`` in headless Chromium with 8 s of virtual time and read <body>'s data- attributes."""
-    with tempfile.TemporaryDirectory(prefix="dv2s-chromium-") as profile:
-        out = subprocess.run(
-            [_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", f"--user-data-dir={profile}",
-             "--autoplay-policy=no-user-gesture-required", "--virtual-time-budget=8000", "--dump-dom",
-             page.resolve().as_uri() + fragment],
-            capture_output=True, text=True, timeout=180)
-    match = re.search(r"<body([^>]*)>", out.stdout)
-    assert match, f"Chromium dumped no page (exit {out.returncode}): {out.stderr[-2000:]}"
-    return dict(re.findall(r'(data-[\w-]+)="([^"]*)"', match.group(1)))
-
-
 def test_chromium_renders_the_plots_and_plays_the_failure_video(run_dir):
     page = write_reports(run_dir)["html"]
-    attributes = _body_attributes(page)
+    attributes = body_attributes(page)
     assert attributes.get("data-plots") == "3", attributes
     assert attributes.get("data-plots-rendered") == "3", attributes
     # 2 samplers x 2 marks, 2 discovery lines, 3 scenario rates minus C (never sampled): 8 marks with a box
@@ -399,7 +373,7 @@ def test_chromium_reports_a_corrupt_failure_video_as_not_played(tmp_path):
     run = make_run(tmp_path / "run")
     clip = run / "failures/A__collision-rear_end__r0/failure.webm"
     clip.write_bytes(b"\x1a\x45\xdf\xa3" + bytes(range(256)) * 40)  # an EBML magic number, then garbage
-    attributes = _body_attributes(write_reports(run)["html"])
+    attributes = body_attributes(write_reports(run)["html"])
     assert attributes.get("data-plots-rendered") == "3", attributes
     assert attributes.get("data-video-played") == "false", attributes
     assert attributes.get("data-video-error"), attributes
