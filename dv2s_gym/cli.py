@@ -49,10 +49,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from dv2s_gym.mining.report import SCHEMA as MINE_SCHEMA
     from dv2s_gym.regress.report import SCHEMA
 
     if _json_schema(args.trace) == SCHEMA:
         return _cmd_replay_report(args)
+    if Path(args.trace).is_dir() or _json_schema(args.trace) == MINE_SCHEMA:
+        folder = Path(args.trace) if Path(args.trace).is_dir() else Path(args.trace).parent
+        return _cmd_replay_mined(args, folder)
     if args.episode:
         raise ValueError(f"--episode picks an episode of a regression report; {args.trace} is an episode trace "
                          "(replay it without --episode)")
@@ -71,6 +77,46 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             for frame in frames:
                 video.write(frame)
     print(f"replayed {len(replayed.actions)} steps of {trace.scenario!r}: every actor state matches the trace"
+          + (f"; video {args.video}" if args.video else ""))
+    return 0
+
+
+def _cmd_replay_mined(args: argparse.Namespace, folder) -> int:
+    from pathlib import Path
+
+    from dv2s_gym.mining.failure_video import rerun_failure, write_failure_video
+    from dv2s_gym.mining.miner import read_records
+
+    settings_file = folder / "settings.json"
+    if not settings_file.is_file():
+        raise ValueError(f"{folder} is not a `dv2s mine` run folder (no settings.json); pass a trace file, a "
+                         "regress report.json or a mining run folder")
+    if args.episode is None or not str(args.episode).isdigit():
+        raise ValueError(f"{folder} is a mining run: name the episode with --episode INDEX (report.md lists the "
+                         "failures and their indices)")
+    settings = json.loads(settings_file.read_text(encoding="utf-8"))
+    records = {int(r["index"]): r for r in read_records(folder / "episodes.jsonl")}
+    record = records.get(int(args.episode))
+    if record is None or record.get("error") or not record.get("result"):
+        raise ValueError(f"episode {args.episode} of {folder} did not finish (not in episodes.jsonl, or an error); "
+                         f"it has episodes 0..{max(records) if records else -1}")
+    options = {"policy": settings["policy"], "bank_dir": settings.get("bank_dir"),
+               "env_config": settings.get("env_config")}
+    if args.video and record.get("failure"):
+        write_failure_video(record, args.video, trace_path=Path(args.video).with_suffix(".json.gz"), **options)
+    else:
+        _, _, frames = rerun_failure(record, render=bool(args.video), **options)
+        if args.video:
+            from envs.recording import VideoWriter
+
+            fps = (settings.get("env_config") or {}).get("policy_frequency", 5)
+            with VideoWriter(args.video, fps=fps) as video:
+                for frame in frames:
+                    video.write(frame)
+    failure = record.get("failure") or {}
+    print(f"episode {record['index']} ({record['scenario']}, seed {record['seed']}): {settings['policy']} re-run "
+          f"with the recorded parameters; trajectory hash {record['result']['trajectory_hash'][:16]} matches the record"
+          + (f"; failure {failure.get('kind')} at {failure.get('time')} s" if failure else "")
           + (f"; video {args.video}" if args.video else ""))
     return 0
 
@@ -570,14 +616,19 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--random", action="store_true", help="drive with random actions")
     run.set_defaults(func=_cmd_run)
 
-    replay = sub.add_parser("replay", help="replay a saved episode trace (or an episode of a regress report)",
+    replay = sub.add_parser("replay", help="replay a saved episode trace (or an episode of a regress report or a "
+                            "mining run)",
                             description="Re-run a saved trace with its seeds and actions; fails if any actor "
                             "state differs. Given a `dv2s regress` report.json and --episode SCENARIO/SEED, "
                             "re-runs that episode (from its stored trace when it failed, else by re-running the "
-                            "policy), checks its trajectory hash (exit 1 if it differs) and can write its video.")
-    replay.add_argument("trace", help="trace file written by `dv2s run --trace` or env.save_trace(), or a "
-                        "report.json written by `dv2s regress`")
-    replay.add_argument("--episode", help="with a report: the episode id, SCENARIO/SEED")
+                            "policy), checks its trajectory hash (exit 1 if it differs) and can write its video. "
+                            "Given a `dv2s mine` run folder and --episode INDEX, re-runs the policy on that "
+                            "episode's scene (scenario, parameters, seed), checks the hash and can write the "
+                            "failure's video.")
+    replay.add_argument("trace", help="trace file written by `dv2s run --trace` or env.save_trace(), a "
+                        "report.json written by `dv2s regress`, or a `dv2s mine` run folder")
+    replay.add_argument("--episode", help="with a regress report: the episode id, SCENARIO/SEED; with a mining "
+                        "run: the episode index")
     replay.add_argument("--policy", choices=["candidate", "baseline"], default="candidate",
                         help="with a report: whose episode (default: candidate)")
     replay.add_argument("--video", help="also write the replayed episode as a video (.webm)")

@@ -99,3 +99,32 @@ def test_sigkill_mid_run_then_resume_equals_an_uninterrupted_run(tmp_path, capsy
     assert code == 0, err
     assert keys(cut) == keys(whole)
     assert stdout.splitlines()[0].startswith("24 episodes")
+
+
+def test_replay_reruns_a_mined_failure_and_writes_its_video(tmp_path, capsys):
+    from dv2s_gym.pipeline.video import read_video
+
+    out = tmp_path / "run"
+    assert run(capsys, "mine", "--policy", "keep_lane", "--scenarios", "highway_lead_vehicle_stopped", "--budget",
+               "4", "--workers", "1", "--out", out, *QUICK)[0] == 0
+    records = keys(out)
+    failed = [r for r in records if r[5]]
+    assert failed, "keep_lane drives into the stopped car"
+    index = failed[0][0]
+    video = tmp_path / "failure.webm"
+    code, stdout, err = run(capsys, "replay", out, "--episode", index, "--video", video)
+    assert code == 0, err
+    assert f"episode {index} (highway_lead_vehicle_stopped" in stdout and "matches the record" in stdout
+    assert len(read_video(video).frames) > 5
+
+    # a tampered record no longer replays: the hash check is real
+    lines = (out / "episodes.jsonl").read_text().splitlines()
+    rows = [json.loads(line) for line in lines]
+    for row in rows:
+        if row["index"] == index:
+            row["params"] = {k: v + 0.5 if isinstance(v, float) else v for k, v in row["params"].items()}
+    (out / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    code, _, err = run(capsys, "replay", out, "--episode", index)
+    assert code == 2 and "diverged" in one_line_error(err)
+    code, _, err = run(capsys, "replay", out)
+    assert code == 2 and "--episode INDEX" in one_line_error(err)
