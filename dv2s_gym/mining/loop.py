@@ -15,7 +15,7 @@ d. **fine-tune**: :func:`policies.training.fine_tune` continues ``P`` on the wor
    minus every held-out scenario, the mined fine-tuning scenarios drawn with ``mined_share``
    of the probability, the rest of the bank with the remainder (so it is not forgotten).
    The training reward is ``P``'s own with the terms of ``fine_tune_reward`` overridden
-   (default ``{"standing": -1.0}``: standing still with a free path ahead, the miner's
+   (default ``{"standing": -0.3}``: standing still with a free path ahead, the miner's
    stall, is penalised like the monitors count it); only fine-tuning uses that env config:
    mining, the held-out evaluations and the regression test run ``P``'s own (a failure
    does not depend on the reward);
@@ -61,7 +61,7 @@ DEFAULTS: Dict[str, Any] = {
     "k_eval": 6,
     "regress_episodes": 4,
     "mined_share": 0.5,
-    "fine_tune_reward": {"standing": -1.0},
+    "fine_tune_reward": {"standing": -0.3},
     "margin": 0.02,
     "seed": 0,
 }
