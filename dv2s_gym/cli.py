@@ -567,6 +567,15 @@ def _cmd_loop(args: argparse.Namespace) -> int:
     options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr",
                                                     "holdout_fraction", "k_eval", "regress_episodes", "mined_share",
                                                     "margin", "seed", "workers", "scenarios")}
+    if args.fine_tune_reward is not None:
+        try:
+            options["fine_tune_reward"] = json.loads(args.fine_tune_reward)
+        except ValueError as error:
+            raise ValueError(f"--fine-tune-reward must be a JSON object of reward-term weights, e.g. "
+                             f"'{{\"standing\": -1.0}}'; {error}") from None
+        if not isinstance(options["fine_tune_reward"], dict):
+            raise ValueError("--fine-tune-reward must be a JSON object of reward-term weights, e.g. "
+                             "'{\"standing\": -1.0}' ('{}' keeps the policy's own reward)")
     out = args.out or DEFAULT_OUT
     report = run_loop(args.policy, out=out, bank_dir=getattr(args, "bank", None), n_envs=args.envs,
                       progress=not args.no_progress, **options)
@@ -934,6 +943,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"seeds per scenario of the regression test (default {LOOP['regress_episodes']})")
     p.add_argument("--mined-share", type=float, default=LOOP["mined_share"],
                    help=f"probability of a mined scenario in fine-tuning (default {LOOP['mined_share']})")
+    p.add_argument("--fine-tune-reward", default=None, metavar="JSON",
+                   help="reward-term weights overriding the policy's own during fine-tuning only, e.g. "
+                   f"'{{\"standing\": -1.0, \"low_ttc\": -0.4}}' (default {json.dumps(LOOP['fine_tune_reward'])}; "
+                   "'{}' keeps the policy's reward; evaluation always uses the policy's own env config)")
     p.add_argument("--margin", type=float, default=LOOP["margin"],
                    help=f"the regression test's non-inferiority margin (default {LOOP['margin']})")
     p.add_argument("--seed", type=int, default=LOOP["seed"], help=f"seed (default {LOOP['seed']})")

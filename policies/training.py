@@ -79,6 +79,7 @@ __all__ = [
     "train",
     "resolve_checkpoint",
     "fine_tune",
+    "with_reward_weights",
 ]
 
 ALGORITHMS = ("ppo", "dqn", "sac")
@@ -847,12 +848,38 @@ def resolve_checkpoint(spec: str) -> Tuple[str, Path, Dict[str, Any]]:
     return algorithm, path.resolve(), card
 
 
+def with_reward_weights(env_config: Mapping[str, Any], reward_weights: Optional[Mapping[str, float]]) -> Dict[str, Any]:
+    """A copy of ``env_config`` whose ``reward_weights`` are updated term by term with ``reward_weights``.
+
+    Terms not named keep their weight from ``env_config`` (or, when it names no
+    ``reward_weights``, DV2S-v0's defaults). Unknown terms and non-finite weights are refused.
+    """
+    config = json.loads(json.dumps(dict(env_config)))
+    if not reward_weights:
+        return config
+    from envs.dv2s_env import DV2SEnv
+
+    defaults = DV2SEnv.default_config()["reward_weights"]
+    unknown = sorted(set(reward_weights) - set(defaults))
+    if unknown:
+        raise TrainingError(f"unknown reward term(s) {', '.join(unknown)}; DV2S-v0's terms are "
+                            f"{', '.join(sorted(defaults))}")
+    for name, value in reward_weights.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+            raise TrainingError(f"the weight of reward term {name!r} must be a finite number, not {value!r}")
+    weights = dict(config.get("reward_weights") or defaults)
+    weights.update({name: float(value) for name, value in reward_weights.items()})
+    config["reward_weights"] = weights
+    return config
+
+
 def fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathLike | str, steps: int,
               weights: Mapping[str, float], seed: int = 0, n_envs: int = 2,
               scenarios: Optional[Sequence[str]] = None, env_config: Optional[Dict[str, Any]] = None,
               eval_freq: int = 0, eval_seeds: int = 1, card_seeds: int = 0, baselines: Sequence[str] = (),
               eval_jobs: int = 2, checkpoint_freq: int = 10_000, progress_bar: bool = True,
               vec_env: str = "subproc", learning_rate: Optional[float] = None,
+              reward_weights: Optional[Mapping[str, float]] = None,
               log: Callable[[str], None] = print) -> Path:
     """Continue training an SB3 checkpoint on a bank with weighted scenario sampling; returns ``out/model.zip``.
 
@@ -866,6 +893,10 @@ def fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathL
     checkpoint's model card (same reward). The card (``model_card.json``, ``README.md``)
     gets a ``fine_tune`` section naming the source checkpoint and its step.
     ``learning_rate`` (constant) replaces the checkpoint's own for the fine-tuning.
+    ``reward_weights`` overrides single reward terms of that env config (e.g.
+    ``{"standing": -1.0}``; the other terms keep their weights): the training env's
+    config is recorded as the card's ``env_config`` and the overrides in its
+    ``fine_tune`` section. Only training uses it; evaluating the result is up to the caller.
 
     Restartable: called again with the same ``out`` it resumes from the newest checkpoint
     there, and returns at once when ``out/model.zip`` and its card are already written.
@@ -881,6 +912,7 @@ def fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathL
     algorithm, source, source_card = resolve_checkpoint(checkpoint_or_spec)
     if env_config is None:
         env_config = dict(source_card.get("env_config") or {})
+    env_config = with_reward_weights(env_config, reward_weights)
     hyperparameters = {k: v for k, v in (source_card.get("hyperparameters") or {}).items()
                        if k != "policy" and k in _known_hyperparameters(algorithm)}
     from policies.registry import read_model_card
@@ -916,7 +948,8 @@ def fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathL
     card = train(config, resume=True, log=log)
     card["fine_tune"] = {"source": str(checkpoint_or_spec), "source_checkpoint": str(source),
                          "source_steps": start_step, "steps": int(card["training"]["steps"]) - start_step,
-                         "weights": config.weights, "learning_rate": learning_rate}
+                         "weights": config.weights, "learning_rate": learning_rate,
+                         "reward_weights": dict(reward_weights) if reward_weights else None}
     card["description"] = (f"Fine-tuned from {checkpoint_or_spec} (step {start_step}) for "
                            f"{card['fine_tune']['steps']} steps on {len(config.scenarios)} scenarios with weighted "
                            "sampling (see sampler.weights).")

@@ -13,7 +13,12 @@ c. **before**: ``P`` runs on the held-out scenarios, ``k_eval`` evaluation seeds
    a Wilson interval;
 d. **fine-tune**: :func:`policies.training.fine_tune` continues ``P`` on the working bank
    minus every held-out scenario, the mined fine-tuning scenarios drawn with ``mined_share``
-   of the probability, the rest of the bank with the remainder (so it is not forgotten);
+   of the probability, the rest of the bank with the remainder (so it is not forgotten).
+   The training reward is ``P``'s own with the terms of ``fine_tune_reward`` overridden
+   (default ``{"standing": -0.3}``: standing still with a free path ahead, the miner's
+   stall, is penalised like the monitors count it); only fine-tuning uses that env config:
+   mining, the held-out evaluations and the regression test run ``P``'s own (a failure
+   does not depend on the reward);
 e. **after**: the new policy runs on the same held-out episodes (paired): rate, interval,
    relative drop (scenario-bootstrap interval), exact two-sided McNemar p;
 f. **regress**: :func:`dv2s_gym.regress.runner.run_regression` new against old on the starting
@@ -56,6 +61,7 @@ DEFAULTS: Dict[str, Any] = {
     "k_eval": 6,
     "regress_episodes": 4,
     "mined_share": 0.5,
+    "fine_tune_reward": {"standing": -0.3},
     "margin": 0.02,
     "seed": 0,
 }
@@ -63,7 +69,7 @@ DEFAULTS: Dict[str, Any] = {
 a short fine-tune, a small evaluation). The measurement in bench/RESULTS.md uses larger ones."""
 
 IDENTITY = ("policy", "bank_dir", "budget", "sampler", "fine_tune_steps", "fine_tune_lr", "holdout_fraction", "k_eval",
-            "regress_episodes", "mined_share", "margin", "seed", "scenarios")
+            "regress_episodes", "mined_share", "fine_tune_reward", "margin", "seed", "scenarios")
 
 
 class LoopError(DV2SError, ValueError):
@@ -250,6 +256,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
              sampler: str = DEFAULTS["sampler"], fine_tune_steps: int = DEFAULTS["fine_tune_steps"],
              holdout_fraction: float = DEFAULTS["holdout_fraction"], k_eval: int = DEFAULTS["k_eval"],
              regress_episodes: int = DEFAULTS["regress_episodes"], mined_share: float = DEFAULTS["mined_share"],
+             fine_tune_reward: Optional[Mapping[str, float]] = None,
              margin: float = DEFAULTS["margin"], seed: int = DEFAULTS["seed"], workers: Optional[int] = None,
              fine_tune_lr: Optional[float] = DEFAULTS["fine_tune_lr"],
              scenarios: Optional[Sequence[str]] = None, n_envs: int = 2, progress: bool = True,
@@ -269,6 +276,8 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         k_eval: evaluation seeds per held-out scenario.
         regress_episodes: seeds per starting-bank scenario in the regression test.
         mined_share: probability of drawing a mined fine-tuning scenario during fine-tuning.
+        fine_tune_reward: reward-term weights overriding the policy's own in the fine-tuning env
+            only (``None``: ``DEFAULTS["fine_tune_reward"]``; ``{}``: the policy's reward unchanged).
         margin: the regression test's non-inferiority margin.
         seed: seeds the miner, the split and the fine-tuning (each round derives its own).
         workers: processes for mining and evaluation (default: every core).
@@ -295,12 +304,22 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
     if out.exists() and not out.is_dir():
         raise LoopError(f"--out {out} is a file; choose a folder for the loop")
     env_config = _policy_env_config(policy)
+    if fine_tune_reward is None:
+        fine_tune_reward = DEFAULTS["fine_tune_reward"]
+    from policies.training import TrainingError, with_reward_weights
+
+    try:
+        fine_tune_config = with_reward_weights(env_config, fine_tune_reward)
+    except TrainingError as error:
+        raise LoopError(f"--fine-tune-reward: {error}") from None
     settings = {"policy": policy, "bank_dir": None if bank_dir is None else str(Path(bank_dir).resolve()),
                 "budget": budget, "sampler": sampler, "fine_tune_steps": fine_tune_steps, "fine_tune_lr": fine_tune_lr,
                 "holdout_fraction": float(holdout_fraction), "k_eval": k_eval, "regress_episodes": regress_episodes,
-                "mined_share": float(mined_share), "margin": float(margin), "seed": seed,
+                "mined_share": float(mined_share), "fine_tune_reward": dict(fine_tune_reward),
+                "margin": float(margin), "seed": seed,
                 "scenarios": list(scenarios) if scenarios is not None else None, "rounds": rounds,
-                "workers": workers, "n_envs": n_envs, "env_config": env_config}
+                "workers": workers, "n_envs": n_envs, "env_config": env_config,
+                "fine_tune_env_config": fine_tune_config}
     state = _State(out / "loop.json", settings)
     bank = _working_bank(out, settings["bank_dir"])
     if state.data.get("start") is None:
@@ -381,9 +400,11 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
 
                 path = fine_tune(current, bank_dir=bank, out=round_dir / "policy", steps=fine_tune_steps,
                                  weights=weights, seed=seed * 1000 + number, n_envs=n_envs, env_config=env_config,
-                                 progress_bar=progress, learning_rate=fine_tune_lr, log=log)
+                                 reward_weights=fine_tune_reward, progress_bar=progress, learning_rate=fine_tune_lr,
+                                 log=log)
                 return {"model": str(path.resolve()), "scenarios": len(names), "mined_upweighted": len(mined),
-                        "steps": fine_tune_steps}
+                        "steps": fine_tune_steps, "reward_weights": dict(fine_tune_reward),
+                        "env_config": fine_tune_config}
 
             timed("fine_tune", do_fine_tune)
         from policies.training import resolve_checkpoint

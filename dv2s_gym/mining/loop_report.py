@@ -10,7 +10,8 @@
                                     "scenario", "reproduction"}], "folder"},
                            "split": {"fine_tune", "held_out", "fine_tune_clusters", "held_out_clusters", "groups"},
                            "before": {"episodes"},
-                           "fine_tune": {"model", "scenarios", "mined_upweighted", "steps"},
+                           "fine_tune": {"model", "scenarios", "mined_upweighted", "steps", "reward_weights",
+                                         "env_config": the fine-tuning env's config},
                            "after": {"pairs", "errors", "before": Rate, "after": Rate, "relative_drop",
                                      "relative_drop_interval", "table", "mcnemar_p", "per_scenario"},
                            "regress": {"verdict", "reason", "episodes", "new_failure_rate", "old_failure_rate",
@@ -41,6 +42,14 @@ def _summary_rate(r: Optional[Mapping[str, Any]]) -> str:
     return f"{r.get('value', 0):.3f} [{r.get('low', 0):.3f}, {r.get('high', 0):.3f}]"
 
 
+def _weights(weights: Optional[Mapping[str, Any]]) -> str:
+    if weights is None:
+        return "-"
+    if not weights:
+        return "none"
+    return ", ".join(f"{name} {float(value):g}" for name, value in sorted(weights.items()))
+
+
 _ORDER = ("mine", "split", "before", "fine_tune", "after", "regress")
 
 
@@ -58,7 +67,8 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         f"Per round: mining budget {settings.get('budget')} episodes ({settings.get('sampler')} sampler), "
         f"{settings.get('holdout_fraction')} of the mined clusters held out, {settings.get('k_eval')} evaluation seeds "
         f"per held-out scenario, fine-tuning {settings.get('fine_tune_steps')} steps (mined scenarios drawn with "
-        f"probability {settings.get('mined_share')}), regression test on the starting bank with "
+        f"probability {settings.get('mined_share')}, reward terms {_weights(settings.get('fine_tune_reward'))} "
+        f"overriding the policy's own in training only), regression test on the starting bank with "
         f"{settings.get('regress_episodes')} seeds per scenario (margin {settings.get('margin')}).", "",
         "| round | failures mined (against the policy) / episodes | clusters | kept | fine-tune / held-out scenarios "
         "| held-out failure rate before | after | relative drop | McNemar p | rest of the bank |",
@@ -101,7 +111,8 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         tuned = steps.get("fine_tune") or {}
         if tuned:
             lines.append(f"- fine-tuned {tuned.get('steps')} steps on {tuned.get('scenarios')} scenarios "
-                         f"({tuned.get('mined_upweighted')} mined, upweighted): `{tuned.get('model')}`")
+                         f"({tuned.get('mined_upweighted')} mined, upweighted), training reward weights "
+                         f"{_weights((tuned.get('env_config') or {}).get('reward_weights'))}: `{tuned.get('model')}`")
         after = steps.get("after") or {}
         if after:
             table = after.get("table", {})
@@ -165,7 +176,8 @@ def render_html(report: Mapping[str, Any]) -> str:
     return (f"<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>dv2s loop</title><style>{_CSS}</style>"
             f"</head><body><h1>dv2s loop</h1><p>Started from <code>{escape(str(settings.get('policy')))}</code>; "
             f"final policy <code>{escape(str(report.get('policy')))}</code>. Mining budget {settings.get('budget')} "
-            f"episodes per round, fine-tuning {settings.get('fine_tune_steps')} steps, {settings.get('k_eval')} "
+            f"episodes per round, fine-tuning {settings.get('fine_tune_steps')} steps (reward terms "
+            f"{escape(_weights(settings.get('fine_tune_reward')))} overridden in training only), {settings.get('k_eval')} "
             f"evaluation seeds per held-out scenario (Wilson 95 % intervals; the drop's interval resamples "
             f"scenarios).</p><table>{head}{''.join(rows)}</table></body></html>\n")
 

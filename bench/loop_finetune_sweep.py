@@ -1,0 +1,103 @@
+"""Re-run only the fine-tuning half of a finished ``dv2s loop`` round with other fine-tuning settings.
+
+    python -m bench.loop_finetune_sweep --loop out/loop-seed0 --name s03_100k --steps 100000 \\
+        --reward '{"standing": -0.3}' --regress
+
+Reuses the round-1 mining run, working bank and by-cluster split of ``--loop`` (so settings are
+compared on the same held-out episodes), evaluates the starting policy on the held-out scenarios
+once (cached in ``OUT/before.jsonl``), fine-tunes exactly as the loop does
+(:func:`policies.training.fine_tune`, the loop's weights from
+:func:`dv2s_gym.mining.loop.fine_tune_weights`, seed ``loop seed * 1000 + 1``, 2 subprocess envs),
+evaluates the fine-tuned policy on the same episodes (paired, the policy's own env config) and,
+with ``--regress``, regression-tests it against the starting policy on the starting bank
+(``--regress-episodes`` seeds per scenario from 10000). Prints one JSON line and appends it to
+``OUT/results.jsonl``. This is how the loop's fine-tuning settings were chosen on seed 0
+(bench/RESULTS.md); a choice is confirmed only by a fresh ``dv2s loop`` on another seed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--loop", required=True, help="a dv2s loop folder whose round 1 finished its split")
+    parser.add_argument("--out", default="out/loop-sweep", help="where the sweep's runs go")
+    parser.add_argument("--name", required=True, help="this setting's folder under --out")
+    parser.add_argument("--steps", type=int, default=40_000)
+    parser.add_argument("--lr", type=float, default=1e-4)
+    parser.add_argument("--share", type=float, default=0.5, help="mined share")
+    parser.add_argument("--reward", default="{}", help="fine-tuning reward-term overrides (JSON)")
+    parser.add_argument("--regress", action="store_true")
+    parser.add_argument("--regress-episodes", type=int, default=4)
+    parser.add_argument("--workers", type=int, default=2)
+    args = parser.parse_args()
+
+    from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, failure_types, paired_summary
+    from dv2s_gym.mining.loop import fine_tune_weights
+    from policies.training import EVAL_SEED_BASE, fine_tune
+    from scenario_bank.bank import Bank
+
+    loop = Path(args.loop)
+    state = json.loads((loop / "loop.json").read_text(encoding="utf-8"))
+    settings, steps = state["settings"], state["rounds"][0]["steps"]
+    held = steps["split"]["held_out"]
+    bank = state["start"]["bank"]
+    policy, env_config = settings["policy"], dict(settings["env_config"])
+    episodes = [(name, EVAL_SEED_BASE + i) for name in held for i in range(settings["k_eval"])]
+    base = Path(args.out)
+    began = time.perf_counter()
+    before = evaluate_heldout("before", policy, episodes, store=HeldOutStore(base / "before.jsonl"), bank_dir=bank,
+                              env_config=env_config, workers=args.workers, progress=False)
+    t_before = time.perf_counter() - began
+    entries = [e for e in Bank(bank) if e.name not in set(held)]
+    names = sorted(e.name for e in entries)
+    mined = [e.name for e in entries if e.source.get("kind") == "mined"]
+    out = base / args.name
+    began = time.perf_counter()
+    path = fine_tune(policy, bank_dir=bank, out=out / "policy", steps=args.steps,
+                     weights=fine_tune_weights(names, mined, args.share), seed=settings["seed"] * 1000 + 1, n_envs=2,
+                     env_config=env_config, reward_weights=json.loads(args.reward), progress_bar=False,
+                     learning_rate=args.lr, log=lambda _: None)
+    t_fine_tune = time.perf_counter() - began
+    spec = f"ppo:{path.resolve()}"
+    began = time.perf_counter()
+    after = evaluate_heldout("after", spec, episodes, store=HeldOutStore(out / "heldout.jsonl"), bank_dir=bank,
+                             env_config=env_config, workers=args.workers, progress=False)
+    t_after = time.perf_counter() - began
+    summary = paired_summary(before, after, seed=settings["seed"])
+    result = {"name": args.name, "args": vars(args), "before": summary["before"], "after": summary["after"],
+              "drop": summary["relative_drop"], "drop_interval": summary["relative_drop_interval"],
+              "mcnemar_p": summary["mcnemar_p"], "table": summary["table"], "types_before": failure_types(before),
+              "types_after": failure_types(after), "seconds": {"before": round(t_before, 1),
+                                                              "fine_tune": round(t_fine_tune, 1),
+                                                              "after": round(t_after, 1)}}
+    if args.regress:
+        from dv2s_gym.regress.runner import run_regression
+
+        began = time.perf_counter()
+        report = run_regression(spec, policy, bank_dir=bank, scenarios=state["start"]["scenarios"],
+                                episodes=args.regress_episodes, seed=EVAL_SEED_BASE, margin=settings["margin"],
+                                workers=args.workers, out_dir=out / "regress", env_config=env_config, progress=False)
+        overall = report["overall"]
+        result["regress"] = {"verdict": report["verdict"], "new": overall["candidate"]["failure_rate"],
+                             "old": overall["baseline"]["failure_rate"],
+                             "difference": overall["comparison"].get("difference"),
+                             "reason": overall["comparison"].get("reason")}
+        result["seconds"]["regress"] = round(time.perf_counter() - began, 1)
+    line = json.dumps(result, default=str)
+    print(line)
+    base.mkdir(parents=True, exist_ok=True)
+    with open(base / "results.jsonl", "a", encoding="utf-8") as handle:
+        handle.write(line + "\n")
+
+
+if __name__ == "__main__":
+    main()
