@@ -1,0 +1,193 @@
+"""Failure mining: how many distinct failures each sampler finds, and how mining scales with workers.
+
+    python -m bench.bench_mine                      # both parts, the settings recorded in bench/RESULTS.md
+    python -m bench.bench_mine --quick              # a short run of both (budget 40, one seed)
+    python -m bench.bench_mine --part samplers --policy dv2s-ppo --budget 200 --seeds 0 1
+    python -m bench.bench_mine --part throughput --budget 160 --repeats 2
+
+**Samplers** (``--part samplers``): every sampler of :data:`dv2s_gym.mining.samplers.SAMPLERS`
+mines the same policy on the same scenarios (the whole shipped bank by default) with the
+same budget, once per run seed (``--seeds``; the seed fixes the sampler's draws and every
+episode's env seed). Printed per sampler, pooled over the seeds: failed episodes per 100
+episodes with the Wilson 95 % interval (``dv2s_gym.regress.stats.wilson_interval``), distinct
+failure clusters per run (``dv2s_gym.mining.cluster``: scenario, failure class, cell of a
+3-bins-per-parameter grid) and how many of them hold a failure the reference driver avoided,
+and the ratio of each sampler's mean distinct clusters to random sampling's (target: the best
+adaptive sampler >= 3x). With ``--reference none`` (the default when the policy under test is
+the reference driver itself, ``rule``) avoidability is not checked.
+
+**Throughput** (``--part throughput``): the same mining run (same budget, seed and sampler,
+default ``random``) with 1 worker and with 2, in alternating rounds so both see the same load;
+episodes per minute end to end (pool start included) and the ratio (target >= 1.8x). The
+machine's parallel capacity (a busy loop in 2 processes against 1, from ``bench.bench_regress``)
+is measured in the same rounds: other processes on a shared machine bound the ratio by it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import tempfile
+import time
+from typing import Any, Dict, List, Optional, Sequence
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+def _load() -> str:
+    try:
+        return " ".join(f"{x:.2f}" for x in os.getloadavg())
+    except OSError:
+        return "n/a"
+
+
+def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, reference: Optional[str],
+              scenarios: Optional[List[str]], batch: Optional[int], out: str,
+              sampler_options: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+    """One mining run in a fresh folder; its counts and wall time."""
+    from dv2s_gym.mining.miner import mine
+
+    shutil.rmtree(out, ignore_errors=True)
+    extra = {"sampler_options": sampler_options} if sampler_options else {}
+    start = time.perf_counter()
+    run = mine(policy, out=out, budget=budget, sampler=sampler, seed=seed, workers=workers, reference=reference,
+               scenarios=scenarios, batch=batch, progress=False, reports=False, **extra)
+    seconds = time.perf_counter() - start
+    failures = run.failures
+    avoidable = [r for r in failures if r.get("avoidable") is True]
+    clusters = set(run.clusters.values())
+    avoidable_clusters = {run.clusters[int(r["index"])] for r in avoidable}
+    return {
+        "sampler": sampler, "seed": seed, "episodes": len(run.records),
+        "errors": sum(1 for r in run.records if r.get("error")), "failures": len(failures),
+        "avoidable": len(avoidable), "clusters": len(clusters), "avoidable_clusters": len(avoidable_clusters),
+        "scenarios_failing": len({r["scenario"] for r in failures}), "seconds": seconds,
+    }
+
+
+def bench_samplers(policy: str, samplers: Sequence[str], seeds: Sequence[int], budget: int, workers: int,
+                   reference: Optional[str], scenarios: Optional[List[str]], batch: Optional[int],
+                   sampler_options: Optional[Dict[str, Any]], root: str) -> Dict[str, Dict[str, Any]]:
+    """Every sampler on every seed; per-sampler summary (printed as it goes)."""
+    from dv2s_gym.regress.stats import wilson_interval
+
+    print(f"# samplers: policy {policy}, reference {reference or 'none'}, "
+          f"scenarios {' '.join(scenarios) if scenarios else 'whole bank'}, budget {budget}, seeds {list(seeds)}, "
+          f"{workers} workers, batch {batch or 'default'}, sampler options {sampler_options or 'VerifAI defaults'}",
+          flush=True)
+    runs: Dict[str, List[Dict[str, Any]]] = {name: [] for name in samplers}
+    for seed in seeds:  # seed-major, so an interrupted bench still compares the samplers on equal terms
+        for name in samplers:
+            row = mine_once(policy, name, seed, budget, workers, reference, scenarios, batch,
+                            os.path.join(root, f"{name}-{seed}"), sampler_options)
+            runs[name].append(row)
+            print(f"  {name:14s} seed {seed}: {row['failures']:4d} failures / {row['episodes']} episodes "
+                  f"({row['errors']} errors), {row['clusters']:4d} distinct clusters, "
+                  f"{row['avoidable_clusters']:4d} avoidable, {row['scenarios_failing']:2d} scenarios, "
+                  f"{row['seconds']:.0f} s, load {_load()}", flush=True)
+    summary: Dict[str, Dict[str, Any]] = {}
+    for name, rows in runs.items():
+        episodes = sum(r["episodes"] - r["errors"] for r in rows)
+        failures = sum(r["failures"] for r in rows)
+        low, high = wilson_interval(failures, episodes)
+        summary[name] = {
+            "per100": 100.0 * failures / max(episodes, 1), "interval": (100.0 * low, 100.0 * high),
+            "clusters": statistics.mean(r["clusters"] for r in rows),
+            "avoidable_clusters": statistics.mean(r["avoidable_clusters"] for r in rows),
+            "per_seed": [r["clusters"] for r in rows], "runs": rows,
+        }
+    base = summary.get("random")
+    print(f"\n| sampler | failures / 100 episodes (95% CI) | distinct clusters per run (per seed) "
+          f"| avoidable clusters | clusters vs random |")
+    print("|---|---|---|---|---|")
+    for name, s in summary.items():
+        ratio = s["clusters"] / base["clusters"] if base and base["clusters"] else float("nan")
+        s["ratio"] = ratio
+        print(f"| {name} | {s['per100']:.1f} ({s['interval'][0]:.1f}-{s['interval'][1]:.1f}) "
+              f"| {s['clusters']:.1f} ({', '.join(map(str, s['per_seed']))}) "
+              f"| {s['avoidable_clusters']:.1f} | {ratio:.2f}x |")
+    adaptive = {k: v for k, v in summary.items() if k not in ("random", "halton")}
+    if adaptive and base:
+        best = max(adaptive, key=lambda k: adaptive[k]["ratio"])
+        print(f"\nbest adaptive sampler: {best}, {adaptive[best]['ratio']:.2f}x the distinct failures of random "
+              "(target >= 3x)", flush=True)
+    return summary
+
+
+def bench_throughput(policy: str, sampler: str, seed: int, budget: int, repeats: int, reference: Optional[str],
+                     scenarios: Optional[List[str]], batch: Optional[int], root: str) -> Dict[str, float]:
+    """1 worker against 2 on the same run, alternating; medians of episodes/min and of the per-round ratio."""
+    from bench.bench_regress import parallel_capacity
+
+    print(f"# throughput: policy {policy}, sampler {sampler}, seed {seed}, budget {budget}, reference "
+          f"{reference or 'none'}, batch {batch or 'default (4 per worker)'}, {repeats} rounds", flush=True)
+    rates: Dict[int, List[float]] = {1: [], 2: []}
+    ratios: List[float] = []
+    capacity: List[float] = []
+    for round_ in range(repeats):
+        capacity.append(parallel_capacity())
+        load = _load()
+        seconds = {}
+        for workers in ((1, 2) if round_ % 2 == 0 else (2, 1)):
+            row = mine_once(policy, sampler, seed, budget, workers, reference, scenarios, batch,
+                            os.path.join(root, f"throughput-{workers}"))
+            seconds[workers] = row["seconds"]
+            rates[workers].append(60.0 * row["episodes"] / row["seconds"])
+        ratios.append(seconds[1] / seconds[2])
+        print(f"  round {round_ + 1}: 1 worker {rates[1][-1]:.1f} ep/min, 2 workers {rates[2][-1]:.1f} ep/min, "
+              f"{ratios[-1]:.2f}x; parallel capacity {capacity[-1]:.2f}x; load {load} -> {_load()}", flush=True)
+    result = {"one": statistics.median(rates[1]), "two": statistics.median(rates[2]),
+              "ratio": statistics.median(ratios), "capacity": statistics.median(capacity)}
+    print(f"\nmining throughput: 1 worker {result['one']:.1f} ep/min, 2 workers {result['two']:.1f} ep/min, "
+          f"{result['ratio']:.2f}x (target >= 1.8x; machine's parallel capacity {result['capacity']:.2f}x)",
+          flush=True)
+    return result
+
+
+def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
+    from dv2s_gym.mining.samplers import SAMPLERS
+
+    parser = argparse.ArgumentParser(prog="python -m bench.bench_mine", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="budget 40, one seed, one throughput round")
+    parser.add_argument("--part", choices=("all", "samplers", "throughput"), default="all")
+    parser.add_argument("--policy", default="rule", help="policy under test (default: rule)")
+    parser.add_argument("--reference", default=None,
+                        help="reference driver for avoidability ('none' to skip; default: rule, or none when the "
+                             "policy is rule)")
+    parser.add_argument("--scenarios", nargs="*", default=None, help="bank names or tag:<tag> (default: whole bank)")
+    parser.add_argument("--samplers", nargs="*", default=list(SAMPLERS))
+    parser.add_argument("--budget", type=int, default=None, help="episodes per run (default 300; --quick 40)")
+    parser.add_argument("--seeds", type=int, nargs="*", default=None, help="run seeds (default 0 1 2; --quick 0)")
+    parser.add_argument("--workers", type=int, default=2, help="workers of the sampler runs")
+    parser.add_argument("--batch", type=int, default=None, help="scenes per chunk (default: the miner's)")
+    parser.add_argument("--throughput-sampler", default="random")
+    parser.add_argument("--throughput-budget", type=int, default=None, help="default 200; --quick 40")
+    parser.add_argument("--repeats", type=int, default=None, help="throughput rounds (default 3; --quick 1)")
+    args = parser.parse_args(argv)
+
+    reference = args.reference if args.reference is not None else (None if args.policy == "rule" else "rule")
+    reference = None if reference in ("none", "") else reference
+    budget = args.budget or (40 if args.quick else 300)
+    seeds = args.seeds if args.seeds else ([0] if args.quick else [0, 1, 2])
+    repeats = args.repeats or (1 if args.quick else 3)
+    throughput_budget = args.throughput_budget or (40 if args.quick else 200)
+    print(f"machine: {os.cpu_count()} cores; {time.strftime('%Y-%m-%d %H:%M')}; load {_load()}", flush=True)
+    root = tempfile.mkdtemp(prefix="dv2s-bench-mine-")
+    results: Dict[str, Any] = {}
+    try:
+        if args.part in ("all", "samplers"):
+            results["samplers"] = bench_samplers(args.policy, args.samplers, seeds, budget, args.workers, reference,
+                                                 args.scenarios, args.batch, None, root)
+        if args.part in ("all", "throughput"):
+            results["throughput"] = bench_throughput(args.policy, args.throughput_sampler, seeds[0],
+                                                     throughput_budget, repeats, reference, args.scenarios,
+                                                     args.batch, root)
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    return results
+
+
+if __name__ == "__main__":
+    main()
