@@ -373,7 +373,6 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
     assert json.loads((out / "settings.json").read_text())["sampler"] == "cross-entropy"
 
 
-@pytest.mark.slow
 def test_a_killed_run_resumes_to_the_same_records(whole_run, tmp_path):
     out, run = whole_run
     copy = tmp_path / "run"
