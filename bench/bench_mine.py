@@ -50,7 +50,11 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
     from dv2s_gym.mining.miner import mine
 
     shutil.rmtree(out, ignore_errors=True)
-    extra = {"sampler_options": sampler_options} if sampler_options else {}
+    from dv2s_gym.mining.samplers import SAMPLER_OPTIONS
+
+    takes = SAMPLER_OPTIONS.get(sampler, ())
+    options = {k: v for k, v in (sampler_options or {}).items() if k in takes}  # random/halton take none
+    extra = {"sampler_options": options} if options else {}
     start = time.perf_counter()
     run = mine(policy, out=out, budget=budget, sampler=sampler, seed=seed, workers=workers, reference=reference,
                scenarios=scenarios, batch=batch, progress=False, reports=False, **extra)
@@ -162,6 +166,9 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     parser.add_argument("--seeds", type=int, nargs="*", default=None, help="run seeds (default 0 1 2; --quick 0)")
     parser.add_argument("--workers", type=int, default=2, help="workers of the sampler runs")
     parser.add_argument("--batch", type=int, default=None, help="scenes per chunk (default: the miner's)")
+    parser.add_argument("--alpha", type=float, default=None, help="adaptive samplers' alpha (VerifAI default 0.9)")
+    parser.add_argument("--buckets", type=int, default=None,
+                        help="adaptive samplers' buckets per parameter (VerifAI default 5)")
     parser.add_argument("--throughput-sampler", default="random")
     parser.add_argument("--throughput-budget", type=int, default=None, help="default 200; --quick 40")
     parser.add_argument("--repeats", type=int, default=None, help="throughput rounds (default 3; --quick 1)")
@@ -173,13 +180,14 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     seeds = args.seeds if args.seeds else ([0] if args.quick else [0, 1, 2])
     repeats = args.repeats or (1 if args.quick else 3)
     throughput_budget = args.throughput_budget or (40 if args.quick else 200)
+    options = {k: v for k, v in (("alpha", args.alpha), ("buckets", args.buckets)) if v is not None}
     print(f"machine: {os.cpu_count()} cores; {time.strftime('%Y-%m-%d %H:%M')}; load {_load()}", flush=True)
     root = tempfile.mkdtemp(prefix="dv2s-bench-mine-")
     results: Dict[str, Any] = {}
     try:
         if args.part in ("all", "samplers"):
             results["samplers"] = bench_samplers(args.policy, args.samplers, seeds, budget, args.workers, reference,
-                                                 args.scenarios, args.batch, None, root)
+                                                 args.scenarios, args.batch, options or None, root)
         if args.part in ("all", "throughput"):
             results["throughput"] = bench_throughput(args.policy, args.throughput_sampler, seeds[0],
                                                      throughput_budget, repeats, reference, args.scenarios,

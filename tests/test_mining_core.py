@@ -332,6 +332,28 @@ def test_a_corrupt_sampler_checkpoint_is_refused():
         SceneSampler.loads(dill.dumps({"not": "a sampler"}))
 
 
+def test_adaptive_samplers_take_verifai_options(small_space):
+    from dv2s_gym.mining.samplers import is_adaptive, sampler_params
+
+    params = sampler_params("cross-entropy", {"alpha": 0.5, "buckets": 1})
+    assert (params.alpha, params.cont.buckets, params.thres) == (0.5, 1, 0.0)
+    assert sampler_params("bandit", None).alpha == 0.9 and sampler_params("random") is None
+    assert [name for name in SAMPLERS if is_adaptive(name)] == ["cross-entropy", "bandit"]
+    # one bucket per parameter: the parameters stay uniform, only the scenario distribution moves
+    sampler = make_sampler("cross-entropy", small_space.feature_space, 1, {"alpha": 0.5, "buckets": 1})
+    for _ in range(6):
+        for point, info in sampler.draw(4):
+            sampler.feed(point, info, -1.0 if small_space.decode(point).scenario == LEFT_TURN else 1.0)
+    drawn = [small_space.decode(point).scenario for point, _ in sampler.draw(40)]
+    assert drawn.count(LEFT_TURN) >= 36
+    for bad, match in (({"alpha": 1.5}, "alpha must be between 0 and 1"), ({"buckets": 0}, "buckets must be"),
+                       ({"gamma": 1}, "no option 'gamma'; it takes alpha, buckets, thres")):
+        with pytest.raises(MiningError, match=match):
+            make_sampler("cross-entropy", small_space.feature_space, 0, bad)
+    with pytest.raises(MiningError, match="sampler 'random' has no option 'alpha'; it takes none"):
+        make_sampler("random", small_space.feature_space, 0, {"alpha": 0.5})
+
+
 def test_an_unknown_sampler_is_refused(small_space):
     with pytest.raises(MiningError, match="unknown sampler 'nope'.*cross-entropy"):
         make_sampler("nope", small_space.feature_space, 0)
@@ -348,21 +370,23 @@ def _stable(records):
     return [json.dumps(r, sort_keys=True) for r in records]
 
 
-@pytest.fixture(scope="module")
-def whole_run(tmp_path_factory):
-    """An uninterrupted run."""
+@pytest.fixture(scope="module", params=["cross-entropy", "random"])
+def whole_run(request, tmp_path_factory):
+    """An uninterrupted run of an adaptive sampler (one chunk at a time) and of a non-adaptive one (whole
+    chunks sent ahead)."""
     out = tmp_path_factory.mktemp("mine-whole")
-    run = mine(POLICY, out=out, **MINE)
-    return out, run
+    settings = {**MINE, "sampler": request.param}
+    run = mine(POLICY, out=out, **settings)
+    return out, run, settings
 
 
 def test_a_run_records_every_episode_with_its_scene(whole_run):
-    out, run = whole_run
+    out, run, settings = whole_run
     records = read_records(out / "episodes.jsonl")
     assert [r["index"] for r in records] == list(range(10)) and not any(r["error"] for r in records)
     assert [r["seed"] for r in records] == [episode_seed(5, i) for i in range(10)]
     for record in records:
-        assert record["scenario"] in (BRAKES, LEFT_TURN) and record["sampler"] == "cross-entropy"
+        assert record["scenario"] in (BRAKES, LEFT_TURN) and record["sampler"] == settings["sampler"]
         assert (record["rho"] < 0) == (record["failure"] is not None)
         if record["failure"]:
             assert (out / record["trace"]).is_file() and record["reference"]["policy"] == "rule"
@@ -370,11 +394,24 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
         else:
             assert record["trace"] is None and record["avoidable"] is None
     assert (out / "sampler.pkl").is_file()
-    assert json.loads((out / "settings.json").read_text())["sampler"] == "cross-entropy"
+    assert json.loads((out / "settings.json").read_text())["sampler"] == settings["sampler"]
+    # the scenes are the sampler's draws in order, however many chunks went to the workers at once
+    space = SceneSpace(MINE["scenarios"])
+    sampler = make_sampler(settings["sampler"], space.feature_space, settings["seed"])
+    expected = []
+    for _ in range(3):
+        drawn = sampler.draw(MINE["batch"])
+        for point, info in drawn:
+            spec = space.decode(point)
+            expected.append((spec.scenario, spec.params))
+            record = records[len(expected) - 1] if len(expected) <= len(records) else None
+            if record is not None:
+                sampler.feed(point, info, record["rho"])
+    assert [(r["scenario"], r["params"]) for r in records] == expected[:10]
 
 
 def test_a_killed_run_resumes_to_the_same_records(whole_run, tmp_path):
-    out, run = whole_run
+    out, run, settings = whole_run
     copy = tmp_path / "run"
     shutil.copytree(out, copy)
     data = (copy / "episodes.jsonl").read_bytes()
@@ -384,28 +421,32 @@ def test_a_killed_run_resumes_to_the_same_records(whole_run, tmp_path):
     (copy / "sampler.pkl").unlink()
     for index in range(6, 10):
         (copy / "traces" / f"{index:06d}.json.gz").unlink(missing_ok=True)
-    resumed = mine(POLICY, out=copy, **MINE)
+    resumed = mine(POLICY, out=copy, **settings)
     assert _stable(read_records(copy / "episodes.jsonl")) == _stable(read_records(out / "episodes.jsonl"))
     assert _stable(resumed.records) == _stable(run.records)
     assert (copy / "episodes.jsonl").read_bytes().count(b"\n") == 10  # the torn line is gone, nothing twice
     assert resumed.clusters == run.clusters
     # a finished run resumes to the same records without running anything
-    again = mine(POLICY, out=copy, **MINE)
+    again = mine(POLICY, out=copy, **settings)
     assert _stable(again.records) == _stable(run.records)
 
 
 def test_resuming_with_other_settings_is_refused(whole_run, tmp_path):
-    out, _ = whole_run
+    out, _, settings = whole_run
     copy = tmp_path / "run"
     shutil.copytree(out, copy)
     before = (copy / "episodes.jsonl").read_bytes()
-    for change in ({"sampler": "random"}, {"seed": 6}, {"env_config": {"duration": 4}}, {"batch": 2}):
+    other = "halton" if settings["sampler"] == "random" else "random"
+    changes = [{"sampler": other}, {"seed": 6}, {"env_config": {"duration": 4}}, {"batch": 2}, {"reference": None}]
+    if settings["sampler"] == "cross-entropy":
+        changes.append({"sampler_options": {"alpha": 0.5}})
+    for change in changes:
         with pytest.raises(MiningError) as error:
-            mine(POLICY, out=copy, **{**MINE, **change})
+            mine(POLICY, out=copy, **{**settings, **change})
         message = str(error.value)
         assert "other settings" in message and "--out" in message and next(iter(change)) in message
     with pytest.raises(MiningError, match="policy"):
-        mine("rule", out=copy, **MINE)
+        mine("rule", out=copy, **settings)
     assert (copy / "episodes.jsonl").read_bytes() == before
 
 

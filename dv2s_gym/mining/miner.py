@@ -34,13 +34,15 @@ import numpy as np
 from dv2s_gym.mining.cluster import cluster_failures, group
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
-from dv2s_gym.mining.samplers import SAMPLERS, SceneSampler, make_sampler
+from dv2s_gym.mining.samplers import SAMPLERS, SceneSampler, is_adaptive, make_sampler, sampler_params
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 
 __all__ = ["MineRun", "mine", "read_records", "episode_seed", "SETTINGS_VERSION"]
 
 SETTINGS_VERSION = 1
-_RESUME_KEYS = ("policy", "sampler", "seed", "batch", "scenarios", "bank_dir", "env_config", "reference",
+LOOKAHEAD_CHUNKS = 16
+"""Whole chunks a non-adaptive sampler (random, halton) sends to the workers at once."""
+_RESUME_KEYS = ("policy", "sampler", "sampler_options", "seed", "batch", "scenarios", "bank_dir", "env_config", "reference",
                 "ttc_threshold", "stall_seconds")
 
 
@@ -130,11 +132,12 @@ class _Appender:
         self._handle.close()
 
 
-def _settings(policy: str, sampler: str, seed: int, batch: int, scenarios: List[str], bank_dir: Optional[str],
+def _settings(policy: str, sampler: str, sampler_options: Dict[str, Any], seed: int, batch: int, scenarios: List[str], bank_dir: Optional[str],
               env_config: Dict[str, Any], reference: Optional[str], ttc_threshold: float, stall_seconds: float,
               budget: int, space_description: Dict[str, Any]) -> Dict[str, Any]:
     return {
-        "schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, "sampler": sampler, "seed": int(seed),
+        "schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, "sampler": sampler,
+        "sampler_options": dict(sampler_options) if sampler_options else None, "seed": int(seed),
         "batch": int(batch), "scenarios": scenarios, "bank_dir": bank_dir, "env_config": env_config,
         "reference": reference, "ttc_threshold": float(ttc_threshold), "stall_seconds": float(stall_seconds),
         "budget": int(budget), "space": space_description,
@@ -164,7 +167,8 @@ def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[i
             sampler = None
         if sampler is not None and sampler.fed == complete * batch:
             return sampler
-    sampler = make_sampler(settings["sampler"], space.feature_space, settings["seed"])
+    sampler = make_sampler(settings["sampler"], space.feature_space, settings["seed"],
+                           settings.get("sampler_options") or None)
     for chunk in range(complete):
         drawn = sampler.draw(batch)
         for offset, (point, info) in enumerate(drawn):
@@ -189,7 +193,7 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
          progress: bool = True, env_config: Optional[Dict[str, Any]] = None,
          ttc_threshold: float = DEFAULT_TTC_THRESHOLD, stall_seconds: float = DEFAULT_STALL_SECONDS,
          convert: bool = False, convert_options: Optional[Dict[str, Any]] = None,
-         reports: bool = True) -> MineRun:
+         reports: bool = True, sampler_options: Optional[Dict[str, Any]] = None) -> MineRun:
     """Mine ``policy``'s failures over ``budget`` episodes; resumable (same ``out``).
 
     Args:
@@ -198,6 +202,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
             and may be given a larger budget).
         budget: episodes to run in total.
         sampler: one of :data:`~dv2s_gym.mining.samplers.SAMPLERS`.
+        sampler_options: VerifAI parameters of an adaptive sampler (``alpha``, ``buckets``,
+            ``thres``; :func:`~dv2s_gym.mining.samplers.sampler_params`); ``None``: VerifAI's defaults.
         scenarios: bank names or ``tag:<tag>`` (``None``: the whole bank).
         bank_dir: the bank folder (``None``: the shipped bank).
         backend, workers, address, timeout: where episodes run (as ``dv2s regress``:
@@ -222,6 +228,7 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         raise MiningError(f"--budget must be at least 1 episode, not {budget}")
     if sampler not in SAMPLERS:
         raise MiningError(f"unknown sampler {sampler!r}: use one of {', '.join(SAMPLERS)}")
+    sampler_params(sampler, sampler_options)  # a bad option fails here, in one line
     from policies.registry import load_policy
 
     load_policy(policy)  # an unknown spec or broken checkpoint fails here, in one line, before any worker starts
@@ -245,7 +252,7 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         batch = int(batch) if batch else (saved["batch"] if saved else 4 * n_workers)
         if batch < 1:
             raise MiningError(f"--batch must be at least 1, not {batch}")
-        settings = _settings(policy, sampler, seed, batch, space.scenarios, bank_dir, env_config, reference,
+        settings = _settings(policy, sampler, sampler_options, seed, batch, space.scenarios, bank_dir, env_config, reference,
                              ttc_threshold, stall_seconds, budget, space.describe())
         if saved is not None:
             _check_resume(saved, settings, out)
@@ -262,10 +269,17 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         try:
             with pool:
                 chunk = scene_sampler.fed // batch
+                lookahead = 1 if is_adaptive(sampler) else LOOKAHEAD_CHUNKS
                 while chunk * batch < budget:
-                    drawn = scene_sampler.draw(batch)
-                    indices = range(chunk * batch, chunk * batch + batch)
-                    specs = {i: space.decode(point) for i, (point, _) in zip(indices, drawn)}
+                    # an adaptive sampler draws a chunk only once it has been fed the last one's outcomes;
+                    # a non-adaptive one learns nothing from them, so several whole chunks go to the
+                    # workers at once (the same draws, without idle workers at the end of every chunk)
+                    count = max(1, min(lookahead, budget // batch - chunk))
+                    draws = [scene_sampler.draw(batch) for _ in range(count)]
+                    first = chunk * batch
+                    indices = range(first, first + count * batch)
+                    pairs = [pair for drawn in draws for pair in drawn]
+                    specs = {i: space.decode(point) for i, (point, _) in zip(indices, pairs)}
                     tasks = [_task(i, specs[i], policy, reference, settings, out) for i in indices
                              if i not in done and i < budget]
                     by_id = {t["id"]: t for t in tasks}
@@ -282,10 +296,10 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
 
                     pool.run(tasks, handle)
                     if all(i in done for i in indices):
-                        for i, (point, info) in zip(indices, drawn):
+                        for i, (point, info) in zip(indices, pairs):
                             scene_sampler.feed(point, info, _rho(done[i]))
                         atomic_write_bytes(out / "sampler.pkl", scene_sampler.dumps())
-                    chunk += 1
+                    chunk += count
         finally:
             appender.close()
             if bar is not None:
