@@ -67,7 +67,8 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
         "sampler": sampler, "seed": seed, "episodes": len(run.records),
         "errors": sum(1 for r in run.records if r.get("error")), "failures": len(failures),
         "avoidable": len(avoidable), "clusters": len(clusters), "avoidable_clusters": len(avoidable_clusters),
-        "scenarios_failing": len({r["scenario"] for r in failures}), "seconds": seconds,
+        "scenarios_failing": len({r["scenario"] for r in failures}),
+        "kinds": len({(r["scenario"], r["failure"]["kind"]) for r in failures}), "seconds": seconds,
     }
 
 
@@ -90,6 +91,7 @@ def bench_samplers(policy: str, samplers: Sequence[str], seeds: Sequence[int], b
             print(f"  {name:14s} seed {seed}: {row['failures']:4d} failures / {row['episodes']} episodes "
                   f"({row['errors']} errors), {row['clusters']:4d} distinct clusters, "
                   f"{row['avoidable_clusters']:4d} avoidable, {row['scenarios_failing']:2d} scenarios, "
+                  f"{row['kinds']:2d} (scenario, class) pairs, "
                   f"{row['seconds']:.0f} s, load {_load()}", flush=True)
     summary: Dict[str, Dict[str, Any]] = {}
     for name, rows in runs.items():
@@ -100,18 +102,19 @@ def bench_samplers(policy: str, samplers: Sequence[str], seeds: Sequence[int], b
             "per100": 100.0 * failures / max(episodes, 1), "interval": (100.0 * low, 100.0 * high),
             "clusters": statistics.mean(r["clusters"] for r in rows),
             "avoidable_clusters": statistics.mean(r["avoidable_clusters"] for r in rows),
+            "kinds": statistics.mean(r["kinds"] for r in rows),
             "per_seed": [r["clusters"] for r in rows], "runs": rows,
         }
     base = summary.get("random")
     print(f"\n| sampler | failures / 100 episodes (95% CI) | distinct clusters per run (per seed) "
-          f"| avoidable clusters | clusters vs random |")
-    print("|---|---|---|---|---|")
+          f"| avoidable clusters | (scenario, class) pairs | clusters vs random |")
+    print("|---|---|---|---|---|---|")
     for name, s in summary.items():
         ratio = s["clusters"] / base["clusters"] if base and base["clusters"] else float("nan")
         s["ratio"] = ratio
         print(f"| {name} | {s['per100']:.1f} ({s['interval'][0]:.1f}-{s['interval'][1]:.1f}) "
               f"| {s['clusters']:.1f} ({', '.join(map(str, s['per_seed']))}) "
-              f"| {s['avoidable_clusters']:.1f} | {ratio:.2f}x |")
+              f"| {s['avoidable_clusters']:.1f} | {s['kinds']:.1f} | {ratio:.2f}x |")
     adaptive = {k: v for k, v in summary.items() if k not in ("random", "halton")}
     if adaptive and base:
         best = max(adaptive, key=lambda k: adaptive[k]["ratio"])
@@ -122,31 +125,51 @@ def bench_samplers(policy: str, samplers: Sequence[str], seeds: Sequence[int], b
 
 def bench_throughput(policy: str, sampler: str, seed: int, budget: int, repeats: int, reference: Optional[str],
                      scenarios: Optional[List[str]], batch: Optional[int], root: str) -> Dict[str, float]:
-    """1 worker against 2 on the same run, alternating; medians of episodes/min and of the per-round ratio."""
-    from bench.bench_regress import parallel_capacity
+    """1 worker against 2 on the same run, alternating; medians of episodes/min and of the per-round ratios.
 
+    A non-adaptive sampler is also run with 2 workers one chunk at a time (``LOOKAHEAD_CHUNKS = 1``, the
+    miner's behaviour for adaptive samplers): the difference is what the idle workers at the end of each
+    chunk cost.
+    """
+    from bench.bench_regress import parallel_capacity
+    from dv2s_gym.mining import miner
+    from dv2s_gym.mining.samplers import is_adaptive
+
+    shipped = miner.LOOKAHEAD_CHUNKS
+    configs = [("1 worker", 1, shipped), ("2 workers", 2, shipped)]
+    if not is_adaptive(sampler):
+        configs.append(("2 workers, chunk by chunk", 2, 1))
     print(f"# throughput: policy {policy}, sampler {sampler}, seed {seed}, budget {budget}, reference "
           f"{reference or 'none'}, batch {batch or 'default (4 per worker)'}, {repeats} rounds", flush=True)
-    rates: Dict[int, List[float]] = {1: [], 2: []}
-    ratios: List[float] = []
+    rates: Dict[str, List[float]] = {label: [] for label, _, _ in configs}
+    ratios: Dict[str, List[float]] = {label: [] for label, _, _ in configs[1:]}
     capacity: List[float] = []
-    for round_ in range(repeats):
-        capacity.append(parallel_capacity())
-        load = _load()
-        seconds = {}
-        for workers in ((1, 2) if round_ % 2 == 0 else (2, 1)):
-            row = mine_once(policy, sampler, seed, budget, workers, reference, scenarios, batch,
-                            os.path.join(root, f"throughput-{workers}"))
-            seconds[workers] = row["seconds"]
-            rates[workers].append(60.0 * row["episodes"] / row["seconds"])
-        ratios.append(seconds[1] / seconds[2])
-        print(f"  round {round_ + 1}: 1 worker {rates[1][-1]:.1f} ep/min, 2 workers {rates[2][-1]:.1f} ep/min, "
-              f"{ratios[-1]:.2f}x; parallel capacity {capacity[-1]:.2f}x; load {load} -> {_load()}", flush=True)
-    result = {"one": statistics.median(rates[1]), "two": statistics.median(rates[2]),
-              "ratio": statistics.median(ratios), "capacity": statistics.median(capacity)}
-    print(f"\nmining throughput: 1 worker {result['one']:.1f} ep/min, 2 workers {result['two']:.1f} ep/min, "
-          f"{result['ratio']:.2f}x (target >= 1.8x; machine's parallel capacity {result['capacity']:.2f}x)",
-          flush=True)
+    try:
+        for round_ in range(repeats):
+            capacity.append(parallel_capacity())
+            load = _load()
+            seconds = {}
+            order = configs if round_ % 2 == 0 else configs[::-1]
+            for label, workers, lookahead in order:
+                miner.LOOKAHEAD_CHUNKS = lookahead
+                row = mine_once(policy, sampler, seed, budget, workers, reference, scenarios, batch,
+                                os.path.join(root, f"throughput-{workers}-{lookahead}"))
+                seconds[label] = row["seconds"]
+                rates[label].append(60.0 * row["episodes"] / row["seconds"])
+            for label in ratios:
+                ratios[label].append(seconds["1 worker"] / seconds[label])
+            print(f"  round {round_ + 1}: " + ", ".join(f"{label} {rates[label][-1]:.1f} ep/min" for label in rates)
+                  + "; " + ", ".join(f"{label} / 1 worker {ratios[label][-1]:.2f}x" for label in ratios)
+                  + f"; parallel capacity {capacity[-1]:.2f}x; load {load} -> {_load()}", flush=True)
+    finally:
+        miner.LOOKAHEAD_CHUNKS = shipped
+    result = {"rates": {k: statistics.median(v) for k, v in rates.items()},
+              "ratios": {k: statistics.median(v) for k, v in ratios.items()},
+              "capacity": statistics.median(capacity)}
+    print("\nmining throughput (medians): " + ", ".join(f"{k} {v:.1f} ep/min" for k, v in result["rates"].items()))
+    for label, ratio in result["ratios"].items():
+        print(f"{label} / 1 worker: {ratio:.2f}x" + (" (target >= 1.8x)" if label == "2 workers" else ""))
+    print(f"machine's parallel capacity: {result['capacity']:.2f}x", flush=True)
     return result
 
 
@@ -169,6 +192,8 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     parser.add_argument("--alpha", type=float, default=None, help="adaptive samplers' alpha (VerifAI default 0.9)")
     parser.add_argument("--buckets", type=int, default=None,
                         help="adaptive samplers' buckets per parameter (VerifAI default 5)")
+    parser.add_argument("--thres", type=float, default=None,
+                        help="adaptive samplers' robustness threshold (VerifAI default 0: failures only)")
     parser.add_argument("--throughput-sampler", default="random")
     parser.add_argument("--throughput-budget", type=int, default=None, help="default 200; --quick 40")
     parser.add_argument("--repeats", type=int, default=None, help="throughput rounds (default 3; --quick 1)")
@@ -180,7 +205,8 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     seeds = args.seeds if args.seeds else ([0] if args.quick else [0, 1, 2])
     repeats = args.repeats or (1 if args.quick else 3)
     throughput_budget = args.throughput_budget or (40 if args.quick else 200)
-    options = {k: v for k, v in (("alpha", args.alpha), ("buckets", args.buckets)) if v is not None}
+    options = {k: v for k, v in (("alpha", args.alpha), ("buckets", args.buckets),
+                                                ("thres", args.thres)) if v is not None}
     print(f"machine: {os.cpu_count()} cores; {time.strftime('%Y-%m-%d %H:%M')}; load {_load()}", flush=True)
     root = tempfile.mkdtemp(prefix="dv2s-bench-mine-")
     results: Dict[str, Any] = {}
