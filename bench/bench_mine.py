@@ -45,7 +45,7 @@ def _load() -> str:
 
 def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, reference: Optional[str],
               scenarios: Optional[List[str]], batch: Optional[int], out: str,
-              sampler_options: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+              sampler_options: Optional[Dict[str, Any]] = None, feedback: str = "robustness") -> Dict[str, Any]:
     """One mining run in a fresh folder; its counts and wall time."""
     from dv2s_gym.mining.miner import mine
 
@@ -54,7 +54,9 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
 
     takes = SAMPLER_OPTIONS.get(sampler, ())
     options = {k: v for k, v in (sampler_options or {}).items() if k in takes}  # random/halton take none
-    extra = {"sampler_options": options} if options else {}
+    extra: Dict[str, Any] = {"sampler_options": options} if options else {}
+    if feedback != "robustness":
+        extra["feedback"] = feedback
     start = time.perf_counter()
     run = mine(policy, out=out, budget=budget, sampler=sampler, seed=seed, workers=workers, reference=reference,
                scenarios=scenarios, batch=batch, progress=False, reports=False, **extra)
@@ -74,19 +76,21 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
 
 def bench_samplers(policy: str, samplers: Sequence[str], seeds: Sequence[int], budget: int, workers: int,
                    reference: Optional[str], scenarios: Optional[List[str]], batch: Optional[int],
-                   sampler_options: Optional[Dict[str, Any]], root: str) -> Dict[str, Dict[str, Any]]:
+                   sampler_options: Optional[Dict[str, Any]], root: str,
+                   feedback: str = "robustness") -> Dict[str, Dict[str, Any]]:
     """Every sampler on every seed; per-sampler summary (printed as it goes)."""
     from dv2s_gym.regress.stats import wilson_interval
 
     print(f"# samplers: policy {policy}, reference {reference or 'none'}, "
           f"scenarios {' '.join(scenarios) if scenarios else 'whole bank'}, budget {budget}, seeds {list(seeds)}, "
-          f"{workers} workers, batch {batch or 'default'}, sampler options {sampler_options or 'VerifAI defaults'}",
+          f"{workers} workers, batch {batch or 'default'}, sampler options {sampler_options or 'VerifAI defaults'}, "
+          f"feedback {feedback}",
           flush=True)
     runs: Dict[str, List[Dict[str, Any]]] = {name: [] for name in samplers}
     for seed in seeds:  # seed-major, so an interrupted bench still compares the samplers on equal terms
         for name in samplers:
             row = mine_once(policy, name, seed, budget, workers, reference, scenarios, batch,
-                            os.path.join(root, f"{name}-{seed}"), sampler_options)
+                            os.path.join(root, f"{name}-{seed}"), sampler_options, feedback)
             runs[name].append(row)
             print(f"  {name:14s} seed {seed}: {row['failures']:4d} failures / {row['episodes']} episodes "
                   f"({row['errors']} errors), {row['clusters']:4d} distinct clusters, "
@@ -194,6 +198,8 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
                         help="adaptive samplers' buckets per parameter (VerifAI default 5)")
     parser.add_argument("--thres", type=float, default=None,
                         help="adaptive samplers' robustness threshold (VerifAI default 0: failures only)")
+    parser.add_argument("--feedback", choices=("robustness", "novelty"), default="robustness",
+                        help="what the adaptive samplers learn from (mine(feedback=...))")
     parser.add_argument("--throughput-sampler", default="random")
     parser.add_argument("--throughput-budget", type=int, default=None, help="default 200; --quick 40")
     parser.add_argument("--repeats", type=int, default=None, help="throughput rounds (default 3; --quick 1)")
@@ -213,7 +219,8 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     try:
         if args.part in ("all", "samplers"):
             results["samplers"] = bench_samplers(args.policy, args.samplers, seeds, budget, args.workers, reference,
-                                                 args.scenarios, args.batch, options or None, root)
+                                                 args.scenarios, args.batch, options or None, root,
+                                                 args.feedback)
         if args.part in ("all", "throughput"):
             results["throughput"] = bench_throughput(args.policy, args.throughput_sampler, seeds[0],
                                                      throughput_budget, repeats, reference, args.scenarios,

@@ -370,12 +370,18 @@ def _stable(records):
     return [json.dumps(r, sort_keys=True) for r in records]
 
 
-@pytest.fixture(scope="module", params=["cross-entropy", "random"])
+RUNS = {
+    "cross-entropy": {"sampler": "cross-entropy"},
+    "random": {"sampler": "random"},  # non-adaptive: whole chunks go to the workers at once
+    "bandit-novelty": {"sampler": "bandit", "feedback": "novelty", "sampler_options": {"alpha": 0.8, "buckets": 2}},
+}
+
+
+@pytest.fixture(scope="module", params=list(RUNS))
 def whole_run(request, tmp_path_factory):
-    """An uninterrupted run of an adaptive sampler (one chunk at a time) and of a non-adaptive one (whole
-    chunks sent ahead)."""
+    """An uninterrupted run of each kind of sampler and feedback."""
     out = tmp_path_factory.mktemp("mine-whole")
-    settings = {**MINE, "sampler": request.param}
+    settings = {**MINE, **RUNS[request.param]}
     run = mine(POLICY, out=out, **settings)
     return out, run, settings
 
@@ -397,7 +403,7 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
     assert json.loads((out / "settings.json").read_text())["sampler"] == settings["sampler"]
     # the scenes are the sampler's draws in order, however many chunks went to the workers at once
     space = SceneSpace(MINE["scenarios"])
-    sampler = make_sampler(settings["sampler"], space.feature_space, settings["seed"])
+    sampler = make_sampler(settings["sampler"], space.feature_space, settings["seed"], settings.get("sampler_options"))
     expected = []
     for _ in range(3):
         drawn = sampler.draw(MINE["batch"])
@@ -406,8 +412,37 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
             expected.append((spec.scenario, spec.params))
             record = records[len(expected) - 1] if len(expected) <= len(records) else None
             if record is not None:
-                sampler.feed(point, info, record["rho"])
+                sampler.feed(point, info, _fed(record, records, settings.get("feedback", "robustness")))
     assert [(r["scenario"], r["params"]) for r in records] == expected[:10]
+
+
+def _fed(record, records, feedback):
+    """What the miner feeds back for ``record`` (written out here from the documented rule)."""
+    from dv2s_gym.mining.cluster import cluster_id
+
+    if record["failure"] and feedback == "novelty":
+        earlier = {cluster_id(r) for r in records if r["index"] < record["index"] and r["failure"]}
+        if cluster_id(record) in earlier:
+            return 9.0
+    return record["rho"]
+
+
+def test_novelty_feedback_feeds_a_repeated_cluster_as_an_easy_scene():
+    from dv2s_gym.mining.miner import _feedback
+
+    failure = {"type": "collision", "kind": "collision:rear_end"}
+    first = {"index": 0, "scenario": BRAKES, "point": [0.1, 0.9], "failure": failure, "rho": -2.0, "error": None}
+    same_cell = {**first, "index": 1, "point": [0.2, 0.8], "rho": -1.5}
+    other_cell = {**first, "index": 2, "point": [0.5, 0.8], "rho": -1.2}
+    passed = {**first, "index": 3, "failure": None, "rho": 3.0}
+    crashed = {**first, "index": 4, "failure": None, "rho": None, "error": "crashed"}
+    seen: set = set()
+    assert [_feedback(r, seen, "novelty") for r in (first, same_cell, other_cell, passed, crashed)] == [
+        -2.0, 9.0, -1.2, 3.0, 1.0]
+    seen = set()
+    assert [_feedback(r, seen, "robustness") for r in (first, same_cell, other_cell)] == [-2.0, -1.5, -1.2]
+    with pytest.raises(MiningError, match="unknown feedback 'curious'.*novelty"):
+        mine("rule", out="unused", budget=1, feedback="curious")
 
 
 def test_a_killed_run_resumes_to_the_same_records(whole_run, tmp_path):
@@ -437,9 +472,10 @@ def test_resuming_with_other_settings_is_refused(whole_run, tmp_path):
     shutil.copytree(out, copy)
     before = (copy / "episodes.jsonl").read_bytes()
     other = "halton" if settings["sampler"] == "random" else "random"
-    changes = [{"sampler": other}, {"seed": 6}, {"env_config": {"duration": 4}}, {"batch": 2}, {"reference": None}]
-    if settings["sampler"] == "cross-entropy":
-        changes.append({"sampler_options": {"alpha": 0.5}})
+    changes = [{"sampler": other, "sampler_options": None}, {"seed": 6}, {"env_config": {"duration": 4}}, {"batch": 2}, {"reference": None}]
+    if settings["sampler"] != "random":
+        changes += [{"sampler_options": {"alpha": 0.5}},
+                    {"feedback": "robustness" if settings.get("feedback") == "novelty" else "novelty"}]
     for change in changes:
         with pytest.raises(MiningError) as error:
             mine(POLICY, out=copy, **{**settings, **change})

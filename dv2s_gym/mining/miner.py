@@ -31,7 +31,7 @@ from typing import Any, Dict, Iterator, List, Optional, Sequence
 
 import numpy as np
 
-from dv2s_gym.mining.cluster import cluster_failures, group
+from dv2s_gym.mining.cluster import cluster_failures, cluster_id, group
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
 from dv2s_gym.mining.samplers import SAMPLERS, SceneSampler, is_adaptive, make_sampler, sampler_params
@@ -42,7 +42,7 @@ __all__ = ["MineRun", "mine", "read_records", "episode_seed", "SETTINGS_VERSION"
 SETTINGS_VERSION = 1
 LOOKAHEAD_CHUNKS = 16
 """Whole chunks a non-adaptive sampler (random, halton) sends to the workers at once."""
-_RESUME_KEYS = ("policy", "sampler", "sampler_options", "seed", "batch", "scenarios", "bank_dir", "env_config", "reference",
+_RESUME_KEYS = ("policy", "sampler", "sampler_options", "feedback", "seed", "batch", "scenarios", "bank_dir", "env_config", "reference",
                 "ttc_threshold", "stall_seconds")
 
 
@@ -132,12 +132,13 @@ class _Appender:
         self._handle.close()
 
 
-def _settings(policy: str, sampler: str, sampler_options: Dict[str, Any], seed: int, batch: int, scenarios: List[str], bank_dir: Optional[str],
+def _settings(policy: str, sampler: str, sampler_options: Dict[str, Any], feedback: str, seed: int, batch: int, scenarios: List[str], bank_dir: Optional[str],
               env_config: Dict[str, Any], reference: Optional[str], ttc_threshold: float, stall_seconds: float,
               budget: int, space_description: Dict[str, Any]) -> Dict[str, Any]:
     return {
         "schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, "sampler": sampler,
-        "sampler_options": dict(sampler_options) if sampler_options else None, "seed": int(seed),
+        "sampler_options": dict(sampler_options) if sampler_options else None,
+        "feedback": feedback, "seed": int(seed),
         "batch": int(batch), "scenarios": scenarios, "bank_dir": bank_dir, "env_config": env_config,
         "reference": reference, "ttc_threshold": float(ttc_threshold), "stall_seconds": float(stall_seconds),
         "budget": int(budget), "space": space_description,
@@ -169,6 +170,7 @@ def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[i
             return sampler
     sampler = make_sampler(settings["sampler"], space.feature_space, settings["seed"],
                            settings.get("sampler_options") or None)
+    seen: set = set()
     for chunk in range(complete):
         drawn = sampler.draw(batch)
         for offset, (point, info) in enumerate(drawn):
@@ -177,13 +179,29 @@ def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[i
             if spec.scenario != records[index]["scenario"] or spec.params != records[index]["params"]:
                 raise MiningError(f"{out}: episode {index} in episodes.jsonl does not match the sampler's draw "
                                   "(the run was made by another version); pass another --out")
-            sampler.feed(point, info, _rho(records[index]))
+            sampler.feed(point, info, _feedback(records[index], seen, settings.get("feedback", "robustness")))
     return sampler
 
 
-def _rho(record: Dict[str, Any]) -> float:
+FEEDBACKS = ("robustness", "novelty")
+"""What the adaptive samplers are fed: ``robustness`` (each episode's robustness) or ``novelty`` (the same,
+except that a failure in a cluster an earlier episode already found is fed as an easy scene)."""
+_REPEAT = 9.0  # what a repeated failure is fed under "novelty": the robustness of a scene without a near miss
+
+
+def _feedback(record: Dict[str, Any], seen: set, mode: str) -> float:
+    """The value fed to the sampler for ``record``; ``seen`` holds the clusters of the episodes fed before it
+    (in index order) and is updated."""
     rho = record.get("rho")
-    return 1.0 if rho is None or record.get("error") else float(rho)
+    if rho is None or record.get("error"):
+        return 1.0
+    if record.get("failure"):
+        cluster = cluster_id(record)
+        repeat = cluster in seen
+        seen.add(cluster)
+        if repeat and mode == "novelty":
+            return _REPEAT
+    return float(rho)
 
 
 def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cross-entropy",
@@ -193,7 +211,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
          progress: bool = True, env_config: Optional[Dict[str, Any]] = None,
          ttc_threshold: float = DEFAULT_TTC_THRESHOLD, stall_seconds: float = DEFAULT_STALL_SECONDS,
          convert: bool = False, convert_options: Optional[Dict[str, Any]] = None,
-         reports: bool = True, sampler_options: Optional[Dict[str, Any]] = None) -> MineRun:
+         reports: bool = True, sampler_options: Optional[Dict[str, Any]] = None,
+         feedback: str = "robustness") -> MineRun:
     """Mine ``policy``'s failures over ``budget`` episodes; resumable (same ``out``).
 
     Args:
@@ -204,6 +223,9 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         sampler: one of :data:`~dv2s_gym.mining.samplers.SAMPLERS`.
         sampler_options: VerifAI parameters of an adaptive sampler (``alpha``, ``buckets``,
             ``thres``; :func:`~dv2s_gym.mining.samplers.sampler_params`); ``None``: VerifAI's defaults.
+        feedback: what the adaptive samplers learn from (:data:`FEEDBACKS`): ``"robustness"`` (every
+            failure pulls the sampler towards its scene) or ``"novelty"`` (only a failure in a cluster not
+            found before does; a repeat is fed as an easy scene, so the sampler keeps looking for new ones).
         scenarios: bank names or ``tag:<tag>`` (``None``: the whole bank).
         bank_dir: the bank folder (``None``: the shipped bank).
         backend, workers, address, timeout: where episodes run (as ``dv2s regress``:
@@ -229,6 +251,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
     if sampler not in SAMPLERS:
         raise MiningError(f"unknown sampler {sampler!r}: use one of {', '.join(SAMPLERS)}")
     sampler_params(sampler, sampler_options)  # a bad option fails here, in one line
+    if feedback not in FEEDBACKS:
+        raise MiningError(f"unknown feedback {feedback!r}: use one of {', '.join(FEEDBACKS)}")
     from policies.registry import load_policy
 
     load_policy(policy)  # an unknown spec or broken checkpoint fails here, in one line, before any worker starts
@@ -252,7 +276,7 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         batch = int(batch) if batch else (saved["batch"] if saved else 4 * n_workers)
         if batch < 1:
             raise MiningError(f"--batch must be at least 1, not {batch}")
-        settings = _settings(policy, sampler, sampler_options, seed, batch, space.scenarios, bank_dir, env_config, reference,
+        settings = _settings(policy, sampler, sampler_options, feedback, seed, batch, space.scenarios, bank_dir, env_config, reference,
                              ttc_threshold, stall_seconds, budget, space.describe())
         if saved is not None:
             _check_resume(saved, settings, out)
@@ -269,6 +293,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         try:
             with pool:
                 chunk = scene_sampler.fed // batch
+                seen = {cluster_id(done[i]) for i in range(scene_sampler.fed)
+                        if done[i].get("failure") and not done[i].get("error")}
                 lookahead = 1 if is_adaptive(sampler) else LOOKAHEAD_CHUNKS
                 while chunk * batch < budget:
                     # an adaptive sampler draws a chunk only once it has been fed the last one's outcomes;
@@ -297,7 +323,7 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
                     pool.run(tasks, handle)
                     if all(i in done for i in indices):
                         for i, (point, info) in zip(indices, pairs):
-                            scene_sampler.feed(point, info, _rho(done[i]))
+                            scene_sampler.feed(point, info, _feedback(done[i], seen, feedback))
                         atomic_write_bytes(out / "sampler.pkl", scene_sampler.dumps())
                     chunk += count
         finally:
