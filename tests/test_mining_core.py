@@ -104,7 +104,8 @@ def mixed_bank(tmp_path_factory):
     shutil.copytree(BANK_DIR / BRAKES, folder / "brakes_mixed")
     script = folder / "brakes_mixed" / "scenario.scenic"
     text = script.read_text()
-    script.write_text(text.replace("param ego_speed = Range(20, 28)\n", "param ego_speed = Range(20, 28)\n" + _EXTRA_PARAMS))
+    line = "param ego_speed = Range(20, 28)\n"
+    script.write_text(text.replace(line, line + _EXTRA_PARAMS))
     meta = json.loads((folder / "brakes_mixed" / "meta.json").read_text())
     meta["name"] = "brakes_mixed"
     (folder / "brakes_mixed" / "meta.json").write_text(json.dumps(meta))
@@ -472,7 +473,8 @@ def test_resuming_with_other_settings_is_refused(whole_run, tmp_path):
     shutil.copytree(out, copy)
     before = (copy / "episodes.jsonl").read_bytes()
     other = "halton" if settings["sampler"] == "random" else "random"
-    changes = [{"sampler": other, "sampler_options": None}, {"seed": 6}, {"env_config": {"duration": 4}}, {"batch": 2}, {"reference": None}]
+    changes = [{"sampler": other, "sampler_options": None}, {"seed": 6}, {"env_config": {"duration": 4}},
+               {"batch": 2}, {"reference": None}]
     if settings["sampler"] != "random":
         changes += [{"sampler_options": {"alpha": 0.5}},
                     {"feedback": "robustness" if settings.get("feedback") == "novelty" else "novelty"}]

@@ -42,8 +42,8 @@ __all__ = ["MineRun", "mine", "read_records", "episode_seed", "SETTINGS_VERSION"
 SETTINGS_VERSION = 1
 LOOKAHEAD_CHUNKS = 16
 """Whole chunks a non-adaptive sampler (random, halton) sends to the workers at once."""
-_RESUME_KEYS = ("policy", "sampler", "sampler_options", "feedback", "seed", "batch", "scenarios", "bank_dir", "env_config", "reference",
-                "ttc_threshold", "stall_seconds")
+_RESUME_KEYS = ("policy", "sampler", "sampler_options", "feedback", "seed", "batch", "scenarios", "bank_dir",
+                "env_config", "reference", "ttc_threshold", "stall_seconds")
 
 
 @dataclass
@@ -132,9 +132,9 @@ class _Appender:
         self._handle.close()
 
 
-def _settings(policy: str, sampler: str, sampler_options: Dict[str, Any], feedback: str, seed: int, batch: int, scenarios: List[str], bank_dir: Optional[str],
-              env_config: Dict[str, Any], reference: Optional[str], ttc_threshold: float, stall_seconds: float,
-              budget: int, space_description: Dict[str, Any]) -> Dict[str, Any]:
+def _settings(policy: str, sampler: str, sampler_options: Optional[Dict[str, Any]], feedback: str, seed: int,
+              batch: int, scenarios: List[str], bank_dir: Optional[str], env_config: Dict[str, Any],
+              reference: Optional[str], ttc_threshold: float, stall_seconds: float, budget: int, space_description: Dict[str, Any]) -> Dict[str, Any]:
     return {
         "schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, "sampler": sampler,
         "sampler_options": dict(sampler_options) if sampler_options else None,
@@ -276,8 +276,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         batch = int(batch) if batch else (saved["batch"] if saved else 4 * n_workers)
         if batch < 1:
             raise MiningError(f"--batch must be at least 1, not {batch}")
-        settings = _settings(policy, sampler, sampler_options, feedback, seed, batch, space.scenarios, bank_dir, env_config, reference,
-                             ttc_threshold, stall_seconds, budget, space.describe())
+        settings = _settings(policy, sampler, sampler_options, feedback, seed, batch, space.scenarios, bank_dir,
+                             env_config, reference, ttc_threshold, stall_seconds, budget, space.describe())
         if saved is not None:
             _check_resume(saved, settings, out)
         atomic_write_json(settings_path, settings)
