@@ -134,7 +134,8 @@ class _Appender:
 
 def _settings(policy: str, sampler: str, sampler_options: Optional[Dict[str, Any]], feedback: str, seed: int,
               batch: int, scenarios: List[str], bank_dir: Optional[str], env_config: Dict[str, Any],
-              reference: Optional[str], ttc_threshold: float, stall_seconds: float, budget: int, space_description: Dict[str, Any]) -> Dict[str, Any]:
+              reference: Optional[str], ttc_threshold: float, stall_seconds: float, budget: int,
+              space_description: Dict[str, Any]) -> Dict[str, Any]:
     return {
         "schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, "sampler": sampler,
         "sampler_options": dict(sampler_options) if sampler_options else None,
