@@ -31,7 +31,7 @@ import shutil
 import statistics
 import tempfile
 import time
-from typing import Any, Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
@@ -74,35 +74,68 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
     }
 
 
+Config = Tuple[str, Dict[str, Any], str]
+"""A setting of the adaptive samplers: ``(label, sampler options, feedback)``."""
+
+DEFAULT_CONFIG: Config = ("VerifAI defaults", {}, "robustness")
+TUNED_CONFIGS: List[Config] = [
+    ("alpha 0.9, 2 buckets", {"alpha": 0.9, "buckets": 2}, "robustness"),
+    ("alpha 0.9, 1 bucket, thres 1", {"alpha": 0.9, "buckets": 1, "thres": 1.0}, "robustness"),
+]
+"""The settings chosen on a tuning seed (100) that is not one of the bench's seeds (see bench/RESULTS.md)."""
+
+
+def parse_config(text: str) -> Config:
+    """``"label:alpha=0.9,buckets=2,thres=1,feedback=novelty"`` (every key optional) as a :data:`Config`."""
+    label, _, body = text.partition(":")
+    options: Dict[str, Any] = {}
+    feedback = "robustness"
+    for item in filter(None, body.split(",")):
+        key, _, value = item.partition("=")
+        if key == "feedback":
+            feedback = value
+        elif key == "buckets":
+            options[key] = int(value)
+        else:
+            options[key] = float(value)
+    return label or body, options, feedback
+
+
 def bench_samplers(policy: str, samplers: Sequence[str], seeds: Sequence[int], budget: int, workers: int,
                    reference: Optional[str], scenarios: Optional[List[str]], batch: Optional[int],
-                   sampler_options: Optional[Dict[str, Any]], root: str,
-                   feedback: str = "robustness") -> Dict[str, Dict[str, Any]]:
-    """Every sampler on every seed; per-sampler summary (printed as it goes)."""
+                   configs: Sequence[Config], root: str) -> Dict[str, Dict[str, Any]]:
+    """Every sampler (each adaptive one in every config) on every seed; the summary by entry (printed)."""
+    from dv2s_gym.mining.samplers import is_adaptive
     from dv2s_gym.regress.stats import wilson_interval
 
+    entries: List[Tuple[str, str, Config]] = []
+    for name in samplers:
+        for config in (configs if is_adaptive(name) else [DEFAULT_CONFIG]):
+            label = name if not is_adaptive(name) or len(configs) == 1 and config == DEFAULT_CONFIG \
+                else f"{name} [{config[0]}]"
+            entries.append((label, name, config))
     print(f"# samplers: policy {policy}, reference {reference or 'none'}, "
           f"scenarios {' '.join(scenarios) if scenarios else 'whole bank'}, budget {budget}, seeds {list(seeds)}, "
-          f"{workers} workers, batch {batch or 'default'}, sampler options {sampler_options or 'VerifAI defaults'}, "
-          f"feedback {feedback}",
-          flush=True)
-    runs: Dict[str, List[Dict[str, Any]]] = {name: [] for name in samplers}
+          f"{workers} workers, batch {batch or 'default'}; adaptive sampler settings: "
+          + "; ".join(f"{label} = {options or 'VerifAI defaults'}, feedback {feedback}"
+                      for label, options, feedback in configs), flush=True)
+    runs: Dict[str, List[Dict[str, Any]]] = {label: [] for label, _, _ in entries}
     for seed in seeds:  # seed-major, so an interrupted bench still compares the samplers on equal terms
-        for name in samplers:
+        for label, name, (_, options, feedback) in entries:
             row = mine_once(policy, name, seed, budget, workers, reference, scenarios, batch,
-                            os.path.join(root, f"{name}-{seed}"), sampler_options, feedback)
-            runs[name].append(row)
-            print(f"  {name:14s} seed {seed}: {row['failures']:4d} failures / {row['episodes']} episodes "
+                            os.path.join(root, f"{len(runs[label])}-{seed}-{name}"), options, feedback)
+            runs[label].append(row)
+            print(f"  {label:46s} seed {seed}: {row['failures']:4d} failures / {row['episodes']} episodes "
                   f"({row['errors']} errors), {row['clusters']:4d} distinct clusters, "
                   f"{row['avoidable_clusters']:4d} avoidable, {row['scenarios_failing']:2d} scenarios, "
                   f"{row['kinds']:2d} (scenario, class) pairs, "
                   f"{row['seconds']:.0f} s, load {_load()}", flush=True)
     summary: Dict[str, Dict[str, Any]] = {}
-    for name, rows in runs.items():
+    for label, rows in runs.items():
         episodes = sum(r["episodes"] - r["errors"] for r in rows)
         failures = sum(r["failures"] for r in rows)
         low, high = wilson_interval(failures, episodes)
-        summary[name] = {
+        summary[label] = {
             "per100": 100.0 * failures / max(episodes, 1), "interval": (100.0 * low, 100.0 * high),
             "clusters": statistics.mean(r["clusters"] for r in rows),
             "avoidable_clusters": statistics.mean(r["avoidable_clusters"] for r in rows),
@@ -110,17 +143,17 @@ def bench_samplers(policy: str, samplers: Sequence[str], seeds: Sequence[int], b
             "per_seed": [r["clusters"] for r in rows], "runs": rows,
         }
     base = summary.get("random")
-    print(f"\n| sampler | failures / 100 episodes (95% CI) | distinct clusters per run (per seed) "
-          f"| avoidable clusters | (scenario, class) pairs | clusters vs random |")
+    print("\n| sampler | failures / 100 episodes (95% CI) | distinct clusters per run (per seed) "
+          "| avoidable clusters | (scenario, class) pairs | clusters vs random |")
     print("|---|---|---|---|---|---|")
-    for name, s in summary.items():
+    for label, s in summary.items():
         ratio = s["clusters"] / base["clusters"] if base and base["clusters"] else float("nan")
         s["ratio"] = ratio
-        print(f"| {name} | {s['per100']:.1f} ({s['interval'][0]:.1f}-{s['interval'][1]:.1f}) "
+        print(f"| {label} | {s['per100']:.1f} ({s['interval'][0]:.1f}-{s['interval'][1]:.1f}) "
               f"| {s['clusters']:.1f} ({', '.join(map(str, s['per_seed']))}) "
               f"| {s['avoidable_clusters']:.1f} | {s['kinds']:.1f} | {ratio:.2f}x |")
-    adaptive = {k: v for k, v in summary.items() if k not in ("random", "halton")}
-    if adaptive and base:
+    adaptive = {label: summary[label] for label, name, _ in entries if is_adaptive(name)}
+    if adaptive and base and base["clusters"]:
         best = max(adaptive, key=lambda k: adaptive[k]["ratio"])
         print(f"\nbest adaptive sampler: {best}, {adaptive[best]['ratio']:.2f}x the distinct failures of random "
               "(target >= 3x)", flush=True)
@@ -193,13 +226,10 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     parser.add_argument("--seeds", type=int, nargs="*", default=None, help="run seeds (default 0 1 2; --quick 0)")
     parser.add_argument("--workers", type=int, default=2, help="workers of the sampler runs")
     parser.add_argument("--batch", type=int, default=None, help="scenes per chunk (default: the miner's)")
-    parser.add_argument("--alpha", type=float, default=None, help="adaptive samplers' alpha (VerifAI default 0.9)")
-    parser.add_argument("--buckets", type=int, default=None,
-                        help="adaptive samplers' buckets per parameter (VerifAI default 5)")
-    parser.add_argument("--thres", type=float, default=None,
-                        help="adaptive samplers' robustness threshold (VerifAI default 0: failures only)")
-    parser.add_argument("--feedback", choices=("robustness", "novelty"), default="robustness",
-                        help="what the adaptive samplers learn from (mine(feedback=...))")
+    parser.add_argument("--config", action="append", default=None, metavar="LABEL:KEY=VALUE,...",
+                        help="a setting of the adaptive samplers (repeatable): alpha, buckets, thres (VerifAI's "
+                             "parameters) and feedback (robustness|novelty), e.g. 'b2:alpha=0.9,buckets=2'; "
+                             "default: VerifAI's defaults and the two tuned settings of TUNED_CONFIGS")
     parser.add_argument("--throughput-sampler", default="random")
     parser.add_argument("--throughput-budget", type=int, default=None, help="default 200; --quick 40")
     parser.add_argument("--repeats", type=int, default=None, help="throughput rounds (default 3; --quick 1)")
@@ -211,16 +241,14 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     seeds = args.seeds if args.seeds else ([0] if args.quick else [0, 1, 2])
     repeats = args.repeats or (1 if args.quick else 3)
     throughput_budget = args.throughput_budget or (40 if args.quick else 200)
-    options = {k: v for k, v in (("alpha", args.alpha), ("buckets", args.buckets),
-                                                ("thres", args.thres)) if v is not None}
+    configs = [parse_config(text) for text in args.config] if args.config else [DEFAULT_CONFIG, *TUNED_CONFIGS]
     print(f"machine: {os.cpu_count()} cores; {time.strftime('%Y-%m-%d %H:%M')}; load {_load()}", flush=True)
     root = tempfile.mkdtemp(prefix="dv2s-bench-mine-")
     results: Dict[str, Any] = {}
     try:
         if args.part in ("all", "samplers"):
             results["samplers"] = bench_samplers(args.policy, args.samplers, seeds, budget, args.workers, reference,
-                                                 args.scenarios, args.batch, options or None, root,
-                                                 args.feedback)
+                                                 args.scenarios, args.batch, configs, root)
         if args.part in ("all", "throughput"):
             results["throughput"] = bench_throughput(args.policy, args.throughput_sampler, seeds[0],
                                                      throughput_budget, repeats, reference, args.scenarios,
