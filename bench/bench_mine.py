@@ -16,9 +16,12 @@ and the ratio of each sampler's mean distinct clusters to random sampling's (tar
 adaptive sampler >= 3x). With ``--reference none`` (the default when the policy under test is
 the reference driver itself, ``rule``) avoidability is not checked.
 
-**Throughput** (``--part throughput``): the same mining run (same budget, seed and sampler,
-default ``random``) with 1 worker and with 2, in alternating rounds so both see the same load;
-episodes per minute end to end (pool start included) and the ratio (target >= 1.8x). The
+**Throughput** (``--part throughput``): the same mining run (same budget, seed, sampler -- default
+``random`` -- and batch, 8 unless ``--batch``) with 1 worker and with 2, in alternating rounds so both see
+the same load; episodes per minute end to end (scene space and worker pool start included) and the ratio
+(target >= 1.8x). A non-adaptive sampler also runs with 2 workers one chunk at a time (what the miner did
+before it sent whole chunks ahead, and still does for adaptive samplers): the cost of the idle worker at the
+end of each chunk. An adaptive sampler also runs with 2 workers and a 4x larger batch. The
 machine's parallel capacity (a busy loop in 2 processes against 1, from ``bench.bench_regress``)
 is measured in the same rounds: other processes on a shared machine bound the ratio by it.
 """
@@ -173,13 +176,16 @@ def bench_throughput(policy: str, sampler: str, seed: int, budget: int, repeats:
     from dv2s_gym.mining.samplers import is_adaptive
 
     shipped = miner.LOOKAHEAD_CHUNKS
-    configs = [("1 worker", 1, shipped), ("2 workers", 2, shipped)]
-    if not is_adaptive(sampler):
-        configs.append(("2 workers, chunk by chunk", 2, 1))
+    batch = batch or 8  # the same for 1 and 2 workers: both run the same episodes (the miner's default: 4 per worker)
+    configs = [("1 worker", 1, shipped, batch), ("2 workers", 2, shipped, batch)]
+    if is_adaptive(sampler):  # another batch draws other scenes: a different (equally long) run
+        configs.append((f"2 workers, batch {4 * batch}", 2, shipped, 4 * batch))
+    else:
+        configs.append(("2 workers, chunk by chunk", 2, 1, batch))
     print(f"# throughput: policy {policy}, sampler {sampler}, seed {seed}, budget {budget}, reference "
-          f"{reference or 'none'}, batch {batch or 'default (4 per worker)'}, {repeats} rounds", flush=True)
-    rates: Dict[str, List[float]] = {label: [] for label, _, _ in configs}
-    ratios: Dict[str, List[float]] = {label: [] for label, _, _ in configs[1:]}
+          f"{reference or 'none'}, batch {batch}, {repeats} rounds", flush=True)
+    rates: Dict[str, List[float]] = {label: [] for label, _, _, _ in configs}
+    ratios: Dict[str, List[float]] = {label: [] for label, _, _, _ in configs[1:]}
     capacity: List[float] = []
     try:
         for round_ in range(repeats):
@@ -187,10 +193,10 @@ def bench_throughput(policy: str, sampler: str, seed: int, budget: int, repeats:
             load = _load()
             seconds = {}
             order = configs if round_ % 2 == 0 else configs[::-1]
-            for label, workers, lookahead in order:
+            for label, workers, lookahead, size in order:
                 miner.LOOKAHEAD_CHUNKS = lookahead
-                row = mine_once(policy, sampler, seed, budget, workers, reference, scenarios, batch,
-                                os.path.join(root, f"throughput-{workers}-{lookahead}"))
+                row = mine_once(policy, sampler, seed, budget, workers, reference, scenarios, size,
+                                os.path.join(root, f"throughput-{workers}-{lookahead}-{size}"))
                 seconds[label] = row["seconds"]
                 rates[label].append(60.0 * row["episodes"] / row["seconds"])
             for label in ratios:
@@ -231,7 +237,7 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
                              "parameters) and feedback (robustness|novelty), e.g. 'b2:alpha=0.9,buckets=2'; "
                              "default: VerifAI's defaults and the two tuned settings of TUNED_CONFIGS")
     parser.add_argument("--throughput-sampler", default="random")
-    parser.add_argument("--throughput-budget", type=int, default=None, help="default 200; --quick 40")
+    parser.add_argument("--throughput-budget", type=int, default=None, help="default 600; --quick 40")
     parser.add_argument("--repeats", type=int, default=None, help="throughput rounds (default 3; --quick 1)")
     args = parser.parse_args(argv)
 
@@ -240,7 +246,7 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     budget = args.budget or (40 if args.quick else 300)
     seeds = args.seeds if args.seeds else ([0] if args.quick else [0, 1, 2])
     repeats = args.repeats or (1 if args.quick else 3)
-    throughput_budget = args.throughput_budget or (40 if args.quick else 200)
+    throughput_budget = args.throughput_budget or (40 if args.quick else 600)
     configs = [parse_config(text) for text in args.config] if args.config else [DEFAULT_CONFIG, *TUNED_CONFIGS]
     print(f"machine: {os.cpu_count()} cores; {time.strftime('%Y-%m-%d %H:%M')}; load {_load()}", flush=True)
     root = tempfile.mkdtemp(prefix="dv2s-bench-mine-")
