@@ -199,6 +199,8 @@ def bench_throughput(policy: str, sampler: str, seed: int, budget: int, repeats:
                                 os.path.join(root, f"throughput-{workers}-{lookahead}-{size}"))
                 seconds[label] = row["seconds"]
                 rates[label].append(60.0 * row["episodes"] / row["seconds"])
+                if row["errors"]:
+                    print(f"  ({label}: {row['errors']} of {row['episodes']} episodes are errors)", flush=True)
             for label in ratios:
                 ratios[label].append(seconds["1 worker"] / seconds[label])
             print(f"  round {round_ + 1}: " + ", ".join(f"{label} {rates[label][-1]:.1f} ep/min" for label in rates)
