@@ -49,10 +49,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from dv2s_gym.mining.report import SCHEMA as MINE_SCHEMA
     from dv2s_gym.regress.report import SCHEMA
 
     if _json_schema(args.trace) == SCHEMA:
         return _cmd_replay_report(args)
+    if Path(args.trace).is_dir() or _json_schema(args.trace) == MINE_SCHEMA:
+        folder = Path(args.trace) if Path(args.trace).is_dir() else Path(args.trace).parent
+        return _cmd_replay_mined(args, folder)
     if args.episode:
         raise ValueError(f"--episode picks an episode of a regression report; {args.trace} is an episode trace "
                          "(replay it without --episode)")
@@ -71,6 +77,46 @@ def _cmd_replay(args: argparse.Namespace) -> int:
             for frame in frames:
                 video.write(frame)
     print(f"replayed {len(replayed.actions)} steps of {trace.scenario!r}: every actor state matches the trace"
+          + (f"; video {args.video}" if args.video else ""))
+    return 0
+
+
+def _cmd_replay_mined(args: argparse.Namespace, folder) -> int:
+    from pathlib import Path
+
+    from dv2s_gym.mining.failure_video import rerun_failure, write_failure_video
+    from dv2s_gym.mining.miner import read_records
+
+    settings_file = folder / "settings.json"
+    if not settings_file.is_file():
+        raise ValueError(f"{folder} is not a `dv2s mine` run folder (no settings.json); pass a trace file, a "
+                         "regress report.json or a mining run folder")
+    if args.episode is None or not str(args.episode).isdigit():
+        raise ValueError(f"{folder} is a mining run: name the episode with --episode INDEX (report.md lists the "
+                         "failures and their indices)")
+    settings = json.loads(settings_file.read_text(encoding="utf-8"))
+    records = {int(r["index"]): r for r in read_records(folder / "episodes.jsonl")}
+    record = records.get(int(args.episode))
+    if record is None or record.get("error") or not record.get("result"):
+        raise ValueError(f"episode {args.episode} of {folder} did not finish (not in episodes.jsonl, or an error); "
+                         f"it has episodes 0..{max(records) if records else -1}")
+    options = {"policy": settings["policy"], "bank_dir": settings.get("bank_dir"),
+               "env_config": settings.get("env_config")}
+    if args.video and record.get("failure"):
+        write_failure_video(record, args.video, trace_path=Path(args.video).with_suffix(".json.gz"), **options)
+    else:
+        _, _, frames = rerun_failure(record, render=bool(args.video), **options)
+        if args.video:
+            from envs.recording import VideoWriter
+
+            fps = (settings.get("env_config") or {}).get("policy_frequency", 5)
+            with VideoWriter(args.video, fps=fps) as video:
+                for frame in frames:
+                    video.write(frame)
+    failure = record.get("failure") or {}
+    print(f"episode {record['index']} ({record['scenario']}, seed {record['seed']}): {settings['policy']} re-run "
+          f"with the recorded parameters; trajectory hash {record['result']['trajectory_hash'][:16]} matches the record"
+          + (f"; failure {failure.get('kind')} at {failure.get('time')} s" if failure else "")
           + (f"; video {args.video}" if args.video else ""))
     return 0
 
@@ -149,6 +195,35 @@ def _cmd_regress(args: argparse.Namespace) -> int:
         names = ("report.json", "junit.xml", "report.md", "report.html")
         print(f"reports: {', '.join(str(Path(out) / f) for f in names if (Path(out) / f).is_file())}")
     return exit_code(report["verdict"])
+
+
+def _cmd_mine(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from dv2s_gym.mining.miner import mine
+
+    env_config = _json_option(args.config, "--config")
+    if env_config is not None and not isinstance(env_config, dict):
+        raise ValueError("--config must be a JSON object of DV2S-v0 config overrides, e.g. '{\"duration\": 10}'")
+    out = Path(args.out or "out/mine")
+    convert_options = {"dra": args.dra, "sg": args.sg, "k": args.k, "threshold": args.threshold,
+                       "llm_config": _llm_config(args)}
+    try:
+        run = mine(args.policy, out=out, budget=args.budget, sampler=args.sampler, scenarios=args.scenarios,
+                   bank_dir=args.bank, backend=args.backend, workers=args.workers, address=args.address,
+                   seed=args.seed, reference=None if args.reference == "none" else args.reference,
+                   batch=args.batch, timeout=args.timeout, progress=not args.no_progress, env_config=env_config,
+                   ttc_threshold=args.ttc_threshold, stall_seconds=args.stall_seconds,
+                   convert=not args.no_convert, convert_options=convert_options,
+                   max_conversions=args.max_conversions)
+    except KeyboardInterrupt:
+        print(f"dv2s: finished episodes are saved in {out / 'episodes.jsonl'}; rerun the same command to resume",
+              file=sys.stderr)
+        raise
+    print(run.summary())
+    if run.reports:
+        print(f"reports: {', '.join(str(p) for p in run.reports.values())}")
+    return 0
 
 
 def _cmd_maps(args: argparse.Namespace) -> int:
@@ -484,6 +559,25 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_loop(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from dv2s_gym.mining.loop import DEFAULT_OUT, run_loop
+
+    options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr",
+                                                    "holdout_fraction", "k_eval", "regress_episodes", "mined_share",
+                                                    "margin", "seed", "workers", "scenarios")}
+    out = args.out or DEFAULT_OUT
+    report = run_loop(args.policy, out=out, bank_dir=getattr(args, "bank", None), n_envs=args.envs,
+                      progress=not args.no_progress, **options)
+    print((Path(out) / "report.md").read_text(encoding="utf-8") if (Path(out) / "report.md").is_file() else "")
+    print(f"final policy: {report.policy}")
+    for kind in ("json", "md", "html"):
+        if kind in report.paths:
+            print(f"report ({kind}): {report.paths[kind]}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``dv2s`` (every subcommand has ``--help``)."""
     parser = argparse.ArgumentParser(prog="dv2s", description="dv2s-gym: turn driving videos into Scenic "
@@ -522,14 +616,19 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--random", action="store_true", help="drive with random actions")
     run.set_defaults(func=_cmd_run)
 
-    replay = sub.add_parser("replay", help="replay a saved episode trace (or an episode of a regress report)",
+    replay = sub.add_parser("replay", help="replay a saved episode trace (or an episode of a regress report or a "
+                            "mining run)",
                             description="Re-run a saved trace with its seeds and actions; fails if any actor "
                             "state differs. Given a `dv2s regress` report.json and --episode SCENARIO/SEED, "
                             "re-runs that episode (from its stored trace when it failed, else by re-running the "
-                            "policy), checks its trajectory hash (exit 1 if it differs) and can write its video.")
-    replay.add_argument("trace", help="trace file written by `dv2s run --trace` or env.save_trace(), or a "
-                        "report.json written by `dv2s regress`")
-    replay.add_argument("--episode", help="with a report: the episode id, SCENARIO/SEED")
+                            "policy), checks its trajectory hash (exit 1 if it differs) and can write its video. "
+                            "Given a `dv2s mine` run folder and --episode INDEX, re-runs the policy on that "
+                            "episode's scene (scenario, parameters, seed), checks the hash and can write the "
+                            "failure's video.")
+    replay.add_argument("trace", help="trace file written by `dv2s run --trace` or env.save_trace(), a "
+                        "report.json written by `dv2s regress`, or a `dv2s mine` run folder")
+    replay.add_argument("--episode", help="with a regress report: the episode id, SCENARIO/SEED; with a mining "
+                        "run: the episode index")
     replay.add_argument("--policy", choices=["candidate", "baseline"], default="candidate",
                         help="with a report: whose episode (default: candidate)")
     replay.add_argument("--video", help="also write the replayed episode as a video (.webm)")
@@ -701,6 +800,56 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the report JSON instead of the table")
     p.set_defaults(func=_cmd_regress)
 
+    p = sub.add_parser(
+        "mine", help="mine a policy's failures: sample scenes, cluster failures, turn them into bank scenarios",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Sample scenes (a bank scenario and values of its Scenic parameters, drawn by a VerifAI "
+        "sampler that learns from the outcomes), run the policy on each in a local process pool or on Ray, and "
+        "detect failures: collision (with whom, and how), off road, time-to-collision under a threshold, stall. "
+        "Failures are clustered by scenario, failure class and region of parameter space; a failure counts "
+        "against the policy only if the reference driver avoids it in the same scene. With a writable --bank, "
+        "one failure per cluster is recorded as a bird's-eye video, turned into a Scenic scenario by the D-V2S "
+        "pipeline, checked in the sandbox, kept if it reproduces the failure, and added to the bank with its "
+        "provenance. Rerunning with the same --out resumes (a larger --budget continues the run).",
+        epilog="examples:\n"
+        "  dv2s mine --policy dv2s-ppo --budget 200 --bank my_bank --out out/mine\n"
+        "  dv2s mine --policy rule --sampler halton --scenarios tag:highway --budget 500 --no-convert\n"
+        "  dv2s mine --policy dv2s-ppo --backend ray --address HEAD:6379 --budget 5000 --bank /shared/bank")
+    p.add_argument("--policy", required=True, help="policy spec: rule, idm, keep_lane, random, dv2s-ppo, model.zip, "
+                   "ppo:PATH, module:attr, with ?key=value options")
+    bank_option(p)
+    p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank)")
+    p.add_argument("--budget", type=int, default=200, help="episodes to run (default 200)")
+    p.add_argument("--sampler", default="cross-entropy", choices=["random", "halton", "cross-entropy", "bandit"],
+                   help="VerifAI sampler (default cross-entropy)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sampler and the episodes (default 0)")
+    p.add_argument("--reference", default="rule",
+                   help="driver deciding avoidability (default rule; 'none' skips the check)")
+    p.add_argument("--ttc-threshold", type=float, default=1.0, help="low-TTC failure threshold [s] (default 1)")
+    p.add_argument("--stall-seconds", type=float, default=5.0,
+                   help="seconds standing with nothing in the lane 40 m ahead that count as a stall (default 5)")
+    p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
+    p.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
+    p.add_argument("--address", default=None, help="with --backend ray: the cluster address")
+    p.add_argument("--timeout", type=float, default=None,
+                   help="seconds one episode may take before its worker counts as hung (default 600)")
+    p.add_argument("--batch", type=int, default=None,
+                   help="scenes drawn before outcomes are fed back to the sampler (default 4 per worker)")
+    p.add_argument("--config", help="DV2S-v0 config overrides as JSON (or a .json file)")
+    p.add_argument("--no-convert", action="store_true", help="only find and cluster failures; add nothing to a bank")
+    p.add_argument("--max-conversions", type=int, default=None,
+                   help="convert at most this many clusters, those with most avoidable failures first (default: all)")
+    p.add_argument("--dra", choices=["bev", "openai"], default="bev", help="DRA backend for failure videos")
+    p.add_argument("--sg", choices=["rules", "openai"], default="rules", help="SG backend")
+    llm_options(p)
+    p.add_argument("-k", type=int, default=10, dest="k",
+                   help="scenes the new scenario is run on to check it reproduces the failure (default 10)")
+    p.add_argument("--threshold", type=float, default=0.3,
+                   help="reproduction rate a new scenario needs to be kept (default 0.3)")
+    p.add_argument("--out", default=None, help="run folder (default out/mine)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=_cmd_mine)
+
     p = sub.add_parser("eval", help="SCS/HR (dra), SP (sg) or E2E-SC (e2e) over a labeled folder",
                        description="Evaluate a stage over a folder of videos/descriptions with <name>.label.json "
                        "files; prints mean ± sd per use case and overall.")
@@ -748,6 +897,51 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--vec-env", choices=["subproc", "dummy"], default="subproc",
                    help="subproc: envs in worker processes (default); dummy: in this process")
     p.set_defaults(func=_cmd_train)
+
+    from dv2s_gym.mining.loop import DEFAULTS as LOOP
+
+    p = sub.add_parser("loop", help="mine a policy's failures, add them to the bank, fine-tune, measure (one round "
+                       "on embedded defaults takes a few minutes)",
+                       formatter_class=argparse.RawDescriptionHelpFormatter,
+                       description="Closed-loop failure mining. Each round: mine the policy's failures (dv2s mine) "
+                       "into new bank scenarios in a working bank (out/bank, a copy of the shipped bank, or --bank), "
+                       "split them by failure cluster into a fine-tuning and a held-out part, evaluate the policy "
+                       "on the held-out scenarios (seeds 10000+), fine-tune it on the grown bank minus the held-out "
+                       "scenarios (mined ones upweighted), evaluate again on the same episodes (paired: relative "
+                       "drop, exact McNemar) and regression-test new against old on the starting bank (dv2s "
+                       "regress statistics). Writes report.json, report.md, report.html to --out; rerunning with the same "
+                       "--out and settings resumes (raise --rounds to add rounds).",
+                       epilog="examples:\n"
+                       "  dv2s loop                                   # one round on dv2s-ppo, out/loop\n"
+                       "  dv2s loop --budget 400 --fine-tune-steps 100000 --k-eval 10 --out out/loop-big\n"
+                       "  dv2s loop --policy ppo:out/train/my_ppo/model.zip --rounds 3")
+    p.add_argument("--policy", default="dv2s-ppo", help="starting policy: an SB3 checkpoint spec (default dv2s-ppo)")
+    p.add_argument("--rounds", type=int, default=LOOP["rounds"], help=f"rounds (default {LOOP['rounds']})")
+    bank_option(p)
+    p.add_argument("--scenarios", nargs="+", help="scenarios mined and regression-tested (default: the whole bank)")
+    p.add_argument("--budget", type=int, default=LOOP["budget"],
+                   help=f"mining episodes per round (default {LOOP['budget']})")
+    p.add_argument("--sampler", default=LOOP["sampler"], help=f"the miner's sampler (default {LOOP['sampler']})")
+    p.add_argument("--fine-tune-steps", type=int, default=LOOP["fine_tune_steps"],
+                   help=f"env steps of fine-tuning per round (default {LOOP['fine_tune_steps']})")
+    p.add_argument("--fine-tune-lr", type=float, default=LOOP["fine_tune_lr"],
+                   help=f"learning rate of the fine-tuning (default {LOOP['fine_tune_lr']})")
+    p.add_argument("--holdout-fraction", type=float, default=LOOP["holdout_fraction"],
+                   help=f"share of the mined clusters held out (default {LOOP['holdout_fraction']})")
+    p.add_argument("--k-eval", type=int, default=LOOP["k_eval"],
+                   help=f"evaluation seeds per held-out scenario (default {LOOP['k_eval']})")
+    p.add_argument("--regress-episodes", type=int, default=LOOP["regress_episodes"],
+                   help=f"seeds per scenario of the regression test (default {LOOP['regress_episodes']})")
+    p.add_argument("--mined-share", type=float, default=LOOP["mined_share"],
+                   help=f"probability of a mined scenario in fine-tuning (default {LOOP['mined_share']})")
+    p.add_argument("--margin", type=float, default=LOOP["margin"],
+                   help=f"the regression test's non-inferiority margin (default {LOOP['margin']})")
+    p.add_argument("--seed", type=int, default=LOOP["seed"], help=f"seed (default {LOOP['seed']})")
+    p.add_argument("--workers", type=int, default=None, help="processes for mining and evaluation (default: every core)")
+    p.add_argument("--envs", type=int, default=2, help="training environments (default 2)")
+    p.add_argument("--out", default=None, help="loop folder (default out/loop; rerunning resumes it)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=_cmd_loop)
     return parser
 
 

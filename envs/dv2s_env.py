@@ -27,7 +27,7 @@ import envs.rendering  # noqa: F401  (sets SDL/XDG variables before any viewer s
 from envs.errors import InvalidActionError
 from envs.hw_road import EventRoad
 from envs.observations import FastKinematicObservation
-from envs.safety_metrics import time_to_collision
+from envs.safety_metrics import STANDING_SPEED, path_is_free, time_to_collision
 from envs.scenarios import (
     CompiledScenario,
     compile_scenario,
@@ -139,6 +139,11 @@ class _SceneStepper(ExternalStepper):
                 x.__dict__.update(_copy_state(state))
 
 
+def weights_standing(config: Dict[str, Any]) -> bool:
+    """Whether the reward has a ``standing`` term (computing it costs a pass over the actors)."""
+    return bool(config["reward_weights"].get("standing"))
+
+
 def _jsonable(value: Any) -> Any:
     if isinstance(value, (bool, int, str)) or value is None:
         return value
@@ -212,7 +217,9 @@ class DV2SEnv(AbstractEnv):
         - ``map``: override the script's map (a shipped map name or an .xodr path).
         - ``max_sample_iterations``: Scenic rejection-sampling budget per scene.
         - ``reward_weights``: weight of each reward term (``collision``, ``off_road``,
-          ``high_speed``, ``lane_change``, ``low_ttc``); ``reward_speed_range`` [m/s]
+          ``high_speed``, ``lane_change``, ``low_ttc``, ``standing``: the ego stands
+          with nothing 40 m ahead in its strip, the stall the failure miner reports;
+          weight 0 by default); ``reward_speed_range`` [m/s]
           maps speed to ``high_speed``; ``ttc_threshold`` [s] triggers ``low_ttc``;
           ``normalize_reward`` maps the sum to [0, 1].
         - ``terminate_on_collision``, ``terminate_off_road``, ``off_road_margin`` [m].
@@ -246,6 +253,7 @@ class DV2SEnv(AbstractEnv):
                     "high_speed": 0.4,
                     "lane_change": -0.05,
                     "low_ttc": -0.1,
+                    "standing": 0.0,
                 },
                 "reward_speed_range": [10.0, 30.0],
                 "ttc_threshold": 2.0,
@@ -361,6 +369,7 @@ class DV2SEnv(AbstractEnv):
             scene_seed=scene_seed,
             params=params,
             config=_jsonable({k: v for k, v in self.config.items()}),
+            fixed_params=_jsonable(dict(options.get("params") or {})),
         )
         self._record_state()
 
@@ -522,7 +531,14 @@ class DV2SEnv(AbstractEnv):
             "high_speed": float(np.clip(hw_utils.lmap(forward, [low, high], [0, 1]), 0, 1)),
             "lane_change": float(any(e["kind"] == "lane_change" and e["actors"] == ["ego"] for e in self._step_events)),
             "low_ttc": float(getattr(self, "_ttc", math.inf) < self.config["ttc_threshold"]),
+            "standing": float(self._standing_with_free_path(ego)) if weights_standing(self.config) else 0.0,
         }
+
+    def _standing_with_free_path(self, ego) -> bool:
+        if ego.speed >= STANDING_SPEED:
+            return False
+        state = (float(ego.position[0]), float(ego.position[1]), float(ego.heading))
+        return path_is_free(state, (o.position for o in self.road.vehicles + self.road.objects if o is not ego))
 
     def _reward(self, action) -> float:
         weights = self.config["reward_weights"]

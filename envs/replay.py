@@ -37,7 +37,10 @@ def replay_trace(trace: EpisodeTrace, *, render_mode: Optional[str] = None, chec
             config["map"] = recorded_map  # the map the script resolved, wherever it was relative to
         env = DV2SEnv(scenario=trace.source, config=config, render_mode=render_mode)
     try:
-        env.reset(seed=trace.seed, options={"scene_seed": trace.scene_seed})
+        options = {"scene_seed": trace.scene_seed}
+        if trace.fixed_params:
+            options["params"] = dict(trace.fixed_params)  # the scene was sampled with these fixed
+        env.reset(seed=trace.seed, options=options)
         _compare(trace, env.trace, 0, check)
         if frames is not None:
             frames.append(env.render())

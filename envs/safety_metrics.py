@@ -3,11 +3,16 @@
 from __future__ import annotations
 
 import math
-from typing import Iterable, Tuple
+from typing import Iterable, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["time_to_collision"]
+__all__ = ["time_to_collision", "path_is_free", "FREE_PATH", "STANDING_SPEED"]
+
+FREE_PATH = 40.0
+"""Metres ahead of the ego that must be empty for its path to count as free."""
+STANDING_SPEED = 0.5
+"""m/s under which a vehicle counts as standing."""
 
 
 def time_to_collision(
@@ -52,3 +57,16 @@ def time_to_collision(
     if best_other is None:
         return math.inf, ""
     return float(best), getattr(best_other, "name", type(best_other).__name__)
+
+
+def path_is_free(ego: Sequence[float], others: Iterable[Sequence[float]], distance: float = FREE_PATH,
+                 half_width: float = 2.0) -> bool:
+    """True when no other object's centre lies in the ``distance`` m long, ``2 * half_width`` m wide
+    strip ahead of the ego. ``ego`` is ``[x, y, heading, ...]``, ``others`` are ``[x, y, ...]``."""
+    c, s = math.cos(ego[2]), math.sin(ego[2])
+    for other in others:
+        dx, dy = other[0] - ego[0], other[1] - ego[1]
+        ahead, lateral = dx * c + dy * s, -dx * s + dy * c
+        if 0 < ahead < distance and abs(lateral) < half_width:
+            return False
+    return True

@@ -49,6 +49,8 @@ class EpisodeTrace:
     events: List[Dict[str, Any]] = field(default_factory=list)
     kinds: Dict[str, str] = field(default_factory=dict)
     """Actor name -> element-vocabulary type (ego, car, truck, pedestrian, obstacle)."""
+    fixed_params: Dict[str, Any] = field(default_factory=dict)
+    """Global parameters the reset fixed (``options={"params": ...}``, failure mining); a replay fixes them again."""
     version: int = TRACE_VERSION
 
     def save(self, path: Union[str, os.PathLike]) -> Path:

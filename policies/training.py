@@ -77,6 +77,8 @@ __all__ = [
     "latest_checkpoint",
     "load_run_config",
     "train",
+    "resolve_checkpoint",
+    "fine_tune",
 ]
 
 ALGORITHMS = ("ppo", "dqn", "sac")
@@ -806,3 +808,120 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
     log(f"wrote {model_path} and {out / 'model_card.json'} (step {model.num_timesteps}, last segment "
         f"{segment['wall_time_s']:.0f} s)")
     return card
+
+
+# --------------------------------------------------------------------------- fine-tuning
+def resolve_checkpoint(spec: str) -> Tuple[str, Path, Dict[str, Any]]:
+    """``(algorithm, checkpoint path, model card)`` of an SB3 policy spec.
+
+    ``spec`` is ``dv2s-ppo`` (the shipped checkpoint), ``ppo:PATH`` / ``dqn:PATH`` /
+    ``sac:PATH``, a ``model.zip`` or the run folder holding one. The card is ``{}`` when
+    none lies beside the checkpoint; the algorithm then comes from loading it.
+    """
+    from policies.registry import SHIPPED_CHECKPOINT, SB3Policy, load_policy, parse_spec, read_model_card
+
+    base, options = parse_spec(str(spec))
+    if options:
+        raise TrainingError(f"cannot fine-tune {spec!r}: policy options ({', '.join(options)}) change how it acts, "
+                            "not its weights; name the checkpoint without '?...'")
+    prefix, sep, rest = base.partition(":")
+    if base == "dv2s-ppo":
+        path, algorithm = SHIPPED_CHECKPOINT, "ppo"
+    elif sep and prefix.lower() in ALGORITHMS:
+        path, algorithm = Path(rest), prefix.lower()
+    else:
+        path, algorithm = Path(base), None
+    if path.is_dir():
+        path = path / "model.zip"
+    if path.suffix != ".zip" or not path.is_file():
+        raise TrainingError(f"cannot fine-tune {spec!r}: it names no stable-baselines3 checkpoint (model.zip); "
+                            "give dv2s-ppo, ppo:PATH or a run folder written by `dv2s train`")
+    card = read_model_card(path)
+    algorithm = algorithm or (card.get("algorithm") or "").lower() or None
+    if algorithm is None:
+        policy = load_policy(str(path))
+        algorithm = type(policy.model).__name__.lower() if isinstance(policy, SB3Policy) else None
+    if algorithm not in ALGORITHMS:
+        raise TrainingError(f"cannot fine-tune {spec!r}: its algorithm {algorithm!r} is not one of "
+                            f"{', '.join(ALGORITHMS)}")
+    return algorithm, path.resolve(), card
+
+
+def fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathLike | str, steps: int,
+              weights: Mapping[str, float], seed: int = 0, n_envs: int = 2,
+              scenarios: Optional[Sequence[str]] = None, env_config: Optional[Dict[str, Any]] = None,
+              eval_freq: int = 0, eval_seeds: int = 1, card_seeds: int = 0, baselines: Sequence[str] = (),
+              eval_jobs: int = 2, checkpoint_freq: int = 10_000, progress_bar: bool = True,
+              vec_env: str = "subproc", learning_rate: Optional[float] = None,
+              log: Callable[[str], None] = print) -> Path:
+    """Continue training an SB3 checkpoint on a bank with weighted scenario sampling; returns ``out/model.zip``.
+
+    The checkpoint is copied into ``out/checkpoints/step_<n>.zip`` (``n``: its own step
+    counter) and :func:`train` resumes from it with the ``weighted`` sampler, so the step
+    counter, the optimizer state saved in the zip and the reset-seed ranges (training
+    seeds >= :data:`TRAIN_SEED_LOW`, evaluation seeds :data:`EVAL_SEED_BASE`...) are those of
+    ``dv2s train``. ``weights`` maps scenario -> sampling weight; the scenarios trained on
+    are ``scenarios`` (default: every scenario with a positive weight), so scenarios left
+    out (held-out ones) are never drawn. The env config defaults to the one on the
+    checkpoint's model card (same reward). The card (``model_card.json``, ``README.md``)
+    gets a ``fine_tune`` section naming the source checkpoint and its step.
+    ``learning_rate`` (constant) replaces the checkpoint's own for the fine-tuning.
+
+    Restartable: called again with the same ``out`` it resumes from the newest checkpoint
+    there, and returns at once when ``out/model.zip`` and its card are already written.
+    """
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
+        raise TrainingError(f"fine-tuning steps must be a positive integer, not {steps!r}")
+    out = Path(out)
+    weights = {str(k): float(v) for k, v in dict(weights or {}).items()}
+    if scenarios is None:
+        scenarios = sorted(name for name, w in weights.items() if w > 0)
+    if not scenarios:
+        raise TrainingError("fine-tuning needs at least one scenario with a positive weight")
+    algorithm, source, source_card = resolve_checkpoint(checkpoint_or_spec)
+    if env_config is None:
+        env_config = dict(source_card.get("env_config") or {})
+    hyperparameters = {k: v for k, v in (source_card.get("hyperparameters") or {}).items()
+                       if k != "policy" and k in _known_hyperparameters(algorithm)}
+    from policies.registry import read_model_card
+    from scenario_bank.atomic import atomic_path, atomic_write_json
+
+    model_path = out / "model.zip"
+    if model_path.is_file() and "fine_tune" in read_model_card(model_path):
+        return model_path
+    import stable_baselines3 as sb3
+
+    start_step = int(getattr(sb3, algorithm.upper()).load(str(source), device="cpu").num_timesteps)
+    config = TrainConfig(out=str(out), algo=algorithm, scenarios=sorted(scenarios), bank_dir=bank_dir,
+                         steps=start_step + steps, n_envs=n_envs, seed=seed, sampler="weighted",
+                         weights={name: weights.get(name, 0.0) for name in sorted(scenarios)},
+                         env_config=dict(env_config), hyperparameters=hyperparameters, eval_freq=eval_freq,
+                         eval_seeds=eval_seeds, card_seeds=card_seeds, baselines=list(baselines), eval_jobs=eval_jobs,
+                         checkpoint_freq=checkpoint_freq, progress_bar=progress_bar, vec_env=vec_env)
+    config.validate()
+    if latest_checkpoint(out) is None:
+        if (out / "run.json").exists():
+            raise TrainingError(f"{out} holds a training run without a checkpoint; remove it or choose another out")
+        first = out / "checkpoints" / f"step_{start_step:09d}.zip"
+        first.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(first, keep_suffix=True) as tmp:
+            if learning_rate is None:
+                Path(tmp).write_bytes(source.read_bytes())
+            else:  # saved with the model: every resume of this run keeps it
+                model = getattr(sb3, algorithm.upper()).load(str(source), device="cpu")
+                model.learning_rate = float(learning_rate)
+                model._setup_lr_schedule()
+                model.save(tmp)
+        atomic_write_json(out / "run.json", {"config": config.to_json(), "segments": []})
+    card = train(config, resume=True, log=log)
+    card["fine_tune"] = {"source": str(checkpoint_or_spec), "source_checkpoint": str(source),
+                         "source_steps": start_step, "steps": int(card["training"]["steps"]) - start_step,
+                         "weights": config.weights, "learning_rate": learning_rate}
+    card["description"] = (f"Fine-tuned from {checkpoint_or_spec} (step {start_step}) for "
+                           f"{card['fine_tune']['steps']} steps on {len(config.scenarios)} scenarios with weighted "
+                           "sampling (see sampler.weights).")
+    card["name"] = out.name
+    from policies.model_card import write_card
+
+    write_card(out, card)
+    return model_path

@@ -28,6 +28,7 @@ This module imports nothing else of dv2s-gym.
 
 from __future__ import annotations
 
+import ast
 import datetime as _dt
 import difflib
 import errno
@@ -47,7 +48,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
 
-from scenario_bank.atomic import atomic_path, atomic_write_json
+from scenario_bank.atomic import atomic_path, atomic_write_json, atomic_write_text
 from scenario_bank.cache import keyed_cache_dir
 from scenario_bank.elements import ElementError, normalize_elements
 from scenario_bank.safety import UnsafeScenarioError
@@ -72,6 +73,10 @@ __all__ = [
     "content_hash",
     "semantic_key",
     "SOURCE_KINDS",
+    "MINED_PROVENANCE_FIELDS",
+    "AddOutcome",
+    "param_ranges",
+    "near_duplicate",
 ]
 
 BANK_VERSION = 1
@@ -85,6 +90,12 @@ INDEX = "index.json"
 LEGACY_INDEX = "bank.json"  # written into the bank folder by dv2s-gym <= 0.1.0; still marks a bank
 _NAME = re.compile(r"^[a-z0-9][a-z0-9_\-]{0,99}$")
 _PROVENANCE_FIELDS = ("kind", "video", "parent", "seed", "generator", "model", "context_hash", "date")
+MINED_PROVENANCE_FIELDS = ("params", "backends", "policy", "failure", "cluster", "reproduction", "e2e_sc", "run",
+                           "index", "merged")
+"""Extra provenance of ``kind == "mined"`` entries (failure mining): the parent's sampled parameters, the
+DRA/SG backends, the policy that failed, its failure and cluster, the reproduction rate and E2E-SC, the
+mining run and episode index, and ``merged``: later failures merged into this entry (see
+:meth:`Bank.add_or_merge`). Sidecars without them (every older sidecar) load as before."""
 
 PathLike = Union[str, os.PathLike]
 
@@ -149,6 +160,66 @@ def semantic_key(elements: Mapping[str, Any], map_name: Optional[str], script: s
                     if name not in ("map", "weather") and _RANDOM.search(value))
     payload = json.dumps([normalize_elements(elements), map_name, ranges], sort_keys=True)
     return hashlib.sha256(payload.encode()).hexdigest()
+
+
+_RANGE_CALLS = ("Range", "DiscreteRange", "VerifaiRange", "VerifaiDiscreteRange", "Uniform", "Options",
+                "Discrete", "VerifaiOptions")
+
+
+def _numeric_interval(node: ast.AST) -> Optional[Tuple[float, float]]:
+    """``(low, high)`` a Scenic parameter expression ranges over, for the numeric forms only."""
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+        return float(node.value), float(node.value)
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+        inner = _numeric_interval(node.operand)
+        if inner is None:
+            return None
+        return (-inner[1], -inner[0]) if isinstance(node.op, ast.USub) else inner
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _RANGE_CALLS \
+            and node.args and not node.keywords:
+        bounds = [_numeric_interval(arg) for arg in node.args]
+        if any(b is None for b in bounds):
+            return None
+        if node.func.id in ("Range", "DiscreteRange", "VerifaiRange", "VerifaiDiscreteRange") and len(bounds) != 2:
+            return None
+        return min(b[0] for b in bounds), max(b[1] for b in bounds)
+    return None
+
+
+def param_ranges(script: str) -> Dict[str, Tuple[float, float]]:
+    """The numeric global parameters of a script (``param x = Range(a, b)``, ``-Range(...)``, a number,
+    ``Uniform``/``Options`` of numbers) as ``name -> (low, high)``; other parameters are left out."""
+    out: Dict[str, Tuple[float, float]] = {}
+    for name, value in _PARAM.findall(script):
+        try:
+            tree = ast.parse(value.split("#", 1)[0].strip(), mode="eval")
+        except SyntaxError:
+            continue
+        interval = _numeric_interval(tree.body)
+        if interval is not None:
+            out[name] = interval
+    return out
+
+
+def near_duplicate(elements_a: Mapping[str, Any], map_a: Optional[str], script_a: str,
+                   elements_b: Mapping[str, Any], map_b: Optional[str], script_b: str) -> bool:
+    """Whether two scenarios are near-duplicates: the same map, the same elements (canonical form) and
+    every numeric parameter both scripts define ranging over overlapping intervals."""
+    if map_a != map_b or normalize_elements(elements_a) != normalize_elements(elements_b):
+        return False
+    ranges_a, ranges_b = param_ranges(script_a), param_ranges(script_b)
+    return all(ranges_a[p][0] <= ranges_b[p][1] and ranges_b[p][0] <= ranges_a[p][1]
+               for p in set(ranges_a) & set(ranges_b))
+
+
+@dataclass
+class AddOutcome:
+    """What :meth:`Bank.add_or_merge` did: ``status`` "added" (a new ``entry``) or "merged" (the
+    provenance was appended to the existing ``entry``'s ``source.merged``; ``how`` says why)."""
+
+    status: str
+    entry: "ScenarioEntry"
+    how: Optional[str] = None
 
 
 @dataclass
@@ -234,6 +305,9 @@ def _validate_sidecar(meta: Any, folder: Path) -> Dict[str, Any]:
     source = meta.get("source") or {}
     if source.get("kind") not in SOURCE_KINDS:
         raise ValueError(f"sidecar source.kind must be one of {SOURCE_KINDS}, got {source.get('kind')!r}")
+    merged = source.get("merged")
+    if merged is not None and not (isinstance(merged, list) and all(isinstance(m, dict) for m in merged)):
+        raise ValueError("sidecar field 'source.merged' must be a list of objects (merged failures)")
     script = folder / SCRIPT
     if not script.is_file():
         raise ValueError(f"the script {SCRIPT} is missing")
@@ -521,7 +595,7 @@ class Bank:
         bank, and (:class:`ScenarioRejectedError`) a script failing the safety check
         or its compile, sample and short run in the sandbox (:mod:`scenario_bank.sandbox`,
         with CPU, memory and wall-clock limits). ``provenance`` keys: kind (hand-written, generated, mined), video,
-        parent, seed, generator, model, context_hash, date.
+        parent, seed, generator, model, context_hash, date; mined entries also :data:`MINED_PROVENANCE_FIELDS`.
         """
         self._check_writable("add a scenario")
         meta = self._make_meta(script, description, name, elements, tags, map, provenance, use_case)
@@ -536,10 +610,82 @@ class Bank:
                     f"not added: the script is {how} to bank entry {existing!r}; use that entry or change the script",
                     existing,
                 )
-            staging = self._stage_entry(name, script, meta)
-            self._commit(staging, name)
-            self._load(locked=True)
+            return self._add_locked(name, script, meta)
+
+    def _add_locked(self, name: str, script: str, meta: Dict[str, Any]) -> ScenarioEntry:
+        staging = self._stage_entry(name, script, meta)
+        self._commit(staging, name)
+        self._load(locked=True)
         return self._entries[name]
+
+    def find_near_duplicate(self, script: str, elements: Mapping[str, Any],
+                            map_name: Optional[str]) -> Optional[Tuple[str, str]]:
+        """``(name, how)`` of an entry identical to this script (:meth:`find_duplicate`) or a near-duplicate
+        of it (:func:`near_duplicate`: same map and elements, overlapping numeric parameter ranges)."""
+        duplicate = self.find_duplicate(script, elements, map_name)
+        if duplicate is not None:
+            return duplicate
+        wanted = normalize_elements(elements)
+        for name in sorted(self._entries):
+            entry = self._entries[name]
+            if entry.map != map_name or entry.elements != wanted:
+                continue
+            try:
+                other = entry.script
+            except OSError:
+                continue
+            if near_duplicate(entry.elements, entry.map, other, wanted, map_name, script):
+                return name, "a near-duplicate (same map and elements, overlapping parameter ranges)"
+        return None
+
+    def add_or_merge(
+        self,
+        script: str,
+        description: str,
+        *,
+        name: Optional[str] = None,
+        elements: Optional[Mapping[str, Any]] = None,
+        tags: Sequence[str] = (),
+        map: Optional[str] = None,
+        provenance: Optional[Mapping[str, Any]] = None,
+        use_case: Optional[str] = None,
+    ) -> AddOutcome:
+        """Add a scenario, or merge it into the entry it duplicates; one atomic step under the writers' lock.
+
+        A script that is byte-for-byte or semantically identical to an entry, or a near-duplicate of
+        one (:meth:`find_near_duplicate`), is not added: its provenance (with ``description`` and
+        ``how``) is appended to that entry's ``source.merged`` list, the sidecar rewritten atomically.
+        Otherwise the script is added as by :meth:`add`, except that ``name`` is a base name that
+        gets a ``_2``, ``_3``... suffix when taken. Scripts are verified (safety check and sandbox)
+        first either way (:class:`ScenarioRejectedError`).
+        """
+        self._check_writable("add a scenario")
+        meta = self._make_meta(script, description, name, elements, tags, map, provenance, use_case)
+        verify(script, f"scenario {meta['name']!r}")  # before the lock: other writers do not wait for it
+        with self._lock():
+            self._load(locked=True)
+            found = self.find_near_duplicate(script, meta["elements"], meta["map"])
+            if found is None:
+                name = meta["name"] = self._free_name(meta["name"], explicit=False)
+                return AddOutcome("added", self._add_locked(name, script, meta))
+            existing, how = found
+            merged = {key: value for key, value in meta["source"].items() if value is not None and key != "merged"}
+            merged.update(description=meta["description"], content_hash=meta["content_hash"], how=how)
+            self._append_merged(existing, merged)
+            return AddOutcome("merged", self._entries[existing], how)
+
+    def _append_merged(self, name: str, record: Dict[str, Any]) -> None:
+        """Append ``record`` to entry ``name``'s ``source.merged`` (caller holds the lock)."""
+        entry = self._entries[name]
+        path = entry.folder / SIDECAR
+        try:
+            meta = json.loads(path.read_text(encoding="utf-8"))
+            source = meta.setdefault("source", {})
+            source["merged"] = list(source.get("merged") or []) + [record]
+            atomic_write_text(path, json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n")
+        except OSError as error:
+            raise _write_error(error, entry.folder) from None
+        self._load(locked=True)
 
     def _commit(self, staging: Path, name: str) -> None:
         try:
@@ -578,6 +724,8 @@ class Bank:
         except ElementError as error:
             raise BankError(f"invalid elements: {error}") from None
         source = {key: None for key in _PROVENANCE_FIELDS}
+        if (provenance or {}).get("kind") == "mined":
+            source.update({key: None for key in MINED_PROVENANCE_FIELDS if key != "merged"})
         source.update(dict(provenance or {}))
         source["kind"] = source.get("kind") or "hand-written"
         if source["kind"] not in SOURCE_KINDS:
@@ -594,6 +742,31 @@ class Bank:
             "source": source,
             "content_hash": content_hash(script),
         }
+
+    def copy_to(self, dest: PathLike) -> "Bank":
+        """A writable copy of every entry in ``dest`` (a new or empty folder), made atomically.
+
+        This is how a run starts a bank of its own from the read-only shipped bank.
+        """
+        dest = Path(dest)
+        if dest.exists() and (not dest.is_dir() or any(dest.iterdir())):
+            raise BankError(f"cannot copy the bank into {dest}: it exists and is not an empty folder; "
+                            "pass a new folder, or use that bank as it is")
+        staging = dest.parent / f".{dest.name}.copy-{uuid.uuid4().hex[:12]}"
+        try:
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            staging.mkdir()
+            for entry in self:
+                shutil.copytree(entry.script_path.parent, staging / entry.name)
+            if (self.root / LEGACY_INDEX).is_file():
+                shutil.copy2(self.root / LEGACY_INDEX, staging / LEGACY_INDEX)
+            if dest.exists():
+                dest.rmdir()
+            os.rename(staging, dest)
+        except OSError as error:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise _write_error(error, dest) from None
+        return Bank(dest)
 
     def remove(self, name: str) -> None:
         """Remove an entry atomically."""

@@ -8,9 +8,6 @@ from __future__ import annotations
 import copy
 import json
 import re
-import shutil
-import subprocess
-import tempfile
 from pathlib import Path
 
 import pytest
@@ -19,31 +16,7 @@ from dv2s_gym.regress.clips import ClipError, render_episode_video
 from dv2s_gym.regress.html import write_html
 
 from regress_report_data import make_report
-
-INSTALL_HINT = ("Chromium is needed for the HTML report's browser test: run scripts/setup.sh as root, or "
-                "`sudo apt-get update && sudo apt-get install -y --no-install-recommends chromium`")
-
-
-def _chromium() -> str:
-    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
-        found = shutil.which(name)
-        if found:
-            return found
-    pytest.fail(INSTALL_HINT, pytrace=False)
-
-
-def _body_attributes(page: Path, fragment: str = "#selftest") -> dict:
-    """Load ``page`` in headless Chromium, let it run 8 s of virtual time, and read <body>'s data- attributes."""
-    with tempfile.TemporaryDirectory(prefix="dv2s-chromium-") as profile:
-        out = subprocess.run(
-            [_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", f"--user-data-dir={profile}",
-             "--autoplay-policy=no-user-gesture-required", "--virtual-time-budget=8000", "--dump-dom",
-             page.resolve().as_uri() + fragment],
-            capture_output=True, text=True, timeout=180)
-    match = re.search(r"<body([^>]*)>", out.stdout)
-    assert match, f"Chromium dumped no page (exit {out.returncode}): {out.stderr[-2000:]}"
-    return dict(re.findall(r'(data-[\w-]+)="([^"]*)"', match.group(1)))
-
+from browser_helpers import body_attributes
 
 @pytest.fixture(scope="module")
 def report_dir(tmp_path_factory) -> Path:
@@ -102,7 +75,7 @@ def test_strings_from_the_report_are_escaped(report, tmp_path):
 
 def test_chromium_loads_the_page_renders_the_plots_and_plays_a_clip(report_dir, report):
     page = write_html(report, report_dir / "report.html")
-    attributes = _body_attributes(page)
+    attributes = body_attributes(page)
     assert attributes.get("data-plots") == "5", attributes
     assert attributes.get("data-plots-rendered") == "5", attributes  # every SVG has a non-empty box
     assert int(attributes.get("data-plot-marks", 0)) >= 10, attributes  # points, intervals and bars drawn
@@ -116,7 +89,7 @@ def test_chromium_reports_a_corrupt_clip_as_not_played(report, tmp_path):
     first = report["newly_failing"][0]
     corrupt = b"\x1a\x45\xdf\xa3" + bytes(range(256)) * 40  # an EBML magic number, then garbage
     page = write_html(report, tmp_path / "r.html", videos={first: corrupt}, render_videos=False, max_videos=1)
-    attributes = _body_attributes(page)
+    attributes = body_attributes(page)
     assert attributes.get("data-plots-rendered") == "5", attributes
     assert attributes.get("data-video-played") == "false", attributes
     assert attributes.get("data-video-error"), attributes

@@ -156,3 +156,21 @@ def test_run_regression_on_the_cluster_equals_the_local_run(ray_address, tmp_pat
         if trace:
             assert (tmp_path / "ray" / trace).read_bytes() == (tmp_path / "local" / trace).read_bytes()
     assert on_ray["newly_failing"], "no failed episode: the trace transfer went untested"
+
+
+@pytest.mark.slow
+def test_mining_on_ray_equals_mining_locally(ray_address, tmp_path):
+    """``dv2s mine --backend ray``: the same records as the local pool, failed episodes' traces shipped back."""
+    from dv2s_gym.mining.miner import mine
+
+    common = dict(budget=8, sampler="cross-entropy", scenarios=["highway_lead_vehicle_brakes"], seed=5,
+                  env_config={"duration": 5}, progress=False, reports=False, policy="keep_lane", batch=4)
+    local = mine(out=tmp_path / "local", workers=2, **common)
+    remote = mine(out=tmp_path / "ray", backend="ray", address=ray_address, workers=2, **common)
+    key = lambda run: [(r["index"], r["seed"], r["params"], r["result"]["trajectory_hash"], r["avoidable"])  # noqa: E731
+                       for r in run.records]
+    assert key(remote) == key(local)
+    failed = [r for r in remote.records if r["failure"]]
+    assert failed, "keep_lane runs into the braking lead car in some of these scenes"
+    for record in failed:
+        assert (tmp_path / "ray" / record["trace"]).is_file()

@@ -73,6 +73,27 @@ class MineRun:
         """Distinct failure clusters."""
         return len(set(self.clusters.values()))
 
+    def summary(self) -> str:
+        """A few lines for the terminal: episodes, failures, clusters, conversions."""
+        from collections import Counter
+
+        errors = sum(1 for r in self.records if r.get("error"))
+        failures = self.failures
+        kinds = Counter(r["failure"]["kind"] for r in failures)
+        avoidable_clusters = {self.clusters[int(r["index"])] for r in self.avoidable}
+        status = Counter(c.get("status") for c in self.conversions)
+        lines = [
+            f"{len(self.records)} episodes of {self.settings['policy']} ({self.settings['sampler']} sampler), "
+            f"{errors} errors, {self.seconds:.0f} s",
+            f"{len(failures)} failures ({', '.join(f'{k} {n}' for k, n in kinds.most_common()) or 'none'}); "
+            f"{len(self.avoidable)} avoidable by {self.settings['reference'] or 'no reference'}",
+            f"{self.distinct_clusters} distinct clusters, {len(avoidable_clusters)} with avoidable failures",
+        ]
+        if self.conversions:
+            lines.append(f"converted {len(self.conversions)}: kept {status.get('kept', 0)}, merged "
+                         f"{status.get('merged', 0)}, rejected {status.get('rejected', 0)}")
+        return "\n".join(lines)
+
 
 def episode_seed(seed: int, index: int) -> int:
     """The env seed of episode ``index`` of a run seeded ``seed`` (distinct per index, below 2**31)."""
@@ -212,8 +233,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
          progress: bool = True, env_config: Optional[Dict[str, Any]] = None,
          ttc_threshold: float = DEFAULT_TTC_THRESHOLD, stall_seconds: float = DEFAULT_STALL_SECONDS,
          convert: bool = False, convert_options: Optional[Dict[str, Any]] = None,
-         reports: bool = True, sampler_options: Optional[Dict[str, Any]] = None,
-         feedback: str = "robustness") -> MineRun:
+         max_conversions: Optional[int] = None, reports: bool = True,
+         sampler_options: Optional[Dict[str, Any]] = None, feedback: str = "robustness") -> MineRun:
     """Mine ``policy``'s failures over ``budget`` episodes; resumable (same ``out``).
 
     Args:
@@ -238,8 +259,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         env_config: DV2S-v0 config overrides.
         ttc_threshold, stall_seconds: monitor settings (:mod:`dv2s_gym.mining.monitors`).
         convert: turn one failure per avoidable cluster into a bank scenario
-            (:mod:`dv2s_gym.mining.convert`; ``convert_options`` are passed on, ``bank_dir``
-            must be a writable bank).
+            (:mod:`dv2s_gym.mining.convert`; ``convert_options`` are passed on). ``bank_dir``
+            must then be a writable bank; a new or empty folder starts as a copy of the shipped bank; at most ``max_conversions`` clusters, largest first.
         reports: write report.json, report.md and report.html at the end.
     """
     from dv2s_gym.mining.space import SceneSpace
@@ -265,7 +286,14 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         (out / "traces").mkdir(exist_ok=True)
     except OSError as error:
         raise MiningError(f"cannot create the run folder {out}: {error.strerror}; pass a writable --out") from None
+    if convert and not bank_dir:
+        raise MiningError("converting failures adds scenarios to a bank, and the shipped bank is read-only: pass "
+                          "--bank DIR (a new folder starts as a copy of the shipped bank), or --no-convert")
     bank_dir = str(Path(bank_dir).resolve()) if bank_dir else None
+    if convert and not _has_entries(Path(bank_dir)):
+        from scenario_bank.bank import Bank
+
+        Bank().copy_to(bank_dir)  # a bank of one's own starts as the shipped one
     env_config = dict(env_config or {})
     n_workers = int(workers) if workers else (1 if backend == "local" and default_workers() < 2 else
                                               default_workers())
@@ -335,7 +363,7 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         run = MineRun(out=out, settings=settings, records=records, clusters=cluster_failures(records))
         if convert:
             run.conversions = convert_clusters(run, bank_dir=bank_dir, options=convert_options or {},
-                                               progress=progress)
+                                               progress=progress, max_conversions=max_conversions)
         else:
             run.conversions = _read_jsonl(out / "conversions.jsonl")
         run.seconds = time.perf_counter() - started
@@ -351,7 +379,7 @@ def _task(index: int, spec, policy: str, reference: Optional[str], settings: Dic
         "kind": "mine", "role": "mine", "index": index, "id": f"{spec.scenario}/{seed}", "policy": policy,
         "reference": reference, "scenario": spec.scenario, "seed": seed, "params": spec.params,
         "env_config": settings["env_config"], "bank_dir": settings["bank_dir"],
-        "trace_path": str(out / "traces" / f"{index:06d}.json.gz"),
+        "trace_dir": str(out / "traces"),
         "ttc_threshold": settings["ttc_threshold"], "stall_seconds": settings["stall_seconds"],
     }
 
@@ -372,6 +400,10 @@ def _complete(result: Dict[str, Any], task: Dict[str, Any], spec, sampler: str, 
     return record
 
 
+def _has_entries(folder: Path) -> bool:
+    return folder.is_dir() and any(not p.name.startswith(".") for p in folder.iterdir())
+
+
 def _read_jsonl(path: Path) -> List[Dict[str, Any]]:
     if not path.is_file():
         return []
@@ -385,11 +417,12 @@ def _read_jsonl(path: Path) -> List[Dict[str, Any]]:
 
 
 def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str, Any],
-                     progress: bool = True) -> List[Dict[str, Any]]:
+                     progress: bool = True, max_conversions: Optional[int] = None) -> List[Dict[str, Any]]:
     """Convert one representative failure per avoidable cluster not converted yet; the conversion records.
 
     The representative is the cluster's most severe failure (lowest robustness, then
-    lowest index). Each conversion is appended to ``conversions.jsonl`` when it ends, so a
+    lowest index). Clusters with more avoidable failures go first; at most
+    ``max_conversions`` conversions are made in the run (``None``: every cluster). Each conversion is appended to ``conversions.jsonl`` when it ends, so a
     resumed run converts the remaining clusters only.
     """
     from dv2s_gym.mining.convert import convert_failure
@@ -401,12 +434,16 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
     path = run.out / "conversions.jsonl"
     existing = _read_jsonl(path)
     converted = {row["cluster"] for row in existing}
-    todo = []
+    candidates = []
     for cluster, members in sorted(group(run.records).items()):
         avoidable = [r for r in members if r.get("avoidable") is not False]
         if cluster in converted or not avoidable:
             continue
-        todo.append((cluster, min(avoidable, key=lambda r: (float(r.get("rho") or 0.0), int(r["index"])))))
+        representative = min(avoidable, key=lambda r: (float(r.get("rho") or 0.0), int(r["index"])))
+        candidates.append((-len(avoidable), cluster, representative))
+    candidates.sort(key=lambda c: (c[0], c[1]))  # the clusters with most avoidable failures first
+    room = None if max_conversions is None else max(0, int(max_conversions) - len(existing))
+    todo = [(cluster, record) for _, cluster, record in candidates][:room]
     bank = Bank(bank_dir)
     appender = _Appender(path)
     bar = _progress(progress, len(todo), 0, desc="converting")

@@ -22,19 +22,18 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Any, Dict, List, Optional
 
+from envs.safety_metrics import FREE_PATH, STANDING_SPEED, path_is_free
+
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "detect_failure", "robustness",
            "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
 
 FAILURE_TYPES = ("collision", "off_road", "low_ttc", "stall")
 """Failure types, most severe first."""
 COLLISION_TYPES = ("rear_end", "struck_from_behind", "side", "head_on", "pedestrian", "obstacle")
-STALL_SPEED = 0.5
+STALL_SPEED = STANDING_SPEED
 """m/s under which the ego counts as standing."""
-FREE_PATH = 30.0
-"""Metres ahead of a standing ego that must be empty for it to count as a stall."""
 DEFAULT_TTC_THRESHOLD = 1.0
-DEFAULT_STALL_SECONDS = 3.0
-_LANE_HALF_WIDTH = 2.0
+DEFAULT_STALL_SECONDS = 5.0
 
 
 @dataclass
@@ -151,15 +150,7 @@ def _stall(trace, stall_seconds: float) -> Optional[Failure]:
 
 
 def _path_free(ego: List[float], states: Dict[str, List[float]]) -> bool:
-    c, s = math.cos(ego[2]), math.sin(ego[2])
-    for name, other in states.items():
-        if name == "ego":
-            continue
-        dx, dy = other[0] - ego[0], other[1] - ego[1]
-        ahead, lateral = dx * c + dy * s, -dx * s + dy * c
-        if 0 < ahead < FREE_PATH and abs(lateral) < _LANE_HALF_WIDTH:
-            return False
-    return True
+    return path_is_free(ego, (state for name, state in states.items() if name != "ego"))
 
 
 def _ego_speed(states: Dict[str, List[float]]) -> Optional[float]:

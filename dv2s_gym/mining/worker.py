@@ -7,7 +7,8 @@ A mining task is a plain dict (shipped to the regression process pool or Ray, wh
 - ``policy``: policy spec; ``reference``: the reference driver's spec (``None``: no
   avoidability check);
 - ``scenario``, ``seed``, ``params``: the scene (see :mod:`dv2s_gym.mining.space`);
-- ``env_config``, ``bank_dir``; ``trace_path``: where to save a failed episode's trace;
+- ``env_config``, ``bank_dir``; ``trace_dir``: the folder for a failed episode's trace
+  (``<index>.json.gz``; the Ray backend swaps in a local folder and ships the file back);
 - ``ttc_threshold``, ``stall_seconds``: monitor settings.
 
 The result is the episode record of the run's ``episodes.jsonl`` without the sampler
@@ -23,7 +24,12 @@ from typing import Any, Dict, Optional
 
 from dv2s_gym.mining.monitors import FAILURE_TYPES, detect_failure, robustness
 
-__all__ = ["run_mine_task", "reference_avoids"]
+__all__ = ["run_mine_task", "reference_avoids", "trace_name"]
+
+
+def trace_name(index: int) -> str:
+    """File name of the trace of failed episode ``index`` in a run's ``traces/`` folder."""
+    return f"{index:06d}.json.gz"
 
 
 def reference_avoids(failure: Optional[Dict[str, Any]], reference_failure: Optional[Dict[str, Any]]) -> bool:
@@ -36,7 +42,7 @@ def reference_avoids(failure: Optional[Dict[str, Any]], reference_failure: Optio
 
 
 def _episode(task: Dict[str, Any], spec: str):
-    from dv2s_gym.regress.worker import drop_env, env_for, policy_for
+    from policies.worker_cache import drop_env, env_for, policy_for
     from policies.evaluation import run_episode
 
     env_key = None
@@ -59,7 +65,7 @@ def run_mine_task(task: Dict[str, Any]) -> Dict[str, Any]:
         "reference": None, "avoidable": None, "trace": None, "error": None,
     }
     monitor = {"ttc_threshold": float(task.get("ttc_threshold", 1.0)),
-               "stall_seconds": float(task.get("stall_seconds", 3.0))}
+               "stall_seconds": float(task.get("stall_seconds", 5.0))}
     try:
         result, trace = _episode(task, task["policy"])
         failure = detect_failure(result, trace, **monitor)
@@ -67,9 +73,10 @@ def run_mine_task(task: Dict[str, Any]) -> Dict[str, Any]:
         record["failure"] = failure.to_json() if failure else None
         record["rho"] = robustness(result, failure, monitor["ttc_threshold"])
         if failure is not None:
-            if task.get("trace_path"):
-                trace.save(task["trace_path"])
-                record["trace"] = task["trace_path"]
+            if task.get("trace_dir"):
+                path = os.path.join(task["trace_dir"], trace_name(int(task["index"])))
+                trace.save(path)
+                record["trace"] = path
             if task.get("reference"):
                 ref_result, ref_trace = _episode(task, task["reference"])
                 ref_failure = detect_failure(ref_result, ref_trace, **monitor)

@@ -46,11 +46,12 @@ class ScenarioCheck:
 
 
 def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview: Optional[Path] = None,
-                   name: str = "generated") -> ScenarioCheck:
+                   name: str = "generated", in_process: bool = True) -> ScenarioCheck:
     """Safety check, compile, sample, run (ego driven by its Scenic behaviour), optionally record a preview.
 
     The script is compiled, sampled and run once in the sandbox (:mod:`scenario_bank.sandbox`) before
-    it runs in this process."""
+    it runs in this process. ``in_process=False`` stops after the sandbox (which compiled, sampled and
+    ran it): for callers that run the scenario themselves next (no preview, no simulated elements)."""
     from dv2s_gym.pipeline.trace_semantics import elements_from_trace
     from envs.dv2s_env import DV2SEnv
     from envs.recording import VideoWriter
@@ -74,6 +75,9 @@ def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview
         check.error = f"sandboxed check: {error.result.message}"
         check.failure_category = ("other" if error.limit in ("cpu", "memory", "wall")
                                   else classify_failure(error.result.message, error.stage))
+        return check
+    if not in_process:
+        check.compiled = check.sampled = check.ran = True
         return check
     try:
         compiled = compile_scenario(script, name=name)

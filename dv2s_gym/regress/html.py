@@ -8,7 +8,8 @@ distributions of minimum time-to-collision and return), a verdict banner, tables
 and the newly failing episodes as embedded ``data:video/webm`` clips rendered from
 their traces (:func:`~dv2s_gym.regress.clips.render_episode_video`).
 
-Every string taken from the report is escaped. A small inline script records, on
+The CSS, plot primitives and self-check script are shared with the mining report
+(:mod:`dv2s_gym.report_page`). Every string taken from the report is escaped. A small inline script records, on
 load, how many plots have a non-empty box (``data-plots-rendered`` on ``<body>``);
 opened as ``report.html#selftest`` it also plays the first clip and records whether
 it played (``data-video-played``) — the browser test reads these attributes.
@@ -16,122 +17,29 @@ it played (``data-video-played``) — the browser test reads these attributes.
 
 from __future__ import annotations
 
-import base64
-import html
 import math
 import os
 import tempfile
 from pathlib import Path
-from typing import Any, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, List, Mapping, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.regress.clips import ClipError, render_episode_video
+from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, VideoSource,
+                                  axis as _axis, escape as _e, finite as _num, fmt as _fmt,
+                                  fmt_interval as _interval, interval_mark as _interval_mark, legend as _legend,
+                                  row_label as _row_label, svg as _svg, video_bytes as _video_bytes, video_tag,
+                                  x_scale as _x_scale)
 
 __all__ = ["write_html", "render_html", "render_episode_video", "MAX_VIDEOS"]
 
 MAX_VIDEOS = 12
 """Newly failing episodes shown as clips; the rest are listed."""
 
-VideoSource = Union[str, os.PathLike, bytes]
-
 COLOURS = {"candidate": "#0b63c5", "baseline": "#8a8f98", "PASS": "#1a7f37", "FAIL": "#cf222e",
            "INCONCLUSIVE": "#b07800", None: "#57606a"}
 
 
-def _e(value: Any) -> str:
-    """Escape anything for HTML text or a double-quoted attribute."""
-    return html.escape("" if value is None else str(value), quote=True)
-
-
-def _num(value: Any) -> Optional[float]:
-    """A finite float, or ``None``."""
-    if isinstance(value, bool) or value is None:
-        return None
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        return None
-    return number if math.isfinite(number) else None
-
-
-def _fmt(value: Any, digits: int = 2) -> str:
-    number = _num(value)
-    return "–" if number is None else f"{number:.{digits}f}"
-
-
-def _interval(stat: Optional[Mapping[str, Any]], digits: int = 2) -> str:
-    if not isinstance(stat, Mapping):
-        return "–"
-    text = _fmt(stat.get("value"), digits)
-    low, high = _num(stat.get("low")), _num(stat.get("high"))
-    if low is not None and high is not None:
-        text += f" [{low:.{digits}f}, {high:.{digits}f}]"
-    return text
-
-
 # --------------------------------------------------------------------------- SVG plots
-ROW, TOP, BOTTOM, LABEL, RIGHT, WIDTH = 22, 44, 34, 240, 24, 760
-
-
-def _x_scale(low: float, high: float) -> Tuple[float, float, Any]:
-    span = (high - low) or 1.0
-    plot = WIDTH - LABEL - RIGHT
-    return low, high, (lambda v: LABEL + (min(max(v, low), high) - low) / span * plot)
-
-
-def _ticks(low: float, high: float, count: int = 5) -> List[float]:
-    step = (high - low) / (count - 1)
-    return [low + i * step for i in range(count)]
-
-
-def _axis(x, low: float, high: float, height: float, title: str, signed: bool = False) -> List[str]:
-    parts = [f'<line class="axis" x1="{LABEL}" y1="{height - BOTTOM}" x2="{WIDTH - RIGHT}" y2="{height - BOTTOM}"/>']
-    for tick in _ticks(low, high):
-        px = x(tick)
-        label = f"{tick:+.2f}" if signed and abs(tick) > 1e-12 else f"{tick:.2f}"
-        parts.append(f'<line class="grid" x1="{px:.1f}" y1="{TOP - 6}" x2="{px:.1f}" y2="{height - BOTTOM}"/>'
-                     f'<text class="tick" x="{px:.1f}" y="{height - BOTTOM + 14}">{_e(label)}</text>')
-    parts.append(f'<text class="axis-title" x="{(LABEL + WIDTH - RIGHT) / 2:.1f}" y="{height - 6}">{_e(title)}</text>')
-    return parts
-
-
-def _svg(height: float, title: str, body: Iterable[str]) -> str:
-    return (f'<svg class="plot" xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{height:.0f}" '
-            f'viewBox="0 0 {WIDTH} {height:.0f}" role="img" aria-label="{_e(title)}"><title>{_e(title)}</title>'
-            + "".join(body) + "</svg>")
-
-
-def _legend(entries: Sequence[Tuple[str, str, str]]) -> str:
-    """``(label, colour, shape)`` entries in the top right corner."""
-    parts, x = [], WIDTH - RIGHT
-    for label, colour, shape in reversed(entries):
-        x -= 8 + 7 * len(label) + 16
-        mark = (f'<rect x="{x}" y="6" width="9" height="9" fill="{colour}"/>' if shape == "square"
-                else f'<circle cx="{x + 4.5}" cy="10.5" r="4.5" fill="{colour}"/>')
-        parts.append(f'{mark}<text class="legend" x="{x + 13}" y="14">{_e(label)}</text>')
-    return "".join(parts)
-
-
-def _interval_mark(x, y: float, stat: Mapping[str, Any], colour: str, shape: str, tooltip: str) -> str:
-    value, low, high = _num(stat.get("value")), _num(stat.get("low")), _num(stat.get("high"))
-    if value is None:
-        return ""
-    parts = [f'<g class="mark"><title>{_e(tooltip)}</title>']
-    if low is not None and high is not None:
-        parts.append(f'<line x1="{x(low):.1f}" y1="{y:.1f}" x2="{x(high):.1f}" y2="{y:.1f}" stroke="{colour}" '
-                     f'stroke-width="2"/>')
-    if shape == "square":
-        parts.append(f'<rect x="{x(value) - 4:.1f}" y="{y - 4:.1f}" width="8" height="8" fill="{colour}"/>')
-    else:
-        parts.append(f'<circle cx="{x(value):.1f}" cy="{y:.1f}" r="4.5" fill="{colour}"/>')
-    return "".join(parts) + "</g>"
-
-
-def _row_label(y: float, label: str, bold: bool = False) -> str:
-    weight = ' font-weight="bold"' if bold else ""
-    short = label if len(label) <= 36 else label[:34] + "…"
-    return f'<text class="row-label" x="{LABEL - 8}" y="{y + 4:.1f}"{weight}>{_e(short)}<title>{_e(label)}</title></text>'
-
-
 def rate_plot(report: Mapping[str, Any], metric: str, title: str) -> str:
     """Forest plot: ``metric`` (a rate) per scenario and overall, with intervals, for both policies."""
     rows = _scenario_rows(report)
@@ -268,70 +176,6 @@ def distribution_plots(report: Mapping[str, Any]) -> List[str]:
 
 
 # --------------------------------------------------------------------------- page
-CSS = """
-body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",sans-serif;margin:0 auto;max-width:1100px;padding:16px 24px;color:#1f2328}
-h1{font-size:22px;margin:8px 0}h2{font-size:18px;margin:28px 0 8px;border-bottom:1px solid #d0d7de;padding-bottom:4px}
-.banner{padding:14px 18px;border-radius:6px;color:#fff;font-size:18px;margin:12px 0}
-.banner small{display:block;font-size:13px;opacity:.95;margin-top:4px}
-.PASS{background:#1a7f37}.FAIL{background:#cf222e}.INCONCLUSIVE{background:#b07800}.NONE{background:#57606a}
-table{border-collapse:collapse;margin:6px 0;font-size:13px}th,td{border:1px solid #d0d7de;padding:3px 8px;text-align:left;vertical-align:top}
-th{background:#f6f8fa}td.num{text-align:right;font-variant-numeric:tabular-nums}
-.v-PASS{color:#1a7f37;font-weight:600}.v-FAIL{color:#cf222e;font-weight:600}.v-INCONCLUSIVE{color:#b07800;font-weight:600}
-figure{margin:10px 0}figcaption{font-size:12px;color:#57606a}
-svg.plot{display:block;background:#fff}
-svg .axis{stroke:#57606a}svg .grid{stroke:#eaeef2}svg .zero{stroke:#57606a}
-svg .margin{stroke:#cf222e;stroke-dasharray:5 4}svg text{font:11px system-ui,sans-serif;fill:#1f2328}
-svg .tick,svg .axis-title{text-anchor:middle}svg .row-label{text-anchor:end}svg .margin-label{fill:#cf222e}
-.clips{display:flex;flex-wrap:wrap;gap:14px}.clip{border:1px solid #d0d7de;border-radius:6px;padding:8px;width:360px}
-.clip video{width:360px;height:360px;background:#000;display:block}.clip p{margin:6px 0 0;font-size:12px}
-.muted{color:#57606a}code{font-size:12px}
-"""
-
-SELFTEST = """
-(function () {
-  function check() {
-    var body = document.body, plots = document.querySelectorAll("svg.plot"), rendered = 0, marks = 0;
-    plots.forEach(function (svg) {
-      var box = svg.getBoundingClientRect();
-      if (box.width > 0 && box.height > 0) { rendered += 1; }
-      svg.querySelectorAll(".mark").forEach(function (mark) {
-        var b = mark.getBBox(); if (b.width > 0 || b.height > 0) { marks += 1; }
-      });
-    });
-    body.setAttribute("data-plots", String(plots.length));
-    body.setAttribute("data-plots-rendered", String(rendered));
-    body.setAttribute("data-plot-marks", String(marks));
-    var videos = document.querySelectorAll("video");
-    body.setAttribute("data-videos", String(videos.length));
-    if (!videos.length || location.hash !== "#selftest") { return; }
-    var video = videos[0];
-    body.setAttribute("data-video-played", "false");
-    video.addEventListener("error", function () {
-      body.setAttribute("data-video-error", "media error " + (video.error ? video.error.code : "?"));
-    });
-    video.addEventListener("timeupdate", function () {
-      if (video.currentTime <= 0 || video.videoWidth <= 0) { return; }
-      body.setAttribute("data-video-played", "true");
-      body.setAttribute("data-video-size", video.videoWidth + "x" + video.videoHeight);
-      try {
-        var canvas = document.createElement("canvas"); canvas.width = 32; canvas.height = 32;
-        var ctx = canvas.getContext("2d"); ctx.drawImage(video, 0, 0, 32, 32);
-        var px = ctx.getImageData(0, 0, 32, 32).data, lo = 255, hi = 0;
-        for (var i = 0; i < px.length; i += 4) { var g = (px[i] + px[i + 1] + px[i + 2]) / 3; lo = Math.min(lo, g); hi = Math.max(hi, g); }
-        body.setAttribute("data-video-contrast", String(Math.round(hi - lo)));
-      } catch (e) { body.setAttribute("data-video-contrast", "unreadable: " + e.name); }
-    });
-    video.muted = true;
-    var played = video.play();
-    if (played && played.catch) {
-      played.catch(function (e) { body.setAttribute("data-video-error", e.name + ": " + e.message); });
-    }
-  }
-  window.addEventListener("load", check);
-})();
-"""
-
-
 def _banner(report: Mapping[str, Any]) -> str:
     verdict = report.get("verdict")
     candidate = (report.get("candidate") or {}).get("spec")
@@ -429,12 +273,6 @@ def _resolve_trace(trace: Any, base: Path) -> Optional[Path]:
     return None
 
 
-def _video_bytes(source: VideoSource) -> bytes:
-    if isinstance(source, (bytes, bytearray)):
-        return bytes(source)
-    return Path(source).read_bytes()
-
-
 def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, VideoSource]],
            render_videos: bool, max_videos: int) -> str:
     newly = [str(i) for i in report.get("newly_failing") or []]
@@ -462,8 +300,7 @@ def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, 
             except (ClipError, OSError, AssertionError, ValueError) as error:
                 note = f"clip not available: {error}"
             if data is not None:
-                media = (f'<video controls loop muted playsinline preload="auto" '
-                         f'src="data:video/webm;base64,{base64.b64encode(data).decode("ascii")}"></video>')
+                media = video_tag(data)
             else:
                 media = f'<p class="muted">{_e(note)}</p>'
             seed = episode.get("seed", "")

@@ -22,20 +22,24 @@ spec, so a worker serves any mix of tasks.
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 import traceback
 from pathlib import Path
-from typing import Any, Dict, Optional, Tuple
+from typing import Any, Dict
 
 if "numpy" not in sys.modules:  # a fresh worker process (e.g. Ray's): one BLAS/OpenMP thread per worker
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-__all__ = ["run_task", "task_id", "trace_filename", "error_result", "clear_caches", "env_for", "policy_for", "drop_env"]
+__all__ = ["run_task", "task_id", "trace_filename", "error_result", "clear_caches"]
 
-_ENVS: Dict[Tuple[Optional[str], str], Any] = {}
-_POLICIES: Dict[Tuple[str, Optional[str], str], Any] = {}
+
+
+def clear_caches() -> None:
+    """Close every env this process cached and forget the loaded policies."""
+    from policies.worker_cache import clear_caches as clear
+
+    clear()
 
 
 def task_id(scenario: str, seed: int) -> str:
@@ -54,55 +58,6 @@ def error_result(task: Dict[str, Any], error: str) -> Dict[str, Any]:
             "seed": int(task["seed"]), "error": str(error), "trace": None}
 
 
-def _config_key(config: Optional[Dict[str, Any]]) -> str:
-    return json.dumps(config or {}, sort_keys=True, default=str)
-
-
-def env_for(bank_dir: Optional[str], config: Optional[Dict[str, Any]]):
-    """This process's cached env for a bank and env config: ``(cache key, env)``."""
-    key = (bank_dir, _config_key(config))
-    env = _ENVS.get(key)
-    if env is None:
-        from policies.evaluation import make_eval_env
-
-        # the whole bank: reset(options={"scenario": name}) picks the episode's scenario,
-        # and each scenario is compiled once, the first time it runs here
-        env = make_eval_env(None, config=dict(config or {}), bank_dir=bank_dir)
-        _ENVS[key] = env
-    return key, env
-
-
-def policy_for(spec: str, env_key: Tuple[Optional[str], str], env):
-    """This process's cached policy ``spec``, bound to the env cached under ``env_key``."""
-    key = (spec, *env_key)
-    policy = _POLICIES.get(key)
-    if policy is None:
-        from policies.registry import load_policy
-
-        policy = load_policy(spec)
-        policy.bind([env])
-        _POLICIES[key] = policy
-    return policy
-
-
-def drop_env(env_key: Tuple[Optional[str], str]) -> None:
-    """Forget an env (and the policies bound to it) after an exception left it in an unknown state."""
-    env = _ENVS.pop(env_key, None)
-    for key in [k for k in _POLICIES if k[1:] == env_key]:
-        del _POLICIES[key]
-    if env is not None:
-        try:
-            env.close()
-        except Exception:  # closing a broken env must not hide the episode's error
-            pass
-
-
-def clear_caches() -> None:
-    """Close every cached env and forget the loaded policies."""
-    for key in list(_ENVS):
-        drop_env(key)
-
-
 def run_task(task: Dict[str, Any]) -> Dict[str, Any]:
     """Run one episode described by ``task`` (see the module docstring) and return its result dict.
 
@@ -110,6 +65,7 @@ def run_task(task: Dict[str, Any]) -> Dict[str, Any]:
     (:func:`dv2s_gym.mining.worker.run_mine_task`); the pools serve both kinds.
     """
     from policies.evaluation import run_episode
+    from policies.worker_cache import drop_env, env_for, policy_for
 
     if task.get("kind") == "mine":
         from dv2s_gym.mining.worker import run_mine_task

@@ -1,0 +1,324 @@
+"""From a mined failure to a validated bank entry.
+
+:func:`convert_failure` takes one failure record of the miner (an episode record of
+``episodes.jsonl`` whose ``failure`` is set) through these stages, each timed, and returns the
+conversion record of ``conversions.jsonl``:
+
+1. ``video``: re-run the episode and write its bird's-eye video and trace
+   (:func:`dv2s_gym.mining.failure_video.record_failure_video`; a diverging replay is a rejection);
+2. ``describe``: the Driving Record Analyzer turns the video into a description;
+3. ``generate``: the Scenario Generator turns the description into a Scenic script;
+4. ``check``: safety allowlist, then compile, sample and run in the sandbox
+   (:func:`dv2s_gym.pipeline.convert.check_scenario`; the in-process run is the reproduction below);
+5. ``reproduction``: the same policy drives the new scenario over ``k`` scenes whose seeds derive
+   from the record's seed (``numpy.random.SeedSequence([seed, record seed])``); the scenario is kept
+   iff the share of episodes failing in the *same failure class* is at least ``threshold``
+   (the rate and its Wilson interval are recorded either way);
+6. ``e2e_sc``: E2E-SC between the source failure's trace (its elements are the ground truth) and each
+   simulated trace of the reproduction, averaged over the ``k`` traces;
+7. ``bank``: :meth:`scenario_bank.bank.Bank.add_or_merge` adds the script with ``mined`` provenance,
+   or merges the failure into the entry it (nearly) duplicates.
+
+Failure class (:func:`same_failure_class`): the failure types must be equal; for collisions the
+other party's kind (``with_kind``: car, truck, pedestrian, obstacle...) and the collision type
+(``collision_type``: rear_end, struck_from_behind, side, head_on...) must be equal too, each
+compared only when both failures know it (a ``None`` matches anything). Actor names are never
+compared (a generated script names its actors anew).
+
+Nothing raises out of :func:`convert_failure` for a bad failure: every rejection is a record with
+``status: "rejected"``, the ``stage`` and a ``reason`` ``"<stage>: <message>"``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import time
+from pathlib import Path
+from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
+
+import numpy as np
+
+__all__ = ["convert_failure", "same_failure_class", "reproduction_seeds", "cluster_slug", "CONVERSION_DIR"]
+
+CONVERSION_DIR = "conversion"
+PathLike = Union[str, os.PathLike]
+
+
+class _Rejected(Exception):
+    def __init__(self, stage: str, message: str) -> None:
+        super().__init__(f"{stage}: {message}")
+        self.stage, self.message = stage, message
+
+
+def same_failure_class(source: Mapping[str, Any], candidate: Optional[Mapping[str, Any]]) -> bool:
+    """Whether ``candidate`` (a failure dict, or None) is in the failure class of ``source`` (see the module doc)."""
+    if not candidate or candidate.get("type") != source.get("type"):
+        return False
+    if source.get("type") == "collision":
+        for key in ("with_kind", "collision_type"):
+            if source.get(key) is not None and candidate.get(key) is not None and source[key] != candidate[key]:
+                return False
+    return True
+
+
+def reproduction_seeds(record_seed: int, k: int, seed: int = 0) -> List[int]:
+    """The ``k`` scene seeds of the reproduction check: a function of the record's seed and ``seed`` only."""
+    state = np.random.SeedSequence([int(seed) & 0xFFFFFFFF, int(record_seed) & 0xFFFFFFFF]).generate_state(k)
+    return [int(s) & 0x7FFFFFFF for s in state]
+
+
+def cluster_slug(cluster: Optional[str], index: Any) -> str:
+    """A folder name for a failure cluster (``"<scenario>/<type>/<region>"`` -> ``<scenario>__<type>__<region>``)."""
+    if not cluster:
+        return f"episode-{int(index):06d}" if isinstance(index, int) else "failure"
+    return re.sub(r"[^A-Za-z0-9_.\-]+", "_", str(cluster).replace("/", "__")).strip("._")[:120] or "failure"
+
+
+def _detect(result, trace, options: Mapping[str, Any]) -> Optional[Dict[str, Any]]:
+    """The episode's failure as a dict (the miner's monitors, :func:`dv2s_gym.mining.monitors.detect_failure`)."""
+    from dv2s_gym.mining.monitors import detect_failure
+
+    found = detect_failure(result, trace, **dict(options))
+    return None if found is None else found.to_json()
+
+
+def _monitor_options(run_dir: Path, monitor: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
+    """The monitor settings: ``monitor`` when given, else the mining run's (``settings.json``), else the defaults."""
+    if monitor is not None:
+        return dict(monitor)
+    try:
+        settings = json.loads((run_dir / "settings.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return {key: settings[key] for key in ("ttc_threshold", "stall_seconds")
+            if isinstance(settings, dict) and settings.get(key) is not None}
+
+
+def _policy_name(policy: Any) -> str:
+    if isinstance(policy, (str, os.PathLike)):
+        return os.fspath(policy)
+    return str(getattr(policy, "name", None) or type(policy).__name__)
+
+
+def _write(path: Path, text: str) -> None:
+    from scenario_bank.atomic import atomic_write_text
+
+    atomic_write_text(path, text, fsync=False)
+
+
+def _rel(path: Path, root: Path) -> str:
+    try:
+        return str(path.resolve().relative_to(root.resolve()))
+    except ValueError:
+        return str(path)
+
+
+def _reproduce(script_path: Path, *, policy: Any, record_seed: int, k: int, seed: int,
+               env_config: Optional[Mapping[str, Any]], source_failure: Mapping[str, Any],
+               monitor: Mapping[str, Any]) -> Tuple[List[Dict[str, Any]], List[Any]]:
+    """Run ``policy`` on the new scenario over ``k`` derived seeds; per episode its seed, failure and match."""
+    from envs.dv2s_env import DV2SEnv
+    from policies.evaluation import run_episode
+    from policies.registry import load_policy
+
+    env = DV2SEnv(scenario=str(script_path), config=dict(env_config or {}))
+    try:
+        bound = load_policy(policy)
+        bound.bind([env])
+        name = script_path.parent.name if script_path.name == "scenario.scenic" else script_path.stem
+        episodes, traces = [], []
+        for scene_seed in reproduction_seeds(record_seed, k, seed):
+            result, trace = run_episode(env, bound, name, scene_seed)
+            failure = _detect(result, trace, monitor)
+            episodes.append({"seed": scene_seed, "failure": failure, "steps": result.steps,
+                             "trajectory_hash": result.trajectory_hash,
+                             "reproduced": same_failure_class(source_failure, failure)})
+            traces.append(trace)
+        return episodes, traces
+    finally:
+        env.close()
+
+
+def _mined_name(parent: str, failure_type: str) -> str:
+    base = re.sub(r"[^a-z0-9_\-]+", "_", f"mined_{parent}_{failure_type}".lower()).strip("_-")
+    return base[:90] or "mined"
+
+
+def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any, bank: Any, dra: str = "bev",
+                    sg: str = "rules", llm_config: Optional[Dict[str, Any]] = None, k: int = 10,
+                    threshold: float = 0.3, seed: int = 0, env_config: Optional[Mapping[str, Any]] = None,
+                    bank_dir: Optional[PathLike] = None, cluster: Optional[str] = None,
+                    monitor: Optional[Mapping[str, Any]] = None, before: float = 4.0,
+                    after: float = 1.0) -> Dict[str, Any]:
+    """Turn one failure record into a bank entry; returns the conversion record (never raises for a bad failure).
+
+    Args:
+        record: an episode record of the miner with a ``failure`` (see the mining contract).
+        run_dir: the mining run folder; files go to ``failures/<cluster slug>/`` (``failure.webm``,
+            ``trace.json.gz``, ``conversion/{description.txt, elements.json, scenario.scenic, report.json}``).
+        policy: the deterministic policy that failed (a spec or a :class:`~policies.registry.Policy`).
+        bank: the bank to add to (a :class:`~scenario_bank.bank.Bank` or its folder).
+        dra, sg, llm_config: the D-V2S backends (``bev``/``openai``, ``rules``/``openai``) and LLM settings.
+        k, threshold: reproduction episodes, and the smallest reproduction rate that keeps the scenario.
+        seed: the SG's seed and the reproduction seeds' salt.
+        env_config: the mining run's env config (the re-run and the reproduction use it).
+        bank_dir: the bank holding the record's scenario (default: ``bank`` when it holds it, else the shipped bank).
+        cluster: the failure's cluster id (default ``record["cluster"]``).
+        monitor: options of the failure monitors (``ttc_threshold``, ``stall_seconds``); default: those in
+            ``run_dir/settings.json``, else the monitors' defaults.
+        before, after: seconds of video before and after the failure.
+
+    Returns ``{"cluster", "index", "status": "kept"|"merged"|"rejected", "reason", "stage", "video",
+    "description", "script", "reproduction", "e2e_sc", "bank_entry", "merged_into", "seconds",
+    "timings"}`` (paths relative to ``run_dir``; ``timings``: seconds per stage).
+    """
+    from scenario_bank.bank import Bank
+
+    start = time.perf_counter()
+    run_dir = Path(run_dir)
+    cluster = cluster if cluster is not None else record.get("cluster")
+    folder = run_dir / "failures" / cluster_slug(cluster, record.get("index"))
+    conversion = folder / CONVERSION_DIR
+    out: Dict[str, Any] = {"cluster": cluster, "index": record.get("index"), "status": "rejected", "reason": None,
+                           "stage": None, "video": None, "description": None, "script": None,
+                           "reproduction": None, "e2e_sc": None, "bank_entry": None, "merged_into": None,
+                           "seconds": None, "timings": {}}
+    details: Dict[str, Any] = {}
+    timings: Dict[str, float] = out["timings"]
+    stage_start = [time.perf_counter()]
+
+    def lap(stage: str) -> None:
+        now = time.perf_counter()
+        timings[stage] = round(now - stage_start[0], 4)
+        stage_start[0] = now
+
+    stage = "input"
+    try:
+        source_failure = dict(record.get("failure") or {})
+        if not source_failure.get("type"):
+            raise _Rejected("input", "the record holds no failure (record['failure'] is empty)")
+        if int(k) < 1 or not 0.0 <= float(threshold) <= 1.0:
+            raise _Rejected("input", f"the reproduction check needs k >= 1 and 0 <= threshold <= 1, not k={k}, "
+                                     f"threshold={threshold}")
+        if isinstance(bank, (str, os.PathLike)):
+            bank = Bank(bank)
+        if bank_dir is None and getattr(bank, "root", None) is not None and record.get("scenario") in bank:
+            bank_dir = bank.root
+        conversion.mkdir(parents=True, exist_ok=True)
+
+        stage = "video"
+        from dv2s_gym.mining.failure_video import write_failure_video
+
+        video = folder / "failure.webm"
+        written = write_failure_video(record, video, policy=policy, bank_dir=bank_dir, env_config=env_config,
+                                      before=before, after=after)
+        out["video"] = _rel(video, run_dir)
+        source_trace = written.trace
+        monitor = _monitor_options(run_dir, monitor)
+        detected = _detect(written.result, source_trace, monitor)
+        details["source_failure_detected"] = detected
+        if detected and detected.get("type") == source_failure["type"]:
+            for key, value in detected.items():  # fill what a minimal failure record leaves out
+                if source_failure.get(key) is None:
+                    source_failure[key] = value
+        lap("video")
+
+        stage = "describe"
+        from dv2s_gym.pipeline.stages import describe, generate
+
+        description = describe(video, backend=dra, llm_config=llm_config)
+        out["description"] = description.text
+        _write(conversion / "description.txt", description.text.strip() + "\n")
+        _write(conversion / "elements.json", json.dumps(description.elements, indent=2) + "\n")
+        details["description"] = description.as_dict()
+        lap("describe")
+
+        stage = "generate"
+        generation = generate(description.text, backend=sg, seed=seed, llm_config=llm_config)
+        script_path = conversion / "scenario.scenic"
+        _write(script_path, generation.script)
+        out["script"] = _rel(script_path, run_dir)
+        details["generation"] = generation.as_dict()
+        lap("generate")
+
+        stage = "check"
+        from dataclasses import asdict
+
+        from dv2s_gym.pipeline.convert import check_scenario
+
+        check = check_scenario(generation.script, seed=seed, name=f"mined failure {record.get('index')}",
+                               in_process=False)
+        details["check"] = {**asdict(check), "ok": check.ok}
+        lap("check")
+        if not check.ok:
+            failed = next(s for s in ("safety", "compile", "sample", "run")
+                          if not {"safety": check.safe, "compile": check.compiled, "sample": check.sampled,
+                                  "run": check.ran}[s])
+            raise _Rejected("check", f"{failed} failed: {check.error}")
+
+        stage = "reproduction"
+        from dv2s_gym.regress.stats import wilson_interval
+
+        episodes, traces = _reproduce(script_path, policy=policy, record_seed=int(record["seed"]), k=int(k),
+                                      seed=seed, env_config=env_config, source_failure=source_failure,
+                                      monitor=monitor)
+        reproduced = sum(e["reproduced"] for e in episodes)
+        low, high = wilson_interval(reproduced, len(episodes))
+        out["reproduction"] = {"k": len(episodes), "reproduced": reproduced, "rate": reproduced / len(episodes),
+                               "interval": [low, high], "threshold": float(threshold)}
+        details["reproduction_episodes"] = episodes
+        lap("reproduction")
+
+        stage = "e2e_sc"
+        from dv2s_gym.pipeline.metrics import e2e_sc
+        from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+
+        truth = elements_from_trace(source_trace)
+        scores = [e2e_sc(truth, elements_from_trace(trace)) for trace in traces]
+        out["e2e_sc"] = float(np.mean(scores))
+        details["source_elements"] = truth
+        lap("e2e_sc")
+        if out["reproduction"]["rate"] < threshold:
+            raise _Rejected("reproduction", f"the new scenario reproduced the {source_failure['type']} failure in "
+                                            f"{reproduced} of {len(episodes)} episodes "
+                                            f"(rate {out['reproduction']['rate']:.2f} < threshold {threshold:g})")
+
+        stage = "bank"
+        import datetime
+
+        result = record.get("result") or {}
+        provenance = {
+            "kind": "mined", "parent": record["scenario"], "seed": int(record["seed"]),
+            "params": dict(result.get("params") or record.get("params") or {}),
+            "video": str(video.resolve()), "generator": f"dra={dra},sg={sg}", "backends": {"dra": dra, "sg": sg},
+            "model": generation.model or description.model,
+            "context_hash": generation.context_hash or description.prompt_hash,
+            "policy": _policy_name(policy), "failure": source_failure, "cluster": cluster,
+            "reproduction": out["reproduction"], "e2e_sc": out["e2e_sc"], "run": str(run_dir.resolve()),
+            "index": record.get("index"), "date": datetime.date.today().isoformat(),
+        }
+        outcome = bank.add_or_merge(generation.script, description.text, name=_mined_name(record["scenario"],
+                                                                                          source_failure["type"]),
+                                    elements=description.elements, tags=["mined", source_failure["type"]],
+                                    provenance=provenance)
+        if outcome.status == "added":
+            out.update(status="kept", bank_entry=outcome.entry.name)
+        else:
+            out.update(status="merged", merged_into=outcome.entry.name, merge_reason=outcome.how)
+        lap("bank")
+    except _Rejected as rejection:
+        out.update(stage=rejection.stage, reason=str(rejection))
+    except Exception as error:  # a bad failure is a rejection with its stage, never an exception
+        first = (str(error).strip().splitlines() or [""])[0]
+        out.update(stage=stage, reason=f"{stage}: {type(error).__name__}: {first}"[:500])
+    if out["stage"] is not None and out["stage"] not in timings:
+        lap(out["stage"])
+    out["seconds"] = round(time.perf_counter() - start, 3)
+    try:
+        conversion.mkdir(parents=True, exist_ok=True)
+        _write(conversion / "report.json", json.dumps({**out, **details}, indent=2, default=str) + "\n")
+    except OSError:
+        pass
+    return out

@@ -1,0 +1,225 @@
+"""A mined failure as a bird's-eye video of the seconds before and through it, plus its trace.
+
+The failure is re-run from its episode record (scenario, seed, sampled parameters) with the
+same deterministic policy in an env that renders off-screen; the re-run must reproduce the
+record's trajectory hash, or :class:`FailureReplayError` says the replay diverged. A saved
+trace (:class:`~envs.trace.EpisodeTrace` or its file) is replayed with its own actions instead
+(:func:`envs.replay.replay_trace`, every actor state checked). The frames from ``before``
+seconds before the failure through ``after`` seconds after it are written as a VP8 ``.webm``
+(:class:`envs.recording.VideoWriter`) at the policy frequency, in the style the ``bev`` Driving
+Record Analyzer reads (ego-centred, north up, 5.5 px/m).
+
+Episodes usually end at the collision (``terminate_on_collision``); to show ``after`` seconds
+past it, the policy keeps driving the re-run env after the episode ended. Those extra steps
+are not part of the episode: the trajectory hash is taken, and the trace saved, before them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
+
+import numpy as np
+
+from envs.errors import DV2SError
+
+__all__ = ["FailureReplayError", "FailureVideo", "VIDEO_CONFIG", "failure_step", "record_failure_video",
+           "rerun_failure", "write_failure_video"]
+
+VIDEO_CONFIG: Dict[str, Any] = {"screen_width": 480, "screen_height": 480, "scaling": 5.5,
+                                "offscreen_rendering": True, "show_trajectories": False}
+"""Rendering settings of failure videos (those of the shipped evaluation clips the ``bev`` DRA was built on).
+They change only the pixels, never the trajectory."""
+
+PathLike = Union[str, os.PathLike]
+
+
+class FailureReplayError(DV2SError, ValueError):
+    """A failure that cannot be re-run: a malformed record, or a replay that diverged from it."""
+
+
+def _frequency(config: Mapping[str, Any]) -> float:
+    return float(config.get("policy_frequency") or 5)
+
+
+def failure_step(failure: Optional[Mapping[str, Any]], steps: int, frequency: float) -> int:
+    """The frame index (0 = the reset) showing the failure: the failure's ``step`` when given, else the
+    frame nearest its ``time`` (as the miner's monitors count steps); the last frame when neither is
+    known. Clipped to ``[0, steps]``."""
+    failure = failure or {}
+    if failure.get("step") is not None:
+        k = int(failure["step"])
+    elif failure.get("time") is not None:
+        k = int(round(float(failure["time"]) * frequency))
+    else:
+        k = steps
+    return max(0, min(steps, k))
+
+
+def _trace_failure(trace) -> Optional[Dict[str, Any]]:
+    """The first failure event of a trace (a collision involving the ego, or leaving the road)."""
+    for event in trace.events:
+        if event.get("kind") == "collision" and "ego" in event.get("actors", []):
+            return {"type": "collision", "time": float(event["time"])}
+        if event.get("kind") == "off_road":
+            return {"type": "off_road", "time": float(event["time"])}
+    return None
+
+
+def _check_record(record: Mapping[str, Any]) -> None:
+    missing = [key for key in ("scenario", "seed") if record.get(key) is None]
+    if not (record.get("result") or {}).get("trajectory_hash"):
+        missing.append("result.trajectory_hash")
+    if missing:
+        raise FailureReplayError(f"the failure record lacks {', '.join(missing)}; pass an episode record of "
+                                 "episodes.jsonl (or a saved episode trace)")
+
+
+def _run_episode(env, policy, scenario: str, seed: int, params: Mapping[str, Any], frames):
+    from policies.evaluation import run_episode
+
+    return run_episode(env, policy, scenario, seed, frames=frames, params=dict(params) or None)
+
+
+def rerun_failure(record: Mapping[str, Any], *, policy: Any, bank_dir: Optional[PathLike] = None,
+                  env_config: Optional[Mapping[str, Any]] = None, render: bool = False,
+                  extra_steps: int = 0) -> Tuple[Any, Any, List[np.ndarray]]:
+    """Re-run an episode record with ``policy`` (a spec or a :class:`~policies.registry.Policy`).
+
+    Returns ``(EpisodeResult, EpisodeTrace, frames)``; frames (when ``render``) hold the reset and every
+    step, then ``extra_steps`` more steps driven past the episode's end. Raises
+    :class:`FailureReplayError` when the trajectory hash differs from the record's.
+    """
+    from policies.evaluation import make_eval_env
+    from policies.registry import load_policy
+
+    _check_record(record)
+    config = dict(env_config or {})
+    if render:
+        config.update(VIDEO_CONFIG)
+    env = make_eval_env([record["scenario"]], config=config, bank_dir=str(bank_dir) if bank_dir else None,
+                        render_mode="rgb_array" if render else None)
+    try:
+        bound = load_policy(policy)
+        bound.bind([env])
+        frames: Optional[List[np.ndarray]] = [] if render else None
+        result, trace = _run_episode(env, bound, record["scenario"], int(record["seed"]),
+                                     record.get("params") or {}, frames)
+        expected = record["result"]["trajectory_hash"]
+        if result.trajectory_hash != expected:
+            raise FailureReplayError(
+                f"the replay of episode {record.get('index', '?')} ({record['scenario']}, seed {record['seed']}) "
+                f"diverged: trajectory hash {result.trajectory_hash[:12]} != recorded {expected[:12]}; re-run with "
+                "the mining run's policy, env config and dv2s-gym version")
+        trace = dataclasses.replace(trace, actions=list(trace.actions), states=list(trace.states),
+                                    events=list(trace.events))  # the episode as recorded, before extra steps
+        base = env.unwrapped
+        for _ in range(extra_steps if render else 0):
+            observation = base.observation_type.observe()
+            action = bound.act(np.asarray(observation)[None], deterministic=True)[0]
+            env.step(action)
+            frames.append(env.render())
+        return result, trace, frames or []
+    finally:
+        env.close()
+
+
+def _replay_trace_frames(trace) -> List[np.ndarray]:
+    from envs.replay import replay_trace
+    from envs.trace import TraceMismatchError
+
+    config = {**trace.config, **VIDEO_CONFIG}
+    frames: List[np.ndarray] = []
+    try:
+        env, _ = replay_trace(dataclasses.replace(trace, config=config), render_mode="rgb_array", frames=frames)
+    except TraceMismatchError as error:
+        raise FailureReplayError(f"the replay of the trace diverged: {str(error)[:300]}") from None
+    env.close()
+    return frames
+
+
+@dataclasses.dataclass
+class FailureVideo:
+    """What :func:`write_failure_video` wrote and saw: the video and trace paths, the frame window
+    ``[first, last]`` (frame indices, 0 = the reset), the failure's frame, the frames per second,
+    and the episode's :class:`~policies.evaluation.EpisodeResult` (None for a trace replay) and trace."""
+
+    path: Path
+    trace_path: Path
+    first: int
+    last: int
+    failure_frame: int
+    fps: float
+    result: Any
+    trace: Any
+
+    @property
+    def frames(self) -> int:
+        return self.last - self.first + 1
+
+
+def record_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike], out_path: PathLike, *,
+                         policy: Any = None, bank_dir: Optional[PathLike] = None,
+                         env_config: Optional[Mapping[str, Any]] = None, before: float = 4.0,
+                         after: float = 1.0, trace_path: Optional[PathLike] = None) -> Path:
+    """Write the bird's-eye video of a failure (``.webm``) and its trace; returns the video's path.
+
+    ``record_or_trace`` is an episode record of the miner (re-run with ``policy``, which must be the
+    deterministic policy that failed, and checked against the record's trajectory hash) or an
+    :class:`~envs.trace.EpisodeTrace` or trace file (replayed with its recorded actions; ``policy`` is
+    not needed, and the clip cannot run past the trace's end). The clip holds the frames from
+    ``before`` seconds before the failure (``record["failure"]``; for a trace, its first ego
+    collision or off-road event) through ``after`` seconds after it, at the policy frequency:
+    ``round(before * f) + round(after * f) + 1`` frames unless the episode started less than
+    ``before`` seconds before the failure. The trace is saved to ``trace_path`` (default
+    ``trace.json.gz`` beside the video).
+    """
+    return write_failure_video(record_or_trace, out_path, policy=policy, bank_dir=bank_dir, env_config=env_config,
+                               before=before, after=after, trace_path=trace_path).path
+
+
+def write_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike], out_path: PathLike, *,
+                        policy: Any = None, bank_dir: Optional[PathLike] = None,
+                        env_config: Optional[Mapping[str, Any]] = None, before: float = 4.0,
+                        after: float = 1.0, trace_path: Optional[PathLike] = None) -> FailureVideo:
+    """:func:`record_failure_video`, returning a :class:`FailureVideo` (window, result, trace)."""
+    from envs.recording import VideoWriter
+    from envs.trace import EpisodeTrace
+
+    if before < 0 or after < 0:
+        raise FailureReplayError(f"before and after must be >= 0 seconds, not {before} and {after}")
+    out_path = Path(out_path)
+    trace_path = Path(trace_path) if trace_path is not None else out_path.parent / "trace.json.gz"
+    if isinstance(record_or_trace, Mapping):
+        record = record_or_trace
+        if policy is None:
+            raise FailureReplayError("re-running a failure record needs the policy that failed (policy=...)")
+        frequency = _frequency({**VIDEO_CONFIG, **dict(env_config or {})})
+        steps = int((record.get("result") or {}).get("steps") or 0)
+        k = failure_step(record.get("failure"), steps, frequency)
+        end = k + int(round(after * frequency))
+        result, trace, frames = rerun_failure(record, policy=policy, bank_dir=bank_dir, env_config=env_config,
+                                         render=True, extra_steps=max(0, end - steps))
+        frequency = _frequency(trace.config)
+        k = failure_step(record.get("failure"), len(trace.actions), frequency)
+    else:
+        trace = record_or_trace if isinstance(record_or_trace, EpisodeTrace) else None
+        if trace is None:
+            try:
+                trace = EpisodeTrace.load(record_or_trace)
+            except (OSError, ValueError) as error:
+                raise FailureReplayError(f"cannot read the failure trace {record_or_trace}: {error}") from None
+        frames = _replay_trace_frames(trace)
+        result = None
+        frequency = _frequency(trace.config)
+        k = failure_step(_trace_failure(trace), len(trace.actions), frequency)
+    start = max(0, k - int(round(before * frequency)))
+    end = min(len(frames) - 1, k + int(round(after * frequency)))
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    with VideoWriter(out_path, fps=frequency) as video:
+        for frame in frames[start:end + 1]:
+            video.write(frame)
+    trace.save(trace_path)
+    return FailureVideo(out_path, trace_path, start, end, k, frequency, result, trace)

@@ -1,0 +1,217 @@
+"""Paired evaluation of policies on the loop's held-out mined scenarios.
+
+An *episode* is ``(scenario, seed)``; every policy evaluated under a role (``before``,
+``after``) runs the same list of episodes, so the before/after outcomes pair up by
+episode (same scene, same seed). An episode *fails* when the mining monitors
+(:func:`dv2s_gym.mining.monitors.detect_failure`: collision, off road, time-to-collision
+under the threshold, stall) report a failure, the same test the miner used to find it.
+
+Results stream into a JSON-lines store (``one line per (role, scenario, seed)``, appended
+and fsynced), so an interrupted evaluation rerun with the same store runs only what is
+missing. Episodes run in a pool of ``workers`` processes (``OMP_NUM_THREADS=1``), each
+keeping its env and loaded policies between episodes.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+
+__all__ = ["HeldOutStore", "heldout_task", "evaluate_heldout", "paired_summary", "episode_failed"]
+
+Episode = Tuple[str, int]
+
+def _detect(result, trace, ttc_threshold: float) -> Optional[Dict[str, Any]]:
+    from dv2s_gym.mining.monitors import detect_failure
+
+    failure = detect_failure(result, trace, ttc_threshold=ttc_threshold)
+    return None if failure is None else failure.to_json()
+
+
+def heldout_task(task: Mapping[str, Any]) -> Dict[str, Any]:
+    """Run one episode in this process: ``task`` has role, policy, scenario, seed, bank_dir,
+    env_config, ttc_threshold. Returns ``{"role", "scenario", "seed", "policy", "failed",
+    "failure", "result", "error"}`` (an exception becomes ``error``, never a failure)."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    record: Dict[str, Any] = {"role": task["role"], "scenario": task["scenario"], "seed": int(task["seed"]),
+                              "policy": task["policy"], "failed": None, "failure": None, "result": None,
+                              "error": None}
+    env_key = None
+    try:
+        from policies.evaluation import run_episode
+        from policies.worker_cache import drop_env, env_for, policy_for
+
+        env_key, env = env_for(task.get("bank_dir"), task.get("env_config"))
+        policy = policy_for(task["policy"], env_key, env)
+        result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
+        failure = _detect(result, trace, float(task.get("ttc_threshold", 1.0)))
+    except Exception as error:  # reported, never counted as a failure of the policy
+        if env_key is not None:
+            drop_env(env_key)
+        record["error"] = " ".join(f"{type(error).__name__}: {error}".split())
+        return record
+    record.update(failed=failure is not None, failure=failure, result=result.to_json())
+    return record
+
+
+def episode_failed(record: Mapping[str, Any]) -> Optional[bool]:
+    """The record's outcome: ``True`` failed, ``False`` did not, ``None`` an error."""
+    return None if record.get("error") else bool(record.get("failed"))
+
+
+class HeldOutStore:
+    """The finished episodes of one evaluation, one JSON line each, keyed by (role, scenario, seed)."""
+
+    def __init__(self, path: os.PathLike | str) -> None:
+        self.path = Path(path)
+        self.records: Dict[Tuple[str, str, int], Dict[str, Any]] = {}
+        if self.path.is_file():
+            for line in self.path.read_text(encoding="utf-8").splitlines():
+                try:
+                    record = json.loads(line)
+                except ValueError:  # a line cut by a kill: its episode runs again
+                    continue
+                if not record.get("error"):
+                    self.records[(record["role"], record["scenario"], int(record["seed"]))] = record
+
+    def append(self, record: Mapping[str, Any]) -> None:
+        """Save one finished episode (fsynced)."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with open(self.path, "a", encoding="utf-8") as handle:
+            handle.write(json.dumps(dict(record), sort_keys=True, default=str) + "\n")
+            handle.flush()
+            os.fsync(handle.fileno())
+        self.records[(record["role"], record["scenario"], int(record["seed"]))] = dict(record)
+
+    def get(self, role: str, scenario: str, seed: int) -> Optional[Dict[str, Any]]:
+        """The record of one episode, or ``None`` when it has not run."""
+        return self.records.get((role, scenario, int(seed)))
+
+
+def _init_worker() -> None:
+    os.environ["OMP_NUM_THREADS"] = "1"
+
+
+def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, store: HeldOutStore,
+                     bank_dir: Optional[str], env_config: Optional[Dict[str, Any]] = None, workers: int = 1,
+                     ttc_threshold: float = 1.0, progress: bool = True) -> List[Dict[str, Any]]:
+    """Run ``policy`` as ``role`` on every episode not yet in ``store``; returns the records in episode order."""
+    tasks = [{"role": role, "policy": policy, "scenario": scenario, "seed": int(seed), "bank_dir": bank_dir,
+              "env_config": dict(env_config or {}), "ttc_threshold": ttc_threshold}
+             for scenario, seed in episodes if store.get(role, scenario, seed) is None]
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(episodes), initial=len(episodes) - len(tasks), desc=f"held-out {role}", unit="episode",
+                   file=sys.stderr, dynamic_ncols=True)
+    try:
+        if tasks and workers <= 1:
+            for task in tasks:
+                store.append(heldout_task(task))
+                if bar is not None:
+                    bar.update(1)
+        elif tasks:
+            context = multiprocessing.get_context("forkserver" if "forkserver" in multiprocessing.get_all_start_methods()
+                                                  else "spawn")
+            saved = os.environ.get("OMP_NUM_THREADS")
+            os.environ["OMP_NUM_THREADS"] = "1"
+            try:
+                with ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker) as pool:
+                    futures = [pool.submit(heldout_task, task) for task in tasks]
+                    for future in as_completed(futures):
+                        store.append(future.result())
+                        if bar is not None:
+                            bar.update(1)
+            finally:
+                if saved is None:
+                    os.environ.pop("OMP_NUM_THREADS", None)
+                else:
+                    os.environ["OMP_NUM_THREADS"] = saved
+    finally:
+        if bar is not None:
+            bar.close()
+    return [store.get(role, scenario, seed) or {"role": role, "scenario": scenario, "seed": int(seed),
+                                                "error": "did not run", "failed": None}
+            for scenario, seed in episodes]
+
+
+def _rate(k: int, n: int) -> Dict[str, Any]:
+    from dv2s_gym.regress.stats import wilson_interval
+
+    low, high = wilson_interval(k, n)
+    return {"k": k, "n": n, "rate": (k / n) if n else None, "low": low, "high": high}
+
+
+def _relative_drop(before: float, after: float) -> Optional[float]:
+    return None if before <= 0 else (before - after) / before
+
+
+def paired_summary(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[str, Any]], *,
+                   bootstrap: int = 2000, seed: int = 0) -> Dict[str, Any]:
+    """Rates before and after (Wilson 95 %), relative drop with a scenario-bootstrap interval,
+    the paired table (candidate = after, baseline = before) and the exact two-sided McNemar p.
+
+    Pairs are matched by (scenario, seed); a pair with an error on either side is left out.
+    """
+    from dv2s_gym.regress.stats import PairedTable, mcnemar_exact
+
+    import numpy as np
+
+    after_by = {(r["scenario"], int(r["seed"])): r for r in after}
+    pairs: List[Tuple[str, bool, bool]] = []
+    errors = 0
+    for record in before:
+        twin = after_by.get((record["scenario"], int(record["seed"])))
+        b, a = episode_failed(record), episode_failed(twin) if twin is not None else None
+        if b is None or a is None:
+            errors += 1
+            continue
+        pairs.append((record["scenario"], b, a))
+    table = PairedTable.from_outcomes([a for _, _, a in pairs], [b for _, b, _ in pairs])
+    n = len(pairs)
+    k_before, k_after = sum(b for _, b, _ in pairs), sum(a for _, _, a in pairs)
+    drop = _relative_drop(k_before / n, k_after / n) if n else None
+    interval = [None, None]
+    scenarios = sorted({s for s, _, _ in pairs})
+    if drop is not None and len(scenarios) > 1 and bootstrap > 0:
+        counts = np.array([[sum(1 for s, b, _ in pairs if s == name and b), sum(1 for s, _, a in pairs if s == name and a)]
+                           for name in scenarios], dtype=float)
+        rng = np.random.default_rng(seed)
+        draws = rng.integers(0, len(scenarios), size=(bootstrap, len(scenarios)))
+        sums = counts[draws].sum(axis=1)
+        valid = sums[:, 0] > 0
+        drops = (sums[valid, 0] - sums[valid, 1]) / sums[valid, 0]
+        if len(drops):
+            interval = [float(np.percentile(drops, 2.5)), float(np.percentile(drops, 97.5))]
+    per_scenario = {}
+    for name in scenarios:
+        rows = [(b, a) for s, b, a in pairs if s == name]
+        per_scenario[name] = {"n": len(rows), "before": sum(b for b, _ in rows), "after": sum(a for _, a in rows)}
+    return {
+        "pairs": n,
+        "errors": errors,
+        "before": _rate(k_before, n),
+        "after": _rate(k_after, n),
+        "relative_drop": drop,
+        "relative_drop_interval": interval,
+        "table": {"both_fail": table.both_fail, "after_only": table.candidate_only,
+                  "before_only": table.baseline_only, "neither": table.neither},
+        "mcnemar_p": mcnemar_exact(table) if n else None,
+        "per_scenario": per_scenario,
+    }
+
+
+def failure_types(records: Iterable[Mapping[str, Any]]) -> Dict[str, int]:
+    """How many records failed with each failure type."""
+    counts: Dict[str, int] = {}
+    for record in records:
+        failure = record.get("failure")
+        if failure:
+            counts[failure.get("type", "?")] = counts.get(failure.get("type", "?"), 0) + 1
+    return counts

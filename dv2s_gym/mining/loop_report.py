@@ -1,0 +1,185 @@
+"""The ``dv2s loop`` report: ``report.json`` (schema ``dv2s-loop`` version 1), ``report.md`` and ``report.html``.
+
+``report.json`` is :meth:`dv2s_gym.mining.loop.LoopReport.to_json`::
+
+    {"schema": "dv2s-loop", "schema_version": 1, "out", "settings", "policy": final policy spec,
+     "rounds": [{"round", "policy": spec it started from, "new_policy": fine-tuned spec,
+                 "timings": {step: seconds},
+                 "steps": {"mine": {"episodes", "errors", "failures", "failures_against_policy", "clusters",
+                                    "conversions": {status: n}, "rejected_reasons", "kept": [{"cluster",
+                                    "scenario", "reproduction"}], "folder"},
+                           "split": {"fine_tune", "held_out", "fine_tune_clusters", "held_out_clusters", "groups"},
+                           "before": {"episodes"},
+                           "fine_tune": {"model", "scenarios", "mined_upweighted", "steps"},
+                           "after": {"pairs", "errors", "before": Rate, "after": Rate, "relative_drop",
+                                     "relative_drop_interval", "table", "mcnemar_p", "per_scenario"},
+                           "regress": {"verdict", "reason", "episodes", "new_failure_rate", "old_failure_rate",
+                                       "difference", "p_value", "regressed", "report"},
+                           "skipped": reason (only when nothing was kept)}}]}
+
+``Rate`` is ``{"k", "n", "rate", "low", "high"}`` (Wilson 95 %). A round missing a step has not
+finished it yet (the loop was stopped; rerunning resumes it).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Dict, List, Mapping, Optional
+
+__all__ = ["write_loop_reports", "render_markdown", "render_html"]
+
+
+def _rate(r: Optional[Mapping[str, Any]]) -> str:
+    if not r or r.get("rate") is None:
+        return "-"
+    return f"{r['k']}/{r['n']} = {r['rate']:.2f} [{r['low']:.2f}, {r['high']:.2f}]"
+
+
+def _summary_rate(r: Optional[Mapping[str, Any]]) -> str:
+    if not r:
+        return "-"
+    return f"{r.get('value', 0):.3f} [{r.get('low', 0):.3f}, {r.get('high', 0):.3f}]"
+
+
+_ORDER = ("mine", "split", "before", "fine_tune", "after", "regress")
+
+
+def _seconds(timings: Mapping[str, Any]) -> str:
+    steps = sorted(timings, key=lambda s: _ORDER.index(s) if s in _ORDER else len(_ORDER))
+    return ", ".join(f"{step} {float(timings[step]):.0f} s" for step in steps) or "-"
+
+
+def render_markdown(report: Mapping[str, Any]) -> str:
+    """The Markdown rendering of a loop report."""
+    settings = report.get("settings", {})
+    lines: List[str] = [
+        "# dv2s loop", "",
+        f"Started from `{settings.get('policy')}`; final policy `{report.get('policy')}`.", "",
+        f"Per round: mining budget {settings.get('budget')} episodes ({settings.get('sampler')} sampler), "
+        f"{settings.get('holdout_fraction')} of the mined clusters held out, {settings.get('k_eval')} evaluation seeds "
+        f"per held-out scenario, fine-tuning {settings.get('fine_tune_steps')} steps (mined scenarios drawn with "
+        f"probability {settings.get('mined_share')}), regression test on the starting bank with "
+        f"{settings.get('regress_episodes')} seeds per scenario (margin {settings.get('margin')}).", "",
+        "| round | failures mined (against the policy) / episodes | clusters | kept | fine-tune / held-out scenarios "
+        "| held-out failure rate before | after | relative drop | McNemar p | rest of the bank |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for record in report.get("rounds", []):
+        steps = record.get("steps", {})
+        mine, split, after, regress = (steps.get(k) or {} for k in ("mine", "split", "after", "regress"))
+        drop = after.get("relative_drop")
+        interval = after.get("relative_drop_interval") or [None, None]
+        drop_text = "-" if drop is None else f"{drop:.0%}" + (
+            f" [{interval[0]:.0%}, {interval[1]:.0%}]" if interval[0] is not None else "")
+        p_value = after.get("mcnemar_p")
+        lines.append(
+            f"| {record.get('round')} | {mine.get('failures', '-')} ({mine.get('failures_against_policy', '-')}) / "
+            f"{mine.get('episodes', '-')} | {mine.get('clusters', '-')} | {len({e['scenario'] for e in mine.get('kept', [])})} | "
+            f"{len(split.get('fine_tune', []))} / {len(split.get('held_out', []))} | {_rate(after.get('before'))} | "
+            f"{_rate(after.get('after'))} | {drop_text} | {'-' if p_value is None else f'{p_value:.3g}'} | "
+            f"{regress.get('verdict') or steps.get('skipped') or '-'} |")
+    for record in report.get("rounds", []):
+        steps = record.get("steps", {})
+        lines += ["", f"## Round {record.get('round')}", "",
+                  f"- policy: `{record.get('policy')}` -> `{record.get('new_policy', '-')}`",
+                  f"- timings: {_seconds(record.get('timings', {}))}"]
+        if steps.get("skipped"):
+            lines.append(f"- skipped: {steps['skipped']}")
+        mine = steps.get("mine") or {}
+        if mine:
+            lines.append(f"- mining ({mine.get('folder')}): {mine.get('episodes')} episodes, {mine.get('failures')} "
+                         f"failures ({mine.get('failures_against_policy')} avoidable by the reference driver), "
+                         f"{mine.get('clusters')} clusters, conversions {mine.get('conversions')}, "
+                         f"{mine.get('errors')} episode errors")
+            for reason in mine.get("rejected_reasons", [])[:5]:
+                lines.append(f"  - rejected: {reason}")
+        split = steps.get("split") or {}
+        if split:
+            lines.append(f"- split by cluster ({split.get('groups')} groups): fine-tune "
+                         f"{', '.join(split.get('fine_tune', [])) or 'none'}; held out "
+                         f"{', '.join(split.get('held_out', [])) or 'none'}")
+        tuned = steps.get("fine_tune") or {}
+        if tuned:
+            lines.append(f"- fine-tuned {tuned.get('steps')} steps on {tuned.get('scenarios')} scenarios "
+                         f"({tuned.get('mined_upweighted')} mined, upweighted): `{tuned.get('model')}`")
+        after = steps.get("after") or {}
+        if after:
+            table = after.get("table", {})
+            lines.append(f"- held-out episodes: {after.get('pairs')} pairs ({after.get('errors')} with errors left "
+                         f"out); before {_rate(after.get('before'))}, after {_rate(after.get('after'))}; paired "
+                         f"table: both failed {table.get('both_fail')}, only before {table.get('before_only')}, "
+                         f"only after {table.get('after_only')}, neither {table.get('neither')}")
+            per = after.get("per_scenario") or {}
+            if per:
+                lines += ["", "| held-out scenario | episodes | failed before | failed after |", "|---|---|---|---|"]
+                lines += [f"| {name} | {row['n']} | {row['before']} | {row['after']} |" for name, row in per.items()]
+                lines.append("")
+        regress = steps.get("regress") or {}
+        if regress:
+            lines.append(f"- regression test on the starting bank ({regress.get('episodes')} paired episodes): "
+                         f"**{regress.get('verdict')}** - {regress.get('reason')}; failure rate new "
+                         f"{_summary_rate(regress.get('new_failure_rate'))}, old "
+                         f"{_summary_rate(regress.get('old_failure_rate'))}; report `{regress.get('report')}`")
+    return "\n".join(lines) + "\n"
+
+
+_CSS = ("body{font-family:system-ui,sans-serif;margin:2em;max-width:1100px}table{border-collapse:collapse;margin:1em 0}"
+        "td,th{border:1px solid #ccc;padding:4px 8px;text-align:left}th{background:#f3f3f3}"
+        ".PASS{color:#186a1f;font-weight:bold}.FAIL{color:#a11;font-weight:bold}.INCONCLUSIVE{color:#a60}"
+        "code{background:#f5f5f5;padding:1px 3px}")
+
+
+def render_html(report: Mapping[str, Any]) -> str:
+    """A self-contained HTML page (inline CSS, nothing fetched) of the loop report."""
+    from html import escape
+
+    settings = report.get("settings", {})
+    rows = []
+    for record in report.get("rounds", []):
+        steps = record.get("steps", {})
+        mine, split, after, regress = (steps.get(k) or {} for k in ("mine", "split", "after", "regress"))
+        drop = after.get("relative_drop")
+        interval = after.get("relative_drop_interval") or [None, None]
+        drop_text = "-" if drop is None else f"{drop:.0%}" + (
+            f" [{interval[0]:.0%}, {interval[1]:.0%}]" if interval[0] is not None else "")
+        verdict = regress.get("verdict") or steps.get("skipped") or "-"
+        p_value = after.get("mcnemar_p")
+        cells = [record.get("round"), f"{mine.get('failures', '-')} / {mine.get('episodes', '-')}",
+                 mine.get("clusters", "-"), len({e["scenario"] for e in mine.get("kept", [])}),
+                 f"{len(split.get('fine_tune', []))} / {len(split.get('held_out', []))}",
+                 _rate(after.get("before")), _rate(after.get("after")), drop_text,
+                 "-" if p_value is None else f"{p_value:.3g}"]
+        row = "".join(f"<td>{escape(str(c))}</td>" for c in cells)
+        rows.append(f"<tr>{row}<td class=\"{escape(str(verdict))}\">{escape(str(verdict))}</td></tr>")
+        details = []
+        for name, per in (after.get("per_scenario") or {}).items():
+            details.append(f"<tr><td>{escape(name)}</td><td>{per['n']}</td><td>{per['before']}</td>"
+                           f"<td>{per['after']}</td></tr>")
+        if details:
+            rows.append(f"<tr><td></td><td colspan=\"9\"><table><tr><th>held-out scenario</th><th>episodes</th>"
+                        f"<th>failed before</th><th>failed after</th></tr>{''.join(details)}</table>"
+                        f"regression test: {escape(str(regress.get('reason')))}</td></tr>")
+    head = ("<tr><th>round</th><th>failures / episodes mined</th><th>clusters</th><th>kept</th>"
+            "<th>fine-tune / held-out</th><th>held-out failure rate before</th><th>after</th><th>relative drop</th>"
+            "<th>McNemar p</th><th>rest of the bank</th></tr>")
+    return (f"<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>dv2s loop</title><style>{_CSS}</style>"
+            f"</head><body><h1>dv2s loop</h1><p>Started from <code>{escape(str(settings.get('policy')))}</code>; "
+            f"final policy <code>{escape(str(report.get('policy')))}</code>. Mining budget {settings.get('budget')} "
+            f"episodes per round, fine-tuning {settings.get('fine_tune_steps')} steps, {settings.get('k_eval')} "
+            f"evaluation seeds per held-out scenario (Wilson 95 % intervals; the drop's interval resamples "
+            f"scenarios).</p><table>{head}{''.join(rows)}</table></body></html>\n")
+
+
+def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
+    """Write ``report.json``, ``report.md`` (and ``report.html`` when available) atomically; returns their paths."""
+    from scenario_bank.atomic import atomic_write_json, atomic_write_text
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"json": atomic_write_json(out / "report.json", dict(report), indent=1) or out / "report.json"}
+    markdown = render_markdown(report)
+    atomic_write_text(out / "report.md", markdown)
+    paths["md"] = out / "report.md"
+    atomic_write_text(out / "report.html", render_html(report))
+    paths["html"] = out / "report.html"
+    return {key: Path(value) for key, value in paths.items()}

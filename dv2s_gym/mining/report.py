@@ -1,0 +1,726 @@
+"""The mining report: what a ``dv2s mine`` run found, read back from its run folder.
+
+:func:`build_report` reads a run folder (``settings.json``, ``episodes.jsonl``,
+``conversions.jsonl``; record formats in the mining contract), groups the failures into
+clusters with :func:`dv2s_gym.mining.cluster.cluster_failures` and returns a JSON-safe
+dict; :func:`write_reports` writes it as ``report.json`` (atomic), ``report.md`` and the
+self-contained ``report.html`` (:mod:`dv2s_gym.mining.html`). Nothing here imports Scenic
+or highway-env, so a report is rebuilt in well under a second from any run folder, also
+from one whose run was killed (a truncated last line of a ``.jsonl`` file is left out).
+
+JSON schema ``dv2s-mine-report``, version 1 (:data:`SCHEMA_VERSION`; a change to any key bumps it)::
+
+    {
+      "schema": "dv2s-mine-report", "schema_version": 1, "created": ISO-8601 (UTC), "dv2s_version",
+      "run_dir": the run folder, "settings": settings.json as written by the miner,
+      "counts": {
+        "episodes": finished episodes without an error, "errors": episodes that ended in an error,
+        "failures": episodes with a failure, "failures_by_type": {type: n},
+        "avoidable": failures the reference driver avoided in the same scene (they count against the policy),
+        "unavoidable": failures the reference driver had too, "avoidability_unknown": no reference outcome,
+        "clusters": distinct clusters, "avoidable_clusters": clusters with an avoidable failure,
+        "unavoidable_clusters": clusters whose failures are all unavoidable,
+        "converted": conversion records (one per converted cluster representative),
+        "kept", "merged", "rejected": by conversion status, "rejected_by_stage": {stage: n},
+        "conversion_seconds": {"n", "median", "max", "total"},
+        "conversion_stage_seconds": {stage: median seconds} (from the conversions' ``timings``)},
+      "samplers": {name: Sampler},
+      "scenarios": {name: Scenario},
+      "clusters": [Cluster]               clusters with at least one failure not known to be unavoidable,
+      "unavoidable_clusters": [Cluster]   clusters whose failures the reference driver had too,
+      "failures": [Failure]               failures not known to be unavoidable (avoidable or unknown),
+      "unavoidable": [Failure]            unavoidable failures, with the reference driver's outcome,
+      "rejected": [{"cluster", "index", "stage", "reason"}],
+      "errors": [{"index", "sampler", "scenario", "seed", "error"}],
+      "skipped_lines": {file: n}          truncated last lines left out (a run killed mid-write)
+    }
+
+``Sampler``: ``{"episodes", "errors", "failures", "avoidable_failures",
+"failures_per_100" and "avoidable_failures_per_100": {"value", "low", "high", "count", "n"}``
+(per 100 episodes, Wilson 95 % interval), ``"clusters", "avoidable_clusters",
+"clusters_per_100", "avoidable_clusters_per_100", "episodes_to_first_failure",
+"discovery": [[episodes, distinct clusters], ...]}`` (a point where each new cluster was
+found, and the last episode). An adaptive sampler's episodes are not independent draws,
+so its interval is a guide, not an exact guarantee.
+
+``Scenario``: ``{"episodes", "errors", "failures", "avoidable", "unavoidable", "unknown",
+"failure_rate": {"value", "low", "high", "count"} (Wilson 95 %), "failures_by_type",
+"clusters", "avoidable_clusters", "converted", "kept"}``.
+
+``Cluster``: ``{"id", "scenario", "type", "kind", "region", "size", "avoidable", "unavoidable",
+"unknown", "samplers": {name: n}, "first_index", "params": {name: {"min", "max"} |
+{"values"}}`` (the parameter region its failures cover), ``"cell": {name: {"low", "high"}}``
+(the bounds of its grid cell for the continuous parameters, from ``settings["space"]``), ``"collision_types", "with_kinds",
+"representative": Failure, "video": path relative to the run folder | null, "status":
+"kept" | "merged" | "rejected" | "not converted", "reason", "bank_entry", "merged_into",
+"reproduction": the conversion's record | null, "reproduction_rate", "e2e_sc", "description",
+"script", "conversion": the conversion record | null}``. A conversion belongs to the cluster
+of its representative episode (``index``); its own ``cluster`` id is kept in the record.
+
+``Failure``: ``{"index", "sampler", "scenario", "seed", "params", "type", "kind" (the type refined by the
+collision type, e.g. ``collision:rear_end``), "time", "with",
+"with_kind", "collision_type", "min_ttc", "rho", "avoidable", "reference", "cluster",
+"trace"}``; replay one exactly with ``dv2s replay RUN/TRACE``.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import math
+import os
+import statistics
+from collections import Counter
+from pathlib import Path
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+
+from dv2s_gym.regress.stats import wilson_interval
+from dv2s_gym.mining.errors import MiningError
+from scenario_bank.atomic import atomic_write_json, atomic_write_text
+
+__all__ = [
+    "SCHEMA", "SCHEMA_VERSION", "FAILURE_ORDER", "MiningReportError", "read_jsonl", "read_run",
+    "build_report", "build_report_from_records", "format_summary", "markdown", "write_reports",
+]
+
+SCHEMA = "dv2s-mine-report"
+SCHEMA_VERSION = 1
+CONFIDENCE = 0.95
+FAILURE_ORDER = ("collision", "off_road", "low_ttc", "stall")
+"""Failure types in the order the report lists them (other types follow, sorted)."""
+STATUS_ORDER = ("kept", "merged", "rejected")
+NOT_CONVERTED = "not converted"
+
+PathLike = Union[str, os.PathLike]
+
+
+class MiningReportError(MiningError):
+    """A run folder that cannot be reported on (missing, not a mining run, unreadable records)."""
+
+
+# --------------------------------------------------------------------------------- reading
+def read_jsonl(path: PathLike) -> Tuple[List[Dict[str, Any]], int]:
+    """The JSON objects of a ``.jsonl`` file and how many truncated last lines were left out.
+
+    A missing file holds no records. An unreadable last line (a run killed while appending)
+    is left out and counted; an unreadable line anywhere else raises
+    :class:`MiningReportError` naming the file and line.
+    """
+    path = Path(path)
+    if not path.is_file():
+        return [], 0
+    lines = path.read_text(encoding="utf-8", errors="replace").splitlines()
+    while lines and not lines[-1].strip():
+        lines.pop()
+    records: List[Dict[str, Any]] = []
+    skipped = 0
+    for number, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        try:
+            record = json.loads(line)
+        except ValueError as error:
+            if number == len(lines):
+                skipped += 1
+                continue
+            raise MiningReportError(f"{path}:{number} is not a JSON record ({error}); the file is damaged: "
+                                    "remove that line (its episode is run again on resume) and rebuild the report"
+                                    ) from None
+        if not isinstance(record, dict):
+            raise MiningReportError(f"{path}:{number} is a JSON {type(record).__name__}, not a record object; "
+                                    "remove that line and rebuild the report")
+        records.append(record)
+    return records, skipped
+
+
+def read_run(run_dir: PathLike) -> Tuple[Dict[str, Any], List[Dict[str, Any]], List[Dict[str, Any]], Dict[str, int]]:
+    """``(settings, episodes, conversions, skipped_lines)`` of a run folder.
+
+    Episodes are sorted by index, one per index (the first record of an index wins);
+    conversions keep the last record of each cluster id.
+    """
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise MiningReportError(f"run folder {run_dir} does not exist; give the --out folder of a `dv2s mine` run")
+    settings_path = run_dir / "settings.json"
+    if not settings_path.is_file():
+        raise MiningReportError(f"{run_dir} has no settings.json, so it is not a `dv2s mine` run folder; give the "
+                                "--out folder of a mining run")
+    try:
+        settings = json.loads(settings_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise MiningReportError(f"{settings_path} is not readable JSON ({error}); restore it or start the run "
+                                "again in a new folder") from None
+    if not isinstance(settings, dict):
+        raise MiningReportError(f"{settings_path} holds a JSON {type(settings).__name__}, not the run's settings "
+                                "object; restore it or start the run again in a new folder")
+    episodes, skipped_episodes = read_jsonl(run_dir / "episodes.jsonl")
+    conversions, skipped_conversions = read_jsonl(run_dir / "conversions.jsonl")
+    by_index: Dict[int, Dict[str, Any]] = {}
+    for number, record in enumerate(episodes, 1):
+        try:
+            index = int(record["index"])
+        except (KeyError, TypeError, ValueError):
+            raise MiningReportError(f"{run_dir / 'episodes.jsonl'}: record {number} has no integer 'index'; "
+                                    "remove it and rebuild the report") from None
+        by_index.setdefault(index, record)
+    latest: Dict[str, Dict[str, Any]] = {}
+    for record in conversions:
+        latest[str(record.get("cluster"))] = record
+    skipped = {name: n for name, n in (("episodes.jsonl", skipped_episodes),
+                                       ("conversions.jsonl", skipped_conversions)) if n}
+    return settings, [by_index[i] for i in sorted(by_index)], list(latest.values()), skipped
+
+
+# ------------------------------------------------------------------------------- helpers
+def _clean(value: Any) -> Any:
+    """JSON-safe: non-finite floats become ``None``, tuples lists, keys strings."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, Mapping):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    return value
+
+
+def _per_100(count: int, n: int) -> Dict[str, Any]:
+    """``count`` events in ``n`` episodes as a rate per 100 episodes with its Wilson interval."""
+    if n == 0:
+        return {"value": None, "low": None, "high": None, "count": count, "n": 0}
+    low, high = wilson_interval(count, n, CONFIDENCE)
+    return {"value": 100.0 * count / n, "low": 100.0 * low, "high": 100.0 * high, "count": count, "n": n}
+
+
+def _rate(count: int, n: int) -> Dict[str, Any]:
+    if n == 0:
+        return {"value": None, "low": None, "high": None, "count": count}
+    low, high = wilson_interval(count, n, CONFIDENCE)
+    return {"value": count / n, "low": low, "high": high, "count": count}
+
+
+def _type_order(types: Iterable[str]) -> List[str]:
+    types = set(types)
+    return [t for t in FAILURE_ORDER if t in types] + sorted(t for t in types if t not in FAILURE_ORDER)
+
+
+def _by_type(failures: Sequence[Mapping[str, Any]]) -> Dict[str, int]:
+    counts = Counter(str(f["type"]) for f in failures)
+    return {t: counts[t] for t in _type_order(counts)}
+
+
+def _avoidability(value: Any) -> str:
+    return "avoidable" if value is True else "unavoidable" if value is False else "unknown"
+
+
+def _stage(reason: Any) -> str:
+    """The stage a rejection reason names (``"stage: message"``), or ``"unknown"`` (for records without ``stage``)."""
+    text = str(reason or "").strip()
+    if ":" in text:
+        stage = text.split(":", 1)[0].strip()
+        if stage and len(stage) <= 40:
+            return stage
+    return "unknown"
+
+
+def _param_region(members: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
+    """Per parameter: ``{"min", "max"}`` over the members' numeric values, else ``{"values"}``."""
+    values: Dict[str, List[Any]] = {}
+    for member in members:
+        for name, value in (member.get("params") or {}).items():
+            values.setdefault(str(name), []).append(value)
+    region: Dict[str, Any] = {}
+    for name in sorted(values):
+        numbers = [float(v) for v in values[name] if isinstance(v, (int, float)) and not isinstance(v, bool)
+                   and math.isfinite(float(v))]
+        if len(numbers) == len(values[name]):
+            region[name] = {"min": min(numbers), "max": max(numbers)}
+        else:
+            region[name] = {"values": sorted({json.dumps(v, sort_keys=True, default=str) for v in values[name]})}
+    return region
+
+
+def _grid_cell(region: str, ranges: Any) -> Dict[str, Dict[str, float]]:
+    """The bounds of a cluster's grid cell (``"r2.0.1"``) in parameter units, for its continuous parameters.
+
+    ``ranges`` is the scenario's entry of ``settings["space"]`` (``{name: {"kind", "low", "high"}}``,
+    sorted by name, one cell index per parameter); anything else gives ``{}``.
+    """
+    from dv2s_gym.mining.cluster import REGION_BINS
+
+    if not isinstance(ranges, Mapping) or not region.startswith("r"):
+        return {}
+    try:
+        cells = [int(c) for c in region[1:].split(".")] if len(region) > 1 else []
+    except ValueError:
+        return {}
+    if len(cells) != len(ranges):
+        return {}
+    bounds: Dict[str, Dict[str, float]] = {}
+    for (name, spec), cell in zip(sorted(ranges.items()), cells):
+        if isinstance(spec, Mapping) and spec.get("kind") == "continuous":
+            low, high = float(spec["low"]), float(spec["high"])
+            step = (high - low) / REGION_BINS
+            bounds[str(name)] = {"low": low + cell * step, "high": low + (cell + 1) * step}
+    return bounds
+
+
+def _failure_entry(record: Mapping[str, Any], cluster: Optional[str], settings: Mapping[str, Any]) -> Dict[str, Any]:
+    failure = record.get("failure") or {}
+    return {
+        "index": int(record["index"]),
+        "sampler": str(record.get("sampler") or settings.get("sampler") or "unknown"),
+        "scenario": record.get("scenario"),
+        "seed": record.get("seed"),
+        "params": dict(record.get("params") or {}),
+        "type": str(failure.get("type")),
+        "kind": str(failure.get("kind") or failure.get("type")),
+        "time": failure.get("time"),
+        "with": failure.get("with"),
+        "with_kind": failure.get("with_kind"),
+        "collision_type": failure.get("collision_type"),
+        "min_ttc": failure.get("min_ttc"),
+        "rho": record.get("rho"),
+        "avoidable": record.get("avoidable"),
+        "reference": record.get("reference"),
+        "cluster": cluster,
+        "trace": record.get("trace"),
+    }
+
+
+def _representative(members: Sequence[Dict[str, Any]], conversion: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
+    """The converted episode, else the one the miner would convert: among failures not known to be
+    unavoidable (all, when every one is), the most violated (lowest rho), then the first."""
+    if conversion is not None:
+        for member in members:
+            if member["index"] == conversion.get("index"):
+                return member
+    pool = [m for m in members if m.get("avoidable") is not False] or list(members)
+
+    def key(member: Mapping[str, Any]) -> Tuple[float, int]:
+        rho = member.get("rho")
+        rho = float(rho) if isinstance(rho, (int, float)) and math.isfinite(float(rho)) else 0.0
+        return rho, member["index"]
+
+    return min(pool, key=key)
+
+
+def _cluster_of(records: Sequence[Dict[str, Any]]) -> Dict[int, str]:
+    """Cluster id of every failed episode, from the mining core's clustering."""
+    from dv2s_gym.mining.cluster import cluster_failures
+
+    mapping = cluster_failures(list(records))
+    return {int(index): str(cluster) for index, cluster in dict(mapping).items()}
+
+
+# --------------------------------------------------------------------------------- report
+def build_report(run_dir: PathLike, *, created: Optional[str] = None) -> Dict[str, Any]:
+    """The report dict (schema in the module docstring) of the run folder ``run_dir``.
+
+    Raises :class:`MiningReportError` for a folder that is not a mining run or holds
+    damaged records.
+    """
+    settings, episodes, conversions, skipped = read_run(run_dir)
+    failed = [r for r in episodes if r.get("failure") and not r.get("error")]
+    clusters = _cluster_of(episodes) if failed else {}
+    report = build_report_from_records(settings, episodes, conversions, clusters, created=created)
+    report["run_dir"] = str(run_dir)
+    report["skipped_lines"] = skipped
+    return report
+
+
+def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Mapping[str, Any]],
+                              conversions: Sequence[Mapping[str, Any]], clusters: Mapping[int, str], *,
+                              created: Optional[str] = None) -> Dict[str, Any]:
+    """The report dict from records already read: ``clusters`` maps each failed episode's index to its cluster id.
+
+    Raises :class:`MiningReportError` when a failed episode has no cluster id.
+    """
+    default_sampler = str(settings.get("sampler") or "unknown")
+    episodes = sorted(episodes, key=lambda r: int(r["index"]))
+    ok = [r for r in episodes if not r.get("error")]
+    errors = [{"index": int(r["index"]), "sampler": str(r.get("sampler") or default_sampler),
+               "scenario": r.get("scenario"), "seed": r.get("seed"), "error": str(r["error"])}
+              for r in episodes if r.get("error")]
+    failed = [r for r in ok if r.get("failure")]
+    missing = [int(r["index"]) for r in failed if int(r["index"]) not in clusters]
+    if missing:
+        raise MiningReportError(f"the clustering gave no cluster to failed episode(s) {missing[:10]}; "
+                                "this is a bug in dv2s_gym.mining.cluster.cluster_failures, please report it")
+    failures = [_failure_entry(r, clusters[int(r["index"])], settings) for r in failed]
+
+    # conversions, attached to the cluster of their representative episode
+    by_cluster_conversions: Dict[str, List[Mapping[str, Any]]] = {}
+    for conversion in conversions:
+        index = conversion.get("index")
+        cluster = clusters.get(int(index)) if isinstance(index, int) else None
+        cluster = cluster or str(conversion.get("cluster"))
+        by_cluster_conversions.setdefault(cluster, []).append(conversion)
+    status_rank = {s: i for i, s in enumerate(STATUS_ORDER)}
+
+    def primary(cluster: str) -> Optional[Mapping[str, Any]]:
+        found = by_cluster_conversions.get(cluster) or []
+        return min(found, key=lambda c: status_rank.get(c.get("status"), len(STATUS_ORDER))) if found else None
+
+    members_of: Dict[str, List[Dict[str, Any]]] = {}
+    for failure in failures:
+        members_of.setdefault(failure["cluster"], []).append(failure)
+    cluster_entries: List[Dict[str, Any]] = []
+    for cluster_id, members in members_of.items():
+        conversion = primary(cluster_id)
+        representative = _representative(members, conversion)
+        parts = cluster_id.split("/", 2)
+        reproduction = (conversion or {}).get("reproduction")
+        cluster_entries.append({
+            "id": cluster_id,
+            "scenario": representative["scenario"],
+            "type": representative["type"],
+            "kind": parts[1] if len(parts) == 3 else representative["kind"],
+            "region": parts[2] if len(parts) == 3 else cluster_id,
+            "size": len(members),
+            "avoidable": sum(m["avoidable"] is True for m in members),
+            "unavoidable": sum(m["avoidable"] is False for m in members),
+            "unknown": sum(m["avoidable"] is None for m in members),
+            "samplers": dict(sorted(Counter(m["sampler"] for m in members).items())),
+            "first_index": min(m["index"] for m in members),
+            "params": _param_region(members),
+            "cell": _grid_cell(parts[2] if len(parts) == 3 else "", (settings.get("space") or {}).get(
+                representative["scenario"])),
+            "collision_types": dict(sorted(Counter(str(m["collision_type"]) for m in members
+                                                   if m["collision_type"]).items())),
+            "with_kinds": dict(sorted(Counter(str(m["with_kind"]) for m in members if m["with_kind"]).items())),
+            "representative": representative,
+            "video": (conversion or {}).get("video"),
+            "status": (conversion or {}).get("status") or NOT_CONVERTED,
+            "reason": (conversion or {}).get("reason"),
+            "bank_entry": (conversion or {}).get("bank_entry"),
+            "merged_into": (conversion or {}).get("merged_into"),
+            "reproduction": reproduction,
+            "reproduction_rate": (reproduction or {}).get("rate") if isinstance(reproduction, Mapping) else None,
+            "e2e_sc": (conversion or {}).get("e2e_sc"),
+            "description": (conversion or {}).get("description"),
+            "script": (conversion or {}).get("script"),
+            "conversion": dict(conversion) if conversion is not None else None,
+        })
+    cluster_entries.sort(key=lambda c: (-c["avoidable"], -c["size"], c["first_index"]))
+    unavoidable_ids = {c["id"] for c in cluster_entries if c["unavoidable"] == c["size"]}
+
+    # counts
+    statuses = Counter(str(c.get("status")) for c in conversions)
+    rejected = [{"cluster": c.get("cluster"), "index": c.get("index"), "stage": c.get("stage") or _stage(c.get("reason")),
+                 "reason": c.get("reason")} for c in conversions if c.get("status") == "rejected"]
+    seconds = [float(c["seconds"]) for c in conversions
+               if isinstance(c.get("seconds"), (int, float)) and math.isfinite(float(c["seconds"]))]
+    stage_seconds: Dict[str, List[float]] = {}
+    for conversion in conversions:
+        for stage, value in (conversion.get("timings") or {}).items():
+            if isinstance(value, (int, float)) and math.isfinite(float(value)):
+                stage_seconds.setdefault(str(stage), []).append(float(value))
+    counts = {
+        "episodes": len(ok),
+        "errors": len(errors),
+        "failures": len(failures),
+        "failures_by_type": _by_type(failures),
+        "avoidable": sum(f["avoidable"] is True for f in failures),
+        "unavoidable": sum(f["avoidable"] is False for f in failures),
+        "avoidability_unknown": sum(f["avoidable"] is None for f in failures),
+        "clusters": len(cluster_entries),
+        "avoidable_clusters": sum(c["avoidable"] > 0 for c in cluster_entries),
+        "unavoidable_clusters": len(unavoidable_ids),
+        "converted": len(conversions),
+        "kept": statuses["kept"],
+        "merged": statuses["merged"],
+        "rejected": statuses["rejected"],
+        "rejected_by_stage": dict(sorted(Counter(r["stage"] for r in rejected).items())),
+        "conversion_seconds": {"n": len(seconds), "median": statistics.median(seconds) if seconds else None,
+                               "max": max(seconds) if seconds else None, "total": sum(seconds)},
+        "conversion_stage_seconds": {stage: statistics.median(values) for stage, values in stage_seconds.items()},
+    }
+
+    # per sampler
+    names = sorted({str(r.get("sampler") or default_sampler) for r in episodes} | {default_sampler})
+    samplers: Dict[str, Any] = {}
+    for name in names:
+        mine = [r for r in episodes if str(r.get("sampler") or default_sampler) == name]
+        ran = [r for r in mine if not r.get("error")]
+        found = [f for f in failures if f["sampler"] == name]
+        avoidable = [f for f in found if f["avoidable"] is True]
+        seen: set = set()
+        discovery: List[List[int]] = []
+        first_failure = None
+        for position, record in enumerate(ran, 1):
+            if record.get("failure"):
+                first_failure = first_failure or position
+                cluster = clusters[int(record["index"])]
+                if cluster not in seen:
+                    seen.add(cluster)
+                    discovery.append([position, len(seen)])
+        if ran and (not discovery or discovery[-1][0] != len(ran)):
+            discovery.append([len(ran), len(seen)])
+        n = len(ran)
+        distinct = len({f["cluster"] for f in found})
+        distinct_avoidable = len({f["cluster"] for f in avoidable})
+        samplers[name] = {
+            "episodes": n,
+            "errors": len(mine) - n,
+            "failures": len(found),
+            "avoidable_failures": len(avoidable),
+            "failures_per_100": _per_100(len(found), n),
+            "avoidable_failures_per_100": _per_100(len(avoidable), n),
+            "clusters": distinct,
+            "avoidable_clusters": distinct_avoidable,
+            "clusters_per_100": 100.0 * distinct / n if n else None,
+            "avoidable_clusters_per_100": 100.0 * distinct_avoidable / n if n else None,
+            "episodes_to_first_failure": first_failure,
+            "discovery": discovery,
+        }
+
+    # per scenario
+    scenario_names = list(dict.fromkeys([*(settings.get("scenarios") or []),
+                                         *sorted({str(r.get("scenario")) for r in episodes})]))
+    scenarios: Dict[str, Any] = {}
+    for name in scenario_names:
+        ran = [r for r in ok if str(r.get("scenario")) == name]
+        found = [f for f in failures if str(f["scenario"]) == name]
+        in_clusters = [c for c in cluster_entries if str(c["scenario"]) == name]
+        scenarios[name] = {
+            "episodes": len(ran),
+            "errors": sum(1 for e in errors if str(e["scenario"]) == name),
+            "failures": len(found),
+            "avoidable": sum(f["avoidable"] is True for f in found),
+            "unavoidable": sum(f["avoidable"] is False for f in found),
+            "unknown": sum(f["avoidable"] is None for f in found),
+            "failure_rate": _rate(len(found), len(ran)),
+            "failures_by_type": _by_type(found),
+            "clusters": len(in_clusters),
+            "avoidable_clusters": sum(c["avoidable"] > 0 for c in in_clusters),
+            "converted": sum(c["conversion"] is not None for c in in_clusters),
+            "kept": sum(c["status"] == "kept" for c in in_clusters),
+        }
+
+    report = {
+        "schema": SCHEMA,
+        "schema_version": SCHEMA_VERSION,
+        "created": created or datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "dv2s_version": _dv2s_version(),
+        "run_dir": None,
+        "settings": dict(settings),
+        "counts": counts,
+        "samplers": samplers,
+        "scenarios": scenarios,
+        "clusters": [c for c in cluster_entries if c["id"] not in unavoidable_ids],
+        "unavoidable_clusters": [c for c in cluster_entries if c["id"] in unavoidable_ids],
+        "failures": [f for f in failures if f["avoidable"] is not False],
+        "unavoidable": [f for f in failures if f["avoidable"] is False],
+        "rejected": rejected,
+        "errors": errors,
+        "skipped_lines": {},
+    }
+    return _clean(report)
+
+
+def _dv2s_version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("dv2s-gym")
+    except metadata.PackageNotFoundError:  # pragma: no cover - running from a source tree
+        return "unknown"
+
+
+# ----------------------------------------------------------------------------------- text
+def _num(value: Any, digits: int = 1) -> str:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
+        return "-"
+    return f"{value:.{digits}f}"
+
+
+def _per_100_text(entry: Optional[Mapping[str, Any]]) -> str:
+    if not entry or entry.get("value") is None:
+        return "-"
+    return f"{entry['value']:.1f} [{entry['low']:.1f}, {entry['high']:.1f}]"
+
+
+def _pct(entry: Optional[Mapping[str, Any]]) -> str:
+    if not entry or entry.get("value") is None:
+        return "-"
+    return f"{100 * entry['value']:.1f}% [{100 * entry['low']:.1f}, {100 * entry['high']:.1f}]"
+
+
+def _region_text(params: Mapping[str, Any], limit: int = 4) -> str:
+    parts = []
+    for name, region in list(params.items())[:limit]:
+        if "min" in region:
+            low, high = region["min"], region["max"]
+            parts.append(f"{name} {low:.3g}" if low == high else f"{name} {low:.3g}..{high:.3g}")
+        else:
+            parts.append(f"{name} in {{{', '.join(region['values'][:3])}}}")
+    if len(params) > limit:
+        parts.append(f"+{len(params) - limit} more")
+    return ", ".join(parts) or "-"
+
+
+def _reproduction_text(cluster: Mapping[str, Any]) -> str:
+    reproduction = cluster.get("reproduction")
+    if not isinstance(reproduction, Mapping) or reproduction.get("rate") is None:
+        return "-"
+    text = f"{reproduction['rate']:.2f}"
+    if reproduction.get("k") is not None:
+        text += f" ({reproduction.get('reproduced', '?')}/{reproduction['k']})"
+    interval = reproduction.get("interval")
+    if isinstance(interval, (list, tuple)) and len(interval) == 2 and None not in interval:
+        text += f" [{interval[0]:.2f}, {interval[1]:.2f}]"
+    return text
+
+
+def _cell(value: Any) -> str:
+    """A Markdown table cell: one line, pipes escaped."""
+    return str("-" if value is None else value).replace("\n", " ").replace("|", "\\|")
+
+
+def headline(report: Mapping[str, Any]) -> str:
+    """One line: what was mined and what came of it."""
+    counts, settings = report["counts"], report["settings"]
+    return (f"policy `{settings.get('policy')}`, sampler {settings.get('sampler')}, seed {settings.get('seed')}: "
+            f"{counts['failures']} failure(s) in {counts['episodes']} episode(s) "
+            f"({counts['avoidable']} avoidable, {counts['unavoidable']} unavoidable, "
+            f"{counts['avoidability_unknown']} unknown), {counts['clusters']} distinct cluster(s) "
+            f"({counts['avoidable_clusters']} avoidable); converted {counts['converted']}: kept {counts['kept']}, "
+            f"merged {counts['merged']}, rejected {counts['rejected']}"
+            + (f"; {counts['errors']} error(s)" if counts["errors"] else ""))
+
+
+def format_summary(report: Mapping[str, Any]) -> str:
+    """The plain-text summary ``dv2s mine`` prints: the headline and the per-sampler table."""
+    rows = [("sampler", "episodes", "failures", "per 100 [95% CI]", "avoidable per 100", "clusters",
+             "clusters per 100")]
+    for name, entry in report["samplers"].items():
+        rows.append((name, str(entry["episodes"]), str(entry["failures"]), _per_100_text(entry["failures_per_100"]),
+                     _per_100_text(entry["avoidable_failures_per_100"]), str(entry["clusters"]),
+                     _num(entry["clusters_per_100"])))
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    lines = [headline(report).replace("`", "")]
+    lines += ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
+    if report["rejected"]:
+        lines.append("rejected: " + "; ".join(f"{r['cluster']} ({r['reason']})" for r in report["rejected"][:3])
+                     + (" ..." if len(report["rejected"]) > 3 else ""))
+    return "\n".join(lines)
+
+
+def _cluster_rows(clusters: Sequence[Mapping[str, Any]]) -> List[str]:
+    lines = ["| cluster | scenario | type | failures | avoidable | parameter region | representative | status | "
+             "bank entry | reproduction | E2E-SC |",
+             "|---|---|---|---:|---:|---|---|---|---|---|---:|"]
+    for c in clusters:
+        rep = c["representative"]
+        status = c["status"] + (f" into `{c['merged_into']}`" if c.get("merged_into") else "")
+        video = f" [video]({c['video']})" if c.get("video") else ""
+        lines.append(f"| `{_cell(c['id'])}` | `{_cell(c['scenario'])}` | {_cell(c['type'])} | {c['size']} | "
+                     f"{c['avoidable']} | {_cell(_region_text(c['params']))} | #{rep['index']} seed {rep['seed']}"
+                     f"{video} | {_cell(status)} | {_cell(c.get('bank_entry'))} | {_reproduction_text(c)} | "
+                     f"{_num(c.get('e2e_sc'), 3)} |")
+    return lines
+
+
+def markdown(report: Mapping[str, Any]) -> str:
+    """The report as Markdown: summary, per sampler, per scenario, clusters, conversions, unavoidable, errors."""
+    counts = report["counts"]
+    lines = [f"## dv2s mine: {counts['avoidable_clusters']} avoidable failure cluster(s)", "", headline(report), ""]
+    lines += ["| failures | avoidable | unavoidable | unknown | clusters | avoidable clusters | converted | kept | "
+              "merged | rejected | errors |", "|" + "---:|" * 11,
+              f"| {counts['failures']} | {counts['avoidable']} | {counts['unavoidable']} | "
+              f"{counts['avoidability_unknown']} | {counts['clusters']} | {counts['avoidable_clusters']} | "
+              f"{counts['converted']} | {counts['kept']} | {counts['merged']} | {counts['rejected']} | "
+              f"{counts['errors']} |", ""]
+    if counts["failures_by_type"]:
+        lines += ["Failures by type: " + ", ".join(f"{t} {n}" for t, n in counts["failures_by_type"].items()), ""]
+    seconds = counts["conversion_seconds"]
+    if seconds["n"]:
+        stages = counts.get("conversion_stage_seconds") or {}
+        lines += [f"Conversion time: median {seconds['median']:.2f} s, max {seconds['max']:.2f} s over "
+                  f"{seconds['n']} conversion(s)" + ("; median per stage: " + ", ".join(
+                      f"{stage} {value:.2f} s" for stage, value in stages.items()) if stages else "") + ".", ""]
+    lines += ["### Per sampler", "",
+              "Failures per 100 episodes with Wilson 95% intervals (an adaptive sampler's episodes are not "
+              "independent, so the interval is a guide).", "",
+              "| sampler | episodes | failures | failures per 100 | avoidable per 100 | clusters | clusters per 100 | "
+              "avoidable clusters | first failure at episode |",
+              "|---|---:|---:|---|---|---:|---:|---:|---:|"]
+    for name, s in report["samplers"].items():
+        lines.append(f"| {_cell(name)} | {s['episodes']} | {s['failures']} | {_per_100_text(s['failures_per_100'])} | "
+                     f"{_per_100_text(s['avoidable_failures_per_100'])} | {s['clusters']} | "
+                     f"{_num(s['clusters_per_100'])} | {s['avoidable_clusters']} | "
+                     f"{_cell(s['episodes_to_first_failure'])} |")
+    lines += ["", "### Per scenario", "",
+              "| scenario | episodes | failures | failure rate [95% CI] | avoidable | unavoidable | clusters | "
+              "converted | kept |", "|---|---:|---:|---|---:|---:|---:|---:|---:|"]
+    for name, s in report["scenarios"].items():
+        lines.append(f"| `{_cell(name)}` | {s['episodes']} | {s['failures']} | {_pct(s['failure_rate'])} | "
+                     f"{s['avoidable']} | {s['unavoidable']} | {s['clusters']} | {s['converted']} | {s['kept']} |")
+    lines += ["", f"### Failure clusters ({len(report['clusters'])})", ""]
+    lines += _cluster_rows(report["clusters"]) if report["clusters"] else ["None."]
+    converted = [c for c in report["clusters"] + report["unavoidable_clusters"] if c.get("conversion")]
+    described = sorted((c for c in converted if c["status"] in ("kept", "merged")), key=lambda c: c["status"] != "kept")
+    if described:
+        lines += ["", "### Converted failures", ""]
+        for c in described:
+            where = f"bank entry `{c['bank_entry']}`" if c.get("bank_entry") else (
+                f"merged into `{c['merged_into']}`" if c.get("merged_into") else c["status"])
+            lines.append(f"- `{_cell(c['id'])}` ({where}; reproduction {_reproduction_text(c)}; "
+                         f"E2E-SC {_num(c.get('e2e_sc'), 3)}): video {c.get('video') or '-'}, script "
+                         f"{c.get('script') or '-'}")
+            if c.get("description"):
+                lines.append(f"  > {_cell(c['description'])}")
+    if report["rejected"]:
+        lines += ["", f"### Rejected conversions ({len(report['rejected'])})", "",
+                  "By stage: " + ", ".join(f"{s} {n}" for s, n in counts["rejected_by_stage"].items()), "",
+                  "| cluster | episode | stage | reason |", "|---|---:|---|---|"]
+        lines += [f"| `{_cell(r['cluster'])}` | {_cell(r['index'])} | {_cell(r['stage'])} | {_cell(r['reason'])} |"
+                  for r in report["rejected"]]
+    lines += ["", f"### Unavoidable failures ({len(report['unavoidable'])})", "",
+              "The reference driver failed in the same scene too; these do not count against the policy."]
+    if report["unavoidable_clusters"]:
+        lines += [""] + _cluster_rows(report["unavoidable_clusters"])
+    if report["unavoidable"]:
+        lines += [""] + [f"- #{f['index']} `{_cell(f['scenario'])}` seed {f['seed']}: {f['type']} "
+                         f"(reference: {_cell(((f.get('reference') or {}).get('failure') or {}).get('type'))}); "
+                         f"cluster `{_cell(f['cluster'])}`" for f in report["unavoidable"][:50]]
+        if len(report["unavoidable"]) > 50:
+            lines.append(f"- ... and {len(report['unavoidable']) - 50} more (see report.json)")
+    if report["failures"]:
+        example = next((f for f in report["failures"] if f.get("trace")), None)
+        if example:
+            lines += ["", f"Replay a failure exactly from its trace: `dv2s replay {report.get('run_dir') or '.'}/"
+                          f"{example['trace']} --video failure.webm`."]
+    if report["errors"]:
+        lines += ["", f"### Errors ({len(report['errors'])})", ""]
+        lines += [f"- #{e['index']} `{_cell(e['scenario'])}` seed {e['seed']}: {_cell(e['error'].splitlines()[0] if e['error'] else '')}"
+                  for e in report["errors"][:20]]
+        if len(report["errors"]) > 20:
+            lines.append(f"- ... and {len(report['errors']) - 20} more (see report.json)")
+    if report.get("skipped_lines"):
+        lines += ["", "Left out (truncated last lines of a killed run): "
+                  + ", ".join(f"{name} {n}" for name, n in report["skipped_lines"].items())]
+    lines.append("")
+    return "\n".join(lines)
+
+
+def write_reports(run_dir: PathLike, report: Optional[Mapping[str, Any]] = None, *, embed_videos: bool = True
+                  ) -> Dict[str, Path]:
+    """Write ``report.json`` (atomic), ``report.md`` and ``report.html`` into the run folder.
+
+    Args:
+        run_dir: the run folder (``--out`` of ``dv2s mine``).
+        report: a report already built from it (default: :func:`build_report`).
+        embed_videos: embed the failure videos in the HTML page (else it links them relatively).
+
+    Returns:
+        ``{"json": path, "markdown": path, "html": path}``.
+    """
+    from dv2s_gym.mining.html import write_html
+
+    run_dir = Path(run_dir)
+    report = dict(report) if report is not None else build_report(run_dir)
+    return {"json": atomic_write_json(run_dir / "report.json", report),
+            "markdown": atomic_write_text(run_dir / "report.md", markdown(report)),
+            "html": write_html(report, run_dir / "report.html", base=run_dir, embed_videos=embed_videos)}

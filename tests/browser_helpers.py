@@ -1,0 +1,36 @@
+"""Loading a self-contained HTML report in headless Chromium and reading what its self-check found."""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import pytest
+
+INSTALL_HINT = ("Chromium is needed for the HTML report's browser test: run scripts/setup.sh as root, or "
+                "`sudo apt-get update && sudo apt-get install -y --no-install-recommends chromium`")
+
+
+def chromium() -> str:
+    """Path of a Chromium binary; fails the test (never skips) with the install command when there is none."""
+    for name in ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable"):
+        found = shutil.which(name)
+        if found:
+            return found
+    pytest.fail(INSTALL_HINT, pytrace=False)
+
+
+def body_attributes(page: Path, fragment: str = "#selftest") -> dict:
+    """Load ``page`` in headless Chromium, let it run 8 s of virtual time, and read <body>'s data- attributes."""
+    with tempfile.TemporaryDirectory(prefix="dv2s-chromium-") as profile:
+        out = subprocess.run(
+            [chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", f"--user-data-dir={profile}",
+             "--autoplay-policy=no-user-gesture-required", "--virtual-time-budget=8000", "--dump-dom",
+             page.resolve().as_uri() + fragment],
+            capture_output=True, text=True, timeout=180)
+    match = re.search(r"<body([^>]*)>", out.stdout)
+    assert match, f"Chromium dumped no page (exit {out.returncode}): {out.stderr[-2000:]}"
+    return dict(re.findall(r'(data-[\w-]+)="([^"]*)"', match.group(1)))

@@ -1,0 +1,61 @@
+"""A stand-in for the miner in loop tests: 'mines' by copying shipped scenarios into the bank as mined entries.
+
+Each call writes a mining run folder in the miner's layout (``episodes.jsonl``,
+``conversions.jsonl``) and adds one bank entry per fake cluster: a shipped script with a
+comment line appended (a new content hash), provenance kind ``mined``. Resumable like the
+real miner: a folder that already holds ``conversions.jsonl`` is left alone.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Dict, List, Sequence
+
+from scenario_bank.atomic import atomic_write_json, atomic_write_text
+from scenario_bank.bank import Bank, content_hash
+
+
+def add_mined_copy(bank_dir: str, source: str, name: str, cluster: str) -> str:
+    """Copy shipped scenario ``source`` into ``bank_dir`` as entry ``name`` (kind ``mined``)."""
+    entry = Bank().get(source)
+    script = entry.script + f"\n# mined copy for cluster {cluster}\n"
+    meta = json.loads(json.dumps(entry.meta))
+    meta.update(name=name, content_hash=content_hash(script))
+    meta["source"] = {**meta["source"], "kind": "mined", "parent": source, "seed": 0}
+    folder = Path(bank_dir) / name
+    folder.mkdir(parents=True)
+    atomic_write_text(folder / "scenario.scenic", script)
+    atomic_write_json(folder / "meta.json", meta)
+    return name
+
+
+class FakeMiner:
+    """Callable with :func:`dv2s_gym.mining.miner.mine`'s signature; ``calls`` counts real work done."""
+
+    def __init__(self, sources: Sequence[str], failures_per_round: int = 6) -> None:
+        self.sources = list(sources)
+        self.failures = failures_per_round
+        self.calls: List[Dict[str, Any]] = []
+
+    def __call__(self, policy: str, *, out: str, budget: int, bank_dir: str, seed: int = 0, **options: Any):
+        out_path = Path(out)
+        if (out_path / "conversions.jsonl").is_file():
+            return None
+        self.calls.append({"policy": policy, "out": out, "budget": budget, "seed": seed, **options})
+        out_path.mkdir(parents=True, exist_ok=True)
+        episodes, conversions = [], []
+        for index in range(budget):
+            source = self.sources[index % len(self.sources)]
+            failed = index < self.failures
+            episodes.append({"index": index, "scenario": source, "seed": 1000 + index, "params": {},
+                             "failure": {"type": "collision"} if failed else None,
+                             "avoidable": True if failed else None, "error": None})
+            if failed:
+                cluster = f"{source}/collision/r{index}"
+                name = add_mined_copy(bank_dir, source, f"mined_s{seed}_{index}", cluster)
+                conversions.append({"cluster": cluster, "index": index, "status": "kept", "reason": None,
+                                    "bank_entry": name, "reproduction": {"rate": 0.5}})
+        (out_path / "episodes.jsonl").write_text("".join(json.dumps(e) + "\n" for e in episodes))
+        (out_path / "conversions.jsonl").write_text("".join(json.dumps(c) + "\n" for c in conversions))
+        return None

@@ -1,0 +1,226 @@
+"""From a mined failure to a bank entry: the failure video, the conversion, its rejections and merges.
+
+Failure records come from the miner's worker (an episode of the ``keep_lane`` policy, which drives at
+constant speed and runs into what stands in its lane, on a scene with fixed Scenic parameters).
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from dv2s_gym.mining.convert import convert_failure, reproduction_seeds, same_failure_class
+from dv2s_gym.mining.failure_video import FailureReplayError, record_failure_video, write_failure_video
+from dv2s_gym.pipeline.video import read_video
+from envs.trace import EpisodeTrace
+from policies.evaluation import trajectory_hash
+from scenario_bank.bank import Bank
+
+SCENARIO = "urban_lead_vehicle_stopped"
+
+
+
+
+def midpoint(scenario: str) -> dict:
+    """The centre of a scenario's mined parameter space (the miner's scene features)."""
+    from dv2s_gym.mining.space import SceneSpace
+
+    return {name: r.from_unit(0.5) for name, r in SceneSpace([scenario]).param_ranges(scenario).items()}
+
+
+def make_record(scenario: str, seed: int, params: dict, policy: str = "keep_lane", index: int = 0) -> dict:
+    """The miner's episode record of one scene (its worker runs the episode and the failure monitors)."""
+    from dv2s_gym.mining.worker import run_mine_task
+
+    record = run_mine_task({"kind": "mine", "role": "mine", "index": index, "policy": policy, "reference": None,
+                            "scenario": scenario, "seed": seed, "params": params, "env_config": {},
+                            "bank_dir": None, "trace_dir": None, "ttc_threshold": 1.0, "stall_seconds": 5.0})
+    assert record["error"] is None and record["failure"]["type"] == "collision", record
+    return record
+
+
+@pytest.fixture(scope="module")
+def record() -> dict:
+    return make_record(SCENARIO, 0, midpoint(SCENARIO))
+
+
+def _red_pixels(frame: np.ndarray) -> int:
+    """Pixels of the red highway-env paints crashed vehicles with (tolerant of VP8's colour shifts)."""
+    r, g, b = (frame[..., i].astype(int) for i in range(3))
+    return int(((r > 160) & (g < 90) & (b < 90)).sum())
+
+
+def test_failure_video_holds_the_window_before_and_through_the_failure(record, tmp_path):
+    written = write_failure_video(record, tmp_path / "failure.webm", policy="keep_lane", before=2.0, after=1.0)
+    fps = 5  # the env's default policy frequency
+    k = record["failure"]["step"]
+    assert abs(k / fps - record["failure"]["time"]) <= 0.5 / fps
+    assert (written.first, written.failure_frame, written.last) == (k - 2 * fps, k, k + fps)
+    # the episode ended at the collision: the last second was driven past its end
+    assert written.last > record["result"]["steps"]
+    clip = read_video(written.path, fps=None, max_frames=1000, max_pixels=10**7)
+    assert len(clip.frames) == written.frames == 3 * fps + 1
+    assert clip.frames[0].shape[:2] == (480, 480)
+    # nothing crashed in the first frame; the crash (vehicles painted red) shows from the failure on
+    assert _red_pixels(clip.frames[0]) == 0
+    assert _red_pixels(clip.frames[-1]) > 20
+    # the saved trace is the recorded episode (not the extra steps) and replays to the record's hash
+    trace = EpisodeTrace.load(tmp_path / "trace.json.gz")
+    assert len(trace.actions) == record["result"]["steps"]
+    assert trajectory_hash(trace) == record["result"]["trajectory_hash"]
+
+
+def test_failure_video_from_a_saved_trace_replays_its_actions(record, tmp_path):
+    write_failure_video(record, tmp_path / "a.webm", policy="keep_lane", before=1.0, after=0.0)
+    out = record_failure_video(tmp_path / "trace.json.gz", tmp_path / "b.webm", before=1.0, after=0.0,
+                               trace_path=tmp_path / "b.json.gz")
+    a = read_video(tmp_path / "a.webm", fps=None, max_frames=1000, max_pixels=10**7).frames
+    b = read_video(out, fps=None, max_frames=1000, max_pixels=10**7).frames
+    assert len(a) == len(b) == 6
+    assert np.array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_a_diverging_replay_raises(record, tmp_path):
+    with pytest.raises(FailureReplayError, match="diverged"):
+        record_failure_video(record, tmp_path / "x.webm", policy="idm")  # not the policy that failed
+    tampered = {**record, "result": {**record["result"], "trajectory_hash": "0" * 64}}
+    with pytest.raises(FailureReplayError, match="diverged.*recorded 000000000000"):
+        record_failure_video(tampered, tmp_path / "x.webm", policy="keep_lane")
+    assert not (tmp_path / "x.webm").exists()
+    with pytest.raises(FailureReplayError, match="lacks result.trajectory_hash"):
+        record_failure_video({"scenario": SCENARIO, "seed": 0}, tmp_path / "x.webm", policy="keep_lane")
+
+
+def test_failure_class_rule():
+    rear = {"type": "collision", "with_kind": "car", "collision_type": "rear_end"}
+    assert same_failure_class(rear, {"type": "collision", "with_kind": "car", "collision_type": "rear_end"})
+    assert same_failure_class(rear, {"type": "collision", "with_kind": "car", "collision_type": None})
+    assert not same_failure_class(rear, {"type": "collision", "with_kind": "car", "collision_type": "side"})
+    assert not same_failure_class(rear, {"type": "collision", "with_kind": "pedestrian", "collision_type": "rear_end"})
+    assert not same_failure_class(rear, {"type": "off_road"})
+    assert not same_failure_class(rear, None)
+    assert same_failure_class({"type": "stall"}, {"type": "stall", "time": 3.0})
+    assert reproduction_seeds(7, 5) == reproduction_seeds(7, 5) != reproduction_seeds(8, 5)
+    assert len(set(reproduction_seeds(7, 10))) == 10
+
+
+def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(record, tmp_path):
+    bank = Bank(tmp_path / "bank")
+    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=bank, cluster=f"{SCENARIO}/collision/0")
+    assert out["status"] == "kept", out["reason"]
+    assert out["reason"] is None and out["merged_into"] is None
+    repro = out["reproduction"]
+    assert repro["k"] == 10 and repro["rate"] == repro["reproduced"] / 10 >= 0.3
+    assert repro["interval"][0] <= repro["rate"] <= repro["interval"][1]
+    assert 0.0 <= out["e2e_sc"] <= 1.0
+    folder = tmp_path / "run" / "failures" / f"{SCENARIO}__collision__0"
+    assert out["video"] == f"failures/{SCENARIO}__collision__0/failure.webm" and (folder / "failure.webm").is_file()
+    for name in ("trace.json.gz", "conversion/description.txt", "conversion/elements.json",
+                 "conversion/scenario.scenic", "conversion/report.json"):
+        assert (folder / name).is_file(), name
+    report = json.loads((folder / "conversion" / "report.json").read_text())
+    assert report["status"] == "kept" and len(report["reproduction_episodes"]) == 10
+    assert set(out["timings"]) == {"video", "describe", "generate", "check", "reproduction", "e2e_sc", "bank"}
+
+    fresh = Bank(tmp_path / "bank")  # as another process sees it
+    assert fresh.names() == [out["bank_entry"]] and not fresh.problems
+    entry = fresh.get(out["bank_entry"])
+    source = entry.source
+    assert source["kind"] == "mined" and source["parent"] == SCENARIO and source["seed"] == 0
+    assert source["params"] == record["result"]["params"] and source["params"]["ego_speed"] == record["params"]["ego_speed"]
+    assert source["video"].endswith("failure.webm") and source["policy"] == "keep_lane"
+    assert source["backends"] == {"dra": "bev", "sg": "rules"}
+    assert source["reproduction"] == repro and source["e2e_sc"] == out["e2e_sc"]
+    assert source["failure"] == record["failure"] and source["failure"]["collision_type"] == "rear_end"
+    assert source["cluster"] == f"{SCENARIO}/collision/0"
+    assert entry.description == out["description"] and "mined" in entry.tags
+    assert entry.script == (folder / "conversion" / "scenario.scenic").read_text()
+
+    again = convert_failure({**record, "index": 5}, tmp_path / "run2", policy="keep_lane", bank=bank)
+    assert again["status"] == "merged" and again["merged_into"] == out["bank_entry"], again["reason"]
+    merged = Bank(tmp_path / "bank").get(out["bank_entry"]).source["merged"]
+    assert len(merged) == 1 and merged[0]["index"] == 5 and merged[0]["parent"] == SCENARIO
+    assert Bank(tmp_path / "bank").names() == [out["bank_entry"]]
+
+
+def test_a_reproduction_rate_below_the_threshold_is_rejected(record, tmp_path):
+    # the collision was with a car; as a collision with a truck, the new scenario never reproduces it
+    truck = {**record, "failure": {**record["failure"], "with_kind": "truck"}}
+    out = convert_failure(truck, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    assert out["status"] == "rejected" and out["stage"] == "reproduction"
+    assert out["reproduction"]["reproduced"] == 0 and out["reproduction"]["rate"] == 0.0
+    assert out["reason"].startswith("reproduction: ") and "0 of 10" in out["reason"]
+    assert out["e2e_sc"] is not None  # measured either way
+    assert len(Bank(tmp_path / "bank")) == 0
+
+
+def _patch_generator(monkeypatch, script: str) -> None:
+    from dv2s_gym.pipeline import stages
+
+    monkeypatch.setattr(stages, "generate", lambda *a, **k: stages.Generation(script, "rules"))
+
+
+def test_an_unsafe_script_is_rejected_at_the_check(record, tmp_path, monkeypatch):
+    _patch_generator(monkeypatch, "param map = 'highway_straight'\nmodel scenic.domains.driving.model\n"
+                                  "import os\nego = new Car\n")
+    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    assert out["status"] == "rejected" and out["stage"] == "check"
+    assert out["reason"].startswith("check: safety failed") and "import" in out["reason"]
+    assert out["reproduction"] is None and out["bank_entry"] is None
+    assert len(Bank(tmp_path / "bank")) == 0
+
+
+@pytest.mark.slow
+def test_a_script_failing_in_the_sandbox_is_rejected_with_its_stage(record, tmp_path, monkeypatch):
+    _patch_generator(monkeypatch, "param map = 'highway_straight'\nmodel scenic.domains.driving.model\n"
+                                  "ego = new Car with behavior NoSuchBehavior()\n")
+    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    assert out["status"] == "rejected" and out["stage"] == "check", out
+    assert "sandboxed check" in out["reason"] and "NoSuchBehavior" in out["reason"]
+    assert len(Bank(tmp_path / "bank")) == 0
+
+
+def test_a_record_without_a_failure_is_rejected_not_raised(record, tmp_path):
+    out = convert_failure({**record, "failure": None}, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    assert out["status"] == "rejected" and out["stage"] == "input"
+    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank", k=0)
+    assert out["status"] == "rejected" and out["stage"] == "input" and "k >= 1" in out["reason"]
+    out = convert_failure({**record, "seed": 1}, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    assert out["status"] == "rejected" and out["stage"] == "video" and "diverged" in out["reason"]
+    out = convert_failure({**record, "params": {"no_such_param": 1}}, tmp_path / "run", policy="keep_lane",
+                          bank=tmp_path / "bank")
+    assert out["status"] == "rejected" and out["stage"] == "video"
+
+
+def test_a_minimal_failure_record_is_completed_from_the_monitors(record, tmp_path):
+    minimal = {**record, "failure": {"type": "collision", "time": record["failure"]["time"]}}
+    out = convert_failure(minimal, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    assert out["status"] == "kept", out["reason"]
+    failure = Bank(tmp_path / "bank").get(out["bank_entry"]).source["failure"]
+    assert failure["with_kind"] == "car" and failure["collision_type"] == "rear_end"
+
+
+CONTRACT_KEYS = {"cluster", "index", "status", "reason", "video", "description", "script", "reproduction", "e2e_sc",
+                 "bank_entry", "merged_into", "seconds"}
+
+
+@pytest.mark.slow
+def test_the_miner_converts_a_cluster_into_the_bank(tmp_path):
+    from dv2s_gym.mining.miner import mine
+
+    run = mine("keep_lane", out=tmp_path / "run", budget=4, sampler="random", scenarios=[SCENARIO],
+               bank_dir=str(tmp_path / "bank"), workers=1, reference=None, progress=False, convert=True,
+               max_conversions=1, reports=False)
+    rows = [json.loads(line) for line in (tmp_path / "run" / "conversions.jsonl").read_text().splitlines()]
+    assert len(rows) == 1 and rows[0] == run.conversions[0]
+    row = rows[0]
+    assert CONTRACT_KEYS <= set(row) and row["status"] == "kept", row
+    assert (tmp_path / "run" / row["video"]).is_file() and (tmp_path / "run" / row["script"]).is_file()
+    entry = Bank(tmp_path / "bank").get(row["bank_entry"])
+    assert entry.source["cluster"] == row["cluster"] and entry.source["index"] == row["index"]
+    assert entry.source["run"] == str((tmp_path / "run").resolve())
+    settings = json.loads((tmp_path / "run" / "settings.json").read_text())
+    report = json.loads((tmp_path / "run" / row["script"]).with_name("report.json").read_text())
+    assert report["reproduction"] == row["reproduction"] and settings["ttc_threshold"] == 1.0
