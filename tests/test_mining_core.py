@@ -22,6 +22,7 @@ from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.miner import episode_seed, mine, read_records
 from dv2s_gym.mining.monitors import (
     COLLISION_TYPES,
+    DEFAULT_STALL_SECONDS,
     FREE_PATH,
     Failure,
     collision_type,
@@ -209,25 +210,31 @@ def test_detect_failure_reports_the_collision_from_the_trace(expected):
     assert robustness(_result(collided=True), failure) < 0
 
 
+STALL_STEPS = int(math.ceil(DEFAULT_STALL_SECONDS * 5))  # at the traces' 5 Hz
+
+
 def _standing(steps: int, others=None):
     return [{"ego": [0.0, 0.0, 0.0, 0.0], **(others or {})} for _ in range(steps)]
 
 
 def test_stall_needs_a_free_path_ahead():
-    # 3 s at 5 Hz standing with an empty road ahead: a stall from the first standing step
-    failure = detect_failure(_result(), _trace([{"ego": [0.0, 0.0, 0.0, 8.0]}] * 2 + _standing(15)))
+    # stall_seconds at 5 Hz standing with an empty road ahead: a stall from the first standing step
+    failure = detect_failure(_result(), _trace([{"ego": [0.0, 0.0, 0.0, 8.0]}] * 2 + _standing(STALL_STEPS)))
     assert failure is not None and failure.type == "stall" and failure.step == 2
+    long = STALL_STEPS + 5
     # a car stopped 10 m ahead in the lane: waiting behind it is not a stall
-    assert detect_failure(_result(), _trace(_standing(20, {"car": [10.0, 0.5, 0.0, 0.0]}))) is None
+    assert detect_failure(_result(), _trace(_standing(long, {"car": [10.0, 0.5, 0.0, 0.0]}))) is None
     # the same car in the next lane, or beyond the free-path distance, or behind: the path is free
     for where in ([10.0, 3.5, 0.0, 0.0], [FREE_PATH + 5.0, 0.0, 0.0, 0.0], [-8.0, 0.0, 0.0, 0.0]):
-        assert detect_failure(_result(), _trace(_standing(20, {"car": where}))).type == "stall"
+        assert detect_failure(_result(), _trace(_standing(long, {"car": where}))).type == "stall"
     # standing for less than stall_seconds, or moving slowly but above the stall speed: no stall
-    assert detect_failure(_result(), _trace(_standing(14))) is None
-    assert detect_failure(_result(), _trace(_standing(20)), stall_seconds=5.0) is None
-    assert detect_failure(_result(), _trace([{"ego": [0.0, 0.0, 0.0, 1.0]}] * 30)) is None
+    assert detect_failure(_result(), _trace(_standing(STALL_STEPS - 1))) is None
+    assert detect_failure(_result(), _trace(_standing(long)), stall_seconds=DEFAULT_STALL_SECONDS + 2) is None
+    assert detect_failure(_result(), _trace(_standing(long)), stall_seconds=1.0).type == "stall"
+    assert detect_failure(_result(), _trace([{"ego": [0.0, 0.0, 0.0, 1.0]}] * (2 * long))) is None
     # standing split in two short stops does not add up to a stall
-    split = _standing(10) + [{"ego": [0.0, 0.0, 0.0, 5.0]}] + _standing(10)
+    half = STALL_STEPS // 2 + 1
+    split = _standing(half) + [{"ego": [0.0, 0.0, 0.0, 5.0]}] + _standing(half)
     assert detect_failure(_result(), _trace(split)) is None
 
 
@@ -255,12 +262,12 @@ def test_robustness_is_negative_exactly_for_failures():
         (_result(off_road=True), _trace(moving)),
         (_result(min_ttc=0.2, extra={"min_ttc_time": 0.4, "min_ttc_with": "c"}), _trace(moving)),
         (_result(min_ttc=0.999), _trace(moving)),
-        (_result(), _trace(_standing(20))),
+        (_result(), _trace(_standing(STALL_STEPS))),
         (_result(min_ttc=1.0), _trace(moving)),
         (_result(min_ttc=1.001), _trace(moving)),
         (_result(min_ttc=25.0), _trace(moving)),
         (_result(), _trace(moving)),
-        (_result(), _trace(_standing(20, {"car": [10.0, 0.0, 0.0, 0.0]}))),
+        (_result(), _trace(_standing(STALL_STEPS, {"car": [10.0, 0.0, 0.0, 0.0]}))),
         (_result(error="boom"), _trace(moving)),
     ]
     kinds = []
