@@ -3,7 +3,8 @@
     python -m bench.bench_mine                      # both parts, the settings recorded in bench/RESULTS.md
     python -m bench.bench_mine --quick              # a short run of both (budget 40, one seed)
     python -m bench.bench_mine --part samplers --policy dv2s-ppo --budget 200 --seeds 0 1
-    python -m bench.bench_mine --part throughput --budget 160 --repeats 2
+    python -m bench.bench_mine --part throughput --throughput-sampler cross-entropy
+    python -m bench.bench_mine --part samplers --config 'b2:alpha=0.9,buckets=2' --config 'nov:feedback=novelty'
 
 **Samplers** (``--part samplers``): every sampler of :data:`dv2s_gym.mining.samplers.SAMPLERS`
 mines the same policy on the same scenarios (the whole shipped bank by default) with the
@@ -13,7 +14,8 @@ episodes with the Wilson 95 % interval (``dv2s_gym.regress.stats.wilson_interval
 failure clusters per run (``dv2s_gym.mining.cluster``: scenario, failure class, cell of a
 3-bins-per-parameter grid) and how many of them hold a failure the reference driver avoided,
 and the ratio of each sampler's mean distinct clusters to random sampling's (target: the best
-adaptive sampler >= 3x). With ``--reference none`` (the default when the policy under test is
+adaptive sampler >= 3x). Each adaptive sampler runs once per setting (``--config``; default:
+VerifAI's defaults and the two settings of :data:`TUNED_CONFIGS`). With ``--reference none`` (the default when the policy under test is
 the reference driver itself, ``rule``) avoidability is not checked.
 
 **Throughput** (``--part throughput``): the same mining run (same budget, seed, sampler -- default
