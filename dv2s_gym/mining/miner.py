@@ -167,7 +167,12 @@ def _settings(policy: str, sampler: str, sampler_options: Optional[Dict[str, Any
     }
 
 
+_ADDED_DEFAULTS = {"sampler_options": None, "feedback": "robustness"}
+"""Settings added after the first runs were written: a run without them had these values."""
+
+
 def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path) -> None:
+    saved = {**_ADDED_DEFAULTS, **saved}
     different = [k for k in _RESUME_KEYS if saved.get(k) != settings.get(k)]
     if different:
         detail = "; ".join(f"{k}: run has {saved.get(k)!r}, asked {settings.get(k)!r}" for k in different[:3])
