@@ -31,17 +31,19 @@ from typing import Any, Dict, Iterator, List, Optional, Sequence
 
 import numpy as np
 
-from dv2s_gym.mining.cluster import cluster_failures, group
+from dv2s_gym.mining.cluster import cluster_failures, cluster_id, group
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
-from dv2s_gym.mining.samplers import SAMPLERS, SceneSampler, make_sampler
+from dv2s_gym.mining.samplers import SAMPLERS, SceneSampler, is_adaptive, make_sampler, sampler_params
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 
 __all__ = ["MineRun", "mine", "read_records", "episode_seed", "SETTINGS_VERSION"]
 
 SETTINGS_VERSION = 1
-_RESUME_KEYS = ("policy", "sampler", "seed", "batch", "scenarios", "bank_dir", "env_config", "reference",
-                "ttc_threshold", "stall_seconds")
+LOOKAHEAD_CHUNKS = 16
+"""Whole chunks a non-adaptive sampler (random, halton) sends to the workers at once."""
+_RESUME_KEYS = ("policy", "sampler", "sampler_options", "feedback", "seed", "batch", "scenarios", "bank_dir",
+                "env_config", "reference", "ttc_threshold", "stall_seconds")
 
 
 @dataclass
@@ -151,18 +153,26 @@ class _Appender:
         self._handle.close()
 
 
-def _settings(policy: str, sampler: str, seed: int, batch: int, scenarios: List[str], bank_dir: Optional[str],
-              env_config: Dict[str, Any], reference: Optional[str], ttc_threshold: float, stall_seconds: float,
-              budget: int, space_description: Dict[str, Any]) -> Dict[str, Any]:
+def _settings(policy: str, sampler: str, sampler_options: Optional[Dict[str, Any]], feedback: str, seed: int,
+              batch: int, scenarios: List[str], bank_dir: Optional[str], env_config: Dict[str, Any],
+              reference: Optional[str], ttc_threshold: float, stall_seconds: float, budget: int,
+              space_description: Dict[str, Any]) -> Dict[str, Any]:
     return {
-        "schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, "sampler": sampler, "seed": int(seed),
+        "schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, "sampler": sampler,
+        "sampler_options": dict(sampler_options) if sampler_options else None,
+        "feedback": feedback, "seed": int(seed),
         "batch": int(batch), "scenarios": scenarios, "bank_dir": bank_dir, "env_config": env_config,
         "reference": reference, "ttc_threshold": float(ttc_threshold), "stall_seconds": float(stall_seconds),
         "budget": int(budget), "space": space_description,
     }
 
 
+_ADDED_DEFAULTS = {"sampler_options": None, "feedback": "robustness"}
+"""Settings added after the first runs were written: a run without them had these values."""
+
+
 def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path) -> None:
+    saved = {**_ADDED_DEFAULTS, **saved}
     different = [k for k in _RESUME_KEYS if saved.get(k) != settings.get(k)]
     if different:
         detail = "; ".join(f"{k}: run has {saved.get(k)!r}, asked {settings.get(k)!r}" for k in different[:3])
@@ -185,7 +195,9 @@ def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[i
             sampler = None
         if sampler is not None and sampler.fed == complete * batch:
             return sampler
-    sampler = make_sampler(settings["sampler"], space.feature_space, settings["seed"])
+    sampler = make_sampler(settings["sampler"], space.feature_space, settings["seed"],
+                           settings.get("sampler_options") or None)
+    seen: set = set()
     for chunk in range(complete):
         drawn = sampler.draw(batch)
         for offset, (point, info) in enumerate(drawn):
@@ -194,13 +206,29 @@ def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[i
             if spec.scenario != records[index]["scenario"] or spec.params != records[index]["params"]:
                 raise MiningError(f"{out}: episode {index} in episodes.jsonl does not match the sampler's draw "
                                   "(the run was made by another version); pass another --out")
-            sampler.feed(point, info, _rho(records[index]))
+            sampler.feed(point, info, _feedback(records[index], seen, settings.get("feedback", "robustness")))
     return sampler
 
 
-def _rho(record: Dict[str, Any]) -> float:
+FEEDBACKS = ("robustness", "novelty")
+"""What the adaptive samplers are fed: ``robustness`` (each episode's robustness) or ``novelty`` (the same,
+except that a failure in a cluster an earlier episode already found is fed as an easy scene)."""
+_REPEAT = 9.0  # what a repeated failure is fed under "novelty": the robustness of a scene without a near miss
+
+
+def _feedback(record: Dict[str, Any], seen: set, mode: str) -> float:
+    """The value fed to the sampler for ``record``; ``seen`` holds the clusters of the episodes fed before it
+    (in index order) and is updated."""
     rho = record.get("rho")
-    return 1.0 if rho is None or record.get("error") else float(rho)
+    if rho is None or record.get("error"):
+        return 1.0
+    if record.get("failure"):
+        cluster = cluster_id(record)
+        repeat = cluster in seen
+        seen.add(cluster)
+        if repeat and mode == "novelty":
+            return _REPEAT
+    return float(rho)
 
 
 def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cross-entropy",
@@ -210,7 +238,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
          progress: bool = True, env_config: Optional[Dict[str, Any]] = None,
          ttc_threshold: float = DEFAULT_TTC_THRESHOLD, stall_seconds: float = DEFAULT_STALL_SECONDS,
          convert: bool = False, convert_options: Optional[Dict[str, Any]] = None,
-         max_conversions: Optional[int] = None, reports: bool = True) -> MineRun:
+         max_conversions: Optional[int] = None, reports: bool = True,
+         sampler_options: Optional[Dict[str, Any]] = None, feedback: str = "robustness") -> MineRun:
     """Mine ``policy``'s failures over ``budget`` episodes; resumable (same ``out``).
 
     Args:
@@ -219,6 +248,11 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
             and may be given a larger budget).
         budget: episodes to run in total.
         sampler: one of :data:`~dv2s_gym.mining.samplers.SAMPLERS`.
+        sampler_options: VerifAI parameters of an adaptive sampler (``alpha``, ``buckets``,
+            ``thres``; :func:`~dv2s_gym.mining.samplers.sampler_params`); ``None``: VerifAI's defaults.
+        feedback: what the adaptive samplers learn from (:data:`FEEDBACKS`): ``"robustness"`` (every
+            failure pulls the sampler towards its scene) or ``"novelty"`` (only a failure in a cluster not
+            found before does; a repeat is fed as an easy scene, so the sampler keeps looking for new ones).
         scenarios: bank names or ``tag:<tag>`` (``None``: the whole bank).
         bank_dir: the bank folder (``None``: the shipped bank).
         backend, workers, address, timeout: where episodes run (as ``dv2s regress``:
@@ -243,6 +277,9 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         raise MiningError(f"--budget must be at least 1 episode, not {budget}")
     if sampler not in SAMPLERS:
         raise MiningError(f"unknown sampler {sampler!r}: use one of {', '.join(SAMPLERS)}")
+    sampler_params(sampler, sampler_options)  # a bad option fails here, in one line
+    if feedback not in FEEDBACKS:
+        raise MiningError(f"unknown feedback {feedback!r}: use one of {', '.join(FEEDBACKS)}")
     from policies.registry import load_policy
 
     load_policy(policy)  # an unknown spec or broken checkpoint fails here, in one line, before any worker starts
@@ -273,8 +310,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         batch = int(batch) if batch else (saved["batch"] if saved else 4 * n_workers)
         if batch < 1:
             raise MiningError(f"--batch must be at least 1, not {batch}")
-        settings = _settings(policy, sampler, seed, batch, space.scenarios, bank_dir, env_config, reference,
-                             ttc_threshold, stall_seconds, budget, space.describe())
+        settings = _settings(policy, sampler, sampler_options, feedback, seed, batch, space.scenarios, bank_dir,
+                             env_config, reference, ttc_threshold, stall_seconds, budget, space.describe())
         if saved is not None:
             _check_resume(saved, settings, out)
         atomic_write_json(settings_path, settings)
@@ -290,10 +327,19 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         try:
             with pool:
                 chunk = scene_sampler.fed // batch
+                seen = {cluster_id(done[i]) for i in range(scene_sampler.fed)
+                        if done[i].get("failure") and not done[i].get("error")}
+                lookahead = 1 if is_adaptive(sampler) else LOOKAHEAD_CHUNKS
                 while chunk * batch < budget:
-                    drawn = scene_sampler.draw(batch)
-                    indices = range(chunk * batch, chunk * batch + batch)
-                    specs = {i: space.decode(point) for i, (point, _) in zip(indices, drawn)}
+                    # an adaptive sampler draws a chunk only once it has been fed the last one's outcomes;
+                    # a non-adaptive one learns nothing from them, so several whole chunks go to the
+                    # workers at once (the same draws, without idle workers at the end of every chunk)
+                    count = max(1, min(lookahead, budget // batch - chunk))
+                    draws = [scene_sampler.draw(batch) for _ in range(count)]
+                    first = chunk * batch
+                    indices = range(first, first + count * batch)
+                    pairs = [pair for drawn in draws for pair in drawn]
+                    specs = {i: space.decode(point) for i, (point, _) in zip(indices, pairs)}
                     tasks = [_task(i, specs[i], policy, reference, settings, out) for i in indices
                              if i not in done and i < budget]
                     by_id = {t["id"]: t for t in tasks}
@@ -310,10 +356,10 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
 
                     pool.run(tasks, handle)
                     if all(i in done for i in indices):
-                        for i, (point, info) in zip(indices, drawn):
-                            scene_sampler.feed(point, info, _rho(done[i]))
+                        for i, (point, info) in zip(indices, pairs):
+                            scene_sampler.feed(point, info, _feedback(done[i], seen, feedback))
                         atomic_write_bytes(out / "sampler.pkl", scene_sampler.dumps())
-                    chunk += 1
+                    chunk += count
         finally:
             appender.close()
             if bar is not None:

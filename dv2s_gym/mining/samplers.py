@@ -14,19 +14,26 @@ Samplers (``name``: VerifAI's):
   (robustness below 0) occurred (``crossEntropySamplerFor``);
 - ``bandit``: the multi-armed-bandit sampler, which balances that against buckets
   tried less often (``multiArmedBanditSamplerFor``).
+
+The adaptive samplers (``cross-entropy``, ``bandit``) take VerifAI's parameters as
+``options`` (:data:`SAMPLER_OPTIONS`): ``alpha`` (how much one failure moves the
+distribution: each update multiplies it by ``alpha``, VerifAI's default 0.9), ``buckets``
+(buckets per continuous parameter, default 5; 1 leaves the parameters uniform and adapts
+only which scenario is drawn) and ``thres`` (robustness below which an outcome counts
+as a failure, default 0).
 """
 
 from __future__ import annotations
 
 import io
 import random
-from typing import Any, Callable, Dict, List, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
 from dv2s_gym.mining.errors import MiningError
 
-__all__ = ["SAMPLERS", "SceneSampler", "make_sampler"]
+__all__ = ["SAMPLERS", "SAMPLER_OPTIONS", "SceneSampler", "make_sampler", "sampler_params", "is_adaptive"]
 
 
 def _factories() -> Dict[str, Callable]:
@@ -42,6 +49,47 @@ def _factories() -> Dict[str, Callable]:
 
 SAMPLERS = ("random", "halton", "cross-entropy", "bandit")
 """Names :func:`make_sampler` accepts."""
+
+SAMPLER_OPTIONS = {"cross-entropy": ("alpha", "buckets", "thres"), "bandit": ("alpha", "buckets", "thres")}
+"""The options each sampler takes (the others take none)."""
+
+_VERIFAI_KIND = {"cross-entropy": "ce", "bandit": "mab"}
+
+
+def is_adaptive(name: str) -> bool:
+    """True for samplers whose next draws depend on the outcomes fed back (``cross-entropy``, ``bandit``)."""
+    return name in _VERIFAI_KIND
+
+
+def sampler_params(name: str, options: Optional[Dict[str, Any]] = None):
+    """VerifAI's parameter ``DotMap`` for sampler ``name`` with ``options`` applied (``None``: VerifAI's defaults).
+
+    Raises :class:`MiningError` for an option the sampler does not take or a value out of range.
+    """
+    options = dict(options or {})
+    allowed = SAMPLER_OPTIONS.get(name, ())
+    unknown = sorted(set(options) - set(allowed))
+    if unknown:
+        takes = f"it takes {', '.join(allowed)}" if allowed else "it takes none"
+        raise MiningError(f"sampler {name!r} has no option {', '.join(map(repr, unknown))}; {takes}")
+    if name not in _VERIFAI_KIND:
+        return None
+    from verifai.samplers.feature_sampler import default_sampler_params
+
+    params = default_sampler_params(_VERIFAI_KIND[name])
+    if "alpha" in options:
+        alpha = float(options["alpha"])
+        if not 0.0 < alpha < 1.0:
+            raise MiningError(f"sampler option alpha must be between 0 and 1 (exclusive), not {options['alpha']!r}")
+        params.alpha = alpha
+    if "buckets" in options:
+        buckets = options["buckets"]
+        if isinstance(buckets, bool) or not isinstance(buckets, int) or buckets < 1:
+            raise MiningError(f"sampler option buckets must be a whole number >= 1, not {buckets!r}")
+        params.cont.buckets = int(buckets)
+    if "thres" in options:
+        params.thres = float(options["thres"])
+    return params
 
 
 class SceneSampler:
@@ -100,16 +148,20 @@ class SceneSampler:
         return sampler
 
 
-def make_sampler(name: str, feature_space: Any, seed: int) -> SceneSampler:
-    """The sampler called ``name`` (:data:`SAMPLERS`) over ``feature_space``, seeded."""
+def make_sampler(name: str, feature_space: Any, seed: int, options: Optional[Dict[str, Any]] = None) -> SceneSampler:
+    """The sampler called ``name`` (:data:`SAMPLERS`) over ``feature_space``, seeded.
+
+    ``options``: VerifAI parameters of the adaptive samplers (see the module docstring).
+    """
     factories = _factories()
     if name not in factories:
         raise MiningError(f"unknown sampler {name!r}: use one of {', '.join(SAMPLERS)}")
+    params = sampler_params(name, options)
     saved_py, saved_np = random.getstate(), np.random.get_state()
     random.seed(seed)
     np.random.seed(seed % (2**32))
     try:  # some samplers draw while they are built
-        inner = factories[name](feature_space)
+        inner = factories[name](feature_space) if params is None else factories[name](feature_space, params)
     finally:
         random.setstate(saved_py)
         np.random.set_state(saved_np)

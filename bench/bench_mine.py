@@ -1,0 +1,272 @@
+"""Failure mining: how many distinct failures each sampler finds, and how mining scales with workers.
+
+    python -m bench.bench_mine                      # both parts, the settings recorded in bench/RESULTS.md
+    python -m bench.bench_mine --quick              # a short run of both (budget 40, one seed)
+    python -m bench.bench_mine --part samplers --policy dv2s-ppo --budget 200 --seeds 0 1
+    python -m bench.bench_mine --part throughput --throughput-sampler cross-entropy
+    python -m bench.bench_mine --part samplers --config 'b2:alpha=0.9,buckets=2' --config 'nov:feedback=novelty'
+
+**Samplers** (``--part samplers``): every sampler of :data:`dv2s_gym.mining.samplers.SAMPLERS`
+mines the same policy on the same scenarios (the whole shipped bank by default) with the
+same budget, once per run seed (``--seeds``; the seed fixes the sampler's draws and every
+episode's env seed). Printed per sampler, pooled over the seeds: failed episodes per 100
+episodes with the Wilson 95 % interval (``dv2s_gym.regress.stats.wilson_interval``), distinct
+failure clusters per run (``dv2s_gym.mining.cluster``: scenario, failure class, cell of a
+3-bins-per-parameter grid) and how many of them hold a failure the reference driver avoided,
+and the ratio of each sampler's mean distinct clusters to random sampling's (target: the best
+adaptive sampler >= 3x). Each adaptive sampler runs once per setting (``--config``; default:
+VerifAI's defaults and the two settings of :data:`TUNED_CONFIGS`). With ``--reference none`` (the default when the policy under test is
+the reference driver itself, ``rule``) avoidability is not checked.
+
+**Throughput** (``--part throughput``): the same mining run (same budget, seed, sampler -- default
+``random`` -- and batch, 8 unless ``--batch``) with 1 worker and with 2, in alternating rounds so both see
+the same load; episodes per minute end to end (scene space and worker pool start included) and the ratio
+(target >= 1.8x). A non-adaptive sampler also runs with 2 workers one chunk at a time (what the miner did
+before it sent whole chunks ahead, and still does for adaptive samplers): the cost of the idle worker at the
+end of each chunk. An adaptive sampler also runs with 2 workers and a 4x larger batch. The
+machine's parallel capacity (a busy loop in 2 processes against 1, from ``bench.bench_regress``)
+is measured in the same rounds: other processes on a shared machine bound the ratio by it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import tempfile
+import time
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+def _load() -> str:
+    try:
+        return " ".join(f"{x:.2f}" for x in os.getloadavg())
+    except OSError:
+        return "n/a"
+
+
+def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, reference: Optional[str],
+              scenarios: Optional[List[str]], batch: Optional[int], out: str,
+              sampler_options: Optional[Dict[str, Any]] = None, feedback: str = "robustness") -> Dict[str, Any]:
+    """One mining run in a fresh folder; its counts and wall time."""
+    from dv2s_gym.mining.miner import mine
+
+    shutil.rmtree(out, ignore_errors=True)
+    from dv2s_gym.mining.samplers import SAMPLER_OPTIONS
+
+    takes = SAMPLER_OPTIONS.get(sampler, ())
+    options = {k: v for k, v in (sampler_options or {}).items() if k in takes}  # random/halton take none
+    extra: Dict[str, Any] = {"sampler_options": options} if options else {}
+    if feedback != "robustness":
+        extra["feedback"] = feedback
+    start = time.perf_counter()
+    run = mine(policy, out=out, budget=budget, sampler=sampler, seed=seed, workers=workers, reference=reference,
+               scenarios=scenarios, batch=batch, progress=False, reports=False, **extra)
+    seconds = time.perf_counter() - start
+    failures = run.failures
+    avoidable = [r for r in failures if r.get("avoidable") is True]
+    clusters = set(run.clusters.values())
+    avoidable_clusters = {run.clusters[int(r["index"])] for r in avoidable}
+    return {
+        "sampler": sampler, "seed": seed, "episodes": len(run.records),
+        "errors": sum(1 for r in run.records if r.get("error")), "failures": len(failures),
+        "avoidable": len(avoidable), "clusters": len(clusters), "avoidable_clusters": len(avoidable_clusters),
+        "scenarios_failing": len({r["scenario"] for r in failures}),
+        "kinds": len({(r["scenario"], r["failure"]["kind"]) for r in failures}), "seconds": seconds,
+    }
+
+
+Config = Tuple[str, Dict[str, Any], str]
+"""A setting of the adaptive samplers: ``(label, sampler options, feedback)``."""
+
+DEFAULT_CONFIG: Config = ("VerifAI defaults", {}, "robustness")
+TUNED_CONFIGS: List[Config] = [
+    ("alpha 0.9, 2 buckets", {"alpha": 0.9, "buckets": 2}, "robustness"),
+    ("alpha 0.9, 1 bucket, thres 1", {"alpha": 0.9, "buckets": 1, "thres": 1.0}, "robustness"),
+]
+"""The settings chosen on a tuning seed (100) that is not one of the bench's seeds (see bench/RESULTS.md)."""
+
+
+def parse_config(text: str) -> Config:
+    """``"label:alpha=0.9,buckets=2,thres=1,feedback=novelty"`` (every key optional) as a :data:`Config`."""
+    label, _, body = text.partition(":")
+    options: Dict[str, Any] = {}
+    feedback = "robustness"
+    for item in filter(None, body.split(",")):
+        key, _, value = item.partition("=")
+        if key == "feedback":
+            feedback = value
+        elif key == "buckets":
+            options[key] = int(value)
+        else:
+            options[key] = float(value)
+    return label or body, options, feedback
+
+
+def bench_samplers(policy: str, samplers: Sequence[str], seeds: Sequence[int], budget: int, workers: int,
+                   reference: Optional[str], scenarios: Optional[List[str]], batch: Optional[int],
+                   configs: Sequence[Config], root: str) -> Dict[str, Dict[str, Any]]:
+    """Every sampler (each adaptive one in every config) on every seed; the summary by entry (printed)."""
+    from dv2s_gym.mining.samplers import is_adaptive
+    from dv2s_gym.regress.stats import wilson_interval
+
+    entries: List[Tuple[str, str, Config]] = []
+    for name in samplers:
+        for config in (configs if is_adaptive(name) else [DEFAULT_CONFIG]):
+            label = name if not is_adaptive(name) or len(configs) == 1 and config == DEFAULT_CONFIG \
+                else f"{name} [{config[0]}]"
+            entries.append((label, name, config))
+    print(f"# samplers: policy {policy}, reference {reference or 'none'}, "
+          f"scenarios {' '.join(scenarios) if scenarios else 'whole bank'}, budget {budget}, seeds {list(seeds)}, "
+          f"{workers} workers, batch {batch or 'default'}; adaptive sampler settings: "
+          + "; ".join(f"{label} = {options or 'VerifAI defaults'}, feedback {feedback}"
+                      for label, options, feedback in configs), flush=True)
+    runs: Dict[str, List[Dict[str, Any]]] = {label: [] for label, _, _ in entries}
+    for seed in seeds:  # seed-major, so an interrupted bench still compares the samplers on equal terms
+        for label, name, (_, options, feedback) in entries:
+            row = mine_once(policy, name, seed, budget, workers, reference, scenarios, batch,
+                            os.path.join(root, f"{len(runs[label])}-{seed}-{name}"), options, feedback)
+            runs[label].append(row)
+            print(f"  {label:46s} seed {seed}: {row['failures']:4d} failures / {row['episodes']} episodes "
+                  f"({row['errors']} errors), {row['clusters']:4d} distinct clusters, "
+                  f"{row['avoidable_clusters']:4d} avoidable, {row['scenarios_failing']:2d} scenarios, "
+                  f"{row['kinds']:2d} (scenario, class) pairs, "
+                  f"{row['seconds']:.0f} s, load {_load()}", flush=True)
+    summary: Dict[str, Dict[str, Any]] = {}
+    for label, rows in runs.items():
+        episodes = sum(r["episodes"] - r["errors"] for r in rows)
+        failures = sum(r["failures"] for r in rows)
+        low, high = wilson_interval(failures, episodes)
+        summary[label] = {
+            "per100": 100.0 * failures / max(episodes, 1), "interval": (100.0 * low, 100.0 * high),
+            "clusters": statistics.mean(r["clusters"] for r in rows),
+            "avoidable_clusters": statistics.mean(r["avoidable_clusters"] for r in rows),
+            "kinds": statistics.mean(r["kinds"] for r in rows),
+            "per_seed": [r["clusters"] for r in rows], "runs": rows,
+        }
+    base = summary.get("random")
+    print("\n| sampler | failures / 100 episodes (95% CI) | distinct clusters per run (per seed) "
+          "| avoidable clusters | (scenario, class) pairs | clusters vs random |")
+    print("|---|---|---|---|---|---|")
+    for label, s in summary.items():
+        ratio = s["clusters"] / base["clusters"] if base and base["clusters"] else float("nan")
+        s["ratio"] = ratio
+        print(f"| {label} | {s['per100']:.1f} ({s['interval'][0]:.1f}-{s['interval'][1]:.1f}) "
+              f"| {s['clusters']:.1f} ({', '.join(map(str, s['per_seed']))}) "
+              f"| {s['avoidable_clusters']:.1f} | {s['kinds']:.1f} | {ratio:.2f}x |")
+    adaptive = {label: summary[label] for label, name, _ in entries if is_adaptive(name)}
+    if adaptive and base and base["clusters"]:
+        best = max(adaptive, key=lambda k: adaptive[k]["ratio"])
+        print(f"\nbest adaptive sampler: {best}, {adaptive[best]['ratio']:.2f}x the distinct failures of random "
+              "(target >= 3x)", flush=True)
+    return summary
+
+
+def bench_throughput(policy: str, sampler: str, seed: int, budget: int, repeats: int, reference: Optional[str],
+                     scenarios: Optional[List[str]], batch: Optional[int], root: str) -> Dict[str, float]:
+    """1 worker against 2 on the same run, alternating; medians of episodes/min and of the per-round ratios.
+
+    A non-adaptive sampler is also run with 2 workers one chunk at a time (``LOOKAHEAD_CHUNKS = 1``, the
+    miner's behaviour for adaptive samplers): the difference is what the idle workers at the end of each
+    chunk cost.
+    """
+    from bench.bench_regress import parallel_capacity
+    from dv2s_gym.mining import miner
+    from dv2s_gym.mining.samplers import is_adaptive
+
+    shipped = miner.LOOKAHEAD_CHUNKS
+    batch = batch or 8  # the same for 1 and 2 workers: both run the same episodes (the miner's default: 4 per worker)
+    configs = [("1 worker", 1, shipped, batch), ("2 workers", 2, shipped, batch)]
+    if is_adaptive(sampler):  # another batch draws other scenes: a different (equally long) run
+        configs.append((f"2 workers, batch {4 * batch}", 2, shipped, 4 * batch))
+    else:
+        configs.append(("2 workers, chunk by chunk", 2, 1, batch))
+    print(f"# throughput: policy {policy}, sampler {sampler}, seed {seed}, budget {budget}, reference "
+          f"{reference or 'none'}, batch {batch}, {repeats} rounds", flush=True)
+    rates: Dict[str, List[float]] = {label: [] for label, _, _, _ in configs}
+    ratios: Dict[str, List[float]] = {label: [] for label, _, _, _ in configs[1:]}
+    capacity: List[float] = []
+    try:
+        for round_ in range(repeats):
+            capacity.append(parallel_capacity())
+            load = _load()
+            seconds = {}
+            order = configs if round_ % 2 == 0 else configs[::-1]
+            for label, workers, lookahead, size in order:
+                miner.LOOKAHEAD_CHUNKS = lookahead
+                row = mine_once(policy, sampler, seed, budget, workers, reference, scenarios, size,
+                                os.path.join(root, f"throughput-{workers}-{lookahead}-{size}"))
+                seconds[label] = row["seconds"]
+                rates[label].append(60.0 * row["episodes"] / row["seconds"])
+                if row["errors"]:
+                    print(f"  ({label}: {row['errors']} of {row['episodes']} episodes are errors)", flush=True)
+            for label in ratios:
+                ratios[label].append(seconds["1 worker"] / seconds[label])
+            print(f"  round {round_ + 1}: " + ", ".join(f"{label} {rates[label][-1]:.1f} ep/min" for label in rates)
+                  + "; " + ", ".join(f"{label} / 1 worker {ratios[label][-1]:.2f}x" for label in ratios)
+                  + f"; parallel capacity {capacity[-1]:.2f}x; load {load} -> {_load()}", flush=True)
+    finally:
+        miner.LOOKAHEAD_CHUNKS = shipped
+    result = {"rates": {k: statistics.median(v) for k, v in rates.items()},
+              "ratios": {k: statistics.median(v) for k, v in ratios.items()},
+              "capacity": statistics.median(capacity)}
+    print("\nmining throughput (medians): " + ", ".join(f"{k} {v:.1f} ep/min" for k, v in result["rates"].items()))
+    for label, ratio in result["ratios"].items():
+        print(f"{label} / 1 worker: {ratio:.2f}x" + (" (target >= 1.8x)" if label == "2 workers" else ""))
+    print(f"machine's parallel capacity: {result['capacity']:.2f}x", flush=True)
+    return result
+
+
+def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
+    from dv2s_gym.mining.samplers import SAMPLERS
+
+    parser = argparse.ArgumentParser(prog="python -m bench.bench_mine", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--quick", action="store_true", help="budget 40, one seed, one throughput round")
+    parser.add_argument("--part", choices=("all", "samplers", "throughput"), default="all")
+    parser.add_argument("--policy", default="rule", help="policy under test (default: rule)")
+    parser.add_argument("--reference", default=None,
+                        help="reference driver for avoidability ('none' to skip; default: rule, or none when the "
+                             "policy is rule)")
+    parser.add_argument("--scenarios", nargs="*", default=None, help="bank names or tag:<tag> (default: whole bank)")
+    parser.add_argument("--samplers", nargs="*", default=list(SAMPLERS))
+    parser.add_argument("--budget", type=int, default=None, help="episodes per run (default 300; --quick 40)")
+    parser.add_argument("--seeds", type=int, nargs="*", default=None, help="run seeds (default 0 1 2; --quick 0)")
+    parser.add_argument("--workers", type=int, default=2, help="workers of the sampler runs")
+    parser.add_argument("--batch", type=int, default=None, help="scenes per chunk (default: the miner's)")
+    parser.add_argument("--config", action="append", default=None, metavar="LABEL:KEY=VALUE,...",
+                        help="a setting of the adaptive samplers (repeatable): alpha, buckets, thres (VerifAI's "
+                             "parameters) and feedback (robustness|novelty), e.g. 'b2:alpha=0.9,buckets=2'; "
+                             "default: VerifAI's defaults and the two tuned settings of TUNED_CONFIGS")
+    parser.add_argument("--throughput-sampler", default="random")
+    parser.add_argument("--throughput-budget", type=int, default=None, help="default 600; --quick 40")
+    parser.add_argument("--repeats", type=int, default=None, help="throughput rounds (default 3; --quick 1)")
+    args = parser.parse_args(argv)
+
+    reference = args.reference if args.reference is not None else (None if args.policy == "rule" else "rule")
+    reference = None if reference in ("none", "") else reference
+    budget = args.budget or (40 if args.quick else 300)
+    seeds = args.seeds if args.seeds else ([0] if args.quick else [0, 1, 2])
+    repeats = args.repeats or (1 if args.quick else 3)
+    throughput_budget = args.throughput_budget or (40 if args.quick else 600)
+    configs = [parse_config(text) for text in args.config] if args.config else [DEFAULT_CONFIG, *TUNED_CONFIGS]
+    print(f"machine: {os.cpu_count()} cores; {time.strftime('%Y-%m-%d %H:%M')}; load {_load()}", flush=True)
+    root = tempfile.mkdtemp(prefix="dv2s-bench-mine-")
+    results: Dict[str, Any] = {}
+    try:
+        if args.part in ("all", "samplers"):
+            results["samplers"] = bench_samplers(args.policy, args.samplers, seeds, budget, args.workers, reference,
+                                                 args.scenarios, args.batch, configs, root)
+        if args.part in ("all", "throughput"):
+            results["throughput"] = bench_throughput(args.policy, args.throughput_sampler, seeds[0],
+                                                     throughput_budget, repeats, reference, args.scenarios,
+                                                     args.batch, root)
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+    return results
+
+
+if __name__ == "__main__":
+    main()
