@@ -215,7 +215,8 @@ def _cmd_mine(args: argparse.Namespace) -> int:
                    batch=args.batch, timeout=args.timeout, progress=not args.no_progress, env_config=env_config,
                    ttc_threshold=args.ttc_threshold, stall_seconds=args.stall_seconds,
                    convert=not args.no_convert, convert_options=convert_options,
-                   max_conversions=args.max_conversions)
+                   max_conversions=args.max_conversions, feedback=args.feedback,
+                   sampler_options=_json_option(args.sampler_options, "--sampler-options"))
     except KeyboardInterrupt:
         print(f"dv2s: finished episodes are saved in {out / 'episodes.jsonl'}; rerun the same command to resume",
               file=sys.stderr)
@@ -831,6 +832,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--budget", type=int, default=200, help="episodes to run (default 200)")
     p.add_argument("--sampler", default="cross-entropy", choices=["random", "halton", "cross-entropy", "bandit"],
                    help="VerifAI sampler (default cross-entropy)")
+    p.add_argument("--sampler-options", default=None,
+                   help="VerifAI settings of cross-entropy/bandit as JSON: alpha (default 0.9), buckets (5), thres (0)")
+    p.add_argument("--feedback", choices=["robustness", "novelty"], default="robustness",
+                   help="what adaptive samplers learn from: robustness (every failure), or novelty (a failure in a "
+                   "cluster already found counts as an easy scene, to spread the search); default robustness")
     p.add_argument("--seed", type=int, default=0, help="seed of the sampler and the episodes (default 0)")
     p.add_argument("--reference", default="rule",
                    help="driver deciding avoidability (default rule; 'none' skips the check)")

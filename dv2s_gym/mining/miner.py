@@ -326,6 +326,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
             raise MiningError(str(error)) from None
         try:
             with pool:
+                counted = [r for r in done.values() if r.get("failure") and not r.get("error")]
+                found, failed = {cluster_id(r) for r in counted}, [len(counted)]  # for the progress bar
                 chunk = scene_sampler.fed // batch
                 seen = {cluster_id(done[i]) for i in range(scene_sampler.fed)
                         if done[i].get("failure") and not done[i].get("error")}
@@ -349,10 +351,12 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
                         record = _complete(result, task, specs[task["index"]], sampler, out)
                         appender.append(record)
                         done[record["index"]] = record
+                        if record.get("failure") and not record.get("error"):
+                            found.add(cluster_id(record))
+                            failed[0] += 1
                         if bar is not None:
                             bar.update(1)
-                            failures = [r for r in done.values() if r.get("failure") and not r.get("error")]
-                            bar.set_postfix(failures=len(failures), clusters=len(set(cluster_failures(failures).values())))
+                            bar.set_postfix(failures=failed[0], clusters=len(found))
 
                     pool.run(tasks, handle)
                     if all(i in done for i in indices):
