@@ -58,6 +58,26 @@ def _seconds(timings: Mapping[str, Any]) -> str:
     return ", ".join(f"{step} {float(timings[step]):.0f} s" for step in steps) or "-"
 
 
+def _round_row(record: Mapping[str, Any]) -> Dict[str, Any]:
+    """The cells of a round's line in the summary tables (Markdown and HTML)."""
+    steps = record.get("steps", {})
+    mine, split, after, regress = (steps.get(k) or {} for k in ("mine", "split", "after", "regress"))
+    drop = after.get("relative_drop")
+    interval = after.get("relative_drop_interval") or [None, None]
+    drop_text = "-" if drop is None else f"{drop:.0%}" + (
+        f" [{interval[0]:.0%}, {interval[1]:.0%}]" if interval[0] is not None else "")
+    p_value = after.get("mcnemar_p")
+    return {
+        "round": record.get("round"), "failures": mine.get("failures", "-"),
+        "against": mine.get("failures_against_policy", "-"), "episodes": mine.get("episodes", "-"),
+        "clusters": mine.get("clusters", "-"), "kept": len({e["scenario"] for e in mine.get("kept", [])}),
+        "split": f"{len(split.get('fine_tune', []))} / {len(split.get('held_out', []))}",
+        "before": _rate(after.get("before")), "after": _rate(after.get("after")), "drop": drop_text,
+        "p": "-" if p_value is None else f"{p_value:.3g}",
+        "verdict": regress.get("verdict") or steps.get("skipped") or "-",
+    }
+
+
 def render_markdown(report: Mapping[str, Any]) -> str:
     """The Markdown rendering of a loop report."""
     settings = report.get("settings", {})
@@ -75,19 +95,11 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for record in report.get("rounds", []):
-        steps = record.get("steps", {})
-        mine, split, after, regress = (steps.get(k) or {} for k in ("mine", "split", "after", "regress"))
-        drop = after.get("relative_drop")
-        interval = after.get("relative_drop_interval") or [None, None]
-        drop_text = "-" if drop is None else f"{drop:.0%}" + (
-            f" [{interval[0]:.0%}, {interval[1]:.0%}]" if interval[0] is not None else "")
-        p_value = after.get("mcnemar_p")
+        row = _round_row(record)
         lines.append(
-            f"| {record.get('round')} | {mine.get('failures', '-')} ({mine.get('failures_against_policy', '-')}) / "
-            f"{mine.get('episodes', '-')} | {mine.get('clusters', '-')} | {len({e['scenario'] for e in mine.get('kept', [])})} | "
-            f"{len(split.get('fine_tune', []))} / {len(split.get('held_out', []))} | {_rate(after.get('before'))} | "
-            f"{_rate(after.get('after'))} | {drop_text} | {'-' if p_value is None else f'{p_value:.3g}'} | "
-            f"{regress.get('verdict') or steps.get('skipped') or '-'} |")
+            f"| {row['round']} | {row['failures']} ({row['against']}) / {row['episodes']} | {row['clusters']} | "
+            f"{row['kept']} | {row['split']} | {row['before']} | {row['after']} | {row['drop']} | {row['p']} | "
+            f"{row['verdict']} |")
     for record in report.get("rounds", []):
         steps = record.get("steps", {})
         lines += ["", f"## Round {record.get('round')}", "",
@@ -147,19 +159,12 @@ def render_html(report: Mapping[str, Any]) -> str:
     settings = report.get("settings", {})
     rows = []
     for record in report.get("rounds", []):
+        row = _round_row(record)
         steps = record.get("steps", {})
-        mine, split, after, regress = (steps.get(k) or {} for k in ("mine", "split", "after", "regress"))
-        drop = after.get("relative_drop")
-        interval = after.get("relative_drop_interval") or [None, None]
-        drop_text = "-" if drop is None else f"{drop:.0%}" + (
-            f" [{interval[0]:.0%}, {interval[1]:.0%}]" if interval[0] is not None else "")
-        verdict = regress.get("verdict") or steps.get("skipped") or "-"
-        p_value = after.get("mcnemar_p")
-        cells = [record.get("round"), f"{mine.get('failures', '-')} / {mine.get('episodes', '-')}",
-                 mine.get("clusters", "-"), len({e["scenario"] for e in mine.get("kept", [])}),
-                 f"{len(split.get('fine_tune', []))} / {len(split.get('held_out', []))}",
-                 _rate(after.get("before")), _rate(after.get("after")), drop_text,
-                 "-" if p_value is None else f"{p_value:.3g}"]
+        after, regress = (steps.get(k) or {} for k in ("after", "regress"))
+        verdict = row["verdict"]
+        cells = [row["round"], f"{row['failures']} / {row['episodes']}", row["clusters"], row["kept"], row["split"],
+                 row["before"], row["after"], row["drop"], row["p"]]
         row = "".join(f"<td>{escape(str(c))}</td>" for c in cells)
         rows.append(f"<tr>{row}<td class=\"{escape(str(verdict))}\">{escape(str(verdict))}</td></tr>")
         details = []
