@@ -175,3 +175,26 @@ def test_a_chunk_scheduled_run_folder_resumes_on_chunks_and_an_unknown_schedule_
     (old / "settings.json").write_text(json.dumps(settings))
     with pytest.raises(MiningError, match="unknown schedule 'zigzag'.*--out"):
         mine(POLICY, out=old, workers=1, **{**RUN, "budget": 8})
+
+
+class _ChunkOnly(LocalBackend):
+    """A pool that cannot take tasks while it runs (as the Ray backend)."""
+
+    streams = False
+    calls = 0
+
+    def run(self, tasks, on_result):  # noqa: D102 - no ``more``
+        type(self).calls += 1
+        super().run(tasks, on_result)
+
+
+def test_a_backend_that_does_not_stream_runs_the_window_call_by_call_to_the_same_records(streamed, tmp_path,
+                                                                                           monkeypatch):
+    from dv2s_gym.regress import backends
+
+    out, whole = streamed
+    monkeypatch.setattr(backends, "get_backend", lambda name, workers=None, address=None, timeout=None:
+                        _ChunkOnly(workers, timeout=timeout))
+    run = mine(POLICY, out=tmp_path / "chunked", workers=2, **RUN)
+    assert _stable(run.records) == _stable(whole.records)
+    assert _ChunkOnly.calls >= 12 // 4
