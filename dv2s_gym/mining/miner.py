@@ -57,6 +57,8 @@ __all__ = ["MineRun", "mine", "read_records", "episode_seed", "SETTINGS_VERSION"
 SETTINGS_VERSION = 1
 LOOKAHEAD_CHUNKS = 16
 """Whole chunks a non-adaptive sampler (random, halton) sends to the workers at once."""
+ADAPTIVE_SCHEDULE = "window"
+"""The schedule of a new adaptive run (``"chunks"``: the chunk schedule, for comparison in ``bench/``)."""
 _RESUME_KEYS = ("policy", "sampler", "sampler_options", "feedback", "seed", "batch", "scenarios", "bank_dir",
                 "env_config", "reference", "ttc_threshold", "stall_seconds")
 
@@ -229,7 +231,7 @@ def _schedule(saved: Optional[Dict[str, Any]], sampler: str, out: Path) -> str:
     """The run's schedule: a new adaptive run streams with a sliding window, anything else runs in chunks;
     a run folder keeps the schedule it was written with (runs from before ``schedule`` existed: chunks)."""
     if saved is None:
-        return "window" if is_adaptive(sampler) else "chunks"
+        return ADAPTIVE_SCHEDULE if is_adaptive(sampler) else "chunks"
     schedule = saved.get("schedule", "chunks")
     if schedule not in SCHEDULES:
         raise MiningError(f"{out}/settings.json has an unknown schedule {schedule!r} (known: {', '.join(SCHEDULES)}); "
