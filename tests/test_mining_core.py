@@ -29,7 +29,7 @@ from dv2s_gym.mining.monitors import (
     detect_failure,
     robustness,
 )
-from dv2s_gym.mining.samplers import SAMPLERS, SceneSampler, make_sampler
+from dv2s_gym.mining.samplers import SAMPLERS, SceneSampler, is_adaptive, make_sampler
 from dv2s_gym.mining.space import SceneSpace
 from envs.errors import DV2SError, SceneSamplingError
 from envs.trace import EpisodeTrace
@@ -413,6 +413,17 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
     space = SceneSpace(MINE["scenarios"])
     sampler = make_sampler(settings["sampler"], space.feature_space, settings["seed"], settings.get("sampler_options"))
     expected = []
+    if is_adaptive(settings["sampler"]):  # the window schedule: scene j is drawn once outcome j - batch was fed
+        assert json.loads((out / "settings.json").read_text())["schedule"] == "window"
+        drawn = sampler.draw(MINE["batch"])
+        for index, record in enumerate(records):
+            point, info = drawn[index]
+            spec = space.decode(point)
+            expected.append((spec.scenario, spec.params))
+            sampler.feed(point, info, _fed(record, records, settings.get("feedback", "robustness")))
+            drawn += sampler.draw(1)
+        assert [(r["scenario"], r["params"]) for r in records] == expected
+        return
     for _ in range(3):
         drawn = sampler.draw(MINE["batch"])
         for point, info in drawn:

@@ -4,18 +4,32 @@ The run is a folder (``out``)::
 
     settings.json     what the run mines (policy, sampler, seed, scenarios, bank, env config, monitors)
     episodes.jsonl    one record per finished episode, appended and fsynced as it arrives
-    sampler.pkl       the sampler's state after the last chunk whose outcomes it was fed
+    sampler.pkl       the sampler's state: after the last chunk whose outcomes it was fed (chunk schedule),
+                      or the window schedule with its drawn, not yet fed scenes (window schedule)
     traces/           the trace of every failed episode
     failures/         per converted cluster: failure video, trace and the D-V2S conversion
     conversions.jsonl one record per converted cluster
     report.json/.md/.html
 
-Episodes run in chunks of ``batch`` scenes: the sampler draws a chunk, the backend
-runs it on its workers, and the outcomes are fed back (in index order, so a run is
-deterministic for a given seed and batch) before the next chunk is drawn. A run killed
-at any point and started again with the same ``out`` loses no finished episode: the
-sampler is restored from its checkpoint (or rebuilt by feeding it the recorded outcomes),
-the chunk in progress is drawn again, and only its missing episodes run.
+An adaptive sampler (cross-entropy, bandit) runs on the sliding-window schedule
+(``settings.json`` ``"schedule": "window"``, :mod:`dv2s_gym.mining.window`): ``batch`` scenes
+are drawn ahead, each outcome is fed back in index order as soon as every earlier one has
+been, and each outcome fed lets the sampler draw one more scene, which goes straight to a
+worker (a backend with ``streams = True``, the local pool; a backend that does not stream,
+such as Ray, runs the window's outstanding scenes call after call: the same records, with
+an idle tail per call). Every draw and record depends on the seed and ``batch`` only, not
+on the number of workers or the timing.
+
+Non-adaptive samplers (random, halton), and adaptive runs written before the window
+schedule existed (``"schedule": "chunks"``, or no schedule in settings.json), run in chunks
+of ``batch`` scenes: the sampler draws a chunk, the backend runs it, and the outcomes are
+fed back in index order before the next chunk is drawn (a non-adaptive sampler sends up
+to :data:`LOOKAHEAD_CHUNKS` chunks at once: its draws do not depend on outcomes).
+
+A run killed at any point and started again with the same ``out`` loses no finished
+episode and produces the same records as an uninterrupted run: the sampler is restored
+from its checkpoint (or rebuilt by replaying the draws and feeding it the recorded
+outcomes in the schedule's order), and only the missing episodes run.
 """
 
 from __future__ import annotations
@@ -35,6 +49,7 @@ from dv2s_gym.mining.cluster import cluster_failures, cluster_id, group
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
 from dv2s_gym.mining.samplers import SAMPLERS, SceneSampler, is_adaptive, make_sampler, sampler_params
+from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 
 __all__ = ["MineRun", "mine", "read_records", "episode_seed", "SETTINGS_VERSION"]
@@ -42,6 +57,8 @@ __all__ = ["MineRun", "mine", "read_records", "episode_seed", "SETTINGS_VERSION"
 SETTINGS_VERSION = 1
 LOOKAHEAD_CHUNKS = 16
 """Whole chunks a non-adaptive sampler (random, halton) sends to the workers at once."""
+ADAPTIVE_SCHEDULE = "window"
+"""The schedule of a new adaptive run (``"chunks"``: the chunk schedule, for comparison in ``bench/``)."""
 _RESUME_KEYS = ("policy", "sampler", "sampler_options", "feedback", "seed", "batch", "scenarios", "bank_dir",
                 "env_config", "reference", "ttc_threshold", "stall_seconds")
 
@@ -210,6 +227,111 @@ def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[i
     return sampler
 
 
+def _schedule(saved: Optional[Dict[str, Any]], sampler: str, out: Path) -> str:
+    """The run's schedule: a new adaptive run streams with a sliding window, anything else runs in chunks;
+    a run folder keeps the schedule it was written with (runs from before ``schedule`` existed: chunks)."""
+    if saved is None:
+        return ADAPTIVE_SCHEDULE if is_adaptive(sampler) else "chunks"
+    schedule = saved.get("schedule", "chunks")
+    if schedule not in SCHEDULES:
+        raise MiningError(f"{out}/settings.json has an unknown schedule {schedule!r} (known: {', '.join(SCHEDULES)}); "
+                          "it was written by another version: pass another --out")
+    return schedule
+
+
+def _restore_window(out: Path, settings: Dict[str, Any], space, records: Dict[int, Dict[str, Any]], batch: int,
+                    budget: int) -> WindowSchedule:
+    """The window schedule after feeding every recorded outcome it can: from its checkpoint when that is
+    usable, else from a fresh sampler; either way the remaining recorded outcomes are fed in the schedule's
+    order, so the state is the one an uninterrupted run had at that point."""
+    window = None
+    checkpoint = out / "sampler.pkl"
+    if checkpoint.is_file():
+        try:
+            window = WindowSchedule.loads(checkpoint.read_bytes())
+        except MiningError:
+            window = None
+        if window is not None and (window.window != batch or any(i not in records for i in range(window.fed))):
+            window = None  # another window, or ahead of the records: rebuild
+    if window is None:
+        window = WindowSchedule(make_sampler(settings["sampler"], space.feature_space, settings["seed"],
+                                             settings.get("sampler_options") or None), batch)
+    mode = settings.get("feedback", "robustness")
+    window.advance(records, budget, lambda record, seen: _feedback(record, seen, mode), _matcher(out, space))
+    return window
+
+
+def _matcher(out: Path, space) -> Any:
+    def check(index: int, point: Any, record: Dict[str, Any]) -> None:
+        spec = space.decode(point)
+        if spec.scenario != record["scenario"] or spec.params != record["params"]:
+            raise MiningError(f"{out}: episode {index} in episodes.jsonl does not match the sampler's draw "
+                              "(the run was made by another version); pass another --out")
+    return check
+
+
+def _run_window(window: WindowSchedule, pool, space, settings: Dict[str, Any], out: Path,
+                done: Dict[int, Dict[str, Any]], budget: int, appender: "_Appender", bar, found: set,
+                failed: List[int]) -> None:
+    """Run the episodes of a window-scheduled run: a streaming backend gets each new draw as soon as the
+    outcome that allows it has been fed (the workers never wait for a chunk's last episode); any other
+    backend runs the window's outstanding scenes, call after call (the same draws and records, with an
+    idle tail per call)."""
+    mode = settings.get("feedback", "robustness")
+    sampler = settings["sampler"]
+    policy, reference = settings["policy"], settings["reference"]
+    check = _matcher(out, space)
+    specs: Dict[int, Any] = {}
+    by_id: Dict[str, Dict[str, Any]] = {}
+    last_saved = [window.fed]
+
+    def tasks_for(indices: Sequence[int]) -> List[Dict[str, Any]]:
+        tasks = []
+        for i in indices:
+            if i >= budget or i in done:
+                continue
+            specs[i] = space.decode(window.pending[i][0])
+            task = _task(i, specs[i], policy, reference, settings, out)
+            by_id[task["id"]] = task
+            tasks.append(task)
+        return tasks
+
+    def handle(result: Dict[str, Any]) -> None:
+        task = by_id.pop(result["id"])
+        record = _complete(result, task, specs.pop(task["index"]), sampler, out)
+        appender.append(record)
+        done[record["index"]] = record
+        if record.get("failure") and not record.get("error"):
+            found.add(cluster_id(record))
+            failed[0] += 1
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(failures=failed[0], clusters=len(found))
+
+    def more() -> List[Dict[str, Any]]:
+        new = window.advance(done, budget, lambda record, seen: _feedback(record, seen, mode), check)
+        if window.fed - last_saved[0] >= window.window or window.fed >= budget:
+            atomic_write_bytes(out / "sampler.pkl", window.dumps())
+            last_saved[0] = window.fed
+        return tasks_for(new)
+
+    streams = getattr(pool, "streams", False)
+    while True:
+        tasks = tasks_for(window.outstanding(done, budget))
+        if not tasks:
+            break
+        before = len(done)
+        if streams:
+            pool.run(tasks, handle, more=more)
+        else:
+            pool.run(tasks, handle)
+            more()
+        if len(done) == before:
+            raise MiningError(f"the {type(pool).__name__} backend returned no result for {len(tasks)} episodes; "
+                              "see its log, then run the same command again to resume")
+    more()  # the checkpoint of the finished run
+
+
 FEEDBACKS = ("robustness", "novelty")
 """What the adaptive samplers are fed: ``robustness`` (each episode's robustness) or ``novelty`` (the same,
 except that a failure in a cluster an earlier episode already found is fed as an easy scene)."""
@@ -314,9 +436,15 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
                              env_config, reference, ttc_threshold, stall_seconds, budget, space.describe())
         if saved is not None:
             _check_resume(saved, settings, out)
+        settings["schedule"] = _schedule(saved, sampler, out)
         atomic_write_json(settings_path, settings)
         done = {int(r["index"]): r for r in read_records(out / "episodes.jsonl")}
-        scene_sampler = _restore_sampler(out, settings, space, done, batch)
+        window = None
+        if settings["schedule"] == "window":
+            window = _restore_window(out, settings, space, done, batch, budget)
+            scene_sampler = window.sampler
+        else:
+            scene_sampler = _restore_sampler(out, settings, space, done, batch)
         appender = _Appender(out / "episodes.jsonl")
         bar = _progress(progress, budget, len([i for i in done if i < budget]))
         try:
@@ -328,7 +456,7 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
             with pool:
                 counted = [r for r in done.values() if r.get("failure") and not r.get("error")]
                 found, failed = {cluster_id(r) for r in counted}, [len(counted)]  # for the progress bar
-                chunk = scene_sampler.fed // batch
+                chunk = scene_sampler.fed // batch if window is None else budget // batch + 1  # (chunks: not used)
                 seen = {cluster_id(done[i]) for i in range(scene_sampler.fed)
                         if done[i].get("failure") and not done[i].get("error")}
                 lookahead = 1 if is_adaptive(sampler) else LOOKAHEAD_CHUNKS
@@ -364,6 +492,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
                             scene_sampler.feed(point, info, _feedback(done[i], seen, feedback))
                         atomic_write_bytes(out / "sampler.pkl", scene_sampler.dumps())
                     chunk += count
+                if window is not None:
+                    _run_window(window, pool, space, settings, out, done, budget, appender, bar, found, failed)
         finally:
             appender.close()
             if bar is not None:

@@ -54,6 +54,8 @@ class Backend:
 
     name = "backend"
     workers = 1
+    streams = False
+    """True when :meth:`run` takes ``more=`` (tasks added while it runs); :class:`LocalBackend` does."""
 
     def run(self, tasks: Iterable[Dict[str, Any]], on_result: OnResult) -> None:
         """Run every task; call ``on_result(result)`` in this process for each, as it finishes."""
@@ -151,10 +153,15 @@ class _ScenarioQueue:
     def __init__(self, tasks: List[Dict[str, Any]]) -> None:
         self._groups: Dict[Tuple[Any, ...], Deque[int]] = {}
         self._group_of: List[Tuple[Any, ...]] = []
-        for index, task in enumerate(tasks):
-            key = (task.get("bank_dir"), repr(sorted((task.get("env_config") or {}).items())), task["scenario"])
-            self._group_of.append(key)
-            self._groups.setdefault(key, deque()).append(index)
+        for task in tasks:
+            self.append(task)
+
+    def append(self, task: Dict[str, Any]) -> int:
+        """Queue one more task (it gets the next index); its index."""
+        key = (task.get("bank_dir"), repr(sorted((task.get("env_config") or {}).items())), task["scenario"])
+        self._group_of.append(key)
+        self._groups.setdefault(key, deque()).append(len(self._group_of) - 1)
+        return len(self._group_of) - 1
 
     def __bool__(self) -> bool:
         return any(self._groups.values())
@@ -170,7 +177,7 @@ class _ScenarioQueue:
         own = [key for key in pending if key in seen]
         fresh = [key for key in pending if not any(key in other for other in others)]
         if own:
-            key = own[0]
+            key = min(own, key=lambda k: self._groups[k][0])  # the oldest task a worker has compiled
         elif fresh:
             key = fresh[0]
         else:
@@ -219,10 +226,22 @@ class LocalBackend(Backend):
         while len(self._pool) < count:
             self._pool.append(_Worker(self._context))
 
-    def run(self, tasks: Iterable[Dict[str, Any]], on_result: OnResult) -> None:
+    streams = True
+
+    def run(self, tasks: Iterable[Dict[str, Any]], on_result: OnResult,
+            more: Optional[Callable[[], Iterable[Dict[str, Any]]]] = None) -> None:
+        """Run every task; ``on_result(result)`` for each as it finishes (see :meth:`Backend.run`).
+
+        ``more``: called after each round of finished results has been handed to ``on_result``; the
+        tasks it returns are queued too (with the same timeouts, retries and scenario affinity), so a
+        caller can keep the workers busy with tasks that depend on earlier results. The call returns
+        when every task, first or added, has a result.
+        """
         from dv2s_gym.regress.worker import error_result
 
         tasks = list(tasks)
+        if not tasks and more is not None:
+            tasks = list(more())
         if not tasks:
             return
         queue = _ScenarioQueue(tasks)
@@ -230,7 +249,7 @@ class LocalBackend(Backend):
         failures: Dict[int, List[str]] = {}
         remaining = len(tasks)
         failed_starts = 0
-        self._ensure(min(self.workers, len(tasks)))
+        self._ensure(self.workers if more is not None else min(self.workers, len(tasks)))  # more may come
         try:
             while remaining:
                 finished: List[Dict[str, Any]] = []
@@ -290,6 +309,12 @@ class LocalBackend(Backend):
                 self._dispatch(queue, tasks, attempts)
                 for result in finished:
                     on_result(result)
+                if more is not None and finished:
+                    added = list(more())
+                    for task in added:
+                        tasks.append(task)
+                        queue.append(task)
+                    remaining += len(added)
         except BaseException:
             self.close()  # an interrupted run leaves no worker behind
             raise

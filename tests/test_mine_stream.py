@@ -1,0 +1,200 @@
+"""Streamed mining of adaptive samplers: the sliding-window schedule (dv2s_gym/mining/window.py), the local
+pool's ``run(..., more=)`` and resuming a streamed run."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+
+from dv2s_gym.mining import miner as miner_module
+from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.miner import episode_seed, mine, read_records
+from dv2s_gym.mining.samplers import make_sampler
+from dv2s_gym.mining.space import SceneSpace
+from dv2s_gym.mining.window import WindowSchedule
+from dv2s_gym.regress.backends import LocalBackend, _ScenarioQueue
+
+BRAKES = "highway_lead_vehicle_brakes"
+LEFT_TURN = "urban_left_turn_oncoming"
+POLICY = "rule?action_noise=0.4"
+RUN = dict(budget=12, sampler="cross-entropy", scenarios=[BRAKES, LEFT_TURN], batch=4, seed=7, reference=None,
+           env_config={"duration": 3}, progress=False, reports=False)
+
+
+def _stable(records):
+    return [json.dumps(r, sort_keys=True) for r in records]
+
+
+# --- the schedule on its own ----------------------------------------------------------------------------------------
+
+def test_the_window_draws_scene_j_once_outcome_j_minus_w_is_fed_whatever_the_arrival_order():
+    space = SceneSpace([BRAKES, LEFT_TURN])
+    fresh = lambda: WindowSchedule(make_sampler("cross-entropy", space.feature_space, 3), 3)  # noqa: E731
+    outcome = lambda index, seen: -1.0 if index % 3 == 0 else 2.0  # noqa: E731
+
+    def run(order):
+        window, done, log = fresh(), {}, []
+        log.append(window.advance(done, 9, lambda r, seen: outcome(r["index"], seen)))
+        for index in order:
+            done[index] = {"index": index}
+            log.append((index, window.fed, window.advance(done, 9, lambda r, seen: outcome(r["index"], seen))))
+        return window, log
+
+    in_order, log = run(range(9))
+    assert log[0] == [0, 1, 2]  # W draws before any outcome
+    assert [entry[2] for entry in log[1:]] == [[3], [4], [5], [6], [7], [8], [9], [10], [11]]  # drawn past budget
+    assert in_order.fed == 9 and sorted(in_order.pending) == [9, 10, 11]
+    shuffled, log = run([2, 1, 0, 5, 3, 4, 8, 6, 7])
+    # nothing is fed (and nothing drawn) until every earlier outcome is in
+    assert log[1][2] == [] and log[2][2] == [] and log[3][2] == [3, 4, 5]
+    points = lambda w: {i: list(p[0]) for i, p in w.pending.items()}  # noqa: E731
+    assert points(shuffled) == points(in_order) and shuffled.dumps() == in_order.dumps()
+
+
+# --- the local pool accepts tasks while it runs ---------------------------------------------------------------------
+
+def test_the_local_pool_runs_tasks_added_while_it_runs_with_retries(tmp_path):
+    log = tmp_path / "attempts.log"
+    base = {"policy": f"regress_helpers:FaultyPolicy?crash_seed=13&log={log}", "role": "candidate",
+            "scenario": BRAKES, "env_config": {"duration": 2}, "bank_dir": None, "trace_dir": None}
+    results, calls = [], []
+
+    def more():
+        calls.append(len(results))
+        seed = 10 + len(calls)
+        return [{**base, "seed": seed}] if seed <= 14 else []
+
+    with LocalBackend(workers=2, timeout=60) as pool:
+        assert pool.streams
+        pool.run([{**base, "seed": 10}], results.append, more=more)
+        by_seed = {r["seed"]: r for r in results}
+        assert sorted(by_seed) == [10, 11, 12, 13, 14] and len(results) == 5
+        assert "crashed" in by_seed[13]["error"] and "2 attempts" in by_seed[13]["error"]  # retried, then reported
+        assert not any(by_seed[s].get("error") for s in (10, 11, 12, 14))
+        assert log.read_text().split() == ["13", "13"]
+        assert calls[0] == 1 and calls == sorted(calls)  # called after results were handed over
+        later = []
+        pool.run([{**base, "seed": 20}], later.append)  # without more: as before
+        assert [r["seed"] for r in later] == [20]
+
+
+def test_the_scenario_queue_takes_appended_tasks_and_prefers_the_oldest_compiled_one():
+    task = lambda scenario: {"scenario": scenario, "bank_dir": None, "env_config": {}}  # noqa: E731
+    queue = _ScenarioQueue([task("a"), task("b")])
+    assert queue.append(task("a")) == 2 and queue.append(task("c")) == 3
+    key = lambda s: queue.group([0, 1, 3][["a", "b", "c"].index(s)])  # noqa: E731
+    seen = {key("a"), key("b")}
+    assert queue.pop_for(seen, [set()]) == 0 and queue.pop_for(seen, [set()]) == 1
+    assert queue.pop_for(seen, [set()]) == 2
+    assert queue.pop_for(seen, [set()]) == 3 and not queue
+
+
+# --- mining runs ----------------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def streamed(tmp_path_factory):
+    out = tmp_path_factory.mktemp("streamed-1")
+    return out, mine(POLICY, out=out, workers=1, **RUN)
+
+
+def test_a_streamed_run_is_the_same_on_one_and_two_workers(streamed, tmp_path):
+    out, one = streamed
+    assert json.loads((out / "settings.json").read_text())["schedule"] == "window"
+    two = mine(POLICY, out=tmp_path / "two", workers=2, **RUN)
+    assert [r["index"] for r in two.records] == list(range(12))
+    assert [r["seed"] for r in two.records] == [episode_seed(7, i) for i in range(12)]
+    assert _stable(two.records) == _stable(one.records)
+    assert any(r["failure"] for r in one.records) and any(not r["failure"] for r in one.records)
+
+
+@pytest.mark.parametrize("stop_after", [3, 6, 9])
+def test_a_streamed_run_interrupted_mid_way_resumes_to_the_same_records(streamed, tmp_path, monkeypatch, stop_after):
+    out, whole = streamed
+    cut = tmp_path / "cut"
+    original = miner_module._Appender.append
+    count = [0]
+
+    def append(self, record):
+        if self._path.name == "episodes.jsonl":
+            if count[0] == stop_after:
+                raise KeyboardInterrupt  # killed with episodes in flight, some finished out of order
+            count[0] += 1
+        original(self, record)
+
+    monkeypatch.setattr(miner_module._Appender, "append", append)
+    with pytest.raises(KeyboardInterrupt):
+        mine(POLICY, out=cut, workers=2, **RUN)
+    monkeypatch.setattr(miner_module._Appender, "append", original)
+    assert len(read_records(cut / "episodes.jsonl")) == stop_after
+    resumed = mine(POLICY, out=cut, workers=2, **RUN)
+    assert _stable(resumed.records) == _stable(whole.records)
+    assert (cut / "episodes.jsonl").read_bytes().count(b"\n") == 12  # nothing ran twice
+
+
+def test_resume_from_records_alone_and_with_a_larger_budget_equals_an_uninterrupted_run(streamed, tmp_path):
+    out, whole = streamed
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    records = read_records(copy / "episodes.jsonl")
+    kept = [r for r in records if r["index"] not in (4, 7, 8, 11)]  # holes: finished out of order, then killed
+    (copy / "episodes.jsonl").write_text("".join(json.dumps(r, sort_keys=True) + "\n" for r in kept))
+    (copy / "sampler.pkl").unlink()
+    resumed = mine(POLICY, out=copy, workers=2, **RUN)
+    assert _stable(resumed.records) == _stable(whole.records)
+    # the finished run's checkpoint, and then a larger budget, continue as one longer run would
+    longer = mine(POLICY, out=copy, workers=1, **{**RUN, "budget": 16})
+    straight = mine(POLICY, out=tmp_path / "straight", workers=2, **{**RUN, "budget": 16})
+    assert _stable(longer.records) == _stable(straight.records)
+    assert _stable(longer.records[:12]) == _stable(whole.records)
+
+
+def test_a_chunk_scheduled_run_folder_resumes_on_chunks_and_an_unknown_schedule_is_refused(streamed, tmp_path):
+    out, _ = streamed
+    old = tmp_path / "old"
+    old.mkdir()
+    settings = json.loads((out / "settings.json").read_text())
+    del settings["schedule"]  # written before the window schedule existed
+    (old / "settings.json").write_text(json.dumps(settings))
+    run = mine(POLICY, out=old, workers=2, **{**RUN, "budget": 8})
+    assert json.loads((old / "settings.json").read_text())["schedule"] == "chunks"
+    space = SceneSpace([BRAKES, LEFT_TURN])
+    sampler = make_sampler("cross-entropy", space.feature_space, 7)
+    expected = []
+    for _ in range(2):  # chunk by chunk: draw 4, feed 4
+        drawn = sampler.draw(4)
+        for point, info in drawn:
+            record = run.records[len(expected)]
+            spec = space.decode(point)
+            expected.append((spec.scenario, spec.params))
+            sampler.feed(point, info, record["rho"])
+    assert [(r["scenario"], r["params"]) for r in run.records] == expected
+
+    settings["schedule"] = "zigzag"
+    (old / "settings.json").write_text(json.dumps(settings))
+    with pytest.raises(MiningError, match="unknown schedule 'zigzag'.*--out"):
+        mine(POLICY, out=old, workers=1, **{**RUN, "budget": 8})
+
+
+class _ChunkOnly(LocalBackend):
+    """A pool that cannot take tasks while it runs (as the Ray backend)."""
+
+    streams = False
+    calls = 0
+
+    def run(self, tasks, on_result):  # noqa: D102 - no ``more``
+        type(self).calls += 1
+        super().run(tasks, on_result)
+
+
+def test_a_backend_that_does_not_stream_runs_the_window_call_by_call_to_the_same_records(streamed, tmp_path,
+                                                                                           monkeypatch):
+    from dv2s_gym.regress import backends
+
+    out, whole = streamed
+    monkeypatch.setattr(backends, "get_backend", lambda name, workers=None, address=None, timeout=None:
+                        _ChunkOnly(workers, timeout=timeout))
+    run = mine(POLICY, out=tmp_path / "chunked", workers=2, **RUN)
+    assert _stable(run.records) == _stable(whole.records)
+    assert _ChunkOnly.calls >= 12 // 4
