@@ -170,6 +170,28 @@ class _Appender:
         self._handle.close()
 
 
+class _Recorder:
+    """Turns finished results into records: appended to ``episodes.jsonl``, kept in ``done``, counted on
+    the progress bar (failures and distinct clusters)."""
+
+    def __init__(self, appender: _Appender, done: Dict[int, Dict[str, Any]], sampler: str, out: Path, bar) -> None:
+        self.appender, self.done, self.sampler, self.out, self.bar = appender, done, sampler, out, bar
+        counted = [r for r in done.values() if r.get("failure") and not r.get("error")]
+        self.found = {cluster_id(r) for r in counted}
+        self.failed = len(counted)
+
+    def add(self, result: Dict[str, Any], task: Dict[str, Any], spec) -> None:
+        record = _complete(result, task, spec, self.sampler, self.out)
+        self.appender.append(record)
+        self.done[record["index"]] = record
+        if record.get("failure") and not record.get("error"):
+            self.found.add(cluster_id(record))
+            self.failed += 1
+        if self.bar is not None:
+            self.bar.update(1)
+            self.bar.set_postfix(failures=self.failed, clusters=len(self.found))
+
+
 def _settings(policy: str, sampler: str, sampler_options: Optional[Dict[str, Any]], feedback: str, seed: int,
               batch: int, scenarios: List[str], bank_dir: Optional[str], env_config: Dict[str, Any],
               reference: Optional[str], ttc_threshold: float, stall_seconds: float, budget: int,
@@ -270,16 +292,50 @@ def _matcher(out: Path, space) -> Any:
     return check
 
 
+def _run_chunks(scene_sampler: SceneSampler, pool, space, settings: Dict[str, Any], out: Path,
+                recorder: "_Recorder", budget: int, batch: int) -> None:
+    """Run the episodes of a chunk-scheduled run: draw ``batch`` scenes, run them, feed their outcomes in
+    index order, draw the next chunk. An adaptive sampler draws a chunk only once it has been fed the last
+    one's outcomes; a non-adaptive one learns nothing from them, so several whole chunks go to the workers
+    at once (the same draws, without idle workers at the end of every chunk)."""
+    done, sampler = recorder.done, settings["sampler"]
+    mode = settings.get("feedback", "robustness")
+    seen = {cluster_id(done[i]) for i in range(scene_sampler.fed)
+            if done[i].get("failure") and not done[i].get("error")}
+    lookahead = 1 if is_adaptive(sampler) else LOOKAHEAD_CHUNKS
+    chunk = scene_sampler.fed // batch
+    while chunk * batch < budget:
+        count = max(1, min(lookahead, budget // batch - chunk))
+        draws = [scene_sampler.draw(batch) for _ in range(count)]
+        first = chunk * batch
+        indices = range(first, first + count * batch)
+        pairs = [pair for drawn in draws for pair in drawn]
+        specs = {i: space.decode(point) for i, (point, _) in zip(indices, pairs)}
+        tasks = [_task(i, specs[i], settings["policy"], settings["reference"], settings, out) for i in indices
+                 if i not in done and i < budget]
+        by_id = {t["id"]: t for t in tasks}
+
+        def handle(result: Dict[str, Any]) -> None:
+            task = by_id[result["id"]]
+            recorder.add(result, task, specs[task["index"]])
+
+        pool.run(tasks, handle)
+        if all(i in done for i in indices):
+            for i, (point, info) in zip(indices, pairs):
+                scene_sampler.feed(point, info, _feedback(done[i], seen, mode))
+            atomic_write_bytes(out / "sampler.pkl", scene_sampler.dumps())
+        chunk += count
+
+
 def _run_window(window: WindowSchedule, pool, space, settings: Dict[str, Any], out: Path,
-                done: Dict[int, Dict[str, Any]], budget: int, appender: "_Appender", bar, found: set,
-                failed: List[int]) -> None:
+                recorder: "_Recorder", budget: int) -> None:
     """Run the episodes of a window-scheduled run: a streaming backend gets each new draw as soon as the
     outcome that allows it has been fed (the workers never wait for a chunk's last episode); any other
     backend runs the window's outstanding scenes, call after call (the same draws and records, with an
     idle tail per call)."""
     mode = settings.get("feedback", "robustness")
-    sampler = settings["sampler"]
     policy, reference = settings["policy"], settings["reference"]
+    done = recorder.done
     check = _matcher(out, space)
     specs: Dict[int, Any] = {}
     by_id: Dict[str, Dict[str, Any]] = {}
@@ -298,15 +354,7 @@ def _run_window(window: WindowSchedule, pool, space, settings: Dict[str, Any], o
 
     def handle(result: Dict[str, Any]) -> None:
         task = by_id.pop(result["id"])
-        record = _complete(result, task, specs.pop(task["index"]), sampler, out)
-        appender.append(record)
-        done[record["index"]] = record
-        if record.get("failure") and not record.get("error"):
-            found.add(cluster_id(record))
-            failed[0] += 1
-        if bar is not None:
-            bar.update(1)
-            bar.set_postfix(failures=failed[0], clusters=len(found))
+        recorder.add(result, task, specs.pop(task["index"]))
 
     def more() -> List[Dict[str, Any]]:
         new = window.advance(done, budget, lambda record, seen: _feedback(record, seen, mode), check)
@@ -439,10 +487,9 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         settings["schedule"] = _schedule(saved, sampler, out)
         atomic_write_json(settings_path, settings)
         done = {int(r["index"]): r for r in read_records(out / "episodes.jsonl")}
-        window = None
+        window, scene_sampler = None, None
         if settings["schedule"] == "window":
             window = _restore_window(out, settings, space, done, batch, budget)
-            scene_sampler = window.sampler
         else:
             scene_sampler = _restore_sampler(out, settings, space, done, batch)
         appender = _Appender(out / "episodes.jsonl")
@@ -454,46 +501,11 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
             raise MiningError(str(error)) from None
         try:
             with pool:
-                counted = [r for r in done.values() if r.get("failure") and not r.get("error")]
-                found, failed = {cluster_id(r) for r in counted}, [len(counted)]  # for the progress bar
-                chunk = scene_sampler.fed // batch if window is None else budget // batch + 1  # (chunks: not used)
-                seen = {cluster_id(done[i]) for i in range(scene_sampler.fed)
-                        if done[i].get("failure") and not done[i].get("error")}
-                lookahead = 1 if is_adaptive(sampler) else LOOKAHEAD_CHUNKS
-                while chunk * batch < budget:
-                    # an adaptive sampler draws a chunk only once it has been fed the last one's outcomes;
-                    # a non-adaptive one learns nothing from them, so several whole chunks go to the
-                    # workers at once (the same draws, without idle workers at the end of every chunk)
-                    count = max(1, min(lookahead, budget // batch - chunk))
-                    draws = [scene_sampler.draw(batch) for _ in range(count)]
-                    first = chunk * batch
-                    indices = range(first, first + count * batch)
-                    pairs = [pair for drawn in draws for pair in drawn]
-                    specs = {i: space.decode(point) for i, (point, _) in zip(indices, pairs)}
-                    tasks = [_task(i, specs[i], policy, reference, settings, out) for i in indices
-                             if i not in done and i < budget]
-                    by_id = {t["id"]: t for t in tasks}
-
-                    def handle(result: Dict[str, Any]) -> None:
-                        task = by_id[result["id"]]
-                        record = _complete(result, task, specs[task["index"]], sampler, out)
-                        appender.append(record)
-                        done[record["index"]] = record
-                        if record.get("failure") and not record.get("error"):
-                            found.add(cluster_id(record))
-                            failed[0] += 1
-                        if bar is not None:
-                            bar.update(1)
-                            bar.set_postfix(failures=failed[0], clusters=len(found))
-
-                    pool.run(tasks, handle)
-                    if all(i in done for i in indices):
-                        for i, (point, info) in zip(indices, pairs):
-                            scene_sampler.feed(point, info, _feedback(done[i], seen, feedback))
-                        atomic_write_bytes(out / "sampler.pkl", scene_sampler.dumps())
-                    chunk += count
+                recorder = _Recorder(appender, done, sampler, out, bar)
                 if window is not None:
-                    _run_window(window, pool, space, settings, out, done, budget, appender, bar, found, failed)
+                    _run_window(window, pool, space, settings, out, recorder, budget)
+                else:
+                    _run_chunks(scene_sampler, pool, space, settings, out, recorder, budget, batch)
         finally:
             appender.close()
             if bar is not None:
