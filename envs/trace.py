@@ -48,7 +48,7 @@ class EpisodeTrace:
     states: List[Dict[str, List[float]]] = field(default_factory=list)
     events: List[Dict[str, Any]] = field(default_factory=list)
     kinds: Dict[str, str] = field(default_factory=dict)
-    """Actor name -> element-vocabulary type (ego, car, truck, pedestrian, obstacle)."""
+    """Actor name -> element-vocabulary type (``scenario_bank.elements.PARTICIPANTS``)."""
     fixed_params: Dict[str, Any] = field(default_factory=dict)
     """Global parameters the reset fixed (``options={"params": ...}``, failure mining); a replay fixes them again."""
     version: int = TRACE_VERSION

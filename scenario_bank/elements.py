@@ -44,12 +44,17 @@ __all__ = [
 ]
 
 ROADS = ("highway", "straight_road", "intersection", "t_junction", "three_way", "roundabout", "merge")
-PARTICIPANTS = ("ego", "car", "truck", "pedestrian", "obstacle")
+PARTICIPANTS = ("ego", "car", "truck", "bus", "motorcycle", "bicycle", "pedestrian", "obstacle")
+"""Vans, SUVs and pickups are ``car``; scooters and cyclists ride a ``bicycle``; a motorcyclist a ``motorcycle``."""
 ACTIONS = (
     "brake", "stop", "accelerate", "lane_change_left", "lane_change_right", "cut_in", "merge",
     "turn_left", "turn_right", "cross", "collide", "keep_lane", "go_straight", "overtake", "drift",
     "collide_rear_end", "collide_side", "collide_head_on",
+    "u_turn", "reverse", "swerve", "pull_out",
 )
+"""``swerve``: a quick sideways move within or out of the lane that is not a completed lane change;
+``pull_out``: leaving a parking spot, the shoulder or a driveway into the traffic lane;
+``reverse``: driving backwards; ``u_turn``: turning round to drive the opposite way."""
 COLLISION_TYPES = ("collide_rear_end", "collide_side", "collide_head_on")
 """The collision-type actions (each comes with ``collide``)."""
 RELATIONS = ("ahead_of", "behind", "left_of", "right_of", "oncoming", "same_lane", "crossing_path")

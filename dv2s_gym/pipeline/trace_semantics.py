@@ -77,7 +77,8 @@ def _kind(name: str, kinds: Dict[str, str]) -> str:
     if name == "ego":
         return "ego"
     lowered = name.lower()
-    for word, kind in (("pedestrian", "pedestrian"), ("truck", "truck"), ("obstacle", "obstacle"),
+    for word, kind in (("pedestrian", "pedestrian"), ("truck", "truck"), ("bus", "bus"), ("motorcycle", "motorcycle"),
+                       ("bicycle", "bicycle"), ("obstacle", "obstacle"),
                        ("prop", "obstacle"), ("car", "car")):
         if word in lowered:
             return kind

@@ -9,7 +9,8 @@ Global parameters:
         ``urban_two_way``, ``urban_crossroads``, ``urban_t_junction``) or a path
         to an OpenDRIVE file.
 
-Classes: ``Car``, ``NPCCar``, ``Truck`` (drawn longer), ``Pedestrian``, ``Obstacle``
+Classes: ``Car``, ``NPCCar``, ``Truck`` and ``Bus`` (longer, wider), ``Motorcycle``, ``Bicycle``,
+``Pedestrian``, ``Obstacle``
 (a static prop on the road).
 
 The driving domain's behaviour library is used as is, with three repairs (see
@@ -80,6 +81,21 @@ class Truck(Car):
     """A truck: drawn and simulated longer and wider than a car."""
     width: 2.5
     length: 9
+
+class Bus(Truck):
+    """A bus: longer than a truck."""
+    width: 2.55
+    length: 12
+
+class Motorcycle(Vehicle, Steers):
+    """A motorcycle with its rider."""
+    width: 0.8
+    length: 2.2
+
+class Bicycle(Vehicle, Steers):
+    """A bicycle (or an e-scooter) with its rider."""
+    width: 0.7
+    length: 1.8
 
 class Pedestrian(Pedestrian, HighwayEnvActor, Walks):
     """A pedestrian; walks with SetWalkingDirectionAction / SetWalkingSpeedAction."""

@@ -432,7 +432,10 @@ class SpeedScheduledLateralController(PIDLateralController):
 
 _KIND_COLORS = {
     "Pedestrian": (255, 140, 0),
+    "Bus": (150, 100, 200),
     "Truck": (150, 100, 200),
+    "Motorcycle": (230, 60, 170),
+    "Bicycle": (230, 60, 170),
 }
 _EGO_COLOR = (50, 200, 0)
 _CAR_COLOR = (100, 200, 255)
@@ -481,10 +484,13 @@ def _along_heading(vel, heading: float) -> bool:
 
 
 def _vocabulary_kind(obj) -> str:
-    """The element-vocabulary type of a Scenic object: car, truck, pedestrian or obstacle."""
+    """The element-vocabulary type of a Scenic object (``scenario_bank.elements.PARTICIPANTS``)."""
     names = {cls.__name__ for cls in type(obj).__mro__}
     if isinstance(obj, Walks) or "Pedestrian" in names:
         return "pedestrian"
+    for cls_name, kind in (("Bus", "bus"), ("Motorcycle", "motorcycle"), ("Bicycle", "bicycle")):
+        if cls_name in names:
+            return kind
     if "Truck" in names:
         return "truck"
     if isinstance(obj, Steers) or getattr(obj, "isVehicle", False):
