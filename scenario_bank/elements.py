@@ -41,6 +41,7 @@ __all__ = [
     "normalize_elements",
     "element_set",
     "empty_elements",
+    "with_undirected",
 ]
 
 ROADS = ("highway", "straight_road", "intersection", "t_junction", "three_way", "roundabout", "merge")
@@ -50,11 +51,13 @@ ACTIONS = (
     "brake", "stop", "accelerate", "lane_change_left", "lane_change_right", "cut_in", "merge",
     "turn_left", "turn_right", "cross", "collide", "keep_lane", "go_straight", "overtake", "drift",
     "collide_rear_end", "collide_side", "collide_head_on",
-    "u_turn", "reverse", "swerve", "pull_out",
+    "u_turn", "reverse", "swerve", "pull_out", "lane_change",
 )
 """``swerve``: a quick sideways move within or out of the lane that is not a completed lane change;
 ``pull_out``: leaving a parking spot, the shoulder or a driveway into the traffic lane;
-``reverse``: driving backwards; ``u_turn``: turning round to drive the opposite way."""
+``reverse``: driving backwards; ``u_turn``: turning round to drive the opposite way;
+``lane_change``: a lane change whose direction the source does not give (the metrics match it with
+either ``lane_change_left`` or ``lane_change_right``, see :func:`with_undirected`)."""
 COLLISION_TYPES = ("collide_rear_end", "collide_side", "collide_head_on")
 """The collision-type actions (each comes with ``collide``)."""
 RELATIONS = ("ahead_of", "behind", "left_of", "right_of", "oncoming", "same_lane", "crossing_path")
@@ -122,3 +125,18 @@ def element_set(data: Mapping[str, Any]) -> FrozenSet[Element]:
     elements.update(("action", a, b) for a, b in data["actions"])
     elements.update(("relation", a, r, b) for a, r, b in data["relations"])
     return frozenset(elements)
+
+
+_DIRECTED = {"lane_change_left": "lane_change", "lane_change_right": "lane_change"}
+
+
+def with_undirected(elements: FrozenSet[Element]) -> FrozenSet[Element]:
+    """``elements`` plus the undirected form of each directed element it holds.
+
+    A source that says "changes lanes" without a side is labelled ``lane_change``;
+    a scenario that changes lanes to the left shows ``lane_change_left``. The metrics
+    widen the side they match against (never the side they divide by) with this, so
+    the undirected label is matched by either direction and a directed one only by itself.
+    """
+    extra = {("action", e[1], _DIRECTED[e[2]]) for e in elements if e[0] == "action" and e[2] in _DIRECTED}
+    return frozenset(elements) | extra

@@ -102,3 +102,17 @@ def test_trace_semantics_car_merging_from_a_side_road(side):
     # A car that stays on the side road does not merge.
     stays = [{**s, "Car1": [30.0, side * 15.0, -side * math.pi / 2, 0.0]} for s in states]
     assert ["car", "merge"] not in elements_from_trace(_trace(stays, map_name="urban_t_junction"))["actions"]
+
+
+def test_an_undirected_lane_change_is_matched_by_either_direction_and_not_the_reverse():
+    undirected = {"road": "highway", "participants": ["ego", "car"], "actions": [["car", "lane_change"]]}
+    left = {"road": "highway", "participants": ["ego", "car"], "actions": [["car", "lane_change_left"]]}
+    right = {"road": "highway", "participants": ["ego", "car"], "actions": [["car", "lane_change_right"]]}
+    assert semantic_preservation(undirected, left) == 1.0
+    assert semantic_preservation(undirected, right) == 1.0
+    # a directed label is not satisfied by an undirected description of it
+    assert semantic_preservation(left, undirected) == 0.75
+    assert semantic_preservation(left, right) == 0.75
+    # the truth says left, the description only "a lane change": nothing hallucinated
+    assert hallucination_rate(left, undirected) == 0.0
+    assert hallucination_rate(undirected, left) == 0.25

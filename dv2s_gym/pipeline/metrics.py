@@ -15,7 +15,7 @@ from __future__ import annotations
 import statistics
 from typing import Any, Dict, FrozenSet, Iterable, List, Mapping, Union
 
-from scenario_bank.elements import element_set
+from scenario_bank.elements import element_set, with_undirected
 
 __all__ = ["scs", "hallucination_rate", "semantic_preservation", "e2e_sc", "mean_sd", "as_set"]
 
@@ -30,7 +30,7 @@ def as_set(elements: Elements) -> FrozenSet:
 
 
 def _recall(reference: Elements, candidate: Elements) -> float:
-    ref, cand = as_set(reference), as_set(candidate)
+    ref, cand = as_set(reference), with_undirected(as_set(candidate))
     return len(ref & cand) / len(ref) if ref else 1.0
 
 
@@ -41,7 +41,7 @@ def scs(ground_truth: Elements, description: Elements) -> float:
 
 def hallucination_rate(ground_truth: Elements, description: Elements) -> float:
     """Hallucination Rate: share of described elements absent from the ground truth."""
-    gt, desc = as_set(ground_truth), as_set(description)
+    gt, desc = with_undirected(as_set(ground_truth)), as_set(description)
     return 1.0 - len(gt & desc) / len(desc) if desc else 0.0
 
 
