@@ -123,6 +123,21 @@ def test_paired_evaluation_runs_identical_episodes_before_and_after(tmp_path):
     assert again == before
 
 
+def test_held_out_workers_that_crash_or_hang_give_error_records_not_failures(tmp_path):
+    episodes = [(SOURCES[0], EVAL_SEED_BASE), (SOURCES[1], EVAL_SEED_BASE)]
+    store = HeldOutStore(tmp_path / "heldout.jsonl")
+    crashed = evaluate_heldout("before", "regress_misbehaving_policies:crash", episodes, store=store, bank_dir=None,
+                               workers=2, progress=False)
+    assert [(r["scenario"], r["seed"]) for r in crashed] == episodes
+    assert all("crashed" in r["error"] and "2 attempts" in r["error"] for r in crashed)
+    hung = evaluate_heldout("after", "regress_misbehaving_policies:hang", episodes[:1], store=store, bank_dir=None,
+                            workers=2, timeout=3, progress=False)
+    assert "hung" in hung[0]["error"]
+    # errors are left out of the pairs, never counted as failures, and run again on a reopened store
+    assert paired_summary(crashed[:1], hung)["errors"] == 1
+    assert HeldOutStore(tmp_path / "heldout.jsonl").records == {}
+
+
 def test_paired_summary_counts_and_drop():
     def records(outcomes):
         return [{"scenario": f"s{i % 2}", "seed": i, "failed": f, "error": None} for i, f in enumerate(outcomes)]

@@ -8,17 +8,16 @@ under the threshold, stall) report a failure, the same test the miner used to fi
 
 Results stream into a JSON-lines store (``one line per (role, scenario, seed)``, appended
 and fsynced), so an interrupted evaluation rerun with the same store runs only what is
-missing. Episodes run in a pool of ``workers`` processes (``OMP_NUM_THREADS=1``), each
-keeping its env and loaded policies between episodes.
+missing. Several workers run on the regression pool (:class:`dv2s_gym.regress.backends.LocalBackend`:
+each worker keeps its env and loaded policies between episodes; a worker that crashes or
+hangs past ``timeout`` is replaced and its episode run once more, then recorded as an error).
 """
 
 from __future__ import annotations
 
 import json
-import multiprocessing
 import os
 import sys
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
@@ -93,15 +92,16 @@ class HeldOutStore:
         return self.records.get((role, scenario, int(seed)))
 
 
-def _init_worker() -> None:
-    os.environ["OMP_NUM_THREADS"] = "1"
-
-
 def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, store: HeldOutStore,
                      bank_dir: Optional[str], env_config: Optional[Dict[str, Any]] = None, workers: int = 1,
-                     ttc_threshold: float = 1.0, progress: bool = True) -> List[Dict[str, Any]]:
-    """Run ``policy`` as ``role`` on every episode not yet in ``store``; returns the records in episode order."""
-    tasks = [{"role": role, "policy": policy, "scenario": scenario, "seed": int(seed), "bank_dir": bank_dir,
+                     ttc_threshold: float = 1.0, timeout: Optional[float] = None,
+                     progress: bool = True) -> List[Dict[str, Any]]:
+    """Run ``policy`` as ``role`` on every episode not yet in ``store``; returns the records in episode order.
+
+    ``timeout``: seconds one episode may take on a worker before it counts as hung (with
+    ``workers`` > 1; default that of :class:`~dv2s_gym.regress.backends.LocalBackend`).
+    """
+    tasks = [{"kind": "heldout", "role": role, "policy": policy, "scenario": scenario, "seed": int(seed), "bank_dir": bank_dir,
               "env_config": dict(env_config or {}), "ttc_threshold": ttc_threshold}
              for scenario, seed in episodes if store.get(role, scenario, seed) is None]
     bar = None
@@ -117,22 +117,15 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
                 if bar is not None:
                     bar.update(1)
         elif tasks:
-            context = multiprocessing.get_context("forkserver" if "forkserver" in multiprocessing.get_all_start_methods()
-                                                  else "spawn")
-            saved = os.environ.get("OMP_NUM_THREADS")
-            os.environ["OMP_NUM_THREADS"] = "1"
-            try:
-                with ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_init_worker) as pool:
-                    futures = [pool.submit(heldout_task, task) for task in tasks]
-                    for future in as_completed(futures):
-                        store.append(future.result())
-                        if bar is not None:
-                            bar.update(1)
-            finally:
-                if saved is None:
-                    os.environ.pop("OMP_NUM_THREADS", None)
-                else:
-                    os.environ["OMP_NUM_THREADS"] = saved
+            from dv2s_gym.regress.backends import LocalBackend
+
+            def finished(record: Dict[str, Any]) -> None:
+                store.append({"policy": policy, "failed": None, "failure": None, "result": None, **record})
+                if bar is not None:
+                    bar.update(1)
+
+            with LocalBackend(workers=workers, timeout=timeout) as backend:
+                backend.run(tasks, finished)
     finally:
         if bar is not None:
             bar.close()

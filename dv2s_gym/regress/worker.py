@@ -62,7 +62,8 @@ def run_task(task: Dict[str, Any]) -> Dict[str, Any]:
     """Run one episode described by ``task`` (see the module docstring) and return its result dict.
 
     A task with ``"kind": "mine"`` is a failure-mining episode
-    (:func:`dv2s_gym.mining.worker.run_mine_task`); the pools serve both kinds.
+    (:func:`dv2s_gym.mining.worker.run_mine_task`), one with ``"kind": "heldout"`` an episode of
+    the loop's held-out evaluation (:func:`dv2s_gym.mining.heldout.heldout_task`); the pools serve every kind.
     """
     from policies.evaluation import run_episode
     from policies.worker_cache import drop_env, env_for, policy_for
@@ -71,6 +72,10 @@ def run_task(task: Dict[str, Any]) -> Dict[str, Any]:
         from dv2s_gym.mining.worker import run_mine_task
 
         return run_mine_task(task)
+    if task.get("kind") == "heldout":
+        from dv2s_gym.mining.heldout import heldout_task
+
+        return heldout_task(task)
 
     env_key = None
     try:
