@@ -9,16 +9,18 @@ A folder is a bank when at least one of its subfolders holds a ``scenario.scenic
 or a ``meta.json``; a missing or empty folder is a new, empty bank. Any other
 folder is refused (:class:`NotABankError`) rather than read as broken entries.
 
-Nothing but entries is written into the bank folder: the index (a cache of every
-entry's metadata) and the lock writers take live in the user cache directory
-(:mod:`scenario_bank.cache`, one folder per bank, keyed by its path), so a
-read-only bank (e.g. the one shipped inside an installed package) is fully usable
-for reading.
+Nothing but entries and the writers' lock file (the hidden ``.dv2s-writers.lock``, created
+by the first write) is written into the bank folder: the index (a cache of every entry's
+metadata) lives in the user cache directory (:mod:`scenario_bank.cache`, one folder per
+bank, keyed by its path), so a read-only bank (e.g. the one shipped inside an installed
+package) is fully usable for reading. The lock lives beside the entries so that every writer
+of a bank takes the same lock, whatever its user, cache directory or host (on a shared
+file system whose ``flock`` is honoured across clients, as NFSv4's is on Linux).
 
 Writes are atomic: an entry is assembled in a hidden staging folder and renamed
 into place in one step, so a crash or a full disk leaves either the whole entry
 or nothing. Imports of several entries keep a journal and are rolled back if
-they did not finish. Concurrent writers (sharing a cache directory) serialise on the lock; readers never
+they did not finish. Concurrent writers serialise on the lock; readers never
 block. The index is rebuilt from the sidecars whenever it is stale, and a
 missing, corrupt or hand-edited sidecar is reported for that entry while the
 rest of the bank stays usable.
@@ -88,6 +90,8 @@ SCRIPT = "scenario.scenic"
 SIDECAR = "meta.json"
 INDEX = "index.json"
 LEGACY_INDEX = "bank.json"  # written into the bank folder by dv2s-gym <= 0.1.0; still marks a bank
+WRITERS_LOCK = ".dv2s-writers.lock"
+"""The file writers of a bank lock (``flock``), in the bank folder itself."""
 _NAME = re.compile(r"^[a-z0-9][a-z0-9_\-]{0,99}$")
 _PROVENANCE_FIELDS = ("kind", "video", "parent", "seed", "generator", "model", "context_hash", "date")
 MINED_PROVENANCE_FIELDS = ("params", "backends", "policy", "failure", "cluster", "reproduction", "e2e_sc", "run",
@@ -337,7 +341,7 @@ class Bank:
 
     # ------------------------------------------------------------- loading
     def _cache_folder(self) -> Path:
-        """This bank's folder in the user cache (index and lock)."""
+        """This bank's folder in the user cache (its index)."""
         return keyed_cache_dir("banks", self.root)
 
     def _read_index(self) -> Dict[str, Any]:
@@ -540,8 +544,7 @@ class Bank:
     def _lock(self) -> Iterator[None]:
         try:
             self.root.mkdir(parents=True, exist_ok=True)
-            lock = self._cache_folder() / "lock"
-            handle = open(lock, "a+")
+            handle = open(self.root / WRITERS_LOCK, "a+")
         except OSError as error:
             raise _write_error(error, self.root) from None
         with handle:

@@ -19,9 +19,11 @@ from scenario_bank.bank import (
     BankError,
     BankVersionError,
     DuplicateScenarioError,
+    WRITERS_LOCK,
     UnknownScenarioError,
     content_hash,
 )
+from scenario_bank.cache import CACHE_ENV
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -143,7 +145,7 @@ def test_import_of_a_corrupt_or_foreign_archive_changes_nothing(bank, tmp_path):
     with pytest.raises(BankError, match="not a readable bank archive"):
         bank.import_archive(garbage)
     assert Bank(bank.root).names() == ["keep"]
-    assert not [p for p in bank.root.iterdir() if p.name.startswith(".")]
+    assert [p.name for p in bank.root.iterdir() if p.name.startswith(".")] == [WRITERS_LOCK]  # no staging left
 
 
 def test_bad_sidecars_are_reported_and_the_rest_stays_usable(bank):
@@ -260,6 +262,39 @@ def test_parallel_writers_never_lose_or_corrupt_entries(bank):
     assert sorted(index["entries"]) == reopened.names()
     for entry in reopened:
         assert entry.content_hash == content_hash(entry.script)
+
+
+_LOCKER = """
+import sys
+sys.path.insert(0, {root!r})
+from scenario_bank.bank import Bank
+bank = Bank({bank!r})
+print("trying", flush=True)
+with bank._lock():
+    print("got", flush=True)
+"""
+
+
+def test_writers_with_different_cache_directories_take_the_same_lock(bank, tmp_path, monkeypatch):
+    """Two users (or hosts) writing one bank: the lock is the bank's, not the writer's cache's."""
+    import select
+
+    add(bank, "first")
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache-a"))
+    env = {**os.environ, CACHE_ENV: str(tmp_path / "cache-b")}
+    with Bank(bank.root)._lock():
+        other = subprocess.Popen([sys.executable, "-c", _LOCKER.format(root=str(ROOT), bank=str(bank.root))],
+                                 stdout=subprocess.PIPE, text=True, env=env)
+        try:
+            assert other.stdout.readline().strip() == "trying"
+            ready, _, _ = select.select([other.stdout], [], [], 2.0)
+            assert not ready, "a writer with another cache directory took the lock we hold"
+        except BaseException:
+            other.kill()
+            raise
+    assert other.stdout.readline().strip() == "got"
+    assert other.wait(60) == 0
+    assert (bank.root / WRITERS_LOCK).is_file() and Bank(bank.root).names() == ["first"]
 
 
 def test_stale_index_is_rebuilt_from_sidecars(bank):

@@ -8,7 +8,7 @@ import shutil
 
 import pytest
 
-from scenario_bank.bank import BANK_DIR, Bank, near_duplicate, param_ranges
+from scenario_bank.bank import BANK_DIR, WRITERS_LOCK, Bank, near_duplicate, param_ranges
 from scenario_bank.sandbox import verify_script
 
 BASE = "highway_lead_vehicle_stopped"
@@ -141,4 +141,5 @@ def test_several_miners_writing_to_one_bank_keep_it_consistent(tmp_path, miners)
         indices += [m["index"] for m in entry.source.get("merged", [])]
         json.loads((entry.folder / "meta.json").read_text())  # whole, parseable sidecars
     assert sorted(indices) == sorted(index for index, _, _, _ in outcomes)  # every failure recorded exactly once
-    assert not list((tmp_path / "bank").glob(".*"))  # no staging or temporary leftovers
+    leftovers = [p.name for p in (tmp_path / "bank").glob(".*")]
+    assert leftovers == [WRITERS_LOCK]  # the writers' lock, and no staging or temporary leftovers
