@@ -23,40 +23,9 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 __all__ = ["HeldOutStore", "heldout_task", "evaluate_heldout", "paired_summary", "episode_failed"]
 
+from dv2s_gym.mining.worker import heldout_task
+
 Episode = Tuple[str, int]
-
-def _detect(result, trace, ttc_threshold: float) -> Optional[Dict[str, Any]]:
-    from dv2s_gym.mining.monitors import detect_failure
-
-    failure = detect_failure(result, trace, ttc_threshold=ttc_threshold)
-    return None if failure is None else failure.to_json()
-
-
-def heldout_task(task: Mapping[str, Any]) -> Dict[str, Any]:
-    """Run one episode in this process: ``task`` has role, policy, scenario, seed, bank_dir,
-    env_config, ttc_threshold. Returns ``{"role", "scenario", "seed", "policy", "failed",
-    "failure", "result", "error"}`` (an exception becomes ``error``, never a failure)."""
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    record: Dict[str, Any] = {"role": task["role"], "scenario": task["scenario"], "seed": int(task["seed"]),
-                              "policy": task["policy"], "failed": None, "failure": None, "result": None,
-                              "error": None}
-    env_key = None
-    try:
-        from policies.evaluation import run_episode
-        from policies.worker_cache import drop_env, env_for, policy_for
-
-        env_key, env = env_for(task.get("bank_dir"), task.get("env_config"))
-        policy = policy_for(task["policy"], env_key, env)
-        result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
-        failure = _detect(result, trace, float(task.get("ttc_threshold", 1.0)))
-    except Exception as error:  # reported, never counted as a failure of the policy
-        if env_key is not None:
-            drop_env(env_key)
-        record["error"] = " ".join(f"{type(error).__name__}: {error}".split())
-        return record
-    record.update(failed=failure is not None, failure=failure, result=result.to_json())
-    return record
-
 
 def episode_failed(record: Mapping[str, Any]) -> Optional[bool]:
     """The record's outcome: ``True`` failed, ``False`` did not, ``None`` an error."""

@@ -1,4 +1,6 @@
-"""One failure-mining episode in a worker process: :func:`run_mine_task`.
+"""Episodes of the miner and the loop in a worker process: :func:`run_mine_task` (one
+failure-mining episode) and :func:`heldout_task` (one episode of the loop's held-out evaluation,
+``"kind": "heldout"``, see :mod:`dv2s_gym.mining.heldout`).
 
 A mining task is a plain dict (shipped to the regression process pool or Ray, whose
 ``run_task`` hands ``"kind": "mine"`` tasks here):
@@ -20,11 +22,11 @@ from __future__ import annotations
 
 import os
 import traceback
-from typing import Any, Dict, Optional
+from typing import Any, Dict, Mapping, Optional
 
 from dv2s_gym.mining.monitors import FAILURE_TYPES, detect_failure, robustness
 
-__all__ = ["run_mine_task", "reference_avoids", "trace_name"]
+__all__ = ["run_mine_task", "heldout_task", "reference_avoids", "trace_name"]
 
 
 def trace_name(index: int) -> str:
@@ -91,4 +93,35 @@ def run_mine_task(task: Dict[str, Any]) -> Dict[str, Any]:
         if os.environ.get("DV2S_DEBUG"):
             message += "\n" + traceback.format_exc()
         record["error"] = message
+    return record
+
+
+def _heldout_failure(result, trace, ttc_threshold: float) -> Optional[Dict[str, Any]]:
+    failure = detect_failure(result, trace, ttc_threshold=ttc_threshold)
+    return None if failure is None else failure.to_json()
+
+
+def heldout_task(task: Mapping[str, Any]) -> Dict[str, Any]:
+    """Run one episode in this process: ``task`` has role, policy, scenario, seed, bank_dir,
+    env_config, ttc_threshold. Returns ``{"role", "scenario", "seed", "policy", "failed",
+    "failure", "result", "error"}`` (an exception becomes ``error``, never a failure)."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    record: Dict[str, Any] = {"role": task["role"], "scenario": task["scenario"], "seed": int(task["seed"]),
+                              "policy": task["policy"], "failed": None, "failure": None, "result": None,
+                              "error": None}
+    env_key = None
+    try:
+        from policies.evaluation import run_episode
+        from policies.worker_cache import drop_env, env_for, policy_for
+
+        env_key, env = env_for(task.get("bank_dir"), task.get("env_config"))
+        policy = policy_for(task["policy"], env_key, env)
+        result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
+        failure = _heldout_failure(result, trace, float(task.get("ttc_threshold", 1.0)))
+    except Exception as error:  # reported, never counted as a failure of the policy
+        if env_key is not None:
+            drop_env(env_key)
+        record["error"] = " ".join(f"{type(error).__name__}: {error}".split())
+        return record
+    record.update(failed=failure is not None, failure=failure, result=result.to_json())
     return record

@@ -73,7 +73,7 @@ def run_task(task: Dict[str, Any]) -> Dict[str, Any]:
 
         return run_mine_task(task)
     if task.get("kind") == "heldout":
-        from dv2s_gym.mining.heldout import heldout_task
+        from dv2s_gym.mining.worker import heldout_task
 
         return heldout_task(task)
 
