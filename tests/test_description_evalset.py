@@ -62,3 +62,27 @@ def test_eval_sg_reads_the_folder_with_labels():
     assert len(items) == len(_stems(".txt"))
     assert all(item.elements is not None and item.description for item in items)
     assert {item.use_case for item in items} == GROUPS
+
+
+def test_bench_analysis_counts_lost_elements_and_silent_drops():
+    from bench.bench_sg_descriptions import analyse
+
+    stem = "nhtsa_lead_stopped_a"  # straight_road; ego, car; car stop; car ahead_of ego; car same_lane ego
+    exact = read_label(FOLDER / f"{stem}.label.json").elements
+    partial = dict(exact, actions=[], relations=[["car", "ahead_of", "ego"]])
+    report = {"items": [
+        {"stem": stem, "use_case": "nhtsa_typology", "metrics": {"SP": 1.0}, "ok": True,
+         "detail": {"simulated": exact, "warnings": []}},
+        {"stem": stem, "use_case": "nhtsa_typology", "metrics": {"SP": 0.6}, "ok": True,
+         "detail": {"simulated": partial, "warnings": []}},
+        {"stem": stem, "use_case": "crash_report", "metrics": {"SP": 0.0}, "ok": False,
+         "detail": {"simulated": None, "warnings": ["could not place 'x': no participant type"]}},
+    ]}
+    result = analyse(report)
+    assert result["runs"] == 2 and result["items"] == 3
+    assert result["groups"]["nhtsa_typology"]["SP"] == "0.800 ± 0.283"
+    assert dict(result["lost"])["action car stop"] == 2
+    assert dict(result["lost"])["relation car same_lane ego"] == 2
+    assert result["lost_by_kind"]["road"] == "1/3"
+    assert result["silent_drops"] == 1  # the second item lost elements and said nothing
+    assert result["warnings"] == [("could not place 'x'", 1)]
