@@ -86,3 +86,9 @@ def test_bench_analysis_counts_lost_elements_and_silent_drops():
     assert result["lost_by_kind"]["road"] == "1/3"
     assert result["silent_drops"] == 1  # the second item lost elements and said nothing
     assert result["warnings"] == [("could not place 'x'", 1)]
+
+
+def test_clip_evalset_does_not_read_the_descriptions():
+    """`dv2s eval dra|e2e` on the clip set (the parent folder) sees no description of this subfolder."""
+    stems = {item.stem for item in collect_items(FOLDER.parent)}
+    assert stems and not stems & _stems(".txt")
