@@ -202,3 +202,30 @@ def test_llm_repair_loop_upgrades_scenic2_without_a_repair_round():
     assert result.ok and result.attempts == 1 and server.request_count == 1 and result.failures == []
     assert result.script == fixed
     assert len(result.scenic2_rewrites) == 3 and all("new Car" in r for r in result.scenic2_rewrites)
+
+
+# corpus scripts whose constructs DV2S-v0 provides: upgraded, with their map line swapped to the shipped
+# urban_crossroads (the allowlist refuses their '../..' paths), they sample and run a few steps
+RUNS_IN_ENV = ["badlyParkedCarPullingIn", "car", "carlaChallenge2", "carlaChallenge3", "oas_scenario_03",
+               "oas_scenario_04", "pedestrianAcrossRoad"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", RUNS_IN_ENV)
+def test_corpus_script_runs_in_dv2s_env_when_upgraded(name):
+    import re
+
+    import gymnasium as gym
+
+    source = (ROOT / "tests" / "data" / "scenic2" / f"{name}.scenic").read_text()
+    source = re.sub(r"^param map = .*$", "param map = 'urban_crossroads'", source, count=1, flags=re.M)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        env = gym.make("dv2s_gym:DV2S-v0", scenario=source,
+                       config={"upgrade_scenic2": True, "duration": 1.0, "max_sample_iterations": 500})
+        env.reset(seed=0)
+    assert any("scenic2:" in str(w.message) for w in caught)
+    for _ in range(3):
+        env.step(1)
+    assert env.unwrapped.road.vehicles
+    env.close()
