@@ -174,7 +174,6 @@ def upgrade_scenic2(source: str) -> Upgrade:
             "requireVisible: Scenic 2 required objects to be visible from ego by default; Scenic 3 keeps "
             "that only in 2D mode (the env compiles with mode2D=True); no 'with requireVisible' was added"
         )
-    notes.extend(_unhandled(source, sig))
     return Upgrade("".join(lines), rewrites, notes)
 
 
@@ -191,23 +190,6 @@ def _old_monitors(sig: Sequence[tokenize.TokenInfo]) -> Tuple[List[Tuple[int, in
                 notes.append(f"line {tok.start[0]}: not translated: Scenic 2 monitor {sig[i + 1].string!r} "
                              "inside a block; add '()' and a 'require monitor' yourself")
     return found, notes
-
-
-_UNHANDLED = [
-    (re.compile(r"^\s*import\s+scenic\.simulators\.gta|scenic\.simulators\.gta"),
-     "the GTA simulator interface was removed in Scenic 3; the script needs another model"),
-    (re.compile(r"\bsetBlueprint\b"), "CARLA blueprint setters are not translated"),
-]
-
-
-def _unhandled(source: str, sig: Sequence[tokenize.TokenInfo]) -> List[str]:
-    notes = []
-    for number, line in enumerate(source.splitlines(), 1):
-        code = line.split("#", 1)[0]
-        for pattern, why in _UNHANDLED:
-            if pattern.search(code):
-                notes.append(f"line {number}: not translated: {why}")
-    return notes
 
 
 _SCENIC2_ERRORS = re.compile(
