@@ -17,7 +17,7 @@ counted for the issue's target; ``scenic2/``: Scenic 2 syntax, counted apart) it
 
 A script *runs* in a simulator when it compiles, samples and steps for every seed without an
 exception. Each attempt is a child process with a time limit (a timeout is a failure). A DV2S
-failure is *clear* when it is a ``DV2SError`` whose message names the construct in backticks.
+failure is *clear* when it is a ``DV2SError`` that names its cause (see :func:`failure_construct`).
 Prints the per-script table and both counts, writes ``bench/carla_corpus_results.json``.
 """
 
@@ -52,16 +52,39 @@ def _first_line(text: str) -> str:
     return text.splitlines()[0][:300] if text else ""
 
 
+def failure_construct(error: BaseException) -> Optional[str]:
+    """What a DV2S failure names as its cause, or None when the message names nothing.
+
+    * :class:`UnsafeScenarioError`: the construct of its first safety finding;
+    * :class:`SceneSamplingError`: the requirement that rejects most (``requirement on line N``);
+    * any other ``DV2SError``: the first name its message puts in backticks.
+    Errors that are not ``DV2SError`` (bare Python or Scenic exceptions) name nothing.
+    """
+    from envs.errors import DV2SError, SceneSamplingError
+    from scenario_bank.safety import UnsafeScenarioError
+
+    message = str(error)
+    if isinstance(error, UnsafeScenarioError):
+        findings = getattr(error, "findings", None) or []
+        return str(findings[0].construct) if findings else None
+    if not isinstance(error, DV2SError):
+        return None
+    if isinstance(error, SceneSamplingError):
+        found = re.search(r"requirement on line \d+", message)
+        return found.group(0) if found else None
+    names = CONSTRUCT.findall(message)
+    return names[0] if names else None
+
+
 def _failure(error: BaseException) -> Dict[str, object]:
     from envs.errors import DV2SError
 
     message = str(error).strip() or type(error).__name__
-    names = CONSTRUCT.findall(message)
     return {
         "runs": False,
         "error": type(error).__name__,
         "dv2s_error": isinstance(error, DV2SError),
-        "construct": names[0] if names else None,
+        "construct": failure_construct(error),
         "message": _first_line(message),
         "traceback_tail": "".join(traceback.format_exception(error)[-3:])[-1500:],
     }
@@ -124,6 +147,7 @@ def attempt_newtonian(path: str, seeds: List[int], steps: int) -> Dict[str, obje
     except Exception as error:
         out = _failure(error)
         out["dv2s_error"] = False
+        out["construct"] = None  # Scenic's own errors are not classified
         out["steps"] = stepped
         return out
     return {"runs": True, "steps": stepped, "rejected_simulations": rejected}
@@ -211,8 +235,8 @@ def summarize(rows: List[Dict[str, object]]) -> Dict[str, object]:
             "scripts": len(part),
             "dv2s_runs": sum(r["dv2s"]["runs"] for r in part),
             "newtonian_runs": sum(r["newtonian"]["runs"] for r in part),
-            "dv2s_fail_clear": sum(bool(f.get("dv2s_error") and f.get("construct")) for f in fails),
-            "dv2s_fail_unclear": sum(not (f.get("dv2s_error") and f.get("construct")) for f in fails),
+            "dv2s_fail_clear": sum(bool(f.get("construct")) for f in fails),
+            "dv2s_fail_unclear": sum(not f.get("construct") for f in fails),
             "dv2s_failures_by_construct": dict(Counter(f.get("construct") or f"<{f.get('error')}>" for f in fails).most_common()),
             "newtonian_failures_by_error": dict(Counter(
                 f"{r['newtonian'].get('error')}: {r['newtonian'].get('message', '')[:80]}"

@@ -1,8 +1,10 @@
 """The public CARLA-model Scenic corpus (tests/data/carla_corpus): each script runs in DV2S-v0 or fails clearly.
 
 "Clearly" means a :class:`envs.errors.DV2SError` whose message names the construct in
-backticks (e.g. "unsupported construct `Debris`"); any other exception (an AttributeError,
-a bare traceback from Scenic or highway-env) fails the test with its traceback.
+backticks (e.g. "unsupported construct `Debris`"), a :class:`SceneSamplingError` naming the
+requirement that rejects, or the safety check's :class:`UnsafeScenarioError` (line and construct
+of each finding). Any other exception (an AttributeError, a bare traceback from Scenic or
+highway-env) fails the test with its traceback.
 The counts against Scenic's own Newtonian simulator are in ``python -m bench.bench_carla_corpus``.
 """
 
@@ -15,12 +17,12 @@ import gymnasium as gym
 import pytest
 
 import dv2s_gym  # noqa: F401  (registers DV2S-v0)
-from bench.bench_carla_corpus import CORPUS, corpus_scripts, summarize
-from envs.errors import DV2SError
+from bench.bench_carla_corpus import CORPUS, corpus_scripts, failure_construct, summarize
+from envs.errors import DV2SError, SceneSamplingError, UnsupportedConstructError
+from scenario_bank.safety import SafetyFinding, UnsafeScenarioError
 
 SCRIPTS = corpus_scripts()
 STEPS = 10
-CONSTRUCT = re.compile(r"`[^`]+`")
 
 
 def test_corpus_has_at_least_30_scenic3_scripts_each_with_its_source_recorded():
@@ -40,6 +42,14 @@ def test_corpus_map_lines_name_a_shipped_carla_town(path: Path):
     for relative in maps:
         assert re.fullmatch(r"maps/Town0[12]\.xodr", relative)
         assert (path.parent / relative).resolve().is_file()
+
+
+def test_failure_construct_names_the_cause_or_nothing():
+    assert failure_construct(UnsupportedConstructError("line 3: unsupported construct `Debris`.")) == "Debris"
+    assert failure_construct(SceneSamplingError("... 'User requirement violation: requirement on line 78' (9x)")) == "requirement on line 78"
+    assert failure_construct(UnsafeScenarioError([SafetyFinding(3, "import os", "no imports")])) == "import os"
+    assert failure_construct(DV2SError("Scenic could not compile the scenario: KeyError: 'road69'")) is None
+    assert failure_construct(AttributeError("'Car' object has no attribute `x`")) is None
 
 
 def test_summarize_counts_runs_and_clear_failures():
@@ -69,8 +79,8 @@ def test_corpus_script_runs_in_dv2s_or_names_the_construct(path: Path):
             _, _, terminated, truncated, _ = env.step(1)
             if terminated or truncated:
                 break
-    except DV2SError as error:
-        assert CONSTRUCT.search(str(error)), f"{path.name}: {type(error).__name__} does not name the construct: {error}"
+    except (DV2SError, UnsafeScenarioError) as error:
+        assert failure_construct(error), f"{path.name}: {type(error).__name__} does not name the construct: {error}"
     finally:
         if env is not None:
             env.close()
