@@ -145,3 +145,5 @@ def test_analysis_reads_a_long_blue_vehicle_as_a_truck_and_a_yellow_one_as_a_car
     assert kinds.count("truck") == 1 and set(kinds) == {"car", "truck"} and kinds.count("car") >= 4, kinds
     assert result.debug["scale_px_per_m"] == pytest.approx(5.0, rel=0.08)
     assert result.debug["scale"]["vehicle_views"] >= 12
+    # the lane lines' spacing at highway-env's 4 m lane width, measured beside it
+    assert result.debug["scale"]["lane_px_per_m"] == pytest.approx(5.0, rel=0.03)

@@ -20,8 +20,9 @@ COMMON_WIDTH_M = 2.0
 OUTLINE_PX = 2.0             # the 1-px outline on both sides, not part of the coloured body
 LONG_RATIO = 1.6             # a vehicle this many common lengths long is a truck (or a bus)
 LANE_WIDTH_M = 4.0           # highway-env's lane width (StraightLane.DEFAULT_WIDTH)
+LANE_RULER_M = LANE_WIDTH_M
 
-__all__ = ["ScaleEstimate", "body_scale", "estimate_scale", "is_long_vehicle", "COMMON_LENGTH_M",
+__all__ = ["lane_width_scale", "LANE_RULER_M", "ScaleEstimate", "body_scale", "estimate_scale", "is_long_vehicle", "COMMON_LENGTH_M",
            "LONG_RATIO"]
 
 
@@ -51,7 +52,7 @@ class ScaleEstimate:
                "common_width_px": round(self.common_width_px, 2), "vehicle_views": self.samples}
         if self.lane_px is not None:
             out["lane_px"] = round(self.lane_px, 2)
-            out["lane_width_m_at_this_scale"] = round(self.lane_px / self.px_per_m, 2)
+            out["lane_px_per_m"] = round(self.lane_px / LANE_WIDTH_M, 3)
         return out
 
 
@@ -85,3 +86,19 @@ def estimate_scale(ego_sizes: Sequence[Tuple[float, float]], other_sizes: Iterab
         gaps.extend(x for x in d.tolist() if 0.5 * LANE_WIDTH_M * scale < x < 2.0 * LANE_WIDTH_M * scale)
     lane_px = float(np.median(gaps)) if gaps else None
     return ScaleEstimate(scale, length, width, len(views), lane_px)
+
+
+def lane_width_scale(frames, body_px_per_m: float, min_gaps: int = 10) -> Optional[float]:
+    """Pixels per metre from the spacing of adjacent parallel lane lines (highway-env lanes are
+    :data:`LANE_WIDTH_M` wide); None when too few spacings agree with the vehicles' scale
+    (``body_px_per_m``, within 0.6x to 1.25x)."""
+    gaps: List[float] = []
+    lo, hi = 0.6 * LANE_WIDTH_M * body_px_per_m, 1.25 * LANE_WIDTH_M * body_px_per_m
+    for fr in frames:
+        for pos in (fr.lines.h_pos, fr.lines.v_pos):
+            if len(pos) >= 2:
+                d = np.diff(np.sort(np.asarray(pos, float)))
+                gaps.extend(x for x in d.tolist() if lo <= x <= hi)
+    if len(gaps) < min_gaps:
+        return None
+    return float(np.median(gaps)) / LANE_WIDTH_M
