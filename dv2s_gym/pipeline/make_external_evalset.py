@@ -10,6 +10,12 @@ highway-env's API (:meth:`IDMVehicle.make_on_lane`, ``target_speed``,
 :class:`IDMVehicle` too (painted in highway-env's ego green), so it keeps its
 distance like a driver, on a scripted lane and route.
 
+The later scripts (``cls_*``, ``stock_*``, ``rb_two_cars_pass_entry``) bring what the first ones did not
+show: stock vehicle classes drawn in the colours highway-env gives them (no colour set: ``LinearVehicle``
+and its Aggressive/Defensive subclasses yellow, ``IDMVehicle`` blue, ``MDPVehicle`` green), a 10 m vehicle,
+other ``scaling`` values and screen sizes (:attr:`Script.scaling`, :attr:`Script.size`), a roundabout with
+two cars, and highway-v0's own traffic kept as ``reset`` made it (:attr:`Script.stock_traffic`).
+
 Each :class:`Script` carries, written by hand, the label of what it scripts
 (elements in the vocabulary of :mod:`scenario_bank.elements`) and a reference
 description. Nothing of the project reads the clips to make the labels. The only
