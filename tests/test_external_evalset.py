@@ -97,16 +97,18 @@ def test_stock_classes_are_drawn_in_highway_envs_own_colours(tmp_path):
                        "DefensiveVehicle": VehicleGraphics.YELLOW}
 
 
-def test_shipped_clip_is_what_the_builder_renders(tmp_path):
+@pytest.mark.parametrize("name", ["hw_cut_in_from_left", "stock_traffic_ego_lane_change"])
+def test_shipped_clip_is_what_the_builder_renders(tmp_path, name):
+    """Deterministic, also with highway-env's own (seeded) traffic and another scaling and screen."""
     from dv2s_gym.pipeline.video import read_video
     import numpy as np
 
-    script = next(s for s in SCRIPTS if s.name == "hw_cut_in_from_left")
+    script = next(s for s in SCRIPTS if s.name == name)
     path = tmp_path / "clip.webm"
     result = render_script(script, 1, path)
     assert result["problem"] is None
     fresh = read_video(path, fps=None, max_frames=200).frames
-    shipped = read_video(EXTERNAL_EVALSET_DIR / "hw_cut_in_from_left_v1.webm", fps=None, max_frames=200).frames
+    shipped = read_video(EXTERNAL_EVALSET_DIR / f"{name}_v1.webm", fps=None, max_frames=200).frames
     assert len(fresh) == len(shipped) == result["frames"]
     assert all(np.array_equal(a, b) for a, b in zip(fresh, shipped))
 
