@@ -9,8 +9,8 @@ To run this file using the Carla simulator:
 """
 
 # SET MAP AND MODEL (i.e. definitions of all referenceable vehicle types, road library, etc)
-param map = localPath('maps/Town01.xodr')
-param carla_map = 'Town01'
+param map = localPath('maps/Town04.xodr')
+param carla_map = 'Town04'
 model scenic.simulators.carla.model
 
 # CONSTANTS

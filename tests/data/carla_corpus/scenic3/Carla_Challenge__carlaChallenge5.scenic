@@ -5,8 +5,8 @@ Ego-vehicle performs a lane changing to evade a leading vehicle, which is moving
 To run this file using the Carla simulator:
     scenic examples/carla/Carla_Challenge/carlaChallenge5.scenic --2d --model scenic.simulators.carla.model --simulate
 """
-param map = localPath('maps/Town01.xodr')
-param carla_map = 'Town01'
+param map = localPath('maps/Town04.xodr')
+param carla_map = 'Town04'
 model scenic.simulators.carla.model
 
 #CONSTANTS

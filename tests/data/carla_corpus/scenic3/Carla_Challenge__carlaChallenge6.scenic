@@ -9,8 +9,8 @@ To run this file using the Carla simulator:
 
 # N.B. Town07 is not included with CARLA by default; see installation instructions at
 # https://carla.readthedocs.io/en/latest/start_quickstart/#import-additional-assets
-param map = localPath('maps/Town02.xodr')
-param carla_map = 'Town02'
+param map = localPath('maps/Town07.xodr')
+param carla_map = 'Town07'
 model scenic.simulators.carla.model
 
 

@@ -7,8 +7,8 @@ Note: The traffic light control is not implemented yet, but it will soon be.
 To run this file using the Carla simulator:
     scenic examples/carla/Carla_Challenge/carlaChallenge7.scenic --2d --model scenic.simulators.carla.model --simulate
 """
-param map = localPath('maps/Town01.xodr')
-param carla_map = 'Town01'
+param map = localPath('maps/Town04.xodr')
+param carla_map = 'Town04'
 model scenic.simulators.carla.model
 
 DELAY_TIME_1 = 1 # the delay time for ego

@@ -5,8 +5,8 @@ Ego-vehicle is performing a right turn at an intersection, yielding to crossing 
 To run this file using the Carla simulator:
     scenic examples/carla/Carla_Challenge/carlaChallenge9.scenic --2d --model scenic.simulators.carla.model --simulate
 """
-param map = localPath('maps/Town01.xodr')
-param carla_map = 'Town01'
+param map = localPath('maps/Town04.xodr')
+param carla_map = 'Town04'
 model scenic.simulators.carla.model
 
 DELAY_TIME_1 = 1 # the delay time for ego

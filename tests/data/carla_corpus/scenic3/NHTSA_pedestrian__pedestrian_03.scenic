@@ -13,8 +13,8 @@ To run this file using the Carla simulator:
 # MAP AND MODEL                 #
 #################################
 
-param map = localPath('maps/Town01.xodr')
-param carla_map = 'Town01'
+param map = localPath('maps/Town04.xodr')
+param carla_map = 'Town04'
 model scenic.simulators.carla.model
 
 #################################

@@ -3,7 +3,7 @@ To run this file using the Carla simulator:
     scenic examples/carla/adjacentLanes.scenic --2d --model scenic.simulators.carla.model
 '''
 
-param map = localPath('maps/Town02.xodr')
+param map = localPath('maps/Town04.xodr')
 model scenic.simulators.carla.model
 
 # Cars on adjacent lanes of the first section of Road 69

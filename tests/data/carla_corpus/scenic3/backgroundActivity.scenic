@@ -7,8 +7,8 @@ To run this file using the Carla simulator:
     scenic examples/carla/backgroundActivity.scenic --2d --model scenic.simulators.carla.model --simulate
 """
 # SET MAP AND MODEL (i.e. definitions of all referenceable vehicle types, road library, etc)
-param map = localPath('maps/Town01.xodr')  # or other CARLA map that definitely works
-param carla_map = 'Town01'
+param map = localPath('maps/Town04.xodr')  # or other CARLA map that definitely works
+param carla_map = 'Town04'
 model scenic.simulators.carla.model
 
 EGO_MODEL = "vehicle.lincoln.mkz_2017"

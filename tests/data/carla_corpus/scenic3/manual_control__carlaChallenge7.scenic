@@ -9,8 +9,8 @@ To run this file using the Carla simulator:
 """
 
 ## SET MAP AND MODEL (i.e. definitions of all referenceable vehicle types, road library, etc)
-param map = localPath('maps/Town01.xodr')  # or other CARLA map that definitely works
-param carla_map = 'Town01'
+param map = localPath('maps/Town04.xodr')  # or other CARLA map that definitely works
+param carla_map = 'Town04'
 param render = 0
 model scenic.simulators.carla.model
 
