@@ -28,6 +28,7 @@ import json
 import os
 import re
 import subprocess
+import tempfile
 import sys
 import time
 import traceback
@@ -170,7 +171,20 @@ def _launch(kind: str, path: Path, seeds: List[int], steps: int) -> subprocess.P
     env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     cmd = [sys.executable, "-m", "bench.bench_carla_corpus", "--child", kind, str(path),
            "--steps", str(steps), "--seeds", *map(str, seeds)]
-    return subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # files, not pipes: a child that prints more than a pipe holds would block until the timeout
+    out, err = tempfile.TemporaryFile("w+"), tempfile.TemporaryFile("w+")
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=out, stderr=err, text=True)
+    proc.outputs = (out, err)  # type: ignore[attr-defined]
+    return proc
+
+
+def _outputs(proc: subprocess.Popen) -> tuple:
+    texts = []
+    for handle in proc.outputs:  # type: ignore[attr-defined]
+        handle.seek(0)
+        texts.append(handle.read())
+        handle.close()
+    return tuple(texts)
 
 
 def _collect(proc: subprocess.Popen, out: str, err: str) -> Dict[str, object]:
@@ -198,11 +212,12 @@ def run_all(scripts: List[Path], seeds: List[int], steps: int, workers: int, tim
                 continue
             if proc.poll() is None:
                 proc.kill()
-                proc.communicate()
+                proc.wait()
+                _outputs(proc)
                 outcome = {"runs": False, "error": "Timeout", "dv2s_error": False, "construct": None,
                            "message": f"no result within {timeout:.0f} s"}
             else:
-                out, err = proc.communicate()
+                out, err = _outputs(proc)
                 outcome = _collect(proc, out, err)
             outcome["seconds"] = round(elapsed, 1)
             results[(kind, path)] = outcome
