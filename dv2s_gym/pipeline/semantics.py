@@ -43,6 +43,7 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
+from dv2s_gym.pipeline.semantics_road import distance_m, road_features, speed_kph, strip_absences, time_s
 from scenario_bank.elements import normalize_elements
 
 __all__ = ["Entity", "ParsedDescription", "parse_description", "elements_from_text", "ROAD_PATTERNS"]
@@ -59,25 +60,52 @@ _NUMBERS = {
 _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
     "car": [
         (r"cars", True), (r"vehicles", True), (r"sedans", True), (r"suvs", True), (r"vans", True),
-        (r"taxis", True), (r"motorcycles", True), (r"motorbikes", True),
+        (r"taxis", True), (r"pickups", True), (r"jeeps", True), (r"minivans", True),
+        (r"automobiles", True), (r"adversarial (?:agents|vehicles|cars)", True), (r"npcs", True),
+        (r"(?:adversarial|adversary|npc|background) (?:agent|vehicle|car|actor)", False),
+        (r"adversary", False), (r"npc", False), (r"v[2-9]", False), (r"vehicle [2-9]", False),
         (r"car", False), (r"vehicle", False), (r"sedan", False), (r"suv", False), (r"van", False),
         (r"minivan", False), (r"hatchback", False), (r"coupe", False), (r"taxi", False), (r"cab", False),
-        (r"jeep", False), (r"pickup(?: truck)?", False), (r"ambulance", False), (r"motorcycle", False),
-        (r"motorbike", False), (r"scooter", False), (r"convertible", False), (r"wagon", False),
+        (r"jeep", False), (r"pickup(?: truck)?", False), (r"ambulance", False), (r"police car", False),
+        (r"convertible", False), (r"wagon", False), (r"automobile", False),
+        (r"(?:toyota|honda|ford|tesla|bmw|audi|mercedes(?: benz)?|volkswagen|vw|nissan|chevrolet|chevy|hyundai|kia|"
+         r"volvo|subaru|mazda|lexus|porsche|jaguar|fiat|renault|peugeot|skoda|opel|dodge|jeep|chrysler|"
+         r"buick|cadillac|mitsubishi|suzuki|land rover|range rover)(?: (?:sedan|suv|car|van|hatchback|"
+         r"model [3sxy]|prius|camry|corolla|civic|accord|golf|polo|focus|fiesta|mustang|f 150|cr v|rav4|"
+         r"outback|a4|x5|c class|e class))?", False),
+        (r"(?:prius|camry|corolla|civic|accord|golf|mustang|model [3sxy])", False),
     ],
     "truck": [
-        (r"trucks", True), (r"lorries", True), (r"buses", True), (r"semis", True),
-        (r"truck", False), (r"lorry", False), (r"bus", False), (r"semi(?: truck| trailer)?", False),
-        (r"tractor trailer", False), (r"trailer", False), (r"18 wheeler", False), (r"coach", False),
-        (r"tanker", False),
+        (r"trucks", True), (r"lorries", True), (r"semis", True), (r"hgvs", True),
+        (r"truck", False), (r"lorry", False), (r"semi(?: truck| trailer)?", False), (r"hgv", False),
+        (r"tractor trailer", False), (r"trailer", False), (r"18 wheeler", False), (r"box truck", False),
+        (r"tanker", False), (r"garbage truck", False), (r"fire truck", False), (r"dump truck", False),
+    ],
+    "bus": [
+        (r"buses", True), (r"busses", True), (r"coaches", True), (r"minibuses", True),
+        (r"(?:school |city |transit |public |double decker |articulated |shuttle )?bus", False),
+        (r"coach", False), (r"minibus", False), (r"shuttle", False), (r"trolleybus", False),
+    ],
+    "motorcycle": [
+        (r"motorcycles", True), (r"motorbikes", True), (r"motorcyclists", True), (r"mopeds", True),
+        (r"bikers", True), (r"motorcycle", False), (r"motorbike", False), (r"motorcyclist", False),
+        (r"moped", False), (r"biker", False), (r"dirt bike", False), (r"motor scooter", False),
+        (r"(?:harley|ducati|yamaha|kawasaki)(?: davidson)?", False),
+    ],
+    "bicycle": [
+        (r"cyclists", True), (r"bicyclists", True), (r"bicycles", True), (r"bikes", True), (r"scooters", True),
+        (r"e scooters", True), (r"scooter riders", True),
+        (r"cyclist", False), (r"bicyclist", False), (r"bicycle", False), (r"(?:e |push |road |mountain )?bike",
+                                                                        False),
+        (r"scooter rider", False), (r"(?:e |electric |kick )?scooter", False),
     ],
     "pedestrian": [
         (r"pedestrians", True), (r"people", True), (r"persons", True), (r"walkers", True), (r"men", True),
-        (r"women", True), (r"children", True), (r"kids", True), (r"cyclists", True), (r"bicyclists", True),
+        (r"women", True), (r"children", True), (r"kids", True),
         (r"joggers", True), (r"passers by", True),
         (r"pedestrian", False), (r"person", False), (r"walker", False), (r"man", False), (r"woman", False),
         (r"child", False), (r"kid", False), (r"boy", False), (r"girl", False), (r"jogger", False),
-        (r"cyclist", False), (r"bicyclist", False), (r"passer by", False), (r"individual", False),
+        (r"passer by", False), (r"schoolchild", False), (r"toddler", False), (r"elderly (?:man|woman|person)", False), (r"individual", False),
     ],
     "obstacle": [
         (r"obstacles", True), (r"cones", True), (r"traffic cones", True), (r"barriers", True),
@@ -92,7 +120,10 @@ _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
         (r"barricade", False), (r"crate", False), (r"pallet", False), (r"road works", False),
     ],
 }
-_EGO = (r"(?:the |an |our |my )?(?:ego(?:[ ](?:car|vehicle|agent|driver|truck))?(?:'s)?|"
+_EGO = (r"(?:the |an |our |my |a )?(?:ego(?:[ ](?:car|vehicle|agent|driver|truck))?(?:'s)?|"
+        r"(?:test|subject|host|tested|instrumented) (?:car|vehicle|truck)(?:'s)?|av(?:'s)?|adv(?:'s)?|"
+        r"(?:automated|driverless|robotic) (?:car|vehicle|truck)(?:'s)?|robotaxi(?:'s)?|v1(?:'s)?|"
+        r"vehicle (?:1|one)(?:'s)?|we|us|"
         r"(?:our|my|host|subject) (?:car|vehicle)(?:'s)?|(?:the )?(?:autonomous|self driving) (?:car|vehicle)(?:'s)?)")
 # actor-like things the vocabulary has no type for (reported, never emitted)
 UNKNOWN_ACTORS = (
@@ -100,7 +131,8 @@ UNKNOWN_ACTORS = (
     "deer", "animal", "dog", "cat", "cow", "bird", "moose", "elephant", "sheep", "carriage", "ufo", "rocket",
     "tank",
 )
-_NOT_ACTOR_AFTER = r"(?! (?:lane|lanes|stop|park|parks|light|lights|wash|seat|door|line|crossings)\b)"
+_NOT_ACTOR_AFTER = (r"(?! (?:lane|lanes|stop|stops|park|parks|light|lights|wash|seat|door|line|crossings|path|paths|"
+                    r"rack|racks|route|shelter|station|bay|bays|dealership)\b)")
 
 _COLORS = ("red", "blue", "white", "black", "silver", "grey", "gray", "green", "yellow", "orange", "brown",
            "purple", "dark", "gold")
@@ -144,11 +176,37 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
              r"at a standstill|stalled|broken down)\b"),
     ("stop", r"\bstop(?:s|ped|ping)?\b(?! (?:sign|line|light|lights|bar)s?\b)"),
     ("stop", r"\bhalt(?:s|ed|ing)\b"),
+    ("stop", r"\byield(?:s|ed|ing)? (?:to|for)\b|\bgiv(?:e|es|ing) way\b|\bgave way\b|\bwait(?:s|ed|ing)? for\b"),
     # accelerating
     ("accelerate", r"\baccelerat(?:e|es|ed|ing)\b(?! lane)"),
     ("accelerate", r"\b(?:speed(?:s|ing)? up|sped up|pick(?:s|ed|ing)? up speed|gain(?:s|ed|ing)? speed|"
                    r"increas(?:e|es|ed|ing) (?:its |his |her |their )?speed)\b"),
     # lane changes, cut-ins, merges
+    # leaving a parking spot, turning round, driving backwards
+    ("pull_out", r"\b(?:pull(?:s|ed|ing)?|nos(?:e|es|ed|ing)|edg(?:e|es|ed|ing)|creep(?:s|ing)?|crept|driv(?:e|es|ing)|"
+                 r"drove|back(?:s|ed|ing)?|revers(?:e|es|ed|ing)) (?:out|away) (?:of|from) (?:a |an |the |its |his |her "
+                 r"|their )?(?:\w+ )?(?:parking|parked|driveway|curb|kerb|shoulder|space|spot|bay|lay by|alley|garage|"
+                 r"car park|side of the road|roadside)\w*\b"),
+    ("pull_out", r"\b(?:leav(?:e|es|ing)|left|exit(?:s|ed|ing)?|depart(?:s|ed|ing)?(?: from)?) (?:a |an |the |its |his |"
+                 r"her |their )?(?:\w+ )?(?:parking (?:spot|space|bay|lot|place)|driveway|parking lane|curbside|"
+                 r"kerbside)\b"),
+    ("pull_out", r"\bpull(?:s|ed|ing)? (?:out|away)\b(?! (?:in front|of the way|to (?:overtake|pass)|into the "
+                 r"(?:left|right|oncoming|opposite|adjacent|next|other|passing)))(?P<generic>)"),
+    ("u_turn", r"\bu turn(?:s|ed|ing)?\b|\bturn(?:s|ed|ing)? (?:a)?round\b|\bturn(?:s|ed|ing)? back\b|"
+               r"\b(?:three|3) point turn\b|\bturn(?:s|ed|ing)? about\b"),
+    ("reverse", r"\brevers(?:e|es|ed|ing)\b(?! (?:gear|lights?|the decision))|\b(?:backs|backed|backing|(?<=to )back|"
+                r"(?<=must )back) (?:up|out|into|away|down)\b|\b(?:driv(?:e|es|ing)|drove|roll(?:s|ed|ing)?|mov(?:e|es|ed|ing)) (?:slowly )?backwards?\b|"
+                r"\bin reverse\b"),
+    ("emerge", r"\b(?:(?:emerg(?:e|es|ed|ing)|appear(?:s|ed|ing)?|pop(?:s|ped|ping)? out|com(?:e|es|ing) out|came out|"
+               r"step(?:s|ped|ping)? out|walk(?:s|ed|ing)? out|run(?:s|ning)? out|ran out|dash(?:es|ed|ing)? out|"
+               r"dart(?:s|ed|ing)? out|jump(?:s|ed|ing)? out|rush(?:es|ed|ing)? out|burst(?:s|ing)? out|"
+               r"sprint(?:s|ed|ing)? out|leap(?:s|ed|ing)? out|emerg\w+) (?:suddenly |quickly )?(?:from behind\b)?|"
+               r"(?:dash|dart|rush|sprint|run|ran|jump|leap|burst)\w* (?:out )?(?:in)?to (?:the )?(?:road|street|"
+               r"roadway|lane|crosswalk|traffic)\b|(?:dash|dart|rush|sprint|run|ran|jump|leap|burst)\w* "
+               r"(?:out )?(?:in front of|from behind)\b)"),
+    ("swerve", r"\b(?:swerv(?:e|es|ed|ing)|jerk(?:s|ed|ing)?) (?:\w+ )?(?:to(?:wards?)? the |to )?(?P<dir>left|right)\b"
+               r"(?! ?(?:most )?lane)"),
+    ("cut_in", r"\bcut(?:s|ting)? (?:(?:the |an? )?\w+ )?off\b(?! (?:the (?:engine|power)|point))"),
     ("cut_in", r"\bcut(?:s|ting)? (?:back )?in(?:to)?\b|\bcut in\b|\bsqueez(?:e|es|ed|ing) in\b"),
     ("cut_in", r"\bpull(?:s|ed|ing)? (?:back |right )?(?:in|into (?:the ego's|its|the) lane|out in front)\b"),
     ("cut_in", r"\b(?:chang(?:e|es|ed|ing)|mov(?:e|es|ed|ing)|swerv(?:e|es|ed|ing)|steer(?:s|ed|ing)?|"
@@ -164,13 +222,20 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
                     r"fast|slow|passing)(?: lane|most lane| side)?\b"),
     ("lane_change", r"\b(?:chang(?:e|es|ed|ing)|switch(?:es|ed|ing)?) lanes? (?:to the )?(?P<dir>left|right)\b"),
     ("lane_change", r"\b(?P<dir>left|right)(?:ward)? lane change\b|\blane change to the (?P<dir2>left|right)\b"),
+    ("lane_change", r"\b(?P<weave>weav(?:e|es|ed|ing)|zig ?zag(?:s|ged|ging)?)\b(?! around)(?: (?:in and out of|"
+                    r"through|between|across) (?:the )?(?:traffic|lanes|cars|vehicles))?"),
+    ("lane_change", r"\b(?:chang(?:e|es|ed|ing)|switch(?:es|ed|ing)?|swap(?:s|ped|ping)?) lanes?\b|\blane change\b|"
+                    r"\b(?:mov(?:e|es|ed|ing)|shift(?:s|ed|ing)?|switch(?:es|ed|ing)?|pull(?:s|ed|ing)?|"
+                    r"steer(?:s|ed|ing)?|go(?:es)?|went) (?:over )?(?:in)?to (?:the |an |another )?(?:adjacent|"
+                    r"neighbou?ring|next|other|another|free|open|empty) lane\b"),
     # turns
-    ("turn", r"\bturn(?:s|ed|ing)? (?:to the )?(?P<dir>left|right)\b"),
+    ("turn", r"\b(?P<unprot>unprotected|protected) (?P<dir>left|right)(?: hand)?(?: turn(?:s|ing)?)?\b(?! lane)"),
+    ("turn", r"\bturn(?:s|ed|ing)? (?:to the )?(?P<dir>left|right)\b(?! (?:lane|only|signal|arrow|pocket|bay))"),
     ("turn", r"\b(?:make|makes|made|making|perform|performs|performed|performing|execute|executes|executed|"
              r"attempt|attempts|attempted|attempting|initiate|initiates|initiated|initiating|"
              r"executing|take|takes|took|taking|complete|completes|completed|completing|do|does|did|doing)"
-             r" a (?:\w+ )?(?P<dir>left|right)(?: hand)? turn\b"),
-    ("turn", r"\b(?P<dir>left|right)(?: hand)? turning\b"),
+             r" an? (?:\w+ )?(?P<dir>left|right)(?: hand)? turn\b(?! (?:lane|only|signal|arrow|pocket|bay|light))"),
+    ("turn", r"\b(?P<dir>left|right)(?: hand)? turning\b(?! (?:lane|traffic|only))"),
     # crossing, straight
     ("go_straight", r"\b(?:go|goes|going|went|gone|drive|drives|driving|drove|driven|continu(?:e|es|ed|ing)|"
                     r"proceed(?:s|ed|ing)?|head(?:s|ed|ing)?|keep(?:s|ing)?|kept|travel(?:s|ed|led|ing|ling)?|"
@@ -211,7 +276,7 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
                   r"(?:in |to )?(?:its|his|her|their|the same|the|its own|their own) lanes?\b"),
     ("keep_lane", r"\blane keeping\b|\bdriv(?:e|es|ing) alongside\b"),
     # overtaking
-    ("overtake", r"\bovert(?:ake|akes|aking|aken|ook)\b"),
+    ("overtake", r"\bovert(?:ake|akes|aking|aken|ook)\b|\bby ?pass(?:es|ed|ing)?\b(?! (?:road|lane))"),
     ("overtake", r"\b(?:manoeuvr|maneuver)(?:e|es|ed|s|ing)? around\b|\b(?:steer(?:s|ed|ing)?|swerv(?:e|es|ed|ing)|"
                  r"go(?:es)?|went|drive|drives|drove|driving|mov(?:e|es|ed|ing)|weav(?:e|es|ed|ing)|"
                  r"navigat(?:e|es|ed|ing)) around\b(?! (?:a |the )?(?:roundabout|corner|bend|curve|block|city|town|"
@@ -219,7 +284,32 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
     ("overtake", r"\bpass(?:es|ed|ing)?\b(?= (?:the |a |an |another |it\b|him\b|them\b|ego\b|our |slower |"
                  r"stopped |stationary ))(?! (?:the |a |an )?(?:intersection|junction|crossroads?|road|street))"),
 )
+_ACTION_PATTERNS = tuple(_ACTION_PATTERNS) + (
+    ("swerve", r"\bswerv(?:e|es|ed|ing)\b|\bevasive (?:steering|manoeuvre|maneuver|swerve)\b|"
+               r"\bjerk(?:s|ed|ing)? (?:the wheel|sideways)\b"),
+)
 _COMPILED_ACTIONS = [(a, re.compile(p)) for a, p in _ACTION_PATTERNS]
+_FRONTED = re.compile(r"(?:after|before|while|when|upon|once|having|on|since|whilst)\s+(?:\w+ly\s+)?\w+(?:ing|ed)\b|"
+                      r"\w+ing\b(?! (?:car|vehicle|truck|bus|traffic|pedestrian|cyclist)s?\b)")
+_NEUTRAL_WORDS = frozenset("""
+a an the this that these those its their his her our my it they he she there here is are was were be been being
+has have had does do did will would can could may might must should also then and or but while whilst as when so
+after before until because although though where meanwhile which who just still now already
+on in at of to into onto from by with along down up through across over under near nearby towards toward around
+about beside between past behind ahead front side same other another one two three some both each all
+drive drives driving drove driven travel travels traveling travelling travelled traveled move moves moving moved
+approach approaches approaching approached head heads heading headed proceed proceeds proceeding proceeded cruise
+cruises cruising come comes coming came go goes going went present exist exists located positioned visible
+normal normally steady steadily slow slowly constant constantly moderate speed speeds direction lane lanes road
+street scene scenario situation shows show depicts depict begins starts start takes take place occurs happen
+happens happened clear sunny daytime day night weather dry wet time traffic flow usual usually follow follows
+following followed scene's view camera image video frame driver driver's seen see sees appears visible
+nothing multi lane urban city residential rural suburban country way one two divided median shoulder hard parking
+turn turning left right middle center centre only junction intersection shaped wide narrow per each either km h
+kph kmh mph m s meters metres seconds feet hour speed limit posted around approximately about roughly
+""".split())
+_MOTOR = ("car", "truck", "bus", "motorcycle")
+_ON_RAMP = re.compile(r"\b(?:on ramp|onramp|slip road|entry ramp|entrance ramp|acceleration lane|ramp)\b")
 _NEGATION = re.compile(
     r"\b(?:not|never|no|avoid|avoids|avoided|avoiding|without|nearly|almost|narrowly|prevent|prevents|"
     r"prevented|preventing|fail|fails|failed|failing|instead of|rather than|refus\w+|unable to|doesn't|didn't|"
@@ -326,6 +416,12 @@ class ParsedDescription:
     entities: List[Entity] = field(default_factory=list)
     unknown_actors: List[str] = field(default_factory=list)
     unresolved: List[str] = field(default_factory=list)
+    features: Dict[str, Any] = field(default_factory=dict)
+    """Road features said in the text (see :func:`dv2s_gym.pipeline.semantics_road.road_features`)."""
+    absent: List[str] = field(default_factory=list)
+    """Participant kinds the text says are not there ("no other vehicles")."""
+    unplaced: List[str] = field(default_factory=list)
+    """Phrases (verbatim clauses) the parser could not place; the generator warns about each."""
 
     @property
     def ego(self) -> Optional[Entity]:
@@ -407,6 +503,11 @@ class _Parser:
         self.last_subject: Optional[Entity] = None
         self.last_group: Optional[Entity] = None
         self.recent: List[Entity] = []  # most recent last
+        self._clause_mentions: List[_Mention] = []
+        self._unplaced_phrases: List[str] = []
+        self._sentence_index = 0
+        self._order = 0
+        self._named: Dict[str, Entity] = {}
 
     # ---------------------------------------------------------------- helpers
     def _entity_for(self, kind: str, count: int, definite: bool, descriptors: set, new: bool) -> Entity:
@@ -450,6 +551,9 @@ class _Parser:
 
     def _new(self, kind: str, count: int, descriptors: set) -> Entity:
         entity = Entity(kind, count=max(1, count), descriptors=set(descriptors))
+        self._order += 1
+        entity.attrs["sentence"] = self._sentence_index
+        entity.attrs["order"] = self._order
         self.out.entities.append(entity)
         return entity
 
@@ -485,8 +589,10 @@ class _Parser:
                 continue
             possessive = m.group(0).endswith("'s") or clause[m.end():m.end() + 2] == "'s"
             taken.append((m.start(), m.end()))
-            mentions.append(_Mention(m.start(), m.end(), self._entity_for("ego", 1, True, set(), False),
-                                     prep_before(m.start()), possessive))
+            ego_entity = self._entity_for("ego", 1, True, set(), False)
+            ego_entity.attrs.setdefault("noun", re.sub(r"^(?:the|an|a|our|my) |'s$", "", m.group(0)))
+            mentions.append(_Mention(m.start(), m.end(), ego_entity,
+                                     prep_before(m.start()) or m.group(0) == "us", possessive))
         for m in _NOUN_RE.finditer(clause):
             if not free(m.start(), m.end()):
                 continue
@@ -521,7 +627,14 @@ class _Parser:
                 count = 2
             if count is None:
                 count = 1
-            if kind == "car" and self._is_ego_alias(clause, m.start()):
+            surface = re.sub(r"(?:'s|s')$", "", m.group(0))
+            named = re.fullmatch(r"v([2-9])|vehicle ([2-9])", surface)
+            if named:
+                key = "v" + (named.group(1) or named.group(2))
+                entity = self._named.get(key)
+                if entity is None:
+                    entity = self._named[key] = self._new("car", 1, {key})
+            elif kind == "car" and self._is_ego_alias(clause, m.start()):
                 entity = self._entity_for("ego", 1, True, set(), False)
             elif plural and definite and self.last_group is not None and self.last_group.kind == kind:
                 entity = self.last_group
@@ -531,7 +644,14 @@ class _Parser:
                     entity.count = count
             possessive = m.group(0).endswith("'s") or m.group(0).endswith("s'")
             taken.append((m.start(), m.end()))
+            entity.attrs.setdefault("noun", surface)
+            if kind == "car" and surface in ("vehicles", "vehicle", "cars", "road users", "agents") and \
+                    (count > 1 or re.match(r"\s*(?:crash|collision|pile ?up|accident)", clause[m.end():])):
+                entity.attrs["generic"] = True
             mentions.append(_Mention(m.start(), m.end(), entity, prep_before(m.start()), possessive))
+            if entity.kind in ("pedestrian", "bicycle") and re.search(r"\bcrossing\s+$", clause[:m.start()]) and \
+                    not _NEGATION.search(clause[:m.start()]):
+                entity.add_action("cross", sudden=False, directions=[])
             # adjectives of state before the noun: stopped car, parked truck, broken down car
             if entity.kind not in ("ego", "obstacle") and re.search(
                     r"\b(?:stopped|stationary|broken down|stalled|standing|disabled|idle|halted)\s+"
@@ -581,13 +701,23 @@ class _Parser:
 
     # ---------------------------------------------------------------- main
     def parse(self) -> ParsedDescription:
-        text = self.text
+        text, absent, no_junction, _ = strip_absences(self.text)
+        self.text = text
+        self.out.absent = absent
         for road, pattern in ROAD_PATTERNS:
+            if road == "merge" and not _ON_RAMP.search(text) and re.search(
+                    r"\b(?:lanes? merg\w*|merg\w* lanes?|lane (?:ends|drop)|road narrows|merg\w* (?:in)?to one|"
+                    r"zipper merge)\b", text):
+                continue  # two lanes becoming one: not an on-ramp
+
             m = re.search(pattern, text)
             if m:
                 self.out.road = road
                 self.out.road_words.append(m.group(0))
                 break
+        self.out.features = road_features(text, self.out.road)
+        if no_junction:
+            self.out.features["no_junction"] = True
         for word in UNKNOWN_ACTORS:
             if re.search(rf"\b{word}s?\b", text):
                 self.out.unknown_actors.append(word)
@@ -595,17 +725,73 @@ class _Parser:
             sentence = sentence.strip(" .!?")
             if sentence:
                 self._sentence(sentence)
+                self._sentence_index += 1
         self._finish()
+        self._counts_add_up()
+        kph = speed_kph(text)
+        if kph is not None and self.out.ego is not None and "speed_kph" not in self.out.ego.attrs:
+            self.out.ego.attrs["speed_kph"] = kph
+        seen = set()
+        for phrase in self._unplaced_phrases:
+            verbatim = self._verbatim(phrase)
+            if verbatim not in seen:
+                seen.add(verbatim)
+                self.out.unplaced.append(verbatim)
         return self.out
+
+    def _verbatim(self, phrase: str) -> str:
+        """The phrase as the user wrote it (case, hyphens) when it can be found in the raw text."""
+        words = re.findall(r"[a-z0-9']+", phrase)
+        if not words:
+            return phrase
+        m = re.search(r"\b" + r"[\W_]+".join(re.escape(w) for w in words) + r"\b", self.raw, re.IGNORECASE)
+        return m.group(0) if m else phrase
+
+    def _counts_add_up(self) -> None:
+        """"Two vehicles: the ego and a bus" is two vehicles, not four: a generic plural group whose members are
+        named after it in the same sentence is dropped."""
+        vehicles = ("ego", "car", "truck", "bus", "motorcycle", "bicycle")
+        for group in [e for e in self.out.entities if e.attrs.get("generic")]:
+            if group.actions or group.relations or any(j is group for e in self.out.entities for _, j in e.relations):
+                continue
+            later = [e for e in self.out.entities if e is not group and e.kind in vehicles
+                     and (e.kind == "ego" or e.attrs.get("sentence") == group.attrs.get("sentence")
+                          and e.attrs.get("order", 0) > group.attrs.get("order", 0))]
+            named_later = sum(e.count for e in later if e.kind != "ego" or True)
+            if later and named_later >= group.count and any(e.kind != "ego" for e in later):
+                self.out.entities = [e for e in self.out.entities if e is not group]
 
     def _sentence(self, sentence: str) -> None:
         clauses = [c.strip() for c in _CLAUSE_SPLIT.split(sentence) if c and c.strip()]
         previous_subject = self.last_subject
+        if len(clauses) > 1 and _FRONTED.match(clauses[0]):
+            # "After turning right, the ego ...": the fronted clause's subject is the main clause's
+            clauses = [clauses[1], clauses[0]] + clauses[2:]
         for clause in clauses:
+            before = self._state()
             subject = self._clause(clause, previous_subject)
+            if self._state()[2:] == before[2:] and not self._said_elsewhere(clause):
+                self._unplaced_phrases.append(clause)
             if subject is not None:
                 previous_subject = subject
                 self.last_subject = subject
+
+    def _state(self) -> Tuple[Any, ...]:
+        """A fingerprint of what has been placed so far (to tell which clauses placed nothing)."""
+        return (len(self.out.entities), sum(e.count for e in self.out.entities),
+                tuple((a, tuple(sorted(k for k, v in d.items() if v))) for e in self.out.entities for a, d in e.actions),
+                sum(len(e.relations) for e in self.out.entities), tuple(e.lane for e in self.out.entities),
+                tuple(len(e.attrs) for e in self.out.entities), len(self._unplaced_phrases))
+
+    def _said_elsewhere(self, clause: str) -> bool:
+        """A clause that adds nothing new is still placed when it only names the road, a known actor with a
+        neutral verb (drives, approaches, is present), or filler."""
+        rest = _NOUN_RE.sub(" ", _EGO_RE.sub(" ", clause))
+        for _, pattern in ROAD_PATTERNS:
+            rest = re.sub(pattern, " ", rest)
+        words = [w for w in re.findall(r"[a-z']+", rest) if w not in _NEUTRAL_WORDS and w not in _NUMBERS
+                 and w not in _COLORS and w not in _ORDINALS]
+        return not words
 
     def _clause(self, clause: str, inherited: Optional[Entity]) -> Optional[Entity]:
         lead = re.match(r"(?:and|while|whilst|whereas|but|as|when|then|so|after|before|until|because|although|"
@@ -752,6 +938,8 @@ class _Parser:
                 owner = self._attach(m.start(), mentions, subject, exclude=target)
                 if owner is None or owner is target:
                     continue
+                if rel == "behind" and re.search(r"\bfrom\s+$", clause[:m.start()]):
+                    continue  # "appears from behind a parked van": occlusion, not a position
                 if rel == "ahead_of" and m.group(0).strip() == "before":
                     continue
                 if owner.kind == "ego" and target.kind != "ego" and rel in ("behind", "ahead_of"):
@@ -804,6 +992,7 @@ class _Parser:
             owner.relations.append((rel, target))
 
     def _actions(self, clause: str, mentions: List[_Mention], subject: Optional[Entity]) -> None:
+        self._clause_mentions = mentions
         spans: List[Tuple[int, int]] = []
         for action, rx in _COMPILED_ACTIONS:
             for m in rx.finditer(clause):
@@ -817,6 +1006,11 @@ class _Parser:
                 if re.search(r"\bor\s+(?:\w+\s+)?$", before) or re.match(r"\s*(?:\w+\s+){0,3}or\b", clause[m.end():]):
                     spans.append((m.start(), m.end()))
                     continue  # "turns right or goes straight": neither is stated
+                if action == "cut_in" and re.search(r"\b(?:is|was|were|are|gets?|got|being|been) (?:\w+ )?$", before) \
+                        and re.match(r"\s*by\b", clause[m.end():]):
+                    agent = self._object_at(clause, m.end(), mentions)
+                    if agent is not None:
+                        owner = agent  # "the ego is cut off by a van"
                 if action.startswith("collide"):
                     passive = _PASSIVE_HIT.search(clause[max(0, m.start() - 25):m.end() + 4])
                     if passive:
@@ -827,6 +1021,42 @@ class _Parser:
                 if owner is None:
                     continue
                 self._record(owner, action, m, clause)
+
+    def _next_mention(self, clause: str, pos: int, mentions: List[_Mention], exclude: Optional[Entity] = None,
+                      limit: int = 30) -> Optional[Entity]:
+        """The first actor mentioned after ``pos`` (within ``limit`` characters), other than ``exclude``."""
+        for mm in mentions:
+            if mm.start >= pos and mm.start - pos <= limit and mm.entity is not exclude and \
+                    not isinstance(mm.entity, tuple):
+                return mm.entity
+        return None
+
+    def _trigger(self, owner: Entity, action: str, m: re.Match, clause: str) -> None:
+        """What sets off a stop or a brake: a conflict with another actor, a distance or a time."""
+        after = clause[m.end():]
+        before = clause[:m.start()]
+        detail: Dict[str, Any] = {}
+        fm = re.match(r"\s*(?:\w+ly )?(?:for|to|because of|due to|to let|to allow|to avoid|until)\b", after)
+        if fm:
+            other = self._next_mention(clause, m.end() + fm.end(), self._clause_mentions, exclude=owner, limit=35)
+            if other is not None:
+                detail = {"kind": "conflict", "with": other}
+        if not detail and (re.search(r"\b(?:must|has to|have to|had to|needs? to|forced to|required to|should)\s+"
+                                     r"(?:\w+ly\s+)?$", before) or m.group(0).startswith(("yield", "giv", "gave",
+                                                                                              "wait"))):
+            detail = {"kind": "conflict", "with": None}
+        if not detail:
+            dist = distance_m(clause)
+            if dist is not None and re.search(r"\b(?:when|once|at|within|from|before|after)\b", clause):
+                detail = {"kind": "distance", "meters": dist}
+            else:
+                sec = time_s(clause)
+                if sec is not None and re.search(r"\b(?:after|within|in|for)\b", clause):
+                    detail = {"kind": "time", "seconds": sec}
+        if detail:
+            existing = owner.detail(action)
+            owner.add_action(action)
+            owner.detail(action).setdefault("trigger", detail) if existing is not None else None
 
     def _action_subject(self, pos: int, mentions: List[_Mention], subject: Optional[Entity],
                         clause: str = "") -> Optional[Entity]:
@@ -854,6 +1084,47 @@ class _Parser:
         if kind == "obstacle":
             return
         groups = m.groupdict()
+        if action == "lane_change" and not (groups.get("dir") or groups.get("dir2")):
+            if kind == "pedestrian":
+                return
+            if groups.get("weave"):
+                owner.add_action("lane_change", sudden=sudden, weave=True)
+            else:
+                owner.add_action("lane_change", sudden=sudden)
+            return
+        if action == "swerve":
+            if kind == "pedestrian":
+                return
+            owner.add_action("swerve", sudden=True, side=groups.get("dir"))
+            return
+        if action == "pull_out":
+            if "generic" in groups and groups.get("generic") is not None and not (
+                    "parked" in owner.descriptors or owner.has("stop") or re.search(
+                        r"\b(?:park\w*|curb|kerb|driveway|shoulder|roadside|side of the road|lay by)\b", clause)):
+                self._unplaced_phrases.append(clause)
+                return
+            if kind == "pedestrian":
+                return
+            owner.actions = [(a, d) for a, d in owner.actions if a != "stop"]
+            owner.add_action("pull_out", sudden=sudden)
+            if re.match(r"(?:back|revers)", m.group(0)):
+                owner.add_action("reverse")
+            return
+        if action == "emerge":
+            behind = None
+            bm = re.search(r"\bfrom behind\b", clause[m.start():])
+            if bm:
+                behind = self._next_mention(clause, m.start() + bm.end(), self._clause_mentions, exclude=owner)
+            if behind is not None:
+                owner.attrs["from_behind"] = behind
+            if kind in ("pedestrian", "bicycle"):
+                quick = bool(re.match(r"(?:dash|dart|rush|sprint|run|ran|jump|leap|burst|pop)", m.group(0)))
+                owner.add_action("cross", sudden=sudden or quick, directions=[])
+                if behind is not None:
+                    owner.detail("cross")["from_behind"] = behind
+            return
+        if action == "stop" or action == "brake":
+            self._trigger(owner, action, m, clause)
         if action == "lane_change":
             d = groups.get("dir") or groups.get("dir2")
             side = _LANE_WORD.get(d, d) if d in _LANE_WORD else d
@@ -869,6 +1140,8 @@ class _Parser:
             if kind in ("pedestrian",):
                 return
             owner.add_action(f"turn_{d}", sudden=sudden)
+            if groups.get("unprot") == "unprotected" or re.search(r"\bunprotected\b", window):
+                owner.detail(f"turn_{d}")["unprotected"] = True
             return
         if action == "cross":
             if kind == "pedestrian":
@@ -891,7 +1164,7 @@ class _Parser:
                 else:
                     owner.add_action("cross", sudden=sudden, directions=[direction] if direction else [])
                 return
-            if kind in ("car", "truck", "ego"):
+            if kind in ("car", "truck", "bus", "motorcycle", "bicycle", "ego"):
                 if re.match(r"cross(?:es|ed|ing)? (?:the |a )?(?:road|street|lanes?|highway)\b", m.group(0) +
                             clause[m.end():m.end() + 20].lstrip().join([" ", ""])):
                     owner.add_action("cross", sudden=sudden)
@@ -917,7 +1190,10 @@ class _Parser:
         if action == "merge" and kind == "pedestrian":
             return
         if action.startswith("collide"):
+            other = self._next_mention(clause, m.end(), self._clause_mentions, exclude=owner, limit=40)
             owner.add_action("collide", sudden=sudden)
+            if other is not None and not owner.detail("collide").get("with"):
+                owner.detail("collide")["with"] = other
             if action != "collide":
                 owner.add_action(action)
             return
@@ -971,7 +1247,7 @@ class _Parser:
                     e.add_action(f"lane_change_{back_side}")
                 elif side in ("left", "right") and not e.has("merge"):
                     e.add_action(f"lane_change_{'right' if side == 'left' else 'left'}")
-            if e.kind in ("car", "truck") and "ahead_of" in rels and not rels & {"left_of", "right_of", "oncoming"} \
+            if e.kind in _MOTOR and "ahead_of" in rels and not rels & {"left_of", "right_of", "oncoming"} \
                     and not (e.has("cut_in") and not e.detail("cut_in").get("back")) and not e.has("merge"):
                 self._relate(e, "same_lane", ego)
             if e.kind == "obstacle" and "same_lane" in rels:
@@ -979,7 +1255,7 @@ class _Parser:
             if e.kind == "pedestrian" and e.has("cross"):
                 self._relate(e, "ahead_of", ego)
                 self._relate(e, "crossing_path", ego)
-            if e.kind in ("car", "truck") and "oncoming" in rels and ego.has("turn_left"):
+            if e.kind in _MOTOR and "oncoming" in rels and ego.has("turn_left"):
                 self._relate(e, "crossing_path", ego)
         # absolute lanes of two actors give a relation
         if ego is not None and ego.lane in ("left", "middle", "right"):
