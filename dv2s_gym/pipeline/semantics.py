@@ -705,6 +705,9 @@ class _Parser:
         self.text = text
         self.out.absent = absent
         for road, pattern in ROAD_PATTERNS:
+            if road == "merge" and re.search(r"\b(?:off ramp|exit ramp|offramp)\b", text) and not re.search(
+                    r"\b(?:on ramp|onramp|entry ramp|entrance ramp|acceleration lane)\b", text):
+                continue  # leaving the motorway: the road is the motorway
             if road == "merge" and not _ON_RAMP.search(text) and re.search(
                     r"\b(?:lanes? merg\w*|merg\w* lanes?|lane (?:ends|drop)|road narrows|merg\w* (?:in)?to one|"
                     r"zipper merge)\b", text):
@@ -741,6 +744,7 @@ class _Parser:
 
     def _verbatim(self, phrase: str) -> str:
         """The phrase as the user wrote it (case, hyphens) when it can be found in the raw text."""
+        phrase = re.sub(r"^(?:(?:and|then|so|but|also)\s+)+", "", phrase)
         words = re.findall(r"[a-z0-9']+", phrase)
         if not words:
             return phrase
@@ -763,6 +767,10 @@ class _Parser:
 
     def _sentence(self, sentence: str) -> None:
         clauses = [c.strip() for c in _CLAUSE_SPLIT.split(sentence) if c and c.strip()]
+        for i in range(len(clauses) - 2, -1, -1):
+            if re.search(r"\b(?:between|involving)\s+(?:\S+\s+){0,4}\S+$", clauses[i]) and \
+                    clauses[i + 1].startswith("and "):
+                clauses[i:i + 2] = [clauses[i] + " " + clauses[i + 1]]  # "between the ego and a bus" is one phrase
         previous_subject = self.last_subject
         if len(clauses) > 1 and _FRONTED.match(clauses[0]):
             # "After turning right, the ego ...": the fronted clause's subject is the main clause's
@@ -770,7 +778,7 @@ class _Parser:
         for clause in clauses:
             before = self._state()
             subject = self._clause(clause, previous_subject)
-            if self._state()[2:] == before[2:] and not self._said_elsewhere(clause):
+            if self._state() == before and not self._said_elsewhere(clause):
                 self._unplaced_phrases.append(clause)
             if subject is not None:
                 previous_subject = subject
@@ -778,10 +786,11 @@ class _Parser:
 
     def _state(self) -> Tuple[Any, ...]:
         """A fingerprint of what has been placed so far (to tell which clauses placed nothing)."""
-        return (len(self.out.entities), sum(e.count for e in self.out.entities),
-                tuple((a, tuple(sorted(k for k, v in d.items() if v))) for e in self.out.entities for a, d in e.actions),
-                sum(len(e.relations) for e in self.out.entities), tuple(e.lane for e in self.out.entities),
-                tuple(len(e.attrs) for e in self.out.entities), len(self._unplaced_phrases))
+        bookkeeping = ("noun", "sentence", "order", "generic")
+        return (tuple((a, tuple(sorted(k for k, v in d.items() if v))) for e in self.out.entities for a, d in e.actions),
+                sum(len(e.relations) for e in self.out.entities), tuple(e.lane for e in self.out.entities if e.lane),
+                sum(1 for e in self.out.entities for k in e.attrs if k not in bookkeeping),
+                len(self._unplaced_phrases))
 
     def _said_elsewhere(self, clause: str) -> bool:
         """A clause that adds nothing new is still placed when it only names the road, a known actor with a
@@ -847,6 +856,13 @@ class _Parser:
         self._lanes(clause, mentions, subject)
         self._relations(clause, mentions, subject)
         self._actions(clause, mentions, subject)
+        kph = speed_kph(clause)
+        if kph is not None:
+            owner = subject or next((mm.entity for mm in mentions if not mm.prep_object), None)
+            if owner is not None:
+                owner.attrs.setdefault("speed_kph", kph)
+                for _, d in owner.actions:
+                    d.setdefault("speed_kph", kph)
         self._crossing_directions(clause, mentions, subject)
         return subject if (explicit or subject is not None) else None
 
@@ -1018,6 +1034,17 @@ class _Parser:
                         if agent is not None:
                             owner = agent
                 spans.append((m.start(), m.end()))
+                if action.startswith("collide"):
+                    bm = re.match(r"\s*(?:\w+\s+){0,3}?(?:between|involving)\s", clause[m.end():])
+                    if bm:
+                        pair = [mm.entity for mm in mentions if mm.start >= m.end() + bm.end() - 1
+                                and not isinstance(mm.entity, tuple)][:2]
+                        if len(pair) == 2 and pair[0] is not pair[1]:
+                            # "a side-impact crash between the ego and a bus": both collide, with each other
+                            for one, other in (pair, pair[::-1]):
+                                self._record(one, action, m, clause)
+                                one.detail("collide")["with"] = other
+                            continue
                 if owner is None:
                     continue
                 self._record(owner, action, m, clause)
@@ -1047,7 +1074,7 @@ class _Parser:
             detail = {"kind": "conflict", "with": None}
         if not detail:
             dist = distance_m(clause)
-            if dist is not None and re.search(r"\b(?:when|once|at|within|from|before|after)\b", clause):
+            if dist is not None:
                 detail = {"kind": "distance", "meters": dist}
             else:
                 sec = time_s(clause)
@@ -1057,6 +1084,9 @@ class _Parser:
             existing = owner.detail(action)
             owner.add_action(action)
             owner.detail(action).setdefault("trigger", detail) if existing is not None else None
+
+    def _conflict_partner(self, who: Entity) -> Optional[Entity]:
+        return _conflict_partner_of(self.out.entities, who)
 
     def _action_subject(self, pos: int, mentions: List[_Mention], subject: Optional[Entity],
                         clause: str = "") -> Optional[Entity]:
@@ -1255,8 +1285,18 @@ class _Parser:
             if e.kind == "pedestrian" and e.has("cross"):
                 self._relate(e, "ahead_of", ego)
                 self._relate(e, "crossing_path", ego)
-            if e.kind in _MOTOR and "oncoming" in rels and ego.has("turn_left"):
+            if e.kind in _MOTOR + ("bicycle",) and "oncoming" in rels and ego.has("turn_left"):
                 self._relate(e, "crossing_path", ego)
+        for e in self.out.entities:
+            # an undirected lane change said next to a directed one adds nothing
+            if e.has("lane_change") and (e.has("lane_change_left") or e.has("lane_change_right")) and \
+                    not e.detail("lane_change").get("weave"):
+                e.actions = [(a, d) for a, d in e.actions if a != "lane_change"]
+            # "must stop" at a junction with no object: the conflict is the actor crossing, turning or oncoming
+            for a, d in e.actions:
+                trig = d.get("trigger")
+                if a in ("stop", "brake") and trig and trig.get("kind") == "conflict" and trig.get("with") is None:
+                    trig["with"] = self._conflict_partner(e)
         # absolute lanes of two actors give a relation
         if ego is not None and ego.lane in ("left", "middle", "right"):
             order = {"left": 0, "middle": 1, "right": 2}
@@ -1272,6 +1312,19 @@ class _Parser:
             if e.kind == "pedestrian" and e.has("cross"):
                 dirs = e.detail("cross").get("directions") or []
                 e.detail("cross")["directions"] = dirs
+
+
+def _conflict_partner_of(entities: List[Entity], who: Entity) -> Optional[Entity]:
+    """The actor ``who`` is in conflict with: one crossing its path, oncoming, crossing, turning or going
+    straight at the junction; else the first other moving actor."""
+    others = [e for e in entities if e is not who and e.kind not in ("ego", "obstacle")]
+    for e in others:
+        if any(j is who and r in ("crossing_path", "oncoming") for r, j in e.relations):
+            return e
+    for e in others:
+        if any(e.has(a) for a in ("cross", "go_straight", "turn_left", "turn_right", "pull_out", "u_turn")):
+            return e
+    return others[0] if others else None
 
 
 def parse_description(text: str) -> ParsedDescription:

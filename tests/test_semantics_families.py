@@ -1,0 +1,208 @@
+"""The description parser on phrasings it was not first written for (issue 10), one test per phrase family.
+
+Sentences are written for these tests (not taken from the held-out evaluation set).
+"""
+
+import pytest
+
+from dv2s_gym.pipeline.semantics import elements_from_text, parse_description
+
+
+def _kinds(text):
+    return sorted(elements_from_text(text)["participants"])
+
+
+def _actions(text):
+    return {tuple(a) for a in elements_from_text(text)["actions"]}
+
+
+# ----------------------------------------------------------------------------- actors
+
+@pytest.mark.parametrize("text, kinds", [
+    ("A motorcyclist filters past the ego car.", ["ego", "motorcycle"]),
+    ("A cyclist rides along the kerb next to the ego vehicle.", ["bicycle", "ego"]),
+    ("A teenager on an e-scooter waits at the corner.", ["bicycle"]),
+    ("A city bus pulls away from the bus stop ahead of the ego car.", ["bus", "ego"]),
+    ("A white van and a Toyota Prius are parked on the left.", ["car", "car"]),
+    ("The adversarial agent accelerates towards the ego.", ["car", "ego"]),
+    ("A Ford F-150 and a Harley-Davidson wait at the lights.", ["car", "motorcycle"]),
+])
+def test_actor_kinds(text, kinds):
+    assert _kinds(text) == kinds
+
+
+@pytest.mark.parametrize("text, noun", [
+    ("The AV brakes hard.", "av"),
+    ("The test vehicle brakes hard.", "test vehicle"),
+    ("The subject vehicle brakes hard.", "subject vehicle"),
+    ("V1 brakes hard.", "v1"),
+    ("We brake hard.", "we"),
+])
+def test_ego_aliases(text, noun):
+    parsed = parse_description(text)
+    assert parsed.entities[0].kind == "ego" and parsed.entities[0].attrs["noun"] == noun
+    assert ("ego", "brake") in _actions(text)
+
+
+def test_numbered_vehicles_are_distinct_and_us_is_the_ego():
+    parsed = parse_description("V2 rear-ends V3 while a truck cuts in front of us.")
+    assert sorted(e.kind for e in parsed.entities) == ["car", "car", "ego", "truck"]
+    v2 = next(e for e in parsed.entities if e.attrs.get("noun") == "v2")
+    assert v2.has("collide_rear_end") and v2.detail("collide")["with"].attrs["noun"] == "v3"
+
+
+# ----------------------------------------------------------------------------- actions
+
+@pytest.mark.parametrize("text, expected", [
+    ("The ego vehicle bypasses a stalled truck.", ("ego", "overtake")),
+    ("The AV overtakes a slow tractor-trailer on the left.", ("ego", "overtake")),
+    ("A black sedan cuts off the ego car.", ("car", "cut_in")),
+    ("The ego vehicle is cut off by a delivery van.", ("car", "cut_in")),
+    ("An SUV makes a U-turn in front of the ego.", ("car", "u_turn")),
+    ("A pickup reverses out of a driveway.", ("car", "reverse")),
+    ("A pickup reverses out of a driveway.", ("car", "pull_out")),
+    ("The truck backs up towards the ego car.", ("truck", "reverse")),
+    ("The ego vehicle swerves to avoid debris.", ("ego", "swerve")),
+    ("A motorcyclist weaves through traffic.", ("motorcycle", "lane_change")),
+    ("A parked car pulls out of its parking spot.", ("car", "pull_out")),
+    ("A bus changes lanes ahead of the ego.", ("bus", "lane_change")),
+])
+def test_actions(text, expected):
+    assert expected in _actions(text)
+
+
+def test_weaving_and_undirected_lane_changes_carry_their_details():
+    moto = parse_description("A motorcyclist weaves through traffic.").entities[0]
+    assert moto.detail("lane_change")["weave"] is True
+    car = parse_description("A car changes lanes to the left.").entities[0]
+    assert car.has("lane_change_left") and not car.has("lane_change")
+
+
+def test_pedestrian_dashing_out_from_behind_something():
+    parsed = parse_description("A child dashes out from behind a parked van in front of the ego car.")
+    child = next(e for e in parsed.entities if e.kind == "pedestrian")
+    cross = child.detail("cross")
+    assert child.has("cross") and cross["sudden"] is True and cross["from_behind"].kind == "car"
+    elements = elements_from_text("A child dashes out from behind a parked van in front of the ego car.")
+    assert ["pedestrian", "behind", "car"] not in elements["relations"]  # occlusion, not a position
+    assert ("pedestrian", "cross") in _actions("A jogger appears from behind a bus and crosses.")
+
+
+def test_unprotected_left_turn():
+    parsed = parse_description("The AV makes an unprotected left turn while an oncoming car goes straight.")
+    ego = parsed.ego
+    assert ego.has("turn_left") and ego.detail("turn_left")["unprotected"] is True
+    assert ("car", "crossing_path", "ego") in {tuple(r) for r in parsed.elements()["relations"]}
+    assert ("ego", "turn_left") in _actions("The ego vehicle is on an unprotected left at the junction.")
+
+
+def test_fronted_clauses_take_the_main_subject():
+    assert {("ego", "turn_right"), ("ego", "brake")} <= _actions("After turning right, the ego car brakes.")
+    assert ("truck", "lane_change") in _actions("Having changed lanes, the truck slows to a crawl.")
+
+
+def test_turn_lane_is_not_a_turn():
+    assert _actions("The ego car waits in the left-turn lane.") == set()
+
+
+# ----------------------------------------------------------------------------- negation, quantity
+
+def test_no_other_vehicles_is_an_absence_not_a_vehicle():
+    parsed = parse_description("The ego drives on an empty street with no other vehicles and no pedestrians.")
+    assert [e.kind for e in parsed.entities] == ["ego"]
+    assert set(parsed.absent) == {"car", "truck", "bus", "motorcycle", "pedestrian"}
+
+
+def test_without_an_intersection():
+    parsed = parse_description("A straight road without an intersection; a car ahead of the ego brakes.")
+    assert parsed.road == "straight_road" and parsed.features["no_junction"] is True
+
+
+@pytest.mark.parametrize("text, kinds", [
+    ("Two vehicles approach the junction: a bus and a motorcycle.", ["bus", "motorcycle"]),
+    ("Three vehicles are involved: the ego, a lead car and a truck.", ["car", "ego", "truck"]),
+    ("Two cars ahead of the ego brake.", ["car", "car", "ego"]),
+])
+def test_counts_add_up(text, kinds):
+    assert _kinds(text) == kinds
+
+
+# ----------------------------------------------------------------------------- roads
+
+@pytest.mark.parametrize("text, road, features", [
+    ("The ego enters a roundabout.", "roundabout", {}),
+    ("The ego drives on a multi-lane urban road.", "straight_road", {"multi_lane": True}),
+    ("The ego drives on a four-lane city street.", "straight_road", {"lanes": 2, "multi_lane": True}),
+    ("A van waits at a Y-junction.", "three_way", {"junction_shape": "y"}),
+    ("A van waits at a three-way intersection.", "three_way", {}),
+    ("A car sits in the right turn lane of the intersection.", "intersection", {"turn_lane": "right"}),
+    ("Cars are parked in the parking lane of the street.", "straight_road", {"parking_lane": True}),
+    ("A truck is stopped on the hard shoulder of the motorway.", "highway", {"shoulder": True}),
+    ("The ego car takes the off-ramp of the freeway.", "highway", {"ramp": "off"}),
+])
+def test_roads_and_features(text, road, features):
+    parsed = parse_description(text)
+    assert parsed.road == road
+    for key, value in features.items():
+        assert parsed.features.get(key) == value, parsed.features
+
+
+def test_merge_is_not_always_an_on_ramp():
+    assert parse_description("On the highway the two lanes merge into one.").road == "highway"
+    assert parse_description("The ego merges from the on-ramp.").road == "merge"
+
+
+# ----------------------------------------------------------------------------- collision geometry
+
+@pytest.mark.parametrize("text, who, kind", [
+    ("A bus rear-ends the ego vehicle.", "bus", "collide_rear_end"),
+    ("A motorcyclist strikes the side of the ego car.", "motorcycle", "collide_side"),
+    ("An oncoming van hits the AV head-on.", "car", "collide_head_on"),
+])
+def test_collision_geometry(text, who, kind):
+    assert {(who, "collide"), (who, kind)} <= _actions(text)
+
+
+def test_collision_between_two_actors_gives_both_with_each_other():
+    parsed = parse_description("A side-impact crash happens between the ego and a bus.")
+    bus = next(e for e in parsed.entities if e.kind == "bus")
+    assert parsed.ego.has("collide_side") and bus.has("collide_side")
+    assert parsed.ego.detail("collide")["with"] is bus and bus.detail("collide")["with"] is parsed.ego
+
+
+# ----------------------------------------------------------------------------- triggers
+
+def test_must_stop_for_a_conflict_is_reactive():
+    parsed = parse_description("At the junction the AV must stop for the crossing cyclist.")
+    cyclist = next(e for e in parsed.entities if e.kind == "bicycle")
+    assert parsed.ego.detail("stop")["trigger"] == {"kind": "conflict", "with": cyclist}
+    assert cyclist.has("cross")
+
+
+def test_must_stop_without_object_finds_the_conflicting_actor():
+    parsed = parse_description("At the four-way intersection the ego must stop while a car goes straight across.")
+    car = next(e for e in parsed.entities if e.kind == "car")
+    assert parsed.ego.detail("stop")["trigger"] == {"kind": "conflict", "with": car}
+
+
+def test_yield_and_numbers():
+    parsed = parse_description("The ego yields to a bus. A truck brakes 25 m ahead of the ego at 60 mph.")
+    bus = next(e for e in parsed.entities if e.kind == "bus")
+    assert parsed.ego.detail("stop")["trigger"]["with"] is bus
+    truck = next(e for e in parsed.entities if e.kind == "truck")
+    assert truck.detail("brake")["trigger"] == {"kind": "distance", "meters": 25.0}
+    assert truck.attrs["speed_kph"] == pytest.approx(96.6)
+
+
+# ----------------------------------------------------------------------------- unplaced phrases
+
+def test_unplaced_phrases_are_reported_verbatim():
+    parsed = parse_description("The ego car brakes, and then the car levitates gracefully over the Road.")
+    assert parsed.unplaced == ["the car levitates gracefully over the Road"]
+    assert parse_description("The ego car brakes on the highway.").unplaced == []
+
+
+def test_every_clause_is_placed_or_reported():
+    text = "A truck is on the left. The ego hums a tune. A bus turns right."
+    parsed = parse_description(text)
+    assert parsed.unplaced == ["The ego hums a tune"]
