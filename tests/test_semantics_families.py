@@ -102,7 +102,8 @@ def test_fronted_clauses_take_the_main_subject():
 
 
 def test_turn_lane_is_not_a_turn():
-    assert _actions("The ego car waits in the left-turn lane.") == set()
+    assert _actions("The ego car drives in the left-turn lane.") == set()
+    assert ("ego", "stop") in _actions("The ego car waits in the left-turn lane.")
 
 
 # ----------------------------------------------------------------------------- negation, quantity

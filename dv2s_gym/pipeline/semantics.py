@@ -176,7 +176,7 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
              r"at a standstill|stalled|broken down)\b"),
     ("stop", r"\bstop(?:s|ped|ping)?\b(?! (?:sign|line|light|lights|bar)s?\b)"),
     ("stop", r"\bhalt(?:s|ed|ing)\b"),
-    ("stop", r"\byield(?:s|ed|ing)? (?:to|for)\b|\bgiv(?:e|es|ing) way\b|\bgave way\b|\bwait(?:s|ed|ing)? for\b"),
+    ("stop", r"\bwait(?:s|ed|ing)?\b(?! for)|\byield(?:s|ed|ing)? (?:to|for)\b|\bgiv(?:e|es|ing) way\b|\bgave way\b|\bwait(?:s|ed|ing)? for\b"),
     # accelerating
     ("accelerate", r"\baccelerat(?:e|es|ed|ing)\b(?! lane)"),
     ("accelerate", r"\b(?:speed(?:s|ing)? up|sped up|pick(?:s|ed|ing)? up speed|gain(?:s|ed|ing)? speed|"
@@ -263,7 +263,8 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
                         r"hit(?:s|ting)?|strik(?:e|es|ing)|struck|smash(?:es|ed|ing)?) (?:\w+ ){0,3}head ?on\b"),
     ("collide_side", r"\bside (?:on )?(?:collision|crash|impact)s?\b|\bt ?bon(?:e|es|ed|ing)\b|"
                      r"\bsideswip(?:e|es|ed|ing)\b|\bbroadsid(?:e|es|ed|ing)\b|"
-                     r"\b(?:" + _CRASH_INTO + r") the (?:\w+ )?side of\b(?! the (?:road|street|highway|lane))"),
+                     r"\b(?:" + _CRASH_INTO + r") the (?:\w+ )?side of\b(?! the (?:road|street|highway|lane))|"
+                     r"\b(?:hit|struck|impacted|broadsided) (?:on|in) (?:the|its|his|her) (?:\w+ )?side\b"),
     # collisions
     ("collide", r"\bcollid(?:e|es|ed|ing)\b|\bcollision with\b"),
     ("collide", r"\bcrash(?:es|ed|ing)?\b|\bsmash(?:es|ed|ing)? into\b|\bslam(?:s|med|ming)? into\b|"
@@ -307,6 +308,7 @@ following followed scene's view camera image video frame driver driver's seen se
 nothing multi lane urban city residential rural suburban country way one two divided median shoulder hard parking
 turn turning left right middle center centre only junction intersection shaped wide narrow per each either km h
 kph kmh mph m s meters metres seconds feet hour speed limit posted around approximately about roughly
+north south east west northbound southbound eastbound westbound parked double idling located situated
 """.split())
 _MOTOR = ("car", "truck", "bus", "motorcycle")
 _ON_RAMP = re.compile(r"\b(?:on ramp|onramp|slip road|entry ramp|entrance ramp|acceleration lane|ramp)\b")
@@ -547,6 +549,11 @@ class _Parser:
                         return e
                 candidates[-1].descriptors |= descriptors
                 return candidates[-1]
+        if count > 1 and "parked" in descriptors and not new:
+            # "parked cars along the curb ... between two parked cars": the same row of parked cars
+            parked = [e for e in same if "parked" in e.descriptors and e.count >= count]
+            if parked:
+                return parked[-1]
         return self._new(kind, count, descriptors)
 
     def _new(self, kind: str, count: int, descriptors: set) -> Entity:
@@ -1019,6 +1026,11 @@ class _Parser:
                     spans.append((m.start(), m.end()))
                     continue
                 owner = self._action_subject(m.start(), mentions, subject, clause)
+                if re.match(r"(?:stopped|stationary|parked|stalled|broken down|waiting|standing)\b", m.group(0)):
+                    right_before = [mm for mm in mentions if 0 <= m.start() - mm.end <= 1
+                                    and not isinstance(mm.entity, tuple)]
+                    if right_before:
+                        owner = right_before[-1].entity  # "a bus stopped at the stop": the bus
                 if re.search(r"\bor\s+(?:\w+\s+)?$", before) or re.match(r"\s*(?:\w+\s+){0,3}or\b", clause[m.end():]):
                     spans.append((m.start(), m.end()))
                     continue  # "turns right or goes straight": neither is stated
@@ -1029,8 +1041,13 @@ class _Parser:
                         owner = agent  # "the ego is cut off by a van"
                 if action.startswith("collide"):
                     passive = _PASSIVE_HIT.search(clause[max(0, m.start() - 25):m.end() + 4])
+                    late_by = re.match(r"(?:\s+\w+){0,5}?\s+by\b", clause[m.end():])
+                    if not passive and late_by and re.search(r"\b(?:is|was|were|are|gets?|got|being|been) (?:\w+ )?$",
+                                                             before):
+                        passive = late_by  # "was struck on the right side by V2"
                     if passive:
-                        agent = self._object_at(clause, m.end(), mentions)
+                        agent = self._object_at(clause, m.end() + (late_by.end() if late_by and passive is late_by
+                                                                   else 0), mentions)
                         if agent is not None:
                             owner = agent
                 spans.append((m.start(), m.end()))
@@ -1282,7 +1299,7 @@ class _Parser:
                 self._relate(e, "same_lane", ego)
             if e.kind == "obstacle" and "same_lane" in rels:
                 self._relate(e, "ahead_of", ego)
-            if e.kind == "pedestrian" and e.has("cross"):
+            if e.kind in ("pedestrian", "bicycle") and e.has("cross"):
                 self._relate(e, "ahead_of", ego)
                 self._relate(e, "crossing_path", ego)
             if e.kind in _MOTOR + ("bicycle",) and "oncoming" in rels and ego.has("turn_left"):
