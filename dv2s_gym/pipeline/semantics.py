@@ -1146,7 +1146,7 @@ class _Parser:
             return
         if action == "pull_out":
             if "generic" in groups and groups.get("generic") is not None and not (
-                    "parked" in owner.descriptors or owner.has("stop") or re.search(
+                    "parked" in owner.descriptors or re.search(
                         r"\b(?:park\w*|curb|kerb|driveway|shoulder|roadside|side of the road|lay by)\b", clause)):
                 self._unplaced_phrases.append(clause)
                 return
