@@ -176,7 +176,7 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
              r"at a standstill|stalled|broken down)\b"),
     ("stop", r"\bstop(?:s|ped|ping)?\b(?! (?:sign|line|light|lights|bar)s?\b)"),
     ("stop", r"\bhalt(?:s|ed|ing)\b"),
-    ("stop", r"\bwait(?:s|ed|ing)?\b(?! for)|\byield(?:s|ed|ing)? (?:to|for)\b|\bgiv(?:e|es|ing) way\b|\bgave way\b|\bwait(?:s|ed|ing)? for\b"),
+    ("stop", r"\bwait(?:s|ed)?\b(?! for)|\b(?:is|are|was|were|be|remains?) waiting\b(?! for)|\byield(?:s|ed|ing)? (?:to|for)\b|\bgiv(?:e|es|ing) way\b|\bgave way\b|\bwait(?:s|ed|ing)? for\b"),
     # accelerating
     ("accelerate", r"\baccelerat(?:e|es|ed|ing)\b(?! lane)"),
     ("accelerate", r"\b(?:speed(?:s|ing)? up|sped up|pick(?:s|ed|ing)? up speed|gain(?:s|ed|ing)? speed|"
