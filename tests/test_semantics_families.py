@@ -207,3 +207,31 @@ def test_every_clause_is_placed_or_reported():
     text = "A truck is on the left. The ego hums a tune. A bus turns right."
     parsed = parse_description(text)
     assert parsed.unplaced == ["The ego hums a tune"]
+
+
+# ----------------------------------------------------------------------------- clause structure
+
+def test_relative_pronoun_refers_to_the_last_actor_and_coordinated_subjects_share_the_verb():
+    assert ("pedestrian", "cross") in _actions(
+        "The ego vehicle, travelling at 50 km/h, encounters a jaywalker who runs across the street.")
+    assert {("pedestrian", "cross"), ("bicycle", "cross")} <= _actions(
+        "Two pedestrians and a cyclist cross the street in front of the AV.")
+
+
+def test_reduced_relatives_belong_to_their_noun():
+    acts = _actions("A car turning right collides with a pedestrian crossing the road.")
+    assert ("pedestrian", "cross") in acts and ("car", "cross") not in acts and ("car", "turn_right") in acts
+
+
+def test_crash_report_style():
+    text = ("V1 was stopped at a three-way intersection. V1 proceeded and was struck on the right side by V2, "
+            "which was traveling west.")
+    acts = _actions(text)
+    assert {("car", "collide"), ("car", "collide_side"), ("ego", "stop")} <= acts
+    assert parse_description(text).unplaced == []
+
+
+def test_pull_over_and_signals():
+    assert {("ego", "lane_change_right"), ("ego", "stop")} <= _actions("The ego pulls over onto the shoulder.")
+    assert parse_description("There is no traffic light at the junction.").features["signals"] is False
+    assert parse_description("The car waits at a red light.").features["signals"] is True

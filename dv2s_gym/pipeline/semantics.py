@@ -105,7 +105,7 @@ _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
         (r"joggers", True), (r"passers by", True),
         (r"pedestrian", False), (r"person", False), (r"walker", False), (r"man", False), (r"woman", False),
         (r"child", False), (r"kid", False), (r"boy", False), (r"girl", False), (r"jogger", False),
-        (r"passer by", False), (r"schoolchild", False), (r"toddler", False), (r"elderly (?:man|woman|person)", False), (r"individual", False),
+        (r"passer by", False), (r"jaywalkers?", False), (r"schoolchild", False), (r"toddler", False), (r"elderly (?:man|woman|person)", False), (r"individual", False),
     ],
     "obstacle": [
         (r"obstacles", True), (r"cones", True), (r"traffic cones", True), (r"barriers", True),
@@ -176,6 +176,7 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
              r"at a standstill|stalled|broken down)\b"),
     ("stop", r"\bstop(?:s|ped|ping)?\b(?! (?:sign|line|light|lights|bar)s?\b)"),
     ("stop", r"\bhalt(?:s|ed|ing)\b"),
+    ("pull_over", r"\bpull(?:s|ed|ing)? (?:over|off the road|onto the (?:hard )?shoulder)\b"),
     ("stop", r"\bwait(?:s|ed)?\b(?! for)|\b(?:is|are|was|were|be|remains?) waiting\b(?! for)|\byield(?:s|ed|ing)? (?:to|for)\b|\bgiv(?:e|es|ing) way\b|\bgave way\b|\bwait(?:s|ed|ing)? for\b"),
     # accelerating
     ("accelerate", r"\baccelerat(?:e|es|ed|ing)\b(?! lane)"),
@@ -309,6 +310,10 @@ nothing multi lane urban city residential rural suburban country way one two div
 turn turning left right middle center centre only junction intersection shaped wide narrow per each either km h
 kph kmh mph m s meters metres seconds feet hour speed limit posted around approximately about roughly
 north south east west northbound southbound eastbound westbound parked double idling located situated
+encounter encounters encountering enter enters entering entered exit exits exiting exited arrive arrives arriving
+arrived reach reaches reaching heavy light dense sparse busy congested moderate free flowing walk walks walking
+stand stands standing ride rides riding first green red amber yellow signal signals signalized signalised
+unsignalized unsignalised controlled uncontrolled already inside outside next no
 """.split())
 _MOTOR = ("car", "truck", "bus", "motorcycle")
 _ON_RAMP = re.compile(r"\b(?:on ramp|onramp|slip road|entry ramp|entrance ramp|acceleration lane|ramp)\b")
@@ -510,6 +515,8 @@ class _Parser:
         self._sentence_index = 0
         self._order = 0
         self._named: Dict[str, Entity] = {}
+        self._last_mentioned: Optional[Entity] = None
+        self._negated = 0
 
     # ---------------------------------------------------------------- helpers
     def _entity_for(self, kind: str, count: int, definite: bool, descriptors: set, new: bool) -> Entity:
@@ -608,6 +615,10 @@ class _Parser:
             plural = number == "p"
             before = clause[:m.start()].split()
             window = before[-4:]
+            for cut in range(len(window) - 1, -1, -1):
+                if window[cut] in ("and", "or", "with", "than", "by", "of") or window[cut].endswith(","):
+                    window = window[cut + 1:]  # "a Ford F-150 and a bus": the count belongs to its own phrase
+                    break
             count = None
             definite = False
             descriptors = set()
@@ -615,7 +626,7 @@ class _Parser:
             for w in window:
                 if w in _NUMBERS and w not in ("a", "an"):
                     count = _NUMBERS[w]
-                elif w.isdigit():
+                elif w.isdigit() and 0 < int(w) <= 30:
                     count = int(w)
                 if w in ("the", "this", "that", "these", "those", "its", "their"):
                     definite = True
@@ -778,6 +789,9 @@ class _Parser:
             if re.search(r"\b(?:between|involving)\s+(?:\S+\s+){0,4}\S+$", clauses[i]) and \
                     clauses[i + 1].startswith("and "):
                 clauses[i:i + 2] = [clauses[i] + " " + clauses[i + 1]]  # "between the ego and a bus" is one phrase
+        for i in range(len(clauses) - 2, -1, -1):
+            if clauses[i + 1].startswith("and ") and self._noun_phrase_only(clauses[i]):
+                clauses[i:i + 2] = [clauses[i] + " " + clauses[i + 1]]  # "two pedestrians and a dog cross ..."
         previous_subject = self.last_subject
         if len(clauses) > 1 and _FRONTED.match(clauses[0]):
             # "After turning right, the ego ...": the fronted clause's subject is the main clause's
@@ -791,17 +805,32 @@ class _Parser:
                 previous_subject = subject
                 self.last_subject = subject
 
+    @staticmethod
+    def _noun_phrase_only(clause: str) -> bool:
+        """A clause that only names actors ("two pedestrians", "the ego car"): no verb of its own."""
+        if not (_NOUN_RE.search(clause) or _EGO_RE.search(clause)):
+            return False
+        if any(rx.search(clause) for _, rx in _COMPILED_ACTIONS):
+            return False
+        rest = _NOUN_RE.sub(" ", _EGO_RE.sub(" ", clause))
+        words = re.findall(r"[a-z']+", rest)
+        return all(w in _NUMBERS or w in _COLORS or w in _ORDINALS or
+                   w in ("the", "a", "an", "and", "another", "other", "both", "each", "some", "white", "small",
+                         "large", "big", "red", "parked") for w in words)
+
     def _state(self) -> Tuple[Any, ...]:
         """A fingerprint of what has been placed so far (to tell which clauses placed nothing)."""
         bookkeeping = ("noun", "sentence", "order", "generic")
         return (tuple((a, tuple(sorted(k for k, v in d.items() if v))) for e in self.out.entities for a, d in e.actions),
                 sum(len(e.relations) for e in self.out.entities), tuple(e.lane for e in self.out.entities if e.lane),
                 sum(1 for e in self.out.entities for k in e.attrs if k not in bookkeeping),
-                len(self._unplaced_phrases))
+                len(self._unplaced_phrases), self._negated, len(self.out.features))
 
     def _said_elsewhere(self, clause: str) -> bool:
         """A clause that adds nothing new is still placed when it only names the road, a known actor with a
         neutral verb (drives, approaches, is present), or filler."""
+        if road_features(clause, self.out.road):
+            return True
         rest = _NOUN_RE.sub(" ", _EGO_RE.sub(" ", clause))
         for _, pattern in ROAD_PATTERNS:
             rest = re.sub(pattern, " ", rest)
@@ -840,7 +869,9 @@ class _Parser:
             first = (clause[body_start:].split() or [""])[0]
             verb_first = bool(re.fullmatch(r"[a-z]+(?:s|ed|ing)", first)) and not _NOUN_RE.fullmatch(first) \
                 and first not in ("this", "his", "its", "as", "is", "was", "has", "does", "thus", "always")
-            if subordinate or verb_first or not _DETERMINER_OR_NOUN.search(head) or \
+            if subordinate and self._last_mentioned is not None:
+                subject = self._last_mentioned  # "..., a jaywalker who runs across": the jaywalker
+            elif subordinate or verb_first or not _DETERMINER_OR_NOUN.search(head) or \
                     re.match(r"\s*(?:it|they|he|she)\b", head):
                 subject = inherited
             else:
@@ -862,7 +893,12 @@ class _Parser:
                 self._relate(inherited, "ahead_of", ego)
         self._lanes(clause, mentions, subject)
         self._relations(clause, mentions, subject)
+        before_actions = [a for a, _ in subject.actions] if subject is not None else []
         self._actions(clause, mentions, subject)
+        self._coordinated(clause, mentions, subject, before_actions)
+        real = [mm for mm in mentions if not isinstance(mm.entity, tuple)]
+        if real:
+            self._last_mentioned = real[-1].entity
         kph = speed_kph(clause)
         if kph is not None:
             owner = subject or next((mm.entity for mm in mentions if not mm.prep_object), None)
@@ -1024,9 +1060,11 @@ class _Parser:
                 before = clause[:m.start()]
                 if _NEGATION.search(before[-45:]):
                     spans.append((m.start(), m.end()))
+                    self._negated += 1  # understood: said not to happen
                     continue
                 owner = self._action_subject(m.start(), mentions, subject, clause)
-                if re.match(r"(?:stopped|stationary|parked|stalled|broken down|waiting|standing)\b", m.group(0)):
+                if re.match(r"(?:stopped|stationary|parked|stalled|broken down|waiting|standing|[a-z]+ing)\b",
+                            m.group(0)):
                     right_before = [mm for mm in mentions if 0 <= m.start() - mm.end <= 1
                                     and not isinstance(mm.entity, tuple)]
                     if right_before:
@@ -1102,6 +1140,28 @@ class _Parser:
             owner.add_action(action)
             owner.detail(action).setdefault("trigger", detail) if existing is not None else None
 
+    def _coordinated(self, clause: str, mentions: List[_Mention], subject: Optional[Entity],
+                     before_actions: List[str]) -> None:
+        """"Two pedestrians and a cyclist cross": the actors joined to the subject by "and" do what it does."""
+        if subject is None:
+            return
+        new = [(a, d) for a, d in subject.actions if a not in before_actions]
+        if not new:
+            return
+        idx = next((i for i, mm in enumerate(mentions) if mm.entity is subject), None)
+        if idx is None:
+            return
+        for prev, mm in zip(mentions[idx:], mentions[idx + 1:]):
+            gap = clause[prev.end:mm.start]
+            if not re.fullmatch(r"\s*(?:,\s*)?(?:and|or|as well as|along with|plus)\s+(?:\w+\s+){0,2}", gap) or \
+                    isinstance(mm.entity, tuple) or mm.entity is subject:
+                break
+            for a, d in new:
+                if mm.entity.kind == "pedestrian" and a not in ("cross", "stop", "collide") and \
+                        not a.startswith("collide"):
+                    continue
+                mm.entity.add_action(a, **{k: v for k, v in d.items() if k != "with"})
+
     def _conflict_partner(self, who: Entity) -> Optional[Entity]:
         return _conflict_partner_of(self.out.entities, who)
 
@@ -1169,6 +1229,11 @@ class _Parser:
                 owner.add_action("cross", sudden=sudden or quick, directions=[])
                 if behind is not None:
                     owner.detail("cross")["from_behind"] = behind
+            return
+        if action == "pull_over":
+            if kind != "pedestrian":
+                owner.add_action("lane_change_right", sudden=sudden)
+                owner.add_action("stop", sudden=sudden)
             return
         if action == "stop" or action == "brake":
             self._trigger(owner, action, m, clause)

@@ -27,7 +27,8 @@ _N = r"(?P<n>\d+|one|single|two|three|four|five|six|eight)"
 # "no other vehicles", "without any other traffic", "no pedestrians are around"
 _ABSENT_PATTERNS: Tuple[Tuple[str, List[str]], ...] = (
     (r"\b(?:no|without(?: any)?|not any|zero|free of(?: any)?|absence of(?: any)?) (?:other |further |additional |"
-     r"surrounding |background |nearby |oncoming )?(?:vehicles?|cars?|traffic|road users|actors|agents)\b",
+     r"surrounding |background |nearby |oncoming )?(?:vehicles?|cars?|traffic|road users|actors|agents)\b"
+     r"(?! (?:lights?|signals?|signs?|control|cones?|jams?|islands?|calming|police))",
      VEHICLE_KINDS),
     (r"\b(?:no|without(?: any)?|not any|zero|free of(?: any)?) (?:other )?(?:pedestrians?|people|persons|walkers)\b",
      ["pedestrian"]),
@@ -116,6 +117,12 @@ def road_features(text: str, road: Optional[str]) -> Dict[str, Any]:
     elif re.search(r"\b(?:four|4) (?:way|leg(?:ged)?|arm(?:ed)?) (?:junction|intersection|stop|crossing)?|"
                    r"\bcrossroads?\b", text):
         f["junction_shape"] = "four_way"
+    if re.search(r"\b(?:no|without(?: any)?) (?:traffic )?(?:lights?|signals?)\b|\bunsignali[sz]ed\b|\buncontrolled\b",
+                 text):
+        f["signals"] = False
+    elif re.search(r"\btraffic (?:lights?|signals?)\b|\bsignali[sz]ed\b|\b(?:red|green|amber|yellow) light\b|"
+                   r"\bturns? (?:red|green)\b", text):
+        f["signals"] = True
     if re.search(r"\bdivided (?:road|highway|street|carriageway)\b|\b(?:central )?median\b|\bcentral reservation\b|"
                  r"\bdual carriageway\b", text):
         f["divided"] = True
