@@ -59,7 +59,9 @@ def load(folder: Path) -> List[Tuple[str, str, Dict[str, Any]]]:
             found = list(_items_from(data, path.stem))
             if not found and isinstance(data, dict):
                 txt = path.with_name(path.name.replace(".label.json", ".txt").replace(".json", ".txt"))
-                label = next((data[k] for k in _LABEL_KEYS if isinstance(data.get(k), dict)), data)
+                label = next((data[k] for k in _LABEL_KEYS if isinstance(data.get(k), dict)), None)
+                if label is None:
+                    label = {k: data[k] for k in ("road", "participants", "actions", "relations") if k in data}
                 if txt.exists():
                     found = [(path.stem, txt.read_text(), label)]
             items.extend(found)
