@@ -235,3 +235,28 @@ def test_pull_over_and_signals():
     assert {("ego", "lane_change_right"), ("ego", "stop")} <= _actions("The ego pulls over onto the shoulder.")
     assert parse_description("There is no traffic light at the junction.").features["signals"] is False
     assert parse_description("The car waits at a red light.").features["signals"] is True
+
+
+def test_engineer_notes_style():
+    parsed = parse_description("Ego: straight; NPC1: cut-in from left at 20m, then hard brake.")
+    npc = next(e for e in parsed.entities if e.kind == "car")
+    assert npc.attrs["noun"] == "npc1" and npc.has("cut_in") and npc.has("brake")
+    assert not parsed.ego.actions
+    parsed = parse_description("Adversarial pedestrian crosses from the right when the ego is 15 m away.")
+    ped = next(e for e in parsed.entities if e.kind == "pedestrian")
+    assert ped.detail("cross")["trigger"] == {"kind": "distance", "meters": 15.0} and parsed.unplaced == []
+
+
+def test_rider_on_a_bike_is_one_bicycle_and_rows_of_parked_cars_stay():
+    text = ("The ego car drives down a residential street with cars parked on both sides while a kid on a bike "
+            "rides out of a driveway.")
+    parsed = parse_description(text)
+    assert sorted(parsed.elements()["participants"]) == ["bicycle", "car", "car", "ego"]
+    assert ("bicycle", "pull_out") in _actions(text) and parsed.features["parking_lane"] is True
+
+
+def test_no_stop_from_a_four_way_stop_and_lost_control():
+    acts = _actions("The ego must stop at the stop line because a car approaches from the left at the 4-way stop.")
+    assert ("ego", "stop") in acts and ("car", "stop") not in acts
+    assert ("car", "swerve") in _actions("A sedan loses control in front of the AV.")
+    assert ("ego", "brake") not in _actions("The ego overtakes a slow tractor.")

@@ -89,7 +89,8 @@ _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
         (r"taxis", True), (r"pickups", True), (r"jeeps", True), (r"minivans", True),
         (r"automobiles", True), (r"adversarial (?:agents|vehicles|cars)", True), (r"npcs", True),
         (r"(?:adversarial|adversary|npc|background) (?:agent|vehicle|car|actor)", False),
-        (r"adversary", False), (r"npc", False), (r"v[2-9]", False), (r"vehicle [2-9]", False),
+        (r"(?:npc|agent|actor|adversary|adv|car) ?[1-9]", False), (r"adversary", False), (r"npc", False),
+        (r"v[2-9]", False), (r"vehicle [2-9]", False),
         (r"car", False), (r"vehicle", False), (r"sedan", False), (r"suv", False), (r"van", False),
         (r"minivan", False), (r"hatchback", False), (r"coupe", False), (r"taxi", False), (r"cab", False),
         (r"jeep", False), (r"pickup(?: truck)?", False), (r"ambulance", False), (r"police car", False),
@@ -104,7 +105,7 @@ _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
     "truck": [
         (r"trucks", True), (r"lorries", True), (r"semis", True), (r"hgvs", True),
         (r"truck", False), (r"lorry", False), (r"semi(?: truck| trailer)?", False), (r"hgv", False),
-        (r"tractor trailer", False), (r"trailer", False), (r"18 wheeler", False), (r"box truck", False),
+        (r"tractor trailer", False), (r"trailer", False), (r"tractor", False), (r"18 wheeler", False), (r"box truck", False),
         (r"tanker", False), (r"garbage truck", False), (r"fire truck", False), (r"dump truck", False),
     ],
     "bus": [
@@ -157,7 +158,7 @@ UNKNOWN_ACTORS = (
     "deer", "animal", "dog", "cat", "cow", "bird", "moose", "elephant", "sheep", "carriage", "ufo", "rocket",
     "tank",
 )
-_NOT_ACTOR_AFTER = (r"(?! (?:lane|lanes|stop|stops|park|parks|light|lights|wash|seat|door|line|crossings|path|paths|"
+_NOT_ACTOR_AFTER = (r"(?! (?:lanes?(?! (?:splitting|splits|split|filtering|filters|changing|changes|change)\b)|stop|stops|park|parks|light|lights|wash|seat|door|line|crossings|path|paths|"
                     r"rack|racks|route|shelter|station|bay|bays|dealership)\b)")
 
 _COLORS = ("red", "blue", "white", "black", "silver", "grey", "gray", "green", "yellow", "orange", "brown",
@@ -193,14 +194,16 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
               r"(?:the |its |his |her )?brakes?\b"),
     ("brake", r"\bbrak(?:e|es|ed|ing)\b(?! lights?)"),
     ("brake", r"\bdecelerat(?:e|es|ed|ing)\b"),
-    ("brake", r"\bslow(?:s|ed|ing)?(?: (?:down|sharply|abruptly|suddenly|quickly))?\b(?! (?:car|vehicle|truck|lane|traffic|moving|speed))"),
+    ("brake", r"(?<!a )(?<!an )(?<!the )(?<!very )\bslow(?:s|ed|ing)?(?: (?:down|sharply|abruptly|suddenly|quickly))?\b"
+              r"(?! (?:car|vehicle|truck|lane|traffic|moving|speed|tractor|bus|cyclist|van|lorry))"),
+    ("brake", r"\b(?:hard|emergency|sudden|harsh|heavy) brak(?:e|ing)\b"),
     ("brake", r"\b(?:reduc(?:e|es|ed|ing)|drop(?:s|ped|ping)?|cut(?:s|ting)?) (?:its |his |her |their )?speed\b"),
     # stopping
     ("stop", r"\b(?:come|comes|came|coming|brought|bring|brings) to a (?:\w+ )?(?:stop|halt|standstill)\b"),
     ("stop", r"\b(?:remain|remains|remained|remaining|stand|stands|stood|standing|stay|stays|stayed|is|was|are|were"
              r"|sits|sat) (?:completely |fully )?(?:stationary|stopped|still|motionless|immobile|"
              r"at a standstill|stalled|broken down)\b"),
-    ("stop", r"\bstop(?:s|ped|ping)?\b(?! (?:sign|line|light|lights|bar)s?\b)"),
+    ("stop", r"(?<!way )(?<!bus )(?<!the )(?<!a )\bstop(?:s|ped|ping)?\b(?! (?:sign|line|light|lights|bar)s?\b)"),
     ("stop", r"\bhalt(?:s|ed|ing)\b"),
     ("pull_over", r"\bpull(?:s|ed|ing)? (?:over|off the road|onto the (?:hard )?shoulder)\b"),
     ("stop", r"\bwait(?:s|ed)?\b(?! for)|\b(?:is|are|was|were|be|remains?) waiting\b(?! for)|\byield(?:s|ed|ing)? (?:to|for)\b|\bgiv(?:e|es|ing) way\b|\bgave way\b|\bwait(?:s|ed|ing)? for\b"),
@@ -210,10 +213,12 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
                    r"increas(?:e|es|ed|ing) (?:its |his |her |their )?speed)\b"),
     # lane changes, cut-ins, merges
     # leaving a parking spot, turning round, driving backwards
-    ("pull_out", r"\b(?:pull(?:s|ed|ing)?|nos(?:e|es|ed|ing)|edg(?:e|es|ed|ing)|creep(?:s|ing)?|crept|driv(?:e|es|ing)|"
+    ("pull_out", r"\b(?:merg(?:e|es|ed|ing)|rid(?:e|es|ing)|rode|com(?:e|es|ing)|came|pull(?:s|ed|ing)?|nos(?:e|es|ed|ing)|edg(?:e|es|ed|ing)|creep(?:s|ing)?|crept|driv(?:e|es|ing)|"
                  r"drove|back(?:s|ed|ing)?|revers(?:e|es|ed|ing)) (?:out|away) (?:of|from) (?:a |an |the |its |his |her "
                  r"|their )?(?:\w+ )?(?:parking|parked|driveway|curb|kerb|shoulder|space|spot|bay|lay by|alley|garage|"
                  r"car park|side of the road|roadside)\w*\b"),
+    ("pull_out", r"\bmerg(?:e|es|ed|ing) (?:in)?to (?:the )?traffic from (?:a |an |the |its )?(?:\w+ )?(?:parking|parked|"
+                 r"driveway|curb|kerb|shoulder|space|spot|bay|lay by)\w*\b"),
     ("pull_out", r"\b(?:leav(?:e|es|ing)|left|exit(?:s|ed|ing)?|depart(?:s|ed|ing)?(?: from)?) (?:a |an |the |its |his |"
                  r"her |their )?(?:\w+ )?(?:parking (?:spot|space|bay|lot|place)|driveway|parking lane|curbside|"
                  r"kerbside)\b"),
@@ -237,7 +242,7 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
     ("cut_in", r"\bcut(?:s|ting)? (?:back )?in(?:to)?\b|\bcut in\b|\bsqueez(?:e|es|ed|ing) in\b"),
     ("cut_in", r"\bpull(?:s|ed|ing)? (?:back |right )?(?:in|into (?:the ego's|its|the) lane|out in front)\b"),
     ("cut_in", r"\b(?:chang(?:e|es|ed|ing)|mov(?:e|es|ed|ing)|swerv(?:e|es|ed|ing)|steer(?:s|ed|ing)?|"
-               r"switch(?:es|ed|ing)?|veer(?:s|ed|ing)?|return(?:s|ed|ing)?) (?:lanes? |back )?(?:in)?to "
+               r"switch(?:es|ed|ing)?|veer(?:s|ed|ing)?|return(?:s|ed|ing)?|swing(?:s|ing)?|swung) (?:lanes? |back |wide )?(?:in)?to "
                r"(?:the ego(?: vehicle| car)?'s|its|the same|our|my) lane\b"),
     ("merge", r"\bmerg(?:e|es|ed|ing)\b(?! (?:lane|area|section|zone|point|ramp)s?\b)(?! (?:in)?to the "
               r"(?:left|right|middle|center|centre) lane)"),
@@ -251,6 +256,8 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
     ("lane_change", r"\b(?P<dir>left|right)(?:ward)? lane change\b|\blane change to the (?P<dir2>left|right)\b"),
     ("lane_change", r"\b(?P<weave>weav(?:e|es|ed|ing)|zig ?zag(?:s|ged|ging)?)\b(?! around)(?: (?:in and out of|"
                     r"through|between|across) (?:the )?(?:traffic|lanes|cars|vehicles))?"),
+    ("lane_change", r"\breturn(?:s|ed|ing)? (?:back )?to (?:its|his|her|their|the) (?:original|own|previous|initial|"
+                    r"former) lane\b"),
     ("lane_change", r"\b(?:chang(?:e|es|ed|ing)|switch(?:es|ed|ing)?|swap(?:s|ped|ping)?) lanes?\b|\blane change\b|"
                     r"\b(?:mov(?:e|es|ed|ing)|shift(?:s|ed|ing)?|switch(?:es|ed|ing)?|pull(?:s|ed|ing)?|"
                     r"steer(?:s|ed|ing)?|go(?:es)?|went) (?:over )?(?:in)?to (?:the |an |another )?(?:adjacent|"
@@ -313,7 +320,8 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
                  r"stopped |stationary ))(?! (?:the |a |an )?(?:intersection|junction|crossroads?|road|street))"),
 )
 _ACTION_PATTERNS = tuple(_ACTION_PATTERNS) + (
-    ("swerve", r"\bswerv(?:e|es|ed|ing)\b|\bevasive (?:steering|manoeuvre|maneuver|swerve)\b|"
+    ("swerve", r"\b(?:los(?:e|es|ing)|lost) control\b|\bspin(?:s|ning)? out\b|\bspun out\b|\bskid(?:s|ded|ding)?\b|"
+               r"\bfishtail(?:s|ed|ing)?\b|\bswerv(?:e|es|ed|ing)\b|\bevasive (?:steering|manoeuvre|maneuver|swerve)\b|"
                r"\bjerk(?:s|ed|ing)? (?:the wheel|sideways)\b"),
 )
 _COMPILED_ACTIONS = [(a, re.compile(p)) for a, p in _ACTION_PATTERNS]
@@ -505,6 +513,10 @@ def _normalize(text: str) -> str:
     text = re.sub(r"(?<=\w)-(?=\w)", " ", text)
     text = re.sub(r"[\u2013\u2014]", ", ", text)
     text = re.sub(r"\s+", " ", text)
+    # "a kid on a bike" is one bicycle, not a pedestrian and a bicycle
+    text = re.sub(r"\b(?:kid|child|man|woman|boy|girl|teenager|teen|person|someone|rider|delivery rider|courier)s? "
+                  r"(?:on|riding) (a|an|his|her|their) ((?:e |electric |push |kick )?(?:bike|bicycle|scooter|motorbike|"
+                  r"motorcycle|moped))\b", r"\2", text)
     # "a pedestrian crossing" as a place is a crosswalk, not a pedestrian
     text = re.sub(r"\b((?:at|near|approach\w*|to|towards?|over|through|before|reach\w*|on) (?:a|the) )"
                   r"(?:zebra|pedestrian) crossing\b", r"\1crosswalk", text)
@@ -542,6 +554,8 @@ class _Parser:
         self._order = 0
         self._named: Dict[str, Entity] = {}
         self._last_mentioned: Optional[Entity] = None
+        self._mention_log: List[Tuple[int, int, Entity]] = []
+        self._placed = 0
         self._negated = 0
 
     # ---------------------------------------------------------------- helpers
@@ -630,6 +644,7 @@ class _Parser:
             possessive = m.group(0).endswith("'s") or clause[m.end():m.end() + 2] == "'s"
             taken.append((m.start(), m.end()))
             ego_entity = self._entity_for("ego", 1, True, set(), False)
+            self._mention_log.append((self._sentence_index, len(self._mention_log), ego_entity))
             ego_entity.attrs.setdefault("noun", re.sub(r"^(?:the|an|a|our|my) |'s$", "", m.group(0)))
             mentions.append(_Mention(m.start(), m.end(), ego_entity,
                                      prep_before(m.start()) or m.group(0) == "us", possessive))
@@ -672,9 +687,10 @@ class _Parser:
             if count is None:
                 count = 1
             surface = re.sub(r"(?:'s|s')$", "", m.group(0))
-            named = re.fullmatch(r"v([2-9])|vehicle ([2-9])", surface)
+            named = re.fullmatch(r"v([2-9])|vehicle ([2-9])|(npc|agent|actor|adversary|adv|car) ?([1-9])", surface)
             if named:
-                key = "v" + (named.group(1) or named.group(2))
+                key = "v" + (named.group(1) or named.group(2)) if not named.group(3) else \
+                    named.group(3) + named.group(4)
                 entity = self._named.get(key)
                 if entity is None:
                     entity = self._named[key] = self._new("car", 1, {key})
@@ -689,7 +705,8 @@ class _Parser:
             possessive = m.group(0).endswith("'s") or m.group(0).endswith("s'")
             taken.append((m.start(), m.end()))
             entity.attrs.setdefault("noun", surface)
-            if kind == "car" and surface in ("vehicles", "vehicle", "cars", "road users", "agents") and \
+            self._mention_log.append((self._sentence_index, len(self._mention_log), entity))
+            if kind == "car" and surface in ("vehicles", "vehicle") and \
                     (count > 1 or re.match(r"\s*(?:crash|collision|pile ?up|accident)", clause[m.end():])):
                 entity.attrs["generic"] = True
             mentions.append(_Mention(m.start(), m.end(), entity, prep_before(m.start()), possessive))
@@ -802,10 +819,15 @@ class _Parser:
         for group in [e for e in self.out.entities if e.attrs.get("generic")]:
             if group.actions or group.relations or any(j is group for e in self.out.entities for _, j in e.relations):
                 continue
-            later = [e for e in self.out.entities if e is not group and e.kind in vehicles
-                     and (e.kind == "ego" or e.attrs.get("sentence") == group.attrs.get("sentence")
-                          and e.attrs.get("order", 0) > group.attrs.get("order", 0))]
-            named_later = sum(e.count for e in later if e.kind != "ego" or True)
+            first = next(((s, i) for s, i, e in self._mention_log if e is group), None)
+            if first is None:
+                continue
+            later: List[Entity] = []
+            for s, i, e in self._mention_log:
+                if s == first[0] and i > first[1] and e is not group and e.kind in vehicles and \
+                        all(e is not x for x in later):
+                    later.append(e)
+            named_later = sum(e.count for e in later)
             if later and named_later >= group.count and any(e.kind != "ego" for e in later):
                 self.out.entities = [e for e in self.out.entities if e is not group]
 
@@ -850,7 +872,7 @@ class _Parser:
         return (tuple((a, tuple(sorted(k for k, v in d.items() if v))) for e in self.out.entities for a, d in e.actions),
                 sum(len(e.relations) for e in self.out.entities), tuple(e.lane for e in self.out.entities if e.lane),
                 sum(1 for e in self.out.entities for k in e.attrs if k not in bookkeeping),
-                len(self._unplaced_phrases), self._negated, len(self.out.features))
+                len(self._unplaced_phrases), self._negated, self._placed)
 
     def _said_elsewhere(self, clause: str) -> bool:
         """A clause that adds nothing new is still placed when it only names the road, a known actor with a
@@ -917,6 +939,15 @@ class _Parser:
             ego = self.out.ego
             if ego is not None:
                 self._relate(inherited, "ahead_of", ego)
+        if lead and lead.group(0).strip() in ("when", "once", "as") and inherited is not None and inherited.actions \
+                and not any(rx.search(clause) for _, rx in _COMPILED_ACTIONS):
+            dist, sec = distance_m(clause), time_s(clause)
+            if dist is not None or sec is not None:
+                detail = inherited.actions[-1][1]
+                detail.setdefault("trigger", {"kind": "distance", "meters": dist} if dist is not None
+                                  else {"kind": "time", "seconds": sec})
+                self._placed += 1
+                return inherited
         self._lanes(clause, mentions, subject)
         self._relations(clause, mentions, subject)
         before_actions = [a for a, _ in subject.actions] if subject is not None else []
@@ -1211,6 +1242,7 @@ class _Parser:
         return subject is None
 
     def _record(self, owner: Entity, action: str, m: re.Match, clause: str) -> None:
+        self._placed += 1
         window = clause[max(0, m.start() - 30):m.end() + 25]
         sudden = bool(_SUDDEN.search(window))
         kind = owner.kind

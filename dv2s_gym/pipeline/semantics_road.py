@@ -104,7 +104,7 @@ def road_features(text: str, road: Optional[str]) -> Dict[str, Any]:
         f["turn_lane"] = m.group("d") or m.group("d2")
     elif re.search(r"\bturn(?:ing)? lane\b", text):
         f["turn_lane"] = "left"
-    if re.search(r"\bparking (?:lane|strip|bay|bays|spaces?|spots?)\b|\bon street parking\b|\bparked (?:cars|vehicles)"
+    if re.search(r"\bparking (?:lane|strip|bay|bays|spaces?|spots?)\b|\bon street parking\b|\b(?:cars|vehicles) (?:are )?parked (?:along|on|at)\b|\bparked (?:cars|vehicles)"
                  r" (?:along|line|lining|on)\b|\bkerbside parking\b|\bcurbside parking\b|\bparallel parked\b", text):
         f["parking_lane"] = True
     if re.search(r"\b(?:hard )?shoulder\b|\bbreakdown lane\b|\bemergency lane\b|\bverge\b", text):
