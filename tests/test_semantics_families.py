@@ -260,3 +260,14 @@ def test_no_stop_from_a_four_way_stop_and_lost_control():
     assert ("ego", "stop") in acts and ("car", "stop") not in acts
     assert ("car", "swerve") in _actions("A sedan loses control in front of the AV.")
     assert ("ego", "brake") not in _actions("The ego overtakes a slow tractor.")
+
+
+def test_crash_typology_phrases():
+    assert ("car", "crossing_path", "ego") in {tuple(r) for r in elements_from_text(
+        "The ego vehicle is struck by a crossing vehicle.")["relations"]}
+    assert ("ego", "drift") in _actions("The ego vehicle departs the road edge on a curve.")
+    assert ("car", "pull_out") in _actions("A vehicle parked on the shoulder pulls into traffic in front of the ego.")
+    assert ("car", "lane_change_right") in _actions("A van pulls alongside the ego and then merges right.")
+    rels = {tuple(r) for r in elements_from_text("The ego is following a bus.")["relations"]}
+    assert ("bus", "ahead_of", "ego") in rels and ("bus", "behind", "ego") not in rels
+    assert parse_description("A truck crosses at a non-signalized junction.").features["signals"] is False

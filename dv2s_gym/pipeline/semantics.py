@@ -122,7 +122,7 @@ _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
     "bicycle": [
         (r"cyclists", True), (r"bicyclists", True), (r"bicycles", True), (r"bikes", True), (r"scooters", True),
         (r"e scooters", True), (r"scooter riders", True),
-        (r"cyclist", False), (r"bicyclist", False), (r"bicycle", False), (r"(?:e |push |road |mountain )?bike",
+        (r"cyclist", False), (r"bicyclist", False), (r"pedal ?cyclists?", False), (r"bicycle", False), (r"(?:e |push |road |mountain )?bike",
                                                                         False),
         (r"scooter rider", False), (r"(?:e |electric |kick )?scooter", False),
     ],
@@ -224,6 +224,8 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
                  r"kerbside)\b"),
     ("pull_out", r"\bpull(?:s|ed|ing)? (?:out|away)\b(?! (?:in front|of the way|to (?:overtake|pass)|into the "
                  r"(?:left|right|oncoming|opposite|adjacent|next|other|passing)))(?P<generic>)"),
+    ("pull_out", r"\b(?:pull(?:s|ed|ing)?|enter(?:s|ed|ing)?|rejoin(?:s|ed|ing)?) (?:(?:in)?to )?(?:the )?(?:flow of )?traffic\b"
+                 r"(?P<generic2>)"),
     ("u_turn", r"\bu turn(?:s|ed|ing)?\b|\bturn(?:s|ed|ing)? (?:a)?round\b|\bturn(?:s|ed|ing)? back\b|"
                r"\b(?:three|3) point turn\b|\bturn(?:s|ed|ing)? about\b"),
     ("reverse", r"\brevers(?:e|es|ed|ing)\b(?! (?:gear|lights?|the decision))|\b(?:backs|backed|backing|(?<=to )back|"
@@ -244,7 +246,7 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
     ("cut_in", r"\b(?:chang(?:e|es|ed|ing)|mov(?:e|es|ed|ing)|swerv(?:e|es|ed|ing)|steer(?:s|ed|ing)?|"
                r"switch(?:es|ed|ing)?|veer(?:s|ed|ing)?|return(?:s|ed|ing)?|swing(?:s|ing)?|swung) (?:lanes? |back |wide )?(?:in)?to "
                r"(?:the ego(?: vehicle| car)?'s|its|the same|our|my) lane\b"),
-    ("merge", r"\bmerg(?:e|es|ed|ing)\b(?! (?:lane|area|section|zone|point|ramp)s?\b)(?! (?:in)?to the "
+    ("merge", r"\bmerg(?:e|es|ed|ing)\b(?! (?:lane|area|section|zone|point|ramp)s?\b)(?! (?:left|right)\b)(?! (?:in)?to the "
               r"(?:left|right|middle|center|centre) lane)"),
     ("merge", r"\bjoin(?:s|ed|ing)? the (?:highway|motorway|freeway|main road|traffic)\b"),
     ("lane_change", r"\b(?:chang(?:e|es|ed|ing)|switch(?:es|ed|ing)?|mov(?:e|es|ed|ing)|shift(?:s|ed|ing)?|"
@@ -256,6 +258,8 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
     ("lane_change", r"\b(?P<dir>left|right)(?:ward)? lane change\b|\blane change to the (?P<dir2>left|right)\b"),
     ("lane_change", r"\b(?P<weave>weav(?:e|es|ed|ing)|zig ?zag(?:s|ged|ging)?)\b(?! around)(?: (?:in and out of|"
                     r"through|between|across) (?:the )?(?:traffic|lanes|cars|vehicles))?"),
+    ("lane_change", r"\b(?:merg(?:e|es|ed|ing)|mov(?:e|es|ed|ing)|shift(?:s|ed|ing)?|chang(?:e|es|ed|ing)|"
+                    r"switch(?:es|ed|ing)?) (?P<dir>left|right)\b(?! (?:turn|lane|side))"),
     ("lane_change", r"\breturn(?:s|ed|ing)? (?:back )?to (?:its|his|her|their|the) (?:original|own|previous|initial|"
                     r"former) lane\b"),
     ("lane_change", r"\b(?:chang(?:e|es|ed|ing)|switch(?:es|ed|ing)?|swap(?:s|ped|ping)?) lanes?\b|\blane change\b|"
@@ -278,6 +282,8 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
     ("go_straight", r"\b(?:cross(?:es|ed|ing)?|pass(?:es|ed|ing)? through|driv(?:e|es|ing) through|"
                     r"go(?:es|ing)? through|went through) (?:the |a )(?:intersection|junction|crossroads?)\b"),
     ("drift", r"\b(?:drift(?:s|ed|ing)?|wander(?:s|ed|ing)?|encroach(?:es|ed|ing)?|invad(?:e|es|ed|ing))\b"),
+    ("drift", r"\b(?:depart(?:s|ed|ing)?|leav(?:e|es|ing)|left|run(?:s|ning)? off|ran off|go(?:es)? off|went off) "
+              r"(?:the )?(?:road|roadway|road edge|carriageway)\b|\broad (?:edge )?departure\b"),
     ("drift", r"\b(?:cross(?:es|ed|ing)?|over) (?:the )?(?:centre|center|middle|dividing|median|double|"
               r"solid|lane) (?:line|marking)s?\b"),
     ("drift", r"\b(?:veer|veers|veered|veering|swerv(?:e|es|ed|ing)|stray(?:s|ed|ing)?) (?:in)?to "
@@ -363,6 +369,7 @@ _PASSIVE_HIT = re.compile(r"\b(?:is|was|were|are|gets?|got|being|been) (?:\w+ )?
 # --------------------------------------------------------------------------- relations
 _REL_PATTERNS: Sequence[Tuple[str, str]] = (
     ("ahead_of", r"\b(?:in front of|ahead of|just ahead of|right in front of|in the path of|before) "),
+    ("behind", r"\b(?:is|are|was|were|been|keeps) (?:closely )?(?:following|tailgating|trailing) "),
     ("behind", r"\b(?:behind|in the back of|to the rear of|at the rear of) "),
     ("left_of", r"\b(?:to|on|at|in) the left (?:side )?of |\bleft of "),
     ("right_of", r"\b(?:to|on|at|in) the right (?:side )?of |\bright of "),
@@ -371,7 +378,8 @@ _REL_IMPLICIT: Sequence[Tuple[str, str]] = (
     ("ahead_of", r"\b(?:in front|ahead|up ahead|further ahead)\b(?! of)"),
     ("ahead_of", r"\b(?:lead|leading|preceding|front) (?=(?:\w+ )?(?:car|vehicle|truck|sedan|suv|van|lorry|bus))"),
     ("behind", r"\b(?:from behind|behind)\b(?! (?:it|the|a|an|him|her|them|us|me|ego|our)\b)"),
-    ("behind", r"\b(?:following|trailing|rear|tailgating) (?=(?:\w+ )?(?:car|vehicle|truck|sedan|suv|van|lorry|bus))"),
+    ("behind", r"(?<!is )(?<!are )(?<!was )(?<!were )(?<!been )(?<!keeps )\b(?:following|trailing|rear|tailgating) "
+               r"(?=(?:\w+ )?(?:car|vehicle|truck|sedan|suv|van|lorry|bus))"),
     ("left_of", r"\b(?:on|to|from|at) (?:its|the ego(?: vehicle| car)?'s|his|her|our|my|the) left\b(?! lane)(?! of)"
                 r"|\b(?:in|on|from) the (?:lane|lanes) (?:to|on) (?:its|the ego(?: vehicle| car)?'s|the) left\b"
                 r"|\b(?:in|on|from) the (?:adjacent|neighbou?ring|next) left lane\b"
@@ -389,7 +397,7 @@ _REL_IMPLICIT: Sequence[Tuple[str, str]] = (
                  r" the other way|the other way)\b"),
     ("same_lane", r"\b(?:in|on|within|occupying|blocking) (?:the same lane|the ego(?: vehicle| car)?'s (?:own )?lane|"
                   r"its lane|our lane|my lane)\b|\bsame lane\b"),
-    ("crossing_path", r"\b(?:cross(?:es|ed|ing)?|cut(?:s|ting)? across|into|in|through|block(?:s|ed|ing)?) "
+    ("crossing_path", r"\b(?:cross(?:es|ed|ing)?|cut(?:s|ting)? across|across|into|in|through|block(?:s|ed|ing)?) "
                       r"(?:the ego(?: vehicle| car)?'s|its|our|my) (?:path|way|trajectory)\b|\bcrossing paths\b"),
 )
 _LANE_POS = re.compile(r"\b(?:on|in|from|of|at|along|using|occupying) the (?P<pos>left|leftmost|middle|center|centre|"
@@ -713,6 +721,10 @@ class _Parser:
             if entity.kind in ("pedestrian", "bicycle") and re.search(r"\bcrossing\s+$", clause[:m.start()]) and \
                     not _NEGATION.search(clause[:m.start()]):
                 entity.add_action("cross", sudden=False, directions=[])
+            elif entity.kind in _MOTOR and re.search(r"\b(?:crossing|cross traffic)\s+$", clause[:m.start()]):
+                pending = entity.attrs.setdefault("pending_relations", [])
+                if "crossing_path" not in pending:
+                    pending.append("crossing_path")  # "a crossing vehicle" crosses the ego's path
             # adjectives of state before the noun: stopped car, parked truck, broken down car
             if entity.kind not in ("ego", "obstacle") and re.search(
                     r"\b(?:stopped|stationary|broken down|stalled|standing|disabled|idle|halted)\s+"
@@ -1263,7 +1275,7 @@ class _Parser:
             owner.add_action("swerve", sudden=True, side=groups.get("dir"))
             return
         if action == "pull_out":
-            if "generic" in groups and groups.get("generic") is not None and not (
+            if any(groups.get(g) is not None for g in ("generic", "generic2")) and not (
                     "parked" in owner.descriptors or re.search(
                         r"\b(?:park\w*|curb|kerb|driveway|shoulder|roadside|side of the road|lay by)\b", clause)):
                 self._unplaced_phrases.append(clause)

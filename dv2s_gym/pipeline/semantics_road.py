@@ -117,7 +117,8 @@ def road_features(text: str, road: Optional[str]) -> Dict[str, Any]:
     elif re.search(r"\b(?:four|4) (?:way|leg(?:ged)?|arm(?:ed)?) (?:junction|intersection|stop|crossing)?|"
                    r"\bcrossroads?\b", text):
         f["junction_shape"] = "four_way"
-    if re.search(r"\b(?:no|without(?: any)?) (?:traffic )?(?:lights?|signals?)\b|\bunsignali[sz]ed\b|\buncontrolled\b",
+    if re.search(r"\b(?:no|without(?: any)?) (?:traffic )?(?:lights?|signals?)\b|\b(?:un|non ?)signali[sz]ed\b|"
+                 r"\buncontrolled\b",
                  text):
         f["signals"] = False
     elif re.search(r"\btraffic (?:lights?|signals?)\b|\bsignali[sz]ed\b|\b(?:red|green|amber|yellow) light\b|"
