@@ -271,3 +271,24 @@ def test_crash_typology_phrases():
     rels = {tuple(r) for r in elements_from_text("The ego is following a bus.")["relations"]}
     assert ("bus", "ahead_of", "ego") in rels and ("bus", "behind", "ego") not in rels
     assert parse_description("A truck crosses at a non-signalized junction.").features["signals"] is False
+
+
+@pytest.mark.parametrize("text, kind", [
+    ("The ego car collides with the car in front of it.", "collide_rear_end"),
+    ("The ego car hits a pedestrian.", "collide_side"),
+    ("An oncoming truck collides with the ego.", "collide_head_on"),
+    ("The front of V2 impacted the right side of V1.", "collide_side"),
+])
+def test_untyped_collisions_get_a_type_for_every_participant(text, kind):
+    typed = [tuple(a) for a in elements_from_text(text)["actions"] if a[1].startswith("collide")]
+    kinds = {a[1] for a in typed}
+    assert kinds == {"collide", kind} and len(typed) == 4
+
+
+def test_animals_and_test_names():
+    assert _kinds("A deer crosses the rural road in front of the AV.") == ["ego", "obstacle"]
+    assert ("obstacle", "cross") in _actions("A deer crosses the rural road in front of the AV.")
+    assert _kinds("Car-to-Car Rear stationary: the vehicle under test drives towards a stationary target car.") \
+        == ["car", "ego"]
+    assert _kinds("urban 2-lane rd, ped dashes out from behind parked bus (L side) ahead of ego") == \
+        ["bus", "ego", "pedestrian"]

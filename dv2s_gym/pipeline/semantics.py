@@ -89,7 +89,8 @@ _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
         (r"taxis", True), (r"pickups", True), (r"jeeps", True), (r"minivans", True),
         (r"automobiles", True), (r"adversarial (?:agents|vehicles|cars)", True), (r"npcs", True),
         (r"(?:adversarial|adversary|npc|background) (?:agent|vehicle|car|actor)", False),
-        (r"(?:npc|agent|actor|adversary|adv|car) ?[1-9]", False), (r"adversary", False), (r"npc", False),
+        (r"(?:npc|agent|actor|adversary|adv|car|pov|tv) ?[1-9]", False), (r"povs", True), (r"pov", False),
+        (r"target (?:car|vehicle)s", True), (r"target (?:car|vehicle)", False), (r"adversary", False), (r"npc", False),
         (r"v[2-9]", False), (r"vehicle [2-9]", False),
         (r"car", False), (r"vehicle", False), (r"sedan", False), (r"suv", False), (r"van", False),
         (r"minivan", False), (r"hatchback", False), (r"coupe", False), (r"taxi", False), (r"cab", False),
@@ -109,13 +110,14 @@ _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
         (r"tanker", False), (r"garbage truck", False), (r"fire truck", False), (r"dump truck", False),
     ],
     "bus": [
+        (r"(?<=city )bus", False),
         (r"buses", True), (r"busses", True), (r"coaches", True), (r"minibuses", True),
         (r"(?:school |city |transit |public |double decker |articulated |shuttle )?bus", False),
         (r"coach", False), (r"minibus", False), (r"shuttle", False), (r"trolleybus", False),
     ],
     "motorcycle": [
         (r"motorcycles", True), (r"motorbikes", True), (r"motorcyclists", True), (r"mopeds", True),
-        (r"bikers", True), (r"motorcycle", False), (r"motorbike", False), (r"motorcyclist", False),
+        (r"bikers", True), (r"motos", True), (r"moto", False), (r"motorcycle", False), (r"motorbike", False), (r"motorcyclist", False),
         (r"moped", False), (r"biker", False), (r"dirt bike", False), (r"motor scooter", False),
         (r"(?:harley|ducati|yamaha|kawasaki)(?: davidson)?", False),
     ],
@@ -127,7 +129,7 @@ _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
         (r"scooter rider", False), (r"(?:e |electric |kick )?scooter", False),
     ],
     "pedestrian": [
-        (r"pedestrians", True), (r"people", True), (r"persons", True), (r"walkers", True), (r"men", True),
+        (r"pedestrians", True), (r"peds", True), (r"ped", False), (r"people", True), (r"persons", True), (r"walkers", True), (r"men", True),
         (r"women", True), (r"children", True), (r"kids", True),
         (r"joggers", True), (r"passers by", True),
         (r"pedestrian", False), (r"person", False), (r"walker", False), (r"man", False), (r"woman", False),
@@ -135,6 +137,10 @@ _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
         (r"passer by", False), (r"jaywalkers?", False), (r"schoolchild", False), (r"toddler", False), (r"elderly (?:man|woman|person)", False), (r"individual", False),
     ],
     "obstacle": [
+        (r"(?:deer|animals|dogs|cats|cows|horses|moose|sheep|birds|elks|kangaroos)", True),
+        (r"(?:animal|dog|cat|cow|horse|bird|elk|kangaroo|fox|boar|wild boar)", False),
+        (r"vending machine", False), (r"obstructions?", False), (r"trash (?:can|bin)", False), (r"mattress", False),
+        (r"(?:lost |loose |fallen )?(?:tire|tyre)", False),
         (r"obstacles", True), (r"cones", True), (r"traffic cones", True), (r"barriers", True),
         (r"boxes", True), (r"barrels", True), (r"rocks", True), (r"tyres", True), (r"tires", True),
         (r"objects", True), (r"signboards", True), (r"barricades", True),
@@ -150,13 +156,13 @@ _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
 _EGO = (r"(?:the |an |our |my |a )?(?:ego(?:[ ](?:car|vehicle|agent|driver|truck))?(?:'s)?|"
         r"(?:test|subject|host|tested|instrumented) (?:car|vehicle|truck)(?:'s)?|av(?:'s)?|adv(?:'s)?|"
         r"(?:automated|driverless|robotic) (?:car|vehicle|truck)(?:'s)?|robotaxi(?:'s)?|v1(?:'s)?|"
-        r"vehicle (?:1|one)(?:'s)?|we|us|"
+        r"vehicle (?:1|one)(?:'s)?|we|us|(?:vehicle|car|system) under test(?:'s)?|vut(?:'s)?|sut(?:'s)?|"
+        r"(?:waymo|cruise|zoox|tesla|uber|apollo|baidu) (?:av|robotaxi|autonomous vehicle|self driving car)(?:'s)?|"
         r"(?:our|my|host|subject) (?:car|vehicle)(?:'s)?|(?:the )?(?:autonomous|self driving) (?:car|vehicle)(?:'s)?)")
 # actor-like things the vocabulary has no type for (reported, never emitted)
 UNKNOWN_ACTORS = (
-    "helicopter", "airplane", "aeroplane", "plane", "drone", "tram", "streetcar", "train", "boat", "horse",
-    "deer", "animal", "dog", "cat", "cow", "bird", "moose", "elephant", "sheep", "carriage", "ufo", "rocket",
-    "tank",
+    "helicopter", "airplane", "aeroplane", "plane", "drone", "tram", "streetcar", "train", "boat",
+    "carriage", "ufo", "rocket", "tank",
 )
 _NOT_ACTOR_AFTER = (r"(?! (?:lanes?(?! (?:splitting|splits|split|filtering|filters|changing|changes|change)\b)|stop|stops|park|parks|light|lights|wash|seat|door|line|crossings|path|paths|"
                     r"rack|racks|route|shelter|station|bay|bays|dealership)\b)")
@@ -185,7 +191,7 @@ ROAD_PATTERNS: Sequence[Tuple[str, str]] = (
 # (action, regex, detail) ; detail names a group that refines the action later
 _A = r"(?:s|es|ed|d|ing)?"
 _CRASH_INTO = (r"(?:crash(?:es|ed|ing)?|slam(?:s|med|ming)?|smash(?:es|ed|ing)?|plow(?:s|ed|ing)?|"
-               r"bump(?:s|ed|ing)?|ram(?:s|med|ming)?) into|hit(?:s|ting)?|strik(?:e|es|ing)|struck|"
+               r"bump(?:s|ed|ing)?|ram(?:s|med|ming)?) into|hit(?:s|ting)?|strik(?:e|es|ing)|struck|impact(?:s|ed|ing)?|"
                r"collid(?:e|es|ed|ing) with")
 """Verb phrases of a collision followed by the part of the vehicle hit ("hits the side of")."""
 _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
@@ -216,7 +222,7 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
     ("pull_out", r"\b(?:merg(?:e|es|ed|ing)|rid(?:e|es|ing)|rode|com(?:e|es|ing)|came|pull(?:s|ed|ing)?|nos(?:e|es|ed|ing)|edg(?:e|es|ed|ing)|creep(?:s|ing)?|crept|driv(?:e|es|ing)|"
                  r"drove|back(?:s|ed|ing)?|revers(?:e|es|ed|ing)) (?:out|away) (?:of|from) (?:a |an |the |its |his |her "
                  r"|their )?(?:\w+ )?(?:parking|parked|driveway|curb|kerb|shoulder|space|spot|bay|lay by|alley|garage|"
-                 r"car park|side of the road|roadside)\w*\b"),
+                 r"car park|side of the road|roadside|bus stop|stop)\w*\b"),
     ("pull_out", r"\bmerg(?:e|es|ed|ing) (?:in)?to (?:the )?traffic from (?:a |an |the |its )?(?:\w+ )?(?:parking|parked|"
                  r"driveway|curb|kerb|shoulder|space|spot|bay|lay by)\w*\b"),
     ("pull_out", r"\b(?:leav(?:e|es|ing)|left|exit(?:s|ed|ing)?|depart(?:s|ed|ing)?(?: from)?) (?:a |an |the |its |his |"
@@ -306,7 +312,7 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
                      r"\b(?:" + _CRASH_INTO + r") the (?:\w+ )?side of\b(?! the (?:road|street|highway|lane))|"
                      r"\b(?:hit|struck|impacted|broadsided) (?:on|in) (?:the|its|his|her) (?:\w+ )?side\b"),
     # collisions
-    ("collide", r"\bcollid(?:e|es|ed|ing)\b|\bcollision with\b"),
+    ("collide", r"\bcollid(?:e|es|ed|ing)\b|\bcollision with\b|\bimpact(?:s|ed|ing)\b"),
     ("collide", r"\bcrash(?:es|ed|ing)?\b|\bsmash(?:es|ed|ing)? into\b|\bslam(?:s|med|ming)? into\b|"
                 r"\bbump(?:s|ed|ing)? into\b|\bplow(?:s|ed|ing)? into\b"),
     ("collide", r"\b(?:hit|hits|hitting)\b(?! (?:the |its |his |her )?brakes?\b)|\bstrik(?:e|es|ing)\b|\bstruck\b|"
@@ -356,6 +362,7 @@ stand stands standing ride rides riding first green red amber yellow signal sign
 unsignalized unsignalised controlled uncontrolled already inside outside next no
 """.split())
 _MOTOR = ("car", "truck", "bus", "motorcycle")
+COLLISION_KINDS = ("collide_rear_end", "collide_head_on", "collide_side")
 _ON_RAMP = re.compile(r"\b(?:on ramp|onramp|slip road|entry ramp|entrance ramp|acceleration lane|ramp)\b")
 _NEGATION = re.compile(
     r"\b(?:not|never|no|avoid|avoids|avoided|avoiding|without|nearly|almost|narrowly|prevent|prevents|"
@@ -370,6 +377,8 @@ _PASSIVE_HIT = re.compile(r"\b(?:is|was|were|are|gets?|got|being|been) (?:\w+ )?
 _REL_PATTERNS: Sequence[Tuple[str, str]] = (
     ("ahead_of", r"\b(?:in front of|ahead of|just ahead of|right in front of|in the path of|before) "),
     ("behind", r"\b(?:is|are|was|were|been|keeps) (?:closely )?(?:following|tailgating|trailing) "),
+    ("toward", r"\b(?:towards?|approach(?:es|ed|ing)?|clos(?:es|ed|ing) in on|catch(?:es|ing)? up (?:with|to)|"
+               r"caught up (?:with|to)) "),
     ("behind", r"\b(?:behind|in the back of|to the rear of|at the rear of) "),
     ("left_of", r"\b(?:to|on|at|in) the left (?:side )?of |\bleft of "),
     ("right_of", r"\b(?:to|on|at|in) the right (?:side )?of |\bright of "),
@@ -521,6 +530,20 @@ def _normalize(text: str) -> str:
     text = re.sub(r"(?<=\w)-(?=\w)", " ", text)
     text = re.sub(r"[\u2013\u2014]", ", ", text)
     text = re.sub(r"\s+", " ", text)
+    # engineers' shorthand
+    text = re.sub(r"\bfrom (?:the )?r\b", "from the right", text)
+    text = re.sub(r"\bfrom (?:the )?l\b", "from the left", text)
+    text = re.sub(r"\b(?:r|rt) side\b", "right side", text)
+    text = re.sub(r"\b(?:l|lt) side\b", "left side", text)
+    text = re.sub(r"\brd\b", "road", text)
+    text = re.sub(r"\bhwy\b", "highway", text)
+    text = re.sub(r"\bint\b|\bx ?ing\b", "intersection", text)
+    text = re.sub(r"\s@\s?", " at ", text)
+    # Euro NCAP test names ("Car-to-Car Rear stationary") are names, not actors
+    text = re.sub(r"\b(?:car|bicyclist|cyclist|pedestrian|motorcyclist|motorcycle) to (?:car|bicyclist|cyclist|"
+                  r"pedestrian|motorcyclist|motorcycle)\b(?: (?:rear|front|side|far side|near side|farside|nearside|"
+                  r"longitudinal|turn across path|crossing|head on|rear stationary|rear moving|rear braking|"
+                  r"backover)\b)*(?: (?:stationary|moving|braking|adult|child|obstructed))*", "test", text)
     # "a kid on a bike" is one bicycle, not a pedestrian and a bicycle
     text = re.sub(r"\b(?:kid|child|man|woman|boy|girl|teenager|teen|person|someone|rider|delivery rider|courier)s? "
                   r"(?:on|riding) (a|an|his|her|their) ((?:e |electric |push |kick )?(?:bike|bicycle|scooter|motorbike|"
@@ -564,6 +587,7 @@ class _Parser:
         self._last_mentioned: Optional[Entity] = None
         self._mention_log: List[Tuple[int, int, Entity]] = []
         self._placed = 0
+        self._clause_subject: Optional[Entity] = None
         self._negated = 0
 
     # ---------------------------------------------------------------- helpers
@@ -644,6 +668,9 @@ class _Parser:
                               or re.fullmatch(r"\w+(?:er|ed|ing|ary|ant|ing|ive|y|ow|ast|ig|all|ed)", before[i])
                               and before[i] not in _PREPOSITIONS):
                 i -= 1
+            if i >= 1 and before[i] == "of" and before[i - 1] in ("front", "rear", "back", "side", "nose", "driver",
+                                                                     "tail") and i - 1 <= 2:
+                return False  # "the front of V2 impacted ...": V2 is the subject
             return i >= 0 and before[i] in _PREPOSITIONS
 
         for m in _EGO_RE.finditer(clause):
@@ -713,6 +740,9 @@ class _Parser:
             possessive = m.group(0).endswith("'s") or m.group(0).endswith("s'")
             taken.append((m.start(), m.end()))
             entity.attrs.setdefault("noun", surface)
+            if kind == "obstacle" and re.fullmatch(r"(?:deer|animals?|dogs?|cats?|cows?|horses?|moose|sheep|birds?|elks?|"
+                                                   r"kangaroos?|fox|boar|wild boar)", surface):
+                entity.attrs["animal"] = True
             self._mention_log.append((self._sentence_index, len(self._mention_log), entity))
             if kind == "car" and surface in ("vehicles", "vehicle") and \
                     (count > 1 or re.match(r"\s*(?:crash|collision|pile ?up|accident)", clause[m.end():])):
@@ -844,6 +874,10 @@ class _Parser:
                 self.out.entities = [e for e in self.out.entities if e is not group]
 
     def _sentence(self, sentence: str) -> None:
+        head = re.match(r"([^:;,.]{1,60}):\s+", sentence)
+        if head and not any(rx.search(head.group(1)) for _, rx in _COMPILED_ACTIONS) and len(head.group(1).split()) >= 2 \
+                and not re.fullmatch(r"\s*(?:the )?(?:" + _EGO + r"|\w+ ?\d)\s*", head.group(1)):
+            sentence = sentence[head.end():]  # a title ("Obstacle avoidance without prior action: ..."), not actors
         clauses = [c.strip() for c in _CLAUSE_SPLIT.split(sentence) if c and c.strip()]
         for i in range(len(clauses) - 2, -1, -1):
             if re.search(r"\b(?:between|involving)\s+(?:\S+\s+){0,4}\S+$", clauses[i]) and \
@@ -939,7 +973,7 @@ class _Parser:
         # resolve pending pronouns: objects -> last other actor mentioned
         for mm in mentions:
             if isinstance(mm.entity, tuple):
-                mm.entity = self._other_than(subject)
+                mm.entity = self._other_than(subject) or subject
         mentions = [mm for mm in mentions if mm.entity is not None]
         for mm in mentions:
             self._touch(mm.entity)
@@ -1063,12 +1097,20 @@ class _Parser:
                 target = self._object_at(clause, m.end(), mentions)
                 if target is None:
                     continue
+                tm = next((mm for mm in mentions if mm.start >= m.end() and mm.entity is target), None)
+                if tm is not None and tm.pronoun and subject is not None and subject is not target and \
+                        self._attach(m.start(), mentions, subject) is target:
+                    target = subject  # "the ego hits the car in front of it": "it" is the ego
                 owner = self._attach(m.start(), mentions, subject, exclude=target)
                 if owner is None or owner is target:
                     continue
                 if rel == "behind" and re.search(r"\bfrom\s+$", clause[:m.start()]):
                     continue  # "appears from behind a parked van": occlusion, not a position
                 if rel == "ahead_of" and m.group(0).strip() == "before":
+                    continue
+                if rel == "toward":
+                    if owner.kind == "ego" and target.kind != "ego":
+                        self._relate(target, "ahead_of", owner)  # "the ego drives towards a stopped car"
                     continue
                 if owner.kind == "ego" and target.kind != "ego" and rel in ("behind", "ahead_of"):
                     # "the ego drives behind a truck": the truck is ahead of the ego
@@ -1121,6 +1163,7 @@ class _Parser:
 
     def _actions(self, clause: str, mentions: List[_Mention], subject: Optional[Entity]) -> None:
         self._clause_mentions = mentions
+        self._clause_subject = subject
         spans: List[Tuple[int, int]] = []
         for action, rx in _COMPILED_ACTIONS:
             for m in rx.finditer(clause):
@@ -1258,7 +1301,8 @@ class _Parser:
         window = clause[max(0, m.start() - 30):m.end() + 25]
         sudden = bool(_SUDDEN.search(window))
         kind = owner.kind
-        if kind == "obstacle":
+        if kind == "obstacle" and not (owner.attrs.get("animal") and action in ("cross", "emerge", "stop")) and \
+                not action.startswith("collide"):
             return
         groups = m.groupdict()
         if action == "lane_change" and not (groups.get("dir") or groups.get("dir2")):
@@ -1373,6 +1417,8 @@ class _Parser:
             return
         if action.startswith("collide"):
             other = self._next_mention(clause, m.end(), self._clause_mentions, exclude=owner, limit=40)
+            if other is None and self._clause_subject is not None and self._clause_subject is not owner:
+                other = self._clause_subject  # "the ego ... is struck by a van": the van hits the ego
             owner.add_action("collide", sudden=sudden)
             if other is not None and not owner.detail("collide").get("with"):
                 owner.detail("collide")["with"] = other
@@ -1381,7 +1427,46 @@ class _Parser:
             return
         owner.add_action(action, sudden=sudden)
 
+    def _collisions(self) -> None:
+        """Every participant of a collision collides, with one type (scenario_bank.elements): the type said,
+        else rear-end for one behind the other in a lane, head-on for oncoming, side for anything else."""
+        ego = self.out.ego
+        for e in list(self.out.entities):
+            if not e.has("collide"):
+                continue
+            other = e.detail("collide").get("with")
+            if other is None:
+                others = [x for x in self.out.entities if x is not e and x.kind != "obstacle" or
+                          x is not e and x.attrs.get("animal")]
+                if e is not ego and ego is not None and not any(x.has("collide") for x in others if x is not ego):
+                    other = ego
+                elif e is ego and len(others) == 1:
+                    other = others[0]
+            kinds = [a for a in COLLISION_KINDS if e.has(a) or other is not None and other.has(a)]
+            if kinds:
+                kind = kinds[0]
+            elif other is None:
+                continue
+            else:
+                rels = {r for r, j in e.relations if j is other} | {r for r, j in other.relations if j is e}
+                if {e.kind, other.kind} & {"pedestrian", "bicycle", "obstacle"}:
+                    kind = "collide_side"
+                elif "oncoming" in rels:
+                    kind = "collide_head_on"
+                elif rels & {"ahead_of", "behind", "same_lane"} and "crossing_path" not in rels:
+                    kind = "collide_rear_end"
+                else:
+                    kind = "collide_side"
+            for x in (e, other):
+                if x is None:
+                    continue
+                x.add_action("collide")
+                x.add_action(kind)
+                if x.detail("collide").get("with") is None:
+                    x.detail("collide")["with"] = e if x is other else other
+
     def _finish(self) -> None:
+        self._collisions()
         ego = self.out.ego
         for e in self.out.entities:
             # "switches to the middle lane": direction from the lane it is on
@@ -1459,6 +1544,23 @@ class _Parser:
                     self._relate(e, "left_of", ego)
                 elif order[e.lane] > order[ego.lane]:
                     self._relate(e, "right_of", ego)
+        # cross traffic at a junction: from the left or right, not oncoming, not changing lanes
+        if ego is not None and self.out.road in ("intersection", "t_junction", "three_way"):
+            for e in self.out.entities:
+                if e is ego or e.kind not in _MOTOR + ("bicycle",):
+                    continue
+                rels = {r for r, j in e.relations if j is ego}
+                lane_moves = ("cut_in", "lane_change", "lane_change_left", "lane_change_right", "overtake", "merge")
+                if rels & {"left_of", "right_of"} and "oncoming" not in rels and not any(e.has(a) for a in lane_moves) \
+                        and (e.attrs.get("side_road") or any(e.has(a) for a in ("go_straight", "turn_left",
+                                                                                  "turn_right", "collide"))
+                             or not e.actions):
+                    self._relate(e, "crossing_path", ego)
+                if "oncoming" in rels and e.has("turn_left") and not ego.has("turn_left"):
+                    self._relate(e, "crossing_path", ego)
+        # animals alone in a text with no road and no vehicle are not a driving scene ("the lazy dog")
+        if self.out.road is None and all(e.attrs.get("animal") or e.kind == "pedestrian" for e in self.out.entities):
+            self.out.entities = [e for e in self.out.entities if not e.attrs.get("animal")]
         # a pedestrian crossing in front of the ego; "one ... and the two others" count directions
         for e in self.out.entities:
             if e.kind == "pedestrian" and e.has("cross"):
