@@ -90,7 +90,8 @@ _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
         (r"automobiles", True), (r"adversarial (?:agents|vehicles|cars)", True), (r"npcs", True),
         (r"(?:adversarial|adversary|npc|background) (?:agent|vehicle|car|actor)", False),
         (r"(?:npc|agent|actor|adversary|adv|car|pov|tv) ?[1-9]", False), (r"povs", True), (r"pov", False),
-        (r"target (?:car|vehicle)s", True), (r"target (?:car|vehicle)", False), (r"adversary", False), (r"npc", False),
+        (r"target (?:car|vehicle)s", True), (r"target (?:car|vehicle)", False),
+        (r"target(?! (?:pedestrian|cyclist|bicyclist|child|adult|motorcycl\w*|scooter|dummy|speed)\b)", False), (r"adversary", False), (r"npc", False),
         (r"v[2-9]", False), (r"vehicle [2-9]", False),
         (r"car", False), (r"vehicle", False), (r"sedan", False), (r"suv", False), (r"van", False),
         (r"minivan", False), (r"hatchback", False), (r"coupe", False), (r"taxi", False), (r"cab", False),
@@ -181,6 +182,8 @@ ROAD_PATTERNS: Sequence[Tuple[str, str]] = (
     ("intersection", r"\b(?:intersection|crossroads?|four way|4 way|junction)\b"),
     ("merge", r"\b(?:on ramp|onramp|slip road|entry ramp|entrance ramp|acceleration lane|merg(?:e|ing) "
               r"(?:lane|area|section|zone|point)|ramp)\b"),
+    ("straight_road", r"\b(?:(?:two|2) lane (?:\w+ )?highway|(?:rural|country|state|county) (?:\w+ )?highway|"
+                      r"state route|county road|arterial|collector road)\b"),
     ("highway", r"\b(?:highway|motorway|freeway|expressway|interstate|autobahn|dual carriageway)\b"),
     ("straight_road", r"\b(?:straight (?:road|street|stretch|section)|street|avenue|boulevard|"
                       r"(?:urban|city|residential|two way|country|rural|suburban|local) road)\b"),
@@ -230,6 +233,7 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
                  r"kerbside)\b"),
     ("pull_out", r"\bpull(?:s|ed|ing)? (?:out|away)\b(?! (?:in front|of the way|to (?:overtake|pass)|into the "
                  r"(?:left|right|oncoming|opposite|adjacent|next|other|passing)))(?P<generic>)"),
+    ("pull_out", r"\bpull(?:s|ed|ing)? (?:out|away) (?:in)?to (?:the )?(?:left|right|travel|traffic|main) lane\b(?P<generic3>)"),
     ("pull_out", r"\b(?:pull(?:s|ed|ing)?|enter(?:s|ed|ing)?|rejoin(?:s|ed|ing)?) (?:(?:in)?to )?(?:the )?(?:flow of )?traffic\b"
                  r"(?P<generic2>)"),
     ("u_turn", r"\bu turn(?:s|ed|ing)?\b|\bturn(?:s|ed|ing)? (?:a)?round\b|\bturn(?:s|ed|ing)? back\b|"
@@ -303,9 +307,9 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
     ("cross", r"\bjaywalk(?:s|ed|ing)?\b"),
     ("cross", r"\bgo(?:es|ing)? from (?:the )?(?P<from>left|right) to (?:the )?(?:left|right)\b"),
     # collisions with their type (scenario_bank.elements.COLLISION_TYPES); each also states "collide"
-    ("collide_rear_end", r"\brear ?end(?:s|ed|ing)?\b(?: (?:collision|crash|impact)s?\b)?|"
+    ("collide_rear_end", r"\bfront to rear\b|\brear ?end(?:s|ed|ing)?\b(?: (?:collision|crash|impact)s?\b)?|"
                          r"\b(?:" + _CRASH_INTO + r") the (?:back|rear|tail) of\b"),
-    ("collide_head_on", r"\bhead ?on (?:collision|crash|impact)s?\b|\b(?:collid(?:e|es|ed|ing)|crash(?:es|ed|ing)?|"
+    ("collide_head_on", r"\bcollid(?:e|es|ed|ing) front to front\b|\bfront to front\b|\bhead ?on (?:collision|crash|impact)s?\b|\b(?:collid(?:e|es|ed|ing)|crash(?:es|ed|ing)?|"
                         r"hit(?:s|ting)?|strik(?:e|es|ing)|struck|smash(?:es|ed|ing)?) (?:\w+ ){0,3}head ?on\b"),
     ("collide_side", r"\bside (?:on )?(?:collision|crash|impact)s?\b|\bt ?bon(?:e|es|ed|ing)\b|"
                      r"\bsideswip(?:e|es|ed|ing)\b|\bbroadsid(?:e|es|ed|ing)\b|"
@@ -377,6 +381,7 @@ _PASSIVE_HIT = re.compile(r"\b(?:is|was|were|are|gets?|got|being|been) (?:\w+ )?
 _REL_PATTERNS: Sequence[Tuple[str, str]] = (
     ("ahead_of", r"\b(?:in front of|ahead of|just ahead of|right in front of|in the path of|before) "),
     ("behind", r"\b(?:is|are|was|were|been|keeps) (?:closely )?(?:following|tailgating|trailing) "),
+    ("follow", r"\bfollow(?:s|ed|ing)? (?=(?:a|an|the)\b)"),
     ("toward", r"\b(?:towards?|approach(?:es|ed|ing)?|clos(?:es|ed|ing) in on|catch(?:es|ing)? up (?:with|to)|"
                r"caught up (?:with|to)) "),
     ("behind", r"\b(?:behind|in the back of|to the rear of|at the rear of) "),
@@ -400,7 +405,7 @@ _REL_IMPLICIT: Sequence[Tuple[str, str]] = (
     ("left_of", r"\bat the far (?:curb|kerb|side)\b"),
     ("ahead_of", r"\bbefore (?:the ego(?: car| vehicle)?|it) (?:reaches|catches up with|gets to) (?:it|them)\b"),
     ("crossing_path", r"\bacross the path of\b"),
-    ("oncoming", r"\b(?:oncoming|on coming|opposing|opposite direction|other direction|opposite lane|"
+    ("oncoming", r"\b(?:oncoming|on coming|opposing|opposite directions?|other direction|opposite lane|"
                  r"head on|wrong way|facing traffic|coming towards?|approaching from the front|"
                  r"from the other side|(?:comes|coming|came|drives|driving|goes|going|travels|travelling|traveling)"
                  r" the other way|the other way)\b"),
@@ -536,6 +541,11 @@ def _normalize(text: str) -> str:
     text = re.sub(r"\b(?:r|rt) side\b", "right side", text)
     text = re.sub(r"\b(?:l|lt) side\b", "left side", text)
     text = re.sub(r"\brd\b", "road", text)
+    text = re.sub(r"\bvehs?\b", "vehicle", text)
+    text = re.sub(r"\b(in|into|to|on) (?:the )?r lane\b", r"\1 the right lane", text)
+    text = re.sub(r"\b(in|into|to|on) (?:the )?l lane\b", r"\1 the left lane", text)
+    text = re.sub(r"\bnearside\b", "right side", text)
+    text = re.sub(r"\b(?:far side|farside|offside)\b", "left side", text)
     text = re.sub(r"\bhwy\b", "highway", text)
     text = re.sub(r"\bint\b|\bx ?ing\b", "intersection", text)
     text = re.sub(r"\s@\s?", " at ", text)
@@ -588,6 +598,7 @@ class _Parser:
         self._mention_log: List[Tuple[int, int, Entity]] = []
         self._placed = 0
         self._clause_subject: Optional[Entity] = None
+        self._sentence_text = ""
         self._negated = 0
 
     # ---------------------------------------------------------------- helpers
@@ -874,6 +885,7 @@ class _Parser:
                 self.out.entities = [e for e in self.out.entities if e is not group]
 
     def _sentence(self, sentence: str) -> None:
+        self._sentence_text = sentence
         head = re.match(r"([^:;,.]{1,60}):\s+", sentence)
         if head and not any(rx.search(head.group(1)) for _, rx in _COMPILED_ACTIONS) and len(head.group(1).split()) >= 2 \
                 and not re.fullmatch(r"\s*(?:the )?(?:" + _EGO + r"|\w+ ?\d)\s*", head.group(1)):
@@ -1106,7 +1118,17 @@ class _Parser:
                     continue
                 if rel == "behind" and re.search(r"\bfrom\s+$", clause[:m.start()]):
                     continue  # "appears from behind a parked van": occlusion, not a position
+                if rel == "behind" and owner.kind in ("pedestrian", "bicycle") and \
+                        re.search(r"\b(?:hidden|concealed|obscured|occluded|hiding|waiting|standing)\s+$", clause[:m.start()]):
+                    owner.attrs["from_behind"] = target  # "a pedestrian hidden behind a parked truck"
+                    continue
                 if rel == "ahead_of" and m.group(0).strip() == "before":
+                    continue
+                if rel == "follow":
+                    if owner.kind == "ego" and target.kind != "ego":
+                        self._relate(target, "ahead_of", owner)  # "the test vehicle follows a target car"
+                    elif target.kind == "ego":
+                        self._relate(owner, "behind", target)
                     continue
                 if rel == "toward":
                     if owner.kind == "ego" and target.kind != "ego":
@@ -1136,7 +1158,8 @@ class _Parser:
                 if rel in ("left_of", "right_of") and m.group(0).startswith("from the") and not (
                         owner.has("cut_in") or re.search(r"\bcut|pull|merg|swerv|mov|chang|approach|come|overt",
                                                           clause)):
-                    if owner.kind == "pedestrian":
+                    if owner.kind == "pedestrian" and not re.search(
+                            r"\bfrom the (?:left|right)(?: (?:side|kerb|curb|sidewalk|pavement))?\b", m.group(0) + clause[m.end():m.end() + 12]):
                         continue
                 if rel == "same_lane" and re.search(r"\binto\s+(?:the ego|its|our|my)", clause[max(0, m.start() - 8):m.end()]):
                     continue
@@ -1305,6 +1328,8 @@ class _Parser:
                 not action.startswith("collide"):
             return
         groups = m.groupdict()
+        if action in ("lane_change", "cut_in") and m.group(0).startswith("merg") and kind != "pedestrian":
+            owner.add_action("merge", sudden=sudden)  # "merges left", "merged into its lane": the text says merge
         if action == "lane_change" and not (groups.get("dir") or groups.get("dir2")):
             if kind == "pedestrian":
                 return
@@ -1319,9 +1344,10 @@ class _Parser:
             owner.add_action("swerve", sudden=True, side=groups.get("dir"))
             return
         if action == "pull_out":
-            if any(groups.get(g) is not None for g in ("generic", "generic2")) and not (
+            if any(groups.get(g) is not None for g in ("generic", "generic2", "generic3")) and not (
                     "parked" in owner.descriptors or re.search(
-                        r"\b(?:park\w*|curb|kerb|driveway|shoulder|roadside|side of the road|lay by)\b", clause)):
+                        r"\b(?:park\w*|curb|kerb|driveway|shoulder|roadside|side of the road|lay by)\b",
+                        self._sentence_text if groups.get("generic3") is not None else clause)):
                 self._unplaced_phrases.append(clause)
                 return
             if kind == "pedestrian":
@@ -1544,6 +1570,15 @@ class _Parser:
                     self._relate(e, "left_of", ego)
                 elif order[e.lane] > order[ego.lane]:
                     self._relate(e, "right_of", ego)
+        for e in self.out.entities:
+            occluder = e.attrs.get("from_behind")
+            if ego is None or occluder is None or occluder is ego or e is ego:
+                continue
+            self._relate(occluder, "ahead_of", ego)
+            for rel, j in list(e.relations):
+                if j is ego and rel in ("left_of", "right_of"):
+                    self._relate(occluder, rel, ego)
+            e.relations = [(r, j) for r, j in e.relations if not (r == "behind" and j is occluder)]
         # cross traffic at a junction: from the left or right, not oncoming, not changing lanes
         if ego is not None and self.out.road in ("intersection", "t_junction", "three_way"):
             for e in self.out.entities:

@@ -38,7 +38,7 @@ _ABSENT_PATTERNS: Tuple[Tuple[str, List[str]], ...] = (
     (r"\b(?:empty|deserted) (?:road|street|highway|motorway|lane)s?\b", VEHICLE_KINDS),
 )
 _NO_JUNCTION = re.compile(
-    r"\b(?:no|without(?: an?| any)?|not (?:at|near|in) (?:an?|any)|away from (?:any |an? )?|far from (?:any |an? )?|"
+    r"\b(?:no|without(?: an?| any)?|not (?:at|near|in) (?:an?|any)|away from(?: any| an?)?|far from(?: any| an?)?|"
     r"no nearby) (?:intersections?|junctions?|crossroads?)\b")
 
 
