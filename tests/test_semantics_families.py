@@ -292,3 +292,24 @@ def test_animals_and_test_names():
         == ["car", "ego"]
     assert _kinds("urban 2-lane rd, ped dashes out from behind parked bus (L side) ahead of ego") == \
         ["bus", "ego", "pedestrian"]
+
+
+def test_occluders_and_kerb_sides():
+    rels = {tuple(r) for r in elements_from_text(
+        "A boy runs out from behind a parked lorry on the right into the path of the AV.")["relations"]}
+    assert {("truck", "ahead_of", "ego"), ("pedestrian", "crossing_path", "ego")} <= rels
+    rels = {tuple(r) for r in elements_from_text(
+        "A woman hidden behind a stopped bus steps out in front of the ego car.")["relations"]}
+    assert ("bus", "ahead_of", "ego") in rels and ("pedestrian", "behind", "bus") not in rels
+    rels = {tuple(r) for r in elements_from_text("A jogger crosses from the left kerb in front of the ego.")["relations"]}
+    assert ("pedestrian", "left_of", "ego") in rels
+
+
+def test_following_merging_and_rural_highways():
+    rels = {tuple(r) for r in elements_from_text("The test vehicle follows a white hatchback.")["relations"]}
+    assert ("car", "ahead_of", "ego") in rels
+    assert {("car", "merge"), ("car", "lane_change_left")} <= _actions("A taxi merges left in front of us.")
+    assert parse_description("A tractor drives on a two-lane rural highway.").road == "straight_road"
+    assert parse_description("A truck drives on the interstate.").road == "highway"
+    assert {("car", "collide_head_on"), ("ego", "collide_head_on")} <= _actions(
+        "V1 and V2 drove in opposite directions and collided front to front.")
