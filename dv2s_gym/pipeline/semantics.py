@@ -314,9 +314,13 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
     ("collide_side", r"\bside (?:on )?(?:collision|crash|impact)s?\b|\bt ?bon(?:e|es|ed|ing)\b|"
                      r"\bsideswip(?:e|es|ed|ing)\b|\bbroadsid(?:e|es|ed|ing)\b|"
                      r"\b(?:" + _CRASH_INTO + r") the (?:\w+ )?side of\b(?! the (?:road|street|highway|lane))|"
-                     r"\b(?:hit|struck|impacted|broadsided) (?:on|in) (?:the|its|his|her) (?:\w+ )?side\b"),
+                     r"\b(?:hit|struck|impacted|broadsided) (?:on|in) (?:the|its|his|her) (?:\w+ )?side\b|"
+                     r"\b(?:hit(?:s|ting)?|strik(?:e|es|ing)|struck|impact(?:s|ed|ing)?) (?:its|his|her|their) (?:\w+ )?side\b|"
+                     r"\b(?:backs|backed|backing|revers(?:es|ed|ing)) into the (?:\w+ )?side of\b"),
     # collisions
-    ("collide", r"\bcollid(?:e|es|ed|ing)\b|\bcollision with\b|\bimpact(?:s|ed|ing)\b"),
+    ("collide", r"\bcollid(?:e|es|ed|ing)\b|\bcollision with\b|\bimpact(?:s|ed|ing)\b|"
+                r"\b(?:made|makes|make|making) contact with\b|\b(?:backs|backed|backing|revers(?:es|ed|ing)) into\b(?! (?:a|the|its) "
+                r"(?:parking|space|spot|bay|driveway|garage))"),
     ("collide", r"\bcrash(?:es|ed|ing)?\b|\bsmash(?:es|ed|ing)? into\b|\bslam(?:s|med|ming)? into\b|"
                 r"\bbump(?:s|ed|ing)? into\b|\bplow(?:s|ed|ing)? into\b"),
     ("collide", r"\b(?:hit|hits|hitting)\b(?! (?:the |its |his |her )?brakes?\b)|\bstrik(?:e|es|ing)\b|\bstruck\b|"
@@ -395,16 +399,17 @@ _REL_IMPLICIT: Sequence[Tuple[str, str]] = (
     ("behind", r"(?<!is )(?<!are )(?<!was )(?<!were )(?<!been )(?<!keeps )\b(?:following|trailing|rear|tailgating) "
                r"(?=(?:\w+ )?(?:car|vehicle|truck|sedan|suv|van|lorry|bus))"),
     ("left_of", r"\b(?:on|to|from|at) (?:its|the ego(?: vehicle| car)?'s|his|her|our|my|the) left\b(?! lane)(?! of)"
-                r"|\b(?:in|on|from) the (?:lane|lanes) (?:to|on) (?:its|the ego(?: vehicle| car)?'s|the) left\b"
+                r"|\b(?:in|on|from) the (?:adjacent |neighbou?ring |next |other )?(?:lane|lanes) (?:to|on) (?:its|the ego(?: vehicle| car)?'s|the) left\b"
                 r"|\b(?:in|on|from) the (?:adjacent|neighbou?ring|next) left lane\b"
                 r"|\bfrom the left\b(?! (?:to|sidewalk|side|curb|kerb|pavement))"),
     ("right_of", r"\b(?:on|to|from|at) (?:its|the ego(?: vehicle| car)?'s|his|her|our|my|the) right\b(?! lane)(?! of)"
-                 r"|\b(?:in|on|from) the (?:lane|lanes) (?:to|on) (?:its|the ego(?: vehicle| car)?'s|the) right\b"
+                 r"|\b(?:in|on|from) the (?:adjacent |neighbou?ring |next |other )?(?:lane|lanes) (?:to|on) (?:its|the ego(?: vehicle| car)?'s|the) right\b"
                  r"|\b(?:in|on|from) the (?:adjacent|neighbou?ring|next) right lane\b"
                  r"|\bfrom the right\b(?! (?:to|sidewalk|side|curb|kerb|pavement))"),
     ("left_of", r"\bat the far (?:curb|kerb|side)\b"),
     ("ahead_of", r"\bbefore (?:the ego(?: car| vehicle)?|it) (?:reaches|catches up with|gets to) (?:it|them)\b"),
     ("crossing_path", r"\bacross the path of\b"),
+    ("crossing_path", r"\bfrom (?:a |the )?perpendicular (?:approach(?:es)?|road|street|direction)\b|\bcross traffic\b"),
     ("oncoming", r"\b(?:oncoming|on coming|opposing|opposite directions?|other direction|opposite lane|"
                  r"head on|wrong way|facing traffic|coming towards?|approaching from the front|"
                  r"from the other side|(?:comes|coming|came|drives|driving|goes|going|travels|travelling|traveling)"
@@ -541,6 +546,12 @@ def _normalize(text: str) -> str:
     text = re.sub(r"\b(?:r|rt) side\b", "right side", text)
     text = re.sub(r"\b(?:l|lt) side\b", "left side", text)
     text = re.sub(r"\brd\b", "road", text)
+    text = re.sub(r"\b(?:v1|vehicle 1)'s\b", "the ego's", text)
+    text = re.sub(r"\bt ?jxn\b", "t junction", text)
+    text = re.sub(r"\b(?:ixn|jxn|jct)\b", "intersection", text)
+    text = re.sub(r"\b(turns?|turning|turned) l\b", r"\1 left", text)
+    text = re.sub(r"\b(turns?|turning|turned) r\b", r"\1 right", text)
+    text = re.sub(r"\blt\b", "left turn", text)
     text = re.sub(r"\bvehs?\b", "vehicle", text)
     text = re.sub(r"\b(in|into|to|on) (?:the )?r lane\b", r"\1 the right lane", text)
     text = re.sub(r"\b(in|into|to|on) (?:the )?l lane\b", r"\1 the left lane", text)
@@ -902,6 +913,12 @@ class _Parser:
         if len(clauses) > 1 and _FRONTED.match(clauses[0]):
             # "After turning right, the ego ...": the fronted clause's subject is the main clause's
             clauses = [clauses[1], clauses[0]] + clauses[2:]
+        kept = []
+        for i, clause in enumerate(clauses):
+            if i > 0 and self._apposition(clauses[i - 1], clause):
+                continue
+            kept.append(clause)
+        clauses = kept
         for clause in clauses:
             before = self._state()
             subject = self._clause(clause, previous_subject)
@@ -910,6 +927,28 @@ class _Parser:
             if subject is not None:
                 previous_subject = subject
                 self.last_subject = subject
+
+    def _apposition(self, previous: str, clause: str) -> bool:
+        """"V2, a Ford F-150 pickup, ...": the noun phrase names the vehicle before it (and may give its kind)."""
+        if not re.match(r"(?:an?|the) ", clause) or len(clause.split()) > 7 or \
+                any(rx.search(clause) for _, rx in _COMPILED_ACTIONS):
+            return False
+        named = re.search(r"\b(?:v[1-9]|vehicle [1-9]|npc ?[1-9]|ego|the ego|the av|the subject vehicle)\s*$", previous)
+        if not named:
+            return False
+        nm = _NOUN_RE.search(clause)
+        if nm is None:
+            return False
+        group = next(k for k, v in nm.groupdict().items() if v)
+        kind = group.split("_")[0]
+        key = re.sub(r"vehicle ", "v", named.group(0).replace(" ", ""))
+        entity = self.out.ego if key in ("v1", "ego", "theego", "theav", "thesubjectvehicle") else self._named.get(key)
+        if entity is None:
+            return False
+        if entity.kind == "car" and kind in ("truck", "bus", "motorcycle", "bicycle"):
+            entity.kind = kind  # "V2, a motorcycle"
+        entity.attrs.setdefault("model", nm.group(0))
+        return True
 
     @staticmethod
     def _noun_phrase_only(clause: str) -> bool:
@@ -1364,7 +1403,7 @@ class _Parser:
                 behind = self._next_mention(clause, m.start() + bm.end(), self._clause_mentions, exclude=owner)
             if behind is not None:
                 owner.attrs["from_behind"] = behind
-            if kind in ("pedestrian", "bicycle"):
+            if kind in ("pedestrian", "bicycle") or owner.attrs.get("animal"):
                 quick = bool(re.match(r"(?:dash|dart|rush|sprint|run|ran|jump|leap|burst|pop)", m.group(0)))
                 owner.add_action("cross", sudden=sudden or quick, directions=[])
                 if behind is not None:
@@ -1545,7 +1584,7 @@ class _Parser:
                 self._relate(e, "same_lane", ego)
             if e.kind == "obstacle" and "same_lane" in rels:
                 self._relate(e, "ahead_of", ego)
-            if e.kind in ("pedestrian", "bicycle") and e.has("cross"):
+            if (e.kind in ("pedestrian", "bicycle") or e.attrs.get("animal")) and e.has("cross"):
                 self._relate(e, "ahead_of", ego)
                 self._relate(e, "crossing_path", ego)
             if e.kind in _MOTOR + ("bicycle",) and "oncoming" in rels and ego.has("turn_left"):
@@ -1580,13 +1619,15 @@ class _Parser:
                     self._relate(occluder, rel, ego)
             e.relations = [(r, j) for r, j in e.relations if not (r == "behind" and j is occluder)]
         # cross traffic at a junction: from the left or right, not oncoming, not changing lanes
-        if ego is not None and self.out.road in ("intersection", "t_junction", "three_way"):
+        if ego is not None and self.out.road in ("intersection", "t_junction", "three_way", "roundabout"):
             for e in self.out.entities:
                 if e is ego or e.kind not in _MOTOR + ("bicycle",):
                     continue
                 rels = {r for r, j in e.relations if j is ego}
                 lane_moves = ("cut_in", "lane_change", "lane_change_left", "lane_change_right", "overtake", "merge")
+                joins = "right_of" in rels and e.has("turn_right")  # a right turn from the right joins the ego's way
                 if rels & {"left_of", "right_of"} and "oncoming" not in rels and not any(e.has(a) for a in lane_moves) \
+                        and not joins \
                         and (e.attrs.get("side_road") or any(e.has(a) for a in ("go_straight", "turn_left",
                                                                                   "turn_right", "collide"))
                              or not e.actions):
