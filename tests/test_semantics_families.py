@@ -313,3 +313,23 @@ def test_following_merging_and_rural_highways():
     assert parse_description("A truck drives on the interstate.").road == "highway"
     assert {("car", "collide_head_on"), ("ego", "collide_head_on")} <= _actions(
         "V1 and V2 drove in opposite directions and collided front to front.")
+
+
+def test_appositions_name_the_vehicle_before_them():
+    assert _kinds("V1, a grey Honda Accord, was northbound when V2, a moped, struck its side.") == \
+        ["ego", "motorcycle"]
+    assert {("motorcycle", "collide_side"), ("ego", "collide_side")} <= _actions(
+        "V1, a grey Honda Accord, was northbound when V2, a moped, struck its side.")
+
+
+def test_contact_backing_and_cross_traffic():
+    assert {("car", "collide"), ("ego", "collide")} <= _actions(
+        "A hatchback in the adjacent lane to its left drifted over and made contact with the AV.")
+    assert ("ego", "collide_side") in _actions("The subject vehicle backs into the side of a parked SUV.")
+    rels = {tuple(r) for r in elements_from_text(
+        "At a four-way junction a bus from V1's right goes straight while V1 goes straight.")["relations"]}
+    assert {("bus", "right_of", "ego"), ("bus", "crossing_path", "ego")} <= rels
+    rels = {tuple(r) for r in elements_from_text(
+        "At the intersection a car from the right turns right into the ego's lane ahead of it.")["relations"]}
+    assert ("car", "crossing_path", "ego") not in rels
+    assert ("ego", "turn_left") in _actions("4-way ixn, ego turns L after a bus passes.")

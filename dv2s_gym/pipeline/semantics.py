@@ -239,7 +239,7 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
     ("u_turn", r"\bu turn(?:s|ed|ing)?\b|\bturn(?:s|ed|ing)? (?:a)?round\b|\bturn(?:s|ed|ing)? back\b|"
                r"\b(?:three|3) point turn\b|\bturn(?:s|ed|ing)? about\b"),
     ("reverse", r"\brevers(?:e|es|ed|ing)\b(?! (?:gear|lights?|the decision))|\b(?:backs|backed|backing|(?<=to )back|"
-                r"(?<=must )back) (?:up|out|into|away|down)\b|\b(?:driv(?:e|es|ing)|drove|roll(?:s|ed|ing)?|mov(?:e|es|ed|ing)) (?:slowly )?backwards?\b|"
+                r"(?<=must )back) (?:up|out|away|down)\b|\b(?:backs|backed|backing|revers(?:es|ed|ing))(?= into\b)|\b(?:driv(?:e|es|ing)|drove|roll(?:s|ed|ing)?|mov(?:e|es|ed|ing)) (?:slowly )?backwards?\b|"
                 r"\bin reverse\b"),
     ("emerge", r"\b(?:(?:emerg(?:e|es|ed|ing)|appear(?:s|ed|ing)?|pop(?:s|ped|ping)? out|com(?:e|es|ing) out|came out|"
                r"step(?:s|ped|ping)? out|walk(?:s|ed|ing)? out|run(?:s|ning)? out|ran out|dash(?:es|ed|ing)? out|"
@@ -316,10 +316,10 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
                      r"\b(?:" + _CRASH_INTO + r") the (?:\w+ )?side of\b(?! the (?:road|street|highway|lane))|"
                      r"\b(?:hit|struck|impacted|broadsided) (?:on|in) (?:the|its|his|her) (?:\w+ )?side\b|"
                      r"\b(?:hit(?:s|ting)?|strik(?:e|es|ing)|struck|impact(?:s|ed|ing)?) (?:its|his|her|their) (?:\w+ )?side\b|"
-                     r"\b(?:backs|backed|backing|revers(?:es|ed|ing)) into the (?:\w+ )?side of\b"),
+                     r"(?:(?<=backs )|(?<=backed )|(?<=backing )|(?<=reverses )|(?<=reversed )|(?<=reversing ))into the (?:\w+ )?side of\b"),
     # collisions
     ("collide", r"\bcollid(?:e|es|ed|ing)\b|\bcollision with\b|\bimpact(?:s|ed|ing)\b|"
-                r"\b(?:made|makes|make|making) contact with\b|\b(?:backs|backed|backing|revers(?:es|ed|ing)) into\b(?! (?:a|the|its) "
+                r"\b(?:made|makes|make|making) contact with\b|(?:(?<=backs )|(?<=backed )|(?<=backing )|(?<=reverses )|(?<=reversed )|(?<=reversing ))into\b(?! (?:a|the|its) "
                 r"(?:parking|space|spot|bay|driveway|garage))"),
     ("collide", r"\bcrash(?:es|ed|ing)?\b|\bsmash(?:es|ed|ing)? into\b|\bslam(?:s|med|ming)? into\b|"
                 r"\bbump(?:s|ed|ing)? into\b|\bplow(?:s|ed|ing)? into\b"),
@@ -913,13 +913,12 @@ class _Parser:
         if len(clauses) > 1 and _FRONTED.match(clauses[0]):
             # "After turning right, the ego ...": the fronted clause's subject is the main clause's
             clauses = [clauses[1], clauses[0]] + clauses[2:]
-        kept = []
+        previous_clause = ""
         for i, clause in enumerate(clauses):
-            if i > 0 and self._apposition(clauses[i - 1], clause):
+            listed = i + 1 < len(clauses) and clauses[i + 1].startswith(("and ", "or "))
+            if previous_clause and not listed and self._apposition(previous_clause, clause):
                 continue
-            kept.append(clause)
-        clauses = kept
-        for clause in clauses:
+            previous_clause = clause
             before = self._state()
             subject = self._clause(clause, previous_subject)
             if self._state() == before and not self._said_elsewhere(clause):
@@ -930,7 +929,7 @@ class _Parser:
 
     def _apposition(self, previous: str, clause: str) -> bool:
         """"V2, a Ford F-150 pickup, ...": the noun phrase names the vehicle before it (and may give its kind)."""
-        if not re.match(r"(?:an?|the) ", clause) or len(clause.split()) > 7 or \
+        if not re.match(r"(?:an?|the) ", clause) or len(clause.split()) > 7 or re.search(r"\b(?:and|or)\b", clause) or \
                 any(rx.search(clause) for _, rx in _COMPILED_ACTIONS):
             return False
         named = re.search(r"\b(?:v[1-9]|vehicle [1-9]|npc ?[1-9]|ego|the ego|the av|the subject vehicle)\s*$", previous)
