@@ -258,7 +258,7 @@ def test_rider_on_a_bike_is_one_bicycle_and_rows_of_parked_cars_stay():
 def test_no_stop_from_a_four_way_stop_and_lost_control():
     acts = _actions("The ego must stop at the stop line because a car approaches from the left at the 4-way stop.")
     assert ("ego", "stop") in acts and ("car", "stop") not in acts
-    assert ("car", "swerve") in _actions("A sedan loses control in front of the AV.")
+    assert ("car", "drift") in _actions("A sedan loses control in front of the AV.")  # unintended: drift
     assert ("ego", "brake") not in _actions("The ego overtakes a slow tractor.")
 
 
@@ -333,3 +333,11 @@ def test_contact_backing_and_cross_traffic():
         "At the intersection a car from the right turns right into the ego's lane ahead of it.")["relations"]}
     assert ("car", "crossing_path", "ego") not in rels
     assert ("ego", "turn_left") in _actions("4-way ixn, ego turns L after a bus passes.")
+
+
+def test_brakes_to_a_stop_bus_stops_and_parts():
+    assert {("ego", "brake"), ("ego", "stop")} <= _actions("The ego brakes to a stop behind a cow.")
+    assert ("bus", "stop") in _actions("A bus stops at the bus stop ahead of the ego.")
+    assert _kinds("The ego vehicle's tyre bursts on the motorway.") == ["ego"]
+    assert _kinds("A cyclist rides ahead of the test vehicle and the vehicle approaches from behind.") == \
+        ["bicycle", "ego"]

@@ -165,7 +165,7 @@ UNKNOWN_ACTORS = (
     "helicopter", "airplane", "aeroplane", "plane", "drone", "tram", "streetcar", "train", "boat",
     "carriage", "ufo", "rocket", "tank",
 )
-_NOT_ACTOR_AFTER = (r"(?! (?:lanes?(?! (?:splitting|splits|split|filtering|filters|changing|changes|change)\b)|stop|stops|park|parks|light|lights|wash|seat|door|line|crossings|path|paths|"
+_NOT_ACTOR_AFTER = (r"(?! (?:lanes?(?! (?:splitting|splits|split|filtering|filters|changing|changes|change)\b)|stop|park|parks|light|lights|wash|seat|door|line|crossings|path|paths|"
                     r"rack|racks|route|shelter|station|bay|bays|dealership)\b)")
 
 _COLORS = ("red", "blue", "white", "black", "silver", "grey", "gray", "green", "yellow", "orange", "brown",
@@ -209,10 +209,12 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
     ("brake", r"\b(?:reduc(?:e|es|ed|ing)|drop(?:s|ped|ping)?|cut(?:s|ting)?) (?:its |his |her |their )?speed\b"),
     # stopping
     ("stop", r"\b(?:come|comes|came|coming|brought|bring|brings) to a (?:\w+ )?(?:stop|halt|standstill)\b"),
+    ("brake_stop", r"\b(?:brak(?:e|es|ed|ing)|slow(?:s|ed|ing)?(?: down)?|decelerat(?:e|es|ed|ing)) to a (?:\w+ )?"
+                   r"(?:stop|halt|standstill)\b"),
     ("stop", r"\b(?:remain|remains|remained|remaining|stand|stands|stood|standing|stay|stays|stayed|is|was|are|were"
              r"|sits|sat) (?:completely |fully )?(?:stationary|stopped|still|motionless|immobile|"
              r"at a standstill|stalled|broken down)\b"),
-    ("stop", r"(?<!way )(?<!bus )(?<!the )(?<!a )\bstop(?:s|ped|ping)?\b(?! (?:sign|line|light|lights|bar)s?\b)"),
+    ("stop", r"(?<!way )\b(?:(?<!bus )stop|stops|stopped|stopping)\b(?! (?:sign|line|light|lights|bar)s?\b)"),
     ("stop", r"\bhalt(?:s|ed|ing)\b"),
     ("pull_over", r"\bpull(?:s|ed|ing)? (?:over|off the road|onto the (?:hard )?shoulder)\b"),
     ("stop", r"\bwait(?:s|ed)?\b(?! for)|\b(?:is|are|was|were|be|remains?) waiting\b(?! for)|\byield(?:s|ed|ing)? (?:to|for)\b|\bgiv(?:e|es|ing) way\b|\bgave way\b|\bwait(?:s|ed|ing)? for\b"),
@@ -340,8 +342,10 @@ _ACTION_PATTERNS: Sequence[Tuple[str, str]] = (
                  r"stopped |stationary ))(?! (?:the |a |an )?(?:intersection|junction|crossroads?|road|street))"),
 )
 _ACTION_PATTERNS = tuple(_ACTION_PATTERNS) + (
-    ("swerve", r"\b(?:los(?:e|es|ing)|lost) control\b|\bspin(?:s|ning)? out\b|\bspun out\b|\bskid(?:s|ded|ding)?\b|"
-               r"\bfishtail(?:s|ed|ing)?\b|\bswerv(?:e|es|ed|ing)\b|\bevasive (?:steering|manoeuvre|maneuver|swerve)\b|"
+    ("drift", r"\b(?:los(?:e|es|ing)|lost) control\b|\bspin(?:s|ning)? out\b|\bspun out\b|\bskid(?:s|ded|ding)?\b|"
+              r"\bfishtail(?:s|ed|ing)?\b|\bhydroplan(?:e|es|ed|ing)\b|\b(?:leav(?:e|es|ing)|left) (?:its|his|her|their|the) "
+              r"lane\b"),
+    ("swerve", r"\bswerv(?:e|es|ed|ing)\b|\bevasive (?:steering|manoeuvre|maneuver|swerve)\b|"
                r"\bjerk(?:s|ed|ing)? (?:the wheel|sideways)\b"),
 )
 _COMPILED_ACTIONS = [(a, re.compile(p)) for a, p in _ACTION_PATTERNS]
@@ -744,6 +748,14 @@ class _Parser:
             if count is None:
                 count = 1
             surface = re.sub(r"(?:'s|s')$", "", m.group(0))
+            if kind == "obstacle" and re.search(r"'s\s+(?:\w+\s+)?$", clause[:m.start()]):
+                continue  # "the ego vehicle's tire": a part of a vehicle, not an obstacle
+            if surface == "vehicle" and re.search(r"\bthe\s+$", clause[:m.start()]) and self.out.ego is not None and \
+                    str(self.out.ego.attrs.get("noun", "")).endswith("vehicle") and \
+                    not any(e.kind == "car" for e in self.out.entities):
+                mentions.append(_Mention(m.start(), m.end(), self.out.ego, prep_before(m.start()), False))
+                taken.append((m.start(), m.end()))
+                continue  # "the test vehicle ... the vehicle approaches": the ego
             named = re.fullmatch(r"v([2-9])|vehicle ([2-9])|(npc|agent|actor|adversary|adv|car) ?([1-9])", surface)
             if named:
                 key = "v" + (named.group(1) or named.group(2)) if not named.group(3) else \
@@ -1407,6 +1419,10 @@ class _Parser:
                 owner.add_action("cross", sudden=sudden or quick, directions=[])
                 if behind is not None:
                     owner.detail("cross")["from_behind"] = behind
+            return
+        if action == "brake_stop":
+            owner.add_action("brake", sudden=sudden)
+            owner.add_action("stop", sudden=sudden)
             return
         if action == "pull_over":
             if kind != "pedestrian":
