@@ -341,3 +341,12 @@ def test_brakes_to_a_stop_bus_stops_and_parts():
     assert _kinds("The ego vehicle's tyre bursts on the motorway.") == ["ego"]
     assert _kinds("A cyclist rides ahead of the test vehicle and the vehicle approaches from behind.") == \
         ["bicycle", "ego"]
+
+
+def test_another_without_a_noun_and_both():
+    text = ("The ego is in the middle lane of a three-lane motorway; a van in the left lane ahead and another in the "
+            "right lane ahead both cut into the middle lane in front of the ego.")
+    elements = elements_from_text(text)
+    assert elements["participants"] == ["car", "car", "ego"]
+    assert {("car", "cut_in"), ("car", "lane_change_left"), ("car", "lane_change_right")} <= _actions(text)
+    assert {("car", "left_of", "ego"), ("car", "right_of", "ego")} <= {tuple(r) for r in elements["relations"]}

@@ -795,6 +795,21 @@ class _Parser:
                     r"(?:\w+\s+)?$", clause[:m.start()]):
                 if not _NEGATION.search(clause[:m.start()]):
                     entity.add_action("stop")
+        for m in re.finditer(r"\b(?:another|a second|one more)\b(?= (?:in|on|from|at|to|that|which|who|behind|ahead|"
+                             r"coming|approaching|travel\w*|driv\w*|is|was)\b)", clause):
+            # "a car in the left lane and another in the right lane": a second actor of the last kind named
+            if not free(m.start(), m.end()):
+                continue
+            last = next((mm.entity for mm in reversed(mentions) if mm.start < m.start() and not isinstance(mm.entity, tuple)
+                         and mm.entity.kind != "ego"), None) or \
+                next((e for e in reversed(self.recent) if e.kind != "ego"), None)
+            if last is None:
+                continue
+            entity = self._new(last.kind, 1, set())
+            entity.attrs["noun"] = last.attrs.get("noun", last.kind)
+            taken.append((m.start(), m.end()))
+            self._mention_log.append((self._sentence_index, len(self._mention_log), entity))
+            mentions.append(_Mention(m.start(), m.end(), entity, prep_before(m.start()), False))
         for m in _GROUP_REF.finditer(clause):
             if not free(m.start(), m.end()) or self.last_group is None:
                 continue
@@ -1061,6 +1076,17 @@ class _Parser:
         before_actions = [a for a, _ in subject.actions] if subject is not None else []
         self._actions(clause, mentions, subject)
         self._coordinated(clause, mentions, subject, before_actions)
+        if subject is not None and re.search(r"\b(?:both|all of them|each of them|all three|both of them)\b", clause):
+            # "a car in the left lane and another in the right lane both cut in": every one of them does
+            new = [(a, d) for a, d in subject.actions if a not in before_actions]
+            same = [e for s_, _, e in self._mention_log if s_ == self._sentence_index and e.kind == subject.kind
+                    and e is not subject]
+            for e in same:
+                for a, d in new:
+                    if a.startswith("lane_change") or a in ("cut_in",):
+                        e.add_action(a, **{k: v for k, v in d.items() if k not in ("side", "with")})
+                    else:
+                        e.add_action(a, **{k: v for k, v in d.items() if k != "with"})
         real = [mm for mm in mentions if not isinstance(mm.entity, tuple)]
         if real:
             self._last_mentioned = real[-1].entity
@@ -1545,7 +1571,21 @@ class _Parser:
                 if x.detail("collide").get("with") is None:
                     x.detail("collide")["with"] = e if x is other else other
 
+    def _absolute_lanes(self) -> None:
+        """Absolute lanes of two actors give a relation (left lane vs the ego's middle lane: left_of)."""
+        ego = self.out.ego
+        if ego is not None and ego.lane in ("left", "middle", "right"):
+            order = {"left": 0, "middle": 1, "right": 2}
+            for e in self.out.entities:
+                if e is ego or e.lane not in order or e.kind == "pedestrian":
+                    continue
+                if order[e.lane] < order[ego.lane]:
+                    self._relate(e, "left_of", ego)
+                elif order[e.lane] > order[ego.lane]:
+                    self._relate(e, "right_of", ego)
+
     def _finish(self) -> None:
+        self._absolute_lanes()  # first, so cut-ins get their side from it
         self._collisions()
         ego = self.out.ego
         for e in self.out.entities:
@@ -1614,16 +1654,7 @@ class _Parser:
                 trig = d.get("trigger")
                 if a in ("stop", "brake") and trig and trig.get("kind") == "conflict" and trig.get("with") is None:
                     trig["with"] = self._conflict_partner(e)
-        # absolute lanes of two actors give a relation
-        if ego is not None and ego.lane in ("left", "middle", "right"):
-            order = {"left": 0, "middle": 1, "right": 2}
-            for e in self.out.entities:
-                if e is ego or e.lane not in order or e.kind == "pedestrian":
-                    continue
-                if order[e.lane] < order[ego.lane]:
-                    self._relate(e, "left_of", ego)
-                elif order[e.lane] > order[ego.lane]:
-                    self._relate(e, "right_of", ego)
+        self._absolute_lanes()
         for e in self.out.entities:
             occluder = e.attrs.get("from_behind")
             if ego is None or occluder is None or occluder is ego or e is ego:
