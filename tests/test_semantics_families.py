@@ -350,3 +350,10 @@ def test_another_without_a_noun_and_both():
     assert elements["participants"] == ["car", "car", "ego"]
     assert {("car", "cut_in"), ("car", "lane_change_left"), ("car", "lane_change_right")} <= _actions(text)
     assert {("car", "left_of", "ego"), ("car", "right_of", "ego")} <= {tuple(r) for r in elements["relations"]}
+
+
+def test_place_phrase_before_the_subject_and_blocking():
+    assert ("ego", "lane_change_left") in _actions("On the highway the ego car changes lanes to the left.")
+    rels = {tuple(r) for r in elements_from_text("A barrier blocks the ego's lane ahead.")["relations"]}
+    assert {("obstacle", "same_lane", "ego"), ("obstacle", "ahead_of", "ego")} <= rels
+    assert _kinds("An adversarial agent vehicle cuts off the AV.") == ["car", "ego"]

@@ -88,7 +88,7 @@ _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
         (r"cars", True), (r"vehicles", True), (r"sedans", True), (r"suvs", True), (r"vans", True),
         (r"taxis", True), (r"pickups", True), (r"jeeps", True), (r"minivans", True),
         (r"automobiles", True), (r"adversarial (?:agents|vehicles|cars)", True), (r"npcs", True),
-        (r"(?:adversarial|adversary|npc|background) (?:agent|vehicle|car|actor)", False),
+        (r"(?:adversarial|adversary|npc|background) (?:agent|vehicle|car|actor)(?: (?:vehicle|car))?", False),
         (r"(?:npc|agent|actor|adversary|adv|car|pov|tv) ?[1-9]", False), (r"povs", True), (r"pov", False),
         (r"target (?:car|vehicle)s", True), (r"target (?:car|vehicle)", False),
         (r"target(?! (?:pedestrian|cyclist|bicyclist|child|adult|motorcycl\w*|scooter|dummy|speed)\b)", False), (r"adversary", False), (r"npc", False),
@@ -374,6 +374,8 @@ stand stands standing ride rides riding first green red amber yellow signal sign
 unsignalized unsignalised controlled uncontrolled already inside outside next no
 """.split())
 _MOTOR = ("car", "truck", "bus", "motorcycle")
+_PLACE_NOUNS = frozenset(("highway", "motorway", "freeway", "expressway", "roadway", "way", "alley", "driveway",
+                          "parkway", "causeway", "gateway", "entryway", "byway", "interstate", "city", "valley"))
 COLLISION_KINDS = ("collide_rear_end", "collide_head_on", "collide_side")
 _ON_RAMP = re.compile(r"\b(?:on ramp|onramp|slip road|entry ramp|entrance ramp|acceleration lane|ramp)\b")
 _NEGATION = re.compile(
@@ -418,7 +420,7 @@ _REL_IMPLICIT: Sequence[Tuple[str, str]] = (
                  r"head on|wrong way|facing traffic|coming towards?|approaching from the front|"
                  r"from the other side|(?:comes|coming|came|drives|driving|goes|going|travels|travelling|traveling)"
                  r" the other way|the other way)\b"),
-    ("same_lane", r"\b(?:in|on|within|occupying|blocking) (?:the same lane|the ego(?: vehicle| car)?'s (?:own )?lane|"
+    ("same_lane", r"\b(?:in|on|within|occupying|blocking|blocks|blocked|occupies) (?:the same lane|the ego(?: vehicle| car)?'s (?:own )?lane|"
                   r"its lane|our lane|my lane)\b|\bsame lane\b"),
     ("crossing_path", r"\b(?:cross(?:es|ed|ing)?|cut(?:s|ting)? across|across|into|in|through|block(?:s|ed|ing)?) "
                       r"(?:the ego(?: vehicle| car)?'s|its|our|my) (?:path|way|trajectory)\b|\bcrossing paths\b"),
@@ -692,6 +694,7 @@ class _Parser:
                                                                      "their", "his", "her", "this", "that")
                               or before[i] in _COLORS or before[i] in _ORDINALS
                               or re.fullmatch(r"\w+(?:er|ed|ing|ary|ant|ing|ive|y|ow|ast|ig|all|ed)", before[i])
+                              and before[i] not in _PLACE_NOUNS
                               and before[i] not in _PREPOSITIONS):
                 i -= 1
             if i >= 1 and before[i] == "of" and before[i - 1] in ("front", "rear", "back", "side", "nose", "driver",
