@@ -357,3 +357,11 @@ def test_place_phrase_before_the_subject_and_blocking():
     rels = {tuple(r) for r in elements_from_text("A barrier blocks the ego's lane ahead.")["relations"]}
     assert {("obstacle", "same_lane", "ego"), ("obstacle", "ahead_of", "ego")} <= rels
     assert _kinds("An adversarial agent vehicle cuts off the AV.") == ["car", "ego"]
+
+
+def test_alias_possessives_and_part_subjects():
+    rels = {tuple(r) for r in elements_from_text(
+        "A pedestrian walks in the test vehicle's lane ahead of it.")["relations"]}
+    assert ("pedestrian", "same_lane", "ego") in rels
+    assert {("car", "collide"), ("ego", "collide")} <= _actions(
+        "V2 merged left, and the right front of V1 struck the left rear of V2.")

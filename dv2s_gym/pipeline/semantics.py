@@ -552,7 +552,8 @@ def _normalize(text: str) -> str:
     text = re.sub(r"\b(?:r|rt) side\b", "right side", text)
     text = re.sub(r"\b(?:l|lt) side\b", "left side", text)
     text = re.sub(r"\brd\b", "road", text)
-    text = re.sub(r"\b(?:v1|vehicle 1)'s\b", "the ego's", text)
+    text = re.sub(r"\b(?:v1|vehicle 1|(?:the )?(?:test|subject|host) (?:vehicle|car)|(?:the )?av|"
+                  r"(?:the )?(?:vehicle|car) under test)'s\b", "the ego's", text)
     text = re.sub(r"\bt ?jxn\b", "t junction", text)
     text = re.sub(r"\b(?:ixn|jxn|jct)\b", "intersection", text)
     text = re.sub(r"\b(turns?|turning|turned) l\b", r"\1 left", text)
@@ -698,7 +699,7 @@ class _Parser:
                               and before[i] not in _PREPOSITIONS):
                 i -= 1
             if i >= 1 and before[i] == "of" and before[i - 1] in ("front", "rear", "back", "side", "nose", "driver",
-                                                                     "tail") and i - 1 <= 2:
+                                                                     "tail") and i - 1 <= 3:
                 return False  # "the front of V2 impacted ...": V2 is the subject
             return i >= 0 and before[i] in _PREPOSITIONS
 
