@@ -1,12 +1,15 @@
 """SP of an SG on the labelled description set, and what it loses.
 
     python -m bench.bench_sg_descriptions [--jobs 2] [--sg rules] [--report REPORT.json] [--top 25]
+                                          [--save SCORES.json] [--compare bench/sg_descriptions_baseline.json]
 
 Runs ``dv2s eval sg dv2s_gym/evalset/descriptions`` (or reads a report written by
 ``dv2s eval sg ... --json`` with ``--report``) and prints SP mean ± sd per source group and overall,
 the share of descriptions whose script compiles and runs, the labelled elements most often lost
 (label elements absent from the simulated ones), the most common warnings, and how many descriptions
-lost elements without any warning (silent drops).
+lost elements without any warning (silent drops). ``--save`` writes the per-description scores
+(stem -> use case, SP, runs); ``--compare`` prints SP before/after on the descriptions both score, and
+which got worse (the shipped baseline, ``bench/sg_descriptions_baseline.json``, is today's rules SG).
 """
 
 from __future__ import annotations
@@ -66,6 +69,22 @@ def analyse(report: Mapping[str, Any], folder: Path = FOLDER) -> Dict[str, Any]:
     }
 
 
+def scores(report: Mapping[str, Any]) -> Dict[str, Dict[str, Any]]:
+    """Per-description scores of a report: stem -> {use_case, SP, ok}."""
+    return {i["stem"]: {"use_case": i["use_case"], "SP": round(i["metrics"]["SP"], 4), "ok": bool(i["ok"])}
+            for i in report["items"]}
+
+
+def compare(before: Mapping[str, Mapping[str, Any]], after: Mapping[str, Mapping[str, Any]]) -> Dict[str, Any]:
+    """SP before/after on the stems both score; the stems that got worse / better."""
+    common = sorted(set(before) & set(after))
+    worse = [(s, before[s]["SP"], after[s]["SP"]) for s in common if after[s]["SP"] < before[s]["SP"] - 1e-9]
+    better = [s for s in common if after[s]["SP"] > before[s]["SP"] + 1e-9]
+    mean = (lambda table: statistics.fmean(table[s]["SP"] for s in common) if common else 0.0)
+    return {"n": len(common), "before": mean(before), "after": mean(after), "worse": worse, "better": better,
+            "runs_before": sum(before[s]["ok"] for s in common), "runs_after": sum(after[s]["ok"] for s in common)}
+
+
 def main(argv: List[str] | None = None) -> None:
     """Run (or read) the evaluation and print the analysis."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -73,6 +92,8 @@ def main(argv: List[str] | None = None) -> None:
     parser.add_argument("--sg", default="rules")
     parser.add_argument("--report", help="a JSON report of `dv2s eval sg ... --json` to analyse instead of running")
     parser.add_argument("--top", type=int, default=25)
+    parser.add_argument("--save", help="write the per-description scores (JSON) here")
+    parser.add_argument("--compare", help="per-description scores (JSON, from --save) to compare against")
     args = parser.parse_args(argv)
     if args.report:
         report = json.loads(Path(args.report).read_text(encoding="utf-8"))
@@ -96,6 +117,18 @@ def main(argv: List[str] | None = None) -> None:
     print("\nmost common warnings:")
     for warning, count in result["warnings"][: args.top]:
         print(f"  {count:3d}  {warning}")
+    table = scores(report)
+    if args.save:
+        from scenario_bank.atomic import atomic_write_text
+
+        atomic_write_text(Path(args.save), json.dumps(table, indent=0, sort_keys=True) + "\n")
+    if args.compare:
+        delta = compare(json.loads(Path(args.compare).read_text(encoding="utf-8")), table)
+        print(f"\nagainst {args.compare} on {delta['n']} descriptions: SP {delta['before']:.3f} -> {delta['after']:.3f}"
+              f", runs {delta['runs_before']} -> {delta['runs_after']}, better {len(delta['better'])}, "
+              f"worse {len(delta['worse'])}")
+        for stem, old, new in delta["worse"]:
+            print(f"  worse: {stem} {old:.2f} -> {new:.2f}")
 
 
 if __name__ == "__main__":

@@ -86,3 +86,26 @@ def test_bench_analysis_counts_lost_elements_and_silent_drops():
     assert result["lost_by_kind"]["road"] == "1/3"
     assert result["silent_drops"] == 1  # the second item lost elements and said nothing
     assert result["warnings"] == [("could not place 'x'", 1)]
+
+
+def test_clip_evalset_does_not_read_the_descriptions():
+    """`dv2s eval dra|e2e` on the clip set (the parent folder) sees no description of this subfolder."""
+    stems = {item.stem for item in collect_items(FOLDER.parent)}
+    assert stems and not stems & _stems(".txt")
+
+
+def test_bench_compare_lists_worse_descriptions():
+    from bench.bench_sg_descriptions import compare
+
+    before = {"a": {"SP": 0.5, "ok": True}, "b": {"SP": 1.0, "ok": True}, "gone": {"SP": 0.0, "ok": False}}
+    after = {"a": {"SP": 0.75, "ok": True}, "b": {"SP": 0.5, "ok": False}, "new": {"SP": 1.0, "ok": True}}
+    delta = compare(before, after)
+    assert delta["n"] == 2 and delta["before"] == 0.75 and delta["after"] == 0.625
+    assert delta["worse"] == [("b", 1.0, 0.5)] and delta["better"] == ["a"]
+    assert (delta["runs_before"], delta["runs_after"]) == (2, 1)
+
+
+def test_shipped_baseline_scores_every_description():
+    baseline = json.loads((FOLDER.parents[2] / "bench" / "sg_descriptions_baseline.json").read_text())
+    assert set(baseline) <= _stems(".txt") and len(baseline) >= 130  # no stale stem; batch 1 + 2 scored
+    assert all(0.0 <= row["SP"] <= 1.0 for row in baseline.values())

@@ -26,7 +26,9 @@ def test_every_bank_scenario_has_several_labeled_clips():
         label = json.loads((EVALSET_DIR / f"{item.stem}.label.json").read_text())
         assert label["scenario"] == item.stem.rsplit("_seed", 1)[0] and label["ego_policy"] in ("agent", "scenic")
     # the folder holds videos, their labels and the README: nothing the analyzer could read instead of pixels
-    assert {p.suffix for p in EVALSET_DIR.iterdir()} == {".webm", ".json", ".md"}
+    assert {p.suffix for p in EVALSET_DIR.iterdir() if p.is_file()} == {".webm", ".json", ".md"}
+    # the labelled descriptions live in a subfolder, which collect_items (top level only) does not read
+    assert {p.name for p in EVALSET_DIR.iterdir() if p.is_dir()} <= {"descriptions", "__pycache__"}
 
 
 KNOWN_E2E_MISSES = {
