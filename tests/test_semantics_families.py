@@ -365,3 +365,10 @@ def test_alias_possessives_and_part_subjects():
     assert ("pedestrian", "same_lane", "ego") in rels
     assert {("car", "collide"), ("ego", "collide")} <= _actions(
         "V2 merged left, and the right front of V1 struck the left rear of V2.")
+
+
+def test_rewritten_words_never_show_up_as_unplaced():
+    for text in ("Car-to-Pedestrian Nearside Adult: an adult crosses in front of the vehicle under test.",
+                 "The ego brakes. No other vehicles are involved.",
+                 "A man hidden behind a parked van steps out in front of the AV."):
+        assert parse_description(text).unplaced == [], text

@@ -372,6 +372,7 @@ encounter encounters encountering enter enters entering entered exit exits exiti
 arrived reach reaches reaching heavy light dense sparse busy congested moderate free flowing walk walks walking
 stand stands standing ride rides riding first green red amber yellow signal signals signalized signalised
 unsignalized unsignalised controlled uncontrolled already inside outside next no
+involved involving hidden concealed obscured static
 """.split())
 _MOTOR = ("car", "truck", "bus", "motorcycle")
 _PLACE_NOUNS = frozenset(("highway", "motorway", "freeway", "expressway", "roadway", "way", "alley", "driveway",
@@ -546,6 +547,11 @@ def _normalize(text: str) -> str:
     text = re.sub(r"(?<=\w)-(?=\w)", " ", text)
     text = re.sub(r"[\u2013\u2014]", ", ", text)
     text = re.sub(r"\s+", " ", text)
+    # Euro NCAP test names ("Car-to-Car Rear stationary") are names, not actors
+    text = re.sub(r"\b(?:car|bicyclist|cyclist|pedestrian|motorcyclist|motorcycle) to (?:car|bicyclist|cyclist|"
+                  r"pedestrian|motorcyclist|motorcycle)\b(?: (?:rear|front|side|far side|near side|farside|nearside|"
+                  r"longitudinal|turn across path|crossing|head on|rear stationary|rear moving|rear braking|"
+                  r"backover|right side|left side)\b)*(?: (?:stationary|moving|braking|adult|child|obstructed))*", " ", text)
     # engineers' shorthand
     text = re.sub(r"\bfrom (?:the )?r\b", "from the right", text)
     text = re.sub(r"\bfrom (?:the )?l\b", "from the left", text)
@@ -567,11 +573,6 @@ def _normalize(text: str) -> str:
     text = re.sub(r"\bhwy\b", "highway", text)
     text = re.sub(r"\bint\b|\bx ?ing\b", "intersection", text)
     text = re.sub(r"\s@\s?", " at ", text)
-    # Euro NCAP test names ("Car-to-Car Rear stationary") are names, not actors
-    text = re.sub(r"\b(?:car|bicyclist|cyclist|pedestrian|motorcyclist|motorcycle) to (?:car|bicyclist|cyclist|"
-                  r"pedestrian|motorcyclist|motorcycle)\b(?: (?:rear|front|side|far side|near side|farside|nearside|"
-                  r"longitudinal|turn across path|crossing|head on|rear stationary|rear moving|rear braking|"
-                  r"backover)\b)*(?: (?:stationary|moving|braking|adult|child|obstructed))*", "test", text)
     # "a kid on a bike" is one bicycle, not a pedestrian and a bicycle
     text = re.sub(r"\b(?:kid|child|man|woman|boy|girl|teenager|teen|person|someone|rider|delivery rider|courier)s? "
                   r"(?:on|riding) (a|an|his|her|their) ((?:e |electric |push |kick )?(?:bike|bicycle|scooter|motorbike|"
@@ -1004,8 +1005,8 @@ class _Parser:
     def _said_elsewhere(self, clause: str) -> bool:
         """A clause that adds nothing new is still placed when it only names the road, a known actor with a
         neutral verb (drives, approaches, is present), or filler."""
-        if road_features(clause, self.out.road):
-            return True
+        if road_features(clause, self.out.road) or "nothing" in clause.split():
+            return True  # a road fact, or an absence ("no other vehicles are involved")
         rest = _NOUN_RE.sub(" ", _EGO_RE.sub(" ", clause))
         for _, pattern in ROAD_PATTERNS:
             rest = re.sub(pattern, " ", rest)
