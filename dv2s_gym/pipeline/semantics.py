@@ -130,7 +130,8 @@ _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
         (r"scooter rider", False), (r"(?:e |electric |kick )?scooter", False),
     ],
     "pedestrian": [
-        (r"pedestrians", True), (r"peds", True), (r"ped", False), (r"people", True), (r"persons", True), (r"walkers", True), (r"men", True),
+        (r"(?:adult |child )pedestrians", True), (r"adults", True), (r"(?:adult|child) pedestrian", False),
+        (r"adult", False), (r"pedestrians", True), (r"peds", True), (r"ped", False), (r"people", True), (r"persons", True), (r"walkers", True), (r"men", True),
         (r"women", True), (r"children", True), (r"kids", True),
         (r"joggers", True), (r"passers by", True),
         (r"pedestrian", False), (r"person", False), (r"walker", False), (r"man", False), (r"woman", False),
