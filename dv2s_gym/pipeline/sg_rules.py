@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from dv2s_gym.pipeline import blocks
+from dv2s_gym.pipeline.errors import GenerationError
 from dv2s_gym.pipeline.semantics import Entity, ParsedDescription, parse_description
 from scenario_bank.elements import normalize_elements
 
@@ -41,8 +42,11 @@ ROAD_MAPS = {
 MAP_ROADS = {"highway_straight": "highway", "highway_onramp": "merge", "urban_two_way": "straight_road",
              "urban_crossroads": "intersection", "urban_t_junction": "t_junction"}
 JUNCTION_MAPS = ("urban_crossroads", "urban_t_junction")
-VEHICLES = ("car", "truck")
-_CLASS = {"car": "Car", "truck": "Truck", "pedestrian": "Pedestrian", "obstacle": "Obstacle"}
+VEHICLES = ("car", "truck", "bus", "motorcycle", "bicycle")
+_CLASS = {"car": "Car", "truck": "Truck", "bus": "Bus", "motorcycle": "Motorcycle", "bicycle": "Bicycle",
+          "pedestrian": "Pedestrian", "obstacle": "Obstacle"}
+_KIND_SPEEDS = {"bicycle": "Range(4, 6)"}
+"""Cruise speed (m/s) of a kind slower than the road's traffic; it replaces the road's speed range."""
 _MAX_COUNT = 4
 _ACTIONS_BY_KIND = {
     "car": {"brake", "stop", "accelerate", "lane_change_left", "lane_change_right", "cut_in", "merge", "turn_left",
@@ -51,6 +55,9 @@ _ACTIONS_BY_KIND = {
     "obstacle": set(),
 }
 _ACTIONS_BY_KIND["truck"] = _ACTIONS_BY_KIND["car"]
+_ACTIONS_BY_KIND["bus"] = _ACTIONS_BY_KIND["car"]
+_ACTIONS_BY_KIND["motorcycle"] = _ACTIONS_BY_KIND["car"]
+_ACTIONS_BY_KIND["bicycle"] = _ACTIONS_BY_KIND["car"]
 _ACTIONS_BY_KIND["ego"] = _ACTIONS_BY_KIND["car"] - {"cross"}
 
 
@@ -143,7 +150,11 @@ def build_frame(description: str, parsed: Optional[ParsedDescription] = None,
     for entity in parsed.entities:
         if entity.kind == "ego":
             continue
-        base = {"car": "car", "truck": "truck", "pedestrian": "pedestrian", "obstacle": "obstacle"}[entity.kind]
+        if entity.kind not in _CLASS:
+            warnings.append(f"could not place the {entity.attrs.get('noun', entity.kind)}: no participant type "
+                            f"'{entity.kind}' ({', '.join(sorted(_CLASS))})")
+            continue
+        base = entity.kind
         names[base] = names.get(base, 0) + 1
         actor = _actor_from(entity, f"{base}{names[base]}")
         for rel, other in entity.relations:
@@ -162,6 +173,8 @@ def build_frame(description: str, parsed: Optional[ParsedDescription] = None,
         warnings.append(f"could not place '{word}': no participant type for it (car, truck, pedestrian, obstacle)")
     for note in parsed.unresolved:
         warnings.append(f"could not resolve: {note}")
+    for phrase in getattr(parsed, "unplaced", []) or []:
+        warnings.append(f"could not place: '{phrase}'")
     road = parsed.road
     map_name = _choose_map(road, ego, actors, warnings)
     return ScenarioFrame(description=description, road=road, map=map_name, ego=ego, actors=actors,
@@ -237,6 +250,9 @@ class _Script:
         self.relations: set = set()
 
     def param(self, name: str, value: str) -> str:
+        kind = name.rstrip("_").split("_")[0].rstrip("0123456789")
+        if name.endswith("_speed") and name.count("_") == 1 and kind in _KIND_SPEEDS:
+            value = _KIND_SPEEDS[kind]
         if all(n != name for n, _ in self.params):
             self.params.append((name, value))
         return f"globalParameters.{name}"
@@ -283,6 +299,43 @@ def _wrap(text: str, width: int) -> List[str]:
     if line:
         out.append(line)
     return out or [""]
+
+
+def _main_event(parsed: ParsedDescription) -> Optional[Tuple[Entity, str]]:
+    """The first action of the first non-ego actor that has one, else the ego's first action."""
+    def first(entity: Entity) -> Optional[str]:
+        for action, _ in entity.actions:
+            if not action.endswith("_pending"):
+                return action
+        return None
+
+    for entity in parsed.entities:
+        if entity.kind != "ego" and first(entity):
+            return entity, first(entity)
+    ego = parsed.ego
+    if ego is not None and first(ego):
+        return ego, first(ego)
+    return None
+
+
+def _check_main_event(parsed: ParsedDescription, frame: ScenarioFrame) -> None:
+    """Raise :class:`GenerationError` when the composition dropped the main event."""
+    main = _main_event(parsed)
+    if main is None:
+        return
+    entity, action = main
+    if entity.kind == "ego":
+        actor: Optional[ActorFrame] = frame.ego
+    else:
+        placed = [e for e in parsed.entities if e.kind != "ego" and e.kind in _CLASS]
+        index = next((i for i, e in enumerate(placed) if e is entity), None)
+        actor = frame.actors[index] if index is not None and len(frame.actors) == len(placed) else None
+    noun = entity.attrs.get("noun", entity.kind) if entity.kind != "ego" else "ego"
+    if actor is None or action not in actor.actions:
+        raise GenerationError(
+            f"cannot place the main event '{noun} {action.replace('_', ' ')}' of the description: the rules SG "
+            f"has no block for it on the chosen road; describe it with a supported manoeuvre (e.g. brake, stop, "
+            f"lane change, cut in, turn, cross, collide) or another road")
 
 
 def _check_actions(actor: ActorFrame, s: _Script, supported: set) -> None:
@@ -1210,6 +1263,7 @@ def generate_rules(description: str, seed: Optional[int] = None) -> SGResult:
         _compose_junction(s)
     else:
         _compose_lanes(s)
+    _check_main_event(parsed, frame)
     script = s.render()
     road = MAP_ROADS.get(frame.map)
     elements = normalize_elements({
