@@ -645,6 +645,8 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
     cls = _CLASS[actor.kind]
     n = actor.name
     urban = two_way
+    if actor.kind in _KIND_SPEEDS:  # a slow kind does not ride at the ego's speed
+        ego_speed = s.param(f"{n}_speed", _KIND_SPEEDS[actor.kind])
     rels = list(actor.relations)
     shown_actions = list(actor.actions)
     if actor.role == "obstacle":

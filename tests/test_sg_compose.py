@@ -1,0 +1,98 @@
+"""sg-compose: the rules SG places buses and two-wheelers, copies the parser's unplaced phrases as warnings and
+fails with a clear error when the main event cannot be placed.
+
+The descriptions' parses are built here per the parser contract (``ParsedDescription``), so these tests do not
+depend on how today's parser reads a phrase."""
+
+import pytest
+
+from dv2s_gym.pipeline import sg_rules
+from dv2s_gym.pipeline.errors import GenerationError
+from dv2s_gym.pipeline.semantics import Entity, ParsedDescription
+from envs.errors import DV2SError
+from scenario_bank.safety import check_script
+
+
+def _generate(monkeypatch, parsed: ParsedDescription, seed: int = 0):
+    monkeypatch.setattr(sg_rules, "parse_description", lambda text: parsed)
+    return sg_rules.generate_rules(parsed.text, seed=seed)
+
+
+def _run(script, seconds=6.0, seed=0):
+    from envs.dv2s_env import DV2SEnv
+
+    env = DV2SEnv(scenario=script, config={"duration": seconds, "ego_policy": "scenic"})
+    try:
+        env.reset(seed=seed)
+        done = False
+        while not done:
+            _, _, terminated, truncated, _ = env.step(1)
+            done = terminated or truncated
+        return env.unwrapped.trace
+    finally:
+        env.close()
+
+
+def _lead(kind: str, action: str, road: str = "straight_road", noun: str = "") -> ParsedDescription:
+    ego = Entity("ego")
+    other = Entity(kind, attrs={"noun": noun or kind})
+    other.add_action(action)
+    other.relations.append(("ahead_of", ego))
+    other.relations.append(("same_lane", ego))
+    return ParsedDescription(text=f"A {noun or kind} ahead of the ego {action}s.", road=road,
+                             entities=[ego, other])
+
+
+@pytest.mark.parametrize("kind, cls", [("bus", "Bus"), ("motorcycle", "Motorcycle"), ("bicycle", "Bicycle")])
+def test_new_kinds_get_their_model_class(monkeypatch, kind, cls):
+    result = _generate(monkeypatch, _lead(kind, "brake"))
+    assert f"new {cls}" in result.script
+    assert check_script(result.script) == []
+    assert [kind, "brake"] in result.elements["actions"]
+    assert kind in result.elements["participants"]
+
+
+def test_a_bicycle_rides_at_bicycle_speed(monkeypatch):
+    result = _generate(monkeypatch, _lead("bicycle", "keep_lane"))
+    assert "param bicycle1_speed = Range(4, 6)" in result.script
+    car = _generate(monkeypatch, _lead("car", "keep_lane"))
+    assert "Range(4, 6)" not in car.script
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["bus", "bicycle"])
+def test_new_kinds_run_and_show_in_the_trace(monkeypatch, kind):
+    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+
+    result = _generate(monkeypatch, _lead(kind, "brake"))
+    trace = _run(result.script)
+    assert kind in set(trace.kinds.values())
+    assert kind in elements_from_trace(trace)["participants"]
+
+
+def test_unplaced_phrases_become_warnings(monkeypatch):
+    parsed = _lead("car", "brake")
+    parsed.unplaced = ["while the sun sets behind the hills"]
+    result = _generate(monkeypatch, parsed)
+    assert "could not place: 'while the sun sets behind the hills'" in result.warnings
+
+
+def test_an_unknown_kind_is_a_warning_not_a_crash(monkeypatch):
+    parsed = _lead("car", "brake")
+    parsed.entities.append(Entity("tram", attrs={"noun": "tram"}))
+    result = _generate(monkeypatch, parsed)
+    assert any("tram" in w for w in result.warnings)
+
+
+def test_main_event_that_cannot_be_placed_is_a_clear_error(monkeypatch):
+    parsed = _lead("car", "u_turn")
+    with pytest.raises(GenerationError) as info:
+        _generate(monkeypatch, parsed)
+    assert isinstance(info.value, DV2SError)
+    message = str(info.value)
+    assert "\n" not in message and "u turn" in message and "main event" in message
+
+
+def test_a_placeable_main_event_does_not_raise(monkeypatch):
+    result = _generate(monkeypatch, _lead("car", "brake"))
+    assert result.script
