@@ -96,3 +96,15 @@ def test_main_event_that_cannot_be_placed_is_a_clear_error(monkeypatch):
 def test_a_placeable_main_event_does_not_raise(monkeypatch):
     result = _generate(monkeypatch, _lead("car", "brake"))
     assert result.script
+
+
+def test_an_action_the_kind_cannot_do_is_a_warning_not_the_main_event(monkeypatch):
+    ego = Entity("ego")
+    walker = Entity("pedestrian", attrs={"noun": "pedestrian"})
+    walker.add_action("go_straight")
+    walker.add_action("cross")
+    parsed = ParsedDescription(text="A pedestrian goes straight across the road.", road="straight_road",
+                               entities=[ego, walker])
+    result = _generate(monkeypatch, parsed)
+    assert any("go straight" in w for w in result.warnings)
+    assert ["pedestrian", "cross"] in result.elements["actions"]

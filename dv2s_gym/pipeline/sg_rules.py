@@ -27,7 +27,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 from dv2s_gym.pipeline import blocks
 from dv2s_gym.pipeline.errors import GenerationError
 from dv2s_gym.pipeline.semantics import Entity, ParsedDescription, parse_description
-from scenario_bank.elements import normalize_elements
+from scenario_bank.elements import ACTIONS, normalize_elements
 
 __all__ = ["ActorFrame", "ScenarioFrame", "SGResult", "generate_rules", "build_frame", "ROAD_MAPS"]
 
@@ -301,11 +301,19 @@ def _wrap(text: str, width: int) -> List[str]:
     return out or [""]
 
 
+_CAN_DO = {kind: set(ACTIONS) for kind in ("ego",) + VEHICLES}
+_CAN_DO["pedestrian"] = {"cross", "stop", "collide", "collide_rear_end", "collide_side", "collide_head_on"}
+"""Actions a participant of each kind can do at all (built or not by the rules SG)."""
+
+
 def _main_event(parsed: ParsedDescription) -> Optional[Tuple[Entity, str]]:
-    """The first action of the first non-ego actor that has one, else the ego's first action."""
+    """The first action of the first non-ego actor that has one, else the ego's first action.
+
+    Only actions a participant of that kind can do count (a parse such as 'pedestrian go straight' is already a
+    warning, not an event)."""
     def first(entity: Entity) -> Optional[str]:
         for action, _ in entity.actions:
-            if not action.endswith("_pending"):
+            if not action.endswith("_pending") and action in _CAN_DO.get(entity.kind, ()):
                 return action
         return None
 
