@@ -108,3 +108,47 @@ def test_an_action_the_kind_cannot_do_is_a_warning_not_the_main_event(monkeypatc
     result = _generate(monkeypatch, parsed)
     assert any("go straight" in w for w in result.warnings)
     assert ["pedestrian", "cross"] in result.elements["actions"]
+
+
+def test_undirected_lane_change_takes_a_side(monkeypatch):
+    parsed = _lead("car", "lane_change", road="highway")
+    result = _generate(monkeypatch, parsed)
+    acts = {a for k, a in result.elements["actions"] if k == "car"}
+    assert acts & {"lane_change_left", "lane_change_right"}
+    ego = Entity("ego")
+    car = Entity("car", attrs={"noun": "car"})
+    car.add_action("lane_change")
+    car.relations.append(("left_of", ego))
+    result = _generate(monkeypatch, ParsedDescription(text="A car left of the ego changes lanes.", road="highway",
+                                                      entities=[ego, car]))
+    assert ["car", "lane_change_right"] in result.elements["actions"]
+
+
+def test_rear_end_collision_places_the_actor_ahead_in_the_ego_lane(monkeypatch):
+    ego = Entity("ego")
+    car = Entity("car", attrs={"noun": "car"})
+    car.add_action("collide")
+    car.add_action("collide_rear_end")
+    parsed = ParsedDescription(text="The ego rear-ends a car.", road="straight_road", entities=[ego, car])
+    result = _generate(monkeypatch, parsed)
+    assert ["car", "collide"] in result.elements["actions"]
+    assert ["car", "ahead_of", "ego"] in result.elements["relations"]
+    assert not any("collide rear end" in w for w in result.warnings)
+
+
+@pytest.mark.slow
+def test_rear_end_collision_happens_with_that_geometry(monkeypatch):
+    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+
+    ego = Entity("ego")
+    car = Entity("car", attrs={"noun": "car"})
+    car.add_action("collide")
+    car.add_action("collide_rear_end")
+    parsed = ParsedDescription(text="The ego rear-ends a car.", road="straight_road", entities=[ego, car])
+    result = _generate(monkeypatch, parsed)
+    hits = 0
+    for seed in range(3):
+        actions = {a for k, a in elements_from_trace(_run(result.script, seconds=10.0, seed=seed))["actions"]
+                   if k == "car"}
+        hits += "collide_rear_end" in actions
+    assert hits >= 2, hits

@@ -109,6 +109,38 @@ class SGResult:
 
 # --------------------------------------------------------------------------- frame
 
+_COLLISION_HINTS = {"collide_rear_end": ["ahead_of", "same_lane"], "collide_head_on": ["oncoming"],
+                    "collide_side": []}
+"""Placement (relations to the ego) that gives a collision its geometry when the text places the actor nowhere."""
+
+
+def _directed_actions(actor: ActorFrame, warnings: List[str]) -> None:
+    """Turn the parser's undirected/typed actions into ones the composer builds.
+
+    An undirected ``lane_change`` takes the side the text gives, else the side away from where the actor is
+    (a car left of the ego changes right), else left. A typed collision (``collide_rear_end|side|head_on``)
+    becomes ``collide``; an actor the text does not place is placed so that the collision has that geometry
+    (behind-in-lane for rear-end, oncoming for head-on); the trace judges the geometry that really happened."""
+    out: List[str] = []
+    for action in actor.actions:
+        detail = actor.details.get(action, {})
+        if action == "lane_change":
+            side = detail.get("side") or detail.get("target")
+            if side not in ("left", "right"):
+                side = "right" if "left_of" in actor.relations else "left"
+            action = f"lane_change_{side}"
+            actor.details.setdefault(action, dict(detail))
+        elif action in _COLLISION_HINTS:
+            if actor.kind != "ego" and not actor.relations:
+                actor.relations.extend(_COLLISION_HINTS[action])
+            actor.details.setdefault("collide", dict(detail))
+            actor.details["collide"]["type"] = action
+            action = "collide"
+        if action not in out:
+            out.append(action)
+    actor.actions = out
+
+
 def _actor_from(entity: Entity, name: str) -> ActorFrame:
     actor = ActorFrame(name=name, kind=entity.kind, count=entity.count, lane=entity.lane)
     for action, detail in entity.actions:
@@ -145,6 +177,7 @@ def build_frame(description: str, parsed: Optional[ParsedDescription] = None,
     warnings = warnings if warnings is not None else []
     ego_entity = parsed.ego
     ego = _actor_from(ego_entity, "ego") if ego_entity is not None else ActorFrame("ego", "ego")
+    _directed_actions(ego, warnings)
     actors: List[ActorFrame] = []
     names: Dict[str, int] = {}
     for entity in parsed.entities:
@@ -165,6 +198,7 @@ def build_frame(description: str, parsed: Optional[ParsedDescription] = None,
                                 "actors is not placed (actors are placed relative to the ego)")
         for rel in entity.attrs.get("pending_relations", []):
             actor.relations.append(rel)
+        _directed_actions(actor, warnings)
         if actor.count > _MAX_COUNT:
             warnings.append(f"{actor.count} {actor.kind}s described; the script places {_MAX_COUNT}")
             actor.count = _MAX_COUNT
@@ -339,7 +373,14 @@ def _check_main_event(parsed: ParsedDescription, frame: ScenarioFrame) -> None:
         index = next((i for i, e in enumerate(placed) if e is entity), None)
         actor = frame.actors[index] if index is not None and len(frame.actors) == len(placed) else None
     noun = entity.attrs.get("noun", entity.kind) if entity.kind != "ego" else "ego"
-    if actor is None or action not in actor.actions:
+    built = set(actor.actions) if actor is not None else set()
+    if action == "lane_change":
+        placed_it = bool(built & {"lane_change_left", "lane_change_right"})
+    elif action in _COLLISION_HINTS:
+        placed_it = "collide" in built
+    else:
+        placed_it = action in built
+    if not placed_it:
         raise GenerationError(
             f"cannot place the main event '{noun} {action.replace('_', ' ')}' of the description: the rules SG "
             f"has no block for it on the chosen road; describe it with a supported manoeuvre (e.g. brake, stop, "
