@@ -152,3 +152,23 @@ def test_rear_end_collision_happens_with_that_geometry(monkeypatch):
                    if k == "car"}
         hits += "collide_rear_end" in actions
     assert hits >= 2, hits
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("who", ["ego", "car"])
+def test_swerve_runs_and_shows_in_the_trace(monkeypatch, who):
+    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+
+    ego = Entity("ego")
+    car = Entity("car", attrs={"noun": "car"})
+    car.relations.append(("ahead_of", ego))
+    car.relations.append(("same_lane", ego))
+    (ego if who == "ego" else car).add_action("swerve")
+    if who == "ego":
+        car.add_action("keep_lane")
+    parsed = ParsedDescription(text="Someone swerves.", road="straight_road", entities=[ego, car])
+    result = _generate(monkeypatch, parsed)
+    assert [who, "swerve"] in result.elements["actions"]
+    hits = sum("swerve" in {a for k, a in elements_from_trace(_run(result.script, seconds=8.0, seed=seed))["actions"]
+                            if k == who} for seed in range(3))
+    assert hits >= 2, hits

@@ -50,7 +50,7 @@ _KIND_SPEEDS = {"bicycle": "Range(4, 6)"}
 _MAX_COUNT = 4
 _ACTIONS_BY_KIND = {
     "car": {"brake", "stop", "accelerate", "lane_change_left", "lane_change_right", "cut_in", "merge", "turn_left",
-            "turn_right", "cross", "collide", "keep_lane", "go_straight", "overtake", "drift"},
+            "turn_right", "cross", "collide", "keep_lane", "go_straight", "overtake", "drift", "swerve"},
     "pedestrian": {"cross", "stop", "collide"},
     "obstacle": set(),
 }
@@ -419,7 +419,7 @@ def _brake_params(s: _Script, actor: ActorFrame) -> Tuple[str, str, str]:
 # --------------------------------------------------------------------------- lane maps
 
 _LANE_ACTIONS = {"brake", "stop", "accelerate", "lane_change_left", "lane_change_right", "cut_in", "merge",
-                 "collide", "keep_lane", "overtake", "drift", "cross", "go_straight"}
+                 "collide", "keep_lane", "overtake", "drift", "cross", "go_straight", "swerve"}
 
 
 def _compose_lanes(s: _Script) -> None:
@@ -668,6 +668,8 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
         dur = s.param("ego_change_duration", "Range(1.5, 2.2)" if ego.sudden else "Range(2.2, 3.2)")
         s.use("ChangeLanesLater")
         return f"ChangeLanesLater({side}, {speed}, {after}, {dur})", True
+    if ego.has("swerve"):
+        return _swerve(s, speed), True
     if ego.has("drift"):
         s.use("DriftAndReturn")
         depth = "Range(2.0, 2.8)" if two_way else "Range(1.5, 2.2)"
@@ -682,6 +684,12 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
         return f"SpeedUpLater({speed}, Range(1.0, 2.0), {speed} + Range(5, 8))", True
     s.use(cruise)
     return f"{cruise}({speed})", True
+
+
+def _swerve(s: _Script, speed: str) -> str:
+    """A quick sideways move of 1.2-1.5 m inside the lane (to the left) and back: no lane change happens."""
+    s.use("SwerveAndBack")
+    return "SwerveAndBack(" + speed + ", Range(1.0, 2.0), Range(1.2, 1.5), Range(0.8, 1.2))"
 
 
 def _something_stops_ego(frame: ScenarioFrame) -> bool:
@@ -875,6 +883,8 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
 
 def _longitudinal_behavior(s: _Script, actor: ActorFrame, speed: str) -> str:
     """Behaviour of a vehicle that stays in its lane: brake, stop, accelerate, change lanes or cruise."""
+    if actor.has("swerve"):
+        return _swerve(s, speed)
     if actor.has("lane_change_left") or actor.has("lane_change_right"):
         side = 1 if actor.has("lane_change_left") else -1
         after = s.param(f"{actor.name}_change_after", "Range(0.5, 1.5)" if actor.sudden else "Range(1.0, 2.5)")
