@@ -172,3 +172,15 @@ def test_swerve_runs_and_shows_in_the_trace(monkeypatch, who):
     hits = sum("swerve" in {a for k, a in elements_from_trace(_run(result.script, seconds=8.0, seed=seed))["actions"]
                             if k == who} for seed in range(3))
     assert hits >= 2, hits
+
+
+def test_ego_bypasses_an_obstacle_in_its_lane(monkeypatch):
+    ego = Entity("ego")
+    ego.add_action("overtake")
+    box = Entity("obstacle", attrs={"noun": "box"})
+    box.relations.append(("ahead_of", ego))
+    parsed = ParsedDescription(text="The ego goes around a box in its lane.", road="straight_road",
+                               entities=[ego, box])
+    result = _generate(monkeypatch, parsed)
+    assert "OvertakeAndReturn(obstacle1" in result.script
+    assert ["ego", "overtake"] in result.elements["actions"]

@@ -655,6 +655,8 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
     cruise = "Cruise" if reckless else "CautiousCruise"
     if ego.has("overtake"):
         target = next((a for a in frame.actors if a.role == "slow_lead"), None)
+        if target is None:  # bypassing something that stands in the ego's lane
+            target = next((a for a in frame.actors if a.role == "obstacle" and a.side == 0 and a.count == 1), None)
         if target is not None:
             s.use("OvertakeAndReturn")
             side = -1 if ego.details.get("overtake", {}).get("side") == "right" and not two_way else 1
