@@ -360,27 +360,23 @@ def _main_event(parsed: ParsedDescription) -> Optional[Tuple[Entity, str]]:
     return None
 
 
-def _check_main_event(parsed: ParsedDescription, frame: ScenarioFrame) -> None:
-    """Raise :class:`GenerationError` when the composition dropped the main event."""
+def _check_main_event(parsed: ParsedDescription, s: _Script) -> None:
+    """Raise :class:`GenerationError` when the script does not show the main event (what it was composed to
+    show, :attr:`_Script.actions`)."""
     main = _main_event(parsed)
     if main is None:
         return
     entity, action = main
-    if entity.kind == "ego":
-        actor: Optional[ActorFrame] = frame.ego
-    else:
-        placed = [e for e in parsed.entities if e.kind != "ego" and e.kind in _CLASS]
-        index = next((i for i, e in enumerate(placed) if e is entity), None)
-        actor = frame.actors[index] if index is not None and len(frame.actors) == len(placed) else None
-    noun = entity.attrs.get("noun", entity.kind) if entity.kind != "ego" else "ego"
-    built = set(actor.actions) if actor is not None else set()
+    kind = "ego" if entity.kind == "ego" else entity.kind
+    shown = {a for k, a in s.actions if k == kind}
     if action == "lane_change":
-        placed_it = bool(built & {"lane_change_left", "lane_change_right"})
+        placed_it = bool(shown & {"lane_change_left", "lane_change_right"})
     elif action in _COLLISION_HINTS:
-        placed_it = "collide" in built
+        placed_it = "collide" in shown
     else:
-        placed_it = action in built
+        placed_it = action in shown
     if not placed_it:
+        noun = entity.attrs.get("noun", entity.kind) if entity.kind != "ego" else "ego"
         raise GenerationError(
             f"cannot place the main event '{noun} {action.replace('_', ' ')}' of the description: the rules SG "
             f"has no block for it on the chosen road; describe it with a supported manoeuvre (e.g. brake, stop, "
@@ -1326,8 +1322,8 @@ def generate_rules(description: str, seed: Optional[int] = None) -> SGResult:
         _compose_junction(s)
     else:
         _compose_lanes(s)
-    _check_main_event(parsed, frame)
     script = s.render()
+    _check_main_event(parsed, s)
     road = MAP_ROADS.get(frame.map)
     elements = normalize_elements({
         "road": road if frame.road in (None, road) or frame.road == "three_way" and road == "t_junction" else road,
