@@ -114,3 +114,13 @@ def test_ego_overtaking_a_bus_is_judged():
     event = {"kind": "lane_change", "actors": ["ego"], "time": 2.0, "direction": "right"}
     el = elements_from_trace(_trace({"ego": ego, "b": bus}, kinds={"b": "bus"}, events=[event]))
     assert "overtake" in _actions(el, "ego")
+
+
+def test_bypass_into_the_oncoming_lane_is_an_overtake_without_a_lane_change_event():
+    box = [[30.0, 1.75, 0.0, 0.0]] * 60
+    ego = [[8.0 * DT * i, 1.75 if abs(8.0 * DT * i - 30.0) > 12 else -1.75, 0.0, 8.0] for i in range(60)]
+    el = elements_from_trace(_trace({"ego": ego, "obstacle1": box}, kinds={"obstacle1": "obstacle"}))
+    assert "overtake" in _actions(el, "ego")
+    close = [[8.0 * DT * i, 1.75 if abs(8.0 * DT * i - 30.0) > 12 else 0.5, 0.0, 8.0] for i in range(60)]
+    el = elements_from_trace(_trace({"ego": close, "obstacle1": box}, kinds={"obstacle1": "obstacle"}))
+    assert "overtake" not in _actions(el, "ego")

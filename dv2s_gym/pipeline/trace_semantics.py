@@ -475,8 +475,12 @@ def _interactions(
             out.add("cut_in")
             if road == "merge":
                 out.add("merge")
-    if rel[0, 0] < -2 and rel[-1, 0] > 2 and changes:
-        out.add("overtake")
+    if rel[0, 0] < -2 and rel[-1, 0] > 2:
+        # passing it: with a lane-change event, or (into an oncoming lane, which has no event) a sideways gap
+        # of more than a lane half-width while alongside
+        alongside = np.abs(rel[:, 0]) <= 3.0
+        if changes or (alongside.any() and np.abs(rel[alongside, 1]).min() > LANE_HALF_WIDTH):
+            out.add("overtake")
     if n and _joins_ego_lane_ahead(ego[n - 1], track[0], track[n - 1], rel[-1]):
         out.add("merge")
     started_opposite = _heading_gap(track[0, 2], ego[0, 2]) > math.radians(135)
