@@ -216,6 +216,9 @@ class DV2SEnv(AbstractEnv):
           (the script's ego behaviour drives; actions are ignored).
         - ``map``: override the script's map (a shipped map name or an .xodr path).
         - ``max_sample_iterations``: Scenic rejection-sampling budget per scene.
+        - ``upgrade_scenic2``: upgrade Scenic 2 syntax in the scripts to Scenic 3
+          before compiling (:mod:`scenario_bank.scenic2`), each rewrite reported
+          in a ``UserWarning``; off by default.
         - ``reward_weights``: weight of each reward term (``collision``, ``off_road``,
           ``high_speed``, ``lane_change``, ``low_ttc``, ``standing``: the ego stands
           with nothing 40 m ahead in its strip, the stall the failure miner reports;
@@ -247,6 +250,7 @@ class DV2SEnv(AbstractEnv):
                 "ego_policy": "agent",
                 "map": None,
                 "max_sample_iterations": 2000,
+                "upgrade_scenic2": False,
                 "reward_weights": {
                     "collision": -1.0,
                     "off_road": -1.0,
@@ -396,8 +400,19 @@ class DV2SEnv(AbstractEnv):
 
     def _compile(self, ref: ScenarioRef) -> CompiledScenario:
         if ref not in self._compiled:
+            text, path = ref.text(), ref.path
+            if self.config.get("upgrade_scenic2"):
+                from scenario_bank.scenic2 import upgrade_scenic2
+
+                upgrade = upgrade_scenic2(text)
+                if upgrade.changed or upgrade.notes:
+                    import warnings
+
+                    warnings.warn(f"scenario {ref.name!r}: " + "; ".join(upgrade.report()), UserWarning, stacklevel=3)
+                if upgrade.changed:  # compile the upgraded text, not the file
+                    text, path = upgrade.source, None
             self._compiled[ref] = compile_scenario(
-                ref.text(), name=ref.name, path=ref.path, map_override=self.config["map"]
+                text, name=ref.name, path=path, map_override=self.config["map"]
             )
         return self._compiled[ref]
 

@@ -406,6 +406,8 @@ class SGResult:
     context_hash: Optional[str] = None
     examples: List[str] = field(default_factory=list)
     retrieval: Optional[str] = None
+    scenic2_rewrites: List[str] = field(default_factory=list)
+    """Rewrites of :func:`scenario_bank.scenic2.upgrade_scenic2` when ``script`` is an upgraded Scenic 2 reply."""
 
     @property
     def ok(self) -> bool:
@@ -419,6 +421,37 @@ class SGResult:
         data = asdict(self)
         data["failure_counts"] = self.failure_counts()
         return data
+
+
+def _try_scenic2_upgrade(
+    script: str,
+    failure: ScriptFailure,
+    result: SGResult,
+    attempt: int,
+    sample_seeds: Sequence[int],
+    run_seconds: float,
+    max_sample_iterations: int,
+) -> Tuple[str, Optional[ScriptFailure]]:
+    """A reply in Scenic 2 syntax that fails to compile is upgraded and checked again, without a repair round.
+
+    Returns the upgraded script and None when it passes every check (its rewrites recorded in
+    ``result.scenic2_rewrites``), else the original script and failure.
+    """
+    from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
+
+    if not looks_like_scenic2(script, failure.message):
+        return script, failure
+    upgrade = upgrade_scenic2(script)
+    again = validate_script(upgrade.source, name=f"<sg attempt {attempt}, Scenic 2 upgraded>",
+                            sample_seeds=sample_seeds, run_seconds=run_seconds,
+                            max_sample_iterations=max_sample_iterations)
+    if again is not None:
+        log.info("SG: attempt %d upgraded from Scenic 2 still fails at %s: %s", attempt, again.stage,
+                 again.message[:200])
+        return script, failure
+    result.scenic2_rewrites = [str(r) for r in upgrade.rewrites]
+    log.info("SG: attempt %d was Scenic 2; upgraded with %d rewrite(s)", attempt, len(upgrade.rewrites))
+    return upgrade.source, None
 
 
 _RETRIEVERS: Dict[Tuple[str, Tuple[Tuple[str, str], ...]], ExampleRetriever] = {}
@@ -490,6 +523,9 @@ def generate_with_llm(
         else:
             failure = validate_script(script, name=f"<sg attempt {attempt}>", sample_seeds=sample_seeds,
                                       run_seconds=run_seconds, max_sample_iterations=max_sample_iterations)
+            if failure is not None and failure.stage == "compile":
+                script, failure = _try_scenic2_upgrade(script, failure, result, attempt, sample_seeds,
+                                                       run_seconds, max_sample_iterations)
         if failure is None:
             result.script = script
             log.info("SG: attempt %d passed safety, compile, sampling and a %g s run", attempt, run_seconds)

@@ -1,0 +1,212 @@
+"""Upgrade Scenic 2 scripts to Scenic 3 syntax, reporting every rewrite.
+
+Scenic 2 created objects with a bare class name (``ego = Car at p``,
+``Car ahead of ego`` as a statement, ``Point on road`` inside an expression);
+Scenic 3 needs ``new`` before the class. A Scenic 2 ``monitor Name:`` ran by
+being defined; Scenic 3 writes ``monitor Name():`` and runs it only under
+``require monitor Name()``, which is appended. The rules are applied on Python tokens, so
+comments, strings, behaviours, ``compose`` and ``monitor`` blocks and
+multi-line specifiers are handled as code is, and a Scenic 3 script (which
+already says ``new``) comes out byte-for-byte unchanged.
+
+What the translator does not rewrite it reports in :attr:`Upgrade.notes`
+(never a silent change of meaning):
+
+* ``requireVisible``: Scenic 2 required every object except ego to be visible
+  from ego. Scenic 3 keeps that default only in 2D mode (``Object2D``, which
+  the env and the bank compile with: ``mode2D=True``); a 3D compile drops it.
+  The translator does not add ``with requireVisible True``; it notes it.
+* a class name used as a value (``x = Car`` with nothing after it is creation in
+  Scenic 2 and is rewritten; ``isinstance(o, Car)`` is a reference and is not).
+* ``with heading H``: Scenic 3 refuses it in 3D mode ("property heading cannot
+  be directly specified") but accepts it, with Scenic 2's meaning, in 2D mode
+  (Scenic 3.1.1's own examples use it), so it is left alone.
+* a source the tokenizer cannot read is returned unchanged with the reason.
+"""
+
+from __future__ import annotations
+
+import io
+import re
+import tokenize
+from dataclasses import dataclass, field
+from typing import Dict, List, Sequence, Set, Tuple
+
+__all__ = ["Rewrite", "Upgrade", "upgrade_scenic2", "looks_like_scenic2", "OBJECT_CLASSES"]
+
+OBJECT_CLASSES: frozenset = frozenset(
+    {
+        # core
+        "Point", "OrientedPoint", "Object",
+        # driving domain, highway-env model, CARLA, GTA, LGSVL, Webots, MetaDrive
+        "Vehicle", "Car", "NPCCar", "Truck", "Bus", "Motorcycle", "Bicycle", "Pedestrian", "Obstacle",
+        "Prop", "Trash", "Cone", "TrafficCone", "Barrier", "Box", "Chair", "Debris", "Garbage", "Kiosk",
+        "VendingMachine", "Bench", "Advertisement", "Container", "Table", "ATM", "PlasticBag",
+        "IronPlate", "Barrel", "CreasedBox", "Case", "Mailbox", "Gnome", "Iceguard", "BusStop",
+        "EgoCar", "BoxCar", "NPCPedestrian", "ToyotaPrius", "MercedesCar",
+    }
+)
+"""Class names that create an object when written bare in Scenic 2 (plus classes the script defines)."""
+
+SPECIFIER_WORDS: frozenset = frozenset(
+    {"at", "offset", "left", "right", "ahead", "behind", "beyond", "visible", "not", "in", "on",
+     "following", "facing", "apparently", "with", "above", "below", "contained"}
+)
+"""Words that start a Scenic specifier; a class name followed by one is an instance creation."""
+
+_BEFORE_CREATION = {"=", "(", "[", ",", "return", "yield", ":", "+", "-", "@", "in", "to", "from", "of",
+                    "and", "or", "else", "lambda"}
+
+
+@dataclass(frozen=True)
+class Rewrite:
+    """One change: 1-based ``line``, the line ``before`` and ``after``, and ``why``."""
+
+    line: int
+    before: str
+    after: str
+    why: str
+
+    def __str__(self) -> str:
+        return f"line {self.line}: {self.before.strip()!s} -> {self.after.strip()!s} ({self.why})"
+
+
+@dataclass
+class Upgrade:
+    """The result of :func:`upgrade_scenic2`: the new ``source``, its rewrites and notes."""
+
+    source: str
+    rewrites: List[Rewrite] = field(default_factory=list)
+    notes: List[str] = field(default_factory=list)
+
+    @property
+    def changed(self) -> bool:
+        """True when at least one rewrite was applied."""
+        return bool(self.rewrites)
+
+    def report(self) -> List[str]:
+        """One line per rewrite, then one per note (what a human should read)."""
+        return [f"scenic2: {r}" for r in self.rewrites] + [f"scenic2 note: {n}" for n in self.notes]
+
+
+def _tokens(source: str) -> List[tokenize.TokenInfo]:
+    return list(tokenize.generate_tokens(io.StringIO(source).readline))
+
+
+def _defined_classes(tokens: Sequence[tokenize.TokenInfo]) -> Set[str]:
+    names = set()
+    for i, tok in enumerate(tokens[:-1]):
+        if tok.type == tokenize.NAME and tok.string == "class" and tokens[i + 1].type == tokenize.NAME:
+            names.add(tokens[i + 1].string)
+    return names
+
+
+_SKIP = (tokenize.NL, tokenize.COMMENT, tokenize.INDENT, tokenize.DEDENT)
+
+
+def _significant(tokens: Sequence[tokenize.TokenInfo]) -> List[tokenize.TokenInfo]:
+    return [t for t in tokens if t.type not in _SKIP and t.type != tokenize.ENCODING]
+
+
+def upgrade_scenic2(source: str) -> Upgrade:
+    """Rewrite Scenic 2 constructs in ``source`` to Scenic 3; see the module docstring for the rules.
+
+    Idempotent: applying it to its own output changes nothing, and Scenic 3
+    source comes back unchanged with no rewrites.
+    """
+    try:
+        tokens = _tokens(source)
+    except (tokenize.TokenError, IndentationError, SyntaxError) as error:
+        return Upgrade(source, [], [f"not upgraded: the script cannot be tokenized ({error}); fix its syntax first"])
+    classes = set(OBJECT_CLASSES) | _defined_classes(tokens)
+    sig = _significant(tokens)
+    # edits: (row, col_start, col_end, replacement, why)
+    edits: List[Tuple[int, int, int, str, str]] = []
+    created = 0
+    for i, tok in enumerate(sig):
+        if tok.type != tokenize.NAME:
+            continue
+        prev = sig[i - 1] if i > 0 else None
+        nxt = sig[i + 1] if i + 1 < len(sig) else None
+        if tok.string in classes:
+            if prev is not None and prev.string in ("new", ".", "class", "def", "import", "isinstance"):
+                continue
+            at_statement_start = prev is None or prev.type in (tokenize.NEWLINE,) or prev.string == ";"
+            before_ok = at_statement_start or prev.string in _BEFORE_CREATION
+            if not before_ok or nxt is None:
+                continue
+            next_is_spec = nxt.type == tokenize.NAME and nxt.string in SPECIFIER_WORDS
+            ends = nxt.type in (tokenize.NEWLINE, tokenize.ENDMARKER) or nxt.string == ";"
+            if next_is_spec or (ends and (at_statement_start or prev.string in ("=", "return"))):
+                edits.append((tok.start[0], tok.start[1], tok.start[1], "new ",
+                              f"Scenic 3 creates objects with 'new {tok.string}'"))
+                created += 1
+    monitors, monitor_notes = _old_monitors(sig)
+    for row, name_end, name in monitors:
+        edits.append((row, name_end, name_end, "()",
+                      "Scenic 3 monitors take parentheses and are required explicitly"))
+    lines = source.splitlines(keepends=True)
+    rewrites: List[Rewrite] = []
+    by_line: Dict[int, List[Tuple[int, int, str, str]]] = {}
+    for row, c0, c1, text, why in edits:
+        by_line.setdefault(row, []).append((c0, c1, text, why))
+    for row in sorted(by_line):
+        original = lines[row - 1]
+        new = original
+        whys = []
+        for c0, c1, text, why in sorted(by_line[row], reverse=True):
+            new = new[:c0] + text + new[c1:]
+            if why not in whys:
+                whys.insert(0, why)
+        lines[row - 1] = new
+        rewrites.append(Rewrite(row, original.rstrip("\n"), new.rstrip("\n"), "; ".join(whys)))
+    if monitors:
+        if lines and not lines[-1].endswith("\n"):
+            lines[-1] += "\n"
+        for _, _, name in monitors:
+            added = f"require monitor {name}()"
+            lines.append(added + "\n")
+            rewrites.append(Rewrite(len(lines), "", added,
+                                    f"a Scenic 2 monitor ran by being defined; Scenic 3 runs {name} only when required"))
+    notes: List[str] = list(monitor_notes)
+    if created:
+        notes.append(
+            "requireVisible: Scenic 2 required objects to be visible from ego by default; Scenic 3 keeps "
+            "that only in 2D mode (the env compiles with mode2D=True); no 'with requireVisible' was added"
+        )
+    return Upgrade("".join(lines), rewrites, notes)
+
+
+def _old_monitors(sig: Sequence[tokenize.TokenInfo]) -> Tuple[List[Tuple[int, int, str]], List[str]]:
+    """Scenic 2 monitors (``monitor Name:``): top-level ones are rewritten, nested ones reported."""
+    found: List[Tuple[int, int, str]] = []
+    notes: List[str] = []
+    for i, tok in enumerate(sig[:-2]):
+        if tok.type == tokenize.NAME and tok.string == "monitor" and sig[i + 1].type == tokenize.NAME \
+                and sig[i + 2].string == ":" and (i == 0 or sig[i - 1].type == tokenize.NEWLINE):
+            if tok.start[1] == 0:
+                found.append((sig[i + 1].start[0], sig[i + 1].end[1], sig[i + 1].string))
+            else:
+                notes.append(f"line {tok.start[0]}: not translated: Scenic 2 monitor {sig[i + 1].string!r} "
+                             "inside a block; add '()' and a 'require monitor' yourself")
+    return found, notes
+
+
+_SCENIC2_ERRORS = re.compile(
+    r"(invalid syntax|unexpected token|2\.0-style|monitor must be converted|ScenicParseError|"
+    r"instance creation|specifier)", re.IGNORECASE
+)
+
+
+def looks_like_scenic2(source: str, compile_error: str = "") -> bool:
+    """True when ``source`` uses Scenic 2 syntax the upgrader rewrites.
+
+    Decided from the syntax (a bare class creation or an old-style monitor, found
+    on tokens, so comments and strings do not count); ``compile_error``, when
+    given, must also be an error such syntax produces (a parse error), so a script failing for another reason is not
+    called Scenic 2.
+    """
+    upgrade = upgrade_scenic2(source)
+    if not upgrade.rewrites:
+        return False
+    return not compile_error or bool(_SCENIC2_ERRORS.search(compile_error))

@@ -1,0 +1,6 @@
+
+param map = localPath('../../tests/formats/opendrive/maps/CARLA/Town01.xodr')
+
+model scenic.domains.driving.model
+
+ego = Car
