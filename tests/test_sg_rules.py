@@ -57,7 +57,6 @@ UNPLACEABLE = {
     "A helicopter lands on the road in front of the ego car.": "helicopter",
     "The ego car drives around a roundabout with a tram crossing.": "roundabout",
     "An oncoming truck passes the ego car on the highway.": "oncoming",
-    "The ego car turns left on the highway.": "turn",
 }
 
 
@@ -114,6 +113,14 @@ def test_unplaceable_content_is_reported(description, word):
     assert any(word in w for w in result.warnings), result.warnings
     assert check_script(result.script) == []
     compile_scenario(result.script, name="sg_rules_warning").sample(0)
+
+
+def test_unplaceable_main_event_is_a_clear_error():
+    """The ego's own manoeuvre is the main event when nobody else acts: a turn on a highway cannot be placed."""
+    from dv2s_gym.pipeline.errors import GenerationError
+
+    with pytest.raises(GenerationError, match="main event 'ego turn left'"):
+        generate_rules("The ego car turns left on the highway.", seed=0)
 
 
 def test_deterministic_given_the_seed():

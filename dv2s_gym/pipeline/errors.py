@@ -12,12 +12,15 @@ Hierarchy::
     │   ├── EndpointHTTPError            non-2xx answer (has .status and .body)
     │   └── MalformedResponseError       2xx answer that is not a chat completion
     ├── MissingAPIKeyError               api.openai.com without a key
-    └── GenerationFailedError            no generated script passed the checks (has .result)
+    ├── GenerationFailedError            no generated script passed the checks (has .result)
+    └── GenerationError                  the rules SG cannot place the ego or the main event (also a DV2SError)
 """
 
 from __future__ import annotations
 
 from typing import Any, Optional
+
+from envs.errors import DV2SError
 
 __all__ = [
     "PipelineError",
@@ -28,6 +31,7 @@ __all__ = [
     "MalformedResponseError",
     "MissingAPIKeyError",
     "GenerationFailedError",
+    "GenerationError",
 ]
 
 
@@ -74,3 +78,8 @@ class GenerationFailedError(PipelineError):
     def __init__(self, message: str, result: Optional[Any] = None) -> None:
         super().__init__(message)
         self.result = result
+
+
+class GenerationError(PipelineError, DV2SError, ValueError):
+    """The rules SG cannot place the ego or the main event of a description (the message names the phrase
+    and what to write instead)."""

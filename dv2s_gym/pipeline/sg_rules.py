@@ -25,8 +25,9 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from dv2s_gym.pipeline import blocks
+from dv2s_gym.pipeline.errors import GenerationError
 from dv2s_gym.pipeline.semantics import Entity, ParsedDescription, parse_description
-from scenario_bank.elements import normalize_elements
+from scenario_bank.elements import ACTIONS, normalize_elements
 
 __all__ = ["ActorFrame", "ScenarioFrame", "SGResult", "generate_rules", "build_frame", "ROAD_MAPS"]
 
@@ -41,16 +42,22 @@ ROAD_MAPS = {
 MAP_ROADS = {"highway_straight": "highway", "highway_onramp": "merge", "urban_two_way": "straight_road",
              "urban_crossroads": "intersection", "urban_t_junction": "t_junction"}
 JUNCTION_MAPS = ("urban_crossroads", "urban_t_junction")
-VEHICLES = ("car", "truck")
-_CLASS = {"car": "Car", "truck": "Truck", "pedestrian": "Pedestrian", "obstacle": "Obstacle"}
+VEHICLES = ("car", "truck", "bus", "motorcycle", "bicycle")
+_CLASS = {"car": "Car", "truck": "Truck", "bus": "Bus", "motorcycle": "Motorcycle", "bicycle": "Bicycle",
+          "pedestrian": "Pedestrian", "obstacle": "Obstacle"}
+_KIND_SPEEDS = {"bicycle": "Range(4, 6)"}
+"""Cruise speed (m/s) of a kind slower than the road's traffic; it replaces the road's speed range."""
 _MAX_COUNT = 4
 _ACTIONS_BY_KIND = {
     "car": {"brake", "stop", "accelerate", "lane_change_left", "lane_change_right", "cut_in", "merge", "turn_left",
-            "turn_right", "cross", "collide", "keep_lane", "go_straight", "overtake", "drift"},
+            "turn_right", "cross", "collide", "keep_lane", "go_straight", "overtake", "drift", "swerve"},
     "pedestrian": {"cross", "stop", "collide"},
     "obstacle": set(),
 }
 _ACTIONS_BY_KIND["truck"] = _ACTIONS_BY_KIND["car"]
+_ACTIONS_BY_KIND["bus"] = _ACTIONS_BY_KIND["car"]
+_ACTIONS_BY_KIND["motorcycle"] = _ACTIONS_BY_KIND["car"]
+_ACTIONS_BY_KIND["bicycle"] = _ACTIONS_BY_KIND["car"]
 _ACTIONS_BY_KIND["ego"] = _ACTIONS_BY_KIND["car"] - {"cross"}
 
 
@@ -102,6 +109,38 @@ class SGResult:
 
 # --------------------------------------------------------------------------- frame
 
+_COLLISION_HINTS = {"collide_rear_end": ["ahead_of", "same_lane"], "collide_head_on": ["oncoming"],
+                    "collide_side": []}
+"""Placement (relations to the ego) that gives a collision its geometry when the text places the actor nowhere."""
+
+
+def _directed_actions(actor: ActorFrame, warnings: List[str]) -> None:
+    """Turn the parser's undirected/typed actions into ones the composer builds.
+
+    An undirected ``lane_change`` takes the side the text gives, else the side away from where the actor is
+    (a car left of the ego changes right), else left. A typed collision (``collide_rear_end|side|head_on``)
+    becomes ``collide``; an actor the text does not place is placed so that the collision has that geometry
+    (behind-in-lane for rear-end, oncoming for head-on); the trace judges the geometry that really happened."""
+    out: List[str] = []
+    for action in actor.actions:
+        detail = actor.details.get(action, {})
+        if action == "lane_change":
+            side = detail.get("side") or detail.get("target")
+            if side not in ("left", "right"):
+                side = "right" if "left_of" in actor.relations else "left"
+            action = f"lane_change_{side}"
+            actor.details.setdefault(action, dict(detail))
+        elif action in _COLLISION_HINTS:
+            if actor.kind != "ego" and not actor.relations:
+                actor.relations.extend(_COLLISION_HINTS[action])
+            actor.details.setdefault("collide", dict(detail))
+            actor.details["collide"]["type"] = action
+            action = "collide"
+        if action not in out:
+            out.append(action)
+    actor.actions = out
+
+
 def _actor_from(entity: Entity, name: str) -> ActorFrame:
     actor = ActorFrame(name=name, kind=entity.kind, count=entity.count, lane=entity.lane)
     for action, detail in entity.actions:
@@ -138,12 +177,17 @@ def build_frame(description: str, parsed: Optional[ParsedDescription] = None,
     warnings = warnings if warnings is not None else []
     ego_entity = parsed.ego
     ego = _actor_from(ego_entity, "ego") if ego_entity is not None else ActorFrame("ego", "ego")
+    _directed_actions(ego, warnings)
     actors: List[ActorFrame] = []
     names: Dict[str, int] = {}
     for entity in parsed.entities:
         if entity.kind == "ego":
             continue
-        base = {"car": "car", "truck": "truck", "pedestrian": "pedestrian", "obstacle": "obstacle"}[entity.kind]
+        if entity.kind not in _CLASS:
+            warnings.append(f"could not place the {entity.attrs.get('noun', entity.kind)}: no participant type "
+                            f"'{entity.kind}' ({', '.join(sorted(_CLASS))})")
+            continue
+        base = entity.kind
         names[base] = names.get(base, 0) + 1
         actor = _actor_from(entity, f"{base}{names[base]}")
         for rel, other in entity.relations:
@@ -154,6 +198,7 @@ def build_frame(description: str, parsed: Optional[ParsedDescription] = None,
                                 "actors is not placed (actors are placed relative to the ego)")
         for rel in entity.attrs.get("pending_relations", []):
             actor.relations.append(rel)
+        _directed_actions(actor, warnings)
         if actor.count > _MAX_COUNT:
             warnings.append(f"{actor.count} {actor.kind}s described; the script places {_MAX_COUNT}")
             actor.count = _MAX_COUNT
@@ -162,6 +207,8 @@ def build_frame(description: str, parsed: Optional[ParsedDescription] = None,
         warnings.append(f"could not place '{word}': no participant type for it (car, truck, pedestrian, obstacle)")
     for note in parsed.unresolved:
         warnings.append(f"could not resolve: {note}")
+    for phrase in getattr(parsed, "unplaced", []) or []:
+        warnings.append(f"could not place: '{phrase}'")
     road = parsed.road
     map_name = _choose_map(road, ego, actors, warnings)
     return ScenarioFrame(description=description, road=road, map=map_name, ego=ego, actors=actors,
@@ -237,6 +284,9 @@ class _Script:
         self.relations: set = set()
 
     def param(self, name: str, value: str) -> str:
+        kind = name.rstrip("_").split("_")[0].rstrip("0123456789")
+        if name.endswith("_speed") and name.count("_") == 1 and kind in _KIND_SPEEDS:
+            value = _KIND_SPEEDS[kind]
         if all(n != name for n, _ in self.params):
             self.params.append((name, value))
         return f"globalParameters.{name}"
@@ -285,6 +335,54 @@ def _wrap(text: str, width: int) -> List[str]:
     return out or [""]
 
 
+_CAN_DO = {kind: set(ACTIONS) for kind in ("ego",) + VEHICLES}
+_CAN_DO["pedestrian"] = {"cross", "stop", "collide", "collide_rear_end", "collide_side", "collide_head_on"}
+"""Actions a participant of each kind can do at all (built or not by the rules SG)."""
+
+
+def _main_event(parsed: ParsedDescription) -> Optional[Tuple[Entity, str]]:
+    """The first action of the first non-ego actor that has one, else the ego's first action.
+
+    Only actions a participant of that kind can do count (a parse such as 'pedestrian go straight' is already a
+    warning, not an event)."""
+    def first(entity: Entity) -> Optional[str]:
+        for action, _ in entity.actions:
+            if not action.endswith("_pending") and action in _CAN_DO.get(entity.kind, ()):
+                return action
+        return None
+
+    for entity in parsed.entities:
+        if entity.kind != "ego" and first(entity):
+            return entity, first(entity)
+    ego = parsed.ego
+    if ego is not None and first(ego):
+        return ego, first(ego)
+    return None
+
+
+def _check_main_event(parsed: ParsedDescription, s: _Script) -> None:
+    """Raise :class:`GenerationError` when the script does not show the main event (what it was composed to
+    show, :attr:`_Script.actions`)."""
+    main = _main_event(parsed)
+    if main is None:
+        return
+    entity, action = main
+    kind = "ego" if entity.kind == "ego" else entity.kind
+    shown = {a for k, a in s.actions if k == kind}
+    if action == "lane_change":
+        placed_it = bool(shown & {"lane_change_left", "lane_change_right"})
+    elif action in _COLLISION_HINTS:
+        placed_it = "collide" in shown
+    else:
+        placed_it = action in shown
+    if not placed_it:
+        noun = entity.attrs.get("noun", entity.kind) if entity.kind != "ego" else "ego"
+        raise GenerationError(
+            f"cannot place the main event '{noun} {action.replace('_', ' ')}' of the description: the rules SG "
+            f"has no block for it on the chosen road; describe it with a supported manoeuvre (e.g. brake, stop, "
+            f"lane change, cut in, turn, cross, collide) or another road")
+
+
 def _check_actions(actor: ActorFrame, s: _Script, supported: set) -> None:
     keep = []
     for a in actor.actions:
@@ -317,7 +415,7 @@ def _brake_params(s: _Script, actor: ActorFrame) -> Tuple[str, str, str]:
 # --------------------------------------------------------------------------- lane maps
 
 _LANE_ACTIONS = {"brake", "stop", "accelerate", "lane_change_left", "lane_change_right", "cut_in", "merge",
-                 "collide", "keep_lane", "overtake", "drift", "cross", "go_straight"}
+                 "collide", "keep_lane", "overtake", "drift", "cross", "go_straight", "swerve"}
 
 
 def _compose_lanes(s: _Script) -> None:
@@ -553,6 +651,8 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
     cruise = "Cruise" if reckless else "CautiousCruise"
     if ego.has("overtake"):
         target = next((a for a in frame.actors if a.role == "slow_lead"), None)
+        if target is None:  # bypassing something that stands in the ego's lane
+            target = next((a for a in frame.actors if a.role == "obstacle" and a.side == 0 and a.count == 1), None)
         if target is not None:
             s.use("OvertakeAndReturn")
             side = -1 if ego.details.get("overtake", {}).get("side") == "right" and not two_way else 1
@@ -566,6 +666,8 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
         dur = s.param("ego_change_duration", "Range(1.5, 2.2)" if ego.sudden else "Range(2.2, 3.2)")
         s.use("ChangeLanesLater")
         return f"ChangeLanesLater({side}, {speed}, {after}, {dur})", True
+    if ego.has("swerve"):
+        return _swerve(s, speed), True
     if ego.has("drift"):
         s.use("DriftAndReturn")
         depth = "Range(2.0, 2.8)" if two_way else "Range(1.5, 2.2)"
@@ -582,6 +684,12 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
     return f"{cruise}({speed})", True
 
 
+def _swerve(s: _Script, speed: str) -> str:
+    """A quick sideways move of 1.2-1.5 m inside the lane (to the left) and back: no lane change happens."""
+    s.use("SwerveAndBack")
+    return "SwerveAndBack(" + speed + ", Range(1.0, 2.0), Range(1.2, 1.5), Range(0.8, 1.2))"
+
+
 def _something_stops_ego(frame: ScenarioFrame) -> bool:
     return any(a.kind == "obstacle" and a.side == 0 or a.role == "lead" and a.has("stop") for a in frame.actors)
 
@@ -592,6 +700,8 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
     cls = _CLASS[actor.kind]
     n = actor.name
     urban = two_way
+    if actor.kind in _KIND_SPEEDS:  # a slow kind does not ride at the ego's speed
+        ego_speed = s.param(f"{n}_speed", _KIND_SPEEDS[actor.kind])
     rels = list(actor.relations)
     shown_actions = list(actor.actions)
     if actor.role == "obstacle":
@@ -771,6 +881,8 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
 
 def _longitudinal_behavior(s: _Script, actor: ActorFrame, speed: str) -> str:
     """Behaviour of a vehicle that stays in its lane: brake, stop, accelerate, change lanes or cruise."""
+    if actor.has("swerve"):
+        return _swerve(s, speed)
     if actor.has("lane_change_left") or actor.has("lane_change_right"):
         side = 1 if actor.has("lane_change_left") else -1
         after = s.param(f"{actor.name}_change_after", "Range(0.5, 1.5)" if actor.sudden else "Range(1.0, 2.5)")
@@ -1211,6 +1323,7 @@ def generate_rules(description: str, seed: Optional[int] = None) -> SGResult:
     else:
         _compose_lanes(s)
     script = s.render()
+    _check_main_event(parsed, s)
     road = MAP_ROADS.get(frame.map)
     elements = normalize_elements({
         "road": road if frame.road in (None, road) or frame.road == "three_way" and road == "t_junction" else road,

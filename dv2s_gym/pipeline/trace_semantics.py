@@ -26,6 +26,16 @@ Every vehicle (the ego included) is judged by the same rules:
 * ``cut_in``, ``overtake``, ``merge``, ``drift``: judged pairwise. A non-ego actor is
   judged against the ego; the ego is judged against every nearby car and truck
   (and, for ``overtake``, obstacle), with the same rules.
+* ``u_turn``: net heading change of at least 150 degrees while moving (it replaces the
+  ``turn_left|right`` that the same heading change would give).
+* ``reverse``: the vehicle travels at least :data:`REVERSE_MIN_M` metres against its own
+  heading (negative speed, or displacement pointing backwards).
+* ``swerve``: without a lane-change event and without turning, the vehicle's centre moves
+  at least :data:`SWERVE_MIN_M` sideways from the line it started on and comes back within
+  half a lane of it.
+* ``pull_out``: the vehicle starts standing still, then drives off at least
+  :data:`PULL_OUT_MIN_M` metres and moves at least :data:`PULL_OUT_LATERAL_M` sideways
+  (out of a parking spot or shoulder into the traffic lane) without turning.
 * ``collide`` for both actors of every collision event, plus its type
   (:func:`collision_type`): ``collide_rear_end``, ``collide_head_on`` or
   ``collide_side``.
@@ -67,7 +77,12 @@ JUNCTION_ROADS = ("intersection", "t_junction", "three_way", "roundabout")
 VEHICLE_LENGTH, VEHICLE_WIDTH = 5.0, 2.0   # m, highway-env's vehicle box (collision faces)
 FRONTAL_GAP = math.radians(45)   # heading gap up to which a front/back contact is rear-end ...
 HEAD_ON_GAP = math.radians(135)  # ... and from which it is head-on
-_LEAVES_LANE = {"drift", "cut_in", "merge", "overtake", "lane_change_left", "lane_change_right",
+U_TURN_ANGLE = math.radians(150)
+REVERSE_MIN_M = 2.0       # m driven backwards for ``reverse``
+SWERVE_MIN_M = 1.0        # m of sideways excursion (and back) for ``swerve``
+PULL_OUT_MIN_M = 8.0      # m driven after standing still for ``pull_out`` ...
+PULL_OUT_LATERAL_M = 1.5  # ... with at least this sideways shift
+_LEAVES_LANE = {"u_turn", "reverse", "swerve", "pull_out", "drift", "cut_in", "merge", "overtake", "lane_change_left", "lane_change_right",
                 "turn_left", "turn_right"}
 
 
@@ -276,7 +291,7 @@ def elements_from_trace(trace) -> Dict[str, Any]:
         own = _motion_actions(track, dt, kind, lane_changes.get(name, []), road, view)
         if name == "ego":
             for other, other_kind in near.items():
-                if other != "ego" and other_kind in ("car", "truck", "obstacle"):
+                if other != "ego" and other_kind in ("car", "truck", "bus", "motorcycle", "bicycle", "obstacle"):
                     found = _interactions(tracks[other], ego, "ego", ego_changes, road, dt, view)
                     own |= found if other_kind != "obstacle" else found & {"overtake"}
         else:
@@ -322,8 +337,11 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
         out.add("accelerate")
     for change in changes:
         out.add("lane_change_left" if change.get("direction") == "left" else "lane_change_right")
+    out |= _special_motions(track, changes)
     turn = float(_wrap(np.array([track[-1, 2] - track[0, 2]]))[0])
-    if abs(turn) >= TURN_ANGLE and speed.max() > 1.0:
+    if "u_turn" in out:
+        pass
+    elif abs(turn) >= TURN_ANGLE and speed.max() > 1.0:
         out.add("turn_right" if turn > 0 else "turn_left")
     elif speed.max() > 1.0:
         travelled = float(np.hypot(*np.diff(track[:, :2], axis=0).T).sum())
@@ -331,6 +349,45 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
             out.add("keep_lane")
         if road in JUNCTION_ROADS and _crosses_junction(track, view):
             out.add("go_straight")
+    return out
+
+
+def _backward_metres(track: np.ndarray) -> float:
+    """Metres the actor travelled against its own heading."""
+    steps = np.diff(track[:, :2], axis=0)
+    along = steps[:, 0] * np.cos(track[:-1, 2]) + steps[:, 1] * np.sin(track[:-1, 2])
+    return float(-along[along < 0].sum())
+
+
+def _special_motions(track: np.ndarray, changes: List[Dict[str, Any]]) -> Set[str]:
+    """``u_turn``, ``reverse``, ``swerve`` and ``pull_out`` of a vehicle track ``[x, y, heading, speed]``."""
+    out: Set[str] = set()
+    speed = np.abs(track[:, 3])
+    if speed.max() <= 1.0 and float(np.hypot(*(track[-1, :2] - track[0, :2]))) < 1.0:
+        return out
+    cumulative = float(np.sum(_wrap(np.diff(track[:, 2]))))
+    if abs(cumulative) >= U_TURN_ANGLE:
+        out.add("u_turn")
+    if _backward_metres(track) >= REVERSE_MIN_M:
+        out.add("reverse")
+    net_turn = abs(float(_wrap(np.array([track[-1, 2] - track[0, 2]]))[0]))
+    if net_turn >= TURN_ANGLE or "u_turn" in out:
+        return out
+    moving = np.flatnonzero(speed > STOP_SPEED)
+    started_still = speed[0] < STOP_SPEED and moving.size > 0
+    if started_still:
+        first = int(moving[0])
+        after = track[first:]
+        travelled = float(np.hypot(*np.diff(after[:, :2], axis=0).T).sum()) if len(after) > 1 else 0.0
+        shift = abs(_ego_frame(track[0], track[-1])[1])
+        if travelled >= PULL_OUT_MIN_M and shift >= PULL_OUT_LATERAL_M:
+            out.add("pull_out")
+            return out
+    if not changes:
+        lateral = np.array([_ego_frame(track[0], row)[1] for row in track])
+        peak = int(np.argmax(np.abs(lateral)))
+        if abs(lateral[peak]) >= SWERVE_MIN_M and abs(lateral[-1]) <= LANE_HALF_WIDTH / 2 and peak < len(track) - 1:
+            out.add("swerve")
     return out
 
 
@@ -418,8 +475,12 @@ def _interactions(
             out.add("cut_in")
             if road == "merge":
                 out.add("merge")
-    if rel[0, 0] < -2 and rel[-1, 0] > 2 and changes:
-        out.add("overtake")
+    if rel[0, 0] < -2 and rel[-1, 0] > 2:
+        # passing it: with a lane-change event, or (into an oncoming lane, which has no event) a sideways gap
+        # of more than a lane half-width while alongside
+        alongside = np.abs(rel[:, 0]) <= 3.0
+        if changes or (alongside.any() and np.abs(rel[alongside, 1]).min() > LANE_HALF_WIDTH):
+            out.add("overtake")
     if n and _joins_ego_lane_ahead(ego[n - 1], track[0], track[n - 1], rel[-1]):
         out.add("merge")
     started_opposite = _heading_gap(track[0, 2], ego[0, 2]) > math.radians(135)

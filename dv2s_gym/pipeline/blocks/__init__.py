@@ -208,6 +208,16 @@ behavior DriftAndReturn(speed, trigger, depth, duration, returnTrigger, returnDu
     do SlideOffset(homeLine, now, 0, speed, returnDuration) for returnDuration + 0.3 seconds
     do FollowLaneBehavior(target_speed=speed)
 ''', ("SlideOffset",)),
+    "SwerveAndBack": ('''\
+behavior SwerveAndBack(speed, delay, depth, duration):
+    # a quick sideways move of `depth` m (left positive) inside the lane, then straight back to its centre
+    do FollowLaneBehavior(target_speed=speed) for delay seconds
+    homeLine = self.laneSection.centerline
+    do SlideOffset(homeLine, 0, depth, speed, duration) for duration seconds
+    now = homeLine.signedDistanceTo(self.position)
+    do SlideOffset(homeLine, now, 0, speed, duration) for duration + 0.3 seconds
+    do FollowLaneBehavior(target_speed=speed)
+''', ("SlideOffset",)),
     "MergeFromRamp": ('''\
 behavior MergeFromRamp(speed, accelLane, delay, duration):
     # drive down the ramp, then leave the acceleration lane for the main carriageway
