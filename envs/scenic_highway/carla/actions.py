@@ -81,7 +81,14 @@ class _NoOpAction(Action):
         return None
 
 
-class SetAutopilotAction(Action):
+class _RefusedAction(Action):
+    """An action whose constructor refuses it; ``applyTo`` is never reached."""
+
+    def applyTo(self, obj, sim) -> None:  # pragma: no cover - __init__ raises first
+        raise NotImplementedError
+
+
+class SetAutopilotAction(_RefusedAction):
     """CARLA's autopilot switch. Taken directly it cannot be emulated (the autopilot is a
     persistent controller, not a per-step action); ``AutopilotBehavior`` is emulated instead."""
 
@@ -140,14 +147,14 @@ class SetTrafficLightAction(_NoOpAction):
         warn_no_traffic_lights()
 
 
-class SetJumpAction(Action):
+class SetJumpAction(_RefusedAction):
     """A walker jump: refused (there is no vertical dimension in 2D)."""
 
     def __init__(self, jump: bool) -> None:
         raise _refuse("SetJumpAction", "a pedestrian jump needs a vertical dimension")
 
 
-class SetAngularVelocityAction(Action):
+class SetAngularVelocityAction(_RefusedAction):
     """Refused: highway-env vehicles turn by steering, their yaw rate cannot be set."""
 
     def __init__(self, angularVel: Any) -> None:
@@ -165,7 +172,7 @@ class SetTransformAction(Action):
         sim.set_actor_position(obj, self.pos)
 
 
-class TrackWaypointsAction(Action):
+class TrackWaypointsAction(_RefusedAction):
     """CARLA's waypoint tracker (an MPC on CARLA's vehicle physics): refused."""
 
     def __init__(self, waypoints: Any, cruising_speed: float = 10.0) -> None:
