@@ -10,8 +10,10 @@ naming it. Nothing here imports ``carla``.
 
 from __future__ import annotations
 
+import os
+import sys
 import warnings
-from typing import Any, Optional
+from typing import Any, Optional, Tuple
 
 from scenic.core.simulators import Action
 from scenic.domains.driving.actions import SetSpeedAction  # noqa: F401  (re-exported for scripts)
@@ -70,10 +72,27 @@ def _dropped(construct: str, why: str) -> None:
 
 
 def _refuse(construct: str, why: str) -> UnsupportedConstructError:
+    path, line = _script_location()
+    where = f"{path}, line {line}: " if path else ""
     return UnsupportedConstructError(
-        f"unsupported construct `{construct}`: {why} (Scenic's CARLA interface, scenic.simulators.carla); "
-        "it has no 2D highway-env equivalent."
+        f"{where}unsupported construct `{construct}`: {why} (Scenic's CARLA interface, scenic.simulators.carla); "
+        "it has no 2D highway-env equivalent.",
+        path=path,
+        line=line,
     )
+
+
+def _script_location() -> Tuple[Optional[str], Optional[int]]:
+    """File and line of the innermost user script frame (a ``.scenic`` file outside this package)."""
+    frame = sys._getframe(1)
+    own = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    while frame is not None:
+        name = frame.f_code.co_filename
+        if not os.path.abspath(name).startswith(own) and (name.endswith(".scenic") or name.startswith("<")) \
+                and "site-packages" not in name:
+            return name, frame.f_lineno
+        frame = frame.f_back
+    return None, None
 
 
 class _NoOpAction(Action):
