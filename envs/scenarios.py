@@ -1,10 +1,11 @@
 """Compile Scenic scenarios for highway-env, once per process, with clear errors.
 
 A scenario can be given as a bank name, a path to a ``.scenic`` file or Scenic
-source text. Whatever the ``model`` line of the script says, it is compiled
-against our highway-env world model (as Scenic's ``--model`` option does), in
-2D mode, so scripts written for CARLA or MetaDrive run as long as they only use
-driving-domain features.
+source text. It is compiled against our highway-env world model (as Scenic's
+``--model`` option does), in 2D mode; a script whose ``model`` line names Scenic's
+CARLA or MetaDrive model compiles against the façade of that model
+(:data:`FOREIGN_MODELS`, extending ours), other simulators' scripts run as long as
+they only use driving-domain features.
 """
 
 from __future__ import annotations
