@@ -15,27 +15,28 @@ from dv2s_gym.pipeline.make_external_evalset import EXTERNAL_EVALSET_DIR, SCRIPT
     render_script
 from scenario_bank.elements import normalize_elements
 
-# measured on 2026-11-23 (bev DRA, rules SG): per use case (SCS, HR) and E2E-SC
+# measured on 2026-11-23 (bev DRA, rules SG) over the 66 clips (the 51 first ones and the 15 of stock
+# classes, scales, roundabout and stock traffic): per use case (SCS, HR) and E2E-SC
 DRA_MEASURED = {
-    "crossing_paths": (1.000, 0.000), "cut_in": (1.000, 0.000), "ego_lane_change": (1.000, 0.000),
-    "ego_turn": (1.000, 0.000), "lead_vehicle_brakes": (1.000, 0.000), "lead_vehicle_stopped": (0.667, 0.000),
+    "crossing_paths": (1.000, 0.000), "cut_in": (0.958, 0.000), "ego_lane_change": (1.000, 0.083),
+    "ego_turn": (1.000, 0.000), "lead_vehicle_brakes": (1.000, 0.000), "lead_vehicle_stopped": (0.833, 0.000),
     "left_turn_oncoming": (1.000, 0.000), "obstacle_in_lane": (1.000, 0.048), "on_ramp_merge": (0.917, 0.000),
-    "overtake": (0.500, 0.000), "roundabout": (0.750, 0.250), "turn_into_path": (1.000, 0.000),
+    "overtake": (0.500, 0.000), "roundabout": (0.944, 0.217), "turn_into_path": (1.000, 0.000),
 }
-DRA_OVERALL = (0.912, 0.032)
+DRA_OVERALL = (0.941, 0.039)
 E2E_MEASURED = {
-    "crossing_paths": 1.000, "cut_in": 1.000, "ego_lane_change": 0.857, "ego_turn": 0.929,
-    "lead_vehicle_brakes": 1.000, "lead_vehicle_stopped": 0.889, "left_turn_oncoming": 1.000,
-    "obstacle_in_lane": 1.000, "on_ramp_merge": 0.500, "overtake": 0.500, "roundabout": 0.750,
+    "crossing_paths": 1.000, "cut_in": 0.958, "ego_lane_change": 1.000, "ego_turn": 0.929,
+    "lead_vehicle_brakes": 1.000, "lead_vehicle_stopped": 0.944, "left_turn_oncoming": 1.000,
+    "obstacle_in_lane": 1.000, "on_ramp_merge": 0.500, "overtake": 0.500, "roundabout": 0.730,
     "turn_into_path": 1.000,
 }
-E2E_OVERALL = 0.859
+E2E_OVERALL = 0.878
 MARGIN = 0.03
 
 
 def test_every_clip_has_its_hand_written_label():
     items = collect_items(EXTERNAL_EVALSET_DIR)
-    assert len(items) >= 40
+    assert len(items) >= 66
     by_stem = {item.stem: item for item in items}
     expected = {f"{s.name}_v{k}": s for s in SCRIPTS for k in VARIANTS}
     assert set(by_stem) == set(expected)
@@ -53,16 +54,61 @@ def test_every_clip_has_its_hand_written_label():
     assert {s.env_id for s in SCRIPTS} == {"highway-v0", "merge-v0", "intersection-v0", "roundabout-v0"}
 
 
-def test_shipped_clip_is_what_the_builder_renders(tmp_path):
+def test_stock_classes_scales_and_traffic_are_in_the_set():
+    """The set holds other scalings and screens, stock traffic, a long vehicle and a roundabout with several
+    vehicles; their labels say how they were rendered and name a truck where the script placed one."""
+    scalings = {s.scaling for s in SCRIPTS}
+    assert {3.5, 5.5, 8.0} <= scalings
+    assert len({tuple(s.size) for s in SCRIPTS}) >= 4
+    assert any(s.stock_traffic > 0 for s in SCRIPTS)
+    truck = next(s for s in SCRIPTS if s.name == "cls_truck_lead_brakes")
+    assert "truck" in truck.elements["participants"]
+    rb = [s for s in SCRIPTS if s.env_id == "roundabout-v0" and s.elements["participants"].count("car") >= 2]
+    assert rb
+    for s in SCRIPTS:
+        label = json.loads((EXTERNAL_EVALSET_DIR / f"{s.name}_v0.label.json").read_text(encoding="utf-8"))
+        if (s.scaling, tuple(s.size), s.stock_traffic) != (5.5, (480, 480), 0):
+            assert label["render"] == {"scaling": s.scaling, "screen": list(s.size),
+                                       "stock_traffic": s.stock_traffic}, s.name
+        else:
+            assert "render" not in label, s.name
+
+
+def test_stock_classes_are_drawn_in_highway_envs_own_colours(tmp_path):
+    """The new scripts set no colour: highway-env picks it from the class (MDPVehicle green, LinearVehicle
+    yellow, IDMVehicle blue); the ego of the cut-in script is highway-env's MDPVehicle."""
+    from dv2s_gym.pipeline import make_external_evalset as m
+
+    import gymnasium as gym
+    import highway_env  # noqa: F401
+    from highway_env.vehicle.graphics import VehicleGraphics
+
+    script = next(s for s in SCRIPTS if s.name == "cls_linear_cut_in")
+    env = gym.make(script.env_id, render_mode="rgb_array", config=m._env_config(script))
+    try:
+        env.reset(seed=0)
+        env.unwrapped.road.vehicles = []
+        scene = script.scene(env.unwrapped, 0)
+        colours = {type(v).__name__: VehicleGraphics.get_color(v) for v in env.unwrapped.road.vehicles}
+    finally:
+        env.close()
+    assert type(scene.ego).__name__ == "MDPVehicle"
+    assert colours == {"MDPVehicle": VehicleGraphics.GREEN, "LinearVehicle": VehicleGraphics.YELLOW,
+                       "DefensiveVehicle": VehicleGraphics.YELLOW}
+
+
+@pytest.mark.parametrize("name", ["hw_cut_in_from_left", "stock_traffic_ego_lane_change"])
+def test_shipped_clip_is_what_the_builder_renders(tmp_path, name):
+    """Deterministic, also with highway-env's own (seeded) traffic and another scaling and screen."""
     from dv2s_gym.pipeline.video import read_video
     import numpy as np
 
-    script = next(s for s in SCRIPTS if s.name == "hw_cut_in_from_left")
+    script = next(s for s in SCRIPTS if s.name == name)
     path = tmp_path / "clip.webm"
     result = render_script(script, 1, path)
     assert result["problem"] is None
     fresh = read_video(path, fps=None, max_frames=200).frames
-    shipped = read_video(EXTERNAL_EVALSET_DIR / "hw_cut_in_from_left_v1.webm", fps=None, max_frames=200).frames
+    shipped = read_video(EXTERNAL_EVALSET_DIR / f"{name}_v1.webm", fps=None, max_frames=200).frames
     assert len(fresh) == len(shipped) == result["frames"]
     assert all(np.array_equal(a, b) for a, b in zip(fresh, shipped))
 

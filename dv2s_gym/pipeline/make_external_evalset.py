@@ -10,6 +10,12 @@ highway-env's API (:meth:`IDMVehicle.make_on_lane`, ``target_speed``,
 :class:`IDMVehicle` too (painted in highway-env's ego green), so it keeps its
 distance like a driver, on a scripted lane and route.
 
+The later scripts (``cls_*``, ``stock_*``, ``rb_two_cars_pass_entry``) bring what the first ones did not
+show: stock vehicle classes drawn in the colours highway-env gives them (no colour set: ``LinearVehicle``
+and its Aggressive/Defensive subclasses yellow, ``IDMVehicle`` blue, ``MDPVehicle`` green), a 10 m vehicle,
+other ``scaling`` values and screen sizes (:attr:`Script.scaling`, :attr:`Script.size`), a roundabout with
+two cars, and highway-v0's own traffic kept as ``reset`` made it (:attr:`Script.stock_traffic`).
+
 Each :class:`Script` carries, written by hand, the label of what it scripts
 (elements in the vocabulary of :mod:`scenario_bank.elements`) and a reference
 description. Nothing of the project reads the clips to make the labels. The only
@@ -71,6 +77,9 @@ class Script:
     elements: Dict[str, Any]
     scene: Callable[[Any, int], "Scene"]
     seconds: float = 10.0
+    scaling: float = SCALING                  # highway-env's viewer scale, px per m
+    size: Tuple[int, int] = (SIZE, SIZE)      # screen width, height (px)
+    stock_traffic: int = 0                    # >0: keep this many vehicles of the env's own traffic
 
 
 @dataclass
@@ -113,6 +122,34 @@ def _car(road, lane_index, s: float, speed: float, target_speed: Optional[float]
         v.plan_route_to(destination)
     if ego:
         v.color = VehicleGraphics.EGO_COLOR
+    road.vehicles.append(v)
+    return v
+
+
+def _vehicle(cls, road, lane_index, s: float, speed: float, target_speed: Optional[float] = None,
+             destination: Optional[str] = None, length: Optional[float] = None):
+    """A stock highway-env vehicle of class ``cls`` (IDMVehicle, LinearVehicle, AggressiveVehicle, ...),
+    no lane changes of its own, drawn in the colour highway-env gives its class (no colour set).
+    ``length`` makes a long vehicle (highway-env draws it as a longer rectangle of its class colour)."""
+    v = cls.make_on_lane(road, lane_index, longitudinal=s, speed=speed)
+    if length is not None:
+        v.LENGTH = float(length)
+        v.diagonal = float((v.LENGTH ** 2 + v.WIDTH ** 2) ** 0.5)
+    v.enable_lane_change = False
+    v.target_speed = speed if target_speed is None else target_speed
+    if destination:
+        v.plan_route_to(destination)
+    road.vehicles.append(v)
+    return v
+
+
+def _mdp_ego(road, lane_index, s: float, speed: float):
+    """The ego as highway-env's own controlled vehicle (MDPVehicle, green by its class): it keeps its lane
+    and speed under the IDLE action; scripted events call ``ego.act("LANE_LEFT")`` and the like."""
+    from highway_env.vehicle.controller import MDPVehicle
+
+    v = MDPVehicle.make_on_lane(road, lane_index, longitudinal=s, speed=speed)
+    v.target_speed = speed
     road.vehicles.append(v)
     return v
 
@@ -302,11 +339,90 @@ def _rb_first_exit(env, k: int) -> Scene:
                  lambda r: _require(_turn_deg(r, "ego") < -60 and _turn_deg(r, "lead") < -60, "no right turn"))
 
 
+# ----------------------------------------------------------------------------- stock classes, scales, traffic
+def _cls_linear_cut_in(env, k: int) -> Scene:
+    """MDPVehicle ego (green by class), a LinearVehicle (yellow) cuts in from the left; a Defensive one drives
+    far ahead on the right."""
+    from highway_env.vehicle.behavior import DefensiveVehicle, LinearVehicle
+
+    road = env.road
+    ego = _mdp_ego(road, (*HW, 1), 200.0, 25.0)
+    cutter = _vehicle(LinearVehicle, road, (*HW, 0), 200.0 + 5 + 3 * k, 30.0)
+    _vehicle(DefensiveVehicle, road, (*HW, 3), 200.0 + 90 + 5 * k, 22.0)
+    return Scene(ego, {"cutter": cutter}, [(1.4 + 0.4 * k, _set(cutter, target_lane_index=(*HW, 1)))],
+                 lambda r: _require(_lane_ids(r, "cutter")[-1] == 1 and _ahead_at_end(r, "cutter"),
+                                    "the car did not cut in ahead of the ego"))
+
+
+def _cls_truck_lead_brakes(env, k: int) -> Scene:
+    """A 10 m IDMVehicle (blue, long) brakes ahead of the ego; an AggressiveVehicle (yellow) drives on the
+    right."""
+    from highway_env.vehicle.behavior import AggressiveVehicle, IDMVehicle
+
+    road = env.road
+    ego = _car(road, (*HW, 1), 200.0, 24.0, ego=True)
+    truck = _vehicle(IDMVehicle, road, (*HW, 1), 200.0 + 30 + 3 * k, 24.0, length=10.0)
+    side = _vehicle(AggressiveVehicle, road, (*HW, 2), 200.0 - 6 + 4 * k, 23.0)
+    return Scene(ego, {"truck": truck, "side": side}, [(2.0 + 0.4 * k, _set(truck, target_speed=6.0 + 2 * k))],
+                 lambda r: _require(min(r.speeds("truck")) < 12.0, "the truck did not brake"))
+
+
+def _cls_lead_stopped_yellow(env, k: int) -> Scene:
+    """A LinearVehicle (yellow) stands in the ego's lane; the ego (green IDM) stops behind it."""
+    from highway_env.vehicle.behavior import LinearVehicle
+
+    road = env.road
+    ego = _car(road, (*HW, 2), 200.0, 17.0 + k, ego=True)
+    stopped = _vehicle(LinearVehicle, road, (*HW, 2), 200.0 + 60 + 8 * k, 0.0, target_speed=0.0)
+    return Scene(ego, {"stopped": stopped}, [],
+                 lambda r: _require(max(r.speeds("stopped")) < 0.5, "the stopped car moved"))
+
+
+def _stock_traffic_ego_lane_change(env, k: int) -> Scene:
+    """highway-v0's own traffic (kept as reset made it, seed = variant); the stock ego is swapped for a green
+    IDMVehicle at its place, which changes lanes to the left at 2 s."""
+    road = env.road
+    stock = env.vehicle
+    others = [v for v in road.vehicles if v is not stock]
+    road.vehicles.remove(stock)
+    lane = stock.lane_index
+    ego = _car(road, lane, stock.lane.local_coordinates(stock.position)[0], 25.0, ego=True)
+    actors = {f"traffic{i}": v for i, v in enumerate(others)}
+
+    def check(r: Record) -> Optional[str]:
+        import math
+
+        if _lane_ids(r, "ego")[-1] != lane[2] - 1:
+            return "the ego did not change lanes to the left"
+        for name in actors:
+            d = min(math.hypot(s[name]["x"] - s["ego"]["x"], s[name]["y"] - s["ego"]["y"]) for s in r.steps)
+            if d > 40.0:
+                return f"{name} never came within 40 m of the ego"
+        return None
+
+    return Scene(ego, actors, [(2.0 + 0.4 * k, _set(ego, target_lane_index=(lane[0], lane[1], lane[2] - 1)))],
+                 check)
+
+
+def _rb_several(env, k: int) -> Scene:
+    """roundabout-v0 with two other vehicles: two circle in the ring past the ego's entry (the ego enters
+    behind them); the ego drives through to the north exit."""
+    from highway_env.vehicle.behavior import IDMVehicle, LinearVehicle
+
+    road = env.road
+    ego = _car(road, ("ser", "ses", 0), 115.0 + 2 * k, 8.0, destination="nxr", ego=True)
+    first = _vehicle(LinearVehicle, road, ("we", "sx", 0), 8.0 + 2 * k, 8.0, destination="exr")
+    second = _vehicle(IDMVehicle, road, ("sx", "se", 0), 2.0 + 2 * k, 8.0, destination="exr")
+    return Scene(ego, {"first": first, "second": second}, [],
+                 lambda r: _require(_exits_north(r) and any(l[0] in ("se", "ex") for l in r.lanes("first")),
+                                    "the ego did not drive through or the first car left early"))
+
+
 SCRIPTS: List[Script] = []
 
 
-def _script(name, env_id, use_case, description, elements, scene, seconds=10.0) -> None:
-    SCRIPTS.append(Script(name, env_id, use_case, description, elements, scene, seconds))
+def _script(name, env_id, use_case, description, elements, scene, seconds=10.0, **render) -> None:
+    SCRIPTS.append(Script(name, env_id, use_case, description, elements, scene, seconds, **render))
 
 
 def _el(road: str, participants: Sequence[str], actions: Sequence[Sequence[str]] = (),
@@ -413,13 +529,47 @@ _script("rb_ego_first_exit", "roundabout-v0", "ego_turn",
         _rb_first_exit, seconds=14.0)
 
 
+# Stock vehicle classes drawn in highway-env's own colours (no colour set: LinearVehicle and its
+# Aggressive/Defensive subclasses yellow, IDMVehicle blue, MDPVehicle green), a long vehicle, other
+# scalings and screen sizes, a roundabout with several vehicles, stock traffic. Labels by hand, as above.
+_script("cls_linear_cut_in", "highway-v0", "cut_in",
+        "On a multi-lane highway a faster car in the lane to the left of the ego, slightly ahead of it, changes "
+        "lanes to the right and cuts in just in front of the ego; another car drives far ahead on the right.",
+        _el("highway", ["ego", "car", "car"], [["car", "cut_in"], ["car", "lane_change_right"]],
+            [["car", "ahead_of", "ego"], ["car", "left_of", "ego"]]),
+        _cls_linear_cut_in, scaling=3.5, size=(640, 320))
+_script("cls_truck_lead_brakes", "highway-v0", "lead_vehicle_brakes",
+        "On a multi-lane highway the truck driving ahead of the ego in its lane brakes hard; a car drives in "
+        "the lane to the right of the ego.",
+        _el("highway", ["ego", "truck", "car"], [["truck", "brake"]],
+            [["truck", "ahead_of", "ego"], ["truck", "same_lane", "ego"]]),
+        _cls_truck_lead_brakes, scaling=8.0, size=(800, 480))
+_script("cls_lead_stopped_yellow", "highway-v0", "lead_vehicle_stopped",
+        "On a multi-lane highway a car stands still in the ego's lane ahead of it; the ego stops behind it.",
+        _el("highway", ["ego", "car"], [["car", "stop"]], [["car", "ahead_of", "ego"], ["car", "same_lane", "ego"]]),
+        _cls_lead_stopped_yellow, scaling=4.5, size=(600, 400))
+_script("stock_traffic_ego_lane_change", "highway-v0", "ego_lane_change",
+        "On a multi-lane highway with two other cars of the stock traffic driving ahead, the ego changes lanes "
+        "to the left.",
+        _el("highway", ["ego", "car", "car"], [["ego", "lane_change_left"]]),
+        _stock_traffic_ego_lane_change, scaling=4.0, size=(720, 360), stock_traffic=2)
+_script("rb_two_cars_pass_entry", "roundabout-v0", "roundabout",
+        "At a roundabout two cars in the ring pass in front of the ego's entry; the ego enters behind them "
+        "and drives straight through to the opposite exit.",
+        _el("roundabout", ["ego", "car", "car"], [["ego", "go_straight"]],
+            [["car", "ahead_of", "ego"], ["car", "crossing_path", "ego"]]),
+        _rb_several, seconds=16.0, scaling=4.5, size=(600, 600))
+
+
 # ----------------------------------------------------------------------------- rendering
-def _env_config(seconds: float) -> Dict[str, Any]:
+def _env_config(script: "Script") -> Dict[str, Any]:
+    seconds = script.seconds
     return {
-        "offscreen_rendering": True, "screen_width": SIZE, "screen_height": SIZE, "scaling": SCALING,
+        "offscreen_rendering": True, "screen_width": script.size[0], "screen_height": script.size[1],
+        "scaling": script.scaling,
         "centering_position": [0.5, 0.5], "policy_frequency": FPS, "simulation_frequency": 15,
         "duration": seconds + 5, "show_trajectories": False, "render_agent": True,
-        "vehicles_count": 0, "spawn_probability": 0.0, "offroad_terminal": False,
+        "vehicles_count": script.stock_traffic, "spawn_probability": 0.0, "offroad_terminal": False,
     }
 
 
@@ -439,11 +589,12 @@ def render_script(script: Script, variant: int, path: Optional[str | os.PathLike
 
     from envs.recording import VideoWriter
 
-    wrapped = gym.make(script.env_id, render_mode="rgb_array", config=_env_config(script.seconds))
+    wrapped = gym.make(script.env_id, render_mode="rgb_array", config=_env_config(script))
     env = wrapped.unwrapped
     try:
         env.reset(seed=variant)
-        env.road.vehicles = []
+        if not script.stock_traffic:
+            env.road.vehicles = []
         env.road.objects = []
         scene = script.scene(env, variant)
         env.vehicle = scene.ego
@@ -507,6 +658,9 @@ def build(out: str | os.PathLike, only: Optional[Sequence[str]] = None) -> List[
             label = {"use_case": script.use_case, "script": script.name, "variant": k, "env": script.env_id,
                      "seconds": script.seconds, "source": "stock highway-env, scripted and labelled by hand",
                      "description": script.description, "elements": normalize_elements(script.elements)}
+            if (script.scaling, tuple(script.size), script.stock_traffic) != (SCALING, (SIZE, SIZE), 0):
+                label["render"] = {"scaling": script.scaling, "screen": list(script.size),
+                                   "stock_traffic": script.stock_traffic}
             (out / f"{stem}.label.json").write_text(json.dumps(label, indent=1, sort_keys=True) + "\n",
                                                    encoding="utf-8")
             rows.append({"stem": stem, "frames": result["frames"]})

@@ -1,9 +1,11 @@
 """``bev``: the embedded, offline Driving Record Analyzer for bird's-eye renders.
 
 It reads a video rendered in highway-env's style (flat grey canvas, white lane
-lines, the green ego at a fixed spot of the view, light-blue cars, purple
-trucks, orange pedestrian discs, grey props with black outlines, crashed
-vehicles in red; the camera follows the ego, north up) and returns what the
+lines, the green ego at a fixed spot of the view, other vehicles in any colour
+(the project's light-blue cars and purple trucks, stock highway-env's yellow
+``LinearVehicle`` and blue ``IDMVehicle``; trucks are told by their size), orange
+pedestrian discs, grey props with black outlines, crashed vehicles in red; the
+camera follows the ego, north up; any ``scaling`` and screen size) and returns what the
 Driving Record Analyzer returns: a three-sentence description and the semantic
 elements of :mod:`scenario_bank.elements`. It works from the pixels alone: no
 trace, sidecar or metadata is read.
@@ -12,10 +14,11 @@ How, per clip (one module of this package per step: :mod:`.frames`, :mod:`.detec
 :mod:`.tracking`, :mod:`.road`, :mod:`.events`, :mod:`.language`; :mod:`.analyze` runs them):
 
 1. *Check* that the frames look like such a render, else :class:`NotBirdsEyeError`.
-2. *Detect*, per frame: coloured blobs by hue (ego, cars, trucks, pedestrians,
-   crashed vehicles), props by their black outline, white lane-line pixels
-   split into horizontal, vertical and other (ramps, arcs) lines.
-3. *Calibrate* the scale (px/m) from the ego rectangle; the ego's heading is its
+2. *Detect*, per frame: coloured blobs (every hue; the colour class marks the ego,
+   pedestrians and crashed vehicles), props by their black outline, white lane-line
+   pixels split into horizontal, vertical and other (ramps, arcs) lines.
+3. *Calibrate* the scale (px/m) from the common vehicles in view (:mod:`.scale`;
+   the lane lines' spacing is measured beside it); the ego's heading is its
    long axis, pointed by its lighter front end (headlights) or by the world's motion.
 4. *Track* the blobs in the ego-centred view (nearest neighbour, constant relative velocity).
 5. *World motion*: the static layer (lane lines, props, waiting pedestrians)

@@ -14,7 +14,10 @@ from dv2s_gym.pipeline.dra_bev.frames import _mask
 
 
 _KINDS = ("none", "red", "ped", "yellow", "ego", "car", "truck")
-_HUE_RANGES = [("red", 0, 7), ("ped", 9, 23), ("yellow", 24, 36), ("ego", 37, 78), ("car", 80, 118),
+# every hue belongs to a colour class (no gaps): a vehicle of any colour is found; the class only hints
+# at the kind (green at the view's fixed spot: the ego; red: crashed; orange: a pedestrian), trucks are
+# told by their size (analyze.py, scale.py), not by the purple of the project's renderer
+_HUE_RANGES = [("red", 0, 8), ("ped", 9, 23), ("yellow", 24, 36), ("ego", 37, 78), ("car", 79, 118),
                ("truck", 119, 162), ("red", 163, 179)]
 _HUE_LUT = np.zeros(256, dtype=np.uint8)
 for _name, _lo, _hi in _HUE_RANGES:

@@ -308,6 +308,14 @@ def _actor(ctx: _Ctx, trk: Track, ego_turn: Optional[str]) -> Optional[Dict[str,
     # ---- through the junction
     if ctx.junction and vehicle and moving and not ({"turn_left", "turn_right"} & acts):
         acts.add("go_straight")
+    both = np.isfinite(lon) & np.isfinite(lat)
+    k_cross = int(np.argmin(np.where(both, np.abs(lat), np.inf))) if both.any() else -1
+    if ctx.road == "roundabout" and vehicle and crossing and "go_straight" in acts and k_cross >= 0 \
+            and float(lon[k_cross]) > 0:
+        # a car circling the ring that passes across the ego's course ahead of it (the ego enters behind
+        # it): it does not "go straight on", it drives round ahead of the ego
+        acts.discard("go_straight")
+        notes["ring_ahead"] = True
     if ctx.junction and (crossing or oncoming or int(np.sum(in_lane & (lon > 0))) < 4):
         acts.discard("brake")   # yielding and slowing for turns are part of crossing a junction
     # ---- relations (where it starts, and where a cut-in ends)
@@ -340,6 +348,8 @@ def _actor(ctx: _Ctx, trk: Track, ego_turn: Optional[str]) -> Optional[Dict[str,
             rels.add("ahead_of")
             if side:
                 rels.add(side)
+        elif crossing and notes.get("ring_ahead"):
+            rels.update({"ahead_of", "crossing_path"})
         elif crossing:
             # across the ego's course: it passes from one side of the ego's heading line to the other, ahead
             ahead = lon > -2.0

@@ -110,6 +110,9 @@ def _clause(actor: Dict[str, Any], count: int, ref: str) -> str:
         else:
             main = f"{verb('passes', 'pass')} by in the other lane"
         return join(f"{head} {main}", extra)
+    if "crossing_path" in rels and actor.get("notes", {}).get("ring_ahead") and not {"turn_left", "turn_right"} & acts:
+        return join(f"{art} {noun} circling the roundabout {verb('crosses', 'cross')} the ego's path ahead of {ref}",
+                    extra)
     if "crossing_path" in rels:
         then = (f"{verb('turns', 'turn')} {'left' if 'turn_left' in acts else 'right'}"
                 if {"turn_left", "turn_right"} & acts else f"{verb('goes', 'go')} straight on")
