@@ -315,6 +315,14 @@ def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompile
             path=label,
             line=line,
         )
+    if isinstance(error, KeyError) and re.fullmatch(r"'(road|lane|junction|intersection)?[\w.-]*'", message):
+        return ScenarioCompileError(
+            f"{where}: the map has no element `{message.strip(chr(39))}` (a road or lane id of another map?). "
+            "Look elements up by position or use `Uniform(*network.roads)`, or set `param map` to the map "
+            "the script was written for.",
+            path=label,
+            line=line,
+        )
     undefined = re.search(r"name '([^']+)' is not defined", message)
     if undefined:
         construct = undefined.group(1)

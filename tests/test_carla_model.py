@@ -166,3 +166,15 @@ def test_metadrive_script_runs_with_sumo_map_param(script):
     first, last = unwrapped.trace.states[0]["Car1"], unwrapped.trace.states[-1]["Car1"]
     assert math.dist(first[:2], last[:2]) > 5.0
     env.close()
+
+
+def test_road_id_of_another_map_is_named():
+    from envs.errors import ScenarioCompileError
+    from envs.scenarios import compile_scenario
+
+    source = (
+        "param map = 'highway_straight'\nmodel scenic.simulators.carla.model\n"
+        "section = network.elements['road999'].sections[0]\nego = new Car\n"
+    )
+    with pytest.raises(ScenarioCompileError, match="no element `road999`"):
+        compile_scenario(source, name="foreign_road_id")
