@@ -34,3 +34,11 @@ class SceneSamplingError(DV2SError, RuntimeError):
 
 class InvalidActionError(DV2SError, ValueError):
     """An action outside the environment's action space."""
+
+
+class ForeignConstructWarning(UserWarning):
+    """A construct of a script written for another simulator (CARLA, MetaDrive) was accepted
+    but part of its meaning is dropped (a gear shift, a light state, traffic lights...)."""
+
+
+__all__.append("ForeignConstructWarning")

@@ -1,10 +1,11 @@
 """Compile Scenic scenarios for highway-env, once per process, with clear errors.
 
 A scenario can be given as a bank name, a path to a ``.scenic`` file or Scenic
-source text. Whatever the ``model`` line of the script says, it is compiled
-against our highway-env world model (as Scenic's ``--model`` option does), in
-2D mode, so scripts written for CARLA or MetaDrive run as long as they only use
-driving-domain features.
+source text. It is compiled against our highway-env world model (as Scenic's
+``--model`` option does), in 2D mode; a script whose ``model`` line names Scenic's
+CARLA or MetaDrive model compiles against the façade of that model
+(:data:`FOREIGN_MODELS`, extending ours), other simulators' scripts run as long as
+they only use driving-domain features.
 """
 
 from __future__ import annotations
@@ -24,10 +25,16 @@ from envs.errors import ScenarioCompileError, SceneSamplingError, UnsupportedCon
 from scenario_bank.safety import UnsafeScenarioError, check_script
 from scenario_bank.scenic_parse import install_parse_cache
 
-__all__ = ["MODEL", "CompiledScenario", "ParamRange", "parameter_ranges", "compile_scenario", "looks_like_source", "runtime_construct_error"]
+__all__ = ["MODEL", "CompiledScenario", "ParamRange", "parameter_ranges", "compile_scenario", "model_for", "FOREIGN_MODELS", "looks_like_source", "runtime_construct_error"]
 
 MODEL = "envs.scenic_highway.model"
 """The Scenic world model every scenario is compiled against."""
+
+FOREIGN_MODELS = {
+    "carla": "envs.scenic_highway.carla.model",
+    "metadrive": "envs.scenic_highway.metadrive.model",
+}
+"""Façade world models for scripts whose ``model`` line names another simulator's model."""
 
 _OTHER_SIMULATORS = ("carla", "metadrive", "lgsvl", "webots", "airsim", "gta", "newtonian")
 
@@ -257,12 +264,13 @@ def compile_scenario(
         raise UnsafeScenarioError(findings, label)
     release_veneer()
     install_parse_cache()
+    model = model_for(source)
     try:
         if path is not None:
-            scenario = scenic.scenarioFromFile(path, params=overrides, model=MODEL, mode2D=True)
+            scenario = scenic.scenarioFromFile(path, params=overrides, model=model, mode2D=True)
         else:
             scenario = scenic.scenarioFromString(
-                source, params=overrides, model=MODEL, mode2D=True, filename=name
+                source, params=overrides, model=model, mode2D=True, filename=name
             )
     except Exception as error:  # Scenic raises many kinds; all become one clear error
         raise _compile_error(error, source, label) from None
@@ -307,6 +315,14 @@ def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompile
             path=label,
             line=line,
         )
+    if isinstance(error, KeyError) and re.fullmatch(r"'(road|lane|junction|intersection)?[\w.-]*'", message):
+        return ScenarioCompileError(
+            f"{where}: the map has no element `{message.strip(chr(39))}` (a road or lane id of another map?). "
+            "Look elements up by position or use `Uniform(*network.roads)`, or set `param map` to the map "
+            "the script was written for.",
+            path=label,
+            line=line,
+        )
     undefined = re.search(r"name '([^']+)' is not defined", message)
     if undefined:
         construct = undefined.group(1)
@@ -347,6 +363,15 @@ def _map_being_loaded(error: Exception) -> Optional[str]:
             found = tb.tb_frame.f_locals.get("path", found)
         tb = tb.tb_next
     return None if found is None else str(found)
+
+
+def model_for(source: str) -> str:
+    """The world model a script compiles against: the CARLA or MetaDrive façade when its
+    ``model`` line names ``scenic.simulators.carla.model`` / ``...metadrive.model``, else :data:`MODEL`."""
+    match = re.search(r"^\s*model\s+scenic\.simulators\.(\w+)\.model\s*$", source, re.M)
+    if match and match.group(1) in FOREIGN_MODELS:
+        return FOREIGN_MODELS[match.group(1)]
+    return MODEL
 
 
 def _mentions_other_simulator(source: str) -> Optional[str]:

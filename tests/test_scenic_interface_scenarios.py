@@ -310,10 +310,10 @@ CARLA_HEADER = "param map = 'highway_straight'\nmodel scenic.simulators.carla.mo
 @pytest.mark.parametrize(
     "construct, body",
     [
-        ("blueprint", "ego = new Car with blueprint 'vehicle.tesla.model3'\n"),
+        # blueprint, AutopilotBehavior and props run since the CARLA-model façade (tests/test_carla_model.py)
         ("carlaActor", "behavior Peek():\n    actor = self.carlaActor\n    wait\nego = new Car with behavior Peek()\n"),
-        ("AutopilotBehavior", "ego = new Car with behavior AutopilotBehavior()\n"),
-        ("Trash", "ego = new Car\ntrash = new Trash ahead of ego by 10\n"),
+        ("SetJumpAction", "behavior Jump():\n    take SetJumpAction(True)\nego = new Car\nw = new Pedestrian ahead of ego by 10, with regionContainedIn None, with behavior Jump()\n"),
+        ("TrackWaypointsAction", "behavior Track():\n    take TrackWaypointsAction([self.position])\nego = new Car with behavior Track()\n"),
     ],
 )
 def test_carla_only_construct_is_reported_by_name(construct, body):

@@ -18,7 +18,10 @@ The driving domain's behaviour library is used as is, with three repairs (see
 brakes and rate-limits steering per second, and backward-pointing seam segments
 are removed from the lane centerlines the behaviours steer along.
 CARLA-only object attributes (``blueprint``, ``carlaActor``) raise
-``envs.errors.UnsupportedConstructError``.
+``envs.errors.UnsupportedConstructError`` here; scripts whose ``model`` line names
+Scenic's CARLA or MetaDrive model compile against the façades that extend this
+model (``envs/scenic_highway/carla/model.scenic``, ``.../metadrive/model.scenic``),
+where ``blueprint`` chooses size and kind.
 """
 
 from envs.scenic_highway.model_support import resolve_map_parameter as _resolve_map_parameter

@@ -233,3 +233,20 @@ def install_driving_behavior_support() -> None:
 
 __all__.append("MissingMapError")
 _ = Action  # re-exported type for model authors
+
+
+class NoMetaDriveActor:
+    """Mixin for the MetaDrive façade's classes: ``obj.metaDriveActor`` fails clearly."""
+
+    @property
+    def metaDriveActor(self):
+        from envs.errors import UnsupportedConstructError
+
+        raise UnsupportedConstructError(
+            "unsupported construct `metaDriveActor`: it is the MetaDrive object behind a Scenic object in "
+            "Scenic's MetaDrive interface (scenic.simulators.metadrive) and has no highway-env equivalent. "
+            "Use driving-domain properties (position, heading, velocity, speed, lane...) and actions instead."
+        )
+
+
+__all__.append("NoMetaDriveActor")

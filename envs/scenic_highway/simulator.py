@@ -442,9 +442,26 @@ _CAR_COLOR = (100, 200, 255)
 _PROP_COLOR = (120, 120, 120)
 
 
+_FACADE_KIND_CLASSES = {"pedestrian": "Pedestrian", "bus": "Bus", "truck": "Truck", "motorcycle": "Motorcycle", "bicycle": "Bicycle"}
+
+
+def _facade_kind(obj):
+    """The kind a CARLA-façade object's blueprint chose (``dv2sKind``), or None for other objects."""
+    try:
+        kind = object.__getattribute__(obj, "dv2sKind")
+    except AttributeError:
+        return None
+    return kind if isinstance(kind, str) else None
+
+
 def _hw_color(obj, is_ego: bool):
     if is_ego:
         return _EGO_COLOR
+    kind = _facade_kind(obj)
+    if kind is not None:
+        if kind in _FACADE_KIND_CLASSES:
+            return _KIND_COLORS[_FACADE_KIND_CLASSES[kind]]
+        return _CAR_COLOR if kind == "car" else _PROP_COLOR
     for cls in type(obj).__mro__:
         if cls.__name__ in _KIND_COLORS:
             return _KIND_COLORS[cls.__name__]
@@ -463,6 +480,8 @@ def _reject_carla_only_properties(obj) -> None:
     """Fail clearly on properties only Scenic's CARLA interface understands (``with blueprint ...``)."""
     from envs.errors import UnsupportedConstructError
 
+    if _facade_kind(obj) is not None:
+        return  # a class of the CARLA/MetaDrive façade (envs/scenic_highway/carla): blueprint maps to size and kind
     for name, meaning in _CARLA_ONLY_PROPERTIES.items():
         value = getattr(obj, name, None)
         if value is not None:
@@ -485,6 +504,9 @@ def _along_heading(vel, heading: float) -> bool:
 
 def _vocabulary_kind(obj) -> str:
     """The element-vocabulary type of a Scenic object (``scenario_bank.elements.PARTICIPANTS``)."""
+    kind = _facade_kind(obj)
+    if kind is not None:
+        return kind
     names = {cls.__name__ for cls in type(obj).__mro__}
     if isinstance(obj, Walks) or "Pedestrian" in names:
         return "pedestrian"

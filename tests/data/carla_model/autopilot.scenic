@@ -1,0 +1,8 @@
+param map = localPath('Town01.xodr')
+param carla_map = 'Town01'
+model scenic.simulators.carla.model
+
+ego = new Car
+npc = new Car following roadDirection from ego for 15,
+    with blueprint 'vehicle.audi.a2',
+    with behavior AutopilotBehavior()
