@@ -50,7 +50,8 @@ _KIND_SPEEDS = {"bicycle": "Range(4, 6)"}
 _MAX_COUNT = 4
 _ACTIONS_BY_KIND = {
     "car": {"brake", "stop", "accelerate", "lane_change_left", "lane_change_right", "cut_in", "merge", "turn_left",
-            "turn_right", "cross", "collide", "keep_lane", "go_straight", "overtake", "drift", "swerve"},
+            "turn_right", "cross", "collide", "keep_lane", "go_straight", "overtake", "drift", "swerve", "pull_out",
+            "reverse", "u_turn"},
     "pedestrian": {"cross", "stop", "collide"},
     "obstacle": set(),
 }
@@ -223,7 +224,7 @@ def _needs_same_direction_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -
             continue
         if a.has("cut_in") or a.has("lane_change_left") or a.has("lane_change_right"):
             return True
-        static = not (set(a.actions) - {"stop", "keep_lane"})
+        static = not (set(a.actions) - {"stop", "keep_lane"}) or a.has("pull_out") or a.has("reverse")
         if ("left_of" in a.relations or "right_of" in a.relations) and "oncoming" not in a.relations \
                 and not a.has("drift") and not static:
             return True
@@ -261,6 +262,8 @@ def _choose_map(road: Optional[str], ego: ActorFrame, actors: Sequence[ActorFram
         return "highway_straight" if _needs_same_direction_lanes(ego, actors) else "urban_two_way"
     if any("oncoming" in a.relations or a.has("drift") for a in actors):
         return "urban_two_way"
+    if any(a.has("pull_out") or a.has("reverse") or a.has("u_turn") for a in [ego, *actors]):
+        return "urban_two_way"  # out of a parking space or driveway, a turn round: a street
     return "highway_straight"
 
 
@@ -415,7 +418,8 @@ def _brake_params(s: _Script, actor: ActorFrame) -> Tuple[str, str, str]:
 # --------------------------------------------------------------------------- lane maps
 
 _LANE_ACTIONS = {"brake", "stop", "accelerate", "lane_change_left", "lane_change_right", "cut_in", "merge",
-                 "collide", "keep_lane", "overtake", "drift", "cross", "go_straight", "swerve"}
+                 "collide", "keep_lane", "overtake", "drift", "cross", "go_straight", "swerve", "pull_out",
+                 "reverse", "u_turn"}
 
 
 def _compose_lanes(s: _Script) -> None:
@@ -457,6 +461,8 @@ def _compose_lanes(s: _Script) -> None:
             actor.side = 1 if "left_of" in rels and not two_way else -1 if "right_of" in rels and not two_way else 0
         elif actor.kind == "pedestrian":
             actor.role = "crosser" if actor.has("cross") or actor.has("collide") else "roadside"
+        elif actor.has("pull_out") or actor.has("reverse"):
+            actor.role = "puller"  # parked at the kerb (or on the shoulder) beside the ego's lane
         elif actor.has("merge") and onramp:
             actor.role = "ramp"
         elif actor.has("drift") or ("oncoming" in rels):
@@ -486,6 +492,10 @@ def _compose_lanes(s: _Script) -> None:
             actor.role = "follower"
         else:
             actor.role = "lead"
+        if not two_way and not onramp and (ego.has("pull_out") or ego.has("reverse")) and \
+                actor.role in ("lead", "follower") and actor.kind in VEHICLES:
+            # the ego is parked on the shoulder: the traffic it pulls out into drives in the lane left of it
+            actor.role, actor.side = "adjacent", 1
         if two_way and actor.role == "adjacent" and not (set(actor.actions) - {"stop", "keep_lane"}):
             actor.role = "far_side"  # parked or standing at the far kerb, in the other lane
         if two_way and actor.role in ("adjacent", "cutter"):
@@ -538,6 +548,8 @@ def _compose_lanes(s: _Script) -> None:
         need[-1] = True
     if ego.has("overtake") and not two_way:
         need[1] = True
+    if (ego.has("pull_out") or ego.has("reverse")) and not two_way and not onramp:
+        need[1] = True  # parked in the rightmost lane (the shoulder), it pulls out into the lane left of it
     around = [a for a in frame.actors if a.has("overtake") and a.details.get("overtake", {}).get("around")]
     if around and not two_way:
         need[1] = True
@@ -571,6 +583,14 @@ def _compose_lanes(s: _Script) -> None:
         if max_right >= 2:
             conds.append("t[4] is not None")
         ego_lane_word = ego.lane
+        at_kerb = ego.has("pull_out") or ego.has("reverse") or any(a.role == "puller" for a in frame.actors)
+        if at_kerb and not onramp:
+            # a vehicle parked at the kerb or on the shoulder: the ego's lane is the rightmost one
+            conds.append("t[3] is None")
+            if max_right:
+                s.warnings.append("lanes to the right of the ego cannot be placed next to a vehicle parked at "
+                                  "the kerb: they are not placed")
+                max_right = 0
         if ego_lane_word == "left" and max_left == 0:
             conds.append("t[1] is None")
         elif ego_lane_word == "right" and max_right == 0:
@@ -622,6 +642,21 @@ def _compose_lanes(s: _Script) -> None:
     ego_lines = [f"ego = new Car at egoLane.centerline.pointAlongBy(egoS),",
                  f"    with speed {ego_speed},",
                  f"    with behavior {ego_behavior}"]
+    if (ego.has("pull_out") or ego.has("reverse")) and two_way:
+        # parked at the kerb, still on the road surface (the env ends an episode whose ego leaves the road)
+        ego_lines = ["egoSpot = new OrientedPoint at egoLane.centerline.pointAlongBy(egoS), facing roadDirection",
+                     "ego = new Car right of egoSpot by Range(1.0, 1.3), facing egoSpot.heading,",
+                     "    with regionContainedIn everywhere,",
+                     "    with speed 0,",
+                     f"    with behavior {ego_behavior}"]
+    elif ego.has("pull_out") or ego.has("reverse"):
+        target = lane_of(1)
+        if target == "egoLane":
+            s.warnings.append("the ego's pull-out needs a lane left of where it is parked: not placed")
+        ego_behavior = ego_behavior.replace("egoLane.centerline", f"{target}.centerline")
+        ego_lines = ["ego = new Car at egoLane.centerline.pointAlongBy(egoS),",
+                     "    with speed 0,",
+                     f"    with behavior {ego_behavior}"]
     if onramp and ego.has("merge"):
         ego_lines = [f"ego = new Car at rampLane.centerline.pointAlongBy(Range(40, 120)),",
                      f"    with speed {ego_speed},",
@@ -660,6 +695,13 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
                     f"Range(2.0, 2.8), {speed})"), False
         s.warnings.append("the ego overtakes, but nothing to overtake was described: the overtake is not placed")
         ego.actions.remove("overtake")
+    if ego.has("pull_out") or ego.has("reverse"):
+        s.use("PullOutWhenNear")
+        back = "Range(2.5, 3.5)" if ego.has("reverse") else "0"
+        return (f"PullOutWhenNear(egoLane.centerline, 0, {speed}, -Range(0.8, 1.5), {back}, "
+                "Range(2.5, 3.5))"), False
+    if ego.has("u_turn"):
+        return _u_turn(s, speed), True
     if ego.has("lane_change_left") or ego.has("lane_change_right"):
         side = 1 if ego.has("lane_change_left") else -1
         after = s.param("ego_change_after", "Range(0.5, 1.5)" if ego.sudden else "Range(1.0, 2.5)")
@@ -682,6 +724,13 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
         return f"SpeedUpLater({speed}, Range(1.0, 2.0), {speed} + Range(5, 8))", True
     s.use(cruise)
     return f"{cruise}({speed})", True
+
+
+def _u_turn(s: _Script, speed: str) -> str:
+    """Drive on for 1-2 s, slow to 3-4 m/s and turn round to the left (>= 150 degrees), then follow the lane
+    it ends in (the opposite lane on a two-way street)."""
+    s.use("UTurnLater")
+    return f"UTurnLater({speed}, Range(1.0, 2.0), Range(3, 4), Range(0.9, 1.0))"
 
 
 def _swerve(s: _Script, speed: str) -> str:
@@ -728,6 +777,9 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
         return
     if actor.role in ("crosser", "roadside"):
         _spawn_lane_pedestrians(s, actor, ego_speed, two_way, reckless)
+        return
+    if actor.role == "puller":
+        _spawn_puller(s, actor, ego_speed, two_way)
         return
     speed_expr = ego_speed
     lines: List[str] = []
@@ -879,8 +931,39 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
            [r for r in dict.fromkeys(rels)], actor.count)
 
 
+def _spawn_puller(s: _Script, actor: ActorFrame, ego_speed: str, two_way: bool) -> None:
+    """A vehicle parked at the kerb (shoulder) right of the ego's lane, ahead of the ego: once the ego is near
+    it backs up (when it reverses) and steers into the lane ahead of the ego."""
+    n = actor.name
+    urban = two_way
+    gap = s.param(f"{n}_gap", "Range(30, 42)" if urban else "Range(55, 75)")
+    trigger = s.param(f"{n}_trigger", ("Range(20, 26)" if urban else "Range(40, 50)") if actor.sudden or
+                      actor.has("collide") else ("Range(26, 34)" if urban else "Range(50, 62)"))
+    # (`right of` puts the vehicle's left side that far from the lane centre)
+    kerb = "Range(1.4, 1.7)" if urban else "Range(1.8, 2.2)"
+    speed = s.param(f"{n}_speed", "Range(6, 9)" if urban else "Range(12, 16)")
+    back = "Range(2.5, 3.5)" if actor.has("reverse") else "0"
+    s.use("PullOutWhenNear")
+    for i in range(actor.count):
+        var = n if actor.count == 1 else f"{n}_{i + 1}"
+        s.spawn += [f"{var}Spot = new OrientedPoint at egoLane.centerline.pointAlongBy(egoS + {gap} + {12 * i}), "
+                    "facing roadDirection",
+                    f"{var} = new {_CLASS[actor.kind]} right of {var}Spot by {kerb}, facing {var}Spot.heading,",
+                    "    with regionContainedIn everywhere,",
+                    "    with speed 0,",
+                    f"    with behavior PullOutWhenNear(egoLane.centerline, -{kerb}, {speed}, {trigger}, {back}, "
+                    "Range(2.2, 3.0))"]
+    shown = [a for a in actor.actions if a in ("pull_out", "reverse", "collide")]
+    if "pull_out" not in shown:
+        shown.append("pull_out")
+    rels = ["ahead_of", "right_of"] + [r for r in actor.relations if r == "crossing_path"]
+    s.show(actor.kind, shown, rels, actor.count)
+
+
 def _longitudinal_behavior(s: _Script, actor: ActorFrame, speed: str) -> str:
     """Behaviour of a vehicle that stays in its lane: brake, stop, accelerate, change lanes or cruise."""
+    if actor.has("u_turn"):
+        return _u_turn(s, speed)
     if actor.has("swerve"):
         return _swerve(s, speed)
     if actor.has("lane_change_left") or actor.has("lane_change_right"):

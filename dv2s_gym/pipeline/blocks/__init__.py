@@ -225,6 +225,64 @@ behavior MergeFromRamp(speed, accelLane, delay, duration):
     do FollowLaneBehavior(target_speed=speed) for delay seconds
     do ChangeLanes(1, speed, duration)
 ''', ("ChangeLanes",)),
+    "PullOutWhenNear": ('''
+behavior PullOutWhenNear(line, fromOffset, speed, trigger, backUp, duration):
+    # stand at the kerb `fromOffset` m beside `line` (left positive) until the ego is within `trigger` m
+    # (a negative trigger: wait -trigger seconds), back up `backUp` m if asked, then steer into the lane
+    if trigger < 0:
+        do HoldStill() for -trigger seconds
+    else:
+        do HoldStill() for 0.4 seconds
+        do HoldStill() until (distance from self to ego) < trigger
+    if backUp > 0:
+        start = self.position
+        take SetReverseAction(True)
+        while (distance from self to start) < backUp:
+            take SetThrottleAction(0.35), SetBrakeAction(0), SetSteerAction(0)
+        while self.speed > 0.3:
+            take SetThrottleAction(0), SetBrakeAction(1)
+        take SetReverseAction(False)
+    # steer onto the lane centre with a gentle heading (at most 0.3 rad off the parked one) while speeding up;
+    # the stock lane-keeping controller oversteers from standstill and turns the car round
+    elapsed = 0
+    reference = self.heading  # parked along the (straight) road
+    while elapsed < duration + 2 and (abs(line.signedDistanceTo(self.position)) > 0.3 or elapsed < duration):
+        elapsed += simulation().timestep
+        offset = line.signedDistanceTo(self.position)
+        relative = self.heading - reference
+        while relative > 180 deg:
+            relative -= 360 deg
+        while relative < -180 deg:
+            relative += 360 deg
+        wanted = max(-0.3, min(0.3, -0.25 * offset))
+        steer = max(-0.3, min(0.3, -1.5 * (wanted - relative)))
+        throttle = 0.5 if self.speed < speed else 0
+        take SetThrottleAction(throttle), SetBrakeAction(0), SetSteerAction(steer)
+    do FollowLaneBehavior(target_speed=speed)
+''', ("HoldStill",)),
+    "UTurnLater": ('''
+behavior UTurnLater(speed, after, turnSpeed, steer):
+    # drive on for `after` seconds, slow to turnSpeed and turn round to the left (steer 0..1) until
+    # the heading has changed by about 170 degrees, then follow the lane it ends up in
+    do FollowLaneBehavior(target_speed=speed) for after seconds
+    while self.speed > turnSpeed + 0.5:
+        take SetThrottleAction(0), SetBrakeAction(0.8)
+    start = self.heading
+    turned = 0
+    last = self.heading
+    while turned < 170 deg:
+        step = self.heading - last
+        if step > 180 deg:
+            step -= 360 deg
+        if step < -180 deg:
+            step += 360 deg
+        turned += abs(step)
+        last = self.heading
+        throttle = 0.25 if self.speed < turnSpeed else 0
+        take SetThrottleAction(throttle), SetBrakeAction(0), SetSteerAction(-steer)
+    take SetSteerAction(0)
+    do FollowLaneBehavior(target_speed=speed)
+''', ()),
     "DriveRoute": ('''\
 behavior DriveRoute(speed, route):
     do FollowTrajectoryBehavior(target_speed=speed, trajectory=route, turn_speed=speed)
