@@ -85,12 +85,12 @@ def test_an_unknown_kind_is_a_warning_not_a_crash(monkeypatch):
 
 
 def test_main_event_that_cannot_be_placed_is_a_clear_error(monkeypatch):
-    parsed = _lead("car", "u_turn")
+    parsed = _lead("car", "drift", road="intersection")
     with pytest.raises(GenerationError) as info:
         _generate(monkeypatch, parsed)
     assert isinstance(info.value, DV2SError)
     message = str(info.value)
-    assert "\n" not in message and "u turn" in message and "main event" in message
+    assert "\n" not in message and "drift" in message and "main event" in message
 
 
 def test_a_placeable_main_event_does_not_raise(monkeypatch):

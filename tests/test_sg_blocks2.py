@@ -1,0 +1,119 @@
+"""sg-blocks2: the rules SG builds pull_out, reverse and u_turn (and junction merges), the scripts pass the
+bank's safety check, run in DV2S-v0 and the trace semantics find the manoeuvre.
+
+Parses are built per the parser contract so these tests do not depend on how today's parser reads a phrase."""
+
+import pytest
+
+from dv2s_gym.pipeline import sg_rules
+from dv2s_gym.pipeline.semantics import Entity, ParsedDescription
+from scenario_bank.safety import check_script
+
+
+def _generate(monkeypatch, parsed: ParsedDescription, seed: int = 0):
+    monkeypatch.setattr(sg_rules, "parse_description", lambda text: parsed)
+    return sg_rules.generate_rules(parsed.text, seed=seed)
+
+
+def _run(script, seconds=8.0, seed=0):
+    from envs.dv2s_env import DV2SEnv
+
+    env = DV2SEnv(scenario=script, config={"duration": seconds, "ego_policy": "scenic"})
+    try:
+        env.reset(seed=seed)
+        done = False
+        while not done:
+            _, _, terminated, truncated, _ = env.step(1)
+            done = terminated or truncated
+        return env.unwrapped.trace
+    finally:
+        env.close()
+
+
+def _trace_actions(script, who, seeds=range(3), seconds=8.0):
+    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+
+    return [{a for k, a in elements_from_trace(_run(script, seconds, seed))["actions"] if k == who} for seed in seeds]
+
+
+def _parked_car(*actions, road="straight_road"):
+    ego = Entity("ego")
+    car = Entity("car", attrs={"noun": "car"})
+    for action in actions:
+        car.add_action(action)
+    car.relations.append(("ahead_of", ego))
+    car.relations.append(("right_of", ego))
+    return ParsedDescription(text="A parked car pulls out ahead of the ego.", road=road, entities=[ego, car])
+
+
+def test_pull_out_is_placed_at_the_kerb_of_a_street(monkeypatch):
+    result = _generate(monkeypatch, _parked_car("pull_out"))
+    assert result.frame.map == "urban_two_way"  # a car at the kerb does not need a second lane
+    assert "PullOutWhenNear(egoLane.centerline" in result.script
+    assert ["car", "pull_out"] in result.elements["actions"]
+    assert ["car", "right_of", "ego"] in result.elements["relations"]
+    check_script(result.script)
+
+
+def test_ego_pull_out_on_a_highway_uses_the_rightmost_lane_as_shoulder(monkeypatch):
+    ego = Entity("ego")
+    ego.add_action("pull_out")
+    car = Entity("car", attrs={"noun": "car"})
+    car.relations.append(("behind", ego))
+    parsed = ParsedDescription(text="The ego pulls out of the shoulder.", road="highway", entities=[ego, car])
+    result = _generate(monkeypatch, parsed)
+    assert "t[3] is None" in result.script  # the ego's lane is the rightmost one
+    assert "PullOutWhenNear(leftLane.centerline" in result.script
+    assert ["car", "left_of", "ego"] in result.elements["relations"]  # traffic in the lane it pulls into
+
+
+def test_u_turn_is_placed(monkeypatch):
+    ego = Entity("ego")
+    ego.add_action("u_turn")
+    parsed = ParsedDescription(text="The ego turns round.", road=None, entities=[ego])
+    result = _generate(monkeypatch, parsed)
+    assert result.frame.map == "urban_two_way"
+    assert "UTurnLater(" in result.script
+    assert ["ego", "u_turn"] in result.elements["actions"]
+    check_script(result.script)
+
+
+@pytest.mark.slow
+def test_pull_out_runs_and_shows_in_the_trace(monkeypatch):
+    result = _generate(monkeypatch, _parked_car("pull_out"))
+    hits = sum("pull_out" in acts for acts in _trace_actions(result.script, "car"))
+    assert hits >= 2, hits
+
+
+@pytest.mark.slow
+def test_reversing_out_shows_reverse_and_pull_out(monkeypatch):
+    result = _generate(monkeypatch, _parked_car("reverse", "pull_out"))
+    assert {"reverse", "pull_out"} <= {a for k, a in result.elements["actions"] if k == "car"}
+    runs = _trace_actions(result.script, "car")
+    assert sum("reverse" in acts for acts in runs) >= 2, runs
+    assert sum("pull_out" in acts for acts in runs) >= 2, runs
+
+
+@pytest.mark.slow
+def test_ego_pull_out_from_the_shoulder_runs(monkeypatch):
+    ego = Entity("ego")
+    ego.add_action("pull_out")
+    parsed = ParsedDescription(text="The ego pulls out of the shoulder.", road="highway", entities=[ego])
+    result = _generate(monkeypatch, parsed)
+    hits = sum("pull_out" in acts for acts in _trace_actions(result.script, "ego"))
+    assert hits >= 2, hits
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("who", ["ego", "car"])
+def test_u_turn_runs_and_shows_in_the_trace(monkeypatch, who):
+    ego = Entity("ego")
+    car = Entity("car", attrs={"noun": "car"})
+    car.relations.append(("ahead_of", ego))
+    car.relations.append(("same_lane", ego))
+    (ego if who == "ego" else car).add_action("u_turn")
+    parsed = ParsedDescription(text="Someone turns round.", road="straight_road", entities=[ego, car])
+    result = _generate(monkeypatch, parsed)
+    assert [who, "u_turn"] in result.elements["actions"]
+    hits = sum("u_turn" in acts for acts in _trace_actions(result.script, who, seconds=10.0))
+    assert hits >= 2, hits
