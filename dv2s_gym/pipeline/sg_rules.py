@@ -254,8 +254,8 @@ def _choose_map(road: Optional[str], ego: ActorFrame, actors: Sequence[ActorFram
             return "highway_onramp"
         return chosen
     # no road type said: infer from what happens
-    if turns:
-        return "urban_crossroads"
+    if turns or any(a.kind in VEHICLES and a.has("cross") for a in actors):
+        return "urban_crossroads"  # a vehicle crossing the ego's path comes from a crossing road
     if "merge" in all_actions:
         return "highway_onramp"
     if any(a.kind == "pedestrian" for a in actors):
@@ -285,6 +285,7 @@ class _Script:
         self.participants: List[str] = []
         self.actions: set = set()
         self.relations: set = set()
+        self.merged_as_lane_change = False
 
     def param(self, name: str, value: str) -> str:
         kind = name.rstrip("_").split("_")[0].rstrip("0123456789")
@@ -372,7 +373,7 @@ def _check_main_event(parsed: ParsedDescription, s: _Script) -> None:
     entity, action = main
     kind = "ego" if entity.kind == "ego" else entity.kind
     shown = {a for k, a in s.actions if k == kind}
-    if action == "lane_change":
+    if action == "lane_change" or action == "merge" and kind == "ego" and s.merged_as_lane_change:
         placed_it = bool(shown & {"lane_change_left", "lane_change_right"})
     elif action in _COLLISION_HINTS:
         placed_it = "collide" in shown
@@ -429,6 +430,14 @@ def _compose_lanes(s: _Script) -> None:
     lo, hi = _speed_ranges(frame.map)
     ego_speed = s.param("ego_speed", f"Range({lo}, {hi})")
     ego = frame.ego
+    if ego.has("merge") and not onramp:
+        # merging into the next lane (a lane closed ahead, two lanes becoming one) without an on-ramp
+        ego.actions.remove("merge")
+        if not (ego.has("lane_change_left") or ego.has("lane_change_right")):
+            side = ego.details.get("merge", {}).get("side") or ego.details.get("merge", {}).get("target")
+            ego.actions.append("lane_change_right" if side == "right" else "lane_change_left")
+        s.warnings.append("the ego's merge without an on-ramp is built as a lane change into the next lane")
+        s.merged_as_lane_change = True
     _check_actions(ego, s, _LANE_ACTIONS - {"cross", "merge"} | ({"merge"} if onramp else set()))
     if ego.has("go_straight") and "keep_lane" not in ego.actions:
         ego.actions.append("keep_lane")
@@ -455,6 +464,10 @@ def _compose_lanes(s: _Script) -> None:
             _check_actions(actor, s, {"cross", "stop", "collide"})
         else:
             actor.actions = []
+        if "same_lane" in actor.relations and "oncoming" in actor.relations and "ahead_of" in actor.relations:
+            # in the ego's lane and oncoming at once: the lane says where it is (a car parked in the ego's lane)
+            actor.relations = [r for r in actor.relations if r != "oncoming"]
+            s.warnings.append(f"the {actor.kind} is both in the ego's lane and oncoming: placed in the ego's lane")
         rels = set(actor.relations)
         if actor.kind == "obstacle":
             actor.role = "obstacle"
@@ -1325,8 +1338,8 @@ def _compose_junction(s: _Script) -> None:
         acts = list(actor.actions)
         if mtype and not any(_TYPE.get(a) == mtype for a in acts):
             acts.append({v: k for k, v in _TYPE.items()}[mtype])
-        if role == "into_path" and actor.has("merge"):
-            acts = [a for a in acts if a != "merge"] + ["cut_in"]
+        if role == "into_path" and actor.has("merge") and "ahead_of" not in rels:
+            rels.append("ahead_of")  # it joins the ego's road in front of the ego
         s.show(actor.kind, acts, list(dict.fromkeys(rels)), actor.count)
 
     # ---------------------------------------------------------------- pedestrians and obstacles
