@@ -117,3 +117,41 @@ def test_u_turn_runs_and_shows_in_the_trace(monkeypatch, who):
     assert [who, "u_turn"] in result.elements["actions"]
     hits = sum("u_turn" in acts for acts in _trace_actions(result.script, who, seconds=10.0))
     assert hits >= 2, hits
+
+
+def _junction_merge():
+    ego = Entity("ego")
+    car = Entity("car", attrs={"noun": "car"})
+    car.add_action("merge")
+    car.relations.append(("ahead_of", ego))
+    return ParsedDescription(text="At a T-junction a car from the side road merges in ahead of the ego.",
+                             road="t_junction", entities=[ego, car])
+
+
+def test_a_merge_from_a_side_road_is_a_merge_not_a_cut_in(monkeypatch):
+    result = _generate(monkeypatch, _junction_merge())
+    assert result.frame.map == "urban_t_junction"
+    assert "PullOutWhenEgoNear(" in result.script
+    acts = {a for k, a in result.elements["actions"] if k == "car"}
+    assert "merge" in acts and "cut_in" not in acts
+
+
+def test_the_egos_merge_without_a_ramp_is_a_lane_change(monkeypatch):
+    ego = Entity("ego")
+    ego.add_action("merge")
+    barrier = Entity("obstacle", attrs={"noun": "barrier"})
+    barrier.relations.append(("ahead_of", ego))
+    barrier.relations.append(("same_lane", ego))
+    parsed = ParsedDescription(text="A barrier closes the ego's lane; the ego merges left.", road="straight_road",
+                               entities=[ego, barrier])
+    result = _generate(monkeypatch, parsed)
+    assert result.frame.map == "highway_straight"  # a lane to merge into in the ego's direction
+    assert ["ego", "lane_change_left"] in result.elements["actions"]
+    assert any("merge without an on-ramp" in w for w in result.warnings)
+
+
+@pytest.mark.slow
+def test_junction_merge_runs_and_shows_in_the_trace(monkeypatch):
+    result = _generate(monkeypatch, _junction_merge())
+    hits = sum("merge" in acts for acts in _trace_actions(result.script, "car", seconds=10.0))
+    assert hits >= 2, hits

@@ -217,7 +217,7 @@ def build_frame(description: str, parsed: Optional[ParsedDescription] = None,
 
 
 def _needs_same_direction_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -> bool:
-    if ego.has("lane_change_left") or ego.has("lane_change_right"):
+    if ego.has("lane_change_left") or ego.has("lane_change_right") or ego.has("merge"):
         return True
     for a in actors:
         if a.kind not in VEHICLES:
@@ -652,7 +652,7 @@ def _compose_lanes(s: _Script) -> None:
 
     # ---------------------------------------------------------------- ego
     ego_behavior, ego_first = _ego_lane_behavior(s, ego, ego_speed, reckless, two_way, frame)
-    ego_lines = [f"ego = new Car at egoLane.centerline.pointAlongBy(egoS),",
+    ego_lines = ["ego = new Car at egoLane.centerline.pointAlongBy(egoS),",
                  f"    with speed {ego_speed},",
                  f"    with behavior {ego_behavior}"]
     if (ego.has("pull_out") or ego.has("reverse")) and two_way:
@@ -671,7 +671,7 @@ def _compose_lanes(s: _Script) -> None:
                      "    with speed 0,",
                      f"    with behavior {ego_behavior}"]
     if onramp and ego.has("merge"):
-        ego_lines = [f"ego = new Car at rampLane.centerline.pointAlongBy(Range(40, 120)),",
+        ego_lines = ["ego = new Car at rampLane.centerline.pointAlongBy(Range(40, 120)),",
                      f"    with speed {ego_speed},",
                      f"    with behavior MergeFromRamp({ego_speed}, accelLane, Range(0.5, 1.5), Range(2.0, 3.0))"]
         s.use("MergeFromRamp")
@@ -772,7 +772,7 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
         for i in range(actor.count):
             var = n if actor.count == 1 else f"{n}_{i + 1}"
             s.spawn += [f"{var} = new Obstacle at {lane}.centerline.pointAlongBy(egoS + {gap} + {3.0 * i}),",
-                        f"    with width Range(0.8, 1.8), with length Range(0.6, 1.4)"]
+                        "    with width Range(0.8, 1.8), with length Range(0.6, 1.4)"]
             obstacles.append(var)
         rel = ["ahead_of"] + (["same_lane"] if actor.side == 0 else ["left_of" if actor.side > 0 else "right_of"])
         s.show("obstacle", [], [r for r in rel if r in rels or r == "ahead_of"], actor.count)
@@ -833,7 +833,7 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
         lane = lane_of(side)
         if actor.kind == "truck" and not actor.has("accelerate") and "behind" not in rels:
             gap = s.param(f"{n}_gap", "Range(45, 65)")
-            speed_expr = s.param(f"{n}_speed", f"Range(14, 18)")
+            speed_expr = s.param(f"{n}_speed", "Range(14, 18)")
             trigger = s.param(f"{n}_trigger", "Range(22, 32)" if actor.sudden else "Range(30, 42)")
             position = f"{lane}.centerline.pointAlongBy(egoS + {gap})"
             s.use("PullInWhenClose")
@@ -1393,8 +1393,11 @@ def _spawn_junction_pedestrians(s: _Script, actor: ActorFrame, map_name: str, re
             place, facing = f"left of {spot} by Range(6.2, 6.9)", f"{spot}.heading - 90 deg"
         else:
             place, facing = f"right of {spot} by Range(2.0, 2.7)", f"{spot}.heading + 90 deg"
-        behavior = (f"CrossWhenEgoNear(globalParameters.{n}_walking_speed, globalParameters.{n}_trigger_time)"
-                    if crossing else "StandStill()")
+        behavior = "StandStill()"
+        if crossing:
+            # the members of a group step out a little apart, as on the straight roads
+            jitter = "" if i == 0 else " + Range(-0.4, 0.4)"
+            behavior = f"CrossWhenEgoNear({walk}, {trigger}{jitter})"
         s.spawn += [f"{var} = new Pedestrian {place},", f"    facing {facing},", f"    with behavior {behavior}"]
     s.show("pedestrian", [a for a in actor.actions if a in ("cross", "collide")], ["ahead_of"], actor.count)
 
