@@ -820,7 +820,12 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
         dist = s.param(f"{n}_distance", "Range(85, 115)" if actor.has("drift") else "Range(40, 90)")
         speed_expr = s.param(f"{n}_speed", "Range(9, 13)")
         position = f"oncomingLane.centerline.pointAlongBy(-(egoS + {dist}))"
-        if actor.has("drift"):
+        if actor.has("drift") and actor.has("collide"):
+            # it drifts a whole lane over and stays there: the head-on collision the text describes
+            s.use("DriftAndReturn")
+            behavior = (f"DriftAndReturn({speed_expr}, Range(45, 60), Range(3.3, 3.7), Range(1.5, 2.2), "
+                        "-1, Range(1.2, 2.0))")
+        elif actor.has("drift"):
             s.use("DriftAndReturn")
             behavior = (f"DriftAndReturn({speed_expr}, Range(55, 75), Range(2.3, 3.2), Range(1.5, 2.5), "
                         f"Range(22, 32), Range(1.2, 2.0))")
@@ -840,9 +845,12 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
             behavior = f"PullInWhenClose({-side}, {speed_expr}, {trigger}, Range(2.8, 4.0))"
         else:
             behind = "behind" in rels or actor.has("overtake")
-            start = s.param(f"{n}_start", "Range(-14, -8)" if behind else "Range(7, 11)")
-            extra = s.param(f"{n}_extra_speed", "Range(4, 7)")
-            gap = s.param(f"{n}_cut_gap", "Range(5, 9)" if actor.sudden else "Range(10, 15)")
+            start = s.param(f"{n}_start", "Range(-14, -8)" if behind else
+                            "Range(-3, 0)" if actor.has("collide") else "Range(7, 11)")
+            hits = actor.has("collide")  # it cuts in beside the ego's front and makes contact
+            extra = s.param(f"{n}_extra_speed", "Range(1, 2)" if hits else "Range(4, 7)")
+            gap = s.param(f"{n}_cut_gap", "Range(0, 1.5)" if hits else "Range(5, 9)" if actor.sudden
+                          else "Range(10, 15)")
             dur = s.param(f"{n}_change_duration", "Range(1.3, 2.0)" if actor.sudden else "Range(2.0, 2.8)")
             after = (f"{ego_speed} - Range(3, 6)" if actor.has("brake") or actor.has("stop")
                      else f"{ego_speed} + Range(-1, 2)")
@@ -883,7 +891,8 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
             changing = actor.has("lane_change_left") or actor.has("lane_change_right")
             # side by side, unless it changes lanes: then a little ahead, so the two never collide
             gap = s.param(f"{n}_offset", "Range(12, 28)" if ahead else "-Range(12, 28)" if behind
-                          else "Range(9, 14)" if changing else "Range(-4, 4)")
+                          else ("Range(0, 2.5)" if actor.has("collide") else "Range(9, 14)") if changing
+                          else "Range(-4, 4)")
         elif actor.has("stop") and not actor.has("brake") and (actor.state_stop or not actor.sudden):
             gap = s.param(f"{n}_gap", "Range(30, 50)" if urban else "Range(55, 90)")
         elif actor.has("brake") or actor.has("stop") or actor.has("collide"):
