@@ -468,6 +468,10 @@ def _compose_lanes(s: _Script) -> None:
             # in the ego's lane and oncoming at once: the lane says where it is (a car parked in the ego's lane)
             actor.relations = [r for r in actor.relations if r != "oncoming"]
             s.warnings.append(f"the {actor.kind} is both in the ego's lane and oncoming: placed in the ego's lane")
+        if actor.has("swerve") and actor.has("cut_in"):
+            # it swerves toward the ego and returns: no cut-in happens
+            actor.actions.remove("cut_in")
+            s.warnings.append(f"the {actor.kind} swerves and returns to its lane: its cut-in is built as a swerve")
         rels = set(actor.relations)
         if actor.kind == "obstacle":
             actor.role = "obstacle"
@@ -497,8 +501,9 @@ def _compose_lanes(s: _Script) -> None:
             actor.role = "slow_lead"
         elif "left_of" in rels or "right_of" in rels or actor.lane == "adjacent" and not two_way or \
                 actor.lane in ("left", "right", "middle") and \
-                ego.lane in ("left", "right", "middle") and actor.lane != ego.lane:
-            actor.role = "adjacent"
+                ego.lane in ("left", "right", "middle") and actor.lane != ego.lane or \
+                actor.lane in ("left", "right") and ego.lane is None and not two_way and "same_lane" not in rels:
+            actor.role = "adjacent"  # (in "the right lane", the ego's lane not said: beside the ego on that side)
         elif "behind" in rels:
             actor.role = "follower"
         elif actor.has("collide") and not (rels & {"ahead_of"}) and not actor.has("brake") and not actor.has("stop"):
@@ -522,6 +527,8 @@ def _compose_lanes(s: _Script) -> None:
         if actor.role == "adjacent" and actor.side == 0:
             if actor.lane in order and ego.lane in order and actor.lane != ego.lane:
                 actor.side = order[actor.lane] - order[ego.lane]
+            elif actor.lane in ("left", "right") and ego.lane is None:
+                actor.side = order[actor.lane]
             elif "left_of" in rels:
                 actor.side = 1
             elif "right_of" in rels:
@@ -722,7 +729,7 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
         s.use("ChangeLanesLater")
         return f"ChangeLanesLater({side}, {speed}, {after}, {dur})", True
     if ego.has("swerve"):
-        return _swerve(s, speed), True
+        return _swerve(s, speed, ego), True
     if ego.has("drift"):
         s.use("DriftAndReturn")
         depth = "Range(2.0, 2.8)" if two_way else "Range(1.5, 2.2)"
@@ -746,10 +753,25 @@ def _u_turn(s: _Script, speed: str) -> str:
     return f"UTurnLater({speed}, Range(1.0, 2.0), Range(3, 4), Range(0.9, 1.0))"
 
 
-def _swerve(s: _Script, speed: str) -> str:
-    """A quick sideways move of 1.2-1.5 m inside the lane (to the left) and back: no lane change happens."""
+def _swerve(s: _Script, speed: str, actor: Optional[ActorFrame] = None) -> str:
+    """A quick sideways move inside the lane and back: no lane change happens.
+
+    The side is the one the text gives, else toward the ego for an actor beside it, else left. At highway
+    speed the move is smaller and slower (1.1-1.3 m in 1.2-1.6 s) so that the car does not overshoot into the
+    next lane. The ego swerves when something blocks its path (at the latest after 4 s)."""
+    detail = actor.details.get("swerve", {}) if actor is not None else {}
+    side = detail.get("side") or detail.get("target")
+    if side not in ("left", "right") and actor is not None:
+        side = "left" if "right_of" in actor.relations else "right" if "left_of" in actor.relations else None
+    sign = "-" if side == "right" else ""
+    fast = s.frame.map in ("highway_straight", "highway_onramp")
+    depth = f"{sign}Range(1.1, 1.3)" if fast else f"{sign}Range(1.2, 1.5)"
+    duration = "Range(1.2, 1.6)" if fast else "Range(0.8, 1.2)"
+    if actor is not None and actor.kind == "ego":
+        s.use("SwerveWhenBlocked")
+        return f"SwerveWhenBlocked({speed}, {depth}, {duration})"
     s.use("SwerveAndBack")
-    return "SwerveAndBack(" + speed + ", Range(1.0, 2.0), Range(1.2, 1.5), Range(0.8, 1.2))"
+    return f"SwerveAndBack({speed}, Range(1.0, 2.0), {depth}, {duration})"
 
 
 def _something_stops_ego(frame: ScenarioFrame) -> bool:
@@ -892,6 +914,7 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
             # side by side, unless it changes lanes: then a little ahead, so the two never collide
             gap = s.param(f"{n}_offset", "Range(12, 28)" if ahead else "-Range(12, 28)" if behind
                           else ("Range(0, 2.5)" if actor.has("collide") else "Range(9, 14)") if changing
+                          else "Range(6, 10)" if actor.has("swerve") and not actor.has("collide")
                           else "Range(-4, 4)")
         elif actor.has("stop") and not actor.has("brake") and (actor.state_stop or not actor.sudden):
             gap = s.param(f"{n}_gap", "Range(30, 50)" if urban else "Range(55, 90)")
@@ -987,7 +1010,7 @@ def _longitudinal_behavior(s: _Script, actor: ActorFrame, speed: str) -> str:
     if actor.has("u_turn"):
         return _u_turn(s, speed)
     if actor.has("swerve"):
-        return _swerve(s, speed)
+        return _swerve(s, speed, actor)
     if actor.has("lane_change_left") or actor.has("lane_change_right"):
         side = 1 if actor.has("lane_change_left") else -1
         after = s.param(f"{actor.name}_change_after", "Range(0.5, 1.5)" if actor.sudden else "Range(1.0, 2.5)")

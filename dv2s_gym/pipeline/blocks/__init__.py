@@ -218,6 +218,18 @@ behavior SwerveAndBack(speed, delay, depth, duration):
     do SlideOffset(homeLine, now, 0, speed, duration) for duration + 0.3 seconds
     do FollowLaneBehavior(target_speed=speed)
 ''', ("SlideOffset",)),
+    "SwerveWhenBlocked": ('''
+behavior SwerveWhenBlocked(speed, depth, duration):
+    # keep the lane until something blocks the path (at the latest after 4 s), swerve `depth` m
+    # (left positive) inside the lane and back, then keep the lane braking for anything in the path
+    do FollowLaneBehavior(target_speed=speed) for 0.4 seconds
+    do FollowLaneBehavior(target_speed=speed) until pathBlocked(self, 10) or simulation().currentTime * simulation().timestep > 4
+    homeLine = self.laneSection.centerline
+    do SlideOffset(homeLine, 0, depth, speed, duration) for duration seconds
+    now = homeLine.signedDistanceTo(self.position)
+    do SlideOffset(homeLine, now, 0, speed, duration) for duration + 0.3 seconds
+    do CautiousCruise(speed)
+''', ("SlideOffset", "pathBlocked", "CautiousCruise")),
     "MergeFromRamp": ('''\
 behavior MergeFromRamp(speed, accelLane, delay, duration):
     # drive down the ramp, then leave the acceleration lane for the main carriageway
