@@ -491,7 +491,8 @@ def _compose_lanes(s: _Script) -> None:
                                       "placed in the next lane instead")
                     actor.relations = [r for r in actor.relations if r != "oncoming"]
                 actor.role = "adjacent"
-                actor.side = 1 if "left_of" in rels or "right_of" not in rels else -1
+                right = "right_of" in rels or actor.lane == "right" and ego.lane in (None, "middle", "left")
+                actor.side = -1 if right and "left_of" not in rels else 1
         elif actor.has("overtake") and not actor.details.get("overtake", {}).get("around"):
             actor.role = "overtaker"
         elif actor.has("cut_in") or (actor.has("merge") and not onramp):
@@ -801,14 +802,19 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
         return
     if actor.role == "far_side":
         gap = s.param(f"{n}_gap", "Range(25, 40)")
+        near = "right_of" in actor.relations  # parked at the ego's own (right) kerb
         for i in range(actor.count):
             var = n if actor.count == 1 else f"{n}_{i + 1}"
+            place = (f"right of {var}Spot by Range(1.4, 1.7), facing {var}Spot.heading,\n"
+                     "    with regionContainedIn everywhere," if near else
+                     f"left of {var}Spot by Range(2.5, 2.7), facing roadDirection,")
             s.spawn += [f"{var}Spot = new OrientedPoint at egoLane.centerline.pointAlongBy(egoS + {gap} + {12 * i}), "
                         "facing roadDirection",
-                        f"{var} = new {cls} left of {var}Spot by Range(2.5, 2.7), facing roadDirection,",
+                        f"{var} = new {cls} {place}",
                         "    with speed 0,", "    with behavior HoldStill()"]
         s.use("HoldStill")
-        s.show(actor.kind, [a for a in actor.actions if a == "stop"], ["ahead_of", "left_of"], actor.count)
+        s.show(actor.kind, [a for a in actor.actions if a == "stop"], ["ahead_of", "right_of" if near else "left_of"],
+               actor.count)
         return
     if actor.role in ("crosser", "roadside"):
         _spawn_lane_pedestrians(s, actor, ego_speed, two_way, reckless)
@@ -1046,7 +1052,13 @@ def _directions(actor: ActorFrame, rng: random.Random) -> List[str]:
             remaining -= 1
         out += [unsized[-1]] * max(0, remaining)
     elif remaining > 0:
-        default = out[-1] if out else rng.choice(["right_to_left", "left_to_right"])
+        # no direction said: from the side the text puts the pedestrian (or what it steps out from behind) on
+        sides = list(actor.relations)
+        hidden = actor.details.get("cross", {}).get("from_behind")
+        if hidden is not None:
+            sides += [r for r, other in getattr(hidden, "relations", []) if getattr(other, "kind", "") == "ego"]
+        said = "right_to_left" if "right_of" in sides else "left_to_right" if "left_of" in sides else None
+        default = out[-1] if out else said or rng.choice(["right_to_left", "left_to_right"])
         out += [default] * remaining
     return out[:actor.count]
 
