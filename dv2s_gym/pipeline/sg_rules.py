@@ -987,9 +987,16 @@ def _spawn_puller(s: _Script, actor: ActorFrame, ego_speed: str, two_way: bool) 
     it backs up (when it reverses) and steers into the lane ahead of the ego."""
     n = actor.name
     urban = two_way
-    gap = s.param(f"{n}_gap", "Range(30, 42)" if urban else "Range(55, 75)")
-    trigger = s.param(f"{n}_trigger", ("Range(20, 26)" if urban else "Range(40, 50)") if actor.sudden or
-                      actor.has("collide") else ("Range(26, 34)" if urban else "Range(50, 62)"))
+    gap = s.param(f"{n}_gap", ("Range(54, 60)" if urban else "Range(100, 110)") if actor.has("collide") and
+                  actor.has("reverse") else "Range(30, 42)" if urban else "Range(55, 75)")
+    backing = actor.has("reverse")
+    if actor.has("collide"):
+        # it is still half in the lane when the ego gets there (backing out first takes about 2 s more)
+        trigger = s.param(f"{n}_trigger", ("Range(47, 53)" if urban else "Range(85, 100)") if backing
+                          else ("Range(20, 26)" if urban else "Range(40, 50)"))
+    else:
+        trigger = s.param(f"{n}_trigger", ("Range(20, 26)" if urban else "Range(40, 50)") if actor.sudden
+                          else ("Range(26, 34)" if urban else "Range(50, 62)"))
     # (`right of` puts the vehicle's left side that far from the lane centre)
     kerb = "Range(1.4, 1.7)" if urban else "Range(1.8, 2.2)"
     speed = s.param(f"{n}_speed", "Range(6, 9)" if urban else "Range(12, 16)")
