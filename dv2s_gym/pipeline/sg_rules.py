@@ -542,6 +542,9 @@ def _compose_lanes(s: _Script) -> None:
                 side = "right"
             if side is None and actor.has("lane_change_right"):
                 side = "left"
+            if side is None and actor.lane in ("left", "right") and ego.lane in (None, "middle") and \
+                    not (rels & {"left_of", "right_of"}):
+                side = actor.lane  # "in the left lane", the ego's lane not said: it comes from that side
             if side is None:
                 side = "left" if "left_of" in rels else "right" if "right_of" in rels else \
                     ("right" if actor.kind == "truck" else s.rng.choice(["left", "right"]))
