@@ -155,3 +155,56 @@ def test_junction_merge_runs_and_shows_in_the_trace(monkeypatch):
     result = _generate(monkeypatch, _junction_merge())
     hits = sum("merge" in acts for acts in _trace_actions(result.script, "car", seconds=10.0))
     assert hits >= 2, hits
+
+
+def test_a_pedestrian_from_the_right_crosses_right_to_left(monkeypatch):
+    ego = Entity("ego")
+    ped = Entity("pedestrian", attrs={"noun": "pedestrian"})
+    ped.add_action("cross")
+    ped.relations.append(("right_of", ego))
+    parsed = ParsedDescription(text="A pedestrian steps off the kerb on the right.", road="straight_road",
+                               entities=[ego, ped])
+    for seed in range(4):  # no coin toss: the side comes from the text
+        script = _generate(monkeypatch, parsed, seed=seed).script
+        assert "pedestrian1 = new Pedestrian right of pedestrian1Spot" in script
+
+
+def test_a_swerve_back_into_lane_is_not_a_cut_in(monkeypatch):
+    ego = Entity("ego")
+    car = Entity("car", attrs={"noun": "car"})
+    car.add_action("cut_in")
+    car.add_action("swerve")
+    car.relations.append(("right_of", ego))
+    parsed = ParsedDescription(text="A car on the right swerves toward the ego and returns.", road="highway",
+                               entities=[ego, car])
+    result = _generate(monkeypatch, parsed)
+    acts = {a for k, a in result.elements["actions"] if k == "car"}
+    assert acts == {"swerve"}
+    assert "SwerveAndBack(" in result.script and "CutInWhenAhead" not in result.script
+    assert any("built as a swerve" in w for w in result.warnings)
+
+
+def test_a_colliding_lane_changer_starts_beside_the_ego(monkeypatch):
+    ego = Entity("ego")
+    truck = Entity("truck", attrs={"noun": "truck"})
+    truck.add_action("lane_change_right")
+    truck.add_action("collide")
+    truck.relations.append(("left_of", ego))
+    parsed = ParsedDescription(text="A truck on the left changes lanes into the ego.", road="highway",
+                               entities=[ego, truck])
+    result = _generate(monkeypatch, parsed)
+    assert "param truck1_offset = Range(0, 2.5)" in result.script
+
+
+@pytest.mark.slow
+def test_a_colliding_lane_changer_sideswipes_the_ego(monkeypatch):
+    ego = Entity("ego")
+    truck = Entity("truck", attrs={"noun": "truck"})
+    truck.add_action("lane_change_right")
+    truck.add_action("collide")
+    truck.relations.append(("left_of", ego))
+    parsed = ParsedDescription(text="A truck on the left changes lanes into the ego.", road="highway",
+                               entities=[ego, truck])
+    result = _generate(monkeypatch, parsed)
+    runs = _trace_actions(result.script, "truck")
+    assert sum("collide_side" in acts for acts in runs) >= 2, runs

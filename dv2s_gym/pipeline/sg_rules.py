@@ -377,6 +377,8 @@ def _check_main_event(parsed: ParsedDescription, s: _Script) -> None:
         placed_it = bool(shown & {"lane_change_left", "lane_change_right"})
     elif action in _COLLISION_HINTS:
         placed_it = "collide" in shown
+    elif action == "cut_in" and "swerve" in shown and "cut_in" not in shown:
+        placed_it = True  # a swerve toward the ego and back, built as a swerve (warned)
     else:
         placed_it = action in shown
     if not placed_it:
