@@ -400,7 +400,7 @@ class DV2SEnv(AbstractEnv):
 
     def _compile(self, ref: ScenarioRef) -> CompiledScenario:
         if ref not in self._compiled:
-            text, path = ref.text(), ref.path
+            text, path, origin = ref.text(), ref.path, None
             if self.config.get("upgrade_scenic2"):
                 from scenario_bank.scenic2 import upgrade_scenic2
 
@@ -409,10 +409,10 @@ class DV2SEnv(AbstractEnv):
                     import warnings
 
                     warnings.warn(f"scenario {ref.name!r}: " + "; ".join(upgrade.report()), UserWarning, stacklevel=3)
-                if upgrade.changed:  # compile the upgraded text, not the file
-                    text, path = upgrade.source, None
+                if upgrade.changed:  # compile the upgraded text, not the file (localPath still resolves there)
+                    text, path, origin = upgrade.source, None, ref.path
             self._compiled[ref] = compile_scenario(
-                text, name=ref.name, path=path, map_override=self.config["map"]
+                text, name=ref.name, path=path, origin=origin, map_override=self.config["map"]
             )
         return self._compiled[ref]
 
