@@ -21,11 +21,11 @@ from typing import Any, Dict, Optional, Tuple
 
 import numpy as np
 
-from envs.errors import ScenarioCompileError, SceneSamplingError, UnsupportedConstructError
+from envs.errors import ScenarioCompileError, SceneSamplingError, StepTimeoutError, UnsupportedConstructError
 from scenario_bank.safety import UnsafeScenarioError, check_script
 from scenario_bank.scenic_parse import install_parse_cache
 
-__all__ = ["MODEL", "CompiledScenario", "ParamRange", "parameter_ranges", "compile_scenario", "model_for", "FOREIGN_MODELS", "looks_like_source", "runtime_construct_error"]
+__all__ = ["MODEL", "CompiledScenario", "ParamRange", "parameter_ranges", "compile_scenario", "model_for", "FOREIGN_MODELS", "looks_like_source", "runtime_construct_error", "step_timeout_error"]
 
 MODEL = "envs.scenic_highway.model"
 """The Scenic world model every scenario is compiled against."""
@@ -294,6 +294,25 @@ def runtime_construct_error(error: NameError, compiled: CompiledScenario) -> Sce
     it gets the same :class:`UnsupportedConstructError` as at compile time.
     """
     return _compile_error(error, compiled.source, compiled.path or compiled.name)
+
+
+def step_timeout_error(overtime: Exception, compiled: CompiledScenario) -> StepTimeoutError:
+    """The error for a simulation step that ran over the env's ``step_time_limit``, naming the
+    script line that was running (the innermost frame of the script)."""
+    label = compiled.path or compiled.name
+    line = None
+    tb = overtime.__traceback__
+    while tb is not None:
+        if tb.tb_frame.f_code.co_filename in (label, os.path.realpath(label)):
+            line = tb.tb_lineno
+        tb = tb.tb_next
+    where = f"{label}, line {line}" if line else label
+    code = _source_line(compiled.source, line) if line else "a behaviour"
+    return StepTimeoutError(
+        f"{where}: one simulation step used over {getattr(overtime, 'seconds', 0):g} s of CPU in `{code}`: a behaviour that "
+        "loops without taking an action (e.g. `while True: do B()` where B returns at once) never ends its time "
+        "step. Make each pass of the loop take an action or `wait`; raise the env's `step_time_limit` if the step "
+        "is only slow.")
 
 
 def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompileError:
