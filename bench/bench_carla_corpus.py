@@ -7,7 +7,8 @@ One command::
 For every script under ``tests/data/carla_corpus/`` (``scenic3/``: Scenic 3 scripts,
 counted for the issue's target; ``scenic2/``: Scenic 2 syntax, counted apart) it tries
 
-* **DV2S-v0**: ``gym.make("dv2s_gym:DV2S-v0", scenario=PATH)``, ``reset(seed=s)`` for each
+* **DV2S-v0**: ``gym.make("dv2s_gym:DV2S-v0", scenario=PATH)`` (for ``scenic2/`` with the env's
+  ``config={"upgrade_scenic2": True}``, the Scenic 2 -> 3 upgrade a user asks for), ``reset(seed=s)`` for each
   seed, then up to ``--steps`` steps of the idle action (``DiscreteMetaAction`` 1) or until
   the episode ends (a collision ends it and still counts as running);
 * **Scenic 3.1.1 Newtonian**: ``scenic.scenarioFromFile(PATH, mode2D=True,
@@ -100,7 +101,9 @@ def attempt_dv2s(path: str, seeds: List[int], steps: int) -> Dict[str, object]:
     stepped = 0
     env = None
     try:
-        env = gym.make("dv2s_gym:DV2S-v0", scenario=path)
+        # Scenic 2 scripts: the env upgrades them when asked to (config upgrade_scenic2), as a user would ask
+        config = {"upgrade_scenic2": True} if Path(path).parent.name == "scenic2" else None
+        env = gym.make("dv2s_gym:DV2S-v0", scenario=path, config=config)
         for seed in seeds:
             env.reset(seed=seed)
             for _ in range(steps):

@@ -34,10 +34,11 @@ from envs.scenarios import (
     looks_like_source,
     read_scenario_file,
     runtime_construct_error,
+    step_timeout_error,
 )
 from envs.scenic_highway.simulator import ActorEvent, HighwayEnvSimulator
 from envs.scenic_highway import stepping
-from envs.scenic_highway.stepping import ExternalStepper, StepOutcome
+from envs.scenic_highway.stepping import ExternalStepper, StepOutcome, StepOvertime, step_watchdog
 from envs.trace import EpisodeTrace, actor_state
 
 __all__ = ["DV2SEnv", "ScenarioRef"]
@@ -216,6 +217,10 @@ class DV2SEnv(AbstractEnv):
           (the script's ego behaviour drives; actions are ignored).
         - ``map``: override the script's map (a shipped map name or an .xodr path).
         - ``max_sample_iterations``: Scenic rejection-sampling budget per scene.
+        - ``step_time_limit`` [s]: CPU-time limit of one simulation step (the first includes
+          setting up the scene); a step over it (a behaviour that loops without taking an
+          action) raises :class:`~envs.errors.StepTimeoutError` naming the script line.
+          Enforced in the main thread (``SIGPROF``); ``None`` disables it.
         - ``upgrade_scenic2``: upgrade Scenic 2 syntax in the scripts to Scenic 3
           before compiling (:mod:`scenario_bank.scenic2`), each rewrite reported
           in a ``UserWarning``; off by default.
@@ -250,6 +255,7 @@ class DV2SEnv(AbstractEnv):
                 "ego_policy": "agent",
                 "map": None,
                 "max_sample_iterations": 2000,
+                "step_time_limit": 60.0,
                 "upgrade_scenic2": False,
                 "reward_weights": {
                     "collision": -1.0,
@@ -381,10 +387,14 @@ class DV2SEnv(AbstractEnv):
         """Start or advance the simulation; a name a behaviour uses but nothing defines
         (e.g. a CARLA-only action) becomes an :class:`UnsupportedConstructError`."""
         try:
-            return call(*args)
+            with step_watchdog(self.config.get("step_time_limit")):
+                return call(*args)
         except NameError as error:
             self._close_simulation()
             raise runtime_construct_error(error, self._running_compiled) from None
+        except StepOvertime as overtime:
+            self._close_simulation()
+            raise step_timeout_error(overtime, self._running_compiled) from None
 
     def _choose_scenario(self, name: Optional[str]) -> ScenarioRef:
         if name is not None:
@@ -400,7 +410,7 @@ class DV2SEnv(AbstractEnv):
 
     def _compile(self, ref: ScenarioRef) -> CompiledScenario:
         if ref not in self._compiled:
-            text, path = ref.text(), ref.path
+            text, path, origin = ref.text(), ref.path, None
             if self.config.get("upgrade_scenic2"):
                 from scenario_bank.scenic2 import upgrade_scenic2
 
@@ -409,10 +419,10 @@ class DV2SEnv(AbstractEnv):
                     import warnings
 
                     warnings.warn(f"scenario {ref.name!r}: " + "; ".join(upgrade.report()), UserWarning, stacklevel=3)
-                if upgrade.changed:  # compile the upgraded text, not the file
-                    text, path = upgrade.source, None
+                if upgrade.changed:  # compile the upgraded text, not the file (localPath still resolves there)
+                    text, path, origin = upgrade.source, None, ref.path
             self._compiled[ref] = compile_scenario(
-                text, name=ref.name, path=path, map_override=self.config["map"]
+                text, name=ref.name, path=path, origin=origin, map_override=self.config["map"]
             )
         return self._compiled[ref]
 

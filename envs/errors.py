@@ -8,6 +8,7 @@ __all__ = [
     "UnsupportedConstructError",
     "SceneSamplingError",
     "InvalidActionError",
+    "StepTimeoutError",
 ]
 
 
@@ -42,3 +43,8 @@ class ForeignConstructWarning(UserWarning):
 
 
 __all__.append("ForeignConstructWarning")
+
+
+class StepTimeoutError(DV2SError, RuntimeError):
+    """One simulation step used more CPU time than the env's ``step_time_limit`` (a behaviour looping
+    without taking an action never lets a time step end)."""

@@ -21,11 +21,11 @@ from typing import Any, Dict, Optional, Tuple
 
 import numpy as np
 
-from envs.errors import ScenarioCompileError, SceneSamplingError, UnsupportedConstructError
+from envs.errors import ScenarioCompileError, SceneSamplingError, StepTimeoutError, UnsupportedConstructError
 from scenario_bank.safety import UnsafeScenarioError, check_script
 from scenario_bank.scenic_parse import install_parse_cache
 
-__all__ = ["MODEL", "CompiledScenario", "ParamRange", "parameter_ranges", "compile_scenario", "model_for", "FOREIGN_MODELS", "looks_like_source", "runtime_construct_error"]
+__all__ = ["MODEL", "CompiledScenario", "ParamRange", "parameter_ranges", "compile_scenario", "model_for", "FOREIGN_MODELS", "looks_like_source", "runtime_construct_error", "step_timeout_error"]
 
 MODEL = "envs.scenic_highway.model"
 """The Scenic world model every scenario is compiled against."""
@@ -234,8 +234,13 @@ def compile_scenario(
     path: Optional[str] = None,
     map_override: Optional[str] = None,
     params: Optional[Dict[str, Any]] = None,
+    origin: Optional[str] = None,
 ) -> CompiledScenario:
     """Compile Scenic ``source`` against the highway-env model (cached per process).
+
+    ``path``: compile that file (``source`` is its text). ``origin``: the file ``source`` was
+    derived from (e.g. upgraded from Scenic 2 syntax); ``localPath`` resolves against it and
+    errors name it.
 
     Raises :class:`ScenarioCompileError` with Scenic's message, the file and the
     line, or :class:`UnsupportedConstructError` when the script relies on
@@ -252,10 +257,10 @@ def compile_scenario(
     digest = hashlib.sha256(
         (source + repr(sorted(overrides.items(), key=lambda kv: kv[0]))).encode()
     ).hexdigest()
-    key = (digest, path)
+    key = (digest, path or origin)
     if key in _CACHE:
         return _CACHE[key]
-    label = path or name
+    label = path or origin or name
     # Every script is untrusted until the allowlist has read it, bank scenarios included (they passed it
     # when added, but the folder may have been edited since); the check shares the compiler's parse.
     # A script the parser cannot read is left to the compiler, whose error names the line.
@@ -270,7 +275,7 @@ def compile_scenario(
             scenario = scenic.scenarioFromFile(path, params=overrides, model=model, mode2D=True)
         else:
             scenario = scenic.scenarioFromString(
-                source, params=overrides, model=model, mode2D=True, filename=name
+                source, params=overrides, model=model, mode2D=True, filename=origin or name
             )
     except Exception as error:  # Scenic raises many kinds; all become one clear error
         raise _compile_error(error, source, label) from None
@@ -289,6 +294,25 @@ def runtime_construct_error(error: NameError, compiled: CompiledScenario) -> Sce
     it gets the same :class:`UnsupportedConstructError` as at compile time.
     """
     return _compile_error(error, compiled.source, compiled.path or compiled.name)
+
+
+def step_timeout_error(overtime: Exception, compiled: CompiledScenario) -> StepTimeoutError:
+    """The error for a simulation step that ran over the env's ``step_time_limit``, naming the
+    script line that was running (the innermost frame of the script)."""
+    label = compiled.path or compiled.name
+    line = None
+    tb = overtime.__traceback__
+    while tb is not None:
+        if tb.tb_frame.f_code.co_filename in (label, os.path.realpath(label)):
+            line = tb.tb_lineno
+        tb = tb.tb_next
+    where = f"{label}, line {line}" if line else label
+    code = _source_line(compiled.source, line) if line else "a behaviour"
+    return StepTimeoutError(
+        f"{where}: one simulation step used over {getattr(overtime, 'seconds', 0):g} s of CPU in `{code}`: a behaviour that "
+        "loops without taking an action (e.g. `while True: do B()` where B returns at once) never ends its time "
+        "step. Make each pass of the loop take an action or `wait`; raise the env's `step_time_limit` if the step "
+        "is only slow.")
 
 
 def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompileError:
@@ -344,11 +368,38 @@ def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompile
             path=label,
             line=line,
         )
+    if "discrete distribution over empty domain" in message:
+        picked = _source_line(source, line)
+        return ScenarioCompileError(
+            f"{where}: `{picked}` picks from an empty set: nothing on this map matches what the script "
+            "filters for (e.g. a 4-way intersection, a lane with a neighbour on its left). Use a map that "
+            "has it (`param map`), or relax the filter.",
+            path=label,
+            line=line,
+        )
+    from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
+
+    if looks_like_scenic2(source, message):
+        first = upgrade_scenic2(source).rewrites[0]
+        return ScenarioCompileError(
+            f"{where}: Scenic 2 syntax: `{first.before.strip()[:80]}` (line {first.line}) creates an object without "
+            "`new`, which Scenic 3 requires. Upgrade the script: the env's config `upgrade_scenic2: True`, or "
+            "`dv2s bank add`, which upgrades it and reports each rewrite.",
+            path=label,
+            line=line,
+        )
     return ScenarioCompileError(
         f"{where}: Scenic could not compile the scenario: {type(error).__name__}: {message}",
         path=label,
         line=line,
     )
+
+
+def _source_line(source: str, line: Optional[int]) -> str:
+    lines = source.splitlines()
+    if line is None or not 1 <= line <= len(lines):
+        return "a choice"
+    return " ".join(lines[line - 1].split())[:80]
 
 
 def _map_being_loaded(error: Exception) -> Optional[str]:

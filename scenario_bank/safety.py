@@ -26,7 +26,9 @@ private state. Frame and code attributes without an underscore (``gi_frame``,
 (``fromFile``, ``dumpPickle``, ``show``...) or change the file system (``touch``,
 ``mkdir``, ``unlink``...) are refused too. ``param map`` is a shipped map name or a
 relative ``.xodr`` path, set before the ``model`` line; ``localPath`` (it returns a
-``pathlib.Path``) may only be such a line's whole value.
+``pathlib.Path``) may only be the whole value of a top-level ``param`` line (the map's, or one
+the model does not open, such as MetaDrive's ``sumo_map``). A bare ``_`` (a throwaway loop
+variable) is the one name starting with ``_`` that is allowed.
 
 Every finding names the line, the construct and the reason. The check is the
 first layer; :mod:`scenario_bank.sandbox` runs what passes it in a child
@@ -245,7 +247,7 @@ def _check_identifier(node: ast.AST, ident: str, is_attribute: bool,
         # does not today, but the check must not depend on which parser compiles the script.
         flag(node, shown, "identifiers must be ASCII (Unicode look-alikes can normalise to other names)")
         return
-    if ident.startswith("_"):
+    if ident.startswith("_") and (is_attribute or ident != "_"):  # a bare `_` is a throwaway loop variable
         flag(node, shown, "names and attributes starting with '_' are not allowed (private or dunder access)")
     elif is_attribute:
         if ident in FRAME_ATTRIBUTES:
@@ -296,7 +298,8 @@ def check_script(source: str, *, absolute_maps: bool = False) -> List[SafetyFind
         kind = type(node).__name__
         if kind == "Name" and node.id == "localPath" and id(node) not in map_calls:
             flag(node, "localPath", "localPath returns a file-system path object; it may only be the whole "
-                                    "value of a `param map = localPath('my_map.xodr')` line before the `model` line")
+                                    "value of a top-level `param` line (`param map = localPath('my_map.xodr')` "
+                                    "before the `model` line)")
             continue
         scenic_node = type(node).__module__.startswith("scenic.")
         if kind in _REFUSED_NODES:
@@ -345,6 +348,8 @@ def _map_local_paths(tree: ast.AST, flag, absolute_maps: bool = False) -> set:
                 continue
             for param in getattr(node, "elts", []):
                 if getattr(param, "identifier", None) != "map":
+                    if node is statement and _is_literal_local_path(param.value):
+                        allowed.add(id(param.value.func))  # e.g. MetaDrive's `param sumo_map = localPath(...)`
                     continue
                 if model_seen or node is not statement:
                     flag(param.value, "param map", "the map must be set at top level before the `model` line")
@@ -353,6 +358,17 @@ def _map_local_paths(tree: ast.AST, flag, absolute_maps: bool = False) -> set:
                 if isinstance(value, ast.Call) and isinstance(value.func, ast.Name) and value.func.id == "localPath":
                     allowed.add(id(value.func))
     return allowed
+
+
+def _is_literal_local_path(value: ast.AST) -> bool:
+    """``localPath('<string literal>')``: a path the script names, as a whole parameter value.
+
+    Only the model reads parameters, and ours opens none but ``map``; a path object left in
+    another parameter can only be reached through attributes and names the check refuses.
+    """
+    return (isinstance(value, ast.Call) and isinstance(value.func, ast.Name) and value.func.id == "localPath"
+            and len(value.args) == 1 and not value.keywords and isinstance(value.args[0], ast.Constant)
+            and isinstance(value.args[0].value, str))
 
 
 def _check_map_value(value: ast.AST, flag, absolute_maps: bool = False) -> None:

@@ -73,7 +73,8 @@ def test_summarize_counts_runs_and_clear_failures():
 def test_corpus_script_runs_in_dv2s_or_names_the_construct(path: Path):
     env = None
     try:
-        env = gym.make("dv2s_gym:DV2S-v0", scenario=str(path))
+        config = {"upgrade_scenic2": True} if path.parent.name == "scenic2" else None
+        env = gym.make("dv2s_gym:DV2S-v0", scenario=str(path), config=config)
         env.reset(seed=0)
         for _ in range(STEPS):
             _, _, terminated, truncated, _ = env.step(1)

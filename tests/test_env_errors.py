@@ -247,3 +247,39 @@ def test_step_after_close():
     env.reset(seed=0)  # and the env can be used again
     env.step(1)
     env.close()
+
+
+SPINNING_BEHAVIOUR = """\
+param map = 'highway_straight'
+model scenic.domains.driving.model
+behavior Maybe():
+    if self.speed < -1:
+        take SetThrottleAction(1)
+behavior Spin():
+    while True:
+        do Maybe()
+ego = new Car with behavior FollowLaneBehavior(target_speed=10)
+other = new Car ahead of ego by 20, with behavior Spin()
+"""
+
+
+def test_a_behaviour_looping_without_an_action_is_stopped_and_named(tmp_path):
+    """Scenic would spin forever in that step; the env's step_time_limit ends it with the line."""
+    import warnings
+
+    from envs.errors import StepTimeoutError
+
+    script = tmp_path / "spin.scenic"
+    script.write_text(SPINNING_BEHAVIOUR)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # Scenic's own StuckBehaviorWarning
+        with pytest.raises(StepTimeoutError, match=r"spin\.scenic, line 8: .*`do Maybe\(\)`.*step_time_limit"):
+            gym.make("dv2s_gym:DV2S-v0", scenario=str(script), config={"step_time_limit": 2})
+    # the process's profiling timer is left as it was: a normal episode runs after it
+    env = gym.make("dv2s_gym:DV2S-v0", scenario="highway_lead_vehicle_brakes", config={"step_time_limit": 2})
+    env.reset(seed=0)
+    for _ in range(5):
+        env.step(1)
+    import signal
+
+    assert signal.getitimer(signal.ITIMER_PROF) == (0.0, 0.0)

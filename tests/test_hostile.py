@@ -181,3 +181,14 @@ def test_the_env_refuses_unsafe_scripts_before_compiling(path, tmp_path):
         with pytest.raises(UnsafeScenarioError, match="failed the safety check"):
             DV2SEnv(scenario=scenario).reset(seed=0)
     assert not marker.exists()
+
+
+def test_foreign_script_idioms_pass_but_what_they_could_reach_stays_refused():
+    """A throwaway `_` and `param sumo_map = localPath(...)` (Scenic's CARLA/MetaDrive examples) are
+    allowed; private attributes on `_`, file methods on such a parameter and a free localPath are not."""
+    fine = ("param map = 'highway_straight'\nparam sumo_map = localPath('../maps/Town01.net.xml')\n"
+            "model scenic.domains.driving.model\nfor _ in range(3):\n    pass\nego = new Car\n")
+    assert check_script(fine) == []
+    hostile = ("param map = 'highway_straight'\nparam sumo_map = localPath('x')\nmodel scenic.domains.driving.model\n"
+               "globalParameters.sumo_map.touch()\nhere = localPath('y')\n_.__class__\n_x = 1\nego = new Car\n")
+    assert sorted(f.construct for f in check_script(hostile)) == [".__class__", ".touch", "_x", "localPath"]

@@ -124,12 +124,17 @@ def test_undirected_lane_change_takes_a_side(monkeypatch):
     assert ["car", "lane_change_right"] in result.elements["actions"]
 
 
-def test_rear_end_collision_places_the_actor_ahead_in_the_ego_lane(monkeypatch):
+def _rear_end() -> ParsedDescription:
+    """"The ego rear-ends a car.", as the parser reads it."""
     ego = Entity("ego")
     car = Entity("car", attrs={"noun": "car"})
     car.add_action("collide")
     car.add_action("collide_rear_end")
-    parsed = ParsedDescription(text="The ego rear-ends a car.", road="straight_road", entities=[ego, car])
+    return ParsedDescription(text="The ego rear-ends a car.", road="straight_road", entities=[ego, car])
+
+
+def test_rear_end_collision_places_the_actor_ahead_in_the_ego_lane(monkeypatch):
+    parsed = _rear_end()
     result = _generate(monkeypatch, parsed)
     assert ["car", "collide"] in result.elements["actions"]
     assert ["car", "ahead_of", "ego"] in result.elements["relations"]
@@ -140,11 +145,7 @@ def test_rear_end_collision_places_the_actor_ahead_in_the_ego_lane(monkeypatch):
 def test_rear_end_collision_happens_with_that_geometry(monkeypatch):
     from dv2s_gym.pipeline.trace_semantics import elements_from_trace
 
-    ego = Entity("ego")
-    car = Entity("car", attrs={"noun": "car"})
-    car.add_action("collide")
-    car.add_action("collide_rear_end")
-    parsed = ParsedDescription(text="The ego rear-ends a car.", road="straight_road", entities=[ego, car])
+    parsed = _rear_end()
     result = _generate(monkeypatch, parsed)
     hits = 0
     for seed in range(3):

@@ -14,8 +14,11 @@ in and set aside when another simulation (or a compilation) needs them.
 
 from __future__ import annotations
 
+import signal
+import threading
+from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, Optional
+from typing import Any, Callable, Dict, Iterator, Optional
 
 import greenlet
 import scenic.syntax.veneer as veneer
@@ -23,7 +26,7 @@ from scenic.core.distributions import RejectionException
 from scenic.core.dynamics import RejectSimulationException
 
 
-__all__ = ["StepOutcome", "ExternalStepper", "release_veneer"]
+__all__ = ["StepOutcome", "ExternalStepper", "release_veneer", "StepOvertime", "step_watchdog"]
 
 _FIELDS = (
     "currentSimulation",
@@ -152,3 +155,41 @@ class ExternalStepper:
         if not self._greenlet.dead and self._greenlet:
             self._greenlet.throw(greenlet.GreenletExit)
         self.done = True
+
+
+class StepOvertime(Exception):
+    """Raised inside a simulation step that ran past :func:`step_watchdog`'s limit."""
+
+    def __init__(self, seconds: float) -> None:
+        super().__init__(f"one simulation step used over {seconds:g} s of CPU time")
+        self.seconds = seconds
+
+
+@contextmanager
+def step_watchdog(seconds: Optional[float]) -> Iterator[None]:
+    """Interrupt the code running in the ``with`` block (a simulation step, whatever greenlet
+    it runs in) with :class:`StepOvertime` once it has used ``seconds`` of CPU time.
+
+    Scenic runs behaviours cooperatively: a behaviour that loops without taking an action
+    (``while True: do B()`` with a ``B`` that returns at once) never hands the step back, and
+    burns CPU. The timer is the process's profiling timer (``ITIMER_PROF``, ``SIGPROF``):
+    Scenic itself uses ``SIGALRM`` for its stuck-behaviour warning, which would cancel a
+    wall-clock timer. Only the main thread takes signals; elsewhere, or with ``seconds``
+    None, nothing is watched. A timer already set by the caller is restored afterwards.
+    """
+    if not seconds or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def overtime(_signum, _frame):
+        raise StepOvertime(float(seconds))
+
+    previous = signal.signal(signal.SIGPROF, overtime)
+    outer_delay, _ = signal.setitimer(signal.ITIMER_PROF, float(seconds))
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_PROF, 0)
+        signal.signal(signal.SIGPROF, previous)
+        if outer_delay:
+            signal.setitimer(signal.ITIMER_PROF, outer_delay)
