@@ -476,10 +476,13 @@ def _interactions(
             if road == "merge":
                 out.add("merge")
     if rel[0, 0] < -2 and rel[-1, 0] > 2:
-        # passing it: with a lane-change event, or (into an oncoming lane, which has no event) a sideways gap
-        # of more than a lane half-width while alongside
+        # passing it: with a lane-change event, or (into an oncoming lane, which has no event) starting in line
+        # behind it and moving out by more than a lane half-width while alongside; a vehicle that drives by
+        # in its own lane beside it is traffic, not an overtake
         alongside = np.abs(rel[:, 0]) <= 3.0
-        if changes or (alongside.any() and np.abs(rel[alongside, 1]).min() > LANE_HALF_WIDTH):
+        swung_out = (abs(rel[0, 1]) <= LANE_HALF_WIDTH and alongside.any()
+                     and np.abs(rel[alongside, 1]).min() > LANE_HALF_WIDTH)
+        if changes or swung_out:
             out.add("overtake")
     if n and _joins_ego_lane_ahead(ego[n - 1], track[0], track[n - 1], rel[-1]):
         out.add("merge")
