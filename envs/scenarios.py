@@ -300,12 +300,7 @@ def step_timeout_error(overtime: Exception, compiled: CompiledScenario) -> StepT
     """The error for a simulation step that ran over the env's ``step_time_limit``, naming the
     script line that was running (the innermost frame of the script)."""
     label = compiled.path or compiled.name
-    line = None
-    tb = overtime.__traceback__
-    while tb is not None:
-        if tb.tb_frame.f_code.co_filename in (label, os.path.realpath(label)):
-            line = tb.tb_lineno
-        tb = tb.tb_next
+    line = _innermost_script_line(overtime, label)
     where = f"{label}, line {line}" if line else label
     code = _source_line(compiled.source, line) if line else "a behaviour"
     return StepTimeoutError(
@@ -315,17 +310,24 @@ def step_timeout_error(overtime: Exception, compiled: CompiledScenario) -> StepT
         "is only slow.")
 
 
+def _innermost_script_line(error: BaseException, label: str) -> Optional[int]:
+    """The line of the innermost frame of ``error``'s traceback that runs the script ``label``."""
+    line = None
+    tb = error.__traceback__
+    while tb is not None:
+        if tb.tb_frame.f_code.co_filename in (label, os.path.realpath(label)):
+            line = tb.tb_lineno
+        tb = tb.tb_next
+    return line
+
+
 def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompileError:
     from envs.scenic_highway.model_support import MissingMapError
 
     message = str(error).strip() or type(error).__name__
     line = getattr(error, "lineno", None)
     if line is None:
-        tb = error.__traceback__
-        while tb is not None:
-            if tb.tb_frame.f_code.co_filename in (label, os.path.realpath(label)):
-                line = tb.tb_lineno
-            tb = tb.tb_next
+        line = _innermost_script_line(error, label)
     where = f"{label}, line {line}" if line else label
     if isinstance(error, MissingMapError):
         return ScenarioCompileError(f"{where}: {message}", path=label, line=line)

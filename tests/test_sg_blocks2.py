@@ -5,29 +5,17 @@ Parses are built per the parser contract so these tests do not depend on how tod
 
 import pytest
 
-from dv2s_gym.pipeline import sg_rules
 from dv2s_gym.pipeline.semantics import Entity, ParsedDescription
 from scenario_bank.safety import check_script
+from sg_helpers import generate_from, run_script
 
 
 def _generate(monkeypatch, parsed: ParsedDescription, seed: int = 0):
-    monkeypatch.setattr(sg_rules, "parse_description", lambda text: parsed)
-    return sg_rules.generate_rules(parsed.text, seed=seed)
+    return generate_from(monkeypatch, parsed, seed)
 
 
 def _run(script, seconds=8.0, seed=0):
-    from envs.dv2s_env import DV2SEnv
-
-    env = DV2SEnv(scenario=script, config={"duration": seconds, "ego_policy": "scenic"})
-    try:
-        env.reset(seed=seed)
-        done = False
-        while not done:
-            _, _, terminated, truncated, _ = env.step(1)
-            done = terminated or truncated
-        return env.unwrapped.trace
-    finally:
-        env.close()
+    return run_script(script, seconds, seed)
 
 
 def _trace_actions(script, who, seeds=range(3), seconds=8.0):

@@ -1,0 +1,26 @@
+"""Helpers of the rules-SG composition tests: generate from a hand-built parse, run a script."""
+
+from dv2s_gym.pipeline import sg_rules
+from dv2s_gym.pipeline.semantics import ParsedDescription
+
+
+def generate_from(monkeypatch, parsed: ParsedDescription, seed: int = 0):
+    """``generate_rules`` on ``parsed`` as if the parser had read its text so."""
+    monkeypatch.setattr(sg_rules, "parse_description", lambda text: parsed)
+    return sg_rules.generate_rules(parsed.text, seed=seed)
+
+
+def run_script(script, seconds: float, seed: int = 0):
+    """The trace of one episode of ``script`` with the script's ego driving, ``seconds`` long."""
+    from envs.dv2s_env import DV2SEnv
+
+    env = DV2SEnv(scenario=script, config={"duration": seconds, "ego_policy": "scenic"})
+    try:
+        env.reset(seed=seed)
+        done = False
+        while not done:
+            _, _, terminated, truncated, _ = env.step(1)
+            done = terminated or truncated
+        return env.unwrapped.trace
+    finally:
+        env.close()
