@@ -7,21 +7,11 @@ import pytest
 
 from dv2s_gym.pipeline.semantics import Entity, ParsedDescription
 from scenario_bank.safety import check_script
-from sg_helpers import generate_from, run_script
+from sg_helpers import generate_from, trace_actions
 
 
 def _generate(monkeypatch, parsed: ParsedDescription, seed: int = 0):
     return generate_from(monkeypatch, parsed, seed)
-
-
-def _run(script, seconds=8.0, seed=0):
-    return run_script(script, seconds, seed)
-
-
-def _trace_actions(script, who, seeds=range(3), seconds=8.0):
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
-
-    return [{a for k, a in elements_from_trace(_run(script, seconds, seed))["actions"] if k == who} for seed in seeds]
 
 
 def _parked_car(*actions, road="straight_road"):
@@ -69,7 +59,7 @@ def test_u_turn_is_placed(monkeypatch):
 @pytest.mark.slow
 def test_pull_out_runs_and_shows_in_the_trace(monkeypatch):
     result = _generate(monkeypatch, _parked_car("pull_out"))
-    hits = sum("pull_out" in acts for acts in _trace_actions(result.script, "car"))
+    hits = sum("pull_out" in acts for acts in trace_actions(result.script, "car"))
     assert hits >= 2, hits
 
 
@@ -77,7 +67,7 @@ def test_pull_out_runs_and_shows_in_the_trace(monkeypatch):
 def test_reversing_out_shows_reverse_and_pull_out(monkeypatch):
     result = _generate(monkeypatch, _parked_car("reverse", "pull_out"))
     assert {"reverse", "pull_out"} <= {a for k, a in result.elements["actions"] if k == "car"}
-    runs = _trace_actions(result.script, "car")
+    runs = trace_actions(result.script, "car")
     assert sum("reverse" in acts for acts in runs) >= 2, runs
     assert sum("pull_out" in acts for acts in runs) >= 2, runs
 
@@ -88,7 +78,7 @@ def test_ego_pull_out_from_the_shoulder_runs(monkeypatch):
     ego.add_action("pull_out")
     parsed = ParsedDescription(text="The ego pulls out of the shoulder.", road="highway", entities=[ego])
     result = _generate(monkeypatch, parsed)
-    hits = sum("pull_out" in acts for acts in _trace_actions(result.script, "ego"))
+    hits = sum("pull_out" in acts for acts in trace_actions(result.script, "ego"))
     assert hits >= 2, hits
 
 
@@ -103,7 +93,7 @@ def test_u_turn_runs_and_shows_in_the_trace(monkeypatch, who):
     parsed = ParsedDescription(text="Someone turns round.", road="straight_road", entities=[ego, car])
     result = _generate(monkeypatch, parsed)
     assert [who, "u_turn"] in result.elements["actions"]
-    hits = sum("u_turn" in acts for acts in _trace_actions(result.script, who, seconds=10.0))
+    hits = sum("u_turn" in acts for acts in trace_actions(result.script, who, seconds=10.0))
     assert hits >= 2, hits
 
 
@@ -141,7 +131,7 @@ def test_the_egos_merge_without_a_ramp_is_a_lane_change(monkeypatch):
 @pytest.mark.slow
 def test_junction_merge_runs_and_shows_in_the_trace(monkeypatch):
     result = _generate(monkeypatch, _junction_merge())
-    hits = sum("merge" in acts for acts in _trace_actions(result.script, "car", seconds=10.0))
+    hits = sum("merge" in acts for acts in trace_actions(result.script, "car", seconds=10.0))
     assert hits >= 2, hits
 
 
@@ -172,27 +162,24 @@ def test_a_swerve_back_into_lane_is_not_a_cut_in(monkeypatch):
     assert any("built as a swerve" in w for w in result.warnings)
 
 
-def test_a_colliding_lane_changer_starts_beside_the_ego(monkeypatch):
+def _colliding_lane_changer() -> ParsedDescription:
+    """"A truck on the left changes lanes into the ego.", as the parser reads it."""
     ego = Entity("ego")
     truck = Entity("truck", attrs={"noun": "truck"})
     truck.add_action("lane_change_right")
     truck.add_action("collide")
     truck.relations.append(("left_of", ego))
-    parsed = ParsedDescription(text="A truck on the left changes lanes into the ego.", road="highway",
-                               entities=[ego, truck])
-    result = _generate(monkeypatch, parsed)
+    return ParsedDescription(text="A truck on the left changes lanes into the ego.", road="highway",
+                             entities=[ego, truck])
+
+
+def test_a_colliding_lane_changer_starts_beside_the_ego(monkeypatch):
+    result = _generate(monkeypatch, _colliding_lane_changer())
     assert "param truck1_offset = Range(0, 2.5)" in result.script
 
 
 @pytest.mark.slow
 def test_a_colliding_lane_changer_sideswipes_the_ego(monkeypatch):
-    ego = Entity("ego")
-    truck = Entity("truck", attrs={"noun": "truck"})
-    truck.add_action("lane_change_right")
-    truck.add_action("collide")
-    truck.relations.append(("left_of", ego))
-    parsed = ParsedDescription(text="A truck on the left changes lanes into the ego.", road="highway",
-                               entities=[ego, truck])
-    result = _generate(monkeypatch, parsed)
-    runs = _trace_actions(result.script, "truck")
+    result = _generate(monkeypatch, _colliding_lane_changer())
+    runs = trace_actions(result.script, "truck")
     assert sum("collide_side" in acts for acts in runs) >= 2, runs

@@ -10,7 +10,7 @@ from dv2s_gym.pipeline.errors import GenerationError
 from dv2s_gym.pipeline.semantics import Entity, ParsedDescription
 from envs.errors import DV2SError
 from scenario_bank.safety import check_script
-from sg_helpers import generate_from, run_script
+from sg_helpers import generate_from, run_script, trace_actions
 
 
 def _generate(monkeypatch, parsed: ParsedDescription, seed: int = 0):
@@ -131,23 +131,15 @@ def test_rear_end_collision_places_the_actor_ahead_in_the_ego_lane(monkeypatch):
 
 @pytest.mark.slow
 def test_rear_end_collision_happens_with_that_geometry(monkeypatch):
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
-
     parsed = _rear_end()
     result = _generate(monkeypatch, parsed)
-    hits = 0
-    for seed in range(3):
-        actions = {a for k, a in elements_from_trace(_run(result.script, seconds=10.0, seed=seed))["actions"]
-                   if k == "car"}
-        hits += "collide_rear_end" in actions
+    hits = sum("collide_rear_end" in acts for acts in trace_actions(result.script, "car", seconds=10.0))
     assert hits >= 2, hits
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("who", ["ego", "car"])
 def test_swerve_runs_and_shows_in_the_trace(monkeypatch, who):
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
-
     ego = Entity("ego")
     car = Entity("car", attrs={"noun": "car"})
     car.relations.append(("ahead_of", ego))
@@ -158,8 +150,7 @@ def test_swerve_runs_and_shows_in_the_trace(monkeypatch, who):
     parsed = ParsedDescription(text="Someone swerves.", road="straight_road", entities=[ego, car])
     result = _generate(monkeypatch, parsed)
     assert [who, "swerve"] in result.elements["actions"]
-    hits = sum("swerve" in {a for k, a in elements_from_trace(_run(result.script, seconds=8.0, seed=seed))["actions"]
-                            if k == who} for seed in range(3))
+    hits = sum("swerve" in acts for acts in trace_actions(result.script, who, seconds=8.0))
     assert hits >= 2, hits
 
 
