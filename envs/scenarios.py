@@ -54,9 +54,16 @@ class CompiledScenario:
     path: Optional[str] = None
     map_override: Optional[str] = None
     digest: str = ""
+    origin: Optional[str] = None
+    """The file an in-memory ``source`` came from (e.g. upgraded from Scenic 2), when not ``path``."""
     _diagnosis_cache: Dict[str, int] = field(default_factory=dict)
     last_iterations: int = 0
     """Rejection-sampling iterations the last :meth:`sample` needed (1 = accepted at once)."""
+
+    @property
+    def label(self) -> str:
+        """What errors name: the file compiled, the file the source came from, or the name."""
+        return self.path or self.origin or self.name
 
     @property
     def map_path(self) -> str:
@@ -280,7 +287,8 @@ def compile_scenario(
     except Exception as error:  # Scenic raises many kinds; all become one clear error
         raise _compile_error(error, source, label) from None
     compiled = CompiledScenario(
-        name=name, source=source, scenario=scenario, path=path, map_override=map_override, digest=digest
+        name=name, source=source, scenario=scenario, path=path, map_override=map_override, digest=digest,
+        origin=origin,
     )
     _CACHE[key] = compiled
     return compiled
@@ -293,13 +301,13 @@ def runtime_construct_error(error: NameError, compiled: CompiledScenario) -> Sce
     CARLA-only action (``SetAutopilotAction``...) surfaces at ``reset``/``step``;
     it gets the same :class:`UnsupportedConstructError` as at compile time.
     """
-    return _compile_error(error, compiled.source, compiled.path or compiled.name)
+    return _compile_error(error, compiled.source, compiled.label)
 
 
 def step_timeout_error(overtime: Exception, compiled: CompiledScenario) -> StepTimeoutError:
     """The error for a simulation step that ran over the env's ``step_time_limit``, naming the
     script line that was running (the innermost frame of the script)."""
-    label = compiled.path or compiled.name
+    label = compiled.label
     line = _innermost_script_line(overtime, label)
     where = f"{label}, line {line}" if line else label
     code = _source_line(compiled.source, line) if line else "a behaviour"

@@ -275,11 +275,17 @@ def test_a_behaviour_looping_without_an_action_is_stopped_and_named(tmp_path):
         warnings.simplefilter("ignore")  # Scenic's own StuckBehaviorWarning
         with pytest.raises(StepTimeoutError, match=r"spin\.scenic, line 8: .*`do Maybe\(\)`.*step_time_limit"):
             gym.make("dv2s_gym:DV2S-v0", scenario=str(script), config={"step_time_limit": 2})
+        # a Scenic 2 script upgraded in memory is still named by its file and line
+        old_style = tmp_path / "spin2.scenic"
+        old_style.write_text(SPINNING_BEHAVIOUR.replace("ego = new Car", "ego = Car"))
+        with pytest.raises(StepTimeoutError, match=r"spin2\.scenic, line 8: .*`do Maybe\(\)`"):
+            gym.make("dv2s_gym:DV2S-v0", scenario=str(old_style), config={"step_time_limit": 2, "upgrade_scenic2": True})
     # the process's profiling timer is left as it was: a normal episode runs after it
     env = gym.make("dv2s_gym:DV2S-v0", scenario="highway_lead_vehicle_brakes", config={"step_time_limit": 2})
     env.reset(seed=0)
     for _ in range(5):
         env.step(1)
+    env.close()
     import signal
 
     assert signal.getitimer(signal.ITIMER_PROF) == (0.0, 0.0)
