@@ -32,6 +32,8 @@ import tokenize
 from dataclasses import dataclass, field
 from typing import Dict, List, Sequence, Set, Tuple
 
+from scenario_bank.scenic2_rules import meaning_edits, syntax_edits
+
 __all__ = ["Rewrite", "Upgrade", "upgrade_scenic2", "looks_like_scenic2", "OBJECT_CLASSES"]
 
 OBJECT_CLASSES: frozenset = frozenset(
@@ -120,6 +122,7 @@ def upgrade_scenic2(source: str) -> Upgrade:
         return Upgrade(source, [], [f"not upgraded: the script cannot be tokenized ({error}); fix its syntax first"])
     classes = set(OBJECT_CLASSES) | _defined_classes(tokens)
     sig = _significant(tokens)
+    lines = source.splitlines(keepends=True)
     # edits: (row, col_start, col_end, replacement, why)
     edits: List[Tuple[int, int, int, str, str]] = []
     created = 0
@@ -129,7 +132,7 @@ def upgrade_scenic2(source: str) -> Upgrade:
         prev = sig[i - 1] if i > 0 else None
         nxt = sig[i + 1] if i + 1 < len(sig) else None
         if tok.string in classes:
-            if prev is not None and prev.string in ("new", ".", "class", "def", "import", "isinstance"):
+            if prev is not None and prev.string in ("new", ".", "class", "def", "import", "isinstance", "constructor"):
                 continue
             at_statement_start = prev is None or prev.type in (tokenize.NEWLINE,) or prev.string == ";"
             before_ok = at_statement_start or prev.string in _BEFORE_CREATION
@@ -145,36 +148,55 @@ def upgrade_scenic2(source: str) -> Upgrade:
     for row, name_end, name in monitors:
         edits.append((row, name_end, name_end, "()",
                       "Scenic 3 monitors take parentheses and are required explicitly"))
-    lines = source.splitlines(keepends=True)
-    rewrites: List[Rewrite] = []
-    by_line: Dict[int, List[Tuple[int, int, str, str]]] = {}
-    for row, c0, c1, text, why in edits:
-        by_line.setdefault(row, []).append((c0, c1, text, why))
-    for row in sorted(by_line):
-        original = lines[row - 1]
-        new = original
-        whys = []
-        for c0, c1, text, why in sorted(by_line[row], reverse=True):
-            new = new[:c0] + text + new[c1:]
-            if why not in whys:
-                whys.insert(0, why)
-        lines[row - 1] = new
-        rewrites.append(Rewrite(row, original.rstrip("\n"), new.rstrip("\n"), "; ".join(whys)))
+    more, syntax_notes = syntax_edits(sig, lines)
+    edits += more
+    notes: List[str] = list(monitor_notes) + syntax_notes
+    changed: Dict[int, Tuple[str, List[str]]] = {}  # row -> (original line, reasons)
+    lines = _apply(lines, edits, changed)
+    appended: List[Rewrite] = []
     if monitors:
         if lines and not lines[-1].endswith("\n"):
             lines[-1] += "\n"
         for _, _, name in monitors:
             added = f"require monitor {name}()"
             lines.append(added + "\n")
-            rewrites.append(Rewrite(len(lines), "", added,
+            appended.append(Rewrite(len(lines), "", added,
                                     f"a Scenic 2 monitor ran by being defined; Scenic 3 runs {name} only when required"))
-    notes: List[str] = list(monitor_notes)
+    if edits:  # the script is Scenic 2: also rewrite the forms whose meaning changed in Scenic 3
+        upgraded = "".join(lines)
+        sig3 = _significant(_tokens(upgraded))
+        meaning, meaning_notes = meaning_edits(sig3, lines)
+        lines = _apply(lines, meaning, changed)
+        notes += meaning_notes
+    rewrites = [Rewrite(row, before.rstrip("\n"), lines[row - 1].rstrip("\n"), "; ".join(whys))
+                for row, (before, whys) in sorted(changed.items())] + appended
     if created:
         notes.append(
             "requireVisible: Scenic 2 required objects to be visible from ego by default; Scenic 3 keeps "
             "that only in 2D mode (the env compiles with mode2D=True); no 'with requireVisible' was added"
         )
     return Upgrade("".join(lines), rewrites, notes)
+
+
+def _apply(lines: List[str], edits: Sequence[Tuple[int, int, int, str, str]],
+           changed: Dict[int, Tuple[str, List[str]]]) -> List[str]:
+    """``lines`` with the same-line ``edits`` applied; ``changed`` collects each row's original and reasons."""
+    lines = list(lines)
+    by_line: Dict[int, List[Tuple[int, int, str, str]]] = {}
+    for row, c0, c1, text, why in edits:
+        by_line.setdefault(row, []).append((c0, c1, text, why))
+    for row in sorted(by_line):
+        original = lines[row - 1]
+        before, whys = changed.setdefault(row, (original, []))
+        new = original
+        added = []
+        for c0, c1, text, why in sorted(by_line[row], reverse=True):
+            new = new[:c0] + text + new[c1:]
+            if why not in whys and why not in added:
+                added.insert(0, why)
+        whys.extend(added)
+        lines[row - 1] = new
+    return lines
 
 
 def _old_monitors(sig: Sequence[tokenize.TokenInfo]) -> Tuple[List[Tuple[int, int, str]], List[str]]:

@@ -46,10 +46,10 @@ def test_bare_creation_gets_new_everywhere_it_creates():
     assert upgrade.source == textwrap.dedent(
         """\
         ego = new Car at (0, 0)   # Car here is a comment
-        new Car ahead of ego by 10
+        new Car ahead of ego by 10 - ego.length / 2
         spot = new OrientedPoint on curb
         p = (new Point on road).position
-        cars = [new Car behind ego, new Car left of ego]
+        cars = [new Car behind ego by -ego.length / 2, new Car left of ego by -ego.width / 2]
         name = "Car at (1, 2)"
         lone = new Car
         def f():
@@ -57,8 +57,10 @@ def test_bare_creation_gets_new_everywhere_it_creates():
         """
     )
     assert [r.line for r in upgrade.rewrites] == [1, 2, 3, 4, 5, 7, 9]
-    assert upgrade.rewrites[4].after.strip() == "cars = [new Car behind ego, new Car left of ego]"
+    assert upgrade.rewrites[4].after.strip() == ("cars = [new Car behind ego by -ego.length / 2, "
+                                                 "new Car left of ego by -ego.width / 2]")
     assert all("new" in r.why for r in upgrade.rewrites)
+    assert "from ego's edge, Scenic 2 from its centre" in upgrade.rewrites[1].why
     assert any("requireVisible" in n for n in upgrade.notes)
 
 
