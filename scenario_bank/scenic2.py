@@ -98,7 +98,7 @@ def _tokens(source: str) -> List[tokenize.TokenInfo]:
 def _defined_classes(tokens: Sequence[tokenize.TokenInfo]) -> Set[str]:
     names = set()
     for i, tok in enumerate(tokens[:-1]):
-        if tok.type == tokenize.NAME and tok.string == "class" and tokens[i + 1].type == tokenize.NAME:
+        if tok.type == tokenize.NAME and tok.string in ("class", "constructor") and tokens[i + 1].type == tokenize.NAME:
             names.add(tokens[i + 1].string)
     return names
 
@@ -110,8 +110,12 @@ def _significant(tokens: Sequence[tokenize.TokenInfo]) -> List[tokenize.TokenInf
     return [t for t in tokens if t.type not in _SKIP and t.type != tokenize.ENCODING]
 
 
-def upgrade_scenic2(source: str) -> Upgrade:
+def upgrade_scenic2(source: str, *, keep_scenic2_meaning: bool = True) -> Upgrade:
     """Rewrite Scenic 2 constructs in ``source`` to Scenic 3; see the module docstring for the rules.
+
+    ``keep_scenic2_meaning`` (default): in a script found to be Scenic 2, also rewrite the specifiers
+    Scenic 3 reads differently (:func:`scenario_bank.scenic2_rules.meaning_edits`) so it samples the
+    scenes Scenic 2 did; False rewrites only the syntax Scenic 3 refuses.
 
     Idempotent: applying it to its own output changes nothing, and Scenic 3
     source comes back unchanged with no rewrites.
@@ -162,7 +166,7 @@ def upgrade_scenic2(source: str) -> Upgrade:
             lines.append(added + "\n")
             appended.append(Rewrite(len(lines), "", added,
                                     f"a Scenic 2 monitor ran by being defined; Scenic 3 runs {name} only when required"))
-    if edits:  # the script is Scenic 2: also rewrite the forms whose meaning changed in Scenic 3
+    if edits and keep_scenic2_meaning:  # a Scenic 2 script: also the forms whose meaning changed
         upgraded = "".join(lines)
         sig3 = _significant(_tokens(upgraded))
         meaning, meaning_notes = meaning_edits(sig3, lines)
