@@ -187,6 +187,9 @@ def test_bank_add_upgrades_and_prints_rewrites(tmp_path, capsys):
     assert entry["name"] == "old" and len(entry["scenic2_rewrites"]) == 2
     stored = Path(entry["path"]).read_text()
     assert "ego = new Car at" in stored and "\nnew Car following" in stored
+    from scenario_bank.bank import Bank
+
+    assert Bank(tmp_path / "bank").get("old").source["scenic2_rewrites"] == entry["scenic2_rewrites"]
 
 
 def test_llm_repair_loop_upgrades_scenic2_without_a_repair_round():
