@@ -4,9 +4,16 @@ Scenic 2 created objects with a bare class name (``ego = Car at p``,
 ``Car ahead of ego`` as a statement, ``Point on road`` inside an expression);
 Scenic 3 needs ``new`` before the class. A Scenic 2 ``monitor Name:`` ran by
 being defined; Scenic 3 writes ``monitor Name():`` and runs it only under
-``require monitor Name()``, which is appended. The rules are applied on Python tokens, so
-comments, strings, behaviours, ``compose`` and ``monitor`` blocks and
-multi-line specifiers are handled as code is, and a Scenic 3 script (which
+``require monitor Name()``, which is appended. The other rules (durations without
+a unit, the old ``mutate`` and ``constructor`` forms, and the specifiers Scenic 3
+reads differently: ``offset by``/``offset along``, ``beyond``, ``apparently facing``,
+``left of``/``right of``/``ahead of``/``behind`` an object, ``with heading`` and class
+``heading`` defaults) are in :mod:`scenario_bank.scenic2_rules`, which also lists what
+was checked and needs no rewrite (``on``, ``visible``, ``simulation()`` and others).
+The meaning rules only apply to a script found to be Scenic 2 (some syntax rule
+fired), so a Scenic 3 script keeps its Scenic 3 meaning. The rules are applied on
+Python tokens, so comments, strings, behaviours, ``compose`` and ``monitor`` blocks
+and multi-line specifiers are handled as code is, and a Scenic 3 script (which
 already says ``new``) comes out byte-for-byte unchanged.
 
 What the translator does not rewrite it reports in :attr:`Upgrade.notes`
@@ -18,9 +25,9 @@ What the translator does not rewrite it reports in :attr:`Upgrade.notes`
   The translator does not add ``with requireVisible True``; it notes it.
 * a class name used as a value (``x = Car`` with nothing after it is creation in
   Scenic 2 and is rewritten; ``isinstance(o, Car)`` is a reference and is not).
-* ``with heading H``: Scenic 3 refuses it in 3D mode ("property heading cannot
-  be directly specified") but accepts it, with Scenic 2's meaning, in 2D mode
-  (Scenic 3.1.1's own examples use it), so it is left alone.
+* ``left of X``/``ahead of X``... when the script does not show whether ``X`` is an
+  object (measured from its centre in Scenic 2, its edge in Scenic 3), ``beyond``
+  with an operand that would be sampled twice, ``mutate`` of a non-name.
 * a source the tokenizer cannot read is returned unchanged with the reason.
 """
 
@@ -46,6 +53,11 @@ OBJECT_CLASSES: frozenset = frozenset(
         "VendingMachine", "Bench", "Advertisement", "Container", "Table", "ATM", "PlasticBag",
         "IronPlate", "Barrel", "CreasedBox", "Case", "Mailbox", "Gnome", "Iceguard", "BusStop",
         "EgoCar", "BoxCar", "NPCPedestrian", "ToyotaPrius", "MercedesCar",
+        # the other classes of Scenic 3.1.1's simulator models (Webots, LGSVL, X-Plane, Newtonian, CARLA)
+        "ApolloCar", "BmwX", "CitroenCZero", "Compact", "Ground", "Hill", "LGSVLObject", "LincolnMKZ",
+        "NewtonianActor", "OilBarrel", "Plane", "PlantPot", "RangeRoverSportSVR", "SmallCar", "SolidBox",
+        "Terrain", "Tractor", "TrafficWarning", "Van", "WebotsObject", "WorkBarrier", "CarlaActor",
+        "MetaDriveActor",
     }
 )
 """Class names that create an object when written bare in Scenic 2 (plus classes the script defines)."""

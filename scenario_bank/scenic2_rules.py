@@ -294,7 +294,8 @@ def _directional(sig, lines, a, b, objects, points) -> Tuple[Optional[Edit], Opt
     row = sig[a].start[0]
     dim = _DIRECTIONAL[word]
     if len(ref) != 1 or ref[0].type != tokenize.NAME:
-        if ref and ref[-1].string != "position" and not _is_vector_literal(ref):
+        vector = _is_vector_literal(ref) or any(t.string in ("offset", "@", "position") for t in ref)
+        if ref and not vector:  # 'X offset by V', 'a @ b', 'X.position' are vectors: same meaning
             return None, (f"line {row}: check: if `{' '.join(t.string for t in ref)}` is an object, Scenic 3 "
                           f"measures '{word}' from its edge, Scenic 2 from its centre (subtract its {dim} / 2)")
         return None, None

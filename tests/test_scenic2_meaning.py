@@ -175,3 +175,28 @@ def test_scenic3_scripts_keep_scenic3_meaning():
     source = "ego = new Car at (0, 0)\nnew Car ahead of ego by 10\nnew Car offset by (3, 0)\nterminate after 5 seconds\n"
     upgrade = upgrade_scenic2(source)
     assert upgrade.source == source and upgrade.rewrites == [] and upgrade.notes == []
+
+
+def test_real_script_ahead_of_ego_keeps_scenic2_placement():
+    """iccv_2_agent_scenario.scenic (``Car ahead of ego by Range(3, 5)``): Scenic 2.1.0 put the car's rear
+    3-5 m ahead of ego's centre (20 recorded samples); upgraded, Scenic 3.1.1 does too, the syntax-only
+    upgrade puts it 3-5 m ahead of ego's front bumper instead."""
+    import random
+
+    import numpy
+    import scenic
+
+    recorded = json.loads((HERE / "reference.json").read_text())["iccv_2_agent_scenario"]["ahead_offsets"]
+    assert len(recorded) == 20 and all(abs(x) < 1e-6 and 3 <= y <= 5 for x, y in recorded)
+    source = (ROOT / "tests" / "data" / "scenic2" / "iccv_2_agent_scenario.scenic").read_text()
+    for keep in (True, False):
+        scenario = scenic.scenarioFromString(upgrade_scenic2(source, keep_scenic2_meaning=keep).source,
+                                             params={"map": TOWN01}, mode2D=True)
+        for seed in range(4):
+            random.seed(seed)
+            numpy.random.seed(seed)
+            scene, _ = scenario.generate(maxIterations=2000)
+            ego, car = scene.objects[0], scene.objects[1]
+            local = (car.position - ego.position).rotatedBy(-ego.heading)
+            shift = 0 if keep else ego.length / 2  # Scenic 3 measures from ego's front bumper
+            assert abs(local.x) < 1e-6 and 3 + shift <= local.y - car.length / 2 <= 5 + shift

@@ -8,7 +8,10 @@ It compiles every case's Scenic 2 ``source`` with Scenic 2.1.0, samples one scen
 deterministic: no random values, or only ones the recorded fields do not depend on), records each
 object's x, y, heading (degrees), width, length and mutationScale, and for cases with ``simulate``
 runs Scenic 2's DummySimulator for at most 200 steps and records the final ``currentTime`` (steps);
-it writes them into ``reference.json`` next to this file. ``tests/test_scenic2_meaning.py`` upgrades
+it writes them into ``reference.json`` next to this file. For the real script
+``iccv_2_agent_scenario.scenic`` (``Car ahead of ego by Range(3, 5)``) it samples 20 scenes and records
+where the second car is in ego's frame: its lateral offset and its longitudinal offset minus half its
+length (Scenic 2 measured ``by`` from ego's centre, so the latter lies in [3, 5]). ``tests/test_scenic2_meaning.py`` upgrades
 each source to Scenic 3 and checks that Scenic 3.1.1 reproduces these values.
 """
 
@@ -41,6 +44,23 @@ def main():
             record["steps"] = simulation.currentTime
         out["cases"][name] = record
         print(name, record)
+    import random
+
+    import numpy
+
+    script = (HERE.parent / "iccv_2_agent_scenario.scenic").read_text()
+    params = {"map": str(HERE.parents[1] / "maps" / "CARLA" / "Town01.xodr")}
+    scenario = scenic.scenarioFromString(script, params=params)
+    offsets = []
+    for seed in range(20):
+        random.seed(seed)
+        numpy.random.seed(seed)
+        scene, _ = scenario.generate(maxIterations=2000)
+        ego, car = scene.objects[0], scene.objects[1]
+        local = (car.position - ego.position).rotatedBy(-ego.heading)
+        offsets.append([round(float(local.x), 6), round(float(local.y - car.length / 2), 6)])
+    out["iccv_2_agent_scenario"] = {"ahead_offsets": offsets}
+    print("iccv_2_agent_scenario", offsets)
     (HERE / "reference.json").write_text(json.dumps(out, indent=1, sort_keys=True) + "\n")
 
 
