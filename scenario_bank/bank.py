@@ -169,7 +169,7 @@ def _verify_or_name_scenic2(script: str, label: str, upgraded: bool) -> None:
             from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
 
             if looks_like_scenic2(script, str(error)):
-                first = upgrade_scenic2(script).rewrites[0]
+                first = upgrade_scenic2(script, keep_scenic2_meaning=False).rewrites[0]  # refused in 3
                 raise ScenarioRejectedError(
                     f"not added: {label} is Scenic 2: line {first.line}: `{first.before.strip()[:80]}` ({first.why}); "
                     "pass upgrade_scenic2=True to Bank.add to upgrade it to Scenic 3 (each rewrite is recorded in "

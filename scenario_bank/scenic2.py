@@ -178,12 +178,18 @@ def upgrade_scenic2(source: str, *, keep_scenic2_meaning: bool = True) -> Upgrad
             lines.append(added + "\n")
             appended.append(Rewrite(len(lines), "", added,
                                     f"a Scenic 2 monitor ran by being defined; Scenic 3 runs {name} only when required"))
-    if edits and keep_scenic2_meaning:  # a Scenic 2 script: also the forms whose meaning changed
-        upgraded = "".join(lines)
-        sig3 = _significant(_tokens(upgraded))
+    if edits and keep_scenic2_meaning:  # also the forms whose meaning changed in Scenic 3
+        sig3 = _significant(_tokens("".join(lines)))
         meaning, meaning_notes = meaning_edits(sig3, lines)
-        lines = _apply(lines, meaning, changed)
-        notes += meaning_notes
+        # only a script written for Scenic 2 throughout (bare creations or old monitors, no 'new') means them
+        # as Scenic 2 did; in one mixing 'new' with old forms they keep their Scenic 3 meaning, noted
+        scenic2_throughout = bool(created or monitors) and not _uses_new(sig)
+        if scenic2_throughout:
+            lines = _apply(lines, meaning, changed)
+            notes += meaning_notes
+        else:
+            notes += [f"line {row}: kept as Scenic 3 reads it, the script also uses 'new': {why}"
+                      for row, _, _, _, why in sorted(meaning)]
     rewrites = [Rewrite(row, before.rstrip("\n"), lines[row - 1].rstrip("\n"), "; ".join(whys))
                 for row, (before, whys) in sorted(changed.items())] + appended
     if created:
@@ -192,6 +198,11 @@ def upgrade_scenic2(source: str, *, keep_scenic2_meaning: bool = True) -> Upgrad
             "that only in 2D mode (the env compiles with mode2D=True); no 'with requireVisible' was added"
         )
     return Upgrade("".join(lines), rewrites, notes)
+
+
+def _uses_new(sig: Sequence[tokenize.TokenInfo]) -> bool:
+    """Whether the script already creates an object with Scenic 3's ``new``."""
+    return any(tok.string == "new" and nxt.type == tokenize.NAME for tok, nxt in zip(sig, sig[1:]))
 
 
 def _apply(lines: List[str], edits: Sequence[Tuple[int, int, int, str, str]],
@@ -232,7 +243,7 @@ def _old_monitors(sig: Sequence[tokenize.TokenInfo]) -> Tuple[List[Tuple[int, in
 
 _SCENIC2_ERRORS = re.compile(
     r"(invalid syntax|unexpected token|2\.0-style|monitor must be converted|ScenicParseError|"
-    r"instance creation|specifier)", re.IGNORECASE
+    r"instance creation|specifier|duration must specify a unit)", re.IGNORECASE
 )
 
 

@@ -45,3 +45,24 @@ def test_add_or_merge_upgrades_too(tmp_path):
     outcome = Bank(tmp_path / "bank").add_or_merge(HIGHWAY_SCENIC2, "A car ahead on a highway.", name="old",
                                                     upgrade_scenic2=True)
     assert outcome.entry.source["scenic2_rewrites"] and "new Car" in outcome.entry.script
+
+
+def test_env_names_a_scenic2_duration_as_the_construct(tmp_path):
+    """A Scenic 2 script whose only Scenic 2 syntax is a duration without a unit: the env says so."""
+    import gymnasium as gym
+
+    from envs.errors import ScenarioCompileError
+    from scenario_bank.scenic2 import upgrade_scenic2
+
+    scenic3 = upgrade_scenic2(HIGHWAY_SCENIC2).source
+    script = tmp_path / "old.scenic"
+    script.write_text(scenic3 + "terminate after 5\n")
+    with pytest.raises(ScenarioCompileError) as caught:
+        gym.make("dv2s_gym:DV2S-v0", scenario=str(script), config={"duration": 1.0})
+    message = str(caught.value)
+    assert "Scenic 2 syntax: `terminate after 5` (line 8)" in message and "needs the unit" in message
+    assert "upgrade_scenic2: True" in message
+    env = gym.make("dv2s_gym:DV2S-v0", scenario=str(script), config={"duration": 1.0, "upgrade_scenic2": True})
+    env.reset(seed=0)
+    env.step(1)
+    env.close()

@@ -200,3 +200,11 @@ def test_real_script_ahead_of_ego_keeps_scenic2_placement():
             local = (car.position - ego.position).rotatedBy(-ego.heading)
             shift = 0 if keep else ego.length / 2  # Scenic 3 measures from ego's front bumper
             assert abs(local.x) < 1e-6 and 3 + shift <= local.y - car.length / 2 <= 5 + shift
+
+
+def test_a_script_mixing_new_with_old_forms_keeps_scenic3_meaning_and_says_so():
+    source = "ego = new Car at (0, 0)\nnew Car ahead of ego by 10\nterminate after 5\n"
+    upgrade = upgrade_scenic2(source)
+    assert upgrade.source == "ego = new Car at (0, 0)\nnew Car ahead of ego by 10\nterminate after 5 seconds\n"
+    assert [r.line for r in upgrade.rewrites] == [3]
+    assert any(n.startswith("line 2: kept as Scenic 3 reads it, the script also uses 'new'") for n in upgrade.notes)
