@@ -35,13 +35,15 @@ places the base on the region, but 2D mode zeroes ``baseOffset``), ``visible``/`
 see`` (2D mode restores centre-only, occlusion-free checks), ``in R``, ``following``, ``facing``,
 ``facing toward``, ``require[p]``, ``workspace``, ``interrupt when``, ``do ... until``, ``x @ y``. The
 simulation-time API is the same in both versions: ``simulation().currentTime`` counts steps,
-``.timestep`` is seconds per step, ``.currentRealTime``, ``.objects``, ``.agents`` all exist in both.
+``.timestep`` is seconds per step, ``.currentRealTime``, ``.objects``, ``.agents`` all exist in both;
+what differs is the step length between simulators, so each ``simulation().currentTime`` of a Scenic 2
+script gets a note (its authors assumed CARLA's 0.1 s steps).
 """
 
 from __future__ import annotations
 
 import tokenize
-from typing import Dict, List, Optional, Sequence, Set, Tuple
+from typing import List, Optional, Sequence, Set, Tuple
 
 __all__ = ["Edit", "syntax_edits", "meaning_edits"]
 
@@ -264,7 +266,18 @@ def meaning_edits(sig: Sequence[Tok], lines: Sequence[str]) -> Tuple[List[Edit],
             edits += [edit] if edit else []
             notes += [note] if note else []
     edits += _class_heading_defaults(sig)
+    notes += _step_counts(sig)
     return edits, notes
+
+
+def _step_counts(sig: Sequence[Tok]) -> List[str]:
+    """Notes on ``simulation().currentTime``: a step count whose step length is the simulator's."""
+    rows = sorted({sig[i].start[0] for i in range(len(sig) - 4)
+                   if sig[i].string == "simulation" and sig[i + 1].string == "(" and sig[i + 2].string == ")"
+                   and sig[i + 3].string == "." and sig[i + 4].string == "currentTime"})
+    return [f"line {row}: check: simulation().currentTime counts steps in Scenic 2 and 3 alike, but a step lasts "
+            "the simulator's timestep (CARLA and LGSVL scripts assume 0.1 s; DV2S-v0 steps 1/policy_frequency s); "
+            "simulation().currentRealTime is in seconds" for row in rows]
 
 
 def _beyond(sig, lines, a, b) -> Tuple[Optional[Edit], Optional[str]]:

@@ -208,3 +208,10 @@ def test_a_script_mixing_new_with_old_forms_keeps_scenic3_meaning_and_says_so():
     assert upgrade.source == "ego = new Car at (0, 0)\nnew Car ahead of ego by 10\nterminate after 5 seconds\n"
     assert [r.line for r in upgrade.rewrites] == [3]
     assert any(n.startswith("line 2: kept as Scenic 3 reads it, the script also uses 'new'") for n in upgrade.notes)
+
+
+def test_simulation_current_time_is_noted_not_rewritten():
+    source = (ROOT / "tests" / "data" / "scenic2" / "oas_scenario_04.scenic").read_text()
+    upgrade = upgrade_scenic2(source)
+    assert "simulation().currentTime > 5 * STEPS_PER_SEC" in upgrade.source
+    assert any(n.startswith("line 18: check: simulation().currentTime counts steps") for n in upgrade.notes)
