@@ -215,3 +215,50 @@ def test_simulation_current_time_is_noted_not_rewritten():
     upgrade = upgrade_scenic2(source)
     assert "simulation().currentTime > 5 * STEPS_PER_SEC" in upgrade.source
     assert any(n.startswith("line 18: check: simulation().currentTime counts steps") for n in upgrade.notes)
+
+
+HIGHWAY_RULES = textwrap.dedent(
+    """\
+    param map = 'highway_straight'
+    model scenic.domains.driving.model
+    lane = Uniform(*network.lanes)
+    ego = Car at lane.centerline.pointAlongBy(200), facing 4 deg relative to roadDirection,
+        with speed 20
+    lead = Car ahead of ego by 12, with speed 15
+    follower = Car behind ego by 10
+    far = Car offset by (0, 40)
+    terminate after 3
+    """
+)
+
+
+def test_highway_model_script_keeps_scenic2_placements_and_runs_in_the_env():
+    """On the env's highway model (compile_scenario: allowlist, mode2D): Scenic 2 put lead's centre
+    12 + lead.length / 2 ahead of ego's centre, the follower 10 + its half length behind, and ``far``
+    (``offset by``) on the road direction, not ego's 4-degree-off heading. The upgraded script does."""
+    import random
+
+    import gymnasium as gym
+    import numpy
+
+    from envs.scenarios import compile_scenario
+
+    upgrade = upgrade_scenic2(HIGHWAY_RULES)
+    assert "terminate after 3 seconds" in upgrade.source and "far = new Car at ego offset by (0, 40)" in upgrade.source
+    scenario = compile_scenario(upgrade.source, name="scenic2_highway_rules").scenario
+    random.seed(0)
+    numpy.random.seed(0)
+    scene, _ = scenario.generate(maxIterations=500)
+    ego, lead, follower, far = scene.objects
+    local = [(o.position - ego.position).rotatedBy(-ego.heading) for o in (lead, follower, far)]
+    assert abs(local[0].y - (12 + lead.length / 2)) < 1e-6 and abs(local[1].y + (10 + follower.length / 2)) < 1e-6
+    assert all(abs(v.x) < 1e-6 for v in local) and abs(local[2].y - 40) < 1e-6
+    assert abs(math.degrees(far.heading - ego.heading) + 4) < 1e-3
+    env = gym.make("dv2s_gym:DV2S-v0", scenario=HIGHWAY_RULES, config={"upgrade_scenic2": True, "duration": 1.0})
+    try:
+        env.reset(seed=0)
+        for _ in range(3):
+            env.step(1)
+        assert len(env.unwrapped.road.vehicles) == 4
+    finally:
+        env.close()
