@@ -216,8 +216,8 @@ def _object_names(sig: Sequence[Tok]) -> Tuple[Set[str], Set[str]]:
     return objects, points - objects
 
 
-def _specifiers(sig: Sequence[Tok]) -> List[Tuple[int, int, int]]:
-    """``(creation_end, start, end)`` index ranges of each specifier of every ``new Class ...``."""
+def _specifiers(sig: Sequence[Tok]) -> List[Tuple[int, int]]:
+    """``(start, end)`` index ranges of each specifier of every ``new Class ...``."""
     found = []
     for i in range(len(sig) - 2):
         if not (sig[i].string == "new" and sig[i + 1].type == tokenize.NAME):
@@ -233,8 +233,7 @@ def _specifiers(sig: Sequence[Tok]) -> List[Tuple[int, int, int]]:
                 k += 1
             if not (k < len(sig) and sig[k].type == tokenize.NAME and sig[k].string in _SPEC_START):
                 break
-        if specs:
-            found += [(specs[-1][1], a, b) for a, b in specs]
+        found += specs
     return found
 
 
@@ -243,7 +242,8 @@ def meaning_edits(sig: Sequence[Tok], lines: Sequence[str]) -> Tuple[List[Edit],
     edits: List[Edit] = []
     notes: List[str] = []
     objects, points = _object_names(sig)
-    for creation_end, a, b in _specifiers(sig):
+    vectors = _vector_names(sig)
+    for a, b in _specifiers(sig):
         words = [t.string for t in sig[a:min(b, a + 2)]]
         row = sig[a].start[0]
         if words == ["offset", "by"] or words == ["offset", "along"]:
@@ -258,7 +258,7 @@ def meaning_edits(sig: Sequence[Tok], lines: Sequence[str]) -> Tuple[List[Edit],
             edits.append(_replace(sig, a, a + 2, "facing",
                                   "Scenic 3 derives heading from orientation: 'with heading' is 'facing'"))
         elif words and words[0] == "beyond":
-            edit, note = _beyond(sig, lines, a, b)
+            edit, note = _beyond(sig, lines, a, b, vectors)
             edits += [edit] if edit else []
             notes += [note] if note else []
         elif words and words[0] in _DIRECTIONAL and (words[0] == "behind" or words[1:] == ["of"]):
@@ -280,7 +280,17 @@ def _step_counts(sig: Sequence[Tok]) -> List[str]:
             "simulation().currentRealTime is in seconds" for row in rows]
 
 
-def _beyond(sig, lines, a, b) -> Tuple[Optional[Edit], Optional[str]]:
+def _vector_names(sig: Sequence[Tok]) -> Set[str]:
+    """Names a statement ``NAME = (a, b)`` or ``NAME = a @ b`` binds."""
+    found = set()
+    for i in _statement_starts(sig):
+        if i + 2 < len(sig) and sig[i].type == tokenize.NAME and sig[i + 1].string == "=":
+            if _is_vector_literal(sig[i + 2:_scan(sig, i + 2, comma=False)]):
+                found.add(sig[i].string)
+    return found
+
+
+def _beyond(sig, lines, a, b, vectors: Set[str]) -> Tuple[Optional[Edit], Optional[str]]:
     by = _scan(sig, a + 1, stops={"by"})
     if by >= b or sig[by].string != "by":
         return None, None
@@ -293,7 +303,8 @@ def _beyond(sig, lines, a, b) -> Tuple[Optional[Edit], Optional[str]]:
     if not (_is_plain(x) and (z is None or _is_plain(z)) and x_text and d_text and z_text):
         return None, (f"line {row}: not translated: 'beyond' sets parentOrientation in Scenic 3, dropping the "
                       "class-default heading Scenic 2 kept; add 'facing' if the heading matters")
-    offset = d_text if _is_vector_literal(d) else f"(0, {d_text})"
+    vector = _is_vector_literal(d) or (len(d) == 1 and d[0].string in vectors)
+    offset = d_text if vector else f"(0, {d_text})"  # Scenic 2 read a number as a distance along the sight line
     new = f"at {x_text} offset along (angle from {z_text} to {x_text}) by {offset}"
     return _replace(sig, a, b, new, "Scenic 3's 'beyond' also sets parentOrientation; this is the position "
                                     "Scenic 2 computed, with its class-default heading"), None

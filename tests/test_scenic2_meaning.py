@@ -25,8 +25,9 @@ TOWN01 = str(ROOT / "tests" / "data" / "maps" / "CARLA" / "Town01.xodr")
 
 # cases where Scenic 3.1.1 reads the Scenic 2 specifier differently (the syntax-only upgrade is wrong)
 MEANING_CHANGED = ["offset_by", "offset_along", "beyond_distance", "beyond_vector", "beyond_from",
-                   "apparently_facing", "apparently_facing_from", "left_of_ego", "right_of_ego_vector",
-                   "ahead_of_ego_range", "behind_ego_touching", "left_of_named_object", "car_offset_by_on_road"]
+                   "beyond_named_vector", "apparently_facing", "apparently_facing_from", "left_of_ego",
+                   "right_of_ego_vector", "ahead_of_ego_range", "behind_ego_touching", "left_of_named_object",
+                   "car_offset_by_on_road"]
 
 
 def _sample(source, case):
@@ -172,7 +173,8 @@ def test_syntax_rules_durations_mutate_constructor():
 
 def test_scenic3_scripts_keep_scenic3_meaning():
     """A valid Scenic 3 script using the same specifiers is not Scenic 2: it is left alone."""
-    source = "ego = new Car at (0, 0)\nnew Car ahead of ego by 10\nnew Car offset by (3, 0)\nterminate after 5 seconds\n"
+    source = ("ego = new Car at (0, 0)\nnew Car ahead of ego by 10\nnew Car offset by (3, 0)\n"
+              "terminate after 5 seconds\n")
     upgrade = upgrade_scenic2(source)
     assert upgrade.source == source and upgrade.rewrites == [] and upgrade.notes == []
 
