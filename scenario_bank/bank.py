@@ -624,7 +624,7 @@ class Bank:
         map: Optional[str] = None,
         provenance: Optional[Mapping[str, Any]] = None,
         use_case: Optional[str] = None,
-    upgrade_scenic2: bool = False,
+        upgrade_scenic2: bool = False,
     ) -> ScenarioEntry:
         """Add a scenario atomically; returns the new entry.
 
@@ -694,7 +694,7 @@ class Bank:
         map: Optional[str] = None,
         provenance: Optional[Mapping[str, Any]] = None,
         use_case: Optional[str] = None,
-    upgrade_scenic2: bool = False,
+        upgrade_scenic2: bool = False,
     ) -> AddOutcome:
         """Add a scenario, or merge it into the entry it duplicates; one atomic step under the writers' lock.
 
