@@ -212,7 +212,7 @@ def test_llm_repair_loop_upgrades_scenic2_without_a_repair_round():
 # corpus scripts whose constructs DV2S-v0 provides: upgraded, with their map line swapped to the shipped
 # urban_crossroads (the allowlist refuses their '../..' paths), they sample and run a few steps
 RUNS_IN_ENV = ["badlyParkedCarPullingIn", "car", "carlaChallenge2", "carlaChallenge3", "oas_scenario_03",
-               "oas_scenario_04", "pedestrianAcrossRoad"]
+               "oas_scenario_04", "pedestrianAcrossRoad", "iccv_2_agent_scenario"]
 
 
 @pytest.mark.slow
