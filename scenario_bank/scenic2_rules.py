@@ -364,9 +364,14 @@ def _directional(sig, lines, a, b, objects, points) -> Tuple[Optional[Edit], Opt
 def _class_heading_defaults(sig: Sequence[Tok]) -> List[Edit]:
     """``heading: E`` (or ``heading[dynamic]: E``) property defaults in class bodies."""
     edits = []
-    for i in _statement_starts(sig):
+    starts = _statement_starts(sig)
+    for n, i in enumerate(starts):
         tok = sig[i]
         if tok.string != "heading" or tok.start[1] == 0 or i + 1 >= len(sig):
+            continue
+        # the enclosing block: the nearest earlier statement indented less must be a 'class' line
+        owner = next((sig[j] for j in reversed(starts[:n]) if sig[j].start[1] < tok.start[1]), None)
+        if owner is None or owner.string != "class":
             continue
         nxt = sig[i + 1]
         if nxt.string == ":" or (nxt.string == "[" and _closing_then_colon(sig, i + 1)):

@@ -151,6 +151,7 @@ def test_syntax_rules_durations_mutate_constructor():
             do FollowLaneBehavior() for 4
             do FollowLaneBehavior() for 2 steps
             do FollowLaneBehavior() until (distance to ego) < 5
+            heading: float = 3
         ego = Car
         mutate ego, 2
         mutate 0.5
@@ -166,9 +167,10 @@ def test_syntax_rules_durations_mutate_constructor():
     assert lines[2] == "    parentOrientation: 45 deg"
     assert lines[4] == "    do FollowLaneBehavior() for 4 seconds"
     assert lines[5:7] == source.splitlines()[5:7]
-    assert lines[8:12] == ["mutate ego by 2", "mutate by 0.5", "mutate ego by SCALE", "mutate ego by 2"]
-    assert lines[12:14] == ["mutate cars[0]", "terminate after 10 steps"]
-    assert any("line 13: not translated: Scenic 3 'mutate' takes object names only" in n for n in upgrade.notes)
+    assert lines[7] == "    heading: float = 3"  # a behaviour's local, not a class default
+    assert lines[9:13] == ["mutate ego by 2", "mutate by 0.5", "mutate ego by SCALE", "mutate ego by 2"]
+    assert lines[13:15] == ["mutate cars[0]", "terminate after 10 steps"]
+    assert any("line 14: not translated: Scenic 3 'mutate' takes object names only" in n for n in upgrade.notes)
 
 
 def test_scenic3_scripts_keep_scenic3_meaning():
