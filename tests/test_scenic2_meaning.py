@@ -66,7 +66,7 @@ def test_reference_covers_every_case():
 def test_upgraded_case_samples_what_scenic2_sampled(name):
     case = CASES[name]
     upgrade = upgrade_scenic2(case["source"])
-    assert upgrade.rewrites
+    assert upgrade.rewrites and upgrade_scenic2(upgrade.source).source == upgrade.source
     objects, steps = _sample(upgrade.source, case)
     fields = case.get("compare", ["x", "y", "heading", "width", "length", "mutationScale"])
     expected = REFERENCE[name]
