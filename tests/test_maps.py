@@ -37,6 +37,7 @@ ALL_MAPS = [
     "highway_straight",
     "highway_onramp",
     "urban_two_way",
+    "urban_multilane",
     "urban_crossroads",
     "urban_t_junction",
 ]
@@ -229,6 +230,51 @@ def test_urban_two_way(network):
     assert len(net.sidewalks) == 2
     for sidewalk in net.sidewalks:
         assert sidewalk.polygon.area == pytest.approx(2.0 * 600.0, rel=0.01)
+
+
+def test_urban_multilane(network):
+    """Two lanes per direction: same-direction neighbours are side lanes, the inner lanes border each other
+    across the centre line, and both directions have a sidewalk at the kerb."""
+    net = network("urban_multilane")
+    (road,) = net.roads
+    assert not net.connectingRoads and not net.intersections
+    forward, backward = road.forwardLanes.lanes, road.backwardLanes.lanes
+    assert len(forward) == 2 and len(backward) == 2 and len(net.lanes) == 4
+    assert road.centerline.length == pytest.approx(600.0, rel=0.01)
+    for lane in forward:
+        assert lane.centerline[0].x < lane.centerline[-1].x
+        assert lane.polygon.area / lane.centerline.length == pytest.approx(LANE_WIDTH, rel=0.01)
+    for lane in backward:
+        assert lane.centerline[0].x > lane.centerline[-1].x
+    for group in (forward, backward):
+        inner = next(lane for lane in group if lane.sections[0]._laneToRight is not None)
+        outer = next(lane for lane in group if lane is not inner)
+        assert inner.sections[0]._laneToRight.lane is outer
+        assert outer.sections[0]._laneToLeft.lane is inner
+        assert outer.sections[0]._laneToRight is None  # the kerb
+        across = inner.sections[0]._laneToLeft  # the inner lane of the other direction
+        assert across is not None and across.isForward != inner.sections[0].isForward
+        # the inner lane lies next to the centre line, the outer one at the kerb
+        assert abs(inner.centerline[0].y) == pytest.approx(LANE_WIDTH / 2)
+        assert abs(outer.centerline[0].y) == pytest.approx(1.5 * LANE_WIDTH)
+    assert len(net.sidewalks) == 2
+    for sidewalk in net.sidewalks:
+        assert sidewalk.polygon.area == pytest.approx(2.0 * 600.0, rel=0.01)
+
+
+def test_urban_multilane_in_highway_env():
+    """The env's road conversion gives one highway-env edge per direction, two lanes each, at town speed."""
+    from envs.road_network import load_road_network
+
+    converted = load_road_network(str(MAPS_DIR / "urban_multilane.xodr"))
+    graph = converted.hw_network.graph
+    edges = [(a, b) for a in graph for b in graph[a]]
+    assert len(edges) == 2
+    for a, b in edges:
+        lanes = graph[a][b]
+        assert len(lanes) == 2
+        for lane in lanes:
+            assert lane.speed_limit == pytest.approx(50 / 3.6, rel=1e-3)
 
 
 def _check_junction_map(net, n_arms):

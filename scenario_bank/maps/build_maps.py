@@ -33,6 +33,10 @@ Maps:
 ``urban_two_way``
     600 m two-way road, one 3.5 m driving lane per direction and a 2 m sidewalk
     on each side.
+``urban_multilane``
+    600 m two-way town street, two 3.5 m driving lanes per direction (broken
+    white line between same-direction lanes, solid double yellow centre line)
+    and a 2 m sidewalk on each side.
 ``urban_crossroads``
     Four 150 m two-way arms with sidewalks meeting in junction 100, which holds
     12 connecting roads (left, straight and right from every incoming lane).
@@ -578,6 +582,21 @@ def urban_two_way_section(center_mark: RoadMark) -> LaneSection:
     )
 
 
+def urban_multilane_section(lanes_per_direction: int, center_mark: RoadMark) -> LaneSection:
+    """``lanes_per_direction`` driving lanes each way (broken marks between
+    same-direction lanes, solid on the kerb side) plus a sidewalk on each side."""
+
+    def side(sign: int) -> Tuple[Lane, ...]:
+        lanes = [
+            Lane(sign * i, "driving", LANE_WIDTH, SOLID if i == lanes_per_direction else BROKEN)
+            for i in range(1, lanes_per_direction + 1)
+        ]
+        lanes.append(Lane(sign * (lanes_per_direction + 1), "sidewalk", SIDEWALK_WIDTH, NO_MARK))
+        return tuple(lanes)
+
+    return LaneSection(s=0.0, left=side(1), right=side(-1), center_mark=center_mark)
+
+
 def connecting_road(
     road_id: int,
     name: str,
@@ -850,6 +869,20 @@ def build_urban_two_way() -> OpenDriveMap:
     return OpenDriveMap("urban_two_way", [road])
 
 
+def build_urban_multilane() -> OpenDriveMap:
+    """Straight 600 m two-way town street, two lanes per direction, sidewalks, along +x."""
+    road = Road(
+        id=1,
+        name="street",
+        start=(0.0, 0.0, 0.0),
+        segments=(Line(600.0),),
+        sections=(urban_multilane_section(2, RoadMark("solid solid", "yellow", "none", 0.3)),),
+        road_type="town",
+        speed_kmh=URBAN_SPEED,
+    )
+    return OpenDriveMap("urban_multilane", [road])
+
+
 ARM_NAMES = {0: "east", 90: "north", 180: "west", 270: "south"}
 
 
@@ -939,6 +972,7 @@ MAP_BUILDERS: Dict[str, Callable[[], OpenDriveMap]] = {
     "highway_straight": build_highway_straight,
     "highway_onramp": build_highway_onramp,
     "urban_two_way": build_urban_two_way,
+    "urban_multilane": build_urban_multilane,
     "urban_crossroads": build_urban_crossroads,
     "urban_t_junction": build_urban_t_junction,
 }
