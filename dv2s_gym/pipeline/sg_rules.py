@@ -40,8 +40,14 @@ ROAD_MAPS = {
     "three_way": "urban_t_junction",
 }
 MAP_ROADS = {"highway_straight": "highway", "highway_onramp": "merge", "urban_two_way": "straight_road",
-             "urban_crossroads": "intersection", "urban_t_junction": "t_junction"}
+             "urban_multilane": "straight_road", "urban_crossroads": "intersection", "urban_t_junction": "t_junction"}
 JUNCTION_MAPS = ("urban_crossroads", "urban_t_junction")
+HIGHWAY_MAPS = ("highway_straight", "highway_onramp")
+MULTILANE_STREET = "urban_multilane"
+"""The town street with two lanes per direction (and oncoming traffic), for streets that need a lane beside the
+ego's; ``urban_two_way`` (one lane per direction) is the plain town street."""
+STREET_LANES = 2
+"""Lanes per direction of :data:`MULTILANE_STREET`."""
 VEHICLES = ("car", "truck", "bus", "motorcycle", "bicycle")
 _CLASS = {"car": "Car", "truck": "Truck", "bus": "Bus", "motorcycle": "Motorcycle", "bicycle": "Bicycle",
           "pedestrian": "Pedestrian", "obstacle": "Obstacle"}
@@ -231,6 +237,20 @@ def _needs_same_direction_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -
     return False
 
 
+def _needs_three_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -> bool:
+    """The ego in a middle lane, or vehicles of its direction on both sides of it: more lanes than the
+    multi-lane town street has per direction."""
+    if ego.lane == "middle":
+        return True
+    sides = set()
+    for a in actors:
+        if a.kind in VEHICLES and "oncoming" not in a.relations:
+            sides.update(r for r in a.relations if r in ("left_of", "right_of"))
+            if a.lane == "adjacent" and a.count >= 2:
+                sides.update(("left_of", "right_of"))
+    return len(sides) == 2
+
+
 def _choose_map(road: Optional[str], ego: ActorFrame, actors: Sequence[ActorFrame], warnings: List[str]) -> str:
     all_actions = set(ego.actions) | {x for a in actors for x in a.actions}
     turns = bool({"turn_left", "turn_right"} & set(ego.actions)) or any(
@@ -242,9 +262,11 @@ def _choose_map(road: Optional[str], ego: ActorFrame, actors: Sequence[ActorFram
     if road in ROAD_MAPS:
         chosen = ROAD_MAPS[road]
         if chosen == "urban_two_way" and _needs_same_direction_lanes(ego, actors):
-            warnings.append("the described straight road needs several lanes in one direction; using the "
-                            "4-lane straight highway map (highway_straight)")
-            return "highway_straight"
+            if _needs_three_lanes(ego, actors):
+                warnings.append("the described straight road needs three lanes in one direction; using the "
+                                "4-lane straight highway map (highway_straight)")
+                return "highway_straight"
+            return MULTILANE_STREET  # a town street with a second lane in the ego's direction
         if chosen in ("highway_straight", "urban_two_way") and turns:
             warnings.append(f"turns were described on a {road.replace('_', ' ')}, which has no junction: "
                             "the turns are not placed")
@@ -259,7 +281,9 @@ def _choose_map(road: Optional[str], ego: ActorFrame, actors: Sequence[ActorFram
     if "merge" in all_actions:
         return "highway_onramp"
     if any(a.kind == "pedestrian" for a in actors):
-        return "highway_straight" if _needs_same_direction_lanes(ego, actors) else "urban_two_way"
+        if not _needs_same_direction_lanes(ego, actors):
+            return "urban_two_way"
+        return "highway_straight" if _needs_three_lanes(ego, actors) else MULTILANE_STREET
     if any("oncoming" in a.relations or a.has("drift") for a in actors):
         return "urban_two_way"
     if any(a.has("pull_out") or a.has("reverse") or a.has("u_turn") for a in [ego, *actors]):
@@ -405,7 +429,8 @@ def _check_actions(actor: ActorFrame, s: _Script, supported: set) -> None:
 # ---- shared parameter helpers
 
 def _speed_ranges(map_name: str) -> Tuple[float, float]:
-    return {"highway_straight": (20, 26), "highway_onramp": (18, 23), "urban_two_way": (8, 12)}.get(map_name, (6, 9))
+    return {"highway_straight": (20, 26), "highway_onramp": (18, 23), "urban_two_way": (8, 12),
+            MULTILANE_STREET: (8, 12)}.get(map_name, (6, 9))
 
 
 def _brake_params(s: _Script, actor: ActorFrame) -> Tuple[str, str, str]:
@@ -413,7 +438,7 @@ def _brake_params(s: _Script, actor: ActorFrame) -> Tuple[str, str, str]:
     stop = actor.has("stop")
     after = s.param(f"{actor.name}_brake_after", "Range(1.0, 2.2)" if sudden else "Range(2.0, 3.5)")
     strength = s.param(f"{actor.name}_brake_strength", "Range(0.8, 1.0)" if sudden else "Range(0.45, 0.7)")
-    urban = s.frame.map not in ("highway_straight", "highway_onramp")
+    urban = s.frame.map not in HIGHWAY_MAPS
     low = "0" if stop else s.param(f"{actor.name}_low_speed", "Range(2, 4)" if urban else "Range(5, 10)")
     return after, low, strength
 
@@ -428,6 +453,7 @@ _LANE_ACTIONS = {"brake", "stop", "accelerate", "lane_change_left", "lane_change
 def _compose_lanes(s: _Script) -> None:
     frame = s.frame
     two_way = frame.map == "urban_two_way"
+    multilane = frame.map == MULTILANE_STREET  # several lanes per direction and oncoming lanes
     onramp = frame.map == "highway_onramp"
     lo, hi = _speed_ranges(frame.map)
     ego_speed = s.param("ego_speed", f"Range({lo}, {hi})")
@@ -485,7 +511,7 @@ def _compose_lanes(s: _Script) -> None:
         elif actor.has("merge") and onramp:
             actor.role = "ramp"
         elif actor.has("drift") or ("oncoming" in rels):
-            if two_way:
+            if two_way or multilane and "oncoming" in rels:
                 actor.role = "oncoming"
             else:
                 if "oncoming" in rels:
@@ -530,6 +556,8 @@ def _compose_lanes(s: _Script) -> None:
         if actor.role == "adjacent" and actor.side == 0:
             if actor.lane in order and ego.lane in order and actor.lane != ego.lane:
                 actor.side = order[actor.lane] - order[ego.lane]
+                if multilane:  # a two-lane carriageway: its left and right lanes are neighbours
+                    actor.side = max(-1, min(1, actor.side))
             elif actor.lane in ("left", "right") and ego.lane is None:
                 actor.side = order[actor.lane]
             elif "left_of" in rels:
@@ -591,7 +619,7 @@ def _compose_lanes(s: _Script) -> None:
                        "egoS = Range(80, 330)"]
         lane_var = {0: "egoLane"}
     else:
-        total = 3 if onramp else 4
+        total = 3 if onramp else STREET_LANES if multilane else 4
         max_left = max([k for k in need if k > 0], default=0)
         max_right = -min([k for k in need if k < 0], default=0)
         if max_left + max_right + 1 > total:
@@ -625,6 +653,14 @@ def _compose_lanes(s: _Script) -> None:
         elif ego_lane_word == "middle":
             conds += ["t[1] is not None", "t[3] is not None"] if "t[1] is not None" not in conds or \
                 "t[3] is not None" not in conds else []
+        if multilane and any(a.role == "oncoming" and (a.has("drift") or a.has("collide")) for a in frame.actors):
+            # an oncoming vehicle that comes over the centre line meets the ego in the lane next to it
+            conds = [c for c in conds if not c.startswith("t[1]") and not c.startswith("t[2]")]
+            conds.append("t[1] is None")
+            if max_left:
+                s.warnings.append("lanes to the left of the ego cannot be placed when an oncoming vehicle comes "
+                                  "over the centre line into the ego's lane: they are not placed")
+                max_left = 0
         ramp_merge = onramp and any(a.role == "ramp" for a in frame.actors)
         if ramp_merge:
             # the ego drives in the lane next to the acceleration lane the merger leaves
@@ -637,11 +673,20 @@ def _compose_lanes(s: _Script) -> None:
         source = ("[network.elements['road2_lane1'], network.elements['road2_lane2'], "
                   "network.elements['road2_lane3']]" if onramp else "network.lanes")
         s.geometry_title = ("a three-lane highway with a one-lane on-ramp joining an acceleration lane" if onramp
-                            else "a straight four-lane one-way highway")
+                            else f"a straight two-way town street, {STREET_LANES} lanes per direction, with "
+                                 "sidewalks" if multilane else "a straight four-lane one-way highway")
+        oncoming = multilane and any(a.role == "oncoming" for a in frame.actors)
+        if oncoming:
+            # t[7]: the oncoming lane next to the centre line (left of the leftmost lane of the ego's direction)
+            s.geometry += ["def oncomingOf(lane):",
+                           "    inner = ([lane] + lanesLeftOf(lane))[-1].sections[0]._laneToLeft",
+                           "    return None if inner is None else inner.lane",
+                           ""]
         s.geometry += [f"mainLanes = {source}",
                        "laneTuples = [(lane, laneLeftOf(lane), laneLeftOf(laneLeftOf(lane)), laneRightOf(lane),",
                        "               laneRightOf(laneRightOf(lane)), len(lanesRightOf(lane)), "
-                       "len(lanesLeftOf(lane))) for lane in mainLanes]",
+                       "len(lanesLeftOf(lane))" + (", oncomingOf(lane)" if oncoming else "") +
+                       ") for lane in mainLanes]",
                        "laneTuple = Uniform(*[t for t in laneTuples" + (f" if {' and '.join(dict.fromkeys(conds))}"
                                                                      if conds else "") + "])",
                        "egoLane = laneTuple[0]"]
@@ -652,7 +697,10 @@ def _compose_lanes(s: _Script) -> None:
             if k in names and (k > 0 and k <= max_left or k < 0 and -k <= max_right):
                 s.geometry.append(f"{names[k]} = laneTuple[{idx[k]}]")
                 lane_var[k] = names[k]
-        s.geometry.append("egoS = " + ("Range(5, 50)" if onramp else "Range(150, 1200)"))
+        if oncoming:
+            s.geometry.append("oncomingLane = laneTuple[7]")
+        s.geometry.append("egoS = " + ("Range(5, 50)" if onramp else "Range(80, 330)" if multilane
+                                       else "Range(150, 1200)"))
         if onramp:
             s.geometry += ["rampLane = Uniform(network.elements['road4_lane0'])",
                            "accelLane = network.elements['road2_lane0']"]
@@ -770,7 +818,7 @@ def _swerve(s: _Script, speed: str, actor: Optional[ActorFrame] = None) -> str:
     if side not in ("left", "right") and actor is not None:
         side = "left" if "right_of" in actor.relations else "right" if "left_of" in actor.relations else None
     sign = "-" if side == "right" else ""
-    fast = s.frame.map in ("highway_straight", "highway_onramp")
+    fast = s.frame.map in HIGHWAY_MAPS
     depth = f"{sign}Range(1.1, 1.3)" if fast else f"{sign}Range(1.2, 1.5)"
     duration = "Range(1.2, 1.6)" if fast else "Range(0.8, 1.2)"
     if actor is not None and actor.kind == "ego":
@@ -789,7 +837,7 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
                       reckless: bool) -> None:
     cls = _CLASS[actor.kind]
     n = actor.name
-    urban = two_way
+    urban = s.frame.map not in HIGHWAY_MAPS  # town speeds and distances
     if actor.kind in _KIND_SPEEDS:  # a slow kind does not ride at the ego's speed
         ego_speed = s.param(f"{n}_speed", _KIND_SPEEDS[actor.kind])
     rels = list(actor.relations)
@@ -991,7 +1039,7 @@ def _spawn_puller(s: _Script, actor: ActorFrame, ego_speed: str, two_way: bool) 
     """A vehicle parked at the kerb (shoulder) right of the ego's lane, ahead of the ego: once the ego is near
     it backs up (when it reverses) and steers into the lane ahead of the ego."""
     n = actor.name
-    urban = two_way
+    urban = s.frame.map not in HIGHWAY_MAPS  # town speeds and distances; parked at a kerb, not on a shoulder
     gap = s.param(f"{n}_gap", ("Range(54, 60)" if urban else "Range(100, 110)") if actor.has("collide") and
                   actor.has("reverse") else "Range(30, 42)" if urban else "Range(55, 75)")
     backing = actor.has("reverse")
@@ -1101,7 +1149,9 @@ def _spawn_lane_pedestrians(s: _Script, actor: ActorFrame, ego_speed: str, two_w
     else:
         s.helpers.append("laneSides")
         right = "1.75 + 3.5 * laneTuple[5] + Range(0.4, 1.0)"
-        left = "1.75 + 3.5 * laneTuple[6] + Range(0.4, 1.0)"
+        # (on the multi-lane street the far kerb is beyond the oncoming lanes too)
+        far = f"(laneTuple[6] + {STREET_LANES})" if s.frame.map == MULTILANE_STREET else "laneTuple[6]"
+        left = f"1.75 + 3.5 * {far} + Range(0.4, 1.0)"
     for i, d in enumerate(dirs):
         var = n if actor.count == 1 else f"{n}_{i + 1}"
         shift = ["0", "Range(1.2, 2.2)", "-Range(1.2, 2.2)", "Range(3.0, 4.0)"][i % 4]
