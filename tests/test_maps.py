@@ -40,6 +40,7 @@ ALL_MAPS = [
     "urban_multilane",
     "urban_crossroads",
     "urban_t_junction",
+    "urban_roundabout",
 ]
 URBAN_MAPS = [name for name in ALL_MAPS if name.startswith("urban_")]
 LANE_WIDTH = 3.5
@@ -327,6 +328,38 @@ def test_urban_t_junction(network):
     types = [m.type for m in junction.maneuvers]
     for kind in (ManeuverType.LEFT_TURN, ManeuverType.STRAIGHT, ManeuverType.RIGHT_TURN):
         assert types.count(kind) == 2
+
+
+def test_urban_roundabout(network):
+    """Four two-way arms into one single-lane ring, driven counter-clockwise; every entry-to-exit movement
+    (first, second, third exit) is a maneuver whose path runs on the ring around the central island."""
+    net = network("urban_roundabout")
+    junction = _check_junction_map(net, 4)
+    assert len(junction.maneuvers) == 12
+    types = [m.type for m in junction.maneuvers]
+    for kind in (ManeuverType.LEFT_TURN, ManeuverType.STRAIGHT, ManeuverType.RIGHT_TURN):
+        assert types.count(kind) == 4
+    ring_radius = build_maps.ROUNDABOUT_RING_RADIUS
+    for maneuver in junction.maneuvers:
+        kind = maneuver.connectingLane.road.name  # <from>_to_<to>_<first|second|third>_exit_<kind>
+        points = np.array([(p[0], p[1]) for p in maneuver.connectingLane.centerline])
+        radii = np.hypot(points[:, 0], points[:, 1])
+        # never over the central island; on the ring (lane centre 1.75 m outside the island) part of the way
+        assert radii.min() == pytest.approx(ring_radius + LANE_WIDTH / 2, abs=0.05), kind
+        # counter-clockwise: the angle about the centre only grows along the path
+        angles = np.unwrap(np.arctan2(points[:, 1], points[:, 0]))
+        assert np.all(np.diff(angles) > -0.01), kind  # (Scenic leaves cm-long seams between geometries)
+        exits = {"right": 1, "straight": 2, "left": 3}[kind.rsplit("_", 1)[1]]
+        # from the inbound lane of one arm to the outbound lane of the next, 1.75 m off each arm's axis
+        offset = 2 * np.arctan2(LANE_WIDTH / 2, build_maps.ROUNDABOUT_ARM_START)
+        assert angles[-1] - angles[0] == pytest.approx(exits * np.pi / 2 - offset, abs=0.02), kind
+    # a circulating path shares the ring with the entry of every arm it passes (Scenic's conflictingManeuvers
+    # counts centre lines that cross, which paths merging into the same ring do not always do)
+    by_name = {m.connectingLane.road.name: m for m in junction.maneuvers}
+    entering = by_name["north_to_west_first_exit_right"].connectingLane.polygon
+    circulating = by_name["east_to_south_third_exit_left"].connectingLane.polygon  # passes the north arm
+    assert entering.intersection(circulating).area > 20.0
+    assert by_name["south_to_east_first_exit_right"].connectingLane.polygon.intersection(entering).area == 0.0
 
 
 @pytest.mark.parametrize("name", URBAN_MAPS)

@@ -225,3 +225,82 @@ def test_a_crossing_pedestrian_on_the_multilane_street_starts_off_the_lanes(monk
         # the street's lanes span |y| <= 7 m (two 3.5 m lanes each side of the centre line)
         assert abs(trace.states[0][name][1]) > 7.0, trace.states[0][name]
         assert math.isfinite(trace.states[-1][name][0])
+
+
+# ---------------------------------------------------------------------------------------------- roundabout
+
+RING = "urban_roundabout"
+
+
+def _circulating_from_the_left(collide: bool = True, cut_in: bool = False):
+    ego = Entity("ego")
+    car = Entity("car", attrs={"noun": "car"})
+    if collide:
+        car.add_action("collide")
+        ego.add_action("collide")
+    if cut_in:
+        car.add_action("cut_in")
+    car.relations.append(("left_of", ego))
+    if not cut_in:
+        car.relations.append(("crossing_path", ego))
+    return ParsedDescription(text="The ego enters a roundabout; a car already circulating comes from its left.",
+                             road="roundabout", entities=[ego, car])
+
+
+def test_a_roundabout_gets_the_roundabout_map_without_a_warning(monkeypatch):
+    result = generate_from(monkeypatch, _circulating_from_the_left())
+    assert result.frame.map == RING
+    assert result.elements["road"] == "roundabout"
+    assert sg_rules.MAP_ROADS[RING] == "roundabout" and RING in sg_rules.JUNCTION_MAPS
+    assert not any("roundabout" in w for w in result.warnings), result.warnings
+    assert check_script(result.script) == []
+    # already circulating: it starts on the ring (its connecting lane), not on its approach arm
+    assert "car1 = new Car at car1Maneuver.connectingLane.centerline.pointAlongBy(" in result.script
+    assert "m0.type is ManeuverType.STRAIGHT" in result.script  # it passes the ego's entry
+
+
+def test_ring_lengths_match_the_map():
+    """The entry curve and the quarter ring the composer times circulating vehicles with are those of the map."""
+    from scenario_bank.map_cache import load_network
+    from scenario_bank.maps import resolve_map
+
+    net = load_network(resolve_map(RING))
+    (junction,) = net.intersections
+    right = next(m for m in junction.maneuvers if m.type.name == "RIGHT_TURN")
+    straight = next(m for m in junction.maneuvers if m.type.name == "STRAIGHT" and m.startLane is right.startLane)
+    # a first-exit path is two entry curves and a quarter ring less two entry angles; the second exit one
+    # quarter ring more
+    assert straight.connectingLane.centerline.length - right.connectingLane.centerline.length == pytest.approx(
+        sg_rules.RING_QUARTER, abs=0.3)
+    assert 10.0 < sg_rules.RING_ENTRY < right.connectingLane.centerline.length / 2
+
+
+@pytest.mark.slow
+def test_a_vehicle_circulating_from_the_left_hits_the_entering_ego(monkeypatch):
+    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+
+    result = generate_from(monkeypatch, _circulating_from_the_left())
+    hits = 0
+    for seed in range(3):
+        trace = run_script(result.script, 8.0, seed)
+        elements = elements_from_trace(trace)
+        assert elements["road"] == "roundabout"
+        hits += ["car", "collide"] in elements["actions"] and ["car", "left_of", "ego"] in elements["relations"]
+    assert hits >= 2, hits
+
+
+@pytest.mark.slow
+def test_a_vehicle_circulating_from_the_left_passes_before_the_ego_when_nobody_collides(monkeypatch):
+    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+
+    result = generate_from(monkeypatch, _circulating_from_the_left(collide=False))
+    assert "DriveRoute(" in result.script.split("car1 = new Car")[1]  # it has the right of way on the ring
+    for seed in range(3):
+        trace = run_script(result.script, 8.0, seed)
+        assert not any(e["kind"] == "collision" for e in trace.events)
+        car = next(n for n in trace.states[0] if n != "ego")
+        gaps = [math.hypot(s["ego"][0] - s[car][0], s["ego"][1] - s[car][1]) for s in trace.states]
+        assert min(gaps) > 5.0  # it is gone past the ego's entry before the ego gets there
+        assert min(s[car][3] for s in trace.states) > 4.0  # and it did not stop for the ego
+        elements = elements_from_trace(trace)
+        assert ["car", "left_of", "ego"] in elements["relations"] and elements["road"] == "roundabout"

@@ -104,6 +104,9 @@ SHIPPED_MAPS: Dict[str, str] = {
                         "left, straight and right movement is a maneuver of network.intersections[0]",
     "urban_t_junction": "a T-junction (three-way road) of three 150 m two-way arms with sidewalks; every "
                         "movement except U-turns is a maneuver of network.intersections[0]",
+    "urban_roundabout": "a single-lane roundabout, driven counter-clockwise, with four 150 m two-way arms with "
+                        "sidewalks; every entry-to-exit movement (first exit: RIGHT_TURN, second: STRAIGHT, third: "
+                        "LEFT_TURN) is a maneuver of network.intersections[0]",
 }
 """The maps a script may name in ``param map``, with what they hold."""
 

@@ -12,13 +12,14 @@ from the building blocks of :mod:`dv2s_gym.pipeline.blocks`:
 4. spawn positions (one placement per relation to the ego).
 
 Whatever it cannot place (an unknown kind of actor, an action a type cannot do,
-a relation the map cannot realise, a roundabout) goes into ``warnings``; nothing
+a relation the map cannot realise) goes into ``warnings``; nothing
 is dropped silently. ``elements`` lists what the script is meant to show.
 The output is deterministic for a given description and seed.
 """
 
 from __future__ import annotations
 
+import math
 import random
 import re
 from dataclasses import dataclass, field
@@ -28,6 +29,7 @@ from dv2s_gym.pipeline import blocks
 from dv2s_gym.pipeline.errors import GenerationError
 from dv2s_gym.pipeline.semantics import Entity, ParsedDescription, parse_description
 from scenario_bank.elements import ACTIONS, normalize_elements
+from scenario_bank.maps.build_maps import LANE_WIDTH, ROUNDABOUT_ARM_START, ROUNDABOUT_RING_RADIUS
 
 __all__ = ["ActorFrame", "ScenarioFrame", "SGResult", "generate_rules", "build_frame", "ROAD_MAPS"]
 
@@ -38,16 +40,32 @@ ROAD_MAPS = {
     "intersection": "urban_crossroads",
     "t_junction": "urban_t_junction",
     "three_way": "urban_t_junction",
+    "roundabout": "urban_roundabout",
 }
 MAP_ROADS = {"highway_straight": "highway", "highway_onramp": "merge", "urban_two_way": "straight_road",
-             "urban_multilane": "straight_road", "urban_crossroads": "intersection", "urban_t_junction": "t_junction"}
-JUNCTION_MAPS = ("urban_crossroads", "urban_t_junction")
+             "urban_multilane": "straight_road", "urban_crossroads": "intersection", "urban_t_junction": "t_junction",
+             "urban_roundabout": "roundabout"}
+JUNCTION_MAPS = ("urban_crossroads", "urban_t_junction", "urban_roundabout")
 HIGHWAY_MAPS = ("highway_straight", "highway_onramp")
 MULTILANE_STREET = "urban_multilane"
 """The town street with two lanes per direction (and oncoming traffic), for streets that need a lane beside the
 ego's; ``urban_two_way`` (one lane per direction) is the plain town street."""
 STREET_LANES = 2
 """Lanes per direction of :data:`MULTILANE_STREET`."""
+RING_MAP = "urban_roundabout"
+
+
+def _ring_lengths() -> Tuple[float, float]:
+    """On :data:`RING_MAP`, the length along the lane centre of an entry curve (arm end to where it joins the
+    ring) and of a quarter of the ring: a vehicle entering from the arm left of the ego's passes the ego's entry
+    after both."""
+    d, r, half = ROUNDABOUT_ARM_START, ROUNDABOUT_RING_RADIUS, LANE_WIDTH / 2
+    entry_radius = (d * d - r * r) / (2 * r)
+    entry_turn = math.pi / 2 - math.atan2(entry_radius, d)
+    return (entry_radius - half) * entry_turn, (r + half) * math.pi / 2
+
+
+RING_ENTRY, RING_QUARTER = _ring_lengths()
 VEHICLES = ("car", "truck", "bus", "motorcycle", "bicycle")
 _CLASS = {"car": "Car", "truck": "Truck", "bus": "Bus", "motorcycle": "Motorcycle", "bicycle": "Bicycle",
           "pedestrian": "Pedestrian", "obstacle": "Obstacle"}
@@ -255,10 +273,6 @@ def _choose_map(road: Optional[str], ego: ActorFrame, actors: Sequence[ActorFram
     all_actions = set(ego.actions) | {x for a in actors for x in a.actions}
     turns = bool({"turn_left", "turn_right"} & set(ego.actions)) or any(
         a.kind in VEHICLES and ({"turn_left", "turn_right"} & set(a.actions)) for a in actors)
-    if road == "roundabout":
-        warnings.append("no roundabout map is shipped; the scenario is placed at a four-way intersection "
-                        "(urban_crossroads) instead")
-        return "urban_crossroads"
     if road in ROAD_MAPS:
         chosen = ROAD_MAPS[road]
         if chosen == "urban_two_way" and _needs_same_direction_lanes(ego, actors):
@@ -1239,6 +1253,10 @@ def _role_condition(role: str, mtype: Optional[str]) -> Tuple[Callable, str]:
     elif role == "into_path":
         py = lambda e, m, net: m.endLane is e.endLane and m.startLane is not e.startLane
         sc = "m.endLane is e.endLane and m.startLane is not e.startLane"
+    elif role == "ring_cut":  # on a roundabout: circulating from the left toward the ego's exit, ahead of it
+        py = lambda e, m, net: net.side(e.startLane, m.startLane) < -0.7 and m.endLane is e.endLane
+        sc = ("sideOf(e.startLane, m.startLane) < -0.7 * approachDir(e.startLane).norm() * "
+              "approachDir(m.startLane).norm() and m.endLane is e.endLane")
     elif role in ("ahead", "behind"):
         py = lambda e, m, net: m.startLane is e.startLane
         sc = "m.startLane is e.startLane"
@@ -1303,6 +1321,13 @@ def _compose_junction(s: _Script) -> None:
         else:
             a.actions = []
     roles: List[Tuple[ActorFrame, str, Optional[str]]] = [(a,) + _junction_role(a, ego, s.rng) for a in vehicles]
+    ring = frame.map == RING_MAP
+    if ring:
+        # a vehicle coming from the left on a roundabout circulates past the ego's entry (not out at its arm)
+        roles = [(a, r, "STRAIGHT" if r == "from_left" and t is None else t) for a, r, t in roles]
+        # one already on the ring on the ego's left that cuts in: it passes the ego's entry just ahead of it
+        roles = [(a, "ring_cut", None) if r == "into_path" and "left_of" in a.relations else (a, r, t)
+                 for a, r, t in roles]
 
     def feasible(ego_t: Optional[str], specs: List[Tuple[ActorFrame, str, Optional[str]]]) -> bool:
         conds = [_role_condition(r, t)[0] for _, r, t in specs]
@@ -1358,7 +1383,9 @@ def _compose_junction(s: _Script) -> None:
         comp.append(f"          for m{i} in junction.maneuvers if {cond}")
     comp[-1] += "]"
     title = {"urban_crossroads": "a four-way junction of two-way urban streets",
-             "urban_t_junction": "a T-junction of two-way urban streets"}[frame.map]
+             "urban_t_junction": "a T-junction of two-way urban streets",
+             "urban_roundabout": "a single-lane roundabout with four two-way arms (first exit right, second "
+                                 "straight on, third left)"}[frame.map]
     s.geometry_title = title + (f"; the ego {default_ego.lower().replace('_', ' ')}" if default_ego else "")
     s.geometry += comp + ["combo = Uniform(*combos)", "egoManeuver = combo[0]",
                           "egoRoute = [egoManeuver.startLane, egoManeuver.connectingLane, egoManeuver.endLane]",
@@ -1403,9 +1430,14 @@ def _compose_junction(s: _Script) -> None:
     for actor, role, mtype in roles:
         n = actor.name
         cls = _CLASS[actor.kind]
-        speed = s.param(f"{n}_speed", "Range(7, 11)" if role != "ahead" else f"Range({lo}, {hi})")
         rels = list(actor.relations)
         route = f"{n}Route"
+        circulating = ring and (role == "from_left" and mtype in ("STRAIGHT", "LEFT_TURN") or role == "ring_cut")
+        if circulating:
+            _spawn_circulating(s, actor, mtype, ego_speed, ego_time, lead_first and role != "ring_cut", reckless,
+                               cuts_in=role == "ring_cut")
+            continue
+        speed = s.param(f"{n}_speed", "Range(7, 11)" if role != "ahead" else f"Range({lo}, {hi})")
         if role in ("ahead", "behind"):
             gap = s.param(f"{n}_gap", "Range(10, 16)")
             along = f"-({ego_dist} - {gap})" if role == "ahead" else f"-({ego_dist} + {gap})"
@@ -1459,6 +1491,43 @@ def _compose_junction(s: _Script) -> None:
                 s.spawn += [f"{var} = new Obstacle at egoManeuver.endLane.centerline.pointAlongBy({gap} + {3 * i}),",
                             "    with width Range(0.8, 1.8), with length Range(0.6, 1.4)"]
             s.show("obstacle", [], ["ahead_of"], actor.count)
+
+
+def _spawn_circulating(s: _Script, actor: ActorFrame, mtype: Optional[str], ego_speed: str, ego_time: str,
+                       lead_first: bool, reckless: bool, cuts_in: bool = False) -> None:
+    """A vehicle already on the roundabout's ring, coming from the ego's left: it starts just after its own entry
+    and drives at the speed that brings it past the ego's entry (a quarter ring on) when the text says: 0.9-1.4 s
+    ahead of the ego when it goes first (the ego, still on its approach, sees it cross its way), with the ego
+    (``arrival_offset`` of +-0.2 s) when they collide, 1.3-1.9 s ahead otherwise; one that cuts in, 0.6-1.0 s
+    ahead (0.1-0.4 s when it hits the ego)."""
+    n = actor.name
+    start = s.param(f"{n}_ring_start", "Range(2, 6)")
+    if lead_first:
+        arrival = f"{ego_time} - " + s.param(f"{n}_ring_gap", "Range(0.9, 1.4)")
+    else:
+        offset = s.param(f"{n}_arrival_offset",
+                         ("Range(-0.4, -0.1)" if cuts_in else "Range(-0.2, 0.2)") if actor.has("collide") else
+                         "Range(-1.0, -0.6)" if cuts_in else "Range(-1.9, -1.3)")
+        arrival = f"{ego_time} + {offset}"
+    # the ego is at its entry `ego_time` after the start, and where the ring meets it RING_ENTRY metres later
+    speed = f"({RING_ENTRY + RING_QUARTER:.1f} - {start}) / ({arrival} + {RING_ENTRY:.1f} / {ego_speed})"
+    route = f"[{n}Maneuver.connectingLane, {n}Maneuver.endLane]"
+    behavior = _junction_longitudinal(s, actor, speed, route, reckless)
+    if behavior.startswith("CautiousRoute("):
+        # it has the right of way on the ring: it does not stop for the ego that is about to enter
+        s.use("DriveRoute")
+        behavior = "DriveRoute(" + behavior[len("CautiousRoute("):]
+    for i in range(actor.count):
+        var = n if actor.count == 1 else f"{n}_{i + 1}"
+        ahead = f" + {12 * i}" if i else ""  # the rest of a group circulates ahead of it, past the entry sooner
+        s.spawn += [f"{var} = new {_CLASS[actor.kind]} at {n}Maneuver.connectingLane.centerline.pointAlongBy("
+                    f"{start}{ahead}),",
+                    f"    with speed {'0' if behavior.startswith('HoldStill') else speed},",
+                    f"    with behavior {behavior}"]
+    acts = list(actor.actions)
+    if mtype and not any(_TYPE.get(a) == mtype for a in acts):
+        acts.append({v: k for k, v in _TYPE.items()}[mtype])
+    s.show(actor.kind, acts, list(dict.fromkeys(actor.relations + (["ahead_of"] if cuts_in else []))), actor.count)
 
 
 def _junction_longitudinal(s: _Script, actor: ActorFrame, speed: str, route: str, reckless: bool) -> str:

@@ -60,6 +60,7 @@ MAP_ROAD_TYPES = {
     "urban_multilane": "straight_road",
     "urban_crossroads": "intersection",
     "urban_t_junction": "t_junction",
+    "urban_roundabout": "roundabout",
 }
 """Road type of each shipped map."""
 
