@@ -30,6 +30,13 @@ Every vehicle (the ego included) is judged by the same rules:
   ``turn_left|right`` that the same heading change would give).
 * ``reverse``: the vehicle travels at least :data:`REVERSE_MIN_M` metres against its own
   heading (negative speed, or displacement pointing backwards).
+* ``drift``: the vehicle leaves its lane gradually without changing lanes (:func:`_drifts`): its centre is
+  outside the lane it was last centred in for at least :data:`DRIFT_OUT_S` seconds of driving, and it does not
+  settle in another lane (its centre never comes within :data:`DRIFT_SETTLE_M` of another lane's centre before
+  it returns or the episode ends): into a neighbouring lane and back, onto the shoulder or off the road edge,
+  or across the centre line. A completed lane change (or an overtaking pull-out into the next lane) reaches the
+  new lane's centre and is no drift. Also (pairwise) a vehicle that starts in the opposite direction to the
+  reference and moves into its lane drifts.
 * ``swerve``: without a lane-change event and without turning, the vehicle's centre moves
   at least :data:`SWERVE_MIN_M` sideways from the line it started on and comes back within
   half a lane of it.
@@ -82,6 +89,9 @@ REVERSE_MIN_M = 2.0       # m driven backwards for ``reverse``
 SWERVE_MIN_M = 1.0        # m of sideways excursion (and back) for ``swerve``
 PULL_OUT_MIN_M = 8.0      # m driven after standing still for ``pull_out`` ...
 PULL_OUT_LATERAL_M = 1.5  # ... with at least this sideways shift
+LANE_WIDTH = 3.5          # m, every shipped map
+DRIFT_OUT_S = 1.5         # s driven with the centre outside the lane it was centred in, for ``drift`` ...
+DRIFT_SETTLE_M = 0.6      # ... without coming this close to another lane's centre (that is a lane change)
 _LEAVES_LANE = {"u_turn", "reverse", "swerve", "pull_out", "drift", "cut_in", "merge", "overtake", "lane_change_left", "lane_change_right",
                 "turn_left", "turn_right"}
 
@@ -339,6 +349,8 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
         out.add("lane_change_left" if change.get("direction") == "left" else "lane_change_right")
     out |= _special_motions(track, changes)
     turn = float(_wrap(np.array([track[-1, 2] - track[0, 2]]))[0])
+    if abs(turn) < TURN_ANGLE and not out & {"u_turn", "pull_out"} and _drifts(track, dt, view):
+        out.add("drift")
     if "u_turn" in out:
         pass
     elif abs(turn) >= TURN_ANGLE and speed.max() > 1.0:
@@ -350,6 +362,58 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
         if road in JUNCTION_ROADS and _crosses_junction(track, view):
             out.add("go_straight")
     return out
+
+
+def _lateral_offsets(track: np.ndarray, view: Optional[_MapView]) -> np.ndarray:
+    """Per row: the centre's signed lateral offset [m] from the centreline of the lane the vehicle is first
+    centred in (NaN before that, and where it is past either end of that lane, e.g. inside a junction).
+
+    Without a map: the offset from the line it starts on (straight roads)."""
+    if view is None:
+        return np.array([_ego_frame(track[0], row)[1] for row in track])
+    network = view.network
+    out = np.full(len(track), np.nan)
+    lane = None
+    for i, (x, y, heading, _) in enumerate(track):
+        position = np.array([x, y])
+        if lane is None:
+            candidate = network.get_lane(network.get_closest_lane_index(position, heading))
+            s, lateral = candidate.local_coordinates(position)
+            if abs(lateral) > DRIFT_SETTLE_M or _heading_gap(candidate.heading_at(s), heading) > math.pi / 4:
+                continue  # not (yet) driving along a lane: parked at the kerb, standing across it
+            lane = candidate
+        s, lateral = lane.local_coordinates(position)
+        if 0.0 <= s <= lane.length:
+            out[i] = lateral
+    return out
+
+
+def _drifts(track: np.ndarray, dt: float, view: Optional[_MapView]) -> bool:
+    """Whether the vehicle drifts out of its lane (see the module's ``drift``): while driving (above 1 m/s),
+    its centre is out of the lane it was last centred in for :data:`DRIFT_OUT_S` seconds or more, and it
+    does not reach another lane's centre in between (reaching one makes that lane its own: a lane change)."""
+    offsets = _lateral_offsets(track, view)
+    moving = np.abs(track[:, 3]) > 1.0
+    home = None       # offset of the centre of the lane it counts as its own
+    out_time = 0.0    # seconds driven out of that lane in the current excursion
+    for offset, drives in zip(offsets, moving):
+        if np.isnan(offset):
+            continue
+        nearest = LANE_WIDTH * round(offset / LANE_WIDTH)
+        centred = abs(offset - nearest) <= DRIFT_SETTLE_M
+        if home is None:
+            if centred:
+                home = nearest
+            continue
+        if centred and nearest != home:
+            home, out_time = nearest, 0.0  # settled in another lane: a lane change, not a drift
+        elif abs(offset - home) > LANE_WIDTH / 2:
+            out_time += dt if drives else 0.0
+        elif out_time >= DRIFT_OUT_S:
+            return True  # out of its lane for a while, then back in it
+        else:
+            out_time = 0.0
+    return out_time >= DRIFT_OUT_S  # still out of its lane (between lanes, on the shoulder, off the road)
 
 
 def _backward_metres(track: np.ndarray) -> float:
