@@ -139,6 +139,21 @@ class Entity:
         return {}
 
 
+_DRIFT_ONCOMING = re.compile(r"\b(?:centre|center|middle|dividing|median|double) (?:line|marking)s?\b|"
+                             r"\b(?:oncoming|opposite|opposing|wrong)\b")
+_DRIFT_SIDE = re.compile(r"\b(?:to(?:wards?)?|into|onto|off|on|over) (?:the |its |their )?(?:\w+ ){0,2}?"
+                         r"(left|right)\b|\b(left|right)(?: hand)? (?:edge|shoulder|kerb|curb|lane|side)\b")
+
+
+def _drift_side(text: str) -> Optional[str]:
+    """The side a drift goes to, from the words after it: across the centre line / into the oncoming lane is
+    left (right-hand traffic), "toward the road edge on the right" / "into the left lane" say it; else None."""
+    if _DRIFT_ONCOMING.search(text):
+        return "left"
+    m = _DRIFT_SIDE.search(text)
+    return (m.group(1) or m.group(2)) if m else None
+
+
 @dataclass
 class ParsedDescription:
     """What a description says: road, entities (ego first when mentioned), unknowns."""
@@ -1179,6 +1194,12 @@ class _Parser:
                 side = next(g for g in sm.groups() if g)
             owner.add_action("overtake", sudden=sudden, side=side,
                              around=" around" in m.group(0), via_pass=m.group(0).startswith("pass"))
+            return
+        if action == "drift":
+            owner.add_action("drift", sudden=sudden)
+            side = _drift_side(clause[m.start():m.end() + 60])
+            if side and not owner.detail("drift").get("side"):
+                owner.detail("drift")["side"] = side
             return
         if action == "stop" and re.match(r"park", m.group(0)) and kind == "ego":
             return

@@ -737,9 +737,13 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
     if ego.has("swerve"):
         return _swerve(s, speed, ego), True
     if ego.has("drift"):
-        s.use("DriftAndReturn")
-        depth = "Range(2.0, 2.8)" if two_way else "Range(1.5, 2.2)"
-        return (f"DriftAndReturn({speed}, 1000, {depth}, Range(1.5, 2.5), -1, Range(1.2, 2.0))", True)
+        oncoming = any(a.role == "oncoming" for a in frame.actors)
+        if two_way and oncoming and ego.has("collide"):
+            # across the centre line into the oncoming vehicle's path
+            s.use("DriftAndReturn")
+            return (f"DriftAndReturn({speed}, 1000, Range(2.0, 2.8), Range(1.5, 2.5), -1, Range(1.2, 2.0))", True)
+        side = ego.details.get("drift", {}).get("side") or ("left" if oncoming else "right")
+        return _drift(s, speed, side, hold=None), True
     if ego.has("brake") or ego.has("stop") and not _something_stops_ego(frame):
         s.use("CautiousBrakeLater" if not reckless else "BrakeLater")
         after, low, strength = _brake_params(s, ego)
@@ -778,6 +782,15 @@ def _swerve(s: _Script, speed: str, actor: Optional[ActorFrame] = None) -> str:
         return f"SwerveWhenBlocked({speed}, {depth}, {duration})"
     s.use("SwerveAndBack")
     return f"SwerveAndBack({speed}, Range(1.0, 2.0), {depth}, {duration})"
+
+
+def _drift(s: _Script, speed: str, side: str, hold: Optional[str]) -> str:
+    """A slow drift out of the lane to ``side`` (about 2.1-2.6 m: the centre leaves the lane, the vehicle does not
+    reach the next lane's centre), held ``hold`` seconds and steered back, or held for good (``hold`` None)."""
+    sign = "-" if side == "right" else ""
+    s.use("DriftLater")
+    return (f"DriftLater({speed}, Range(0.8, 1.6), {sign}Range(2.1, 2.6), Range(2.5, 3.5), "
+            f"{hold if hold is not None else -1}, Range(1.8, 2.4))")
 
 
 def _something_stops_ego(frame: ScenarioFrame) -> bool:
@@ -926,6 +939,7 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
             gap = s.param(f"{n}_offset", "Range(12, 28)" if ahead else "-Range(12, 28)" if behind
                           else ("Range(0, 2.5)" if actor.has("collide") else "Range(9, 14)") if changing
                           else "Range(6, 10)" if actor.has("swerve") and not actor.has("collide")
+                          else "Range(8, 14)" if actor.has("drift") and not actor.has("collide")
                           else "Range(-4, 4)")
         elif actor.has("stop") and not actor.has("brake") and (actor.state_stop or not actor.sudden):
             gap = s.param(f"{n}_gap", "Range(30, 50)" if urban else "Range(55, 90)")
@@ -1029,6 +1043,11 @@ def _longitudinal_behavior(s: _Script, actor: ActorFrame, speed: str) -> str:
         return _u_turn(s, speed)
     if actor.has("swerve"):
         return _swerve(s, speed, actor)
+    if actor.has("drift"):
+        # a vehicle beside the ego drifts toward the ego's lane; one in the ego's lane to the side the text says
+        side = "left" if actor.side < 0 else "right" if actor.side > 0 else \
+            actor.details.get("drift", {}).get("side") or "right"
+        return _drift(s, speed, side, hold=None if actor.has("collide") else "Range(2.0, 3.0)")
     if actor.has("lane_change_left") or actor.has("lane_change_right"):
         side = 1 if actor.has("lane_change_left") else -1
         after = s.param(f"{actor.name}_change_after", "Range(0.5, 1.5)" if actor.sudden else "Range(1.0, 2.5)")

@@ -30,12 +30,12 @@ Every vehicle (the ego included) is judged by the same rules:
   ``turn_left|right`` that the same heading change would give).
 * ``reverse``: the vehicle travels at least :data:`REVERSE_MIN_M` metres against its own
   heading (negative speed, or displacement pointing backwards).
-* ``drift``: the vehicle leaves its lane gradually without changing lanes (:func:`_drifts`): its centre is
+* ``drift``: the vehicle leaves its lane gradually without changing lanes (:func:`_drift_windows`): its centre is
   outside the lane it was last centred in for at least :data:`DRIFT_OUT_S` seconds of driving, and it does not
   settle in another lane (its centre never comes within :data:`DRIFT_SETTLE_M` of another lane's centre before
   it returns or the episode ends): into a neighbouring lane and back, onto the shoulder or off the road edge,
   or across the centre line. A completed lane change (or an overtaking pull-out into the next lane) reaches the
-  new lane's centre and is no drift. Also (pairwise) a vehicle that starts in the opposite direction to the
+  new lane's centre and is no drift; the env's lane-change events during a drift are not lane changes. Also (pairwise) a vehicle that starts in the opposite direction to the
   reference and moves into its lane drifts.
 * ``swerve``: without a lane-change event and without turning, the vehicle's centre moves
   at least :data:`SWERVE_MIN_M` sideways from the line it started on and comes back within
@@ -285,6 +285,13 @@ def elements_from_trace(trace) -> Dict[str, Any]:
                     actions.add((_kind(actor, kinds), typed))
     road = _road_type(trace, ego)
     view = _map_view(trace)
+    for name, changes in list(lane_changes.items()):
+        # a drift across a lane line is no lane change (the env logs one whenever the nearest lane changes)
+        track = tracks.get(name)
+        if track is not None and _kind(name, kinds) not in ("pedestrian", "obstacle") and \
+                abs(float(_wrap(np.array([track[-1, 2] - track[0, 2]]))[0])) < TURN_ANGLE:
+            windows = _drift_windows(track, dt, view)
+            lane_changes[name] = [c for c in changes if not _during(windows, float(c.get("time", 0.0)))]
 
     near: Dict[str, str] = {}
     for name, track in tracks.items():
@@ -349,8 +356,12 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
         out.add("lane_change_left" if change.get("direction") == "left" else "lane_change_right")
     out |= _special_motions(track, changes)
     turn = float(_wrap(np.array([track[-1, 2] - track[0, 2]]))[0])
-    if abs(turn) < TURN_ANGLE and not out & {"u_turn", "pull_out"} and _drifts(track, dt, view):
+    windows = _drift_windows(track, dt, view) if abs(turn) < TURN_ANGLE and not out & {"u_turn", "pull_out"} else []
+    if windows:
         out.add("drift")
+        lateral = np.array([abs(_ego_frame(track[0], row)[1]) for row in track])
+        if "swerve" in out and _during(windows, float(np.argmax(lateral)) * dt, margin=0.0):
+            out.discard("swerve")  # its widest excursion is the drift: a slow drift and back is no swerve
     if "u_turn" in out:
         pass
     elif abs(turn) >= TURN_ANGLE and speed.max() > 1.0:
@@ -388,15 +399,18 @@ def _lateral_offsets(track: np.ndarray, view: Optional[_MapView]) -> np.ndarray:
     return out
 
 
-def _drifts(track: np.ndarray, dt: float, view: Optional[_MapView]) -> bool:
-    """Whether the vehicle drifts out of its lane (see the module's ``drift``): while driving (above 1 m/s),
-    its centre is out of the lane it was last centred in for :data:`DRIFT_OUT_S` seconds or more, and it
-    does not reach another lane's centre in between (reaching one makes that lane its own: a lane change)."""
+def _drift_windows(track: np.ndarray, dt: float, view: Optional[_MapView]) -> List[Tuple[float, float]]:
+    """The times (start, end) [s] of the vehicle's drifts out of its lane (see the module's ``drift``): while
+    driving (above 1 m/s) its centre is out of the lane it was last centred in for :data:`DRIFT_OUT_S` seconds
+    or more, and it does not reach another lane's centre in between (reaching one makes that lane its own: a
+    lane change). A drift ends when the vehicle is back in its lane, else with the episode."""
     offsets = _lateral_offsets(track, view)
     moving = np.abs(track[:, 3]) > 1.0
+    windows: List[Tuple[float, float]] = []
     home = None       # offset of the centre of the lane it counts as its own
-    out_time = 0.0    # seconds driven out of that lane in the current excursion
-    for offset, drives in zip(offsets, moving):
+    out_time = 0.0    # seconds driven out of that lane in the current excursion ...
+    left_at = 0.0     # ... which began then
+    for i, (offset, drives) in enumerate(zip(offsets, moving)):
         if np.isnan(offset):
             continue
         nearest = LANE_WIDTH * round(offset / LANE_WIDTH)
@@ -408,12 +422,20 @@ def _drifts(track: np.ndarray, dt: float, view: Optional[_MapView]) -> bool:
         if centred and nearest != home:
             home, out_time = nearest, 0.0  # settled in another lane: a lane change, not a drift
         elif abs(offset - home) > LANE_WIDTH / 2:
+            if out_time == 0.0:
+                left_at = i * dt
             out_time += dt if drives else 0.0
-        elif out_time >= DRIFT_OUT_S:
-            return True  # out of its lane for a while, then back in it
         else:
+            if out_time >= DRIFT_OUT_S:
+                windows.append((left_at, i * dt))  # out of its lane for a while, then back in it
             out_time = 0.0
-    return out_time >= DRIFT_OUT_S  # still out of its lane (between lanes, on the shoulder, off the road)
+    if out_time >= DRIFT_OUT_S:  # still out of its lane (between lanes, on the shoulder, off the road)
+        windows.append((left_at, len(track) * dt))
+    return windows
+
+
+def _during(windows: List[Tuple[float, float]], time: float, margin: float = 0.5) -> bool:
+    return any(start - margin <= time <= end + margin for start, end in windows)
 
 
 def _backward_metres(track: np.ndarray) -> float:

@@ -208,6 +208,20 @@ behavior DriftAndReturn(speed, trigger, depth, duration, returnTrigger, returnDu
     do SlideOffset(homeLine, now, 0, speed, returnDuration) for returnDuration + 0.3 seconds
     do FollowLaneBehavior(target_speed=speed)
 ''', ("SlideOffset",)),
+    "DriftLater": ('''
+behavior DriftLater(speed, after, depth, duration, hold, returnDuration):
+    # after `after` seconds, drift slowly `depth` m sideways (left positive) out of the lane, stay there
+    # `hold` seconds (negative: for good), then steer back to the lane centre
+    do FollowLaneBehavior(target_speed=speed) for after seconds
+    homeLine = self.laneSection.centerline
+    start = homeLine.signedDistanceTo(self.position)
+    if hold < 0:
+        do SlideOffset(homeLine, start, depth, speed, duration)
+    do SlideOffset(homeLine, start, depth, speed, duration) for duration + hold seconds
+    now = homeLine.signedDistanceTo(self.position)
+    do SlideOffset(homeLine, now, 0, speed, returnDuration) for returnDuration + 0.3 seconds
+    do FollowLaneBehavior(target_speed=speed)
+''', ("SlideOffset",)),
     "SwerveAndBack": ('''\
 behavior SwerveAndBack(speed, delay, depth, duration):
     # a quick sideways move of `depth` m (left positive) inside the lane, then straight back to its centre

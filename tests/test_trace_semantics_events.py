@@ -1,0 +1,42 @@
+"""Drift and side collisions read off real simulated traces (scripts of the rules SG, run in the env).
+
+A drift is a vehicle leaving its lane gradually without settling in another one (see
+dv2s_gym/pipeline/trace_semantics.py); a lane change that reaches the next lane's centre is none.
+"""
+
+import pytest
+
+from dv2s_gym.pipeline.sg_rules import generate_rules
+from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+from sg_helpers import run_script
+
+pytestmark = pytest.mark.slow
+
+
+def _actions(elements, who):
+    return {a for k, a in elements["actions"] if k == who}
+
+
+def _simulate(text, seed=0, seconds=10.0):
+    return elements_from_trace(run_script(generate_rules(text).script, seconds, seed))
+
+
+def test_ego_drifting_toward_the_road_edge_drifts_and_does_not_keep_its_lane():
+    elements = _simulate("On a two-lane rural road the ego car drifts slowly off the right edge of the road.")
+    assert elements["road"] == "straight_road"
+    assert "drift" in _actions(elements, "ego")
+    assert not {"keep_lane", "lane_change_left", "lane_change_right", "swerve"} & _actions(elements, "ego")
+
+
+def test_truck_drifting_into_the_egos_lane_and_back_drifts_without_lane_changes():
+    elements = _simulate("On a highway a truck in the lane to the right of the ego drifts into the ego's lane.")
+    truck = _actions(elements, "truck")
+    assert "drift" in truck
+    # the env logged lane changes when its centre crossed the line; during a drift they are none
+    assert not {"lane_change_left", "lane_change_right", "cut_in", "swerve", "keep_lane"} & truck
+
+
+def test_a_real_lane_change_is_no_drift():
+    elements = _simulate("On a highway a car in the lane to the left of the ego changes lanes to the left.")
+    car = _actions(elements, "car")
+    assert "lane_change_left" in car and "drift" not in car
