@@ -139,6 +139,7 @@ class Entity:
         return {}
 
 
+_NO_JUNCTION_WORDS = re.compile(r"\b(?:intersections?|junctions?|crossroads?)\b")
 _DRIFT_ONCOMING = re.compile(r"\b(?:centre|center|middle|dividing|median|double) (?:line|marking)s?\b|"
                              r"\b(?:oncoming|opposite|opposing|wrong)\b")
 _DRIFT_SIDE = re.compile(r"\b(?:to(?:wards?)?|into|onto|off|on|over) (?:the |its |their )?(?:\w+ ){0,2}?"
@@ -168,6 +169,8 @@ class ParsedDescription:
     """Road features said in the text (see :func:`dv2s_gym.pipeline.semantics_road.road_features`)."""
     absent: List[str] = field(default_factory=list)
     """Participant kinds the text says are not there ("no other vehicles")."""
+    absent_phrases: List[str] = field(default_factory=list)
+    """The words that said so ("no other vehicles")."""
     unplaced: List[str] = field(default_factory=list)
     """Phrases (verbatim clauses) the parser could not place; the generator warns about each."""
 
@@ -531,9 +534,10 @@ class _Parser:
 
     # ---------------------------------------------------------------- main
     def parse(self) -> ParsedDescription:
-        text, absent, no_junction, _ = strip_absences(self.text)
+        text, absent, no_junction, removed = strip_absences(self.text)
         self.text = text
         self.out.absent = absent
+        self.out.absent_phrases = [r for r in removed if not _NO_JUNCTION_WORDS.search(r)]
         for road, pattern in ROAD_PATTERNS:
             if road == "merge" and re.search(r"\b(?:off ramp|exit ramp|offramp)\b", text) and not re.search(
                     r"\b(?:on ramp|onramp|entry ramp|entrance ramp|acceleration lane)\b", text):
@@ -1074,6 +1078,14 @@ class _Parser:
         return subject is None
 
     def _record(self, owner: Entity, action: str, m: re.Match, clause: str) -> None:
+        """Record ``action`` of ``owner``; each action it adds keeps the words it was read from (``phrase``)."""
+        before = {a for a, _ in owner.actions}
+        self._record_action(owner, action, m, clause)
+        for name, detail in owner.actions:
+            if name not in before:
+                detail.setdefault("phrase", m.group(0))
+
+    def _record_action(self, owner: Entity, action: str, m: re.Match, clause: str) -> None:
         self._placed += 1
         window = clause[max(0, m.start() - 30):m.end() + 25]
         sudden = bool(_SUDDEN.search(window))

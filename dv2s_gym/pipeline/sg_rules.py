@@ -27,9 +27,10 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 from dv2s_gym.pipeline import blocks
 from dv2s_gym.pipeline.errors import GenerationError
 from dv2s_gym.pipeline.semantics import Entity, ParsedDescription, parse_description
-from scenario_bank.elements import ACTIONS, normalize_elements
+from scenario_bank.elements import ACTIONS, PARTICIPANTS, RELATIONS, ROADS, normalize_elements
 
-__all__ = ["ActorFrame", "ScenarioFrame", "SGResult", "generate_rules", "build_frame", "ROAD_MAPS"]
+__all__ = ["ActorFrame", "ScenarioFrame", "SGResult", "generate_rules", "build_frame", "ROAD_MAPS", "unbuilt_warnings",
+           "unshown_warnings"]
 
 ROAD_MAPS = {
     "highway": "highway_straight",
@@ -906,7 +907,9 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
             behavior = f"CutInWhenAhead({-side}, {speed_expr}, {gap}, {dur}, {after})"
             if not behind and "ahead_of" not in rels:
                 rels.append("ahead_of")
+        # it changes lanes toward the ego (from the left: to the right)
         shown_actions = [a for a in shown_actions if a not in ("lane_change_left", "lane_change_right")]
+        shown_actions.append("lane_change_right" if actor.side > 0 else "lane_change_left")
         if "cut_in" not in shown_actions:
             shown_actions.append("cut_in")
     elif actor.role == "overtaker":
@@ -1477,6 +1480,97 @@ def _spawn_junction_pedestrians(s: _Script, actor: ActorFrame, map_name: str, re
     s.show("pedestrian", [a for a in actor.actions if a in ("cross", "collide")], ["ahead_of"], actor.count)
 
 
+# --------------------------------------------------------------------------- what was not built
+
+def _typed_collisions(s: _Script) -> None:
+    """The script means the collision type the text gives wherever it means the collision itself."""
+    for actor in [s.frame.ego, *s.frame.actors]:
+        kind = "ego" if actor.name == "ego" else actor.kind
+        typed = actor.details.get("collide", {}).get("type")
+        if typed and (kind, "collide") in s.actions:
+            s.actions.add((kind, typed))
+
+
+def _words(element: Tuple) -> str:
+    return " ".join(str(x) for x in element[1:] if not isinstance(x, int)).replace("_", " ")
+
+
+def unbuilt_warnings(parsed: ParsedDescription, s: "_Script", said: Sequence[str] = ()) -> List[str]:
+    """One ``not built: <element> (<phrase>)`` warning per element of the parsed description that the
+    composed script does not mean to show (its :attr:`_Script.actions`, relations and participants), unless a
+    warning in ``said`` already names it. The phrase is the text the parser read the element from (the actor's
+    noun when it has none)."""
+    from scenario_bank.elements import element_set, with_undirected
+
+    meant = with_undirected(element_set({"road": MAP_ROADS.get(s.frame.map),
+                                         "participants": s.participants,
+                                         "actions": [list(a) for a in s.actions],
+                                         "relations": [list(r) for r in s.relations]}))
+    if s.frame.road == "three_way" and s.frame.map == "urban_t_junction":
+        meant = meant | {("road", "three_way")}
+    said_text = " ".join(w.lower().replace("_", " ") for w in said)
+    phrases: Dict[Tuple, str] = {}
+    for entity in parsed.entities:
+        noun = "ego" if entity.kind == "ego" else str(entity.attrs.get("noun", entity.kind))
+        for action, detail in entity.actions:
+            phrases.setdefault(("action", entity.kind, action), str(detail.get("phrase") or noun))
+        for rel, other in entity.relations:
+            phrases.setdefault(("relation", entity.kind, rel, other.kind), noun)
+    out: List[str] = []
+    described = set()
+    for entity in parsed.entities:
+        if entity.kind not in PARTICIPANTS:
+            continue  # an unknown kind is warned about already
+        described.update(("participant", entity.kind, i + 1) for i in range(entity.count if entity.kind != "ego" else 1))
+        described.update(("action", entity.kind, a) for a, _ in entity.actions if a in ACTIONS)
+        described.update(("relation", entity.kind, r, o.kind) for r, o in entity.relations
+                         if o is not entity and o.kind in PARTICIPANTS and r in RELATIONS)
+    if parsed.road in ROADS:
+        described.add(("road", parsed.road))
+    for element in sorted(described, key=str):
+        if element in meant:
+            continue
+        if element[0] == "road":
+            phrase = " ".join(parsed.road_words) or str(element[1])
+            if s.frame.map in said_text or str(element[1]).replace("_", " ") in said_text:
+                continue  # the map choice is warned about already
+        elif element[0] == "participant":
+            phrase = element[1]
+        else:
+            phrase = phrases.get(element, element[1])
+        words = _words(element)
+        if words in said_text or element[0] == "action" and f"{element[1]} {element[2].replace('_', ' ')}" in \
+                said_text or element[0] == "action" and f"'{element[2].replace('_', ' ')}'" in said_text:
+            continue
+        out.append(f"not built: {element[0]} {words} ('{phrase}')")
+    return out
+
+
+def _absent_warnings(parsed: ParsedDescription) -> List[str]:
+    """What the script did with the participants the text says are not there ("no other vehicles")."""
+    if not parsed.absent:
+        return []
+    said = ", ".join(f"'{p}'" for p in getattr(parsed, "absent_phrases", []) or []) or "absent"
+    kinds = list(dict.fromkeys(parsed.absent))
+    present = sorted({e.kind for e in parsed.entities if e.kind in kinds})
+    note = (f"read {said}: the script adds no background traffic, so no {', '.join(k for k in kinds if k not in present)}"
+            " is placed")
+    if present:
+        note += f"; the text also describes a {' and a '.join(present)}, which is placed"
+    return [note]
+
+
+def unshown_warnings(meant: Dict[str, Any], simulated: Dict[str, Any]) -> List[str]:
+    """One ``not shown in the simulated run: <element>`` warning per element the script was composed to show
+    (``meant``, :attr:`SGResult.elements`) that a simulated run of it did not show (``simulated``, from
+    :func:`dv2s_gym.pipeline.trace_semantics.elements_from_trace`)."""
+    from scenario_bank.elements import element_set, with_undirected
+
+    shown = with_undirected(element_set(simulated or {}))
+    return [f"not shown in the simulated run: {e[0]} {_words(e)}"
+            for e in sorted(element_set(meant or {}), key=str) if e not in shown]
+
+
 # --------------------------------------------------------------------------- entry point
 
 def generate_rules(description: str, seed: Optional[int] = None) -> SGResult:
@@ -1498,6 +1592,9 @@ def generate_rules(description: str, seed: Optional[int] = None) -> SGResult:
         _compose_lanes(s)
     script = s.render()
     _check_main_event(parsed, s)
+    _typed_collisions(s)
+    warnings.extend(unbuilt_warnings(parsed, s, warnings))
+    warnings.extend(_absent_warnings(parsed))
     road = MAP_ROADS.get(frame.map)
     elements = normalize_elements({
         "road": road if frame.road in (None, road) or frame.road == "three_way" and road == "t_junction" else road,
