@@ -1338,7 +1338,17 @@ def _compose_junction(s: _Script) -> None:
     extra_ahead = 12 * max([a.count - 1 for a, r, _ in roles if r == "ahead"], default=0)
     timed = [(a, r) for a, r, _ in roles if r not in ("ahead", "behind", "into_path")]
     lead_first = bool(timed) and not any(a.has("collide") for a, _ in timed)
-    if lead_first:
+    # the ego stops at the junction (for a crossing vehicle, at a stop sign) and then goes on: it waits at the
+    # entry until the vehicle it yields to has cleared the junction
+    yields = ego.has("stop") and not reckless and not extra_ahead and not any(r == "ahead" for _, r, _ in roles) \
+        and (bool(timed) or default_ego is not None and ego_type is not None)
+    conflict = _conflict_actor(ego, [a for a, _ in timed]) if yields else None
+    if yields and lead_first:
+        # close to the junction: it stops there while the other vehicle (which gets there first) crosses
+        first = s.param("first_arrival", "Range(0.3, 0.8)")
+        ego_dist = s.param("ego_distance", "Range(12, 16)")
+        ego_time = f"{ego_dist} / {ego_speed}"
+    elif lead_first:
         # the crossing/oncoming vehicles reach the junction first (the last one `ego_gap_time` s
         # before the ego): the ego's distance follows from those times
         spread = 1.6 * max(a.count - 1 for a, _ in timed)
@@ -1357,7 +1367,18 @@ def _compose_junction(s: _Script) -> None:
                        f"{actor.name}Maneuver.endLane]"]
 
     # ---------------------------------------------------------------- ego
-    if ego.has("brake") or ego.has("stop"):
+    if yields:
+        s.use("StopForConflict")
+        other, exit_lane = "None", "None"
+        if conflict is not None:
+            var = conflict.name if conflict.count == 1 else f"{conflict.name}_{conflict.count}"
+            other, exit_lane = var, f"{conflict.name}Maneuver.endLane"
+        ego_behavior = (f"StopForConflict({ego_speed}, egoRoute, egoEntry, {other}, {exit_lane}, Range(0.6, 1.0), "
+                        "Range(4, 5))")
+        if default_ego is not None and not any(_TYPE.get(a) == default_ego for a in ego.actions):
+            # it goes on through the junction after the stop: straight unless the text says a turn
+            ego.actions.append({v: k for k, v in _TYPE.items()}[default_ego])
+    elif ego.has("brake") or ego.has("stop"):
         after, low, strength = _brake_params(s, ego)
         s.use("RouteThenBrake")
         ego_behavior = f"RouteThenBrake({ego_speed}, egoRoute, {after}, {low}, {strength})"
@@ -1365,10 +1386,12 @@ def _compose_junction(s: _Script) -> None:
         name = "DriveRoute" if reckless else "CautiousRoute"
         s.use(name)
         ego_behavior = f"{name}({ego_speed}, egoRoute)"
-    s.spawn += [f"ego = new Car at egoManeuver.startLane.centerline.pointAlongBy(-{ego_dist}),",
-                f"    with speed {ego_speed},",
-                "    with route egoRoute,",
-                f"    with behavior {ego_behavior}"]
+    ego_lines = [f"ego = new Car at egoManeuver.startLane.centerline.pointAlongBy(-{ego_dist}),",
+                 f"    with speed {ego_speed},",
+                 "    with route egoRoute,",
+                 f"    with behavior {ego_behavior}"]
+    if not yields:
+        s.spawn += ego_lines
     s.show("ego", list(ego.actions))
 
     # ---------------------------------------------------------------- vehicles
@@ -1420,6 +1443,8 @@ def _compose_junction(s: _Script) -> None:
             rels.append("ahead_of")  # it joins the ego's road in front of the ego
         s.show(actor.kind, acts, list(dict.fromkeys(rels)), actor.count)
 
+    if yields:
+        s.spawn += ego_lines  # after the vehicle it waits for, which its behaviour names
     # ---------------------------------------------------------------- pedestrians and obstacles
     for actor in frame.actors:
         if actor.kind == "pedestrian":
@@ -1431,6 +1456,15 @@ def _compose_junction(s: _Script) -> None:
                 s.spawn += [f"{var} = new Obstacle at egoManeuver.endLane.centerline.pointAlongBy({gap} + {3 * i}),",
                             "    with width Range(0.8, 1.8), with length Range(0.6, 1.4)"]
             s.show("obstacle", [], ["ahead_of"], actor.count)
+
+
+def _conflict_actor(ego: ActorFrame, candidates: Sequence[ActorFrame]) -> Optional[ActorFrame]:
+    """The vehicle the ego's stop waits for: the one its stop's trigger names (by kind), else the first
+    vehicle crossing or meeting it at the junction."""
+    trigger = ego.details.get("stop", {}).get("trigger") or {}
+    other = trigger.get("with") if isinstance(trigger, dict) else None
+    kind = getattr(other, "kind", None)
+    return next((a for a in candidates if a.kind == kind), candidates[0] if candidates else None)
 
 
 def _junction_longitudinal(s: _Script, actor: ActorFrame, speed: str, route: str, reckless: bool) -> str:

@@ -10,7 +10,8 @@ Frames: trace states are in highway-env's frame (y drawn downward; heading from
 Every vehicle (the ego included) is judged by the same rules:
 
 * ``brake`` / ``accelerate``: speed falls / rises by 3 m/s within 2 s; ``stop``: it
-  ends below 0.5 m/s after moving, or never moves.
+  ends below 0.5 m/s after moving, or never moves, or after driving stands still for
+  :data:`STOP_HOLD_S` seconds and drives on (a stop at a stop line).
 * ``lane_change_left|right``: a lane-change event of the env for that actor.
 * ``turn_left|right``: net heading change of at least 55 degrees while moving.
 * ``go_straight``: on a junction road (intersection, T-junction, three-way,
@@ -73,6 +74,7 @@ LANE_HALF_WIDTH = 1.75
 BRAKE_DROP = 3.0          # m/s lost ...
 BRAKE_WINDOW = 2.0        # ... within this many seconds
 STOP_SPEED = 0.5
+STOP_HOLD_S = 0.4         # s standing still, after driving, for a ``stop`` the vehicle drives on from
 TURN_ANGLE = math.radians(55)
 MERGE_FROM = (math.radians(45), math.radians(135))   # heading gap to the ego's at the start ...
 MERGE_ALIGNED = math.radians(20)                      # ... and at the end, for a merge
@@ -347,7 +349,7 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
     if drops.size and drops.max() >= BRAKE_DROP:
         out.add("brake")
     moving_before = speed.max() > 2.0
-    if (moving_before and speed[-1] < STOP_SPEED) or speed.max() < STOP_SPEED:
+    if (moving_before and speed[-1] < STOP_SPEED) or speed.max() < STOP_SPEED or _stops_and_goes(speed, dt):
         out.add("stop")
     rises = speed[window:] - speed[:-window] if len(speed) > window else np.array([speed[-1] - speed[0]])
     if rises.size and rises.max() >= BRAKE_DROP:
@@ -373,6 +375,23 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
         if road in JUNCTION_ROADS and _crosses_junction(track, view):
             out.add("go_straight")
     return out
+
+
+def _stops_and_goes(speed: np.ndarray, dt: float) -> bool:
+    """After driving (above 2 m/s) the vehicle stands still (below 0.5 m/s) for :data:`STOP_HOLD_S` seconds or
+    more, then drives on (a stop at a stop line, for a crossing vehicle)."""
+    standing = 0.0
+    moved = False
+    for v in np.abs(speed):
+        if v > 2.0:
+            moved = True
+        if moved and v < STOP_SPEED:
+            standing += dt
+            if standing >= STOP_HOLD_S:
+                return True
+        else:
+            standing = 0.0
+    return False
 
 
 def _lateral_offsets(track: np.ndarray, view: Optional[_MapView]) -> np.ndarray:

@@ -332,6 +332,19 @@ behavior RouteThenBrake(speed, route, after, lowSpeed, strength):
             do HoldStill()
         do FollowLaneBehavior(target_speed=lowSpeed)
 ''', ("DriveRoute", "HoldStill")),
+    "StopForConflict": ('''\
+behavior StopForConflict(speed, route, entry, other, otherExit, minWait, maxWait):
+    # drive the route, stop at the junction entry, wait at least minWait seconds and until `other` (None: no
+    # one) has cleared the junction (it is on its exit lane, otherExit), at most maxWait seconds, then go on
+    do DriveRoute(speed, route) until (distance from self to entry) < 1.5 + self.speed * self.speed / 10
+    while self.speed > 0.2:
+        take SetThrottleAction(0), SetBrakeAction(1)
+    waited = 0
+    while waited < maxWait and (waited < minWait or (other is not None and other.lane is not otherExit)):
+        take SetThrottleAction(0), SetBrakeAction(1)
+        waited += simulation().timestep
+    do CautiousRoute(speed, route)
+''', ("DriveRoute", "CautiousRoute")),
     "PullOutWhenEgoNear": ('''\
 behavior PullOutWhenEgoNear(speed, route, egoEntry, triggerTime):
     # wait at the give-way line until the ego is about triggerTime seconds from the junction
