@@ -40,3 +40,29 @@ def test_a_real_lane_change_is_no_drift():
     elements = _simulate("On a highway a car in the lane to the left of the ego changes lanes to the left.")
     car = _actions(elements, "car")
     assert "lane_change_left" in car and "drift" not in car
+
+
+def _checked(text, seed=0):
+    """Elements of one run as the SG evaluation runs it (the episode goes on after a collision)."""
+    from dv2s_gym.pipeline.convert import check_scenario
+
+    check = check_scenario(generate_rules(text).script, seed=seed, seconds=10.0)
+    assert check.ran, check.error
+    return check.simulated_elements
+
+
+def test_a_sideswipe_on_the_highway_is_a_side_collision_and_the_lane_change_stays_one():
+    elements = _checked("On a three-lane highway a car in the lane to the left of the ego changes lanes to the right "
+                        "into the ego's lane and sideswipes the ego.")
+    assert {"collide", "collide_side"} <= _actions(elements, "ego") & _actions(elements, "car")
+    assert "collide_head_on" not in _actions(elements, "ego")
+    # the crash ends the lane change half-way: it is no drift, and the lane change is kept
+    assert "lane_change_right" in _actions(elements, "car") and "drift" not in _actions(elements, "car")
+
+
+def test_a_t_boned_ego_went_straight_although_the_crash_kept_it_in_the_junction():
+    elements = _checked("The ego goes straight through a four-way intersection; a car from the right runs the red "
+                        "light and T-bones the ego.")
+    ego = _actions(elements, "ego")
+    assert {"collide", "collide_side", "go_straight"} <= ego
+    assert not {"turn_left", "turn_right"} & ego

@@ -739,7 +739,7 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
         return _swerve(s, speed, ego), True
     if ego.has("drift"):
         oncoming = any(a.role == "oncoming" for a in frame.actors)
-        if two_way and oncoming and ego.has("collide"):
+        if two_way and oncoming and ego.details.get("drift", {}).get("side") != "right":
             # across the centre line into the oncoming vehicle's path
             s.use("DriftAndReturn")
             return (f"DriftAndReturn({speed}, 1000, Range(2.0, 2.8), Range(1.5, 2.5), -1, Range(1.2, 2.0))", True)

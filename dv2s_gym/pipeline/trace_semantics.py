@@ -17,8 +17,9 @@ Every vehicle (the ego included) is judged by the same rules:
 * ``go_straight``: on a junction road (intersection, T-junction, three-way,
   roundabout) the vehicle drives through the junction area of the map (the Scenic
   intersection polygons): it is outside the junction, then inside, then outside
-  again, and does not turn. A vehicle that stops before the junction, or stays in
-  it, does not go straight. Without a loadable map nothing goes straight.
+  again, and does not turn; or it drives into the junction area and, still heading the
+  way it came, collides there (the crash ends its way across). A vehicle that stops
+  before the junction, or stays in it without a collision, does not go straight. Without a loadable map nothing goes straight.
 * ``keep_lane``: the vehicle travels at least :data:`KEEP_LANE_MIN_M` metres along
   its path, has no lane-change event, does not turn, drift, cut in, merge or
   overtake, and (when the map can be loaded) its centre stays inside the lane it is
@@ -276,10 +277,13 @@ def elements_from_trace(trace) -> Dict[str, Any]:
     actions: Set[Tuple[str, str]] = set()
     relations: Set[Tuple[str, str, str]] = set()
     lane_changes: Dict[str, List[Dict[str, Any]]] = {}
+    crashed: Dict[str, float] = {}  # actor -> time of its first collision
     for event in trace.events:
         if event.get("kind") == "lane_change" and event.get("actors"):
             lane_changes.setdefault(event["actors"][0], []).append(event)
         if event.get("kind") == "collision":
+            for actor in event.get("actors", []):
+                crashed.setdefault(actor, float(event.get("time", 0.0)))
             typed = _collision_actions(trace, event, dt)
             for actor in event.get("actors", []):
                 actions.add((_kind(actor, kinds), "collide"))
@@ -292,7 +296,7 @@ def elements_from_trace(trace) -> Dict[str, Any]:
         track = tracks.get(name)
         if track is not None and _kind(name, kinds) not in ("pedestrian", "obstacle") and \
                 abs(float(_wrap(np.array([track[-1, 2] - track[0, 2]]))[0])) < TURN_ANGLE:
-            windows = _drift_windows(track, dt, view)
+            windows = _drift_windows(_until_crash(track, crashed.get(name), dt), dt, view)
             lane_changes[name] = [c for c in changes if not _during(windows, float(c.get("time", 0.0)))]
 
     near: Dict[str, str] = {}
@@ -307,7 +311,7 @@ def elements_from_trace(trace) -> Dict[str, Any]:
     for name, kind in near.items():
         track = tracks[name]
         participants.append(kind)
-        own = _motion_actions(track, dt, kind, lane_changes.get(name, []), road, view)
+        own = _motion_actions(track, dt, kind, lane_changes.get(name, []), road, view, crashed.get(name))
         if name == "ego":
             for other, other_kind in near.items():
                 if other != "ego" and other_kind in ("car", "truck", "bus", "motorcycle", "bicycle", "obstacle"):
@@ -335,7 +339,7 @@ def _step_seconds(trace) -> float:
 
 
 def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[str, Any]], road,
-                    view: Optional[_MapView] = None) -> Set[str]:
+                    view: Optional[_MapView] = None, crashed_at: Optional[float] = None) -> Set[str]:
     out: Set[str] = set()
     if len(track) < 2:
         return out
@@ -358,7 +362,7 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
         out.add("lane_change_left" if change.get("direction") == "left" else "lane_change_right")
     out |= _special_motions(track, changes)
     turn = float(_wrap(np.array([track[-1, 2] - track[0, 2]]))[0])
-    windows = _drift_windows(track, dt, view) if abs(turn) < TURN_ANGLE and not out & {"u_turn", "pull_out"} else []
+    windows = _drift_windows(_until_crash(track, crashed_at, dt), dt, view) if abs(turn) < TURN_ANGLE and not out & {"u_turn", "pull_out"} else []
     if windows:
         out.add("drift")
         lateral = np.array([abs(_ego_frame(track[0], row)[1]) for row in track])
@@ -372,9 +376,31 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
         travelled = float(np.hypot(*np.diff(track[:, :2], axis=0).T).sum())
         if not changes and travelled >= KEEP_LANE_MIN_M and _stays_in_lane(track, view):
             out.add("keep_lane")
-        if road in JUNCTION_ROADS and _crosses_junction(track, view):
+        if road in JUNCTION_ROADS and (_crosses_junction(track, view) or
+                                       crashed_at is not None and _crashed_going_straight(track, crashed_at, dt, view)):
             out.add("go_straight")
     return out
+
+
+def _crashed_going_straight(track: np.ndarray, crashed_at: float, dt: float, view: Optional[_MapView]) -> bool:
+    """It drove into the junction area from outside it and, still heading the way it came in, collided there: the
+    crash ended its way straight across (a T-boned car does not leave the junction)."""
+    if view is None:
+        return False
+    step = min(len(track) - 1, max(0, int(round(crashed_at / dt))))
+    inside = view.in_junction(track[: step + 1])
+    if not inside.size or inside[0] or not inside[-1]:
+        return False
+    entered = int(np.flatnonzero(inside)[0])
+    return _heading_gap(track[step, 2], track[entered, 2]) < math.radians(20) and \
+        _heading_gap(track[step, 2], track[0, 2]) < math.radians(20)
+
+
+def _until_crash(track: np.ndarray, crashed_at: Optional[float], dt: float) -> np.ndarray:
+    """The track up to the actor's first collision (a crash ends its manoeuvre: where it ends up is no drift)."""
+    if crashed_at is None:
+        return track
+    return track[: min(len(track), max(1, int(round(crashed_at / dt)) + 1))]
 
 
 def _stops_and_goes(speed: np.ndarray, dt: float) -> bool:
