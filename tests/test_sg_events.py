@@ -55,3 +55,19 @@ def test_a_typed_collision_is_meant_and_checked_against_the_run():
     missing = unshown_warnings(result.elements, shown)
     assert "not shown in the simulated run: action ego collide side" in missing
     assert not any(w.endswith("action ego collide") for w in missing)
+
+
+@pytest.mark.slow
+def test_a_parked_ego_backing_out_collides_with_the_side_of_the_car_coming_from_behind():
+    from dv2s_gym.pipeline.convert import check_scenario
+
+    result = generate_rules("The ego reverses out of a parking space on a street and backs into the side of a car "
+                            "driving along the street behind it.")
+    assert "BackUpThenPullOutInto(" in result.script
+    hits = 0
+    for seed in (0, 1):
+        check = check_scenario(result.script, seed=seed, seconds=10.0)
+        actions = {tuple(a) for a in check.simulated_elements["actions"]}
+        assert ("ego", "reverse") in actions
+        hits += {("ego", "collide_side"), ("car", "collide_side")} <= actions
+    assert hits == 2

@@ -722,6 +722,14 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
                     f"Range(2.0, 2.8), {speed})"), False
         s.warnings.append("the ego overtakes, but nothing to overtake was described: the overtake is not placed")
         ego.actions.remove("overtake")
+    passer = next((a for a in frame.actors if a.role == "follower" and a.has("collide") and a.count == 1), None)
+    if (ego.has("pull_out") or ego.has("reverse")) and ego.has("collide") and passer is not None and two_way:
+        # it backs up, then pulls out into the side of the vehicle coming along the lane from behind
+        s.use("BackUpThenPullOutInto")
+        back = "Range(2.5, 3.5)" if ego.has("reverse") else "0.2"
+        trigger = "Range(5.5, 7.0)" if passer.kind not in _KIND_SPEEDS else "Range(6.5, 8.0)"
+        return (f"BackUpThenPullOutInto(egoLane.centerline, {speed}, {back}, {passer.name}, {trigger}, "
+                "Range(2.5, 3.5))"), False
     if ego.has("pull_out") or ego.has("reverse"):
         s.use("PullOutWhenNear")
         back = "Range(2.5, 3.5)" if ego.has("reverse") else "0"
@@ -956,7 +964,15 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
         slot = used.get(k, 0)
         used[k] = slot + actor.count
         position = f"{lane}.centerline.pointAlongBy(egoS + {gap})"
-        if actor.role == "follower" and actor.has("collide"):
+        parked_ego = two_way and (ego.has("pull_out") or ego.has("reverse")) and ego.has("collide")
+        if actor.role == "follower" and actor.has("collide") and parked_ego:
+            # it comes along the lane past the parked ego, which pulls out into its side
+            if actor.kind not in _KIND_SPEEDS:
+                speed_expr = s.param(f"{n}_speed", "Range(6, 8)")
+            position = f"{lane}.centerline.pointAlongBy(egoS - " + s.param(f"{n}_distance", "Range(28, 36)") + ")"
+            s.use("Cruise")
+            behavior = f"Cruise({speed_expr})"
+        elif actor.role == "follower" and actor.has("collide"):
             speed_expr = f"{ego_speed} + " + s.param(f"{n}_extra_speed", "Range(5, 8)")
             s.use("Cruise")
             behavior = f"Cruise({speed_expr})"

@@ -286,6 +286,35 @@ behavior PullOutWhenNear(line, fromOffset, speed, trigger, backUp, duration):
         take SetThrottleAction(throttle), SetBrakeAction(0), SetSteerAction(steer)
     do FollowLaneBehavior(target_speed=speed)
 ''', ("HoldStill",)),
+    "BackUpThenPullOutInto": ('''
+behavior BackUpThenPullOutInto(line, speed, backUp, other, trigger, duration):
+    # parked at the kerb beside `line`: back up `backUp` m, wait until `other` (coming along the lane from
+    # behind) is within `trigger` m, then steer into the lane, into its path
+    do HoldStill() for 0.4 seconds
+    start = self.position
+    take SetReverseAction(True)
+    while (distance from self to start) < backUp:
+        take SetThrottleAction(0.35), SetBrakeAction(0), SetSteerAction(0)
+    while self.speed > 0.3:
+        take SetThrottleAction(0), SetBrakeAction(1)
+    take SetReverseAction(False)
+    do HoldStill() until (distance from self to other) < trigger
+    elapsed = 0
+    reference = self.heading
+    while elapsed < duration + 2 and (abs(line.signedDistanceTo(self.position)) > 0.3 or elapsed < duration):
+        elapsed += simulation().timestep
+        offset = line.signedDistanceTo(self.position)
+        relative = self.heading - reference
+        while relative > 180 deg:
+            relative -= 360 deg
+        while relative < -180 deg:
+            relative += 360 deg
+        wanted = max(-0.3, min(0.3, -0.25 * offset))
+        steer = max(-0.3, min(0.3, -1.5 * (wanted - relative)))
+        throttle = 0.5 if self.speed < speed else 0
+        take SetThrottleAction(throttle), SetBrakeAction(0), SetSteerAction(steer)
+    do FollowLaneBehavior(target_speed=speed)
+''', ("HoldStill",)),
     "UTurnLater": ('''
 behavior UTurnLater(speed, after, turnSpeed, steer):
     # drive on for `after` seconds, slow to turnSpeed and turn round to the left (steer 0..1) until
