@@ -1556,8 +1556,6 @@ def unbuilt_warnings(parsed: ParsedDescription, s: "_Script", said: Sequence[str
                                          "participants": s.participants,
                                          "actions": [list(a) for a in s.actions],
                                          "relations": [list(r) for r in s.relations]}))
-    if s.frame.road == "three_way" and s.frame.map == "urban_t_junction":
-        meant = meant | {("road", "three_way")}
     said_text = " ".join(w.lower().replace("_", " ") for w in said)
     phrases: Dict[Tuple, str] = {}
     for entity in parsed.entities:
@@ -1582,8 +1580,10 @@ def unbuilt_warnings(parsed: ParsedDescription, s: "_Script", said: Sequence[str
             continue
         if element[0] == "road":
             phrase = " ".join(parsed.road_words) or str(element[1])
-            if s.frame.map in said_text or str(element[1]).replace("_", " ") in said_text:
-                continue  # the map choice is warned about already
+            built = MAP_ROADS.get(s.frame.map, s.frame.map).replace("_", " ")
+            out.append(f"not built: road {_words(element)} ('{phrase}'): the script uses map {s.frame.map} "
+                       f"(road type {built})")
+            continue
         elif element[0] == "participant":
             phrase = element[1]
         else:
