@@ -71,3 +71,16 @@ def test_a_parked_ego_backing_out_collides_with_the_side_of_the_car_coming_from_
         assert ("ego", "reverse") in actions
         hits += {("ego", "collide_side"), ("car", "collide_side")} <= actions
     assert hits == 2
+
+
+@pytest.mark.slow
+def test_an_ego_that_stops_then_turns_left_into_an_oncoming_car_is_hit_on_its_side():
+    from dv2s_gym.pipeline.convert import check_scenario
+
+    result = generate_rules("The ego waits at a four-way intersection, then turns left, and an oncoming car going "
+                            "straight hits the right side of the ego.")
+    assert "StopThenGoInto(" in result.script
+    for seed in (0, 1):
+        check = check_scenario(result.script, seed=seed, seconds=10.0)
+        actions = {tuple(a) for a in check.simulated_elements["actions"]}
+        assert {("ego", "stop"), ("ego", "collide_side"), ("car", "collide_side"), ("car", "go_straight")} <= actions

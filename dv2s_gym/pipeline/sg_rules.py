@@ -1358,8 +1358,16 @@ def _compose_junction(s: _Script) -> None:
     # entry until the vehicle it yields to has cleared the junction
     yields = ego.has("stop") and not reckless and not extra_ahead and not any(r == "ahead" for _, r, _ in roles) \
         and (bool(timed) or default_ego is not None and ego_type is not None)
-    conflict = _conflict_actor(ego, [a for a, _ in timed]) if yields else None
-    if yields and lead_first:
+    # ... or it stops, misjudges the gap and goes just before the vehicle it collides with gets there
+    hitters = [a for a, _ in timed if a.has("collide")]
+    misjudges = ego.has("stop") and ego.has("collide") and bool(hitters) and not extra_ahead \
+        and not any(r == "ahead" for _, r, _ in roles)
+    conflict = _conflict_actor(ego, [a for a, _ in timed]) if yields else \
+        _conflict_actor(ego, hitters) if misjudges else None
+    if misjudges:
+        ego_dist = s.param("ego_distance", "Range(10, 14)")
+        ego_time = f"{ego_dist} / {ego_speed}"
+    elif yields and lead_first:
         # close to the junction: it stops there while the other vehicle (which gets there first) crosses
         first = s.param("first_arrival", "Range(0.3, 0.8)")
         ego_dist = s.param("ego_distance", "Range(12, 16)")
@@ -1383,7 +1391,16 @@ def _compose_junction(s: _Script) -> None:
                        f"{actor.name}Maneuver.endLane]"]
 
     # ---------------------------------------------------------------- ego
-    if yields:
+    if misjudges and conflict is not None:
+        s.use("StopThenGoInto")
+        var = conflict.name if conflict.count == 1 else f"{conflict.name}_1"
+        # a left turn meets the other vehicle in the far half of the junction: it goes earlier
+        go_time = "Range(3.2, 3.6)" if default_ego == "LEFT_TURN" else "Range(2.6, 3.0)"
+        ego_behavior = (f"StopThenGoInto({ego_speed}, egoRoute, egoEntry, {var}, "
+                        f"{conflict.name}Maneuver.startLane.centerline.end, {go_time}, Range(0.6, 1.0))")
+        if default_ego is not None and not any(_TYPE.get(a) == default_ego for a in ego.actions):
+            ego.actions.append({v: k for k, v in _TYPE.items()}[default_ego])
+    elif yields:
         s.use("StopForConflict")
         other, exit_lane = "None", "None"
         if conflict is not None:
@@ -1406,7 +1423,7 @@ def _compose_junction(s: _Script) -> None:
                  f"    with speed {ego_speed},",
                  "    with route egoRoute,",
                  f"    with behavior {ego_behavior}"]
-    if not yields:
+    if not (yields or misjudges):
         s.spawn += ego_lines
     s.show("ego", list(ego.actions))
 
@@ -1434,7 +1451,10 @@ def _compose_junction(s: _Script) -> None:
         else:
             # it reaches the junction `offset` seconds after the ego would (negative: before it); a
             # group arrives one after the other, the last one still ahead of the ego
-            if lead_first:
+            if misjudges and actor is conflict:
+                # it gets to the junction after the ego has stopped at it
+                arrival = s.param(f"{n}_arrival", "Range(4.5, 5.5)")
+            elif lead_first:
                 arrival = f"{first} + Range(0, 0.4)"
             else:
                 # (with a collision described, the ego reaches the junction in 2.4 s at least)
@@ -1459,7 +1479,7 @@ def _compose_junction(s: _Script) -> None:
             rels.append("ahead_of")  # it joins the ego's road in front of the ego
         s.show(actor.kind, acts, list(dict.fromkeys(rels)), actor.count)
 
-    if yields:
+    if yields or misjudges:
         s.spawn += ego_lines  # after the vehicle it waits for, which its behaviour names
     # ---------------------------------------------------------------- pedestrians and obstacles
     for actor in frame.actors:

@@ -18,7 +18,8 @@ Every vehicle (the ego included) is judged by the same rules:
   roundabout) the vehicle drives through the junction area of the map (the Scenic
   intersection polygons): it is outside the junction, then inside, then outside
   again, and does not turn; or it drives into the junction area and, still heading the
-  way it came, collides there (the crash ends its way across). A vehicle that stops
+  way it came, collides there (the crash ends its way across; one that had turned 20
+  degrees or more when it collided there turns). A vehicle that stops
   before the junction, or stays in it without a collision, does not go straight. Without a loadable map nothing goes straight.
 * ``keep_lane``: the vehicle travels at least :data:`KEEP_LANE_MIN_M` metres along
   its path, has no lane-change event, does not turn, drift, cut in, merge or
@@ -376,24 +377,32 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
         travelled = float(np.hypot(*np.diff(track[:, :2], axis=0).T).sum())
         if not changes and travelled >= KEEP_LANE_MIN_M and _stays_in_lane(track, view):
             out.add("keep_lane")
-        if road in JUNCTION_ROADS and (_crosses_junction(track, view) or
-                                       crashed_at is not None and _crashed_going_straight(track, crashed_at, dt, view)):
+        crashed_way = _crashed_in_junction(track, crashed_at, dt, view) if road in JUNCTION_ROADS else None
+        if road in JUNCTION_ROADS and _crosses_junction(track, view) or crashed_way == "go_straight":
             out.add("go_straight")
+        elif crashed_way:
+            out.add(crashed_way)
     return out
 
 
-def _crashed_going_straight(track: np.ndarray, crashed_at: float, dt: float, view: Optional[_MapView]) -> bool:
-    """It drove into the junction area from outside it and, still heading the way it came in, collided there: the
-    crash ended its way straight across (a T-boned car does not leave the junction)."""
-    if view is None:
-        return False
+def _crashed_in_junction(track: np.ndarray, crashed_at: Optional[float], dt: float,
+                         view: Optional[_MapView]) -> Optional[str]:
+    """The way across the junction of a vehicle that drove into the junction area from outside it and collided
+    there (the crash ended its manoeuvre: a T-boned car does not leave the junction): ``go_straight`` while still
+    heading within 10 degrees of the way it came in, ``turn_left|right`` once turned 20 degrees or more."""
+    if view is None or crashed_at is None:
+        return None
     step = min(len(track) - 1, max(0, int(round(crashed_at / dt))))
     inside = view.in_junction(track[: step + 1])
     if not inside.size or inside[0] or not inside[-1]:
-        return False
+        return None
     entered = int(np.flatnonzero(inside)[0])
-    return _heading_gap(track[step, 2], track[entered, 2]) < math.radians(20) and \
-        _heading_gap(track[step, 2], track[0, 2]) < math.radians(20)
+    turned = float(_wrap(np.array([track[step, 2] - track[max(0, entered - 1), 2]]))[0])
+    if abs(turned) < math.radians(10) and _heading_gap(track[step, 2], track[0, 2]) < math.radians(10):
+        return "go_straight"
+    if math.radians(20) <= abs(turned) < TURN_ANGLE:
+        return "turn_right" if turned > 0 else "turn_left"
+    return None
 
 
 def _until_crash(track: np.ndarray, crashed_at: Optional[float], dt: float) -> np.ndarray:
@@ -618,7 +627,8 @@ def _interactions(
     if n and _joins_ego_lane_ahead(ego[n - 1], track[0], track[n - 1], rel[-1]):
         out.add("merge")
     started_opposite = _heading_gap(track[0, 2], ego[0, 2]) > math.radians(135)
-    if started_opposite and n:
+    if started_opposite and n and road not in JUNCTION_ROADS:
+        # (at a junction a left turn across the oncoming lane is no drift)
         inside = np.abs(rel[:, 1]) < LANE_HALF_WIDTH * 0.9
         # ... and it is the one that left its lane (the reference staying put is not drifting)
         if inside.any() and not inside[0] and not _stays_in_lane(track, view):

@@ -374,6 +374,19 @@ behavior StopForConflict(speed, route, entry, other, otherExit, minWait, maxWait
         waited += simulation().timestep
     do CautiousRoute(speed, route)
 ''', ("DriveRoute", "CautiousRoute")),
+    "StopThenGoInto": ('''\
+behavior StopThenGoInto(speed, route, entry, other, otherEntry, goTime, minWait):
+    # drive the route, stop at the junction entry, then misjudge the gap: go on (at the latest after 6 s) once
+    # `other` is about goTime seconds from the junction (otherEntry: the end of its approach lane)
+    do DriveRoute(speed, route) until (distance from self to entry) < 1.5 + self.speed * self.speed / 10
+    while self.speed > 0.2:
+        take SetThrottleAction(0), SetBrakeAction(1)
+    waited = 0
+    while waited < 6 and (waited < minWait or (distance from other to otherEntry) > max(2, other.speed * goTime - 8)):
+        take SetThrottleAction(0), SetBrakeAction(1)
+        waited += simulation().timestep
+    do DriveRoute(speed, route)
+''', ("DriveRoute",)),
     "PullOutWhenEgoNear": ('''\
 behavior PullOutWhenEgoNear(speed, route, egoEntry, triggerTime):
     # wait at the give-way line until the ego is about triggerTime seconds from the junction
