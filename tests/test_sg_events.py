@@ -84,3 +84,33 @@ def test_an_ego_that_stops_then_turns_left_into_an_oncoming_car_is_hit_on_its_si
         check = check_scenario(result.script, seed=seed, seconds=10.0)
         actions = {tuple(a) for a in check.simulated_elements["actions"]}
         assert {("ego", "stop"), ("ego", "collide_side"), ("car", "collide_side"), ("car", "go_straight")} <= actions
+
+
+@pytest.mark.parametrize("text, who, side", [
+    ("The ego veers into the lane to its left after a tyre blow-out.", "ego", "left"),
+    ("The ego car drifts slowly towards the road edge on the right.", "ego", "right"),
+    ("An oncoming truck drifts across the centre line.", "truck", "left"),
+    ("The ego changes lanes to the right, overshoots the lane and runs onto the shoulder.", "ego", None),
+    ("A truck in the right lane drifts into the ego's lane.", "truck", None),
+])
+def test_drift_phrases_and_their_side(text, who, side):
+    from dv2s_gym.pipeline.semantics import parse_description
+
+    entity = next(e for e in parse_description(text).entities if e.kind == who)
+    assert entity.has("drift")
+    assert entity.detail("drift").get("side") == side
+
+
+def test_pulling_onto_the_shoulder_is_no_drift():
+    from dv2s_gym.pipeline.semantics import parse_description
+
+    car = next(e for e in parse_description("The car ahead pulls onto the shoulder and stops.").entities
+               if e.kind == "car")
+    assert not car.has("drift") and car.has("stop")
+
+
+def test_an_action_read_onto_a_static_object_is_an_unplaced_phrase():
+    from dv2s_gym.pipeline.semantics import parse_description
+
+    parsed = parse_description("After a tyre blow-out the ego veers into the lane to its left.")
+    assert parsed.unplaced, "the clause whose action went to the tyre must be warned about"

@@ -1092,6 +1092,8 @@ class _Parser:
         kind = owner.kind
         if kind == "obstacle" and not (owner.attrs.get("animal") and action in ("cross", "emerge", "stop")) and \
                 not action.startswith("collide"):
+            if clause not in self._unplaced_phrases:
+                self._unplaced_phrases.append(clause)  # an action read onto a static object: not placed
             return
         groups = m.groupdict()
         if action in ("lane_change", "cut_in") and m.group(0).startswith("merg") and kind != "pedestrian":

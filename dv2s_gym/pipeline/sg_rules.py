@@ -737,6 +737,12 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
                 "Range(2.5, 3.5))"), False
     if ego.has("u_turn"):
         return _u_turn(s, speed), True
+    if (ego.has("lane_change_left") or ego.has("lane_change_right")) and ego.has("drift"):
+        # it changes lanes and overshoots: on past the new lane's centre and out of that lane too
+        sign = "" if ego.has("lane_change_left") else "-"
+        s.use("DriftLater")
+        return (f"DriftLater({speed}, Range(0.8, 1.6), {sign}(3.5 + Range(2.1, 2.6)), Range(3.5, 4.5), -1, "
+                "Range(1.8, 2.4))"), True
     if ego.has("lane_change_left") or ego.has("lane_change_right"):
         side = 1 if ego.has("lane_change_left") else -1
         after = s.param("ego_change_after", "Range(0.5, 1.5)" if ego.sudden else "Range(1.0, 2.5)")
