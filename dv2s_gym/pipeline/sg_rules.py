@@ -727,7 +727,7 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
         # it backs up, then pulls out into the side of the vehicle coming along the lane from behind
         s.use("BackUpThenPullOutInto")
         back = "Range(2.5, 3.5)" if ego.has("reverse") else "0.2"
-        trigger = "Range(5.5, 7.0)" if passer.kind not in _KIND_SPEEDS else "Range(6.5, 8.0)"
+        trigger = "Range(5.5, 7.0)" if passer.kind not in _KIND_SPEEDS else "Range(3.0, 4.0)"
         return (f"BackUpThenPullOutInto(egoLane.centerline, {speed}, {back}, {passer.name}, {trigger}, "
                 "Range(2.5, 3.5))"), False
     if ego.has("pull_out") or ego.has("reverse"):
