@@ -66,3 +66,11 @@ def test_a_t_boned_ego_went_straight_although_the_crash_kept_it_in_the_junction(
     ego = _actions(elements, "ego")
     assert {"collide", "collide_side", "go_straight"} <= ego
     assert not {"turn_left", "turn_right"} & ego
+
+
+def test_a_cyclist_riding_across_the_street_in_front_of_the_ego_crosses():
+    text = "On a two-lane street a cyclist suddenly crosses in front of the ego from the right."
+    assert "RideAcrossWhenEgoNear(" in generate_rules(text).script
+    elements = _checked(text)
+    assert "cross" in _actions(elements, "bicycle")
+    assert "cross" not in _actions(elements, "ego")

@@ -1190,8 +1190,10 @@ class _Parser:
                 return
             if kind in ("car", "truck", "bus", "motorcycle", "bicycle", "ego"):
                 if re.match(r"cross(?:es|ed|ing)? (?:the |a )?(?:road|street|lanes?|highway)\b", m.group(0) +
-                            clause[m.end():m.end() + 20].lstrip().join([" ", ""])):
-                    owner.add_action("cross", sudden=sudden)
+                            clause[m.end():m.end() + 20].lstrip().join([" ", ""])) or kind == "bicycle":
+                    owner.add_action("cross", sudden=sudden)  # (a cyclist crossing in front: like a pedestrian)
+                elif clause not in self._unplaced_phrases:
+                    self._unplaced_phrases.append(clause)  # "crosses" of a vehicle that says not what: warned
                 return
         if action == "cut_in":
             side = None

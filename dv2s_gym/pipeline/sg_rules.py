@@ -461,7 +461,9 @@ def _compose_lanes(s: _Script) -> None:
     # ---------------------------------------------------------------- roles
     need: Dict[int, bool] = {}  # lane offsets (+ left, - right) the ego's lane must have
     for actor in frame.actors:
-        if actor.kind in VEHICLES:
+        if actor.kind == "bicycle" and actor.has("cross"):
+            _check_actions(actor, s, {"cross", "collide"})  # a cyclist riding across the road, like a pedestrian
+        elif actor.kind in VEHICLES:
             _check_actions(actor, s, _LANE_ACTIONS - {"cross"} | ({"merge"} if onramp else set()))
         elif actor.kind == "pedestrian":
             _check_actions(actor, s, {"cross", "stop", "collide"})
@@ -481,6 +483,8 @@ def _compose_lanes(s: _Script) -> None:
             actor.side = 1 if "left_of" in rels and not two_way else -1 if "right_of" in rels and not two_way else 0
         elif actor.kind == "pedestrian":
             actor.role = "crosser" if actor.has("cross") or actor.has("collide") else "roadside"
+        elif actor.kind == "bicycle" and actor.has("cross"):
+            actor.role = "crosser"
         elif actor.has("pull_out") or actor.has("reverse"):
             actor.role = "puller"  # parked at the kerb (or on the shoulder) beside the ego's lane
         elif actor.has("merge") and onramp:
@@ -1128,7 +1132,13 @@ def _spawn_lane_pedestrians(s: _Script, actor: ActorFrame, ego_speed: str, two_w
     if crossing and parked is not None:
         # a parked vehicle on the far kerb: the pedestrian steps out just in front of it, not through it
         dist = s.param(f"{parked.name}_gap", "Range(25, 40)") + " + Range(6.5, 8.0)"
-    if crossing:
+    riding = actor.kind == "bicycle"
+    if crossing and riding:
+        walk = s.param(f"{n}_riding_speed", "Range(4, 5.5)")
+        hit = actor.has("collide") or reckless and s.frame.ego.has("collide")
+        trigger = s.param(f"{n}_trigger_time", "Range(1.6, 2.0)" if hit else "Range(2.2, 2.8)")
+        s.use("RideAcrossWhenEgoNear")
+    elif crossing:
         walk = s.param(f"{n}_walking_speed", "Range(1.7, 2.3)" if actor.sudden else "Range(1.2, 1.8)")
         hit = actor.has("collide") or reckless and s.frame.ego.has("collide")
         trigger = s.param(f"{n}_trigger_time",
@@ -1161,18 +1171,18 @@ def _spawn_lane_pedestrians(s: _Script, actor: ActorFrame, ego_speed: str, two_w
             if d == "left_to_right":
                 jitter += " + Range(1.2, 1.8)"  # the far side is a lane further away: start earlier
             when = f"{trigger}{jitter}"
-            if hit_any:
+            if hit_any and not riding:
                 # step out so as to reach the middle of the ego's lane when the ego gets there
                 when = f"{'3.3' if d != 'left_to_right' else '6.0'} / {walk} + Range(-0.2, 0.2)"
-            behavior = f"CrossWhenEgoNear({walk}, {when})"
-        contained = "" if two_way else ",\n    with regionContainedIn everywhere"
-        s.spawn += [f"{var} = new Pedestrian {place},", f"    facing {facing}{contained},",
-                    f"    with behavior {behavior}"]
+            behavior = f"{'RideAcrossWhenEgoNear' if riding else 'CrossWhenEgoNear'}({walk}, {when})"
+        contained = "" if two_way and not riding else ",\n    with regionContainedIn everywhere"
+        s.spawn += [f"{var} = new {_CLASS[actor.kind]} {place},", f"    facing {facing}{contained},"] + \
+            (["    with speed 0,"] if riding else []) + [f"    with behavior {behavior}"]
     rels = ["ahead_of"] + [r for r in actor.relations if r in ("crossing_path",)]
     shown = [a for a in actor.actions if a in ("cross", "collide")]
     if not crossing and actor.has("stop"):
         shown.append("stop")
-    s.show("pedestrian", shown, rels if ("ahead_of" in actor.relations or crossing) else
+    s.show(actor.kind, shown, rels if ("ahead_of" in actor.relations or crossing) else
            [r for r in actor.relations if r == "ahead_of"], actor.count)
 
 

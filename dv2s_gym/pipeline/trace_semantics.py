@@ -46,6 +46,8 @@ Every vehicle (the ego included) is judged by the same rules:
 * ``pull_out``: the vehicle starts standing still, then drives off at least
   :data:`PULL_OUT_MIN_M` metres and moves at least :data:`PULL_OUT_LATERAL_M` sideways
   (out of a parking spot or shoulder into the traffic lane) without turning.
+* ``cross``: a pedestrian, or a cyclist starting across the ego's heading (45-135 degrees), that moves
+  more than 2.5 m and more than 2 m sideways relative to the ego.
 * ``collide`` for both actors of every collision event, plus its type
   (:func:`collision_type`): ``collide_rear_end``, ``collide_head_on`` or
   ``collide_side``.
@@ -608,6 +610,11 @@ def _interactions(
         return out
     if kind == "obstacle":
         return out
+    if kind == "bicycle" and n and math.radians(45) <= _heading_gap(track[0, 2], ego[0, 2]) <= math.radians(135):
+        # a cyclist riding across the reference's road (a crossing, a crosswalk), judged like a pedestrian
+        moved = float(np.hypot(*(track[n - 1, :2] - track[0, :2])))
+        if moved > 2.5 and abs(rel[-1, 1] - rel[0, 1]) > 2.0:
+            out.add("cross")
     for change in changes:
         step = min(n - 1, max(0, int(round(change.get("time", 0) / dt))))
         after = rel[min(n - 1, step + 5)]

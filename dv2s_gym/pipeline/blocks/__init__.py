@@ -402,6 +402,15 @@ behavior CrossWhenEgoNear(speed, triggerTime):
     while True:
         take SetWalkingSpeedAction(speed)
 ''', ()),
+    "RideAcrossWhenEgoNear": ('''\
+behavior RideAcrossWhenEgoNear(speed, triggerTime):
+    # a cyclist waiting at the roadside rides straight across once the ego is about triggerTime seconds away
+    while (distance from self to ego) > max(9, triggerTime * ego.speed):
+        take SetThrottleAction(0), SetBrakeAction(1)
+    while True:
+        throttle = 0.7 if self.speed < speed else 0
+        take SetThrottleAction(throttle), SetBrakeAction(0), SetSteerAction(0)
+''', ()),
     "StandStill": ('''\
 behavior StandStill():
     while True:
