@@ -13,7 +13,11 @@ from the building blocks of :mod:`dv2s_gym.pipeline.blocks`:
 
 Whatever it cannot place (an unknown kind of actor, an action a type cannot do,
 a relation the map cannot realise, a roundabout) goes into ``warnings``; nothing
-is dropped silently. ``elements`` lists what the script is meant to show.
+is dropped silently: every phrase the parser could not place is a ``could not place``
+warning, and every parsed element the composed script does not mean to show is a
+``not built: <element> ('<words>')`` warning (:func:`unbuilt_warnings`). ``elements``
+lists what the script is meant to show; :func:`unshown_warnings` names what of it a
+simulated run did not show (``Generation.note_simulated`` adds those after a run).
 The output is deterministic for a given description and seed.
 """
 
