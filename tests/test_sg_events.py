@@ -114,3 +114,18 @@ def test_an_action_read_onto_a_static_object_is_an_unplaced_phrase():
 
     parsed = parse_description("After a tyre blow-out the ego veers into the lane to its left.")
     assert parsed.unplaced, "the clause whose action went to the tyre must be warned about"
+
+
+def test_generation_notes_what_the_simulated_run_did_not_show():
+    from dv2s_gym.pipeline.stages import Generation
+
+    meant = {"road": "highway", "participants": ["ego", "car"], "actions": [["car", "cut_in"], ["ego", "brake"]],
+             "relations": [["car", "left_of", "ego"]]}
+    shown = {"road": "highway", "participants": ["ego", "car"], "actions": [["ego", "brake"]], "relations": []}
+    generation = Generation("script", "rules", warnings=["could not place: 'x'"], intended_elements=meant)
+    new = generation.note_simulated(shown)
+    assert new == ["not shown in the simulated run: action car cut in",
+                   "not shown in the simulated run: relation car left of ego"]
+    assert generation.warnings == ["could not place: 'x'"] + new
+    assert generation.note_simulated(shown) == []  # said once
+    assert Generation("script", "openai").note_simulated(shown) == []  # nothing meant, nothing to compare
