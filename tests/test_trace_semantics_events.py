@@ -74,3 +74,10 @@ def test_a_cyclist_riding_across_the_street_in_front_of_the_ego_crosses():
     elements = _checked(text)
     assert "cross" in _actions(elements, "bicycle")
     assert "cross" not in _actions(elements, "ego")
+
+
+def test_a_pull_out_cut_short_by_a_collision_is_still_a_pull_out():
+    elements = _checked("A car reverses out of a parking space on the right side of the street into the path of "
+                        "the ego, and the ego strikes its rear corner.")
+    car = _actions(elements, "car")
+    assert {"collide", "reverse", "pull_out"} <= car

@@ -45,7 +45,9 @@ Every vehicle (the ego included) is judged by the same rules:
   half a lane of it.
 * ``pull_out``: the vehicle starts standing still, then drives off at least
   :data:`PULL_OUT_MIN_M` metres and moves at least :data:`PULL_OUT_LATERAL_M` sideways
-  (out of a parking spot or shoulder into the traffic lane) without turning.
+  (out of a parking spot or shoulder into the traffic lane) without turning; or it starts still, drives at least
+  :data:`PULL_OUT_CRASH_M` metres with :data:`PULL_OUT_CRASH_LATERAL_M` sideways and collides (the crash cut the
+  pull-out short).
 * ``cross``: a pedestrian, or a cyclist starting across the ego's heading (45-135 degrees), that moves
   more than 2.5 m and more than 2 m sideways relative to the ego.
 * ``collide`` for both actors of every collision event, plus its type
@@ -95,6 +97,8 @@ REVERSE_MIN_M = 2.0       # m driven backwards for ``reverse``
 SWERVE_MIN_M = 1.0        # m of sideways excursion (and back) for ``swerve``
 PULL_OUT_MIN_M = 8.0      # m driven after standing still for ``pull_out`` ...
 PULL_OUT_LATERAL_M = 1.5  # ... with at least this sideways shift
+PULL_OUT_CRASH_M = 1.5          # a pull-out a collision cut short: at least this far driven ...
+PULL_OUT_CRASH_LATERAL_M = 0.2  # ... and this far sideways before the collision
 LANE_WIDTH = 3.5          # m, every shipped map
 DRIFT_OUT_S = 1.5         # s driven with the centre outside the lane it was centred in, for ``drift`` ...
 DRIFT_SETTLE_M = 0.6      # ... without coming this close to another lane's centre (that is a lane change)
@@ -364,6 +368,8 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
     for change in changes:
         out.add("lane_change_left" if change.get("direction") == "left" else "lane_change_right")
     out |= _special_motions(track, changes)
+    if "pull_out" not in out and crashed_at is not None and _crashed_pulling_out(track, crashed_at, dt):
+        out.add("pull_out")
     turn = float(_wrap(np.array([track[-1, 2] - track[0, 2]]))[0])
     windows = _drift_windows(_until_crash(track, crashed_at, dt), dt, view) if abs(turn) < TURN_ANGLE and not out & {"u_turn", "pull_out"} else []
     if windows:
@@ -405,6 +411,18 @@ def _crashed_in_junction(track: np.ndarray, crashed_at: Optional[float], dt: flo
     if math.radians(20) <= abs(turned) < TURN_ANGLE:
         return "turn_right" if turned > 0 else "turn_left"
     return None
+
+
+def _crashed_pulling_out(track: np.ndarray, crashed_at: float, dt: float) -> bool:
+    """It started standing still, drove (forward or backward) at least :data:`PULL_OUT_CRASH_M` metres and moved at
+    least :data:`PULL_OUT_CRASH_LATERAL_M` sideways out of where it stood, then collided: the crash cut its
+    pull-out short (a car backing out of a parking space into a passing car)."""
+    before = _until_crash(track, crashed_at, dt)
+    if len(before) < 2 or abs(before[0, 3]) >= STOP_SPEED:
+        return False
+    travelled = float(np.hypot(*np.diff(before[:, :2], axis=0).T).sum())
+    shift = max(abs(_ego_frame(before[0], row)[1]) for row in before)
+    return travelled >= PULL_OUT_CRASH_M and shift >= PULL_OUT_CRASH_LATERAL_M
 
 
 def _until_crash(track: np.ndarray, crashed_at: Optional[float], dt: float) -> np.ndarray:
