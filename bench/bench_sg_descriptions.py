@@ -6,8 +6,9 @@
 Runs ``dv2s eval sg dv2s_gym/evalset/descriptions`` (or reads a report written by
 ``dv2s eval sg ... --json`` with ``--report``) and prints SP mean ± sd per source group and overall,
 the share of descriptions whose script compiles and runs, the labelled elements most often lost
-(label elements absent from the simulated ones), the most common warnings, and how many descriptions
-lost elements without any warning (silent drops). ``--save`` writes the per-description scores
+(label elements absent from the simulated ones), the most common warnings, how many descriptions
+lost elements without any warning (silent drops) and how many lost elements no warning names (their words,
+e.g. ``action ego collide side``, appear in none of the description's warnings). ``--save`` writes the per-description scores
 (stem -> use case, SP, runs); ``--compare`` prints SP before/after on the descriptions both score, and
 which got worse (the shipped baseline, ``bench/sg_descriptions_baseline.json``, is today's rules SG).
 """
