@@ -1453,12 +1453,13 @@ def _compose_junction(s: _Script) -> None:
     lead_first = bool(timed) and not any(a.has("collide") for a, _ in timed)
     # the ego stops at the junction (for a crossing vehicle, at a stop sign) and then goes on: it waits at the
     # entry until the vehicle it yields to has cleared the junction
+    # (not on the roundabout: its circulating traffic is timed against the ego's own approach)
     yields = ego.has("stop") and not reckless and not extra_ahead and not any(r == "ahead" for _, r, _ in roles) \
-        and (bool(timed) or default_ego is not None and ego_type is not None)
+        and (bool(timed) or default_ego is not None and ego_type is not None) and frame.map != RING_MAP
     # ... or it stops, misjudges the gap and goes just before the vehicle it collides with gets there
     hitters = [a for a, _ in timed if a.has("collide")]
     misjudges = ego.has("stop") and ego.has("collide") and bool(hitters) and not extra_ahead \
-        and not any(r == "ahead" for _, r, _ in roles)
+        and not any(r == "ahead" for _, r, _ in roles) and frame.map != RING_MAP
     conflict = _conflict_actor(ego, [a for a, _ in timed]) if yields else \
         _conflict_actor(ego, hitters) if misjudges else None
     if misjudges:

@@ -364,12 +364,19 @@ behavior RouteThenBrake(speed, route, after, lowSpeed, strength):
     "StopForConflict": ('''\
 behavior StopForConflict(speed, route, entry, other, otherExit, minWait, maxWait):
     # drive the route, stop at the junction entry, wait at least minWait seconds and until `other` (None: no
-    # one) has cleared the junction (it is on its exit lane, otherExit), at most maxWait seconds, then go on
+    # one) has cleared the ego's way (it is on its exit lane, otherExit, or it is 4 m further from the ego's
+    # entry than it came since the ego stopped: it has passed), at most maxWait seconds, then go on
     do DriveRoute(speed, route) until (distance from self to entry) < 1.5 + self.speed * self.speed / 10
     while self.speed > 0.2:
         take SetThrottleAction(0), SetBrakeAction(1)
     waited = 0
-    while waited < maxWait and (waited < minWait or (other is not None and other.lane is not otherExit)):
+    closest = 1000
+    cleared = other is None
+    while waited < maxWait and (waited < minWait or not cleared):
+        if other is not None:
+            gap = distance from other to entry
+            closest = min(closest, gap)
+            cleared = otherExit.containsPoint(other.position) or gap > closest + 4
         take SetThrottleAction(0), SetBrakeAction(1)
         waited += simulation().timestep
     do CautiousRoute(speed, route)
