@@ -536,7 +536,11 @@ class DV2SEnv(AbstractEnv):
             return True
         s, lat = lane.local_coordinates(vehicle.position)
         width = lane.width_at(s)
-        return abs(lat) > width / 2 + self.config["off_road_margin"] or not (-vehicle.LENGTH <= s <= lane.length + vehicle.LENGTH)
+        off = abs(lat) > width / 2 + self.config["off_road_margin"] or not (-vehicle.LENGTH <= s <= lane.length + vehicle.LENGTH)
+        if off and getattr(self, "_converted", None) is not None:
+            # a parking lane or hard shoulder is road too (not a highway-env lane: see ConvertedNetwork.on_shoulder)
+            return not self._converted.on_shoulder(vehicle.position)
+        return off
 
     def _record_state(self) -> None:
         actors = self.road.vehicles + self.road.objects

@@ -487,6 +487,7 @@ class ConvertedNetwork:
     _lanes_by_uid: Dict[str, "Lane"] = field(default_factory=dict, repr=False)
     _polygon_tree: Any = field(default=None, repr=False)
     _polygon_uids: Tuple[str, ...] = field(default=(), repr=False)
+    _shoulder_area: Any = field(default=None, repr=False)
 
     def _uid(self, lane: Union["Lane", str]) -> str:
         return lane if isinstance(lane, str) else lane.uid
@@ -508,6 +509,21 @@ class ConvertedNetwork:
         if isinstance(lane, tuple):
             lane = self.scenic_lane_of[lane]
         return self._uid(lane) in self.connecting_lanes
+
+    def on_shoulder(self, position_hw: Sequence[float]) -> bool:
+        """Whether a highway-env position lies on a Scenic shoulder: an OpenDRIVE ``shoulder``,
+        ``parking``, ``stop`` or ``border`` lane (Scenic's ``network.shoulders``). Those lanes are
+        not highway-env lanes, but a vehicle standing on them (parked, stopped on the hard
+        shoulder) is still on the road."""
+        if self._shoulder_area is None:
+            polygons = [p for sh in getattr(self.scenic_network, "shoulders", ()) for p in _polygons_of(sh)]
+            area = shapely.unary_union(polygons) if polygons else shapely.Polygon()
+            shapely.prepare(area)
+            self._shoulder_area = area
+        if self._shoulder_area.is_empty:
+            return False
+        x, y = hw_to_scenic_position(float(position_hw[0]), float(position_hw[1]))
+        return bool(self._shoulder_area.intersects(shapely.Point(x, y)))
 
     def route_for(self, lanes: Iterable[Union["Lane", str]]) -> List[LaneIndex]:
         """highway-env route (list of lane indexes) through a sequence of Scenic lanes."""
@@ -889,6 +905,14 @@ def hw_lane_index_at(
             key=lambda idx: converted.hw_network.get_lane(idx).distance_with_heading(position, heading_hw),
         )
     return converted.hw_network.get_closest_lane_index(position, heading_hw)
+
+
+def _polygons_of(region: Any) -> List[Any]:
+    """Shapely polygons of a Scenic polygonal region (a shoulder)."""
+    geom = getattr(region, "polygons", None)
+    if geom is None:
+        return []
+    return list(getattr(geom, "geoms", [geom]))
 
 
 # ---------------------------------------------------------------------------

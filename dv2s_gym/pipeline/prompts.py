@@ -98,6 +98,8 @@ SHIPPED_MAPS: Dict[str, str] = {
                       "right main lane before the ramp, 'road4_lane0' the ramp, 'road2_lane0' the "
                       "acceleration lane)",
     "urban_two_way": "a 600 m straight two-way street, one lane per direction, with a sidewalk on each side",
+    "urban_parking": "a 600 m straight two-way street, one lane per direction, a parking lane at each kerb (OpenDRIVE "
+                     "lane type 'parking', in network.shoulders, not network.lanes) and a sidewalk beyond it",
     "urban_multilane": "a 600 m straight two-way town street, two lanes per direction, with a sidewalk on each "
                        "side",
     "urban_crossroads": "a four-way intersection of four 150 m two-way arms with sidewalks; every "

@@ -48,6 +48,7 @@ ROAD_MAPS = {
     "roundabout": "urban_roundabout",
 }
 MAP_ROADS = {"highway_straight": "highway", "highway_onramp": "merge", "urban_two_way": "straight_road",
+             "urban_parking": "straight_road",
              "urban_multilane": "straight_road", "urban_crossroads": "intersection", "urban_t_junction": "t_junction",
              "urban_roundabout": "roundabout"}
 JUNCTION_MAPS = ("urban_crossroads", "urban_t_junction", "urban_roundabout")
@@ -58,6 +59,16 @@ ego's; ``urban_two_way`` (one lane per direction) is the plain town street."""
 STREET_LANES = 2
 """Lanes per direction of :data:`MULTILANE_STREET`."""
 RING_MAP = "urban_roundabout"
+PARKING_STREET = "urban_parking"
+"""``urban_two_way`` with a parking lane at each kerb: the street of vehicles parked at the kerb, pulling out
+of a parking space or backing out of one."""
+STREET_MAPS = ("urban_two_way", PARKING_STREET)
+"""The town streets with one lane per direction."""
+_PARKING_KERB = "Range(1.9, 2.1)"
+"""``right of <lane centre point> by`` this puts a car on the centre of the kerbside parking lane of
+:data:`PARKING_STREET` (the car's left side ``LANE_WIDTH / 2 + 0.25`` m from the lane centre, give or take)."""
+_PARKING_FAR_KERB = "Range(5.4, 5.6)"
+"""``left of <ego's lane centre point> by`` this puts a car on the far (oncoming side's) parking lane."""
 
 
 def _ring_lengths() -> Tuple[float, float]:
@@ -241,8 +252,18 @@ def build_frame(description: str, parsed: Optional[ParsedDescription] = None,
         warnings.append(f"could not place: '{phrase}'")
     road = parsed.road
     map_name = _choose_map(road, ego, actors, warnings)
+    if map_name == "urban_two_way" and _at_the_kerb(ego, actors, getattr(parsed, "features", None) or {}):
+        map_name = PARKING_STREET
     return ScenarioFrame(description=description, road=road, map=map_name, ego=ego, actors=actors,
                          ego_mentioned=ego_entity is not None, weather=_weather(description))
+
+
+def _at_the_kerb(ego: ActorFrame, actors: Sequence[ActorFrame], features: Dict[str, Any]) -> bool:
+    """A vehicle pulls out of (or backs out of) a parking space, or the street is said to have parking: the
+    street gets its parking lanes (:data:`PARKING_STREET`)."""
+    if features.get("parking_lane"):
+        return True
+    return any(a.has("pull_out") or a.has("reverse") for a in [ego, *actors] if a is ego or a.kind in VEHICLES)
 
 
 def _needs_same_direction_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -> bool:
@@ -448,7 +469,7 @@ def _check_actions(actor: ActorFrame, s: _Script, supported: set) -> None:
 # ---- shared parameter helpers
 
 def _speed_ranges(map_name: str) -> Tuple[float, float]:
-    return {"highway_straight": (20, 26), "highway_onramp": (18, 23), "urban_two_way": (8, 12),
+    return {"highway_straight": (20, 26), "highway_onramp": (18, 23), "urban_two_way": (8, 12), PARKING_STREET: (8, 12),
             MULTILANE_STREET: (8, 12)}.get(map_name, (6, 9))
 
 
@@ -471,7 +492,7 @@ _LANE_ACTIONS = {"brake", "stop", "accelerate", "lane_change_left", "lane_change
 
 def _compose_lanes(s: _Script) -> None:
     frame = s.frame
-    two_way = frame.map == "urban_two_way"
+    two_way = frame.map in STREET_MAPS
     multilane = frame.map == MULTILANE_STREET  # several lanes per direction and oncoming lanes
     onramp = frame.map == "highway_onramp"
     lo, hi = _speed_ranges(frame.map)
@@ -633,7 +654,9 @@ def _compose_lanes(s: _Script) -> None:
 
     # ---------------------------------------------------------------- road geometry
     if two_way:
-        s.geometry_title = "a two-way urban street, one lane per direction, with sidewalks"
+        s.geometry_title = ("a two-way urban street, one lane per direction, with a parking lane and a sidewalk "
+                            "at each kerb" if frame.map == PARKING_STREET else
+                            "a two-way urban street, one lane per direction, with sidewalks")
         s.geometry += ["lanePairs = [(lane, other) for lane in network.lanes for other in network.lanes "
                        "if other is not lane]",
                        "lanePair = Uniform(*lanePairs)",
@@ -741,8 +764,9 @@ def _compose_lanes(s: _Script) -> None:
                  f"    with behavior {ego_behavior}"]
     if (ego.has("pull_out") or ego.has("reverse")) and two_way:
         # parked at the kerb, still on the road surface (the env ends an episode whose ego leaves the road)
+        kerb = _PARKING_KERB if frame.map == PARKING_STREET else "Range(1.0, 1.3)"
         ego_lines = ["egoSpot = new OrientedPoint at egoLane.centerline.pointAlongBy(egoS), facing roadDirection",
-                     "ego = new Car right of egoSpot by Range(1.0, 1.3), facing egoSpot.heading,",
+                     f"ego = new Car right of egoSpot by {kerb}, facing egoSpot.heading,",
                      "    with regionContainedIn everywhere,",
                      "    with speed 0,",
                      f"    with behavior {ego_behavior}"]
@@ -908,8 +932,11 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
         near = "right_of" in actor.relations  # parked at the ego's own (right) kerb
         for i in range(actor.count):
             var = n if actor.count == 1 else f"{n}_{i + 1}"
-            place = (f"right of {var}Spot by Range(1.4, 1.7), facing {var}Spot.heading,\n"
-                     "    with regionContainedIn everywhere," if near else
+            parking = s.frame.map == PARKING_STREET  # on the parking lane at either kerb
+            place = (f"right of {var}Spot by {_PARKING_KERB if parking else 'Range(1.4, 1.7)'}, "
+                     f"facing {var}Spot.heading,\n    with regionContainedIn everywhere," if near else
+                     f"left of {var}Spot by {_PARKING_FAR_KERB}, facing roadDirection,\n"
+                     "    with regionContainedIn everywhere," if parking else
                      f"left of {var}Spot by Range(2.5, 2.7), facing roadDirection,")
             s.spawn += [f"{var}Spot = new OrientedPoint at egoLane.centerline.pointAlongBy(egoS + {gap} + {12 * i}), "
                         "facing roadDirection",
@@ -1112,7 +1139,7 @@ def _spawn_puller(s: _Script, actor: ActorFrame, ego_speed: str, two_way: bool) 
         trigger = s.param(f"{n}_trigger", ("Range(20, 26)" if urban else "Range(40, 50)") if actor.sudden
                           else ("Range(26, 34)" if urban else "Range(50, 62)"))
     # (`right of` puts the vehicle's left side that far from the lane centre)
-    kerb = "Range(1.4, 1.7)" if urban else "Range(1.8, 2.2)"
+    kerb = _PARKING_KERB if s.frame.map == PARKING_STREET else "Range(1.4, 1.7)" if urban else "Range(1.8, 2.2)"
     speed = s.param(f"{n}_speed", "Range(6, 9)" if urban else "Range(12, 16)")
     back = "Range(2.5, 3.5)" if actor.has("reverse") else "0"
     s.use("PullOutWhenNear")

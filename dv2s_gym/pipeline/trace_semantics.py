@@ -72,6 +72,7 @@ MAP_ROAD_TYPES = {
     "highway_onramp": "merge",
     "urban_two_way": "straight_road",
     "urban_multilane": "straight_road",
+    "urban_parking": "straight_road",
     "urban_crossroads": "intersection",
     "urban_t_junction": "t_junction",
     "urban_roundabout": "roundabout",

@@ -6,7 +6,7 @@ in CARLA or MetaDrive by changing its ``model`` line.
 
 Global parameters:
     map: a shipped map name (``highway_straight``, ``highway_onramp``,
-        ``urban_two_way``, ``urban_multilane``, ``urban_crossroads``,
+        ``urban_two_way``, ``urban_parking``, ``urban_multilane``, ``urban_crossroads``,
         ``urban_t_junction``, ``urban_roundabout``) or a path
         to an OpenDRIVE file.
 

@@ -33,6 +33,10 @@ Maps:
 ``urban_two_way``
     600 m two-way road, one 3.5 m driving lane per direction and a 2 m sidewalk
     on each side.
+``urban_parking``
+    600 m two-way town street, one 3.5 m driving lane per direction, a 2.5 m
+    parking lane (OpenDRIVE type ``parking``) at each kerb and a 2 m sidewalk
+    beyond it.
 ``urban_multilane``
     600 m two-way town street, two 3.5 m driving lanes per direction (broken
     white line between same-direction lanes, solid double yellow centre line)
@@ -62,6 +66,7 @@ from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Un
 
 __all__ = [
     "LANE_WIDTH",
+    "PARKING_WIDTH",
     "MAP_BUILDERS",
     "Line",
     "Arc",
@@ -83,6 +88,8 @@ LANE_WIDTH = 3.5
 """Default driving-lane width in metres."""
 
 SIDEWALK_WIDTH = 2.0
+PARKING_WIDTH = 2.5
+"""Width of a kerbside parking lane (``urban_parking``) in metres."""
 MARK_WIDTH = 0.15
 DEFAULT_OUT_DIR = pathlib.Path(__file__).resolve().parent
 
@@ -587,6 +594,19 @@ def urban_two_way_section(center_mark: RoadMark) -> LaneSection:
     )
 
 
+def urban_parking_section(center_mark: RoadMark) -> LaneSection:
+    """One driving lane per direction, a parking lane at each kerb (solid line between them) and a sidewalk."""
+
+    def side(sign: int) -> Tuple[Lane, ...]:
+        return (
+            Lane(sign * 1, "driving", LANE_WIDTH, SOLID),
+            Lane(sign * 2, "parking", PARKING_WIDTH, NO_MARK),
+            Lane(sign * 3, "sidewalk", SIDEWALK_WIDTH, NO_MARK),
+        )
+
+    return LaneSection(s=0.0, left=side(1), right=side(-1), center_mark=center_mark)
+
+
 def urban_multilane_section(lanes_per_direction: int, center_mark: RoadMark) -> LaneSection:
     """``lanes_per_direction`` driving lanes each way (broken marks between
     same-direction lanes, solid on the kerb side) plus a sidewalk on each side."""
@@ -874,6 +894,20 @@ def build_urban_two_way() -> OpenDriveMap:
     return OpenDriveMap("urban_two_way", [road])
 
 
+def build_urban_parking() -> OpenDriveMap:
+    """Straight 600 m two-way street with a parking lane and a sidewalk on each side, along +x."""
+    road = Road(
+        id=1,
+        name="street",
+        start=(0.0, 0.0, 0.0),
+        segments=(Line(600.0),),
+        sections=(urban_parking_section(RoadMark("broken", "yellow", "both")),),
+        road_type="town",
+        speed_kmh=URBAN_SPEED,
+    )
+    return OpenDriveMap("urban_parking", [road])
+
+
 def build_urban_multilane() -> OpenDriveMap:
     """Straight 600 m two-way town street, two lanes per direction, sidewalks, along +x."""
     road = Road(
@@ -1070,6 +1104,7 @@ MAP_BUILDERS: Dict[str, Callable[[], OpenDriveMap]] = {
     "highway_straight": build_highway_straight,
     "highway_onramp": build_highway_onramp,
     "urban_two_way": build_urban_two_way,
+    "urban_parking": build_urban_parking,
     "urban_multilane": build_urban_multilane,
     "urban_crossroads": build_urban_crossroads,
     "urban_t_junction": build_urban_t_junction,
