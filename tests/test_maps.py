@@ -37,6 +37,7 @@ ALL_MAPS = [
     "highway_straight",
     "highway_onramp",
     "urban_two_way",
+    "urban_parking",
     "urban_multilane",
     "urban_crossroads",
     "urban_t_junction",
