@@ -185,3 +185,41 @@ def test_the_ego_pulling_out_of_a_parking_space_stays_on_the_road():
     assert abs(trace.states[0]["ego"][1]) == pytest.approx(PARKING_CENTRE, abs=0.3)
     assert not any(e["kind"] == "off_road" for e in trace.events)
     assert "pull_out" in _actions(elements_from_trace(trace), "ego")
+
+
+
+
+def test_a_car_stopped_on_the_hard_shoulder_stands_on_the_shoulder():
+    result = generate_rules("On the highway a car is stopped on the hard shoulder ahead of the ego.")
+    assert result.frame.map == "highway_straight"
+    assert "car1 = new Car right of car1Spot by Range(2.15, 2.35)" in result.script
+    assert "t[3] is None" in result.script  # beside the rightmost lane
+    # a car stopped in a lane stays in the lane
+    plain = generate_rules("On the highway a car ahead of the ego stops suddenly.")
+    assert "right of car1Spot" not in plain.script
+
+
+@pytest.mark.slow
+def test_a_car_stopped_on_the_hard_shoulder_is_passed_without_a_crash():
+    trace = run_script(generate_rules("On the highway a car is stopped on the hard shoulder ahead of the ego.").script,
+                       8.0)
+    car = _other(trace)
+    first, last = trace.states[0], trace.states[-1]
+    assert abs(first[car][1]) == pytest.approx(abs(first["ego"][1]) + 3.25, abs=0.15)  # on the shoulder
+    assert last[car][:2] == pytest.approx(first[car][:2], abs=0.05)
+    assert last["ego"][0] > first[car][0]  # the ego drove past it
+    assert not any(e["kind"] in ("collision", "off_road") for e in trace.events)
+
+
+@pytest.mark.slow
+def test_the_ego_parked_on_the_hard_shoulder_pulls_out_into_the_right_lane():
+    result = generate_rules("ego parked on hwy shoulder, pulls out into R lane; car approaching from behind in that "
+                            "lane")
+    assert result.frame.map == "highway_straight"
+    trace = run_script(result.script, 10.0)
+    first, last = trace.states[0], trace.states[-1]
+    car = _other(trace)
+    assert abs(first["ego"][1] - first[car][1]) == pytest.approx(3.25, abs=0.15)  # ego on the shoulder, car in lane
+    assert abs(last["ego"][1] - first[car][1]) < 0.5  # the ego ends in that lane
+    assert not any(e["kind"] == "off_road" for e in trace.events)
+    assert "pull_out" in _actions(elements_from_trace(trace), "ego")

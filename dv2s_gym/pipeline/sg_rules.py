@@ -63,6 +63,11 @@ PARKING_STREET = "urban_parking"
 """``urban_two_way`` with a parking lane at each kerb: the street of vehicles parked at the kerb, pulling out
 of a parking space or backing out of one."""
 STREET_MAPS = ("urban_two_way", PARKING_STREET)
+SHOULDER_HIGHWAY = "highway_straight"
+"""The highway with a hard shoulder (3 m, right of the rightmost lane): the ego parked on it pulls out from it."""
+_SHOULDER_KERB = "Range(2.15, 2.35)"
+"""``right of <rightmost lane centre point> by`` this puts a car on the centre of :data:`SHOULDER_HIGHWAY`'s
+hard shoulder (3.25 m right of the lane centre)."""
 """The town streets with one lane per direction."""
 _PARKING_KERB = "Range(1.9, 2.1)"
 """``right of <lane centre point> by`` this puts a car on the centre of the kerbside parking lane of
@@ -264,6 +269,21 @@ def _at_the_kerb(ego: ActorFrame, actors: Sequence[ActorFrame], features: Dict[s
     if features.get("parking_lane"):
         return True
     return any(a.has("pull_out") or a.has("reverse") for a in [ego, *actors] if a is ego or a.kind in VEHICLES)
+
+
+_ON_SHOULDER = re.compile(r"\b(?:on|onto|in|into|along) (?:the |its |their )?(?:hard |right )?shoulder\b|"
+                          r"\b(?:breakdown|emergency) lane\b")
+
+
+def _standing_on_the_shoulder(frame: ScenarioFrame) -> Optional[ActorFrame]:
+    """On :data:`SHOULDER_HIGHWAY`, the one vehicle that stands still (stopped, parked, broken down: no action but
+    stopping) when the description puts a vehicle on the (hard) shoulder or in the breakdown lane; else None."""
+    if frame.map != SHOULDER_HIGHWAY or frame.ego.lane not in (None, "right") or \
+            not _ON_SHOULDER.search(frame.description.lower()):
+        return None
+    still = [a for a in frame.actors if a.kind in VEHICLES and not (set(a.actions) - {"stop", "keep_lane"})
+             and not ({"left_of", "oncoming", "behind"} & set(a.relations))]
+    return still[0] if len(still) == 1 else None
 
 
 def _needs_same_direction_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -> bool:
@@ -495,6 +515,8 @@ def _compose_lanes(s: _Script) -> None:
     two_way = frame.map in STREET_MAPS
     multilane = frame.map == MULTILANE_STREET  # several lanes per direction and oncoming lanes
     onramp = frame.map == "highway_onramp"
+    # the ego parked on the hard shoulder right of the rightmost lane, which it pulls out into
+    on_shoulder = frame.map == SHOULDER_HIGHWAY and (frame.ego.has("pull_out") or frame.ego.has("reverse"))
     lo, hi = _speed_ranges(frame.map)
     ego_speed = s.param("ego_speed", f"Range({lo}, {hi})")
     ego = frame.ego
@@ -525,6 +547,7 @@ def _compose_lanes(s: _Script) -> None:
 
     # ---------------------------------------------------------------- roles
     need: Dict[int, bool] = {}  # lane offsets (+ left, - right) the ego's lane must have
+    standing = _standing_on_the_shoulder(frame)
     for actor in frame.actors:
         if actor.kind == "bicycle" and actor.has("cross"):
             _check_actions(actor, s, {"cross", "collide"})  # a cyclist riding across the road, like a pedestrian
@@ -583,10 +606,12 @@ def _compose_lanes(s: _Script) -> None:
             actor.role = "follower"
         else:
             actor.role = "lead"
-        if not two_way and not onramp and (ego.has("pull_out") or ego.has("reverse")) and \
+        if not two_way and not onramp and not on_shoulder and (ego.has("pull_out") or ego.has("reverse")) and \
                 actor.role in ("lead", "follower") and actor.kind in VEHICLES:
             # the ego is parked on the shoulder: the traffic it pulls out into drives in the lane left of it
             actor.role, actor.side = "adjacent", 1
+        if actor is standing:
+            actor.role = "shoulder"  # stopped on the hard shoulder right of the rightmost lane
         if two_way and actor.role == "adjacent" and not (set(actor.actions) - {"stop", "keep_lane"}):
             actor.role = "far_side"  # parked or standing at the far kerb, in the other lane
         if two_way and actor.role in ("adjacent", "cutter"):
@@ -646,7 +671,7 @@ def _compose_lanes(s: _Script) -> None:
         need[-1] = True
     if ego.has("overtake") and not two_way:
         need[1] = True
-    if (ego.has("pull_out") or ego.has("reverse")) and not two_way and not onramp:
+    if (ego.has("pull_out") or ego.has("reverse")) and not two_way and not onramp and not on_shoulder:
         need[1] = True  # parked in the rightmost lane (the shoulder), it pulls out into the lane left of it
     around = [a for a in frame.actors if a.has("overtake") and a.details.get("overtake", {}).get("around")]
     if around and not two_way:
@@ -683,7 +708,8 @@ def _compose_lanes(s: _Script) -> None:
         if max_right >= 2:
             conds.append("t[4] is not None")
         ego_lane_word = ego.lane
-        at_kerb = ego.has("pull_out") or ego.has("reverse") or any(a.role == "puller" for a in frame.actors)
+        at_kerb = ego.has("pull_out") or ego.has("reverse") or any(a.role in ("puller", "shoulder")
+                                                                    for a in frame.actors)
         if at_kerb and not onramp:
             # a vehicle parked at the kerb or on the shoulder: the ego's lane is the rightmost one
             conds.append("t[3] is None")
@@ -767,6 +793,12 @@ def _compose_lanes(s: _Script) -> None:
         kerb = _PARKING_KERB if frame.map == PARKING_STREET else "Range(1.0, 1.3)"
         ego_lines = ["egoSpot = new OrientedPoint at egoLane.centerline.pointAlongBy(egoS), facing roadDirection",
                      f"ego = new Car right of egoSpot by {kerb}, facing egoSpot.heading,",
+                     "    with regionContainedIn everywhere,",
+                     "    with speed 0,",
+                     f"    with behavior {ego_behavior}"]
+    elif on_shoulder:
+        ego_lines = ["egoSpot = new OrientedPoint at egoLane.centerline.pointAlongBy(egoS), facing roadDirection",
+                     f"ego = new Car right of egoSpot by {_SHOULDER_KERB}, facing egoSpot.heading,",
                      "    with regionContainedIn everywhere,",
                      "    with speed 0,",
                      f"    with behavior {ego_behavior}"]
@@ -926,6 +958,18 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
             obstacles.append(var)
         rel = ["ahead_of"] + (["same_lane"] if actor.side == 0 else ["left_of" if actor.side > 0 else "right_of"])
         s.show("obstacle", [], [r for r in rel if r in rels or r == "ahead_of"], actor.count)
+        return
+    if actor.role == "shoulder":
+        gap = s.param(f"{n}_gap", "Range(55, 85)")
+        for i in range(actor.count):
+            var = n if actor.count == 1 else f"{n}_{i + 1}"
+            s.spawn += [f"{var}Spot = new OrientedPoint at egoLane.centerline.pointAlongBy(egoS + {gap} + {14 * i}), "
+                        "facing roadDirection",
+                        f"{var} = new {cls} right of {var}Spot by {_SHOULDER_KERB}, facing {var}Spot.heading,",
+                        "    with regionContainedIn everywhere,",
+                        "    with speed 0,", "    with behavior HoldStill()"]
+        s.use("HoldStill")
+        s.show(actor.kind, [a for a in actor.actions if a == "stop"], ["ahead_of", "right_of"], actor.count)
         return
     if actor.role == "far_side":
         gap = s.param(f"{n}_gap", "Range(25, 40)")
