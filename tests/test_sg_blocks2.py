@@ -26,14 +26,15 @@ def _parked_car(*actions, road="straight_road"):
 
 def test_pull_out_is_placed_at_the_kerb_of_a_street(monkeypatch):
     result = _generate(monkeypatch, _parked_car("pull_out"))
-    assert result.frame.map == "urban_two_way"  # a car at the kerb does not need a second lane
+    # a car at the kerb does not need a second lane; it is parked on the parking lane of the parking street
+    assert result.frame.map == "urban_parking"
     assert "PullOutWhenNear(egoLane.centerline" in result.script
     assert ["car", "pull_out"] in result.elements["actions"]
     assert ["car", "right_of", "ego"] in result.elements["relations"]
     check_script(result.script)
 
 
-def test_ego_pull_out_on_a_highway_uses_the_rightmost_lane_as_shoulder(monkeypatch):
+def test_ego_pull_out_on_a_highway_starts_on_the_hard_shoulder(monkeypatch):
     ego = Entity("ego")
     ego.add_action("pull_out")
     car = Entity("car", attrs={"noun": "car"})
@@ -41,7 +42,9 @@ def test_ego_pull_out_on_a_highway_uses_the_rightmost_lane_as_shoulder(monkeypat
     parsed = ParsedDescription(text="The ego pulls out of the shoulder.", road="highway", entities=[ego, car])
     result = _generate(monkeypatch, parsed)
     assert "t[3] is None" in result.script  # the ego's lane is the rightmost one
-    assert "PullOutWhenNear(leftLane.centerline" in result.script
+    # parked on the hard shoulder right of it (sg-kerb; before, the rightmost lane stood in for the shoulder)
+    assert "ego = new Car right of egoSpot by Range(2.15, 2.35)" in result.script
+    assert "PullOutWhenNear(egoLane.centerline" in result.script
     assert ["car", "left_of", "ego"] in result.elements["relations"]  # traffic in the lane it pulls into
 
 

@@ -612,6 +612,9 @@ def _compose_lanes(s: _Script) -> None:
             actor.role, actor.side = "adjacent", 1
         if actor is standing:
             actor.role = "shoulder"  # stopped on the hard shoulder right of the rightmost lane
+        if on_shoulder and actor.role in ("lead", "follower") and actor.kind in VEHICLES and \
+                "left_of" not in actor.relations:
+            actor.relations.append("left_of")  # in the lane left of the ego parked on the shoulder
         if two_way and actor.role == "adjacent" and not (set(actor.actions) - {"stop", "keep_lane"}):
             actor.role = "far_side"  # parked or standing at the far kerb, in the other lane
         if two_way and actor.role in ("adjacent", "cutter"):
