@@ -223,3 +223,23 @@ def test_the_ego_parked_on_the_hard_shoulder_pulls_out_into_the_right_lane():
     assert abs(last["ego"][1] - first[car][1]) < 0.5  # the ego ends in that lane
     assert not any(e["kind"] == "off_road" for e in trace.events)
     assert "pull_out" in _actions(elements_from_trace(trace), "ego")
+
+
+def test_a_pedestrian_stepping_out_between_parked_cars_may_stand_on_the_parking_lane():
+    """The parking lane is no walkable region: a pedestrian at the kerb of the parking street is let stand on it."""
+    result = generate_rules("A child runs out from behind two parked cars on the right into the path of the ego.")
+    assert result.frame.map == PARKING_STREET
+    spawn = result.script.split("# 4. Spawn positions")[1]
+    pedestrian = spawn[spawn.index("= new Pedestrian"):]
+    assert "with regionContainedIn everywhere" in pedestrian.split("with behavior")[0]
+
+
+@pytest.mark.slow
+def test_a_child_running_out_between_parked_cars_crosses_in_the_run():
+    from dv2s_gym.pipeline.convert import check_scenario
+
+    result = generate_rules("A child runs out from behind two parked cars on the right into the path of the ego.")
+    check = check_scenario(result.script, seed=0, seconds=10.0)
+    assert check.ran, check.error
+    assert ["pedestrian", "cross"] in check.simulated_elements["actions"]
+    assert ["car", "right_of", "ego"] in check.simulated_elements["relations"]

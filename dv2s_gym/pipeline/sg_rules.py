@@ -1317,7 +1317,10 @@ def _spawn_lane_pedestrians(s: _Script, actor: ActorFrame, ego_speed: str, two_w
                 # step out so as to reach the middle of the ego's lane when the ego gets there
                 when = f"{'3.3' if d != 'left_to_right' else '6.0'} / {walk} + Range(-0.2, 0.2)"
             behavior = f"{'RideAcrossWhenEgoNear' if riding else 'CrossWhenEgoNear'}({walk}, {when})"
-        contained = "" if two_way and not riding else ",\n    with regionContainedIn everywhere"
+        # (on the parking street a pedestrian at the near or far kerb stands between the parked cars, on the
+        # parking lane, which is not walkable region)
+        contained = "" if two_way and not riding and s.frame.map != PARKING_STREET else \
+            ",\n    with regionContainedIn everywhere"
         s.spawn += [f"{var} = new {_CLASS[actor.kind]} {place},", f"    facing {facing}{contained},"] + \
             (["    with speed 0,"] if riding else []) + [f"    with behavior {behavior}"]
     rels = ["ahead_of"] + [r for r in actor.relations if r in ("crossing_path",)]
