@@ -243,3 +243,12 @@ def test_a_child_running_out_between_parked_cars_crosses_in_the_run():
     assert check.ran, check.error
     assert ["pedestrian", "cross"] in check.simulated_elements["actions"]
     assert ["car", "right_of", "ego"] in check.simulated_elements["relations"]
+
+
+def test_parked_cars_on_the_parking_street_stand_at_the_kerb_not_in_the_egos_lane():
+    result = generate_rules("A pedestrian steps out between parked cars along the curb in front of the ego.")
+    assert result.frame.map == PARKING_STREET
+    car = next(a for a in result.frame.actors if a.kind == "car")
+    assert car.role == "far_side" and "right_of" in car.relations and "same_lane" not in car.relations
+    assert "car1_1 = new Car right of car1_1Spot by Range(1.9, 2.1)" in result.script
+    assert ["car", "right_of", "ego"] in result.elements["relations"]

@@ -123,6 +123,7 @@ class ActorFrame:
     cross_dirs: List[Tuple[str, int]] = field(default_factory=list)
     role: str = ""
     side: int = 0
+    parked: bool = False
 
     def has(self, action: str) -> bool:
         return action in self.actions
@@ -200,6 +201,7 @@ def _actor_from(entity: Entity, name: str) -> ActorFrame:
         if d and d not in [c[0] for c in actor.cross_dirs]:
             actor.cross_dirs.append((d, 0))
     actor.state_stop = bool(entity.attrs.get("state_stop"))
+    actor.parked = "parked" in entity.descriptors
     return actor
 
 
@@ -612,6 +614,11 @@ def _compose_lanes(s: _Script) -> None:
             actor.role, actor.side = "adjacent", 1
         if actor is standing:
             actor.role = "shoulder"  # stopped on the hard shoulder right of the rightmost lane
+        if frame.map == PARKING_STREET and actor.parked and actor.role == "lead" and actor.kind in VEHICLES and \
+                not (set(actor.actions) - {"stop", "keep_lane"}) and not ({"oncoming", "left_of"} & rels):
+            # a parked car (or a row of them) on the street with parking lanes: at the ego's kerb, not in its lane
+            actor.role = "far_side"
+            actor.relations = [r for r in actor.relations if r != "same_lane"] + ["right_of"]
         if on_shoulder and actor.role in ("lead", "follower") and actor.kind in VEHICLES and \
                 "left_of" not in actor.relations:
             actor.relations.append("left_of")  # in the lane left of the ego parked on the shoulder
