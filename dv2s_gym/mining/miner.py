@@ -234,7 +234,7 @@ def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[i
             sampler = None
         if sampler is not None and sampler.fed == complete * batch:
             return sampler
-    sampler = make_sampler(settings["sampler"], space.feature_space, settings["seed"],
+    sampler = make_sampler(settings["sampler"], space, settings["seed"],
                            settings.get("sampler_options") or None)
     seen: set = set()
     for chunk in range(complete):
@@ -276,7 +276,7 @@ def _restore_window(out: Path, settings: Dict[str, Any], space, records: Dict[in
         if window is not None and (window.window != batch or any(i not in records for i in range(window.fed))):
             window = None  # another window, or ahead of the records: rebuild
     if window is None:
-        window = WindowSchedule(make_sampler(settings["sampler"], space.feature_space, settings["seed"],
+        window = WindowSchedule(make_sampler(settings["sampler"], space, settings["seed"],
                                              settings.get("sampler_options") or None), batch)
     mode = settings.get("feedback", "robustness")
     window.advance(records, budget, lambda record, seen: _feedback(record, seen, mode), _matcher(out, space))
