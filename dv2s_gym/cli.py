@@ -837,13 +837,17 @@ def build_parser() -> argparse.ArgumentParser:
     bank_option(p)
     p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank)")
     p.add_argument("--budget", type=int, default=200, help="episodes to run (default 200)")
-    p.add_argument("--sampler", default="cross-entropy", choices=["random", "halton", "cross-entropy", "bandit"],
-                   help="VerifAI sampler (default cross-entropy)")
+    p.add_argument("--sampler", default="cross-entropy",
+                   choices=["random", "halton", "cross-entropy", "bandit", "split"],
+                   help="VerifAI sampler (default cross-entropy); split: VerifAI's cross-entropy over which scenario "
+                   "and a Halton sequence per scenario over its parameters, which finds the most distinct failures")
     p.add_argument("--sampler-options", default=None,
-                   help="VerifAI settings of cross-entropy/bandit as JSON: alpha (default 0.9), buckets (5), thres (0)")
-    p.add_argument("--feedback", choices=["robustness", "novelty"], default="robustness",
+                   help="VerifAI settings of cross-entropy/bandit as JSON: alpha (default 0.9), buckets (5), thres (0); "
+                   "split also takes chooser (cross-entropy|ucb) and params (halton|random|bandit|cross-entropy)")
+    p.add_argument("--feedback", choices=["robustness", "novelty"], default=None,
                    help="what adaptive samplers learn from: robustness (every failure), or novelty (a failure in a "
-                   "cluster already found counts as an easy scene, to spread the search); default robustness")
+                   "cluster already found counts as an easy scene, to spread the search); default novelty for "
+                   "split, robustness for the others")
     p.add_argument("--seed", type=int, default=0, help="seed of the sampler and the episodes (default 0)")
     p.add_argument("--reference", default="rule",
                    help="driver deciding avoidability (default rule; 'none' skips the check)")

@@ -33,7 +33,7 @@ import numpy as np
 
 from dv2s_gym.mining.errors import MiningError
 
-__all__ = ["SAMPLERS", "SAMPLER_OPTIONS", "SceneSampler", "make_sampler", "sampler_params", "is_adaptive"]
+__all__ = ["SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "SceneSampler", "default_feedback", "make_sampler", "sampler_params", "is_adaptive"]
 
 
 def _factories() -> Dict[str, Callable]:
@@ -62,7 +62,15 @@ SPLIT_DEFAULTS: Dict[str, Any] = {"chooser": "cross-entropy", "params": "halton"
                                   "buckets": 3}
 """The settings of :data:`SPLIT` when no option is given."""
 
+DEFAULT_FEEDBACK = {SPLIT: "novelty"}
+"""What a sampler learns from when the run does not say (``mine(feedback=None)``); ``robustness`` otherwise."""
+
 _VERIFAI_KIND = {"cross-entropy": "ce", "bandit": "mab"}
+
+
+def default_feedback(name: str) -> str:
+    """The feedback (:data:`dv2s_gym.mining.miner.FEEDBACKS`) sampler ``name`` gets unless told otherwise."""
+    return DEFAULT_FEEDBACK.get(name, "robustness")
 
 
 def is_adaptive(name: str) -> bool:
