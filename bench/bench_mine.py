@@ -99,10 +99,11 @@ _TEXT_OPTIONS = ("chooser", "params")
 
 
 def parse_config(text: str) -> Config:
-    """``"label:alpha=0.9,buckets=2,thres=1,feedback=novelty"`` (every key optional) as a :data:`Config`."""
+    """``"label:alpha=0.9,buckets=2,thres=1,feedback=novelty"`` (every key optional; also ``chooser`` and
+    ``params`` of the split sampler) as a :data:`Config`; no feedback: the sampler's default."""
     label, _, body = text.partition(":")
     options: Dict[str, Any] = {}
-    feedback: Optional[str] = "robustness"
+    feedback: Optional[str] = None  # the sampler's default (robustness, novelty for split)
     for item in filter(None, body.split(",")):
         key, _, value = item.partition("=")
         if key == "feedback":
@@ -137,7 +138,7 @@ def bench_samplers(policy: str, samplers: Sequence[str], seeds: Sequence[int], b
     print(f"# samplers: policy {policy}, reference {reference or 'none'}, "
           f"scenarios {' '.join(scenarios) if scenarios else 'whole bank'}, budget {budget}, seeds {list(seeds)}, "
           f"{workers} workers, batch {batch or 'default'}; adaptive sampler settings: "
-          + "; ".join(f"{label} = {options or 'VerifAI defaults'}, feedback {feedback}"
+          + "; ".join(f"{label} = {options or 'VerifAI defaults'}, feedback {feedback or 'robustness'}"
                       for label, options, feedback in configs)
           + (f"; split settings: " + "; ".join(f"{label} = {options or 'its defaults'}, feedback "
                                                f"{feedback or 'its default'}" for label, options, feedback in

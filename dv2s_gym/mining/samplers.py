@@ -13,14 +13,22 @@ Samplers (``name``: VerifAI's):
 - ``cross-entropy``: moves probability to the parameter buckets where failures
   (robustness below 0) occurred (``crossEntropySamplerFor``);
 - ``bandit``: the multi-armed-bandit sampler, which balances that against buckets
-  tried less often (``multiArmedBanditSamplerFor``).
+  tried less often (``multiArmedBanditSamplerFor``);
+- ``split``: VerifAI domain samplers composed differently
+  (:class:`~dv2s_gym.mining.split_sampler.ScenarioSplitSampler`): VerifAI's discrete cross-entropy
+  sampler picks the scenario, and each scenario has its own VerifAI Halton sampler over its own
+  parameters; it learns by default from ``novelty`` feedback (a repeat of a failure cluster
+  already found counts as an easy scene). It finds the most distinct failure clusters of these
+  samplers (bench/RESULTS.md, ``python -m bench.bench_mine --part samplers``).
 
 The adaptive samplers (``cross-entropy``, ``bandit``) take VerifAI's parameters as
 ``options`` (:data:`SAMPLER_OPTIONS`): ``alpha`` (how much one failure moves the
 distribution: each update multiplies it by ``alpha``, VerifAI's default 0.9), ``buckets``
 (buckets per continuous parameter, default 5; 1 leaves the parameters uniform and adapts
 only which scenario is drawn) and ``thres`` (robustness below which an outcome counts
-as a failure, default 0).
+as a failure, default 0). ``split`` takes them too (defaults :data:`SPLIT_DEFAULTS`: alpha 0.9,
+thres 0, buckets 3, the last only used by bucketed parameter samplers), and ``chooser``
+(``cross-entropy`` or ``ucb``) and ``params`` (``halton``, ``random``, ``bandit``, ``cross-entropy``).
 """
 
 from __future__ import annotations
