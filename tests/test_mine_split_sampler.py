@@ -41,7 +41,7 @@ def _plain(specs):
     return [(s.scenario, s.point) for s in specs]
 
 
-@pytest.mark.parametrize("options", [{}, {"chooser": "ucb"}, {"params": "bandit"}, {"params": "cross-entropy"}])
+@pytest.mark.parametrize("options", [{}, {"chooser": "ucb"}, {"chooser": "epsilon-greedy"}, {"params": "bandit"}, {"params": "cross-entropy"}])
 def test_split_is_deterministic_under_a_seed_resumes_exactly_and_keeps_the_global_generators(space, options):
     random.seed(5)
     np.random.seed(5)
@@ -92,7 +92,7 @@ def test_each_scenario_has_its_own_parameter_sampler_over_its_own_parameters(spa
 
 
 def test_split_options_are_checked(space):
-    for bad, match in (({"chooser": "greedy"}, "chooser must be one of cross-entropy, ucb"),
+    for bad, match in (({"chooser": "greedy"}, "chooser must be one of cross-entropy, ucb, epsilon-greedy"),
                        ({"params": "sobol"}, "params must be one of halton, random, bandit, cross-entropy"),
                        ({"alpha": 1.0}, "alpha must be between 0 and 1"), ({"buckets": 0}, "buckets must be"),
                        ({"gamma": 1}, "no option 'gamma'")):

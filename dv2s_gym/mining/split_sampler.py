@@ -15,7 +15,9 @@ differently:
   discrete part of VerifAI's bandit: every failure moves probability ``1 - alpha`` to its
   scenario) or ``"ucb"`` (``ContinuousMultiArmedBanditSampler`` over a one-dimensional box cut
   into one bucket per scenario: the UCB1 rule over scenarios, failure rate plus a bonus for
-  scenarios tried less often);
+  scenarios tried less often) or ``"epsilon-greedy"`` (``ContinuousEpsilonGreedySampler`` over the
+  same buckets: cross-entropy, with every draw uniform instead with probability ``epsilon``, 0.5 halved
+  every 100 failures);
 - the **parameters** of each scenario are drawn by that scenario's own VerifAI sampler over a
   unit box of the scenario's own dimension (``params``): ``"halton"`` (``HaltonSampler``, a
   low-discrepancy sequence that spreads the points over the box, started at a seeded
@@ -36,7 +38,7 @@ from verifai.samplers.feature_sampler import FeatureSampler
 
 __all__ = ["ScenarioSplitSampler", "CHOOSERS", "PARAM_SAMPLERS", "scenario_dimensions"]
 
-CHOOSERS = ("cross-entropy", "ucb")
+CHOOSERS = ("cross-entropy", "ucb", "epsilon-greedy")
 """VerifAI samplers that can pick the scenario."""
 
 PARAM_SAMPLERS = ("halton", "random", "bandit", "cross-entropy")
@@ -59,6 +61,10 @@ def _make_chooser(kind: str, count: int, alpha: float, thres: float):
         from verifai.samplers.cross_entropy import DiscreteCrossEntropySampler
 
         return DiscreteCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=alpha, thres=thres)
+    if kind == "epsilon-greedy":
+        from verifai.samplers.eg_sampler import ContinuousEpsilonGreedySampler
+
+        return ContinuousEpsilonGreedySampler(domain=Box([0.0, 1.0]), alpha=alpha, thres=thres, buckets=count)
     from verifai.samplers.multi_armed_bandit import ContinuousMultiArmedBanditSampler
 
     return ContinuousMultiArmedBanditSampler(domain=Box([0.0, 1.0]), alpha=alpha, thres=thres, buckets=count)
@@ -114,8 +120,12 @@ class ScenarioSplitSampler(FeatureSampler):
         """Scenes drawn per scenario."""
 
     def _scenario(self) -> Tuple[int, Any, Any]:
-        sample, info = self.chooser.getSample()
-        if self.chooser_kind == "ucb":
+        if self.chooser_kind == "epsilon-greedy":  # VerifAI's class draws with generateSample (no getVector)
+            vector, info = self.chooser.generateSample()
+            sample = self.chooser.domain.unstandardize(vector)
+        else:
+            sample, info = self.chooser.getSample()
+        if self.chooser_kind in ("ucb", "epsilon-greedy"):
             index = int(info[0])  # the bucket is the scenario
         else:
             index = int(sample[0])
@@ -139,7 +149,7 @@ class ScenarioSplitSampler(FeatureSampler):
 
     def scenario_weights(self) -> List[float]:
         """The chooser's current probability of each scenario (``cross-entropy``), or its UCB scores (``ucb``)."""
-        if self.chooser_kind == "cross-entropy":
+        if self.chooser_kind in ("cross-entropy", "epsilon-greedy"):
             return [float(x) for x in self.chooser.dist[0]]
         proportions = self.chooser.errors[0] / self.chooser.counts[0]
         return [float(x) for x in proportions + np.sqrt(2 / self.chooser.counts[0] * np.log(self.chooser.t))]
