@@ -5,6 +5,7 @@
     python -m bench.bench_mine --part samplers --policy dv2s-ppo --budget 200 --seeds 0 1
     python -m bench.bench_mine --part throughput --throughput-sampler cross-entropy
     python -m bench.bench_mine --part samplers --config 'b2:alpha=0.9,buckets=2' --config 'nov:feedback=novelty'
+    python -m bench.bench_mine --part samplers --samplers random split --split-config 'ucb:chooser=ucb'
 
 **Samplers** (``--part samplers``): every sampler of :data:`dv2s_gym.mining.samplers.SAMPLERS`
 mines the same policy on the same scenarios (the whole shipped bank by default) with the
@@ -15,7 +16,8 @@ failure clusters per run (``dv2s_gym.mining.cluster``: scenario, failure class, 
 3-bins-per-parameter grid) and how many of them hold a failure the reference driver avoided,
 and the ratio of each sampler's mean distinct clusters to random sampling's (target: the best
 adaptive sampler >= 3x). Each adaptive sampler runs once per setting (``--config``; default:
-VerifAI's defaults and the two settings of :data:`TUNED_CONFIGS`). With ``--reference none`` (the default when the policy under test is
+VerifAI's defaults and the two settings of :data:`TUNED_CONFIGS`); the ``split`` sampler runs in its preset
+(``dv2s mine --sampler split``) or in each ``--split-config``. With ``--reference none`` (the default when the policy under test is
 the reference driver itself, ``rule``) avoidability is not checked.
 
 **Throughput** (``--part throughput``): the same mining run (same budget, seed, sampler -- default
