@@ -37,8 +37,10 @@ ALL_MAPS = [
     "highway_straight",
     "highway_onramp",
     "urban_two_way",
+    "urban_multilane",
     "urban_crossroads",
     "urban_t_junction",
+    "urban_roundabout",
 ]
 URBAN_MAPS = [name for name in ALL_MAPS if name.startswith("urban_")]
 LANE_WIDTH = 3.5
@@ -231,6 +233,51 @@ def test_urban_two_way(network):
         assert sidewalk.polygon.area == pytest.approx(2.0 * 600.0, rel=0.01)
 
 
+def test_urban_multilane(network):
+    """Two lanes per direction: same-direction neighbours are side lanes, the inner lanes border each other
+    across the centre line, and both directions have a sidewalk at the kerb."""
+    net = network("urban_multilane")
+    (road,) = net.roads
+    assert not net.connectingRoads and not net.intersections
+    forward, backward = road.forwardLanes.lanes, road.backwardLanes.lanes
+    assert len(forward) == 2 and len(backward) == 2 and len(net.lanes) == 4
+    assert road.centerline.length == pytest.approx(600.0, rel=0.01)
+    for lane in forward:
+        assert lane.centerline[0].x < lane.centerline[-1].x
+        assert lane.polygon.area / lane.centerline.length == pytest.approx(LANE_WIDTH, rel=0.01)
+    for lane in backward:
+        assert lane.centerline[0].x > lane.centerline[-1].x
+    for group in (forward, backward):
+        inner = next(lane for lane in group if lane.sections[0]._laneToRight is not None)
+        outer = next(lane for lane in group if lane is not inner)
+        assert inner.sections[0]._laneToRight.lane is outer
+        assert outer.sections[0]._laneToLeft.lane is inner
+        assert outer.sections[0]._laneToRight is None  # the kerb
+        across = inner.sections[0]._laneToLeft  # the inner lane of the other direction
+        assert across is not None and across.isForward != inner.sections[0].isForward
+        # the inner lane lies next to the centre line, the outer one at the kerb
+        assert abs(inner.centerline[0].y) == pytest.approx(LANE_WIDTH / 2)
+        assert abs(outer.centerline[0].y) == pytest.approx(1.5 * LANE_WIDTH)
+    assert len(net.sidewalks) == 2
+    for sidewalk in net.sidewalks:
+        assert sidewalk.polygon.area == pytest.approx(2.0 * 600.0, rel=0.01)
+
+
+def test_urban_multilane_in_highway_env():
+    """The env's road conversion gives one highway-env edge per direction, two lanes each, at town speed."""
+    from envs.road_network import load_road_network
+
+    converted = load_road_network(str(MAPS_DIR / "urban_multilane.xodr"))
+    graph = converted.hw_network.graph
+    edges = [(a, b) for a in graph for b in graph[a]]
+    assert len(edges) == 2
+    for a, b in edges:
+        lanes = graph[a][b]
+        assert len(lanes) == 2
+        for lane in lanes:
+            assert lane.speed_limit == pytest.approx(50 / 3.6, rel=1e-3)
+
+
 def _check_junction_map(net, n_arms):
     assert len(net.roads) == n_arms
     for road in net.roads:
@@ -281,6 +328,38 @@ def test_urban_t_junction(network):
     types = [m.type for m in junction.maneuvers]
     for kind in (ManeuverType.LEFT_TURN, ManeuverType.STRAIGHT, ManeuverType.RIGHT_TURN):
         assert types.count(kind) == 2
+
+
+def test_urban_roundabout(network):
+    """Four two-way arms into one single-lane ring, driven counter-clockwise; every entry-to-exit movement
+    (first, second, third exit) is a maneuver whose path runs on the ring around the central island."""
+    net = network("urban_roundabout")
+    junction = _check_junction_map(net, 4)
+    assert len(junction.maneuvers) == 12
+    types = [m.type for m in junction.maneuvers]
+    for kind in (ManeuverType.LEFT_TURN, ManeuverType.STRAIGHT, ManeuverType.RIGHT_TURN):
+        assert types.count(kind) == 4
+    ring_radius = build_maps.ROUNDABOUT_RING_RADIUS
+    for maneuver in junction.maneuvers:
+        kind = maneuver.connectingLane.road.name  # <from>_to_<to>_<first|second|third>_exit_<kind>
+        points = np.array([(p[0], p[1]) for p in maneuver.connectingLane.centerline])
+        radii = np.hypot(points[:, 0], points[:, 1])
+        # never over the central island; on the ring (lane centre 1.75 m outside the island) part of the way
+        assert radii.min() == pytest.approx(ring_radius + LANE_WIDTH / 2, abs=0.05), kind
+        # counter-clockwise: the angle about the centre only grows along the path
+        angles = np.unwrap(np.arctan2(points[:, 1], points[:, 0]))
+        assert np.all(np.diff(angles) > -0.01), kind  # (Scenic leaves cm-long seams between geometries)
+        exits = {"right": 1, "straight": 2, "left": 3}[kind.rsplit("_", 1)[1]]
+        # from the inbound lane of one arm to the outbound lane of the next, 1.75 m off each arm's axis
+        offset = 2 * np.arctan2(LANE_WIDTH / 2, build_maps.ROUNDABOUT_ARM_START)
+        assert angles[-1] - angles[0] == pytest.approx(exits * np.pi / 2 - offset, abs=0.02), kind
+    # a circulating path shares the ring with the entry of every arm it passes (Scenic's conflictingManeuvers
+    # counts centre lines that cross, which paths merging into the same ring do not always do)
+    by_name = {m.connectingLane.road.name: m for m in junction.maneuvers}
+    entering = by_name["north_to_west_first_exit_right"].connectingLane.polygon
+    circulating = by_name["east_to_south_third_exit_left"].connectingLane.polygon  # passes the north arm
+    assert entering.intersection(circulating).area > 20.0
+    assert by_name["south_to_east_first_exit_right"].connectingLane.polygon.intersection(entering).area == 0.0
 
 
 @pytest.mark.parametrize("name", URBAN_MAPS)

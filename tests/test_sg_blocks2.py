@@ -123,7 +123,7 @@ def test_the_egos_merge_without_a_ramp_is_a_lane_change(monkeypatch):
     parsed = ParsedDescription(text="A barrier closes the ego's lane; the ego merges left.", road="straight_road",
                                entities=[ego, barrier])
     result = _generate(monkeypatch, parsed)
-    assert result.frame.map == "highway_straight"  # a lane to merge into in the ego's direction
+    assert result.frame.map == "urban_multilane"  # a lane to merge into in the ego's direction, in town
     assert ["ego", "lane_change_left"] in result.elements["actions"]
     assert any("merge without an on-ramp" in w for w in result.warnings)
 

@@ -55,7 +55,7 @@ VARIED = [
 ]
 UNPLACEABLE = {
     "A helicopter lands on the road in front of the ego car.": "helicopter",
-    "The ego car drives around a roundabout with a tram crossing.": "roundabout",
+    "The ego car drives around a roundabout with a tram crossing.": "tram",
     "An oncoming truck passes the ego car on the highway.": "oncoming",
 }
 

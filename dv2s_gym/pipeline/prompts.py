@@ -98,10 +98,15 @@ SHIPPED_MAPS: Dict[str, str] = {
                       "right main lane before the ramp, 'road4_lane0' the ramp, 'road2_lane0' the "
                       "acceleration lane)",
     "urban_two_way": "a 600 m straight two-way street, one lane per direction, with a sidewalk on each side",
+    "urban_multilane": "a 600 m straight two-way town street, two lanes per direction, with a sidewalk on each "
+                       "side",
     "urban_crossroads": "a four-way intersection of four 150 m two-way arms with sidewalks; every "
                         "left, straight and right movement is a maneuver of network.intersections[0]",
     "urban_t_junction": "a T-junction (three-way road) of three 150 m two-way arms with sidewalks; every "
                         "movement except U-turns is a maneuver of network.intersections[0]",
+    "urban_roundabout": "a single-lane roundabout, driven counter-clockwise, with four 150 m two-way arms with "
+                        "sidewalks; every entry-to-exit movement (first exit: RIGHT_TURN, second: STRAIGHT, third: "
+                        "LEFT_TURN) is a maneuver of network.intersections[0]",
 }
 """The maps a script may name in ``param map``, with what they hold."""
 

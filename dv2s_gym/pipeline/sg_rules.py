@@ -12,13 +12,14 @@ from the building blocks of :mod:`dv2s_gym.pipeline.blocks`:
 4. spawn positions (one placement per relation to the ego).
 
 Whatever it cannot place (an unknown kind of actor, an action a type cannot do,
-a relation the map cannot realise, a roundabout) goes into ``warnings``; nothing
+a relation the map cannot realise) goes into ``warnings``; nothing
 is dropped silently. ``elements`` lists what the script is meant to show.
 The output is deterministic for a given description and seed.
 """
 
 from __future__ import annotations
 
+import math
 import random
 import re
 from dataclasses import dataclass, field
@@ -28,6 +29,7 @@ from dv2s_gym.pipeline import blocks
 from dv2s_gym.pipeline.errors import GenerationError
 from dv2s_gym.pipeline.semantics import Entity, ParsedDescription, parse_description
 from scenario_bank.elements import ACTIONS, normalize_elements
+from scenario_bank.maps.build_maps import LANE_WIDTH, ROUNDABOUT_ARM_START, ROUNDABOUT_RING_RADIUS
 
 __all__ = ["ActorFrame", "ScenarioFrame", "SGResult", "generate_rules", "build_frame", "ROAD_MAPS"]
 
@@ -38,10 +40,32 @@ ROAD_MAPS = {
     "intersection": "urban_crossroads",
     "t_junction": "urban_t_junction",
     "three_way": "urban_t_junction",
+    "roundabout": "urban_roundabout",
 }
 MAP_ROADS = {"highway_straight": "highway", "highway_onramp": "merge", "urban_two_way": "straight_road",
-             "urban_crossroads": "intersection", "urban_t_junction": "t_junction"}
-JUNCTION_MAPS = ("urban_crossroads", "urban_t_junction")
+             "urban_multilane": "straight_road", "urban_crossroads": "intersection", "urban_t_junction": "t_junction",
+             "urban_roundabout": "roundabout"}
+JUNCTION_MAPS = ("urban_crossroads", "urban_t_junction", "urban_roundabout")
+HIGHWAY_MAPS = ("highway_straight", "highway_onramp")
+MULTILANE_STREET = "urban_multilane"
+"""The town street with two lanes per direction (and oncoming traffic), for streets that need a lane beside the
+ego's; ``urban_two_way`` (one lane per direction) is the plain town street."""
+STREET_LANES = 2
+"""Lanes per direction of :data:`MULTILANE_STREET`."""
+RING_MAP = "urban_roundabout"
+
+
+def _ring_lengths() -> Tuple[float, float]:
+    """On :data:`RING_MAP`, the length along the lane centre of an entry curve (arm end to where it joins the
+    ring) and of a quarter of the ring: a vehicle entering from the arm left of the ego's passes the ego's entry
+    after both."""
+    d, r, half = ROUNDABOUT_ARM_START, ROUNDABOUT_RING_RADIUS, LANE_WIDTH / 2
+    entry_radius = (d * d - r * r) / (2 * r)
+    entry_turn = math.pi / 2 - math.atan2(entry_radius, d)
+    return (entry_radius - half) * entry_turn, (r + half) * math.pi / 2
+
+
+RING_ENTRY, RING_QUARTER = _ring_lengths()
 VEHICLES = ("car", "truck", "bus", "motorcycle", "bicycle")
 _CLASS = {"car": "Car", "truck": "Truck", "bus": "Bus", "motorcycle": "Motorcycle", "bicycle": "Bicycle",
           "pedestrian": "Pedestrian", "obstacle": "Obstacle"}
@@ -231,20 +255,32 @@ def _needs_same_direction_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -
     return False
 
 
+def _needs_three_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -> bool:
+    """The ego in a middle lane, or vehicles of its direction on both sides of it: more lanes than the
+    multi-lane town street has per direction."""
+    if ego.lane == "middle":
+        return True
+    sides = set()
+    for a in actors:
+        if a.kind in VEHICLES and "oncoming" not in a.relations:
+            sides.update(r for r in a.relations if r in ("left_of", "right_of"))
+            if a.lane == "adjacent" and a.count >= 2:
+                sides.update(("left_of", "right_of"))
+    return len(sides) == 2
+
+
 def _choose_map(road: Optional[str], ego: ActorFrame, actors: Sequence[ActorFrame], warnings: List[str]) -> str:
     all_actions = set(ego.actions) | {x for a in actors for x in a.actions}
     turns = bool({"turn_left", "turn_right"} & set(ego.actions)) or any(
         a.kind in VEHICLES and ({"turn_left", "turn_right"} & set(a.actions)) for a in actors)
-    if road == "roundabout":
-        warnings.append("no roundabout map is shipped; the scenario is placed at a four-way intersection "
-                        "(urban_crossroads) instead")
-        return "urban_crossroads"
     if road in ROAD_MAPS:
         chosen = ROAD_MAPS[road]
         if chosen == "urban_two_way" and _needs_same_direction_lanes(ego, actors):
-            warnings.append("the described straight road needs several lanes in one direction; using the "
-                            "4-lane straight highway map (highway_straight)")
-            return "highway_straight"
+            if _needs_three_lanes(ego, actors):
+                warnings.append("the described straight road needs three lanes in one direction; using the "
+                                "4-lane straight highway map (highway_straight)")
+                return "highway_straight"
+            return MULTILANE_STREET  # a town street with a second lane in the ego's direction
         if chosen in ("highway_straight", "urban_two_way") and turns:
             warnings.append(f"turns were described on a {road.replace('_', ' ')}, which has no junction: "
                             "the turns are not placed")
@@ -259,7 +295,9 @@ def _choose_map(road: Optional[str], ego: ActorFrame, actors: Sequence[ActorFram
     if "merge" in all_actions:
         return "highway_onramp"
     if any(a.kind == "pedestrian" for a in actors):
-        return "highway_straight" if _needs_same_direction_lanes(ego, actors) else "urban_two_way"
+        if not _needs_same_direction_lanes(ego, actors):
+            return "urban_two_way"
+        return "highway_straight" if _needs_three_lanes(ego, actors) else MULTILANE_STREET
     if any("oncoming" in a.relations or a.has("drift") for a in actors):
         return "urban_two_way"
     if any(a.has("pull_out") or a.has("reverse") or a.has("u_turn") for a in [ego, *actors]):
@@ -405,7 +443,8 @@ def _check_actions(actor: ActorFrame, s: _Script, supported: set) -> None:
 # ---- shared parameter helpers
 
 def _speed_ranges(map_name: str) -> Tuple[float, float]:
-    return {"highway_straight": (20, 26), "highway_onramp": (18, 23), "urban_two_way": (8, 12)}.get(map_name, (6, 9))
+    return {"highway_straight": (20, 26), "highway_onramp": (18, 23), "urban_two_way": (8, 12),
+            MULTILANE_STREET: (8, 12)}.get(map_name, (6, 9))
 
 
 def _brake_params(s: _Script, actor: ActorFrame) -> Tuple[str, str, str]:
@@ -413,7 +452,7 @@ def _brake_params(s: _Script, actor: ActorFrame) -> Tuple[str, str, str]:
     stop = actor.has("stop")
     after = s.param(f"{actor.name}_brake_after", "Range(1.0, 2.2)" if sudden else "Range(2.0, 3.5)")
     strength = s.param(f"{actor.name}_brake_strength", "Range(0.8, 1.0)" if sudden else "Range(0.45, 0.7)")
-    urban = s.frame.map not in ("highway_straight", "highway_onramp")
+    urban = s.frame.map not in HIGHWAY_MAPS
     low = "0" if stop else s.param(f"{actor.name}_low_speed", "Range(2, 4)" if urban else "Range(5, 10)")
     return after, low, strength
 
@@ -428,6 +467,7 @@ _LANE_ACTIONS = {"brake", "stop", "accelerate", "lane_change_left", "lane_change
 def _compose_lanes(s: _Script) -> None:
     frame = s.frame
     two_way = frame.map == "urban_two_way"
+    multilane = frame.map == MULTILANE_STREET  # several lanes per direction and oncoming lanes
     onramp = frame.map == "highway_onramp"
     lo, hi = _speed_ranges(frame.map)
     ego_speed = s.param("ego_speed", f"Range({lo}, {hi})")
@@ -485,7 +525,7 @@ def _compose_lanes(s: _Script) -> None:
         elif actor.has("merge") and onramp:
             actor.role = "ramp"
         elif actor.has("drift") or ("oncoming" in rels):
-            if two_way:
+            if two_way or multilane and "oncoming" in rels:
                 actor.role = "oncoming"
             else:
                 if "oncoming" in rels:
@@ -530,6 +570,8 @@ def _compose_lanes(s: _Script) -> None:
         if actor.role == "adjacent" and actor.side == 0:
             if actor.lane in order and ego.lane in order and actor.lane != ego.lane:
                 actor.side = order[actor.lane] - order[ego.lane]
+                if multilane:  # a two-lane carriageway: its left and right lanes are neighbours
+                    actor.side = max(-1, min(1, actor.side))
             elif actor.lane in ("left", "right") and ego.lane is None:
                 actor.side = order[actor.lane]
             elif "left_of" in rels:
@@ -591,7 +633,7 @@ def _compose_lanes(s: _Script) -> None:
                        "egoS = Range(80, 330)"]
         lane_var = {0: "egoLane"}
     else:
-        total = 3 if onramp else 4
+        total = 3 if onramp else STREET_LANES if multilane else 4
         max_left = max([k for k in need if k > 0], default=0)
         max_right = -min([k for k in need if k < 0], default=0)
         if max_left + max_right + 1 > total:
@@ -625,6 +667,14 @@ def _compose_lanes(s: _Script) -> None:
         elif ego_lane_word == "middle":
             conds += ["t[1] is not None", "t[3] is not None"] if "t[1] is not None" not in conds or \
                 "t[3] is not None" not in conds else []
+        if multilane and any(a.role == "oncoming" and (a.has("drift") or a.has("collide")) for a in frame.actors):
+            # an oncoming vehicle that comes over the centre line meets the ego in the lane next to it
+            conds = [c for c in conds if not c.startswith("t[1]") and not c.startswith("t[2]")]
+            conds.append("t[1] is None")
+            if max_left:
+                s.warnings.append("lanes to the left of the ego cannot be placed when an oncoming vehicle comes "
+                                  "over the centre line into the ego's lane: they are not placed")
+                max_left = 0
         ramp_merge = onramp and any(a.role == "ramp" for a in frame.actors)
         if ramp_merge:
             # the ego drives in the lane next to the acceleration lane the merger leaves
@@ -637,11 +687,20 @@ def _compose_lanes(s: _Script) -> None:
         source = ("[network.elements['road2_lane1'], network.elements['road2_lane2'], "
                   "network.elements['road2_lane3']]" if onramp else "network.lanes")
         s.geometry_title = ("a three-lane highway with a one-lane on-ramp joining an acceleration lane" if onramp
-                            else "a straight four-lane one-way highway")
+                            else f"a straight two-way town street, {STREET_LANES} lanes per direction, with "
+                                 "sidewalks" if multilane else "a straight four-lane one-way highway")
+        oncoming = multilane and any(a.role == "oncoming" for a in frame.actors)
+        if oncoming:
+            # t[7]: the oncoming lane next to the centre line (left of the leftmost lane of the ego's direction)
+            s.geometry += ["def oncomingOf(lane):",
+                           "    inner = ([lane] + lanesLeftOf(lane))[-1].sections[0]._laneToLeft",
+                           "    return None if inner is None else inner.lane",
+                           ""]
         s.geometry += [f"mainLanes = {source}",
                        "laneTuples = [(lane, laneLeftOf(lane), laneLeftOf(laneLeftOf(lane)), laneRightOf(lane),",
                        "               laneRightOf(laneRightOf(lane)), len(lanesRightOf(lane)), "
-                       "len(lanesLeftOf(lane))) for lane in mainLanes]",
+                       "len(lanesLeftOf(lane))" + (", oncomingOf(lane)" if oncoming else "") +
+                       ") for lane in mainLanes]",
                        "laneTuple = Uniform(*[t for t in laneTuples" + (f" if {' and '.join(dict.fromkeys(conds))}"
                                                                      if conds else "") + "])",
                        "egoLane = laneTuple[0]"]
@@ -652,7 +711,10 @@ def _compose_lanes(s: _Script) -> None:
             if k in names and (k > 0 and k <= max_left or k < 0 and -k <= max_right):
                 s.geometry.append(f"{names[k]} = laneTuple[{idx[k]}]")
                 lane_var[k] = names[k]
-        s.geometry.append("egoS = " + ("Range(5, 50)" if onramp else "Range(150, 1200)"))
+        if oncoming:
+            s.geometry.append("oncomingLane = laneTuple[7]")
+        s.geometry.append("egoS = " + ("Range(5, 50)" if onramp else "Range(80, 330)" if multilane
+                                       else "Range(150, 1200)"))
         if onramp:
             s.geometry += ["rampLane = Uniform(network.elements['road4_lane0'])",
                            "accelLane = network.elements['road2_lane0']"]
@@ -770,7 +832,7 @@ def _swerve(s: _Script, speed: str, actor: Optional[ActorFrame] = None) -> str:
     if side not in ("left", "right") and actor is not None:
         side = "left" if "right_of" in actor.relations else "right" if "left_of" in actor.relations else None
     sign = "-" if side == "right" else ""
-    fast = s.frame.map in ("highway_straight", "highway_onramp")
+    fast = s.frame.map in HIGHWAY_MAPS
     depth = f"{sign}Range(1.1, 1.3)" if fast else f"{sign}Range(1.2, 1.5)"
     duration = "Range(1.2, 1.6)" if fast else "Range(0.8, 1.2)"
     if actor is not None and actor.kind == "ego":
@@ -789,7 +851,7 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
                       reckless: bool) -> None:
     cls = _CLASS[actor.kind]
     n = actor.name
-    urban = two_way
+    urban = s.frame.map not in HIGHWAY_MAPS  # town speeds and distances
     if actor.kind in _KIND_SPEEDS:  # a slow kind does not ride at the ego's speed
         ego_speed = s.param(f"{n}_speed", _KIND_SPEEDS[actor.kind])
     rels = list(actor.relations)
@@ -991,7 +1053,7 @@ def _spawn_puller(s: _Script, actor: ActorFrame, ego_speed: str, two_way: bool) 
     """A vehicle parked at the kerb (shoulder) right of the ego's lane, ahead of the ego: once the ego is near
     it backs up (when it reverses) and steers into the lane ahead of the ego."""
     n = actor.name
-    urban = two_way
+    urban = s.frame.map not in HIGHWAY_MAPS  # town speeds and distances; parked at a kerb, not on a shoulder
     gap = s.param(f"{n}_gap", ("Range(54, 60)" if urban else "Range(100, 110)") if actor.has("collide") and
                   actor.has("reverse") else "Range(30, 42)" if urban else "Range(55, 75)")
     backing = actor.has("reverse")
@@ -1101,7 +1163,9 @@ def _spawn_lane_pedestrians(s: _Script, actor: ActorFrame, ego_speed: str, two_w
     else:
         s.helpers.append("laneSides")
         right = "1.75 + 3.5 * laneTuple[5] + Range(0.4, 1.0)"
-        left = "1.75 + 3.5 * laneTuple[6] + Range(0.4, 1.0)"
+        # (on the multi-lane street the far kerb is beyond the oncoming lanes too)
+        far = f"(laneTuple[6] + {STREET_LANES})" if s.frame.map == MULTILANE_STREET else "laneTuple[6]"
+        left = f"1.75 + 3.5 * {far} + Range(0.4, 1.0)"
     for i, d in enumerate(dirs):
         var = n if actor.count == 1 else f"{n}_{i + 1}"
         shift = ["0", "Range(1.2, 2.2)", "-Range(1.2, 2.2)", "Range(3.0, 4.0)"][i % 4]
@@ -1189,6 +1253,10 @@ def _role_condition(role: str, mtype: Optional[str]) -> Tuple[Callable, str]:
     elif role == "into_path":
         py = lambda e, m, net: m.endLane is e.endLane and m.startLane is not e.startLane
         sc = "m.endLane is e.endLane and m.startLane is not e.startLane"
+    elif role == "ring_cut":  # on a roundabout: circulating from the left toward the ego's exit, ahead of it
+        py = lambda e, m, net: net.side(e.startLane, m.startLane) < -0.7 and m.endLane is e.endLane
+        sc = ("sideOf(e.startLane, m.startLane) < -0.7 * approachDir(e.startLane).norm() * "
+              "approachDir(m.startLane).norm() and m.endLane is e.endLane")
     elif role in ("ahead", "behind"):
         py = lambda e, m, net: m.startLane is e.startLane
         sc = "m.startLane is e.startLane"
@@ -1253,6 +1321,13 @@ def _compose_junction(s: _Script) -> None:
         else:
             a.actions = []
     roles: List[Tuple[ActorFrame, str, Optional[str]]] = [(a,) + _junction_role(a, ego, s.rng) for a in vehicles]
+    ring = frame.map == RING_MAP
+    if ring:
+        # a vehicle coming from the left on a roundabout circulates past the ego's entry (not out at its arm)
+        roles = [(a, r, "STRAIGHT" if r == "from_left" and t is None else t) for a, r, t in roles]
+        # one already on the ring on the ego's left that cuts in: it passes the ego's entry just ahead of it
+        roles = [(a, "ring_cut", None) if r == "into_path" and "left_of" in a.relations else (a, r, t)
+                 for a, r, t in roles]
 
     def feasible(ego_t: Optional[str], specs: List[Tuple[ActorFrame, str, Optional[str]]]) -> bool:
         conds = [_role_condition(r, t)[0] for _, r, t in specs]
@@ -1308,7 +1383,9 @@ def _compose_junction(s: _Script) -> None:
         comp.append(f"          for m{i} in junction.maneuvers if {cond}")
     comp[-1] += "]"
     title = {"urban_crossroads": "a four-way junction of two-way urban streets",
-             "urban_t_junction": "a T-junction of two-way urban streets"}[frame.map]
+             "urban_t_junction": "a T-junction of two-way urban streets",
+             "urban_roundabout": "a single-lane roundabout with four two-way arms (first exit right, second "
+                                 "straight on, third left)"}[frame.map]
     s.geometry_title = title + (f"; the ego {default_ego.lower().replace('_', ' ')}" if default_ego else "")
     s.geometry += comp + ["combo = Uniform(*combos)", "egoManeuver = combo[0]",
                           "egoRoute = [egoManeuver.startLane, egoManeuver.connectingLane, egoManeuver.endLane]",
@@ -1353,9 +1430,14 @@ def _compose_junction(s: _Script) -> None:
     for actor, role, mtype in roles:
         n = actor.name
         cls = _CLASS[actor.kind]
-        speed = s.param(f"{n}_speed", "Range(7, 11)" if role != "ahead" else f"Range({lo}, {hi})")
         rels = list(actor.relations)
         route = f"{n}Route"
+        circulating = ring and (role == "from_left" and mtype in ("STRAIGHT", "LEFT_TURN") or role == "ring_cut")
+        if circulating:
+            _spawn_circulating(s, actor, mtype, ego_speed, ego_time, lead_first and role != "ring_cut", reckless,
+                               cuts_in=role == "ring_cut")
+            continue
+        speed = s.param(f"{n}_speed", "Range(7, 11)" if role != "ahead" else f"Range({lo}, {hi})")
         if role in ("ahead", "behind"):
             gap = s.param(f"{n}_gap", "Range(10, 16)")
             along = f"-({ego_dist} - {gap})" if role == "ahead" else f"-({ego_dist} + {gap})"
@@ -1409,6 +1491,43 @@ def _compose_junction(s: _Script) -> None:
                 s.spawn += [f"{var} = new Obstacle at egoManeuver.endLane.centerline.pointAlongBy({gap} + {3 * i}),",
                             "    with width Range(0.8, 1.8), with length Range(0.6, 1.4)"]
             s.show("obstacle", [], ["ahead_of"], actor.count)
+
+
+def _spawn_circulating(s: _Script, actor: ActorFrame, mtype: Optional[str], ego_speed: str, ego_time: str,
+                       lead_first: bool, reckless: bool, cuts_in: bool = False) -> None:
+    """A vehicle already on the roundabout's ring, coming from the ego's left: it starts just after its own entry
+    and drives at the speed that brings it past the ego's entry (a quarter ring on) when the text says: 0.9-1.4 s
+    ahead of the ego when it goes first (the ego, still on its approach, sees it cross its way), with the ego
+    (``arrival_offset`` of +-0.2 s) when they collide, 1.3-1.9 s ahead otherwise; one that cuts in, 0.6-1.0 s
+    ahead (0.1-0.4 s when it hits the ego)."""
+    n = actor.name
+    start = s.param(f"{n}_ring_start", "Range(2, 6)")
+    if lead_first:
+        arrival = f"{ego_time} - " + s.param(f"{n}_ring_gap", "Range(0.9, 1.4)")
+    else:
+        offset = s.param(f"{n}_arrival_offset",
+                         ("Range(-0.4, -0.1)" if cuts_in else "Range(-0.2, 0.2)") if actor.has("collide") else
+                         "Range(-1.0, -0.6)" if cuts_in else "Range(-1.9, -1.3)")
+        arrival = f"{ego_time} + {offset}"
+    # the ego is at its entry `ego_time` after the start, and where the ring meets it RING_ENTRY metres later
+    speed = f"({RING_ENTRY + RING_QUARTER:.1f} - {start}) / ({arrival} + {RING_ENTRY:.1f} / {ego_speed})"
+    route = f"[{n}Maneuver.connectingLane, {n}Maneuver.endLane]"
+    behavior = _junction_longitudinal(s, actor, speed, route, reckless)
+    if behavior.startswith("CautiousRoute("):
+        # it has the right of way on the ring: it does not stop for the ego that is about to enter
+        s.use("DriveRoute")
+        behavior = "DriveRoute(" + behavior[len("CautiousRoute("):]
+    for i in range(actor.count):
+        var = n if actor.count == 1 else f"{n}_{i + 1}"
+        ahead = f" + {12 * i}" if i else ""  # the rest of a group circulates ahead of it, past the entry sooner
+        s.spawn += [f"{var} = new {_CLASS[actor.kind]} at {n}Maneuver.connectingLane.centerline.pointAlongBy("
+                    f"{start}{ahead}),",
+                    f"    with speed {'0' if behavior.startswith('HoldStill') else speed},",
+                    f"    with behavior {behavior}"]
+    acts = list(actor.actions)
+    if mtype and not any(_TYPE.get(a) == mtype for a in acts):
+        acts.append({v: k for k, v in _TYPE.items()}[mtype])
+    s.show(actor.kind, acts, list(dict.fromkeys(actor.relations + (["ahead_of"] if cuts_in else []))), actor.count)
 
 
 def _junction_longitudinal(s: _Script, actor: ActorFrame, speed: str, route: str, reckless: bool) -> str:

@@ -57,8 +57,10 @@ MAP_ROAD_TYPES = {
     "highway_straight": "highway",
     "highway_onramp": "merge",
     "urban_two_way": "straight_road",
+    "urban_multilane": "straight_road",
     "urban_crossroads": "intersection",
     "urban_t_junction": "t_junction",
+    "urban_roundabout": "roundabout",
 }
 """Road type of each shipped map."""
 

@@ -6,7 +6,8 @@ in CARLA or MetaDrive by changing its ``model`` line.
 
 Global parameters:
     map: a shipped map name (``highway_straight``, ``highway_onramp``,
-        ``urban_two_way``, ``urban_crossroads``, ``urban_t_junction``) or a path
+        ``urban_two_way``, ``urban_multilane``, ``urban_crossroads``,
+        ``urban_t_junction``, ``urban_roundabout``) or a path
         to an OpenDRIVE file.
 
 Classes: ``Car``, ``NPCCar``, ``Truck`` and ``Bus`` (longer, wider), ``Motorcycle``, ``Bicycle``,

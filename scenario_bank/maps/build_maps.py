@@ -33,12 +33,21 @@ Maps:
 ``urban_two_way``
     600 m two-way road, one 3.5 m driving lane per direction and a 2 m sidewalk
     on each side.
+``urban_multilane``
+    600 m two-way town street, two 3.5 m driving lanes per direction (broken
+    white line between same-direction lanes, solid double yellow centre line)
+    and a 2 m sidewalk on each side.
 ``urban_crossroads``
     Four 150 m two-way arms with sidewalks meeting in junction 100, which holds
     12 connecting roads (left, straight and right from every incoming lane).
 ``urban_t_junction``
     Three 150 m two-way arms with sidewalks meeting in junction 100, which holds
     6 connecting roads (every movement except U-turns).
+``urban_roundabout``
+    Single-lane roundabout (ring lane 3.5 m wide around a 12 m central island,
+    driven counter-clockwise) with four 150 m two-way arms with sidewalks, all
+    in junction 100: 12 connecting roads, one per entry and exit (first, second
+    and third exit), each an entry curve, part of the ring and an exit curve.
 """
 
 from __future__ import annotations
@@ -578,6 +587,21 @@ def urban_two_way_section(center_mark: RoadMark) -> LaneSection:
     )
 
 
+def urban_multilane_section(lanes_per_direction: int, center_mark: RoadMark) -> LaneSection:
+    """``lanes_per_direction`` driving lanes each way (broken marks between
+    same-direction lanes, solid on the kerb side) plus a sidewalk on each side."""
+
+    def side(sign: int) -> Tuple[Lane, ...]:
+        lanes = [
+            Lane(sign * i, "driving", LANE_WIDTH, SOLID if i == lanes_per_direction else BROKEN)
+            for i in range(1, lanes_per_direction + 1)
+        ]
+        lanes.append(Lane(sign * (lanes_per_direction + 1), "sidewalk", SIDEWALK_WIDTH, NO_MARK))
+        return tuple(lanes)
+
+    return LaneSection(s=0.0, left=side(1), right=side(-1), center_mark=center_mark)
+
+
 def connecting_road(
     road_id: int,
     name: str,
@@ -850,6 +874,20 @@ def build_urban_two_way() -> OpenDriveMap:
     return OpenDriveMap("urban_two_way", [road])
 
 
+def build_urban_multilane() -> OpenDriveMap:
+    """Straight 600 m two-way town street, two lanes per direction, sidewalks, along +x."""
+    road = Road(
+        id=1,
+        name="street",
+        start=(0.0, 0.0, 0.0),
+        segments=(Line(600.0),),
+        sections=(urban_multilane_section(2, RoadMark("solid solid", "yellow", "none", 0.3)),),
+        road_type="town",
+        speed_kmh=URBAN_SPEED,
+    )
+    return OpenDriveMap("urban_multilane", [road])
+
+
 ARM_NAMES = {0: "east", 90: "north", 180: "west", 270: "south"}
 
 
@@ -935,12 +973,107 @@ def build_urban_t_junction() -> OpenDriveMap:
     return build_intersection("urban_t_junction", (0, 180, 270))
 
 
+ROUNDABOUT_RING_RADIUS = 12.0
+"""Radius [m] of the ring's reference line (the inner edge of its single lane, the central island's kerb)."""
+ROUNDABOUT_ARM_START = 24.0
+"""Distance [m] from the centre at which the approach arms start."""
+
+
+def build_urban_roundabout(
+    name: str = "urban_roundabout",
+    *,
+    ring_radius: float = ROUNDABOUT_RING_RADIUS,
+    arm_start: float = ROUNDABOUT_ARM_START,
+    arm_length: float = 150.0,
+    junction_id: int = 100,
+) -> OpenDriveMap:
+    """Single-lane roundabout with four two-way arms (east, north, west, south), in one junction.
+
+    The ring is driven counter-clockwise (right-hand traffic). Every movement from
+    the inbound lane of one arm to the outbound lane of another (first, second and
+    third exit: right, straight, left) is one connecting road whose reference line
+    (the left edge of its single lane) is three arcs: a right-turning entry curve
+    from the arm onto the ring, the ring itself (the reference line on the central
+    island's edge, ``ring_radius``), and a right-turning exit curve onto the next
+    arm. The entry curve is tangent to the arm and to the ring; its radius follows
+    from ``arm_start`` and ``ring_radius`` (``(arm_start**2 - ring_radius**2) /
+    (2 * ring_radius)``), and the exit curve is its mirror image. Connecting roads
+    of different movements share the ring, as the lanes of a junction share its
+    box, so Scenic sees every circulating path that meets the ego's as a
+    conflicting maneuver.
+    """
+    d, r = arm_start, ring_radius
+    entry_radius = (d * d - r * r) / (2.0 * r)
+    # the entry curve meets the ring at this angle from the arm's axis
+    meet = math.atan2(entry_radius, d)
+    entry_turn = math.pi / 2 - meet  # right turn from the inbound heading onto the ring
+    roads: List[Road] = []
+    starts: Dict[int, Pose] = {}
+    arm_angles = (0, 90, 180, 270)
+    for index, angle_deg in enumerate(arm_angles):
+        road_id = index + 1
+        hdg = math.radians(angle_deg)
+        start = (d * math.cos(hdg), d * math.sin(hdg), hdg)
+        starts[road_id] = start
+        roads.append(
+            Road(
+                id=road_id,
+                name=f"arm_{ARM_NAMES[angle_deg]}",
+                start=start,
+                segments=(Line(arm_length),),
+                sections=(urban_two_way_section(RoadMark("solid", "yellow")),),
+                predecessor=Link("junction", junction_id),
+                road_type="town",
+                speed_kmh=URBAN_SPEED,
+            )
+        )
+    arm_names = {road.id: road.name[len("arm_") :] for road in roads}
+    junction = Junction(junction_id, f"{name}_ring")
+    next_id = 101
+    exit_kind = {1: "first_exit_right", 2: "second_exit_straight", 3: "third_exit_left"}
+    for from_id, from_start in starts.items():
+        for steps in (1, 2, 3):
+            to_id = (from_id - 1 + steps) % len(arm_angles) + 1
+            to_start = starts[to_id]
+            entry = (from_start[0], from_start[1], wrap_angle(from_start[2] + math.pi))
+            ring_arc = math.pi / 2 * steps - 2 * meet
+            segments = (
+                Arc(length=entry_radius * entry_turn, curvature=-1.0 / entry_radius),
+                Arc(length=r * ring_arc, curvature=1.0 / r),
+                Arc(length=entry_radius * entry_turn, curvature=-1.0 / entry_radius),
+            )
+            conn = Road(
+                id=next_id,
+                name=f"{arm_names[from_id]}_to_{arm_names[to_id]}_{exit_kind[steps]}",
+                start=entry,
+                segments=segments,
+                sections=(
+                    LaneSection(
+                        s=0.0,
+                        right=(Lane(-1, "driving", LANE_WIDTH, NO_MARK, predecessor=1, successor=-1),),
+                    ),
+                ),
+                predecessor=Link("road", from_id, "start"),
+                successor=Link("road", to_id, "start"),
+                junction=junction_id,
+                road_type="town",
+                speed_kmh=URBAN_SPEED,
+            )
+            assert_poses_meet(conn.end_pose(), to_start, f"{name} {conn.name}")
+            roads.append(conn)
+            junction.connections.append(Connection(from_id, next_id, ((1, -1),)))
+            next_id += 1
+    return OpenDriveMap(name, roads, [junction])
+
+
 MAP_BUILDERS: Dict[str, Callable[[], OpenDriveMap]] = {
     "highway_straight": build_highway_straight,
     "highway_onramp": build_highway_onramp,
     "urban_two_way": build_urban_two_way,
+    "urban_multilane": build_urban_multilane,
     "urban_crossroads": build_urban_crossroads,
     "urban_t_junction": build_urban_t_junction,
+    "urban_roundabout": build_urban_roundabout,
 }
 """Map name -> builder, in the order the maps are written."""
 
