@@ -142,7 +142,7 @@ def bench_samplers(policy: str, samplers: Sequence[str], seeds: Sequence[int], b
           f"{workers} workers, batch {batch or 'default'}; adaptive sampler settings: "
           + "; ".join(f"{label} = {options or 'VerifAI defaults'}, feedback {feedback or 'robustness'}"
                       for label, options, feedback in configs)
-          + (f"; split settings: " + "; ".join(f"{label} = {options or 'its defaults'}, feedback "
+          + ("; split settings: " + "; ".join(f"{label} = {options or 'its defaults'}, feedback "
                                                f"{feedback or 'its default'}" for label, options, feedback in
                                                split_configs) if SPLIT in samplers else ""), flush=True)
     runs: Dict[str, List[Dict[str, Any]]] = {label: [] for label, _, _ in entries}
