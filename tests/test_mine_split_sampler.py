@@ -41,7 +41,7 @@ def _plain(specs):
     return [(s.scenario, s.point) for s in specs]
 
 
-@pytest.mark.parametrize("options", [{}, {"chooser": "ucb"}, {"chooser": "epsilon-greedy"}, {"params": "bandit"}, {"params": "cross-entropy"}])
+@pytest.mark.parametrize("options", [{}, {"chooser": "ucb"}, {"chooser": "epsilon-greedy"}, {"warmup": 2}, {"params": "bandit"}, {"params": "cross-entropy"}])
 def test_split_is_deterministic_under_a_seed_resumes_exactly_and_keeps_the_global_generators(space, options):
     random.seed(5)
     np.random.seed(5)
@@ -91,11 +91,20 @@ def test_each_scenario_has_its_own_parameter_sampler_over_its_own_parameters(spa
     assert common >= 5 and mixed_turns[:common] == [s.point for s in turns[:common]]
 
 
+@pytest.mark.parametrize("chooser", ["cross-entropy", "ucb"])
+def test_a_warm_up_tries_every_scenario_first_and_the_chooser_learns_from_it(space, chooser):
+    sampler = make_sampler(SPLIT, space, 4, {"warmup": 3, "chooser": chooser})
+    first = _drive(sampler, space, 6, fails=lambda spec: spec.scenario == BRAKES)
+    assert sorted(s.scenario for s in first) == [BRAKES] * 3 + [LEFT_TURN] * 3
+    weights = sampler._sampler.scenario_weights()
+    assert weights[space.scenarios.index(BRAKES)] > weights[space.scenarios.index(LEFT_TURN)]
+
+
 def test_split_options_are_checked(space):
     for bad, match in (({"chooser": "greedy"}, "chooser must be one of cross-entropy, ucb, epsilon-greedy"),
                        ({"params": "sobol"}, "params must be one of halton, random, bandit, cross-entropy"),
                        ({"alpha": 1.0}, "alpha must be between 0 and 1"), ({"buckets": 0}, "buckets must be"),
-                       ({"gamma": 1}, "no option 'gamma'")):
+                       ({"warmup": -1}, "warmup must be a whole number >= 0"), ({"gamma": 1}, "no option 'gamma'")):
         with pytest.raises(MiningError, match=match):
             make_sampler(SPLIT, space, 0, bad)
 

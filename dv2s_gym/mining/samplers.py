@@ -63,11 +63,11 @@ SAMPLERS = ("random", "halton", "cross-entropy", "bandit", SPLIT)
 """Names :func:`make_sampler` accepts."""
 
 SAMPLER_OPTIONS = {"cross-entropy": ("alpha", "buckets", "thres"), "bandit": ("alpha", "buckets", "thres"),
-                   SPLIT: ("alpha", "buckets", "thres", "chooser", "params")}
+                   SPLIT: ("alpha", "buckets", "thres", "chooser", "params", "warmup")}
 """The options each sampler takes (the others take none)."""
 
 SPLIT_DEFAULTS: Dict[str, Any] = {"chooser": "cross-entropy", "params": "halton", "alpha": 0.9, "thres": 0.0,
-                                  "buckets": 3}
+                                  "buckets": 3, "warmup": 0}
 """The settings of :data:`SPLIT` when no option is given."""
 
 DEFAULT_FEEDBACK = {SPLIT: "novelty"}
@@ -125,6 +125,9 @@ def _split_params(options: Dict[str, Any]) -> Dict[str, Any]:
     if params["params"] not in PARAM_SAMPLERS:
         raise MiningError(f"sampler option params must be one of {', '.join(PARAM_SAMPLERS)}, "
                           f"not {params['params']!r}")
+    warmup = params["warmup"]
+    if isinstance(warmup, bool) or not isinstance(warmup, int) or warmup < 0:
+        raise MiningError(f"sampler option warmup must be a whole number >= 0, not {warmup!r}")
     params["alpha"], params["thres"], params["buckets"] = (float(params["alpha"]), float(params["thres"]),
                                                            int(params["buckets"]))
     return params
@@ -237,4 +240,5 @@ def _make_split(space: Any, feature_space: Any, params: Dict[str, Any]):
         count = feature_space.featureNamed["scenario"].domain.intervals[0][1] + 1
         dimensions = [width] * int(count)
     return ScenarioSplitSampler(feature_space, dimensions, chooser=params["chooser"], params=params["params"],
-                                alpha=params["alpha"], thres=params["thres"], buckets=params["buckets"])
+                                alpha=params["alpha"], thres=params["thres"], buckets=params["buckets"],
+                                warmup=params["warmup"])

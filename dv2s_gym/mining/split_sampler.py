@@ -106,13 +106,15 @@ class ScenarioSplitSampler(FeatureSampler):
         chooser: :data:`CHOOSERS`; ``params``: :data:`PARAM_SAMPLERS`.
         alpha, thres, buckets: VerifAI's parameters of the adaptive parts (``buckets``: per parameter,
             for the ``bandit`` and ``cross-entropy`` parameter samplers).
+        warmup: the first ``warmup * len(dimensions)`` scenes try every scenario ``warmup`` times (each
+            round in a seeded order) and are fed to the chooser like its own draws; 0: none.
 
     Build it with the generators seeded (the Halton starts are drawn here); then draw with
     ``getSample`` and feed with ``update`` like any VerifAI feature sampler.
     """
 
     def __init__(self, space, dimensions: Sequence[int], chooser: str = "cross-entropy", params: str = "halton",
-                 alpha: float = 0.9, thres: float = 0.0, buckets: int = 3) -> None:
+                 alpha: float = 0.9, thres: float = 0.0, buckets: int = 3, warmup: int = 0) -> None:
         super().__init__(space)
         self.width = max([int(d) for d in dimensions] + [1])
         """Coordinates of ``u`` in the feature space (the largest parameter count)."""
@@ -122,8 +124,17 @@ class ScenarioSplitSampler(FeatureSampler):
         self.param_samplers = [_make_params(params, d, alpha, thres, buckets) for d in self.dimensions]
         self.draws = [0] * len(self.dimensions)
         """Scenes drawn per scenario."""
+        count = len(self.dimensions)
+        self.warmup_order = [int(i) for _ in range(int(warmup)) for i in np.random.permutation(count)]
+        """The scenarios of the first draws: every scenario ``warmup`` times, each round in a seeded order."""
+        self.drawn = 0
 
     def _scenario(self) -> Tuple[int, Any, Any]:
+        if self.drawn < len(self.warmup_order):  # warm-up: the chooser is only fed, as if it had drawn these
+            index = self.warmup_order[self.drawn]
+            if self.chooser_kind == "cross-entropy":
+                return index, (index,), None
+            return index, ((index + 0.5) / len(self.dimensions),), np.array([index])
         if self.chooser_kind == "epsilon-greedy":  # VerifAI's class draws with generateSample (no getVector)
             vector, info = self.chooser.generateSample()
             sample = self.chooser.domain.unstandardize(vector)
@@ -138,6 +149,7 @@ class ScenarioSplitSampler(FeatureSampler):
     def getSample(self):
         """The next ``(point, info)``: a scenario from the chooser, its parameters from its own sampler."""
         index, choice, choice_info = self._scenario()
+        self.drawn += 1
         own, own_info = self.param_samplers[index].getSample()
         own = tuple(float(x) for x in own)
         u = own[: self.dimensions[index]] + (0.5,) * (self.width - self.dimensions[index])
