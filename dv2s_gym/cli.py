@@ -843,7 +843,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "and a Halton sequence per scenario over its parameters, which finds the most distinct failures")
     p.add_argument("--sampler-options", default=None,
                    help="VerifAI settings of cross-entropy/bandit as JSON: alpha (default 0.9), buckets (5), thres (0); "
-                   "split also takes chooser (cross-entropy|ucb|epsilon-greedy) and params (halton|random|bandit|cross-entropy)")
+                   "split also takes chooser (cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy) "
+                   "and warmup (0)")
     p.add_argument("--feedback", choices=["robustness", "novelty"], default=None,
                    help="what adaptive samplers learn from: robustness (every failure), or novelty (a failure in a "
                    "cluster already found counts as an easy scene, to spread the search); default novelty for "

@@ -28,7 +28,8 @@ distribution: each update multiplies it by ``alpha``, VerifAI's default 0.9), ``
 only which scenario is drawn) and ``thres`` (robustness below which an outcome counts
 as a failure, default 0). ``split`` takes them too (defaults :data:`SPLIT_DEFAULTS`: alpha 0.9,
 thres 0, buckets 3, the last only used by bucketed parameter samplers), and ``chooser``
-(``cross-entropy`` or ``ucb``) and ``params`` (``halton``, ``random``, ``bandit``, ``cross-entropy``).
+(``cross-entropy``, ``ucb``, ``epsilon-greedy``), ``params`` (``halton``, ``random``, ``bandit``,
+``cross-entropy``) and ``warmup`` (tries of every scenario before the chooser draws, default 0).
 """
 
 from __future__ import annotations
