@@ -6,8 +6,9 @@
 Runs ``dv2s eval sg dv2s_gym/evalset/descriptions`` (or reads a report written by
 ``dv2s eval sg ... --json`` with ``--report``) and prints SP mean ± sd per source group and overall,
 the share of descriptions whose script compiles and runs, the labelled elements most often lost
-(label elements absent from the simulated ones), the most common warnings, and how many descriptions
-lost elements without any warning (silent drops). ``--save`` writes the per-description scores
+(label elements absent from the simulated ones), the most common warnings, how many descriptions
+lost elements without any warning (silent drops) and how many lost elements no warning names (their words,
+e.g. ``action ego collide side``, appear in none of the description's warnings). ``--save`` writes the per-description scores
 (stem -> use case, SP, runs); ``--compare`` prints SP before/after on the descriptions both score, and
 which got worse (the shipped baseline, ``bench/sg_descriptions_baseline.json``, is today's rules SG).
 """
@@ -34,6 +35,11 @@ def _mean_sd(values: List[float]) -> str:
     return f"{statistics.fmean(values):.3f} ± {sd:.3f}"
 
 
+def _words(element) -> str:
+    """An element as warnings name it: ``action ego collide side``."""
+    return " ".join(str(x) for x in element if not isinstance(x, int)).replace("_", " ")
+
+
 def analyse(report: Mapping[str, Any], folder: Path = FOLDER) -> Dict[str, Any]:
     """Per-group SP, run share, lost elements and warnings of an ``eval sg`` report on ``folder``."""
     groups: Dict[str, List[float]] = {}
@@ -42,6 +48,7 @@ def analyse(report: Mapping[str, Any], folder: Path = FOLDER) -> Dict[str, Any]:
     total_by_kind: Counter = Counter()
     warnings: Counter = Counter()
     silent = 0
+    unnamed = 0
     items = report["items"]
     for item in items:
         groups.setdefault(item["use_case"], []).append(item["metrics"]["SP"])
@@ -57,6 +64,8 @@ def analyse(report: Mapping[str, Any], folder: Path = FOLDER) -> Dict[str, Any]:
         item_warnings = detail.get("warnings") or []
         warnings.update(w.split(":")[0][:90] for w in item_warnings)
         silent += bool(missing) and not item_warnings
+        said = " ".join(w.lower().replace("_", " ") for w in item_warnings)
+        unnamed += sum(_words(e) not in said for e in missing)
     every = [sp for values in groups.values() for sp in values]
     return {
         "groups": {g: {"n": len(v), "SP": _mean_sd(v)} for g, v in sorted(groups.items())},
@@ -65,7 +74,7 @@ def analyse(report: Mapping[str, Any], folder: Path = FOLDER) -> Dict[str, Any]:
         "lost_by_kind": {k: f"{lost_by_kind[k]}/{total_by_kind[k]}" for k in sorted(total_by_kind)},
         "lost": lost.most_common(), "warnings": warnings.most_common(),
         "with_warnings": sum(bool((i.get("detail") or {}).get("warnings")) for i in items),
-        "silent_drops": silent,
+        "silent_drops": silent, "lost_unnamed": unnamed,
     }
 
 
@@ -109,7 +118,7 @@ def main(argv: List[str] | None = None) -> None:
     print(f"\nscript compiles and runs: {result['runs']}/{result['items']} "
           f"({100 * result['runs'] / max(result['items'], 1):.1f}%)")
     print(f"descriptions with warnings: {result['with_warnings']}; lost elements without any warning: "
-          f"{result['silent_drops']}")
+          f"{result['silent_drops']}; lost elements that no warning names: {result['lost_unnamed']}")
     print("lost / labelled, by kind: " + ", ".join(f"{k} {v}" for k, v in result["lost_by_kind"].items()))
     print("\nmost often lost:")
     for element, count in result["lost"][: args.top]:

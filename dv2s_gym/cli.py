@@ -284,11 +284,11 @@ def _cmd_bank_add(args: argparse.Namespace) -> int:
     upgrade = upgrade_scenic2(script)  # Scenic 2 syntax -> Scenic 3; Scenic 3 scripts come back unchanged
     for line in upgrade.report() if upgrade.changed else []:
         print(line, file=sys.stderr)
-    script = upgrade.source  # then the usual allowlist + sandbox checks in Bank.add
     elements = json.loads(Path(args.elements).read_text()) if args.elements else None
     provenance = {"kind": args.kind, "video": args.video, "parent": args.parent}
+    # Bank.add upgrades the same way (recording the rewrites in provenance), then its allowlist + sandbox checks
     entry = _bank(args).add(script, args.description, name=args.name, elements=elements, tags=args.tag or [],
-                            map=args.map, provenance=provenance)
+                            map=args.map, provenance=provenance, upgrade_scenic2=True)
     summary = dict(entry.summary(), scenic2_rewrites=[str(r) for r in upgrade.rewrites])
     _print(args, summary, f"added {entry.name} ({entry.script_path})")
     return 0

@@ -390,11 +390,11 @@ def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompile
     from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
 
     if looks_like_scenic2(source, message):
-        first = upgrade_scenic2(source).rewrites[0]
+        first = upgrade_scenic2(source, keep_scenic2_meaning=False).rewrites[0]  # a construct Scenic 3 refuses
         return ScenarioCompileError(
-            f"{where}: Scenic 2 syntax: `{first.before.strip()[:80]}` (line {first.line}) creates an object without "
-            "`new`, which Scenic 3 requires. Upgrade the script: the env's config `upgrade_scenic2: True`, or "
-            "`dv2s bank add`, which upgrades it and reports each rewrite.",
+            f"{where}: Scenic 2 syntax: `{first.before.strip()[:80]}` (line {first.line}): {first.why}. Upgrade the "
+            "script: the env's config `upgrade_scenic2: True`, `Bank.add(..., upgrade_scenic2=True)` or "
+            "`dv2s bank add`, which upgrade it and report each rewrite.",
             path=label,
             line=line,
         )

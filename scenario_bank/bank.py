@@ -144,6 +144,40 @@ def verify(script: str, label: str) -> None:
         raise ScenarioRejectedError(f"not added: {error}", error.stage, limit=error.limit) from None
 
 
+def _upgrade_scenic2(script: str, provenance: Optional[Mapping[str, Any]],
+                     upgrade: bool) -> Tuple[str, Optional[Mapping[str, Any]]]:
+    """``script`` upgraded from Scenic 2 when ``upgrade`` is asked, its rewrites and notes added to ``provenance``."""
+    if not upgrade or not isinstance(script, str):
+        return script, provenance
+    from scenario_bank.scenic2 import upgrade_scenic2
+
+    result = upgrade_scenic2(script)
+    if not result.changed:
+        return script, provenance
+    provenance = dict(provenance or {})
+    provenance["scenic2_rewrites"] = [str(r) for r in result.rewrites]
+    provenance["scenic2_notes"] = list(result.notes)
+    return result.source, provenance
+
+
+def _verify_or_name_scenic2(script: str, label: str, upgraded: bool) -> None:
+    """:func:`verify`; a refused script in Scenic 2 syntax (not upgraded) gets an error naming the construct."""
+    try:
+        verify(script, label)
+    except ScenarioRejectedError as error:
+        if not upgraded:
+            from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
+
+            if looks_like_scenic2(script, str(error)):
+                first = upgrade_scenic2(script, keep_scenic2_meaning=False).rewrites[0]  # refused in 3
+                raise ScenarioRejectedError(
+                    f"not added: {label} is Scenic 2: line {first.line}: `{first.before.strip()[:80]}` ({first.why}); "
+                    "pass upgrade_scenic2=True to Bank.add to upgrade it to Scenic 3 (each rewrite is recorded in "
+                    "the entry's provenance; `dv2s bank add` does this)", error.stage, findings=error.findings,
+                    limit=error.limit) from None
+        raise
+
+
 class UnknownScenarioError(BankError, ValueError):
     """A scenario name or tag that the bank does not hold."""
 
@@ -590,6 +624,7 @@ class Bank:
         map: Optional[str] = None,
         provenance: Optional[Mapping[str, Any]] = None,
         use_case: Optional[str] = None,
+        upgrade_scenic2: bool = False,
     ) -> ScenarioEntry:
         """Add a scenario atomically; returns the new entry.
 
@@ -599,10 +634,17 @@ class Bank:
         or its compile, sample and short run in the sandbox (:mod:`scenario_bank.sandbox`,
         with CPU, memory and wall-clock limits). ``provenance`` keys: kind (hand-written, generated, mined), video,
         parent, seed, generator, model, context_hash, date; mined entries also :data:`MINED_PROVENANCE_FIELDS`.
+
+        ``upgrade_scenic2``: upgrade a script in Scenic 2 syntax to Scenic 3 first
+        (:func:`scenario_bank.scenic2.upgrade_scenic2`, as ``dv2s bank add`` does), its rewrites and notes
+        recorded in the provenance (``scenic2_rewrites``, ``scenic2_notes``). Without it a Scenic 2 script is
+        refused with a :class:`ScenarioRejectedError` naming the construct, its line and this option.
         """
         self._check_writable("add a scenario")
+        script, provenance = _upgrade_scenic2(script, provenance, upgrade_scenic2)
         meta = self._make_meta(script, description, name, elements, tags, map, provenance, use_case)
-        verify(script, f"scenario {meta['name']!r}")  # before the lock: other writers do not wait for it
+        # before the lock: other writers do not wait for it
+        _verify_or_name_scenic2(script, f"scenario {meta['name']!r}", upgrade_scenic2)
         with self._lock():
             self._load(locked=True)
             name = meta["name"] = self._free_name(meta["name"], explicit=name is not None)
@@ -652,6 +694,7 @@ class Bank:
         map: Optional[str] = None,
         provenance: Optional[Mapping[str, Any]] = None,
         use_case: Optional[str] = None,
+        upgrade_scenic2: bool = False,
     ) -> AddOutcome:
         """Add a scenario, or merge it into the entry it duplicates; one atomic step under the writers' lock.
 
@@ -660,11 +703,12 @@ class Bank:
         ``how``) is appended to that entry's ``source.merged`` list, the sidecar rewritten atomically.
         Otherwise the script is added as by :meth:`add`, except that ``name`` is a base name that
         gets a ``_2``, ``_3``... suffix when taken. Scripts are verified (safety check and sandbox)
-        first either way (:class:`ScenarioRejectedError`).
+        first either way (:class:`ScenarioRejectedError`). ``upgrade_scenic2`` is as for :meth:`add`.
         """
         self._check_writable("add a scenario")
+        script, provenance = _upgrade_scenic2(script, provenance, upgrade_scenic2)
         meta = self._make_meta(script, description, name, elements, tags, map, provenance, use_case)
-        verify(script, f"scenario {meta['name']!r}")  # before the lock: other writers do not wait for it
+        _verify_or_name_scenic2(script, f"scenario {meta['name']!r}", upgrade_scenic2)
         with self._lock():
             self._load(locked=True)
             found = self.find_near_duplicate(script, meta["elements"], meta["map"])

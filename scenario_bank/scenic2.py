@@ -4,9 +4,16 @@ Scenic 2 created objects with a bare class name (``ego = Car at p``,
 ``Car ahead of ego`` as a statement, ``Point on road`` inside an expression);
 Scenic 3 needs ``new`` before the class. A Scenic 2 ``monitor Name:`` ran by
 being defined; Scenic 3 writes ``monitor Name():`` and runs it only under
-``require monitor Name()``, which is appended. The rules are applied on Python tokens, so
-comments, strings, behaviours, ``compose`` and ``monitor`` blocks and
-multi-line specifiers are handled as code is, and a Scenic 3 script (which
+``require monitor Name()``, which is appended. The other rules (durations without
+a unit, the old ``mutate`` and ``constructor`` forms, and the specifiers Scenic 3
+reads differently: ``offset by``/``offset along``, ``beyond``, ``apparently facing``,
+``left of``/``right of``/``ahead of``/``behind`` an object, ``with heading`` and class
+``heading`` defaults) are in :mod:`scenario_bank.scenic2_rules`, which also lists what
+was checked and needs no rewrite (``on``, ``visible``, ``simulation()`` and others).
+The meaning rules only apply to a script found to be Scenic 2 (some syntax rule
+fired), so a Scenic 3 script keeps its Scenic 3 meaning. The rules are applied on
+Python tokens, so comments, strings, behaviours, ``compose`` and ``monitor`` blocks
+and multi-line specifiers are handled as code is, and a Scenic 3 script (which
 already says ``new``) comes out byte-for-byte unchanged.
 
 What the translator does not rewrite it reports in :attr:`Upgrade.notes`
@@ -18,9 +25,9 @@ What the translator does not rewrite it reports in :attr:`Upgrade.notes`
   The translator does not add ``with requireVisible True``; it notes it.
 * a class name used as a value (``x = Car`` with nothing after it is creation in
   Scenic 2 and is rewritten; ``isinstance(o, Car)`` is a reference and is not).
-* ``with heading H``: Scenic 3 refuses it in 3D mode ("property heading cannot
-  be directly specified") but accepts it, with Scenic 2's meaning, in 2D mode
-  (Scenic 3.1.1's own examples use it), so it is left alone.
+* ``left of X``/``ahead of X``... when the script does not show whether ``X`` is an
+  object (measured from its centre in Scenic 2, its edge in Scenic 3), ``beyond``
+  with an operand that would be sampled twice, ``mutate`` of a non-name.
 * a source the tokenizer cannot read is returned unchanged with the reason.
 """
 
@@ -31,6 +38,8 @@ import re
 import tokenize
 from dataclasses import dataclass, field
 from typing import Dict, List, Sequence, Set, Tuple
+
+from scenario_bank.scenic2_rules import meaning_edits, syntax_edits
 
 __all__ = ["Rewrite", "Upgrade", "upgrade_scenic2", "looks_like_scenic2", "OBJECT_CLASSES"]
 
@@ -44,6 +53,11 @@ OBJECT_CLASSES: frozenset = frozenset(
         "VendingMachine", "Bench", "Advertisement", "Container", "Table", "ATM", "PlasticBag",
         "IronPlate", "Barrel", "CreasedBox", "Case", "Mailbox", "Gnome", "Iceguard", "BusStop",
         "EgoCar", "BoxCar", "NPCPedestrian", "ToyotaPrius", "MercedesCar",
+        # the other classes of Scenic 3.1.1's simulator models (Webots, LGSVL, X-Plane, Newtonian, CARLA)
+        "ApolloCar", "BmwX", "CitroenCZero", "Compact", "Ground", "Hill", "LGSVLObject", "LincolnMKZ",
+        "NewtonianActor", "OilBarrel", "Plane", "PlantPot", "RangeRoverSportSVR", "SmallCar", "SolidBox",
+        "Terrain", "Tractor", "TrafficWarning", "Van", "WebotsObject", "WorkBarrier", "CarlaActor",
+        "MetaDriveActor",
     }
 )
 """Class names that create an object when written bare in Scenic 2 (plus classes the script defines)."""
@@ -96,7 +110,7 @@ def _tokens(source: str) -> List[tokenize.TokenInfo]:
 def _defined_classes(tokens: Sequence[tokenize.TokenInfo]) -> Set[str]:
     names = set()
     for i, tok in enumerate(tokens[:-1]):
-        if tok.type == tokenize.NAME and tok.string == "class" and tokens[i + 1].type == tokenize.NAME:
+        if tok.type == tokenize.NAME and tok.string in ("class", "constructor") and tokens[i + 1].type == tokenize.NAME:
             names.add(tokens[i + 1].string)
     return names
 
@@ -108,8 +122,12 @@ def _significant(tokens: Sequence[tokenize.TokenInfo]) -> List[tokenize.TokenInf
     return [t for t in tokens if t.type not in _SKIP and t.type != tokenize.ENCODING]
 
 
-def upgrade_scenic2(source: str) -> Upgrade:
+def upgrade_scenic2(source: str, *, keep_scenic2_meaning: bool = True) -> Upgrade:
     """Rewrite Scenic 2 constructs in ``source`` to Scenic 3; see the module docstring for the rules.
+
+    ``keep_scenic2_meaning`` (default): in a script found to be Scenic 2, also rewrite the specifiers
+    Scenic 3 reads differently (:func:`scenario_bank.scenic2_rules.meaning_edits`) so it samples the
+    scenes Scenic 2 did; False rewrites only the syntax Scenic 3 refuses.
 
     Idempotent: applying it to its own output changes nothing, and Scenic 3
     source comes back unchanged with no rewrites.
@@ -120,6 +138,7 @@ def upgrade_scenic2(source: str) -> Upgrade:
         return Upgrade(source, [], [f"not upgraded: the script cannot be tokenized ({error}); fix its syntax first"])
     classes = set(OBJECT_CLASSES) | _defined_classes(tokens)
     sig = _significant(tokens)
+    lines = source.splitlines(keepends=True)
     # edits: (row, col_start, col_end, replacement, why)
     edits: List[Tuple[int, int, int, str, str]] = []
     created = 0
@@ -129,7 +148,7 @@ def upgrade_scenic2(source: str) -> Upgrade:
         prev = sig[i - 1] if i > 0 else None
         nxt = sig[i + 1] if i + 1 < len(sig) else None
         if tok.string in classes:
-            if prev is not None and prev.string in ("new", ".", "class", "def", "import", "isinstance"):
+            if prev is not None and prev.string in ("new", ".", "class", "def", "import", "isinstance", "constructor"):
                 continue
             at_statement_start = prev is None or prev.type in (tokenize.NEWLINE,) or prev.string == ";"
             before_ok = at_statement_start or prev.string in _BEFORE_CREATION
@@ -145,36 +164,66 @@ def upgrade_scenic2(source: str) -> Upgrade:
     for row, name_end, name in monitors:
         edits.append((row, name_end, name_end, "()",
                       "Scenic 3 monitors take parentheses and are required explicitly"))
-    lines = source.splitlines(keepends=True)
-    rewrites: List[Rewrite] = []
-    by_line: Dict[int, List[Tuple[int, int, str, str]]] = {}
-    for row, c0, c1, text, why in edits:
-        by_line.setdefault(row, []).append((c0, c1, text, why))
-    for row in sorted(by_line):
-        original = lines[row - 1]
-        new = original
-        whys = []
-        for c0, c1, text, why in sorted(by_line[row], reverse=True):
-            new = new[:c0] + text + new[c1:]
-            if why not in whys:
-                whys.insert(0, why)
-        lines[row - 1] = new
-        rewrites.append(Rewrite(row, original.rstrip("\n"), new.rstrip("\n"), "; ".join(whys)))
+    more, syntax_notes = syntax_edits(sig, lines)
+    edits += more
+    notes: List[str] = list(monitor_notes) + syntax_notes
+    changed: Dict[int, Tuple[str, List[str]]] = {}  # row -> (original line, reasons)
+    lines = _apply(lines, edits, changed)
+    appended: List[Rewrite] = []
     if monitors:
         if lines and not lines[-1].endswith("\n"):
             lines[-1] += "\n"
         for _, _, name in monitors:
             added = f"require monitor {name}()"
             lines.append(added + "\n")
-            rewrites.append(Rewrite(len(lines), "", added,
+            appended.append(Rewrite(len(lines), "", added,
                                     f"a Scenic 2 monitor ran by being defined; Scenic 3 runs {name} only when required"))
-    notes: List[str] = list(monitor_notes)
+    if edits and keep_scenic2_meaning:  # also the forms whose meaning changed in Scenic 3
+        sig3 = _significant(_tokens("".join(lines)))
+        meaning, meaning_notes = meaning_edits(sig3, lines)
+        # only a script written for Scenic 2 throughout (bare creations or old monitors, no 'new') means them
+        # as Scenic 2 did; in one mixing 'new' with old forms they keep their Scenic 3 meaning, noted
+        scenic2_throughout = bool(created or monitors) and not _uses_new(sig)
+        if scenic2_throughout:
+            lines = _apply(lines, meaning, changed)
+            notes += meaning_notes
+        else:
+            notes += [f"line {row}: kept as Scenic 3 reads it, the script also uses 'new': {why}"
+                      for row, _, _, _, why in sorted(meaning)]
+    rewrites = [Rewrite(row, before.rstrip("\n"), lines[row - 1].rstrip("\n"), "; ".join(whys))
+                for row, (before, whys) in sorted(changed.items())] + appended
     if created:
         notes.append(
             "requireVisible: Scenic 2 required objects to be visible from ego by default; Scenic 3 keeps "
             "that only in 2D mode (the env compiles with mode2D=True); no 'with requireVisible' was added"
         )
     return Upgrade("".join(lines), rewrites, notes)
+
+
+def _uses_new(sig: Sequence[tokenize.TokenInfo]) -> bool:
+    """Whether the script already creates an object with Scenic 3's ``new``."""
+    return any(tok.string == "new" and nxt.type == tokenize.NAME for tok, nxt in zip(sig, sig[1:]))
+
+
+def _apply(lines: List[str], edits: Sequence[Tuple[int, int, int, str, str]],
+           changed: Dict[int, Tuple[str, List[str]]]) -> List[str]:
+    """``lines`` with the same-line ``edits`` applied; ``changed`` collects each row's original and reasons."""
+    lines = list(lines)
+    by_line: Dict[int, List[Tuple[int, int, str, str]]] = {}
+    for row, c0, c1, text, why in edits:
+        by_line.setdefault(row, []).append((c0, c1, text, why))
+    for row in sorted(by_line):
+        original = lines[row - 1]
+        before, whys = changed.setdefault(row, (original, []))
+        new = original
+        added = []
+        for c0, c1, text, why in sorted(by_line[row], reverse=True):
+            new = new[:c0] + text + new[c1:]
+            if why not in whys and why not in added:
+                added.insert(0, why)
+        whys.extend(added)
+        lines[row - 1] = new
+    return lines
 
 
 def _old_monitors(sig: Sequence[tokenize.TokenInfo]) -> Tuple[List[Tuple[int, int, str]], List[str]]:
@@ -194,7 +243,7 @@ def _old_monitors(sig: Sequence[tokenize.TokenInfo]) -> Tuple[List[Tuple[int, in
 
 _SCENIC2_ERRORS = re.compile(
     r"(invalid syntax|unexpected token|2\.0-style|monitor must be converted|ScenicParseError|"
-    r"instance creation|specifier)", re.IGNORECASE
+    r"instance creation|specifier|duration must specify a unit)", re.IGNORECASE
 )
 
 

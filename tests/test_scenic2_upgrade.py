@@ -46,10 +46,10 @@ def test_bare_creation_gets_new_everywhere_it_creates():
     assert upgrade.source == textwrap.dedent(
         """\
         ego = new Car at (0, 0)   # Car here is a comment
-        new Car ahead of ego by 10
+        new Car ahead of ego by 10 - ego.length / 2
         spot = new OrientedPoint on curb
         p = (new Point on road).position
-        cars = [new Car behind ego, new Car left of ego]
+        cars = [new Car behind ego by -ego.length / 2, new Car left of ego by -ego.width / 2]
         name = "Car at (1, 2)"
         lone = new Car
         def f():
@@ -57,8 +57,10 @@ def test_bare_creation_gets_new_everywhere_it_creates():
         """
     )
     assert [r.line for r in upgrade.rewrites] == [1, 2, 3, 4, 5, 7, 9]
-    assert upgrade.rewrites[4].after.strip() == "cars = [new Car behind ego, new Car left of ego]"
+    assert upgrade.rewrites[4].after.strip() == ("cars = [new Car behind ego by -ego.length / 2, "
+                                                 "new Car left of ego by -ego.width / 2]")
     assert all("new" in r.why for r in upgrade.rewrites)
+    assert "from ego's edge, Scenic 2 from its centre" in upgrade.rewrites[1].why
     assert any("requireVisible" in n for n in upgrade.notes)
 
 
@@ -185,6 +187,9 @@ def test_bank_add_upgrades_and_prints_rewrites(tmp_path, capsys):
     assert entry["name"] == "old" and len(entry["scenic2_rewrites"]) == 2
     stored = Path(entry["path"]).read_text()
     assert "ego = new Car at" in stored and "\nnew Car following" in stored
+    from scenario_bank.bank import Bank
+
+    assert Bank(tmp_path / "bank").get("old").source["scenic2_rewrites"] == entry["scenic2_rewrites"]
 
 
 def test_llm_repair_loop_upgrades_scenic2_without_a_repair_round():
@@ -207,7 +212,7 @@ def test_llm_repair_loop_upgrades_scenic2_without_a_repair_round():
 # corpus scripts whose constructs DV2S-v0 provides: upgraded, with their map line swapped to the shipped
 # urban_crossroads (the allowlist refuses their '../..' paths), they sample and run a few steps
 RUNS_IN_ENV = ["badlyParkedCarPullingIn", "car", "carlaChallenge2", "carlaChallenge3", "oas_scenario_03",
-               "oas_scenario_04", "pedestrianAcrossRoad"]
+               "oas_scenario_04", "pedestrianAcrossRoad", "iccv_2_agent_scenario"]
 
 
 @pytest.mark.slow

@@ -150,8 +150,10 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
         generation = None
     if generation is not None:
         _write(out, "scenario.scenic", generation.script)
-        report["generation"] = generation.as_dict()
         check = check_scenario(generation.script, seed=seed, seconds=seconds, preview=out / "preview.webm")
+        if check.ran:
+            generation.note_simulated(check.simulated_elements)
+        report["generation"] = generation.as_dict()
         report["check"] = {**asdict(check), "ok": check.ok}
         if check.ran:
             report["sp"] = semantic_preservation(description.elements, check.simulated_elements)

@@ -120,6 +120,8 @@ def _evaluate_item(stage: str, item: EvalItem, dra: str, sg: str, llm_config: Op
         if stage in ("sg", "e2e"):
             generation = generate(text, backend=sg, llm_config=llm_config)
             check = check_scenario(generation.script, seconds=seconds, name=item.stem)
+            if check.ran:
+                generation.note_simulated(check.simulated_elements)
             result.ok = check.ok
             result.detail.update({"warnings": generation.warnings, "failures": generation.failure_counts(),
                                   "check_error": check.error, "simulated": check.simulated_elements})

@@ -139,6 +139,22 @@ class Entity:
         return {}
 
 
+_NO_JUNCTION_WORDS = re.compile(r"\b(?:intersections?|junctions?|crossroads?)\b")
+_DRIFT_ONCOMING = re.compile(r"\b(?:centre|center|middle|dividing|median|double) (?:line|marking)s?\b|"
+                             r"\b(?:oncoming|opposite|opposing|wrong)\b")
+_DRIFT_SIDE = re.compile(r"\b(?:to(?:wards?)?|into|onto|off|on|over) (?:the |its |their )?(?:\w+ ){0,2}?"
+                         r"(left|right)\b|\b(left|right)(?: hand)? (?:edge|shoulder|kerb|curb|lane|side)\b")
+
+
+def _drift_side(text: str) -> Optional[str]:
+    """The side a drift goes to, from the words after it: across the centre line / into the oncoming lane is
+    left (right-hand traffic), "toward the road edge on the right" / "into the left lane" say it; else None."""
+    if _DRIFT_ONCOMING.search(text):
+        return "left"
+    m = _DRIFT_SIDE.search(text)
+    return (m.group(1) or m.group(2)) if m else None
+
+
 @dataclass
 class ParsedDescription:
     """What a description says: road, entities (ego first when mentioned), unknowns."""
@@ -153,6 +169,8 @@ class ParsedDescription:
     """Road features said in the text (see :func:`dv2s_gym.pipeline.semantics_road.road_features`)."""
     absent: List[str] = field(default_factory=list)
     """Participant kinds the text says are not there ("no other vehicles")."""
+    absent_phrases: List[str] = field(default_factory=list)
+    """The words that said so ("no other vehicles")."""
     unplaced: List[str] = field(default_factory=list)
     """Phrases (verbatim clauses) the parser could not place; the generator warns about each."""
 
@@ -516,9 +534,10 @@ class _Parser:
 
     # ---------------------------------------------------------------- main
     def parse(self) -> ParsedDescription:
-        text, absent, no_junction, _ = strip_absences(self.text)
+        text, absent, no_junction, removed = strip_absences(self.text)
         self.text = text
         self.out.absent = absent
+        self.out.absent_phrases = [r for r in removed if not _NO_JUNCTION_WORDS.search(r)]
         for road, pattern in ROAD_PATTERNS:
             if road == "merge" and re.search(r"\b(?:off ramp|exit ramp|offramp)\b", text) and not re.search(
                     r"\b(?:on ramp|onramp|entry ramp|entrance ramp|acceleration lane)\b", text):
@@ -1059,12 +1078,22 @@ class _Parser:
         return subject is None
 
     def _record(self, owner: Entity, action: str, m: re.Match, clause: str) -> None:
+        """Record ``action`` of ``owner``; each action it adds keeps the words it was read from (``phrase``)."""
+        before = {a for a, _ in owner.actions}
+        self._record_action(owner, action, m, clause)
+        for name, detail in owner.actions:
+            if name not in before:
+                detail.setdefault("phrase", m.group(0))
+
+    def _record_action(self, owner: Entity, action: str, m: re.Match, clause: str) -> None:
         self._placed += 1
         window = clause[max(0, m.start() - 30):m.end() + 25]
         sudden = bool(_SUDDEN.search(window))
         kind = owner.kind
         if kind == "obstacle" and not (owner.attrs.get("animal") and action in ("cross", "emerge", "stop")) and \
                 not action.startswith("collide"):
+            if clause not in self._unplaced_phrases:
+                self._unplaced_phrases.append(clause)  # an action read onto a static object: not placed
             return
         groups = m.groupdict()
         if action in ("lane_change", "cut_in") and m.group(0).startswith("merg") and kind != "pedestrian":
@@ -1161,8 +1190,10 @@ class _Parser:
                 return
             if kind in ("car", "truck", "bus", "motorcycle", "bicycle", "ego"):
                 if re.match(r"cross(?:es|ed|ing)? (?:the |a )?(?:road|street|lanes?|highway)\b", m.group(0) +
-                            clause[m.end():m.end() + 20].lstrip().join([" ", ""])):
-                    owner.add_action("cross", sudden=sudden)
+                            clause[m.end():m.end() + 20].lstrip().join([" ", ""])) or kind == "bicycle":
+                    owner.add_action("cross", sudden=sudden)  # (a cyclist crossing in front: like a pedestrian)
+                elif clause not in self._unplaced_phrases:
+                    self._unplaced_phrases.append(clause)  # "crosses" of a vehicle that says not what: warned
                 return
         if action == "cut_in":
             side = None
@@ -1179,6 +1210,12 @@ class _Parser:
                 side = next(g for g in sm.groups() if g)
             owner.add_action("overtake", sudden=sudden, side=side,
                              around=" around" in m.group(0), via_pass=m.group(0).startswith("pass"))
+            return
+        if action == "drift":
+            owner.add_action("drift", sudden=sudden)
+            side = _drift_side(clause[m.start():m.end() + 60])
+            if side and not owner.detail("drift").get("side"):
+                owner.detail("drift")["side"] = side
             return
         if action == "stop" and re.match(r"park", m.group(0)) and kind == "ego":
             return

@@ -283,6 +283,12 @@ _ACTION_PATTERNS = tuple(_ACTION_PATTERNS) + (
     ("drift", r"\b(?:los(?:e|es|ing)|lost) control\b|\bspin(?:s|ning)? out\b|\bspun out\b|\bskid(?:s|ded|ding)?\b|"
               r"\bfishtail(?:s|ed|ing)?\b|\bhydroplan(?:e|es|ed|ing)\b|\b(?:leav(?:e|es|ing)|left) (?:its|his|her|their|the) "
               r"lane\b"),
+    # leaving the lane without a lane change: "veers into the lane to its left", "slides into the left lane",
+    # "runs onto the shoulder", "overshoots the lane"
+    ("drift", r"\b(?:veer(?:s|ed|ing)?|slid(?:e|es|ing)?|skid(?:s|ded|ding)?|run(?:s|ning)?|ran|overshoot(?:s|ing)?|"
+              r"overshot) (?:in|on)?to (?:the )?(?:lane to (?:its|his|her|their|the) (?:left|right)|(?:left|right|next|"
+              r"adjacent|other|neighbouring|neighboring) lane|(?:hard )?shoulder|verge|ditch|road edge|edge of the "
+              r"road)\b|\bovershoot(?:s|ing)? (?:the|its) (?:target )?lane\b|\bovershot (?:the|its) (?:target )?lane\b"),
     ("swerve", r"\bswerv(?:e|es|ed|ing)\b|\bevasive (?:steering|manoeuvre|maneuver|swerve)\b|"
                r"\bjerk(?:s|ed|ing)? (?:the wheel|sideways)\b"),
 )

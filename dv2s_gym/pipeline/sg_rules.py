@@ -13,7 +13,11 @@ from the building blocks of :mod:`dv2s_gym.pipeline.blocks`:
 
 Whatever it cannot place (an unknown kind of actor, an action a type cannot do,
 a relation the map cannot realise) goes into ``warnings``; nothing
-is dropped silently. ``elements`` lists what the script is meant to show.
+is dropped silently: every phrase the parser could not place is a ``could not place``
+warning, and every parsed element the composed script does not mean to show is a
+``not built: <element> ('<words>')`` warning (:func:`unbuilt_warnings`). ``elements``
+lists what the script is meant to show; :func:`unshown_warnings` names what of it a
+simulated run did not show (``Generation.note_simulated`` adds those after a run).
 The output is deterministic for a given description and seed.
 """
 
@@ -28,10 +32,11 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 from dv2s_gym.pipeline import blocks
 from dv2s_gym.pipeline.errors import GenerationError
 from dv2s_gym.pipeline.semantics import Entity, ParsedDescription, parse_description
-from scenario_bank.elements import ACTIONS, normalize_elements
+from scenario_bank.elements import ACTIONS, PARTICIPANTS, RELATIONS, ROADS, normalize_elements
 from scenario_bank.maps.build_maps import LANE_WIDTH, ROUNDABOUT_ARM_START, ROUNDABOUT_RING_RADIUS
 
-__all__ = ["ActorFrame", "ScenarioFrame", "SGResult", "generate_rules", "build_frame", "ROAD_MAPS"]
+__all__ = ["ActorFrame", "ScenarioFrame", "SGResult", "generate_rules", "build_frame", "ROAD_MAPS", "unbuilt_warnings",
+           "unshown_warnings"]
 
 ROAD_MAPS = {
     "highway": "highway_straight",
@@ -500,7 +505,9 @@ def _compose_lanes(s: _Script) -> None:
     # ---------------------------------------------------------------- roles
     need: Dict[int, bool] = {}  # lane offsets (+ left, - right) the ego's lane must have
     for actor in frame.actors:
-        if actor.kind in VEHICLES:
+        if actor.kind == "bicycle" and actor.has("cross"):
+            _check_actions(actor, s, {"cross", "collide"})  # a cyclist riding across the road, like a pedestrian
+        elif actor.kind in VEHICLES:
             _check_actions(actor, s, _LANE_ACTIONS - {"cross"} | ({"merge"} if onramp else set()))
         elif actor.kind == "pedestrian":
             _check_actions(actor, s, {"cross", "stop", "collide"})
@@ -520,6 +527,8 @@ def _compose_lanes(s: _Script) -> None:
             actor.side = 1 if "left_of" in rels and not two_way else -1 if "right_of" in rels and not two_way else 0
         elif actor.kind == "pedestrian":
             actor.role = "crosser" if actor.has("cross") or actor.has("collide") else "roadside"
+        elif actor.kind == "bicycle" and actor.has("cross"):
+            actor.role = "crosser"
         elif actor.has("pull_out") or actor.has("reverse"):
             actor.role = "puller"  # parked at the kerb (or on the shoulder) beside the ego's lane
         elif actor.has("merge") and onramp:
@@ -783,6 +792,14 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
                     f"Range(2.0, 2.8), {speed})"), False
         s.warnings.append("the ego overtakes, but nothing to overtake was described: the overtake is not placed")
         ego.actions.remove("overtake")
+    passer = next((a for a in frame.actors if a.role == "follower" and a.has("collide") and a.count == 1), None)
+    if (ego.has("pull_out") or ego.has("reverse")) and ego.has("collide") and passer is not None and two_way:
+        # it backs up, then pulls out into the side of the vehicle coming along the lane from behind
+        s.use("BackUpThenPullOutInto")
+        back = "Range(2.5, 3.5)" if ego.has("reverse") else "0.2"
+        trigger = "Range(5.5, 7.0)" if passer.kind not in _KIND_SPEEDS else "Range(3.0, 4.0)"
+        return (f"BackUpThenPullOutInto(egoLane.centerline, {speed}, {back}, {passer.name}, {trigger}, "
+                "Range(2.5, 3.5))"), False
     if ego.has("pull_out") or ego.has("reverse"):
         s.use("PullOutWhenNear")
         back = "Range(2.5, 3.5)" if ego.has("reverse") else "0"
@@ -790,6 +807,12 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
                 "Range(2.5, 3.5))"), False
     if ego.has("u_turn"):
         return _u_turn(s, speed), True
+    if (ego.has("lane_change_left") or ego.has("lane_change_right")) and ego.has("drift"):
+        # it changes lanes and overshoots: on past the new lane's centre and out of that lane too
+        sign = "" if ego.has("lane_change_left") else "-"
+        s.use("DriftLater")
+        return (f"DriftLater({speed}, Range(0.8, 1.6), {sign}(3.5 + Range(2.1, 2.6)), Range(3.5, 4.5), -1, "
+                "Range(1.8, 2.4))"), True
     if ego.has("lane_change_left") or ego.has("lane_change_right"):
         side = 1 if ego.has("lane_change_left") else -1
         after = s.param("ego_change_after", "Range(0.5, 1.5)" if ego.sudden else "Range(1.0, 2.5)")
@@ -799,9 +822,13 @@ def _ego_lane_behavior(s: _Script, ego: ActorFrame, speed: str, reckless: bool, 
     if ego.has("swerve"):
         return _swerve(s, speed, ego), True
     if ego.has("drift"):
-        s.use("DriftAndReturn")
-        depth = "Range(2.0, 2.8)" if two_way else "Range(1.5, 2.2)"
-        return (f"DriftAndReturn({speed}, 1000, {depth}, Range(1.5, 2.5), -1, Range(1.2, 2.0))", True)
+        oncoming = any(a.role == "oncoming" for a in frame.actors)
+        if two_way and oncoming and ego.details.get("drift", {}).get("side") != "right":
+            # across the centre line into the oncoming vehicle's path
+            s.use("DriftAndReturn")
+            return (f"DriftAndReturn({speed}, 1000, Range(2.0, 2.8), Range(1.5, 2.5), -1, Range(1.2, 2.0))", True)
+        side = ego.details.get("drift", {}).get("side") or ("left" if oncoming else "right")
+        return _drift(s, speed, side, hold=None), True
     if ego.has("brake") or ego.has("stop") and not _something_stops_ego(frame):
         s.use("CautiousBrakeLater" if not reckless else "BrakeLater")
         after, low, strength = _brake_params(s, ego)
@@ -840,6 +867,15 @@ def _swerve(s: _Script, speed: str, actor: Optional[ActorFrame] = None) -> str:
         return f"SwerveWhenBlocked({speed}, {depth}, {duration})"
     s.use("SwerveAndBack")
     return f"SwerveAndBack({speed}, Range(1.0, 2.0), {depth}, {duration})"
+
+
+def _drift(s: _Script, speed: str, side: str, hold: Optional[str]) -> str:
+    """A slow drift out of the lane to ``side`` (about 2.1-2.6 m: the centre leaves the lane, the vehicle does not
+    reach the next lane's centre), held ``hold`` seconds and steered back, or held for good (``hold`` None)."""
+    sign = "-" if side == "right" else ""
+    s.use("DriftLater")
+    return (f"DriftLater({speed}, Range(0.8, 1.6), {sign}Range(2.1, 2.6), Range(2.5, 3.5), "
+            f"{hold if hold is not None else -1}, Range(1.8, 2.4))")
 
 
 def _something_stops_ego(frame: ScenarioFrame) -> bool:
@@ -955,7 +991,9 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
             behavior = f"CutInWhenAhead({-side}, {speed_expr}, {gap}, {dur}, {after})"
             if not behind and "ahead_of" not in rels:
                 rels.append("ahead_of")
+        # it changes lanes toward the ego (from the left: to the right)
         shown_actions = [a for a in shown_actions if a not in ("lane_change_left", "lane_change_right")]
+        shown_actions.append("lane_change_right" if actor.side > 0 else "lane_change_left")
         if "cut_in" not in shown_actions:
             shown_actions.append("cut_in")
     elif actor.role == "overtaker":
@@ -988,6 +1026,7 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
             gap = s.param(f"{n}_offset", "Range(12, 28)" if ahead else "-Range(12, 28)" if behind
                           else ("Range(0, 2.5)" if actor.has("collide") else "Range(9, 14)") if changing
                           else "Range(6, 10)" if actor.has("swerve") and not actor.has("collide")
+                          else "Range(8, 14)" if actor.has("drift") and not actor.has("collide")
                           else "Range(-4, 4)")
         elif actor.has("stop") and not actor.has("brake") and (actor.state_stop or not actor.sudden):
             gap = s.param(f"{n}_gap", "Range(30, 50)" if urban else "Range(55, 90)")
@@ -1001,7 +1040,15 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
         slot = used.get(k, 0)
         used[k] = slot + actor.count
         position = f"{lane}.centerline.pointAlongBy(egoS + {gap})"
-        if actor.role == "follower" and actor.has("collide"):
+        parked_ego = two_way and (ego.has("pull_out") or ego.has("reverse")) and ego.has("collide")
+        if actor.role == "follower" and actor.has("collide") and parked_ego:
+            # it comes along the lane past the parked ego, which pulls out into its side
+            if actor.kind not in _KIND_SPEEDS:
+                speed_expr = s.param(f"{n}_speed", "Range(6, 8)")
+            position = f"{lane}.centerline.pointAlongBy(egoS - " + s.param(f"{n}_distance", "Range(28, 36)") + ")"
+            s.use("Cruise")
+            behavior = f"Cruise({speed_expr})"
+        elif actor.role == "follower" and actor.has("collide"):
             speed_expr = f"{ego_speed} + " + s.param(f"{n}_extra_speed", "Range(5, 8)")
             s.use("Cruise")
             behavior = f"Cruise({speed_expr})"
@@ -1091,6 +1138,11 @@ def _longitudinal_behavior(s: _Script, actor: ActorFrame, speed: str) -> str:
         return _u_turn(s, speed)
     if actor.has("swerve"):
         return _swerve(s, speed, actor)
+    if actor.has("drift"):
+        # a vehicle beside the ego drifts toward the ego's lane; one in the ego's lane to the side the text says
+        side = "left" if actor.side < 0 else "right" if actor.side > 0 else \
+            actor.details.get("drift", {}).get("side") or "right"
+        return _drift(s, speed, side, hold=None if actor.has("collide") else "Range(2.0, 3.0)")
     if actor.has("lane_change_left") or actor.has("lane_change_right"):
         side = 1 if actor.has("lane_change_left") else -1
         after = s.param(f"{actor.name}_change_after", "Range(0.5, 1.5)" if actor.sudden else "Range(1.0, 2.5)")
@@ -1146,7 +1198,13 @@ def _spawn_lane_pedestrians(s: _Script, actor: ActorFrame, ego_speed: str, two_w
     if crossing and parked is not None:
         # a parked vehicle on the far kerb: the pedestrian steps out just in front of it, not through it
         dist = s.param(f"{parked.name}_gap", "Range(25, 40)") + " + Range(6.5, 8.0)"
-    if crossing:
+    riding = actor.kind == "bicycle"
+    if crossing and riding:
+        walk = s.param(f"{n}_riding_speed", "Range(4, 5.5)")
+        hit = actor.has("collide") or reckless and s.frame.ego.has("collide")
+        trigger = s.param(f"{n}_trigger_time", "Range(1.6, 2.0)" if hit else "Range(2.2, 2.8)")
+        s.use("RideAcrossWhenEgoNear")
+    elif crossing:
         walk = s.param(f"{n}_walking_speed", "Range(1.7, 2.3)" if actor.sudden else "Range(1.2, 1.8)")
         hit = actor.has("collide") or reckless and s.frame.ego.has("collide")
         trigger = s.param(f"{n}_trigger_time",
@@ -1181,18 +1239,18 @@ def _spawn_lane_pedestrians(s: _Script, actor: ActorFrame, ego_speed: str, two_w
             if d == "left_to_right":
                 jitter += " + Range(1.2, 1.8)"  # the far side is a lane further away: start earlier
             when = f"{trigger}{jitter}"
-            if hit_any:
+            if hit_any and not riding:
                 # step out so as to reach the middle of the ego's lane when the ego gets there
                 when = f"{'3.3' if d != 'left_to_right' else '6.0'} / {walk} + Range(-0.2, 0.2)"
-            behavior = f"CrossWhenEgoNear({walk}, {when})"
-        contained = "" if two_way else ",\n    with regionContainedIn everywhere"
-        s.spawn += [f"{var} = new Pedestrian {place},", f"    facing {facing}{contained},",
-                    f"    with behavior {behavior}"]
+            behavior = f"{'RideAcrossWhenEgoNear' if riding else 'CrossWhenEgoNear'}({walk}, {when})"
+        contained = "" if two_way and not riding else ",\n    with regionContainedIn everywhere"
+        s.spawn += [f"{var} = new {_CLASS[actor.kind]} {place},", f"    facing {facing}{contained},"] + \
+            (["    with speed 0,"] if riding else []) + [f"    with behavior {behavior}"]
     rels = ["ahead_of"] + [r for r in actor.relations if r in ("crossing_path",)]
     shown = [a for a in actor.actions if a in ("cross", "collide")]
     if not crossing and actor.has("stop"):
         shown.append("stop")
-    s.show("pedestrian", shown, rels if ("ahead_of" in actor.relations or crossing) else
+    s.show(actor.kind, shown, rels if ("ahead_of" in actor.relations or crossing) else
            [r for r in actor.relations if r == "ahead_of"], actor.count)
 
 
@@ -1393,7 +1451,26 @@ def _compose_junction(s: _Script) -> None:
     extra_ahead = 12 * max([a.count - 1 for a, r, _ in roles if r == "ahead"], default=0)
     timed = [(a, r) for a, r, _ in roles if r not in ("ahead", "behind", "into_path")]
     lead_first = bool(timed) and not any(a.has("collide") for a, _ in timed)
-    if lead_first:
+    # the ego stops at the junction (for a crossing vehicle, at a stop sign) and then goes on: it waits at the
+    # entry until the vehicle it yields to has cleared the junction
+    # (not on the roundabout: its circulating traffic is timed against the ego's own approach)
+    yields = ego.has("stop") and not reckless and not extra_ahead and not any(r == "ahead" for _, r, _ in roles) \
+        and (bool(timed) or default_ego is not None and ego_type is not None) and frame.map != RING_MAP
+    # ... or it stops, misjudges the gap and goes just before the vehicle it collides with gets there
+    hitters = [a for a, _ in timed if a.has("collide")]
+    misjudges = ego.has("stop") and ego.has("collide") and bool(hitters) and not extra_ahead \
+        and not any(r == "ahead" for _, r, _ in roles) and frame.map != RING_MAP
+    conflict = _conflict_actor(ego, [a for a, _ in timed]) if yields else \
+        _conflict_actor(ego, hitters) if misjudges else None
+    if misjudges:
+        ego_dist = s.param("ego_distance", "Range(10, 14)")
+        ego_time = f"{ego_dist} / {ego_speed}"
+    elif yields and lead_first:
+        # close to the junction: it stops there while the other vehicle (which gets there first) crosses
+        first = s.param("first_arrival", "Range(0.3, 0.8)")
+        ego_dist = s.param("ego_distance", "Range(12, 16)")
+        ego_time = f"{ego_dist} / {ego_speed}"
+    elif lead_first:
         # the crossing/oncoming vehicles reach the junction first (the last one `ego_gap_time` s
         # before the ego): the ego's distance follows from those times
         spread = 1.6 * max(a.count - 1 for a, _ in timed)
@@ -1412,7 +1489,27 @@ def _compose_junction(s: _Script) -> None:
                        f"{actor.name}Maneuver.endLane]"]
 
     # ---------------------------------------------------------------- ego
-    if ego.has("brake") or ego.has("stop"):
+    if misjudges and conflict is not None:
+        s.use("StopThenGoInto")
+        var = conflict.name if conflict.count == 1 else f"{conflict.name}_1"
+        # a left turn meets the other vehicle in the far half of the junction: it goes earlier
+        go_time = "Range(3.2, 3.6)" if default_ego == "LEFT_TURN" else "Range(2.6, 3.0)"
+        ego_behavior = (f"StopThenGoInto({ego_speed}, egoRoute, egoEntry, {var}, "
+                        f"{conflict.name}Maneuver.startLane.centerline.end, {go_time}, Range(0.6, 1.0))")
+        if default_ego is not None and not any(_TYPE.get(a) == default_ego for a in ego.actions):
+            ego.actions.append({v: k for k, v in _TYPE.items()}[default_ego])
+    elif yields:
+        s.use("StopForConflict")
+        other, exit_lane = "None", "None"
+        if conflict is not None:
+            var = conflict.name if conflict.count == 1 else f"{conflict.name}_{conflict.count}"
+            other, exit_lane = var, f"{conflict.name}Maneuver.endLane"
+        ego_behavior = (f"StopForConflict({ego_speed}, egoRoute, egoEntry, {other}, {exit_lane}, Range(0.6, 1.0), "
+                        "Range(4, 5))")
+        if default_ego is not None and not any(_TYPE.get(a) == default_ego for a in ego.actions):
+            # it goes on through the junction after the stop: straight unless the text says a turn
+            ego.actions.append({v: k for k, v in _TYPE.items()}[default_ego])
+    elif ego.has("brake") or ego.has("stop"):
         after, low, strength = _brake_params(s, ego)
         s.use("RouteThenBrake")
         ego_behavior = f"RouteThenBrake({ego_speed}, egoRoute, {after}, {low}, {strength})"
@@ -1420,10 +1517,12 @@ def _compose_junction(s: _Script) -> None:
         name = "DriveRoute" if reckless else "CautiousRoute"
         s.use(name)
         ego_behavior = f"{name}({ego_speed}, egoRoute)"
-    s.spawn += [f"ego = new Car at egoManeuver.startLane.centerline.pointAlongBy(-{ego_dist}),",
-                f"    with speed {ego_speed},",
-                "    with route egoRoute,",
-                f"    with behavior {ego_behavior}"]
+    ego_lines = [f"ego = new Car at egoManeuver.startLane.centerline.pointAlongBy(-{ego_dist}),",
+                 f"    with speed {ego_speed},",
+                 "    with route egoRoute,",
+                 f"    with behavior {ego_behavior}"]
+    if not (yields or misjudges):
+        s.spawn += ego_lines
     s.show("ego", list(ego.actions))
 
     # ---------------------------------------------------------------- vehicles
@@ -1455,7 +1554,10 @@ def _compose_junction(s: _Script) -> None:
         else:
             # it reaches the junction `offset` seconds after the ego would (negative: before it); a
             # group arrives one after the other, the last one still ahead of the ego
-            if lead_first:
+            if misjudges and actor is conflict:
+                # it gets to the junction after the ego has stopped at it
+                arrival = s.param(f"{n}_arrival", "Range(4.5, 5.5)")
+            elif lead_first:
                 arrival = f"{first} + Range(0, 0.4)"
             else:
                 # (with a collision described, the ego reaches the junction in 2.4 s at least)
@@ -1480,6 +1582,8 @@ def _compose_junction(s: _Script) -> None:
             rels.append("ahead_of")  # it joins the ego's road in front of the ego
         s.show(actor.kind, acts, list(dict.fromkeys(rels)), actor.count)
 
+    if yields or misjudges:
+        s.spawn += ego_lines  # after the vehicle it waits for, which its behaviour names
     # ---------------------------------------------------------------- pedestrians and obstacles
     for actor in frame.actors:
         if actor.kind == "pedestrian":
@@ -1491,6 +1595,15 @@ def _compose_junction(s: _Script) -> None:
                 s.spawn += [f"{var} = new Obstacle at egoManeuver.endLane.centerline.pointAlongBy({gap} + {3 * i}),",
                             "    with width Range(0.8, 1.8), with length Range(0.6, 1.4)"]
             s.show("obstacle", [], ["ahead_of"], actor.count)
+
+
+def _conflict_actor(ego: ActorFrame, candidates: Sequence[ActorFrame]) -> Optional[ActorFrame]:
+    """The vehicle the ego's stop waits for: the one its stop's trigger names (by kind), else the first
+    vehicle crossing or meeting it at the junction."""
+    trigger = ego.details.get("stop", {}).get("trigger") or {}
+    other = trigger.get("with") if isinstance(trigger, dict) else None
+    kind = getattr(other, "kind", None)
+    return next((a for a in candidates if a.kind == kind), candidates[0] if candidates else None)
 
 
 def _spawn_circulating(s: _Script, actor: ActorFrame, mtype: Optional[str], ego_speed: str, ego_time: str,
@@ -1577,6 +1690,97 @@ def _spawn_junction_pedestrians(s: _Script, actor: ActorFrame, map_name: str, re
     s.show("pedestrian", [a for a in actor.actions if a in ("cross", "collide")], ["ahead_of"], actor.count)
 
 
+# --------------------------------------------------------------------------- what was not built
+
+def _typed_collisions(s: _Script) -> None:
+    """The script means the collision type the text gives wherever it means the collision itself."""
+    for actor in [s.frame.ego, *s.frame.actors]:
+        kind = "ego" if actor.name == "ego" else actor.kind
+        typed = actor.details.get("collide", {}).get("type")
+        if typed and (kind, "collide") in s.actions:
+            s.actions.add((kind, typed))
+
+
+def _words(element: Tuple) -> str:
+    return " ".join(str(x) for x in element[1:] if not isinstance(x, int)).replace("_", " ")
+
+
+def unbuilt_warnings(parsed: ParsedDescription, s: "_Script", said: Sequence[str] = ()) -> List[str]:
+    """One ``not built: <element> (<phrase>)`` warning per element of the parsed description that the
+    composed script does not mean to show (its :attr:`_Script.actions`, relations and participants), unless a
+    warning in ``said`` already names it. The phrase is the text the parser read the element from (the actor's
+    noun when it has none)."""
+    from scenario_bank.elements import element_set, with_undirected
+
+    meant = with_undirected(element_set({"road": MAP_ROADS.get(s.frame.map),
+                                         "participants": s.participants,
+                                         "actions": [list(a) for a in s.actions],
+                                         "relations": [list(r) for r in s.relations]}))
+    said_text = " ".join(w.lower().replace("_", " ") for w in said)
+    phrases: Dict[Tuple, str] = {}
+    for entity in parsed.entities:
+        noun = "ego" if entity.kind == "ego" else str(entity.attrs.get("noun", entity.kind))
+        for action, detail in entity.actions:
+            phrases.setdefault(("action", entity.kind, action), str(detail.get("phrase") or noun))
+        for rel, other in entity.relations:
+            phrases.setdefault(("relation", entity.kind, rel, other.kind), noun)
+    out: List[str] = []
+    described = set()
+    for entity in parsed.entities:
+        if entity.kind not in PARTICIPANTS:
+            continue  # an unknown kind is warned about already
+        described.update(("participant", entity.kind, i + 1) for i in range(entity.count if entity.kind != "ego" else 1))
+        described.update(("action", entity.kind, a) for a, _ in entity.actions if a in ACTIONS)
+        described.update(("relation", entity.kind, r, o.kind) for r, o in entity.relations
+                         if o is not entity and o.kind in PARTICIPANTS and r in RELATIONS)
+    if parsed.road in ROADS:
+        described.add(("road", parsed.road))
+    for element in sorted(described, key=str):
+        if element in meant:
+            continue
+        if element[0] == "road":
+            phrase = " ".join(parsed.road_words) or str(element[1])
+            built = MAP_ROADS.get(s.frame.map, s.frame.map).replace("_", " ")
+            out.append(f"not built: road {_words(element)} ('{phrase}'): the script uses map {s.frame.map} "
+                       f"(road type {built})")
+            continue
+        elif element[0] == "participant":
+            phrase = element[1]
+        else:
+            phrase = phrases.get(element, element[1])
+        words = _words(element)
+        if words in said_text or element[0] == "action" and f"{element[1]} {element[2].replace('_', ' ')}" in \
+                said_text or element[0] == "action" and f"'{element[2].replace('_', ' ')}'" in said_text:
+            continue
+        out.append(f"not built: {element[0]} {words} ('{phrase}')")
+    return out
+
+
+def _absent_warnings(parsed: ParsedDescription) -> List[str]:
+    """What the script did with the participants the text says are not there ("no other vehicles")."""
+    if not parsed.absent:
+        return []
+    said = ", ".join(f"'{p}'" for p in getattr(parsed, "absent_phrases", []) or []) or "absent"
+    kinds = list(dict.fromkeys(parsed.absent))
+    present = sorted({e.kind for e in parsed.entities if e.kind in kinds})
+    note = (f"read {said}: the script adds no background traffic, so no {', '.join(k for k in kinds if k not in present)}"
+            " is placed")
+    if present:
+        note += f"; the text also describes a {' and a '.join(present)}, which is placed"
+    return [note]
+
+
+def unshown_warnings(meant: Dict[str, Any], simulated: Dict[str, Any]) -> List[str]:
+    """One ``not shown in the simulated run: <element>`` warning per element the script was composed to show
+    (``meant``, :attr:`SGResult.elements`) that a simulated run of it did not show (``simulated``, from
+    :func:`dv2s_gym.pipeline.trace_semantics.elements_from_trace`)."""
+    from scenario_bank.elements import element_set, with_undirected
+
+    shown = with_undirected(element_set(simulated or {}))
+    return [f"not shown in the simulated run: {e[0]} {_words(e)}"
+            for e in sorted(element_set(meant or {}), key=str) if e not in shown]
+
+
 # --------------------------------------------------------------------------- entry point
 
 def generate_rules(description: str, seed: Optional[int] = None) -> SGResult:
@@ -1598,6 +1802,9 @@ def generate_rules(description: str, seed: Optional[int] = None) -> SGResult:
         _compose_lanes(s)
     script = s.render()
     _check_main_event(parsed, s)
+    _typed_collisions(s)
+    warnings.extend(unbuilt_warnings(parsed, s, warnings))
+    warnings.extend(_absent_warnings(parsed))
     road = MAP_ROADS.get(frame.map)
     elements = normalize_elements({
         "road": road if frame.road in (None, road) or frame.road == "three_way" and road == "t_junction" else road,

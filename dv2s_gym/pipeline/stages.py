@@ -55,6 +55,17 @@ class Generation:
             counts[failure["category"]] = counts.get(failure["category"], 0) + 1
         return counts
 
+    def note_simulated(self, simulated: Dict[str, Any]) -> List[str]:
+        """Add a warning for each element the script was composed to show (``intended_elements``, rules SG)
+        that a simulated run of it (``simulated``, the trace's elements) did not show; returns the new ones."""
+        if not self.intended_elements:
+            return []
+        from dv2s_gym.pipeline.sg_rules import unshown_warnings
+
+        new = [w for w in unshown_warnings(self.intended_elements, simulated) if w not in self.warnings]
+        self.warnings.extend(new)
+        return new
+
     def as_dict(self) -> Dict[str, Any]:
         data = asdict(self)
         data["failure_counts"] = self.failure_counts()

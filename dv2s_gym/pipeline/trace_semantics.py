@@ -10,14 +10,17 @@ Frames: trace states are in highway-env's frame (y drawn downward; heading from
 Every vehicle (the ego included) is judged by the same rules:
 
 * ``brake`` / ``accelerate``: speed falls / rises by 3 m/s within 2 s; ``stop``: it
-  ends below 0.5 m/s after moving, or never moves.
+  ends below 0.5 m/s after moving, or never moves, or after driving stands still for
+  :data:`STOP_HOLD_S` seconds and drives on (a stop at a stop line).
 * ``lane_change_left|right``: a lane-change event of the env for that actor.
 * ``turn_left|right``: net heading change of at least 55 degrees while moving.
 * ``go_straight``: on a junction road (intersection, T-junction, three-way,
   roundabout) the vehicle drives through the junction area of the map (the Scenic
   intersection polygons): it is outside the junction, then inside, then outside
-  again, and does not turn. A vehicle that stops before the junction, or stays in
-  it, does not go straight. Without a loadable map nothing goes straight.
+  again, and does not turn; or it drives into the junction area and, still heading the
+  way it came, collides there (the crash ends its way across; one that had turned 20
+  degrees or more when it collided there turns). A vehicle that stops
+  before the junction, or stays in it without a collision, does not go straight. Without a loadable map nothing goes straight.
 * ``keep_lane``: the vehicle travels at least :data:`KEEP_LANE_MIN_M` metres along
   its path, has no lane-change event, does not turn, drift, cut in, merge or
   overtake, and (when the map can be loaded) its centre stays inside the lane it is
@@ -30,12 +33,23 @@ Every vehicle (the ego included) is judged by the same rules:
   ``turn_left|right`` that the same heading change would give).
 * ``reverse``: the vehicle travels at least :data:`REVERSE_MIN_M` metres against its own
   heading (negative speed, or displacement pointing backwards).
+* ``drift``: the vehicle leaves its lane gradually without changing lanes (:func:`_drift_windows`): its centre is
+  outside the lane it was last centred in for at least :data:`DRIFT_OUT_S` seconds of driving, and it does not
+  settle in another lane (its centre never comes within :data:`DRIFT_SETTLE_M` of another lane's centre before
+  it returns or the episode ends): into a neighbouring lane and back, onto the shoulder or off the road edge,
+  or across the centre line. A completed lane change (or an overtaking pull-out into the next lane) reaches the
+  new lane's centre and is no drift; the env's lane-change events during a drift are not lane changes. Also (pairwise) a vehicle that starts in the opposite direction to the
+  reference and moves into its lane drifts.
 * ``swerve``: without a lane-change event and without turning, the vehicle's centre moves
   at least :data:`SWERVE_MIN_M` sideways from the line it started on and comes back within
   half a lane of it.
 * ``pull_out``: the vehicle starts standing still, then drives off at least
   :data:`PULL_OUT_MIN_M` metres and moves at least :data:`PULL_OUT_LATERAL_M` sideways
-  (out of a parking spot or shoulder into the traffic lane) without turning.
+  (out of a parking spot or shoulder into the traffic lane) without turning; or it starts still, drives at least
+  :data:`PULL_OUT_CRASH_M` metres with :data:`PULL_OUT_CRASH_LATERAL_M` sideways and collides (the crash cut the
+  pull-out short).
+* ``cross``: a pedestrian, or a cyclist starting across the ego's heading (45-135 degrees), that moves
+  more than 2.5 m and more than 2 m sideways relative to the ego.
 * ``collide`` for both actors of every collision event, plus its type
   (:func:`collision_type`): ``collide_rear_end``, ``collide_head_on`` or
   ``collide_side``.
@@ -68,6 +82,7 @@ LANE_HALF_WIDTH = 1.75
 BRAKE_DROP = 3.0          # m/s lost ...
 BRAKE_WINDOW = 2.0        # ... within this many seconds
 STOP_SPEED = 0.5
+STOP_HOLD_S = 0.4         # s standing still, after driving, for a ``stop`` the vehicle drives on from
 TURN_ANGLE = math.radians(55)
 MERGE_FROM = (math.radians(45), math.radians(135))   # heading gap to the ego's at the start ...
 MERGE_ALIGNED = math.radians(20)                      # ... and at the end, for a merge
@@ -84,6 +99,11 @@ REVERSE_MIN_M = 2.0       # m driven backwards for ``reverse``
 SWERVE_MIN_M = 1.0        # m of sideways excursion (and back) for ``swerve``
 PULL_OUT_MIN_M = 8.0      # m driven after standing still for ``pull_out`` ...
 PULL_OUT_LATERAL_M = 1.5  # ... with at least this sideways shift
+PULL_OUT_CRASH_M = 1.5          # a pull-out a collision cut short: at least this far driven ...
+PULL_OUT_CRASH_LATERAL_M = 0.2  # ... and this far sideways before the collision
+LANE_WIDTH = 3.5          # m, every shipped map
+DRIFT_OUT_S = 1.5         # s driven with the centre outside the lane it was centred in, for ``drift`` ...
+DRIFT_SETTLE_M = 0.6      # ... without coming this close to another lane's centre (that is a lane change)
 _LEAVES_LANE = {"u_turn", "reverse", "swerve", "pull_out", "drift", "cut_in", "merge", "overtake", "lane_change_left", "lane_change_right",
                 "turn_left", "turn_right"}
 
@@ -266,10 +286,13 @@ def elements_from_trace(trace) -> Dict[str, Any]:
     actions: Set[Tuple[str, str]] = set()
     relations: Set[Tuple[str, str, str]] = set()
     lane_changes: Dict[str, List[Dict[str, Any]]] = {}
+    crashed: Dict[str, float] = {}  # actor -> time of its first collision
     for event in trace.events:
         if event.get("kind") == "lane_change" and event.get("actors"):
             lane_changes.setdefault(event["actors"][0], []).append(event)
         if event.get("kind") == "collision":
+            for actor in event.get("actors", []):
+                crashed.setdefault(actor, float(event.get("time", 0.0)))
             typed = _collision_actions(trace, event, dt)
             for actor in event.get("actors", []):
                 actions.add((_kind(actor, kinds), "collide"))
@@ -277,6 +300,13 @@ def elements_from_trace(trace) -> Dict[str, Any]:
                     actions.add((_kind(actor, kinds), typed))
     road = _road_type(trace, ego)
     view = _map_view(trace)
+    for name, changes in list(lane_changes.items()):
+        # a drift across a lane line is no lane change (the env logs one whenever the nearest lane changes)
+        track = tracks.get(name)
+        if track is not None and _kind(name, kinds) not in ("pedestrian", "obstacle") and \
+                abs(float(_wrap(np.array([track[-1, 2] - track[0, 2]]))[0])) < TURN_ANGLE:
+            windows = _drift_windows(_until_crash(track, crashed.get(name), dt), dt, view)
+            lane_changes[name] = [c for c in changes if not _during(windows, float(c.get("time", 0.0)))]
 
     near: Dict[str, str] = {}
     for name, track in tracks.items():
@@ -290,7 +320,7 @@ def elements_from_trace(trace) -> Dict[str, Any]:
     for name, kind in near.items():
         track = tracks[name]
         participants.append(kind)
-        own = _motion_actions(track, dt, kind, lane_changes.get(name, []), road, view)
+        own = _motion_actions(track, dt, kind, lane_changes.get(name, []), road, view, crashed.get(name))
         if name == "ego":
             for other, other_kind in near.items():
                 if other != "ego" and other_kind in ("car", "truck", "bus", "motorcycle", "bicycle", "obstacle"):
@@ -318,7 +348,7 @@ def _step_seconds(trace) -> float:
 
 
 def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[str, Any]], road,
-                    view: Optional[_MapView] = None) -> Set[str]:
+                    view: Optional[_MapView] = None, crashed_at: Optional[float] = None) -> Set[str]:
     out: Set[str] = set()
     if len(track) < 2:
         return out
@@ -332,7 +362,7 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
     if drops.size and drops.max() >= BRAKE_DROP:
         out.add("brake")
     moving_before = speed.max() > 2.0
-    if (moving_before and speed[-1] < STOP_SPEED) or speed.max() < STOP_SPEED:
+    if (moving_before and speed[-1] < STOP_SPEED) or speed.max() < STOP_SPEED or _stops_and_goes(speed, dt):
         out.add("stop")
     rises = speed[window:] - speed[:-window] if len(speed) > window else np.array([speed[-1] - speed[0]])
     if rises.size and rises.max() >= BRAKE_DROP:
@@ -340,7 +370,15 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
     for change in changes:
         out.add("lane_change_left" if change.get("direction") == "left" else "lane_change_right")
     out |= _special_motions(track, changes)
+    if "pull_out" not in out and crashed_at is not None and _crashed_pulling_out(track, crashed_at, dt):
+        out.add("pull_out")
     turn = float(_wrap(np.array([track[-1, 2] - track[0, 2]]))[0])
+    windows = _drift_windows(_until_crash(track, crashed_at, dt), dt, view) if abs(turn) < TURN_ANGLE and not out & {"u_turn", "pull_out"} else []
+    if windows:
+        out.add("drift")
+        lateral = np.array([abs(_ego_frame(track[0], row)[1]) for row in track])
+        if "swerve" in out and _during(windows, float(np.argmax(lateral)) * dt, margin=0.0):
+            out.discard("swerve")  # its widest excursion is the drift: a slow drift and back is no swerve
     if "u_turn" in out:
         pass
     elif abs(turn) >= TURN_ANGLE and speed.max() > 1.0:
@@ -349,9 +387,131 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
         travelled = float(np.hypot(*np.diff(track[:, :2], axis=0).T).sum())
         if not changes and travelled >= KEEP_LANE_MIN_M and _stays_in_lane(track, view):
             out.add("keep_lane")
-        if road in JUNCTION_ROADS and _crosses_junction(track, view):
+        crashed_way = _crashed_in_junction(track, crashed_at, dt, view) if road in JUNCTION_ROADS else None
+        if road in JUNCTION_ROADS and _crosses_junction(track, view) or crashed_way == "go_straight":
             out.add("go_straight")
+        elif crashed_way:
+            out.add(crashed_way)
     return out
+
+
+def _crashed_in_junction(track: np.ndarray, crashed_at: Optional[float], dt: float,
+                         view: Optional[_MapView]) -> Optional[str]:
+    """The way across the junction of a vehicle that drove into the junction area from outside it and collided
+    there (the crash ended its manoeuvre: a T-boned car does not leave the junction): ``go_straight`` while still
+    heading within 10 degrees of the way it came in, ``turn_left|right`` once turned 20 degrees or more."""
+    if view is None or crashed_at is None:
+        return None
+    step = min(len(track) - 1, max(0, int(round(crashed_at / dt))))
+    inside = view.in_junction(track[: step + 1])
+    if not inside.size or inside[0] or not inside[-1]:
+        return None
+    entered = int(np.flatnonzero(inside)[0])
+    turned = float(_wrap(np.array([track[step, 2] - track[max(0, entered - 1), 2]]))[0])
+    if abs(turned) < math.radians(10) and _heading_gap(track[step, 2], track[0, 2]) < math.radians(10):
+        return "go_straight"
+    if math.radians(20) <= abs(turned) < TURN_ANGLE:
+        return "turn_right" if turned > 0 else "turn_left"
+    return None
+
+
+def _crashed_pulling_out(track: np.ndarray, crashed_at: float, dt: float) -> bool:
+    """It started standing still, drove (forward or backward) at least :data:`PULL_OUT_CRASH_M` metres and moved at
+    least :data:`PULL_OUT_CRASH_LATERAL_M` sideways out of where it stood, then collided: the crash cut its
+    pull-out short (a car backing out of a parking space into a passing car)."""
+    before = _until_crash(track, crashed_at, dt)
+    if len(before) < 2 or abs(before[0, 3]) >= STOP_SPEED:
+        return False
+    travelled = float(np.hypot(*np.diff(before[:, :2], axis=0).T).sum())
+    shift = max(abs(_ego_frame(before[0], row)[1]) for row in before)
+    return travelled >= PULL_OUT_CRASH_M and shift >= PULL_OUT_CRASH_LATERAL_M
+
+
+def _until_crash(track: np.ndarray, crashed_at: Optional[float], dt: float) -> np.ndarray:
+    """The track up to the actor's first collision (a crash ends its manoeuvre: where it ends up is no drift)."""
+    if crashed_at is None:
+        return track
+    return track[: min(len(track), max(1, int(round(crashed_at / dt)) + 1))]
+
+
+def _stops_and_goes(speed: np.ndarray, dt: float) -> bool:
+    """After driving (above 2 m/s) the vehicle stands still (below 0.5 m/s) for :data:`STOP_HOLD_S` seconds or
+    more, then drives on (a stop at a stop line, for a crossing vehicle)."""
+    standing = 0.0
+    moved = False
+    for v in np.abs(speed):
+        if v > 2.0:
+            moved = True
+        if moved and v < STOP_SPEED:
+            standing += dt
+            if standing >= STOP_HOLD_S:
+                return True
+        else:
+            standing = 0.0
+    return False
+
+
+def _lateral_offsets(track: np.ndarray, view: Optional[_MapView]) -> np.ndarray:
+    """Per row: the centre's signed lateral offset [m] from the centreline of the lane the vehicle is first
+    centred in (NaN before that, and where it is past either end of that lane, e.g. inside a junction).
+
+    Without a map: the offset from the line it starts on (straight roads)."""
+    if view is None:
+        return np.array([_ego_frame(track[0], row)[1] for row in track])
+    network = view.network
+    out = np.full(len(track), np.nan)
+    lane = None
+    for i, (x, y, heading, _) in enumerate(track):
+        position = np.array([x, y])
+        if lane is None:
+            candidate = network.get_lane(network.get_closest_lane_index(position, heading))
+            s, lateral = candidate.local_coordinates(position)
+            if abs(lateral) > DRIFT_SETTLE_M or _heading_gap(candidate.heading_at(s), heading) > math.pi / 4:
+                continue  # not (yet) driving along a lane: parked at the kerb, standing across it
+            lane = candidate
+        s, lateral = lane.local_coordinates(position)
+        if 0.0 <= s <= lane.length:
+            out[i] = lateral
+    return out
+
+
+def _drift_windows(track: np.ndarray, dt: float, view: Optional[_MapView]) -> List[Tuple[float, float]]:
+    """The times (start, end) [s] of the vehicle's drifts out of its lane (see the module's ``drift``): while
+    driving (above 1 m/s) its centre is out of the lane it was last centred in for :data:`DRIFT_OUT_S` seconds
+    or more, and it does not reach another lane's centre in between (reaching one makes that lane its own: a
+    lane change). A drift ends when the vehicle is back in its lane, else with the episode."""
+    offsets = _lateral_offsets(track, view)
+    moving = np.abs(track[:, 3]) > 1.0
+    windows: List[Tuple[float, float]] = []
+    home = None       # offset of the centre of the lane it counts as its own
+    out_time = 0.0    # seconds driven out of that lane in the current excursion ...
+    left_at = 0.0     # ... which began then
+    for i, (offset, drives) in enumerate(zip(offsets, moving)):
+        if np.isnan(offset):
+            continue
+        nearest = LANE_WIDTH * round(offset / LANE_WIDTH)
+        centred = abs(offset - nearest) <= DRIFT_SETTLE_M
+        if home is None:
+            if centred:
+                home = nearest
+            continue
+        if centred and nearest != home:
+            home, out_time = nearest, 0.0  # settled in another lane: a lane change, not a drift
+        elif abs(offset - home) > LANE_WIDTH / 2:
+            if out_time == 0.0:
+                left_at = i * dt
+            out_time += dt if drives else 0.0
+        else:
+            if out_time >= DRIFT_OUT_S:
+                windows.append((left_at, i * dt))  # out of its lane for a while, then back in it
+            out_time = 0.0
+    if out_time >= DRIFT_OUT_S:  # still out of its lane (between lanes, on the shoulder, off the road)
+        windows.append((left_at, len(track) * dt))
+    return windows
+
+
+def _during(windows: List[Tuple[float, float]], time: float, margin: float = 0.5) -> bool:
+    return any(start - margin <= time <= end + margin for start, end in windows)
 
 
 def _backward_metres(track: np.ndarray) -> float:
@@ -470,6 +630,11 @@ def _interactions(
         return out
     if kind == "obstacle":
         return out
+    if kind == "bicycle" and n and math.radians(45) <= _heading_gap(track[0, 2], ego[0, 2]) <= math.radians(135):
+        # a cyclist riding across the reference's road (a crossing, a crosswalk), judged like a pedestrian
+        moved = float(np.hypot(*(track[n - 1, :2] - track[0, :2])))
+        if moved > 2.5 and abs(rel[-1, 1] - rel[0, 1]) > 2.0:
+            out.add("cross")
     for change in changes:
         step = min(n - 1, max(0, int(round(change.get("time", 0) / dt))))
         after = rel[min(n - 1, step + 5)]
@@ -489,7 +654,8 @@ def _interactions(
     if n and _joins_ego_lane_ahead(ego[n - 1], track[0], track[n - 1], rel[-1]):
         out.add("merge")
     started_opposite = _heading_gap(track[0, 2], ego[0, 2]) > math.radians(135)
-    if started_opposite and n:
+    if started_opposite and n and road not in JUNCTION_ROADS:
+        # (at a junction a left turn across the oncoming lane is no drift)
         inside = np.abs(rel[:, 1]) < LANE_HALF_WIDTH * 0.9
         # ... and it is the one that left its lane (the reference staying put is not drifting)
         if inside.any() and not inside[0] and not _stays_in_lane(track, view):

@@ -208,6 +208,20 @@ behavior DriftAndReturn(speed, trigger, depth, duration, returnTrigger, returnDu
     do SlideOffset(homeLine, now, 0, speed, returnDuration) for returnDuration + 0.3 seconds
     do FollowLaneBehavior(target_speed=speed)
 ''', ("SlideOffset",)),
+    "DriftLater": ('''
+behavior DriftLater(speed, after, depth, duration, hold, returnDuration):
+    # after `after` seconds, drift slowly `depth` m sideways (left positive) out of the lane, stay there
+    # `hold` seconds (negative: for good), then steer back to the lane centre
+    do FollowLaneBehavior(target_speed=speed) for after seconds
+    homeLine = self.laneSection.centerline
+    start = homeLine.signedDistanceTo(self.position)
+    if hold < 0:
+        do SlideOffset(homeLine, start, depth, speed, duration)
+    do SlideOffset(homeLine, start, depth, speed, duration) for duration + hold seconds
+    now = homeLine.signedDistanceTo(self.position)
+    do SlideOffset(homeLine, now, 0, speed, returnDuration) for returnDuration + 0.3 seconds
+    do FollowLaneBehavior(target_speed=speed)
+''', ("SlideOffset",)),
     "SwerveAndBack": ('''\
 behavior SwerveAndBack(speed, delay, depth, duration):
     # a quick sideways move of `depth` m (left positive) inside the lane, then straight back to its centre
@@ -272,6 +286,35 @@ behavior PullOutWhenNear(line, fromOffset, speed, trigger, backUp, duration):
         take SetThrottleAction(throttle), SetBrakeAction(0), SetSteerAction(steer)
     do FollowLaneBehavior(target_speed=speed)
 ''', ("HoldStill",)),
+    "BackUpThenPullOutInto": ('''
+behavior BackUpThenPullOutInto(line, speed, backUp, other, trigger, duration):
+    # parked at the kerb beside `line`: back up `backUp` m, wait until `other` (coming along the lane from
+    # behind) is within `trigger` m, then steer into the lane, into its path
+    do HoldStill() for 0.4 seconds
+    start = self.position
+    take SetReverseAction(True)
+    while (distance from self to start) < backUp:
+        take SetThrottleAction(0.35), SetBrakeAction(0), SetSteerAction(0)
+    while self.speed > 0.3:
+        take SetThrottleAction(0), SetBrakeAction(1)
+    take SetReverseAction(False)
+    do HoldStill() until (distance from self to other) < trigger
+    elapsed = 0
+    reference = self.heading
+    while elapsed < duration + 2 and (abs(line.signedDistanceTo(self.position)) > 0.3 or elapsed < duration):
+        elapsed += simulation().timestep
+        offset = line.signedDistanceTo(self.position)
+        relative = self.heading - reference
+        while relative > 180 deg:
+            relative -= 360 deg
+        while relative < -180 deg:
+            relative += 360 deg
+        wanted = max(-0.3, min(0.3, -0.25 * offset))
+        steer = max(-0.3, min(0.3, -1.5 * (wanted - relative)))
+        throttle = 0.5 if self.speed < speed else 0
+        take SetThrottleAction(throttle), SetBrakeAction(0), SetSteerAction(steer)
+    do FollowLaneBehavior(target_speed=speed)
+''', ("HoldStill",)),
     "UTurnLater": ('''
 behavior UTurnLater(speed, after, turnSpeed, steer):
     # drive on for `after` seconds, slow to turnSpeed and turn round to the left (steer 0..1) until
@@ -318,6 +361,39 @@ behavior RouteThenBrake(speed, route, after, lowSpeed, strength):
             do HoldStill()
         do FollowLaneBehavior(target_speed=lowSpeed)
 ''', ("DriveRoute", "HoldStill")),
+    "StopForConflict": ('''\
+behavior StopForConflict(speed, route, entry, other, otherExit, minWait, maxWait):
+    # drive the route, stop at the junction entry, wait at least minWait seconds and until `other` (None: no
+    # one) has cleared the ego's way (it is on its exit lane, otherExit, or it is 4 m further from the ego's
+    # entry than it came since the ego stopped: it has passed), at most maxWait seconds, then go on
+    do DriveRoute(speed, route) until (distance from self to entry) < 1.5 + self.speed * self.speed / 10
+    while self.speed > 0.2:
+        take SetThrottleAction(0), SetBrakeAction(1)
+    waited = 0
+    closest = 1000
+    cleared = other is None
+    while waited < maxWait and (waited < minWait or not cleared):
+        if other is not None:
+            gap = distance from other to entry
+            closest = min(closest, gap)
+            cleared = otherExit.containsPoint(other.position) or gap > closest + 4
+        take SetThrottleAction(0), SetBrakeAction(1)
+        waited += simulation().timestep
+    do CautiousRoute(speed, route)
+''', ("DriveRoute", "CautiousRoute")),
+    "StopThenGoInto": ('''\
+behavior StopThenGoInto(speed, route, entry, other, otherEntry, goTime, minWait):
+    # drive the route, stop at the junction entry, then misjudge the gap: go on (at the latest after 6 s) once
+    # `other` is about goTime seconds from the junction (otherEntry: the end of its approach lane)
+    do DriveRoute(speed, route) until (distance from self to entry) < 1.5 + self.speed * self.speed / 10
+    while self.speed > 0.2:
+        take SetThrottleAction(0), SetBrakeAction(1)
+    waited = 0
+    while waited < 6 and (waited < minWait or (distance from other to otherEntry) > max(2, other.speed * goTime - 8)):
+        take SetThrottleAction(0), SetBrakeAction(1)
+        waited += simulation().timestep
+    do DriveRoute(speed, route)
+''', ("DriveRoute",)),
     "PullOutWhenEgoNear": ('''\
 behavior PullOutWhenEgoNear(speed, route, egoEntry, triggerTime):
     # wait at the give-way line until the ego is about triggerTime seconds from the junction
@@ -332,6 +408,15 @@ behavior CrossWhenEgoNear(speed, triggerTime):
         wait
     while True:
         take SetWalkingSpeedAction(speed)
+''', ()),
+    "RideAcrossWhenEgoNear": ('''\
+behavior RideAcrossWhenEgoNear(speed, triggerTime):
+    # a cyclist waiting at the roadside rides straight across once the ego is about triggerTime seconds away
+    while (distance from self to ego) > max(9, triggerTime * ego.speed):
+        take SetThrottleAction(0), SetBrakeAction(1)
+    while True:
+        throttle = 0.7 if self.speed < speed else 0
+        take SetThrottleAction(throttle), SetBrakeAction(0), SetSteerAction(0)
 ''', ()),
     "StandStill": ('''\
 behavior StandStill():
