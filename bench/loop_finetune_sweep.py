@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -70,7 +71,8 @@ def main() -> None:
     out = base / args.name
     began = time.perf_counter()
     weights = fine_tune_weights(names, mined, args.share)
-    fine_tune_log = []
+    def fine_tune_log(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
     if args.method == "dagger":
         from policies.imitation import dagger_fine_tune
 
@@ -78,7 +80,7 @@ def main() -> None:
                  if getattr(args, key) is not None}
         path = dagger_fine_tune(policy, bank_dir=bank, out=out / "policy", steps=args.steps, weights=weights,
                                 seed=settings["seed"] * 1000 + 1, n_envs=2, env_config=env_config,
-                                learning_rate=args.lr, progress_bar=False, log=fine_tune_log.append, **extra)
+                                learning_rate=args.lr, progress_bar=False, log=fine_tune_log, **extra)
     else:
         path = fine_tune(policy, bank_dir=bank, out=out / "policy", steps=args.steps, weights=weights,
                          seed=settings["seed"] * 1000 + 1, n_envs=2, env_config=env_config,

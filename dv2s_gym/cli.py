@@ -949,7 +949,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fine-tune-steps", type=int, default=LOOP["fine_tune_steps"],
                    help=f"env steps of fine-tuning per round (default {LOOP['fine_tune_steps']})")
     p.add_argument("--fine-tune-lr", type=float, default=LOOP["fine_tune_lr"],
-                   help=f"learning rate of the fine-tuning (default {LOOP['fine_tune_lr']})")
+                   help="learning rate of the fine-tuning (default: the method's, ppo 1e-4, dagger 1e-3)")
     p.add_argument("--holdout-fraction", type=float, default=LOOP["holdout_fraction"],
                    help=f"share of the mined clusters held out (default {LOOP['holdout_fraction']})")
     p.add_argument("--k-eval", type=int, default=LOOP["k_eval"],

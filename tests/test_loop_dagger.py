@@ -139,9 +139,10 @@ def test_the_loop_runs_end_to_end_with_dagger(tmp_path):
     assert state["settings"]["fine_tune_method"] == "dagger"
     assert "DAgger" in report.paths["md"].read_text()
     assert "(dagger)" in report.paths["html"].read_text()
+    assert state["settings"]["fine_tune_lr"] == 1e-3  # DAgger's own learning rate when none is given
     # the method is part of the loop's identity
     with pytest.raises(LoopError, match="fine_tune_method='dagger'"):
-        run_loop("dv2s-ppo", out=out, miner=miner, fine_tune_method="ppo", **tiny)
+        run_loop("dv2s-ppo", out=out, miner=miner, fine_tune_method="ppo", fine_tune_lr=1e-3, **tiny)
 
 
 def test_a_loop_folder_from_before_the_method_existed_is_a_ppo_loop(tmp_path):

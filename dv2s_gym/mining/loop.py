@@ -59,13 +59,13 @@ DEFAULTS: Dict[str, Any] = {
     "budget": 80,
     "sampler": "cross-entropy",
     "fine_tune_steps": 30_000,
-    "fine_tune_lr": 1e-4,
+    "fine_tune_lr": None,
     "holdout_fraction": 0.5,
     "k_eval": 6,
     "regress_episodes": 4,
     "mined_share": 0.5,
     "fine_tune_reward": {"standing": -0.3},
-    "fine_tune_method": "ppo",
+    "fine_tune_method": "dagger",
     "margin": 0.02,
     "seed": 0,
 }
@@ -79,6 +79,10 @@ FINE_TUNE_METHODS = ("ppo", "dagger")
 """How the loop fine-tunes: ``ppo`` continues PPO on the fine-tuning reward
 (:func:`policies.training.fine_tune`); ``dagger`` imitates the reference driver on the
 policy's own states (:func:`policies.imitation.dagger_fine_tune`)."""
+
+METHOD_LEARNING_RATES = {"ppo": 1e-4, "dagger": 1e-3}
+"""The fine-tuning learning rate when none is given: PPO's constant rate (its own 5e-4 made the
+bank worse, bench/RESULTS.md) and DAgger's Adam rate."""
 
 _LEGACY = {"fine_tune_method": "ppo"}
 """Identity settings added later, with the value a ``loop.json`` written before them meant."""
@@ -285,7 +289,8 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         bank_dir: a writable bank to grow (default: a copy of the shipped bank in ``out/bank``).
         budget / sampler: the miner's episodes per round and its sampler.
         fine_tune_steps: env steps of fine-tuning per round.
-        fine_tune_lr: the fine-tuning's (constant) learning rate (``None``: the checkpoint's own).
+        fine_tune_lr: the fine-tuning's (constant) learning rate (``None``: the method's,
+            :data:`METHOD_LEARNING_RATES`).
         holdout_fraction: share of the round's mined clusters held out from fine-tuning.
         k_eval: evaluation seeds per held-out scenario.
         regress_episodes: seeds per starting-bank scenario in the regression test.
@@ -315,6 +320,10 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         raise LoopError(f"--mined-share must be strictly between 0 and 1, not {mined_share}")
     if fine_tune_method not in FINE_TUNE_METHODS:
         raise LoopError(f"--fine-tune-method must be one of {', '.join(FINE_TUNE_METHODS)}, not {fine_tune_method!r}")
+    if fine_tune_lr is None:
+        fine_tune_lr = METHOD_LEARNING_RATES[fine_tune_method]
+    if not float(fine_tune_lr) > 0:
+        raise LoopError(f"--fine-tune-lr must be a positive number, not {fine_tune_lr}")
     from dv2s_gym.regress.backends import default_workers
 
     workers = int(workers or default_workers())
