@@ -156,7 +156,7 @@ def test_paired_summary_counts_and_drop():
 
 # --------------------------------------------------------------------------- the loop
 TINY = dict(budget=6, fine_tune_steps=100, k_eval=2, regress_episodes=1, workers=1, n_envs=1, progress=False,
-            scenarios=SOURCES, log=lambda _: None)
+            scenarios=SOURCES, fine_tune_method="ppo", log=lambda _: None)  # DAgger: tests/test_loop_dagger.py
 
 
 class _Kill(BaseException):
