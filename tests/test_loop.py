@@ -4,7 +4,6 @@ resuming a killed loop without redoing finished steps, and the report of a whole
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
