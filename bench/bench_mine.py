@@ -5,6 +5,7 @@
     python -m bench.bench_mine --part samplers --policy dv2s-ppo --budget 200 --seeds 0 1
     python -m bench.bench_mine --part throughput --throughput-sampler cross-entropy
     python -m bench.bench_mine --part samplers --config 'b2:alpha=0.9,buckets=2' --config 'nov:feedback=novelty'
+    python -m bench.bench_mine --part samplers --samplers random split --split-config 'ucb:chooser=ucb'
 
 **Samplers** (``--part samplers``): every sampler of :data:`dv2s_gym.mining.samplers.SAMPLERS`
 mines the same policy on the same scenarios (the whole shipped bank by default) with the
@@ -15,7 +16,8 @@ failure clusters per run (``dv2s_gym.mining.cluster``: scenario, failure class, 
 3-bins-per-parameter grid) and how many of them hold a failure the reference driver avoided,
 and the ratio of each sampler's mean distinct clusters to random sampling's (target: the best
 adaptive sampler >= 3x). Each adaptive sampler runs once per setting (``--config``; default:
-VerifAI's defaults and the two settings of :data:`TUNED_CONFIGS`). With ``--reference none`` (the default when the policy under test is
+VerifAI's defaults and the two settings of :data:`TUNED_CONFIGS`); the ``split`` sampler runs in its preset
+(``dv2s mine --sampler split``) or in each ``--split-config``. With ``--reference none`` (the default when the policy under test is
 the reference driver itself, ``rule``) avoidability is not checked.
 
 **Throughput** (``--part throughput``): the same mining run (same budget, seed, sampler -- default
@@ -51,7 +53,8 @@ def _load() -> str:
 
 def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, reference: Optional[str],
               scenarios: Optional[List[str]], batch: Optional[int], out: str,
-              sampler_options: Optional[Dict[str, Any]] = None, feedback: str = "robustness") -> Dict[str, Any]:
+              sampler_options: Optional[Dict[str, Any]] = None, feedback: Optional[str] = "robustness"
+              ) -> Dict[str, Any]:
     """One mining run in a fresh folder; its counts and wall time."""
     from dv2s_gym.mining.miner import mine
 
@@ -61,7 +64,7 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
     takes = SAMPLER_OPTIONS.get(sampler, ())
     options = {k: v for k, v in (sampler_options or {}).items() if k in takes}  # random/halton take none
     extra: Dict[str, Any] = {"sampler_options": options} if options else {}
-    if feedback != "robustness":
+    if feedback is not None:  # None: the sampler's own default (mine's)
         extra["feedback"] = feedback
     start = time.perf_counter()
     run = mine(policy, out=out, budget=budget, sampler=sampler, seed=seed, workers=workers, reference=reference,
@@ -80,8 +83,9 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
     }
 
 
-Config = Tuple[str, Dict[str, Any], str]
-"""A setting of the adaptive samplers: ``(label, sampler options, feedback)``."""
+Config = Tuple[str, Dict[str, Any], Optional[str]]
+"""A setting of the adaptive samplers: ``(label, sampler options, feedback)`` (feedback ``None``: the sampler's
+default)."""
 
 DEFAULT_CONFIG: Config = ("VerifAI defaults", {}, "robustness")
 TUNED_CONFIGS: List[Config] = [
@@ -90,17 +94,25 @@ TUNED_CONFIGS: List[Config] = [
 ]
 """The settings chosen on a tuning seed (100) that is not one of the bench's seeds (see bench/RESULTS.md)."""
 
+SPLIT_PRESET: Config = ("preset", {}, None)
+"""The split sampler as ``dv2s mine --sampler split`` runs it (its defaults, chosen on tuning seed 7)."""
+
+_TEXT_OPTIONS = ("chooser", "params")
+
 
 def parse_config(text: str) -> Config:
-    """``"label:alpha=0.9,buckets=2,thres=1,feedback=novelty"`` (every key optional) as a :data:`Config`."""
+    """``"label:alpha=0.9,buckets=2,thres=1,feedback=novelty"`` (every key optional; also ``chooser`` and
+    ``params`` of the split sampler) as a :data:`Config`; no feedback: the sampler's default."""
     label, _, body = text.partition(":")
     options: Dict[str, Any] = {}
-    feedback = "robustness"
+    feedback: Optional[str] = None  # the sampler's default (robustness, novelty for split)
     for item in filter(None, body.split(",")):
         key, _, value = item.partition("=")
         if key == "feedback":
             feedback = value
-        elif key == "buckets":
+        elif key in _TEXT_OPTIONS:
+            options[key] = value
+        elif key in ("buckets", "warmup"):
             options[key] = int(value)
         else:
             options[key] = float(value)
@@ -109,13 +121,18 @@ def parse_config(text: str) -> Config:
 
 def bench_samplers(policy: str, samplers: Sequence[str], seeds: Sequence[int], budget: int, workers: int,
                    reference: Optional[str], scenarios: Optional[List[str]], batch: Optional[int],
-                   configs: Sequence[Config], root: str) -> Dict[str, Dict[str, Any]]:
-    """Every sampler (each adaptive one in every config) on every seed; the summary by entry (printed)."""
-    from dv2s_gym.mining.samplers import is_adaptive
+                   configs: Sequence[Config], root: str,
+                   split_configs: Sequence[Config] = (SPLIT_PRESET,)) -> Dict[str, Dict[str, Any]]:
+    """Every sampler (each adaptive one in every config; ``split`` in each of ``split_configs``) on every
+    seed; the summary by entry (printed)."""
+    from dv2s_gym.mining.samplers import SPLIT, is_adaptive
     from dv2s_gym.regress.stats import wilson_interval
 
     entries: List[Tuple[str, str, Config]] = []
     for name in samplers:
+        if name == SPLIT:
+            entries += [(f"{name} [{config[0]}]", name, config) for config in split_configs]
+            continue
         for config in (configs if is_adaptive(name) else [DEFAULT_CONFIG]):
             label = name if not is_adaptive(name) or len(configs) == 1 and config == DEFAULT_CONFIG \
                 else f"{name} [{config[0]}]"
@@ -123,8 +140,11 @@ def bench_samplers(policy: str, samplers: Sequence[str], seeds: Sequence[int], b
     print(f"# samplers: policy {policy}, reference {reference or 'none'}, "
           f"scenarios {' '.join(scenarios) if scenarios else 'whole bank'}, budget {budget}, seeds {list(seeds)}, "
           f"{workers} workers, batch {batch or 'default'}; adaptive sampler settings: "
-          + "; ".join(f"{label} = {options or 'VerifAI defaults'}, feedback {feedback}"
-                      for label, options, feedback in configs), flush=True)
+          + "; ".join(f"{label} = {options or 'VerifAI defaults'}, feedback {feedback or 'robustness'}"
+                      for label, options, feedback in configs)
+          + ("; split settings: " + "; ".join(f"{label} = {options or 'its defaults'}, feedback "
+                                               f"{feedback or 'its default'}" for label, options, feedback in
+                                               split_configs) if SPLIT in samplers else ""), flush=True)
     runs: Dict[str, List[Dict[str, Any]]] = {label: [] for label, _, _ in entries}
     for seed in seeds:  # seed-major, so an interrupted bench still compares the samplers on equal terms
         for label, name, (_, options, feedback) in entries:
@@ -243,6 +263,10 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
                         help="a setting of the adaptive samplers (repeatable): alpha, buckets, thres (VerifAI's "
                              "parameters) and feedback (robustness|novelty), e.g. 'b2:alpha=0.9,buckets=2'; "
                              "default: VerifAI's defaults and the two tuned settings of TUNED_CONFIGS")
+    parser.add_argument("--split-config", action="append", default=None, metavar="LABEL:KEY=VALUE,...",
+                        help="a setting of the split sampler (repeatable): alpha, buckets, thres, chooser "
+                             "(cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy), "
+                             "warmup, feedback; default: its preset (dv2s mine --sampler split)")
     parser.add_argument("--throughput-sampler", default="random")
     parser.add_argument("--throughput-budget", type=int, default=None, help="default 600; --quick 40")
     parser.add_argument("--repeats", type=int, default=None, help="throughput rounds (default 3; --quick 1)")
@@ -255,13 +279,14 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     repeats = args.repeats or (1 if args.quick else 3)
     throughput_budget = args.throughput_budget or (40 if args.quick else 600)
     configs = [parse_config(text) for text in args.config] if args.config else [DEFAULT_CONFIG, *TUNED_CONFIGS]
+    split_configs = [parse_config(text) for text in args.split_config] if args.split_config else [SPLIT_PRESET]
     print(f"machine: {os.cpu_count()} cores; {time.strftime('%Y-%m-%d %H:%M')}; load {_load()}", flush=True)
     root = tempfile.mkdtemp(prefix="dv2s-bench-mine-")
     results: Dict[str, Any] = {}
     try:
         if args.part in ("all", "samplers"):
             results["samplers"] = bench_samplers(args.policy, args.samplers, seeds, budget, args.workers, reference,
-                                                 args.scenarios, args.batch, configs, root)
+                                                 args.scenarios, args.batch, configs, root, split_configs)
         if args.part in ("all", "throughput"):
             results["throughput"] = bench_throughput(args.policy, args.throughput_sampler, seeds[0],
                                                      throughput_budget, repeats, reference, args.scenarios,

@@ -2,11 +2,14 @@
 
     python -m bench.loop_finetune_sweep --loop out/loop-seed0 --name s03_100k --steps 100000 \\
         --reward '{"standing": -0.3}' --regress
+    python -m bench.loop_finetune_sweep --loop out/loop-seed0 --name dagger_40k --method dagger --steps 40000 \
+        --lr 3e-4 --regress
 
 Reuses the round-1 mining run, working bank and by-cluster split of ``--loop`` (so settings are
 compared on the same held-out episodes), evaluates the starting policy on the held-out scenarios
 once (cached in ``OUT/before.jsonl``), fine-tunes exactly as the loop does
-(:func:`policies.training.fine_tune`, the loop's weights from
+(``--method ppo``: :func:`policies.training.fine_tune`; ``--method dagger``:
+:func:`policies.imitation.dagger_fine_tune`; the loop's weights from
 :func:`dv2s_gym.mining.loop.fine_tune_weights`, seed ``loop seed * 1000 + 1``, 2 subprocess envs),
 evaluates the fine-tuned policy on the same episodes (paired, the policy's own env config) and,
 with ``--regress``, regression-tests it against the starting policy on the starting bank
@@ -20,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
@@ -35,6 +39,10 @@ def main() -> None:
     parser.add_argument("--lr", type=float, default=1e-4)
     parser.add_argument("--share", type=float, default=0.5, help="mined share")
     parser.add_argument("--reward", default="{}", help="fine-tuning reward-term overrides (JSON)")
+    parser.add_argument("--method", choices=["ppo", "dagger"], default="ppo", help="the loop's --fine-tune-method")
+    parser.add_argument("--iterations", type=int, default=None, help="DAgger iterations (default: its own)")
+    parser.add_argument("--epochs", type=int, default=None, help="DAgger epochs per iteration (default: its own)")
+    parser.add_argument("--beta-decay", type=float, default=None, help="DAgger mixture decay (default: its own)")
     parser.add_argument("--regress", action="store_true")
     parser.add_argument("--regress-episodes", type=int, default=4)
     parser.add_argument("--workers", type=int, default=2)
@@ -62,10 +70,22 @@ def main() -> None:
     mined = [e.name for e in entries if e.source.get("kind") == "mined"]
     out = base / args.name
     began = time.perf_counter()
-    path = fine_tune(policy, bank_dir=bank, out=out / "policy", steps=args.steps,
-                     weights=fine_tune_weights(names, mined, args.share), seed=settings["seed"] * 1000 + 1, n_envs=2,
-                     env_config=env_config, reward_weights=json.loads(args.reward), progress_bar=False,
-                     learning_rate=args.lr, log=lambda _: None)
+    weights = fine_tune_weights(names, mined, args.share)
+    def fine_tune_log(line: str) -> None:
+        print(line, file=sys.stderr, flush=True)
+    if args.method == "dagger":
+        from policies.imitation import dagger_fine_tune
+
+        extra = {key: getattr(args, key) for key in ("iterations", "epochs", "beta_decay")
+                 if getattr(args, key) is not None}
+        path = dagger_fine_tune(policy, bank_dir=bank, out=out / "policy", steps=args.steps, weights=weights,
+                                seed=settings["seed"] * 1000 + 1, n_envs=2, env_config=env_config,
+                                learning_rate=args.lr, progress_bar=False, log=fine_tune_log, **extra)
+    else:
+        path = fine_tune(policy, bank_dir=bank, out=out / "policy", steps=args.steps, weights=weights,
+                         seed=settings["seed"] * 1000 + 1, n_envs=2, env_config=env_config,
+                         reward_weights=json.loads(args.reward), progress_bar=False, learning_rate=args.lr,
+                         log=lambda _: None)
     t_fine_tune = time.perf_counter() - began
     spec = f"ppo:{path.resolve()}"
     began = time.perf_counter()
@@ -79,6 +99,11 @@ def main() -> None:
               "types_after": failure_types(after), "seconds": {"before": round(t_before, 1),
                                                               "fine_tune": round(t_fine_tune, 1),
                                                               "after": round(t_after, 1)}}
+    if args.method == "dagger":
+        from policies.registry import read_model_card
+
+        result["dagger"] = {key: value for key, value in (read_model_card(path).get("fine_tune") or {}).items()
+                            if key in ("agreement", "history", "iterations", "epochs", "beta_decay", "learning_rate")}
     if args.regress:
         from dv2s_gym.regress.runner import run_regression
 

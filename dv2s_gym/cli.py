@@ -574,7 +574,8 @@ def _cmd_loop(args: argparse.Namespace) -> int:
 
     options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr",
                                                     "holdout_fraction", "k_eval", "regress_episodes", "mined_share",
-                                                    "margin", "seed", "workers", "scenarios")}
+                                                    "margin", "seed", "workers", "scenarios",
+                                                    "fine_tune_method")}
     if args.fine_tune_reward is not None:
         try:
             options["fine_tune_reward"] = json.loads(args.fine_tune_reward)
@@ -837,13 +838,18 @@ def build_parser() -> argparse.ArgumentParser:
     bank_option(p)
     p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank)")
     p.add_argument("--budget", type=int, default=200, help="episodes to run (default 200)")
-    p.add_argument("--sampler", default="cross-entropy", choices=["random", "halton", "cross-entropy", "bandit"],
-                   help="VerifAI sampler (default cross-entropy)")
+    p.add_argument("--sampler", default="cross-entropy",
+                   choices=["random", "halton", "cross-entropy", "bandit", "split"],
+                   help="VerifAI sampler (default cross-entropy); split: VerifAI's cross-entropy over which scenario "
+                   "and a Halton sequence per scenario over its parameters, which finds the most distinct failures")
     p.add_argument("--sampler-options", default=None,
-                   help="VerifAI settings of cross-entropy/bandit as JSON: alpha (default 0.9), buckets (5), thres (0)")
-    p.add_argument("--feedback", choices=["robustness", "novelty"], default="robustness",
+                   help="VerifAI settings of cross-entropy/bandit as JSON: alpha (default 0.9), buckets (5), thres (0); "
+                   "split also takes chooser (cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy) "
+                   "and warmup (0)")
+    p.add_argument("--feedback", choices=["robustness", "novelty"], default=None,
                    help="what adaptive samplers learn from: robustness (every failure), or novelty (a failure in a "
-                   "cluster already found counts as an easy scene, to spread the search); default robustness")
+                   "cluster already found counts as an easy scene, to spread the search); default novelty for "
+                   "split, robustness for the others")
     p.add_argument("--seed", type=int, default=0, help="seed of the sampler and the episodes (default 0)")
     p.add_argument("--reference", default="rule",
                    help="driver deciding avoidability (default rule; 'none' skips the check)")
@@ -948,7 +954,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fine-tune-steps", type=int, default=LOOP["fine_tune_steps"],
                    help=f"env steps of fine-tuning per round (default {LOOP['fine_tune_steps']})")
     p.add_argument("--fine-tune-lr", type=float, default=LOOP["fine_tune_lr"],
-                   help=f"learning rate of the fine-tuning (default {LOOP['fine_tune_lr']})")
+                   help="learning rate of the fine-tuning (default: the method's, ppo 1e-4, dagger 1e-3)")
     p.add_argument("--holdout-fraction", type=float, default=LOOP["holdout_fraction"],
                    help=f"share of the mined clusters held out (default {LOOP['holdout_fraction']})")
     p.add_argument("--k-eval", type=int, default=LOOP["k_eval"],
@@ -961,6 +967,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="reward-term weights overriding the policy's own during fine-tuning only, e.g. "
                    f"'{{\"standing\": -1.0, \"low_ttc\": -0.4}}' (default {json.dumps(LOOP['fine_tune_reward'])}; "
                    "'{}' keeps the policy's reward; evaluation always uses the policy's own env config)")
+    p.add_argument("--fine-tune-method", choices=["ppo", "dagger"], default=LOOP["fine_tune_method"],
+                   help="ppo: continue PPO on the fine-tuning reward; dagger: imitate the rule-based reference "
+                   "driver on the policy's own states (DAgger; --fine-tune-reward unused) "
+                   f"(default {LOOP['fine_tune_method']})")
     p.add_argument("--margin", type=float, default=LOOP["margin"],
                    help=f"the regression test's non-inferiority margin (default {LOOP['margin']})")
     p.add_argument("--seed", type=int, default=LOOP["seed"], help=f"seed (default {LOOP['seed']})")

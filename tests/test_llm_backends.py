@@ -12,7 +12,6 @@ import base64
 import logging
 import os
 import sys
-import time
 
 import cv2
 import numpy as np

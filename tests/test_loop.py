@@ -4,7 +4,6 @@ resuming a killed loop without redoing finished steps, and the report of a whole
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -156,7 +155,7 @@ def test_paired_summary_counts_and_drop():
 
 # --------------------------------------------------------------------------- the loop
 TINY = dict(budget=6, fine_tune_steps=100, k_eval=2, regress_episodes=1, workers=1, n_envs=1, progress=False,
-            scenarios=SOURCES, log=lambda _: None)
+            scenarios=SOURCES, fine_tune_method="ppo", log=lambda _: None)  # DAgger: tests/test_loop_dagger.py
 
 
 class _Kill(BaseException):

@@ -95,9 +95,9 @@ def test_loop_fine_tunes_with_its_reward_but_evaluates_with_the_policys_config(t
     monkeypatch.setattr(runner, "run_regression", fake_regression)
     miner = FakeMiner(SOURCES, failures_per_round=4)
     reward = {"standing": -0.7, "low_ttc": -0.5}
-    report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, budget=6, fine_tune_steps=100, k_eval=2,
-                      regress_episodes=1, workers=1, n_envs=1, progress=False, scenarios=SOURCES,
-                      fine_tune_reward=reward, log=lambda _: None)
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, fine_tune_method="ppo", budget=6,
+                      fine_tune_steps=100, k_eval=2, regress_episodes=1, workers=1, n_envs=1, progress=False,
+                      scenarios=SOURCES, fine_tune_reward=reward, log=lambda _: None)
     expected = with_reward_weights(SHIPPED_CONFIG, reward)
     assert len(fine_tunes) == 1 and fine_tunes[0]["training_config"] == expected
     # everything that counts failures runs the policy's own env config
@@ -115,8 +115,9 @@ def test_loop_fine_tunes_with_its_reward_but_evaluates_with_the_policys_config(t
     assert "low_ttc -0.5, standing -0.7" in report.paths["html"].read_text()
     # the reward is part of the loop's identity: resuming with another one is refused
     with pytest.raises(LoopError, match="fine_tune_reward"):
-        run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, budget=6, fine_tune_steps=100, k_eval=2,
-                 regress_episodes=1, workers=1, n_envs=1, progress=False, scenarios=SOURCES, log=lambda _: None)
+        run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, fine_tune_method="ppo", budget=6,
+                 fine_tune_steps=100, k_eval=2, regress_episodes=1, workers=1, n_envs=1, progress=False,
+                 scenarios=SOURCES, log=lambda _: None)
 
 
 def test_the_default_fine_tune_reward_penalises_the_stall():

@@ -29,7 +29,7 @@ from dv2s_gym.mining.monitors import (
     detect_failure,
     robustness,
 )
-from dv2s_gym.mining.samplers import SAMPLERS, SceneSampler, is_adaptive, make_sampler
+from dv2s_gym.mining.samplers import SAMPLERS, SceneSampler, default_feedback, is_adaptive, make_sampler
 from dv2s_gym.mining.space import SceneSpace
 from envs.errors import DV2SError, SceneSamplingError
 from envs.trace import EpisodeTrace
@@ -346,7 +346,7 @@ def test_adaptive_samplers_take_verifai_options(small_space):
     params = sampler_params("cross-entropy", {"alpha": 0.5, "buckets": 1})
     assert (params.alpha, params.cont.buckets, params.thres) == (0.5, 1, 0.0)
     assert sampler_params("bandit", None).alpha == 0.9 and sampler_params("random") is None
-    assert [name for name in SAMPLERS if is_adaptive(name)] == ["cross-entropy", "bandit"]
+    assert [name for name in SAMPLERS if is_adaptive(name)] == ["cross-entropy", "bandit", "split"]
     # one bucket per parameter: the parameters stay uniform, only the scenario distribution moves
     sampler = make_sampler("cross-entropy", small_space.feature_space, 1, {"alpha": 0.5, "buckets": 1})
     for _ in range(6):
@@ -382,6 +382,7 @@ RUNS = {
     "cross-entropy": {"sampler": "cross-entropy"},
     "random": {"sampler": "random"},  # non-adaptive: whole chunks go to the workers at once
     "bandit-novelty": {"sampler": "bandit", "feedback": "novelty", "sampler_options": {"alpha": 0.8, "buckets": 2}},
+    "split": {"sampler": "split"},  # its default feedback: novelty
 }
 
 
@@ -411,7 +412,9 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
     assert json.loads((out / "settings.json").read_text())["sampler"] == settings["sampler"]
     # the scenes are the sampler's draws in order, however many chunks went to the workers at once
     space = SceneSpace(MINE["scenarios"])
-    sampler = make_sampler(settings["sampler"], space.feature_space, settings["seed"], settings.get("sampler_options"))
+    sampler = make_sampler(settings["sampler"], space, settings["seed"], settings.get("sampler_options"))
+    feedback = settings.get("feedback") or default_feedback(settings["sampler"])
+    assert json.loads((out / "settings.json").read_text())["feedback"] == feedback
     expected = []
     if is_adaptive(settings["sampler"]):  # the window schedule: scene j is drawn once outcome j - batch was fed
         assert json.loads((out / "settings.json").read_text())["schedule"] == "window"
@@ -420,7 +423,7 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
             point, info = drawn[index]
             spec = space.decode(point)
             expected.append((spec.scenario, spec.params))
-            sampler.feed(point, info, _fed(record, records, settings.get("feedback", "robustness")))
+            sampler.feed(point, info, _fed(record, records, feedback))
             drawn += sampler.draw(1)
         assert [(r["scenario"], r["params"]) for r in records] == expected
         return
@@ -431,7 +434,7 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
             expected.append((spec.scenario, spec.params))
             record = records[len(expected) - 1] if len(expected) <= len(records) else None
             if record is not None:
-                sampler.feed(point, info, _fed(record, records, settings.get("feedback", "robustness")))
+                sampler.feed(point, info, _fed(record, records, feedback))
     assert [(r["scenario"], r["params"]) for r in records] == expected[:10]
 
 
@@ -483,7 +486,8 @@ def test_a_killed_run_resumes_to_the_same_records(whole_run, tmp_path):
     # a finished run resumes to the same records without running anything
     again = mine(POLICY, out=copy, **settings)
     assert _stable(again.records) == _stable(run.records)
-    if not settings.get("sampler_options") and not settings.get("feedback"):
+    if not settings.get("sampler_options") and default_feedback(settings["sampler"]) == "robustness" \
+            and not settings.get("feedback"):
         # a run written before these two settings existed had their defaults, and still resumes
         saved = json.loads((copy / "settings.json").read_text())
         del saved["sampler_options"], saved["feedback"]
@@ -502,7 +506,8 @@ def test_resuming_with_other_settings_is_refused(whole_run, tmp_path):
                {"batch": 2}, {"reference": None}]
     if settings["sampler"] != "random":
         changes += [{"sampler_options": {"alpha": 0.5}},
-                    {"feedback": "robustness" if settings.get("feedback") == "novelty" else "novelty"}]
+                    {"feedback": "robustness" if (settings.get("feedback") or default_feedback(settings["sampler"]))
+                     == "novelty" else "novelty"}]
     for change in changes:
         with pytest.raises(MiningError) as error:
             mine(POLICY, out=copy, **{**settings, **change})

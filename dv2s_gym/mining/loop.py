@@ -18,7 +18,9 @@ d. **fine-tune**: :func:`policies.training.fine_tune` continues ``P`` on the wor
    (default ``{"standing": -0.3}``: standing still with a free path ahead, the miner's
    stall, is penalised like the monitors count it); only fine-tuning uses that env config:
    mining, the held-out evaluations and the regression test run ``P``'s own (a failure
-   does not depend on the reward);
+   does not depend on the reward). That is ``fine_tune_method="ppo"``; with ``"dagger"``
+   the policy instead imitates the reference driver (``rule``) on the states it visits
+   itself in the same weighted scenario mix (:mod:`policies.imitation`; no reward);
 e. **after**: the new policy runs on the same held-out episodes (paired): rate, interval,
    relative drop (scenario-bootstrap interval), exact two-sided McNemar p;
 f. **regress**: :func:`dv2s_gym.regress.runner.run_regression` new against old on the starting
@@ -38,7 +40,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import shutil
 import sys
 import time
 from pathlib import Path
@@ -46,7 +47,8 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 
 from envs.errors import DV2SError
 
-__all__ = ["LoopError", "LoopReport", "run_loop", "DEFAULT_OUT", "DEFAULTS", "mined_entries", "fine_tune_weights"]
+__all__ = ["LoopError", "LoopReport", "run_loop", "DEFAULT_OUT", "DEFAULTS", "mined_entries", "fine_tune_weights",
+           "FINE_TUNE_METHODS"]
 
 DEFAULT_OUT = "out/loop"
 """Where ``dv2s loop`` writes when ``--out`` is not given (rerunning resumes it)."""
@@ -56,12 +58,13 @@ DEFAULTS: Dict[str, Any] = {
     "budget": 80,
     "sampler": "cross-entropy",
     "fine_tune_steps": 30_000,
-    "fine_tune_lr": 1e-4,
+    "fine_tune_lr": None,
     "holdout_fraction": 0.5,
     "k_eval": 6,
     "regress_episodes": 4,
     "mined_share": 0.5,
     "fine_tune_reward": {"standing": -0.3},
+    "fine_tune_method": "dagger",
     "margin": 0.02,
     "seed": 0,
 }
@@ -69,7 +72,19 @@ DEFAULTS: Dict[str, Any] = {
 a short fine-tune, a small evaluation). The measurement in bench/RESULTS.md uses larger ones."""
 
 IDENTITY = ("policy", "bank_dir", "budget", "sampler", "fine_tune_steps", "fine_tune_lr", "holdout_fraction", "k_eval",
-            "regress_episodes", "mined_share", "fine_tune_reward", "margin", "seed", "scenarios")
+            "regress_episodes", "mined_share", "fine_tune_reward", "margin", "seed", "scenarios", "fine_tune_method")
+
+FINE_TUNE_METHODS = ("ppo", "dagger")
+"""How the loop fine-tunes: ``ppo`` continues PPO on the fine-tuning reward
+(:func:`policies.training.fine_tune`); ``dagger`` imitates the reference driver on the
+policy's own states (:func:`policies.imitation.dagger_fine_tune`)."""
+
+METHOD_LEARNING_RATES = {"ppo": 1e-4, "dagger": 1e-3}
+"""The fine-tuning learning rate when none is given: PPO's constant rate (its own 5e-4 made the
+bank worse, bench/RESULTS.md) and DAgger's Adam rate."""
+
+_LEGACY = {"fine_tune_method": "ppo"}
+"""Identity settings added later, with the value a ``loop.json`` written before them meant."""
 
 
 class LoopError(DV2SError, ValueError):
@@ -106,8 +121,9 @@ class _State:
                 raise LoopError(f"{path} is not readable JSON ({error}); choose another --out") from error
             recorded = data.get("settings", {})
             for key in IDENTITY:
-                if json.dumps(recorded.get(key), sort_keys=True) != json.dumps(settings.get(key), sort_keys=True):
-                    raise LoopError(f"{path.parent} holds a loop with {key}={recorded.get(key)!r}, not "
+                value = recorded.get(key, _LEGACY.get(key))
+                if json.dumps(value, sort_keys=True) != json.dumps(settings.get(key), sort_keys=True):
+                    raise LoopError(f"{path.parent} holds a loop with {key}={value!r}, not "
                                     f"{settings.get(key)!r}; rerun with its settings to resume it, or choose "
                                     "another --out")
             data["settings"].update({k: settings[k] for k in settings if k not in IDENTITY})
@@ -257,6 +273,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
              holdout_fraction: float = DEFAULTS["holdout_fraction"], k_eval: int = DEFAULTS["k_eval"],
              regress_episodes: int = DEFAULTS["regress_episodes"], mined_share: float = DEFAULTS["mined_share"],
              fine_tune_reward: Optional[Mapping[str, float]] = None,
+             fine_tune_method: str = DEFAULTS["fine_tune_method"],
              margin: float = DEFAULTS["margin"], seed: int = DEFAULTS["seed"], workers: Optional[int] = None,
              fine_tune_lr: Optional[float] = DEFAULTS["fine_tune_lr"],
              scenarios: Optional[Sequence[str]] = None, n_envs: int = 2, progress: bool = True,
@@ -271,13 +288,16 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         bank_dir: a writable bank to grow (default: a copy of the shipped bank in ``out/bank``).
         budget / sampler: the miner's episodes per round and its sampler.
         fine_tune_steps: env steps of fine-tuning per round.
-        fine_tune_lr: the fine-tuning's (constant) learning rate (``None``: the checkpoint's own).
+        fine_tune_lr: the fine-tuning's (constant) learning rate (``None``: the method's,
+            :data:`METHOD_LEARNING_RATES`).
         holdout_fraction: share of the round's mined clusters held out from fine-tuning.
         k_eval: evaluation seeds per held-out scenario.
         regress_episodes: seeds per starting-bank scenario in the regression test.
         mined_share: probability of drawing a mined fine-tuning scenario during fine-tuning.
         fine_tune_reward: reward-term weights overriding the policy's own in the fine-tuning env
-            only (``None``: ``DEFAULTS["fine_tune_reward"]``; ``{}``: the policy's reward unchanged).
+            only (``None``: ``DEFAULTS["fine_tune_reward"]``; ``{}``: the policy's reward unchanged);
+            used by the ``ppo`` method only (imitation has no reward).
+        fine_tune_method: ``ppo`` or ``dagger`` (:data:`FINE_TUNE_METHODS`).
         margin: the regression test's non-inferiority margin.
         seed: seeds the miner, the split and the fine-tuning (each round derives its own).
         workers: processes for mining and evaluation (default: every core).
@@ -297,6 +317,12 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         raise LoopError(f"--holdout-fraction must be in [0, 1], not {holdout_fraction}")
     if not 0.0 < float(mined_share) < 1.0:
         raise LoopError(f"--mined-share must be strictly between 0 and 1, not {mined_share}")
+    if fine_tune_method not in FINE_TUNE_METHODS:
+        raise LoopError(f"--fine-tune-method must be one of {', '.join(FINE_TUNE_METHODS)}, not {fine_tune_method!r}")
+    if fine_tune_lr is None:
+        fine_tune_lr = METHOD_LEARNING_RATES[fine_tune_method]
+    if not float(fine_tune_lr) > 0:
+        raise LoopError(f"--fine-tune-lr must be a positive number, not {fine_tune_lr}")
     from dv2s_gym.regress.backends import default_workers
 
     workers = int(workers or default_workers())
@@ -316,6 +342,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                 "budget": budget, "sampler": sampler, "fine_tune_steps": fine_tune_steps, "fine_tune_lr": fine_tune_lr,
                 "holdout_fraction": float(holdout_fraction), "k_eval": k_eval, "regress_episodes": regress_episodes,
                 "mined_share": float(mined_share), "fine_tune_reward": dict(fine_tune_reward),
+                "fine_tune_method": fine_tune_method,
                 "margin": float(margin), "seed": seed,
                 "scenarios": list(scenarios) if scenarios is not None else None, "rounds": rounds,
                 "workers": workers, "n_envs": n_envs, "env_config": env_config,
@@ -396,15 +423,28 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                 names = sorted(e.name for e in entries)
                 mined = [e.name for e in entries if e.source.get("kind") == "mined"]
                 weights = fine_tune_weights(names, mined, mined_share)
+                if fine_tune_method == "dagger":
+                    from policies.imitation import dagger_fine_tune
+                    from policies.registry import read_model_card
+
+                    path = dagger_fine_tune(current, bank_dir=bank, out=round_dir / "policy", steps=fine_tune_steps,
+                                            weights=weights, seed=seed * 1000 + number, n_envs=n_envs,
+                                            env_config=env_config, learning_rate=fine_tune_lr,
+                                            progress_bar=progress, log=log)
+                    dagger = read_model_card(path).get("fine_tune") or {}
+                    return {"model": str(path.resolve()), "method": "dagger", "scenarios": len(names),
+                            "mined_upweighted": len(mined), "steps": fine_tune_steps, "reward_weights": None,
+                            "env_config": env_config, "reference": dagger.get("reference"),
+                            "agreement": dagger.get("agreement")}
                 from policies.training import fine_tune
 
                 path = fine_tune(current, bank_dir=bank, out=round_dir / "policy", steps=fine_tune_steps,
                                  weights=weights, seed=seed * 1000 + number, n_envs=n_envs, env_config=env_config,
                                  reward_weights=fine_tune_reward, progress_bar=progress, learning_rate=fine_tune_lr,
                                  log=log)
-                return {"model": str(path.resolve()), "scenarios": len(names), "mined_upweighted": len(mined),
-                        "steps": fine_tune_steps, "reward_weights": dict(fine_tune_reward),
-                        "env_config": fine_tune_config}
+                return {"model": str(path.resolve()), "method": "ppo", "scenarios": len(names),
+                        "mined_upweighted": len(mined), "steps": fine_tune_steps,
+                        "reward_weights": dict(fine_tune_reward), "env_config": fine_tune_config}
 
             timed("fine_tune", do_fine_tune)
         from policies.training import resolve_checkpoint

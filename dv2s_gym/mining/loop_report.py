@@ -10,8 +10,10 @@
                                     "scenario", "reproduction"}], "folder"},
                            "split": {"fine_tune", "held_out", "fine_tune_clusters", "held_out_clusters", "groups"},
                            "before": {"episodes"},
-                           "fine_tune": {"model", "scenarios", "mined_upweighted", "steps", "reward_weights",
-                                         "env_config": the fine-tuning env's config},
+                           "fine_tune": {"model", "method": "ppo" | "dagger", "scenarios", "mined_upweighted",
+                                         "steps", "reward_weights" (ppo; None for dagger),
+                                         "env_config": the fine-tuning env's config,
+                                         "reference", "agreement" (dagger only)},
                            "after": {"pairs", "errors", "before": Rate, "after": Rate, "relative_drop",
                                      "relative_drop_interval", "table", "mcnemar_p", "per_scenario"},
                            "regress": {"verdict", "reason", "episodes", "new_failure_rate", "old_failure_rate",
@@ -86,7 +88,8 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         f"Started from `{settings.get('policy')}`; final policy `{report.get('policy')}`.", "",
         f"Per round: mining budget {settings.get('budget')} episodes ({settings.get('sampler')} sampler), "
         f"{settings.get('holdout_fraction')} of the mined clusters held out, {settings.get('k_eval')} evaluation seeds "
-        f"per held-out scenario, fine-tuning {settings.get('fine_tune_steps')} steps (mined scenarios drawn with "
+        f"per held-out scenario, fine-tuning ({settings.get('fine_tune_method', 'ppo')}) "
+        f"{settings.get('fine_tune_steps')} steps (mined scenarios drawn with "
         f"probability {settings.get('mined_share')}, reward terms {_weights(settings.get('fine_tune_reward'))} "
         f"overriding the policy's own in training only), regression test on the starting bank with "
         f"{settings.get('regress_episodes')} seeds per scenario (margin {settings.get('margin')}).", "",
@@ -122,9 +125,18 @@ def render_markdown(report: Mapping[str, Any]) -> str:
                          f"{', '.join(split.get('held_out', [])) or 'none'}")
         tuned = steps.get("fine_tune") or {}
         if tuned:
-            lines.append(f"- fine-tuned {tuned.get('steps')} steps on {tuned.get('scenarios')} scenarios "
-                         f"({tuned.get('mined_upweighted')} mined, upweighted), training reward weights "
-                         f"{_weights((tuned.get('env_config') or {}).get('reward_weights'))}: `{tuned.get('model')}`")
+            if tuned.get("method") == "dagger":
+                agreement = tuned.get("agreement") or {}
+                lines.append(f"- fine-tuned by DAgger ({tuned.get('steps')} labelled steps, imitating "
+                             f"`{tuned.get('reference')}` on the policy's own states) on {tuned.get('scenarios')} "
+                             f"scenarios ({tuned.get('mined_upweighted')} mined, upweighted); agreement with the "
+                             f"reference on the {agreement.get('states')} labelled states "
+                             f"{agreement.get('source')} -> {agreement.get('fine_tuned')}: `{tuned.get('model')}`")
+            else:
+                lines.append(f"- fine-tuned by PPO {tuned.get('steps')} steps on {tuned.get('scenarios')} scenarios "
+                             f"({tuned.get('mined_upweighted')} mined, upweighted), training reward weights "
+                             f"{_weights((tuned.get('env_config') or {}).get('reward_weights'))}: "
+                             f"`{tuned.get('model')}`")
         after = steps.get("after") or {}
         if after:
             table = after.get("table", {})
@@ -181,7 +193,8 @@ def render_html(report: Mapping[str, Any]) -> str:
     return (f"<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>dv2s loop</title><style>{_CSS}</style>"
             f"</head><body><h1>dv2s loop</h1><p>Started from <code>{escape(str(settings.get('policy')))}</code>; "
             f"final policy <code>{escape(str(report.get('policy')))}</code>. Mining budget {settings.get('budget')} "
-            f"episodes per round, fine-tuning {settings.get('fine_tune_steps')} steps (reward terms "
+            f"episodes per round, fine-tuning ({escape(str(settings.get('fine_tune_method', 'ppo')))}) "
+            f"{settings.get('fine_tune_steps')} steps (reward terms "
             f"{escape(_weights(settings.get('fine_tune_reward')))} overridden in training only), {settings.get('k_eval')} "
             f"evaluation seeds per held-out scenario (Wilson 95 % intervals; the drop's interval resamples "
             f"scenarios).</p><table>{head}{''.join(rows)}</table></body></html>\n")

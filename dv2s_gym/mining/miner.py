@@ -48,7 +48,14 @@ import numpy as np
 from dv2s_gym.mining.cluster import cluster_failures, cluster_id, group
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
-from dv2s_gym.mining.samplers import SAMPLERS, SceneSampler, is_adaptive, make_sampler, sampler_params
+from dv2s_gym.mining.samplers import (
+    SAMPLERS,
+    SceneSampler,
+    default_feedback,
+    is_adaptive,
+    make_sampler,
+    sampler_params,
+)
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 
@@ -234,7 +241,7 @@ def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[i
             sampler = None
         if sampler is not None and sampler.fed == complete * batch:
             return sampler
-    sampler = make_sampler(settings["sampler"], space.feature_space, settings["seed"],
+    sampler = make_sampler(settings["sampler"], space, settings["seed"],
                            settings.get("sampler_options") or None)
     seen: set = set()
     for chunk in range(complete):
@@ -276,7 +283,7 @@ def _restore_window(out: Path, settings: Dict[str, Any], space, records: Dict[in
         if window is not None and (window.window != batch or any(i not in records for i in range(window.fed))):
             window = None  # another window, or ahead of the records: rebuild
     if window is None:
-        window = WindowSchedule(make_sampler(settings["sampler"], space.feature_space, settings["seed"],
+        window = WindowSchedule(make_sampler(settings["sampler"], space, settings["seed"],
                                              settings.get("sampler_options") or None), batch)
     mode = settings.get("feedback", "robustness")
     window.advance(records, budget, lambda record, seen: _feedback(record, seen, mode), _matcher(out, space))
@@ -409,7 +416,7 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
          ttc_threshold: float = DEFAULT_TTC_THRESHOLD, stall_seconds: float = DEFAULT_STALL_SECONDS,
          convert: bool = False, convert_options: Optional[Dict[str, Any]] = None,
          max_conversions: Optional[int] = None, reports: bool = True,
-         sampler_options: Optional[Dict[str, Any]] = None, feedback: str = "robustness") -> MineRun:
+         sampler_options: Optional[Dict[str, Any]] = None, feedback: Optional[str] = None) -> MineRun:
     """Mine ``policy``'s failures over ``budget`` episodes; resumable (same ``out``).
 
     Args:
@@ -422,7 +429,9 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
             ``thres``; :func:`~dv2s_gym.mining.samplers.sampler_params`); ``None``: VerifAI's defaults.
         feedback: what the adaptive samplers learn from (:data:`FEEDBACKS`): ``"robustness"`` (every
             failure pulls the sampler towards its scene) or ``"novelty"`` (only a failure in a cluster not
-            found before does; a repeat is fed as an easy scene, so the sampler keeps looking for new ones).
+            found before does; a repeat is fed as an easy scene, so the sampler keeps looking for new ones);
+            ``None``: the sampler's default (:func:`~dv2s_gym.mining.samplers.default_feedback`: ``novelty``
+            for ``split``, ``robustness`` for the others).
         scenarios: bank names or ``tag:<tag>`` (``None``: the whole bank).
         bank_dir: the bank folder (``None``: the shipped bank).
         backend, workers, address, timeout: where episodes run (as ``dv2s regress``:
@@ -448,6 +457,7 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
     if sampler not in SAMPLERS:
         raise MiningError(f"unknown sampler {sampler!r}: use one of {', '.join(SAMPLERS)}")
     sampler_params(sampler, sampler_options)  # a bad option fails here, in one line
+    feedback = feedback or default_feedback(sampler)
     if feedback not in FEEDBACKS:
         raise MiningError(f"unknown feedback {feedback!r}: use one of {', '.join(FEEDBACKS)}")
     from policies.registry import load_policy

@@ -13,14 +13,23 @@ Samplers (``name``: VerifAI's):
 - ``cross-entropy``: moves probability to the parameter buckets where failures
   (robustness below 0) occurred (``crossEntropySamplerFor``);
 - ``bandit``: the multi-armed-bandit sampler, which balances that against buckets
-  tried less often (``multiArmedBanditSamplerFor``).
+  tried less often (``multiArmedBanditSamplerFor``);
+- ``split``: VerifAI domain samplers composed differently
+  (:class:`~dv2s_gym.mining.split_sampler.ScenarioSplitSampler`): VerifAI's discrete cross-entropy
+  sampler picks the scenario, and each scenario has its own VerifAI Halton sampler over its own
+  parameters; it learns by default from ``novelty`` feedback (a repeat of a failure cluster
+  already found counts as an easy scene). It finds the most distinct failure clusters of these
+  samplers (bench/RESULTS.md, ``python -m bench.bench_mine --part samplers``).
 
 The adaptive samplers (``cross-entropy``, ``bandit``) take VerifAI's parameters as
 ``options`` (:data:`SAMPLER_OPTIONS`): ``alpha`` (how much one failure moves the
 distribution: each update multiplies it by ``alpha``, VerifAI's default 0.9), ``buckets``
 (buckets per continuous parameter, default 5; 1 leaves the parameters uniform and adapts
 only which scenario is drawn) and ``thres`` (robustness below which an outcome counts
-as a failure, default 0).
+as a failure, default 0). ``split`` takes them too (defaults :data:`SPLIT_DEFAULTS`: alpha 0.9,
+thres 0, buckets 3, the last only used by bucketed parameter samplers), and ``chooser``
+(``cross-entropy``, ``ucb``, ``epsilon-greedy``), ``params`` (``halton``, ``random``, ``bandit``,
+``cross-entropy``) and ``warmup`` (tries of every scenario before the chooser draws, default 0).
 """
 
 from __future__ import annotations
@@ -33,7 +42,7 @@ import numpy as np
 
 from dv2s_gym.mining.errors import MiningError
 
-__all__ = ["SAMPLERS", "SAMPLER_OPTIONS", "SceneSampler", "make_sampler", "sampler_params", "is_adaptive"]
+__all__ = ["SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "SceneSampler", "default_feedback", "make_sampler", "sampler_params", "is_adaptive"]
 
 
 def _factories() -> Dict[str, Callable]:
@@ -47,18 +56,36 @@ def _factories() -> Dict[str, Callable]:
     }
 
 
-SAMPLERS = ("random", "halton", "cross-entropy", "bandit")
+SPLIT = "split"
+"""The sampler split into a scenario chooser and one parameter sampler per scenario
+(:mod:`dv2s_gym.mining.split_sampler`)."""
+
+SAMPLERS = ("random", "halton", "cross-entropy", "bandit", SPLIT)
 """Names :func:`make_sampler` accepts."""
 
-SAMPLER_OPTIONS = {"cross-entropy": ("alpha", "buckets", "thres"), "bandit": ("alpha", "buckets", "thres")}
+SAMPLER_OPTIONS = {"cross-entropy": ("alpha", "buckets", "thres"), "bandit": ("alpha", "buckets", "thres"),
+                   SPLIT: ("alpha", "buckets", "thres", "chooser", "params", "warmup")}
 """The options each sampler takes (the others take none)."""
+
+SPLIT_DEFAULTS: Dict[str, Any] = {"chooser": "cross-entropy", "params": "halton", "alpha": 0.9, "thres": 0.0,
+                                  "buckets": 3, "warmup": 0}
+"""The settings of :data:`SPLIT` when no option is given."""
+
+DEFAULT_FEEDBACK = {SPLIT: "novelty"}
+"""What a sampler learns from when the run does not say (``mine(feedback=None)``); ``robustness`` otherwise."""
 
 _VERIFAI_KIND = {"cross-entropy": "ce", "bandit": "mab"}
 
 
+def default_feedback(name: str) -> str:
+    """The feedback (:data:`dv2s_gym.mining.miner.FEEDBACKS`) sampler ``name`` gets unless told otherwise."""
+    return DEFAULT_FEEDBACK.get(name, "robustness")
+
+
 def is_adaptive(name: str) -> bool:
-    """True for samplers whose next draws depend on the outcomes fed back (``cross-entropy``, ``bandit``)."""
-    return name in _VERIFAI_KIND
+    """True for samplers whose next draws depend on the outcomes fed back (``cross-entropy``, ``bandit``,
+    ``split``)."""
+    return name in _VERIFAI_KIND or name == SPLIT
 
 
 def sampler_params(name: str, options: Optional[Dict[str, Any]] = None):
@@ -72,24 +99,52 @@ def sampler_params(name: str, options: Optional[Dict[str, Any]] = None):
     if unknown:
         takes = f"it takes {', '.join(allowed)}" if allowed else "it takes none"
         raise MiningError(f"sampler {name!r} has no option {', '.join(map(repr, unknown))}; {takes}")
+    if name == SPLIT:
+        return _split_params(options)
     if name not in _VERIFAI_KIND:
         return None
     from verifai.samplers.feature_sampler import default_sampler_params
 
     params = default_sampler_params(_VERIFAI_KIND[name])
+    _check_numbers(options)
+    if "alpha" in options:
+        params.alpha = float(options["alpha"])
+    if "buckets" in options:
+        params.cont.buckets = int(options["buckets"])
+    if "thres" in options:
+        params.thres = float(options["thres"])
+    return params
+
+
+def _split_params(options: Dict[str, Any]) -> Dict[str, Any]:
+    from dv2s_gym.mining.split_sampler import CHOOSERS, PARAM_SAMPLERS
+
+    _check_numbers(options)
+    params = {**SPLIT_DEFAULTS, **options}
+    if params["chooser"] not in CHOOSERS:
+        raise MiningError(f"sampler option chooser must be one of {', '.join(CHOOSERS)}, not {params['chooser']!r}")
+    if params["params"] not in PARAM_SAMPLERS:
+        raise MiningError(f"sampler option params must be one of {', '.join(PARAM_SAMPLERS)}, "
+                          f"not {params['params']!r}")
+    warmup = params["warmup"]
+    if isinstance(warmup, bool) or not isinstance(warmup, int) or warmup < 0:
+        raise MiningError(f"sampler option warmup must be a whole number >= 0, not {warmup!r}")
+    params["alpha"], params["thres"], params["buckets"] = (float(params["alpha"]), float(params["thres"]),
+                                                           int(params["buckets"]))
+    return params
+
+
+def _check_numbers(options: Dict[str, Any]) -> None:
     if "alpha" in options:
         alpha = float(options["alpha"])
         if not 0.0 < alpha < 1.0:
             raise MiningError(f"sampler option alpha must be between 0 and 1 (exclusive), not {options['alpha']!r}")
-        params.alpha = alpha
     if "buckets" in options:
         buckets = options["buckets"]
         if isinstance(buckets, bool) or not isinstance(buckets, int) or buckets < 1:
             raise MiningError(f"sampler option buckets must be a whole number >= 1, not {buckets!r}")
-        params.cont.buckets = int(buckets)
     if "thres" in options:
-        params.thres = float(options["thres"])
-    return params
+        float(options["thres"])
 
 
 class SceneSampler:
@@ -148,21 +203,43 @@ class SceneSampler:
         return sampler
 
 
-def make_sampler(name: str, feature_space: Any, seed: int, options: Optional[Dict[str, Any]] = None) -> SceneSampler:
-    """The sampler called ``name`` (:data:`SAMPLERS`) over ``feature_space``, seeded.
+def make_sampler(name: str, space: Any, seed: int, options: Optional[Dict[str, Any]] = None) -> SceneSampler:
+    """The sampler called ``name`` (:data:`SAMPLERS`) over ``space``, seeded.
 
-    ``options``: VerifAI parameters of the adaptive samplers (see the module docstring).
+    ``space``: a :class:`~dv2s_gym.mining.space.SceneSpace`, or its VerifAI ``feature_space``
+    (then ``split`` gives every scenario the full width of the unit box). ``options``: VerifAI
+    parameters of the adaptive samplers (see the module docstring).
     """
     factories = _factories()
-    if name not in factories:
+    if name not in factories and name != SPLIT:
         raise MiningError(f"unknown sampler {name!r}: use one of {', '.join(SAMPLERS)}")
     params = sampler_params(name, options)
+    feature_space = getattr(space, "feature_space", space)
     saved_py, saved_np = random.getstate(), np.random.get_state()
     random.seed(seed)
     np.random.seed(seed % (2**32))
     try:  # some samplers draw while they are built
-        inner = factories[name](feature_space) if params is None else factories[name](feature_space, params)
+        if name == SPLIT:
+            inner = _make_split(space, feature_space, params)
+        elif params is None:
+            inner = factories[name](feature_space)
+        else:
+            inner = factories[name](feature_space, params)
     finally:
         random.setstate(saved_py)
         np.random.set_state(saved_np)
     return SceneSampler(name, inner, seed)
+
+
+def _make_split(space: Any, feature_space: Any, params: Dict[str, Any]):
+    from dv2s_gym.mining.split_sampler import ScenarioSplitSampler, scenario_dimensions
+
+    if hasattr(space, "scenarios"):
+        dimensions = scenario_dimensions(space)
+    else:
+        width = len(feature_space.featureNamed["u"].domain.intervals)
+        count = feature_space.featureNamed["scenario"].domain.intervals[0][1] + 1
+        dimensions = [width] * int(count)
+    return ScenarioSplitSampler(feature_space, dimensions, chooser=params["chooser"], params=params["params"],
+                                alpha=params["alpha"], thres=params["thres"], buckets=params["buckets"],
+                                warmup=params["warmup"])

@@ -19,7 +19,6 @@ Results are printed per use case and overall as mean ± sd, like the paper's tab
 
 from __future__ import annotations
 
-import json
 import time
 from collections import defaultdict
 from concurrent.futures import ProcessPoolExecutor

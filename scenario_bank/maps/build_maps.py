@@ -925,6 +925,38 @@ def build_urban_multilane() -> OpenDriveMap:
 ARM_NAMES = {0: "east", 90: "north", 180: "west", 270: "south"}
 
 
+def junction_arms(arm_angles_deg: Sequence[int], start_distance: float, arm_length: float,
+                  junction_id: int) -> Tuple[List[Road], Dict[int, Pose]]:
+    """Straight two-way town arms (one lane each way, sidewalks) leaving a junction at the origin.
+
+    Arm ``i`` (road id ``i + 1``) starts ``start_distance`` metres from the centre at
+    ``arm_angles_deg[i]`` and runs outward, its predecessor the junction. Returns the
+    roads and each road's start pose.
+    """
+    roads: List[Road] = []
+    starts: Dict[int, Pose] = {}
+    for index, angle_deg in enumerate(arm_angles_deg):
+        if angle_deg % 90:
+            raise ValueError("arms must be multiples of 90 degrees apart")
+        road_id = index + 1
+        hdg = math.radians(angle_deg)
+        start = (start_distance * math.cos(hdg), start_distance * math.sin(hdg), hdg)
+        starts[road_id] = start
+        roads.append(
+            Road(
+                id=road_id,
+                name=f"arm_{ARM_NAMES[angle_deg % 360]}",
+                start=start,
+                segments=(Line(arm_length),),
+                sections=(urban_two_way_section(RoadMark("solid", "yellow")),),
+                predecessor=Link("junction", junction_id),
+                road_type="town",
+                speed_kmh=URBAN_SPEED,
+            )
+        )
+    return roads, starts
+
+
 def build_intersection(
     name: str,
     arm_angles_deg: Sequence[int],
@@ -944,27 +976,7 @@ def build_intersection(
     quarter circle of radius ``junction_half_size`` for turns.
     """
     d = junction_half_size
-    roads: List[Road] = []
-    starts: Dict[int, Pose] = {}
-    for index, angle_deg in enumerate(arm_angles_deg):
-        if angle_deg % 90:
-            raise ValueError("arms must be multiples of 90 degrees apart")
-        road_id = index + 1
-        hdg = math.radians(angle_deg)
-        start = (d * math.cos(hdg), d * math.sin(hdg), hdg)
-        starts[road_id] = start
-        roads.append(
-            Road(
-                id=road_id,
-                name=f"arm_{ARM_NAMES[angle_deg % 360]}",
-                start=start,
-                segments=(Line(arm_length),),
-                sections=(urban_two_way_section(RoadMark("solid", "yellow")),),
-                predecessor=Link("junction", junction_id),
-                road_type="town",
-                speed_kmh=URBAN_SPEED,
-            )
-        )
+    roads, starts = junction_arms(arm_angles_deg, d, arm_length, junction_id)
     arm_names = {road.id: road.name[len("arm_") :] for road in roads}
 
     junction = Junction(junction_id, f"{name}_junction")
@@ -1041,26 +1053,8 @@ def build_urban_roundabout(
     # the entry curve meets the ring at this angle from the arm's axis
     meet = math.atan2(entry_radius, d)
     entry_turn = math.pi / 2 - meet  # right turn from the inbound heading onto the ring
-    roads: List[Road] = []
-    starts: Dict[int, Pose] = {}
     arm_angles = (0, 90, 180, 270)
-    for index, angle_deg in enumerate(arm_angles):
-        road_id = index + 1
-        hdg = math.radians(angle_deg)
-        start = (d * math.cos(hdg), d * math.sin(hdg), hdg)
-        starts[road_id] = start
-        roads.append(
-            Road(
-                id=road_id,
-                name=f"arm_{ARM_NAMES[angle_deg]}",
-                start=start,
-                segments=(Line(arm_length),),
-                sections=(urban_two_way_section(RoadMark("solid", "yellow")),),
-                predecessor=Link("junction", junction_id),
-                road_type="town",
-                speed_kmh=URBAN_SPEED,
-            )
-        )
+    roads, starts = junction_arms(arm_angles, d, arm_length, junction_id)
     arm_names = {road.id: road.name[len("arm_") :] for road in roads}
     junction = Junction(junction_id, f"{name}_ring")
     next_id = 101

@@ -251,46 +251,9 @@ behavior MergeFromRamp(speed, accelLane, delay, duration):
     do FollowLaneBehavior(target_speed=speed) for delay seconds
     do ChangeLanes(1, speed, duration)
 ''', ("ChangeLanes",)),
-    "PullOutWhenNear": ('''
-behavior PullOutWhenNear(line, fromOffset, speed, trigger, backUp, duration):
-    # stand at the kerb `fromOffset` m beside `line` (left positive) until the ego is within `trigger` m
-    # (a negative trigger: wait -trigger seconds), back up `backUp` m if asked, then steer into the lane
-    if trigger < 0:
-        do HoldStill() for -trigger seconds
-    else:
-        do HoldStill() for 0.4 seconds
-        do HoldStill() until (distance from self to ego) < trigger
-    if backUp > 0:
-        start = self.position
-        take SetReverseAction(True)
-        while (distance from self to start) < backUp:
-            take SetThrottleAction(0.35), SetBrakeAction(0), SetSteerAction(0)
-        while self.speed > 0.3:
-            take SetThrottleAction(0), SetBrakeAction(1)
-        take SetReverseAction(False)
-    # steer onto the lane centre with a gentle heading (at most 0.3 rad off the parked one) while speeding up;
-    # the stock lane-keeping controller oversteers from standstill and turns the car round
-    elapsed = 0
-    reference = self.heading  # parked along the (straight) road
-    while elapsed < duration + 2 and (abs(line.signedDistanceTo(self.position)) > 0.3 or elapsed < duration):
-        elapsed += simulation().timestep
-        offset = line.signedDistanceTo(self.position)
-        relative = self.heading - reference
-        while relative > 180 deg:
-            relative -= 360 deg
-        while relative < -180 deg:
-            relative += 360 deg
-        wanted = max(-0.3, min(0.3, -0.25 * offset))
-        steer = max(-0.3, min(0.3, -1.5 * (wanted - relative)))
-        throttle = 0.5 if self.speed < speed else 0
-        take SetThrottleAction(throttle), SetBrakeAction(0), SetSteerAction(steer)
-    do FollowLaneBehavior(target_speed=speed)
-''', ("HoldStill",)),
-    "BackUpThenPullOutInto": ('''
-behavior BackUpThenPullOutInto(line, speed, backUp, other, trigger, duration):
-    # parked at the kerb beside `line`: back up `backUp` m, wait until `other` (coming along the lane from
-    # behind) is within `trigger` m, then steer into the lane, into its path
-    do HoldStill() for 0.4 seconds
+    "BackUp": ('''
+behavior BackUp(backUp):
+    # reverse straight back `backUp` m, then stand
     start = self.position
     take SetReverseAction(True)
     while (distance from self to start) < backUp:
@@ -298,7 +261,12 @@ behavior BackUpThenPullOutInto(line, speed, backUp, other, trigger, duration):
     while self.speed > 0.3:
         take SetThrottleAction(0), SetBrakeAction(1)
     take SetReverseAction(False)
-    do HoldStill() until (distance from self to other) < trigger
+''', ()),
+    "SteerOntoLine": ('''
+behavior SteerOntoLine(line, speed, duration):
+    # from standing beside `line`, steer onto it with a gentle heading (at most 0.3 rad off the start heading)
+    # while speeding up to `speed`; the stock lane-keeping controller oversteers from standstill and turns the
+    # car round. Ends on the line, at the earliest after `duration` s
     elapsed = 0
     reference = self.heading
     while elapsed < duration + 2 and (abs(line.signedDistanceTo(self.position)) > 0.3 or elapsed < duration):
@@ -313,8 +281,31 @@ behavior BackUpThenPullOutInto(line, speed, backUp, other, trigger, duration):
         steer = max(-0.3, min(0.3, -1.5 * (wanted - relative)))
         throttle = 0.5 if self.speed < speed else 0
         take SetThrottleAction(throttle), SetBrakeAction(0), SetSteerAction(steer)
+''', ()),
+    "PullOutWhenNear": ('''
+behavior PullOutWhenNear(line, fromOffset, speed, trigger, backUp, duration):
+    # stand at the kerb `fromOffset` m beside `line` (left positive) until the ego is within `trigger` m
+    # (a negative trigger: wait -trigger seconds), back up `backUp` m if asked, then steer into the lane
+    if trigger < 0:
+        do HoldStill() for -trigger seconds
+    else:
+        do HoldStill() for 0.4 seconds
+        do HoldStill() until (distance from self to ego) < trigger
+    if backUp > 0:
+        do BackUp(backUp)
+    do SteerOntoLine(line, speed, duration)
     do FollowLaneBehavior(target_speed=speed)
-''', ("HoldStill",)),
+''', ("HoldStill", "BackUp", "SteerOntoLine")),
+    "BackUpThenPullOutInto": ('''
+behavior BackUpThenPullOutInto(line, speed, backUp, other, trigger, duration):
+    # parked at the kerb beside `line`: back up `backUp` m, wait until `other` (coming along the lane from
+    # behind) is within `trigger` m, then steer into the lane, into its path
+    do HoldStill() for 0.4 seconds
+    do BackUp(backUp)
+    do HoldStill() until (distance from self to other) < trigger
+    do SteerOntoLine(line, speed, duration)
+    do FollowLaneBehavior(target_speed=speed)
+''', ("HoldStill", "BackUp", "SteerOntoLine")),
     "UTurnLater": ('''
 behavior UTurnLater(speed, after, turnSpeed, steer):
     # drive on for `after` seconds, slow to turnSpeed and turn round to the left (steer 0..1) until

@@ -139,7 +139,6 @@ def analyze_bev(clip, question: Optional[str] = None) -> BevAnalysis:
         heading = heading + math.pi
     # ---- tracks
     tracks = _stitch(_track(out, scale, heading), out, scale, heading, (w, h))
-    ego_len_m = ego_len / scale
     kept: List[Track] = []
     for trk in tracks:
         if len(trk.idx) < 2:

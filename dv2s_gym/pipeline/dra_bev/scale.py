@@ -9,7 +9,6 @@ about 5 %; the spacing of parallel lane lines is measured beside it (``lane_px``
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 

@@ -1,0 +1,146 @@
+"""The split sampler (dv2s_gym/mining/split_sampler.py): a VerifAI sampler over which scenario, one VerifAI
+sampler per scenario over its parameters; deterministic, resumable, adaptive."""
+
+from __future__ import annotations
+
+import json
+import random
+
+import numpy as np
+import pytest
+
+from dv2s_gym.mining import miner as miner_module
+from dv2s_gym.mining.cluster import region_of
+from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.miner import mine, read_records
+from dv2s_gym.mining.samplers import SPLIT, SceneSampler, is_adaptive, make_sampler
+from dv2s_gym.mining.space import SceneSpace
+
+BRAKES = "highway_lead_vehicle_brakes"  # 4 parameters
+LEFT_TURN = "urban_left_turn_oncoming"  # 2 parameters
+POLICY = "rule?action_noise=0.4"
+
+
+@pytest.fixture(scope="module")
+def space():
+    return SceneSpace([BRAKES, LEFT_TURN])
+
+
+def _drive(sampler, space, draws: int, fails=lambda spec: spec.scenario == LEFT_TURN):
+    """Draw and feed one scene at a time; the decoded scenes."""
+    specs = []
+    for _ in range(draws):
+        ((point, info),) = sampler.draw(1)
+        spec = space.decode(point)
+        specs.append(spec)
+        sampler.feed(point, info, -1.0 if fails(spec) else 2.0)
+    return specs
+
+
+def _plain(specs):
+    return [(s.scenario, s.point) for s in specs]
+
+
+@pytest.mark.parametrize("options", [{}, {"chooser": "ucb"}, {"chooser": "epsilon-greedy"}, {"warmup": 2}, {"params": "bandit"}, {"params": "cross-entropy"}])
+def test_split_is_deterministic_under_a_seed_resumes_exactly_and_keeps_the_global_generators(space, options):
+    random.seed(5)
+    np.random.seed(5)
+    before = (random.random(), np.random.random())
+    random.seed(5)
+    np.random.seed(5)
+    first = make_sampler(SPLIT, space, 11, options)
+    head = _drive(first, space, 15)
+    assert (random.random(), np.random.random()) == before  # nothing drawn from the global generators
+    copy = SceneSampler.loads(first.dumps())  # the checkpoint, mid-way
+    tail = _drive(first, space, 15)
+    assert _plain(_drive(copy, space, 15)) == _plain(tail)  # the restored sampler continues exactly
+    random.seed(999)
+    again = make_sampler(SPLIT, space, 11, options)
+    assert _plain(_drive(again, space, 30)) == _plain(head + tail)
+    assert _plain(_drive(make_sampler(SPLIT, space, 12, options), space, 30)) != _plain(head + tail)
+    assert is_adaptive(SPLIT)
+
+
+@pytest.mark.parametrize("options", [{}, {"chooser": "ucb"}])
+def test_split_draws_the_scenario_it_is_fed_failures_on_more_often(space, options):
+    sampler = make_sampler(SPLIT, space, 3, options)
+    learned = _drive(sampler, space, 40)
+    late = [s.scenario for s in learned[20:]]
+    assert late.count(LEFT_TURN) >= 16, late
+    # and the other way round: failures only on the brakes scenario pull the sampler there
+    other = _drive(make_sampler(SPLIT, space, 3, options), space, 40, fails=lambda spec: spec.scenario == BRAKES)
+    assert [s.scenario for s in other[20:]].count(BRAKES) >= 16
+
+
+def test_each_scenario_has_its_own_parameter_sampler_over_its_own_parameters(space):
+    sampler = make_sampler(SPLIT, space, 0)  # Halton per scenario
+    specs = _drive(sampler, space, 60, fails=lambda spec: False)
+    turns = [s for s in specs if s.scenario == LEFT_TURN]
+    brakes = [s for s in specs if s.scenario == BRAKES]
+    assert len(turns[0].point) == 2 and len(brakes[0].point) == 4
+    # the left turn's own 2-D Halton sequence: its first 18 points cover all 9 cells of the 3 x 3 cluster grid
+    assert len(turns) >= 18 and len({region_of(s.point) for s in turns[:18]}) == 9
+    # unused coordinates of the shared unit box are fixed, not drawn
+    ((point, _),) = make_sampler(SPLIT, space, 0).draw(1)
+    spec = space.decode(point)
+    assert all(u == 0.5 for u in list(point.u)[len(spec.point):])
+    # the left turn's points do not depend on what the other scenario was fed
+    mixed = _drive(make_sampler(SPLIT, space, 0), space, 60, fails=lambda spec: spec.scenario == BRAKES)
+    mixed_turns = [s.point for s in mixed if s.scenario == LEFT_TURN]
+    common = min(len(mixed_turns), len(turns))
+    assert common >= 5 and mixed_turns[:common] == [s.point for s in turns[:common]]
+
+
+@pytest.mark.parametrize("chooser", ["cross-entropy", "ucb"])
+def test_a_warm_up_tries_every_scenario_first_and_the_chooser_learns_from_it(space, chooser):
+    sampler = make_sampler(SPLIT, space, 4, {"warmup": 3, "chooser": chooser})
+    first = _drive(sampler, space, 6, fails=lambda spec: spec.scenario == BRAKES)
+    assert sorted(s.scenario for s in first) == [BRAKES] * 3 + [LEFT_TURN] * 3
+    weights = sampler._sampler.scenario_weights()
+    assert weights[space.scenarios.index(BRAKES)] > weights[space.scenarios.index(LEFT_TURN)]
+
+
+def test_split_options_are_checked(space):
+    for bad, match in (({"chooser": "greedy"}, "chooser must be one of cross-entropy, ucb, epsilon-greedy"),
+                       ({"params": "sobol"}, "params must be one of halton, random, bandit, cross-entropy"),
+                       ({"alpha": 1.0}, "alpha must be between 0 and 1"), ({"buckets": 0}, "buckets must be"),
+                       ({"warmup": -1}, "warmup must be a whole number >= 0"), ({"gamma": 1}, "no option 'gamma'")):
+        with pytest.raises(MiningError, match=match):
+            make_sampler(SPLIT, space, 0, bad)
+
+
+RUN = dict(budget=12, sampler=SPLIT, scenarios=[BRAKES, LEFT_TURN], batch=4, seed=7, reference=None,
+           env_config={"duration": 3}, progress=False, reports=False)
+
+
+def _stable(records):
+    return [json.dumps(r, sort_keys=True) for r in records]
+
+
+@pytest.mark.slow
+def test_a_split_mining_run_killed_mid_way_resumes_to_the_same_records(tmp_path, monkeypatch):
+    whole = mine(POLICY, out=tmp_path / "whole", workers=1, **RUN)
+    assert json.loads((tmp_path / "whole" / "settings.json").read_text())["schedule"] == "window"
+    cut = tmp_path / "cut"
+    original = miner_module._Appender.append
+    count = [0]
+
+    def append(self, record):
+        if self._path.name == "episodes.jsonl":
+            if count[0] == 5:
+                raise KeyboardInterrupt
+            count[0] += 1
+        original(self, record)
+
+    monkeypatch.setattr(miner_module._Appender, "append", append)
+    with pytest.raises(KeyboardInterrupt):
+        mine(POLICY, out=cut, workers=2, **RUN)
+    monkeypatch.setattr(miner_module._Appender, "append", original)
+    assert len(read_records(cut / "episodes.jsonl")) == 5
+    resumed = mine(POLICY, out=cut, workers=2, **RUN)
+    assert _stable(resumed.records) == _stable(whole.records)
+    assert (cut / "episodes.jsonl").read_bytes().count(b"\n") == 12
+    (cut / "sampler.pkl").unlink()  # rebuilt from the records alone, with a larger budget
+    longer = mine(POLICY, out=cut, workers=1, **{**RUN, "budget": 14})
+    assert _stable(longer.records[:12]) == _stable(whole.records)
+    assert [r["scenario"] for r in whole.records] and {r["scenario"] for r in whole.records} <= {BRAKES, LEFT_TURN}
