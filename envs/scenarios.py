@@ -17,7 +17,7 @@ import re
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -306,27 +306,37 @@ def runtime_construct_error(error: NameError, compiled: CompiledScenario) -> Sce
 
 def step_timeout_error(overtime: Exception, compiled: CompiledScenario) -> StepTimeoutError:
     """The error for a simulation step that ran over the env's ``step_time_limit``, naming the
-    script line that was running (the innermost frame of the script)."""
+    script lines that were running: the outermost frame of the script (the behaviour whose loop
+    never ends its step) and, inside it, where the CPU limit caught it."""
     label = compiled.label
-    line = _innermost_script_line(overtime, label)
-    where = f"{label}, line {line}" if line else label
-    code = _source_line(compiled.source, line) if line else "a behaviour"
+    lines = _script_lines(overtime, label)
+    where = f"{label}, line {lines[0]}" if lines else label
+    code = f"`{_source_line(compiled.source, lines[0])}`" if lines else "a behaviour"
+    inner = [line for line in dict.fromkeys(lines[1:]) if line != lines[0]]
+    if inner:
+        code += ", inside it " + ", ".join(f"line {n} `{_source_line(compiled.source, n)}`" for n in inner)
     return StepTimeoutError(
-        f"{where}: one simulation step used over {getattr(overtime, 'seconds', 0):g} s of CPU in `{code}`: a behaviour that "
+        f"{where}: one simulation step used over {getattr(overtime, 'seconds', 0):g} s of CPU in {code}: a behaviour that "
         "loops without taking an action (e.g. `while True: do B()` where B returns at once) never ends its time "
         "step. Make each pass of the loop take an action or `wait`; raise the env's `step_time_limit` if the step "
         "is only slow.")
 
 
-def _innermost_script_line(error: BaseException, label: str) -> Optional[int]:
-    """The line of the innermost frame of ``error``'s traceback that runs the script ``label``."""
-    line = None
+def _script_lines(error: BaseException, label: str) -> List[int]:
+    """The lines of the frames of ``error``'s traceback that run the script ``label``, outermost first."""
+    lines = []
     tb = error.__traceback__
     while tb is not None:
         if tb.tb_frame.f_code.co_filename in (label, os.path.realpath(label)):
-            line = tb.tb_lineno
+            lines.append(tb.tb_lineno)
         tb = tb.tb_next
-    return line
+    return lines
+
+
+def _innermost_script_line(error: BaseException, label: str) -> Optional[int]:
+    """The line of the innermost frame of ``error``'s traceback that runs the script ``label``."""
+    lines = _script_lines(error, label)
+    return lines[-1] if lines else None
 
 
 def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompileError:

@@ -75,15 +75,17 @@ def _make_chooser(kind: str, count: int, alpha: float, thres: float):
 
 
 def _make_params(kind: str, dimension: int, alpha: float, thres: float, buckets: int):
-    from dotmap import DotMap
     from verifai.features import Box
+    from verifai.samplers.feature_sampler import default_sampler_params
 
     box = Box(*[[0.0, 1.0]] * max(dimension, 1))
     if kind == "halton":
         from verifai.samplers.halton import HaltonSampler
 
         start = int(np.random.randint(0, _HALTON_START))  # the caller seeds the generators
-        return HaltonSampler(domain=box, halton_params=DotMap(sample_index=start, bases_skipped=0))
+        params = default_sampler_params("halton")  # VerifAI's DotMap: sample_index, bases_skipped
+        params.sample_index = start
+        return HaltonSampler(domain=box, halton_params=params)
     if kind == "random":
         from verifai.samplers.random_sampler import RandomSampler
 
