@@ -578,45 +578,18 @@ def identity_links(ids: Iterable[int], pred: bool = True, succ: bool = True):
     return {i: (i if pred else None, i if succ else None) for i in ids}
 
 
-def urban_two_way_section(center_mark: RoadMark) -> LaneSection:
-    """One driving lane per direction plus a sidewalk on each side."""
-    return LaneSection(
-        s=0.0,
-        left=(
-            Lane(1, "driving", LANE_WIDTH, SOLID),
-            Lane(2, "sidewalk", SIDEWALK_WIDTH, NO_MARK),
-        ),
-        right=(
-            Lane(-1, "driving", LANE_WIDTH, SOLID),
-            Lane(-2, "sidewalk", SIDEWALK_WIDTH, NO_MARK),
-        ),
-        center_mark=center_mark,
-    )
-
-
-def urban_parking_section(center_mark: RoadMark) -> LaneSection:
-    """One driving lane per direction, a parking lane at each kerb (solid line between them) and a sidewalk."""
-
-    def side(sign: int) -> Tuple[Lane, ...]:
-        return (
-            Lane(sign * 1, "driving", LANE_WIDTH, SOLID),
-            Lane(sign * 2, "parking", PARKING_WIDTH, NO_MARK),
-            Lane(sign * 3, "sidewalk", SIDEWALK_WIDTH, NO_MARK),
-        )
-
-    return LaneSection(s=0.0, left=side(1), right=side(-1), center_mark=center_mark)
-
-
-def urban_multilane_section(lanes_per_direction: int, center_mark: RoadMark) -> LaneSection:
-    """``lanes_per_direction`` driving lanes each way (broken marks between
-    same-direction lanes, solid on the kerb side) plus a sidewalk on each side."""
+def town_street_section(center_mark: RoadMark, lanes_per_direction: int = 1, parking: bool = False) -> LaneSection:
+    """``lanes_per_direction`` driving lanes each way (broken marks between same-direction lanes, solid on
+    the kerb side), with ``parking`` a parking lane at each kerb, then a sidewalk on each side."""
 
     def side(sign: int) -> Tuple[Lane, ...]:
         lanes = [
             Lane(sign * i, "driving", LANE_WIDTH, SOLID if i == lanes_per_direction else BROKEN)
             for i in range(1, lanes_per_direction + 1)
         ]
-        lanes.append(Lane(sign * (lanes_per_direction + 1), "sidewalk", SIDEWALK_WIDTH, NO_MARK))
+        if parking:
+            lanes.append(Lane(sign * (len(lanes) + 1), "parking", PARKING_WIDTH, NO_MARK))
+        lanes.append(Lane(sign * (len(lanes) + 1), "sidewalk", SIDEWALK_WIDTH, NO_MARK))
         return tuple(lanes)
 
     return LaneSection(s=0.0, left=side(1), right=side(-1), center_mark=center_mark)
@@ -880,46 +853,35 @@ def build_highway_onramp() -> OpenDriveMap:
     )
 
 
-def build_urban_two_way() -> OpenDriveMap:
-    """Straight 600 m two-way street with sidewalks, along +x."""
+def straight_town_street(name: str, section: LaneSection) -> OpenDriveMap:
+    """A straight 600 m town street along +x, one road of lane section ``section``."""
     road = Road(
         id=1,
         name="street",
         start=(0.0, 0.0, 0.0),
         segments=(Line(600.0),),
-        sections=(urban_two_way_section(RoadMark("broken", "yellow", "both")),),
+        sections=(section,),
         road_type="town",
         speed_kmh=URBAN_SPEED,
     )
-    return OpenDriveMap("urban_two_way", [road])
+    return OpenDriveMap(name, [road])
+
+
+def build_urban_two_way() -> OpenDriveMap:
+    """Straight 600 m two-way street with sidewalks, along +x."""
+    return straight_town_street("urban_two_way", town_street_section(RoadMark("broken", "yellow", "both")))
 
 
 def build_urban_parking() -> OpenDriveMap:
     """Straight 600 m two-way street with a parking lane and a sidewalk on each side, along +x."""
-    road = Road(
-        id=1,
-        name="street",
-        start=(0.0, 0.0, 0.0),
-        segments=(Line(600.0),),
-        sections=(urban_parking_section(RoadMark("broken", "yellow", "both")),),
-        road_type="town",
-        speed_kmh=URBAN_SPEED,
-    )
-    return OpenDriveMap("urban_parking", [road])
+    return straight_town_street("urban_parking",
+                                town_street_section(RoadMark("broken", "yellow", "both"), parking=True))
 
 
 def build_urban_multilane() -> OpenDriveMap:
     """Straight 600 m two-way town street, two lanes per direction, sidewalks, along +x."""
-    road = Road(
-        id=1,
-        name="street",
-        start=(0.0, 0.0, 0.0),
-        segments=(Line(600.0),),
-        sections=(urban_multilane_section(2, RoadMark("solid solid", "yellow", "none", 0.3)),),
-        road_type="town",
-        speed_kmh=URBAN_SPEED,
-    )
-    return OpenDriveMap("urban_multilane", [road])
+    return straight_town_street("urban_multilane",
+                                town_street_section(RoadMark("solid solid", "yellow", "none", 0.3), 2))
 
 
 ARM_NAMES = {0: "east", 90: "north", 180: "west", 270: "south"}
@@ -948,7 +910,7 @@ def junction_arms(arm_angles_deg: Sequence[int], start_distance: float, arm_leng
                 name=f"arm_{ARM_NAMES[angle_deg % 360]}",
                 start=start,
                 segments=(Line(arm_length),),
-                sections=(urban_two_way_section(RoadMark("solid", "yellow")),),
+                sections=(town_street_section(RoadMark("solid", "yellow")),),
                 predecessor=Link("junction", junction_id),
                 road_type="town",
                 speed_kmh=URBAN_SPEED,
