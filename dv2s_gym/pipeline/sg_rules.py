@@ -63,17 +63,28 @@ PARKING_STREET = "urban_parking"
 """``urban_two_way`` with a parking lane at each kerb: the street of vehicles parked at the kerb, pulling out
 of a parking space or backing out of one."""
 STREET_MAPS = ("urban_two_way", PARKING_STREET)
+"""The town streets with one lane per direction."""
 SHOULDER_HIGHWAY = "highway_straight"
 """The highway with a hard shoulder (3 m, right of the rightmost lane): the ego parked on it pulls out from it."""
 _SHOULDER_KERB = "Range(2.15, 2.35)"
 """``right of <rightmost lane centre point> by`` this puts a car on the centre of :data:`SHOULDER_HIGHWAY`'s
 hard shoulder (3.25 m right of the lane centre)."""
-"""The town streets with one lane per direction."""
 _PARKING_KERB = "Range(1.9, 2.1)"
 """``right of <lane centre point> by`` this puts a car on the centre of the kerbside parking lane of
 :data:`PARKING_STREET` (the car's left side ``LANE_WIDTH / 2 + 0.25`` m from the lane centre, give or take)."""
 _PARKING_FAR_KERB = "Range(5.4, 5.6)"
 """``left of <ego's lane centre point> by`` this puts a car on the far (oncoming side's) parking lane."""
+
+
+def _at_kerb(var: str, cls: str, along: str, kerb: str, behavior: str) -> List[str]:
+    """Scenic lines for ``var``, a standing ``cls`` at the right kerb of the ego's lane: ``along`` metres down
+    the lane's centre line, its left side ``kerb`` metres right of it (off the driving lane, so the lane
+    containment requirement is lifted), facing the lane's direction."""
+    return [f"{var}Spot = new OrientedPoint at egoLane.centerline.pointAlongBy({along}), facing roadDirection",
+            f"{var} = new {cls} right of {var}Spot by {kerb}, facing {var}Spot.heading,",
+            "    with regionContainedIn everywhere,",
+            "    with speed 0,",
+            f"    with behavior {behavior}"]
 
 
 def _ring_lengths() -> Tuple[float, float]:
@@ -801,17 +812,9 @@ def _compose_lanes(s: _Script) -> None:
     if (ego.has("pull_out") or ego.has("reverse")) and two_way:
         # parked at the kerb, still on the road surface (the env ends an episode whose ego leaves the road)
         kerb = _PARKING_KERB if frame.map == PARKING_STREET else "Range(1.0, 1.3)"
-        ego_lines = ["egoSpot = new OrientedPoint at egoLane.centerline.pointAlongBy(egoS), facing roadDirection",
-                     f"ego = new Car right of egoSpot by {kerb}, facing egoSpot.heading,",
-                     "    with regionContainedIn everywhere,",
-                     "    with speed 0,",
-                     f"    with behavior {ego_behavior}"]
+        ego_lines = _at_kerb("ego", "Car", "egoS", kerb, ego_behavior)
     elif on_shoulder:
-        ego_lines = ["egoSpot = new OrientedPoint at egoLane.centerline.pointAlongBy(egoS), facing roadDirection",
-                     f"ego = new Car right of egoSpot by {_SHOULDER_KERB}, facing egoSpot.heading,",
-                     "    with regionContainedIn everywhere,",
-                     "    with speed 0,",
-                     f"    with behavior {ego_behavior}"]
+        ego_lines = _at_kerb("ego", "Car", "egoS", _SHOULDER_KERB, ego_behavior)
     elif ego.has("pull_out") or ego.has("reverse"):
         target = lane_of(1)
         if target == "egoLane":
@@ -973,11 +976,7 @@ def _spawn_lane_actor(s: _Script, actor: ActorFrame, ego: ActorFrame, ego_speed:
         gap = s.param(f"{n}_gap", "Range(55, 85)")
         for i in range(actor.count):
             var = n if actor.count == 1 else f"{n}_{i + 1}"
-            s.spawn += [f"{var}Spot = new OrientedPoint at egoLane.centerline.pointAlongBy(egoS + {gap} + {14 * i}), "
-                        "facing roadDirection",
-                        f"{var} = new {cls} right of {var}Spot by {_SHOULDER_KERB}, facing {var}Spot.heading,",
-                        "    with regionContainedIn everywhere,",
-                        "    with speed 0,", "    with behavior HoldStill()"]
+            s.spawn += _at_kerb(var, cls, f"egoS + {gap} + {14 * i}", _SHOULDER_KERB, "HoldStill()")
         s.use("HoldStill")
         s.show(actor.kind, [a for a in actor.actions if a == "stop"], ["ahead_of", "right_of"], actor.count)
         return
@@ -1199,13 +1198,8 @@ def _spawn_puller(s: _Script, actor: ActorFrame, ego_speed: str, two_way: bool) 
     s.use("PullOutWhenNear")
     for i in range(actor.count):
         var = n if actor.count == 1 else f"{n}_{i + 1}"
-        s.spawn += [f"{var}Spot = new OrientedPoint at egoLane.centerline.pointAlongBy(egoS + {gap} + {12 * i}), "
-                    "facing roadDirection",
-                    f"{var} = new {_CLASS[actor.kind]} right of {var}Spot by {kerb}, facing {var}Spot.heading,",
-                    "    with regionContainedIn everywhere,",
-                    "    with speed 0,",
-                    f"    with behavior PullOutWhenNear(egoLane.centerline, -{kerb}, {speed}, {trigger}, {back}, "
-                    "Range(2.2, 3.0))"]
+        s.spawn += _at_kerb(var, _CLASS[actor.kind], f"egoS + {gap} + {12 * i}", kerb,
+                            f"PullOutWhenNear(egoLane.centerline, -{kerb}, {speed}, {trigger}, {back}, Range(2.2, 3.0))")
     shown = [a for a in actor.actions if a in ("pull_out", "reverse", "collide")]
     if "pull_out" not in shown:
         shown.append("pull_out")
