@@ -352,14 +352,19 @@ behavior RouteThenBrake(speed, route, after, lowSpeed, strength):
             do HoldStill()
         do FollowLaneBehavior(target_speed=lowSpeed)
 ''', ("DriveRoute", "HoldStill")),
+    "StopAtEntry": ('''\
+behavior StopAtEntry(speed, route, entry):
+    # drive the route and brake to a stop at the junction entry (`entry`: the end of the approach lane)
+    do DriveRoute(speed, route) until (distance from self to entry) < 1.5 + self.speed * self.speed / 10
+    while self.speed > 0.2:
+        take SetThrottleAction(0), SetBrakeAction(1)
+''', ("DriveRoute",)),
     "StopForConflict": ('''\
 behavior StopForConflict(speed, route, entry, other, otherExit, minWait, maxWait):
     # drive the route, stop at the junction entry, wait at least minWait seconds and until `other` (None: no
     # one) has cleared the ego's way (it is on its exit lane, otherExit, or it is 4 m further from the ego's
     # entry than it came since the ego stopped: it has passed), at most maxWait seconds, then go on
-    do DriveRoute(speed, route) until (distance from self to entry) < 1.5 + self.speed * self.speed / 10
-    while self.speed > 0.2:
-        take SetThrottleAction(0), SetBrakeAction(1)
+    do StopAtEntry(speed, route, entry)
     waited = 0
     closest = 1000
     cleared = other is None
@@ -371,20 +376,18 @@ behavior StopForConflict(speed, route, entry, other, otherExit, minWait, maxWait
         take SetThrottleAction(0), SetBrakeAction(1)
         waited += simulation().timestep
     do CautiousRoute(speed, route)
-''', ("DriveRoute", "CautiousRoute")),
+''', ("StopAtEntry", "CautiousRoute")),
     "StopThenGoInto": ('''\
 behavior StopThenGoInto(speed, route, entry, other, otherEntry, goTime, minWait):
     # drive the route, stop at the junction entry, then misjudge the gap: go on (at the latest after 6 s) once
     # `other` is about goTime seconds from the junction (otherEntry: the end of its approach lane)
-    do DriveRoute(speed, route) until (distance from self to entry) < 1.5 + self.speed * self.speed / 10
-    while self.speed > 0.2:
-        take SetThrottleAction(0), SetBrakeAction(1)
+    do StopAtEntry(speed, route, entry)
     waited = 0
     while waited < 6 and (waited < minWait or (distance from other to otherEntry) > max(2, other.speed * goTime - 8)):
         take SetThrottleAction(0), SetBrakeAction(1)
         waited += simulation().timestep
     do DriveRoute(speed, route)
-''', ("DriveRoute",)),
+''', ("StopAtEntry", "DriveRoute")),
     "PullOutWhenEgoNear": ('''\
 behavior PullOutWhenEgoNear(speed, route, egoEntry, triggerTime):
     # wait at the give-way line until the ego is about triggerTime seconds from the junction
