@@ -9,12 +9,12 @@ import random
 import numpy as np
 import pytest
 
-from dv2s_gym.mining import miner as miner_module
 from dv2s_gym.mining.cluster import region_of
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.miner import mine, read_records
 from dv2s_gym.mining.samplers import SPLIT, SceneSampler, is_adaptive, make_sampler
 from dv2s_gym.mining.space import SceneSpace
+from mining_helpers import mine_killed_after
 
 BRAKES = "highway_lead_vehicle_brakes"  # 4 parameters
 LEFT_TURN = "urban_left_turn_oncoming"  # 2 parameters
@@ -122,20 +122,7 @@ def test_a_split_mining_run_killed_mid_way_resumes_to_the_same_records(tmp_path,
     whole = mine(POLICY, out=tmp_path / "whole", workers=1, **RUN)
     assert json.loads((tmp_path / "whole" / "settings.json").read_text())["schedule"] == "window"
     cut = tmp_path / "cut"
-    original = miner_module._Appender.append
-    count = [0]
-
-    def append(self, record):
-        if self._path.name == "episodes.jsonl":
-            if count[0] == 5:
-                raise KeyboardInterrupt
-            count[0] += 1
-        original(self, record)
-
-    monkeypatch.setattr(miner_module._Appender, "append", append)
-    with pytest.raises(KeyboardInterrupt):
-        mine(POLICY, out=cut, workers=2, **RUN)
-    monkeypatch.setattr(miner_module._Appender, "append", original)
+    mine_killed_after(POLICY, cut, 5, monkeypatch, workers=2, **RUN)
     assert len(read_records(cut / "episodes.jsonl")) == 5
     resumed = mine(POLICY, out=cut, workers=2, **RUN)
     assert _stable(resumed.records) == _stable(whole.records)

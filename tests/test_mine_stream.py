@@ -8,11 +8,11 @@ import shutil
 
 import pytest
 
-from dv2s_gym.mining import miner as miner_module
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.miner import episode_seed, mine, read_records
 from dv2s_gym.mining.samplers import make_sampler
 from dv2s_gym.mining.space import SceneSpace
+from mining_helpers import mine_killed_after
 from dv2s_gym.mining.window import WindowSchedule
 from dv2s_gym.regress.backends import LocalBackend, _ScenarioQueue
 
@@ -113,20 +113,7 @@ def test_a_streamed_run_is_the_same_on_one_and_two_workers(streamed, tmp_path):
 def test_a_streamed_run_interrupted_mid_way_resumes_to_the_same_records(streamed, tmp_path, monkeypatch, stop_after):
     out, whole = streamed
     cut = tmp_path / "cut"
-    original = miner_module._Appender.append
-    count = [0]
-
-    def append(self, record):
-        if self._path.name == "episodes.jsonl":
-            if count[0] == stop_after:
-                raise KeyboardInterrupt  # killed with episodes in flight, some finished out of order
-            count[0] += 1
-        original(self, record)
-
-    monkeypatch.setattr(miner_module._Appender, "append", append)
-    with pytest.raises(KeyboardInterrupt):
-        mine(POLICY, out=cut, workers=2, **RUN)
-    monkeypatch.setattr(miner_module._Appender, "append", original)
+    mine_killed_after(POLICY, cut, stop_after, monkeypatch, workers=2, **RUN)
     assert len(read_records(cut / "episodes.jsonl")) == stop_after
     resumed = mine(POLICY, out=cut, workers=2, **RUN)
     assert _stable(resumed.records) == _stable(whole.records)
