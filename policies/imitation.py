@@ -26,6 +26,7 @@ greedy action equals the label) of the source and of the result on the same stat
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import time
@@ -94,27 +95,9 @@ class ReferenceLabels(gym.Wrapper):
         return observation, reward, terminated, truncated, info
 
 
-def _build_labelled_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Optional[str],
-                        probabilities: Mapping[str, float], seed: int, stream: int, reference: str) -> gym.Env:
-    os.environ["OMP_NUM_THREADS"] = "1"
-    from envs.dv2s_env import DV2SEnv
-    from policies.training import ScenarioSchedule
-
-    env = DV2SEnv(scenario=list(names), config=dict(config), bank_dir=bank_dir)
-    return ReferenceLabels(ScenarioSchedule(env, probabilities, seed=seed, stream=stream), reference=reference,
-                           seed=seed, stream=stream)
-
-
-def _labelled_vec_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Optional[str],
-                      probabilities: Mapping[str, float], n_envs: int, seed: int, reference: str, vec_env: str):
-    import functools
-
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
-
-    os.environ["OMP_NUM_THREADS"] = "1"
-    factories = [functools.partial(_build_labelled_env, list(names), dict(config), bank_dir, dict(probabilities),
-                                   int(seed) + rank, 0, reference) for rank in range(n_envs)]
-    return DummyVecEnv(factories) if vec_env == "dummy" else SubprocVecEnv(factories)
+def _with_labels(env: gym.Env, seed: int, stream: int, reference: str) -> gym.Env:
+    """The training env's outer wrapper in DAgger (``make_vec_env``'s ``wrap``)."""
+    return ReferenceLabels(env, reference=reference, seed=seed, stream=stream)
 
 
 def agreement(model: Any, observations: np.ndarray, labels: np.ndarray, batch: int = 4096) -> float:
@@ -211,7 +194,10 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
     lr = DAGGER_DEFAULTS["learning_rate"] if learning_rate is None else float(learning_rate)
     optimizer = torch.optim.Adam(model.policy.parameters(), lr=lr)
     rng = np.random.default_rng([int(seed), 11])
-    venv = _labelled_vec_env(scenarios, env_config, bank_dir, probabilities, n_envs, seed, reference, vec_env)
+    from policies.training import make_vec_env
+
+    venv = make_vec_env(scenarios, env_config, bank_dir, probabilities, n_envs, int(seed), vec_env=vec_env,
+                        wrap=functools.partial(_with_labels, reference=reference))
     bar = None
     if progress_bar:
         from tqdm import tqdm

@@ -378,31 +378,39 @@ class ScenarioSchedule(gym.Wrapper):
 
 
 def _build_train_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Optional[str],
-                     probabilities: Mapping[str, float], seed: int, stream: int) -> gym.Env:
+                     probabilities: Mapping[str, float], seed: int, stream: int,
+                     wrap: Optional[Callable[[gym.Env, int, int], gym.Env]] = None) -> gym.Env:
     os.environ["OMP_NUM_THREADS"] = "1"
     from stable_baselines3.common.monitor import Monitor
 
     from envs.dv2s_env import DV2SEnv
 
     env = DV2SEnv(scenario=list(names), config=dict(config), bank_dir=bank_dir)
-    return Monitor(ScenarioSchedule(env, probabilities, seed=seed, stream=stream))
+    scheduled = ScenarioSchedule(env, probabilities, seed=seed, stream=stream)
+    return Monitor(scheduled) if wrap is None else wrap(scheduled, seed, stream)
 
 
 def make_train_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Optional[str],
-                   probabilities: Mapping[str, float], seed: int, stream: int = 0) -> Callable[[], gym.Env]:
-    """A picklable factory of one training env (DV2S-v0 in a :class:`ScenarioSchedule` and SB3's Monitor)."""
+                   probabilities: Mapping[str, float], seed: int, stream: int = 0,
+                   wrap: Optional[Callable[[gym.Env, int, int], gym.Env]] = None) -> Callable[[], gym.Env]:
+    """A picklable factory of one training env (DV2S-v0 in a :class:`ScenarioSchedule` and SB3's Monitor).
+
+    ``wrap(env, seed, stream)``, a picklable callable, replaces the Monitor as the outer wrapper
+    (DAgger's reference labels, :mod:`policies.imitation`)."""
     return functools.partial(_build_train_env, list(names), dict(config), bank_dir, dict(probabilities), int(seed),
-                             int(stream))
+                             int(stream), wrap)
 
 
 def make_vec_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Optional[str],
                  probabilities: Mapping[str, float], n_envs: int, seed: int, stream: int = 0,
-                 vec_env: str = "subproc"):
-    """``n_envs`` training envs in a ``SubprocVecEnv`` (or ``DummyVecEnv``); env ``i`` is seeded ``seed + i``."""
+                 vec_env: str = "subproc", wrap: Optional[Callable[[gym.Env, int, int], gym.Env]] = None):
+    """``n_envs`` training envs in a ``SubprocVecEnv`` (or ``DummyVecEnv``); env ``i`` is seeded ``seed + i``
+    (``wrap``: see :func:`make_train_env`)."""
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     os.environ["OMP_NUM_THREADS"] = "1"  # inherited by the worker processes
-    factories = [make_train_env(names, config, bank_dir, probabilities, seed + rank, stream) for rank in range(n_envs)]
+    factories = [make_train_env(names, config, bank_dir, probabilities, seed + rank, stream, wrap)
+                 for rank in range(n_envs)]
     if vec_env == "dummy":
         return DummyVecEnv(factories)
     return SubprocVecEnv(factories)
