@@ -22,6 +22,10 @@ The result is a normal SB3 checkpoint (``out/model.zip``, the source's class and
 a model card (``model_card.json``, ``README.md``) whose ``fine_tune`` section has
 ``method: "dagger"`` and the agreement with the reference (share of labelled states where the
 greedy action equals the label) of the source and of the result on the same states.
+
+A run is resumable: each finished iteration is committed to ``out/dagger_checkpoint/``
+(:mod:`policies.dagger_checkpoint`), and a killed run called again with the same settings
+continues after the last one to the same model and stats as an uninterrupted run.
 """
 
 from __future__ import annotations

@@ -162,3 +162,29 @@ def test_an_unreadable_checkpoint_is_refused_with_the_fix(tmp_path):
     (folder / "progress.json").write_text("{not json")
     with pytest.raises(DAggerResumeError, match=f"unreadable .*delete {folder}"):
         dagger_fine_tune("dv2s-ppo", out=tmp_path / "run", log=lambda _: None, **RUN)
+
+
+def test_the_loop_resumes_a_killed_dagger_fine_tune_and_says_so(tmp_path, monkeypatch):
+    from dv2s_gym.mining.loop import run_loop
+    from loop_helpers import FakeMiner
+
+    out = tmp_path / "loop"
+    miner = FakeMiner(SOURCES, failures_per_round=4)
+    tiny = dict(budget=6, fine_tune_steps=200, k_eval=1, regress_episodes=1, workers=1, n_envs=1, progress=False,
+                scenarios=SOURCES, fine_tune_method="dagger")
+    _kill_on_train_call(monkeypatch, 2)
+    with pytest.raises(KeyboardInterrupt):
+        run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **tiny)
+    monkeypatch.undo()
+    steps = json.loads((out / "loop.json").read_text())["rounds"][0]["steps"]
+    assert "before" in steps and "fine_tune" not in steps
+    assert checkpoint_iteration(out / "round_1" / "policy") == 1
+    lines = []
+    report = run_loop("dv2s-ppo", out=out, miner=miner, log=lines.append, **tiny)
+    assert "round 1: fine-tune (dagger) resumed from iteration 1 of 4" in lines
+    assert "DAgger iteration 1/4" not in "\n".join(lines)  # not redone
+    tuned = report.rounds[0]["steps"]["fine_tune"]
+    assert tuned["resumed"] == [{"from_iteration": 1, "envs_reproduced": True}]  # subprocess envs too
+    assert [h["iteration"] for h in read_card(tuned["model"])["fine_tune"]["history"]] == [1, 2, 3, 4]
+    assert "resumed from iteration 1:" in report.paths["md"].read_text()
+    assert len(miner.calls) == 1  # mining was not redone either
