@@ -12,10 +12,15 @@ After every iteration the run writes, into ``out/dagger_checkpoint/`` (all atomi
   training env's position (:meth:`policies.imitation.ReferenceLabels.snapshot`), the wall
   time spent so far and the earlier resumes.
 
-A run killed at any point restarts from the last committed iteration and ends with the same
-model as an uninterrupted one (the envs are put back where they were by replaying the
-current episode's actions). A checkpoint whose identity differs from the new call's is
-refused (:class:`DAggerResumeError`), never mixed in.
+While iteration ``k + 1`` collects, every ``checkpoint_every`` env steps the states labelled so
+far go to ``partial_<k+1>_<rows>.npz`` and ``progress.json`` gains a ``partial`` record (rows,
+episode counts, the envs' positions); a kill during collection then loses at most that many
+steps (one during training loses the iteration's training, not its collection).
+
+A run killed at any point restarts from the last commit and ends with the same model as an
+uninterrupted one (the envs are put back where they were by replaying the current episode's
+actions). A checkpoint whose identity differs from the new call's is refused
+(:class:`DAggerResumeError`), never mixed in.
 """
 
 from __future__ import annotations
@@ -26,14 +31,14 @@ import io
 import json
 import shutil
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Optional
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
 from policies.training import TrainingError
 
-__all__ = ["CHECKPOINT_DIR", "DAggerResumeError", "DAggerCheckpoint", "SavedIteration", "run_identity",
-           "checkpoint_iteration"]
+__all__ = ["CHECKPOINT_DIR", "DAggerResumeError", "DAggerCheckpoint", "SavedIteration", "PartialIteration",
+           "run_identity", "checkpoint_position", "describe_position"]
 
 CHECKPOINT_DIR = "dagger_checkpoint"
 """The checkpoint's folder inside the fine-tuning run's ``out``."""
@@ -53,6 +58,26 @@ class DAggerResumeError(TrainingError):
 
 
 @dataclasses.dataclass
+class PartialIteration:
+    """The states labelled so far in an iteration that was still collecting when the run stopped."""
+
+    iteration: int
+    """The iteration collecting (1-based)."""
+    observations: np.ndarray
+    labels: np.ndarray
+    next_observations: np.ndarray
+    """The training envs' observations at that point."""
+    episodes: int
+    crashes: int
+    envs: List[Dict[str, Any]]
+
+    @property
+    def rows(self) -> int:
+        """Labelled states collected in the iteration so far."""
+        return int(len(self.labels))
+
+
+@dataclasses.dataclass
 class SavedIteration:
     """A committed checkpoint, loaded: everything needed to run iteration ``iteration + 1``."""
 
@@ -62,13 +87,15 @@ class SavedIteration:
     labels: List[np.ndarray]
     next_observations: np.ndarray
     """The training envs' observations when iteration ``iteration`` ended."""
-    weights: Dict[str, Any]
-    """``{"policy": state_dict, "optimizer": state_dict, "torch_rng": ByteTensor}``."""
+    weights: Optional[Dict[str, Any]]
+    """``{"policy": state_dict, "optimizer": state_dict, "torch_rng": ByteTensor}`` (``None`` before
+    the first iteration's training: the source's)."""
     rng_state: Dict[str, Any]
     history: List[Dict[str, Any]]
     envs: List[Dict[str, Any]]
     wall_time_s: float
     resumes: List[Dict[str, Any]]
+    partial: Optional[PartialIteration] = None
 
 
 def _sha256(path: Path) -> str:
@@ -116,6 +143,7 @@ class DAggerCheckpoint:
     def __init__(self, folder: Path, identity: Mapping[str, Any]) -> None:
         self.folder = Path(folder)
         self.identity = dict(identity)
+        self._committed: Optional[Dict[str, Any]] = None
 
     @property
     def progress_path(self) -> Path:
@@ -160,16 +188,28 @@ class DAggerCheckpoint:
                     observations.append(batch["observations"])
                     labels.append(batch["labels"])
                     next_observations = batch["next_observations"]
-            import torch
+            weights = None
+            if iteration:
+                import torch
 
-            weights = torch.load(self.folder / f"weights_{iteration}.pt", map_location="cpu", weights_only=True)
+                weights = torch.load(self.folder / f"weights_{iteration}.pt", map_location="cpu", weights_only=True)
+            partial = None
+            if data.get("partial"):
+                record = data["partial"]
+                with np.load(self.folder / record["file"]) as batch:
+                    partial = PartialIteration(
+                        iteration=int(record["iteration"]), observations=batch["observations"],
+                        labels=batch["labels"], next_observations=batch["next_observations"],
+                        episodes=int(record["episodes"]), crashes=int(record["crashes"]), envs=list(record["envs"]))
         except (OSError, KeyError, ValueError, RuntimeError) as error:
             raise DAggerResumeError(f"the DAgger checkpoint in {self.folder} is incomplete ({error}); delete "
                                     f"{self.folder} to start the fine-tuning over") from None
+        self._committed = {key: value for key, value in data.items() if key != "partial"}
         return SavedIteration(iteration=iteration, observations=observations, labels=labels,
                               next_observations=next_observations, weights=weights, rng_state=data["rng"],
                               history=list(data["history"]), envs=list(data["envs"]),
-                              wall_time_s=float(data.get("wall_time_s", 0.0)), resumes=list(data.get("resumes", [])))
+                              wall_time_s=float(data.get("wall_time_s", 0.0)), resumes=list(data.get("resumes", [])),
+                              partial=partial)
 
     def save(self, *, iteration: int, observations: np.ndarray, labels: np.ndarray, next_observations: np.ndarray,
              model: Any, optimizer: Any, rng: np.random.Generator, history: List[Dict[str, Any]],
@@ -188,22 +228,57 @@ class DAggerCheckpoint:
         torch.save({"policy": model.policy.state_dict(), "optimizer": optimizer.state_dict(),
                     "torch_rng": torch.get_rng_state()}, buffer)
         atomic_write_bytes(self.folder / f"weights_{iteration}.pt", buffer.getvalue())
-        atomic_write_json(self.progress_path, {
-            "schema": SCHEMA, "schema_version": 1, "identity": self.identity, "iteration": int(iteration),
-            "history": history, "rng": rng.bit_generator.state, "envs": envs,
-            "wall_time_s": round(float(wall_time_s), 3), "resumes": resumes})
+        self._committed = {"schema": SCHEMA, "schema_version": 1, "identity": self.identity, "iteration": int(iteration),
+                           "history": history, "rng": rng.bit_generator.state, "envs": envs,
+                           "wall_time_s": round(float(wall_time_s), 3), "resumes": resumes}
+        atomic_write_json(self.progress_path, {**self._committed, "partial": None})
         (self.folder / f"weights_{iteration - 1}.pt").unlink(missing_ok=True)
+        self._remove_partials(keep=None)
+
+    def save_partial(self, *, iteration: int, observations: np.ndarray, labels: np.ndarray,
+                     next_observations: np.ndarray, episodes: int, crashes: int, envs: List[Dict[str, Any]],
+                     rng: np.random.Generator, resumes: List[Dict[str, Any]], wall_time_s: float) -> None:
+        """Commit the states iteration ``iteration`` (1-based, still collecting) has labelled so far, with
+        the envs' positions; the last finished iteration's commit stays as it was."""
+        from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
+
+        self.folder.mkdir(parents=True, exist_ok=True)
+        name = f"partial_{iteration}_{len(labels)}.npz"
+        buffer = io.BytesIO()
+        np.savez(buffer, observations=observations, labels=labels, next_observations=next_observations)
+        atomic_write_bytes(self.folder / name, buffer.getvalue())
+        committed = self._committed or {
+            "schema": SCHEMA, "schema_version": 1, "identity": self.identity, "iteration": 0, "history": [],
+            "rng": rng.bit_generator.state, "envs": []}
+        atomic_write_json(self.progress_path, {
+            **committed, "wall_time_s": round(float(wall_time_s), 3), "resumes": resumes,
+            "partial": {"iteration": int(iteration), "file": name, "rows": int(len(labels)),
+                        "episodes": int(episodes), "crashes": int(crashes), "envs": envs}})
+        self._remove_partials(keep=name)
+
+    def _remove_partials(self, keep: Optional[str]) -> None:
+        for path in self.folder.glob("partial_*.npz"):
+            if path.name != keep:
+                path.unlink(missing_ok=True)
 
     def remove(self) -> None:
         """Delete the folder (the run is finished: its model and card are written)."""
         shutil.rmtree(self.folder, ignore_errors=True)
 
 
-def checkpoint_iteration(out: Path | str) -> Optional[int]:
-    """The iterations a DAgger run in ``out`` has committed, or ``None`` when ``out`` holds no checkpoint
-    (for progress messages; :meth:`DAggerCheckpoint.load` checks the settings)."""
+def checkpoint_position(out: Path | str) -> Optional[Tuple[int, int]]:
+    """``(finished iterations, states labelled in the next one)`` of the DAgger run checkpointed in
+    ``out``, or ``None`` when there is none (for progress messages; :meth:`DAggerCheckpoint.load`
+    checks the settings)."""
     path = Path(out) / CHECKPOINT_DIR / "progress.json"
     try:
-        return int(json.loads(path.read_text(encoding="utf-8"))["iteration"])
-    except (OSError, ValueError, KeyError, TypeError):
+        data = json.loads(path.read_text(encoding="utf-8"))
+        return int(data["iteration"]), int((data.get("partial") or {}).get("rows", 0))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return None
+
+
+def describe_position(iteration: int, rows: int, iterations: int) -> str:
+    """``"iteration 2 of 4"`` or ``"iteration 2 of 4 (+1200 steps of iteration 3)"``: where a run resumes."""
+    text = f"iteration {iteration} of {iterations}"
+    return text + (f" (+{rows} steps of iteration {iteration + 1})" if rows else "")

@@ -191,7 +191,8 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
                      beta: float = DAGGER_DEFAULTS["beta"], beta_decay: float = DAGGER_DEFAULTS["beta_decay"],
                      epochs: int = DAGGER_DEFAULTS["epochs"], batch_size: int = DAGGER_DEFAULTS["batch_size"],
                      reference: str = DAGGER_DEFAULTS["reference"], vec_env: str = "subproc",
-                     progress_bar: bool = True, log: Callable[[str], None] = print) -> Path:
+                     progress_bar: bool = True, log: Callable[[str], None] = print,
+                     checkpoint_every: int = 2000) -> Path:
     """Fine-tune an SB3 checkpoint by DAgger toward ``reference`` (module docstring); returns ``out/model.zip``.
 
     ``steps``: env steps collected in all (split evenly over ``iterations``); ``weights``:
@@ -201,20 +202,22 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
 
     Resumable: every finished iteration is committed to ``out/dagger_checkpoint/``
     (:mod:`policies.dagger_checkpoint`: the labelled states, the weights and Adam's state, the
-    RNGs, the envs' positions, the stats). Called again with the same ``out`` and settings, it
-    continues after the last committed iteration and ends with the same model and stats as an
+    RNGs, the envs' positions, the stats), and so are the states collected so far every
+    ``checkpoint_every`` env steps (0: only finished iterations). Called again with the same
+    ``out`` and settings, it continues from the last commit and ends with the same model and stats as an
     uninterrupted run (the card's ``fine_tune.resumed`` lists the resumes); with other settings it
     raises :class:`~policies.dagger_checkpoint.DAggerResumeError` naming the difference. Called
     with an ``out`` that already holds the result, it returns at once (the checkpoint is removed
     once the result is written).
     """
     for name, value, low in (("steps", steps, 1), ("iterations", iterations, 1), ("epochs", epochs, 0),
-                             ("batch_size", batch_size, 1), ("n_envs", n_envs, 1)):
+                             ("batch_size", batch_size, 1), ("n_envs", n_envs, 1),
+                             ("checkpoint_every", checkpoint_every, 0)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise TrainingError(f"DAgger {name} must be an integer >= {low}, not {value!r}")
     if not 0.0 <= float(beta) <= 1.0 or not 0.0 <= float(beta_decay) <= 1.0:
         raise TrainingError(f"DAgger beta and beta_decay must be in [0, 1], not {beta} and {beta_decay}")
-    from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, run_identity
+    from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, describe_position, run_identity
     from policies.model_card import write_card
     from policies.registry import read_model_card
     from policies.training import resolve_checkpoint
@@ -257,16 +260,18 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
     labels: List[np.ndarray] = []
     history: List[Dict[str, Any]] = []
     resumes: List[Dict[str, Any]] = []
-    start, spent = 0, 0.0
+    start, spent, partial = 0, 0.0, None
     if saved is not None:
-        model.policy.load_state_dict(saved.weights["policy"])
-        optimizer.load_state_dict(saved.weights["optimizer"])
-        torch.set_rng_state(saved.weights["torch_rng"])
+        if saved.weights is not None:
+            model.policy.load_state_dict(saved.weights["policy"])
+            optimizer.load_state_dict(saved.weights["optimizer"])
+            torch.set_rng_state(saved.weights["torch_rng"])
         rng.bit_generator.state = saved.rng_state
         observations, labels, history = list(saved.observations), list(saved.labels), list(saved.history)
-        resumes, start, spent = list(saved.resumes), saved.iteration, saved.wall_time_s
-        log(f"DAgger: resumed from iteration {start}/{iterations} ({sum(len(x) for x in labels)} labelled "
-            f"states from {checkpoint.folder})")
+        resumes, start, spent, partial = list(saved.resumes), saved.iteration, saved.wall_time_s, saved.partial
+        log(f"DAgger: resumed from {describe_position(start, partial.rows if partial else 0, iterations)} "
+            f"({sum(len(x) for x in labels) + (partial.rows if partial else 0)} labelled states from "
+            f"{checkpoint.folder})")
     began = time.perf_counter()
     if start < iterations:
         from policies.training import make_vec_env
@@ -277,16 +282,20 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
         if progress_bar:
             from tqdm import tqdm
 
-            bar = tqdm(total=steps, initial=sum(per_iteration[:start]), desc="DAgger fine-tune", unit="step")
+            bar = tqdm(total=steps, initial=sum(per_iteration[:start]) + (partial.rows if partial else 0),
+                       desc="DAgger fine-tune", unit="step")
         try:
             venv.seed(int(seed))
             obs = venv.reset()
-            if saved is not None:  # the envs back where the committed iteration left them
+            if saved is not None and (partial is not None or start > 0):  # the envs back where they were
+                snapshots, expected = (partial.envs, partial.next_observations) if partial else \
+                    (saved.envs, saved.next_observations)
                 restored = [venv.env_method("restore", snapshot, indices=[rank])[0]
-                            for rank, snapshot in enumerate(saved.envs)]
-                obs = np.stack(restored).astype(saved.next_observations.dtype)
-                reproduced = bool(np.array_equal(obs, saved.next_observations))
-                resumes.append({"from_iteration": start, "envs_reproduced": reproduced})
+                            for rank, snapshot in enumerate(snapshots)]
+                obs = np.stack(restored).astype(expected.dtype)
+                reproduced = bool(np.array_equal(obs, expected))
+                resumes.append({"from_iteration": start, "steps_into_next": partial.rows if partial else 0,
+                                "envs_reproduced": reproduced})
                 if not reproduced:
                     log("DAgger: warning: the restored envs do not show the checkpoint's observations (the env is "
                         "not deterministic); the result may differ from an uninterrupted run")
@@ -294,13 +303,17 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
                 budget = per_iteration[iteration]
                 mixture = float(beta) * float(beta_decay) ** iteration
                 venv.env_method("set_beta", mixture)
-                rows, labelled, episodes, crashes = 0, [], 0, 0
+                rows, episodes, crashes = 0, 0, 0
                 new_obs: List[np.ndarray] = []
+                labelled: List[np.ndarray] = []
+                if partial is not None and partial.iteration == iteration + 1:
+                    new_obs, labelled = [partial.observations], [partial.labels]
+                    rows, episodes, crashes = partial.rows, partial.episodes, partial.crashes
                 while rows < budget:
                     actions, _ = model.predict(obs, deterministic=True)
                     next_obs, _, dones, infos = venv.step(actions)
                     new_obs.append(np.array(obs, dtype=np.float32, copy=True))
-                    labelled.append([info["reference_action"] for info in infos])
+                    labelled.append(np.array([info["reference_action"] for info in infos], dtype=np.int64))
                     for done, info in zip(dones, infos):
                         if done:
                             episodes += 1
@@ -309,8 +322,15 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
                     rows += len(actions)
                     if bar is not None:
                         bar.update(len(actions))
+                    if checkpoint_every and rows < budget and rows // checkpoint_every > \
+                            (rows - len(actions)) // checkpoint_every:
+                        checkpoint.save_partial(
+                            iteration=iteration + 1, observations=np.concatenate(new_obs),
+                            labels=np.concatenate(labelled), next_observations=np.asarray(obs), episodes=episodes,
+                            crashes=crashes, envs=venv.env_method("snapshot"), rng=rng, resumes=resumes,
+                            wall_time_s=spent + time.perf_counter() - began)
                 batch_obs = np.concatenate(new_obs)
-                batch_labels = np.asarray(labelled, dtype=np.int64).reshape(-1)
+                batch_labels = np.concatenate(labelled)
                 on_policy = agreement(model, batch_obs, batch_labels)
                 observations.append(batch_obs)
                 labels.append(batch_labels)

@@ -12,7 +12,7 @@ import torch
 
 import policies.imitation as imitation
 from envs.dv2s_env import DV2SEnv
-from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerResumeError, checkpoint_iteration
+from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, DAggerResumeError, checkpoint_position
 from policies.imitation import ReferenceLabels, dagger_fine_tune
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT, load_policy
@@ -99,6 +99,7 @@ def _kill_on_train_call(monkeypatch, call: int) -> None:
 def test_a_killed_dagger_run_resumes_to_the_same_model_and_refuses_other_settings(tmp_path, monkeypatch):
     whole = dagger_fine_tune("dv2s-ppo", out=tmp_path / "whole", log=lambda _: None, **RUN)
     assert read_card(whole)["fine_tune"]["resumed"] == []
+    assert not list((tmp_path / "whole").rglob("partial_*"))  # 220-step iterations, a partial every 2000 steps
     assert not (tmp_path / "whole" / CHECKPOINT_DIR).exists()  # removed once the result is written
 
     out = tmp_path / "killed"
@@ -106,7 +107,7 @@ def test_a_killed_dagger_run_resumes_to_the_same_model_and_refuses_other_setting
     with pytest.raises(KeyboardInterrupt):
         dagger_fine_tune("dv2s-ppo", out=out, log=lambda _: None, **RUN)
     monkeypatch.undo()
-    assert checkpoint_iteration(out) == 1 and not (out / "model.zip").exists()
+    assert checkpoint_position(out) == (1, 0) and not (out / "model.zip").exists()
     progress = json.loads((out / CHECKPOINT_DIR / "progress.json").read_text())
     assert progress["history"][0]["episodes_finished"] >= 1  # the schedule moved on before the kill...
     assert all(env["episode"]["actions"] for env in progress["envs"])  # ...and each env is mid-episode
@@ -122,12 +123,42 @@ def test_a_killed_dagger_run_resumes_to_the_same_model_and_refuses_other_setting
 
     lines = []
     resumed = dagger_fine_tune("dv2s-ppo", out=out, log=lines.append, **RUN)
-    assert lines[0].startswith("DAgger: resumed from iteration 1/2 (220 labelled states")
+    assert lines[0].startswith("DAgger: resumed from iteration 1 of 2 (220 labelled states")
     assert [line.split(":")[0] for line in lines[1:2]] == ["DAgger iteration 2/2"]  # iteration 1 not redone
     _same_model(whole, resumed)
     assert _stats(resumed) == _stats(whole)
-    assert read_card(resumed)["fine_tune"]["resumed"] == [{"from_iteration": 1, "envs_reproduced": True}]
+    assert read_card(resumed)["fine_tune"]["resumed"] == [{"from_iteration": 1, "steps_into_next": 0, "envs_reproduced": True}]
     assert not (out / CHECKPOINT_DIR).exists()
+
+
+@pytest.mark.parametrize("killed_at_call, position", [(3, (0, 120)), (6, (1, 120))])
+def test_a_run_killed_while_collecting_resumes_from_its_last_partial_commit(tmp_path, monkeypatch, killed_at_call,
+                                                                             position):
+    whole = dagger_fine_tune("dv2s-ppo", out=tmp_path / "whole", log=lambda _: None, **RUN)
+    run = {**RUN, "checkpoint_every": 60}  # partial commits at 60, 120, 180 steps of each 220-step iteration
+    original, calls = DAggerCheckpoint.save_partial, [0]
+
+    def save_partial(self, **kwargs):
+        calls[0] += 1
+        if calls[0] == killed_at_call:  # killed mid-collection, 60 steps after the last partial commit
+            raise KeyboardInterrupt
+        original(self, **kwargs)
+
+    monkeypatch.setattr(DAggerCheckpoint, "save_partial", save_partial)
+    out = tmp_path / "killed"
+    with pytest.raises(KeyboardInterrupt):
+        dagger_fine_tune("dv2s-ppo", out=out, log=lambda _: None, **run)
+    monkeypatch.undo()
+    assert checkpoint_position(out) == position
+    assert [p.name for p in (out / CHECKPOINT_DIR).glob("partial_*")] == [f"partial_{position[0] + 1}_120.npz"]
+    lines = []
+    resumed = dagger_fine_tune("dv2s-ppo", out=out, log=lines.append, **run)
+    assert lines[0].startswith(f"DAgger: resumed from iteration {position[0]} of 2 (+120 steps of iteration "
+                               f"{position[0] + 1})")
+    _same_model(whole, resumed)
+    assert _stats(resumed) == _stats(whole)
+    assert read_card(resumed)["fine_tune"]["resumed"] == [{"from_iteration": position[0], "steps_into_next": 120,
+                                                           "envs_reproduced": True}]
 
 
 def test_a_run_killed_after_its_last_iteration_only_writes_the_result(tmp_path, monkeypatch):
@@ -142,7 +173,7 @@ def test_a_run_killed_after_its_last_iteration_only_writes_the_result(tmp_path, 
     with pytest.raises(KeyboardInterrupt):
         dagger_fine_tune("dv2s-ppo", out=tmp_path / "late", log=lambda _: None, **run)
     monkeypatch.undo()
-    assert checkpoint_iteration(tmp_path / "late") == 2
+    assert checkpoint_position(tmp_path / "late") == (2, 0)
 
     def no_envs(*args, **kwargs):
         raise AssertionError("a finished run built training envs")
@@ -178,13 +209,13 @@ def test_the_loop_resumes_a_killed_dagger_fine_tune_and_says_so(tmp_path, monkey
     monkeypatch.undo()
     steps = json.loads((out / "loop.json").read_text())["rounds"][0]["steps"]
     assert "before" in steps and "fine_tune" not in steps
-    assert checkpoint_iteration(out / "round_1" / "policy") == 1
+    assert checkpoint_position(out / "round_1" / "policy") == (1, 0)
     lines = []
     report = run_loop("dv2s-ppo", out=out, miner=miner, log=lines.append, **tiny)
     assert "round 1: fine-tune (dagger) resumed from iteration 1 of 4" in lines
     assert "DAgger iteration 1/4" not in "\n".join(lines)  # not redone
     tuned = report.rounds[0]["steps"]["fine_tune"]
-    assert tuned["resumed"] == [{"from_iteration": 1, "envs_reproduced": True}]  # subprocess envs too
+    assert tuned["resumed"] == [{"from_iteration": 1, "steps_into_next": 0, "envs_reproduced": True}]  # subprocess envs too
     assert [h["iteration"] for h in read_card(tuned["model"])["fine_tune"]["history"]] == [1, 2, 3, 4]
     assert "resumed from iteration 1:" in report.paths["md"].read_text()
     assert len(miner.calls) == 1  # mining was not redone either

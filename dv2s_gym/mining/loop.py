@@ -425,14 +425,14 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                 mined = [e.name for e in entries if e.source.get("kind") == "mined"]
                 weights = fine_tune_weights(names, mined, mined_share)
                 if fine_tune_method == "dagger":
-                    from policies.dagger_checkpoint import checkpoint_iteration
+                    from policies.dagger_checkpoint import checkpoint_position, describe_position
                     from policies.imitation import DAGGER_DEFAULTS, dagger_fine_tune
                     from policies.registry import read_model_card
 
-                    finished = checkpoint_iteration(round_dir / "policy")
-                    if finished is not None:
-                        log(f"round {number}: fine-tune (dagger) resumed from iteration {finished} of "
-                            f"{DAGGER_DEFAULTS['iterations']}")
+                    position = checkpoint_position(round_dir / "policy")
+                    if position is not None:
+                        log(f"round {number}: fine-tune (dagger) resumed from "
+                            f"{describe_position(*position, DAGGER_DEFAULTS['iterations'])}")
                     path = dagger_fine_tune(current, bank_dir=bank, out=round_dir / "policy", steps=fine_tune_steps,
                                             weights=weights, seed=seed * 1000 + number, n_envs=n_envs,
                                             env_config=env_config, learning_rate=fine_tune_lr,

@@ -133,6 +133,7 @@ def render_markdown(report: Mapping[str, Any]) -> str:
                              f"reference on the {agreement.get('states')} labelled states "
                              f"{agreement.get('source')} -> {agreement.get('fine_tuned')}"
                              + "".join(f", resumed from iteration {r.get('from_iteration')}"
+                                       + (f" (+{r['steps_into_next']} steps)" if r.get("steps_into_next") else "")
                                        for r in tuned.get("resumed") or [])
                              + f": `{tuned.get('model')}`")
             else:
