@@ -30,6 +30,7 @@ continues after the last one to the same model and stats as an uninterrupted run
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import os
@@ -184,6 +185,52 @@ def _train(model: Any, optimizer: Any, observations: np.ndarray, labels: np.ndar
     return float(np.mean(losses)) if losses else float("nan")
 
 
+@dataclasses.dataclass
+class _Collected:
+    """The states one DAgger iteration has labelled so far, in collection order, and its episode counts."""
+
+    observations: List[np.ndarray] = dataclasses.field(default_factory=list)
+    labels: List[np.ndarray] = dataclasses.field(default_factory=list)
+    episodes: int = 0
+    crashes: int = 0
+
+    @property
+    def rows(self) -> int:
+        return int(sum(len(chunk) for chunk in self.labels))
+
+
+def _collect(venv: Any, model: Any, obs: np.ndarray, budget: int, collected: _Collected, every: int,
+             commit: Callable[[np.ndarray], None], bar: Any) -> np.ndarray:
+    """Step ``venv`` with ``model``'s greedy actions until ``collected`` holds ``budget`` labelled states
+    (the wrapper mixes in the reference); ``commit(obs)`` whenever another ``every`` states are in and
+    the iteration is not done. Returns the envs' observations at the end."""
+    rows = collected.rows
+    while rows < budget:
+        actions, _ = model.predict(obs, deterministic=True)
+        next_obs, _, dones, infos = venv.step(actions)
+        collected.observations.append(np.array(obs, dtype=np.float32, copy=True))
+        collected.labels.append(np.array([info["reference_action"] for info in infos], dtype=np.int64))
+        for done, info in zip(dones, infos):
+            if done:
+                collected.episodes += 1
+                collected.crashes += bool(info.get("crashed") or info.get("collisions") or info.get("off_road"))
+        obs = next_obs
+        rows += len(actions)
+        if bar is not None:
+            bar.update(len(actions))
+        if every and rows < budget and rows // every > (rows - len(actions)) // every:
+            commit(obs)
+    return obs
+
+
+def _restore_envs(venv: Any, snapshots: Sequence[Mapping[str, Any]], expected: np.ndarray):
+    """Put each env of ``venv`` back where its snapshot was taken (:meth:`ReferenceLabels.restore`):
+    ``(observations, whether they equal the checkpoint's)``."""
+    restored = [venv.env_method("restore", snapshot, indices=[rank])[0] for rank, snapshot in enumerate(snapshots)]
+    obs = np.stack(restored).astype(expected.dtype)
+    return obs, bool(np.array_equal(obs, expected))
+
+
 def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathLike | str, steps: int,
                      weights: Mapping[str, float], seed: int = 0, n_envs: int = 2,
                      scenarios: Optional[Sequence[str]] = None, env_config: Optional[Dict[str, Any]] = None,
@@ -288,12 +335,8 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
             venv.seed(int(seed))
             obs = venv.reset()
             if saved is not None and (partial is not None or start > 0):  # the envs back where they were
-                snapshots, expected = (partial.envs, partial.next_observations) if partial else \
-                    (saved.envs, saved.next_observations)
-                restored = [venv.env_method("restore", snapshot, indices=[rank])[0]
-                            for rank, snapshot in enumerate(snapshots)]
-                obs = np.stack(restored).astype(expected.dtype)
-                reproduced = bool(np.array_equal(obs, expected))
+                obs, reproduced = _restore_envs(venv, *((partial.envs, partial.next_observations) if partial
+                                                        else (saved.envs, saved.next_observations)))
                 resumes.append({"from_iteration": start, "steps_into_next": partial.rows if partial else 0,
                                 "envs_reproduced": reproduced})
                 if not reproduced:
@@ -303,34 +346,22 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
                 budget = per_iteration[iteration]
                 mixture = float(beta) * float(beta_decay) ** iteration
                 venv.env_method("set_beta", mixture)
-                rows, episodes, crashes = 0, 0, 0
-                new_obs: List[np.ndarray] = []
-                labelled: List[np.ndarray] = []
+                collected = _Collected()
                 if partial is not None and partial.iteration == iteration + 1:
-                    new_obs, labelled = [partial.observations], [partial.labels]
-                    rows, episodes, crashes = partial.rows, partial.episodes, partial.crashes
-                while rows < budget:
-                    actions, _ = model.predict(obs, deterministic=True)
-                    next_obs, _, dones, infos = venv.step(actions)
-                    new_obs.append(np.array(obs, dtype=np.float32, copy=True))
-                    labelled.append(np.array([info["reference_action"] for info in infos], dtype=np.int64))
-                    for done, info in zip(dones, infos):
-                        if done:
-                            episodes += 1
-                            crashes += bool(info.get("crashed") or info.get("collisions") or info.get("off_road"))
-                    obs = next_obs
-                    rows += len(actions)
-                    if bar is not None:
-                        bar.update(len(actions))
-                    if checkpoint_every and rows < budget and rows // checkpoint_every > \
-                            (rows - len(actions)) // checkpoint_every:
-                        checkpoint.save_partial(
-                            iteration=iteration + 1, observations=np.concatenate(new_obs),
-                            labels=np.concatenate(labelled), next_observations=np.asarray(obs), episodes=episodes,
-                            crashes=crashes, envs=venv.env_method("snapshot"), rng=rng, resumes=resumes,
-                            wall_time_s=spent + time.perf_counter() - began)
-                batch_obs = np.concatenate(new_obs)
-                batch_labels = np.concatenate(labelled)
+                    collected = _Collected([partial.observations], [partial.labels], partial.episodes,
+                                           partial.crashes)
+
+                def commit_partial(now: np.ndarray, number: int = iteration + 1, so_far: _Collected = collected):
+                    checkpoint.save_partial(
+                        iteration=number, observations=np.concatenate(so_far.observations),
+                        labels=np.concatenate(so_far.labels), next_observations=np.asarray(now),
+                        episodes=so_far.episodes, crashes=so_far.crashes, envs=venv.env_method("snapshot"), rng=rng,
+                        resumes=resumes, wall_time_s=spent + time.perf_counter() - began)
+
+                obs = _collect(venv, model, obs, budget, collected, checkpoint_every, commit_partial, bar)
+                batch_obs = np.concatenate(collected.observations)
+                batch_labels = np.concatenate(collected.labels)
+                episodes, crashes = collected.episodes, collected.crashes
                 on_policy = agreement(model, batch_obs, batch_labels)
                 observations.append(batch_obs)
                 labels.append(batch_labels)
