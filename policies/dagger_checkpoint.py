@@ -228,8 +228,8 @@ class DAggerCheckpoint:
         torch.save({"policy": model.policy.state_dict(), "optimizer": optimizer.state_dict(),
                     "torch_rng": torch.get_rng_state()}, buffer)
         atomic_write_bytes(self.folder / f"weights_{iteration}.pt", buffer.getvalue())
-        self._committed = {"schema": SCHEMA, "schema_version": 1, "identity": self.identity, "iteration": int(iteration),
-                           "history": history, "rng": rng.bit_generator.state, "envs": envs,
+        self._committed = {"schema": SCHEMA, "schema_version": 1, "identity": self.identity,
+                           "iteration": int(iteration), "history": history, "rng": rng.bit_generator.state, "envs": envs,
                            "wall_time_s": round(float(wall_time_s), 3), "resumes": resumes}
         atomic_write_json(self.progress_path, {**self._committed, "partial": None})
         (self.folder / f"weights_{iteration - 1}.pt").unlink(missing_ok=True)

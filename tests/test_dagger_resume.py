@@ -127,7 +127,8 @@ def test_a_killed_dagger_run_resumes_to_the_same_model_and_refuses_other_setting
     assert [line.split(":")[0] for line in lines[1:2]] == ["DAgger iteration 2/2"]  # iteration 1 not redone
     _same_model(whole, resumed)
     assert _stats(resumed) == _stats(whole)
-    assert read_card(resumed)["fine_tune"]["resumed"] == [{"from_iteration": 1, "steps_into_next": 0, "envs_reproduced": True}]
+    assert read_card(resumed)["fine_tune"]["resumed"] == [{"from_iteration": 1, "steps_into_next": 0,
+                                                           "envs_reproduced": True}]
     assert not (out / CHECKPOINT_DIR).exists()
 
 
@@ -215,7 +216,8 @@ def test_the_loop_resumes_a_killed_dagger_fine_tune_and_says_so(tmp_path, monkey
     assert "round 1: fine-tune (dagger) resumed from iteration 1 of 4" in lines
     assert "DAgger iteration 1/4" not in "\n".join(lines)  # not redone
     tuned = report.rounds[0]["steps"]["fine_tune"]
-    assert tuned["resumed"] == [{"from_iteration": 1, "steps_into_next": 0, "envs_reproduced": True}]  # subprocess envs too
+    # subprocess envs put back where they were too
+    assert tuned["resumed"] == [{"from_iteration": 1, "steps_into_next": 0, "envs_reproduced": True}]
     assert [h["iteration"] for h in read_card(tuned["model"])["fine_tune"]["history"]] == [1, 2, 3, 4]
     assert "resumed from iteration 1:" in report.paths["md"].read_text()
     assert len(miner.calls) == 1  # mining was not redone either
