@@ -307,6 +307,7 @@ def _cmd_bank_validate(args: argparse.Namespace) -> int:
         return _cmd_bank_story(args)
     from dv2s_gym.bank_validate import validate_bank
 
+    _bank(args)  # a --bank that does not exist is an error, not "0/0 scenarios valid"
     reports = validate_bank(args.bank, args.name or None, samples=args.samples, seconds=args.seconds,
                             jobs=args.jobs, progress=not args.json)
     lines = []
