@@ -607,6 +607,12 @@ def format_summary(report: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _type_text(cluster: Mapping[str, Any]) -> str:
+    """The cluster's failure type with how and with whom, e.g. ``collision (rear_end, with car)``."""
+    details = list(cluster.get("collision_types") or {}) + [f"with {kind}" for kind in cluster.get("with_kinds") or {}]
+    return f"{cluster['type']} ({', '.join(details)})" if details else str(cluster["type"])
+
+
 def _cluster_rows(clusters: Sequence[Mapping[str, Any]]) -> List[str]:
     lines = ["| cluster | scenario | type | failures | avoidable | parameter region | representative | status | "
              "bank entry | reproduction | E2E-SC |",
@@ -615,7 +621,7 @@ def _cluster_rows(clusters: Sequence[Mapping[str, Any]]) -> List[str]:
         rep = c["representative"]
         status = c["status"] + (f" into `{c['merged_into']}`" if c.get("merged_into") else "")
         video = f" [video]({c['video']})" if c.get("video") else ""
-        lines.append(f"| `{_cell(c['id'])}` | `{_cell(c['scenario'])}` | {_cell(c['type'])} | {c['size']} | "
+        lines.append(f"| `{_cell(c['id'])}` | `{_cell(c['scenario'])}` | {_cell(_type_text(c))} | {c['size']} | "
                      f"{c['avoidable']} | {_cell(_region_text(c['params']))} | #{rep['index']} seed {rep['seed']}"
                      f"{video} | {_cell(status)} | {_cell(c.get('bank_entry'))} | {_reproduction_text(c)} | "
                      f"{_num(c.get('e2e_sc'), 3)} |")
