@@ -610,8 +610,10 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
     bar = _progress(progress, len(todo), 0, desc="converting")
     try:
         for cluster, record in todo:
-            row = convert_failure(dict(record, cluster=cluster), run.out, policy=run.settings["policy"], bank=bank,
-                                  env_config=run.settings["env_config"], **options)
+            row = _reached_bank(bank, run.out, cluster)  # killed after the bank write, before its line
+            if row is None:
+                row = convert_failure(dict(record, cluster=cluster), run.out, policy=run.settings["policy"],
+                                      bank=bank, env_config=run.settings["env_config"], **options)
             row["cluster"] = cluster
             appender.append(row)
             existing.append(row)
@@ -622,6 +624,33 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
         if bar is not None:
             bar.close()
     return existing
+
+
+def _reached_bank(bank, out: Path, cluster: str) -> Optional[Dict[str, Any]]:
+    """The conversion row of ``cluster`` when this run already added it to the bank (or merged it into an entry)
+    but was killed before writing its ``conversions.jsonl`` line; rebuilt from the entry's provenance, so a
+    resumed run neither converts the cluster again nor reports it merged into the entry it made itself."""
+    run = str(Path(out).resolve())
+    for entry in bank:
+        source = entry.source
+        found = [("kept", source)] + [("merged", merged) for merged in source.get("merged") or []]
+        for status, provenance in found:
+            if provenance.get("run") != run or provenance.get("cluster") != cluster:
+                continue
+            from dv2s_gym.mining.convert import CONVERSION_DIR, cluster_slug
+
+            folder = Path(out) / "failures" / cluster_slug(cluster, provenance.get("index"))
+            video, script = folder / "failure.webm", folder / CONVERSION_DIR / "scenario.scenic"
+            return {"cluster": cluster, "index": provenance.get("index"), "status": status, "reason": None,
+                    "stage": None, "video": str(video.relative_to(out)) if video.is_file() else provenance.get("video"),
+                    "description": provenance.get("description") if status == "merged" else entry.description,
+                    "script": str(script.relative_to(out)) if script.is_file() else None,
+                    "reproduction": provenance.get("reproduction"), "e2e_sc": provenance.get("e2e_sc"),
+                    "bank_entry": entry.name if status == "kept" else None,
+                    "merged_into": entry.name if status == "merged" else None,
+                    **({"merge_reason": provenance.get("how")} if status == "merged" else {}),
+                    "seconds": None, "timings": {}, "recovered_from_bank": True}
+    return None
 
 
 def _write_reports(out: Path) -> Dict[str, Path]:
