@@ -534,6 +534,28 @@ def test_a_crashing_worker_gives_an_error_record_and_the_run_completes(tmp_path)
     assert len(read_records(tmp_path / "run" / "episodes.jsonl")) == 3
 
 
+def test_an_episode_finished_after_its_worker_crashed_is_reported(tmp_path):
+    # the retry used to succeed silently: nothing in the record, report or summary said a worker had died
+    crash_seed = episode_seed(0, 1)
+    log = tmp_path / "attempts.log"
+    policy = f"regress_helpers:FaultyPolicy?crash_seed={crash_seed}&log={log}&once=1"
+    run = mine(policy, out=tmp_path / "run", budget=3, sampler="random", scenarios=[BRAKES], workers=1, seed=0,
+               reference=None, env_config={"duration": 2}, timeout=60, progress=False, reports=False)
+    assert log.read_text().split() == [str(crash_seed)]  # crashed once; the retry ran it to the end
+    assert not any(r["error"] for r in run.records) and run.records[1]["result"]["trajectory_hash"]
+    restarts = run.records[1]["worker_restarts"]
+    assert len(restarts) == 1 and "crashed" in restarts[0]
+    assert "worker_restarts" not in run.records[0] and "worker_restarts" not in run.records[2]
+    assert "1 finished after their worker crashed or hung" in run.summary()
+    from dv2s_gym.mining.report import write_reports
+
+    paths = write_reports(tmp_path / "run")
+    data = json.loads(paths["json"].read_text())
+    assert data["counts"]["worker_restarts"] == 1 and data["worker_restarts"][0]["index"] == 1
+    assert "### Worker restarts (1)" in paths["markdown"].read_text()
+    assert "finished by a new worker" in paths["html"].read_text()
+
+
 def test_every_episode_crashing_still_completes_with_error_records(tmp_path):
     run = mine("regress_misbehaving_policies:crash", out=tmp_path / "run", budget=2, sampler="random",
                scenarios=[BRAKES], workers=2, seed=0, reference=None, env_config={"duration": 2}, progress=False,

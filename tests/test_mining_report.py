@@ -236,7 +236,7 @@ def test_report_json_is_strict_schema_json(run_dir, tmp_path):
         raise AssertionError(f"report.json holds {name}")
 
     data = json.loads(paths["json"].read_text(), parse_constant=no_constants)
-    assert (data["schema"], data["schema_version"]) == (SCHEMA, SCHEMA_VERSION) == ("dv2s-mine-report", 1)
+    assert (data["schema"], data["schema_version"]) == (SCHEMA, SCHEMA_VERSION) == ("dv2s-mine-report", 2)
     for key in ("created", "dv2s_version", "run_dir", "settings", "counts", "samplers", "scenarios", "clusters",
                 "unavoidable_clusters", "failures", "unavoidable", "rejected", "errors", "skipped_lines"):
         assert key in data, key

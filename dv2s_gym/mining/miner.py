@@ -102,13 +102,15 @@ class MineRun:
         from collections import Counter
 
         errors = sum(1 for r in self.records if r.get("error"))
+        restarted = sum(1 for r in self.records if r.get("worker_restarts"))
         failures = self.failures
         kinds = Counter(r["failure"]["kind"] for r in failures)
         avoidable_clusters = {self.clusters[int(r["index"])] for r in self.avoidable}
         status = Counter(c.get("status") for c in self.conversions)
         lines = [
             f"{len(self.records)} episodes of {self.settings['policy']} ({self.settings['sampler']} sampler), "
-            f"{errors} errors, {self.seconds:.0f} s",
+            f"{errors} errors, " + (f"{restarted} finished after their worker crashed or hung and was "
+                                    f"replaced, " if restarted else "") + f"{self.seconds:.0f} s",
             f"{len(failures)} failures ({', '.join(f'{k} {n}' for k, n in kinds.most_common()) or 'none'}); "
             f"{len(self.avoidable)} avoidable by {self.settings['reference'] or 'no reference'}",
             f"{self.distinct_clusters} distinct clusters, {len(avoidable_clusters)} with avoidable failures",
@@ -554,6 +556,8 @@ def _complete(result: Dict[str, Any], task: Dict[str, Any], spec, sampler: str, 
     }
     record.update({k: v for k, v in result.items() if k in record and k not in ("index", "params")})
     record.pop("role", None)
+    if result.get("worker_restarts"):  # a worker crashed or hung on this episode, then a new one finished it
+        record["worker_restarts"] = list(result["worker_restarts"])
     record["sampler"] = sampler
     record["point"] = spec.point
     if record.get("trace"):
