@@ -547,6 +547,7 @@ def test_an_episode_finished_after_its_worker_crashed_is_reported(tmp_path):
     assert len(restarts) == 1 and "crashed" in restarts[0]
     assert "worker_restarts" not in run.records[0] and "worker_restarts" not in run.records[2]
     assert "1 finished after their worker crashed or hung" in run.summary()
+    assert "avoidability not checked" in run.summary()  # reference=None; it said "3 avoidable by no reference"
     from dv2s_gym.mining.report import write_reports
 
     paths = write_reports(tmp_path / "run")

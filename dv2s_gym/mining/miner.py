@@ -112,7 +112,8 @@ class MineRun:
             f"{errors} errors, " + (f"{restarted} finished after their worker crashed or hung and was "
                                     f"replaced, " if restarted else "") + f"{self.seconds:.0f} s",
             f"{len(failures)} failures ({', '.join(f'{k} {n}' for k, n in kinds.most_common()) or 'none'}); "
-            f"{len(self.avoidable)} avoidable by {self.settings['reference'] or 'no reference'}",
+            + (f"{len(self.avoidable)} avoidable by {self.settings['reference']}" if self.settings["reference"]
+             else "avoidability not checked (no reference driver)"),
             f"{self.distinct_clusters} distinct clusters, {len(avoidable_clusters)} with avoidable failures",
         ]
         if self.conversions:
