@@ -60,6 +60,18 @@ def test_bad_input_is_one_line(tmp_path, capsys, argv, message):
     code, _, err = run(capsys, "mine", *argv, "--out", tmp_path / "run", "--no-progress")
     assert code == 2
     assert message in one_line_error(err)
+    assert not (tmp_path / "run").exists()  # refused input leaves no empty run folder behind
+
+
+@pytest.mark.parametrize("flag", ["--out", "--bank"])
+def test_a_file_where_a_folder_belongs_is_named(tmp_path, capsys, flag):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("mine\n")
+    given = {"--out": tmp_path / "run", "--bank": tmp_path / "bank", flag: a_file}
+    code, _, err = run(capsys, "mine", "--policy", "rule", "--budget", "4", "--out", given["--out"],
+                       "--bank", given["--bank"], "--no-progress")
+    assert code == 2 and f"{flag} {a_file} is a file, not a folder" in one_line_error(err)
+    assert a_file.read_text() == "mine\n" and not (tmp_path / "run").exists() and not (tmp_path / "bank").exists()
 
 
 def test_resuming_with_other_settings_is_refused(tmp_path, capsys):

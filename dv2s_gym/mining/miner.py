@@ -37,6 +37,7 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import shutil
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -450,10 +451,6 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
             must then be a writable bank; a new or empty folder starts as a copy of the shipped bank; at most ``max_conversions`` clusters, largest first.
         reports: write report.json, report.md and report.html at the end.
     """
-    from dv2s_gym.mining.space import SceneSpace
-    from dv2s_gym.regress.backends import default_workers, get_backend
-    from dv2s_gym.regress.errors import RegressError
-
     started = time.perf_counter()
     if int(budget) < 1:
         raise MiningError(f"--budget must be at least 1 episode, not {budget}")
@@ -469,14 +466,52 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
     if reference:
         load_policy(reference)
     out = Path(out)
+    if convert and not bank_dir:
+        raise MiningError("converting failures adds scenarios to a bank, and the shipped bank is read-only: pass "
+                          "--bank DIR (a new folder starts as a copy of the shipped bank), or --no-convert")
+    for flag, folder in (("--out", out), ("--bank", Path(bank_dir) if bank_dir else None)):
+        if folder is not None and folder.exists() and not folder.is_dir():
+            raise MiningError(f"{flag} {folder} is a file, not a folder; pass a folder (a new one is created)")
+    created = not out.exists()
     try:
         out.mkdir(parents=True, exist_ok=True)
         (out / "traces").mkdir(exist_ok=True)
     except OSError as error:
         raise MiningError(f"cannot create the run folder {out}: {error.strerror}; pass a writable --out") from None
-    if convert and not bank_dir:
-        raise MiningError("converting failures adds scenarios to a bank, and the shipped bank is read-only: pass "
-                          "--bank DIR (a new folder starts as a copy of the shipped bank), or --no-convert")
+    try:
+        return _mine_in(out, started, policy=policy, budget=budget, sampler=sampler, scenarios=scenarios,
+                        bank_dir=bank_dir, backend=backend, workers=workers, address=address, seed=seed,
+                        reference=reference, batch=batch, timeout=timeout, progress=progress, env_config=env_config,
+                        ttc_threshold=ttc_threshold, stall_seconds=stall_seconds, convert=convert,
+                        convert_options=convert_options, max_conversions=max_conversions, reports=reports,
+                        sampler_options=sampler_options, feedback=feedback)
+    except BaseException:
+        if created:
+            _remove_if_empty(out)  # bad input found late (an unknown scenario) leaves no empty run folder behind
+        raise
+
+
+def _remove_if_empty(out: Path) -> None:
+    """Remove a run folder this call created when no episode reached it (only settings, lock, empty traces)."""
+    traces = out / "traces"
+    if (traces.is_dir() and any(traces.iterdir())) or any(
+            p.name not in ("traces", "settings.json", ".lock") for p in out.iterdir()):
+        return
+    shutil.rmtree(out, ignore_errors=True)
+
+
+def _mine_in(out: Path, started: float, *, policy: str, budget: int, sampler: str,
+             scenarios: Optional[Sequence[str]], bank_dir: Optional[str], backend: str, workers: Optional[int],
+             address: Optional[str], seed: int, reference: Optional[str], batch: Optional[int],
+             timeout: Optional[float], progress: bool, env_config: Optional[Dict[str, Any]], ttc_threshold: float,
+             stall_seconds: float, convert: bool, convert_options: Optional[Dict[str, Any]],
+             max_conversions: Optional[int], reports: bool, sampler_options: Optional[Dict[str, Any]],
+             feedback: str) -> MineRun:
+    """The body of :func:`mine` once the input is checked and the run folder exists."""
+    from dv2s_gym.mining.space import SceneSpace
+    from dv2s_gym.regress.backends import default_workers, get_backend
+    from dv2s_gym.regress.errors import RegressError
+
     bank_dir = str(Path(bank_dir).resolve()) if bank_dir else None
     if convert and not _has_entries(Path(bank_dir)):
         from scenario_bank.bank import Bank
