@@ -63,6 +63,14 @@ def test_bad_input_is_one_line(tmp_path, capsys, argv, message):
     assert not (tmp_path / "run").exists()  # refused input leaves no empty run folder behind
 
 
+def test_mining_a_bank_that_does_not_exist_names_it(tmp_path, capsys):
+    code, _, err = run(capsys, "mine", "--policy", "rule", "--budget", "4", "--no-convert", "--bank",
+                       tmp_path / "typo", "--out", tmp_path / "run", "--no-progress")
+    line = one_line_error(err)  # it said only "the bank at ... holds no scenarios"
+    assert code == 2 and "there is no bank at" in line and "the folder does not exist" in line
+    assert not (tmp_path / "typo").exists() and not (tmp_path / "run").exists()
+
+
 @pytest.mark.parametrize("flag", ["--out", "--bank"])
 def test_a_file_where_a_folder_belongs_is_named(tmp_path, capsys, flag):
     a_file = tmp_path / "a_file"
