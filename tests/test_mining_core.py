@@ -596,3 +596,35 @@ def test_a_second_miner_on_the_same_folder_is_refused(tmp_path):
         os.killpg(holder.pid, signal.SIGKILL)
         holder.wait()
     assert read_records(out / "episodes.jsonl") == []
+
+
+def _start_bank(dest: str, barrier, results) -> None:
+    from dv2s_gym.mining.miner import _own_bank
+
+    barrier.wait()
+    try:
+        _own_bank(dest)
+        results.put("ok")
+    except Exception as error:  # noqa: BLE001 - the test reports what the losing miner raised
+        results.put(f"{type(error).__name__}: {error}")
+
+
+def test_miners_started_together_on_a_new_bank_folder_share_one_copy(tmp_path):
+    # both copied the shipped bank; the second rename failed and that miner died ("Directory not empty")
+    import multiprocessing
+
+    from scenario_bank.bank import Bank
+
+    context = multiprocessing.get_context("spawn")
+    for trial in range(3):
+        dest = tmp_path / f"bank{trial}"
+        barrier, results = context.Barrier(2), context.Queue()
+        starters = [context.Process(target=_start_bank, args=(str(dest), barrier, results)) for _ in range(2)]
+        for process in starters:
+            process.start()
+        outcomes = [results.get(timeout=120) for _ in starters]
+        for process in starters:
+            process.join(30)
+        assert outcomes == ["ok", "ok"], outcomes
+        assert Bank(dest).names() == Bank().names() and not Bank(dest).problems
+        assert not [p for p in tmp_path.iterdir() if ".copy-" in p.name]  # no staging folder left behind

@@ -513,10 +513,8 @@ def _mine_in(out: Path, started: float, *, policy: str, budget: int, sampler: st
     from dv2s_gym.regress.errors import RegressError
 
     bank_dir = str(Path(bank_dir).resolve()) if bank_dir else None
-    if convert and not _has_entries(Path(bank_dir)):
-        from scenario_bank.bank import Bank
-
-        Bank().copy_to(bank_dir)  # a bank of one's own starts as the shipped one
+    if convert:
+        _own_bank(bank_dir)
     env_config = dict(env_config or {})
     n_workers = int(workers) if workers else (1 if backend == "local" and default_workers() < 2 else
                                               default_workers())
@@ -599,6 +597,23 @@ def _complete(result: Dict[str, Any], task: Dict[str, Any], spec, sampler: str, 
     if record.get("trace"):
         record["trace"] = os.path.relpath(record["trace"], out)
     return record
+
+
+def _own_bank(bank_dir: os.PathLike | str) -> None:
+    """Make ``bank_dir`` a writable bank: a new or empty folder becomes a copy of the shipped bank.
+
+    Miners started at the same moment on one new folder all copy; the first copy lands (atomically) and
+    the others, refused because the folder is no longer empty, use it.
+    """
+    from scenario_bank.bank import Bank, BankError
+
+    if _has_entries(Path(bank_dir)):
+        return
+    try:
+        Bank().copy_to(bank_dir)  # a bank of one's own starts as the shipped one
+    except BankError:
+        if not _has_entries(Path(bank_dir)):
+            raise
 
 
 def _has_entries(folder: Path) -> bool:
