@@ -257,3 +257,24 @@ def test_a_run_killed_between_the_bank_write_and_its_record_resumes_without_a_se
     assert not entry.source.get("merged") and row["reproduction"] == entry.source["reproduction"]
     assert CONTRACT_KEYS <= set(row) and (tmp_path / "run" / row["video"]).is_file()
     assert (tmp_path / "run" / row["script"]).is_file()
+
+
+@pytest.mark.slow
+def test_an_unreachable_model_endpoint_stops_converting_and_the_rerun_converts(tmp_path, monkeypatch):
+    # every cluster used to be recorded "rejected (describe: EndpointUnreachableError)", and a rerun after the
+    # endpoint came back never tried them again
+    from llm_server import closed_port_url
+
+    from dv2s_gym.mining.errors import MiningError
+    from dv2s_gym.mining.miner import mine
+
+    monkeypatch.setenv("DV2S_LLM_RETRIES", "0")
+    run = dict(out=tmp_path / "run", budget=4, sampler="random", scenarios=[SCENARIO], bank_dir=str(tmp_path / "bank"),
+               workers=1, reference=None, progress=False, convert=True, max_conversions=1, reports=False)
+    down = {"dra": "openai", "llm_config": {"base_url": closed_port_url(), "model": "m"}}
+    with pytest.raises(MiningError, match="converting stopped at cluster .*could not connect.*Rerun the same command"):
+        mine("keep_lane", convert_options=down, **run)
+    assert not (tmp_path / "run" / "conversions.jsonl").read_text().strip()
+    assert len((tmp_path / "run" / "episodes.jsonl").read_text().splitlines()) == 4
+    rows = mine("keep_lane", convert_options={"dra": "bev"}, **run).conversions
+    assert len(rows) == 1 and rows[0]["stage"] != "describe" and rows[0]["status"] == "kept", rows

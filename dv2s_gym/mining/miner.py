@@ -641,7 +641,7 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
     ``max_conversions`` conversions are made in the run (``None``: every cluster). Each conversion is appended to ``conversions.jsonl`` when it ends, so a
     resumed run converts the remaining clusters only.
     """
-    from dv2s_gym.mining.convert import convert_failure
+    from dv2s_gym.mining.convert import SETUP_ERRORS, convert_failure
     from scenario_bank.bank import Bank
 
     if bank_dir is None:
@@ -667,8 +667,14 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
         for cluster, record in todo:
             row = _reached_bank(bank, run.out, cluster)  # killed after the bank write, before its line
             if row is None:
-                row = convert_failure(dict(record, cluster=cluster), run.out, policy=run.settings["policy"],
-                                      bank=bank, env_config=run.settings["env_config"], **options)
+                try:
+                    row = convert_failure(dict(record, cluster=cluster), run.out, policy=run.settings["policy"],
+                                          bank=bank, env_config=run.settings["env_config"], **options)
+                except SETUP_ERRORS as error:
+                    first = (str(error).strip().splitlines() or [type(error).__name__])[0]
+                    raise MiningError(f"converting stopped at cluster {cluster} ({len(existing)} converted, the rest "
+                                      f"not tried): {first} Rerun the same command when it works; finished "
+                                      "episodes and conversions are kept") from None
             row["cluster"] = cluster
             appender.append(row)
             existing.append(row)
