@@ -71,6 +71,16 @@ def test_mining_a_bank_that_does_not_exist_names_it(tmp_path, capsys):
     assert not (tmp_path / "typo").exists() and not (tmp_path / "run").exists()
 
 
+def test_an_unreachable_ray_cluster_is_one_line_and_leaves_no_run_folder(tmp_path, capsys):
+    from llm_server import closed_port_url
+
+    address = closed_port_url().split("//")[1].split("/")[0]
+    code, _, err = run(capsys, "mine", "--policy", "rule", "--budget", "2", "--no-convert", "--backend", "ray",
+                       "--address", address, "--out", tmp_path / "run", "--no-progress")
+    assert code == 2 and f"Ray is not reachable at {address}" in one_line_error(err)
+    assert not (tmp_path / "run").exists()  # it kept settings.json and an empty episodes.jsonl
+
+
 @pytest.mark.parametrize("flag", ["--out", "--bank"])
 def test_a_file_where_a_folder_belongs_is_named(tmp_path, capsys, flag):
     a_file = tmp_path / "a_file"

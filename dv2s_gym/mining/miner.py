@@ -492,10 +492,11 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
 
 
 def _remove_if_empty(out: Path) -> None:
-    """Remove a run folder this call created when no episode reached it (only settings, lock, empty traces)."""
-    traces = out / "traces"
-    if (traces.is_dir() and any(traces.iterdir())) or any(
-            p.name not in ("traces", "settings.json", ".lock") for p in out.iterdir()):
+    """Remove a run folder this call created when no episode reached it (settings, lock, sampler state, an empty
+    episode log and trace folder only)."""
+    traces, log = out / "traces", out / "episodes.jsonl"
+    if (traces.is_dir() and any(traces.iterdir())) or (log.is_file() and log.stat().st_size) or any(
+            p.name not in ("traces", "settings.json", ".lock", "episodes.jsonl", "sampler.pkl") for p in out.iterdir()):
         return
     shutil.rmtree(out, ignore_errors=True)
 
