@@ -628,3 +628,20 @@ def test_miners_started_together_on_a_new_bank_folder_share_one_copy(tmp_path):
         assert outcomes == ["ok", "ok"], outcomes
         assert Bank(dest).names() == Bank().names() and not Bank(dest).problems
         assert not [p for p in tmp_path.iterdir() if ".copy-" in p.name]  # no staging folder left behind
+
+
+def test_an_empty_run_folder_another_miner_holds_is_not_removed(tmp_path):
+    # a miner refused late removes the empty run folder it made, unless a miner started on it at the same moment
+    import fcntl
+
+    from dv2s_gym.mining.miner import _remove_if_empty
+
+    out = tmp_path / "run"
+    (out / "traces").mkdir(parents=True)
+    (out / "episodes.jsonl").write_text("")
+    with open(out / ".lock", "a+") as held:
+        fcntl.flock(held.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        _remove_if_empty(out)
+        assert out.is_dir()
+    _remove_if_empty(out)
+    assert not out.exists()

@@ -498,7 +498,12 @@ def _remove_if_empty(out: Path) -> None:
     if (traces.is_dir() and any(traces.iterdir())) or (log.is_file() and log.stat().st_size) or any(
             p.name not in ("traces", "settings.json", ".lock", "episodes.jsonl", "sampler.pkl") for p in out.iterdir()):
         return
-    shutil.rmtree(out, ignore_errors=True)
+    with open(out / ".lock", "a+") as handle:
+        try:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return  # another miner started on the same new folder at the same moment and runs in it
+        shutil.rmtree(out, ignore_errors=True)
 
 
 def _mine_in(out: Path, started: float, *, policy: str, budget: int, sampler: str,
