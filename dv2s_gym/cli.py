@@ -307,6 +307,7 @@ def _cmd_bank_validate(args: argparse.Namespace) -> int:
         return _cmd_bank_story(args)
     from dv2s_gym.bank_validate import validate_bank
 
+    _bank(args)  # a --bank that does not exist is an error, not "0/0 scenarios valid"
     reports = validate_bank(args.bank, args.name or None, samples=args.samples, seconds=args.seconds,
                             jobs=args.jobs, progress=not args.json)
     lines = []
@@ -950,7 +951,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenarios", nargs="+", help="scenarios mined and regression-tested (default: the whole bank)")
     p.add_argument("--budget", type=int, default=LOOP["budget"],
                    help=f"mining episodes per round (default {LOOP['budget']})")
-    p.add_argument("--sampler", default=LOOP["sampler"], help=f"the miner's sampler (default {LOOP['sampler']})")
+    p.add_argument("--sampler", default=LOOP["sampler"], help=f"the miner's sampler: random, halton, cross-entropy, "
+                   f"bandit or split (default {LOOP['sampler']}; see dv2s mine --help)")
     p.add_argument("--fine-tune-steps", type=int, default=LOOP["fine_tune_steps"],
                    help=f"env steps of fine-tuning per round (default {LOOP['fine_tune_steps']})")
     p.add_argument("--fine-tune-lr", type=float, default=LOOP["fine_tune_lr"],

@@ -40,6 +40,14 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
 
 import numpy as np
 
+from dv2s_gym.pipeline.errors import (EndpointHTTPError, EndpointTimeoutError, EndpointUnreachableError,
+                                      MissingAPIKeyError)
+
+SETUP_ERRORS = (EndpointUnreachableError, EndpointTimeoutError, EndpointHTTPError, MissingAPIKeyError)
+"""Errors of the model backends' setup (no connection, no answer, an HTTP error, no API key):
+:func:`convert_failure` raises them instead of rejecting the failure, so a run stops and can be resumed
+when the endpoint works, rather than rejecting every cluster."""
+
 __all__ = ["convert_failure", "same_failure_class", "reproduction_seeds", "cluster_slug", "CONVERSION_DIR"]
 
 CONVERSION_DIR = "conversion"
@@ -169,6 +177,8 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         monitor: options of the failure monitors (``ttc_threshold``, ``stall_seconds``); default: those in
             ``run_dir/settings.json``, else the monitors' defaults.
         before, after: seconds of video before and after the failure.
+
+    Raises the model backends' setup errors (:data:`SETUP_ERRORS`); every other problem is a rejection.
 
     Returns ``{"cluster", "index", "status": "kept"|"merged"|"rejected", "reason", "stage", "video",
     "description", "script", "reproduction", "e2e_sc", "bank_entry", "merged_into", "seconds",
@@ -310,6 +320,8 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         lap("bank")
     except _Rejected as rejection:
         out.update(stage=rejection.stage, reason=str(rejection))
+    except SETUP_ERRORS:
+        raise  # the endpoint's or its configuration's fault, not the failure's: not a rejection
     except Exception as error:  # a bad failure is a rejection with its stage, never an exception
         first = (str(error).strip().splitlines() or [""])[0]
         out.update(stage=stage, reason=f"{stage}: {type(error).__name__}: {first}"[:500])

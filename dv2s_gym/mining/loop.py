@@ -318,6 +318,10 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         raise LoopError(f"--holdout-fraction must be in [0, 1], not {holdout_fraction}")
     if not 0.0 < float(mined_share) < 1.0:
         raise LoopError(f"--mined-share must be strictly between 0 and 1, not {mined_share}")
+    from dv2s_gym.mining.samplers import SAMPLERS
+
+    if sampler not in SAMPLERS:  # else round 1 starts (the working bank copied) before the miner refuses it
+        raise LoopError(f"--sampler must be one of {', '.join(SAMPLERS)}, not {sampler!r}")
     if fine_tune_method not in FINE_TUNE_METHODS:
         raise LoopError(f"--fine-tune-method must be one of {', '.join(FINE_TUNE_METHODS)}, not {fine_tune_method!r}")
     if fine_tune_lr is None:
