@@ -58,10 +58,16 @@ def scenario_dimensions(space) -> List[int]:
     return [len(space.param_ranges(name)) for name in space.scenarios]
 
 
-def _make_chooser(kind: str, count: int, alpha: float, thres: float):
+def _make_chooser(kind: str, count: int, alpha: float, thres: float, forget: float = 0.0, patience: int = 0,
+                  floor: float = 0.5):
     from verifai.features import Box, DiscreteBox
 
     if kind == "cross-entropy":
+        if forget or patience:
+            from dv2s_gym.mining.chooser import ForgetfulCrossEntropySampler
+
+            return ForgetfulCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=alpha, thres=thres,
+                                                forget=forget, patience=patience, floor=floor)
         from verifai.samplers.cross_entropy import DiscreteCrossEntropySampler
 
         return DiscreteCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=alpha, thres=thres)
@@ -110,19 +116,23 @@ class ScenarioSplitSampler(FeatureSampler):
             for the ``bandit`` and ``cross-entropy`` parameter samplers).
         warmup: the first ``warmup * len(dimensions)`` scenes try every scenario ``warmup`` times (each
             round in a seeded order) and are fed to the chooser like its own draws; 0: none.
+        forget, patience, floor: the ``cross-entropy`` chooser leaves scenarios that stop yielding failures
+            (:class:`~dv2s_gym.mining.chooser.ForgetfulCrossEntropySampler`); ``forget=0, patience=0``: VerifAI's
+            ``DiscreteCrossEntropySampler`` as it is.
 
     Build it with the generators seeded (the Halton starts are drawn here); then draw with
     ``getSample`` and feed with ``update`` like any VerifAI feature sampler.
     """
 
     def __init__(self, space, dimensions: Sequence[int], chooser: str = "cross-entropy", params: str = "halton",
-                 alpha: float = 0.9, thres: float = 0.0, buckets: int = 3, warmup: int = 0) -> None:
+                 alpha: float = 0.9, thres: float = 0.0, buckets: int = 3, warmup: int = 0, forget: float = 0.0,
+                 patience: int = 0, floor: float = 0.5) -> None:
         super().__init__(space)
         self.width = max([int(d) for d in dimensions] + [1])
         """Coordinates of ``u`` in the feature space (the largest parameter count)."""
         self.dimensions = [int(d) for d in dimensions]
         self.chooser_kind, self.params_kind = chooser, params
-        self.chooser = _make_chooser(chooser, len(self.dimensions), alpha, thres)
+        self.chooser = _make_chooser(chooser, len(self.dimensions), alpha, thres, forget, patience, floor)
         self.param_samplers = [_make_params(params, d, alpha, thres, buckets) for d in self.dimensions]
         self.draws = [0] * len(self.dimensions)
         """Scenes drawn per scenario."""
