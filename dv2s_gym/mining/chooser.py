@@ -16,14 +16,18 @@ unchanged for failures):
 - **a stagnation restart** (``patience``, draws): a scenario whose last ``patience`` draws gave no failure
   (no new cluster, under novelty feedback) has its probability cut to ``floor`` (of the uniform share
   ``1 / count``, if it is above that), the excess spread uniformly over the other scenarios, and its count
-  starts again; 0: no restart.
+  starts again; 0: no restart;
+- **remaining capacity** (``capacity``, with each scenario's ``cells``): a scenario drawn ``capacity x cells``
+  times or more (its parameter sampler has had the chance to visit each of its grid cells ``capacity`` times)
+  is treated as exhausted: every non-failure on it cuts its probability to ``floor`` as above, so only new
+  failures keep it drawn; 0: off.
 
 Every change keeps the distribution summing to 1; the draws are VerifAI's (``getVector`` unchanged).
 """
 
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import Any, Optional, Sequence
 
 import numpy as np
 from verifai.samplers.cross_entropy import DiscreteCrossEntropySampler
@@ -41,10 +45,13 @@ class ForgetfulCrossEntropySampler(DiscreteCrossEntropySampler):
         forget: fraction of the drawn index's probability moved to the others on a non-failure.
         patience: draws of an index without a failure before its probability is cut to ``floor / count``.
         floor: the cut, as a fraction of the uniform share.
+        capacity, cells: draws per cell (``capacity``) of an index with ``cells[i]`` cells after which its
+            non-failures cut it to the floor; ``capacity`` 0 or no ``cells``: off.
     """
 
     def __init__(self, domain, alpha: float, thres: float, forget: float = 0.0, patience: int = 0,
-                 floor: float = 0.5, dist: Optional[Any] = None) -> None:
+                 floor: float = 0.5, capacity: float = 0.0, cells: Optional[Sequence[int]] = None,
+                 dist: Optional[Any] = None) -> None:
         super().__init__(domain, alpha=alpha, thres=thres, dist=dist)
         if len(self.dist) != 1:
             raise ValueError("ForgetfulCrossEntropySampler chooses one index; give it a one-dimensional DiscreteBox")
@@ -54,7 +61,14 @@ class ForgetfulCrossEntropySampler(DiscreteCrossEntropySampler):
         self.dry = np.zeros(len(self.dist[0]), dtype=int)
         """Per index: draws fed since its last failure."""
         self.restarts = 0
-        """How many stagnation restarts happened."""
+        """How many stagnation restarts (and capacity cuts) happened."""
+        self.capacity = float(capacity)
+        count = len(self.dist[0])
+        self.cells = np.array(list(cells) if cells is not None else [0] * count, dtype=float)
+        if len(self.cells) != count:
+            raise ValueError(f"cells has {len(self.cells)} entries for {count} indices")
+        self.drawn = np.zeros(count, dtype=int)
+        """Per index: outcomes fed."""
 
     def _move_away(self, index: int, amount: float) -> None:
         row = self.dist[0]
@@ -70,6 +84,7 @@ class ForgetfulCrossEntropySampler(DiscreteCrossEntropySampler):
     def updateVector(self, vector, info, rho) -> None:
         """VerifAI's update on a failure; otherwise forgetting and the stagnation count (module docstring)."""
         index = int(vector[0]) - int(self.domain.standardizedIntervals[0][0])
+        self.drawn[index] += 1
         if rho is not None and rho < self.thres:
             self.dry[index] = 0
             super().updateVector(vector, info, rho)
@@ -77,7 +92,8 @@ class ForgetfulCrossEntropySampler(DiscreteCrossEntropySampler):
         row = self.dist[0]
         self._move_away(index, self.forget * float(row[index]))
         self.dry[index] += 1
-        if self.patience and self.dry[index] >= self.patience:
+        exhausted = self.capacity > 0 and self.cells[index] > 0 and self.drawn[index] >= self.capacity * self.cells[index]
+        if exhausted or self.patience and self.dry[index] >= self.patience:
             self.dry[index] = 0
             cut = self.floor / len(row)
             if row[index] > cut:

@@ -64,11 +64,11 @@ SAMPLERS = ("random", "halton", "cross-entropy", "bandit", SPLIT)
 """Names :func:`make_sampler` accepts."""
 
 SAMPLER_OPTIONS = {"cross-entropy": ("alpha", "buckets", "thres"), "bandit": ("alpha", "buckets", "thres"),
-                   SPLIT: ("alpha", "buckets", "thres", "chooser", "params", "warmup", "forget", "patience", "floor")}
+                   SPLIT: ("alpha", "buckets", "thres", "chooser", "params", "warmup", "forget", "patience", "floor", "capacity")}
 """The options each sampler takes (the others take none)."""
 
 SPLIT_DEFAULTS: Dict[str, Any] = {"chooser": "cross-entropy", "params": "halton", "alpha": 0.9, "thres": 0.0,
-                                  "buckets": 3, "warmup": 0, "forget": 0.0, "patience": 0, "floor": 0.5}
+                                  "buckets": 3, "warmup": 0, "forget": 0.0, "patience": 0, "floor": 0.5, "capacity": 0.0}
 """The settings of :data:`SPLIT` when no option is given."""
 
 DEFAULT_FEEDBACK = {SPLIT: "novelty"}
@@ -133,8 +133,11 @@ def _split_params(options: Dict[str, Any]) -> Dict[str, Any]:
     if isinstance(patience, bool) or not isinstance(patience, int) or patience < 0:
         raise MiningError(f"sampler option patience must be a whole number >= 0 (0: no restart), not {patience!r}")
     forget, floor = float(params["forget"]), float(params["floor"])
-    if (forget or patience) and params["chooser"] != "cross-entropy":
-        raise MiningError(f"sampler options forget and patience need chooser cross-entropy, not "
+    capacity = float(params["capacity"])
+    if capacity < 0.0:
+        raise MiningError(f"sampler option capacity must be >= 0 (0: off), not {params['capacity']!r}")
+    if (forget or patience or capacity) and params["chooser"] != "cross-entropy":
+        raise MiningError(f"sampler options forget, patience and capacity need chooser cross-entropy, not "
                           f"{params['chooser']!r}; drop them or use chooser=cross-entropy")
     if not 0.0 <= forget < 1.0:
         raise MiningError(f"sampler option forget must be in [0, 1) (0: no forgetting), not {params['forget']!r}")
@@ -143,7 +146,7 @@ def _split_params(options: Dict[str, Any]) -> Dict[str, Any]:
                           f"not {params['floor']!r}")
     params["alpha"], params["thres"], params["buckets"] = (float(params["alpha"]), float(params["thres"]),
                                                            int(params["buckets"]))
-    params["forget"], params["floor"] = forget, floor
+    params["forget"], params["floor"], params["capacity"] = forget, floor, capacity
     return params
 
 
@@ -256,4 +259,4 @@ def _make_split(space: Any, feature_space: Any, params: Dict[str, Any]):
     return ScenarioSplitSampler(feature_space, dimensions, chooser=params["chooser"], params=params["params"],
                                 alpha=params["alpha"], thres=params["thres"], buckets=params["buckets"],
                                 warmup=params["warmup"], forget=params["forget"], patience=params["patience"],
-                                floor=params["floor"])
+                                floor=params["floor"], capacity=params["capacity"])

@@ -35,10 +35,12 @@ clusters of random sampling on seeds 0-2, against 1.31x for the best VerifAI fea
 
 from __future__ import annotations
 
-from typing import Any, List, Sequence, Tuple
+from typing import Any, List, Optional, Sequence, Tuple
 
 import numpy as np
 from verifai.samplers.feature_sampler import FeatureSampler
+
+from dv2s_gym.mining.cluster import REGION_BINS
 
 __all__ = ["ScenarioSplitSampler", "CHOOSERS", "PARAM_SAMPLERS", "scenario_dimensions"]
 
@@ -59,15 +61,16 @@ def scenario_dimensions(space) -> List[int]:
 
 
 def _make_chooser(kind: str, count: int, alpha: float, thres: float, forget: float = 0.0, patience: int = 0,
-                  floor: float = 0.5):
+                  floor: float = 0.5, capacity: float = 0.0, cells: Optional[Sequence[int]] = None):
     from verifai.features import Box, DiscreteBox
 
     if kind == "cross-entropy":
-        if forget or patience:
+        if forget or patience or capacity:
             from dv2s_gym.mining.chooser import ForgetfulCrossEntropySampler
 
             return ForgetfulCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=alpha, thres=thres,
-                                                forget=forget, patience=patience, floor=floor)
+                                                forget=forget, patience=patience, floor=floor, capacity=capacity,
+                                                cells=cells)
         from verifai.samplers.cross_entropy import DiscreteCrossEntropySampler
 
         return DiscreteCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=alpha, thres=thres)
@@ -116,7 +119,7 @@ class ScenarioSplitSampler(FeatureSampler):
             for the ``bandit`` and ``cross-entropy`` parameter samplers).
         warmup: the first ``warmup * len(dimensions)`` scenes try every scenario ``warmup`` times (each
             round in a seeded order) and are fed to the chooser like its own draws; 0: none.
-        forget, patience, floor: the ``cross-entropy`` chooser leaves scenarios that stop yielding failures
+        forget, patience, floor, capacity: the ``cross-entropy`` chooser leaves scenarios that stop yielding failures
             (:class:`~dv2s_gym.mining.chooser.ForgetfulCrossEntropySampler`); ``forget=0, patience=0``: VerifAI's
             ``DiscreteCrossEntropySampler`` as it is.
 
@@ -126,13 +129,15 @@ class ScenarioSplitSampler(FeatureSampler):
 
     def __init__(self, space, dimensions: Sequence[int], chooser: str = "cross-entropy", params: str = "halton",
                  alpha: float = 0.9, thres: float = 0.0, buckets: int = 3, warmup: int = 0, forget: float = 0.0,
-                 patience: int = 0, floor: float = 0.5) -> None:
+                 patience: int = 0, floor: float = 0.5, capacity: float = 0.0) -> None:
         super().__init__(space)
         self.width = max([int(d) for d in dimensions] + [1])
         """Coordinates of ``u`` in the feature space (the largest parameter count)."""
         self.dimensions = [int(d) for d in dimensions]
         self.chooser_kind, self.params_kind = chooser, params
-        self.chooser = _make_chooser(chooser, len(self.dimensions), alpha, thres, forget, patience, floor)
+        cells = [REGION_BINS ** d for d in self.dimensions]  # the cluster grid's cells of each scenario
+        self.chooser = _make_chooser(chooser, len(self.dimensions), alpha, thres, forget, patience, floor, capacity,
+                                     cells)
         self.param_samplers = [_make_params(params, d, alpha, thres, buckets) for d in self.dimensions]
         self.draws = [0] * len(self.dimensions)
         """Scenes drawn per scenario."""
