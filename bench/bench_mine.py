@@ -112,7 +112,7 @@ def parse_config(text: str) -> Config:
             feedback = value
         elif key in _TEXT_OPTIONS:
             options[key] = value
-        elif key in ("buckets", "warmup", "patience"):
+        elif key in ("buckets", "warmup", "patience", "avoid"):
             options[key] = int(value)
         else:
             options[key] = float(value)

@@ -11,6 +11,7 @@ from verifai.features import DiscreteBox
 from verifai.samplers.cross_entropy import DiscreteCrossEntropySampler
 
 from dv2s_gym.mining.chooser import ForgetfulCrossEntropySampler
+from dv2s_gym.mining.cluster import region_of
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.samplers import SPLIT, SceneSampler, make_sampler
 from dv2s_gym.mining.space import SceneSpace
@@ -91,7 +92,8 @@ def test_the_split_sampler_leaves_a_scenario_that_stopped_yielding(space):
     assert late_left <= 18 and late_left < late_locked
 
 
-@pytest.mark.parametrize("options", [{"forget": 0.1}, {"patience": 5}, {"forget": 0.05, "patience": 4, "floor": 0.2}])
+@pytest.mark.parametrize("options", [{"forget": 0.1}, {"patience": 5}, {"forget": 0.05, "patience": 4, "floor": 0.2},
+                                     {"avoid": 9, "capacity": 1.0}])
 def test_forgetting_split_is_deterministic_and_resumes_exactly(space, options):
     def half(step, spec):
         return spec.scenario == LEFT_TURN and step % 2 == 0
@@ -110,7 +112,7 @@ def test_forgetting_split_is_deterministic_and_resumes_exactly(space, options):
 def test_forgetting_options_are_checked(space):
     for bad, match in (({"forget": 1.0}, "forget must be in"), ({"capacity": -1}, "capacity must be >= 0"), ({"forget": -0.1}, "forget must be in"),
                        ({"patience": -1}, "patience must be a whole number"),
-                       ({"patience": 2.5}, "patience must be a whole number"), ({"floor": 2}, "floor must be in"),
+                       ({"patience": 2.5}, "patience must be a whole number"), ({"avoid": -2}, "avoid must be a whole number"), ({"floor": 2}, "floor must be in"),
                        ({"chooser": "ucb", "forget": 0.1}, "need chooser cross-entropy")):
         with pytest.raises(MiningError, match=match):
             make_sampler(SPLIT, space, 0, bad)
@@ -139,3 +141,26 @@ def test_the_split_sampler_gives_the_chooser_each_scenarios_cells(space):
     assert list(sampler.chooser.cells) == [3 ** 4, 3 ** 2]  # brakes: 4 parameters, left turn: 2
     assert type(make_sampler(SPLIT, space, 0, {"forget": 0.0, "patience": 0, "capacity": 0.0})._sampler.chooser) \
         is DiscreteCrossEntropySampler  # all off: VerifAI's own chooser, the old behaviour
+
+
+def test_avoid_draws_past_the_cells_where_a_scenario_already_failed(space):
+    def turns(options, draws=40):
+        sampler = make_sampler(SPLIT, space, 5, {"forget": 0.0, "patience": 0, "capacity": 0.0, **options})
+        cells = []
+        for _ in range(draws):
+            ((point, info),) = sampler.draw(1)
+            spec = space.decode(point)
+            if spec.scenario == LEFT_TURN:
+                cell = region_of(spec.point)
+                failed = cell in ("r0.0", "r1.1")  # the left turn fails in two of its 9 cells only
+                cells.append((cell, failed))
+            else:
+                failed = False
+            sampler.feed(point, info, -1.0 if failed else 9.0)
+        return cells
+
+    plain, avoiding = turns({"avoid": 0}), turns({"avoid": 9})
+    plain_repeats = sum(failed for _, failed in plain) - len({c for c, failed in plain if failed})
+    avoiding_repeats = sum(failed for _, failed in avoiding) - len({c for c, failed in avoiding if failed})
+    assert plain_repeats >= 2  # Halton comes back to the failing cells
+    assert avoiding_repeats == 0 and {c for c, failed in avoiding if failed} == {"r0.0", "r1.1"}

@@ -64,11 +64,11 @@ SAMPLERS = ("random", "halton", "cross-entropy", "bandit", SPLIT)
 """Names :func:`make_sampler` accepts."""
 
 SAMPLER_OPTIONS = {"cross-entropy": ("alpha", "buckets", "thres"), "bandit": ("alpha", "buckets", "thres"),
-                   SPLIT: ("alpha", "buckets", "thres", "chooser", "params", "warmup", "forget", "patience", "floor", "capacity")}
+                   SPLIT: ("alpha", "buckets", "thres", "chooser", "params", "warmup", "forget", "patience", "floor", "capacity", "avoid")}
 """The options each sampler takes (the others take none)."""
 
 SPLIT_DEFAULTS: Dict[str, Any] = {"chooser": "cross-entropy", "params": "halton", "alpha": 0.9, "thres": 0.0,
-                                  "buckets": 3, "warmup": 0, "forget": 0.0, "patience": 0, "floor": 0.5, "capacity": 0.0}
+                                  "buckets": 3, "warmup": 0, "forget": 0.0, "patience": 0, "floor": 0.5, "capacity": 0.0, "avoid": 0}
 """The settings of :data:`SPLIT` when no option is given."""
 
 DEFAULT_FEEDBACK = {SPLIT: "novelty"}
@@ -129,9 +129,11 @@ def _split_params(options: Dict[str, Any]) -> Dict[str, Any]:
     warmup = params["warmup"]
     if isinstance(warmup, bool) or not isinstance(warmup, int) or warmup < 0:
         raise MiningError(f"sampler option warmup must be a whole number >= 0, not {warmup!r}")
+    for key in ("patience", "avoid"):
+        value = params[key]
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise MiningError(f"sampler option {key} must be a whole number >= 0 (0: off), not {value!r}")
     patience = params["patience"]
-    if isinstance(patience, bool) or not isinstance(patience, int) or patience < 0:
-        raise MiningError(f"sampler option patience must be a whole number >= 0 (0: no restart), not {patience!r}")
     forget, floor = float(params["forget"]), float(params["floor"])
     capacity = float(params["capacity"])
     if capacity < 0.0:
@@ -259,4 +261,5 @@ def _make_split(space: Any, feature_space: Any, params: Dict[str, Any]):
     return ScenarioSplitSampler(feature_space, dimensions, chooser=params["chooser"], params=params["params"],
                                 alpha=params["alpha"], thres=params["thres"], buckets=params["buckets"],
                                 warmup=params["warmup"], forget=params["forget"], patience=params["patience"],
-                                floor=params["floor"], capacity=params["capacity"])
+                                floor=params["floor"], capacity=params["capacity"],
+                                avoid=params["avoid"])

@@ -40,7 +40,7 @@ from typing import Any, List, Optional, Sequence, Tuple
 import numpy as np
 from verifai.samplers.feature_sampler import FeatureSampler
 
-from dv2s_gym.mining.cluster import REGION_BINS
+from dv2s_gym.mining.cluster import REGION_BINS, region_of
 
 __all__ = ["ScenarioSplitSampler", "CHOOSERS", "PARAM_SAMPLERS", "scenario_dimensions"]
 
@@ -119,6 +119,9 @@ class ScenarioSplitSampler(FeatureSampler):
             for the ``bandit`` and ``cross-entropy`` parameter samplers).
         warmup: the first ``warmup * len(dimensions)`` scenes try every scenario ``warmup`` times (each
             round in a seeded order) and are fed to the chooser like its own draws; 0: none.
+        avoid: up to this many further points of the scenario's parameter sampler are drawn while the point
+            falls in a cell of the cluster grid where a failure (``rho < thres``; under novelty feedback a new
+            cluster) was already found in that scenario; 0: the sampler's first point.
         forget, patience, floor, capacity: the ``cross-entropy`` chooser leaves scenarios that stop yielding failures
             (:class:`~dv2s_gym.mining.chooser.ForgetfulCrossEntropySampler`); ``forget=0, patience=0``: VerifAI's
             ``DiscreteCrossEntropySampler`` as it is.
@@ -129,7 +132,7 @@ class ScenarioSplitSampler(FeatureSampler):
 
     def __init__(self, space, dimensions: Sequence[int], chooser: str = "cross-entropy", params: str = "halton",
                  alpha: float = 0.9, thres: float = 0.0, buckets: int = 3, warmup: int = 0, forget: float = 0.0,
-                 patience: int = 0, floor: float = 0.5, capacity: float = 0.0) -> None:
+                 patience: int = 0, floor: float = 0.5, capacity: float = 0.0, avoid: int = 0) -> None:
         super().__init__(space)
         self.width = max([int(d) for d in dimensions] + [1])
         """Coordinates of ``u`` in the feature space (the largest parameter count)."""
@@ -145,6 +148,10 @@ class ScenarioSplitSampler(FeatureSampler):
         self.warmup_order = [int(i) for _ in range(int(warmup)) for i in np.random.permutation(count)]
         """The scenarios of the first draws: every scenario ``warmup`` times, each round in a seeded order."""
         self.drawn = 0
+        self.avoid = int(avoid)
+        """Redraws allowed per scene to leave the cells where a failure was already found (0: none)."""
+        self.found: List[set] = [set() for _ in self.dimensions]
+        """Per scenario: the cluster-grid cells (:func:`~dv2s_gym.mining.cluster.region_of`) of its failures."""
 
     def _scenario(self) -> Tuple[int, Any, Any]:
         if self.drawn < len(self.warmup_order):  # warm-up: the chooser is only fed, as if it had drawn these
@@ -168,6 +175,11 @@ class ScenarioSplitSampler(FeatureSampler):
         index, choice, choice_info = self._scenario()
         self.drawn += 1
         own, own_info = self.param_samplers[index].getSample()
+        found = getattr(self, "found", None)  # a checkpoint from before the option has none
+        for _ in range(getattr(self, "avoid", 0)):  # the sampler's next points, past the cells already failing
+            if region_of(own[: self.dimensions[index]]) not in found[index]:
+                break
+            own, own_info = self.param_samplers[index].getSample()
         own = tuple(float(x) for x in own)
         u = own[: self.dimensions[index]] + (0.5,) * (self.width - self.dimensions[index])
         self.draws[index] += 1
@@ -177,6 +189,8 @@ class ScenarioSplitSampler(FeatureSampler):
     def update(self, sample, info, rho) -> None:
         """Feed the outcome ``rho`` of a drawn point to the chooser and to its scenario's parameter sampler."""
         index, choice, choice_info, own, own_info = info
+        if rho < self.chooser.thres and getattr(self, "found", None) is not None:
+            self.found[index].add(region_of(own[: self.dimensions[index]]))
         self.chooser.update(choice, choice_info, rho)
         self.param_samplers[index].update(own, own_info, rho)
 
