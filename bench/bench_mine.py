@@ -266,7 +266,8 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     parser.add_argument("--split-config", action="append", default=None, metavar="LABEL:KEY=VALUE,...",
                         help="a setting of the split sampler (repeatable): alpha, buckets, thres, chooser "
                              "(cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy), "
-                             "warmup, feedback; default: its preset (dv2s mine --sampler split)")
+                             "warmup, forget, patience, floor, capacity, avoid, feedback; default: its preset "
+                             "(dv2s mine --sampler split)")
     parser.add_argument("--throughput-sampler", default="random")
     parser.add_argument("--throughput-budget", type=int, default=None, help="default 600; --quick 40")
     parser.add_argument("--repeats", type=int, default=None, help="throughput rounds (default 3; --quick 1)")

@@ -68,7 +68,7 @@ SAMPLER_OPTIONS = {"cross-entropy": ("alpha", "buckets", "thres"), "bandit": ("a
 """The options each sampler takes (the others take none)."""
 
 SPLIT_DEFAULTS: Dict[str, Any] = {"chooser": "cross-entropy", "params": "halton", "alpha": 0.9, "thres": 0.0,
-                                  "buckets": 3, "warmup": 0, "forget": 0.0, "patience": 0, "floor": 0.5, "capacity": 0.0, "avoid": 0}
+                                  "buckets": 3, "warmup": 0, "forget": 0.0, "patience": 0, "floor": 0.5, "capacity": 0.0, "avoid": 81}
 """The settings of :data:`SPLIT` when no option is given."""
 
 DEFAULT_FEEDBACK = {SPLIT: "novelty"}
