@@ -20,7 +20,8 @@ d. **fine-tune**: :func:`policies.training.fine_tune` continues ``P`` on the wor
    mining, the held-out evaluations and the regression test run ``P``'s own (a failure
    does not depend on the reward). That is ``fine_tune_method="ppo"``; with ``"dagger"``
    the policy instead imitates the reference driver (``rule``) on the states it visits
-   itself in the same weighted scenario mix (:mod:`policies.imitation`; no reward);
+   itself in the same weighted scenario mix (:mod:`policies.imitation`; no reward; a killed
+   DAgger run resumes from its last finished iteration, ``resumed`` in the step's record);
 e. **after**: the new policy runs on the same held-out episodes (paired): rate, interval,
    relative drop (scenario-bootstrap interval), exact two-sided McNemar p;
 f. **regress**: :func:`dv2s_gym.regress.runner.run_regression` new against old on the starting
@@ -424,9 +425,14 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                 mined = [e.name for e in entries if e.source.get("kind") == "mined"]
                 weights = fine_tune_weights(names, mined, mined_share)
                 if fine_tune_method == "dagger":
-                    from policies.imitation import dagger_fine_tune
+                    from policies.dagger_checkpoint import checkpoint_position, describe_position
+                    from policies.imitation import DAGGER_DEFAULTS, dagger_fine_tune
                     from policies.registry import read_model_card
 
+                    position = checkpoint_position(round_dir / "policy")
+                    if position is not None:
+                        log(f"round {number}: fine-tune (dagger) resumed from "
+                            f"{describe_position(*position, DAGGER_DEFAULTS['iterations'])}")
                     path = dagger_fine_tune(current, bank_dir=bank, out=round_dir / "policy", steps=fine_tune_steps,
                                             weights=weights, seed=seed * 1000 + number, n_envs=n_envs,
                                             env_config=env_config, learning_rate=fine_tune_lr,
@@ -435,7 +441,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                     return {"model": str(path.resolve()), "method": "dagger", "scenarios": len(names),
                             "mined_upweighted": len(mined), "steps": fine_tune_steps, "reward_weights": None,
                             "env_config": env_config, "reference": dagger.get("reference"),
-                            "agreement": dagger.get("agreement")}
+                            "agreement": dagger.get("agreement"), "resumed": dagger.get("resumed") or []}
                 from policies.training import fine_tune
 
                 path = fine_tune(current, bank_dir=bank, out=round_dir / "policy", steps=fine_tune_steps,

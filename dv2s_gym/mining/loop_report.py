@@ -13,7 +13,7 @@
                            "fine_tune": {"model", "method": "ppo" | "dagger", "scenarios", "mined_upweighted",
                                          "steps", "reward_weights" (ppo; None for dagger),
                                          "env_config": the fine-tuning env's config,
-                                         "reference", "agreement" (dagger only)},
+                                         "reference", "agreement", "resumed" (dagger only)},
                            "after": {"pairs", "errors", "before": Rate, "after": Rate, "relative_drop",
                                      "relative_drop_interval", "table", "mcnemar_p", "per_scenario"},
                            "regress": {"verdict", "reason", "episodes", "new_failure_rate", "old_failure_rate",
@@ -131,7 +131,11 @@ def render_markdown(report: Mapping[str, Any]) -> str:
                              f"`{tuned.get('reference')}` on the policy's own states) on {tuned.get('scenarios')} "
                              f"scenarios ({tuned.get('mined_upweighted')} mined, upweighted); agreement with the "
                              f"reference on the {agreement.get('states')} labelled states "
-                             f"{agreement.get('source')} -> {agreement.get('fine_tuned')}: `{tuned.get('model')}`")
+                             f"{agreement.get('source')} -> {agreement.get('fine_tuned')}"
+                             + "".join(f", resumed from iteration {r.get('from_iteration')}"
+                                       + (f" (+{r['steps_into_next']} steps)" if r.get("steps_into_next") else "")
+                                       for r in tuned.get("resumed") or [])
+                             + f": `{tuned.get('model')}`")
             else:
                 lines.append(f"- fine-tuned by PPO {tuned.get('steps')} steps on {tuned.get('scenarios')} scenarios "
                              f"({tuned.get('mined_upweighted')} mined, upweighted), training reward weights "
