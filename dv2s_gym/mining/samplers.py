@@ -18,8 +18,9 @@ Samplers (``name``: VerifAI's):
   (:class:`~dv2s_gym.mining.split_sampler.ScenarioSplitSampler`): VerifAI's discrete cross-entropy
   sampler picks the scenario, and each scenario has its own VerifAI Halton sampler over its own
   parameters; it learns by default from ``novelty`` feedback (a repeat of a failure cluster
-  already found counts as an easy scene). It finds the most distinct failure clusters of these
-  samplers (bench/RESULTS.md, ``python -m bench.bench_mine --part samplers``).
+  already found counts as an easy scene), and by default (``avoid=81``) draws a scenario's Halton
+  points past the cells of the cluster grid where that scenario already failed. It finds the most
+  distinct failure clusters of these samplers (bench/RESULTS.md, ``python -m bench.bench_mine --part samplers``).
 
 The adaptive samplers (``cross-entropy``, ``bandit``) take VerifAI's parameters as
 ``options`` (:data:`SAMPLER_OPTIONS`): ``alpha`` (how much one failure moves the
@@ -29,7 +30,13 @@ only which scenario is drawn) and ``thres`` (robustness below which an outcome c
 as a failure, default 0). ``split`` takes them too (defaults :data:`SPLIT_DEFAULTS`: alpha 0.9,
 thres 0, buckets 3, the last only used by bucketed parameter samplers), and ``chooser``
 (``cross-entropy``, ``ucb``, ``epsilon-greedy``), ``params`` (``halton``, ``random``, ``bandit``,
-``cross-entropy``) and ``warmup`` (tries of every scenario before the chooser draws, default 0).
+``cross-entropy``), ``warmup`` (tries of every scenario before the chooser draws, default 0), ``avoid``
+(redraws of a scenario's parameters past cells where it already failed, default 81; 0: the session-11
+preset), and for a cross-entropy chooser that leaves scenarios which stop yielding
+(:mod:`dv2s_gym.mining.chooser`, all off by default): ``forget`` (fraction of the drawn scenario's
+probability moved to the others on each non-failure), ``patience`` (draws without a failure before a
+scenario is cut to ``floor`` of the uniform share, default 0.5) and ``capacity`` (draws per grid cell after
+which a scenario is cut on every non-failure).
 """
 
 from __future__ import annotations

@@ -28,9 +28,16 @@ Every outcome is fed to the chooser and to the drawn scenario's parameter sample
 points of the same feature space as the other samplers (unused coordinates of ``u`` are
 0.5), so the miner, its records and its checkpoints treat this sampler like any other.
 
-``dv2s mine --sampler split`` uses the cross-entropy chooser (alpha 0.9), Halton parameters and
-``novelty`` feedback (settings chosen on tuning seeds; bench/RESULTS.md: 2.56x the distinct failure
-clusters of random sampling on seeds 0-2, against 1.31x for the best VerifAI feature sampler).
+Two extensions (options): ``avoid`` keeps drawing a scenario's parameter sampler (up to ``avoid`` more
+points) while its point falls in a cell of the cluster grid (:mod:`dv2s_gym.mining.cluster`) where that
+scenario already failed (under novelty feedback: where a cluster was found), so the Halton sequence is
+spent on cells not yet failing; ``forget``/``patience``/``capacity`` replace VerifAI's chooser by
+:class:`~dv2s_gym.mining.chooser.ForgetfulCrossEntropySampler`, which moves probability away from scenarios
+that stop yielding failures.
+
+``dv2s mine --sampler split`` uses the cross-entropy chooser (alpha 0.9), Halton parameters, ``avoid=81``
+and ``novelty`` feedback (settings chosen on tuning seeds 7-14; bench/RESULTS.md). ``avoid=0`` is the
+session-11 preset (2.56x the distinct failure clusters of random sampling on seeds 0-2).
 """
 
 from __future__ import annotations
