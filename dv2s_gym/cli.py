@@ -846,7 +846,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sampler-options", default=None,
                    help="VerifAI settings of cross-entropy/bandit as JSON: alpha (default 0.9), buckets (5), thres (0); "
                    "split also takes chooser (cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy) "
-                   "and warmup (0)")
+                   "and warmup (0), and against scenarios that stop yielding: forget, patience, floor, capacity, avoid "
+                   "(see dv2s_gym/mining/samplers.py)")
     p.add_argument("--feedback", choices=["robustness", "novelty"], default=None,
                    help="what adaptive samplers learn from: robustness (every failure), or novelty (a failure in a "
                    "cluster already found counts as an easy scene, to spread the search); default novelty for "
