@@ -194,7 +194,8 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         cluster: the failure's cluster id (default ``record["cluster"]``).
         monitor: options of the failure monitors (``ttc_threshold``, ``stall_seconds``); default: those in
             ``run_dir/settings.json``, else the monitors' defaults.
-        before, after: seconds of video before and after the failure.
+        before, after: seconds of video before and after the failure (a stall's clip covers the stall, up to
+            the monitor's ``stall_seconds``, between them: :func:`~dv2s_gym.mining.failure_video.write_failure_video`).
 
     Raises the model backends' setup errors (:data:`SETUP_ERRORS`); every other problem is a rejection.
 
@@ -240,11 +241,11 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         from dv2s_gym.mining.failure_video import write_failure_video
 
         video = folder / "failure.webm"
+        monitor = _monitor_options(run_dir, monitor)
         written = write_failure_video(record, video, policy=policy, bank_dir=bank_dir, env_config=env_config,
-                                      before=before, after=after)
+                                      before=before, after=after, stall_seconds=monitor.get("stall_seconds"))
         out["video"] = _rel(video, run_dir)
         source_trace = written.trace
-        monitor = _monitor_options(run_dir, monitor)
         detected = _detect(written.result, source_trace, monitor)
         details["source_failure_detected"] = detected
         if detected and detected.get("type") == source_failure["type"]:
