@@ -80,6 +80,7 @@ __all__ = [
     "param_ranges",
     "near_duplicate",
     "ENTRY_FILE_KEYS",
+    "ENTRY_FILES",
     "entry_files",
     "entry_file_name",
 ]
@@ -105,11 +106,13 @@ mining run and episode index, and ``merged``: later failures merged into this en
 :meth:`Bank.add_or_merge`). Sidecars without them (every older sidecar) load as before."""
 
 ENTRY_FILE_KEYS = ("video", "trace")
-"""Provenance fields that may name a file the entry carries in its own folder (a path relative to the
-entry folder, e.g. a mined failure's ``failure.webm``), in ``source`` and in each ``source.merged``
-record. Files are added with the entry (``files=`` of :meth:`Bank.add` / :meth:`Bank.add_or_merge`),
-travel with :meth:`Bank.export`, :meth:`Bank.import_archive` and :meth:`Bank.copy_to`, and
-``dv2s bank validate`` reports one that is missing. Absolute paths and ``None`` are left as they are."""
+"""Provenance fields that may name one of the entry's own files by its path relative to the entry folder (a
+mined failure's ``video: "failure.webm"``); a merge rewrites them to the merged copy's path."""
+ENTRY_FILES = "files"
+"""The provenance field listing the files an entry carries in its own folder (relative paths), in ``source``
+and in each ``source.merged`` record. They are added with the entry (``files=`` of :meth:`Bank.add` /
+:meth:`Bank.add_or_merge`), travel with :meth:`Bank.export`, :meth:`Bank.import_archive` and
+:meth:`Bank.copy_to`, and ``dv2s bank validate`` reports one that is missing. Older sidecars have none."""
 _ENTRY_FILE = re.compile(r"^[A-Za-z0-9_\-][A-Za-z0-9_.\-]*(/[A-Za-z0-9_\-][A-Za-z0-9_.\-]*)*$")
 
 PathLike = Union[str, os.PathLike]
@@ -125,14 +128,15 @@ def entry_file_name(name: Any) -> str:
 
 
 def entry_files(source: Mapping[str, Any]) -> List[str]:
-    """The files a sidecar's ``source`` names inside the entry folder (:data:`ENTRY_FILE_KEYS` of the source
-    and of its ``merged`` records whose value is a relative path), in order, without repeats."""
+    """The files a sidecar's ``source`` says the entry carries (:data:`ENTRY_FILES` of the source and of its
+    ``merged`` records; valid relative names only), in order, without repeats."""
     records = [source] + [m for m in (source.get("merged") or []) if isinstance(m, Mapping)]
     out: List[str] = []
     for record in records:
-        for key in ENTRY_FILE_KEYS:
-            value = record.get(key)
-            if isinstance(value, str) and value and _ENTRY_FILE.match(value) and value not in out:
+        listed = record.get(ENTRY_FILES)
+        for value in listed if isinstance(listed, list) else []:
+            if isinstance(value, str) and _ENTRY_FILE.match(value) and value not in (SCRIPT, SIDECAR) \
+                    and value not in out:
                 out.append(value)
     return out
 
@@ -336,12 +340,12 @@ class ScenarioEntry:
 
     @property
     def files(self) -> List[Path]:
-        """Absolute paths of the files the provenance names inside the entry folder (:func:`entry_files`),
-        whether or not they exist."""
+        """Absolute paths of the files the entry carries in its folder (:func:`entry_files`), whether or not
+        they exist."""
         return [self.folder / name for name in entry_files(self.source)]
 
     def missing_files(self) -> List[str]:
-        """The entry files (relative names) the provenance names that are not in the entry folder."""
+        """The entry's files (relative names, :func:`entry_files`) that are not in its folder."""
         return [name for name in entry_files(self.source) if not (self.folder / name).is_file()]
 
     def summary(self) -> Dict[str, Any]:
@@ -688,13 +692,15 @@ class Bank:
         refused with a :class:`ScenarioRejectedError` naming the construct, its line and this option.
 
         ``files``: entry file name (relative to the entry folder, e.g. ``"failure.webm"``) -> a file to copy
-        there in the same atomic step; the provenance names them by those relative names
-        (:data:`ENTRY_FILE_KEYS`), so the entry stands alone.
+        there in the same atomic step, listed in the provenance's :data:`ENTRY_FILES`; provenance fields
+        (:data:`ENTRY_FILE_KEYS`) name them by those relative names, so the entry stands alone.
         """
         self._check_writable("add a scenario")
         files = _check_files(files)
         script, provenance = _upgrade_scenic2(script, provenance, upgrade_scenic2)
         meta = self._make_meta(script, description, name, elements, tags, map, provenance, use_case)
+        if files:
+            meta["source"][ENTRY_FILES] = list(files)
         # before the lock: other writers do not wait for it
         _verify_or_name_scenic2(script, f"scenario {meta['name']!r}", upgrade_scenic2)
         with self._lock():
@@ -772,6 +778,8 @@ class Bank:
             found = self.find_near_duplicate(script, meta["elements"], meta["map"])
             if found is None:
                 name = meta["name"] = self._free_name(meta["name"], explicit=False)
+                if files:
+                    meta["source"][ENTRY_FILES] = list(files)
                 return AddOutcome("added", self._add_locked(name, script, meta, files))
             existing, how = found
             merged = {key: value for key, value in meta["source"].items() if value is not None and key != "merged"}
@@ -785,8 +793,10 @@ class Bank:
                             _copy_synced(origin, tmp)
                 except OSError as error:
                     raise _write_error(error, folder) from None
-                merged = {key: prefix + value if key in ENTRY_FILE_KEYS and value in files else value
+                merged = {key: prefix + value if key in ENTRY_FILE_KEYS and isinstance(value, str) and value in files
+                          else value
                           for key, value in merged.items()}
+                merged[ENTRY_FILES] = [prefix + file for file in files]
             self._append_merged(existing, merged)
             return AddOutcome("merged", self._entries[existing], how)
 

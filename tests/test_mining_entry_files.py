@@ -47,6 +47,8 @@ def test_a_kept_and_a_merged_entry_keep_their_videos_once_the_runs_are_deleted(r
     assert source["video"] == "failure.webm" and source["trace"] == "trace.json.gz"
     assert source["merged"][0]["video"] == "merged/1/failure.webm"
     assert source["merged"][0]["trace"] == "merged/1/trace.json.gz"
+    assert source["files"] == ["failure.webm", "trace.json.gz"]
+    assert source["merged"][0]["files"] == ["merged/1/failure.webm", "merged/1/trace.json.gz"]
     assert entry_files(source) == ["failure.webm", "trace.json.gz", "merged/1/failure.webm", "merged/1/trace.json.gz"]
     assert entry.missing_files() == []
     clip = read_video(entry.folder / "failure.webm", fps=None, max_frames=1000, max_pixels=10**7)
@@ -85,3 +87,6 @@ def test_entry_file_names_are_checked(tmp_path):
     with pytest.raises(BankError, match="does not exist"):
         bank.add(script, "a test scenario", files={"v.webm": tmp_path / "nope.webm"})
     assert bank.names() == []
+    # a video given by a path of the user's (not carried) is not taken for a missing entry file
+    entry = bank.add(script, "a test scenario", provenance={"kind": "generated", "video": "clips/a.mp4"})
+    assert entry.files == [] and entry.missing_files() == []
