@@ -267,10 +267,13 @@ def _cmd_bank_list(args: argparse.Namespace) -> int:
 
 def _cmd_bank_show(args: argparse.Namespace) -> int:
     entry = _bank(args).get(args.name)
-    data = {**entry.meta, "path": str(entry.script_path), "script": entry.script}
+    missing = set(entry.missing_files())
+    files = [str(f) + (" (missing)" if str(f.relative_to(entry.folder)) in missing else "") for f in entry.files]
+    data = {**entry.meta, "path": str(entry.script_path), "script": entry.script, "files": files}
     human = (f"{entry.name}  ({entry.map}, {entry.source.get('kind')})\n{entry.description}\n"
              f"tags: {', '.join(entry.tags)}\nelements: {json.dumps(entry.elements)}\n"
-             f"source: {json.dumps(entry.source)}\npath: {entry.script_path}\n\n{entry.script}")
+             f"source: {json.dumps(entry.source)}\npath: {entry.script_path}\n"
+             + "".join(f"file: {f}\n" for f in files) + f"\n{entry.script}")
     _print(args, data, human)
     return 0
 

@@ -42,7 +42,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, Iterator, List, Optional, Sequence
+from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -693,6 +693,15 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
     return existing
 
 
+def _entry_video(entry, provenance: Mapping[str, Any]) -> Optional[str]:
+    """The path of a provenance record's video: in the entry's folder when relative to it (as the converter
+    writes it), else as recorded."""
+    video = provenance.get("video")
+    if isinstance(video, str) and video and not os.path.isabs(video):
+        return str(entry.folder / video)
+    return video
+
+
 def _reached_bank(bank, out: Path, cluster: str) -> Optional[Dict[str, Any]]:
     """The conversion row of ``cluster`` when this run already added it to the bank (or merged it into an entry)
     but was killed before writing its ``conversions.jsonl`` line; rebuilt from the entry's provenance, so a
@@ -709,7 +718,7 @@ def _reached_bank(bank, out: Path, cluster: str) -> Optional[Dict[str, Any]]:
             folder = Path(out) / "failures" / cluster_slug(cluster, provenance.get("index"))
             video, script = folder / "failure.webm", folder / CONVERSION_DIR / "scenario.scenic"
             return {"cluster": cluster, "index": provenance.get("index"), "status": status, "reason": None,
-                    "stage": None, "video": str(video.relative_to(out)) if video.is_file() else provenance.get("video"),
+                    "stage": None, "video": str(video.relative_to(out)) if video.is_file() else _entry_video(entry, provenance),
                     "description": provenance.get("description") if status == "merged" else entry.description,
                     "script": str(script.relative_to(out)) if script.is_file() else None,
                     "reproduction": provenance.get("reproduction"), "e2e_sc": provenance.get("e2e_sc"),
