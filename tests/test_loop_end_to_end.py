@@ -4,7 +4,6 @@ what the report says is what the working bank and the run folders hold."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 

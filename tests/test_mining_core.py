@@ -518,12 +518,18 @@ def test_resuming_with_other_settings_is_refused(whole_run, tmp_path):
     assert (copy / "episodes.jsonl").read_bytes() == before
 
 
-def test_a_crashing_worker_gives_an_error_record_and_the_run_completes(tmp_path):
+def _mine_with_a_crash(tmp_path, once: bool):
+    """Mine 3 random scenes with a policy whose worker crashes on the second one (every time, or once)."""
     crash_seed = episode_seed(0, 1)
     log = tmp_path / "attempts.log"
-    policy = f"regress_helpers:FaultyPolicy?crash_seed={crash_seed}&log={log}"
+    policy = f"regress_helpers:FaultyPolicy?crash_seed={crash_seed}&log={log}" + ("&once=1" if once else "")
     run = mine(policy, out=tmp_path / "run", budget=3, sampler="random", scenarios=[BRAKES], workers=1, seed=0,
                reference=None, env_config={"duration": 2}, timeout=60, progress=False, reports=False)
+    return run, crash_seed, log
+
+
+def test_a_crashing_worker_gives_an_error_record_and_the_run_completes(tmp_path):
+    run, crash_seed, log = _mine_with_a_crash(tmp_path, once=False)
     assert [r["index"] for r in run.records] == [0, 1, 2]
     assert log.read_text().split() == [str(crash_seed)] * 2  # tried again once in a new worker
     error = run.records[1]["error"]
@@ -536,11 +542,7 @@ def test_a_crashing_worker_gives_an_error_record_and_the_run_completes(tmp_path)
 
 def test_an_episode_finished_after_its_worker_crashed_is_reported(tmp_path):
     # the retry used to succeed silently: nothing in the record, report or summary said a worker had died
-    crash_seed = episode_seed(0, 1)
-    log = tmp_path / "attempts.log"
-    policy = f"regress_helpers:FaultyPolicy?crash_seed={crash_seed}&log={log}&once=1"
-    run = mine(policy, out=tmp_path / "run", budget=3, sampler="random", scenarios=[BRAKES], workers=1, seed=0,
-               reference=None, env_config={"duration": 2}, timeout=60, progress=False, reports=False)
+    run, crash_seed, log = _mine_with_a_crash(tmp_path, once=True)
     assert log.read_text().split() == [str(crash_seed)]  # crashed once; the retry ran it to the end
     assert not any(r["error"] for r in run.records) and run.records[1]["result"]["trajectory_hash"]
     restarts = run.records[1]["worker_restarts"]
