@@ -95,7 +95,7 @@ TUNED_CONFIGS: List[Config] = [
 """The settings chosen on a tuning seed (100) that is not one of the bench's seeds (see bench/RESULTS.md)."""
 
 SPLIT_PRESET: Config = ("preset", {}, None)
-"""The split sampler as ``dv2s mine --sampler split`` runs it (its defaults, chosen on tuning seed 7)."""
+"""The split sampler as ``dv2s mine --sampler split`` runs it (its defaults, chosen on tuning seeds 7-14)."""
 
 _TEXT_OPTIONS = ("chooser", "params")
 
@@ -112,7 +112,7 @@ def parse_config(text: str) -> Config:
             feedback = value
         elif key in _TEXT_OPTIONS:
             options[key] = value
-        elif key in ("buckets", "warmup"):
+        elif key in ("buckets", "warmup", "patience", "avoid"):
             options[key] = int(value)
         else:
             options[key] = float(value)
@@ -266,7 +266,8 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
     parser.add_argument("--split-config", action="append", default=None, metavar="LABEL:KEY=VALUE,...",
                         help="a setting of the split sampler (repeatable): alpha, buckets, thres, chooser "
                              "(cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy), "
-                             "warmup, feedback; default: its preset (dv2s mine --sampler split)")
+                             "warmup, forget, patience, floor, capacity, avoid, feedback; default: its preset "
+                             "(dv2s mine --sampler split)")
     parser.add_argument("--throughput-sampler", default="random")
     parser.add_argument("--throughput-budget", type=int, default=None, help="default 600; --quick 40")
     parser.add_argument("--repeats", type=int, default=None, help="throughput rounds (default 3; --quick 1)")

@@ -59,6 +59,9 @@ def validate_entry(bank_root: Optional[str], name: str, samples: int = 3, second
         report.safety = [str(f) for f in check_script(script)]
         if entry.content_hash != content_hash(script):
             report.sidecar.append("content_hash does not match the script (edited after it was added?)")
+        for missing in entry.missing_files():
+            report.sidecar.append(f"the provenance names {missing!r}, which is not in the entry folder "
+                                  "(restore it, or re-add the entry with its files)")
         from scenario_bank.maps import list_maps
 
         if entry.map not in list_maps() and not entry.map.endswith(".xodr"):

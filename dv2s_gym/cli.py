@@ -267,10 +267,13 @@ def _cmd_bank_list(args: argparse.Namespace) -> int:
 
 def _cmd_bank_show(args: argparse.Namespace) -> int:
     entry = _bank(args).get(args.name)
-    data = {**entry.meta, "path": str(entry.script_path), "script": entry.script}
+    missing = set(entry.missing_files())
+    files = [str(f) + (" (missing)" if str(f.relative_to(entry.folder)) in missing else "") for f in entry.files]
+    data = {**entry.meta, "path": str(entry.script_path), "script": entry.script, "files": files}
     human = (f"{entry.name}  ({entry.map}, {entry.source.get('kind')})\n{entry.description}\n"
              f"tags: {', '.join(entry.tags)}\nelements: {json.dumps(entry.elements)}\n"
-             f"source: {json.dumps(entry.source)}\npath: {entry.script_path}\n\n{entry.script}")
+             f"source: {json.dumps(entry.source)}\npath: {entry.script_path}\n"
+             + "".join(f"file: {f}\n" for f in files) + f"\n{entry.script}")
     _print(args, data, human)
     return 0
 
@@ -307,6 +310,7 @@ def _cmd_bank_validate(args: argparse.Namespace) -> int:
         return _cmd_bank_story(args)
     from dv2s_gym.bank_validate import validate_bank
 
+    _bank(args)  # a --bank that does not exist is an error, not "0/0 scenarios valid"
     reports = validate_bank(args.bank, args.name or None, samples=args.samples, seconds=args.seconds,
                             jobs=args.jobs, progress=not args.json)
     lines = []
@@ -845,7 +849,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sampler-options", default=None,
                    help="VerifAI settings of cross-entropy/bandit as JSON: alpha (default 0.9), buckets (5), thres (0); "
                    "split also takes chooser (cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy) "
-                   "and warmup (0)")
+                   "and warmup (0), and against scenarios that stop yielding: forget, patience, floor, capacity, avoid "
+                   "(see dv2s_gym/mining/samplers.py)")
     p.add_argument("--feedback", choices=["robustness", "novelty"], default=None,
                    help="what adaptive samplers learn from: robustness (every failure), or novelty (a failure in a "
                    "cluster already found counts as an easy scene, to spread the search); default novelty for "
@@ -950,7 +955,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenarios", nargs="+", help="scenarios mined and regression-tested (default: the whole bank)")
     p.add_argument("--budget", type=int, default=LOOP["budget"],
                    help=f"mining episodes per round (default {LOOP['budget']})")
-    p.add_argument("--sampler", default=LOOP["sampler"], help=f"the miner's sampler (default {LOOP['sampler']})")
+    p.add_argument("--sampler", default=LOOP["sampler"], help=f"the miner's sampler: random, halton, cross-entropy, "
+                   f"bandit or split (default {LOOP['sampler']}; see dv2s mine --help)")
     p.add_argument("--fine-tune-steps", type=int, default=LOOP["fine_tune_steps"],
                    help=f"env steps of fine-tuning per round (default {LOOP['fine_tune_steps']})")
     p.add_argument("--fine-tune-lr", type=float, default=LOOP["fine_tune_lr"],

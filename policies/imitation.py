@@ -22,10 +22,15 @@ The result is a normal SB3 checkpoint (``out/model.zip``, the source's class and
 a model card (``model_card.json``, ``README.md``) whose ``fine_tune`` section has
 ``method: "dagger"`` and the agreement with the reference (share of labelled states where the
 greedy action equals the label) of the source and of the result on the same states.
+
+A run is resumable: each finished iteration is committed to ``out/dagger_checkpoint/``
+(:mod:`policies.dagger_checkpoint`), and a killed run called again with the same settings
+continues after the last one to the same model and stats as an uninterrupted run.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import os
@@ -36,7 +41,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 import gymnasium as gym
 import numpy as np
 
-from policies.training import TrainingError
+from policies.training import ScenarioSchedule, TrainingError
 
 __all__ = ["ReferenceLabels", "DAGGER_DEFAULTS", "dagger_fine_tune", "agreement", "imitation_step"]
 
@@ -79,6 +84,10 @@ class ReferenceLabels(gym.Wrapper):
         self.beta = float(beta)
 
     def reset(self, **kwargs: Any):
+        schedule = self.env if isinstance(self.env, ScenarioSchedule) else None
+        self._episode = {"reset": {k: kwargs[k] for k in ("seed", "options") if kwargs.get(k) is not None},
+                         "schedule_rng": None if schedule is None else schedule.rng.bit_generator.state,
+                         "actions": []}
         observation, info = self.env.reset(**kwargs)
         self.reference.reset(0)
         self._observation = observation
@@ -89,10 +98,46 @@ class ReferenceLabels(gym.Wrapper):
         executed = label if self.rng.random() < self.beta else int(np.asarray(action).reshape(-1)[0])
         observation, reward, terminated, truncated, info = self.env.step(executed)
         self._observation = observation
+        self._episode["actions"].append(executed)
         info = dict(info)
         info["reference_action"] = label
         info["executed_action"] = executed
         return observation, reward, terminated, truncated, info
+
+    def snapshot(self) -> Dict[str, Any]:
+        """Where this env is (JSON-safe): how its current episode was reset (the arguments and the
+        scenario schedule's RNG state before it), the actions executed since, the mixture's RNG state
+        and ``beta``. :meth:`restore` on a fresh env of the same settings puts it back there."""
+        return json.loads(json.dumps({"episode": self._episode, "rng": self.rng.bit_generator.state,
+                                      "beta": self.beta}, default=_plain))
+
+    def restore(self, snapshot: Mapping[str, Any]) -> np.ndarray:
+        """Put this env where :meth:`snapshot` was taken (same scenario, reset seed and actions, the
+        reference asked at every replayed state as in :meth:`step`); returns the current observation.
+
+        The replay costs the current episode's steps, not the run's."""
+        episode = snapshot["episode"]
+        if episode.get("schedule_rng") is not None and isinstance(self.env, ScenarioSchedule):
+            self.env.rng.bit_generator.state = episode["schedule_rng"]
+        self.reset(**episode["reset"])
+        for action in episode["actions"]:
+            self.reference.act(np.asarray(self._observation)[None])
+            observation, _, terminated, truncated, _ = self.env.step(int(action))
+            if terminated or truncated:
+                raise TrainingError("a restored DAgger env ended its episode while replaying it; the env is "
+                                    "not deterministic under its reset seed, so the run cannot be resumed")
+            self._observation = observation
+            self._episode["actions"].append(int(action))
+        self.rng.bit_generator.state = snapshot["rng"]
+        self.set_beta(snapshot["beta"])
+        return self._observation
+
+
+def _plain(value: Any) -> Any:
+    """JSON for numpy scalars (a reset seed handed over as ``np.int64``)."""
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} is not JSON serialisable")
 
 
 def _with_labels(env: gym.Env, seed: int, stream: int, reference: str) -> gym.Env:
@@ -140,6 +185,52 @@ def _train(model: Any, optimizer: Any, observations: np.ndarray, labels: np.ndar
     return float(np.mean(losses)) if losses else float("nan")
 
 
+@dataclasses.dataclass
+class _Collected:
+    """The states one DAgger iteration has labelled so far, in collection order, and its episode counts."""
+
+    observations: List[np.ndarray] = dataclasses.field(default_factory=list)
+    labels: List[np.ndarray] = dataclasses.field(default_factory=list)
+    episodes: int = 0
+    crashes: int = 0
+
+    @property
+    def rows(self) -> int:
+        return int(sum(len(chunk) for chunk in self.labels))
+
+
+def _collect(venv: Any, model: Any, obs: np.ndarray, budget: int, collected: _Collected, every: int,
+             commit: Callable[[np.ndarray], None], bar: Any) -> np.ndarray:
+    """Step ``venv`` with ``model``'s greedy actions until ``collected`` holds ``budget`` labelled states
+    (the wrapper mixes in the reference); ``commit(obs)`` whenever another ``every`` states are in and
+    the iteration is not done. Returns the envs' observations at the end."""
+    rows = collected.rows
+    while rows < budget:
+        actions, _ = model.predict(obs, deterministic=True)
+        next_obs, _, dones, infos = venv.step(actions)
+        collected.observations.append(np.array(obs, dtype=np.float32, copy=True))
+        collected.labels.append(np.array([info["reference_action"] for info in infos], dtype=np.int64))
+        for done, info in zip(dones, infos):
+            if done:
+                collected.episodes += 1
+                collected.crashes += bool(info.get("crashed") or info.get("collisions") or info.get("off_road"))
+        obs = next_obs
+        rows += len(actions)
+        if bar is not None:
+            bar.update(len(actions))
+        if every and rows < budget and rows // every > (rows - len(actions)) // every:
+            commit(obs)
+    return obs
+
+
+def _restore_envs(venv: Any, snapshots: Sequence[Mapping[str, Any]], expected: np.ndarray):
+    """Put each env of ``venv`` back where its snapshot was taken (:meth:`ReferenceLabels.restore`):
+    ``(observations, whether they equal the checkpoint's)``."""
+    restored = [venv.env_method("restore", snapshot, indices=[rank])[0] for rank, snapshot in enumerate(snapshots)]
+    obs = np.stack(restored).astype(expected.dtype)
+    return obs, bool(np.array_equal(obs, expected))
+
+
 def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathLike | str, steps: int,
                      weights: Mapping[str, float], seed: int = 0, n_envs: int = 2,
                      scenarios: Optional[Sequence[str]] = None, env_config: Optional[Dict[str, Any]] = None,
@@ -147,21 +238,33 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
                      beta: float = DAGGER_DEFAULTS["beta"], beta_decay: float = DAGGER_DEFAULTS["beta_decay"],
                      epochs: int = DAGGER_DEFAULTS["epochs"], batch_size: int = DAGGER_DEFAULTS["batch_size"],
                      reference: str = DAGGER_DEFAULTS["reference"], vec_env: str = "subproc",
-                     progress_bar: bool = True, log: Callable[[str], None] = print) -> Path:
+                     progress_bar: bool = True, log: Callable[[str], None] = print,
+                     checkpoint_every: int = 2000) -> Path:
     """Fine-tune an SB3 checkpoint by DAgger toward ``reference`` (module docstring); returns ``out/model.zip``.
 
     ``steps``: env steps collected in all (split evenly over ``iterations``); ``weights``:
     scenario -> sampling weight (the scenarios are ``scenarios``, default every one with a
     positive weight); ``env_config``: the env's config (default the checkpoint card's; the
-    reward plays no part); ``learning_rate``: Adam's (default ``DAGGER_DEFAULTS["learning_rate"]``). Called again with an
-    ``out`` that already holds the result, it returns at once; an unfinished run starts over.
+    reward plays no part); ``learning_rate``: Adam's (default ``DAGGER_DEFAULTS["learning_rate"]``).
+
+    Resumable: every finished iteration is committed to ``out/dagger_checkpoint/``
+    (:mod:`policies.dagger_checkpoint`: the labelled states, the weights and Adam's state, the
+    RNGs, the envs' positions, the stats), and so are the states collected so far every
+    ``checkpoint_every`` env steps (0: only finished iterations). Called again with the same
+    ``out`` and settings, it continues from the last commit and ends with the same model and stats as an
+    uninterrupted run (the card's ``fine_tune.resumed`` lists the resumes); with other settings it
+    raises :class:`~policies.dagger_checkpoint.DAggerResumeError` naming the difference. Called
+    with an ``out`` that already holds the result, it returns at once (the checkpoint is removed
+    once the result is written).
     """
     for name, value, low in (("steps", steps, 1), ("iterations", iterations, 1), ("epochs", epochs, 0),
-                             ("batch_size", batch_size, 1), ("n_envs", n_envs, 1)):
+                             ("batch_size", batch_size, 1), ("n_envs", n_envs, 1),
+                             ("checkpoint_every", checkpoint_every, 0)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise TrainingError(f"DAgger {name} must be an integer >= {low}, not {value!r}")
     if not 0.0 <= float(beta) <= 1.0 or not 0.0 <= float(beta_decay) <= 1.0:
         raise TrainingError(f"DAgger beta and beta_decay must be in [0, 1], not {beta} and {beta_decay}")
+    from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, describe_position, run_identity
     from policies.model_card import write_card
     from policies.registry import read_model_card
     from policies.training import resolve_checkpoint
@@ -186,70 +289,102 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
                             f"{algorithm}; use --fine-tune-method ppo")
     if env_config is None:
         env_config = dict(source_card.get("env_config") or {})
+    lr = DAGGER_DEFAULTS["learning_rate"] if learning_rate is None else float(learning_rate)
+    checkpoint = DAggerCheckpoint(out / CHECKPOINT_DIR, run_identity(
+        source=checkpoint_or_spec, source_checkpoint=source, bank_dir=bank_dir, weights=probabilities,
+        env_config=env_config, steps=steps, iterations=iterations, beta=beta, beta_decay=beta_decay, epochs=epochs,
+        batch_size=batch_size, learning_rate=lr, reference=reference, seed=int(seed), n_envs=n_envs))
+    saved = checkpoint.load()  # refuses a checkpoint of other settings before any work
     import stable_baselines3 as sb3
     import torch
 
     torch.manual_seed(int(seed))
     model = sb3.PPO.load(str(source), device="cpu")
-    lr = DAGGER_DEFAULTS["learning_rate"] if learning_rate is None else float(learning_rate)
     optimizer = torch.optim.Adam(model.policy.parameters(), lr=lr)
     rng = np.random.default_rng([int(seed), 11])
-    from policies.training import make_vec_env
-
-    venv = make_vec_env(scenarios, env_config, bank_dir, probabilities, n_envs, int(seed), vec_env=vec_env,
-                        wrap=functools.partial(_with_labels, reference=reference))
-    bar = None
-    if progress_bar:
-        from tqdm import tqdm
-
-        bar = tqdm(total=steps, desc="DAgger fine-tune", unit="step")
+    per_iteration = [steps // iterations + (1 if i < steps % iterations else 0) for i in range(iterations)]
     observations: List[np.ndarray] = []
     labels: List[np.ndarray] = []
     history: List[Dict[str, Any]] = []
+    resumes: List[Dict[str, Any]] = []
+    start, spent, partial = 0, 0.0, None
+    if saved is not None:
+        if saved.weights is not None:
+            model.policy.load_state_dict(saved.weights["policy"])
+            optimizer.load_state_dict(saved.weights["optimizer"])
+            torch.set_rng_state(saved.weights["torch_rng"])
+        rng.bit_generator.state = saved.rng_state
+        observations, labels, history = list(saved.observations), list(saved.labels), list(saved.history)
+        resumes, start, spent, partial = list(saved.resumes), saved.iteration, saved.wall_time_s, saved.partial
+        log(f"DAgger: resumed from {describe_position(start, partial.rows if partial else 0, iterations)} "
+            f"({sum(len(x) for x in labels) + (partial.rows if partial else 0)} labelled states from "
+            f"{checkpoint.folder})")
     began = time.perf_counter()
-    try:
-        venv.seed(int(seed))
-        obs = venv.reset()
-        per_iteration = [steps // iterations + (1 if i < steps % iterations else 0) for i in range(iterations)]
-        for iteration, budget in enumerate(per_iteration):
-            mixture = float(beta) * float(beta_decay) ** iteration
-            venv.env_method("set_beta", mixture)
-            rows, labelled, episodes, crashes = 0, [], 0, 0
-            new_obs: List[np.ndarray] = []
-            while rows < budget:
-                actions, _ = model.predict(obs, deterministic=True)
-                next_obs, _, dones, infos = venv.step(actions)
-                new_obs.append(np.array(obs, dtype=np.float32, copy=True))
-                labelled.append([info["reference_action"] for info in infos])
-                for done, info in zip(dones, infos):
-                    if done:
-                        episodes += 1
-                        crashes += bool(info.get("crashed") or info.get("collisions") or info.get("off_road"))
-                obs = next_obs
-                rows += len(actions)
-                if bar is not None:
-                    bar.update(len(actions))
-            batch_obs = np.concatenate(new_obs)
-            batch_labels = np.asarray(labelled, dtype=np.int64).reshape(-1)
-            on_policy = agreement(model, batch_obs, batch_labels)
-            observations.append(batch_obs)
-            labels.append(batch_labels)
-            all_obs, all_labels = np.concatenate(observations), np.concatenate(labels)
-            loss = _train(model, optimizer, all_obs, all_labels, epochs, batch_size, rng)
-            record = {"iteration": iteration + 1, "beta": mixture, "steps": int(len(batch_labels)),
-                      "episodes_finished": episodes, "episodes_failed": crashes,
-                      "agreement_before": round(on_policy, 4),
-                      "agreement_after": round(agreement(model, batch_obs, batch_labels), 4),
-                      "dataset": int(len(all_labels)), "loss": round(loss, 4)}
-            history.append(record)
-            log(f"DAgger iteration {iteration + 1}/{iterations}: beta {mixture:.3g}, {record['steps']} labelled "
-                f"steps, agreement with {reference} {on_policy:.3f} -> {record['agreement_after']:.3f}, "
-                f"{crashes}/{episodes} finished episodes crashed or left the road")
-    finally:
-        venv.close()
-        if bar is not None:
-            bar.close()
-    wall = time.perf_counter() - began
+    if start < iterations:
+        from policies.training import make_vec_env
+
+        venv = make_vec_env(scenarios, env_config, bank_dir, probabilities, n_envs, int(seed), vec_env=vec_env,
+                            wrap=functools.partial(_with_labels, reference=reference))
+        bar = None
+        if progress_bar:
+            from tqdm import tqdm
+
+            bar = tqdm(total=steps, initial=sum(per_iteration[:start]) + (partial.rows if partial else 0),
+                       desc="DAgger fine-tune", unit="step")
+        try:
+            venv.seed(int(seed))
+            obs = venv.reset()
+            if saved is not None and (partial is not None or start > 0):  # the envs back where they were
+                obs, reproduced = _restore_envs(venv, *((partial.envs, partial.next_observations) if partial
+                                                        else (saved.envs, saved.next_observations)))
+                resumes.append({"from_iteration": start, "steps_into_next": partial.rows if partial else 0,
+                                "envs_reproduced": reproduced})
+                if not reproduced:
+                    log("DAgger: warning: the restored envs do not show the checkpoint's observations (the env is "
+                        "not deterministic); the result may differ from an uninterrupted run")
+            for iteration in range(start, iterations):
+                budget = per_iteration[iteration]
+                mixture = float(beta) * float(beta_decay) ** iteration
+                venv.env_method("set_beta", mixture)
+                collected = _Collected()
+                if partial is not None and partial.iteration == iteration + 1:
+                    collected = _Collected([partial.observations], [partial.labels], partial.episodes,
+                                           partial.crashes)
+
+                def commit_partial(now: np.ndarray, number: int = iteration + 1, so_far: _Collected = collected):
+                    checkpoint.save_partial(
+                        iteration=number, observations=np.concatenate(so_far.observations),
+                        labels=np.concatenate(so_far.labels), next_observations=np.asarray(now),
+                        episodes=so_far.episodes, crashes=so_far.crashes, envs=venv.env_method("snapshot"), rng=rng,
+                        resumes=resumes, wall_time_s=spent + time.perf_counter() - began)
+
+                obs = _collect(venv, model, obs, budget, collected, checkpoint_every, commit_partial, bar)
+                batch_obs = np.concatenate(collected.observations)
+                batch_labels = np.concatenate(collected.labels)
+                episodes, crashes = collected.episodes, collected.crashes
+                on_policy = agreement(model, batch_obs, batch_labels)
+                observations.append(batch_obs)
+                labels.append(batch_labels)
+                all_obs, all_labels = np.concatenate(observations), np.concatenate(labels)
+                loss = _train(model, optimizer, all_obs, all_labels, epochs, batch_size, rng)
+                record = {"iteration": iteration + 1, "beta": mixture, "steps": int(len(batch_labels)),
+                          "episodes_finished": episodes, "episodes_failed": crashes,
+                          "agreement_before": round(on_policy, 4),
+                          "agreement_after": round(agreement(model, batch_obs, batch_labels), 4),
+                          "dataset": int(len(all_labels)), "loss": round(loss, 4)}
+                history.append(record)
+                checkpoint.save(iteration=iteration + 1, observations=batch_obs, labels=batch_labels,
+                                next_observations=np.asarray(obs), model=model, optimizer=optimizer, rng=rng,
+                                history=history, envs=venv.env_method("snapshot"),
+                                wall_time_s=spent + time.perf_counter() - began, resumes=resumes)
+                log(f"DAgger iteration {iteration + 1}/{iterations}: beta {mixture:.3g}, {record['steps']} labelled "
+                    f"steps, agreement with {reference} {on_policy:.3f} -> {record['agreement_after']:.3f}, "
+                    f"{crashes}/{episodes} finished episodes crashed or left the road")
+        finally:
+            venv.close()
+            if bar is not None:
+                bar.close()
+    wall = spent + time.perf_counter() - began
     all_obs, all_labels = np.concatenate(observations), np.concatenate(labels)
     source_model = sb3.PPO.load(str(source), device="cpu")
     out.mkdir(parents=True, exist_ok=True)
@@ -267,12 +402,14 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
                          "epochs": epochs, "batch_size": batch_size, "history": history,
                          "agreement": {"source": round(agreement(source_model, all_obs, all_labels), 4),
                                        "fine_tuned": round(agreement(model, all_obs, all_labels), 4),
-                                       "states": int(len(all_labels))}}
+                                       "states": int(len(all_labels))},
+                         "resumed": resumes}
     card["description"] = (f"Fine-tuned from {checkpoint_or_spec} by DAgger toward the {reference} driver: {steps} "
                            f"labelled env steps in {iterations} iterations on {len(scenarios)} scenarios with "
                            "weighted sampling (see fine_tune).")
     card["name"] = out.name
     write_card(out, card)
+    checkpoint.remove()
     log(f"wrote {model_path} (DAgger, agreement with {reference} on {len(all_labels)} labelled states: "
         f"{card['fine_tune']['agreement']['source']:.3f} -> {card['fine_tune']['agreement']['fine_tuned']:.3f})")
     return model_path

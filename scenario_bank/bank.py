@@ -79,6 +79,10 @@ __all__ = [
     "AddOutcome",
     "param_ranges",
     "near_duplicate",
+    "ENTRY_FILE_KEYS",
+    "ENTRY_FILES",
+    "entry_files",
+    "entry_file_name",
 ]
 
 BANK_VERSION = 1
@@ -94,14 +98,47 @@ WRITERS_LOCK = ".dv2s-writers.lock"
 """The file writers of a bank lock (``flock``), in the bank folder itself."""
 _NAME = re.compile(r"^[a-z0-9][a-z0-9_\-]{0,99}$")
 _PROVENANCE_FIELDS = ("kind", "video", "parent", "seed", "generator", "model", "context_hash", "date")
-MINED_PROVENANCE_FIELDS = ("params", "backends", "policy", "failure", "cluster", "reproduction", "e2e_sc", "run",
+MINED_PROVENANCE_FIELDS = ("params", "backends", "policy", "failure", "cluster", "reproduction", "e2e_sc", "run", "trace",
                            "index", "merged")
 """Extra provenance of ``kind == "mined"`` entries (failure mining): the parent's sampled parameters, the
 DRA/SG backends, the policy that failed, its failure and cluster, the reproduction rate and E2E-SC, the
 mining run and episode index, and ``merged``: later failures merged into this entry (see
 :meth:`Bank.add_or_merge`). Sidecars without them (every older sidecar) load as before."""
 
+ENTRY_FILE_KEYS = ("video", "trace")
+"""Provenance fields that may name one of the entry's own files by its path relative to the entry folder (a
+mined failure's ``video: "failure.webm"``); a merge rewrites them to the merged copy's path."""
+ENTRY_FILES = "files"
+"""The provenance field listing the files an entry carries in its own folder (relative paths), in ``source``
+and in each ``source.merged`` record. They are added with the entry (``files=`` of :meth:`Bank.add` /
+:meth:`Bank.add_or_merge`), travel with :meth:`Bank.export`, :meth:`Bank.import_archive` and
+:meth:`Bank.copy_to`, and ``dv2s bank validate`` reports one that is missing. Older sidecars have none."""
+_ENTRY_FILE = re.compile(r"^[A-Za-z0-9_\-][A-Za-z0-9_.\-]*(/[A-Za-z0-9_\-][A-Za-z0-9_.\-]*)*$")
+
 PathLike = Union[str, os.PathLike]
+
+
+def entry_file_name(name: Any) -> str:
+    """``name`` if it is a valid file name inside an entry folder (relative, no ``..``, no hidden parts,
+    not the script or sidecar), else a :class:`BankError` saying so."""
+    if not isinstance(name, str) or not _ENTRY_FILE.match(name) or name in (SCRIPT, SIDECAR):
+        raise BankError(f"invalid entry file name {name!r}: use a relative path of letters, digits, '_', '-', "
+                        f"'.' and '/' (no '..', no hidden parts, not {SCRIPT} or {SIDECAR})")
+    return name
+
+
+def entry_files(source: Mapping[str, Any]) -> List[str]:
+    """The files a sidecar's ``source`` says the entry carries (:data:`ENTRY_FILES` of the source and of its
+    ``merged`` records; valid relative names only), in order, without repeats."""
+    records = [source] + [m for m in (source.get("merged") or []) if isinstance(m, Mapping)]
+    out: List[str] = []
+    for record in records:
+        listed = record.get(ENTRY_FILES)
+        for value in listed if isinstance(listed, list) else []:
+            if isinstance(value, str) and _ENTRY_FILE.match(value) and value not in (SCRIPT, SIDECAR) \
+                    and value not in out:
+                out.append(value)
+    return out
 
 
 class BankError(Exception):
@@ -300,6 +337,16 @@ class ScenarioEntry:
     @property
     def content_hash(self) -> str:
         return self.meta.get("content_hash", "")
+
+    @property
+    def files(self) -> List[Path]:
+        """Absolute paths of the files the entry carries in its folder (:func:`entry_files`), whether or not
+        they exist."""
+        return [self.folder / name for name in entry_files(self.source)]
+
+    def missing_files(self) -> List[str]:
+        """The entry's files (relative names, :func:`entry_files`) that are not in its folder."""
+        return [name for name in entry_files(self.source) if not (self.folder / name).is_file()]
 
     def summary(self) -> Dict[str, Any]:
         """A JSON-ready record for listings."""
@@ -592,7 +639,8 @@ class Bank:
     def _write_json_atomic(path: Path, data: Any) -> None:
         atomic_write_json(path, data)
 
-    def _stage_entry(self, name: str, script: str, meta: Dict[str, Any]) -> Path:
+    def _stage_entry(self, name: str, script: str, meta: Dict[str, Any],
+                     files: Optional[Mapping[str, PathLike]] = None) -> Path:
         staging = self.root / f".staging-{name}-{uuid.uuid4().hex[:12]}"
         staging.mkdir(parents=True)
         try:
@@ -601,6 +649,8 @@ class Bank:
                     handle.write(text)
                     handle.flush()
                     os.fsync(handle.fileno())
+            for file, origin in (files or {}).items():
+                _copy_synced(Path(origin), staging / file)
         except OSError as error:
             shutil.rmtree(staging, ignore_errors=True)
             raise _write_error(error, self.root) from None
@@ -625,6 +675,7 @@ class Bank:
         provenance: Optional[Mapping[str, Any]] = None,
         use_case: Optional[str] = None,
         upgrade_scenic2: bool = False,
+        files: Optional[Mapping[str, PathLike]] = None,
     ) -> ScenarioEntry:
         """Add a scenario atomically; returns the new entry.
 
@@ -639,10 +690,17 @@ class Bank:
         (:func:`scenario_bank.scenic2.upgrade_scenic2`, as ``dv2s bank add`` does), its rewrites and notes
         recorded in the provenance (``scenic2_rewrites``, ``scenic2_notes``). Without it a Scenic 2 script is
         refused with a :class:`ScenarioRejectedError` naming the construct, its line and this option.
+
+        ``files``: entry file name (relative to the entry folder, e.g. ``"failure.webm"``) -> a file to copy
+        there in the same atomic step, listed in the provenance's :data:`ENTRY_FILES`; provenance fields
+        (:data:`ENTRY_FILE_KEYS`) name them by those relative names, so the entry stands alone.
         """
         self._check_writable("add a scenario")
+        files = _check_files(files)
         script, provenance = _upgrade_scenic2(script, provenance, upgrade_scenic2)
         meta = self._make_meta(script, description, name, elements, tags, map, provenance, use_case)
+        if files:
+            meta["source"][ENTRY_FILES] = list(files)
         # before the lock: other writers do not wait for it
         _verify_or_name_scenic2(script, f"scenario {meta['name']!r}", upgrade_scenic2)
         with self._lock():
@@ -655,10 +713,11 @@ class Bank:
                     f"not added: the script is {how} to bank entry {existing!r}; use that entry or change the script",
                     existing,
                 )
-            return self._add_locked(name, script, meta)
+            return self._add_locked(name, script, meta, files)
 
-    def _add_locked(self, name: str, script: str, meta: Dict[str, Any]) -> ScenarioEntry:
-        staging = self._stage_entry(name, script, meta)
+    def _add_locked(self, name: str, script: str, meta: Dict[str, Any],
+                    files: Optional[Mapping[str, PathLike]] = None) -> ScenarioEntry:
+        staging = self._stage_entry(name, script, meta, files)
         self._commit(staging, name)
         self._load(locked=True)
         return self._entries[name]
@@ -695,6 +754,7 @@ class Bank:
         provenance: Optional[Mapping[str, Any]] = None,
         use_case: Optional[str] = None,
         upgrade_scenic2: bool = False,
+        files: Optional[Mapping[str, PathLike]] = None,
     ) -> AddOutcome:
         """Add a scenario, or merge it into the entry it duplicates; one atomic step under the writers' lock.
 
@@ -703,9 +763,13 @@ class Bank:
         ``how``) is appended to that entry's ``source.merged`` list, the sidecar rewritten atomically.
         Otherwise the script is added as by :meth:`add`, except that ``name`` is a base name that
         gets a ``_2``, ``_3``... suffix when taken. Scripts are verified (safety check and sandbox)
-        first either way (:class:`ScenarioRejectedError`). ``upgrade_scenic2`` is as for :meth:`add`.
+        first either way (:class:`ScenarioRejectedError`). ``upgrade_scenic2`` and ``files`` are as for
+        :meth:`add`; on a merge the files go to ``merged/<n>/<name>`` in the existing entry's folder (``n``:
+        the merged record's 1-based position) and the merged record's provenance values naming them are
+        rewritten to those paths, so every merged source keeps its own files.
         """
         self._check_writable("add a scenario")
+        files = _check_files(files)
         script, provenance = _upgrade_scenic2(script, provenance, upgrade_scenic2)
         meta = self._make_meta(script, description, name, elements, tags, map, provenance, use_case)
         _verify_or_name_scenic2(script, f"scenario {meta['name']!r}", upgrade_scenic2)
@@ -714,10 +778,25 @@ class Bank:
             found = self.find_near_duplicate(script, meta["elements"], meta["map"])
             if found is None:
                 name = meta["name"] = self._free_name(meta["name"], explicit=False)
-                return AddOutcome("added", self._add_locked(name, script, meta))
+                if files:
+                    meta["source"][ENTRY_FILES] = list(files)
+                return AddOutcome("added", self._add_locked(name, script, meta, files))
             existing, how = found
             merged = {key: value for key, value in meta["source"].items() if value is not None and key != "merged"}
             merged.update(description=meta["description"], content_hash=meta["content_hash"], how=how)
+            if files:
+                prefix = f"merged/{len(self._entries[existing].source.get('merged') or []) + 1}/"
+                folder = self._entries[existing].folder
+                try:
+                    for file, origin in files.items():
+                        with atomic_path(folder / (prefix + file)) as tmp:
+                            _copy_synced(origin, tmp)
+                except OSError as error:
+                    raise _write_error(error, folder) from None
+                merged = {key: prefix + value if key in ENTRY_FILE_KEYS and isinstance(value, str) and value in files
+                          else value
+                          for key, value in merged.items()}
+                merged[ENTRY_FILES] = [prefix + file for file in files]
             self._append_merged(existing, merged)
             return AddOutcome("merged", self._entries[existing], how)
 
@@ -843,6 +922,9 @@ class Bank:
                         entry = self._entries[n]
                         _add_bytes(tar, f"{n}/{SCRIPT}", entry.script_path.read_bytes())
                         _add_bytes(tar, f"{n}/{SIDECAR}", (entry.folder / SIDECAR).read_bytes())
+                        for file in entry_files(entry.source):
+                            if (entry.folder / file).is_file():
+                                _add_bytes(tar, f"{n}/{file}", (entry.folder / file).read_bytes())
         except OSError as error:
             raise _write_error(error, archive.parent) from None
         return archive
@@ -902,7 +984,8 @@ class Bank:
                         while target in [t for t, _ in staged]:
                             target = f"{target}_i"
                         meta["name"] = target
-                        staged.append((target, self._stage_entry(target, script, meta)))
+                        carried = {f: folder / f for f in entry_files(meta.get("source") or {}) if (folder / f).is_file()}
+                        staged.append((target, self._stage_entry(target, script, meta, carried)))
                     self._write_json_atomic(journal, {"adding": [t for t, _ in staged]})
                     for target, staging in staged:
                         self._commit(staging, target)
@@ -987,6 +1070,26 @@ def _check_is_bank(root: Path, visible: Sequence[os.DirEntry]) -> None:
         f"(it holds {shown}). Pass a bank folder (its entries are <name>/{SCRIPT} + <name>/{SIDECAR}), "
         "or a new or empty folder to start a bank there."
     )
+
+
+def _copy_synced(origin: Path, dest: Path) -> None:
+    """Copy ``origin`` to ``dest`` (parents made) and flush it to disk."""
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(origin, dest)
+    with open(dest, "rb") as handle:
+        os.fsync(handle.fileno())
+
+
+def _check_files(files: Optional[Mapping[str, PathLike]]) -> Dict[str, Path]:
+    """``files`` (entry file name -> file to copy) checked: valid names, existing regular files."""
+    out: Dict[str, Path] = {}
+    for name, origin in (files or {}).items():
+        entry_file_name(name)
+        if not Path(origin).is_file():
+            raise BankError(f"the entry file {name!r} to add ({origin}) does not exist or is not a file; "
+                            "pass an existing file")
+        out[name] = Path(origin)
+    return out
 
 
 def _write_error(error: OSError, where: Path) -> BankError:

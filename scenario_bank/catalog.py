@@ -47,7 +47,11 @@ def select_scenarios(selector: Union[None, str, Sequence[str]], bank_dir: Option
     bank = open_bank(bank_dir)
     if selector is None:
         if not len(bank):
-            raise UnknownScenarioError(f"the bank at {bank.root} holds no scenarios")
+            root = Path(bank.root)
+            where = ("the folder does not exist" if not root.exists() else "it is a file" if not root.is_dir()
+                     else "the folder holds no scenarios")
+            raise UnknownScenarioError(f"there is no bank at {bank.root} ({where}); check the --bank path, or leave "
+                                       "--bank out for the shipped bank")
         return bank.names()
     items = [selector] if isinstance(selector, str) else list(selector)
     selected: List[str] = []

@@ -2,7 +2,8 @@
 
 :class:`FaultyPolicy` keeps the lane (action 1, IDLE) and misbehaves on chosen seeds: the
 worker process dies (``os._exit``), hangs (sleeps far past any test timeout) or raises. Every
-start of an episode on a chosen seed appends a line to ``log`` so a test can count attempts.
+start of an episode on a chosen seed appends a line to ``log`` so a test can count attempts; with
+``once=1`` it misbehaves only on the first attempt (the log has no line for the seed yet), so a retry succeeds.
 """
 
 from __future__ import annotations
@@ -20,11 +21,16 @@ class FaultyPolicy(Policy):
 
     name = "faulty"
 
-    def __init__(self, crash_seed: int = -1, hang_seed: int = -1, raise_seed: int = -1, log: str = "") -> None:
+    def __init__(self, crash_seed: int = -1, hang_seed: int = -1, raise_seed: int = -1, log: str = "",
+                 once: int = 0) -> None:
         self.crash_seed, self.hang_seed, self.raise_seed = int(crash_seed), int(hang_seed), int(raise_seed)
-        self.log = log
+        self.log, self.once = log, bool(int(once))
 
     def seed(self, seed: int) -> None:
+        if self.once and self.log and os.path.exists(self.log):
+            with open(self.log, encoding="utf-8") as handle:
+                if str(seed) in handle.read().split():
+                    return  # misbehaved on an earlier attempt already
         if seed in (self.crash_seed, self.hang_seed, self.raise_seed) and self.log:
             with open(self.log, "a", encoding="utf-8") as handle:
                 handle.write(f"{seed}\n")

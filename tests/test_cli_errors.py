@@ -133,3 +133,10 @@ def test_what_marks_a_bank(tmp_path, small_bank):
 def test_a_bank_that_does_not_exist_is_refused_for_reading(capsys, tmp_path):
     code, _, err = run(capsys, "bank", "list", "--bank", tmp_path / "typo")
     assert code == 2 and "there is no bank at" in one_line_error(err)
+
+
+def test_validating_a_bank_that_does_not_exist_fails(capsys, tmp_path):
+    # it used to print "0/0 scenarios valid" and exit 0, passing a typo'd path in CI
+    code, out, err = run(capsys, "bank", "validate", "--bank", tmp_path / "typo")
+    assert code == 2 and "there is no bank at" in one_line_error(err) and "valid" not in out
+    assert not (tmp_path / "typo").exists()

@@ -220,6 +220,7 @@ def test_loop_refuses_a_policy_it_cannot_fine_tune(tmp_path):
     (["--policy", "rule"], "stable-baselines3 checkpoint"),
     (["--budget", "0"], "--budget must be an integer >= 1"),
     (["--holdout-fraction", "2"], "--holdout-fraction must be in [0, 1]"),
+    (["--sampler", "no-such"], "--sampler must be one of random, halton"),  # it used to start round 1 first
 ])
 def test_cli_refuses_bad_input_in_one_line(tmp_path, capsys, argv, needle):
     code, _, err = run(capsys, "loop", "--out", tmp_path / "loop", "--no-progress", *argv)

@@ -60,6 +60,36 @@ def test_bad_input_is_one_line(tmp_path, capsys, argv, message):
     code, _, err = run(capsys, "mine", *argv, "--out", tmp_path / "run", "--no-progress")
     assert code == 2
     assert message in one_line_error(err)
+    assert not (tmp_path / "run").exists()  # refused input leaves no empty run folder behind
+
+
+def test_mining_a_bank_that_does_not_exist_names_it(tmp_path, capsys):
+    code, _, err = run(capsys, "mine", "--policy", "rule", "--budget", "4", "--no-convert", "--bank",
+                       tmp_path / "typo", "--out", tmp_path / "run", "--no-progress")
+    line = one_line_error(err)  # it said only "the bank at ... holds no scenarios"
+    assert code == 2 and "there is no bank at" in line and "the folder does not exist" in line
+    assert not (tmp_path / "typo").exists() and not (tmp_path / "run").exists()
+
+
+def test_an_unreachable_ray_cluster_is_one_line_and_leaves_no_run_folder(tmp_path, capsys):
+    from llm_server import closed_port_url
+
+    address = closed_port_url().split("//")[1].split("/")[0]
+    code, _, err = run(capsys, "mine", "--policy", "rule", "--budget", "2", "--no-convert", "--backend", "ray",
+                       "--address", address, "--out", tmp_path / "run", "--no-progress")
+    assert code == 2 and f"Ray is not reachable at {address}" in one_line_error(err)
+    assert not (tmp_path / "run").exists()  # it kept settings.json and an empty episodes.jsonl
+
+
+@pytest.mark.parametrize("flag", ["--out", "--bank"])
+def test_a_file_where_a_folder_belongs_is_named(tmp_path, capsys, flag):
+    a_file = tmp_path / "a_file"
+    a_file.write_text("mine\n")
+    given = {"--out": tmp_path / "run", "--bank": tmp_path / "bank", flag: a_file}
+    code, _, err = run(capsys, "mine", "--policy", "rule", "--budget", "4", "--out", given["--out"],
+                       "--bank", given["--bank"], "--no-progress")
+    assert code == 2 and f"{flag} {a_file} is a file, not a folder" in one_line_error(err)
+    assert a_file.read_text() == "mine\n" and not (tmp_path / "run").exists() and not (tmp_path / "bank").exists()
 
 
 def test_resuming_with_other_settings_is_refused(tmp_path, capsys):

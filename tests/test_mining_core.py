@@ -534,6 +534,29 @@ def test_a_crashing_worker_gives_an_error_record_and_the_run_completes(tmp_path)
     assert len(read_records(tmp_path / "run" / "episodes.jsonl")) == 3
 
 
+def test_an_episode_finished_after_its_worker_crashed_is_reported(tmp_path):
+    # the retry used to succeed silently: nothing in the record, report or summary said a worker had died
+    crash_seed = episode_seed(0, 1)
+    log = tmp_path / "attempts.log"
+    policy = f"regress_helpers:FaultyPolicy?crash_seed={crash_seed}&log={log}&once=1"
+    run = mine(policy, out=tmp_path / "run", budget=3, sampler="random", scenarios=[BRAKES], workers=1, seed=0,
+               reference=None, env_config={"duration": 2}, timeout=60, progress=False, reports=False)
+    assert log.read_text().split() == [str(crash_seed)]  # crashed once; the retry ran it to the end
+    assert not any(r["error"] for r in run.records) and run.records[1]["result"]["trajectory_hash"]
+    restarts = run.records[1]["worker_restarts"]
+    assert len(restarts) == 1 and "crashed" in restarts[0]
+    assert "worker_restarts" not in run.records[0] and "worker_restarts" not in run.records[2]
+    assert "1 finished after their worker crashed or hung" in run.summary()
+    assert "avoidability not checked" in run.summary()  # reference=None; it said "3 avoidable by no reference"
+    from dv2s_gym.mining.report import write_reports
+
+    paths = write_reports(tmp_path / "run")
+    data = json.loads(paths["json"].read_text())
+    assert data["counts"]["worker_restarts"] == 1 and data["worker_restarts"][0]["index"] == 1
+    assert "### Worker restarts (1)" in paths["markdown"].read_text()
+    assert "finished by a new worker" in paths["html"].read_text()
+
+
 def test_every_episode_crashing_still_completes_with_error_records(tmp_path):
     run = mine("regress_misbehaving_policies:crash", out=tmp_path / "run", budget=2, sampler="random",
                scenarios=[BRAKES], workers=2, seed=0, reference=None, env_config={"duration": 2}, progress=False,
@@ -573,3 +596,52 @@ def test_a_second_miner_on_the_same_folder_is_refused(tmp_path):
         os.killpg(holder.pid, signal.SIGKILL)
         holder.wait()
     assert read_records(out / "episodes.jsonl") == []
+
+
+def _start_bank(dest: str, barrier, results) -> None:
+    from dv2s_gym.mining.miner import _own_bank
+
+    barrier.wait()
+    try:
+        _own_bank(dest)
+        results.put("ok")
+    except Exception as error:  # noqa: BLE001 - the test reports what the losing miner raised
+        results.put(f"{type(error).__name__}: {error}")
+
+
+def test_miners_started_together_on_a_new_bank_folder_share_one_copy(tmp_path):
+    # both copied the shipped bank; the second rename failed and that miner died ("Directory not empty")
+    import multiprocessing
+
+    from scenario_bank.bank import Bank
+
+    context = multiprocessing.get_context("spawn")
+    for trial in range(3):
+        dest = tmp_path / f"bank{trial}"
+        barrier, results = context.Barrier(2), context.Queue()
+        starters = [context.Process(target=_start_bank, args=(str(dest), barrier, results)) for _ in range(2)]
+        for process in starters:
+            process.start()
+        outcomes = [results.get(timeout=120) for _ in starters]
+        for process in starters:
+            process.join(30)
+        assert outcomes == ["ok", "ok"], outcomes
+        assert Bank(dest).names() == Bank().names() and not Bank(dest).problems
+        assert not [p for p in tmp_path.iterdir() if ".copy-" in p.name]  # no staging folder left behind
+
+
+def test_an_empty_run_folder_another_miner_holds_is_not_removed(tmp_path):
+    # a miner refused late removes the empty run folder it made, unless a miner started on it at the same moment
+    import fcntl
+
+    from dv2s_gym.mining.miner import _remove_if_empty
+
+    out = tmp_path / "run"
+    (out / "traces").mkdir(parents=True)
+    (out / "episodes.jsonl").write_text("")
+    with open(out / ".lock", "a+") as held:
+        fcntl.flock(held.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        _remove_if_empty(out)
+        assert out.is_dir()
+    _remove_if_empty(out)
+    assert not out.exists()

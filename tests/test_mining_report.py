@@ -236,7 +236,7 @@ def test_report_json_is_strict_schema_json(run_dir, tmp_path):
         raise AssertionError(f"report.json holds {name}")
 
     data = json.loads(paths["json"].read_text(), parse_constant=no_constants)
-    assert (data["schema"], data["schema_version"]) == (SCHEMA, SCHEMA_VERSION) == ("dv2s-mine-report", 1)
+    assert (data["schema"], data["schema_version"]) == (SCHEMA, SCHEMA_VERSION) == ("dv2s-mine-report", 2)
     for key in ("created", "dv2s_version", "run_dir", "settings", "counts", "samplers", "scenarios", "clusters",
                 "unavoidable_clusters", "failures", "unavoidable", "rejected", "errors", "skipped_lines"):
         assert key in data, key
@@ -251,7 +251,7 @@ def test_markdown_has_the_tables(report):
     ce = report["samplers"]["cross-entropy"]["failures_per_100"]
     assert f"| cross-entropy | 11 | 8 | {ce['value']:.1f} [{ce['low']:.1f}, {ce['high']:.1f}] |" in text
     assert "| `A` | 11 | 5 | 45.5% [" in text
-    assert f"| `{A_COLLISION}` | `A` | collision | 4 | 4 |" in text
+    assert f"| `{A_COLLISION}` | `A` | collision (rear_end, with car) | 4 | 4 |" in text  # how and with whom
     assert "ego_speed 20.8..24.5" in text and "mined_a_rear_end" in text and "0.60 (6/10) [0.31, 0.83]" in text
     assert f"| `{B_STALL}` | 8 | check | check: compile failed: unknown name 'Lanee' |" in text
     assert "### Unavoidable failures (3)" in text and f"| `{B_OFF_ROAD}` | `B` | off_road | 3 | 0 |" in text

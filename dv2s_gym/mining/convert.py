@@ -17,7 +17,10 @@ conversion record of ``conversions.jsonl``:
 6. ``e2e_sc``: E2E-SC between the source failure's trace (its elements are the ground truth) and each
    simulated trace of the reproduction, averaged over the ``k`` traces;
 7. ``bank``: :meth:`scenario_bank.bank.Bank.add_or_merge` adds the script with ``mined`` provenance,
-   or merges the failure into the entry it (nearly) duplicates.
+   or merges the failure into the entry it (nearly) duplicates. The failure video and trace are copied
+   into the entry's folder in the same atomic step (provenance ``video: "failure.webm"``,
+   ``trace: "trace.json.gz"``, relative to the entry folder; a merge puts them under ``merged/<n>/``), and
+   a map path in ``params`` is kept as its file name: the entry stands alone once the run folder is gone.
 
 Failure class (:func:`same_failure_class`): the failure types must be equal; for collisions the
 other party's kind (``with_kind``: car, truck, pedestrian, obstacle...) and the collision type
@@ -40,9 +43,23 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
 
 import numpy as np
 
-__all__ = ["convert_failure", "same_failure_class", "reproduction_seeds", "cluster_slug", "CONVERSION_DIR"]
+from dv2s_gym.pipeline.errors import (EndpointHTTPError, EndpointTimeoutError, EndpointUnreachableError,
+                                      MissingAPIKeyError)
+
+SETUP_ERRORS = (EndpointUnreachableError, EndpointTimeoutError, EndpointHTTPError, MissingAPIKeyError)
+"""Errors of the model backends' setup (no connection, no answer, an HTTP error, no API key):
+:func:`convert_failure` raises them instead of rejecting the failure, so a run stops and can be resumed
+when the endpoint works, rather than rejecting every cluster."""
+
+__all__ = ["convert_failure", "same_failure_class", "reproduction_seeds", "cluster_slug", "CONVERSION_DIR", "ENTRY_VIDEO",
+           "ENTRY_TRACE"]
 
 CONVERSION_DIR = "conversion"
+ENTRY_VIDEO = "failure.webm"
+"""The failure video's name in a kept entry's bank folder (its provenance ``video``; a merged failure's is
+``merged/<n>/failure.webm``)."""
+ENTRY_TRACE = "trace.json.gz"
+"""The source episode's trace in a kept entry's bank folder (its provenance ``trace``)."""
 PathLike = Union[str, os.PathLike]
 
 
@@ -141,6 +158,15 @@ def _reproduce(script_path: Path, *, policy: Any, record_seed: int, k: int, seed
         env.close()
 
 
+def _portable_params(params: Mapping[str, Any]) -> Dict[str, Any]:
+    """The sampled parameters as the bank keeps them: a map given by a path becomes its file name (the
+    entry's ``map`` names it; shipped maps are found by name), so no path into this machine is kept."""
+    out = dict(params)
+    if isinstance(out.get("map"), str) and ("/" in out["map"] or os.sep in out["map"]):
+        out["map"] = Path(out["map"]).name
+    return out
+
+
 def _mined_name(parent: str, failure_type: str) -> str:
     base = re.sub(r"[^a-z0-9_\-]+", "_", f"mined_{parent}_{failure_type}".lower()).strip("_-")
     return base[:90] or "mined"
@@ -168,7 +194,10 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         cluster: the failure's cluster id (default ``record["cluster"]``).
         monitor: options of the failure monitors (``ttc_threshold``, ``stall_seconds``); default: those in
             ``run_dir/settings.json``, else the monitors' defaults.
-        before, after: seconds of video before and after the failure.
+        before, after: seconds of video before and after the failure (a stall's clip covers the stall, up to
+            the monitor's ``stall_seconds``, between them: :func:`~dv2s_gym.mining.failure_video.write_failure_video`).
+
+    Raises the model backends' setup errors (:data:`SETUP_ERRORS`); every other problem is a rejection.
 
     Returns ``{"cluster", "index", "status": "kept"|"merged"|"rejected", "reason", "stage", "video",
     "description", "script", "reproduction", "e2e_sc", "bank_entry", "merged_into", "seconds",
@@ -212,11 +241,11 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         from dv2s_gym.mining.failure_video import write_failure_video
 
         video = folder / "failure.webm"
+        monitor = _monitor_options(run_dir, monitor)
         written = write_failure_video(record, video, policy=policy, bank_dir=bank_dir, env_config=env_config,
-                                      before=before, after=after)
+                                      before=before, after=after, stall_seconds=monitor.get("stall_seconds"))
         out["video"] = _rel(video, run_dir)
         source_trace = written.trace
-        monitor = _monitor_options(run_dir, monitor)
         detected = _detect(written.result, source_trace, monitor)
         details["source_failure_detected"] = detected
         if detected and detected.get("type") == source_failure["type"]:
@@ -291,8 +320,9 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         result = record.get("result") or {}
         provenance = {
             "kind": "mined", "parent": record["scenario"], "seed": int(record["seed"]),
-            "params": dict(result.get("params") or record.get("params") or {}),
-            "video": str(video.resolve()), "generator": f"dra={dra},sg={sg}", "backends": {"dra": dra, "sg": sg},
+            "params": _portable_params(result.get("params") or record.get("params") or {}),
+            "video": ENTRY_VIDEO, "trace": ENTRY_TRACE, "generator": f"dra={dra},sg={sg}",
+            "backends": {"dra": dra, "sg": sg},
             "model": generation.model or description.model,
             "context_hash": generation.context_hash or description.prompt_hash,
             "policy": _policy_name(policy), "failure": source_failure, "cluster": cluster,
@@ -302,7 +332,8 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         outcome = bank.add_or_merge(generation.script, description.text, name=_mined_name(record["scenario"],
                                                                                           source_failure["type"]),
                                     elements=description.elements, tags=["mined", source_failure["type"]],
-                                    provenance=provenance)
+                                    provenance=provenance,
+                                    files={ENTRY_VIDEO: video, ENTRY_TRACE: written.trace_path})
         if outcome.status == "added":
             out.update(status="kept", bank_entry=outcome.entry.name)
         else:
@@ -310,6 +341,8 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         lap("bank")
     except _Rejected as rejection:
         out.update(stage=rejection.stage, reason=str(rejection))
+    except SETUP_ERRORS:
+        raise  # the endpoint's or its configuration's fault, not the failure's: not a rejection
     except Exception as error:  # a bad failure is a rejection with its stage, never an exception
         first = (str(error).strip().splitlines() or [""])[0]
         out.update(stage=stage, reason=f"{stage}: {type(error).__name__}: {first}"[:500])

@@ -9,6 +9,11 @@ seconds before the failure through ``after`` seconds after it are written as a V
 (:class:`envs.recording.VideoWriter`) at the policy frequency, in the style the ``bev`` Driving
 Record Analyzer reads (ego-centred, north up, 5.5 px/m).
 
+A ``stall`` failure's time is when the ego starts standing, so its clip covers the stall: from
+``before`` seconds before it starts through its last standing frame (at most ``stall_seconds``, the
+monitor's stall duration, after its start), then ``after`` seconds; every other failure class keeps the
+window around its failure time.
+
 Episodes usually end at the collision (``terminate_on_collision``); to show ``after`` seconds
 past it, the policy keeps driving the re-run env after the episode ended. Those extra steps
 are not part of the episode: the trajectory hash is taken, and the trace saved, before them.
@@ -17,6 +22,7 @@ are not part of the episode: the trajectory hash is taken, and the trace saved, 
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
@@ -26,7 +32,7 @@ import numpy as np
 from envs.errors import DV2SError
 
 __all__ = ["FailureReplayError", "FailureVideo", "VIDEO_CONFIG", "failure_step", "record_failure_video",
-           "rerun_failure", "write_failure_video"]
+           "rerun_failure", "stall_end", "write_failure_video"]
 
 VIDEO_CONFIG: Dict[str, Any] = {"screen_width": 480, "screen_height": 480, "scaling": 5.5,
                                 "offscreen_rendering": True, "show_trajectories": False}
@@ -56,6 +62,24 @@ def failure_step(failure: Optional[Mapping[str, Any]], steps: int, frequency: fl
     else:
         k = steps
     return max(0, min(steps, k))
+
+
+def stall_end(trace, start: int, max_frames: int) -> int:
+    """The last frame (0 = the reset) of the stall starting at frame ``start``: the ego stands (speed below
+    the monitors' stall speed) with a free path ahead (:func:`envs.safety_metrics.path_is_free`) from
+    ``start`` through it; at most ``start + max_frames - 1``, at least ``start``, within the trace."""
+    from dv2s_gym.mining.monitors import STALL_SPEED
+    from envs.safety_metrics import path_is_free
+
+    last = start
+    for k in range(start, min(len(trace.states), start + max(1, int(max_frames)))):
+        states = trace.states[k]
+        ego = states.get("ego")
+        if ego is None or ego[3] >= STALL_SPEED or not path_is_free(
+                ego, (state for name, state in states.items() if name != "ego")):
+            break
+        last = k
+    return last
 
 
 def _trace_failure(trace) -> Optional[Dict[str, Any]]:
@@ -163,7 +187,8 @@ class FailureVideo:
 def record_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike], out_path: PathLike, *,
                          policy: Any = None, bank_dir: Optional[PathLike] = None,
                          env_config: Optional[Mapping[str, Any]] = None, before: float = 4.0,
-                         after: float = 1.0, trace_path: Optional[PathLike] = None) -> Path:
+                         after: float = 1.0, trace_path: Optional[PathLike] = None,
+                         stall_seconds: Optional[float] = None) -> Path:
     """Write the bird's-eye video of a failure (``.webm``) and its trace; returns the video's path.
 
     ``record_or_trace`` is an episode record of the miner (re-run with ``policy``, which must be the
@@ -173,23 +198,33 @@ def record_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike
     ``before`` seconds before the failure (``record["failure"]``; for a trace, its first ego
     collision or off-road event) through ``after`` seconds after it, at the policy frequency:
     ``round(before * f) + round(after * f) + 1`` frames unless the episode started less than
-    ``before`` seconds before the failure. The trace is saved to ``trace_path`` (default
-    ``trace.json.gz`` beside the video).
+    ``before`` seconds before the failure. A record's ``stall`` covers the stall: the window runs from
+    ``before`` seconds before its start through its last standing frame (:func:`stall_end`, at most
+    ``stall_seconds`` after the start; default the monitors' ``DEFAULT_STALL_SECONDS``) plus ``after``
+    seconds. The trace is saved to ``trace_path`` (default ``trace.json.gz`` beside the video).
     """
     return write_failure_video(record_or_trace, out_path, policy=policy, bank_dir=bank_dir, env_config=env_config,
-                               before=before, after=after, trace_path=trace_path).path
+                               before=before, after=after, trace_path=trace_path,
+                               stall_seconds=stall_seconds).path
 
 
 def write_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike], out_path: PathLike, *,
                         policy: Any = None, bank_dir: Optional[PathLike] = None,
                         env_config: Optional[Mapping[str, Any]] = None, before: float = 4.0,
-                        after: float = 1.0, trace_path: Optional[PathLike] = None) -> FailureVideo:
+                        after: float = 1.0, trace_path: Optional[PathLike] = None,
+                        stall_seconds: Optional[float] = None) -> FailureVideo:
     """:func:`record_failure_video`, returning a :class:`FailureVideo` (window, result, trace)."""
     from envs.recording import VideoWriter
     from envs.trace import EpisodeTrace
 
+    from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS
+
     if before < 0 or after < 0:
         raise FailureReplayError(f"before and after must be >= 0 seconds, not {before} and {after}")
+    stall_seconds = DEFAULT_STALL_SECONDS if stall_seconds is None else float(stall_seconds)
+    if not stall_seconds > 0:
+        raise FailureReplayError(f"stall_seconds must be > 0, not {stall_seconds}")
+    stall = False
     out_path = Path(out_path)
     trace_path = Path(trace_path) if trace_path is not None else out_path.parent / "trace.json.gz"
     if isinstance(record_or_trace, Mapping):
@@ -199,7 +234,9 @@ def write_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike]
         frequency = _frequency({**VIDEO_CONFIG, **dict(env_config or {})})
         steps = int((record.get("result") or {}).get("steps") or 0)
         k = failure_step(record.get("failure"), steps, frequency)
-        end = k + int(round(after * frequency))
+        stall = (record.get("failure") or {}).get("type") == "stall"
+        span = int(math.ceil(stall_seconds * frequency)) if stall else 0  # an upper bound of the stall's frames
+        end = k + span + int(round(after * frequency))
         result, trace, frames = rerun_failure(record, policy=policy, bank_dir=bank_dir, env_config=env_config,
                                          render=True, extra_steps=max(0, end - steps))
         frequency = _frequency(trace.config)
@@ -216,7 +253,8 @@ def write_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike]
         frequency = _frequency(trace.config)
         k = failure_step(_trace_failure(trace), len(trace.actions), frequency)
     start = max(0, k - int(round(before * frequency)))
-    end = min(len(frames) - 1, k + int(round(after * frequency)))
+    last = stall_end(trace, k, int(math.ceil(stall_seconds * frequency))) if stall else k
+    end = min(len(frames) - 1, last + int(round(after * frequency)))
     out_path.parent.mkdir(parents=True, exist_ok=True)
     with VideoWriter(out_path, fps=frequency) as video:
         for frame in frames[start:end + 1]:

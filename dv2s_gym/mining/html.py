@@ -376,10 +376,13 @@ def _failure_rows(failures: Sequence[Mapping[str, Any]], limit: int = 200) -> st
 
 def _errors(report: Mapping[str, Any]) -> str:
     errors = report.get("errors") or []
-    if not errors:
+    if not errors and not report.get("worker_restarts"):
         return '<p class="muted">None.</p>'
     items = [f"<li><b>#{escape(e.get('index'))} {escape(e.get('scenario'))} seed {escape(e.get('seed'))}</b>: "
              f"{escape(e.get('error'))}</li>" for e in errors[:100]]
+    items += [f"<li><b>#{escape(r.get('index'))} {escape(r.get('scenario'))} seed {escape(r.get('seed'))}</b>: "
+              f"{escape('; then '.join(r.get('problems') or []))}; finished by a new worker</li>"
+              for r in (report.get("worker_restarts") or [])[:100]]
     return "<ul>" + "".join(items) + "</ul>"
 
 
@@ -425,7 +428,7 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
         "policy.</p>", _cluster_table(unavoidable),
         _cards(unavoidable_converted, videos, base) if unavoidable_converted else "",
         _failure_rows(report.get("unavoidable") or []),
-        "<h2>Errors</h2>", _errors(report),
+        "<h2>Errors and worker restarts</h2>", _errors(report),
         f"<script>{SELFTEST}</script></body></html>",
     ]
     return "\n".join(parts)

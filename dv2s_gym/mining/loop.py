@@ -20,7 +20,8 @@ d. **fine-tune**: :func:`policies.training.fine_tune` continues ``P`` on the wor
    mining, the held-out evaluations and the regression test run ``P``'s own (a failure
    does not depend on the reward). That is ``fine_tune_method="ppo"``; with ``"dagger"``
    the policy instead imitates the reference driver (``rule``) on the states it visits
-   itself in the same weighted scenario mix (:mod:`policies.imitation`; no reward);
+   itself in the same weighted scenario mix (:mod:`policies.imitation`; no reward; a killed
+   DAgger run resumes from its last finished iteration, ``resumed`` in the step's record);
 e. **after**: the new policy runs on the same held-out episodes (paired): rate, interval,
    relative drop (scenario-bootstrap interval), exact two-sided McNemar p;
 f. **regress**: :func:`dv2s_gym.regress.runner.run_regression` new against old on the starting
@@ -317,6 +318,10 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         raise LoopError(f"--holdout-fraction must be in [0, 1], not {holdout_fraction}")
     if not 0.0 < float(mined_share) < 1.0:
         raise LoopError(f"--mined-share must be strictly between 0 and 1, not {mined_share}")
+    from dv2s_gym.mining.samplers import SAMPLERS
+
+    if sampler not in SAMPLERS:  # else round 1 starts (the working bank copied) before the miner refuses it
+        raise LoopError(f"--sampler must be one of {', '.join(SAMPLERS)}, not {sampler!r}")
     if fine_tune_method not in FINE_TUNE_METHODS:
         raise LoopError(f"--fine-tune-method must be one of {', '.join(FINE_TUNE_METHODS)}, not {fine_tune_method!r}")
     if fine_tune_lr is None:
@@ -424,9 +429,14 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                 mined = [e.name for e in entries if e.source.get("kind") == "mined"]
                 weights = fine_tune_weights(names, mined, mined_share)
                 if fine_tune_method == "dagger":
-                    from policies.imitation import dagger_fine_tune
+                    from policies.dagger_checkpoint import checkpoint_position, describe_position
+                    from policies.imitation import DAGGER_DEFAULTS, dagger_fine_tune
                     from policies.registry import read_model_card
 
+                    position = checkpoint_position(round_dir / "policy")
+                    if position is not None:
+                        log(f"round {number}: fine-tune (dagger) resumed from "
+                            f"{describe_position(*position, DAGGER_DEFAULTS['iterations'])}")
                     path = dagger_fine_tune(current, bank_dir=bank, out=round_dir / "policy", steps=fine_tune_steps,
                                             weights=weights, seed=seed * 1000 + number, n_envs=n_envs,
                                             env_config=env_config, learning_rate=fine_tune_lr,
@@ -435,7 +445,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                     return {"model": str(path.resolve()), "method": "dagger", "scenarios": len(names),
                             "mined_upweighted": len(mined), "steps": fine_tune_steps, "reward_weights": None,
                             "env_config": env_config, "reference": dagger.get("reference"),
-                            "agreement": dagger.get("agreement")}
+                            "agreement": dagger.get("agreement"), "resumed": dagger.get("resumed") or []}
                 from policies.training import fine_tune
 
                 path = fine_tune(current, bank_dir=bank, out=round_dir / "policy", steps=fine_tune_steps,

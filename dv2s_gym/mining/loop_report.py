@@ -13,12 +13,21 @@
                            "fine_tune": {"model", "method": "ppo" | "dagger", "scenarios", "mined_upweighted",
                                          "steps", "reward_weights" (ppo; None for dagger),
                                          "env_config": the fine-tuning env's config,
-                                         "reference", "agreement" (dagger only)},
+                                         "reference", "agreement", "resumed" (dagger only)},
                            "after": {"pairs", "errors", "before": Rate, "after": Rate, "relative_drop",
                                      "relative_drop_interval", "table", "mcnemar_p", "per_scenario"},
                            "regress": {"verdict", "reason", "episodes", "new_failure_rate", "old_failure_rate",
                                        "difference", "p_value", "regressed", "report"},
-                           "skipped": reason (only when nothing was kept)}}]}
+                           "skipped": reason (only when nothing was kept)}}],
+     "final_vs_start": (with two or more regression-tested rounds) {"start", "final", "rounds": [first, last],
+                        "verdict", "reason", "episodes", "new_failure_rate", "old_failure_rate", "difference",
+                        "p_value", "regressed", "report"} or {"error"}}
+
+``final_vs_start`` compares the final policy with the starting one on the starting bank without running
+anything: each round's regression test runs the same starting-bank scenarios and seeds, so the first tested
+round's baseline episodes (the starting policy) are paired with the last tested round's candidate episodes
+(the final policy) and judged by the regression test's own rule (:func:`final_vs_start`); the paired report is
+``final_vs_start/report.json`` in the loop folder.
 
 ``Rate`` is ``{"k", "n", "rate", "low", "high"}`` (Wilson 95 %). A round missing a step has not
 finished it yet (the loop was stopped; rerunning resumes it).
@@ -29,7 +38,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional
 
-__all__ = ["write_loop_reports", "render_markdown", "render_html"]
+__all__ = ["write_loop_reports", "render_markdown", "render_html", "final_vs_start", "FINAL_VS_START_DIR"]
+
+FINAL_VS_START_DIR = "final_vs_start"
+"""Folder (in the loop folder) of the final-vs-starting-policy paired regression report."""
 
 
 def _rate(r: Optional[Mapping[str, Any]]) -> str:
@@ -50,6 +62,73 @@ def _weights(weights: Optional[Mapping[str, Any]]) -> str:
     if not weights:
         return "none"
     return ", ".join(f"{name} {float(value):g}" for name, value in sorted(weights.items()))
+
+
+def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None) -> Optional[Dict[str, Any]]:
+    """The final policy against the starting policy on the starting bank, from the rounds' regression reports.
+
+    ``None`` unless two or more rounds finished their regression test. The first tested round's baseline
+    (the starting policy: a skipped round does not change the policy) and the last tested round's candidate
+    (the final policy) ran the same scenarios and seeds; their episodes are paired by id and judged as
+    ``dv2s regress`` does (:func:`dv2s_gym.regress.report.build_report`). With ``out`` the paired report is
+    written to ``out/final_vs_start/report.json``. A report that cannot be read, or a starting-bank scenario
+    that changed between the rounds, gives ``{"error": reason}`` instead.
+    """
+    from dv2s_gym.regress.report import build_report, load_report
+
+    tested = [r for r in report.get("rounds", []) if ((r.get("steps") or {}).get("regress") or {}).get("report")]
+    if len(tested) < 2:
+        return None
+    first, last = tested[0], tested[-1]
+    try:
+        start = load_report(first["steps"]["regress"]["report"])
+        final = load_report(last["steps"]["regress"]["report"])
+    except Exception as error:  # noqa: BLE001 - a missing or foreign report is a line of the loop report
+        return {"error": f"cannot read the rounds' regression reports: {(str(error).splitlines() or [''])[0]}"}
+    names = list((start.get("bank") or {}).get("scenarios") or [])
+    hashes = [(start.get("bank") or {}).get("hashes") or {}, (final.get("bank") or {}).get("hashes") or {}]
+    changed = [n for n in names if hashes[0].get(n) != hashes[1].get(n)]
+    if changed or names != list((final.get("bank") or {}).get("scenarios") or []):
+        return {"error": f"the starting bank differs between round {first.get('round')} and round "
+                         f"{last.get('round')} ({', '.join(changed[:3]) or 'scenario list'}); no paired comparison"}
+    baseline = {e["id"]: e.get("baseline") for e in start.get("episodes") or []}
+    episodes = [{"id": e["id"], "scenario": e["scenario"], "seed": e["seed"], "candidate": e["candidate"],
+                 "baseline": baseline[e["id"]]}
+                for e in final.get("episodes") or [] if baseline.get(e["id"]) is not None]
+    if not episodes:
+        return {"error": f"round {first.get('round')} and round {last.get('round')} share no regression episode"}
+    paired = build_report(bank=final["bank"], settings=final["settings"], candidate=final["candidate"],
+                          baseline=start["baseline"], episodes=episodes)
+    path = None
+    if out is not None:
+        from dv2s_gym.regress.report import write_json
+
+        path = write_json(paired, Path(out) / FINAL_VS_START_DIR / "report.json")
+    overall = paired.get("overall") or {}
+    comparison = overall.get("comparison") or {}
+    return {"start": (start.get("baseline") or {}).get("spec"), "final": (final.get("candidate") or {}).get("spec"),
+            "rounds": [first.get("round"), last.get("round")], "verdict": paired.get("verdict"),
+            "reason": comparison.get("reason"), "episodes": comparison.get("n"),
+            "new_failure_rate": (overall.get("candidate") or {}).get("failure_rate"),
+            "old_failure_rate": (overall.get("baseline") or {}).get("failure_rate"),
+            "difference": comparison.get("difference"), "p_value": comparison.get("p_value"),
+            "regressed": paired.get("regressed") or [], "report": str(path) if path is not None else None}
+
+
+def _final_line(final: Optional[Mapping[str, Any]]) -> Optional[str]:
+    """One sentence on the final policy against the starting one (None when there is no such comparison)."""
+    if not final:
+        return None
+    if final.get("error"):
+        return f"Final against starting policy on the starting bank: not compared ({final['error']})."
+    rounds = final.get("rounds") or ["?", "?"]
+    return (f"Final policy `{final.get('final')}` against starting policy `{final.get('start')}` on the starting "
+            f"bank ({final.get('episodes')} paired episodes: round {rounds[0]}'s baseline episodes with round "
+            f"{rounds[1]}'s candidate episodes, same scenarios and seeds): **{final.get('verdict')}** - "
+            f"{final.get('reason')}; failure rate final {_summary_rate(final.get('new_failure_rate'))}, start "
+            f"{_summary_rate(final.get('old_failure_rate'))}"
+            + (f"; regressed: {', '.join(final['regressed'])}" if final.get("regressed") else "")
+            + (f"; report `{final['report']}`" if final.get("report") else "") + ".")
 
 
 _ORDER = ("mine", "split", "before", "fine_tune", "after", "regress")
@@ -103,6 +182,9 @@ def render_markdown(report: Mapping[str, Any]) -> str:
             f"| {row['round']} | {row['failures']} ({row['against']}) / {row['episodes']} | {row['clusters']} | "
             f"{row['kept']} | {row['split']} | {row['before']} | {row['after']} | {row['drop']} | {row['p']} | "
             f"{row['verdict']} |")
+    final_line = _final_line(report.get("final_vs_start"))
+    if final_line:
+        lines += ["", final_line]
     for record in report.get("rounds", []):
         steps = record.get("steps", {})
         lines += ["", f"## Round {record.get('round')}", "",
@@ -131,7 +213,11 @@ def render_markdown(report: Mapping[str, Any]) -> str:
                              f"`{tuned.get('reference')}` on the policy's own states) on {tuned.get('scenarios')} "
                              f"scenarios ({tuned.get('mined_upweighted')} mined, upweighted); agreement with the "
                              f"reference on the {agreement.get('states')} labelled states "
-                             f"{agreement.get('source')} -> {agreement.get('fine_tuned')}: `{tuned.get('model')}`")
+                             f"{agreement.get('source')} -> {agreement.get('fine_tuned')}"
+                             + "".join(f", resumed from iteration {r.get('from_iteration')}"
+                                       + (f" (+{r['steps_into_next']} steps)" if r.get("steps_into_next") else "")
+                                       for r in tuned.get("resumed") or [])
+                             + f": `{tuned.get('model')}`")
             else:
                 lines.append(f"- fine-tuned by PPO {tuned.get('steps')} steps on {tuned.get('scenarios')} scenarios "
                              f"({tuned.get('mined_upweighted')} mined, upweighted), training reward weights "
@@ -187,6 +273,8 @@ def render_html(report: Mapping[str, Any]) -> str:
             rows.append(f"<tr><td></td><td colspan=\"9\"><table><tr><th>held-out scenario</th><th>episodes</th>"
                         f"<th>failed before</th><th>failed after</th></tr>{''.join(details)}</table>"
                         f"regression test: {escape(str(regress.get('reason')))}</td></tr>")
+    final_line = _final_line(report.get("final_vs_start"))
+    final_html = f"<p>{escape(final_line).replace('**', '')}</p>" if final_line else ""
     head = ("<tr><th>round</th><th>failures / episodes mined</th><th>clusters</th><th>kept</th>"
             "<th>fine-tune / held-out</th><th>held-out failure rate before</th><th>after</th><th>relative drop</th>"
             "<th>McNemar p</th><th>rest of the bank</th></tr>")
@@ -197,15 +285,21 @@ def render_html(report: Mapping[str, Any]) -> str:
             f"{settings.get('fine_tune_steps')} steps (reward terms "
             f"{escape(_weights(settings.get('fine_tune_reward')))} overridden in training only), {settings.get('k_eval')} "
             f"evaluation seeds per held-out scenario (Wilson 95 % intervals; the drop's interval resamples "
-            f"scenarios).</p><table>{head}{''.join(rows)}</table></body></html>\n")
+            f"scenarios).</p><table>{head}{''.join(rows)}</table>{final_html}</body></html>\n")
 
 
 def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
-    """Write ``report.json``, ``report.md`` (and ``report.html`` when available) atomically; returns their paths."""
+    """Write ``report.json``, ``report.md`` (and ``report.html`` when available) atomically; returns their paths.
+
+    With two or more regression-tested rounds, ``final_vs_start`` (:func:`final_vs_start`) is added to them."""
     from scenario_bank.atomic import atomic_write_json, atomic_write_text
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    if "final_vs_start" not in report:
+        final = final_vs_start(report, out)
+        if final is not None:
+            report = {**report, "final_vs_start": final}
     paths = {"json": atomic_write_json(out / "report.json", dict(report), indent=1) or out / "report.json"}
     markdown = render_markdown(report)
     atomic_write_text(out / "report.md", markdown)

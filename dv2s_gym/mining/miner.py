@@ -37,11 +37,12 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import shutil
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Dict, Iterator, List, Optional, Sequence
+from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -102,15 +103,18 @@ class MineRun:
         from collections import Counter
 
         errors = sum(1 for r in self.records if r.get("error"))
+        restarted = sum(1 for r in self.records if r.get("worker_restarts"))
         failures = self.failures
         kinds = Counter(r["failure"]["kind"] for r in failures)
         avoidable_clusters = {self.clusters[int(r["index"])] for r in self.avoidable}
         status = Counter(c.get("status") for c in self.conversions)
         lines = [
             f"{len(self.records)} episodes of {self.settings['policy']} ({self.settings['sampler']} sampler), "
-            f"{errors} errors, {self.seconds:.0f} s",
+            f"{errors} errors, " + (f"{restarted} finished after their worker crashed or hung and was "
+                                    f"replaced, " if restarted else "") + f"{self.seconds:.0f} s",
             f"{len(failures)} failures ({', '.join(f'{k} {n}' for k, n in kinds.most_common()) or 'none'}); "
-            f"{len(self.avoidable)} avoidable by {self.settings['reference'] or 'no reference'}",
+            + (f"{len(self.avoidable)} avoidable by {self.settings['reference']}" if self.settings["reference"]
+             else "avoidability not checked (no reference driver)"),
             f"{self.distinct_clusters} distinct clusters, {len(avoidable_clusters)} with avoidable failures",
         ]
         if self.conversions:
@@ -447,10 +451,6 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
             must then be a writable bank; a new or empty folder starts as a copy of the shipped bank; at most ``max_conversions`` clusters, largest first.
         reports: write report.json, report.md and report.html at the end.
     """
-    from dv2s_gym.mining.space import SceneSpace
-    from dv2s_gym.regress.backends import default_workers, get_backend
-    from dv2s_gym.regress.errors import RegressError
-
     started = time.perf_counter()
     if int(budget) < 1:
         raise MiningError(f"--budget must be at least 1 episode, not {budget}")
@@ -466,19 +466,61 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
     if reference:
         load_policy(reference)
     out = Path(out)
+    if convert and not bank_dir:
+        raise MiningError("converting failures adds scenarios to a bank, and the shipped bank is read-only: pass "
+                          "--bank DIR (a new folder starts as a copy of the shipped bank), or --no-convert")
+    for flag, folder in (("--out", out), ("--bank", Path(bank_dir) if bank_dir else None)):
+        if folder is not None and folder.exists() and not folder.is_dir():
+            raise MiningError(f"{flag} {folder} is a file, not a folder; pass a folder (a new one is created)")
+    created = not out.exists()
     try:
         out.mkdir(parents=True, exist_ok=True)
         (out / "traces").mkdir(exist_ok=True)
     except OSError as error:
         raise MiningError(f"cannot create the run folder {out}: {error.strerror}; pass a writable --out") from None
-    if convert and not bank_dir:
-        raise MiningError("converting failures adds scenarios to a bank, and the shipped bank is read-only: pass "
-                          "--bank DIR (a new folder starts as a copy of the shipped bank), or --no-convert")
-    bank_dir = str(Path(bank_dir).resolve()) if bank_dir else None
-    if convert and not _has_entries(Path(bank_dir)):
-        from scenario_bank.bank import Bank
+    try:
+        return _mine_in(out, started, policy=policy, budget=budget, sampler=sampler, scenarios=scenarios,
+                        bank_dir=bank_dir, backend=backend, workers=workers, address=address, seed=seed,
+                        reference=reference, batch=batch, timeout=timeout, progress=progress, env_config=env_config,
+                        ttc_threshold=ttc_threshold, stall_seconds=stall_seconds, convert=convert,
+                        convert_options=convert_options, max_conversions=max_conversions, reports=reports,
+                        sampler_options=sampler_options, feedback=feedback)
+    except BaseException:
+        if created:
+            _remove_if_empty(out)  # bad input found late (an unknown scenario) leaves no empty run folder behind
+        raise
 
-        Bank().copy_to(bank_dir)  # a bank of one's own starts as the shipped one
+
+def _remove_if_empty(out: Path) -> None:
+    """Remove a run folder this call created when no episode reached it (settings, lock, sampler state, an empty
+    episode log and trace folder only)."""
+    traces, log = out / "traces", out / "episodes.jsonl"
+    if (traces.is_dir() and any(traces.iterdir())) or (log.is_file() and log.stat().st_size) or any(
+            p.name not in ("traces", "settings.json", ".lock", "episodes.jsonl", "sampler.pkl") for p in out.iterdir()):
+        return
+    with open(out / ".lock", "a+") as handle:
+        try:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return  # another miner started on the same new folder at the same moment and runs in it
+        shutil.rmtree(out, ignore_errors=True)
+
+
+def _mine_in(out: Path, started: float, *, policy: str, budget: int, sampler: str,
+             scenarios: Optional[Sequence[str]], bank_dir: Optional[str], backend: str, workers: Optional[int],
+             address: Optional[str], seed: int, reference: Optional[str], batch: Optional[int],
+             timeout: Optional[float], progress: bool, env_config: Optional[Dict[str, Any]], ttc_threshold: float,
+             stall_seconds: float, convert: bool, convert_options: Optional[Dict[str, Any]],
+             max_conversions: Optional[int], reports: bool, sampler_options: Optional[Dict[str, Any]],
+             feedback: str) -> MineRun:
+    """The body of :func:`mine` once the input is checked and the run folder exists."""
+    from dv2s_gym.mining.space import SceneSpace
+    from dv2s_gym.regress.backends import default_workers, get_backend
+    from dv2s_gym.regress.errors import RegressError
+
+    bank_dir = str(Path(bank_dir).resolve()) if bank_dir else None
+    if convert:
+        _own_bank(bank_dir)
     env_config = dict(env_config or {})
     n_workers = int(workers) if workers else (1 if backend == "local" and default_workers() < 2 else
                                               default_workers())
@@ -554,11 +596,30 @@ def _complete(result: Dict[str, Any], task: Dict[str, Any], spec, sampler: str, 
     }
     record.update({k: v for k, v in result.items() if k in record and k not in ("index", "params")})
     record.pop("role", None)
+    if result.get("worker_restarts"):  # a worker crashed or hung on this episode, then a new one finished it
+        record["worker_restarts"] = list(result["worker_restarts"])
     record["sampler"] = sampler
     record["point"] = spec.point
     if record.get("trace"):
         record["trace"] = os.path.relpath(record["trace"], out)
     return record
+
+
+def _own_bank(bank_dir: os.PathLike | str) -> None:
+    """Make ``bank_dir`` a writable bank: a new or empty folder becomes a copy of the shipped bank.
+
+    Miners started at the same moment on one new folder all copy; the first copy lands (atomically) and
+    the others, refused because the folder is no longer empty, use it.
+    """
+    from scenario_bank.bank import Bank, BankError
+
+    if _has_entries(Path(bank_dir)):
+        return
+    try:
+        Bank().copy_to(bank_dir)  # a bank of one's own starts as the shipped one
+    except BankError:
+        if not _has_entries(Path(bank_dir)):
+            raise
 
 
 def _has_entries(folder: Path) -> bool:
@@ -586,7 +647,7 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
     ``max_conversions`` conversions are made in the run (``None``: every cluster). Each conversion is appended to ``conversions.jsonl`` when it ends, so a
     resumed run converts the remaining clusters only.
     """
-    from dv2s_gym.mining.convert import convert_failure
+    from dv2s_gym.mining.convert import SETUP_ERRORS, convert_failure
     from scenario_bank.bank import Bank
 
     if bank_dir is None:
@@ -610,8 +671,16 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
     bar = _progress(progress, len(todo), 0, desc="converting")
     try:
         for cluster, record in todo:
-            row = convert_failure(dict(record, cluster=cluster), run.out, policy=run.settings["policy"], bank=bank,
-                                  env_config=run.settings["env_config"], **options)
+            row = _reached_bank(bank, run.out, cluster)  # killed after the bank write, before its line
+            if row is None:
+                try:
+                    row = convert_failure(dict(record, cluster=cluster), run.out, policy=run.settings["policy"],
+                                          bank=bank, env_config=run.settings["env_config"], **options)
+                except SETUP_ERRORS as error:
+                    first = (str(error).strip().splitlines() or [type(error).__name__])[0]
+                    raise MiningError(f"converting stopped at cluster {cluster} ({len(existing)} converted, the rest "
+                                      f"not tried): {first} Rerun the same command when it works; finished "
+                                      "episodes and conversions are kept") from None
             row["cluster"] = cluster
             appender.append(row)
             existing.append(row)
@@ -622,6 +691,42 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
         if bar is not None:
             bar.close()
     return existing
+
+
+def _entry_video(entry, provenance: Mapping[str, Any]) -> Optional[str]:
+    """The path of a provenance record's video: in the entry's folder when relative to it (as the converter
+    writes it), else as recorded."""
+    video = provenance.get("video")
+    if isinstance(video, str) and video and not os.path.isabs(video):
+        return str(entry.folder / video)
+    return video
+
+
+def _reached_bank(bank, out: Path, cluster: str) -> Optional[Dict[str, Any]]:
+    """The conversion row of ``cluster`` when this run already added it to the bank (or merged it into an entry)
+    but was killed before writing its ``conversions.jsonl`` line; rebuilt from the entry's provenance, so a
+    resumed run neither converts the cluster again nor reports it merged into the entry it made itself."""
+    run = str(Path(out).resolve())
+    for entry in bank:
+        source = entry.source
+        found = [("kept", source)] + [("merged", merged) for merged in source.get("merged") or []]
+        for status, provenance in found:
+            if provenance.get("run") != run or provenance.get("cluster") != cluster:
+                continue
+            from dv2s_gym.mining.convert import CONVERSION_DIR, cluster_slug
+
+            folder = Path(out) / "failures" / cluster_slug(cluster, provenance.get("index"))
+            video, script = folder / "failure.webm", folder / CONVERSION_DIR / "scenario.scenic"
+            return {"cluster": cluster, "index": provenance.get("index"), "status": status, "reason": None,
+                    "stage": None, "video": str(video.relative_to(out)) if video.is_file() else _entry_video(entry, provenance),
+                    "description": provenance.get("description") if status == "merged" else entry.description,
+                    "script": str(script.relative_to(out)) if script.is_file() else None,
+                    "reproduction": provenance.get("reproduction"), "e2e_sc": provenance.get("e2e_sc"),
+                    "bank_entry": entry.name if status == "kept" else None,
+                    "merged_into": entry.name if status == "merged" else None,
+                    **({"merge_reason": provenance.get("how")} if status == "merged" else {}),
+                    "seconds": None, "timings": {}, "recovered_from_bank": True}
+    return None
 
 
 def _write_reports(out: Path) -> Dict[str, Path]:

@@ -8,13 +8,14 @@ self-contained ``report.html`` (:mod:`dv2s_gym.mining.html`). Nothing here impor
 or highway-env, so a report is rebuilt in well under a second from any run folder, also
 from one whose run was killed (a truncated last line of a ``.jsonl`` file is left out).
 
-JSON schema ``dv2s-mine-report``, version 1 (:data:`SCHEMA_VERSION`; a change to any key bumps it)::
+JSON schema ``dv2s-mine-report``, version 2 (:data:`SCHEMA_VERSION`; a change to any key bumps it)::
 
     {
-      "schema": "dv2s-mine-report", "schema_version": 1, "created": ISO-8601 (UTC), "dv2s_version",
+      "schema": "dv2s-mine-report", "schema_version": 2, "created": ISO-8601 (UTC), "dv2s_version",
       "run_dir": the run folder, "settings": settings.json as written by the miner,
       "counts": {
         "episodes": finished episodes without an error, "errors": episodes that ended in an error,
+        "worker_restarts": episodes finished by a new worker after theirs crashed or hung,
         "failures": episodes with a failure, "failures_by_type": {type: n},
         "avoidable": failures the reference driver avoided in the same scene (they count against the policy),
         "unavoidable": failures the reference driver had too, "avoidability_unknown": no reference outcome,
@@ -32,6 +33,7 @@ JSON schema ``dv2s-mine-report``, version 1 (:data:`SCHEMA_VERSION`; a change to
       "unavoidable": [Failure]            unavoidable failures, with the reference driver's outcome,
       "rejected": [{"cluster", "index", "stage", "reason"}],
       "errors": [{"index", "sampler", "scenario", "seed", "error"}],
+      "worker_restarts": [{"index", "scenario", "seed", "problems": [what happened to each earlier attempt]}],
       "skipped_lines": {file: n}          truncated last lines left out (a run killed mid-write)
     }
 
@@ -84,7 +86,7 @@ __all__ = [
 ]
 
 SCHEMA = "dv2s-mine-report"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 CONFIDENCE = 0.95
 FAILURE_ORDER = ("collision", "off_road", "low_ttc", "stall")
 """Failure types in the order the report lists them (other types follow, sorted)."""
@@ -342,6 +344,8 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
     errors = [{"index": int(r["index"]), "sampler": str(r.get("sampler") or default_sampler),
                "scenario": r.get("scenario"), "seed": r.get("seed"), "error": str(r["error"])}
               for r in episodes if r.get("error")]
+    restarts = [{"index": int(r["index"]), "scenario": r.get("scenario"), "seed": r.get("seed"),
+                 "problems": [str(p) for p in r["worker_restarts"]]} for r in episodes if r.get("worker_restarts")]
     failed = [r for r in ok if r.get("failure")]
     missing = [int(r["index"]) for r in failed if int(r["index"]) not in clusters]
     if missing:
@@ -419,6 +423,7 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
     counts = {
         "episodes": len(ok),
         "errors": len(errors),
+        "worker_restarts": len(restarts),
         "failures": len(failures),
         "failures_by_type": _by_type(failures),
         "avoidable": sum(f["avoidable"] is True for f in failures),
@@ -514,6 +519,7 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
         "unavoidable": [f for f in failures if f["avoidable"] is False],
         "rejected": rejected,
         "errors": errors,
+        "worker_restarts": restarts,
         "skipped_lines": {},
     }
     return _clean(report)
@@ -607,6 +613,12 @@ def format_summary(report: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def _type_text(cluster: Mapping[str, Any]) -> str:
+    """The cluster's failure type with how and with whom, e.g. ``collision (rear_end, with car)``."""
+    details = list(cluster.get("collision_types") or {}) + [f"with {kind}" for kind in cluster.get("with_kinds") or {}]
+    return f"{cluster['type']} ({', '.join(details)})" if details else str(cluster["type"])
+
+
 def _cluster_rows(clusters: Sequence[Mapping[str, Any]]) -> List[str]:
     lines = ["| cluster | scenario | type | failures | avoidable | parameter region | representative | status | "
              "bank entry | reproduction | E2E-SC |",
@@ -615,7 +627,7 @@ def _cluster_rows(clusters: Sequence[Mapping[str, Any]]) -> List[str]:
         rep = c["representative"]
         status = c["status"] + (f" into `{c['merged_into']}`" if c.get("merged_into") else "")
         video = f" [video]({c['video']})" if c.get("video") else ""
-        lines.append(f"| `{_cell(c['id'])}` | `{_cell(c['scenario'])}` | {_cell(c['type'])} | {c['size']} | "
+        lines.append(f"| `{_cell(c['id'])}` | `{_cell(c['scenario'])}` | {_cell(_type_text(c))} | {c['size']} | "
                      f"{c['avoidable']} | {_cell(_region_text(c['params']))} | #{rep['index']} seed {rep['seed']}"
                      f"{video} | {_cell(status)} | {_cell(c.get('bank_entry'))} | {_reproduction_text(c)} | "
                      f"{_num(c.get('e2e_sc'), 3)} |")
@@ -698,6 +710,11 @@ def markdown(report: Mapping[str, Any]) -> str:
                   for e in report["errors"][:20]]
         if len(report["errors"]) > 20:
             lines.append(f"- ... and {len(report['errors']) - 20} more (see report.json)")
+    if report.get("worker_restarts"):
+        lines += ["", f"### Worker restarts ({len(report['worker_restarts'])})", "",
+                  "Episodes whose worker crashed or hung (`--timeout`) and were finished by a new worker:", ""]
+        lines += [f"- #{r['index']} `{_cell(r['scenario'])}` seed {r['seed']}: {_cell('; then '.join(r['problems']))}"
+                  for r in report["worker_restarts"][:20]]
     if report.get("skipped_lines"):
         lines += ["", "Left out (truncated last lines of a killed run): "
                   + ", ".join(f"{name} {n}" for name, n in report["skipped_lines"].items())]

@@ -18,8 +18,9 @@ Samplers (``name``: VerifAI's):
   (:class:`~dv2s_gym.mining.split_sampler.ScenarioSplitSampler`): VerifAI's discrete cross-entropy
   sampler picks the scenario, and each scenario has its own VerifAI Halton sampler over its own
   parameters; it learns by default from ``novelty`` feedback (a repeat of a failure cluster
-  already found counts as an easy scene). It finds the most distinct failure clusters of these
-  samplers (bench/RESULTS.md, ``python -m bench.bench_mine --part samplers``).
+  already found counts as an easy scene), and by default (``avoid=81``) draws a scenario's Halton
+  points past the cells of the cluster grid where that scenario already failed. It finds the most
+  distinct failure clusters of these samplers (bench/RESULTS.md, ``python -m bench.bench_mine --part samplers``).
 
 The adaptive samplers (``cross-entropy``, ``bandit``) take VerifAI's parameters as
 ``options`` (:data:`SAMPLER_OPTIONS`): ``alpha`` (how much one failure moves the
@@ -29,7 +30,13 @@ only which scenario is drawn) and ``thres`` (robustness below which an outcome c
 as a failure, default 0). ``split`` takes them too (defaults :data:`SPLIT_DEFAULTS`: alpha 0.9,
 thres 0, buckets 3, the last only used by bucketed parameter samplers), and ``chooser``
 (``cross-entropy``, ``ucb``, ``epsilon-greedy``), ``params`` (``halton``, ``random``, ``bandit``,
-``cross-entropy``) and ``warmup`` (tries of every scenario before the chooser draws, default 0).
+``cross-entropy``), ``warmup`` (tries of every scenario before the chooser draws, default 0), ``avoid``
+(redraws of a scenario's parameters past cells where it already failed, default 81; 0: the session-11
+preset), and for a cross-entropy chooser that leaves scenarios which stop yielding
+(:mod:`dv2s_gym.mining.chooser`, all off by default): ``forget`` (fraction of the drawn scenario's
+probability moved to the others on each non-failure), ``patience`` (draws without a failure before a
+scenario is cut to ``floor`` of the uniform share, default 0.5) and ``capacity`` (draws per grid cell after
+which a scenario is cut on every non-failure).
 """
 
 from __future__ import annotations
@@ -64,11 +71,11 @@ SAMPLERS = ("random", "halton", "cross-entropy", "bandit", SPLIT)
 """Names :func:`make_sampler` accepts."""
 
 SAMPLER_OPTIONS = {"cross-entropy": ("alpha", "buckets", "thres"), "bandit": ("alpha", "buckets", "thres"),
-                   SPLIT: ("alpha", "buckets", "thres", "chooser", "params", "warmup")}
+                   SPLIT: ("alpha", "buckets", "thres", "chooser", "params", "warmup", "forget", "patience", "floor", "capacity", "avoid")}
 """The options each sampler takes (the others take none)."""
 
 SPLIT_DEFAULTS: Dict[str, Any] = {"chooser": "cross-entropy", "params": "halton", "alpha": 0.9, "thres": 0.0,
-                                  "buckets": 3, "warmup": 0}
+                                  "buckets": 3, "warmup": 0, "forget": 0.0, "patience": 0, "floor": 0.5, "capacity": 0.0, "avoid": 81}
 """The settings of :data:`SPLIT` when no option is given."""
 
 DEFAULT_FEEDBACK = {SPLIT: "novelty"}
@@ -129,8 +136,26 @@ def _split_params(options: Dict[str, Any]) -> Dict[str, Any]:
     warmup = params["warmup"]
     if isinstance(warmup, bool) or not isinstance(warmup, int) or warmup < 0:
         raise MiningError(f"sampler option warmup must be a whole number >= 0, not {warmup!r}")
+    for key in ("patience", "avoid"):
+        value = params[key]
+        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+            raise MiningError(f"sampler option {key} must be a whole number >= 0 (0: off), not {value!r}")
+    patience = params["patience"]
+    forget, floor = float(params["forget"]), float(params["floor"])
+    capacity = float(params["capacity"])
+    if capacity < 0.0:
+        raise MiningError(f"sampler option capacity must be >= 0 (0: off), not {params['capacity']!r}")
+    if (forget or patience or capacity) and params["chooser"] != "cross-entropy":
+        raise MiningError(f"sampler options forget, patience and capacity need chooser cross-entropy, not "
+                          f"{params['chooser']!r}; drop them or use chooser=cross-entropy")
+    if not 0.0 <= forget < 1.0:
+        raise MiningError(f"sampler option forget must be in [0, 1) (0: no forgetting), not {params['forget']!r}")
+    if not 0.0 <= floor <= 1.0:
+        raise MiningError(f"sampler option floor must be in [0, 1] (a fraction of the uniform share), "
+                          f"not {params['floor']!r}")
     params["alpha"], params["thres"], params["buckets"] = (float(params["alpha"]), float(params["thres"]),
                                                            int(params["buckets"]))
+    params["forget"], params["floor"], params["capacity"] = forget, floor, capacity
     return params
 
 
@@ -242,4 +267,6 @@ def _make_split(space: Any, feature_space: Any, params: Dict[str, Any]):
         dimensions = [width] * int(count)
     return ScenarioSplitSampler(feature_space, dimensions, chooser=params["chooser"], params=params["params"],
                                 alpha=params["alpha"], thres=params["thres"], buckets=params["buckets"],
-                                warmup=params["warmup"])
+                                warmup=params["warmup"], forget=params["forget"], patience=params["patience"],
+                                floor=params["floor"], capacity=params["capacity"],
+                                avoid=params["avoid"])

@@ -28,17 +28,26 @@ Every outcome is fed to the chooser and to the drawn scenario's parameter sample
 points of the same feature space as the other samplers (unused coordinates of ``u`` are
 0.5), so the miner, its records and its checkpoints treat this sampler like any other.
 
-``dv2s mine --sampler split`` uses the cross-entropy chooser (alpha 0.9), Halton parameters and
-``novelty`` feedback (settings chosen on tuning seeds; bench/RESULTS.md: 2.56x the distinct failure
-clusters of random sampling on seeds 0-2, against 1.31x for the best VerifAI feature sampler).
+Two extensions (options): ``avoid`` keeps drawing a scenario's parameter sampler (up to ``avoid`` more
+points) while its point falls in a cell of the cluster grid (:mod:`dv2s_gym.mining.cluster`) where that
+scenario already failed (under novelty feedback: where a cluster was found), so the Halton sequence is
+spent on cells not yet failing; ``forget``/``patience``/``capacity`` replace VerifAI's chooser by
+:class:`~dv2s_gym.mining.chooser.ForgetfulCrossEntropySampler`, which moves probability away from scenarios
+that stop yielding failures.
+
+``dv2s mine --sampler split`` uses the cross-entropy chooser (alpha 0.9), Halton parameters, ``avoid=81``
+and ``novelty`` feedback (settings chosen on tuning seeds 7-14; bench/RESULTS.md). ``avoid=0`` is the
+session-11 preset (2.56x the distinct failure clusters of random sampling on seeds 0-2).
 """
 
 from __future__ import annotations
 
-from typing import Any, List, Sequence, Tuple
+from typing import Any, List, Optional, Sequence, Tuple
 
 import numpy as np
 from verifai.samplers.feature_sampler import FeatureSampler
+
+from dv2s_gym.mining.cluster import REGION_BINS, region_of
 
 __all__ = ["ScenarioSplitSampler", "CHOOSERS", "PARAM_SAMPLERS", "scenario_dimensions"]
 
@@ -58,10 +67,17 @@ def scenario_dimensions(space) -> List[int]:
     return [len(space.param_ranges(name)) for name in space.scenarios]
 
 
-def _make_chooser(kind: str, count: int, alpha: float, thres: float):
+def _make_chooser(kind: str, count: int, alpha: float, thres: float, forget: float = 0.0, patience: int = 0,
+                  floor: float = 0.5, capacity: float = 0.0, cells: Optional[Sequence[int]] = None):
     from verifai.features import Box, DiscreteBox
 
     if kind == "cross-entropy":
+        if forget or patience or capacity:
+            from dv2s_gym.mining.chooser import ForgetfulCrossEntropySampler
+
+            return ForgetfulCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=alpha, thres=thres,
+                                                forget=forget, patience=patience, floor=floor, capacity=capacity,
+                                                cells=cells)
         from verifai.samplers.cross_entropy import DiscreteCrossEntropySampler
 
         return DiscreteCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=alpha, thres=thres)
@@ -110,19 +126,28 @@ class ScenarioSplitSampler(FeatureSampler):
             for the ``bandit`` and ``cross-entropy`` parameter samplers).
         warmup: the first ``warmup * len(dimensions)`` scenes try every scenario ``warmup`` times (each
             round in a seeded order) and are fed to the chooser like its own draws; 0: none.
+        avoid: up to this many further points of the scenario's parameter sampler are drawn while the point
+            falls in a cell of the cluster grid where a failure (``rho < thres``; under novelty feedback a new
+            cluster) was already found in that scenario; 0: the sampler's first point.
+        forget, patience, floor, capacity: the ``cross-entropy`` chooser leaves scenarios that stop yielding failures
+            (:class:`~dv2s_gym.mining.chooser.ForgetfulCrossEntropySampler`); ``forget=0, patience=0``: VerifAI's
+            ``DiscreteCrossEntropySampler`` as it is.
 
     Build it with the generators seeded (the Halton starts are drawn here); then draw with
     ``getSample`` and feed with ``update`` like any VerifAI feature sampler.
     """
 
     def __init__(self, space, dimensions: Sequence[int], chooser: str = "cross-entropy", params: str = "halton",
-                 alpha: float = 0.9, thres: float = 0.0, buckets: int = 3, warmup: int = 0) -> None:
+                 alpha: float = 0.9, thres: float = 0.0, buckets: int = 3, warmup: int = 0, forget: float = 0.0,
+                 patience: int = 0, floor: float = 0.5, capacity: float = 0.0, avoid: int = 0) -> None:
         super().__init__(space)
         self.width = max([int(d) for d in dimensions] + [1])
         """Coordinates of ``u`` in the feature space (the largest parameter count)."""
         self.dimensions = [int(d) for d in dimensions]
         self.chooser_kind, self.params_kind = chooser, params
-        self.chooser = _make_chooser(chooser, len(self.dimensions), alpha, thres)
+        cells = [REGION_BINS ** d for d in self.dimensions]  # the cluster grid's cells of each scenario
+        self.chooser = _make_chooser(chooser, len(self.dimensions), alpha, thres, forget, patience, floor, capacity,
+                                     cells)
         self.param_samplers = [_make_params(params, d, alpha, thres, buckets) for d in self.dimensions]
         self.draws = [0] * len(self.dimensions)
         """Scenes drawn per scenario."""
@@ -130,6 +155,10 @@ class ScenarioSplitSampler(FeatureSampler):
         self.warmup_order = [int(i) for _ in range(int(warmup)) for i in np.random.permutation(count)]
         """The scenarios of the first draws: every scenario ``warmup`` times, each round in a seeded order."""
         self.drawn = 0
+        self.avoid = int(avoid)
+        """Redraws allowed per scene to leave the cells where a failure was already found (0: none)."""
+        self.found: List[set] = [set() for _ in self.dimensions]
+        """Per scenario: the cluster-grid cells (:func:`~dv2s_gym.mining.cluster.region_of`) of its failures."""
 
     def _scenario(self) -> Tuple[int, Any, Any]:
         if self.drawn < len(self.warmup_order):  # warm-up: the chooser is only fed, as if it had drawn these
@@ -153,6 +182,11 @@ class ScenarioSplitSampler(FeatureSampler):
         index, choice, choice_info = self._scenario()
         self.drawn += 1
         own, own_info = self.param_samplers[index].getSample()
+        found = getattr(self, "found", None)  # a checkpoint from before the option has none
+        for _ in range(getattr(self, "avoid", 0)):  # the sampler's next points, past the cells already failing
+            if region_of(own[: self.dimensions[index]]) not in found[index]:
+                break
+            own, own_info = self.param_samplers[index].getSample()
         own = tuple(float(x) for x in own)
         u = own[: self.dimensions[index]] + (0.5,) * (self.width - self.dimensions[index])
         self.draws[index] += 1
@@ -162,6 +196,8 @@ class ScenarioSplitSampler(FeatureSampler):
     def update(self, sample, info, rho) -> None:
         """Feed the outcome ``rho`` of a drawn point to the chooser and to its scenario's parameter sampler."""
         index, choice, choice_info, own, own_info = info
+        if rho < self.chooser.thres and getattr(self, "found", None) is not None:
+            self.found[index].add(region_of(own[: self.dimensions[index]]))
         self.chooser.update(choice, choice_info, rho)
         self.param_samplers[index].update(own, own_info, rho)
 

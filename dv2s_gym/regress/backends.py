@@ -7,7 +7,8 @@ worker (``forkserver`` context where available, else ``spawn``; ``OMP_NUM_THREAD
 tasks. A worker that dies mid-episode (segfault, ``os._exit``, out of memory) or gives no
 result within the per-episode timeout is killed and replaced; its task is retried once
 (``retries``), then reported as an error result ``{"error": ..., "id", "role", ...}`` -
-never silently dropped.
+never silently dropped; a task that finishes on a retry carries ``"worker_restarts"``, the
+problems of its earlier attempts.
 
 :func:`get_backend` picks one by name (``"local"`` or ``"ray"``; the Ray backend lives in
 :mod:`dv2s_gym.regress.ray_backend`).
@@ -269,6 +270,8 @@ class LocalBackend(Backend):
                                 worker.ready = True
                                 continue
                             _, result = message
+                            if worker.busy[0] in failures:  # finished on a retry: say what happened before
+                                result = dict(result, worker_restarts=list(failures[worker.busy[0]]))
                             worker.busy = None
                             remaining -= 1
                             finished.append(result)

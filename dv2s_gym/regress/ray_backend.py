@@ -199,7 +199,10 @@ class RayBackend(Backend):
                         problem = f"the Ray actor died ({type(error).__name__})"
                     else:
                         self._idle.append(actor)
-                        on_result(self._deliver(tasks[index], result, trace))
+                        delivered = self._deliver(tasks[index], result, trace)
+                        if index in failures:  # finished on a retry: say what happened before
+                            delivered = dict(delivered, worker_restarts=list(failures[index]))
+                        on_result(delivered)
                         continue
                     self._replace(actor)
                     self._retry_or_fail(tasks, index, problem, attempts, failures, queue, on_result, error_result)

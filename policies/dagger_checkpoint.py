@@ -1,0 +1,284 @@
+"""The checkpoint of an unfinished DAgger run (:func:`policies.imitation.dagger_fine_tune`), one per iteration.
+
+After every iteration the run writes, into ``out/dagger_checkpoint/`` (all atomic):
+
+- ``iteration_<i>.npz``: the states labelled in iteration ``i`` (``observations``, ``labels``)
+  and the training envs' observations when it ended (``next_observations``); the aggregated
+  data set after iteration ``k`` is ``iteration_1 .. iteration_k`` in order;
+- ``weights_<k>.pt``: the policy's parameters, Adam's state and torch's RNG state after
+  iteration ``k``'s training (the previous iteration's file is removed once ``k`` is committed);
+- ``progress.json`` (written last: the commit): the run's identity (:func:`run_identity`), the
+  number ``k`` of finished iterations, their stats, the minibatch-order RNG's state, each
+  training env's position (:meth:`policies.imitation.ReferenceLabels.snapshot`), the wall
+  time spent so far and the earlier resumes.
+
+While iteration ``k + 1`` collects, every ``checkpoint_every`` env steps the states labelled so
+far go to ``partial_<k+1>_<rows>.npz`` and ``progress.json`` gains a ``partial`` record (rows,
+episode counts, the envs' positions); a kill during collection then loses at most that many
+steps (one during training loses the iteration's training, not its collection).
+
+A run killed at any point restarts from the last commit and ends with the same model as an
+uninterrupted one (the envs are put back where they were by replaying the current episode's
+actions). A checkpoint whose identity differs from the new call's is refused
+(:class:`DAggerResumeError`), never mixed in.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import io
+import json
+import shutil
+from pathlib import Path
+from typing import Any, Dict, List, Mapping, Optional, Tuple
+
+import numpy as np
+
+from policies.training import TrainingError
+
+__all__ = ["CHECKPOINT_DIR", "DAggerResumeError", "DAggerCheckpoint", "SavedIteration", "PartialIteration",
+           "run_identity", "checkpoint_position", "describe_position"]
+
+CHECKPOINT_DIR = "dagger_checkpoint"
+"""The checkpoint's folder inside the fine-tuning run's ``out``."""
+
+SCHEMA = "dv2s-dagger-checkpoint"
+
+IDENTITY_ORDER = ("steps", "iterations", "epochs", "batch_size", "learning_rate", "beta", "beta_decay", "reference",
+                  "seed", "n_envs", "weights", "env_config", "bank_dir", "source", "source_sha256", "scenario_hashes")
+"""The order in which a refused checkpoint's settings are compared (the first difference is named)."""
+
+_DERIVED = {"source_sha256": " (the source checkpoint's file changed)",
+            "scenario_hashes": " (the bank's scenario scripts changed)"}
+
+
+class DAggerResumeError(TrainingError):
+    """A DAgger checkpoint that cannot be resumed: written with other settings, or unreadable."""
+
+
+@dataclasses.dataclass
+class PartialIteration:
+    """The states labelled so far in an iteration that was still collecting when the run stopped."""
+
+    iteration: int
+    """The iteration collecting (1-based)."""
+    observations: np.ndarray
+    labels: np.ndarray
+    next_observations: np.ndarray
+    """The training envs' observations at that point."""
+    episodes: int
+    crashes: int
+    envs: List[Dict[str, Any]]
+
+    @property
+    def rows(self) -> int:
+        """Labelled states collected in the iteration so far."""
+        return int(len(self.labels))
+
+
+@dataclasses.dataclass
+class SavedIteration:
+    """A committed checkpoint, loaded: everything needed to run iteration ``iteration + 1``."""
+
+    iteration: int
+    """Finished iterations."""
+    observations: List[np.ndarray]
+    labels: List[np.ndarray]
+    next_observations: np.ndarray
+    """The training envs' observations when iteration ``iteration`` ended."""
+    weights: Optional[Dict[str, Any]]
+    """``{"policy": state_dict, "optimizer": state_dict, "torch_rng": ByteTensor}`` (``None`` before
+    the first iteration's training: the source's)."""
+    rng_state: Dict[str, Any]
+    history: List[Dict[str, Any]]
+    envs: List[Dict[str, Any]]
+    wall_time_s: float
+    resumes: List[Dict[str, Any]]
+    partial: Optional[PartialIteration] = None
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _scenario_hashes(bank_dir: Optional[str], names: List[str]) -> Dict[str, Optional[str]]:
+    """Each scenario's script content hash in the bank (``None`` when the bank does not hold it)."""
+    from scenario_bank.bank import Bank
+
+    bank = Bank(bank_dir) if bank_dir is not None else Bank()
+    return {name: (bank.get(name).content_hash or None) if name in bank else None for name in names}
+
+
+def run_identity(*, source: str, source_checkpoint: Path, bank_dir: Optional[str], weights: Mapping[str, float],
+                 env_config: Mapping[str, Any], steps: int, iterations: int, beta: float, beta_decay: float,
+                 epochs: int, batch_size: int, learning_rate: float, reference: str, seed: int,
+                 n_envs: int) -> Dict[str, Any]:
+    """The settings a checkpoint must share with a call to resume it (JSON-safe): everything that changes
+    the result (the source checkpoint's bytes, the bank's scenario scripts, the schedule, the training),
+    not how it runs (``vec_env``, the progress bar)."""
+    names = sorted(weights)
+    return json.loads(json.dumps({
+        "source": str(source), "source_sha256": _sha256(Path(source_checkpoint)),
+        "bank_dir": None if bank_dir is None else str(Path(bank_dir).resolve()),
+        "weights": {name: float(weights[name]) for name in names},
+        "scenario_hashes": _scenario_hashes(bank_dir, names), "env_config": dict(env_config),
+        "steps": int(steps), "iterations": int(iterations), "beta": float(beta), "beta_decay": float(beta_decay),
+        "epochs": int(epochs), "batch_size": int(batch_size), "learning_rate": float(learning_rate),
+        "reference": str(reference), "seed": int(seed), "n_envs": int(n_envs)}, sort_keys=True))
+
+
+def _short(value: Any, limit: int = 80) -> str:
+    text = json.dumps(value, sort_keys=True)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
+
+
+class DAggerCheckpoint:
+    """The checkpoint folder of one DAgger run (module docstring); ``identity`` is the current call's."""
+
+    def __init__(self, folder: Path, identity: Mapping[str, Any]) -> None:
+        self.folder = Path(folder)
+        self.identity = dict(identity)
+        self._committed: Optional[Dict[str, Any]] = None
+
+    @property
+    def progress_path(self) -> Path:
+        return self.folder / "progress.json"
+
+    def _progress(self) -> Optional[Dict[str, Any]]:
+        if not self.progress_path.is_file():
+            return None
+        try:
+            data = json.loads(self.progress_path.read_text(encoding="utf-8"))
+            if data.get("schema") != SCHEMA:
+                raise ValueError(f"schema {data.get('schema')!r}, not {SCHEMA!r}")
+            return data
+        except ValueError as error:
+            raise DAggerResumeError(f"the DAgger checkpoint {self.progress_path} is unreadable ({error}); delete "
+                                    f"{self.folder} to start the fine-tuning over") from None
+
+    def load(self) -> Optional[SavedIteration]:
+        """The last committed iteration, or ``None`` when there is none (a fresh run).
+
+        Raises:
+            DAggerResumeError: the checkpoint was written with other settings (the message names the
+                first one that differs and both values) or its files are unreadable.
+        """
+        data = self._progress()
+        if data is None:
+            return None
+        recorded = data.get("identity") or {}
+        keys = [key for key in IDENTITY_ORDER if key in recorded or key in self.identity]
+        for key in keys + sorted((set(recorded) | set(self.identity)) - set(keys)):
+            old, new = recorded.get(key), self.identity.get(key)
+            if json.dumps(old, sort_keys=True) != json.dumps(new, sort_keys=True):
+                what = _DERIVED.get(key, "")
+                raise DAggerResumeError(
+                    f"{self.folder} holds an unfinished DAgger run with {key}={_short(old)}, not {_short(new)}{what}; "
+                    f"pass the same settings to resume it, or delete {self.folder} to start over")
+        iteration = int(data["iteration"])
+        try:
+            observations, labels, next_observations = [], [], None
+            for number in range(1, iteration + 1):
+                with np.load(self.folder / f"iteration_{number}.npz") as batch:
+                    observations.append(batch["observations"])
+                    labels.append(batch["labels"])
+                    next_observations = batch["next_observations"]
+            weights = None
+            if iteration:
+                import torch
+
+                weights = torch.load(self.folder / f"weights_{iteration}.pt", map_location="cpu", weights_only=True)
+            partial = None
+            if data.get("partial"):
+                record = data["partial"]
+                with np.load(self.folder / record["file"]) as batch:
+                    partial = PartialIteration(
+                        iteration=int(record["iteration"]), observations=batch["observations"],
+                        labels=batch["labels"], next_observations=batch["next_observations"],
+                        episodes=int(record["episodes"]), crashes=int(record["crashes"]), envs=list(record["envs"]))
+        except (OSError, KeyError, ValueError, RuntimeError) as error:
+            raise DAggerResumeError(f"the DAgger checkpoint in {self.folder} is incomplete ({error}); delete "
+                                    f"{self.folder} to start the fine-tuning over") from None
+        self._committed = {key: value for key, value in data.items() if key != "partial"}
+        return SavedIteration(iteration=iteration, observations=observations, labels=labels,
+                              next_observations=next_observations, weights=weights, rng_state=data["rng"],
+                              history=list(data["history"]), envs=list(data["envs"]),
+                              wall_time_s=float(data.get("wall_time_s", 0.0)), resumes=list(data.get("resumes", [])),
+                              partial=partial)
+
+    def save(self, *, iteration: int, observations: np.ndarray, labels: np.ndarray, next_observations: np.ndarray,
+             model: Any, optimizer: Any, rng: np.random.Generator, history: List[Dict[str, Any]],
+             envs: List[Dict[str, Any]], wall_time_s: float, resumes: List[Dict[str, Any]]) -> None:
+        """Commit iteration ``iteration`` (its new labelled states, the weights after its training, the RNGs,
+        the envs' positions); a kill at any point leaves the previous commit intact."""
+        import torch
+
+        from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
+
+        self.folder.mkdir(parents=True, exist_ok=True)
+        buffer = io.BytesIO()
+        np.savez(buffer, observations=observations, labels=labels, next_observations=next_observations)
+        atomic_write_bytes(self.folder / f"iteration_{iteration}.npz", buffer.getvalue())
+        buffer = io.BytesIO()
+        torch.save({"policy": model.policy.state_dict(), "optimizer": optimizer.state_dict(),
+                    "torch_rng": torch.get_rng_state()}, buffer)
+        atomic_write_bytes(self.folder / f"weights_{iteration}.pt", buffer.getvalue())
+        self._committed = {"schema": SCHEMA, "schema_version": 1, "identity": self.identity,
+                           "iteration": int(iteration), "history": history, "rng": rng.bit_generator.state, "envs": envs,
+                           "wall_time_s": round(float(wall_time_s), 3), "resumes": resumes}
+        atomic_write_json(self.progress_path, {**self._committed, "partial": None})
+        (self.folder / f"weights_{iteration - 1}.pt").unlink(missing_ok=True)
+        self._remove_partials(keep=None)
+
+    def save_partial(self, *, iteration: int, observations: np.ndarray, labels: np.ndarray,
+                     next_observations: np.ndarray, episodes: int, crashes: int, envs: List[Dict[str, Any]],
+                     rng: np.random.Generator, resumes: List[Dict[str, Any]], wall_time_s: float) -> None:
+        """Commit the states iteration ``iteration`` (1-based, still collecting) has labelled so far, with
+        the envs' positions; the last finished iteration's commit stays as it was."""
+        from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
+
+        self.folder.mkdir(parents=True, exist_ok=True)
+        name = f"partial_{iteration}_{len(labels)}.npz"
+        buffer = io.BytesIO()
+        np.savez(buffer, observations=observations, labels=labels, next_observations=next_observations)
+        atomic_write_bytes(self.folder / name, buffer.getvalue())
+        committed = self._committed or {
+            "schema": SCHEMA, "schema_version": 1, "identity": self.identity, "iteration": 0, "history": [],
+            "rng": rng.bit_generator.state, "envs": []}
+        atomic_write_json(self.progress_path, {
+            **committed, "wall_time_s": round(float(wall_time_s), 3), "resumes": resumes,
+            "partial": {"iteration": int(iteration), "file": name, "rows": int(len(labels)),
+                        "episodes": int(episodes), "crashes": int(crashes), "envs": envs}})
+        self._remove_partials(keep=name)
+
+    def _remove_partials(self, keep: Optional[str]) -> None:
+        for path in self.folder.glob("partial_*.npz"):
+            if path.name != keep:
+                path.unlink(missing_ok=True)
+
+    def remove(self) -> None:
+        """Delete the folder (the run is finished: its model and card are written)."""
+        shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def checkpoint_position(out: Path | str) -> Optional[Tuple[int, int]]:
+    """``(finished iterations, states labelled in the next one)`` of the DAgger run checkpointed in
+    ``out``, or ``None`` when there is none (for progress messages; :meth:`DAggerCheckpoint.load`
+    checks the settings)."""
+    path = Path(out) / CHECKPOINT_DIR / "progress.json"
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        return int(data["iteration"]), int((data.get("partial") or {}).get("rows", 0))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None
+
+
+def describe_position(iteration: int, rows: int, iterations: int) -> str:
+    """``"iteration 2 of 4"`` or ``"iteration 2 of 4 (+1200 steps of iteration 3)"``: where a run resumes."""
+    text = f"iteration {iteration} of {iterations}"
+    return text + (f" (+{rows} steps of iteration {iteration + 1})" if rows else "")

@@ -1,0 +1,223 @@
+"""Resuming a killed DAgger run (`policies.dagger_checkpoint`): the envs put back where they were, the run
+continued from its last committed iteration to the same model and stats as an uninterrupted one, a
+checkpoint of other settings refused."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import policies.imitation as imitation
+from envs.dv2s_env import DV2SEnv
+from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, DAggerResumeError, checkpoint_position
+from policies.imitation import ReferenceLabels, dagger_fine_tune
+from policies.model_card import read_card
+from policies.registry import SHIPPED_CHECKPOINT, load_policy
+from policies.training import ScenarioSchedule
+
+SOURCES = ["highway_lead_vehicle_brakes", "urban_pedestrian_crossing"]
+WEIGHTS = {SOURCES[0]: 1.0, SOURCES[1]: 3.0}
+SHIPPED_CONFIG = read_card(SHIPPED_CHECKPOINT)["env_config"]
+# 2 iterations of 110 steps in each of 2 envs (episodes: 100 steps at most): iteration 1 ends mid-episode, after
+# an episode has ended
+RUN = dict(bank_dir=None, steps=440, weights=WEIGHTS, seed=3, n_envs=2, vec_env="dummy", iterations=2, epochs=2,
+           batch_size=64, progress_bar=False)
+
+
+def _labelled_env(stream: int = 0) -> ReferenceLabels:
+    schedule = ScenarioSchedule(DV2SEnv(scenario=SOURCES, config=dict(SHIPPED_CONFIG)), WEIGHTS, seed=4, stream=stream)
+    return ReferenceLabels(schedule, beta=0.5, seed=4, stream=stream)
+
+
+def _drive(env: ReferenceLabels, model, observation, steps: int):
+    """``steps`` greedy steps of ``model`` (resetting when an episode ends): observations, labels, executed."""
+    seen = []
+    for _ in range(steps):
+        action, _ = model.predict(observation, deterministic=True)
+        observation, _, terminated, truncated, info = env.step(action)
+        seen.append((np.asarray(observation).tobytes(), info["reference_action"], info["executed_action"]))
+        if terminated or truncated:
+            observation, _ = env.reset()
+    return seen, observation
+
+
+def test_a_restored_env_continues_exactly_like_the_original():
+    model = load_policy("dv2s-ppo").model
+    original = _labelled_env()
+    observation, _ = original.reset(seed=9)
+    for _ in range(200):  # past one episode's end, 10 steps into the next
+        if original.snapshot()["episode"]["reset"] == {} and len(original.snapshot()["episode"]["actions"]) == 10:
+            break
+        _, observation = _drive(original, model, observation, 1)
+    snapshot = original.snapshot()
+    assert snapshot["episode"]["actions"] and "seed" not in snapshot["episode"]["reset"]  # an auto-reset episode
+    expected, _ = _drive(original, model, observation, 40)
+    original.close()
+    copy = _labelled_env()
+    copy.reset(seed=123)  # anywhere else first
+    observation = copy.restore(json.loads(json.dumps(snapshot)))
+    assert copy.snapshot() == snapshot
+    seen, _ = _drive(copy, model, observation, 40)
+    copy.close()
+    assert seen == expected
+
+
+def _weights(path):
+    return load_policy(f"ppo:{path}").model.policy.state_dict()
+
+
+def _same_model(a, b) -> None:
+    wa, wb = _weights(a), _weights(b)
+    assert wa.keys() == wb.keys() and all(torch.equal(wa[k], wb[k]) for k in wa)
+    batch = np.random.default_rng(0).uniform(-1, 1, size=(64, *load_policy(f"ppo:{a}").model.observation_space.shape))
+    pa = load_policy(f"ppo:{a}").model.policy.get_distribution(torch.as_tensor(batch, dtype=torch.float32))
+    pb = load_policy(f"ppo:{b}").model.policy.get_distribution(torch.as_tensor(batch, dtype=torch.float32))
+    assert torch.equal(pa.distribution.probs, pb.distribution.probs)
+
+
+def _stats(path):
+    tuned = read_card(path)["fine_tune"]
+    return tuned["history"], tuned["agreement"]
+
+
+def _kill_on_train_call(monkeypatch, call: int) -> None:
+    """Make the ``call``-th training of the run raise ``KeyboardInterrupt`` (killed mid-iteration)."""
+    original, calls = imitation._train, [0]
+
+    def train(*args, **kwargs):
+        calls[0] += 1
+        if calls[0] == call:
+            raise KeyboardInterrupt
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(imitation, "_train", train)
+
+
+def test_a_killed_dagger_run_resumes_to_the_same_model_and_refuses_other_settings(tmp_path, monkeypatch):
+    whole = dagger_fine_tune("dv2s-ppo", out=tmp_path / "whole", log=lambda _: None, **RUN)
+    assert read_card(whole)["fine_tune"]["resumed"] == []
+    assert not list((tmp_path / "whole").rglob("partial_*"))  # 220-step iterations, a partial every 2000 steps
+    assert not (tmp_path / "whole" / CHECKPOINT_DIR).exists()  # removed once the result is written
+
+    out = tmp_path / "killed"
+    _kill_on_train_call(monkeypatch, 2)  # iteration 2 collected, killed while training on it
+    with pytest.raises(KeyboardInterrupt):
+        dagger_fine_tune("dv2s-ppo", out=out, log=lambda _: None, **RUN)
+    monkeypatch.undo()
+    assert checkpoint_position(out) == (1, 0) and not (out / "model.zip").exists()
+    progress = json.loads((out / CHECKPOINT_DIR / "progress.json").read_text())
+    assert progress["history"][0]["episodes_finished"] >= 1  # the schedule moved on before the kill...
+    assert all(env["episode"]["actions"] for env in progress["envs"])  # ...and each env is mid-episode
+
+    # other settings: refused before any work, naming the setting and the fix; the checkpoint is untouched
+    before = (out / CHECKPOINT_DIR / "progress.json").read_bytes()
+    for change, named in (({"learning_rate": 5e-4}, "learning_rate=0.001, not 0.0005"), ({"steps": 200}, "steps=440"),
+                          ({"seed": 4}, "seed=3, not 4"), ({"weights": {SOURCES[0]: 1.0}}, "weights=")):
+        with pytest.raises(DAggerResumeError, match=named) as error:
+            dagger_fine_tune("dv2s-ppo", out=out, log=lambda _: None, **{**RUN, **change})
+        assert f"delete {out / CHECKPOINT_DIR}" in str(error.value) and "same settings" in str(error.value)
+    assert (out / CHECKPOINT_DIR / "progress.json").read_bytes() == before
+
+    lines = []
+    resumed = dagger_fine_tune("dv2s-ppo", out=out, log=lines.append, **RUN)
+    assert lines[0].startswith("DAgger: resumed from iteration 1 of 2 (220 labelled states")
+    assert [line.split(":")[0] for line in lines[1:2]] == ["DAgger iteration 2/2"]  # iteration 1 not redone
+    _same_model(whole, resumed)
+    assert _stats(resumed) == _stats(whole)
+    assert read_card(resumed)["fine_tune"]["resumed"] == [{"from_iteration": 1, "steps_into_next": 0,
+                                                           "envs_reproduced": True}]
+    assert not (out / CHECKPOINT_DIR).exists()
+
+
+@pytest.mark.parametrize("killed_at_call, position", [(3, (0, 120)), (6, (1, 120))])
+def test_a_run_killed_while_collecting_resumes_from_its_last_partial_commit(tmp_path, monkeypatch, killed_at_call,
+                                                                             position):
+    whole = dagger_fine_tune("dv2s-ppo", out=tmp_path / "whole", log=lambda _: None, **RUN)
+    run = {**RUN, "checkpoint_every": 60}  # partial commits at 60, 120, 180 steps of each 220-step iteration
+    original, calls = DAggerCheckpoint.save_partial, [0]
+
+    def save_partial(self, **kwargs):
+        calls[0] += 1
+        if calls[0] == killed_at_call:  # killed mid-collection, 60 steps after the last partial commit
+            raise KeyboardInterrupt
+        original(self, **kwargs)
+
+    monkeypatch.setattr(DAggerCheckpoint, "save_partial", save_partial)
+    out = tmp_path / "killed"
+    with pytest.raises(KeyboardInterrupt):
+        dagger_fine_tune("dv2s-ppo", out=out, log=lambda _: None, **run)
+    monkeypatch.undo()
+    assert checkpoint_position(out) == position
+    assert [p.name for p in (out / CHECKPOINT_DIR).glob("partial_*")] == [f"partial_{position[0] + 1}_120.npz"]
+    lines = []
+    resumed = dagger_fine_tune("dv2s-ppo", out=out, log=lines.append, **run)
+    assert lines[0].startswith(f"DAgger: resumed from iteration {position[0]} of 2 (+120 steps of iteration "
+                               f"{position[0] + 1})")
+    _same_model(whole, resumed)
+    assert _stats(resumed) == _stats(whole)
+    assert read_card(resumed)["fine_tune"]["resumed"] == [{"from_iteration": position[0], "steps_into_next": 120,
+                                                           "envs_reproduced": True}]
+
+
+def test_a_run_killed_after_its_last_iteration_only_writes_the_result(tmp_path, monkeypatch):
+    run = {**RUN, "steps": 120}
+    whole = dagger_fine_tune("dv2s-ppo", out=tmp_path / "whole", log=lambda _: None, **run)
+    import policies.model_card as model_card
+
+    def killed(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(model_card, "write_card", killed)
+    with pytest.raises(KeyboardInterrupt):
+        dagger_fine_tune("dv2s-ppo", out=tmp_path / "late", log=lambda _: None, **run)
+    monkeypatch.undo()
+    assert checkpoint_position(tmp_path / "late") == (2, 0)
+
+    def no_envs(*args, **kwargs):
+        raise AssertionError("a finished run built training envs")
+
+    import policies.training as training
+
+    monkeypatch.setattr(training, "make_vec_env", no_envs)
+    resumed = dagger_fine_tune("dv2s-ppo", out=tmp_path / "late", log=lambda _: None, **run)
+    _same_model(whole, resumed)
+    assert _stats(resumed) == _stats(whole)
+    assert read_card(resumed)["fine_tune"]["resumed"] == []  # no env was restored
+
+
+def test_an_unreadable_checkpoint_is_refused_with_the_fix(tmp_path):
+    folder = tmp_path / "run" / CHECKPOINT_DIR
+    folder.mkdir(parents=True)
+    (folder / "progress.json").write_text("{not json")
+    with pytest.raises(DAggerResumeError, match=f"unreadable .*delete {folder}"):
+        dagger_fine_tune("dv2s-ppo", out=tmp_path / "run", log=lambda _: None, **RUN)
+
+
+def test_the_loop_resumes_a_killed_dagger_fine_tune_and_says_so(tmp_path, monkeypatch):
+    from dv2s_gym.mining.loop import run_loop
+    from loop_helpers import FakeMiner
+
+    out = tmp_path / "loop"
+    miner = FakeMiner(SOURCES, failures_per_round=4)
+    tiny = dict(budget=6, fine_tune_steps=200, k_eval=1, regress_episodes=1, workers=1, n_envs=1, progress=False,
+                scenarios=SOURCES, fine_tune_method="dagger")
+    _kill_on_train_call(monkeypatch, 2)
+    with pytest.raises(KeyboardInterrupt):
+        run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **tiny)
+    monkeypatch.undo()
+    steps = json.loads((out / "loop.json").read_text())["rounds"][0]["steps"]
+    assert "before" in steps and "fine_tune" not in steps
+    assert checkpoint_position(out / "round_1" / "policy") == (1, 0)
+    lines = []
+    report = run_loop("dv2s-ppo", out=out, miner=miner, log=lines.append, **tiny)
+    assert "round 1: fine-tune (dagger) resumed from iteration 1 of 4" in lines
+    assert "DAgger iteration 1/4" not in "\n".join(lines)  # not redone
+    tuned = report.rounds[0]["steps"]["fine_tune"]
+    # subprocess envs put back where they were too
+    assert tuned["resumed"] == [{"from_iteration": 1, "steps_into_next": 0, "envs_reproduced": True}]
+    assert [h["iteration"] for h in read_card(tuned["model"])["fine_tune"]["history"]] == [1, 2, 3, 4]
+    assert "resumed from iteration 1:" in report.paths["md"].read_text()
+    assert len(miner.calls) == 1  # mining was not redone either

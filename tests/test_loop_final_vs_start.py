@@ -1,0 +1,81 @@
+"""The loop report compares the final policy with the starting one on the starting bank.
+
+The rounds' regression reports are made from hand-written episode results (two scenarios x four seeds) with
+the regression test's own report builder, as ``dv2s loop`` writes them: round 1 tests P1 against the start
+P0, round 2 tests P2 against P1. The final comparison pairs round 1's P0 episodes with round 2's P2 episodes.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from dv2s_gym.mining.loop_report import final_vs_start, write_loop_reports
+from dv2s_gym.regress.report import build_report, write_json
+
+NAMES = ["scenario_a", "scenario_b"]
+SEEDS = [0, 1, 2, 3]
+
+
+def _result(failed: bool) -> dict:
+    return {"failed": failed, "collided": failed, "off_road": False, "success": not failed, "error": None,
+            "min_ttc": 1.0, "mean_speed": 10.0, "episode_return": 1.0}
+
+
+def _regress(path: Path, candidate: str, baseline: str, cand_fail: set, base_fail: set, hashes=None) -> str:
+    episodes = [{"id": f"{n}:{s}", "scenario": n, "seed": s, "candidate": _result((n, s) in cand_fail),
+                 "baseline": _result((n, s) in base_fail)} for n in NAMES for s in SEEDS]
+    bank = {"path": "bank", "version": 1, "scenarios": NAMES, "hashes": hashes or {n: "h-" + n for n in NAMES}}
+    report = build_report(bank=bank, settings={"margin": 0.05, "alpha": 0.05, "episodes": 4, "seed": 0},
+                          candidate={"spec": candidate}, baseline={"spec": baseline}, episodes=episodes)
+    return str(write_json(report, path))
+
+
+P0_FAILS = {("scenario_a", 0)}
+P1_FAILS = {("scenario_a", 0), ("scenario_b", 1)}
+P2_FAILS = {(n, s) for n in NAMES for s in SEEDS} - {("scenario_b", 3)}
+
+
+def _loop(tmp_path: Path, rounds: int, hashes2=None) -> dict:
+    records = [{"round": 1, "policy": "p0", "new_policy": "p1", "steps": {"regress": {
+        "verdict": "PASS", "report": _regress(tmp_path / "r1.json", "p1", "p0", P1_FAILS, P0_FAILS)}}}]
+    if rounds > 1:
+        records.append({"round": 2, "policy": "p1", "new_policy": "p2", "steps": {"regress": {
+            "verdict": "FAIL", "report": _regress(tmp_path / "r2.json", "p2", "p1", P2_FAILS, P1_FAILS, hashes2)}}})
+    return {"schema": "dv2s-loop", "schema_version": 1, "settings": {"policy": "p0"}, "policy": records[-1]["new_policy"],
+            "rounds": records}
+
+
+def test_final_policy_is_paired_with_the_starting_policy(tmp_path):
+    final = final_vs_start(_loop(tmp_path, 2), tmp_path / "loop")
+    assert final["start"] == "p0" and final["final"] == "p2" and final["rounds"] == [1, 2]
+    assert final["episodes"] == 8
+    assert final["new_failure_rate"]["value"] == 7 / 8 and final["old_failure_rate"]["value"] == 1 / 8
+    assert final["difference"]["value"] == 6 / 8
+    assert final["verdict"] == "FAIL"  # 6 discordant pairs all against P2: McNemar p = 1/64
+    paired = json.loads(Path(final["report"]).read_text())
+    assert paired["baseline"]["spec"] == "p0" and paired["candidate"]["spec"] == "p2"
+    assert sum(e["baseline"]["failed"] for e in paired["episodes"]) == 1
+
+
+def test_the_report_shows_the_comparison_only_with_two_tested_rounds(tmp_path):
+    paths = write_loop_reports(_loop(tmp_path, 2), tmp_path / "two")
+    data = json.loads(paths["json"].read_text())
+    assert data["final_vs_start"]["verdict"] == "FAIL"
+    markdown = paths["md"].read_text()
+    assert "Final policy `p2` against starting policy `p0`" in markdown and "**FAIL**" in markdown
+    assert "Final policy" in paths["html"].read_text()
+
+    (tmp_path / "one").mkdir()
+    paths = write_loop_reports(_loop(tmp_path / "one", 1), tmp_path / "one")
+    assert "final_vs_start" not in json.loads(paths["json"].read_text())
+    assert "starting policy `" not in paths["md"].read_text()
+
+
+def test_a_changed_starting_bank_is_not_compared(tmp_path):
+    changed = {"scenario_a": "h-scenario_a", "scenario_b": "edited"}
+    final = final_vs_start(_loop(tmp_path, 2, hashes2=changed))
+    assert "scenario_b" in final["error"] and "no paired comparison" in final["error"]
+    missing = _loop(tmp_path, 2)
+    Path(missing["rounds"][0]["steps"]["regress"]["report"]).unlink()
+    assert final_vs_start(missing)["error"].startswith("cannot read the rounds' regression reports")
