@@ -192,8 +192,7 @@ class CautiousDriver(StateDriver):
     policy is. Needs ``DiscreteMetaAction``. Each step, in order:
 
     1. *Car following*: slow down when time-to-collision falls below ``ttc_brake`` or the
-       gap ahead is shorter than ``headway`` seconds of travel (road users with a crossing
-       path are left to rule 2: braking for them inside the zone would leave the ego there).
+       gap ahead is shorter than ``headway`` seconds of travel.
     2. *Gap acceptance* at every zone where the ego's planned path (its lane and route)
        crosses the straight-ahead path of a moving road user (:func:`conflict_zone`): the ego
        may go only if it clears the zone ``gap_margin`` seconds before that road user could
@@ -204,10 +203,13 @@ class CautiousDriver(StateDriver):
        drives on to clear it.
     3. *Road end*: brake to stop ``stop_buffer`` metres before the end of its lane graph (a
        dead end, the edge of the map) instead of driving off it.
-    4. *Yielding* to everything else (cars cutting in, road users without a crossing path):
-       slow down when one, moving at its current velocity, comes within ``conflict_radius``
-       of the ego's planned path within ``yield_horizon`` seconds.
+    4. *Yielding*: slow down when a road user, moving at its current velocity, comes within
+       ``conflict_radius`` of the ego's planned path within ``yield_horizon`` seconds (cars
+       cutting in, and crossing road users before the gap acceptance needs to act).
     5. *Cruise control* otherwise.
+
+    Rules 1 and 4 leave out the road users whose crossing zone the ego is committed to
+    (:meth:`_committed`): braking for them would leave it standing in their path.
 
     Args:
         env: the DV2S env (wrapped or not) this driver controls.
@@ -265,8 +267,8 @@ class CautiousDriver(StateDriver):
         if base.steps == 0 or self._cruise is None:
             self._cruise = self.cruise_speed if self.cruise_speed is not None else max(ego.speed, 5.0)
         zones = self._crossing_zones(ego, others)
-        crossing = {id(other) for other, _ in zones}
-        rest = [other for other in others if id(other) not in crossing]
+        committed = {id(other) for other, zone in zones if self._committed(ego, zone)}
+        rest = [other for other in others if id(other) not in committed]
         ttc, _ = time_to_collision(ego, rest, horizon=10.0, ahead_only=True)
         gap = self._gap_ahead(ego, rest)
         if ttc < self.ttc_brake or gap < max(6.0, self.headway * ego.speed):
@@ -331,6 +333,10 @@ class CautiousDriver(StateDriver):
         if ego.speed < 3.0 and stop_at > 4.0:  # creep up to where it waits
             return FASTER
         return IDLE
+
+    def _committed(self, ego, zone: ConflictZone) -> bool:
+        """Whether the ego is inside ``zone`` or too close to stop before it."""
+        return zone.ego_entry <= 0.0 or ego.speed ** 2 / (2.0 * self.max_braking) > zone.ego_entry
 
     def _must_stop_for_road_end(self, ego) -> bool:
         """Whether the ego must brake now to stop ``stop_buffer`` metres before the end of its road."""

@@ -68,10 +68,8 @@ def test_yields_to_a_car_crossing_the_planned_turn_but_not_to_traffic_in_the_nex
     [(other, zone)] = driver._crossing_zones(ego, road.vehicles)
     assert other is crossing
     assert 10.0 < zone.ego_entry < zone.ego_exit < 25.0  # on the arc, 10 m ahead at the earliest
-    # 13.5 m before where it waits, 8 m/s needs 2.4 m/s² of braking: not yet
-    assert driver.act() == IDLE
-    ego.position = road.network.get_lane(("a", "b", 0)).position(34.0, 0)
-    assert driver.act() == SLOWER  # 9.5 m left: brakes to stop before the zone
+    assert not driver._committed(ego, zone)
+    assert driver.act() == SLOWER
 
 
 def test_road_left_ends_with_the_lane_graph_and_the_driver_stops_before_it():
