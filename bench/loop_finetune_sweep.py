@@ -46,8 +46,8 @@ def main() -> None:
     parser.add_argument("--epochs", type=int, default=None, help="DAgger epochs per iteration (default: its own)")
     parser.add_argument("--beta-decay", type=float, default=None, help="DAgger mixture decay (default: its own)")
     parser.add_argument("--slower-weight", type=float, default=None,
-                        help="DAgger: weight of the reference's SLOWER labels in the cross-entropy (default: 1, "
-                             "unweighted; an experiment of this bench, not an option of dagger_fine_tune)")
+                        help="DAgger: weight of the reference's SLOWER labels in the cross-entropy (default: its own, 3; "
+                             "1 is unweighted)")
     parser.add_argument("--regress", action="store_true")
     parser.add_argument("--regress-episodes", type=int, default=4)
     parser.add_argument("--workers", type=int, default=2)
@@ -81,10 +81,8 @@ def main() -> None:
     if args.method == "dagger":
         from policies.imitation import dagger_fine_tune
 
-        extra = {key: getattr(args, key) for key in ("iterations", "epochs", "beta_decay")
+        extra = {key: getattr(args, key) for key in ("iterations", "epochs", "beta_decay", "slower_weight")
                  if getattr(args, key) is not None}
-        if args.slower_weight is not None:
-            _weight_slower_labels(args.slower_weight)
         path = dagger_fine_tune(policy, bank_dir=bank, out=out / "policy", steps=args.steps, weights=weights,
                                 seed=settings["seed"] * 1000 + 1, n_envs=2, env_config=env_config,
                                 learning_rate=args.lr, progress_bar=False, log=fine_tune_log, **extra)
@@ -129,28 +127,6 @@ def main() -> None:
     base.mkdir(parents=True, exist_ok=True)
     with open(base / "results.jsonl", "a", encoding="utf-8") as handle:
         handle.write(line + "\n")
-
-
-def _weight_slower_labels(weight: float) -> None:
-    """Make DAgger's cross-entropy weight the reference's SLOWER labels by ``weight`` (the others by 1)."""
-    import torch
-
-    import policies.imitation as imitation
-    from policies.state_driver import SLOWER
-
-    def weighted_step(model, optimizer, observations, labels) -> float:
-        policy = model.policy
-        obs = torch.as_tensor(observations, dtype=torch.float32, device=policy.device)
-        actions = torch.as_tensor(labels, dtype=torch.long, device=policy.device)
-        weights = torch.where(actions == SLOWER, torch.tensor(float(weight)), torch.tensor(1.0)).to(policy.device)
-        loss = -(policy.get_distribution(obs).log_prob(actions) * weights).sum() / weights.sum()
-        optimizer.zero_grad()
-        loss.backward()
-        torch.nn.utils.clip_grad_norm_(policy.parameters(), 0.5)
-        optimizer.step()
-        return float(loss.detach())
-
-    imitation.imitation_step = weighted_step
 
 
 if __name__ == "__main__":

@@ -117,7 +117,7 @@ def _scenario_hashes(bank_dir: Optional[str], names: List[str]) -> Dict[str, Opt
 def run_identity(*, source: str, source_checkpoint: Path, bank_dir: Optional[str], weights: Mapping[str, float],
                  env_config: Mapping[str, Any], steps: int, iterations: int, beta: float, beta_decay: float,
                  epochs: int, batch_size: int, learning_rate: float, reference: str, seed: int,
-                 n_envs: int) -> Dict[str, Any]:
+                 n_envs: int, slower_weight: float = 1.0) -> Dict[str, Any]:
     """The settings a checkpoint must share with a call to resume it (JSON-safe): everything that changes
     the result (the source checkpoint's bytes, the bank's scenario scripts, the schedule, the training),
     not how it runs (``vec_env``, the progress bar)."""
@@ -129,7 +129,8 @@ def run_identity(*, source: str, source_checkpoint: Path, bank_dir: Optional[str
         "scenario_hashes": _scenario_hashes(bank_dir, names), "env_config": dict(env_config),
         "steps": int(steps), "iterations": int(iterations), "beta": float(beta), "beta_decay": float(beta_decay),
         "epochs": int(epochs), "batch_size": int(batch_size), "learning_rate": float(learning_rate),
-        "reference": str(reference), "seed": int(seed), "n_envs": int(n_envs)}, sort_keys=True))
+        "reference": str(reference), "slower_weight": float(slower_weight), "seed": int(seed),
+        "n_envs": int(n_envs)}, sort_keys=True))
 
 
 def _short(value: Any, limit: int = 80) -> str:

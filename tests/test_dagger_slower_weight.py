@@ -1,4 +1,4 @@
-"""bench.loop_finetune_sweep --slower-weight: DAgger's cross-entropy weights the reference's SLOWER labels."""
+"""DAgger's cross-entropy weights the reference's SLOWER labels (``slower_weight``, default 3)."""
 
 import gymnasium as gym
 import numpy as np
@@ -7,7 +7,6 @@ import torch
 from stable_baselines3.common.policies import ActorCriticPolicy
 
 import policies.imitation as imitation
-from bench.loop_finetune_sweep import _weight_slower_labels
 from policies.state_driver import FASTER, IDLE, SLOWER
 
 
@@ -17,14 +16,7 @@ class _Model:  # the part of an SB3 model imitation_step reads
         self.policy = ActorCriticPolicy(space, gym.spaces.Discrete(5), lambda _: 1e-3)
 
 
-@pytest.fixture
-def restore_imitation_step():
-    original = imitation.imitation_step
-    yield
-    imitation.imitation_step = original
-
-
-def test_slower_labels_weigh_more_in_the_loss(restore_imitation_step):
+def test_slower_labels_weigh_more_in_the_loss():
     torch.manual_seed(0)
     model = _Model()
     with torch.no_grad():  # a policy that prefers IDLE, so SLOWER labels cost more than IDLE ones
@@ -34,8 +26,16 @@ def test_slower_labels_weigh_more_in_the_loss(restore_imitation_step):
     with torch.no_grad():
         nll = -model.policy.get_distribution(torch.as_tensor(obs)).log_prob(torch.as_tensor(labels)).numpy()
     weights = np.where(labels == SLOWER, 3.0, 1.0)
-    _weight_slower_labels(3.0)
     optimizer = torch.optim.SGD(model.policy.parameters(), lr=0.0)  # a step that changes nothing
-    loss = imitation.imitation_step(model, optimizer, obs, labels)
+    loss = imitation.imitation_step(model, optimizer, obs, labels, slower_weight=3.0)
     assert loss == pytest.approx(float((weights * nll).sum() / weights.sum()), rel=1e-5)
     assert loss != pytest.approx(float(nll.mean()), rel=1e-3)  # not the unweighted mean
+    unweighted = imitation.imitation_step(model, optimizer, obs, labels)
+    assert unweighted == pytest.approx(float(nll.mean()), rel=1e-5)
+
+
+def test_dagger_defaults_weight_slower_labels_and_refuse_a_bad_weight(tmp_path):
+    assert imitation.DAGGER_DEFAULTS["slower_weight"] == 3.0
+    with pytest.raises(imitation.TrainingError, match="slower_weight"):
+        imitation.dagger_fine_tune("dv2s-ppo", bank_dir=None, out=tmp_path, steps=10, weights={"x": 1.0},
+                                   slower_weight=0)
