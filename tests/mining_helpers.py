@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import random
 from pathlib import Path
-from typing import Any
+from typing import Any, Tuple
 
+import numpy as np
 import pytest
 
 from dv2s_gym.mining import miner as miner_module
@@ -29,3 +31,19 @@ def mine_killed_after(policy: str, out: Path, stop_after: int, monkeypatch: Any,
     with pytest.raises(KeyboardInterrupt):
         mine(policy, out=out, **run)
     monkeypatch.setattr(miner_module._Appender, "append", original)
+
+
+def global_draws() -> Tuple[float, float]:
+    """The next draw of Python's and of NumPy's global random generators."""
+    return random.random(), np.random.random()
+
+
+def seed_globals_and_peek(seed: int) -> Tuple[float, float]:
+    """Seed both global generators with ``seed`` and return their next draws (:func:`global_draws`), leaving
+    them seeded as before the peek: a caller that draws nothing from them sees the same draws again."""
+    random.seed(seed)
+    np.random.seed(seed)
+    before = global_draws()
+    random.seed(seed)
+    np.random.seed(seed)
+    return before

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import random
 
-import numpy as np
 import pytest
 
 from dv2s_gym.mining.cluster import region_of
@@ -14,7 +13,7 @@ from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.miner import mine, read_records
 from dv2s_gym.mining.samplers import SPLIT, SceneSampler, is_adaptive, make_sampler
 from dv2s_gym.mining.space import SceneSpace
-from mining_helpers import mine_killed_after
+from mining_helpers import global_draws, mine_killed_after, seed_globals_and_peek
 
 BRAKES = "highway_lead_vehicle_brakes"  # 4 parameters
 LEFT_TURN = "urban_left_turn_oncoming"  # 2 parameters
@@ -43,14 +42,10 @@ def _plain(specs):
 
 @pytest.mark.parametrize("options", [{}, {"chooser": "ucb"}, {"chooser": "epsilon-greedy"}, {"warmup": 2}, {"params": "bandit"}, {"params": "cross-entropy"}])
 def test_split_is_deterministic_under_a_seed_resumes_exactly_and_keeps_the_global_generators(space, options):
-    random.seed(5)
-    np.random.seed(5)
-    before = (random.random(), np.random.random())
-    random.seed(5)
-    np.random.seed(5)
+    before = seed_globals_and_peek(5)
     first = make_sampler(SPLIT, space, 11, options)
     head = _drive(first, space, 15)
-    assert (random.random(), np.random.random()) == before  # nothing drawn from the global generators
+    assert global_draws() == before  # nothing drawn from the global generators
     copy = SceneSampler.loads(first.dumps())  # the checkpoint, mid-way
     tail = _drive(first, space, 15)
     assert _plain(_drive(copy, space, 15)) == _plain(tail)  # the restored sampler continues exactly

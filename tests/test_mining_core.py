@@ -34,6 +34,7 @@ from dv2s_gym.mining.space import SceneSpace
 from envs.errors import DV2SError, SceneSamplingError
 from envs.trace import EpisodeTrace
 from policies.evaluation import EpisodeResult
+from mining_helpers import global_draws, seed_globals_and_peek
 
 ROOT = Path(__file__).resolve().parents[1]
 BANK_DIR = ROOT / "scenario_bank" / "scenarios"
@@ -309,13 +310,9 @@ def _drive(sampler: SceneSampler, space, rounds: int = 3, batch: int = 5):
 
 @pytest.mark.parametrize("name", SAMPLERS)
 def test_samplers_are_deterministic_for_a_seed_and_keep_the_global_rngs(name, small_space):
-    random.seed(123)
-    np.random.seed(123)
-    before = (random.random(), np.random.random())
-    random.seed(123)
-    np.random.seed(123)
+    before = seed_globals_and_peek(123)
     first = _drive(make_sampler(name, small_space.feature_space, 7), small_space)
-    assert (random.random(), np.random.random()) == before  # the sampler never touched the global generators
+    assert global_draws() == before  # the sampler never touched the global generators
     random.seed(999)  # whatever else ran in the process, the same seed draws the same scenes
     second = _drive(make_sampler(name, small_space.feature_space, 7), small_space)
     assert first == second
