@@ -318,14 +318,14 @@ class CautiousDriver(StateDriver):
                 self.gap_margin,
             )
             if not accepted:
-                blocking.append((zone.ego_entry, zone.other_entry <= 0.0))
+                blocking.append((zone.ego_entry, zone.other_entry <= 0.0, zone))
         if not blocking:
             return None
-        entry, occupied = min(blocking)  # the nearest zone the ego may not cross now
+        entry, occupied, zone = min(blocking, key=lambda b: b[:2])  # the nearest zone the ego may not cross now
         clear = FASTER if ego.speed < self._cruise else IDLE
         if entry <= 0.0:  # already inside: clear it, unless the road user is in it too
             return SLOWER if occupied else clear
-        if not occupied and ego.speed ** 2 / (2.0 * self.max_braking) > entry:
+        if not occupied and self._committed(ego, zone):
             return clear  # too close to stop before the zone: never stop inside it
         stop_at = entry - self.stop_buffer  # distance left to where the ego waits
         if stop_at < 0.5 or ego.speed ** 2 > 2.0 * self.comfort_braking * stop_at:
