@@ -118,10 +118,16 @@ _ENTRY_FILE = re.compile(r"^[A-Za-z0-9_\-][A-Za-z0-9_.\-]*(/[A-Za-z0-9_\-][A-Za-
 PathLike = Union[str, os.PathLike]
 
 
+def _is_entry_file(name: Any) -> bool:
+    """Whether ``name`` is a valid file name inside an entry folder (relative, no ``..``, no hidden parts,
+    not the script or sidecar)."""
+    return isinstance(name, str) and bool(_ENTRY_FILE.match(name)) and name not in (SCRIPT, SIDECAR)
+
+
 def entry_file_name(name: Any) -> str:
-    """``name`` if it is a valid file name inside an entry folder (relative, no ``..``, no hidden parts,
-    not the script or sidecar), else a :class:`BankError` saying so."""
-    if not isinstance(name, str) or not _ENTRY_FILE.match(name) or name in (SCRIPT, SIDECAR):
+    """``name`` if it is a valid file name inside an entry folder (:func:`_is_entry_file`), else a
+    :class:`BankError` saying so."""
+    if not _is_entry_file(name):
         raise BankError(f"invalid entry file name {name!r}: use a relative path of letters, digits, '_', '-', "
                         f"'.' and '/' (no '..', no hidden parts, not {SCRIPT} or {SIDECAR})")
     return name
@@ -135,8 +141,7 @@ def entry_files(source: Mapping[str, Any]) -> List[str]:
     for record in records:
         listed = record.get(ENTRY_FILES)
         for value in listed if isinstance(listed, list) else []:
-            if isinstance(value, str) and _ENTRY_FILE.match(value) and value not in (SCRIPT, SIDECAR) \
-                    and value not in out:
+            if _is_entry_file(value) and value not in out:
                 out.append(value)
     return out
 
