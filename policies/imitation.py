@@ -42,7 +42,7 @@ import gymnasium as gym
 import numpy as np
 
 from policies.state_driver import SLOWER
-from policies.training import ScenarioSchedule, TrainingError
+from policies.training import ScenarioSchedule, TrainingError, fine_tune_scenarios
 
 __all__ = ["ReferenceLabels", "DAGGER_DEFAULTS", "dagger_fine_tune", "agreement", "imitation_step"]
 
@@ -290,12 +290,8 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
     model_path = out / "model.zip"
     if model_path.is_file() and (read_model_card(model_path).get("fine_tune") or {}).get("method") == "dagger":
         return model_path
-    weights = {str(k): float(v) for k, v in dict(weights or {}).items()}
-    if scenarios is None:
-        scenarios = sorted(name for name, w in weights.items() if w > 0)
+    weights, scenarios = fine_tune_scenarios(weights, scenarios)
     scenarios = sorted(scenarios)
-    if not scenarios:
-        raise TrainingError("fine-tuning needs at least one scenario with a positive weight")
     probabilities = {name: weights.get(name, 0.0) for name in scenarios}
     if sum(probabilities.values()) <= 0:
         raise TrainingError("fine-tuning needs at least one scenario with a positive weight")

@@ -79,6 +79,7 @@ __all__ = [
     "train",
     "resolve_checkpoint",
     "fine_tune",
+    "fine_tune_scenarios",
     "with_reward_weights",
 ]
 
@@ -881,6 +882,18 @@ def with_reward_weights(env_config: Mapping[str, Any], reward_weights: Optional[
     return config
 
 
+def fine_tune_scenarios(weights: Optional[Mapping[str, float]],
+                        scenarios: Optional[Sequence[str]]) -> Tuple[Dict[str, float], List[str]]:
+    """The sampling weights (``str -> float``) and the scenarios a fine-tuning draws from: ``scenarios``,
+    or by default every scenario with a positive weight (sorted); :class:`TrainingError` if there are none."""
+    weights = {str(k): float(v) for k, v in dict(weights or {}).items()}
+    if scenarios is None:
+        scenarios = sorted(name for name, w in weights.items() if w > 0)
+    if not scenarios:
+        raise TrainingError("fine-tuning needs at least one scenario with a positive weight")
+    return weights, list(scenarios)
+
+
 def fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathLike | str, steps: int,
               weights: Mapping[str, float], seed: int = 0, n_envs: int = 2,
               scenarios: Optional[Sequence[str]] = None, env_config: Optional[Dict[str, Any]] = None,
@@ -912,11 +925,7 @@ def fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathL
     if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
         raise TrainingError(f"fine-tuning steps must be a positive integer, not {steps!r}")
     out = Path(out)
-    weights = {str(k): float(v) for k, v in dict(weights or {}).items()}
-    if scenarios is None:
-        scenarios = sorted(name for name, w in weights.items() if w > 0)
-    if not scenarios:
-        raise TrainingError("fine-tuning needs at least one scenario with a positive weight")
+    weights, scenarios = fine_tune_scenarios(weights, scenarios)
     algorithm, source, source_card = resolve_checkpoint(checkpoint_or_spec)
     if env_config is None:
         env_config = dict(source_card.get("env_config") or {})
