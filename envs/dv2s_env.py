@@ -66,6 +66,8 @@ def resolve_scenarios(spec: ScenarioSpec, bank_dir: Optional[str] = None) -> Lis
     """
     from scenario_bank import scenario_path, select_scenarios
 
+    if isinstance(spec, (list, tuple)) and spec and all(isinstance(item, ScenarioRef) for item in spec):
+        return list(spec)
     if isinstance(spec, os.PathLike):
         spec = os.fspath(spec)
     if isinstance(spec, str):
@@ -89,6 +91,26 @@ def resolve_scenarios(spec: ScenarioSpec, bank_dir: Optional[str] = None) -> Lis
         )
     names = select_scenarios(spec, bank_dir)
     return [ScenarioRef(name=n, path=str(scenario_path(n, bank_dir))) for n in names]
+
+
+def _read_script(path: Optional[str]) -> str:
+    from envs.jailed_env import MAX_SCRIPT_BYTES, read_bounded
+
+    data = read_bounded(path, MAX_SCRIPT_BYTES, "scenario file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise ValueError(f"scenario file {path!r} is not UTF-8 text ({error}); save it as UTF-8") from None
+
+
+def _all_shipped(texts: Sequence[str], config: Optional[dict]) -> bool:
+    from scenario_bank.maps import list_maps
+    from scenario_bank.shipped import is_shipped_text
+
+    map_override = (config or {}).get("map")
+    if map_override is not None and map_override not in list_maps():
+        return False  # a map file of the user's is parsed by Scenic: in the jail
+    return all(is_shipped_text(text) for text in texts)
 
 
 def _copy_state(state: Dict[str, Any]) -> Dict[str, Any]:
@@ -176,9 +198,48 @@ class DV2SEnv(AbstractEnv):
         config: overrides of :meth:`default_config`.
         render_mode: ``"rgb_array"`` (headless) or ``"human"``.
         bank_dir: a bank folder other than the shipped one.
+        trusted: run the scripts in this process without the jail. Only for scripts you
+            wrote or reviewed: a Scenic script is Python and can do anything you can.
+        jail: ``True`` runs even the shipped scenarios in the jail; ``None`` (default)
+            runs the package's own scripts (recognised by content hash) here and every
+            other script in the jail, where it cannot reach this process, your files,
+            the network or your environment. Without a jail on this machine, untrusted
+            scripts are refused with an error naming the fix.
+        jail_limits: the jailed worker's limits (:class:`scenario_bank.jail.JailLimits`).
+
+    Untrusted scenarios make ``DV2SEnv(...)`` return a
+    :class:`~envs.jailed_env.JailedDV2SEnv` (same interface) instead.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 15}
+    runs_in_jail = False
+
+    def __new__(
+        cls,
+        scenario: ScenarioSpec = None,
+        config: Optional[dict] = None,
+        render_mode: Optional[str] = None,
+        bank_dir: Optional[str] = None,
+        trusted: bool = False,
+        jail: Optional[bool] = None,
+        jail_limits: Any = None,
+    ):
+        # Decide where the simulation runs before anything of the scripts is compiled:
+        # the package's own scripts (by content hash) here, everything else in the jail.
+        if trusted or os.environ.get("DV2S_IN_JAIL") == "1":
+            return super().__new__(cls)
+        refs = resolve_scenarios(scenario, bank_dir)
+        texts = [ref.source if ref.source is not None else _read_script(ref.path) for ref in refs]
+        frozen = [ScenarioRef(name=ref.name, path=ref.path, source=text) for ref, text in zip(refs, texts)]
+        if jail is not True and _all_shipped(texts, config):
+            env = super().__new__(cls)
+            env._frozen_refs = frozen  # the text checked is the text compiled: files are not read again
+            return env
+        from envs.jailed_env import JailedDV2SEnv
+        from scenario_bank.jail import require_jail
+
+        require_jail(f"scenario {refs[0].name!r}" if len(refs) == 1 else f"{len(refs)} scenarios")
+        return JailedDV2SEnv(frozen, texts, config=config, render_mode=render_mode, limits=jail_limits)
 
     def __init__(
         self,
@@ -186,8 +247,12 @@ class DV2SEnv(AbstractEnv):
         config: Optional[dict] = None,
         render_mode: Optional[str] = None,
         bank_dir: Optional[str] = None,
+        trusted: bool = False,
+        jail: Optional[bool] = None,
+        jail_limits: Any = None,
     ) -> None:
-        self._scenario_refs = resolve_scenarios(scenario, bank_dir)
+        frozen = self.__dict__.pop("_frozen_refs", None)
+        self._scenario_refs = frozen if frozen is not None else resolve_scenarios(scenario, bank_dir)
         self._bank_dir = bank_dir
         self._compiled: Dict[ScenarioRef, CompiledScenario] = {}
         self._stepper: Optional[ExternalStepper] = None

@@ -63,6 +63,24 @@ class EpisodeTrace:
         return atomic_write_bytes(path, data)
 
     @classmethod
+    def from_dict(cls, data: Any, source: str = "trace") -> "EpisodeTrace":
+        """The trace a :meth:`save`-d dict describes; ``ValueError`` naming ``source`` when it is not one."""
+        names = {f.name for f in fields(cls)}
+        required = {f.name for f in fields(cls) if f.default is MISSING and f.default_factory is MISSING}
+        if not isinstance(data, dict) or not required <= data.keys():
+            missing = sorted(required - data.keys()) if isinstance(data, dict) else sorted(required)
+            raise ValueError(
+                f"{source} is not a dv2s episode trace: missing fields {', '.join(missing)}; "
+                "traces are written by env.save_trace()"
+            )
+        version = data.get("version", 0)
+        if version > TRACE_VERSION:
+            raise ValueError(
+                f"{source} was written by a newer dv2s-gym (trace version {version} > {TRACE_VERSION}); upgrade"
+            )
+        return cls(**{k: v for k, v in data.items() if k in names})
+
+    @classmethod
     def load(cls, path: Union[str, os.PathLike]) -> "EpisodeTrace":
         """Read a trace written by :meth:`save`."""
         raw = Path(path).read_bytes()
@@ -75,17 +93,4 @@ class EpisodeTrace:
                 f"{path} is not a dv2s episode trace (corrupt or truncated file: {error}); "
                 "save it again with env.save_trace()"
             ) from None
-        names = {f.name for f in fields(cls)}
-        required = {f.name for f in fields(cls) if f.default is MISSING and f.default_factory is MISSING}
-        if not isinstance(data, dict) or not required <= data.keys():
-            missing = sorted(required - data.keys()) if isinstance(data, dict) else sorted(required)
-            raise ValueError(
-                f"{path} is not a dv2s episode trace: missing fields {', '.join(missing)}; "
-                "traces are written by env.save_trace()"
-            )
-        version = data.get("version", 0)
-        if version > TRACE_VERSION:
-            raise ValueError(
-                f"{path} was written by a newer dv2s-gym (trace version {version} > {TRACE_VERSION}); upgrade"
-            )
-        return cls(**{k: v for k, v in data.items() if k in names})
+        return cls.from_dict(data, str(path))

@@ -19,6 +19,12 @@ class StateDriver:
     the SB3-style :meth:`predict` and the ``driver(obs, info)`` call interface.
     """
 
+    def __new__(cls, env=None, *args: Any, **kwargs: Any):
+        # A jailed simulation's state stays in the jail: the driver is built there, next to it.
+        if env is not None and getattr(env.unwrapped, "runs_in_jail", False) and cls is not RemoteStateDriver:
+            return RemoteStateDriver(env, cls, args, kwargs)
+        return super().__new__(cls)
+
     def __init__(self, env) -> None:
         self.env = env
         action_type = env.unwrapped.config["action"]["type"]
@@ -39,3 +45,20 @@ class StateDriver:
 
     def __call__(self, observation: Any = None, info: Optional[dict] = None) -> int:
         return self.act()
+
+
+class RemoteStateDriver(StateDriver):
+    """A :class:`StateDriver` of a jailed env: the driver runs in the jail, only its action comes back.
+
+    ``CautiousDriver(env)`` returns one of these when ``env`` is a
+    :class:`~envs.jailed_env.JailedDV2SEnv`; it acts like the driver it stands for.
+    """
+
+    def __init__(self, env, driver_class: type, args: Tuple[Any, ...] = (), kwargs: Optional[dict] = None) -> None:
+        super().__init__(env)
+        self.driver_class = driver_class
+        self._handle = env.unwrapped.driver_new(driver_class, args, dict(kwargs or {}))
+
+    def act(self) -> int:
+        """The remote driver's action for the simulation's current state."""
+        return self.env.unwrapped.driver_act(self._handle)

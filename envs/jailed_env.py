@@ -1,0 +1,388 @@
+"""``DV2S-v0`` for untrusted scenarios: a thin client of a simulation running in the jail.
+
+:class:`JailedDV2SEnv` has the interface of :class:`~envs.dv2s_env.DV2SEnv`
+(Gymnasium's API, ``config``, ``trace``/``save_trace``, rendering, the ego's
+state as ``vehicle``) but compiles, samples and simulates nothing itself: a
+jailed worker (:mod:`envs.jail_worker`) does, and sends back observations,
+rewards, ``info``, frames and traces as data. Drivers that read the simulator
+state (:class:`~policies.state_driver.StateDriver`) run next to the simulation
+in the worker and send back only their action.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+import stat
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+
+import gymnasium as gym
+import numpy as np
+
+from envs.errors import DV2SError, InvalidActionError, ScenarioCompileError, SceneSamplingError, StepTimeoutError
+from envs.errors import UnsupportedConstructError
+from envs.trace import EpisodeTrace
+from scenario_bank.jail import JailCrashError, JailError, JailLimitError, JailLimits, JailedProcess
+from scenario_bank.jail.process import JailRemoteError
+
+__all__ = ["JailedDV2SEnv", "space_to_data", "data_to_space", "MAX_SCRIPT_BYTES", "MAX_MAP_BYTES"]
+
+MAX_SCRIPT_BYTES = 256 * 1024
+MAX_MAP_BYTES = 64 * 2**20
+_MAP_LINE = re.compile(r"""^[ \t]*param[ \t]+(map|sumo_map)[ \t]*=[ \t]*(localPath[ \t]*\([ \t]*)?(['"])([^'"\n\\]{1,1024})\3""",
+                       re.M)
+
+
+# ---------------------------------------------------------------- spaces as data
+def space_to_data(space: gym.Space) -> Dict[str, Any]:
+    """A Gymnasium space as plain data (Box, Discrete, MultiDiscrete, MultiBinary, Tuple, Dict)."""
+    if isinstance(space, gym.spaces.Box):
+        return {"type": "Box", "low": space.low, "high": space.high, "dtype": np.dtype(space.dtype).str}
+    if isinstance(space, gym.spaces.Discrete):
+        return {"type": "Discrete", "n": int(space.n), "start": int(space.start)}
+    if isinstance(space, gym.spaces.MultiDiscrete):
+        return {"type": "MultiDiscrete", "nvec": space.nvec, "dtype": np.dtype(space.dtype).str}
+    if isinstance(space, gym.spaces.MultiBinary):
+        return {"type": "MultiBinary", "n": list(np.atleast_1d(space.n))}
+    if isinstance(space, gym.spaces.Tuple):
+        return {"type": "Tuple", "spaces": [space_to_data(s) for s in space.spaces]}
+    if isinstance(space, gym.spaces.Dict):
+        return {"type": "Dict", "spaces": {k: space_to_data(s) for k, s in space.spaces.items()}}
+    raise TypeError(f"space {space} cannot cross the jail")
+
+
+def data_to_space(data: Any, depth: int = 0) -> gym.Space:
+    """The space :func:`space_to_data` described; raises ``ValueError`` on anything else."""
+    if not isinstance(data, dict) or depth > 8:
+        raise ValueError("not a space description")
+    kind = data.get("type")
+    if kind == "Box":
+        low, high = np.asarray(data["low"]), np.asarray(data["high"])
+        if low.shape != high.shape or low.size > 10**7:
+            raise ValueError("Box bounds disagree")
+        return gym.spaces.Box(low=low, high=high, dtype=np.dtype(str(data["dtype"])))
+    if kind == "Discrete":
+        return gym.spaces.Discrete(int(data["n"]), start=int(data.get("start", 0)))
+    if kind == "MultiDiscrete":
+        return gym.spaces.MultiDiscrete(np.asarray(data["nvec"]), dtype=np.dtype(str(data["dtype"])))
+    if kind == "MultiBinary":
+        return gym.spaces.MultiBinary([int(n) for n in data["n"]])
+    if kind == "Tuple":
+        return gym.spaces.Tuple([data_to_space(s, depth + 1) for s in data["spaces"]])
+    if kind == "Dict":
+        return gym.spaces.Dict({str(k): data_to_space(s, depth + 1) for k, s in data["spaces"].items()})
+    raise ValueError(f"unknown space type {kind!r}")
+
+
+def _as_space_value(value: Any, space: gym.Space) -> Any:
+    if isinstance(space, gym.spaces.Tuple) and isinstance(value, list):
+        return tuple(_as_space_value(v, s) for v, s in zip(value, space.spaces))
+    if isinstance(space, gym.spaces.Dict) and isinstance(value, dict):
+        return {k: _as_space_value(value.get(k), s) for k, s in space.spaces.items()}
+    if isinstance(space, gym.spaces.Box) and isinstance(value, np.ndarray) and value.dtype != space.dtype:
+        return value.astype(space.dtype)
+    return value
+
+
+# ---------------------------------------------------------------- bounded reads
+def read_bounded(path: Union[str, os.PathLike], max_bytes: int, what: str) -> bytes:
+    """The bytes of a regular file (no FIFO, device or symlink at the last component), at most ``max_bytes``."""
+    flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(path, flags)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{what} {str(path)!r} does not exist") from None
+    except OSError as error:
+        raise ValueError(f"{what} {str(path)!r} cannot be opened ({error.strerror}); give a regular file, "
+                         "not a link, pipe or device") from None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise ValueError(f"{what} {str(path)!r} is not a regular file; give a regular file, not a pipe or device")
+        chunks, left = [], max_bytes + 1
+        while left > 0:
+            chunk = os.read(fd, min(left, 1 << 20))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            left -= len(chunk)
+        data = b"".join(chunks)
+    finally:
+        os.close(fd)
+    if len(data) > max_bytes:
+        raise ValueError(f"{what} {str(path)!r} is larger than {max_bytes} bytes; that is not a scenario file")
+    return data
+
+
+def map_references(text: str) -> List[Tuple[str, bool]]:
+    """``(path, is_local_path)`` of the literal map paths a script names (``param map = ...``)."""
+    return [(m.group(4), bool(m.group(2))) for m in _MAP_LINE.finditer(text)]
+
+
+def _looks_like_map_path(value: str) -> bool:
+    return "/" in value or value.lower().endswith(".xodr") or value.startswith(("~", "."))
+
+
+# ---------------------------------------------------------------- the client
+@dataclass
+class _Ego:
+    """The ego's state after the last reset or step (a copy: the vehicle lives in the jail)."""
+
+    position: np.ndarray
+    heading: float
+    speed: float
+    crashed: bool
+
+
+_REMOTE_ERRORS = {
+    "ScenarioCompileError": ScenarioCompileError,
+    "UnsupportedConstructError": UnsupportedConstructError,
+    "SceneSamplingError": SceneSamplingError,
+    "StepTimeoutError": StepTimeoutError,
+    "InvalidActionError": InvalidActionError,
+    "UnknownScenarioError": KeyError,
+    "RecursionError": ScenarioCompileError,
+}
+
+
+class JailedDV2SEnv(gym.Env):
+    """``DV2S-v0`` whose simulation runs in the jail; see :class:`~envs.dv2s_env.DV2SEnv` for the arguments.
+
+    Built by ``DV2SEnv(...)`` (and so by ``gym.make("DV2S-v0", ...)``) whenever a
+    scenario is not one the package ships; not meant to be built directly.
+    ``limits`` sets the worker's CPU, memory and per-request wall-clock limits
+    (:class:`~scenario_bank.jail.JailLimits`).
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 15}
+    runs_in_jail = True
+
+    def __init__(self, refs: Sequence[Any], texts: Sequence[str], config: Optional[dict] = None,
+                 render_mode: Optional[str] = None, limits: Optional[JailLimits] = None) -> None:
+        from envs.dv2s_env import DV2SEnv
+
+        self.render_mode = render_mode
+        self._refs = list(refs)
+        self._labels = {ref.name: ref.path for ref in refs}
+        user_config = dict(config or {})
+        unknown = sorted(set(user_config) - set(DV2SEnv.default_config()))
+        if unknown:
+            raise ValueError(f"unknown config key(s) {', '.join(map(repr, unknown))}; "
+                             "see DV2SEnv.default_config() for the keys")
+        payload = [self._scenario_payload(ref, text) for ref, text in zip(refs, texts)]
+        self._map_paths: Dict[str, str] = {}
+        if isinstance(user_config.get("map"), (str, os.PathLike)) and _looks_like_map_path(str(user_config["map"])):
+            path = Path(os.path.expanduser(str(user_config["map"]))).resolve()
+            user_config["map_file"] = {"name": path.name, "data": np.frombuffer(
+                read_bounded(path, MAX_MAP_BYTES, "map file"), dtype=np.uint8)}
+            user_config.pop("map")
+            self._host_map = str(path)
+        else:
+            self._host_map = None
+        limits = limits or JailLimits.from_env()
+        step_limit = user_config.get("step_time_limit", DV2SEnv.default_config()["step_time_limit"])
+        if step_limit is not None:
+            limits = limits.with_request_seconds(max(float(step_limit), 1.0) * 2 + 5)
+        self._limits = limits
+        names = ", ".join(ref.name for ref in refs[:3]) + (", ..." if len(refs) > 3 else "")
+        self._worker = JailedProcess("envs.jail_worker", limits=limits, name=f"scenario {names}")
+        try:
+            opened = self._call("open", scenarios=payload, config=user_config,
+                                render_mode=None if render_mode is None else "rgb_array",
+                                timeout=max(limits.request_seconds, 300.0))
+            self.observation_space = data_to_space(opened["observation_space"])
+            self.action_space = data_to_space(opened["action_space"])
+            self.config = opened["config"] if isinstance(opened["config"], dict) else {}
+        except BaseException:
+            self._worker.kill()
+            raise
+        self.vehicle: Optional[_Ego] = None
+        self.steps = 0
+        self.time = 0.0
+        self._trace_cache: Optional[Tuple[int, EpisodeTrace]] = None
+        self._drivers = 0
+        self._window = None
+
+    # ------------------------------------------------------------------ setup
+    def _scenario_payload(self, ref: Any, text: str) -> Dict[str, Any]:
+        files: Dict[str, np.ndarray] = {}
+        folder = Path(ref.path).parent if ref.path else None
+        for value, local in map_references(text):
+            if not _looks_like_map_path(value) or not value.lower().endswith(".xodr"):
+                continue
+            if local or not os.path.isabs(value):
+                if folder is None or os.path.isabs(value) or ".." in Path(value).parts:
+                    continue  # the allowlist in the jail names the problem
+                source = folder / value
+                key = value
+            else:
+                continue  # an absolute path: the jail cannot see it; the allowlist reports it there
+            if source.exists():
+                files[key] = np.frombuffer(read_bounded(source, MAX_MAP_BYTES, "map file"), dtype=np.uint8)
+        name = Path(ref.path).name if ref.path else "scenario.scenic"
+        return {"name": ref.name, "text": text, "filename": name if name.endswith(".scenic") else "scenario.scenic",
+                "files": files}
+
+    def _call(self, op: str, timeout: Optional[float] = None, **payload: Any) -> Any:
+        try:
+            return self._worker.call(op, timeout=timeout, **payload)
+        except JailRemoteError as error:
+            cls = _REMOTE_ERRORS.get(error.error_type)
+            message = error.plain_message
+            if error.output:
+                message += f"\n--- the script's output (last {len(error.output)} characters) ---\n{error.output}"
+            if error.error_type == "UnsafeScenarioError":
+                from scenario_bank.safety import UnsafeScenarioError
+
+                unsafe = UnsafeScenarioError.__new__(UnsafeScenarioError)
+                ValueError.__init__(unsafe, message)
+                unsafe.findings = list(error.details.get("findings") or [])
+                raise unsafe from None
+            if error.error_type in ("FileNotFoundError", "UnknownMapError"):
+                raise FileNotFoundError(message) from None
+            if cls is None:
+                raise ScenarioCompileError(f"{error.error_type} in the jailed simulation: {message}") from None
+            raise _remote(cls, message) from None
+        except JailLimitError as error:
+            if error.limit == "wall" and op == "step":
+                raise StepTimeoutError(f"{error}; the simulation was stopped") from None
+            raise
+
+    # ------------------------------------------------------------------ Gymnasium API
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        """Sample a new scene in the jail and start it; see :meth:`DV2SEnv.reset`."""
+        super().reset(seed=seed)
+        result = self._call("reset", seed=seed, options=dict(options or {}))
+        self._after(result)
+        return _as_space_value(result["obs"], self.observation_space), self._info(result)
+
+    def step(self, action):
+        """Apply ``action`` for one policy period; Gymnasium's 5-tuple."""
+        if self.vehicle is None:
+            raise RuntimeError("call reset() before step()")
+        if isinstance(action, np.ndarray) and action.dtype.kind not in "biuf":
+            raise InvalidActionError(f"action {action!r} is outside the action space {self.action_space}")
+        if isinstance(action, (np.integer,)):
+            action = int(action)
+        result = self._call("step", action=action)
+        self._after(result)
+        return (_as_space_value(result["obs"], self.observation_space), float(result["reward"]),
+                bool(result["terminated"]), bool(result["truncated"]), self._info(result))
+
+    def _after(self, result: Dict[str, Any]) -> None:
+        state = result.get("state") or {}
+        ego = state.get("ego")
+        self.vehicle = None if ego is None else _Ego(np.asarray(ego["position"], dtype=float), float(ego["heading"]),
+                                                     float(ego["speed"]), bool(ego["crashed"]))
+        self.steps = int(state.get("steps", 0))
+        self.time = float(state.get("time", 0.0))
+        self._trace_cache = None
+
+    def _info(self, result: Dict[str, Any]) -> dict:
+        info = result.get("info")
+        if not isinstance(info, dict):
+            info = {}
+        if self._host_map is not None and isinstance(info.get("params"), dict) and "map" in info["params"]:
+            info["params"]["map"] = self._host_map
+        return info
+
+    def render(self):
+        """A frame (``rgb_array``), or the frame drawn in a window (``human``)."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
+            return None
+        frame = self._call("render")
+        frame = None if frame is None else np.asarray(frame, dtype=np.uint8)
+        if self.render_mode == "human" and frame is not None:
+            self._show(frame)
+            return None
+        return frame
+
+    def _show(self, frame: np.ndarray) -> None:
+        import pygame
+
+        if self._window is None:
+            pygame.init()
+            self._window = pygame.display.set_mode((frame.shape[1], frame.shape[0]))
+            pygame.display.set_caption("DV2S-v0")
+        pygame.surfarray.blit_array(self._window, np.transpose(frame, (1, 0, 2)))
+        pygame.display.flip()
+        pygame.event.pump()
+
+    # ------------------------------------------------------------------ traces
+    @property
+    def unwrapped(self) -> "JailedDV2SEnv":
+        return self
+
+    @property
+    def trace(self) -> Optional[EpisodeTrace]:
+        """The current episode's trace, fetched from the jail (cached until the next step)."""
+        if self._trace_cache is not None and self._trace_cache[0] == self.steps:
+            return self._trace_cache[1]
+        data = self._call("trace")
+        if data is None:
+            return None
+        trace = EpisodeTrace.from_dict(data, "the jailed simulation's trace")
+        trace.scenario_path = self._labels.get(trace.scenario, trace.scenario_path)
+        if self._host_map is not None and "map" in trace.params:
+            trace.params["map"] = self._host_map
+        self._trace_cache = (self.steps, trace)
+        return trace
+
+    def save_trace(self, path: Union[str, os.PathLike]) -> Path:
+        """Write the current episode's trace to ``path`` (JSON, ``.gz`` compresses)."""
+        trace = self.trace
+        if trace is None:
+            raise RuntimeError("no episode to save; call reset() first")
+        return trace.save(path)
+
+    # ------------------------------------------------------------------ privileged drivers
+    def driver_new(self, driver_class: type, args: Sequence[Any], kwargs: Dict[str, Any]) -> int:
+        """Bind a :class:`~policies.state_driver.StateDriver` class to the simulation in the jail; its handle."""
+        path = f"{driver_class.__module__}:{driver_class.__qualname__}"
+        return int(self._call("driver_new", class_path=path, args=list(args), kwargs=dict(kwargs)))
+
+    def driver_act(self, handle: int) -> int:
+        """The action of the driver ``handle`` for the current state."""
+        return int(self._call("driver_act", handle=handle))
+
+    # ------------------------------------------------------------------ cleanup
+    @property
+    def worker_pid(self) -> Optional[int]:
+        """The process id of the jail (bubblewrap) on this machine."""
+        return self._worker.pid
+
+    def close(self) -> None:
+        """Stop the jailed simulation and close the window."""
+        worker = getattr(self, "_worker", None)
+        if worker is not None:
+            worker.close()
+        if getattr(self, "_window", None) is not None:
+            import pygame
+
+            pygame.display.quit()
+            self._window = None
+
+    def __del__(self) -> None:
+        try:
+            worker = getattr(self, "_worker", None)
+            if worker is not None:
+                worker.kill()
+        except Exception:
+            pass
+
+
+def _remote(cls: type, message: str) -> BaseException:
+    try:
+        return cls(message)
+    except TypeError:  # an error class with a richer constructor
+        error = DV2SError(message)
+        return error
+
+
+def digest(text: str) -> str:
+    """The SHA-256 of a script's text (what the shipped manifest lists)."""
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()

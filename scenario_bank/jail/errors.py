@@ -1,0 +1,38 @@
+"""Errors of the jail; each says what happened and what to do."""
+
+from __future__ import annotations
+
+from typing import Optional
+
+__all__ = ["JailError", "JailUnavailableError", "JailLimitError", "JailCrashError", "JailProtocolError"]
+
+
+class JailError(RuntimeError):
+    """Something went wrong with a jailed worker; ``output`` holds the tail of what it printed."""
+
+    def __init__(self, message: str, output: str = "") -> None:
+        if output:
+            message = f"{message}\n--- the script's output (last {len(output)} characters) ---\n{output}"
+        super().__init__(message)
+        self.output = output
+
+
+class JailUnavailableError(JailError):
+    """The jail cannot be created on this machine (no bubblewrap, no user namespaces, no seccomp)."""
+
+
+class JailLimitError(JailError):
+    """A jailed worker hit a limit: ``limit`` is ``"cpu"``, ``"memory"``, ``"wall"``, ``"output"`` or ``"file"``."""
+
+    def __init__(self, message: str, limit: str, stage: Optional[str] = None, output: str = "") -> None:
+        super().__init__(message, output)
+        self.limit = limit
+        self.stage = stage
+
+
+class JailCrashError(JailError):
+    """A jailed worker died without answering (killed by a signal, exited)."""
+
+
+class JailProtocolError(JailError):
+    """A jailed worker sent something that is not a valid message (too large, wrong types)."""
