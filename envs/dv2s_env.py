@@ -252,6 +252,7 @@ class DV2SEnv(AbstractEnv):
         jail_limits: Any = None,
     ) -> None:
         frozen = self.__dict__.pop("_frozen_refs", None)
+        self._trusted = bool(trusted) or frozen is not None
         self._scenario_refs = frozen if frozen is not None else resolve_scenarios(scenario, bank_dir)
         self._bank_dir = bank_dir
         self._compiled: Dict[ScenarioRef, CompiledScenario] = {}
@@ -487,7 +488,8 @@ class DV2SEnv(AbstractEnv):
                 if upgrade.changed:  # compile the upgraded text, not the file (localPath still resolves there)
                     text, path, origin = upgrade.source, None, ref.path
             self._compiled[ref] = compile_scenario(
-                text, name=ref.name, path=path, origin=origin, map_override=self.config["map"]
+                text, name=ref.name, path=path, origin=origin, map_override=self.config["map"],
+                trusted=self._trusted,
             )
         return self._compiled[ref]
 

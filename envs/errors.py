@@ -43,8 +43,13 @@ class ForeignConstructWarning(UserWarning):
 
 
 __all__.append("ForeignConstructWarning")
+__all__.append("UntrustedScenarioError")
 
 
 class StepTimeoutError(DV2SError, RuntimeError):
     """One simulation step used more CPU time than the env's ``step_time_limit`` (a behaviour looping
     without taking an action never lets a time step end)."""
+
+
+class UntrustedScenarioError(DV2SError, PermissionError):
+    """Untrusted Scenic was about to be compiled outside the jail; run it through DV2SEnv or the sandbox."""

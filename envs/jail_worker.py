@@ -131,10 +131,22 @@ class _Worker:
             handle.write(script)
         return check_compiles_and_runs(script, name, path, seeds, run_seconds, max_sample_iterations)
 
+    def parameter_ranges(self, name: str, text: str, files: Optional[dict] = None,
+                         filename: Optional[str] = None) -> dict:
+        from envs.scenarios import compile_scenario
+
+        folder = self._write_files(len(self.map_paths) + 100, files or {})
+        self.map_paths[name] = folder
+        path = os.path.join(folder, filename or "scenario.scenic")
+        with open(path, "w", encoding="utf-8") as handle:
+            handle.write(text)
+        compiled = compile_scenario(text, name=name, path=path)
+        return {k: v.as_dict() for k, v in compiled.parameter_ranges().items()}
+
     def check(self, script: str, absolute_maps: bool = False) -> list:
         from scenario_bank.safety import check_script
 
-        return [f.as_dict() if hasattr(f, "as_dict") else str(f) for f in check_script(script, absolute_maps=absolute_maps)]
+        return [_finding(f) for f in check_script(script, absolute_maps=absolute_maps)]
 
 
 def _jsonable(value: Any, depth: int = 0) -> Any:
@@ -157,6 +169,11 @@ def _jsonable(value: Any, depth: int = 0) -> Any:
     return str(value)[:1000]
 
 
+def _finding(finding: Any) -> dict:
+    return {"line": int(getattr(finding, "line", 0) or 0), "construct": str(getattr(finding, "construct", ""))[:200],
+            "reason": str(getattr(finding, "reason", finding))[:500]}
+
+
 def _error(error: BaseException) -> dict:
     message = str(error).strip() or type(error).__name__
     details: Dict[str, Any] = {"type": type(error).__name__, "message": message[:4000]}
@@ -168,7 +185,7 @@ def _error(error: BaseException) -> dict:
         details["limit"] = "memory"
     findings = getattr(error, "findings", None)
     if findings:
-        details["findings"] = [str(f)[:500] for f in list(findings)[:50]]
+        details["findings"] = [_finding(f) for f in list(findings)[:50]]
     return details
 
 

@@ -207,7 +207,8 @@ class JailedDV2SEnv(gym.Env):
         self._window = None
 
     # ------------------------------------------------------------------ setup
-    def _scenario_payload(self, ref: Any, text: str) -> Dict[str, Any]:
+    @staticmethod
+    def _scenario_payload(ref: Any, text: str) -> Dict[str, Any]:
         files: Dict[str, np.ndarray] = {}
         folder = Path(ref.path).parent if ref.path else None
         for value, local in map_references(text):
@@ -373,6 +374,51 @@ class JailedDV2SEnv(gym.Env):
                 worker.kill()
         except Exception:
             pass
+
+
+def parameter_ranges_of(refs: Sequence[Any]) -> Dict[str, Dict[str, Any]]:
+    """``{scenario: {param: ParamRange}}`` of each scenario's random global parameters.
+
+    The package's own scripts are compiled here; every other script in one jailed
+    worker, which sends back only the ranges (checked: kinds, numbers, constants).
+    """
+    from envs.dv2s_env import _read_script
+    from envs.scenarios import ParamRange, compile_scenario
+    from scenario_bank.shipped import is_shipped_text
+
+    result: Dict[str, Dict[str, Any]] = {}
+    untrusted = []
+    for ref in refs:
+        text = ref.source if ref.source is not None else _read_script(ref.path)
+        if is_shipped_text(text):
+            result[ref.name] = compile_scenario(text, name=ref.name, path=ref.path).parameter_ranges()
+        else:
+            untrusted.append((ref, text))
+    if untrusted:
+        from scenario_bank.jail import require_jail
+
+        require_jail(f"scenario {untrusted[0][0].name!r}")
+        with JailedProcess("envs.jail_worker", name=f"scenario {untrusted[0][0].name!r}") as worker:
+            for ref, text in untrusted:
+                payload = JailedDV2SEnv._scenario_payload(ref, text)
+                data = worker.call("parameter_ranges", **payload)
+                result[ref.name] = {str(k): _param_range(ParamRange, v) for k, v in (data or {}).items()}
+    return {ref.name: result[ref.name] for ref in refs}
+
+
+def _param_range(cls: type, data: Any) -> Any:
+    if not isinstance(data, dict) or data.get("kind") not in ("continuous", "integer", "choice"):
+        raise JailError("the jailed worker sent an invalid parameter range")
+    if data["kind"] == "choice":
+        values = data.get("values")
+        if not isinstance(values, list) or not all(isinstance(v, (str, int, float, bool)) for v in values):
+            raise JailError("the jailed worker sent an invalid parameter range")
+        return cls("choice", values=tuple(values))
+    low, high = data.get("low"), data.get("high")
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in (low, high)):
+        raise JailError("the jailed worker sent an invalid parameter range")
+    return cls(data["kind"], int(low) if data["kind"] == "integer" else float(low),
+               int(high) if data["kind"] == "integer" else float(high))
 
 
 def _remote(cls: type, message: str) -> BaseException:

@@ -21,7 +21,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from envs.errors import ScenarioCompileError, SceneSamplingError, StepTimeoutError, UnsupportedConstructError
+from envs.errors import ScenarioCompileError, UntrustedScenarioError, SceneSamplingError, StepTimeoutError, UnsupportedConstructError
 from scenario_bank.safety import UnsafeScenarioError, check_script
 from scenario_bank.scenic_parse import install_parse_cache
 
@@ -242,6 +242,7 @@ def compile_scenario(
     map_override: Optional[str] = None,
     params: Optional[Dict[str, Any]] = None,
     origin: Optional[str] = None,
+    trusted: bool = False,
 ) -> CompiledScenario:
     """Compile Scenic ``source`` against the highway-env model (cached per process).
 
@@ -249,10 +250,23 @@ def compile_scenario(
     derived from (e.g. upgraded from Scenic 2 syntax); ``localPath`` resolves against it and
     errors name it.
 
+    Only the package's own scripts (by content hash), scripts inside the jail and
+    scripts the caller vouches for (``trusted=True``) are compiled; any other text
+    raises :class:`UntrustedScenarioError`: run it through ``DV2SEnv`` (which
+    jails it) or :func:`scenario_bank.sandbox.verify_script`.
+
     Raises :class:`ScenarioCompileError` with Scenic's message, the file and the
     line, or :class:`UnsupportedConstructError` when the script relies on
     something only another simulator provides.
     """
+    if not (trusted or os.environ.get("DV2S_IN_JAIL") == "1"):
+        from scenario_bank.shipped import is_shipped_text
+
+        if not is_shipped_text(source):
+            raise UntrustedScenarioError(
+                f"{path or origin or name}: refusing to compile a script that does not ship with dv2s-gym in this "
+                "process; untrusted Scenic runs only in the jail (DV2SEnv / gym.make run it there). "
+                "Pass trusted=True only for a script you wrote or reviewed")
     import scenic
     from scenario_bank.maps import resolve_map
 

@@ -1,24 +1,18 @@
-"""The sandbox for untrusted Scenic: a safety check, then compile, sample and run in a limited child.
+"""The bank's check of untrusted Scenic: bounded checks here, then everything else in the jail.
 
-Defence in depth behind :mod:`scenario_bank.safety`: a script that passed the
-allowlist is compiled, sampled and run for a few simulated seconds in a child
-process (``python -m envs.sandbox_runner``, started by module name, so this
-bottom layer imports nothing else of dv2s-gym) that has
+The user's process only checks what is linear and bounded (type, size, encoding:
+:func:`bounded_precheck`); the allowlist (:mod:`scenario_bank.safety`), Scenic's
+parser and compiler, sampling and a few simulated seconds of the episode run in
+a fresh jailed worker (:mod:`scenario_bank.jail`: bubblewrap namespaces, seccomp,
+CPU, memory, file-size and wall-clock limits, an empty environment, no network,
+no view of the user's files). A scene that never satisfies its requirements ends
+as "no scene sampled in N iterations".
 
-* a CPU-time limit (``RLIMIT_CPU``) and an address-space limit (``RLIMIT_AS``),
-  set before the interpreter starts, and a file-size limit;
-* a wall-clock timeout, after which its whole process group is killed;
-* a minimal environment: ``PATH``, a temporary ``HOME``/``TMPDIR`` and working
-  directory, ``PYTHONPATH`` = the code root this module was loaded from, one
-  BLAS/OpenMP thread, SDL offscreen; no API keys or other variables;
-* a sampling budget: a scene that never satisfies its requirements ends as
-  "no scene sampled in N iterations".
-
-Every way it can fail is a :class:`SandboxError` that names the stage and the
-limit ("exceeded the 30 s CPU-time limit while running"). Successful checks are
-cached by script hash, dv2s-gym code version and limits under the user cache
-directory, so the same script is not re-run.
-"""
+Every way it can fail is an :class:`~scenario_bank.safety.UnsafeScenarioError`
+(the allowlist refused it) or a :class:`SandboxError` that names the stage and
+the limit ("exceeded the 30 s CPU-time limit while running"). Successful checks
+are cached by script hash, dv2s-gym code version and limits under the user cache
+directory, so the same script is not re-run."""
 
 from __future__ import annotations
 
@@ -32,12 +26,15 @@ import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Dict, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence
 
 from scenario_bank.atomic import atomic_write_text
-from scenario_bank.safety import UnsafeScenarioError, check_script
+from scenario_bank.jail import JailedProcess, JailError, JailLimitError, JailLimits
+from scenario_bank.jail.process import JailRemoteError
+from scenario_bank.safety import SafetyFinding, UnsafeScenarioError
 
-__all__ = ["SandboxLimits", "SandboxResult", "SandboxError", "run_in_sandbox", "verify_script", "cache_dir"]
+__all__ = ["SandboxLimits", "SandboxResult", "SandboxError", "run_in_sandbox", "verify_script", "check_in_jail",
+           "bounded_precheck", "cache_dir"]
 
 CODE_ROOT = Path(__file__).resolve().parents[1]
 """The folder holding ``scenario_bank`` and ``envs``: the child imports this code, not an installed copy."""
@@ -113,52 +110,6 @@ class SandboxError(ValueError):
         return self.result.limit
 
 
-def _minimal_env(home: str) -> Dict[str, str]:
-    return {
-        "PATH": os.environ.get("PATH", "/usr/bin:/bin"),
-        "HOME": home,
-        "TMPDIR": home,
-        "PYTHONPATH": str(CODE_ROOT),
-        "PYTHONDONTWRITEBYTECODE": "1",
-        "PYTHONHASHSEED": "0",
-        "OMP_NUM_THREADS": "1",
-        "OPENBLAS_NUM_THREADS": "1",
-        "MKL_NUM_THREADS": "1",
-        "SDL_VIDEODRIVER": "offscreen",
-        "SDL_AUDIODRIVER": "dummy",
-        "PYGAME_HIDE_SUPPORT_PROMPT": "1",
-        "MPLBACKEND": "Agg",
-        "LANG": "C.UTF-8",
-    }
-
-
-def _limit_child(limits: SandboxLimits):
-    def apply() -> None:  # runs in the child between fork and exec
-        import resource
-
-        cpu = max(1, int(limits.cpu_seconds))
-        resource.setrlimit(resource.RLIMIT_CPU, (cpu, cpu + 2))  # SIGXCPU at the soft limit, SIGKILL 2 s later
-        resource.setrlimit(resource.RLIMIT_AS, (limits.memory_bytes, limits.memory_bytes))
-        resource.setrlimit(resource.RLIMIT_FSIZE, (limits.file_bytes, limits.file_bytes))
-        resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
-
-    return apply
-
-
-def _children_cpu() -> float:
-    import resource
-
-    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return usage.ru_utime + usage.ru_stime
-
-
-def _kill_group(proc: subprocess.Popen) -> None:
-    try:
-        os.killpg(proc.pid, signal.SIGKILL)
-    except (ProcessLookupError, PermissionError):
-        pass
-
-
 def run_in_sandbox(
     script: str,
     *,
@@ -167,76 +118,122 @@ def run_in_sandbox(
     seeds: Sequence[int] = (0, 1),
     run_seconds: float = 3.0,
     max_sample_iterations: int = 2000,
+    files: Optional[Dict[str, bytes]] = None,
 ) -> SandboxResult:
-    """Compile, sample (each seed) and run ``script`` for ``run_seconds`` in a limited child process.
+    """Check, compile, sample (each seed) and run ``script`` for ``run_seconds`` in a fresh jailed worker.
 
-    Does not run the safety check (:func:`verify_script` does, first); never
-    raises for a failure of the script: the result says what happened.
+    ``files`` are the files beside the script it may need (``localPath`` maps), by
+    relative name. Never raises for a failure of the script: the result says what
+    happened. Raises :class:`~scenario_bank.jail.JailUnavailableError` when the
+    jail cannot be created here.
     """
+    import numpy as np
+
     limits = limits or SandboxLimits.from_env()
-    request = {"script": script, "name": name, "seeds": list(seeds), "run_seconds": run_seconds,
-               "max_sample_iterations": max_sample_iterations}
+    jail_limits = JailLimits.from_env(cpu_seconds=limits.cpu_seconds, memory_bytes=limits.memory_bytes,
+                                      file_bytes=limits.file_bytes, request_seconds=limits.wall_seconds,
+                                      start_seconds=max(limits.wall_seconds, 120.0))
     start = time.perf_counter()
     cpu_before = _children_cpu()
-    with tempfile.TemporaryDirectory(prefix="dv2s-sandbox-") as tmp:
-        request_path, result_path = os.path.join(tmp, "request.json"), os.path.join(tmp, "result.json")
-        with open(request_path, "w", encoding="utf-8") as handle:
-            json.dump(request, handle)
-        work = os.path.join(tmp, "work")
-        os.mkdir(work)
-        proc = subprocess.Popen(
-            [sys.executable, "-s", "-m", RUNNER, request_path, result_path],
-            cwd=work, env=_minimal_env(work), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE, preexec_fn=_limit_child(limits), start_new_session=True, close_fds=True,
-        )
-        timed_out = False
-        try:
-            _, stderr = proc.communicate(timeout=limits.wall_seconds)
-        except subprocess.TimeoutExpired:
-            timed_out = True
-            _kill_group(proc)
-            _, stderr = proc.communicate()
-        finally:
-            _kill_group(proc)  # nothing the script started outlives the check
-        wall = time.perf_counter() - start
-        try:
-            with open(result_path, encoding="utf-8") as handle:
-                data = json.load(handle)
-        except (OSError, ValueError):
-            data = {}
-    if isinstance(data.get("timings"), dict):
-        data["timings"]["cpu"] = _children_cpu() - cpu_before
-    return _interpret(data, proc.returncode, timed_out, stderr.decode("utf-8", "replace"), limits, wall)
-
-
-def _interpret(data: Dict[str, Any], returncode: int, timed_out: bool, stderr: str, limits: SandboxLimits,
-               wall: float) -> SandboxResult:
-    stage = data.get("stage", "import")
-    where = {"import": "while starting", "compile": "while compiling", "sample": "while sampling a scene",
-             "run": "while running the episode"}.get(stage, f"at stage {stage}")
-    timings = data.get("timings") or {}
-    if timed_out:
-        return SandboxResult(False, stage, f"exceeded the {limits.wall_seconds:g} s wall-clock limit {where}",
-                             "wall", None, wall, timings)
-    if returncode in (-signal.SIGXCPU, -signal.SIGKILL) and data.get("ok") is None:
-        return SandboxResult(False, stage, f"exceeded the {limits.cpu_seconds} s CPU-time limit {where}",
-                             "cpu", None, wall, timings)
-    memory_words = ("MemoryError", "Cannot allocate memory", "Unable to allocate", "std::bad_alloc")
-    if data.get("limit") == "memory" or (data.get("ok") is None and any(w in stderr for w in memory_words)):
-        return SandboxResult(False, stage, f"exceeded the {limits.describe_memory()} memory limit {where}",
-                             "memory", "MemoryError", wall, timings)
+    payload = {name_: np.frombuffer(data, dtype=np.uint8) for name_, data in (files or {}).items()}
+    stage = "import"
+    try:
+        with JailedProcess("envs.jail_worker", limits=jail_limits, name=name) as worker:
+            stage = "compile"
+            data = worker.call("verify", script=script, name=name, seeds=[int(s) for s in seeds],
+                               run_seconds=float(run_seconds), max_sample_iterations=int(max_sample_iterations),
+                               files=payload)
+    except JailLimitError as error:
+        where = _WHERE.get(error.stage or stage, "while checking")
+        what = {"wall": f"exceeded the {limits.wall_seconds:g} s wall-clock limit",
+                "cpu": f"exceeded the {limits.cpu_seconds} s CPU-time limit",
+                "memory": f"exceeded the {limits.describe_memory()} memory limit",
+                "file": f"wrote a file over the {limits.file_bytes}-byte limit"}.get(error.limit, f"hit the {error.limit} limit")
+        return SandboxResult(False, stage, _with_output(f"{what} {where}", error.output), error.limit,
+                             "MemoryError" if error.limit == "memory" else None, time.perf_counter() - start)
+    except JailRemoteError as error:
+        failed = str(error.details.get("stage") or stage)
+        if error.error_type == "UnsafeScenarioError":
+            findings = _findings(error.details.get("findings"))
+            raise UnsafeScenarioError(findings or [SafetyFinding(0, "script", error.plain_message)], name) from None
+        limit = error.details.get("limit")
+        if error.error_type == "RecursionError" or "RecursionError" in error.plain_message:
+            message, limit = f"exceeded Python's recursion limit {_WHERE.get(failed, '')}: {error.plain_message}", "recursion"
+        else:
+            message = f"{error.error_type} {_WHERE.get(failed, '')}: {error.plain_message}"
+        return SandboxResult(False, failed, _with_output(message, error.output), limit, error.error_type,
+                             time.perf_counter() - start)
+    except JailError as error:
+        return SandboxResult(False, stage, f"the sandboxed check died {_WHERE.get(stage, '')}: {error}", None, None,
+                             time.perf_counter() - start)
+    wall = time.perf_counter() - start
+    if not isinstance(data, dict):
+        return SandboxResult(False, stage, "the sandboxed check answered nothing", None, None, wall)
+    timings = data.get("timings") if isinstance(data.get("timings"), dict) else {}
+    timings = {str(k): float(v) for k, v in timings.items() if isinstance(v, (int, float))}
+    timings["cpu"] = _children_cpu() - cpu_before
     if data.get("ok") is True:
         return SandboxResult(True, "done", "", None, None, wall, timings)
-    if data.get("ok") is False:
-        message = data.get("message", "")
-        if data.get("limit") == "recursion":
-            message = f"exceeded Python's recursion limit {where}: {message}"
-        elif data.get("limit") != "iterations":
-            message = f"{data.get('error_type', 'Error')} {where}: {message}"
-        return SandboxResult(False, stage, message, data.get("limit"), data.get("error_type"), wall, timings)
-    tail = " ".join(stderr.strip().splitlines()[-3:])[-400:]
-    return SandboxResult(False, stage, f"the sandboxed check died {where} (exit status {returncode}): {tail}",
-                         None, None, wall, timings)
+    return SandboxResult(False, str(data.get("stage", "sample")), str(data.get("message", ""))[:4000],
+                         data.get("limit") if isinstance(data.get("limit"), str) else None,
+                         str(data.get("error_type", "")) or None, wall, timings)
+
+
+def _findings(data: Any) -> List[SafetyFinding]:
+    findings = []
+    for item in data if isinstance(data, list) else []:
+        if isinstance(item, dict):
+            findings.append(SafetyFinding(int(item.get("line") or 0) if isinstance(item.get("line"), int) else 0,
+                                          str(item.get("construct", ""))[:200], str(item.get("reason", ""))[:500]))
+    return findings
+
+
+MAX_SCRIPT_BYTES = 256 * 1024
+
+
+def bounded_precheck(script: Any, name: str = "<script>") -> None:
+    """The checks the user's process runs on untrusted text before the jail sees it: type, size, NUL bytes.
+
+    Linear and bounded; everything that parses the text runs in the jail.
+    """
+    if not isinstance(script, str):
+        raise TypeError(f"{name}: a Scenic script is text (str), not {type(script).__name__}")
+    try:
+        from scenario_bank.precheck import precheck_text
+    except ImportError:
+        precheck_text = None
+    if precheck_text is not None:
+        precheck_text(script, name)
+        return
+    if len(script) > MAX_SCRIPT_BYTES:
+        raise UnsafeScenarioError([SafetyFinding(0, "size", f"{len(script)} characters is over the "
+                                                 f"{MAX_SCRIPT_BYTES}-character limit of a scenario script")], name)
+    if "\x00" in script:
+        raise UnsafeScenarioError([SafetyFinding(0, "encoding", "the text holds NUL characters")], name)
+
+
+def check_in_jail(script: str, *, name: str = "<script>", absolute_maps: bool = False) -> List[SafetyFinding]:
+    """The allowlist's findings for ``script``, computed in a fresh jailed worker (empty list: it passed)."""
+    bounded_precheck(script, name)
+    with JailedProcess("envs.jail_worker", name=name) as worker:
+        return _findings(worker.call("check", script=script, absolute_maps=absolute_maps))
+
+
+_WHERE = {"import": "while starting", "start": "while starting", "compile": "while compiling",
+          "sample": "while sampling a scene", "run": "while running the episode", "verify": "while compiling"}
+
+
+def _with_output(message: str, output: str) -> str:
+    if not output:
+        return message
+    return f"{message}; the script printed (last {len(output)} characters): {output[-2000:]}"
+
+
+def _children_cpu() -> float:
+    import resource
+
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 # ---------------------------------------------------------------- verification with a cache
@@ -292,9 +289,7 @@ def verify_script(
     or :class:`SandboxError` (it failed or hit a limit in the child). Passes are
     cached (``use_cache``); set ``DV2S_SANDBOX_CACHE=0`` to disable the cache.
     """
-    findings = check_script(script)
-    if findings:
-        raise UnsafeScenarioError(findings, name)
+    bounded_precheck(script, name)
     limits = limits or SandboxLimits.from_env()
     request = {"seeds": list(seeds), "run_seconds": run_seconds, "max_sample_iterations": max_sample_iterations}
     use_cache = use_cache and os.environ.get("DV2S_SANDBOX_CACHE", "1") != "0"

@@ -46,7 +46,7 @@ class SceneSpace:
 
     def __init__(self, scenarios: Optional[Sequence[str]] = None, bank_dir: Optional[str] = None) -> None:
         from envs.dv2s_env import resolve_scenarios
-        from envs.scenarios import compile_scenario
+        from envs.jailed_env import parameter_ranges_of
 
         refs = resolve_scenarios(list(scenarios) if scenarios else None, bank_dir)
         if not refs:
@@ -54,10 +54,9 @@ class SceneSpace:
         self.bank_dir = bank_dir
         self.scenarios: List[str] = [ref.name for ref in refs]
         self._ranges: Dict[str, Dict[str, Any]] = {}
-        for ref in refs:
-            compiled = compile_scenario(ref.text(), name=ref.name, path=ref.path)
-            ranges = {k: v for k, v in compiled.parameter_ranges().items() if k not in IGNORED_PARAMS}
-            self._ranges[ref.name] = dict(sorted(ranges.items()))
+        for name, all_ranges in parameter_ranges_of(refs).items():
+            ranges = {k: v for k, v in all_ranges.items() if k not in IGNORED_PARAMS}
+            self._ranges[name] = dict(sorted(ranges.items()))
         self.dimension = max([len(r) for r in self._ranges.values()] + [1])
         self._feature_space = None
 

@@ -55,39 +55,36 @@ def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview
     from dv2s_gym.pipeline.trace_semantics import elements_from_trace
     from envs.dv2s_env import DV2SEnv
     from envs.recording import VideoWriter
-    from envs.scenarios import compile_scenario
-    from scenario_bank.safety import UnsafeScenarioError, check_script
+    from scenario_bank.safety import UnsafeScenarioError
     from scenario_bank.sandbox import SandboxError, verify_script
 
     check = ScenarioCheck()
-    findings = check_script(script)
-    check.safety_findings = [str(f) for f in findings]
-    if findings:
-        check.error = UnsafeScenarioError(findings).args[0]
+    try:  # the allowlist, compilation, sampling and a short run, all in the jail (cached by script hash)
+        verify_script(script, name=name)
+    except UnsafeScenarioError as error:
+        check.safety_findings = [str(f) for f in error.findings]
+        check.error = error.args[0]
         check.failure_category = "unsafe_code"
         return check
-    check.safe = True
-    try:  # first in the sandbox (limits, minimal environment; cached when the SG already did it)
-        verify_script(script, name=name)
     except SandboxError as error:
+        check.safe = True
         check.compiled = error.stage in ("sample", "run")
         check.sampled = error.stage == "run"
         check.error = f"sandboxed check: {error.result.message}"
         check.failure_category = ("other" if error.limit in ("cpu", "memory", "wall")
                                   else classify_failure(error.result.message, error.stage))
         return check
+    check.safe = True
     if not in_process:
         check.compiled = check.sampled = check.ran = True
         return check
     try:
-        compiled = compile_scenario(script, name=name)
-        check.compiled = True
-        compiled.sample(seed)
-        check.sampled = True
         env = DV2SEnv(scenario=script, config={"duration": seconds, "ego_policy": "scenic",
                                                "terminate_on_collision": False, "terminate_off_road": False},
                       render_mode="rgb_array" if preview else None)
+        check.compiled = True
         obs, info = env.reset(seed=seed)
+        check.sampled = True
         writer = VideoWriter(preview, fps=env.config["policy_frequency"]) if preview else None
         if writer:
             writer.write(env.render())

@@ -365,22 +365,19 @@ def validate_script(
     process with CPU, memory and wall-clock limits, so a reply that loops or allocates without end
     fails with the limit it hit instead of hanging the generator. Passes are cached by content.
     """
-    from scenario_bank.safety import UnsafeScenarioError, check_script
+    from scenario_bank.safety import UnsafeScenarioError
     from scenario_bank.sandbox import SandboxError, verify_script
 
-    findings = check_script(script)
-    unsafe = [f for f in findings if f.construct != "syntax"]
-    if unsafe:
-        message = "; ".join(str(f) for f in unsafe[:5])
-        return ScriptFailure("safety", "unsafe_code", f"the safety check rejected the script: {message}")
-    if findings:  # Scenic's parser could not read it (nothing ran): the compile error it would be
-        message = "; ".join(f.reason for f in findings[:5])
-        return ScriptFailure("compile", classify_failure(message, "compile"), message)
     try:
         verify_script(script, name=name, seeds=sample_seeds, run_seconds=run_seconds,
                       max_sample_iterations=max_sample_iterations)
     except UnsafeScenarioError as error:
-        return ScriptFailure("safety", "unsafe_code", str(error))
+        syntax = [f for f in error.findings if getattr(f, "construct", "") == "syntax"]
+        if syntax and len(syntax) == len(error.findings):  # the parser could not read it: a compile error
+            message = "; ".join(f.reason for f in syntax[:5])
+            return ScriptFailure("compile", classify_failure(message, "compile"), message)
+        message = "; ".join(str(f) for f in error.findings[:5] if getattr(f, "construct", "") != "syntax")
+        return ScriptFailure("safety", "unsafe_code", f"the safety check rejected the script: {message or error}")
     except SandboxError as error:
         stage = error.stage if error.stage in ("compile", "sample", "run") else "compile"
         message = error.result.message
