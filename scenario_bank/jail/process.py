@@ -22,7 +22,7 @@ from scenario_bank.jail.errors import (
 )
 from scenario_bank.jail.limits import JailLimits
 
-__all__ = ["JailedProcess", "JailRemoteError", "jail_status", "require_jail", "FIX"]
+__all__ = ["JailedProcess", "JailRemoteError", "jail_status", "require_jail", "discard_spares", "FIX"]
 
 FIX = (
     "install bubblewrap (Debian/Ubuntu: `sudo apt-get install bubblewrap`; scripts/setup.sh does it when it "
@@ -140,13 +140,37 @@ class JailedProcess:
         require_jail(name)
         self.limits = limits or JailLimits.from_env()
         self.name = name
+        self.module = module
         self._proc: Optional[subprocess.Popen] = None
         self._closed = False
+        spare = _take_spare(module, self.limits, tuple(args))
+        if spare is not None:
+            self.__dict__.update({k: v for k, v in spare.__dict__.items() if k not in ("name",)})
+            spare._proc = None  # this object owns the worker now
+        else:
+            self._spawn(args)
+        try:
+            self.hello = self._receive(self.limits.start_seconds, stage="start")
+        except BaseException:
+            self.kill()
+            raise
+        if _spares_wanted():
+            _keep_spare(module, self.limits, tuple(args))
+
+    @classmethod
+    def _unstarted(cls, module: str, limits: JailLimits, args: Sequence[str]) -> "JailedProcess":
+        worker = cls.__new__(cls)
+        worker.limits, worker.name, worker.module = limits, "jailed worker", module
+        worker._proc, worker._closed = None, False
+        worker._spawn(args)
+        return worker
+
+    def _spawn(self, args: Sequence[str]) -> None:
         to_child_r, to_child_w = os.pipe()
         from_child_r, from_child_w = os.pipe()
         out_r, out_w = os.pipe()
         filter_fd = seccomp.filter_fd()
-        argv = [sys.executable, "-s", "-m", module, str(to_child_r), str(from_child_w), *args]
+        argv = [sys.executable, "-s", "-m", self.module, str(to_child_r), str(from_child_w), *args]
         command = bwrap.command(argv, scratch_bytes=self.limits.scratch_bytes, seccomp_fd=filter_fd,
                                 environment=bwrap.worker_environment())
         try:
@@ -158,7 +182,7 @@ class JailedProcess:
         except OSError as error:
             for fd in (to_child_r, to_child_w, from_child_r, from_child_w, out_r, out_w, filter_fd):
                 os.close(fd)
-            raise JailUnavailableError(f"could not start the jail for {name}: {error}. To fix: {FIX}.") from None
+            raise JailUnavailableError(f"could not start the jail for {self.name}: {error}. To fix: {FIX}.") from None
         for fd in (to_child_r, from_child_w, out_w, filter_fd):
             os.close(fd)
         self._to_child = os.fdopen(to_child_w, "wb", buffering=0)
@@ -166,8 +190,6 @@ class JailedProcess:
         self._output = _OutputTail(out_r, self.limits.output_bytes)
         self._started = time.monotonic()
         self.requests = 0
-        ready = self._receive(self.limits.start_seconds, stage="start")
-        self.hello = ready
 
     def _apply_limits(self) -> None:  # between fork and exec of bwrap: inherited by the worker
         import resource
@@ -350,6 +372,42 @@ class JailedProcess:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+# One started, not yet used worker per module and limits: the next jailed env skips the ~4 s of
+# importing Scenic and highway-env. Started from the caller's thread (bubblewrap's --die-with-parent
+# follows the thread that started it), only after a first jailed worker was asked for, never shared:
+# each worker serves one owner and is never reused for another script.
+_SPARES: Dict[Tuple[str, JailLimits, Tuple[str, ...]], JailedProcess] = {}
+
+
+def _spares_wanted() -> bool:
+    return os.environ.get("DV2S_JAIL_SPARE", "1") != "0" and threading.current_thread() is threading.main_thread()
+
+
+def _take_spare(module: str, limits: JailLimits, args: Tuple[str, ...]) -> Optional[JailedProcess]:
+    spare = _SPARES.pop((module, limits, args), None)
+    if spare is not None and (spare._proc is None or spare._proc.poll() is not None):
+        spare.kill()
+        return None
+    return spare
+
+
+def _keep_spare(module: str, limits: JailLimits, args: Tuple[str, ...]) -> None:
+    key = (module, limits, args)
+    if key in _SPARES:
+        return
+    try:
+        _SPARES[key] = JailedProcess._unstarted(module, limits, args)
+    except JailError:
+        pass
+
+
+def discard_spares() -> None:
+    """Kill the started, unused workers (tests call this to count processes)."""
+    while _SPARES:
+        _, spare = _SPARES.popitem()
+        spare.kill()
 
 
 def _doing(stage: str) -> str:
