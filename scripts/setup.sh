@@ -20,6 +20,16 @@ for other in opencv-python-headless opencv-contrib-python opencv-contrib-python-
         python -m pip install -q --force-reinstall --no-deps opencv-python
     fi
 done
+# The jail for untrusted Scenic: bubblewrap (unprivileged user namespaces) and libseccomp.
+if ! command -v bwrap >/dev/null 2>&1; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        apt-get install -y -q --no-install-recommends bubblewrap libseccomp2 \
+            || { apt-get update -q && apt-get install -y -q --no-install-recommends bubblewrap libseccomp2; }
+    else
+        echo "bubblewrap is missing: untrusted scenarios will be refused until it is installed." >&2
+        echo "  Debian/Ubuntu: sudo apt-get install bubblewrap   Fedora: sudo dnf install bubblewrap" >&2
+    fi
+fi
 # Headless Chromium from the system packages: the HTML regression report's browser test runs in it.
 if ! command -v chromium >/dev/null 2>&1 && ! command -v chromium-browser >/dev/null 2>&1; then
     if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
@@ -29,3 +39,4 @@ if ! command -v chromium >/dev/null 2>&1 && ! command -v chromium-browser >/dev/
     fi
 fi
 python -c "import cv2, scenic, highway_env, stable_baselines3, torch; print('dv2s-gym environment ready: cv2', cv2.__version__, 'torch', torch.__version__)"
+python -c "from scenario_bank.jail import jail_status; ok, why = jail_status(); print('jail for untrusted Scenic:', 'ready' if ok else 'NOT available: ' + why)"
