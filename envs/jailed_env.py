@@ -233,6 +233,9 @@ class JailedDV2SEnv(gym.Env):
         except JailRemoteError as error:
             cls = _REMOTE_ERRORS.get(error.error_type)
             message = error.plain_message
+            for index, ref in enumerate(self._refs if isinstance(self, JailedDV2SEnv) else []):
+                message = message.replace(f"/tmp/scenarios/{index}/", "").replace(
+                    Path(ref.path).name if ref.path else "scenario.scenic", ref.path or ref.name, 1)
             if error.output:
                 message += f"\n--- the script's output (last {len(error.output)} characters) ---\n{error.output}"
             if error.error_type == "UnsafeScenarioError":
