@@ -246,9 +246,10 @@ def compile_scenario(
 ) -> CompiledScenario:
     """Compile Scenic ``source`` against the highway-env model (cached per process).
 
-    ``path``: compile that file (``source`` is its text). ``origin``: the file ``source`` was
-    derived from (e.g. upgraded from Scenic 2 syntax); ``localPath`` resolves against it and
-    errors name it.
+    ``path``: the file ``source`` was read from; ``localPath`` resolves against its folder and
+    errors name it, but the file is never read again: the text compiled is exactly the text
+    checked (a file swapped after the check is not what runs). ``origin``: the file ``source``
+    was derived from (e.g. upgraded from Scenic 2 syntax), used the same way.
 
     Only the package's own scripts (by content hash), scripts inside the jail and
     scripts the caller vouches for (``trusted=True``) are compiled; any other text
@@ -292,12 +293,9 @@ def compile_scenario(
     install_parse_cache()
     model = model_for(source)
     try:
-        if path is not None:
-            scenario = scenic.scenarioFromFile(path, params=overrides, model=model, mode2D=True)
-        else:
-            scenario = scenic.scenarioFromString(
-                source, params=overrides, model=model, mode2D=True, filename=origin or name
-            )
+        # Scenic's localPath resolves against the folder of the compiled code's file name
+        filename = os.path.realpath(path) if path is not None else origin or name
+        scenario = scenic.scenarioFromString(source, params=overrides, model=model, mode2D=True, filename=filename)
     except Exception as error:  # Scenic raises many kinds; all become one clear error
         raise _compile_error(error, source, label) from None
     compiled = CompiledScenario(
@@ -467,8 +465,24 @@ def _mentions_other_simulator(source: str) -> Optional[str]:
 
 
 def read_scenario_file(path: str | os.PathLike) -> str:
-    """Read a ``.scenic`` file, with a clear error when it is missing."""
+    """Read a ``.scenic`` file, with a clear error when it is missing.
+
+    Only a regular file is read, and no more than the precheck's size cap (one byte more, to
+    tell a too-large file): a FIFO, a device or a huge file cannot hang or fill the process.
+    The bytes then pass :func:`~scenario_bank.precheck.precheck_text` (strict UTF-8, no coding
+    declaration but UTF-8, bounded lines and nesting).
+    """
+    import stat
+
+    from scenario_bank.precheck import MAX_SCRIPT_BYTES, precheck_text
+
     file = Path(path)
     if not file.is_file():
         raise FileNotFoundError(f"scenario file {str(file)!r} does not exist")
-    return file.read_text(encoding="utf-8")
+    # O_NONBLOCK: a FIFO swapped in after is_file() does not block the open
+    fd = os.open(file, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    with os.fdopen(fd, "rb") as stream:
+        if not stat.S_ISREG(os.fstat(stream.fileno()).st_mode):
+            raise FileNotFoundError(f"scenario file {str(file)!r} is not a regular file")
+        data = stream.read(MAX_SCRIPT_BYTES + 1)
+    return precheck_text(data, str(file))

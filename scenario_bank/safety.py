@@ -25,10 +25,23 @@ private state. Frame and code attributes without an underscore (``gi_frame``,
 (``.format``/``.format_map``), and methods that read or write files
 (``fromFile``, ``dumpPickle``, ``show``...) or change the file system (``touch``,
 ``mkdir``, ``unlink``...) are refused too. ``param map`` is a shipped map name or a
-relative ``.xodr`` path, set before the ``model`` line; ``localPath`` (it returns a
-``pathlib.Path``) may only be the whole value of a top-level ``param`` line (the map's, or one
-the model does not open, such as MetaDrive's ``sumo_map``). A bare ``_`` (a throwaway loop
+relative ``.xodr`` path, set before the ``model`` line. A bare ``_`` (a throwaway loop
 variable) is the one name starting with ``_`` that is allowed.
+
+No script reaches the env, the simulator, Gymnasium or highway-env, whose objects lead back to the
+interpreter (``spec.make`` imports and calls any function, ``change_vehicles`` imports a module, ``config``
+holds the env's limits). The rule has two parts. ``simulation`` may only be called, with no arguments,
+and read for one of a few data attributes (:data:`SIMULATION_ATTRIBUTES`: ``simulation().currentTime``);
+binding it or its result to a name, passing it on or reading anything else is refused, so no chain of
+attributes starts from the simulation. And the names of the env's, the simulator's, Gymnasium's and
+highway-env's own attributes (:data:`ENV_ATTRIBUTES`: ``spec``, ``unwrapped``, ``config``...) are refused
+on any object, whatever route led to it. ``param`` is a statement only (``param(...)`` called as a
+function is refused), and ``localPath`` may only be the whole value of ``param map`` or of MetaDrive's
+``param sumo_map`` (:data:`LOCAL_PATH_PARAMS`), with one literal relative path that stays inside the
+script's folder.
+
+Before any parse, :func:`scenario_bank.precheck.precheck_text` bounds the text (size, lines, statement
+length, nesting) and refuses encodings and characters that make the code read differ from the code shown.
 
 Every finding names the line, the construct and the reason. The check is the
 first layer; :mod:`scenario_bank.sandbox` runs what passes it in a child
@@ -40,14 +53,20 @@ from __future__ import annotations
 import ast
 import builtins
 import re
-from dataclasses import dataclass
-from typing import Callable, Iterator, List, Tuple
+from typing import Callable, Iterator, List, Tuple, Union
+
+from scenario_bank.precheck import PrecheckError, SafetyFinding, UnsafeScenarioError, precheck_text
 
 __all__ = [
     "SAFE_BUILTINS",
     "DENIED_NAMES",
     "SCENIC_OPTIONAL_ATTRIBUTES",
     "FILESYSTEM_ATTRIBUTES",
+    "ENV_ATTRIBUTES",
+    "SIMULATION_ATTRIBUTES",
+    "LOCAL_PATH_PARAMS",
+    "PrecheckError",
+    "precheck_text",
     "WORLD_MODELS",
     "SafetyFinding",
     "UnsafeScenarioError",
@@ -94,6 +113,10 @@ DENIED_NAMES = frozenset({
 })
 """Names refused even though Scenic or Python defines them."""
 
+LOCAL_PATH_PARAMS = frozenset({"map", "sumo_map"})
+"""Parameters whose value may be ``localPath('relative/file')``: the map, and MetaDrive's SUMO map (which our
+models never open). Their values may not be read back through ``globalParameters``."""
+
 SCENIC_OPTIONAL_ATTRIBUTES = frozenset({
     "_laneToLeft", "_laneToRight", "_fasterLane", "_slowerLane",  # LaneSection
     "_lane", "_laneSection", "_laneGroup", "_road", "_intersection", "_crossing", "_element",  # DrivingObject
@@ -117,8 +140,48 @@ FILESYSTEM_ATTRIBUTES = frozenset({
     "hardlink_to", "link_to", "symlink", "link", "chmod", "lchmod", "chown", "lchown", "iterdir", "glob", "rglob",
     "readlink", "truncate", "mkfifo", "mknod", "chdir", "chroot", "putenv", "unsetenv", "environ", "kill",
     "killpg", "fork", "listdir", "scandir", "utime", "expanduser", "home", "cwd",
+    # pathlib.Path's other methods that reach the file system or build paths to it
+    "replace", "stat", "lstat", "exists", "is_file", "is_dir", "is_symlink", "is_mount", "is_socket", "is_fifo",
+    "is_block_device", "is_char_device", "resolve", "absolute", "samefile", "owner", "group", "joinpath",
+    "with_name", "with_stem", "with_suffix", "relative_to", "as_uri", "as_posix", "parent", "parents", "walk",
+    "chflags", "lchflags", "access", "remove", "removexattr", "setxattr", "getxattr", "listxattr", "sendfile",
+    "copy", "copyfile", "copytree", "move", "abspath", "realpath",
 })
-"""``pathlib.Path``/``os`` methods that change or list the file system; refused should a path object be reachable."""
+"""Methods of ``pathlib.Path``, ``os`` and ``shutil`` that read, change or list the file system (or build
+the path objects that do), refused on any object: whatever a script holds (a parameter's value, an item of
+``globalParameters``, an object's attribute), these names never reach the file system. ``replace`` is
+also ``str.replace``: scripts use string slicing and ``+`` instead."""
+
+SIMULATION_ATTRIBUTES = frozenset({"currentTime", "currentRealTime", "timestep", "objects", "agents",
+                                   "getLaneFollowingControllers"})
+"""The only attributes of ``simulation()`` a script may read: the clock, the objects and the driving
+domain's controllers. ``simulation`` may appear only as ``simulation().<one of these>``."""
+
+ENV_ATTRIBUTES = frozenset({
+    # Gymnasium: Env, Wrapper, EnvSpec and registration (``spec.make()`` imports and calls any function)
+    "spec", "entry_point", "vector_entry_point", "kwargs", "make", "make_vec", "register", "registry",
+    "unwrapped", "env", "envs", "wrapper_spec", "get_wrapper_attr", "has_wrapper_attr", "set_wrapper_attr",
+    "additional_wrappers", "disable_env_checker", "apply_api_compatibility", "order_enforce", "autoreset",
+    "max_episode_steps", "reward_threshold", "nondeterministic", "np_random", "np_random_seed", "seed",
+    "action_space", "observation_space", "metadata", "render", "render_mode", "reset", "step", "close",
+    "from_json", "to_json", "pprint",
+    # highway-env's AbstractEnv (``change_vehicles`` imports a module by name; ``config`` holds the env's limits)
+    "change_vehicles", "call_vehicle_method", "set_vehicle_field", "configure", "config", "default_config",
+    "define_spaces", "create_ego", "randomize_behavior", "set_preferred_lane", "set_route_at_intersection",
+    "set_record_video_wrapper", "simplify", "to_finite_mdp", "get_available_actions", "update_metadata",
+    "viewer", "action_type", "observation_type", "controlled_vehicles", "vehicle", "vehicles",
+    "enable_auto_render", "step_time_limit",
+    # Scenic's simulator and simulation, and our env's handles on them
+    "simulator", "simulation", "createSimulation", "createObjectInSimulator", "executeActions",
+    "updateObjects", "getProperties", "scheduleForAgents", "setup", "destroy", "currentState",
+    "recordCurrentState", "getReplay", "replay", "initializeReplay", "recordSampledValue",
+    "replaySampledValue", "simulate", "before_physics", "save_trace", "stepper",
+})
+"""Attribute names refused on any object: the names by which the env, the simulator and their Gymnasium
+and highway-env parts are reached or driven. The list is the public attributes of ``gymnasium.Env``,
+``Wrapper`` and ``EnvSpec``, highway-env's ``AbstractEnv``, Scenic's ``Simulator``/``Simulation`` and
+dv2s-gym's env and simulator, minus the names Scenic's driving domain also defines (``road``, ``lanes``,
+``objects``...) and generic ones (``id``, ``name``, ``time``); a test recomputes it."""
 
 _IO_ATTRIBUTE = re.compile(r"file|pickle|dump|load|save|write|read|show|plot|export|replay|serial|stream|"
                            r"open|exec|eval|system|spawn|popen|import|module|global|builtin|frame|code|"
@@ -165,32 +228,6 @@ _TEXT_FIELDS = frozenset({("Constant", "value"), ("Constant", "kind"), ("ImportF
                           ("Require", "name"), ("RequireMonitor", "name"), ("Record", "name"),
                           ("RecordInitial", "name"), ("RecordFinal", "name"), ("TerminateWhen", "name"),
                           ("TerminateSimulationWhen", "name")})
-
-
-@dataclass(frozen=True)
-class SafetyFinding:
-    """One reason a script is unsafe: where, what and why."""
-
-    line: int
-    construct: str
-    reason: str
-
-    def __str__(self) -> str:
-        return f"line {self.line}: {self.construct}: {self.reason}"
-
-
-class UnsafeScenarioError(ValueError):
-    """A script failed the safety check; ``findings`` lists why."""
-
-    def __init__(self, findings: List[SafetyFinding], label: str = "<script>") -> None:
-        self.findings = findings
-        lines = "; ".join(str(f) for f in findings[:5])
-        more = f" (and {len(findings) - 5} more)" if len(findings) > 5 else ""
-        super().__init__(
-            f"{label} failed the safety check: {lines}{more}. Generated Scenic may only use Scenic's driving "
-            "domain and world models, math and a few safe builtins: no imports beyond Scenic models and math, "
-            "no file/process/network access, no exec/eval/getattr, no names or attributes starting with '_'."
-        )
 
 
 def _identifiers(node: ast.AST, flag: Callable[[ast.AST, str, str], None]) -> Iterator[Tuple[str, bool]]:
@@ -254,6 +291,9 @@ def _check_identifier(node: ast.AST, ident: str, is_attribute: bool,
             flag(node, shown, "frame, code-object and attribute-formatting attributes are not allowed")
         elif ident in FILESYSTEM_ATTRIBUTES:
             flag(node, shown, "file-system methods (of paths or os) are not allowed")
+        elif ident in ENV_ATTRIBUTES:
+            flag(node, shown, "this attribute reaches the env, the simulator, Gymnasium or highway-env (whose "
+                              "objects lead back to the interpreter); scripts use Scenic's driving domain only")
         elif _IO_ATTRIBUTE.search(ident):
             flag(node, shown, "methods that read or write files or reach interpreter internals are not allowed")
     elif isinstance(node, (ast.alias, ast.ImportFrom, ast.Import)):
@@ -265,8 +305,11 @@ def _check_identifier(node: ast.AST, ident: str, is_attribute: bool,
                           "code-execution access)")
 
 
-def check_script(source: str, *, absolute_maps: bool = False) -> List[SafetyFinding]:
+def check_script(source: Union[str, bytes], *, absolute_maps: bool = False) -> List[SafetyFinding]:
     """All safety findings of a Scenic script (empty list: safe to compile).
+
+    The text first goes through :func:`~scenario_bank.precheck.precheck_text` (size, encoding, nesting...):
+    a text it refuses is not parsed, and its one finding is returned. ``source`` may be a file's bytes.
 
     ``absolute_maps`` allows ``param map`` to be an absolute ``.xodr`` path (a script the
     user runs from their own disk); scripts kept in a bank must name shipped maps or
@@ -279,6 +322,10 @@ def check_script(source: str, *, absolute_maps: bool = False) -> List[SafetyFind
     # The parse (the costly part) is shared with the compiler and with repeated checks of one text.
     from scenario_bank.scenic_parse import parse_scenic
 
+    try:
+        source = precheck_text(source)
+    except PrecheckError as error:
+        return list(error.findings)
     try:
         tree = parse_scenic(source)
     except SyntaxError as error:
@@ -294,8 +341,11 @@ def check_script(source: str, *, absolute_maps: bool = False) -> List[SafetyFind
             findings.append(finding)
 
     map_calls = _map_local_paths(tree, flag, absolute_maps)
+    parents = {id(child): parent for parent in ast.walk(tree) for child in ast.iter_child_nodes(parent)}
     for node in ast.walk(tree):
         kind = type(node).__name__
+        if kind == "Name" and node.id in _ROOTED_NAMES:
+            _check_rooted_name(node, parents.get(id(node)), parents, flag)
         if kind == "Name" and node.id == "localPath" and id(node) not in map_calls:
             flag(node, "localPath", "localPath returns a file-system path object; it may only be the whole "
                                     "value of a top-level `param` line (`param map = localPath('my_map.xodr')` "
@@ -327,6 +377,33 @@ def check_script(source: str, *, absolute_maps: bool = False) -> List[SafetyFind
     return findings
 
 
+_ROOTED_NAMES = frozenset({"simulation", "param", "globalParameters"})
+
+
+def _check_rooted_name(node: ast.Name, parent, parents: dict, flag) -> None:
+    """``simulation``, ``param`` and ``globalParameters`` are allowed in one shape each (see the module docstring)."""
+    if node.id == "param":
+        flag(node, "param(...)", "`param` is a statement (`param name = value` at top level); calling it as a "
+                                 "function is not allowed")
+    elif node.id == "simulation":
+        call = parent
+        attribute = parents.get(id(call)) if call is not None else None
+        if not (isinstance(call, ast.Call) and call.func is node and not call.args and not call.keywords
+                and isinstance(attribute, ast.Attribute) and attribute.value is call):
+            flag(node, "simulation", "`simulation` may only be used as `simulation().<attribute>` with one of "
+                                     f"{', '.join(sorted(SIMULATION_ATTRIBUTES))}; the simulation object itself "
+                                     "leads to the env and the interpreter")
+        elif attribute.attr not in SIMULATION_ATTRIBUTES or not isinstance(attribute.ctx, ast.Load):
+            flag(attribute, f"simulation().{attribute.attr}",
+                 f"a script may only read {', '.join(sorted(SIMULATION_ATTRIBUTES))} of the simulation")
+    elif not (isinstance(parent, ast.Attribute) and parent.value is node and isinstance(parent.ctx, ast.Load)):
+        flag(node, "globalParameters", "`globalParameters` may only be read as `globalParameters.<name>` "
+                                       "(set parameters with `param` lines)")
+    elif parent.attr in LOCAL_PATH_PARAMS:
+        flag(parent, f"globalParameters.{parent.attr}", "the map parameters may hold file-system paths; a "
+                                                        "script may not read them back")
+
+
 def _pattern_class(node: ast.MatchClass) -> str:
     cls = node.cls
     return cls.id if isinstance(cls, ast.Name) else getattr(cls, "attr", "...")
@@ -347,9 +424,14 @@ def _map_local_paths(tree: ast.AST, flag, absolute_maps: bool = False) -> set:
             if type(node).__name__ != "Param":
                 continue
             for param in getattr(node, "elts", []):
-                if getattr(param, "identifier", None) != "map":
-                    if node is statement and _is_literal_local_path(param.value):
-                        allowed.add(id(param.value.func))  # e.g. MetaDrive's `param sumo_map = localPath(...)`
+                name = getattr(param, "identifier", None)
+                if name != "map":
+                    if name in LOCAL_PATH_PARAMS and node is statement and _is_literal_local_path(param.value):
+                        if _local_path_escapes(param.value.args[0].value):
+                            flag(param.value, f"param {name} = localPath({param.value.args[0].value!r})",
+                                 "localPath must name a file inside the script's folder (a relative path "
+                                 "without '..')")
+                        allowed.add(id(param.value.func))  # MetaDrive's `param sumo_map = localPath(...)`
                     continue
                 if model_seen or node is not statement:
                     flag(param.value, "param map", "the map must be set at top level before the `model` line")
@@ -371,6 +453,13 @@ def _is_literal_local_path(value: ast.AST) -> bool:
             and isinstance(value.args[0].value, str))
 
 
+def _local_path_escapes(path: str) -> bool:
+    """Whether a ``localPath`` argument may leave the script's folder (absolute, ``~``, ``..``, a drive)."""
+    parts = path.replace("\\", "/").split("/")
+    return (not path or path.startswith(("/", "~")) or ":" in path or ".." in parts
+            or any(not part.isprintable() for part in parts))
+
+
 def _check_map_value(value: ast.AST, flag, absolute_maps: bool = False) -> None:
     if isinstance(value, ast.Constant) and isinstance(value.value, str):
         path = value.value
@@ -384,6 +473,9 @@ def _check_map_value(value: ast.AST, flag, absolute_maps: bool = False) -> None:
         args = value.args
         if len(args) != 1 or value.keywords or not (isinstance(args[0], ast.Constant) and isinstance(args[0].value, str)):
             flag(value, "param map = localPath(...)", "localPath takes one string literal, a relative .xodr path")
+        elif _local_path_escapes(args[0].value):
+            flag(value, f"param map = localPath({args[0].value!r})", "localPath must name a file inside the "
+                                                                     "script's folder (a relative path without '..')")
         else:
             _check_map_value(args[0], flag, absolute_maps)
     else:
