@@ -134,15 +134,16 @@ def _open_error(error: OSError, shown: str) -> Exception:
     return error
 
 
-def read_regular_file(path: PathLike, max_bytes: int) -> bytes:
+def read_regular_file(path: PathLike, max_bytes: int, *, follow_symlinks: bool = False) -> bytes:
     """The bytes of ``path``, a regular file of at most ``max_bytes`` bytes.
 
-    The last part of ``path`` is not followed if it is a symbolic link, a FIFO or a device is refused
-    without blocking, and the type is checked on the opened descriptor. Raises :class:`UnsafeInputError`
-    for those, ``FileNotFoundError`` (an ``OSError``) if it does not exist.
+    The last part of ``path`` is not followed if it is a symbolic link (unless ``follow_symlinks``: a file
+    the user named), a FIFO or a device is refused without blocking, and the type is checked on the opened
+    descriptor. Raises :class:`UnsafeInputError` for those, ``FileNotFoundError`` (an ``OSError``) if it
+    does not exist.
     """
     try:
-        fd = os.open(path, _OPEN_FLAGS)
+        fd = os.open(path, _OPEN_FLAGS & ~os.O_NOFOLLOW if follow_symlinks else _OPEN_FLAGS)
     except OSError as error:
         raise _open_error(error, str(path)) from None
     try:
@@ -393,12 +394,9 @@ def extract_archive(archive: PathLike, dest: PathLike, member_cap: Callable[[str
                 if member.isdir():
                     _make_dirs(dest, name)
                     continue
-                cap = member_cap(name)
-                size = _stream_member(tar, member, dest, name, cap, archive)
+                size = _stream_member(tar, member, dest, name, member_cap(name), limits.max_total_bytes - total,
+                                      archive)
                 total += size
-                if total > limits.max_total_bytes:
-                    raise UnsafeInputError(f"{archive} holds more than {limits.max_total_bytes} bytes of files; "
-                                           "refusing to import it (split it into smaller archives)")
                 sizes[name] = size
     return sizes
 
@@ -417,14 +415,19 @@ def _make_dirs(dest: Path, relative: str) -> Path:
     return current
 
 
-def _stream_member(tar: tarfile.TarFile, member: tarfile.TarInfo, dest: Path, name: str, cap: int,
+def _stream_member(tar: tarfile.TarFile, member: tarfile.TarInfo, dest: Path, name: str, cap: int, budget: int,
                    archive: str) -> int:
-    """Copy one member's data to ``dest/name`` in chunks, refusing it past ``cap`` bytes; returns its size."""
+    """Copy one member's data to ``dest/name`` in chunks, refusing it past ``cap`` bytes or past ``budget``
+    (what is left of the archive's total); returns its size."""
     folder, _, base = name.rpartition("/")
     target = (_make_dirs(dest, folder) if folder else dest) / base
     if member.size > cap:
         raise UnsafeInputError(f"{archive}: member {_shown(name)} is larger than {cap} bytes, the limit for this "
                                "file; refusing to import it")
+    too_much = UnsafeInputError(f"{archive} holds more files than the limit of its total size; refusing to "
+                                "import it (split it into smaller archives)")
+    if member.size > budget:
+        raise too_much
     source = tar.extractfile(member)
     try:
         fd = os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600)
@@ -435,10 +438,12 @@ def _stream_member(tar: tarfile.TarFile, member: tarfile.TarInfo, dest: Path, na
     size = 0
     try:
         while True:
-            chunk = source.read(min(_CHUNK, cap + 1 - size)) if source is not None else b""
+            chunk = source.read(min(_CHUNK, min(cap, budget) + 1 - size)) if source is not None else b""
             if not chunk:
                 break
             size += len(chunk)
+            if size > budget:
+                raise too_much
             if size > cap:
                 raise UnsafeInputError(f"{archive}: member {_shown(name)} is larger than {cap} bytes, the limit for "
                                        "this file; refusing to import it")
