@@ -70,9 +70,21 @@ def validate_entry(bank_root: Optional[str], name: str, samples: int = 3, second
             report.error = "unsafe script"
             return report
         start = time.perf_counter()
+<<<<<<< HEAD
         env = DV2SEnv(scenario=str(entry.script_path), config={"duration": seconds})  # compiles (in the jail)
         report.compile_seconds = round(time.perf_counter() - start, 3)
         for seed in range(samples):
+=======
+        # the text read (and checked) once, never the path again: the file may be swapped in between
+        compiled = compile_scenario(script, name=name, origin=str(entry.script_path))
+        report.compile_seconds = round(time.perf_counter() - start, 3)
+        for seed in range(samples):
+            compiled.sample(seed)
+            report.samples += 1
+            report.sampling_iterations += compiled.last_iterations
+        env = DV2SEnv(scenario=script, config={"duration": seconds})
+        for seed in range(samples):
+>>>>>>> bank-files
             obs, info = env.reset(seed=seed)
             report.samples += 1
             terminated = truncated = False

@@ -251,6 +251,32 @@ def _bank(args: argparse.Namespace):
     return Bank(args.bank)
 
 
+def _read_input_file(path: str, what: str, max_bytes: int) -> bytes:
+    """A file named on the command line: a regular file (a FIFO or device is refused, never waited on) of at
+    most ``max_bytes``."""
+    from scenario_bank.bank import UnsafeBankInputError
+    from scenario_bank.safe_files import UnsafeInputError, read_regular_file
+
+    try:
+        return read_regular_file(path, max_bytes, follow_symlinks=True)
+    except UnsafeInputError as error:
+        raise UnsafeBankInputError(f"the {what} {error}") from None
+
+
+def _json_argument(text: str, what: str):
+    """A JSON value given on the command line (or in a file), size and nesting capped."""
+    from scenario_bank.bank import MAX_JSON_DEPTH, MAX_SIDECAR_BYTES, UnsafeBankInputError
+    from scenario_bank.safe_files import UnsafeInputError, load_json_bounded
+
+    data = text.encode("utf-8", "surrogateescape") if isinstance(text, str) else text
+    if len(data) > MAX_SIDECAR_BYTES:
+        raise UnsafeBankInputError(f"{what} is larger than {MAX_SIDECAR_BYTES} bytes; shorten it")
+    try:
+        return load_json_bounded(data, MAX_JSON_DEPTH, what)
+    except UnsafeInputError as error:
+        raise UnsafeBankInputError(str(error)) from None
+
+
 def _print(args: argparse.Namespace, data, human: str) -> None:
     print(json.dumps(data, indent=2, default=str) if args.json else human)
 
@@ -279,15 +305,18 @@ def _cmd_bank_show(args: argparse.Namespace) -> int:
 
 
 def _cmd_bank_add(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
+    from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES
     from scenario_bank.scenic2 import upgrade_scenic2
 
-    script = Path(args.script).read_text(encoding="utf-8")
+    try:
+        script = _read_input_file(args.script, "script", MAX_SCRIPT_BYTES).decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise ValueError(f"the script {args.script} is not UTF-8 text ({error.reason}); save it as UTF-8") from None
     upgrade = upgrade_scenic2(script)  # Scenic 2 syntax -> Scenic 3; Scenic 3 scripts come back unchanged
     for line in upgrade.report() if upgrade.changed else []:
         print(line, file=sys.stderr)
-    elements = json.loads(Path(args.elements).read_text()) if args.elements else None
+    elements = (_json_argument(_read_input_file(args.elements, "elements file", MAX_SIDECAR_BYTES),
+                               f"the elements file {args.elements}") if args.elements else None)
     provenance = {"kind": args.kind, "video": args.video, "parent": args.parent}
     # Bank.add upgrades the same way (recording the rewrites in provenance), then its allowlist + sandbox checks
     entry = _bank(args).add(script, args.description, name=args.name, elements=elements, tags=args.tag or [],
@@ -309,8 +338,16 @@ def _cmd_bank_validate(args: argparse.Namespace) -> int:
     if args.story:
         return _cmd_bank_story(args)
     from dv2s_gym.bank_validate import validate_bank
+    from scenario_bank.bank import UnsafeBankInputError
+    from scenario_bank.safe_files import UnsafeInputError, validate_entry_name
 
-    _bank(args)  # a --bank that does not exist is an error, not "0/0 scenarios valid"
+    bank = _bank(args)  # a --bank that does not exist is an error, not "0/0 scenarios valid"
+    for name in args.name or []:
+        if name not in bank.problems:
+            try:
+                validate_entry_name(name, "scenario name")
+            except UnsafeInputError as error:
+                raise UnsafeBankInputError(str(error)) from None
     reports = validate_bank(args.bank, args.name or None, samples=args.samples, seconds=args.seconds,
                             jobs=args.jobs, progress=not args.json)
     lines = []
@@ -364,7 +401,9 @@ def _cmd_bank_story(args: argparse.Namespace) -> int:
 def _cmd_bank_sample(args: argparse.Namespace) -> int:
     bank = _bank(args)
     candidates = [e.name for e in bank.list(tag=args.tag)] if args.tag else None
-    weights = json.loads(args.weights) if args.weights else None
+    weights = _json_argument(args.weights, "--weights") if args.weights else None
+    if weights is not None and not (isinstance(weights, dict) and all(isinstance(v, (int, float)) for v in weights.values())):
+        raise ValueError('--weights must be a JSON object of scenario name -> number, e.g. \'{"a": 2, "b": 1}\'')
     picks = [bank.sample(args.seed + k, weights=weights, candidates=candidates).name for k in range(args.count)]
     _print(args, picks, "\n".join(picks))
     return 0

@@ -71,7 +71,7 @@ def resolve_scenarios(spec: ScenarioSpec, bank_dir: Optional[str] = None) -> Lis
     if isinstance(spec, os.PathLike):
         spec = os.fspath(spec)
     if isinstance(spec, str):
-        if looks_like_source(spec):
+        if len(spec) > 4096 or looks_like_source(spec):  # no file name is that long: text (and a bounded regex)
             return [ScenarioRef(name="<string>", source=spec)]
         if spec.endswith(".scenic") or os.sep in spec:
             path = Path(spec)

@@ -38,13 +38,16 @@ import fcntl
 import hashlib
 import io
 import json
+import lzma
 import os
 import random
 import re
 import shutil
+import stat
 import tarfile
 import tempfile
 import uuid
+import zlib
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,6 +56,9 @@ from typing import Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optio
 from scenario_bank.atomic import atomic_path, atomic_write_json, atomic_write_text
 from scenario_bank.cache import keyed_cache_dir
 from scenario_bank.elements import ElementError, normalize_elements
+from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, extract_archive, is_entry_name,
+                                      load_json_bounded, read_in_folder, read_regular_file, real_folder_in,
+                                      regular_file_in_folder, validate_entry_name, validate_relative_path)
 from scenario_bank.safety import UnsafeScenarioError
 from scenario_bank.sandbox import SandboxError, verify_script
 
@@ -68,6 +74,11 @@ __all__ = [
     "BankDiff",
     "BankError",
     "BankVersionError",
+    "UnsafeBankInputError",
+    "ArchiveLimits",
+    "MAX_SCRIPT_BYTES",
+    "MAX_SIDECAR_BYTES",
+    "MAX_FILE_BYTES",
     "DuplicateScenarioError",
     "NotABankError",
     "ScenarioRejectedError",
@@ -97,6 +108,17 @@ LEGACY_INDEX = "bank.json"  # written into the bank folder by dv2s-gym <= 0.1.0;
 WRITERS_LOCK = ".dv2s-writers.lock"
 """The file writers of a bank lock (``flock``), in the bank folder itself."""
 _NAME = re.compile(r"^[a-z0-9][a-z0-9_\-]{0,99}$")
+"""Names of new entries; an existing folder or an archive entry only needs a safe name (:func:`is_entry_name`)."""
+MAX_SCRIPT_BYTES = ArchiveLimits.max_script_bytes
+"""The largest ``scenario.scenic`` read from a bank folder or archive."""
+MAX_SIDECAR_BYTES = ArchiveLimits.max_sidecar_bytes
+"""The largest ``meta.json`` (or archive header) read from a bank folder or archive."""
+MAX_FILE_BYTES = ArchiveLimits.max_file_bytes
+"""The largest file an entry carries (a failure video, a trace) that is read for an export or a copy."""
+MAX_JSON_DEPTH = 64
+"""Deepest nesting of arrays and objects accepted in a sidecar."""
+_MAX_INDEX_BYTES = 256 << 20
+ARCHIVE_HEADER = "bank-archive.json"
 _PROVENANCE_FIELDS = ("kind", "video", "parent", "seed", "generator", "model", "context_hash", "date")
 MINED_PROVENANCE_FIELDS = ("params", "backends", "policy", "failure", "cluster", "reproduction", "e2e_sc", "run", "trace",
                            "index", "merged")
@@ -119,9 +141,15 @@ PathLike = Union[str, os.PathLike]
 
 
 def _is_entry_file(name: Any) -> bool:
-    """Whether ``name`` is a valid file name inside an entry folder (relative, no ``..``, no hidden parts,
-    not the script or sidecar)."""
-    return isinstance(name, str) and bool(_ENTRY_FILE.match(name)) and name not in (SCRIPT, SIDECAR)
+    """Whether ``name`` is a valid file name inside an entry folder (relative, at most 8 parts each a safe
+    name (:func:`~scenario_bank.safe_files.validate_relative_path`), no hidden parts, not the script or sidecar)."""
+    if not (isinstance(name, str) and bool(_ENTRY_FILE.match(name)) and name not in (SCRIPT, SIDECAR)):
+        return False
+    try:
+        validate_relative_path(name)
+    except UnsafeInputError:
+        return False
+    return True
 
 
 def entry_file_name(name: Any) -> str:
@@ -152,6 +180,32 @@ class BankError(Exception):
 
 class BankVersionError(BankError):
     """The bank (or an entry) was written by a newer dv2s-gym."""
+
+
+class UnsafeBankInputError(BankError, ValueError):
+    """A bank folder, file, name or archive is malformed or hostile (a link, a FIFO, an unsafe name, too
+    large or too deeply nested); the message names it and the fix, and nothing was written."""
+
+
+def _unsafe(error: UnsafeInputError, suffix: str = "") -> UnsafeBankInputError:
+    return UnsafeBankInputError(f"{error}{suffix}")
+
+
+def _read_text(folder: Path, relative: str, max_bytes: int) -> str:
+    """``folder/relative`` as UTF-8 text: a regular file (no part a symbolic link) of at most ``max_bytes``."""
+    data = read_in_folder(folder, relative, max_bytes)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise UnsafeInputError(f"{folder / relative} is not UTF-8 text ({error.reason} at byte {error.start}); "
+                               "rewrite it as UTF-8") from None
+
+
+def _read_json(folder: Path, relative: str, max_bytes: int = MAX_SIDECAR_BYTES, shown: Optional[str] = None) -> Any:
+    """``folder/relative`` parsed as JSON, size and nesting capped (:func:`load_json_bounded`); ``shown`` names
+    it in errors (default: its path)."""
+    return load_json_bounded(read_in_folder(folder, relative, max_bytes), MAX_JSON_DEPTH,
+                             shown or str(folder / relative))
 
 
 class NotABankError(BankError, ValueError):
@@ -316,8 +370,12 @@ class ScenarioEntry:
 
     @property
     def script(self) -> str:
-        """The Scenic source."""
-        return self.script_path.read_text(encoding="utf-8")
+        """The Scenic source: a regular file in the entry folder (never a link), at most
+        :data:`MAX_SCRIPT_BYTES`; :class:`UnsafeBankInputError` otherwise."""
+        try:
+            return _read_text(self.folder.parent, f"{self.folder.name}/{SCRIPT}", MAX_SCRIPT_BYTES)
+        except UnsafeInputError as error:
+            raise _unsafe(error) from None
 
     @property
     def description(self) -> str:
@@ -351,7 +409,8 @@ class ScenarioEntry:
 
     def missing_files(self) -> List[str]:
         """The entry's files (relative names, :func:`entry_files`) that are not in its folder."""
-        return [name for name in entry_files(self.source) if not (self.folder / name).is_file()]
+        return [name for name in entry_files(self.source)
+                if not regular_file_in_folder(self.folder.parent, f"{self.folder.name}/{name}")]
 
     def summary(self) -> Dict[str, Any]:
         """A JSON-ready record for listings."""
@@ -398,8 +457,24 @@ def _validate_sidecar(meta: Any, folder: Path) -> Dict[str, Any]:
     merged = source.get("merged")
     if merged is not None and not (isinstance(merged, list) and all(isinstance(m, dict) for m in merged)):
         raise ValueError("sidecar field 'source.merged' must be a list of objects (merged failures)")
-    script = folder / SCRIPT
-    if not script.is_file():
+    if "name" in meta and not is_entry_name(meta["name"]):
+        raise ValueError(f"sidecar field 'name' {str(meta['name'])[:80]!r} is not a valid entry name; "
+                         "set it to the entry folder's name")
+    for where, record in [("source", source)] + [(f"source.merged[{k}]", m) for k, m in enumerate(merged or [])]:
+        listed = record.get(ENTRY_FILES)
+        if listed is None:
+            continue
+        if not isinstance(listed, list):
+            raise ValueError(f"sidecar field '{where}.{ENTRY_FILES}' must be a list of file names in the entry folder")
+        for file in listed:
+            if not _is_entry_file(file):
+                raise ValueError(f"sidecar field '{where}.{ENTRY_FILES}' names {str(file)[:80]!r}, which is not a "
+                                 "file inside the entry folder: list relative paths of letters, digits, '_', '-', "
+                                 "'.' and '/' only (no '..', not absolute)")
+    if not regular_file_in_folder(folder.parent, f"{folder.name}/{SCRIPT}"):
+        if os.path.lexists(folder / SCRIPT):
+            raise ValueError(f"the script {SCRIPT} is not a regular file (a link, a FIFO or a device?); "
+                             "replace it by the script itself")
         raise ValueError(f"the script {SCRIPT} is missing")
     return meta
 
@@ -432,9 +507,9 @@ class Bank:
 
     def _read_index(self) -> Dict[str, Any]:
         legacy = self.root / LEGACY_INDEX
-        if legacy.is_file():  # the folder's own format version, as written by dv2s-gym <= 0.1.0
+        if os.path.lexists(legacy):  # the folder's own format version, as written by dv2s-gym <= 0.1.0
             try:
-                version = json.loads(legacy.read_text(encoding="utf-8")).get("version", 0)
+                version = _read_json(self.root, LEGACY_INDEX, _MAX_INDEX_BYTES).get("version", 0)
             except (OSError, ValueError, AttributeError):
                 version = 0
             if not isinstance(version, int) or version > BANK_VERSION:
@@ -449,7 +524,7 @@ class Bank:
         if not index_path.is_file():
             return {"version": BANK_VERSION, "entries": {}}
         try:
-            index = json.loads(index_path.read_text(encoding="utf-8"))
+            index = load_json_bounded(read_regular_file(index_path, _MAX_INDEX_BYTES), MAX_JSON_DEPTH, str(index_path))
         except (OSError, ValueError):
             return {"version": BANK_VERSION, "entries": {}}  # rebuilt from sidecars below
         if not isinstance(index, dict) or index.get("version") != BANK_VERSION:
@@ -471,23 +546,41 @@ class Bank:
         if self.root.is_dir():
             with os.scandir(self.root) as it:
                 visible = [d for d in it if not d.name.startswith(".")]
-            folders = sorted(d.name for d in visible if d.is_dir())
             _check_is_bank(self.root, visible)
-            for name in folders:
+            for d in sorted(visible, key=lambda d: d.name):
+                name = d.name
+                if d.is_symlink():
+                    if d.is_dir():
+                        problems[_printable(name)] = (
+                            f"{_printable(name)} is a symbolic link to a folder; bank entries must be real folders "
+                            "inside the bank: replace the link by a copy of the entry")
+                    continue
+                if not d.is_dir(follow_symlinks=False):
+                    continue
+                if not is_entry_name(name):
+                    problems[_printable(name)] = (
+                        f"the folder name {_printable(name)!r} is not a valid entry name (1 to 128 letters, digits, "
+                        "'_', '-' and '.', not starting with '.' or '-', no '..'); rename the folder")
+                    continue
                 folder = self.root / name
                 try:
-                    st = os.stat(folder / SIDECAR)
+                    st = os.lstat(folder / SIDECAR)
                 except FileNotFoundError:
                     problems[name] = f"missing sidecar {name}/{SIDECAR}: re-add the scenario or restore the file"
                     continue
+                except OSError as error:
+                    problems[name] = f"unreadable sidecar {name}/{SIDECAR}: {error.strerror or error}"
+                    continue
                 stamp = [st.st_mtime_ns, st.st_size]
                 hit = cached.get(name)
-                if hit is not None and hit.get("stamp") == stamp and "semantic_key" in hit:
+                if stat.S_ISREG(st.st_mode) and isinstance(hit, dict) and hit.get("stamp") == stamp \
+                        and "semantic_key" in hit:
                     meta, key = hit["meta"], hit["semantic_key"]
                 else:
                     try:
-                        meta = _validate_sidecar(json.loads((folder / SIDECAR).read_text(encoding="utf-8")), folder)
-                        key = semantic_key(meta["elements"], meta["map"], (folder / SCRIPT).read_text(encoding="utf-8"))
+                        meta = _validate_sidecar(_read_json(self.root, f"{name}/{SIDECAR}"), folder)
+                        key = semantic_key(meta["elements"], meta["map"],
+                                           _read_text(self.root, f"{name}/{SCRIPT}", MAX_SCRIPT_BYTES))
                     except (ValueError, BankVersionError, OSError) as error:
                         problems[name] = f"bad sidecar {name}/{SIDECAR}: {error}"
                         continue
@@ -521,11 +614,17 @@ class Bank:
         return sorted(self._entries)
 
     def get(self, name: str) -> ScenarioEntry:
-        """One entry; :class:`UnknownScenarioError` with near matches if absent."""
+        """One entry; :class:`UnknownScenarioError` with near matches if absent, or naming the rule if
+        ``name`` is not a valid entry name."""
         if name in self._entries:
             return self._entries[name]
         if name in self.problems:
             raise UnknownScenarioError(f"scenario {name!r} is unusable: {self.problems[name]}")
+        if not is_entry_name(name):
+            try:
+                validate_entry_name(name, "scenario name")
+            except UnsafeInputError as error:
+                raise UnknownScenarioError(f"{error}. `dv2s bank list` shows the bank's scenarios") from None
         near = difflib.get_close_matches(name, self._entries, n=3, cutoff=0.5)
         hint = f" Did you mean {', '.join(repr(n) for n in near)}?" if near else ""
         raise UnknownScenarioError(
@@ -578,7 +677,8 @@ class Bank:
         """Draw one entry, uniformly or by ``weights`` (a name->weight map or a function of the entry)."""
         names = sorted(candidates) if candidates is not None else self.names()
         if not names:
-            raise BankError(f"the bank at {self.root} holds no scenarios to sample")
+            unusable = "".join(f"; {name} is unusable: {message}" for name, message in sorted(self.problems.items())[:3])
+            raise BankError(f"the bank at {self.root} holds no scenarios to sample{unusable}")
         if not isinstance(rng, random.Random):
             rng = random.Random(rng)
         if weights is None:
@@ -792,6 +892,11 @@ class Bank:
             if files:
                 prefix = f"merged/{len(self._entries[existing].source.get('merged') or []) + 1}/"
                 folder = self._entries[existing].folder
+                for file in files:
+                    if not real_folder_in(self.root, f"{existing}/{prefix}{file}".rsplit("/", 1)[0]):
+                        raise UnsafeBankInputError(
+                            f"cannot merge into {existing!r}: a part of {existing}/{prefix}{file} is a symbolic link "
+                            "or a file; bank entries hold real folders only: remove it and retry")
                 try:
                     for file, origin in files.items():
                         with atomic_path(folder / (prefix + file)) as tmp:
@@ -810,10 +915,12 @@ class Bank:
         entry = self._entries[name]
         path = entry.folder / SIDECAR
         try:
-            meta = json.loads(path.read_text(encoding="utf-8"))
+            meta = _read_json(self.root, f"{name}/{SIDECAR}")
             source = meta.setdefault("source", {})
             source["merged"] = list(source.get("merged") or []) + [record]
             atomic_write_text(path, json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n")
+        except UnsafeInputError as error:
+            raise _unsafe(error, "; the entry was not changed") from None
         except OSError as error:
             raise _write_error(error, entry.folder) from None
         self._load(locked=True)
@@ -888,16 +995,32 @@ class Bank:
             dest.parent.mkdir(parents=True, exist_ok=True)
             staging.mkdir()
             for entry in self:
-                shutil.copytree(entry.script_path.parent, staging / entry.name)
-            if (self.root / LEGACY_INDEX).is_file():
-                shutil.copy2(self.root / LEGACY_INDEX, staging / LEGACY_INDEX)
+                for relative, data in self._entry_bytes(entry):
+                    target = staging / entry.name / relative
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    target.write_bytes(data)
+            if os.path.lexists(self.root / LEGACY_INDEX):
+                (staging / LEGACY_INDEX).write_bytes(read_regular_file(self.root / LEGACY_INDEX, MAX_SIDECAR_BYTES))
             if dest.exists():
                 dest.rmdir()
             os.rename(staging, dest)
+        except UnsafeInputError as error:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise _unsafe(error, f"; nothing was written to {dest}") from None
         except OSError as error:
             shutil.rmtree(staging, ignore_errors=True)
             raise _write_error(error, dest) from None
         return Bank(dest)
+
+    def _entry_bytes(self, entry: ScenarioEntry) -> List[Tuple[str, bytes]]:
+        """``(relative path, bytes)`` of an entry's script, sidecar and the files it lists that exist, each read
+        as a capped regular file with no part a link (:func:`~scenario_bank.safe_files.read_in_folder`)."""
+        out = [(SCRIPT, read_in_folder(self.root, f"{entry.name}/{SCRIPT}", MAX_SCRIPT_BYTES)),
+               (SIDECAR, read_in_folder(self.root, f"{entry.name}/{SIDECAR}", MAX_SIDECAR_BYTES))]
+        for file in entry_files(entry.source):
+            if regular_file_in_folder(self.root, f"{entry.name}/{file}"):
+                out.append((file, read_in_folder(self.root, f"{entry.name}/{file}", MAX_FILE_BYTES)))
+        return out
 
     def remove(self, name: str) -> None:
         """Remove an entry atomically."""
@@ -906,8 +1029,13 @@ class Bank:
             self._load(locked=True)
             if name not in self._entries and name not in self.problems:
                 self.get(name)  # raises with near matches
+            if not is_entry_name(name):
+                raise BankError(f"cannot remove {name!r}: {self.problems.get(name, 'not a valid entry name')}; "
+                                "remove or rename the folder by hand")
             trash = self.root / f".trash-{name}-{uuid.uuid4().hex[:12]}"
             os.rename(self.root / name, trash)
+            if trash.is_symlink():
+                trash.unlink()  # a linked entry: drop the link, never what it points to
             shutil.rmtree(trash, ignore_errors=True)
             self._load(locked=True)
 
@@ -922,57 +1050,70 @@ class Bank:
             with atomic_path(archive) as tmp:
                 with tarfile.open(tmp, "w:gz") as tar:
                     header = json.dumps({"dv2s_bank_archive": BANK_VERSION, "entries": chosen}).encode()
-                    _add_bytes(tar, "bank-archive.json", header)
+                    _add_bytes(tar, ARCHIVE_HEADER, header)
                     for n in chosen:
-                        entry = self._entries[n]
-                        _add_bytes(tar, f"{n}/{SCRIPT}", entry.script_path.read_bytes())
-                        _add_bytes(tar, f"{n}/{SIDECAR}", (entry.folder / SIDECAR).read_bytes())
-                        for file in entry_files(entry.source):
-                            if (entry.folder / file).is_file():
-                                _add_bytes(tar, f"{n}/{file}", (entry.folder / file).read_bytes())
+                        for relative, data in self._entry_bytes(self._entries[n]):
+                            _add_bytes(tar, f"{n}/{relative}", data)
+        except UnsafeInputError as error:
+            raise _unsafe(error, f"; {archive} was not written") from None
         except OSError as error:
             raise _write_error(error, archive.parent) from None
         return archive
 
-    def import_archive(self, archive: PathLike, on_duplicate: str = "skip") -> Dict[str, List[str]]:
+    def import_archive(self, archive: PathLike, on_duplicate: str = "skip",
+                       limits: Optional[ArchiveLimits] = None) -> Dict[str, List[str]]:
         """Import an archive written by :meth:`export`; all or nothing.
 
         Entries identical to existing ones are skipped (``on_duplicate="skip"``)
         or abort the import (``"error"``). Every new entry is verified like
         :meth:`add` (safety check, compile, sample and run in the sandbox); one
         failure (:class:`ScenarioRejectedError`) imports nothing. Returns ``{"added": [...], "skipped": [...]}``.
+
+        The archive may come from anyone: its members are streamed into a private folder with the number of
+        members, each file's size and the total capped while decompressing (``limits``, default
+        :class:`~scenario_bank.safe_files.ArchiveLimits`), and only regular files and folders with safe names
+        are accepted. A link, a device, an unsafe name (in a member, in the header or in a sidecar), a
+        too large or too deeply nested file is one :class:`UnsafeBankInputError`, and nothing is imported.
         """
         if on_duplicate not in ("skip", "error"):
             raise ValueError("on_duplicate must be 'skip' or 'error'")
         self._check_writable("import scenarios")
+        limits = limits or ArchiveLimits()
         staged: List[Tuple[str, Path]] = []
         added: List[str] = []
         skipped: List[str] = []
         with self._lock():
             self._load(locked=True)
-            with tempfile.TemporaryDirectory(dir=self.root, prefix=".import-") as unpack:
-                members = _safe_extract(Path(archive), Path(unpack))
-                header = json.loads(members.get("bank-archive.json", b"{}") or b"{}")
+            unpack = Path(tempfile.mkdtemp(dir=self.root, prefix=".import-"))
+            try:
+                try:
+                    header, entries = _unpack_archive(Path(archive), unpack, limits)
+                except UnsafeInputError as error:
+                    raise _unsafe(error, "; nothing was imported") from None
                 version = header.get("dv2s_bank_archive")
                 if not isinstance(version, int):
-                    raise BankError(f"{archive} is not a dv2s bank archive (no bank-archive.json header)")
+                    raise BankError(f"{archive} is not a dv2s bank archive (no {ARCHIVE_HEADER} header)")
                 if version > BANK_VERSION:
                     raise BankVersionError(f"{archive} was written by a newer dv2s-gym (format {version}); upgrade")
                 journal = self.root / f".journal-{uuid.uuid4().hex[:12]}.json"
                 try:
-                    for n in header.get("entries", []):
-                        folder = Path(unpack) / n
+                    for n in entries:
+                        folder = unpack / n
                         try:
-                            meta = _validate_sidecar(json.loads((folder / SIDECAR).read_text(encoding="utf-8")), folder)
+                            meta = _validate_sidecar(_read_json(unpack, f"{n}/{SIDECAR}", limits.max_sidecar_bytes,
+                                                                shown=f"its {SIDECAR}"), folder)
+                            script = _read_text(unpack, f"{n}/{SCRIPT}", limits.max_script_bytes)
                         except (OSError, ValueError) as error:
-                            raise BankError(f"archive entry {n!r} is broken: {error}; nothing was imported") from None
-                        script = (folder / SCRIPT).read_text(encoding="utf-8")
+                            message = error.strerror if isinstance(error, OSError) and error.strerror else error
+                            raise UnsafeBankInputError(f"archive entry {n!r} is broken: {message}; nothing was "
+                                                       "imported") from None
                         if meta.get("content_hash") != content_hash(script):
                             raise BankError(f"archive entry {n!r}: script does not match its content_hash; nothing was imported")
                         duplicate = self.find_duplicate(script, meta["elements"], meta["map"])
                         if duplicate is None:
                             duplicate = next(((a, "identical to another archive entry") for a, s in staged
-                                              if content_hash((s / SCRIPT).read_text(encoding="utf-8")) == meta["content_hash"]), None)
+                                              if content_hash(_read_text(s, SCRIPT, MAX_SCRIPT_BYTES))
+                                              == meta["content_hash"]), None)
                         if duplicate is not None:
                             if on_duplicate == "error":
                                 raise DuplicateScenarioError(
@@ -989,7 +1130,8 @@ class Bank:
                         while target in [t for t, _ in staged]:
                             target = f"{target}_i"
                         meta["name"] = target
-                        carried = {f: folder / f for f in entry_files(meta.get("source") or {}) if (folder / f).is_file()}
+                        carried = {f: folder / f for f in entry_files(meta.get("source") or {})
+                                   if regular_file_in_folder(unpack, f"{n}/{f}")}
                         staged.append((target, self._stage_entry(target, script, meta, carried)))
                     self._write_json_atomic(journal, {"adding": [t for t, _ in staged]})
                     for target, staging in staged:
@@ -1004,6 +1146,8 @@ class Bank:
                     if journal.exists():
                         journal.unlink()
                     raise
+            finally:
+                shutil.rmtree(unpack, ignore_errors=True)
             self._load(locked=True)
         return {"added": added, "skipped": skipped}
 
@@ -1016,11 +1160,11 @@ class Bank:
             return
         for journal in self.root.glob(".journal-*.json"):
             try:
-                names = json.loads(journal.read_text(encoding="utf-8")).get("adding", [])
-            except (OSError, ValueError):
+                names = _read_json(self.root, journal.name).get("adding", [])
+            except (OSError, ValueError, AttributeError):
                 names = []
-            for n in names:
-                if _NAME.match(n):
+            for n in names if isinstance(names, list) else []:
+                if isinstance(n, str) and _NAME.match(n) and not (self.root / n).is_symlink():
                     shutil.rmtree(self.root / n, ignore_errors=True)
             journal.unlink(missing_ok=True)
         for pattern in (".staging-*", ".trash-*", ".import-*"):
@@ -1053,6 +1197,11 @@ def _has_element(elements: Mapping[str, Any], wanted: str) -> bool:
         or any(a[1] == wanted for a in elements.get("actions", []))
         or any(r[1] == wanted for r in elements.get("relations", []))
     )
+
+
+def _printable(name: str) -> str:
+    """A folder name as it can be shown and used as a key: control and undecodable characters escaped."""
+    return name.encode("unicode_escape", "backslashreplace").decode("ascii")[:200]
 
 
 def _slug(text: str) -> str:
@@ -1110,23 +1259,44 @@ def _add_bytes(tar: tarfile.TarFile, name: str, data: bytes) -> None:
     tar.addfile(info, io.BytesIO(data))
 
 
-def _safe_extract(archive: Path, dest: Path) -> Dict[str, bytes]:
-    """Extract regular files of a tar archive under ``dest`` (no links, no escaping paths)."""
-    if not archive.is_file():
-        raise FileNotFoundError(f"archive {str(archive)!r} does not exist")
-    members: Dict[str, bytes] = {}
+def _member_cap(limits: ArchiveLimits) -> Callable[[str], int]:
+    """The size cap of an archive member, by its role: header, sidecar, script or another file."""
+    def cap(name: str) -> int:
+        if name == ARCHIVE_HEADER or name.endswith("/" + SIDECAR) and name.count("/") == 1:
+            return limits.max_sidecar_bytes
+        if name.endswith("/" + SCRIPT) and name.count("/") == 1:
+            return limits.max_script_bytes
+        return limits.max_file_bytes
+    return cap
+
+
+def _unpack_archive(archive: Path, dest: Path, limits: ArchiveLimits) -> Tuple[Dict[str, Any], List[str]]:
+    """Stream a bank archive's members into ``dest`` (:func:`~scenario_bank.safe_files.extract_archive`); return
+    its header and its entry names, checked: safe names, no repeats, every member belonging to one of them."""
     try:
-        with tarfile.open(archive, "r:*") as tar:
-            for member in tar.getmembers():
-                path = Path(member.name)
-                if not member.isfile() or path.is_absolute() or ".." in path.parts:
-                    raise BankError(f"{archive} holds an unsafe member {member.name!r}; refusing to import it")
-                data = tar.extractfile(member).read()
-                members[member.name] = data
-                (dest / path).parent.mkdir(parents=True, exist_ok=True)
-                (dest / path).write_bytes(data)
-    except (tarfile.TarError, EOFError, OSError) as error:
+        sizes = extract_archive(archive, dest, _member_cap(limits), limits)
+    except FileNotFoundError:
+        raise FileNotFoundError(errno.ENOENT, f"archive {str(archive)!r} does not exist", str(archive)) from None
+    except (tarfile.TarError, EOFError, OSError, zlib.error, lzma.LZMAError) as error:
         if isinstance(error, OSError) and error.errno == errno.ENOSPC:
             raise _write_error(error, dest) from None
         raise BankError(f"{archive} is not a readable bank archive: {error}") from None
-    return members
+    if ARCHIVE_HEADER not in sizes:
+        return {}, []
+    header = load_json_bounded(read_in_folder(dest, ARCHIVE_HEADER, limits.max_sidecar_bytes), MAX_JSON_DEPTH,
+                               f"{archive}: {ARCHIVE_HEADER}")
+    if not isinstance(header, dict):
+        raise UnsafeInputError(f"{archive}: {ARCHIVE_HEADER} is not a JSON object; it is not a bank archive")
+    entries = header.get("entries", [])
+    if not isinstance(entries, list) or len(entries) > limits.max_members:
+        raise UnsafeInputError(f"{archive}: {ARCHIVE_HEADER} 'entries' must be a list of at most "
+                               f"{limits.max_members} entry names")
+    for n in entries:
+        validate_entry_name(n, f"entry name in {archive}'s {ARCHIVE_HEADER}")
+    if len(set(entries)) != len(entries):
+        raise UnsafeInputError(f"{archive}: {ARCHIVE_HEADER} lists an entry twice; it is not a bank archive")
+    stray = sorted(m for m in sizes if m != ARCHIVE_HEADER and m.split("/", 1)[0] not in entries)
+    if stray:
+        raise UnsafeInputError(f"{archive} holds {stray[0]!r}, which belongs to no entry its {ARCHIVE_HEADER} "
+                               "lists; it is not a bank archive written by `dv2s bank export`")
+    return header, entries
