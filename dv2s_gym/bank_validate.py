@@ -47,7 +47,7 @@ def _outcome(info: Dict[str, Any], terminated: bool, truncated: bool) -> str:
 
 def validate_entry(bank_root: Optional[str], name: str, samples: int = 3, seconds: float = 3.0) -> EntryReport:
     """Safety check, sidecar check, compile, sample ``samples`` scenes, run each ``seconds`` in DV2S-v0."""
-    from envs.dv2s_env import DV2SEnv
+    from envs.dv2s_env import DV2SEnv, ScenarioRef
     from scenario_bank.bank import Bank, content_hash
     from scenario_bank.sandbox import check_in_jail
     from scenario_bank.shipped import is_shipped_text
@@ -70,21 +70,11 @@ def validate_entry(bank_root: Optional[str], name: str, samples: int = 3, second
             report.error = "unsafe script"
             return report
         start = time.perf_counter()
-<<<<<<< HEAD
-        env = DV2SEnv(scenario=str(entry.script_path), config={"duration": seconds})  # compiles (in the jail)
-        report.compile_seconds = round(time.perf_counter() - start, 3)
-        for seed in range(samples):
-=======
         # the text read (and checked) once, never the path again: the file may be swapped in between
-        compiled = compile_scenario(script, name=name, origin=str(entry.script_path))
+        ref = ScenarioRef(name=name, path=str(entry.script_path), source=script)
+        env = DV2SEnv(scenario=[ref], config={"duration": seconds})  # compiles (in the jail when untrusted)
         report.compile_seconds = round(time.perf_counter() - start, 3)
         for seed in range(samples):
-            compiled.sample(seed)
-            report.samples += 1
-            report.sampling_iterations += compiled.last_iterations
-        env = DV2SEnv(scenario=script, config={"duration": seconds})
-        for seed in range(samples):
->>>>>>> bank-files
             obs, info = env.reset(seed=seed)
             report.samples += 1
             terminated = truncated = False
