@@ -3,6 +3,8 @@ the tests' caches (bank indexes, parsed maps) in a throwaway directory instead o
 user's cache directory. Subprocesses inherit both."""
 
 import os
+
+import pytest
 import sys
 import tempfile
 from pathlib import Path
@@ -14,3 +16,24 @@ os.environ.setdefault("DV2S_CACHE_DIR", tempfile.mkdtemp(prefix="dv2s-test-cache
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
+
+
+@pytest.fixture
+def in_process_simulator(monkeypatch):
+    """Run the test's own Scenic scripts in this process: for tests of the simulator's internals.
+
+    Product code runs every script the package does not ship in the jail (tests/test_jail.py
+    checks that a jailed episode equals the in-process one); these tests read the road,
+    vehicles and compiled scenarios directly, which only exist in the process that simulates.
+    """
+    import envs.dv2s_env as dv2s_env
+    import envs.scenarios as scenarios
+
+    monkeypatch.setattr(dv2s_env, "_all_shipped", lambda texts, config: True)
+    original = scenarios.compile_scenario
+
+    def compile_trusted(*args, **kwargs):
+        kwargs.setdefault("trusted", True)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(scenarios, "compile_scenario", compile_trusted)

@@ -36,6 +36,8 @@ from scenario_bank import BANK_DIR, list_scenarios  # noqa: E402
 from scenario_bank.elements import PARTICIPANTS, normalize_elements  # noqa: E402
 from scenario_bank.maps import list_maps, resolve_map  # noqa: E402
 
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
 pytest.importorskip("scenic")
 
 NAMES = list_scenarios()

@@ -21,6 +21,8 @@ from bench.bench_carla_corpus import CORPUS, corpus_scripts, failure_construct, 
 from envs.errors import DV2SError, SceneSamplingError, UnsupportedConstructError
 from scenario_bank.safety import SafetyFinding, UnsafeScenarioError
 
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
 SCRIPTS = corpus_scripts()
 STEPS = 10
 

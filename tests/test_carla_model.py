@@ -21,6 +21,8 @@ import dv2s_gym  # noqa: F401  (registers DV2S-v0)
 from envs.errors import ForeignConstructWarning, UnsupportedConstructError
 from envs.scenarios import FOREIGN_MODELS, MODEL, model_for
 
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
 DATA = Path(__file__).parent / "data" / "carla_model"
 TOWN01 = Path(__file__).parent / "data" / "maps" / "CARLA" / "Town01.xodr"
 IDLE = 1

@@ -12,6 +12,8 @@ import pytest
 
 import dv2s_gym  # noqa: F401  (registers DV2S-v0)
 
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
 CORPUS = Path(__file__).parent / "data" / "carla_corpus" / "scenic3"
 SCRIPTS = [
     "Carla_Challenge__carlaChallenge3_static.scenic",  # Trash prop in the lane

@@ -342,6 +342,8 @@ import hashlib, json
 import numpy as np
 from envs.dv2s_env import DV2SEnv
 
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
 def episode_digest(scenario, config, seed, actions):
     env = DV2SEnv(scenario=scenario, config=config)
     h = hashlib.sha256()

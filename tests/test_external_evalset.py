@@ -15,6 +15,8 @@ from dv2s_gym.pipeline.make_external_evalset import EXTERNAL_EVALSET_DIR, SCRIPT
     render_script
 from scenario_bank.elements import normalize_elements
 
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
 # measured on 2026-11-23 (bev DRA, rules SG) over the 66 clips (the 51 first ones and the 15 of stock
 # classes, scales, roundabout and stock traffic): per use case (SCS, HR) and E2E-SC
 DRA_MEASURED = {

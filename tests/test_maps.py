@@ -33,6 +33,8 @@ from scenario_bank.maps import build_maps  # noqa: E402
 scenic = pytest.importorskip("scenic")
 from scenic.domains.driving.roads import ManeuverType, Network  # noqa: E402
 
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
 ALL_MAPS = [
     "highway_straight",
     "highway_onramp",

@@ -26,6 +26,7 @@ from envs.road_network import (
     PolylineLane,
     hw_lane_index_at,
     load_road_network,
+
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,6 +38,9 @@ DT = 1.0 / 15.0
 # A hand-written OpenDRIVE road: 100 m line + 100 m arc, two lanes each way,
 # and a third forward lane that only exists in the second lane section (it
 # starts half-way along the lane group, like an acceleration lane).
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
+
 def _synthetic_xodr() -> str:
     def lane(i: int, pred: int | None = None, succ: int | None = None) -> str:
         link = ""

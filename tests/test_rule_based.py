@@ -13,7 +13,11 @@ from policies.evaluation import make_eval_env, run_episode
 from policies.registry import load_policy
 from policies.rule_based import (
     FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER, CautiousDriver, ConflictZone, _planned_path, conflict_zone, gap_accepted, road_left, travel_time,
+
 )
+
+
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
 
 
 def _left_turn_road():

@@ -17,6 +17,8 @@ import pytest
 
 from scenario_bank.scenic2 import upgrade_scenic2
 
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
 ROOT = Path(__file__).resolve().parents[1]
 HERE = ROOT / "tests" / "data" / "scenic2" / "meaning"
 CASES = json.loads((HERE / "cases.json").read_text())

@@ -10,6 +10,8 @@ import pytest
 
 from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
 
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS = sorted((ROOT / "tests" / "data" / "scenic2").glob("*.scenic"))
 TOWN01 = str(ROOT / "tests" / "data" / "maps" / "CARLA" / "Town01.xodr")

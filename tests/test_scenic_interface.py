@@ -42,6 +42,7 @@ from scenic_sim_helpers import (  # noqa: E402
     run_scenario,
     scenic_heading,
     wrap,
+
 )
 
 # --------------------------------------------------------------------------- the highway program
@@ -55,6 +56,9 @@ param map = 'highway_straight'
 model scenic.domains.driving.model
 
 L0, L1, L2, L3 = network.lanes[0], network.lanes[1], network.lanes[2], network.lanes[3]
+
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
 
 def spot(lane, x, right=0):
     pt = new OrientedPoint at lane.centerline.pointAlongBy(x), facing roadDirection

@@ -225,6 +225,8 @@ def test_pedestrian_appears_in_the_kinematics_observation(pedestrian_hit):
 VERIFAI_PROGRAM = """
 param verifaiSamplerType = 'halton'
 from scenic.core.external_params import VerifaiRange, VerifaiDiscreteRange
+
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
 param gap = VerifaiRange(10, 40)
 param leadLane = VerifaiDiscreteRange(0, 3)
 param map = 'highway_straight'

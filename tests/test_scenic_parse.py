@@ -8,6 +8,8 @@ from scenic.core.errors import ScenicParseError
 
 from scenario_bank.scenic_parse import install_parse_cache, parse_scenic
 
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
 SOURCE = "param speed = Range(5, 10)\nx = 3\n"
 
 

@@ -9,6 +9,8 @@ from dv2s_gym.pipeline.sg_rules import SGResult, generate_rules
 from scenario_bank.elements import element_set, normalize_elements
 from scenario_bank.safety import check_script
 
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenario_bank" / "scenarios"
 
