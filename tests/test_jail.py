@@ -236,3 +236,9 @@ def test_jailed_env_passes_gymnasiums_checker_and_renders():
     frame = env.render()
     assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.std() > 0
     env.close()
+
+
+def test_the_shipped_manifest_lists_exactly_the_shipped_scripts():
+    from scenario_bank.shipped import MANIFEST, manifest_text
+
+    assert MANIFEST.read_text(encoding="ascii") == manifest_text(), "run python -m scenario_bank.shipped"
