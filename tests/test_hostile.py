@@ -37,7 +37,7 @@ def _header(text: str, key: str) -> str:
 
 def corpus(caught_by=None):
     files = sorted(HOSTILE.glob("*.scenic"))
-    return [p for p in files if caught_by is None or _header(p.read_text(), "caught-by") == caught_by]
+    return [p for p in files if caught_by is None or _header(p.read_bytes().decode("utf-8", "replace"), "caught-by") == caught_by]
 
 
 def hostile_text(path: Path, marker: Path) -> str:
@@ -47,10 +47,10 @@ def hostile_text(path: Path, marker: Path) -> str:
 def test_corpus_covers_every_class_with_at_least_40_scripts():
     files = corpus()
     assert len(files) >= 40
-    classes = [_header(p.read_text(), "class") for p in files]
+    classes = [_header(p.read_bytes().decode("utf-8", "replace"), "class") for p in files]
     assert set(classes) == CLASSES
-    assert all(_header(p.read_text(), "caught-by") in ("safety", "sandbox") for p in files)
-    assert all(_header(p.read_text(), "limit") in LIMIT_WORDS for p in corpus("sandbox"))
+    assert all(_header(p.read_bytes().decode("utf-8", "replace"), "caught-by") in ("safety", "sandbox") for p in files)
+    assert all(_header(p.read_bytes().decode("utf-8", "replace"), "limit") in LIMIT_WORDS for p in corpus("sandbox"))
 
 
 @pytest.mark.parametrize("path", corpus("safety"), ids=lambda p: p.stem)
@@ -80,20 +80,20 @@ def test_sandbox_limits_hold_with_the_safety_check_bypassed(path, tmp_path):
     assert LIMIT_WORDS[limit] in result.message
 
 
-@pytest.mark.parametrize("path", [p for p in corpus("sandbox") if _header(p.read_text(), "limit") in ("memory", "iterations")],
+@pytest.mark.parametrize("path", [p for p in corpus("sandbox") if _header(p.read_bytes().decode("utf-8", "replace"), "limit") in ("memory", "iterations")],
                          ids=lambda p: p.stem)
 def test_bank_add_refuses_what_the_sandbox_stops_and_stays_unchanged(path, tmp_path, monkeypatch):
     # CPU-limit cases are covered above; these are the quick ones through the whole Bank.add path.
     # The iterations case spends ~5.5 s of CPU on 2000 rejected samples, so it keeps the default
     # CPU limit: a tight one would make the CPU limit, not the iteration cap, stop it on a busy machine.
-    if _header(path.read_text(), "limit") == "memory":
+    if _header(path.read_bytes().decode("utf-8", "replace"), "limit") == "memory":
         monkeypatch.setenv("DV2S_SANDBOX_CPU", "6")
     monkeypatch.setenv("DV2S_SANDBOX_MEMORY_MB", "1536")
     monkeypatch.setenv("DV2S_SANDBOX_WALL", "40")
     bank = Bank(tmp_path / "bank")
     with pytest.raises(ScenarioRejectedError, match="sandboxed check") as caught:
         bank.add(path.read_text(encoding="utf-8"), "a hostile script", name="hostile")
-    assert caught.value.limit == _header(path.read_text(), "limit")
+    assert caught.value.limit == _header(path.read_bytes().decode("utf-8", "replace"), "limit")
     assert len(Bank(bank.root)) == 0 and not (bank.root / "hostile").exists()
 
 
