@@ -77,6 +77,7 @@ def validate_entry(bank_root: Optional[str], name: str, samples: int = 3, second
         for seed in range(samples):
             obs, info = env.reset(seed=seed)
             report.samples += 1
+            report.sampling_iterations += int(info.get("sample_iterations") or 0)
             terminated = truncated = False
             steps = 0
             while not (terminated or truncated):

@@ -368,6 +368,7 @@ class DV2SEnv(AbstractEnv):
         # highway-env fills the reset info with an (unseeded) sample of the action
         # space; no action was taken, and a random value would break reproducibility.
         info["action"] = None
+        info["sample_iterations"] = int(getattr(self._running_compiled, "last_iterations", 0) or 0)
         return obs, info
 
     def _reset(self) -> None:
