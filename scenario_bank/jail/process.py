@@ -55,7 +55,7 @@ def _probe() -> Tuple[bool, str]:
     try:
         argv = bwrap.command([sys.executable, "-s", "-c", "pass"], scratch_bytes=2**20, seccomp_fd=fd,
                              environment=bwrap.worker_environment())
-        done = subprocess.run(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+        done = subprocess.run(argv, env={"PATH": "/usr/bin:/bin"}, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                               pass_fds=(fd,), timeout=60, start_new_session=True)
     except (OSError, subprocess.TimeoutExpired) as error:
         return False, f"bubblewrap could not start ({error})"
@@ -177,7 +177,7 @@ class JailedProcess:
             self._proc = subprocess.Popen(
                 command, stdin=subprocess.DEVNULL, stdout=out_w, stderr=out_w,
                 pass_fds=(to_child_r, from_child_w, filter_fd), start_new_session=True,
-                preexec_fn=self._apply_limits,
+                preexec_fn=self._apply_limits, env={"PATH": "/usr/bin:/bin"},  # bwrap is PID 1 inside: /proc/1/environ
             )
         except OSError as error:
             for fd in (to_child_r, to_child_w, from_child_r, from_child_w, out_r, out_w, filter_fd):

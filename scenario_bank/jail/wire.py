@@ -104,7 +104,10 @@ def _array(spec: Dict[str, Any], buffers: List[bytes], used: set) -> np.ndarray:
     if count * kind.itemsize != len(data):
         raise JailProtocolError("array shape and buffer size disagree")
     used.add(index)
-    return np.frombuffer(data, dtype=kind).reshape(shape).copy()
+    try:
+        return np.frombuffer(data, dtype=kind).reshape(shape).copy()
+    except (ValueError, OverflowError) as error:
+        raise JailProtocolError(f"array cannot be built: {error}") from None
 
 
 def decode(header: bytes, buffers: List[bytes]) -> Any:
