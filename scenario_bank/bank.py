@@ -25,6 +25,11 @@ block. The index is rebuilt from the sidecars whenever it is stale, and a
 missing, corrupt or hand-edited sidecar is reported for that entry while the
 rest of the bank stays usable.
 
+Bank folders and archives may come from anyone: every file of a bank is read through
+:mod:`scenario_bank.safe_files` (regular files only, never through a link, size-capped, JSON depth-capped),
+every name read from a folder, an archive or a sidecar is checked against one safe pattern, and an
+archive is streamed into a private folder under caps before anything of it is used.
+
 This module imports nothing else of dv2s-gym.
 """
 

@@ -292,3 +292,21 @@ def test_an_oversized_archive_stops_at_the_cap_while_streaming(world, tmp_path):
     with pytest.raises(BankError, match="larger than 1000 bytes"):
         Bank(bank_dir).import_archive(tmp_path / "a.tar", limits=ArchiveLimits(max_file_bytes=1000))
     assert Bank(bank_dir).names() == [GOOD]
+
+
+def test_a_merge_never_writes_through_a_linked_folder(world, tmp_path, monkeypatch):
+    """An entry whose ``merged`` folder links outside the bank: the merged failure's files are refused."""
+    import scenario_bank.bank as bank_module
+
+    bank_dir, _, outside = world
+    monkeypatch.setattr(bank_module, "_verify_or_name_scenic2", lambda *args: None)  # no sandbox run needed here
+    os.symlink(outside, bank_dir / GOOD / "merged")
+    video = tmp_path / "failure.webm"
+    video.write_bytes(b"video")
+    before = snapshot(tmp_path)
+    bank = Bank(bank_dir)
+    entry = bank.get(GOOD)
+    with pytest.raises(BankError, match="symbolic link"):
+        bank.add_or_merge(entry.script, "the same failure", elements=entry.elements, map=entry.map,
+                          provenance={"kind": "mined"}, files={"failure.webm": video})
+    assert snapshot(tmp_path) == before and list(outside.iterdir()) == [outside / "secret.txt"]

@@ -105,11 +105,19 @@ def _pax_header_bomb(path: Path) -> None:
     write(path, [header("x"), ("x/meta.json", sidecar()), (info, SCRIPT)], fmt=tarfile.PAX_FORMAT)
 
 
+def _chained_pax_headers(path: Path) -> None:
+    # 2000 extended headers in a row: tarfile reads each by recursion (a RecursionError without a cap)
+    record = b"13 comment=x\n"
+    chain = [(_info("././@PaxHeader", kind=tarfile.XHDTYPE), record) for _ in range(2000)]
+    write(path, [header("x")] + chain + entry())
+
+
 ARCHIVES: Dict[str, Tuple[str, Callable[[Path], None]]] = {
     "gzip_bomb.tar.gz": ("larger than", _gzip_bomb),
     "total_size_bomb.tar.gz": ("limit of its total size", _file_bomb),
     "many_members.tar.gz": ("more than 10000 members", _many_members),
     "pax_header_bomb.tar.gz": ("extended tar header", _pax_header_bomb),
+    "chained_pax_headers.tar.gz": ("chains more than 8 extended tar headers", _chained_pax_headers),
     "absolute_member.tar.gz": ("invalid member name", lambda p: write(p, [header("x")] + entry() + [
         (f"{ESCAPE}/pwned", b"escaped")])),
     "dotdot_member.tar.gz": ("invalid member name", lambda p: write(p, [header("x")] + entry() + [
