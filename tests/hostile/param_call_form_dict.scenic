@@ -1,6 +1,7 @@
 # class: param-path
 # caught-by: safety
 # param called as a function bypasses the map-path rules
+param map = 'highway_straight'
 param({'map': localPath('/etc/shadow.xodr')})
 model scenic.domains.driving.model
 

@@ -1,6 +1,7 @@
 # class: param-path
 # caught-by: safety
 # the map's localPath as an absolute path
+param map = 'highway_straight'
 param map = localPath('/etc/ssl/private/road.xodr')
 model scenic.domains.driving.model
 

@@ -1,6 +1,7 @@
 # class: param-path
 # caught-by: safety
 # the map's localPath leaving the script's folder with ..
+param map = 'highway_straight'
 param map = localPath('../../../../etc/passwd.xodr')
 model scenic.domains.driving.model
 
