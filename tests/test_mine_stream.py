@@ -14,7 +14,8 @@ from dv2s_gym.mining.samplers import make_sampler
 from dv2s_gym.mining.space import SceneSpace
 from mining_helpers import mine_killed_after
 from dv2s_gym.mining.window import WindowSchedule
-from dv2s_gym.regress.backends import LocalBackend, _ScenarioQueue
+from dv2s_gym.regress.tasks import KIND
+from dv2s_gym.workers.pool import LocalBackend, _ScenarioQueue
 
 BRAKES = "highway_lead_vehicle_brakes"
 LEFT_TURN = "urban_left_turn_oncoming"
@@ -57,7 +58,7 @@ def test_the_window_draws_scene_j_once_outcome_j_minus_w_is_fed_whatever_the_arr
 
 def test_the_local_pool_runs_tasks_added_while_it_runs_with_retries(tmp_path):
     log = tmp_path / "attempts.log"
-    base = {"policy": f"regress_helpers:FaultyPolicy?crash_seed=13&log={log}", "role": "candidate",
+    base = {"kind": KIND, "policy": f"regress_helpers:FaultyPolicy?crash_seed=13&log={log}", "role": "candidate",
             "scenario": BRAKES, "env_config": {"duration": 2}, "bank_dir": None, "trace_dir": None}
     results, calls = [], []
 
@@ -177,10 +178,10 @@ class _ChunkOnly(LocalBackend):
 
 def test_a_backend_that_does_not_stream_runs_the_window_call_by_call_to_the_same_records(streamed, tmp_path,
                                                                                            monkeypatch):
-    from dv2s_gym.regress import backends
+    from dv2s_gym.workers import pool
 
     out, whole = streamed
-    monkeypatch.setattr(backends, "get_backend", lambda name, workers=None, address=None, timeout=None:
+    monkeypatch.setattr(pool, "get_backend", lambda name, workers=None, address=None, timeout=None:
                         _ChunkOnly(workers, timeout=timeout))
     run = mine(POLICY, out=tmp_path / "chunked", workers=2, **RUN)
     assert _stable(run.records) == _stable(whole.records)

@@ -32,7 +32,7 @@ def midpoint(scenario: str) -> dict:
 
 def make_record(scenario: str, seed: int, params: dict, policy: str = "keep_lane", index: int = 0) -> dict:
     """The miner's episode record of one scene (its worker runs the episode and the failure monitors)."""
-    from dv2s_gym.mining.worker import run_mine_task
+    from dv2s_gym.mining.tasks import run_mine_task
 
     record = run_mine_task({"kind": "mine", "role": "mine", "index": index, "policy": policy, "reference": None,
                             "scenario": scenario, "seed": seed, "params": params, "env_config": {},

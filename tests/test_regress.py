@@ -8,16 +8,17 @@ import xml.etree.ElementTree as ET
 import pytest
 
 from dv2s_gym.regress import (
-    LocalBackend,
     RegressError,
     ReportMismatchError,
     ResumeMismatchError,
-    get_backend,
     load_report,
     run_regression,
 )
 from dv2s_gym.regress.report import SCHEMA, SCHEMA_VERSION
 from dv2s_gym.regress.replay import replay_episode
+from dv2s_gym.regress.tasks import KIND
+from dv2s_gym.workers.errors import WorkerError
+from dv2s_gym.workers.pool import LocalBackend, get_backend
 
 NOISY = "rule?action_noise=0.5"
 PAIR = ["highway_obstacle_in_lane", "urban_lead_vehicle_stopped"]
@@ -196,7 +197,7 @@ def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp
 
     backend = LocalBackend(workers=1, timeout=60)
     results = []
-    task = {"policy": "regress_helpers:FaultyPolicy?raise_seed=4", "role": "candidate",
+    task = {"kind": KIND, "policy": "regress_helpers:FaultyPolicy?raise_seed=4", "role": "candidate",
             "scenario": "highway_lead_vehicle_brakes", "seed": 4, "env_config": {"duration": 2}, "bank_dir": None,
             "trace_dir": None}
     with backend:
@@ -285,14 +286,16 @@ def test_empty_scenario_selection_and_bad_settings_are_refused(tmp_path):
     assert not (tmp_path / "results.jsonl").exists()
 
 
-def test_ray_backend_missing_is_a_clear_error(monkeypatch):
+def test_ray_backend_missing_is_a_clear_error(monkeypatch, tmp_path):
     import sys
 
-    monkeypatch.setitem(sys.modules, "dv2s_gym.regress.ray_backend", None)
-    with pytest.raises(RegressError, match="--backend ray needs dv2s_gym.regress.ray_backend"):
+    monkeypatch.setitem(sys.modules, "dv2s_gym.workers.ray_pool", None)
+    with pytest.raises(WorkerError, match="--backend ray needs dv2s_gym.workers.ray_pool"):
         get_backend("ray", workers=2)
-    with pytest.raises(RegressError, match="unknown backend 'slurm'"):
+    with pytest.raises(WorkerError, match="unknown backend 'slurm'"):
         get_backend("slurm")
+    with pytest.raises(RegressError, match="unknown backend 'slurm'"):  # run_regression reports it as its own
+        run_regression("rule", backend="slurm", episodes=1, progress=False, out_dir=tmp_path)
 
 
 def test_noisy_policies_act_alike_on_the_same_episode_whatever_ran_before():

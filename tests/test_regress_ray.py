@@ -21,8 +21,9 @@ import pytest
 
 import ray  # the ray extra (scripts/setup.sh installs it): pip install -e '.[ray]'
 
-from dv2s_gym.regress.errors import RegressError
-from dv2s_gym.regress.ray_backend import RayBackend, RayUnavailableError
+from dv2s_gym.regress.tasks import KIND
+from dv2s_gym.workers.errors import WorkerError
+from dv2s_gym.workers.ray_pool import RayBackend, RayUnavailableError
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ["highway_cut_in_from_left", "urban_pedestrian_crossing"]
@@ -83,7 +84,7 @@ def ray_address():
 
 
 def _task(policy: str, scenario: str, seed: int, trace_dir=None, role: str = "candidate") -> dict:
-    return {"policy": policy, "role": role, "scenario": scenario, "seed": seed, "env_config": {"duration": 8},
+    return {"kind": KIND, "policy": policy, "role": role, "scenario": scenario, "seed": seed, "env_config": {"duration": 8},
             "bank_dir": None, "trace_dir": None if trace_dir is None else str(trace_dir)}
 
 
@@ -95,7 +96,7 @@ def test_an_address_where_nothing_listens_fails_at_once_with_the_fix():
     message = str(error.value)
     assert f"127.0.0.1:{port}" in message and "ray start --head" in message
     assert "\n" not in message
-    assert isinstance(error.value, RegressError)
+    assert isinstance(error.value, WorkerError)
     assert time.monotonic() - started < 60  # not Ray's own minutes of retrying
     with pytest.raises(RayUnavailableError, match="is not HOST:PORT"):
         RayBackend(address="no-port-here")

@@ -8,7 +8,7 @@ under the threshold, stall) report a failure, the same test the miner used to fi
 
 Results stream into a JSON-lines store (``one line per (role, scenario, seed)``, appended
 and fsynced), so an interrupted evaluation rerun with the same store runs only what is
-missing. Several workers run on the regression pool (:class:`dv2s_gym.regress.backends.LocalBackend`:
+missing. Several workers run on the local process pool (:class:`dv2s_gym.workers.pool.LocalBackend`:
 each worker keeps its env and loaded policies between episodes; a worker that crashes or
 hangs past ``timeout`` is replaced and its episode run once more, then recorded as an error).
 """
@@ -23,7 +23,7 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 __all__ = ["HeldOutStore", "heldout_task", "evaluate_heldout", "paired_summary", "episode_failed"]
 
-from dv2s_gym.mining.worker import heldout_task
+from dv2s_gym.mining.tasks import HELDOUT, heldout_task
 
 Episode = Tuple[str, int]
 
@@ -68,10 +68,10 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
     """Run ``policy`` as ``role`` on every episode not yet in ``store``; returns the records in episode order.
 
     ``timeout``: seconds one episode may take on a worker before it counts as hung (with
-    ``workers`` > 1; default that of :class:`~dv2s_gym.regress.backends.LocalBackend`).
+    ``workers`` > 1; default that of :class:`~dv2s_gym.workers.pool.LocalBackend`).
     """
-    tasks = [{"kind": "heldout", "role": role, "policy": policy, "scenario": scenario, "seed": int(seed), "bank_dir": bank_dir,
-              "env_config": dict(env_config or {}), "ttc_threshold": ttc_threshold}
+    tasks = [{"kind": HELDOUT, "role": role, "policy": policy, "scenario": scenario, "seed": int(seed),
+              "bank_dir": bank_dir, "env_config": dict(env_config or {}), "ttc_threshold": ttc_threshold}
              for scenario, seed in episodes if store.get(role, scenario, seed) is None]
     bar = None
     if progress:
@@ -86,7 +86,7 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
                 if bar is not None:
                     bar.update(1)
         elif tasks:
-            from dv2s_gym.regress.backends import LocalBackend
+            from dv2s_gym.workers.pool import LocalBackend
 
             def finished(record: Dict[str, Any]) -> None:
                 store.append({"policy": policy, "failed": None, "failure": None, "result": None, **record})

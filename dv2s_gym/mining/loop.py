@@ -328,7 +328,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         fine_tune_lr = METHOD_LEARNING_RATES[fine_tune_method]
     if not float(fine_tune_lr) > 0:
         raise LoopError(f"--fine-tune-lr must be a positive number, not {fine_tune_lr}")
-    from dv2s_gym.regress.backends import default_workers
+    from dv2s_gym.workers.pool import default_workers
 
     workers = int(workers or default_workers())
     out = Path(out)

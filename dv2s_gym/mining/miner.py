@@ -57,6 +57,7 @@ from dv2s_gym.mining.samplers import (
     make_sampler,
     sampler_params,
 )
+from dv2s_gym.mining.tasks import MINE
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 
@@ -515,8 +516,8 @@ def _mine_in(out: Path, started: float, *, policy: str, budget: int, sampler: st
              feedback: str) -> MineRun:
     """The body of :func:`mine` once the input is checked and the run folder exists."""
     from dv2s_gym.mining.space import SceneSpace
-    from dv2s_gym.regress.backends import default_workers, get_backend
-    from dv2s_gym.regress.errors import RegressError
+    from dv2s_gym.workers.errors import WorkerError
+    from dv2s_gym.workers.pool import default_workers, get_backend
 
     bank_dir = str(Path(bank_dir).resolve()) if bank_dir else None
     if convert:
@@ -548,7 +549,7 @@ def _mine_in(out: Path, started: float, *, policy: str, budget: int, sampler: st
         bar = _progress(progress, budget, len([i for i in done if i < budget]))
         try:
             pool = get_backend(backend, workers=n_workers, address=address, timeout=timeout)
-        except RegressError as error:
+        except WorkerError as error:
             appender.close()
             raise MiningError(str(error)) from None
         try:
@@ -579,7 +580,7 @@ def _task(index: int, spec, policy: str, reference: Optional[str], settings: Dic
           out: Path) -> Dict[str, Any]:
     seed = episode_seed(settings["seed"], index)
     return {
-        "kind": "mine", "role": "mine", "index": index, "id": f"{spec.scenario}/{seed}", "policy": policy,
+        "kind": MINE, "role": "mine", "index": index, "id": f"{spec.scenario}/{seed}", "policy": policy,
         "reference": reference, "scenario": spec.scenario, "seed": seed, "params": spec.params,
         "env_config": settings["env_config"], "bank_dir": settings["bank_dir"],
         "trace_dir": str(out / "traces"),

@@ -3,22 +3,21 @@
 :func:`run_regression` runs both policies on the same scenario x seed pairs (a local
 process pool or Ray), streams results to disk (resumable), and writes a versioned JSON
 report, JUnit XML and Markdown with a PASS / FAIL / INCONCLUSIVE verdict per scenario
-and overall; :mod:`dv2s_gym.regress.stats` holds the statistics.
+and overall; :mod:`dv2s_gym.regress.stats` holds the statistics. The episodes run in the pools
+of :mod:`dv2s_gym.workers` (task kind ``"regress"``, :mod:`dv2s_gym.regress.tasks`).
 
 The names below are re-exported lazily, so a worker process that imports
-:mod:`dv2s_gym.regress.worker` does not load the statistics and reporting modules.
+:mod:`dv2s_gym.regress.tasks` does not load the statistics and reporting modules.
 """
 
 from importlib import import_module
 from typing import Any
 
 _EXPORTS = {
-    "Backend": "backends", "LocalBackend": "backends", "get_backend": "backends",
     "RegressError": "errors", "ReportMismatchError": "errors", "ResumeMismatchError": "errors",
     "EXIT_CODES": "report", "SCHEMA": "report", "SCHEMA_VERSION": "report", "exit_code": "report",
     "load_report": "report", "write_reports": "report",
     "run_regression": "runner",
-    "run_task": "worker",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -220,7 +220,7 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         settings: the run's settings (``margin`` and ``alpha`` decide the verdicts).
         candidate / baseline: ``{"spec", "card", ...}``; ``baseline`` None for a run without one.
         episodes: ``{"id", "scenario", "seed", "candidate": result, "baseline": result | None}``
-            (results as returned by :func:`~dv2s_gym.regress.worker.run_task`).
+            (results as returned by :func:`~dv2s_gym.regress.tasks.run_regress_task`).
         stopped_early / sequential: the sequential test's outcome (``sequential["verdict"]``,
             when set, is the overall verdict of a sequential run; a scenario FAIL still FAILs).
     """

@@ -2,7 +2,7 @@
 
 Episode ``k`` of a scenario uses env seed ``seed + k`` for both policies, so each
 candidate episode has a twin baseline episode on the identical scene (the env is
-deterministic given the seed). Tasks go to a backend (:mod:`dv2s_gym.regress.backends`)
+deterministic given the seed). Tasks go to a pool (:mod:`dv2s_gym.workers`)
 round by round (seed ``k`` of every scenario before seed ``k + 1``); results stream into
 ``results.jsonl`` as they finish (:mod:`dv2s_gym.regress.store`), and the report
 (:mod:`dv2s_gym.regress.report`) is built from them at the end.
@@ -22,7 +22,6 @@ from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.regress import stats
-from dv2s_gym.regress.backends import get_backend
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
 from dv2s_gym.regress.report import (
     build_report,
@@ -32,7 +31,10 @@ from dv2s_gym.regress.report import (
     write_reports,
 )
 from dv2s_gym.regress.store import RunStore
-from dv2s_gym.regress.worker import task_id
+from dv2s_gym.regress.tasks import KIND
+from dv2s_gym.workers.errors import WorkerError
+from dv2s_gym.workers.pool import get_backend
+from dv2s_gym.workers.tasks import task_id
 
 __all__ = ["run_regression", "bank_info", "plan_tasks", "DEFAULT_OUT", "ROLES"]
 
@@ -55,8 +57,8 @@ def bank_info(scenarios: Sequence[str], bank_dir: Optional[Union[str, os.PathLik
 def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterable[int], *,
                env_config: Dict[str, Any], bank_dir: Optional[str], trace_dir: Optional[str]) -> List[Dict[str, Any]]:
     """Task dicts, seed by seed (every scenario, then the next seed), each role in turn."""
-    return [{"policy": spec, "role": role, "scenario": scenario, "seed": int(seed), "env_config": dict(env_config),
-             "bank_dir": bank_dir, "trace_dir": trace_dir}
+    return [{"kind": KIND, "policy": spec, "role": role, "scenario": scenario, "seed": int(seed),
+             "env_config": dict(env_config), "bank_dir": bank_dir, "trace_dir": trace_dir}
             for seed in seeds for scenario in scenarios for role, spec in policies.items()]
 
 
@@ -292,6 +294,8 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
             sequential_info = {"looks": looks, "episodes": last_n, "max_episodes": episodes * len(names),
                                "batch": batch, "spending": test.spending,
                                "verdict": None if verdict is None else verdict.name}
+    except WorkerError as error:  # bad backend settings, or workers that cannot start: an error of this run
+        raise RegressError(str(error)) from None
     finally:
         if bar is not None:
             bar.close()

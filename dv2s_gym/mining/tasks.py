@@ -1,16 +1,16 @@
 """Episodes of the miner and the loop in a worker process: :func:`run_mine_task` (one
-failure-mining episode) and :func:`heldout_task` (one episode of the loop's held-out evaluation,
-``"kind": "heldout"``, see :mod:`dv2s_gym.mining.heldout`).
+failure-mining episode, task kind ``"mine"``) and :func:`heldout_task` (one episode of the loop's
+held-out evaluation, kind ``"heldout"``, see :mod:`dv2s_gym.mining.heldout`), both registered with
+:mod:`dv2s_gym.workers.tasks` when this module is imported.
 
-A mining task is a plain dict (shipped to the regression process pool or Ray, whose
-``run_task`` hands ``"kind": "mine"`` tasks here):
+A mining task is a plain dict (shipped to a pool of :mod:`dv2s_gym.workers`, local or Ray):
 
-- ``kind``: ``"mine"``; ``role``: ``"mine"``; ``index``: the episode's index in the run;
+- ``kind``: ``"mine"`` (:data:`MINE`); ``role``: ``"mine"``; ``index``: the episode's index in the run;
 - ``policy``: policy spec; ``reference``: the reference driver's spec (``None``: no
   avoidability check);
 - ``scenario``, ``seed``, ``params``: the scene (see :mod:`dv2s_gym.mining.space`);
 - ``env_config``, ``bank_dir``; ``trace_dir``: the folder for a failed episode's trace
-  (``<index>.json.gz``; the Ray backend swaps in a local folder and ships the file back);
+  (``<index>.json.gz``; the Ray pool swaps in a local folder and ships the file back);
 - ``ttc_threshold``, ``stall_seconds``: monitor settings.
 
 The result is the episode record of the run's ``episodes.jsonl`` without the sampler
@@ -25,8 +25,14 @@ import traceback
 from typing import Any, Dict, Mapping, Optional
 
 from dv2s_gym.mining.monitors import FAILURE_TYPES, detect_failure, robustness
+from dv2s_gym.workers.tasks import register
 
-__all__ = ["run_mine_task", "heldout_task", "reference_avoids", "trace_name"]
+__all__ = ["MINE", "HELDOUT", "run_mine_task", "heldout_task", "reference_avoids", "trace_name"]
+
+MINE = "mine"
+"""The ``"kind"`` of a failure-mining task."""
+HELDOUT = "heldout"
+"""The ``"kind"`` of a task of the loop's held-out evaluation."""
 
 
 def trace_name(index: int) -> str:
@@ -125,3 +131,7 @@ def heldout_task(task: Mapping[str, Any]) -> Dict[str, Any]:
         return record
     record.update(failed=failure is not None, failure=failure, result=result.to_json())
     return record
+
+
+register(MINE, run_mine_task)
+register(HELDOUT, heldout_task)

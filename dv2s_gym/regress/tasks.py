@@ -1,7 +1,8 @@
-"""One regression episode in a worker process: :func:`run_task`.
+"""One regression episode in a worker process: :func:`run_regress_task`, registered as task kind ``"regress"``.
 
-A *task* is a plain dict, so any backend (the local process pool, Ray) can ship it:
+A task is a plain dict, so any pool of :mod:`dv2s_gym.workers` (local processes, Ray) can ship it:
 
+- ``kind``: ``"regress"``;
 - ``policy``: policy spec (:func:`policies.registry.load_policy`), e.g. ``"rule"``;
 - ``role``: ``"candidate"`` or ``"baseline"``;
 - ``scenario``: bank name; ``seed``: the episode's env seed;
@@ -9,7 +10,7 @@ A *task* is a plain dict, so any backend (the local process pool, Ray) can ship 
 - ``bank_dir``: bank folder (``None``: the shipped bank);
 - ``trace_dir``: folder for the trace of a failed episode (``None``: keep no trace).
 
-:func:`run_task` returns ``EpisodeResult.to_json()`` plus ``role``, ``id``
+:func:`run_regress_task` returns ``EpisodeResult.to_json()`` plus ``role``, ``id``
 (``"<scenario>/<seed>"``) and ``trace`` (the saved trace's path or ``None``). An
 exception inside the episode comes back as an error result (``{"id", "role",
 "scenario", "seed", "error", "trace": None}``) instead of propagating: it is kept in
@@ -23,28 +24,16 @@ spec, so a worker serves any mix of tasks.
 from __future__ import annotations
 
 import os
-import sys
 import traceback
 from pathlib import Path
 from typing import Any, Dict
 
-if "numpy" not in sys.modules:  # a fresh worker process (e.g. Ray's): one BLAS/OpenMP thread per worker
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+from dv2s_gym.workers.tasks import error_result, register, task_id
 
-__all__ = ["run_task", "task_id", "trace_filename", "error_result", "clear_caches"]
+__all__ = ["KIND", "run_regress_task", "trace_filename"]
 
-
-
-def clear_caches() -> None:
-    """Close every env this process cached and forget the loaded policies."""
-    from policies.worker_cache import clear_caches as clear
-
-    clear()
-
-
-def task_id(scenario: str, seed: int) -> str:
-    """The episode id used in reports: ``"<scenario>/<seed>"``."""
-    return f"{scenario}/{int(seed)}"
+KIND = "regress"
+"""The ``"kind"`` of a regression task."""
 
 
 def trace_filename(role: str, scenario: str, seed: int) -> str:
@@ -52,30 +41,10 @@ def trace_filename(role: str, scenario: str, seed: int) -> str:
     return f"{scenario}__{int(seed)}__{role}.json.gz"
 
 
-def error_result(task: Dict[str, Any], error: str) -> Dict[str, Any]:
-    """The result standing for a task that produced no episode (exception, crash, hang)."""
-    return {"id": task_id(task["scenario"], task["seed"]), "role": task["role"], "scenario": task["scenario"],
-            "seed": int(task["seed"]), "error": str(error), "trace": None}
-
-
-def run_task(task: Dict[str, Any]) -> Dict[str, Any]:
-    """Run one episode described by ``task`` (see the module docstring) and return its result dict.
-
-    A task with ``"kind": "mine"`` is a failure-mining episode
-    (:func:`dv2s_gym.mining.worker.run_mine_task`), one with ``"kind": "heldout"`` an episode of
-    the loop's held-out evaluation (:func:`dv2s_gym.mining.heldout.heldout_task`); the pools serve every kind.
-    """
+def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
+    """Run one episode described by ``task`` (see the module docstring) and return its result dict."""
     from policies.evaluation import run_episode
     from policies.worker_cache import drop_env, env_for, policy_for
-
-    if task.get("kind") == "mine":
-        from dv2s_gym.mining.worker import run_mine_task
-
-        return run_mine_task(task)
-    if task.get("kind") == "heldout":
-        from dv2s_gym.mining.worker import heldout_task
-
-        return heldout_task(task)
 
     env_key = None
     try:
@@ -97,3 +66,6 @@ def run_task(task: Dict[str, Any]) -> Dict[str, Any]:
         trace.save(path)
         data["trace"] = str(path)
     return data
+
+
+register(KIND, run_regress_task)

@@ -1,9 +1,9 @@
-"""Where regression episodes run: a pool of local processes, or Ray.
+"""Where episodes of regress and mining run: a pool of local processes, or Ray.
 
-A :class:`Backend` takes task dicts (see :mod:`dv2s_gym.regress.worker`) and hands each
+A :class:`Backend` takes task dicts (see :mod:`dv2s_gym.workers.tasks`) and hands each
 result to a callback as soon as it finishes. :class:`LocalBackend` runs one process per
-worker (``forkserver`` context where available, else ``spawn``; ``OMP_NUM_THREADS=1``), each calling
-:func:`~dv2s_gym.regress.worker.run_task` and keeping its envs and policies between
+worker (``forkserver`` context where available, else ``spawn``; ``OMP_NUM_THREADS=1``), each running
+the registered function of every task it gets and keeping its envs and policies between
 tasks. A worker that dies mid-episode (segfault, ``os._exit``, out of memory) or gives no
 result within the per-episode timeout is killed and replaced; its task is retried once
 (``retries``), then reported as an error result ``{"error": ..., "id", "role", ...}`` -
@@ -11,7 +11,7 @@ never silently dropped; a task that finishes on a retry carries ``"worker_restar
 problems of its earlier attempts.
 
 :func:`get_backend` picks one by name (``"local"`` or ``"ray"``; the Ray backend lives in
-:mod:`dv2s_gym.regress.ray_backend`).
+:mod:`dv2s_gym.workers.ray_pool`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,8 @@ from collections import deque
 from multiprocessing.connection import wait
 from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Set, Tuple
 
-from dv2s_gym.regress.errors import RegressError
+from dv2s_gym.workers.errors import WorkerError
+from dv2s_gym.workers.tasks import TaskFunction, function_for, gave_up_result, run_task, task_modules
 
 __all__ = ["Backend", "LocalBackend", "get_backend", "default_workers", "DEFAULT_TIMEOUT"]
 
@@ -34,7 +35,7 @@ DEFAULT_TIMEOUT = 600.0
 
 OnResult = Callable[[Dict[str, Any]], None]
 _READY = "ready"
-_PRELOAD = ("dv2s_gym.regress.worker", "envs.dv2s_env", "policies.evaluation")
+_PRELOAD = ("dv2s_gym.workers.pool", "envs.dv2s_env", "policies.evaluation")
 
 
 def default_workers() -> int:
@@ -73,10 +74,8 @@ class Backend:
 
 
 def _worker_main(connection) -> None:
-    """A pool process: receive ``(index, task)``, send ``(index, result)``; ``None`` stops it."""
+    """A pool process: receive ``(index, function, task)``, send ``(index, result)``; ``None`` stops it."""
     os.environ["OMP_NUM_THREADS"] = "1"
-    from dv2s_gym.regress.worker import error_result, run_task
-
     try:
         import envs.dv2s_env  # noqa: F401  (the slow imports happen before the first episode's clock starts)
         import policies.evaluation  # noqa: F401
@@ -93,11 +92,8 @@ def _worker_main(connection) -> None:
             return
         if message is None:
             return
-        index, task = message
-        try:
-            result = run_task(task)
-        except BaseException as error:  # run_task reports episode errors itself; this is the last net
-            result = error_result(task, f"{type(error).__name__}: {error}")
+        index, function, task = message
+        result = run_task(function, task)
         try:
             connection.send((index, result))
         except (OSError, KeyboardInterrupt):
@@ -109,7 +105,7 @@ class _Worker:
         parent, child = context.Pipe()
         self.connection = parent
         self.process = context.Process(target=_worker_main, args=(child,), daemon=True,
-                                       name="dv2s-regress-worker")
+                                       name="dv2s-worker")
         saved = os.environ.get("OMP_NUM_THREADS")
         os.environ["OMP_NUM_THREADS"] = "1"  # set before the child imports numpy
         try:
@@ -206,20 +202,20 @@ class LocalBackend(Backend):
     def __init__(self, workers: Optional[int] = None, timeout: Optional[float] = None, retries: int = 1,
                  start_method: Optional[str] = None) -> None:
         if workers is not None and int(workers) < 1:
-            raise RegressError(f"--workers must be at least 1, not {workers}")
+            raise WorkerError(f"--workers must be at least 1, not {workers}")
         if timeout is not None and not float(timeout) > 0:
-            raise RegressError(f"the per-episode timeout must be positive, not {timeout}")
+            raise WorkerError(f"the per-episode timeout must be positive, not {timeout}")
         if start_method is None:
             start_method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
         if start_method not in ("spawn", "forkserver"):
-            raise RegressError(f"start_method must be 'spawn' or 'forkserver', not {start_method!r}")
+            raise WorkerError(f"start_method must be 'spawn' or 'forkserver', not {start_method!r}")
         self.workers = int(workers) if workers is not None else default_workers()
         self.timeout = float(timeout) if timeout is not None else DEFAULT_TIMEOUT
         self.retries = int(retries)
         self._context = multiprocessing.get_context(start_method)
         if start_method == "forkserver":
             # imported once by the server (it starts with the first worker), inherited by every fork
-            self._context.set_forkserver_preload(list(_PRELOAD))
+            self._context.set_forkserver_preload(list(_PRELOAD) + task_modules())
         self._pool: List[_Worker] = []
 
     def _ensure(self, count: int) -> None:
@@ -238,13 +234,12 @@ class LocalBackend(Backend):
         caller can keep the workers busy with tasks that depend on earlier results. The call returns
         when every task, first or added, has a result.
         """
-        from dv2s_gym.regress.worker import error_result
-
         tasks = list(tasks)
         if not tasks and more is not None:
             tasks = list(more())
         if not tasks:
             return
+        functions = [function_for(task) for task in tasks]  # a task of no registered kind fails here, at once
         queue = _ScenarioQueue(tasks)
         attempts: Dict[int, int] = {}
         failures: Dict[int, List[str]] = {}
@@ -254,7 +249,7 @@ class LocalBackend(Backend):
         try:
             while remaining:
                 finished: List[Dict[str, Any]] = []
-                self._dispatch(queue, tasks, attempts)
+                self._dispatch(queue, tasks, functions, attempts)
                 deadlines = [w.busy[1] + self.timeout for w in self._pool if w.busy is not None]
                 wait_for = max(0.0, min(deadlines) - time.monotonic()) if deadlines else None
                 ready = wait([x for w in self._pool for x in (w.connection, w.process.sentinel)], timeout=wait_for)
@@ -290,10 +285,10 @@ class LocalBackend(Backend):
                     if worker.busy is None:  # died before taking a task: the process cannot start
                         failed_starts += 1
                         if failed_starts > 2 * self.workers:
-                            raise RegressError(
-                                f"regression worker processes exit while starting (exit code {code}); a script "
+                            raise WorkerError(
+                                f"worker processes exit while starting (exit code {code}); a script "
                                 "that starts a run must do so under `if __name__ == '__main__':`, and "
-                                "`python -c 'import dv2s_gym.regress.worker'` must work")
+                                "`python -c 'import dv2s_gym.workers.pool'` must work")
                         continue
                     index = worker.busy[0]
                     failures.setdefault(index, []).append(
@@ -303,18 +298,16 @@ class LocalBackend(Backend):
                         queue.push_front(index)
                     else:
                         remaining -= 1
-                        task = tasks[index]
-                        finished.append(error_result(task, f"{'; then '.join(failures[index])} running {task['role']} "
-                                                           f"{task['policy']!r} on {task['scenario']} seed "
-                                                           f"{task['seed']} ({attempts[index]} attempts)"))
+                        finished.append(gave_up_result(tasks[index], failures[index], attempts[index]))
                 # idle workers get their next task before the results are handled (saved, reported),
                 # so they do not wait for that
-                self._dispatch(queue, tasks, attempts)
+                self._dispatch(queue, tasks, functions, attempts)
                 for result in finished:
                     on_result(result)
                 if more is not None and finished:
                     added = list(more())
                     for task in added:
+                        functions.append(function_for(task))
                         tasks.append(task)
                         queue.append(task)
                     remaining += len(added)
@@ -322,7 +315,8 @@ class LocalBackend(Backend):
             self.close()  # an interrupted run leaves no worker behind
             raise
 
-    def _dispatch(self, queue: "_ScenarioQueue", tasks: List[Dict[str, Any]], attempts: Dict[int, int]) -> None:
+    def _dispatch(self, queue: "_ScenarioQueue", tasks: List[Dict[str, Any]], functions: List[TaskFunction],
+                  attempts: Dict[int, int]) -> None:
         """Send a task to every started, idle worker while tasks are left."""
         for worker in self._pool:
             if worker.ready and worker.busy is None and queue:
@@ -331,7 +325,7 @@ class LocalBackend(Backend):
                 attempts[index] = attempts.get(index, 0) + 1
                 worker.busy = (index, time.monotonic())
                 try:
-                    worker.connection.send((index, tasks[index]))
+                    worker.connection.send((index, functions[index], tasks[index]))
                 except OSError:  # the worker just died: its sentinel reports it on the next wait
                     pass
 
@@ -349,19 +343,19 @@ def get_backend(name: str, workers: Optional[int] = None, address: Optional[str]
     """The backend called ``name``: ``"local"`` (process pool) or ``"ray"`` (a Ray cluster at ``address``)."""
     if name == "local":
         if address:
-            raise RegressError("--address is for --backend ray; the local backend runs on this machine")
+            raise WorkerError("--address is for --backend ray; the local backend runs on this machine")
         return LocalBackend(workers, timeout=timeout)
     if name == "ray":
         try:
-            module = importlib.import_module("dv2s_gym.regress.ray_backend")
+            module = importlib.import_module("dv2s_gym.workers.ray_pool")
         except ModuleNotFoundError as error:
-            if error.name not in ("dv2s_gym.regress.ray_backend", "ray"):
+            if error.name not in ("dv2s_gym.workers.ray_pool", "ray"):
                 raise
-            missing = "the ray package" if error.name == "ray" else "dv2s_gym.regress.ray_backend"
-            raise RegressError(f"--backend ray needs {missing}, which is not installed; "
+            missing = "the ray package" if error.name == "ray" else "dv2s_gym.workers.ray_pool"
+            raise WorkerError(f"--backend ray needs {missing}, which is not installed; "
                                "install ray (pip install 'ray[default]') or use --backend local") from None
         options: Dict[str, Any] = {"workers": workers, "address": address}
         if timeout is not None and "timeout" in inspect.signature(module.RayBackend).parameters:
             options["timeout"] = timeout
         return module.RayBackend(**options)
-    raise RegressError(f"unknown backend {name!r}: use 'local' or 'ray'")
+    raise WorkerError(f"unknown backend {name!r}: use 'local' or 'ray'")

@@ -1,9 +1,9 @@
-"""Running regression episodes on a Ray cluster: ``dv2s regress --backend ray --address HOST:PORT``.
+"""Running episodes on a Ray cluster: ``dv2s regress --backend ray --address HOST:PORT`` (``dv2s mine`` too).
 
 :class:`RayBackend` connects to a running cluster (``ray start --head`` prints its
 address) or, without an address, starts a local Ray instance. Episodes run in Ray
-actors, one per CPU (or ``workers``), each calling
-:func:`~dv2s_gym.regress.worker.run_task` and keeping its envs and policies between
+actors, one per CPU (or ``workers``), each running the registered function of every task
+it gets (:mod:`dv2s_gym.workers.tasks`) and keeping its envs and policies between
 tasks. Results come back as they finish (``ray.wait``). An actor that dies (crash,
 out of memory, a lost node) or gives no result within the per-episode timeout is
 killed and replaced; its task is retried once, then reported as an error result,
@@ -28,8 +28,9 @@ from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Tuple
 import ray
 import ray.exceptions
 
-from dv2s_gym.regress.backends import DEFAULT_TIMEOUT, Backend
-from dv2s_gym.regress.errors import RegressError
+from dv2s_gym.workers.errors import WorkerError
+from dv2s_gym.workers.pool import DEFAULT_TIMEOUT, Backend
+from dv2s_gym.workers.tasks import TaskFunction, function_for, gave_up_result, run_task
 
 __all__ = ["RayBackend", "RayUnavailableError", "CONNECT_TIMEOUT"]
 
@@ -40,28 +41,23 @@ START_HINT = ("start a cluster with `ray start --head` (it prints the address to
               "or use --backend local")
 
 
-class RayUnavailableError(RegressError):
+class RayUnavailableError(WorkerError):
     """No Ray cluster answers at the address given."""
 
 
 class EpisodeActor:
-    """A Ray actor running regression tasks in one long-lived worker process."""
+    """A Ray actor running tasks in one long-lived worker process."""
 
     def __init__(self) -> None:
         os.environ["OMP_NUM_THREADS"] = "1"
         self.scratch = Path(tempfile.mkdtemp(prefix="dv2s-ray-traces-"))
 
-    def run(self, task: Dict[str, Any]) -> Tuple[Dict[str, Any], Optional[bytes]]:
-        """``(result, trace bytes or None)``: the trace goes back to the driver, not a shared disk."""
-        from dv2s_gym.regress.worker import error_result, run_task
-
+    def run(self, function: TaskFunction, task: Dict[str, Any]) -> Tuple[Dict[str, Any], Optional[bytes]]:
+        """``(function(task), trace bytes or None)``: the trace goes back to the driver, not a shared disk."""
         local = dict(task)
         if task.get("trace_dir"):
             local["trace_dir"] = str(self.scratch)
-        try:
-            result = run_task(local)
-        except BaseException as error:  # run_task reports episode errors itself; this is the last net
-            return error_result(task, f"{type(error).__name__}: {error}"), None
+        result = run_task(function, local)
         data = None
         if result.get("trace"):
             path = Path(result["trace"])
@@ -106,7 +102,7 @@ class RayBackend(Backend):
             Ray Client, or ``"auto"``); ``None`` starts a local Ray instance for this run.
         workers: actors (default: the cluster's CPUs).
         timeout: seconds one episode may take before its actor counts as hung (default
-            :data:`~dv2s_gym.regress.backends.DEFAULT_TIMEOUT`).
+            :data:`~dv2s_gym.workers.pool.DEFAULT_TIMEOUT`).
         retries: how often a task whose actor died or hung runs again before it is reported
             as an error (default 1).
         connect_timeout: seconds to wait for ``address`` to answer.
@@ -118,9 +114,9 @@ class RayBackend(Backend):
                  timeout: Optional[float] = None, retries: int = 1,
                  connect_timeout: float = CONNECT_TIMEOUT) -> None:
         if workers is not None and int(workers) < 1:
-            raise RegressError(f"--workers must be at least 1, not {workers}")
+            raise WorkerError(f"--workers must be at least 1, not {workers}")
         if timeout is not None and not float(timeout) > 0:
-            raise RegressError(f"the per-episode timeout must be positive, not {timeout}")
+            raise WorkerError(f"the per-episode timeout must be positive, not {timeout}")
         self.address = address
         self.timeout = float(timeout) if timeout is not None else DEFAULT_TIMEOUT
         self.retries = int(retries)
@@ -165,11 +161,10 @@ class RayBackend(Backend):
         is not counted); a new actor that cannot start three times in a row stops the run
         with :class:`RayUnavailableError`.
         """
-        from dv2s_gym.regress.worker import error_result
-
         tasks = list(tasks)
         if not tasks:
             return
+        functions = [function_for(task) for task in tasks]  # a task of no registered kind fails here, at once
         queue: Deque[int] = deque(range(len(tasks)))
         attempts: Dict[int, int] = {}
         failures: Dict[int, List[str]] = {}
@@ -182,7 +177,7 @@ class RayBackend(Backend):
                     index = queue.popleft()
                     actor = self._idle.pop()
                     attempts[index] = attempts.get(index, 0) + 1
-                    running[actor.run.remote(tasks[index])] = (index, actor, time.monotonic())
+                    running[actor.run.remote(functions[index], tasks[index])] = (index, actor, time.monotonic())
                 now = time.monotonic()
                 deadlines = [start + self.timeout for _, _, start in running.values()]
                 wait_for = max(0.0, min(deadlines) - now) if deadlines else 5.0
@@ -205,7 +200,7 @@ class RayBackend(Backend):
                         on_result(delivered)
                         continue
                     self._replace(actor)
-                    self._retry_or_fail(tasks, index, problem, attempts, failures, queue, on_result, error_result)
+                    self._retry_or_fail(tasks, index, problem, attempts, failures, queue, on_result)
                 now = time.monotonic()
                 for ref, (index, actor, start) in list(running.items()):
                     if now - start < self.timeout:
@@ -213,7 +208,7 @@ class RayBackend(Backend):
                     del running[ref]
                     self._replace(actor)
                     problem = f"the Ray actor hung (no result after {self.timeout:g} s)"
-                    self._retry_or_fail(tasks, index, problem, attempts, failures, queue, on_result, error_result)
+                    self._retry_or_fail(tasks, index, problem, attempts, failures, queue, on_result)
         except BaseException:
             self.close()  # an interrupted run leaves no actor behind
             raise
@@ -240,15 +235,12 @@ class RayBackend(Backend):
         self._actors.remove(actor)
         self._new_actor()
 
-    def _retry_or_fail(self, tasks, index, problem, attempts, failures, queue, on_result, error_result) -> None:
+    def _retry_or_fail(self, tasks, index, problem, attempts, failures, queue, on_result) -> None:
         failures.setdefault(index, []).append(problem)
         if attempts[index] <= self.retries:
             queue.appendleft(index)
             return
-        task = tasks[index]
-        on_result(error_result(task, f"{'; then '.join(failures[index])} running {task['role']} "
-                                     f"{task['policy']!r} on {task['scenario']} seed {task['seed']} "
-                                     f"({attempts[index]} attempts)"))
+        on_result(gave_up_result(tasks[index], failures[index], attempts[index]))
 
     @staticmethod
     def _deliver(task: Dict[str, Any], result: Dict[str, Any], trace: Optional[bytes]) -> Dict[str, Any]:

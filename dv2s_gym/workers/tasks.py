@@ -1,0 +1,90 @@
+"""Task kinds, the functions that run them in a worker process, and the results standing for failed tasks.
+
+A *task* is a plain dict, so any pool (local processes, Ray) can ship it. Every task has a
+``kind`` (which function runs it), ``role``, ``policy``, ``scenario`` and ``seed``; the other keys
+belong to its kind. The packages that make tasks register their kinds when they are imported
+(:func:`register`): ``"regress"`` in :mod:`dv2s_gym.regress.tasks`, ``"mine"`` and ``"heldout"`` in
+:mod:`dv2s_gym.mining.tasks`. A pool looks the function of each task up in the caller's process
+(:func:`function_for`) and ships it with the task by reference (the worker imports the module that
+defines it), so the pools import neither regress nor mining and one worker serves every kind.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from typing import Any, Callable, Dict, List, Mapping, Sequence
+
+from dv2s_gym.workers.errors import WorkerError
+
+if "numpy" not in sys.modules:  # a fresh worker process (e.g. Ray's): one BLAS/OpenMP thread per worker
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+__all__ = ["TaskFunction", "register", "function_for", "task_modules", "run_task", "task_id", "error_result",
+           "gave_up_result"]
+
+TaskFunction = Callable[[Dict[str, Any]], Dict[str, Any]]
+"""Runs one task in a worker process and returns its result (a JSON-able dict)."""
+
+_KINDS: Dict[str, TaskFunction] = {}
+
+
+def _name(function: TaskFunction) -> str:
+    return f"{function.__module__}.{function.__qualname__}"
+
+
+def register(kind: str, function: TaskFunction) -> TaskFunction:
+    """Make ``function`` run the tasks whose ``"kind"`` is ``kind``; returns ``function``.
+
+    ``function`` must be a module-level function (pools ship it by reference). A kind
+    registered with another function is an error.
+    """
+    existing = _KINDS.get(kind)
+    if existing is not None and _name(existing) != _name(function):
+        raise WorkerError(f"task kind {kind!r} is registered twice ({_name(existing)} and {_name(function)})")
+    _KINDS[kind] = function
+    return function
+
+
+def function_for(task: Mapping[str, Any]) -> TaskFunction:
+    """The registered function that runs ``task``."""
+    kind = task.get("kind")
+    try:
+        return _KINDS[kind]
+    except KeyError:
+        known = ", ".join(repr(k) for k in sorted(_KINDS)) or "none"
+        raise WorkerError(f"no task function is registered for kind {kind!r} (registered: {known}); import the "
+                          "module that registers it before running its tasks") from None
+
+
+def task_modules() -> List[str]:
+    """The modules defining the registered task functions (a pool may import them before the first task)."""
+    return sorted({function.__module__ for function in _KINDS.values()})
+
+
+def run_task(function: TaskFunction, task: Dict[str, Any]) -> Dict[str, Any]:
+    """``function(task)`` in a worker; an exception escaping it becomes an error result (the last net).
+
+    Task functions report their episodes' errors themselves; this catches what they do not.
+    """
+    try:
+        return function(task)
+    except BaseException as error:
+        return error_result(task, f"{type(error).__name__}: {error}")
+
+
+def task_id(scenario: str, seed: int) -> str:
+    """The episode id used in results and reports: ``"<scenario>/<seed>"``."""
+    return f"{scenario}/{int(seed)}"
+
+
+def error_result(task: Mapping[str, Any], error: str) -> Dict[str, Any]:
+    """The result standing for a task that produced no episode (exception, crash, hang)."""
+    return {"id": task_id(task["scenario"], task["seed"]), "role": task["role"], "scenario": task["scenario"],
+            "seed": int(task["seed"]), "error": str(error), "trace": None}
+
+
+def gave_up_result(task: Mapping[str, Any], problems: Sequence[str], attempts: int) -> Dict[str, Any]:
+    """The error result of a task whose every attempt crashed or hung its worker (``problems``, in order)."""
+    return error_result(task, f"{'; then '.join(problems)} running {task['role']} {task['policy']!r} on "
+                              f"{task['scenario']} seed {task['seed']} ({attempts} attempts)")
