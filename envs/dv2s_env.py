@@ -93,16 +93,6 @@ def resolve_scenarios(spec: ScenarioSpec, bank_dir: Optional[str] = None) -> Lis
     return [ScenarioRef(name=n, path=str(scenario_path(n, bank_dir))) for n in names]
 
 
-def _read_script(path: Optional[str]) -> str:
-    from envs.jailed_env import MAX_SCRIPT_BYTES, read_bounded
-
-    data = read_bounded(path, MAX_SCRIPT_BYTES, "scenario file")
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as error:
-        raise ValueError(f"scenario file {path!r} is not UTF-8 text ({error}); save it as UTF-8") from None
-
-
 def _all_shipped(texts: Sequence[str], config: Optional[dict]) -> bool:
     from scenario_bank.maps import list_maps
     from scenario_bank.shipped import is_shipped_text
@@ -229,7 +219,9 @@ class DV2SEnv(AbstractEnv):
         if trusted or os.environ.get("DV2S_IN_JAIL") == "1":
             return super().__new__(cls)
         refs = resolve_scenarios(scenario, bank_dir)
-        texts = [ref.source if ref.source is not None else _read_script(ref.path) for ref in refs]
+        from envs.jailed_env import read_script
+
+        texts = [ref.source if ref.source is not None else read_script(ref.path) for ref in refs]
         frozen = [ScenarioRef(name=ref.name, path=ref.path, source=text) for ref, text in zip(refs, texts)]
         if jail is not True and _all_shipped(texts, config):
             env = super().__new__(cls)
@@ -239,7 +231,8 @@ class DV2SEnv(AbstractEnv):
         from scenario_bank.jail import require_jail
 
         require_jail(f"scenario {refs[0].name!r}" if len(refs) == 1 else f"{len(refs)} scenarios")
-        return JailedDV2SEnv(frozen, texts, config=config, render_mode=render_mode, limits=jail_limits)
+        return JailedDV2SEnv(frozen, texts, config=config, render_mode=render_mode, limits=jail_limits,
+                             default_config=cls.default_config())
 
     def __init__(
         self,

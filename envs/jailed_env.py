@@ -117,6 +117,15 @@ def read_bounded(path: Union[str, os.PathLike], max_bytes: int, what: str) -> by
     return data
 
 
+def read_script(path: Union[str, os.PathLike]) -> str:
+    """A scenario file's text: a bounded read of a regular file, strict UTF-8."""
+    data = read_bounded(path, MAX_SCRIPT_BYTES, "scenario file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise ValueError(f"scenario file {str(path)!r} is not UTF-8 text ({error}); save it as UTF-8") from None
+
+
 def map_references(text: str) -> List[Tuple[str, bool]]:
     """``(path, is_local_path)`` of the literal map paths a script names (``param map = ...``)."""
     return [(m.group(4), bool(m.group(2))) for m in _MAP_LINE.finditer(text)]
@@ -161,14 +170,14 @@ class JailedDV2SEnv(gym.Env):
     runs_in_jail = True
 
     def __init__(self, refs: Sequence[Any], texts: Sequence[str], config: Optional[dict] = None,
-                 render_mode: Optional[str] = None, limits: Optional[JailLimits] = None) -> None:
-        from envs.dv2s_env import DV2SEnv
-
+                 render_mode: Optional[str] = None, limits: Optional[JailLimits] = None,
+                 default_config: Optional[dict] = None) -> None:
+        defaults = dict(default_config or {})
         self.render_mode = render_mode
         self._refs = list(refs)
         self._labels = {ref.name: ref.path for ref in refs}
         user_config = dict(config or {})
-        unknown = sorted(set(user_config) - set(DV2SEnv.default_config()))
+        unknown = sorted(set(user_config) - set(defaults)) if defaults else []
         if unknown:
             raise ValueError(f"unknown config key(s) {', '.join(map(repr, unknown))}; "
                              "see DV2SEnv.default_config() for the keys")
@@ -183,7 +192,7 @@ class JailedDV2SEnv(gym.Env):
         else:
             self._host_map = None
         limits = limits or JailLimits.from_env()
-        step_limit = user_config.get("step_time_limit", DV2SEnv.default_config()["step_time_limit"])
+        step_limit = user_config.get("step_time_limit", defaults.get("step_time_limit", 60.0))
         if step_limit is not None:
             limits = limits.with_request_seconds(max(float(step_limit), 1.0) * 2 + 5)
         self._limits = limits
@@ -385,14 +394,13 @@ def parameter_ranges_of(refs: Sequence[Any]) -> Dict[str, Dict[str, Any]]:
     The package's own scripts are compiled here; every other script in one jailed
     worker, which sends back only the ranges (checked: kinds, numbers, constants).
     """
-    from envs.dv2s_env import _read_script
     from envs.scenarios import ParamRange, compile_scenario
     from scenario_bank.shipped import is_shipped_text
 
     result: Dict[str, Dict[str, Any]] = {}
     untrusted = []
     for ref in refs:
-        text = ref.source if ref.source is not None else _read_script(ref.path)
+        text = ref.source if ref.source is not None else read_script(ref.path)
         if is_shipped_text(text):
             result[ref.name] = compile_scenario(text, name=ref.name, path=ref.path).parameter_ranges()
         else:
