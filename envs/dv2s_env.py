@@ -219,9 +219,7 @@ class DV2SEnv(AbstractEnv):
         if trusted or os.environ.get("DV2S_IN_JAIL") == "1":
             return super().__new__(cls)
         refs = resolve_scenarios(scenario, bank_dir)
-        from envs.jailed_env import read_script
-
-        texts = [ref.source if ref.source is not None else read_script(ref.path) for ref in refs]
+        texts = [ref.source if ref.source is not None else read_scenario_file(ref.path) for ref in refs]
         frozen = [ScenarioRef(name=ref.name, path=ref.path, source=text) for ref, text in zip(refs, texts)]
         if jail is not True and _all_shipped(texts, config):
             env = super().__new__(cls)

@@ -19,10 +19,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import signal
-import subprocess
-import sys
-import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -31,6 +27,7 @@ from typing import Any, Dict, List, Optional, Sequence
 from scenario_bank.atomic import atomic_write_text
 from scenario_bank.jail import JailedProcess, JailError, JailLimitError, JailLimits
 from scenario_bank.jail.process import JailRemoteError
+from scenario_bank.precheck import precheck_text
 from scenario_bank.safety import SafetyFinding, UnsafeScenarioError
 
 __all__ = ["SandboxLimits", "SandboxResult", "SandboxError", "run_in_sandbox", "verify_script", "check_in_jail",
@@ -188,28 +185,15 @@ def _findings(data: Any) -> List[SafetyFinding]:
     return findings
 
 
-MAX_SCRIPT_BYTES = 256 * 1024
-
-
 def bounded_precheck(script: Any, name: str = "<script>") -> None:
-    """The checks the user's process runs on untrusted text before the jail sees it: type, size, NUL bytes.
+    """The checks the user's process runs on untrusted text before the jail sees it
+    (:func:`scenario_bank.precheck.precheck_text`: type, size, encoding, nesting; linear and bounded).
 
-    Linear and bounded; everything that parses the text runs in the jail.
+    Everything that parses the text runs in the jail.
     """
     if not isinstance(script, str):
         raise TypeError(f"{name}: a Scenic script is text (str), not {type(script).__name__}")
-    try:
-        from scenario_bank.precheck import precheck_text
-    except ImportError:
-        precheck_text = None
-    if precheck_text is not None:
-        precheck_text(script, name)
-        return
-    if len(script) > MAX_SCRIPT_BYTES:
-        raise UnsafeScenarioError([SafetyFinding(0, "size", f"{len(script)} characters is over the "
-                                                 f"{MAX_SCRIPT_BYTES}-character limit of a scenario script")], name)
-    if "\x00" in script:
-        raise UnsafeScenarioError([SafetyFinding(0, "encoding", "the text holds NUL characters")], name)
+    precheck_text(script, name)
 
 
 def check_in_jail(script: str, *, name: str = "<script>", absolute_maps: bool = False) -> List[SafetyFinding]:
