@@ -20,7 +20,6 @@ answered as ``{"type", "message"}`` and the worker goes on.
 from __future__ import annotations
 
 import importlib
-import math
 import os
 import sys
 import time
@@ -35,7 +34,7 @@ class _Worker:
     def __init__(self) -> None:
         self.env = None
         self.drivers: Dict[int, Any] = {}
-        self.map_paths: Dict[str, str] = {}
+        self.folders = 0  # scratch folders used so far
 
     # ------------------------------------------------------------------ files
     def _write_files(self, index: int, files: Dict[str, Any]) -> str:
@@ -88,11 +87,7 @@ class _Worker:
 
     def reset(self, seed: Optional[int], options: Optional[dict]) -> dict:
         obs, info = self.env.reset(seed=seed, options=options)
-        self.drivers_reset()
         return {"obs": obs, "info": _jsonable(info), "state": self._state()}
-
-    def drivers_reset(self) -> None:
-        pass  # drivers keep their own per-episode state (they look at env.steps == 0)
 
     def step(self, action: Any) -> dict:
         obs, reward, terminated, truncated, info = self.env.step(action)
@@ -135,8 +130,8 @@ class _Worker:
                          filename: Optional[str] = None) -> dict:
         from envs.scenarios import compile_scenario
 
-        folder = self._write_files(len(self.map_paths) + 100, files or {})
-        self.map_paths[name] = folder
+        self.folders += 1
+        folder = self._write_files(1000 + self.folders, files or {})  # apart from the env's scenario folders
         path = os.path.join(folder, filename or "scenario.scenic")
         with open(path, "w", encoding="utf-8") as handle:
             handle.write(text)
@@ -177,7 +172,7 @@ def _finding(finding: Any) -> dict:
 def _error(error: BaseException) -> dict:
     message = str(error).strip() or type(error).__name__
     details: Dict[str, Any] = {"type": type(error).__name__, "message": message[:4000]}
-    for name in ("stage", "limit", "line", "construct"):
+    for name in ("stage", "limit", "path", "line", "construct"):
         value = getattr(error, name, None)
         if isinstance(value, (str, int, float)) or value is None:
             details[name] = value

@@ -11,10 +11,8 @@ in the worker and send back only their action.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import re
-import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
@@ -25,13 +23,14 @@ import numpy as np
 from envs.errors import DV2SError, InvalidActionError, ScenarioCompileError, SceneSamplingError, StepTimeoutError
 from envs.errors import UnsupportedConstructError
 from envs.trace import EpisodeTrace
-from scenario_bank.jail import JailCrashError, JailError, JailLimitError, JailLimits, JailedProcess
+from scenario_bank.jail import JailError, JailLimitError, JailLimits, JailedProcess
 from scenario_bank.jail.process import JailRemoteError
+from scenario_bank.safe_files import read_regular_file
 
-__all__ = ["JailedDV2SEnv", "space_to_data", "data_to_space", "MAX_SCRIPT_BYTES", "MAX_MAP_BYTES"]
+__all__ = ["JailedDV2SEnv", "space_to_data", "data_to_space", "parameter_ranges_of", "MAX_MAP_BYTES"]
 
-MAX_SCRIPT_BYTES = 256 * 1024
 MAX_MAP_BYTES = 64 * 2**20
+_JAIL_SCENARIOS = "/tmp/scenarios"  # envs.jail_worker.SCRATCH: where the worker writes the scripts it runs
 _MAP_LINE = re.compile(r"""^[ \t]*param[ \t]+(map|sumo_map)[ \t]*=[ \t]*(localPath[ \t]*\([ \t]*)?(['"])([^'"\n\\]{1,1024})\3""",
                        re.M)
 
@@ -87,45 +86,7 @@ def _as_space_value(value: Any, space: gym.Space) -> Any:
     return value
 
 
-# ---------------------------------------------------------------- bounded reads
-def read_bounded(path: Union[str, os.PathLike], max_bytes: int, what: str) -> bytes:
-    """The bytes of a regular file (no FIFO, device or symlink at the last component), at most ``max_bytes``."""
-    flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
-    try:
-        fd = os.open(path, flags)
-    except FileNotFoundError:
-        raise FileNotFoundError(f"{what} {str(path)!r} does not exist") from None
-    except OSError as error:
-        raise ValueError(f"{what} {str(path)!r} cannot be opened ({error.strerror}); give a regular file, "
-                         "not a link, pipe or device") from None
-    try:
-        info = os.fstat(fd)
-        if not stat.S_ISREG(info.st_mode):
-            raise ValueError(f"{what} {str(path)!r} is not a regular file; give a regular file, not a pipe or device")
-        chunks, left = [], max_bytes + 1
-        while left > 0:
-            chunk = os.read(fd, min(left, 1 << 20))
-            if not chunk:
-                break
-            chunks.append(chunk)
-            left -= len(chunk)
-        data = b"".join(chunks)
-    finally:
-        os.close(fd)
-    if len(data) > max_bytes:
-        raise ValueError(f"{what} {str(path)!r} is larger than {max_bytes} bytes; that is not a scenario file")
-    return data
-
-
-def read_script(path: Union[str, os.PathLike]) -> str:
-    """A scenario file's text: a bounded read of a regular file, strict UTF-8."""
-    data = read_bounded(path, MAX_SCRIPT_BYTES, "scenario file")
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError as error:
-        raise ValueError(f"scenario file {str(path)!r} is not UTF-8 text ({error}); save it as UTF-8") from None
-
-
+# ---------------------------------------------------------------- map files
 def map_references(text: str) -> List[Tuple[str, bool]]:
     """``(path, is_local_path)`` of the literal map paths a script names (``param map = ...``)."""
     return [(m.group(4), bool(m.group(2))) for m in _MAP_LINE.finditer(text)]
@@ -182,15 +143,16 @@ class JailedDV2SEnv(gym.Env):
             raise ValueError(f"unknown config key(s) {', '.join(map(repr, unknown))}; "
                              "see DV2SEnv.default_config() for the keys")
         payload = [self._scenario_payload(ref, text) for ref, text in zip(refs, texts)]
-        self._map_paths: Dict[str, str] = {}
-        if isinstance(user_config.get("map"), (str, os.PathLike)) and _looks_like_map_path(str(user_config["map"])):
-            path = Path(os.path.expanduser(str(user_config["map"]))).resolve()
-            user_config["map_file"] = {"name": path.name, "data": np.frombuffer(
-                read_bounded(path, MAX_MAP_BYTES, "map file"), dtype=np.uint8)}
-            user_config.pop("map")
-            self._host_map = str(path)
-        else:
-            self._host_map = None
+        self._host_map = None
+        if user_config.get("map") is not None:
+            from scenario_bank.maps import list_maps, resolve_map
+
+            path = resolve_map(user_config["map"])  # the shipped maps' rules and errors, nothing read yet
+            if str(user_config["map"]) not in list_maps():  # a file of the user's: its bytes go in, not its path
+                user_config["map_file"] = {"name": path.name, "data": np.frombuffer(
+                    read_regular_file(path, MAX_MAP_BYTES, follow_symlinks=True), dtype=np.uint8)}
+                user_config.pop("map")
+                self._host_map = str(path)
         limits = limits or JailLimits.from_env()
         step_limit = user_config.get("step_time_limit", defaults.get("step_time_limit", 60.0))
         if step_limit is not None:
@@ -212,7 +174,6 @@ class JailedDV2SEnv(gym.Env):
         self.steps = 0
         self.time = 0.0
         self._trace_cache: Optional[Tuple[int, EpisodeTrace]] = None
-        self._drivers = 0
         self._window = None
 
     # ------------------------------------------------------------------ setup
@@ -231,7 +192,7 @@ class JailedDV2SEnv(gym.Env):
             else:
                 continue  # an absolute path: the jail cannot see it; the allowlist reports it there
             if source.exists():
-                files[key] = np.frombuffer(read_bounded(source, MAX_MAP_BYTES, "map file"), dtype=np.uint8)
+                files[key] = np.frombuffer(read_regular_file(source, MAX_MAP_BYTES), dtype=np.uint8)
         name = Path(ref.path).name if ref.path else "scenario.scenic"
         return {"name": ref.name, "text": text, "filename": name if name.endswith(".scenic") else "scenario.scenic",
                 "files": files}
@@ -241,10 +202,7 @@ class JailedDV2SEnv(gym.Env):
             return self._worker.call(op, timeout=timeout, **payload)
         except JailRemoteError as error:
             cls = _REMOTE_ERRORS.get(error.error_type)
-            message = error.plain_message
-            for index, ref in enumerate(self._refs if isinstance(self, JailedDV2SEnv) else []):
-                message = message.replace(f"/tmp/scenarios/{index}/", "").replace(
-                    Path(ref.path).name if ref.path else "scenario.scenic", ref.path or ref.name, 1)
+            message = self._host_names(error.plain_message)
             if error.output:
                 message += f"\n--- the script's output (last {len(error.output)} characters) ---\n{error.output}"
             if error.error_type == "UnsafeScenarioError":
@@ -254,15 +212,40 @@ class JailedDV2SEnv(gym.Env):
                 ValueError.__init__(unsafe, message)
                 unsafe.findings = list(error.details.get("findings") or [])
                 raise unsafe from None
-            if error.error_type in ("FileNotFoundError", "UnknownMapError"):
+            if error.error_type == "UnknownMapError":
+                from scenario_bank.maps import UnknownMapError
+
+                raise UnknownMapError(message) from None
+            if error.error_type == "FileNotFoundError":
                 raise FileNotFoundError(message) from None
             if cls is None:
                 raise ScenarioCompileError(f"{error.error_type} in the jailed simulation: {message}") from None
+            if issubclass(cls, ScenarioCompileError):
+                path, line = error.details.get("path"), error.details.get("line")
+                raise cls(message, path=self._host_names(path) if isinstance(path, str) else None,
+                          line=line if isinstance(line, int) and not isinstance(line, bool) else None) from None
             raise _remote(cls, message) from None
         except JailLimitError as error:
             if error.limit == "wall" and op == "step":
                 raise StepTimeoutError(f"{error}; the simulation was stopped") from None
             raise
+
+    def _host_names(self, text: str) -> str:
+        """``text`` with the jail's copies of the files named as the user knows them.
+
+        The worker writes scenario ``i`` to ``/tmp/scenarios/i/`` under the script's own file name
+        (``scenario.scenic`` for text), its map files beside it, and a ``config["map"]`` file to the
+        next folder; each prefix becomes the folder the file came from (a text's script: its name).
+        """
+        for index, ref in enumerate(self._refs):
+            prefix = f"{_JAIL_SCENARIOS}/{index}/"
+            script = Path(ref.path).name if ref.path and ref.path.endswith(".scenic") else "scenario.scenic"
+            text = text.replace(prefix + script, ref.path or ref.name)
+            if ref.path:
+                text = text.replace(prefix, str(Path(ref.path).parent) + "/")
+        if self._host_map is not None:
+            text = text.replace(f"{_JAIL_SCENARIOS}/{len(self._refs)}/", str(Path(self._host_map).parent) + "/")
+        return text
 
     # ------------------------------------------------------------------ Gymnasium API
     def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
@@ -394,13 +377,13 @@ def parameter_ranges_of(refs: Sequence[Any]) -> Dict[str, Dict[str, Any]]:
     The package's own scripts are compiled here; every other script in one jailed
     worker, which sends back only the ranges (checked: kinds, numbers, constants).
     """
-    from envs.scenarios import ParamRange, compile_scenario
+    from envs.scenarios import ParamRange, compile_scenario, read_scenario_file
     from scenario_bank.shipped import is_shipped_text
 
     result: Dict[str, Dict[str, Any]] = {}
     untrusted = []
     for ref in refs:
-        text = ref.source if ref.source is not None else read_script(ref.path)
+        text = ref.source if ref.source is not None else read_scenario_file(ref.path)
         if is_shipped_text(text):
             result[ref.name] = compile_scenario(text, name=ref.name, path=ref.path).parameter_ranges()
         else:
@@ -439,7 +422,3 @@ def _remote(cls: type, message: str) -> BaseException:
         error = DV2SError(message)
         return error
 
-
-def digest(text: str) -> str:
-    """The SHA-256 of a script's text (what the shipped manifest lists)."""
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
