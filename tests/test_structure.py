@@ -13,6 +13,8 @@ import ast
 from pathlib import Path
 from typing import Dict, List, Set
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("scenario_bank", "envs", "policies", "dv2s_gym")
 LAYER = {name: rank for rank, name in enumerate(PACKAGES)}  # may import only its own rank or lower
@@ -123,3 +125,15 @@ def test_layers_import_one_way():
     wrong = sorted(f"{m} imports {t}" for m, ts in import_graph().items() for t in ts
                    if LAYER[t.split(".")[0]] > LAYER[m.split(".")[0]])
     assert not wrong, "scenario_bank <- envs <- policies <- dv2s_gym is violated:\n" + "\n".join(wrong)
+
+
+@pytest.mark.parametrize("source, forbidden", [
+    ("dv2s_gym.regress", ("dv2s_gym.mining",)),
+    ("dv2s_gym.workers", ("dv2s_gym.regress", "dv2s_gym.mining")),  # the pools run tasks they are handed
+])
+def test_subsystems_import_one_way(source, forbidden):
+    graph = import_graph()
+    assert "dv2s_gym.workers.pool" in graph["dv2s_gym.regress.runner"]  # the graph reads these modules
+    wrong = sorted(f"{m} imports {t}" for m, ts in graph.items() if m == source or m.startswith(source + ".")
+                   for t in ts if any(t == f or t.startswith(f + ".") for f in forbidden))
+    assert not wrong, "\n".join(wrong)
