@@ -237,7 +237,7 @@ def code_version() -> str:
     if _CODE_VERSION is None:
         digest = hashlib.sha256()
         files = sorted([*(CODE_ROOT / "envs").rglob("*.py"), *(CODE_ROOT / "envs").rglob("*.scenic"),
-                        *(CODE_ROOT / "scenario_bank").glob("*.py"), *(CODE_ROOT / "scenario_bank" / "maps").glob("*.xodr")])
+                        *(CODE_ROOT / "scenario_bank").rglob("*.py"), *(CODE_ROOT / "scenario_bank" / "maps").glob("*.xodr")])
         for path in files:
             digest.update(str(path.relative_to(CODE_ROOT)).encode())
             digest.update(path.read_bytes())
