@@ -18,8 +18,8 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 
-@pytest.fixture
-def in_process_simulator(monkeypatch):
+@pytest.fixture(scope="module")
+def in_process_simulator():
     """Run the test's own Scenic scripts in this process: for tests of the simulator's internals.
 
     Product code runs every script the package does not ship in the jail (tests/test_jail.py
@@ -29,11 +29,15 @@ def in_process_simulator(monkeypatch):
     import envs.dv2s_env as dv2s_env
     import envs.scenarios as scenarios
 
-    monkeypatch.setattr(dv2s_env, "_all_shipped", lambda texts, config: True)
     original = scenarios.compile_scenario
 
     def compile_trusted(*args, **kwargs):
         kwargs.setdefault("trusted", True)
         return original(*args, **kwargs)
 
-    monkeypatch.setattr(scenarios, "compile_scenario", compile_trusted)
+    # module scope, so that the module's own module-scoped fixtures (a compiled highway, a
+    # simulated run) are built in this process too
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(dv2s_env, "_all_shipped", lambda texts, config: True)
+        patch.setattr(scenarios, "compile_scenario", compile_trusted)
+        yield

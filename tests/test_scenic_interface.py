@@ -45,6 +45,8 @@ from scenic_sim_helpers import (  # noqa: E402
 
 )
 
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
 # --------------------------------------------------------------------------- the highway program
 #
 # highway_straight: four lanes along +x (Scenic heading -90 deg), 2000 m long.
@@ -56,8 +58,6 @@ param map = 'highway_straight'
 model scenic.domains.driving.model
 
 L0, L1, L2, L3 = network.lanes[0], network.lanes[1], network.lanes[2], network.lanes[3]
-
-pytestmark = pytest.mark.usefixtures("in_process_simulator")
 
 
 def spot(lane, x, right=0):

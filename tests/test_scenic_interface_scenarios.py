@@ -30,6 +30,8 @@ from scenic_sim_helpers import (  # noqa: E402
     run_scenario,
 )
 
+pytestmark = pytest.mark.usefixtures("in_process_simulator")
+
 # DiscreteMetaAction
 IDLE, FASTER = 1, 3
 
@@ -226,7 +228,6 @@ VERIFAI_PROGRAM = """
 param verifaiSamplerType = 'halton'
 from scenic.core.external_params import VerifaiRange, VerifaiDiscreteRange
 
-pytestmark = pytest.mark.usefixtures("in_process_simulator")
 param gap = VerifaiRange(10, 40)
 param leadLane = VerifaiDiscreteRange(0, 3)
 param map = 'highway_straight'
