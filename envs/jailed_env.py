@@ -281,9 +281,14 @@ class JailedDV2SEnv(gym.Env):
         info = result.get("info")
         if not isinstance(info, dict):
             info = {}
-        if self._host_map is not None and isinstance(info.get("params"), dict) and "map" in info["params"]:
-            info["params"]["map"] = self._host_map
+        if isinstance(info.get("params"), dict):
+            self._host_map_param(info["params"])
         return info
+
+    def _host_map_param(self, params: Dict[str, Any]) -> None:
+        """``params["map"]``, the file Scenic resolved, named as the user's file instead of the jail's copy."""
+        if isinstance(params.get("map"), str):
+            params["map"] = self._host_names(params["map"])
 
     def render(self):
         """A frame (``rgb_array``), or the frame drawn in a window (``human``)."""
@@ -323,8 +328,7 @@ class JailedDV2SEnv(gym.Env):
             return None
         trace = EpisodeTrace.from_dict(data, "the jailed simulation's trace")
         trace.scenario_path = self._labels.get(trace.scenario, trace.scenario_path)
-        if self._host_map is not None and "map" in trace.params:
-            trace.params["map"] = self._host_map
+        self._host_map_param(trace.params)
         self._trace_cache = (self.steps, trace)
         return trace
 

@@ -242,7 +242,7 @@ def _old_monitors(sig: Sequence[tokenize.TokenInfo]) -> Tuple[List[Tuple[int, in
 
 
 _SCENIC2_ERRORS = re.compile(
-    r"(invalid syntax|unexpected token|2\.0-style|monitor must be converted|ScenicParseError|"
+    r"(Scenic 2 syntax|invalid syntax|unexpected token|2\.0-style|monitor must be converted|ScenicParseError|"
     r"instance creation|specifier|duration must specify a unit)", re.IGNORECASE
 )
 

@@ -241,8 +241,7 @@ def test_scenic_source_text():
     obs, info = env.reset(seed=0)
     _info_keys_ok(info, "<string>")
     assert 15 <= info["params"]["gap"] <= 25
-    assert len(env.unwrapped.road.vehicles) == 2
-    assert obs[1, 0] == 1  # the lead car is observed
+    assert obs[:, 0].tolist().count(1) == 2  # the ego and the lead car, and nobody else
     env.step(IDLE)
     env.close()
 
@@ -341,8 +340,6 @@ _DIGEST_SRC = '''
 import hashlib, json
 import numpy as np
 from envs.dv2s_env import DV2SEnv
-
-pytestmark = pytest.mark.usefixtures("in_process_simulator")
 
 def episode_digest(scenario, config, seed, actions):
     env = DV2SEnv(scenario=scenario, config=config)

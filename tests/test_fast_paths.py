@@ -103,6 +103,7 @@ other = new Car on network.lanes[2].centerline, with speed 22, with behavior Lan
 """
 
 
+@pytest.mark.usefixtures("in_process_simulator")  # reads Scenic's objects in the simulating process
 def test_lazy_dynamic_finals_equal_scenic_recomputation():
     import gymnasium as gym
 

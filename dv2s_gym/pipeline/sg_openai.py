@@ -306,7 +306,7 @@ _GEOMETRY = ("no scene satisfied", "rejection", "does not fit in container", "no
 _API = ("attributeerror", "has no attribute", "unknown specifier", "modulenotfounderror", "no module named",
         "importerror", "map not found", "unknown map", "failed to load", "unknown behavior",
         "not a class", "is not a behavior", "unknown property")
-_MISUSE = ("typeerror", "syntaxerror", "parseerror", "invalid syntax", "specifiererror", "indentationerror",
+_MISUSE = ("scenic 2 syntax", "typeerror", "syntaxerror", "parseerror", "invalid syntax", "specifiererror", "indentationerror",
            "missing a required argument", "unexpected keyword", "positional argument", "expected ':'",
            "specified twice", "valueerror", "invalidscenarioerror", "ambiguous", "cannot use", "must be")
 
