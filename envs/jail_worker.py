@@ -192,7 +192,9 @@ def main(argv: List[str]) -> int:
     start = time.perf_counter()
     import envs.dv2s_env  # noqa: F401  (the simulator: imported before hello, so starting includes it)
     import envs.jailed_env  # noqa: F401
+    from scenario_bank.jail.limits import start_charging_cpu
 
+    start_charging_cpu()
     wire.write_message(outbound, {"ok": True, "value": {"import_seconds": time.perf_counter() - start}})
     worker = _Worker()
     while True:

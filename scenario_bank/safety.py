@@ -159,7 +159,7 @@ domain's controllers. ``simulation`` may appear only as ``simulation().<one of t
 
 ENV_ATTRIBUTES = frozenset({
     # Gymnasium: Env, Wrapper, EnvSpec and registration (``spec.make()`` imports and calls any function)
-    "spec", "entry_point", "vector_entry_point", "kwargs", "make", "make_vec", "register", "registry",
+    "spec", "entry_point", "vector_entry_point", "runs_in_jail", "kwargs", "make", "make_vec", "register", "registry",
     "unwrapped", "env", "envs", "wrapper_spec", "get_wrapper_attr", "has_wrapper_attr", "set_wrapper_attr",
     "additional_wrappers", "disable_env_checker", "apply_api_compatibility", "order_enforce", "autoreset",
     "max_episode_steps", "reward_threshold", "nondeterministic", "np_random", "np_random_seed", "seed",

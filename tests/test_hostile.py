@@ -151,12 +151,12 @@ def test_a_normal_script_passes_the_sandbox():
 
 
 def test_the_child_gets_a_minimal_environment(monkeypatch):
-    from scenario_bank.sandbox import _minimal_env
+    from scenario_bank.jail.bwrap import SCRATCH, worker_environment
 
     monkeypatch.setenv("OPENAI_API_KEY", "sk-secret")
-    env = _minimal_env("/tmp/x")
+    env = worker_environment()
     assert "OPENAI_API_KEY" not in env and not any("KEY" in k or "TOKEN" in k for k in env)
-    assert env["HOME"] == "/tmp/x" and env["OMP_NUM_THREADS"] == "1"
+    assert env["HOME"].startswith(SCRATCH) and env["OMP_NUM_THREADS"] == "1"
 
 
 def test_a_script_that_fails_to_compile_is_a_clear_sandbox_error():
@@ -177,10 +177,10 @@ def test_path_methods_on_the_map_are_refused_and_a_local_map_still_compiles(tmp_
     from envs.scenarios import compile_scenario
 
     with pytest.raises(UnsafeScenarioError):
-        compile_scenario(hostile, path=str(tmp_path / "local_map.scenic"))
+        compile_scenario(hostile, path=str(tmp_path / "local_map.scenic"), trusted=True)  # the allowlist still runs
     script = tmp_path / "fine.scenic"
     script.write_text(head + body, encoding="utf-8")
-    compiled = compile_scenario(script.read_text(encoding="utf-8"), path=str(script))
+    compiled = compile_scenario(script.read_text(encoding="utf-8"), path=str(script), trusted=True)
     assert compiled.map_path.endswith("road.xodr") and (tmp_path / "road.xodr").is_file() and not marker.exists()
 
 
@@ -198,7 +198,7 @@ def test_the_text_compiled_is_the_text_checked_not_the_file_swapped_in_after(tmp
     assert check_script(text) == []
     marker = tmp_path / "swapped-ran"
     script.write_text(hostile_text(HOSTILE / "file_localpath_touch.scenic", marker), encoding="utf-8")
-    compiled = compile_scenario(text, path=str(script))
+    compiled = compile_scenario(text, path=str(script), trusted=True)
     assert compiled.source == text and compiled.map_path.endswith("road.xodr")
     compiled.sample(0)
     assert not marker.exists()

@@ -6,10 +6,14 @@ import os
 from dataclasses import dataclass, replace
 from typing import Optional
 
-__all__ = ["JailLimits"]
+__all__ = ["JailLimits", "START_CPU_SECONDS", "start_charging_cpu"]
 
 _MIB = 2**20
 _GIB = 2**30
+
+# CPU time a worker may spend starting (interpreter, simulator imports) before its budget starts:
+# a busy machine must not make a script's CPU limit fire in our own imports
+START_CPU_SECONDS = 120
 
 
 @dataclass(frozen=True)
@@ -23,8 +27,9 @@ class JailLimits:
     override them (:meth:`from_env`).
 
     Attributes:
-        cpu_seconds: CPU time of the whole worker (``RLIMIT_CPU``); a long-lived env
-            worker (training) needs hours, a one-off check seconds.
+        cpu_seconds: CPU time of the worker's requests (``RLIMIT_CPU``, counted from the
+            moment it has started; starting may take up to ``START_CPU_SECONDS`` more); a
+            long-lived env worker (training) needs hours, a one-off check seconds.
         memory_bytes: address space (``RLIMIT_AS``).
         file_bytes: largest file the worker may write in its scratch folder (``RLIMIT_FSIZE``).
         scratch_bytes: size of the scratch file system (a tmpfs).
@@ -73,7 +78,7 @@ class JailLimits:
         """``(resource, soft, hard)`` triples to set in the worker before it starts."""
         import resource
 
-        cpu = max(1, int(self.cpu_seconds))
+        cpu = max(1, int(self.cpu_seconds)) + START_CPU_SECONDS  # lowered by start_charging_cpu
         return [
             (resource.RLIMIT_CPU, cpu, cpu + 2),  # SIGXCPU at the soft limit, SIGKILL 2 s later
             (resource.RLIMIT_AS, self.memory_bytes, self.memory_bytes),
@@ -87,3 +92,23 @@ class JailLimits:
 
     def with_request_seconds(self, seconds: Optional[float]) -> "JailLimits":
         return self if seconds is None else replace(self, request_seconds=float(seconds))
+
+
+def start_charging_cpu() -> None:
+    """In the worker, once started: lower ``RLIMIT_CPU`` to the CPU used so far plus the budget.
+
+    The budget is what :meth:`JailLimits.rlimits` set beyond ``START_CPU_SECONDS``; a worker can
+    only lower its limits, so this cannot grant more than the parent allowed.
+    """
+    import math
+    import resource
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_CPU)
+    if soft == resource.RLIM_INFINITY:
+        return
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    used = int(math.ceil(usage.ru_utime + usage.ru_stime))
+    budget = max(1, soft - START_CPU_SECONDS)
+    new_soft = min(soft, used + budget)
+    new_hard = min(hard, new_soft + 2) if hard != resource.RLIM_INFINITY else new_soft + 2
+    resource.setrlimit(resource.RLIMIT_CPU, (new_soft, new_hard))
