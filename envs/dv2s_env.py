@@ -103,6 +103,12 @@ def _all_shipped(texts: Sequence[str], config: Optional[dict]) -> bool:
     return all(is_shipped_text(text) for text in texts)
 
 
+def _is_shipped(text: str) -> bool:
+    from scenario_bank.shipped import is_shipped_text
+
+    return is_shipped_text(text)
+
+
 def _copy_state(state: Dict[str, Any]) -> Dict[str, Any]:
     """Copy of an object's ``__dict__`` whose containers are not shared with the original."""
     return {k: (v.copy() if isinstance(v, (list, dict, set)) else v) for k, v in state.items()}
@@ -243,7 +249,8 @@ class DV2SEnv(AbstractEnv):
         jail_limits: Any = None,
     ) -> None:
         frozen = self.__dict__.pop("_frozen_refs", None)
-        self._trusted = bool(trusted) or frozen is not None
+        # trust is decided per text at compile time: explicit, or a script the package ships
+        self._trusted = bool(trusted) or os.environ.get("DV2S_IN_JAIL") == "1"
         self._scenario_refs = frozen if frozen is not None else resolve_scenarios(scenario, bank_dir)
         self._bank_dir = bank_dir
         self._compiled: Dict[ScenarioRef, CompiledScenario] = {}
@@ -459,6 +466,11 @@ class DV2SEnv(AbstractEnv):
             for ref in self._scenario_refs:
                 if ref.name == name:
                     return ref
+            if not self._trusted:
+                raise ValueError(
+                    f"reset(options={{'scenario': {name!r}}}): this env was made with "
+                    f"{', '.join(repr(r.name) for r in self._scenario_refs)}; a scenario it was not made with "
+                    f"needs its own env: gym.make('DV2S-v0', scenario={name!r})")
             from scenario_bank import scenario_path
 
             return ScenarioRef(name=name, path=str(scenario_path(name, self._bank_dir)))
@@ -481,7 +493,7 @@ class DV2SEnv(AbstractEnv):
                     text, path, origin = upgrade.source, None, ref.path
             self._compiled[ref] = compile_scenario(
                 text, name=ref.name, path=path, origin=origin, map_override=self.config["map"],
-                trusted=self._trusted,
+                trusted=self._trusted or _is_shipped(text),
             )
         return self._compiled[ref]
 

@@ -88,10 +88,14 @@ def test_jail_refuses_processes_network_writes_and_tracing(tmp_path):
         attempt("write_outside", lambda: open({str(tmp_path / "marker")!r}, "w").write("x"))
         attempt("write_usr", lambda: open("/usr/dv2s-marker", "w").write("x"))
         attempt("write_root", lambda: open("/dv2s-marker", "w").write("x"))
+        attempt("write_dev", lambda: open("/dev/dv2s-marker", "w").write("x"))  # /dev is a tmpfs of no set size
+        attempt("shm_over_1mib", lambda: open("/dev/shm/big", "wb").write(b"x" * (2 << 20)))
+        attempt("memfd", lambda: os.memfd_create("big"))  # memory the address-space limit does not count
         attempt("unshare", lambda: os.unshare(os.CLONE_NEWUSER) if hasattr(os, "unshare") else (_ for _ in ()).throw(OSError()))
         libc = ctypes.CDLL(None, use_errno=True)
         out["ptrace"] = "refused" if libc.ptrace(16, 1, 0, 0) != 0 else "allowed"  # PTRACE_ATTACH to pid 1
         out["kill_outside"] = "refused" if libc.kill({os.getpid()}, 0) != 0 else "allowed"  # this test's process
+        open("/dev/null", "w").write("device nodes still work")
         with open("/tmp/ok", "w") as f:
             f.write("scratch works")
         out["scratch"] = open("/tmp/ok").read()
@@ -191,6 +195,28 @@ def test_untrusted_text_runs_in_the_jail_shipped_names_in_process():
     edited = DV2SEnv(scenario=text + "\n# edited\n")
     assert isinstance(edited, JailedDV2SEnv)
     edited.close()
+
+
+def test_an_in_process_env_does_not_switch_to_a_script_outside_its_own(tmp_path):
+    """A bank folder whose scripts are not shipped: an env made from a shipped name in it runs in
+    process, and ``reset(options={"scenario": ...})`` may not reach the edited neighbour there."""
+    import shutil
+
+    from envs.dv2s_env import DV2SEnv
+
+    bank = tmp_path / "bank"
+    for name in (SHIPPED, "edited"):
+        shutil.copytree(bwrap.CODE_ROOT / "scenario_bank" / "scenarios" / SHIPPED, bank / name)
+    marker = tmp_path / "ran"
+    with open(bank / "edited" / "scenario.scenic", "a", encoding="utf-8") as handle:
+        handle.write(f"\nsimulation().env.spec.make  # {marker}\n")
+    env = DV2SEnv(scenario=SHIPPED, bank_dir=str(bank), config={"duration": 1.0})
+    assert not env.runs_in_jail
+    with pytest.raises(ValueError, match="needs its own env"):
+        env.reset(seed=0, options={"scenario": "edited"})
+    env.reset(seed=0, options={"scenario": SHIPPED})
+    env.close()
+    assert not marker.exists()
 
 
 def test_compile_scenario_refuses_untrusted_text_outside_the_jail():

@@ -112,6 +112,7 @@ def command(argv: Sequence[str], *, scratch_bytes: int, seccomp_fd: Optional[int
         "--dir", f"{SCRATCH}/home", "--dir", f"{SCRATCH}/tmp", "--dir", f"{SCRATCH}/work",
         "--chdir", f"{SCRATCH}/work",
         "--remount-ro", "/",
+        "--remount-ro", "/dev",  # bwrap's /dev is a tmpfs of no set size; its device nodes still work
     ]
     for key, value in environment.items():
         args += ["--setenv", key, value]

@@ -36,6 +36,8 @@ DENIED_SYSCALLS = (
     "clock_settime", "adjtimex", "clock_adjtime", "mknod", "mknodat", "personality", "lookup_dcookie",
     "fanotify_init", "move_mount", "open_tree", "fsopen", "fsmount", "fsconfig", "fspick", "pidfd_getfd",
     "kcmp", "vhangup", "uselib", "nfsservctl", "migrate_pages", "move_pages", "mbind", "set_mempolicy",
+    # anonymous files live in memory the address-space limit does not count
+    "memfd_create", "memfd_secret",
 )
 _CLONE_THREAD = 0x00010000
 _TIOCSTI = 0x5412
