@@ -158,6 +158,16 @@ def test_a_worker_claiming_a_huge_message_is_refused_before_reading():
         wire.read_message(stream, 2**20)
 
 
+def test_a_header_of_many_small_objects_is_refused_before_parsing():
+    # 40 MiB of "[]," would become ~700 MB of Python lists: refused by its declared size
+    size = 40 * 2**20
+    read, write = os.pipe()
+    os.write(write, struct.pack("<4sII", b"DV2S", size, 0))
+    os.close(write)
+    with os.fdopen(read, "rb") as stream, pytest.raises(JailProtocolError, match="header of .* bulk data"):
+        wire.read_message(stream, 256 * 2**20)
+
+
 LOOPING = textwrap.dedent("""
     param map = 'highway_straight'
     model scenic.domains.driving.model

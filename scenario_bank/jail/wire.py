@@ -30,6 +30,9 @@ __all__ = ["encode", "decode", "write_message", "read_message", "MAX_DEPTH"]
 MAGIC = b"DV2S"
 MAX_DEPTH = 64
 MAX_BUFFERS = 4096
+# JSON becomes Python objects up to ~20x its size ("[[],[],...]"): the header gets its own, smaller cap;
+# bulk data travels in the array buffers, which cost their size and no more
+MAX_HEADER_BYTES = 32 * 2**20
 _ALLOWED_KINDS = "biuf"  # bool, signed and unsigned integers, floats
 _PREFIX = struct.Struct("<4sII")
 
@@ -146,6 +149,9 @@ def read_message(stream: BinaryIO, max_bytes: int) -> Any:
     magic, header_size, count = _PREFIX.unpack(_read_exactly(stream, _PREFIX.size))
     if magic != MAGIC:
         raise JailProtocolError("the worker sent something that is not a message")
+    if header_size > min(max_bytes, MAX_HEADER_BYTES):
+        raise JailProtocolError(f"message header of {header_size} bytes is over the "
+                                f"{min(max_bytes, MAX_HEADER_BYTES)}-byte limit (bulk data goes in arrays)")
     if count > MAX_BUFFERS:
         raise JailProtocolError(f"message has {count} buffers (at most {MAX_BUFFERS})")
     sizes = struct.unpack(f"<{count}Q", _read_exactly(stream, 8 * count)) if count else ()
