@@ -240,6 +240,10 @@ def test_killed_writer_leaves_the_bank_as_it_was(bank):
 
 
 def _parallel_writer(root: str, worker: int, count: int) -> None:
+    import scenario_bank.bank as bank_module
+
+    # the locking and atomic writes are under test, not the check of each script: no jail start per entry
+    bank_module.verify = lambda script, label: None
     bank = Bank(root)
     for k in range(count):
         text = script(worker * 100 + k, f"param w{worker}_{k} = Range({worker}, {k + worker + 1})\n")
@@ -253,8 +257,8 @@ def test_parallel_writers_never_lose_or_corrupt_entries(bank):
     for p in workers:
         p.start()
     for p in workers:
-        p.join(120)
-        assert p.exitcode == 0
+        p.join(600)
+        assert p.exitcode == 0, f"writer exit code {p.exitcode} (None: still running after 600 s)"
     reopened = Bank(bank.root)
     assert len(reopened) == 32 and not reopened.problems
     index = json.loads(index_path(reopened).read_text())
