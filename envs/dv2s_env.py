@@ -24,7 +24,7 @@ from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.envs.common.observation import KinematicObservation
 
 import envs.rendering  # noqa: F401  (sets SDL/XDG variables before any viewer starts pygame)
-from envs.errors import InvalidActionError
+from envs.errors import InvalidActionError, check_config_keys
 from envs.hw_road import EventRoad
 from envs.observations import FastKinematicObservation
 from envs.safety_metrics import STANDING_SPEED, path_is_free, time_to_collision
@@ -263,6 +263,7 @@ class DV2SEnv(AbstractEnv):
         self._step_events: List[Dict[str, Any]] = []
         self._reset_seed: Optional[int] = None
         self._running_compiled: Optional[CompiledScenario] = None
+        check_config_keys(config, self.default_config())
         super().__init__(config, render_mode)
 
     # ------------------------------------------------------------------ config

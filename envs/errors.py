@@ -8,6 +8,8 @@ __all__ = [
     "UnsupportedConstructError",
     "SceneSamplingError",
     "InvalidActionError",
+    "UnknownConfigKeyError",
+    "check_config_keys",
     "StepTimeoutError",
 ]
 
@@ -35,6 +37,24 @@ class SceneSamplingError(DV2SError, RuntimeError):
 
 class InvalidActionError(DV2SError, ValueError):
     """An action outside the environment's action space."""
+
+
+class UnknownConfigKeyError(DV2SError, ValueError):
+    """A ``config=`` key the env does not have (a typo would otherwise be ignored)."""
+
+
+def check_config_keys(config, defaults) -> None:
+    """Raise :class:`UnknownConfigKeyError` naming each key of ``config`` not in ``defaults``, with a suggestion."""
+    import difflib
+
+    unknown = sorted(set(config or {}) - set(defaults))
+    if not unknown:
+        return
+    hints = []
+    for key in unknown:
+        close = difflib.get_close_matches(str(key), [str(k) for k in defaults], n=1)
+        hints.append(f"{key!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    raise UnknownConfigKeyError(f"unknown config key(s) {', '.join(hints)}; DV2SEnv.default_config() lists the keys")
 
 
 class ForeignConstructWarning(UserWarning):

@@ -21,7 +21,7 @@ import gymnasium as gym
 import numpy as np
 
 from envs.errors import DV2SError, InvalidActionError, ScenarioCompileError, SceneSamplingError, StepTimeoutError
-from envs.errors import UnsupportedConstructError
+from envs.errors import UnsupportedConstructError, check_config_keys
 from envs.trace import EpisodeTrace
 from scenario_bank.jail import JailError, JailLimitError, JailLimits, JailedProcess
 from scenario_bank.jail.process import JailRemoteError
@@ -138,10 +138,8 @@ class JailedDV2SEnv(gym.Env):
         self._refs = list(refs)
         self._labels = {ref.name: ref.path for ref in refs}
         user_config = dict(config or {})
-        unknown = sorted(set(user_config) - set(defaults)) if defaults else []
-        if unknown:
-            raise ValueError(f"unknown config key(s) {', '.join(map(repr, unknown))}; "
-                             "see DV2SEnv.default_config() for the keys")
+        if defaults:
+            check_config_keys(user_config, defaults)
         payload = [self._scenario_payload(ref, text) for ref, text in zip(refs, texts)]
         self._host_map = None
         if user_config.get("map") is not None:

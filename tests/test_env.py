@@ -95,6 +95,13 @@ def _unexpected(caught, allowed):
     ]
 
 
+def test_a_misspelt_config_key_is_refused_with_a_suggestion():
+    from envs.errors import UnknownConfigKeyError
+
+    with pytest.raises(UnknownConfigKeyError, match=r"'duraton' \(did you mean 'duration'\?\)"):
+        DV2SEnv(scenario=BRAKES, config={"duraton": 3.0})
+
+
 def test_gymnasium_env_checker_passes():
     from gymnasium.utils.env_checker import check_env
 
