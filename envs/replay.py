@@ -17,6 +17,27 @@ from envs.trace import EpisodeTrace, TraceMismatchError
 __all__ = ["replay_trace", "TraceMismatchError"]
 
 
+# a trace file is data from anywhere: its config may choose the episode, not how long a step may run
+_BOUNDS = {"simulation_frequency": (1, 1000), "policy_frequency": (1, 1000), "duration": (0, 24 * 3600)}
+
+
+def trace_config(trace: EpisodeTrace) -> dict:
+    """The env config a trace recorded, checked: known keys, bounded frequencies and duration,
+    and this machine's step time limit (never the trace's)."""
+    defaults = DV2SEnv.default_config()
+    config = {k: v for k, v in trace.config.items() if k in defaults and k != "step_time_limit"}
+    for key, (low, high) in _BOUNDS.items():
+        value = config.get(key, defaults[key])
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
+            raise ValueError(f"the trace's config has {key}={value!r}, outside [{low}, {high}]: the trace is "
+                             "damaged or was not written by env.save_trace()")
+    if config.get("policy_frequency", defaults["policy_frequency"]) > config.get(
+            "simulation_frequency", defaults["simulation_frequency"]):
+        raise ValueError("the trace's config has a policy frequency above its simulation frequency: the trace "
+                         "is damaged or was not written by env.save_trace()")
+    return config
+
+
 def replay_trace(trace: EpisodeTrace, *, render_mode: Optional[str] = None, check: bool = True,
                  frames: Optional[List[np.ndarray]] = None):
     """Re-run a traced episode with its actions; returns ``(env, replayed_trace)``.
@@ -25,7 +46,7 @@ def replay_trace(trace: EpisodeTrace, *, render_mode: Optional[str] = None, chec
     whose actor states differ from the trace. When ``frames`` is a list, a rendered
     frame is appended after the reset and after every step (needs ``render_mode="rgb_array"``).
     """
-    config = {k: v for k, v in trace.config.items() if k in DV2SEnv.default_config()}
+    config = trace_config(trace)
     path = Path(trace.scenario_path) if trace.scenario_path else None
     if path is not None and path.is_file() and path.read_text(encoding="utf-8") == trace.source:
         # The script is still where it was: compile it from there, so that paths in it

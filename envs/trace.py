@@ -33,6 +33,9 @@ class TraceMismatchError(AssertionError):
     """A replay diverged from its trace."""
 
 
+MAX_TRACE_BYTES = 64 * 2**20
+
+
 @dataclass
 class EpisodeTrace:
     """One episode, step by step."""
@@ -82,11 +85,23 @@ class EpisodeTrace:
 
     @classmethod
     def load(cls, path: Union[str, os.PathLike]) -> "EpisodeTrace":
-        """Read a trace written by :meth:`save`."""
-        raw = Path(path).read_bytes()
+        """Read a trace written by :meth:`save` (at most ``MAX_TRACE_BYTES``, compressed or not)."""
         try:
-            if raw[:2] == b"\x1f\x8b":
-                raw = gzip.decompress(raw)
+            with open(path, "rb") as handle:
+                raw = handle.read(MAX_TRACE_BYTES + 1)
+                if raw[:2] == b"\x1f\x8b":
+                    handle.seek(0)
+                    with gzip.GzipFile(fileobj=handle) as unzipped:  # streamed: a small bomb stays small
+                        raw = unzipped.read(MAX_TRACE_BYTES + 1)
+        except FileNotFoundError:
+            raise FileNotFoundError(f"no trace file {path}") from None
+        except (OSError, EOFError, zlib.error) as error:
+            raise ValueError(f"{path} is not a dv2s episode trace (corrupt or truncated file: {error}); "
+                             "save it again with env.save_trace()") from None
+        if len(raw) > MAX_TRACE_BYTES:
+            raise ValueError(f"{path}: a trace over {MAX_TRACE_BYTES // 2**20} MiB (uncompressed) is refused; "
+                             "a dv2s episode trace is far smaller: is this the right file?")
+        try:
             data = json.loads(raw.decode("utf-8"))
         except (OSError, EOFError, zlib.error, UnicodeDecodeError, json.JSONDecodeError) as error:
             raise ValueError(

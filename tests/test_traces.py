@@ -231,6 +231,40 @@ def test_trace_from_a_newer_version(tmp_path, discrete_episode):
         EpisodeTrace.load(path)
 
 
+def test_a_compressed_trace_is_read_with_a_size_cap(tmp_path):
+    # 1 MB of gzip that would become 1 GiB of text
+    path = tmp_path / "bomb.json.gz"
+    with gzip.open(path, "wb", compresslevel=9) as handle:
+        handle.write(b'{"version": 1, "pad": "')
+        chunk = b" " * 2**20
+        for _ in range(1024):
+            handle.write(chunk)
+        handle.write(b'"}')
+    assert path.stat().st_size < 4 * 2**20
+    with pytest.raises(ValueError, match="MiB .uncompressed. is refused"):
+        EpisodeTrace.load(path)
+
+
+@pytest.mark.parametrize("change", [{"simulation_frequency": 1e9}, {"policy_frequency": 0},
+                                    {"duration": float("inf")}, {"simulation_frequency": "15"}])
+def test_a_trace_cannot_set_how_the_replay_runs(tmp_path, discrete_episode, change):
+    """A trace file is data from anywhere: a shipped script with a config that would run for ever is refused."""
+    _, paths = discrete_episode
+    trace = EpisodeTrace.load(paths["json"])
+    trace.config.update(change)
+    with pytest.raises(ValueError, match="the trace's config has"):
+        replay_trace(trace)
+
+
+def test_a_trace_does_not_choose_the_step_time_limit(discrete_episode):
+    from envs.replay import trace_config
+
+    _, paths = discrete_episode
+    trace = EpisodeTrace.load(paths["json"])
+    trace.config["step_time_limit"] = None
+    assert "step_time_limit" not in trace_config(trace)
+
+
 def test_missing_trace_file(tmp_path):
     with pytest.raises(FileNotFoundError):
         EpisodeTrace.load(tmp_path / "absent.json")
