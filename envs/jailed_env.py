@@ -25,11 +25,12 @@ from envs.errors import UnsupportedConstructError, check_config_keys
 from envs.trace import EpisodeTrace
 from scenario_bank.jail import JailError, JailLimitError, JailLimits, JailedProcess
 from scenario_bank.jail.process import JailRemoteError
-from scenario_bank.safe_files import read_regular_file
+from scenario_bank.safe_files import read_in_folder, read_regular_file
 
 __all__ = ["JailedDV2SEnv", "space_to_data", "data_to_space", "parameter_ranges_of", "MAX_MAP_BYTES"]
 
-MAX_MAP_BYTES = 64 * 2**20
+MAX_MAP_BYTES = 64 * 2**20  # all map files of one scenario together
+MAX_MAP_FILES = 4
 _JAIL_SCENARIOS = "/tmp/scenarios"  # envs.jail_worker.SCRATCH: where the worker writes the scripts it runs
 _MAP_LINE = re.compile(r"""^[ \t]*param[ \t]+(map|sumo_map)[ \t]*=[ \t]*(localPath[ \t]*\([ \t]*)?(['"])([^'"\n\\]{1,1024})\3""",
                        re.M)
@@ -179,18 +180,25 @@ class JailedDV2SEnv(gym.Env):
     def _scenario_payload(ref: Any, text: str) -> Dict[str, Any]:
         files: Dict[str, np.ndarray] = {}
         folder = Path(ref.path).parent if ref.path else None
+        total = 0
         for value, local in map_references(text):
-            if not _looks_like_map_path(value) or not value.lower().endswith(".xodr"):
+            if folder is None or not _looks_like_map_path(value) or not value.lower().endswith(".xodr"):
                 continue
-            if local or not os.path.isabs(value):
-                if folder is None or os.path.isabs(value) or ".." in Path(value).parts:
-                    continue  # the allowlist in the jail names the problem
-                source = folder / value
-                key = value
-            else:
-                continue  # an absolute path: the jail cannot see it; the allowlist reports it there
-            if source.exists():
-                files[key] = np.frombuffer(read_regular_file(source, MAX_MAP_BYTES), dtype=np.uint8)
+            if os.path.isabs(value) or value.startswith("~"):
+                continue  # the jail cannot see it; the allowlist in the jail names the problem
+            key = os.path.normpath(value)
+            if key in files or key.startswith("..") or key == ".":
+                continue  # one copy per file however it is spelt; outside the script's folder: refused there
+            if len(files) >= MAX_MAP_FILES:
+                raise ValueError(f"{ref.path}: names more than {MAX_MAP_FILES} map files; a scenario uses one")
+            try:
+                data = read_in_folder(folder, key, MAX_MAP_BYTES)  # no symbolic link followed at any level
+            except FileNotFoundError:
+                continue  # Scenic reports the missing map, in the jail
+            total += len(data)
+            if total > MAX_MAP_BYTES:
+                raise ValueError(f"{ref.path}: its map files add up to over {MAX_MAP_BYTES // 2**20} MiB")
+            files[key] = np.frombuffer(data, dtype=np.uint8)
         name = Path(ref.path).name if ref.path else "scenario.scenic"
         return {"name": ref.name, "text": text, "filename": name if name.endswith(".scenic") else "scenario.scenic",
                 "files": files}

@@ -229,6 +229,32 @@ def test_an_in_process_env_does_not_switch_to_a_script_outside_its_own(tmp_path)
     assert not marker.exists()
 
 
+def test_map_files_go_into_the_jail_once_each_and_within_a_total(tmp_path):
+    """However often and however spelt a script names its map, its bytes are read and sent once;
+    more map files than a scenario uses are refused before they are read."""
+    from envs.dv2s_env import ScenarioRef
+    from envs.jailed_env import MAX_MAP_FILES, JailedDV2SEnv
+
+    (tmp_path / "road.xodr").write_bytes(b"<OpenDRIVE/>")
+    spellings = ["road.xodr", "./road.xodr", "././road.xodr", ".//road.xodr"]
+    text = '"""\n' + "".join(f"param map = localPath('{s}')\n" for s in spellings) + '"""\n'
+    script = tmp_path / "s.scenic"
+    payload = JailedDV2SEnv._scenario_payload(ScenarioRef(name="s", path=str(script)), text)
+    assert list(payload["files"]) == ["road.xodr"]
+    for k in range(MAX_MAP_FILES + 1):
+        (tmp_path / f"m{k}.xodr").write_bytes(b"<OpenDRIVE/>")
+    many = "".join(f"param map = 'm{k}.xodr'\n" for k in range(MAX_MAP_FILES + 1))
+    with pytest.raises(ValueError, match="more than .* map files"):
+        JailedDV2SEnv._scenario_payload(ScenarioRef(name="s", path=str(script)), many)
+    (tmp_path / "sub").symlink_to(tmp_path / "elsewhere", target_is_directory=True)
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / "private.xodr").write_bytes(b"secret")
+    from scenario_bank.safe_files import UnsafeInputError
+
+    with pytest.raises(UnsafeInputError):
+        JailedDV2SEnv._scenario_payload(ScenarioRef(name="s", path=str(script)), "param map = 'sub/private.xodr'\n")
+
+
 def test_compile_scenario_refuses_untrusted_text_outside_the_jail():
     from envs.errors import UntrustedScenarioError
     from envs.scenarios import compile_scenario
