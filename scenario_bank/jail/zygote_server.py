@@ -39,8 +39,8 @@ A worker (``SPAWN``, which passes the worker's three pipe ends):
   (:meth:`.JailLimits.rlimits`, CPU counted from zero) and runs
   ``MODULE.serve(3, 4, started)`` (requests in on fd 3, answers out on fd 4,
   output on fds 1 and 2);
-- the middle process hands the zygote a pidfd of the worker, waits for it and
-  exits with its status (128 + the signal when one killed it, as bubblewrap does).
+- the middle process hands the zygote a pidfd of the worker, drops its
+  capabilities, waits for the worker and exits with its status (128 + the signal when one killed it, as bubblewrap does).
 
 ``KILL`` sends SIGKILL through that pidfd: the worker is the init of its PID
 namespace, so nothing in it survives. When the zygote ends (its socket closes),
@@ -292,6 +292,7 @@ class _Zygote:
             os.close(pidfd)
             channel.close()
             os.closerange(0, _CHANNEL_FD)  # the worker is the only holder of its pipes: its death closes them
+            linux.drop_capabilities()  # it only waits now
             code = _exit_code(os.waitpid(worker, 0)[1])
         finally:
             os._exit(code)
