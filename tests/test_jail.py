@@ -220,7 +220,17 @@ def test_a_forked_worker_sees_and_reaches_only_itself(zygote_only):
     first, second = JailedProcess(PROBE, name="first"), JailedProcess(PROBE, name="second")
     try:
         assert first.forked and second.forked
-        _run(second, "open('/tmp/work/secret', 'w').write('the sibling'); result = None")
+        _run(second, """
+            import socket
+            open("/tmp/work/secret", "w").write("the sibling")
+            listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            listener.bind("\\0dv2s-sibling")  # abstract names belong to the network namespace
+            listener.listen()
+            import sys
+            sys.dv2s_listener = listener  # kept open after this request
+            socket.socket(socket.AF_UNIX, socket.SOCK_STREAM).connect("\\0dv2s-sibling")
+            result = None
+        """)
         seen = _run(first, """
             import os
             reached = []
@@ -230,6 +240,12 @@ def test_a_forked_worker_sees_and_reaches_only_itself(zygote_only):
                     reached.append(pid)
                 except ProcessLookupError:
                     pass
+            import socket
+            try:
+                socket.socket(socket.AF_UNIX, socket.SOCK_STREAM).connect("\\0dv2s-sibling")
+                reached.append("the sibling's socket")
+            except ConnectionRefusedError:
+                pass
             result = {"ids": [os.getpid(), os.getpgid(0), os.getsid(0)], "reached": reached,
                       "processes": sorted(int(p) for p in os.listdir("/proc") if p.isdigit()),
                       "scratch": sorted(os.listdir("/tmp")), "secret": os.path.exists("/tmp/work/secret")}
@@ -266,6 +282,16 @@ def test_killing_one_forked_worker_leaves_the_zygote_and_its_siblings(zygote_onl
         assert _run(third, "result = 'new'") == "new"
     assert zygote._ZYGOTES[(os.getpid(), PROBE)] is fork_server and fork_server.alive()
     second.close()
+
+
+def test_where_no_zygote_can_start_each_worker_gets_a_bubblewrap(zygote_only, monkeypatch):
+    monkeypatch.setattr(zygote, "_PROBE", {})
+    monkeypatch.setattr(zygote, "_ZYGOTES", {})
+    monkeypatch.setattr(zygote, "CAPABILITIES", ())  # so it cannot mount the procfs its workers need
+    with JailedProcess(PROBE, name="probe") as worker:
+        assert not worker.forked and _run(worker, "result = 1") == 1
+    ok, why = zygote.zygote_status()
+    assert not ok and "Operation not permitted" in why and not zygote.enabled()
 
 
 REFUSALS = """

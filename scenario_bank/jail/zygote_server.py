@@ -195,6 +195,8 @@ class _Zygote:
                 return _pack_reply(op, code, message=message), []
             return _pack_reply(op, worker=worker), [os.dup(pidfd)]
         _close(fds)
+        if op == SPAWN:
+            return _pack_reply(op, errno.EINVAL, message=f"a new worker needs 3 pipe ends, not {len(fds)}"), []
         if op == KILL:
             self.kill(worker)
             return _pack_reply(op, worker=worker), []
@@ -443,6 +445,8 @@ def main(argv: List[str]) -> int:
         module.preload()
         zygote.serve_worker = module.serve
         linux.prctl(linux.PR_SET_DUMPABLE, 0)
+        sys.stdout.flush()  # or every worker would print what the imports left in the buffers
+        sys.stderr.flush()
     except Exception as error:
         code, message = _describe(error)
         host.send(_pack_reply(READY, code, message=message))
