@@ -43,7 +43,11 @@ A worker (``SPAWN``, which passes the worker's three pipe ends):
   capabilities, waits for the worker and exits with its status (128 + the signal when one killed it, as bubblewrap does).
 
 ``KILL`` sends SIGKILL through that pidfd: the worker is the init of its PID
-namespace, so nothing in it survives. When the zygote ends (its socket closes),
+namespace, so nothing in it survives. Being that init, the worker ignores
+signals it has no handler for unless they come from outside its namespace, so
+the soft CPU limit's SIGXCPU does nothing; the hard limit's SIGKILL, 2 s of CPU
+later, ends it (exit status 137, which :class:`.JailedProcess` names as the CPU
+limit). When the zygote ends (its socket closes),
 bubblewrap's init ends and every worker with it.
 """
 
