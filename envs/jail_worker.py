@@ -1,8 +1,10 @@
 """The jailed side of ``DV2S-v0``: one simulation, driven by requests from the user's process.
 
-Started only by :class:`scenario_bank.jail.JailedProcess` as ``python -m
-envs.jail_worker IN_FD OUT_FD`` inside bubblewrap. It imports the simulator,
-says hello, then answers requests (:mod:`scenario_bank.jail.wire` messages):
+Started only by :class:`scenario_bank.jail.JailedProcess`: forked by the jail's
+zygote, which imported the simulator once (:func:`preload`) and calls :func:`serve`,
+or as ``python -m envs.jail_worker IN_FD OUT_FD`` inside bubblewrap (:func:`main`:
+import, then serve). It says hello, then answers requests
+(:mod:`scenario_bank.jail.wire` messages):
 
 - ``open``: write the scenario texts and the map files sent with them into the
   scratch folder, build a :class:`~envs.dv2s_env.DV2SEnv` over them (the
@@ -120,11 +122,17 @@ class _Worker:
                files: Optional[dict] = None, filename: Optional[str] = None) -> dict:
         from envs.sandbox_checks import check_compiles_and_runs
 
+        import resource
+
         folder = self._write_files(0, files or {})
         path = os.path.join(folder, filename or "scenario.scenic")
         with open(path, "w", encoding="utf-8") as handle:
             handle.write(script)
-        return check_compiles_and_runs(script, name, path, seeds, run_seconds, max_sample_iterations)
+        result = check_compiles_and_runs(script, name, path, seeds, run_seconds, max_sample_iterations)
+        if isinstance(result.get("timings"), dict):  # a forked worker is not the user's child: it says its CPU time
+            usage = resource.getrusage(resource.RUSAGE_SELF)
+            result["timings"]["cpu"] = usage.ru_utime + usage.ru_stime
+        return result
 
     def parameter_ranges(self, name: str, text: str, files: Optional[dict] = None,
                          filename: Optional[str] = None) -> dict:
@@ -184,18 +192,20 @@ def _error(error: BaseException) -> dict:
     return details
 
 
-def main(argv: List[str]) -> int:
+def preload() -> None:
+    """Import the simulator: what starting a worker costs, done once by the zygote for all its workers."""
+    import envs.dv2s_env  # noqa: F401
+    import envs.jailed_env  # noqa: F401
+
+
+def serve(inbound_fd: int, outbound_fd: int, started: float) -> int:
+    """Say hello (``started``: :func:`time.perf_counter` when starting began), then answer requests until
+    ``exit`` or the end of the input; the exit status."""
     from scenario_bank.jail import wire
 
-    inbound = os.fdopen(int(argv[0]), "rb", buffering=0)
-    outbound = os.fdopen(int(argv[1]), "wb", buffering=0)
-    start = time.perf_counter()
-    import envs.dv2s_env  # noqa: F401  (the simulator: imported before hello, so starting includes it)
-    import envs.jailed_env  # noqa: F401
-    from scenario_bank.jail.limits import start_charging_cpu
-
-    start_charging_cpu()
-    wire.write_message(outbound, {"ok": True, "value": {"import_seconds": time.perf_counter() - start}})
+    inbound = os.fdopen(inbound_fd, "rb", buffering=0)
+    outbound = os.fdopen(outbound_fd, "wb", buffering=0)
+    wire.write_message(outbound, {"ok": True, "value": {"import_seconds": time.perf_counter() - started}})
     worker = _Worker()
     while True:
         try:
@@ -218,6 +228,16 @@ def main(argv: List[str]) -> int:
             wire.write_message(outbound, reply)
         except Exception as error:  # an answer that cannot be sent (e.g. an object) is an error answer
             wire.write_message(outbound, {"ok": False, "error": _error(error)})
+
+
+def main(argv: List[str]) -> int:
+    """``python -m envs.jail_worker IN_FD OUT_FD``: import the simulator, then :func:`serve`."""
+    from scenario_bank.jail.limits import start_charging_cpu
+
+    start = time.perf_counter()
+    preload()  # before hello, so starting includes it
+    start_charging_cpu()
+    return serve(int(argv[0]), int(argv[1]), start)
 
 
 if __name__ == "__main__":

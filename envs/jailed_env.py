@@ -358,7 +358,7 @@ class JailedDV2SEnv(gym.Env):
     # ------------------------------------------------------------------ cleanup
     @property
     def worker_pid(self) -> Optional[int]:
-        """The process id of the jail (bubblewrap) on this machine."""
+        """The jailed worker's process id on this machine (bubblewrap's, when bubblewrap started it)."""
         return self._worker.pid
 
     def close(self) -> None:

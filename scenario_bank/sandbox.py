@@ -168,7 +168,8 @@ def run_in_sandbox(
         return SandboxResult(False, stage, "the sandboxed check answered nothing", None, None, wall)
     timings = data.get("timings") if isinstance(data.get("timings"), dict) else {}
     timings = {str(k): float(v) for k, v in timings.items() if isinstance(v, (int, float))}
-    timings["cpu"] = _children_cpu() - cpu_before
+    # a worker bubblewrap started is our child; one the zygote forked reports its own CPU time
+    timings["cpu"] = max(timings.get("cpu", 0.0), _children_cpu() - cpu_before)
     if data.get("ok") is True:
         return SandboxResult(True, "done", "", None, None, wall, timings)
     return SandboxResult(False, str(data.get("stage", "sample")), str(data.get("message", ""))[:4000],

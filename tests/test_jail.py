@@ -15,13 +15,16 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from scenario_bank.jail import JailedProcess, JailLimits, JailProtocolError, jail_status
-from scenario_bank.jail import bwrap, seccomp, wire
+from scenario_bank.jail import JailedProcess, JailError, JailLimitError, JailLimits, JailProtocolError, jail_status
+from scenario_bank.jail import bwrap, seccomp, wire, zygote
+from scenario_bank.jail.limits import START_CPU_SECONDS
+from scenario_bank.jail.process import discard_spares
 
 pytestmark = pytest.mark.skipif(not jail_status()[0], reason=f"no jail here: {jail_status()[1]}")
 
 CANARY = "sk-dv2s-canary-0123456789"
 SHIPPED = "highway_cut_in_from_left"
+PROBE = "scenario_bank.jail.probe"  # a worker that runs the Python it is sent
 
 
 def _limit() -> None:
@@ -120,16 +123,246 @@ def _session_processes(sid: int):
     return found
 
 
-def test_killing_a_worker_leaves_no_process():
+def _running(pid) -> bool:
+    """Whether process ``pid`` exists on this machine and is not a zombie."""
+    try:
+        with open(f"/proc/{pid}/stat", encoding="ascii") as handle:
+            return handle.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+def _descendants(root: int):
+    """``root``'s descendants on this machine (in any PID namespace below ours)."""
+    children = {}
+    for pid in os.listdir("/proc"):
+        try:
+            with open(f"/proc/{pid}/stat", encoding="ascii") as handle:
+                children.setdefault(int(handle.read().rsplit(")", 1)[1].split()[1]), []).append(int(pid))
+        except (OSError, ValueError, IndexError):
+            pass
+    found, todo = [], [root]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            found.append(child)
+            todo.append(child)
+    return found
+
+
+def _eventually(condition, seconds: float = 10.0) -> bool:
+    deadline = time.monotonic() + seconds
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.05)
+    return True
+
+
+@pytest.fixture(params=[True, False], ids=["zygote", "bubblewrap"])
+def forked(request, monkeypatch):
+    """Run the test with workers forked by the zygote, then with a bubblewrap per worker."""
+    if request.param:
+        if not zygote.zygote_status()[0]:
+            pytest.skip(f"no zygote here: {zygote.zygote_status()[1]}")
+    else:
+        monkeypatch.setenv("DV2S_JAIL_ZYGOTE", "0")
+    return request.param
+
+
+@pytest.fixture
+def zygote_only():
+    if not zygote.zygote_status()[0]:
+        pytest.skip(f"no zygote here: {zygote.zygote_status()[1]}")
+
+
+def _run(worker: JailedProcess, code: str):
+    return worker.call("run", code=textwrap.dedent(code))
+
+
+def test_killing_a_worker_leaves_no_process(forked):
     worker = JailedProcess("envs.jail_worker", name="probe")
+    assert worker.forked == forked
     pid = worker.pid
-    assert _session_processes(pid)
+    assert _running(pid)
     worker.kill()
-    for _ in range(50):
-        if not _session_processes(pid):
-            break
-        time.sleep(0.1)
-    assert _session_processes(pid) == []
+    assert _eventually(lambda: not _running(pid) and not _session_processes(pid))
+
+
+def test_stopping_the_zygotes_leaves_no_process(zygote_only):
+    workers = [JailedProcess(PROBE, name="probe") for _ in range(2)]
+    fork_server = zygote._ZYGOTES[(os.getpid(), PROBE)]
+    jail = _descendants(fork_server.pid)  # bubblewrap's init, the zygote, two middle processes, two workers
+    assert len(jail) >= 6 and {w.pid for w in workers} <= set(jail)
+    discard_spares()
+    assert _eventually(lambda: not any(_running(pid) for pid in [fork_server.pid, *jail]))
+    for worker in workers:
+        with pytest.raises(JailError):
+            _run(worker, "result = 1")
+
+
+def test_the_zygote_and_its_workers_die_with_the_users_process(zygote_only, tmp_path):
+    code = (f"import os, sys, time; sys.path.insert(0, {str(bwrap.CODE_ROOT)!r})\n"
+            "from scenario_bank.jail import JailedProcess, zygote\n"
+            f"worker = JailedProcess({PROBE!r})\n"
+            f"print(worker.pid, zygote._ZYGOTES[(os.getpid(), {PROBE!r})].pid, flush=True)\n"
+            "time.sleep(600)\n")
+    user = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        worker_pid, zygote_pid = map(int, user.stdout.readline().split())
+        assert _running(worker_pid) and _running(zygote_pid)
+    finally:
+        user.kill()
+        user.wait()
+    assert _eventually(lambda: not _running(worker_pid) and not _running(zygote_pid))
+
+
+def test_a_forked_worker_sees_and_reaches_only_itself(zygote_only):
+    first, second = JailedProcess(PROBE, name="first"), JailedProcess(PROBE, name="second")
+    try:
+        assert first.forked and second.forked
+        _run(second, """
+            import socket
+            open("/tmp/work/secret", "w").write("the sibling")
+            listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            listener.bind("\\0dv2s-sibling")  # abstract names belong to the network namespace
+            listener.listen()
+            import sys
+            sys.dv2s_listener = listener  # kept open after this request
+            socket.socket(socket.AF_UNIX, socket.SOCK_STREAM).connect("\\0dv2s-sibling")
+            result = None
+        """)
+        seen = _run(first, """
+            import os
+            reached = []
+            for pid in range(2, 4097):  # 1 is itself
+                try:
+                    os.kill(pid, 0)
+                    reached.append(pid)
+                except ProcessLookupError:
+                    pass
+            import socket
+            try:
+                socket.socket(socket.AF_UNIX, socket.SOCK_STREAM).connect("\\0dv2s-sibling")
+                reached.append("the sibling's socket")
+            except ConnectionRefusedError:
+                pass
+            result = {"ids": [os.getpid(), os.getpgid(0), os.getsid(0)], "reached": reached,
+                      "processes": sorted(int(p) for p in os.listdir("/proc") if p.isdigit()),
+                      "scratch": sorted(os.listdir("/tmp")), "secret": os.path.exists("/tmp/work/secret")}
+        """)
+        assert seen == {"ids": [1, 1, 1], "reached": [], "processes": [1], "scratch": ["home", "tmp", "work"],
+                        "secret": False}
+        everyone = _run(first, """
+            import os, signal
+            try:
+                os.kill(-1, signal.SIGKILL)  # every process it may signal but itself
+                result = "killed some"
+            except ProcessLookupError:
+                result = "no one"
+        """)
+        assert everyone == "no one"
+        # its process group is itself alone, and the init of a PID namespace ignores its own SIGKILL
+        assert _run(first, "import os, signal; os.killpg(0, signal.SIGKILL); result = 'here'") == "here"
+        assert _run(second, "result = open('/tmp/work/secret').read()") == "the sibling"
+        with JailedProcess(PROBE, name="third") as third:  # the zygote is alive too
+            assert third.forked and _run(third, "import os; result = os.listdir('/tmp/work')") == []
+    finally:
+        first.close()
+        second.close()
+
+
+def test_killing_one_forked_worker_leaves_the_zygote_and_its_siblings(zygote_only):
+    first, second = JailedProcess(PROBE, name="first"), JailedProcess(PROBE, name="second")
+    fork_server = zygote._ZYGOTES[(os.getpid(), PROBE)]
+    pid = first.pid
+    first.kill()
+    assert _eventually(lambda: not _running(pid))
+    assert _running(second.pid) and _run(second, "result = 2 + 2") == 4
+    with JailedProcess(PROBE, name="third") as third:
+        assert _run(third, "result = 'new'") == "new"
+    assert zygote._ZYGOTES[(os.getpid(), PROBE)] is fork_server and fork_server.alive()
+    second.close()
+
+
+def test_where_no_zygote_can_start_each_worker_gets_a_bubblewrap(zygote_only, monkeypatch):
+    monkeypatch.setattr(zygote, "_PROBE", {})
+    monkeypatch.setattr(zygote, "_ZYGOTES", {})
+    monkeypatch.setattr(zygote, "CAPABILITIES", ())  # so it cannot mount the procfs its workers need
+    with JailedProcess(PROBE, name="probe") as worker:
+        assert not worker.forked and _run(worker, "result = 1") == 1
+    ok, why = zygote.zygote_status()
+    assert not ok and "Operation not permitted" in why and not zygote.enabled()
+
+
+REFUSALS = """
+    import ctypes, errno, json, os, socket
+    out = {}
+    def attempt(name, call):
+        try:
+            call()
+            out[name] = "allowed"
+        except OSError as error:
+            out[name] = "refused"
+    libc = ctypes.CDLL(None, use_errno=True)
+    def libc_call(name, *args):
+        if getattr(libc, name)(*args) != 0:
+            raise OSError(ctypes.get_errno(), name)
+    attempt("fork", os.fork)
+    attempt("inet", lambda: socket.socket(socket.AF_INET, socket.SOCK_STREAM))
+    attempt("inet6", lambda: socket.socket(socket.AF_INET6, socket.SOCK_DGRAM))
+    attempt("ptrace", lambda: libc_call("ptrace", 16, 1, 0, 0))  # PTRACE_ATTACH
+    attempt("unshare", lambda: libc_call("unshare", 0x10000000))  # CLONE_NEWUSER
+    attempt("mount", lambda: libc_call("mount", b"none", b"/tmp/tmp", b"tmpfs", 0, None))
+    attempt("memfd", lambda: os.memfd_create("big"))
+    attempt("kill_outside", lambda: os.kill(HOST_PID, 0))
+    attempt("write_usr", lambda: open("/usr/dv2s-marker", "w").write("x"))
+    attempt("write_dev", lambda: open("/dev/dv2s-marker", "w").write("x"))
+    def write(path, size):
+        with open(path, "wb") as handle:  # closing flushes: a short write fails there
+            handle.write(b"x" * size)
+    attempt("shm_over_1mib", lambda: write("/dev/shm/big", 2 << 20))
+    attempt("file_over_limit", lambda: write("/tmp/tmp/file", FILE_BYTES + 1))
+    attempt("scratch_over_limit", lambda: [write(f"/tmp/tmp/part{i}", FILE_BYTES) for i in range(8)])
+    status = dict(line.split(":", 1) for line in open("/proc/self/status"))
+    import resource
+    result = {"attempts": out, "env": dict(os.environ), "uid": os.getuid(),
+              "status": {k: status[k].strip() for k in ("CapInh", "CapPrm", "CapEff", "CapBnd", "CapAmb",
+                                                        "NoNewPrivs", "Seccomp")},
+              "rlimits": {name: list(resource.getrlimit(getattr(resource, name)))
+                          for name in ("RLIMIT_AS", "RLIMIT_CPU", "RLIMIT_FSIZE", "RLIMIT_NOFILE", "RLIMIT_CORE")}}
+"""
+
+
+def test_a_worker_is_refused_and_holds_what_a_jailed_worker_does(forked, monkeypatch):
+    monkeypatch.setenv("CANARY_API_KEY", CANARY)
+    limits = JailLimits(cpu_seconds=50, memory_bytes=3 * 2**30, file_bytes=2 * 2**20, scratch_bytes=8 * 2**20,
+                        open_files=100)
+    with JailedProcess(PROBE, name="probe", limits=limits) as worker:
+        assert worker.forked == forked
+        found = _run(worker, REFUSALS.replace("HOST_PID", str(os.getpid())).replace("FILE_BYTES", str(2 * 2**20)))
+    assert {k for k, v in found["attempts"].items() if v != "refused"} == set(), found["attempts"]
+    assert CANARY not in json.dumps(found["env"]) and set(found["env"]) <= set(bwrap.worker_environment()) | {"PWD"}
+    assert found["uid"] == 65534
+    assert found["status"] == {"CapInh": "0000000000000000", "CapPrm": "0000000000000000",
+                               "CapEff": "0000000000000000", "CapBnd": "0000000000000000",
+                               "CapAmb": "0000000000000000", "NoNewPrivs": "1", "Seccomp": "2"}
+    rlimits = found["rlimits"]
+    assert rlimits["RLIMIT_AS"] == [3 * 2**30] * 2 and rlimits["RLIMIT_FSIZE"] == [2 * 2**20] * 2
+    assert rlimits["RLIMIT_NOFILE"] == [100, 100] and rlimits["RLIMIT_CORE"] == [0, 0]
+    cpu = 50 if forked else 50 + START_CPU_SECONDS  # a forked worker's CPU time starts at zero, with the budget
+    assert rlimits["RLIMIT_CPU"] == [cpu, cpu + 2]
+
+
+def test_a_busy_forked_worker_is_stopped_by_the_wall_clock_and_the_cpu_limit(zygote_only):
+    with JailedProcess(PROBE, name="spinner", limits=JailLimits(request_seconds=2)) as worker:
+        pid = worker.pid
+        with pytest.raises(JailLimitError, match="2 s wall-clock limit") as caught:
+            _run(worker, "while True: pass")
+        assert caught.value.limit == "wall" and _eventually(lambda: not _running(pid))
+    with JailedProcess(PROBE, name="spinner", limits=JailLimits(cpu_seconds=1, request_seconds=120)) as worker:
+        with pytest.raises(JailLimitError, match="1 s CPU-time limit") as caught:
+            _run(worker, "while True: pass")
+        assert caught.value.limit == "cpu"
 
 
 def test_wire_refuses_what_is_not_data():
@@ -192,7 +425,7 @@ def test_a_script_that_never_yields_is_stopped_by_the_wall_clock(monkeypatch):
         env.step(1)
     assert "limit" in str(caught.value)
     env.close()
-    assert _session_processes(pid) == []
+    assert _eventually(lambda: not _running(pid) and _session_processes(pid) == [])
 
 
 def test_untrusted_text_runs_in_the_jail_shipped_names_in_process():

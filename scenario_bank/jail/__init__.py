@@ -15,6 +15,10 @@ carries data, never objects.
 - :mod:`.wire`: the data-only message format, validated on the way in.
 - :mod:`.process`: :class:`JailedProcess`, one worker and its request/response
   channel, its captured (bounded) output and its kill.
+- :mod:`.zygote` and :mod:`.zygote_server`: the fork server that imports the
+  simulator once and forks each new worker into fresh namespaces in milliseconds
+  (:mod:`.linux`: the system calls it needs; :mod:`.probe`: a worker for the
+  jail's own tests).
 
 This package imports nothing else of dv2s-gym, so every layer can use it.
 """

@@ -20,13 +20,20 @@ import sys
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
 
-__all__ = ["CODE_ROOT", "PACKAGES", "bwrap_path", "command", "worker_environment", "SCRATCH"]
+__all__ = ["CODE_ROOT", "PACKAGES", "bwrap_path", "command", "worker_environment", "SCRATCH", "SCRATCH_DIRS",
+           "SHM_BYTES", "WORKER_UID"]
 
 CODE_ROOT = Path(__file__).resolve().parents[2]
 """The folder holding dv2s-gym's packages; the worker imports this code, not another copy."""
 PACKAGES = ("envs", "scenario_bank", "policies")
 """The packages a worker may import (never ``dv2s_gym``: the front door has no business in the jail)."""
 SCRATCH = "/tmp"
+SCRATCH_DIRS = ("home", "tmp", "work")
+"""The folders made in the scratch tmpfs; the worker starts in ``work``."""
+SHM_BYTES = 2**20
+"""Size of the jail's ``/dev/shm`` tmpfs."""
+WORKER_UID = 65534
+"""The worker's user and group id in the jail (nobody)."""
 _ETC = ("ld.so.cache", "ld.so.conf", "ld.so.conf.d", "localtime", "alternatives", "fonts", "mime.types")
 
 
@@ -93,23 +100,29 @@ def _mounts() -> List[str]:
 
 
 def command(argv: Sequence[str], *, scratch_bytes: int, seccomp_fd: Optional[int],
-            environment: Dict[str, str]) -> List[str]:
-    """The full ``bwrap ... -- argv`` command line."""
+            environment: Dict[str, str], uid: int = WORKER_UID, capabilities: Sequence[str] = ()) -> List[str]:
+    """The full ``bwrap ... -- argv`` command line.
+
+    ``uid`` and ``capabilities`` (kept in the jail's own user namespace) are for the zygote, which
+    starts as uid 0 with ``CAP_SYS_ADMIN`` and ``CAP_SETFCAP`` there, does what needs them and
+    drops them before anything else runs (:mod:`.zygote_server`); a worker gets uid 65534 and none.
+    """
     bwrap = bwrap_path()
     if bwrap is None:
         raise FileNotFoundError("bwrap")
+    capability_args = [arg for cap in capabilities for arg in ("--cap-add", cap)]
     args = [
         bwrap,
         "--unshare-user", "--unshare-ipc", "--unshare-pid", "--unshare-net", "--unshare-uts",
         "--unshare-cgroup-try",
-        "--uid", "65534", "--gid", "65534", "--hostname", "dv2s-jail",
-        "--die-with-parent", "--new-session", "--cap-drop", "ALL", "--clearenv",
+        "--uid", str(int(uid)), "--gid", str(int(uid)), "--hostname", "dv2s-jail",
+        "--die-with-parent", "--new-session", "--cap-drop", "ALL", *capability_args, "--clearenv",
         *_mounts(),
         "--proc", "/proc",
         "--dev", "/dev",
         "--size", str(int(scratch_bytes)), "--tmpfs", SCRATCH,
-        "--size", str(1024 * 1024), "--tmpfs", "/dev/shm",
-        "--dir", f"{SCRATCH}/home", "--dir", f"{SCRATCH}/tmp", "--dir", f"{SCRATCH}/work",
+        "--size", str(SHM_BYTES), "--tmpfs", "/dev/shm",
+        *[arg for name in SCRATCH_DIRS for arg in ("--dir", f"{SCRATCH}/{name}")],
         "--chdir", f"{SCRATCH}/work",
         "--remount-ro", "/",
         "--remount-ro", "/dev",  # bwrap's /dev is a tmpfs of no set size; its device nodes still work

@@ -28,7 +28,8 @@ class JailLimits:
 
     Attributes:
         cpu_seconds: CPU time of the worker's requests (``RLIMIT_CPU``, counted from the
-            moment it has started; starting may take up to ``START_CPU_SECONDS`` more); a
+            moment it has started; starting a worker that imports the simulator itself may
+            take up to ``START_CPU_SECONDS`` more, one forked by the zygote starts at zero); a
             long-lived env worker (training) needs hours, a one-off check seconds.
         memory_bytes: address space (``RLIMIT_AS``).
         file_bytes: largest file the worker may write in its scratch folder (``RLIMIT_FSIZE``).
@@ -74,11 +75,16 @@ class JailLimits:
         value = self.memory_bytes / _GIB
         return f"{value:g} GiB" if value >= 1 else f"{self.memory_bytes / _MIB:g} MiB"
 
-    def rlimits(self):
-        """``(resource, soft, hard)`` triples to set in the worker before it starts."""
+    def rlimits(self, start_cpu_seconds: int = START_CPU_SECONDS):
+        """``(resource, soft, hard)`` triples to set in the worker before it starts.
+
+        ``start_cpu_seconds`` is the CPU time allowed for starting, on top of the budget (lowered by
+        :func:`start_charging_cpu` once started); 0 for a worker forked by the zygote, which starts
+        with the simulator imported and its CPU time at zero.
+        """
         import resource
 
-        cpu = max(1, int(self.cpu_seconds)) + START_CPU_SECONDS  # lowered by start_charging_cpu
+        cpu = max(1, int(self.cpu_seconds)) + start_cpu_seconds
         return [
             (resource.RLIMIT_CPU, cpu, cpu + 2),  # SIGXCPU at the soft limit, SIGKILL 2 s later
             (resource.RLIMIT_AS, self.memory_bytes, self.memory_bytes),

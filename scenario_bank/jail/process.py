@@ -10,9 +10,9 @@ import subprocess
 import sys
 import threading
 import time
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
-from scenario_bank.jail import bwrap, seccomp, wire
+from scenario_bank.jail import bwrap, seccomp, wire, zygote
 from scenario_bank.jail.errors import (
     JailCrashError,
     JailError,
@@ -21,6 +21,7 @@ from scenario_bank.jail.errors import (
     JailUnavailableError,
 )
 from scenario_bank.jail.limits import JailLimits
+from scenario_bank.jail.output import OutputTail
 
 __all__ = ["JailedProcess", "JailRemoteError", "jail_status", "require_jail", "discard_spares", "FIX"]
 
@@ -85,54 +86,50 @@ class JailRemoteError(JailError):
         self.plain_message = message
 
 
-class _OutputTail:
-    """Drains a pipe, keeping the last ``limit`` bytes and counting the rest."""
+class _BwrapWorker:
+    """A worker bubblewrap started: its :class:`subprocess.Popen`, killed with its process group."""
 
-    def __init__(self, fd: int, limit: int) -> None:
-        self.limit = limit
-        self.data = bytearray()
-        self.total = 0
-        self._lock = threading.Lock()
-        self._thread = threading.Thread(target=self._drain, args=(fd,), daemon=True, name="dv2s-jail-output")
-        self._thread.start()
+    def __init__(self, proc: subprocess.Popen) -> None:
+        self._proc = proc
 
-    def _drain(self, fd: int) -> None:
+    @property
+    def pid(self) -> int:
+        return self._proc.pid
+
+    def poll(self) -> Optional[int]:
+        return self._proc.poll()
+
+    def wait(self, timeout: Optional[float] = None) -> int:
+        return self._proc.wait(timeout=timeout)
+
+    def kill(self) -> None:
+        """SIGKILL bubblewrap and everything in its jail (its session), and reap it."""
         try:
-            while True:
-                chunk = os.read(fd, 65536)
-                if not chunk:
-                    break
-                with self._lock:
-                    self.total += len(chunk)
-                    self.data += chunk
-                    if len(self.data) > self.limit:
-                        del self.data[: len(self.data) - self.limit]
-        except OSError:
+            os.killpg(self._proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
             pass
-        finally:
-            os.close(fd)
+        try:
+            self._proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            pass
 
-    def text(self) -> str:
-        with self._lock:
-            tail = self.data.decode("utf-8", "replace")
-            dropped = self.total - len(self.data)
-        tail = "".join(c if c.isprintable() or c in "\n\t" else "?" for c in tail)  # no terminal escapes
-        return (f"[... {dropped} earlier bytes dropped ...]\n" if dropped > 0 else "") + tail
 
-    def join(self, timeout: float) -> None:
-        self._thread.join(timeout)
+_Worker = Union[_BwrapWorker, "zygote.ForkedWorker"]
 
 
 class JailedProcess:
     """A Python module run in the jail, answering requests on a private channel.
 
-    ``module`` is started as ``python -m module IN_FD OUT_FD`` inside bubblewrap
-    with the seccomp filter and ``limits``; it reads messages (:mod:`.wire`) on
-    ``IN_FD`` and answers each with ``{"ok": true, "value": ...}`` or
-    ``{"ok": false, "error": {"type", "message", ...}}`` on ``OUT_FD``. Its
-    stdout and stderr are captured (only the last ``limits.output_bytes`` kept)
-    and shown with errors. :meth:`close` (also on garbage collection) kills it
-    and everything it started.
+    The worker is forked by the module's zygote (:mod:`.zygote`: the module's
+    ``preload()`` already imported, then ``serve(IN_FD, OUT_FD, started)`` in
+    fresh namespaces with the seccomp filter and ``limits``), or, where no zygote
+    can run, with ``DV2S_JAIL_ZYGOTE=0`` or with ``args``, started as ``python -m
+    module IN_FD OUT_FD *args`` in a bubblewrap of its own. Either way it reads
+    messages (:mod:`.wire`) on ``IN_FD`` and answers each with ``{"ok": true,
+    "value": ...}`` or ``{"ok": false, "error": {"type", "message", ...}}`` on
+    ``OUT_FD``. Its stdout and stderr are captured (only the last
+    ``limits.output_bytes`` kept) and shown with errors. :meth:`close` (also on
+    garbage collection) kills it and everything it started.
     """
 
     def __init__(self, module: str, *, limits: Optional[JailLimits] = None, name: str = "jailed worker",
@@ -141,31 +138,54 @@ class JailedProcess:
         self.limits = limits or JailLimits.from_env()
         self.name = name
         self.module = module
-        self._proc: Optional[subprocess.Popen] = None
+        self._proc: Optional[_Worker] = None
         self._closed = False
-        spare = _take_spare(module, self.limits, tuple(args))
-        if spare is not None:
-            self.__dict__.update({k: v for k, v in spare.__dict__.items() if k not in ("name",)})
-            spare._proc = None  # this object owns the worker now
-        else:
-            self._spawn(args)
+        self.forked = False
+        """Whether the zygote forked this worker (else bubblewrap started it)."""
+        if not args and zygote.enabled():
+            self._fork()
+        if self._proc is None:
+            spare = _take_spare(module, self.limits, tuple(args))
+            if spare is not None:
+                self.__dict__.update({k: v for k, v in spare.__dict__.items() if k not in ("name",)})
+                spare._proc = None  # this object owns the worker now
+            else:
+                self._spawn(args)
         try:
             self.hello = self._receive(self.limits.start_seconds, stage="start")
         except BaseException:
             self.kill()
             raise
-        if _spares_wanted():
+        if not self.forked and _spares_wanted():
             _keep_spare(module, self.limits, tuple(args))
 
     @classmethod
     def _unstarted(cls, module: str, limits: JailLimits, args: Sequence[str]) -> "JailedProcess":
         worker = cls.__new__(cls)
         worker.limits, worker.name, worker.module = limits, "jailed worker", module
-        worker._proc, worker._closed = None, False
+        worker._proc, worker._closed, worker.forked = None, False, False
         worker._spawn(args)
         return worker
 
+    def _fork(self) -> None:
+        """Get the worker from the module's zygote; leave ``_proc`` unset if it cannot give one."""
+        to_child_r, to_child_w = os.pipe()
+        from_child_r, from_child_w = os.pipe()
+        out_r, out_w = os.pipe()
+        try:
+            proc = zygote.fork_worker(self.module, self.limits, (to_child_r, from_child_w, out_w))
+        except zygote.ZygoteError:
+            for fd in (to_child_w, from_child_r, out_r):
+                os.close(fd)
+            return
+        finally:
+            for fd in (to_child_r, from_child_w, out_w):  # the worker holds its own copies
+                os.close(fd)
+        self.forked = True
+        self._attach(proc, to_child_w, from_child_r, out_r)
+
     def _spawn(self, args: Sequence[str]) -> None:
+        """Start the worker in a bubblewrap of its own."""
         to_child_r, to_child_w = os.pipe()
         from_child_r, from_child_w = os.pipe()
         out_r, out_w = os.pipe()
@@ -174,7 +194,7 @@ class JailedProcess:
         command = bwrap.command(argv, scratch_bytes=self.limits.scratch_bytes, seccomp_fd=filter_fd,
                                 environment=bwrap.worker_environment())
         try:
-            self._proc = subprocess.Popen(
+            proc = subprocess.Popen(
                 command, stdin=subprocess.DEVNULL, stdout=out_w, stderr=out_w,
                 pass_fds=(to_child_r, from_child_w, filter_fd), start_new_session=True,
                 preexec_fn=self._apply_limits, env={"PATH": "/usr/bin:/bin"},  # bwrap is PID 1 inside: /proc/1/environ
@@ -185,9 +205,13 @@ class JailedProcess:
             raise JailUnavailableError(f"could not start the jail for {self.name}: {error}. To fix: {FIX}.") from None
         for fd in (to_child_r, from_child_w, out_w, filter_fd):
             os.close(fd)
+        self._attach(_BwrapWorker(proc), to_child_w, from_child_r, out_r)
+
+    def _attach(self, proc: "_Worker", to_child_w: int, from_child_r: int, out_r: int) -> None:
+        self._proc = proc
         self._to_child = os.fdopen(to_child_w, "wb", buffering=0)
         self._from_child = from_child_r
-        self._output = _OutputTail(out_r, self.limits.output_bytes)
+        self._output = OutputTail(out_r, self.limits.output_bytes)
         self._started = time.monotonic()
         self.requests = 0
 
@@ -311,6 +335,7 @@ class JailedProcess:
 
     @property
     def pid(self) -> Optional[int]:
+        """The worker's process id on this machine (for a worker bubblewrap started: bubblewrap's)."""
         return None if self._proc is None else self._proc.pid
 
     def alive(self) -> bool:
@@ -322,14 +347,7 @@ class JailedProcess:
         proc = self._proc
         if proc is None:
             return
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            pass
+        proc.kill()
         self._closed = True
         for stream in (getattr(self, "_to_child", None),):
             try:
@@ -368,8 +386,8 @@ class JailedProcess:
         self.close()
 
 
-# One started, not yet used worker per module and limits: the next jailed env skips the ~4 s of
-# importing Scenic and highway-env. Started from the caller's thread (bubblewrap's --die-with-parent
+# Without a zygote: one started, not yet used worker per module and limits, so the next jailed env skips
+# the ~4 s of importing Scenic and highway-env. Started from the caller's thread (bubblewrap's --die-with-parent
 # follows the thread that started it), only after a first jailed worker was asked for, never shared:
 # each worker serves one owner and is never reused for another script.
 _SPARES: Dict[Tuple[str, JailLimits, Tuple[str, ...]], JailedProcess] = {}
@@ -398,10 +416,11 @@ def _keep_spare(module: str, limits: JailLimits, args: Tuple[str, ...]) -> None:
 
 
 def discard_spares() -> None:
-    """Kill the started, unused workers (tests call this to count processes)."""
+    """Kill the started, unused workers and stop the zygotes (tests call this to count processes)."""
     while _SPARES:
         _, spare = _SPARES.popitem()
         spare.kill()
+    zygote.stop_zygotes()
 
 
 def _doing(stage: str) -> str:

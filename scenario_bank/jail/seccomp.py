@@ -1,7 +1,9 @@
 """The system-call filter of the jail, compiled by libseccomp (``pyseccomp``).
 
 Installed by bubblewrap (``--seccomp FD``) just before the worker's interpreter
-starts. Like the filters of Flatpak and Chromium's renderer it allows by default
+starts, or, in a worker forked by the zygote (:mod:`.zygote_server`), loaded by the
+worker itself (:meth:`pyseccomp.SyscallFilter.load`, with ``no_new_privs``) before it
+reads its first request. Like the filters of Flatpak and Chromium's renderer it allows by default
 and refuses what a simulation never needs and an escape always does:
 
 - new processes: ``fork``, ``vfork``, ``clone`` without ``CLONE_THREAD``; ``clone3``
@@ -25,7 +27,7 @@ import os
 import socket
 import tempfile
 
-__all__ = ["DENIED_SYSCALLS", "filter_bytes", "seccomp_available"]
+__all__ = ["DENIED_SYSCALLS", "build_filter", "filter_bytes", "filter_fd", "seccomp_available"]
 
 DENIED_SYSCALLS = (
     "fork", "vfork", "ptrace", "process_vm_readv", "process_vm_writev", "unshare", "setns", "mount",
@@ -54,24 +56,29 @@ def seccomp_available() -> bool:
     return True
 
 
+def build_filter():
+    """The filter as a :class:`pyseccomp.SyscallFilter` (``load()`` installs it in this process, ``no_new_privs`` on)."""
+    import pyseccomp as sc
+
+    f = sc.SyscallFilter(defaction=sc.ALLOW)
+    deny = sc.ERRNO(errno.EPERM)
+    for name in DENIED_SYSCALLS:
+        try:
+            f.add_rule(deny, name)
+        except (ValueError, RuntimeError, OSError):
+            pass  # a call this kernel/architecture does not have
+    f.add_rule(deny, "clone", sc.Arg(0, sc.MASKED_EQ, _CLONE_THREAD, 0))
+    f.add_rule(sc.ERRNO(errno.ENOSYS), "clone3")
+    f.add_rule(deny, "socket", sc.Arg(0, sc.NE, socket.AF_UNIX))
+    f.add_rule(deny, "ioctl", sc.Arg(1, sc.MASKED_EQ, 0xFFFFFFFF, _TIOCSTI))
+    return f
+
+
 def filter_bytes() -> bytes:
     """The BPF program (cached per process)."""
     if "bpf" not in _CACHE:
-        import pyseccomp as sc
-
-        f = sc.SyscallFilter(defaction=sc.ALLOW)
-        deny = sc.ERRNO(errno.EPERM)
-        for name in DENIED_SYSCALLS:
-            try:
-                f.add_rule(deny, name)
-            except (ValueError, RuntimeError, OSError):
-                pass  # a call this kernel/architecture does not have
-        f.add_rule(deny, "clone", sc.Arg(0, sc.MASKED_EQ, _CLONE_THREAD, 0))
-        f.add_rule(sc.ERRNO(errno.ENOSYS), "clone3")
-        f.add_rule(deny, "socket", sc.Arg(0, sc.NE, socket.AF_UNIX))
-        f.add_rule(deny, "ioctl", sc.Arg(1, sc.MASKED_EQ, 0xFFFFFFFF, _TIOCSTI))
         with tempfile.TemporaryFile() as handle:
-            f.export_bpf(handle)
+            build_filter().export_bpf(handle)
             handle.seek(0)
             _CACHE["bpf"] = handle.read()
     return _CACHE["bpf"]
