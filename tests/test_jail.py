@@ -284,6 +284,22 @@ def test_killing_one_forked_worker_leaves_the_zygote_and_its_siblings(zygote_onl
     second.close()
 
 
+def test_the_user_process_refuses_a_huge_header_and_shows_no_escape_sequences():
+    """Code running in a worker writes its own bytes to the reply pipe: a header too large to parse is
+    refused by its declared size, and an error text full of terminal escapes arrives harmless."""
+    from scenario_bank.jail.process import JailRemoteError
+
+    with JailedProcess(PROBE, name="probe") as worker:
+        with pytest.raises(JailRemoteError) as caught:
+            _run(worker, "raise RuntimeError(chr(27) + ']0;TITLE' + chr(7) + chr(27) + '[2J cleared')")
+        assert "\x1b" not in str(caught.value) and "\x07" not in str(caught.value) and "cleared" in str(caught.value)
+    with JailedProcess(PROBE, name="probe") as worker:
+        with pytest.raises(JailProtocolError, match="header of .* over"):
+            _run(worker, "import os, struct\n"
+                         "os.write(outbound_fd, struct.pack('<4sII', b'DV2S', 64 * 2**20, 0) + b'[' * 4096)\n"
+                         "import time; time.sleep(30)")
+
+
 def test_where_no_zygote_can_start_each_worker_gets_a_bubblewrap(zygote_only, monkeypatch):
     monkeypatch.setattr(zygote, "_PROBE", {})
     monkeypatch.setattr(zygote, "_ZYGOTES", {})
@@ -392,8 +408,8 @@ def test_a_worker_claiming_a_huge_message_is_refused_before_reading():
 
 
 def test_a_header_of_many_small_objects_is_refused_before_parsing():
-    # 40 MiB of "[]," would become ~700 MB of Python lists: refused by its declared size
-    size = 40 * 2**20
+    # 10 MiB of "[]," would become ~190 MB of Python lists: refused by its declared size
+    size = 10 * 2**20
     read, write = os.pipe()
     os.write(write, struct.pack("<4sII", b"DV2S", size, 0))
     os.close(write)

@@ -39,8 +39,13 @@ class OutputTail:
         with self._lock:
             tail = self.data.decode("utf-8", "replace")
             dropped = self.total - len(self.data)
-        tail = "".join(c if c.isprintable() or c in "\n\t" else "?" for c in tail)  # no terminal escapes
+        tail = printable(tail)
         return (f"[... {dropped} earlier bytes dropped ...]\n" if dropped > 0 else "") + tail
 
     def join(self, timeout: float) -> None:
         self._thread.join(timeout)
+
+
+def printable(text: str) -> str:
+    """``text`` with every character a terminal would act on (escape sequences, bells, ...) shown as ``?``."""
+    return "".join(c if c.isprintable() or c in "\n\t" else "?" for c in text)

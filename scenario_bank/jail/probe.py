@@ -35,7 +35,7 @@ def serve(inbound_fd: int, outbound_fd: int, started: float) -> int:
             return 0
         if not isinstance(request, dict) or request.get("op") != "run":
             return 0
-        namespace: dict = {}
+        namespace: dict = {"outbound_fd": outbound_fd}  # so a test can write raw bytes to the user's process
         try:
             exec(str(request.get("code", "")), namespace)  # noqa: S102  (the point of the probe, inside the jail)
             reply = {"ok": True, "value": namespace.get("result")}

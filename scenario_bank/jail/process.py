@@ -21,7 +21,7 @@ from scenario_bank.jail.errors import (
     JailUnavailableError,
 )
 from scenario_bank.jail.limits import JailLimits
-from scenario_bank.jail.output import OutputTail
+from scenario_bank.jail.output import OutputTail, printable
 
 __all__ = ["JailedProcess", "JailRemoteError", "jail_status", "require_jail", "discard_spares", "FIX"]
 
@@ -74,6 +74,18 @@ def require_jail(what: str = "this script") -> None:
     if not ok:
         raise JailUnavailableError(f"{what} is untrusted Scenic and runs only in the jail, which is not "
                                    f"available here: {why}. To fix: {FIX}.")
+
+
+def _printable_strings(value: Any, depth: int = 0) -> Any:
+    if isinstance(value, str):
+        return printable(value)
+    if depth > 8:
+        return None
+    if isinstance(value, dict):
+        return {printable(str(k)): _printable_strings(v, depth + 1) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_printable_strings(v, depth + 1) for v in value]
+    return value
 
 
 class JailRemoteError(JailError):
@@ -264,6 +276,7 @@ class JailedProcess:
         error = message.get("error")
         if not isinstance(error, dict):
             error = {}
+        error = _printable_strings(error)  # the worker's words reach a terminal: no escape sequences in them
         error_type = str(error.get("type", "Error"))[:100]
         text = str(error.get("message", ""))[:4000]
         if error.get("limit") == "memory":
@@ -276,6 +289,9 @@ class JailedProcess:
         magic, header_size, count = wire._PREFIX.unpack(prefix)
         if magic != wire.MAGIC or count > wire.MAX_BUFFERS:
             raise JailProtocolError("not a message")
+        if header_size > wire.MAX_HEADER_BYTES:
+            raise JailProtocolError(f"message header of {header_size} bytes is over the "
+                                    f"{wire.MAX_HEADER_BYTES}-byte limit (bulk data goes in arrays)")
         sizes = struct.unpack(f"<{count}Q", self._read_exactly(8 * count, deadline)) if count else ()
         total = header_size + sum(sizes)
         if total > self.limits.message_bytes:

@@ -32,7 +32,7 @@ MAX_DEPTH = 64
 MAX_BUFFERS = 4096
 # JSON becomes Python objects up to ~20x its size ("[[],[],...]"): the header gets its own, smaller cap;
 # bulk data travels in the array buffers, which cost their size and no more
-MAX_HEADER_BYTES = 32 * 2**20
+MAX_HEADER_BYTES = 8 * 2**20
 _ALLOWED_KINDS = "biuf"  # bool, signed and unsigned integers, floats
 _PREFIX = struct.Struct("<4sII")
 
