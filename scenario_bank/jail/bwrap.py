@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
+import subprocess
 import sys
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
@@ -132,3 +134,15 @@ def command(argv: Sequence[str], *, scratch_bytes: int, seccomp_fd: Optional[int
     if seccomp_fd is not None:
         args += ["--seccomp", str(seccomp_fd)]
     return [*args, "--", *argv]
+
+
+def kill_session(proc: "subprocess.Popen") -> None:
+    """SIGKILL the bubblewrap ``proc`` and everything in its jail (its process group), then reap it."""
+    try:
+        os.killpg(proc.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
+    try:
+        proc.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        pass

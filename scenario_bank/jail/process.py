@@ -116,14 +116,7 @@ class _BwrapWorker:
 
     def kill(self) -> None:
         """SIGKILL bubblewrap and everything in its jail (its session), and reap it."""
-        try:
-            os.killpg(self._proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
-        try:
-            self._proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            pass
+        bwrap.kill_session(self._proc)
 
 
 _Worker = Union[_BwrapWorker, "zygote.ForkedWorker"]

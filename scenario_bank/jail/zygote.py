@@ -215,14 +215,7 @@ class Zygote:
                 sock.close()
         if os.getpid() != self.owner:
             return  # a forked copy of the user's process: the zygote is its parent's
-        try:
-            os.killpg(self._proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
-        try:
-            self._proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            pass
+        bwrap.kill_session(self._proc)
 
 
 class ForkedWorker:
