@@ -32,12 +32,13 @@ def in_process_simulator():
     original = scenarios.compile_scenario
 
     def compile_trusted(*args, **kwargs):
-        kwargs.setdefault("trusted", True)
+        kwargs["trusted"] = True
         return original(*args, **kwargs)
 
     # module scope, so that the module's own module-scoped fixtures (a compiled highway, a
     # simulated run) are built in this process too
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(dv2s_env, "_all_shipped", lambda texts, config: True)
+        patch.setattr(dv2s_env, "_is_shipped", lambda text: True)
         patch.setattr(scenarios, "compile_scenario", compile_trusted)
         yield
