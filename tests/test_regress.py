@@ -106,7 +106,7 @@ def test_markdown_has_the_comparison_table(noisy_run):
     out, report = noisy_run
     text = (out / "report.md").read_text()
     assert text.startswith(f"## dv2s regress: {report['verdict']}")
-    assert "| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (Holm) | verdict |" \
+    assert "| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (adjusted) | verdict |" \
         in text
     for name in PAIR:
         row = next(line for line in text.splitlines() if line.startswith(f"| `{name}` | 4 |"))

@@ -118,7 +118,7 @@ def test_failure_messages_from_a_report_dict(tmp_path):
     report = RegressionReport(data, tmp_path)
     message = report.failure_message()
     assert message.splitlines()[0] == "dv2s regression FAIL: 'new' against 'old' regressed on a"
-    assert "a: failure rate 30% vs 0%, difference +30.0 pp [+7.7 pp, +51.9 pp], p = 0.0156 (Holm 0.0312)" in message
+    assert "a: failure rate 30% vs 0%, difference +30.0 pp [+7.7 pp, +51.9 pp], p = 0.0156 (adjusted 0.0312)" in message
     assert "a/0, a/1" in message and "and 2 more" in message
     assert f"report: {tmp_path / 'report.md'}" in message
     with pytest.raises(RegressionFailed):

@@ -132,7 +132,7 @@ class RegressionReport(Mapping[str, Any]):
         baseline = ((entry.get("baseline") or {}).get("failure_rate") or {}).get("value")
         p_value, p_adjusted = comparison.get("p_value"), comparison.get("p_adjusted")
         p_text = "" if p_value is None else f", p = {p_value:.3g}" + (
-            "" if p_adjusted is None else f" (Holm {p_adjusted:.3g})")
+            "" if p_adjusted is None else f" (adjusted {p_adjusted:.3g})")
         return (f"{name}: failure rate {_pct(candidate)} vs {_pct(baseline)}, difference {_pp(difference.get('value'))} "
                 f"[{_pp(difference.get('low'))}, {_pp(difference.get('high'))}]{p_text}")
 

@@ -219,7 +219,7 @@ def _scenario_table(report: Mapping[str, Any]) -> str:
     head = ["scenario", "episodes", "candidate failure rate"]
     if has_baseline:
         head += ["baseline failure rate", "both fail / cand. only / base. only / neither", "difference",
-                 "p", "p (Holm)", "verdict", "reason"]
+                 "p", "p (adjusted)", "verdict", "reason"]
     out = ["<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in head) + "</tr>"]
     for name, entry, overall in _scenario_rows(report):
         candidate = entry.get("candidate") or {}

@@ -51,7 +51,7 @@ error on either side are left out)::
     {"n": pairs, "table": {"both_fail", "candidate_only", "baseline_only", "neither"},
      "candidate_rate", "baseline_rate",
      "difference": {"value", "low", "high"}     failure-rate difference, Newcombe interval,
-     "p_value": one-sided exact McNemar, "p_adjusted": Holm over scenarios,
+     "p_value": one-sided exact McNemar, "p_adjusted": p-value scaled by the family of tests (FAIL iff <= alpha),
      "verdict": "PASS" | "FAIL" | "INCONCLUSIVE", "reason": one line}
 
 Verdicts follow :mod:`dv2s_gym.regress.stats` (non-inferiority within ``margin``). The
@@ -404,7 +404,7 @@ def _headline(report: Mapping[str, Any]) -> str:
 
 def format_summary(report: Mapping[str, Any]) -> str:
     """The plain-text table ``dv2s regress`` prints."""
-    rows = [("scenario", "n", "candidate fails", "baseline fails", "difference [95% CI]", "p (Holm)", "verdict")]
+    rows = [("scenario", "n", "candidate fails", "baseline fails", "difference [95% CI]", "p (adjusted)", "verdict")]
     for name, entry in list(report["scenarios"].items()) + [("OVERALL", report["overall"])]:
         comparison = entry.get("comparison")
         rows.append((name, str(entry["candidate"]["episodes"]), _failures(entry["candidate"]),
@@ -438,7 +438,7 @@ def _markdown(report: Mapping[str, Any], report_path: str = "report.json") -> st
             lines += ["Regressed: " + ", ".join(f"`{n}`" for n in report["regressed"]), ""]
         if report.get("stopped_early"):
             lines += ["Stopped early: the sequential test settled the verdict.", ""]
-        lines += ["| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (Holm) | verdict |",
+        lines += ["| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (adjusted) | verdict |",
                   "|---|---:|---:|---:|---|---:|---|"]
         for name, entry in list(report["scenarios"].items()) + [("**overall**", report["overall"])]:
             c = entry["comparison"]
