@@ -170,18 +170,17 @@ def _cmd_regress(args: argparse.Namespace) -> int:
             raise ValueError("--config must be a JSON object of DV2S-v0 config overrides, e.g. '{\"duration\": 10}'")
     out = args.out or DEFAULT_OUT
     episodes, seed = args.episodes, args.seed
-    if args.baseline_report and (episodes is None or seed is None or env_config is None):
+    if args.baseline_report and (seed is None or env_config is None):
         from dv2s_gym.regress.report import load_report
 
-        old = load_report(args.baseline_report).get("settings") or {}  # by default: the episodes it ran
-        episodes = old.get("episodes") if episodes is None else episodes
+        old = load_report(args.baseline_report).get("settings") or {}  # by default: the seeds it ran
         seed = old.get("seed") if seed is None else seed
         env_config = old.get("env_config") if env_config is None else env_config
     try:
         report = run_regression(
             args.policy, args.baseline, baseline_report=args.baseline_report, bank_dir=args.bank,
-            scenarios=args.scenarios, episodes=20 if episodes is None else episodes, seed=seed or 0,
-            margin=args.margin, alpha=args.alpha,
+            scenarios=args.scenarios, episodes=episodes, seed=seed or 0,
+            margin=args.margin, alpha=args.alpha, mde=args.mde, power=args.power,
             backend=args.backend, workers=args.workers, address=args.address, out_dir=out,
             sequential=args.sequential, env_config=env_config, progress=not args.no_progress and not args.json,
             timeout=args.timeout, batch=args.batch, baseline_role=args.baseline_role)
@@ -821,7 +820,10 @@ def build_parser() -> argparse.ArgumentParser:
         "uses seed S+k for both) over bank scenarios, in a local process pool or on Ray. Reports per scenario "
         "and overall collision, off-road and success rates (Wilson intervals), minimum TTC, mean speed and "
         "return (bootstrap intervals), and the paired difference in failure rate (Newcombe interval, exact "
-        "McNemar test, Holm over scenarios) with a non-inferiority verdict against --margin. Writes "
+        "McNemar test) with a non-inferiority verdict against --margin. Every scenario is a test in its own "
+        "right, beside the pooled one, with the family-wise false-alarm rate at most --alpha. The episodes per "
+        "scenario are planned from --mde and --power unless --episodes is given; the report states the power "
+        "the run had. Writes "
         "report.json (schema dv2s-regress v1), junit.xml, report.md, results.jsonl and traces/ of failed "
         "episodes to --out; rerunning with the same --out and settings resumes.",
         epilog="exit status: 0 PASS (or no baseline: measures only), 1 FAIL, 3 INCONCLUSIVE (too few episodes "
@@ -843,7 +845,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank, or the "
                    "baseline report's scenarios)")
     p.add_argument("--episodes", type=int, default=None,
-                   help="seeds per scenario (default 20, or those of the baseline report)")
+                   help="seeds per scenario (default: planned from --mde and --power, at most those of the "
+                   "baseline report)")
+    p.add_argument("--mde", type=float, default=None,
+                   help="minimum detectable effect: the rise of one scenario's failure rate the run must FAIL "
+                   "(default 0.30: 30 points); with --power it chooses --episodes")
+    p.add_argument("--power", type=float, default=None,
+                   help="probability of FAIL at --mde (default 0.8)")
     p.add_argument("--seed", type=int, default=None,
                    help="seed of the first episode (default 0, or the baseline report's)")
     p.add_argument("--margin", type=float, default=0.02,

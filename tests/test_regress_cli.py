@@ -95,6 +95,10 @@ def test_baseline_report_reruns_only_the_candidate(failing_run, tmp_path, capsys
     report = json.loads((tmp_path / "report.json").read_text())
     # the report's tested policy (the noisy copy) is the baseline now; the original does not fail more
     assert report["settings"]["episodes"] == 8 and report["baseline"]["spec"] == "rule?action_noise=0.5"
+    # the power plan wanted more episodes than the baseline report has: said, and the power stated
+    plan = report["settings"]["plan"]
+    assert plan["planned"] > 8 and "fewer than the" in plan["note"]
+    assert "has less power than planned" in capsys.readouterr().out
     assert code in (0, 3) and report["verdict"] != "FAIL"
     lines = (tmp_path / "results.jsonl").read_text().splitlines()
     assert len(lines) == 8 and {json.loads(line)["role"] for line in lines} == {"candidate"}

@@ -247,9 +247,13 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
     regressed: List[str] = []
     newly_failing: List[str] = []
     comparisons: Dict[str, Any] = {}
+    power = None
     if has_baseline:
         tables = paired_tables(episodes, list(by_scenario))
-        per_scenario, overall = stats.compare_scenarios(tables, margin, alpha)
+        pooled_rejected = None
+        if sequential and sequential.get("verdict") is not None:  # the pooled member was tested sequentially
+            pooled_rejected = sequential["verdict"] == "FAIL"
+        per_scenario, overall = stats.compare_scenarios(tables, margin, alpha, pooled_rejected=pooled_rejected)
         for name, comparison in per_scenario.items():
             scenario_verdict, reason = _verdict(comparison.verdict), comparison.reason
             if scenario_verdict == "PASS" and errors_in[name]:
@@ -257,15 +261,10 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
             comparisons[name] = comparison_json(comparison, verdict=scenario_verdict, reason=reason)
         regressed = [name for name, c in comparisons.items() if c["verdict"] == "FAIL"]
         verdict, reason = _verdict(overall.verdict), overall.reason
-        if sequential and sequential.get("verdict"):
-            sequential_verdict = sequential["verdict"]
-            looks = (f"sequential test ({sequential.get('looks')} looks, {sequential.get('episodes')} of "
-                     f"{sequential.get('max_episodes')} paired episodes)")
-            if regressed or sequential_verdict == "FAIL":
-                verdict = "FAIL"
-                reason = (f"{looks}: FAIL; " if sequential_verdict == "FAIL" else "") + reason
-            else:
-                verdict, reason = sequential_verdict, f"{looks}: {sequential_verdict}; pooled: {overall.reason}"
+        if sequential and sequential.get("verdict") is not None:
+            reason = (f"sequential test of the pooled table ({sequential.get('looks')} looks, "
+                      f"{sequential.get('episodes')} of {sequential.get('max_episodes')} paired episodes): "
+                      f"{sequential['verdict']}; {reason}")
         if verdict == "PASS" and errors:
             verdict, reason = "INCONCLUSIVE", f"{_errors_note(len(errors))}; {reason}"
         elif errors:
@@ -274,6 +273,7 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         newly_failing = [e["id"] for e in episodes if e.get("baseline") is not None
                          and not e["candidate"].get("error") and not e["baseline"].get("error")
                          and e["candidate"].get("failed") and not e["baseline"].get("failed")]
+        power = _power(tables, margin, alpha, settings)
 
     for name in by_scenario:
         report_scenarios[name] = {
@@ -304,7 +304,18 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         "errors": errors,
         "stopped_early": bool(stopped_early),
         "sequential": dict(sequential) if sequential else None,
+        "power": power,
     }
+
+
+def _power(tables: Mapping[str, "stats.PairedTable"], margin: float, alpha: float,
+           settings: Mapping[str, Any]) -> Dict[str, Any]:
+    """The power the run had (:func:`dv2s_gym.regress.power.run_power`), from its baseline's observed failure rates."""
+    from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
+
+    rates = {name: (table.baseline_rate if table.n else None) for name, table in tables.items()}
+    return run_power({name: table.n for name, table in tables.items()}, rates, margin=margin, alpha=alpha,
+                     mde=float(settings.get("mde") or DEFAULT_MDE), power=float(settings.get("power") or DEFAULT_POWER))
 
 
 def _dv2s_version() -> str:
@@ -402,6 +413,39 @@ def _headline(report: Mapping[str, Any]) -> str:
             f"alpha {settings['alpha']:g}; bank version {str(report['bank']['version'])[:12]}")
 
 
+def power_lines(report: Mapping[str, Any]) -> List[str]:
+    """What the run could detect: the power per scenario and pooled at the margin and at the planned effect."""
+    power = report.get("power")
+    if not power:
+        return []
+    per = list((power.get("per_scenario") or {}).values())
+    pooled = power.get("pooled") or {}
+    margin = 100 * float(report["settings"]["margin"])
+    target = float(power.get("power") or 0.8)
+
+    def low(key: str) -> Optional[float]:
+        values = [v[key] for v in per if v.get(key) is not None]
+        return min(values) if values else None
+
+    def share(value: Optional[float]) -> str:
+        return "-" if value is None else f"{value:.2f}"
+
+    detectable = [v["detectable"] for v in per if v.get("detectable") is not None]
+    worst = f"+{100 * max(detectable):.1f} pp" if len(detectable) == len(per) and per else "none below 100 pp"
+    mde = power.get("mde")
+    lines = [f"power per scenario (lowest of {len(per)}): {share(low('at_margin'))} at the +{margin:g} pp margin"
+             + (f", {share(low('at_mde'))} at +{100 * mde:g} pp" if mde else "")
+             + f"; {target:.0%} power at {worst}",
+             f"power pooled ({pooled.get('n', 0)} pairs): {share(pooled.get('at_margin'))} at the +{margin:g} pp margin; "
+             f"{target:.0%} power at " + (f"+{100 * pooled['detectable']:.1f} pp" if pooled.get("detectable") is not None
+                                          else "none below 100 pp"),
+             f"power model: {power.get('assumption')}"]
+    note = ((report.get("settings") or {}).get("plan") or {}).get("note")
+    if note:
+        lines.append(f"note: {note}")
+    return lines
+
+
 def format_summary(report: Mapping[str, Any]) -> str:
     """The plain-text table ``dv2s regress`` prints."""
     rows = [("scenario", "n", "candidate fails", "baseline fails", "difference [95% CI]", "p (adjusted)", "verdict")]
@@ -421,6 +465,7 @@ def format_summary(report: Mapping[str, Any]) -> str:
             lines.append(f"regressed: {', '.join(report['regressed'])}")
     else:
         lines.append("no baseline: measures only, no verdict")
+    lines += power_lines(report)
     if report["errors"]:
         lines.append(f"{len(report['errors'])} error(s): " + "; ".join(
             f"{e['id']} ({e['role']}): {e['error']}" for e in report["errors"][:3]))

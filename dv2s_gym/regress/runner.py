@@ -8,8 +8,9 @@ round by round (seed ``k`` of every scenario before seed ``k + 1``); results str
 (:mod:`dv2s_gym.regress.report`) is built from them at the end.
 
 With ``sequential=True`` the pooled paired table is examined after every batch of
-seeds by :class:`~dv2s_gym.regress.stats.SequentialTest` (group-sequential, alpha
-spending), and the run stops as soon as it reaches PASS or FAIL.
+seeds by :class:`~dv2s_gym.regress.stats.SequentialTest` (group-sequential, spending the
+pooled test's share of alpha), and the run stops as soon as it reaches FAIL; PASS is decided
+at the end, when every scenario has had its planned episodes.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ import sys
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
+from dv2s_gym.regress import power as power_plan
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
 from dv2s_gym.regress.report import (
@@ -74,8 +76,8 @@ def _policy_info(spec: str) -> Dict[str, Any]:
     return {"spec": spec, "card": card}
 
 
-def _check_settings(episodes: int, seed: int, margin: float, alpha: float, batch: Optional[int]) -> None:
-    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+def _check_settings(episodes: Optional[int], seed: int, margin: float, alpha: float, batch: Optional[int]) -> None:
+    if episodes is not None and (isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1):
         raise RegressError(f"--episodes must be a positive integer, not {episodes!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise RegressError(f"--seed must be a non-negative integer, not {seed!r}")
@@ -140,7 +142,8 @@ def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Seque
 def run_regression(candidate: str, baseline: Optional[str] = None, *,
                    baseline_report: Optional[Union[str, os.PathLike]] = None,
                    bank_dir: Optional[Union[str, os.PathLike]] = None, scenarios: Scenarios = None,
-                   episodes: int = 20, seed: int = 0, margin: float = stats.DEFAULT_MARGIN, alpha: float = 0.05,
+                   episodes: Optional[int] = None, seed: int = 0, margin: float = stats.DEFAULT_MARGIN,
+                   alpha: float = 0.05, mde: Optional[float] = None, power: Optional[float] = None,
                    backend: str = "local", workers: Optional[int] = None, address: Optional[str] = None,
                    out_dir: Optional[Union[str, os.PathLike]] = None, sequential: bool = False,
                    env_config: Optional[Dict[str, Any]] = None, progress: bool = True,
@@ -158,7 +161,11 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         bank_dir: bank folder (default: the shipped bank).
         scenarios: bank names and/or ``tag:<tag>`` (default: the whole bank, or the baseline
             report's scenarios); an empty selection is an error.
-        episodes: seeds per scenario; episode ``k`` uses env seed ``seed + k``.
+        episodes: seeds per scenario; episode ``k`` uses env seed ``seed + k``. Default: planned from
+            ``mde`` and ``power`` (:func:`dv2s_gym.regress.power.plan_episodes`), with the baseline
+            report's failure rates when there is one (and at most the episodes it has).
+        mde / power: the regression of one scenario's failure rate the run must FAIL (default 0.30)
+            and the probability it does (default 0.8); they choose ``episodes``, so not with it.
         margin: non-inferiority margin on the failure-rate difference (default 0.02 = 2 points, the margin the
             statistics are calibrated at: bench/calibrate_regress.py).
         alpha: level of the FAIL test (PASS is tested at ``alpha / 2``).
@@ -167,8 +174,10 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         out_dir: output folder (default ``out/regress``): ``run.json``, ``results.jsonl``,
             ``traces/``, ``report.json``, ``junit.xml``, ``report.md``. Rerunning with the same
             folder and settings resumes: finished episodes are not run again.
-        sequential: stop as soon as a group-sequential test settles PASS or FAIL, looking after
-            every ``batch`` seeds (default: a fifth of ``episodes``). Needs a baseline.
+        sequential: stop as soon as a group-sequential test of the pooled table (spending the pooled
+            test's share of ``alpha``) settles FAIL, looking after every ``batch`` seeds (default: a
+            fifth of ``episodes``); PASS is decided at the end, so every scenario gets its planned
+            episodes. Needs a baseline.
         env_config: ``DV2S-v0`` config overrides for every episode (default: none, or the
             baseline report's).
         progress: a progress bar on stderr.
@@ -194,6 +203,11 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
     env_config = dict(env_config or {})
     names = _select(scenarios, bank_dir, fallback)
     bank = bank_info(names, bank_dir)
+    if episodes is not None and (mde is not None or power is not None):
+        raise RegressError("give --episodes, or --mde and --power to choose the episodes per scenario; not both")
+    plan = None
+    if episodes is None:
+        episodes, plan = _planned_episodes(names, baseline_report, baseline_role, seed, mde, power, alpha)
     seeds = [seed + k for k in range(episodes)]
 
     candidate_info = _policy_info(candidate)
@@ -276,7 +290,8 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
             if pending:
                 runner.run(pending, handle)
         else:
-            test = stats.SequentialTest(float(margin), float(alpha), max_episodes=episodes * len(names))
+            test = stats.SequentialTest(float(margin), float(alpha) * stats.DEFAULT_POOLED_WEIGHT,
+                                        max_episodes=episodes * len(names), stop_for_pass=False)
             looks, last_n, verdict = 0, 0, None
             for start in range(0, episodes, batch):
                 chunk = seeds[start:start + batch]
@@ -303,10 +318,45 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         if runner is not None:
             runner.close()
 
+    if plan is not None:
+        settings["plan"] = plan
+    settings["mde"] = float(mde if mde is not None else power_plan.DEFAULT_MDE)
+    settings["power"] = float(power if power is not None else power_plan.DEFAULT_POWER)
     report = build_report(bank=bank, settings=settings, candidate=candidate_info, baseline=baseline_info,
                           episodes=paired(ran_seeds), stopped_early=stopped_early, sequential=sequential_info)
     write_reports(report, out)
     return report
+
+
+def _planned_episodes(names: Sequence[str], baseline_report: Optional[Union[str, os.PathLike]], role: str,
+                      seed: int, mde: Optional[float], power: Optional[float], alpha: float
+                      ) -> Tuple[int, Dict[str, Any]]:
+    """Episodes per scenario from the power plan; with a baseline report, its failure rates and at most its episodes."""
+    rates: Dict[str, Optional[float]] = {}
+    available = None
+    if baseline_report is not None:
+        old = load_report(baseline_report)
+        for name in names:
+            summary = ((old.get("scenarios") or {}).get(name) or {}).get(role) or {}
+            rates[name] = (summary.get("failure_rate") or {}).get("value")
+        settings = old.get("settings") or {}
+        if isinstance(settings.get("episodes"), int) and isinstance(settings.get("seed"), int):
+            available = settings["seed"] + settings["episodes"] - seed
+    try:
+        plan = power_plan.plan_episodes(names, mde=power_plan.DEFAULT_MDE if mde is None else mde,
+                                        power=power_plan.DEFAULT_POWER if power is None else power, alpha=alpha,
+                                        baseline_rates=rates)
+    except ValueError as error:
+        raise RegressError(str(error)) from None
+    episodes = plan["episodes"]
+    plan = {key: value for key, value in plan.items() if key != "per_scenario"}
+    plan["planned"] = episodes
+    if available is not None and available < episodes:
+        episodes = max(1, available)
+        plan["note"] = (f"the baseline report has {available} episode(s) per scenario from seed {seed}, fewer than "
+                        f"the {plan['planned']} planned: the run has less power than planned (see its power)")
+    plan["episodes"] = episodes
+    return episodes, plan
 
 
 def _progress(enabled: bool, total: int, initial: int):

@@ -789,6 +789,9 @@ class SequentialTest:
         alpha: Level of the FAIL test (PASS gets ``alpha / 2``).
         max_episodes: Paired episodes at the last look (the information fraction's unit).
         spending: ``"obrien-fleming"`` (default) or ``"pocock"``.
+        stop_for_pass: stop at an interim look that PASSes (default); when False, PASS is only
+            decided at the last look, with the whole ``alpha / 2`` (as :func:`compare` does), so
+            every planned episode runs unless a FAIL boundary is crossed.
     """
 
     def __init__(
@@ -797,6 +800,7 @@ class SequentialTest:
         alpha: float = DEFAULT_ALPHA,
         max_episodes: int = DOCUMENTED_EPISODES,
         spending: str = "obrien-fleming",
+        stop_for_pass: bool = True,
     ) -> None:
         if spending not in SPENDING_FUNCTIONS:
             raise ValueError(f"spending must be one of {sorted(SPENDING_FUNCTIONS)}, got {spending!r}")
@@ -808,6 +812,7 @@ class SequentialTest:
         self.alpha = _check_level(alpha, "alpha")
         self.max_episodes = int(max_episodes)
         self.spending = spending
+        self.stop_for_pass = bool(stop_for_pass)
         self._spend = SPENDING_FUNCTIONS[spending]
         self._continuing = np.ones(1)  # P(S = s and no FAIL yet) for s candidate-only of m discordant
         self._fail_spent = 0.0
@@ -860,7 +865,12 @@ class SequentialTest:
         fraction = min(1.0, table.n / self.max_episodes)
         critical = self._fail_boundary(table, final, fraction)
         pass_total = self.alpha / 2.0
-        pass_level = (pass_total if final else self._spend(fraction, pass_total)) - self._pass_spent
+        if final:
+            pass_level = pass_total - self._pass_spent
+        elif self.stop_for_pass:
+            pass_level = self._spend(fraction, pass_total) - self._pass_spent
+        else:
+            pass_level = 0.0
         self._pass_spent += pass_level
         upper = None
         if pass_level > 0.0:
