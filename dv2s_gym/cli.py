@@ -827,7 +827,7 @@ def build_parser() -> argparse.ArgumentParser:
         "report.json (schema dv2s-regress v1), junit.xml, report.md, results.jsonl and traces/ of failed "
         "episodes to --out; rerunning with the same --out and settings resumes.",
         epilog="exit status: 0 PASS (or no baseline: measures only), 1 FAIL, 3 INCONCLUSIVE (too few episodes "
-        "to tell, or episodes ended in errors), 2 bad input.\n"
+        "to tell), 4 ERROR (an episode ended in an error: never green), 2 bad input.\n"
         "examples:\n"
         "  dv2s regress --policy ppo:model.zip --baseline rule --scenarios tag:highway --episodes 50\n"
         "  dv2s regress --policy rule --out out/main          # measures only, keep report.json\n"
@@ -1059,7 +1059,7 @@ def main(argv: Optional[List[str]] = None) -> int:
 
     Exit status: 0 success, 1 a check failed (validation, generation; ``regress``: FAIL),
     2 an error (one line on stderr; ``--debug`` prints the traceback), 3 ``regress``
-    INCONCLUSIVE, 130 interrupted.
+    INCONCLUSIVE, 4 ``regress`` ERROR (an episode ended in an error), 130 interrupted.
     """
     parser = build_parser()
     args = parser.parse_args(argv)

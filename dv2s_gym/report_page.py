@@ -160,10 +160,10 @@ body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",sans-serif;margin:0 auto;
 h1{font-size:22px;margin:8px 0}h2{font-size:18px;margin:28px 0 8px;border-bottom:1px solid #d0d7de;padding-bottom:4px}
 .banner{padding:14px 18px;border-radius:6px;color:#fff;font-size:18px;margin:12px 0}
 .banner small{display:block;font-size:13px;opacity:.95;margin-top:4px}
-.PASS{background:#1a7f37}.FAIL{background:#cf222e}.INCONCLUSIVE{background:#b07800}.NONE{background:#57606a}
+.PASS{background:#1a7f37}.FAIL{background:#cf222e}.INCONCLUSIVE{background:#b07800}.ERROR{background:#8250df}.NONE{background:#57606a}
 table{border-collapse:collapse;margin:6px 0;font-size:13px}th,td{border:1px solid #d0d7de;padding:3px 8px;text-align:left;vertical-align:top}
 th{background:#f6f8fa}td.num{text-align:right;font-variant-numeric:tabular-nums}
-.v-PASS{color:#1a7f37;font-weight:600}.v-FAIL{color:#cf222e;font-weight:600}.v-INCONCLUSIVE{color:#b07800;font-weight:600}
+.v-PASS{color:#1a7f37;font-weight:600}.v-FAIL{color:#cf222e;font-weight:600}.v-INCONCLUSIVE{color:#b07800;font-weight:600}.v-ERROR{color:#8250df;font-weight:600}
 figure{margin:10px 0}figcaption{font-size:12px;color:#57606a}
 svg.plot{display:block;background:#fff}
 svg .axis{stroke:#57606a}svg .grid{stroke:#eaeef2}svg .zero{stroke:#57606a}

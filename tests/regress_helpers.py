@@ -43,3 +43,12 @@ class FaultyPolicy(Policy):
 
     def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
         return np.ones(len(observations), dtype=np.int64)
+
+
+class BrokenPolicy(Policy):
+    """Raises on its first action in every episode: a candidate whose every episode is an error."""
+
+    name = "broken"
+
+    def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        raise RuntimeError("broken policy: no action")

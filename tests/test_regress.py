@@ -206,7 +206,7 @@ def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp
     assert by_seed[4]["error"] == "RuntimeError: deliberate failure on seed 4" and by_seed[4]["id"].endswith("/4")
     assert not by_seed[5].get("error") and by_seed[5]["steps"] == 10
 
-    # a PASS on the remaining pairs becomes INCONCLUSIVE when an episode is missing
+    # a PASS on the remaining pairs becomes ERROR when an episode is missing
     ok = dict(by_seed[5], failed=False)
     episodes = [{"id": f"s/{k}", "scenario": "s", "seed": k, "candidate": ok, "baseline": ok} for k in range(200)]
     bank = {"path": "x", "version": "v", "scenarios": ["s"], "hashes": {"s": "h"}}
@@ -217,8 +217,18 @@ def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp
     episodes[0] = dict(episodes[0], candidate=by_seed[4])
     broken = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
                           episodes=episodes)
-    assert broken["verdict"] == "INCONCLUSIVE" and "ended in an error" in broken["overall"]["comparison"]["reason"]
+    assert broken["verdict"] == "ERROR" and "ended in an error" in broken["overall"]["comparison"]["reason"]
+    assert broken["scenarios"]["s"]["comparison"]["verdict"] == "ERROR"
     assert broken["errors"] == [{"id": "s/0", "role": "candidate", "error": by_seed[4]["error"]}]
+    # so does a FAIL: an error is never hidden behind another verdict
+    failing = [dict(e, candidate=dict(ok, failed=True)) for e in episodes]
+    failing[0] = episodes[0]
+    assert build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
+                        episodes=failing)["verdict"] == "ERROR"
+    # and a measures-only run with an error has the verdict ERROR, not none
+    alone = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline=None,
+                         episodes=[dict(e, baseline=None) for e in episodes])
+    assert alone["verdict"] == "ERROR" and "1 episode ended in an error" in alone["error_reason"]
 
 
 def test_baseline_report_runs_only_the_candidate(noisy_run, tmp_path):

@@ -51,6 +51,25 @@ def test_inconclusive_exits_3(tmp_path, capsys):
     assert "verdict: INCONCLUSIVE" in printed and "highway_lead_vehicle_brakes" in printed
 
 
+def test_a_policy_that_crashes_in_every_episode_is_never_green(tmp_path, capsys):
+    broken = "regress_helpers:BrokenPolicy"
+    code = regress("--policy", broken, "--baseline", "rule", "--scenarios", "highway_lead_vehicle_brakes",
+                   "--episodes", "2", "--workers", "1", "--out", str(tmp_path / "paired"), *QUICK)
+    printed = capsys.readouterr().out
+    assert code == 4 and "verdict: ERROR" in printed and "broken policy: no action" in printed
+    suite = ET.parse(tmp_path / "paired" / "junit.xml").getroot().find("testsuite")
+    assert int(suite.get("errors")) >= 1 and suite.find("testcase/error") is not None
+    # measures only: still ERROR, exit 4; and that report cannot be a baseline
+    code = regress("--policy", broken, "--scenarios", "highway_lead_vehicle_brakes", "--episodes", "2",
+                   "--workers", "1", "--out", str(tmp_path / "alone"), *QUICK)
+    assert code == 4 and "verdict: ERROR" in capsys.readouterr().out
+    code = regress("--policy", "rule", "--baseline-report", str(tmp_path / "alone" / "report.json"), "--workers", "1",
+                   "--out", str(tmp_path / "next"), *QUICK)
+    err = capsys.readouterr().err
+    assert code == 2 and "cannot be a baseline: 2 of its episodes ended in an error" in err
+    assert not (tmp_path / "next" / "results.jsonl").exists()
+
+
 def test_pass_exits_0(tmp_path, capsys):
     # 20 pairs without a failure on either side: the interval's upper end (16 points) is below a 20-point margin
     code = regress("--policy", "rule", "--baseline", "rule", "--scenarios", "highway_lead_vehicle_brakes",
@@ -161,4 +180,4 @@ def test_regress_help_documents_the_exit_codes(capsys):
     with pytest.raises(SystemExit):
         main(["regress", "--help"])
     text = capsys.readouterr().out
-    assert "0 PASS" in text and "1 FAIL" in text and "3 INCONCLUSIVE" in text and "2 bad input" in text
+    assert "0 PASS" in text and "1 FAIL" in text and "3 INCONCLUSIVE" in text and "2 bad input" in text and "4 ERROR" in text

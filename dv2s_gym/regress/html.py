@@ -36,7 +36,7 @@ MAX_VIDEOS = 12
 """Newly failing episodes shown as clips; the rest are listed."""
 
 COLOURS = {"candidate": "#0b63c5", "baseline": "#8a8f98", "PASS": "#1a7f37", "FAIL": "#cf222e",
-           "INCONCLUSIVE": "#b07800", None: "#57606a"}
+           "INCONCLUSIVE": "#b07800", "ERROR": "#8250df", None: "#57606a"}
 
 
 # --------------------------------------------------------------------------- SVG plots
@@ -180,8 +180,10 @@ def _banner(report: Mapping[str, Any]) -> str:
     verdict = report.get("verdict")
     candidate = (report.get("candidate") or {}).get("spec")
     baseline = (report.get("baseline") or {}).get("spec") if report.get("baseline") else None
-    css = verdict if verdict in ("PASS", "FAIL", "INCONCLUSIVE") else "NONE"
-    if verdict is None:
+    css = verdict if verdict in ("PASS", "FAIL", "INCONCLUSIVE", "ERROR") else "NONE"
+    if verdict == "ERROR" and report.get("baseline") is None:
+        head = f"ERROR: {_e(candidate)} (measures only): {_e(report.get('error_reason', ''))}"
+    elif verdict is None:
         head = f"No verdict: {_e(candidate)} was run without a baseline"
     else:
         head = f"{_e(verdict)}: {_e(candidate)} against {_e(baseline)}"

@@ -17,13 +17,20 @@ bumps it, and ``--baseline-report`` refuses a report of another version)::
       "scenarios": {name: {"candidate": Summary, "baseline": Summary | null,
                            "comparison": Comparison | null}},
       "overall": {"candidate": Summary, "baseline": Summary | null, "comparison": Comparison | null},
-      "verdict": "PASS" | "FAIL" | "INCONCLUSIVE" | null (no baseline),
+      "verdict": "PASS" | "FAIL" | "INCONCLUSIVE" | "ERROR" | null (no baseline, no error),
+      "error_reason": one line (measures only, with errors; absent otherwise),
       "regressed": [scenario names whose verdict is FAIL],
       "newly_failing": [episode ids where the candidate failed and the baseline did not],
       "errors": [{"id", "role", "error"}],
       "stopped_early": bool,
-      "sequential": {"looks", "episodes", "max_episodes", "verdict"} | null
+      "sequential": {"looks", "episodes", "max_episodes", "verdict"} | null,
+      "power": {"per_scenario": {name: Power}, "pooled": Power, "power", "mde", "assumption"} | null
     }
+
+``Power`` (:func:`dv2s_gym.regress.power.run_power`): ``{"n", "baseline_rate", "level", "at_margin",
+"at_mde", "detectable"}``: the probability the run had to FAIL an increase of the margin and of the
+planned ``mde``, and the smallest increase it detected with the planned power. ``settings`` also
+holds ``mde``, ``power`` and, for a run sized by them, ``plan``.
 
 ``Episode`` is :meth:`policies.evaluation.EpisodeResult.to_json` (scenario, seed, scene_seed,
 sampled ``params``, collided, collisions, off_road, success, failed, min_ttc (null when no
@@ -52,12 +59,13 @@ error on either side are left out)::
      "candidate_rate", "baseline_rate",
      "difference": {"value", "low", "high"}     failure-rate difference, Newcombe interval,
      "p_value": one-sided exact McNemar, "p_adjusted": p-value scaled by the family of tests (FAIL iff <= alpha),
-     "verdict": "PASS" | "FAIL" | "INCONCLUSIVE", "reason": one line}
+     "verdict": "PASS" | "FAIL" | "INCONCLUSIVE" | "ERROR", "reason": one line}
 
 Verdicts follow :mod:`dv2s_gym.regress.stats` (non-inferiority within ``margin``). The
 overall verdict is FAIL when any scenario or the pooled table FAILs, PASS when the pooled
-table PASSes and no scenario FAILs. Episodes that ended in errors never let a verdict be
-PASS: it becomes INCONCLUSIVE, saying how many are missing.
+table PASSes and no scenario FAILs. An episode that ended in an error makes the verdict ERROR
+(its scenario's too; a measures-only run's verdict becomes ERROR as well, with ``error_reason``),
+whatever the other episodes show, and such a report cannot serve as a baseline.
 """
 
 from __future__ import annotations
@@ -101,13 +109,24 @@ RATES = (("collision_rate", "collided"), ("off_road_rate", "off_road"), ("failur
          ("success_rate", "success"))
 MEANS = (("min_ttc", "min_ttc"), ("mean_speed", "mean_speed"), ("return", "episode_return"))
 
-EXIT_CODES = {"PASS": 0, "FAIL": 1, "INCONCLUSIVE": 3, None: 0}
-"""Exit status of ``dv2s regress`` per verdict (2 stays "bad input"); no baseline: 0."""
+EXIT_CODES = {"PASS": 0, "FAIL": 1, "INCONCLUSIVE": 3, "ERROR": 4, None: 0}
+"""Exit status of ``dv2s regress`` per verdict (2 stays "bad input"); no baseline and no error: 0."""
+
+VERDICTS = ("PASS", "FAIL", "INCONCLUSIVE", "ERROR")
+"""Every verdict a report can carry (``None``: measures only, every episode ran)."""
 
 
 def exit_code(verdict: Optional[str]) -> int:
-    """The exit status for a report's verdict: 0 PASS (or no baseline), 1 FAIL, 3 INCONCLUSIVE."""
+    """The exit status for a report's verdict: 0 PASS (or measures only), 1 FAIL, 3 INCONCLUSIVE, 4 ERROR."""
     return EXIT_CODES[verdict]
+
+
+def _error_reason(errors: Sequence[Mapping[str, Any]]) -> str:
+    first = errors[0]
+    message = str(first.get("error") or "").splitlines()[0] if first.get("error") else "no result"
+    return (f"{len(errors)} episode{'s' if len(errors) != 1 else ''} ended in an error, so the run cannot be judged "
+            f"(first: {first['id']} ({first['role']}): {message}); fix the error and rerun the same command to "
+            "run them again")
 
 
 def _verdict(value: Any) -> str:
@@ -205,7 +224,7 @@ def paired_tables(episodes: Sequence[Dict[str, Any]], scenarios: Sequence[str]) 
 
 
 def _errors_note(count: int) -> str:
-    return f"{count} episode{'s' if count != 1 else ''} ended in an error, so it cannot PASS"
+    return f"{count} episode{'s' if count != 1 else ''} ended in an error, so it cannot be judged"
 
 
 # ---------------------------------------------------------------------------------- report
@@ -256,8 +275,8 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         per_scenario, overall = stats.compare_scenarios(tables, margin, alpha, pooled_rejected=pooled_rejected)
         for name, comparison in per_scenario.items():
             scenario_verdict, reason = _verdict(comparison.verdict), comparison.reason
-            if scenario_verdict == "PASS" and errors_in[name]:
-                scenario_verdict, reason = "INCONCLUSIVE", f"{_errors_note(errors_in[name])}; {reason}"
+            if errors_in[name]:
+                scenario_verdict, reason = "ERROR", f"{_errors_note(errors_in[name])}; {reason}"
             comparisons[name] = comparison_json(comparison, verdict=scenario_verdict, reason=reason)
         regressed = [name for name, c in comparisons.items() if c["verdict"] == "FAIL"]
         verdict, reason = _verdict(overall.verdict), overall.reason
@@ -265,10 +284,8 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
             reason = (f"sequential test of the pooled table ({sequential.get('looks')} looks, "
                       f"{sequential.get('episodes')} of {sequential.get('max_episodes')} paired episodes): "
                       f"{sequential['verdict']}; {reason}")
-        if verdict == "PASS" and errors:
-            verdict, reason = "INCONCLUSIVE", f"{_errors_note(len(errors))}; {reason}"
-        elif errors:
-            reason = f"{reason}; {len(errors)} episode{'s' if len(errors) != 1 else ''} ended in an error"
+        if errors:
+            verdict, reason = "ERROR", f"{_error_reason(errors)}; without them: {verdict}, {reason}"
         overall_comparison = comparison_json(overall, verdict=verdict, reason=reason)
         newly_failing = [e["id"] for e in episodes if e.get("baseline") is not None
                          and not e["candidate"].get("error") and not e["baseline"].get("error")
@@ -286,7 +303,7 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         "baseline": summarize_groups({n: results(n, "baseline") for n in by_scenario}) if has_baseline else None,
         "comparison": overall_comparison,
     }
-    return {
+    report = {
         "schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,
         "created": created or datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -306,6 +323,10 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         "sequential": dict(sequential) if sequential else None,
         "power": power,
     }
+    if errors and verdict is None:  # measures only: an error is still never green
+        report["verdict"] = "ERROR"
+        report["error_reason"] = _error_reason(errors)
+    return report
 
 
 def _power(tables: Mapping[str, "stats.PairedTable"], margin: float, alpha: float,
@@ -354,7 +375,15 @@ def load_report(path: Union[str, os.PathLike]) -> Dict[str, Any]:
 
 def check_baseline_report(report: Mapping[str, Any], *, path: Union[str, os.PathLike], bank: Mapping[str, Any],
                           env_config: Mapping[str, Any]) -> None:
-    """Refuse a baseline report whose bank scenarios or env config differ from this run's, saying what differs."""
+    """Refuse a baseline report with errors, or whose bank scenarios or env config differ from this run's,
+    saying what differs."""
+    errors = report.get("errors") or []
+    if errors:
+        first = errors[0]
+        raise ReportMismatchError(
+            f"baseline report {path} cannot be a baseline: {len(errors)} of its episodes ended in an error "
+            f"(first: {first.get('id')} ({first.get('role')}): {str(first.get('error') or '').splitlines()[0][:160]}); "
+            "rerun that run's command until it has no errors, and compare against that report")
     theirs = report.get("bank") or {}
     their_hashes = theirs.get("hashes") or {}
     missing = [n for n in bank["scenarios"] if n not in their_hashes]
@@ -459,7 +488,9 @@ def format_summary(report: Mapping[str, Any]) -> str:
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     lines = [_headline(report)]
     lines += ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
-    if report["verdict"] is not None:
+    if report.get("error_reason"):
+        lines.append(f"verdict: ERROR ({report['error_reason']})")
+    elif report["verdict"] is not None:
         lines.append(f"verdict: {report['verdict']} ({report['overall']['comparison']['reason']})")
         if report["regressed"]:
             lines.append(f"regressed: {', '.join(report['regressed'])}")
@@ -477,7 +508,9 @@ def format_summary(report: Mapping[str, Any]) -> str:
 def _markdown(report: Mapping[str, Any], report_path: str = "report.json") -> str:
     verdict = report["verdict"]
     lines = [f"## dv2s regress: {verdict if verdict else 'measures (no baseline)'}", "", _headline(report), ""]
-    if verdict is not None:
+    if report.get("error_reason"):
+        lines += [f"**ERROR**: {report['error_reason']}", ""]
+    if report["overall"].get("comparison") is not None:
         lines += [f"**{verdict}**: {report['overall']['comparison']['reason']}", ""]
         if report["regressed"]:
             lines += ["Regressed: " + ", ".join(f"`{n}`" for n in report["regressed"]), ""]
