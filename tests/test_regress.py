@@ -19,6 +19,7 @@ from dv2s_gym.regress.replay import replay_episode
 from dv2s_gym.regress.tasks import KIND
 from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.pool import LocalBackend, get_backend
+from regress_junit_schema import junit_problems
 
 NOISY = "rule?action_noise=0.5"
 PAIR = ["highway_obstacle_in_lane", "urban_lead_vehicle_stopped"]
@@ -89,17 +90,77 @@ def test_newly_failing_and_traces_of_failed_episodes(noisy_run):
     assert report["newly_failing"] == expected and expected  # the noisy copy crashes somewhere in 8 episodes
 
 
-def test_junit_xml_has_one_case_per_scenario_and_failures_for_fail(noisy_run):
+def test_junit_xml_has_one_case_per_scenario_and_the_verdict_and_is_valid(noisy_run):
     out, report = noisy_run
     root = ET.parse(out / "junit.xml").getroot()
+    assert junit_problems(root) == []
     cases = root.findall(".//testcase")
-    assert [c.get("name") for c in cases] == PAIR
-    for case in cases:
+    assert [c.get("name") for c in cases] == PAIR + ["overall verdict"]
+    for case in cases[:-1]:
         verdict = report["scenarios"][case.get("name")]["comparison"]["verdict"]
         assert (case.find("failure") is not None) == (verdict == "FAIL")
         assert (case.find("skipped") is not None) == (verdict == "INCONCLUSIVE")
+    assert (cases[-1].find("failure") is not None) == (report["verdict"] == "FAIL")
     suite = root.find("testsuite")
-    assert int(suite.get("failures")) == len(report["regressed"])
+    assert int(suite.get("failures")) == len(report["regressed"]) + (report["verdict"] == "FAIL")
+    assert float(suite.get("time")) > 0 and suite.get("hostname") == report["hostname"]
+
+
+def _junit_of(tables, errors=0, baseline=True):
+    """The JUnit XML of a report built from paired outcomes per scenario (``(candidate failed, baseline failed)``)."""
+    import tempfile
+
+    from dv2s_gym.regress.report import build_report, write_junit
+
+    episodes = []
+    for name, outcomes in tables.items():
+        for seed, (cand, base) in enumerate(outcomes):
+            result = lambda failed, role: {"failed": failed, "collided": failed, "seconds": 0.5}  # noqa: E731
+            episodes.append({"id": f"{name}/{seed}", "scenario": name, "seed": seed,
+                             "candidate": result(cand, "candidate"), "baseline": result(base, "baseline") if baseline else None})
+    for k in range(errors):
+        episodes[k] = dict(episodes[k], candidate={"error": "RuntimeError: boom"})
+    bank = {"path": "x", "version": "v", "scenarios": list(tables), "hashes": {n: "h" for n in tables}}
+    report = build_report(bank=bank, settings={"episodes": 1, "seed": 0, "margin": 0.02, "alpha": 0.05},
+                          candidate={"spec": "new"}, baseline={"spec": "old"} if baseline else None, episodes=episodes)
+    with tempfile.TemporaryDirectory() as folder:
+        write_junit(report, f"{folder}/junit.xml")
+        root = ET.parse(f"{folder}/junit.xml").getroot()
+    assert junit_problems(root) == []
+    return report, {c.get("name"): c for c in root.iter("testcase")}, root.find("testsuite")
+
+
+def test_the_junit_schema_check_finds_what_ci_systems_reject():
+    bad = ET.fromstring('<testsuites><testsuite name="s" tests="2" failures="0" errors="0" timestamp="2026-01-01 10:00">'
+                        '<testcase name="a"><failure message="x"/></testcase><properties/></testsuite></testsuites>')
+    problems = " | ".join(junit_problems(bad))
+    for expected in ("missing attribute hostname", "missing attribute time", "timestamp='2026-01-01 10:00'",
+                     "tests=2 but 1 test cases", "failures=0 but 1", "missing attribute classname", "out of order"):
+        assert expected in problems
+
+
+def test_junit_a_pooled_only_fail_is_a_failure_of_the_overall_case():
+    # a small rise in each of 5 scenarios: no scenario FAILs alone, the pooled test does
+    spread = {f"s{i}": [(True, False)] * 7 + [(False, True)] * 3 + [(True, True)] * 3 + [(False, False)] * 187
+              for i in range(5)}
+    report, cases, suite = _junit_of(spread)
+    assert report["verdict"] == "FAIL" and report["regressed"] == []
+    assert cases["overall verdict"].find("failure") is not None
+    assert "all scenarios pooled" in cases["overall verdict"].find("failure").get("message")
+    assert suite.get("failures") == "1" and all(cases[f"s{i}"].find("skipped") is not None for i in range(5))
+
+
+def test_junit_error_is_an_error_and_inconclusive_is_skipped_with_its_reason():
+    few = {"a": [(False, False)] * 3}
+    report, cases, suite = _junit_of(few)
+    assert report["verdict"] == "INCONCLUSIVE"
+    assert cases["overall verdict"].find("skipped").get("message").startswith("INCONCLUSIVE: no scenario fails")
+    report, cases, suite = _junit_of(few, errors=1)
+    assert report["verdict"] == "ERROR" and suite.get("errors") == "2"
+    assert "RuntimeError: boom" in cases["overall verdict"].find("error").text
+    assert cases["a"].find("error") is not None and cases["a"].find("skipped") is None
+    report, cases, suite = _junit_of(few, errors=1, baseline=False)  # measures only
+    assert report["verdict"] == "ERROR" and cases["overall verdict"].find("error") is not None
 
 
 def test_markdown_has_the_comparison_table(noisy_run):

@@ -39,7 +39,8 @@ def test_fail_exits_1_and_names_the_scenario(failing_run, capsys):
     report = json.loads((out / "report.json").read_text())
     assert report["verdict"] == "FAIL" and report["regressed"] == ["urban_lead_vehicle_stopped"]
     cases = ET.parse(out / "junit.xml").getroot().findall(".//testcase")
-    assert len(cases) == 1 and cases[0].find("failure") is not None
+    assert [c.get("name") for c in cases] == ["urban_lead_vehicle_stopped", "overall verdict"]
+    assert all(c.find("failure") is not None for c in cases)
     assert "| `urban_lead_vehicle_stopped` | 8 |" in (out / "report.md").read_text()
 
 

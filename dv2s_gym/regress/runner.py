@@ -18,7 +18,9 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import socket
 import sys
+import time
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
@@ -187,6 +189,7 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
     Returns:
         The report dict (schema: :mod:`dv2s_gym.regress.report`).
     """
+    started = time.time()
     _check_settings(episodes, seed, margin, alpha, batch)
     if baseline is not None and baseline_report is not None:
         raise RegressError("give --baseline POLICY or --baseline-report REPORT, not both")
@@ -324,6 +327,8 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
     settings["power"] = float(power if power is not None else power_plan.DEFAULT_POWER)
     report = build_report(bank=bank, settings=settings, candidate=candidate_info, baseline=baseline_info,
                           episodes=paired(ran_seeds), stopped_early=stopped_early, sequential=sequential_info)
+    report["hostname"] = socket.gethostname()
+    report["duration"] = round(time.time() - started, 3)
     write_reports(report, out)
     return report
 

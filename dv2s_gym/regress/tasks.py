@@ -11,7 +11,8 @@ A task is a plain dict, so any pool of :mod:`dv2s_gym.workers` (local processes,
 - ``trace_dir``: folder for the trace of a failed episode (``None``: keep no trace).
 
 :func:`run_regress_task` returns ``EpisodeResult.to_json()`` plus ``role``, ``id``
-(``"<scenario>/<seed>"``) and ``trace`` (the saved trace's path or ``None``). An
+(``"<scenario>/<seed>"``), ``trace`` (the saved trace's path or ``None``) and ``seconds`` (the
+episode's wall time). An
 exception inside the episode comes back as an error result (``{"id", "role",
 "scenario", "seed", "error", "trace": None}``) instead of propagating: it is kept in
 the report, never dropped.
@@ -24,6 +25,7 @@ spec, so a worker serves any mix of tasks.
 from __future__ import annotations
 
 import os
+import time
 import traceback
 from pathlib import Path
 from typing import Any, Dict
@@ -50,7 +52,9 @@ def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
     try:
         env_key, env = env_for(task.get("bank_dir"), task.get("env_config"))
         policy = policy_for(task["policy"], env_key, env)
+        started = time.perf_counter()
         result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
+        seconds = time.perf_counter() - started
     except Exception as error:  # reported as an error episode, never dropped
         if env_key is not None:
             drop_env(env_key)
@@ -59,7 +63,7 @@ def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
             message += "\n" + traceback.format_exc()
         return error_result(task, message)
     data = result.to_json()
-    data.update(role=task["role"], id=task_id(task["scenario"], task["seed"]), trace=None)
+    data.update(role=task["role"], id=task_id(task["scenario"], task["seed"]), trace=None, seconds=round(seconds, 4))
     trace_dir = task.get("trace_dir")
     if result.failed and trace_dir:
         path = Path(trace_dir) / trace_filename(task["role"], task["scenario"], task["seed"])
