@@ -183,7 +183,8 @@ def _cmd_regress(args: argparse.Namespace) -> int:
             margin=args.margin, alpha=args.alpha, mde=args.mde, power=args.power,
             backend=args.backend, workers=args.workers, address=args.address, out_dir=out,
             sequential=args.sequential, env_config=env_config, progress=not args.no_progress and not args.json,
-            timeout=args.timeout, batch=args.batch, baseline_role=args.baseline_role)
+            timeout=args.timeout, batch=args.batch, baseline_role=args.baseline_role, failure=args.failure,
+            stall_seconds=args.stall_seconds)
     except KeyboardInterrupt:
         print(f"dv2s: finished episodes are saved in {Path(out) / 'results.jsonl'}; rerun the same command to resume",
               file=sys.stderr)
@@ -857,6 +858,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--margin", type=float, default=0.02,
                    help="non-inferiority margin on the failure rate (default 0.02: 2 points, as calibrated in bench/calibrate_regress.py)")
     p.add_argument("--alpha", type=float, default=0.05, help="level of the FAIL test (default 0.05)")
+    p.add_argument("--failure", default=None,
+                   help="what counts as a failure: a comma-separated list of collision, off_road, stall (default: "
+                   "all three; stall: the ego stands with a free road ahead); each kind is also reported apart")
+    p.add_argument("--stall-seconds", type=float, default=5.0,
+                   help="seconds the ego must stand with a free road ahead for a stall (default 5)")
     p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
     p.add_argument("--address", default=None, help="with --backend ray: the cluster address")

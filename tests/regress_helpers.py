@@ -52,3 +52,12 @@ class BrokenPolicy(Policy):
 
     def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
         raise RuntimeError("broken policy: no action")
+
+
+class StopPolicy(Policy):
+    """Brakes (SLOWER) every step: the ego comes to a standstill on a free road, and never collides."""
+
+    name = "stop"
+
+    def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        return np.full(len(observations), 4, dtype=np.int64)

@@ -257,6 +257,9 @@ def _outcome(result: Any) -> str:
                                     if result.get("collisions") else ""))
     if result.get("off_road"):
         parts.append("off road")
+    if result.get("stalled"):
+        stall = _num(result.get("stall_time"))
+        parts.append("stall" + (f" from {stall:.1f} s" if stall is not None else ""))
     if not parts:
         parts.append("success" if result.get("success") else "no failure")
     ttc = _num(result.get("min_ttc"))
@@ -336,7 +339,8 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
     """The report page as a string (see :func:`write_html`); relative trace paths resolve against ``base``."""
     title = f"dv2s regress: {(report.get('candidate') or {}).get('spec', '?')}"
     has_baseline = report.get("baseline") is not None
-    plots = [("Failure (collision or off road) rate per scenario, 95% intervals",
+    failure = ", ".join((report.get("settings") or {}).get("failure") or ["collision", "off_road"])
+    plots = [(f"Failure ({failure}) rate per scenario, 95% intervals",
               rate_plot(report, "failure_rate", "Failure rate")),
              ("Collision rate per scenario, 95% intervals", rate_plot(report, "collision_rate", "Collision rate"))]
     if has_baseline:

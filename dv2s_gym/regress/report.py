@@ -43,11 +43,13 @@ result (an exception, or a worker that crashed or hung twice) is
 ``Summary`` (one policy, one scenario or all)::
 
     {"episodes": n (without errors), "errors": count,
-     "collision_rate" | "off_road_rate" | "failure_rate" | "success_rate":
+     "collision_rate" | "off_road_rate" | "stall_rate" | "failure_rate" | "success_rate":
          {"value", "low", "high", "count"}          Wilson 95 % interval,
      "min_ttc" | "mean_speed" | "return": {"value", "low", "high", "n"}   bootstrap 95 % interval}
 
-A failure is a collision or leaving the road. ``min_ttc`` is the mean over episodes of each
+A failure is any of the run's failure kinds (``settings["failure"]``: collision, off-road and
+stall by default; :mod:`dv2s_gym.regress.failures`); each kind has its own rate, whether it counts
+as a failure or not. ``min_ttc`` is the mean over episodes of each
 episode's minimum time-to-collision [s], over the ``n`` episodes where it was finite. The
 means' intervals resample episodes within a scenario and whole scenarios for the overall
 figure (``cluster_bootstrap_mean``), since episodes of one scenario are not independent.
@@ -106,8 +108,8 @@ __all__ = [
 SCHEMA = "dv2s-regress"
 SCHEMA_VERSION = 1
 CONFIDENCE = 0.95
-RATES = (("collision_rate", "collided"), ("off_road_rate", "off_road"), ("failure_rate", "failed"),
-         ("success_rate", "success"))
+RATES = (("collision_rate", "collided"), ("off_road_rate", "off_road"), ("stall_rate", "stalled"),
+         ("failure_rate", "failed"), ("success_rate", "success"))
 MEANS = (("min_ttc", "min_ttc"), ("mean_speed", "mean_speed"), ("return", "episode_return"))
 
 EXIT_CODES = {"PASS": 0, "FAIL": 1, "INCONCLUSIVE": 3, "ERROR": 4, None: 0}
@@ -438,7 +440,9 @@ def _headline(report: Mapping[str, Any]) -> str:
     baseline = report.get("baseline")
     against = ("" if baseline is None else
                f" vs baseline `{baseline.get('spec')}`" + (f" (from {baseline['report']})" if baseline.get("report") else ""))
-    return (f"candidate `{report['candidate']['spec']}`{against}; {len(report['scenarios'])} scenario(s) x "
+    failure = ", ".join(settings.get("failure") or ["collision", "off_road"])
+    return (f"candidate `{report['candidate']['spec']}`{against}; failure: {failure}; "
+            f"{len(report['scenarios'])} scenario(s) x "
             f"{settings['episodes']} episode(s) from seed {settings['seed']}; margin {100 * settings['margin']:g} pp, "
             f"alpha {settings['alpha']:g}; bank version {str(report['bank']['version'])[:12]}")
 
@@ -526,8 +530,8 @@ def _markdown(report: Mapping[str, Any], report_path: str = "report.json") -> st
                          f"{c['p_adjusted']:.3g} | {c['verdict']} |")
         lines.append("")
     lines += ["### Measures", "",
-              "| scenario | policy | episodes | collision | off-road | success | min TTC [s] | mean speed [m/s] | return |",
-              "|---|---|---:|---|---|---|---|---|---|"]
+              "| scenario | policy | episodes | collision | off-road | stall | success | min TTC [s] | mean speed [m/s] | return |",
+              "|---|---|---:|---|---|---|---|---|---|---|"]
     for name, entry in list(report["scenarios"].items()) + [("**overall**", report["overall"])]:
         for role in ("candidate", "baseline"):
             s = entry.get(role)
@@ -535,7 +539,7 @@ def _markdown(report: Mapping[str, Any], report_path: str = "report.json") -> st
                 continue
             label = name if name.startswith("**") else f"`{name}`"
             lines.append(f"| {label} | {role} | {s['episodes']} | {_interval(s['collision_rate'])} | "
-                         f"{_interval(s['off_road_rate'])} | {_interval(s['success_rate'])} | "
+                         f"{_interval(s['off_road_rate'])} | {_interval(s.get('stall_rate'))} | {_interval(s['success_rate'])} | "
                          f"{_interval(s['min_ttc'], False)} | {_interval(s['mean_speed'], False, 1)} | "
                          f"{_interval(s['return'], False)} |")
     lines.append("")

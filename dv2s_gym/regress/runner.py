@@ -27,6 +27,8 @@ from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tupl
 from dv2s_gym.regress import power as power_plan
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
+from dv2s_gym.regress.failures import (DEFAULT_FAILURE, DEFAULT_STALL_SECONDS, apply_failure, missing_facts,
+                                        parse_failure)
 from dv2s_gym.regress.report import (
     build_report,
     check_baseline_report,
@@ -59,10 +61,13 @@ def bank_info(scenarios: Sequence[str], bank_dir: Optional[Union[str, os.PathLik
 
 
 def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterable[int], *,
-               env_config: Dict[str, Any], bank_dir: Optional[str], trace_dir: Optional[str]) -> List[Dict[str, Any]]:
+               env_config: Dict[str, Any], bank_dir: Optional[str], trace_dir: Optional[str],
+               failure: Sequence[str] = DEFAULT_FAILURE, stall_seconds: float = DEFAULT_STALL_SECONDS
+               ) -> List[Dict[str, Any]]:
     """Task dicts, seed by seed (every scenario, then the next seed), each role in turn."""
     return [{"kind": KIND, "policy": spec, "role": role, "scenario": scenario, "seed": int(seed),
-             "env_config": dict(env_config), "bank_dir": bank_dir, "trace_dir": trace_dir}
+             "env_config": dict(env_config), "bank_dir": bank_dir, "trace_dir": trace_dir,
+             "failure": list(failure), "stall_seconds": float(stall_seconds)}
             for seed in seeds for scenario in scenarios for role, spec in policies.items()]
 
 
@@ -108,8 +113,8 @@ def _select(scenarios: Scenarios, bank_dir: Optional[str], fallback: Optional[Se
 
 
 def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Sequence[str], seeds: Sequence[int],
-                          bank: Dict[str, Any], env_config: Dict[str, Any]
-                          ) -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]], str]:
+                          bank: Dict[str, Any], env_config: Dict[str, Any], failure: Sequence[str],
+                          stall_seconds: float) -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]], str]:
     """The baseline info, the baseline result per episode id, and the report file's SHA-256."""
     path = Path(path)
     old = load_report(path)
@@ -137,6 +142,18 @@ def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Seque
             f"baseline report {path} has no episode {missing[0]}{more}; it ran {settings.get('episodes')} "
             f"episode(s) per scenario from seed {settings.get('seed')}: use --episodes and --seed within those, "
             "or rerun the baseline with more episodes")
+    wanted = [results[task_id(n, s)] for s in seeds for n in names]
+    lacking = missing_facts(wanted, failure)
+    if lacking:
+        raise ReportMismatchError(
+            f"baseline report {path} does not record {', '.join(lacking)} for its episodes (an older dv2s made it); "
+            f"rerun the baseline with this version, or leave {', '.join(lacking)} out of --failure")
+    their_stall = (old.get("settings") or {}).get("stall_seconds", DEFAULT_STALL_SECONDS)
+    if "stall" in failure and float(their_stall) != float(stall_seconds):
+        raise ReportMismatchError(f"baseline report {path} detected stalls after {their_stall:g} s, this run after "
+                                  f"{stall_seconds:g} s; use the same stall time, or rerun the baseline")
+    for result in results.values():
+        apply_failure(result, failure)
     info = {"report": str(path.resolve()), "role": role, "spec": old[role].get("spec"), "card": old[role].get("card")}
     return info, results, hashlib.sha256(path.read_bytes()).hexdigest()
 
@@ -150,6 +167,7 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
                    out_dir: Optional[Union[str, os.PathLike]] = None, sequential: bool = False,
                    env_config: Optional[Dict[str, Any]] = None, progress: bool = True,
                    timeout: Optional[float] = None, batch: Optional[int] = None,
+                   failure: Union[None, str, Sequence[str]] = None, stall_seconds: float = DEFAULT_STALL_SECONDS,
                    baseline_role: str = "candidate",
                    on_result: Optional[Callable[[Dict[str, Any]], None]] = None) -> Dict[str, Any]:
     """Run ``candidate`` (and ``baseline``) on scenario x seed pairs and write the reports.
@@ -185,12 +203,18 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         progress: a progress bar on stderr.
         timeout: seconds one episode may take before its worker counts as hung (local backend).
         on_result: called in this process with each finished episode's result (after it is saved).
+        failure: what counts as a failure: kinds among ``collision``, ``off_road``, ``stall`` (a list or
+            ``"collision,stall"``; default all three); each kind is also reported apart.
+        stall_seconds: how long the ego must stand with a free road ahead for a stall.
 
     Returns:
         The report dict (schema: :mod:`dv2s_gym.regress.report`).
     """
     started = time.time()
     _check_settings(episodes, seed, margin, alpha, batch)
+    failure = parse_failure(failure)
+    if not float(stall_seconds) > 0:
+        raise RegressError(f"--stall-seconds must be positive, not {stall_seconds}")
     if baseline is not None and baseline_report is not None:
         raise RegressError("give --baseline POLICY or --baseline-report REPORT, not both")
     if sequential and baseline is None and baseline_report is None:
@@ -218,7 +242,7 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
     report_hash = None
     if baseline_report is not None:
         baseline_info, old_results, report_hash = _baseline_from_report(baseline_report, baseline_role, names, seeds,
-                                                                        bank, env_config)
+                                                                        bank, env_config, failure, float(stall_seconds))
     elif baseline is not None:
         baseline_info = _policy_info(baseline)
     else:
@@ -231,13 +255,14 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         "candidate": candidate, "baseline": baseline, "baseline_report": report_hash,
         "baseline_role": baseline_role if baseline_report is not None else None,
         "bank_version": bank["version"], "scenarios": names, "episodes": episodes, "seed": seed,
-        "env_config": env_config, "sequential": bool(sequential),
+        "env_config": env_config, "sequential": bool(sequential), "failure": failure,
+        "stall_seconds": float(stall_seconds),
     }
     if sequential:  # the stopping point depends on these
         identity.update(margin=float(margin), alpha=float(alpha), batch=batch)
     settings = {"episodes": episodes, "seed": seed, "margin": float(margin), "alpha": float(alpha),
                 "sequential": bool(sequential), "env_config": env_config, "backend": backend,
-                "workers": workers, "timeout": timeout}
+                "workers": workers, "timeout": timeout, "failure": failure, "stall_seconds": float(stall_seconds)}
     if sequential:
         settings["batch"] = batch
 
@@ -252,7 +277,8 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
     def task_key(task: Dict[str, Any]) -> Tuple[str, str]:
         return task_id(task["scenario"], task["seed"]), task["role"]
 
-    all_tasks = plan_tasks(policies, names, seeds, env_config=env_config, bank_dir=bank_dir, trace_dir=trace_dir)
+    all_tasks = plan_tasks(policies, names, seeds, env_config=env_config, bank_dir=bank_dir, trace_dir=trace_dir,
+                           failure=failure, stall_seconds=float(stall_seconds))
     results: Dict[Tuple[str, str], Dict[str, Any]] = {task_key(t): done[task_key(t)] for t in all_tasks
                                                       if task_key(t) in done}
     bar = _progress(progress, total=len(all_tasks), initial=len(results))
