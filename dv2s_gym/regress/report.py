@@ -447,6 +447,15 @@ def _headline(report: Mapping[str, Any]) -> str:
             f"alpha {settings['alpha']:g}; bank version {str(report['bank']['version'])[:12]}")
 
 
+def warnings(report: Mapping[str, Any]) -> List[str]:
+    """What a reader must know before trusting the verdict (a baseline from another dv2s version, ...)."""
+    found = []
+    warning = (report.get("baseline") or {}).get("warning")
+    if warning:
+        found.append(str(warning))
+    return found
+
+
 def power_lines(report: Mapping[str, Any]) -> List[str]:
     """What the run could detect: the power per scenario and pooled at the margin and at the planned effect."""
     power = report.get("power")
@@ -502,6 +511,7 @@ def format_summary(report: Mapping[str, Any]) -> str:
     else:
         lines.append("no baseline: measures only, no verdict")
     lines += power_lines(report)
+    lines += [f"warning: {w}" for w in warnings(report)]
     if report["errors"]:
         lines.append(f"{len(report['errors'])} error(s): " + "; ".join(
             f"{e['id']} ({e['role']}): {e['error']}" for e in report["errors"][:3]))

@@ -36,6 +36,7 @@ from dv2s_gym.regress.report import (
     paired_tables,
     write_reports,
 )
+from dv2s_gym.regress.identity import policy_fingerprint
 from dv2s_gym.regress.store import RunStore
 from dv2s_gym.regress.tasks import KIND
 from dv2s_gym.workers.errors import WorkerError
@@ -155,6 +156,13 @@ def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Seque
     for result in results.values():
         apply_failure(result, failure)
     info = {"report": str(path.resolve()), "role": role, "spec": old[role].get("spec"), "card": old[role].get("card")}
+    from dv2s_gym.regress.report import _dv2s_version
+
+    theirs, ours = old.get("dv2s_version"), _dv2s_version()
+    if theirs != ours:
+        info["warning"] = (f"baseline report {path} was made by dv2s-gym {theirs}, this is {ours}: the simulator or the "
+                           "policies may have changed between them, so differences may not be the candidate's; "
+                           "rerun the baseline with this version to be sure")
     return info, results, hashlib.sha256(path.read_bytes()).hexdigest()
 
 
@@ -238,13 +246,15 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
     seeds = [seed + k for k in range(episodes)]
 
     candidate_info = _policy_info(candidate)
+    if baseline is not None:  # a bad baseline spec is bad input too, before any episode
+        baseline_info_early = _policy_info(baseline)
     old_results: Dict[str, Dict[str, Any]] = {}
     report_hash = None
     if baseline_report is not None:
         baseline_info, old_results, report_hash = _baseline_from_report(baseline_report, baseline_role, names, seeds,
                                                                         bank, env_config, failure, float(stall_seconds))
     elif baseline is not None:
-        baseline_info = _policy_info(baseline)
+        baseline_info = baseline_info_early
     else:
         baseline_info = None
     has_baseline = baseline_info is not None
@@ -258,6 +268,9 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         "env_config": env_config, "sequential": bool(sequential), "failure": failure,
         "stall_seconds": float(stall_seconds),
     }
+    for role, spec in (("candidate", candidate), ("baseline", baseline)):
+        if spec is not None:  # what the policy is, not what it is called
+            identity.update({f"{role} {key}": value for key, value in policy_fingerprint(spec).items()})
     if sequential:  # the stopping point depends on these
         identity.update(margin=float(margin), alpha=float(alpha), batch=batch)
     settings = {"episodes": episodes, "seed": seed, "margin": float(margin), "alpha": float(alpha),
@@ -279,6 +292,9 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
 
     all_tasks = plan_tasks(policies, names, seeds, env_config=env_config, bank_dir=bank_dir, trace_dir=trace_dir,
                            failure=failure, stall_seconds=float(stall_seconds))
+    if any(":" in spec.partition("?")[0] for spec in policies.values()):
+        for task in all_tasks:  # module:attribute specs are found in this folder in the workers too
+            task["python_path"] = [os.getcwd()]
     results: Dict[Tuple[str, str], Dict[str, Any]] = {task_key(t): done[task_key(t)] for t in all_tasks
                                                       if task_key(t) in done}
     bar = _progress(progress, total=len(all_tasks), initial=len(results))

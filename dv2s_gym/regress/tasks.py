@@ -28,6 +28,7 @@ spec, so a worker serves any mix of tasks.
 from __future__ import annotations
 
 import os
+import sys
 import time
 import traceback
 from pathlib import Path
@@ -51,6 +52,9 @@ def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
     from policies.evaluation import run_episode
     from policies.worker_cache import drop_env, env_for, policy_for
 
+    for folder in task.get("python_path") or []:  # where a module:attribute policy is found
+        if folder not in sys.path:
+            sys.path.append(folder)
     env_key = None
     try:
         env_key, env = env_for(task.get("bank_dir"), task.get("env_config"))
