@@ -172,6 +172,34 @@ def test_markdown_has_the_comparison_table(noisy_run):
     for name in PAIR:
         row = next(line for line in text.splitlines() if line.startswith(f"| `{name}` | 4 |"))
         assert row.endswith(f"| {report['scenarios'][name]['comparison']['verdict']} |")
+    # a pull-request comment: the verdict first, the tables folded, no absolute path of this machine
+    head = text.split("<details>")[0]
+    assert head.splitlines()[2].startswith(f"**{report['verdict']}**") and len(head) < 1500
+    assert "<summary>Scenarios, worst first</summary>" in text and text.count("<details>") == text.count("</details>")
+    assert str(out) not in text and "dv2s replay report.json --episode" in text
+
+
+def test_markdown_puts_the_regressed_scenarios_first_and_fits_a_comment(tmp_path):
+    from dv2s_gym.regress.report import MARKDOWN_LIMIT, build_report, write_markdown
+
+    tables = {"calm": [(False, False)] * 40, "broken": [(True, False)] * 12 + [(False, False)] * 28,
+              "alpha": [(False, False)] * 40}
+    episodes = [{"id": f"{n}/{k}", "scenario": n, "seed": k, "candidate": {"failed": c, "collided": c},
+                 "baseline": {"failed": b, "collided": b}} for n, rows in tables.items() for k, (c, b) in enumerate(rows)]
+    bank = {"path": "x", "version": "v", "scenarios": list(tables), "hashes": {n: "h" for n in tables}}
+    report = build_report(bank=bank, settings={"episodes": 40, "seed": 0, "margin": 0.02, "alpha": 0.05},
+                          candidate={"spec": "new"}, baseline={"spec": "old", "report": str(tmp_path / "old" / "report.json")},
+                          episodes=episodes)
+    text = write_markdown(report, tmp_path / "out" / "report.md").read_text()
+    first = text.splitlines()[2]
+    assert first.startswith("**FAIL**: the candidate fails more often in `broken` +30.0 pp [")
+    assert "(0/40 (0.0%) -> 12/40 (30.0%))" in first
+    rows = [line.split("|")[1].strip() for line in text.splitlines() if line.startswith("| `")]
+    assert rows[:3] == ["`broken`", "`alpha`", "`calm`"]  # worst first, then by name
+    assert "(from `../old/report.json`)" in text and str(tmp_path) not in text
+    huge = dict(report, newly_failing=[], errors=[{"id": f"broken/{k}", "role": "candidate", "error": "x" * 400}
+                                                   for k in range(5000)])
+    assert len(write_markdown(huge, tmp_path / "huge.md").read_text()) <= MARKDOWN_LIMIT + 200
 
 
 def test_replay_reproduces_failed_and_passed_episodes(noisy_run, tmp_path):

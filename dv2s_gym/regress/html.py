@@ -4,15 +4,19 @@
 runner) into a single file with no external resources: inline CSS, plots drawn as
 inline SVG by the small functions below (per-scenario failure and collision rates
 with their intervals, the paired difference per scenario against the margin,
-distributions of minimum time-to-collision and return), a verdict banner, tables,
-and the newly failing episodes as embedded ``data:video/webm`` clips rendered from
-their traces (:func:`~dv2s_gym.regress.clips.render_episode_video`).
+distributions of minimum time-to-collision and return), a verdict banner, tables with
+the scenarios worst first, and the newly failing episodes grouped by scenario (regressed
+scenarios first), each as two embedded ``data:video/webm`` clips side by side: the
+candidate's failure, replayed from its trace
+(:func:`~dv2s_gym.regress.clips.render_episode_video`), and the baseline's run of the same
+scene (from its trace, or re-run: :func:`~dv2s_gym.regress.clips.render_policy_video`).
 
 The CSS, plot primitives and self-check script are shared with the mining report
 (:mod:`dv2s_gym.report_page`). Every string taken from the report is escaped. A small inline script records, on
 load, how many plots have a non-empty box (``data-plots-rendered`` on ``<body>``);
-opened as ``report.html#selftest`` it also plays the first clip and records whether
-it played (``data-video-played``) — the browser test reads these attributes.
+opened as ``report.html#selftest`` it also plays the first clip and both sides of the first
+pair and records whether they played (``data-video-played``, ``data-pair-played``) — the
+browser test reads these attributes.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ import tempfile
 from pathlib import Path
 from typing import Any, List, Mapping, Optional, Sequence, Tuple, Union
 
-from dv2s_gym.regress.clips import ClipError, render_episode_video
+from dv2s_gym.regress.clips import ClipError, render_episode_video, render_policy_video
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, VideoSource,
                                   axis as _axis, escape as _e, finite as _num, fmt as _fmt,
                                   fmt_interval as _interval, interval_mark as _interval_mark, legend as _legend,
@@ -138,8 +142,15 @@ def _bin_label(low: float, high: float) -> str:
 
 
 def _scenario_rows(report: Mapping[str, Any]) -> List[Tuple[str, Mapping[str, Any], bool]]:
-    scenarios = report.get("scenarios") or {}
-    rows = [(str(name), entry, False) for name, entry in sorted(scenarios.items()) if isinstance(entry, Mapping)]
+    """Scenarios worst first (:func:`~dv2s_gym.regress.report.scenarios_by_severity`), then overall."""
+    from dv2s_gym.regress.report import scenarios_by_severity
+
+    scenarios = {name: entry for name, entry in (report.get("scenarios") or {}).items() if isinstance(entry, Mapping)}
+    try:
+        order = scenarios_by_severity({"scenarios": scenarios})
+    except (TypeError, ValueError, AttributeError):  # a hand-edited report: fall back to names
+        order = sorted(scenarios)
+    rows = [(str(name), scenarios[name], False) for name in order]
     overall = report.get("overall")
     if isinstance(overall, Mapping):
         rows.append(("overall", overall, True))
@@ -278,44 +289,69 @@ def _resolve_trace(trace: Any, base: Path) -> Optional[Path]:
     return None
 
 
+def _clip(report: Mapping[str, Any], episode: Mapping[str, Any], role: str, base: Path, scratch: Path,
+          given: Optional[VideoSource], render_videos: bool) -> Tuple[Optional[bytes], str]:
+    """One side of a pair: the given clip, the trace's replay, or (no trace) a re-run of the policy."""
+    result = episode.get(role)
+    if given is not None:
+        return _video_bytes(given), ""
+    if not render_videos:
+        return None, "clips were not rendered"
+    if not isinstance(result, Mapping) or result.get("error"):
+        return None, f"the {role} has no run of this scene to show"
+    out = scratch / f"{role}-{abs(hash(str(episode.get('id'))))}.webm"
+    try:
+        trace = _resolve_trace(result.get("trace"), base)
+        if trace is not None:
+            return render_episode_video(trace, out).read_bytes(), ""
+        if role == "candidate":
+            return None, "no trace was recorded for this episode"
+        return render_policy_video(dict(report), dict(result), role, out).read_bytes(), ""
+    except (ClipError, OSError, AssertionError, ValueError) as error:
+        return None, f"clip not available: {error}"
+
+
 def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, VideoSource]],
            render_videos: bool, max_videos: int) -> str:
+    """The newly failing episodes, grouped by scenario (worst first): the candidate's clip beside the
+    baseline's run of the same scene."""
     newly = [str(i) for i in report.get("newly_failing") or []]
     if not newly:
         return '<p class="muted">No episode fails for the candidate that the baseline passes.</p>'
     episodes = {str(e.get("id")): e for e in report.get("episodes") or [] if isinstance(e, Mapping)}
     videos = dict(videos or {})
-    out = ['<div class="clips">']
+    order = [name for name, _, overall in _scenario_rows(report) if not overall]
+    by_scenario: dict = {}
+    for episode_id in newly:
+        scenario = str((episodes.get(episode_id) or {}).get("scenario") or episode_id.rsplit("/", 1)[0])
+        by_scenario.setdefault(scenario, []).append(episode_id)
+    regressed = set(map(str, report.get("regressed") or []))
+    out, shown, left = [], 0, []
     with tempfile.TemporaryDirectory(prefix="dv2s-clips-") as scratch:
-        for index, episode_id in enumerate(newly[:max_videos]):
-            episode = episodes.get(episode_id, {})
-            candidate = episode.get("candidate")
-            note, data = "", None
-            try:
-                if episode_id in videos:
-                    data = _video_bytes(videos[episode_id])
-                elif render_videos:
-                    trace = _resolve_trace((candidate or {}).get("trace"), base)
-                    if trace is None:
-                        note = "no trace was recorded for this episode"
-                    else:
-                        data = render_episode_video(trace, Path(scratch) / f"clip{index}.webm").read_bytes()
-                else:
-                    note = "clips were not rendered"
-            except (ClipError, OSError, AssertionError, ValueError) as error:
-                note = f"clip not available: {error}"
-            if data is not None:
-                media = video_tag(data)
-            else:
-                media = f'<p class="muted">{_e(note)}</p>'
-            seed = episode.get("seed", "")
-            out.append(f'<div class="clip" id="clip-{index}">{media}<p><b>{_e(episode_id)}</b> (seed {_e(seed)})<br>'
-                       f"candidate: {_e(_outcome(candidate))}<br>baseline: {_e(_outcome(episode.get('baseline')))}"
-                       f"</p></div>")
-    out.append("</div>")
-    if len(newly) > max_videos:
-        rest = ", ".join(newly[max_videos:])
-        out.append(f'<p class="muted">{len(newly) - max_videos} more not shown as clips: {_e(rest)}</p>')
+        for scenario in sorted(by_scenario, key=lambda n: (n not in regressed, order.index(n) if n in order else 10**6)):
+            ids = by_scenario[scenario]
+            label = "regressed" if scenario in regressed else "not significant alone"
+            out.append(f'<section class="scenario-clips" data-scenario="{_e(scenario)}"><h3>{_e(scenario)} '
+                       f'<small>({_e(label)}; {len(ids)} newly failing)</small></h3><div class="clips">')
+            for episode_id in ids:
+                if shown >= max_videos:
+                    left.append(episode_id)
+                    continue
+                episode = episodes.get(episode_id, {})
+                sides = []
+                for role in ("candidate", "baseline"):
+                    given = videos.get(episode_id) if role == "candidate" else videos.get(f"{episode_id}#baseline")
+                    data, note = _clip(report, episode, role, Path(base), Path(scratch), given, render_videos)
+                    media = video_tag(data) if data is not None else f'<p class="muted">{_e(note)}</p>'
+                    sides.append(f'<figure class="side {role}">{media}<figcaption><b>{role}</b>: '
+                                 f"{_e(_outcome(episode.get(role)))}</figcaption></figure>")
+                out.append(f'<div class="clip pair" id="clip-{shown}"><p><b>{_e(episode_id)}</b> (seed '
+                           f'{_e(episode.get("seed", ""))}): the same scene, candidate beside baseline</p>'
+                           f'<div class="sides">{"".join(sides)}</div></div>')
+                shown += 1
+            out.append("</div></section>")
+    if left:
+        out.append(f'<p class="muted">{len(left)} more not shown as clips: {_e(", ".join(left))}</p>')
     return "".join(out)
 
 
@@ -377,8 +413,10 @@ def write_html(report: Mapping[str, Any], path: Union[str, os.PathLike], *,
     Args:
         report: a ``dv2s-regress`` report dict.
         path: the ``.html`` file to write; relative trace paths in the report resolve against its folder.
-        videos: clips to embed, by episode id (``"<scenario>/<seed>"``): a ``.webm`` path or its bytes.
-        render_videos: render the newly failing episodes that ``videos`` lacks from their traces.
+        videos: clips to embed, by episode id (``"<scenario>/<seed>"``; ``"<scenario>/<seed>#baseline"`` for the
+            baseline's run of the same scene): a ``.webm`` path or its bytes.
+        render_videos: render the clips ``videos`` lacks: from the traces, or by re-running the baseline
+            policy on the scene when its run kept no trace (it must reproduce the report's trajectory hash).
         max_videos: at most this many clips; the other newly failing episodes are listed.
     """
     from scenario_bank.atomic import atomic_write_text

@@ -435,16 +435,35 @@ def _failures(summary: Optional[Mapping[str, Any]]) -> str:
     return f"{rate['count']}/{summary['episodes']} ({_pct(rate['value'])})"
 
 
-def _headline(report: Mapping[str, Any]) -> str:
+def _headline(report: Mapping[str, Any], base: Optional[Path] = None) -> str:
     settings = report["settings"]
     baseline = report.get("baseline")
-    against = ("" if baseline is None else
-               f" vs baseline `{baseline.get('spec')}`" + (f" (from {baseline['report']})" if baseline.get("report") else ""))
+    against = ("" if baseline is None else f" vs baseline `{baseline.get('spec')}`" + (
+        f" (from {_relative(baseline['report'], base)})" if baseline.get("report") else ""))
     failure = ", ".join(settings.get("failure") or ["collision", "off_road"])
     return (f"candidate `{report['candidate']['spec']}`{against}; failure: {failure}; "
             f"{len(report['scenarios'])} scenario(s) x "
             f"{settings['episodes']} episode(s) from seed {settings['seed']}; margin {100 * settings['margin']:g} pp, "
             f"alpha {settings['alpha']:g}; bank version {str(report['bank']['version'])[:12]}")
+
+
+SEVERITY = {"ERROR": 0, "FAIL": 1, "INCONCLUSIVE": 2, "PASS": 3}
+
+
+def scenarios_by_severity(report: Mapping[str, Any]) -> List[str]:
+    """Scenario names, worst first: ERROR, FAIL, INCONCLUSIVE, PASS, each by the largest rise in failure
+    rate (measures only: by the candidate's failure rate), then by name."""
+    def key(name: str) -> tuple:
+        entry = report["scenarios"][name]
+        comparison = entry.get("comparison") or {}
+        errors = (entry.get("candidate") or {}).get("errors", 0) + ((entry.get("baseline") or {}).get("errors") or 0)
+        verdict = comparison.get("verdict") or ("ERROR" if errors else None)
+        rise = (comparison.get("difference") or {}).get("value")
+        if rise is None:
+            rise = ((entry.get("candidate") or {}).get("failure_rate") or {}).get("value") or 0.0
+        return SEVERITY.get(verdict, 4), -float(rise), name
+
+    return sorted(report["scenarios"], key=key)
 
 
 def warnings(report: Mapping[str, Any]) -> List[str]:
@@ -492,7 +511,8 @@ def power_lines(report: Mapping[str, Any]) -> List[str]:
 def format_summary(report: Mapping[str, Any]) -> str:
     """The plain-text table ``dv2s regress`` prints."""
     rows = [("scenario", "n", "candidate fails", "baseline fails", "difference [95% CI]", "p (adjusted)", "verdict")]
-    for name, entry in list(report["scenarios"].items()) + [("OVERALL", report["overall"])]:
+    ordered = [(name, report["scenarios"][name]) for name in scenarios_by_severity(report)]
+    for name, entry in ordered + [("OVERALL", report["overall"])]:
         comparison = entry.get("comparison")
         rows.append((name, str(entry["candidate"]["episodes"]), _failures(entry["candidate"]),
                      _failures(entry.get("baseline")),
@@ -520,53 +540,122 @@ def format_summary(report: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _markdown(report: Mapping[str, Any], report_path: str = "report.json") -> str:
+MARKDOWN_LIMIT = 60000
+"""Characters a Markdown report may have (a pull-request comment holds 65536); longer details are cut."""
+
+
+def _relative(path: Any, base: Optional[Path]) -> str:
+    """``path`` relative to ``base`` (the Markdown file's folder) when it can be, else as it is."""
+    if not path or base is None:
+        return str(path)
+    try:
+        return Path(os.path.relpath(Path(path).resolve(), base.resolve())).as_posix()
+    except ValueError:  # another drive
+        return str(path)
+
+
+def _details(summary: str, lines: Sequence[str]) -> List[str]:
+    return ["<details>", f"<summary>{summary}</summary>", "", *lines, "", "</details>", ""]
+
+
+def _verdict_line(report: Mapping[str, Any]) -> str:
     verdict = report["verdict"]
-    lines = [f"## dv2s regress: {verdict if verdict else 'measures (no baseline)'}", "", _headline(report), ""]
     if report.get("error_reason"):
-        lines += [f"**ERROR**: {report['error_reason']}", ""]
+        return f"**ERROR**: {report['error_reason']}"
+    comparison = report["overall"].get("comparison")
+    if comparison is None:
+        return "No baseline: measures only, no verdict."
+    if verdict == "FAIL" and report["regressed"]:
+        parts = []
+        for name in [n for n in scenarios_by_severity(report) if n in report["regressed"]]:
+            entry = report["scenarios"][name]
+            parts.append(f"`{name}` {_pp(entry['comparison']['difference'])} "
+                         f"({_failures(entry['baseline'])} -> {_failures(entry['candidate'])})")
+        pooled = " and in all scenarios pooled" if "all scenarios pooled" in comparison["reason"] else ""
+        return f"**FAIL**: the candidate fails more often in {'; '.join(parts)}{pooled}."
+    if verdict == "ERROR":
+        return f"**ERROR**: {comparison['reason']}"
+    return f"**{verdict}**: {comparison['reason']}"
+
+
+def _markdown(report: Mapping[str, Any], report_path: str = "report.json", base: Optional[Path] = None) -> str:
+    """The Markdown report for a pull-request comment: the verdict and what to look at first, the rest folded."""
+    verdict = report["verdict"]
+    settings = report["settings"]
+    baseline = report.get("baseline")
+    against = "" if baseline is None else (f" vs baseline `{baseline.get('spec')}`" + (
+        f" (from `{_relative(baseline['report'], base)}`)" if baseline.get("report") else ""))
+    lines = [f"## dv2s regress: {verdict or 'measures (no baseline)'} - candidate `{report['candidate']['spec']}`{against}",
+             "", _verdict_line(report), ""]
+    facts = [f"{len(report['scenarios'])} scenario(s) x {settings['episodes']} episode(s) from seed {settings['seed']}; "
+             f"failure: {', '.join(settings.get('failure') or ['collision', 'off_road'])}; margin "
+             f"{100 * settings['margin']:g} pp, alpha {settings['alpha']:g}"]
+    if report["newly_failing"]:
+        facts.append(f"{len(report['newly_failing'])} newly failing episode(s) (candidate fails, baseline does not)")
+    if report["errors"]:
+        facts.append(f"{len(report['errors'])} episode(s) ended in an error")
+    if report.get("stopped_early"):
+        facts.append("stopped early: the sequential test settled the verdict")
+    facts += power_lines(report)[:2]
+    facts += [f"warning: {w}" for w in warnings(report)]
+    lines += [f"- {fact}" for fact in facts] + [""]
+    order = scenarios_by_severity(report)
     if report["overall"].get("comparison") is not None:
-        lines += [f"**{verdict}**: {report['overall']['comparison']['reason']}", ""]
-        if report["regressed"]:
-            lines += ["Regressed: " + ", ".join(f"`{n}`" for n in report["regressed"]), ""]
-        if report.get("stopped_early"):
-            lines += ["Stopped early: the sequential test settled the verdict.", ""]
-        lines += ["| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (adjusted) | verdict |",
-                  "|---|---:|---:|---:|---|---:|---|"]
-        for name, entry in list(report["scenarios"].items()) + [("**overall**", report["overall"])]:
+        table = ["| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (adjusted) | verdict |",
+                 "|---|---:|---:|---:|---|---:|---|"]
+        for name, entry in [(n, report["scenarios"][n]) for n in order] + [("**overall**", report["overall"])]:
             c = entry["comparison"]
-            lines.append(f"| {name if name.startswith('**') else f'`{name}`'} | {c['n']} | "
+            table.append(f"| {name if name.startswith('**') else f'`{name}`'} | {c['n']} | "
                          f"{_failures(entry['candidate'])} | {_failures(entry['baseline'])} | {_pp(c['difference'])} | "
                          f"{c['p_adjusted']:.3g} | {c['verdict']} |")
-        lines.append("")
-    lines += ["### Measures", "",
-              "| scenario | policy | episodes | collision | off-road | stall | success | min TTC [s] | mean speed [m/s] | return |",
-              "|---|---|---:|---|---|---|---|---|---|---|"]
-    for name, entry in list(report["scenarios"].items()) + [("**overall**", report["overall"])]:
+        lines += _details("Scenarios, worst first", table)
+    if report["newly_failing"]:
+        shown = report["newly_failing"][:20]
+        items = [f"Reproduce one from this folder: `dv2s replay {report_path} --episode ID --video out.webm` "
+                 "(`report.html` shows each beside the baseline's run of the same scene).", ""]
+        items += [f"- `{episode_id}`" for episode_id in shown]
+        if len(report["newly_failing"]) > len(shown):
+            items.append(f"- ... and {len(report['newly_failing']) - len(shown)} more (see `{report_path}`)")
+        lines += _details(f"Newly failing episodes ({len(report['newly_failing'])})", items)
+    measures = ["| scenario | policy | episodes | collision | off-road | stall | success | min TTC [s] | mean speed [m/s] | return |",
+                "|---|---|---:|---|---|---|---|---|---|---|"]
+    for name, entry in [(n, report["scenarios"][n]) for n in order] + [("**overall**", report["overall"])]:
         for role in ("candidate", "baseline"):
             s = entry.get(role)
             if not s:
                 continue
             label = name if name.startswith("**") else f"`{name}`"
-            lines.append(f"| {label} | {role} | {s['episodes']} | {_interval(s['collision_rate'])} | "
-                         f"{_interval(s['off_road_rate'])} | {_interval(s.get('stall_rate'))} | {_interval(s['success_rate'])} | "
-                         f"{_interval(s['min_ttc'], False)} | {_interval(s['mean_speed'], False, 1)} | "
-                         f"{_interval(s['return'], False)} |")
-    lines.append("")
-    if report["newly_failing"]:
-        shown = report["newly_failing"][:20]
-        lines += [f"### Newly failing episodes ({len(report['newly_failing'])})", "",
-                  "The candidate failed, the baseline did not. Reproduce one with "
-                  f"`dv2s replay {report_path} --episode ID --video out.webm`.", ""]
-        lines += [f"- `{episode_id}`" for episode_id in shown]
-        if len(report["newly_failing"]) > len(shown):
-            lines.append(f"- ... and {len(report['newly_failing']) - len(shown)} more (see {report_path})")
-        lines.append("")
+            measures.append(f"| {label} | {role} | {s['episodes']} | {_interval(s['collision_rate'])} | "
+                            f"{_interval(s['off_road_rate'])} | {_interval(s.get('stall_rate'))} | "
+                            f"{_interval(s['success_rate'])} | {_interval(s['min_ttc'], False)} | "
+                            f"{_interval(s['mean_speed'], False, 1)} | {_interval(s['return'], False)} |")
+    lines += _details("Measures per scenario (95% intervals)", measures)
+    context = aggregates_lines(report)
+    if context:
+        lines += _details("Context: interquartile mean of return and probability of improvement (not the verdict)",
+                          context)
+    more = power_lines(report)[2:] + [_headline(report, base)]
+    lines += _details("Power and settings", [f"- {line}" for line in more])
     if report["errors"]:
-        lines += [f"### Errors ({len(report['errors'])})", ""]
-        lines += [f"- `{e['id']}` ({e['role']}): {e['error'].splitlines()[0]}" for e in report["errors"][:20]]
-        lines.append("")
-    return "\n".join(lines)
+        errors = [f"- `{e['id']}` ({e['role']}): {str(e['error']).splitlines()[0][:300]}" for e in report["errors"][:20]]
+        if len(report["errors"]) > 20:
+            errors.append(f"- ... and {len(report['errors']) - 20} more (see `{report_path}`)")
+        lines += _details(f"Errors ({len(report['errors'])})", errors)
+    text = "\n".join(lines)
+    if len(text) > MARKDOWN_LIMIT:
+        cut = text[:MARKDOWN_LIMIT].rsplit("\n", 1)[0]
+        if cut.count("<details>") > cut.count("</details>"):
+            cut += "\n\n</details>"
+        text = cut + f"\n\n(cut to fit a pull-request comment: the whole report is `{report_path}`)\n"
+    return text
+
+
+def aggregates_lines(report: Mapping[str, Any]) -> List[str]:
+    """Lines of the context aggregates (filled in by the aggregates step; empty when the report has none)."""
+    aggregates = report.get("aggregates")
+    if not aggregates:
+        return []
+    return [str(line) for line in aggregates.get("lines") or []]
 
 
 def _seconds(results: Sequence[Any]) -> float:
@@ -665,8 +754,8 @@ def write_junit(report: Mapping[str, Any], path: Union[str, os.PathLike]) -> Pat
 
 
 def write_markdown(report: Mapping[str, Any], path: Union[str, os.PathLike], report_path: str = "report.json") -> Path:
-    """Write the Markdown summary (for a pull-request comment)."""
-    return atomic_write_text(path, _markdown(report, report_path))
+    """Write the Markdown summary for a pull-request comment (paths relative to its folder)."""
+    return atomic_write_text(path, _markdown(report, report_path, Path(path).parent))
 
 
 def write_reports(report: Mapping[str, Any], out_dir: Union[str, os.PathLike]) -> Dict[str, Path]:
@@ -676,7 +765,7 @@ def write_reports(report: Mapping[str, Any], out_dir: Union[str, os.PathLike]) -
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"json": write_json(report, out_dir / "report.json"),
              "junit": write_junit(report, out_dir / "junit.xml"),
-             "markdown": write_markdown(report, out_dir / "report.md", str(out_dir / "report.json"))}
+             "markdown": write_markdown(report, out_dir / "report.md", "report.json")}
     try:
         html = importlib.import_module("dv2s_gym.regress.html")
     except ModuleNotFoundError as error:
