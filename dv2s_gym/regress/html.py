@@ -355,6 +355,22 @@ def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, 
     return "".join(out)
 
 
+def _aggregates(report: Mapping[str, Any]) -> str:
+    """The return aggregates (interquartile mean, probability of improvement) as context, not the verdict."""
+    aggregates = report.get("aggregates")
+    if not isinstance(aggregates, Mapping):
+        return ""
+    iqm = aggregates.get("return_iqm") or {}
+    rows = [("interquartile mean of the return, candidate", iqm.get("candidate")),
+            ("interquartile mean of the return, baseline", iqm.get("baseline")),
+            ("probability of improvement (return)", aggregates.get("probability_of_improvement"))]
+    body = "".join(f'<tr><th>{_e(label)}</th><td class="num">{_e(_interval(value, 3))}</td></tr>'
+                   for label, value in rows)
+    return ('<h2>Context: aggregates of the return</h2><p class="muted">Stratified bootstrap intervals (episodes '
+            'resampled within each scenario). Context only: the verdict is the paired failure test.</p>'
+            f'<table id="aggregates">{body}</table>')
+
+
 def _errors(report: Mapping[str, Any]) -> str:
     errors = report.get("errors") or []
     if not errors:
@@ -397,6 +413,7 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
         "<h2>Settings</h2>", _settings_table(report),
         "<h2>Scenarios</h2>", _scenario_table(report),
         "<h2>Plots</h2>", figures,
+        _aggregates(report),
         f"<h2>Newly failing episodes ({len(report.get('newly_failing') or [])})</h2>",
         _clips(report, Path(base), videos, render_videos, max_videos),
         "<h2>Errors</h2>", _errors(report),

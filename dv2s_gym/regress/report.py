@@ -24,7 +24,9 @@ bumps it, and ``--baseline-report`` refuses a report of another version)::
       "errors": [{"id", "role", "error"}],
       "stopped_early": bool,
       "sequential": {"looks", "episodes", "max_episodes", "verdict"} | null,
-      "power": {"per_scenario": {name: Power}, "pooled": Power, "power", "mde", "assumption"} | null
+      "power": {"per_scenario": {name: Power}, "pooled": Power, "power", "mde", "assumption"} | null,
+      "aggregates": {"return_iqm": {"candidate", "baseline"}, "probability_of_improvement",
+                     "resamples", "confidence"} | null      context, not the verdict
     }
 
 ``Power`` (:func:`dv2s_gym.regress.power.run_power`): ``{"n", "baseline_rate", "level", "at_margin",
@@ -269,7 +271,7 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
     regressed: List[str] = []
     newly_failing: List[str] = []
     comparisons: Dict[str, Any] = {}
-    power = None
+    power = aggregates = None
     if has_baseline:
         tables = paired_tables(episodes, list(by_scenario))
         pooled_rejected = None
@@ -294,6 +296,9 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
                          and not e["candidate"].get("error") and not e["baseline"].get("error")
                          and e["candidate"].get("failed") and not e["baseline"].get("failed")]
         power = _power(tables, margin, alpha, settings)
+        from dv2s_gym.regress.aggregates import return_aggregates
+
+        aggregates = return_aggregates(episodes)
 
     for name in by_scenario:
         report_scenarios[name] = {
@@ -325,6 +330,7 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         "stopped_early": bool(stopped_early),
         "sequential": dict(sequential) if sequential else None,
         "power": power,
+        "aggregates": aggregates,
     }
     if errors and verdict is None:  # measures only: an error is still never green
         report["verdict"] = "ERROR"
@@ -651,11 +657,19 @@ def _markdown(report: Mapping[str, Any], report_path: str = "report.json", base:
 
 
 def aggregates_lines(report: Mapping[str, Any]) -> List[str]:
-    """Lines of the context aggregates (filled in by the aggregates step; empty when the report has none)."""
+    """The context aggregates (:mod:`dv2s_gym.regress.aggregates`) as Markdown lines; none without them."""
     aggregates = report.get("aggregates")
     if not aggregates:
         return []
-    return [str(line) for line in aggregates.get("lines") or []]
+    iqm = aggregates.get("return_iqm") or {}
+    poi = aggregates.get("probability_of_improvement") or {}
+    level = f"{100 * float(aggregates.get('confidence', 0.95)):g}%"
+    return [f"Return, stratified bootstrap {level} intervals ({aggregates.get('resamples')} resamples within each "
+            "scenario); the verdict is the paired failure test's.", "",
+            f"- interquartile mean of the return: candidate {_interval(iqm.get('candidate'), False)}, baseline "
+            f"{_interval(iqm.get('baseline'), False)}",
+            f"- probability of improvement (a candidate episode's return above a baseline episode's, per scenario, "
+            f"averaged): {_interval(poi, False)}"]
 
 
 def _seconds(results: Sequence[Any]) -> float:
