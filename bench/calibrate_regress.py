@@ -211,7 +211,10 @@ def gate(reps: int, rng: np.random.Generator) -> None:
           f"scenarios with failure rates 2-25 % (rho {DEFAULT_CORRELATION:g}), {reps} repetitions each")
     print(f"   planned episodes per scenario for --mde {planned['mde']:g} --power {planned['power']:g}: "
           f"{planned['episodes']} ({planned['assumption']})")
-    designs = [(planned["episodes"], "default (planned)"), (20, "20 per scenario (the former default)")]
+    sized = plan_episodes(names, mde=0.2, power=0.8)
+    print(f"   planned for --mde 0.2 --power 0.8: {sized['episodes']} per scenario")
+    designs = [(planned["episodes"], "default (planned for --mde 0.3)"),
+               (sized["episodes"], "power-sized for --mde 0.2"), (20, "20 per scenario (the former default)")]
     for n, label in designs:
         print(f"  {n} episodes per scenario, {label}:")
         cases = [
@@ -235,7 +238,9 @@ def gate(reps: int, rng: np.random.Generator) -> None:
     for n, _ in designs:
         power = run_power({name: n for name in names}, {}, margin=DEFAULT_MARGIN, alpha=DEFAULT_ALPHA)
         one, pooled = power["per_scenario"][names[0]], power["pooled"]
+        at20 = run_power({name: n for name in names}, {}, margin=DEFAULT_MARGIN, alpha=DEFAULT_ALPHA, mde=0.2)
         print(f"    {n} per scenario: one scenario at the margin {one['at_margin']:.4f}, at +30 pp {one['at_mde']:.3f}, "
+              f"at +20 pp {at20['per_scenario'][names[0]]['at_mde']:.3f}, "
               f"80 % at +{100 * one['detectable']:.1f} pp; pooled ({pooled['n']} pairs) at the margin "
               f"{pooled['at_margin']:.3f}, 80 % at +{100 * pooled['detectable']:.1f} pp")
 
