@@ -115,7 +115,7 @@ def _junit_of(tables, errors=0, baseline=True):
     episodes = []
     for name, outcomes in tables.items():
         for seed, (cand, base) in enumerate(outcomes):
-            result = lambda failed, role: {"failed": failed, "collided": failed, "seconds": 0.5}  # noqa: E731
+            result = lambda failed, role: {"failed": failed, "collided": failed}  # noqa: E731
             episodes.append({"id": f"{name}/{seed}", "scenario": name, "seed": seed,
                              "candidate": result(cand, "candidate"), "baseline": result(base, "baseline") if baseline else None})
     for k in range(errors):

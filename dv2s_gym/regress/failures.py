@@ -13,7 +13,7 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.regress.errors import RegressError
 
-__all__ = ["FAILURE_KINDS", "DEFAULT_FAILURE", "DEFAULT_STALL_SECONDS", "parse_failure", "apply_failure"]
+__all__ = ["FAILURE_KINDS", "DEFAULT_FAILURE", "DEFAULT_STALL_SECONDS", "parse_failure", "apply_failure", "missing_facts"]
 
 FAILURE_KINDS: Dict[str, str] = {"collision": "collided", "off_road": "off_road", "stall": "stalled"}
 """Failure kind -> the episode result's field that says it happened."""

@@ -26,7 +26,9 @@ bumps it, and ``--baseline-report`` refuses a report of another version)::
       "sequential": {"looks", "episodes", "max_episodes", "verdict"} | null,
       "power": {"per_scenario": {name: Power}, "pooled": Power, "power", "mde", "assumption"} | null,
       "aggregates": {"return_iqm": {"candidate", "baseline"}, "probability_of_improvement",
-                     "resamples", "confidence"} | null      context, not the verdict
+                     "resamples", "confidence"} | null      context, not the verdict,
+      "hostname": machine of the run, "duration": its wall time [s],
+      "timing": {scenario: wall time of its episodes run in this invocation [s]}
     }
 
 ``Power`` (:func:`dv2s_gym.regress.power.run_power`): ``{"n", "baseline_rate", "level", "at_margin",
@@ -672,8 +674,12 @@ def aggregates_lines(report: Mapping[str, Any]) -> List[str]:
             f"averaged): {_interval(poi, False)}"]
 
 
-def _seconds(results: Sequence[Any]) -> float:
-    return float(sum(float(r.get("seconds") or 0.0) for r in results if isinstance(r, Mapping)))
+def _seconds(report: Mapping[str, Any], scenario: Optional[str] = None) -> float:
+    """Wall time the episodes of a scenario (None: of every scenario) took in this run (``report["timing"]``)."""
+    timing = report.get("timing") or {}
+    if scenario is not None:
+        return float(timing.get(scenario) or 0.0)
+    return float(sum(float(v or 0.0) for v in timing.values()))
 
 
 def _junit_timestamp(created: Any) -> str:
@@ -704,7 +710,6 @@ def _case(name: str, classname: str, seconds: float, verdict: Optional[str], rea
 
 
 def _junit(report: Mapping[str, Any]) -> ET.ElementTree:
-    episodes = report.get("episodes") or []
     cases = []
     for name, entry in report["scenarios"].items():
         comparison = entry.get("comparison")
@@ -720,8 +725,7 @@ def _junit(report: Mapping[str, Any]) -> ET.ElementTree:
             detail += "\n" + "\n".join(f"{e['id']} ({e['role']}): {e['error']}" for e in errors)
         out = (f"candidate failures {_failures(entry['candidate'])}, baseline failures "
                f"{_failures(entry.get('baseline'))}; {reason}")
-        seconds = _seconds([e.get(role) for e in episodes if e.get("scenario") == name
-                            for role in ("candidate", "baseline")])
+        seconds = _seconds(report, name)
         cases.append(_case(name, "dv2s.regress.scenario", seconds, verdict, reason, detail, out))
     verdict = report.get("verdict")
     comparison = (report.get("overall") or {}).get("comparison")
@@ -732,10 +736,9 @@ def _junit(report: Mapping[str, Any]) -> ET.ElementTree:
     if report["errors"]:
         detail += "\n" + "\n".join(f"{e['id']} ({e['role']}): {e['error']}" for e in report["errors"][:50])
     out = "\n".join([_headline(report), f"verdict: {verdict or 'none (measures only)'}"] + power_lines(report))
-    cases.append(_case("overall verdict", "dv2s.regress", _seconds(
-        [e.get(role) for e in episodes for role in ("candidate", "baseline")]), verdict, reason, detail, out))
+    cases.append(_case("overall verdict", "dv2s.regress", _seconds(report), verdict, reason, detail, out))
     counts = {key: str(sum(1 for c in cases if c.find(key) is not None)) for key in ("failure", "error", "skipped")}
-    total = f"{float(report.get('duration') or _seconds([e.get(r) for e in episodes for r in ('candidate', 'baseline')])):.3f}"
+    total = f"{float(report.get('duration') or _seconds(report)):.3f}"
     suite = ET.Element("testsuite", {
         "name": "dv2s regress", "tests": str(len(cases)), "failures": counts["failure"], "errors": counts["error"],
         "skipped": counts["skipped"], "time": total, "timestamp": _junit_timestamp(report.get("created")),

@@ -299,8 +299,13 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
                                                       if task_key(t) in done}
     bar = _progress(progress, total=len(all_tasks), initial=len(results))
 
+    timing: Dict[str, float] = {}
+
     def handle(result: Dict[str, Any]) -> None:
         result = dict(result)
+        seconds = result.pop("seconds", None)  # wall time varies: kept apart, so episodes compare equal
+        if seconds is not None:
+            timing[result["scenario"]] = timing.get(result["scenario"], 0.0) + float(seconds)
         result["trace"] = store.relative(result.get("trace"))
         store.append(result)
         results[(result["id"], result["role"])] = result
@@ -370,6 +375,7 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
     report = build_report(bank=bank, settings=settings, candidate=candidate_info, baseline=baseline_info,
                           episodes=paired(ran_seeds), stopped_early=stopped_early, sequential=sequential_info)
     report["hostname"] = socket.gethostname()
+    report["timing"] = {name: round(value, 3) for name, value in timing.items()}
     report["duration"] = round(time.time() - started, 3)
     write_reports(report, out)
     return report

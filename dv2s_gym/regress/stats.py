@@ -86,15 +86,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import integrate, stats
 
+from dv2s_gym.regress.family import DEFAULT_POOLED_WEIGHT  # noqa: F401 - the pooled test's share, re-exported
+
 DEFAULT_ALPHA = 0.05
 """Level of the FAIL test (one-sided); PASS is tested at ``alpha / 2``."""
 
 DEFAULT_MARGIN = 0.02
 """Non-inferiority margin on the failure rate: the candidate may fail 2 percentage points more."""
 
-DEFAULT_POOLED_WEIGHT = 0.5
-"""Share of ``alpha`` the pooled test starts with in :func:`compare_scenarios`'s family; the scenarios
-share the rest (:mod:`dv2s_gym.regress.family`)."""
 
 DEFAULT_CORRELATION = 0.5
 """Latent correlation ``rho`` of the shared-difficulty model used for power and sample sizes."""

@@ -14,7 +14,7 @@ A task is a plain dict, so any pool of :mod:`dv2s_gym.workers` (local processes,
 
 :func:`run_regress_task` returns ``EpisodeResult.to_json()`` plus ``role``, ``id``
 (``"<scenario>/<seed>"``), ``trace`` (the saved trace's path or ``None``) and ``seconds`` (the
-episode's wall time), ``stalled`` and ``stall_time`` (the stall detector's finding), with ``failed``
+episode's wall time; the runner keeps it apart from the result), ``stalled`` and ``stall_time`` (the stall detector's finding), with ``failed``
 and ``failure_kinds`` set from the task's failure kinds. An
 exception inside the episode comes back as an error result (``{"id", "role",
 "scenario", "seed", "error", "trace": None}``) instead of propagating: it is kept in
