@@ -2,7 +2,7 @@
 
     python -m bench.calibrate_regress            # full run (a few minutes on 2 cores)
     python -m bench.calibrate_regress --quick    # fewer repetitions
-    python -m bench.calibrate_regress --only gate  # one section (fixed, sizes, sequential, gate)
+    python -m bench.calibrate_regress --only gate  # one section (fixed, sizes, sequential, gate, gate-sequential)
 
 Synthetic paired outcomes from the shared-difficulty model (a per-episode latent difficulty
 shared by both policies, latent correlation rho; see the module docstring), fed through the
@@ -245,11 +245,52 @@ def gate(reps: int, rng: np.random.Generator) -> None:
               f"{pooled['at_margin']:.3f}, 80 % at +{100 * pooled['detectable']:.1f} pp")
 
 
+def gate_sequential(reps: int, rng: np.random.Generator, looks: int = 5) -> None:
+    """The gate as ``dv2s regress --sequential`` runs it: the pooled table looked at after every fifth of the
+    seeds by ``SequentialTest`` (spending the pooled share, alpha/2; stopping only for FAIL), then the family
+    at the stop with the pooled member decided by the sequential test."""
+    names = [f"s{i}" for i in range(BANK_SCENARIOS)]
+    n = plan_episodes(names)["episodes"]
+    rates = bank_rates()
+    print(f"\n== the gate with --sequential: {BANK_SCENARIOS} scenarios x {n} seeds, {looks} looks, {reps} repetitions")
+    for text, changes, named in (("identical policies: FAIL", {}, None),
+                                 ("one scenario 0 % -> 30 %: FAIL and named", {0: (0.0, 0.3)}, 0),
+                                 ("every scenario +3 pp: FAIL", {i: (p, p + 0.03) for i, p in enumerate(rates)}, None)):
+        episodes = []  # per scenario: (reps, n, 4) one-hot cells per seed
+        for i, p in enumerate(rates):
+            base_rate, cand_rate = changes.get(i, (p, p))
+            difficulty = rng.standard_normal((reps, n))
+            threshold = lambda q: stats.norm.isf(q) if q > 0 else np.inf  # noqa: E731
+            shared, own = np.sqrt(DEFAULT_CORRELATION), np.sqrt(1 - DEFAULT_CORRELATION)
+            cand = shared * difficulty + own * rng.standard_normal((reps, n)) > threshold(cand_rate)
+            base = shared * difficulty + own * rng.standard_normal((reps, n)) > threshold(base_rate)
+            episodes.append(np.stack([cand & base, cand & ~base, ~cand & base, ~cand & ~base], axis=-1).cumsum(axis=1))
+        cells = np.stack(episodes, axis=1)  # (reps, scenarios, n, 4) cumulative over seeds
+        fails = hits = used = 0
+        for r in range(reps):
+            test = SequentialTest(DEFAULT_MARGIN, DEFAULT_ALPHA * 0.5, max_episodes=n * BANK_SCENARIOS,
+                                  stop_for_pass=False)
+            verdict, seeds = None, n
+            for k in range(1, looks + 1):
+                seeds = n * k // looks
+                pooled = cells[r, :, seeds - 1].sum(axis=0)
+                verdict = test.update(PairedTable(*map(int, pooled)))
+                if verdict is not None:
+                    break
+            tables = {name: PairedTable(*map(int, cells[r, i, seeds - 1])) for i, name in enumerate(names)}
+            per, whole = compare_scenarios(tables, DEFAULT_MARGIN, pooled_rejected=verdict is Verdict.FAIL)
+            fails += whole.verdict is Verdict.FAIL
+            hits += named is not None and per[names[named]].verdict is Verdict.FAIL and whole.verdict is Verdict.FAIL
+            used += seeds
+        rate = MonteCarloRate(hits if named is not None else fails, reps)
+        print(f"    {text:<44} {rate}   mean seeds run {used / reps:.1f} of {n}")
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--seed", type=int, default=20261123)
-    parser.add_argument("--only", choices=["fixed", "sizes", "sequential", "gate"], default=None)
+    parser.add_argument("--only", choices=["fixed", "sizes", "sequential", "gate", "gate-sequential"], default=None)
     args = parser.parse_args(argv)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     reps = 500 if args.quick else 4000
@@ -261,7 +302,8 @@ def main(argv=None) -> None:
           f"latent correlation rho {DEFAULT_CORRELATION:g} (phi {phi_of(P0, P1, DEFAULT_CORRELATION):.2f} at "
           f"{P0:.0%} vs {P1:.0%}), seed {args.seed}\n")
     sections = {"fixed": lambda: fixed_design(reps, rng), "sizes": lambda: sample_sizes(search_reps, args.seed),
-                "sequential": lambda: sequential(slow_reps, rng), "gate": lambda: gate(slow_reps, rng)}
+                "sequential": lambda: sequential(slow_reps, rng), "gate": lambda: gate(slow_reps, rng),
+                "gate-sequential": lambda: gate_sequential(slow_reps // 2, rng)}
     for name, section in sections.items():
         if args.only in (None, name):
             section()
