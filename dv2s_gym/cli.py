@@ -170,21 +170,21 @@ def _cmd_regress(args: argparse.Namespace) -> int:
             raise ValueError("--config must be a JSON object of DV2S-v0 config overrides, e.g. '{\"duration\": 10}'")
     out = args.out or DEFAULT_OUT
     episodes, seed = args.episodes, args.seed
-    if args.baseline_report and (episodes is None or seed is None or env_config is None):
+    if args.baseline_report and (seed is None or env_config is None):
         from dv2s_gym.regress.report import load_report
 
-        old = load_report(args.baseline_report).get("settings") or {}  # by default: the episodes it ran
-        episodes = old.get("episodes") if episodes is None else episodes
+        old = load_report(args.baseline_report).get("settings") or {}  # by default: the seeds it ran
         seed = old.get("seed") if seed is None else seed
         env_config = old.get("env_config") if env_config is None else env_config
     try:
         report = run_regression(
             args.policy, args.baseline, baseline_report=args.baseline_report, bank_dir=args.bank,
-            scenarios=args.scenarios, episodes=20 if episodes is None else episodes, seed=seed or 0,
-            margin=args.margin, alpha=args.alpha,
+            scenarios=args.scenarios, episodes=episodes, seed=seed or 0,
+            margin=args.margin, alpha=args.alpha, mde=args.mde, power=args.power,
             backend=args.backend, workers=args.workers, address=args.address, out_dir=out,
             sequential=args.sequential, env_config=env_config, progress=not args.no_progress and not args.json,
-            timeout=args.timeout, batch=args.batch, baseline_role=args.baseline_role)
+            timeout=args.timeout, batch=args.batch, baseline_role=args.baseline_role, failure=args.failure,
+            stall_seconds=args.stall_seconds)
     except KeyboardInterrupt:
         print(f"dv2s: finished episodes are saved in {Path(out) / 'results.jsonl'}; rerun the same command to resume",
               file=sys.stderr)
@@ -821,11 +821,14 @@ def build_parser() -> argparse.ArgumentParser:
         "uses seed S+k for both) over bank scenarios, in a local process pool or on Ray. Reports per scenario "
         "and overall collision, off-road and success rates (Wilson intervals), minimum TTC, mean speed and "
         "return (bootstrap intervals), and the paired difference in failure rate (Newcombe interval, exact "
-        "McNemar test, Holm over scenarios) with a non-inferiority verdict against --margin. Writes "
+        "McNemar test) with a non-inferiority verdict against --margin. Every scenario is a test in its own "
+        "right, beside the pooled one, with the family-wise false-alarm rate at most --alpha. The episodes per "
+        "scenario are planned from --mde and --power unless --episodes is given; the report states the power "
+        "the run had. Writes "
         "report.json (schema dv2s-regress v1), junit.xml, report.md, results.jsonl and traces/ of failed "
         "episodes to --out; rerunning with the same --out and settings resumes.",
         epilog="exit status: 0 PASS (or no baseline: measures only), 1 FAIL, 3 INCONCLUSIVE (too few episodes "
-        "to tell, or episodes ended in errors), 2 bad input.\n"
+        "to tell), 4 ERROR (an episode ended in an error: never green), 2 bad input.\n"
         "examples:\n"
         "  dv2s regress --policy ppo:model.zip --baseline rule --scenarios tag:highway --episodes 50\n"
         "  dv2s regress --policy rule --out out/main          # measures only, keep report.json\n"
@@ -843,12 +846,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank, or the "
                    "baseline report's scenarios)")
     p.add_argument("--episodes", type=int, default=None,
-                   help="seeds per scenario (default 20, or those of the baseline report)")
+                   help="seeds per scenario (default: planned from --mde and --power, at most those of the "
+                   "baseline report)")
+    p.add_argument("--mde", type=float, default=None,
+                   help="minimum detectable effect: the rise of one scenario's failure rate the run must FAIL "
+                   "(default 0.30: 30 points); with --power it chooses --episodes")
+    p.add_argument("--power", type=float, default=None,
+                   help="probability of FAIL at --mde (default 0.8)")
     p.add_argument("--seed", type=int, default=None,
                    help="seed of the first episode (default 0, or the baseline report's)")
     p.add_argument("--margin", type=float, default=0.02,
                    help="non-inferiority margin on the failure rate (default 0.02: 2 points, as calibrated in bench/calibrate_regress.py)")
     p.add_argument("--alpha", type=float, default=0.05, help="level of the FAIL test (default 0.05)")
+    p.add_argument("--failure", default=None,
+                   help="what counts as a failure: a comma-separated list of collision, off_road, stall (default: "
+                   "all three; stall: the ego stands with a free road ahead); each kind is also reported apart")
+    p.add_argument("--stall-seconds", type=float, default=5.0,
+                   help="seconds the ego must stand with a free road ahead for a stall (default 5)")
     p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
     p.add_argument("--address", default=None, help="with --backend ray: the cluster address")
@@ -1051,7 +1065,7 @@ def main(argv: Optional[List[str]] = None) -> int:
 
     Exit status: 0 success, 1 a check failed (validation, generation; ``regress``: FAIL),
     2 an error (one line on stderr; ``--debug`` prints the traceback), 3 ``regress``
-    INCONCLUSIVE, 130 interrupted.
+    INCONCLUSIVE, 4 ``regress`` ERROR (an episode ended in an error), 130 interrupted.
     """
     parser = build_parser()
     args = parser.parse_args(argv)

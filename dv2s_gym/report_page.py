@@ -7,8 +7,9 @@ browser self-check script (:data:`SELFTEST`): on load it records on ``<body>`` h
 plots have a non-empty box (``data-plots``, ``data-plots-rendered``, ``data-plot-marks``)
 and how many videos there are (``data-videos``); opened as ``page.html#selftest`` it also
 plays the first video and records whether it played (``data-video-played``,
-``data-video-size``, ``data-video-contrast``, ``data-video-error``). The browser tests
-read these attributes.
+``data-video-size``, ``data-video-contrast``, ``data-video-error``) and plays every clip of
+the first side-by-side pair (``.pair``), recording which sides played (``data-pair-played``,
+e.g. ``baseline,candidate``). The browser tests read these attributes.
 
 Every string taken from a report goes through :func:`escape`.
 """
@@ -160,16 +161,16 @@ body{font:14px/1.45 system-ui,-apple-system,"Segoe UI",sans-serif;margin:0 auto;
 h1{font-size:22px;margin:8px 0}h2{font-size:18px;margin:28px 0 8px;border-bottom:1px solid #d0d7de;padding-bottom:4px}
 .banner{padding:14px 18px;border-radius:6px;color:#fff;font-size:18px;margin:12px 0}
 .banner small{display:block;font-size:13px;opacity:.95;margin-top:4px}
-.PASS{background:#1a7f37}.FAIL{background:#cf222e}.INCONCLUSIVE{background:#b07800}.NONE{background:#57606a}
+.PASS{background:#1a7f37}.FAIL{background:#cf222e}.INCONCLUSIVE{background:#b07800}.ERROR{background:#8250df}.NONE{background:#57606a}
 table{border-collapse:collapse;margin:6px 0;font-size:13px}th,td{border:1px solid #d0d7de;padding:3px 8px;text-align:left;vertical-align:top}
 th{background:#f6f8fa}td.num{text-align:right;font-variant-numeric:tabular-nums}
-.v-PASS{color:#1a7f37;font-weight:600}.v-FAIL{color:#cf222e;font-weight:600}.v-INCONCLUSIVE{color:#b07800;font-weight:600}
+.v-PASS{color:#1a7f37;font-weight:600}.v-FAIL{color:#cf222e;font-weight:600}.v-INCONCLUSIVE{color:#b07800;font-weight:600}.v-ERROR{color:#8250df;font-weight:600}
 figure{margin:10px 0}figcaption{font-size:12px;color:#57606a}
 svg.plot{display:block;background:#fff}
 svg .axis{stroke:#57606a}svg .grid{stroke:#eaeef2}svg .zero{stroke:#57606a}
 svg .margin{stroke:#cf222e;stroke-dasharray:5 4}svg text{font:11px system-ui,sans-serif;fill:#1f2328}
 svg .tick,svg .axis-title{text-anchor:middle}svg .row-label{text-anchor:end}svg .margin-label{fill:#cf222e}
-.clips{display:flex;flex-wrap:wrap;gap:14px}.clip{border:1px solid #d0d7de;border-radius:6px;padding:8px;width:360px}
+.clips{display:flex;flex-wrap:wrap;gap:14px}.clip{border:1px solid #d0d7de;border-radius:6px;padding:8px;width:360px}.clip.pair{width:auto}.sides{display:flex;gap:10px;flex-wrap:wrap}.side{margin:0;width:360px}.side figcaption{font-size:13px}
 .clip video{width:360px;height:360px;background:#000;display:block}.clip p{margin:6px 0 0;font-size:12px}
 .muted{color:#57606a}code{font-size:12px}
 """
@@ -192,6 +193,19 @@ SELFTEST = """
     var videos = document.querySelectorAll("video");
     body.setAttribute("data-videos", String(videos.length));
     if (!videos.length || location.hash !== "#selftest") { return; }
+    var pair = document.querySelector(".pair"), playedInPair = {};
+    if (pair) {  // every clip of the first side-by-side pair plays too
+      body.setAttribute("data-pair-played", "");
+      pair.querySelectorAll("video").forEach(function (clip, index) {
+        var side = clip.closest(".side"), role = side ? (side.classList.contains("baseline") ? "baseline" : "candidate") : String(index);
+        clip.addEventListener("timeupdate", function () {
+          if (clip.currentTime <= 0 || clip.videoWidth <= 0 || playedInPair[role]) { return; }
+          playedInPair[role] = true;
+          body.setAttribute("data-pair-played", Object.keys(playedInPair).sort().join(","));
+        });
+        if (index > 0) { clip.muted = true; var p = clip.play(); if (p && p.catch) { p.catch(function () {}); } }
+      });
+    }
     var video = videos[0];
     body.setAttribute("data-video-played", "false");
     video.addEventListener("error", function () {

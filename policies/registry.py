@@ -11,7 +11,9 @@ Every policy is a :class:`Policy`: ``act(observations) -> actions`` over a batch
   the model card beside it, ``model_card.json``, or found by trying PPO, DQN, SAC,
   A2C and TD3), or ``ppo:path/to/model.zip`` to name it;
 - a Python object: ``package.module:attribute`` (a :class:`Policy`, a factory
-  returning one, or a plain callable ``obs -> action``).
+  returning one, or a plain callable ``obs -> action``); a callable that needs no argument is a
+  factory and is called when the spec loads, with the spec's options; a module in the current
+  directory is found.
 
 Options follow a ``?`` as ``key=value`` pairs and are passed to the factory, e.g.
 ``idm?time_headway=2.0``. ``action_noise=p`` works on every policy: with probability
@@ -26,8 +28,10 @@ before acting (the regression runner does this).
 from __future__ import annotations
 
 import importlib
+import inspect
 import json
 import os
+import sys
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
@@ -136,6 +140,24 @@ class Policy:
         return f"{type(self).__name__}({self.name!r})"
 
 
+def _check_options(name: str, driver_class: type, options: Mapping[str, Any]) -> None:
+    """Refuse options the driver does not take now, not in a worker's first episode."""
+    try:
+        signature = inspect.signature(driver_class)
+    except (TypeError, ValueError):  # pragma: no cover - a builtin without a signature
+        return
+    try:
+        signature.bind(None, **options)  # the env comes first
+    except TypeError:
+        accepted = [p.name for p in list(signature.parameters.values())[1:]
+                    if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+        unknown = [key for key in options if key not in accepted]
+        if unknown and not any(p.kind is p.VAR_KEYWORD for p in signature.parameters.values()):
+            raise PolicyError(f"policy {name!r} has no option {', '.join(map(repr, unknown))}; its options are "
+                              f"{', '.join(accepted) or 'none'} (and action_noise, noise_seed)") from None
+        raise
+
+
 def _spaces_match(a: gym.Space, b: gym.Space) -> bool:
     if type(a) is not type(b):
         return False
@@ -157,6 +179,7 @@ class StateDriverPolicy(Policy):
         self.driver_class = driver_class
         self.kwargs = kwargs
         self.drivers: List[Any] = []
+        _check_options(name, driver_class, kwargs)
 
     def bind(self, envs: Sequence[gym.Env]) -> None:
         super().bind(envs)
@@ -377,19 +400,56 @@ def _load_base(base: str, options: Dict[str, Any]) -> Policy:
         f"(model.zip, or ppo:/dqn:/sac:PATH), or module:attribute")
 
 
+def import_policy_module(module_name: str) -> Any:
+    """Import a ``module:attribute`` spec's module; a module in the current directory is found too."""
+    try:
+        return importlib.import_module(module_name)
+    except ModuleNotFoundError as error:
+        here = os.getcwd()
+        top = module_name.split(".")[0]
+        if error.name != top or here in sys.path or not (
+                Path(here, f"{top}.py").is_file() or Path(here, top, "__init__.py").is_file()):
+            raise
+        sys.path.append(here)
+        return importlib.import_module(module_name)
+
+
+def _is_factory(target: Callable) -> bool:
+    """A callable that needs no argument is a factory (called to make the policy); one that needs an
+    observation is the policy itself (``obs -> action``)."""
+    try:
+        parameters = inspect.signature(target).parameters.values()
+    except (TypeError, ValueError):
+        return False
+    return not any(p.default is p.empty and p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)
+                   for p in parameters)
+
+
 def _load_object(module_name: str, attribute: str, spec: str, options: Dict[str, Any]) -> Policy:
     try:
-        target = getattr(importlib.import_module(module_name), attribute)
+        target = getattr(import_policy_module(module_name), attribute)
     except (ImportError, AttributeError) as error:
-        raise PolicyError(f"policy {spec!r}: cannot import {attribute!r} from {module_name!r} ({error})") from error
+        raise PolicyError(f"policy {spec!r}: cannot import {attribute!r} from {module_name!r} ({error}); run from "
+                          "the folder that holds the module or put its folder on PYTHONPATH") from error
     if isinstance(target, Policy):
         return target
     if isinstance(target, type) and issubclass(target, Policy):
-        return target(**options)
+        try:
+            return target(**options)
+        except TypeError as error:
+            raise PolicyError(f"policy {spec!r}: {error}") from None
     if callable(target):
-        made = target(**options) if options else target
+        if not options and not _is_factory(target):
+            return CallablePolicy(spec, target)
+        try:
+            made = target(**options)
+        except TypeError as error:
+            raise PolicyError(f"policy {spec!r}: the factory {attribute} refused its options ({error})") from None
         if isinstance(made, Policy):
             return made
+        if not callable(made):
+            raise PolicyError(f"policy {spec!r}: the factory {attribute} returned a {type(made).__name__}, not a "
+                              "Policy or a callable obs -> action")
         return CallablePolicy(spec, made)
     raise PolicyError(f"policy {spec!r} is a {type(target).__name__}, not a Policy or a callable")
 

@@ -43,3 +43,21 @@ class FaultyPolicy(Policy):
 
     def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
         return np.ones(len(observations), dtype=np.int64)
+
+
+class BrokenPolicy(Policy):
+    """Raises on its first action in every episode: a candidate whose every episode is an error."""
+
+    name = "broken"
+
+    def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        raise RuntimeError("broken policy: no action")
+
+
+class StopPolicy(Policy):
+    """Brakes (SLOWER) every step: the ego comes to a standstill on a free road, and never collides."""
+
+    name = "stop"
+
+    def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        return np.full(len(observations), 4, dtype=np.int64)

@@ -19,6 +19,7 @@ from dv2s_gym.regress.replay import replay_episode
 from dv2s_gym.regress.tasks import KIND
 from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.pool import LocalBackend, get_backend
+from regress_junit_schema import junit_problems
 
 NOISY = "rule?action_noise=0.5"
 PAIR = ["highway_obstacle_in_lane", "urban_lead_vehicle_stopped"]
@@ -89,28 +90,116 @@ def test_newly_failing_and_traces_of_failed_episodes(noisy_run):
     assert report["newly_failing"] == expected and expected  # the noisy copy crashes somewhere in 8 episodes
 
 
-def test_junit_xml_has_one_case_per_scenario_and_failures_for_fail(noisy_run):
+def test_junit_xml_has_one_case_per_scenario_and_the_verdict_and_is_valid(noisy_run):
     out, report = noisy_run
     root = ET.parse(out / "junit.xml").getroot()
+    assert junit_problems(root) == []
     cases = root.findall(".//testcase")
-    assert [c.get("name") for c in cases] == PAIR
-    for case in cases:
+    assert [c.get("name") for c in cases] == PAIR + ["overall verdict"]
+    for case in cases[:-1]:
         verdict = report["scenarios"][case.get("name")]["comparison"]["verdict"]
         assert (case.find("failure") is not None) == (verdict == "FAIL")
         assert (case.find("skipped") is not None) == (verdict == "INCONCLUSIVE")
+    assert (cases[-1].find("failure") is not None) == (report["verdict"] == "FAIL")
     suite = root.find("testsuite")
-    assert int(suite.get("failures")) == len(report["regressed"])
+    assert int(suite.get("failures")) == len(report["regressed"]) + (report["verdict"] == "FAIL")
+    assert float(suite.get("time")) > 0 and suite.get("hostname") == report["hostname"]
+
+
+def _junit_of(tables, errors=0, baseline=True):
+    """The JUnit XML of a report built from paired outcomes per scenario (``(candidate failed, baseline failed)``)."""
+    import tempfile
+
+    from dv2s_gym.regress.report import build_report, write_junit
+
+    episodes = []
+    for name, outcomes in tables.items():
+        for seed, (cand, base) in enumerate(outcomes):
+            result = lambda failed, role: {"failed": failed, "collided": failed}  # noqa: E731
+            episodes.append({"id": f"{name}/{seed}", "scenario": name, "seed": seed,
+                             "candidate": result(cand, "candidate"), "baseline": result(base, "baseline") if baseline else None})
+    for k in range(errors):
+        episodes[k] = dict(episodes[k], candidate={"error": "RuntimeError: boom"})
+    bank = {"path": "x", "version": "v", "scenarios": list(tables), "hashes": {n: "h" for n in tables}}
+    report = build_report(bank=bank, settings={"episodes": 1, "seed": 0, "margin": 0.02, "alpha": 0.05},
+                          candidate={"spec": "new"}, baseline={"spec": "old"} if baseline else None, episodes=episodes)
+    with tempfile.TemporaryDirectory() as folder:
+        write_junit(report, f"{folder}/junit.xml")
+        root = ET.parse(f"{folder}/junit.xml").getroot()
+    assert junit_problems(root) == []
+    return report, {c.get("name"): c for c in root.iter("testcase")}, root.find("testsuite")
+
+
+def test_the_junit_schema_check_finds_what_ci_systems_reject():
+    bad = ET.fromstring('<testsuites><testsuite name="s" tests="2" failures="0" errors="0" timestamp="2026-01-01 10:00">'
+                        '<testcase name="a"><failure message="x"/></testcase><properties/></testsuite></testsuites>')
+    problems = " | ".join(junit_problems(bad))
+    for expected in ("missing attribute hostname", "missing attribute time", "timestamp='2026-01-01 10:00'",
+                     "tests=2 but 1 test cases", "failures=0 but 1", "missing attribute classname", "out of order"):
+        assert expected in problems
+
+
+def test_junit_a_pooled_only_fail_is_a_failure_of_the_overall_case():
+    # a small rise in each of 5 scenarios: no scenario FAILs alone, the pooled test does
+    spread = {f"s{i}": [(True, False)] * 7 + [(False, True)] * 3 + [(True, True)] * 3 + [(False, False)] * 187
+              for i in range(5)}
+    report, cases, suite = _junit_of(spread)
+    assert report["verdict"] == "FAIL" and report["regressed"] == []
+    assert cases["overall verdict"].find("failure") is not None
+    assert "all scenarios pooled" in cases["overall verdict"].find("failure").get("message")
+    assert suite.get("failures") == "1" and all(cases[f"s{i}"].find("skipped") is not None for i in range(5))
+
+
+def test_junit_error_is_an_error_and_inconclusive_is_skipped_with_its_reason():
+    few = {"a": [(False, False)] * 3}
+    report, cases, suite = _junit_of(few)
+    assert report["verdict"] == "INCONCLUSIVE"
+    assert cases["overall verdict"].find("skipped").get("message").startswith("INCONCLUSIVE: no scenario fails")
+    report, cases, suite = _junit_of(few, errors=1)
+    assert report["verdict"] == "ERROR" and suite.get("errors") == "2"
+    assert "RuntimeError: boom" in cases["overall verdict"].find("error").text
+    assert cases["a"].find("error") is not None and cases["a"].find("skipped") is None
+    report, cases, suite = _junit_of(few, errors=1, baseline=False)  # measures only
+    assert report["verdict"] == "ERROR" and cases["overall verdict"].find("error") is not None
 
 
 def test_markdown_has_the_comparison_table(noisy_run):
     out, report = noisy_run
     text = (out / "report.md").read_text()
     assert text.startswith(f"## dv2s regress: {report['verdict']}")
-    assert "| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (Holm) | verdict |" \
+    assert "| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (adjusted) | verdict |" \
         in text
     for name in PAIR:
         row = next(line for line in text.splitlines() if line.startswith(f"| `{name}` | 4 |"))
         assert row.endswith(f"| {report['scenarios'][name]['comparison']['verdict']} |")
+    # a pull-request comment: the verdict first, the tables folded, no absolute path of this machine
+    head = text.split("<details>")[0]
+    assert head.splitlines()[2].startswith(f"**{report['verdict']}**") and len(head) < 1500
+    assert "<summary>Scenarios, worst first</summary>" in text and text.count("<details>") == text.count("</details>")
+    assert str(out) not in text and "dv2s replay report.json --episode" in text
+
+
+def test_markdown_puts_the_regressed_scenarios_first_and_fits_a_comment(tmp_path):
+    from dv2s_gym.regress.report import MARKDOWN_LIMIT, build_report, write_markdown
+
+    tables = {"calm": [(False, False)] * 40, "broken": [(True, False)] * 12 + [(False, False)] * 28,
+              "alpha": [(False, False)] * 40}
+    episodes = [{"id": f"{n}/{k}", "scenario": n, "seed": k, "candidate": {"failed": c, "collided": c},
+                 "baseline": {"failed": b, "collided": b}} for n, rows in tables.items() for k, (c, b) in enumerate(rows)]
+    bank = {"path": "x", "version": "v", "scenarios": list(tables), "hashes": {n: "h" for n in tables}}
+    report = build_report(bank=bank, settings={"episodes": 40, "seed": 0, "margin": 0.02, "alpha": 0.05},
+                          candidate={"spec": "new"}, baseline={"spec": "old", "report": str(tmp_path / "old" / "report.json")},
+                          episodes=episodes)
+    text = write_markdown(report, tmp_path / "out" / "report.md").read_text()
+    first = text.splitlines()[2]
+    assert first.startswith("**FAIL**: the candidate fails more often in `broken` +30.0 pp [")
+    assert "(0/40 (0.0%) -> 12/40 (30.0%))" in first
+    rows = [line.split("|")[1].strip() for line in text.splitlines() if line.startswith("| `")]
+    assert rows[:3] == ["`broken`", "`alpha`", "`calm`"]  # worst first, then by name
+    assert "(from `../old/report.json`)" in text and str(tmp_path) not in text
+    huge = dict(report, newly_failing=[], errors=[{"id": f"broken/{k}", "role": "candidate", "error": "x" * 400}
+                                                   for k in range(5000)])
+    assert len(write_markdown(huge, tmp_path / "huge.md").read_text()) <= MARKDOWN_LIMIT + 200
 
 
 def test_replay_reproduces_failed_and_passed_episodes(noisy_run, tmp_path):
@@ -206,7 +295,7 @@ def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp
     assert by_seed[4]["error"] == "RuntimeError: deliberate failure on seed 4" and by_seed[4]["id"].endswith("/4")
     assert not by_seed[5].get("error") and by_seed[5]["steps"] == 10
 
-    # a PASS on the remaining pairs becomes INCONCLUSIVE when an episode is missing
+    # a PASS on the remaining pairs becomes ERROR when an episode is missing
     ok = dict(by_seed[5], failed=False)
     episodes = [{"id": f"s/{k}", "scenario": "s", "seed": k, "candidate": ok, "baseline": ok} for k in range(200)]
     bank = {"path": "x", "version": "v", "scenarios": ["s"], "hashes": {"s": "h"}}
@@ -217,8 +306,18 @@ def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp
     episodes[0] = dict(episodes[0], candidate=by_seed[4])
     broken = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
                           episodes=episodes)
-    assert broken["verdict"] == "INCONCLUSIVE" and "ended in an error" in broken["overall"]["comparison"]["reason"]
+    assert broken["verdict"] == "ERROR" and "ended in an error" in broken["overall"]["comparison"]["reason"]
+    assert broken["scenarios"]["s"]["comparison"]["verdict"] == "ERROR"
     assert broken["errors"] == [{"id": "s/0", "role": "candidate", "error": by_seed[4]["error"]}]
+    # so does a FAIL: an error is never hidden behind another verdict
+    failing = [dict(e, candidate=dict(ok, failed=True)) for e in episodes]
+    failing[0] = episodes[0]
+    assert build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
+                        episodes=failing)["verdict"] == "ERROR"
+    # and a measures-only run with an error has the verdict ERROR, not none
+    alone = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline=None,
+                         episodes=[dict(e, baseline=None) for e in episodes])
+    assert alone["verdict"] == "ERROR" and "1 episode ended in an error" in alone["error_reason"]
 
 
 def test_baseline_report_runs_only_the_candidate(noisy_run, tmp_path):

@@ -39,7 +39,8 @@ def test_fail_exits_1_and_names_the_scenario(failing_run, capsys):
     report = json.loads((out / "report.json").read_text())
     assert report["verdict"] == "FAIL" and report["regressed"] == ["urban_lead_vehicle_stopped"]
     cases = ET.parse(out / "junit.xml").getroot().findall(".//testcase")
-    assert len(cases) == 1 and cases[0].find("failure") is not None
+    assert [c.get("name") for c in cases] == ["urban_lead_vehicle_stopped", "overall verdict"]
+    assert all(c.find("failure") is not None for c in cases)
     assert "| `urban_lead_vehicle_stopped` | 8 |" in (out / "report.md").read_text()
 
 
@@ -49,6 +50,25 @@ def test_inconclusive_exits_3(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert code == 3
     assert "verdict: INCONCLUSIVE" in printed and "highway_lead_vehicle_brakes" in printed
+
+
+def test_a_policy_that_crashes_in_every_episode_is_never_green(tmp_path, capsys):
+    broken = "regress_helpers:BrokenPolicy"
+    code = regress("--policy", broken, "--baseline", "rule", "--scenarios", "highway_lead_vehicle_brakes",
+                   "--episodes", "2", "--workers", "1", "--out", str(tmp_path / "paired"), *QUICK)
+    printed = capsys.readouterr().out
+    assert code == 4 and "verdict: ERROR" in printed and "broken policy: no action" in printed
+    suite = ET.parse(tmp_path / "paired" / "junit.xml").getroot().find("testsuite")
+    assert int(suite.get("errors")) >= 1 and suite.find("testcase/error") is not None
+    # measures only: still ERROR, exit 4; and that report cannot be a baseline
+    code = regress("--policy", broken, "--scenarios", "highway_lead_vehicle_brakes", "--episodes", "2",
+                   "--workers", "1", "--out", str(tmp_path / "alone"), *QUICK)
+    assert code == 4 and "verdict: ERROR" in capsys.readouterr().out
+    code = regress("--policy", "rule", "--baseline-report", str(tmp_path / "alone" / "report.json"), "--workers", "1",
+                   "--out", str(tmp_path / "next"), *QUICK)
+    err = capsys.readouterr().err
+    assert code == 2 and "cannot be a baseline: 2 of its episodes ended in an error" in err
+    assert not (tmp_path / "next" / "results.jsonl").exists()
 
 
 def test_pass_exits_0(tmp_path, capsys):
@@ -95,6 +115,10 @@ def test_baseline_report_reruns_only_the_candidate(failing_run, tmp_path, capsys
     report = json.loads((tmp_path / "report.json").read_text())
     # the report's tested policy (the noisy copy) is the baseline now; the original does not fail more
     assert report["settings"]["episodes"] == 8 and report["baseline"]["spec"] == "rule?action_noise=0.5"
+    # the power plan wanted more episodes than the baseline report has: said, and the power stated
+    plan = report["settings"]["plan"]
+    assert plan["planned"] > 8 and "fewer than the" in plan["note"]
+    assert "has less power than planned" in capsys.readouterr().out
     assert code in (0, 3) and report["verdict"] != "FAIL"
     lines = (tmp_path / "results.jsonl").read_text().splitlines()
     assert len(lines) == 8 and {json.loads(line)["role"] for line in lines} == {"candidate"}
@@ -157,4 +181,4 @@ def test_regress_help_documents_the_exit_codes(capsys):
     with pytest.raises(SystemExit):
         main(["regress", "--help"])
     text = capsys.readouterr().out
-    assert "0 PASS" in text and "1 FAIL" in text and "3 INCONCLUSIVE" in text and "2 bad input" in text
+    assert "0 PASS" in text and "1 FAIL" in text and "3 INCONCLUSIVE" in text and "2 bad input" in text and "4 ERROR" in text

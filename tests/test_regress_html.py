@@ -39,10 +39,53 @@ def test_the_page_is_one_file_with_no_external_resource(report_dir, report, tmp_
     assert not re.search(r"""\b(src|href)\s*=\s*["'](?!data:|#)""", page), "a resource loaded from outside the page"
     assert "url(" not in page and "@import" not in page
     assert page.count('<svg class="plot"') == 5  # two rate plots, the differences, two distributions
-    assert page.count("<video ") == len(report["newly_failing"]) > 0
-    assert page.count('src="data:video/webm;base64,') == len(report["newly_failing"])
+    # each newly failing episode: the candidate's clip beside the baseline's run of the same scene
+    assert page.count("<video ") == 2 * len(report["newly_failing"]) > 0
+    assert page.count('src="data:video/webm;base64,') == 2 * len(report["newly_failing"])
+    assert page.count('class="clip pair"') == len(report["newly_failing"])
     for scenario in report["scenarios"]:
         assert scenario in page
+
+
+def test_clips_are_grouped_by_scenario_regressed_first_and_rows_sorted_by_severity(report, tmp_path):
+    report = copy.deepcopy(report)
+    names = list(report["scenarios"])
+    worse, other = names[1], names[0]  # the second scenario (by name) is made the regressed one
+    report["regressed"] = [worse]
+    report["scenarios"][worse]["comparison"]["verdict"] = "FAIL"
+    report["scenarios"][other]["comparison"]["verdict"] = "PASS"
+    newly = [f"{worse}/{k}" for k in range(2)] + [f"{other}/{k}" for k in range(2)]
+    for episode in report["episodes"]:
+        if episode["id"] in newly:
+            episode["candidate"]["failed"], episode["baseline"]["failed"] = True, False
+    report["newly_failing"] = [i for i in newly if i.startswith(other)] + [i for i in newly if i.startswith(worse)]
+    page = write_html(report, tmp_path / "r.html", render_videos=False).read_text()
+    sections = re.findall(r'<section class="scenario-clips" data-scenario="([^"]+)">', page)
+    assert sections == [worse, other]  # every clip goes to its own scenario, the regressed one first
+    first, second = page.split('data-scenario="')[1:3]
+    assert first.count('class="clip pair"') == 2 and all(f"{worse}/" in first for _ in range(1))
+    assert f"{other}/0" not in first and f"{other}/0" in second
+    table = page.split("<h2>Scenarios</h2>")[1]
+    assert table.index(f"<td>{worse}</td>") < table.index(f"<td>{other}</td>")
+
+
+def test_the_baseline_clip_is_a_rerun_when_its_run_kept_no_trace(report_dir, report):
+    from dv2s_gym.regress.runner import bank_info
+
+    report = copy.deepcopy(report)
+    report["bank"] = bank_info(list(report["scenarios"]))  # the scripts the episodes ran
+    first = report["newly_failing"][0]
+    for episode in report["episodes"]:
+        episode["baseline"]["trace"] = None  # as in a real run: only failed episodes keep a trace
+    page = write_html(report, report_dir / "rerun.html", max_videos=1).read_text()
+    pair = page.split('class="clip pair"')[1]
+    assert first in pair and pair.count("<video ") == 2
+    # a run that does not reproduce the report's trajectory is not shown as if it were the same scene
+    episode = next(e for e in report["episodes"] if e["id"] == first)
+    episode["baseline"]["trajectory_hash"] = "0" * 64
+    page = write_html(report, report_dir / "rerun2.html", max_videos=1).read_text()
+    pair = page.split('class="clip pair"')[1]
+    assert pair.count("<video ") == 1 and "did not reproduce" in pair
 
 
 def test_a_report_without_baseline_has_no_difference_plot(report, tmp_path):
@@ -79,10 +122,11 @@ def test_chromium_loads_the_page_renders_the_plots_and_plays_a_clip(report_dir, 
     assert attributes.get("data-plots") == "5", attributes
     assert attributes.get("data-plots-rendered") == "5", attributes  # every SVG has a non-empty box
     assert int(attributes.get("data-plot-marks", 0)) >= 10, attributes  # points, intervals and bars drawn
-    assert attributes.get("data-videos") == str(len(report["newly_failing"]))
+    assert attributes.get("data-videos") == str(2 * len(report["newly_failing"]))
     assert attributes.get("data-video-played") == "true", attributes  # currentTime advanced past 0
     assert attributes.get("data-video-size") == "360x360", attributes
     assert int(attributes.get("data-video-contrast", "0")) >= 10, attributes  # a decoded picture, not a blank
+    assert attributes.get("data-pair-played") == "baseline,candidate", attributes  # both sides of the pair play
 
 
 def test_chromium_reports_a_corrupt_clip_as_not_played(report, tmp_path):
@@ -99,8 +143,9 @@ def test_given_clips_are_embedded_as_they_are(report, tmp_path):
     clip = tmp_path / "given.webm"
     clip.write_bytes(b"not really a video, embedded as given")
     first = report["newly_failing"][0]
-    page = write_html(report, tmp_path / "r.html", videos={first: clip}, render_videos=False).read_text()
-    assert page.count("<video ") == 1
+    page = write_html(report, tmp_path / "r.html", videos={first: clip, f"{first}#baseline": clip},
+                      render_videos=False).read_text()
+    assert page.count("<video ") == 2
     assert "bm90IHJlYWxseSBhIHZpZGVv" in page  # base64 of the bytes
     assert "clips were not rendered" in page
 

@@ -28,7 +28,7 @@ def _plugin_args() -> list:
 
 @pytest.fixture
 def user_suite(pytester, monkeypatch):
-    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(ROOT), str(ROOT / "tests"), os.environ.get("PYTHONPATH", "")]))
     monkeypatch.setenv("OMP_NUM_THREADS", "1")
 
     def run(source: str, *args: str):
@@ -88,12 +88,19 @@ def test_strict():
 def test_no_baseline():
     pass
 
+@pytest.mark.dv2s_regression(policy="regress_helpers:BrokenPolicy", baseline="rule", scenarios=["{SCENARIO}"],
+                             episodes=2, env_config={{"duration": 2}})
+def test_crashing_candidate():
+    pass
+
 @pytest.mark.dv2s_regression(policy="rule", baseline="rule", episode=3)
 def test_misspelt():
     pass
 ''')
-    result.assert_outcomes(passed=1, failed=1, errors=2)
+    result.assert_outcomes(passed=1, failed=2, errors=2)
     out = result.stdout.str()
+    assert "dv2s regression ERROR: 'regress_helpers:BrokenPolicy' against 'rule': 2 episode(s) ended in an error" in out
+    assert "RuntimeError: broken policy: no action" in out
     assert "dv2s regression INCONCLUSIVE: 'rule' against 'rule'" in out and "run more episodes" in out
     assert "give baseline= (a policy spec) or baseline_report=" in out
     assert "unexpected keyword argument 'episode'" in out
@@ -118,7 +125,7 @@ def test_failure_messages_from_a_report_dict(tmp_path):
     report = RegressionReport(data, tmp_path)
     message = report.failure_message()
     assert message.splitlines()[0] == "dv2s regression FAIL: 'new' against 'old' regressed on a"
-    assert "a: failure rate 30% vs 0%, difference +30.0 pp [+7.7 pp, +51.9 pp], p = 0.0156 (Holm 0.0312)" in message
+    assert "a: failure rate 30% vs 0%, difference +30.0 pp [+7.7 pp, +51.9 pp], p = 0.0156 (adjusted 0.0312)" in message
     assert "a/0, a/1" in message and "and 2 more" in message
     assert f"report: {tmp_path / 'report.md'}" in message
     with pytest.raises(RegressionFailed):

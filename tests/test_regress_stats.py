@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
+from dv2s_gym.regress.family import gate_rejections, smallest_p_value, tarone_level
 from dv2s_gym.regress.stats import (
     DEFAULT_ALPHA,
     DEFAULT_CORRELATION,
@@ -352,7 +353,7 @@ def test_holm_adjusted_p_can_turn_fail_into_inconclusive():
     assert compare(table, 0.02).verdict is Verdict.FAIL
     adjusted = compare(table, 0.02, adjusted_p=0.09)
     assert adjusted.verdict is Verdict.INCONCLUSIVE and adjusted.adjusted_p == 0.09
-    assert "Holm 0.09" in adjusted.reason
+    assert "adjusted for the scenarios 0.09" in adjusted.reason
     with pytest.raises(ValueError):
         compare(table, 0.02, adjusted_p=0.001)  # below the raw p-value
     with pytest.raises(ValueError):
@@ -367,19 +368,51 @@ def test_vectorised_verdicts_equal_compare():
         assert vectorised == [compare(PairedTable(*map(int, row)), margin).verdict for row in tables]
 
 
-def test_compare_scenarios_holm_over_scenarios_and_pooled_overall():
+def test_compare_scenarios_tests_every_scenario_in_the_family():
     tables = {
-        "cut_in": PairedTable(2, 14, 2, 82),  # p ~ 0.002: fails after Holm over 3
+        "cut_in": PairedTable(2, 14, 2, 82),  # p ~ 0.002
         "lead_brakes": PairedTable(1, 3, 2, 94),
         "merge": PairedTable(0, 2, 2, 96),
     }
-    per, overall = compare_scenarios(tables, margin=0.02, pooled_weight=None)
-    raw = [mcnemar_exact(t, "greater") for t in tables.values()]
-    assert [c.adjusted_p for c in per.values()] == pytest.approx(holm(raw))
+    per, overall = compare_scenarios(tables, margin=0.02)
     assert per["cut_in"].verdict is Verdict.FAIL
     assert per["lead_brakes"].verdict is Verdict.INCONCLUSIVE
     assert overall.verdict is Verdict.FAIL and "scenario cut_in" in overall.reason
     assert overall.table == PairedTable(3, 19, 6, 272)
+    for comparison in per.values():  # the scaled p-value reads against alpha like an adjusted one
+        assert comparison.adjusted_p >= comparison.p_value
+        assert (comparison.adjusted_p <= DEFAULT_ALPHA) == (comparison.verdict is Verdict.FAIL)
+
+
+def test_a_regression_in_one_scenario_is_not_averaged_away_by_fixes_elsewhere():
+    # 0 % -> 30 % in one scenario of 40 episodes, 12 failures fixed elsewhere: the pooled table shows nothing
+    tables = {"broken": PairedTable(0, 12, 0, 28), "fixed": PairedTable(0, 0, 12, 28)}
+    tables.update({f"same{i}": PairedTable(1, 2, 2, 35) for i in range(19)})
+    per, overall = compare_scenarios(tables, margin=0.02)
+    assert per["broken"].verdict is Verdict.FAIL
+    assert overall.verdict is Verdict.FAIL and "scenario broken" in overall.reason
+    assert "all scenarios pooled" not in overall.reason
+    # the scenarios that cannot reach a level take none of it: stronger than Holm over the 21 scenarios
+    assert per["broken"].adjusted_p < holm([mcnemar_exact(t, "greater") for t in tables.values()])[0]
+
+
+def test_tarone_levels_go_only_to_scenarios_that_can_reach_them():
+    # a scenario with m discordant pairs cannot give p below 0.5 ** m
+    assert smallest_p_value(0) == 1.0 and smallest_p_value(5) == 0.5 ** 5
+    assert tarone_level([1.0] * 20 + [0.5 ** 6], 0.025) == 0.025  # only one can reach it
+    assert tarone_level([0.5 ** 10] * 4, 0.025) == pytest.approx(0.025 / 4)  # all four can
+    # testable at budget / 2 are two of them: K = 2
+    assert tarone_level([0.5 ** 10, 0.5 ** 10, 0.02, 0.02], 0.025) == pytest.approx(0.0125)
+    decision = gate_rejections([0.001, 0.5, 0.5], [10, 3, 3], pooled_p=0.04, alpha=0.05)
+    assert decision.scenarios == (True, False, False)
+    # the pooled test keeps its share until every scenario is rejected
+    assert decision.pooled_level == pytest.approx(0.025) and not decision.pooled
+    # once the pooled test rejects, its share goes to the scenarios (step down)
+    decision = gate_rejections([0.03, 0.5], [8, 1], pooled_p=0.02, alpha=0.05)
+    assert decision.pooled and decision.scenarios == (True, False)
+    assert decision.scenario_levels[0] == pytest.approx(0.05)
+    with pytest.raises(ValueError, match="one discordant count per p-value"):
+        gate_rejections([0.1], [1, 2], 0.5, 0.05)
 
 
 def test_compare_scenarios_pass_and_inconclusive_overall():
@@ -396,28 +429,21 @@ def test_compare_scenarios_pass_and_inconclusive_overall():
 def test_compare_scenarios_pooled_regression_spread_over_scenarios_fails():
     # +3 pp in every scenario, none significant alone, clearly significant pooled
     tables = {f"s{i}": PairedTable(3, 7, 3, 187) for i in range(5)}
-    per, overall = compare_scenarios(tables, 0.02, pooled_weight=None)
+    per, overall = compare_scenarios(tables, 0.02)
     assert all(c.verdict is not Verdict.FAIL for c in per.values())
     assert overall.verdict is Verdict.FAIL and "all scenarios pooled" in overall.reason
-    # the weighted-Holm family (the default): pooled test at 0.8 alpha still catches it
-    assert compare_scenarios(tables, 0.02)[1].verdict is Verdict.FAIL
 
 
-def test_compare_scenarios_overall_false_alarm():
-    # identical policies, 4 scenarios of 200 paired episodes: with pooled_weight (one weighted-Holm
-    # family) the overall rate is at most alpha; the default (pooled at alpha, Holm over the
-    # scenarios at alpha) is only bounded by 2 alpha, and measures a little above alpha here
+def test_compare_scenarios_overall_false_alarm_at_most_alpha():
+    # identical policies, 21 scenarios of 40 paired episodes with failure rates from 2 to 25 %
     rng = np.random.default_rng(2026)
-    reps, rates = 1000, [0.03, 0.05, 0.05, 0.08]
-    sims = [simulate_tables(200, p, p, DEFAULT_CORRELATION, reps, rng) for p in rates]
-    family = default = 0
+    reps, rates = 600, np.linspace(0.02, 0.25, 21)
+    sims = [simulate_tables(40, p, p, DEFAULT_CORRELATION, reps, rng) for p in rates]
+    false_alarms = 0
     for r in range(reps):
         tables = {f"s{i}": PairedTable(*map(int, sims[i][r])) for i in range(len(rates))}
-        family += compare_scenarios(tables, DEFAULT_MARGIN, pooled_weight=0.8)[1].verdict is Verdict.FAIL
-        default += compare_scenarios(tables, DEFAULT_MARGIN, pooled_weight=None)[1].verdict is Verdict.FAIL
-    assert MonteCarloRate(family, reps).interval()[0] <= DEFAULT_ALPHA
-    assert MonteCarloRate(default, reps).interval()[0] <= 2 * DEFAULT_ALPHA
-    assert family <= default
+        false_alarms += compare_scenarios(tables, DEFAULT_MARGIN)[1].verdict is Verdict.FAIL
+    assert MonteCarloRate(false_alarms, reps).interval()[0] <= DEFAULT_ALPHA
 
 
 # --- sequential test --------------------------------------------------------------------------

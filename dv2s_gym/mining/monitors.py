@@ -24,7 +24,7 @@ from typing import Any, Dict, List, Optional
 
 from envs.safety_metrics import FREE_PATH, STANDING_SPEED, path_is_free
 
-__all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "detect_failure", "robustness",
+__all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "detect_failure", "detect_stall", "robustness",
            "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
 
 FAILURE_TYPES = ("collision", "off_road", "low_ttc", "stall")
@@ -130,6 +130,12 @@ def detect_failure(result, trace, *, ttc_threshold: float = DEFAULT_TTC_THRESHOL
         other = result.extra.get("min_ttc_with") or None
         return Failure("low_ttc", time, _step_at(trace, time), other, trace.kinds.get(other) if other else None,
                        None, float(result.min_ttc))
+    return _stall(trace, stall_seconds)
+
+
+def detect_stall(trace, stall_seconds: float = DEFAULT_STALL_SECONDS) -> Optional[Failure]:
+    """The episode's first stall (the ego stood for ``stall_seconds`` with a free path ahead), or ``None``,
+    whatever else happened in it."""
     return _stall(trace, stall_seconds)
 
 

@@ -2,8 +2,9 @@
 
 :func:`run_regression` runs both policies on the same scenario x seed pairs (a local
 process pool or Ray), streams results to disk (resumable), and writes a versioned JSON
-report, JUnit XML and Markdown with a PASS / FAIL / INCONCLUSIVE verdict per scenario
-and overall; :mod:`dv2s_gym.regress.stats` holds the statistics. The episodes run in the pools
+report, JUnit XML (:mod:`~dv2s_gym.regress.junit`), Markdown and HTML with a PASS / FAIL /
+INCONCLUSIVE / ERROR verdict per scenario and overall; :mod:`dv2s_gym.regress.stats` and
+:mod:`dv2s_gym.regress.family` hold the statistics, :mod:`dv2s_gym.regress.power` sizes runs. The episodes run in the pools
 of :mod:`dv2s_gym.workers` (task kind ``"regress"``, :mod:`dv2s_gym.regress.tasks`).
 
 The names below are re-exported lazily, so a worker process that imports

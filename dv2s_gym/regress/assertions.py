@@ -61,7 +61,7 @@ class RegressionReport(Mapping[str, Any]):
 
     @property
     def verdict(self) -> Optional[str]:
-        """``"PASS"``, ``"FAIL"``, ``"INCONCLUSIVE"``, or ``None`` without a baseline."""
+        """``"PASS"``, ``"FAIL"``, ``"INCONCLUSIVE"``, ``"ERROR"``, or ``None`` without a baseline."""
         return self.data.get("verdict")
 
     @property
@@ -87,8 +87,9 @@ class RegressionReport(Mapping[str, Any]):
     def failure_message(self, allow_inconclusive: bool = True) -> Optional[str]:
         """Why this report's verdict is not acceptable, or ``None`` when it is.
 
-        FAIL is never acceptable; INCONCLUSIVE only with ``allow_inconclusive``; a report
-        without a verdict (no baseline) is not acceptable, since nothing was compared.
+        FAIL and ERROR (an episode ended in an error) are never acceptable; INCONCLUSIVE only with
+        ``allow_inconclusive``; a report without a verdict (no baseline) is not acceptable, since
+        nothing was compared.
         """
         verdict = self.verdict
         if verdict == "PASS" or (verdict == "INCONCLUSIVE" and allow_inconclusive):
@@ -98,6 +99,17 @@ class RegressionReport(Mapping[str, Any]):
         where = f"report: {self.path}" if self.path is not None else ""
         if verdict is None:
             return f"dv2s regression: {candidate!r} was run without a baseline, so there is no verdict; {where}"
+        errors = self.data.get("errors") or []
+        if verdict == "ERROR":
+            lines = [f"dv2s regression ERROR: {candidate!r} against {baseline!r}: {len(errors)} episode(s) ended in "
+                     "an error, so the run cannot be judged"]
+            lines += [f"  {e.get('id')} ({e.get('role')}): {str(e.get('error') or '').splitlines()[0][:200]}"
+                      for e in errors[:SHOWN_EPISODES]]
+            if len(errors) > SHOWN_EPISODES:
+                lines.append(f"  and {len(errors) - SHOWN_EPISODES} more")
+            if where:
+                lines.append(f"  {where}")
+            return "\n".join(lines)
         lines = [f"dv2s regression {verdict}: {candidate!r} against {baseline!r}"]
         scenarios = self.data.get("scenarios") or {}
         if verdict == "FAIL":
@@ -117,7 +129,6 @@ class RegressionReport(Mapping[str, Any]):
             shown = ", ".join(newly[:SHOWN_EPISODES])
             more = f" and {len(newly) - SHOWN_EPISODES} more" if len(newly) > SHOWN_EPISODES else ""
             lines.append(f"  newly failing episodes: {shown}{more}")
-        errors = self.data.get("errors") or []
         if errors:
             lines.append(f"  {len(errors)} episode(s) ended in errors")
         if where:
@@ -132,7 +143,7 @@ class RegressionReport(Mapping[str, Any]):
         baseline = ((entry.get("baseline") or {}).get("failure_rate") or {}).get("value")
         p_value, p_adjusted = comparison.get("p_value"), comparison.get("p_adjusted")
         p_text = "" if p_value is None else f", p = {p_value:.3g}" + (
-            "" if p_adjusted is None else f" (Holm {p_adjusted:.3g})")
+            "" if p_adjusted is None else f" (adjusted {p_adjusted:.3g})")
         return (f"{name}: failure rate {_pct(candidate)} vs {_pct(baseline)}, difference {_pp(difference.get('value'))} "
                 f"[{_pp(difference.get('low'))}, {_pp(difference.get('high'))}]{p_text}")
 

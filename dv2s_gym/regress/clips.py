@@ -17,7 +17,7 @@ import numpy as np
 
 from envs.errors import DV2SError
 
-__all__ = ["ClipError", "render_episode_video", "DEFAULT_CLIP_CONFIG"]
+__all__ = ["ClipError", "render_episode_video", "render_policy_video", "DEFAULT_CLIP_CONFIG"]
 
 DEFAULT_CLIP_CONFIG: Dict[str, Any] = {
     "seconds": 7.0,
@@ -73,6 +73,56 @@ def render_episode_video(trace_path: Union[str, os.PathLike], out_path: Union[st
     frames = frames[-max(1, int(round(seconds * frequency))):]
     if not frames:
         raise ClipError(f"episode trace {trace_path} rendered no frames")
+    with VideoWriter(out_path, fps=frequency) as video:
+        for frame in frames:
+            video.write(frame)
+    return Path(out_path)
+
+
+def render_policy_video(report: Dict[str, Any], result: Dict[str, Any], role: str, out_path: Union[str, os.PathLike], *,
+                        seconds: float = DEFAULT_CLIP_CONFIG["seconds"], size: int = DEFAULT_CLIP_CONFIG["size"],
+                        zoom: float = DEFAULT_CLIP_CONFIG["zoom"]) -> Path:
+    """Re-run ``role``'s policy of a regression report on ``result``'s scene and write its last ``seconds``.
+
+    For an episode that kept no trace (one that did not fail): the policy spec, scenario, seed and env
+    config of the report, rendered off-screen like :func:`render_episode_video`. The re-run must
+    reproduce the report's trajectory hash, so the clip shows the very episode the report counted.
+    """
+    from envs.recording import VideoWriter
+    from policies.evaluation import make_eval_env, run_episode
+    from policies.registry import load_policy
+
+    from dv2s_gym.regress.replay import _bank_for
+
+    spec = (report.get(role) or {}).get("spec")
+    if not spec:
+        raise ClipError(f"the report names no {role} policy to re-run")
+    if seconds <= 0 or size < 16 or zoom <= 0:
+        raise ClipError(f"a clip needs seconds > 0, size >= 16 px and zoom > 0, "
+                        f"not seconds={seconds}, size={size}, zoom={zoom}")
+    scenario, seed = result["scenario"], int(result["seed"])
+    config = dict((report.get("settings") or {}).get("env_config") or {})
+    env = make_eval_env(None, config=config, bank_dir=_bank_for(report.get("bank") or {}, scenario),
+                        render_mode="rgb_array")
+    frames: List[np.ndarray] = []
+    try:
+        own = env.unwrapped.config
+        own.update(scaling=float(own.get("scaling") or 5.5) * zoom * size / float(own.get("screen_width") or 600),
+                   screen_width=int(size), screen_height=int(size), offscreen_rendering=True)
+        policy = load_policy(spec)
+        policy.bind([env])
+        rerun, _ = run_episode(env, policy, scenario, seed, frames=frames)
+        frequency = float(own.get("policy_frequency") or 5)
+    finally:
+        env.close()
+    expected = result.get("trajectory_hash")
+    if expected and rerun.trajectory_hash != expected:
+        raise ClipError(f"the {role}'s run of {scenario}/{seed} did not reproduce (trajectory hash "
+                        f"{rerun.trajectory_hash[:12]}, the report has {str(expected)[:12]}); the policy or the "
+                        "simulator changed since the report was made")
+    frames = frames[-max(1, int(round(seconds * frequency))):]
+    if not frames:
+        raise ClipError(f"the {role}'s run of {scenario}/{seed} rendered no frames")
     with VideoWriter(out_path, fps=frequency) as video:
         for frame in frames:
             video.write(frame)

@@ -4,15 +4,19 @@
 runner) into a single file with no external resources: inline CSS, plots drawn as
 inline SVG by the small functions below (per-scenario failure and collision rates
 with their intervals, the paired difference per scenario against the margin,
-distributions of minimum time-to-collision and return), a verdict banner, tables,
-and the newly failing episodes as embedded ``data:video/webm`` clips rendered from
-their traces (:func:`~dv2s_gym.regress.clips.render_episode_video`).
+distributions of minimum time-to-collision and return), a verdict banner, tables with
+the scenarios worst first, and the newly failing episodes grouped by scenario (regressed
+scenarios first), each as two embedded ``data:video/webm`` clips side by side: the
+candidate's failure, replayed from its trace
+(:func:`~dv2s_gym.regress.clips.render_episode_video`), and the baseline's run of the same
+scene (from its trace, or re-run: :func:`~dv2s_gym.regress.clips.render_policy_video`).
 
 The CSS, plot primitives and self-check script are shared with the mining report
 (:mod:`dv2s_gym.report_page`). Every string taken from the report is escaped. A small inline script records, on
 load, how many plots have a non-empty box (``data-plots-rendered`` on ``<body>``);
-opened as ``report.html#selftest`` it also plays the first clip and records whether
-it played (``data-video-played``) — the browser test reads these attributes.
+opened as ``report.html#selftest`` it also plays the first clip and both sides of the first
+pair and records whether they played (``data-video-played``, ``data-pair-played``) — the
+browser test reads these attributes.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ import tempfile
 from pathlib import Path
 from typing import Any, List, Mapping, Optional, Sequence, Tuple, Union
 
-from dv2s_gym.regress.clips import ClipError, render_episode_video
+from dv2s_gym.regress.clips import ClipError, render_episode_video, render_policy_video
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, VideoSource,
                                   axis as _axis, escape as _e, finite as _num, fmt as _fmt,
                                   fmt_interval as _interval, interval_mark as _interval_mark, legend as _legend,
@@ -36,7 +40,7 @@ MAX_VIDEOS = 12
 """Newly failing episodes shown as clips; the rest are listed."""
 
 COLOURS = {"candidate": "#0b63c5", "baseline": "#8a8f98", "PASS": "#1a7f37", "FAIL": "#cf222e",
-           "INCONCLUSIVE": "#b07800", None: "#57606a"}
+           "INCONCLUSIVE": "#b07800", "ERROR": "#8250df", None: "#57606a"}
 
 
 # --------------------------------------------------------------------------- SVG plots
@@ -138,8 +142,15 @@ def _bin_label(low: float, high: float) -> str:
 
 
 def _scenario_rows(report: Mapping[str, Any]) -> List[Tuple[str, Mapping[str, Any], bool]]:
-    scenarios = report.get("scenarios") or {}
-    rows = [(str(name), entry, False) for name, entry in sorted(scenarios.items()) if isinstance(entry, Mapping)]
+    """Scenarios worst first (:func:`~dv2s_gym.regress.report.scenarios_by_severity`), then overall."""
+    from dv2s_gym.regress.report import scenarios_by_severity
+
+    scenarios = {name: entry for name, entry in (report.get("scenarios") or {}).items() if isinstance(entry, Mapping)}
+    try:
+        order = scenarios_by_severity({"scenarios": scenarios})
+    except (TypeError, ValueError, AttributeError):  # a hand-edited report: fall back to names
+        order = sorted(scenarios)
+    rows = [(str(name), scenarios[name], False) for name in order]
     overall = report.get("overall")
     if isinstance(overall, Mapping):
         rows.append(("overall", overall, True))
@@ -180,8 +191,10 @@ def _banner(report: Mapping[str, Any]) -> str:
     verdict = report.get("verdict")
     candidate = (report.get("candidate") or {}).get("spec")
     baseline = (report.get("baseline") or {}).get("spec") if report.get("baseline") else None
-    css = verdict if verdict in ("PASS", "FAIL", "INCONCLUSIVE") else "NONE"
-    if verdict is None:
+    css = verdict if verdict in ("PASS", "FAIL", "INCONCLUSIVE", "ERROR") else "NONE"
+    if verdict == "ERROR" and report.get("baseline") is None:
+        head = f"ERROR: {_e(candidate)} (measures only): {_e(report.get('error_reason', ''))}"
+    elif verdict is None:
         head = f"No verdict: {_e(candidate)} was run without a baseline"
     else:
         head = f"{_e(verdict)}: {_e(candidate)} against {_e(baseline)}"
@@ -219,7 +232,7 @@ def _scenario_table(report: Mapping[str, Any]) -> str:
     head = ["scenario", "episodes", "candidate failure rate"]
     if has_baseline:
         head += ["baseline failure rate", "both fail / cand. only / base. only / neither", "difference",
-                 "p", "p (Holm)", "verdict", "reason"]
+                 "p", "p (adjusted)", "verdict", "reason"]
     out = ["<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in head) + "</tr>"]
     for name, entry, overall in _scenario_rows(report):
         candidate = entry.get("candidate") or {}
@@ -255,6 +268,9 @@ def _outcome(result: Any) -> str:
                                     if result.get("collisions") else ""))
     if result.get("off_road"):
         parts.append("off road")
+    if result.get("stalled"):
+        stall = _num(result.get("stall_time"))
+        parts.append("stall" + (f" from {stall:.1f} s" if stall is not None else ""))
     if not parts:
         parts.append("success" if result.get("success") else "no failure")
     ttc = _num(result.get("min_ttc"))
@@ -273,45 +289,86 @@ def _resolve_trace(trace: Any, base: Path) -> Optional[Path]:
     return None
 
 
+def _clip(report: Mapping[str, Any], episode: Mapping[str, Any], role: str, base: Path, scratch: Path,
+          given: Optional[VideoSource], render_videos: bool) -> Tuple[Optional[bytes], str]:
+    """One side of a pair: the given clip, the trace's replay, or (no trace) a re-run of the policy."""
+    result = episode.get(role)
+    if given is not None:
+        return _video_bytes(given), ""
+    if not render_videos:
+        return None, "clips were not rendered"
+    if not isinstance(result, Mapping) or result.get("error"):
+        return None, f"the {role} has no run of this scene to show"
+    out = scratch / f"{role}-{abs(hash(str(episode.get('id'))))}.webm"
+    try:
+        trace = _resolve_trace(result.get("trace"), base)
+        if trace is not None:
+            return render_episode_video(trace, out).read_bytes(), ""
+        if role == "candidate":
+            return None, "no trace was recorded for this episode"
+        return render_policy_video(dict(report), dict(result), role, out).read_bytes(), ""
+    except (ClipError, OSError, AssertionError, ValueError) as error:
+        return None, f"clip not available: {error}"
+
+
 def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, VideoSource]],
            render_videos: bool, max_videos: int) -> str:
+    """The newly failing episodes, grouped by scenario (worst first): the candidate's clip beside the
+    baseline's run of the same scene."""
     newly = [str(i) for i in report.get("newly_failing") or []]
     if not newly:
         return '<p class="muted">No episode fails for the candidate that the baseline passes.</p>'
     episodes = {str(e.get("id")): e for e in report.get("episodes") or [] if isinstance(e, Mapping)}
     videos = dict(videos or {})
-    out = ['<div class="clips">']
+    order = [name for name, _, overall in _scenario_rows(report) if not overall]
+    by_scenario: dict = {}
+    for episode_id in newly:
+        scenario = str((episodes.get(episode_id) or {}).get("scenario") or episode_id.rsplit("/", 1)[0])
+        by_scenario.setdefault(scenario, []).append(episode_id)
+    regressed = set(map(str, report.get("regressed") or []))
+    out, shown, left = [], 0, []
     with tempfile.TemporaryDirectory(prefix="dv2s-clips-") as scratch:
-        for index, episode_id in enumerate(newly[:max_videos]):
-            episode = episodes.get(episode_id, {})
-            candidate = episode.get("candidate")
-            note, data = "", None
-            try:
-                if episode_id in videos:
-                    data = _video_bytes(videos[episode_id])
-                elif render_videos:
-                    trace = _resolve_trace((candidate or {}).get("trace"), base)
-                    if trace is None:
-                        note = "no trace was recorded for this episode"
-                    else:
-                        data = render_episode_video(trace, Path(scratch) / f"clip{index}.webm").read_bytes()
-                else:
-                    note = "clips were not rendered"
-            except (ClipError, OSError, AssertionError, ValueError) as error:
-                note = f"clip not available: {error}"
-            if data is not None:
-                media = video_tag(data)
-            else:
-                media = f'<p class="muted">{_e(note)}</p>'
-            seed = episode.get("seed", "")
-            out.append(f'<div class="clip" id="clip-{index}">{media}<p><b>{_e(episode_id)}</b> (seed {_e(seed)})<br>'
-                       f"candidate: {_e(_outcome(candidate))}<br>baseline: {_e(_outcome(episode.get('baseline')))}"
-                       f"</p></div>")
-    out.append("</div>")
-    if len(newly) > max_videos:
-        rest = ", ".join(newly[max_videos:])
-        out.append(f'<p class="muted">{len(newly) - max_videos} more not shown as clips: {_e(rest)}</p>')
+        for scenario in sorted(by_scenario, key=lambda n: (n not in regressed, order.index(n) if n in order else 10**6)):
+            ids = by_scenario[scenario]
+            label = "regressed" if scenario in regressed else "not significant alone"
+            out.append(f'<section class="scenario-clips" data-scenario="{_e(scenario)}"><h3>{_e(scenario)} '
+                       f'<small>({_e(label)}; {len(ids)} newly failing)</small></h3><div class="clips">')
+            for episode_id in ids:
+                if shown >= max_videos:
+                    left.append(episode_id)
+                    continue
+                episode = episodes.get(episode_id, {})
+                sides = []
+                for role in ("candidate", "baseline"):
+                    given = videos.get(episode_id) if role == "candidate" else videos.get(f"{episode_id}#baseline")
+                    data, note = _clip(report, episode, role, Path(base), Path(scratch), given, render_videos)
+                    media = video_tag(data) if data is not None else f'<p class="muted">{_e(note)}</p>'
+                    sides.append(f'<figure class="side {role}">{media}<figcaption><b>{role}</b>: '
+                                 f"{_e(_outcome(episode.get(role)))}</figcaption></figure>")
+                out.append(f'<div class="clip pair" id="clip-{shown}"><p><b>{_e(episode_id)}</b> (seed '
+                           f'{_e(episode.get("seed", ""))}): the same scene, candidate beside baseline</p>'
+                           f'<div class="sides">{"".join(sides)}</div></div>')
+                shown += 1
+            out.append("</div></section>")
+    if left:
+        out.append(f'<p class="muted">{len(left)} more not shown as clips: {_e(", ".join(left))}</p>')
     return "".join(out)
+
+
+def _aggregates(report: Mapping[str, Any]) -> str:
+    """The return aggregates (interquartile mean, probability of improvement) as context, not the verdict."""
+    aggregates = report.get("aggregates")
+    if not isinstance(aggregates, Mapping):
+        return ""
+    iqm = aggregates.get("return_iqm") or {}
+    rows = [("interquartile mean of the return, candidate", iqm.get("candidate")),
+            ("interquartile mean of the return, baseline", iqm.get("baseline")),
+            ("probability of improvement (return)", aggregates.get("probability_of_improvement"))]
+    body = "".join(f'<tr><th>{_e(label)}</th><td class="num">{_e(_interval(value, 3))}</td></tr>'
+                   for label, value in rows)
+    return ('<h2>Context: aggregates of the return</h2><p class="muted">Stratified bootstrap intervals (episodes '
+            'resampled within each scenario). Context only: the verdict is the paired failure test.</p>'
+            f'<table id="aggregates">{body}</table>')
 
 
 def _errors(report: Mapping[str, Any]) -> str:
@@ -334,7 +391,8 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
     """The report page as a string (see :func:`write_html`); relative trace paths resolve against ``base``."""
     title = f"dv2s regress: {(report.get('candidate') or {}).get('spec', '?')}"
     has_baseline = report.get("baseline") is not None
-    plots = [("Failure (collision or off road) rate per scenario, 95% intervals",
+    failure = ", ".join((report.get("settings") or {}).get("failure") or ["collision", "off_road"])
+    plots = [(f"Failure ({failure}) rate per scenario, 95% intervals",
               rate_plot(report, "failure_rate", "Failure rate")),
              ("Collision rate per scenario, 95% intervals", rate_plot(report, "collision_rate", "Collision rate"))]
     if has_baseline:
@@ -355,6 +413,7 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
         "<h2>Settings</h2>", _settings_table(report),
         "<h2>Scenarios</h2>", _scenario_table(report),
         "<h2>Plots</h2>", figures,
+        _aggregates(report),
         f"<h2>Newly failing episodes ({len(report.get('newly_failing') or [])})</h2>",
         _clips(report, Path(base), videos, render_videos, max_videos),
         "<h2>Errors</h2>", _errors(report),
@@ -371,8 +430,10 @@ def write_html(report: Mapping[str, Any], path: Union[str, os.PathLike], *,
     Args:
         report: a ``dv2s-regress`` report dict.
         path: the ``.html`` file to write; relative trace paths in the report resolve against its folder.
-        videos: clips to embed, by episode id (``"<scenario>/<seed>"``): a ``.webm`` path or its bytes.
-        render_videos: render the newly failing episodes that ``videos`` lacks from their traces.
+        videos: clips to embed, by episode id (``"<scenario>/<seed>"``; ``"<scenario>/<seed>#baseline"`` for the
+            baseline's run of the same scene): a ``.webm`` path or its bytes.
+        render_videos: render the clips ``videos`` lacks: from the traces, or by re-running the baseline
+            policy on the scene when its run kept no trace (it must reproduce the report's trajectory hash).
         max_videos: at most this many clips; the other newly failing episodes are listed.
     """
     from scenario_bank.atomic import atomic_write_text

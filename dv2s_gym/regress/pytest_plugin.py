@@ -1,8 +1,8 @@
 """pytest plugin: "this policy must not regress on these scenarios" in a user's own test suite.
 
 Installed with dv2s-gym (entry point ``pytest11: dv2s``; or ``-p dv2s_gym.regress.pytest_plugin``).
-A marker runs a regression once for the test and fails it on a FAIL verdict (and on
-INCONCLUSIVE when ``allow_inconclusive=False``)::
+A marker runs a regression once for the test and fails it on a FAIL or ERROR verdict (ERROR:
+an episode ended in an error; and on INCONCLUSIVE when ``allow_inconclusive=False``)::
 
     import pytest
 
@@ -19,9 +19,10 @@ or, in code, the ``dv2s_regress`` fixture takes the same arguments and returns a
         report.assert_no_regression()          # or: assert report.verdict != "FAIL"
 
 Arguments (both forms): ``policy`` (the candidate spec), ``baseline`` (a spec) or
-``baseline_report`` (an earlier ``report.json``), ``scenarios``, ``episodes``, ``seed``,
-``margin``, ``alpha``, ``sequential``, ``env_config``, ``bank_dir``, ``timeout``; the marker
-also takes ``allow_inconclusive`` (default ``True``: only a significant regression fails).
+``baseline_report`` (an earlier ``report.json``), ``scenarios``, ``episodes`` (default: planned
+from ``mde`` and ``power``, as ``dv2s regress`` does), ``seed``, ``margin``, ``alpha``, ``mde``,
+``power``, ``sequential``, ``env_config``, ``bank_dir``, ``timeout``; the marker also takes
+``allow_inconclusive`` (default ``True``: a significant regression or an error fails).
 The statistics and verdicts are those of ``dv2s regress``.
 
 Options: ``--dv2s-workers N`` (processes per regression; default every core),
@@ -49,8 +50,9 @@ _ALLOW = pytest.StashKey[bool]()
 
 
 def regression_arguments(policy: str, baseline: Optional[str] = None, *, baseline_report: Optional[str] = None,
-                         scenarios: Union[str, Sequence[str], None] = None, episodes: int = 20, seed: int = 0,
-                         margin: float = 0.02, alpha: float = 0.05, sequential: bool = False,
+                         scenarios: Union[str, Sequence[str], None] = None, episodes: Optional[int] = None,
+                         seed: int = 0, margin: float = 0.02, alpha: float = 0.05, mde: Optional[float] = None,
+                         power: Optional[float] = None, sequential: bool = False,
                          env_config: Optional[Dict[str, Any]] = None, bank_dir: Optional[str] = None,
                          timeout: Optional[float] = None) -> Dict[str, Any]:
     """The keyword arguments of :func:`~dv2s_gym.regress.runner.run_regression` for one check."""
@@ -61,7 +63,7 @@ def regression_arguments(policy: str, baseline: Optional[str] = None, *, baselin
         scenarios = [scenarios]
     return dict(candidate=policy, baseline=baseline, baseline_report=baseline_report,
                 scenarios=None if scenarios is None else list(scenarios), episodes=episodes, seed=seed,
-                margin=margin, alpha=alpha, sequential=sequential, env_config=env_config, bank_dir=bank_dir,
+                margin=margin, alpha=alpha, mde=mde, power=power, sequential=sequential, env_config=env_config, bank_dir=bank_dir,
                 timeout=timeout)
 
 
@@ -80,10 +82,10 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line(
         "markers",
-        f"{MARKER}(policy, baseline=None, *, baseline_report=None, scenarios=None, episodes=20, seed=0, "
-        "margin=0.02, alpha=0.05, sequential=False, env_config=None, bank_dir=None, timeout=None, "
-        "allow_inconclusive=True): run a dv2s regression of policy against baseline for this test and fail "
-        "it on a FAIL verdict (and on INCONCLUSIVE unless allowed)")
+        f"{MARKER}(policy, baseline=None, *, baseline_report=None, scenarios=None, episodes=None, seed=0, "
+        "margin=0.02, alpha=0.05, mde=None, power=None, sequential=False, env_config=None, bank_dir=None, "
+        "timeout=None, allow_inconclusive=True): run a dv2s regression of policy against baseline for this test "
+        "and fail it on a FAIL or ERROR verdict (and on INCONCLUSIVE unless allowed)")
 
 
 def _folder_name(nodeid: str) -> str:

@@ -17,13 +17,24 @@ bumps it, and ``--baseline-report`` refuses a report of another version)::
       "scenarios": {name: {"candidate": Summary, "baseline": Summary | null,
                            "comparison": Comparison | null}},
       "overall": {"candidate": Summary, "baseline": Summary | null, "comparison": Comparison | null},
-      "verdict": "PASS" | "FAIL" | "INCONCLUSIVE" | null (no baseline),
+      "verdict": "PASS" | "FAIL" | "INCONCLUSIVE" | "ERROR" | null (no baseline, no error),
+      "error_reason": one line (measures only, with errors; absent otherwise),
       "regressed": [scenario names whose verdict is FAIL],
       "newly_failing": [episode ids where the candidate failed and the baseline did not],
       "errors": [{"id", "role", "error"}],
       "stopped_early": bool,
-      "sequential": {"looks", "episodes", "max_episodes", "verdict"} | null
+      "sequential": {"looks", "episodes", "max_episodes", "verdict"} | null,
+      "power": {"per_scenario": {name: Power}, "pooled": Power, "power", "mde", "assumption"} | null,
+      "aggregates": {"return_iqm": {"candidate", "baseline"}, "probability_of_improvement",
+                     "resamples", "confidence"} | null      context, not the verdict,
+      "hostname": machine of the run, "duration": its wall time [s],
+      "timing": {scenario: wall time of its episodes run in this invocation [s]}
     }
+
+``Power`` (:func:`dv2s_gym.regress.power.run_power`): ``{"n", "baseline_rate", "level", "at_margin",
+"at_mde", "detectable"}``: the probability the run had to FAIL an increase of the margin and of the
+planned ``mde``, and the smallest increase it detected with the planned power. ``settings`` also
+holds ``mde``, ``power`` and, for a run sized by them, ``plan``.
 
 ``Episode`` is :meth:`policies.evaluation.EpisodeResult.to_json` (scenario, seed, scene_seed,
 sampled ``params``, collided, collisions, off_road, success, failed, min_ttc (null when no
@@ -36,11 +47,13 @@ result (an exception, or a worker that crashed or hung twice) is
 ``Summary`` (one policy, one scenario or all)::
 
     {"episodes": n (without errors), "errors": count,
-     "collision_rate" | "off_road_rate" | "failure_rate" | "success_rate":
+     "collision_rate" | "off_road_rate" | "stall_rate" | "failure_rate" | "success_rate":
          {"value", "low", "high", "count"}          Wilson 95 % interval,
      "min_ttc" | "mean_speed" | "return": {"value", "low", "high", "n"}   bootstrap 95 % interval}
 
-A failure is a collision or leaving the road. ``min_ttc`` is the mean over episodes of each
+A failure is any of the run's failure kinds (``settings["failure"]``: collision, off-road and
+stall by default; :mod:`dv2s_gym.regress.failures`); each kind has its own rate, whether it counts
+as a failure or not. ``min_ttc`` is the mean over episodes of each
 episode's minimum time-to-collision [s], over the ``n`` episodes where it was finite. The
 means' intervals resample episodes within a scenario and whole scenarios for the overall
 figure (``cluster_bootstrap_mean``), since episodes of one scenario are not independent.
@@ -51,13 +64,14 @@ error on either side are left out)::
     {"n": pairs, "table": {"both_fail", "candidate_only", "baseline_only", "neither"},
      "candidate_rate", "baseline_rate",
      "difference": {"value", "low", "high"}     failure-rate difference, Newcombe interval,
-     "p_value": one-sided exact McNemar, "p_adjusted": Holm over scenarios,
-     "verdict": "PASS" | "FAIL" | "INCONCLUSIVE", "reason": one line}
+     "p_value": one-sided exact McNemar, "p_adjusted": p-value scaled by the family of tests (FAIL iff <= alpha),
+     "verdict": "PASS" | "FAIL" | "INCONCLUSIVE" | "ERROR", "reason": one line}
 
 Verdicts follow :mod:`dv2s_gym.regress.stats` (non-inferiority within ``margin``). The
 overall verdict is FAIL when any scenario or the pooled table FAILs, PASS when the pooled
-table PASSes and no scenario FAILs. Episodes that ended in errors never let a verdict be
-PASS: it becomes INCONCLUSIVE, saying how many are missing.
+table PASSes and no scenario FAILs. An episode that ended in an error makes the verdict ERROR
+(its scenario's too; a measures-only run's verdict becomes ERROR as well, with ``error_reason``),
+whatever the other episodes show, and such a report cannot serve as a baseline.
 """
 
 from __future__ import annotations
@@ -67,7 +81,6 @@ import importlib
 import json
 import math
 import os
-import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Union
 
@@ -97,17 +110,28 @@ __all__ = [
 SCHEMA = "dv2s-regress"
 SCHEMA_VERSION = 1
 CONFIDENCE = 0.95
-RATES = (("collision_rate", "collided"), ("off_road_rate", "off_road"), ("failure_rate", "failed"),
-         ("success_rate", "success"))
+RATES = (("collision_rate", "collided"), ("off_road_rate", "off_road"), ("stall_rate", "stalled"),
+         ("failure_rate", "failed"), ("success_rate", "success"))
 MEANS = (("min_ttc", "min_ttc"), ("mean_speed", "mean_speed"), ("return", "episode_return"))
 
-EXIT_CODES = {"PASS": 0, "FAIL": 1, "INCONCLUSIVE": 3, None: 0}
-"""Exit status of ``dv2s regress`` per verdict (2 stays "bad input"); no baseline: 0."""
+EXIT_CODES = {"PASS": 0, "FAIL": 1, "INCONCLUSIVE": 3, "ERROR": 4, None: 0}
+"""Exit status of ``dv2s regress`` per verdict (2 stays "bad input"); no baseline and no error: 0."""
+
+VERDICTS = ("PASS", "FAIL", "INCONCLUSIVE", "ERROR")
+"""Every verdict a report can carry (``None``: measures only, every episode ran)."""
 
 
 def exit_code(verdict: Optional[str]) -> int:
-    """The exit status for a report's verdict: 0 PASS (or no baseline), 1 FAIL, 3 INCONCLUSIVE."""
+    """The exit status for a report's verdict: 0 PASS (or measures only), 1 FAIL, 3 INCONCLUSIVE, 4 ERROR."""
     return EXIT_CODES[verdict]
+
+
+def _error_reason(errors: Sequence[Mapping[str, Any]]) -> str:
+    first = errors[0]
+    message = str(first.get("error") or "").splitlines()[0] if first.get("error") else "no result"
+    return (f"{len(errors)} episode{'s' if len(errors) != 1 else ''} ended in an error, so the run cannot be judged "
+            f"(first: {first['id']} ({first['role']}): {message}); fix the error and rerun the same command to "
+            "run them again")
 
 
 def _verdict(value: Any) -> str:
@@ -205,7 +229,7 @@ def paired_tables(episodes: Sequence[Dict[str, Any]], scenarios: Sequence[str]) 
 
 
 def _errors_note(count: int) -> str:
-    return f"{count} episode{'s' if count != 1 else ''} ended in an error, so it cannot PASS"
+    return f"{count} episode{'s' if count != 1 else ''} ended in an error, so it cannot be judged"
 
 
 # ---------------------------------------------------------------------------------- report
@@ -247,33 +271,34 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
     regressed: List[str] = []
     newly_failing: List[str] = []
     comparisons: Dict[str, Any] = {}
+    power = aggregates = None
     if has_baseline:
         tables = paired_tables(episodes, list(by_scenario))
-        per_scenario, overall = stats.compare_scenarios(tables, margin, alpha)
+        pooled_rejected = None
+        if sequential and sequential.get("verdict") is not None:  # the pooled member was tested sequentially
+            pooled_rejected = sequential["verdict"] == "FAIL"
+        per_scenario, overall = stats.compare_scenarios(tables, margin, alpha, pooled_rejected=pooled_rejected)
         for name, comparison in per_scenario.items():
             scenario_verdict, reason = _verdict(comparison.verdict), comparison.reason
-            if scenario_verdict == "PASS" and errors_in[name]:
-                scenario_verdict, reason = "INCONCLUSIVE", f"{_errors_note(errors_in[name])}; {reason}"
+            if errors_in[name]:
+                scenario_verdict, reason = "ERROR", f"{_errors_note(errors_in[name])}; {reason}"
             comparisons[name] = comparison_json(comparison, verdict=scenario_verdict, reason=reason)
         regressed = [name for name, c in comparisons.items() if c["verdict"] == "FAIL"]
         verdict, reason = _verdict(overall.verdict), overall.reason
-        if sequential and sequential.get("verdict"):
-            sequential_verdict = sequential["verdict"]
-            looks = (f"sequential test ({sequential.get('looks')} looks, {sequential.get('episodes')} of "
-                     f"{sequential.get('max_episodes')} paired episodes)")
-            if regressed or sequential_verdict == "FAIL":
-                verdict = "FAIL"
-                reason = (f"{looks}: FAIL; " if sequential_verdict == "FAIL" else "") + reason
-            else:
-                verdict, reason = sequential_verdict, f"{looks}: {sequential_verdict}; pooled: {overall.reason}"
-        if verdict == "PASS" and errors:
-            verdict, reason = "INCONCLUSIVE", f"{_errors_note(len(errors))}; {reason}"
-        elif errors:
-            reason = f"{reason}; {len(errors)} episode{'s' if len(errors) != 1 else ''} ended in an error"
+        if sequential and sequential.get("verdict") is not None:
+            reason = (f"sequential test of the pooled table ({sequential.get('looks')} looks, "
+                      f"{sequential.get('episodes')} of {sequential.get('max_episodes')} paired episodes): "
+                      f"{sequential['verdict']}; {reason}")
+        if errors:
+            verdict, reason = "ERROR", f"{_error_reason(errors)}; without them: {verdict}, {reason}"
         overall_comparison = comparison_json(overall, verdict=verdict, reason=reason)
         newly_failing = [e["id"] for e in episodes if e.get("baseline") is not None
                          and not e["candidate"].get("error") and not e["baseline"].get("error")
                          and e["candidate"].get("failed") and not e["baseline"].get("failed")]
+        power = _power(tables, margin, alpha, settings)
+        from dv2s_gym.regress.aggregates import return_aggregates
+
+        aggregates = return_aggregates(episodes)
 
     for name in by_scenario:
         report_scenarios[name] = {
@@ -286,7 +311,7 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         "baseline": summarize_groups({n: results(n, "baseline") for n in by_scenario}) if has_baseline else None,
         "comparison": overall_comparison,
     }
-    return {
+    report = {
         "schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,
         "created": created or datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -304,7 +329,23 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         "errors": errors,
         "stopped_early": bool(stopped_early),
         "sequential": dict(sequential) if sequential else None,
+        "power": power,
+        "aggregates": aggregates,
     }
+    if errors and verdict is None:  # measures only: an error is still never green
+        report["verdict"] = "ERROR"
+        report["error_reason"] = _error_reason(errors)
+    return report
+
+
+def _power(tables: Mapping[str, "stats.PairedTable"], margin: float, alpha: float,
+           settings: Mapping[str, Any]) -> Dict[str, Any]:
+    """The power the run had (:func:`dv2s_gym.regress.power.run_power`), from its baseline's observed failure rates."""
+    from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
+
+    rates = {name: (table.baseline_rate if table.n else None) for name, table in tables.items()}
+    return run_power({name: table.n for name, table in tables.items()}, rates, margin=margin, alpha=alpha,
+                     mde=float(settings.get("mde") or DEFAULT_MDE), power=float(settings.get("power") or DEFAULT_POWER))
 
 
 def _dv2s_version() -> str:
@@ -343,7 +384,15 @@ def load_report(path: Union[str, os.PathLike]) -> Dict[str, Any]:
 
 def check_baseline_report(report: Mapping[str, Any], *, path: Union[str, os.PathLike], bank: Mapping[str, Any],
                           env_config: Mapping[str, Any]) -> None:
-    """Refuse a baseline report whose bank scenarios or env config differ from this run's, saying what differs."""
+    """Refuse a baseline report with errors, or whose bank scenarios or env config differ from this run's,
+    saying what differs."""
+    errors = report.get("errors") or []
+    if errors:
+        first = errors[0]
+        raise ReportMismatchError(
+            f"baseline report {path} cannot be a baseline: {len(errors)} of its episodes ended in an error "
+            f"(first: {first.get('id')} ({first.get('role')}): {str(first.get('error') or '').splitlines()[0][:160]}); "
+            "rerun that run's command until it has no errors, and compare against that report")
     theirs = report.get("bank") or {}
     their_hashes = theirs.get("hashes") or {}
     missing = [n for n in bank["scenarios"] if n not in their_hashes]
@@ -392,20 +441,84 @@ def _failures(summary: Optional[Mapping[str, Any]]) -> str:
     return f"{rate['count']}/{summary['episodes']} ({_pct(rate['value'])})"
 
 
-def _headline(report: Mapping[str, Any]) -> str:
+def _headline(report: Mapping[str, Any], base: Optional[Path] = None) -> str:
     settings = report["settings"]
     baseline = report.get("baseline")
-    against = ("" if baseline is None else
-               f" vs baseline `{baseline.get('spec')}`" + (f" (from {baseline['report']})" if baseline.get("report") else ""))
-    return (f"candidate `{report['candidate']['spec']}`{against}; {len(report['scenarios'])} scenario(s) x "
+    against = ("" if baseline is None else f" vs baseline `{baseline.get('spec')}`" + (
+        f" (from {_relative(baseline['report'], base)})" if baseline.get("report") else ""))
+    failure = ", ".join(settings.get("failure") or ["collision", "off_road"])
+    return (f"candidate `{report['candidate']['spec']}`{against}; failure: {failure}; "
+            f"{len(report['scenarios'])} scenario(s) x "
             f"{settings['episodes']} episode(s) from seed {settings['seed']}; margin {100 * settings['margin']:g} pp, "
             f"alpha {settings['alpha']:g}; bank version {str(report['bank']['version'])[:12]}")
 
 
+SEVERITY = {"ERROR": 0, "FAIL": 1, "INCONCLUSIVE": 2, "PASS": 3}
+
+
+def scenarios_by_severity(report: Mapping[str, Any]) -> List[str]:
+    """Scenario names, worst first: ERROR, FAIL, INCONCLUSIVE, PASS, each by the largest rise in failure
+    rate (measures only: by the candidate's failure rate), then by name."""
+    def key(name: str) -> tuple:
+        entry = report["scenarios"][name]
+        comparison = entry.get("comparison") or {}
+        errors = (entry.get("candidate") or {}).get("errors", 0) + ((entry.get("baseline") or {}).get("errors") or 0)
+        verdict = comparison.get("verdict") or ("ERROR" if errors else None)
+        rise = (comparison.get("difference") or {}).get("value")
+        if rise is None:
+            rise = ((entry.get("candidate") or {}).get("failure_rate") or {}).get("value") or 0.0
+        return SEVERITY.get(verdict, 4), -float(rise), name
+
+    return sorted(report["scenarios"], key=key)
+
+
+def warnings(report: Mapping[str, Any]) -> List[str]:
+    """What a reader must know before trusting the verdict (a baseline from another dv2s version, ...)."""
+    found = []
+    warning = (report.get("baseline") or {}).get("warning")
+    if warning:
+        found.append(str(warning))
+    return found
+
+
+def power_lines(report: Mapping[str, Any]) -> List[str]:
+    """What the run could detect: the power per scenario and pooled at the margin and at the planned effect."""
+    power = report.get("power")
+    if not power:
+        return []
+    per = list((power.get("per_scenario") or {}).values())
+    pooled = power.get("pooled") or {}
+    margin = 100 * float(report["settings"]["margin"])
+    target = float(power.get("power") or 0.8)
+
+    def low(key: str) -> Optional[float]:
+        values = [v[key] for v in per if v.get(key) is not None]
+        return min(values) if values else None
+
+    def share(value: Optional[float]) -> str:
+        return "-" if value is None else f"{value:.2f}"
+
+    detectable = [v["detectable"] for v in per if v.get("detectable") is not None]
+    worst = f"+{100 * max(detectable):.1f} pp" if len(detectable) == len(per) and per else "none below 100 pp"
+    mde = power.get("mde")
+    lines = [f"power per scenario (lowest of {len(per)}): {share(low('at_margin'))} at the +{margin:g} pp margin"
+             + (f", {share(low('at_mde'))} at +{100 * mde:g} pp" if mde else "")
+             + f"; {target:.0%} power at {worst}",
+             f"power pooled ({pooled.get('n', 0)} pairs): {share(pooled.get('at_margin'))} at the +{margin:g} pp margin; "
+             f"{target:.0%} power at " + (f"+{100 * pooled['detectable']:.1f} pp" if pooled.get("detectable") is not None
+                                          else "none below 100 pp"),
+             f"power model: {power.get('assumption')}"]
+    note = ((report.get("settings") or {}).get("plan") or {}).get("note")
+    if note:
+        lines.append(f"note: {note}")
+    return lines
+
+
 def format_summary(report: Mapping[str, Any]) -> str:
     """The plain-text table ``dv2s regress`` prints."""
-    rows = [("scenario", "n", "candidate fails", "baseline fails", "difference [95% CI]", "p (Holm)", "verdict")]
-    for name, entry in list(report["scenarios"].items()) + [("OVERALL", report["overall"])]:
+    rows = [("scenario", "n", "candidate fails", "baseline fails", "difference [95% CI]", "p (adjusted)", "verdict")]
+    ordered = [(name, report["scenarios"][name]) for name in scenarios_by_severity(report)]
+    for name, entry in ordered + [("OVERALL", report["overall"])]:
         comparison = entry.get("comparison")
         rows.append((name, str(entry["candidate"]["episodes"]), _failures(entry["candidate"]),
                      _failures(entry.get("baseline")),
@@ -415,12 +528,16 @@ def format_summary(report: Mapping[str, Any]) -> str:
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     lines = [_headline(report)]
     lines += ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
-    if report["verdict"] is not None:
+    if report.get("error_reason"):
+        lines.append(f"verdict: ERROR ({report['error_reason']})")
+    elif report["verdict"] is not None:
         lines.append(f"verdict: {report['verdict']} ({report['overall']['comparison']['reason']})")
         if report["regressed"]:
             lines.append(f"regressed: {', '.join(report['regressed'])}")
     else:
         lines.append("no baseline: measures only, no verdict")
+    lines += power_lines(report)
+    lines += [f"warning: {w}" for w in warnings(report)]
     if report["errors"]:
         lines.append(f"{len(report['errors'])} error(s): " + "; ".join(
             f"{e['id']} ({e['role']}): {e['error']}" for e in report["errors"][:3]))
@@ -429,91 +546,130 @@ def format_summary(report: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _markdown(report: Mapping[str, Any], report_path: str = "report.json") -> str:
+MARKDOWN_LIMIT = 60000
+"""Characters a Markdown report may have (a pull-request comment holds 65536); longer details are cut."""
+
+
+def _relative(path: Any, base: Optional[Path]) -> str:
+    """``path`` relative to ``base`` (the Markdown file's folder) when it can be, else as it is."""
+    if not path or base is None:
+        return str(path)
+    try:
+        return Path(os.path.relpath(Path(path).resolve(), base.resolve())).as_posix()
+    except ValueError:  # another drive
+        return str(path)
+
+
+def _details(summary: str, lines: Sequence[str]) -> List[str]:
+    return ["<details>", f"<summary>{summary}</summary>", "", *lines, "", "</details>", ""]
+
+
+def _verdict_line(report: Mapping[str, Any]) -> str:
     verdict = report["verdict"]
-    lines = [f"## dv2s regress: {verdict if verdict else 'measures (no baseline)'}", "", _headline(report), ""]
-    if verdict is not None:
-        lines += [f"**{verdict}**: {report['overall']['comparison']['reason']}", ""]
-        if report["regressed"]:
-            lines += ["Regressed: " + ", ".join(f"`{n}`" for n in report["regressed"]), ""]
-        if report.get("stopped_early"):
-            lines += ["Stopped early: the sequential test settled the verdict.", ""]
-        lines += ["| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (Holm) | verdict |",
-                  "|---|---:|---:|---:|---|---:|---|"]
-        for name, entry in list(report["scenarios"].items()) + [("**overall**", report["overall"])]:
+    if report.get("error_reason"):
+        return f"**ERROR**: {report['error_reason']}"
+    comparison = report["overall"].get("comparison")
+    if comparison is None:
+        return "No baseline: measures only, no verdict."
+    if verdict == "FAIL" and report["regressed"]:
+        parts = []
+        for name in [n for n in scenarios_by_severity(report) if n in report["regressed"]]:
+            entry = report["scenarios"][name]
+            parts.append(f"`{name}` {_pp(entry['comparison']['difference'])} "
+                         f"({_failures(entry['baseline'])} -> {_failures(entry['candidate'])})")
+        pooled = " and in all scenarios pooled" if "all scenarios pooled" in comparison["reason"] else ""
+        return f"**FAIL**: the candidate fails more often in {'; '.join(parts)}{pooled}."
+    if verdict == "ERROR":
+        return f"**ERROR**: {comparison['reason']}"
+    return f"**{verdict}**: {comparison['reason']}"
+
+
+def _markdown(report: Mapping[str, Any], report_path: str = "report.json", base: Optional[Path] = None) -> str:
+    """The Markdown report for a pull-request comment: the verdict and what to look at first, the rest folded."""
+    verdict = report["verdict"]
+    settings = report["settings"]
+    baseline = report.get("baseline")
+    against = "" if baseline is None else (f" vs baseline `{baseline.get('spec')}`" + (
+        f" (from `{_relative(baseline['report'], base)}`)" if baseline.get("report") else ""))
+    lines = [f"## dv2s regress: {verdict or 'measures (no baseline)'} - candidate `{report['candidate']['spec']}`{against}",
+             "", _verdict_line(report), ""]
+    facts = [f"{len(report['scenarios'])} scenario(s) x {settings['episodes']} episode(s) from seed {settings['seed']}; "
+             f"failure: {', '.join(settings.get('failure') or ['collision', 'off_road'])}; margin "
+             f"{100 * settings['margin']:g} pp, alpha {settings['alpha']:g}"]
+    if report["newly_failing"]:
+        facts.append(f"{len(report['newly_failing'])} newly failing episode(s) (candidate fails, baseline does not)")
+    if report["errors"]:
+        facts.append(f"{len(report['errors'])} episode(s) ended in an error")
+    if report.get("stopped_early"):
+        facts.append("stopped early: the sequential test settled the verdict")
+    facts += power_lines(report)[:2]
+    facts += [f"warning: {w}" for w in warnings(report)]
+    lines += [f"- {fact}" for fact in facts] + [""]
+    order = scenarios_by_severity(report)
+    if report["overall"].get("comparison") is not None:
+        table = ["| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (adjusted) | verdict |",
+                 "|---|---:|---:|---:|---|---:|---|"]
+        for name, entry in [(n, report["scenarios"][n]) for n in order] + [("**overall**", report["overall"])]:
             c = entry["comparison"]
-            lines.append(f"| {name if name.startswith('**') else f'`{name}`'} | {c['n']} | "
+            table.append(f"| {name if name.startswith('**') else f'`{name}`'} | {c['n']} | "
                          f"{_failures(entry['candidate'])} | {_failures(entry['baseline'])} | {_pp(c['difference'])} | "
                          f"{c['p_adjusted']:.3g} | {c['verdict']} |")
-        lines.append("")
-    lines += ["### Measures", "",
-              "| scenario | policy | episodes | collision | off-road | success | min TTC [s] | mean speed [m/s] | return |",
-              "|---|---|---:|---|---|---|---|---|---|"]
-    for name, entry in list(report["scenarios"].items()) + [("**overall**", report["overall"])]:
+        lines += _details("Scenarios, worst first", table)
+    if report["newly_failing"]:
+        shown = report["newly_failing"][:20]
+        items = [f"Reproduce one from this folder: `dv2s replay {report_path} --episode ID --video out.webm` "
+                 "(`report.html` shows each beside the baseline's run of the same scene).", ""]
+        items += [f"- `{episode_id}`" for episode_id in shown]
+        if len(report["newly_failing"]) > len(shown):
+            items.append(f"- ... and {len(report['newly_failing']) - len(shown)} more (see `{report_path}`)")
+        lines += _details(f"Newly failing episodes ({len(report['newly_failing'])})", items)
+    measures = ["| scenario | policy | episodes | collision | off-road | stall | success | min TTC [s] | mean speed [m/s] | return |",
+                "|---|---|---:|---|---|---|---|---|---|---|"]
+    for name, entry in [(n, report["scenarios"][n]) for n in order] + [("**overall**", report["overall"])]:
         for role in ("candidate", "baseline"):
             s = entry.get(role)
             if not s:
                 continue
             label = name if name.startswith("**") else f"`{name}`"
-            lines.append(f"| {label} | {role} | {s['episodes']} | {_interval(s['collision_rate'])} | "
-                         f"{_interval(s['off_road_rate'])} | {_interval(s['success_rate'])} | "
-                         f"{_interval(s['min_ttc'], False)} | {_interval(s['mean_speed'], False, 1)} | "
-                         f"{_interval(s['return'], False)} |")
-    lines.append("")
-    if report["newly_failing"]:
-        shown = report["newly_failing"][:20]
-        lines += [f"### Newly failing episodes ({len(report['newly_failing'])})", "",
-                  "The candidate failed, the baseline did not. Reproduce one with "
-                  f"`dv2s replay {report_path} --episode ID --video out.webm`.", ""]
-        lines += [f"- `{episode_id}`" for episode_id in shown]
-        if len(report["newly_failing"]) > len(shown):
-            lines.append(f"- ... and {len(report['newly_failing']) - len(shown)} more (see {report_path})")
-        lines.append("")
+            measures.append(f"| {label} | {role} | {s['episodes']} | {_interval(s['collision_rate'])} | "
+                            f"{_interval(s['off_road_rate'])} | {_interval(s.get('stall_rate'))} | "
+                            f"{_interval(s['success_rate'])} | {_interval(s['min_ttc'], False)} | "
+                            f"{_interval(s['mean_speed'], False, 1)} | {_interval(s['return'], False)} |")
+    lines += _details("Measures per scenario (95% intervals)", measures)
+    context = aggregates_lines(report)
+    if context:
+        lines += _details("Context: interquartile mean of return and probability of improvement (not the verdict)",
+                          context)
+    more = power_lines(report)[2:] + [_headline(report, base)]
+    lines += _details("Power and settings", [f"- {line}" for line in more])
     if report["errors"]:
-        lines += [f"### Errors ({len(report['errors'])})", ""]
-        lines += [f"- `{e['id']}` ({e['role']}): {e['error'].splitlines()[0]}" for e in report["errors"][:20]]
-        lines.append("")
-    return "\n".join(lines)
+        errors = [f"- `{e['id']}` ({e['role']}): {str(e['error']).splitlines()[0][:300]}" for e in report["errors"][:20]]
+        if len(report["errors"]) > 20:
+            errors.append(f"- ... and {len(report['errors']) - 20} more (see `{report_path}`)")
+        lines += _details(f"Errors ({len(report['errors'])})", errors)
+    text = "\n".join(lines)
+    if len(text) > MARKDOWN_LIMIT:
+        cut = text[:MARKDOWN_LIMIT].rsplit("\n", 1)[0]
+        if cut.count("<details>") > cut.count("</details>"):
+            cut += "\n\n</details>"
+        text = cut + f"\n\n(cut to fit a pull-request comment: the whole report is `{report_path}`)\n"
+    return text
 
 
-def _junit(report: Mapping[str, Any]) -> ET.ElementTree:
-    cases = []
-    for name, entry in report["scenarios"].items():
-        case = ET.Element("testcase", {"classname": "dv2s.regress", "name": name})
-        comparison = entry.get("comparison")
-        errors = [e for e in report["errors"] if e["id"].rsplit("/", 1)[0] == name]
-        if comparison and comparison["verdict"] == "FAIL":
-            failure = ET.SubElement(case, "failure", {"type": "regression", "message": comparison["reason"]})
-            failing = [i for i in report["newly_failing"] if i.rsplit("/", 1)[0] == name]
-            failure.text = comparison["reason"] + ("\nnewly failing: " + ", ".join(failing) if failing else "")
-        elif errors:
-            error = ET.SubElement(case, "error", {"type": "episode error",
-                                                  "message": f"{len(errors)} episode(s) ended in an error"})
-            error.text = "\n".join(f"{e['id']} ({e['role']}): {e['error']}" for e in errors)
-        elif comparison and comparison["verdict"] == "INCONCLUSIVE":
-            ET.SubElement(case, "skipped", {"message": f"INCONCLUSIVE: {comparison['reason']}"})
-        out = ET.SubElement(case, "system-out")
-        out.text = (f"candidate failures {_failures(entry['candidate'])}, baseline failures "
-                    f"{_failures(entry.get('baseline'))}" + (f"; {comparison['reason']}" if comparison else ""))
-        cases.append(case)
-    suite = ET.Element("testsuite", {
-        "name": "dv2s regress",
-        "tests": str(len(cases)),
-        "failures": str(sum(1 for c in cases if c.find("failure") is not None)),
-        "errors": str(sum(1 for c in cases if c.find("error") is not None)),
-        "skipped": str(sum(1 for c in cases if c.find("skipped") is not None)),
-        "timestamp": str(report.get("created", "")),
-    })
-    properties = ET.SubElement(suite, "properties")
-    for key, value in (("candidate", report["candidate"]["spec"]),
-                       ("baseline", (report.get("baseline") or {}).get("spec")),
-                       ("verdict", report["verdict"]), ("bank_version", report["bank"]["version"])):
-        ET.SubElement(properties, "property", {"name": key, "value": str(value)})
-    suite.extend(cases)
-    root = ET.Element("testsuites", {"name": "dv2s regress"})
-    root.append(suite)
-    ET.indent(root)
-    return ET.ElementTree(root)
+def aggregates_lines(report: Mapping[str, Any]) -> List[str]:
+    """The context aggregates (:mod:`dv2s_gym.regress.aggregates`) as Markdown lines; none without them."""
+    aggregates = report.get("aggregates")
+    if not aggregates:
+        return []
+    iqm = aggregates.get("return_iqm") or {}
+    poi = aggregates.get("probability_of_improvement") or {}
+    level = f"{100 * float(aggregates.get('confidence', 0.95)):g}%"
+    return [f"Return, stratified bootstrap {level} intervals ({aggregates.get('resamples')} resamples within each "
+            "scenario); the verdict is the paired failure test's.", "",
+            f"- interquartile mean of the return: candidate {_interval(iqm.get('candidate'), False)}, baseline "
+            f"{_interval(iqm.get('baseline'), False)}",
+            f"- probability of improvement (a candidate episode's return above a baseline episode's, per scenario, "
+            f"averaged): {_interval(poi, False)}"]
 
 
 def write_json(report: Mapping[str, Any], path: Union[str, os.PathLike]) -> Path:
@@ -522,16 +678,15 @@ def write_json(report: Mapping[str, Any], path: Union[str, os.PathLike]) -> Path
 
 
 def write_junit(report: Mapping[str, Any], path: Union[str, os.PathLike]) -> Path:
-    """Write JUnit XML: one test case per scenario, a failure for FAIL, skipped for INCONCLUSIVE, an error
-    for a scenario whose episodes ended in errors."""
-    tree = _junit(report)
-    text = ET.tostring(tree.getroot(), encoding="unicode", xml_declaration=False)
-    return atomic_write_text(path, '<?xml version="1.0" encoding="utf-8"?>\n' + text + "\n")
+    """Write JUnit XML (:func:`dv2s_gym.regress.junit.write_junit`)."""
+    from dv2s_gym.regress import junit
+
+    return junit.write_junit(report, path)
 
 
 def write_markdown(report: Mapping[str, Any], path: Union[str, os.PathLike], report_path: str = "report.json") -> Path:
-    """Write the Markdown summary (for a pull-request comment)."""
-    return atomic_write_text(path, _markdown(report, report_path))
+    """Write the Markdown summary for a pull-request comment (paths relative to its folder)."""
+    return atomic_write_text(path, _markdown(report, report_path, Path(path).parent))
 
 
 def write_reports(report: Mapping[str, Any], out_dir: Union[str, os.PathLike]) -> Dict[str, Path]:
@@ -541,7 +696,7 @@ def write_reports(report: Mapping[str, Any], out_dir: Union[str, os.PathLike]) -
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"json": write_json(report, out_dir / "report.json"),
              "junit": write_junit(report, out_dir / "junit.xml"),
-             "markdown": write_markdown(report, out_dir / "report.md", str(out_dir / "report.json"))}
+             "markdown": write_markdown(report, out_dir / "report.md", "report.json")}
     try:
         html = importlib.import_module("dv2s_gym.regress.html")
     except ModuleNotFoundError as error:

@@ -8,8 +8,9 @@ round by round (seed ``k`` of every scenario before seed ``k + 1``); results str
 (:mod:`dv2s_gym.regress.report`) is built from them at the end.
 
 With ``sequential=True`` the pooled paired table is examined after every batch of
-seeds by :class:`~dv2s_gym.regress.stats.SequentialTest` (group-sequential, alpha
-spending), and the run stops as soon as it reaches PASS or FAIL.
+seeds by :class:`~dv2s_gym.regress.stats.SequentialTest` (group-sequential, spending the
+pooled test's share of alpha), and the run stops as soon as it reaches FAIL; PASS is decided
+at the end, when every scenario has had its planned episodes.
 """
 
 from __future__ import annotations
@@ -17,12 +18,17 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import socket
 import sys
+import time
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
+from dv2s_gym.regress import power as power_plan
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
+from dv2s_gym.regress.failures import (DEFAULT_FAILURE, DEFAULT_STALL_SECONDS, apply_failure, missing_facts,
+                                        parse_failure)
 from dv2s_gym.regress.report import (
     build_report,
     check_baseline_report,
@@ -30,6 +36,7 @@ from dv2s_gym.regress.report import (
     paired_tables,
     write_reports,
 )
+from dv2s_gym.regress.identity import policy_fingerprint
 from dv2s_gym.regress.store import RunStore
 from dv2s_gym.regress.tasks import KIND
 from dv2s_gym.workers.errors import WorkerError
@@ -55,10 +62,13 @@ def bank_info(scenarios: Sequence[str], bank_dir: Optional[Union[str, os.PathLik
 
 
 def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterable[int], *,
-               env_config: Dict[str, Any], bank_dir: Optional[str], trace_dir: Optional[str]) -> List[Dict[str, Any]]:
+               env_config: Dict[str, Any], bank_dir: Optional[str], trace_dir: Optional[str],
+               failure: Sequence[str] = DEFAULT_FAILURE, stall_seconds: float = DEFAULT_STALL_SECONDS
+               ) -> List[Dict[str, Any]]:
     """Task dicts, seed by seed (every scenario, then the next seed), each role in turn."""
     return [{"kind": KIND, "policy": spec, "role": role, "scenario": scenario, "seed": int(seed),
-             "env_config": dict(env_config), "bank_dir": bank_dir, "trace_dir": trace_dir}
+             "env_config": dict(env_config), "bank_dir": bank_dir, "trace_dir": trace_dir,
+             "failure": list(failure), "stall_seconds": float(stall_seconds)}
             for seed in seeds for scenario in scenarios for role, spec in policies.items()]
 
 
@@ -74,8 +84,8 @@ def _policy_info(spec: str) -> Dict[str, Any]:
     return {"spec": spec, "card": card}
 
 
-def _check_settings(episodes: int, seed: int, margin: float, alpha: float, batch: Optional[int]) -> None:
-    if isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1:
+def _check_settings(episodes: Optional[int], seed: int, margin: float, alpha: float, batch: Optional[int]) -> None:
+    if episodes is not None and (isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1):
         raise RegressError(f"--episodes must be a positive integer, not {episodes!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise RegressError(f"--seed must be a non-negative integer, not {seed!r}")
@@ -104,8 +114,8 @@ def _select(scenarios: Scenarios, bank_dir: Optional[str], fallback: Optional[Se
 
 
 def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Sequence[str], seeds: Sequence[int],
-                          bank: Dict[str, Any], env_config: Dict[str, Any]
-                          ) -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]], str]:
+                          bank: Dict[str, Any], env_config: Dict[str, Any], failure: Sequence[str],
+                          stall_seconds: float) -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]], str]:
     """The baseline info, the baseline result per episode id, and the report file's SHA-256."""
     path = Path(path)
     old = load_report(path)
@@ -133,18 +143,39 @@ def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Seque
             f"baseline report {path} has no episode {missing[0]}{more}; it ran {settings.get('episodes')} "
             f"episode(s) per scenario from seed {settings.get('seed')}: use --episodes and --seed within those, "
             "or rerun the baseline with more episodes")
+    wanted = [results[task_id(n, s)] for s in seeds for n in names]
+    lacking = missing_facts(wanted, failure)
+    if lacking:
+        raise ReportMismatchError(
+            f"baseline report {path} does not record {', '.join(lacking)} for its episodes (an older dv2s made it); "
+            f"rerun the baseline with this version, or leave {', '.join(lacking)} out of --failure")
+    their_stall = (old.get("settings") or {}).get("stall_seconds", DEFAULT_STALL_SECONDS)
+    if "stall" in failure and float(their_stall) != float(stall_seconds):
+        raise ReportMismatchError(f"baseline report {path} detected stalls after {their_stall:g} s, this run after "
+                                  f"{stall_seconds:g} s; use the same stall time, or rerun the baseline")
+    for result in results.values():
+        apply_failure(result, failure)
     info = {"report": str(path.resolve()), "role": role, "spec": old[role].get("spec"), "card": old[role].get("card")}
+    from dv2s_gym.regress.report import _dv2s_version
+
+    theirs, ours = old.get("dv2s_version"), _dv2s_version()
+    if theirs != ours:
+        info["warning"] = (f"baseline report {path} was made by dv2s-gym {theirs}, this is {ours}: the simulator or the "
+                           "policies may have changed between them, so differences may not be the candidate's; "
+                           "rerun the baseline with this version to be sure")
     return info, results, hashlib.sha256(path.read_bytes()).hexdigest()
 
 
 def run_regression(candidate: str, baseline: Optional[str] = None, *,
                    baseline_report: Optional[Union[str, os.PathLike]] = None,
                    bank_dir: Optional[Union[str, os.PathLike]] = None, scenarios: Scenarios = None,
-                   episodes: int = 20, seed: int = 0, margin: float = stats.DEFAULT_MARGIN, alpha: float = 0.05,
+                   episodes: Optional[int] = None, seed: int = 0, margin: float = stats.DEFAULT_MARGIN,
+                   alpha: float = 0.05, mde: Optional[float] = None, power: Optional[float] = None,
                    backend: str = "local", workers: Optional[int] = None, address: Optional[str] = None,
                    out_dir: Optional[Union[str, os.PathLike]] = None, sequential: bool = False,
                    env_config: Optional[Dict[str, Any]] = None, progress: bool = True,
                    timeout: Optional[float] = None, batch: Optional[int] = None,
+                   failure: Union[None, str, Sequence[str]] = None, stall_seconds: float = DEFAULT_STALL_SECONDS,
                    baseline_role: str = "candidate",
                    on_result: Optional[Callable[[Dict[str, Any]], None]] = None) -> Dict[str, Any]:
     """Run ``candidate`` (and ``baseline``) on scenario x seed pairs and write the reports.
@@ -158,7 +189,11 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         bank_dir: bank folder (default: the shipped bank).
         scenarios: bank names and/or ``tag:<tag>`` (default: the whole bank, or the baseline
             report's scenarios); an empty selection is an error.
-        episodes: seeds per scenario; episode ``k`` uses env seed ``seed + k``.
+        episodes: seeds per scenario; episode ``k`` uses env seed ``seed + k``. Default: planned from
+            ``mde`` and ``power`` (:func:`dv2s_gym.regress.power.plan_episodes`), with the baseline
+            report's failure rates when there is one (and at most the episodes it has).
+        mde / power: the regression of one scenario's failure rate the run must FAIL (default 0.30)
+            and the probability it does (default 0.8); they choose ``episodes``, so not with it.
         margin: non-inferiority margin on the failure-rate difference (default 0.02 = 2 points, the margin the
             statistics are calibrated at: bench/calibrate_regress.py).
         alpha: level of the FAIL test (PASS is tested at ``alpha / 2``).
@@ -167,18 +202,27 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         out_dir: output folder (default ``out/regress``): ``run.json``, ``results.jsonl``,
             ``traces/``, ``report.json``, ``junit.xml``, ``report.md``. Rerunning with the same
             folder and settings resumes: finished episodes are not run again.
-        sequential: stop as soon as a group-sequential test settles PASS or FAIL, looking after
-            every ``batch`` seeds (default: a fifth of ``episodes``). Needs a baseline.
+        sequential: stop as soon as a group-sequential test of the pooled table (spending the pooled
+            test's share of ``alpha``) settles FAIL, looking after every ``batch`` seeds (default: a
+            fifth of ``episodes``); PASS is decided at the end, so every scenario gets its planned
+            episodes. Needs a baseline.
         env_config: ``DV2S-v0`` config overrides for every episode (default: none, or the
             baseline report's).
         progress: a progress bar on stderr.
         timeout: seconds one episode may take before its worker counts as hung (local backend).
         on_result: called in this process with each finished episode's result (after it is saved).
+        failure: what counts as a failure: kinds among ``collision``, ``off_road``, ``stall`` (a list or
+            ``"collision,stall"``; default all three); each kind is also reported apart.
+        stall_seconds: how long the ego must stand with a free road ahead for a stall.
 
     Returns:
         The report dict (schema: :mod:`dv2s_gym.regress.report`).
     """
+    started = time.time()
     _check_settings(episodes, seed, margin, alpha, batch)
+    failure = parse_failure(failure)
+    if not float(stall_seconds) > 0:
+        raise RegressError(f"--stall-seconds must be positive, not {stall_seconds}")
     if baseline is not None and baseline_report is not None:
         raise RegressError("give --baseline POLICY or --baseline-report REPORT, not both")
     if sequential and baseline is None and baseline_report is None:
@@ -194,16 +238,23 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
     env_config = dict(env_config or {})
     names = _select(scenarios, bank_dir, fallback)
     bank = bank_info(names, bank_dir)
+    if episodes is not None and (mde is not None or power is not None):
+        raise RegressError("give --episodes, or --mde and --power to choose the episodes per scenario; not both")
+    plan = None
+    if episodes is None:
+        episodes, plan = _planned_episodes(names, baseline_report, baseline_role, seed, mde, power, alpha)
     seeds = [seed + k for k in range(episodes)]
 
     candidate_info = _policy_info(candidate)
+    if baseline is not None:  # a bad baseline spec is bad input too, before any episode
+        baseline_info_early = _policy_info(baseline)
     old_results: Dict[str, Dict[str, Any]] = {}
     report_hash = None
     if baseline_report is not None:
         baseline_info, old_results, report_hash = _baseline_from_report(baseline_report, baseline_role, names, seeds,
-                                                                        bank, env_config)
+                                                                        bank, env_config, failure, float(stall_seconds))
     elif baseline is not None:
-        baseline_info = _policy_info(baseline)
+        baseline_info = baseline_info_early
     else:
         baseline_info = None
     has_baseline = baseline_info is not None
@@ -214,13 +265,17 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         "candidate": candidate, "baseline": baseline, "baseline_report": report_hash,
         "baseline_role": baseline_role if baseline_report is not None else None,
         "bank_version": bank["version"], "scenarios": names, "episodes": episodes, "seed": seed,
-        "env_config": env_config, "sequential": bool(sequential),
+        "env_config": env_config, "sequential": bool(sequential), "failure": failure,
+        "stall_seconds": float(stall_seconds),
     }
+    for role, spec in (("candidate", candidate), ("baseline", baseline)):
+        if spec is not None:  # what the policy is, not what it is called
+            identity.update({f"{role} {key}": value for key, value in policy_fingerprint(spec).items()})
     if sequential:  # the stopping point depends on these
         identity.update(margin=float(margin), alpha=float(alpha), batch=batch)
     settings = {"episodes": episodes, "seed": seed, "margin": float(margin), "alpha": float(alpha),
                 "sequential": bool(sequential), "env_config": env_config, "backend": backend,
-                "workers": workers, "timeout": timeout}
+                "workers": workers, "timeout": timeout, "failure": failure, "stall_seconds": float(stall_seconds)}
     if sequential:
         settings["batch"] = batch
 
@@ -235,13 +290,22 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
     def task_key(task: Dict[str, Any]) -> Tuple[str, str]:
         return task_id(task["scenario"], task["seed"]), task["role"]
 
-    all_tasks = plan_tasks(policies, names, seeds, env_config=env_config, bank_dir=bank_dir, trace_dir=trace_dir)
+    all_tasks = plan_tasks(policies, names, seeds, env_config=env_config, bank_dir=bank_dir, trace_dir=trace_dir,
+                           failure=failure, stall_seconds=float(stall_seconds))
+    if any(":" in spec.partition("?")[0] for spec in policies.values()):
+        for task in all_tasks:  # module:attribute specs are found in this folder in the workers too
+            task["python_path"] = [os.getcwd()]
     results: Dict[Tuple[str, str], Dict[str, Any]] = {task_key(t): done[task_key(t)] for t in all_tasks
                                                       if task_key(t) in done}
     bar = _progress(progress, total=len(all_tasks), initial=len(results))
 
+    timing: Dict[str, float] = {}
+
     def handle(result: Dict[str, Any]) -> None:
         result = dict(result)
+        seconds = result.pop("seconds", None)  # wall time varies: kept apart, so episodes compare equal
+        if seconds is not None:
+            timing[result["scenario"]] = timing.get(result["scenario"], 0.0) + float(seconds)
         result["trace"] = store.relative(result.get("trace"))
         store.append(result)
         results[(result["id"], result["role"])] = result
@@ -276,7 +340,8 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
             if pending:
                 runner.run(pending, handle)
         else:
-            test = stats.SequentialTest(float(margin), float(alpha), max_episodes=episodes * len(names))
+            test = stats.SequentialTest(float(margin), float(alpha) * stats.DEFAULT_POOLED_WEIGHT,
+                                        max_episodes=episodes * len(names), stop_for_pass=False)
             looks, last_n, verdict = 0, 0, None
             for start in range(0, episodes, batch):
                 chunk = seeds[start:start + batch]
@@ -303,10 +368,48 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         if runner is not None:
             runner.close()
 
+    if plan is not None:
+        settings["plan"] = plan
+    settings["mde"] = float(mde if mde is not None else power_plan.DEFAULT_MDE)
+    settings["power"] = float(power if power is not None else power_plan.DEFAULT_POWER)
     report = build_report(bank=bank, settings=settings, candidate=candidate_info, baseline=baseline_info,
                           episodes=paired(ran_seeds), stopped_early=stopped_early, sequential=sequential_info)
+    report["hostname"] = socket.gethostname()
+    report["timing"] = {name: round(value, 3) for name, value in timing.items()}
+    report["duration"] = round(time.time() - started, 3)
     write_reports(report, out)
     return report
+
+
+def _planned_episodes(names: Sequence[str], baseline_report: Optional[Union[str, os.PathLike]], role: str,
+                      seed: int, mde: Optional[float], power: Optional[float], alpha: float
+                      ) -> Tuple[int, Dict[str, Any]]:
+    """Episodes per scenario from the power plan; with a baseline report, its failure rates and at most its episodes."""
+    rates: Dict[str, Optional[float]] = {}
+    available = None
+    if baseline_report is not None:
+        old = load_report(baseline_report)
+        for name in names:
+            summary = ((old.get("scenarios") or {}).get(name) or {}).get(role) or {}
+            rates[name] = (summary.get("failure_rate") or {}).get("value")
+        settings = old.get("settings") or {}
+        if isinstance(settings.get("episodes"), int) and isinstance(settings.get("seed"), int):
+            available = settings["seed"] + settings["episodes"] - seed
+    try:
+        plan = power_plan.plan_episodes(names, mde=power_plan.DEFAULT_MDE if mde is None else mde,
+                                        power=power_plan.DEFAULT_POWER if power is None else power, alpha=alpha,
+                                        baseline_rates=rates)
+    except ValueError as error:
+        raise RegressError(str(error)) from None
+    episodes = plan["episodes"]
+    plan = {key: value for key, value in plan.items() if key != "per_scenario"}
+    plan["planned"] = episodes
+    if available is not None and available < episodes:
+        episodes = max(1, available)
+        plan["note"] = (f"the baseline report has {available} episode(s) per scenario from seed {seed}, fewer than "
+                        f"the {plan['planned']} planned: the run has less power than planned (see its power)")
+    plan["episodes"] = episodes
+    return episodes, plan
 
 
 def _progress(enabled: bool, total: int, initial: int):

@@ -38,16 +38,13 @@ margin, passes (that is what a non-inferiority margin means).
 
 Scenarios (:func:`compare_scenarios`)
 -------------------------------------
-Each scenario gets its own comparison, with its one-sided McNemar p-value Holm-adjusted over
-the scenarios; the pooled table (all scenarios together) gets an unadjusted comparison. The
-overall verdict is FAIL if any scenario FAILs or the pooled comparison FAILs; PASS if the pooled
-comparison PASSes and no scenario FAILs; INCONCLUSIVE otherwise. Holm bounds the chance that
-any scenario falsely FAILs by ``alpha`` and the pooled test adds at most ``alpha``, so the
-overall false-alarm rate is only bounded by ``2 * alpha``; the two are dependent (the pooled
-table is the sum of the scenarios'), and the measured overall rate is 5-6 % at ``alpha = 0.05``
-with 2-8 scenarios (``bench/RESULTS.md``). ``pooled_weight=`` puts the pooled test and the
-scenarios in one weighted-Holm family instead, which keeps the overall rate at most ``alpha``
-at the price of less power per scenario.
+Every scenario is a test in its own right: the scenarios' one-sided McNemar tests and the pooled
+table's (all scenarios together) form one family, tested by a step-down weighted Bonferroni
+procedure with Tarone's refinement for discrete tests (:mod:`dv2s_gym.regress.family`), so the
+family-wise false-alarm rate is at most ``alpha`` and a regression confined to one scenario cannot
+be averaged away by the others. The overall verdict is FAIL if any scenario FAILs or the pooled
+comparison FAILs; PASS if the pooled comparison PASSes and no scenario FAILs; INCONCLUSIVE
+otherwise. Measured rates: ``bench/RESULTS.md``.
 
 Early stopping (:class:`SequentialTest`)
 ----------------------------------------
@@ -89,15 +86,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import integrate, stats
 
+from dv2s_gym.regress.family import DEFAULT_POOLED_WEIGHT  # noqa: F401 - the pooled test's share, re-exported
+
 DEFAULT_ALPHA = 0.05
 """Level of the FAIL test (one-sided); PASS is tested at ``alpha / 2``."""
 
 DEFAULT_MARGIN = 0.02
 """Non-inferiority margin on the failure rate: the candidate may fail 2 percentage points more."""
 
-DEFAULT_POOLED_WEIGHT = 0.8
-"""Share of ``alpha`` the pooled test gets in :func:`compare_scenarios`'s one weighted-Holm family
-(the separate pooled-at-alpha rule measured a 6.2 % overall false-alarm rate with 4 scenarios)."""
 
 DEFAULT_CORRELATION = 0.5
 """Latent correlation ``rho`` of the shared-difficulty model used for power and sample sizes."""
@@ -587,7 +583,7 @@ def _reason(table: PairedTable, verdict: Verdict, interval: tuple[float, float],
              f"{100 * (1 - alpha):g}% CI {_pp(interval[0])} to {_pp(interval[1])})")
     p_text = f"one-sided exact McNemar p = {p_value:.3g}"
     if adjusted_p != p_value:
-        p_text += f" (Holm {adjusted_p:.3g})"
+        p_text += f" (adjusted for the scenarios {adjusted_p:.3g})"
     if verdict is Verdict.PASS:
         return f"not worse by {_pp(margin)} or more: {rates}; CI upper end below the margin"
     if verdict is Verdict.FAIL:
@@ -597,7 +593,8 @@ def _reason(table: PairedTable, verdict: Verdict, interval: tuple[float, float],
 
 
 def compare(
-    table: PairedTable, margin: float, alpha: float = DEFAULT_ALPHA, adjusted_p: float | None = None
+    table: PairedTable, margin: float, alpha: float = DEFAULT_ALPHA, adjusted_p: float | None = None,
+    rejected: bool | None = None,
 ) -> Comparison:
     """Verdict on one paired table (see the module docstring for the rule).
 
@@ -609,8 +606,10 @@ def compare(
         table: The paired counts.
         margin: Non-inferiority margin on the failure-rate difference, in ``[0, 1)``.
         alpha: Level of the FAIL test.
-        adjusted_p: The table's p-value after a multiplicity adjustment (Holm over scenarios);
-            must not be below the raw one-sided p-value.
+        adjusted_p: The table's p-value after a multiplicity adjustment (the gate's family of
+            tests); must not be below the raw one-sided p-value.
+        rejected: The multiplicity procedure's decision on "the candidate does not fail more often",
+            when it made one: it replaces ``adjusted_p < alpha`` in the FAIL rule.
 
     Returns:
         The :class:`Comparison`.
@@ -624,7 +623,8 @@ def compare(
         adjusted_p = p_value
     elif not p_value - 1e-12 <= adjusted_p <= 1.0:
         raise ValueError(f"adjusted_p={adjusted_p} must lie between the raw p-value {p_value:.6g} and 1")
-    verdict = _VERDICT_OF_CODE[int(_decide(interval[1], table.difference, adjusted_p, margin, alpha))]
+    decisive_p = adjusted_p if rejected is None else (0.0 if rejected else 1.0)
+    verdict = _VERDICT_OF_CODE[int(_decide(interval[1], table.difference, decisive_p, margin, alpha))]
     return Comparison(
         table=table, margin=margin, alpha=alpha, difference=table.difference, interval=interval,
         p_value=p_value, adjusted_p=float(adjusted_p), verdict=verdict,
@@ -636,64 +636,62 @@ def compare_scenarios(
     tables: Mapping[str, PairedTable],
     margin: float,
     alpha: float = DEFAULT_ALPHA,
-    pooled_weight: float | None = DEFAULT_POOLED_WEIGHT,
+    pooled_weight: float = DEFAULT_POOLED_WEIGHT,
+    pooled_rejected: bool | None = None,
 ) -> tuple[dict[str, Comparison], Comparison]:
-    """Per-scenario verdicts (Holm over scenarios) and the overall verdict on the pooled table.
+    """Per-scenario verdicts and the overall verdict: every scenario is a test in its own right.
 
-    The pooled hypothesis (all scenarios together) and the per-scenario ones form one family
-    tested by :func:`weighted_holm` (``pooled_weight``, default 0.8, below), which keeps the
-    overall false-alarm rate at most ``alpha``. With ``pooled_weight=None`` each scenario is
-    compared with its one-sided McNemar p-value Holm-adjusted over all the scenarios, and the
-    pooled table with its unadjusted one.
-    The overall comparison is :func:`compare` on the pooled table, with its verdict replaced by
-    the overall rule: FAIL if any scenario FAILs or the pooled comparison FAILs; PASS if the
-    pooled comparison PASSes and no scenario FAILs; else INCONCLUSIVE.
+    The scenarios' one-sided exact McNemar tests and the pooled table's form one family tested by
+    :func:`dv2s_gym.regress.family.gate_rejections` (step-down weighted Bonferroni with Tarone's
+    refinement for discrete tests): the family-wise false-alarm rate is at most ``alpha``, and a
+    regression confined to one scenario is tested at nearly the scenarios' whole share of ``alpha``
+    when the other scenarios have few discordant pairs. Each scenario's verdict is :func:`compare`
+    with the family's decision; its ``adjusted_p`` is the raw p-value scaled by ``alpha`` over the
+    level it was tested at (FAIL iff at most ``alpha``).
 
-    That variant tests the pooled table and the scenarios each at ``alpha``, so the overall
-    false-alarm rate can exceed ``alpha`` (at most ``2 * alpha``; ``bench/RESULTS.md`` has
-    measured rates). With ``pooled_weight`` the pooled hypothesis and the scenarios form one
-    family tested by :func:`weighted_holm`: the pooled test gets weight ``pooled_weight`` and the
-    scenarios share the rest equally, which keeps the overall false-alarm rate at most
-    ``alpha`` (e.g. ``pooled_weight=0.8``: the pooled test at ``0.8 alpha`` at worst, the full
-    ``alpha`` once a scenario is rejected).
+    The overall comparison is :func:`compare` on the pooled table, with its verdict replaced by the
+    overall rule: FAIL if any scenario FAILs or the pooled comparison FAILs; PASS if the pooled
+    comparison PASSes and no scenario FAILs; else INCONCLUSIVE.
 
     Args:
         tables: Paired table per scenario name (at least one).
         margin: Non-inferiority margin, for the scenarios and the pooled table alike.
-        alpha: Level of the FAIL tests.
-        pooled_weight: Share of ``alpha`` for the pooled test in a single weighted-Holm family
-            with the scenarios, in ``(0, 1)``; None for the separate tests described above.
+        alpha: Family-wise level of the FAIL tests.
+        pooled_weight: Share of ``alpha`` the pooled test starts with, in ``(0, 1)``.
+        pooled_rejected: The pooled hypothesis's rejection when another test decided it (a
+            sequential test spending ``pooled_weight * alpha``); None: the fixed-size test.
 
     Returns:
         ``(per_scenario, overall)``.
     """
+    from dv2s_gym.regress.family import gate_rejections
+
     if not tables:
         raise ValueError("compare_scenarios needs at least one scenario")
     names = list(tables)
     pooled_table = PairedTable.pooled([tables[name] for name in names])
     raw = [mcnemar_exact(tables[name], "greater") for name in names]
     pooled_raw = mcnemar_exact(pooled_table, "greater")
-    if pooled_weight is None:
-        adjusted, pooled_adjusted = holm(raw), pooled_raw
-    else:
-        if not 0.0 < pooled_weight < 1.0:
-            raise ValueError(f"pooled_weight must be strictly between 0 and 1, got {pooled_weight}")
-        share = (1.0 - pooled_weight) / len(names)
-        *adjusted, pooled_adjusted = weighted_holm(raw + [pooled_raw], [share] * len(names) + [pooled_weight])
+    decision = gate_rejections(raw, [tables[name].discordant for name in names],
+                               0.0 if pooled_rejected else (1.0 if pooled_rejected is False else pooled_raw),
+                               alpha, pooled_weight)
+    adjusted, pooled_adjusted = decision.scaled_p(raw, pooled_raw, alpha)
     per_scenario = {
-        name: compare(tables[name], margin, alpha, adjusted_p=max(p_adj, p_raw))
-        for name, p_raw, p_adj in zip(names, raw, adjusted)
+        name: compare(tables[name], margin, alpha, adjusted_p=max(p_adj, p_raw), rejected=hit)
+        for name, p_raw, p_adj, hit in zip(names, raw, adjusted, decision.scenarios)
     }
-    pooled = compare(pooled_table, margin, alpha, adjusted_p=max(pooled_adjusted, pooled_raw))
+    if pooled_rejected is not None:
+        pooled_adjusted = pooled_raw
+    pooled = compare(pooled_table, margin, alpha, adjusted_p=max(pooled_adjusted, pooled_raw),
+                     rejected=decision.pooled)
     failed = [name for name in names if per_scenario[name].verdict is Verdict.FAIL]
     if failed or pooled.verdict is Verdict.FAIL:
         verdict = Verdict.FAIL
         which = []
+        if failed:
+            which.append("scenario" + ("s " if len(failed) > 1 else " ") + ", ".join(failed))
         if pooled.verdict is Verdict.FAIL:
             which.append("all scenarios pooled")
-        if failed:
-            which.append("scenario" + ("s " if len(failed) > 1 else " ") + ", ".join(failed)
-                         + " (Holm-adjusted)")
         reason = f"candidate fails more often in {' and in '.join(which)}; pooled: {pooled.reason}"
     elif pooled.verdict is Verdict.PASS:
         verdict, reason = Verdict.PASS, f"no scenario fails; pooled: {pooled.reason}"
@@ -790,6 +788,9 @@ class SequentialTest:
         alpha: Level of the FAIL test (PASS gets ``alpha / 2``).
         max_episodes: Paired episodes at the last look (the information fraction's unit).
         spending: ``"obrien-fleming"`` (default) or ``"pocock"``.
+        stop_for_pass: stop at an interim look that PASSes (default); when False, PASS is only
+            decided at the last look, with the whole ``alpha / 2`` (as :func:`compare` does), so
+            every planned episode runs unless a FAIL boundary is crossed.
     """
 
     def __init__(
@@ -798,6 +799,7 @@ class SequentialTest:
         alpha: float = DEFAULT_ALPHA,
         max_episodes: int = DOCUMENTED_EPISODES,
         spending: str = "obrien-fleming",
+        stop_for_pass: bool = True,
     ) -> None:
         if spending not in SPENDING_FUNCTIONS:
             raise ValueError(f"spending must be one of {sorted(SPENDING_FUNCTIONS)}, got {spending!r}")
@@ -809,6 +811,7 @@ class SequentialTest:
         self.alpha = _check_level(alpha, "alpha")
         self.max_episodes = int(max_episodes)
         self.spending = spending
+        self.stop_for_pass = bool(stop_for_pass)
         self._spend = SPENDING_FUNCTIONS[spending]
         self._continuing = np.ones(1)  # P(S = s and no FAIL yet) for s candidate-only of m discordant
         self._fail_spent = 0.0
@@ -861,7 +864,12 @@ class SequentialTest:
         fraction = min(1.0, table.n / self.max_episodes)
         critical = self._fail_boundary(table, final, fraction)
         pass_total = self.alpha / 2.0
-        pass_level = (pass_total if final else self._spend(fraction, pass_total)) - self._pass_spent
+        if final:
+            pass_level = pass_total - self._pass_spent
+        elif self.stop_for_pass:
+            pass_level = self._spend(fraction, pass_total) - self._pass_spent
+        else:
+            pass_level = 0.0
         self._pass_spent += pass_level
         upper = None
         if pass_level > 0.0:

@@ -8,10 +8,14 @@ A task is a plain dict, so any pool of :mod:`dv2s_gym.workers` (local processes,
 - ``scenario``: bank name; ``seed``: the episode's env seed;
 - ``env_config``: ``DV2S-v0`` config overrides (dict, may be empty);
 - ``bank_dir``: bank folder (``None``: the shipped bank);
-- ``trace_dir``: folder for the trace of a failed episode (``None``: keep no trace).
+- ``trace_dir``: folder for the trace of a failed episode (``None``: keep no trace);
+- ``failure``: the failure kinds (:mod:`dv2s_gym.regress.failures`; default collision, off-road, stall)
+  and ``stall_seconds``.
 
 :func:`run_regress_task` returns ``EpisodeResult.to_json()`` plus ``role``, ``id``
-(``"<scenario>/<seed>"``) and ``trace`` (the saved trace's path or ``None``). An
+(``"<scenario>/<seed>"``), ``trace`` (the saved trace's path or ``None``) and ``seconds`` (the
+episode's wall time; the runner keeps it apart from the result), ``stalled`` and ``stall_time`` (the stall detector's finding), with ``failed``
+and ``failure_kinds`` set from the task's failure kinds. An
 exception inside the episode comes back as an error result (``{"id", "role",
 "scenario", "seed", "error", "trace": None}``) instead of propagating: it is kept in
 the report, never dropped.
@@ -24,6 +28,8 @@ spec, so a worker serves any mix of tasks.
 from __future__ import annotations
 
 import os
+import sys
+import time
 import traceback
 from pathlib import Path
 from typing import Any, Dict
@@ -46,11 +52,16 @@ def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
     from policies.evaluation import run_episode
     from policies.worker_cache import drop_env, env_for, policy_for
 
+    for folder in task.get("python_path") or []:  # where a module:attribute policy is found
+        if folder not in sys.path:
+            sys.path.append(folder)
     env_key = None
     try:
         env_key, env = env_for(task.get("bank_dir"), task.get("env_config"))
         policy = policy_for(task["policy"], env_key, env)
+        started = time.perf_counter()
         result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
+        seconds = time.perf_counter() - started
     except Exception as error:  # reported as an error episode, never dropped
         if env_key is not None:
             drop_env(env_key)
@@ -58,10 +69,16 @@ def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
         if os.environ.get("DV2S_DEBUG"):
             message += "\n" + traceback.format_exc()
         return error_result(task, message)
+    from dv2s_gym.mining.monitors import detect_stall
+    from dv2s_gym.regress.failures import DEFAULT_STALL_SECONDS, apply_failure, parse_failure
+
     data = result.to_json()
-    data.update(role=task["role"], id=task_id(task["scenario"], task["seed"]), trace=None)
+    stall = detect_stall(trace, float(task.get("stall_seconds") or DEFAULT_STALL_SECONDS))
+    data.update(role=task["role"], id=task_id(task["scenario"], task["seed"]), trace=None, seconds=round(seconds, 4),
+                stalled=stall is not None, stall_time=None if stall is None else stall.time)
+    apply_failure(data, parse_failure(task.get("failure")))
     trace_dir = task.get("trace_dir")
-    if result.failed and trace_dir:
+    if data["failed"] and trace_dir:
         path = Path(trace_dir) / trace_filename(task["role"], task["scenario"], task["seed"])
         trace.save(path)
         data["trace"] = str(path)

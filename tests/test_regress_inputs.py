@@ -1,0 +1,109 @@
+"""dv2s regress: bad input is refused before any episode runs, and resume is keyed on what the policies are."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from dv2s_gym.cli import main
+from dv2s_gym.regress import ResumeMismatchError, run_regression
+from policies.registry import PolicyError, load_policy
+
+SCENARIO = "highway_lead_vehicle_brakes"
+QUICK = {"duration": 2}
+
+POLICY_MODULE = '''
+import numpy as np
+from policies.registry import Policy
+
+CALLS = []
+
+class Keep(Policy):
+    name = "keep"
+    def act(self, observations, deterministic=True):
+        return np.full(len(observations), {action}, dtype=np.int64)
+
+def make(**options):
+    CALLS.append(options)
+    if options.get("broken"):
+        raise ValueError("cannot build")
+    return Keep()
+'''
+
+
+def regress(*args: str) -> int:
+    return main(["regress", *args])
+
+
+def test_a_misspelt_policy_option_is_bad_input_before_any_episode(tmp_path, capsys):
+    with pytest.raises(PolicyError, match="policy 'rule' has no option 'action_nosie'; its options are"):
+        load_policy("rule?action_nosie=0.3")
+    code = regress("--policy", "rule", "--baseline", "rule?action_nosie=0.3", "--scenarios", SCENARIO, "--episodes",
+                   "1", "--out", str(tmp_path), "--no-progress")
+    assert code == 2 and "has no option 'action_nosie'" in capsys.readouterr().err
+    assert not (tmp_path / "results.jsonl").exists()
+
+
+def test_a_factory_spec_is_called_and_a_module_in_the_current_folder_is_found(tmp_path, monkeypatch):
+    (tmp_path / "my_policies_here.py").write_text(POLICY_MODULE.format(action=1))
+    monkeypatch.chdir(tmp_path)
+    policy = load_policy("my_policies_here:make")
+    assert type(policy).__name__ == "Keep"
+    import my_policies_here
+
+    assert my_policies_here.CALLS == [{}]  # the factory was called, without options
+    with pytest.raises(ValueError, match="cannot build"):
+        load_policy("my_policies_here:make?broken=true")
+    with pytest.raises(PolicyError, match="returned a int, not a Policy"):
+        (tmp_path / "other_policies_here.py").write_text("def make():\n    return 3\n")
+        load_policy("other_policies_here:make")
+    # the workers find the module in this folder too
+    report = run_regression("my_policies_here:make", "rule", scenarios=[SCENARIO], episodes=1, workers=1,
+                            out_dir=tmp_path / "out", env_config=QUICK, progress=False)
+    assert report["errors"] == [] and report["episodes"][0]["candidate"]["steps"] > 0
+
+
+def test_resume_is_refused_when_the_policy_module_changed_under_the_same_spec(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    module = tmp_path / "resumed_policy_here.py"
+    module.write_text(POLICY_MODULE.format(action=1))
+    arguments = dict(scenarios=[SCENARIO], episodes=1, workers=1, out_dir=tmp_path / "out", env_config=QUICK,
+                     progress=False)
+    first = run_regression("resumed_policy_here:make", "rule", **arguments)
+    again = run_regression("resumed_policy_here:make", "rule", **arguments)  # unchanged: resumes, runs nothing
+    assert again["episodes"] == first["episodes"]
+    lines = (tmp_path / "out" / "results.jsonl").read_text().splitlines()
+    assert len(lines) == 2
+    module.write_text(POLICY_MODULE.format(action=4))  # same spec, other code
+    with pytest.raises(ResumeMismatchError, match=r"candidate module resumed_policy_here source \(SHA-256\)"):
+        run_regression("resumed_policy_here:make", "rule", **arguments)
+
+
+def test_resume_is_refused_when_the_checkpoint_changed_under_the_same_path(tmp_path):
+    from dv2s_gym.regress.identity import policy_fingerprint
+
+    checkpoint = tmp_path / "model.zip"
+    checkpoint.write_bytes(b"one")
+    before = policy_fingerprint(f"ppo:{checkpoint}?device=cpu")
+    checkpoint.write_bytes(b"two")
+    after = policy_fingerprint(f"ppo:{checkpoint}?device=cpu")
+    key = f"checkpoint {checkpoint} (SHA-256)"
+    assert before[key] != after[key] and before["options"] == after["options"] == '{"device": "cpu"}'
+    assert policy_fingerprint(str(checkpoint))[key] == after[key]
+    assert policy_fingerprint("rule?action_noise=0.2")["options"] == '{"action_noise": 0.2}'
+    assert any(k.startswith("module policies.rule_based source") for k in policy_fingerprint("rule"))
+
+
+def test_a_baseline_report_from_another_version_is_flagged(tmp_path, capsys):
+    old = run_regression("rule", scenarios=[SCENARIO], episodes=1, workers=1, out_dir=tmp_path / "old",
+                         env_config=QUICK, progress=False)
+    path = tmp_path / "old" / "report.json"
+    data = json.loads(path.read_text())
+    data["dv2s_version"] = "0.0.1"
+    path.write_text(json.dumps(data))
+    code = regress("--policy", "rule", "--baseline-report", str(path), "--workers", "1", "--out",
+                   str(tmp_path / "new"), "--no-progress")
+    printed = capsys.readouterr().out
+    assert code in (0, 3)
+    assert f"warning: baseline report {path} was made by dv2s-gym 0.0.1, this is {old['dv2s_version']}" in printed
