@@ -21,13 +21,18 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
-import statistics
-import time
-from pathlib import Path
 
-import dv2s_gym  # noqa: F401  (registers DV2S-v0)
-from envs.dv2s_env import DV2SEnv
+# the jailed worker runs with one BLAS/OpenMP thread; so does this process, or the comparison is of thread counts
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("MKL_NUM_THREADS", "1")
+import platform  # noqa: E402
+import statistics  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import dv2s_gym  # noqa: E402,F401  (registers DV2S-v0)
+from envs.dv2s_env import DV2SEnv  # noqa: E402
 
 SCENE = Path(__file__).with_name("six_cars_highway.scenic")
 CONFIG = {"duration": 40.0, "simulation_frequency": 15, "policy_frequency": 5}
