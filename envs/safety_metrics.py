@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import math
-from typing import Iterable, Sequence, Tuple
+from typing import Iterable, Optional, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["time_to_collision", "path_is_free", "FREE_PATH", "STANDING_SPEED"]
+__all__ = ["time_to_collision", "path_is_free", "first_stall_step", "FREE_PATH", "STANDING_SPEED"]
 
 FREE_PATH = 40.0
 """Metres ahead of the ego that must be empty for its path to count as free."""
@@ -70,3 +70,21 @@ def path_is_free(ego: Sequence[float], others: Iterable[Sequence[float]], distan
         if 0 < ahead < distance and abs(lateral) < half_width:
             return False
     return True
+
+
+def first_stall_step(trace, stall_seconds: float) -> Optional[int]:
+    """The step where the trace's first stall begins (the ego below ``STANDING_SPEED`` for ``stall_seconds``
+    with a free path ahead, :func:`path_is_free`), or ``None``."""
+    period = 1.0 / float(trace.config.get("policy_frequency", 5))
+    needed = max(1, int(math.ceil(stall_seconds / period)))
+    run = 0
+    for step, states in enumerate(trace.states):
+        ego = states.get("ego")
+        if ego is None or ego[3] >= STANDING_SPEED or not path_is_free(
+                ego, (state for name, state in states.items() if name != "ego")):
+            run = 0
+            continue
+        run += 1
+        if run >= needed:
+            return step - needed + 1
+    return None

@@ -110,7 +110,8 @@ def _junit_of(tables, errors=0, baseline=True):
     """The JUnit XML of a report built from paired outcomes per scenario (``(candidate failed, baseline failed)``)."""
     import tempfile
 
-    from dv2s_gym.regress.report import build_report, write_junit
+    from dv2s_gym.regress.junit import write_junit
+    from dv2s_gym.regress.report import build_report
 
     episodes = []
     for name, outcomes in tables.items():

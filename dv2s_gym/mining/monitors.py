@@ -22,7 +22,7 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Any, Dict, List, Optional
 
-from envs.safety_metrics import FREE_PATH, STANDING_SPEED, path_is_free
+from envs.safety_metrics import FREE_PATH, STANDING_SPEED, first_stall_step
 
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "detect_failure", "detect_stall", "robustness",
            "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
@@ -140,23 +140,10 @@ def detect_stall(trace, stall_seconds: float = DEFAULT_STALL_SECONDS) -> Optiona
 
 
 def _stall(trace, stall_seconds: float) -> Optional[Failure]:
-    period = 1.0 / float(trace.config.get("policy_frequency", 5))
-    needed = max(1, int(math.ceil(stall_seconds / period)))
-    run = 0
-    for step, states in enumerate(trace.states):
-        ego = states.get("ego")
-        if ego is None or ego[3] >= STALL_SPEED or not _path_free(ego, states):
-            run = 0
-            continue
-        run += 1
-        if run >= needed:
-            start = step - needed + 1
-            return Failure("stall", start * period, start)
-    return None
-
-
-def _path_free(ego: List[float], states: Dict[str, List[float]]) -> bool:
-    return path_is_free(ego, (state for name, state in states.items() if name != "ego"))
+    start = first_stall_step(trace, stall_seconds)
+    if start is None:
+        return None
+    return Failure("stall", start / float(trace.config.get("policy_frequency", 5)), start)
 
 
 def _ego_speed(states: Dict[str, List[float]]) -> Optional[float]:

@@ -17,7 +17,7 @@ from typing import Any
 _EXPORTS = {
     "RegressError": "errors", "ReportMismatchError": "errors", "ResumeMismatchError": "errors",
     "EXIT_CODES": "report", "SCHEMA": "report", "SCHEMA_VERSION": "report", "exit_code": "report",
-    "load_report": "report", "write_reports": "report",
+    "load_report": "report", "write_reports": "outputs",
     "run_regression": "runner",
 }
 

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional, Union
 
 from dv2s_gym.regress.errors import RegressError
-from dv2s_gym.regress.report import load_report
+from dv2s_gym.regress.report import bank_info, load_report
 
 __all__ = ["find_episode", "replay_episode"]
 
@@ -119,8 +119,6 @@ def _from_policy(report: Dict[str, Any], result: Dict[str, Any], role: str, fram
 def _bank_for(bank: Dict[str, Any], scenario: str) -> Optional[str]:
     """The report's bank folder, or the shipped bank when that folder is not on this machine, as long as
     the scenario's script is the one the report ran."""
-    from dv2s_gym.regress.runner import bank_info
-
     expected = (bank.get("hashes") or {}).get(scenario)
     path = bank.get("path")
     here = None

@@ -77,9 +77,9 @@ whatever the other episodes show, and such a report cannot serve as a baseline.
 from __future__ import annotations
 
 import datetime
-import importlib
 import json
 import math
+import hashlib
 import os
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Union
@@ -97,13 +97,12 @@ __all__ = [
     "summarize",
     "summarize_groups",
     "comparison_json",
+    "bank_info",
     "build_report",
     "load_report",
     "check_baseline_report",
     "write_json",
-    "write_junit",
     "write_markdown",
-    "write_reports",
     "format_summary",
 ]
 
@@ -233,6 +232,17 @@ def _errors_note(count: int) -> str:
 
 
 # ---------------------------------------------------------------------------------- report
+def bank_info(scenarios: Sequence[str], bank_dir: Optional[Union[str, os.PathLike]] = None) -> Dict[str, Any]:
+    """``{"path", "version", "scenarios", "hashes"}``: the version is a SHA-256 over the scenarios' names and scripts."""
+    from scenario_bank.bank import Bank, content_hash
+
+    bank = Bank(bank_dir)
+    hashes = {name: content_hash(bank.get(name).script) for name in scenarios}
+    payload = "\n".join(f"{name}:{hashes[name]}" for name in sorted(hashes))
+    return {"path": str(Path(bank.root).resolve()), "version": hashlib.sha256(payload.encode()).hexdigest(),
+            "scenarios": list(scenarios), "hashes": hashes}
+
+
 def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: Dict[str, Any],
                  baseline: Optional[Dict[str, Any]], episodes: Sequence[Dict[str, Any]],
                  stopped_early: bool = False, sequential: Optional[Dict[str, Any]] = None,
@@ -677,32 +687,6 @@ def write_json(report: Mapping[str, Any], path: Union[str, os.PathLike]) -> Path
     return atomic_write_json(path, report)
 
 
-def write_junit(report: Mapping[str, Any], path: Union[str, os.PathLike]) -> Path:
-    """Write JUnit XML (:func:`dv2s_gym.regress.junit.write_junit`)."""
-    from dv2s_gym.regress import junit
-
-    return junit.write_junit(report, path)
-
-
 def write_markdown(report: Mapping[str, Any], path: Union[str, os.PathLike], report_path: str = "report.json") -> Path:
     """Write the Markdown summary for a pull-request comment (paths relative to its folder)."""
     return atomic_write_text(path, _markdown(report, report_path, Path(path).parent))
-
-
-def write_reports(report: Mapping[str, Any], out_dir: Union[str, os.PathLike]) -> Dict[str, Path]:
-    """Write ``report.json``, ``junit.xml``, ``report.md`` (and ``report.html`` when
-    :mod:`dv2s_gym.regress.html` exists) into ``out_dir``; returns format -> path."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    paths = {"json": write_json(report, out_dir / "report.json"),
-             "junit": write_junit(report, out_dir / "junit.xml"),
-             "markdown": write_markdown(report, out_dir / "report.md", "report.json")}
-    try:
-        html = importlib.import_module("dv2s_gym.regress.html")
-    except ModuleNotFoundError as error:
-        if error.name != "dv2s_gym.regress.html":
-            raise
-    else:
-        written = html.write_html(report, out_dir / "report.html")
-        paths["html"] = Path(written) if written is not None else out_dir / "report.html"
-    return paths

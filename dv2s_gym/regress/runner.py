@@ -30,12 +30,13 @@ from dv2s_gym.regress.errors import RegressError, ReportMismatchError
 from dv2s_gym.regress.failures import (DEFAULT_FAILURE, DEFAULT_STALL_SECONDS, apply_failure, missing_facts,
                                         parse_failure)
 from dv2s_gym.regress.report import (
+    bank_info,
     build_report,
     check_baseline_report,
     load_report,
     paired_tables,
-    write_reports,
 )
+from dv2s_gym.regress.outputs import write_reports
 from dv2s_gym.regress.identity import policy_fingerprint
 from dv2s_gym.regress.store import RunStore
 from dv2s_gym.regress.tasks import KIND
@@ -48,17 +49,6 @@ __all__ = ["run_regression", "bank_info", "plan_tasks", "DEFAULT_OUT", "ROLES"]
 DEFAULT_OUT = "out/regress"
 ROLES = ("candidate", "baseline")
 Scenarios = Union[None, str, Sequence[str]]
-
-
-def bank_info(scenarios: Sequence[str], bank_dir: Optional[Union[str, os.PathLike]] = None) -> Dict[str, Any]:
-    """``{"path", "version", "scenarios", "hashes"}``: the version is a SHA-256 over the scenarios' names and scripts."""
-    from scenario_bank.bank import Bank, content_hash
-
-    bank = Bank(bank_dir)
-    hashes = {name: content_hash(bank.get(name).script) for name in scenarios}
-    payload = "\n".join(f"{name}:{hashes[name]}" for name in sorted(hashes))
-    return {"path": str(Path(bank.root).resolve()), "version": hashlib.sha256(payload.encode()).hexdigest(),
-            "scenarios": list(scenarios), "hashes": hashes}
 
 
 def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterable[int], *,

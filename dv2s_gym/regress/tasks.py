@@ -69,13 +69,14 @@ def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
         if os.environ.get("DV2S_DEBUG"):
             message += "\n" + traceback.format_exc()
         return error_result(task, message)
-    from dv2s_gym.mining.monitors import detect_stall
     from dv2s_gym.regress.failures import DEFAULT_STALL_SECONDS, apply_failure, parse_failure
+    from envs.safety_metrics import first_stall_step
 
     data = result.to_json()
-    stall = detect_stall(trace, float(task.get("stall_seconds") or DEFAULT_STALL_SECONDS))
+    stall = first_stall_step(trace, float(task.get("stall_seconds") or DEFAULT_STALL_SECONDS))
+    period = 1.0 / float(trace.config.get("policy_frequency", 5))
     data.update(role=task["role"], id=task_id(task["scenario"], task["seed"]), trace=None, seconds=round(seconds, 4),
-                stalled=stall is not None, stall_time=None if stall is None else stall.time)
+                stalled=stall is not None, stall_time=None if stall is None else stall * period)
     apply_failure(data, parse_failure(task.get("failure")))
     trace_dir = task.get("trace_dir")
     if data["failed"] and trace_dir:
