@@ -26,7 +26,6 @@ actions). A checkpoint whose identity differs from the new call's is refused
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import io
 import json
 import shutil
@@ -36,6 +35,7 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple
 import numpy as np
 
 from policies.training import TrainingError
+from scenario_bank.atomic import file_sha256
 
 __all__ = ["CHECKPOINT_DIR", "DAggerResumeError", "DAggerCheckpoint", "SavedIteration", "PartialIteration",
            "run_identity", "checkpoint_position", "describe_position"]
@@ -98,14 +98,6 @@ class SavedIteration:
     partial: Optional[PartialIteration] = None
 
 
-def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def _scenario_hashes(bank_dir: Optional[str], names: List[str]) -> Dict[str, Optional[str]]:
     """Each scenario's script content hash in the bank (``None`` when the bank does not hold it)."""
     from scenario_bank.bank import Bank
@@ -123,7 +115,7 @@ def run_identity(*, source: str, source_checkpoint: Path, bank_dir: Optional[str
     not how it runs (``vec_env``, the progress bar)."""
     names = sorted(weights)
     return json.loads(json.dumps({
-        "source": str(source), "source_sha256": _sha256(Path(source_checkpoint)),
+        "source": str(source), "source_sha256": file_sha256(source_checkpoint),
         "bank_dir": None if bank_dir is None else str(Path(bank_dir).resolve()),
         "weights": {name: float(weights[name]) for name in names},
         "scenario_hashes": _scenario_hashes(bank_dir, names), "env_config": dict(env_config),

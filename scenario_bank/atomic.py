@@ -12,6 +12,7 @@ This module imports nothing else of dv2s-gym.
 from __future__ import annotations
 
 import errno
+import hashlib
 import json
 import os
 import uuid
@@ -19,7 +20,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator, Union
 
-__all__ = ["AtomicWriteError", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "atomic_path"]
+__all__ = ["AtomicWriteError", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "atomic_path",
+           "file_sha256"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -94,3 +96,12 @@ def atomic_write_text(path: PathLike, text: str, *, encoding: str = "utf-8", fsy
 def atomic_write_json(path: PathLike, data: Any, *, indent: int = 1, fsync: bool = True) -> Path:
     """Write ``data`` as JSON (sorted keys) to ``path`` atomically (see :func:`atomic_write_bytes`)."""
     return atomic_write_text(path, json.dumps(data, indent=indent, sort_keys=True) + "\n", fsync=fsync)
+
+
+def file_sha256(path: Union[str, os.PathLike]) -> str:
+    """SHA-256 of a file's bytes, read in 1 MiB blocks."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()

@@ -14,22 +14,14 @@ options under the same spec is refused, naming what changed.
 
 from __future__ import annotations
 
-import hashlib
 import importlib.util
 import json
 from pathlib import Path
 from typing import Any, Dict, Optional
 
+from scenario_bank.atomic import file_sha256
+
 __all__ = ["policy_fingerprint", "file_sha256"]
-
-
-def file_sha256(path: Path) -> str:
-    """SHA-256 of a file's bytes."""
-    digest = hashlib.sha256()
-    with open(path, "rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def _module_file(name: str) -> Optional[Path]:
