@@ -44,7 +44,6 @@ def render_episode_video(trace_path: Union[str, os.PathLike], out_path: Union[st
     recorded episode (a diverging replay raises
     :class:`~envs.trace.TraceMismatchError`). Returns ``out_path``.
     """
-    from envs.recording import VideoWriter
     from envs.replay import replay_trace
     from envs.trace import EpisodeTrace
 
@@ -70,13 +69,7 @@ def render_episode_video(trace_path: Union[str, os.PathLike], out_path: Union[st
     frames: List[np.ndarray] = []
     env, _ = replay_trace(dataclasses.replace(trace, config=config), render_mode="rgb_array", frames=frames)
     env.close()
-    frames = frames[-max(1, int(round(seconds * frequency))):]
-    if not frames:
-        raise ClipError(f"episode trace {trace_path} rendered no frames")
-    with VideoWriter(out_path, fps=frequency) as video:
-        for frame in frames:
-            video.write(frame)
-    return Path(out_path)
+    return _write_last_seconds(frames, seconds, frequency, out_path, f"episode trace {trace_path}")
 
 
 def render_policy_video(report: Dict[str, Any], result: Dict[str, Any], role: str, out_path: Union[str, os.PathLike], *,
@@ -88,7 +81,6 @@ def render_policy_video(report: Dict[str, Any], result: Dict[str, Any], role: st
     config of the report, rendered off-screen like :func:`render_episode_video`. The re-run must
     reproduce the report's trajectory hash, so the clip shows the very episode the report counted.
     """
-    from envs.recording import VideoWriter
     from policies.evaluation import make_eval_env, run_episode
     from policies.registry import load_policy
 
@@ -120,9 +112,17 @@ def render_policy_video(report: Dict[str, Any], result: Dict[str, Any], role: st
         raise ClipError(f"the {role}'s run of {scenario}/{seed} did not reproduce (trajectory hash "
                         f"{rerun.trajectory_hash[:12]}, the report has {str(expected)[:12]}); the policy or the "
                         "simulator changed since the report was made")
+    return _write_last_seconds(frames, seconds, frequency, out_path, f"the {role}'s run of {scenario}/{seed}")
+
+
+def _write_last_seconds(frames: List[np.ndarray], seconds: float, frequency: float,
+                        out_path: Union[str, os.PathLike], what: str) -> Path:
+    """Write the last ``seconds`` of ``frames`` as a video; :class:`ClipError` naming ``what`` if there are none."""
+    from envs.recording import VideoWriter
+
     frames = frames[-max(1, int(round(seconds * frequency))):]
     if not frames:
-        raise ClipError(f"the {role}'s run of {scenario}/{seed} rendered no frames")
+        raise ClipError(f"{what} rendered no frames")
     with VideoWriter(out_path, fps=frequency) as video:
         for frame in frames:
             video.write(frame)
