@@ -640,9 +640,41 @@ def _cmd_loop(args: argparse.Namespace) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line in the words of the (sub)command the user typed.
+
+    argparse prints the whole usage block before a usage error and reports an unknown option of a
+    subcommand as the top-level command's; here the subcommand that received it names it, with the
+    closest option it has and where its help is.
+    """
+
+    def error(self, message: str):  # argparse's hook; never returns
+        self.exit(2, f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")
+
+    def parse_known_args(self, args=None, namespace=None):
+        leaf = not any(isinstance(action, argparse._SubParsersAction) for action in self._actions)
+        if leaf and args is not None:  # a mistyped option is named before "--policy is required" hides it
+            unknown = [token for token in args if token.startswith("--") and token != "--"
+                       and not any(flag.startswith(token.split("=", 1)[0]) for flag in self._option_string_actions)]
+            if unknown:
+                self.error(self._unrecognized(unknown))
+        namespace, extras = super().parse_known_args(args, namespace)
+        if extras and leaf:
+            self.error(self._unrecognized(extras))
+        return namespace, extras
+
+    def _unrecognized(self, extras: List[str]) -> str:
+        import difflib
+
+        message = f"unrecognized arguments: {' '.join(extras)}"
+        flags = [flag.split("=", 1)[0] for flag in extras if flag.startswith("-")]
+        close = difflib.get_close_matches(flags[0], list(self._option_string_actions), n=1) if flags else []
+        return message + (f"; did you mean {close[0]}?" if close else "")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``dv2s`` (every subcommand has ``--help``)."""
-    parser = argparse.ArgumentParser(prog="dv2s", description="dv2s-gym: turn driving videos into Scenic "
+    parser = _Parser(prog="dv2s", description="dv2s-gym: turn driving videos into Scenic "
                                      "scenarios and run them as Gymnasium episodes in highway-env.")
     parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
     parser.add_argument("--bank", default=None, help="bank folder (default: the bank shipped with dv2s-gym); "

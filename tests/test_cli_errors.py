@@ -140,3 +140,23 @@ def test_validating_a_bank_that_does_not_exist_fails(capsys, tmp_path):
     code, out, err = run(capsys, "bank", "validate", "--bank", tmp_path / "typo")
     assert code == 2 and "there is no bank at" in one_line_error(err) and "valid" not in out
     assert not (tmp_path / "typo").exists()
+
+
+@pytest.mark.parametrize("argv, named, hint", [
+    (["regress", "--polcy", "rule"], "unrecognized arguments: --polcy; did you mean --policy?", "dv2s regress --help"),
+    (["bank", "validate", "--storyy"], "unrecognized arguments: --storyy; did you mean --story?",
+     "dv2s bank validate --help"),
+    (["mine"], "the following arguments are required: --policy", "dv2s mine --help"),
+    (["run", "x", "--frobnicate"], "unrecognized arguments: --frobnicate", "dv2s run --help"),
+])
+def test_usage_errors_are_one_line_from_the_subcommand(capsys, argv, named, hint):
+    """A wrong or missing option is named by the subcommand it was given to, in one line with where
+    its help is, not after argparse's whole usage block."""
+    with pytest.raises(SystemExit) as stop:
+        from dv2s_gym.cli import main
+
+        main(argv)
+    err = capsys.readouterr().err
+    assert stop.value.code == 2
+    assert err.count("\n") == 1 and "usage:" not in err
+    assert named in err and hint in err and err.startswith(f"dv2s {argv[0]}")
