@@ -4,9 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
+import threading
 from dataclasses import asdict
 from typing import List, Optional
+
+from envs.errors import Interrupted
 
 __all__ = ["main", "build_parser"]
 
@@ -185,10 +189,9 @@ def _cmd_regress(args: argparse.Namespace) -> int:
             sequential=args.sequential, env_config=env_config, progress=not args.no_progress and not args.json,
             timeout=args.timeout, batch=args.batch, baseline_role=args.baseline_role, failure=args.failure,
             stall_seconds=args.stall_seconds)
-    except KeyboardInterrupt:
-        print(f"dv2s: finished episodes are saved in {Path(out) / 'results.jsonl'}; rerun the same command to resume",
-              file=sys.stderr)
-        raise
+    except KeyboardInterrupt as stop:
+        raise Interrupted(getattr(stop, "note", None) or f"finished episodes are kept in "
+                          f"{Path(out) / 'results.jsonl'}; rerun the same command to resume") from None
     if args.json:
         print(json.dumps(report, indent=1))
     else:
@@ -218,10 +221,9 @@ def _cmd_mine(args: argparse.Namespace) -> int:
                    convert=not args.no_convert, convert_options=convert_options,
                    max_conversions=args.max_conversions, feedback=args.feedback,
                    sampler_options=_json_option(args.sampler_options, "--sampler-options"))
-    except KeyboardInterrupt:
-        print(f"dv2s: finished episodes are saved in {out / 'episodes.jsonl'}; rerun the same command to resume",
-              file=sys.stderr)
-        raise
+    except KeyboardInterrupt as stop:
+        raise Interrupted(getattr(stop, "note", None) or f"finished episodes are kept in "
+                          f"{out / 'episodes.jsonl'}; rerun the same command to resume") from None
     print(run.summary())
     if run.reports:
         print(f"reports: {', '.join(str(p) for p in run.reports.values())}")
@@ -1092,6 +1094,34 @@ def _error_line(error: BaseException) -> str:
     return f"{type(error).__name__}: {message}" if message else type(error).__name__
 
 
+_RESUME_NOTES = {
+    "loop": "finished steps are kept in the loop folder (loop.json); rerun the same command to resume",
+    "train": "rerun the same command with --resume to continue from the last checkpoint",
+}
+"""What an interrupted command kept, for commands whose own code does not say it more precisely."""
+
+
+class _SigintFlag:
+    """Notes whether Ctrl-C arrived while a command ran (the default handler still raises KeyboardInterrupt)."""
+
+    def __init__(self) -> None:
+        self.received = False
+        self._previous = None
+
+    def _handle(self, signum, frame) -> None:
+        self.received = True
+        signal.default_int_handler(signum, frame)
+
+    def __enter__(self) -> "_SigintFlag":
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     """Entry point of the ``dv2s`` console command.
 
@@ -1101,12 +1131,19 @@ def main(argv: Optional[List[str]] = None) -> int:
     """
     parser = build_parser()
     args = parser.parse_args(argv)
+    sigint = _SigintFlag()
     try:
-        return int(args.func(args) or 0)
-    except KeyboardInterrupt:
-        print("dv2s: interrupted", file=sys.stderr)
+        with sigint:
+            return int(args.func(args) or 0)
+    except KeyboardInterrupt as stop:
+        note = getattr(stop, "note", None) or _RESUME_NOTES.get(args.command)
+        print("dv2s: interrupted" + (f"; {note}" if note else ""), file=sys.stderr)
         return 130
     except Exception as error:  # every error reaches the user as one line, never a raw traceback
+        if sigint.received:  # e.g. a broken pipe to a worker that Ctrl-C stopped first
+            note = _RESUME_NOTES.get(args.command)
+            print("dv2s: interrupted" + (f"; {note}" if note else ""), file=sys.stderr)
+            return 130
         if args.debug:
             import traceback
 

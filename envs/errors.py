@@ -11,11 +11,20 @@ __all__ = [
     "UnknownConfigKeyError",
     "check_config_keys",
     "StepTimeoutError",
+    "Interrupted",
 ]
 
 
 class DV2SError(Exception):
     """Base class of dv2s-gym errors."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C, carrying one line on what the interrupted run kept and how to resume it."""
+
+    def __init__(self, note: str) -> None:
+        super().__init__(note)
+        self.note = note
 
 
 class ScenarioCompileError(DV2SError, ValueError):

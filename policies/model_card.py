@@ -25,8 +25,9 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import sys
 from pathlib import Path
-from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from envs.errors import DV2SError
 from policies.evaluation import EpisodeResult
@@ -377,37 +378,68 @@ def _evaluate_chunk(spec: str, episodes: List[Tuple[str, int]], config: Optional
 
 
 def evaluate_parallel(spec: str, episodes: Sequence[Tuple[str, int]], config: Optional[Dict[str, Any]] = None,
-                      bank_dir: Optional[str] = None, jobs: int = 2) -> List[EpisodeResult]:
+                      bank_dir: Optional[str] = None, jobs: int = 2,
+                      on_done: Optional[Callable[[int], None]] = None) -> List[EpisodeResult]:
     """:func:`policies.evaluation.evaluate` of a policy spec over ``episodes`` in ``jobs`` processes.
 
-    Episodes are dealt round-robin to the processes and the results come back in the
+    Episodes go to the processes in small consecutive chunks and the results come back in the
     order of ``episodes``; an episode's result does not depend on the process it ran in.
+    ``on_done(n)`` is called as chunks of ``n`` episodes finish (a progress bar). On an interrupt
+    the worker processes are terminated at once, not waited for.
     """
     episodes = [(str(s), int(seed)) for s, seed in episodes]
     jobs = max(1, min(int(jobs), len(episodes)))
+    size = max(1, min(25, len(episodes) // (jobs * 4) or 1))
+    chunks = [episodes[i:i + size] for i in range(0, len(episodes), size)]
+    results: List[EpisodeResult] = []
     if jobs == 1:
-        return _evaluate_chunk(spec, episodes, config, bank_dir)
+        for chunk in chunks:
+            results += _evaluate_chunk(spec, chunk, config, bank_dir)
+            if on_done is not None:
+                on_done(len(chunk))
+        return results
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
 
-    chunks = [episodes[j::jobs] for j in range(jobs)]
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("forkserver")) as pool:
-        parts = list(pool.map(_evaluate_chunk, [spec] * jobs, chunks, [config] * jobs, [bank_dir] * jobs))
-    results: List[Optional[EpisodeResult]] = [None] * len(episodes)
-    for j, part in enumerate(parts):
-        for offset, result in enumerate(part):
-            results[j + offset * jobs] = result
-    return results  # type: ignore[return-value]
+    pool = multiprocessing.get_context("forkserver").Pool(jobs)
+    try:
+        for part in pool.imap(_evaluate_chunk_args, [(spec, chunk, config, bank_dir) for chunk in chunks]):
+            results += part
+            if on_done is not None:
+                on_done(len(part))
+        pool.close()
+    except BaseException:
+        pool.terminate()
+        raise
+    finally:
+        pool.join()
+    return results
+
+
+def _evaluate_chunk_args(args: Tuple[str, List[Tuple[str, int]], Optional[Dict[str, Any]], Optional[str]]
+                         ) -> List[EpisodeResult]:
+    return _evaluate_chunk(*args)
 
 
 def evaluate_for_card(specs: Mapping[str, str], episodes: Sequence[Tuple[str, int]],
                       configs: Mapping[str, Optional[Dict[str, Any]]], bank_dir: Optional[str] = None,
                       candidate: str = "policy", seed_base: Optional[int] = None, seeds: Optional[int] = None,
-                      jobs: int = 2, confidence: float = 0.95) -> Dict[str, Any]:
+                      jobs: int = 2, confidence: float = 0.95, progress: bool = False) -> Dict[str, Any]:
     """Run every policy of ``specs`` (label -> spec) on the same ``episodes`` and build the
     card's ``evaluation`` section (:func:`evaluation_section`); ``configs`` gives each
-    label's env config (a baseline driving ``DiscreteMetaAction`` next to a continuous policy)."""
-    results = {label: evaluate_parallel(spec, episodes, configs.get(label), bank_dir, jobs)
-               for label, spec in specs.items()}
+    label's env config (a baseline driving ``DiscreteMetaAction`` next to a continuous policy).
+    ``progress``: one progress bar on stderr over every policy's episodes."""
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(specs) * len(episodes), desc="card evaluation", unit="episode", file=sys.stderr,
+                   dynamic_ncols=True)
+    try:
+        results = {label: evaluate_parallel(spec, episodes, configs.get(label), bank_dir, jobs,
+                                            on_done=None if bar is None else bar.update)
+                   for label, spec in specs.items()}
+    finally:
+        if bar is not None:
+            bar.close()
     return evaluation_section(results, episodes, candidate=candidate, confidence=confidence, seed_base=seed_base,
                               seeds=seeds, specs=specs)

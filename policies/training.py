@@ -55,7 +55,7 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from envs.errors import DV2SError
+from envs.errors import DV2SError, Interrupted
 
 __all__ = [
     "ALGORITHMS",
@@ -765,8 +765,8 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
             except KeyboardInterrupt:
                 saved = saver.save()
                 close_segment("interrupted")
-                log(f"interrupted at step {model.num_timesteps}: saved {saved}; resume with --resume")
-                raise
+                raise Interrupted(f"training stopped at step {model.num_timesteps}: checkpoint {saved} is kept; "
+                                  "rerun the same command with --resume to continue") from None
         else:
             log(f"the model already has {start} steps (>= --steps {config.steps}); nothing to train")
         saver.save()
@@ -805,14 +805,22 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
     if config.card_seeds > 0:
         from policies.model_card import evaluate_for_card
 
-        log(f"evaluating on {len(names)} scenarios x {config.card_seeds} held-out seeds "
-            f"({', '.join([config.algo] + list(config.baselines))})")
         specs = {config.algo: f"{config.algo}:{model_path.resolve()}", **{b: b for b in config.baselines}}
+        log(f"model card evaluation: {len(names)} scenarios x {config.card_seeds} held-out seeds x "
+            f"{len(specs)} policies ({', '.join(specs)}) = {len(names) * config.card_seeds * len(specs)} episodes; "
+            "--card-seeds N shortens it (0 skips it), Ctrl-C writes the card without it")
         baseline_config = {k: v for k, v in env_config.items() if k != "action"}
         configs = {label: (env_config if label == config.algo else baseline_config) for label in specs}
-        card["evaluation"] = evaluate_for_card(specs, evaluation_episodes(names, config.card_seeds), configs,
-                                               bank_dir=config.bank_dir, candidate=config.algo,
-                                               seed_base=EVAL_SEED_BASE, seeds=config.card_seeds, jobs=config.eval_jobs)
+        try:
+            card["evaluation"] = evaluate_for_card(specs, evaluation_episodes(names, config.card_seeds), configs,
+                                                   bank_dir=config.bank_dir, candidate=config.algo,
+                                                   seed_base=EVAL_SEED_BASE, seeds=config.card_seeds,
+                                                   jobs=config.eval_jobs, progress=config.progress_bar)
+        except KeyboardInterrupt:
+            card["evaluation"] = None
+            write_card(out, card)
+            raise Interrupted(f"stopped during the card's evaluation: {model_path} and {out / 'model_card.json'} "
+                              "are written without it; rerun the same command with --resume to evaluate") from None
         card["evaluation"]["specs"][config.algo] = f"{config.algo}:model.zip (beside this card)"
     write_card(out, card)
     log(f"wrote {model_path} and {out / 'model_card.json'} (step {model.num_timesteps}, last segment "

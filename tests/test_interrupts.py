@@ -1,0 +1,79 @@
+"""Ctrl-C during a long `dv2s` step: one line saying what was kept and how to resume, exit 130, and no
+process of the run left behind, whether the signal goes to the whole process group (a terminal's
+Ctrl-C) or to the main process alone."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+TRAIN = ["train", "--steps", "64", "--envs", "1", "--vec-env", "dummy", "--hp", "n_steps=32", "--hp", "batch_size=32",
+         "--scenarios", "highway_lead_vehicle_brakes", "highway_cut_in_from_left", "--card-seeds", "30",
+         "--eval-jobs", "2"]
+
+
+def _descendants(pid: int) -> set:
+    """Every process whose ancestry leads to ``pid`` (read from /proc)."""
+    parents = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            parents[int(entry.name)] = int(stat.rsplit(")", 1)[1].split()[1])
+    found, frontier = set(), {pid}
+    while frontier:
+        frontier = {child for child, parent in parents.items() if parent in frontier} - found
+        found |= frontier
+    return found
+
+
+def _wait_for(path: Path, text: str, proc: subprocess.Popen, limit: float = 600.0) -> None:
+    began = time.monotonic()
+    while time.monotonic() - began < limit:
+        if path.is_file() and text in path.read_text(errors="replace"):
+            return
+        assert proc.poll() is None, path.read_text(errors="replace")
+        time.sleep(0.5)
+    raise AssertionError(f"{text!r} did not appear in {limit} s")
+
+
+@pytest.mark.parametrize("target", ["group", "main"])
+def test_ctrl_c_during_the_card_evaluation_keeps_the_model_and_says_how_to_resume(tmp_path, target):
+    err = tmp_path / "err.txt"
+    env = dict(os.environ, OMP_NUM_THREADS="1")
+    with open(err, "w") as stderr:
+        proc = subprocess.Popen([sys.executable, "-m", "dv2s_gym.cli", *TRAIN, "--out", str(tmp_path / "run")],
+                                stdout=subprocess.DEVNULL, stderr=stderr, env=env, start_new_session=True)
+    try:
+        _wait_for(err, "card evaluation:", proc)
+        time.sleep(3)  # the evaluation's workers are running episodes
+        workers = _descendants(proc.pid)
+        assert workers, "the evaluation runs in worker processes"
+        if target == "group":
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            os.kill(proc.pid, signal.SIGINT)
+        code = proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    lines = [line for line in err.read_text().replace("\r", "\n").splitlines() if line.startswith("dv2s:")]
+    assert code == 130
+    assert len(lines) == 1 and lines[0].startswith("dv2s: interrupted; ") and "--resume" in lines[0], lines
+    card = json.loads((tmp_path / "run" / "model_card.json").read_text())
+    assert (tmp_path / "run" / "model.zip").is_file() and card["evaluation"] is None
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(Path(f"/proc/{pid}").exists() for pid in workers):
+        time.sleep(0.2)
+    assert not [pid for pid in workers if Path(f"/proc/{pid}").exists()], "worker processes were left behind"
