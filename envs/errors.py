@@ -52,10 +52,36 @@ class UnknownConfigKeyError(DV2SError, ValueError):
     """A ``config=`` key the env does not have (a typo would otherwise be ignored)."""
 
 
-def check_config_keys(config, defaults) -> None:
-    """Raise :class:`UnknownConfigKeyError` naming each key of ``config`` not in ``defaults``, with a suggestion."""
+OBSERVATION_TYPES = ("Kinematics", "OccupancyGrid", "TimeToCollision", "GrayscaleObservation")
+"""highway-env observation types DV2S-v0 supports."""
+
+ACTION_TYPES = ("DiscreteMetaAction", "ContinuousAction", "DiscreteAction")
+"""highway-env action types DV2S-v0 supports."""
+
+
+def _check_type(config, key: str, choices) -> None:
     import difflib
 
+    section = (config or {}).get(key)
+    if section is None:
+        return
+    if not isinstance(section, dict) or "type" not in section:
+        raise UnknownConfigKeyError(f"config[{key!r}] must be a dict with a 'type' (one of {', '.join(choices)}), "
+                                    f"e.g. {{'type': {choices[0]!r}}}; got {section!r}")
+    if section["type"] not in choices:
+        close = difflib.get_close_matches(str(section["type"]), choices, n=1)
+        raise UnknownConfigKeyError(f"unknown {key} type {section['type']!r}"
+                                    + (f" (did you mean {close[0]!r}?)" if close else "")
+                                    + f"; DV2S-v0 supports {', '.join(choices)}")
+
+
+def check_config_keys(config, defaults) -> None:
+    """Raise :class:`UnknownConfigKeyError` naming each key of ``config`` not in ``defaults`` (with a
+    suggestion), or an observation or action type DV2S-v0 does not support (with the choices)."""
+    import difflib
+
+    _check_type(config, "observation", OBSERVATION_TYPES)
+    _check_type(config, "action", ACTION_TYPES)
     unknown = sorted(set(config or {}) - set(defaults))
     if not unknown:
         return

@@ -102,6 +102,23 @@ def test_a_misspelt_config_key_is_refused_with_a_suggestion():
         DV2SEnv(scenario=BRAKES, config={"duraton": 3.0})
 
 
+@pytest.mark.parametrize("config, message", [
+    ({"observation": {"type": "Kinematic"}}, r"unknown observation type 'Kinematic' \(did you mean 'Kinematics'\?\); "
+                                             r"DV2S-v0 supports Kinematics, OccupancyGrid"),
+    ({"action": {"type": "Continuous"}}, r"unknown action type 'Continuous' \(did you mean 'ContinuousAction'\?\); "
+                                         r"DV2S-v0 supports DiscreteMetaAction, ContinuousAction, DiscreteAction"),
+    ({"observation": "Kinematics"}, r"config\['observation'\] must be a dict with a 'type'"),
+])
+def test_an_unknown_observation_or_action_type_is_named_with_the_choices(config, message):
+    from envs.errors import UnknownConfigKeyError
+
+    with pytest.raises(UnknownConfigKeyError, match=message):
+        DV2SEnv(scenario=BRAKES, config=config)
+    text = (ROOT / "scenario_bank" / "scenarios" / BRAKES / "scenario.scenic").read_text()
+    with pytest.raises(UnknownConfigKeyError, match=message):  # Scenic text: checked before anything runs
+        gym.make("dv2s_gym:DV2S-v0", scenario=text, config=config)
+
+
 def test_gymnasium_env_checker_passes():
     from gymnasium.utils.env_checker import check_env
 
