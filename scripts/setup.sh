@@ -20,9 +20,13 @@ for other in opencv-python-headless opencv-contrib-python opencv-contrib-python-
         python -m pip install -q --force-reinstall --no-deps opencv-python
     fi
 done
+# System packages are installed with apt-get only when run as root, each announced first;
+# DV2S_SETUP_SYSTEM=0 skips them (and prints the command to run instead).
+SYSTEM=${DV2S_SETUP_SYSTEM:-1}
 # The jail for untrusted Scenic: bubblewrap (unprivileged user namespaces) and libseccomp.
 if ! command -v bwrap >/dev/null 2>&1; then
-    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    if [ "$SYSTEM" != 0 ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        echo "setup: installing system packages with apt-get: bubblewrap libseccomp2 (DV2S_SETUP_SYSTEM=0 skips this)" >&2
         apt-get install -y -q --no-install-recommends bubblewrap libseccomp2 \
             || { apt-get update -q && apt-get install -y -q --no-install-recommends bubblewrap libseccomp2; }
     else
@@ -32,7 +36,8 @@ if ! command -v bwrap >/dev/null 2>&1; then
 fi
 # Headless Chromium from the system packages: the HTML regression report's browser test runs in it.
 if ! command -v chromium >/dev/null 2>&1 && ! command -v chromium-browser >/dev/null 2>&1; then
-    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    if [ "$SYSTEM" != 0 ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+        echo "setup: installing system package with apt-get: chromium, for the HTML report's browser test (DV2S_SETUP_SYSTEM=0 skips this)" >&2
         apt-get update -q && apt-get install -y -q --no-install-recommends chromium
     else
         echo "Chromium is missing (needed by tests/test_regress_html.py): sudo apt-get update && sudo apt-get install -y --no-install-recommends chromium" >&2

@@ -21,6 +21,7 @@ import inspect
 import multiprocessing
 import os
 import time
+import warnings
 from collections import deque
 from multiprocessing.connection import wait
 from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Set, Tuple
@@ -79,6 +80,11 @@ def _worker_main(connection) -> None:
     try:
         import envs.dv2s_env  # noqa: F401  (the slow imports happen before the first episode's clock starts)
         import policies.evaluation  # noqa: F401
+        from scenic.core.dynamics import StuckBehaviorWarning
+
+        # Scenic's wall-clock "behavior is taking a long time" fires on a loaded machine and would print
+        # through the progress bars; a behaviour that is really stuck hits the env's step_time_limit.
+        warnings.filterwarnings("ignore", category=StuckBehaviorWarning)
     except Exception:  # reported by the first task instead
         pass
     try:
