@@ -1,4 +1,4 @@
-"""From a mined failure to a validated bank entry.
+"""From a mined failure to validated bank entries: the failing scene kept exactly, and its D-V2S conversion judged.
 
 :func:`convert_failure` takes one failure record of the miner (an episode record of
 ``episodes.jsonl`` whose ``failure`` is set) through these stages, each timed, and returns the
@@ -6,21 +6,39 @@ conversion record of ``conversions.jsonl``:
 
 1. ``video``: re-run the episode and write its bird's-eye video and trace
    (:func:`dv2s_gym.mining.failure_video.record_failure_video`; a diverging replay is a rejection);
-2. ``describe``: the Driving Record Analyzer turns the video into a description;
-3. ``generate``: the Scenario Generator turns the description into a Scenic script;
-4. ``check``: safety allowlist, then compile, sample and run in the sandbox
-   (:func:`dv2s_gym.pipeline.convert.check_scenario`; the in-process run is the reproduction below);
-5. ``reproduction``: the same policy drives the new scenario over ``k`` scenes whose seeds derive
-   from the record's seed (``numpy.random.SeedSequence([seed, record seed])``); the scenario is kept
-   iff the share of episodes failing in the *same failure class* is at least ``threshold``
-   (the rate and its Wilson interval are recorded either way);
-6. ``e2e_sc``: E2E-SC between the source failure's trace (its elements are the ground truth) and each
+2. ``interaction``: the failure's interaction read from its own trace
+   (:func:`dv2s_gym.mining.interaction.failure_interaction`): the actor involved (the collision partner, or
+   the actor the ego slowed down for, however far ahead), its kind and its manoeuvres;
+3. ``replay``: the exact replay of the failing scene goes into the bank whatever becomes of the conversion
+   (:mod:`dv2s_gym.mining.exact_replay`): the parent script narrowed around the failing parameters, tagged
+   ``replay``, its provenance ``replay`` holding the parameters, seed and trajectory hash that pin the
+   scene; it is checked to replay the recorded episode step for step first (else a ``replay`` rejection);
+4. ``describe``: the Driving Record Analyzer turns the video into a description, and the trace's account of
+   the interaction is added to it (:func:`~dv2s_gym.mining.interaction.interaction_sentence`), so the
+   description names what caused the failure even when the clip does not show it;
+5. ``generate``: the Scenario Generator turns the description into a Scenic script;
+6. ``check``: safety allowlist, then compile, sample and run in the sandbox
+   (:func:`dv2s_gym.pipeline.convert.check_scenario`);
+7. ``reproduction``: the same policy drives the new scenario over ``k`` scenes whose seeds derive
+   from the record's seed (``numpy.random.SeedSequence([seed, record seed])``); an episode reproduces the
+   failure when it fails in the *same failure class* with the *same kind of actor*; each episode also says
+   whether its trace shows the failure's interaction (the actor's kind doing one of its manoeuvres);
+8. ``avoidability``: the reference driver (``rule``) drives the same ``k`` scenes;
+9. ``e2e_sc``: E2E-SC between the source failure's trace (its elements are the ground truth) and each
    simulated trace of the reproduction, averaged over the ``k`` traces;
-7. ``bank``: :meth:`scenario_bank.bank.Bank.add_or_merge` adds the script with ``mined`` provenance,
-   or merges the failure into the entry it (nearly) duplicates. The failure video and trace are copied
-   into the entry's folder in the same atomic step (provenance ``video: "failure.webm"``,
-   ``trace: "trace.json.gz"``, relative to the entry folder; a merge puts them under ``merged/<n>/``), and
-   a map path in ``params`` is kept as its file name: the entry stands alone once the run folder is gone.
+10. the judge: the script is rejected, each reason with its own stage and every failed one listed in
+    ``rejections``, when the interaction shows in fewer than ``threshold`` of the episodes
+    (``interaction: ...``), the failure reproduces in fewer than ``threshold`` (``reproduction: ...``), or
+    the reference driver fails the same way in half of the episodes or more (``avoidability: ...``);
+11. ``bank``: :meth:`scenario_bank.bank.Bank.add_or_merge` adds the script with ``mined`` provenance,
+    or merges the failure into the entry it (nearly) duplicates, a converted entry of the same family
+    (parent and failure type) whose code differs in at most :data:`~scenario_bank.bank.NEAR_COPY_LINES`
+    lines included. The failure video and trace are copied into the entry's folder in the same atomic
+    step (provenance ``video: "failure.webm"``, ``trace: "trace.json.gz"``, relative to the entry folder; a
+    merge puts them under ``merged/<n>/``), and a map path in ``params`` is kept as its file name: the entry
+    stands alone once the run folder is gone. The two entries of one failure link each other
+    (``replay_entry`` on the script, ``converted`` on the replay) and the replay records the converted
+    script's E2E-SC (``converted_e2e_sc``) and rejections beside its own E2E-SC (1.0 for an exact replay).
 
 Failure class (:func:`same_failure_class`): the failure types must be equal; for collisions the
 other party's kind (``with_kind``: car, truck, pedestrian, obstacle...) and the collision type
@@ -403,7 +421,7 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
 
         description = describe(video, backend=dra, llm_config=llm_config)
         details["dra_description"] = description.text
-        events = interaction_sentence(interaction) if describe_events else ""
+        events = interaction_sentence(interaction, known=description.elements) if describe_events else ""
         if events:  # what the trace says caused the failure, even where the clip does not show it
             description.text = f"{description.text.strip()} {events}"
             description.elements = elements_from_text(description.text)

@@ -162,14 +162,19 @@ def shows_interaction(interaction: Mapping[str, Any], elements: Mapping[str, Any
 _ARTICLE = {"obstacle": "An obstacle", "ego": "The ego vehicle"}
 
 
-def interaction_sentence(interaction: Mapping[str, Any]) -> str:
+def interaction_sentence(interaction: Mapping[str, Any], known: Optional[Mapping[str, Any]] = None) -> str:
     """One or two sentences naming the key actor and what it did (from the trace), for the description of a
-    failure video; empty when the ego was alone."""
+    failure video; empty when the ego was alone. ``known``: the elements a description already states; what
+    they hold (the actor's kind doing one of its manoeuvres, its collision) is not said again."""
     kind = interaction.get("kind")
     if kind is None:
         return ""
-    subject = _ARTICLE.get(kind, f"A {kind}")
+    said = {action for who, action in (known or {}).get("actions") or [] if who == kind}
     moves = list(interaction.get("manoeuvres") or [])
+    collided = interaction.get("failure_type") == "collision"
+    if moves and set(moves) & said or not moves and kind in ((known or {}).get("participants") or []):
+        return f"The ego vehicle collides with the {kind}." if collided and "collide" not in said else ""
+    subject = _ARTICLE.get(kind, f"A {kind}")
     gap, side = interaction.get("gap_m"), interaction.get("side")
     where = f" about {abs(gap):.0f} m {'ahead of' if gap >= 0 else 'behind'} the ego vehicle" if gap is not None else ""
     if kind == "pedestrian" or "cross" in moves:
@@ -191,6 +196,6 @@ def interaction_sentence(interaction: Mapping[str, Any]) -> str:
     else:
         text = f"{subject} drives{where} in the lane to the {side} of the ego vehicle." if side else \
             f"{subject} drives near the ego vehicle."
-    if interaction.get("failure_type") == "collision":
+    if collided and "collide" not in said:
         text += f" The ego vehicle collides with the {kind}."
     return text
