@@ -148,3 +148,13 @@ def test_a_collision_is_shown_only_with_the_kind_colliding():
                                      {"type": "low_ttc", "with": "lead", "step": 10}])
 def test_the_partner_of_a_collision_or_low_ttc_is_the_key_actor(failure):
     assert key_actor(stall_behind_braking_car(), failure) == "lead"
+
+
+def test_an_actor_without_a_manoeuvre_is_named_where_it_was_unless_the_description_places_it():
+    interaction = {"failure_type": "low_ttc", "kind": "car", "manoeuvres": [], "gap_m": -2.1, "side": "right"}
+    vague = elements_from_text("The ego car drives in the left lane of a highway. Three other cars drive nearby.")
+    sentence = interaction_sentence(interaction, known=vague)
+    assert "lane to the right" in sentence, sentence
+    assert ["car", "right_of", "ego"] in elements_from_text(sentence)["relations"]
+    placed = elements_from_text("A car drives in the lane to the right of the ego car.")
+    assert interaction_sentence(interaction, known=placed) == ""

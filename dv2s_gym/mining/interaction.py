@@ -165,14 +165,17 @@ _ARTICLE = {"obstacle": "An obstacle", "ego": "The ego vehicle"}
 def interaction_sentence(interaction: Mapping[str, Any], known: Optional[Mapping[str, Any]] = None) -> str:
     """One or two sentences naming the key actor and what it did (from the trace), for the description of a
     failure video; empty when the ego was alone. ``known``: the elements a description already states; what
-    they hold (the actor's kind doing one of its manoeuvres, its collision) is not said again."""
+    they hold (the actor's kind doing one of its manoeuvres, or, for an actor that did none, its kind where it
+    was; its collision) is not said again."""
     kind = interaction.get("kind")
     if kind is None:
         return ""
     said = {action for who, action in (known or {}).get("actions") or [] if who == kind}
+    placed = {relation for who, relation, _ in (known or {}).get("relations") or [] if who == kind}
     moves = list(interaction.get("manoeuvres") or [])
     collided = interaction.get("failure_type") == "collision"
-    if moves and set(moves) & said or not moves and kind in ((known or {}).get("participants") or []):
+    relation = {"same_lane": "same_lane", "left": "left_of", "right": "right_of"}.get(interaction.get("side"))
+    if moves and set(moves) & said or not moves and relation in placed:
         return f"The ego vehicle collides with the {kind}." if collided and "collide" not in said else ""
     subject = _ARTICLE.get(kind, f"A {kind}")
     gap, side = interaction.get("gap_m"), interaction.get("side")
