@@ -171,10 +171,11 @@ def test_a_reproduction_rate_below_the_threshold_is_rejected(record, tmp_path):
     # the collision was with a car; as a collision with a truck, the new scenario never reproduces it
     truck = {**record, "failure": {**record["failure"], "with_kind": "truck"}}
     out = convert_failure(truck, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
-    assert out["status"] == "rejected" and out["stage"] == "interaction"  # no truck in its runs either
+    assert out["status"] == "rejected" and out["stage"] == "reproduction"
     assert out["reproduction"]["reproduced"] == 0 and out["reproduction"]["rate"] == 0.0
-    assert [r.split(":")[0] for r in out["rejections"]] == ["interaction", "reproduction"]
-    assert out["rejections"][1].startswith("reproduction: ") and "0 of 10" in out["rejections"][1]
+    assert out["reason"].startswith("reproduction: ") and "0 of 10" in out["reason"]
+    # the interaction is read from the trace, where the stopped actor is a car, and the new scenario shows it
+    assert out["interaction"]["kind"] == "car" and out["rejections"] == [out["reason"]]
     assert out["e2e_sc"] is not None  # measured either way
     assert _converted(tmp_path / "bank") == []
 

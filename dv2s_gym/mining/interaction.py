@@ -113,7 +113,8 @@ def actor_manoeuvres(trace, name: str) -> List[str]:
 def failure_interaction(trace, failure: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
     """The failure's interaction: ``{"failure_type", "actor", "kind", "manoeuvres", "gap_m", "side"}``.
 
-    ``actor`` is the key actor's name (None: the ego was alone), ``kind`` its participant type,
+    ``actor`` is the key actor's name (None: the ego was alone), ``kind`` its participant type (the trace's
+    ``kinds``; else the failure's ``with_kind``; else guessed from the name),
     ``manoeuvres`` what it did, ``gap_m`` its distance ahead of the ego (metres along the ego's heading) when
     first seen in the :data:`LOOKBACK_S` seconds up to the failure, ``side`` where it was then
     (``"same_lane"``, ``"left"``, ``"right"``).
@@ -124,8 +125,9 @@ def failure_interaction(trace, failure: Optional[Mapping[str, Any]]) -> Dict[str
                            "gap_m": None, "side": None}
     if name is None:
         return out
-    out["kind"] = failure.get("with_kind") if failure.get("with") == name and failure.get("with_kind") else \
-        _kind(trace, name)
+    known = dict(getattr(trace, "kinds", {}) or {})
+    out["kind"] = known[name] if name in known else (
+        failure.get("with_kind") if failure.get("with") == name and failure.get("with_kind") else _kind(trace, name))
     out["manoeuvres"] = actor_manoeuvres(trace, name)
     k = _failure_step(trace, failure)
     first = max(0, k - int(round(LOOKBACK_S * _frequency(trace))))
