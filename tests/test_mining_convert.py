@@ -181,8 +181,8 @@ def test_a_reproduction_rate_below_the_threshold_is_rejected(record, tmp_path):
 
 
 def _converted(bank_dir) -> list:
-    """The bank's entries that are not exact replays of a failing scene."""
-    return [e.name for e in Bank(bank_dir) if not e.source.get("replay")]
+    """The bank's mined entries that are converted scripts (not exact replays of a failing scene)."""
+    return [e.name for e in Bank(bank_dir) if e.source.get("kind") == "mined" and not e.source.get("replay")]
 
 
 def _patch_generator(monkeypatch, script: str) -> None:
@@ -277,12 +277,15 @@ def test_a_run_killed_between_the_bank_write_and_its_record_resumes_without_a_se
     monkeypatch.setattr(miner_module._Appender, "append", original)
     mined = _converted(tmp_path / "bank")
     assert len(mined) == 1 and not (tmp_path / "run" / "conversions.jsonl").read_text().strip()
+    replays = [e.name for e in Bank(tmp_path / "bank") if e.source.get("replay")]
+    assert len(replays) == 1 and Bank(tmp_path / "bank").get(replays[0]).source["converted"] == mined[0]
 
     resumed = mine("keep_lane", **run)
     row = resumed.conversions[0]
     assert len(resumed.conversions) == 1 and row["status"] == "kept" and row["bank_entry"] == mined[0], row
     entry = Bank(tmp_path / "bank").get(mined[0])
     assert _converted(tmp_path / "bank") == mined
+    assert [e.name for e in Bank(tmp_path / "bank") if e.source.get("replay")] == replays
     assert not entry.source.get("merged") and row["reproduction"] == entry.source["reproduction"]
     assert CONTRACT_KEYS <= set(row) and (tmp_path / "run" / row["video"]).is_file()
     assert (tmp_path / "run" / row["script"]).is_file()
@@ -378,3 +381,18 @@ def test_a_near_copy_of_a_mined_entry_of_the_same_family_is_merged(tmp_path):
                               provenance=source, near_copy_of=_family(SCENARIO, "collision"))
     assert apart.status == "added"
     assert sorted(Bank(tmp_path / "bank").names()) == ["mined_a", "mined_b", "mined_d"]
+
+
+def test_the_replay_script_narrows_only_the_continuous_ranges_around_the_failing_values():
+    from dv2s_gym.mining.exact_replay import narrowed_script
+
+    script = ("param map = 'highway_straight'\nparam gap = Range(20, 40)  # metres\nparam lanes = DiscreteRange(1, 3)\n"
+              "param colour = Uniform('red', 'blue')\nparam other = Range(0, 10)\nego = new Car\n")
+    narrowed, intervals = narrowed_script(script, {"gap": 25.0, "lanes": 2, "colour": "red", "other": 0.0})
+    assert intervals == {"gap": [24.6, 25.4], "other": [0.0, 0.2]}  # 2 % of the width each side, within range
+    assert "param gap = Range(24.6, 25.4)" in narrowed and "param other = Range(0.0, 0.2)" in narrowed
+    for kept in ("param lanes = DiscreteRange(1, 3)", "param colour = Uniform('red', 'blue')",
+                 "param map = 'highway_straight'", "ego = new Car"):
+        assert kept in narrowed
+    with pytest.raises(ValueError, match="outside its range"):
+        narrowed_script(script, {"gap": 41.0})
