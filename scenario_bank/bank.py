@@ -95,6 +95,8 @@ __all__ = [
     "AddOutcome",
     "param_ranges",
     "near_duplicate",
+    "changed_code_lines",
+    "NEAR_COPY_LINES",
     "ENTRY_FILE_KEYS",
     "ENTRY_FILES",
     "entry_files",
@@ -126,11 +128,15 @@ _MAX_INDEX_BYTES = 256 << 20
 ARCHIVE_HEADER = "bank-archive.json"
 _PROVENANCE_FIELDS = ("kind", "video", "parent", "seed", "generator", "model", "context_hash", "date")
 MINED_PROVENANCE_FIELDS = ("params", "backends", "policy", "failure", "cluster", "reproduction", "e2e_sc", "run", "trace",
-                           "index", "merged")
+                           "index", "merged", "interaction", "judge", "replay", "replay_entry", "converted")
 """Extra provenance of ``kind == "mined"`` entries (failure mining): the parent's sampled parameters, the
 DRA/SG backends, the policy that failed, its failure and cluster, the reproduction rate and E2E-SC, the
-mining run and episode index, and ``merged``: later failures merged into this entry (see
-:meth:`Bank.add_or_merge`). Sidecars without them (every older sidecar) load as before."""
+mining run and episode index, ``merged``: later failures merged into this entry (see
+:meth:`Bank.add_or_merge`), ``interaction``: the failure's actor and manoeuvre read from its trace,
+``judge``: the checks the converted script passed, ``replay``: on an exact replay of the failing scene,
+the parameters, seed and trajectory hash that pin it, and the links between the two entries of one failure
+(``replay_entry`` on the converted script, ``converted`` on the replay). Sidecars without them (every older
+sidecar) load as before."""
 
 ENTRY_FILE_KEYS = ("video", "trace")
 """Provenance fields that may name one of the entry's own files by its path relative to the entry folder (a
@@ -349,6 +355,29 @@ def near_duplicate(elements_a: Mapping[str, Any], map_a: Optional[str], script_a
     ranges_a, ranges_b = param_ranges(script_a), param_ranges(script_b)
     return all(ranges_a[p][0] <= ranges_b[p][1] and ranges_b[p][0] <= ranges_a[p][1]
                for p in set(ranges_a) & set(ranges_b))
+
+
+NEAR_COPY_LINES = 2
+"""Two scripts whose code (comments and blank lines aside) differs in at most this many lines are near-copies
+(:func:`changed_code_lines`)."""
+
+
+def _code_lines(script: str) -> List[str]:
+    lines: List[str] = []
+    for line in script.splitlines():
+        text = line.strip()
+        if not text or text.startswith("#") or (not lines and text.startswith(('"' * 3, "'" * 3))):
+            continue
+        lines.append(text)
+    return lines
+
+
+def changed_code_lines(script_a: str, script_b: str) -> int:
+    """How many lines of code (blank lines, comment lines and a leading one-line docstring aside) one script would
+    need changed, added or removed to become the other."""
+    a, b = _code_lines(script_a), _code_lines(script_b)
+    matcher = difflib.SequenceMatcher(None, a, b, autojunk=False)
+    return sum(max(i2 - i1, j2 - j1) for tag, i1, i2, j1, j2 in matcher.get_opcodes() if tag != "equal")
 
 
 @dataclass
@@ -865,6 +894,7 @@ class Bank:
         use_case: Optional[str] = None,
         upgrade_scenic2: bool = False,
         files: Optional[Mapping[str, PathLike]] = None,
+        near_copy_of: Optional[Callable[["ScenarioEntry"], bool]] = None,
     ) -> AddOutcome:
         """Add a scenario, or merge it into the entry it duplicates; one atomic step under the writers' lock.
 
@@ -877,6 +907,10 @@ class Bank:
         :meth:`add`; on a merge the files go to ``merged/<n>/<name>`` in the existing entry's folder (``n``:
         the merged record's 1-based position) and the merged record's provenance values naming them are
         rewritten to those paths, so every merged source keeps its own files.
+
+        ``near_copy_of``: entries it returns True for (e.g. mined entries of the same family) are also merged
+        into when their script's code differs from this one in at most :data:`NEAR_COPY_LINES` lines
+        (:func:`changed_code_lines`), whatever their elements.
         """
         self._check_writable("add a scenario")
         files = _check_files(files)
@@ -886,6 +920,8 @@ class Bank:
         with self._lock():
             self._load(locked=True)
             found = self.find_near_duplicate(script, meta["elements"], meta["map"])
+            if found is None and near_copy_of is not None:
+                found = self._find_near_copy(script, near_copy_of)
             if found is None:
                 name = meta["name"] = self._free_name(meta["name"], explicit=False)
                 if files:
@@ -914,6 +950,45 @@ class Bank:
                 merged[ENTRY_FILES] = [prefix + file for file in files]
             self._append_merged(existing, merged)
             return AddOutcome("merged", self._entries[existing], how)
+
+    def _find_near_copy(self, script: str, accept: Callable[["ScenarioEntry"], bool]) -> Optional[Tuple[str, str]]:
+        """``(name, how)`` of the first entry ``accept`` takes whose code differs from ``script`` in at most
+        :data:`NEAR_COPY_LINES` lines (caller holds the lock)."""
+        for name in sorted(self._entries):
+            entry = self._entries[name]
+            if not accept(entry):
+                continue
+            try:
+                other = entry.script
+            except OSError:
+                continue
+            changed = changed_code_lines(other, script)
+            if changed <= NEAR_COPY_LINES:
+                return name, f"a near-copy ({changed} changed line(s) of code) of an entry of the same family"
+        return None
+
+    def update_source(self, name: str, fields: Mapping[str, Any]) -> "ScenarioEntry":
+        """Set ``fields`` in entry ``name``'s provenance (``source``), rewriting its sidecar atomically under the
+        writers' lock; returns the updated entry. ``kind``, ``merged`` and the entry's file list cannot be set."""
+        self._check_writable("change a scenario's provenance")
+        refused = sorted(set(fields) & {"kind", "merged", ENTRY_FILES})
+        if refused:
+            raise BankError(f"update_source cannot set {', '.join(refused)}; add or merge the scenario instead")
+        with self._lock():
+            self._load(locked=True)
+            if name not in self._entries:
+                raise UnknownScenarioError(f"no scenario named {name!r} in the bank at {self.root}")
+            entry = self._entries[name]
+            try:
+                meta = _read_json(self.root, f"{name}/{SIDECAR}")
+                meta.setdefault("source", {}).update(dict(fields))
+                atomic_write_text(entry.folder / SIDECAR, json.dumps(meta, indent=2, sort_keys=True, default=str) + "\n")
+            except UnsafeInputError as error:
+                raise _unsafe(error, "; the entry was not changed") from None
+            except OSError as error:
+                raise _write_error(error, entry.folder) from None
+            self._load(locked=True)
+            return self._entries[name]
 
     def _append_merged(self, name: str, record: Dict[str, Any]) -> None:
         """Append ``record`` to entry ``name``'s ``source.merged`` (caller holds the lock)."""

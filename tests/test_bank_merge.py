@@ -143,3 +143,20 @@ def test_several_miners_writing_to_one_bank_keep_it_consistent(tmp_path, miners)
     assert sorted(indices) == sorted(index for index, _, _, _ in outcomes)  # every failure recorded exactly once
     leftovers = [p.name for p in (tmp_path / "bank").glob(".*")]
     assert leftovers == [WRITERS_LOCK]  # the writers' lock, and no staging or temporary leftovers
+
+
+def test_update_source_sets_provenance_fields_atomically_and_refuses_the_structural_ones(tmp_path):
+    from scenario_bank.bank import BankError, UnknownScenarioError
+
+    bank = Bank(tmp_path / "bank")
+    entry = bank.add(A, "A stopped car ahead.", name="mined_stop", elements=ELEMENTS, provenance=mined(1))
+    updated = bank.update_source(entry.name, {"converted": "mined_other", "converted_e2e_sc": 0.5})
+    assert updated.source["converted"] == "mined_other" and updated.source["index"] == 1
+    reread = Bank(tmp_path / "bank").get(entry.name)
+    assert reread.source["converted_e2e_sc"] == 0.5 and reread.script == A and reread.content_hash == entry.content_hash
+    for field in ("kind", "merged", "files"):
+        with pytest.raises(BankError, match="cannot set"):
+            bank.update_source(entry.name, {field: []})
+    with pytest.raises(UnknownScenarioError):
+        bank.update_source("no_such_entry", {"converted": None})
+    assert not list((tmp_path / "bank").glob(".staging-*")) and not Bank(tmp_path / "bank").problems

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from dv2s_gym.mining.convert import convert_failure, reproduction_seeds, same_failure_class
+from dv2s_gym.mining.exact_replay import replay_failure
 from dv2s_gym.mining.failure_video import FailureReplayError, record_failure_video, write_failure_video
 from dv2s_gym.pipeline.video import read_video
 from envs.trace import EpisodeTrace
@@ -122,10 +123,28 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
         assert (folder / name).is_file(), name
     report = json.loads((folder / "conversion" / "report.json").read_text())
     assert report["status"] == "kept" and len(report["reproduction_episodes"]) == 10
-    assert set(out["timings"]) == {"video", "describe", "generate", "check", "reproduction", "e2e_sc", "bank"}
+    assert set(out["timings"]) == {"video", "interaction", "replay", "describe", "generate", "check", "reproduction",
+                                   "avoidability", "e2e_sc", "bank"}
+    # the judge: the stopped car the ego ran into shows in the runs, the policy fails on it the same way, and
+    # the reference driver avoids it
+    assert out["interaction"]["kind"] == "car" and out["interaction"]["manoeuvres"] == ["stop"]
+    assert out["interaction"]["gap_m"] == pytest.approx(record["params"]["stopped_gap"], abs=0.5)
+    assert repro["interaction_shown"] >= 3 and out["rejections"] == []
+    assert out["avoidability"]["reference"] == "rule" and out["avoidability"]["avoided_rate"] > 0.5
 
     fresh = Bank(tmp_path / "bank")  # as another process sees it
-    assert fresh.names() == [out["bank_entry"]] and not fresh.problems
+    assert fresh.names() == sorted([out["bank_entry"], out["replay_entry"]]) and not fresh.problems
+    # the failing scene itself, kept exactly: running the replay entry is the recorded episode, step for step
+    replay = fresh.get(out["replay_entry"])
+    assert {"mined", "replay", "collision"} <= set(replay.tags)
+    assert replay.source["replay"]["seed"] == 0 and replay.source["replay"]["params"] == record["params"]
+    assert replay.source["converted"] == out["bank_entry"] and replay.source["converted_e2e_sc"] == out["e2e_sc"]
+    assert replay.source["e2e_sc"] == 1.0
+    for name, (low, high) in replay.source["replay"]["intervals"].items():
+        assert low <= record["params"][name] <= high and f"Range({low!r}, {high!r})" in replay.script
+    rerun = replay_failure(fresh, out["replay_entry"])
+    assert rerun["matches"] and rerun["trajectory_hash"] == record["result"]["trajectory_hash"]
+    assert same_failure_class(record["failure"], rerun["failure"])
     entry = fresh.get(out["bank_entry"])
     source = entry.source
     assert source["kind"] == "mined" and source["parent"] == SCENARIO and source["seed"] == 0
@@ -138,12 +157,14 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     assert source["cluster"] == f"{SCENARIO}/collision/0"
     assert entry.description == out["description"] and "mined" in entry.tags
     assert entry.script == (folder / "conversion" / "scenario.scenic").read_text()
+    assert source["replay_entry"] == out["replay_entry"] and source["interaction"] == out["interaction"]
 
     again = convert_failure({**record, "index": 5}, tmp_path / "run2", policy="keep_lane", bank=bank)
     assert again["status"] == "merged" and again["merged_into"] == out["bank_entry"], again["reason"]
     merged = Bank(tmp_path / "bank").get(out["bank_entry"]).source["merged"]
     assert len(merged) == 1 and merged[0]["index"] == 5 and merged[0]["parent"] == SCENARIO
-    assert Bank(tmp_path / "bank").names() == [out["bank_entry"]]
+    assert again["replay_entry"] == out["replay_entry"]  # the same failing scene: its replay is not added twice
+    assert Bank(tmp_path / "bank").names() == sorted([out["bank_entry"], out["replay_entry"]])
 
 
 def test_a_reproduction_rate_below_the_threshold_is_rejected(record, tmp_path):
@@ -153,8 +174,15 @@ def test_a_reproduction_rate_below_the_threshold_is_rejected(record, tmp_path):
     assert out["status"] == "rejected" and out["stage"] == "reproduction"
     assert out["reproduction"]["reproduced"] == 0 and out["reproduction"]["rate"] == 0.0
     assert out["reason"].startswith("reproduction: ") and "0 of 10" in out["reason"]
+    # the interaction is read from the trace, where the stopped actor is a car, and the new scenario shows it
+    assert out["interaction"]["kind"] == "car" and out["rejections"] == [out["reason"]]
     assert out["e2e_sc"] is not None  # measured either way
-    assert len(Bank(tmp_path / "bank")) == 0
+    assert _converted(tmp_path / "bank") == []
+
+
+def _converted(bank_dir) -> list:
+    """The bank's mined entries that are converted scripts (not exact replays of a failing scene)."""
+    return [e.name for e in Bank(bank_dir) if e.source.get("kind") == "mined" and not e.source.get("replay")]
 
 
 def _patch_generator(monkeypatch, script: str) -> None:
@@ -170,7 +198,7 @@ def test_an_unsafe_script_is_rejected_at_the_check(record, tmp_path, monkeypatch
     assert out["status"] == "rejected" and out["stage"] == "check"
     assert out["reason"].startswith("check: safety failed") and "import" in out["reason"]
     assert out["reproduction"] is None and out["bank_entry"] is None
-    assert len(Bank(tmp_path / "bank")) == 0
+    assert _converted(tmp_path / "bank") == [] and out["replay_entry"] in Bank(tmp_path / "bank")
 
 
 @pytest.mark.slow
@@ -180,7 +208,7 @@ def test_a_script_failing_in_the_sandbox_is_rejected_with_its_stage(record, tmp_
     out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "check", out
     assert "sandboxed check" in out["reason"] and "NoSuchBehavior" in out["reason"]
-    assert len(Bank(tmp_path / "bank")) == 0
+    assert _converted(tmp_path / "bank") == []
 
 
 def test_a_record_without_a_failure_is_rejected_not_raised(record, tmp_path):
@@ -247,14 +275,17 @@ def test_a_run_killed_between_the_bank_write_and_its_record_resumes_without_a_se
     with pytest.raises(KeyboardInterrupt):
         mine("keep_lane", **run)
     monkeypatch.setattr(miner_module._Appender, "append", original)
-    mined = [e.name for e in Bank(tmp_path / "bank") if e.source.get("kind") == "mined"]
+    mined = _converted(tmp_path / "bank")
     assert len(mined) == 1 and not (tmp_path / "run" / "conversions.jsonl").read_text().strip()
+    replays = [e.name for e in Bank(tmp_path / "bank") if e.source.get("replay")]
+    assert len(replays) == 1 and Bank(tmp_path / "bank").get(replays[0]).source["converted"] == mined[0]
 
     resumed = mine("keep_lane", **run)
     row = resumed.conversions[0]
     assert len(resumed.conversions) == 1 and row["status"] == "kept" and row["bank_entry"] == mined[0], row
     entry = Bank(tmp_path / "bank").get(mined[0])
-    assert [e.name for e in Bank(tmp_path / "bank") if e.source.get("kind") == "mined"] == mined
+    assert _converted(tmp_path / "bank") == mined
+    assert [e.name for e in Bank(tmp_path / "bank") if e.source.get("replay")] == replays
     assert not entry.source.get("merged") and row["reproduction"] == entry.source["reproduction"]
     assert CONTRACT_KEYS <= set(row) and (tmp_path / "run" / row["video"]).is_file()
     assert (tmp_path / "run" / row["script"]).is_file()
@@ -279,3 +310,89 @@ def test_an_unreachable_model_endpoint_stops_converting_and_the_rerun_converts(t
     assert len((tmp_path / "run" / "episodes.jsonl").read_text().splitlines()) == 4
     rows = mine("keep_lane", convert_options={"dra": "bev"}, **run).conversions
     assert len(rows) == 1 and rows[0]["stage"] != "describe" and rows[0]["status"] == "kept", rows
+
+
+def test_a_script_without_the_failures_interaction_is_rejected_though_the_policy_fails_on_it(record, tmp_path,
+                                                                                            monkeypatch):
+    # the failure: the ego ran into a car standing still in its lane. The script below has the ego run into a
+    # car *driving* slowly in its lane: the same failure class (rear-end collision with a car), but not the
+    # stopped car of the failure
+    moving = Bank().get(SCENARIO).script.replace(
+        "    with speed 0,\n    with behavior StayStopped()",
+        "    with speed 3,\n    with behavior FollowLaneBehavior(target_speed=3)")
+    assert moving != Bank().get(SCENARIO).script
+    _patch_generator(monkeypatch, moving)
+    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    assert out["status"] == "rejected" and out["stage"] == "interaction", out
+    assert out["reproduction"]["rate"] >= 0.3  # the policy does fail on it, the same way ...
+    assert out["reproduction"]["interaction_shown"] == 0  # ... but never with a car that stops
+    assert out["rejections"] == [out["reason"]] and out["reason"].startswith("interaction: ")
+    assert "car (stop)" in out["reason"]
+    assert _converted(tmp_path / "bank") == []
+    # the failure itself is kept exactly all the same
+    replay = Bank(tmp_path / "bank").get(out["replay_entry"])
+    assert replay.source["converted"] is None and replay.source["converted_rejections"] == [out["reason"]]
+
+
+def test_each_failed_check_of_the_judge_is_its_own_reason():
+    from dv2s_gym.mining.convert import _judge
+
+    interaction = {"kind": "car", "manoeuvres": ["brake", "stop"], "failure_type": "stall"}
+    out = {"reproduction": {"k": 10, "reproduced": 2, "rate": 0.2, "interaction_shown": 1},
+           "avoidability": {"reference": "rule", "k": 10, "failed": 6, "avoided_rate": 0.4}}
+    reasons = [str(r) for r in _judge(out, interaction, {"type": "stall"}, 0.3)]
+    assert [r.split(":")[0] for r in reasons] == ["interaction", "reproduction", "avoidability"]
+    assert "car (brake, stop) in 1 of 10" in reasons[0] and "stall failure with a car in 2 of 10" in reasons[1]
+    assert "rule failed the same way in 6 of 10" in reasons[2]
+    passing = {"reproduction": {"k": 10, "reproduced": 3, "rate": 0.3, "interaction_shown": 3},
+               "avoidability": {"reference": "rule", "k": 10, "failed": 4, "avoided_rate": 0.6}}
+    assert _judge(passing, interaction, {"type": "stall"}, 0.3) == []
+    # the reference avoiding it in half of the episodes is not "most"
+    half = {**passing, "avoidability": {"reference": "rule", "k": 10, "failed": 5, "avoided_rate": 0.5}}
+    assert [str(r).split(":")[0] for r in _judge(half, interaction, {"type": "stall"}, 0.3)] == ["avoidability"]
+
+
+def test_a_near_copy_of_a_mined_entry_of_the_same_family_is_merged(tmp_path):
+    from dv2s_gym.mining.convert import _family
+    from scenario_bank.bank import changed_code_lines
+
+    script = Bank().get(SCENARIO).script
+    one_line = script.replace("param stopped_gap = Range(30, 60)", "param stopped_gap = Range(61, 90)")
+    three_lines = one_line.replace("param ego_speed = Range(8, 13)", "param ego_speed = Range(14, 16)").replace(
+        "param oncoming_speed = Range(8, 12)", "param oncoming_speed = Range(13, 15)")
+    assert changed_code_lines(script, one_line) == 1 and changed_code_lines(script, three_lines) == 3
+    assert changed_code_lines(script, "# a comment\n" + script) == 0
+    bank = Bank(tmp_path / "bank")
+    source = {"kind": "mined", "parent": SCENARIO, "failure": {"type": "collision"}}
+    first = bank.add_or_merge(script, "a car stands still ahead", elements={"participants": ["ego", "car"]},
+                              provenance=source, name="mined_a", near_copy_of=_family(SCENARIO, "collision"))
+    assert first.status == "added"
+    # other elements, no overlapping range: not a near-duplicate by elements, but one line of code apart
+    other = {"participants": ["ego", "car", "car"], "actions": [["car", "stop"]]}
+    elsewhere = script.replace("param oncoming_distance = Range(40, 90)", "param oncoming_distance = Range(91, 120)")
+    stall = bank.add_or_merge(elsewhere, "another description", elements=other, name="mined_b",
+                              provenance={**source, "failure": {"type": "stall"}},
+                              near_copy_of=_family(SCENARIO, "stall"))
+    assert stall.status == "added"  # another family (failure type): kept apart
+    copy = bank.add_or_merge(one_line, "another description", elements=other, name="mined_c", provenance=source,
+                             near_copy_of=_family(SCENARIO, "collision"))
+    assert copy.status == "merged" and copy.entry.name == first.entry.name and "1 changed line" in copy.how
+    apart = bank.add_or_merge(three_lines, "a third description", elements=other, name="mined_d",
+                              provenance=source, near_copy_of=_family(SCENARIO, "collision"))
+    assert apart.status == "added"
+    assert sorted(Bank(tmp_path / "bank").names()) == ["mined_a", "mined_b", "mined_d"]
+
+
+def test_the_replay_script_narrows_only_the_continuous_ranges_around_the_failing_values():
+    from dv2s_gym.mining.exact_replay import narrowed_script
+
+    script = ("param map = 'highway_straight'\nparam gap = Range(20, 40)  # metres\nparam lanes = DiscreteRange(1, 3)\n"
+              "param colour = Uniform('red', 'blue')\nparam other = Range(0, 10)\nego = new Car\n")
+    narrowed, intervals = narrowed_script(script, {"gap": 25.0, "lanes": 2, "colour": "red", "other": 0.0})
+    assert intervals == {"gap": [24.6, 25.4], "other": [0.0, 0.2]}  # 2 % of the width each side, within range
+    assert "param gap = Range(24.6, 25.4)" in narrowed and "param other = Range(0.0, 0.2)" in narrowed
+    for kept in ("param lanes = DiscreteRange(1, 3)", "param colour = Uniform('red', 'blue')",
+                 "param map = 'highway_straight'", "ego = new Car"):
+        assert kept in narrowed
+    with pytest.raises(ValueError, match="outside its range"):
+        narrowed_script(script, {"gap": 41.0})

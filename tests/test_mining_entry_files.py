@@ -68,7 +68,7 @@ def test_a_kept_and_a_merged_entry_keep_their_videos_once_the_runs_are_deleted(r
     assert not report.ok and "merged/1/failure.webm" in report.error
 
     # export/import carries the files that exist
-    archive = Bank(tmp_path / "bank").export(tmp_path / "bank.tar.gz")
+    archive = Bank(tmp_path / "bank").export(tmp_path / "bank.tar.gz", names=[entry.name])
     imported = Bank(tmp_path / "other")
     assert imported.import_archive(archive)["added"] == [entry.name]
     copy = imported.get(entry.name)

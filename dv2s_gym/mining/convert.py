@@ -1,4 +1,4 @@
-"""From a mined failure to a validated bank entry.
+"""From a mined failure to validated bank entries: the failing scene kept exactly, and its D-V2S conversion judged.
 
 :func:`convert_failure` takes one failure record of the miner (an episode record of
 ``episodes.jsonl`` whose ``failure`` is set) through these stages, each timed, and returns the
@@ -6,21 +6,39 @@ conversion record of ``conversions.jsonl``:
 
 1. ``video``: re-run the episode and write its bird's-eye video and trace
    (:func:`dv2s_gym.mining.failure_video.record_failure_video`; a diverging replay is a rejection);
-2. ``describe``: the Driving Record Analyzer turns the video into a description;
-3. ``generate``: the Scenario Generator turns the description into a Scenic script;
-4. ``check``: safety allowlist, then compile, sample and run in the sandbox
-   (:func:`dv2s_gym.pipeline.convert.check_scenario`; the in-process run is the reproduction below);
-5. ``reproduction``: the same policy drives the new scenario over ``k`` scenes whose seeds derive
-   from the record's seed (``numpy.random.SeedSequence([seed, record seed])``); the scenario is kept
-   iff the share of episodes failing in the *same failure class* is at least ``threshold``
-   (the rate and its Wilson interval are recorded either way);
-6. ``e2e_sc``: E2E-SC between the source failure's trace (its elements are the ground truth) and each
+2. ``interaction``: the failure's interaction read from its own trace
+   (:func:`dv2s_gym.mining.interaction.failure_interaction`): the actor involved (the collision partner, or
+   the actor the ego slowed down for, however far ahead), its kind and its manoeuvres;
+3. ``replay``: the exact replay of the failing scene goes into the bank whatever becomes of the conversion
+   (:mod:`dv2s_gym.mining.exact_replay`): the parent script narrowed around the failing parameters, tagged
+   ``replay``, its provenance ``replay`` holding the parameters, seed and trajectory hash that pin the
+   scene; it is checked to replay the recorded episode step for step first (else a ``replay`` rejection);
+4. ``describe``: the Driving Record Analyzer turns the video into a description, and the trace's account of
+   the interaction is added to it (:func:`~dv2s_gym.mining.interaction.interaction_sentence`), so the
+   description names what caused the failure even when the clip does not show it;
+5. ``generate``: the Scenario Generator turns the description into a Scenic script;
+6. ``check``: safety allowlist, then compile, sample and run in the sandbox
+   (:func:`dv2s_gym.pipeline.convert.check_scenario`);
+7. ``reproduction``: the same policy drives the new scenario over ``k`` scenes whose seeds derive
+   from the record's seed (``numpy.random.SeedSequence([seed, record seed])``); an episode reproduces the
+   failure when it fails in the *same failure class* with the *same kind of actor*; each episode also says
+   whether its trace shows the failure's interaction (the actor's kind doing one of its manoeuvres);
+8. ``avoidability``: the reference driver (``rule``) drives the same ``k`` scenes;
+9. ``e2e_sc``: E2E-SC between the source failure's trace (its elements are the ground truth) and each
    simulated trace of the reproduction, averaged over the ``k`` traces;
-7. ``bank``: :meth:`scenario_bank.bank.Bank.add_or_merge` adds the script with ``mined`` provenance,
-   or merges the failure into the entry it (nearly) duplicates. The failure video and trace are copied
-   into the entry's folder in the same atomic step (provenance ``video: "failure.webm"``,
-   ``trace: "trace.json.gz"``, relative to the entry folder; a merge puts them under ``merged/<n>/``), and
-   a map path in ``params`` is kept as its file name: the entry stands alone once the run folder is gone.
+10. the judge: the script is rejected, each reason with its own stage and every failed one listed in
+    ``rejections``, when the interaction shows in fewer than ``threshold`` of the episodes
+    (``interaction: ...``), the failure reproduces in fewer than ``threshold`` (``reproduction: ...``), or
+    the reference driver fails the same way in half of the episodes or more (``avoidability: ...``);
+11. ``bank``: :meth:`scenario_bank.bank.Bank.add_or_merge` adds the script with ``mined`` provenance,
+    or merges the failure into the entry it (nearly) duplicates, a converted entry of the same family
+    (parent and failure type) whose code differs in at most :data:`~scenario_bank.bank.NEAR_COPY_LINES`
+    lines included. The failure video and trace are copied into the entry's folder in the same atomic
+    step (provenance ``video: "failure.webm"``, ``trace: "trace.json.gz"``, relative to the entry folder; a
+    merge puts them under ``merged/<n>/``), and a map path in ``params`` is kept as its file name: the entry
+    stands alone once the run folder is gone. The two entries of one failure link each other
+    (``replay_entry`` on the script, ``converted`` on the replay) and the replay records the converted
+    script's E2E-SC (``converted_e2e_sc``) and rejections beside its own E2E-SC (1.0 for an exact replay).
 
 Failure class (:func:`same_failure_class`): the failure types must be equal; for collisions the
 other party's kind (``with_kind``: car, truck, pedestrian, obstacle...) and the collision type
@@ -134,8 +152,14 @@ def _rel(path: Path, root: Path) -> str:
 
 def _reproduce(script_path: Path, *, policy: Any, record_seed: int, k: int, seed: int,
                env_config: Optional[Mapping[str, Any]], source_failure: Mapping[str, Any],
-               monitor: Mapping[str, Any]) -> Tuple[List[Dict[str, Any]], List[Any]]:
-    """Run ``policy`` on the new scenario over ``k`` derived seeds; per episode its seed, failure and match."""
+               monitor: Mapping[str, Any], interaction: Optional[Mapping[str, Any]] = None
+               ) -> Tuple[List[Dict[str, Any]], List[Any]]:
+    """Run ``policy`` on the new scenario over ``k`` derived seeds; per episode its seed, failure, the kind of
+    the actor its failure involved (``actor_kind``, :func:`~dv2s_gym.mining.interaction.key_actor`), whether it
+    shows the source failure's interaction (``interaction``) and ``reproduced``: the same failure class with
+    the same kind of actor."""
+    from dv2s_gym.mining.interaction import key_actor, shows_interaction
+    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
     from envs.dv2s_env import DV2SEnv
     from policies.evaluation import run_episode
     from policies.registry import load_policy
@@ -149,13 +173,126 @@ def _reproduce(script_path: Path, *, policy: Any, record_seed: int, k: int, seed
         for scene_seed in reproduction_seeds(record_seed, k, seed):
             result, trace = run_episode(env, bound, name, scene_seed)
             failure = _detect(result, trace, monitor)
+            actor = key_actor(trace, failure) if failure else None
+            actor_kind = None
+            if actor is not None:
+                actor_kind = (failure.get("with_kind") if failure.get("with") == actor and failure.get("with_kind")
+                              else _actor_kind(trace, actor))
+            wanted_kind = (interaction or {}).get("kind")
+            same = same_failure_class(source_failure, failure) and (wanted_kind is None or actor_kind == wanted_kind)
+            shown = shows_interaction(interaction, elements_from_trace(trace)) if interaction else None
             episodes.append({"seed": scene_seed, "failure": failure, "steps": result.steps,
-                             "trajectory_hash": result.trajectory_hash,
-                             "reproduced": same_failure_class(source_failure, failure)})
+                             "trajectory_hash": result.trajectory_hash, "actor_kind": actor_kind,
+                             "interaction": shown, "reproduced": same})
             traces.append(trace)
         return episodes, traces
     finally:
         env.close()
+
+
+def _actor_kind(trace, name: str) -> str:
+    from dv2s_gym.pipeline.trace_semantics import _kind
+
+    return _kind(name, dict(getattr(trace, "kinds", {}) or {}))
+
+
+def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failure: Mapping[str, Any],
+           threshold: float) -> List[_Rejected]:
+    """The checks a converted script must pass, each failing one a rejection with its own stage:
+    ``interaction`` (its runs show the failure's actor doing its manoeuvre), ``reproduction`` (the policy
+    fails the same way with the same kind of actor) and ``avoidability`` (the reference driver avoids it in
+    most episodes)."""
+    found: List[_Rejected] = []
+    repro = out["reproduction"]
+    k = repro["k"]
+    what = f"{interaction.get('kind')} ({', '.join(interaction.get('manoeuvres') or []) or 'no manoeuvre'})"
+    if interaction.get("kind") and repro["interaction_shown"] / k < threshold:
+        found.append(_Rejected("interaction", f"the new scenario's runs show the failure's {what} in "
+                                              f"{repro['interaction_shown']} of {k} episodes "
+                                              f"(share {repro['interaction_shown'] / k:.2f} < threshold {threshold:g})"))
+    if repro["rate"] < threshold:
+        with_kind = f" with a {interaction['kind']}" if interaction.get("kind") else ""
+        found.append(_Rejected("reproduction", f"the new scenario reproduced the {source_failure['type']} failure"
+                                               f"{with_kind} in {repro['reproduced']} of {k} episodes "
+                                               f"(rate {repro['rate']:.2f} < threshold {threshold:g})"))
+    avoid = out.get("avoidability")
+    if avoid and not avoid["avoided_rate"] > 0.5:
+        found.append(_Rejected("avoidability", f"the reference driver {avoid['reference']} failed the same way in "
+                                               f"{avoid['failed']} of {avoid['k']} episodes of the new scenario "
+                                               "(it must avoid the failure in most)"))
+    return found
+
+
+def _family(parent: str, failure_type: str):
+    """Whether a bank entry is a converted (not replay) mined entry from ``parent`` with a ``failure_type`` failure."""
+    def same(entry) -> bool:
+        source = entry.source
+        return (source.get("kind") == "mined" and not source.get("replay") and source.get("parent") == parent
+                and (source.get("failure") or {}).get("type") == failure_type)
+    return same
+
+
+def _link(bank, name: str, fields: Mapping[str, Any]) -> None:
+    bank.update_source(name, dict(fields))
+
+
+def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, policy: Any,
+                env_config: Optional[Mapping[str, Any]], monitor: Mapping[str, Any],
+                source_failure: Mapping[str, Any], cluster: Optional[str], run_dir: Path,
+                interaction: Mapping[str, Any], files: Mapping[str, Path]) -> Dict[str, Any]:
+    """Add the exact replay of the failing scene to ``bank`` (:mod:`dv2s_gym.mining.exact_replay`): the parent
+    script narrowed around the failing parameters, checked to replay the recorded episode step for step.
+    Returns ``{"entry", "params", "intervals", "seed", "trajectory_hash", "e2e_sc", "note"}`` (``entry`` None,
+    with a ``note``, when the narrowed script is the parent itself and the parent is in ``bank``)."""
+    import datetime
+
+    from dv2s_gym.mining.exact_replay import REPLAY_TAG, narrowed_script, replay_name, run_replay
+    from dv2s_gym.mining.interaction import interaction_sentence
+    from dv2s_gym.pipeline.metrics import e2e_sc
+    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from scenario_bank.bank import Bank, DuplicateScenarioError
+
+    parent = (Bank(bank_dir) if bank_dir else Bank()).get(record["scenario"])
+    params = dict(record.get("params") or {})
+    script, intervals = narrowed_script(parent.script, params)
+    seed = int(record["seed"])
+    expected = record["result"]["trajectory_hash"]
+    folder = run_dir / "failures" / cluster_slug(cluster, record.get("index")) / CONVERSION_DIR
+    path = folder / "replay.scenic"
+    _write(path, script)
+    result, trace, failure = run_replay(path, policy=policy, seed=seed, params=params, env_config=env_config,
+                                        monitor=monitor)
+    if result.trajectory_hash != expected:
+        raise _Rejected("replay", f"the parent {record['scenario']!r} narrowed around the failing parameters does not "
+                                  f"replay the failing episode (trajectory hash {result.trajectory_hash[:12]} != "
+                                  f"recorded {expected[:12]})")
+    replay = {"params": params, "intervals": intervals, "seed": seed, "trajectory_hash": expected,
+              "policy": _policy_name(policy)}
+    out = {"entry": None, **replay, "failure": failure, "note": None,
+           "e2e_sc": e2e_sc(elements_from_trace(source_trace), elements_from_trace(trace))}
+    events = interaction_sentence(interaction)
+    description = (f"{parent.description.strip()} Exact replay of a failure of {_policy_name(policy)}: seed {seed}, "
+                   f"parameters narrowed around the failing values." + (f" {events}" if events else ""))
+    provenance = {"kind": "mined", "parent": record["scenario"], "seed": seed, "params": params,
+                  "video": ENTRY_VIDEO, "trace": ENTRY_TRACE, "generator": "exact replay",
+                  "policy": _policy_name(policy), "failure": dict(source_failure), "cluster": cluster,
+                  "run": str(run_dir.resolve()), "index": record.get("index"), "interaction": dict(interaction),
+                  "replay": replay, "e2e_sc": out["e2e_sc"], "date": datetime.date.today().isoformat()}
+    base = replay_name(record["scenario"], source_failure["type"])
+    name, n = base, 2
+    while name in bank:
+        name, n = f"{base}_{n}", n + 1
+    try:
+        entry = bank.add(script, description, name=name, elements=parent.elements, map=parent.map,
+                         tags=["mined", REPLAY_TAG, source_failure["type"]], provenance=provenance, files=dict(files))
+        out["entry"] = entry.name
+    except DuplicateScenarioError as error:
+        existing = bank.get(error.existing).source.get("replay") or {}
+        if existing.get("seed") == seed and existing.get("params") == params:
+            out["entry"] = error.existing  # this failing scene is in the bank already (a resumed run)
+        else:
+            out["note"] = f"no replay entry: {error}"
+    return out
 
 
 def _portable_params(params: Mapping[str, Any]) -> Dict[str, Any]:
@@ -177,7 +314,8 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
                     threshold: float = 0.3, seed: int = 0, env_config: Optional[Mapping[str, Any]] = None,
                     bank_dir: Optional[PathLike] = None, cluster: Optional[str] = None,
                     monitor: Optional[Mapping[str, Any]] = None, before: float = 4.0,
-                    after: float = 1.0) -> Dict[str, Any]:
+                    after: float = 1.0, reference: Optional[Any] = "rule",
+                    describe_events: bool = True) -> Dict[str, Any]:
     """Turn one failure record into a bank entry; returns the conversion record (never raises for a bad failure).
 
     Args:
@@ -196,12 +334,19 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
             ``run_dir/settings.json``, else the monitors' defaults.
         before, after: seconds of video before and after the failure (a stall's clip covers the stall, up to
             the monitor's ``stall_seconds``, between them: :func:`~dv2s_gym.mining.failure_video.write_failure_video`).
+        reference: the reference driver that must avoid the failure on the new script (``None``: not checked).
+        describe_events: add to the DRA's description the failure's actor and manoeuvre read from the trace
+            (:func:`~dv2s_gym.mining.interaction.interaction_sentence`), so the description names what caused
+            the failure even when the clip does not show it.
 
     Raises the model backends' setup errors (:data:`SETUP_ERRORS`); every other problem is a rejection.
 
     Returns ``{"cluster", "index", "status": "kept"|"merged"|"rejected", "reason", "stage", "video",
     "description", "script", "reproduction", "e2e_sc", "bank_entry", "merged_into", "seconds",
-    "timings"}`` (paths relative to ``run_dir``; ``timings``: seconds per stage).
+    "timings", "interaction", "replay_entry", "avoidability", "rejections"}`` (paths relative to ``run_dir``;
+    ``timings``: seconds per stage; ``status`` is the converted script's; ``replay_entry``: the exact replay's
+    bank entry, kept whatever the script's fate; ``rejections``: every judge check that failed, the first
+    one is ``reason``).
     """
     from scenario_bank.bank import Bank
 
@@ -213,7 +358,8 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
     out: Dict[str, Any] = {"cluster": cluster, "index": record.get("index"), "status": "rejected", "reason": None,
                            "stage": None, "video": None, "description": None, "script": None,
                            "reproduction": None, "e2e_sc": None, "bank_entry": None, "merged_into": None,
-                           "seconds": None, "timings": {}}
+                           "seconds": None, "timings": {}, "interaction": None, "replay_entry": None,
+                           "avoidability": None, "rejections": []}
     details: Dict[str, Any] = {}
     timings: Dict[str, float] = out["timings"]
     stage_start = [time.perf_counter()]
@@ -254,10 +400,31 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
                     source_failure[key] = value
         lap("video")
 
+        stage = "interaction"
+        from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence
+
+        interaction = failure_interaction(source_trace, source_failure)
+        out["interaction"] = interaction
+        lap("interaction")
+
+        stage = "replay"
+        replay = _add_replay(record, source_trace, bank, bank_dir=bank_dir, policy=policy, env_config=env_config,
+                             monitor=monitor, source_failure=source_failure, cluster=cluster, run_dir=run_dir,
+                             interaction=interaction, files={ENTRY_VIDEO: video, ENTRY_TRACE: written.trace_path})
+        out["replay_entry"] = replay["entry"]
+        details["replay"] = replay
+        lap("replay")
+
         stage = "describe"
+        from dv2s_gym.pipeline.semantics import elements_from_text
         from dv2s_gym.pipeline.stages import describe, generate
 
         description = describe(video, backend=dra, llm_config=llm_config)
+        details["dra_description"] = description.text
+        events = interaction_sentence(interaction, known=description.elements) if describe_events else ""
+        if events:  # what the trace says caused the failure, even where the clip does not show it
+            description.text = f"{description.text.strip()} {events}"
+            description.elements = elements_from_text(description.text)
         out["description"] = description.text
         _write(conversion / "description.txt", description.text.strip() + "\n")
         _write(conversion / "elements.json", json.dumps(description.elements, indent=2) + "\n")
@@ -292,13 +459,27 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
 
         episodes, traces = _reproduce(script_path, policy=policy, record_seed=int(record["seed"]), k=int(k),
                                       seed=seed, env_config=env_config, source_failure=source_failure,
-                                      monitor=monitor)
+                                      monitor=monitor, interaction=interaction)
         reproduced = sum(e["reproduced"] for e in episodes)
+        shown = sum(bool(e["interaction"]) for e in episodes)
         low, high = wilson_interval(reproduced, len(episodes))
         out["reproduction"] = {"k": len(episodes), "reproduced": reproduced, "rate": reproduced / len(episodes),
-                               "interval": [low, high], "threshold": float(threshold)}
+                               "interval": [low, high], "threshold": float(threshold),
+                               "interaction_shown": shown, "actor_kind": interaction.get("kind")}
         details["reproduction_episodes"] = episodes
         lap("reproduction")
+
+        stage = "avoidability"
+        if reference:
+            reference_episodes, _ = _reproduce(script_path, policy=reference, record_seed=int(record["seed"]),
+                                               k=int(k), seed=seed, env_config=env_config,
+                                               source_failure=source_failure, monitor=monitor)
+            failed_reference = sum(same_failure_class(source_failure, e["failure"]) for e in reference_episodes)
+            out["avoidability"] = {"reference": _policy_name(reference), "k": len(reference_episodes),
+                                   "failed": failed_reference,
+                                   "avoided_rate": 1.0 - failed_reference / len(reference_episodes)}
+            details["reference_episodes"] = reference_episodes
+        lap("avoidability")
 
         stage = "e2e_sc"
         from dv2s_gym.pipeline.metrics import e2e_sc
@@ -309,10 +490,14 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         out["e2e_sc"] = float(np.mean(scores))
         details["source_elements"] = truth
         lap("e2e_sc")
-        if out["reproduction"]["rate"] < threshold:
-            raise _Rejected("reproduction", f"the new scenario reproduced the {source_failure['type']} failure in "
-                                            f"{reproduced} of {len(episodes)} episodes "
-                                            f"(rate {out['reproduction']['rate']:.2f} < threshold {threshold:g})")
+
+        # the judge: every check that failed is recorded; the first one is the rejection's stage
+        rejections = _judge(out, interaction, source_failure, threshold)
+        out["rejections"] = [str(r) for r in rejections]
+        if replay["entry"]:
+            _link(bank, replay["entry"], {"converted_e2e_sc": out["e2e_sc"], "converted_rejections": out["rejections"]})
+        if rejections:
+            raise rejections[0]
 
         stage = "bank"
         import datetime
@@ -328,16 +513,23 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
             "policy": _policy_name(policy), "failure": source_failure, "cluster": cluster,
             "reproduction": out["reproduction"], "e2e_sc": out["e2e_sc"], "run": str(run_dir.resolve()),
             "index": record.get("index"), "date": datetime.date.today().isoformat(),
+            "interaction": interaction, "judge": {"avoidability": out.get("avoidability"),
+                                                  "interaction_shown": shown, "reproduced": reproduced},
+            "replay_entry": replay["entry"],
         }
+        family = _family(record["scenario"], source_failure["type"])
         outcome = bank.add_or_merge(generation.script, description.text, name=_mined_name(record["scenario"],
                                                                                           source_failure["type"]),
                                     elements=description.elements, tags=["mined", source_failure["type"]],
                                     provenance=provenance,
-                                    files={ENTRY_VIDEO: video, ENTRY_TRACE: written.trace_path})
+                                    files={ENTRY_VIDEO: video, ENTRY_TRACE: written.trace_path},
+                                    near_copy_of=family)
         if outcome.status == "added":
             out.update(status="kept", bank_entry=outcome.entry.name)
         else:
             out.update(status="merged", merged_into=outcome.entry.name, merge_reason=outcome.how)
+        if replay["entry"]:
+            _link(bank, replay["entry"], {"converted": outcome.entry.name})
         lap("bank")
     except _Rejected as rejection:
         out.update(stage=rejection.stage, reason=str(rejection))

@@ -1,0 +1,206 @@
+"""The interaction behind a failure, read from the failure's own trace.
+
+A failure is more than its type: the policy failed *because of* some actor doing something. This module
+finds that actor in an :class:`~envs.trace.EpisodeTrace` and what it did, so a scenario generated from the
+failure can be judged on whether it holds the same interaction (:func:`shows_interaction`), and so the
+description of a failure video names it (:func:`interaction_sentence`) even when the actor was outside
+the rendered frame.
+
+The **key actor** (:func:`key_actor`):
+
+* a ``collision``: the ego's collision partner (the failure's ``with``, else the collision event's);
+* a ``low_ttc``: the actor of the smallest time-to-collision (the failure's ``with``);
+* a ``stall``, an ``off_road`` or anything else: the actor nearest ahead of the ego in its lane during
+  the :data:`LOOKBACK_S` seconds up to the failure (the one the ego slowed down for), however far
+  ahead; when no actor was ahead in the lane, the actor nearest to the ego in that window.
+
+Its **manoeuvres** are the actions the project's trace semantics
+(:func:`dv2s_gym.pipeline.trace_semantics.elements_from_trace`, the same rules as the E2E-SC metric)
+give that actor alone with the ego, restricted to :data:`MANOEUVRES` (braking, stopping, lane changes,
+cut-ins, merges, crossings...); keeping its lane is no manoeuvre.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, Dict, List, Mapping, Optional
+
+__all__ = ["MANOEUVRES", "LOOKBACK_S", "key_actor", "actor_manoeuvres", "failure_interaction", "shows_interaction",
+           "interaction_sentence"]
+
+MANOEUVRES = ("cut_in", "cross", "merge", "lane_change_left", "lane_change_right", "brake", "stop", "pull_out",
+              "drift", "swerve", "turn_left", "turn_right", "u_turn", "reverse", "overtake")
+"""The actions that make an actor's part in a failure, most telling first."""
+LOOKBACK_S = 6.0
+"""Seconds before the failure searched for the actor the ego reacted to (stalls, leaving the road)."""
+_SAME_LANE_M = 2.0   # |lateral offset| [m] within which an actor is in the ego's lane
+_LANE_CHANGES = {"lane_change_left", "lane_change_right"}
+
+
+def _kind(trace, name: str) -> str:
+    from dv2s_gym.pipeline.trace_semantics import _kind as semantic_kind
+
+    return semantic_kind(name, dict(getattr(trace, "kinds", {}) or {}))
+
+
+def _frequency(trace) -> float:
+    return float((trace.config or {}).get("policy_frequency") or 5)
+
+
+def _ego_frame(ego, other):
+    dx, dy = other[0] - ego[0], other[1] - ego[1]
+    c, s = math.cos(ego[2]), math.sin(ego[2])
+    return dx * c + dy * s, dx * s - dy * c
+
+
+def _failure_step(trace, failure: Mapping[str, Any]) -> int:
+    last = max(0, len(trace.states) - 1)
+    if failure.get("step") is not None:
+        return max(0, min(last, int(failure["step"])))
+    if failure.get("time") is not None:
+        return max(0, min(last, int(round(float(failure["time"]) * _frequency(trace)))))
+    return last
+
+
+def key_actor(trace, failure: Optional[Mapping[str, Any]]) -> Optional[str]:
+    """The name of the actor the failure involved (see the module doc), or None when the ego was alone."""
+    failure = dict(failure or {})
+    if not trace.states:
+        return None
+    names = [n for n in trace.states[0] if n != "ego"]
+    partner = failure.get("with")
+    if failure.get("type") == "collision" and partner is None:
+        for event in trace.events:
+            if event.get("kind") == "collision" and "ego" in event.get("actors", []):
+                partner = next((a for a in event["actors"] if a != "ego"), None)
+                break
+    if partner is not None and partner in names and failure.get("type") in ("collision", "low_ttc"):
+        return partner
+    k = _failure_step(trace, failure)
+    first = max(0, k - int(round(LOOKBACK_S * _frequency(trace))))
+    ahead: Dict[str, float] = {}
+    near: Dict[str, float] = {}
+    for step in trace.states[first:k + 1]:
+        ego = step.get("ego")
+        if ego is None:
+            continue
+        for name in names:
+            if name not in step:
+                continue
+            lon, left = _ego_frame(ego, step[name])
+            near[name] = min(near.get(name, math.inf), math.hypot(lon, left))
+            if lon > 0 and abs(left) <= _SAME_LANE_M:
+                ahead[name] = min(ahead.get(name, math.inf), lon)
+    pool = ahead or near
+    return min(pool, key=lambda n: (pool[n], n)) if pool else None
+
+
+def actor_manoeuvres(trace, name: str) -> List[str]:
+    """The :data:`MANOEUVRES` actor ``name`` performs in ``trace``, judged alone with the ego by the trace
+    semantics' rules (in :data:`MANOEUVRES` order)."""
+    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+
+    keep = {"ego", name}
+    alone = dataclasses.replace(
+        trace, states=[{k: v for k, v in step.items() if k in keep} for step in trace.states],
+        events=[e for e in trace.events if set(e.get("actors") or []) <= keep])
+    kind = _kind(trace, name)
+    found = {action for who, action in elements_from_trace(alone)["actions"] if who == kind}
+    return [m for m in MANOEUVRES if m in found]
+
+
+def failure_interaction(trace, failure: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
+    """The failure's interaction: ``{"failure_type", "actor", "kind", "manoeuvres", "gap_m", "side"}``.
+
+    ``actor`` is the key actor's name (None: the ego was alone), ``kind`` its participant type (the trace's
+    ``kinds``; else the failure's ``with_kind``; else guessed from the name),
+    ``manoeuvres`` what it did, ``gap_m`` its distance ahead of the ego (metres along the ego's heading) when
+    first seen in the :data:`LOOKBACK_S` seconds up to the failure, ``side`` where it was then
+    (``"same_lane"``, ``"left"``, ``"right"``).
+    """
+    failure = dict(failure or {})
+    name = key_actor(trace, failure)
+    out: Dict[str, Any] = {"failure_type": failure.get("type"), "actor": name, "kind": None, "manoeuvres": [],
+                           "gap_m": None, "side": None}
+    if name is None:
+        return out
+    known = dict(getattr(trace, "kinds", {}) or {})
+    out["kind"] = known[name] if name in known else (
+        failure.get("with_kind") if failure.get("with") == name and failure.get("with_kind") else _kind(trace, name))
+    out["manoeuvres"] = actor_manoeuvres(trace, name)
+    k = _failure_step(trace, failure)
+    first = max(0, k - int(round(LOOKBACK_S * _frequency(trace))))
+    for step in trace.states[first:k + 1]:
+        if "ego" in step and name in step:
+            lon, left = _ego_frame(step["ego"], step[name])
+            out["gap_m"] = round(lon, 1)
+            out["side"] = "same_lane" if abs(left) <= _SAME_LANE_M else ("left" if left > 0 else "right")
+            break
+    return out
+
+
+def shows_interaction(interaction: Mapping[str, Any], elements: Mapping[str, Any]) -> bool:
+    """Whether simulated ``elements`` (a trace's, :func:`~dv2s_gym.pipeline.trace_semantics.elements_from_trace`)
+    hold the interaction: a participant of the key actor's kind doing one of its manoeuvres (a lane change
+    in either direction matches a lane change), and, for a collision, that kind colliding. An interaction
+    without a key actor is shown by any elements."""
+    kind = interaction.get("kind")
+    if kind is None:
+        return True
+    if kind not in (elements.get("participants") or []):
+        return False
+    actions = {action for who, action in elements.get("actions") or [] if who == kind}
+    if interaction.get("failure_type") == "collision" and "collide" not in actions:
+        return False
+    wanted = set(interaction.get("manoeuvres") or [])
+    if not wanted:
+        return True
+    if wanted & _LANE_CHANGES and actions & _LANE_CHANGES:
+        return True
+    return bool(wanted & actions)
+
+
+_ARTICLE = {"obstacle": "An obstacle", "ego": "The ego vehicle"}
+
+
+def interaction_sentence(interaction: Mapping[str, Any], known: Optional[Mapping[str, Any]] = None) -> str:
+    """One or two sentences naming the key actor and what it did (from the trace), for the description of a
+    failure video; empty when the ego was alone. ``known``: the elements a description already states; what
+    they hold (the actor's kind doing one of its manoeuvres, or, for an actor that did none, its kind where it
+    was; its collision) is not said again."""
+    kind = interaction.get("kind")
+    if kind is None:
+        return ""
+    said = {action for who, action in (known or {}).get("actions") or [] if who == kind}
+    placed = {relation for who, relation, _ in (known or {}).get("relations") or [] if who == kind}
+    moves = list(interaction.get("manoeuvres") or [])
+    collided = interaction.get("failure_type") == "collision"
+    relation = {"same_lane": "same_lane", "left": "left_of", "right": "right_of"}.get(interaction.get("side"))
+    if moves and set(moves) & said or not moves and relation in placed:
+        return f"The ego vehicle collides with the {kind}." if collided and "collide" not in said else ""
+    subject = _ARTICLE.get(kind, f"A {kind}")
+    gap, side = interaction.get("gap_m"), interaction.get("side")
+    where = f" about {abs(gap):.0f} m {'ahead of' if gap >= 0 else 'behind'} the ego vehicle" if gap is not None else ""
+    if kind == "pedestrian" or "cross" in moves:
+        text = f"{subject} crosses the road in front of the ego vehicle."
+    elif "cut_in" in moves or "merge" in moves:
+        lane = f" from the lane to the {side} of the ego vehicle" if side in ("left", "right") else ""
+        text = f"{subject}{lane} cuts into the ego's lane{where}."
+    elif moves and moves[0] in _LANE_CHANGES:
+        direction = moves[0].rsplit("_", 1)[1]
+        text = f"{subject}{where} changes lanes to the {direction}."
+    elif "brake" in moves:
+        lane = " in the ego's lane" if side == "same_lane" else ""
+        text = f"{subject}{lane}{where} suddenly brakes hard" + (" and stops." if "stop" in moves else ".")
+    elif "stop" in moves:
+        text = f"{subject} stands still in the ego's lane{where}." if side == "same_lane" else \
+            f"{subject}{where} stands still."
+    elif side == "same_lane":
+        text = f"{subject} drives in the ego's lane{where}."
+    else:
+        text = f"{subject} drives{where} in the lane to the {side} of the ego vehicle." if side else \
+            f"{subject} drives near the ego vehicle."
+    if collided and "collide" not in said:
+        text += f" The ego vehicle collides with the {kind}."
+    return text

@@ -1,0 +1,160 @@
+"""The interaction behind a mined failure (its actor and manoeuvre, read from the failure's trace), the
+sentence that names it in the failure's description, and the judge's test of a simulated run against it.
+
+The traces are built by hand (straight highway, highway-env frame: x along the road, y to the right), so
+each case holds exactly the interaction it is about.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from dv2s_gym.mining.interaction import (failure_interaction, interaction_sentence, key_actor,
+                                         shows_interaction)
+from dv2s_gym.pipeline.semantics import elements_from_text
+from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+from envs.trace import EpisodeTrace
+
+DT = 0.2  # the env's default policy frequency, 5 Hz
+LANE = 4.0
+
+
+def _drive(x0: float, y0: float, speeds, lane_shift=None):
+    """States ``[x, y, heading, speed]`` of a vehicle driving along +x with the given speed per step;
+    ``lane_shift = (first step, steps, dy)`` moves it sideways by ``dy`` over those steps."""
+    x, y, rows = x0, y0, []
+    for i, v in enumerate(speeds):
+        if lane_shift and lane_shift[0] <= i < lane_shift[0] + lane_shift[1]:
+            y += lane_shift[2] / lane_shift[1]
+        rows.append([x, y, 0.0, v])
+        x += v * DT
+    return rows
+
+
+def _ramp(start: float, end: float, first: int, steps: int, total: int):
+    """Speeds: ``start`` until step ``first``, then linearly to ``end`` over ``steps`` steps, then ``end``."""
+    out = []
+    for i in range(total):
+        if i < first:
+            out.append(start)
+        elif i < first + steps:
+            out.append(start + (end - start) * (i - first + 1) / steps)
+        else:
+            out.append(end)
+    return out
+
+
+def _trace(actors, events=(), kinds=None) -> EpisodeTrace:
+    n = len(actors["ego"])
+    states = [{name: rows[i] for name, rows in actors.items()} for i in range(n)]
+    return EpisodeTrace(scenario="hand", source="test", seed=0, scene_seed=0, params={"map": "highway_straight"},
+                        config={"policy_frequency": 5}, actions=[1] * (n - 1), states=states, events=list(events),
+                        kinds=kinds or {name: "car" for name in actors if name != "ego"})
+
+
+def stall_behind_braking_car() -> EpisodeTrace:
+    """The ego slows to a standstill on a highway while, 63 m ahead in its lane, a car brakes hard and
+    stops; two cars drive on in the lanes beside it. The ego stands still 60 m behind the stopped car."""
+    n = 60
+    return _trace({
+        "ego": _drive(0.0, 0.0, _ramp(25.0, 0.0, 0, 25, n)),
+        "lead": _drive(63.0, 0.0, _ramp(25.0, 0.0, 5, 15, n)),
+        "left": _drive(-10.0, -LANE, [25.0] * n),
+        "right": _drive(5.0, LANE, [25.0] * n),
+    })
+
+
+STALL = {"type": "stall", "time": 5.0, "step": 25}
+
+
+def cut_in_with_large_gap() -> EpisodeTrace:
+    """A car 63 m ahead in the lane to the ego's left, slower than the ego, changes into the ego's lane; the
+    ego closes in on it until the time-to-collision is below a second."""
+    n = 30
+    return _trace({
+        "ego": _drive(0.0, 0.0, [30.0] * n),
+        "cutter": _drive(63.0, -LANE, [20.0] * n, lane_shift=(10, 5, LANE)),
+        "far": _drive(-40.0, LANE, [30.0] * n),
+    }, events=[{"time": 2.4, "kind": "lane_change", "actors": ["cutter"], "direction": "right"}])
+
+
+CUT_IN = {"type": "low_ttc", "time": 5.6, "step": 28, "with": "cutter", "with_kind": "car", "min_ttc": 0.4}
+
+
+def test_the_stall_names_the_braking_car_far_ahead():
+    trace = stall_behind_braking_car()
+    assert key_actor(trace, STALL) == "lead"  # in the ego's lane ahead; the cars beside it are not
+    interaction = failure_interaction(trace, STALL)
+    assert interaction["kind"] == "car" and interaction["side"] == "same_lane"
+    assert {"brake", "stop"} <= set(interaction["manoeuvres"])
+    assert interaction["gap_m"] == 63.0
+    sentence = interaction_sentence(interaction)
+    assert "63 m ahead" in sentence and "brakes" in sentence, sentence
+    said = elements_from_text("The ego car drives in the right lane of a highway with three other cars nearby. "
+                              + sentence)
+    assert ["car", "brake"] in said["actions"] and ["car", "same_lane", "ego"] in said["relations"]
+
+
+def test_the_cut_in_names_the_car_cutting_in_from_the_left():
+    trace = cut_in_with_large_gap()
+    interaction = failure_interaction(trace, CUT_IN)
+    assert interaction["actor"] == "cutter" and interaction["side"] == "left" and interaction["gap_m"] == 63.0
+    assert interaction["manoeuvres"][0] == "cut_in" and "lane_change_right" in interaction["manoeuvres"]
+    sentence = interaction_sentence(interaction)
+    assert "cuts into the ego's lane" in sentence and "left" in sentence, sentence
+    assert ["car", "cut_in"] in elements_from_text(sentence)["actions"]
+
+
+def test_a_description_that_names_the_interaction_is_not_told_it_again():
+    interaction = failure_interaction(stall_behind_braking_car(), STALL)
+    known = elements_from_text("The car in front of the ego car suddenly brakes hard.")
+    assert interaction_sentence(interaction, known=known) == ""
+    assert interaction_sentence(interaction, known=elements_from_text("The ego car drives on a highway.")) != ""
+    assert interaction_sentence({"kind": None}) == ""
+
+
+def test_a_run_without_the_braking_car_does_not_show_the_interaction():
+    interaction = failure_interaction(stall_behind_braking_car(), STALL)
+    n = 60
+    # the ego stops on an empty highway: the same failure type, but nothing it stopped for
+    alone = _trace({"ego": _drive(0.0, 0.0, _ramp(25.0, 0.0, 0, 25, n))})
+    assert not shows_interaction(interaction, elements_from_trace(alone))
+    # cars drive beside it and none brakes: still not the interaction
+    beside = _trace({"ego": _drive(0.0, 0.0, _ramp(25.0, 0.0, 0, 25, n)),
+                     "left": _drive(-10.0, -LANE, [25.0] * n), "right": _drive(5.0, LANE, [25.0] * n)})
+    assert not shows_interaction(interaction, elements_from_trace(beside))
+    assert shows_interaction(interaction, elements_from_trace(stall_behind_braking_car()))
+
+
+def test_a_lane_change_to_either_side_shows_a_cut_in_but_braking_does_not():
+    interaction = failure_interaction(cut_in_with_large_gap(), CUT_IN)
+    mirrored = {"road": "highway", "participants": ["ego", "car"], "actions": [["car", "lane_change_left"]],
+                "relations": []}
+    braking = {"road": "highway", "participants": ["ego", "car"], "actions": [["car", "brake"]], "relations": []}
+    assert shows_interaction(interaction, mirrored)
+    assert not shows_interaction(interaction, braking)
+    truck = {**mirrored, "participants": ["ego", "truck"], "actions": [["truck", "cut_in"]]}
+    assert not shows_interaction(interaction, truck)
+
+
+def test_a_collision_is_shown_only_with_the_kind_colliding():
+    interaction = {"failure_type": "collision", "kind": "car", "manoeuvres": ["stop"]}
+    stopped = {"participants": ["ego", "car"], "actions": [["car", "stop"]]}
+    assert not shows_interaction(interaction, stopped)
+    assert shows_interaction(interaction, {**stopped, "actions": [["car", "stop"], ["car", "collide"]]})
+
+
+@pytest.mark.parametrize("failure", [{"type": "collision", "with": "lead", "step": 10},
+                                     {"type": "low_ttc", "with": "lead", "step": 10}])
+def test_the_partner_of_a_collision_or_low_ttc_is_the_key_actor(failure):
+    assert key_actor(stall_behind_braking_car(), failure) == "lead"
+
+
+def test_an_actor_without_a_manoeuvre_is_named_where_it_was_unless_the_description_places_it():
+    interaction = {"failure_type": "low_ttc", "kind": "car", "manoeuvres": [], "gap_m": -2.1, "side": "right"}
+    vague = elements_from_text("The ego car drives in the left lane of a highway. Three other cars drive nearby.")
+    sentence = interaction_sentence(interaction, known=vague)
+    assert "lane to the right" in sentence, sentence
+    assert ["car", "right_of", "ego"] in elements_from_text(sentence)["relations"]
+    placed = elements_from_text("A car drives in the lane to the right of the ego car.")
+    assert interaction_sentence(interaction, known=placed) == ""
