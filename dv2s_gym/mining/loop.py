@@ -360,7 +360,8 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
             raise LoopError(f"--{name} must be an integer >= {low}, not {value!r}")
     if max_conversions is not None and (isinstance(max_conversions, bool) or not isinstance(max_conversions, int)
                                         or max_conversions < 1):
-        raise LoopError(f"--max-conversions must be an integer >= 1, not {max_conversions!r}")
+        raise LoopError(f"--max-conversions must be a positive integer (0 on the command line: every cluster), "
+                        f"not {max_conversions!r}")
     if not 0.0 <= float(holdout_fraction) <= 1.0:
         raise LoopError(f"--holdout-fraction must be in [0, 1], not {holdout_fraction}")
     if not 0.0 < float(mined_share) < 1.0:
