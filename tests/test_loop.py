@@ -211,7 +211,8 @@ def test_paired_summary_counts_and_drop():
 
 # --------------------------------------------------------------------------- the loop
 TINY = dict(budget=6, fine_tune_steps=100, k_eval=2, regress_episodes=1, workers=1, n_envs=1, progress=False,
-            scenarios=SOURCES, fine_tune_method="ppo", log=lambda _: None)  # DAgger: tests/test_loop_dagger.py
+            scenarios=SOURCES, fine_tune_method="ppo", min_heldout_episodes=1, untouched_seeds=0,
+            log=lambda _: None)  # DAgger: tests/test_loop_dagger.py
 
 
 class _Kill(BaseException):
@@ -241,10 +242,13 @@ def test_loop_resumes_without_redoing_steps_and_reports_every_field(tmp_path, mo
     report = run_loop("dv2s-ppo", out=out, miner=miner, **TINY)
     assert len(miner.calls) == 1  # mining was not run again
     lines = (out / "round_1" / "heldout.jsonl").read_text().splitlines()
-    assert lines[:len(lines_before)] == lines_before and len(lines) == 2 * len(lines_before)  # only "after" ran
+    # only "after" and "control" ran
+    assert lines[:len(lines_before)] == lines_before and len(lines) == 3 * len(lines_before)
     record = report.rounds[0]
     steps = record["steps"]
-    assert set(steps) == {"mine", "split", "before", "fine_tune", "after", "regress"}
+    assert set(steps) == {"mine", "split", "before", "fine_tune", "control", "after", "regress"}
+    assert steps["control"]["mined_upweighted"] == 0 and steps["control"]["mined_left_out"] == 2
+    assert {"k", "n", "rate", "low", "high"} <= set(steps["after"]["control"])
     assert steps["mine"]["failures"] == 4 and len(steps["mine"]["kept"]) == 4
     assert steps["after"]["pairs"] == 2 * TINY["k_eval"]
     for key in ("before", "after"):
@@ -254,6 +258,9 @@ def test_loop_resumes_without_redoing_steps_and_reports_every_field(tmp_path, mo
     assert steps["fine_tune"]["mined_upweighted"] == 2  # the held-out ones are not trained on
     card = read_card(steps["fine_tune"]["model"])
     assert not set(held) & set(card["sampler"]["weights"])
+    assert not set(steps["split"]["held_out_families"]) & set(card["sampler"]["weights"])  # nor their parents
+    control_card = read_card(steps["control"]["model"])
+    assert not {e["scenario"] for e in steps["mine"]["kept"]} & set(control_card["sampler"]["weights"])
     assert set(record["timings"]) >= {"mine", "before", "fine_tune", "after", "regress"}
     assert report.policy == record["new_policy"] and report.policy.startswith("ppo:")
     data = json.loads(report.paths["json"].read_text())
