@@ -284,6 +284,9 @@ def test_loop_refuses_a_policy_it_cannot_fine_tune(tmp_path):
     (["--budget", "0"], "--budget must be an integer >= 1"),
     (["--holdout-fraction", "2"], "--holdout-fraction must be in [0, 1]"),
     (["--sampler", "no-such"], "--sampler must be one of random, halton"),  # it used to start round 1 first
+    (["--max-conversions", "-1"], "--max-conversions must be a positive integer (0 on the command line"),
+    (["--untouched-seeds", "-1"], "--untouched-seeds must be an integer >= 0"),
+    (["--min-heldout-episodes", "-2"], "--min-heldout-episodes must be an integer >= 0"),
 ])
 def test_cli_refuses_bad_input_in_one_line(tmp_path, capsys, argv, needle):
     code, _, err = run(capsys, "loop", "--out", tmp_path / "loop", "--no-progress", *argv)
@@ -432,3 +435,22 @@ def test_a_loop_recorded_before_the_family_split_and_the_control_resumes_as_it_w
     steps = report.rounds[0]["steps"]
     assert "by" not in steps["split"] and "control" not in steps and "untouched" not in steps  # split by cluster
     assert len(stand.fine_tunes) == 1 and report.settings["holdout_by"] == "cluster"
+
+
+def test_the_untouched_set_is_a_bank_of_the_corpus_scripts_with_their_licences():
+    from pathlib import Path
+
+    from dv2s_gym.mining.loop import UNTOUCHED_BANK
+    from scenario_bank.bank import Bank
+
+    bank = Bank(UNTOUCHED_BANK)
+    assert len(bank) == 3 and not bank.problems
+    corpus = Path(__file__).parent / "data" / "carla_corpus" / "scenic3"
+    originals = {path.stem.lower(): path for path in corpus.glob("*.scenic")}
+    sources = (UNTOUCHED_BANK / "SOURCES.md").read_text()
+    for entry in bank:
+        assert entry.script == originals[entry.name].read_text()  # as in the corpus, nothing changed here
+        assert "untouched" in entry.tags and entry.source["kind"] != "mined"
+        assert entry.name in sources and not entry.missing_files()
+    for name in ("LICENSE-Scenic.txt", "LICENSE-CARLA-maps.txt"):
+        assert (UNTOUCHED_BANK / name).is_file() and name in sources
