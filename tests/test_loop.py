@@ -382,6 +382,14 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
     assert any("[5/8] control" in line for line in lines)
     markdown = report.paths["md"].read_text()
     assert "control arm" in markdown and "untouched scenario set" in markdown and "split by family" in markdown
+    # the HTML shows a kept scenario's failure clip where its bank entry has one
+    from dv2s_gym.mining.loop_report import write_loop_reports
+
+    assert "<video" not in report.paths["html"].read_text()
+    held = split["held_out"][0]
+    (tmp_path / "loop" / "bank" / held / "failure.webm").write_bytes(b"clip")
+    page = write_loop_reports(report.to_json(), tmp_path / "loop")["html"].read_text()
+    assert f'<video src="bank/{held}/failure.webm"' in page and f"{held} (held out)" in page
 
 
 def test_loop_says_loudly_when_too_few_episodes_are_held_out(tmp_path, monkeypatch):

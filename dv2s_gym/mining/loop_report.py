@@ -473,8 +473,9 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
 
 
 def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, List[Dict[str, str]]]]:
-    """Per round, each kept mined scenario's videos that exist: the mining run's failure folder
-    (``failures/<cluster slug>/*.webm``) and the bank entry's own (``*.webm``), as paths relative to ``out``."""
+    """Per round, each kept mined scenario's failure clips, as paths relative to ``out``: the bank entry's own
+    (``failure.webm`` and those of failures merged into it), else the mining run's
+    (``failures/<cluster slug>/*.webm``)."""
     import os
 
     settings = report.get("settings") or {}
@@ -488,18 +489,21 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
         for entry in mine.get("kept") or []:
             scenario = str(entry["scenario"])
             videos = clips.setdefault(f"{scenario} ({'held out' if scenario in held else 'fine-tuned on'})", [])
-            folders = []
-            if mine.get("folder"):
+            entry_folder = bank / scenario
+            found_videos = sorted(entry_folder.rglob("*.webm")) if entry_folder.is_dir() else []
+            labels = [f"failure of cluster {entry.get('cluster')}" if video.parent == entry_folder
+                      else f"failure merged into it ({video.parent.relative_to(entry_folder)})"
+                      for video in found_videos]
+            if not found_videos and mine.get("folder"):  # the bank entry is gone: the mining run's copy
                 from dv2s_gym.mining.convert import cluster_slug
 
-                folders.append((Path(mine["folder"]) / "failures" / cluster_slug(entry.get("cluster"), None),
-                                f"mining run, cluster {entry.get('cluster')}"))
-            folders.append((bank / scenario, "bank entry"))
-            for folder, label in folders:
-                for video in sorted(folder.glob("*.webm")) if folder.is_dir() else []:
-                    path = os.path.relpath(video.resolve(), Path(out).resolve())
-                    if all(v["path"] != path for v in videos):
-                        videos.append({"path": path, "label": f"{label}: {video.name}"})
+                folder = Path(mine["folder"]) / "failures" / cluster_slug(entry.get("cluster"), None)
+                found_videos = sorted(folder.glob("*.webm")) if folder.is_dir() else []
+                labels = [f"failure of cluster {entry.get('cluster')} (mining run)"] * len(found_videos)
+            for video, label in zip(found_videos, labels):
+                path = os.path.relpath(video.resolve(), Path(out).resolve())
+                if all(v["path"] != path for v in videos):
+                    videos.append({"path": path, "label": label})
         found[int(record.get("round") or 0)] = clips
     return found
 
