@@ -328,7 +328,9 @@ class _StandIns:
         def regression(candidate, baseline=None, **options):
             self.regressions.append({"candidate": candidate, "baseline": baseline, **options})
             rate = {"value": 0.5, "low": 0.1, "high": 0.9, "count": 1}
+            per = {"candidate": {"failure_rate": rate, "stall_rate": rate}, "baseline": {"failure_rate": rate}}
             return {"verdict": "INCONCLUSIVE", "bank": {"scenarios": ["x"]},
+                    "scenarios": {name: per for name in options.get("scenarios") or []},
                     "overall": {"candidate": {"episodes": 2, "failure_rate": rate, "stall_rate": rate,
                                               "mean_speed": {"value": 3.0}},
                                 "baseline": {"episodes": 2, "failure_rate": rate},
@@ -380,8 +382,10 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
                                                            .UNTOUCHED_BANK)
     assert second["candidate"] == report.rounds[0]["control_policy"] and second["baseline_role"] == "candidate"
     assert any("[5/8] control" in line for line in lines)
+    assert set(steps["regress"]["held_out_parents"]) == set(split["held_out_families"])
     markdown = report.paths["md"].read_text()
     assert "control arm" in markdown and "untouched scenario set" in markdown and "split by family" in markdown
+    assert markdown.count("held-out family's parent") == len(split["held_out_families"])
     # the HTML shows a kept scenario's failure clip where its bank entry has one
     from dv2s_gym.mining.loop_report import write_loop_reports
 

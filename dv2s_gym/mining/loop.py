@@ -282,8 +282,11 @@ def _policy_env_config(spec: str) -> Dict[str, Any]:
     return dict(card.get("env_config") or {})
 
 
-def _regress_summary(report: Mapping[str, Any], path: Path) -> Dict[str, Any]:
+def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[str] = ()) -> Dict[str, Any]:
+    """The regression step's record; ``parents``: scenarios whose own results are kept apart (the held-out
+    families' parents, never fine-tuned on: the regression test's view beyond the fine-tuning mix)."""
     overall = report.get("overall") or {}
+    per_scenario = report.get("scenarios") or {}
     comparison = overall.get("comparison") or {}
 
     def rate(role: str) -> Optional[Dict[str, Any]]:
@@ -293,7 +296,11 @@ def _regress_summary(report: Mapping[str, Any], path: Path) -> Dict[str, Any]:
     return {"verdict": report.get("verdict"), "reason": comparison.get("reason"),
             "episodes": comparison.get("n"), "new_failure_rate": rate("candidate"), "old_failure_rate": rate("baseline"),
             "difference": comparison.get("difference"), "p_value": comparison.get("p_value"),
-            "regressed": report.get("regressed") or [], "report": str(path)}
+            "regressed": report.get("regressed") or [], "report": str(path),
+            "held_out_parents": {name: {role: {key: ((per_scenario[name].get(side) or {}).get(key))
+                                               for key in ("failure_rate", "stall_rate", "mean_speed")}
+                                        for role, side in (("new", "candidate"), ("old", "baseline"))}
+                                 for name in parents if name in per_scenario}}
 
 
 def _log_default(line: str) -> None:
@@ -538,7 +545,8 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                                         episodes=regress_episodes, seed=EVAL_SEED_BASE, margin=margin,
                                         workers=workers, out_dir=round_dir / "regress", env_config=env_config,
                                         progress=progress)
-                return _regress_summary(report, round_dir / "regress" / "report.json")
+                return _regress_summary(report, round_dir / "regress" / "report.json",
+                                        split.get("held_out_families", []))
 
             timed("regress", do_regress)
         _log_round(log, number, steps)

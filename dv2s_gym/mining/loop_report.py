@@ -32,7 +32,8 @@
                                          "control_vs_fine_tuned": {"verdict", "reason", "episodes", "difference",
                                          "p_value", "report"}},
                            "regress": {"verdict", "reason", "episodes", "new_failure_rate", "old_failure_rate",
-                                       "difference", "p_value", "regressed", "report"},
+                                       "difference", "p_value", "regressed", "report", "held_out_parents":
+                                       {scenario: {"new" | "old": {"failure_rate", "stall_rate", "mean_speed"}}}},
                            "skipped": reason (only when nothing was kept)}}],
      "final_vs_start": (with two or more regression-tested rounds) {"start", "final", "rounds": [first, last],
                         "verdict", "reason", "episodes", "new_failure_rate", "old_failure_rate", "difference",
@@ -354,6 +355,12 @@ def render_markdown(report: Mapping[str, Any]) -> str:
                          f"**{regress.get('verdict')}** - {regress.get('reason')}; failure rate new "
                          f"{_summary_rate(regress.get('new_failure_rate'))}, old "
                          f"{_summary_rate(regress.get('old_failure_rate'))}; report `{regress.get('report')}`")
+            for name, row in (regress.get("held_out_parents") or {}).items():
+                lines.append(f"- held-out family's parent `{name}` (never fine-tuned on) in the regression test: "
+                             f"failure rate new {_summary_rate(row['new'].get('failure_rate'))}, old "
+                             f"{_summary_rate(row['old'].get('failure_rate'))}; stall rate new "
+                             f"{_summary_rate(row['new'].get('stall_rate'))}, old "
+                             f"{_summary_rate(row['old'].get('stall_rate'))}")
     return "\n".join(lines) + "\n"
 
 
