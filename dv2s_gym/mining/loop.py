@@ -474,7 +474,12 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         split = steps["split"]
         held_out, tuned = split["held_out"], split["fine_tune"]
         if not tuned and not held_out:
-            steps["skipped"] = "no mined scenario was kept this round: nothing to fine-tune on or to measure"
+            mined = steps["mine"]
+            tried = sum((mined.get("conversions") or {}).values())
+            steps["skipped"] = (f"no mined scenario was kept this round ({tried} conversion(s) tried"
+                                + (f", {mined['clusters_not_converted']} cluster(s) not converted: raise "
+                                   "--max-conversions or --budget" if mined.get("clusters_not_converted") else "")
+                                + "): nothing to fine-tune on or to measure")
             state.save()
             log(f"round {number}: {steps['skipped']}")
             _write(out, state, current)
