@@ -42,7 +42,7 @@ f. **regress**: :func:`dv2s_gym.regress.runner.run_regression` new against old o
 g. the next round starts from the new policy.
 
 Everything lives under ``out``: ``loop.json`` (settings and every finished step, written
-atomically after each), ``bank/``, ``round_<r>/{mine,heldout.jsonl,policy,regress}`` and the
+atomically after each), ``bank/``, ``round_<r>/{mine,heldout.jsonl,policy,control,untouched,regress}`` and the
 report (``report.json``, ``report.md``, ``report.html``).
 Restarted with the same ``out`` and settings, the loop skips finished steps and resumes the
 unfinished one (the miner, the held-out store, training and the regression run are each
@@ -86,9 +86,9 @@ DEFAULTS: Dict[str, Any] = {
     "margin": 0.02,
     "seed": 0,
 }
-"""Embedded defaults: one round finishes in a few minutes on 2 cores (a small mining budget, at most
-4 conversions, two short fine-tunes, a small evaluation; bench/bench_loop.py times it). The
-measurements in bench/RESULTS.md use larger ones."""
+"""Embedded defaults: small, for one round in minutes on 2 cores (a small mining budget, at most 4
+conversions, two short fine-tunes, a small evaluation; ``python -m bench.bench_loop`` times a round and
+bench/RESULTS.md records it). The other measurements in bench/RESULTS.md use larger ones."""
 
 IDENTITY = ("policy", "bank_dir", "budget", "sampler", "fine_tune_steps", "fine_tune_lr", "holdout_fraction", "k_eval",
             "regress_episodes", "mined_share", "fine_tune_reward", "margin", "seed", "scenarios", "fine_tune_method",
