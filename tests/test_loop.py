@@ -266,7 +266,7 @@ def test_loop_resumes_without_redoing_steps_and_reports_every_field(tmp_path, mo
     data = json.loads(report.paths["json"].read_text())
     assert data["schema"] == "dv2s-loop" and data["rounds"][0]["steps"]["regress"]["verdict"]
     markdown = report.paths["md"].read_text()
-    assert "held-out failure rate before" in markdown and steps["regress"]["verdict"] in markdown
+    assert "held-out failure rate start" in markdown and steps["regress"]["verdict"] in markdown
     page = report.paths["html"].read_text()
     assert page.startswith("<!DOCTYPE html>") and steps["regress"]["verdict"] in page and "http" not in page
     # a finished loop rerun does nothing new
