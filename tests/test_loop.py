@@ -394,6 +394,7 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
     (tmp_path / "loop" / "bank" / held / "failure.webm").write_bytes(b"clip")
     page = write_loop_reports(report.to_json(), tmp_path / "loop")["html"].read_text()
     assert f'<video src="bank/{held}/failure.webm"' in page and f"{held} (held out)" in page
+    assert page.count("<svg") == 2 and "held-out failure rate (95 % Wilson)" in page and "http" not in page
 
 
 def test_loop_says_loudly_when_too_few_episodes_are_held_out(tmp_path, monkeypatch):

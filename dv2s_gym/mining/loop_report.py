@@ -435,6 +435,54 @@ def _clips_html(clips: Mapping[str, Any]) -> str:
     return "".join(parts)
 
 
+def _rates_svg(title: str, bars: List[tuple]) -> str:
+    """An inline SVG bar chart of failure rates with their 95 % intervals: ``bars`` = ``[(label, rate, low,
+    high)]`` (``rate`` ``None``: no bar)."""
+    from html import escape
+
+    bars = [b for b in bars if b[1] is not None]
+    if not bars:
+        return ""
+    width, height, left, top = 120 * len(bars) + 60, 190, 40, 24
+    plot = height - top - 36
+    parts = [f'<svg width="{width}" height="{height}" role="img">'
+             f'<title>{escape(title)}</title><text x="4" y="14" font-size="12">{escape(title)}</text>']
+    for tick in (0.0, 0.5, 1.0):
+        y = top + plot * (1 - tick)
+        parts.append(f'<line x1="{left - 4}" x2="{width - 8}" y1="{y:.1f}" y2="{y:.1f}" stroke="#ddd"/>'
+                     f'<text x="4" y="{y + 4:.1f}" font-size="10">{tick:.1f}</text>')
+    for index, (label, rate, low, high) in enumerate(bars):
+        x = left + 20 + index * 120
+        y = top + plot * (1 - float(rate))
+        parts.append(f'<rect x="{x}" y="{y:.1f}" width="60" height="{top + plot - y:.1f}" fill="#7a9cc6"/>')
+        if low is not None and high is not None:
+            y_low, y_high = top + plot * (1 - float(low)), top + plot * (1 - float(high))
+            parts.append(f'<line x1="{x + 30}" x2="{x + 30}" y1="{y_low:.1f}" y2="{y_high:.1f}" stroke="#222"/>'
+                         f'<line x1="{x + 22}" x2="{x + 38}" y1="{y_low:.1f}" y2="{y_low:.1f}" stroke="#222"/>'
+                         f'<line x1="{x + 22}" x2="{x + 38}" y1="{y_high:.1f}" y2="{y_high:.1f}" stroke="#222"/>')
+        parts.append(f'<text x="{x + 30}" y="{height - 18}" font-size="11" text-anchor="middle">{escape(label)}</text>'
+                     f'<text x="{x + 30}" y="{height - 5}" font-size="10" text-anchor="middle">{float(rate):.2f}</text>')
+    return "".join(parts) + "</svg>"
+
+
+def _round_figures(record: Mapping[str, Any]) -> str:
+    """The round's failure rates as charts: held-out (start, control, fine-tuned) and untouched."""
+    steps = record.get("steps") or {}
+    after = steps.get("after") or {}
+    held = [(label, (after.get(key) or {}).get("rate"), (after.get(key) or {}).get("low"),
+             (after.get(key) or {}).get("high"))
+            for label, key in (("start", "before"), ("control", "control"), ("fine-tuned", "after"))]
+    policies = (steps.get("untouched") or {}).get("policies") or {}
+    untouched = [(label, ((policies.get(key) or {}).get("failure_rate") or {}).get("value"),
+                  ((policies.get(key) or {}).get("failure_rate") or {}).get("low"),
+                  ((policies.get(key) or {}).get("failure_rate") or {}).get("high"))
+                 for label, key in (("start", "start"), ("control", "control"), ("fine-tuned", "fine_tuned"))]
+    charts = [_rates_svg("held-out failure rate (95 % Wilson)", held),
+              _rates_svg("untouched set failure rate (95 % Wilson)", untouched)]
+    charts = [chart for chart in charts if chart]
+    return f'<div class="row">{"".join(charts)}</div>' if charts else ""
+
+
 def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[str, Any]]] = None) -> str:
     """A self-contained HTML page (inline CSS, nothing fetched) of the loop report; ``clips``: round -> scenario ->
     ``[{"path", "label"}]`` videos shown per round (:func:`round_clips`)."""
@@ -463,6 +511,8 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
         end = starts[position + 1] if position + 1 < len(starts) else len(markdown)
         number = report["rounds"][position].get("round") if position < len(report.get("rounds", [])) else None
         details.append(_markdown_to_html(markdown[begin:end]))
+        if position < len(report.get("rounds", [])):
+            details.append(_round_figures(report["rounds"][position]))
         round_clips = (clips or {}).get(number) or {}
         if any(round_clips.values()):
             details.append("<h3>Failure clips of the kept mined scenarios</h3>" + _clips_html(round_clips))
