@@ -329,7 +329,7 @@ def render_markdown(report: Mapping[str, Any]) -> str:
             if key == "control":
                 lines.append(f"- control arm: the same fine-tuning ({tuned.get('method')}, {tuned.get('steps')} "
                              f"steps, same seed) on {tuned.get('scenarios')} scenarios, the "
-                             f"{tuned.get('mined_left_out')} mined ones left out: `{tuned.get('model')}`")
+                             f"{tuned.get('mined_left_out')} mined scenario(s) left out: `{tuned.get('model')}`")
                 continue
             if tuned.get("method") == "dagger":
                 agreement = tuned.get("agreement") or {}
