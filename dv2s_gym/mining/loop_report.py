@@ -231,6 +231,8 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
     lines = []
     if after.get("underpowered"):
         lines.append(f"- **WARNING: {after['underpowered']}**")
+    if not after.get("pairs"):
+        return lines + [f"- held-out episodes: none ran ({after.get('errors', 0)} with errors)"]
     table = after.get("table", {})
     lines.append(f"- held-out episodes: {after.get('pairs')} pairs ({after.get('errors')} with errors left "
                  f"out); start {_rate(after.get('before'))}"
