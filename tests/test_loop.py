@@ -116,6 +116,10 @@ def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
     assert short["vs_control"]["mcnemar_p"] is None and short["vs_control"]["relative_drop"] is None
     assert short["after"] == full["after"] and short["control"] == full["control"]  # the rates stay
     assert "control" not in heldout_comparison(start, tuned, None, min_episodes=1)
+    start[0]["failure"], start[1]["failure"] = {"type": "stall"}, {"type": "collision"}
+    tuned[0]["failure"] = {"type": "stall"}
+    kinds = heldout_comparison(start, tuned, control, min_episodes=1)["failure_types"]
+    assert kinds == {"start": {"stall": 1, "collision": 1}, "fine_tuned": {"stall": 1}, "control": {}}
 
 
 def test_fine_tune_weights_keep_the_bank_in_the_mix():

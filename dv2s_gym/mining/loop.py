@@ -618,18 +618,21 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
                        control: Optional[Sequence[Mapping[str, Any]]], *, min_episodes: int,
                        seed: int = 0) -> Dict[str, Any]:
     """The ``after`` step: :func:`~dv2s_gym.mining.heldout.paired_summary` of fine-tuned against start, plus
-    the control's rate and the paired fine-tuned-vs-control table and exact McNemar p (``vs_control``).
+    the control's rate and the paired fine-tuned-vs-control table and exact McNemar p (``vs_control``), and
+    each policy's failures by type (``failure_types``: stalls apart from collisions and the rest).
 
     Below ``min_episodes`` pairs the drop, its interval and both p-values are ``None`` and ``underpowered``
     says why (the rates, with their wide intervals, stay)."""
-    from dv2s_gym.mining.heldout import paired_summary
+    from dv2s_gym.mining.heldout import failure_types, paired_summary
 
     summary = paired_summary(before, after, seed=seed)
     summary["min_episodes"] = min_episodes
+    summary["failure_types"] = {"start": failure_types(before), "fine_tuned": failure_types(after)}
     if control is not None:
         versus = paired_summary(control, after, seed=seed, bootstrap=0)
         table = versus["table"]
         summary["control"] = versus["before"]
+        summary["failure_types"]["control"] = failure_types(control)
         summary["vs_control"] = {"pairs": versus["pairs"], "errors": versus["errors"],
                                  "relative_drop": versus["relative_drop"],
                                  "table": {"both_fail": table["both_fail"], "fine_tuned_only": table["after_only"],

@@ -24,6 +24,7 @@
                                      "vs_control": {"pairs", "errors", "relative_drop", "table": {"both_fail",
                                                     "fine_tuned_only", "control_only", "neither"}, "mcnemar_p",
                                                     "per_scenario": {scenario: control failures}},
+                                     "failure_types": {"start" | "control" | "fine_tuned": {type: n}},
                                      "min_episodes", "underpowered": why no drop or test is reported (only
                                      below min_episodes pairs; then the drop and p-values are None)},
                            "untouched": {"scenarios", "seeds", "policies": {"start" | "control" | "fine_tuned":
@@ -241,6 +242,12 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
                  f"{table.get('both_fail')}, only start {table.get('before_only')}, only fine-tuned "
                  f"{table.get('after_only')}, neither {table.get('neither')}"
                  + ("" if after.get("mcnemar_p") is None else f", exact McNemar p = {after['mcnemar_p']:.3g}"))
+    kinds = after.get("failure_types") or {}
+    if kinds:
+        lines.append("- held-out failures by type: " + "; ".join(
+            f"{label} " + (", ".join(f"{name} {count}" for name, count in sorted(kinds[role].items())) or "none")
+            for role, label in (("start", "start"), ("control", "control"), ("fine_tuned", "fine-tuned"))
+            if role in kinds))
     versus = after.get("vs_control") or {}
     if versus:
         table = versus.get("table") or {}
