@@ -471,3 +471,14 @@ def test_the_untouched_set_is_a_bank_of_the_corpus_scripts_with_their_licences()
         assert entry.name in sources and not entry.missing_files()
     for name in ("LICENSE-Scenic.txt", "LICENSE-CARLA-maps.txt"):
         assert (UNTOUCHED_BANK / name).is_file() and name in sources
+
+
+def test_a_round_that_keeps_nothing_is_skipped_and_says_why(tmp_path, monkeypatch):
+    stand = _StandIns(monkeypatch)
+    lines = []
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=FakeMiner(WIRING["scenarios"], failures_per_round=0),
+                      log=lines.append, **WIRING)
+    steps = report.rounds[0]["steps"]
+    assert steps["skipped"].startswith("no mined scenario was kept this round (0 conversion(s) tried")
+    assert not stand.fine_tunes and not stand.evaluations and not stand.regressions
+    assert any(steps["skipped"] in line for line in lines) and steps["skipped"] in report.paths["md"].read_text()
