@@ -621,7 +621,10 @@ def _cmd_loop(args: argparse.Namespace) -> int:
     options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr",
                                                     "holdout_fraction", "k_eval", "regress_episodes", "mined_share",
                                                     "margin", "seed", "workers", "scenarios",
-                                                    "fine_tune_method")}
+                                                    "fine_tune_method", "max_conversions", "min_heldout_episodes",
+                                                    "untouched_seeds")}
+    options["max_conversions"] = None if options["max_conversions"] == 0 else options["max_conversions"]
+    options["control"] = not args.no_control
     if args.fine_tune_reward is not None:
         try:
             options["fine_tune_reward"] = json.loads(args.fine_tune_reward)
@@ -1032,11 +1035,13 @@ def build_parser() -> argparse.ArgumentParser:
                        formatter_class=argparse.RawDescriptionHelpFormatter,
                        description="Closed-loop failure mining. Each round: mine the policy's failures (dv2s mine) "
                        "into new bank scenarios in a working bank (out/bank, a copy of the shipped bank, or --bank), "
-                       "split them by failure cluster into a fine-tuning and a held-out part, evaluate the policy "
-                       "on the held-out scenarios (seeds 10000+), fine-tune it on the grown bank minus the held-out "
-                       "scenarios (mined ones upweighted), evaluate again on the same episodes (paired: relative "
-                       "drop, exact McNemar) and regression-test new against old on the starting bank (dv2s "
-                       "regress statistics). Writes report.json, report.md, report.html to --out; rerunning with the same "
+                       "split them by family (parent bank scenario) into a fine-tuning and a held-out part, "
+                       "evaluate the policy on the held-out scenarios (seeds 10000+), fine-tune it on the grown bank "
+                       "minus the held-out scenarios and their parents (mined ones upweighted), fine-tune a control "
+                       "the same way without any mined scenario, evaluate both on the same episodes (paired: "
+                       "relative drop, exact McNemar against the start and against the control), run all three on "
+                       "an untouched scenario set (Scenic's CARLA examples) and regression-test new against old on "
+                       "the starting bank (dv2s regress statistics). Writes report.json, report.md, report.html to --out; rerunning with the same "
                        "--out and settings resumes (raise --rounds to add rounds).",
                        epilog="examples:\n"
                        "  dv2s loop                                   # one round on dv2s-ppo, out/loop\n"
@@ -1055,7 +1060,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fine-tune-lr", type=float, default=LOOP["fine_tune_lr"],
                    help="learning rate of the fine-tuning (default: the method's, ppo 1e-4, dagger 1e-3)")
     p.add_argument("--holdout-fraction", type=float, default=LOOP["holdout_fraction"],
-                   help=f"share of the mined clusters held out (default {LOOP['holdout_fraction']})")
+                   help=f"share of the mined families (parent scenarios) held out (default {LOOP['holdout_fraction']})")
+    p.add_argument("--max-conversions", type=int, default=LOOP["max_conversions"],
+                   help="failure clusters converted into bank scenarios per round, largest first; 0 converts every "
+                   f"cluster (default {LOOP['max_conversions']})")
+    p.add_argument("--min-heldout-episodes", type=int, default=LOOP["min_heldout_episodes"],
+                   help="below this many held-out episodes a round reports rates only, no drop and no test "
+                   f"(default {LOOP['min_heldout_episodes']})")
+    p.add_argument("--no-control", action="store_true",
+                   help="skip the control arm (the same fine-tuning without the mined scenarios)")
+    p.add_argument("--untouched-seeds", type=int, default=LOOP["untouched_seeds"],
+                   help="seeds per scenario of the untouched set the loop never mines or fine-tunes on; 0 skips it "
+                   f"(default {LOOP['untouched_seeds']})")
     p.add_argument("--k-eval", type=int, default=LOOP["k_eval"],
                    help=f"evaluation seeds per held-out scenario (default {LOOP['k_eval']})")
     p.add_argument("--regress-episodes", type=int, default=LOOP["regress_episodes"],

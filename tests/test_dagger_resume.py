@@ -203,7 +203,7 @@ def test_the_loop_resumes_a_killed_dagger_fine_tune_and_says_so(tmp_path, monkey
     out = tmp_path / "loop"
     miner = FakeMiner(SOURCES, failures_per_round=4)
     tiny = dict(budget=6, fine_tune_steps=200, k_eval=1, regress_episodes=1, workers=1, n_envs=1, progress=False,
-                scenarios=SOURCES, fine_tune_method="dagger")
+                scenarios=SOURCES, fine_tune_method="dagger", control=False, untouched_seeds=0)
     _kill_on_train_call(monkeypatch, 2)
     with pytest.raises(KeyboardInterrupt):
         run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **tiny)

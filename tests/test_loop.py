@@ -1,4 +1,4 @@
-"""`dv2s loop`: the by-cluster split, fine-tuning from a checkpoint, paired held-out evaluation,
+"""`dv2s loop`: the by-family and by-cluster splits, the control arm, the minimum of held-out episodes, fine-tuning from a checkpoint, paired held-out evaluation,
 resuming a killed loop without redoing finished steps, and the report of a whole round."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 
 from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, paired_summary
 from dv2s_gym.mining.loop import LoopError, fine_tune_weights, run_loop
-from dv2s_gym.mining.split import cluster_groups, split_by_cluster
+from dv2s_gym.mining.split import cluster_groups, family_of, split_by_cluster, split_by_family
 from cli_helpers import one_line_error, run
 from loop_helpers import FakeMiner
 from policies.model_card import read_card
@@ -60,6 +60,66 @@ def test_split_share_and_seed():
     assert split_by_cluster(tied, 0.5, 0)["groups"] == 1
     with pytest.raises(ValueError, match="fraction"):
         split_by_cluster(entries, 1.5)
+
+
+@pytest.mark.parametrize("trial", range(30))
+def test_family_split_never_puts_one_parent_on_both_sides(trial):
+    rng = np.random.default_rng(100 + trial)
+    entries = _random_entries(rng, int(rng.integers(2, 25)))
+    for entry in entries[::3]:  # some sidecars name the parent: it wins over the cluster id
+        entry["parent"] = f"p{rng.integers(3)}"
+    split = split_by_family(entries, fraction=0.5, seed=trial)
+    families = {side: {family_of(e) for e in entries if e["scenario"] in split[side]}
+                for side in ("held_out", "fine_tune")}
+    assert not families["held_out"] & families["fine_tune"]  # no parent on both sides
+    assert set(split["held_out_families"]) == families["held_out"]
+    assert set(split["fine_tune_families"]) == families["fine_tune"]
+    assert not set(split["held_out"]) & set(split["fine_tune"])
+    assert not set(split["held_out_clusters"]) & set(split["fine_tune_clusters"])
+    assert set(split["held_out"]) | set(split["fine_tune"]) == {e["scenario"] for e in entries}
+    if split["groups"] >= 2:
+        assert split["held_out"] and split["fine_tune"]
+    assert split_by_family(list(reversed(entries)), 0.5, trial) == split
+
+
+def test_family_split_keeps_a_family_held_out_once_held_out():
+    entries = [{"cluster": f"s{i % 4}/collision/r{i}", "scenario": f"m{i}"} for i in range(12)]
+    split = split_by_family(entries, 0.5, seed=3)
+    assert split["by"] == "family" and split["groups"] == 4 and len(split["held_out_families"]) == 2
+    assert len({tuple(split_by_family(entries, 0.5, seed=s)["held_out_families"]) for s in range(8)}) > 1
+    tuned = split["fine_tune_families"]
+    forced = split_by_family(entries, 0.5, seed=3, held_families=tuned)
+    assert set(tuned) <= set(forced["held_out_families"])  # an earlier round's held-out family never moves
+    one = [{"cluster": "s0/collision/r1", "scenario": "a"}, {"cluster": "s0/off_road/r2", "scenario": "b"}]
+    assert split_by_family(one, 0.5, 0)["held_out"] == []  # one family: nothing to hold out apart
+    assert family_of({"cluster": "s0/collision/r1", "parent": "p"}) == "p"
+
+
+def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
+    from dv2s_gym.mining.loop import heldout_comparison
+
+    def records(outcomes):
+        return [{"scenario": f"s{i % 2}", "seed": i, "failed": f, "error": None} for i, f in enumerate(outcomes)]
+
+    start = records([True] * 18 + [False] * 2)
+    tuned = records([True] * 6 + [False] * 14)
+    control = records([True] * 16 + [False] * 4)
+    full = heldout_comparison(start, tuned, control, min_episodes=20)
+    assert "underpowered" not in full
+    assert full["after"]["k"] == 6 and full["control"]["k"] == 16 and full["before"]["k"] == 18
+    assert full["relative_drop"] == pytest.approx(1 - 6 / 18) and full["mcnemar_p"] < 0.01
+    assert full["vs_control"]["table"] == {"both_fail": 6, "fine_tuned_only": 0, "control_only": 10, "neither": 4}
+    assert full["vs_control"]["mcnemar_p"] == pytest.approx(2 * 0.5 ** 10)
+    short = heldout_comparison(start, tuned, control, min_episodes=21)
+    assert "fewer than the 21 needed" in short["underpowered"]
+    assert short["relative_drop"] is None and short["mcnemar_p"] is None
+    assert short["vs_control"]["mcnemar_p"] is None and short["vs_control"]["relative_drop"] is None
+    assert short["after"] == full["after"] and short["control"] == full["control"]  # the rates stay
+    assert "control" not in heldout_comparison(start, tuned, None, min_episodes=1)
+    start[0]["failure"], start[1]["failure"] = {"type": "stall"}, {"type": "collision"}
+    tuned[0]["failure"] = {"type": "stall"}
+    kinds = heldout_comparison(start, tuned, control, min_episodes=1)["failure_types"]
+    assert kinds == {"start": {"stall": 1, "collision": 1}, "fine_tuned": {"stall": 1}, "control": {}}
 
 
 def test_fine_tune_weights_keep_the_bank_in_the_mix():
@@ -155,7 +215,8 @@ def test_paired_summary_counts_and_drop():
 
 # --------------------------------------------------------------------------- the loop
 TINY = dict(budget=6, fine_tune_steps=100, k_eval=2, regress_episodes=1, workers=1, n_envs=1, progress=False,
-            scenarios=SOURCES, fine_tune_method="ppo", log=lambda _: None)  # DAgger: tests/test_loop_dagger.py
+            scenarios=SOURCES, fine_tune_method="ppo", min_heldout_episodes=1, untouched_seeds=0,
+            log=lambda _: None)  # DAgger: tests/test_loop_dagger.py
 
 
 class _Kill(BaseException):
@@ -185,10 +246,13 @@ def test_loop_resumes_without_redoing_steps_and_reports_every_field(tmp_path, mo
     report = run_loop("dv2s-ppo", out=out, miner=miner, **TINY)
     assert len(miner.calls) == 1  # mining was not run again
     lines = (out / "round_1" / "heldout.jsonl").read_text().splitlines()
-    assert lines[:len(lines_before)] == lines_before and len(lines) == 2 * len(lines_before)  # only "after" ran
+    # only "after" and "control" ran
+    assert lines[:len(lines_before)] == lines_before and len(lines) == 3 * len(lines_before)
     record = report.rounds[0]
     steps = record["steps"]
-    assert set(steps) == {"mine", "split", "before", "fine_tune", "after", "regress"}
+    assert set(steps) == {"mine", "split", "before", "fine_tune", "control", "after", "regress"}
+    assert steps["control"]["mined_upweighted"] == 0 and steps["control"]["mined_left_out"] == 2
+    assert {"k", "n", "rate", "low", "high"} <= set(steps["after"]["control"])
     assert steps["mine"]["failures"] == 4 and len(steps["mine"]["kept"]) == 4
     assert steps["after"]["pairs"] == 2 * TINY["k_eval"]
     for key in ("before", "after"):
@@ -198,12 +262,15 @@ def test_loop_resumes_without_redoing_steps_and_reports_every_field(tmp_path, mo
     assert steps["fine_tune"]["mined_upweighted"] == 2  # the held-out ones are not trained on
     card = read_card(steps["fine_tune"]["model"])
     assert not set(held) & set(card["sampler"]["weights"])
+    assert not set(steps["split"]["held_out_families"]) & set(card["sampler"]["weights"])  # nor their parents
+    control_card = read_card(steps["control"]["model"])
+    assert not {e["scenario"] for e in steps["mine"]["kept"]} & set(control_card["sampler"]["weights"])
     assert set(record["timings"]) >= {"mine", "before", "fine_tune", "after", "regress"}
     assert report.policy == record["new_policy"] and report.policy.startswith("ppo:")
     data = json.loads(report.paths["json"].read_text())
     assert data["schema"] == "dv2s-loop" and data["rounds"][0]["steps"]["regress"]["verdict"]
     markdown = report.paths["md"].read_text()
-    assert "held-out failure rate before" in markdown and steps["regress"]["verdict"] in markdown
+    assert "held-out failure rate start" in markdown and steps["regress"]["verdict"] in markdown
     page = report.paths["html"].read_text()
     assert page.startswith("<!DOCTYPE html>") and steps["regress"]["verdict"] in page and "http" not in page
     # a finished loop rerun does nothing new
@@ -221,8 +288,197 @@ def test_loop_refuses_a_policy_it_cannot_fine_tune(tmp_path):
     (["--budget", "0"], "--budget must be an integer >= 1"),
     (["--holdout-fraction", "2"], "--holdout-fraction must be in [0, 1]"),
     (["--sampler", "no-such"], "--sampler must be one of random, halton"),  # it used to start round 1 first
+    (["--max-conversions", "-1"], "--max-conversions must be a positive integer (0 on the command line"),
+    (["--untouched-seeds", "-1"], "--untouched-seeds must be an integer >= 0"),
+    (["--min-heldout-episodes", "-2"], "--min-heldout-episodes must be an integer >= 0"),
 ])
 def test_cli_refuses_bad_input_in_one_line(tmp_path, capsys, argv, needle):
     code, _, err = run(capsys, "loop", "--out", tmp_path / "loop", "--no-progress", *argv)
     assert code == 2 and needle in one_line_error(err)
     assert not (tmp_path / "loop").exists()  # refused before anything is written
+
+
+# --------------------------------------------------------------------------- the loop's wiring, with stand-ins
+class _StandIns:
+    """Stand-ins for fine-tuning (a copy of the shipped checkpoint), the held-out evaluation (outcome read from
+    the role) and the regression runs, recording every call: the loop's wiring runs in seconds."""
+
+    def __init__(self, monkeypatch, kill_in=None):
+        import shutil
+
+        import dv2s_gym.mining.heldout as heldout
+        import dv2s_gym.regress.runner as runner
+        import policies.training as training
+
+        self.fine_tunes, self.evaluations, self.regressions = [], [], []
+
+        def fine_tune(policy, *, bank_dir, out, steps, weights, seed, learning_rate, **options):
+            if kill_in is not None and str(out).endswith(kill_in):
+                raise _Kill()
+            self.fine_tunes.append({"out": str(out), "steps": steps, "weights": dict(weights), "seed": seed,
+                                    "learning_rate": learning_rate, "policy": policy})
+            folder = __import__("pathlib").Path(out)
+            folder.mkdir(parents=True, exist_ok=True)
+            for name in ("model.zip", "model_card.json"):
+                shutil.copyfile(SHIPPED_CHECKPOINT.parent / name, folder / name)
+            return folder / "model.zip"
+
+        def evaluate(role, policy, episodes, **options):
+            self.evaluations.append((role, policy, list(episodes)))
+            fails = {"before": lambda i: True, "control": lambda i: i % 2 == 0, "after": lambda i: i % 4 == 0}[role]
+            return [{"role": role, "scenario": s, "seed": seed, "failed": fails(i), "error": None}
+                    for i, (s, seed) in enumerate(episodes)]
+
+        def regression(candidate, baseline=None, **options):
+            self.regressions.append({"candidate": candidate, "baseline": baseline, **options})
+            rate = {"value": 0.5, "low": 0.1, "high": 0.9, "count": 1}
+            per = {"candidate": {"failure_rate": rate, "stall_rate": rate}, "baseline": {"failure_rate": rate}}
+            return {"verdict": "INCONCLUSIVE", "bank": {"scenarios": ["x"]},
+                    "scenarios": {name: per for name in options.get("scenarios") or []},
+                    "overall": {"candidate": {"episodes": 2, "failure_rate": rate, "stall_rate": rate,
+                                              "mean_speed": {"value": 3.0}},
+                                "baseline": {"episodes": 2, "failure_rate": rate},
+                                "comparison": {"reason": "few episodes", "n": 2, "difference": {"value": 0.0}}}}
+
+        monkeypatch.setattr(training, "fine_tune", fine_tune)
+        monkeypatch.setattr(heldout, "evaluate_heldout", evaluate)
+        monkeypatch.setattr(runner, "run_regression", regression)
+
+
+WIRING = dict(budget=8, fine_tune_steps=100, k_eval=3, regress_episodes=1, workers=1, n_envs=1, progress=False,
+              scenarios=SOURCES + ["highway_cut_in_from_left"], fine_tune_method="ppo", untouched_seeds=1)
+
+
+def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scenarios(tmp_path, monkeypatch):
+    from scenario_bank.bank import Bank
+
+    stand = _StandIns(monkeypatch)
+    lines = []
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=FakeMiner(WIRING["scenarios"], failures_per_round=6),
+                      min_heldout_episodes=1, log=lines.append, **WIRING)
+    steps = report.rounds[0]["steps"]
+    split = steps["split"]
+    assert split["by"] == "family" and split["groups"] == 3 and len(split["held_out_families"]) == 2
+    bank = Bank(tmp_path / "loop" / "bank")
+    parents = {name: bank.get(name).source["parent"] for name in split["held_out"] + split["fine_tune"]}
+    assert {parents[n] for n in split["held_out"]} == set(split["held_out_families"])
+    assert not {parents[n] for n in split["held_out"]} & {parents[n] for n in split["fine_tune"]}
+    tuned, control = stand.fine_tunes
+    assert tuned["out"].endswith("round_1/policy") and control["out"].endswith("round_1/control")
+    for key in ("steps", "seed", "learning_rate", "policy"):
+        assert tuned[key] == control[key]  # the same fine-tuning but for the mined scenarios
+    mined = {e.name for e in bank if e.source.get("kind") == "mined"}
+    assert set(split["fine_tune"]) <= set(tuned["weights"]) and not mined & set(control["weights"])
+    assert set(control["weights"]) == set(tuned["weights"]) - mined
+    for arm in (tuned, control):  # neither arm sees a held-out scenario or a held-out family's parent
+        assert not (set(split["held_out"]) | set(split["held_out_families"])) & set(arm["weights"])
+    roles = [role for role, _, _ in stand.evaluations]
+    assert roles.count("control") == 1 and roles.count("after") == 1
+    episodes = {role: episodes for role, _, episodes in stand.evaluations}
+    assert episodes["control"] == episodes["after"] == episodes["before"]  # paired on the same episodes
+    after = steps["after"]
+    assert after["before"]["rate"] == 1.0 and after["control"]["rate"] > after["after"]["rate"]
+    assert after["vs_control"]["mcnemar_p"] is not None and "underpowered" not in after
+    untouched = steps["untouched"]
+    assert set(untouched["policies"]) == {"start", "fine_tuned", "control"}
+    first, second = stand.regressions[:2]  # the untouched set: never the loop's bank
+    assert first["bank_dir"] == second["bank_dir"] == str(__import__("dv2s_gym.mining.loop", fromlist=["x"])
+                                                           .UNTOUCHED_BANK)
+    assert second["candidate"] == report.rounds[0]["control_policy"] and second["baseline_role"] == "candidate"
+    assert any("[5/8] control" in line for line in lines)
+    assert set(steps["regress"]["held_out_parents"]) == set(split["held_out_families"])
+    markdown = report.paths["md"].read_text()
+    assert "control arm" in markdown and "untouched scenario set" in markdown and "split by family" in markdown
+    assert markdown.count("held-out family's parent") == len(split["held_out_families"])
+    # the HTML shows a kept scenario's failure clip where its bank entry has one
+    from dv2s_gym.mining.loop_report import write_loop_reports
+
+    assert "<video" not in report.paths["html"].read_text()
+    held = split["held_out"][0]
+    (tmp_path / "loop" / "bank" / held / "failure.webm").write_bytes(b"clip")
+    page = write_loop_reports(report.to_json(), tmp_path / "loop")["html"].read_text()
+    assert f'<video src="bank/{held}/failure.webm"' in page and f"{held} (held out)" in page
+    assert page.count("<svg") == 2 and "held-out failure rate (95 % Wilson)" in page and "http" not in page
+
+
+def test_loop_says_loudly_when_too_few_episodes_are_held_out(tmp_path, monkeypatch):
+    _StandIns(monkeypatch)
+    lines = []
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=FakeMiner(WIRING["scenarios"], failures_per_round=6),
+                      min_heldout_episodes=20, log=lines.append, **WIRING)
+    after = report.rounds[0]["steps"]["after"]
+    held = report.rounds[0]["steps"]["split"]["held_out"]
+    assert after["pairs"] == len(held) * WIRING["k_eval"] < 20
+    assert after["underpowered"] and after["relative_drop"] is None and after["mcnemar_p"] is None
+    assert sum("WARNING" in line and "fewer than the 20 needed" in line for line in lines) == 1
+    assert any("NO DROP OR TEST REPORTED" in line for line in lines)
+    for kind in ("md", "html"):
+        text = report.paths[kind].read_text()
+        assert "WARNING" in text and "fewer than the 20 needed" in text
+        assert f"not reported: {after['pairs']} &lt; 20" in (text if kind == "html" else text.replace("<", "&lt;"))
+
+
+def test_loop_resumes_the_control_arm_without_redoing_the_fine_tune(tmp_path, monkeypatch):
+    out = tmp_path / "loop"
+    miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
+    _StandIns(monkeypatch, kill_in="control")
+    with pytest.raises(_Kill):
+        run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **WIRING)
+    state = json.loads((out / "loop.json").read_text())
+    assert set(state["rounds"][0]["steps"]) == {"mine", "split", "before", "fine_tune"}
+    stand = _StandIns(monkeypatch)
+    with pytest.raises(LoopError, match="control=True"):
+        run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, control=False, **WIRING)
+    report = run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **WIRING)
+    assert [call["out"][-len("control"):] for call in stand.fine_tunes] == ["control"]  # only the control ran
+    assert len(miner.calls) == 1 and "control" in report.rounds[0]["steps"]
+
+
+def test_a_loop_recorded_before_the_family_split_and_the_control_resumes_as_it_was(tmp_path, monkeypatch):
+    out = tmp_path / "loop"
+    miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
+    _StandIns(monkeypatch, kill_in="round_1/policy")
+    with pytest.raises(_Kill):
+        run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **WIRING)
+    state = json.loads((out / "loop.json").read_text())
+    for key in ("holdout_by", "max_conversions", "control", "untouched_seeds", "min_heldout_episodes"):
+        del state["settings"][key]  # as an older dv2s wrote it
+    state["rounds"][0]["steps"] = {"mine": state["rounds"][0]["steps"]["mine"]}
+    (out / "loop.json").write_text(json.dumps(state))
+    stand = _StandIns(monkeypatch)
+    old = dict(WIRING, untouched_seeds=0)
+    report = run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, control=False, max_conversions=None,
+                      min_heldout_episodes=0, **{k: v for k, v in old.items()})
+    steps = report.rounds[0]["steps"]
+    assert "by" not in steps["split"] and "control" not in steps and "untouched" not in steps  # split by cluster
+    assert len(stand.fine_tunes) == 1 and report.settings["holdout_by"] == "cluster"
+
+
+def test_the_untouched_set_is_a_bank_of_the_corpus_scripts_with_their_licences():
+    from pathlib import Path
+
+    from dv2s_gym.mining.loop import UNTOUCHED_BANK
+    from scenario_bank.bank import Bank
+
+    bank = Bank(UNTOUCHED_BANK)
+    assert len(bank) == 3 and not bank.problems
+    corpus = Path(__file__).parent / "data" / "carla_corpus" / "scenic3"
+    originals = {path.stem.lower(): path for path in corpus.glob("*.scenic")}
+    sources = (UNTOUCHED_BANK / "SOURCES.md").read_text()
+    for entry in bank:
+        assert entry.script == originals[entry.name].read_text()  # as in the corpus, nothing changed here
+        assert "untouched" in entry.tags and entry.source["kind"] != "mined"
+        assert entry.name in sources and not entry.missing_files()
+    for name in ("LICENSE-Scenic.txt", "LICENSE-CARLA-maps.txt"):
+        assert (UNTOUCHED_BANK / name).is_file() and name in sources
+
+
+def test_a_round_that_keeps_nothing_is_skipped_and_says_why(tmp_path, monkeypatch):
+    stand = _StandIns(monkeypatch)
+    lines = []
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=FakeMiner(WIRING["scenarios"], failures_per_round=0),
+                      log=lines.append, **WIRING)
+    steps = report.rounds[0]["steps"]
+    assert steps["skipped"].startswith("no mined scenario was kept this round (0 conversion(s) tried")
+    assert not stand.fine_tunes and not stand.evaluations and not stand.regressions
+    assert any(steps["skipped"] in line for line in lines) and steps["skipped"] in report.paths["md"].read_text()

@@ -97,9 +97,11 @@ def test_loop_fine_tunes_with_its_reward_but_evaluates_with_the_policys_config(t
     reward = {"standing": -0.7, "low_ttc": -0.5}
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, fine_tune_method="ppo", budget=6,
                       fine_tune_steps=100, k_eval=2, regress_episodes=1, workers=1, n_envs=1, progress=False,
-                      scenarios=SOURCES, fine_tune_reward=reward, log=lambda _: None)
+                      scenarios=SOURCES, fine_tune_reward=reward, min_heldout_episodes=1, untouched_seeds=0,
+                      log=lambda _: None)
     expected = with_reward_weights(SHIPPED_CONFIG, reward)
-    assert len(fine_tunes) == 1 and fine_tunes[0]["training_config"] == expected
+    assert len(fine_tunes) == 2  # the fine-tuning and its control arm, with the same reward
+    assert all(call["training_config"] == expected for call in fine_tunes)
     # everything that counts failures runs the policy's own env config
     assert miner.calls[0]["env_config"] == SHIPPED_CONFIG
     assert evaluations and all(config == SHIPPED_CONFIG for _, config in evaluations)
@@ -117,7 +119,7 @@ def test_loop_fine_tunes_with_its_reward_but_evaluates_with_the_policys_config(t
     with pytest.raises(LoopError, match="fine_tune_reward"):
         run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, fine_tune_method="ppo", budget=6,
                  fine_tune_steps=100, k_eval=2, regress_episodes=1, workers=1, n_envs=1, progress=False,
-                 scenarios=SOURCES, log=lambda _: None)
+                 scenarios=SOURCES, min_heldout_episodes=1, untouched_seeds=0, log=lambda _: None)
 
 
 def test_the_default_fine_tune_reward_penalises_the_stall():

@@ -3,16 +3,20 @@
 One round, starting from policy ``P`` (an SB3 checkpoint spec, e.g. ``dv2s-ppo``):
 
 a. **mine**: :func:`dv2s_gym.mining.miner.mine` runs ``P`` on sampled scenes of the starting
-   bank's scenarios, clusters its failures, converts each cluster's representative through
+   bank's scenarios, clusters its failures, converts the representatives of at most
+   ``max_conversions`` clusters (largest first; the rest are counted as not converted) through
    the D-V2S pipeline and adds the kept scenarios to the *working bank* (``out/bank``, a copy
    of the shipped bank, or the ``bank_dir`` given);
-b. **split**: the newly kept scenarios are split by cluster (:mod:`dv2s_gym.mining.split`)
-   into a fine-tuning part and a held-out part, deterministically from the seed;
+b. **split**: the newly kept scenarios are split by *family* (their parent bank scenario,
+   :func:`dv2s_gym.mining.split.split_by_family`) into a fine-tuning part and a held-out part,
+   deterministically from the seed; a family held out once stays held out;
 c. **before**: ``P`` runs on the held-out scenarios, ``k_eval`` evaluation seeds each
    (``EVAL_SEED_BASE + i``, never a training seed): failure rate (the miner's monitors) with
-   a Wilson interval;
+   a Wilson interval; fewer than ``min_heldout_episodes`` held-out episodes is said loudly and
+   the round reports rates but no drop and no test;
 d. **fine-tune**: :func:`policies.training.fine_tune` continues ``P`` on the working bank
-   minus every held-out scenario, the mined fine-tuning scenarios drawn with ``mined_share``
+   minus every held-out scenario and every held-out family's parent scenario (so the parent over
+   its full range cannot leak the held-out failures), the mined fine-tuning scenarios drawn with ``mined_share``
    of the probability, the rest of the bank with the remainder (so it is not forgotten).
    The training reward is ``P``'s own with the terms of ``fine_tune_reward`` overridden
    (default ``{"standing": -0.3}``: standing still with a free path ahead, the miner's
@@ -22,14 +26,23 @@ d. **fine-tune**: :func:`policies.training.fine_tune` continues ``P`` on the wor
    the policy instead imitates the reference driver (``rule``) on the states it visits
    itself in the same weighted scenario mix (:mod:`policies.imitation`; no reward; a killed
    DAgger run resumes from its last finished iteration, ``resumed`` in the step's record);
-e. **after**: the new policy runs on the same held-out episodes (paired): rate, interval,
-   relative drop (scenario-bootstrap interval), exact two-sided McNemar p;
+d'. **control**: the same fine-tuning (method, steps, seed, learning rate) on the same scenarios
+   less every mined one, into ``round_<r>/control``: what the fine-tuning does without the mined
+   scenarios, so a drop can be credited to them (``control=False`` leaves it out);
+e. **after**: the fine-tuned policy and the control run on the same held-out episodes (paired):
+   rates with Wilson intervals for start, control and fine-tuned, relative drop
+   (scenario-bootstrap interval), exact two-sided McNemar p fine-tuned vs start and fine-tuned
+   vs control;
+e'. **untouched**: start, control and fine-tuned run on the scenario set the loop never mines or
+   fine-tunes on (:data:`UNTOUCHED_BANK`: scripts written by others for Scenic's CARLA model),
+   ``untouched_seeds`` seeds each, judged by :func:`dv2s_gym.regress.runner.run_regression`
+   (failure rates, stalls apart, mean speed; fine-tuned vs start and control vs fine-tuned);
 f. **regress**: :func:`dv2s_gym.regress.runner.run_regression` new against old on the starting
    bank's scenarios (PASS / FAIL / INCONCLUSIVE against ``margin``);
 g. the next round starts from the new policy.
 
 Everything lives under ``out``: ``loop.json`` (settings and every finished step, written
-atomically after each), ``bank/``, ``round_<r>/{mine,heldout.jsonl,policy,regress}`` and the
+atomically after each), ``bank/``, ``round_<r>/{mine,heldout.jsonl,policy,control,untouched,regress}`` and the
 report (``report.json``, ``report.md``, ``report.html``).
 Restarted with the same ``out`` and settings, the loop skips finished steps and resumes the
 unfinished one (the miner, the held-out store, training and the regression run are each
@@ -61,7 +74,11 @@ DEFAULTS: Dict[str, Any] = {
     "fine_tune_steps": 30_000,
     "fine_tune_lr": None,
     "holdout_fraction": 0.5,
-    "k_eval": 6,
+    "k_eval": 10,
+    "max_conversions": 4,
+    "min_heldout_episodes": 20,
+    "control": True,
+    "untouched_seeds": 2,
     "regress_episodes": 4,
     "mined_share": 0.5,
     "fine_tune_reward": {"standing": -0.3},
@@ -69,11 +86,22 @@ DEFAULTS: Dict[str, Any] = {
     "margin": 0.02,
     "seed": 0,
 }
-"""Embedded defaults: one round finishes in a few minutes on 2 cores (a small mining budget,
-a short fine-tune, a small evaluation). The measurement in bench/RESULTS.md uses larger ones."""
+"""Embedded defaults: small, for one round in minutes on 2 cores (a small mining budget, at most 4
+conversions, two short fine-tunes, a small evaluation; ``python -m bench.bench_loop`` times a round and
+bench/RESULTS.md records it). The other measurements in bench/RESULTS.md use larger ones."""
 
 IDENTITY = ("policy", "bank_dir", "budget", "sampler", "fine_tune_steps", "fine_tune_lr", "holdout_fraction", "k_eval",
-            "regress_episodes", "mined_share", "fine_tune_reward", "margin", "seed", "scenarios", "fine_tune_method")
+            "regress_episodes", "mined_share", "fine_tune_reward", "margin", "seed", "scenarios", "fine_tune_method",
+            "max_conversions", "control", "untouched_seeds", "min_heldout_episodes")
+_RECORDED = ("holdout_by",)
+"""Settings a loop keeps as first recorded (not chosen by the user, so never a reason to refuse a resume)."""
+
+HOLDOUT_BY = "family"
+"""How new loops split their mined scenarios (loops recorded before hold out by ``cluster``)."""
+
+UNTOUCHED_BANK = Path(__file__).resolve().parent / "untouched"
+"""The scenario set no loop mines or fine-tunes on: a bank folder of scripts written by others for Scenic's
+CARLA model (its ``SOURCES.md`` names them and their licence)."""
 
 FINE_TUNE_METHODS = ("ppo", "dagger")
 """How the loop fine-tunes: ``ppo`` continues PPO on the fine-tuning reward
@@ -84,7 +112,8 @@ METHOD_LEARNING_RATES = {"ppo": 1e-4, "dagger": 1e-3}
 """The fine-tuning learning rate when none is given: PPO's constant rate (its own 5e-4 made the
 bank worse, bench/RESULTS.md) and DAgger's Adam rate."""
 
-_LEGACY = {"fine_tune_method": "ppo"}
+_LEGACY = {"fine_tune_method": "ppo", "max_conversions": None, "holdout_by": "cluster", "control": False,
+           "untouched_seeds": 0, "min_heldout_episodes": 0}
 """Identity settings added later, with the value a ``loop.json`` written before them meant."""
 
 
@@ -127,7 +156,9 @@ class _State:
                     raise LoopError(f"{path.parent} holds a loop with {key}={value!r}, not "
                                     f"{settings.get(key)!r}; rerun with its settings to resume it, or choose "
                                     "another --out")
-            data["settings"].update({k: settings[k] for k in settings if k not in IDENTITY})
+            data["settings"].update({k: settings[k] for k in settings if k not in IDENTITY and k not in _RECORDED})
+            for key in _RECORDED:
+                data["settings"].setdefault(key, _LEGACY[key])
             self.data = data
         else:
             self.data = {"settings": settings, "start": None, "rounds": []}
@@ -219,8 +250,10 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
             statuses[record.get("status", "?")] = statuses.get(record.get("status", "?"), 0) + 1
             if record.get("status") == "rejected" and record.get("reason"):
                 reasons.append(str(record["reason"]))
+    converted = sum(statuses.values())
     return {"episodes": episodes, "errors": errors, "failures": failures, "failures_against_policy": counted,
-            "clusters": clusters, "conversions": statuses, "rejected_reasons": reasons[:20]}
+            "clusters": clusters, "conversions": statuses, "rejected_reasons": reasons[:20],
+            "clusters_not_converted": None if clusters is None else max(0, clusters - converted)}
 
 
 def fine_tune_weights(names: Sequence[str], mined: Sequence[str], mined_share: float) -> Dict[str, float]:
@@ -249,8 +282,11 @@ def _policy_env_config(spec: str) -> Dict[str, Any]:
     return dict(card.get("env_config") or {})
 
 
-def _regress_summary(report: Mapping[str, Any], path: Path) -> Dict[str, Any]:
+def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[str] = ()) -> Dict[str, Any]:
+    """The regression step's record; ``parents``: scenarios whose own results are kept apart (the held-out
+    families' parents, never fine-tuned on: the regression test's view beyond the fine-tuning mix)."""
     overall = report.get("overall") or {}
+    per_scenario = report.get("scenarios") or {}
     comparison = overall.get("comparison") or {}
 
     def rate(role: str) -> Optional[Dict[str, Any]]:
@@ -260,7 +296,11 @@ def _regress_summary(report: Mapping[str, Any], path: Path) -> Dict[str, Any]:
     return {"verdict": report.get("verdict"), "reason": comparison.get("reason"),
             "episodes": comparison.get("n"), "new_failure_rate": rate("candidate"), "old_failure_rate": rate("baseline"),
             "difference": comparison.get("difference"), "p_value": comparison.get("p_value"),
-            "regressed": report.get("regressed") or [], "report": str(path)}
+            "regressed": report.get("regressed") or [], "report": str(path),
+            "held_out_parents": {name: {role: {key: ((per_scenario[name].get(side) or {}).get(key))
+                                               for key in ("failure_rate", "stall_rate", "mean_speed")}
+                                        for role, side in (("new", "candidate"), ("old", "baseline"))}
+                                 for name in parents if name in per_scenario}}
 
 
 def _log_default(line: str) -> None:
@@ -277,10 +317,14 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
              fine_tune_method: str = DEFAULTS["fine_tune_method"],
              margin: float = DEFAULTS["margin"], seed: int = DEFAULTS["seed"], workers: Optional[int] = None,
              fine_tune_lr: Optional[float] = DEFAULTS["fine_tune_lr"],
+             max_conversions: Optional[int] = DEFAULTS["max_conversions"],
+             min_heldout_episodes: int = DEFAULTS["min_heldout_episodes"], control: bool = DEFAULTS["control"],
+             untouched_seeds: int = DEFAULTS["untouched_seeds"],
              scenarios: Optional[Sequence[str]] = None, n_envs: int = 2, progress: bool = True,
              mine_options: Optional[Mapping[str, Any]] = None, miner: Optional[Callable[..., Any]] = None,
              log: Callable[[str], None] = _log_default) -> LoopReport:
-    """Run ``rounds`` rounds of mine -> split -> evaluate -> fine-tune -> evaluate -> regress (module docstring).
+    """Run ``rounds`` rounds of mine -> split -> evaluate -> fine-tune (+ control) -> evaluate -> regress
+    (module docstring).
 
     Args:
         policy: the starting policy, an SB3 checkpoint spec (``dv2s-ppo``, ``ppo:PATH``, a run folder).
@@ -291,7 +335,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         fine_tune_steps: env steps of fine-tuning per round.
         fine_tune_lr: the fine-tuning's (constant) learning rate (``None``: the method's,
             :data:`METHOD_LEARNING_RATES`).
-        holdout_fraction: share of the round's mined clusters held out from fine-tuning.
+        holdout_fraction: share of the round's mined families held out from fine-tuning.
         k_eval: evaluation seeds per held-out scenario.
         regress_episodes: seeds per starting-bank scenario in the regression test.
         mined_share: probability of drawing a mined fine-tuning scenario during fine-tuning.
@@ -301,6 +345,11 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         fine_tune_method: ``ppo`` or ``dagger`` (:data:`FINE_TUNE_METHODS`).
         margin: the regression test's non-inferiority margin.
         seed: seeds the miner, the split and the fine-tuning (each round derives its own).
+        max_conversions: clusters converted into bank scenarios per round, largest first (``None``: all).
+        min_heldout_episodes: below this many held-out episodes a round reports rates only, no drop and no
+            test, and says so in the log and the reports.
+        control: also fine-tune without the mined scenarios (the control arm) and compare on held-out.
+        untouched_seeds: seeds per scenario of the untouched set (:data:`UNTOUCHED_BANK`); 0 skips it.
         workers: processes for mining and evaluation (default: every core).
         scenarios: the scenarios mined and regression-tested (default: the starting bank's).
         n_envs: training environments (subprocesses).
@@ -311,9 +360,15 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         A :class:`LoopReport`; the reports are written to ``out`` after every round.
     """
     for name, value, low in (("rounds", rounds, 1), ("budget", budget, 1), ("fine-tune-steps", fine_tune_steps, 1),
-                             ("k-eval", k_eval, 1), ("regress-episodes", regress_episodes, 1)):
+                             ("k-eval", k_eval, 1), ("regress-episodes", regress_episodes, 1),
+                             ("min-heldout-episodes", min_heldout_episodes, 0),
+                             ("untouched-seeds", untouched_seeds, 0)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise LoopError(f"--{name} must be an integer >= {low}, not {value!r}")
+    if max_conversions is not None and (isinstance(max_conversions, bool) or not isinstance(max_conversions, int)
+                                        or max_conversions < 1):
+        raise LoopError(f"--max-conversions must be a positive integer (0 on the command line: every cluster), "
+                        f"not {max_conversions!r}")
     if not 0.0 <= float(holdout_fraction) <= 1.0:
         raise LoopError(f"--holdout-fraction must be in [0, 1], not {holdout_fraction}")
     if not 0.0 < float(mined_share) < 1.0:
@@ -350,9 +405,13 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                 "fine_tune_method": fine_tune_method,
                 "margin": float(margin), "seed": seed,
                 "scenarios": list(scenarios) if scenarios is not None else None, "rounds": rounds,
+                "max_conversions": max_conversions, "holdout_by": HOLDOUT_BY, "control": bool(control),
+                "untouched_seeds": untouched_seeds, "min_heldout_episodes": min_heldout_episodes,
                 "workers": workers, "n_envs": n_envs, "env_config": env_config,
                 "fine_tune_env_config": fine_tune_config}
     state = _State(out / "loop.json", settings)
+    settings = state.data["settings"]
+    holdout_by = settings.get("holdout_by", _LEGACY["holdout_by"])
     bank = _working_bank(out, settings["bank_dir"])
     if state.data.get("start") is None:
         from scenario_bank import select_scenarios
@@ -376,91 +435,93 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
             current = record.get("new_policy") or current
             continue
         log(f"round {number}: policy {current}")
+        stages = ["mine", "split", "before", "fine_tune"] + (["control"] if control else []) + ["after"] + (
+            ["untouched"] if untouched_seeds else []) + ["regress"]
 
         def timed(step: str, function: Callable[[], Any]) -> Any:
+            log(f"round {number} [{stages.index(step) + 1}/{len(stages)}] {_STAGE_NAMES[step]} ...")
             began = time.perf_counter()
             value = function()
             timings[step] = round(time.perf_counter() - began, 1)  # of the run that finished the step
             steps[step] = value
             state.save()
+            log(f"round {number} [{stages.index(step) + 1}/{len(stages)}] {_STAGE_NAMES[step]}: done in "
+                f"{timings[step]:.0f} s")
             return value
 
         if "mine" not in steps:
             def do_mine() -> Dict[str, Any]:
                 options = {"sampler": sampler, "scenarios": start_names, "bank_dir": bank, "workers": workers,
                            "seed": seed * 1000 + number, "progress": progress, "env_config": env_config,
-                           "convert": True, **dict(mine_options or {})}
+                           "convert": True, "max_conversions": max_conversions, **dict(mine_options or {})}
                 miner(current, out=str(round_dir / "mine"), budget=budget, **options)
                 return {**_mining_summary(round_dir / "mine"), "kept": mined_entries(round_dir / "mine"),
                         "folder": str(round_dir / "mine")}
 
             timed("mine", do_mine)
-            log(f"round {number}: mined {steps['mine']['failures']} failures in {steps['mine']['episodes']} episodes, "
-                f"{len({e['scenario'] for e in steps['mine']['kept']})} scenarios kept")
+            mined = steps["mine"]
+            log(f"round {number}: mined {mined['failures']} failures in {mined['episodes']} episodes, "
+                f"{mined.get('clusters')} clusters, "
+                f"{len({e['scenario'] for e in mined['kept']})} scenarios kept"
+                + (f"; {mined['clusters_not_converted']} clusters not converted (--max-conversions "
+                   f"{max_conversions})" if mined.get("clusters_not_converted") else ""))
         if "split" not in steps:
-            timed("split", lambda: _split(steps["mine"]["kept"], holdout_fraction, seed * 1000 + number))
+            held_families = sorted({f for earlier in state.data["rounds"][:number - 1]
+                                    for f in ((earlier.get("steps") or {}).get("split") or {}).get(
+                                        "held_out_families", [])})
+            timed("split", lambda: _split(steps["mine"]["kept"], holdout_fraction, seed * 1000 + number, holdout_by,
+                                          bank, held_families))
         split = steps["split"]
         held_out, tuned = split["held_out"], split["fine_tune"]
         if not tuned and not held_out:
-            steps["skipped"] = "no mined scenario was kept this round: nothing to fine-tune on or to measure"
+            mined = steps["mine"]
+            tried = sum((mined.get("conversions") or {}).values())
+            steps["skipped"] = (f"no mined scenario was kept this round ({tried} conversion(s) tried"
+                                + (f", {mined['clusters_not_converted']} cluster(s) not converted: raise "
+                                   "--max-conversions or --budget" if mined.get("clusters_not_converted") else "")
+                                + "): nothing to fine-tune on or to measure")
             state.save()
             log(f"round {number}: {steps['skipped']}")
             _write(out, state, current)
             continue
 
-        from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, paired_summary
+        from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout
         from policies.training import EVAL_SEED_BASE
 
         episodes = [(name, EVAL_SEED_BASE + i) for name in held_out for i in range(k_eval)]
+        shortfall = underpowered(len(episodes), min_heldout_episodes)
+        if shortfall:
+            log(f"round {number}: WARNING: {shortfall}")
         store_path = round_dir / "heldout.jsonl"
         if "before" not in steps:
             timed("before", lambda: {"episodes": len(episodes), "done": bool(evaluate_heldout(
                 "before", current, episodes, store=HeldOutStore(store_path), bank_dir=bank, env_config=env_config,
                 workers=workers, progress=progress))})
+        excluded = set(held_out) | set(split.get("held_out_families", []))
+        for earlier in state.data["rounds"][:number - 1]:
+            earlier_split = earlier.get("steps", {}).get("split") or {}
+            excluded.update(earlier_split.get("held_out", []))
+            excluded.update(earlier_split.get("held_out_families", []))
+        arm = dict(bank=bank, method=fine_tune_method, steps=fine_tune_steps, seed=seed * 1000 + number,
+                   n_envs=n_envs, env_config=env_config, fine_tune_config=fine_tune_config,
+                   reward=fine_tune_reward, learning_rate=fine_tune_lr, progress=progress, log=log)
         if "fine_tune" not in steps:
-            def do_fine_tune() -> Dict[str, Any]:
-                from scenario_bank.bank import Bank
-
-                excluded = set(held_out)
-                for earlier in state.data["rounds"][:number - 1]:
-                    excluded.update((earlier.get("steps", {}).get("split") or {}).get("held_out", []))
-                entries = [e for e in Bank(bank) if e.name not in excluded]
-                names = sorted(e.name for e in entries)
-                mined = [e.name for e in entries if e.source.get("kind") == "mined"]
-                weights = fine_tune_weights(names, mined, mined_share)
-                if fine_tune_method == "dagger":
-                    from policies.dagger_checkpoint import checkpoint_position, describe_position
-                    from policies.imitation import DAGGER_DEFAULTS, dagger_fine_tune
-                    from policies.registry import read_model_card
-
-                    position = checkpoint_position(round_dir / "policy")
-                    if position is not None:
-                        log(f"round {number}: fine-tune (dagger) resumed from "
-                            f"{describe_position(*position, DAGGER_DEFAULTS['iterations'])}")
-                    path = dagger_fine_tune(current, bank_dir=bank, out=round_dir / "policy", steps=fine_tune_steps,
-                                            weights=weights, seed=seed * 1000 + number, n_envs=n_envs,
-                                            env_config=env_config, learning_rate=fine_tune_lr,
-                                            progress_bar=progress, log=log)
-                    dagger = read_model_card(path).get("fine_tune") or {}
-                    return {"model": str(path.resolve()), "method": "dagger", "scenarios": len(names),
-                            "mined_upweighted": len(mined), "steps": fine_tune_steps, "reward_weights": None,
-                            "env_config": env_config, "reference": dagger.get("reference"),
-                            "agreement": dagger.get("agreement"), "resumed": dagger.get("resumed") or []}
-                from policies.training import fine_tune
-
-                path = fine_tune(current, bank_dir=bank, out=round_dir / "policy", steps=fine_tune_steps,
-                                 weights=weights, seed=seed * 1000 + number, n_envs=n_envs, env_config=env_config,
-                                 reward_weights=fine_tune_reward, progress_bar=progress, learning_rate=fine_tune_lr,
-                                 log=log)
-                return {"model": str(path.resolve()), "method": "ppo", "scenarios": len(names),
-                        "mined_upweighted": len(mined), "steps": fine_tune_steps,
-                        "reward_weights": dict(fine_tune_reward), "env_config": fine_tune_config}
-
-            timed("fine_tune", do_fine_tune)
+            timed("fine_tune", lambda: _fine_tune_arm(current, round_dir / "policy", excluded, mined_share,
+                                                      with_mined=True, label=f"round {number}", **arm))
         from policies.training import resolve_checkpoint
 
-        new_policy = f"{resolve_checkpoint(steps['fine_tune']['model'])[0]}:{steps['fine_tune']['model']}"
+        def spec_of(model: str) -> str:
+            return f"{resolve_checkpoint(model)[0]}:{model}"
+
+        new_policy = spec_of(steps["fine_tune"]["model"])
         record["new_policy"] = new_policy
+        control_policy = None
+        if control:
+            if "control" not in steps:
+                timed("control", lambda: _fine_tune_arm(current, round_dir / "control", excluded, mined_share,
+                                                        with_mined=False, label=f"round {number} control", **arm))
+            control_policy = spec_of(steps["control"]["model"])
+            record["control_policy"] = control_policy
         if "after" not in steps:
             def do_after() -> Dict[str, Any]:
                 store = HeldOutStore(store_path)
@@ -468,9 +529,19 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                                           env_config=env_config, workers=workers, progress=False)
                 after = evaluate_heldout("after", new_policy, episodes, store=store, bank_dir=bank,
                                          env_config=env_config, workers=workers, progress=progress)
-                return paired_summary(before, after, seed=seed)
+                control_records = None
+                if control_policy is not None:
+                    control_records = evaluate_heldout("control", control_policy, episodes, store=store,
+                                                       bank_dir=bank, env_config=env_config, workers=workers,
+                                                       progress=progress)
+                return heldout_comparison(before, after, control_records, min_episodes=min_heldout_episodes,
+                                          seed=seed)
 
             timed("after", do_after)
+        if untouched_seeds and "untouched" not in steps:
+            timed("untouched", lambda: evaluate_untouched(
+                current, new_policy, control_policy, seeds=untouched_seeds, out=round_dir / "untouched",
+                env_config=env_config, margin=margin, workers=workers, progress=progress))
         if "regress" not in steps:
             def do_regress() -> Dict[str, Any]:
                 from dv2s_gym.regress.runner import run_regression
@@ -479,7 +550,8 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                                         episodes=regress_episodes, seed=EVAL_SEED_BASE, margin=margin,
                                         workers=workers, out_dir=round_dir / "regress", env_config=env_config,
                                         progress=progress)
-                return _regress_summary(report, round_dir / "regress" / "report.json")
+                return _regress_summary(report, round_dir / "regress" / "report.json",
+                                        split.get("held_out_families", []))
 
             timed("regress", do_regress)
         _log_round(log, number, steps)
@@ -488,21 +560,192 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
     return _write(out, state, current)
 
 
-def _split(kept: Sequence[Mapping[str, Any]], fraction: float, seed: int) -> Dict[str, Any]:
-    from dv2s_gym.mining.split import split_by_cluster
+_STAGE_NAMES = {"mine": "mining failures", "split": "splitting by family", "before": "held-out: starting policy",
+                "fine_tune": "fine-tuning with the mined scenarios", "control": "control: fine-tuning without them",
+                "after": "held-out: fine-tuned and control", "untouched": "untouched scenario set",
+                "regress": "regression test on the starting bank"}
 
-    return split_by_cluster(kept, fraction, seed)
+
+def underpowered(episodes: int, minimum: int) -> Optional[str]:
+    """The warning for a round with fewer than ``minimum`` held-out episodes, or ``None``."""
+    if episodes >= minimum:
+        return None
+    return (f"only {episodes} held-out episode(s), fewer than the {minimum} needed (--min-heldout-episodes): "
+            "this round reports held-out rates but no drop and no test; raise --k-eval, --max-conversions or "
+            "--budget for more held-out scenarios")
+
+
+def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, *, with_mined: bool, label: str,
+                   bank: str, method: str, steps: int, seed: int, n_envs: int, env_config: Dict[str, Any],
+                   fine_tune_config: Dict[str, Any], reward: Mapping[str, float], learning_rate: float,
+                   progress: bool, log: Callable[[str], None]) -> Dict[str, Any]:
+    """Fine-tune ``current`` into ``out`` on the working bank less ``excluded``: the mined scenarios upweighted
+    (``with_mined``) or left out (the control arm); everything else identical between the two arms."""
+    from scenario_bank.bank import Bank
+
+    entries = [e for e in Bank(bank) if e.name not in excluded]
+    mined = sorted(e.name for e in entries if e.source.get("kind") == "mined")
+    names = sorted(e.name for e in entries if with_mined or e.name not in mined)
+    weights = fine_tune_weights(names, mined if with_mined else [], mined_share)
+    common = {"scenarios": len(names), "mined_upweighted": len(mined) if with_mined else 0, "steps": steps,
+              "mined_left_out": 0 if with_mined else len(mined)}
+    if method == "dagger":
+        from policies.dagger_checkpoint import checkpoint_position, describe_position
+        from policies.imitation import DAGGER_DEFAULTS, dagger_fine_tune
+        from policies.registry import read_model_card
+
+        position = checkpoint_position(out)
+        if position is not None:
+            log(f"{label}: fine-tune (dagger) resumed from "
+                f"{describe_position(*position, DAGGER_DEFAULTS['iterations'])}")
+        path = dagger_fine_tune(current, bank_dir=bank, out=out, steps=steps, weights=weights, seed=seed,
+                                n_envs=n_envs, env_config=env_config, learning_rate=learning_rate,
+                                progress_bar=progress, log=log)
+        dagger = read_model_card(path).get("fine_tune") or {}
+        return {"model": str(path.resolve()), "method": "dagger", **common, "reward_weights": None,
+                "env_config": env_config, "reference": dagger.get("reference"), "agreement": dagger.get("agreement"),
+                "resumed": dagger.get("resumed") or []}
+    from policies.training import fine_tune
+
+    path = fine_tune(current, bank_dir=bank, out=out, steps=steps, weights=weights, seed=seed, n_envs=n_envs,
+                     env_config=env_config, reward_weights=reward, progress_bar=progress,
+                     learning_rate=learning_rate, log=log)
+    return {"model": str(path.resolve()), "method": "ppo", **common, "reward_weights": dict(reward),
+            "env_config": fine_tune_config}
+
+
+def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[str, Any]],
+                       control: Optional[Sequence[Mapping[str, Any]]], *, min_episodes: int,
+                       seed: int = 0) -> Dict[str, Any]:
+    """The ``after`` step: :func:`~dv2s_gym.mining.heldout.paired_summary` of fine-tuned against start, plus
+    the control's rate and the paired fine-tuned-vs-control table and exact McNemar p (``vs_control``), and
+    each policy's failures by type (``failure_types``: stalls apart from collisions and the rest).
+
+    Below ``min_episodes`` pairs the drop, its interval and both p-values are ``None`` and ``underpowered``
+    says why (the rates, with their wide intervals, stay)."""
+    from dv2s_gym.mining.heldout import failure_types, paired_summary
+
+    summary = paired_summary(before, after, seed=seed)
+    summary["min_episodes"] = min_episodes
+    summary["failure_types"] = {"start": failure_types(before), "fine_tuned": failure_types(after)}
+    if control is not None:
+        versus = paired_summary(control, after, seed=seed, bootstrap=0)
+        table = versus["table"]
+        summary["control"] = versus["before"]
+        summary["failure_types"]["control"] = failure_types(control)
+        summary["vs_control"] = {"pairs": versus["pairs"], "errors": versus["errors"],
+                                 "relative_drop": versus["relative_drop"],
+                                 "table": {"both_fail": table["both_fail"], "fine_tuned_only": table["after_only"],
+                                           "control_only": table["before_only"], "neither": table["neither"]},
+                                 "mcnemar_p": versus["mcnemar_p"],
+                                 "per_scenario": {name: row["before"]
+                                                  for name, row in versus["per_scenario"].items()}}
+    shortfall = underpowered(summary["pairs"], min_episodes)
+    if shortfall:
+        summary["underpowered"] = shortfall
+        summary.update(relative_drop=None, relative_drop_interval=[None, None], mcnemar_p=None)
+        if "vs_control" in summary:
+            summary["vs_control"].update(relative_drop=None, mcnemar_p=None)
+    return summary
+
+
+def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, seeds: int, out: Path,
+                       env_config: Mapping[str, Any], margin: float, workers: int, progress: bool,
+                       bank_dir: Optional[os.PathLike | str] = None) -> Dict[str, Any]:
+    """Start, fine-tuned and control on the untouched scenario set (``bank_dir``, default
+    :data:`UNTOUCHED_BANK`), ``seeds`` seeds each from ``EVAL_SEED_BASE``, with ``dv2s regress``: fine-tuned
+    against start (``out/vs_start``), then the control against the fine-tuned policy's episodes of that run
+    (``out/vs_control``: only the control runs). Failure rates, stall rates and mean speeds per policy, and
+    the two comparisons' verdicts, differences and p-values."""
+    from dv2s_gym.regress.runner import run_regression
+    from policies.training import EVAL_SEED_BASE
+
+    bank_dir = str(Path(bank_dir or UNTOUCHED_BANK).resolve())
+    first = run_regression(fine_tuned, start, bank_dir=bank_dir, episodes=seeds, seed=EVAL_SEED_BASE, margin=margin,
+                           workers=workers, out_dir=out / "vs_start", env_config=dict(env_config), progress=progress)
+    overall = first.get("overall") or {}
+    result: Dict[str, Any] = {"scenarios": list((first.get("bank") or {}).get("scenarios") or []),
+                              "seeds": seeds, "policies": {"start": _measures(overall.get("baseline")),
+                                                           "fine_tuned": _measures(overall.get("candidate"))},
+                              "fine_tuned_vs_start": _comparison(first, out / "vs_start" / "report.json")}
+    if control is not None:
+        second = run_regression(control, baseline_report=out / "vs_start" / "report.json", baseline_role="candidate",
+                                bank_dir=bank_dir, episodes=seeds, seed=EVAL_SEED_BASE, margin=margin, workers=workers,
+                                out_dir=out / "vs_control", env_config=dict(env_config), progress=progress)
+        result["policies"]["control"] = _measures((second.get("overall") or {}).get("candidate"))
+        result["control_vs_fine_tuned"] = _comparison(second, out / "vs_control" / "report.json")
+    return result
+
+
+def _measures(summary: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
+    summary = summary or {}
+    return {"episodes": summary.get("episodes"), "errors": summary.get("errors"),
+            "failure_rate": summary.get("failure_rate"), "stall_rate": summary.get("stall_rate"),
+            "collision_rate": summary.get("collision_rate"), "mean_speed": summary.get("mean_speed")}
+
+
+def _comparison(report: Mapping[str, Any], path: Path) -> Dict[str, Any]:
+    comparison = (report.get("overall") or {}).get("comparison") or {}
+    return {"verdict": report.get("verdict"), "reason": comparison.get("reason"), "episodes": comparison.get("n"),
+            "difference": comparison.get("difference"), "p_value": comparison.get("p_value"), "report": str(path)}
+
+
+def _split(kept: Sequence[Mapping[str, Any]], fraction: float, seed: int, by: str = HOLDOUT_BY,
+           bank: Optional[str] = None, held_families: Sequence[str] = ()) -> Dict[str, Any]:
+    from dv2s_gym.mining.split import split_by_cluster, split_by_family
+
+    if by == "cluster":
+        return split_by_cluster(kept, fraction, seed)
+    return split_by_family(_with_parents(kept, bank), fraction, seed, held_families)
+
+
+def _with_parents(kept: Sequence[Mapping[str, Any]], bank: Optional[str]) -> List[Dict[str, Any]]:
+    """The kept entries with ``parent``: the bank sidecar's provenance parent when there is one."""
+    entries = [dict(e) for e in kept]
+    if bank is None:
+        return entries
+    from scenario_bank.bank import Bank
+
+    opened = Bank(bank)
+    for entry in entries:
+        if not entry.get("parent") and entry["scenario"] in opened:
+            parent = opened.get(entry["scenario"]).source.get("parent")
+            if parent:
+                entry["parent"] = str(parent)
+    return entries
 
 
 def _log_round(log: Callable[[str], None], number: int, steps: Mapping[str, Any]) -> None:
     after = steps.get("after") or {}
-    if after.get("pairs"):
-        b, a = after["before"], after["after"]
-        drop = after.get("relative_drop")
-        log(f"round {number}: held-out failure rate {b['rate']:.2f} [{b['low']:.2f}, {b['high']:.2f}] -> "
-            f"{a['rate']:.2f} [{a['low']:.2f}, {a['high']:.2f}]"
-            + (f", relative drop {drop:.0%}" if drop is not None else "")
-            + f", McNemar p = {after['mcnemar_p']:.3g}")
+
+    def rate(r: Optional[Mapping[str, Any]]) -> str:
+        if not r or r.get("rate") is None:
+            return "-"
+        return f"{r['k']}/{r['n']} = {r['rate']:.2f} [{r['low']:.2f}, {r['high']:.2f}]"
+
+    if after:
+        line = (f"round {number}: held-out failure rate start {rate(after.get('before'))}, "
+                + (f"control {rate(after.get('control'))}, " if after.get("control") else "")
+                + f"fine-tuned {rate(after.get('after'))}")
+        if after.get("underpowered"):
+            log(line + f"; NO DROP OR TEST REPORTED: {after['underpowered']}")
+        else:
+            drop = after.get("relative_drop")
+            versus = after.get("vs_control") or {}
+            log(line + (f", relative drop {drop:.0%}" if drop is not None else "")
+                + (f", McNemar p vs start = {after['mcnemar_p']:.3g}" if after.get("mcnemar_p") is not None else "")
+                + (f", vs control = {versus['mcnemar_p']:.3g}" if versus.get("mcnemar_p") is not None else ""))
+    untouched = steps.get("untouched") or {}
+    if untouched:
+        policies = untouched.get("policies") or {}
+
+        def share(role: str) -> str:
+            value = ((policies.get(role) or {}).get("failure_rate") or {}).get("value")
+            return "-" if value is None else f"{value:.2f}"
+
+        log(f"round {number}: untouched set failure rate start {share('start')}, control {share('control')}, "
+            f"fine-tuned {share('fine_tuned')}; fine-tuned vs start "
+            f"{(untouched.get('fine_tuned_vs_start') or {}).get('verdict')}")
     regress = steps.get("regress") or {}
     log(f"round {number}: rest of the bank: {regress.get('verdict')} ({regress.get('reason')})")
 

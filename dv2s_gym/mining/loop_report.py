@@ -5,19 +5,36 @@
     {"schema": "dv2s-loop", "schema_version": 1, "out", "settings", "policy": final policy spec,
      "rounds": [{"round", "policy": spec it started from, "new_policy": fine-tuned spec,
                  "timings": {step: seconds},
+                 "control_policy": the control arm's spec (with a control),
                  "steps": {"mine": {"episodes", "errors", "failures", "failures_against_policy", "clusters",
-                                    "conversions": {status: n}, "rejected_reasons", "kept": [{"cluster",
-                                    "scenario", "reproduction"}], "folder"},
-                           "split": {"fine_tune", "held_out", "fine_tune_clusters", "held_out_clusters", "groups"},
+                                    "clusters_not_converted", "conversions": {status: n}, "rejected_reasons",
+                                    "kept": [{"cluster", "scenario", "reproduction"}], "folder"},
+                           "split": {"by": "family", "fine_tune", "held_out", "fine_tune_clusters",
+                                     "held_out_clusters", "fine_tune_families", "held_out_families", "groups"}
+                                    (loops recorded before the family split: no "by" and no families),
                            "before": {"episodes"},
-                           "fine_tune": {"model", "method": "ppo" | "dagger", "scenarios", "mined_upweighted",
-                                         "steps", "reward_weights" (ppo; None for dagger),
+                           "fine_tune" and "control": {"model", "method": "ppo" | "dagger", "scenarios",
+                                         "mined_upweighted", "mined_left_out", "steps",
+                                         "reward_weights" (ppo; None for dagger),
                                          "env_config": the fine-tuning env's config,
                                          "reference", "agreement", "resumed" (dagger only)},
-                           "after": {"pairs", "errors", "before": Rate, "after": Rate, "relative_drop",
-                                     "relative_drop_interval", "table", "mcnemar_p", "per_scenario"},
+                           "after": {"pairs", "errors", "before": Rate (start), "after": Rate (fine-tuned),
+                                     "control": Rate, "relative_drop", "relative_drop_interval", "table",
+                                     "mcnemar_p" (fine-tuned vs start), "per_scenario",
+                                     "vs_control": {"pairs", "errors", "relative_drop", "table": {"both_fail",
+                                                    "fine_tuned_only", "control_only", "neither"}, "mcnemar_p",
+                                                    "per_scenario": {scenario: control failures}},
+                                     "failure_types": {"start" | "control" | "fine_tuned": {type: n}},
+                                     "min_episodes", "underpowered": why no drop or test is reported (only
+                                     below min_episodes pairs; then the drop and p-values are None)},
+                           "untouched": {"scenarios", "seeds", "policies": {"start" | "control" | "fine_tuned":
+                                         {"episodes", "errors", "failure_rate", "stall_rate", "collision_rate",
+                                          "mean_speed"}} (dv2s regress summaries), "fine_tuned_vs_start" and
+                                         "control_vs_fine_tuned": {"verdict", "reason", "episodes", "difference",
+                                         "p_value", "report"}},
                            "regress": {"verdict", "reason", "episodes", "new_failure_rate", "old_failure_rate",
-                                       "difference", "p_value", "regressed", "report"},
+                                       "difference", "p_value", "regressed", "report", "held_out_parents":
+                                       {scenario: {"new" | "old": {"failure_rate", "stall_rate", "mean_speed"}}}},
                            "skipped": reason (only when nothing was kept)}}],
      "final_vs_start": (with two or more regression-tested rounds) {"start", "final", "rounds": [first, last],
                         "verdict", "reason", "episodes", "new_failure_rate", "old_failure_rate", "difference",
@@ -29,7 +46,8 @@ round's baseline episodes (the starting policy) are paired with the last tested 
 (the final policy) and judged by the regression test's own rule (:func:`final_vs_start`); the paired report is
 ``final_vs_start/report.json`` in the loop folder.
 
-``Rate`` is ``{"k", "n", "rate", "low", "high"}`` (Wilson 95 %). A round missing a step has not
+``Rate`` is ``{"k", "n", "rate", "low", "high"}`` (Wilson 95 %). ``report.html`` also shows, per round, the
+failure clips of the kept mined scenarios (the mining run's and the bank entry's videos) beside each other. A round missing a step has not
 finished it yet (the loop was stopped; rerunning resumes it).
 """
 
@@ -38,7 +56,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional
 
-__all__ = ["write_loop_reports", "render_markdown", "render_html", "final_vs_start", "FINAL_VS_START_DIR"]
+__all__ = ["write_loop_reports", "render_markdown", "render_html", "round_clips", "final_vs_start", "FINAL_VS_START_DIR"]
 
 FINAL_VS_START_DIR = "final_vs_start"
 """Folder (in the loop folder) of the final-vs-starting-policy paired regression report."""
@@ -131,7 +149,7 @@ def _final_line(final: Optional[Mapping[str, Any]]) -> Optional[str]:
             + (f"; report `{final['report']}`" if final.get("report") else "") + ".")
 
 
-_ORDER = ("mine", "split", "before", "fine_tune", "after", "regress")
+_ORDER = ("mine", "split", "before", "fine_tune", "control", "after", "untouched", "regress")
 
 
 def _seconds(timings: Mapping[str, Any]) -> str:
@@ -147,8 +165,15 @@ def _round_row(record: Mapping[str, Any]) -> Dict[str, Any]:
     interval = after.get("relative_drop_interval") or [None, None]
     drop_text = "-" if drop is None else f"{drop:.0%}" + (
         f" [{interval[0]:.0%}, {interval[1]:.0%}]" if interval[0] is not None else "")
+    if after.get("underpowered"):
+        drop_text = f"not reported: {after.get('pairs')} < {after.get('min_episodes')} episodes"
     p_value = after.get("mcnemar_p")
+    p_control = (after.get("vs_control") or {}).get("mcnemar_p")
+    untouched = steps.get("untouched") or {}
     return {
+        "control": _rate(after.get("control")) if after.get("control") else "-",
+        "p_control": "-" if p_control is None else f"{p_control:.3g}",
+        "untouched": _untouched_cell(untouched),
         "round": record.get("round"), "failures": mine.get("failures", "-"),
         "against": mine.get("failures_against_policy", "-"), "episodes": mine.get("episodes", "-"),
         "clusters": mine.get("clusters", "-"), "kept": len({e["scenario"] for e in mine.get("kept", [])}),
@@ -159,29 +184,119 @@ def _round_row(record: Mapping[str, Any]) -> Dict[str, Any]:
     }
 
 
+def _share(summary: Optional[Mapping[str, Any]], key: str) -> str:
+    value = ((summary or {}).get(key) or {}).get("value")
+    return "-" if value is None else f"{value:.2f}"
+
+
+def _untouched_cell(untouched: Mapping[str, Any]) -> str:
+    """Failure rates start / control / fine-tuned on the untouched set, one cell."""
+    if not untouched:
+        return "-"
+    policies = untouched.get("policies") or {}
+    return " / ".join(_share(policies.get(role), "failure_rate") for role in ("start", "control", "fine_tuned"))
+
+
+def _untouched_lines(untouched: Mapping[str, Any]) -> List[str]:
+    """The untouched set's table (Markdown) and its two comparisons."""
+    if not untouched:
+        return []
+    policies = untouched.get("policies") or {}
+    lines = [f"- untouched scenario set ({len(untouched.get('scenarios') or [])} scripts written by others for "
+             f"Scenic's CARLA model, never mined or fine-tuned on; {untouched.get('seeds')} seeds each; "
+             "dv2s regress statistics):", "",
+             "| policy | episodes | failure rate | stall rate | collision rate | mean speed [m/s] |",
+             "|---|---|---|---|---|---|"]
+    for role, label in (("start", "start"), ("control", "control"), ("fine_tuned", "fine-tuned")):
+        row = policies.get(role)
+        if row is None:
+            continue
+        speed = (row.get("mean_speed") or {}).get("value")
+        lines.append(f"| {label} | {row.get('episodes')} | {_summary_rate(row.get('failure_rate'))} | "
+                     f"{_summary_rate(row.get('stall_rate'))} | {_summary_rate(row.get('collision_rate'))} | "
+                     f"{'-' if speed is None else f'{speed:.1f}'} |")
+    lines.append("")
+    for key, label in (("fine_tuned_vs_start", "fine-tuned against start"),
+                       ("control_vs_fine_tuned", "control against fine-tuned")):
+        comparison = untouched.get(key)
+        if comparison:
+            lines.append(f"- untouched, {label}: **{comparison.get('verdict')}** - {comparison.get('reason')}; "
+                         f"report `{comparison.get('report')}`")
+    return lines
+
+
+def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
+    """The held-out comparison: start, control, fine-tuned, and what is (not) reported."""
+    if not after:
+        return []
+    lines = []
+    if after.get("underpowered"):
+        lines.append(f"- **WARNING: {after['underpowered']}**")
+    if not after.get("pairs"):
+        return lines + [f"- held-out episodes: none ran ({after.get('errors', 0)} with errors)"]
+    table = after.get("table", {})
+    lines.append(f"- held-out episodes: {after.get('pairs')} pairs ({after.get('errors')} with errors left "
+                 f"out); start {_rate(after.get('before'))}"
+                 + (f", control {_rate(after.get('control'))}" if after.get("control") else "")
+                 + f", fine-tuned {_rate(after.get('after'))}; paired fine-tuned vs start: both failed "
+                 f"{table.get('both_fail')}, only start {table.get('before_only')}, only fine-tuned "
+                 f"{table.get('after_only')}, neither {table.get('neither')}"
+                 + ("" if after.get("mcnemar_p") is None else f", exact McNemar p = {after['mcnemar_p']:.3g}"))
+    kinds = after.get("failure_types") or {}
+    if kinds:
+        lines.append("- held-out failures by type: " + "; ".join(
+            f"{label} " + (", ".join(f"{name} {count}" for name, count in sorted(kinds[role].items())) or "none")
+            for role, label in (("start", "start"), ("control", "control"), ("fine_tuned", "fine-tuned"))
+            if role in kinds))
+    versus = after.get("vs_control") or {}
+    if versus:
+        table = versus.get("table") or {}
+        lines.append(f"- paired fine-tuned vs control: both failed {table.get('both_fail')}, only control "
+                     f"{table.get('control_only')}, only fine-tuned {table.get('fine_tuned_only')}, neither "
+                     f"{table.get('neither')}"
+                     + ("" if versus.get("mcnemar_p") is None else f", exact McNemar p = {versus['mcnemar_p']:.3g}")
+                     + ("" if versus.get("relative_drop") is None
+                        else f", relative drop against the control {versus['relative_drop']:.0%}"))
+    elif not after.get("control"):
+        lines.append("- no control arm in this round: a drop cannot be credited to the mined scenarios")
+    per = after.get("per_scenario") or {}
+    if per:
+        controls = versus.get("per_scenario") or {}
+        lines += ["", "| held-out scenario | episodes | failed: start | control | fine-tuned |", "|---|---|---|---|---|"]
+        lines += [f"| {name} | {row['n']} | {row['before']} | {controls.get(name, '-')} | {row['after']} |"
+                  for name, row in per.items()]
+        lines.append("")
+    return lines
+
+
 def render_markdown(report: Mapping[str, Any]) -> str:
     """The Markdown rendering of a loop report."""
     settings = report.get("settings", {})
     lines: List[str] = [
         "# dv2s loop", "",
         f"Started from `{settings.get('policy')}`; final policy `{report.get('policy')}`.", "",
-        f"Per round: mining budget {settings.get('budget')} episodes ({settings.get('sampler')} sampler), "
-        f"{settings.get('holdout_fraction')} of the mined clusters held out, {settings.get('k_eval')} evaluation seeds "
-        f"per held-out scenario, fine-tuning ({settings.get('fine_tune_method', 'ppo')}) "
+        f"Per round: mining budget {settings.get('budget')} episodes ({settings.get('sampler')} sampler), at most "
+        f"{settings.get('max_conversions') or 'every'} cluster(s) converted, "
+        f"{settings.get('holdout_fraction')} of the mined {'families (parent scenarios)' if settings.get('holdout_by', 'cluster') == 'family' else 'clusters'} "
+        f"held out, {settings.get('k_eval')} evaluation seeds per held-out scenario (at least "
+        f"{settings.get('min_heldout_episodes', 0)} held-out episodes for a drop or test), "
+        f"{'a control arm fine-tuned without the mined scenarios, ' if settings.get('control') else 'no control arm, '}"
+        f"fine-tuning ({settings.get('fine_tune_method', 'ppo')}) "
         f"{settings.get('fine_tune_steps')} steps (mined scenarios drawn with "
         f"probability {settings.get('mined_share')}, reward terms {_weights(settings.get('fine_tune_reward'))} "
         f"overriding the policy's own in training only), regression test on the starting bank with "
         f"{settings.get('regress_episodes')} seeds per scenario (margin {settings.get('margin')}).", "",
         "| round | failures mined (against the policy) / episodes | clusters | kept | fine-tune / held-out scenarios "
-        "| held-out failure rate before | after | relative drop | McNemar p | rest of the bank |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| held-out failure rate start | control | fine-tuned | relative drop | McNemar p vs start | vs control "
+        "| untouched failure rate start / control / fine-tuned | rest of the bank |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for record in report.get("rounds", []):
         row = _round_row(record)
         lines.append(
             f"| {row['round']} | {row['failures']} ({row['against']}) / {row['episodes']} | {row['clusters']} | "
-            f"{row['kept']} | {row['split']} | {row['before']} | {row['after']} | {row['drop']} | {row['p']} | "
-            f"{row['verdict']} |")
+            f"{row['kept']} | {row['split']} | {row['before']} | {row['control']} | {row['after']} | {row['drop']} | "
+            f"{row['p']} | {row['p_control']} | {row['untouched']} | {row['verdict']} |")
     final_line = _final_line(report.get("final_vs_start"))
     if final_line:
         lines += ["", final_line]
@@ -197,16 +312,34 @@ def render_markdown(report: Mapping[str, Any]) -> str:
             lines.append(f"- mining ({mine.get('folder')}): {mine.get('episodes')} episodes, {mine.get('failures')} "
                          f"failures ({mine.get('failures_against_policy')} avoidable by the reference driver), "
                          f"{mine.get('clusters')} clusters, conversions {mine.get('conversions')}, "
-                         f"{mine.get('errors')} episode errors")
+                         f"{mine.get('errors')} episode errors"
+                         + (f"; **{mine['clusters_not_converted']} clusters not converted** (at most "
+                            f"{settings.get('max_conversions')} per round)" if mine.get("clusters_not_converted")
+                            else ""))
             for reason in mine.get("rejected_reasons", [])[:5]:
                 lines.append(f"  - rejected: {reason}")
         split = steps.get("split") or {}
         if split:
-            lines.append(f"- split by cluster ({split.get('groups')} groups): fine-tune "
-                         f"{', '.join(split.get('fine_tune', [])) or 'none'}; held out "
-                         f"{', '.join(split.get('held_out', [])) or 'none'}")
-        tuned = steps.get("fine_tune") or {}
-        if tuned:
+            if split.get("by") == "family":
+                lines.append(f"- split by family ({split.get('groups')} family groups): fine-tune families "
+                             f"{', '.join(split.get('fine_tune_families', [])) or 'none'} "
+                             f"({', '.join(split.get('fine_tune', [])) or 'no scenario'}); held-out families "
+                             f"{', '.join(split.get('held_out_families', [])) or 'none'} "
+                             f"({', '.join(split.get('held_out', [])) or 'no scenario'}; their parents are not "
+                             "fine-tuned on either)")
+            else:
+                lines.append(f"- split by cluster ({split.get('groups')} groups): fine-tune "
+                             f"{', '.join(split.get('fine_tune', [])) or 'none'}; held out "
+                             f"{', '.join(split.get('held_out', [])) or 'none'}")
+        for key in ("fine_tune", "control"):
+            tuned = steps.get(key) or {}
+            if not tuned:
+                continue
+            if key == "control":
+                lines.append(f"- control arm: the same fine-tuning ({tuned.get('method')}, {tuned.get('steps')} "
+                             f"steps, same seed) on {tuned.get('scenarios')} scenarios, the "
+                             f"{tuned.get('mined_left_out')} mined scenario(s) left out: `{tuned.get('model')}`")
+                continue
             if tuned.get("method") == "dagger":
                 agreement = tuned.get("agreement") or {}
                 lines.append(f"- fine-tuned by DAgger ({tuned.get('steps')} labelled steps, imitating "
@@ -223,69 +356,222 @@ def render_markdown(report: Mapping[str, Any]) -> str:
                              f"({tuned.get('mined_upweighted')} mined, upweighted), training reward weights "
                              f"{_weights((tuned.get('env_config') or {}).get('reward_weights'))}: "
                              f"`{tuned.get('model')}`")
-        after = steps.get("after") or {}
-        if after:
-            table = after.get("table", {})
-            lines.append(f"- held-out episodes: {after.get('pairs')} pairs ({after.get('errors')} with errors left "
-                         f"out); before {_rate(after.get('before'))}, after {_rate(after.get('after'))}; paired "
-                         f"table: both failed {table.get('both_fail')}, only before {table.get('before_only')}, "
-                         f"only after {table.get('after_only')}, neither {table.get('neither')}")
-            per = after.get("per_scenario") or {}
-            if per:
-                lines += ["", "| held-out scenario | episodes | failed before | failed after |", "|---|---|---|---|"]
-                lines += [f"| {name} | {row['n']} | {row['before']} | {row['after']} |" for name, row in per.items()]
-                lines.append("")
+        lines += _heldout_lines(steps.get("after") or {})
+        lines += _untouched_lines(steps.get("untouched") or {})
         regress = steps.get("regress") or {}
         if regress:
             lines.append(f"- regression test on the starting bank ({regress.get('episodes')} paired episodes): "
                          f"**{regress.get('verdict')}** - {regress.get('reason')}; failure rate new "
                          f"{_summary_rate(regress.get('new_failure_rate'))}, old "
                          f"{_summary_rate(regress.get('old_failure_rate'))}; report `{regress.get('report')}`")
+            for name, row in (regress.get("held_out_parents") or {}).items():
+                lines.append(f"- held-out family's parent `{name}` (never fine-tuned on) in the regression test: "
+                             f"failure rate new {_summary_rate(row['new'].get('failure_rate'))}, old "
+                             f"{_summary_rate(row['old'].get('failure_rate'))}; stall rate new "
+                             f"{_summary_rate(row['new'].get('stall_rate'))}, old "
+                             f"{_summary_rate(row['old'].get('stall_rate'))}")
     return "\n".join(lines) + "\n"
 
 
 _CSS = ("body{font-family:system-ui,sans-serif;margin:2em;max-width:1100px}table{border-collapse:collapse;margin:1em 0}"
         "td,th{border:1px solid #ccc;padding:4px 8px;text-align:left}th{background:#f3f3f3}"
         ".PASS{color:#186a1f;font-weight:bold}.FAIL{color:#a11;font-weight:bold}.INCONCLUSIVE{color:#a60}"
-        "code{background:#f5f5f5;padding:1px 3px}")
+        "code{background:#f5f5f5;padding:1px 3px}.row{display:flex;flex-wrap:wrap;gap:8px}"
+        "figure{margin:0}figcaption{font-size:small}")
 
 
-def render_html(report: Mapping[str, Any]) -> str:
-    """A self-contained HTML page (inline CSS, nothing fetched) of the loop report."""
+def _markdown_to_html(lines: List[str]) -> str:
+    """The few Markdown forms the round details use (headings, bullets, tables, bold) as HTML."""
+    import re
+    from html import escape
+
+    def inline(text: str) -> str:
+        text = escape(text)
+        text = re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", text)
+        return re.sub(r"`([^`]+)`", r"<code>\1</code>", text)
+
+    html: List[str] = []
+    table: List[List[str]] = []
+    bullets: List[str] = []
+
+    def flush() -> None:
+        if bullets:
+            html.append("<ul>" + "".join(f"<li>{b}</li>" for b in bullets) + "</ul>")
+            bullets.clear()
+        if table:
+            head, *body = table
+            html.append("<table><tr>" + "".join(f"<th>{inline(c)}</th>" for c in head) + "</tr>"
+                        + "".join("<tr>" + "".join(f"<td>{inline(c)}</td>" for c in row) + "</tr>" for row in body)
+                        + "</table>")
+            table.clear()
+
+    for line in lines:
+        if line.startswith("|"):
+            if bullets:
+                flush()
+            cells = [c.strip() for c in line.strip().strip("|").split("|")]
+            if not all(set(c) <= set("-") for c in cells):
+                table.append(cells)
+            continue
+        if table:
+            flush()
+        if line.startswith("## "):
+            flush()
+            html.append(f"<h2>{inline(line[3:])}</h2>")
+        elif line.startswith("- "):
+            bullets.append(inline(line[2:]))
+        elif line.startswith("  - ") and bullets:
+            bullets[-1] += "<br>" + inline(line[4:])
+        elif line.strip():
+            flush()
+            html.append(f"<p>{inline(line)}</p>")
+    flush()
+    return "".join(html)
+
+
+def _clips_html(clips: Mapping[str, Any]) -> str:
+    """Each kept mined scenario's videos side by side (paths relative to the loop folder)."""
+    from html import escape
+
+    parts = []
+    for scenario, videos in clips.items():
+        if not videos:
+            continue
+        cells = "".join(f"<figure><video src=\"{escape(v['path'])}\" controls muted loop preload=\"metadata\" "
+                        f"width=\"320\"></video><figcaption>{escape(v['label'])}</figcaption></figure>"
+                        for v in videos)
+        parts.append(f"<div class=\"clips\"><h3>{escape(scenario)}</h3><div class=\"row\">{cells}</div></div>")
+    return "".join(parts)
+
+
+def _rates_svg(title: str, bars: List[tuple]) -> str:
+    """An inline SVG bar chart of failure rates with their 95 % intervals: ``bars`` = ``[(label, rate, low,
+    high)]`` (``rate`` ``None``: no bar)."""
+    from html import escape
+
+    bars = [b for b in bars if b[1] is not None]
+    if not bars:
+        return ""
+    width, height, left, top = 120 * len(bars) + 60, 190, 40, 24
+    plot = height - top - 36
+    parts = [f'<svg width="{width}" height="{height}" role="img">'
+             f'<title>{escape(title)}</title><text x="4" y="14" font-size="12">{escape(title)}</text>']
+    for tick in (0.0, 0.5, 1.0):
+        y = top + plot * (1 - tick)
+        parts.append(f'<line x1="{left - 4}" x2="{width - 8}" y1="{y:.1f}" y2="{y:.1f}" stroke="#ddd"/>'
+                     f'<text x="4" y="{y + 4:.1f}" font-size="10">{tick:.1f}</text>')
+    for index, (label, rate, low, high) in enumerate(bars):
+        x = left + 20 + index * 120
+        y = top + plot * (1 - float(rate))
+        parts.append(f'<rect x="{x}" y="{y:.1f}" width="60" height="{top + plot - y:.1f}" fill="#7a9cc6"/>')
+        if low is not None and high is not None:
+            y_low, y_high = top + plot * (1 - float(low)), top + plot * (1 - float(high))
+            parts.append(f'<line x1="{x + 30}" x2="{x + 30}" y1="{y_low:.1f}" y2="{y_high:.1f}" stroke="#222"/>'
+                         f'<line x1="{x + 22}" x2="{x + 38}" y1="{y_low:.1f}" y2="{y_low:.1f}" stroke="#222"/>'
+                         f'<line x1="{x + 22}" x2="{x + 38}" y1="{y_high:.1f}" y2="{y_high:.1f}" stroke="#222"/>')
+        parts.append(f'<text x="{x + 30}" y="{height - 18}" font-size="11" text-anchor="middle">{escape(label)}</text>'
+                     f'<text x="{x + 30}" y="{height - 5}" font-size="10" text-anchor="middle">{float(rate):.2f}</text>')
+    return "".join(parts) + "</svg>"
+
+
+def _round_figures(record: Mapping[str, Any]) -> str:
+    """The round's failure rates as charts: held-out (start, control, fine-tuned) and untouched."""
+    steps = record.get("steps") or {}
+    after = steps.get("after") or {}
+    held = [(label, (after.get(key) or {}).get("rate"), (after.get(key) or {}).get("low"),
+             (after.get(key) or {}).get("high"))
+            for label, key in (("start", "before"), ("control", "control"), ("fine-tuned", "after"))]
+    policies = (steps.get("untouched") or {}).get("policies") or {}
+    untouched = [(label, ((policies.get(key) or {}).get("failure_rate") or {}).get("value"),
+                  ((policies.get(key) or {}).get("failure_rate") or {}).get("low"),
+                  ((policies.get(key) or {}).get("failure_rate") or {}).get("high"))
+                 for label, key in (("start", "start"), ("control", "control"), ("fine-tuned", "fine_tuned"))]
+    charts = [_rates_svg("held-out failure rate (95 % Wilson)", held),
+              _rates_svg("untouched set failure rate (95 % Wilson)", untouched)]
+    charts = [chart for chart in charts if chart]
+    return f'<div class="row">{"".join(charts)}</div>' if charts else ""
+
+
+def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[str, Any]]] = None) -> str:
+    """A self-contained HTML page (inline CSS, nothing fetched) of the loop report; ``clips``: round -> scenario ->
+    ``[{"path", "label"}]`` videos shown per round (:func:`round_clips`)."""
     from html import escape
 
     settings = report.get("settings", {})
     rows = []
     for record in report.get("rounds", []):
         row = _round_row(record)
-        steps = record.get("steps", {})
-        after, regress = (steps.get(k) or {} for k in ("after", "regress"))
         verdict = row["verdict"]
         cells = [row["round"], f"{row['failures']} / {row['episodes']}", row["clusters"], row["kept"], row["split"],
-                 row["before"], row["after"], row["drop"], row["p"]]
+                 row["before"], row["control"], row["after"], row["drop"], row["p"], row["p_control"],
+                 row["untouched"]]
         row = "".join(f"<td>{escape(str(c))}</td>" for c in cells)
         rows.append(f"<tr>{row}<td class=\"{escape(str(verdict))}\">{escape(str(verdict))}</td></tr>")
-        details = []
-        for name, per in (after.get("per_scenario") or {}).items():
-            details.append(f"<tr><td>{escape(name)}</td><td>{per['n']}</td><td>{per['before']}</td>"
-                           f"<td>{per['after']}</td></tr>")
-        if details:
-            rows.append(f"<tr><td></td><td colspan=\"9\"><table><tr><th>held-out scenario</th><th>episodes</th>"
-                        f"<th>failed before</th><th>failed after</th></tr>{''.join(details)}</table>"
-                        f"regression test: {escape(str(regress.get('reason')))}</td></tr>")
     final_line = _final_line(report.get("final_vs_start"))
     final_html = f"<p>{escape(final_line).replace('**', '')}</p>" if final_line else ""
     head = ("<tr><th>round</th><th>failures / episodes mined</th><th>clusters</th><th>kept</th>"
-            "<th>fine-tune / held-out</th><th>held-out failure rate before</th><th>after</th><th>relative drop</th>"
-            "<th>McNemar p</th><th>rest of the bank</th></tr>")
+            "<th>fine-tune / held-out</th><th>held-out failure rate: start</th><th>control</th><th>fine-tuned</th>"
+            "<th>relative drop</th><th>McNemar p vs start</th><th>vs control</th>"
+            "<th>untouched failure rate start / control / fine-tuned</th><th>rest of the bank</th></tr>")
+    markdown = render_markdown(report).splitlines()
+    details = []
+    starts = [i for i, line in enumerate(markdown) if line.startswith("## Round ")]
+    for position, begin in enumerate(starts):
+        end = starts[position + 1] if position + 1 < len(starts) else len(markdown)
+        number = report["rounds"][position].get("round") if position < len(report.get("rounds", [])) else None
+        details.append(_markdown_to_html(markdown[begin:end]))
+        if position < len(report.get("rounds", [])):
+            details.append(_round_figures(report["rounds"][position]))
+        round_clips = (clips or {}).get(number) or {}
+        if any(round_clips.values()):
+            details.append("<h3>Failure clips of the kept mined scenarios</h3>" + _clips_html(round_clips))
     return (f"<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>dv2s loop</title><style>{_CSS}</style>"
             f"</head><body><h1>dv2s loop</h1><p>Started from <code>{escape(str(settings.get('policy')))}</code>; "
             f"final policy <code>{escape(str(report.get('policy')))}</code>. Mining budget {settings.get('budget')} "
-            f"episodes per round, fine-tuning ({escape(str(settings.get('fine_tune_method', 'ppo')))}) "
+            f"episodes per round, at most {escape(str(settings.get('max_conversions') or 'every'))} cluster(s) "
+            f"converted, fine-tuning ({escape(str(settings.get('fine_tune_method', 'ppo')))}) "
             f"{settings.get('fine_tune_steps')} steps (reward terms "
-            f"{escape(_weights(settings.get('fine_tune_reward')))} overridden in training only), {settings.get('k_eval')} "
+            f"{escape(_weights(settings.get('fine_tune_reward')))} overridden in training only), "
+            f"{'with' if settings.get('control') else 'without'} a control arm, {settings.get('k_eval')} "
             f"evaluation seeds per held-out scenario (Wilson 95 % intervals; the drop's interval resamples "
-            f"scenarios).</p><table>{head}{''.join(rows)}</table>{final_html}</body></html>\n")
+            f"scenarios; no drop or test below {settings.get('min_heldout_episodes', 0)} held-out episodes).</p>"
+            f"<table>{head}{''.join(rows)}</table>{final_html}{''.join(details)}</body></html>\n")
+
+
+def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, List[Dict[str, str]]]]:
+    """Per round, each kept mined scenario's failure clips, as paths relative to ``out``: the bank entry's own
+    (``failure.webm`` and those of failures merged into it), else the mining run's
+    (``failures/<cluster slug>/*.webm``)."""
+    import os
+
+    settings = report.get("settings") or {}
+    bank = Path(settings.get("bank_dir") or Path(out) / "bank")
+    found: Dict[int, Dict[str, List[Dict[str, str]]]] = {}
+    for record in report.get("rounds", []):
+        mine = (record.get("steps") or {}).get("mine") or {}
+        split = (record.get("steps") or {}).get("split") or {}
+        held = set(split.get("held_out") or [])
+        clips: Dict[str, List[Dict[str, str]]] = {}
+        for entry in mine.get("kept") or []:
+            scenario = str(entry["scenario"])
+            videos = clips.setdefault(f"{scenario} ({'held out' if scenario in held else 'fine-tuned on'})", [])
+            entry_folder = bank / scenario
+            found_videos = sorted(entry_folder.rglob("*.webm")) if entry_folder.is_dir() else []
+            labels = [f"failure of cluster {entry.get('cluster')}" if video.parent == entry_folder
+                      else f"failure merged into it ({video.parent.relative_to(entry_folder)})"
+                      for video in found_videos]
+            if not found_videos and mine.get("folder"):  # the bank entry is gone: the mining run's copy
+                from dv2s_gym.mining.convert import cluster_slug
+
+                folder = Path(mine["folder"]) / "failures" / cluster_slug(entry.get("cluster"), None)
+                found_videos = sorted(folder.glob("*.webm")) if folder.is_dir() else []
+                labels = [f"failure of cluster {entry.get('cluster')} (mining run)"] * len(found_videos)
+            for video, label in zip(found_videos, labels):
+                path = os.path.relpath(video.resolve(), Path(out).resolve())
+                if all(v["path"] != path for v in videos):
+                    videos.append({"path": path, "label": label})
+        found[int(record.get("round") or 0)] = clips
+    return found
 
 
 def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
@@ -304,6 +590,10 @@ def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
     markdown = render_markdown(report)
     atomic_write_text(out / "report.md", markdown)
     paths["md"] = out / "report.md"
-    atomic_write_text(out / "report.html", render_html(report))
+    try:
+        clips = round_clips(report, out)
+    except OSError:  # the clips are extra: a report without them beats no report
+        clips = {}
+    atomic_write_text(out / "report.html", render_html(report, clips))
     paths["html"] = out / "report.html"
     return {key: Path(value) for key, value in paths.items()}

@@ -1,4 +1,12 @@
-"""Splitting a round's mined scenarios into a fine-tuning part and a held-out part, by cluster.
+"""Splitting a round's mined scenarios into a fine-tuning part and a held-out part.
+
+:func:`split_by_family` (what ``dv2s loop`` uses) holds out whole *families*: a mined scenario's
+family is its parent bank scenario (the sidecar's provenance ``parent``, else the first
+``/``-part of its cluster id). No held-out scenario shares a parent with a fine-tuning one, and
+the loop also keeps the held-out families' parent scenarios out of fine-tuning, so the held-out
+failures come from scenarios the fine-tuning never drew in any form.
+
+:func:`split_by_cluster` (loops recorded before the family split) moves groups of tied clusters:
 
 A mined scenario comes from one failure cluster (``"<scenario>/<failure type>/<region>"``);
 clusters merged into one bank entry, or one cluster converted into several entries, are tied
@@ -16,7 +24,7 @@ from typing import Any, Dict, List, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["split_by_cluster", "cluster_groups"]
+__all__ = ["split_by_family", "split_by_cluster", "cluster_groups", "family_of"]
 
 
 def cluster_groups(entries: Sequence[Mapping[str, Any]]) -> List[Dict[str, List[str]]]:
@@ -76,5 +84,81 @@ def split_by_cluster(entries: Sequence[Mapping[str, Any]], fraction: float = 0.5
         "held_out": sorted(s for g in held for s in g["scenarios"]),
         "fine_tune_clusters": sorted(c for g in tuned for c in g["clusters"]),
         "held_out_clusters": sorted(c for g in held for c in g["clusters"]),
+        "groups": count,
+    }
+
+
+def family_of(entry: Mapping[str, Any]) -> str:
+    """A mined entry's family: its ``parent`` when known, else the first ``/``-part of its cluster id."""
+    parent = entry.get("parent")
+    return str(parent) if parent else str(entry["cluster"]).split("/")[0]
+
+
+def family_groups(entries: Sequence[Mapping[str, Any]]) -> List[Dict[str, List[str]]]:
+    """Connected groups of mined entries: two entries are in one group when they share a family, a cluster
+    or a scenario (a failure merged into another family's scenario ties the two families). Returns
+    ``[{"families", "clusters", "scenarios"}]`` sorted by their first family."""
+    parent: Dict[str, str] = {}
+
+    def find(key: str) -> str:
+        while parent.setdefault(key, key) != key:
+            parent[key] = parent[parent[key]]
+            key = parent[key]
+        return key
+
+    def union(a: str, b: str) -> None:
+        a, b = find(a), find(b)
+        if a != b:
+            parent[max(a, b)] = min(a, b)
+
+    for entry in entries:
+        family = "f:" + family_of(entry)
+        union(family, "c:" + str(entry["cluster"]))
+        union(family, "s:" + str(entry["scenario"]))
+    groups: Dict[str, Dict[str, set]] = {}
+    for entry in entries:
+        group = groups.setdefault(find("f:" + family_of(entry)), {"families": set(), "clusters": set(),
+                                                                   "scenarios": set()})
+        group["families"].add(family_of(entry))
+        group["clusters"].add(str(entry["cluster"]))
+        group["scenarios"].add(str(entry["scenario"]))
+    result = [{key: sorted(values) for key, values in g.items()} for g in groups.values()]
+    return sorted(result, key=lambda g: g["families"][0])
+
+
+def split_by_family(entries: Sequence[Mapping[str, Any]], fraction: float = 0.5, seed: int = 0,
+                    held_families: Sequence[str] = ()) -> Dict[str, Any]:
+    """Split mined entries (``{"cluster", "scenario"}`` and optionally ``"parent"``) by family.
+
+    ``fraction`` of the family groups (rounded, at least one and at most all but one when there are two or
+    more) go to the held-out part, chosen by a shuffle seeded with ``seed``. A group holding one of
+    ``held_families`` (families held out in an earlier round) is always held out, so a family never moves
+    to the fine-tuning side. Returns ``{"by": "family", "fine_tune", "held_out", "fine_tune_clusters",
+    "held_out_clusters", "fine_tune_families", "held_out_families", "groups"}``.
+    """
+    if not 0.0 <= float(fraction) <= 1.0:
+        raise ValueError(f"the held-out fraction must be in [0, 1], not {fraction}")
+    groups = family_groups(entries)
+    forced = set(held_families)
+    order = [groups[i] for i in np.random.default_rng([int(seed), 11]).permutation(len(groups))]
+    count = len(groups)
+    target = int(round(fraction * count))
+    if count >= 2 and 0.0 < fraction < 1.0:
+        target = min(max(target, 1), count - 1)
+    held = [g for g in order if forced & set(g["families"])]
+    for group in order:
+        if len(held) >= target:
+            break
+        if group not in held:
+            held.append(group)
+    tuned = [g for g in order if g not in held]
+    return {
+        "by": "family",
+        "fine_tune": sorted(s for g in tuned for s in g["scenarios"]),
+        "held_out": sorted(s for g in held for s in g["scenarios"]),
+        "fine_tune_clusters": sorted(c for g in tuned for c in g["clusters"]),
+        "held_out_clusters": sorted(c for g in held for c in g["clusters"]),
+        "fine_tune_families": sorted(f for g in tuned for f in g["families"]),
+        "held_out_families": sorted(f for g in held for f in g["families"]),
         "groups": count,
     }
