@@ -33,9 +33,10 @@ def add_mined_copy(bank_dir: str, source: str, name: str, cluster: str) -> str:
 class FakeMiner:
     """Callable with :func:`dv2s_gym.mining.miner.mine`'s signature; ``calls`` counts real work done."""
 
-    def __init__(self, sources: Sequence[str], failures_per_round: int = 6) -> None:
+    def __init__(self, sources: Sequence[str], failures_per_round: int = 6, replays: bool = False) -> None:
         self.sources = list(sources)
         self.failures = failures_per_round
+        self.replays = replays  # also an exact-replay entry per failure, as the real converter adds
         self.calls: List[Dict[str, Any]] = []
 
     def __call__(self, policy: str, *, out: str, budget: int, bank_dir: str, seed: int = 0, **options: Any):
@@ -54,8 +55,9 @@ class FakeMiner:
             if failed:
                 cluster = f"{source}/collision/r{index}"
                 name = add_mined_copy(bank_dir, source, f"mined_s{seed}_{index}", cluster)
+                replay = add_mined_copy(bank_dir, source, f"replay_s{seed}_{index}", cluster) if self.replays else None
                 conversions.append({"cluster": cluster, "index": index, "status": "kept", "reason": None,
-                                    "bank_entry": name, "reproduction": {"rate": 0.5}})
+                                    "bank_entry": name, "replay_entry": replay, "reproduction": {"rate": 0.5}})
         (out_path / "episodes.jsonl").write_text("".join(json.dumps(e) + "\n" for e in episodes))
         (out_path / "conversions.jsonl").write_text("".join(json.dumps(c) + "\n" for c in conversions))
         return None

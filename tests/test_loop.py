@@ -401,6 +401,21 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
     assert page.count("<svg") == 2 and "held-out failure rate (95 % Wilson)" in page and "http" not in page
 
 
+def test_no_member_of_a_held_out_family_reaches_either_arm(tmp_path, monkeypatch):
+    """Exact replays of held-out failures are bank entries of the held-out family too: neither arm trains on them."""
+    from scenario_bank.bank import Bank
+
+    stand = _StandIns(monkeypatch)
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", min_heldout_episodes=1, log=lambda _: None,
+                      miner=FakeMiner(WIRING["scenarios"], failures_per_round=6, replays=True), **WIRING)
+    split = report.rounds[0]["steps"]["split"]
+    bank = Bank(tmp_path / "loop" / "bank")
+    family = {e.name for e in bank if e.source.get("parent") in split["held_out_families"]}
+    assert any(name.startswith("replay_") for name in family)
+    for arm in stand.fine_tunes:
+        assert not family & set(arm["weights"])
+
+
 def test_loop_says_loudly_when_too_few_episodes_are_held_out(tmp_path, monkeypatch):
     _StandIns(monkeypatch)
     lines = []

@@ -583,7 +583,8 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, *
     (``with_mined``) or left out (the control arm); everything else identical between the two arms."""
     from scenario_bank.bank import Bank
 
-    entries = [e for e in Bank(bank) if e.name not in excluded]
+    # a held-out family's every member stays out too: exact replays of its failures and entries of earlier rounds
+    entries = [e for e in Bank(bank) if e.name not in excluded and e.source.get("parent") not in excluded]
     mined = sorted(e.name for e in entries if e.source.get("kind") == "mined")
     names = sorted(e.name for e in entries if with_mined or e.name not in mined)
     weights = fine_tune_weights(names, mined if with_mined else [], mined_share)
