@@ -57,6 +57,7 @@ from dv2s_gym.mining.samplers import (
     is_adaptive,
     make_sampler,
     sampler_params,
+    scene_proposal,
 )
 from dv2s_gym.mining.tasks import MINE
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
@@ -596,11 +597,7 @@ def _task(index: int, spec, policy: str, reference: Optional[str], settings: Dic
 def _with_proposal(spec, proposal: Optional[Dict[str, Any]]):
     """``spec`` with the density its point was drawn with, over the scenario's own coordinates (importance
     weights of the failure-rate estimate, :mod:`dv2s_gym.mining.rate`)."""
-    if proposal is not None:
-        density = 1.0
-        for value in proposal["coords"][: len(spec.point)]:
-            density *= float(value)
-        spec.proposal = {"scenario": float(proposal["scenario"]), "params": density}
+    spec.proposal = scene_proposal(proposal, len(spec.point))
     return spec
 
 

@@ -2,19 +2,26 @@
 
 A mining run does not draw scenes the way they occur: an adaptive sampler draws more where failures
 were found. Each episode record keeps the density its scene was drawn with (``record["proposal"]``:
-the probability of its scenario and the density of its parameters in the scenario's unit box, see
-:func:`dv2s_gym.mining.samplers.proposal_density`). A scenario's own distribution is uniform over
-that unit box (each parameter's range or set of values, as the scenario declares it), so an
-episode's importance weight in its scenario is ``1 / params`` and, over the whole run, with every
-mined scenario equally likely, ``(1 / S) / (scenario * params)``.
+``scenario``, the probability of its scenario; ``params``, the density of its parameters in the
+scenario's unit box; ``floor``, the smallest share the sampler gave any scenario or parameter bucket
+at that draw, relative to uniform; see :func:`dv2s_gym.mining.samplers.proposal_density`). A scenario's
+own distribution is uniform over that unit box (each parameter's range or set of values, as the scenario
+declares it), so an episode's importance weight in its scenario is ``1 / params`` and, over the whole
+run, with every mined scenario equally likely, ``(1 / S) / (scenario * params)``.
 
-:func:`failure_rate` is the self-normalised importance-sampling estimate ``sum(w y) / sum(w)`` of the
-failure rate (``y`` = 1 for a failed episode), with Kish's effective sample size
-``(sum w)^2 / sum(w^2)`` and a 95 % Wilson interval at that sample size (for equal weights: the usual
-Wilson interval of the plain failure rate). An adaptive sampler's draws depend on earlier outcomes;
-the estimate stays consistent, and a small effective sample size says how little the run tells.
-Records without a proposal density (a sampler that has none, or a run written before densities were
-kept; ``random`` and ``halton`` runs are uniform and need none) make the estimate unavailable.
+:func:`weighted_rate` is the plain importance-sampling estimate ``mean(w * y)`` (``y`` = 1 for a failed
+episode): unbiased also when the proposal adapts to earlier outcomes, as long as it gives every region
+some chance. Its 95 % interval is Wilson's at the estimate's effective sample size
+``p (1 - p) / Var(estimate)`` (for equal weights: the number of episodes, and the usual Wilson interval);
+without a failure, at Kish's effective sample size of the weights. A per-scenario estimate averages
+``y / params`` over the scenario's episodes.
+
+An adaptive sampler that collapses (VerifAI's cross-entropy sampler moves almost all probability to the
+buckets where failures were found, also along parameters that do not matter) stops drawing some regions;
+the estimate then misses their failures and can be far too low. ``collapsed`` says when some draw gave a
+region under :data:`COLLAPSE_FLOOR` of its uniform share. A ``random`` or ``halton`` run is uniform.
+Records without a proposal density (a sampler that has none, or a run written before densities were kept;
+``random`` and ``halton`` runs need none) make the estimate unavailable.
 """
 
 from __future__ import annotations
@@ -24,27 +31,37 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence
 
 from dv2s_gym.regress.stats import wilson_interval
 
-__all__ = ["failure_rate", "weighted_rate", "rate_estimates", "UNIFORM_SAMPLERS"]
+__all__ = ["failure_rate", "weighted_rate", "rate_estimates", "UNIFORM_SAMPLERS", "COLLAPSE_FLOOR"]
+
+COLLAPSE_FLOOR = 0.01
+"""A draw whose proposal gave some scenario or parameter bucket under this share of its uniform share marks the
+estimate ``collapsed``."""
 
 UNIFORM_SAMPLERS = ("random", "halton")
 """Samplers whose scenes are uniform over the scenarios and their unit boxes (weight 1 without a record of it)."""
 
 
 def weighted_rate(outcomes: Sequence[float], weights: Sequence[float], confidence: float = 0.95) -> Dict[str, Any]:
-    """Self-normalised importance-sampling estimate of a rate from 0/1 ``outcomes`` and their ``weights``.
+    """Plain importance-sampling estimate ``mean(w * y)`` of a rate from 0/1 ``outcomes`` and their ``weights``.
 
-    Returns ``{"value", "low", "high", "ess", "n", "failures"}`` (``value`` ``None`` without weight).
+    Returns ``{"value", "low", "high", "ess", "n", "failures"}`` (``value`` ``None`` without outcomes).
     """
     if len(outcomes) != len(weights):
         raise ValueError(f"{len(outcomes)} outcomes but {len(weights)} weights; give one weight per outcome")
-    total = sum(weights)
     n = len(outcomes)
     failures = int(sum(1 for y in outcomes if y))
-    if n == 0 or total <= 0.0:
-        return {"value": None, "low": None, "high": None, "ess": 0.0, "n": n, "failures": failures}
-    value = sum(w * y for w, y in zip(weights, outcomes)) / total
-    ess = total * total / sum(w * w for w in weights)
-    low, high = _wilson(value, ess, confidence)
+    if n == 0:
+        return {"value": None, "low": None, "high": None, "ess": 0.0, "n": 0, "failures": 0}
+    terms = [float(w) * (1.0 if y else 0.0) for w, y in zip(weights, outcomes)]
+    value = sum(terms) / n
+    variance = sum((t - value) ** 2 for t in terms) / n / n  # of the estimate
+    shown = min(1.0, value)
+    if failures and variance > 0.0:
+        ess = shown * (1.0 - shown) / variance if shown < 1.0 else float(n)
+    else:
+        total, squares = sum(weights), sum(float(w) ** 2 for w in weights)
+        ess = total * total / squares if squares > 0 else 0.0
+    low, high = _wilson(shown, ess, confidence)
     return {"value": value, "low": low, "high": high, "ess": ess, "n": n, "failures": failures}
 
 
@@ -69,7 +86,7 @@ def _proposal(record: Mapping[str, Any], sampler: str) -> Optional[Mapping[str, 
     if isinstance(proposal, Mapping) and proposal.get("scenario") and proposal.get("params"):
         return proposal
     if str(record.get("sampler") or sampler) in UNIFORM_SAMPLERS:
-        return {"scenario": None, "params": 1.0}
+        return {"scenario": None, "params": 1.0, "floor": 1.0}
     return None
 
 
@@ -82,8 +99,8 @@ def failure_rate(records: Iterable[Mapping[str, Any]], *, scenarios: Optional[Se
         scenarios: the mined scenarios (the overall rate weighs each equally; default: those in ``records``).
         sampler: the run's sampler (for records that do not name theirs).
 
-    Returns ``{"available": bool, "reason": why not | None, "overall": estimate, "scenarios": {name:
-    estimate}}`` with each estimate as :func:`weighted_rate` returns it.
+    Returns ``{"available": bool, "reason": why not | None, "collapsed": bool, "overall": estimate, "scenarios":
+    {name: estimate}}`` with each estimate as :func:`weighted_rate` returns it.
     """
     records = [r for r in records if not r.get("error")]
     names = list(scenarios) if scenarios else sorted({str(r["scenario"]) for r in records})
@@ -91,7 +108,7 @@ def failure_rate(records: Iterable[Mapping[str, Any]], *, scenarios: Optional[Se
     if missing:
         return {"available": False, "reason": f"{len(missing)} of {len(records)} episodes have no proposal density "
                 "(the sampler draws without one, e.g. bandit or split with cell avoidance)",
-                "overall": None, "scenarios": {}}
+                "collapsed": False, "overall": None, "scenarios": {}}
     by_scenario: Dict[str, List[Mapping[str, Any]]] = {name: [] for name in names}
     for record in records:
         by_scenario.setdefault(str(record["scenario"]), []).append(record)
@@ -106,7 +123,9 @@ def failure_rate(records: Iterable[Mapping[str, Any]], *, scenarios: Optional[Se
         chance = proposal["scenario"] if proposal["scenario"] else 1.0 / count
         overall_weights.append((1.0 / count) / (float(chance) * float(proposal["params"])))
         outcomes.append(1.0 if record.get("failure") else 0.0)
-    return {"available": True, "reason": None, "overall": weighted_rate(outcomes, overall_weights, confidence),
+    collapsed = any(float(_proposal(r, sampler).get("floor", 1.0)) < COLLAPSE_FLOOR for r in records)
+    return {"available": True, "reason": None, "collapsed": collapsed,
+            "overall": weighted_rate(outcomes, overall_weights, confidence),
             "scenarios": estimates}
 
 

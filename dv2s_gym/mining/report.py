@@ -601,7 +601,10 @@ def rate_text(rate: Optional[Mapping[str, Any]]) -> str:
     overall = rate.get("overall") or {}
     return ("Failure rate under the scenarios' own parameter distributions (importance-weighted, each scenario "
             f"equally likely): {_pct(overall)}, effective sample size {_num(overall.get('ess'))} of "
-            f"{overall.get('n', 0)} episodes.")
+            f"{overall.get('n', 0)} episodes."
+            + (" The sampler almost stopped drawing some regions, so failures there are missing from the estimate: "
+               "it can be far too low; a random-sampler run estimates it without that risk." if rate.get("collapsed")
+               else ""))
 
 
 def headline(report: Mapping[str, Any]) -> str:

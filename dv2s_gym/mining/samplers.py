@@ -49,7 +49,7 @@ import numpy as np
 
 from dv2s_gym.mining.errors import MiningError
 
-__all__ = ["proposal_density", "SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "SceneSampler", "default_feedback", "make_sampler", "sampler_params", "is_adaptive"]
+__all__ = ["proposal_density", "scene_proposal", "SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "SceneSampler", "default_feedback", "make_sampler", "sampler_params", "is_adaptive"]
 
 
 def _factories() -> Dict[str, Callable]:
@@ -218,8 +218,10 @@ class SceneSampler:
 
     def proposal(self, index: int) -> Optional[Dict[str, Any]]:
         """The density the point of draw ``index`` was drawn from, at the moment it was drawn:
-        ``{"scenario": probability of its scenario, "coords": [density of each coordinate of u]}`` (the density
-        of the scenario's own parameters is the product of its first coordinates), or ``None`` when the sampler
+        ``{"scenario": probability of its scenario, "coords": [density of each coordinate of u], "floor": the
+        smallest scenario probability times the scenario count, "floors": [per coordinate, its smallest bucket
+        density]}`` (the density of the scenario's own parameters is the product of its first coordinates; a
+        floor far below 1 says the sampler had almost stopped drawing some region), or ``None`` when the sampler
         has no density to tell (:func:`proposal_density`)."""
         return getattr(self, "proposals", {}).get(int(index))
 
@@ -263,24 +265,29 @@ def proposal_density(name: str, sampler: Any, point: Any) -> Optional[Dict[str, 
     u = [float(x) for x in point.u]
     if name in ("random", "halton"):
         count = _scenario_count(sampler)
-        return {"scenario": 1.0 / count, "coords": [1.0] * len(u)} if count else None
+        return {"scenario": 1.0 / count, "coords": [1.0] * len(u), "floor": 1.0, "floors": [1.0] * len(u)} if count else None
     if name == "cross-entropy":
         domain = getattr(sampler, "domainSampler", None)
         cont, disc = getattr(domain, "cont_sampler", None), getattr(domain, "disc_sampler", None)
         if cont is None or disc is None:
             return None
-        return {"scenario": float(disc.dist[0][scenario]), "coords": _bucket_densities(cont, u)}
+        return {"scenario": float(disc.dist[0][scenario]), "coords": _bucket_densities(cont, u),
+                "floor": float(min(disc.dist[0])) * len(disc.dist[0]), "floors": _floors(cont, len(u))}
     if name == SPLIT:
         if (getattr(sampler, "chooser_kind", None) != "cross-entropy" or getattr(sampler, "avoid", 0)
                 or sampler.drawn <= len(sampler.warmup_order)):
             return None
         dimension = sampler.dimensions[scenario]
         own = sampler.param_samplers[scenario]
-        coords = ([1.0] * dimension if sampler.params_kind in ("halton", "random") else
+        uniform = sampler.params_kind in ("halton", "random")
+        coords = ([1.0] * dimension if uniform else
                   _bucket_densities(own, u[:dimension]) if sampler.params_kind == "cross-entropy" else None)
         if coords is None:
             return None
-        return {"scenario": float(sampler.chooser.dist[0][scenario]), "coords": coords + [1.0] * (len(u) - dimension)}
+        floors = [1.0] * dimension if uniform else _floors(own, dimension)
+        dist = sampler.chooser.dist[0]
+        return {"scenario": float(dist[scenario]), "coords": coords + [1.0] * (len(u) - dimension),
+                "floor": float(min(dist)) * len(dist), "floors": floors + [1.0] * (len(u) - dimension)}
     return None
 
 
@@ -294,6 +301,24 @@ def _scenario_count(sampler: Any) -> int:
         return int(high) - int(low) + 1
     except (AttributeError, KeyError, TypeError, ValueError):
         return 0
+
+
+def scene_proposal(proposal: Optional[Dict[str, Any]], used: int) -> Optional[Dict[str, float]]:
+    """What an episode record keeps of a draw's :meth:`SceneSampler.proposal` for a scenario with ``used``
+    parameters: ``{"scenario", "params" (the density of its own coordinates), "floor" (the smallest share, relative
+    to uniform, of any scenario or bucket of its coordinates)}``; ``None`` stays ``None``."""
+    if proposal is None:
+        return None
+    density = 1.0
+    for value in proposal["coords"][:used]:
+        density *= float(value)
+    floor = min([float(proposal.get("floor", 1.0))] + [float(f) for f in proposal.get("floors", [])[:used]])
+    return {"scenario": float(proposal["scenario"]), "params": density, "floor": floor}
+
+
+def _floors(cont: Any, count: int) -> List[float]:
+    """Per coordinate: the smallest density any of its buckets has (1 when uniform)."""
+    return [float(min(cont.dist[i])) * int(cont.buckets[i]) for i in range(count)]
 
 
 def _bucket_densities(cont: Any, u: List[float]) -> List[float]:
