@@ -444,3 +444,17 @@ def test_a_uniform_run_estimates_its_plain_failure_rate(tmp_path):
     # random draws every scenario as often as the overall target weighs it: every weight is 1
     assert (rate["overall"]["value"], rate["overall"]["ess"]) == (pytest.approx(10 / 19), pytest.approx(19))
     assert "importance-weighted" in markdown(report)
+
+
+def test_the_miner_s_summary_states_the_breadth(run_dir):
+    from pathlib import Path as _Path
+
+    from dv2s_gym.mining.cluster import cluster_failures
+    from dv2s_gym.mining.miner import MineRun, read_records
+
+    records = read_records(_Path(run_dir) / "episodes.jsonl")
+    settings = json.loads((_Path(run_dir) / "settings.json").read_text())
+    run = MineRun(out=_Path(run_dir), settings=settings, records=records, clusters=cluster_failures(records))
+    # the miner counts a failure of unknown avoidability (the low TTC) as avoidable
+    assert ("5 distinct behaviours, 4 with avoidable failures; 5 (scenario, failure type) pairs, 2 scenarios with a "
+            "failure; 5 collisions, 1 stalls") in run.summary()

@@ -98,7 +98,7 @@ class MineRun:
 
     @property
     def distinct_clusters(self) -> int:
-        """Distinct failure clusters."""
+        """Distinct failure clusters (behaviours, :mod:`dv2s_gym.mining.cluster`)."""
         return len(set(self.clusters.values()))
 
     def summary(self) -> str:
@@ -109,6 +109,7 @@ class MineRun:
         restarted = sum(1 for r in self.records if r.get("worker_restarts"))
         failures = self.failures
         kinds = Counter(r["failure"]["kind"] for r in failures)
+        kinds_by_type = Counter(r["failure"]["type"] for r in failures)
         avoidable_clusters = {self.clusters[int(r["index"])] for r in self.avoidable}
         status = Counter(c.get("status") for c in self.conversions)
         lines = [
@@ -118,7 +119,10 @@ class MineRun:
             f"{len(failures)} failures ({', '.join(f'{k} {n}' for k, n in kinds.most_common()) or 'none'}); "
             + (f"{len(self.avoidable)} avoidable by {self.settings['reference']}" if self.settings["reference"]
              else "avoidability not checked (no reference driver)"),
-            f"{self.distinct_clusters} distinct clusters, {len(avoidable_clusters)} with avoidable failures",
+            f"{self.distinct_clusters} distinct behaviours, {len(avoidable_clusters)} with avoidable failures; "
+            f"{len({(r['scenario'], r['failure']['kind']) for r in failures})} (scenario, failure type) pairs, "
+            f"{len({r['scenario'] for r in failures})} scenarios with a failure; "
+            f"{kinds_by_type.get('collision', 0)} collisions, {kinds_by_type.get('stall', 0)} stalls",
         ]
         if self.conversions:
             lines.append(f"converted {len(self.conversions)}: kept {status.get('kept', 0)}, merged "
