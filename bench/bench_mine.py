@@ -205,7 +205,8 @@ BREADTH_POLICIES = ("idm", "keep_lane", "rule?action_noise=0.2")
 
 def bench_breadth(policies: Sequence[str], samplers: Sequence[str], seeds: Sequence[int], budget: int, workers: int,
                   scenarios: Optional[List[str]], batch: Optional[int], root: str) -> Dict[str, Any]:
-    """Every sampler, in the setting ``dv2s mine --sampler NAME`` runs it (its default options and feedback), on
+    """Every sampler, in the setting ``dv2s mine --sampler NAME`` runs it (its default options and feedback; a name
+    ``NAME+FEEDBACK`` runs it with that feedback, e.g. ``cross-entropy+novelty``), on
     every policy and seed, at the same budget; the breadth of the failures found, none of which any sampler is fed:
     behaviour clusters, (scenario, failure type) pairs and scenarios with a failure. Printed per run, then the
     mean per policy and each sampler's ratio to random's mean (per policy and over all runs)."""
@@ -216,8 +217,9 @@ def bench_breadth(policies: Sequence[str], samplers: Sequence[str], seeds: Seque
     for policy in policies:
         for seed in seeds:  # seed-major within a policy: an interrupted bench still compares on equal terms
             for sampler in samplers:
-                row = mine_once(policy, sampler, seed, budget, workers, None, scenarios, batch,
-                                os.path.join(root, f"breadth-{len(rows)}-{seed}-{sampler}"), None, None)
+                name, _, feedback = sampler.partition("+")  # "cross-entropy+novelty": another feedback
+                row = mine_once(policy, name, seed, budget, workers, None, scenarios, batch,
+                                os.path.join(root, f"breadth-{len(rows)}-{seed}-{name}"), None, feedback or None)
                 rows.setdefault((policy, sampler), []).append(row)
                 print(f"  {policy:24s} {sampler:14s} seed {seed}: {row['failures']:4d} failures / {row['episodes']} "
                       f"episodes ({row['errors']} errors), {row['clusters']:3d} behaviour clusters, "
