@@ -677,10 +677,11 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
     path = run.out / "conversions.jsonl"
     existing = _read_jsonl(path)
     converted = {row["cluster"] for row in existing}
+    converted_episodes = {row.get("index") for row in existing}  # a run converted under older cluster ids
     candidates = []
     for cluster, members in sorted(group(run.records).items()):
         avoidable = [r for r in members if r.get("avoidable") is not False]
-        if cluster in converted or not avoidable:
+        if cluster in converted or not avoidable or any(r["index"] in converted_episodes for r in members):
             continue
         representative = min(avoidable, key=lambda r: (float(r.get("rho") or 0.0), int(r["index"])))
         candidates.append((-len(avoidable), cluster, representative))
