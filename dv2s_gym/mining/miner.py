@@ -400,11 +400,13 @@ def _run_window(window: WindowSchedule, pool, space, settings: Dict[str, Any], o
     more()  # the checkpoint of the finished run
 
 
-FEEDBACKS = ("robustness", "novelty")
+FEEDBACKS = ("robustness", "novelty", "scenario-novelty")
 """What the adaptive samplers are fed: ``robustness`` (each episode's robustness) or ``novelty`` (the same,
 except that a failure in a parameter cell an earlier episode already failed in with the same failure class,
 :func:`~dv2s_gym.mining.cluster.cell_id`, is fed as an easy scene). Novelty is over where in parameter space
-the sampler has found failures, not over the behaviour clusters the reports count."""
+the sampler has found failures, not over the behaviour clusters the reports count. ``scenario-novelty``: only
+the first failure of each scenario is fed as a failure, later ones as easy scenes (the sampler keeps looking in
+scenarios that have not failed yet)."""
 _REPEAT = 9.0  # what a repeated failure is fed under "novelty": the robustness of a scene without a near miss
 
 
@@ -415,10 +417,10 @@ def _feedback(record: Dict[str, Any], seen: set, mode: str) -> float:
     if rho is None or record.get("error"):
         return 1.0
     if record.get("failure"):
-        cluster = cell_id(record)
+        cluster = cell_id(record) if mode != "scenario-novelty" else f"scenario:{record['scenario']}"
         repeat = cluster in seen
         seen.add(cluster)
-        if repeat and mode == "novelty":
+        if repeat and mode in ("novelty", "scenario-novelty"):
             return _REPEAT
     return float(rho)
 
