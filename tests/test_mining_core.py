@@ -470,6 +470,10 @@ def test_novelty_feedback_feeds_a_repeated_parameter_cell_as_an_easy_scene():
         -2.0, 9.0, -1.2, 3.0, 1.0]
     seen = set()
     assert [_feedback(r, seen, "robustness") for r in (first, same_cell, other_cell)] == [-2.0, -1.5, -1.2]
+    seen = set()  # scenario-novelty: only each scenario's first failure is fed as one
+    elsewhere = {**other_cell, "index": 5, "scenario": LEFT_TURN, "rho": -1.1}
+    assert [_feedback(r, seen, "scenario-novelty") for r in (first, other_cell, passed, elsewhere)] == [
+        -2.0, 9.0, 3.0, -1.1]
     with pytest.raises(MiningError, match="unknown feedback 'curious'.*novelty"):
         mine("rule", out="unused", budget=1, feedback="curious")
 
