@@ -44,14 +44,15 @@ UNIFORM_SAMPLERS = ("random", "halton")
 def weighted_rate(outcomes: Sequence[float], weights: Sequence[float], confidence: float = 0.95) -> Dict[str, Any]:
     """Plain importance-sampling estimate ``mean(w * y)`` of a rate from 0/1 ``outcomes`` and their ``weights``.
 
-    Returns ``{"value", "low", "high", "ess", "n", "failures"}`` (``value`` ``None`` without outcomes).
+    Returns ``{"value", "raw", "low", "high", "ess", "n", "failures"}`` (``value`` ``None`` without outcomes;
+    ``raw`` is the estimate itself, which a few heavy weights can push past 1, ``value`` it capped at 1).
     """
     if len(outcomes) != len(weights):
         raise ValueError(f"{len(outcomes)} outcomes but {len(weights)} weights; give one weight per outcome")
     n = len(outcomes)
     failures = int(sum(1 for y in outcomes if y))
     if n == 0:
-        return {"value": None, "low": None, "high": None, "ess": 0.0, "n": 0, "failures": 0}
+        return {"value": None, "raw": None, "low": None, "high": None, "ess": 0.0, "n": 0, "failures": 0}
     terms = [float(w) * (1.0 if y else 0.0) for w, y in zip(weights, outcomes)]
     value = sum(terms) / n
     variance = sum((t - value) ** 2 for t in terms) / n / n  # of the estimate
@@ -62,7 +63,7 @@ def weighted_rate(outcomes: Sequence[float], weights: Sequence[float], confidenc
         total, squares = sum(weights), sum(float(w) ** 2 for w in weights)
         ess = total * total / squares if squares > 0 else 0.0
     low, high = _wilson(shown, ess, confidence)
-    return {"value": value, "low": low, "high": high, "ess": ess, "n": n, "failures": failures}
+    return {"value": shown, "raw": value, "low": low, "high": high, "ess": ess, "n": n, "failures": failures}
 
 
 def _wilson(p: float, n: float, confidence: float) -> tuple:

@@ -56,7 +56,8 @@ so its interval is a guide, not an exact guarantee.
 (under the scenario's own parameter distribution), "failures_by_type", "failure_types",
 "clusters", "avoidable_clusters", "converted", "kept"}``.
 
-``Estimate``: ``{"value", "low", "high" (95 %), "ess" (effective sample size), "n", "failures"}``.
+``Estimate``: ``{"value" (capped at 1), "raw" (the importance-sampling estimate itself), "low", "high" (95 %), "ess"
+(effective sample size), "n", "failures"}``.
 
 ``Cluster``: ``{"id", "scenario", "type", "kind", "region" (the id after scenario and class), "behaviour":
 {"actor", "actor_manoeuvre", "ego_manoeuvre"}, "size", "avoidable", "unavoidable",

@@ -19,8 +19,10 @@ Samplers (``name``: VerifAI's):
   sampler picks the scenario, and each scenario has its own VerifAI Halton sampler over its own
   parameters; it learns by default from ``novelty`` feedback (a repeat of a failure cluster
   already found counts as an easy scene), and by default (``avoid=81``) draws a scenario's Halton
-  points past the cells of the cluster grid where that scenario already failed. It finds the most
-  distinct failure clusters of these samplers (bench/RESULTS.md, ``python -m bench.bench_mine --part samplers``).
+  points past the cells of the parameter grid (:func:`~dv2s_gym.mining.cluster.region_of`) where that scenario
+  already failed. It finds the most of those grid cells of these samplers (``python -m bench.bench_mine --part
+  samplers``); on the behaviour clusters the reports count it beats random sampling only for policies that fail
+  rarely (``--part breadth``, bench/RESULTS.md).
 
 The adaptive samplers (``cross-entropy``, ``bandit``) take VerifAI's parameters as
 ``options`` (:data:`SAMPLER_OPTIONS`): ``alpha`` (how much one failure moves the
