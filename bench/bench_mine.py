@@ -6,6 +6,7 @@
     python -m bench.bench_mine --part throughput --throughput-sampler cross-entropy
     python -m bench.bench_mine --part samplers --config 'b2:alpha=0.9,buckets=2' --config 'nov:feedback=novelty'
     python -m bench.bench_mine --part samplers --samplers random split --split-config 'ucb:chooser=ucb'
+    python -m bench.bench_mine --part breadth --budget 100 --seeds 0 1 2   # breadth on three policies
 
 **Samplers** (``--part samplers``): every sampler of :data:`dv2s_gym.mining.samplers.SAMPLERS`
 mines the same policy on the same scenarios (the whole shipped bank by default) with the
@@ -19,6 +20,13 @@ adaptive sampler >= 3x). Each adaptive sampler runs once per setting (``--config
 VerifAI's defaults and the two settings of :data:`TUNED_CONFIGS`); the ``split`` sampler runs in its preset
 (``dv2s mine --sampler split``) or in each ``--split-config``. With ``--reference none`` (the default when the policy under test is
 the reference driver itself, ``rule``) avoidability is not checked.
+
+**Breadth** (``--part breadth``): ``random``, ``cross-entropy`` (``dv2s mine``'s default) and ``split``, each as
+``dv2s mine --sampler NAME`` runs it, on several policies the project did not train for it (``--policies``,
+default :data:`BREADTH_POLICIES`) and seeds, at the same budget, measured on what none of them is fed:
+behaviour clusters (``dv2s_gym.mining.cluster``), (scenario, failure type) pairs and scenarios with a failure;
+printed with each sampler's ratio to random (target: the default adaptive sampler >= 2x random on behaviour
+clusters and never below it on pairs).
 
 **Throughput** (``--part throughput``): the same mining run (same budget, seed, sampler -- default
 ``random`` -- and batch, 8 unless ``--batch``) with 1 worker and with 2, in alternating rounds so both see
@@ -186,6 +194,65 @@ def bench_samplers(policy: str, samplers: Sequence[str], seeds: Sequence[int], b
     return summary
 
 
+BREADTH = ("clusters", "kinds", "scenarios_failing")
+"""The breadth measures of ``--part breadth``: behaviour clusters, (scenario, failure type) pairs, scenarios with a
+failure (keys of :func:`mine_once`'s row)."""
+BREADTH_NAMES = {"clusters": "behaviour clusters", "kinds": "(scenario, failure type) pairs",
+                 "scenarios_failing": "scenarios with a failure"}
+BREADTH_POLICIES = ("idm", "keep_lane", "rule?action_noise=0.2")
+"""Policies the project did not train for the comparison (``policies/registry.py``)."""
+
+
+def bench_breadth(policies: Sequence[str], samplers: Sequence[str], seeds: Sequence[int], budget: int, workers: int,
+                  scenarios: Optional[List[str]], batch: Optional[int], root: str) -> Dict[str, Any]:
+    """Every sampler, in the setting ``dv2s mine --sampler NAME`` runs it (its default options and feedback; a name
+    ``NAME+FEEDBACK`` runs it with that feedback, e.g. ``cross-entropy+novelty``), on
+    every policy and seed, at the same budget; the breadth of the failures found, none of which any sampler is fed:
+    behaviour clusters, (scenario, failure type) pairs and scenarios with a failure. Printed per run, then the
+    mean per policy and each sampler's ratio to random's mean (per policy and over all runs)."""
+    print(f"# breadth: policies {list(policies)}, samplers {list(samplers)}, budget {budget}, seeds {list(seeds)}, "
+          f"{workers} workers, batch {batch or 'default'}, no reference driver, scenarios "
+          f"{' '.join(scenarios) if scenarios else 'whole bank'}", flush=True)
+    rows: Dict[Tuple[str, str], List[Dict[str, Any]]] = {}
+    for policy in policies:
+        for seed in seeds:  # seed-major within a policy: an interrupted bench still compares on equal terms
+            for sampler in samplers:
+                name, _, feedback = sampler.partition("+")  # "cross-entropy+novelty": another feedback
+                row = mine_once(policy, name, seed, budget, workers, None, scenarios, batch,
+                                os.path.join(root, f"breadth-{len(rows)}-{seed}-{name}"), None, feedback or None)
+                rows.setdefault((policy, sampler), []).append(row)
+                print(f"  {policy:24s} {sampler:14s} seed {seed}: {row['failures']:4d} failures / {row['episodes']} "
+                      f"episodes ({row['errors']} errors), {row['clusters']:3d} behaviour clusters, "
+                      f"{row['kinds']:3d} (scenario, type) pairs, {row['scenarios_failing']:2d} scenarios, "
+                      f"{row['seconds']:.0f} s, load {_load()}", flush=True)
+    summary: Dict[str, Any] = {"per_policy": {}, "overall": {}}
+    print("\n| policy | sampler | failures | " + " | ".join(BREADTH_NAMES[m] for m in BREADTH)
+          + " | " + " | ".join(f"{BREADTH_NAMES[m]} vs random" for m in BREADTH) + " |")
+    print("|---|---|---:|" + "---:|" * (2 * len(BREADTH)))
+    for policy in policies:
+        base = {m: statistics.mean(r[m] for r in rows[(policy, "random")]) for m in BREADTH} \
+            if (policy, "random") in rows else None
+        for sampler in samplers:
+            got = rows[(policy, sampler)]
+            means = {m: statistics.mean(r[m] for r in got) for m in BREADTH}
+            ratios = {m: (means[m] / base[m] if base and base[m] else float("nan")) for m in BREADTH}
+            summary["per_policy"][(policy, sampler)] = {"means": means, "ratios": ratios,
+                                                        "failures": statistics.mean(r["failures"] for r in got)}
+            print(f"| {policy} | {sampler} | {statistics.mean(r['failures'] for r in got):.1f} | "
+                  + " | ".join(f"{means[m]:.1f} ({', '.join(str(r[m]) for r in got)})" for m in BREADTH) + " | "
+                  + " | ".join(f"{ratios[m]:.2f}x" for m in BREADTH) + " |")
+    if "random" in samplers:
+        print("\nover all policies and seeds (sum over runs, ratio to random at the same budget):")
+        totals = {s: {m: sum(r[m] for p in policies for r in rows[(p, s)]) for m in BREADTH} for s in samplers}
+        for sampler in samplers:
+            ratios = {m: totals[sampler][m] / totals["random"][m] if totals["random"][m] else float("nan")
+                      for m in BREADTH}
+            summary["overall"][sampler] = ratios
+            print(f"  {sampler:14s} " + ", ".join(f"{BREADTH_NAMES[m]} {totals[sampler][m]} ({ratios[m]:.2f}x)"
+                                                  for m in BREADTH), flush=True)
+    return summary
+
+
 def bench_throughput(policy: str, sampler: str, seed: int, budget: int, repeats: int, reference: Optional[str],
                      scenarios: Optional[List[str]], batch: Optional[int], root: str) -> Dict[str, float]:
     """1 worker against 2 on the same run, alternating; medians of episodes/min and of the per-round ratios.
@@ -248,7 +315,10 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
 
     parser = argparse.ArgumentParser(prog="python -m bench.bench_mine", description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="budget 40, one seed, one throughput round")
-    parser.add_argument("--part", choices=("all", "samplers", "throughput"), default="all")
+    parser.add_argument("--part", choices=("all", "samplers", "throughput", "breadth"), default="all",
+                        help="all: samplers and throughput; breadth: the samplers' breadth on several policies")
+    parser.add_argument("--policies", nargs="*", default=list(BREADTH_POLICIES),
+                        help="policies of --part breadth (default: idm keep_lane rule?action_noise=0.2)")
     parser.add_argument("--policy", default="rule", help="policy under test (default: rule)")
     parser.add_argument("--reference", default=None,
                         help="reference driver for avoidability ('none' to skip; default: rule, or none when the "
@@ -288,6 +358,10 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
         if args.part in ("all", "samplers"):
             results["samplers"] = bench_samplers(args.policy, args.samplers, seeds, budget, args.workers, reference,
                                                  args.scenarios, args.batch, configs, root, split_configs)
+        if args.part == "breadth":
+            samplers = args.samplers if args.samplers != list(SAMPLERS) else ["random", "cross-entropy", "split"]
+            results["breadth"] = bench_breadth(args.policies, samplers, seeds, budget, args.workers, args.scenarios,
+                                               args.batch, root)
         if args.part in ("all", "throughput"):
             results["throughput"] = bench_throughput(args.policy, args.throughput_sampler, seeds[0],
                                                      throughput_budget, repeats, reference, args.scenarios,

@@ -947,10 +947,11 @@ def build_parser() -> argparse.ArgumentParser:
                    "split also takes chooser (cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy) "
                    "and warmup (0), and against scenarios that stop yielding: forget, patience, floor, capacity, avoid "
                    "(see dv2s_gym/mining/samplers.py)")
-    p.add_argument("--feedback", choices=["robustness", "novelty"], default=None,
-                   help="what adaptive samplers learn from: robustness (every failure), or novelty (a failure in a "
-                   "cluster already found counts as an easy scene, to spread the search); default novelty for "
-                   "split, robustness for the others")
+    p.add_argument("--feedback", choices=["robustness", "novelty", "scenario-novelty"], default=None,
+                   help="what adaptive samplers learn from: robustness (every failure), novelty (a failure in a "
+                   "parameter cell that already failed counts as an easy scene, to spread the search) or "
+                   "scenario-novelty (only each scenario's first failure counts); default novelty for split, "
+                   "robustness for the others")
     p.add_argument("--seed", type=int, default=0, help="seed of the sampler and the episodes (default 0)")
     p.add_argument("--reference", default="rule",
                    help="driver deciding avoidability (default rule; 'none' skips the check)")

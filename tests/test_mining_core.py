@@ -403,8 +403,18 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
         if record["failure"]:
             assert (out / record["trace"]).is_file() and record["reference"]["policy"] == "rule"
             assert isinstance(record["avoidable"], bool)
+            assert set(record["behaviour"]) == {"actor", "actor_manoeuvre", "ego_manoeuvre"}
+            assert "unknown" not in record["behaviour"].values()
         else:
+            assert "behaviour" not in record
             assert record["trace"] is None and record["avoidable"] is None
+        proposal = record["proposal"]  # the density the scene was drawn with (the failure-rate estimate's weights)
+        if settings["sampler"] == "random":
+            assert proposal == {"scenario": 0.5, "params": 1.0, "floor": 1.0}
+        elif settings["sampler"] == "cross-entropy":
+            assert 0.0 < proposal["scenario"] < 1.0 and proposal["params"] > 0.0
+        else:  # the bandit picks its buckets deterministically; split's cell avoidance leaves cells out
+            assert proposal is None
     assert (out / "sampler.pkl").is_file()
     assert json.loads((out / "settings.json").read_text())["sampler"] == settings["sampler"]
     # the scenes are the sampler's draws in order, however many chunks went to the workers at once
@@ -437,16 +447,16 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
 
 def _fed(record, records, feedback):
     """What the miner feeds back for ``record`` (written out here from the documented rule)."""
-    from dv2s_gym.mining.cluster import cluster_id
+    from dv2s_gym.mining.cluster import cell_id
 
-    if record["failure"] and feedback == "novelty":
-        earlier = {cluster_id(r) for r in records if r["index"] < record["index"] and r["failure"]}
-        if cluster_id(record) in earlier:
+    if record["failure"] and feedback == "novelty":  # novelty is over parameter cells, not behaviour clusters
+        earlier = {cell_id(r) for r in records if r["index"] < record["index"] and r["failure"]}
+        if cell_id(record) in earlier:
             return 9.0
     return record["rho"]
 
 
-def test_novelty_feedback_feeds_a_repeated_cluster_as_an_easy_scene():
+def test_novelty_feedback_feeds_a_repeated_parameter_cell_as_an_easy_scene():
     from dv2s_gym.mining.miner import _feedback
 
     failure = {"type": "collision", "kind": "collision:rear_end"}
@@ -460,6 +470,10 @@ def test_novelty_feedback_feeds_a_repeated_cluster_as_an_easy_scene():
         -2.0, 9.0, -1.2, 3.0, 1.0]
     seen = set()
     assert [_feedback(r, seen, "robustness") for r in (first, same_cell, other_cell)] == [-2.0, -1.5, -1.2]
+    seen = set()  # scenario-novelty: only each scenario's first failure is fed as one
+    elsewhere = {**other_cell, "index": 5, "scenario": LEFT_TURN, "rho": -1.1}
+    assert [_feedback(r, seen, "scenario-novelty") for r in (first, other_cell, passed, elsewhere)] == [
+        -2.0, 9.0, 3.0, -1.1]
     with pytest.raises(MiningError, match="unknown feedback 'curious'.*novelty"):
         mine("rule", out="unused", budget=1, feedback="curious")
 

@@ -22,8 +22,8 @@ from envs.errors import DV2SError
 from browser_helpers import body_attributes
 
 POLICY = "rule?action_noise=0.3"
-# (sampler, scenario, u, failure type, avoidable, error); u is the one unit-box coordinate of the scene, the
-# clustering's grid cuts it into thirds (r0 below 1/3, r2 above 2/3)
+# (sampler, scenario, u, failure type, avoidable, error); u is the one unit-box coordinate of the scene; each
+# failure's behaviour follows its type (BEHAVIOURS), so the clusters are (scenario, type) here
 EPISODES = [
     ("cross-entropy", "A", 0.10, "collision", True, None),   # 0  A/collision:rear_end/r0
     ("cross-entropy", "A", 0.15, "collision", True, None),   # 1  A/collision:rear_end/r0
@@ -46,8 +46,11 @@ EPISODES = [
     ("random", "A", 0.64, None, None, None),                 # 18
     ("random", "B", 0.66, None, None, None),                 # 19
 ]
-A_COLLISION, B_COLLISION = "A/collision:rear_end/r0", "B/collision:rear_end/r2"
-A_TTC, B_STALL, B_OFF_ROAD = "A/low_ttc/r2", "B/stall/r2", "B/off_road/r0"
+BEHAVIOURS = {"collision": ("car", "braking", "keeping_lane"), "off_road": ("none", "none", "lane_change"),
+              "low_ttc": ("truck", "steady", "keeping_lane"), "stall": ("none", "none", "stopped")}
+A_COLLISION, B_COLLISION = "A/collision:rear_end/car-braking/ego-keeping_lane", "B/collision:rear_end/car-braking/ego-keeping_lane"
+A_TTC, B_STALL = "A/low_ttc/truck-steady/ego-keeping_lane", "B/stall/none-none/ego-stopped"
+B_OFF_ROAD = "B/off_road/none-none/ego-lane_change"
 DESCRIPTION = "The ego drives in the right lane; a car ahead brakes hard and the ego <hits> it from behind."
 
 
@@ -80,7 +83,8 @@ def _record(index: int, sampler: str, scenario: str, u: float, kind, avoidable, 
             "params": {"ego_speed": 20.0 + 15.0 * u}, "point": [u], "result": result, "failure": failure,
             "rho": (-1.0 - index / 100) if kind else 1.0, "reference": reference,
             "avoidable": avoidable if kind else None, "trace": f"traces/{index:06d}.json.gz" if kind else None,
-            "error": error}
+            "error": error, **({"behaviour": dict(zip(("actor", "actor_manoeuvre", "ego_manoeuvre"), BEHAVIOURS[kind]))}
+                               if kind else {})}
 
 
 def write_clip(path: Path, frames: int = 12, size: int = 96) -> Path:
@@ -199,11 +203,11 @@ def test_clusters_carry_their_conversion(report):
     assert list(clusters) == [A_COLLISION, B_COLLISION, B_STALL, A_TTC]  # most avoidable failures first
     a = clusters[A_COLLISION]
     assert (a["scenario"], a["type"], a["kind"], a["region"], a["size"], a["avoidable"]) == (
-        "A", "collision", "collision:rear_end", "r0", 4, 4)
+        "A", "collision", "collision:rear_end", "car-braking/ego-keeping_lane", 4, 4)
     assert a["samplers"] == {"cross-entropy": 3, "random": 1}
     assert a["params"]["ego_speed"]["min"] == pytest.approx(20.75) and a["params"]["ego_speed"]["max"] == pytest.approx(24.5)
-    assert a["cell"] == {"ego_speed": {"low": 20.0, "high": 25.0}}  # the first third of 20..35
-    assert clusters[B_STALL]["cell"] == {"ego_speed": {"low": 30.0, "high": 35.0}}
+    assert a["behaviour"] == {"actor": "car", "actor_manoeuvre": "braking", "ego_manoeuvre": "keeping_lane"}
+    assert clusters[B_STALL]["behaviour"] == {"actor": "none", "actor_manoeuvre": "none", "ego_manoeuvre": "stopped"}
     assert a["collision_types"] == {"rear_end": 4} and a["with_kinds"] == {"car": 4}
     assert a["representative"]["index"] == 0 and a["representative"]["seed"] == 1000
     assert (a["status"], a["bank_entry"], a["reproduction_rate"], a["e2e_sc"]) == ("kept", "mined_a_rear_end", 0.6, 0.712)
@@ -236,7 +240,7 @@ def test_report_json_is_strict_schema_json(run_dir, tmp_path):
         raise AssertionError(f"report.json holds {name}")
 
     data = json.loads(paths["json"].read_text(), parse_constant=no_constants)
-    assert (data["schema"], data["schema_version"]) == (SCHEMA, SCHEMA_VERSION) == ("dv2s-mine-report", 2)
+    assert (data["schema"], data["schema_version"]) == (SCHEMA, SCHEMA_VERSION) == ("dv2s-mine-report", 3)
     for key in ("created", "dv2s_version", "run_dir", "settings", "counts", "samplers", "scenarios", "clusters",
                 "unavoidable_clusters", "failures", "unavoidable", "rejected", "errors", "skipped_lines"):
         assert key in data, key
@@ -322,7 +326,7 @@ def test_the_page_embeds_videos_descriptions_and_scripts(run_dir, report, tmp_pa
     assert page.count('src="data:video/webm;base64,') == 2  # the kept and the merged cluster's clips
     assert "is missing from the run folder" in page  # the rejected stall cluster's clip was never written
     assert "The ego drives in the right lane; a car ahead brakes hard and the ego &lt;hits&gt; it from behind." in page
-    assert "its grid cell: ego_speed 20 to 25" in page
+    assert "behaviour: car braking; ego keeping_lane" in page
     assert "<details><summary>Generated Scenic script" in page and "FollowLaneBehavior()" in page
     assert "check: compile failed: unknown name &#x27;Lanee&#x27;" in page
     kept, rejected = page.index('id="card-' + A_COLLISION), page.index('id="card-' + B_STALL)
@@ -403,3 +407,54 @@ def test_the_report_of_a_real_mining_run_matches_its_records(tmp_path):
         assert cluster in page
     for name, params in report["scenarios"].items():
         assert name == "highway_lead_vehicle_brakes" and params["failures"] == len(failed)
+
+
+def test_breadth_counts_and_their_text(report):
+    counts = report["counts"]
+    assert counts["behaviours"] == counts["clusters"] == 5
+    # A: collision, low_ttc; B: off_road, collision, stall
+    assert counts["scenario_failure_types"] == 5 and counts["scenarios_failing"] == 2
+    assert (counts["collisions"], counts["stalls"]) == (5, 1)
+    assert report["scenarios"]["A"]["failure_types"] == 2 and report["scenarios"]["B"]["failure_types"] == 3
+    line = ("10 failure(s): 5 distinct behaviour(s), 5 (scenario, failure type) pair(s), 2 scenario(s) with a "
+            "failure; 5 collision(s), 1 stall(s)")
+    assert line in format_summary(report) and line in markdown(report)
+
+
+def test_the_rate_estimate_needs_every_proposal_density(report):
+    rate = report["failure_rate"]  # the cross-entropy records of this run were written without their densities
+    assert rate["available"] is False and "no proposal density" in rate["reason"]
+    assert "not estimated" in format_summary(report)
+
+
+def test_a_uniform_run_estimates_its_plain_failure_rate(tmp_path):
+    run = make_run(tmp_path / "run", clips=False)
+    lines = (run / "episodes.jsonl").read_text().splitlines()[:-1]
+    records = [json.loads(line.replace("NaN", "1.0")) for line in lines]
+    for record in records:
+        record["sampler"] = "random"
+    (run / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    report = build_report(run)
+    rate = report["failure_rate"]
+    assert rate["available"] is True
+    a = rate["scenarios"]["A"]
+    assert (a["value"], a["n"], a["ess"]) == (pytest.approx(5 / 11), 11, pytest.approx(11))
+    low, high = wilson(5, 11)
+    assert (a["low"], a["high"]) == (pytest.approx(low), pytest.approx(high))
+    # random draws every scenario as often as the overall target weighs it: every weight is 1
+    assert (rate["overall"]["value"], rate["overall"]["ess"]) == (pytest.approx(10 / 19), pytest.approx(19))
+    assert "importance-weighted" in markdown(report)
+
+
+def test_the_miner_s_summary_states_the_breadth(run_dir):
+    from pathlib import Path as _Path
+
+    from dv2s_gym.mining.cluster import cluster_failures
+    from dv2s_gym.mining.miner import MineRun, read_records
+
+    records = read_records(_Path(run_dir) / "episodes.jsonl")
+    settings = json.loads((_Path(run_dir) / "settings.json").read_text())
+    run = MineRun(out=_Path(run_dir), settings=settings, records=records, clusters=cluster_failures(records))
+    # the miner counts a failure of unknown avoidability (the low TTC) as avoidable
+    assert ("5 distinct behaviours, 4 with avoidable failures; 5 (scenario, failure type) pairs, 2 scenarios with a "
+            "failure; 5 collisions, 1 stalls") in run.summary()

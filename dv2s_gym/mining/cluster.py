@@ -1,11 +1,19 @@
-"""Grouping failures so a report counts distinct failures, not repeats of one.
+"""Grouping failures by behaviour, so a report counts distinct failures, not repeats of one.
 
-A failure's cluster is ``"<scenario>/<failure class>/<region>"``: its scenario, its class
-(``collision:rear_end``, ``off_road``...; :attr:`~dv2s_gym.mining.monitors.Failure.kind`)
-and the cell of a regular grid over the scenario's parameter space (each parameter's
-range cut into :data:`REGION_BINS` equal parts) its parameters fall in. Grid cells do
-not move when more failures arrive, so a cluster keeps its id across a resumed run and
-across runs, and the conversion of a cluster is done once.
+A failure's cluster is ``"<scenario>/<failure class>/<actor>-<its manoeuvre>/ego-<ego manoeuvre>"``, e.g.
+``"cut_in/collision:rear_end/car-braking/ego-keeping_lane"``: its scenario (the parent scenario of the
+failure family), its class (``collision:rear_end``, ``off_road``, ``stall``...;
+:attr:`~dv2s_gym.mining.monitors.Failure.kind`), the kind of the other actor involved and what it was doing,
+and what the ego was doing, in the seconds before the failure (:mod:`dv2s_gym.mining.behaviour`, kept in
+the episode record when it runs). The first two ``/``-parts are always the scenario and the failure class.
+A cluster id depends on its own record only, so it is the same across a resumed run and across runs,
+and the conversion of a cluster is done once.
+
+The scenario parameters are not part of the cluster: two failures that look the same on the road are one
+behaviour whatever the parameters were. :func:`cell_id` (the failure's cell of a regular grid over the
+parameters, :data:`REGION_BINS` per parameter) is what the ``novelty`` feedback of the adaptive samplers
+and the ``split`` sampler's cell avoidance use: a signal about where in parameter space a sampler has
+been, which is not what the reports count.
 """
 
 from __future__ import annotations
@@ -13,7 +21,9 @@ from __future__ import annotations
 from collections import defaultdict
 from typing import Any, Dict, Iterable, List, Sequence
 
-__all__ = ["REGION_BINS", "region_of", "cluster_id", "cluster_failures", "slug"]
+from dv2s_gym.mining.behaviour import behaviour_of
+
+__all__ = ["REGION_BINS", "region_of", "cluster_id", "cell_id", "cluster_failures", "group", "slug", "pair_of"]
 
 REGION_BINS = 3
 
@@ -24,22 +34,34 @@ def region_of(point: Sequence[float], bins: int = REGION_BINS) -> str:
     return "r" + ".".join(cells)
 
 
-def cluster_id(record: Dict[str, Any], bins: int = REGION_BINS) -> str:
-    """The cluster of a failed episode record."""
+def cluster_id(record: Dict[str, Any]) -> str:
+    """The behaviour cluster of a failed episode record (module docstring)."""
+    behaviour = behaviour_of(record)
+    return (f"{record['scenario']}/{record['failure']['kind']}/{behaviour['actor']}-{behaviour['actor_manoeuvre']}"
+            f"/ego-{behaviour['ego_manoeuvre']}")
+
+
+def cell_id(record: Dict[str, Any], bins: int = REGION_BINS) -> str:
+    """``"<scenario>/<failure class>/<grid cell>"`` of a failed record: where in parameter space it failed."""
     return f"{record['scenario']}/{record['failure']['kind']}/{region_of(record.get('point') or [], bins)}"
 
 
-def cluster_failures(records: Iterable[Dict[str, Any]], bins: int = REGION_BINS) -> Dict[int, str]:
+def pair_of(record: Dict[str, Any]) -> str:
+    """``"<scenario>/<failure class>"`` of a failed record."""
+    return f"{record['scenario']}/{record['failure']['kind']}"
+
+
+def cluster_failures(records: Iterable[Dict[str, Any]]) -> Dict[int, str]:
     """``{episode index: cluster id}`` for every failed episode record."""
-    return {int(r["index"]): cluster_id(r, bins) for r in records if r.get("failure") and not r.get("error")}
+    return {int(r["index"]): cluster_id(r) for r in records if r.get("failure") and not r.get("error")}
 
 
-def group(records: Iterable[Dict[str, Any]], bins: int = REGION_BINS) -> Dict[str, List[Dict[str, Any]]]:
+def group(records: Iterable[Dict[str, Any]]) -> Dict[str, List[Dict[str, Any]]]:
     """Failed records by cluster id (each list in index order)."""
     groups: Dict[str, List[Dict[str, Any]]] = defaultdict(list)
     for record in sorted(records, key=lambda r: int(r["index"])):
         if record.get("failure") and not record.get("error"):
-            groups[cluster_id(record, bins)].append(record)
+            groups[cluster_id(record)].append(record)
     return dict(groups)
 
 

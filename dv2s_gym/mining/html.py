@@ -21,6 +21,7 @@ import os
 from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 
+from dv2s_gym.mining.report import breadth, rate_text
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, axis, escape, finite,
                                   fmt, fmt_interval, interval_mark, legend, row_label, svg, video_tag, x_scale)
 
@@ -141,8 +142,8 @@ def _banner(report: Mapping[str, Any]) -> str:
     episodes, avoidable = counts.get("episodes", 0), counts.get("avoidable_clusters", 0)
     css = "NONE" if not episodes else "FAIL" if avoidable else "PASS"
     head = (f"{counts.get('failures', 0)} failure(s) in {episodes} episode(s): {counts.get('clusters', 0)} distinct "
-            f"cluster(s), {avoidable} avoidable")
-    detail = [f"{counts.get('avoidable', 0)} avoidable, {counts.get('unavoidable', 0)} unavoidable, "
+            f"behaviour(s), {avoidable} avoidable")
+    detail = [breadth(counts),f"{counts.get('avoidable', 0)} avoidable, {counts.get('unavoidable', 0)} unavoidable, "
               f"{counts.get('avoidability_unknown', 0)} unknown failure(s)",
               f"converted {counts.get('converted', 0)}: kept {counts.get('kept', 0)}, merged {counts.get('merged', 0)}, "
               f"rejected {counts.get('rejected', 0)}"]
@@ -172,10 +173,12 @@ def _settings_table(report: Mapping[str, Any]) -> str:
 
 def _counts_table(report: Mapping[str, Any]) -> str:
     c = report.get("counts") or {}
-    head = ["episodes", "errors", "failures", "avoidable", "unavoidable", "unknown", "clusters", "avoidable clusters",
-            "converted", "kept", "merged", "rejected"]
-    keys = ["episodes", "errors", "failures", "avoidable", "unavoidable", "avoidability_unknown", "clusters",
-            "avoidable_clusters", "converted", "kept", "merged", "rejected"]
+    head = ["episodes", "errors", "failures", "distinct behaviours", "(scenario, failure type) pairs",
+            "scenarios with a failure", "collisions", "stalls", "avoidable", "unavoidable", "unknown",
+            "avoidable behaviours", "converted", "kept", "merged", "rejected"]
+    keys = ["episodes", "errors", "failures", "behaviours", "scenario_failure_types", "scenarios_failing", "collisions",
+            "stalls", "avoidable", "unavoidable", "avoidability_unknown", "avoidable_clusters", "converted", "kept",
+            "merged", "rejected"]
     table = _table(head, [[(escape(c.get(k, 0)), True) for k in keys]])
     by_type = c.get("failures_by_type") or {}
     seconds = c.get("conversion_seconds") or {}
@@ -208,12 +211,21 @@ def _scenario_table(report: Mapping[str, Any]) -> str:
     for name, s in (report.get("scenarios") or {}).items():
         types = ", ".join(f"{t} {n}" for t, n in (s.get("failures_by_type") or {}).items())
         rows.append([(escape(name), False), (escape(s.get("episodes")), True), (escape(s.get("failures")), True),
-                     (escape(fmt_interval(s.get("failure_rate"))), True), (escape(s.get("avoidable")), True),
+                     (escape(fmt_interval(s.get("failure_rate"))), True),
+                     (escape(_estimate(s.get("estimated_rate"))), True), (escape(s.get("avoidable")), True),
                      (escape(s.get("unavoidable")), True), (escape(types or "–"), False),
                      (escape(s.get("clusters")), True), (escape(s.get("converted")), True),
                      (escape(s.get("kept")), True)])
-    return _table(["scenario", "episodes", "failures", "failure rate [95%]", "avoidable", "unavoidable", "by type",
-                   "clusters", "converted", "kept"], rows)
+    return _table(["scenario", "episodes", "failures", "sampled failure rate [95%]",
+                   "estimated rate under its own distribution [95%] (ESS)", "avoidable", "unavoidable", "by type",
+                   "behaviours", "converted", "kept"], rows)
+
+
+def _estimate(estimate: Any) -> str:
+    if not isinstance(estimate, Mapping) or estimate.get("value") is None:
+        return "–"
+    return (f"{100 * estimate['value']:.1f}% [{100 * estimate['low']:.1f}, {100 * estimate['high']:.1f}] "
+            f"({fmt(estimate.get('ess'))})")
 
 
 def _region(params: Mapping[str, Any]) -> str:
@@ -226,13 +238,6 @@ def _region(params: Mapping[str, Any]) -> str:
             parts.append(f"{name} {low:.3g}" if low == high else f"{name} {low:.3g}–{high:.3g}")
         elif isinstance(region, Mapping):
             parts.append(f"{name} ∈ {{{', '.join(map(str, region.get('values') or []))}}}")
-    return "; ".join(parts) or "–"
-
-
-def _cell_text(cell: Mapping[str, Any]) -> str:
-    parts = [f"{name} {bounds['low']:.3g} to {bounds['high']:.3g}" for name, bounds in cell.items()
-             if isinstance(bounds, Mapping) and finite(bounds.get("low")) is not None
-             and finite(bounds.get("high")) is not None]
     return "; ".join(parts) or "–"
 
 
@@ -274,7 +279,7 @@ def _cluster_table(clusters: Sequence[Mapping[str, Any]]) -> str:
                      (f"#{escape(rep.get('index'))} seed {escape(rep.get('seed'))}{link}", False),
                      (_status(c), False), (escape(c.get("bank_entry") or "–"), False),
                      (escape(_reproduction(c)), True), (escape(fmt(c.get("e2e_sc"), 3)), True)])
-    return _table(["cluster (class/cell)", "scenario", "type", "failures", "avoidable", "parameter region",
+    return _table(["cluster (class/actor/ego)", "scenario", "type", "failures", "avoidable", "parameter region",
                    "representative",
                    "conversion", "bank entry", "reproduction", "E2E-SC"], rows)
 
@@ -315,6 +320,12 @@ def _script(base: Path, script: Any) -> str:
             f"<pre><code>{escape(text)}</code></pre></details>")
 
 
+def _behaviour_text(behaviour: Mapping[str, Any]) -> str:
+    actor = behaviour.get("actor") or "unknown"
+    other = "no other actor" if actor == "none" else f"{actor} {behaviour.get('actor_manoeuvre') or 'unknown'}"
+    return f"{other}; ego {behaviour.get('ego_manoeuvre') or 'unknown'}"
+
+
 def _cards(clusters: Sequence[Mapping[str, Any]], videos: _Videos, base: Path) -> str:
     if not clusters:
         return '<p class="muted">None.</p>'
@@ -327,7 +338,7 @@ def _cards(clusters: Sequence[Mapping[str, Any]], videos: _Videos, base: Path) -
                  + (f", {escape(rep.get('collision_type'))}" if rep.get("collision_type") else "")
                  + (f" with {escape(rep.get('with'))}" if rep.get("with") else ""),
                  f"parameters of its failures: {escape(_region(c.get('params') or {}))}",
-                 f"its grid cell: {escape(_cell_text(c.get('cell') or {}))}",
+                 f"behaviour: {escape(_behaviour_text(c.get('behaviour') or {}))}",
                  f"conversion: {_status(c)}" + (f", bank entry <code>{escape(c['bank_entry'])}</code>"
                                                 if c.get("bank_entry") else ""),
                  f"reproduction: {escape(_reproduction(c))}; E2E-SC {escape(fmt(c.get('e2e_sc'), 3))}"]
@@ -411,7 +422,7 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
         f"<h1>{escape(title)}</h1>",
         _banner(report),
         "<h2>Settings</h2>", _settings_table(report),
-        "<h2>Summary</h2>", _counts_table(report),
+        "<h2>Summary</h2>", _counts_table(report), f"<p>{escape(rate_text(report.get('failure_rate')))}</p>",
         "<h2>Samplers</h2>", _sampler_table(report),
         "<h2>Plots</h2>", figures,
         "<h2>Scenarios</h2>", _scenario_table(report),

@@ -46,7 +46,8 @@ from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence
 
 import numpy as np
 
-from dv2s_gym.mining.cluster import cluster_failures, cluster_id, group
+from dv2s_gym.mining.behaviour import backfill
+from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, group
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
 from dv2s_gym.mining.samplers import (
@@ -56,6 +57,7 @@ from dv2s_gym.mining.samplers import (
     is_adaptive,
     make_sampler,
     sampler_params,
+    scene_proposal,
 )
 from dv2s_gym.mining.tasks import MINE
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
@@ -96,7 +98,7 @@ class MineRun:
 
     @property
     def distinct_clusters(self) -> int:
-        """Distinct failure clusters."""
+        """Distinct failure clusters (behaviours, :mod:`dv2s_gym.mining.cluster`)."""
         return len(set(self.clusters.values()))
 
     def summary(self) -> str:
@@ -107,6 +109,7 @@ class MineRun:
         restarted = sum(1 for r in self.records if r.get("worker_restarts"))
         failures = self.failures
         kinds = Counter(r["failure"]["kind"] for r in failures)
+        kinds_by_type = Counter(r["failure"]["type"] for r in failures)
         avoidable_clusters = {self.clusters[int(r["index"])] for r in self.avoidable}
         status = Counter(c.get("status") for c in self.conversions)
         lines = [
@@ -116,7 +119,10 @@ class MineRun:
             f"{len(failures)} failures ({', '.join(f'{k} {n}' for k, n in kinds.most_common()) or 'none'}); "
             + (f"{len(self.avoidable)} avoidable by {self.settings['reference']}" if self.settings["reference"]
              else "avoidability not checked (no reference driver)"),
-            f"{self.distinct_clusters} distinct clusters, {len(avoidable_clusters)} with avoidable failures",
+            f"{self.distinct_clusters} distinct behaviours, {len(avoidable_clusters)} with avoidable failures; "
+            f"{len({(r['scenario'], r['failure']['kind']) for r in failures})} (scenario, failure type) pairs, "
+            f"{len({r['scenario'] for r in failures})} scenarios with a failure; "
+            f"{kinds_by_type.get('collision', 0)} collisions, {kinds_by_type.get('stall', 0)} stalls",
         ]
         if self.conversions:
             lines.append(f"converted {len(self.conversions)}: kept {status.get('kept', 0)}, merged "
@@ -145,7 +151,9 @@ def read_records(path: Path) -> List[Dict[str, Any]]:
                 continue
             raise MiningError(f"{path}, line {number + 1} is corrupt; remove that line to resume the run") from None
         records[int(record["index"])] = record
-    return [records[i] for i in sorted(records)]
+    ordered = [records[i] for i in sorted(records)]
+    backfill(ordered, path.parent)  # records from before the behaviour was kept: read it from their traces
+    return ordered
 
 
 @contextmanager
@@ -312,7 +320,7 @@ def _run_chunks(scene_sampler: SceneSampler, pool, space, settings: Dict[str, An
     at once (the same draws, without idle workers at the end of every chunk)."""
     done, sampler = recorder.done, settings["sampler"]
     mode = settings.get("feedback", "robustness")
-    seen = {cluster_id(done[i]) for i in range(scene_sampler.fed)
+    seen = {cell_id(done[i]) for i in range(scene_sampler.fed)
             if done[i].get("failure") and not done[i].get("error")}
     lookahead = 1 if is_adaptive(sampler) else LOOKAHEAD_CHUNKS
     chunk = scene_sampler.fed // batch
@@ -322,7 +330,7 @@ def _run_chunks(scene_sampler: SceneSampler, pool, space, settings: Dict[str, An
         first = chunk * batch
         indices = range(first, first + count * batch)
         pairs = [pair for drawn in draws for pair in drawn]
-        specs = {i: space.decode(point) for i, (point, _) in zip(indices, pairs)}
+        specs = {i: _with_proposal(space.decode(point), scene_sampler.proposal(i)) for i, (point, _) in zip(indices, pairs)}
         tasks = [_task(i, specs[i], settings["policy"], settings["reference"], settings, out) for i in indices
                  if i not in done and i < budget]
         by_id = {t["id"]: t for t in tasks}
@@ -358,7 +366,7 @@ def _run_window(window: WindowSchedule, pool, space, settings: Dict[str, Any], o
         for i in indices:
             if i >= budget or i in done:
                 continue
-            specs[i] = space.decode(window.pending[i][0])
+            specs[i] = _with_proposal(space.decode(window.pending[i][0]), window.sampler.proposal(i))
             task = _task(i, specs[i], policy, reference, settings, out)
             by_id[task["id"]] = task
             tasks.append(task)
@@ -392,23 +400,27 @@ def _run_window(window: WindowSchedule, pool, space, settings: Dict[str, Any], o
     more()  # the checkpoint of the finished run
 
 
-FEEDBACKS = ("robustness", "novelty")
+FEEDBACKS = ("robustness", "novelty", "scenario-novelty")
 """What the adaptive samplers are fed: ``robustness`` (each episode's robustness) or ``novelty`` (the same,
-except that a failure in a cluster an earlier episode already found is fed as an easy scene)."""
+except that a failure in a parameter cell an earlier episode already failed in with the same failure class,
+:func:`~dv2s_gym.mining.cluster.cell_id`, is fed as an easy scene). Novelty is over where in parameter space
+the sampler has found failures, not over the behaviour clusters the reports count. ``scenario-novelty``: only
+the first failure of each scenario is fed as a failure, later ones as easy scenes (the sampler keeps looking in
+scenarios that have not failed yet)."""
 _REPEAT = 9.0  # what a repeated failure is fed under "novelty": the robustness of a scene without a near miss
 
 
 def _feedback(record: Dict[str, Any], seen: set, mode: str) -> float:
-    """The value fed to the sampler for ``record``; ``seen`` holds the clusters of the episodes fed before it
-    (in index order) and is updated."""
+    """The value fed to the sampler for ``record``; ``seen`` holds the parameter cells (:func:`cell_id`) of the
+    failures fed before it (in index order) and is updated."""
     rho = record.get("rho")
     if rho is None or record.get("error"):
         return 1.0
     if record.get("failure"):
-        cluster = cluster_id(record)
+        cluster = cell_id(record) if mode != "scenario-novelty" else f"scenario:{record['scenario']}"
         repeat = cluster in seen
         seen.add(cluster)
-        if repeat and mode == "novelty":
+        if repeat and mode in ("novelty", "scenario-novelty"):
             return _REPEAT
     return float(rho)
 
@@ -588,6 +600,13 @@ def _task(index: int, spec, policy: str, reference: Optional[str], settings: Dic
     }
 
 
+def _with_proposal(spec, proposal: Optional[Dict[str, Any]]):
+    """``spec`` with the density its point was drawn with, over the scenario's own coordinates (importance
+    weights of the failure-rate estimate, :mod:`dv2s_gym.mining.rate`)."""
+    spec.proposal = scene_proposal(proposal, len(spec.point))
+    return spec
+
+
 def _complete(result: Dict[str, Any], task: Dict[str, Any], spec, sampler: str, out: Path) -> Dict[str, Any]:
     """The episode record from a worker's result (or a backend's error result for a crashed or hung worker)."""
     record = {
@@ -596,11 +615,14 @@ def _complete(result: Dict[str, Any], task: Dict[str, Any], spec, sampler: str, 
         "avoidable": None, "trace": None, "error": None,
     }
     record.update({k: v for k, v in result.items() if k in record and k not in ("index", "params")})
+    if result.get("behaviour") is not None:
+        record["behaviour"] = result["behaviour"]
     record.pop("role", None)
     if result.get("worker_restarts"):  # a worker crashed or hung on this episode, then a new one finished it
         record["worker_restarts"] = list(result["worker_restarts"])
     record["sampler"] = sampler
     record["point"] = spec.point
+    record["proposal"] = getattr(spec, "proposal", None)
     if record.get("trace"):
         record["trace"] = os.path.relpath(record["trace"], out)
     return record
@@ -657,10 +679,11 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
     path = run.out / "conversions.jsonl"
     existing = _read_jsonl(path)
     converted = {row["cluster"] for row in existing}
+    converted_episodes = {row.get("index") for row in existing}  # a run converted under older cluster ids
     candidates = []
     for cluster, members in sorted(group(run.records).items()):
         avoidable = [r for r in members if r.get("avoidable") is not False]
-        if cluster in converted or not avoidable:
+        if cluster in converted or not avoidable or any(r["index"] in converted_episodes for r in members):
             continue
         representative = min(avoidable, key=lambda r: (float(r.get("rho") or 0.0), int(r["index"])))
         candidates.append((-len(avoidable), cluster, representative))

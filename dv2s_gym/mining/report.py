@@ -8,10 +8,10 @@ self-contained ``report.html`` (:mod:`dv2s_gym.mining.html`). Nothing here impor
 or highway-env, so a report is rebuilt in well under a second from any run folder, also
 from one whose run was killed (a truncated last line of a ``.jsonl`` file is left out).
 
-JSON schema ``dv2s-mine-report``, version 2 (:data:`SCHEMA_VERSION`; a change to any key bumps it)::
+JSON schema ``dv2s-mine-report``, version 3 (:data:`SCHEMA_VERSION`; a change to any key bumps it)::
 
     {
-      "schema": "dv2s-mine-report", "schema_version": 2, "created": ISO-8601 (UTC), "dv2s_version",
+      "schema": "dv2s-mine-report", "schema_version": 3, "created": ISO-8601 (UTC), "dv2s_version",
       "run_dir": the run folder, "settings": settings.json as written by the miner,
       "counts": {
         "episodes": finished episodes without an error, "errors": episodes that ended in an error,
@@ -19,7 +19,10 @@ JSON schema ``dv2s-mine-report``, version 2 (:data:`SCHEMA_VERSION`; a change to
         "failures": episodes with a failure, "failures_by_type": {type: n},
         "avoidable": failures the reference driver avoided in the same scene (they count against the policy),
         "unavoidable": failures the reference driver had too, "avoidability_unknown": no reference outcome,
-        "clusters": distinct clusters, "avoidable_clusters": clusters with an avoidable failure,
+        "clusters": distinct clusters (behaviours, :mod:`dv2s_gym.mining.cluster`), "behaviours": the same count,
+        "scenario_failure_types": distinct (scenario, failure class) pairs, "scenarios_failing": scenarios with a
+        failure, "collisions", "stalls": failures of those types,
+        "avoidable_clusters": clusters with an avoidable failure,
         "unavoidable_clusters": clusters whose failures are all unavoidable,
         "converted": conversion records (one per converted cluster representative),
         "kept", "merged", "rejected": by conversion status, "rejected_by_stage": {stage: n},
@@ -27,6 +30,9 @@ JSON schema ``dv2s-mine-report``, version 2 (:data:`SCHEMA_VERSION`; a change to
         "conversion_stage_seconds": {stage: median seconds} (from the conversions' ``timings``)},
       "samplers": {name: Sampler},
       "scenarios": {name: Scenario},
+      "failure_rate": {"available", "reason", "overall": Estimate, "scenarios": {name: Estimate}}
+                                          the failure rate under the scenarios' own parameter distributions
+                                          (:mod:`dv2s_gym.mining.rate`),
       "clusters": [Cluster]               clusters with at least one failure not known to be unavoidable,
       "unavoidable_clusters": [Cluster]   clusters whose failures the reference driver had too,
       "failures": [Failure]               failures not known to be unavoidable (avoidable or unknown),
@@ -46,13 +52,17 @@ found, and the last episode). An adaptive sampler's episodes are not independent
 so its interval is a guide, not an exact guarantee.
 
 ``Scenario``: ``{"episodes", "errors", "failures", "avoidable", "unavoidable", "unknown",
-"failure_rate": {"value", "low", "high", "count"} (Wilson 95 %), "failures_by_type",
+"failure_rate": {"value", "low", "high", "count"} (Wilson 95 %, as sampled), "estimated_rate": Estimate | null
+(under the scenario's own parameter distribution), "failures_by_type", "failure_types",
 "clusters", "avoidable_clusters", "converted", "kept"}``.
 
-``Cluster``: ``{"id", "scenario", "type", "kind", "region", "size", "avoidable", "unavoidable",
+``Estimate``: ``{"value" (capped at 1), "raw" (the importance-sampling estimate itself), "low", "high" (95 %), "ess"
+(effective sample size), "n", "failures"}``.
+
+``Cluster``: ``{"id", "scenario", "type", "kind", "region" (the id after scenario and class), "behaviour":
+{"actor", "actor_manoeuvre", "ego_manoeuvre"}, "size", "avoidable", "unavoidable",
 "unknown", "samplers": {name: n}, "first_index", "params": {name: {"min", "max"} |
-{"values"}}`` (the parameter region its failures cover), ``"cell": {name: {"low", "high"}}``
-(the bounds of its grid cell for the continuous parameters, from ``settings["space"]``), ``"collision_types", "with_kinds",
+{"values"}}`` (the parameter region its failures cover), ``"collision_types", "with_kinds",
 "representative": Failure, "video": path relative to the run folder | null, "status":
 "kept" | "merged" | "rejected" | "not converted", "reason", "bank_entry", "merged_into",
 "reproduction": the conversion's record | null, "reproduction_rate", "e2e_sc", "description",
@@ -61,7 +71,7 @@ of its representative episode (``index``); its own ``cluster`` id is kept in the
 
 ``Failure``: ``{"index", "sampler", "scenario", "seed", "params", "type", "kind" (the type refined by the
 collision type, e.g. ``collision:rear_end``), "time", "with",
-"with_kind", "collision_type", "min_ttc", "rho", "avoidable", "reference", "cluster",
+"with_kind", "collision_type", "min_ttc", "rho", "avoidable", "reference", "cluster", "behaviour",
 "trace"}``; replay one exactly with ``dv2s replay RUN/TRACE``.
 """
 
@@ -77,16 +87,18 @@ from pathlib import Path
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.regress.stats import wilson_interval
+from dv2s_gym.mining.behaviour import behaviour_of
 from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.rate import rate_estimates
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 
 __all__ = [
     "SCHEMA", "SCHEMA_VERSION", "FAILURE_ORDER", "MiningReportError", "read_jsonl", "read_run",
-    "build_report", "build_report_from_records", "format_summary", "markdown", "write_reports",
+    "build_report", "build_report_from_records", "format_summary", "markdown", "write_reports", "breadth", "rate_text",
 ]
 
 SCHEMA = "dv2s-mine-report"
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 CONFIDENCE = 0.95
 FAILURE_ORDER = ("collision", "off_road", "low_ttc", "stall")
 """Failure types in the order the report lists them (other types follow, sorted)."""
@@ -171,7 +183,11 @@ def read_run(run_dir: PathLike) -> Tuple[Dict[str, Any], List[Dict[str, Any]], L
         latest[str(record.get("cluster"))] = record
     skipped = {name: n for name, n in (("episodes.jsonl", skipped_episodes),
                                        ("conversions.jsonl", skipped_conversions)) if n}
-    return settings, [by_index[i] for i in sorted(by_index)], list(latest.values()), skipped
+    from dv2s_gym.mining.behaviour import backfill
+
+    ordered = [by_index[i] for i in sorted(by_index)]
+    backfill(ordered, run_dir)  # records from before the behaviour was kept: read it from their traces
+    return settings, ordered, list(latest.values()), skipped
 
 
 # ------------------------------------------------------------------------------- helpers
@@ -242,31 +258,6 @@ def _param_region(members: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
     return region
 
 
-def _grid_cell(region: str, ranges: Any) -> Dict[str, Dict[str, float]]:
-    """The bounds of a cluster's grid cell (``"r2.0.1"``) in parameter units, for its continuous parameters.
-
-    ``ranges`` is the scenario's entry of ``settings["space"]`` (``{name: {"kind", "low", "high"}}``,
-    sorted by name, one cell index per parameter); anything else gives ``{}``.
-    """
-    from dv2s_gym.mining.cluster import REGION_BINS
-
-    if not isinstance(ranges, Mapping) or not region.startswith("r"):
-        return {}
-    try:
-        cells = [int(c) for c in region[1:].split(".")] if len(region) > 1 else []
-    except ValueError:
-        return {}
-    if len(cells) != len(ranges):
-        return {}
-    bounds: Dict[str, Dict[str, float]] = {}
-    for (name, spec), cell in zip(sorted(ranges.items()), cells):
-        if isinstance(spec, Mapping) and spec.get("kind") == "continuous":
-            low, high = float(spec["low"]), float(spec["high"])
-            step = (high - low) / REGION_BINS
-            bounds[str(name)] = {"low": low + cell * step, "high": low + (cell + 1) * step}
-    return bounds
-
-
 def _failure_entry(record: Mapping[str, Any], cluster: Optional[str], settings: Mapping[str, Any]) -> Dict[str, Any]:
     failure = record.get("failure") or {}
     return {
@@ -286,6 +277,7 @@ def _failure_entry(record: Mapping[str, Any], cluster: Optional[str], settings: 
         "avoidable": record.get("avoidable"),
         "reference": record.get("reference"),
         "cluster": cluster,
+        "behaviour": behaviour_of(record),
         "trace": record.get("trace"),
     }
 
@@ -374,6 +366,7 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
         conversion = primary(cluster_id)
         representative = _representative(members, conversion)
         parts = cluster_id.split("/", 2)
+        behaviour = behaviour_of(representative)
         reproduction = (conversion or {}).get("reproduction")
         cluster_entries.append({
             "id": cluster_id,
@@ -381,6 +374,7 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
             "type": representative["type"],
             "kind": parts[1] if len(parts) == 3 else representative["kind"],
             "region": parts[2] if len(parts) == 3 else cluster_id,
+            "behaviour": behaviour,
             "size": len(members),
             "avoidable": sum(m["avoidable"] is True for m in members),
             "unavoidable": sum(m["avoidable"] is False for m in members),
@@ -388,8 +382,6 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
             "samplers": dict(sorted(Counter(m["sampler"] for m in members).items())),
             "first_index": min(m["index"] for m in members),
             "params": _param_region(members),
-            "cell": _grid_cell(parts[2] if len(parts) == 3 else "", (settings.get("space") or {}).get(
-                representative["scenario"])),
             "collision_types": dict(sorted(Counter(str(m["collision_type"]) for m in members
                                                    if m["collision_type"]).items())),
             "with_kinds": dict(sorted(Counter(str(m["with_kind"]) for m in members if m["with_kind"]).items())),
@@ -430,6 +422,11 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
         "unavoidable": sum(f["avoidable"] is False for f in failures),
         "avoidability_unknown": sum(f["avoidable"] is None for f in failures),
         "clusters": len(cluster_entries),
+        "behaviours": len(cluster_entries),
+        "scenario_failure_types": len({(str(f["scenario"]), str(f["kind"])) for f in failures}),
+        "scenarios_failing": len({str(f["scenario"]) for f in failures}),
+        "collisions": sum(f["type"] == "collision" for f in failures),
+        "stalls": sum(f["type"] == "stall" for f in failures),
         "avoidable_clusters": sum(c["avoidable"] > 0 for c in cluster_entries),
         "unavoidable_clusters": len(unavoidable_ids),
         "converted": len(conversions),
@@ -480,6 +477,7 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
             "discovery": discovery,
         }
 
+    rate = rate_estimates(settings, ok)
     # per scenario
     scenario_names = list(dict.fromkeys([*(settings.get("scenarios") or []),
                                          *sorted({str(r.get("scenario")) for r in episodes})]))
@@ -496,7 +494,9 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
             "unavoidable": sum(f["avoidable"] is False for f in found),
             "unknown": sum(f["avoidable"] is None for f in found),
             "failure_rate": _rate(len(found), len(ran)),
+            "estimated_rate": (rate.get("scenarios") or {}).get(name),
             "failures_by_type": _by_type(found),
+            "failure_types": len({str(f["kind"]) for f in found}),
             "clusters": len(in_clusters),
             "avoidable_clusters": sum(c["avoidable"] > 0 for c in in_clusters),
             "converted": sum(c["conversion"] is not None for c in in_clusters),
@@ -513,6 +513,7 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
         "counts": counts,
         "samplers": samplers,
         "scenarios": scenarios,
+        "failure_rate": rate,
         "clusters": [c for c in cluster_entries if c["id"] not in unavoidable_ids],
         "unavoidable_clusters": [c for c in cluster_entries if c["id"] in unavoidable_ids],
         "failures": [f for f in failures if f["avoidable"] is not False],
@@ -584,13 +585,36 @@ def _cell(value: Any) -> str:
     return str("-" if value is None else value).replace("\n", " ").replace("|", "\\|")
 
 
+def breadth(counts: Mapping[str, Any]) -> str:
+    """How broad the failures found are: failures, distinct behaviours, (scenario, failure type) pairs, scenarios
+    with a failure, and stalls apart from collisions."""
+    return (f"{counts['failures']} failure(s): {counts.get('behaviours', counts['clusters'])} distinct behaviour(s), "
+            f"{counts.get('scenario_failure_types', 0)} (scenario, failure type) pair(s), "
+            f"{counts.get('scenarios_failing', 0)} scenario(s) with a failure; "
+            f"{counts.get('collisions', 0)} collision(s), {counts.get('stalls', 0)} stall(s)")
+
+
+def rate_text(rate: Optional[Mapping[str, Any]]) -> str:
+    """The estimated failure rate under the scenarios' own parameter distributions, as one sentence."""
+    if not rate or not rate.get("available"):
+        reason = (rate or {}).get("reason") or "no episodes"
+        return f"Failure rate under the scenarios' own parameter distributions: not estimated ({reason})."
+    overall = rate.get("overall") or {}
+    return ("Failure rate under the scenarios' own parameter distributions (importance-weighted, each scenario "
+            f"equally likely): {_pct(overall)}, effective sample size {_num(overall.get('ess'))} of "
+            f"{overall.get('n', 0)} episodes."
+            + (" The sampler almost stopped drawing some regions, so failures there are missing from the estimate: "
+               "it can be far too low; a random-sampler run estimates it without that risk." if rate.get("collapsed")
+               else ""))
+
+
 def headline(report: Mapping[str, Any]) -> str:
     """One line: what was mined and what came of it."""
     counts, settings = report["counts"], report["settings"]
     return (f"policy `{settings.get('policy')}`, sampler {settings.get('sampler')}, seed {settings.get('seed')}: "
             f"{counts['failures']} failure(s) in {counts['episodes']} episode(s) "
             f"({counts['avoidable']} avoidable, {counts['unavoidable']} unavoidable, "
-            f"{counts['avoidability_unknown']} unknown), {counts['clusters']} distinct cluster(s) "
+            f"{counts['avoidability_unknown']} unknown), {counts['clusters']} distinct behaviour(s) "
             f"({counts['avoidable_clusters']} avoidable); converted {counts['converted']}: kept {counts['kept']}, "
             f"merged {counts['merged']}, rejected {counts['rejected']}"
             + (f"; {counts['errors']} error(s)" if counts["errors"] else ""))
@@ -605,7 +629,7 @@ def format_summary(report: Mapping[str, Any]) -> str:
                      _per_100_text(entry["avoidable_failures_per_100"]), str(entry["clusters"]),
                      _num(entry["clusters_per_100"])))
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
-    lines = [headline(report).replace("`", "")]
+    lines = [headline(report).replace("`", ""), breadth(report["counts"]), rate_text(report.get("failure_rate"))]
     lines += ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
     if report["rejected"]:
         lines.append("rejected: " + "; ".join(f"{r['cluster']} ({r['reason']})" for r in report["rejected"][:3])
@@ -637,7 +661,8 @@ def _cluster_rows(clusters: Sequence[Mapping[str, Any]]) -> List[str]:
 def markdown(report: Mapping[str, Any]) -> str:
     """The report as Markdown: summary, per sampler, per scenario, clusters, conversions, unavoidable, errors."""
     counts = report["counts"]
-    lines = [f"## dv2s mine: {counts['avoidable_clusters']} avoidable failure cluster(s)", "", headline(report), ""]
+    lines = [f"## dv2s mine: {counts['avoidable_clusters']} avoidable failure cluster(s)", "", headline(report), "",
+             breadth(counts) + ".", "", rate_text(report.get("failure_rate")), ""]
     lines += ["| failures | avoidable | unavoidable | unknown | clusters | avoidable clusters | converted | kept | "
               "merged | rejected | errors |", "|" + "---:|" * 11,
               f"| {counts['failures']} | {counts['avoidable']} | {counts['unavoidable']} | "
@@ -664,10 +689,16 @@ def markdown(report: Mapping[str, Any]) -> str:
                      f"{_num(s['clusters_per_100'])} | {s['avoidable_clusters']} | "
                      f"{_cell(s['episodes_to_first_failure'])} |")
     lines += ["", "### Per scenario", "",
-              "| scenario | episodes | failures | failure rate [95% CI] | avoidable | unavoidable | clusters | "
-              "converted | kept |", "|---|---:|---:|---|---:|---:|---:|---:|---:|"]
+              "Sampled failure rate: failures per episode as the sampler drew them; estimated: under the scenario's "
+              "own parameter distribution (importance-weighted; effective sample size in brackets).", "",
+              "| scenario | episodes | failures | sampled failure rate [95% CI] | estimated rate [95% CI] (ESS) | "
+              "failure types | avoidable | unavoidable | behaviours | converted | kept |",
+              "|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|"]
     for name, s in report["scenarios"].items():
+        estimate = s.get("estimated_rate")
+        estimated = f"{_pct(estimate)} ({_num((estimate or {}).get('ess'))})" if estimate else "-"
         lines.append(f"| `{_cell(name)}` | {s['episodes']} | {s['failures']} | {_pct(s['failure_rate'])} | "
+                     f"{estimated} | {s.get('failure_types', '-')} | "
                      f"{s['avoidable']} | {s['unavoidable']} | {s['clusters']} | {s['converted']} | {s['kept']} |")
     lines += ["", f"### Failure clusters ({len(report['clusters'])})", ""]
     lines += _cluster_rows(report["clusters"]) if report["clusters"] else ["None."]

@@ -19,8 +19,10 @@ Samplers (``name``: VerifAI's):
   sampler picks the scenario, and each scenario has its own VerifAI Halton sampler over its own
   parameters; it learns by default from ``novelty`` feedback (a repeat of a failure cluster
   already found counts as an easy scene), and by default (``avoid=81``) draws a scenario's Halton
-  points past the cells of the cluster grid where that scenario already failed. It finds the most
-  distinct failure clusters of these samplers (bench/RESULTS.md, ``python -m bench.bench_mine --part samplers``).
+  points past the cells of the parameter grid (:func:`~dv2s_gym.mining.cluster.region_of`) where that scenario
+  already failed. It finds the most of those grid cells of these samplers (``python -m bench.bench_mine --part
+  samplers``); on the behaviour clusters the reports count it beats random sampling only for policies that fail
+  rarely (``--part breadth``, bench/RESULTS.md).
 
 The adaptive samplers (``cross-entropy``, ``bandit``) take VerifAI's parameters as
 ``options`` (:data:`SAMPLER_OPTIONS`): ``alpha`` (how much one failure moves the
@@ -49,7 +51,7 @@ import numpy as np
 
 from dv2s_gym.mining.errors import MiningError
 
-__all__ = ["SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "SceneSampler", "default_feedback", "make_sampler", "sampler_params", "is_adaptive"]
+__all__ = ["proposal_density", "scene_proposal", "SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "SceneSampler", "default_feedback", "make_sampler", "sampler_params", "is_adaptive"]
 
 
 def _factories() -> Dict[str, Callable]:
@@ -187,6 +189,10 @@ class SceneSampler:
         self._np_state = np.random.RandomState(seed % (2**32)).get_state()
         self.fed = 0
         """How many outcomes have been fed back."""
+        self.drawn = 0
+        """How many points have been drawn (the next draw's index in the run)."""
+        self.proposals: Dict[int, Optional[Dict[str, Any]]] = {}
+        """Draw index -> the proposal density the point was drawn from (:meth:`proposal`)."""
 
     def _swap(self, fn: Callable, *args):
         saved_py, saved_np = random.getstate(), np.random.get_state()
@@ -201,7 +207,25 @@ class SceneSampler:
 
     def draw(self, count: int) -> List[Tuple[Any, Any]]:
         """The next ``count`` ``(point, info)`` pairs; ``info`` goes back with :meth:`feed`."""
-        return [self._swap(self._sampler.getSample) for _ in range(count)]
+        pairs = []
+        if not hasattr(self, "proposals"):  # a checkpoint from before proposals were kept: its draw count is unknown
+            self.proposals, self.drawn = {}, None
+        for _ in range(count):
+            point, info = self._swap(self._sampler.getSample)
+            if self.drawn is not None:
+                self.proposals[self.drawn] = proposal_density(self.name, self._sampler, point)
+                self.drawn += 1
+            pairs.append((point, info))
+        return pairs
+
+    def proposal(self, index: int) -> Optional[Dict[str, Any]]:
+        """The density the point of draw ``index`` was drawn from, at the moment it was drawn:
+        ``{"scenario": probability of its scenario, "coords": [density of each coordinate of u], "floor": the
+        smallest scenario probability times the scenario count, "floors": [per coordinate, its smallest bucket
+        density]}`` (the density of the scenario's own parameters is the product of its first coordinates; a
+        floor far below 1 says the sampler had almost stopped drawing some region), or ``None`` when the sampler
+        has no density to tell (:func:`proposal_density`)."""
+        return getattr(self, "proposals", {}).get(int(index))
 
     def feed(self, point: Any, info: Any, rho: float) -> None:
         """Tell the sampler the robustness of a drawn point (adaptive samplers learn from it)."""
@@ -226,6 +250,86 @@ class SceneSampler:
             raise MiningError("the sampler checkpoint holds no sampler; delete sampler.pkl to rebuild it from "
                               "episodes.jsonl")
         return sampler
+
+
+def proposal_density(name: str, sampler: Any, point: Any) -> Optional[Dict[str, Any]]:
+    """The density ``sampler`` (VerifAI's, called ``name``) draws ``point`` with right now, for importance weights.
+
+    ``random`` and ``halton`` draw the scenario uniformly and the unit box uniformly (Halton's sequence is
+    a quasi-random uniform cover: density 1); ``cross-entropy`` draws the scenario from its discrete
+    distribution and each coordinate from its bucket distribution (density ``dist[bucket] * buckets``);
+    ``split`` with the cross-entropy chooser and no cell avoidance (``avoid=0``) draws the scenario from the
+    chooser's distribution and the parameters from its own sampler (uniform for ``halton``/``random``,
+    bucketed for ``cross-entropy``). ``None`` when there is no density to tell: ``bandit`` and the ``ucb``
+    chooser pick deterministically, cell avoidance never draws some cells, a warm-up round follows a fixed order.
+    """
+    scenario = int(round(float(_first(point.scenario))))
+    u = [float(x) for x in point.u]
+    if name in ("random", "halton"):
+        count = _scenario_count(sampler)
+        return {"scenario": 1.0 / count, "coords": [1.0] * len(u), "floor": 1.0, "floors": [1.0] * len(u)} if count else None
+    if name == "cross-entropy":
+        domain = getattr(sampler, "domainSampler", None)
+        cont, disc = getattr(domain, "cont_sampler", None), getattr(domain, "disc_sampler", None)
+        if cont is None or disc is None:
+            return None
+        return {"scenario": float(disc.dist[0][scenario]), "coords": _bucket_densities(cont, u),
+                "floor": float(min(disc.dist[0])) * len(disc.dist[0]), "floors": _floors(cont, len(u))}
+    if name == SPLIT:
+        if (getattr(sampler, "chooser_kind", None) != "cross-entropy" or getattr(sampler, "avoid", 0)
+                or sampler.drawn <= len(sampler.warmup_order)):
+            return None
+        dimension = sampler.dimensions[scenario]
+        own = sampler.param_samplers[scenario]
+        uniform = sampler.params_kind in ("halton", "random")
+        coords = ([1.0] * dimension if uniform else
+                  _bucket_densities(own, u[:dimension]) if sampler.params_kind == "cross-entropy" else None)
+        if coords is None:
+            return None
+        floors = [1.0] * dimension if uniform else _floors(own, dimension)
+        dist = sampler.chooser.dist[0]
+        return {"scenario": float(dist[scenario]), "coords": coords + [1.0] * (len(u) - dimension),
+                "floor": float(min(dist)) * len(dist), "floors": floors + [1.0] * (len(u) - dimension)}
+    return None
+
+
+def _first(value):
+    return value[0] if isinstance(value, (tuple, list)) else value
+
+
+def _scenario_count(sampler: Any) -> int:
+    try:
+        (low, high), = sampler.space.featureNamed["scenario"].domain.intervals
+        return int(high) - int(low) + 1
+    except (AttributeError, KeyError, TypeError, ValueError):
+        return 0
+
+
+def scene_proposal(proposal: Optional[Dict[str, Any]], used: int) -> Optional[Dict[str, float]]:
+    """What an episode record keeps of a draw's :meth:`SceneSampler.proposal` for a scenario with ``used``
+    parameters: ``{"scenario", "params" (the density of its own coordinates), "floor" (the smallest share, relative
+    to uniform, of any scenario or bucket of its coordinates)}``; ``None`` stays ``None``."""
+    if proposal is None:
+        return None
+    density = 1.0
+    for value in proposal["coords"][:used]:
+        density *= float(value)
+    floor = min([float(proposal.get("floor", 1.0))] + [float(f) for f in proposal.get("floors", [])[:used]])
+    return {"scenario": float(proposal["scenario"]), "params": density, "floor": floor}
+
+
+def _floors(cont: Any, count: int) -> List[float]:
+    """Per coordinate: the smallest density any of its buckets has (1 when uniform)."""
+    return [float(min(cont.dist[i])) * int(cont.buckets[i]) for i in range(count)]
+
+
+def _bucket_densities(cont: Any, u: List[float]) -> List[float]:
+    densities = []
+    for i, x in enumerate(u):
+        buckets = int(cont.buckets[i])
+        bucket = min(buckets - 1, max(0, int(x * buckets)))
+        densities.append(float(cont.dist[i][bucket]) * buckets)
+    return densities
 
 
 def make_sampler(name: str, space: Any, seed: int, options: Optional[Dict[str, Any]] = None) -> SceneSampler:

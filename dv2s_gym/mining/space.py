@@ -34,6 +34,9 @@ class SceneSpec:
     params: Dict[str, Any]
     point: List[float] = field(default_factory=list)
     """The unit-box coordinates the parameters came from (one per parameter, sorted by name)."""
+    proposal: Optional[Dict[str, float]] = None
+    """The density the sampler drew this scene with: ``{"scenario": probability of the scenario, "params":
+    density of ``point`` in the scenario's unit box}`` (``None``: unknown; see :mod:`dv2s_gym.mining.rate`)."""
 
 
 class SceneSpace:

@@ -13,7 +13,8 @@ A mining task is a plain dict (shipped to a pool of :mod:`dv2s_gym.workers`, loc
   (``<index>.json.gz``; the Ray pool swaps in a local folder and ships the file back);
 - ``ttc_threshold``, ``stall_seconds``: monitor settings.
 
-The result is the episode record of the run's ``episodes.jsonl`` without the sampler
+The result is the episode record (a failed episode's ``behaviour``: who else was involved and what
+each side was doing, :mod:`dv2s_gym.mining.behaviour`) of the run's ``episodes.jsonl`` without the sampler
 fields (the miner adds those). The policy's episode and, when it failed, the reference
 driver's episode on the same scene run here, so a record is complete when it arrives.
 """
@@ -24,6 +25,7 @@ import os
 import traceback
 from typing import Any, Dict, Mapping, Optional
 
+from dv2s_gym.mining.behaviour import extract_behaviour
 from dv2s_gym.mining.monitors import FAILURE_TYPES, detect_failure, robustness
 from dv2s_gym.workers.tasks import register
 
@@ -81,6 +83,7 @@ def run_mine_task(task: Dict[str, Any]) -> Dict[str, Any]:
         record["failure"] = failure.to_json() if failure else None
         record["rho"] = robustness(result, failure, monitor["ttc_threshold"])
         if failure is not None:
+            record["behaviour"] = extract_behaviour(trace, record["failure"])
             if task.get("trace_dir"):
                 path = os.path.join(task["trace_dir"], trace_name(int(task["index"])))
                 trace.save(path)

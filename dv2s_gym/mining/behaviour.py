@@ -1,0 +1,187 @@
+"""What happened in a failure: who was involved and what each side was doing just before it.
+
+:func:`extract_behaviour` reads an episode's trace (:class:`~envs.trace.EpisodeTrace`: every actor's
+``[x, y, heading, speed]`` after every step, and each actor's kind) and its
+:class:`~dv2s_gym.mining.monitors.Failure`, and returns a small dict the miner keeps in the episode
+record (``record["behaviour"]``)::
+
+    {"actor": kind of the other actor involved ("car", "truck", "pedestrian", ...) or "none",
+     "actor_manoeuvre": "crossing" | "oncoming" | "stopped" | "cut_in" | "lane_change" | "braking"
+                        | "steady" | "none",
+     "ego_manoeuvre": "stopped" | "lane_change" | "braking" | "keeping_lane"}
+
+The manoeuvres are read from the :data:`WINDOW_SECONDS` before the failure step:
+
+- the other actor is ``crossing`` when its heading at the failure differs from the ego's by 45 to 135
+  degrees, ``oncoming`` beyond 135; else ``stopped`` (below ``STANDING_SPEED`` at the failure),
+  ``cut_in`` (it moved sideways by :data:`LATERAL_METRES` or more and ended up ahead of the ego, closer to
+  its line), ``lane_change`` (moved sideways otherwise), ``braking`` (lost :data:`BRAKING_DROP` m/s or more)
+  or ``steady``;
+- the ego is ``stopped``, ``lane_change``, ``braking`` (same thresholds) or ``keeping_lane``.
+
+Sideways motion is measured across the heading at the start of the window, so on a tight curve a
+long window can read as a lane change; the bank's roads are mostly straight or gently curved over
+two seconds. A failure without another actor (``off_road``, ``stall``) has actor ``"none"``.
+
+Records written before the behaviour existed have none; :func:`backfill` fills it from the failed
+episode's trace in the run folder (every failed episode's trace is kept), so old runs cluster the
+same way as new ones.
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import math
+import zlib
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any, Dict, Iterable, List, Mapping, Optional
+
+__all__ = ["extract_behaviour", "behaviour_of", "backfill", "UNKNOWN", "WINDOW_SECONDS", "LATERAL_METRES",
+           "BRAKING_DROP", "ACTOR_MANOEUVRES", "EGO_MANOEUVRES"]
+
+WINDOW_SECONDS = 2.0
+"""How far back from the failure step the manoeuvres are read."""
+LATERAL_METRES = 2.0
+"""Sideways motion (across the heading at the window's start) that counts as a lane change (half a lane)."""
+BRAKING_DROP = 2.0
+"""Speed lost over the window [m/s] that counts as braking."""
+STANDING = 0.5
+"""m/s under which an actor stands (``envs.safety_metrics.STANDING_SPEED``)."""
+ACTOR_MANOEUVRES = ("crossing", "oncoming", "stopped", "cut_in", "lane_change", "braking", "steady", "none")
+EGO_MANOEUVRES = ("stopped", "lane_change", "braking", "keeping_lane")
+UNKNOWN = {"actor": "unknown", "actor_manoeuvre": "unknown", "ego_manoeuvre": "unknown"}
+"""The behaviour of a failure whose record and trace cannot tell it."""
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def _lateral(start: List[float], end: List[float]) -> float:
+    """Signed sideways motion from ``start`` to ``end`` across ``start``'s heading."""
+    dx, dy = end[0] - start[0], end[1] - start[1]
+    return -dx * math.sin(start[2]) + dy * math.cos(start[2])
+
+
+def _window(states: List[Dict[str, List[float]]], name: str, step: int, steps: int) -> List[List[float]]:
+    return [s[name] for s in states[max(0, step - steps): step + 1] if name in s]
+
+
+def _ego_manoeuvre(path: List[List[float]]) -> str:
+    if not path:
+        return "unknown"
+    if path[-1][3] < STANDING:
+        return "stopped"
+    if abs(_lateral(path[0], path[-1])) >= LATERAL_METRES:
+        return "lane_change"
+    if path[0][3] - path[-1][3] >= BRAKING_DROP:
+        return "braking"
+    return "keeping_lane"
+
+
+def _actor_manoeuvre(path: List[List[float]], ego_path: List[List[float]]) -> str:
+    if not path:
+        return "unknown"
+    end = path[-1]
+    if ego_path:
+        ego = ego_path[-1]
+        relative = abs(_wrap(end[2] - ego[2]))
+        if relative > 3 * math.pi / 4:
+            return "oncoming"
+        if relative > math.pi / 4:
+            return "crossing"
+    if end[3] < STANDING:
+        return "stopped"
+    if abs(_lateral(path[0], end)) >= LATERAL_METRES:
+        if ego_path:
+            ego = ego_path[-1]
+            dx, dy = end[0] - ego[0], end[1] - ego[1]
+            ahead = dx * math.cos(ego[2]) + dy * math.sin(ego[2])
+            offset_end = abs(-dx * math.sin(ego[2]) + dy * math.cos(ego[2]))
+            sx, sy = path[0][0] - ego[0], path[0][1] - ego[1]
+            offset_start = abs(-sx * math.sin(ego[2]) + sy * math.cos(ego[2]))
+            if ahead > 0 and offset_end < offset_start:
+                return "cut_in"
+        return "lane_change"
+    if path[0][3] - end[3] >= BRAKING_DROP:
+        return "braking"
+    return "steady"
+
+
+def extract_behaviour(trace: Any, failure: Optional[Mapping[str, Any]]) -> Optional[Dict[str, str]]:
+    """The behaviour dict (module docstring) of ``failure`` (a ``Failure.to_json()`` dict) in ``trace``;
+    ``None`` without a failure."""
+    if not failure:
+        return None
+    states = list(getattr(trace, "states", None) or [])
+    if not states:
+        return dict(UNKNOWN)
+    frequency = float((getattr(trace, "config", None) or {}).get("policy_frequency", 5))
+    steps = max(1, int(round(WINDOW_SECONDS * frequency)))
+    step = failure.get("step")
+    step = len(states) - 1 if not isinstance(step, int) else max(0, min(len(states) - 1, step))
+    ego_path = _window(states, "ego", step, steps)
+    other = failure.get("with")
+    if other and other != "ego":
+        kinds = getattr(trace, "kinds", None) or {}
+        actor = str(failure.get("with_kind") or kinds.get(other) or "car")
+        manoeuvre = _actor_manoeuvre(_window(states, other, step, steps), ego_path)
+    else:
+        actor, manoeuvre = "none", "none"
+    return {"actor": actor, "actor_manoeuvre": manoeuvre, "ego_manoeuvre": _ego_manoeuvre(ego_path)}
+
+
+def behaviour_of(record: Mapping[str, Any]) -> Dict[str, str]:
+    """The behaviour of a failed episode record (:data:`UNKNOWN` parts where it has none)."""
+    found = record.get("behaviour")
+    if not isinstance(found, Mapping):
+        return dict(UNKNOWN)
+    return {key: str(found.get(key) or UNKNOWN[key]) for key in UNKNOWN}
+
+
+_MAX_TRACE_BYTES = 64 * 2**20
+
+
+def _read_trace(path: Path) -> Optional[SimpleNamespace]:
+    """The states, kinds and config of a saved trace (read without the env package), or ``None`` when the file
+    is missing or damaged."""
+    try:
+        with open(path, "rb") as handle:
+            raw = handle.read(_MAX_TRACE_BYTES + 1)
+            if raw[:2] == b"\x1f\x8b":
+                handle.seek(0)
+                with gzip.GzipFile(fileobj=handle) as unzipped:
+                    raw = unzipped.read(_MAX_TRACE_BYTES + 1)
+        if len(raw) > _MAX_TRACE_BYTES:
+            return None
+        data = json.loads(raw.decode("utf-8"))
+    except (OSError, EOFError, zlib.error, UnicodeDecodeError, ValueError):
+        return None
+    if not isinstance(data, dict) or not isinstance(data.get("states"), list):
+        return None
+    return SimpleNamespace(states=data["states"], kinds=data.get("kinds") or {}, config=data.get("config") or {})
+
+
+def backfill(records: Iterable[Dict[str, Any]], run_dir: Optional[Path]) -> int:
+    """Give every failed record without a behaviour the one its trace in ``run_dir`` shows (in place);
+    how many were filled. A record whose trace is missing or unreadable keeps none (it clusters as
+    ``unknown``)."""
+    if run_dir is None:
+        return 0
+    filled = 0
+    for record in records:
+        if not record.get("failure") or record.get("error") or isinstance(record.get("behaviour"), Mapping):
+            continue
+        trace_path = record.get("trace")
+        if not trace_path:
+            continue
+        path = Path(trace_path)
+        path = path if path.is_absolute() else Path(run_dir) / path
+        trace = _read_trace(path)
+        if trace is None:
+            continue
+        record["behaviour"] = extract_behaviour(trace, record["failure"])
+        filled += 1
+    return filled

@@ -1,0 +1,135 @@
+"""How often the policy fails under each scenario's own parameter distribution, from a mining run.
+
+A mining run does not draw scenes the way they occur: an adaptive sampler draws more where failures
+were found. Each episode record keeps the density its scene was drawn with (``record["proposal"]``:
+``scenario``, the probability of its scenario; ``params``, the density of its parameters in the
+scenario's unit box; ``floor``, the smallest share the sampler gave any scenario or parameter bucket
+at that draw, relative to uniform; see :func:`dv2s_gym.mining.samplers.proposal_density`). A scenario's
+own distribution is uniform over that unit box (each parameter's range or set of values, as the scenario
+declares it), so an episode's importance weight in its scenario is ``1 / params`` and, over the whole
+run, with every mined scenario equally likely, ``(1 / S) / (scenario * params)``.
+
+:func:`weighted_rate` is the plain importance-sampling estimate ``mean(w * y)`` (``y`` = 1 for a failed
+episode): unbiased also when the proposal adapts to earlier outcomes, as long as it gives every region
+some chance. Its 95 % interval is Wilson's at the estimate's effective sample size
+``p (1 - p) / Var(estimate)`` (for equal weights: the number of episodes, and the usual Wilson interval);
+without a failure, at Kish's effective sample size of the weights. A per-scenario estimate averages
+``y / params`` over the scenario's episodes.
+
+An adaptive sampler that collapses (VerifAI's cross-entropy sampler moves almost all probability to the
+buckets where failures were found, also along parameters that do not matter) stops drawing some regions;
+the estimate then misses their failures and can be far too low. ``collapsed`` says when some draw gave a
+region under :data:`COLLAPSE_FLOOR` of its uniform share. A ``random`` or ``halton`` run is uniform.
+Records without a proposal density (a sampler that has none, or a run written before densities were kept;
+``random`` and ``halton`` runs need none) make the estimate unavailable.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence
+
+from dv2s_gym.regress.stats import wilson_interval
+
+__all__ = ["failure_rate", "weighted_rate", "rate_estimates", "UNIFORM_SAMPLERS", "COLLAPSE_FLOOR"]
+
+COLLAPSE_FLOOR = 0.01
+"""A draw whose proposal gave some scenario or parameter bucket under this share of its uniform share marks the
+estimate ``collapsed``."""
+
+UNIFORM_SAMPLERS = ("random", "halton")
+"""Samplers whose scenes are uniform over the scenarios and their unit boxes (weight 1 without a record of it)."""
+
+
+def weighted_rate(outcomes: Sequence[float], weights: Sequence[float], confidence: float = 0.95) -> Dict[str, Any]:
+    """Plain importance-sampling estimate ``mean(w * y)`` of a rate from 0/1 ``outcomes`` and their ``weights``.
+
+    Returns ``{"value", "raw", "low", "high", "ess", "n", "failures"}`` (``value`` ``None`` without outcomes;
+    ``raw`` is the estimate itself, which a few heavy weights can push past 1, ``value`` it capped at 1).
+    """
+    if len(outcomes) != len(weights):
+        raise ValueError(f"{len(outcomes)} outcomes but {len(weights)} weights; give one weight per outcome")
+    n = len(outcomes)
+    failures = int(sum(1 for y in outcomes if y))
+    if n == 0:
+        return {"value": None, "raw": None, "low": None, "high": None, "ess": 0.0, "n": 0, "failures": 0}
+    terms = [float(w) * (1.0 if y else 0.0) for w, y in zip(weights, outcomes)]
+    value = sum(terms) / n
+    variance = sum((t - value) ** 2 for t in terms) / n / n  # of the estimate
+    shown = min(1.0, value)
+    if failures and variance > 0.0:
+        ess = shown * (1.0 - shown) / variance if shown < 1.0 else float(n)
+    else:
+        total, squares = sum(weights), sum(float(w) ** 2 for w in weights)
+        ess = total * total / squares if squares > 0 else 0.0
+    low, high = _wilson(shown, ess, confidence)
+    return {"value": shown, "raw": value, "low": low, "high": high, "ess": ess, "n": n, "failures": failures}
+
+
+def _wilson(p: float, n: float, confidence: float) -> tuple:
+    """Wilson score interval of a proportion ``p`` observed on an effective sample of ``n`` (not necessarily
+    whole)."""
+    if n <= 0:
+        return 0.0, 1.0
+    if float(n).is_integer() and (p * n).is_integer() and confidence == 0.95:
+        low, high = wilson_interval(int(round(p * n)), int(n))
+        return float(low), float(high)
+    from statistics import NormalDist
+
+    z = NormalDist().inv_cdf(0.5 + confidence / 2)
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def _proposal(record: Mapping[str, Any], sampler: str) -> Optional[Mapping[str, float]]:
+    proposal = record.get("proposal")
+    if isinstance(proposal, Mapping) and proposal.get("scenario") and proposal.get("params"):
+        return proposal
+    if str(record.get("sampler") or sampler) in UNIFORM_SAMPLERS:
+        return {"scenario": None, "params": 1.0, "floor": 1.0}
+    return None
+
+
+def failure_rate(records: Iterable[Mapping[str, Any]], *, scenarios: Optional[Sequence[str]] = None,
+                 sampler: str = "", confidence: float = 0.95) -> Dict[str, Any]:
+    """The failure rate of the run's policy under its scenarios' own distributions (module docstring).
+
+    Args:
+        records: the run's episode records (errors are left out).
+        scenarios: the mined scenarios (the overall rate weighs each equally; default: those in ``records``).
+        sampler: the run's sampler (for records that do not name theirs).
+
+    Returns ``{"available": bool, "reason": why not | None, "collapsed": bool, "overall": estimate, "scenarios":
+    {name: estimate}}`` with each estimate as :func:`weighted_rate` returns it.
+    """
+    records = [r for r in records if not r.get("error")]
+    names = list(scenarios) if scenarios else sorted({str(r["scenario"]) for r in records})
+    missing = [r for r in records if _proposal(r, sampler) is None]
+    if missing:
+        return {"available": False, "reason": f"{len(missing)} of {len(records)} episodes have no proposal density "
+                "(the sampler draws without one, e.g. bandit or split with cell avoidance)",
+                "collapsed": False, "overall": None, "scenarios": {}}
+    by_scenario: Dict[str, List[Mapping[str, Any]]] = {name: [] for name in names}
+    for record in records:
+        by_scenario.setdefault(str(record["scenario"]), []).append(record)
+    estimates = {}
+    for name, members in by_scenario.items():
+        weights = [1.0 / float(_proposal(r, sampler)["params"]) for r in members]
+        estimates[name] = weighted_rate([1.0 if r.get("failure") else 0.0 for r in members], weights, confidence)
+    count = len(by_scenario)
+    overall_weights, outcomes = [], []
+    for record in records:
+        proposal = _proposal(record, sampler)
+        chance = proposal["scenario"] if proposal["scenario"] else 1.0 / count
+        overall_weights.append((1.0 / count) / (float(chance) * float(proposal["params"])))
+        outcomes.append(1.0 if record.get("failure") else 0.0)
+    collapsed = any(float(_proposal(r, sampler).get("floor", 1.0)) < COLLAPSE_FLOOR for r in records)
+    return {"available": True, "reason": None, "collapsed": collapsed,
+            "overall": weighted_rate(outcomes, overall_weights, confidence),
+            "scenarios": estimates}
+
+
+def rate_estimates(settings: Mapping[str, Any], records: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
+    """:func:`failure_rate` of a run from its ``settings.json`` and records."""
+    return failure_rate(records, scenarios=settings.get("scenarios") or None, sampler=str(settings.get("sampler") or ""))

@@ -1,0 +1,123 @@
+"""What a failure's behaviour says (``dv2s_gym.mining.behaviour``) on hand-made traces, and the behaviour
+clusters built from it (``dv2s_gym.mining.cluster``)."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import math
+from types import SimpleNamespace
+
+import pytest
+
+from dv2s_gym.mining.behaviour import UNKNOWN, backfill, extract_behaviour
+from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, pair_of
+
+FREQUENCY = 5  # steps per second
+
+
+def _trace(paths: dict, kinds: dict | None = None) -> SimpleNamespace:
+    """A trace whose states follow ``paths`` (actor -> function of the step giving [x, y, heading, speed])."""
+    steps = 21
+    states = [{name: [float(v) for v in path(step)] for name, path in paths.items()} for step in range(steps)]
+    return SimpleNamespace(states=states, kinds=kinds or {}, config={"policy_frequency": FREQUENCY})
+
+
+def _cruise(y: float, speed: float, x0: float = 0.0):
+    return lambda step: [x0 + speed * step / FREQUENCY, y, 0.0, speed]
+
+
+def _collision(with_: str = "car1", kind: str = "car", step: int = 20) -> dict:
+    return {"type": "collision", "time": step / FREQUENCY, "step": step, "with": with_, "with_kind": kind,
+            "collision_type": "rear_end", "kind": "collision:rear_end"}
+
+
+def test_a_braking_lead_car_hit_by_a_lane_keeping_ego():
+    # car1 drives at 20 m/s, then brakes at 7.5 m/s^2 in the last two seconds
+    speed = lambda s: 20.0 - 1.5 * max(0, s - 10)  # noqa: E731
+    trace = _trace({"ego": _cruise(0.0, 25.0),
+                    "car1": lambda s: [40.0 + sum(speed(k) for k in range(s)) / FREQUENCY, 0.0, 0.0, speed(s)]})
+    assert extract_behaviour(trace, _collision()) == {"actor": "car", "actor_manoeuvre": "braking",
+                                                      "ego_manoeuvre": "keeping_lane"}
+
+
+def test_a_car_cutting_in_from_the_next_lane():
+    # car1 drives in the lane at y = 4 and moves into the ego's lane (y = 0) ahead of it in the last two seconds
+    trace = _trace({"ego": _cruise(0.0, 25.0),
+                    "car1": lambda s: [30.0 + 22.0 * s / FREQUENCY, max(0.0, 4.0 - 0.4 * max(0, s - 10)), 0.0, 22.0]})
+    assert extract_behaviour(trace, _collision())["actor_manoeuvre"] == "cut_in"
+
+
+def test_a_car_leaving_the_ego_s_lane_is_a_lane_change_not_a_cut_in():
+    trace = _trace({"ego": _cruise(0.0, 25.0),
+                    "car1": lambda s: [10.0 + 22.0 * s / FREQUENCY, min(4.0, 0.4 * max(0, s - 10)), 0.0, 22.0]})
+    assert extract_behaviour(trace, _collision())["actor_manoeuvre"] == "lane_change"
+
+
+def test_a_crossing_pedestrian_and_an_oncoming_car():
+    walker = _trace({"ego": _cruise(0.0, 10.0), "ped": lambda s: [40.0, -5.0 + 0.3 * s, math.pi / 2, 1.5]},
+                    {"ped": "pedestrian"})
+    behaviour = extract_behaviour(walker, _collision("ped", None))
+    assert behaviour == {"actor": "pedestrian", "actor_manoeuvre": "crossing", "ego_manoeuvre": "keeping_lane"}
+    oncoming = _trace({"ego": _cruise(0.0, 10.0), "car2": lambda s: [80.0 - 3.0 * s, 0.0, math.pi, 15.0]})
+    assert extract_behaviour(oncoming, _collision("car2"))["actor_manoeuvre"] == "oncoming"
+
+
+def test_a_stopped_obstacle_and_an_ego_changing_lanes_or_braking():
+    stopped = {"car1": lambda s: [60.0, 4.0, 0.0, 0.0]}
+    swerving = _trace({"ego": lambda s: [5.0 * s, 0.4 * max(0, s - 10), 0.0, 25.0], **stopped})
+    assert extract_behaviour(swerving, _collision()) == {"actor": "car", "actor_manoeuvre": "stopped",
+                                                         "ego_manoeuvre": "lane_change"}
+    braking = _trace({"ego": lambda s: [4.0 * s, 4.0, 0.0, 25.0 - s], **stopped})
+    assert extract_behaviour(braking, _collision())["ego_manoeuvre"] == "braking"
+
+
+def test_failures_without_another_actor():
+    stalled = _trace({"ego": lambda s: [10.0, 0.0, 0.0, 0.0], "car1": _cruise(4.0, 20.0)})
+    stall = {"type": "stall", "time": 1.0, "step": 5, "with": None, "kind": "stall"}
+    assert extract_behaviour(stalled, stall) == {"actor": "none", "actor_manoeuvre": "none", "ego_manoeuvre": "stopped"}
+    assert extract_behaviour(stalled, None) is None
+    empty = SimpleNamespace(states=[], kinds={}, config={})
+    assert extract_behaviour(empty, stall) == UNKNOWN
+
+
+def _record(index: int, scenario: str, kind: str, behaviour, point) -> dict:
+    record = {"index": index, "scenario": scenario, "failure": {"type": kind.split(":")[0], "kind": kind},
+              "point": point, "error": None}
+    if behaviour:
+        record["behaviour"] = dict(zip(("actor", "actor_manoeuvre", "ego_manoeuvre"), behaviour))
+    return record
+
+
+def test_clusters_are_behaviours_not_parameter_cells():
+    records = [
+        _record(0, "cut_in", "collision:rear_end", ("car", "braking", "keeping_lane"), [0.1]),
+        _record(1, "cut_in", "collision:rear_end", ("car", "braking", "keeping_lane"), [0.9]),  # other cell, same
+        _record(2, "cut_in", "collision:rear_end", ("car", "cut_in", "keeping_lane"), [0.1]),   # same cell, other
+        _record(3, "cut_in", "stall", ("none", "none", "stopped"), [0.5]),
+        {"index": 4, "scenario": "cut_in", "failure": None, "error": None},
+    ]
+    clusters = cluster_failures(records)
+    assert clusters[0] == clusters[1] == "cut_in/collision:rear_end/car-braking/ego-keeping_lane"
+    assert clusters[2] == "cut_in/collision:rear_end/car-cut_in/ego-keeping_lane"
+    assert clusters[3] == "cut_in/stall/none-none/ego-stopped" and 4 not in clusters
+    assert all(c.split("/")[:2] == pair_of(records[i]).split("/") for i, c in clusters.items())
+    assert cell_id(records[0]) == cell_id(records[2]) != cell_id(records[1])  # novelty feedback's cells
+    assert cluster_id(_record(5, "a", "off_road", None, [])) == "a/off_road/unknown-unknown/ego-unknown"
+
+
+def test_old_records_get_their_behaviour_from_their_traces(tmp_path):
+    trace = _trace({"ego": _cruise(0.0, 25.0), "car1": lambda s: [30.0 + 22.0 * s / FREQUENCY,
+                                                                  max(0.0, 4.0 - 0.4 * max(0, s - 10)), 0.0, 22.0]})
+    (tmp_path / "traces").mkdir()
+    data = {"states": trace.states, "kinds": {"car1": "car"}, "config": trace.config}
+    (tmp_path / "traces" / "000003.json.gz").write_bytes(gzip.compress(json.dumps(data).encode()))
+    (tmp_path / "traces" / "000004.json.gz").write_bytes(b"not a trace")
+    old = {"index": 3, "scenario": "s", "failure": _collision(), "trace": "traces/000003.json.gz", "error": None}
+    broken = {"index": 4, "scenario": "s", "failure": _collision(), "trace": "traces/000004.json.gz", "error": None}
+    kept = {"index": 5, "scenario": "s", "failure": _collision(), "trace": None, "error": None,
+            "behaviour": {"actor": "truck", "actor_manoeuvre": "steady", "ego_manoeuvre": "braking"}}
+    assert backfill([old, broken, kept], tmp_path) == 1
+    assert old["behaviour"]["actor_manoeuvre"] == "cut_in"
+    assert "behaviour" not in broken and kept["behaviour"]["actor"] == "truck"
+    assert cluster_id(broken).endswith("/unknown-unknown/ego-unknown")
