@@ -105,7 +105,8 @@ def reproduction_seeds(record_seed: int, k: int, seed: int = 0) -> List[int]:
 
 
 def cluster_slug(cluster: Optional[str], index: Any) -> str:
-    """A folder name for a failure cluster (``"<scenario>/<type>/<region>"`` -> ``<scenario>__<type>__<region>``)."""
+    """A folder name for a failure cluster (``"<scenario>/<type>/<actor>-<manoeuvre>/ego-<manoeuvre>"`` -> its
+    parts joined by ``__``, other characters replaced)."""
     if not cluster:
         return f"episode-{int(index):06d}" if isinstance(index, int) else "failure"
     return re.sub(r"[^A-Za-z0-9_.\-]+", "_", str(cluster).replace("/", "__")).strip("._")[:120] or "failure"
