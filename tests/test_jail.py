@@ -369,6 +369,30 @@ def test_a_worker_is_refused_and_holds_what_a_jailed_worker_does(forked, monkeyp
     assert rlimits["RLIMIT_CPU"] == [cpu, cpu + 2]
 
 
+KERNEL_SETTINGS = """
+    import errno, os
+    found = {}
+    for path in ("/proc/sys/vm/swappiness", "/proc/sys/kernel/core_pattern", "/proc/sysrq-trigger",
+                 "/proc/irq/default_smp_affinity"):
+        try:
+            fd = os.open(path, os.O_WRONLY)  # opened only: nothing is written, whatever happens
+        except OSError as error:
+            found[path] = errno.errorcode.get(error.errno, str(error.errno))
+        else:
+            os.close(fd)
+            found[path] = "opened"
+    result = found
+"""
+
+
+def test_a_worker_cannot_open_kernel_settings_for_writing(forked):
+    with JailedProcess(PROBE, name="probe") as worker:
+        assert worker.forked == forked
+        found = _run(worker, KERNEL_SETTINGS)
+    assert found["/proc/sys/vm/swappiness"] in ("EROFS", "EACCES", "EPERM"), found
+    assert {path: how for path, how in found.items() if how == "opened"} == {}, found
+
+
 def test_a_busy_forked_worker_is_stopped_by_the_wall_clock_and_the_cpu_limit(zygote_only):
     with JailedProcess(PROBE, name="spinner", limits=JailLimits(request_seconds=2)) as worker:
         pid = worker.pid
