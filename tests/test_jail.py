@@ -577,3 +577,26 @@ def test_the_shipped_manifest_lists_exactly_the_shipped_scripts():
     from scenario_bank.shipped import MANIFEST, manifest_text
 
     assert MANIFEST.read_text(encoding="ascii") == manifest_text(), "run python -m scenario_bank.shipped"
+
+
+def test_compiling_a_shipped_scenario_imports_nothing_from_the_current_folder(tmp_path):
+    # Scenic puts the current folder first on sys.path while it compiles, and its driving domain
+    # imports `attr` and `shapely` on first use; planted copies there must never run.
+    folder = tmp_path / "cwd"
+    folder.mkdir()
+    for module in ("attr", "shapely", "numpy", "dv2s_planted"):
+        marker = tmp_path / f"{module}.imported"
+        (folder / f"{module}.py").write_text(f"open({str(marker)!r}, 'w').write('imported')\n")
+    code = textwrap.dedent(f"""
+        import sys
+        from envs.scenarios import compile_scenario, read_scenario_file
+        path = {str(bwrap.CODE_ROOT / "scenario_bank" / "scenarios" / SHIPPED / "scenario.scenic")!r}
+        compile_scenario(read_scenario_file(path), name="shipped")
+        print("compiled")
+    """)
+    env = dict(os.environ, PYTHONPATH=str(bwrap.CODE_ROOT))
+    # -P: the interpreter itself puts no current folder on sys.path, as with the `dv2s` command
+    done = subprocess.run([sys.executable, "-P", "-c", code], cwd=folder, env=env, capture_output=True,
+                          timeout=300)
+    assert done.returncode == 0 and b"compiled" in done.stdout, done.stderr.decode()[-2000:]
+    assert sorted(p.name for p in tmp_path.glob("*.imported")) == []
