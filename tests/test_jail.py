@@ -600,3 +600,14 @@ def test_compiling_a_shipped_scenario_imports_nothing_from_the_current_folder(tm
                           timeout=300)
     assert done.returncode == 0 and b"compiled" in done.stdout, done.stderr.decode()[-2000:]
     assert sorted(p.name for p in tmp_path.glob("*.imported")) == []
+
+
+def test_the_compile_limit_follows_its_own_variable_else_the_request_limit(monkeypatch):
+    monkeypatch.delenv("DV2S_JAIL_COMPILE_SECONDS", raising=False)
+    monkeypatch.delenv("DV2S_JAIL_REQUEST_SECONDS", raising=False)
+    assert JailLimits.from_env().compile_seconds == 300.0
+    monkeypatch.setenv("DV2S_JAIL_REQUEST_SECONDS", "7")
+    assert JailLimits.from_env().compile_seconds == 7.0
+    monkeypatch.setenv("DV2S_JAIL_COMPILE_SECONDS", "12")
+    limits = JailLimits.from_env()
+    assert (limits.request_seconds, limits.compile_seconds) == (7.0, 12.0)
