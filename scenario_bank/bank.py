@@ -762,6 +762,7 @@ class Bank:
     # ------------------------------------------------------------- writing
     @contextmanager
     def _lock(self) -> Iterator[None]:
+        created = not self.root.exists()
         try:
             self.root.mkdir(parents=True, exist_ok=True)
             handle = open(self.root / WRITERS_LOCK, "a+")
@@ -771,8 +772,21 @@ class Bank:
             fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
             try:
                 yield
+            except BaseException:
+                if created:
+                    self._remove_if_only_the_lock()
+                raise
             finally:
                 fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
+
+    def _remove_if_only_the_lock(self) -> None:
+        """A write that failed into a bank folder it created leaves no folder holding only the lock file."""
+        try:
+            if [p.name for p in self.root.iterdir()] == [WRITERS_LOCK]:
+                (self.root / WRITERS_LOCK).unlink()
+                self.root.rmdir()
+        except OSError:
+            pass  # a writer of another process got in: the folder is its bank now
 
     @staticmethod
     def _write_json_atomic(path: Path, data: Any) -> None:

@@ -104,7 +104,10 @@ def test_hostile_archive_is_refused_by_the_cli(name, world, tmp_path):
 def test_import_into_a_new_bank_leaves_no_folder_behind(tmp_path):
     code, _, err = cli("bank", "--bank", tmp_path / "new", "import", HOSTILE / "absolute_member.tar.gz")
     assert code == 2 and "invalid member name" in err
-    assert [p.name for p in (tmp_path / "new").iterdir()] == [WRITERS_LOCK]
+    assert not (tmp_path / "new").exists()  # not even a folder holding only the writers' lock
+    (tmp_path / "existing").mkdir()
+    code, _, err = cli("bank", "--bank", tmp_path / "existing", "import", HOSTILE / "absolute_member.tar.gz")
+    assert code == 2 and (tmp_path / "existing").is_dir()  # a folder the user made stays
 
 
 def test_a_fifo_given_as_the_archive_is_refused_without_waiting(world, tmp_path):
