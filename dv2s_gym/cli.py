@@ -281,7 +281,10 @@ def _json_argument(text: str, what: str):
 
 
 def _print(args: argparse.Namespace, data, human: str) -> None:
-    print(json.dumps(data, indent=2, default=str) if args.json else human)
+    from scenario_bank.jail.output import printable
+
+    # bank text comes from folders and archives of others: no escape sequence reaches the terminal
+    print(json.dumps(data, indent=2, default=str) if args.json else printable(human))
 
 
 def _cmd_bank_list(args: argparse.Namespace) -> int:
