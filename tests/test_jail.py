@@ -393,6 +393,32 @@ def test_a_worker_cannot_open_kernel_settings_for_writing(forked):
     assert {path: how for path, how in found.items() if how == "opened"} == {}, found
 
 
+THREADS = """
+    import threading
+    release = threading.Event()
+    started = []
+    try:
+        for _ in range(400):
+            thread = threading.Thread(target=release.wait, daemon=True)
+            thread.start()
+            started.append(thread)
+    except RuntimeError:  # can't start new thread: the limit
+        pass
+    release.set()
+    for thread in started:
+        thread.join()
+    result = len(started)
+"""
+
+
+def test_a_worker_cannot_start_more_threads_than_its_process_limit(forked):
+    limits = JailLimits(processes=32)
+    with JailedProcess(PROBE, name="probe", limits=limits) as worker:
+        assert worker.forked == forked
+        started = _run(worker, THREADS)
+    assert started < 32, started  # the main thread counts too
+
+
 def test_a_busy_forked_worker_is_stopped_by_the_wall_clock_and_the_cpu_limit(zygote_only):
     with JailedProcess(PROBE, name="spinner", limits=JailLimits(request_seconds=2)) as worker:
         pid = worker.pid
