@@ -40,7 +40,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     if args.map:
         config["map"] = args.map
     env = gym.make("dv2s_gym:DV2S-v0", scenario=args.scenario, config=config, render_mode="rgb_array",
-                   trusted=args.trusted)
+                   trusted=args.trusted, bank_dir=args.bank)
     policy = None if args.ego_policy == "scenic" or args.random else CautiousDriver(env)
     result = record_episode(env, args.video, policy, seed=args.seed)
     if args.trace:
@@ -281,7 +281,10 @@ def _json_argument(text: str, what: str):
 
 
 def _print(args: argparse.Namespace, data, human: str) -> None:
-    print(json.dumps(data, indent=2, default=str) if args.json else human)
+    from scenario_bank.jail.output import printable
+
+    # bank text comes from folders and archives of others: no escape sequence reaches the terminal
+    print(json.dumps(data, indent=2, default=str) if args.json else printable(human))
 
 
 def _cmd_bank_list(args: argparse.Namespace) -> int:
@@ -705,6 +708,7 @@ def build_parser() -> argparse.ArgumentParser:
                          description="Run one DV2S-v0 episode of a scenario (bank name, .scenic path or "
                          "tag:<tag>) and record it as a video; optionally save its trace.")
     run.add_argument("scenario", help="bank name, path to a .scenic file, or tag:<tag>")
+    bank_option(run)
     run.add_argument("--video", default="out/episode.webm", help="video path (.webm VP8; .mp4/.avi also work)")
     run.add_argument("--trace", default=None, help="also save the episode trace here (.json or .json.gz)")
     run.add_argument("--seed", type=int, default=0)
@@ -1177,8 +1181,11 @@ def _is_project_error(error: BaseException) -> bool:
     from dv2s_gym.pipeline.errors import PipelineError
     from envs.errors import DV2SError
     from scenario_bank.bank import BankError
+    from scenario_bank.jail.errors import JailLimitError, JailUnavailableError
 
-    return isinstance(error, (PipelineError, DV2SError, BankError, ValueError, OSError))
+    # a script that hits a jail limit, or a machine without the jail, is an outcome the message explains
+    return isinstance(error, (PipelineError, DV2SError, BankError, JailLimitError, JailUnavailableError, ValueError,
+                              OSError))
 
 
 if __name__ == "__main__":

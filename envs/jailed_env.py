@@ -162,7 +162,7 @@ class JailedDV2SEnv(gym.Env):
         try:
             opened = self._call("open", scenarios=payload, config=user_config,
                                 render_mode=None if render_mode is None else "rgb_array",
-                                timeout=max(limits.request_seconds, 300.0))
+                                timeout=limits.compile_seconds)
             self.observation_space = data_to_space(opened["observation_space"])
             self.action_space = data_to_space(opened["action_space"])
             self.config = opened["config"] if isinstance(opened["config"], dict) else {}

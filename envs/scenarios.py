@@ -272,6 +272,7 @@ def compile_scenario(
     from scenario_bank.maps import resolve_map
 
     from envs.scenic_highway.stepping import release_veneer
+    from envs.scenic_imports import no_folder_imports
 
     overrides = dict(params or {})
     if map_override is not None:
@@ -295,7 +296,9 @@ def compile_scenario(
     try:
         # Scenic's localPath resolves against the folder of the compiled code's file name
         filename = os.path.realpath(path) if path is not None else origin or name
-        scenario = scenic.scenarioFromString(source, params=overrides, model=model, mode2D=True, filename=filename)
+        with no_folder_imports():
+            scenario = scenic.scenarioFromString(source, params=overrides, model=model, mode2D=True,
+                                                 filename=filename)
     except Exception as error:  # Scenic raises many kinds; all become one clear error
         raise _compile_error(error, source, label) from None
     compiled = CompiledScenario(

@@ -51,6 +51,7 @@ import shutil
 import stat
 import tarfile
 import tempfile
+import unicodedata
 import uuid
 import zlib
 from contextlib import contextmanager
@@ -467,10 +468,35 @@ class BankDiff:
         return not (self.only_in_first or self.only_in_second or self.changed)
 
 
+def _control_character_field(value: Any, where: str = "") -> Optional[str]:
+    """The first field of ``value`` (a sidecar or part of one) whose text holds a control character
+    other than a newline or a tab (terminal escape sequences start with one), or ``None``."""
+    if isinstance(value, str):
+        return where if any(unicodedata.category(c) == "Cc" and c not in "\n\t" for c in value) else None
+    if isinstance(value, dict):
+        items = [(str(k), v) for k, v in value.items()] + [(str(k), str(k)) for k in value]
+    elif isinstance(value, (list, tuple)):
+        items = [(f"[{k}]", v) for k, v in enumerate(value)]
+    else:
+        return None
+    for key, item in items:
+        found = _control_character_field(item, f"{where}{key}" if key.startswith("[") or not where else f"{where}.{key}")
+        if found is not None:
+            return found
+    return None
+
+
+_CONTROL_FIX = ("control characters (escape sequences, carriage returns, ...) are not allowed in a bank "
+                "entry's description, tags or other sidecar text; remove them")
+
+
 def _validate_sidecar(meta: Any, folder: Path) -> Dict[str, Any]:
     """Check a sidecar; return it or raise ``ValueError`` saying what is wrong."""
     if not isinstance(meta, dict):
         raise ValueError("sidecar is not a JSON object")
+    field_name = _control_character_field(meta)
+    if field_name is not None:
+        raise ValueError(f"sidecar field {field_name!r} holds a control character: {_CONTROL_FIX}")
     version = meta.get("schema_version", 1)
     if not isinstance(version, int) or version > SIDECAR_VERSION:
         raise BankVersionError(
@@ -762,6 +788,7 @@ class Bank:
     # ------------------------------------------------------------- writing
     @contextmanager
     def _lock(self) -> Iterator[None]:
+        created = not self.root.exists()
         try:
             self.root.mkdir(parents=True, exist_ok=True)
             handle = open(self.root / WRITERS_LOCK, "a+")
@@ -771,8 +798,21 @@ class Bank:
             fcntl.flock(handle.fileno(), fcntl.LOCK_EX)
             try:
                 yield
+            except BaseException:
+                if created:
+                    self._remove_if_only_the_lock()
+                raise
             finally:
                 fcntl.flock(handle.fileno(), fcntl.LOCK_UN)
+
+    def _remove_if_only_the_lock(self) -> None:
+        """A write that failed into a bank folder it created leaves no folder holding only the lock file."""
+        try:
+            if [p.name for p in self.root.iterdir()] == [WRITERS_LOCK]:
+                (self.root / WRITERS_LOCK).unlink()
+                self.root.rmdir()
+        except OSError:
+            pass  # a writer of another process got in: the folder is its bank now
 
     @staticmethod
     def _write_json_atomic(path: Path, data: Any) -> None:
@@ -780,6 +820,9 @@ class Bank:
 
     def _stage_entry(self, name: str, script: str, meta: Dict[str, Any],
                      files: Optional[Mapping[str, PathLike]] = None) -> Path:
+        field_name = _control_character_field(meta)
+        if field_name is not None:  # every write passes here, whatever built the sidecar
+            raise BankError(f"the sidecar field {field_name!r} of {name} holds a control character: {_CONTROL_FIX}")
         staging = self.root / f".staging-{name}-{uuid.uuid4().hex[:12]}"
         staging.mkdir(parents=True)
         try:
@@ -1049,7 +1092,7 @@ class Bank:
         if source["kind"] not in SOURCE_KINDS:
             raise BankError(f"provenance kind must be one of {SOURCE_KINDS}, got {source['kind']!r}")
         source["date"] = source.get("date") or _dt.date.today().isoformat()
-        return {
+        meta = {
             "schema_version": SIDECAR_VERSION,
             "name": name,
             "description": description.strip(),
@@ -1060,6 +1103,10 @@ class Bank:
             "source": source,
             "content_hash": content_hash(script),
         }
+        field_name = _control_character_field(meta)
+        if field_name is not None:
+            raise BankError(f"the scenario's {field_name} holds a control character: {_CONTROL_FIX}")
+        return meta
 
     def copy_to(self, dest: PathLike) -> "Bank":
         """A writable copy of every entry in ``dest`` (a new or empty folder), made atomically.

@@ -104,7 +104,10 @@ def test_hostile_archive_is_refused_by_the_cli(name, world, tmp_path):
 def test_import_into_a_new_bank_leaves_no_folder_behind(tmp_path):
     code, _, err = cli("bank", "--bank", tmp_path / "new", "import", HOSTILE / "absolute_member.tar.gz")
     assert code == 2 and "invalid member name" in err
-    assert [p.name for p in (tmp_path / "new").iterdir()] == [WRITERS_LOCK]
+    assert not (tmp_path / "new").exists()  # not even a folder holding only the writers' lock
+    (tmp_path / "existing").mkdir()
+    code, _, err = cli("bank", "--bank", tmp_path / "existing", "import", HOSTILE / "absolute_member.tar.gz")
+    assert code == 2 and (tmp_path / "existing").is_dir()  # a folder the user made stays
 
 
 def test_a_fifo_given_as_the_archive_is_refused_without_waiting(world, tmp_path):
@@ -310,3 +313,35 @@ def test_a_merge_never_writes_through_a_linked_folder(world, tmp_path, monkeypat
         bank.add_or_merge(entry.script, "the same failure", elements=entry.elements, map=entry.map,
                           provenance={"kind": "mined"}, files={"failure.webm": video})
     assert snapshot(tmp_path) == before and list(outside.iterdir()) == [outside / "secret.txt"]
+
+
+ESCAPES = "\x1b]2;PWNED\x07\x1b[2J\x1b[31mRED"
+
+
+def test_escape_sequences_in_sidecars_are_refused_and_never_printed(world, tmp_path):
+    bank_dir, _, _ = world
+    evil = tmp_path / "evil" / "evil_entry"
+    shutil.copytree(bank_dir / GOOD, evil)
+    meta = json.loads((evil / "meta.json").read_text())
+    meta.update(name="evil_entry", description="desc " + ESCAPES, tags=meta["tags"] + ["tag" + ESCAPES])
+    (evil / "meta.json").write_text(json.dumps(meta))
+    archive = tmp_path / "escapes.tar.gz"
+    with tarfile.open(archive, "w:gz") as tar:
+        header = json.dumps({"dv2s_bank_archive": 1, "entries": ["evil_entry"]}).encode()
+        info = tarfile.TarInfo("bank-archive.json")
+        info.size = len(header)
+        tar.addfile(info, io.BytesIO(header))
+        tar.add(evil, arcname="evil_entry")
+    code, _, err = cli("bank", "--bank", bank_dir, "import", archive)
+    assert code == 2 and "control character" in one_error_line(err)
+    assert Bank(bank_dir).names() == [GOOD]
+
+    with pytest.raises(BankError, match="description holds a control character"):
+        Bank(bank_dir).add(Bank().get(GOOD).script, description="brakes " + ESCAPES, name="evil_added")
+
+    shutil.copytree(evil, bank_dir / "evil_entry")  # a folder edited by hand
+    for argv in (("list",), ("show", "evil_entry"), ("show", GOOD)):
+        code, out, err = cli("--bank", bank_dir, "bank", *argv)
+        assert "\x1b" not in out + err and "\x07" not in out + err, argv
+    code, out, _ = cli("--bank", bank_dir, "bank", "list")
+    assert code == 0 and "evil_entry" in out and "control character" in out

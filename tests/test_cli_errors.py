@@ -160,3 +160,40 @@ def test_usage_errors_are_one_line_from_the_subcommand(capsys, argv, named, hint
     assert stop.value.code == 2
     assert err.count("\n") == 1 and "usage:" not in err
     assert named in err and hint in err and err.startswith(f"dv2s {argv[0]}")
+
+
+STUCK_COMPILING = """param map = 'highway_straight'
+model scenic.domains.driving.model
+ego = new Car
+k = 0
+while True:
+    k = k + 1
+"""
+
+
+def test_a_script_stuck_compiling_stops_at_the_compile_limit_as_an_expected_outcome(capsys, tmp_path, monkeypatch):
+    import time
+
+    from scenario_bank.jail import jail_status
+
+    if not jail_status()[0]:
+        pytest.skip(f"no jail here: {jail_status()[1]}")
+    script = tmp_path / "stuck.scenic"
+    script.write_text(STUCK_COMPILING)
+    monkeypatch.setenv("DV2S_JAIL_COMPILE_SECONDS", "4")
+    started = time.monotonic()
+    code, _, err = run(capsys, "run", script, "--duration", "1", "--video", tmp_path / "episode.webm")
+    assert time.monotonic() - started < 60
+    line = one_line_error(err)
+    assert code == 2 and "4 s wall-clock limit while compiling" in line, line
+    assert "unexpected error" not in line and "--debug" not in line
+
+
+def test_run_takes_its_scenario_from_the_bank_given(capsys, tmp_path):
+    bank = tmp_path / "bank"
+    bank.mkdir()
+    shutil.copytree(BANK_DIR / "highway_lead_vehicle_brakes", bank / "only_in_this_bank")
+    code, out, err = run(capsys, "--bank", bank, "run", "only_in_this_bank", "--duration", "1",
+                         "--video", tmp_path / "episode.webm")
+    assert code == 0, err
+    assert json.loads(out)["scenario"] == "only_in_this_bank"

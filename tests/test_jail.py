@@ -369,6 +369,56 @@ def test_a_worker_is_refused_and_holds_what_a_jailed_worker_does(forked, monkeyp
     assert rlimits["RLIMIT_CPU"] == [cpu, cpu + 2]
 
 
+KERNEL_SETTINGS = """
+    import errno, os
+    found = {}
+    for path in ("/proc/sys/vm/swappiness", "/proc/sys/kernel/core_pattern", "/proc/sysrq-trigger",
+                 "/proc/irq/default_smp_affinity"):
+        try:
+            fd = os.open(path, os.O_WRONLY)  # opened only: nothing is written, whatever happens
+        except OSError as error:
+            found[path] = errno.errorcode.get(error.errno, str(error.errno))
+        else:
+            os.close(fd)
+            found[path] = "opened"
+    result = found
+"""
+
+
+def test_a_worker_cannot_open_kernel_settings_for_writing(forked):
+    with JailedProcess(PROBE, name="probe") as worker:
+        assert worker.forked == forked
+        found = _run(worker, KERNEL_SETTINGS)
+    assert found["/proc/sys/vm/swappiness"] in ("EROFS", "EACCES", "EPERM"), found
+    assert {path: how for path, how in found.items() if how == "opened"} == {}, found
+
+
+THREADS = """
+    import threading
+    release = threading.Event()
+    started = []
+    try:
+        for _ in range(400):
+            thread = threading.Thread(target=release.wait, daemon=True)
+            thread.start()
+            started.append(thread)
+    except RuntimeError:  # can't start new thread: the limit
+        pass
+    release.set()
+    for thread in started:
+        thread.join()
+    result = len(started)
+"""
+
+
+def test_a_worker_cannot_start_more_threads_than_its_process_limit(forked):
+    limits = JailLimits(processes=32)
+    with JailedProcess(PROBE, name="probe", limits=limits) as worker:
+        assert worker.forked == forked
+        started = _run(worker, THREADS)
+    assert started < 32, started  # the main thread counts too
+
+
 def test_a_busy_forked_worker_is_stopped_by_the_wall_clock_and_the_cpu_limit(zygote_only):
     with JailedProcess(PROBE, name="spinner", limits=JailLimits(request_seconds=2)) as worker:
         pid = worker.pid
@@ -553,3 +603,37 @@ def test_the_shipped_manifest_lists_exactly_the_shipped_scripts():
     from scenario_bank.shipped import MANIFEST, manifest_text
 
     assert MANIFEST.read_text(encoding="ascii") == manifest_text(), "run python -m scenario_bank.shipped"
+
+
+def test_compiling_a_shipped_scenario_imports_nothing_from_the_current_folder(tmp_path):
+    # Scenic puts the current folder first on sys.path while it compiles, and its driving domain
+    # imports `attr` and `shapely` on first use; planted copies there must never run.
+    folder = tmp_path / "cwd"
+    folder.mkdir()
+    for module in ("attr", "shapely", "numpy", "dv2s_planted"):
+        marker = tmp_path / f"{module}.imported"
+        (folder / f"{module}.py").write_text(f"open({str(marker)!r}, 'w').write('imported')\n")
+    code = textwrap.dedent(f"""
+        import sys
+        from envs.scenarios import compile_scenario, read_scenario_file
+        path = {str(bwrap.CODE_ROOT / "scenario_bank" / "scenarios" / SHIPPED / "scenario.scenic")!r}
+        compile_scenario(read_scenario_file(path), name="shipped")
+        print("compiled")
+    """)
+    env = dict(os.environ, PYTHONPATH=str(bwrap.CODE_ROOT))
+    # -P: the interpreter itself puts no current folder on sys.path, as with the `dv2s` command
+    done = subprocess.run([sys.executable, "-P", "-c", code], cwd=folder, env=env, capture_output=True,
+                          timeout=300)
+    assert done.returncode == 0 and b"compiled" in done.stdout, done.stderr.decode()[-2000:]
+    assert sorted(p.name for p in tmp_path.glob("*.imported")) == []
+
+
+def test_the_compile_limit_follows_its_own_variable_else_the_request_limit(monkeypatch):
+    monkeypatch.delenv("DV2S_JAIL_COMPILE_SECONDS", raising=False)
+    monkeypatch.delenv("DV2S_JAIL_REQUEST_SECONDS", raising=False)
+    assert JailLimits.from_env().compile_seconds == 300.0
+    monkeypatch.setenv("DV2S_JAIL_REQUEST_SECONDS", "7")
+    assert JailLimits.from_env().compile_seconds == 7.0
+    monkeypatch.setenv("DV2S_JAIL_COMPILE_SECONDS", "12")
+    limits = JailLimits.from_env()
+    assert (limits.request_seconds, limits.compile_seconds) == (7.0, 12.0)

@@ -101,6 +101,19 @@ def _mounts() -> List[str]:
     return args
 
 
+_KERNEL_SETTINGS = ("sys", "sysrq-trigger", "irq", "bus", "fs")
+"""Parts of ``/proc`` that change the machine rather than the process: read-only in the jail."""
+
+
+def _read_only_kernel_settings() -> List[str]:
+    # bubblewrap's --proc leaves /proc/sys writable, and a jail started by root maps its user to
+    # the machine's root, who may write there: cover each with a read-only bind of the same path.
+    args: List[str] = []
+    for name in _KERNEL_SETTINGS:
+        args += ["--ro-bind-try", f"/proc/{name}", f"/proc/{name}"]
+    return args
+
+
 def command(argv: Sequence[str], *, scratch_bytes: int, seccomp_fd: Optional[int],
             environment: Dict[str, str], uid: int = WORKER_UID, capabilities: Sequence[str] = ()) -> List[str]:
     """The full ``bwrap ... -- argv`` command line.
@@ -121,6 +134,7 @@ def command(argv: Sequence[str], *, scratch_bytes: int, seccomp_fd: Optional[int
         "--die-with-parent", "--new-session", "--cap-drop", "ALL", *capability_args, "--clearenv",
         *_mounts(),
         "--proc", "/proc",
+        *_read_only_kernel_settings(),
         "--dev", "/dev",
         "--size", str(int(scratch_bytes)), "--tmpfs", SCRATCH,
         "--size", str(SHM_BYTES), "--tmpfs", "/dev/shm",

@@ -23,8 +23,9 @@ class JailLimits:
     A bank scenario needs about 0.8 GiB of address space and a few seconds of
     CPU to import, compile and run a 20-s episode; the defaults leave room for
     large OpenDRIVE maps and long training runs. Environment variables
-    ``DV2S_JAIL_CPU`` (s), ``DV2S_JAIL_MEMORY_MB``, ``DV2S_JAIL_REQUEST_SECONDS``
-    override them (:meth:`from_env`).
+    ``DV2S_JAIL_CPU`` (s), ``DV2S_JAIL_MEMORY_MB``, ``DV2S_JAIL_REQUEST_SECONDS`` and
+    ``DV2S_JAIL_COMPILE_SECONDS`` override them (:meth:`from_env`); without the last, a set
+    ``DV2S_JAIL_REQUEST_SECONDS`` limits compiling too.
 
     Attributes:
         cpu_seconds: CPU time of the worker's requests (``RLIMIT_CPU``, counted from the
@@ -37,7 +38,8 @@ class JailLimits:
         open_files: ``RLIMIT_NOFILE``.
         processes: ``RLIMIT_NPROC`` (threads count; the seccomp filter refuses new processes anyway).
         start_seconds: wall-clock time to start the worker and import the simulator.
-        request_seconds: wall-clock time of one request (compile, reset, step, ...).
+        request_seconds: wall-clock time of one request (reset, step, ...).
+        compile_seconds: wall-clock time to compile the scripts (and load their maps) when an env opens.
         message_bytes: largest message the worker may send.
         output_bytes: how much of the worker's printed output is kept (the tail).
     """
@@ -50,6 +52,7 @@ class JailLimits:
     processes: int = 64
     start_seconds: float = 120.0
     request_seconds: float = 120.0
+    compile_seconds: float = 300.0
     message_bytes: int = 256 * _MIB
     output_bytes: int = 16 * 1024
 
@@ -65,6 +68,9 @@ class JailLimits:
                 values["memory_bytes"] = int(float(os.environ["DV2S_JAIL_MEMORY_MB"]) * _MIB)
             if "DV2S_JAIL_REQUEST_SECONDS" in os.environ:
                 values["request_seconds"] = float(os.environ["DV2S_JAIL_REQUEST_SECONDS"])
+                values["compile_seconds"] = values["request_seconds"]
+            if "DV2S_JAIL_COMPILE_SECONDS" in os.environ:
+                values["compile_seconds"] = float(os.environ["DV2S_JAIL_COMPILE_SECONDS"])
         except ValueError as error:
             raise ValueError(f"bad DV2S_JAIL_* limit: {error}; give whole seconds and megabytes") from None
         values.update(overrides)

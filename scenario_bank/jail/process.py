@@ -22,6 +22,7 @@ from scenario_bank.jail.errors import (
 )
 from scenario_bank.jail.limits import JailLimits
 from scenario_bank.jail.output import OutputTail, printable
+from scenario_bank.jail.pids_cgroup import JAIL_TASKS, TaskCap, cap_tasks
 
 __all__ = ["JailedProcess", "JailRemoteError", "jail_status", "require_jail", "discard_spares", "FIX"]
 
@@ -144,6 +145,7 @@ class JailedProcess:
         self.name = name
         self.module = module
         self._proc: Optional[_Worker] = None
+        self._task_cap: Optional[TaskCap] = None
         self._closed = False
         self.forked = False
         """Whether the zygote forked this worker (else bubblewrap started it)."""
@@ -168,7 +170,7 @@ class JailedProcess:
     def _unstarted(cls, module: str, limits: JailLimits, args: Sequence[str]) -> "JailedProcess":
         worker = cls.__new__(cls)
         worker.limits, worker.name, worker.module = limits, "jailed worker", module
-        worker._proc, worker._closed, worker.forked = None, False, False
+        worker._proc, worker._closed, worker.forked, worker._task_cap = None, False, False, None
         worker._spawn(args)
         return worker
 
@@ -188,6 +190,13 @@ class JailedProcess:
                 os.close(fd)
         self.forked = True
         self._attach(proc, to_child_w, from_child_r, out_r)
+        self._task_cap = cap_tasks(self.limits.processes)
+        if self._task_cap is not None and proc.pid is not None:
+            try:  # before the first request: the script's code has not run yet
+                self._task_cap.add(proc.pid)
+            except OSError:
+                self._task_cap.remove()
+                self._task_cap = None
 
     def _spawn(self, args: Sequence[str]) -> None:
         """Start the worker in a bubblewrap of its own."""
@@ -195,6 +204,7 @@ class JailedProcess:
         from_child_r, from_child_w = os.pipe()
         out_r, out_w = os.pipe()
         filter_fd = seccomp.filter_fd()
+        self._task_cap = cap_tasks(self.limits.processes, JAIL_TASKS)
         argv = [sys.executable, "-s", "-m", self.module, str(to_child_r), str(from_child_w), *args]
         command = bwrap.command(argv, scratch_bytes=self.limits.scratch_bytes, seccomp_fd=filter_fd,
                                 environment=bwrap.worker_environment())
@@ -228,6 +238,11 @@ class JailedProcess:
                 resource.setrlimit(which, (soft, hard))
             except (ValueError, OSError):
                 pass
+        if self._task_cap is not None:
+            try:
+                self._task_cap.add_self()
+            except OSError:
+                pass  # RLIMIT_NPROC still applies to a worker not started by root
 
     # ------------------------------------------------------------------ requests
     def call(self, op: str, timeout: Optional[float] = None, **payload: Any) -> Any:
@@ -358,6 +373,9 @@ class JailedProcess:
             return
         proc.kill()
         self._closed = True
+        if getattr(self, "_task_cap", None) is not None:
+            self._task_cap.remove()
+            self._task_cap = None
         for stream in (getattr(self, "_to_child", None),):
             try:
                 if stream is not None:
