@@ -111,8 +111,10 @@ def _cmd_replay_mined(args: argparse.Namespace, folder) -> int:
         from policies.registry import spec_from_file
 
         policy = spec_from_file(settings.get("policy"), str(settings_file), "--policy-spec SPEC")
+    from envs.trace_bounds import check_file_config
+
     options = {"policy": policy, "bank_dir": settings.get("bank_dir"),
-               "env_config": settings.get("env_config")}
+               "env_config": check_file_config(settings.get("env_config"), str(settings_file))}
     if args.video and record.get("failure"):
         write_failure_video(record, args.video, trace_path=Path(args.video).with_suffix(".json.gz"), **options)
     else:

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any, Dict, Mapping
 
 __all__ = ["TraceConfigError", "MAX_VEHICLES", "MAX_GRID_CELLS", "MAX_SCREEN", "MAX_MAP_BYTES",
-           "check_observation", "check_action", "check_values", "check_map"]
+           "check_observation", "check_action", "check_values", "check_map", "check_file_config"]
 
 MAX_VEHICLES = 100
 MAX_GRID_CELLS = 100_000
@@ -38,6 +38,21 @@ def _fail(key: str, value: Any, why: str) -> None:
     shown = repr(value)
     raise TraceConfigError(f"the trace's config has {key}={shown[:80]}{'...' if len(shown) > 80 else ''}: {why}; "
                            f"{_DAMAGED}")
+
+
+def check_file_config(config: Any, source: str) -> Dict[str, Any]:
+    """An env config read from a file other than a trace (a report's or a run folder's ``env_config``),
+    bounded like a trace's; the error names ``source``."""
+    if config is None:
+        return {}
+    if not isinstance(config, Mapping):
+        raise TraceConfigError(f"{source} has an env_config that is not a mapping; the file is damaged")
+    try:
+        check_values(config)
+    except TraceConfigError as error:
+        raise TraceConfigError(str(error).replace("the trace's config", f"the env_config of {source}").replace(
+            _DAMAGED, "the file is damaged or was not written by dv2s")) from None
+    return dict(config)
 
 
 def _plain(key: str, value: Any, depth: int = 0) -> None:

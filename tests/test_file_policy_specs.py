@@ -82,3 +82,51 @@ def test_a_baseline_reports_policy_is_not_rerun_for_a_clip(tmp_path):
     with pytest.raises(ClipError, match="not a built-in policy"):
         render_policy_video(report, {"scenario": "highway_lead_vehicle_brakes", "seed": 0}, "baseline",
                             tmp_path / "clip.webm")
+
+
+def test_replay_of_a_mining_run_bounds_its_env_config(capsys, tmp_path):
+    folder = tmp_path / "run"
+    folder.mkdir()
+    (folder / "settings.json").write_text(json.dumps({
+        "schema": "dv2s-mine-run", "policy": "rule", "bank_dir": None,
+        "env_config": {"observation": {"type": "Kinematics", "vehicles_count": 50_000_000}}}))
+    (folder / "episodes.jsonl").write_text(json.dumps({"index": 0, "scenario": "highway_lead_vehicle_brakes",
+                                                       "seed": 0, "params": {},
+                                                       "result": {"trajectory_hash": "00"}}) + "\n")
+    code, _, err = run(capsys, "replay", folder, "--episode", "0")
+    line = one_line_error(err)
+    assert code == 2 and "observation.vehicles_count=50000000" in line and "settings.json" in line
+
+
+def test_replay_of_a_report_episode_bounds_its_env_config(tmp_path):
+    from dv2s_gym.regress.replay import replay_episode
+    from envs.trace_bounds import TraceConfigError
+
+    report = {"schema": "dv2s-regress", "schema_version": 1, "candidate": {"spec": "rule"},
+              "bank": {"hashes": {}}, "settings": {"env_config": {"screen_width": 10**6}},
+              "episodes": [{"id": "highway_lead_vehicle_brakes/0",
+                            "candidate": {"scenario": "highway_lead_vehicle_brakes", "seed": 0,
+                                          "trajectory_hash": "00", "failed": False}}]}
+    path = tmp_path / "report.json"
+    path.write_text(json.dumps(report))
+    with pytest.raises(TraceConfigError, match="env_config of the report has screen_width=1000000"):
+        replay_episode(path, "highway_lead_vehicle_brakes/0")
+
+
+def test_a_bank_replay_entry_names_a_policy_only_if_it_is_built_in(tmp_path):
+    from dv2s_gym.mining.exact_replay import replay_failure
+    from scenario_bank.bank import Bank
+
+    class Entry:
+        source = {"replay": {"seed": 0, "policy": "marker:make"}}
+        script_path = tmp_path / "scenario.scenic"
+
+    class FakeBank(Bank):
+        def __init__(self):
+            pass
+
+        def get(self, name):
+            return Entry()
+
+    with pytest.raises(PolicyError, match="bank entry 'x'.*policy=SPEC"):
+        replay_failure(FakeBank(), "x")

@@ -100,7 +100,12 @@ def render_policy_video(report: Dict[str, Any], result: Dict[str, Any], role: st
         raise ClipError(f"a clip needs seconds > 0, size >= 16 px and zoom > 0, "
                         f"not seconds={seconds}, size={size}, zoom={zoom}")
     scenario, seed = result["scenario"], int(result["seed"])
-    config = dict((report.get("settings") or {}).get("env_config") or {})
+    from envs.trace_bounds import TraceConfigError, check_file_config
+
+    try:
+        config = check_file_config((report.get("settings") or {}).get("env_config"), "the report")
+    except TraceConfigError as error:
+        raise ClipError(str(error)) from None
     env = make_eval_env(None, config=config, bank_dir=_bank_for(report.get("bank") or {}, scenario),
                         render_mode="rgb_array")
     frames: List[np.ndarray] = []

@@ -109,10 +109,12 @@ def _from_policy(report: Dict[str, Any], result: Dict[str, Any], spec: str, fram
     from policies.evaluation import make_eval_env, run_episode
     from policies.registry import load_policy
 
+    from envs.trace_bounds import check_file_config
+
+    config = check_file_config((report.get("settings") or {}).get("env_config"), "the report")
     bank = report.get("bank") or {}
     scenario = result["scenario"]
     bank_dir = _bank_for(bank, scenario)
-    config = dict((report.get("settings") or {}).get("env_config") or {})
     env = make_eval_env(None, config=config, bank_dir=bank_dir,
                         render_mode="rgb_array" if frames is not None else None)
     try:
