@@ -105,8 +105,16 @@ def _cmd_replay_mined(args: argparse.Namespace, folder) -> int:
     if record is None or record.get("error") or not record.get("result"):
         raise ValueError(f"episode {args.episode} of {folder} did not finish (not in episodes.jsonl, or an error); "
                          f"it has episodes 0..{max(records) if records else -1}")
-    options = {"policy": settings["policy"], "bank_dir": settings.get("bank_dir"),
-               "env_config": settings.get("env_config")}
+    if args.policy_spec:
+        policy = args.policy_spec
+    else:
+        from policies.registry import spec_from_file
+
+        policy = spec_from_file(settings.get("policy"), str(settings_file), "--policy-spec SPEC")
+    from envs.trace_bounds import check_file_config
+
+    options = {"policy": policy, "bank_dir": settings.get("bank_dir"),
+               "env_config": check_file_config(settings.get("env_config"), str(settings_file))}
     if args.video and record.get("failure"):
         write_failure_video(record, args.video, trace_path=Path(args.video).with_suffix(".json.gz"), **options)
     else:
@@ -119,7 +127,7 @@ def _cmd_replay_mined(args: argparse.Namespace, folder) -> int:
                 for frame in frames:
                     video.write(frame)
     failure = record.get("failure") or {}
-    print(f"episode {record['index']} ({record['scenario']}, seed {record['seed']}): {settings['policy']} re-run "
+    print(f"episode {record['index']} ({record['scenario']}, seed {record['seed']}): {policy} re-run "
           f"with the recorded parameters; trajectory hash {record['result']['trajectory_hash'][:16]} matches the record"
           + (f"; failure {failure.get('kind')} at {failure.get('time')} s" if failure else "")
           + (f"; video {args.video}" if args.video else ""))
@@ -147,7 +155,7 @@ def _cmd_replay_report(args: argparse.Namespace) -> int:
         raise ValueError(f"{args.trace} is a regression report: name the episode with --episode SCENARIO/SEED "
                          "(its newly_failing list and report.md show the failed ones)")
     result = replay_episode(args.trace, args.episode, role=args.policy, video=args.video,
-                            from_policy=args.from_policy)
+                            from_policy=args.from_policy, spec=args.policy_spec)
     how = "trace replayed, every actor state matches" if result["source"] == "trace" else "policy re-run"
     verdict = "matches the report" if result["matches"] else (
         f"DIFFERS from the report ({result['expected_hash']})")
@@ -737,6 +745,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "run: the episode index")
     replay.add_argument("--policy", choices=["candidate", "baseline"], default="candidate",
                         help="with a report: whose episode (default: candidate)")
+    replay.add_argument("--policy-spec", metavar="SPEC",
+                        help="the policy to re-run (with a mining run, or a report episode re-run from its policy) "
+                        "instead of the one the file names; needed for any policy that is not built in "
+                        "(module:attribute, a checkpoint): a file's policy spec is loaded only if it is built in")
     replay.add_argument("--video", help="also write the replayed episode as a video (.webm)")
     replay.add_argument("--from-policy", action="store_true",
                         help="with a report: re-run the policy even when a trace is stored")

@@ -13,6 +13,10 @@ import numpy as np
 
 from envs.dv2s_env import DV2SEnv
 from envs.trace import EpisodeTrace, TraceMismatchError
+from envs.trace_bounds import check_map, check_values
+
+MAX_SCRIPT_BYTES = 1024 * 1024
+"""The largest script a trace's ``scenario_path`` may name."""
 
 __all__ = ["replay_trace", "TraceMismatchError"]
 
@@ -25,7 +29,11 @@ def trace_config(trace: EpisodeTrace) -> dict:
     """The env config a trace recorded, checked: known keys, bounded frequencies and duration,
     and this machine's step time limit (never the trace's)."""
     defaults = DV2SEnv.default_config()
+    if not isinstance(trace.config, dict):
+        raise ValueError("the trace's config is not a mapping: the trace is damaged or was not written by "
+                         "env.save_trace()")
     config = {k: v for k, v in trace.config.items() if k in defaults and k != "step_time_limit"}
+    check_values(config)
     for key, (low, high) in _BOUNDS.items():
         value = config.get(key, defaults[key])
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
@@ -48,13 +56,14 @@ def replay_trace(trace: EpisodeTrace, *, render_mode: Optional[str] = None, chec
     """
     config = trace_config(trace)
     path = Path(trace.scenario_path) if trace.scenario_path else None
-    if path is not None and path.is_file() and path.read_text(encoding="utf-8") == trace.source:
+    if path is not None and _script_at(path) == trace.source:
         # The script is still where it was: compile it from there, so that paths in it
         # (`localPath(...)` maps) resolve as they did and the scenario keeps its name.
         env = DV2SEnv(scenario=str(path), config=config, render_mode=render_mode)
     else:
         recorded_map = trace.params.get("map")
         if config.get("map") is None and isinstance(recorded_map, str) and Path(recorded_map).is_file():
+            check_map(recorded_map)
             config["map"] = recorded_map  # the map the script resolved, wherever it was relative to
         env = DV2SEnv(scenario=trace.source, config=config, render_mode=render_mode)
     try:
@@ -74,6 +83,30 @@ def replay_trace(trace: EpisodeTrace, *, render_mode: Optional[str] = None, chec
         env.close()  # an env left open keeps its suspended simulation, and itself, alive
         raise
     return env, env.trace
+
+
+def _script_at(path: Path) -> Optional[str]:
+    """The text of the script a trace says it ran (``None`` when it is no longer there): a regular ``.scenic``
+    file of at most :data:`MAX_SCRIPT_BYTES`, not a symbolic link; anything else is refused."""
+    from scenario_bank.safe_files import read_regular_file
+
+    if not isinstance(path, Path) or path.suffix != ".scenic":
+        raise ValueError(f"the trace's scenario_path {str(path)[:200]!r} is not a .scenic file: the trace is "
+                         "damaged or was not written by env.save_trace()")
+    try:
+        data = read_regular_file(path, MAX_SCRIPT_BYTES)
+    except FileNotFoundError:
+        return None
+    except OSError as error:
+        raise ValueError(f"the trace's scenario_path {str(path)[:200]!r} cannot be read ({error}); move the "
+                         "trace away from it or remove scenario_path from the trace") from None
+    except ValueError as error:
+        raise ValueError(f"the trace's scenario_path is refused: {error}; the trace replays from the script it "
+                         "holds once scenario_path is removed from it") from None
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        return None
 
 
 def _action_from_json(action):

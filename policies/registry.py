@@ -54,6 +54,8 @@ __all__ = [
     "load_policy",
     "parse_spec",
     "SHIPPED_CHECKPOINT",
+    "BUILTIN_POLICIES",
+    "spec_from_file",
 ]
 
 SHIPPED_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "dv2s_ppo" / "model.zip"
@@ -340,6 +342,40 @@ register_policy("idm", _state_driver("idm", "policies.baselines:IDMEgo"))
 register_policy("keep_lane", _state_driver("keep_lane", "policies.baselines:KeepLaneEgo"))
 register_policy("random", lambda seed=0: RandomPolicy("random", seed=int(seed)))
 register_policy("dv2s-ppo", _shipped)
+
+
+BUILTIN_POLICIES = ("rule", "idm", "keep_lane", "random", "dv2s-ppo")
+"""The policies that ship with dv2s-gym: the only specs a file (a report, a run folder) may name."""
+
+
+def spec_from_file(spec: Any, source: str, fix: str) -> str:
+    """``spec`` read from a file (``source`` names it), if it is safe to load: a built-in policy
+    (:data:`BUILTIN_POLICIES`) with numeric options only.
+
+    A file is data: a ``module:attribute`` spec would import and call code, and a checkpoint is
+    unpickled, so only the user may name those, on the command line. Raises :class:`PolicyError`
+    naming the spec and ``fix`` (the option that passes the policy explicitly) otherwise.
+    """
+    text = spec if isinstance(spec, str) else repr(spec)
+    refusal = PolicyError(f"{source} names the policy {text[:200]!r}, which is not a built-in policy "
+                          f"({', '.join(BUILTIN_POLICIES)} with numeric options); a policy named by a file is "
+                          f"not loaded: if you trust it, pass it yourself with {fix}")
+    if not isinstance(spec, str):
+        raise refusal
+    base, _, query = spec.partition("?")
+    if base not in BUILTIN_POLICIES:
+        raise refusal
+    for pair in filter(None, query.split("&")):
+        key, sep, value = pair.partition("=")
+        if not sep or not key.isidentifier():
+            raise refusal
+        try:
+            number = float(value)
+        except ValueError:
+            raise refusal from None
+        if number != number or number in (float("inf"), float("-inf")):
+            raise refusal
+    return spec
 
 
 def parse_spec(spec: str) -> Tuple[str, Dict[str, Any]]:

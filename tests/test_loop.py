@@ -497,3 +497,16 @@ def test_a_round_that_keeps_nothing_is_skipped_and_says_why(tmp_path, monkeypatc
     assert steps["skipped"].startswith("no mined scenario was kept this round (0 conversion(s) tried")
     assert not stand.fine_tunes and not stand.evaluations and not stand.regressions
     assert any(steps["skipped"] in line for line in lines) and steps["skipped"] in report.paths["md"].read_text()
+
+
+def test_a_round_policy_read_back_from_loop_json_must_be_that_rounds_own_checkpoint(tmp_path):
+    from dv2s_gym.mining.loop import _round_spec
+
+    folder = tmp_path / "round_1" / "policy"
+    folder.mkdir(parents=True)
+    own = f"ppo:{folder / 'model.zip'}"
+    assert _round_spec(own, folder, tmp_path) == own
+    for planted in ("subprocess:run?args=id&shell=true", f"ppo:{tmp_path / 'elsewhere' / 'model.zip'}",
+                    f"ppo:{folder}/../../../x.zip", f"ppo:{folder / 'model.zip'}?device=cpu", "dv2s-ppo", None):
+        with pytest.raises(LoopError, match="not a checkpoint in .*choose another --out"):
+            _round_spec(planted, folder, tmp_path)

@@ -333,8 +333,10 @@ def test_sampler_state_round_trips_through_dumps_and_loads(name, small_space):
 def test_a_corrupt_sampler_checkpoint_is_refused():
     import dill
 
-    with pytest.raises(MiningError, match="delete sampler.pkl"):
-        SceneSampler.loads(dill.dumps({"not": "a sampler"}))
+    from dv2s_gym.mining.checkpoint_mac import seal
+
+    with pytest.raises(MiningError, match="holds no sampler.*delete sampler.pkl"):
+        SceneSampler.loads(seal(dill.dumps({"not": "a sampler"})))
 
 
 def test_adaptive_samplers_take_verifai_options(small_space):
@@ -505,6 +507,28 @@ def test_a_killed_run_resumes_to_the_same_records(whole_run, tmp_path):
         (copy / "settings.json").write_text(json.dumps(saved))
         again = mine(POLICY, out=copy, **settings)
         assert _stable(again.records) == _stable(run.records)
+
+
+class _Planted:
+    def __reduce__(self):
+        import os
+
+        return (os.system, (f"touch {os.environ['DV2S_TEST_MARKER']}",))
+
+
+def test_a_planted_sampler_checkpoint_is_not_unpickled_and_the_run_resumes_from_its_records(
+        whole_run, tmp_path, monkeypatch):
+    import pickle
+
+    out, run, settings = whole_run
+    copy = tmp_path / "run"
+    shutil.copytree(out, copy)
+    marker = tmp_path / "unpickled"
+    monkeypatch.setenv("DV2S_TEST_MARKER", str(marker))
+    (copy / "sampler.pkl").write_bytes(pickle.dumps(_Planted()))
+    resumed = mine(POLICY, out=copy, **settings)
+    assert not marker.exists()
+    assert _stable(resumed.records) == _stable(run.records)
 
 
 def test_resuming_with_other_settings_is_refused(whole_run, tmp_path):

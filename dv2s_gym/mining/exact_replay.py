@@ -108,7 +108,11 @@ def replay_failure(bank: Any, name: str, *, policy: Optional[Any] = None,
     if not isinstance(replay, Mapping) or replay.get("seed") is None:
         raise BankError(f"bank entry {name!r} is no replay of a mined failure (its provenance has no 'replay'); "
                         "replay entries are tagged 'replay'")
-    result, trace, failure = run_replay(str(entry.script_path), policy=policy or replay.get("policy"),
+    if policy is None:
+        from policies.registry import spec_from_file
+
+        policy = spec_from_file(replay.get("policy"), f"the provenance of bank entry {name!r}", "policy=SPEC")
+    result, trace, failure = run_replay(str(entry.script_path), policy=policy,
                                         seed=int(replay["seed"]), params=replay.get("params") or {},
                                         env_config=env_config, monitor=monitor)
     out = ReplayOutcome(trajectory_hash=result.trajectory_hash, matches=result.trajectory_hash == replay.get(

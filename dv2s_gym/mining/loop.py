@@ -176,6 +176,26 @@ class _State:
 
 
 # --------------------------------------------------------------------------- helpers
+def _round_spec(spec: Any, folder: Path, out: Path) -> str:
+    """A round's policy spec read back from ``loop.json``: an SB3 checkpoint inside that round's own
+    ``folder``, as the loop writes it. A spec naming anything else (code, a checkpoint elsewhere) is refused:
+    ``loop.json`` is a file, not the user's command line."""
+    from policies.registry import SB3_ALGORITHMS
+
+    text = spec if isinstance(spec, str) else repr(spec)
+    algorithm, sep, path = text.partition(":")
+    inside = False
+    if sep and algorithm in SB3_ALGORITHMS and "?" not in path:
+        try:
+            inside = Path(path).resolve().is_relative_to(folder.resolve())
+        except (OSError, ValueError):
+            inside = False
+    if not inside:
+        raise LoopError(f"{out / 'loop.json'} names the round policy {text[:200]!r}, not a checkpoint in {folder}: "
+                        "this loop folder was not written by this loop as it stands; choose another --out")
+    return text
+
+
 def _working_bank(out: Path, bank_dir: Optional[str]) -> str:
     """The bank the loop adds to: ``bank_dir`` itself, or a copy of the shipped bank in ``out/bank``."""
     if bank_dir is not None:
@@ -432,7 +452,8 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         record.setdefault("policy", current)
         round_dir = out / f"round_{number}"
         if "regress" in steps or steps.get("skipped"):
-            current = record.get("new_policy") or current
+            if record.get("new_policy"):
+                current = _round_spec(record["new_policy"], round_dir / "policy", out)
             continue
         log(f"round {number}: policy {current}")
         stages = ["mine", "split", "before", "fine_tune"] + (["control"] if control else []) + ["after"] + (
@@ -510,17 +531,18 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                                                       with_mined=True, label=f"round {number}", **arm))
         from policies.training import resolve_checkpoint
 
-        def spec_of(model: str) -> str:
+        def spec_of(model: str, folder: Path) -> str:
+            _round_spec(f"ppo:{model}", folder, out)  # loop.json is a file: only this round's own checkpoint
             return f"{resolve_checkpoint(model)[0]}:{model}"
 
-        new_policy = spec_of(steps["fine_tune"]["model"])
+        new_policy = spec_of(steps["fine_tune"]["model"], round_dir / "policy")
         record["new_policy"] = new_policy
         control_policy = None
         if control:
             if "control" not in steps:
                 timed("control", lambda: _fine_tune_arm(current, round_dir / "control", excluded, mined_share,
                                                         with_mined=False, label=f"round {number} control", **arm))
-            control_policy = spec_of(steps["control"]["model"])
+            control_policy = spec_of(steps["control"]["model"], round_dir / "control")
             record["control_policy"] = control_policy
         if "after" not in steps:
             def do_after() -> Dict[str, Any]:

@@ -233,23 +233,36 @@ class SceneSampler:
         self.fed += 1
 
     def dumps(self) -> bytes:
-        """The whole state (sampler and generators) as bytes (:meth:`loads` restores it)."""
+        """The whole state (sampler and generators) as bytes (:meth:`loads` restores it), sealed with this
+        user's MAC (:mod:`~dv2s_gym.mining.checkpoint_mac`)."""
         import dill
+
+        from dv2s_gym.mining.checkpoint_mac import seal
 
         buffer = io.BytesIO()
         dill.dump(self, buffer)
-        return buffer.getvalue()
+        return seal(buffer.getvalue())
 
     @staticmethod
     def loads(data: bytes) -> "SceneSampler":
-        """Inverse of :meth:`dumps`."""
+        """Inverse of :meth:`dumps`; :class:`MiningError` (nothing unpickled) unless ``data`` carries this user's
+        MAC."""
         import dill
 
-        sampler = dill.loads(data)
+        from dv2s_gym.mining.checkpoint_mac import unseal
+
+        payload = unseal(data)
+        if payload is None:
+            raise MiningError(UNSEALED)
+        sampler = dill.loads(payload)
         if not isinstance(sampler, SceneSampler):
             raise MiningError("the sampler checkpoint holds no sampler; delete sampler.pkl to rebuild it from "
                               "episodes.jsonl")
         return sampler
+
+
+UNSEALED = ("the sampler checkpoint was not written by this user's dv2s-gym (no valid MAC), so it is not "
+            "loaded; delete sampler.pkl to rebuild it from episodes.jsonl, or start a new run with another --out")
 
 
 def proposal_density(name: str, sampler: Any, point: Any) -> Optional[Dict[str, Any]]:

@@ -24,7 +24,8 @@ import io
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.samplers import SceneSampler
+from dv2s_gym.mining.checkpoint_mac import seal, unseal
+from dv2s_gym.mining.samplers import UNSEALED, SceneSampler
 
 __all__ = ["WindowSchedule", "SCHEDULES"]
 
@@ -95,15 +96,18 @@ class WindowSchedule:
 
         buffer = io.BytesIO()
         dill.dump({"schedule": "window", "state": self}, buffer)
-        return buffer.getvalue()
+        return seal(buffer.getvalue())
 
     @staticmethod
     def loads(data: bytes) -> "WindowSchedule":
         """Inverse of :meth:`dumps`; :class:`MiningError` if ``data`` holds something else."""
         import dill
 
+        sealed = unseal(data)
+        if sealed is None:
+            raise MiningError(UNSEALED)
         try:
-            payload = dill.loads(data)
+            payload = dill.loads(sealed)
         except Exception as error:
             raise MiningError(f"the sampler checkpoint cannot be read ({type(error).__name__}); delete sampler.pkl "
                               "to rebuild it from episodes.jsonl") from None

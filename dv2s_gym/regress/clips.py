@@ -89,11 +89,23 @@ def render_policy_video(report: Dict[str, Any], result: Dict[str, Any], role: st
     spec = (report.get(role) or {}).get("spec")
     if not spec:
         raise ClipError(f"the report names no {role} policy to re-run")
+    if (report.get(role) or {}).get("report"):  # the spec came from another report file, not the command line
+        from policies.registry import PolicyError, spec_from_file
+
+        try:
+            spec_from_file(spec, f"the baseline report {report[role]['report']}", "--baseline SPEC (instead of --baseline-report)")
+        except PolicyError as error:
+            raise ClipError(str(error)) from None
     if seconds <= 0 or size < 16 or zoom <= 0:
         raise ClipError(f"a clip needs seconds > 0, size >= 16 px and zoom > 0, "
                         f"not seconds={seconds}, size={size}, zoom={zoom}")
     scenario, seed = result["scenario"], int(result["seed"])
-    config = dict((report.get("settings") or {}).get("env_config") or {})
+    from envs.trace_bounds import TraceConfigError, check_file_config
+
+    try:
+        config = check_file_config((report.get("settings") or {}).get("env_config"), "the report")
+    except TraceConfigError as error:
+        raise ClipError(str(error)) from None
     env = make_eval_env(None, config=config, bank_dir=_bank_for(report.get("bank") or {}, scenario),
                         render_mode="rgb_array")
     frames: List[np.ndarray] = []

@@ -44,8 +44,12 @@ def find_episode(report: Dict[str, Any], episode_id: str, role: str = "candidate
 
 
 def replay_episode(report_path: Union[str, os.PathLike], episode_id: str, role: str = "candidate",
-                   video: Optional[Union[str, os.PathLike]] = None, from_policy: bool = False) -> Dict[str, Any]:
+                   video: Optional[Union[str, os.PathLike]] = None, from_policy: bool = False,
+                   spec: Optional[str] = None) -> Dict[str, Any]:
     """Re-run one episode of a report and check its trajectory hash.
+
+    A re-run loads the policy ``spec`` (the caller's), else the report's spec for ``role``, and that only if
+    it is a built-in policy (:func:`~policies.registry.spec_from_file`): a report is data.
 
     Returns ``{"id", "role", "source": "trace" | "policy", "steps", "trajectory_hash",
     "expected_hash", "matches", "video"}``; ``matches`` is False when the hash differs (a
@@ -66,7 +70,14 @@ def replay_episode(report_path: Union[str, os.PathLike], episode_id: str, role: 
         steps, digest, fps = _from_trace(trace_path, frames)
         source = "trace"
     else:
-        steps, digest, fps = _from_policy(report, result, role, frames)
+        if not spec:
+            from policies.registry import spec_from_file
+
+            named = (report.get(role) or {}).get("spec")
+            if not named:
+                raise RegressError(f"the report names no {role} policy to re-run")
+            spec = spec_from_file(named, f"the report {report_path} ({role})", "--policy-spec SPEC")
+        steps, digest, fps = _from_policy(report, result, spec, frames)
         source = "policy"
     written = None
     if video:
@@ -94,17 +105,16 @@ def _from_trace(path: str, frames: Optional[List[Any]]):
         env.close()
 
 
-def _from_policy(report: Dict[str, Any], result: Dict[str, Any], role: str, frames: Optional[List[Any]]):
+def _from_policy(report: Dict[str, Any], result: Dict[str, Any], spec: str, frames: Optional[List[Any]]):
     from policies.evaluation import make_eval_env, run_episode
     from policies.registry import load_policy
 
-    spec = (report.get(role) or {}).get("spec")
-    if not spec:
-        raise RegressError(f"the report names no {role} policy to re-run")
+    from envs.trace_bounds import check_file_config
+
+    config = check_file_config((report.get("settings") or {}).get("env_config"), "the report")
     bank = report.get("bank") or {}
     scenario = result["scenario"]
     bank_dir = _bank_for(bank, scenario)
-    config = dict((report.get("settings") or {}).get("env_config") or {})
     env = make_eval_env(None, config=config, bank_dir=bank_dir,
                         render_mode="rgb_array" if frames is not None else None)
     try:
