@@ -107,3 +107,35 @@ def test_a_baseline_report_from_another_version_is_flagged(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert code in (0, 3)
     assert f"warning: baseline report {path} was made by dv2s-gym 0.0.1, this is {old['dv2s_version']}" in printed
+
+
+def test_resume_key_covers_helper_modules_data_files_and_dv2s_itself(tmp_path, monkeypatch):
+    from dv2s_gym.regress import identity
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "stealth_cfg.py").write_text("ACTION = 1\n")
+    (tmp_path / "helped_policy_here.py").write_text("import stealth_cfg\n" + POLICY_MODULE.format(action=1))
+    (tmp_path / "weights.json").write_text('{"w": 1}')
+    spec = "helped_policy_here:make?weights=weights.json"
+    before = identity.policy_fingerprint(spec)
+    assert before["dv2s version"] and before["dv2s sources (SHA-256)"]
+    (tmp_path / "stealth_cfg.py").write_text("ACTION = 4\n")  # the helper the module imports changed
+    (tmp_path / "weights.json").write_text('{"w": 2}')  # the data file an option names changed
+    after = identity.policy_fingerprint(spec)
+    changed = sorted(key for key in before.keys() | after.keys() if before.get(key) != after.get(key))
+    assert changed == [f"module file {(tmp_path / 'stealth_cfg.py').resolve()} (SHA-256)",
+                       "option weights file weights.json (SHA-256)"]
+    monkeypatch.setattr(identity, "dv2s_sources_sha256", lambda: "edited simulator")
+    assert identity.policy_fingerprint("rule")["dv2s sources (SHA-256)"] == "edited simulator"
+
+
+def test_resume_is_refused_when_a_helper_module_of_the_policy_changed(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "stealth_cfg2.py").write_text("ACTION = 1\n")
+    (tmp_path / "helped_policy_there.py").write_text("import stealth_cfg2\n" + POLICY_MODULE.format(action=1))
+    arguments = dict(scenarios=[SCENARIO], episodes=1, workers=1, out_dir=tmp_path / "out", env_config=QUICK,
+                     progress=False)
+    run_regression("helped_policy_there:make", "rule", **arguments)
+    (tmp_path / "stealth_cfg2.py").write_text("ACTION = 4\n")
+    with pytest.raises(ResumeMismatchError, match=r"stealth_cfg2\.py \(SHA-256\)"):
+        run_regression("helped_policy_there:make", "rule", **arguments)
