@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import xml.etree.ElementTree as ET
 
 import pytest
 
@@ -106,7 +107,13 @@ def test_a_baseline_report_from_another_version_is_flagged(tmp_path, capsys):
                    str(tmp_path / "new"), "--no-progress")
     printed = capsys.readouterr().out
     assert code in (0, 3)
-    assert f"warning: baseline report {path} was made by dv2s-gym 0.0.1, this is {old['dv2s_version']}" in printed
+    warning = f"baseline report {path} was made by dv2s-gym 0.0.1, this is {old['dv2s_version']}"
+    assert f"warning: {warning}" in printed
+    for name in ("report.md", "report.json", "junit.xml", "report.html"):  # every report carries it
+        assert warning in (tmp_path / "new" / name).read_text().replace("&quot;", '"'), name
+    suite = ET.parse(tmp_path / "new" / "junit.xml").getroot().find("testsuite")
+    assert any(p.get("name") == "warning" and warning in p.get("value") for p in suite.iter("property"))
+    assert warning in suite.find("system-err").text
 
 
 def test_resume_key_covers_helper_modules_data_files_and_dv2s_itself(tmp_path, monkeypatch):

@@ -105,10 +105,16 @@ def _select(scenarios: Scenarios, bank_dir: Optional[str], fallback: Optional[Se
 
 def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Sequence[str], seeds: Sequence[int],
                           bank: Dict[str, Any], env_config: Dict[str, Any], failure: Sequence[str],
-                          stall_seconds: float) -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]], str]:
+                          stall_seconds: float, accept_failed: bool = False
+                          ) -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]], str]:
     """The baseline info, the baseline result per episode id, and the report file's SHA-256."""
     path = Path(path)
     old = load_report(path)
+    if old.get("verdict") in ("FAIL", "ERROR") and not accept_failed:
+        raise ReportMismatchError(
+            f"baseline report {path} has the verdict {old['verdict']}: its candidate did not pass its own gate, so "
+            "it is no baseline to compare against; compare against a report that passed, or give "
+            "--accept-failed-baseline to use it anyway")
     check_baseline_report(old, path=path, bank=bank, env_config=env_config)
     if role not in ROLES:
         raise RegressError(f"--baseline-role must be 'candidate' or 'baseline', not {role!r}")
@@ -166,7 +172,7 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
                    env_config: Optional[Dict[str, Any]] = None, progress: bool = True,
                    timeout: Optional[float] = None, batch: Optional[int] = None,
                    failure: Union[None, str, Sequence[str]] = None, stall_seconds: float = DEFAULT_STALL_SECONDS,
-                   baseline_role: str = "candidate",
+                   baseline_role: str = "candidate", accept_failed_baseline: bool = False,
                    on_result: Optional[Callable[[Dict[str, Any]], None]] = None) -> Dict[str, Any]:
     """Run ``candidate`` (and ``baseline``) on scenario x seed pairs and write the reports.
 
@@ -175,7 +181,8 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         baseline: policy spec to compare against, run on the same episodes; or
         baseline_report: an earlier ``report.json`` whose episodes (of its ``baseline_role``
             policy, by default the one it tested) are the baseline: only the candidate runs.
-            Refused when its schema version, the bank scenarios' scripts or the env config differ.
+            Refused when its schema version, the bank scenarios' scripts or the env config differ, and
+            when its verdict was FAIL or ERROR unless ``accept_failed_baseline``.
         bank_dir: bank folder (default: the shipped bank).
         scenarios: bank names and/or ``tag:<tag>`` (default: the whole bank, or the baseline
             report's scenarios); an empty selection is an error.
@@ -242,7 +249,8 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
     report_hash = None
     if baseline_report is not None:
         baseline_info, old_results, report_hash = _baseline_from_report(baseline_report, baseline_role, names, seeds,
-                                                                        bank, env_config, failure, float(stall_seconds))
+                                                                        bank, env_config, failure, float(stall_seconds),
+                                                                        accept_failed=accept_failed_baseline)
     elif baseline is not None:
         baseline_info = baseline_info_early
     else:
