@@ -44,7 +44,7 @@ def test_the_regression_worker_counts_total_standing_time(monkeypatch):
     result = SimpleNamespace(to_json=lambda: {"scenario": "s", "seed": 0, "collided": False, "off_road": False,
                                               "error": None})
     monkeypatch.setattr(worker_cache, "env_for", lambda bank, config: (("k", "{}"), None))
-    monkeypatch.setattr(worker_cache, "policy_for", lambda spec, key, env: None)
+    monkeypatch.setattr(worker_cache, "policy_for", lambda spec, key, env, owner="": None)
     monkeypatch.setattr(evaluation, "run_episode", lambda env, policy, scenario, seed: (result, trace))
     data = run_regress_task({"kind": "regress", "policy": "rule", "role": "candidate", "scenario": "s", "seed": 0,
                              "env_config": {}, "bank_dir": None, "trace_dir": None, "stall_seconds": 5.0})

@@ -55,11 +55,16 @@ def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterab
                env_config: Dict[str, Any], bank_dir: Optional[str], trace_dir: Optional[str],
                failure: Sequence[str] = DEFAULT_FAILURE, stall_seconds: float = DEFAULT_STALL_SECONDS
                ) -> List[Dict[str, Any]]:
-    """Task dicts, seed by seed (every scenario, then the next seed), each role in turn."""
-    return [{"kind": KIND, "policy": spec, "role": role, "scenario": scenario, "seed": int(seed),
-             "env_config": dict(env_config), "bank_dir": bank_dir, "trace_dir": trace_dir,
-             "failure": list(failure), "stall_seconds": float(stall_seconds)}
-            for seed in seeds for scenario in scenarios for role, spec in policies.items()]
+    """Task dicts, seed by seed (every scenario, then the next seed), each role in turn; which role goes first
+    alternates from pair to pair, so neither role is always the first to meet a scene."""
+    roles = list(policies.items())
+    tasks = []
+    for pair, (seed, scenario) in enumerate((seed, scenario) for seed in seeds for scenario in scenarios):
+        for role, spec in (roles if pair % 2 == 0 else roles[::-1]):
+            tasks.append({"kind": KIND, "policy": spec, "role": role, "scenario": scenario, "seed": int(seed),
+                          "env_config": dict(env_config), "bank_dir": bank_dir, "trace_dir": trace_dir,
+                          "failure": list(failure), "stall_seconds": float(stall_seconds)})
+    return tasks
 
 
 def _policy_info(spec: str) -> Dict[str, Any]:

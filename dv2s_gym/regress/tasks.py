@@ -59,7 +59,7 @@ def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
     env_key = None
     try:
         env_key, env = env_for(task.get("bank_dir"), task.get("env_config"))
-        policy = policy_for(task["policy"], env_key, env)
+        policy = policy_for(task["policy"], env_key, env, owner=task["role"])  # one instance per role
         started = time.perf_counter()
         result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
         seconds = time.perf_counter() - started
