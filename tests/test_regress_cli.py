@@ -17,7 +17,7 @@ import pytest
 from dv2s_gym.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
-QUICK = ["--config", '{"duration": 3}', "--no-progress"]
+QUICK = ["--config", '{"duration": 3}', "--stall-seconds", "1", "--no-progress"]
 
 
 def regress(*args: str) -> int:

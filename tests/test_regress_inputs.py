@@ -61,7 +61,7 @@ def test_a_factory_spec_is_called_and_a_module_in_the_current_folder_is_found(tm
         load_policy("other_policies_here:make")
     # the workers find the module in this folder too
     report = run_regression("my_policies_here:make", "rule", scenarios=[SCENARIO], episodes=1, workers=1,
-                            out_dir=tmp_path / "out", env_config=QUICK, progress=False)
+                            out_dir=tmp_path / "out", env_config=QUICK, stall_seconds=1, progress=False)
     assert report["errors"] == [] and report["episodes"][0]["candidate"]["steps"] > 0
 
 
@@ -69,7 +69,7 @@ def test_resume_is_refused_when_the_policy_module_changed_under_the_same_spec(tm
     monkeypatch.chdir(tmp_path)
     module = tmp_path / "resumed_policy_here.py"
     module.write_text(POLICY_MODULE.format(action=1))
-    arguments = dict(scenarios=[SCENARIO], episodes=1, workers=1, out_dir=tmp_path / "out", env_config=QUICK,
+    arguments = dict(scenarios=[SCENARIO], episodes=1, workers=1, out_dir=tmp_path / "out", env_config=QUICK, stall_seconds=1,
                      progress=False)
     first = run_regression("resumed_policy_here:make", "rule", **arguments)
     again = run_regression("resumed_policy_here:make", "rule", **arguments)  # unchanged: resumes, runs nothing
@@ -98,13 +98,13 @@ def test_resume_is_refused_when_the_checkpoint_changed_under_the_same_path(tmp_p
 
 def test_a_baseline_report_from_another_version_is_flagged(tmp_path, capsys):
     old = run_regression("rule", scenarios=[SCENARIO], episodes=1, workers=1, out_dir=tmp_path / "old",
-                         env_config=QUICK, progress=False)
+                         env_config=QUICK, stall_seconds=1, progress=False)
     path = tmp_path / "old" / "report.json"
     data = json.loads(path.read_text())
     data["dv2s_version"] = "0.0.1"
     path.write_text(json.dumps(data))
     code = regress("--policy", "rule", "--baseline-report", str(path), "--workers", "1", "--out",
-                   str(tmp_path / "new"), "--no-progress")
+                   str(tmp_path / "new"), "--stall-seconds", "1", "--no-progress")
     printed = capsys.readouterr().out
     assert code in (0, 3)
     warning = f"baseline report {path} was made by dv2s-gym 0.0.1, this is {old['dv2s_version']}"
@@ -140,9 +140,26 @@ def test_resume_is_refused_when_a_helper_module_of_the_policy_changed(tmp_path, 
     monkeypatch.chdir(tmp_path)
     (tmp_path / "stealth_cfg2.py").write_text("ACTION = 1\n")
     (tmp_path / "helped_policy_there.py").write_text("import stealth_cfg2\n" + POLICY_MODULE.format(action=1))
-    arguments = dict(scenarios=[SCENARIO], episodes=1, workers=1, out_dir=tmp_path / "out", env_config=QUICK,
+    arguments = dict(scenarios=[SCENARIO], episodes=1, workers=1, out_dir=tmp_path / "out", env_config=QUICK, stall_seconds=1,
                      progress=False)
     run_regression("helped_policy_there:make", "rule", **arguments)
     (tmp_path / "stealth_cfg2.py").write_text("ACTION = 4\n")
     with pytest.raises(ResumeMismatchError, match=r"stealth_cfg2\.py \(SHA-256\)"):
         run_regression("helped_policy_there:make", "rule", **arguments)
+
+
+def test_degenerate_episode_settings_are_refused_before_any_episode(tmp_path, capsys):
+    out = tmp_path / "out"
+    for config, stall, message in (('{"duration": -5}', "1", "duration must be a positive number of seconds"),
+                                   ('{"duration": 0}', "1", "duration must be a positive number of seconds"),
+                                   ('{"duration": 4}', "5", "--stall-seconds 5 is not shorter than the episodes (4 s)"),
+                                   ('{"duration": 4}', "4", "--stall-seconds 4 is not shorter than the episodes (4 s)"),
+                                   ('{"durration": 4}', "1", "unknown config key(s) 'durration' (did you mean 'duration'?)")):
+        assert regress("--policy", "rule", "--baseline", "rule", "--scenarios", SCENARIO, "--config", config,
+                       "--stall-seconds", stall, "--out", str(out), "--no-progress") == 2, config
+        assert message in capsys.readouterr().err, config
+        assert not out.exists()  # refused before any episode or output
+    # without stall among the failure kinds a short episode is fine
+    from dv2s_gym.regress.runner import _check_env_config
+
+    _check_env_config({"duration": 2}, ["collision", "off_road"], 5.0)

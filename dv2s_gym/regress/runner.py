@@ -92,6 +92,27 @@ def _check_settings(episodes: Optional[int], seed: int, margin: float, alpha: fl
         raise RegressError(f"the sequential batch must be a positive number of seeds, not {batch!r}")
 
 
+def _check_env_config(env_config: Dict[str, Any], failure: Sequence[str], stall_seconds: float) -> None:
+    """Refuse env settings under which the gate cannot see failures: unknown keys, a non-positive episode
+    duration, or a stall time the episodes are too short to reach."""
+    from envs.dv2s_env import DV2SEnv
+    from envs.errors import UnknownConfigKeyError, check_config_keys
+
+    defaults = DV2SEnv.default_config()
+    try:
+        check_config_keys(env_config, defaults)
+    except (UnknownConfigKeyError, ValueError) as error:
+        raise RegressError(f"--config: {error}") from None
+    duration = env_config.get("duration", defaults["duration"])
+    if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not math.isfinite(duration) \
+            or duration <= 0:
+        raise RegressError(f"--config duration must be a positive number of seconds per episode, not {duration!r}")
+    if "stall" in failure and float(stall_seconds) >= float(duration):
+        raise RegressError(f"--stall-seconds {stall_seconds:g} is not shorter than the episodes ({duration:g} s): no "
+                           "stall could ever be detected; lower --stall-seconds, lengthen the episodes with "
+                           "--config '{\"duration\": ...}', or leave stall out of --failure")
+
+
 def _select(scenarios: Scenarios, bank_dir: Optional[str], fallback: Optional[Sequence[str]]) -> List[str]:
     from scenario_bank import select_scenarios
 
@@ -115,12 +136,12 @@ def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Seque
     """The baseline info, the baseline result per episode id, and the report file's SHA-256."""
     path = Path(path)
     old = load_report(path)
+    check_baseline_report(old, path=path, bank=bank, env_config=env_config)  # a report with errors: never
     if old.get("verdict") in ("FAIL", "ERROR") and not accept_failed:
         raise ReportMismatchError(
             f"baseline report {path} has the verdict {old['verdict']}: its candidate did not pass its own gate, so "
             "it is no baseline to compare against; compare against a report that passed, or give "
             "--accept-failed-baseline to use it anyway")
-    check_baseline_report(old, path=path, bank=bank, env_config=env_config)
     if role not in ROLES:
         raise RegressError(f"--baseline-role must be 'candidate' or 'baseline', not {role!r}")
     if old.get(role) is None:
@@ -238,6 +259,7 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         if env_config is None:
             env_config = (old.get("settings") or {}).get("env_config")
     env_config = dict(env_config or {})
+    _check_env_config(env_config, failure, float(stall_seconds))
     names = _select(scenarios, bank_dir, fallback)
     bank = bank_info(names, bank_dir)
     if episodes is not None and (mde is not None or power is not None):
