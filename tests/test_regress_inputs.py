@@ -77,8 +77,10 @@ def test_resume_is_refused_when_the_policy_module_changed_under_the_same_spec(tm
     lines = (tmp_path / "out" / "results.jsonl").read_text().splitlines()
     assert len(lines) == 2
     module.write_text(POLICY_MODULE.format(action=4))  # same spec, other code
-    with pytest.raises(ResumeMismatchError, match=r"candidate module resumed_policy_here source \(SHA-256\)"):
+    with pytest.raises(ResumeMismatchError, match=r"candidate module resumed_policy_here source \(SHA-256\)") as info:
         run_regression("resumed_policy_here:make", "rule", **arguments)
+    # the folder's reports are the earlier run's: the refusal says so, and leaves them untouched
+    assert "its reports (junit.xml, report.html, report.md, report.json) are that run's, not this one's" in str(info.value)
 
 
 def test_resume_is_refused_when_the_checkpoint_changed_under_the_same_path(tmp_path):
