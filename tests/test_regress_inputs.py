@@ -165,3 +165,11 @@ def test_degenerate_episode_settings_are_refused_before_any_episode(tmp_path, ca
     from dv2s_gym.regress.runner import _check_env_config
 
     _check_env_config({"duration": 2}, ["collision", "off_road"], 5.0)
+
+
+def test_a_policy_option_of_the_wrong_type_is_named():
+    with pytest.raises(PolicyError, match="action_noise must be a number, not 'abc'"):
+        load_policy("rule?action_noise=abc")
+    with pytest.raises(PolicyError, match="noise_seed must be an integer, not 1.5"):
+        load_policy("rule?action_noise=0.1&noise_seed=1.5")
+    assert load_policy("rule?action_noise=0.1&noise_seed=3").base_seed == 3
