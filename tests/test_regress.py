@@ -197,7 +197,7 @@ def test_markdown_puts_the_regressed_scenarios_first_and_fits_a_comment(tmp_path
     assert "(0/40 (0.0%) -> 12/40 (30.0%))" in first
     rows = [line.split("|")[1].strip() for line in text.splitlines() if line.startswith("| `")]
     assert rows[:3] == ["`broken`", "`alpha`", "`calm`"]  # worst first, then by name
-    assert "(from `../old/report.json`)" in text and str(tmp_path) not in text
+    assert "(the candidate policy of `../old/report.json`)" in text and str(tmp_path) not in text
     huge = dict(report, newly_failing=[], errors=[{"id": f"broken/{k}", "role": "candidate", "error": "x" * 400}
                                                    for k in range(5000)])
     assert len(write_markdown(huge, tmp_path / "huge.md").read_text()) <= MARKDOWN_LIMIT + 200
@@ -463,4 +463,4 @@ def test_a_changed_scenario_script_makes_an_old_report_another_bank_version(tmp_
     script.write_text(script.read_text() + "\n# tuned\n")
     with pytest.raises(ReportMismatchError, match="another bank version .*changed scenario highway_lead_vehicle_brakes"):
         run_regression("rule", baseline_report=tmp_path / "old" / "report.json", bank_dir=bank, episodes=1,
-                       out_dir=tmp_path / "new", progress=False)
+                       out_dir=tmp_path / "new", stall_seconds=1, progress=False)
