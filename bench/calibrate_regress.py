@@ -156,9 +156,9 @@ def simulate_scenario(n: int, p_baseline: float, p_candidate: float, reps: int, 
 
 
 def gate_outcomes(tables: np.ndarray, margin: float = DEFAULT_MARGIN, alpha: float = DEFAULT_ALPHA
-                  ) -> tuple[np.ndarray, np.ndarray]:
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The gate's decisions for simulated runs, ``tables`` of shape (reps, scenarios, 4): (overall FAIL per run,
-    scenario FAIL per run and scenario). The same rule as ``compare_scenarios`` (checked against it in ``gate``),
+    scenario FAIL per run and scenario, overall PASS per run). The same rule as ``compare_scenarios`` (checked against it in ``gate``),
     vectorised where it can be: the p-values, intervals and PASS checks; the family procedure per run."""
     reps, count, _ = tables.shape
     a, b, c, d = (tables[..., i] for i in range(4))
@@ -176,7 +176,9 @@ def gate_outcomes(tables: np.ndarray, margin: float = DEFAULT_MARGIN, alpha: flo
         scenario_fail[r] = np.array(decision.scenarios) & (b[r] > c[r]) & (upper[r] >= margin)
         pooled_fail = decision.pooled and pb[r] > pc[r] and pooled_upper[r] >= margin
         overall[r] = scenario_fail[r].any() or pooled_fail
-    return overall, scenario_fail
+    worse_alone = ((p < alpha) & (b > c)).any(axis=1)
+    passed = ~overall & (pooled_upper < margin) & ~worse_alone
+    return overall, scenario_fail, passed
 
 
 BANK_SCENARIOS = 21
@@ -201,11 +203,12 @@ def gate(reps: int, rng: np.random.Generator) -> None:
     planned = plan_episodes(names)
     rates = bank_rates()
     check = simulate_run(20, rates, 50, rng, {0: (0.0, 0.3)})
-    overall, scenario_fail = gate_outcomes(check)
+    check = np.concatenate([check, simulate_run(1000, rates, 50, rng, {2: (0.05, 0.08)})])  # PASSes among them
+    overall, scenario_fail, passed = gate_outcomes(check)
     for r in range(check.shape[0]):  # the vectorised rule is compare_scenarios'
         tables = {name: PairedTable(*map(int, check[r, i])) for i, name in enumerate(names)}
         per, whole = compare_scenarios(tables, DEFAULT_MARGIN)
-        assert whole.verdict is (Verdict.FAIL if overall[r] else whole.verdict) and (whole.verdict is Verdict.FAIL) == overall[r]
+        assert (whole.verdict is Verdict.FAIL) == overall[r] and (whole.verdict is Verdict.PASS) == passed[r]
         assert [per[name].verdict is Verdict.FAIL for name in names] == list(scenario_fail[r])
     print(f"\n== the gate (compare_scenarios: every scenario a test, pooled test in the family), {BANK_SCENARIOS} "
           f"scenarios with failure rates 2-25 % (rho {DEFAULT_CORRELATION:g}), {reps} repetitions each")
@@ -224,10 +227,15 @@ def gate(reps: int, rng: np.random.Generator) -> None:
              {0: (0.0, 0.3), 1: (0.3, 0.0)}, 0),
             ("one scenario 5 % -> 25 % (+20 pp): FAIL and named", {2: (0.05, 0.25)}, 2),
             ("every scenario +3 pp: FAIL", {i: (p, p + 0.03) for i, p in enumerate(rates)}, None),
+            ("identical policies: PASS", {}, "pass"),
+            ("one scenario 5 % -> 15 % (+10 pp): PASS (should be rare)", {2: (0.05, 0.15)}, "pass"),
+            ("one scenario 5 % -> 15 % (+10 pp): FAIL", {2: (0.05, 0.15)}, None),
         ]
         for text, changes, named in cases:
-            overall, scenario_fail = gate_outcomes(simulate_run(n, rates, reps, rng, changes))
-            if named is None:
+            overall, scenario_fail, passed = gate_outcomes(simulate_run(n, rates, reps, rng, changes))
+            if named == "pass":
+                print(f"    {text:<72} {MonteCarloRate(int(passed.sum()), reps)}")
+            elif named is None:
                 print(f"    {text:<72} {MonteCarloRate(int(overall.sum()), reps)}")
             else:
                 hit = overall & scenario_fail[:, named]

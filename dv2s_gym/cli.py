@@ -196,7 +196,7 @@ def _cmd_regress(args: argparse.Namespace) -> int:
             backend=args.backend, workers=args.workers, address=args.address, out_dir=out,
             sequential=args.sequential, env_config=env_config, progress=not args.no_progress and not args.json,
             timeout=args.timeout, batch=args.batch, baseline_role=args.baseline_role, failure=args.failure,
-            stall_seconds=args.stall_seconds)
+            stall_seconds=args.stall_seconds, accept_failed_baseline=args.accept_failed_baseline)
     except KeyboardInterrupt as stop:
         raise Interrupted(getattr(stop, "note", None) or f"finished episodes are kept in "
                           f"{Path(out) / 'results.jsonl'}; rerun the same command to resume") from None
@@ -895,6 +895,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "(refused if its schema version, bank scenarios or env config differ)")
     p.add_argument("--baseline-role", choices=["candidate", "baseline"], default="candidate",
                    help="with --baseline-report: which of its policies is the baseline (default: the one it tested)")
+    p.add_argument("--accept-failed-baseline", action="store_true",
+                   help="with --baseline-report: use a report whose verdict was FAIL or ERROR (refused otherwise)")
     bank_option(p)
     p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank, or the "
                    "baseline report's scenarios)")

@@ -7,7 +7,7 @@ from typing import Iterable, Optional, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["time_to_collision", "path_is_free", "first_stall_step", "FREE_PATH", "STANDING_SPEED"]
+__all__ = ["time_to_collision", "path_is_free", "first_stall_step", "total_stall_step", "FREE_PATH", "STANDING_SPEED"]
 
 FREE_PATH = 40.0
 """Metres ahead of the ego that must be empty for its path to count as free."""
@@ -87,4 +87,27 @@ def first_stall_step(trace, stall_seconds: float) -> Optional[int]:
         run += 1
         if run >= needed:
             return step - needed + 1
+    return None
+
+
+def _standing_free(states) -> bool:
+    ego = states.get("ego")
+    return ego is not None and ego[3] < STANDING_SPEED and path_is_free(
+        ego, (state for name, state in states.items() if name != "ego"))
+
+
+def total_stall_step(trace, stall_seconds: float) -> Optional[int]:
+    """The step at which the ego's *total* standing time with a free path ahead reaches ``stall_seconds``, or ``None``.
+
+    Unlike :func:`first_stall_step` the standing need not be one unbroken stretch: a policy that stands
+    4.6 s on a free road, creeps a moment and stands again is stalling just the same.
+    """
+    period = 1.0 / float(trace.config.get("policy_frequency", 5))
+    needed = max(1, int(math.ceil(stall_seconds / period)))
+    standing = 0
+    for step, states in enumerate(trace.states):
+        if _standing_free(states):
+            standing += 1
+            if standing >= needed:
+                return step
     return None

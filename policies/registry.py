@@ -410,13 +410,23 @@ def load_policy(spec: Union[str, os.PathLike, Policy, Callable], **options: Any)
     else:
         base, parsed = parse_spec(os.fspath(spec))
         parsed.update(options)
-        noise = parsed.pop("action_noise", None)
-        noise_seed = parsed.pop("noise_seed", 0)
+        noise = _option_number("action_noise", parsed.pop("action_noise", None), float)
+        noise_seed = _option_number("noise_seed", parsed.pop("noise_seed", 0), int)
         policy = _load_base(base, parsed)
         if noise:
-            return ActionNoise(policy, float(noise), seed=noise_seed)
+            return ActionNoise(policy, noise, seed=noise_seed)
         return policy
     return ActionNoise(policy, float(noise)) if noise else policy
+
+
+def _option_number(name: str, value: Any, cast: type) -> Any:
+    """``value`` as a ``cast`` number, or a :class:`PolicyError` naming the option."""
+    if value is None:
+        return None
+    kind = "an integer" if cast is int else "a number"
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or (cast is int and value != int(value)):
+        raise PolicyError(f"{name} must be {kind}, not {value!r}")
+    return cast(value)
 
 
 def _load_base(base: str, options: Dict[str, Any]) -> Policy:

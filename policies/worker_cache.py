@@ -13,7 +13,7 @@ from typing import Any, Dict, Optional, Tuple
 __all__ = ["env_for", "policy_for", "drop_env", "clear_caches"]
 
 _ENVS: Dict[Tuple[Optional[str], str], Any] = {}
-_POLICIES: Dict[Tuple[str, Optional[str], str], Any] = {}
+_POLICIES: Dict[Tuple[str, str, Optional[str], str], Any] = {}
 
 
 def _config_key(config: Optional[Dict[str, Any]]) -> str:
@@ -34,9 +34,13 @@ def env_for(bank_dir: Optional[str], config: Optional[Dict[str, Any]]):
     return key, env
 
 
-def policy_for(spec: str, env_key: Tuple[Optional[str], str], env):
-    """This process's cached policy ``spec``, bound to the env cached under ``env_key``."""
-    key = (spec, *env_key)
+def policy_for(spec: str, env_key: Tuple[Optional[str], str], env, owner: str = ""):
+    """This process's cached policy ``spec``, bound to the env cached under ``env_key``.
+
+    ``owner`` keeps instances apart: ``dv2s regress`` gives each role its own, so a stateful policy
+    run as both candidate and baseline sees the same sequence of episodes in both roles.
+    """
+    key = (spec, owner, *env_key)
     policy = _POLICIES.get(key)
     if policy is None:
         from policies.registry import load_policy
@@ -50,7 +54,7 @@ def policy_for(spec: str, env_key: Tuple[Optional[str], str], env):
 def drop_env(env_key: Tuple[Optional[str], str]) -> None:
     """Forget an env (and the policies bound to it) after an exception left it in an unknown state."""
     env = _ENVS.pop(env_key, None)
-    for key in [k for k in _POLICIES if k[1:] == env_key]:
+    for key in [k for k in _POLICIES if k[2:] == env_key]:
         del _POLICIES[key]
     if env is not None:
         try:

@@ -61,3 +61,19 @@ class StopPolicy(Policy):
 
     def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
         return np.full(len(observations), 4, dtype=np.int64)
+
+
+class EpisodeCountingPolicy(Policy):
+    """Brakes (SLOWER) in the first ``slow`` episodes this instance drives, keeps the lane (IDLE) afterwards:
+    a stateful policy whose behaviour depends on how many episodes it has seen."""
+
+    name = "counting"
+
+    def __init__(self, slow: int = 1) -> None:
+        self.slow, self.episodes = int(slow), 0
+
+    def seed(self, seed: int) -> None:
+        self.episodes += 1
+
+    def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        return np.full(len(observations), 4 if self.episodes <= self.slow else 1, dtype=np.int64)

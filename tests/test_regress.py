@@ -197,7 +197,7 @@ def test_markdown_puts_the_regressed_scenarios_first_and_fits_a_comment(tmp_path
     assert "(0/40 (0.0%) -> 12/40 (30.0%))" in first
     rows = [line.split("|")[1].strip() for line in text.splitlines() if line.startswith("| `")]
     assert rows[:3] == ["`broken`", "`alpha`", "`calm`"]  # worst first, then by name
-    assert "(from `../old/report.json`)" in text and str(tmp_path) not in text
+    assert "(the candidate policy of `../old/report.json`)" in text and str(tmp_path) not in text
     huge = dict(report, newly_failing=[], errors=[{"id": f"broken/{k}", "role": "candidate", "error": "x" * 400}
                                                    for k in range(5000)])
     assert len(write_markdown(huge, tmp_path / "huge.md").read_text()) <= MARKDOWN_LIMIT + 200
@@ -219,7 +219,7 @@ def test_replay_reproduces_failed_and_passed_episodes(noisy_run, tmp_path):
 
 def test_too_few_episodes_is_inconclusive_never_pass(tmp_path):
     report = run_regression("rule", "rule", scenarios=["highway_lead_vehicle_brakes"], episodes=2, workers=1,
-                            out_dir=tmp_path, env_config={"duration": 3}, progress=False)
+                            out_dir=tmp_path, env_config={"duration": 3}, stall_seconds=1, progress=False)
     assert report["verdict"] == "INCONCLUSIVE"
     assert report["scenarios"]["highway_lead_vehicle_brakes"]["comparison"]["verdict"] == "INCONCLUSIVE"
     assert report["regressed"] == []
@@ -227,7 +227,7 @@ def test_too_few_episodes_is_inconclusive_never_pass(tmp_path):
 
 def test_without_a_baseline_measures_only(tmp_path):
     report = run_regression("rule", scenarios=["highway_lead_vehicle_brakes"], episodes=2, workers=1,
-                            out_dir=tmp_path, env_config={"duration": 3}, progress=False)
+                            out_dir=tmp_path, env_config={"duration": 3}, stall_seconds=1, progress=False)
     assert report["verdict"] is None and report["baseline"] is None
     entry = report["scenarios"]["highway_lead_vehicle_brakes"]
     assert entry["baseline"] is None and entry["comparison"] is None and entry["candidate"]["episodes"] == 2
@@ -236,7 +236,7 @@ def test_without_a_baseline_measures_only(tmp_path):
 
 def test_resume_after_an_interruption_loses_and_duplicates_nothing(tmp_path):
     options = dict(scenarios=["highway_lead_vehicle_brakes", "highway_cut_in_from_left"], episodes=4, workers=2,
-                   out_dir=tmp_path, env_config={"duration": 3}, progress=False)
+                   out_dir=tmp_path, env_config={"duration": 3}, stall_seconds=1, progress=False)
     seen = []
 
     def interrupt(result):
@@ -268,7 +268,7 @@ def test_a_worker_that_crashes_or_hangs_is_retried_once_then_reported(tmp_path):
     log = tmp_path / "attempts.log"
     spec = f"regress_helpers:FaultyPolicy?crash_seed=0&hang_seed=1&log={log}"
     report = run_regression(spec, scenarios=["highway_lead_vehicle_brakes"], episodes=3, workers=2,
-                            out_dir=tmp_path / "out", env_config={"duration": 2}, timeout=20, progress=False)
+                            out_dir=tmp_path / "out", env_config={"duration": 2}, stall_seconds=1, timeout=20, progress=False)
     assert sorted(log.read_text().split()) == ["0", "0", "1", "1"]  # each tried twice
     errors = {e["id"]: e for e in report["errors"]}
     assert set(errors) == {"highway_lead_vehicle_brakes/0", "highway_lead_vehicle_brakes/1"}
@@ -352,7 +352,7 @@ def test_baseline_report_of_another_schema_bank_or_config_is_refused(noisy_run, 
     with pytest.raises(ReportMismatchError, match=f"another bank version.*changed scenario {PAIR[1]}"):
         run_regression("rule", baseline_report=other_bank, episodes=4, out_dir=tmp_path / "b", progress=False)
     with pytest.raises(ReportMismatchError, match="another env config .*duration: 3 here, 8 there"):
-        run_regression("rule", baseline_report=out / "report.json", episodes=4, env_config={"duration": 3},
+        run_regression("rule", baseline_report=out / "report.json", episodes=4, env_config={"duration": 3}, stall_seconds=1,
                        out_dir=tmp_path / "c", progress=False)
     with pytest.raises(ReportMismatchError, match="no episodes of highway_cut_in_from_left"):
         run_regression("rule", baseline_report=out / "report.json", scenarios=["highway_cut_in_from_left"],
@@ -457,10 +457,10 @@ def test_a_changed_scenario_script_makes_an_old_report_another_bank_version(tmp_
     entry = bank / "highway_lead_vehicle_brakes"
     shutil.copytree(scenario_path("highway_lead_vehicle_brakes").parent, entry)
     old = run_regression("rule", bank_dir=bank, episodes=1, workers=1, out_dir=tmp_path / "old",
-                         env_config={"duration": 2}, progress=False)
+                         env_config={"duration": 2}, stall_seconds=1, progress=False)
     assert old["bank"]["path"] == str(bank.resolve()) and old["bank"]["scenarios"] == ["highway_lead_vehicle_brakes"]
     script = entry / "scenario.scenic"
     script.write_text(script.read_text() + "\n# tuned\n")
     with pytest.raises(ReportMismatchError, match="another bank version .*changed scenario highway_lead_vehicle_brakes"):
         run_regression("rule", baseline_report=tmp_path / "old" / "report.json", bank_dir=bank, episodes=1,
-                       out_dir=tmp_path / "new", progress=False)
+                       out_dir=tmp_path / "new", stall_seconds=1, progress=False)

@@ -17,7 +17,7 @@ import pytest
 from dv2s_gym.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
-QUICK = ["--config", '{"duration": 3}', "--no-progress"]
+QUICK = ["--config", '{"duration": 3}', "--stall-seconds", "1", "--no-progress"]
 
 
 def regress(*args: str) -> int:
@@ -110,15 +110,21 @@ def test_bad_input_exits_2_with_one_line(failing_run, tmp_path, capsys):
 
 def test_baseline_report_reruns_only_the_candidate(failing_run, tmp_path, capsys):
     _, out = failing_run
+    # a report whose verdict was FAIL is no baseline, unless asked for explicitly
+    assert regress("--policy", "rule", "--baseline-report", str(out / "report.json"), "--workers", "2",
+                   "--out", str(tmp_path / "refused"), "--no-progress") == 2
+    assert "has the verdict FAIL" in capsys.readouterr().err and not (tmp_path / "refused").exists()
     code = regress("--policy", "rule", "--baseline-report", str(out / "report.json"), "--workers", "2",
-                   "--out", str(tmp_path), "--no-progress")
+                   "--out", str(tmp_path), "--no-progress", "--accept-failed-baseline")
+    printed = capsys.readouterr().out
+    assert f"(the candidate policy of {out / 'report.json'})" in printed  # which of its policies is the baseline
     report = json.loads((tmp_path / "report.json").read_text())
     # the report's tested policy (the noisy copy) is the baseline now; the original does not fail more
     assert report["settings"]["episodes"] == 8 and report["baseline"]["spec"] == "rule?action_noise=0.5"
     # the power plan wanted more episodes than the baseline report has: said, and the power stated
     plan = report["settings"]["plan"]
     assert plan["planned"] > 8 and "fewer than the" in plan["note"]
-    assert "has less power than planned" in capsys.readouterr().out
+    assert "has less power than planned" in printed
     assert code in (0, 3) and report["verdict"] != "FAIL"
     lines = (tmp_path / "results.jsonl").read_text().splitlines()
     assert len(lines) == 8 and {json.loads(line)["role"] for line in lines} == {"candidate"}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import xml.etree.ElementTree as ET
 
 import pytest
 
@@ -60,7 +61,7 @@ def test_a_factory_spec_is_called_and_a_module_in_the_current_folder_is_found(tm
         load_policy("other_policies_here:make")
     # the workers find the module in this folder too
     report = run_regression("my_policies_here:make", "rule", scenarios=[SCENARIO], episodes=1, workers=1,
-                            out_dir=tmp_path / "out", env_config=QUICK, progress=False)
+                            out_dir=tmp_path / "out", env_config=QUICK, stall_seconds=1, progress=False)
     assert report["errors"] == [] and report["episodes"][0]["candidate"]["steps"] > 0
 
 
@@ -68,7 +69,7 @@ def test_resume_is_refused_when_the_policy_module_changed_under_the_same_spec(tm
     monkeypatch.chdir(tmp_path)
     module = tmp_path / "resumed_policy_here.py"
     module.write_text(POLICY_MODULE.format(action=1))
-    arguments = dict(scenarios=[SCENARIO], episodes=1, workers=1, out_dir=tmp_path / "out", env_config=QUICK,
+    arguments = dict(scenarios=[SCENARIO], episodes=1, workers=1, out_dir=tmp_path / "out", env_config=QUICK, stall_seconds=1,
                      progress=False)
     first = run_regression("resumed_policy_here:make", "rule", **arguments)
     again = run_regression("resumed_policy_here:make", "rule", **arguments)  # unchanged: resumes, runs nothing
@@ -76,8 +77,10 @@ def test_resume_is_refused_when_the_policy_module_changed_under_the_same_spec(tm
     lines = (tmp_path / "out" / "results.jsonl").read_text().splitlines()
     assert len(lines) == 2
     module.write_text(POLICY_MODULE.format(action=4))  # same spec, other code
-    with pytest.raises(ResumeMismatchError, match=r"candidate module resumed_policy_here source \(SHA-256\)"):
+    with pytest.raises(ResumeMismatchError, match=r"candidate module resumed_policy_here source \(SHA-256\)") as info:
         run_regression("resumed_policy_here:make", "rule", **arguments)
+    # the folder's reports are the earlier run's: the refusal says so, and leaves them untouched
+    assert "its reports (junit.xml, report.html, report.md, report.json) are that run's, not this one's" in str(info.value)
 
 
 def test_resume_is_refused_when_the_checkpoint_changed_under_the_same_path(tmp_path):
@@ -97,13 +100,76 @@ def test_resume_is_refused_when_the_checkpoint_changed_under_the_same_path(tmp_p
 
 def test_a_baseline_report_from_another_version_is_flagged(tmp_path, capsys):
     old = run_regression("rule", scenarios=[SCENARIO], episodes=1, workers=1, out_dir=tmp_path / "old",
-                         env_config=QUICK, progress=False)
+                         env_config=QUICK, stall_seconds=1, progress=False)
     path = tmp_path / "old" / "report.json"
     data = json.loads(path.read_text())
     data["dv2s_version"] = "0.0.1"
     path.write_text(json.dumps(data))
     code = regress("--policy", "rule", "--baseline-report", str(path), "--workers", "1", "--out",
-                   str(tmp_path / "new"), "--no-progress")
+                   str(tmp_path / "new"), "--stall-seconds", "1", "--no-progress")
     printed = capsys.readouterr().out
     assert code in (0, 3)
-    assert f"warning: baseline report {path} was made by dv2s-gym 0.0.1, this is {old['dv2s_version']}" in printed
+    warning = f"baseline report {path} was made by dv2s-gym 0.0.1, this is {old['dv2s_version']}"
+    assert f"warning: {warning}" in printed
+    for name in ("report.md", "report.json", "junit.xml", "report.html"):  # every report carries it
+        assert warning in (tmp_path / "new" / name).read_text().replace("&quot;", '"'), name
+    suite = ET.parse(tmp_path / "new" / "junit.xml").getroot().find("testsuite")
+    assert any(p.get("name") == "warning" and warning in p.get("value") for p in suite.iter("property"))
+    assert warning in suite.find("system-err").text
+
+
+def test_resume_key_covers_helper_modules_data_files_and_dv2s_itself(tmp_path, monkeypatch):
+    from dv2s_gym.regress import identity
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "stealth_cfg.py").write_text("ACTION = 1\n")
+    (tmp_path / "helped_policy_here.py").write_text("import stealth_cfg\n" + POLICY_MODULE.format(action=1))
+    (tmp_path / "weights.json").write_text('{"w": 1}')
+    spec = "helped_policy_here:make?weights=weights.json"
+    before = identity.policy_fingerprint(spec)
+    assert before["dv2s version"] and before["dv2s sources (SHA-256)"]
+    (tmp_path / "stealth_cfg.py").write_text("ACTION = 4\n")  # the helper the module imports changed
+    (tmp_path / "weights.json").write_text('{"w": 2}')  # the data file an option names changed
+    after = identity.policy_fingerprint(spec)
+    changed = sorted(key for key in before.keys() | after.keys() if before.get(key) != after.get(key))
+    assert changed == [f"module file {(tmp_path / 'stealth_cfg.py').resolve()} (SHA-256)",
+                       "option weights file weights.json (SHA-256)"]
+    monkeypatch.setattr(identity, "dv2s_sources_sha256", lambda: "edited simulator")
+    assert identity.policy_fingerprint("rule")["dv2s sources (SHA-256)"] == "edited simulator"
+
+
+def test_resume_is_refused_when_a_helper_module_of_the_policy_changed(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "stealth_cfg2.py").write_text("ACTION = 1\n")
+    (tmp_path / "helped_policy_there.py").write_text("import stealth_cfg2\n" + POLICY_MODULE.format(action=1))
+    arguments = dict(scenarios=[SCENARIO], episodes=1, workers=1, out_dir=tmp_path / "out", env_config=QUICK, stall_seconds=1,
+                     progress=False)
+    run_regression("helped_policy_there:make", "rule", **arguments)
+    (tmp_path / "stealth_cfg2.py").write_text("ACTION = 4\n")
+    with pytest.raises(ResumeMismatchError, match=r"stealth_cfg2\.py \(SHA-256\)"):
+        run_regression("helped_policy_there:make", "rule", **arguments)
+
+
+def test_degenerate_episode_settings_are_refused_before_any_episode(tmp_path, capsys):
+    out = tmp_path / "out"
+    for config, stall, message in (('{"duration": -5}', "1", "duration must be a positive number of seconds"),
+                                   ('{"duration": 0}', "1", "duration must be a positive number of seconds"),
+                                   ('{"duration": 4}', "5", "--stall-seconds 5 is not shorter than the episodes (4 s)"),
+                                   ('{"duration": 4}', "4", "--stall-seconds 4 is not shorter than the episodes (4 s)"),
+                                   ('{"durration": 4}', "1", "unknown config key(s) 'durration' (did you mean 'duration'?)")):
+        assert regress("--policy", "rule", "--baseline", "rule", "--scenarios", SCENARIO, "--config", config,
+                       "--stall-seconds", stall, "--out", str(out), "--no-progress") == 2, config
+        assert message in capsys.readouterr().err, config
+        assert not out.exists()  # refused before any episode or output
+    # without stall among the failure kinds a short episode is fine
+    from dv2s_gym.regress.runner import _check_env_config
+
+    _check_env_config({"duration": 2}, ["collision", "off_road"], 5.0)
+
+
+def test_a_policy_option_of_the_wrong_type_is_named():
+    with pytest.raises(PolicyError, match="action_noise must be a number, not 'abc'"):
+        load_policy("rule?action_noise=abc")
+    with pytest.raises(PolicyError, match="noise_seed must be an integer, not 1.5"):
+        load_policy("rule?action_noise=0.1&noise_seed=1.5")
+    assert load_policy("rule?action_noise=0.1&noise_seed=3").base_seed == 3

@@ -89,7 +89,7 @@ def test_no_baseline():
     pass
 
 @pytest.mark.dv2s_regression(policy="regress_helpers:BrokenPolicy", baseline="rule", scenarios=["{SCENARIO}"],
-                             episodes=2, env_config={{"duration": 2}})
+                             episodes=2, env_config={{"duration": 2}}, stall_seconds=1)
 def test_crashing_candidate():
     pass
 

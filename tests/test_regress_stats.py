@@ -426,6 +426,20 @@ def test_compare_scenarios_pass_and_inconclusive_overall():
         compare_scenarios({}, 0.02)
 
 
+def test_compare_scenarios_a_scenario_significantly_worse_on_its_own_blocks_pass():
+    # 20 alike scenarios and one where the candidate fails in 8 more pairs than it wins: significant alone
+    # (p = 0.02), not after adjusting for 21 scenarios; the pooled table alone would PASS
+    tables = {f"s{i}": PairedTable(10, 3, 3, 200) for i in range(20)}
+    tables["worse"] = PairedTable(10, 8, 1, 197)
+    per, overall = compare_scenarios(tables, 0.02)
+    assert per["worse"].verdict is Verdict.INCONCLUSIVE and per["worse"].p_value < 0.05
+    pooled_only = compare(PairedTable.pooled(list(tables.values())), 0.02)
+    assert pooled_only.verdict is Verdict.PASS
+    assert overall.verdict is Verdict.INCONCLUSIVE and "scenario worse fails significantly" in overall.reason
+    del tables["worse"]
+    assert compare_scenarios(tables, 0.02)[1].verdict is Verdict.PASS
+
+
 def test_compare_scenarios_pooled_regression_spread_over_scenarios_fails():
     # +3 pp in every scenario, none significant alone, clearly significant pooled
     tables = {f"s{i}": PairedTable(3, 7, 3, 187) for i in range(5)}

@@ -692,7 +692,9 @@ def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, s
                                                            "fine_tuned": _measures(overall.get("candidate"))},
                               "fine_tuned_vs_start": _comparison(first, out / "vs_start" / "report.json")}
     if control is not None:
+        # a measurement, not a gate: the fine-tuned policy is the reference whatever its own verdict was
         second = run_regression(control, baseline_report=out / "vs_start" / "report.json", baseline_role="candidate",
+                                accept_failed_baseline=True,
                                 bank_dir=bank_dir, episodes=seeds, seed=EVAL_SEED_BASE, margin=margin, workers=workers,
                                 out_dir=out / "vs_control", env_config=dict(env_config), progress=progress)
         result["policies"]["control"] = _measures((second.get("overall") or {}).get("candidate"))

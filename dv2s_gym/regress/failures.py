@@ -1,8 +1,9 @@
 """What counts as a failure for ``dv2s regress``: collision, off-road and stall by default.
 
 A worker records the facts of every episode (``collided``, ``off_road``, ``stalled``: the ego stood
-below :data:`~dv2s_gym.mining.monitors.STALL_SPEED` for ``stall_seconds`` with a free road ahead,
-the stall detector the failure miner uses), and :func:`apply_failure` marks the episode ``failed``
+below :data:`envs.safety_metrics.STANDING_SPEED` with a free road ahead for ``stall_seconds`` in
+total over the episode, :func:`envs.safety_metrics.total_stall_step`; the failure miner looks for one
+unbroken stretch instead, to find where a stall begins), and :func:`apply_failure` marks the episode ``failed``
 when any of the chosen kinds happened, listing them in ``failure_kinds``. The paired test compares
 ``failed``; the reports show each kind apart.
 """

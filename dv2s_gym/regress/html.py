@@ -212,7 +212,12 @@ def _banner(report: Mapping[str, Any]) -> str:
     if report.get("stopped_early"):
         detail.append("stopped early (sequential test)")
     small = f"<small>{'; '.join(detail)}</small>" if detail else ""
-    return f'<div class="banner {css}" id="verdict">{head}{small}</div>'
+    banner = f'<div class="banner {css}" id="verdict">{head}{small}</div>'
+    from dv2s_gym.regress.report import warnings
+
+    for number, warning in enumerate(warnings(report)):  # before the verdict is trusted: as prominent as it
+        banner += f'<div class="banner INCONCLUSIVE" id="warning-{number}">warning: {_e(warning)}</div>'
+    return banner
 
 
 def _settings_table(report: Mapping[str, Any]) -> str:

@@ -6,7 +6,14 @@
   its bytes (and of the model card beside it);
 - ``module:attribute``: the SHA-256 of the module's source file;
 - a registered driver (``rule``, ``idm``, ...): the SHA-256 of the module that implements it;
-- the spec's options, typed and sorted.
+- the spec's options, typed and sorted, and the bytes (SHA-256) of every option value that names an
+  existing file (``?weights=weights.json``);
+- the user's own modules the policy may use: every ``.py`` file beside a ``module:attribute``
+  policy's module (its package's tree when it is in a package; at most :data:`MAX_HELPER_FILES`), and
+  every module loaded in this process from under that folder, leaving out the standard library,
+  site-packages and dv2s's own packages;
+- the dv2s version and one SHA-256 of dv2s's simulator, regression and policy sources (``envs/``,
+  ``dv2s_gym/regress/``, ``policies/``), so an edited editable install is noticed.
 
 A run's output folder records them (``run.json``); resuming with a changed checkpoint, module or
 options under the same spec is refused, naming what changed.
@@ -14,14 +21,71 @@ options under the same spec is refused, naming what changed.
 
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import json
+import sys
+import sysconfig
 from pathlib import Path
-from typing import Any, Dict, Optional
+from typing import Any, Dict, Iterable, List, Optional
 
 from scenario_bank.atomic import file_sha256
 
-__all__ = ["policy_fingerprint", "file_sha256"]
+__all__ = ["policy_fingerprint", "file_sha256", "dv2s_sources_sha256", "MAX_HELPER_FILES"]
+
+MAX_HELPER_FILES = 500
+"""At most this many ``.py`` files beside a policy module are hashed (a policy in a huge folder)."""
+
+_DV2S_ROOT = Path(__file__).resolve().parents[2]
+_DV2S_PACKAGES = ("envs", "dv2s_gym", "policies", "scenario_bank")
+_DV2S_SOURCES = ("envs", "dv2s_gym/regress", "policies")
+_SKIPPED_DIRS = {"__pycache__", "site-packages", "dist-packages", "node_modules"}
+
+
+def dv2s_sources_sha256() -> str:
+    """One SHA-256 over dv2s's simulator (``envs/``), regression (``dv2s_gym/regress/``) and ``policies/`` sources."""
+    digest = hashlib.sha256()
+    for folder in _DV2S_SOURCES:
+        root = _DV2S_ROOT / folder
+        for path in sorted(root.rglob("*.py")) if root.is_dir() else []:
+            if "__pycache__" in path.parts:
+                continue
+            digest.update(str(path.relative_to(_DV2S_ROOT)).encode() + b"\0" + file_sha256(path).encode() + b"\n")
+    return digest.hexdigest()
+
+
+def _outside_user_code() -> List[Path]:
+    roots = {sysconfig.get_paths()[key] for key in ("stdlib", "platstdlib", "purelib", "platlib")}
+    return [Path(r).resolve() for r in roots if r] + [_DV2S_ROOT / p for p in _DV2S_PACKAGES]
+
+
+def _is_under(path: Path, roots: Iterable[Path]) -> bool:
+    return any(path == root or root in path.parents for root in roots)
+
+
+def _helper_files(module_file: Path, module: str) -> List[Path]:
+    """The user's ``.py`` files a ``module:attribute`` policy may use (see the module docstring)."""
+    folder = module_file.resolve().parent
+    for _ in range(module.count(".")):  # a package's tree starts at its top-level folder
+        folder = folder.parent
+    excluded = _outside_user_code()
+    found = set()
+    if module.count("."):
+        candidates = (p for p in folder.rglob("*.py") if not (_SKIPPED_DIRS & set(p.parts)))
+    else:
+        candidates = folder.glob("*.py")
+    for path in candidates:
+        if len(found) >= MAX_HELPER_FILES:
+            break
+        found.add(path.resolve())
+    for loaded in list(sys.modules.values()):
+        name = getattr(loaded, "__file__", None)
+        if not name or not str(name).endswith(".py"):
+            continue
+        path = Path(name).resolve()
+        if folder in path.parents and path.is_file():
+            found.add(path)
+    return sorted(p for p in found if p.is_file() and not _is_under(p, excluded))
 
 
 def _module_file(name: str) -> Optional[Path]:
@@ -30,7 +94,13 @@ def _module_file(name: str) -> Optional[Path]:
     except (ImportError, ValueError):
         return None
     origin = getattr(spec, "origin", None) if spec is not None else None
-    return Path(origin) if origin and Path(origin).is_file() else None
+    if origin and Path(origin).is_file():
+        return Path(origin)
+    here = Path.cwd() / Path(*name.split("."))  # load_policy finds a module:attribute policy in this folder too
+    for path in (here.with_suffix(".py"), here / "__init__.py"):
+        if path.is_file():
+            return path
+    return None
 
 
 def _checkpoint(base: str) -> Optional[Path]:
@@ -51,8 +121,14 @@ def policy_fingerprint(spec: str) -> Dict[str, Any]:
     """``{description: value}`` facts of a policy spec (see the module docstring); every key names what it is."""
     from policies.registry import _REGISTRY, parse_spec
 
+    from dv2s_gym.regress.report import _dv2s_version
+
     base, options = parse_spec(spec)
-    facts: Dict[str, Any] = {"options": json.dumps(options, sort_keys=True, default=str)}
+    facts: Dict[str, Any] = {"options": json.dumps(options, sort_keys=True, default=str),
+                             "dv2s version": _dv2s_version(), "dv2s sources (SHA-256)": dv2s_sources_sha256()}
+    for key, value in sorted(options.items()):
+        if isinstance(value, str) and value and Path(value).is_file():
+            facts[f"option {key} file {value} (SHA-256)"] = file_sha256(Path(value))
     checkpoint = _checkpoint(base)
     if checkpoint is not None:
         resolved = checkpoint.resolve()
@@ -74,4 +150,8 @@ def policy_fingerprint(spec: str) -> Dict[str, Any]:
         module = base.partition(":")[0]
         found = _module_file(module)
         facts[f"module {module} source (SHA-256)"] = file_sha256(found) if found else "not found"
+        if found is not None:
+            for helper in _helper_files(found, module):
+                if helper != found.resolve():
+                    facts[f"module file {helper} (SHA-256)"] = file_sha256(helper)
     return facts

@@ -15,7 +15,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any, Mapping, Optional, Union
 
-from dv2s_gym.regress.report import _failures, _headline, power_lines
+from dv2s_gym.regress.report import _failures, _headline, power_lines, warnings
 from scenario_bank.atomic import atomic_write_text
 
 __all__ = ["write_junit", "junit_tree"]
@@ -97,7 +97,12 @@ def junit_tree(report: Mapping[str, Any]) -> ET.ElementTree:
                        ("baseline", (report.get("baseline") or {}).get("spec")),
                        ("verdict", verdict), ("bank_version", report["bank"]["version"])):
         ET.SubElement(properties, "property", {"name": key, "value": str(value)})
+    found = warnings(report)
+    for warning in found:
+        ET.SubElement(properties, "property", {"name": "warning", "value": warning})
     suite.extend(cases)
+    if found:  # CI systems show a suite's system-err beside its results
+        ET.SubElement(suite, "system-err").text = "\n".join(f"warning: {w}" for w in found)
     root = ET.Element("testsuites", {"name": "dv2s regress", "tests": str(len(cases)), "failures": counts["failure"],
                                      "errors": counts["error"], "skipped": counts["skipped"], "time": total})
     root.append(suite)

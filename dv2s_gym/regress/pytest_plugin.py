@@ -21,7 +21,7 @@ or, in code, the ``dv2s_regress`` fixture takes the same arguments and returns a
 Arguments (both forms): ``policy`` (the candidate spec), ``baseline`` (a spec) or
 ``baseline_report`` (an earlier ``report.json``), ``scenarios``, ``episodes`` (default: planned
 from ``mde`` and ``power``, as ``dv2s regress`` does), ``seed``, ``margin``, ``alpha``, ``mde``,
-``power``, ``sequential``, ``env_config``, ``bank_dir``, ``timeout``; the marker also takes
+``power``, ``sequential``, ``env_config``, ``bank_dir``, ``timeout``, ``failure``, ``stall_seconds``; the marker also takes
 ``allow_inconclusive`` (default ``True``: a significant regression or an error fails).
 The statistics and verdicts are those of ``dv2s regress``.
 
@@ -54,7 +54,8 @@ def regression_arguments(policy: str, baseline: Optional[str] = None, *, baselin
                          seed: int = 0, margin: float = 0.02, alpha: float = 0.05, mde: Optional[float] = None,
                          power: Optional[float] = None, sequential: bool = False,
                          env_config: Optional[Dict[str, Any]] = None, bank_dir: Optional[str] = None,
-                         timeout: Optional[float] = None) -> Dict[str, Any]:
+                         timeout: Optional[float] = None, failure: Union[str, Sequence[str], None] = None,
+                         stall_seconds: float = 5.0) -> Dict[str, Any]:
     """The keyword arguments of :func:`~dv2s_gym.regress.runner.run_regression` for one check."""
     if baseline is None and baseline_report is None:
         raise pytest.UsageError(f"{MARKER}: give baseline= (a policy spec) or baseline_report= (a report.json) "
@@ -64,7 +65,7 @@ def regression_arguments(policy: str, baseline: Optional[str] = None, *, baselin
     return dict(candidate=policy, baseline=baseline, baseline_report=baseline_report,
                 scenarios=None if scenarios is None else list(scenarios), episodes=episodes, seed=seed,
                 margin=margin, alpha=alpha, mde=mde, power=power, sequential=sequential, env_config=env_config, bank_dir=bank_dir,
-                timeout=timeout)
+                timeout=timeout, failure=failure, stall_seconds=stall_seconds)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

@@ -455,7 +455,8 @@ def _headline(report: Mapping[str, Any], base: Optional[Path] = None) -> str:
     settings = report["settings"]
     baseline = report.get("baseline")
     against = ("" if baseline is None else f" vs baseline `{baseline.get('spec')}`" + (
-        f" (from {_relative(baseline['report'], base)})" if baseline.get("report") else ""))
+        f" (the {baseline.get('role') or 'candidate'} policy of {_relative(baseline['report'], base)})"
+        if baseline.get("report") else ""))
     failure = ", ".join(settings.get("failure") or ["collision", "off_road"])
     return (f"candidate `{report['candidate']['spec']}`{against}; failure: {failure}; "
             f"{len(report['scenarios'])} scenario(s) x "
@@ -600,7 +601,8 @@ def _markdown(report: Mapping[str, Any], report_path: str = "report.json", base:
     settings = report["settings"]
     baseline = report.get("baseline")
     against = "" if baseline is None else (f" vs baseline `{baseline.get('spec')}`" + (
-        f" (from `{_relative(baseline['report'], base)}`)" if baseline.get("report") else ""))
+        f" (the {baseline.get('role') or 'candidate'} policy of `{_relative(baseline['report'], base)}`)"
+        if baseline.get("report") else ""))
     lines = [f"## dv2s regress: {verdict or 'measures (no baseline)'} - candidate `{report['candidate']['spec']}`{against}",
              "", _verdict_line(report), ""]
     facts = [f"{len(report['scenarios'])} scenario(s) x {settings['episodes']} episode(s) from seed {settings['seed']}; "

@@ -55,11 +55,16 @@ def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterab
                env_config: Dict[str, Any], bank_dir: Optional[str], trace_dir: Optional[str],
                failure: Sequence[str] = DEFAULT_FAILURE, stall_seconds: float = DEFAULT_STALL_SECONDS
                ) -> List[Dict[str, Any]]:
-    """Task dicts, seed by seed (every scenario, then the next seed), each role in turn."""
-    return [{"kind": KIND, "policy": spec, "role": role, "scenario": scenario, "seed": int(seed),
-             "env_config": dict(env_config), "bank_dir": bank_dir, "trace_dir": trace_dir,
-             "failure": list(failure), "stall_seconds": float(stall_seconds)}
-            for seed in seeds for scenario in scenarios for role, spec in policies.items()]
+    """Task dicts, seed by seed (every scenario, then the next seed), each role in turn; which role goes first
+    alternates from pair to pair, so neither role is always the first to meet a scene."""
+    roles = list(policies.items())
+    tasks = []
+    for pair, (seed, scenario) in enumerate((seed, scenario) for seed in seeds for scenario in scenarios):
+        for role, spec in (roles if pair % 2 == 0 else roles[::-1]):
+            tasks.append({"kind": KIND, "policy": spec, "role": role, "scenario": scenario, "seed": int(seed),
+                          "env_config": dict(env_config), "bank_dir": bank_dir, "trace_dir": trace_dir,
+                          "failure": list(failure), "stall_seconds": float(stall_seconds)})
+    return tasks
 
 
 def _policy_info(spec: str) -> Dict[str, Any]:
@@ -87,6 +92,27 @@ def _check_settings(episodes: Optional[int], seed: int, margin: float, alpha: fl
         raise RegressError(f"the sequential batch must be a positive number of seeds, not {batch!r}")
 
 
+def _check_env_config(env_config: Dict[str, Any], failure: Sequence[str], stall_seconds: float) -> None:
+    """Refuse env settings under which the gate cannot see failures: unknown keys, a non-positive episode
+    duration, or a stall time the episodes are too short to reach."""
+    from envs.dv2s_env import DV2SEnv
+    from envs.errors import UnknownConfigKeyError, check_config_keys
+
+    defaults = DV2SEnv.default_config()
+    try:
+        check_config_keys(env_config, defaults)
+    except (UnknownConfigKeyError, ValueError) as error:
+        raise RegressError(f"--config: {error}") from None
+    duration = env_config.get("duration", defaults["duration"])
+    if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not math.isfinite(duration) \
+            or duration <= 0:
+        raise RegressError(f"--config duration must be a positive number of seconds per episode, not {duration!r}")
+    if "stall" in failure and float(stall_seconds) >= float(duration):
+        raise RegressError(f"--stall-seconds {stall_seconds:g} is not shorter than the episodes ({duration:g} s): no "
+                           "stall could ever be detected; lower --stall-seconds, lengthen the episodes with "
+                           "--config '{\"duration\": ...}', or leave stall out of --failure")
+
+
 def _select(scenarios: Scenarios, bank_dir: Optional[str], fallback: Optional[Sequence[str]]) -> List[str]:
     from scenario_bank import select_scenarios
 
@@ -105,11 +131,17 @@ def _select(scenarios: Scenarios, bank_dir: Optional[str], fallback: Optional[Se
 
 def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Sequence[str], seeds: Sequence[int],
                           bank: Dict[str, Any], env_config: Dict[str, Any], failure: Sequence[str],
-                          stall_seconds: float) -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]], str]:
+                          stall_seconds: float, accept_failed: bool = False
+                          ) -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]], str]:
     """The baseline info, the baseline result per episode id, and the report file's SHA-256."""
     path = Path(path)
     old = load_report(path)
-    check_baseline_report(old, path=path, bank=bank, env_config=env_config)
+    check_baseline_report(old, path=path, bank=bank, env_config=env_config)  # a report with errors: never
+    if old.get("verdict") in ("FAIL", "ERROR") and not accept_failed:
+        raise ReportMismatchError(
+            f"baseline report {path} has the verdict {old['verdict']}: its candidate did not pass its own gate, so "
+            "it is no baseline to compare against; compare against a report that passed, or give "
+            "--accept-failed-baseline to use it anyway")
     if role not in ROLES:
         raise RegressError(f"--baseline-role must be 'candidate' or 'baseline', not {role!r}")
     if old.get(role) is None:
@@ -166,7 +198,7 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
                    env_config: Optional[Dict[str, Any]] = None, progress: bool = True,
                    timeout: Optional[float] = None, batch: Optional[int] = None,
                    failure: Union[None, str, Sequence[str]] = None, stall_seconds: float = DEFAULT_STALL_SECONDS,
-                   baseline_role: str = "candidate",
+                   baseline_role: str = "candidate", accept_failed_baseline: bool = False,
                    on_result: Optional[Callable[[Dict[str, Any]], None]] = None) -> Dict[str, Any]:
     """Run ``candidate`` (and ``baseline``) on scenario x seed pairs and write the reports.
 
@@ -175,7 +207,8 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         baseline: policy spec to compare against, run on the same episodes; or
         baseline_report: an earlier ``report.json`` whose episodes (of its ``baseline_role``
             policy, by default the one it tested) are the baseline: only the candidate runs.
-            Refused when its schema version, the bank scenarios' scripts or the env config differ.
+            Refused when its schema version, the bank scenarios' scripts or the env config differ, and
+            when its verdict was FAIL or ERROR unless ``accept_failed_baseline``.
         bank_dir: bank folder (default: the shipped bank).
         scenarios: bank names and/or ``tag:<tag>`` (default: the whole bank, or the baseline
             report's scenarios); an empty selection is an error.
@@ -226,6 +259,7 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
         if env_config is None:
             env_config = (old.get("settings") or {}).get("env_config")
     env_config = dict(env_config or {})
+    _check_env_config(env_config, failure, float(stall_seconds))
     names = _select(scenarios, bank_dir, fallback)
     bank = bank_info(names, bank_dir)
     if episodes is not None and (mde is not None or power is not None):
@@ -242,7 +276,8 @@ def run_regression(candidate: str, baseline: Optional[str] = None, *,
     report_hash = None
     if baseline_report is not None:
         baseline_info, old_results, report_hash = _baseline_from_report(baseline_report, baseline_role, names, seeds,
-                                                                        bank, env_config, failure, float(stall_seconds))
+                                                                        bank, env_config, failure, float(stall_seconds),
+                                                                        accept_failed=accept_failed_baseline)
     elif baseline is not None:
         baseline_info = baseline_info_early
     else:

@@ -85,10 +85,14 @@ class RunStore:
             if not isinstance(there, dict) or stored.get("schema") != _RUN_SCHEMA:
                 raise RegressError(f"{run_file} was not written by dv2s regress; choose another --out")
             if there != self.settings:
+                stale = [n for n in ("junit.xml", "report.html", "report.md", "report.json")
+                         if (self.root / n).is_file()]
+                warning = (f"; its reports ({', '.join(stale)}) are that run's, not this one's: nothing was "
+                           "written, so do not read them as this run's verdict" if stale else "")
                 raise ResumeMismatchError(
                     f"{self.root} holds a regression run with other settings "
-                    f"({describe_differences(self.settings, there)}); rerun with the same settings to resume "
-                    f"it, or choose another --out (or delete {self.root}) for a new run")
+                    f"({describe_differences(self.settings, there)}){warning}; rerun with the same settings to "
+                    f"resume it, or choose another --out (or delete {self.root}) for a new run")
         elif self.results_path.exists():
             raise RegressError(f"{self.results_path} exists without {RUN_FILE}; choose another --out or delete it")
         else:

@@ -14,7 +14,8 @@ A task is a plain dict, so any pool of :mod:`dv2s_gym.workers` (local processes,
 
 :func:`run_regress_task` returns ``EpisodeResult.to_json()`` plus ``role``, ``id``
 (``"<scenario>/<seed>"``), ``trace`` (the saved trace's path or ``None``) and ``seconds`` (the
-episode's wall time; the runner keeps it apart from the result), ``stalled`` and ``stall_time`` (the stall detector's finding), with ``failed``
+episode's wall time; the runner keeps it apart from the result), ``stalled`` and ``stall_time`` (when the ego's total standing time on a free road reached
+``stall_seconds``: :func:`envs.safety_metrics.total_stall_step`), with ``failed``
 and ``failure_kinds`` set from the task's failure kinds. An
 exception inside the episode comes back as an error result (``{"id", "role",
 "scenario", "seed", "error", "trace": None}``) instead of propagating: it is kept in
@@ -58,7 +59,7 @@ def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
     env_key = None
     try:
         env_key, env = env_for(task.get("bank_dir"), task.get("env_config"))
-        policy = policy_for(task["policy"], env_key, env)
+        policy = policy_for(task["policy"], env_key, env, owner=task["role"])  # one instance per role
         started = time.perf_counter()
         result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
         seconds = time.perf_counter() - started
@@ -70,10 +71,10 @@ def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
             message += "\n" + traceback.format_exc()
         return error_result(task, message)
     from dv2s_gym.regress.failures import DEFAULT_STALL_SECONDS, apply_failure, parse_failure
-    from envs.safety_metrics import first_stall_step
+    from envs.safety_metrics import total_stall_step
 
     data = result.to_json()
-    stall = first_stall_step(trace, float(task.get("stall_seconds") or DEFAULT_STALL_SECONDS))
+    stall = total_stall_step(trace, float(task.get("stall_seconds") or DEFAULT_STALL_SECONDS))
     period = 1.0 / float(trace.config.get("policy_frequency", 5))
     data.update(role=task["role"], id=task_id(task["scenario"], task["seed"]), trace=None, seconds=round(seconds, 4),
                 stalled=stall is not None, stall_time=None if stall is None else stall * period)
