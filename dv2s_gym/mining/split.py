@@ -27,22 +27,33 @@ import numpy as np
 __all__ = ["split_by_family", "split_by_cluster", "cluster_groups", "family_of"]
 
 
-def cluster_groups(entries: Sequence[Mapping[str, Any]]) -> List[Dict[str, List[str]]]:
-    """Connected groups of ``{"cluster", "scenario"}`` entries: two entries are in one group
-    when they share a cluster or a scenario. Returns ``[{"clusters": [...], "scenarios": [...]}]``
-    sorted by their first cluster."""
-    parent: Dict[str, str] = {}
+class _UnionFind:
+    """Disjoint sets of string keys; each set is named by its smallest key, so groups do not depend on order."""
 
-    def find(key: str) -> str:
+    def __init__(self) -> None:
+        self.parent: Dict[str, str] = {}
+
+    def find(self, key: str) -> str:
+        parent = self.parent
         while parent.setdefault(key, key) != key:
             parent[key] = parent[parent[key]]
             key = parent[key]
         return key
 
-    for entry in entries:
-        a, b = find("c:" + str(entry["cluster"])), find("s:" + str(entry["scenario"]))
+    def union(self, a: str, b: str) -> None:
+        a, b = self.find(a), self.find(b)
         if a != b:
-            parent[max(a, b)] = min(a, b)
+            self.parent[max(a, b)] = min(a, b)
+
+
+def cluster_groups(entries: Sequence[Mapping[str, Any]]) -> List[Dict[str, List[str]]]:
+    """Connected groups of ``{"cluster", "scenario"}`` entries: two entries are in one group
+    when they share a cluster or a scenario. Returns ``[{"clusters": [...], "scenarios": [...]}]``
+    sorted by their first cluster."""
+    sets = _UnionFind()
+    find = sets.find
+    for entry in entries:
+        sets.union("c:" + str(entry["cluster"]), "s:" + str(entry["scenario"]))
     groups: Dict[str, Dict[str, set]] = {}
     for entry in entries:
         group = groups.setdefault(find("c:" + str(entry["cluster"])), {"clusters": set(), "scenarios": set()})
@@ -98,19 +109,8 @@ def family_groups(entries: Sequence[Mapping[str, Any]]) -> List[Dict[str, List[s
     """Connected groups of mined entries: two entries are in one group when they share a family, a cluster
     or a scenario (a failure merged into another family's scenario ties the two families). Returns
     ``[{"families", "clusters", "scenarios"}]`` sorted by their first family."""
-    parent: Dict[str, str] = {}
-
-    def find(key: str) -> str:
-        while parent.setdefault(key, key) != key:
-            parent[key] = parent[parent[key]]
-            key = parent[key]
-        return key
-
-    def union(a: str, b: str) -> None:
-        a, b = find(a), find(b)
-        if a != b:
-            parent[max(a, b)] = min(a, b)
-
+    sets = _UnionFind()
+    find, union = sets.find, sets.union
     for entry in entries:
         family = "f:" + family_of(entry)
         union(family, "c:" + str(entry["cluster"]))
