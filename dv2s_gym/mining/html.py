@@ -21,7 +21,7 @@ import os
 from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 
-from dv2s_gym.mining.report import breadth, rate_text
+from dv2s_gym.mining.report_text import breadth, rate_text
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, axis, escape, finite,
                                   fmt, fmt_interval, interval_mark, legend, row_label, svg, video_tag, x_scale)
 

@@ -86,10 +86,13 @@ from collections import Counter
 from pathlib import Path
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
-from dv2s_gym.regress.stats import wilson_interval
 from dv2s_gym.mining.behaviour import behaviour_of
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.rate import rate_estimates
+from dv2s_gym.mining.report_text import breadth, rate_text
+from dv2s_gym.mining.report_text import number_text as _num
+from dv2s_gym.mining.report_text import percent_text as _pct
+from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 
 __all__ = [
@@ -536,22 +539,10 @@ def _dv2s_version() -> str:
 
 
 # ----------------------------------------------------------------------------------- text
-def _num(value: Any, digits: int = 1) -> str:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(float(value)):
-        return "-"
-    return f"{value:.{digits}f}"
-
-
 def _per_100_text(entry: Optional[Mapping[str, Any]]) -> str:
     if not entry or entry.get("value") is None:
         return "-"
     return f"{entry['value']:.1f} [{entry['low']:.1f}, {entry['high']:.1f}]"
-
-
-def _pct(entry: Optional[Mapping[str, Any]]) -> str:
-    if not entry or entry.get("value") is None:
-        return "-"
-    return f"{100 * entry['value']:.1f}% [{100 * entry['low']:.1f}, {100 * entry['high']:.1f}]"
 
 
 def _region_text(params: Mapping[str, Any], limit: int = 4) -> str:
@@ -583,29 +574,6 @@ def _reproduction_text(cluster: Mapping[str, Any]) -> str:
 def _cell(value: Any) -> str:
     """A Markdown table cell: one line, pipes escaped."""
     return str("-" if value is None else value).replace("\n", " ").replace("|", "\\|")
-
-
-def breadth(counts: Mapping[str, Any]) -> str:
-    """How broad the failures found are: failures, distinct behaviours, (scenario, failure type) pairs, scenarios
-    with a failure, and stalls apart from collisions."""
-    return (f"{counts['failures']} failure(s): {counts.get('behaviours', counts['clusters'])} distinct behaviour(s), "
-            f"{counts.get('scenario_failure_types', 0)} (scenario, failure type) pair(s), "
-            f"{counts.get('scenarios_failing', 0)} scenario(s) with a failure; "
-            f"{counts.get('collisions', 0)} collision(s), {counts.get('stalls', 0)} stall(s)")
-
-
-def rate_text(rate: Optional[Mapping[str, Any]]) -> str:
-    """The estimated failure rate under the scenarios' own parameter distributions, as one sentence."""
-    if not rate or not rate.get("available"):
-        reason = (rate or {}).get("reason") or "no episodes"
-        return f"Failure rate under the scenarios' own parameter distributions: not estimated ({reason})."
-    overall = rate.get("overall") or {}
-    return ("Failure rate under the scenarios' own parameter distributions (importance-weighted, each scenario "
-            f"equally likely): {_pct(overall)}, effective sample size {_num(overall.get('ess'))} of "
-            f"{overall.get('n', 0)} episodes."
-            + (" The sampler almost stopped drawing some regions, so failures there are missing from the estimate: "
-               "it can be far too low; a random-sampler run estimates it without that risk." if rate.get("collapsed")
-               else ""))
 
 
 def headline(report: Mapping[str, Any]) -> str:
