@@ -272,7 +272,7 @@ class DV2SEnv(AbstractEnv):
         """Default configuration; every key can be overridden with ``config=``.
 
         - ``observation``: highway-env observation config; ``Kinematics`` (default),
-          ``OccupancyGrid``, ``TimeToCollision`` and ``GrayscaleObservation`` work.
+          ``OccupancyGrid``, ``TimeToCollision``, ``LidarObservation`` and ``GrayscaleObservation`` work.
         - ``action``: highway-env action config; ``DiscreteMetaAction`` (default,
           target speeds 0-30 m/s), ``ContinuousAction`` or ``DiscreteAction``.
         - ``simulation_frequency`` / ``policy_frequency`` [Hz]: physics steps and

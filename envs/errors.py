@@ -12,6 +12,8 @@ __all__ = [
     "check_config_keys",
     "StepTimeoutError",
     "Interrupted",
+    "OBSERVATION_TYPES",
+    "ACTION_TYPES",
 ]
 
 
@@ -52,7 +54,7 @@ class UnknownConfigKeyError(DV2SError, ValueError):
     """A ``config=`` key the env does not have (a typo would otherwise be ignored)."""
 
 
-OBSERVATION_TYPES = ("Kinematics", "OccupancyGrid", "TimeToCollision", "GrayscaleObservation")
+OBSERVATION_TYPES = ("Kinematics", "OccupancyGrid", "TimeToCollision", "LidarObservation", "GrayscaleObservation")
 """highway-env observation types DV2S-v0 supports."""
 
 ACTION_TYPES = ("DiscreteMetaAction", "ContinuousAction", "DiscreteAction")

@@ -13,6 +13,8 @@ import math
 from pathlib import Path
 from typing import Any, Dict, Mapping
 
+from envs.errors import ACTION_TYPES, OBSERVATION_TYPES
+
 __all__ = ["TraceConfigError", "MAX_VEHICLES", "MAX_GRID_CELLS", "MAX_SCREEN", "MAX_MAP_BYTES",
            "check_observation", "check_action", "check_values", "check_map", "check_file_config"]
 
@@ -23,8 +25,6 @@ MAX_MAP_BYTES = 16 * 1024 * 1024
 _MAX_LIST = 64
 _MAX_TEXT = 200
 
-OBSERVATION_TYPES = ("Kinematics", "OccupancyGrid", "TimeToCollision", "LidarObservation", "GrayscaleObservation")
-ACTION_TYPES = ("DiscreteMetaAction", "ContinuousAction", "DiscreteAction")
 OTHER_VEHICLE_TYPES = tuple(f"highway_env.vehicle.behavior.{name}" for name in (
     "IDMVehicle", "LinearVehicle", "AggressiveVehicle", "DefensiveVehicle"))
 _DAMAGED = "the trace is damaged or was not written by env.save_trace()"
