@@ -14,28 +14,13 @@ from pathlib import Path
 
 import pytest
 
+from process_tree import descendants
+
 pytestmark = pytest.mark.slow
 
 TRAIN = ["train", "--steps", "64", "--envs", "1", "--vec-env", "dummy", "--hp", "n_steps=32", "--hp", "batch_size=32",
          "--scenarios", "highway_lead_vehicle_brakes", "highway_cut_in_from_left", "--card-seeds", "30",
          "--eval-jobs", "2"]
-
-
-def _descendants(pid: int) -> set:
-    """Every process whose ancestry leads to ``pid`` (read from /proc)."""
-    parents = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                stat = (entry / "stat").read_text()
-            except OSError:
-                continue
-            parents[int(entry.name)] = int(stat.rsplit(")", 1)[1].split()[1])
-    found, frontier = set(), {pid}
-    while frontier:
-        frontier = {child for child, parent in parents.items() if parent in frontier} - found
-        found |= frontier
-    return found
 
 
 def _wait_for(path: Path, text: str, proc: subprocess.Popen, limit: float = 600.0) -> None:
@@ -58,7 +43,7 @@ def test_ctrl_c_during_the_card_evaluation_keeps_the_model_and_says_how_to_resum
     try:
         _wait_for(err, "card evaluation:", proc)
         time.sleep(3)  # the evaluation's workers are running episodes
-        workers = _descendants(proc.pid)
+        workers = set(descendants(proc.pid))
         assert workers, "the evaluation runs in worker processes"
         if target == "group":
             os.killpg(proc.pid, signal.SIGINT)

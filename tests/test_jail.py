@@ -15,6 +15,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from process_tree import descendants
+
 from scenario_bank.jail import JailedProcess, JailError, JailLimitError, JailLimits, JailProtocolError, jail_status
 from scenario_bank.jail import bwrap, seccomp, wire, zygote
 from scenario_bank.jail.limits import START_CPU_SECONDS
@@ -132,23 +134,6 @@ def _running(pid) -> bool:
         return False
 
 
-def _descendants(root: int):
-    """``root``'s descendants on this machine (in any PID namespace below ours)."""
-    children = {}
-    for pid in os.listdir("/proc"):
-        try:
-            with open(f"/proc/{pid}/stat", encoding="ascii") as handle:
-                children.setdefault(int(handle.read().rsplit(")", 1)[1].split()[1]), []).append(int(pid))
-        except (OSError, ValueError, IndexError):
-            pass
-    found, todo = [], [root]
-    while todo:
-        for child in children.get(todo.pop(), []):
-            found.append(child)
-            todo.append(child)
-    return found
-
-
 def _eventually(condition, seconds: float = 10.0) -> bool:
     deadline = time.monotonic() + seconds
     while not condition():
@@ -191,7 +176,7 @@ def test_killing_a_worker_leaves_no_process(forked):
 def test_stopping_the_zygotes_leaves_no_process(zygote_only):
     workers = [JailedProcess(PROBE, name="probe") for _ in range(2)]
     fork_server = zygote._ZYGOTES[(os.getpid(), PROBE)]
-    jail = _descendants(fork_server.pid)  # bubblewrap's init, the zygote, two middle processes, two workers
+    jail = descendants(fork_server.pid)  # bubblewrap's init, the zygote, two middle processes, two workers
     assert len(jail) >= 6 and {w.pid for w in workers} <= set(jail)
     discard_spares()
     assert _eventually(lambda: not any(_running(pid) for pid in [fork_server.pid, *jail]))
