@@ -19,6 +19,8 @@ from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from scenario_bank.errors import DV2SError
+
 __all__ = ["VideoClip", "VideoError", "read_video", "frames_to_data_urls", "VIDEO_EXTENSIONS"]
 
 VIDEO_EXTENSIONS = (".mp4", ".m4v", ".mov", ".webm", ".mkv", ".avi", ".gif")
@@ -44,7 +46,7 @@ _COMMON_CODECS = {"VP8", "VP80", "VP9", "VP90", "MJPG", "MP4V", "FMP4", "XVID", 
 """Codecs OpenCV's FFmpeg backend decodes: a file naming one of these but giving no frame is empty or truncated."""
 
 
-class VideoError(ValueError):
+class VideoError(DV2SError, ValueError):
     """A video file that cannot be read; the message names the file, the problem and the fix."""
 
 
