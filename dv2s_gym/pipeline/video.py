@@ -280,6 +280,9 @@ def _fourcc(cap) -> str:
 
 
 def _open(path: Path):
+    # FFmpeg's own log lines ("moov atom not found") would precede our one-line error; OpenCV reads this
+    # variable when its FFmpeg backend first starts, and the user's own setting wins
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
     import cv2
 
     previous = cv2.utils.logging.getLogLevel()
