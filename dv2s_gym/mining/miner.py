@@ -35,6 +35,7 @@ outcomes in the schedule's order), and only the missing episodes run.
 from __future__ import annotations
 
 import fcntl
+import importlib.util
 import json
 import os
 import shutil
@@ -469,6 +470,9 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
             derived from its own. Not a setting: a resumed run may be given another.
     """
     started = time.perf_counter()
+    if importlib.util.find_spec("verifai") is None:  # the core install has no mining extra
+        raise MiningError("failure mining needs VerifAI's samplers, which the core install leaves out: "
+                          "pip install 'dv2s-gym[mining]'")
     if int(budget) < 1:
         raise MiningError(f"--budget must be at least 1 episode, not {budget}")
     if sampler not in SAMPLERS:
