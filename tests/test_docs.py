@@ -36,6 +36,7 @@ def site(tmp_path_factory) -> Path:
     return out
 
 
+@pytest.mark.slow  # the site takes 20-40 s to build
 @pytest.mark.parametrize("page", sorted(API_PAGES))
 def test_api_pages_document_the_public_api(site, page):
     text = (site / page / "index.html").read_text(encoding="utf-8")
@@ -44,6 +45,7 @@ def test_api_pages_document_the_public_api(site, page):
     assert "Args:" not in text  # Google-style sections were parsed, not shown as text
 
 
+@pytest.mark.slow
 def test_the_site_fetches_nothing_from_the_network(site):
     for page in site.rglob("*.html"):
         text = page.read_text(encoding="utf-8")
@@ -62,6 +64,7 @@ def test_no_page_speaks_of_internal_history(page):
     assert not found, f"{page.relative_to(ROOT)} mentions {found}"
 
 
+@pytest.mark.slow
 def test_no_built_page_speaks_of_internal_history(site):
     for page in site.rglob("*.html"):
         text = html.unescape(re.sub(r"<[^>]+>", " ", page.read_text(encoding="utf-8")))
