@@ -154,7 +154,7 @@ def _banner(report: Mapping[str, Any]) -> str:
     return f'<div class="banner {css}" id="summary">{escape(head)}<small>{escape("; ".join(detail))}</small></div>'
 
 
-def breakable(value: Any) -> str:
+def _breakable(value: Any) -> str:
     """``value`` escaped, with a line-break opportunity after each ``/``, ``_`` and ``:``, so long identifiers
     (cluster ids, scenario and entry names) wrap inside their column instead of widening the table."""
     text = escape(value)
@@ -224,7 +224,7 @@ def _scenario_table(report: Mapping[str, Any]) -> str:
     rows = []
     for name, s in (report.get("scenarios") or {}).items():
         types = ", ".join(f"{t} {n}" for t, n in (s.get("failures_by_type") or {}).items())
-        rows.append([(breakable(name), False), (escape(s.get("episodes")), True), (escape(s.get("failures")), True),
+        rows.append([(_breakable(name), False), (escape(s.get("episodes")), True), (escape(s.get("failures")), True),
                      (escape(fmt_interval(s.get("failure_rate"))), True),
                      (escape(_estimate(s.get("estimated_rate"))), True), (escape(s.get("avoidable")), True),
                      (escape(s.get("unavoidable")), True), (escape(types or "–"), False),
@@ -274,7 +274,7 @@ def _status(cluster: Mapping[str, Any]) -> str:
     status = str(cluster.get("status") or "")
     text = f'<span class="s-{escape(status)}">{escape(status)}</span>'
     if cluster.get("merged_into"):
-        text += f" into {breakable(cluster['merged_into'])}"
+        text += f" into {_breakable(cluster['merged_into'])}"
     return text
 
 
@@ -286,12 +286,12 @@ def _cluster_table(clusters: Sequence[Mapping[str, Any]]) -> str:
         rep = c.get("representative") or {}
         link = f' <a href="#card-{escape(c["id"])}">video</a>' if c.get("conversion") else ""
         short = str(c.get("id") or "").split("/", 1)[-1]  # the scenario has its own column
-        rows.append([(f'<code class="id" title="{escape(c.get("id"))}">{breakable(short)}</code>', False),
-                     (breakable(c.get("scenario")), False),
+        rows.append([(f'<code class="id" title="{escape(c.get("id"))}">{_breakable(short)}</code>', False),
+                     (_breakable(c.get("scenario")), False),
                      (escape(c.get("type")), False), (escape(c.get("size")), True), (escape(c.get("avoidable")), True),
                      ('<span class="region">' + escape(_region(c.get("params") or {})) + "</span>", False),
                      (f"#{escape(rep.get('index'))} seed {escape(rep.get('seed'))}{link}", False),
-                     (_status(c), False), (breakable(c.get("bank_entry") or "–"), False),
+                     (_status(c), False), (_breakable(c.get("bank_entry") or "–"), False),
                      (escape(_reproduction(c)), True), (escape(fmt(c.get("e2e_sc"), 3)), True)])
     return _table(["cluster (class/actor/ego)", "scenario", "type", "failures", "avoidable", "parameter region",
                    "representative",
@@ -377,7 +377,7 @@ def _rejected(report: Mapping[str, Any]) -> str:
         return '<p class="muted">None.</p>'
     by_stage = (report.get("counts") or {}).get("rejected_by_stage") or {}
     summary = "<p>By stage: " + ", ".join(f"{escape(s)} {escape(n)}" for s, n in by_stage.items()) + ".</p>"
-    rows = [[(f"<code>{breakable(r.get('cluster'))}</code>", False), (escape(r.get("index")), True),
+    rows = [[(f"<code>{_breakable(r.get('cluster'))}</code>", False), (escape(r.get("index")), True),
              (escape(r.get("stage")), False), (escape(r.get("reason")), False)] for r in rejected]
     return summary + _table(["cluster", "episode", "stage", "reason"], rows)
 
@@ -392,9 +392,9 @@ def _failure_rows(failures: Sequence[Mapping[str, Any]], limit: int = 200) -> st
         ref_text = (f"{reference.get('policy', '?')}: "
                     + (str(ref_failure.get("type")) if isinstance(ref_failure, Mapping) else "no failure")
                     if reference else "–")
-        rows.append([(escape(f.get("index")), True), (breakable(f.get("scenario")), False),
+        rows.append([(escape(f.get("index")), True), (_breakable(f.get("scenario")), False),
                      (escape(f.get("seed")), True), (escape(f.get("type")), False), (escape(ref_text), False),
-                     (f"<code>{breakable(f.get('cluster'))}</code>", False), (breakable(f.get("trace") or "–"), False)])
+                     (f"<code>{_breakable(f.get('cluster'))}</code>", False), (_breakable(f.get("trace") or "–"), False)])
     more = (f'<p class="muted">{len(failures) - limit} more in report.json.</p>' if len(failures) > limit else "")
     return _table(["episode", "scenario", "seed", "failure", "reference driver", "cluster", "trace"], rows) + more
 
