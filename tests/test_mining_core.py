@@ -345,7 +345,7 @@ def test_adaptive_samplers_take_verifai_options(small_space):
     params = sampler_params("cross-entropy", {"alpha": 0.5, "buckets": 1})
     assert (params.alpha, params.cont.buckets, params.thres) == (0.5, 1, 0.0)
     assert sampler_params("bandit", None).alpha == 0.9 and sampler_params("random") is None
-    assert [name for name in SAMPLERS if is_adaptive(name)] == ["cross-entropy", "bandit", "split"]
+    assert [name for name in SAMPLERS if is_adaptive(name)] == ["cross-entropy", "bandit", "split", "novelty-bandit"]
     # one bucket per parameter: the parameters stay uniform, only the scenario distribution moves
     sampler = make_sampler("cross-entropy", small_space.feature_space, 1, {"alpha": 0.5, "buckets": 1})
     for _ in range(6):
