@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.failure_state import NOVELTY_RADIUS, STATE_SIZE
 from dv2s_gym.mining.miner import episode_seed, mine, read_records
 from dv2s_gym.mining.monitors import (
     COLLISION_TYPES,
@@ -382,6 +383,7 @@ RUNS = {
     "random": {"sampler": "random"},  # non-adaptive: whole chunks go to the workers at once
     "bandit-novelty": {"sampler": "bandit", "feedback": "novelty", "sampler_options": {"alpha": 0.8, "buckets": 2}},
     "split": {"sampler": "split"},  # its default feedback: novelty
+    "novelty-bandit": {"sampler": "novelty-bandit"},  # its default feedback: state-novelty
 }
 
 
@@ -406,15 +408,18 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
             assert (out / record["trace"]).is_file() and record["reference"]["policy"] == "rule"
             assert isinstance(record["avoidable"], bool)
             assert set(record["behaviour"]) == {"actor", "actor_manoeuvre", "ego_manoeuvre"}
+            assert len(record["failure_state"]) == STATE_SIZE
             assert "unknown" not in record["behaviour"].values()
         else:
-            assert "behaviour" not in record
+            assert "behaviour" not in record and "failure_state" not in record
             assert record["trace"] is None and record["avoidable"] is None
         proposal = record["proposal"]  # the density the scene was drawn with (the failure-rate estimate's weights)
         if settings["sampler"] == "random":
             assert proposal == {"scenario": 0.5, "params": 1.0, "floor": 1.0}
         elif settings["sampler"] == "cross-entropy":
             assert 0.0 < proposal["scenario"] < 1.0 and proposal["params"] > 0.0
+        elif settings["sampler"] == "novelty-bandit":  # a mixture with uniform (explore 0.2), parameters uniform
+            assert 0.1 - 1e-9 <= proposal["scenario"] <= 0.1 + 0.8 + 1e-9 and proposal["params"] == 1.0
         else:  # the bandit picks its buckets deterministically; split's cell avoidance leaves cells out
             assert proposal is None
     assert (out / "sampler.pkl").is_file()
@@ -454,6 +459,11 @@ def _fed(record, records, feedback):
     if record["failure"] and feedback == "novelty":  # novelty is over parameter cells, not behaviour clusters
         earlier = {cell_id(r) for r in records if r["index"] < record["index"] and r["failure"]}
         if cell_id(record) in earlier:
+            return 9.0
+    if record["failure"] and feedback == "state-novelty":  # over the failure-state descriptors, per scenario
+        earlier = [r["failure_state"] for r in records
+                   if r["index"] < record["index"] and r["failure"] and r["scenario"] == record["scenario"]]
+        if any(math.dist(record["failure_state"], other) <= NOVELTY_RADIUS for other in earlier):
             return 9.0
     return record["rho"]
 
@@ -540,7 +550,7 @@ def test_resuming_with_other_settings_is_refused(whole_run, tmp_path):
     changes = [{"sampler": other, "sampler_options": None}, {"seed": 6}, {"env_config": {"duration": 4}},
                {"batch": 2}, {"reference": None}]
     if settings["sampler"] != "random":
-        changes += [{"sampler_options": {"alpha": 0.5}},
+        changes += [{"sampler_options": {"explore": 0.5} if settings["sampler"] == "novelty-bandit" else {"alpha": 0.5}},
                     {"feedback": "robustness" if (settings.get("feedback") or default_feedback(settings["sampler"]))
                      == "novelty" else "novelty"}]
     for change in changes:
