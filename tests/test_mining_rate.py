@@ -164,3 +164,15 @@ def test_the_novelty_bandit_s_densities_recover_the_true_rates():
         values.append(overall["value"])
     assert covered >= 7
     assert sum(values) / len(values) == pytest.approx(truth, abs=0.01)
+
+
+def test_an_estimate_pushed_past_one_by_heavy_weights_keeps_a_wide_interval():
+    """A short adaptive run of a policy that fails often: the few uniform draws (weight 5) all failed, the many
+    draws of the favoured scenario (weight 0.1) mostly too; the plain estimate passes 1 and is shown capped, but
+    its interval must say how little 60 such episodes tell (not [0.94, 1] as 60 equal-weight failures would)."""
+    weights = [5.0] * 12 + [0.1] * 48
+    outcomes = [1] * 12 + [1] * 40 + [0] * 8
+    estimate = weighted_rate(outcomes, weights)
+    assert estimate["raw"] > 1.0 and estimate["value"] == 1.0 and estimate["high"] == 1.0
+    assert estimate["low"] < 0.75
+    assert estimate["ess"] < 20  # Kish's: a few heavy weights are worth a few draws
