@@ -23,6 +23,13 @@ Samplers (``name``: VerifAI's):
   already failed. It finds the most of those grid cells of these samplers (``python -m bench.bench_mine --part
   samplers``); on the behaviour clusters the reports count it beats random sampling only for policies that fail
   rarely (``--part breadth``, bench/RESULTS.md).
+- ``novelty-bandit``: not one of VerifAI's (:class:`~dv2s_gym.mining.novelty_sampler.NoveltyBanditSampler`):
+  the scenario with the highest estimated rate of *new* failures (a failure whose continuous failure-state
+  descriptor, :mod:`~dv2s_gym.mining.failure_state`, is far from every earlier one's in the scenario; its
+  ``state-novelty`` feedback), mixed with uniform draws (``explore``, default 0.2, so no scenario's chance falls
+  below ``explore / S``), parameters uniform; every draw's density is known, so the failure-rate estimate
+  (:mod:`dv2s_gym.mining.rate`) holds. It is fed neither behaviour clusters nor (scenario, failure type) pairs,
+  the breadth it is scored on (``python -m bench.bench_mine --part breadth``).
 
 The adaptive samplers (``cross-entropy``, ``bandit``) take VerifAI's parameters as
 ``options`` (:data:`SAMPLER_OPTIONS`): ``alpha`` (how much one failure moves the
