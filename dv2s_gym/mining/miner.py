@@ -11,7 +11,7 @@ The run is a folder (``out``)::
     conversions.jsonl one record per converted cluster
     report.json/.md/.html
 
-An adaptive sampler (cross-entropy, bandit) runs on the sliding-window schedule
+An adaptive sampler (cross-entropy, bandit, split, novelty-bandit) runs on the sliding-window schedule
 (``settings.json`` ``"schedule": "window"``, :mod:`dv2s_gym.mining.window`): ``batch`` scenes
 are drawn ahead, each outcome is fed back in index order as soon as every earlier one has
 been, and each outcome fed lets the sampler draw one more scene, which goes straight to a
