@@ -1076,7 +1076,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--budget", type=int, default=LOOP["budget"],
                    help=f"mining episodes per round (default {LOOP['budget']})")
     p.add_argument("--sampler", default=LOOP["sampler"], help=f"the miner's sampler: random, halton, cross-entropy, "
-                   f"bandit or split (default {LOOP['sampler']}; see dv2s mine --help)")
+                   f"bandit, split or novelty-bandit (default {LOOP['sampler']}; see dv2s mine --help)")
     p.add_argument("--fine-tune-steps", type=int, default=LOOP["fine_tune_steps"],
                    help=f"env steps of fine-tuning per round (default {LOOP['fine_tune_steps']})")
     p.add_argument("--fine-tune-lr", type=float, default=LOOP["fine_tune_lr"],
