@@ -956,9 +956,9 @@ def build_parser() -> argparse.ArgumentParser:
     bank_option(p)
     p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank)")
     p.add_argument("--budget", type=int, default=200, help="episodes to run (default 200)")
-    p.add_argument("--sampler", default="cross-entropy",
+    p.add_argument("--sampler", default="novelty-bandit",
                    choices=["random", "halton", "cross-entropy", "bandit", "split", "novelty-bandit"],
-                   help="VerifAI sampler (default cross-entropy); split: VerifAI's cross-entropy over which scenario "
+                   help="scene sampler (default novelty-bandit); split: VerifAI's cross-entropy over which scenario "
                    "and a Halton sequence per scenario over its parameters; novelty-bandit: the scenarios that keep "
                    "giving failures unlike earlier ones, mixed with uniform, parameters uniform (explore, prior_new, "
                    "prior_old)")

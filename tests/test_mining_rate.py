@@ -142,6 +142,7 @@ def _novelty_bandit_run(draws: int, seed: int, window: int = 4):
     return records
 
 
+@pytest.mark.slow
 def test_the_novelty_bandit_s_densities_recover_the_true_rates():
     """The sampler draws the failing scenarios far more often than uniform; its recorded densities (a mixture with
     uniform: every weight at most 1 / explore = 5) bring the estimates back to the true rates under the scenarios'

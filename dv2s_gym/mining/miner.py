@@ -438,7 +438,7 @@ def _feedback(record: Dict[str, Any], seen: set, mode: str) -> float:
     return float(rho)
 
 
-def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cross-entropy",
+def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "novelty-bandit",
          scenarios: Optional[Sequence[str]] = None, bank_dir: Optional[str] = None, backend: str = "local",
          workers: Optional[int] = None, address: Optional[str] = None, seed: int = 0,
          reference: Optional[str] = "rule", batch: Optional[int] = None, timeout: Optional[float] = None,
@@ -454,7 +454,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         out: the run folder (created; an existing run with the same settings is resumed
             and may be given a larger budget).
         budget: episodes to run in total.
-        sampler: one of :data:`~dv2s_gym.mining.samplers.SAMPLERS`.
+        sampler: one of :data:`~dv2s_gym.mining.samplers.SAMPLERS` (default ``novelty-bandit``: broader failures than
+            VerifAI's cross-entropy on the breadth bench, bench/RESULTS.md).
         sampler_options: VerifAI parameters of an adaptive sampler (``alpha``, ``buckets``,
             ``thres``; :func:`~dv2s_gym.mining.samplers.sampler_params`); ``None``: VerifAI's defaults.
         feedback: what the adaptive samplers learn from (:data:`FEEDBACKS`): ``"robustness"`` (every
