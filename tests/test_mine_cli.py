@@ -99,7 +99,7 @@ def test_resuming_with_other_settings_is_refused(tmp_path, capsys):
     assert run(capsys, *base)[0] == 0
     code, _, err = run(capsys, *base, "--sampler", "halton")
     assert code == 2
-    assert "other settings (sampler: run has 'novelty-bandit', asked 'halton')" in one_line_error(err)
+    assert "other settings (sampler: run has 'novelty-bandit', asked 'halton'" in one_line_error(err)
 
 
 @pytest.mark.slow
