@@ -692,3 +692,42 @@ def test_an_empty_run_folder_another_miner_holds_is_not_removed(tmp_path):
         assert out.is_dir()
     _remove_if_empty(out)
     assert not out.exists()
+
+
+def test_the_failure_state_descriptor_and_state_novelty_feedback():
+    """The descriptor reads speeds and geometry at the failure step from the trace; state-novelty feeds a failure
+    as one only when its descriptor is far from every earlier failure's in the same scenario."""
+    from dv2s_gym.mining.failure_state import failure_state
+    from dv2s_gym.mining.miner import _feedback
+
+    # ego at 20 m/s slowing to 15 over the last second, a car 10 m ahead in the same lane at 5 m/s, heading along
+    states = [{"ego": [float(i), 0.0, 0.0, 20.0 - max(0, i - 5)], "Car1": [10.0 + i, 0.0, 0.0, 5.0]}
+              for i in range(11)]
+    trace = SimpleNamespace(states=states, config={"policy_frequency": 5, "duration": 20.0})
+    state = failure_state(trace, {"type": "collision", "with": "Car1", "step": 10})
+    assert len(state) == STATE_SIZE
+    assert state[:4] == pytest.approx([15.0 / 30, -5.0 / 10, 0.0, 10 / 100])
+    assert state[4:] == pytest.approx([1.0, 10.0 / 30, 0.0, (5.0 - 15.0) / 20, 0.0])
+    assert failure_state(trace, None) is None
+    failure = {"type": "collision", "kind": "collision:rear_end"}
+    near = [x + 0.01 for x in state]
+    far = [x + 0.5 for x in state]
+    records = [{"index": 0, "scenario": BRAKES, "failure": failure, "rho": -2.0, "failure_state": state},
+               {"index": 1, "scenario": BRAKES, "failure": failure, "rho": -1.5, "failure_state": near},
+               {"index": 2, "scenario": BRAKES, "failure": failure, "rho": -1.2, "failure_state": far},
+               {"index": 3, "scenario": LEFT_TURN, "failure": failure, "rho": -1.1, "failure_state": state},
+               {"index": 4, "scenario": BRAKES, "failure": failure, "rho": -1.0, "failure_state": None},
+               {"index": 5, "scenario": BRAKES, "failure": None, "rho": 3.0}]
+    seen: set = set()
+    assert [_feedback(r, seen, "state-novelty") for r in records] == [-2.0, 9.0, -1.2, -1.1, -1.0, 3.0]
+    assert default_feedback("novelty-bandit") == "state-novelty"
+
+
+def test_novelty_bandit_options_are_checked(small_space):
+    from dv2s_gym.mining.samplers import sampler_params
+
+    assert sampler_params("novelty-bandit", {"explore": 0.5}) == {"explore": 0.5, "prior_new": 2.0, "prior_old": 1.0}
+    for bad, match in (({"explore": 0.0}, r"explore must be in \(0, 1\]"), ({"prior_old": -1}, "prior_old must be > 0"),
+                       ({"alpha": 0.5}, "no option 'alpha'; it takes explore, prior_new, prior_old")):
+        with pytest.raises(MiningError, match=match):
+            make_sampler("novelty-bandit", small_space.feature_space, 0, bad)
