@@ -106,7 +106,7 @@ def default_feedback(name: str) -> str:
 
 def is_adaptive(name: str) -> bool:
     """True for samplers whose next draws depend on the outcomes fed back (``cross-entropy``, ``bandit``,
-    ``split``)."""
+    ``split``, ``novelty-bandit``)."""
     return name in _VERIFAI_KIND or name in (SPLIT, NOVELTY)
 
 
