@@ -62,6 +62,7 @@ from typing import Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optio
 from scenario_bank.atomic import atomic_path, atomic_write_json, atomic_write_text
 from scenario_bank.cache import keyed_cache_dir
 from scenario_bank.elements import ElementError, normalize_elements
+from scenario_bank.story import StoryError, normalize_story
 from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, extract_archive, is_entry_name,
                                       load_json_bounded, read_in_folder, read_regular_file, real_folder_in,
                                       regular_file_in_folder, validate_entry_name, validate_relative_path)
@@ -511,6 +512,11 @@ def _validate_sidecar(meta: Any, folder: Path) -> Dict[str, Any]:
         meta["elements"] = normalize_elements(meta.get("elements") or {})
     except ElementError as error:
         raise ValueError(f"sidecar elements: {error}") from None
+    if "story" in meta:
+        try:
+            normalize_story(meta["story"], "sidecar story")
+        except StoryError as error:
+            raise ValueError(str(error)) from None
     source = meta.get("source") or {}
     if source.get("kind") not in SOURCE_KINDS:
         raise ValueError(f"sidecar source.kind must be one of {SOURCE_KINDS}, got {source.get('kind')!r}")
