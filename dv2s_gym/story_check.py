@@ -20,6 +20,9 @@ A sidecar's ``story`` block names the script's story actors and the steps each m
   that stands still 10 m short of a crossing pedestrian is 3.3 s from it).
 * ``hold``: true when the action's state must last from the event to the end of the episode (a
   vehicle that stops and stays stopped).
+* ``when``: another story actor; the step's relations are read at the moment of that actor's last step
+  found (its action must be under way then): the cars that box the ego in are beside it when it
+  reaches the obstacle.
 
 Every step is required, in its order per actor (a step's event comes no earlier than the event of
 the same actor's previous step). Steps of the ego (``"actor": "ego"``) are required only of the
@@ -79,6 +82,7 @@ STOP_SPEED = 0.5
 ONSET_SPEED_CHANGE = 1.0  # m/s: a brake or speed-up has begun
 ONSET_SHIFT = 0.5         # m sideways: a lane change, cut-in, merge or drift has begun
 CUT_IN_AHEAD = 50.0       # m
+PATH_EXTEND_M = 30.0      # m: a vehicle's path runs on this far past where the episode ends
 TURN_ONSET = math.radians(10)
 TURN_ANGLE = math.radians(55)
 _LATERAL = {"lane_change_left", "lane_change_right", "cut_in", "merge", "drift", "swerve", "pull_out",
@@ -130,6 +134,7 @@ class _Episode:
                     rows[i] = state[name][:4]
             self.tracks[name] = rows
         self.kinds = dict(getattr(trace, "kinds", {}) or {})
+        self._paths: Dict[Tuple[str, int], Any] = {}
         self.lane_changes: Dict[str, List[Tuple[int, str]]] = {}
         self.collisions: Dict[str, List[Tuple[int, str]]] = {}
         for event in trace.events:
@@ -156,27 +161,75 @@ class _Episode:
         return not np.isnan(self.tracks[name][i, 0])
 
     def gap_s(self, actor: str, i: int) -> float:
-        """Time gap [s] from the ego's front to ``actor`` at step ``i`` (inf when it is not ahead)."""
-        ahead, _ = self.rel("ego", actor, i)
-        if not ahead > EGO_FRONT:
+        """Time gap [s] from the ego's front to ``actor`` at step ``i`` (inf when it is not ahead): along the
+        ego's path when the actor is on it, else straight ahead."""
+        along = self.along_path("ego", actor, i)
+        if along is None:
+            ahead, _ = self.rel("ego", actor, i)
+            along = ahead - EGO_FRONT
+        if not along > 0:
             return math.inf
-        return (ahead - EGO_FRONT) / max(abs(float(self.tracks["ego"][i, 3])), MIN_GAP_SPEED)
+        return along / max(abs(float(self.tracks["ego"][i, 3])), MIN_GAP_SPEED)
 
-    def in_ego_path(self, actor: str, i: int) -> bool:
-        ahead, left = self.rel("ego", actor, i)
-        return abs(left) <= LANE_HALF and ahead > EGO_FRONT
+    def along_path(self, reference: str, actor: str, i: int) -> Optional[float]:
+        """How far [m] ahead of ``reference``'s front ``actor`` stands on ``reference``'s path at step ``i``;
+        None when the actor is not on it.
 
-    def path_entries(self, actor: str, start: int = 0, end: Optional[int] = None) -> List[int]:
-        """Steps at which ``actor`` enters the ego's path ahead of it from the side."""
+        The path is the one ``reference`` drives from step ``i`` on (so a car about to turn has the road it
+        turns into ahead of it), extended :data:`PATH_EXTEND_M` along its last heading; the actor is on it when
+        its centre is within half a lane of it, ahead of the reference's front bumper."""
+        cache = self._paths.get((reference, i))
+        if cache is None:
+            track = self.tracks[reference][i:]
+            track = track[~np.isnan(track[:, 0])]
+            if not len(track):
+                return None
+            x, y, heading = track[-1, :3]
+            points = np.vstack([track[:, :2], [x + PATH_EXTEND_M * math.cos(heading),
+                                               y + PATH_EXTEND_M * math.sin(heading)]])
+            steps = np.diff(points, axis=0)
+            lengths = np.hypot(steps[:, 0], steps[:, 1])
+            keep = lengths > 1e-6
+            starts, steps, lengths = points[:-1][keep], steps[keep], lengths[keep]
+            arc = np.concatenate([[0.0], np.cumsum(lengths)[:-1]])
+            cache = (starts, steps, lengths, arc)
+            self._paths[(reference, i)] = cache
+        starts, steps, lengths, arc = cache
+        if not len(starts) or not self.present(actor, i):
+            return None
+        point = self.tracks[actor][i, :2]
+        u = np.clip(((point - starts) * steps).sum(axis=1) / lengths ** 2, 0.0, 1.0)
+        nearest = starts + steps * u[:, None]
+        distance = np.hypot(*(point - nearest).T)
+        near = np.flatnonzero(distance <= LANE_HALF)
+        if not near.size:
+            return None
+        along = float(arc[near[0]] + u[near[0]] * lengths[near[0]]) - EGO_FRONT
+        return along if along > 0 else None
+
+    def path_entries(self, actor: str, start: int = 0, end: Optional[int] = None,
+                     reference: str = "ego") -> List[int]:
+        """Steps at which ``actor`` comes onto ``reference``'s path ahead of it from off it (see
+        :meth:`along_path`)."""
         end = self.n - 1 if end is None else end
         out = []
         for i in range(max(1, start), end + 1):
-            if not (self.present(actor, i) and self.present(actor, i - 1)):
+            if not (self.present(actor, i) and self.present(actor, i - 1) and self.present(reference, i)):
                 continue
-            _, before = self.rel("ego", actor, i - 1)
-            if abs(before) > LANE_HALF and self.in_ego_path(actor, i):
+            if self.along_path(reference, actor, i) is None:
+                continue
+            if self._off_path(reference, actor, i - 1):
                 out.append(i)
         return out
+
+    def _off_path(self, reference: str, actor: str, i: int) -> bool:
+        """Not on ``reference``'s path at step ``i``, nor beside or behind its front (off to the side of it)."""
+        if not self.present(reference, i):
+            return True
+        if self.along_path(reference, actor, i) is not None:
+            return False
+        _, left = self.rel(reference, actor, i)
+        return abs(left) > LANE_HALF or self.rel(reference, actor, i)[0] > EGO_FRONT
 
 
 def resolve_actors(story: Mapping[str, Any], names: Sequence[str]) -> Dict[str, Optional[str]]:
@@ -210,7 +263,11 @@ def check_story(story: Mapping[str, Any], trace, ego: str = "scenic") -> StoryRe
             names[actor] = None
             result.missed.append((actor, f"is a {episode.kinds[name]} in the episode, the story says {kind}"))
     detector = _Detector(episode, names)
-    for actor in ["ego"] + list(story["actors"]):
+    moments: Dict[str, int] = {}  # actor -> event step of its last step found
+    # actors whose steps are read at another actor's moment ("when") come after the others
+    order = sorted(["ego"] + list(story["actors"]),
+                   key=lambda a: any(s.get("when") for s in story["steps"] if s["actor"] == a))
+    for actor in order:
         steps = [s for s in story["steps"] if s["actor"] == actor]
         if actor == "ego" and ego != "scenic":
             continue
@@ -223,9 +280,17 @@ def check_story(story: Mapping[str, Any], trace, ego: str = "scenic") -> StoryRe
             continue
         after = 0
         for k, step in enumerate(steps):
-            found, why = detector.find(step, after)
+            if step.get("when"):
+                moment = moments.get(step["when"])
+                if moment is None:
+                    result.missed.append((step_label(step), f"{step['when']}'s step was not seen"))
+                    continue
+                found, why = detector.find(step, 0, at=moment)
+            else:
+                found, why = detector.find(step, after)
             if found is not None:
-                after = found
+                after = max(after, found)
+                moments[actor] = found
                 continue
             credit = detector.collision_credit(step, after)
             if credit:
@@ -243,10 +308,17 @@ class _Detector:
         self.names = names
 
     # ------------------------------------------------------------------ steps
-    def find(self, step: Mapping[str, Any], after: int) -> Tuple[Optional[int], str]:
-        """The event step of the first occurrence at or after ``after`` that satisfies ``step``; else why not."""
+    def find(self, step: Mapping[str, Any], after: int, at: Optional[int] = None) -> Tuple[Optional[int], str]:
+        """The event step of the first occurrence at or after ``after`` that satisfies ``step``; else why not.
+
+        ``at``: read the step at this moment instead (an occurrence under way then)."""
         name = self.names[step["actor"]]
         occurrences = [o for o in self.occurrences(name, step["action"]) if o.event >= after]
+        if at is not None:
+            occurrences = [_Occurrence(o.onset, at, o.end) for o in self.occurrences(name, step["action"])
+                           if o.onset <= at <= o.end][:1]
+            if not occurrences:
+                return None, f"not under way at {at * self.e.dt:.1f} s, when {step['when']} does its step"
         if not occurrences:
             return None, "not seen" + (f" after {after * self.e.dt:.1f} s" if after else "")
         reasons = []
@@ -287,16 +359,8 @@ class _Detector:
         return None
 
     def _path_entries_of(self, ref: str, name: str, occ: _Occurrence) -> List[int]:
-        """Steps of the occurrence at which ``name`` enters ``ref``'s path ahead of it from the side."""
-        e, out = self.e, []
-        for i in range(max(1, occ.event), occ.end + 1):
-            if not all(e.present(n, j) for n in (ref, name) for j in (i - 1, i)):
-                continue
-            _, before = e.rel(ref, name, i - 1)
-            ahead, left = e.rel(ref, name, i)
-            if abs(before) > LANE_HALF and abs(left) <= LANE_HALF and ahead > EGO_FRONT:
-                out.append(i)
-        return out
+        """Steps of the occurrence at which ``name`` comes onto ``ref``'s path ahead of it."""
+        return self.e.path_entries(name, max(0, occ.event), occ.end, reference=ref)
 
     def _relation(self, relation: str, ref: str, name: str, i: int) -> bool:
         ahead, left = self.e.rel(ref, name, i)

@@ -13,8 +13,10 @@ their vocabulary kinds, and the steps each must play, in order per actor::
 
 A step holds ``actor`` (a story actor or ``ego``), ``action`` (:data:`scenario_bank.elements.ACTIONS`),
 and optionally ``relations`` (``[relation, other]`` pairs, ``other`` the ego or another story actor),
-``within_s`` (a time gap in seconds the step must happen within, ahead of the ego) and ``hold`` (the
-action's state lasts to the end of the episode). What each means in an episode is
+``within_s`` (a time gap in seconds the step must happen within, ahead of the ego), ``hold`` (the
+action's state lasts to the end of the episode) and ``when`` (another story actor: the step's relations
+are read at the moment of that actor's last step, e.g. the cars that box the ego in are beside it when it
+reaches the obstacle). What each means in an episode is
 :mod:`dv2s_gym.story_check`'s business.
 """
 
@@ -27,7 +29,7 @@ from scenario_bank.elements import ACTIONS, PARTICIPANTS, RELATIONS
 
 __all__ = ["StoryError", "normalize_story", "step_label", "STEP_KEYS"]
 
-STEP_KEYS = {"actor", "action", "relations", "within_s", "hold"}
+STEP_KEYS = {"actor", "action", "relations", "within_s", "hold", "when"}
 """The keys a step may have."""
 
 
@@ -86,11 +88,17 @@ def normalize_story(story: Any, where: str = "story") -> Dict[str, Any]:
             raise StoryError(f"{at}.within_s must be a positive number of seconds")
         if not isinstance(step.get("hold", False), bool):
             raise StoryError(f"{at}.hold must be true or false")
+        when = step.get("when")
+        if when is not None and (when not in actors or when == step["actor"]):
+            raise StoryError(f"{at}.when {when!r} must name another story actor (the step is read at the moment "
+                             "of that actor's last step)")
         clean = {"actor": step["actor"], "action": step["action"], "relations": [list(p) for p in relations]}
         if within is not None:
             clean["within_s"] = float(within)
         if step.get("hold"):
             clean["hold"] = True
+        if when is not None:
+            clean["when"] = when
         out.append(clean)
     return {"actors": dict(actors), "steps": out}
 
@@ -102,4 +110,6 @@ def step_label(step: Mapping[str, Any]) -> str:
         words.append(f"within {step['within_s']:g} s")
     if step.get("hold"):
         words.append("to the end")
+    if step.get("when"):
+        words.append(f"when {step['when']} does")
     return " ".join(words)

@@ -265,6 +265,22 @@ def test_ego_steps_are_required_only_of_the_scripts_own_ego():
     assert [label for label, _ in check_story(story, t, ego="scenic").missed] == ["ego brake"]
 
 
+def test_when_reads_a_step_at_the_moment_of_another_actors_step():
+    # the obstacle is within 2 s ahead of the ego from about 6 s on; the blocker is to the ego's left then,
+    # unless it moved over to the right lane at 3 s
+    story = {"actors": {"obstacle": "obstacle", "blocker": "car"},
+             "steps": [{"actor": "obstacle", "action": "stop", "relations": [["same_lane", "ego"]], "within_s": 2.0},
+                       {"actor": "blocker", "action": "keep_lane", "relations": [["left_of", "ego"]],
+                        "when": "obstacle"}]}
+    kinds = {"obstacle": "obstacle"}
+    load = [[160.0, 0.0, 0.0, 0.0] for _ in range(N)]
+    beside = car(0.0, lambda i: -3.5, 20.0)
+    assert check_story(story, trace({"ego": ego_track(), "obstacle": load, "blocker": beside}, kinds=kinds)).played
+    moved = car(0.0, lambda i: -3.5 if i < 15 else 3.5, 20.0)
+    result = check_story(story, trace({"ego": ego_track(), "obstacle": load, "blocker": moved}, kinds=kinds))
+    assert [label for label, _ in result.missed] == ["blocker keep_lane left_of ego when obstacle does"]
+
+
 @pytest.mark.parametrize("story, message", [
     ({"steps": []}, "actors"),
     ({"actors": {"ego": "car"}, "steps": [{"actor": "ego", "action": "brake"}]}, "not 'ego'"),
@@ -274,7 +290,9 @@ def test_ego_steps_are_required_only_of_the_scripts_own_ego():
     ({"actors": {"cutter": "car"}, "steps": [{"actor": "cutter", "action": "brake",
                                               "relations": [["ahead", "ego"]]}]}, "[relation, other]"),
     ({"actors": {"cutter": "car"}, "steps": [{"actor": "cutter", "action": "brake", "within_s": 0}]}, "within_s"),
-    ({"actors": {"cutter": "car"}, "steps": [{"actor": "cutter", "action": "brake", "when": 1}]}, "unknown keys"),
+    ({"actors": {"cutter": "car"}, "steps": [{"actor": "cutter", "action": "brake", "at": 1}]}, "unknown keys"),
+    ({"actors": {"cutter": "car"}, "steps": [{"actor": "cutter", "action": "brake", "when": "cutter"}]},
+     "another story actor"),
 ])
 def test_a_malformed_story_is_refused_with_the_fix(story, message):
     with pytest.raises(StoryError, match=message.replace("[", r"\[").replace("]", r"\]")):
