@@ -47,7 +47,7 @@ SECTIONS = (
     "# 3. Road geometry",
     "# 4. Spawn positions",
 )
-SIDECAR_FIELDS = {"schema_version", "name", "description", "elements", "tags", "map", "use_case", "source",
+SIDECAR_FIELDS = {"schema_version", "name", "description", "elements", "story", "tags", "map", "use_case", "source",
                   "content_hash"}
 SOURCE_FIELDS = {"kind", "video", "parent", "seed", "generator", "model", "context_hash", "date"}
 USE_CASES = {
@@ -114,6 +114,14 @@ def test_sidecar_is_valid(name):
     assert isinstance(meta["description"], str) and 20 <= len(meta["description"]) <= 400
     # elements follow the vocabulary, are stored in canonical form and have an ego
     assert normalize_elements(meta["elements"]) == meta["elements"]
+    # the story names actors the script names, of kinds the elements list
+    from scenario_bank.story import normalize_story
+
+    story = normalize_story(meta["story"])
+    script_text = script_path(name).read_text(encoding="utf-8")
+    for actor, kind in story["actors"].items():
+        assert f'with name "{actor}"' in script_text, f"{name}: story actor {actor} is not named in the script"
+        assert kind in meta["elements"]["participants"]
     assert meta["elements"]["road"] is not None
     assert "ego" in meta["elements"]["participants"]
     assert set(meta["elements"]["participants"]) <= set(PARTICIPANTS)

@@ -23,6 +23,7 @@ egoLane = Uniform(*network.lanes)
 ego = new Car at egoLane.centerline.pointAlongBy(Range(50, 1200)),
     with speed globalParameters.ego_speed
 lead = new Car following roadDirection from ego for globalParameters.lead_gap,
+    with name "lead",
     with speed globalParameters.ego_speed,
     with behavior SuddenBrake(globalParameters.ego_speed, globalParameters.brake_after, globalParameters.brake_strength)
 traffic1 = new Car offset by (Uniform(-3.5, 3.5), Range(-30, 50)), with regionContainedIn road,

@@ -36,6 +36,7 @@ ego = new Car at egoLane.centerline.pointAlongBy(egoS),
     with speed globalParameters.ego_speed,
     with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed)
 lead = new Car at egoLane.centerline.pointAlongBy(egoS + globalParameters.lead_gap),
+    with name "lead",
     with speed globalParameters.ego_speed,
     with behavior DecelerateToSpeed(globalParameters.ego_speed, globalParameters.lead_low_speed,
                                     globalParameters.decel_after, globalParameters.decel_trigger,

@@ -31,11 +31,14 @@ ego = new Car at egoLane.centerline.pointAlongBy(egoS),
     with speed globalParameters.ego_speed,
     with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed)
 obstacle = new Obstacle at egoLane.centerline.pointAlongBy(egoS + globalParameters.obstacle_gap),
+    with name "obstacle",
     with width globalParameters.obstacle_width,
     with length globalParameters.obstacle_length
 blocker = new Car at leftLane.centerline.pointAlongBy(egoS + globalParameters.blocker_offset),
+    with name "blocker",
     with speed globalParameters.ego_speed + globalParameters.blocker_speed_delta,
     with behavior StayAlongside(globalParameters.ego_speed + globalParameters.blocker_speed_delta)
 follower = new Car at leftLane.centerline.pointAlongBy(egoS + globalParameters.blocker_offset - Range(12, 20)),
+    with name "follower",
     with speed globalParameters.ego_speed + globalParameters.blocker_speed_delta,
     with behavior StayAlongside(globalParameters.ego_speed + globalParameters.blocker_speed_delta)

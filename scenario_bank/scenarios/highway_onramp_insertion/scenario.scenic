@@ -48,6 +48,7 @@ rightLane = Uniform(network.elements['road1_lane0'])
 ego = new Car at rightLane.centerline.pointAlongBy(Range(340, 420)),
     with speed globalParameters.ego_speed
 merger = new Car at rampLane.centerline.pointAlongBy(Range(120, 200)),
+    with name "merger",
     with speed globalParameters.ego_speed,
     with behavior MergeAheadOfEgo(accelLane, globalParameters.merger_lead, globalParameters.merger_extra_speed,
                                   globalParameters.lane_change_duration)

@@ -51,5 +51,6 @@ ego = new Car at egoManeuver.startLane.centerline.pointAlongBy(-globalParameters
 crossSpot = new OrientedPoint at egoManeuver.endLane.centerline.pointAlongBy(globalParameters.crossing_position),
     facing roadDirection
 pedestrian = new Pedestrian right of crossSpot by pedestrianSide,
+    with name "pedestrian",
     facing toward crossSpot,
     with behavior CrossWhenEgoNear(globalParameters.walking_speed, globalParameters.trigger_time)

@@ -37,8 +37,10 @@ ego = new Car following roadDirection from egoStart.centerline.end for -Range(12
     with route egoRoute,
     with behavior TurnLeft(globalParameters.ego_speed, egoRoute)
 oncoming = new Car following roadDirection from oncomingStart.centerline.end for -Range(15, 50),
+    with name "oncoming",
     with speed globalParameters.oncoming_speed,
     with behavior GoStraightThrough(globalParameters.oncoming_speed, oncomingRoute)
 follower = new Car following roadDirection from oncoming for Range(-25, -12),
+    with name "follower",
     with speed globalParameters.oncoming_speed,
     with behavior GoStraightThrough(globalParameters.oncoming_speed, oncomingRoute)

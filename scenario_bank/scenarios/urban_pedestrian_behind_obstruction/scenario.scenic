@@ -42,8 +42,10 @@ ego = new Car at egoLane.centerline.pointAlongBy(egoS),
 # the truck (9 m long) ends just before the crossing point, seen from the ego
 truckSpot = new OrientedPoint at egoLane.centerline.pointAlongBy(crossS - 4.5 - globalParameters.hidden_gap),
     facing roadDirection
-parked = new Truck left of truckSpot by Range(2.5, 2.7), facing roadDirection, with speed 0
+parked = new Truck left of truckSpot by Range(2.5, 2.7), facing roadDirection, with speed 0,
+    with name "parked"
 crossSpot = new OrientedPoint at egoLane.centerline.pointAlongBy(crossS), facing roadDirection
 pedestrian = new Pedestrian left of crossSpot by Range(5.5, 6.2),
+    with name "pedestrian",
     facing crossSpot.heading - 90 deg,
     with behavior StepOutWhenEgoNear(globalParameters.walking_speed, globalParameters.trigger_time)

@@ -25,8 +25,10 @@ ego = new Car at egoLane.centerline.pointAlongBy(Range(60, 460)),
     with speed globalParameters.ego_speed
 spot = new OrientedPoint following roadDirection from ego for globalParameters.crossing_distance
 pedestrian = new Pedestrian right of spot by Range(2.6, 3.2),
+    with name "pedestrian",
     facing spot.heading + 90 deg,
     with behavior CrossWhenClose(globalParameters.walking_speed, globalParameters.trigger_distance)
 oncomingSpot = new OrientedPoint following roadDirection from ego for Range(30, 90)
 oncoming = new Car left of oncomingSpot by 2.5, facing roadDirection, with speed Range(8, 12),
+    with name "oncoming",
     with behavior FollowLaneBehavior(target_speed=Range(8, 12))

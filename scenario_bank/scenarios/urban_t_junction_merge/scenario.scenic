@@ -39,5 +39,6 @@ ego = new Car at egoManeuver.startLane.centerline.pointAlongBy(-egoDistance),
     with route egoRoute,
     with behavior DriveRoute(globalParameters.ego_speed, egoRoute)
 merger = new Car at mergerManeuver.startLane.centerline.pointAlongBy(-globalParameters.merger_distance),
+    with name "merger",
     with speed globalParameters.merger_speed,
     with behavior DriveRoute(globalParameters.merger_speed, mergerRoute)

@@ -42,14 +42,17 @@ spotLeft = new OrientedPoint at egoLane.centerline.pointAlongBy(crossS), facing 
 spotRight1 = new OrientedPoint at egoLane.centerline.pointAlongBy(crossS - Range(1.2, 2.5)), facing roadDirection
 spotRight2 = new OrientedPoint at egoLane.centerline.pointAlongBy(crossS + Range(1.2, 2.5)), facing roadDirection
 leftToRight = new Pedestrian left of spotLeft by Range(5.5, 6.2),
+    with name "leftToRight",
     facing spotLeft.heading - 90 deg,
     with behavior CrossWhenEgoNear(globalParameters.walking_speed,
                                    globalParameters.trigger_time + globalParameters.left_head_start)
 rightToLeft1 = new Pedestrian right of spotRight1 by Range(2.0, 2.7),
+    with name "rightToLeft1",
     facing spotRight1.heading + 90 deg,
     with behavior CrossWhenEgoNear(globalParameters.walking_speed + Range(-0.2, 0.2),
                                    globalParameters.trigger_time)
 rightToLeft2 = new Pedestrian right of spotRight2 by Range(2.0, 2.7),
+    with name "rightToLeft2",
     facing spotRight2.heading + 90 deg,
     with behavior CrossWhenEgoNear(globalParameters.walking_speed + Range(-0.2, 0.2),
                                    globalParameters.trigger_time + Range(-0.4, 0.4))
