@@ -48,8 +48,10 @@ Events of each action (times are trace steps):
 * ``collide`` and its types: a collision event of the actor.
 
 The relation ``crossing_path`` holds when, between the event and the end of the manoeuvre, the actor
-enters the ego's path ahead of it (with ``within_s``: within that time gap); the others hold at the
-event: ``ahead_of``/``behind`` (more than 2 m along the other's heading), ``left_of``/``right_of``/
+enters the ego's path ahead of it (with ``within_s``: within that time gap), or, for a vehicle, when its
+path crosses the ego's at 20 to 160 degrees with a post-encroachment time (how far apart in time the two
+pass the crossing point, whichever first) within ``within_s`` (an oncoming car that strikes the side of
+a car turning across its path crossed it); the others hold at the event: ``ahead_of``/``behind`` (more than 2 m along the other's heading), ``left_of``/``right_of``/
 ``same_lane`` (beyond / within half a lane sideways), ``oncoming`` (heading more than 135 degrees off).
 
 A collision of the ego with a story actor stands in for that actor's remaining steps when the
@@ -339,12 +341,19 @@ class _Detector:
                 return f"no actor named {other!r} in the episode"
             if relation == "crossing_path":
                 entries = self._path_entries_of(ref, name, occ)
+                gap = min((e.gap_s(name, i) for i in entries), default=math.inf) if ref == "ego" else 0.0
+                if entries and (within is None or gap <= within):
+                    continue
+                if e.kinds.get(name) != "pedestrian":
+                    pet = self._encroachment(ref, name)
+                    if pet is not None and (within is None or pet <= within):
+                        continue
+                    if pet is not None:
+                        return (f"{when}: crosses the path of {other} {pet:.1f} s apart from it "
+                                f"(more than {within:g} s)")
                 if not entries:
                     return f"{when}: never enters the path of {other} ahead of it"
-                if within is not None and ref == "ego" and min(e.gap_s(name, i) for i in entries) > within:
-                    gap = min(e.gap_s(name, i) for i in entries)
-                    return f"{when}: enters the ego's path {gap:.1f} s ahead of it (more than {within:g} s)"
-                continue
+                return f"{when}: enters the ego's path {gap:.1f} s ahead of it (more than {within:g} s)"
             if not (e.present(name, at) and e.present(ref, at)):
                 return f"{when}: {other} is not in the episode then"
             if not self._relation(relation, ref, name, at):
@@ -357,6 +366,54 @@ class _Detector:
         if step.get("hold") and not self._holds(step["action"], name, at):
             return f"{when}: does not last to the end of the episode"
         return None
+
+    def _encroachment(self, ref: str, name: str) -> Optional[float]:
+        """Post-encroachment time [s] where the paths of ``name`` and ``ref`` cross (at 20 to 160 degrees): how
+        far apart in time the two pass the crossing point, whichever comes first; the smallest over their
+        crossings. None when the paths do not cross where ``name`` really drove (or crashed into ``ref``).
+
+        Each path runs on :data:`PATH_EXTEND_M` past its end at the last speed (at least
+        :data:`MIN_GAP_SPEED`), so a car that stands short of the crossing, or one the episode ended on,
+        is timed as if it drove on."""
+        a, b = self._timed_path(ref), self._timed_path(name)
+        if a is None or b is None:
+            return None
+        hit_ref = any(other == ref for _, other in self.e.collisions.get(name, []))
+        (pa, ta, ea), (pb, tb, eb) = a, b
+        ra, rb = np.diff(pa, axis=0), np.diff(pb, axis=0)
+        qa, qb = pa[:-1], pb[:-1]
+        denom = ra[:, None, 0] * rb[None, :, 1] - ra[:, None, 1] * rb[None, :, 0]
+        diff = qb[None, :, :] - qa[:, None, :]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = (diff[..., 0] * rb[None, :, 1] - diff[..., 1] * rb[None, :, 0]) / denom
+            v = (diff[..., 0] * ra[:, None, 1] - diff[..., 1] * ra[:, None, 0]) / denom
+        dot = ra[:, None, 0] * rb[None, :, 0] + ra[:, None, 1] * rb[None, :, 1]
+        angle = np.abs(np.arctan2(denom, dot))
+        ok = (np.abs(denom) > 1e-9) & (u >= 0) & (u <= 1) & (v >= 0) & (v <= 1)
+        ok &= (angle >= math.radians(20)) & (angle <= math.radians(160))
+        if not hit_ref:
+            ok &= ~eb[None, :]  # the actor really got there, not only its extension
+        i, j = np.nonzero(ok)
+        if not i.size:
+            return None
+        time_a = ta[i] + u[i, j] * (ta[i + 1] - ta[i])
+        time_b = tb[j] + v[i, j] * (tb[j + 1] - tb[j])
+        return float(np.min(np.abs(time_a - time_b)))
+
+    def _timed_path(self, name: str) -> Optional[Tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """(points, times [s], per segment: is it the extension) of an actor's path, extended past its end."""
+        track = self.e.tracks[name]
+        valid = np.flatnonzero(~np.isnan(track[:, 0]))
+        if valid.size < 2:
+            return None
+        points, times = track[valid, :2], valid * self.e.dt
+        x, y, heading, speed = track[valid[-1]]
+        end = [x + PATH_EXTEND_M * math.cos(heading), y + PATH_EXTEND_M * math.sin(heading)]
+        points = np.vstack([points, end])
+        times = np.append(times, times[-1] + PATH_EXTEND_M / max(abs(speed), MIN_GAP_SPEED))
+        extension = np.zeros(len(points) - 1, dtype=bool)
+        extension[-1] = True
+        return points, times, extension
 
     def _path_entries_of(self, ref: str, name: str, occ: _Occurrence) -> List[int]:
         """Steps of the occurrence at which ``name`` comes onto ``ref``'s path ahead of it."""

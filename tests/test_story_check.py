@@ -185,8 +185,24 @@ def test_crossing_path_of_a_car_needs_it_to_enter_the_egos_path_ahead():
                         "within_s": 3.0}]}
     crosser = [[100.0, 20.0 - 10.0 * i * DT, -math.pi / 2, 10.0] for i in range(N)]
     assert check_story(story, trace({"ego": ego_track(), "other": crosser})).played
-    late = [[30.0, 20.0 - 10.0 * i * DT, -math.pi / 2, 10.0] for i in range(N)]  # crosses after the ego passed
-    assert not check_story(story, trace({"ego": ego_track(), "other": late})).played
+    long_after = [[30.0, 60.0 - 10.0 * i * DT, -math.pi / 2, 10.0] for i in range(N)]  # 4.5 s after the ego
+    result = check_story(story, trace({"ego": ego_track(), "other": long_after}))
+    assert result.missed and "4.5 s apart" in result.missed[0][1]
+
+
+def test_a_car_crossing_just_behind_the_ego_crossed_its_path_but_a_walker_did_not():
+    # the ego passes x=30 at 1.5 s; the other reaches the ego's line at 2 s (post-encroachment 0.5 s)
+    story = {"actors": {"other": "car"},
+             "steps": [{"actor": "other", "action": "keep_lane", "relations": [["crossing_path", "ego"]],
+                        "within_s": 3.0}]}
+    late = [[30.0, 20.0 - 10.0 * i * DT, -math.pi / 2, 10.0] for i in range(N)]
+    assert check_story(story, trace({"ego": ego_track(), "other": late})).played
+    walker_story = {"actors": {"other": "pedestrian"},
+                    "steps": [{"actor": "other", "action": "cross", "relations": [["crossing_path", "ego"]],
+                               "within_s": 3.0}]}
+    slow = [[30.0, 4.5 - 1.5 * i * DT, -math.pi / 2, 1.5] for i in range(N)]  # in the lane at 1.8 s, behind
+    assert not check_story(walker_story, trace({"ego": ego_track(), "other": slow},
+                                               kinds={"other": "pedestrian"})).played
 
 
 # ---------------------------------------------------------- every actor

@@ -9,14 +9,19 @@ model scenic.domains.driving.model
 param ego_speed = Range(8, 12)
 param crossing_distance = Range(35, 55)
 param hidden_gap = Range(0.8, 2.0)
-param trigger_time = Range(2.3, 3.2)
+param entry_gap = Range(1.0, 2.0)
 param walking_speed = Range(1.6, 2.4)
+param kerb_offset = Range(5.5, 6.2)
 
 # 2. Adversarial behaviours
-behavior StepOutWhenEgoNear(speed, triggerTime):
-    # wait hidden on the sidewalk, step out once the ego is about triggerTime seconds away,
-    # cross the street and stop on the other sidewalk
-    while (distance from self to ego) > max(8, triggerTime * ego.speed):
+behavior CrossInFrontOfEgo(speed, toLane, gap):
+    # step off the kerb once the walk to the ego's lane (toLane metres at `speed`) would reach it `gap`
+    # seconds before the ego's front does; the ego's time is read every step from its distance and speed,
+    # so an ego that slows down, stops short or speeds up is still met in front of it
+    while True:
+        ahead = -(distance past self of ego) - 2.5
+        if ahead > 0 and (ahead <= 10 or ahead / max(ego.speed, 0.1) <= toLane / speed + gap):
+            break
         wait
     take SetWalkingSpeedAction(speed)
     while self.position in network.sidewalkRegion:
@@ -45,7 +50,8 @@ truckSpot = new OrientedPoint at egoLane.centerline.pointAlongBy(crossS - 4.5 - 
 parked = new Truck left of truckSpot by Range(2.5, 2.7), facing roadDirection, with speed 0,
     with name "parked"
 crossSpot = new OrientedPoint at egoLane.centerline.pointAlongBy(crossS), facing roadDirection
-pedestrian = new Pedestrian left of crossSpot by Range(5.5, 6.2),
+pedestrian = new Pedestrian left of crossSpot by globalParameters.kerb_offset,
     with name "pedestrian",
     facing crossSpot.heading - 90 deg,
-    with behavior StepOutWhenEgoNear(globalParameters.walking_speed, globalParameters.trigger_time)
+    with behavior CrossInFrontOfEgo(globalParameters.walking_speed, globalParameters.kerb_offset - 1.75,
+                                   globalParameters.entry_gap)

@@ -7,12 +7,19 @@ model scenic.domains.driving.model
 
 param ego_speed = Range(8, 13)
 param crossing_distance = Range(35, 55)
-param trigger_distance = Range(18, 30)
+param entry_gap = Range(1.2, 2.0)
+param kerb_offset = Range(2.6, 3.2)
 param walking_speed = Range(1.0, 2.0)
 
 # 2. Adversarial behaviours
-behavior CrossWhenClose(speed, trigger):
-    while (distance from self to ego) > trigger:
+behavior CrossInFrontOfEgo(speed, toLane, gap):
+    # step off the kerb once the walk to the ego's lane (toLane metres at `speed`) would reach it `gap`
+    # seconds before the ego's front does; the ego's time is read every step from its distance and speed,
+    # so an ego that slows down, stops short or speeds up is still met in front of it
+    while True:
+        ahead = -(distance past self of ego) - 2.5
+        if ahead > 0 and (ahead <= 10 or ahead / max(ego.speed, 0.1) <= toLane / speed + gap):
+            break
         wait
     while True:
         take SetWalkingSpeedAction(speed)
@@ -24,10 +31,11 @@ egoLane = Uniform(*network.lanes)
 ego = new Car at egoLane.centerline.pointAlongBy(Range(60, 460)),
     with speed globalParameters.ego_speed
 spot = new OrientedPoint following roadDirection from ego for globalParameters.crossing_distance
-pedestrian = new Pedestrian right of spot by Range(2.6, 3.2),
+pedestrian = new Pedestrian right of spot by globalParameters.kerb_offset,
     with name "pedestrian",
     facing spot.heading + 90 deg,
-    with behavior CrossWhenClose(globalParameters.walking_speed, globalParameters.trigger_distance)
+    with behavior CrossInFrontOfEgo(globalParameters.walking_speed, globalParameters.kerb_offset - 1.75,
+                                    globalParameters.entry_gap)
 oncomingSpot = new OrientedPoint following roadDirection from ego for Range(30, 90)
 oncoming = new Car left of oncomingSpot by 2.5, facing roadDirection, with speed Range(8, 12),
     with name "oncoming",
