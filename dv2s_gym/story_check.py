@@ -16,8 +16,8 @@ A sidecar's ``story`` block names the script's story actors and the steps each m
 * ``relations``: ``[relation, other]`` pairs, ``other`` the ego or another story actor, read at the
   moment of the step's event (see below), not at the start of the episode.
 * ``within_s``: at the event the actor is ahead of the ego within this time gap: the distance from
-  the ego's front to the actor over the ego's speed (floored at :data:`MIN_GAP_SPEED`, so an ego
-  that stands still 10 m short of a crossing pedestrian is 3.3 s from it).
+  the ego's front to the actor over the ego's speed (floored at :data:`MIN_GAP_SPEED`, 5 m/s, so an
+  ego that stands still 12.5 m short of a crossing pedestrian is 2 s from it).
 * ``hold``: true when the action's state must last from the event to the end of the episode (a
   vehicle that stops and stays stopped).
 * ``when``: another story actor; the step's relations are read at the moment of that actor's last step
@@ -36,19 +36,20 @@ Events of each action (times are trace steps):
 * ``lane_change_left|right``: the env's lane-change event of the actor in that direction.
 * ``cut_in``: a lane-change event of the actor after which (1 s later) it is in the ego's lane ahead
   of it (within 50 m). ``merge``: the same, or, for an actor that starts across the ego's heading
-  (a side road), the moment it enters the ego's lane ahead of it.
+  (a side road), the first moment it is on the ego's path ahead of it and heading its way (within 20
+  degrees).
 * ``overtake``: the moment the actor passes the ego (from behind it to ahead of it).
 * ``cross``: the moment the actor enters the ego's path (its lane ahead of its front bumper) from the
   side; an actor that reaches the ego's lane beside or behind the ego does not cross its path.
-* ``go_straight`` / ``turn_left|right``: entering the junction area (turns: the heading has turned
-  10 degrees) of a vehicle that goes straight through it / turns at least 55 degrees.
+* ``go_straight`` / ``turn_left|right``: 1 s before entering the junction area (turns: the heading has
+  turned 10 degrees) of a vehicle that goes straight through it / turns at least 55 degrees.
 * ``keep_lane``, ``drift``, ``swerve``, ``pull_out``, ``u_turn``, ``reverse``: as
   :mod:`dv2s_gym.pipeline.trace_semantics` reads them off the actor's track; event at the start of
   the manoeuvre (a drift's first excursion; the others when the actor first moves).
 * ``collide`` and its types: a collision event of the actor.
 
-The relation ``crossing_path`` holds when, between the event and the end of the manoeuvre, the actor
-enters the ego's path ahead of it (with ``within_s``: within that time gap), or, for a vehicle, when its
+The relation ``crossing_path`` holds when, between 1 s before the event and the end of the manoeuvre,
+the actor enters the ego's path ahead of it (with ``within_s``: within that time gap), or, for a vehicle, when its
 path crosses the ego's at 20 to 160 degrees with a post-encroachment time (how far apart in time the two
 pass the crossing point, whichever first) within ``within_s`` (an oncoming car that strikes the side of
 a car turning across its path crossed it); the others hold at the event: ``ahead_of``/``behind`` (more than 2 m along the other's heading), ``left_of``/``right_of``/
@@ -75,7 +76,7 @@ from scenario_bank.story import StoryError, normalize_story, step_label
 __all__ = ["StoryError", "StoryResult", "normalize_story", "check_story", "resolve_actors", "step_label",
            "MIN_GAP_SPEED"]
 
-MIN_GAP_SPEED = 3.0      # m/s: the ego speed a time gap is computed with at the least
+MIN_GAP_SPEED = 5.0      # m/s: the ego speed a time gap is computed with at the least
 LANE_HALF = 1.75         # m
 EGO_FRONT = 2.5          # m from the ego's centre to its front bumper
 WINDOW_S = 2.0           # s: brake / accelerate window ...
@@ -417,7 +418,8 @@ class _Detector:
 
     def _path_entries_of(self, ref: str, name: str, occ: _Occurrence) -> List[int]:
         """Steps of the occurrence at which ``name`` comes onto ``ref``'s path ahead of it."""
-        return self.e.path_entries(name, max(0, occ.event), occ.end, reference=ref)
+        lead_in = int(round(1.0 / self.e.dt))  # an actor on the ego's path just before its event counts
+        return self.e.path_entries(name, max(0, occ.event - lead_in), occ.end, reference=ref)
 
     def _relation(self, relation: str, ref: str, name: str, i: int) -> bool:
         ahead, left = self.e.rel(ref, name, i)
@@ -546,9 +548,11 @@ class _Detector:
             if action == "merge" and e.present("ego", first):
                 gap = _angle(track[first, 2] - e.tracks["ego"][first, 2])
                 if math.radians(45) <= gap <= math.radians(135):
-                    for i in e.path_entries(name, first, last):
-                        if _angle(track[i, 2] - e.tracks["ego"][i, 2]) <= math.radians(20):
+                    for i in range(first, last + 1):
+                        if e.present("ego", i) and e.along_path("ego", name, i) is not None \
+                                and _angle(track[i, 2] - e.tracks["ego"][i, 2]) <= math.radians(20):
                             out.append(_Occurrence(first, i, last))
+                            break
             return sorted(out, key=lambda o: o.event)
         if action == "overtake":
             out, behind = [], False
@@ -620,8 +624,9 @@ class _Detector:
         turned = float((track[leave, 2] - track[max(first, enter - 1), 2] + math.pi) % (2 * math.pi) - math.pi)
         crashed = [i for i, _ in self.e.collisions.get(name, []) if enter <= i <= leave]
         if action == "go_straight":
+            approach = max(first, enter - int(round(1.0 / self.e.dt)))
             if abs(turned) < math.radians(30) and (exits or crashed):
-                return [_Occurrence(enter, enter, leave)]
+                return [_Occurrence(approach, approach, leave)]
             return []
         want = 1.0 if action == "turn_right" else -1.0  # a growing heading turns right (y drawn downward)
         full = track[last, 2] - track[first, 2]

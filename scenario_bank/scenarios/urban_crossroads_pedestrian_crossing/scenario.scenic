@@ -15,14 +15,28 @@ param walking_speed = Range(1.2, 2.0)
 # 2. Adversarial behaviours
 behavior CrossInFrontOfEgo(speed, toLane, gap):
     # step off the kerb once the walk to the ego's lane (toLane metres at `speed`) would reach it `gap`
-    # seconds before the ego's front does; the ego's time is read every step from its distance and speed,
-    # so an ego that slows down, stops short or speeds up is still met in front of it
+    # seconds before the ego's front does; at the lane's edge wait, if the ego has slowed down since,
+    # until it is `gap` seconds away again, within 9 m, or standing (the ego's time is read every step
+    # from its distance and speed, so an ego that hangs back or speeds up is still met in front of it)
     while True:
         ahead = (distance from ego to self) - 2.5
-        if ahead > 0 and (ahead <= 10 or ahead / max(ego.speed, 0.1) <= toLane / speed + gap):
+        if ahead > 0 and (ahead <= 9 or ahead / max(ego.speed, 0.1) <= toLane / speed + gap):
             break
         wait
     take SetWalkingSpeedAction(speed)
+    walked = 0
+    while walked < toLane - 0.4:
+        walked += speed * simulation().timestep
+        wait
+    ahead = (distance from ego to self) - 2.5
+    if ahead > 9 and ego.speed >= 0.5 and ahead / max(ego.speed, 0.1) > gap + 0.5:
+        take SetWalkingSpeedAction(0)
+        while True:
+            ahead = (distance from ego to self) - 2.5
+            if ahead <= 9 or ego.speed < 0.5 or ahead / max(ego.speed, 0.1) <= gap:
+                break
+            wait
+        take SetWalkingSpeedAction(speed)
     while self.position in network.sidewalkRegion:
         wait
     while not (self.position in network.sidewalkRegion):
