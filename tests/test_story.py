@@ -109,7 +109,8 @@ def test_baselines_refuse_other_action_types():
 
 
 def test_cli_story_table_and_exit_code(tmp_path, capsys):
-    """`dv2s bank validate --story`: 0 when every scenario plays its story, 1 (naming it) when one does not."""
+    """`dv2s bank validate --story`: 0 when every scenario plays its story, 1 (naming it, with the step it
+    missed and a seed that shows it) when one does not."""
     import json
     import shutil
 
@@ -122,8 +123,8 @@ def test_cli_story_table_and_exit_code(tmp_path, capsys):
     for name in ("stopped", "untold"):
         meta = json.loads((bank / name / "meta.json").read_text())
         meta["name"] = name
-        if name == "untold":  # a story this script never plays
-            meta["elements"]["actions"].append(["car", "turn_left"])
+        if name == "untold":  # a story step this script never plays
+            meta["story"]["steps"].append({"actor": "stopped", "action": "turn_left"})
         (bank / name / "meta.json").write_text(json.dumps(meta))
     argv = ["bank", "--bank", str(bank), "validate", "--story", "--seeds", "2", "--egos", "keep_lane", "idm", "--"]
     assert main(argv[:-1] + ["--json", "--", "stopped"]) == 0
@@ -131,6 +132,7 @@ def test_cli_story_table_and_exit_code(tmp_path, capsys):
     assert data["table"]["stopped"]["idm"]["rate"] == 1.0 and data["under_threshold"] == []
     assert main(argv) == 1
     out = capsys.readouterr().out
-    assert "under: untold" in out and "missing car turn_left" in out
+    assert "under: untold" in out
+    assert "missed stopped turn_left in 2/2 seeds, e.g. seed 0: not seen" in out
     assert main(argv + ["nosuch"]) == 2
     assert "unknown scenario 'nosuch'" in capsys.readouterr().err
