@@ -380,7 +380,7 @@ class _Detector:
         if a is None or b is None:
             return None
         hit_ref = any(other == ref for _, other in self.e.collisions.get(name, []))
-        (pa, ta, ea), (pb, tb, eb) = a, b
+        (pa, ta, _), (pb, tb, eb) = a, b
         ra, rb = np.diff(pa, axis=0), np.diff(pb, axis=0)
         qa, qb = pa[:-1], pb[:-1]
         denom = ra[:, None, 0] * rb[None, :, 1] - ra[:, None, 1] * rb[None, :, 0]

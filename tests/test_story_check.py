@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 from types import SimpleNamespace
 
-import numpy as np
 import pytest
 
 from dv2s_gym.story_check import StoryError, check_story, normalize_story, resolve_actors
