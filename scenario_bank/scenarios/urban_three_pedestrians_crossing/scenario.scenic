@@ -7,7 +7,7 @@ param weather = Uniform('ClearNoon', 'CloudyNoon', 'WetNoon', 'CloudySunset', 'S
 model scenic.domains.driving.model
 
 param ego_speed = Range(8, 12)
-param crossing_distance = Range(35, 50)
+param crossing_distance = Range(60, 80)
 param entry_gap = Range(1.4, 2.2)
 param left_kerb = Range(5.5, 6.2)
 param walking_speed = Range(1.1, 1.8)
