@@ -88,13 +88,16 @@ def stays_stopped(actor):
 
 
 def boxed_in_at_the_obstacle(trace):
-    """When the ego is within 30 m of the obstacle (or at the end), the blocker is beside it in the lane
-    to its left (within 15 m along)."""
+    """When the ego is within 30 m of the obstacle (or at the end), the lane to its left is taken beside it:
+    the blocker or the car behind it is there, within 12 m along."""
     for state in trace.states:
         ahead, _ = _frame(state["ego"], state["obstacle"])
         if ahead < 30 or state is trace.states[-1]:
-            along, left = _frame(state["ego"], state["blocker"])
-            return abs(along) <= 15 and 1.75 < left < 5.25
+            for car in ("blocker", "follower"):
+                along, left = _frame(state["ego"], state[car])
+                if abs(along) <= 12 and 1.75 < left < 5.25:
+                    return True
+            return False
     return False
 
 
