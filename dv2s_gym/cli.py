@@ -11,6 +11,7 @@ from dataclasses import asdict
 from typing import List, Optional
 
 from envs.errors import Interrupted
+from scenario_bank.errors import DV2SError
 
 __all__ = ["main", "build_parser"]
 
@@ -1123,12 +1124,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _error_line(error: BaseException) -> str:
     """One line for the user: the project's errors say what is wrong and the fix; others get their type."""
-    from dv2s_gym.pipeline.errors import PipelineError
-    from envs.errors import DV2SError
-    from scenario_bank.bank import BankError
-
     message = " ".join(str(error).split())
-    if isinstance(error, (PipelineError, DV2SError, BankError, ValueError)) and message:
+    if message and (isinstance(error, DV2SError) and error.expected or isinstance(error, ValueError)):
         return message
     if isinstance(error, OSError) and error.strerror:
         where = f": {error.filename}" if error.filename and str(error.filename) not in message else ""
@@ -1197,14 +1194,11 @@ def main(argv: Optional[List[str]] = None) -> int:
 
 
 def _is_project_error(error: BaseException) -> bool:
-    from dv2s_gym.pipeline.errors import PipelineError
-    from envs.errors import DV2SError
-    from scenario_bank.bank import BankError
-    from scenario_bank.jail.errors import JailLimitError, JailUnavailableError
-
-    # a script that hits a jail limit, or a machine without the jail, is an outcome the message explains
-    return isinstance(error, (PipelineError, DV2SError, BankError, JailLimitError, JailUnavailableError, ValueError,
-                              OSError))
+    """An error whose message explains it: every expected :class:`DV2SError` (bad input, a script that hits a jail
+    limit, a machine without the jail), and a bad value or a file problem from elsewhere."""
+    if isinstance(error, DV2SError):
+        return error.expected
+    return isinstance(error, (ValueError, OSError))
 
 
 if __name__ == "__main__":

@@ -158,3 +158,14 @@ def test_replay_reruns_a_mined_failure_and_writes_its_video(tmp_path, capsys):
     assert code == 2 and "diverged" in one_line_error(err)
     code, _, err = run(capsys, "replay", out)
     assert code == 2 and "--episode INDEX" in one_line_error(err)
+
+
+def test_mining_without_the_mining_extra_names_the_extra(tmp_path, monkeypatch):
+    """The core install has no VerifAI: mining says which extra to install, in one line, before any work."""
+    from dv2s_gym.mining.errors import MiningError
+    from dv2s_gym.mining.miner import mine
+
+    monkeypatch.setitem(sys.modules, "verifai", None)  # as if it were not installed
+    with pytest.raises(MiningError, match=r"pip install 'dv2s-gym\[mining\]'"):
+        mine("rule", out=tmp_path / "mine", budget=2, progress=False)
+    assert not (tmp_path / "mine").exists()

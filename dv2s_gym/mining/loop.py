@@ -474,7 +474,9 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
             def do_mine() -> Dict[str, Any]:
                 options = {"sampler": sampler, "scenarios": start_names, "bank_dir": bank, "workers": workers,
                            "seed": seed * 1000 + number, "progress": progress, "env_config": env_config,
-                           "convert": True, "max_conversions": max_conversions, **dict(mine_options or {})}
+                           "convert": True, "max_conversions": max_conversions,
+                           "origin": {"command": "dv2s loop", "seed": seed, "round": number},
+                           **dict(mine_options or {})}
                 miner(current, out=str(round_dir / "mine"), budget=budget, **options)
                 return {**_mining_summary(round_dir / "mine"), "kept": mined_entries(round_dir / "mine"),
                         "folder": str(round_dir / "mine")}

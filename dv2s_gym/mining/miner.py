@@ -35,6 +35,7 @@ outcomes in the schedule's order), and only the missing episodes run.
 from __future__ import annotations
 
 import fcntl
+import importlib.util
 import json
 import os
 import shutil
@@ -433,7 +434,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
          ttc_threshold: float = DEFAULT_TTC_THRESHOLD, stall_seconds: float = DEFAULT_STALL_SECONDS,
          convert: bool = False, convert_options: Optional[Dict[str, Any]] = None,
          max_conversions: Optional[int] = None, reports: bool = True,
-         sampler_options: Optional[Dict[str, Any]] = None, feedback: Optional[str] = None) -> MineRun:
+         sampler_options: Optional[Dict[str, Any]] = None, feedback: Optional[str] = None,
+         origin: Optional[Mapping[str, Any]] = None) -> MineRun:
     """Mine ``policy``'s failures over ``budget`` episodes; resumable (same ``out``).
 
     Args:
@@ -463,8 +465,14 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
             (:mod:`dv2s_gym.mining.convert`; ``convert_options`` are passed on). ``bank_dir``
             must then be a writable bank; a new or empty folder starts as a copy of the shipped bank; at most ``max_conversions`` clusters, largest first.
         reports: write report.json, report.md and report.html at the end.
+        origin: what started this run, shown beside the seed in its reports: ``dv2s loop`` passes
+            ``{"command": "dv2s loop", "seed": S, "round": R}`` because it mines each round with a seed
+            derived from its own. Not a setting: a resumed run may be given another.
     """
     started = time.perf_counter()
+    if importlib.util.find_spec("verifai") is None:  # the core install has no mining extra
+        raise MiningError("failure mining needs VerifAI's samplers, which the core install leaves out: "
+                          "pip install 'dv2s-gym[mining]'")
     if int(budget) < 1:
         raise MiningError(f"--budget must be at least 1 episode, not {budget}")
     if sampler not in SAMPLERS:
@@ -497,7 +505,7 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
                         reference=reference, batch=batch, timeout=timeout, progress=progress, env_config=env_config,
                         ttc_threshold=ttc_threshold, stall_seconds=stall_seconds, convert=convert,
                         convert_options=convert_options, max_conversions=max_conversions, reports=reports,
-                        sampler_options=sampler_options, feedback=feedback)
+                        sampler_options=sampler_options, feedback=feedback, origin=origin)
     except BaseException:
         if created:
             _remove_if_empty(out)  # bad input found late (an unknown scenario) leaves no empty run folder behind
@@ -525,7 +533,7 @@ def _mine_in(out: Path, started: float, *, policy: str, budget: int, sampler: st
              timeout: Optional[float], progress: bool, env_config: Optional[Dict[str, Any]], ttc_threshold: float,
              stall_seconds: float, convert: bool, convert_options: Optional[Dict[str, Any]],
              max_conversions: Optional[int], reports: bool, sampler_options: Optional[Dict[str, Any]],
-             feedback: str) -> MineRun:
+             feedback: str, origin: Optional[Mapping[str, Any]] = None) -> MineRun:
     """The body of :func:`mine` once the input is checked and the run folder exists."""
     from dv2s_gym.mining.space import SceneSpace
     from dv2s_gym.workers.errors import WorkerError
@@ -550,6 +558,8 @@ def _mine_in(out: Path, started: float, *, policy: str, budget: int, sampler: st
         if saved is not None:
             _check_resume(saved, settings, out)
         settings["schedule"] = _schedule(saved, sampler, out)
+        if origin:
+            settings["origin"] = dict(origin)
         atomic_write_json(settings_path, settings)
         done = {int(r["index"]): r for r in read_records(out / "episodes.jsonl")}
         window, scene_sampler = None, None
