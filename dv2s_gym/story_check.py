@@ -41,8 +41,9 @@ Events of each action (times are trace steps):
 * ``overtake``: the moment the actor passes the ego (from behind it to ahead of it).
 * ``cross``: the moment the actor enters the ego's path (its lane ahead of its front bumper) from the
   side; an actor that reaches the ego's lane beside or behind the ego does not cross its path.
-* ``go_straight`` / ``turn_left|right``: 1 s before entering the junction area (turns: the heading has
-  turned 10 degrees) of a vehicle that goes straight through it / turns at least 55 degrees.
+* ``go_straight`` / ``turn_left|right``: 1 s before entering the junction area, of a vehicle that goes
+  straight through it / any moment from when the heading has turned 10 degrees until it has turned 55, of
+  a vehicle that turns at least 55 degrees (a car that brakes as it starts to turn brakes, then turns).
 * ``keep_lane``, ``drift``, ``swerve``, ``pull_out``, ``u_turn``, ``reverse``: as
   :mod:`dv2s_gym.pipeline.trace_semantics` reads them off the actor's track; event at the start of
   the manoeuvre (a drift's first excursion; the others when the actor first moves).
@@ -632,8 +633,11 @@ class _Detector:
         full = track[last, 2] - track[first, 2]
         net = float((full + math.pi) % (2 * math.pi) - math.pi)
         if want * net >= TURN_ANGLE or (crashed and want * turned >= math.radians(20)):
+            # the turn is under way from its onset until it has turned TURN_ANGLE: any moment of it is its event
             start = self.onset(name, action, first) or enter
-            return [_Occurrence(start, start, last)]
+            done = next((i for i in range(start, last + 1)
+                         if want * _signed(track[i, 2] - track[first, 2]) >= TURN_ANGLE), last)
+            return [_Occurrence(start, i, last) for i in range(start, done + 1)]
         return []
 
     def _whole_track(self, name: str, action: str, first: int, last: int) -> List[_Occurrence]:
@@ -671,6 +675,10 @@ def _frame(reference: np.ndarray, other: np.ndarray) -> Tuple[float, float]:
     dx, dy = other[0] - reference[0], other[1] - reference[1]
     c, s = math.cos(reference[2]), math.sin(reference[2])
     return dx * c + dy * s, dx * s - dy * c
+
+
+def _signed(a: float) -> float:
+    return float((a + math.pi) % (2 * math.pi) - math.pi)
 
 
 def _angle(a: float) -> float:
