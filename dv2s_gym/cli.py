@@ -404,8 +404,13 @@ def _cmd_bank_story(args: argparse.Namespace) -> int:
                  "actor of the story before the trace showed all of it)")
     for name in under:
         for ego in egos:
-            for seed, problem in table[name][ego]["failures"][:3]:
-                lines.append(f"  {name} / {ego} seed {seed}: {problem}")
+            cell = table[name][ego]
+            if cell["rate"] >= args.threshold:
+                continue
+            lines.append(f"  {name} / {ego}: rate {cell['rate']:.2f}")
+            for step, miss in cell.get("missed", {}).items():
+                lines.append(f"    missed {step!s} in {miss['count']}/{args.seeds} seeds, e.g. seed {miss['seed']}"
+                             + (f": {miss['why']}" if miss["why"] else ""))
     lines.append(f"{len(names) - len(under)}/{len(names)} scenarios play their story in at least "
                  f"{args.threshold:.0%} of seeds with every ego" + (f"; under: {', '.join(under)}" if under else ""))
     _print(args, {"seeds": args.seeds, "threshold": args.threshold, "egos": egos, "table": table,

@@ -1,5 +1,11 @@
 """Story rate: how often a bank scenario plays its adversarial story, whatever the ego does.
 
+A scenario whose sidecar has a ``story`` block (its story actors by script name, and the steps
+each must play) is checked actor by actor by :func:`dv2s_gym.story_check.check_story`: every
+step of every story actor, bound to that actor, relations read at the moment of the step's event,
+timing where the step asks for it. The rest of this docstring describes the older, kind-based
+check that sidecars without a ``story`` block get.
+
 An episode *plays its story* when the elements read off its trace
 (:func:`dv2s_gym.pipeline.trace_semantics.elements_from_trace`) contain every
 action and every relation of the scenario's sidecar whose subject is not the ego:
@@ -26,7 +32,7 @@ from concurrent.futures import ProcessPoolExecutor
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 __all__ = ["EGOS", "STORY_SECONDS", "required_elements", "story_problem", "ego_collisions", "run_episode",
-           "story_episodes", "story_rate", "story_table"]
+           "story_episodes", "missed_steps", "story_rate", "story_table"]
 
 EGOS = ("scenic", "rule", "keep_lane", "idm")
 """Ego drivers a story is checked against."""
@@ -112,25 +118,51 @@ def run_episode(script_path: str, ego: str, seed: int, seconds: Optional[float] 
 
 def story_episodes(name: str, ego: str, seeds: Sequence[int], bank_root: Optional[str] = None
                    ) -> List[Dict[str, Any]]:
-    """Per seed: ``{"seed", "problem", "missing", "ego_hit"}`` for bank scenario ``name`` with ``ego``.
+    """Per seed: ``{"seed", "problem", "missing", "missed", "ego_hit"}`` for bank scenario ``name`` with ``ego``.
 
     ``problem`` is None when the episode plays the story; ``missing`` is what its trace lacks when a
-    collision is not counted as the story (None when nothing is missing); ``ego_hit`` the kinds the ego hit.
+    collision is not counted as the story (None when nothing is missing); ``missed`` the ``[step, why]``
+    pairs of the steps it did not play (a sidecar without a ``story`` block: ``[what is missing, ""]``);
+    ``ego_hit`` the kinds the ego hit.
     """
     from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.story_check import check_story
+    from scenario_bank.story import normalize_story
     from scenario_bank.bank import Bank
     from scenario_bank.elements import normalize_elements
 
     entry = Bank(bank_root).get(name)
+    story = entry.meta.get("story")
+    story = normalize_story(story, f"{name}: story") if story is not None else None
     elements = normalize_elements(entry.elements)
     seconds = STORY_SECONDS.get(name)
     records = []
     for seed in seeds:
         trace = run_episode(str(entry.script_path), ego, seed, seconds)
-        shown, hit = elements_from_trace(trace), ego_collisions(trace)
-        records.append({"seed": seed, "problem": story_problem(elements, shown, ego, hit),
-                        "missing": story_problem(elements, shown, ego), "ego_hit": hit})
+        hit = ego_collisions(trace)
+        if story is not None:
+            result = check_story(story, trace, ego)
+            records.append({"seed": seed, "problem": result.problem(),
+                            "missing": "; ".join(result.by_collision) or result.problem(),
+                            "missed": [list(m) for m in result.missed], "ego_hit": hit})
+            continue
+        shown = elements_from_trace(trace)
+        problem = story_problem(elements, shown, ego, hit)
+        records.append({"seed": seed, "problem": problem, "missing": story_problem(elements, shown, ego),
+                        "missed": [[problem, ""]] if problem else [], "ego_hit": hit})
     return records
+
+
+def missed_steps(records: Sequence[Dict[str, Any]]) -> Dict[str, Dict[str, Any]]:
+    """Per step missed in ``records`` (of :func:`story_episodes`): ``{"count", "seed", "why"}``, the seed and
+    reason of its first miss, so a scenario author can replay one episode that shows it."""
+    out: Dict[str, Dict[str, Any]] = {}
+    for record in records:
+        for step, why in record.get("missed", []):
+            if step not in out:
+                out[step] = {"count": 0, "seed": record["seed"], "why": why}
+            out[step]["count"] += 1
+    return out
 
 
 def story_rate(name: str, ego: str, seeds: Sequence[int], bank_root: Optional[str] = None
@@ -149,21 +181,23 @@ def _rate_job(args) -> Tuple[str, str, Dict[str, Any]]:
     try:
         records = story_episodes(name, ego, seeds, bank_root)
     except Exception as error:  # a scenario that does not run has no story
-        return name, ego, {"rate": 0.0, "failures": [(-1, f"{type(error).__name__}: {error}")],
-                           "by_collision": 0}
+        problem = f"{type(error).__name__}: {error}"
+        return name, ego, {"rate": 0.0, "failures": [(-1, problem)], "by_collision": 0,
+                           "missed": {"the scenario runs": {"count": len(seeds), "seed": -1, "why": problem}}}
     failures = [(r["seed"], r["problem"]) for r in records if r["problem"]]
     by_collision = sum(1 for r in records if r["problem"] is None and r["missing"])
     return name, ego, {"rate": 1.0 - len(failures) / len(records) if records else 0.0, "failures": failures,
-                       "by_collision": by_collision}
+                       "by_collision": by_collision, "missed": missed_steps(records)}
 
 
 def story_table(names: Sequence[str], egos: Sequence[str] = EGOS, seeds: Sequence[int] = range(20),
                 bank_root: Optional[str] = None, jobs: int = 1, progress: bool = True
                 ) -> Dict[str, Dict[str, Dict[str, Any]]]:
-    """``{scenario: {ego: {"rate", "failures", "by_collision"}}}`` over ``seeds``, in ``jobs`` processes.
+    """``{scenario: {ego: {"rate", "failures", "by_collision", "missed"}}}`` over ``seeds``, in ``jobs`` processes.
 
     ``by_collision``: episodes counted as playing the story because the ego hit a story actor
-    before the trace showed all of it.
+    before the trace showed all of it; ``missed``: per step not played, how often, the first seed that
+    missed it and why (:func:`missed_steps`).
     """
     from tqdm import tqdm
 

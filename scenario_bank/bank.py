@@ -68,6 +68,7 @@ from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, extract_a
                                       regular_file_in_folder, validate_entry_name, validate_relative_path)
 from scenario_bank.safety import UnsafeScenarioError
 from scenario_bank.sandbox import SandboxError, verify_script
+from scenario_bank.story import StoryError, normalize_story
 
 BANK_DIR = Path(__file__).resolve().parent / "scenarios"
 """Folder of the bank shipped with dv2s-gym."""
@@ -512,6 +513,11 @@ def _validate_sidecar(meta: Any, folder: Path) -> Dict[str, Any]:
         meta["elements"] = normalize_elements(meta.get("elements") or {})
     except ElementError as error:
         raise ValueError(f"sidecar elements: {error}") from None
+    if "story" in meta:
+        try:
+            normalize_story(meta["story"], "sidecar story")
+        except StoryError as error:
+            raise ValueError(str(error)) from None
     source = meta.get("source") or {}
     if source.get("kind") not in SOURCE_KINDS:
         raise ValueError(f"sidecar source.kind must be one of {SOURCE_KINDS}, got {source.get('kind')!r}")

@@ -163,6 +163,18 @@ def test_bad_sidecars_are_reported_and_the_rest_stays_usable(bank):
         reopened.get("corrupt")
 
 
+def test_a_sidecar_with_a_malformed_story_is_reported_with_the_fix(bank):
+    add(bank, "told")
+    meta = json.loads((bank.root / "told" / "meta.json").read_text())
+    meta["story"] = {"actors": {"cutter": "car"}, "steps": [{"actor": "cuter", "action": "cut_in"}]}
+    (bank.root / "told" / "meta.json").write_text(json.dumps(meta))
+    problem = Bank(bank.root).problems["told"]
+    assert "'cuter'" in problem and "story.actors" in problem
+    meta["story"]["steps"][0]["actor"] = "cutter"
+    (bank.root / "told" / "meta.json").write_text(json.dumps(meta))
+    assert Bank(bank.root).get("told").meta["story"]["actors"] == {"cutter": "car"}
+
+
 def index_path(bank):
     """The bank's index in the user cache directory."""
     return bank._cache_folder() / "index.json"

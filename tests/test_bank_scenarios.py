@@ -6,10 +6,12 @@ section comments, map/weather/model lines) and passes the safety check, every
 script compiles once and samples scenes quickly, and a short DV2S-v0 episode of
 each runs to the end with an agent-driven ego.
 
-Story tests: the adversarial story of each scenario (its sidecar's actions and
-relations whose subject is not the ego, read off the episode trace) plays in at
-least 9 of 10 fixed seeds with each of four egos (the script's own, the
-rule-based driver, a keep-lane ego and an IDM ego); see dv2s_gym/story.py.
+Story tests: the adversarial story of each scenario (its sidecar's ``story`` block:
+every step of every named story actor, checked actor by actor on the episode trace,
+see dv2s_gym/story_check.py) plays in at least 9 of 10 fixed seeds with each of four
+egos (the script's own, the rule-based driver, a constant-speed keep-lane ego and an
+IDM ego); see dv2s_gym/story.py. tests/test_bank_events.py reads the point of some
+scenarios straight off the tracks.
 
 Slow test (``-m slow``): the short episode with the script's own ego behaviour
 (``ego_policy="scenic"``).
@@ -115,6 +117,14 @@ def test_sidecar_is_valid(name):
     assert isinstance(meta["description"], str) and 20 <= len(meta["description"]) <= 400
     # elements follow the vocabulary, are stored in canonical form and have an ego
     assert normalize_elements(meta["elements"]) == meta["elements"]
+    # the story names actors the script names, of kinds the elements list
+    from scenario_bank.story import normalize_story
+
+    story = normalize_story(meta["story"]) if "story" in meta else {"actors": {}}
+    script_text = script_path(name).read_text(encoding="utf-8")
+    for actor, kind in story["actors"].items():
+        assert f'with name "{actor}"' in script_text, f"{name}: story actor {actor} is not named in the script"
+        assert kind in meta["elements"]["participants"]
     assert meta["elements"]["road"] is not None
     assert "ego" in meta["elements"]["participants"]
     assert set(meta["elements"]["participants"]) <= set(PARTICIPANTS)
@@ -208,8 +218,8 @@ STORY_THRESHOLD = 0.9  # at least 9 of 10 seeds, with every ego
 
 @pytest.mark.parametrize("name", NAMES)
 def test_story_rate(name):
-    """The scenario's adversarial story (its sidecar's non-ego actions and relations, see
-    dv2s_gym/story.py) plays in at least 90% of a fixed range of seeds with each of the four egos."""
+    """The scenario's adversarial story (its sidecar's story block, see dv2s_gym/story_check.py) plays in
+    at least 90% of a fixed range of seeds with each of the four egos."""
     from dv2s_gym.story import EGOS, story_rate
 
     compiled(name)  # shares the compiled scenario with the env

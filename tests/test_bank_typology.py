@@ -79,14 +79,17 @@ def test_story_block_names_script_actors_in_the_vocabulary(name):
     assert all(kind in PARTICIPANTS and kind != "ego" for kind in story["actors"].values())
     assert story["steps"]
     for step in story["steps"]:
-        assert step["actor"] in story["actors"]
+        # a step of the ego itself is required only of the script's own ego (dv2s_gym/story_check.py)
+        assert step["actor"] in story["actors"] or step["actor"] == "ego"
         assert step["action"] in ACTIONS
         for relation, other in step.get("relations", []):
             assert relation in RELATIONS and other == "ego"
         assert step.get("within_s", 1.0) > 0
-        # the element block states the same (by kind), so element-based search and metrics see the story
-        kind = story["actors"][step["actor"]]
-        assert [kind, step["action"]] in meta["elements"]["actions"]
+        # the element block states the same (by kind), so element-based search and metrics see the story;
+        # an obstacle has no action in the elements read off a trace, its step only marks a moment
+        kind = "ego" if step["actor"] == "ego" else story["actors"][step["actor"]]
+        if kind != "obstacle":
+            assert [kind, step["action"]] in meta["elements"]["actions"]
 
 
 # ------------------------------------------------- the manoeuvre happens in front of the ego

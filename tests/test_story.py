@@ -64,6 +64,35 @@ def test_keep_lane_ego_always_idles():
     assert [driver() for _ in range(5)] == [IDLE] * 5
 
 
+def test_keep_lane_ego_holds_its_own_speed_not_the_speed_grid():
+    env = _fake_env(23.0)
+    env.vehicle.target_speed = 25.0  # what the action type's vehicle snapped it to
+    driver = KeepLaneEgo(env)
+    driver()
+    assert env.vehicle.target_speed == 23.0
+    env.vehicle.speed = 22.0
+    driver()
+    assert env.vehicle.target_speed == 23.0  # the speed it started with, not the one it has now
+
+
+def test_keep_lane_ego_keeps_its_speed_in_a_real_episode():
+    from envs.dv2s_env import DV2SEnv
+
+    env = DV2SEnv(scenario="highway_truck_cut_in", config={"duration": 4, "ego_policy": "agent"})
+    try:
+        env.reset(seed=0)
+        start = float(env.unwrapped.vehicle.speed)
+        driver = KeepLaneEgo(env)
+        speeds = []
+        for _ in range(20):
+            env.step(driver())
+            speeds.append(float(env.unwrapped.vehicle.speed))
+    finally:
+        env.close()
+    assert start % 5.0 > 0.2 and 5.0 - start % 5.0 > 0.2, "the scene should start off the 5 m/s grid"
+    assert max(abs(v - start) for v in speeds) < 0.2
+
+
 def test_idm_ego_brakes_for_a_close_slow_leader_and_ignores_the_next_lane():
     assert IDMEgo(_fake_env(20.0, leader_gap=8.0, leader_speed=5.0)).act() == SLOWER
     assert IDMEgo(_fake_env(20.0, leader_gap=8.0, leader_speed=5.0, lateral=3.5)).act() == IDLE
@@ -80,7 +109,8 @@ def test_baselines_refuse_other_action_types():
 
 
 def test_cli_story_table_and_exit_code(tmp_path, capsys):
-    """`dv2s bank validate --story`: 0 when every scenario plays its story, 1 (naming it) when one does not."""
+    """`dv2s bank validate --story`: 0 when every scenario plays its story, 1 (naming it, with the step it
+    missed and a seed that shows it) when one does not."""
     import json
     import shutil
 
@@ -93,8 +123,8 @@ def test_cli_story_table_and_exit_code(tmp_path, capsys):
     for name in ("stopped", "untold"):
         meta = json.loads((bank / name / "meta.json").read_text())
         meta["name"] = name
-        if name == "untold":  # a story this script never plays
-            meta["elements"]["actions"].append(["car", "turn_left"])
+        if name == "untold":  # a story step this script never plays
+            meta["story"]["steps"].append({"actor": "stopped", "action": "turn_left"})
         (bank / name / "meta.json").write_text(json.dumps(meta))
     argv = ["bank", "--bank", str(bank), "validate", "--story", "--seeds", "2", "--egos", "keep_lane", "idm", "--"]
     assert main(argv[:-1] + ["--json", "--", "stopped"]) == 0
@@ -102,6 +132,7 @@ def test_cli_story_table_and_exit_code(tmp_path, capsys):
     assert data["table"]["stopped"]["idm"]["rate"] == 1.0 and data["under_threshold"] == []
     assert main(argv) == 1
     out = capsys.readouterr().out
-    assert "under: untold" in out and "missing car turn_left" in out
+    assert "under: untold" in out
+    assert "missed stopped turn_left in 2/2 seeds, e.g. seed 0: not seen" in out
     assert main(argv + ["nosuch"]) == 2
     assert "unknown scenario 'nosuch'" in capsys.readouterr().err

@@ -144,6 +144,10 @@ class HighwayEnvSimulation(DrivingSimulation):
 
     # ---------------------------------------------------------------- creation
     def setup(self) -> None:
+        # A script's `with name "cutter"` names its actor exactly "cutter" when no other object has that
+        # name; the others are counted per label (Car1, Car2, ...; two objects named "walker": walker1, walker2).
+        others = [obj for obj in self.scene.objects if obj is not self.scene.egoObject]
+        given = [getattr(obj, "name", None) for obj in others]
         counts: Dict[str, int] = {}
         for obj in self.scene.objects:
             if obj is self.scene.egoObject:
@@ -152,6 +156,11 @@ class HighwayEnvSimulation(DrivingSimulation):
                 label = getattr(obj, "name", None) or _object_label(obj)
                 counts[label] = counts.get(label, 0) + 1
                 self.names[id(obj)] = f"{label}{counts[label]}"
+        taken = set(self.names.values())
+        for obj, name in zip(others, given):
+            if name and name != "ego" and given.count(name) == 1 and name not in taken:
+                self.names[id(obj)] = name
+                taken.add(name)
         super().setup()
 
     def _createObject(self, obj) -> None:

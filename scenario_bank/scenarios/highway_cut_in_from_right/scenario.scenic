@@ -50,6 +50,7 @@ ego = new Car at egoLane.centerline.pointAlongBy(egoS),
     with speed globalParameters.ego_speed,
     with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed)
 cutter = new Car at cutterLane.centerline.pointAlongBy(egoS + globalParameters.start_offset),
+    with name "cutter",
     with speed globalParameters.ego_speed + globalParameters.cutter_extra_speed,
     with behavior CutInToTheLeft(globalParameters.ego_speed + globalParameters.cutter_extra_speed,
                                  globalParameters.cut_in_gap,

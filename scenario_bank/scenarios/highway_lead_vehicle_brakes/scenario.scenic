@@ -7,12 +7,28 @@ model scenic.domains.driving.model
 
 param ego_speed = Range(20, 28)
 param lead_gap = Range(18, 35)
-param brake_after = Range(1.5, 4.0)
+param brake_after = Range(1.5, 3.0)
+param brake_headway = Range(1.0, 1.6)
 param brake_strength = Range(0.6, 1.0)
 
 # 2. Adversarial behaviours
-behavior SuddenBrake(speed, after, strength):
-    do FollowLaneBehavior(target_speed=speed) for after seconds
+behavior PaceThenBrake(minCruise, headway, maxWait, strength):
+    # keep pace with the ego (easing off while it hangs back more than 2.5 s behind), then brake hard
+    # once it is within `headway` seconds (or, after maxWait seconds, within 2.5 s)
+    lonControl, latControl = simulation().getLaneFollowingControllers(self)
+    line = self.lane.centerline
+    pastSteer = 0
+    elapsed = 0
+    while True:
+        egoHeadway = ((distance from self to ego) - 5) / max(ego.speed, 1)
+        if elapsed >= minCruise and (egoHeadway <= headway or (elapsed >= maxWait and egoHeadway <= 2.5)):
+            break
+        target = ego.speed - 2 if egoHeadway > 2.5 else ego.speed
+        throttle = lonControl.run_step(target - self.speed)
+        steer = latControl.run_step(line.signedDistanceTo(self.position))
+        take RegulatedControlAction(throttle, steer, pastSteer)
+        pastSteer = steer
+        elapsed += simulation().timestep
     while True:
         take SetThrottleAction(0), SetBrakeAction(strength)
 
@@ -23,8 +39,10 @@ egoLane = Uniform(*network.lanes)
 ego = new Car at egoLane.centerline.pointAlongBy(Range(50, 1200)),
     with speed globalParameters.ego_speed
 lead = new Car following roadDirection from ego for globalParameters.lead_gap,
+    with name "lead",
     with speed globalParameters.ego_speed,
-    with behavior SuddenBrake(globalParameters.ego_speed, globalParameters.brake_after, globalParameters.brake_strength)
+    with behavior PaceThenBrake(globalParameters.brake_after, globalParameters.brake_headway, 4,
+                                globalParameters.brake_strength)
 traffic1 = new Car offset by (Uniform(-3.5, 3.5), Range(-30, 50)), with regionContainedIn road,
     with speed Range(20, 26), with behavior FollowLaneBehavior(target_speed=Range(20, 26))
 traffic2 = new Car offset by (Uniform(-7, 7), Range(-30, 50)), with regionContainedIn road,

@@ -8,17 +8,28 @@ model scenic.domains.driving.model
 param ego_speed = Range(22, 28)
 param lead_gap = Range(20, 40)
 param decel_after = Range(1.0, 3.0)
-param decel_trigger = Range(10, 16)
+param decel_headway = Range(0.9, 1.5)
 param lead_low_speed = Range(8, 15)
 param decel_strength = Range(0.35, 0.55)
 
 # 2. Adversarial behaviours
-behavior DecelerateToSpeed(speed, lowSpeed, after, trigger, strength):
-    # cruise with the ego, then (after a while, or earlier if the ego closes in) brake to a lower speed
-    try:
-        do FollowLaneBehavior(target_speed=speed) for after seconds
-    interrupt when (distance from self to ego) < trigger:
-        abort
+behavior PaceThenDecelerate(lowSpeed, minCruise, headway, maxWait, strength):
+    # keep pace with the ego (easing off while it hangs back more than 2.5 s behind), then brake down to
+    # lowSpeed once it is within `headway` seconds (or, after maxWait seconds, within 2.5 s)
+    lonControl, latControl = simulation().getLaneFollowingControllers(self)
+    line = self.lane.centerline
+    pastSteer = 0
+    elapsed = 0
+    while True:
+        egoHeadway = ((distance from self to ego) - 5) / max(ego.speed, 1)
+        if elapsed >= minCruise and (egoHeadway <= headway or (elapsed >= maxWait and egoHeadway <= 2.5)):
+            break
+        target = ego.speed - 2 if egoHeadway > 2.5 else ego.speed
+        throttle = lonControl.run_step(target - self.speed)
+        steer = latControl.run_step(line.signedDistanceTo(self.position))
+        take RegulatedControlAction(throttle, steer, pastSteer)
+        pastSteer = steer
+        elapsed += simulation().timestep
     while self.speed > lowSpeed:
         take SetThrottleAction(0), SetBrakeAction(strength)
     do FollowLaneBehavior(target_speed=lowSpeed)
@@ -36,9 +47,9 @@ ego = new Car at egoLane.centerline.pointAlongBy(egoS),
     with speed globalParameters.ego_speed,
     with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed)
 lead = new Car at egoLane.centerline.pointAlongBy(egoS + globalParameters.lead_gap),
+    with name "lead",
     with speed globalParameters.ego_speed,
-    with behavior DecelerateToSpeed(globalParameters.ego_speed, globalParameters.lead_low_speed,
-                                    globalParameters.decel_after, globalParameters.decel_trigger,
-                                    globalParameters.decel_strength)
+    with behavior PaceThenDecelerate(globalParameters.lead_low_speed, globalParameters.decel_after,
+                                     globalParameters.decel_headway, 4, globalParameters.decel_strength)
 traffic = new Car at nextLane.centerline.pointAlongBy(egoS + Range(-30, 40)),
     with speed Range(20, 27), with behavior FollowLaneBehavior(target_speed=Range(20, 27))

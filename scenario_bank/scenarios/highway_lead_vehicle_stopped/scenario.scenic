@@ -27,6 +27,7 @@ ego = new Car at egoLane.centerline.pointAlongBy(egoS),
     with speed globalParameters.ego_speed,
     with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed)
 stopped = new Car at egoLane.centerline.pointAlongBy(egoS + globalParameters.stopped_gap),
+    with name "stopped",
     with speed 0,
     with behavior StayStopped()
 traffic = new Car at nextLane.centerline.pointAlongBy(egoS + Range(-25, 25)),

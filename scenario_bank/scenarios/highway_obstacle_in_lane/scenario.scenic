@@ -11,12 +11,22 @@ param obstacle_gap = Range(60, 110)
 param obstacle_width = Range(1.2, 2.4)
 param obstacle_length = Range(0.8, 2.5)
 param blocker_offset = Range(-8, 4)
-param blocker_speed_delta = Range(-0.5, 0.8)
+param follower_gap = Range(12, 20)
 
 # 2. Adversarial behaviours
-behavior StayAlongside(speed):
-    # the blocking car holds about the ego's speed in the next lane
-    do FollowLaneBehavior(target_speed=speed)
+behavior StayAlongside(offset):
+    # hold `offset` metres ahead of the ego (negative: behind it) in the next lane, whatever the ego's
+    # speed: an ego that brakes early or speeds up still finds the lane beside it taken
+    lonControl, latControl = simulation().getLaneFollowingControllers(self)
+    line = self.lane.centerline
+    pastSteer = 0
+    while True:
+        ahead = -(distance past self of ego)
+        target = min(max(ego.speed + 0.6 * (offset - ahead), 0), ego.speed + 6)
+        throttle = lonControl.run_step(target - self.speed)
+        steer = latControl.run_step(line.signedDistanceTo(self.position))
+        take RegulatedControlAction(throttle, steer, pastSteer)
+        pastSteer = steer
 
 # 3. Road geometry: a straight multi-lane highway; the ego's lane and the lane to its left
 lanePairs = [(lane, lane.sections[0]._laneToLeft.lane) for lane in network.lanes
@@ -31,11 +41,14 @@ ego = new Car at egoLane.centerline.pointAlongBy(egoS),
     with speed globalParameters.ego_speed,
     with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed)
 obstacle = new Obstacle at egoLane.centerline.pointAlongBy(egoS + globalParameters.obstacle_gap),
+    with name "obstacle",
     with width globalParameters.obstacle_width,
     with length globalParameters.obstacle_length
 blocker = new Car at leftLane.centerline.pointAlongBy(egoS + globalParameters.blocker_offset),
-    with speed globalParameters.ego_speed + globalParameters.blocker_speed_delta,
-    with behavior StayAlongside(globalParameters.ego_speed + globalParameters.blocker_speed_delta)
-follower = new Car at leftLane.centerline.pointAlongBy(egoS + globalParameters.blocker_offset - Range(12, 20)),
-    with speed globalParameters.ego_speed + globalParameters.blocker_speed_delta,
-    with behavior StayAlongside(globalParameters.ego_speed + globalParameters.blocker_speed_delta)
+    with name "blocker",
+    with speed globalParameters.ego_speed,
+    with behavior StayAlongside(globalParameters.blocker_offset)
+follower = new Car at leftLane.centerline.pointAlongBy(egoS + globalParameters.blocker_offset - globalParameters.follower_gap),
+    with name "follower",
+    with speed globalParameters.ego_speed,
+    with behavior StayAlongside(globalParameters.blocker_offset - globalParameters.follower_gap)

@@ -9,6 +9,7 @@ param ego_speed = Range(18, 24)
 param merger_lead = Range(6, 12)
 param merger_extra_speed = Range(1, 4)
 param lane_change_duration = Range(1.8, 2.6)
+param ramp_speed = Range(10, 14)
 
 # 2. Adversarial behaviours
 behavior SlideToLane(section, speed, duration):
@@ -48,7 +49,8 @@ rightLane = Uniform(network.elements['road1_lane0'])
 ego = new Car at rightLane.centerline.pointAlongBy(Range(340, 420)),
     with speed globalParameters.ego_speed
 merger = new Car at rampLane.centerline.pointAlongBy(Range(120, 200)),
-    with speed globalParameters.ego_speed,
+    with name "merger",
+    with speed globalParameters.ramp_speed,
     with behavior MergeAheadOfEgo(accelLane, globalParameters.merger_lead, globalParameters.merger_extra_speed,
                                   globalParameters.lane_change_duration)
 traffic = new Car following roadDirection from ego for Range(45, 70),

@@ -38,6 +38,7 @@ ego = new Car at leftLane.centerline.pointAlongBy(egoS),
     with speed globalParameters.ego_speed,
     with behavior ChangeLaneAfter(globalParameters.ego_speed, globalParameters.ego_change_after, False)
 other = new Car at rightLane.centerline.pointAlongBy(egoS + globalParameters.other_offset),
+    with name "other",
     with speed globalParameters.ego_speed + globalParameters.other_speed_delta,
     with behavior ChangeLaneAfter(globalParameters.ego_speed + globalParameters.other_speed_delta,
                                   globalParameters.ego_change_after + globalParameters.other_change_offset, True)

@@ -49,6 +49,7 @@ ego = new Car at egoLane.centerline.pointAlongBy(egoS),
     with speed globalParameters.ego_speed,
     with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed)
 truck = new Truck at truckLane.centerline.pointAlongBy(egoS + globalParameters.truck_gap),
+    with name "truck",
     with speed globalParameters.truck_speed,
     with behavior PullOutInFrontOf(globalParameters.truck_speed, globalParameters.cut_in_trigger,
                                    globalParameters.lane_change_duration)

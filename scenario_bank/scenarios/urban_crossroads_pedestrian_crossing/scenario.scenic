@@ -9,16 +9,34 @@ model scenic.domains.driving.model
 param ego_speed = Range(7, 10)
 param ego_distance = Range(15, 30)
 param crossing_position = Range(3, 7)
-param trigger_time = Range(2.5, 4.0)
+param entry_gap = Range(1.2, 2.0)
 param walking_speed = Range(1.2, 2.0)
 
 # 2. Adversarial behaviours
-behavior CrossWhenEgoNear(speed, triggerTime):
-    # step off the kerb once the ego is about triggerTime seconds away, cross the arm and stop
-    # on the other sidewalk
-    while (distance from self to ego) > max(10, triggerTime * ego.speed):
+behavior CrossInFrontOfEgo(speed, toLane, gap):
+    # step off the kerb once the walk to the ego's lane (toLane metres at `speed`) would reach it `gap`
+    # seconds before the ego's front does; at the lane's edge wait, if the ego has slowed down since,
+    # until it is `gap` seconds away again, within 9 m, or standing (the ego's time is read every step
+    # from its distance and speed, so an ego that hangs back or speeds up is still met in front of it)
+    while True:
+        ahead = (distance from ego to self) - 2.5
+        if ahead > 0 and (ahead <= 9 or ahead / max(ego.speed, 0.1) <= toLane / speed + gap):
+            break
         wait
     take SetWalkingSpeedAction(speed)
+    walked = 0
+    while walked < toLane - 0.4:
+        walked += speed * simulation().timestep
+        wait
+    ahead = (distance from ego to self) - 2.5
+    if ahead > 9 and ego.speed >= 0.5 and ahead / max(ego.speed, 0.1) > gap + 0.5:
+        take SetWalkingSpeedAction(0)
+        while True:
+            ahead = (distance from ego to self) - 2.5
+            if ahead <= 9 or ego.speed < 0.5 or ahead / max(ego.speed, 0.1) <= gap:
+                break
+            wait
+        take SetWalkingSpeedAction(speed)
     while self.position in network.sidewalkRegion:
         wait
     while not (self.position in network.sidewalkRegion):
@@ -51,5 +69,7 @@ ego = new Car at egoManeuver.startLane.centerline.pointAlongBy(-globalParameters
 crossSpot = new OrientedPoint at egoManeuver.endLane.centerline.pointAlongBy(globalParameters.crossing_position),
     facing roadDirection
 pedestrian = new Pedestrian right of crossSpot by pedestrianSide,
+    with name "pedestrian",
     facing toward crossSpot,
-    with behavior CrossWhenEgoNear(globalParameters.walking_speed, globalParameters.trigger_time)
+    with behavior CrossInFrontOfEgo(globalParameters.walking_speed, abs(pedestrianSide) - 1.75,
+                                   globalParameters.entry_gap)

@@ -28,9 +28,11 @@ ego = new Car at egoLane.centerline.pointAlongBy(egoS),
     with speed globalParameters.ego_speed,
     with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed)
 stopped = new Car at egoLane.centerline.pointAlongBy(egoS + globalParameters.stopped_gap),
+    with name "stopped",
     with speed 0,
     with behavior StayStopped()
 # both lanes are 600 m long: a negative distance counts back from the oncoming lane's end
 oncoming = new Car at oncomingLane.centerline.pointAlongBy(-(egoS + globalParameters.oncoming_distance)),
+    with name "oncoming",
     with speed globalParameters.oncoming_speed,
     with behavior FollowLaneBehavior(target_speed=globalParameters.oncoming_speed)

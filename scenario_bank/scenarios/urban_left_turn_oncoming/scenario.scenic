@@ -7,11 +7,30 @@ model scenic.domains.driving.model
 
 param ego_speed = Range(6, 10)
 param oncoming_speed = Range(8, 13)
+param arrival_offset = Range(-0.5, 0.8)
+param follower_delay = Range(1.5, 2.5)
 
 # 2. Adversarial behaviours
-behavior GoStraightThrough(speed, trajectory):
-    do FollowTrajectoryBehavior(target_speed=speed, trajectory=trajectory)
+behavior SyncArrival(speed, route, egoEntry, offset):
+    # approach the junction adapting speed so as to enter it `offset` seconds after the ego does
+    # (at the ego's current speed), then drive through at a steady speed
+    entry = route[0].centerline.end
+    line = route[0].centerline
+    lonControl, latControl = simulation().getLaneFollowingControllers(self)
+    pastSteer = 0
+    egoEntered = False
+    while (distance from self to entry) > 3:
+        egoEntered = egoEntered or (distance from ego to egoEntry) < 3 or ego.position in network.intersectionRegion
+        egoTime = 0 if egoEntered else (distance from ego to egoEntry) / max(ego.speed, 1)
+        wanted = (distance from self to entry) / max(egoTime + offset, 0.5)
+        wanted = min(1.4 * speed, max(3, wanted))
+        throttle = lonControl.run_step(wanted - self.speed)
+        steer = latControl.run_step(line.signedDistanceTo(self.position))
+        take RegulatedControlAction(throttle, steer, pastSteer)
+        pastSteer = steer
+    do FollowTrajectoryBehavior(target_speed=speed, trajectory=route, turn_speed=speed)
     do FollowLaneBehavior(target_speed=speed)
+
 
 behavior TurnLeft(speed, trajectory):
     do FollowTrajectoryBehavior(target_speed=speed, trajectory=trajectory)
@@ -30,6 +49,7 @@ egoStart = egoManeuver.startLane
 egoRoute = [egoStart, egoManeuver.connectingLane, egoManeuver.endLane]
 oncomingStart = oncomingManeuver.startLane
 oncomingRoute = [oncomingStart, oncomingManeuver.connectingLane, oncomingManeuver.endLane]
+egoEntry = egoStart.centerline.end
 
 # 4. Spawn positions
 ego = new Car following roadDirection from egoStart.centerline.end for -Range(12, 35),
@@ -37,8 +57,12 @@ ego = new Car following roadDirection from egoStart.centerline.end for -Range(12
     with route egoRoute,
     with behavior TurnLeft(globalParameters.ego_speed, egoRoute)
 oncoming = new Car following roadDirection from oncomingStart.centerline.end for -Range(15, 50),
+    with name "oncoming",
     with speed globalParameters.oncoming_speed,
-    with behavior GoStraightThrough(globalParameters.oncoming_speed, oncomingRoute)
+    with behavior SyncArrival(globalParameters.oncoming_speed, oncomingRoute, egoEntry,
+                              globalParameters.arrival_offset)
 follower = new Car following roadDirection from oncoming for Range(-25, -12),
+    with name "follower",
     with speed globalParameters.oncoming_speed,
-    with behavior GoStraightThrough(globalParameters.oncoming_speed, oncomingRoute)
+    with behavior SyncArrival(globalParameters.oncoming_speed, oncomingRoute, egoEntry,
+                              globalParameters.arrival_offset + globalParameters.follower_delay)

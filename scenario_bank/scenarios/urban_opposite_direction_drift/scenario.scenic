@@ -54,6 +54,7 @@ ego = new Car at egoLane.centerline.pointAlongBy(egoS),
     with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed)
 # both lanes are 600 m long: a negative distance counts back from the oncoming lane's end
 oncoming = new Car at oncomingLane.centerline.pointAlongBy(-(egoS + globalParameters.oncoming_distance)),
+    with name "oncoming",
     with speed globalParameters.oncoming_speed,
     with behavior DriftAcrossCentre(globalParameters.oncoming_speed, globalParameters.drift_trigger,
                                     globalParameters.drift_depth, globalParameters.drift_duration,

@@ -47,6 +47,7 @@ egoLane = Uniform(*filter(lambda l: l.sections[0]._laneToLeft is not None, netwo
 ego = new Car at egoLane.centerline.pointAlongBy(Range(100, 1100)),
     with speed globalParameters.ego_speed
 overtaker = new Car following roadDirection from ego for -globalParameters.start_gap,
+    with name "overtaker",
     with speed globalParameters.ego_speed + globalParameters.overtaker_extra_speed,
     with behavior OvertakeAndPullBackIn(globalParameters.overtaker_extra_speed, globalParameters.pull_out_gap,
                                         globalParameters.return_gap, globalParameters.slow_down_to,

@@ -45,6 +45,7 @@ ego = new Car at egoManeuver.startLane.centerline.pointAlongBy(-egoDistance),
     with route egoRoute,
     with behavior DriveRoute(globalParameters.ego_speed, egoRoute)
 turner = new Car at turnerManeuver.startLane.centerline.pointAlongBy(-globalParameters.turner_wait_position),
+    with name "turner",
     with speed 0,
     with behavior PullOutWhenEgoNear(globalParameters.turner_speed, turnerRoute, egoEntry,
                                      globalParameters.trigger_time)

@@ -57,6 +57,7 @@ ego = new Car at egoManeuver.startLane.centerline.pointAlongBy(-globalParameters
     with route egoRoute,
     with behavior DriveRoute(globalParameters.ego_speed, egoRoute)
 crosser = new Car at crosserManeuver.startLane.centerline.pointAlongBy(-(1 + crosserDistance)),
+    with name "crosser",
     with speed globalParameters.crosser_speed,
     with behavior SyncArrival(globalParameters.crosser_speed, crosserRoute, egoEntry,
                               -globalParameters.crosser_lead_time)

@@ -57,6 +57,7 @@ ego = new Car at egoManeuver.startLane.centerline.pointAlongBy(-globalParameters
     with route egoRoute,
     with behavior DriveRoute(globalParameters.ego_speed, egoRoute, globalParameters.ego_speed)
 oncoming = new Car at oncomingManeuver.startLane.centerline.pointAlongBy(-(1 + oncomingDistance)),
+    with name "oncoming",
     with speed globalParameters.oncoming_speed,
     with behavior SyncArrival(globalParameters.oncoming_speed, oncomingRoute, egoEntry,
                               globalParameters.arrival_offset)
