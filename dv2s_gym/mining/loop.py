@@ -76,6 +76,7 @@ DEFAULTS: Dict[str, Any] = {
     "holdout_fraction": 0.5,
     "k_eval": 10,
     "max_conversions": 4,
+    "max_replays": 16,
     "min_heldout_episodes": 20,
     "control": True,
     "untouched_seeds": 2,
@@ -92,7 +93,7 @@ bench/RESULTS.md records it). The other measurements in bench/RESULTS.md use lar
 
 IDENTITY = ("policy", "bank_dir", "budget", "sampler", "fine_tune_steps", "fine_tune_lr", "holdout_fraction", "k_eval",
             "regress_episodes", "mined_share", "fine_tune_reward", "margin", "seed", "scenarios", "fine_tune_method",
-            "max_conversions", "control", "untouched_seeds", "min_heldout_episodes")
+            "max_conversions", "control", "untouched_seeds", "min_heldout_episodes", "max_replays")
 _RECORDED = ("holdout_by",)
 """Settings a loop keeps as first recorded (not chosen by the user, so never a reason to refuse a resume)."""
 
@@ -113,7 +114,7 @@ METHOD_LEARNING_RATES = {"ppo": 1e-4, "dagger": 1e-3}
 bank worse, bench/RESULTS.md) and DAgger's Adam rate."""
 
 _LEGACY = {"fine_tune_method": "ppo", "max_conversions": None, "holdout_by": "cluster", "control": False,
-           "untouched_seeds": 0, "min_heldout_episodes": 0}
+           "untouched_seeds": 0, "min_heldout_episodes": 0, "max_replays": 0}
 """Identity settings added later, with the value a ``loop.json`` written before them meant."""
 
 
@@ -208,9 +209,11 @@ def _working_bank(out: Path, bank_dir: Optional[str]) -> str:
     return str(target.resolve())
 
 
-def mined_entries(mine_out: os.PathLike | str) -> List[Dict[str, Any]]:
+def mined_entries(mine_out: os.PathLike | str, replays: bool = True) -> List[Dict[str, Any]]:
     """The kept scenarios of a mining run: ``[{"cluster", "scenario", "reproduction"}]`` from
-    its ``conversions.jsonl`` (status ``kept`` with a bank entry)."""
+    its ``conversions.jsonl`` (status ``kept`` with a bank entry), then (``replays``) the exact replays of its
+    failing scenes (:func:`dv2s_gym.mining.replays.replay_entries`: ``"replay": True`` and ``"parent"``, from
+    the conversions' ``replay_entry`` and from ``replays.jsonl``)."""
     path = Path(mine_out) / "conversions.jsonl"
     if not path.is_file():
         return []
@@ -231,7 +234,12 @@ def mined_entries(mine_out: os.PathLike | str) -> List[Dict[str, Any]]:
             entries.setdefault(str(record["cluster"]), {"cluster": str(record["cluster"]),
                                                         "scenario": record["merged_into"],
                                                         "reproduction": (record.get("reproduction") or {}).get("rate")})
-    return [entries[key] for key in sorted(entries)]
+    converted = [entries[key] for key in sorted(entries)]
+    if not replays:
+        return converted
+    from dv2s_gym.mining.replays import replay_entries
+
+    return converted + replay_entries(mine_out)
 
 
 def _mining_summary(mine_out: Path) -> Dict[str, Any]:
@@ -271,9 +279,22 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
             if record.get("status") == "rejected" and record.get("reason"):
                 reasons.append(str(record["reason"]))
     converted = sum(statuses.values())
-    return {"episodes": episodes, "errors": errors, "failures": failures, "failures_against_policy": counted,
+    from dv2s_gym.mining.replays import REPLAYS_FILE
+
+    replayed: Dict[str, int] = {}
+    replay_path = mine_out / REPLAYS_FILE
+    if replay_path.is_file():
+        for line in replay_path.read_text(encoding="utf-8").splitlines():
+            try:
+                row = json.loads(line)
+            except ValueError:
+                continue
+            replayed[row.get("status", "?")] = replayed.get(row.get("status", "?"), 0) + 1
+    return {"replays": replayed, "episodes": episodes, "errors": errors, "failures": failures, "failures_against_policy": counted,
             "clusters": clusters, "conversions": statuses, "rejected_reasons": reasons[:20],
-            "clusters_not_converted": None if clusters is None else max(0, clusters - converted)}
+            "clusters_not_converted": None if clusters is None else max(0, clusters - converted),
+            "clusters_not_kept": None if clusters is None else max(0, clusters - converted
+                                                                   - sum(replayed.values()))}
 
 
 def fine_tune_weights(names: Sequence[str], mined: Sequence[str], mined_share: float) -> Dict[str, float]:
@@ -338,6 +359,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
              margin: float = DEFAULTS["margin"], seed: int = DEFAULTS["seed"], workers: Optional[int] = None,
              fine_tune_lr: Optional[float] = DEFAULTS["fine_tune_lr"],
              max_conversions: Optional[int] = DEFAULTS["max_conversions"],
+             max_replays: Optional[int] = DEFAULTS["max_replays"],
              min_heldout_episodes: int = DEFAULTS["min_heldout_episodes"], control: bool = DEFAULTS["control"],
              untouched_seeds: int = DEFAULTS["untouched_seeds"],
              scenarios: Optional[Sequence[str]] = None, n_envs: int = 2, progress: bool = True,
@@ -366,6 +388,8 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         margin: the regression test's non-inferiority margin.
         seed: seeds the miner, the split and the fine-tuning (each round derives its own).
         max_conversions: clusters converted into bank scenarios per round, largest first (``None``: all).
+        max_replays: clusters beyond the converted ones whose failing scene is kept as an exact replay entry
+            per round, largest first (:func:`dv2s_gym.mining.replays.replay_clusters`; ``None``: all, 0: none).
         min_heldout_episodes: below this many held-out episodes a round reports rates only, no drop and no
             test, and says so in the log and the reports.
         control: also fine-tune without the mined scenarios (the control arm) and compare on held-out.
@@ -389,6 +413,10 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                                         or max_conversions < 1):
         raise LoopError(f"--max-conversions must be a positive integer (0 on the command line: every cluster), "
                         f"not {max_conversions!r}")
+    if max_replays is not None and (isinstance(max_replays, bool) or not isinstance(max_replays, int)
+                                    or max_replays < 0):
+        raise LoopError(f"--max-replays must be an integer >= 0 (0: no replays beyond the converted clusters; "
+                        f"'all' on the command line: every cluster), not {max_replays!r}")
     if not 0.0 <= float(holdout_fraction) <= 1.0:
         raise LoopError(f"--holdout-fraction must be in [0, 1], not {holdout_fraction}")
     if not 0.0 < float(mined_share) < 1.0:
@@ -425,7 +453,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                 "fine_tune_method": fine_tune_method,
                 "margin": float(margin), "seed": seed,
                 "scenarios": list(scenarios) if scenarios is not None else None, "rounds": rounds,
-                "max_conversions": max_conversions, "holdout_by": HOLDOUT_BY, "control": bool(control),
+                "max_conversions": max_conversions, "max_replays": max_replays, "holdout_by": HOLDOUT_BY, "control": bool(control),
                 "untouched_seeds": untouched_seeds, "min_heldout_episodes": min_heldout_episodes,
                 "workers": workers, "n_envs": n_envs, "env_config": env_config,
                 "fine_tune_env_config": fine_tune_config}
@@ -476,6 +504,10 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                            "seed": seed * 1000 + number, "progress": progress, "env_config": env_config,
                            "convert": True, "max_conversions": max_conversions, **dict(mine_options or {})}
                 miner(current, out=str(round_dir / "mine"), budget=budget, **options)
+                if max_replays != 0 and (round_dir / "mine" / "settings.json").is_file():  # a miner's run folder
+                    from dv2s_gym.mining.replays import replay_clusters
+
+                    replay_clusters(round_dir / "mine", bank_dir=bank, max_replays=max_replays, progress=progress)
                 return {**_mining_summary(round_dir / "mine"), "kept": mined_entries(round_dir / "mine"),
                         "folder": str(round_dir / "mine")}
 
@@ -483,7 +515,8 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
             mined = steps["mine"]
             log(f"round {number}: mined {mined['failures']} failures in {mined['episodes']} episodes, "
                 f"{mined.get('clusters')} clusters, "
-                f"{len({e['scenario'] for e in mined['kept']})} scenarios kept"
+                f"{len({e['scenario'] for e in mined['kept'] if not e.get('replay')})} converted scenarios and "
+                f"{len({e['scenario'] for e in mined['kept'] if e.get('replay')})} exact replays kept"
                 + (f"; {mined['clusters_not_converted']} clusters not converted (--max-conversions "
                    f"{max_conversions})" if mined.get("clusters_not_converted") else ""))
         if "split" not in steps:
