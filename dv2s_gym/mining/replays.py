@@ -37,7 +37,7 @@ def _rows(path: Path) -> List[Dict[str, Any]]:
 def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
                     max_replays: Optional[int] = None, progress: bool = True) -> List[Dict[str, Any]]:
     """Add the exact replay of one failure per avoidable cluster of the mining run in ``run_dir`` to the bank in
-    ``bank_dir`` (the run's own working bank), skipping clusters a conversion or an earlier call has tried;
+    ``bank_dir`` (the loop's working bank; the parent scripts come from the bank the run mined), skipping clusters a conversion or an earlier call has tried;
     at most ``max_replays`` rows in ``replays.jsonl`` (``None``: every cluster). The representative failure is the
     one the conversion would take (lowest robustness, then lowest index). Returns every row of the run's
     ``replays.jsonl`` (:func:`dv2s_gym.mining.convert.replay_failure_entry`'s records)."""
@@ -75,6 +75,7 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
         for _, cluster, record in todo:
             row = replay_failure_entry(dict(record, cluster=cluster), run_dir, policy=settings["policy"], bank=bank,
                                        env_config=settings.get("env_config"), cluster=cluster,
+                                       bank_dir=settings.get("bank_dir"),  # the bank the run mined (the parents')
                                        monitor={key: settings[key] for key in ("ttc_threshold", "stall_seconds")
                                                 if settings.get(key) is not None})
             appender.append(row)
