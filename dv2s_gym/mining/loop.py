@@ -6,8 +6,13 @@ a. **mine**: :func:`dv2s_gym.mining.miner.mine` runs ``P`` on sampled scenes of 
    bank's scenarios, clusters its failures, converts the representatives of at most
    ``max_conversions`` clusters (largest first; the rest are counted as not converted) through
    the D-V2S pipeline and adds the kept scenarios to the *working bank* (``out/bank``, a copy
-   of the shipped bank, or the ``bank_dir`` given);
-b. **split**: the newly kept scenarios are split by *family* (their parent bank scenario,
+   of the shipped bank, or the ``bank_dir`` given); every converted failure's scene is also kept
+   exactly (its *exact replay* entry: the parent scenario narrowed around the failing parameters),
+   and so is that of up to ``max_replays`` more clusters, largest first
+   (:func:`dv2s_gym.mining.replays.replay_clusters`: no video, description or script, only the narrowed
+   parent checked to replay the failing episode step for step): these are mined scenarios of the
+   round too, so a round whose conversions are all rejected still has families to split;
+b. **split**: the newly kept scenarios (converted scripts and exact replays) are split by *family* (their parent bank scenario,
    :func:`dv2s_gym.mining.split.split_by_family`) into a fine-tuning part and a held-out part,
    deterministically from the seed; a family held out once stays held out;
 c. **before**: ``P`` runs on the held-out scenarios, ``k_eval`` evaluation seeds each
@@ -518,7 +523,9 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                 f"{len({e['scenario'] for e in mined['kept'] if not e.get('replay')})} converted scenarios and "
                 f"{len({e['scenario'] for e in mined['kept'] if e.get('replay')})} exact replays kept"
                 + (f"; {mined['clusters_not_converted']} clusters not converted (--max-conversions "
-                   f"{max_conversions})" if mined.get("clusters_not_converted") else ""))
+                   f"{max_conversions})" if mined.get("clusters_not_converted") else "")
+                + (f", {mined['clusters_not_kept']} neither converted nor replayed (--max-replays "
+                   f"{'all' if max_replays is None else max_replays})" if mined.get("clusters_not_kept") else ""))
         if "split" not in steps:
             held_families = sorted({f for earlier in state.data["rounds"][:number - 1]
                                     for f in ((earlier.get("steps") or {}).get("split") or {}).get(
@@ -530,9 +537,12 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         if not tuned and not held_out:
             mined = steps["mine"]
             tried = sum((mined.get("conversions") or {}).values())
+            replayed = sum((mined.get("replays") or {}).values())
             steps["skipped"] = (f"no mined scenario was kept this round ({tried} conversion(s) tried"
+                                + (f", {replayed} exact replay(s) tried" if replayed else "")
                                 + (f", {mined['clusters_not_converted']} cluster(s) not converted: raise "
-                                   "--max-conversions or --budget" if mined.get("clusters_not_converted") else "")
+                                   "--max-conversions, --max-replays or --budget"
+                                   if mined.get("clusters_not_converted") else "")
                                 + "): nothing to fine-tune on or to measure")
             state.save()
             log(f"round {number}: {steps['skipped']}")
