@@ -291,6 +291,8 @@ def test_loop_refuses_a_policy_it_cannot_fine_tune(tmp_path):
     (["--max-conversions", "-1"], "--max-conversions must be a positive integer (0 on the command line"),
     (["--untouched-seeds", "-1"], "--untouched-seeds must be an integer >= 0"),
     (["--min-heldout-episodes", "-2"], "--min-heldout-episodes must be an integer >= 0"),
+    (["--max-replays", "some"], "--max-replays must be a whole number of clusters or 'all'"),
+    (["--max-replays", "-1"], "--max-replays must be an integer >= 0"),
 ])
 def test_cli_refuses_bad_input_in_one_line(tmp_path, capsys, argv, needle):
     code, _, err = run(capsys, "loop", "--out", tmp_path / "loop", "--no-progress", *argv)
