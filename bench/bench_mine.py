@@ -7,6 +7,7 @@
     python -m bench.bench_mine --part samplers --config 'b2:alpha=0.9,buckets=2' --config 'nov:feedback=novelty'
     python -m bench.bench_mine --part samplers --samplers random split --split-config 'ucb:chooser=ucb'
     python -m bench.bench_mine --part breadth --budget 100 --seeds 0 1 2   # breadth on three policies
+    python -m bench.bench_mine --part saturation --budget 60 --saturation-budget 300 --seeds 50
 
 **Samplers** (``--part samplers``): every sampler of :data:`dv2s_gym.mining.samplers.SAMPLERS`
 mines the same policy on the same scenarios (the whole shipped bank by default) with the
@@ -27,6 +28,10 @@ default :data:`BREADTH_POLICIES`) and seeds, at the same budget, measured on wha
 behaviour clusters (``dv2s_gym.mining.cluster``), (scenario, failure type) pairs and scenarios with a failure;
 printed with each sampler's ratio to random (target: the default adaptive sampler >= 2x random on behaviour
 clusters and never below it on pairs).
+
+**Saturation** (``--part saturation``): random sampling at ``--budget`` against ``--saturation-budget`` episodes
+(one run per policy of ``--policies``, first seed): how much of what exists random already finds at the bench's
+budget, which bounds the ratio any sampler can reach on that policy.
 
 **Throughput** (``--part throughput``): the same mining run (same budget, seed, sampler -- default
 ``random`` -- and batch, 8 unless ``--batch``) with 1 worker and with 2, in alternating rounds so both see
@@ -81,6 +86,10 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
     failures = run.failures
     avoidable = [r for r in failures if r.get("avoidable") is True]
     clusters = set(run.clusters.values())
+    from dv2s_gym.mining.rate import rate_estimates
+
+    rate = rate_estimates(run.settings, run.records)
+    overall = rate["overall"] if rate["available"] else None
     avoidable_clusters = {run.clusters[int(r["index"])] for r in avoidable}
     return {
         "sampler": sampler, "seed": seed, "episodes": len(run.records),
@@ -88,6 +97,8 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
         "avoidable": len(avoidable), "clusters": len(clusters), "avoidable_clusters": len(avoidable_clusters),
         "scenarios_failing": len({r["scenario"] for r in failures}),
         "kinds": len({(r["scenario"], r["failure"]["kind"]) for r in failures}), "seconds": seconds,
+        "rate": (overall["value"], overall["low"], overall["high"], overall["ess"]) if overall else None,
+        "collapsed": bool(rate.get("collapsed")),
     }
 
 
@@ -203,6 +214,15 @@ BREADTH_POLICIES = ("idm", "keep_lane", "rule?action_noise=0.2")
 """Policies the project did not train for the comparison (``policies/registry.py``)."""
 
 
+def _rate_text(row: Dict[str, Any]) -> str:
+    """The run's importance-weighted failure-rate estimate under the scenarios' own distributions
+    (``dv2s_gym.mining.rate``), with its 95 % interval and effective sample size."""
+    if row.get("rate") is None:
+        return "n/a (no proposal densities)"
+    value, low, high, ess = row["rate"]
+    return f"{value:.3f} [{low:.3f}, {high:.3f}] (ess {ess:.0f}{', collapsed' if row.get('collapsed') else ''})"
+
+
 def bench_breadth(policies: Sequence[str], samplers: Sequence[str], seeds: Sequence[int], budget: int, workers: int,
                   scenarios: Optional[List[str]], batch: Optional[int], root: str) -> Dict[str, Any]:
     """Every sampler, in the setting ``dv2s mine --sampler NAME`` runs it (its default options and feedback; a name
@@ -224,7 +244,7 @@ def bench_breadth(policies: Sequence[str], samplers: Sequence[str], seeds: Seque
                 print(f"  {policy:24s} {sampler:14s} seed {seed}: {row['failures']:4d} failures / {row['episodes']} "
                       f"episodes ({row['errors']} errors), {row['clusters']:3d} behaviour clusters, "
                       f"{row['kinds']:3d} (scenario, type) pairs, {row['scenarios_failing']:2d} scenarios, "
-                      f"{row['seconds']:.0f} s, load {_load()}", flush=True)
+                      f"failure rate {_rate_text(row)}, {row['seconds']:.0f} s, load {_load()}", flush=True)
     summary: Dict[str, Any] = {"per_policy": {}, "overall": {}}
     print("\n| policy | sampler | failures | " + " | ".join(BREADTH_NAMES[m] for m in BREADTH)
           + " | " + " | ".join(f"{BREADTH_NAMES[m]} vs random" for m in BREADTH) + " |")
@@ -251,6 +271,38 @@ def bench_breadth(policies: Sequence[str], samplers: Sequence[str], seeds: Seque
             print(f"  {sampler:14s} " + ", ".join(f"{BREADTH_NAMES[m]} {totals[sampler][m]} ({ratios[m]:.2f}x)"
                                                   for m in BREADTH), flush=True)
     return summary
+
+
+def bench_saturation(policies: Sequence[str], seed: int, budget: int, large: int, workers: int,
+                     scenarios: Optional[List[str]], batch: Optional[int], root: str) -> Dict[str, Any]:
+    """How close random sampling at ``budget`` episodes already is to everything it finds at ``large``: one random
+    run of ``large`` episodes per policy (its first ``budget`` episodes are exactly a random run of ``budget`` with
+    the same seed: random draws do not depend on outcomes or on the budget); the breadth counts after ``budget``
+    and after ``large``. ``found / found_large`` above 1/2 means no sampler can find 2x random's at ``budget`` on
+    that policy, unless it finds what ``large`` random episodes do not."""
+    from dv2s_gym.mining.cluster import cluster_id, pair_of
+    from dv2s_gym.mining.miner import mine
+
+    print(f"# saturation: random sampling, policies {list(policies)}, seed {seed}, {budget} against {large} episodes, "
+          f"{workers} workers", flush=True)
+    result: Dict[str, Any] = {}
+    for index, policy in enumerate(policies):
+        out = os.path.join(root, f"saturation-{index}")
+        shutil.rmtree(out, ignore_errors=True)
+        run = mine(policy, out=out, budget=large, sampler="random", seed=seed, workers=workers, reference=None,
+                   scenarios=scenarios, batch=batch, progress=False, reports=False)
+        counts = {}
+        for n in (budget, large):
+            failed = [r for r in run.records[:n] if r.get("failure") and not r.get("error")]
+            counts[n] = {"failures": len(failed), "clusters": len({cluster_id(r) for r in failed}),
+                         "kinds": len({pair_of(r) for r in failed}),
+                         "scenarios_failing": len({r["scenario"] for r in failed})}
+        result[policy] = counts
+        print(f"  {policy:24s} " + "; ".join(
+            f"{BREADTH_NAMES[m]} {counts[budget][m]} at {budget} of {counts[large][m]} at {large} "
+            f"({counts[budget][m] / counts[large][m]:.0%}; at most {counts[large][m] / max(counts[budget][m], 1):.2f}x)"
+            if counts[large][m] else f"{BREADTH_NAMES[m]} 0" for m in BREADTH) + f", load {_load()}", flush=True)
+    return result
 
 
 def bench_throughput(policy: str, sampler: str, seed: int, budget: int, repeats: int, reference: Optional[str],
@@ -315,8 +367,11 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
 
     parser = argparse.ArgumentParser(prog="python -m bench.bench_mine", description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="budget 40, one seed, one throughput round")
-    parser.add_argument("--part", choices=("all", "samplers", "throughput", "breadth"), default="all",
-                        help="all: samplers and throughput; breadth: the samplers' breadth on several policies")
+    parser.add_argument("--part", choices=("all", "samplers", "throughput", "breadth", "saturation"), default="all",
+                        help="all: samplers and throughput; breadth: the samplers' breadth on several policies; "
+                             "saturation: random at --budget against --saturation-budget episodes on those policies")
+    parser.add_argument("--saturation-budget", type=int, default=300,
+                        help="the large random budget of --part saturation (default 300)")
     parser.add_argument("--policies", nargs="*", default=list(BREADTH_POLICIES),
                         help="policies of --part breadth (default: idm keep_lane rule?action_noise=0.2)")
     parser.add_argument("--policy", default="rule", help="policy under test (default: rule)")
@@ -359,9 +414,13 @@ def main(argv: Sequence[str] | None = None) -> Dict[str, Any]:
             results["samplers"] = bench_samplers(args.policy, args.samplers, seeds, budget, args.workers, reference,
                                                  args.scenarios, args.batch, configs, root, split_configs)
         if args.part == "breadth":
-            samplers = args.samplers if args.samplers != list(SAMPLERS) else ["random", "cross-entropy", "split"]
+            samplers = args.samplers if args.samplers != list(SAMPLERS) else ["random", "cross-entropy", "split",
+                                                                                "novelty-bandit"]
             results["breadth"] = bench_breadth(args.policies, samplers, seeds, budget, args.workers, args.scenarios,
                                                args.batch, root)
+        if args.part == "saturation":
+            results["saturation"] = bench_saturation(args.policies, seeds[0], budget, args.saturation_budget,
+                                                     args.workers, args.scenarios, args.batch, root)
         if args.part in ("all", "throughput"):
             results["throughput"] = bench_throughput(args.policy, args.throughput_sampler, seeds[0],
                                                      throughput_budget, repeats, reference, args.scenarios,

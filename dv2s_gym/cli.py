@@ -11,6 +11,7 @@ from dataclasses import asdict
 from typing import List, Optional
 
 from envs.errors import Interrupted
+from scenario_bank.errors import DV2SError
 
 __all__ = ["main", "build_parser"]
 
@@ -964,20 +965,23 @@ def build_parser() -> argparse.ArgumentParser:
     bank_option(p)
     p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank)")
     p.add_argument("--budget", type=int, default=200, help="episodes to run (default 200)")
-    p.add_argument("--sampler", default="cross-entropy",
-                   choices=["random", "halton", "cross-entropy", "bandit", "split"],
-                   help="VerifAI sampler (default cross-entropy); split: VerifAI's cross-entropy over which scenario "
-                   "and a Halton sequence per scenario over its parameters, which finds the most distinct failures")
+    p.add_argument("--sampler", default="novelty-bandit",
+                   choices=["random", "halton", "cross-entropy", "bandit", "split", "novelty-bandit"],
+                   help="scene sampler (default novelty-bandit); split: VerifAI's cross-entropy over which scenario "
+                   "and a Halton sequence per scenario over its parameters; novelty-bandit: the scenarios that keep "
+                   "giving failures unlike earlier ones, mixed with uniform, parameters uniform (explore, prior_new, "
+                   "prior_old)")
     p.add_argument("--sampler-options", default=None,
                    help="VerifAI settings of cross-entropy/bandit as JSON: alpha (default 0.9), buckets (5), thres (0); "
                    "split also takes chooser (cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy) "
                    "and warmup (0), and against scenarios that stop yielding: forget, patience, floor, capacity, avoid "
                    "(see dv2s_gym/mining/samplers.py)")
-    p.add_argument("--feedback", choices=["robustness", "novelty", "scenario-novelty"], default=None,
+    p.add_argument("--feedback", choices=["robustness", "novelty", "scenario-novelty", "state-novelty"], default=None,
                    help="what adaptive samplers learn from: robustness (every failure), novelty (a failure in a "
                    "parameter cell that already failed counts as an easy scene, to spread the search) or "
-                   "scenario-novelty (only each scenario's first failure counts); default novelty for split, "
-                   "robustness for the others")
+                   "scenario-novelty (only each scenario's first failure counts) or state-novelty (a failure whose "
+                   "speeds and geometry at the failure are close to an earlier one's in the scenario counts as easy); "
+                   "default novelty for split, state-novelty for novelty-bandit, robustness for the others")
     p.add_argument("--seed", type=int, default=0, help="seed of the sampler and the episodes (default 0)")
     p.add_argument("--reference", default="rule",
                    help="driver deciding avoidability (default rule; 'none' skips the check)")
@@ -1081,7 +1085,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--budget", type=int, default=LOOP["budget"],
                    help=f"mining episodes per round (default {LOOP['budget']})")
     p.add_argument("--sampler", default=LOOP["sampler"], help=f"the miner's sampler: random, halton, cross-entropy, "
-                   f"bandit or split (default {LOOP['sampler']}; see dv2s mine --help)")
+                   f"bandit, split or novelty-bandit (default {LOOP['sampler']}; see dv2s mine --help)")
     p.add_argument("--fine-tune-steps", type=int, default=LOOP["fine_tune_steps"],
                    help=f"env steps of fine-tuning per round (default {LOOP['fine_tune_steps']})")
     p.add_argument("--fine-tune-lr", type=float, default=LOOP["fine_tune_lr"],
@@ -1130,12 +1134,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _error_line(error: BaseException) -> str:
     """One line for the user: the project's errors say what is wrong and the fix; others get their type."""
-    from dv2s_gym.pipeline.errors import PipelineError
-    from envs.errors import DV2SError
-    from scenario_bank.bank import BankError
-
     message = " ".join(str(error).split())
-    if isinstance(error, (PipelineError, DV2SError, BankError, ValueError)) and message:
+    if message and (isinstance(error, DV2SError) and error.expected or isinstance(error, ValueError)):
         return message
     if isinstance(error, OSError) and error.strerror:
         where = f": {error.filename}" if error.filename and str(error.filename) not in message else ""
@@ -1204,14 +1204,11 @@ def main(argv: Optional[List[str]] = None) -> int:
 
 
 def _is_project_error(error: BaseException) -> bool:
-    from dv2s_gym.pipeline.errors import PipelineError
-    from envs.errors import DV2SError
-    from scenario_bank.bank import BankError
-    from scenario_bank.jail.errors import JailLimitError, JailUnavailableError
-
-    # a script that hits a jail limit, or a machine without the jail, is an outcome the message explains
-    return isinstance(error, (PipelineError, DV2SError, BankError, JailLimitError, JailUnavailableError, ValueError,
-                              OSError))
+    """An error whose message explains it: every expected :class:`DV2SError` (bad input, a script that hits a jail
+    limit, a machine without the jail), and a bad value or a file problem from elsewhere."""
+    if isinstance(error, DV2SError):
+        return error.expected
+    return isinstance(error, (ValueError, OSError))
 
 
 if __name__ == "__main__":

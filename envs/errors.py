@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from scenario_bank.errors import DV2SError
+
 __all__ = [
     "DV2SError",
     "ScenarioCompileError",
@@ -15,10 +17,6 @@ __all__ = [
     "OBSERVATION_TYPES",
     "ACTION_TYPES",
 ]
-
-
-class DV2SError(Exception):
-    """Base class of dv2s-gym errors."""
 
 
 class Interrupted(KeyboardInterrupt):

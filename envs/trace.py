@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional, Union
 
 from scenario_bank.atomic import atomic_write_bytes
+from scenario_bank.errors import DV2SError
 
 __all__ = ["EpisodeTrace", "actor_state", "TraceMismatchError", "TRACE_VERSION"]
 
@@ -29,7 +30,7 @@ def actor_state(vehicle) -> List[float]:
     return [float(vehicle.position[0]), float(vehicle.position[1]), float(vehicle.heading), float(vehicle.speed)]
 
 
-class TraceMismatchError(AssertionError):
+class TraceMismatchError(DV2SError, AssertionError):
     """A replay diverged from its trace."""
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any, Dict, Mapping
 
 from envs.errors import ACTION_TYPES, OBSERVATION_TYPES
+from scenario_bank.errors import DV2SError
 
 __all__ = ["TraceConfigError", "MAX_VEHICLES", "MAX_GRID_CELLS", "MAX_SCREEN", "MAX_MAP_BYTES",
            "check_observation", "check_action", "check_values", "check_map", "check_file_config"]
@@ -30,7 +31,7 @@ OTHER_VEHICLE_TYPES = tuple(f"highway_env.vehicle.behavior.{name}" for name in (
 _DAMAGED = "the trace is damaged or was not written by env.save_trace()"
 
 
-class TraceConfigError(ValueError):
+class TraceConfigError(DV2SError, ValueError):
     """A trace's config holds a value the env cannot safely build."""
 
 

@@ -20,13 +20,15 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator, Union
 
+from scenario_bank.errors import DV2SError
+
 __all__ = ["AtomicWriteError", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "atomic_path",
            "file_sha256"]
 
 PathLike = Union[str, os.PathLike]
 
 
-class AtomicWriteError(OSError):
+class AtomicWriteError(DV2SError, OSError):
     """A file could not be written; the target is unchanged and no partial file is left."""
 
 

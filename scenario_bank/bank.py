@@ -62,6 +62,7 @@ from typing import Any, Callable, Dict, Iterable, Iterator, List, Mapping, Optio
 from scenario_bank.atomic import atomic_path, atomic_write_json, atomic_write_text
 from scenario_bank.cache import keyed_cache_dir
 from scenario_bank.elements import ElementError, normalize_elements
+from scenario_bank.errors import DV2SError
 from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, extract_archive, is_entry_name,
                                       load_json_bounded, read_in_folder, read_regular_file, real_folder_in,
                                       regular_file_in_folder, validate_entry_name, validate_relative_path)
@@ -186,7 +187,7 @@ def entry_files(source: Mapping[str, Any]) -> List[str]:
     return out
 
 
-class BankError(Exception):
+class BankError(DV2SError):
     """A bank operation failed; the bank is unchanged."""
 
 

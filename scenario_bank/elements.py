@@ -31,6 +31,8 @@ from __future__ import annotations
 
 from typing import Any, Dict, FrozenSet, Iterable, List, Mapping, Tuple
 
+from scenario_bank.errors import DV2SError
+
 __all__ = [
     "ROADS",
     "PARTICIPANTS",
@@ -65,7 +67,7 @@ RELATIONS = ("ahead_of", "behind", "left_of", "right_of", "oncoming", "same_lane
 Element = Tuple[Any, ...]
 
 
-class ElementError(ValueError):
+class ElementError(DV2SError, ValueError):
     """Elements that do not follow the vocabulary."""
 
 

@@ -33,6 +33,8 @@ import unicodedata
 from dataclasses import dataclass
 from typing import List, Union
 
+from scenario_bank.errors import DV2SError
+
 __all__ = [
     "MAX_SCRIPT_BYTES",
     "MAX_LINES",
@@ -83,7 +85,7 @@ class SafetyFinding:
         return f"line {self.line}: {self.construct}: {self.reason}"
 
 
-class UnsafeScenarioError(ValueError):
+class UnsafeScenarioError(DV2SError, ValueError):
     """A script failed the safety check; ``findings`` lists why."""
 
     def __init__(self, findings: List[SafetyFinding], label: str = "<script>") -> None:

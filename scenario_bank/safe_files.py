@@ -34,6 +34,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Union
 
+from scenario_bank.errors import DV2SError
+
 __all__ = [
     "ENTRY_NAME_PATTERN",
     "UnsafeInputError",
@@ -60,7 +62,7 @@ _OPEN_FLAGS = os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC | getat
 _DIR_FLAGS = os.O_RDONLY | os.O_NOFOLLOW | os.O_DIRECTORY | os.O_CLOEXEC
 
 
-class UnsafeInputError(ValueError):
+class UnsafeInputError(DV2SError, ValueError):
     """A bank file, folder, name or archive is malformed or hostile; nothing was written."""
 
 

@@ -29,6 +29,7 @@ from scenario_bank.jail import JailedProcess, JailError, JailLimitError, JailLim
 from scenario_bank.jail.process import JailRemoteError
 from scenario_bank.precheck import precheck_text
 from scenario_bank.safety import SafetyFinding, UnsafeScenarioError
+from scenario_bank.errors import DV2SError
 
 __all__ = ["SandboxLimits", "SandboxResult", "SandboxError", "run_in_sandbox", "verify_script", "check_in_jail",
            "bounded_precheck", "cache_dir"]
@@ -91,7 +92,7 @@ class SandboxResult:
         return asdict(self)
 
 
-class SandboxError(ValueError):
+class SandboxError(DV2SError, ValueError):
     """A script failed its sandboxed check; ``result`` says at which stage and by which limit."""
 
     def __init__(self, message: str, result: SandboxResult) -> None:

@@ -9,9 +9,9 @@ command -v "$PY" >/dev/null 2>&1 || PY=python3
 python -m pip install -q --upgrade pip
 # torch first, pinned: an unpinned torch pulls a multi-GB CUDA build.
 python -m pip install -q "torch==2.13.0"
-# Editable: edits to the checkout take effect without reinstalling. rl and mining hold the
-# training and falsification libraries the next issues build on.
-python -m pip install -q -e ".[test,llm,rl,mining,ray]"
+# Editable: edits to the checkout take effect without reinstalling. Every extra: the tests, the LLM
+# generator's retrieval, training, failure mining, Ray, and the documentation site (mkdocs).
+python -m pip install -q -e ".[test,llm,rl,mining,ray,docs]"
 # Scenic needs opencv-python; a second OpenCV distribution (e.g. -headless, pulled by
 # some extras) would share the cv2/ folder. Keep exactly one.
 for other in opencv-python-headless opencv-contrib-python opencv-contrib-python-headless; do

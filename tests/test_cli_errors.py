@@ -5,7 +5,10 @@ not a bank refused; file lists that name only what was written."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -197,3 +200,17 @@ def test_run_takes_its_scenario_from_the_bank_given(capsys, tmp_path):
                          "--video", tmp_path / "episode.webm")
     assert code == 0, err
     assert json.loads(out)["scenario"] == "only_in_this_bank"
+
+
+@pytest.mark.parametrize("name, content", [("notes.mp4", b"hello\n"), ("cut.webm", bytes(range(256)) * 20)])
+def test_a_file_that_is_not_a_video_gives_one_line_and_no_ffmpeg_noise(tmp_path, name, content):
+    # a fresh process: FFmpeg prints its own lines ("moov atom not found") to the stderr file descriptor,
+    # which only a separate process sees
+    video = tmp_path / name
+    video.write_bytes(content)
+    env = {k: v for k, v in os.environ.items() if k != "OPENCV_FFMPEG_LOGLEVEL"}
+    done = subprocess.run([sys.executable, "-m", "dv2s_gym.cli", "describe", str(video)], capture_output=True,
+                          text=True, env=env, timeout=300)
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1, done.stderr
+    assert lines[0].startswith("dv2s: error: cannot read video") and "ffmpeg -i" in lines[0]

@@ -501,6 +501,15 @@ def test_a_round_that_keeps_nothing_is_skipped_and_says_why(tmp_path, monkeypatc
     assert any(steps["skipped"] in line for line in lines) and steps["skipped"] in report.paths["md"].read_text()
 
 
+def test_each_round_mines_with_a_derived_seed_and_tells_the_miner_the_loop_s_own(tmp_path, monkeypatch):
+    """Round R of a loop with seed S mines with seed 1000 S + R; the miner is told S and R, so its report can name
+    the loop's seed beside its own (a loop run with seed 0 is not reported as one with seed 1)."""
+    _StandIns(monkeypatch)
+    miner = FakeMiner(WIRING["scenarios"], failures_per_round=0)
+    run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, seed=4, log=lambda _: None, **WIRING)
+    assert [(c["seed"], c["origin"]) for c in miner.calls] == [(4001, {"command": "dv2s loop", "seed": 4, "round": 1})]
+
+
 def test_a_round_policy_read_back_from_loop_json_must_be_that_rounds_own_checkpoint(tmp_path):
     from dv2s_gym.mining.loop import _round_spec
 

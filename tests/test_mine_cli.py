@@ -33,7 +33,7 @@ def test_mine_writes_records_settings_and_a_summary(tmp_path, capsys):
                             "--out", out, *QUICK)
     assert code == 0, err
     settings = json.loads((out / "settings.json").read_text())
-    assert settings["policy"] == "keep_lane" and settings["sampler"] == "cross-entropy"
+    assert settings["policy"] == "keep_lane" and settings["sampler"] == "novelty-bandit"
     assert sorted(settings["space"]) == ["highway_cut_in_from_left", "highway_lead_vehicle_brakes"]
     records = keys(out)
     assert [r[0] for r in records] == list(range(8))
@@ -43,7 +43,7 @@ def test_mine_writes_records_settings_and_a_summary(tmp_path, capsys):
         for name, value in params.items():
             assert ranges[name]["low"] <= value <= ranges[name]["high"]
     failed = [r for r in records if r[5]]
-    assert stdout.splitlines()[0].startswith("8 episodes of keep_lane (cross-entropy sampler), 0 errors")
+    assert stdout.splitlines()[0].startswith("8 episodes of keep_lane (novelty-bandit sampler), 0 errors")
     assert f"{len(failed)} failures" in stdout
     for record in failed:  # every failure kept its trace and was checked against the reference driver
         assert record[6] in (True, False)
@@ -99,7 +99,7 @@ def test_resuming_with_other_settings_is_refused(tmp_path, capsys):
     assert run(capsys, *base)[0] == 0
     code, _, err = run(capsys, *base, "--sampler", "halton")
     assert code == 2
-    assert "other settings (sampler: run has 'cross-entropy', asked 'halton')" in one_line_error(err)
+    assert "other settings (sampler: run has 'novelty-bandit', asked 'halton'" in one_line_error(err)
 
 
 @pytest.mark.slow
@@ -158,3 +158,14 @@ def test_replay_reruns_a_mined_failure_and_writes_its_video(tmp_path, capsys):
     assert code == 2 and "diverged" in one_line_error(err)
     code, _, err = run(capsys, "replay", out)
     assert code == 2 and "--episode INDEX" in one_line_error(err)
+
+
+def test_mining_without_the_mining_extra_names_the_extra(tmp_path, monkeypatch):
+    """The core install has no VerifAI: mining says which extra to install, in one line, before any work."""
+    from dv2s_gym.mining.errors import MiningError
+    from dv2s_gym.mining.miner import mine
+
+    monkeypatch.setitem(sys.modules, "verifai", None)  # as if it were not installed
+    with pytest.raises(MiningError, match=r"pip install 'dv2s-gym\[mining\]'"):
+        mine("rule", out=tmp_path / "mine", budget=2, progress=False)
+    assert not (tmp_path / "mine").exists()

@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.failure_state import NOVELTY_RADIUS, STATE_SIZE
 from dv2s_gym.mining.miner import episode_seed, mine, read_records
 from dv2s_gym.mining.monitors import (
     COLLISION_TYPES,
@@ -345,7 +346,7 @@ def test_adaptive_samplers_take_verifai_options(small_space):
     params = sampler_params("cross-entropy", {"alpha": 0.5, "buckets": 1})
     assert (params.alpha, params.cont.buckets, params.thres) == (0.5, 1, 0.0)
     assert sampler_params("bandit", None).alpha == 0.9 and sampler_params("random") is None
-    assert [name for name in SAMPLERS if is_adaptive(name)] == ["cross-entropy", "bandit", "split"]
+    assert [name for name in SAMPLERS if is_adaptive(name)] == ["cross-entropy", "bandit", "split", "novelty-bandit"]
     # one bucket per parameter: the parameters stay uniform, only the scenario distribution moves
     sampler = make_sampler("cross-entropy", small_space.feature_space, 1, {"alpha": 0.5, "buckets": 1})
     for _ in range(6):
@@ -382,6 +383,7 @@ RUNS = {
     "random": {"sampler": "random"},  # non-adaptive: whole chunks go to the workers at once
     "bandit-novelty": {"sampler": "bandit", "feedback": "novelty", "sampler_options": {"alpha": 0.8, "buckets": 2}},
     "split": {"sampler": "split"},  # its default feedback: novelty
+    "novelty-bandit": {"sampler": "novelty-bandit"},  # its default feedback: state-novelty
 }
 
 
@@ -406,15 +408,18 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
             assert (out / record["trace"]).is_file() and record["reference"]["policy"] == "rule"
             assert isinstance(record["avoidable"], bool)
             assert set(record["behaviour"]) == {"actor", "actor_manoeuvre", "ego_manoeuvre"}
+            assert len(record["failure_state"]) == STATE_SIZE
             assert "unknown" not in record["behaviour"].values()
         else:
-            assert "behaviour" not in record
+            assert "behaviour" not in record and "failure_state" not in record
             assert record["trace"] is None and record["avoidable"] is None
         proposal = record["proposal"]  # the density the scene was drawn with (the failure-rate estimate's weights)
         if settings["sampler"] == "random":
             assert proposal == {"scenario": 0.5, "params": 1.0, "floor": 1.0}
         elif settings["sampler"] == "cross-entropy":
             assert 0.0 < proposal["scenario"] < 1.0 and proposal["params"] > 0.0
+        elif settings["sampler"] == "novelty-bandit":  # a mixture with uniform (explore 0.2), parameters uniform
+            assert 0.1 - 1e-9 <= proposal["scenario"] <= 0.1 + 0.8 + 1e-9 and proposal["params"] == 1.0
         else:  # the bandit picks its buckets deterministically; split's cell avoidance leaves cells out
             assert proposal is None
     assert (out / "sampler.pkl").is_file()
@@ -454,6 +459,11 @@ def _fed(record, records, feedback):
     if record["failure"] and feedback == "novelty":  # novelty is over parameter cells, not behaviour clusters
         earlier = {cell_id(r) for r in records if r["index"] < record["index"] and r["failure"]}
         if cell_id(record) in earlier:
+            return 9.0
+    if record["failure"] and feedback == "state-novelty":  # over the failure-state descriptors, per scenario
+        earlier = [r["failure_state"] for r in records
+                   if r["index"] < record["index"] and r["failure"] and r["scenario"] == record["scenario"]]
+        if any(math.dist(record["failure_state"], other) <= NOVELTY_RADIUS for other in earlier):
             return 9.0
     return record["rho"]
 
@@ -540,7 +550,7 @@ def test_resuming_with_other_settings_is_refused(whole_run, tmp_path):
     changes = [{"sampler": other, "sampler_options": None}, {"seed": 6}, {"env_config": {"duration": 4}},
                {"batch": 2}, {"reference": None}]
     if settings["sampler"] != "random":
-        changes += [{"sampler_options": {"alpha": 0.5}},
+        changes += [{"sampler_options": {"explore": 0.5} if settings["sampler"] == "novelty-bandit" else {"alpha": 0.5}},
                     {"feedback": "robustness" if (settings.get("feedback") or default_feedback(settings["sampler"]))
                      == "novelty" else "novelty"}]
     for change in changes:
@@ -682,3 +692,42 @@ def test_an_empty_run_folder_another_miner_holds_is_not_removed(tmp_path):
         assert out.is_dir()
     _remove_if_empty(out)
     assert not out.exists()
+
+
+def test_the_failure_state_descriptor_and_state_novelty_feedback():
+    """The descriptor reads speeds and geometry at the failure step from the trace; state-novelty feeds a failure
+    as one only when its descriptor is far from every earlier failure's in the same scenario."""
+    from dv2s_gym.mining.failure_state import failure_state
+    from dv2s_gym.mining.miner import _feedback
+
+    # ego at 20 m/s slowing to 15 over the last second, a car 10 m ahead in the same lane at 5 m/s, heading along
+    states = [{"ego": [float(i), 0.0, 0.0, 20.0 - max(0, i - 5)], "Car1": [10.0 + i, 0.0, 0.0, 5.0]}
+              for i in range(11)]
+    trace = SimpleNamespace(states=states, config={"policy_frequency": 5, "duration": 20.0})
+    state = failure_state(trace, {"type": "collision", "with": "Car1", "step": 10})
+    assert len(state) == STATE_SIZE
+    assert state[:4] == pytest.approx([15.0 / 30, -5.0 / 10, 0.0, 10 / 100])
+    assert state[4:] == pytest.approx([1.0, 10.0 / 30, 0.0, (5.0 - 15.0) / 20, 0.0])
+    assert failure_state(trace, None) is None
+    failure = {"type": "collision", "kind": "collision:rear_end"}
+    near = [x + 0.01 for x in state]
+    far = [x + 0.5 for x in state]
+    records = [{"index": 0, "scenario": BRAKES, "failure": failure, "rho": -2.0, "failure_state": state},
+               {"index": 1, "scenario": BRAKES, "failure": failure, "rho": -1.5, "failure_state": near},
+               {"index": 2, "scenario": BRAKES, "failure": failure, "rho": -1.2, "failure_state": far},
+               {"index": 3, "scenario": LEFT_TURN, "failure": failure, "rho": -1.1, "failure_state": state},
+               {"index": 4, "scenario": BRAKES, "failure": failure, "rho": -1.0, "failure_state": None},
+               {"index": 5, "scenario": BRAKES, "failure": None, "rho": 3.0}]
+    seen: set = set()
+    assert [_feedback(r, seen, "state-novelty") for r in records] == [-2.0, 9.0, -1.2, -1.1, -1.0, 3.0]
+    assert default_feedback("novelty-bandit") == "state-novelty"
+
+
+def test_novelty_bandit_options_are_checked(small_space):
+    from dv2s_gym.mining.samplers import sampler_params
+
+    assert sampler_params("novelty-bandit", {"explore": 0.5}) == {"explore": 0.5, "prior_new": 2.0, "prior_old": 1.0}
+    for bad, match in (({"explore": 0.0}, r"explore must be in \(0, 1\]"), ({"prior_old": -1}, "prior_old must be > 0"),
+                       ({"alpha": 0.5}, "no option 'alpha'; it takes explore, prior_new, prior_old")):
+        with pytest.raises(MiningError, match=match):
+            make_sampler("novelty-bandit", small_space.feature_space, 0, bad)

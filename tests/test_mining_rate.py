@@ -115,3 +115,65 @@ def test_a_sampler_without_densities_gives_no_estimate():
     records = [{"index": 0, "scenario": "a", "failure": None, "sampler": "bandit", "proposal": None}]
     rate = failure_rate(records, sampler="bandit")
     assert rate["available"] is False and rate["overall"] is None
+
+
+def _novelty_bandit_run(draws: int, seed: int, window: int = 4):
+    """Records of the novelty-bandit sampler mining three synthetic scenarios, fed back ``window`` draws late (as the
+    miner's window does): scenario 0 fails where its first parameter is below 0.2 (true rate 0.2), scenario 1 where
+    both are above 0.7 (0.09), scenario 2 never; every failure is fed as a new one, so the sampler keeps drawing the
+    failing scenarios."""
+    from verifai.features import Box, DiscreteBox, Feature, FeatureSpace
+
+    from dv2s_gym.mining.samplers import NOVELTY, make_sampler, scene_proposal
+
+    space = FeatureSpace({"scenario": Feature(DiscreteBox([0, 2])), "u": Feature(Box(*[[0.0, 1.0]] * 2))})
+    sampler = make_sampler(NOVELTY, space, seed)
+    records, pending = [], []
+    for index in range(draws):
+        ((point, info),) = sampler.draw(1)
+        scenario, u = int(point.scenario[0]), [float(x) for x in point.u]
+        failed = (scenario == 0 and u[0] < 0.2) or (scenario == 1 and u[0] > 0.7 and u[1] > 0.7)
+        pending.append((point, info, -1.0 if failed else 1.0))
+        if len(pending) > window:
+            sampler.feed(*pending.pop(0))
+        records.append({"index": index, "scenario": f"s{scenario}", "sampler": NOVELTY,
+                        "failure": {"type": "collision"} if failed else None,
+                        "proposal": scene_proposal(sampler.proposal(index), 2)})
+    return records
+
+
+@pytest.mark.slow
+def test_the_novelty_bandit_s_densities_recover_the_true_rates():
+    """The sampler draws the failing scenarios far more often than uniform; its recorded densities (a mixture with
+    uniform: every weight at most 1 / explore = 5) bring the estimates back to the true rates under the scenarios'
+    own distributions (overall (0.2 + 0.09 + 0) / 3). Over eight seeds the 95 % intervals cover the truth (all but
+    one allowed) and the overall estimates average to it."""
+    truth = (0.2 + 0.09 + 0.0) / 3
+    covered = 0
+    values = []
+    for seed in range(8):
+        records = _novelty_bandit_run(draws=400, seed=seed)
+        shares = {name: sum(1 for r in records if r["scenario"] == name) / len(records) for name in ("s0", "s1", "s2")}
+        assert shares["s2"] < 0.2 < shares["s0"]  # not uniform: the scenario that never fails is drawn least
+        assert min(r["proposal"]["scenario"] for r in records) == pytest.approx(0.2 / 3)  # never below explore / S
+        assert all(r["proposal"]["params"] == 1.0 and r["proposal"]["floor"] >= 0.2 - 1e-9 for r in records)
+        rate = failure_rate(records, scenarios=["s0", "s1", "s2"], sampler="novelty-bandit")
+        assert rate["available"] and not rate["collapsed"]
+        assert rate["scenarios"]["s2"]["value"] == 0.0
+        overall = rate["overall"]
+        covered += overall["low"] <= truth <= overall["high"]
+        values.append(overall["value"])
+    assert covered >= 7
+    assert sum(values) / len(values) == pytest.approx(truth, abs=0.01)
+
+
+def test_an_estimate_pushed_past_one_by_heavy_weights_keeps_a_wide_interval():
+    """A short adaptive run of a policy that fails often: the few uniform draws (weight 5) all failed, the many
+    draws of the favoured scenario (weight 0.1) mostly too; the plain estimate passes 1 and is shown capped, but
+    its interval must say how little 60 such episodes tell (not [0.94, 1] as 60 equal-weight failures would)."""
+    weights = [5.0] * 12 + [0.1] * 48
+    outcomes = [1] * 12 + [1] * 40 + [0] * 8
+    estimate = weighted_rate(outcomes, weights)
+    assert estimate["raw"] > 1.0 and estimate["value"] == 1.0 and estimate["high"] == 1.0
+    assert estimate["low"] < 0.75
+    assert estimate["ess"] < 20  # Kish's: a few heavy weights are worth a few draws

@@ -19,7 +19,7 @@ from dv2s_gym.mining.html import write_html
 from dv2s_gym.mining.report import (SCHEMA, SCHEMA_VERSION, MiningReportError, build_report, format_summary,
                                     markdown, write_reports)
 from envs.errors import DV2SError
-from browser_helpers import body_attributes
+from browser_helpers import body_attributes, table_widths
 
 POLICY = "rule?action_noise=0.3"
 # (sampler, scenario, u, failure type, avoidable, error); u is the one unit-box coordinate of the scene; each
@@ -458,3 +458,45 @@ def test_the_miner_s_summary_states_the_breadth(run_dir):
     # the miner counts a failure of unknown avoidability (the low TTC) as avoidable
     assert ("5 distinct behaviours, 4 with avoidable failures; 5 (scenario, failure type) pairs, 2 scenarios with a "
             "failure; 5 collisions, 1 stalls") in run.summary()
+
+
+def test_a_plain_run_states_its_seed(report):
+    assert "sampler cross-entropy, seed 7: " in format_summary(report)
+    assert "derived" not in markdown(report)
+
+
+def test_a_loop_round_s_report_names_the_loop_seed_beside_its_own(tmp_path):
+    """`dv2s loop` mines round R of a loop with seed S with seed 1000 S + R; every form of the report says both."""
+    run = make_run(tmp_path / "run", clips=False)
+    settings = json.loads((run / "settings.json").read_text())
+    settings.update(seed=1, origin={"command": "dv2s loop", "seed": 0, "round": 1})
+    (run / "settings.json").write_text(json.dumps(settings))
+    paths = write_reports(run)
+    said = "seed 1 (derived by dv2s loop from its seed 0, round 1)"
+    assert said in format_summary(json.loads(paths["json"].read_text()))
+    assert said in paths["markdown"].read_text()
+    page = paths["html"].read_text()
+    start = page.index('id="summary"')
+    assert said in page[start:page.index("</div>", start)]  # the banner
+    assert "<th>seed</th><td>1 (derived by dv2s loop from its seed 0, round 1)</td>" in page
+
+
+LONG_NAMES = {"A": "urban_t_junction_left_turn_oncoming", "B": "highway_simultaneous_merge_middle",
+              "mined_a_rear_end": "mined_urban_t_junction_left_turn_oncoming_collision_rear_end_3"}
+
+
+def test_the_page_s_tables_fit_a_1400_pixel_window(tmp_path):
+    """With the bank's longest scenario names and real cluster ids, no table is wider than the page's column
+    (a wider one would scroll inside its box, its scroll bar below a table of 60 clusters)."""
+    run = make_run(tmp_path / "run", clips=False)
+    for name in ("settings.json", "episodes.jsonl", "conversions.jsonl"):
+        text = (run / name).read_text()
+        for short, long in LONG_NAMES.items():
+            text = text.replace(f'"{short}"', f'"{long}"').replace(f'"{short}/', f'"{long}/')
+        (run / name).write_text(text)
+    page = write_reports(run)["html"]
+    assert LONG_NAMES["A"] + "/collision:rear_end/car-braking/ego-keeping_lane" in page.read_text()
+    widths = table_widths(page, window_width=1400)
+    assert len(widths) >= 6, widths
+    too_wide = [w for w in widths if w["table"] > w["box"] + 1 or w["box"] > w["window"]]
+    assert not too_wide, too_wide

@@ -137,3 +137,46 @@ def test_subsystems_import_one_way(source, forbidden):
     wrong = sorted(f"{m} imports {t}" for m, ts in graph.items() if m == source or m.startswith(source + ".")
                    for t in ts if any(t == f or t.startswith(f + ".") for f in forbidden))
     assert not wrong, "\n".join(wrong)
+
+
+_EXCEPTION_BASES = {"Exception", "ValueError", "RuntimeError", "OSError", "FileNotFoundError", "PermissionError",
+                    "AssertionError", "KeyError", "TypeError", "LookupError"}
+
+
+def error_classes() -> Dict[str, List[str]]:
+    """Every exception class defined in the four packages (parsed): ``module.Class`` -> the names of its bases."""
+    found: Dict[str, List[str]] = {}
+    for module, path in _modules().items():
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            if isinstance(node, ast.ClassDef):
+                bases = [b.id if isinstance(b, ast.Name) else b.attr if isinstance(b, ast.Attribute) else ""
+                         for b in node.bases]
+                found[f"{module}.{node.name}"] = bases
+    by_name: Dict[str, List[str]] = {}
+    for qualified, bases in found.items():
+        by_name.setdefault(qualified.rpartition(".")[2], []).extend(bases)
+
+    def is_exception(name: str, seen: frozenset = frozenset()) -> bool:
+        if name in _EXCEPTION_BASES:
+            return True
+        return name not in seen and any(is_exception(b, seen | {name}) for b in by_name.get(name, ()))
+
+    return {q: b for q, b in found.items() if any(is_exception(base) for base in b)}
+
+
+def test_every_project_error_derives_from_the_one_base():
+    """One base error (``scenario_bank.errors.DV2SError``) under every error the project raises, so the command
+    line catches it once. ``Interrupted`` is Ctrl-C (a KeyboardInterrupt), not an error; a private class is a
+    module's own control flow and never leaves it."""
+    classes = error_classes()
+    by_name = {q.rpartition(".")[2]: b for q, b in classes.items()}
+    assert "scenario_bank.errors.DV2SError" in classes and len(classes) > 40
+
+    def reaches_base(name: str, seen: frozenset = frozenset()) -> bool:
+        return name == "DV2SError" or (name not in seen and any(
+            reaches_base(b, seen | {name}) for b in by_name.get(name, ())))
+
+    stray = sorted(q for q, bases in classes.items()
+                   if not q.endswith(".DV2SError") and not q.rpartition(".")[2].startswith("_")
+                   and not any(reaches_base(b) for b in bases))
+    assert not stray, f"errors outside the one base class: {stray}"

@@ -21,7 +21,7 @@ import os
 from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 
-from dv2s_gym.mining.report_text import breadth, rate_text
+from dv2s_gym.mining.report_text import breadth, rate_text, seed_text
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, axis, escape, finite,
                                   fmt, fmt_interval, interval_mark, legend, row_label, svg, video_tag, x_scale)
 
@@ -43,7 +43,7 @@ border-left:4px solid #0b63c5;background:#f6f8fa;white-space:pre-wrap}
 pre{background:#f6f8fa;padding:8px;overflow:auto;max-height:420px;font-size:12px}
 .s-kept{color:#1a7f37;font-weight:600}.s-merged{color:#8250df;font-weight:600}.s-rejected{color:#cf222e;font-weight:600}
 svg .line{fill:none;stroke-width:2}.wide{overflow-x:auto;max-width:100%}
-code.id{white-space:nowrap}span.region{font-size:12px;display:inline-block;min-width:200px}
+span.region{font-size:12px;display:inline-block;min-width:110px}
 """
 
 
@@ -143,13 +143,24 @@ def _banner(report: Mapping[str, Any]) -> str:
     css = "NONE" if not episodes else "FAIL" if avoidable else "PASS"
     head = (f"{counts.get('failures', 0)} failure(s) in {episodes} episode(s): {counts.get('clusters', 0)} distinct "
             f"behaviour(s), {avoidable} avoidable")
-    detail = [breadth(counts),f"{counts.get('avoidable', 0)} avoidable, {counts.get('unavoidable', 0)} unavoidable, "
+    settings = report.get("settings") or {}
+    detail = [f"policy {settings.get('policy')}, sampler {settings.get('sampler')}, {seed_text(settings)}",
+              breadth(counts), f"{counts.get('avoidable', 0)} avoidable, {counts.get('unavoidable', 0)} unavoidable, "
               f"{counts.get('avoidability_unknown', 0)} unknown failure(s)",
               f"converted {counts.get('converted', 0)}: kept {counts.get('kept', 0)}, merged {counts.get('merged', 0)}, "
               f"rejected {counts.get('rejected', 0)}"]
     if counts.get("errors"):
         detail.append(f"{counts['errors']} error(s)")
     return f'<div class="banner {css}" id="summary">{escape(head)}<small>{escape("; ".join(detail))}</small></div>'
+
+
+def _breakable(value: Any) -> str:
+    """``value`` escaped, with a line-break opportunity after each ``/``, ``_`` and ``:``, so long identifiers
+    (cluster ids, scenario and entry names) wrap inside their column instead of widening the table."""
+    text = escape(value)
+    for mark in ("/", "_", ":"):
+        text = text.replace(mark, mark + "<wbr>")
+    return text
 
 
 def _table(head: Sequence[str], rows: Sequence[Sequence[Tuple[str, bool]]]) -> str:
@@ -165,7 +176,8 @@ def _settings_table(report: Mapping[str, Any]) -> str:
     settings = report.get("settings") or {}
     keys = [k for k in ("policy", "sampler", "seed", "budget", "scenarios", "bank_dir", "reference", "backend",
                         "workers", "convert") if k in settings]
-    rows = [(k, ", ".join(map(str, settings[k])) if isinstance(settings[k], list) else settings[k]) for k in keys]
+    rows = [(k, ", ".join(map(str, settings[k])) if isinstance(settings[k], list) else
+             seed_text(settings).removeprefix("seed ") if k == "seed" else settings[k]) for k in keys]
     rows += [("run folder", report.get("run_dir")), ("created", report.get("created")),
              ("dv2s version", report.get("dv2s_version"))]
     return "<table>" + "".join(f"<tr><th>{escape(k)}</th><td>{escape(v)}</td></tr>" for k, v in rows) + "</table>"
@@ -179,7 +191,9 @@ def _counts_table(report: Mapping[str, Any]) -> str:
     keys = ["episodes", "errors", "failures", "behaviours", "scenario_failure_types", "scenarios_failing", "collisions",
             "stalls", "avoidable", "unavoidable", "avoidability_unknown", "avoidable_clusters", "converted", "kept",
             "merged", "rejected"]
-    table = _table(head, [[(escape(c.get(k, 0)), True) for k in keys]])
+    half = len(head) // 2  # two tables of eight columns: one of sixteen is wider than the page
+    table = "".join(_table(head[part], [[(escape(c.get(k, 0)), True) for k in keys[part]]])
+                    for part in (slice(0, half), slice(half, None)))
     by_type = c.get("failures_by_type") or {}
     seconds = c.get("conversion_seconds") or {}
     notes = []
@@ -210,7 +224,7 @@ def _scenario_table(report: Mapping[str, Any]) -> str:
     rows = []
     for name, s in (report.get("scenarios") or {}).items():
         types = ", ".join(f"{t} {n}" for t, n in (s.get("failures_by_type") or {}).items())
-        rows.append([(escape(name), False), (escape(s.get("episodes")), True), (escape(s.get("failures")), True),
+        rows.append([(_breakable(name), False), (escape(s.get("episodes")), True), (escape(s.get("failures")), True),
                      (escape(fmt_interval(s.get("failure_rate"))), True),
                      (escape(_estimate(s.get("estimated_rate"))), True), (escape(s.get("avoidable")), True),
                      (escape(s.get("unavoidable")), True), (escape(types or "–"), False),
@@ -260,7 +274,7 @@ def _status(cluster: Mapping[str, Any]) -> str:
     status = str(cluster.get("status") or "")
     text = f'<span class="s-{escape(status)}">{escape(status)}</span>'
     if cluster.get("merged_into"):
-        text += f" into {escape(cluster['merged_into'])}"
+        text += f" into {_breakable(cluster['merged_into'])}"
     return text
 
 
@@ -272,12 +286,12 @@ def _cluster_table(clusters: Sequence[Mapping[str, Any]]) -> str:
         rep = c.get("representative") or {}
         link = f' <a href="#card-{escape(c["id"])}">video</a>' if c.get("conversion") else ""
         short = str(c.get("id") or "").split("/", 1)[-1]  # the scenario has its own column
-        rows.append([(f'<code class="id" title="{escape(c.get("id"))}">{escape(short)}</code>', False),
-                     (escape(c.get("scenario")), False),
+        rows.append([(f'<code class="id" title="{escape(c.get("id"))}">{_breakable(short)}</code>', False),
+                     (_breakable(c.get("scenario")), False),
                      (escape(c.get("type")), False), (escape(c.get("size")), True), (escape(c.get("avoidable")), True),
                      ('<span class="region">' + escape(_region(c.get("params") or {})) + "</span>", False),
                      (f"#{escape(rep.get('index'))} seed {escape(rep.get('seed'))}{link}", False),
-                     (_status(c), False), (escape(c.get("bank_entry") or "–"), False),
+                     (_status(c), False), (_breakable(c.get("bank_entry") or "–"), False),
                      (escape(_reproduction(c)), True), (escape(fmt(c.get("e2e_sc"), 3)), True)])
     return _table(["cluster (class/actor/ego)", "scenario", "type", "failures", "avoidable", "parameter region",
                    "representative",
@@ -363,7 +377,7 @@ def _rejected(report: Mapping[str, Any]) -> str:
         return '<p class="muted">None.</p>'
     by_stage = (report.get("counts") or {}).get("rejected_by_stage") or {}
     summary = "<p>By stage: " + ", ".join(f"{escape(s)} {escape(n)}" for s, n in by_stage.items()) + ".</p>"
-    rows = [[(f"<code>{escape(r.get('cluster'))}</code>", False), (escape(r.get("index")), True),
+    rows = [[(f"<code>{_breakable(r.get('cluster'))}</code>", False), (escape(r.get("index")), True),
              (escape(r.get("stage")), False), (escape(r.get("reason")), False)] for r in rejected]
     return summary + _table(["cluster", "episode", "stage", "reason"], rows)
 
@@ -378,9 +392,9 @@ def _failure_rows(failures: Sequence[Mapping[str, Any]], limit: int = 200) -> st
         ref_text = (f"{reference.get('policy', '?')}: "
                     + (str(ref_failure.get("type")) if isinstance(ref_failure, Mapping) else "no failure")
                     if reference else "–")
-        rows.append([(escape(f.get("index")), True), (escape(f.get("scenario")), False), (escape(f.get("seed")), True),
-                     (escape(f.get("type")), False), (escape(ref_text), False),
-                     (f"<code>{escape(f.get('cluster'))}</code>", False), (escape(f.get("trace") or "–"), False)])
+        rows.append([(escape(f.get("index")), True), (_breakable(f.get("scenario")), False),
+                     (escape(f.get("seed")), True), (escape(f.get("type")), False), (escape(ref_text), False),
+                     (f"<code>{_breakable(f.get('cluster'))}</code>", False), (_breakable(f.get("trace") or "–"), False)])
     more = (f'<p class="muted">{len(failures) - limit} more in report.json.</p>' if len(failures) > limit else "")
     return _table(["episode", "scenario", "seed", "failure", "reference driver", "cluster", "trace"], rows) + more
 

@@ -507,7 +507,9 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
             def do_mine() -> Dict[str, Any]:
                 options = {"sampler": sampler, "scenarios": start_names, "bank_dir": bank, "workers": workers,
                            "seed": seed * 1000 + number, "progress": progress, "env_config": env_config,
-                           "convert": True, "max_conversions": max_conversions, **dict(mine_options or {})}
+                           "convert": True, "max_conversions": max_conversions,
+                           "origin": {"command": "dv2s loop", "seed": seed, "round": number},
+                           **dict(mine_options or {})}
                 miner(current, out=str(round_dir / "mine"), budget=budget, **options)
                 if max_replays != 0 and (round_dir / "mine" / "settings.json").is_file():  # a miner's run folder
                     from dv2s_gym.mining.replays import replay_clusters

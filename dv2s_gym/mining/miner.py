@@ -11,7 +11,7 @@ The run is a folder (``out``)::
     conversions.jsonl one record per converted cluster
     report.json/.md/.html
 
-An adaptive sampler (cross-entropy, bandit) runs on the sliding-window schedule
+An adaptive sampler (cross-entropy, bandit, split, novelty-bandit) runs on the sliding-window schedule
 (``settings.json`` ``"schedule": "window"``, :mod:`dv2s_gym.mining.window`): ``batch`` scenes
 are drawn ahead, each outcome is fed back in index order as soon as every earlier one has
 been, and each outcome fed lets the sampler draw one more scene, which goes straight to a
@@ -35,6 +35,7 @@ outcomes in the schedule's order), and only the missing episodes run.
 from __future__ import annotations
 
 import fcntl
+import importlib.util
 import json
 import os
 import shutil
@@ -320,8 +321,9 @@ def _run_chunks(scene_sampler: SceneSampler, pool, space, settings: Dict[str, An
     at once (the same draws, without idle workers at the end of every chunk)."""
     done, sampler = recorder.done, settings["sampler"]
     mode = settings.get("feedback", "robustness")
-    seen = {cell_id(done[i]) for i in range(scene_sampler.fed)
-            if done[i].get("failure") and not done[i].get("error")}
+    seen: set = set()
+    for i in range(scene_sampler.fed):  # what the feedback had seen when the sampler was last fed
+        _feedback(done[i], seen, mode)
     lookahead = 1 if is_adaptive(sampler) else LOOKAHEAD_CHUNKS
     chunk = scene_sampler.fed // batch
     while chunk * batch < budget:
@@ -400,13 +402,16 @@ def _run_window(window: WindowSchedule, pool, space, settings: Dict[str, Any], o
     more()  # the checkpoint of the finished run
 
 
-FEEDBACKS = ("robustness", "novelty", "scenario-novelty")
+FEEDBACKS = ("robustness", "novelty", "scenario-novelty", "state-novelty")
 """What the adaptive samplers are fed: ``robustness`` (each episode's robustness) or ``novelty`` (the same,
 except that a failure in a parameter cell an earlier episode already failed in with the same failure class,
 :func:`~dv2s_gym.mining.cluster.cell_id`, is fed as an easy scene). Novelty is over where in parameter space
 the sampler has found failures, not over the behaviour clusters the reports count. ``scenario-novelty``: only
 the first failure of each scenario is fed as a failure, later ones as easy scenes (the sampler keeps looking in
-scenarios that have not failed yet)."""
+scenarios that have not failed yet). ``state-novelty`` (``novelty-bandit``'s default): a failure is fed as one
+only when its failure-state descriptor (:mod:`dv2s_gym.mining.failure_state`, continuous: speeds, geometry and
+timing at the failure) is farther than :data:`~dv2s_gym.mining.failure_state.NOVELTY_RADIUS` from every earlier
+failure's in the same scenario."""
 _REPEAT = 9.0  # what a repeated failure is fed under "novelty": the robustness of a scene without a near miss
 
 
@@ -416,6 +421,15 @@ def _feedback(record: Dict[str, Any], seen: set, mode: str) -> float:
     rho = record.get("rho")
     if rho is None or record.get("error"):
         return 1.0
+    if record.get("failure") and mode == "state-novelty":
+        from dv2s_gym.mining.failure_state import is_novel
+
+        state = record.get("failure_state")
+        scenario = str(record["scenario"])
+        archive = [entry[2:] for entry in seen if isinstance(entry, tuple) and entry[:2] == ("state", scenario)]
+        if state is not None:
+            seen.add(("state", scenario) + tuple(float(x) for x in state))
+        return float(rho) if is_novel(state, archive) else _REPEAT
     if record.get("failure"):
         cluster = cell_id(record) if mode != "scenario-novelty" else f"scenario:{record['scenario']}"
         repeat = cluster in seen
@@ -425,7 +439,7 @@ def _feedback(record: Dict[str, Any], seen: set, mode: str) -> float:
     return float(rho)
 
 
-def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cross-entropy",
+def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "novelty-bandit",
          scenarios: Optional[Sequence[str]] = None, bank_dir: Optional[str] = None, backend: str = "local",
          workers: Optional[int] = None, address: Optional[str] = None, seed: int = 0,
          reference: Optional[str] = "rule", batch: Optional[int] = None, timeout: Optional[float] = None,
@@ -433,7 +447,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
          ttc_threshold: float = DEFAULT_TTC_THRESHOLD, stall_seconds: float = DEFAULT_STALL_SECONDS,
          convert: bool = False, convert_options: Optional[Dict[str, Any]] = None,
          max_conversions: Optional[int] = None, reports: bool = True,
-         sampler_options: Optional[Dict[str, Any]] = None, feedback: Optional[str] = None) -> MineRun:
+         sampler_options: Optional[Dict[str, Any]] = None, feedback: Optional[str] = None,
+         origin: Optional[Mapping[str, Any]] = None) -> MineRun:
     """Mine ``policy``'s failures over ``budget`` episodes; resumable (same ``out``).
 
     Args:
@@ -441,7 +456,8 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
         out: the run folder (created; an existing run with the same settings is resumed
             and may be given a larger budget).
         budget: episodes to run in total.
-        sampler: one of :data:`~dv2s_gym.mining.samplers.SAMPLERS`.
+        sampler: one of :data:`~dv2s_gym.mining.samplers.SAMPLERS` (default ``novelty-bandit``: broader failures than
+            VerifAI's cross-entropy on the breadth bench, bench/RESULTS.md).
         sampler_options: VerifAI parameters of an adaptive sampler (``alpha``, ``buckets``,
             ``thres``; :func:`~dv2s_gym.mining.samplers.sampler_params`); ``None``: VerifAI's defaults.
         feedback: what the adaptive samplers learn from (:data:`FEEDBACKS`): ``"robustness"`` (every
@@ -463,8 +479,14 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
             (:mod:`dv2s_gym.mining.convert`; ``convert_options`` are passed on). ``bank_dir``
             must then be a writable bank; a new or empty folder starts as a copy of the shipped bank; at most ``max_conversions`` clusters, largest first.
         reports: write report.json, report.md and report.html at the end.
+        origin: what started this run, shown beside the seed in its reports: ``dv2s loop`` passes
+            ``{"command": "dv2s loop", "seed": S, "round": R}`` because it mines each round with a seed
+            derived from its own. Not a setting: a resumed run may be given another.
     """
     started = time.perf_counter()
+    if importlib.util.find_spec("verifai") is None:  # the core install has no mining extra
+        raise MiningError("failure mining needs VerifAI's samplers, which the core install leaves out: "
+                          "pip install 'dv2s-gym[mining]'")
     if int(budget) < 1:
         raise MiningError(f"--budget must be at least 1 episode, not {budget}")
     if sampler not in SAMPLERS:
@@ -497,7 +519,7 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "cr
                         reference=reference, batch=batch, timeout=timeout, progress=progress, env_config=env_config,
                         ttc_threshold=ttc_threshold, stall_seconds=stall_seconds, convert=convert,
                         convert_options=convert_options, max_conversions=max_conversions, reports=reports,
-                        sampler_options=sampler_options, feedback=feedback)
+                        sampler_options=sampler_options, feedback=feedback, origin=origin)
     except BaseException:
         if created:
             _remove_if_empty(out)  # bad input found late (an unknown scenario) leaves no empty run folder behind
@@ -525,7 +547,7 @@ def _mine_in(out: Path, started: float, *, policy: str, budget: int, sampler: st
              timeout: Optional[float], progress: bool, env_config: Optional[Dict[str, Any]], ttc_threshold: float,
              stall_seconds: float, convert: bool, convert_options: Optional[Dict[str, Any]],
              max_conversions: Optional[int], reports: bool, sampler_options: Optional[Dict[str, Any]],
-             feedback: str) -> MineRun:
+             feedback: str, origin: Optional[Mapping[str, Any]] = None) -> MineRun:
     """The body of :func:`mine` once the input is checked and the run folder exists."""
     from dv2s_gym.mining.space import SceneSpace
     from dv2s_gym.workers.errors import WorkerError
@@ -550,6 +572,8 @@ def _mine_in(out: Path, started: float, *, policy: str, budget: int, sampler: st
         if saved is not None:
             _check_resume(saved, settings, out)
         settings["schedule"] = _schedule(saved, sampler, out)
+        if origin:
+            settings["origin"] = dict(origin)
         atomic_write_json(settings_path, settings)
         done = {int(r["index"]): r for r in read_records(out / "episodes.jsonl")}
         window, scene_sampler = None, None
@@ -617,6 +641,8 @@ def _complete(result: Dict[str, Any], task: Dict[str, Any], spec, sampler: str, 
     record.update({k: v for k, v in result.items() if k in record and k not in ("index", "params")})
     if result.get("behaviour") is not None:
         record["behaviour"] = result["behaviour"]
+    if result.get("failure_state") is not None:
+        record["failure_state"] = result["failure_state"]
     record.pop("role", None)
     if result.get("worker_restarts"):  # a worker crashed or hung on this episode, then a new one finished it
         record["worker_restarts"] = list(result["worker_restarts"])

@@ -13,7 +13,8 @@ run, with every mined scenario equally likely, ``(1 / S) / (scenario * params)``
 episode): unbiased also when the proposal adapts to earlier outcomes, as long as it gives every region
 some chance. Its 95 % interval is Wilson's at the estimate's effective sample size
 ``p (1 - p) / Var(estimate)`` (for equal weights: the number of episodes, and the usual Wilson interval);
-without a failure, at Kish's effective sample size of the weights. A per-scenario estimate averages
+without a failure, at Kish's effective sample size of the weights; when heavy weights push the estimate to 1
+or past it, the normal interval of the estimate cut at 1, with Kish's effective sample size. A per-scenario estimate averages
 ``y / params`` over the scenario's episodes.
 
 An adaptive sampler that collapses (VerifAI's cross-entropy sampler moves almost all probability to the
@@ -57,11 +58,17 @@ def weighted_rate(outcomes: Sequence[float], weights: Sequence[float], confidenc
     value = sum(terms) / n
     variance = sum((t - value) ** 2 for t in terms) / n / n  # of the estimate
     shown = min(1.0, value)
-    if failures and variance > 0.0:
-        ess = shown * (1.0 - shown) / variance if shown < 1.0 else float(n)
-    else:
-        total, squares = sum(weights), sum(float(w) ** 2 for w in weights)
-        ess = total * total / squares if squares > 0 else 0.0
+    total, squares = sum(weights), sum(float(w) ** 2 for w in weights)
+    kish = total * total / squares if squares > 0 else 0.0
+    if failures and variance > 0.0 and shown >= 1.0:
+        # heavy weights pushed the estimate to 1 or past it: p (1 - p) says nothing there, so the interval is the
+        # normal one of the estimate itself (cut at 1) and the effective sample size Kish's
+        from statistics import NormalDist
+
+        z = NormalDist().inv_cdf(0.5 + confidence / 2)
+        return {"value": shown, "raw": value, "low": max(0.0, value - z * math.sqrt(variance)), "high": 1.0,
+                "ess": kish, "n": n, "failures": failures}
+    ess = shown * (1.0 - shown) / variance if failures and variance > 0.0 else kish
     low, high = _wilson(shown, ess, confidence)
     return {"value": shown, "raw": value, "low": low, "high": high, "ess": ess, "n": n, "failures": failures}
 

@@ -89,7 +89,7 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 from dv2s_gym.mining.behaviour import behaviour_of
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.rate import rate_estimates
-from dv2s_gym.mining.report_text import breadth, rate_text
+from dv2s_gym.mining.report_text import breadth, rate_text, seed_text
 from dv2s_gym.mining.report_text import number_text as _num
 from dv2s_gym.mining.report_text import percent_text as _pct
 from dv2s_gym.regress.stats import wilson_interval
@@ -579,7 +579,7 @@ def _cell(value: Any) -> str:
 def headline(report: Mapping[str, Any]) -> str:
     """One line: what was mined and what came of it."""
     counts, settings = report["counts"], report["settings"]
-    return (f"policy `{settings.get('policy')}`, sampler {settings.get('sampler')}, seed {settings.get('seed')}: "
+    return (f"policy `{settings.get('policy')}`, sampler {settings.get('sampler')}, {seed_text(settings)}: "
             f"{counts['failures']} failure(s) in {counts['episodes']} episode(s) "
             f"({counts['avoidable']} avoidable, {counts['unavoidable']} unavoidable, "
             f"{counts['avoidability_unknown']} unknown), {counts['clusters']} distinct behaviour(s) "

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping, Optional
 
-__all__ = ["breadth", "rate_text", "number_text", "percent_text"]
+__all__ = ["breadth", "rate_text", "number_text", "percent_text", "seed_text"]
 
 
 def number_text(value: Any, digits: int = 1) -> str:
@@ -20,6 +20,24 @@ def percent_text(entry: Optional[Mapping[str, Any]]) -> str:
     if not entry or entry.get("value") is None:
         return "-"
     return f"{100 * entry['value']:.1f}% [{100 * entry['low']:.1f}, {100 * entry['high']:.1f}]"
+
+
+def seed_text(settings: Mapping[str, Any]) -> str:
+    """The run's seed, and where it came from when another command derived it (``settings["origin"]``).
+
+    ``dv2s loop`` mines round ``R`` of a loop with seed ``S`` with the seed ``1000 * S + R``; the report names
+    the loop's own seed and round beside it, so a loop run with seed 0 is not read as one with seed 1.
+    """
+    text = f"seed {settings.get('seed')}"
+    origin = settings.get("origin")
+    if isinstance(origin, Mapping) and origin:
+        parts = [str(origin.get("command") or "another command")]
+        if origin.get("seed") is not None:
+            parts.append(f"seed {origin['seed']}")
+        if origin.get("round") is not None:
+            parts.append(f"round {origin['round']}")
+        text += f" (derived by {parts[0]}" + (f" from its {', '.join(parts[1:])}" if parts[1:] else "") + ")"
+    return text
 
 
 def breadth(counts: Mapping[str, Any]) -> str:

@@ -23,6 +23,13 @@ Samplers (``name``: VerifAI's):
   already failed. It finds the most of those grid cells of these samplers (``python -m bench.bench_mine --part
   samplers``); on the behaviour clusters the reports count it beats random sampling only for policies that fail
   rarely (``--part breadth``, bench/RESULTS.md).
+- ``novelty-bandit``: not one of VerifAI's (:class:`~dv2s_gym.mining.novelty_sampler.NoveltyBanditSampler`):
+  the scenario with the highest estimated rate of *new* failures (a failure whose continuous failure-state
+  descriptor, :mod:`~dv2s_gym.mining.failure_state`, is far from every earlier one's in the scenario; its
+  ``state-novelty`` feedback), mixed with uniform draws (``explore``, default 0.2, so no scenario's chance falls
+  below ``explore / S``), parameters uniform; every draw's density is known, so the failure-rate estimate
+  (:mod:`dv2s_gym.mining.rate`) holds. It is fed neither behaviour clusters nor (scenario, failure type) pairs,
+  the breadth it is scored on (``python -m bench.bench_mine --part breadth``).
 
 The adaptive samplers (``cross-entropy``, ``bandit``) take VerifAI's parameters as
 ``options`` (:data:`SAMPLER_OPTIONS`): ``alpha`` (how much one failure moves the
@@ -51,7 +58,8 @@ import numpy as np
 
 from dv2s_gym.mining.errors import MiningError
 
-__all__ = ["proposal_density", "scene_proposal", "SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "SceneSampler", "default_feedback", "make_sampler", "sampler_params", "is_adaptive"]
+__all__ = ["proposal_density", "scene_proposal", "SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "NOVELTY",
+           "SceneSampler", "default_feedback", "make_sampler", "sampler_params", "is_adaptive"]
 
 
 def _factories() -> Dict[str, Callable]:
@@ -69,18 +77,23 @@ SPLIT = "split"
 """The sampler split into a scenario chooser and one parameter sampler per scenario
 (:mod:`dv2s_gym.mining.split_sampler`)."""
 
-SAMPLERS = ("random", "halton", "cross-entropy", "bandit", SPLIT)
+NOVELTY = "novelty-bandit"
+"""The sampler that spreads the budget over scenarios by their rate of new failures
+(:mod:`dv2s_gym.mining.novelty_sampler`)."""
+
+SAMPLERS = ("random", "halton", "cross-entropy", "bandit", SPLIT, NOVELTY)
 """Names :func:`make_sampler` accepts."""
 
 SAMPLER_OPTIONS = {"cross-entropy": ("alpha", "buckets", "thres"), "bandit": ("alpha", "buckets", "thres"),
-                   SPLIT: ("alpha", "buckets", "thres", "chooser", "params", "warmup", "forget", "patience", "floor", "capacity", "avoid")}
+                   SPLIT: ("alpha", "buckets", "thres", "chooser", "params", "warmup", "forget", "patience", "floor", "capacity", "avoid"),
+                   NOVELTY: ("explore", "prior_new", "prior_old")}
 """The options each sampler takes (the others take none)."""
 
 SPLIT_DEFAULTS: Dict[str, Any] = {"chooser": "cross-entropy", "params": "halton", "alpha": 0.9, "thres": 0.0,
                                   "buckets": 3, "warmup": 0, "forget": 0.0, "patience": 0, "floor": 0.5, "capacity": 0.0, "avoid": 81}
 """The settings of :data:`SPLIT` when no option is given."""
 
-DEFAULT_FEEDBACK = {SPLIT: "novelty"}
+DEFAULT_FEEDBACK = {SPLIT: "novelty", NOVELTY: "state-novelty"}
 """What a sampler learns from when the run does not say (``mine(feedback=None)``); ``robustness`` otherwise."""
 
 _VERIFAI_KIND = {"cross-entropy": "ce", "bandit": "mab"}
@@ -93,8 +106,8 @@ def default_feedback(name: str) -> str:
 
 def is_adaptive(name: str) -> bool:
     """True for samplers whose next draws depend on the outcomes fed back (``cross-entropy``, ``bandit``,
-    ``split``)."""
-    return name in _VERIFAI_KIND or name == SPLIT
+    ``split``, ``novelty-bandit``)."""
+    return name in _VERIFAI_KIND or name in (SPLIT, NOVELTY)
 
 
 def sampler_params(name: str, options: Optional[Dict[str, Any]] = None):
@@ -110,6 +123,8 @@ def sampler_params(name: str, options: Optional[Dict[str, Any]] = None):
         raise MiningError(f"sampler {name!r} has no option {', '.join(map(repr, unknown))}; {takes}")
     if name == SPLIT:
         return _split_params(options)
+    if name == NOVELTY:
+        return _novelty_params(options)
     if name not in _VERIFAI_KIND:
         return None
     from verifai.samplers.feature_sampler import default_sampler_params
@@ -158,6 +173,23 @@ def _split_params(options: Dict[str, Any]) -> Dict[str, Any]:
     params["alpha"], params["thres"], params["buckets"] = (float(params["alpha"]), float(params["thres"]),
                                                            int(params["buckets"]))
     params["forget"], params["floor"], params["capacity"] = forget, floor, capacity
+    return params
+
+
+def _novelty_params(options: Dict[str, Any]) -> Dict[str, float]:
+    from dv2s_gym.mining.novelty_sampler import NOVELTY_DEFAULTS
+
+    params = {**NOVELTY_DEFAULTS, **options}
+    try:
+        params = {key: float(value) for key, value in params.items()}
+    except (TypeError, ValueError):
+        raise MiningError(f"sampler options of {NOVELTY} are numbers; got {options!r}") from None
+    if not 0.0 < params["explore"] <= 1.0:
+        raise MiningError(f"sampler option explore must be in (0, 1] (the uniform share; 0 would leave scenarios "
+                          f"undrawn and the failure-rate estimate without weights), not {options.get('explore')!r}")
+    for key in ("prior_new", "prior_old"):
+        if not params[key] > 0.0:
+            raise MiningError(f"sampler option {key} must be > 0 (a Beta prior), not {options.get(key)!r}")
     return params
 
 
@@ -273,7 +305,8 @@ def proposal_density(name: str, sampler: Any, point: Any) -> Optional[Dict[str, 
     distribution and each coordinate from its bucket distribution (density ``dist[bucket] * buckets``);
     ``split`` with the cross-entropy chooser and no cell avoidance (``avoid=0``) draws the scenario from the
     chooser's distribution and the parameters from its own sampler (uniform for ``halton``/``random``,
-    bucketed for ``cross-entropy``). ``None`` when there is no density to tell: ``bandit`` and the ``ucb``
+    bucketed for ``cross-entropy``); ``novelty-bandit`` draws the scenario from its mixture of uniform and the
+    best-scoring scenarios and the parameters uniformly. ``None`` when there is no density to tell: ``bandit`` and the ``ucb``
     chooser pick deterministically, cell avoidance never draws some cells, a warm-up round follows a fixed order.
     """
     scenario = int(round(float(_first(point.scenario))))
@@ -288,6 +321,12 @@ def proposal_density(name: str, sampler: Any, point: Any) -> Optional[Dict[str, 
             return None
         return {"scenario": float(disc.dist[0][scenario]), "coords": _bucket_densities(cont, u),
                 "floor": float(min(disc.dist[0])) * len(disc.dist[0]), "floors": _floors(cont, len(u))}
+    if name == NOVELTY:
+        row = list(getattr(sampler, "last_probabilities", None) or [])
+        if not row or scenario >= len(row):
+            return None
+        return {"scenario": float(row[scenario]), "coords": [1.0] * len(u), "floor": float(min(row)) * len(row),
+                "floors": [1.0] * len(u)}
     if name == SPLIT:
         if (getattr(sampler, "chooser_kind", None) != "cross-entropy" or getattr(sampler, "avoid", 0)
                 or sampler.drawn <= len(sampler.warmup_order)):
@@ -353,7 +392,7 @@ def make_sampler(name: str, space: Any, seed: int, options: Optional[Dict[str, A
     parameters of the adaptive samplers (see the module docstring).
     """
     factories = _factories()
-    if name not in factories and name != SPLIT:
+    if name not in factories and name not in (SPLIT, NOVELTY):
         raise MiningError(f"unknown sampler {name!r}: use one of {', '.join(SAMPLERS)}")
     params = sampler_params(name, options)
     feature_space = getattr(space, "feature_space", space)
@@ -363,6 +402,8 @@ def make_sampler(name: str, space: Any, seed: int, options: Optional[Dict[str, A
     try:  # some samplers draw while they are built
         if name == SPLIT:
             inner = _make_split(space, feature_space, params)
+        elif name == NOVELTY:
+            inner = _make_novelty(space, feature_space, params)
         elif params is None:
             inner = factories[name](feature_space)
         else:
@@ -387,3 +428,17 @@ def _make_split(space: Any, feature_space: Any, params: Dict[str, Any]):
                                 warmup=params["warmup"], forget=params["forget"], patience=params["patience"],
                                 floor=params["floor"], capacity=params["capacity"],
                                 avoid=params["avoid"])
+
+
+def _make_novelty(space: Any, feature_space: Any, params: Dict[str, float]):
+    from dv2s_gym.mining.novelty_sampler import NoveltyBanditSampler
+
+    if hasattr(space, "scenarios"):
+        from dv2s_gym.mining.split_sampler import scenario_dimensions
+
+        dimensions = scenario_dimensions(space)
+    else:
+        width = len(feature_space.featureNamed["u"].domain.intervals)
+        count = feature_space.featureNamed["scenario"].domain.intervals[0][1] + 1
+        dimensions = [width] * int(count)
+    return NoveltyBanditSampler(feature_space, dimensions, **params)

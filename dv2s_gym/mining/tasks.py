@@ -26,6 +26,7 @@ import traceback
 from typing import Any, Dict, Mapping, Optional
 
 from dv2s_gym.mining.behaviour import extract_behaviour
+from dv2s_gym.mining.failure_state import failure_state
 from dv2s_gym.mining.monitors import FAILURE_TYPES, detect_failure, robustness
 from dv2s_gym.workers.tasks import register
 
@@ -84,6 +85,7 @@ def run_mine_task(task: Dict[str, Any]) -> Dict[str, Any]:
         record["rho"] = robustness(result, failure, monitor["ttc_threshold"])
         if failure is not None:
             record["behaviour"] = extract_behaviour(trace, record["failure"])
+            record["failure_state"] = failure_state(trace, record["failure"])
             if task.get("trace_dir"):
                 path = os.path.join(task["trace_dir"], trace_name(int(task["index"])))
                 trace.save(path)

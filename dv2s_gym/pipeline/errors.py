@@ -35,7 +35,7 @@ __all__ = [
 ]
 
 
-class PipelineError(Exception):
+class PipelineError(DV2SError):
     """Base class of the pipeline's errors."""
 
 
@@ -80,6 +80,6 @@ class GenerationFailedError(PipelineError):
         self.result = result
 
 
-class GenerationError(PipelineError, DV2SError, ValueError):
+class GenerationError(PipelineError, ValueError):
     """The rules SG cannot place the ego or the main event of a description (the message names the phrase
     and what to write instead)."""

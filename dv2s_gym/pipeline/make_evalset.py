@@ -36,6 +36,11 @@ __all__ = ["CLIP_SECONDS", "build_evalset", "story_problem", "main"]
 CLIP_SECONDS: Dict[str, float] = {
     # The on-ramp car reaches the end of its acceleration lane 10-14 s in.
     "highway_onramp_insertion": 16.0,
+    # A careful ego waits behind the standing car, which drives off only when the ego comes near and
+    # stops again 10-12 s in.
+    "urban_lead_vehicle_accelerates_then_stops": 16.0,
+    # A careful ego follows the turning car 60-80 m to the junction, slowing behind it.
+    "urban_lead_vehicle_turns": 16.0,
 }
 """Clip lengths that differ from the default (the scripted event happens later)."""
 

@@ -36,7 +36,7 @@ the rule-based scenario generator builds its scenario frame from.
 
 Precision is preferred over recall: what is not said is not emitted.
 
-Descriptions written by others (issue 10) add:
+Descriptions written by others (crash reports, test protocols, engineers' notes) add:
 
 * actors: buses, motorcycles (motorcyclist, moped), bicycles (cyclist, scooter), brand and model names
   (a Ford F-150 is a car), "adversarial agent", numbered crash-report vehicles (V2, V3 are distinct

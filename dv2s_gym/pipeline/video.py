@@ -19,6 +19,8 @@ from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from scenario_bank.errors import DV2SError
+
 __all__ = ["VideoClip", "VideoError", "read_video", "frames_to_data_urls", "VIDEO_EXTENSIONS"]
 
 VIDEO_EXTENSIONS = (".mp4", ".m4v", ".mov", ".webm", ".mkv", ".avi", ".gif")
@@ -44,7 +46,7 @@ _COMMON_CODECS = {"VP8", "VP80", "VP9", "VP90", "MJPG", "MP4V", "FMP4", "XVID", 
 """Codecs OpenCV's FFmpeg backend decodes: a file naming one of these but giving no frame is empty or truncated."""
 
 
-class VideoError(ValueError):
+class VideoError(DV2SError, ValueError):
     """A video file that cannot be read; the message names the file, the problem and the fix."""
 
 
@@ -278,6 +280,9 @@ def _fourcc(cap) -> str:
 
 
 def _open(path: Path):
+    # FFmpeg's own log lines ("moov atom not found") would precede our one-line error; OpenCV reads this
+    # variable when its FFmpeg backend first starts, and the user's own setting wins
+    os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
     import cv2
 
     previous = cv2.utils.logging.getLogLevel()

@@ -13,13 +13,15 @@ import os
 from pathlib import Path
 from typing import Any, Dict, Iterator, List, Mapping, Optional, Union
 
+from scenario_bank.errors import DV2SError
+
 __all__ = ["RegressionReport", "RegressionFailed"]
 
 SHOWN_EPISODES = 8
 """Newly failing episode ids named in a failure message; the rest are counted."""
 
 
-class RegressionFailed(AssertionError):
+class RegressionFailed(DV2SError, AssertionError):
     """A regression verdict that the caller did not accept (FAIL, or INCONCLUSIVE when not allowed)."""
 
 

@@ -15,6 +15,8 @@ from scenic.core.vectors import Vector
 from scenic.domains.driving import actions as _driving_actions
 from scenic.domains.driving.actions import WalkingAction
 
+from scenario_bank.errors import DV2SError
+
 __all__ = [
     "resolve_map_parameter",
     "remove_backward_seams",
@@ -25,7 +27,7 @@ __all__ = [
 ]
 
 
-class MissingMapError(ValueError):
+class MissingMapError(DV2SError, ValueError):
     """The scenario names no map."""
 
 

@@ -25,6 +25,8 @@ import scenic.syntax.veneer as veneer
 from scenic.core.distributions import RejectionException
 from scenic.core.dynamics import RejectSimulationException
 
+from scenario_bank.errors import DV2SError
+
 
 __all__ = ["StepOutcome", "ExternalStepper", "release_veneer", "StepOvertime", "step_watchdog"]
 
@@ -157,8 +159,10 @@ class ExternalStepper:
         self.done = True
 
 
-class StepOvertime(Exception):
+class StepOvertime(DV2SError):
     """Raised inside a simulation step that ran past :func:`step_watchdog`'s limit."""
+
+    expected = False
 
     def __init__(self, seconds: float) -> None:
         super().__init__(f"one simulation step used over {seconds:g} s of CPU time")

@@ -81,6 +81,16 @@ def _python_roots() -> List[str]:
     return sorted(r for r in roots if not (r == "/usr" or r.startswith("/usr/")))
 
 
+def hidden_by_scratch() -> Optional[str]:
+    """The first folder the jail needs (the interpreter's, the code's) that lies under the jail's own
+    :data:`SCRATCH` or ``/dev/shm``, which the jail mounts empty; ``None`` when there is none."""
+    for folder in [*_python_roots(), str(CODE_ROOT)]:
+        for covered in (SCRATCH, "/dev/shm"):
+            if folder == covered or folder.startswith(covered.rstrip("/") + "/"):
+                return folder
+    return None
+
+
 def _mounts() -> List[str]:
     args: List[str] = ["--ro-bind", "/usr", "/usr"]
     for link in ("bin", "sbin", "lib", "lib32", "lib64", "libx32"):

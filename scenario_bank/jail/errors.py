@@ -4,11 +4,15 @@ from __future__ import annotations
 
 from typing import Optional
 
+from scenario_bank.errors import DV2SError
+
 __all__ = ["JailError", "JailUnavailableError", "JailLimitError", "JailCrashError", "JailProtocolError"]
 
 
-class JailError(RuntimeError):
+class JailError(DV2SError, RuntimeError):
     """Something went wrong with a jailed worker; ``output`` holds the tail of what it printed."""
+
+    expected = False
 
     def __init__(self, message: str, output: str = "") -> None:
         if output:
@@ -20,9 +24,13 @@ class JailError(RuntimeError):
 class JailUnavailableError(JailError):
     """The jail cannot be created on this machine (no bubblewrap, no user namespaces, no seccomp)."""
 
+    expected = True
+
 
 class JailLimitError(JailError):
     """A jailed worker hit a limit: ``limit`` is ``"cpu"``, ``"memory"``, ``"wall"``, ``"output"`` or ``"file"``."""
+
+    expected = True  # a script that hits a limit is an outcome its message explains
 
     def __init__(self, message: str, limit: str, stage: Optional[str] = None, output: str = "") -> None:
         super().__init__(message, output)

@@ -49,6 +49,11 @@ def _probe() -> Tuple[bool, str]:
         return False, f"the jail needs Linux namespaces; this is {sys.platform}"
     if bwrap.bwrap_path() is None:
         return False, "bubblewrap (bwrap) is not installed"
+    hidden = bwrap.hidden_by_scratch()
+    if hidden:
+        return False, (f"{hidden} is under {bwrap.SCRATCH}, which the jail replaces with an empty folder of its own. "
+                       f"To fix: put dv2s-gym and its virtual environment outside {bwrap.SCRATCH} (e.g. in your "
+                       "home folder or /var/tmp)")
     try:
         seccomp.filter_bytes()
     except Exception as error:  # ImportError, missing libseccomp, ...
@@ -73,8 +78,9 @@ def require_jail(what: str = "this script") -> None:
     """Raise :class:`JailUnavailableError` (naming the fix) unless jailed workers can start."""
     ok, why = jail_status()
     if not ok:
+        fix = "" if "To fix:" in why else f". To fix: {FIX}"
         raise JailUnavailableError(f"{what} is untrusted Scenic and runs only in the jail, which is not "
-                                   f"available here: {why}. To fix: {FIX}.")
+                                   f"available here: {why}{fix}.")
 
 
 def _printable_strings(value: Any, depth: int = 0) -> Any:

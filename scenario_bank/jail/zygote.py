@@ -44,6 +44,7 @@ from scenario_bank.jail.zygote_server import (
     pack_request,
     unpack_reply,
 )
+from scenario_bank.errors import DV2SError
 
 __all__ = ["ZygoteError", "Zygote", "ForkedWorker", "enabled", "fork_worker", "stop_zygotes", "zygote_status"]
 
@@ -57,8 +58,10 @@ _OUTPUT_BYTES = 16 * 1024
 T = TypeVar("T")
 
 
-class ZygoteError(RuntimeError):
+class ZygoteError(DV2SError, RuntimeError):
     """A zygote could not start, or could not fork a worker; ``broken``: it is unusable and was stopped."""
+
+    expected = False
 
     def __init__(self, message: str, broken: bool = True) -> None:
         super().__init__(message)

@@ -17,6 +17,8 @@ import os
 from pathlib import Path
 from typing import List, Union
 
+from scenario_bank.errors import DV2SError
+
 __all__ = ["MAPS_DIR", "MAP_SUFFIX", "UnknownMapError", "list_maps", "resolve_map"]
 
 MAPS_DIR: Path = Path(__file__).resolve().parent
@@ -26,7 +28,7 @@ MAP_SUFFIX = ".xodr"
 """File suffix of OpenDRIVE maps."""
 
 
-class UnknownMapError(ValueError):
+class UnknownMapError(DV2SError, ValueError):
     """A map name that is neither a shipped map nor a path to an ``.xodr`` file."""
 
 

@@ -8,6 +8,8 @@ from typing import Any, Dict, List, Sequence, Tuple
 
 import numpy as np
 
+from scenario_bank.errors import DV2SError
+
 
 BEV_READ_OPTIONS = {"fps": 5.0, "max_frames": 100, "max_pixels": 448 * 448}
 """:func:`~dv2s_gym.pipeline.video.read_video` arguments that suit this backend."""
@@ -16,7 +18,7 @@ BEV_READ_OPTIONS = {"fps": 5.0, "max_frames": 100, "max_pixels": 448 * 448}
 MIN_RESAMPLE_FPS = 4.0
 
 
-class NotBirdsEyeError(ValueError):
+class NotBirdsEyeError(DV2SError, ValueError):
     """The video is not a bird's-eye render in highway-env's style."""
 
 

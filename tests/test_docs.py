@@ -1,0 +1,84 @@
+"""The documentation: `mkdocs build --strict` builds the site with its API pages, and nothing a user reads
+speaks of the project's internal history."""
+
+from __future__ import annotations
+
+import html
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+API_PAGES = {  # page -> objects its docstrings must document
+    "api/envs": ["envs.dv2s_env.DV2SEnv", "envs.dv2s_env.DV2SEnv.default_config"],
+    "api/bank": ["scenario_bank.bank.Bank", "scenario_bank.bank.Bank.add", "scenario_bank.list_scenarios"],
+    "api/policies": ["policies.registry.load_policy", "policies.registry.register_policy"],
+    "api/regress": ["dv2s_gym.regress.runner.run_regression"],
+    "api/mining": ["dv2s_gym.mining.miner.mine", "dv2s_gym.mining.loop.run_loop"],
+}
+# Internal history a user cannot follow: issue numbers, work sessions, numbered work periods, met targets.
+HISTORY = re.compile(r"\bissue\s*#?\s*\d+|\bissues?\s+#\d+|#\d{1,3}\b(?![\w-])|\bbefore issue\b|\bnext issues?\b|"
+                     r"\bwork (?:session|period)s?\b|\bperiod \d+\b|\bthe (?:issue's )?target is met\b|"
+                     r"\bthe earlier driver\b", re.IGNORECASE)
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("site")
+    env = {**os.environ, "NO_MKDOCS_2_WARNING": "1", "PYTHONPATH": str(ROOT)}
+    done = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(out)],
+                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, f"mkdocs build --strict failed:\n{done.stdout[-3000:]}\n{done.stderr[-5000:]}"
+    return out
+
+
+@pytest.mark.slow  # the site takes 20-40 s to build
+@pytest.mark.parametrize("page", sorted(API_PAGES))
+def test_api_pages_document_the_public_api(site, page):
+    text = (site / page / "index.html").read_text(encoding="utf-8")
+    for name in API_PAGES[page]:
+        assert f'id="{name}"' in text, f"{page} does not document {name}"
+    assert "Args:" not in text  # Google-style sections were parsed, not shown as text
+
+
+@pytest.mark.slow
+def test_the_site_fetches_nothing_from_the_network(site):
+    for page in site.rglob("*.html"):
+        text = page.read_text(encoding="utf-8")
+        assert "fonts.googleapis.com" not in text and "fonts.gstatic.com" not in text, page
+
+
+def _user_pages():
+    yield ROOT / "README.md"
+    yield from sorted((ROOT / "docs").rglob("*.md"))
+
+
+@pytest.mark.parametrize("page", list(_user_pages()), ids=lambda p: str(p.relative_to(ROOT)))
+def test_no_page_speaks_of_internal_history(page):
+    text = page.read_text(encoding="utf-8")
+    found = [m.group(0) for m in HISTORY.finditer(text)]
+    assert not found, f"{page.relative_to(ROOT)} mentions {found}"
+
+
+@pytest.mark.slow
+def test_no_built_page_speaks_of_internal_history(site):
+    for page in site.rglob("*.html"):
+        text = html.unescape(re.sub(r"<[^>]+>", " ", page.read_text(encoding="utf-8")))
+        found = [m.group(0) for m in HISTORY.finditer(text)]
+        assert not found, f"{page.relative_to(site)} mentions {found}"
+
+
+def test_the_readme_opens_with_the_two_commands_and_its_pictures_exist():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"```(\w*)\n(.*?)```", readme, re.DOTALL)
+    assert [b[1].strip() for b in blocks[:2]] == ["./scripts/setup.sh && .venv/bin/dv2s loop",
+                                                  ".venv/bin/python -m pytest -q -n 2"]
+    pictures = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", readme)
+    assert pictures and readme.index(pictures[0]) < readme.index("./scripts/setup.sh")
+    for picture in pictures:
+        assert (ROOT / picture).is_file(), picture
+    assert sum((ROOT / p).stat().st_size for p in pictures) < 1_000_000
