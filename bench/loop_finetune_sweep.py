@@ -7,8 +7,9 @@
     python -m bench.loop_finetune_sweep --loop out/loop-seed0 --name dagger_w3 --method dagger --steps 40000 \
         --lr 1e-3 --epochs 8 --slower-weight 3 --regress
 
-Reuses the round-1 mining run, working bank and by-cluster split of ``--loop`` (so settings are
-compared on the same held-out episodes), evaluates the starting policy on the held-out scenarios
+Reuses the round-1 mining run, working bank and split of ``--loop`` (so settings are
+compared on the same held-out episodes; a by-family split also keeps every member of a held-out family, its
+parent scenario included, out of the fine-tuning, as the loop does), evaluates the starting policy on the held-out scenarios
 once (cached in ``OUT/before.jsonl``), fine-tunes exactly as the loop does
 (``--method ppo``: :func:`policies.training.fine_tune`; ``--method dagger``:
 :func:`policies.imitation.dagger_fine_tune`; the loop's weights from
@@ -17,7 +18,9 @@ evaluates the fine-tuned policy on the same episodes (paired, the policy's own e
 with ``--regress``, regression-tests it against the starting policy on the starting bank
 (``--regress-episodes`` seeds per scenario from 10000). Prints one JSON line and appends it to
 ``OUT/results.jsonl``. This is how the loop's fine-tuning settings were chosen on seed 0
-(bench/RESULTS.md); a choice is confirmed only by a fresh ``dv2s loop`` on another seed.
+(bench/RESULTS.md); a choice is confirmed only by a fresh ``dv2s loop`` on another seed. When the loop's
+round ran a control arm, the result also pairs the new fine-tune with the control's held-out episodes
+(``vs_control``: the table and exact McNemar p), the loop's own fine-tuned arm beside it.
 """
 
 from __future__ import annotations
@@ -67,10 +70,17 @@ def main() -> None:
     episodes = [(name, EVAL_SEED_BASE + i) for name in held for i in range(settings["k_eval"])]
     base = Path(args.out)
     began = time.perf_counter()
-    before = evaluate_heldout("before", policy, episodes, store=HeldOutStore(base / "before.jsonl"), bank_dir=bank,
+    loop_store = loop / "round_1" / "heldout.jsonl"
+    cached = HeldOutStore(loop_store) if loop_store.is_file() else None
+    if cached is not None and all(cached.get("before", name, seed) for name, seed in episodes):
+        before_store = cached  # the loop's own episodes of the starting policy: nothing runs again
+    else:
+        before_store = HeldOutStore(base / "before.jsonl")
+    before = evaluate_heldout("before", policy, episodes, store=before_store, bank_dir=bank,
                               env_config=env_config, workers=args.workers, progress=False)
     t_before = time.perf_counter() - began
-    entries = [e for e in Bank(bank) if e.name not in set(held)]
+    excluded = set(held) | set(steps["split"].get("held_out_families") or [])
+    entries = [e for e in Bank(bank) if e.name not in excluded and e.source.get("parent") not in excluded]
     names = sorted(e.name for e in entries)
     mined = [e.name for e in entries if e.source.get("kind") == "mined"]
     out = base / args.name
@@ -104,6 +114,14 @@ def main() -> None:
               "types_after": failure_types(after), "seconds": {"before": round(t_before, 1),
                                                               "fine_tune": round(t_fine_tune, 1),
                                                               "after": round(t_after, 1)}}
+    if loop_store.is_file():  # the loop's own control arm (and fine-tuned arm) on the same episodes
+        store = HeldOutStore(loop_store)
+        for role in ("control", "after"):
+            records = [store.get(role, name, seed) for name, seed in episodes]
+            if all(r is not None for r in records):
+                versus = paired_summary(records, after, seed=settings["seed"], bootstrap=0)
+                result[f"vs_loop_{role}"] = {"loop_rate": versus["before"], "table": versus["table"],
+                                             "mcnemar_p": versus["mcnemar_p"]}
     if args.method == "dagger":
         from policies.registry import read_model_card
 

@@ -641,6 +641,14 @@ def _cmd_loop(args: argparse.Namespace) -> int:
                                                     "fine_tune_method", "max_conversions", "min_heldout_episodes",
                                                     "untouched_seeds")}
     options["max_conversions"] = None if options["max_conversions"] == 0 else options["max_conversions"]
+    if args.max_replays == "all":
+        options["max_replays"] = None
+    else:
+        try:
+            options["max_replays"] = int(args.max_replays)
+        except ValueError:
+            raise ValueError(f"--max-replays must be a whole number of clusters or 'all', not {args.max_replays!r}") \
+                from None
     options["control"] = not args.no_control
     if args.fine_tune_reward is not None:
         try:
@@ -1092,6 +1100,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--max-conversions", type=int, default=LOOP["max_conversions"],
                    help="failure clusters converted into bank scenarios per round, largest first; 0 converts every "
                    f"cluster (default {LOOP['max_conversions']})")
+    p.add_argument("--max-replays", default=str(LOOP["max_replays"]),
+                   help="failure clusters beyond the converted ones whose failing scene is kept as an exact replay "
+                   "entry (the parent scenario narrowed around the failure, checked to replay it step for step) per "
+                   f"round, largest first; 0 for none, 'all' for every cluster (default {LOOP['max_replays']})")
     p.add_argument("--min-heldout-episodes", type=int, default=LOOP["min_heldout_episodes"],
                    help="below this many held-out episodes a round reports rates only, no drop and no test "
                    f"(default {LOOP['min_heldout_episodes']})")

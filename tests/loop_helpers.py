@@ -33,10 +33,12 @@ def add_mined_copy(bank_dir: str, source: str, name: str, cluster: str) -> str:
 class FakeMiner:
     """Callable with :func:`dv2s_gym.mining.miner.mine`'s signature; ``calls`` counts real work done."""
 
-    def __init__(self, sources: Sequence[str], failures_per_round: int = 6, replays: bool = False) -> None:
+    def __init__(self, sources: Sequence[str], failures_per_round: int = 6, replays: bool = False,
+                 replays_only: bool = False) -> None:
         self.sources = list(sources)
         self.failures = failures_per_round
         self.replays = replays  # also an exact-replay entry per failure, as the real converter adds
+        self.replays_only = replays_only  # every conversion rejected; the failures kept as replays.jsonl rows only
         self.calls: List[Dict[str, Any]] = []
 
     def __call__(self, policy: str, *, out: str, budget: int, bank_dir: str, seed: int = 0, **options: Any):
@@ -45,19 +47,26 @@ class FakeMiner:
             return None
         self.calls.append({"policy": policy, "out": out, "budget": budget, "seed": seed, **options})
         out_path.mkdir(parents=True, exist_ok=True)
-        episodes, conversions = [], []
+        episodes, conversions, replayed = [], [], []
         for index in range(budget):
             source = self.sources[index % len(self.sources)]
             failed = index < self.failures
             episodes.append({"index": index, "scenario": source, "seed": 1000 + index, "params": {},
                              "failure": {"type": "collision"} if failed else None,
                              "avoidable": True if failed else None, "error": None})
-            if failed:
+            if failed and self.replays_only:
+                cluster = f"{source}/collision/r{index}"
+                replay = add_mined_copy(bank_dir, source, f"replay_s{seed}_{index}", cluster)
+                replayed.append({"cluster": cluster, "index": index, "scenario": source, "status": "kept",
+                                 "replay_entry": replay, "reason": None})
+            elif failed:
                 cluster = f"{source}/collision/r{index}"
                 name = add_mined_copy(bank_dir, source, f"mined_s{seed}_{index}", cluster)
                 replay = add_mined_copy(bank_dir, source, f"replay_s{seed}_{index}", cluster) if self.replays else None
                 conversions.append({"cluster": cluster, "index": index, "status": "kept", "reason": None,
                                     "bank_entry": name, "replay_entry": replay, "reproduction": {"rate": 0.5}})
         (out_path / "episodes.jsonl").write_text("".join(json.dumps(e) + "\n" for e in episodes))
+        if replayed:
+            (out_path / "replays.jsonl").write_text("".join(json.dumps(r) + "\n" for r in replayed))
         (out_path / "conversions.jsonl").write_text("".join(json.dumps(c) + "\n" for c in conversions))
         return None

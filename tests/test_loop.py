@@ -291,6 +291,8 @@ def test_loop_refuses_a_policy_it_cannot_fine_tune(tmp_path):
     (["--max-conversions", "-1"], "--max-conversions must be a positive integer (0 on the command line"),
     (["--untouched-seeds", "-1"], "--untouched-seeds must be an integer >= 0"),
     (["--min-heldout-episodes", "-2"], "--min-heldout-episodes must be an integer >= 0"),
+    (["--max-replays", "some"], "--max-replays must be a whole number of clusters or 'all'"),
+    (["--max-replays", "-1"], "--max-replays must be an integer >= 0"),
 ])
 def test_cli_refuses_bad_input_in_one_line(tmp_path, capsys, argv, needle):
     code, _, err = run(capsys, "loop", "--out", tmp_path / "loop", "--no-progress", *argv)
@@ -519,3 +521,56 @@ def test_a_round_policy_read_back_from_loop_json_must_be_that_rounds_own_checkpo
                     f"ppo:{folder}/../../../x.zip", f"ppo:{folder / 'model.zip'}?device=cpu", "dv2s-ppo", None):
         with pytest.raises(LoopError, match="not a checkpoint in .*choose another --out"):
             _round_spec(planted, folder, tmp_path)
+
+
+# --------------------------------------------------------------------------- exact replays as mined scenarios
+def test_mined_entries_include_the_exact_replays_with_their_parent(tmp_path):
+    from dv2s_gym.mining.loop import mined_entries
+
+    run_dir = tmp_path / "mine"
+    run_dir.mkdir()
+    episodes = [{"index": 0, "scenario": "a"}, {"index": 1, "scenario": "b"}, {"index": 2, "scenario": "c"}]
+    conversions = [{"cluster": "a/collision/x", "index": 0, "status": "kept", "bank_entry": "mined_a",
+                    "replay_entry": "replay_a", "reproduction": {"rate": 0.4}},
+                   {"cluster": "b/stall/y", "index": 1, "status": "rejected", "bank_entry": None,
+                    "replay_entry": "replay_b"}]
+    replays = [{"cluster": "c/stall/z", "index": 2, "scenario": "c", "status": "kept", "replay_entry": "replay_c"},
+               {"cluster": "c/collision/w", "index": 3, "scenario": "c", "status": "rejected", "replay_entry": None}]
+    for name, rows in (("episodes", episodes), ("conversions", conversions), ("replays", replays)):
+        (run_dir / f"{name}.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    entries = mined_entries(run_dir)
+    assert [e["scenario"] for e in entries] == ["mined_a", "replay_a", "replay_b", "replay_c"]
+    assert {e["scenario"]: e.get("parent") for e in entries if e.get("replay")} == {
+        "replay_a": "a", "replay_b": "b", "replay_c": "c"}
+    assert [e["scenario"] for e in mined_entries(run_dir, replays=False)] == ["mined_a"]
+    # the family split keeps a converted entry and the replay of the same failure on one side
+    split = split_by_family(entries, 0.5, seed=3)
+    assert {"mined_a", "replay_a"} <= set(split["held_out"]) or {"mined_a", "replay_a"} <= set(split["fine_tune"])
+    assert split["groups"] == 3 and not set(split["held_out_families"]) & set(split["fine_tune_families"])
+
+
+def test_a_round_whose_conversions_are_all_rejected_holds_out_replay_families(tmp_path, monkeypatch):
+    """Replays alone give a round families to split: it fine-tunes, and no replay of a held-out family reaches
+    either arm, while the fine-tuning families' replays are upweighted in the fine-tuned arm and absent from the
+    control."""
+    from scenario_bank.bank import Bank
+
+    stand = _StandIns(monkeypatch)
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", min_heldout_episodes=1, log=lambda _: None,
+                      miner=FakeMiner(WIRING["scenarios"], failures_per_round=6, replays_only=True), **WIRING)
+    steps = report.rounds[0]["steps"]
+    assert "skipped" not in steps and steps["mine"]["conversions"] == {}
+    split = steps["split"]
+    assert split["groups"] == 3 and split["held_out"] and split["fine_tune"]
+    assert all(name.startswith("replay_") for name in split["held_out"] + split["fine_tune"])
+    bank = Bank(tmp_path / "loop" / "bank")
+    held_family = {e.name for e in bank if e.source.get("parent") in split["held_out_families"]}
+    assert set(split["held_out"]) <= held_family
+    tuned, control = stand.fine_tunes
+    for arm in (tuned, control):
+        assert not held_family & set(arm["weights"])
+    assert set(split["fine_tune"]) <= set(tuned["weights"]) and not set(split["fine_tune"]) & set(control["weights"])
+    share = sum(tuned["weights"][name] for name in split["fine_tune"]) / sum(tuned["weights"].values())
+    assert share == pytest.approx(0.5)
+    evaluated = {scenario for role, _, episodes in stand.evaluations for scenario, _ in episodes}
+    assert evaluated == set(split["held_out"])

@@ -37,7 +37,12 @@ def test_one_round_of_the_real_loop(tmp_path, capsys):
     shipped = set(Bank().names())
     assert shipped <= set(bank.names())
     kept = {c["bank_entry"] for c in conversions if c["status"] == "kept"}
-    replays = {c["replay_entry"] for c in conversions if c.get("replay_entry")}  # the failing scene, kept exactly
+    replay_rows = [json.loads(line) for line in (mine_dir / "replays.jsonl").read_text().splitlines()] \
+        if (mine_dir / "replays.jsonl").is_file() else []
+    assert all(row["status"] == "kept" or row["reason"] for row in replay_rows)
+    assert not {r["cluster"] for r in replay_rows} & {c["cluster"] for c in conversions}  # one replay per cluster
+    # the failing scenes, kept exactly: those of the converted clusters and those of the others (replays.jsonl)
+    replays = {c["replay_entry"] for c in conversions + replay_rows if c.get("replay_entry")}
     mined = {e.name for e in bank if e.source.get("kind") == "mined"}
     assert replays and mined == kept | replays and set(bank.names()) == shipped | kept | replays
     for name in replays:
@@ -53,9 +58,10 @@ def test_one_round_of_the_real_loop(tmp_path, capsys):
         assert source["parent"] in SCENARIOS and source["reproduction"]["rate"] >= 0.3
         assert (bank.get(name).folder / source["video"]).is_file()  # carried in the entry folder
 
-    # the split holds every kept scenario once; the held-out ones ran before and after on the same episodes
+    # the split holds every kept scenario and exact replay once; the held-out ones ran before and after on the
+    # same episodes
     split = steps["split"]
-    assert set(split["fine_tune"]) | set(split["held_out"]) == kept
+    assert set(split["fine_tune"]) | set(split["held_out"]) == kept | replays
     assert not set(split["fine_tune"]) & set(split["held_out"])
     if split["held_out"]:
         assert steps["after"]["pairs"] == 2 * len(split["held_out"])

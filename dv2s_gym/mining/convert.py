@@ -69,7 +69,7 @@ SETUP_ERRORS = (EndpointUnreachableError, EndpointTimeoutError, EndpointHTTPErro
 :func:`convert_failure` raises them instead of rejecting the failure, so a run stops and can be resumed
 when the endpoint works, rather than rejecting every cluster."""
 
-__all__ = ["convert_failure", "same_failure_class", "reproduction_seeds", "cluster_slug", "CONVERSION_DIR", "ENTRY_VIDEO",
+__all__ = ["convert_failure", "replay_failure_entry", "same_failure_class", "reproduction_seeds", "cluster_slug", "CONVERSION_DIR", "ENTRY_VIDEO",
            "ENTRY_TRACE"]
 
 CONVERSION_DIR = "conversion"
@@ -240,11 +240,15 @@ def _link(bank, name: str, fields: Mapping[str, Any]) -> None:
 def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, policy: Any,
                 env_config: Optional[Mapping[str, Any]], monitor: Mapping[str, Any],
                 source_failure: Mapping[str, Any], cluster: Optional[str], run_dir: Path,
-                interaction: Mapping[str, Any], files: Mapping[str, Path]) -> Dict[str, Any]:
+                interaction: Optional[Mapping[str, Any]], files: Optional[Mapping[str, Path]]) -> Dict[str, Any]:
     """Add the exact replay of the failing scene to ``bank`` (:mod:`dv2s_gym.mining.exact_replay`): the parent
     script narrowed around the failing parameters, checked to replay the recorded episode step for step.
     Returns ``{"entry", "params", "intervals", "seed", "trajectory_hash", "e2e_sc", "note"}`` (``entry`` None,
-    with a ``note``, when the narrowed script is the parent itself and the parent is in ``bank``)."""
+    with a ``note``, when the narrowed script is the parent itself and the parent is in ``bank``).
+
+    Without a ``source_trace`` (no failure video was made), the replay's own trace stands for it once its
+    trajectory hash matches the record's, and is what the entry keeps (``files``: the trace only, no video);
+    without an ``interaction`` it is read from that trace."""
     import datetime
 
     from dv2s_gym.mining.exact_replay import REPLAY_TAG, narrowed_script, replay_name, run_replay
@@ -267,6 +271,17 @@ def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, poli
         raise _Rejected("replay", f"the parent {record['scenario']!r} narrowed around the failing parameters does not "
                                   f"replay the failing episode (trajectory hash {result.trajectory_hash[:12]} != "
                                   f"recorded {expected[:12]})")
+    if source_trace is None:  # the same episode step for step: its trace is the failure's own
+        from dv2s_gym.mining.interaction import failure_interaction
+
+        source_trace = trace
+        trace.save(folder / ENTRY_TRACE)
+        files = {ENTRY_TRACE: folder / ENTRY_TRACE}
+        if failure and failure.get("type") == source_failure.get("type"):
+            source_failure = {**failure, **{k: v for k, v in source_failure.items() if v is not None}}
+        if interaction is None:
+            interaction = failure_interaction(trace, source_failure)
+    files = dict(files or {})
     replay = {"params": params, "intervals": intervals, "seed": seed, "trajectory_hash": expected,
               "policy": _policy_name(policy)}
     out = {"entry": None, **replay, "failure": failure, "note": None,
@@ -275,7 +290,8 @@ def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, poli
     description = (f"{parent.description.strip()} Exact replay of a failure of {_policy_name(policy)}: seed {seed}, "
                    f"parameters narrowed around the failing values." + (f" {events}" if events else ""))
     provenance = {"kind": "mined", "parent": record["scenario"], "seed": seed, "params": params,
-                  "video": ENTRY_VIDEO, "trace": ENTRY_TRACE, "generator": "exact replay",
+                  "video": ENTRY_VIDEO if ENTRY_VIDEO in files else None,
+                  "trace": ENTRY_TRACE if ENTRY_TRACE in files else None, "generator": "exact replay",
                   "policy": _policy_name(policy), "failure": dict(source_failure), "cluster": cluster,
                   "run": str(run_dir.resolve()), "index": record.get("index"), "interaction": dict(interaction),
                   "replay": replay, "e2e_sc": out["e2e_sc"], "date": datetime.date.today().isoformat()}
@@ -285,7 +301,7 @@ def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, poli
         name, n = f"{base}_{n}", n + 1
     try:
         entry = bank.add(script, description, name=name, elements=parent.elements, map=parent.map,
-                         tags=["mined", REPLAY_TAG, source_failure["type"]], provenance=provenance, files=dict(files))
+                         tags=["mined", REPLAY_TAG, source_failure["type"]], provenance=provenance, files=files)
         out["entry"] = entry.name
     except DuplicateScenarioError as error:
         existing = bank.get(error.existing).source.get("replay") or {}
@@ -293,6 +309,49 @@ def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, poli
             out["entry"] = error.existing  # this failing scene is in the bank already (a resumed run)
         else:
             out["note"] = f"no replay entry: {error}"
+    return out
+
+
+def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any, bank: Any,
+                         env_config: Optional[Mapping[str, Any]] = None, bank_dir: Optional[PathLike] = None,
+                         cluster: Optional[str] = None, monitor: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
+    """Keep one failure exactly, without converting it: only the exact replay entry of the failing scene
+    (stage 3 of :func:`convert_failure`, with no video, description or script; the entry keeps the replay's
+    trace). Never raises for a bad failure.
+
+    Returns ``{"cluster", "index", "scenario", "status": "kept"|"rejected", "replay_entry", "reason",
+    "note", "seconds"}``: ``kept`` with the entry's name, or ``rejected`` with the reason (a replay that
+    diverges from the recorded episode, a bad record); ``kept`` with no entry and a ``note`` when the bank
+    holds the scene already under another name."""
+    from scenario_bank.bank import Bank
+
+    start = time.perf_counter()
+    run_dir = Path(run_dir)
+    cluster = cluster if cluster is not None else record.get("cluster")
+    out: Dict[str, Any] = {"cluster": cluster, "index": record.get("index"), "scenario": record.get("scenario"),
+                           "status": "rejected", "replay_entry": None, "reason": None, "note": None, "seconds": None}
+    try:
+        failure = dict(record.get("failure") or {})
+        if not failure.get("type"):
+            raise _Rejected("input", "the record holds no failure (record['failure'] is empty)")
+        if not (record.get("result") or {}).get("trajectory_hash"):
+            raise _Rejected("input", "the record holds no trajectory hash to check the replay against")
+        if isinstance(bank, (str, os.PathLike)):
+            bank = Bank(bank)
+        if bank_dir is None and getattr(bank, "root", None) is not None and record.get("scenario") in bank:
+            bank_dir = bank.root
+        replay = _add_replay(record, None, bank, bank_dir=bank_dir, policy=policy, env_config=env_config,
+                             monitor=_monitor_options(run_dir, monitor), source_failure=failure, cluster=cluster,
+                             run_dir=run_dir, interaction=None, files=None)
+        out.update(status="kept", replay_entry=replay["entry"], note=replay["note"])
+    except _Rejected as rejection:
+        out["reason"] = str(rejection)
+    except SETUP_ERRORS:
+        raise
+    except Exception as error:  # a bad failure is a rejection, never an exception
+        first = (str(error).strip().splitlines() or [""])[0]
+        out["reason"] = f"replay: {type(error).__name__}: {first}"[:500]
+    out["seconds"] = round(time.perf_counter() - start, 3)
     return out
 
 

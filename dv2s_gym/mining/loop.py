@@ -6,8 +6,13 @@ a. **mine**: :func:`dv2s_gym.mining.miner.mine` runs ``P`` on sampled scenes of 
    bank's scenarios, clusters its failures, converts the representatives of at most
    ``max_conversions`` clusters (largest first; the rest are counted as not converted) through
    the D-V2S pipeline and adds the kept scenarios to the *working bank* (``out/bank``, a copy
-   of the shipped bank, or the ``bank_dir`` given);
-b. **split**: the newly kept scenarios are split by *family* (their parent bank scenario,
+   of the shipped bank, or the ``bank_dir`` given); every converted failure's scene is also kept
+   exactly (its *exact replay* entry: the parent scenario narrowed around the failing parameters),
+   and so is that of up to ``max_replays`` more clusters, largest first
+   (:func:`dv2s_gym.mining.replays.replay_clusters`: no video, description or script, only the narrowed
+   parent checked to replay the failing episode step for step): these are mined scenarios of the
+   round too, so a round whose conversions are all rejected still has families to split;
+b. **split**: the newly kept scenarios (converted scripts and exact replays) are split by *family* (their parent bank scenario,
    :func:`dv2s_gym.mining.split.split_by_family`) into a fine-tuning part and a held-out part,
    deterministically from the seed; a family held out once stays held out;
 c. **before**: ``P`` runs on the held-out scenarios, ``k_eval`` evaluation seeds each
@@ -76,6 +81,7 @@ DEFAULTS: Dict[str, Any] = {
     "holdout_fraction": 0.5,
     "k_eval": 10,
     "max_conversions": 4,
+    "max_replays": 16,
     "min_heldout_episodes": 20,
     "control": True,
     "untouched_seeds": 2,
@@ -92,7 +98,7 @@ bench/RESULTS.md records it). The other measurements in bench/RESULTS.md use lar
 
 IDENTITY = ("policy", "bank_dir", "budget", "sampler", "fine_tune_steps", "fine_tune_lr", "holdout_fraction", "k_eval",
             "regress_episodes", "mined_share", "fine_tune_reward", "margin", "seed", "scenarios", "fine_tune_method",
-            "max_conversions", "control", "untouched_seeds", "min_heldout_episodes")
+            "max_conversions", "control", "untouched_seeds", "min_heldout_episodes", "max_replays")
 _RECORDED = ("holdout_by",)
 """Settings a loop keeps as first recorded (not chosen by the user, so never a reason to refuse a resume)."""
 
@@ -113,7 +119,7 @@ METHOD_LEARNING_RATES = {"ppo": 1e-4, "dagger": 1e-3}
 bank worse, bench/RESULTS.md) and DAgger's Adam rate."""
 
 _LEGACY = {"fine_tune_method": "ppo", "max_conversions": None, "holdout_by": "cluster", "control": False,
-           "untouched_seeds": 0, "min_heldout_episodes": 0}
+           "untouched_seeds": 0, "min_heldout_episodes": 0, "max_replays": 0}
 """Identity settings added later, with the value a ``loop.json`` written before them meant."""
 
 
@@ -208,9 +214,11 @@ def _working_bank(out: Path, bank_dir: Optional[str]) -> str:
     return str(target.resolve())
 
 
-def mined_entries(mine_out: os.PathLike | str) -> List[Dict[str, Any]]:
+def mined_entries(mine_out: os.PathLike | str, replays: bool = True) -> List[Dict[str, Any]]:
     """The kept scenarios of a mining run: ``[{"cluster", "scenario", "reproduction"}]`` from
-    its ``conversions.jsonl`` (status ``kept`` with a bank entry)."""
+    its ``conversions.jsonl`` (status ``kept`` with a bank entry), then (``replays``) the exact replays of its
+    failing scenes (:func:`dv2s_gym.mining.replays.replay_entries`: ``"replay": True`` and ``"parent"``, from
+    the conversions' ``replay_entry`` and from ``replays.jsonl``)."""
     path = Path(mine_out) / "conversions.jsonl"
     if not path.is_file():
         return []
@@ -231,7 +239,12 @@ def mined_entries(mine_out: os.PathLike | str) -> List[Dict[str, Any]]:
             entries.setdefault(str(record["cluster"]), {"cluster": str(record["cluster"]),
                                                         "scenario": record["merged_into"],
                                                         "reproduction": (record.get("reproduction") or {}).get("rate")})
-    return [entries[key] for key in sorted(entries)]
+    converted = [entries[key] for key in sorted(entries)]
+    if not replays:
+        return converted
+    from dv2s_gym.mining.replays import replay_entries
+
+    return converted + replay_entries(mine_out)
 
 
 def _mining_summary(mine_out: Path) -> Dict[str, Any]:
@@ -271,9 +284,22 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
             if record.get("status") == "rejected" and record.get("reason"):
                 reasons.append(str(record["reason"]))
     converted = sum(statuses.values())
-    return {"episodes": episodes, "errors": errors, "failures": failures, "failures_against_policy": counted,
+    from dv2s_gym.mining.replays import REPLAYS_FILE
+
+    replayed: Dict[str, int] = {}
+    replay_path = mine_out / REPLAYS_FILE
+    if replay_path.is_file():
+        for line in replay_path.read_text(encoding="utf-8").splitlines():
+            try:
+                row = json.loads(line)
+            except ValueError:
+                continue
+            replayed[row.get("status", "?")] = replayed.get(row.get("status", "?"), 0) + 1
+    return {"replays": replayed, "episodes": episodes, "errors": errors, "failures": failures, "failures_against_policy": counted,
             "clusters": clusters, "conversions": statuses, "rejected_reasons": reasons[:20],
-            "clusters_not_converted": None if clusters is None else max(0, clusters - converted)}
+            "clusters_not_converted": None if clusters is None else max(0, clusters - converted),
+            "clusters_not_kept": None if clusters is None else max(0, clusters - converted
+                                                                   - sum(replayed.values()))}
 
 
 def fine_tune_weights(names: Sequence[str], mined: Sequence[str], mined_share: float) -> Dict[str, float]:
@@ -338,6 +364,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
              margin: float = DEFAULTS["margin"], seed: int = DEFAULTS["seed"], workers: Optional[int] = None,
              fine_tune_lr: Optional[float] = DEFAULTS["fine_tune_lr"],
              max_conversions: Optional[int] = DEFAULTS["max_conversions"],
+             max_replays: Optional[int] = DEFAULTS["max_replays"],
              min_heldout_episodes: int = DEFAULTS["min_heldout_episodes"], control: bool = DEFAULTS["control"],
              untouched_seeds: int = DEFAULTS["untouched_seeds"],
              scenarios: Optional[Sequence[str]] = None, n_envs: int = 2, progress: bool = True,
@@ -366,6 +393,8 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         margin: the regression test's non-inferiority margin.
         seed: seeds the miner, the split and the fine-tuning (each round derives its own).
         max_conversions: clusters converted into bank scenarios per round, largest first (``None``: all).
+        max_replays: clusters beyond the converted ones whose failing scene is kept as an exact replay entry
+            per round, largest first (:func:`dv2s_gym.mining.replays.replay_clusters`; ``None``: all, 0: none).
         min_heldout_episodes: below this many held-out episodes a round reports rates only, no drop and no
             test, and says so in the log and the reports.
         control: also fine-tune without the mined scenarios (the control arm) and compare on held-out.
@@ -389,6 +418,10 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                                         or max_conversions < 1):
         raise LoopError(f"--max-conversions must be a positive integer (0 on the command line: every cluster), "
                         f"not {max_conversions!r}")
+    if max_replays is not None and (isinstance(max_replays, bool) or not isinstance(max_replays, int)
+                                    or max_replays < 0):
+        raise LoopError(f"--max-replays must be an integer >= 0 (0: no replays beyond the converted clusters; "
+                        f"'all' on the command line: every cluster), not {max_replays!r}")
     if not 0.0 <= float(holdout_fraction) <= 1.0:
         raise LoopError(f"--holdout-fraction must be in [0, 1], not {holdout_fraction}")
     if not 0.0 < float(mined_share) < 1.0:
@@ -425,7 +458,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                 "fine_tune_method": fine_tune_method,
                 "margin": float(margin), "seed": seed,
                 "scenarios": list(scenarios) if scenarios is not None else None, "rounds": rounds,
-                "max_conversions": max_conversions, "holdout_by": HOLDOUT_BY, "control": bool(control),
+                "max_conversions": max_conversions, "max_replays": max_replays, "holdout_by": HOLDOUT_BY, "control": bool(control),
                 "untouched_seeds": untouched_seeds, "min_heldout_episodes": min_heldout_episodes,
                 "workers": workers, "n_envs": n_envs, "env_config": env_config,
                 "fine_tune_env_config": fine_tune_config}
@@ -478,6 +511,10 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                            "origin": {"command": "dv2s loop", "seed": seed, "round": number},
                            **dict(mine_options or {})}
                 miner(current, out=str(round_dir / "mine"), budget=budget, **options)
+                if max_replays != 0 and (round_dir / "mine" / "settings.json").is_file():  # a miner's run folder
+                    from dv2s_gym.mining.replays import replay_clusters
+
+                    replay_clusters(round_dir / "mine", bank_dir=bank, max_replays=max_replays, progress=progress)
                 return {**_mining_summary(round_dir / "mine"), "kept": mined_entries(round_dir / "mine"),
                         "folder": str(round_dir / "mine")}
 
@@ -485,9 +522,12 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
             mined = steps["mine"]
             log(f"round {number}: mined {mined['failures']} failures in {mined['episodes']} episodes, "
                 f"{mined.get('clusters')} clusters, "
-                f"{len({e['scenario'] for e in mined['kept']})} scenarios kept"
+                f"{len({e['scenario'] for e in mined['kept'] if not e.get('replay')})} converted scenarios and "
+                f"{len({e['scenario'] for e in mined['kept'] if e.get('replay')})} exact replays kept"
                 + (f"; {mined['clusters_not_converted']} clusters not converted (--max-conversions "
-                   f"{max_conversions})" if mined.get("clusters_not_converted") else ""))
+                   f"{max_conversions})" if mined.get("clusters_not_converted") else "")
+                + (f", {mined['clusters_not_kept']} neither converted nor replayed (--max-replays "
+                   f"{'all' if max_replays is None else max_replays})" if mined.get("clusters_not_kept") else ""))
         if "split" not in steps:
             held_families = sorted({f for earlier in state.data["rounds"][:number - 1]
                                     for f in ((earlier.get("steps") or {}).get("split") or {}).get(
@@ -499,9 +539,12 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         if not tuned and not held_out:
             mined = steps["mine"]
             tried = sum((mined.get("conversions") or {}).values())
+            replayed = sum((mined.get("replays") or {}).values())
             steps["skipped"] = (f"no mined scenario was kept this round ({tried} conversion(s) tried"
+                                + (f", {replayed} exact replay(s) tried" if replayed else "")
                                 + (f", {mined['clusters_not_converted']} cluster(s) not converted: raise "
-                                   "--max-conversions or --budget" if mined.get("clusters_not_converted") else "")
+                                   "--max-conversions, --max-replays or --budget"
+                                   if mined.get("clusters_not_converted") else "")
                                 + "): nothing to fine-tune on or to measure")
             state.save()
             log(f"round {number}: {steps['skipped']}")

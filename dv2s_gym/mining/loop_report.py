@@ -7,8 +7,10 @@
                  "timings": {step: seconds},
                  "control_policy": the control arm's spec (with a control),
                  "steps": {"mine": {"episodes", "errors", "failures", "failures_against_policy", "clusters",
-                                    "clusters_not_converted", "conversions": {status: n}, "rejected_reasons",
-                                    "kept": [{"cluster", "scenario", "reproduction"}], "folder"},
+                                    "clusters_not_converted", "clusters_not_kept", "conversions": {status: n},
+                                    "replays": {status: n}, "rejected_reasons",
+                                    "kept": [{"cluster", "scenario", "reproduction", "replay" (exact replays:
+                                              True), "parent" (exact replays)}], "folder"},
                            "split": {"by": "family", "fine_tune", "held_out", "fine_tune_clusters",
                                      "held_out_clusters", "fine_tune_families", "held_out_families", "groups"}
                                     (loops recorded before the family split: no "by" and no families),
@@ -184,6 +186,14 @@ def _round_row(record: Mapping[str, Any]) -> Dict[str, Any]:
     }
 
 
+def _replays_text(settings: Mapping[str, Any]) -> str:
+    """How many clusters beyond the converted ones a round keeps as exact replays, in words."""
+    count = settings.get("max_replays", 0)
+    if count == 0:
+        return "no exact replays beyond the converted clusters"
+    return f"{'every other cluster' if count is None else f'at most {count} other clusters'} kept as exact replays"
+
+
 def _share(summary: Optional[Mapping[str, Any]], key: str) -> str:
     value = ((summary or {}).get(key) or {}).get("value")
     return "-" if value is None else f"{value:.2f}"
@@ -277,6 +287,7 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         f"Started from `{settings.get('policy')}`; final policy `{report.get('policy')}`.", "",
         f"Per round: mining budget {settings.get('budget')} episodes ({settings.get('sampler')} sampler), at most "
         f"{settings.get('max_conversions') or 'every'} cluster(s) converted, "
+        f"{_replays_text(settings)}, "
         f"{settings.get('holdout_fraction')} of the mined {'families (parent scenarios)' if settings.get('holdout_by', 'cluster') == 'family' else 'clusters'} "
         f"held out, {settings.get('k_eval')} evaluation seeds per held-out scenario (at least "
         f"{settings.get('min_heldout_episodes', 0)} held-out episodes for a drop or test), "
@@ -312,7 +323,9 @@ def render_markdown(report: Mapping[str, Any]) -> str:
             lines.append(f"- mining ({mine.get('folder')}): {mine.get('episodes')} episodes, {mine.get('failures')} "
                          f"failures ({mine.get('failures_against_policy')} avoidable by the reference driver), "
                          f"{mine.get('clusters')} clusters, conversions {mine.get('conversions')}, "
-                         f"{mine.get('errors')} episode errors"
+                         f"exact replays of other clusters {mine.get('replays') or {}}, "
+                         f"{sum(1 for e in mine.get('kept') or [] if e.get('replay'))} exact replay entries kept "
+                         f"in all, {mine.get('errors')} episode errors"
                          + (f"; **{mine['clusters_not_converted']} clusters not converted** (at most "
                             f"{settings.get('max_conversions')} per round)" if mine.get("clusters_not_converted")
                             else ""))
@@ -529,7 +542,8 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
             f"</head><body><h1>dv2s loop</h1><p>Started from <code>{escape(str(settings.get('policy')))}</code>; "
             f"final policy <code>{escape(str(report.get('policy')))}</code>. Mining budget {settings.get('budget')} "
             f"episodes per round, at most {escape(str(settings.get('max_conversions') or 'every'))} cluster(s) "
-            f"converted, fine-tuning ({escape(str(settings.get('fine_tune_method', 'ppo')))}) "
+            f"converted, {escape(_replays_text(settings))}, "
+            f"fine-tuning ({escape(str(settings.get('fine_tune_method', 'ppo')))}) "
             f"{settings.get('fine_tune_steps')} steps (reward terms "
             f"{escape(_weights(settings.get('fine_tune_reward')))} overridden in training only), "
             f"{'with' if settings.get('control') else 'without'} a control arm, {settings.get('k_eval')} "

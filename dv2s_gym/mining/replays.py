@@ -1,0 +1,111 @@
+"""Exact replays for every failure cluster of a mining run, not only the converted ones.
+
+Converting a failure through D-V2S (video, description, script, judge) is slow and keeps few scripts, so a run
+converts at most a few clusters. The exact replay of a failing scene (:mod:`dv2s_gym.mining.exact_replay`) needs
+none of that: the parent script narrowed around the failing parameters, one episode to check that it replays
+the recorded one step for step, and a bank add. :func:`replay_clusters` keeps one for each avoidable cluster
+that no conversion has tried yet (a conversion makes its own replay first), largest clusters first, and appends
+a row per cluster to the run's ``replays.jsonl`` (:data:`REPLAYS_FILE`), so a resumed call replays only the
+clusters left. :func:`replay_entries` reads the replay entries of a run back, from both files.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+__all__ = ["REPLAYS_FILE", "replay_clusters", "replay_entries"]
+
+REPLAYS_FILE = "replays.jsonl"
+"""The rows of :func:`replay_clusters` in a mining run folder (one JSON object a line)."""
+
+
+def _rows(path: Path) -> List[Dict[str, Any]]:
+    if not path.is_file():
+        return []
+    rows = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            rows.append(json.loads(line))
+        except ValueError:
+            continue  # a torn last line, left by a kill mid-write
+    return rows
+
+
+def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
+                    max_replays: Optional[int] = None, progress: bool = True) -> List[Dict[str, Any]]:
+    """Add the exact replay of one failure per avoidable cluster of the mining run in ``run_dir`` to the bank in
+    ``bank_dir`` (the loop's working bank; the parent scripts come from the bank the run mined), skipping clusters a conversion or an earlier call has tried;
+    at most ``max_replays`` rows in ``replays.jsonl`` (``None``: every cluster). The representative failure is the
+    one the conversion would take (lowest robustness, then lowest index). Returns every row of the run's
+    ``replays.jsonl`` (:func:`dv2s_gym.mining.convert.replay_failure_entry`'s records)."""
+    from dv2s_gym.mining.cluster import group
+    from dv2s_gym.mining.convert import replay_failure_entry
+    from dv2s_gym.mining.errors import MiningError
+    from dv2s_gym.mining.miner import _Appender, _progress, read_records
+    from scenario_bank.bank import Bank
+
+    run_dir = Path(run_dir)
+    try:
+        settings = json.loads((run_dir / "settings.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError) as error:
+        raise MiningError(f"{run_dir} holds no readable mining run (settings.json: {error}); mine into it first") \
+            from None
+    path = run_dir / REPLAYS_FILE
+    existing = _rows(path)
+    tried = {str(row.get("cluster")) for row in existing + _rows(run_dir / "conversions.jsonl")}
+    candidates = []
+    for cluster, members in sorted(group(read_records(run_dir / "episodes.jsonl")).items()):
+        avoidable = [r for r in members if r.get("avoidable") is not False]
+        if cluster in tried or not avoidable:
+            continue
+        representative = min(avoidable, key=lambda r: (float(r.get("rho") or 0.0), int(r["index"])))
+        candidates.append((-len(avoidable), cluster, representative))
+    candidates.sort(key=lambda c: (c[0], c[1]))
+    room = None if max_replays is None else max(0, int(max_replays) - len(existing))
+    todo = candidates[:room]
+    if not todo:
+        return existing
+    bank = Bank(bank_dir)
+    appender = _Appender(path)
+    bar = _progress(progress, len(todo), 0, desc="exact replays")
+    try:
+        for _, cluster, record in todo:
+            row = replay_failure_entry(dict(record, cluster=cluster), run_dir, policy=settings["policy"], bank=bank,
+                                       env_config=settings.get("env_config"), cluster=cluster,
+                                       bank_dir=settings.get("bank_dir"),  # the bank the run mined (the parents')
+                                       monitor={key: settings[key] for key in ("ttc_threshold", "stall_seconds")
+                                                if settings.get(key) is not None})
+            appender.append(row)
+            existing.append(row)
+            if bar is not None:
+                bar.update(1)
+    finally:
+        appender.close()
+        if bar is not None:
+            bar.close()
+    return existing
+
+
+def replay_entries(run_dir: os.PathLike | str) -> List[Dict[str, Any]]:
+    """The exact replay entries a mining run added: ``[{"cluster", "scenario", "parent", "reproduction": None,
+    "replay": True}]``, from the conversions' ``replay_entry`` and from ``replays.jsonl``, one per entry."""
+    run_dir = Path(run_dir)
+    found: Dict[str, Dict[str, Any]] = {}
+    episodes = None
+    for row in _rows(run_dir / "conversions.jsonl") + _rows(run_dir / REPLAYS_FILE):
+        name = row.get("replay_entry")
+        if not name or name in found:
+            continue
+        parent = row.get("scenario")
+        if not parent:  # conversion rows do not name the parent: the failing episode does
+            if episodes is None:
+                from dv2s_gym.mining.miner import read_records
+
+                episodes = {r.get("index"): r for r in read_records(run_dir / "episodes.jsonl")}
+            parent = (episodes.get(row.get("index")) or {}).get("scenario")
+        found[name] = {"cluster": str(row.get("cluster")), "scenario": name, "parent": parent, "reproduction": None,
+                       "replay": True}
+    return [found[name] for name in sorted(found)]
