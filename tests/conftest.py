@@ -13,6 +13,9 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("DV2S_CACHE_DIR", tempfile.mkdtemp(prefix="dv2s-test-cache-"))
 
+# DV2S_TEST_CPU_LOG=path records each test's CPU time (tests/cpu_time_plugin.py)
+pytest_plugins = ["cpu_time_plugin"]
+
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))

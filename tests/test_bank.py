@@ -56,6 +56,7 @@ def bank(tmp_path):
     return Bank(tmp_path / "bank")
 
 
+@pytest.mark.slow
 def test_add_get_list_filter_remove(bank):
     entry = add(bank, "lead_slow", provenance={"kind": "generated", "video": "v.mp4", "generator": "rules",
                                                "model": None, "context_hash": "abc", "seed": 3})
@@ -105,6 +106,7 @@ def test_bad_input_to_add(bank):
     assert len(Bank(bank.root)) == 0
 
 
+@pytest.mark.slow
 def test_sample_by_weights_and_stats(bank):
     for k in range(3):
         add(bank, f"s{k}", speed=10 + k, extra=f"param p{k} = Range({k}, {k + 1})\n")
@@ -147,6 +149,7 @@ def test_import_of_a_corrupt_or_foreign_archive_changes_nothing(bank, tmp_path):
     assert [p.name for p in bank.root.iterdir() if p.name.startswith(".")] == [WRITERS_LOCK]  # no staging left
 
 
+@pytest.mark.slow
 def test_bad_sidecars_are_reported_and_the_rest_stays_usable(bank):
     for k, name in enumerate(("good", "corrupt", "edited", "missing")):
         add(bank, name, speed=k, extra=f"param {name} = Range(0, {k + 1})\n")
@@ -224,6 +227,7 @@ _WRITER = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_killed_writer_leaves_the_bank_as_it_was(bank):
     add(bank, "before")
     code = _WRITER.format(root=str(ROOT), bank=str(bank.root), script=script(33, "param k = Range(1, 9)\n"))

@@ -55,6 +55,7 @@ def test_add_list_show_sample_stats_rm(bank, tmp_path, capsys):
     assert json.loads(out)["scenarios"] == []
 
 
+@pytest.mark.slow
 def test_export_import_and_validate_exit_codes(bank, tmp_path, capsys):
     script = tmp_path / "lead.scenic"
     script.write_text(SCRIPT.format(lo=12))

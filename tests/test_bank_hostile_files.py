@@ -92,6 +92,7 @@ def test_hostile_archive_is_refused_by_the_api(name, world, tmp_path):
     assert Bank(bank_dir).names() == [GOOD]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(ARCHIVES))
 def test_hostile_archive_is_refused_by_the_cli(name, world, tmp_path):
     bank_dir, _, _ = world
@@ -178,6 +179,7 @@ def test_hostile_folder_through_the_api(name, world, tmp_path):
     assert snapshot(tmp_path) == before
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(FOLDERS))
 def test_hostile_folder_through_the_cli(name, world, tmp_path):
     bank_dir, secret, outside = world

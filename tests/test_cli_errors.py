@@ -57,6 +57,7 @@ def test_missing_video_and_bad_trace_are_one_line(capsys, tmp_path):
     assert code == 2 and "not a dv2s episode trace" in one_line_error(err)
 
 
+@pytest.mark.slow
 def test_failed_generate_lists_only_what_it_wrote(capsys, tmp_path, no_llm_env):
     out_dir = tmp_path / "gen"
     out_dir.mkdir()

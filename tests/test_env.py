@@ -385,6 +385,7 @@ def episode_digest(scenario, config, seed, actions):
 '''
 
 
+@pytest.mark.slow
 def test_same_seed_same_episode_across_processes():
     args = (PULL_BACK_IN, {"duration": 4.0}, 11, ACTIONS)
     namespace: dict = {}

@@ -263,6 +263,7 @@ other = new Car ahead of ego by 20, with behavior Spin()
 """
 
 
+@pytest.mark.slow
 def test_a_behaviour_looping_without_an_action_is_stopped_and_named(tmp_path):
     """Scenic would spin forever in that step; the env's step_time_limit ends it with the line."""
     import warnings

@@ -83,6 +83,7 @@ def sg_report(tmp_path_factory):
     return source, {item["stem"]: item for item in report["items"]}, report
 
 
+@pytest.mark.slow
 def test_eval_sg_scores_against_the_label(sg_report):
     source, items, _ = sg_report
     real = items["real"]

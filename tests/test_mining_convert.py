@@ -107,6 +107,7 @@ def test_failure_class_rule():
     assert len(set(reproduction_seeds(7, 10))) == 10
 
 
+@pytest.mark.slow
 def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(record, tmp_path):
     bank = Bank(tmp_path / "bank")
     out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=bank, cluster=f"{SCENARIO}/collision/0")
@@ -167,6 +168,7 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     assert Bank(tmp_path / "bank").names() == sorted([out["bank_entry"], out["replay_entry"]])
 
 
+@pytest.mark.slow
 def test_a_reproduction_rate_below_the_threshold_is_rejected(record, tmp_path):
     # the collision was with a car; as a collision with a truck, the new scenario never reproduces it
     truck = {**record, "failure": {**record["failure"], "with_kind": "truck"}}

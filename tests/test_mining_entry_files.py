@@ -31,6 +31,7 @@ def record() -> dict:
     return make_record(SCENARIO, 0, midpoint(SCENARIO))
 
 
+@pytest.mark.slow
 def test_a_kept_and_a_merged_entry_keep_their_videos_once_the_runs_are_deleted(record, tmp_path):
     bank = Bank(tmp_path / "bank")
     out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=bank, k=3,

@@ -306,6 +306,7 @@ def test_bad_run_folders_get_one_line_errors(tmp_path, damage, message):
     assert isinstance(caught.value, DV2SError) and "\n" not in str(caught.value)
 
 
+@pytest.mark.slow
 def test_the_report_loads_neither_scenic_nor_highway_env(run_dir):
     code = ("import sys; from dv2s_gym.mining.report import write_reports; import tempfile, shutil; "
             f"d = tempfile.mkdtemp(); shutil.copytree({str(run_dir)!r}, d, dirs_exist_ok=True); write_reports(d); "
@@ -383,6 +384,7 @@ def test_chromium_reports_a_corrupt_failure_video_as_not_played(tmp_path):
     assert attributes.get("data-video-error"), attributes
 
 
+@pytest.mark.slow
 def test_the_report_of_a_real_mining_run_matches_its_records(tmp_path):
     """``mine`` writes the three reports at its end; their numbers are those of its episodes.jsonl."""
     from dv2s_gym.mining.cluster import cluster_failures

@@ -31,6 +31,7 @@ def stall(tmp_path_factory) -> dict:
     return min(stalls, key=lambda r: r["index"])
 
 
+@pytest.mark.slow
 def test_a_stall_video_runs_from_before_the_stall_through_it(stall, tmp_path):
     written = write_failure_video(stall, tmp_path / "stall.webm", policy="dv2s-ppo", before=4.0, after=1.0)
     k = stall["failure"]["step"]

@@ -448,6 +448,7 @@ def test_compare_scenarios_pooled_regression_spread_over_scenarios_fails():
     assert overall.verdict is Verdict.FAIL and "all scenarios pooled" in overall.reason
 
 
+@pytest.mark.slow
 def test_compare_scenarios_overall_false_alarm_at_most_alpha():
     # identical policies, 21 scenarios of 40 paired episodes with failure rates from 2 to 25 %
     rng = np.random.default_rng(2026)
@@ -541,6 +542,7 @@ def run_sequential(p_candidate: float, repetitions: int, seed: int, looks: int =
     return {"counts": counts, "episodes": used / repetitions}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spending", ["obrien-fleming", "pocock"])
 def test_sequential_type_one_error_by_monte_carlo(spending):
     reps = 1500
@@ -551,6 +553,7 @@ def test_sequential_type_one_error_by_monte_carlo(spending):
     assert false_alarm.interval()[0] <= DEFAULT_ALPHA
 
 
+@pytest.mark.slow
 def test_sequential_false_pass_at_the_margin_by_monte_carlo():
     reps = 1500
     result = run_sequential(DOCUMENTED_BASELINE_RATE + DEFAULT_MARGIN, reps, seed=19)

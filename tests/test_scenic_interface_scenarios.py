@@ -339,6 +339,7 @@ for i in range(3):
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("town", [TOWN01, TOWN02], ids=["Town01", "Town02"])
 def test_town_scene_with_npcs_runs_20_seconds(town):
     run = run_scenario(TOWN_PROGRAM.format(town=town), 20, seed=3)
