@@ -1,6 +1,6 @@
 """The offline backends' figures on the two whole evaluation sets, checked against the figures measured on them.
 
-    python -m bench.bench_evalset                    # both sets, DRA and end to end (about 15 min on 2 cores)
+    python -m bench.bench_evalset                    # both sets, DRA and end to end
     python -m bench.bench_evalset --set external     # only dv2s_gym/evalset_highway_env
     python -m bench.bench_evalset --stage dra        # only the DRA figures
 

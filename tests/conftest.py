@@ -45,3 +45,20 @@ def in_process_simulator():
         patch.setattr(dv2s_env, "_is_shipped", lambda text: True)
         patch.setattr(scenarios, "compile_scenario", compile_trusted)
         yield
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config, items):
+    """Run the modules that hold slow tests first, each module's tests still together and in order.
+
+    Under ``-n 2`` a module of minutes-long tests collected last keeps one worker busy while the other has
+    nothing left; started first, the short tests fill in around it. Only the order changes (a stable sort,
+    modules kept whole so their module-scoped fixtures are built once); the quick run (``-m "not slow"``)
+    has no slow test and keeps the collection order.
+    """
+    slow_tests = {}
+    for item in items:
+        if item.get_closest_marker("slow") is not None:
+            slow_tests[item.path] = slow_tests.get(item.path, 0) + 1
+    if slow_tests:
+        items.sort(key=lambda item: -slow_tests.get(item.path, 0))
