@@ -79,6 +79,8 @@ def pytest_runtest_protocol(item, nextitem):
         "cpu": round(end[1] - start[1], 3),
         "children_cpu": round(end[2] - start[2], 3),
         "slow": item.get_closest_marker("slow") is not None,
+        "worker": os.environ.get("PYTEST_XDIST_WORKER", "main"),
+        "end": round(time.time(), 3),
     })
     fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
     try:

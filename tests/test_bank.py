@@ -79,6 +79,7 @@ def test_add_get_list_filter_remove(bank):
         Bank(bank.root).get("lead_fas")
 
 
+@pytest.mark.slow
 def test_duplicates_are_refused_with_the_existing_name(bank):
     add(bank, "original")
     with pytest.raises(DuplicateScenarioError, match="original") as exc:
@@ -121,6 +122,7 @@ def test_sample_by_weights_and_stats(bank):
     assert stats["scenarios"] == 3 and stats["by_map"] == {"highway_straight": 3}
 
 
+@pytest.mark.slow
 def test_export_import_and_diff(bank, tmp_path):
     add(bank, "a", speed=11)
     add(bank, "b", speed=12, extra="param q = Range(1, 2)\n")
@@ -189,6 +191,7 @@ def test_newer_versions_are_refused(bank):
     assert "newer" in Bank(bank.root).problems["x"]
 
 
+@pytest.mark.slow
 def test_full_disk_mid_write_leaves_the_bank_unchanged(bank, monkeypatch):
     add(bank, "before")
     real_fsync = os.fsync
@@ -254,6 +257,7 @@ def _parallel_writer(root: str, worker: int, count: int) -> None:
         bank.add(text, f"worker {worker} entry {k}", name=f"w{worker}_{k}", elements=ELEMENTS)
 
 
+@pytest.mark.slow
 def test_parallel_writers_never_lose_or_corrupt_entries(bank):
     bank.root.mkdir(parents=True)
     ctx = mp.get_context("spawn")

@@ -47,6 +47,7 @@ def test_near_duplicate_needs_same_map_elements_and_overlapping_ranges():
     assert near_duplicate(ELEMENTS, "m", variant(60, 100), ELEMENTS, "m", variant(100, 130) + "\nparam z = Range(0, 1)\n")
 
 
+@pytest.mark.slow
 def test_add_or_merge_adds_then_merges_into_the_existing_sidecar(tmp_path):
     bank = Bank(tmp_path / "bank")
     first = bank.add_or_merge(A, "A stopped car ahead.", name="mined_stop", elements=ELEMENTS, provenance=mined(1))

@@ -178,6 +178,7 @@ def test_metadrive_script_runs_with_sumo_map_param(script):
     env.close()
 
 
+@pytest.mark.slow
 def test_road_id_of_another_map_is_named():
     from envs.errors import ScenarioCompileError
     from envs.scenarios import compile_scenario

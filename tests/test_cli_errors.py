@@ -172,6 +172,7 @@ while True:
 """
 
 
+@pytest.mark.slow
 def test_a_script_stuck_compiling_stops_at_the_compile_limit_as_an_expected_outcome(capsys, tmp_path, monkeypatch):
     import time
 

@@ -44,6 +44,7 @@ def _drive(env: ReferenceLabels, model, observation, steps: int):
     return seen, observation
 
 
+@pytest.mark.slow
 def test_a_restored_env_continues_exactly_like_the_original():
     model = load_policy("dv2s-ppo").model
     original = _labelled_env()
@@ -164,6 +165,7 @@ def test_a_run_killed_while_collecting_resumes_from_its_last_partial_commit(tmp_
                                                            "envs_reproduced": True}]
 
 
+@pytest.mark.slow
 def test_a_run_killed_after_its_last_iteration_only_writes_the_result(tmp_path, monkeypatch):
     run = {**RUN, "steps": 120}
     whole = dagger_fine_tune("dv2s-ppo", out=tmp_path / "whole", log=lambda _: None, **run)

@@ -251,6 +251,7 @@ def test_path_to_scenic_file(tmp_path):
     env.close()
 
 
+@pytest.mark.slow
 def test_scenic_source_text():
     source = textwrap.dedent(
         """
@@ -270,6 +271,7 @@ def test_scenic_source_text():
     env.close()
 
 
+@pytest.mark.slow
 def test_list_of_names_and_tags():
     from scenario_bank import list_scenarios as names_with
 
@@ -300,6 +302,7 @@ def small_bank(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_tag_selects_tagged_scenarios(small_bank):
     env = gym.make("DV2S-v0", scenario="tag:highway", config={"duration": 1.0}, bank_dir=str(small_bank))
     assert sorted(r.name for r in env.unwrapped._scenario_refs) == [BRAKES, PULL_BACK_IN]
@@ -552,6 +555,7 @@ CONSTANT_BEHAVIOR = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "scenario",
     [PULL_BACK_IN, CONSTANT_BEHAVIOR],
@@ -754,6 +758,7 @@ def _rss_bytes() -> int:
         return int(handle.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/statm").exists(), reason="needs /proc")
 def test_many_resets_work_without_memory_growth():
     env = make(BRAKES)

@@ -145,6 +145,7 @@ def test_every_bank_script_passes_the_safety_check(path):
     assert check_script(path.read_text(encoding="utf-8")) == []
 
 
+@pytest.mark.slow
 def test_a_normal_script_passes_the_sandbox():
     assert len(BANK_SCRIPTS) >= 21
     text = BANK_SCRIPTS[0].read_text(encoding="utf-8")
@@ -162,6 +163,7 @@ def test_the_child_gets_a_minimal_environment(monkeypatch):
     assert env["HOME"].startswith(SCRATCH) and env["OMP_NUM_THREADS"] == "1"
 
 
+@pytest.mark.slow
 def test_a_script_that_fails_to_compile_is_a_clear_sandbox_error():
     text = BANK_SCRIPTS[0].read_text(encoding="utf-8") + "\nbroken = UndefinedThing(3)\n"
     with pytest.raises(SandboxError, match="while compiling.*UndefinedThing") as caught:
@@ -231,6 +233,7 @@ print(len(findings), findings[0] if findings else "")
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", corpus("precheck") + corpus("safety"), ids=_stem)
 def test_every_refusal_takes_bounded_time(path):
     # A child process with a timeout: a parser that hangs or crashes shows as a failure, not a hung suite.

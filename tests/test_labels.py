@@ -91,6 +91,7 @@ def test_eval_sg_scores_against_the_label(sg_report):
     assert real["metrics"]["SP"] == pytest.approx(semantic_preservation(source.elements, real["detail"]["simulated"]))
 
 
+@pytest.mark.slow
 def test_eval_sg_with_nonsense_labels_drops(sg_report):
     source, items, _ = sg_report
     nonsense, real = items["nonsense"], items["real"]

@@ -94,6 +94,7 @@ def test_a_file_where_a_folder_belongs_is_named(tmp_path, capsys, flag):
     assert a_file.read_text() == "mine\n" and not (tmp_path / "run").exists() and not (tmp_path / "bank").exists()
 
 
+@pytest.mark.slow
 def test_resuming_with_other_settings_is_refused(tmp_path, capsys):
     out = tmp_path / "run"
     base = ["mine", "--policy", "rule", "--scenarios", "highway_lead_vehicle_brakes", "--budget", "2",

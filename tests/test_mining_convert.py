@@ -354,6 +354,7 @@ def test_each_failed_check_of_the_judge_is_its_own_reason():
     assert [str(r).split(":")[0] for r in _judge(half, interaction, {"type": "stall"}, 0.3)] == ["avoidability"]
 
 
+@pytest.mark.slow
 def test_a_near_copy_of_a_mined_entry_of_the_same_family_is_merged(tmp_path):
     from dv2s_gym.mining.convert import _family
     from scenario_bank.bank import changed_code_lines

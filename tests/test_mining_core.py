@@ -519,6 +519,7 @@ class _Planted:
         return (os.system, (f"touch {os.environ['DV2S_TEST_MARKER']}",))
 
 
+@pytest.mark.slow
 def test_a_planted_sampler_checkpoint_is_not_unpickled_and_the_run_resumes_from_its_records(
         whole_run, tmp_path, monkeypatch):
     import pickle

@@ -137,6 +137,7 @@ def test_every_repo_script_is_unchanged():
     assert changed == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", CORPUS, ids=[p.name for p in CORPUS])
 def test_corpus_script_upgrades_to_compiling_scenic3(path):
     import scenic
