@@ -361,6 +361,7 @@ def test_strings_from_records_are_escaped(run_dir, tmp_path):
     assert page.count("<script>") == 1
 
 
+@pytest.mark.slow
 def test_chromium_renders_the_plots_and_plays_the_failure_video(run_dir):
     page = write_reports(run_dir)["html"]
     attributes = body_attributes(page)

@@ -69,6 +69,7 @@ def test_report_has_the_documented_schema(noisy_run):
     assert report["regressed"] == [n for n in PAIR if report["scenarios"][n]["comparison"]["verdict"] == "FAIL"]
 
 
+@pytest.mark.slow
 def test_paired_episodes_run_identical_scenes(noisy_run):
     _, report = noisy_run
     for episode in report["episodes"]:
@@ -218,6 +219,7 @@ def test_replay_reproduces_failed_and_passed_episodes(noisy_run, tmp_path):
         replay_episode(out / "report.json", "nowhere/1")
 
 
+@pytest.mark.slow
 def test_too_few_episodes_is_inconclusive_never_pass(tmp_path):
     report = run_regression("rule", "rule", scenarios=["highway_lead_vehicle_brakes"], episodes=2, workers=1,
                             out_dir=tmp_path, env_config={"duration": 3}, stall_seconds=1, progress=False)
@@ -226,6 +228,7 @@ def test_too_few_episodes_is_inconclusive_never_pass(tmp_path):
     assert report["regressed"] == []
 
 
+@pytest.mark.slow
 def test_without_a_baseline_measures_only(tmp_path):
     report = run_regression("rule", scenarios=["highway_lead_vehicle_brakes"], episodes=2, workers=1,
                             out_dir=tmp_path, env_config={"duration": 3}, stall_seconds=1, progress=False)

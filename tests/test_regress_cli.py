@@ -93,6 +93,7 @@ def test_no_baseline_exits_0_and_json_prints_the_report(tmp_path, capsys):
     assert report["verdict"] is None and report["schema"] == "dv2s-regress"
 
 
+@pytest.mark.slow
 def test_bad_input_exits_2_with_one_line(failing_run, tmp_path, capsys):
     _, out = failing_run
     assert regress("--policy", "rule", "--baseline", "rule", "--scenarios", "", "--out", str(tmp_path / "a")) == 2

@@ -121,6 +121,7 @@ def test_a_baseline_report_from_another_version_is_flagged(tmp_path, capsys):
     assert warning in suite.find("system-err").text
 
 
+@pytest.mark.slow
 def test_resume_key_covers_helper_modules_data_files_and_dv2s_itself(tmp_path, monkeypatch):
     from dv2s_gym.regress import identity
 
@@ -141,6 +142,7 @@ def test_resume_key_covers_helper_modules_data_files_and_dv2s_itself(tmp_path, m
     assert identity.policy_fingerprint("rule")["dv2s sources (SHA-256)"] == "edited simulator"
 
 
+@pytest.mark.slow
 def test_resume_is_refused_when_a_helper_module_of_the_policy_changed(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "stealth_cfg2.py").write_text("ACTION = 1\n")

@@ -239,6 +239,7 @@ def test_newcombe_properties():
     assert paired_difference_interval(PairedTable()) == (-1.0, 1.0)
 
 
+@pytest.mark.slow
 def test_newcombe_coverage_by_simulation():
     # 95 % interval, one-sided misses at most ~2.5 % each side (allowing for its approximation)
     rng = np.random.default_rng(11)
@@ -498,6 +499,7 @@ def test_sequential_stops_early_on_a_flagrant_regression_and_refuses_misuse():
         test.update(PairedTable(1, 4, 3, 152))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spending", ["obrien-fleming", "pocock"])
 def test_sequential_fail_error_is_exact_given_the_discordant_counts(spending):
     # every sign sequence of 10 discordant pairs, seen at looks with 2, 5, 7, 10 of them: the
@@ -561,6 +563,7 @@ def test_sequential_false_pass_at_the_margin_by_monte_carlo():
     assert false_pass.interval()[0] <= DEFAULT_ALPHA and false_pass.rate <= DEFAULT_ALPHA
 
 
+@pytest.mark.slow
 def test_sequential_keeps_power_and_saves_episodes():
     reps = 1000
     result = run_sequential(DOCUMENTED_BASELINE_RATE + DOCUMENTED_DELTA, reps, seed=23)

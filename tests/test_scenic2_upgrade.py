@@ -196,6 +196,7 @@ def test_bank_add_upgrades_and_prints_rewrites(tmp_path, capsys):
     assert Bank(tmp_path / "bank").get("old").source["scenic2_rewrites"] == entry["scenic2_rewrites"]
 
 
+@pytest.mark.slow
 def test_llm_repair_loop_upgrades_scenic2_without_a_repair_round():
     from llm_server import ChatServer, load_recorded
 

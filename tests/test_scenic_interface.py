@@ -131,6 +131,7 @@ def highway():
     return run_scenario(HIGHWAY_PROGRAM, DURATION)
 
 
+@pytest.mark.slow
 def test_highway_program_runs_to_the_end_without_collisions(highway):
     assert highway.truncated and not highway.terminated
     assert highway.duration == pytest.approx(DURATION)
@@ -419,6 +420,7 @@ def _maneuver(start, kind):
     return next(m for m in network.elements[start].maneuvers if m.type is kind)
 
 
+@pytest.mark.slow
 def test_crossroads_program_has_no_collisions(crossroads):
     assert crossroads.events("collision") == []
     assert not any(info["off_road"] for info in crossroads.infos)
@@ -500,6 +502,7 @@ ego = new Car at network.lanes[0].centerline.pointAlongBy(1), with speed 0
     return run_scenario(source, 10)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("index", range(TOWN01_APPROACHES))
 def test_follow_lane_through_a_town01_junction(town01_junctions, town01_starts, index):
     run, name = town01_junctions, f"car{index}1"

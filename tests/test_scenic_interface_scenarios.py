@@ -273,6 +273,7 @@ walker = new Pedestrian at 100 @ -1.75, facing 90 deg, with regionContainedIn No
 """
 
 
+@pytest.mark.slow
 def test_agent_drives_the_ego_and_its_scenic_behavior_is_ignored():
     run = run_scenario(EGO_POLICY_PROGRAM, 3, config={"ego_policy": "agent"}, action=IDLE)
     assert run.hw_types["ego"] == "MDPVehicle"

@@ -82,6 +82,7 @@ def test_other_scripts_never_reach_the_disk(monkeypatch, tmp_path):
     assert not list(tmp_path.rglob("*.pickle"))
 
 
+@pytest.mark.slow
 def test_foreign_or_corrupt_cache_files_are_ignored(monkeypatch, tmp_path):
     import os
     import pickle

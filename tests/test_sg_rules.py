@@ -107,6 +107,7 @@ def test_generated_script_is_safe_compiles_samples_and_runs(description):
     assert steps >= 1 and "ego" in trace.states[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("description,word", list(UNPLACEABLE.items()), ids=list(UNPLACEABLE.values()))
 def test_unplaceable_content_is_reported(description, word):
     from envs.scenarios import compile_scenario
