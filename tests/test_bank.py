@@ -93,6 +93,7 @@ def test_duplicates_are_refused_with_the_existing_name(bank):
     assert bank.add(other, "closer lead", name="closer", elements=ELEMENTS).name == "closer"
 
 
+@pytest.mark.slow
 def test_bad_input_to_add(bank):
     with pytest.raises(BankError, match="description"):
         bank.add(script(), " ", name="x")
@@ -141,6 +142,7 @@ def test_export_import_and_diff(bank, tmp_path):
     assert diff.only_in_first == ["a"] and diff.only_in_second == ["c"] and diff.same == ["b"]
 
 
+@pytest.mark.slow
 def test_import_of_a_corrupt_or_foreign_archive_changes_nothing(bank, tmp_path):
     add(bank, "keep")
     garbage = tmp_path / "garbage.tar.gz"

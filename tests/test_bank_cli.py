@@ -30,7 +30,7 @@ def bank(tmp_path):
     return str(tmp_path / "bank")
 
 
-@pytest.mark.slow
+# about 2 s of CPU, kept in the quick run: the bank command's one end-to-end check there
 def test_add_list_show_sample_stats_rm(bank, tmp_path, capsys):
     script = tmp_path / "lead.scenic"
     script.write_text(SCRIPT.format(lo=10))

@@ -191,6 +191,7 @@ def test_a_script_stuck_compiling_stops_at_the_compile_limit_as_an_expected_outc
     assert "unexpected error" not in line and "--debug" not in line
 
 
+@pytest.mark.slow
 def test_run_takes_its_scenario_from_the_bank_given(capsys, tmp_path):
     bank = tmp_path / "bank"
     bank.mkdir()

@@ -95,6 +95,7 @@ def _unexpected(caught, allowed):
     ]
 
 
+@pytest.mark.slow
 def test_a_misspelt_config_key_is_refused_with_a_suggestion():
     from envs.errors import UnknownConfigKeyError
 
@@ -311,6 +312,7 @@ def test_tag_selects_tagged_scenarios(small_bank):
     env.close()
 
 
+@pytest.mark.slow
 def test_none_samples_the_whole_bank(small_bank):
     env = gym.make("DV2S-v0", scenario=None, config={"duration": 1.0}, bank_dir=str(small_bank))
     seen = {env.reset(seed=s)[1]["scenario"] for s in range(15)}

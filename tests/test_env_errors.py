@@ -81,6 +81,7 @@ def test_missing_scenic_file(tmp_path):
 # ------------------------------------------------------------------ compilation
 
 
+@pytest.mark.slow
 def test_syntax_error_names_file_and_line(tmp_path):
     path = script(tmp_path, HEADER + "\nego = new Car at (0, 0\nx = 3\n")
     with pytest.raises(ScenarioCompileError) as info:

@@ -31,6 +31,7 @@ def test_two_policies_meet_the_same_scene_and_outcomes_are_read_from_the_episode
     assert not rule[0].failed and rule[0].success and rule[0].distance > 20
 
 
+# over 1 s of CPU, kept in the quick run: the episode evaluation's one check there
 def test_results_round_trip_through_json():
     result = evaluate("rule", EPISODES[:1])[0]
     data = result.to_json()

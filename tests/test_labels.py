@@ -103,6 +103,7 @@ def test_eval_sg_with_nonsense_labels_drops(sg_report):
     assert nonsense["metrics"]["SP"] < real["metrics"]["SP"] - 0.3
 
 
+@pytest.mark.slow
 def test_eval_sg_falls_back_to_the_text_without_a_label(sg_report):
     source, items, report = sg_report
     free = items["free"]

@@ -353,6 +353,7 @@ def test_sg_never_returns_an_unsafe_script(tfidf_retriever):
     assert result.script is None and result.failure_counts() == {"unsafe_code": 1}
 
 
+@pytest.mark.slow
 def test_sg_unsafe_then_fixed_returns_only_the_safe_script(tfidf_retriever):
     with ChatServer(queue=["sg_unsafe_import_os.json", "sg_lead_brake_attempt2_fixed.json"]) as server:
         result = generate_with_llm(DRA_TEXT, fast_client(server), retriever=tfidf_retriever, **FAST)

@@ -83,6 +83,7 @@ def test_failure_video_from_a_saved_trace_replays_its_actions(record, tmp_path):
     assert np.array_equal(np.asarray(a), np.asarray(b))
 
 
+@pytest.mark.slow
 def test_a_diverging_replay_raises(record, tmp_path):
     with pytest.raises(FailureReplayError, match="diverged"):
         record_failure_video(record, tmp_path / "x.webm", policy="idm")  # not the policy that failed
@@ -193,6 +194,7 @@ def _patch_generator(monkeypatch, script: str) -> None:
     monkeypatch.setattr(stages, "generate", lambda *a, **k: stages.Generation(script, "rules"))
 
 
+@pytest.mark.slow
 def test_an_unsafe_script_is_rejected_at_the_check(record, tmp_path, monkeypatch):
     _patch_generator(monkeypatch, "param map = 'highway_straight'\nmodel scenic.domains.driving.model\n"
                                   "import os\nego = new Car\n")
@@ -225,6 +227,7 @@ def test_a_record_without_a_failure_is_rejected_not_raised(record, tmp_path):
     assert out["status"] == "rejected" and out["stage"] == "video"
 
 
+@pytest.mark.slow
 def test_a_minimal_failure_record_is_completed_from_the_monitors(record, tmp_path):
     minimal = {**record, "failure": {"type": "collision", "time": record["failure"]["time"]}}
     out = convert_failure(minimal, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
@@ -314,6 +317,7 @@ def test_an_unreachable_model_endpoint_stops_converting_and_the_rerun_converts(t
     assert len(rows) == 1 and rows[0]["stage"] != "describe" and rows[0]["status"] == "kept", rows
 
 
+@pytest.mark.slow
 def test_a_script_without_the_failures_interaction_is_rejected_though_the_policy_fails_on_it(record, tmp_path,
                                                                                             monkeypatch):
     # the failure: the ego ran into a car standing still in its lane. The script below has the ego run into a

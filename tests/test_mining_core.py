@@ -114,6 +114,7 @@ def mixed_bank(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_scene_space_decodes_unit_points_into_each_parameter_range(mixed_bank):
     space = SceneSpace(["brakes_mixed", BRAKES], str(mixed_bank))
     assert space.scenarios == ["brakes_mixed", BRAKES]
@@ -535,6 +536,7 @@ def test_a_planted_sampler_checkpoint_is_not_unpickled_and_the_run_resumes_from_
     assert _stable(resumed.records) == _stable(run.records)
 
 
+@pytest.mark.slow
 def test_resuming_with_other_settings_is_refused(whole_run, tmp_path):
     out, _, settings = whole_run
     copy = tmp_path / "run"

@@ -79,6 +79,7 @@ def test_paired_episodes_run_identical_scenes(noisy_run):
         assert candidate["params"] == baseline["params"]
 
 
+@pytest.mark.slow
 def test_newly_failing_and_traces_of_failed_episodes(noisy_run):
     out, report = noisy_run
     for episode in report["episodes"]:

@@ -137,6 +137,7 @@ def test_baseline_report_reruns_only_the_candidate(failing_run, tmp_path, capsys
     assert len(lines) == 8 and {json.loads(line)["role"] for line in lines} == {"candidate"}
 
 
+@pytest.mark.slow
 def test_replay_an_episode_of_a_report(failing_run, tmp_path, capsys):
     _, out = failing_run
     report = json.loads((out / "report.json").read_text())

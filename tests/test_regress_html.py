@@ -48,6 +48,7 @@ def test_the_page_is_one_file_with_no_external_resource(report_dir, report, tmp_
         assert scenario in page
 
 
+@pytest.mark.slow
 def test_clips_are_grouped_by_scenario_regressed_first_and_rows_sorted_by_severity(report, tmp_path):
     report = copy.deepcopy(report)
     names = list(report["scenarios"])
@@ -132,6 +133,7 @@ def test_chromium_loads_the_page_renders_the_plots_and_plays_a_clip(report_dir, 
     assert attributes.get("data-pair-played") == "baseline,candidate", attributes  # both sides of the pair play
 
 
+@pytest.mark.slow
 def test_chromium_reports_a_corrupt_clip_as_not_played(report, tmp_path):
     first = report["newly_failing"][0]
     corrupt = b"\x1a\x45\xdf\xa3" + bytes(range(256)) * 40  # an EBML magic number, then garbage

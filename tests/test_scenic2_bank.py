@@ -33,6 +33,7 @@ def test_bank_add_without_the_option_names_the_scenic2_construct_and_the_fix(tmp
     assert Bank(tmp_path / "bank").names() == []
 
 
+@pytest.mark.slow
 def test_scenic3_script_with_the_option_is_stored_unchanged_without_scenic2_provenance(tmp_path):
     from scenario_bank.scenic2 import upgrade_scenic2
 

@@ -142,6 +142,7 @@ def test_highway_program_runs_to_the_end_without_collisions(highway):
 # --------------------------------------------------------------------------- FollowLaneBehavior
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, speed, lane", [("ego", 10, "road1_lane2"), ("fast1", 30, "road1_lane3")])
 def test_follow_lane_converges_to_the_lane_centre_and_holds_speed(highway, name, speed, lane):
     track = highway.track(name)

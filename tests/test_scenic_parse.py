@@ -55,6 +55,7 @@ def _fresh_process_cache(monkeypatch, tmp_path):
     return sp
 
 
+@pytest.mark.slow
 def test_library_trees_are_kept_on_disk_and_read_back(monkeypatch, tmp_path):
     import scenic
 

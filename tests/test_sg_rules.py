@@ -170,6 +170,7 @@ def test_described_elements_happen_in_simulation(description):
     assert sum(scores) / len(scores) >= 0.8, scores
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("description, map_name", [
     ("A pedestrian stands on the side of the road.", "urban_two_way"),
     ("A pedestrian stands on the side of the highway.", "highway_straight"),
