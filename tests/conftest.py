@@ -21,6 +21,23 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 
+@pytest.fixture(autouse=True)
+def _scenic_globals_idle():
+    """Start every test with Scenic's global state idle, whatever the tests before it left running.
+
+    An env stepping a simulation in this process keeps it in Scenic's module globals between steps
+    (``envs.scenic_highway.stepping``); the package's own compiles set it aside first, but a test
+    compiling with Scenic directly would trip over it ("assert currentSimulation is None") and leave
+    Scenic half-activated for every later test in the worker: which test ran before depends on how
+    xdist shares the tests out. Setting it aside is what ``compile_scenario`` does; a suspended
+    simulation takes its globals back at its next step.
+    """
+    stepping = sys.modules.get("envs.scenic_highway.stepping")
+    if stepping is not None:
+        stepping.release_veneer()
+    yield
+
+
 @pytest.fixture(scope="module")
 def in_process_simulator():
     """Run the test's own Scenic scripts in this process: for tests of the simulator's internals.
