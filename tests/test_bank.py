@@ -56,6 +56,7 @@ def bank(tmp_path):
     return Bank(tmp_path / "bank")
 
 
+@pytest.mark.slow
 def test_add_get_list_filter_remove(bank):
     entry = add(bank, "lead_slow", provenance={"kind": "generated", "video": "v.mp4", "generator": "rules",
                                                "model": None, "context_hash": "abc", "seed": 3})
@@ -78,6 +79,7 @@ def test_add_get_list_filter_remove(bank):
         Bank(bank.root).get("lead_fas")
 
 
+@pytest.mark.slow
 def test_duplicates_are_refused_with_the_existing_name(bank):
     add(bank, "original")
     with pytest.raises(DuplicateScenarioError, match="original") as exc:
@@ -91,6 +93,7 @@ def test_duplicates_are_refused_with_the_existing_name(bank):
     assert bank.add(other, "closer lead", name="closer", elements=ELEMENTS).name == "closer"
 
 
+@pytest.mark.slow
 def test_bad_input_to_add(bank):
     with pytest.raises(BankError, match="description"):
         bank.add(script(), " ", name="x")
@@ -105,6 +108,7 @@ def test_bad_input_to_add(bank):
     assert len(Bank(bank.root)) == 0
 
 
+@pytest.mark.slow
 def test_sample_by_weights_and_stats(bank):
     for k in range(3):
         add(bank, f"s{k}", speed=10 + k, extra=f"param p{k} = Range({k}, {k + 1})\n")
@@ -119,6 +123,7 @@ def test_sample_by_weights_and_stats(bank):
     assert stats["scenarios"] == 3 and stats["by_map"] == {"highway_straight": 3}
 
 
+@pytest.mark.slow
 def test_export_import_and_diff(bank, tmp_path):
     add(bank, "a", speed=11)
     add(bank, "b", speed=12, extra="param q = Range(1, 2)\n")
@@ -137,6 +142,7 @@ def test_export_import_and_diff(bank, tmp_path):
     assert diff.only_in_first == ["a"] and diff.only_in_second == ["c"] and diff.same == ["b"]
 
 
+@pytest.mark.slow
 def test_import_of_a_corrupt_or_foreign_archive_changes_nothing(bank, tmp_path):
     add(bank, "keep")
     garbage = tmp_path / "garbage.tar.gz"
@@ -147,6 +153,7 @@ def test_import_of_a_corrupt_or_foreign_archive_changes_nothing(bank, tmp_path):
     assert [p.name for p in bank.root.iterdir() if p.name.startswith(".")] == [WRITERS_LOCK]  # no staging left
 
 
+@pytest.mark.slow
 def test_bad_sidecars_are_reported_and_the_rest_stays_usable(bank):
     for k, name in enumerate(("good", "corrupt", "edited", "missing")):
         add(bank, name, speed=k, extra=f"param {name} = Range(0, {k + 1})\n")
@@ -198,6 +205,7 @@ def test_newer_versions_are_refused(bank):
     assert "newer" in Bank(bank.root).problems["x"]
 
 
+@pytest.mark.slow
 def test_full_disk_mid_write_leaves_the_bank_unchanged(bank, monkeypatch):
     add(bank, "before")
     real_fsync = os.fsync
@@ -236,6 +244,7 @@ _WRITER = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_killed_writer_leaves_the_bank_as_it_was(bank):
     add(bank, "before")
     code = _WRITER.format(root=str(ROOT), bank=str(bank.root), script=script(33, "param k = Range(1, 9)\n"))
@@ -262,6 +271,7 @@ def _parallel_writer(root: str, worker: int, count: int) -> None:
         bank.add(text, f"worker {worker} entry {k}", name=f"w{worker}_{k}", elements=ELEMENTS)
 
 
+@pytest.mark.slow
 def test_parallel_writers_never_lose_or_corrupt_entries(bank):
     bank.root.mkdir(parents=True)
     ctx = mp.get_context("spawn")

@@ -30,6 +30,7 @@ def bank(tmp_path):
     return str(tmp_path / "bank")
 
 
+# about 2 s of CPU, kept in the quick run: the bank command's one end-to-end check there
 def test_add_list_show_sample_stats_rm(bank, tmp_path, capsys):
     script = tmp_path / "lead.scenic"
     script.write_text(SCRIPT.format(lo=10))
@@ -55,6 +56,7 @@ def test_add_list_show_sample_stats_rm(bank, tmp_path, capsys):
     assert json.loads(out)["scenarios"] == []
 
 
+@pytest.mark.slow
 def test_export_import_and_validate_exit_codes(bank, tmp_path, capsys):
     script = tmp_path / "lead.scenic"
     script.write_text(SCRIPT.format(lo=12))

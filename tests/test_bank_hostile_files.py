@@ -79,7 +79,12 @@ def test_the_corpus_is_complete():
 
 
 # ------------------------------------------------------------------ archives
-@pytest.mark.parametrize("name", sorted(ARCHIVES))
+# the two archives that take over a second of CPU to refuse (measured) run with the slow tests
+_SLOW_ARCHIVES = {"many_members.tar.gz", "total_size_bomb.tar.gz"}
+
+
+@pytest.mark.parametrize("name", [pytest.param(name, marks=pytest.mark.slow) if name in _SLOW_ARCHIVES else name
+                                  for name in sorted(ARCHIVES)])
 def test_hostile_archive_is_refused_by_the_api(name, world, tmp_path):
     bank_dir, _, _ = world
     expected = ARCHIVES[name][0]
@@ -92,6 +97,7 @@ def test_hostile_archive_is_refused_by_the_api(name, world, tmp_path):
     assert Bank(bank_dir).names() == [GOOD]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(ARCHIVES))
 def test_hostile_archive_is_refused_by_the_cli(name, world, tmp_path):
     bank_dir, _, _ = world
@@ -178,6 +184,7 @@ def test_hostile_folder_through_the_api(name, world, tmp_path):
     assert snapshot(tmp_path) == before
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(FOLDERS))
 def test_hostile_folder_through_the_cli(name, world, tmp_path):
     bank_dir, secret, outside = world
@@ -216,6 +223,7 @@ def test_hostile_folder_through_the_cli(name, world, tmp_path):
     assert snapshot(tmp_path) == before
 
 
+@pytest.mark.slow
 def test_names_given_on_the_command_line_are_validated(world):
     bank_dir, _, _ = world
     for command in (["show", "../outside"], ["validate", "/etc"], ["rm", "../x"], ["export", "a.tar.gz", "--name", "a/b"]):
@@ -318,6 +326,7 @@ def test_a_merge_never_writes_through_a_linked_folder(world, tmp_path, monkeypat
 ESCAPES = "\x1b]2;PWNED\x07\x1b[2J\x1b[31mRED"
 
 
+@pytest.mark.slow
 def test_escape_sequences_in_sidecars_are_refused_and_never_printed(world, tmp_path):
     bank_dir, _, _ = world
     evil = tmp_path / "evil" / "evil_entry"

@@ -47,6 +47,7 @@ def test_near_duplicate_needs_same_map_elements_and_overlapping_ranges():
     assert near_duplicate(ELEMENTS, "m", variant(60, 100), ELEMENTS, "m", variant(100, 130) + "\nparam z = Range(0, 1)\n")
 
 
+@pytest.mark.slow
 def test_add_or_merge_adds_then_merges_into_the_existing_sidecar(tmp_path):
     bank = Bank(tmp_path / "bank")
     first = bank.add_or_merge(A, "A stopped car ahead.", name="mined_stop", elements=ELEMENTS, provenance=mined(1))
@@ -75,6 +76,7 @@ def test_add_or_merge_adds_then_merges_into_the_existing_sidecar(tmp_path):
         bank.add(A, "again", elements=ELEMENTS)
 
 
+@pytest.mark.slow
 def test_old_sidecars_load_and_take_merges(tmp_path):
     shutil.copytree(BANK_DIR / BASE, tmp_path / "bank" / BASE)  # a sidecar without any mined field
     bank = Bank(tmp_path / "bank")
@@ -110,6 +112,7 @@ def _miner(bank_dir: str, order: list, start, results) -> None:
     results.put(out)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("miners", [2, 4])
 def test_several_miners_writing_to_one_bank_keep_it_consistent(tmp_path, miners):
     for script in (A, A_NEAR, B):  # sandbox once here (cached by content); the race is the bank's

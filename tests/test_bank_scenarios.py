@@ -216,6 +216,7 @@ STORY_SEEDS = range(10)
 STORY_THRESHOLD = 0.9  # at least 9 of 10 seeds, with every ego
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", NAMES)
 def test_story_rate(name):
     """The scenario's adversarial story (its sidecar's story block, see dv2s_gym/story_check.py) plays in

@@ -64,6 +64,7 @@ def test_model_lines_route_to_the_facades():
     assert model_for("model scenic.domains.driving.model\n") == MODEL
 
 
+@pytest.mark.slow
 def test_blueprints_choose_kind_and_size_and_cosmetics_are_accepted(script):
     env, unwrapped, _ = _run(script("props_and_blueprints"), steps=3)
     kinds = unwrapped.trace.kinds
@@ -79,6 +80,7 @@ def test_blueprints_choose_kind_and_size_and_cosmetics_are_accepted(script):
     env.close()
 
 
+@pytest.mark.slow
 def test_props_are_static_obstacles_that_collide(script):
     env, unwrapped, infos = _run(script("prop_collision"), steps=30)
     assert unwrapped.trace.kinds["Barrier1"] == "obstacle"
@@ -89,6 +91,7 @@ def test_props_are_static_obstacles_that_collide(script):
     env.close()
 
 
+@pytest.mark.slow
 def test_autopilot_cars_follow_their_lane(script):
     env = gym.make("dv2s_gym:DV2S-v0", scenario=script("autopilot"))
     env.reset(seed=0)
@@ -109,6 +112,7 @@ def test_autopilot_cars_follow_their_lane(script):
     env.close()
 
 
+@pytest.mark.slow
 def test_crossing_pedestrian_crosses_ahead_of_the_ego(script):
     env, unwrapped, _ = _run(script("crossing"), steps=30)
     states = unwrapped.trace.states
@@ -122,6 +126,7 @@ def test_crossing_pedestrian_crosses_ahead_of_the_ego(script):
     env.close()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_visible_and_view_region_work_in_2d(script, seed):
     env, unwrapped, _ = _run(script("visibility"), steps=1, seed=seed)
@@ -136,6 +141,7 @@ def test_visible_and_view_region_work_in_2d(script, seed):
     env.close()
 
 
+@pytest.mark.slow
 def test_traffic_light_helpers_and_gears_warn_and_do_nothing(script):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -150,6 +156,7 @@ def test_traffic_light_helpers_and_gears_warn_and_do_nothing(script):
     env.close()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "name, construct",
     [("unsupported_waypoints", "TrackWaypointsAction"), ("unsupported_autopilot_action", "SetAutopilotAction")],
@@ -161,6 +168,7 @@ def test_unsupported_carla_actions_name_the_construct(script, name, construct):
     assert f"`{construct}`" in message and "\n" not in message
 
 
+@pytest.mark.slow
 def test_metadrive_script_runs_with_sumo_map_param(script):
     env, unwrapped, _ = _run(script("metadrive_follow"), steps=15)
     assert unwrapped.trace.kinds["Car1"] == "car"
@@ -170,6 +178,7 @@ def test_metadrive_script_runs_with_sumo_map_param(script):
     env.close()
 
 
+@pytest.mark.slow
 def test_road_id_of_another_map_is_named():
     from envs.errors import ScenarioCompileError
     from envs.scenarios import compile_scenario

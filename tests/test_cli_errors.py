@@ -60,6 +60,7 @@ def test_missing_video_and_bad_trace_are_one_line(capsys, tmp_path):
     assert code == 2 and "not a dv2s episode trace" in one_line_error(err)
 
 
+@pytest.mark.slow
 def test_failed_generate_lists_only_what_it_wrote(capsys, tmp_path, no_llm_env):
     out_dir = tmp_path / "gen"
     out_dir.mkdir()
@@ -174,6 +175,7 @@ while True:
 """
 
 
+@pytest.mark.slow
 def test_a_script_stuck_compiling_stops_at_the_compile_limit_as_an_expected_outcome(capsys, tmp_path, monkeypatch):
     import time
 
@@ -192,6 +194,7 @@ def test_a_script_stuck_compiling_stops_at_the_compile_limit_as_an_expected_outc
     assert "unexpected error" not in line and "--debug" not in line
 
 
+@pytest.mark.slow
 def test_run_takes_its_scenario_from_the_bank_given(capsys, tmp_path):
     bank = tmp_path / "bank"
     bank.mkdir()

@@ -44,6 +44,7 @@ def _drive(env: ReferenceLabels, model, observation, steps: int):
     return seen, observation
 
 
+@pytest.mark.slow
 def test_a_restored_env_continues_exactly_like_the_original():
     model = load_policy("dv2s-ppo").model
     original = _labelled_env()
@@ -96,6 +97,7 @@ def _kill_on_train_call(monkeypatch, call: int) -> None:
     monkeypatch.setattr(imitation, "_train", train)
 
 
+@pytest.mark.slow
 def test_a_killed_dagger_run_resumes_to_the_same_model_and_refuses_other_settings(tmp_path, monkeypatch):
     whole = dagger_fine_tune("dv2s-ppo", out=tmp_path / "whole", log=lambda _: None, **RUN)
     assert read_card(whole)["fine_tune"]["resumed"] == []
@@ -132,6 +134,7 @@ def test_a_killed_dagger_run_resumes_to_the_same_model_and_refuses_other_setting
     assert not (out / CHECKPOINT_DIR).exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("killed_at_call, position", [(3, (0, 120)), (6, (1, 120))])
 def test_a_run_killed_while_collecting_resumes_from_its_last_partial_commit(tmp_path, monkeypatch, killed_at_call,
                                                                              position):
@@ -162,6 +165,7 @@ def test_a_run_killed_while_collecting_resumes_from_its_last_partial_commit(tmp_
                                                            "envs_reproduced": True}]
 
 
+@pytest.mark.slow
 def test_a_run_killed_after_its_last_iteration_only_writes_the_result(tmp_path, monkeypatch):
     run = {**RUN, "steps": 120}
     whole = dagger_fine_tune("dv2s-ppo", out=tmp_path / "whole", log=lambda _: None, **run)
@@ -196,6 +200,7 @@ def test_an_unreadable_checkpoint_is_refused_with_the_fix(tmp_path):
         dagger_fine_tune("dv2s-ppo", out=tmp_path / "run", log=lambda _: None, **RUN)
 
 
+@pytest.mark.slow
 def test_the_loop_resumes_a_killed_dagger_fine_tune_and_says_so(tmp_path, monkeypatch):
     from dv2s_gym.mining.loop import run_loop
     from loop_helpers import FakeMiner

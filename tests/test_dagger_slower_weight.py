@@ -16,6 +16,7 @@ class _Model:  # the part of an SB3 model imitation_step reads
         self.policy = ActorCriticPolicy(space, gym.spaces.Discrete(5), lambda _: 1e-3)
 
 
+@pytest.mark.slow
 def test_slower_labels_weigh_more_in_the_loss():
     torch.manual_seed(0)
     model = _Model()

@@ -119,6 +119,7 @@ def test_crashed_stock_vehicle_is_found_in_its_red():
     assert b.kind == "red" and abs(b.x - xy[0]) < 0.6 * 5.5
 
 
+@pytest.mark.slow
 def test_analysis_reads_a_long_blue_vehicle_as_a_truck_and_a_yellow_one_as_a_car():
     from types import SimpleNamespace
 

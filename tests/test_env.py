@@ -95,6 +95,7 @@ def _unexpected(caught, allowed):
     ]
 
 
+@pytest.mark.slow
 def test_a_misspelt_config_key_is_refused_with_a_suggestion():
     from envs.errors import UnknownConfigKeyError
 
@@ -251,6 +252,7 @@ def test_path_to_scenic_file(tmp_path):
     env.close()
 
 
+@pytest.mark.slow
 def test_scenic_source_text():
     source = textwrap.dedent(
         """
@@ -270,6 +272,7 @@ def test_scenic_source_text():
     env.close()
 
 
+@pytest.mark.slow
 def test_list_of_names_and_tags():
     from scenario_bank import list_scenarios as names_with
 
@@ -300,6 +303,7 @@ def small_bank(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_tag_selects_tagged_scenarios(small_bank):
     env = gym.make("DV2S-v0", scenario="tag:highway", config={"duration": 1.0}, bank_dir=str(small_bank))
     assert sorted(r.name for r in env.unwrapped._scenario_refs) == [BRAKES, PULL_BACK_IN]
@@ -308,6 +312,7 @@ def test_tag_selects_tagged_scenarios(small_bank):
     env.close()
 
 
+@pytest.mark.slow
 def test_none_samples_the_whole_bank(small_bank):
     env = gym.make("DV2S-v0", scenario=None, config={"duration": 1.0}, bank_dir=str(small_bank))
     seen = {env.reset(seed=s)[1]["scenario"] for s in range(15)}
@@ -385,6 +390,7 @@ def episode_digest(scenario, config, seed, actions):
 '''
 
 
+@pytest.mark.slow
 def test_same_seed_same_episode_across_processes():
     args = (PULL_BACK_IN, {"duration": 4.0}, 11, ACTIONS)
     namespace: dict = {}
@@ -551,6 +557,7 @@ CONSTANT_BEHAVIOR = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "scenario",
     [PULL_BACK_IN, CONSTANT_BEHAVIOR],
@@ -753,6 +760,7 @@ def _rss_bytes() -> int:
         return int(handle.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not Path("/proc/self/statm").exists(), reason="needs /proc")
 def test_many_resets_work_without_memory_growth():
     env = make(BRAKES)

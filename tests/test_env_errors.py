@@ -81,6 +81,7 @@ def test_missing_scenic_file(tmp_path):
 # ------------------------------------------------------------------ compilation
 
 
+@pytest.mark.slow
 def test_syntax_error_names_file_and_line(tmp_path):
     path = script(tmp_path, HEADER + "\nego = new Car at (0, 0\nx = 3\n")
     with pytest.raises(ScenarioCompileError) as info:
@@ -91,6 +92,7 @@ def test_syntax_error_names_file_and_line(tmp_path):
     assert_short_chain(error)
 
 
+@pytest.mark.slow
 def test_error_while_running_the_script_names_file_and_line(tmp_path):
     path = script(tmp_path, HEADER + "\nego = new Car\nlimit = 1 / 0\n")
     with pytest.raises(ScenarioCompileError) as info:
@@ -115,6 +117,7 @@ def test_map_file_that_does_not_exist(tmp_path):
     assert_short_chain(info.value)
 
 
+@pytest.mark.slow
 def test_corrupt_map_file(tmp_path):
     (tmp_path / "broken.xodr").write_text("<OpenDRIVE><header/><road garbage")
     path = script(tmp_path, "param map = localPath('broken.xodr')\nmodel scenic.domains.driving.model\nego = new Car\n")
@@ -144,6 +147,7 @@ def test_script_without_a_map():
     assert "sets no map" in message and "param map" in message and "config={'map'" in message
 
 
+@pytest.mark.slow
 def test_carla_only_construct_at_top_level():
     source = textwrap.dedent(
         """
@@ -161,6 +165,7 @@ def test_carla_only_construct_at_top_level():
     assert_short_chain(info.value)
 
 
+@pytest.mark.slow
 def test_carla_only_action_inside_a_behavior():
     """Names in behaviours are looked up when the simulation runs: still a clear error."""
     source = textwrap.dedent(
@@ -183,11 +188,13 @@ def test_carla_only_action_inside_a_behavior():
     env.close()
 
 
+@pytest.mark.slow
 def test_undefined_name_without_another_simulator():
     with pytest.raises(UnsupportedConstructError, match="`Spaceship` is not defined"):
         DV2SEnv(scenario=HEADER + "ego = new Car\nship = new Spaceship\n")
 
 
+@pytest.mark.slow
 def test_agent_cannot_drive_a_pedestrian_ego():
     source = "param map = 'urban_two_way'\nmodel scenic.domains.driving.model\nego = new Pedestrian on sidewalk\n"
     with pytest.raises(Exception, match="make the ego a Car"):
@@ -197,6 +204,7 @@ def test_agent_cannot_drive_a_pedestrian_ego():
 # --------------------------------------------------------------------- sampling
 
 
+@pytest.mark.slow
 def test_scene_that_cannot_be_sampled():
     source = HEADER + "ego = new Car with speed Range(0, 10)\nrequire ego.speed > 20\n"
     with pytest.raises(SceneSamplingError) as info:
@@ -263,6 +271,7 @@ other = new Car ahead of ego by 20, with behavior Spin()
 """
 
 
+@pytest.mark.slow
 def test_a_behaviour_looping_without_an_action_is_stopped_and_named(tmp_path):
     """Scenic would spin forever in that step; the env's step_time_limit ends it with the line."""
     import warnings

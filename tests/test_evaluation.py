@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from policies.evaluation import EpisodeResult, evaluate
 
 EPISODES = [("urban_left_turn_oncoming", 0), ("highway_cut_in_from_left", 1)]
 
 
+@pytest.mark.slow
 def test_same_policy_same_episodes_same_trajectories():
     first = evaluate("keep_lane", EPISODES)
     second = evaluate("keep_lane", EPISODES)
@@ -16,6 +19,7 @@ def test_same_policy_same_episodes_same_trajectories():
     assert [(r.scenario, r.seed) for r in first] == EPISODES
 
 
+@pytest.mark.slow
 def test_two_policies_meet_the_same_scene_and_outcomes_are_read_from_the_episode():
     keep_lane = evaluate("keep_lane", EPISODES)
     rule = evaluate("rule", EPISODES)
@@ -27,6 +31,7 @@ def test_two_policies_meet_the_same_scene_and_outcomes_are_read_from_the_episode
     assert not rule[0].failed and rule[0].success and rule[0].distance > 20
 
 
+# over 1 s of CPU, kept in the quick run: the episode evaluation's one check there
 def test_results_round_trip_through_json():
     result = evaluate("rule", EPISODES[:1])[0]
     data = result.to_json()

@@ -38,6 +38,7 @@ def _random_pair(rng, spread: float):
     return objs
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spread", [2.0, 5.0, 10.0])
 def test_clearly_apart_never_drops_a_collision(spread):
     rng = np.random.default_rng(int(spread * 10))
@@ -162,6 +163,7 @@ def test_time_to_collision_cases():
 # --------------------------------------------------------------------------- observation
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("env_id", ["DV2S-v0", "highway-v0"])
 def test_fast_kinematics_equals_highway_env_kinematics(env_id):
     """The NumPy Kinematics gives highway-env's pandas Kinematics array, step by step."""

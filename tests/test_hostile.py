@@ -88,6 +88,7 @@ def test_safety_check_refuses_with_line_and_reason(path, tmp_path):
     assert not marker.exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", corpus("sandbox"), ids=_stem)
 def test_sandbox_limits_hold_with_the_safety_check_bypassed(path, tmp_path):
     text = path.read_text(encoding="utf-8")
@@ -98,6 +99,7 @@ def test_sandbox_limits_hold_with_the_safety_check_bypassed(path, tmp_path):
     assert LIMIT_WORDS[limit] in result.message
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", [p for p in corpus("sandbox") if _header(p, "limit") in ("memory", "iterations")],
                          ids=lambda p: p.stem)
 def test_bank_add_refuses_what_the_sandbox_stops_and_stays_unchanged(path, tmp_path, monkeypatch):
@@ -115,6 +117,7 @@ def test_bank_add_refuses_what_the_sandbox_stops_and_stays_unchanged(path, tmp_p
     assert len(Bank(bank.root)) == 0 and not (bank.root / "hostile").exists()
 
 
+@pytest.mark.slow
 def test_an_infinite_loop_through_bank_add_names_the_cpu_limit(tmp_path, monkeypatch):
     monkeypatch.setenv("DV2S_SANDBOX_CPU", "4")
     bank = Bank(tmp_path / "bank")
@@ -142,6 +145,7 @@ def test_every_bank_script_passes_the_safety_check(path):
     assert check_script(path.read_text(encoding="utf-8")) == []
 
 
+@pytest.mark.slow
 def test_a_normal_script_passes_the_sandbox():
     assert len(BANK_SCRIPTS) >= 21
     text = BANK_SCRIPTS[0].read_text(encoding="utf-8")
@@ -159,6 +163,7 @@ def test_the_child_gets_a_minimal_environment(monkeypatch):
     assert env["HOME"].startswith(SCRATCH) and env["OMP_NUM_THREADS"] == "1"
 
 
+@pytest.mark.slow
 def test_a_script_that_fails_to_compile_is_a_clear_sandbox_error():
     text = BANK_SCRIPTS[0].read_text(encoding="utf-8") + "\nbroken = UndefinedThing(3)\n"
     with pytest.raises(SandboxError, match="while compiling.*UndefinedThing") as caught:
@@ -228,6 +233,7 @@ print(len(findings), findings[0] if findings else "")
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", corpus("precheck") + corpus("safety"), ids=_stem)
 def test_every_refusal_takes_bounded_time(path):
     # A child process with a timeout: a parser that hangs or crashes shows as a failure, not a hung suite.

@@ -88,6 +88,7 @@ def _clean_env():
     return {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
 
 
+@pytest.mark.slow
 @installed
 def test_gym_make_with_the_module_prefix_needs_no_import(tmp_path):
     """Gymnasium's idiom: ``gym.make("dv2s_gym:DV2S-v0")`` imports dv2s_gym itself, which registers."""

@@ -411,6 +411,7 @@ def test_a_worker_cannot_start_more_threads_than_its_process_limit(forked):
     assert started < 32, started  # the main thread counts too
 
 
+@pytest.mark.slow
 def test_a_busy_forked_worker_is_stopped_by_the_wall_clock_and_the_cpu_limit(zygote_only):
     with JailedProcess(PROBE, name="spinner", limits=JailLimits(request_seconds=2)) as worker:
         pid = worker.pid
@@ -471,6 +472,7 @@ LOOPING = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_a_script_that_never_yields_is_stopped_by_the_wall_clock(monkeypatch):
     from envs.dv2s_env import DV2SEnv
     from envs.errors import StepTimeoutError
@@ -486,6 +488,7 @@ def test_a_script_that_never_yields_is_stopped_by_the_wall_clock(monkeypatch):
     assert _eventually(lambda: not _running(pid) and _session_processes(pid) == [])
 
 
+@pytest.mark.slow
 def test_untrusted_text_runs_in_the_jail_shipped_names_in_process():
     from envs.dv2s_env import DV2SEnv
     from envs.jailed_env import JailedDV2SEnv
@@ -554,6 +557,7 @@ def test_compile_scenario_refuses_untrusted_text_outside_the_jail():
         compile_scenario("param map = 'highway_straight'\nmodel scenic.domains.driving.model\nego = new Car\n")
 
 
+@pytest.mark.slow
 def test_jailed_env_matches_the_in_process_env_step_for_step():
     """Same scene, same actions: the jailed client and the trusted in-process env agree exactly."""
     from envs.dv2s_env import DV2SEnv
@@ -578,6 +582,7 @@ def test_jailed_env_matches_the_in_process_env_step_for_step():
     np.testing.assert_array_equal(observations[0], observations[1])
 
 
+@pytest.mark.slow
 def test_jailed_env_passes_gymnasiums_checker_and_renders():
     from gymnasium.utils.env_checker import check_env
 
@@ -597,6 +602,7 @@ def test_the_shipped_manifest_lists_exactly_the_shipped_scripts():
     assert MANIFEST.read_text(encoding="ascii") == manifest_text(), "run python -m scenario_bank.shipped"
 
 
+@pytest.mark.slow
 def test_compiling_a_shipped_scenario_imports_nothing_from_the_current_folder(tmp_path):
     # Scenic puts the current folder first on sys.path while it compiles, and its driving domain
     # imports `attr` and `shapely` on first use; planted copies there must never run.

@@ -83,6 +83,7 @@ def sg_report(tmp_path_factory):
     return source, {item["stem"]: item for item in report["items"]}, report
 
 
+@pytest.mark.slow
 def test_eval_sg_scores_against_the_label(sg_report):
     source, items, _ = sg_report
     real = items["real"]
@@ -90,6 +91,7 @@ def test_eval_sg_scores_against_the_label(sg_report):
     assert real["metrics"]["SP"] == pytest.approx(semantic_preservation(source.elements, real["detail"]["simulated"]))
 
 
+@pytest.mark.slow
 def test_eval_sg_with_nonsense_labels_drops(sg_report):
     source, items, _ = sg_report
     nonsense, real = items["nonsense"], items["real"]
@@ -101,6 +103,7 @@ def test_eval_sg_with_nonsense_labels_drops(sg_report):
     assert nonsense["metrics"]["SP"] < real["metrics"]["SP"] - 0.3
 
 
+@pytest.mark.slow
 def test_eval_sg_falls_back_to_the_text_without_a_label(sg_report):
     source, items, report = sg_report
     free = items["free"]

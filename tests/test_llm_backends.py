@@ -311,6 +311,7 @@ def test_extract_scenic_block():
     assert extract_scenic_block("```scenic\nparam map = 'x'\n") is None  # cut off before the closing fence
 
 
+@pytest.mark.slow
 def test_sg_repairs_undefined_symbol_on_attempt_2(examples, tfidf_retriever):
     routes = [("Failure category: undefined_symbol", "sg_lead_brake_attempt2_fixed.json"),
               ("Description of the driving video", "sg_lead_brake_attempt1_undefined.json")]
@@ -352,6 +353,7 @@ def test_sg_never_returns_an_unsafe_script(tfidf_retriever):
     assert result.script is None and result.failure_counts() == {"unsafe_code": 1}
 
 
+@pytest.mark.slow
 def test_sg_unsafe_then_fixed_returns_only_the_safe_script(tfidf_retriever):
     with ChatServer(queue=["sg_unsafe_import_os.json", "sg_lead_brake_attempt2_fixed.json"]) as server:
         result = generate_with_llm(DRA_TEXT, fast_client(server), retriever=tfidf_retriever, **FAST)
@@ -373,6 +375,7 @@ def test_sg_endpoint_errors_are_not_counted_as_script_failures(tfidf_retriever):
             generate_with_llm(DRA_TEXT, fast_client(server), retriever=tfidf_retriever)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("edit, category, stage", [
     (("FollowLaneBehavior(target_speed=globalParameters.passing_speed)",
       "FollowLaneBehavior(speed=globalParameters.passing_speed)"), "function_misuse", "compile"),
@@ -405,6 +408,7 @@ def test_classify_failure_messages():
     assert classify_failure("ZeroDivisionError: division by zero") == "other"
 
 
+@pytest.mark.slow
 def test_the_client_makes_no_network_call_of_its_own(tmp_path):
     """Importing openai and building clients (local or api.openai.com) touches no network; only chat() does."""
     import subprocess

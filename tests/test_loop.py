@@ -135,6 +135,7 @@ def _parameters(spec):
     return np.concatenate([p.detach().numpy().ravel() for p in model.policy.parameters()])
 
 
+@pytest.mark.slow
 def test_fine_tune_continues_the_checkpoint_and_writes_a_card(tmp_path):
     out = tmp_path / "ft"
     path = fine_tune("dv2s-ppo", bank_dir=None, out=out, steps=200, weights={SOURCES[0]: 3.0, SOURCES[1]: 1.0},
@@ -165,6 +166,7 @@ def test_fine_tune_continues_the_checkpoint_and_writes_a_card(tmp_path):
 
 
 # --------------------------------------------------------------------------- paired evaluation
+@pytest.mark.slow
 def test_paired_evaluation_runs_identical_episodes_before_and_after(tmp_path):
     episodes = [(name, EVAL_SEED_BASE + i) for name in SOURCES for i in range(2)]
     store = HeldOutStore(tmp_path / "heldout.jsonl")
@@ -182,6 +184,7 @@ def test_paired_evaluation_runs_identical_episodes_before_and_after(tmp_path):
     assert again == before
 
 
+@pytest.mark.slow
 def test_held_out_workers_that_crash_or_hang_give_error_records_not_failures(tmp_path):
     episodes = [(SOURCES[0], EVAL_SEED_BASE), (SOURCES[1], EVAL_SEED_BASE)]
     store = HeldOutStore(tmp_path / "heldout.jsonl")

@@ -41,6 +41,7 @@ def test_reward_overrides_change_only_the_named_terms():
         with_reward_weights(SHIPPED_CONFIG, {"standing": float("nan")})
 
 
+@pytest.mark.slow
 def test_fine_tune_trains_with_the_overridden_reward_and_records_it(tmp_path, monkeypatch):
     seen = []
     build = training._build_train_env

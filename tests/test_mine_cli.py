@@ -27,6 +27,7 @@ def keys(out: Path):
              r["failure"], r["avoidable"]) for r in rows]
 
 
+@pytest.mark.slow
 def test_mine_writes_records_settings_and_a_summary(tmp_path, capsys):
     out = tmp_path / "run"
     code, stdout, err = run(capsys, "mine", "--policy", "keep_lane", *SCENARIOS, "--budget", "8", "--workers", "2",
@@ -71,6 +72,7 @@ def test_mining_a_bank_that_does_not_exist_names_it(tmp_path, capsys):
     assert not (tmp_path / "typo").exists() and not (tmp_path / "run").exists()
 
 
+@pytest.mark.slow
 def test_an_unreachable_ray_cluster_is_one_line_and_leaves_no_run_folder(tmp_path, capsys):
     from llm_server import closed_port_url
 
@@ -92,6 +94,7 @@ def test_a_file_where_a_folder_belongs_is_named(tmp_path, capsys, flag):
     assert a_file.read_text() == "mine\n" and not (tmp_path / "run").exists() and not (tmp_path / "bank").exists()
 
 
+@pytest.mark.slow
 def test_resuming_with_other_settings_is_refused(tmp_path, capsys):
     out = tmp_path / "run"
     base = ["mine", "--policy", "rule", "--scenarios", "highway_lead_vehicle_brakes", "--budget", "2",
@@ -131,6 +134,7 @@ def test_sigkill_mid_run_then_resume_equals_an_uninterrupted_run(tmp_path, capsy
     assert stdout.splitlines()[0].startswith("24 episodes")
 
 
+@pytest.mark.slow
 def test_replay_reruns_a_mined_failure_and_writes_its_video(tmp_path, capsys):
     from dv2s_gym.pipeline.video import read_video
 

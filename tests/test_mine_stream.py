@@ -56,6 +56,7 @@ def test_the_window_draws_scene_j_once_outcome_j_minus_w_is_fed_whatever_the_arr
 
 # --- the local pool accepts tasks while it runs ---------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_the_local_pool_runs_tasks_added_while_it_runs_with_retries(tmp_path):
     log = tmp_path / "attempts.log"
     base = {"kind": KIND, "policy": f"regress_helpers:FaultyPolicy?crash_seed=13&log={log}", "role": "candidate",
@@ -100,6 +101,7 @@ def streamed(tmp_path_factory):
     return out, mine(POLICY, out=out, workers=1, **RUN)
 
 
+@pytest.mark.slow
 def test_a_streamed_run_is_the_same_on_one_and_two_workers(streamed, tmp_path):
     out, one = streamed
     assert json.loads((out / "settings.json").read_text())["schedule"] == "window"
@@ -110,6 +112,7 @@ def test_a_streamed_run_is_the_same_on_one_and_two_workers(streamed, tmp_path):
     assert any(r["failure"] for r in one.records) and any(not r["failure"] for r in one.records)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stop_after", [3, 6, 9])
 def test_a_streamed_run_interrupted_mid_way_resumes_to_the_same_records(streamed, tmp_path, monkeypatch, stop_after):
     out, whole = streamed
@@ -121,6 +124,7 @@ def test_a_streamed_run_interrupted_mid_way_resumes_to_the_same_records(streamed
     assert (cut / "episodes.jsonl").read_bytes().count(b"\n") == 12  # nothing ran twice
 
 
+@pytest.mark.slow
 def test_resume_from_records_alone_and_with_a_larger_budget_equals_an_uninterrupted_run(streamed, tmp_path):
     out, whole = streamed
     copy = tmp_path / "copy"
@@ -138,6 +142,7 @@ def test_resume_from_records_alone_and_with_a_larger_budget_equals_an_uninterrup
     assert _stable(longer.records[:12]) == _stable(whole.records)
 
 
+@pytest.mark.slow
 def test_a_chunk_scheduled_run_folder_resumes_on_chunks_and_an_unknown_schedule_is_refused(streamed, tmp_path):
     out, _ = streamed
     old = tmp_path / "old"
@@ -176,6 +181,7 @@ class _ChunkOnly(LocalBackend):
         super().run(tasks, on_result)
 
 
+@pytest.mark.slow
 def test_a_backend_that_does_not_stream_runs_the_window_call_by_call_to_the_same_records(streamed, tmp_path,
                                                                                            monkeypatch):
     from dv2s_gym.workers import pool

@@ -83,6 +83,7 @@ def test_failure_video_from_a_saved_trace_replays_its_actions(record, tmp_path):
     assert np.array_equal(np.asarray(a), np.asarray(b))
 
 
+@pytest.mark.slow
 def test_a_diverging_replay_raises(record, tmp_path):
     with pytest.raises(FailureReplayError, match="diverged"):
         record_failure_video(record, tmp_path / "x.webm", policy="idm")  # not the policy that failed
@@ -107,6 +108,7 @@ def test_failure_class_rule():
     assert len(set(reproduction_seeds(7, 10))) == 10
 
 
+@pytest.mark.slow
 def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(record, tmp_path):
     bank = Bank(tmp_path / "bank")
     out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=bank, cluster=f"{SCENARIO}/collision/0")
@@ -167,6 +169,7 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     assert Bank(tmp_path / "bank").names() == sorted([out["bank_entry"], out["replay_entry"]])
 
 
+@pytest.mark.slow
 def test_a_reproduction_rate_below_the_threshold_is_rejected(record, tmp_path):
     # the collision was with a car; as a collision with a truck, the new scenario never reproduces it
     truck = {**record, "failure": {**record["failure"], "with_kind": "truck"}}
@@ -191,6 +194,7 @@ def _patch_generator(monkeypatch, script: str) -> None:
     monkeypatch.setattr(stages, "generate", lambda *a, **k: stages.Generation(script, "rules"))
 
 
+@pytest.mark.slow
 def test_an_unsafe_script_is_rejected_at_the_check(record, tmp_path, monkeypatch):
     _patch_generator(monkeypatch, "param map = 'highway_straight'\nmodel scenic.domains.driving.model\n"
                                   "import os\nego = new Car\n")
@@ -223,6 +227,7 @@ def test_a_record_without_a_failure_is_rejected_not_raised(record, tmp_path):
     assert out["status"] == "rejected" and out["stage"] == "video"
 
 
+@pytest.mark.slow
 def test_a_minimal_failure_record_is_completed_from_the_monitors(record, tmp_path):
     minimal = {**record, "failure": {"type": "collision", "time": record["failure"]["time"]}}
     out = convert_failure(minimal, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
@@ -312,6 +317,7 @@ def test_an_unreachable_model_endpoint_stops_converting_and_the_rerun_converts(t
     assert len(rows) == 1 and rows[0]["stage"] != "describe" and rows[0]["status"] == "kept", rows
 
 
+@pytest.mark.slow
 def test_a_script_without_the_failures_interaction_is_rejected_though_the_policy_fails_on_it(record, tmp_path,
                                                                                             monkeypatch):
     # the failure: the ego ran into a car standing still in its lane. The script below has the ego run into a
@@ -352,6 +358,7 @@ def test_each_failed_check_of_the_judge_is_its_own_reason():
     assert [str(r).split(":")[0] for r in _judge(half, interaction, {"type": "stall"}, 0.3)] == ["avoidability"]
 
 
+@pytest.mark.slow
 def test_a_near_copy_of_a_mined_entry_of_the_same_family_is_merged(tmp_path):
     from dv2s_gym.mining.convert import _family
     from scenario_bank.bank import changed_code_lines

@@ -115,6 +115,7 @@ def mixed_bank(tmp_path_factory):
     return folder
 
 
+@pytest.mark.slow
 def test_scene_space_decodes_unit_points_into_each_parameter_range(mixed_bank):
     space = SceneSpace(["brakes_mixed", BRAKES], str(mixed_bank))
     assert space.scenarios == ["brakes_mixed", BRAKES]
@@ -146,6 +147,7 @@ def test_scene_space_decodes_unit_points_into_each_parameter_range(mixed_bank):
     assert spec.scenario == BRAKES and len(spec.point) == 4 and spec.params["ego_speed"] == pytest.approx(24.0)
 
 
+@pytest.mark.slow
 def test_decoded_params_are_accepted_by_the_env(mixed_bank):
     from envs.dv2s_env import DV2SEnv
 
@@ -396,6 +398,7 @@ def whole_run(request, tmp_path_factory):
     return out, run, settings
 
 
+@pytest.mark.slow
 def test_a_run_records_every_episode_with_its_scene(whole_run):
     out, run, settings = whole_run
     records = read_records(out / "episodes.jsonl")
@@ -490,6 +493,7 @@ def test_novelty_feedback_feeds_a_repeated_parameter_cell_as_an_easy_scene():
         mine("rule", out="unused", budget=1, feedback="curious")
 
 
+@pytest.mark.slow
 def test_a_killed_run_resumes_to_the_same_records(whole_run, tmp_path):
     out, run, settings = whole_run
     copy = tmp_path / "run"
@@ -526,6 +530,7 @@ class _Planted:
         return (os.system, (f"touch {os.environ['DV2S_TEST_MARKER']}",))
 
 
+@pytest.mark.slow
 def test_a_planted_sampler_checkpoint_is_not_unpickled_and_the_run_resumes_from_its_records(
         whole_run, tmp_path, monkeypatch):
     import pickle
@@ -541,6 +546,7 @@ def test_a_planted_sampler_checkpoint_is_not_unpickled_and_the_run_resumes_from_
     assert _stable(resumed.records) == _stable(run.records)
 
 
+@pytest.mark.slow
 def test_resuming_with_other_settings_is_refused(whole_run, tmp_path):
     out, _, settings = whole_run
     copy = tmp_path / "run"
@@ -573,6 +579,7 @@ def _mine_with_a_crash(tmp_path, once: bool):
     return run, crash_seed, log
 
 
+@pytest.mark.slow
 def test_a_crashing_worker_gives_an_error_record_and_the_run_completes(tmp_path):
     run, crash_seed, log = _mine_with_a_crash(tmp_path, once=False)
     assert [r["index"] for r in run.records] == [0, 1, 2]
@@ -585,6 +592,7 @@ def test_a_crashing_worker_gives_an_error_record_and_the_run_completes(tmp_path)
     assert len(read_records(tmp_path / "run" / "episodes.jsonl")) == 3
 
 
+@pytest.mark.slow
 def test_an_episode_finished_after_its_worker_crashed_is_reported(tmp_path):
     # the retry used to succeed silently: nothing in the record, report or summary said a worker had died
     run, crash_seed, log = _mine_with_a_crash(tmp_path, once=True)
@@ -604,6 +612,7 @@ def test_an_episode_finished_after_its_worker_crashed_is_reported(tmp_path):
     assert "finished by a new worker" in paths["html"].read_text()
 
 
+@pytest.mark.slow
 def test_every_episode_crashing_still_completes_with_error_records(tmp_path):
     run = mine("regress_misbehaving_policies:crash", out=tmp_path / "run", budget=2, sampler="random",
                scenarios=[BRAKES], workers=2, seed=0, reference=None, env_config={"duration": 2}, progress=False,
@@ -621,6 +630,7 @@ if __name__ == "__main__":
 """
 
 
+@pytest.mark.slow
 def test_a_second_miner_on_the_same_folder_is_refused(tmp_path):
     out = tmp_path / "run"
     script = tmp_path / "holder.py"
@@ -656,6 +666,7 @@ def _start_bank(dest: str, barrier, results) -> None:
         results.put(f"{type(error).__name__}: {error}")
 
 
+@pytest.mark.slow
 def test_miners_started_together_on_a_new_bank_folder_share_one_copy(tmp_path):
     # both copied the shipped bank; the second rename failed and that miner died ("Directory not empty")
     import multiprocessing

@@ -31,6 +31,7 @@ def record() -> dict:
     return make_record(SCENARIO, 0, midpoint(SCENARIO))
 
 
+@pytest.mark.slow
 def test_a_kept_and_a_merged_entry_keep_their_videos_once_the_runs_are_deleted(record, tmp_path):
     bank = Bank(tmp_path / "bank")
     out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=bank, k=3,
@@ -76,6 +77,7 @@ def test_a_kept_and_a_merged_entry_keep_their_videos_once_the_runs_are_deleted(r
     assert copy.missing_files() == ["merged/1/failure.webm"]
 
 
+# over 1 s of CPU, kept in the quick run: the entry files' one check there
 def test_entry_file_names_are_checked(tmp_path):
     script = Bank().get(SCENARIO).script
     video = tmp_path / "v.webm"

@@ -79,6 +79,7 @@ def _cross_entropy_run(dimensions: int, draws: int, seed: int):
     return records
 
 
+@pytest.mark.slow
 def test_the_cross_entropy_sampler_s_densities_recover_the_true_rates():
     """The sampler learns to draw the failure region (its first bucket of five); the densities recorded at each
     draw bring the estimate back to the rates under the scenarios' own (uniform) distributions. Over six seeds
@@ -100,6 +101,7 @@ def test_the_cross_entropy_sampler_s_densities_recover_the_true_rates():
     assert sum(values) / len(values) == pytest.approx(0.2, abs=0.005)
 
 
+@pytest.mark.slow
 def test_a_collapsed_proposal_is_flagged():
     """Along a parameter that does not matter the sampler also collapses onto one bucket and stops drawing the
     rest, so the estimate misses most of the failures: the report must say so."""

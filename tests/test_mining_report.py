@@ -306,6 +306,7 @@ def test_bad_run_folders_get_one_line_errors(tmp_path, damage, message):
     assert isinstance(caught.value, DV2SError) and "\n" not in str(caught.value)
 
 
+@pytest.mark.slow
 def test_the_report_loads_neither_scenic_nor_highway_env(run_dir):
     code = ("import sys; from dv2s_gym.mining.report import write_reports; import tempfile, shutil; "
             f"d = tempfile.mkdtemp(); shutil.copytree({str(run_dir)!r}, d, dirs_exist_ok=True); write_reports(d); "
@@ -360,6 +361,7 @@ def test_strings_from_records_are_escaped(run_dir, tmp_path):
     assert page.count("<script>") == 1
 
 
+@pytest.mark.slow
 def test_chromium_renders_the_plots_and_plays_the_failure_video(run_dir):
     page = write_reports(run_dir)["html"]
     attributes = body_attributes(page)
@@ -383,6 +385,7 @@ def test_chromium_reports_a_corrupt_failure_video_as_not_played(tmp_path):
     assert attributes.get("data-video-error"), attributes
 
 
+@pytest.mark.slow
 def test_the_report_of_a_real_mining_run_matches_its_records(tmp_path):
     """``mine`` writes the three reports at its end; their numbers are those of its episodes.jsonl."""
     from dv2s_gym.mining.cluster import cluster_failures

@@ -31,6 +31,7 @@ def stall(tmp_path_factory) -> dict:
     return min(stalls, key=lambda r: r["index"])
 
 
+@pytest.mark.slow
 def test_a_stall_video_runs_from_before_the_stall_through_it(stall, tmp_path):
     written = write_failure_video(stall, tmp_path / "stall.webm", policy="dv2s-ppo", before=4.0, after=1.0)
     k = stall["failure"]["step"]
@@ -47,6 +48,7 @@ def test_a_stall_video_runs_from_before_the_stall_through_it(stall, tmp_path):
     assert len(clip.frames) == written.frames == written.last - written.first + 1
 
 
+@pytest.mark.slow
 def test_a_shorter_monitor_stall_duration_shortens_the_clip(stall, tmp_path):
     written = write_failure_video(stall, tmp_path / "stall.webm", policy="dv2s-ppo", before=1.0, after=0.0,
                                   stall_seconds=2.0)

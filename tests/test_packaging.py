@@ -39,6 +39,7 @@ def _chmod_tree(folder: Path, writable: bool) -> None:
             path.chmod(mode & ~(stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH))
 
 
+@pytest.mark.slow
 def test_a_read_only_install_works_and_is_not_written_to(tmp_path):
     """A copy of the packages, made read-only: list the bank, compile and run an episode (parsing
     a map Scenic would cache as .snet), export the bank. Nothing under the copy changes; the index

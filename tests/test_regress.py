@@ -38,6 +38,7 @@ def noisy_run(tmp_path_factory):
     return out, report
 
 
+@pytest.mark.slow
 def test_report_has_the_documented_schema(noisy_run):
     out, report = noisy_run
     assert report == json.loads((out / "report.json").read_text())
@@ -68,6 +69,7 @@ def test_report_has_the_documented_schema(noisy_run):
     assert report["regressed"] == [n for n in PAIR if report["scenarios"][n]["comparison"]["verdict"] == "FAIL"]
 
 
+@pytest.mark.slow
 def test_paired_episodes_run_identical_scenes(noisy_run):
     _, report = noisy_run
     for episode in report["episodes"]:
@@ -77,6 +79,7 @@ def test_paired_episodes_run_identical_scenes(noisy_run):
         assert candidate["params"] == baseline["params"]
 
 
+@pytest.mark.slow
 def test_newly_failing_and_traces_of_failed_episodes(noisy_run):
     out, report = noisy_run
     for episode in report["episodes"]:
@@ -217,6 +220,7 @@ def test_replay_reproduces_failed_and_passed_episodes(noisy_run, tmp_path):
         replay_episode(out / "report.json", "nowhere/1")
 
 
+@pytest.mark.slow
 def test_too_few_episodes_is_inconclusive_never_pass(tmp_path):
     report = run_regression("rule", "rule", scenarios=["highway_lead_vehicle_brakes"], episodes=2, workers=1,
                             out_dir=tmp_path, env_config={"duration": 3}, stall_seconds=1, progress=False)
@@ -225,6 +229,7 @@ def test_too_few_episodes_is_inconclusive_never_pass(tmp_path):
     assert report["regressed"] == []
 
 
+@pytest.mark.slow
 def test_without_a_baseline_measures_only(tmp_path):
     report = run_regression("rule", scenarios=["highway_lead_vehicle_brakes"], episodes=2, workers=1,
                             out_dir=tmp_path, env_config={"duration": 3}, stall_seconds=1, progress=False)
@@ -234,6 +239,7 @@ def test_without_a_baseline_measures_only(tmp_path):
     assert all(e["baseline"] is None for e in report["episodes"])
 
 
+@pytest.mark.slow
 def test_resume_after_an_interruption_loses_and_duplicates_nothing(tmp_path):
     options = dict(scenarios=["highway_lead_vehicle_brakes", "highway_cut_in_from_left"], episodes=4, workers=2,
                    out_dir=tmp_path, env_config={"duration": 3}, stall_seconds=1, progress=False)
@@ -264,6 +270,7 @@ def test_resume_after_an_interruption_loses_and_duplicates_nothing(tmp_path):
     assert again == []  # a finished run resumes to the same report without running anything
 
 
+@pytest.mark.slow
 def test_a_worker_that_crashes_or_hangs_is_retried_once_then_reported(tmp_path):
     log = tmp_path / "attempts.log"
     spec = f"regress_helpers:FaultyPolicy?crash_seed=0&hang_seed=1&log={log}"
@@ -282,6 +289,7 @@ def test_a_worker_that_crashes_or_hangs_is_retried_once_then_reported(tmp_path):
     assert junit.find(".//testcase/error") is not None
 
 
+@pytest.mark.slow
 def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp_path):
     from dv2s_gym.regress.report import build_report
 
@@ -321,6 +329,7 @@ def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp
     assert alone["verdict"] == "ERROR" and "1 episode ended in an error" in alone["error_reason"]
 
 
+@pytest.mark.slow
 def test_baseline_report_runs_only_the_candidate(noisy_run, tmp_path):
     out, old = noisy_run
     roles = []
@@ -413,6 +422,7 @@ def test_noisy_policies_act_alike_on_the_same_episode_whatever_ran_before():
         env.close()
 
 
+@pytest.mark.slow
 def test_sequential_run_stops_as_soon_as_the_verdict_is_settled(tmp_path):
     report = run_regression(NOISY, "rule", scenarios=PAIR, episodes=30, batch=5, sequential=True, workers=2,
                             out_dir=tmp_path, progress=False)
@@ -448,6 +458,7 @@ def test_a_degraded_copy_fails_and_names_the_scenarios_that_regressed(tmp_path):
     assert swapped["verdict"] != "FAIL"
 
 
+@pytest.mark.slow
 def test_a_changed_scenario_script_makes_an_old_report_another_bank_version(tmp_path):
     import shutil
 

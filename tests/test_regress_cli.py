@@ -33,6 +33,7 @@ def failing_run(tmp_path_factory):
     return code, out
 
 
+@pytest.mark.slow
 def test_fail_exits_1_and_names_the_scenario(failing_run, capsys):
     code, out = failing_run
     assert code == 1
@@ -44,6 +45,7 @@ def test_fail_exits_1_and_names_the_scenario(failing_run, capsys):
     assert "| `urban_lead_vehicle_stopped` | 8 |" in (out / "report.md").read_text()
 
 
+@pytest.mark.slow
 def test_inconclusive_exits_3(tmp_path, capsys):
     code = regress("--policy", "rule", "--baseline", "rule", "--scenarios", "highway_lead_vehicle_brakes",
                    "--episodes", "2", "--workers", "1", "--out", str(tmp_path), *QUICK)
@@ -52,6 +54,7 @@ def test_inconclusive_exits_3(tmp_path, capsys):
     assert "verdict: INCONCLUSIVE" in printed and "highway_lead_vehicle_brakes" in printed
 
 
+@pytest.mark.slow
 def test_a_policy_that_crashes_in_every_episode_is_never_green(tmp_path, capsys):
     broken = "regress_helpers:BrokenPolicy"
     code = regress("--policy", broken, "--baseline", "rule", "--scenarios", "highway_lead_vehicle_brakes",
@@ -71,6 +74,7 @@ def test_a_policy_that_crashes_in_every_episode_is_never_green(tmp_path, capsys)
     assert not (tmp_path / "next" / "results.jsonl").exists()
 
 
+@pytest.mark.slow
 def test_pass_exits_0(tmp_path, capsys):
     # 20 pairs without a failure on either side: the interval's upper end (16 points) is below a 20-point margin
     code = regress("--policy", "rule", "--baseline", "rule", "--scenarios", "highway_lead_vehicle_brakes",
@@ -80,6 +84,7 @@ def test_pass_exits_0(tmp_path, capsys):
     assert "verdict: PASS" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_no_baseline_exits_0_and_json_prints_the_report(tmp_path, capsys):
     code = regress("--policy", "rule", "--scenarios", "highway_lead_vehicle_brakes", "--episodes", "2",
                    "--workers", "1", "--out", str(tmp_path), "--json", *QUICK)
@@ -88,6 +93,7 @@ def test_no_baseline_exits_0_and_json_prints_the_report(tmp_path, capsys):
     assert report["verdict"] is None and report["schema"] == "dv2s-regress"
 
 
+@pytest.mark.slow
 def test_bad_input_exits_2_with_one_line(failing_run, tmp_path, capsys):
     _, out = failing_run
     assert regress("--policy", "rule", "--baseline", "rule", "--scenarios", "", "--out", str(tmp_path / "a")) == 2
@@ -108,6 +114,7 @@ def test_bad_input_exits_2_with_one_line(failing_run, tmp_path, capsys):
     assert exit_info.value.code == 2
 
 
+@pytest.mark.slow
 def test_baseline_report_reruns_only_the_candidate(failing_run, tmp_path, capsys):
     _, out = failing_run
     # a report whose verdict was FAIL is no baseline, unless asked for explicitly
@@ -130,6 +137,7 @@ def test_baseline_report_reruns_only_the_candidate(failing_run, tmp_path, capsys
     assert len(lines) == 8 and {json.loads(line)["role"] for line in lines} == {"candidate"}
 
 
+@pytest.mark.slow
 def test_replay_an_episode_of_a_report(failing_run, tmp_path, capsys):
     _, out = failing_run
     report = json.loads((out / "report.json").read_text())
@@ -153,6 +161,7 @@ def test_replay_an_episode_of_a_report(failing_run, tmp_path, capsys):
     assert "DIFFERS from the report" in capsys.readouterr().out
 
 
+@pytest.mark.slow
 def test_a_killed_run_resumes_without_losing_or_repeating_episodes(tmp_path, capsys):
     out = tmp_path / "run"
     args = ["regress", "--policy", "rule", "--baseline", "keep_lane", "--scenarios", "highway_lead_vehicle_brakes",

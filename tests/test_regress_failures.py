@@ -26,6 +26,7 @@ def test_failure_kinds_are_parsed_and_applied():
     assert apply_failure(dict(result), ["collision"])["failed"] is False
 
 
+@pytest.mark.slow
 def test_a_policy_that_stands_still_fails_by_stalling(tmp_path):
     report = run_regression(STOP, "rule", scenarios=[FREE_ROAD], episodes=6, workers=2, out_dir=tmp_path / "stall",
                             env_config=CONFIG, progress=False)

@@ -32,6 +32,7 @@ def report(report_dir) -> dict:
     return json.loads((report_dir / "report.json").read_text())
 
 
+@pytest.mark.slow
 def test_the_page_is_one_file_with_no_external_resource(report_dir, report, tmp_path):
     page = write_html(report, report_dir / "report.html").read_text()
     assert page.startswith("<!DOCTYPE html>")
@@ -47,6 +48,7 @@ def test_the_page_is_one_file_with_no_external_resource(report_dir, report, tmp_
         assert scenario in page
 
 
+@pytest.mark.slow
 def test_clips_are_grouped_by_scenario_regressed_first_and_rows_sorted_by_severity(report, tmp_path):
     report = copy.deepcopy(report)
     names = list(report["scenarios"])
@@ -69,6 +71,7 @@ def test_clips_are_grouped_by_scenario_regressed_first_and_rows_sorted_by_severi
     assert table.index(f"<td>{worse}</td>") < table.index(f"<td>{other}</td>")
 
 
+@pytest.mark.slow
 def test_the_baseline_clip_is_a_rerun_when_its_run_kept_no_trace(report_dir, report):
     from dv2s_gym.regress.runner import bank_info
 
@@ -116,6 +119,7 @@ def test_strings_from_the_report_are_escaped(report, tmp_path):
     assert page.count("<script>") == 1  # only the page's own self-check
 
 
+@pytest.mark.slow
 def test_chromium_loads_the_page_renders_the_plots_and_plays_a_clip(report_dir, report):
     page = write_html(report, report_dir / "report.html")
     attributes = body_attributes(page)
@@ -129,6 +133,7 @@ def test_chromium_loads_the_page_renders_the_plots_and_plays_a_clip(report_dir, 
     assert attributes.get("data-pair-played") == "baseline,candidate", attributes  # both sides of the pair play
 
 
+@pytest.mark.slow
 def test_chromium_reports_a_corrupt_clip_as_not_played(report, tmp_path):
     first = report["newly_failing"][0]
     corrupt = b"\x1a\x45\xdf\xa3" + bytes(range(256)) * 40  # an EBML magic number, then garbage

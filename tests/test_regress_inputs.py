@@ -46,6 +46,7 @@ def test_a_misspelt_policy_option_is_bad_input_before_any_episode(tmp_path, caps
     assert not (tmp_path / "results.jsonl").exists()
 
 
+@pytest.mark.slow
 def test_a_factory_spec_is_called_and_a_module_in_the_current_folder_is_found(tmp_path, monkeypatch):
     (tmp_path / "my_policies_here.py").write_text(POLICY_MODULE.format(action=1))
     monkeypatch.chdir(tmp_path)
@@ -65,6 +66,7 @@ def test_a_factory_spec_is_called_and_a_module_in_the_current_folder_is_found(tm
     assert report["errors"] == [] and report["episodes"][0]["candidate"]["steps"] > 0
 
 
+@pytest.mark.slow
 def test_resume_is_refused_when_the_policy_module_changed_under_the_same_spec(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     module = tmp_path / "resumed_policy_here.py"
@@ -98,6 +100,7 @@ def test_resume_is_refused_when_the_checkpoint_changed_under_the_same_path(tmp_p
     assert any(k.startswith("module policies.rule_based source") for k in policy_fingerprint("rule"))
 
 
+@pytest.mark.slow
 def test_a_baseline_report_from_another_version_is_flagged(tmp_path, capsys):
     old = run_regression("rule", scenarios=[SCENARIO], episodes=1, workers=1, out_dir=tmp_path / "old",
                          env_config=QUICK, stall_seconds=1, progress=False)
@@ -118,6 +121,7 @@ def test_a_baseline_report_from_another_version_is_flagged(tmp_path, capsys):
     assert warning in suite.find("system-err").text
 
 
+@pytest.mark.slow
 def test_resume_key_covers_helper_modules_data_files_and_dv2s_itself(tmp_path, monkeypatch):
     from dv2s_gym.regress import identity
 
@@ -138,6 +142,7 @@ def test_resume_key_covers_helper_modules_data_files_and_dv2s_itself(tmp_path, m
     assert identity.policy_fingerprint("rule")["dv2s sources (SHA-256)"] == "edited simulator"
 
 
+@pytest.mark.slow
 def test_resume_is_refused_when_a_helper_module_of_the_policy_changed(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "stealth_cfg2.py").write_text("ACTION = 1\n")

@@ -39,6 +39,7 @@ def user_suite(pytester, monkeypatch):
     return run
 
 
+@pytest.mark.slow
 def test_a_self_comparison_passes_and_a_degraded_candidate_fails_naming_the_scenario(user_suite, tmp_path):
     reports = tmp_path / "reports"
     result = user_suite(f'''
@@ -66,6 +67,7 @@ def test_noisy_policy():
     assert json.loads((reports / "test_user.py_test_same_policy" / "report.json").read_text())["verdict"] != "FAIL"
 
 
+@pytest.mark.slow
 def test_the_fixture_form_and_inconclusive_when_not_allowed(user_suite):
     result = user_suite(f'''
 import pytest

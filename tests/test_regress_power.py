@@ -68,6 +68,7 @@ def test_run_power_states_power_per_scenario_and_pooled():
     assert power["per_scenario"]["b"]["baseline_rate"] == ASSUMED_BASELINE_RATE
 
 
+@pytest.mark.slow
 def test_a_run_without_episodes_is_sized_by_power_and_states_it(tmp_path):
     report = run_regression("rule", "rule", scenarios=[SCENARIO], mde=0.9, power=0.5, workers=1, out_dir=tmp_path,
                             env_config={"duration": 2}, stall_seconds=1, progress=False)

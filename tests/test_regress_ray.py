@@ -119,6 +119,7 @@ def test_a_crashed_or_hung_actor_is_retried_once_then_reported(ray_address):
     assert crashed["role"] == hung["role"] == "candidate"
 
 
+@pytest.mark.slow
 def test_the_command_names_an_unreachable_address_and_how_to_start_a_cluster(tmp_path):
     port = _free_port()
     out = subprocess.run([sys.executable, "-m", "dv2s_gym.cli", "regress", "--policy", "rule", "--baseline", "idm",

@@ -1,11 +1,14 @@
 """dv2s regress keeps the roles apart: one policy instance per role, and neither role always runs first."""
 
+import pytest
+
 from dv2s_gym.regress import run_regression
 from dv2s_gym.regress.runner import plan_tasks
 
 COUNTING = "regress_helpers:EpisodeCountingPolicy?slow=1"
 
 
+@pytest.mark.slow
 def test_a_stateful_policy_against_itself_drives_alike_in_both_roles(tmp_path):
     report = run_regression(COUNTING, COUNTING, scenarios=["highway_lead_vehicle_brakes"], episodes=3, workers=1,
                             out_dir=tmp_path, env_config={"duration": 2}, stall_seconds=1, progress=False)

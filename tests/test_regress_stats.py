@@ -239,6 +239,7 @@ def test_newcombe_properties():
     assert paired_difference_interval(PairedTable()) == (-1.0, 1.0)
 
 
+@pytest.mark.slow
 def test_newcombe_coverage_by_simulation():
     # 95 % interval, one-sided misses at most ~2.5 % each side (allowing for its approximation)
     rng = np.random.default_rng(11)
@@ -448,6 +449,7 @@ def test_compare_scenarios_pooled_regression_spread_over_scenarios_fails():
     assert overall.verdict is Verdict.FAIL and "all scenarios pooled" in overall.reason
 
 
+@pytest.mark.slow
 def test_compare_scenarios_overall_false_alarm_at_most_alpha():
     # identical policies, 21 scenarios of 40 paired episodes with failure rates from 2 to 25 %
     rng = np.random.default_rng(2026)
@@ -497,6 +499,7 @@ def test_sequential_stops_early_on_a_flagrant_regression_and_refuses_misuse():
         test.update(PairedTable(1, 4, 3, 152))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spending", ["obrien-fleming", "pocock"])
 def test_sequential_fail_error_is_exact_given_the_discordant_counts(spending):
     # every sign sequence of 10 discordant pairs, seen at looks with 2, 5, 7, 10 of them: the
@@ -541,6 +544,7 @@ def run_sequential(p_candidate: float, repetitions: int, seed: int, looks: int =
     return {"counts": counts, "episodes": used / repetitions}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("spending", ["obrien-fleming", "pocock"])
 def test_sequential_type_one_error_by_monte_carlo(spending):
     reps = 1500
@@ -551,6 +555,7 @@ def test_sequential_type_one_error_by_monte_carlo(spending):
     assert false_alarm.interval()[0] <= DEFAULT_ALPHA
 
 
+@pytest.mark.slow
 def test_sequential_false_pass_at_the_margin_by_monte_carlo():
     reps = 1500
     result = run_sequential(DOCUMENTED_BASELINE_RATE + DEFAULT_MARGIN, reps, seed=19)
@@ -558,6 +563,7 @@ def test_sequential_false_pass_at_the_margin_by_monte_carlo():
     assert false_pass.interval()[0] <= DEFAULT_ALPHA and false_pass.rate <= DEFAULT_ALPHA
 
 
+@pytest.mark.slow
 def test_sequential_keeps_power_and_saves_episodes():
     reps = 1000
     result = run_sequential(DOCUMENTED_BASELINE_RATE + DOCUMENTED_DELTA, reps, seed=23)

@@ -186,6 +186,7 @@ def _outcomes(scenario):
     return results
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario, max_failures", [
     # measured on seeds 10000-10011: the driver before gap acceptance and road-end stops collided in 6 and
     # 5 (+1 off road) of 12 and drove off the end of the map in 2; this one succeeds in all 12 of each

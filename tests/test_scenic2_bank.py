@@ -8,6 +8,7 @@ from scenario_bank.bank import Bank, ScenarioRejectedError
 from test_scenic2_upgrade import HIGHWAY_SCENIC2
 
 
+@pytest.mark.slow
 def test_bank_add_upgrades_scenic2_on_request_and_records_the_rewrites(tmp_path):
     bank = Bank(tmp_path / "bank")
     entry = bank.add(HIGHWAY_SCENIC2, "A car ahead on a highway.", name="old", upgrade_scenic2=True)
@@ -32,6 +33,7 @@ def test_bank_add_without_the_option_names_the_scenic2_construct_and_the_fix(tmp
     assert Bank(tmp_path / "bank").names() == []
 
 
+@pytest.mark.slow
 def test_scenic3_script_with_the_option_is_stored_unchanged_without_scenic2_provenance(tmp_path):
     from scenario_bank.scenic2 import upgrade_scenic2
 
@@ -47,6 +49,7 @@ def test_add_or_merge_upgrades_too(tmp_path):
     assert outcome.entry.source["scenic2_rewrites"] and "new Car" in outcome.entry.script
 
 
+@pytest.mark.slow
 def test_env_names_a_scenic2_duration_as_the_construct(tmp_path):
     """A Scenic 2 script whose only Scenic 2 syntax is a duration without a unit: the env says so."""
     import gymnasium as gym

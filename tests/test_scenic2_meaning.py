@@ -183,6 +183,7 @@ def test_scenic3_scripts_keep_scenic3_meaning():
     assert upgrade.source == source and upgrade.rewrites == [] and upgrade.notes == []
 
 
+@pytest.mark.slow
 def test_real_script_ahead_of_ego_keeps_scenic2_placement():
     """iccv_2_agent_scenario.scenic (``Car ahead of ego by Range(3, 5)``): Scenic 2.1.0 put the car's rear
     3-5 m ahead of ego's centre (20 recorded samples); upgraded, Scenic 3.1.1 does too, the syntax-only
@@ -238,6 +239,7 @@ HIGHWAY_RULES = textwrap.dedent(
 )
 
 
+@pytest.mark.slow
 def test_highway_model_script_keeps_scenic2_placements_and_runs_in_the_env():
     """On the env's highway model (compile_scenario: allowlist, mode2D): Scenic 2 put lead's centre
     12 + lead.length / 2 ahead of ego's centre, the follower 10 + its half length behind, and ``far``

@@ -137,6 +137,7 @@ def test_every_repo_script_is_unchanged():
     assert changed == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("path", CORPUS, ids=[p.name for p in CORPUS])
 def test_corpus_script_upgrades_to_compiling_scenic3(path):
     import scenic
@@ -195,6 +196,7 @@ def test_bank_add_upgrades_and_prints_rewrites(tmp_path, capsys):
     assert Bank(tmp_path / "bank").get("old").source["scenic2_rewrites"] == entry["scenic2_rewrites"]
 
 
+@pytest.mark.slow
 def test_llm_repair_loop_upgrades_scenic2_without_a_repair_round():
     from llm_server import ChatServer, load_recorded
 

@@ -131,6 +131,7 @@ def highway():
     return run_scenario(HIGHWAY_PROGRAM, DURATION)
 
 
+@pytest.mark.slow
 def test_highway_program_runs_to_the_end_without_collisions(highway):
     assert highway.truncated and not highway.terminated
     assert highway.duration == pytest.approx(DURATION)
@@ -141,6 +142,7 @@ def test_highway_program_runs_to_the_end_without_collisions(highway):
 # --------------------------------------------------------------------------- FollowLaneBehavior
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, speed, lane", [("ego", 10, "road1_lane2"), ("fast1", 30, "road1_lane3")])
 def test_follow_lane_converges_to_the_lane_centre_and_holds_speed(highway, name, speed, lane):
     track = highway.track(name)
@@ -419,6 +421,7 @@ def _maneuver(start, kind):
     return next(m for m in network.elements[start].maneuvers if m.type is kind)
 
 
+@pytest.mark.slow
 def test_crossroads_program_has_no_collisions(crossroads):
     assert crossroads.events("collision") == []
     assert not any(info["off_road"] for info in crossroads.infos)
@@ -474,15 +477,22 @@ def _town01_junction_approaches(count):
     return [lanes[i * step].uid for i in range(count)]
 
 
-TOWN01_STARTS = _town01_junction_approaches(3)
+# three approaches, chosen when the module's first junction test runs: loading Town01 at import would
+# make every collection of the suite parse the map
+TOWN01_APPROACHES = 3
 
 
 @pytest.fixture(scope="module")
-def town01_junctions():
+def town01_starts():
+    return _town01_junction_approaches(TOWN01_APPROACHES)
+
+
+@pytest.fixture(scope="module")
+def town01_junctions(town01_starts):
     cars = "\n".join(
         f"new Car following roadDirection from network.elements['{uid}'].centerline.end for -25, "
         f"with name 'car{i}', with speed 8, with behavior FollowLaneBehavior(target_speed=8)"
-        for i, uid in enumerate(TOWN01_STARTS)
+        for i, uid in enumerate(town01_starts)
     )
     source = f"""
 param map = r'{TOWN01}'
@@ -493,11 +503,12 @@ ego = new Car at network.lanes[0].centerline.pointAlongBy(1), with speed 0
     return run_scenario(source, 10)
 
 
-@pytest.mark.parametrize("index", range(len(TOWN01_STARTS)), ids=TOWN01_STARTS)
-def test_follow_lane_through_a_town01_junction(town01_junctions, index):
+@pytest.mark.slow
+@pytest.mark.parametrize("index", range(TOWN01_APPROACHES))
+def test_follow_lane_through_a_town01_junction(town01_junctions, town01_starts, index):
     run, name = town01_junctions, f"car{index}1"
     converted = converted_network(run)
-    lane = converted.scenic_network.elements[TOWN01_STARTS[index]]
+    lane = converted.scenic_network.elements[town01_starts[index]]
     allowed_ends = {m.endLane.uid for m in lane.maneuvers}
     track = run.track(name)
     assert any(s.lane_index and converted.is_connecting(s.lane_index) for s in track), "never entered the junction"

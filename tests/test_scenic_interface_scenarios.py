@@ -54,6 +54,7 @@ ego = new Car at network.lanes[1].centerline.pointAlongBy(50), with speed 2, wit
 # --------------------------------------------------------------------------- require always, termination
 
 
+@pytest.mark.slow
 def test_require_always_violated_mid_run_truncates_as_rejected():
     run = run_scenario(_accelerating_ego("require always ego.speed < 8"), 5)
     assert run.truncated and not run.terminated
@@ -273,6 +274,7 @@ walker = new Pedestrian at 100 @ -1.75, facing 90 deg, with regionContainedIn No
 """
 
 
+@pytest.mark.slow
 def test_agent_drives_the_ego_and_its_scenic_behavior_is_ignored():
     run = run_scenario(EGO_POLICY_PROGRAM, 3, config={"ego_policy": "agent"}, action=IDLE)
     assert run.hw_types["ego"] == "MDPVehicle"
@@ -282,6 +284,7 @@ def test_agent_drives_the_ego_and_its_scenic_behavior_is_ignored():
     assert run.xy("Car1")[-1][0] - run.xy("Car1")[0][0] == pytest.approx(30, abs=0.5)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("action", [IDLE, FASTER], ids=["IDLE", "FASTER"])
 def test_scenic_ego_policy_runs_the_ego_behavior_and_ignores_actions(action):
     run = run_scenario(EGO_POLICY_PROGRAM, 3, config={"ego_policy": "scenic"}, action=action)
@@ -339,6 +342,7 @@ for i in range(3):
 """
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("town", [TOWN01, TOWN02], ids=["Town01", "Town02"])
 def test_town_scene_with_npcs_runs_20_seconds(town):
     run = run_scenario(TOWN_PROGRAM.format(town=town), 20, seed=3)

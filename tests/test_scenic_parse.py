@@ -55,6 +55,7 @@ def _fresh_process_cache(monkeypatch, tmp_path):
     return sp
 
 
+@pytest.mark.slow
 def test_library_trees_are_kept_on_disk_and_read_back(monkeypatch, tmp_path):
     import scenic
 
@@ -82,6 +83,7 @@ def test_other_scripts_never_reach_the_disk(monkeypatch, tmp_path):
     assert not list(tmp_path.rglob("*.pickle"))
 
 
+@pytest.mark.slow
 def test_foreign_or_corrupt_cache_files_are_ignored(monkeypatch, tmp_path):
     import os
     import pickle

@@ -157,6 +157,7 @@ oncoming2 = new Car at oncomingOuter.centerline.pointAlongBy(-230), with speed 1
 """
 
 
+@pytest.mark.slow
 def test_the_multilane_street_runs_with_traffic_on_every_lane(tmp_path):
     """Cars on both lanes of both directions, a lane change in the ego's direction, oncoming traffic."""
     import gymnasium as gym

@@ -107,6 +107,7 @@ def test_generated_script_is_safe_compiles_samples_and_runs(description):
     assert steps >= 1 and "ego" in trace.states[0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("description,word", list(UNPLACEABLE.items()), ids=list(UNPLACEABLE.values()))
 def test_unplaceable_content_is_reported(description, word):
     from envs.scenarios import compile_scenario
@@ -169,6 +170,7 @@ def test_described_elements_happen_in_simulation(description):
     assert sum(scores) / len(scores) >= 0.8, scores
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("description, map_name", [
     ("A pedestrian stands on the side of the road.", "urban_two_way"),
     ("A pedestrian stands on the side of the highway.", "highway_straight"),

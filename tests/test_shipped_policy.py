@@ -34,6 +34,7 @@ def _collisions(codes: str):
     return [c == "C" for c in codes]
 
 
+@pytest.mark.slow
 def test_the_shipped_checkpoint_is_small_loads_and_matches_the_env_it_was_trained_on():
     assert SHIPPED_CHECKPOINT.stat().st_size < 2 * 1024 * 1024
     assert (SHIPPED_CHECKPOINT.parent / "README.md").read_text(encoding="utf-8") == render_markdown(CARD)

@@ -80,6 +80,7 @@ def _drive(sampler, space, draws, fails):
     return specs
 
 
+@pytest.mark.slow
 def test_the_split_sampler_leaves_a_scenario_that_stopped_yielding(space):
     def early(step, spec):  # the left turn yields new failures for the first 15 draws, then nothing new
         return spec.scenario == LEFT_TURN and step < 15

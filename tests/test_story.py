@@ -108,6 +108,7 @@ def test_baselines_refuse_other_action_types():
         IDMEgo(env)
 
 
+@pytest.mark.slow
 def test_cli_story_table_and_exit_code(tmp_path, capsys):
     """`dv2s bank validate --story`: 0 when every scenario plays its story, 1 (naming it, with the step it
     missed and a seed that shows it) when one does not."""

@@ -108,12 +108,14 @@ def test_the_detector_finds_a_cycle():
     assert find_cycles({"a": {"b"}, "b": set()}) == []
 
 
+@pytest.mark.slow
 def test_the_graph_sees_function_level_and_relative_imports():
     graph = import_graph()
     assert "scenario_bank.bank" in graph["scenario_bank.catalog"]
     assert "envs.road_network" in graph["envs.scenic_highway.simulator"]  # imported inside a method
 
 
+@pytest.mark.slow
 def test_no_import_cycles():
     graph = {m: {t for t in ts if not _is_package_init_edge(m, t)} for m, ts in import_graph().items()}
     cycles = find_cycles(graph)
@@ -121,12 +123,14 @@ def test_no_import_cycles():
         " <-> ".join(c) for c in cycles)
 
 
+@pytest.mark.slow
 def test_layers_import_one_way():
     wrong = sorted(f"{m} imports {t}" for m, ts in import_graph().items() for t in ts
                    if LAYER[t.split(".")[0]] > LAYER[m.split(".")[0]])
     assert not wrong, "scenario_bank <- envs <- policies <- dv2s_gym is violated:\n" + "\n".join(wrong)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("source, forbidden", [
     ("dv2s_gym.regress", ("dv2s_gym.mining",)),
     ("dv2s_gym.workers", ("dv2s_gym.regress", "dv2s_gym.mining")),  # the pools run tasks they are handed

@@ -129,6 +129,7 @@ def test_replay_of_an_unseeded_episode(tmp_path):
     replay_env.close()
 
 
+@pytest.mark.slow
 def test_replay_of_a_script_with_a_local_map(tmp_path, monkeypatch):
     """`localPath` maps resolve as in the original run, from any working directory."""
     folder = tmp_path / "my_scenario"
@@ -231,6 +232,7 @@ def test_trace_from_a_newer_version(tmp_path, discrete_episode):
         EpisodeTrace.load(path)
 
 
+@pytest.mark.slow
 def test_a_compressed_trace_is_read_with_a_size_cap(tmp_path):
     # 1 MB of gzip that would become 1 GiB of text
     path = tmp_path / "bomb.json.gz"

@@ -175,6 +175,7 @@ def _tiny_config(out: Path, algo: str, **kwargs) -> TrainConfig:
                        eval_freq=0, card_seeds=0, checkpoint_freq=0, progress_bar=False, vec_env="dummy", **kwargs)
 
 
+@pytest.mark.slow
 def test_resume_refuses_a_broken_checkpoint_and_one_of_other_spaces(tmp_path, capsys):
     from stable_baselines3 import PPO
 
@@ -208,6 +209,7 @@ def _spaces_env(shape):
     return Env()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algo", ["dqn", "sac"])
 def test_dqn_and_sac_train_tiny_and_load_through_the_registry(tmp_path, algo):
     out = tmp_path / algo
@@ -293,6 +295,7 @@ def test_card_summary_says_where_the_policy_is_worse():
     assert "collides more often than rule on 1 scenario(s): a (8/10 collisions against 0/10)" in text
 
 
+@pytest.mark.slow
 def test_the_same_settings_train_the_same_model(tmp_path):
     """What makes a card reproducible from its command: same seed, same settings, same weights
     (two subprocess envs, as `dv2s train` runs them)."""

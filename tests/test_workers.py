@@ -53,6 +53,7 @@ def test_the_last_net_and_the_result_of_a_task_given_up():
                                  "running candidate 'rule' on s seed 3 (2 attempts)")
 
 
+@pytest.mark.slow
 def test_the_local_pool_runs_any_registered_kind_in_its_workers_and_refuses_an_unknown_one_at_once():
     results = []
     with LocalBackend(workers=1, timeout=120) as pool:
