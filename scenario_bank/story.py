@@ -26,6 +26,7 @@ import re
 from typing import Any, Dict, Mapping
 
 from scenario_bank.elements import ACTIONS, PARTICIPANTS, RELATIONS
+from scenario_bank.errors import DV2SError
 
 __all__ = ["StoryError", "normalize_story", "step_label", "STEP_KEYS"]
 
@@ -33,7 +34,7 @@ STEP_KEYS = {"actor", "action", "relations", "within_s", "hold", "when"}
 """The keys a step may have."""
 
 
-class StoryError(ValueError):
+class StoryError(DV2SError, ValueError):
     """A ``story`` block that does not follow the format."""
 
 
