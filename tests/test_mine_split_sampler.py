@@ -13,10 +13,11 @@ from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.miner import mine, read_records
 from dv2s_gym.mining.samplers import SPLIT, SceneSampler, is_adaptive, make_sampler
 from dv2s_gym.mining.space import SceneSpace
+from dv2s_gym.mining.split_sampler import scenario_dimensions
 from mining_helpers import global_draws, mine_killed_after, seed_globals_and_peek
 
-BRAKES = "highway_lead_vehicle_brakes"  # 4 parameters
-LEFT_TURN = "urban_left_turn_oncoming"  # 2 parameters
+BRAKES = "highway_lead_vehicle_brakes"
+LEFT_TURN = "urban_left_turn_oncoming"
 POLICY = "rule?action_noise=0.4"
 
 
@@ -72,9 +73,12 @@ def test_each_scenario_has_its_own_parameter_sampler_over_its_own_parameters(spa
     specs = _drive(sampler, space, 60, fails=lambda spec: False)
     turns = [s for s in specs if s.scenario == LEFT_TURN]
     brakes = [s for s in specs if s.scenario == BRAKES]
-    assert len(turns[0].point) == 2 and len(brakes[0].point) == 4
-    # the left turn's own 2-D Halton sequence: its first 18 points cover all 9 cells of the 3 x 3 cluster grid
-    assert len(turns) >= 18 and len({region_of(s.point) for s in turns[:18]}) == 9
+    dimensions = dict(zip([BRAKES, LEFT_TURN], scenario_dimensions(space)))
+    assert dimensions[LEFT_TURN] != dimensions[BRAKES]
+    assert len(turns[0].point) == dimensions[LEFT_TURN] and len(brakes[0].point) == dimensions[BRAKES]
+    # the left turn's own Halton sequence: its first 18 points cover all 9 cells of the 3 x 3 grid over its
+    # first two parameters (a sequence shared with the other scenario would leave gaps there)
+    assert len(turns) >= 18 and len({region_of(s.point[:2]) for s in turns[:18]}) == 9
     # unused coordinates of the shared unit box are fixed, not drawn
     ((point, _),) = make_sampler(SPLIT, space, 0).draw(1)
     spec = space.decode(point)

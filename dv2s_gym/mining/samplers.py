@@ -414,15 +414,22 @@ def make_sampler(name: str, space: Any, seed: int, options: Optional[Dict[str, A
     return SceneSampler(name, inner, seed)
 
 
-def _make_split(space: Any, feature_space: Any, params: Dict[str, Any]):
-    from dv2s_gym.mining.split_sampler import ScenarioSplitSampler, scenario_dimensions
+def _scenario_dimensions(space: Any, feature_space: Any) -> list:
+    """Parameter dimensions per scenario: read from a mining space, or the same width for every scenario of a
+    bare feature space."""
+    from dv2s_gym.mining.split_sampler import scenario_dimensions
 
     if hasattr(space, "scenarios"):
-        dimensions = scenario_dimensions(space)
-    else:
-        width = len(feature_space.featureNamed["u"].domain.intervals)
-        count = feature_space.featureNamed["scenario"].domain.intervals[0][1] + 1
-        dimensions = [width] * int(count)
+        return scenario_dimensions(space)
+    width = len(feature_space.featureNamed["u"].domain.intervals)
+    count = feature_space.featureNamed["scenario"].domain.intervals[0][1] + 1
+    return [width] * int(count)
+
+
+def _make_split(space: Any, feature_space: Any, params: Dict[str, Any]):
+    from dv2s_gym.mining.split_sampler import ScenarioSplitSampler
+
+    dimensions = _scenario_dimensions(space, feature_space)
     return ScenarioSplitSampler(feature_space, dimensions, chooser=params["chooser"], params=params["params"],
                                 alpha=params["alpha"], thres=params["thres"], buckets=params["buckets"],
                                 warmup=params["warmup"], forget=params["forget"], patience=params["patience"],
@@ -433,12 +440,4 @@ def _make_split(space: Any, feature_space: Any, params: Dict[str, Any]):
 def _make_novelty(space: Any, feature_space: Any, params: Dict[str, float]):
     from dv2s_gym.mining.novelty_sampler import NoveltyBanditSampler
 
-    if hasattr(space, "scenarios"):
-        from dv2s_gym.mining.split_sampler import scenario_dimensions
-
-        dimensions = scenario_dimensions(space)
-    else:
-        width = len(feature_space.featureNamed["u"].domain.intervals)
-        count = feature_space.featureNamed["scenario"].domain.intervals[0][1] + 1
-        dimensions = [width] * int(count)
-    return NoveltyBanditSampler(feature_space, dimensions, **params)
+    return NoveltyBanditSampler(feature_space, _scenario_dimensions(space, feature_space), **params)
