@@ -18,9 +18,10 @@ from evalset_helpers import one_clip_per_use_case
 
 # measured on 2026-11-27 on the subset (the first clip of each of the 30 bank scenarios), bev DRA and rules
 # SG: (SCS, HR) and E2E-SC. The first clips of the 21 older scenarios give SCS 0.942 and HR 0.097; those of
-# the 9 pre-crash typology scenarios 0.712 and 0.103 (the analyzer has no bicycle, reversing or pull-out yet)
+# the 9 pre-crash typology scenarios 0.712 and 0.103 (the analyzer has no bicycle, reversing or pull-out yet);
+# E2E-SC 0.944 on the 21 and 0.785 on the 9
 SUBSET_DRA = (0.873, 0.099)
-SUBSET_E2E = 0.944
+SUBSET_E2E = 0.897
 MARGIN = 0.03
 
 
