@@ -10,7 +10,7 @@ episode's info.
 Compiling a Scenic program takes about 3 s (Scenic re-parses the world model
 every time), so the programs put many independent actors on one map, far enough
 apart not to interact, and run once per module; each actor is named with
-``with name 'x'`` and appears in highway-env as ``x1``.
+``with name 'x'`` and appears in highway-env as ``x`` (``x1``, ``x2``... when several share it).
 
 Covered here: the driving domain's behaviour library (lane following, lane
 changes, trajectories and turns through junctions, collision avoidance, walking,
@@ -143,7 +143,7 @@ def test_highway_program_runs_to_the_end_without_collisions(highway):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("name, speed, lane", [("ego", 10, "road1_lane2"), ("fast1", 30, "road1_lane3")])
+@pytest.mark.parametrize("name, speed, lane", [("ego", 10, "road1_lane2"), ("fast", 30, "road1_lane3")])
 def test_follow_lane_converges_to_the_lane_centre_and_holds_speed(highway, name, speed, lane):
     track = highway.track(name)
     assert all(s.lane_index == hw_lane_of(highway, lane) for s in track)
@@ -161,35 +161,35 @@ def test_follow_lane_converges_to_the_lane_centre_and_holds_speed(highway, name,
 
 
 def test_follow_lane_accelerates_from_standstill_to_the_target_speed(highway):
-    speeds = highway.speeds("standstill1")
+    speeds = highway.speeds("standstill")
     assert speeds[0] == 0
     assert speeds.max() < 15.1  # no overshoot
     assert np.abs(speeds[-15:] - 15).max() < 0.3  # last 3 s
-    assert lateral_errors(highway, "standstill1").max() < 0.01
+    assert lateral_errors(highway, "standstill").max() < 0.01
 
 
 # --------------------------------------------------------------------------- LaneChangeBehavior
 
 
 def test_lane_change_ends_centred_in_the_adjacent_lane(highway):
-    track = highway.track("lanechange1")
+    track = highway.track("lanechange")
     start, final = track[0], track[-1]
     assert start.lane_index == hw_lane_of(highway, "road1_lane1")
     assert final.lane_index == hw_lane_of(highway, "road1_lane0")
-    ys = highway.xy("lanechange1")[:, 1]
+    ys = highway.xy("lanechange")[:, 1]
     assert final.y - start.y == pytest.approx(3.5, abs=0.05)  # lane 0 is 3.5 m to the right
     assert ys.max() - start.y < 3.5 + 0.2  # barely overshoots
     assert abs(final.heading) < math.radians(0.5)
-    assert np.abs(highway.headings("lanechange1")).max() < math.radians(15)
+    assert np.abs(highway.headings("lanechange")).max() < math.radians(15)
     assert abs(final.speed - 15) < 0.2
-    changes = [e for e in highway.events("lane_change") if e["actors"] == ["lanechange1"]]
+    changes = [e for e in highway.events("lane_change") if e["actors"] == ["lanechange"]]
     assert [e["direction"] for e in changes] == ["right"]
 
 
 # --------------------------------------------------------------------------- throttle behaviours and actions
 
 
-@pytest.mark.parametrize("name", ["constant1", "accelerate1"])
+@pytest.mark.parametrize("name", ["constant", "accelerate"])
 def test_half_throttle_behaviours_accelerate_straight_ahead(highway, name):
     speeds = highway.speeds(name)
     # the behaviour's first action is taken at time 0, so after t seconds v = 2.5 t
@@ -201,25 +201,25 @@ def test_half_throttle_behaviours_accelerate_straight_ahead(highway, name):
 
 
 def test_set_throttle_action_full_throttle(highway):
-    speeds = highway.speeds("floor1")
+    speeds = highway.speeds("floor")
     below_top_speed = speeds[1:] < 40  # highway-env caps vehicle speeds at 40 m/s
     assert below_top_speed[:30].all()
     assert (np.diff(speeds) / highway.timestep)[below_top_speed] == pytest.approx(MAX_ACCELERATION)
 
 
 def test_set_brake_action_stops_the_car_and_never_reverses(highway):
-    speeds = highway.speeds("brake1")
+    speeds = highway.speeds("brake")
     assert speeds[0] == 15 and np.all(speeds >= 0)
     stop = int(np.argmax(speeds == 0))
     assert stop > 0 and np.all(speeds[stop:] == 0)
     assert stop * highway.timestep == pytest.approx(15 / MAX_BRAKING, abs=highway.timestep)
-    xs = highway.xy("brake1")[:, 0]
+    xs = highway.xy("brake")[:, 0]
     assert np.all(np.diff(xs) >= 0)  # never rolls backwards
     assert xs[-1] - xs[0] == pytest.approx(15**2 / (2 * MAX_BRAKING), rel=0.05)
     assert np.all(xs[stop:] == xs[stop])
 
 
-@pytest.mark.parametrize("name, steer", [("steerright1", 0.3), ("steerleft1", -0.3)])
+@pytest.mark.parametrize("name, steer", [("steerright", 0.3), ("steerleft", -0.3)])
 def test_set_steer_action_turns_the_right_way(highway, name, steer):
     """Positive steer turns right: clockwise seen from above, the Scenic heading decreases."""
     headings = np.unwrap([scenic_heading(h) for h in highway.headings(name)])
@@ -234,25 +234,25 @@ def test_set_steer_action_turns_the_right_way(highway, name, steer):
 
 
 def test_set_speed_action_sets_and_holds_the_speed(highway):
-    speeds = highway.speeds("setspeed1")
+    speeds = highway.speeds("setspeed")
     assert speeds == pytest.approx(12)  # taken at time 0: already visible after reset
-    xs = highway.xy("setspeed1")[:, 0]
+    xs = highway.xy("setspeed")[:, 0]
     assert xs[-1] - xs[0] == pytest.approx(12 * DURATION)
 
 
 def test_set_velocity_action_on_a_car(highway):
-    assert highway.speeds("setvelocity1") == pytest.approx(7)
-    xy = highway.xy("setvelocity1")
+    assert highway.speeds("setvelocity") == pytest.approx(7)
+    xy = highway.xy("setvelocity")
     assert xy[-1] - xy[0] == pytest.approx([7 * DURATION, 0])
 
 
 def test_set_position_action_teleports(highway):
-    xy = highway.xy("teleport1")
+    xy = highway.xy("teleport")
     # step 0 waits; step 1's teleport is applied when step 1 starts (visible after the first env.step)
     assert xy[0] == pytest.approx([400, 5.25])
     assert xy[1] == pytest.approx([900, 5.25])
     assert xy[2] == pytest.approx([901, 5.25])  # then it keeps driving at 5 m/s
-    assert highway.track("teleport1")[-1].lane_index == hw_lane_of(highway, "road1_lane2")
+    assert highway.track("teleport")[-1].lane_index == hw_lane_of(highway, "road1_lane2")
 
 
 # --------------------------------------------------------------------------- collision avoidance
@@ -260,7 +260,7 @@ def test_set_position_action_teleports(highway):
 
 @pytest.mark.parametrize(
     "name, lead, speed, threshold",
-    [("avoid1", "stopped1", 10, 20), ("avoidfast1", "stopped2", 15, 25), ("careful1", "stopped3", 12, 18)],
+    [("avoid", "stopped1", 10, 20), ("avoidfast", "stopped2", 15, 25), ("careful", "stopped3", 12, 18)],
     ids=["DriveAvoidingCollisions", "DriveAvoidingCollisions_fast", "interrupt_when"],
 )
 def test_stops_behind_a_stopped_car_instead_of_hitting_it(highway, name, lead, speed, threshold):
@@ -318,7 +318,7 @@ def walking(request):
 
 @pytest.mark.parametrize(
     "name, direction_deg, expected",
-    [("west1", 90, (-1, 0)), ("north1", 0, (0, -1)), ("east1", -90, (1, 0)), ("south1", 180, (0, 1))],
+    [("west", 90, (-1, 0)), ("north", 0, (0, -1)), ("east", -90, (1, 0)), ("south", 180, (0, 1))],
 )
 def test_set_walking_direction_and_speed(walking, name, direction_deg, expected):
     """Scenic heading 90 deg is west (-x); Scenic north (+y) is highway-env -y."""
@@ -329,31 +329,31 @@ def test_set_walking_direction_and_speed(walking, name, direction_deg, expected)
 
 
 def test_set_speed_action_keeps_a_walking_direction_set_in_the_same_step(walking):
-    xy = walking.xy("speedkeeper1")
+    xy = walking.xy("speedkeeper")
     assert xy[-1] - xy[0] == pytest.approx([2 * 3, 0], abs=1e-6)
 
 
 def test_set_velocity_action_on_a_pedestrian(walking):
-    xy = walking.xy("velocity1")
+    xy = walking.xy("velocity")
     assert xy[-1] - xy[0] == pytest.approx([0, -1.5 * 3], abs=1e-6)
-    assert walking.speeds("velocity1") == pytest.approx(1.5)
+    assert walking.speeds("velocity") == pytest.approx(1.5)
 
 
 def test_walk_forward_behavior_walks_along_the_sidewalk(walking):
-    xy = walking.xy("wanderer1")
+    xy = walking.xy("wanderer")
     moved = xy[-1] - xy[0]
     assert abs(moved[0]) == pytest.approx(3 * 1.0, abs=0.01)  # 1 m/s for 3 s, along the sidewalk (x)
     assert abs(moved[1]) < 0.01
     assert abs(xy[0, 1]) == pytest.approx(4.5, abs=0.3)  # on a sidewalk...
     assert np.abs(xy[:, 1] - xy[0, 1]).max() < 0.4  # ...and stays on it
-    assert walking.speeds("wanderer1") == pytest.approx(1.0)
+    assert walking.speeds("wanderer") == pytest.approx(1.0)
 
 
 def test_walk_forward_direction_is_random_per_scene():
     directions = set()
     for seed in range(6):
         run = run_scenario(WALKING_PROGRAM, 0.4, seed=seed)
-        xy = run.xy("wanderer1")
+        xy = run.xy("wanderer")
         directions.add(int(np.sign(xy[-1][0] - xy[0][0])))
     assert directions == {-1, 1}
 
@@ -404,10 +404,10 @@ new Car at approach(tbLeft, 70), with name 'tbleft', with speed 6, with behavior
 CROSSROADS_CARS = {
     # name: (start lane, maneuver type)
     "ego": ("road4_lane1", ManeuverType.STRAIGHT),
-    "tbright1": ("road2_lane1", ManeuverType.RIGHT_TURN),
-    "ftright1": ("road4_lane1", ManeuverType.RIGHT_TURN),
-    "ftleft1": ("road3_lane1", ManeuverType.LEFT_TURN),
-    "tbleft1": ("road1_lane1", ManeuverType.LEFT_TURN),
+    "tbright": ("road2_lane1", ManeuverType.RIGHT_TURN),
+    "ftright": ("road4_lane1", ManeuverType.RIGHT_TURN),
+    "ftleft": ("road3_lane1", ManeuverType.LEFT_TURN),
+    "tbleft": ("road1_lane1", ManeuverType.LEFT_TURN),
 }
 
 
