@@ -504,9 +504,17 @@ def test_lane_left_emits_lane_change_event():
     assert idle[-1][4]["lane_changes"] == 0
 
 
+ALONE_ON_THE_STREET = """param map = 'urban_two_way'
+model scenic.domains.driving.model
+egoLane = Uniform(*network.lanes)
+ego = new Car at egoLane.centerline.pointAlongBy(Range(60, 460)), with speed 10
+"""
+
+
 def test_driving_off_the_end_of_the_road_terminates():
-    """The urban_two_way street is 600 m long; accelerating along it runs off its end."""
-    env = make(PEDESTRIAN, duration=60.0, terminate_on_collision=False)
+    """The urban_two_way street is 600 m long; accelerating along it, alone, runs off its end."""
+    env = DV2SEnv(scenario=ALONE_ON_THE_STREET, config={"duration": 60.0, "terminate_on_collision": False},
+                  trusted=True)
     steps = rollout(env, 0, [FASTER] * 300)
     _, _, terminated, truncated, info = steps[-1]
     assert terminated and not truncated
