@@ -73,8 +73,14 @@ def test_failure_video_holds_the_window_before_and_through_the_failure(record, t
     assert trajectory_hash(trace) == record["result"]["trajectory_hash"]
 
 
-def test_failure_video_from_a_saved_trace_replays_its_actions(record, tmp_path):
-    write_failure_video(record, tmp_path / "a.webm", policy="keep_lane", before=1.0, after=0.0)
+NOISY = "rule?action_noise=0.5"
+
+
+def test_failure_video_from_a_saved_trace_replays_its_actions(tmp_path):
+    # a driver whose whole behaviour is its actions: keep_lane also resets the ego's target speed outside its
+    # action, which a replay of the recorded actions cannot reproduce
+    noisy = make_record(SCENARIO, 0, midpoint(SCENARIO), policy=NOISY)
+    write_failure_video(noisy, tmp_path / "a.webm", policy=NOISY, before=1.0, after=0.0)
     out = record_failure_video(tmp_path / "trace.json.gz", tmp_path / "b.webm", before=1.0, after=0.0,
                                trace_path=tmp_path / "b.json.gz")
     a = read_video(tmp_path / "a.webm", fps=None, max_frames=1000, max_pixels=10**7).frames
