@@ -64,6 +64,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 
+from dv2s_gym.mining.jsonl import read_rows
 from envs.errors import DV2SError
 
 __all__ = ["LoopError", "LoopReport", "run_loop", "DEFAULT_OUT", "DEFAULTS", "mined_entries", "fine_tune_weights",
@@ -222,12 +223,7 @@ def mined_entries(mine_out: os.PathLike | str, replays: bool = True) -> List[Dic
     path = Path(mine_out) / "conversions.jsonl"
     if not path.is_file():
         return []
-    records = []
-    for line in path.read_text(encoding="utf-8").splitlines():
-        try:
-            records.append(json.loads(line))
-        except ValueError:
-            continue
+    records = read_rows(path)
     entries: Dict[str, Dict[str, Any]] = {}
     for record in records:
         if record.get("status") == "kept" and record.get("bank_entry"):

@@ -50,6 +50,7 @@ import numpy as np
 from dv2s_gym.mining.behaviour import backfill
 from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, group
 from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
 from dv2s_gym.mining.samplers import (
     SAMPLERS,
@@ -605,7 +606,7 @@ def _mine_in(out: Path, started: float, *, policy: str, budget: int, sampler: st
             run.conversions = convert_clusters(run, bank_dir=bank_dir, options=convert_options or {},
                                                progress=progress, max_conversions=max_conversions)
         else:
-            run.conversions = _read_jsonl(out / "conversions.jsonl")
+            run.conversions = read_rows(out / "conversions.jsonl")
         run.seconds = time.perf_counter() - started
         if reports:
             run.reports = _write_reports(out)
@@ -675,18 +676,6 @@ def _has_entries(folder: Path) -> bool:
     return folder.is_dir() and any(not p.name.startswith(".") for p in folder.iterdir())
 
 
-def _read_jsonl(path: Path) -> List[Dict[str, Any]]:
-    if not path.is_file():
-        return []
-    rows = []
-    for line in path.read_text(encoding="utf-8").splitlines():
-        try:
-            rows.append(json.loads(line))
-        except json.JSONDecodeError:
-            continue  # a torn last line
-    return rows
-
-
 def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str, Any],
                      progress: bool = True, max_conversions: Optional[int] = None) -> List[Dict[str, Any]]:
     """Convert one representative failure per avoidable cluster not converted yet; the conversion records.
@@ -703,7 +692,7 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
         raise MiningError("converting failures adds scenarios to a bank: pass a writable bank folder "
                           "(--bank DIR); the shipped bank is read-only")
     path = run.out / "conversions.jsonl"
-    existing = _read_jsonl(path)
+    existing = read_rows(path)
     converted = {row["cluster"] for row in existing}
     converted_episodes = {row.get("index") for row in existing}  # a run converted under older cluster ids
     candidates = []

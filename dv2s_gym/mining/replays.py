@@ -16,22 +16,12 @@ import os
 from pathlib import Path
 from typing import Any, Dict, List, Optional
 
+from dv2s_gym.mining.jsonl import read_rows
+
 __all__ = ["REPLAYS_FILE", "replay_clusters", "replay_entries"]
 
 REPLAYS_FILE = "replays.jsonl"
 """The rows of :func:`replay_clusters` in a mining run folder (one JSON object a line)."""
-
-
-def _rows(path: Path) -> List[Dict[str, Any]]:
-    if not path.is_file():
-        return []
-    rows = []
-    for line in path.read_text(encoding="utf-8").splitlines():
-        try:
-            rows.append(json.loads(line))
-        except ValueError:
-            continue  # a torn last line, left by a kill mid-write
-    return rows
 
 
 def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
@@ -54,8 +44,8 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
         raise MiningError(f"{run_dir} holds no readable mining run (settings.json: {error}); mine into it first") \
             from None
     path = run_dir / REPLAYS_FILE
-    existing = _rows(path)
-    tried = {str(row.get("cluster")) for row in existing + _rows(run_dir / "conversions.jsonl")}
+    existing = read_rows(path)
+    tried = {str(row.get("cluster")) for row in existing + read_rows(run_dir / "conversions.jsonl")}
     candidates = []
     for cluster, members in sorted(group(read_records(run_dir / "episodes.jsonl")).items()):
         avoidable = [r for r in members if r.get("avoidable") is not False]
@@ -95,7 +85,7 @@ def replay_entries(run_dir: os.PathLike | str) -> List[Dict[str, Any]]:
     run_dir = Path(run_dir)
     found: Dict[str, Dict[str, Any]] = {}
     episodes = None
-    for row in _rows(run_dir / "conversions.jsonl") + _rows(run_dir / REPLAYS_FILE):
+    for row in read_rows(run_dir / "conversions.jsonl") + read_rows(run_dir / REPLAYS_FILE):
         name = row.get("replay_entry")
         if not name or name in found:
             continue
