@@ -63,8 +63,12 @@ class Run:
         return (len(self.states) - 1) * self.timestep
 
     def track(self, name: str) -> List[ActorState]:
-        """States of one actor over the episode (steps where it exists)."""
-        return [step[name] for step in self.states if name in step]
+        """States of one actor over the episode (steps where it exists); a name never seen is an error."""
+        track = [step[name] for step in self.states if name in step]
+        if not track:
+            seen = sorted({n for step in self.states for n in step})
+            raise KeyError(f"no actor named {name!r} in this run; the run has {seen}")
+        return track
 
     def xy(self, name: str) -> np.ndarray:
         return np.array([[s.x, s.y] for s in self.track(name)])

@@ -506,7 +506,7 @@ ego = new Car at network.lanes[0].centerline.pointAlongBy(1), with speed 0
 @pytest.mark.slow
 @pytest.mark.parametrize("index", range(TOWN01_APPROACHES))
 def test_follow_lane_through_a_town01_junction(town01_junctions, town01_starts, index):
-    run, name = town01_junctions, f"car{index}1"
+    run, name = town01_junctions, f"car{index}"
     converted = converted_network(run)
     lane = converted.scenic_network.elements[town01_starts[index]]
     allowed_ends = {m.endLane.uid for m in lane.maneuvers}

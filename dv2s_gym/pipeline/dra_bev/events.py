@@ -406,6 +406,8 @@ def _actor(ctx: _Ctx, trk: Track, ego_turn: Optional[str]) -> Optional[Dict[str,
         rels = {"ahead_of", "same_lane"}
     if role == "traffic":
         acts, rels = set(), set()
+    elif vehicle and oncoming and not ctx.junction and not (acts - {"accelerate"}):
+        acts = {"keep_lane"}   # an oncoming car that only drives past holds its own lane
     if "merge" in acts:
         acts -= {"lane_change_left", "lane_change_right"}   # merging is the lane change
         if "ahead_of" in rels and bool(np.any(in_lane[k0:])):

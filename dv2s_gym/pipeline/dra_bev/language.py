@@ -107,6 +107,8 @@ def _clause(actor: Dict[str, Any], count: int, ref: str) -> str:
             main = f"{verb('turns', 'turn')} {'left' if 'turn_left' in acts else 'right'}"
             if "crossing_path" in rels:
                 main += f" and {verb('crosses', 'cross')} the ego's path"
+        elif "keep_lane" in acts:
+            main = f"{verb('keeps', 'keep')} to its lane and {verb('passes', 'pass')} by on the other side"
         else:
             main = f"{verb('passes', 'pass')} by in the other lane"
         return join(f"{head} {main}", extra)
