@@ -215,11 +215,7 @@ def test_short_episode_runs(name, policy):
 STORY_SEEDS = range(10)
 STORY_THRESHOLD = 0.9  # at least 9 of 10 seeds, with every ego
 
-KNOWN_STORY_MISSES = {
-    # a careful ego slows as the crossing starts, so the walker or the turning car enters its path more than
-    # the story's 3 s ahead of it (the scenario does not yet adapt its timing to an ego that hangs back)
-    ("urban_left_turn_across_cyclist", "idm"): 0.5,
-}
+KNOWN_STORY_MISSES: dict = {}
 """Scenario and ego pairs under the threshold, with their rate on STORY_SEEDS: the test asserts exactly these
 miss, so it fails when one more falls under or when one of them is fixed (then remove it here)."""
 
