@@ -2,7 +2,7 @@
 
     python -m bench.bench_bank
 
-Targets (issue 3): listing and filtering 10,000 entries under 1 s; opening the
+Targets: listing and filtering 10,000 entries under 1 s; opening the
 shipped bank under 0.5 s. The 10,000 entries are written straight to disk
 (copies of shipped scenarios with varied parameters and tags), then opened twice:
 cold (index rebuilt from every sidecar) and warm (index up to date).

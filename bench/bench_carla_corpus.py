@@ -5,7 +5,7 @@ One command::
     python -m bench.bench_carla_corpus [--steps 100] [--seeds 0 1 2] [--workers 2] [--timeout 300]
 
 For every script under ``tests/data/carla_corpus/`` (``scenic3/``: Scenic 3 scripts,
-counted for the issue's target; ``scenic2/``: Scenic 2 syntax, counted apart) it tries
+counted for the target; ``scenic2/``: Scenic 2 syntax, counted apart) it tries
 
 * **DV2S-v0**: ``gym.make("dv2s_gym:DV2S-v0", scenario=PATH)`` (for ``scenic2/`` with the env's
   ``config={"upgrade_scenic2": True}``, the Scenic 2 -> 3 upgrade a user asks for), ``reset(seed=s)`` for each

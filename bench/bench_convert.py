@@ -7,7 +7,7 @@ through :func:`dv2s_gym.pipeline.convert.convert_video` with ``--dra bev --sg
 rules`` in this process (one core: OpenCV threads pinned to 1): read and sample the
 video, describe it, generate the Scenic script, check it (safety, compile, sample,
 a 10 s DV2S-v0 run), render the preview video and write the output folder.
-Baseline: the paper's 19.08 s per video with GPT-4o; target (issue 4): at most
+Baseline: the paper's 19.08 s per video with GPT-4o; target: at most
 2 s per 10 s of video. Prints the time per video, mean/median/max per 10 s of video and
 the ratio to the paper.
 

@@ -203,6 +203,17 @@ def _crosses_turning_path(trace, t):
     assert crossed or _hit(trace, "cyclist") is not None, "the cyclist never crosses the ego's path ahead of it"
 
 
+def _obstacle_after_turn(trace, t):
+    ego, obstacle = t["ego"], _actor(t, "obstacle")
+    turned = np.abs((ego[:, 2] - ego[0, 2] + math.pi) % (2 * math.pi) - math.pi) > math.radians(60)
+    assert turned.any(), "the ego never turns"
+    first = int(np.argmax(turned))
+    rel = _rel(ego, obstacle)
+    in_lane_ahead = (rel[:, 0] > 0) & (np.abs(rel[:, 1]) < LANE_HALF)
+    assert not in_lane_ahead[:first].any(), "the obstacle is in the ego's lane before the turn"
+    assert in_lane_ahead[first:].any(), "the obstacle is not in the lane the ego turns into"
+
+
 EVENTS = {
     "highway_slow_lead_vehicle": _slow_lead,
     "highway_adjacent_car_drifts": _drift,
@@ -213,6 +224,8 @@ EVENTS = {
     "urban_lead_vehicle_accelerates_then_stops": _speed_change_ahead("lead", rise_first=True),
     "urban_car_backs_up_toward_ego": _backs_up,
     "urban_left_turn_across_cyclist": _crosses_turning_path,
+    "highway_fast_car_passes_behind_slow_truck": _enters_lane_ahead("passer"),
+    "urban_obstacle_after_right_turn": _obstacle_after_turn,
 }
 
 

@@ -274,10 +274,11 @@ def test_tfidf_retrieval_puts_pedestrian_scenarios_first(tfidf_retriever):
                                 "the ego car on an urban road.", k=3)
     assert len(top) == 3 and all("pedestrian" in e.name for e in top)
     assert top[0].name == "urban_pedestrian_crossing"
-    # on the 30-scenario bank the braking lead is third for this description, behind the simultaneous merge (the
-    # description's "middle lanes") and the slow lead; TF-IDF has no notion of which words carry the event
-    lead = [e.name for e in tfidf_retriever.top_k(DRA_TEXT, k=3)]
-    assert "highway_lead_vehicle_brakes" in lead, lead
+    # on the 32-scenario bank the braking lead is fourth for this description, behind the simultaneous merge (the
+    # description's "middle lanes"), the slow lead and the car that passes the ego in the lane to its left and
+    # brakes in front of it; TF-IDF has no notion of which words carry the event. All four are highway scenarios.
+    lead = [e.name for e in tfidf_retriever.top_k(DRA_TEXT, k=4)]
+    assert "highway_lead_vehicle_brakes" in lead and all(n.startswith("highway_") for n in lead), lead
 
 
 def test_embedding_choice_falls_back_to_tfidf_and_logs(examples, monkeypatch, caplog):

@@ -40,8 +40,8 @@ as a failure, default 0). ``split`` takes them too (defaults :data:`SPLIT_DEFAUL
 thres 0, buckets 3, the last only used by bucketed parameter samplers), and ``chooser``
 (``cross-entropy``, ``ucb``, ``epsilon-greedy``), ``params`` (``halton``, ``random``, ``bandit``,
 ``cross-entropy``), ``warmup`` (tries of every scenario before the chooser draws, default 0), ``avoid``
-(redraws of a scenario's parameters past cells where it already failed, default 81; 0: the session-11
-preset), and for a cross-entropy chooser that leaves scenarios which stop yielding
+(redraws of a scenario's parameters past cells where it already failed, default 81; 0 turns the
+redraws off), and for a cross-entropy chooser that leaves scenarios which stop yielding
 (:mod:`dv2s_gym.mining.chooser`, all off by default): ``forget`` (fraction of the drawn scenario's
 probability moved to the others on each non-failure), ``patience`` (draws without a failure before a
 scenario is cut to ``floor`` of the uniform share, default 0.5) and ``capacity`` (draws per grid cell after

@@ -36,8 +36,8 @@ spent on cells not yet failing; ``forget``/``patience``/``capacity`` replace Ver
 that stop yielding failures.
 
 ``dv2s mine --sampler split`` uses the cross-entropy chooser (alpha 0.9), Halton parameters, ``avoid=81``
-and ``novelty`` feedback (settings chosen on tuning seeds 7-14; bench/RESULTS.md). ``avoid=0`` is the
-session-11 preset (2.56x the distinct failure clusters of random sampling on seeds 0-2).
+and ``novelty`` feedback (settings chosen on tuning seeds 7-14; bench/RESULTS.md). ``avoid=0`` turns the
+redraws off, the earlier preset (2.56x the distinct failure clusters of random sampling on seeds 0-2).
 """
 
 from __future__ import annotations
