@@ -55,6 +55,11 @@ class UnknownConfigKeyError(DV2SError, ValueError):
 OBSERVATION_TYPES = ("Kinematics", "OccupancyGrid", "TimeToCollision", "LidarObservation", "GrayscaleObservation")
 """highway-env observation types DV2S-v0 supports."""
 
+REQUIRED_OBSERVATION_KEYS = {
+    "GrayscaleObservation": {"observation_shape": (128, 64), "stack_size": 4, "weights": [0.2989, 0.5870, 0.1140]},
+}
+"""Keys an observation type cannot do without, each with an example value (highway-env has no default)."""
+
 ACTION_TYPES = ("DiscreteMetaAction", "ContinuousAction", "DiscreteAction")
 """highway-env action types DV2S-v0 supports."""
 
@@ -82,6 +87,13 @@ def check_config_keys(config, defaults) -> None:
 
     _check_type(config, "observation", OBSERVATION_TYPES)
     _check_type(config, "action", ACTION_TYPES)
+    observation = (config or {}).get("observation") or {}
+    needed = REQUIRED_OBSERVATION_KEYS.get(observation.get("type"), {})
+    missing = [key for key in needed if key not in observation]
+    if missing:
+        example = {"type": observation["type"], **needed}
+        raise UnknownConfigKeyError(f"the {observation['type']} observation needs {', '.join(map(repr, missing))}; "
+                                    f"e.g. config['observation'] = {example!r}")
     unknown = sorted(set(config or {}) - set(defaults))
     if not unknown:
         return

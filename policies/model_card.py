@@ -400,7 +400,8 @@ def evaluate_parallel(spec: str, episodes: Sequence[Tuple[str, int]], config: Op
         return results
     import multiprocessing
 
-    pool = multiprocessing.get_context("forkserver").Pool(jobs)
+    # workers leave Ctrl-C to this process, which stops them: one line to the user, no worker tracebacks
+    pool = multiprocessing.get_context("forkserver").Pool(jobs, initializer=_ignore_interrupts)
     try:
         for part in pool.imap(_evaluate_chunk_args, [(spec, chunk, config, bank_dir) for chunk in chunks]):
             results += part
@@ -413,6 +414,12 @@ def evaluate_parallel(spec: str, episodes: Sequence[Tuple[str, int]], config: Op
     finally:
         pool.join()
     return results
+
+
+def _ignore_interrupts() -> None:
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _evaluate_chunk_args(args: Tuple[str, List[Tuple[str, int]], Optional[Dict[str, Any]], Optional[str]]

@@ -545,18 +545,22 @@ class CheckpointSaver(BaseCallback):
             self.save()
         return True
 
-    def save(self) -> Path:
-        """Write a checkpoint at the current step now; returns its path."""
+    def save(self, model: Optional[Any] = None) -> Path:
+        """Write a checkpoint of ``model`` (default: the model this callback is attached to) at its
+        current step now; returns its path. ``model`` serves a run interrupted before SB3 attached
+        the callbacks."""
         from scenario_bank.atomic import atomic_path, atomic_write_json
 
-        self._last = self.num_timesteps
-        path = self.directory / f"step_{self.num_timesteps:09d}.zip"
+        model = model if model is not None else self.model
+        steps = int(model.num_timesteps)
+        self._last = steps
+        path = self.directory / f"step_{steps:09d}.zip"
         with atomic_path(path, keep_suffix=True) as tmp:
-            self.model.save(tmp)
+            model.save(tmp)
         atomic_write_json(path.with_suffix(".sampler.json"), self.sampler.state_dict())
-        if getattr(self.model, "replay_buffer", None) is not None:
+        if getattr(model, "replay_buffer", None) is not None:
             with atomic_path(path.with_suffix(".replay.pkl"), keep_suffix=True) as tmp:
-                self.model.save_replay_buffer(tmp)
+                model.save_replay_buffer(tmp)
         for old in _checkpoints(self.directory)[:-self.keep]:
             for companion in (old, old.with_suffix(".sampler.json"), old.with_suffix(".replay.pkl")):
                 companion.unlink(missing_ok=True)
@@ -704,9 +708,11 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         recorded, record = load_run_config(out)
         _check_resume(config, recorded)
         if checkpoint is None:
-            raise TrainingError(f"{out} holds no checkpoint to resume from (checkpoints/step_<n>.zip); "
-                                "start the run again without --resume in an empty --out")
-        record["config"] = config.to_json()
+            # stopped before its first checkpoint: nothing was kept, so the run starts over in place
+            log(f"{out} holds no checkpoint yet (the run stopped before its first one): starting from step 0")
+            resume, record = False, {"config": config.to_json(), "segments": []}
+        else:
+            record["config"] = config.to_json()
     elif checkpoint is not None or run_path.exists():
         at = f" (checkpoint at step {int(_CHECKPOINT.match(checkpoint.name).group(1))})" if checkpoint else ""
         raise TrainingError(f"{out} already holds a training run{at}; pass --resume to continue it, "
@@ -763,13 +769,13 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
                 model.learn(remaining, callback=CallbackList(callbacks), reset_num_timesteps=not resume,
                             tb_log_name=config.algo.upper(), progress_bar=False)
             except KeyboardInterrupt:
-                saved = saver.save()
+                saved = saver.save(model)
                 close_segment("interrupted")
                 raise Interrupted(f"training stopped at step {model.num_timesteps}: checkpoint {saved} is kept; "
                                   "rerun the same command with --resume to continue") from None
+            saver.save(model)
         else:
             log(f"the model already has {start} steps (>= --steps {config.steps}); nothing to train")
-        saver.save()
         segment = close_segment("finished")
     finally:
         venv.close()

@@ -217,3 +217,16 @@ def test_a_file_that_is_not_a_video_gives_one_line_and_no_ffmpeg_noise(tmp_path,
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 2 and len(lines) == 1, done.stderr
     assert lines[0].startswith("dv2s: error: cannot read video") and "ffmpeg -i" in lines[0]
+
+
+def test_a_reader_that_goes_away_stops_the_command_quietly(monkeypatch, capsys):
+    """`dv2s bank list | head -1`: the closed pipe ends the command without an error line."""
+    import dv2s_gym.cli as cli
+
+    def closed_pipe(args):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(cli, "_cmd_bank_list", closed_pipe)
+    monkeypatch.setattr(cli, "_silence_stdout", lambda: None)  # the test's own stdout stays usable
+    assert cli.main(["bank", "list"]) == 141
+    assert capsys.readouterr().err == ""

@@ -109,6 +109,8 @@ def test_a_misspelt_config_key_is_refused_with_a_suggestion():
     ({"action": {"type": "Continuous"}}, r"unknown action type 'Continuous' \(did you mean 'ContinuousAction'\?\); "
                                          r"DV2S-v0 supports DiscreteMetaAction, ContinuousAction, DiscreteAction"),
     ({"observation": "Kinematics"}, r"config\['observation'\] must be a dict with a 'type'"),
+    ({"observation": {"type": "GrayscaleObservation", "stack_size": 4}},
+     r"the GrayscaleObservation observation needs 'observation_shape', 'weights'; e.g. config\['observation'\] = "),
 ])
 def test_an_unknown_observation_or_action_type_is_named_with_the_choices(config, message):
     from envs.errors import UnknownConfigKeyError

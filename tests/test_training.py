@@ -195,6 +195,31 @@ def test_resume_refuses_a_broken_checkpoint_and_one_of_other_spaces(tmp_path, ca
     assert newest.is_file()
 
 
+@pytest.mark.slow
+def test_resume_of_a_finished_run_rewrites_its_card_and_one_stopped_before_its_first_checkpoint_starts_over(
+        tmp_path):
+    out = tmp_path / "run"
+    lines = []
+    first = train(_tiny_config(out, "ppo", steps=64, hyperparameters={"n_steps": 64}), log=lines.append)
+    # what the CLI advises after Ctrl-C in the card evaluation: the same command with --resume
+    again = train(_tiny_config(out, "ppo", steps=64, hyperparameters={"n_steps": 64}), resume=True,
+                  log=lines.append)
+    assert any("nothing to train" in line for line in lines)
+    assert again["training"]["steps"] == first["training"]["steps"] == 64
+    assert [s["status"] for s in again["training"]["segments"]] == ["finished", "finished"]
+    assert read_card(out)["training"]["steps"] == 64
+    # a run folder with run.json but no checkpoint (interrupted while starting): --resume trains from step 0
+    for path in (out / "checkpoints").iterdir():
+        path.unlink()
+    (out / "model.zip").unlink()
+    lines.clear()
+    card = train(_tiny_config(out, "ppo", steps=64, hyperparameters={"n_steps": 64}), resume=True,
+                 log=lines.append)
+    assert any("holds no checkpoint yet" in line and "step 0" in line for line in lines)
+    assert [s["start_step"] for s in card["training"]["segments"]] == [0] and card["training"]["steps"] == 64
+    assert latest_checkpoint(out) is not None
+
+
 def _spaces_env(shape):
     class Env(gym.Env):
         observation_space = gym.spaces.Box(-np.inf, np.inf, shape, dtype=np.float32)

@@ -230,10 +230,6 @@ def _by_type(failures: Sequence[Mapping[str, Any]]) -> Dict[str, int]:
     return {t: counts[t] for t in _type_order(counts)}
 
 
-def _avoidability(value: Any) -> str:
-    return "avoidable" if value is True else "unavoidable" if value is False else "unknown"
-
-
 def _stage(reason: Any) -> str:
     """The stage a rejection reason names (``"stage: message"``), or ``"unknown"`` (for records without ``stage``)."""
     text = str(reason or "").strip()
