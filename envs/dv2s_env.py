@@ -14,6 +14,7 @@ from __future__ import annotations
 import copy
 import math
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Union
@@ -42,6 +43,11 @@ from envs.scenic_highway.stepping import ExternalStepper, StepOutcome, StepOvert
 from envs.trace import EpisodeTrace, actor_state
 
 __all__ = ["DV2SEnv", "ScenarioRef"]
+
+if getattr(sys.excepthook, "__module__", "") == "scenic.core.errors":
+    # Scenic replaces Python's default excepthook on import (only the default one); a user's own tracebacks
+    # stay Python's, while Scenic's errors still name the script's line in their message
+    sys.excepthook = sys.__excepthook__
 
 ScenarioSpec = Union[None, str, os.PathLike, Sequence[str]]
 

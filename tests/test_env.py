@@ -789,3 +789,12 @@ def test_many_resets_work_without_memory_growth():
     env.close()
     assert len(scene_seeds) == 100
     assert growth < 100 * 2**20, f"RSS grew by {growth / 2**20:.1f} MB over 100 resets"
+
+
+def test_importing_the_env_leaves_the_users_tracebacks_alone():
+    """Scenic installs its own sys.excepthook on import; the env puts Python's back."""
+    code = ("import sys\nimport envs.dv2s_env\nimport scenic.core.errors\n"
+            "print(sys.excepthook is sys.__excepthook__)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=str(ROOT))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "True"
