@@ -352,8 +352,17 @@ class DV2SEnv(AbstractEnv):
         return config
 
     def define_spaces(self) -> None:
-        """Observation and action types from the config (Kinematics is computed without pandas)."""
+        """Observation and action types from the config (Kinematics is computed without pandas).
+
+        highway-env builds new space objects on every reset; an unchanged space keeps
+        its previous object, so ``env.action_space.seed(s)`` before ``reset`` still
+        holds afterwards (Gymnasium's contract that spaces are stable).
+        """
+        previous = {name: getattr(self, name, None) for name in ("action_space", "observation_space")}
         super().define_spaces()
+        for name, space in previous.items():
+            if space is not None and space == getattr(self, name):
+                setattr(self, name, space)
         if type(self.observation_type) is KinematicObservation:
             self.observation_type.__class__ = FastKinematicObservation
 
