@@ -220,10 +220,7 @@ def mined_entries(mine_out: os.PathLike | str, replays: bool = True) -> List[Dic
     its ``conversions.jsonl`` (status ``kept`` with a bank entry), then (``replays``) the exact replays of its
     failing scenes (:func:`dv2s_gym.mining.replays.replay_entries`: ``"replay": True`` and ``"parent"``, from
     the conversions' ``replay_entry`` and from ``replays.jsonl``)."""
-    path = Path(mine_out) / "conversions.jsonl"
-    if not path.is_file():
-        return []
-    records = read_rows(path)
+    records = read_rows(Path(mine_out) / "conversions.jsonl")  # none when no cluster was converted
     entries: Dict[str, Dict[str, Any]] = {}
     for record in records:
         if record.get("status") == "kept" and record.get("bank_entry"):
