@@ -468,7 +468,7 @@ def _cmd_generate(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from dv2s_gym.pipeline.convert import generate_to_folder
-    from dv2s_gym.pipeline.semantics import elements_from_text
+    from dv2s_gym.pipeline.semantics.text import elements_from_text
     from dv2s_gym.pipeline.stages import Description
 
     if args.from_file:
@@ -1147,14 +1147,21 @@ def _error_line(error: BaseException) -> str:
     if isinstance(error, OSError) and error.strerror:
         where = f": {error.filename}" if error.filename and str(error.filename) not in message else ""
         return f"{message}{where}"
+    if isinstance(error, FileNotFoundError) and message:
+        return message   # raised with a sentence of its own ("scenario file ... does not exist")
     return f"{type(error).__name__}: {message}" if message else type(error).__name__
 
 
 _RESUME_NOTES = {
-    "loop": "finished steps are kept in the loop folder (loop.json); rerun the same command to resume",
+    "loop": "finished steps are kept in {out} (loop.json); rerun the same command to resume",
     "train": "rerun the same command with --resume to continue from the last checkpoint",
 }
 """What an interrupted command kept, for commands whose own code does not say it more precisely."""
+
+
+def _resume_note(args) -> Optional[str]:
+    note = _RESUME_NOTES.get(args.command)
+    return note.format(out=getattr(args, "out", None) or "the output folder") if note else None
 
 
 class _SigintFlag:
@@ -1192,7 +1199,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         with sigint:
             return int(args.func(args) or 0)
     except KeyboardInterrupt as stop:
-        note = getattr(stop, "note", None) or _RESUME_NOTES.get(args.command)
+        note = getattr(stop, "note", None) or _resume_note(args)
         print("dv2s: interrupted" + (f"; {note}" if note else ""), file=sys.stderr)
         return 130
     except BrokenPipeError:
@@ -1201,7 +1208,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         return 141
     except Exception as error:  # every error reaches the user as one line, never a raw traceback
         if sigint.received:  # e.g. a broken pipe to a worker that Ctrl-C stopped first
-            note = _RESUME_NOTES.get(args.command)
+            note = _resume_note(args)
             print("dv2s: interrupted" + (f"; {note}" if note else ""), file=sys.stderr)
             return 130
         if args.debug:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import copy
 import math
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Union
@@ -42,6 +43,11 @@ from envs.scenic_highway.stepping import ExternalStepper, StepOutcome, StepOvert
 from envs.trace import EpisodeTrace, actor_state
 
 __all__ = ["DV2SEnv", "ScenarioRef"]
+
+if getattr(sys.excepthook, "__module__", "") == "scenic.core.errors":
+    # Scenic replaces Python's default excepthook on import (only the default one); a user's own tracebacks
+    # stay Python's, while Scenic's errors still name the script's line in their message
+    sys.excepthook = sys.__excepthook__
 
 ScenarioSpec = Union[None, str, os.PathLike, Sequence[str]]
 
@@ -346,8 +352,17 @@ class DV2SEnv(AbstractEnv):
         return config
 
     def define_spaces(self) -> None:
-        """Observation and action types from the config (Kinematics is computed without pandas)."""
+        """Observation and action types from the config (Kinematics is computed without pandas).
+
+        highway-env builds new space objects on every reset; an unchanged space keeps
+        its previous object, so ``env.action_space.seed(s)`` before ``reset`` still
+        holds afterwards (Gymnasium's contract that spaces are stable).
+        """
+        previous = {name: getattr(self, name, None) for name in ("action_space", "observation_space")}
         super().define_spaces()
+        for name, space in previous.items():
+            if space is not None and space == getattr(self, name):
+                setattr(self, name, space)
         if type(self.observation_type) is KinematicObservation:
             self.observation_type.__class__ = FastKinematicObservation
 

@@ -352,6 +352,26 @@ def test_same_seed_same_episode_in_process():
     assert_same_steps(rollout(env, 11, ACTIONS), a)
 
 
+def test_a_seeded_action_space_stays_seeded_across_resets():
+    """highway-env rebuilds its spaces on reset; the env keeps the seeded objects."""
+
+    def samples(env):
+        env.action_space.seed(5)
+        env.reset(seed=5)
+        space = env.action_space
+        env.reset(seed=6)
+        assert env.action_space is space
+        return [int(space.sample()) for _ in range(20)]
+
+    first = make(PULL_BACK_IN)
+    used = make(BRAKES)
+    used.reset(seed=1)
+    used.action_space.sample()  # a space with a history of its own
+    assert samples(first) == samples(used)
+    first.close()
+    used.close()
+
+
 def test_different_seeds_different_scenes():
     env = make(BRAKES)
     infos, observations = [], []
@@ -789,3 +809,12 @@ def test_many_resets_work_without_memory_growth():
     env.close()
     assert len(scene_seeds) == 100
     assert growth < 100 * 2**20, f"RSS grew by {growth / 2**20:.1f} MB over 100 resets"
+
+
+def test_importing_the_env_leaves_the_users_tracebacks_alone():
+    """Scenic installs its own sys.excepthook on import; the env puts Python's back."""
+    code = ("import sys\nimport envs.dv2s_env\nimport scenic.core.errors\n"
+            "print(sys.excepthook is sys.__excepthook__)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=str(ROOT))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "True"

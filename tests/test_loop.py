@@ -550,6 +550,9 @@ def test_mined_entries_include_the_exact_replays_with_their_parent(tmp_path):
     split = split_by_family(entries, 0.5, seed=3)
     assert {"mined_a", "replay_a"} <= set(split["held_out"]) or {"mined_a", "replay_a"} <= set(split["fine_tune"])
     assert split["groups"] == 3 and not set(split["held_out_families"]) & set(split["fine_tune_families"])
+    # a run that converted nothing (no conversions.jsonl) still yields its exact replays
+    (run_dir / "conversions.jsonl").unlink()
+    assert [e["scenario"] for e in mined_entries(run_dir)] == ["replay_c"]
 
 
 def test_a_round_whose_conversions_are_all_rejected_holds_out_replay_families(tmp_path, monkeypatch):

@@ -503,3 +503,16 @@ def test_the_page_s_tables_fit_a_1400_pixel_window(tmp_path):
     assert len(widths) >= 6, widths
     too_wide = [w for w in widths if w["table"] > w["box"] + 1 or w["box"] > w["window"]]
     assert not too_wide, too_wide
+
+
+def test_the_rate_sentence_says_how_many_episodes_and_which_scenarios_were_never_drawn():
+    from dv2s_gym.mining.report_text import rate_text
+
+    drawn = {"value": 0.2, "raw": 0.2, "low": 0.04, "high": 0.6, "ess": 9.4, "n": 6, "failures": 1}
+    empty = {"value": None, "raw": None, "low": None, "high": None, "ess": 0.0, "n": 0, "failures": 0}
+    rate = {"available": True, "reason": None, "collapsed": False, "overall": drawn,
+            "scenarios": {"a": drawn, "b": drawn, "c": empty}}
+    text = rate_text(rate)
+    assert "from 6 episodes, as precise as 9.4 draws" in text
+    assert "1 of 3 scenarios were never drawn" in text and "--budget" in text
+    assert "never drawn" not in rate_text({**rate, "scenarios": {"a": drawn}})

@@ -23,6 +23,7 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 __all__ = ["HeldOutStore", "heldout_task", "evaluate_heldout", "paired_summary", "episode_failed"]
 
+from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.mining.tasks import HELDOUT, heldout_task
 
 Episode = Tuple[str, int]
@@ -38,14 +39,9 @@ class HeldOutStore:
     def __init__(self, path: os.PathLike | str) -> None:
         self.path = Path(path)
         self.records: Dict[Tuple[str, str, int], Dict[str, Any]] = {}
-        if self.path.is_file():
-            for line in self.path.read_text(encoding="utf-8").splitlines():
-                try:
-                    record = json.loads(line)
-                except ValueError:  # a line cut by a kill: its episode runs again
-                    continue
-                if not record.get("error"):
-                    self.records[(record["role"], record["scenario"], int(record["seed"]))] = record
+        for record in read_rows(self.path):  # a line cut by a kill is left out: its episode runs again
+            if not record.get("error"):
+                self.records[(record["role"], record["scenario"], int(record["seed"]))] = record
 
     def append(self, record: Mapping[str, Any]) -> None:
         """Save one finished episode (fsynced)."""

@@ -220,10 +220,7 @@ def mined_entries(mine_out: os.PathLike | str, replays: bool = True) -> List[Dic
     its ``conversions.jsonl`` (status ``kept`` with a bank entry), then (``replays``) the exact replays of its
     failing scenes (:func:`dv2s_gym.mining.replays.replay_entries`: ``"replay": True`` and ``"parent"``, from
     the conversions' ``replay_entry`` and from ``replays.jsonl``)."""
-    path = Path(mine_out) / "conversions.jsonl"
-    if not path.is_file():
-        return []
-    records = read_rows(path)
+    records = read_rows(Path(mine_out) / "conversions.jsonl")  # none when no cluster was converted
     entries: Dict[str, Dict[str, Any]] = {}
     for record in records:
         if record.get("status") == "kept" and record.get("bank_entry"):
@@ -246,20 +243,13 @@ def mined_entries(mine_out: os.PathLike | str, replays: bool = True) -> List[Dic
 def _mining_summary(mine_out: Path) -> Dict[str, Any]:
     """Counts read from a mining run folder (episodes, failures, avoidable ones, clusters, conversions)."""
     episodes, failures, counted, errors = 0, 0, 0, 0
-    records = []
-    path = mine_out / "episodes.jsonl"
-    if path.is_file():
-        for line in path.read_text(encoding="utf-8").splitlines():
-            try:
-                record = json.loads(line)
-            except ValueError:
-                continue
-            records.append(record)
-            episodes += 1
-            errors += bool(record.get("error"))
-            if record.get("failure"):
-                failures += 1
-                counted += record.get("avoidable") is not False  # as MineRun.avoidable
+    records = read_rows(mine_out / "episodes.jsonl")
+    for record in records:
+        episodes += 1
+        errors += bool(record.get("error"))
+        if record.get("failure"):
+            failures += 1
+            counted += record.get("avoidable") is not False  # as MineRun.avoidable
     clusters = None
     try:
         from dv2s_gym.mining.cluster import cluster_failures
@@ -269,28 +259,16 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
         pass
     statuses: Dict[str, int] = {}
     reasons: List[str] = []
-    conversions = mine_out / "conversions.jsonl"
-    if conversions.is_file():
-        for line in conversions.read_text(encoding="utf-8").splitlines():
-            try:
-                record = json.loads(line)
-            except ValueError:
-                continue
-            statuses[record.get("status", "?")] = statuses.get(record.get("status", "?"), 0) + 1
-            if record.get("status") == "rejected" and record.get("reason"):
-                reasons.append(str(record["reason"]))
+    for record in read_rows(mine_out / "conversions.jsonl"):
+        statuses[record.get("status", "?")] = statuses.get(record.get("status", "?"), 0) + 1
+        if record.get("status") == "rejected" and record.get("reason"):
+            reasons.append(str(record["reason"]))
     converted = sum(statuses.values())
     from dv2s_gym.mining.replays import REPLAYS_FILE
 
     replayed: Dict[str, int] = {}
-    replay_path = mine_out / REPLAYS_FILE
-    if replay_path.is_file():
-        for line in replay_path.read_text(encoding="utf-8").splitlines():
-            try:
-                row = json.loads(line)
-            except ValueError:
-                continue
-            replayed[row.get("status", "?")] = replayed.get(row.get("status", "?"), 0) + 1
+    for row in read_rows(mine_out / REPLAYS_FILE):
+        replayed[row.get("status", "?")] = replayed.get(row.get("status", "?"), 0) + 1
     return {"replays": replayed, "episodes": episodes, "errors": errors, "failures": failures, "failures_against_policy": counted,
             "clusters": clusters, "conversions": statuses, "rejected_reasons": reasons[:20],
             "clusters_not_converted": None if clusters is None else max(0, clusters - converted),
