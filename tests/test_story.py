@@ -64,17 +64,6 @@ def test_keep_lane_ego_always_idles():
     assert [driver() for _ in range(5)] == [IDLE] * 5
 
 
-def test_keep_lane_ego_holds_its_own_speed_not_the_speed_grid():
-    env = _fake_env(23.0)
-    env.vehicle.target_speed = 25.0  # what the action type's vehicle snapped it to
-    driver = KeepLaneEgo(env)
-    driver()
-    assert env.vehicle.target_speed == 23.0
-    env.vehicle.speed = 22.0
-    driver()
-    assert env.vehicle.target_speed == 23.0  # the speed it started with, not the one it has now
-
-
 def test_keep_lane_ego_keeps_its_speed_in_a_real_episode():
     from envs.dv2s_env import DV2SEnv
 
