@@ -17,13 +17,14 @@ import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from dv2s_gym.pipeline.sg_openai import classify_failure
 from scenario_bank.atomic import atomic_write_text
 from dv2s_gym.pipeline.stages import Description, Generation, describe, generate
 
-__all__ = ["ScenarioCheck", "check_scenario", "classify_failure", "convert_video", "generate_to_folder", "label_for"]
+__all__ = ["ScenarioCheck", "add_converted", "check_scenario", "classify_failure", "conversion_provenance", "convert_video",
+           "convert_videos", "generate_to_folder", "label_for", "videos_to_convert"]
 
 
 @dataclass
@@ -174,3 +175,78 @@ def convert_video(video: str | os.PathLike, out: str | os.PathLike, *, dra: str 
     report["seconds_total"] = round(time.perf_counter() - start, 3)
     _write(Path(out), "report.json", json.dumps(report, indent=2, default=str) + "\n")
     return report
+
+
+def videos_to_convert(source: str | os.PathLike, out: str | os.PathLike) -> List[Tuple[Path, Path]]:
+    """The (video, output folder) pairs of a conversion: ``source`` itself, or every video of the folder
+    ``source`` (sorted by name, each into ``out/<video stem>``)."""
+    from dv2s_gym.pipeline.evaluate import VIDEO_SUFFIXES
+
+    source = Path(source)
+    if not source.is_dir():
+        return [(source, Path(out))]
+    videos = sorted(p for p in source.iterdir() if p.suffix.lower() in VIDEO_SUFFIXES)
+    if not videos:
+        raise FileNotFoundError(f"no videos ({', '.join(VIDEO_SUFFIXES)}) in {source}")
+    return [(video, Path(out) / video.stem) for video in videos]
+
+
+def _convert_one(video: str, out: str, options: Dict[str, Any]) -> Dict[str, Any]:
+    return convert_video(video, out, **options)
+
+
+def convert_videos(pairs: List[Tuple[Path, Path]], *, jobs: int = 1, progress: bool = True,
+                   **options: Any) -> List[Dict[str, Any]]:
+    """:func:`convert_video` for each (video, output folder) pair, in ``jobs`` processes when there are several;
+    returns the reports in the order of ``pairs``. ``options`` are :func:`convert_video`'s keyword arguments."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from tqdm import tqdm
+
+    reports = []
+    with tqdm(total=len(pairs), desc="converting", unit="video", disable=not progress or len(pairs) == 1) as bar:
+        if jobs > 1 and len(pairs) > 1:
+            with ProcessPoolExecutor(max_workers=jobs) as pool:
+                futures = [pool.submit(_convert_one, str(v), str(o), options) for v, o in pairs]
+                for future in futures:
+                    reports.append(future.result())
+                    bar.update()
+        else:
+            for v, o in pairs:
+                reports.append(_convert_one(str(v), str(o), options))
+                bar.update()
+    return reports
+
+
+def _field(record: Any, key: str) -> Any:
+    return record.get(key) if isinstance(record, Mapping) else getattr(record, key, None)
+
+
+def conversion_provenance(dra: str, sg: str, generation: Any, description: Any) -> Dict[str, Any]:
+    """The provenance fields every converted bank entry records: the backends (``generator``), the model and
+    prompt context that made the script (from the generation, else the description) and today's date.
+    ``generation`` and ``description`` are :class:`Generation` and :class:`Description` or their report dicts."""
+    import datetime
+
+    return {"generator": f"dra={dra},sg={sg}",
+            "model": _field(generation, "model") or _field(description, "model"),
+            "context_hash": _field(generation, "context_hash") or _field(description, "prompt_hash"),
+            "date": datetime.date.today().isoformat()}
+
+
+def add_converted(bank_dir: Optional[str | os.PathLike], video: str | os.PathLike, out: str | os.PathLike,
+                  report: Mapping[str, Any], *, seed: int, dra: str, sg: str) -> str:
+    """Add the scenario a conversion wrote to ``out`` to the bank in ``bank_dir`` (the shipped bank, read-only, when
+    None) with ``generated`` provenance; returns the entry's name, or a note saying why a conversion whose checks
+    failed was not added."""
+    from scenario_bank.bank import Bank
+
+    if not report.get("check", {}).get("ok"):
+        return f"(not added: {video} failed validation)"
+    description = report["description"]
+    provenance = {"kind": "generated", "video": str(video), "seed": seed,
+                  **conversion_provenance(dra, sg, report["generation"], description)}
+    script = (Path(out) / "scenario.scenic").read_text(encoding="utf-8")
+    entry = Bank(bank_dir).add(script, description["text"], elements=description["elements"],
+                               tags=["generated"], provenance=provenance, name=None)
+    return entry.name
