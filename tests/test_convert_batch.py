@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from dv2s_gym.cli import main
-from dv2s_gym.pipeline.convert import add_converted, conversion_provenance, videos_to_convert
+from dv2s_gym.pipeline.batch_convert import videos_to_convert
+from dv2s_gym.pipeline.convert import add_converted, conversion_provenance
 from dv2s_gym.pipeline.stages import Description, Generation
 from scenario_bank.bank import Bank
 

@@ -111,7 +111,8 @@ def report_text(report, out) -> str:
 def run_convert(args: argparse.Namespace) -> int:
     """``dv2s convert``: each video to a checked scenario (added to the bank with ``--add-to-bank``); exit 1 if
     any conversion's checks fail."""
-    from dv2s_gym.pipeline.convert import add_converted, convert_videos, videos_to_convert
+    from dv2s_gym.pipeline.batch_convert import convert_videos, videos_to_convert
+    from dv2s_gym.pipeline.convert import add_converted
 
     pairs = videos_to_convert(args.video, args.out)
     reports = convert_videos(pairs, jobs=args.jobs, progress=not args.json, dra=args.dra, sg=args.sg,
