@@ -107,7 +107,7 @@ def external_e2e_checks(report: Dict[str, Any]) -> List[Check]:
 
 def _runs() -> Dict[Tuple[str, str], Tuple[Any, Callable[[Dict[str, Any]], List[Check]]]]:
     from dv2s_gym.pipeline.evaluate import EVALSET_DIR
-    from dv2s_gym.pipeline.make_external_evalset import EXTERNAL_EVALSET_DIR
+    from bench.evalsets.make_external_evalset import EXTERNAL_EVALSET_DIR
 
     return {("in-house", "dra"): (EVALSET_DIR, in_house_dra_checks),
             ("in-house", "e2e"): (EVALSET_DIR, in_house_e2e_checks),

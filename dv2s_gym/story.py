@@ -7,7 +7,7 @@ timing where the step asks for it. The rest of this docstring describes the olde
 check that sidecars without a ``story`` block get.
 
 An episode *plays its story* when the elements read off its trace
-(:func:`dv2s_gym.pipeline.trace_semantics.elements_from_trace`) contain every
+(:func:`dv2s_gym.pipeline.semantics.trace.elements_from_trace`) contain every
 action and every relation of the scenario's sidecar whose subject is not the ego:
 the adversaries' story relative to the ego (the cut-in car cuts in, the oncoming
 car goes straight and crosses the ego's path, the pedestrian crosses...). The
@@ -125,7 +125,7 @@ def story_episodes(name: str, ego: str, seeds: Sequence[int], bank_root: Optiona
     pairs of the steps it did not play (a sidecar without a ``story`` block: ``[what is missing, ""]``);
     ``ego_hit`` the kinds the ego hit.
     """
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
     from dv2s_gym.story_check import check_story
     from scenario_bank.story import normalize_story
     from scenario_bank.bank import Bank

@@ -45,7 +45,7 @@ Events of each action (times are trace steps):
   straight through it / any moment from when the heading has turned 10 degrees until it has turned 55, of
   a vehicle that turns at least 55 degrees (a car that brakes as it starts to turn brakes, then turns).
 * ``keep_lane``, ``drift``, ``swerve``, ``pull_out``, ``u_turn``, ``reverse``: as
-  :mod:`dv2s_gym.pipeline.trace_semantics` reads them off the actor's track; event at the start of
+  :mod:`dv2s_gym.pipeline.semantics.trace` reads them off the actor's track; event at the start of
   the manoeuvre (a drift's first excursion; the others when the actor first moves).
 * ``collide`` and its types: a collision event of the actor.
 
@@ -582,7 +582,7 @@ class _Detector:
         return self._whole_track(name, action, first, last)
 
     def _collision_type(self, name: str, other: str, i: int) -> Optional[str]:
-        from dv2s_gym.pipeline.trace_semantics import collision_type
+        from dv2s_gym.pipeline.semantics.trace import collision_type
 
         for k in range(i, -1, -1):
             if self.e.present(name, k) and self.e.present(other, k):
@@ -602,7 +602,7 @@ class _Detector:
         return event
 
     def _in_junction(self, name: str) -> np.ndarray:
-        from dv2s_gym.pipeline.trace_semantics import _map_view
+        from dv2s_gym.pipeline.semantics.trace import _map_view
 
         view = _map_view(self.e.trace)
         track = self.e.tracks[name]
@@ -653,7 +653,7 @@ def _actor_elements(trace, name: str) -> set:
     """Actions the trace semantics read for actor ``name`` alone (the trace cut down to it and the ego)."""
     from types import SimpleNamespace
 
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 
     kinds = dict(getattr(trace, "kinds", {}) or {})
     marker = "story_actor"

@@ -530,6 +530,10 @@ class DV2SEnv(AbstractEnv):
         if self.config["ego_policy"] == "scenic":
             return None
         vehicle = self.action_type.vehicle_class(road, position, heading, speed)
+        if hasattr(vehicle, "target_speed"):
+            # highway-env snaps a new vehicle's target to the action type's speed grid (0, 5, ... 30 m/s);
+            # the script's speed is the one the ego holds until the policy asks for FASTER or SLOWER
+            vehicle.target_speed = float(speed)
         vehicle.LENGTH, vehicle.WIDTH = float(obj.length), float(obj.width)
         vehicle.diagonal = math.hypot(vehicle.LENGTH, vehicle.WIDTH)
         route = getattr(obj, "route", None)

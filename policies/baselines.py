@@ -20,22 +20,12 @@ __all__ = ["KeepLaneEgo", "IDMEgo"]
 class KeepLaneEgo(StateDriver):
     """Holds its lane at the speed it starts with: ``IDLE`` every step, whatever happens.
 
-    The action type's vehicle snaps its target speed to the ``DiscreteMetaAction`` speed grid
-    (0, 5, ..., 30 m/s) when it is created, so ``IDLE`` alone would drift to the nearest grid speed;
-    this driver sets the vehicle's target back to the speed it had when the driver first acted.
+    The env's ego keeps the script's start speed as its target until the policy asks for ``FASTER``
+    or ``SLOWER``, so ``IDLE`` alone is constant speed, and an episode replays from its actions.
     """
 
-    def __init__(self, env) -> None:
-        super().__init__(env)
-        self._speed: Optional[float] = None
-
     def act(self) -> int:
-        """Always ``IDLE`` (at the speed the ego had when this driver first acted)."""
-        ego = getattr(self.env.unwrapped, "vehicle", None)
-        if ego is not None and hasattr(ego, "target_speed"):
-            if self._speed is None:
-                self._speed = float(ego.speed)
-            ego.target_speed = self._speed
+        """Always ``IDLE``."""
         return IDLE
 
 

@@ -90,6 +90,10 @@ EVAL_SEED_BASE = 10_000
 TRAIN_SEED_LOW = 1_000_000
 """Training episodes draw reset seeds from ``[TRAIN_SEED_LOW, 2**31 - 1)``: never an evaluation seed."""
 TRAIN_SEED_HIGH = 2**31 - 1
+#: Seeds per scenario of the model card's evaluation, and for runs shorter than SHORT_RUN_STEPS.
+CARD_SEEDS = 20
+SHORT_RUN_STEPS = 100_000
+SHORT_RUN_CARD_SEEDS = 3
 
 DEFAULT_HYPERPARAMETERS: Dict[str, Dict[str, Any]] = {
     # highway-env's documented PPO settings for highway (batch 64, 10 epochs, lr 5e-4), with a
@@ -135,8 +139,10 @@ class TrainConfig:
             ``policy_kwargs``).
         eval_freq / eval_seeds: periodic held-out evaluation every ``eval_freq`` steps over
             ``eval_seeds`` seeds per scenario (0 turns it off).
-        card_seeds / baselines / eval_jobs: the card's final evaluation: seeds per scenario,
-            baseline policies evaluated on the same episodes, parallel processes.
+        card_seeds / baselines / eval_jobs: the card's final evaluation: seeds per scenario
+            (``None``: :data:`CARD_SEEDS` for runs of :data:`SHORT_RUN_STEPS` steps or more,
+            :data:`SHORT_RUN_CARD_SEEDS` below, so a trial run is not followed by a long
+            evaluation), baseline policies evaluated on the same episodes, parallel processes.
         checkpoint_freq / keep_checkpoints: checkpoint every that many steps, keep the newest.
         progress_bar: show a tqdm progress bar on stderr.
         vec_env: ``subproc`` (worker processes) or ``dummy`` (in this process).
@@ -158,7 +164,7 @@ class TrainConfig:
     hyperparameters: Dict[str, Any] = dataclasses.field(default_factory=dict)
     eval_freq: int = 10_000
     eval_seeds: int = 2
-    card_seeds: int = 20
+    card_seeds: Optional[int] = None
     baselines: List[str] = dataclasses.field(default_factory=lambda: ["keep_lane", "rule"])
     eval_jobs: int = 2
     checkpoint_freq: int = 10_000
@@ -178,14 +184,14 @@ class TrainConfig:
             raise TrainingError("the scenario selection is empty; name bank scenarios or tag:<tag> after "
                                 "--scenarios, or leave --scenarios out to train on the whole bank")
         for name, value, low in (("steps", self.steps, 1), ("envs", self.n_envs, 1), ("eval-seeds", self.eval_seeds, 0),
-                                 ("card-seeds", self.card_seeds, 0), ("eval-freq", self.eval_freq, 0),
+                                 ("card-seeds", self.card_seed_count(), 0), ("eval-freq", self.eval_freq, 0),
                                  ("checkpoint-freq", self.checkpoint_freq, 0), ("eval-jobs", self.eval_jobs, 1),
                                  ("keep-checkpoints", self.keep_checkpoints, 1),
                                  ("curriculum-window", self.curriculum_window, 1),
                                  ("curriculum-update", self.curriculum_update, 1)):
             if not isinstance(value, int) or value < low:
                 raise TrainingError(f"--{name} must be an integer >= {low}, not {value!r}")
-        if self.eval_seeds > 1000 or self.card_seeds > 1000:
+        if self.eval_seeds > 1000 or self.card_seed_count() > 1000:
             raise TrainingError("at most 1000 evaluation seeds per scenario (seeds 10000..10999 are the held-out range)")
         if self.sampler not in SAMPLERS:
             raise TrainingError(f"unknown sampler {self.sampler!r}; use one of {', '.join(SAMPLERS)}")
@@ -206,6 +212,12 @@ class TrainConfig:
         if unknown:
             raise TrainingError(f"unknown {self.algo.upper()} hyperparameter(s) {', '.join(sorted(unknown))}; "
                                 f"see stable-baselines3's {self.algo.upper()} arguments")
+
+    def card_seed_count(self) -> int:
+        """Seeds per scenario of the card's evaluation: ``card_seeds``, or the default for ``steps``."""
+        if self.card_seeds is not None:
+            return self.card_seeds
+        return CARD_SEEDS if self.steps >= SHORT_RUN_STEPS else SHORT_RUN_CARD_SEEDS
 
     def effective_env_config(self) -> Dict[str, Any]:
         """The env config the policy trains on: ``env_config``, with ``ContinuousAction`` for SAC."""
@@ -808,19 +820,20 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         },
         "versions": _versions(),
     }
-    if config.card_seeds > 0:
+    card_seeds = config.card_seed_count()
+    if card_seeds > 0:
         from policies.model_card import evaluate_for_card
 
         specs = {config.algo: f"{config.algo}:{model_path.resolve()}", **{b: b for b in config.baselines}}
-        log(f"model card evaluation: {len(names)} scenarios x {config.card_seeds} held-out seeds x "
-            f"{len(specs)} policies ({', '.join(specs)}) = {len(names) * config.card_seeds * len(specs)} episodes; "
+        log(f"model card evaluation: {len(names)} scenarios x {card_seeds} held-out seeds x "
+            f"{len(specs)} policies ({', '.join(specs)}) = {len(names) * card_seeds * len(specs)} episodes; "
             "--card-seeds N shortens it (0 skips it), Ctrl-C writes the card without it")
         baseline_config = {k: v for k, v in env_config.items() if k != "action"}
         configs = {label: (env_config if label == config.algo else baseline_config) for label in specs}
         try:
-            card["evaluation"] = evaluate_for_card(specs, evaluation_episodes(names, config.card_seeds), configs,
+            card["evaluation"] = evaluate_for_card(specs, evaluation_episodes(names, card_seeds), configs,
                                                    bank_dir=config.bank_dir, candidate=config.algo,
-                                                   seed_base=EVAL_SEED_BASE, seeds=config.card_seeds,
+                                                   seed_base=EVAL_SEED_BASE, seeds=card_seeds,
                                                    jobs=config.eval_jobs, progress=config.progress_bar)
         except KeyboardInterrupt:
             card["evaluation"] = None

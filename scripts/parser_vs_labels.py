@@ -23,7 +23,7 @@ from typing import List
 
 from dv2s_gym.pipeline.evaluate import collect_items
 from dv2s_gym.pipeline.metrics import hallucination_rate, scs
-from dv2s_gym.pipeline.semantics import elements_from_text
+from dv2s_gym.pipeline.semantics.text import elements_from_text
 from scenario_bank.elements import element_set, with_undirected
 
 def main(argv: List[str] | None = None) -> int:

@@ -1,7 +1,7 @@
 """Helpers of the rules-SG composition tests: generate from a hand-built parse, run a script."""
 
-from dv2s_gym.pipeline import sg_rules
-from dv2s_gym.pipeline.semantics import ParsedDescription
+from dv2s_gym.pipeline.sg import rules as sg_rules
+from dv2s_gym.pipeline.semantics.text import ParsedDescription
 
 
 def generate_from(monkeypatch, parsed: ParsedDescription, seed: int = 0):
@@ -28,7 +28,7 @@ def run_script(script, seconds: float, seed: int = 0):
 
 def trace_actions(script, who: str, seeds=range(3), seconds: float = 8.0):
     """Per seed, the actions the trace of ``script`` shows for participant type ``who``."""
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 
     return [{a for k, a in elements_from_trace(run_script(script, seconds, seed))["actions"] if k == who}
             for seed in seeds]

@@ -82,3 +82,25 @@ def test_the_readme_opens_with_the_two_commands_and_its_pictures_exist():
     for picture in pictures:
         assert (ROOT / picture).is_file(), picture
     assert sum((ROOT / p).stat().st_size for p in pictures) < 1_000_000
+
+
+def test_the_readme_regress_picture_is_made_by_the_command_above_it():
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        from make_readme_pictures import REGRESS_ARGS
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    command = re.search(r"^dv2s regress (.*) --out out/regress$", readme, re.MULTILINE)
+    assert command, "the README shows no `dv2s regress ... --out out/regress` command"
+    shown = command.group(1).split()
+    picture_only = {"--workers": "1", "--no-progress": None}  # how the picture is made, not what it shows
+    made = []
+    args = iter(REGRESS_ARGS)
+    for arg in args:
+        if arg in picture_only:
+            if picture_only[arg] is not None:
+                next(args)
+            continue
+        made.append(arg)
+    assert shown == made

@@ -17,7 +17,7 @@ os.environ.setdefault("SDL_VIDEODRIVER", "offscreen")
 if os.environ.get("SDL_VIDEODRIVER") == "dummy":
     os.environ["SDL_VIDEODRIVER"] = "offscreen"
 
-from dv2s_gym.pipeline.dra_bev import BevAnalysis, NotBirdsEyeError, analyze_bev, analyze_bev_file  # noqa: E402
+from dv2s_gym.pipeline.dra.bev import BevAnalysis, NotBirdsEyeError, analyze_bev, analyze_bev_file  # noqa: E402
 from dv2s_gym.pipeline.metrics import hallucination_rate, scs  # noqa: E402
 from dv2s_gym.pipeline.video import VideoClip, read_video  # noqa: E402
 from envs.recording import VideoWriter  # noqa: E402
@@ -158,7 +158,7 @@ def test_synthetic_lead_vehicle_brakes():
 
 
 def test_description_reads_back_as_the_elements():
-    from dv2s_gym.pipeline.semantics import elements_from_text
+    from dv2s_gym.pipeline.semantics.text import elements_from_text
 
     result = analyze_bev(_clip(_highway_lead_brakes()))
     assert element_set(elements_from_text(result.description)) == element_set(result.elements)
@@ -293,7 +293,7 @@ def _episode_plays_its_story(name: str, summary: dict, expected_frames: int) -> 
 
 @pytest.fixture(scope="module")
 def bank_clips(tmp_path_factory):
-    from dv2s_gym.pipeline.make_bev_clips import render_clip
+    from bench.evalsets.make_bev_clips import render_clip
 
     videos = tmp_path_factory.mktemp("bank_videos")        # holds the .webm files only
     clips = {}
@@ -363,7 +363,7 @@ def test_use_cases_aggregate(bank_results):
 
 @pytest.mark.slow
 def test_use_case_descriptions_read_back(bank_results):
-    from dv2s_gym.pipeline.semantics import elements_from_text
+    from dv2s_gym.pipeline.semantics.text import elements_from_text
 
     for name, r in bank_results.items():
         a = r["analysis"]
@@ -396,7 +396,7 @@ def test_stock_highway_env(tmp_path):
 
 @pytest.mark.slow
 def test_make_bev_clips_is_deterministic(tmp_path):
-    from dv2s_gym.pipeline.make_bev_clips import render_clip
+    from bench.evalsets.make_bev_clips import render_clip
 
     decoded = []
     for k in range(2):

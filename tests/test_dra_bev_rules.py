@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from dv2s_gym.pipeline.dra_bev.events import _quick_reversals_dropped
-from dv2s_gym.pipeline.dra_bev.language import _clause
-from dv2s_gym.pipeline.semantics import elements_from_text
+from dv2s_gym.pipeline.dra.bev.events import _quick_reversals_dropped
+from dv2s_gym.pipeline.dra.bev.language import _clause
+from dv2s_gym.pipeline.semantics.text import elements_from_text
 from scenario_bank.elements import element_set
 
 

@@ -10,9 +10,9 @@ import pytest
 if os.environ.get("SDL_VIDEODRIVER", "dummy") == "dummy":
     os.environ["SDL_VIDEODRIVER"] = "offscreen"
 
-from dv2s_gym.pipeline.dra_bev.detection import _detect_blobs
-from dv2s_gym.pipeline.dra_bev.frames import _hsv
-from dv2s_gym.pipeline.dra_bev.scale import body_scale, estimate_scale, is_long_vehicle
+from dv2s_gym.pipeline.dra.bev.detection import _detect_blobs
+from dv2s_gym.pipeline.dra.bev.frames import _hsv
+from dv2s_gym.pipeline.dra.bev.scale import body_scale, estimate_scale, is_long_vehicle
 
 VEHICLE_KINDS = ("ego", "car", "truck", "yellow", "red")
 
@@ -123,7 +123,7 @@ def test_crashed_stock_vehicle_is_found_in_its_red():
 def test_analysis_reads_a_long_blue_vehicle_as_a_truck_and_a_yellow_one_as_a_car():
     from types import SimpleNamespace
 
-    from dv2s_gym.pipeline.dra_bev.analyze import analyze_bev
+    from dv2s_gym.pipeline.dra.bev.analyze import analyze_bev
 
     env = _stock_env(5.0, (320, 240))
     try:

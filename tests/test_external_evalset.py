@@ -12,7 +12,7 @@ import json
 import pytest
 
 from dv2s_gym.pipeline.evaluate import VIDEO_SUFFIXES, collect_items, evaluate
-from dv2s_gym.pipeline.make_external_evalset import EXTERNAL_EVALSET_DIR, SCRIPTS, VARIANTS, Scene, Script, \
+from bench.evalsets.make_external_evalset import EXTERNAL_EVALSET_DIR, SCRIPTS, VARIANTS, Scene, Script, \
     render_script
 from scenario_bank.elements import normalize_elements
 
@@ -70,7 +70,7 @@ def test_stock_classes_scales_and_traffic_are_in_the_set():
 def test_stock_classes_are_drawn_in_highway_envs_own_colours(tmp_path):
     """The new scripts set no colour: highway-env picks it from the class (MDPVehicle green, LinearVehicle
     yellow, IDMVehicle blue); the ego of the cut-in script is highway-env's MDPVehicle."""
-    from dv2s_gym.pipeline import make_external_evalset as m
+    from bench.evalsets import make_external_evalset as m
 
     import gymnasium as gym
     import highway_env  # noqa: F401
@@ -108,7 +108,7 @@ def test_shipped_clip_is_what_the_builder_renders(tmp_path, name):
 
 
 def test_builder_refuses_a_script_whose_event_does_not_happen():
-    from dv2s_gym.pipeline import make_external_evalset as m
+    from bench.evalsets import make_external_evalset as m
 
     def no_cut_in(env, k):
         ego = m._car(env.road, ("0", "1", 1), 200.0, 22.0, ego=True)

@@ -169,7 +169,7 @@ def test_an_llm_that_answers_with_a_hostile_script_gets_no_scenario(name, tmp_pa
     from llm_server import ChatServer
 
     from dv2s_gym.pipeline.llm_client import ChatClient
-    from dv2s_gym.pipeline.sg_openai import ExampleRetriever, bank_examples, generate_with_llm
+    from dv2s_gym.pipeline.sg.openai import ExampleRetriever, bank_examples, generate_with_llm
 
     monkeypatch.setenv("OPENAI_API_KEY", CANARY)
     marker = tmp_path / "marker"

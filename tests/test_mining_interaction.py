@@ -11,8 +11,8 @@ import pytest
 
 from dv2s_gym.mining.interaction import (failure_interaction, interaction_sentence, key_actor,
                                          shows_interaction)
-from dv2s_gym.pipeline.semantics import elements_from_text
-from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+from dv2s_gym.pipeline.semantics.text import elements_from_text
+from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 from envs.trace import EpisodeTrace
 
 DT = 0.2  # the env's default policy frequency, 5 Hz

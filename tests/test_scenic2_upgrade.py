@@ -201,7 +201,7 @@ def test_llm_repair_loop_upgrades_scenic2_without_a_repair_round():
     from llm_server import ChatServer, load_recorded
 
     from dv2s_gym.pipeline.llm_client import ChatClient
-    from dv2s_gym.pipeline.sg_openai import ExampleRetriever, bank_examples, extract_scenic_block, generate_with_llm
+    from dv2s_gym.pipeline.sg.openai import ExampleRetriever, bank_examples, extract_scenic_block, generate_with_llm
 
     fixed = extract_scenic_block(load_recorded("sg_lead_brake_attempt2_fixed.json")["choices"][0]["message"]["content"])
     with ChatServer(default="sg_lead_brake_scenic2.json") as server:

@@ -5,7 +5,7 @@ Sentences are written for these tests (not taken from the held-out evaluation se
 
 import pytest
 
-from dv2s_gym.pipeline.semantics import elements_from_text, parse_description
+from dv2s_gym.pipeline.semantics.text import elements_from_text, parse_description
 
 
 def _kinds(text):

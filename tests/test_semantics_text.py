@@ -1,4 +1,4 @@
-"""Semantic elements from description text (dv2s_gym.pipeline.semantics).
+"""Semantic elements from description text (dv2s_gym.pipeline.semantics.text).
 
 Labelling conventions follow the bank sidecars: a vehicle "in front of" the ego with no side is also in
 its lane (same_lane); a cut-in also counts as a lane change toward the ego; a crossing pedestrian is
@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from dv2s_gym.pipeline.semantics import elements_from_text, parse_description
+from dv2s_gym.pipeline.semantics.text import elements_from_text, parse_description
 from scenario_bank.elements import element_set, normalize_elements
 
 ROOT = Path(__file__).resolve().parents[1]

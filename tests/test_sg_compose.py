@@ -7,7 +7,7 @@ depend on how today's parser reads a phrase."""
 import pytest
 
 from dv2s_gym.pipeline.errors import GenerationError
-from dv2s_gym.pipeline.semantics import Entity, ParsedDescription
+from dv2s_gym.pipeline.semantics.text import Entity, ParsedDescription
 from envs.errors import DV2SError
 from scenario_bank.safety import check_script
 from sg_helpers import generate_from, run_script, trace_actions
@@ -50,7 +50,7 @@ def test_a_bicycle_rides_at_bicycle_speed(monkeypatch):
 @pytest.mark.slow
 @pytest.mark.parametrize("kind", ["bus", "bicycle"])
 def test_new_kinds_run_and_show_in_the_trace(monkeypatch, kind):
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 
     result = _generate(monkeypatch, _lead(kind, "brake"))
     trace = _run(result.script)

@@ -4,7 +4,7 @@ highway-env frame: heading 0 drives +x, growing heading turns right)."""
 
 import math
 
-from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 from envs.trace import EpisodeTrace
 
 DT = 0.2

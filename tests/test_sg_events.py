@@ -4,8 +4,8 @@ and the warnings about what the script does not build."""
 import numpy as np
 import pytest
 
-from dv2s_gym.pipeline.sg_rules import generate_rules, unshown_warnings
-from dv2s_gym.pipeline.trace_semantics import _map_view, elements_from_trace
+from dv2s_gym.pipeline.sg.rules import generate_rules, unshown_warnings
+from dv2s_gym.pipeline.semantics.trace import _map_view, elements_from_trace
 from sg_helpers import run_script
 
 STOP_THEN_STRAIGHT = ("At a four-way intersection the ego stops at the stop sign for a car crossing from the right, "
@@ -94,7 +94,7 @@ def test_an_ego_that_stops_then_turns_left_into_an_oncoming_car_is_hit_on_its_si
     ("A truck in the right lane drifts into the ego's lane.", "truck", None),
 ])
 def test_drift_phrases_and_their_side(text, who, side):
-    from dv2s_gym.pipeline.semantics import parse_description
+    from dv2s_gym.pipeline.semantics.text import parse_description
 
     entity = next(e for e in parse_description(text).entities if e.kind == who)
     assert entity.has("drift")
@@ -102,7 +102,7 @@ def test_drift_phrases_and_their_side(text, who, side):
 
 
 def test_pulling_onto_the_shoulder_is_no_drift():
-    from dv2s_gym.pipeline.semantics import parse_description
+    from dv2s_gym.pipeline.semantics.text import parse_description
 
     car = next(e for e in parse_description("The car ahead pulls onto the shoulder and stops.").entities
                if e.kind == "car")
@@ -110,7 +110,7 @@ def test_pulling_onto_the_shoulder_is_no_drift():
 
 
 def test_an_action_read_onto_a_static_object_is_an_unplaced_phrase():
-    from dv2s_gym.pipeline.semantics import parse_description
+    from dv2s_gym.pipeline.semantics.text import parse_description
 
     parsed = parse_description("After a tyre blow-out the ego veers into the lane to its left.")
     assert parsed.unplaced, "the clause whose action went to the tyre must be warned about"

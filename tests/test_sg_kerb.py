@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from dv2s_gym.pipeline.sg_rules import PARKING_STREET, generate_rules
-from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+from dv2s_gym.pipeline.sg.rules import PARKING_STREET, generate_rules
+from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 from scenario_bank.maps import MAPS_DIR
 from scenario_bank.maps.build_maps import LANE_WIDTH, PARKING_WIDTH, SIDEWALK_WIDTH
 from sg_helpers import run_script

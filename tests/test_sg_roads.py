@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from dv2s_gym.pipeline import sg_rules
-from dv2s_gym.pipeline.semantics import Entity, ParsedDescription
+from dv2s_gym.pipeline.sg import rules as sg_rules
+from dv2s_gym.pipeline.semantics.text import Entity, ParsedDescription
 from scenario_bank.safety import check_script
 from sg_helpers import generate_from, run_script
 
@@ -162,7 +162,7 @@ def test_the_multilane_street_runs_with_traffic_on_every_lane(tmp_path):
     """Cars on both lanes of both directions, a lane change in the ego's direction, oncoming traffic."""
     import gymnasium as gym
 
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 
     path = Path(tmp_path) / "four_lanes.scenic"
     path.write_text(_FOUR_LANES)
@@ -195,7 +195,7 @@ def test_the_multilane_street_runs_with_traffic_on_every_lane(tmp_path):
 
 @pytest.mark.slow
 def test_a_cut_in_on_the_multilane_street_shows_in_the_trace(monkeypatch):
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 
     result = generate_from(monkeypatch, _cut_in())
     hits = 0
@@ -278,7 +278,7 @@ def test_ring_lengths_match_the_map():
 
 @pytest.mark.slow
 def test_a_vehicle_circulating_from_the_left_hits_the_entering_ego(monkeypatch):
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 
     result = generate_from(monkeypatch, _circulating_from_the_left())
     hits = 0
@@ -292,7 +292,7 @@ def test_a_vehicle_circulating_from_the_left_hits_the_entering_ego(monkeypatch):
 
 @pytest.mark.slow
 def test_a_vehicle_circulating_from_the_left_passes_before_the_ego_when_nobody_collides(monkeypatch):
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 
     result = generate_from(monkeypatch, _circulating_from_the_left(collide=False))
     assert "DriveRoute(" in result.script.split("car1 = new Car")[1]  # it has the right of way on the ring

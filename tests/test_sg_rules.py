@@ -1,11 +1,11 @@
-"""The rule-based Scenario Generator (dv2s_gym.pipeline.sg_rules): safe, compilable, runnable scripts."""
+"""The rule-based Scenario Generator (dv2s_gym.pipeline.sg.rules): safe, compilable, runnable scripts."""
 
 import json
 from pathlib import Path
 
 import pytest
 
-from dv2s_gym.pipeline.sg_rules import SGResult, generate_rules
+from dv2s_gym.pipeline.sg.rules import SGResult, generate_rules
 from scenario_bank.elements import element_set, normalize_elements
 from scenario_bank.safety import check_script
 
@@ -157,8 +157,8 @@ def test_empty_description_is_refused():
                          ids=[d[:45] for d in PAPER + USE_CASES])
 def test_described_elements_happen_in_simulation(description):
     """Semantic preservation: most elements of the description show up in a 10 s episode."""
-    from dv2s_gym.pipeline.semantics import elements_from_text
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.pipeline.semantics.text import elements_from_text
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 
     result = generate_rules(description, seed=0)
     described = element_set(elements_from_text(description))
@@ -179,7 +179,7 @@ def test_standing_pedestrian_on_a_map_without_a_junction(description, map_name):
     """Before: UnboundLocalError in _spawn_lane_pedestrians for any pedestrian who does not cross."""
     import math
 
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 
     result = generate_rules(description, seed=0)
     assert result.frame.map == map_name

@@ -130,14 +130,23 @@ def test_layers_import_one_way():
     assert not wrong, "scenario_bank <- envs <- policies <- dv2s_gym is violated:\n" + "\n".join(wrong)
 
 
+_PIPELINE_FRONT = ("dv2s_gym.pipeline.stages", "dv2s_gym.pipeline.convert", "dv2s_gym.pipeline.evaluate")
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("source, forbidden", [
     ("dv2s_gym.regress", ("dv2s_gym.mining",)),
     ("dv2s_gym.workers", ("dv2s_gym.regress", "dv2s_gym.mining")),  # the pools run tasks they are handed
+    # the backends of one stage know nothing of the other stage's, nor of the stages that pick them
+    ("dv2s_gym.pipeline.dra", ("dv2s_gym.pipeline.sg",) + _PIPELINE_FRONT),
+    ("dv2s_gym.pipeline.sg", ("dv2s_gym.pipeline.dra",) + _PIPELINE_FRONT),
+    # semantics reads text and traces for every stage and metric, below all of them
+    ("dv2s_gym.pipeline.semantics", ("dv2s_gym.pipeline.dra", "dv2s_gym.pipeline.sg") + _PIPELINE_FRONT),
 ])
 def test_subsystems_import_one_way(source, forbidden):
     graph = import_graph()
     assert "dv2s_gym.workers.pool" in graph["dv2s_gym.regress.runner"]  # the graph reads these modules
+    assert source in graph and all(f in graph for f in forbidden)  # no rule names a module that is not there
     wrong = sorted(f"{m} imports {t}" for m, ts in graph.items() if m == source or m.startswith(source + ".")
                    for t in ts if any(t == f or t.startswith(f + ".") for f in forbidden))
     assert not wrong, "\n".join(wrong)

@@ -1,13 +1,13 @@
 """Drift and side collisions read off real simulated traces (scripts of the rules SG, run in the env).
 
 A drift is a vehicle leaving its lane gradually without settling in another one (see
-dv2s_gym/pipeline/trace_semantics.py); a lane change that reaches the next lane's centre is none.
+dv2s_gym/pipeline/semantics/trace.py); a lane change that reaches the next lane's centre is none.
 """
 
 import pytest
 
-from dv2s_gym.pipeline.sg_rules import generate_rules
-from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+from dv2s_gym.pipeline.sg.rules import generate_rules
+from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 from sg_helpers import run_script
 
 pytestmark = pytest.mark.slow

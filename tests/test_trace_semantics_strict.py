@@ -9,7 +9,7 @@ import math
 
 import pytest
 
-from dv2s_gym.pipeline.trace_semantics import collision_type, elements_from_trace
+from dv2s_gym.pipeline.semantics.trace import collision_type, elements_from_trace
 from envs.trace import EpisodeTrace
 
 DT = 0.2

@@ -256,6 +256,20 @@ def test_dqn_and_sac_train_tiny_and_load_through_the_registry(tmp_path, algo):
     assert result.steps > 0 and result.error is None
 
 
+def test_a_short_run_gets_a_short_card_evaluation_unless_told_otherwise():
+    from policies.training import CARD_SEEDS, SHORT_RUN_CARD_SEEDS, SHORT_RUN_STEPS, TrainConfig
+
+    assert TrainConfig(out="o", steps=2_000).card_seed_count() == SHORT_RUN_CARD_SEEDS < CARD_SEEDS
+    assert TrainConfig(out="o", steps=SHORT_RUN_STEPS).card_seed_count() == CARD_SEEDS
+    assert TrainConfig(out="o", steps=2_000, card_seeds=20).card_seed_count() == 20
+    assert TrainConfig(out="o", steps=400_000, card_seeds=0).card_seed_count() == 0
+    # the command line names the seeds only when they were set
+    assert "--card-seeds" not in TrainConfig(out="o", steps=2_000).command()
+    assert "--card-seeds 20" in TrainConfig(out="o", steps=2_000, card_seeds=20).command()
+    with pytest.raises(TrainingError, match="--card-seeds must be an integer >= 0"):
+        TrainConfig(out="o", card_seeds=-1).validate()
+
+
 def test_bad_training_input_is_one_clear_line(tmp_path, capsys):
     out = tmp_path / "run"
     code, _, err = run(capsys, "train", "--scenarios", "nonexistent_scenario", "--out", out)

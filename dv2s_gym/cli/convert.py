@@ -72,7 +72,7 @@ def run_generate(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from dv2s_gym.pipeline.convert import generate_to_folder
-    from dv2s_gym.pipeline.semantics import elements_from_text
+    from dv2s_gym.pipeline.semantics.text import elements_from_text
     from dv2s_gym.pipeline.stages import Description
 
     if args.from_file:

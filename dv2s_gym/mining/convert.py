@@ -160,7 +160,7 @@ def _reproduce(script_path: Path, *, policy: Any, record_seed: int, k: int, seed
     shows the source failure's interaction (``interaction``) and ``reproduced``: the same failure class with
     the same kind of actor."""
     from dv2s_gym.mining.interaction import key_actor, shows_interaction
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
     from envs.dv2s_env import DV2SEnv
     from policies.evaluation import run_episode
     from policies.registry import load_policy
@@ -192,7 +192,7 @@ def _reproduce(script_path: Path, *, policy: Any, record_seed: int, k: int, seed
 
 
 def _actor_kind(trace, name: str) -> str:
-    from dv2s_gym.pipeline.trace_semantics import _kind
+    from dv2s_gym.pipeline.semantics.trace import _kind
 
     return _kind(name, dict(getattr(trace, "kinds", {}) or {}))
 
@@ -254,7 +254,7 @@ def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, poli
     from dv2s_gym.mining.exact_replay import REPLAY_TAG, narrowed_script, replay_name, run_replay
     from dv2s_gym.mining.interaction import interaction_sentence
     from dv2s_gym.pipeline.metrics import e2e_sc
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
     from scenario_bank.bank import Bank, DuplicateScenarioError
 
     parent = (Bank(bank_dir) if bank_dir else Bank()).get(record["scenario"])
@@ -476,7 +476,7 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         lap("replay")
 
         stage = "describe"
-        from dv2s_gym.pipeline.semantics import elements_from_text
+        from dv2s_gym.pipeline.semantics.text import elements_from_text
         from dv2s_gym.pipeline.stages import describe, generate
 
         description = describe(video, backend=dra, llm_config=llm_config)
@@ -543,7 +543,7 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
 
         stage = "e2e_sc"
         from dv2s_gym.pipeline.metrics import e2e_sc
-        from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+        from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 
         truth = elements_from_trace(source_trace)
         scores = [e2e_sc(truth, elements_from_trace(trace)) for trace in traces]

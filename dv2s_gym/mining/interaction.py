@@ -15,7 +15,7 @@ The **key actor** (:func:`key_actor`):
   ahead; when no actor was ahead in the lane, the actor nearest to the ego in that window.
 
 Its **manoeuvres** are the actions the project's trace semantics
-(:func:`dv2s_gym.pipeline.trace_semantics.elements_from_trace`, the same rules as the E2E-SC metric)
+(:func:`dv2s_gym.pipeline.semantics.trace.elements_from_trace`, the same rules as the E2E-SC metric)
 give that actor alone with the ego, restricted to :data:`MANOEUVRES` (braking, stopping, lane changes,
 cut-ins, merges, crossings...); keeping its lane is no manoeuvre.
 """
@@ -39,7 +39,7 @@ _LANE_CHANGES = {"lane_change_left", "lane_change_right"}
 
 
 def _kind(trace, name: str) -> str:
-    from dv2s_gym.pipeline.trace_semantics import _kind as semantic_kind
+    from dv2s_gym.pipeline.semantics.trace import _kind as semantic_kind
 
     return semantic_kind(name, dict(getattr(trace, "kinds", {}) or {}))
 
@@ -99,7 +99,7 @@ def key_actor(trace, failure: Optional[Mapping[str, Any]]) -> Optional[str]:
 def actor_manoeuvres(trace, name: str) -> List[str]:
     """The :data:`MANOEUVRES` actor ``name`` performs in ``trace``, judged alone with the ego by the trace
     semantics' rules (in :data:`MANOEUVRES` order)."""
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 
     keep = {"ego", name}
     alone = dataclasses.replace(
@@ -141,7 +141,7 @@ def failure_interaction(trace, failure: Optional[Mapping[str, Any]]) -> Dict[str
 
 
 def shows_interaction(interaction: Mapping[str, Any], elements: Mapping[str, Any]) -> bool:
-    """Whether simulated ``elements`` (a trace's, :func:`~dv2s_gym.pipeline.trace_semantics.elements_from_trace`)
+    """Whether simulated ``elements`` (a trace's, :func:`~dv2s_gym.pipeline.semantics.trace.elements_from_trace`)
     hold the interaction: a participant of the key actor's kind doing one of its manoeuvres (a lane change
     in either direction matches a lane change), and, for a collision, that kind colliding. An interaction
     without a key actor is shown by any elements."""

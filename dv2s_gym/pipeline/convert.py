@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional
 
-from dv2s_gym.pipeline.sg_openai import classify_failure
+from dv2s_gym.pipeline.sg.openai import classify_failure
 from scenario_bank.atomic import atomic_write_text
 from dv2s_gym.pipeline.stages import Description, Generation, describe, generate
 
@@ -53,7 +53,7 @@ def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview
     The script is compiled, sampled and run once in the sandbox (:mod:`scenario_bank.sandbox`) before
     it runs in this process. ``in_process=False`` stops after the sandbox (which compiled, sampled and
     ran it): for callers that run the scenario themselves next (no preview, no simulated elements)."""
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
     from envs.dv2s_env import DV2SEnv
     from envs.recording import VideoWriter
     from scenario_bank.safety import UnsafeScenarioError

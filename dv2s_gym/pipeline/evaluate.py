@@ -93,7 +93,7 @@ def collect_items(folder: str | Path, *, unlabeled_descriptions: bool = False) -
 def _evaluate_item(stage: str, item: EvalItem, dra: str, sg: str, llm_config: Optional[Dict[str, Any]],
                    seconds: float) -> ItemResult:
     from dv2s_gym.pipeline.convert import check_scenario
-    from dv2s_gym.pipeline.semantics import elements_from_text
+    from dv2s_gym.pipeline.semantics.text import elements_from_text
     from dv2s_gym.pipeline.stages import describe, generate
 
     result = ItemResult(item.stem, item.use_case)

@@ -1,23 +1,31 @@
 """The two D-V2S stages behind one interface each, whatever the backend.
 
 * :func:`describe` (Driving Record Analyzer): video -> :class:`Description`.
-  Backends: ``bev`` (embedded, offline: bird's-eye renders in highway-env style)
-  and ``openai`` (any OpenAI-compatible VLM endpoint).
+  Backends (:mod:`dv2s_gym.pipeline.dra`): ``bev`` (embedded, offline: bird's-eye
+  renders in highway-env style) and ``openai`` (any OpenAI-compatible VLM endpoint).
 * :func:`generate` (Scenario Generator): description -> :class:`Generation`.
-  Backends: ``rules`` (embedded, offline composer) and ``openai`` (any
-  OpenAI-compatible LLM with the fixed context and compile-in-the-loop repair).
+  Backends (:mod:`dv2s_gym.pipeline.sg`): ``rules`` (embedded, offline composer) and
+  ``openai`` (any OpenAI-compatible LLM with the fixed context and compile-in-the-loop repair).
+
+Each stage picks its backend by name from a registry (:func:`register_dra`, :func:`register_sg`);
+a backend module is imported only when its backend runs.
 """
 
 from __future__ import annotations
 
 import os
 from dataclasses import asdict, dataclass, field
-from typing import Any, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
-__all__ = ["Description", "Generation", "describe", "generate", "DRA_BACKENDS", "SG_BACKENDS"]
+from dv2s_gym.pipeline.errors import PipelineError
+
+__all__ = ["Description", "Generation", "describe", "generate", "DRA_BACKENDS", "SG_BACKENDS",
+           "register_dra", "register_sg", "registered_dras", "registered_sgs"]
 
 DRA_BACKENDS = ("bev", "openai")
+"""The Driving Record Analyzer backends that ship with dv2s-gym."""
 SG_BACKENDS = ("rules", "openai")
+"""The Scenario Generator backends that ship with dv2s-gym."""
 
 
 @dataclass
@@ -60,7 +68,7 @@ class Generation:
         that a simulated run of it (``simulated``, the trace's elements) did not show; returns the new ones."""
         if not self.intended_elements:
             return []
-        from dv2s_gym.pipeline.sg_rules import unshown_warnings
+        from dv2s_gym.pipeline.sg.rules import unshown_warnings
 
         new = [w for w in unshown_warnings(self.intended_elements, simulated) if w not in self.warnings]
         self.warnings.extend(new)
@@ -72,6 +80,95 @@ class Generation:
         return data
 
 
+# --------------------------------------------------------------------------- registries
+DRABackend = Callable[..., Tuple[str, Dict[str, Any]]]
+"""``backend(clip, *, camera, question, llm_config) -> (text, provenance)``: ``clip`` is a
+:class:`~dv2s_gym.pipeline.video.VideoClip`; ``provenance`` may name the ``model`` and ``prompt_hash``."""
+SGBackend = Callable[..., Generation]
+"""``backend(description, *, seed, llm_config, max_attempts) -> Generation``."""
+
+_DRA_REGISTRY: Dict[str, DRABackend] = {}
+_SG_REGISTRY: Dict[str, SGBackend] = {}
+
+
+def _register(registry: Dict[str, Callable[..., Any]], stage: str, name: str, backend: Callable[..., Any],
+              overwrite: bool) -> None:
+    if not isinstance(name, str) or not name:
+        raise PipelineError(f"{stage} backend name {name!r} must be a non-empty string")
+    if name in registry and not overwrite:
+        raise PipelineError(f"a {stage} backend named {name!r} is already registered; "
+                            "pass overwrite=True to replace it")
+    registry[name] = backend
+
+
+def register_dra(name: str, backend: DRABackend, overwrite: bool = False) -> None:
+    """Make ``describe(video, backend=name)`` call ``backend(clip, camera=..., question=..., llm_config=...)``
+    (see :data:`DRABackend`); the description's elements are read from the text it returns."""
+    _register(_DRA_REGISTRY, "DRA", name, backend, overwrite)
+
+
+def register_sg(name: str, backend: SGBackend, overwrite: bool = False) -> None:
+    """Make ``generate(description, backend=name)`` call
+    ``backend(description, seed=..., llm_config=..., max_attempts=...)`` (see :data:`SGBackend`);
+    the script of the :class:`Generation` it returns must pass the safety check."""
+    _register(_SG_REGISTRY, "SG", name, backend, overwrite)
+
+
+def registered_dras() -> List[str]:
+    """The DRA backend names :func:`describe` knows, sorted."""
+    return sorted(_DRA_REGISTRY)
+
+
+def registered_sgs() -> List[str]:
+    """The SG backend names :func:`generate` knows, sorted."""
+    return sorted(_SG_REGISTRY)
+
+
+def _describe_bev(clip: Any, *, camera: str, question: Optional[str],
+                  llm_config: Optional[Dict[str, Any]]) -> Tuple[str, Dict[str, Any]]:
+    from dv2s_gym.pipeline.dra.bev import analyze_bev
+
+    return analyze_bev(clip, question=question).description, {}
+
+
+def _describe_openai(clip: Any, *, camera: str, question: Optional[str],
+                     llm_config: Optional[Dict[str, Any]]) -> Tuple[str, Dict[str, Any]]:
+    from dv2s_gym.pipeline.dra.openai import describe_with_vlm
+    from dv2s_gym.pipeline.llm_client import ChatClient
+
+    client = ChatClient.from_config(llm_config, kind="vlm")
+    return describe_with_vlm(clip.frames, client, camera=camera, question=question)
+
+
+def _generate_rules(description: str, *, seed: int, llm_config: Optional[Dict[str, Any]],
+                    max_attempts: int) -> Generation:
+    from dv2s_gym.pipeline.sg.rules import generate_rules
+
+    result = generate_rules(description, seed=seed)
+    return Generation(result.script, "rules", warnings=list(result.warnings),
+                      context_hash=getattr(result, "context_hash", None),
+                      intended_elements=dict(getattr(result, "elements", {}) or {}))
+
+
+def _generate_openai(description: str, *, seed: int, llm_config: Optional[Dict[str, Any]],
+                     max_attempts: int) -> Generation:
+    from dv2s_gym.pipeline.llm_client import ChatClient
+    from dv2s_gym.pipeline.sg.openai import generate_with_llm
+    from scenario_bank.bank import Bank
+
+    client = ChatClient.from_config(llm_config)
+    result = generate_with_llm(description, client, bank=Bank(), max_attempts=max_attempts)
+    return Generation(result.script, "openai", failures=list(result.failures),
+                      attempts=result.attempts, model=result.model, context_hash=result.context_hash)
+
+
+register_dra("bev", _describe_bev)
+register_dra("openai", _describe_openai)
+register_sg("rules", _generate_rules)
+register_sg("openai", _generate_openai)
+
+
+# --------------------------------------------------------------------------- the stages
 def describe(
     video: str | os.PathLike,
     *,
@@ -84,23 +181,14 @@ def describe(
     llm_config: Optional[Dict[str, Any]] = None,
 ) -> Description:
     """Describe a driving video (frames sampled at ``fps`` under ``max_frames`` and ``max_pixels``)."""
-    from dv2s_gym.pipeline.semantics import elements_from_text
+    from dv2s_gym.pipeline.semantics.text import elements_from_text
     from dv2s_gym.pipeline.video import read_video
 
-    if backend not in DRA_BACKENDS:
-        raise ValueError(f"unknown DRA backend {backend!r}; use one of {DRA_BACKENDS}")
+    if backend not in _DRA_REGISTRY:
+        raise ValueError(f"unknown DRA backend {backend!r}; use one of {tuple(_DRA_REGISTRY)}")
     clip = read_video(video, fps=fps, max_frames=max_frames, max_pixels=max_pixels)
-    if backend == "bev":
-        from dv2s_gym.pipeline.dra_bev import analyze_bev
-
-        analysis = analyze_bev(clip, question=question)
-        return Description(analysis.description, elements_from_text(analysis.description), "bev", video=str(video))
-    from dv2s_gym.pipeline.dra_openai import describe_with_vlm
-    from dv2s_gym.pipeline.llm_client import ChatClient
-
-    client = ChatClient.from_config(llm_config, kind="vlm")
-    text, provenance = describe_with_vlm(clip.frames, client, camera=camera, question=question)
-    return Description(text, elements_from_text(text), "openai", model=provenance.get("model"),
+    text, provenance = _DRA_REGISTRY[backend](clip, camera=camera, question=question, llm_config=llm_config)
+    return Description(text, elements_from_text(text), backend, model=provenance.get("model"),
                        prompt_hash=provenance.get("prompt_hash"), video=str(video))
 
 
@@ -115,23 +203,8 @@ def generate(
     """Turn a description into a Scenic script that passed the safety check."""
     from scenario_bank.safety import assert_safe
 
-    if backend not in SG_BACKENDS:
-        raise ValueError(f"unknown SG backend {backend!r}; use one of {SG_BACKENDS}")
-    if backend == "rules":
-        from dv2s_gym.pipeline.sg_rules import generate_rules
-
-        result = generate_rules(description, seed=seed)
-        generation = Generation(result.script, "rules", warnings=list(result.warnings),
-                                context_hash=getattr(result, "context_hash", None),
-                                intended_elements=dict(getattr(result, "elements", {}) or {}))
-    else:
-        from dv2s_gym.pipeline.llm_client import ChatClient
-        from dv2s_gym.pipeline.sg_openai import generate_with_llm
-        from scenario_bank.bank import Bank
-
-        client = ChatClient.from_config(llm_config)
-        result = generate_with_llm(description, client, bank=Bank(), max_attempts=max_attempts)
-        generation = Generation(result.script, "openai", failures=list(result.failures),
-                                attempts=result.attempts, model=result.model, context_hash=result.context_hash)
+    if backend not in _SG_REGISTRY:
+        raise ValueError(f"unknown SG backend {backend!r}; use one of {tuple(_SG_REGISTRY)}")
+    generation = _SG_REGISTRY[backend](description, seed=seed, llm_config=llm_config, max_attempts=max_attempts)
     assert_safe(generation.script, "generated script")
     return generation

@@ -19,9 +19,18 @@ param brake_distance = Range(12, 20)
 param brake_strength = Range(0.6, 0.9)
 
 # 2. Adversarial behaviours
-behavior SlideToLane(section, speed, duration):
+def approachLimit(truckSpeed, gap, brakeDistance):
+    # the fastest speed from which braking at 5 m/s^2 still reaches the hard-braking point `brakeDistance`
+    # + 10 m behind the truck no more than 5 m/s faster than it (it only binds for an ego that rushes
+    # up on the truck, where the gap is short)
+    room = max(0, gap - brakeDistance - 10)
+    return truckSpeed + 5 + math.sqrt(2 * 5 * room)
+
+behavior SlideToLane(section, truck, brakeDistance, duration):
     # change lanes by tracking a reference that slides smoothly from the current lateral offset
-    # to the centre of the target lane section within `duration` seconds
+    # to the centre of the target lane section within `duration` seconds, at the ego's speed
+    # (+1 m/s; still closing in on the truck behind an ego that hangs back) unless that is too fast to
+    # brake behind the truck
     line = section.centerline
     lonControl, latControl = simulation().getLaneFollowingControllers(self)
     startOffset = line.signedDistanceTo(self.position)
@@ -30,28 +39,33 @@ behavior SlideToLane(section, speed, duration):
     for i in range(steps):
         u = (i + 1) / steps
         reference = startOffset * (1 - u * u * (3 - 2 * u))
+        speed = min(max(ego.speed + 1, truck.speed + 4),
+                    approachLimit(truck.speed, distance past self of truck, brakeDistance))
         throttle = lonControl.run_step(speed - self.speed)
         steer = latControl.run_step(line.signedDistanceTo(self.position) - reference)
-        take RegulatedControlAction(throttle, steer, pastSteer)
+        take RegulatedControlAction(throttle, steer, pastSteer, max_brake=1.0)
         pastSteer = steer
 
 behavior PassAndMoveIn(truck, extraSpeed, moveInGap, duration, brakeDistance, strength):
     # triggers on the ego: come up from behind in the next lane at `extraSpeed` above the ego's speed,
     # and once `moveInGap` metres ahead of it move into its lane (matching the ego's speed while
     # changing lanes, so it lands in the gap behind the truck); close in on the truck at the ego's
-    # speed and, `brakeDistance` metres behind it, brake hard to the truck's speed
+    # speed, never too fast to brake behind it, and, `brakeDistance` metres behind it, brake hard to
+    # the truck's speed
     # (distance past ego of self: how far self is ahead of the ego)
     lonControl, latControl = simulation().getLaneFollowingControllers(self)
     while (distance past ego of self) <= moveInGap + 5:
         throttle = lonControl.run_step(ego.speed + extraSpeed - self.speed)
         steer = latControl.run_step(self.lane.centerline.signedDistanceTo(self.position))
         take RegulatedControlAction(throttle, steer, 0)
-    do SlideToLane(self.laneSection.laneToRight, ego.speed + 1, duration)
+    do SlideToLane(self.laneSection.laneToRight, truck, brakeDistance, duration)
     pastSteer = 0
     while (distance past self of truck) > brakeDistance + 10:
-        throttle = lonControl.run_step(max(ego.speed, truck.speed + 4) - self.speed)
+        speed = min(max(ego.speed, truck.speed + 4),
+                    approachLimit(truck.speed, distance past self of truck, brakeDistance))
+        throttle = lonControl.run_step(speed - self.speed)
         steer = latControl.run_step(self.lane.centerline.signedDistanceTo(self.position))
-        take RegulatedControlAction(throttle, steer, pastSteer)
+        take RegulatedControlAction(throttle, steer, pastSteer, max_brake=1.0)
         pastSteer = steer
     while self.speed > truck.speed:
         take SetThrottleAction(0), SetBrakeAction(strength)

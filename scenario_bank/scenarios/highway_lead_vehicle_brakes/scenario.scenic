@@ -32,18 +32,24 @@ behavior PaceThenBrake(minCruise, headway, maxWait, strength):
     while True:
         take SetThrottleAction(0), SetBrakeAction(strength)
 
-# 3. Road geometry: a straight multi-lane one-way highway
-egoLane = Uniform(*network.lanes)
+# 3. Road geometry: a straight multi-lane one-way highway; the ego's lane has a lane on each side
+laneTriples = [(lane.sections[0]._laneToLeft.lane, lane, lane.sections[0]._laneToRight.lane)
+               for lane in network.lanes
+               if lane.sections[0]._laneToLeft is not None and lane.sections[0]._laneToRight is not None]
+laneTriple = Uniform(*laneTriples)
+egoLane = laneTriple[1]
+egoS = Range(50, 1200)
 
 # 4. Spawn positions
-ego = new Car at egoLane.centerline.pointAlongBy(Range(50, 1200)),
+ego = new Car at egoLane.centerline.pointAlongBy(egoS),
     with speed globalParameters.ego_speed
 lead = new Car following roadDirection from ego for globalParameters.lead_gap,
     with name "lead",
     with speed globalParameters.ego_speed,
     with behavior PaceThenBrake(globalParameters.brake_after, globalParameters.brake_headway, 4,
                                 globalParameters.brake_strength)
-traffic1 = new Car offset by (Uniform(-3.5, 3.5), Range(-30, 50)), with regionContainedIn road,
+# one car in each neighbouring lane
+traffic1 = new Car at laneTriple[0].centerline.pointAlongBy(egoS + Range(-30, 50)),
     with speed Range(20, 26), with behavior FollowLaneBehavior(target_speed=Range(20, 26))
-traffic2 = new Car offset by (Uniform(-7, 7), Range(-30, 50)), with regionContainedIn road,
+traffic2 = new Car at laneTriple[2].centerline.pointAlongBy(egoS + Range(-30, 50)),
     with speed Range(20, 26), with behavior FollowLaneBehavior(target_speed=Range(20, 26))

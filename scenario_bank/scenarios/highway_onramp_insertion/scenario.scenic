@@ -30,12 +30,18 @@ behavior SlideToLane(section, speed, duration):
 
 behavior MergeAheadOfEgo(accelLane, lead, extraSpeed, duration):
     # triggers on the ego: down the ramp, match speed so as to stay `lead` metres ahead of the
-    # ego (distance past ego of self: how far self is ahead of it); once in the acceleration
-    # lane and ahead by `lead`, slide into the ego's lane
+    # ego (distance past ego of self: how far self is ahead of it), never more than 6 m/s slower or
+    # 8 m/s faster than the ego, accelerating as hard as it must to keep up with an ego that rushes;
+    # once in the acceleration lane and ahead by `lead`, slide into the ego's lane
+    lonControl, latControl = simulation().getLaneFollowingControllers(self)
+    pastSteer = 0
     while not (self.lane is accelLane and (distance past ego of self) > lead):
         gapError = lead + 3 - (distance past ego of self)
-        speed = max(8, min(36, ego.speed + 0.5 * gapError))
-        do FollowLaneBehavior(target_speed=speed) for 0.4 seconds
+        speed = max(8, min(40, ego.speed + max(-6, min(8, 0.4 * gapError))))
+        throttle = lonControl.run_step(speed - self.speed)
+        steer = latControl.run_step(self.lane.centerline.signedDistanceTo(self.position))
+        take RegulatedControlAction(throttle, steer, pastSteer, max_throttle=1.0)
+        pastSteer = steer
     do SlideToLane(self.laneSection.laneToLeft, ego.speed + extraSpeed, duration)
     do FollowLaneBehavior(target_speed=ego.speed + extraSpeed)
 

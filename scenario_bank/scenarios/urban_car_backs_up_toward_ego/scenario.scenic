@@ -1,5 +1,5 @@
 """Backing up into another vehicle on a town street: a car standing in the ego's lane ahead, just past a
-free parking space, reverses toward the ego to reach the space as the ego approaches."""
+free parking space, backs straight up toward the ego as the ego approaches, and stops in the lane."""
 
 # 1. Map and global parameters
 param map = 'urban_parking'

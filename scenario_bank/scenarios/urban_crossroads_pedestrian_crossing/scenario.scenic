@@ -13,20 +13,20 @@ param entry_gap = Range(1.2, 2.0)
 param walking_speed = Range(1.2, 2.0)
 
 # 2. Adversarial behaviours
-behavior CrossInFrontOfEgo(speed, toLane, gap):
+behavior CrossInFrontOfEgo(speed, toLane, gap, egoLane):
     # step off the kerb once the walk to the ego's lane (toLane metres at `speed`) would reach it `gap`
-    # seconds before the ego's front does; at the lane's edge wait, if the ego has slowed down since,
+    # seconds before the ego's front does; short of the lane's edge wait, if the ego has slowed down since,
     # until it is `gap` seconds away again, within 9 m, or standing (the ego's time is read every step
-    # from its distance and speed, so an ego that hangs back or speeds up is still met in front of it)
+    # from its distance and speed, so an ego that hangs back or speeds up is still met in front of it).
+    # The edge is measured from the walker's position, and the stop is ordered a step's walk early (it
+    # takes effect a step later), so the walker waits outside the lane, not already in the ego's way.
     while True:
         ahead = (distance from ego to self) - 2.5
         if ahead > 0 and (ahead <= 9 or ahead / max(ego.speed, 0.1) <= toLane / speed + gap):
             break
         wait
     take SetWalkingSpeedAction(speed)
-    walked = 0
-    while walked < toLane - 0.4:
-        walked += speed * simulation().timestep
+    while (egoLane.centerline.distanceTo(self.position) - 1.75) > 0.3 + speed * simulation().timestep:
         wait
     ahead = (distance from ego to self) - 2.5
     if ahead > 9 and ego.speed >= 0.5 and ahead / max(ego.speed, 0.1) > gap + 0.5:
@@ -72,4 +72,4 @@ pedestrian = new Pedestrian right of crossSpot by pedestrianSide,
     with name "pedestrian",
     facing toward crossSpot,
     with behavior CrossInFrontOfEgo(globalParameters.walking_speed, abs(pedestrianSide) - 1.75,
-                                   globalParameters.entry_gap)
+                                   globalParameters.entry_gap, egoManeuver.endLane)

@@ -9,27 +9,39 @@ model scenic.domains.driving.model
 param ego_speed = Range(6, 9)
 param ego_distance = Range(25, 40)
 param cyclist_speed = Range(4, 6)
-param cyclist_lead_time = Range(0.7, 1.5)
+param cyclist_lead_time = Range(1.6, 2.2)
 
 # 2. Adversarial behaviours
 behavior SyncArrival(speed, route, egoRoute, lead):
-    # ride toward the junction adapting speed so as to reach the ego's turning path `lead` seconds
-    # before the ego does at its current speed (an ego that slows down gets a cyclist that slows down
-    # too), then ride straight through at a steady speed; where the two paths cross is estimated from
-    # the lengths of the two ways through the junction
+    # ride toward the point where the two ways through the junction cross, adapting speed all the way
+    # to it so as to get there `lead` seconds before the ego does at its current speed (the ego's time is
+    # read every step from its distance along its way and its speed, so an ego that slows down gets a
+    # cyclist that slows down too, and one that speeds up a cyclist that hurries), then ride on through
+    # at a steady speed
     entry = route[0].centerline.end
-    line = route[0].centerline
     egoEntry = egoRoute[0].centerline.end
-    inside = 0.6 * route[1].centerline.length
-    egoInside = 0.45 * egoRoute[1].centerline.length
+    own = route[1].centerline
+    egoTurn = egoRoute[1].centerline
+    samples = [0.25 * k for k in range(int(4 * own.length) + 1)]
+    offsets = [egoTurn.distanceTo(own.pointAlongBy(d)) for d in samples]
+    inside = samples[offsets.index(min(offsets))]
+    crossing = own.pointAlongBy(inside)
+    ownEnd = own.pointAlongBy(own.length)
+    egoSamples = [0.25 * k for k in range(int(4 * egoTurn.length) + 1)]
+    egoOffsets = [(distance from egoTurn.pointAlongBy(d) to crossing) for d in egoSamples]
+    egoInside = egoSamples[egoOffsets.index(min(egoOffsets))]
     lonControl, latControl = simulation().getLaneFollowingControllers(self)
     pastSteer = 0
     egoEntered = False
-    while (distance from self to entry) > 2:
+    onTurn = False
+    toCrossing = (distance from self to entry) + inside
+    while toCrossing > 0.5:
+        onTurn = onTurn or (distance from self to entry) < 0.5 or self.position in network.intersectionRegion
+        line = own if onTurn else route[0].centerline
+        toCrossing = (distance from self to ownEnd) - (own.length - inside) if onTurn else (distance from self to entry) + inside
         egoEntered = egoEntered or (distance from ego to egoEntry) < 2 or ego.position in network.intersectionRegion
-        egoLeft = egoInside if egoEntered else (distance from ego to egoEntry) + egoInside
-        egoTime = egoLeft / max(ego.speed, 1)
-        wanted = (distance from self to entry) / max(egoTime - lead - inside / speed, 0.4)
+        egoLeft = (distance from ego to crossing) if egoEntered else (distance from ego to egoEntry) + egoInside
+        wanted = toCrossing / max(egoLeft / max(ego.speed, 1) - lead, 0.3)
         wanted = min(1.6 * speed, max(1.5, wanted))
         throttle = lonControl.run_step(wanted - self.speed)
         steer = latControl.run_step(line.signedDistanceTo(self.position))
@@ -54,7 +66,8 @@ cyclistManeuver = turnPair[1]
 egoRoute = [egoManeuver.startLane, egoManeuver.connectingLane, egoManeuver.endLane]
 cyclistRoute = [cyclistManeuver.startLane, cyclistManeuver.connectingLane, cyclistManeuver.endLane]
 # the cyclist starts about where it would reach the ego's turning path cyclist_lead_time seconds
-# before the ego (the same estimate of where the paths cross as in SyncArrival)
+# before the ego (estimating where the paths cross from the lengths of the two ways through the junction;
+# SyncArrival finds the crossing itself and adapts the cyclist's speed on the way)
 egoTime = (globalParameters.ego_distance + 0.45 * egoManeuver.connectingLane.centerline.length) / globalParameters.ego_speed
 cyclistDistance = max(5, globalParameters.cyclist_speed * (egoTime - globalParameters.cyclist_lead_time)
                       - 0.6 * cyclistManeuver.connectingLane.centerline.length)

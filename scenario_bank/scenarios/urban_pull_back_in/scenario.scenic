@@ -14,9 +14,9 @@ param slow_down_to = Range(10, 14)
 param lane_change_duration = Range(1.8, 2.6)
 
 # 2. Adversarial behaviours
-behavior SlideToLane(section, speed, duration):
+behavior SlideToLane(section, extraSpeed, duration):
     # change lanes by tracking a reference that slides smoothly from the current lateral offset
-    # to the centre of the target lane section within `duration` seconds
+    # to the centre of the target lane section within `duration` seconds, `extraSpeed` faster than the ego
     line = section.centerline
     lonControl, latControl = simulation().getLaneFollowingControllers(self)
     startOffset = line.signedDistanceTo(self.position)
@@ -25,19 +25,30 @@ behavior SlideToLane(section, speed, duration):
     for i in range(steps):
         u = (i + 1) / steps
         reference = startOffset * (1 - u * u * (3 - 2 * u))
-        throttle = lonControl.run_step(speed - self.speed)
+        throttle = lonControl.run_step(ego.speed + extraSpeed - self.speed)
         steer = latControl.run_step(line.signedDistanceTo(self.position) - reference)
+        take RegulatedControlAction(throttle, steer, pastSteer)
+        pastSteer = steer
+
+behavior PaceEgoUntil(extraSpeed, aheadOfEgo):
+    # follow the lane `extraSpeed` faster than the ego, whatever its speed, until `aheadOfEgo` metres
+    # ahead of it (negative: behind it)
+    lonControl, latControl = simulation().getLaneFollowingControllers(self)
+    pastSteer = 0
+    while (distance past ego of self) <= aheadOfEgo:
+        throttle = lonControl.run_step(ego.speed + extraSpeed - self.speed)
+        steer = latControl.run_step(self.lane.centerline.signedDistanceTo(self.position))
         take RegulatedControlAction(throttle, steer, pastSteer)
         pastSteer = steer
 
 behavior OvertakeAndPullBackIn(extraSpeed, pullOutGap, returnGap, slowSpeed, duration):
     # triggers on the ego: close in behind it, pull out to the left when `pullOutGap` metres
-    # behind, pass at `extraSpeed` above the ego's speed, pull back in `returnGap` metres ahead
-    # (distance past ego of self: how far self is ahead of the ego)
-    do FollowLaneBehavior(target_speed=ego.speed + extraSpeed) until (distance past ego of self) > -pullOutGap
-    do SlideToLane(self.laneSection.laneToLeft, ego.speed + extraSpeed, duration)
-    do FollowLaneBehavior(target_speed=ego.speed + extraSpeed) until (distance past ego of self) > returnGap + 5
-    do SlideToLane(self.laneSection.laneToRight, ego.speed + extraSpeed / 2, duration)
+    # behind, pass at `extraSpeed` above the ego's current speed (an ego that rushes is still passed),
+    # pull back in `returnGap` metres ahead (distance past ego of self: how far self is ahead of the ego)
+    do PaceEgoUntil(extraSpeed, -pullOutGap)
+    do SlideToLane(self.laneSection.laneToLeft, extraSpeed, duration)
+    do PaceEgoUntil(extraSpeed, returnGap + 5)
+    do SlideToLane(self.laneSection.laneToRight, extraSpeed / 2, duration)
     do FollowLaneBehavior(target_speed=slowSpeed)
 
 # 3. Road geometry: a straight multi-lane road; the ego keeps a lane that has a lane to its left

@@ -14,7 +14,8 @@ param merge_lead_time = Range(2.0, 3.0)
 # 2. Adversarial behaviours
 behavior SyncArrival(speed, route, egoEntry, offset):
     # approach the junction adapting speed so as to enter it `offset` seconds after the ego does
-    # (at the ego's current speed), then drive through at a steady speed
+    # (at the ego's current speed; down to a crawl for an ego that slows down), then drive through at a
+    # steady speed
     entry = route[0].centerline.end
     line = route[0].centerline
     lonControl, latControl = simulation().getLaneFollowingControllers(self)
@@ -24,7 +25,7 @@ behavior SyncArrival(speed, route, egoEntry, offset):
         egoEntered = egoEntered or (distance from ego to egoEntry) < 3 or ego.position in network.intersectionRegion
         egoTime = 0 if egoEntered else (distance from ego to egoEntry) / max(ego.speed, 1)
         wanted = (distance from self to entry) / max(egoTime + offset, 0.5)
-        wanted = min(1.4 * speed, max(3, wanted))
+        wanted = min(1.4 * speed, max(1, wanted))
         throttle = lonControl.run_step(wanted - self.speed)
         steer = latControl.run_step(line.signedDistanceTo(self.position))
         take RegulatedControlAction(throttle, steer, pastSteer)

@@ -35,7 +35,7 @@ How, per clip (one module of this package per step: :mod:`.frames`, :mod:`.detec
    each actor starts. Actors that interact with the ego are described in full;
    the other vehicles in view are only counted.
 
-The description is written so that :func:`dv2s_gym.pipeline.semantics.elements_from_text`
+The description is written so that :func:`dv2s_gym.pipeline.semantics.text.elements_from_text`
 reads the same elements back from it.
 
 Use :func:`analyze_bev_file` on a path or :func:`analyze_bev` on a
@@ -45,7 +45,7 @@ that names a readable file is re-read at :data:`BEV_READ_OPTIONS` (same pixels,
 denser in time).
 """
 
-from dv2s_gym.pipeline.dra_bev.analyze import BevAnalysis, analyze_bev, analyze_bev_file
-from dv2s_gym.pipeline.dra_bev.frames import BEV_READ_OPTIONS, NotBirdsEyeError
+from dv2s_gym.pipeline.dra.bev.analyze import BevAnalysis, analyze_bev, analyze_bev_file
+from dv2s_gym.pipeline.dra.bev.frames import BEV_READ_OPTIONS, NotBirdsEyeError
 
 __all__ = ["BevAnalysis", "NotBirdsEyeError", "analyze_bev", "analyze_bev_file", "BEV_READ_OPTIONS"]

@@ -1,20 +1,20 @@
 """Build the labeled evaluation set: bird's-eye clips of bank scenarios with ground-truth labels.
 
 For every chosen bank scenario, seeds ``0 .. per_scenario - 1`` are rendered, one
-``DV2S-v0`` episode each (:func:`dv2s_gym.pipeline.make_bev_clips.render_clip`),
+``DV2S-v0`` episode each (:func:`bench.evalsets.make_bev_clips.render_clip`),
 the ego driven by the rule-based driver, or by the script's own ego behaviour where
 the label asks the ego for a manoeuvre (a turn, a lane change), chosen per scenario; and labeled
 with the scenario's semantic elements from its bank sidecar. Every seed drawn is
 kept: no seed is skipped for not playing its story (the bank's scenarios play
 their story in at least 90% of seeds whatever the ego does, checked by
 ``dv2s bank validate --story``). Where the elements read off an episode's trace
-(:func:`dv2s_gym.pipeline.trace_semantics.elements_from_trace`) miss a labeled
+(:func:`dv2s_gym.pipeline.semantics.trace.elements_from_trace`) miss a labeled
 element or show a collision the label does not name, the clip is still kept and
 the README lists the difference.
 
 Command line::
 
-    python -m dv2s_gym.pipeline.make_evalset OUT_DIR [--scenario NAME ...] [--per-scenario 3]
+    python -m bench.evalsets.make_evalset OUT_DIR [--scenario NAME ...] [--per-scenario 3]
         [--seconds 10] [--size 480]
 
 writes ``OUT_DIR/<scenario>_seed<seed>.webm`` and ``<scenario>_seed<seed>.label.json``
@@ -68,8 +68,8 @@ def build_evalset(out: str | os.PathLike, scenarios: Optional[Sequence[str]] = N
     """
     from tqdm import tqdm
 
-    from dv2s_gym.pipeline.make_bev_clips import render_clip
-    from dv2s_gym.pipeline.trace_semantics import elements_from_trace
+    from bench.evalsets.make_bev_clips import render_clip
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
     from scenario_bank.bank import Bank
     from scenario_bank.elements import normalize_elements
 
@@ -135,7 +135,7 @@ def _write_readme(out: Path, kept: Dict[str, List[int]], differs: Dict[str, List
         "`<clip>.label.json` holding the ground-truth semantic elements (the scenario's sidecar elements) and",
         "reference description. Seeds 0 .. N-1 of every scenario (N clips each), none skipped; episodes whose trace",
         "misses a labeled element or shows an unlabeled collision are listed below.",
-        "Rebuild with `python -m dv2s_gym.pipeline.make_evalset dv2s_gym/evalset` (deterministic).",
+        "Rebuild with `python -m bench.evalsets.make_evalset dv2s_gym/evalset` (deterministic).",
         "",
         "| scenario | seeds | differ from label |",
         "|---|---|---|",

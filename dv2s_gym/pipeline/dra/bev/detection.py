@@ -10,7 +10,7 @@ from typing import List, Optional, Tuple
 
 import numpy as np
 
-from dv2s_gym.pipeline.dra_bev.frames import _mask
+from dv2s_gym.pipeline.dra.bev.frames import _mask
 
 
 _KINDS = ("none", "red", "ped", "yellow", "ego", "car", "truck")

@@ -1,9 +1,9 @@
 """The embedded, offline Scenario Generator backend ``rules``: description -> Scenic script.
 
-:func:`generate_rules` parses a description with :mod:`dv2s_gym.pipeline.semantics`
+:func:`generate_rules` parses a description with :mod:`dv2s_gym.pipeline.semantics.text`
 into a :class:`ScenarioFrame` (road, ego, actors with counts, actions, triggers and
 relations to the ego), then composes a Scenic script in the paper's four sections
-from the building blocks of :mod:`dv2s_gym.pipeline.blocks`:
+from the building blocks of :mod:`dv2s_gym.pipeline.sg.blocks`:
 
 1. map and global parameters (map chosen by road type, weather, randomized speeds,
    gaps, trigger distances and spawn offsets as ``param`` ranges);
@@ -29,9 +29,9 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
-from dv2s_gym.pipeline import blocks
+from dv2s_gym.pipeline.sg import blocks
 from dv2s_gym.pipeline.errors import GenerationError
-from dv2s_gym.pipeline.semantics import Entity, ParsedDescription, parse_description
+from dv2s_gym.pipeline.semantics.text import Entity, ParsedDescription, parse_description
 from scenario_bank.elements import ACTIONS, PARTICIPANTS, RELATIONS, ROADS, normalize_elements
 from scenario_bank.maps.build_maps import LANE_WIDTH, ROUNDABOUT_ARM_START, ROUNDABOUT_RING_RADIUS
 
@@ -1851,7 +1851,7 @@ def _absent_warnings(parsed: ParsedDescription) -> List[str]:
 def unshown_warnings(meant: Dict[str, Any], simulated: Dict[str, Any]) -> List[str]:
     """One ``not shown in the simulated run: <element>`` warning per element the script was composed to show
     (``meant``, :attr:`SGResult.elements`) that a simulated run of it did not show (``simulated``, from
-    :func:`dv2s_gym.pipeline.trace_semantics.elements_from_trace`)."""
+    :func:`dv2s_gym.pipeline.semantics.trace.elements_from_trace`)."""
     from scenario_bank.elements import element_set, with_undirected
 
     shown = with_undirected(element_set(simulated or {}))

@@ -9,11 +9,11 @@ from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
-from dv2s_gym.pipeline.dra_bev.detection import _Frame
-from dv2s_gym.pipeline.dra_bev.tracking import (
+from dv2s_gym.pipeline.dra.bev.detection import _Frame
+from dv2s_gym.pipeline.dra.bev.tracking import (
     Track, _facing_votes, _local_slope, _smooth, _unwrap_axis, _wrap,
 )
-from dv2s_gym.pipeline.dra_bev.road import _lane_changes, _lane_of, _lines_lat
+from dv2s_gym.pipeline.dra.bev.road import _lane_changes, _lane_of, _lines_lat
 
 
 BRAKE_DROP = 3.5            # m/s lost ...

@@ -8,7 +8,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from dv2s_gym.pipeline.dra_bev.detection import _Frame
+from dv2s_gym.pipeline.dra.bev.detection import _Frame
 
 
 LANE_WIDTH_M = 3.5          # lane width when no lines are seen

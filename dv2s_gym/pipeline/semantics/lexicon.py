@@ -1,4 +1,4 @@
-"""The lexicon of the description parser (:mod:`dv2s_gym.pipeline.semantics`): regular expressions and word lists.
+"""The lexicon of the description parser (:mod:`dv2s_gym.pipeline.semantics.text`): regular expressions and word lists.
 
 Actor nouns per participant type, the ego's aliases, road patterns, action patterns (order matters: an earlier
 pattern's span hides later ones), relation patterns, lanes, clause splitting and the neutral words a clause may

@@ -1,8 +1,8 @@
-"""Scenic building blocks of the rule-based Scenario Generator (``sg_rules``).
+"""Scenic building blocks of the rule-based Scenario Generator (:mod:`dv2s_gym.pipeline.sg.rules`).
 
 Each block is a piece of Scenic text: behaviours (section 2 of a script), helper
 functions for road geometry (section 3) and the header (section 1). The
-composer in :mod:`dv2s_gym.pipeline.sg_rules` picks the blocks a description
+composer in :mod:`dv2s_gym.pipeline.sg.rules` picks the blocks a description
 needs, fills their parameters and glues them into one script.
 
 Conventions every block follows (they were measured on the highway-env model):

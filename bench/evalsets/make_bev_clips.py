@@ -8,7 +8,7 @@ size)`` gives the same frames.
 
 Command line::
 
-    python -m dv2s_gym.pipeline.make_bev_clips OUT_DIR [--scenario NAME ...] [--seeds 0 1 2]
+    python -m bench.evalsets.make_bev_clips OUT_DIR [--scenario NAME ...] [--seeds 0 1 2]
         [--seconds 10] [--size 400]
 
 writes ``OUT_DIR/<scenario>_seed<seed>.webm`` (video only: no sidecar, no trace).

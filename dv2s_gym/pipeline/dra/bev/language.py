@@ -1,5 +1,5 @@
 """Language: the three-sentence description (and answer) written from the analysis so that
-:func:`dv2s_gym.pipeline.semantics.elements_from_text` reads the same elements back."""
+:func:`dv2s_gym.pipeline.semantics.text.elements_from_text` reads the same elements back."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ ROAD_SCENES = {
 }
 
 
-# Every template below reads back, through dv2s_gym.pipeline.semantics.elements_from_text, as the
+# Every template below reads back, through dv2s_gym.pipeline.semantics.text.elements_from_text, as the
 # elements the analysis produced (the pipeline parses the description text).
 _COUNT = {1: "a", 2: "two", 3: "three", 4: "four", 5: "five", 6: "six", 7: "seven", 8: "eight"}
 

@@ -1,6 +1,6 @@
 """Build the external evaluation set: clips rendered by stock highway-env, scripted and labelled by hand.
 
-The in-house set (:mod:`dv2s_gym.pipeline.make_evalset`) renders the project's own
+The in-house set (:mod:`bench.evalsets.make_evalset`) renders the project's own
 bank scenarios in the project's own env. This set does not: every clip is an
 episode of a stock highway-env environment (``highway-v0``, ``merge-v0``,
 ``intersection-v0``, ``roundabout-v0``) rendered by highway-env's own viewer. After
@@ -32,7 +32,7 @@ crossing a junction are).
 
 Command line::
 
-    python -m dv2s_gym.pipeline.make_external_evalset OUT_DIR [--only NAME ...]
+    python -m bench.evalsets.make_external_evalset OUT_DIR [--only NAME ...]
 
 writes ``OUT_DIR/<script>_v<k>.webm`` and ``<script>_v<k>.label.json`` (the format ``dv2s eval``
 reads). The shipped set lives in ``dv2s_gym/evalset_highway_env/`` (:data:`EXTERNAL_EVALSET_DIR`), whose
@@ -50,6 +50,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
+from dv2s_gym.pipeline.evaluate import EVALSET_DIR
+
 # highway-env's viewer draws nothing under SDL's "dummy" driver: render offscreen.
 if os.environ.get("SDL_VIDEODRIVER", "dummy") == "dummy":
     os.environ["SDL_VIDEODRIVER"] = "offscreen"
@@ -57,7 +59,7 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 
 __all__ = ["EXTERNAL_EVALSET_DIR", "SCRIPTS", "Script", "Scene", "render_script", "build", "main"]
 
-EXTERNAL_EVALSET_DIR = Path(__file__).resolve().parents[1] / "evalset_highway_env"
+EXTERNAL_EVALSET_DIR = EVALSET_DIR.parent / "evalset_highway_env"
 """The shipped external evaluation set (stock highway-env clips, labelled by hand)."""
 
 FPS = 5

@@ -9,7 +9,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from dv2s_gym.pipeline.dra_bev.detection import Blob, _Frame
+from dv2s_gym.pipeline.dra.bev.detection import Blob, _Frame
 
 
 MAX_SPEED = 42.0            # m/s, fastest plausible world motion

@@ -11,21 +11,21 @@ from typing import Any, Dict, List, Optional
 import numpy as np
 
 from scenario_bank.elements import normalize_elements
-from dv2s_gym.pipeline.dra_bev.frames import (
+from dv2s_gym.pipeline.dra.bev.frames import (
     BEV_READ_OPTIONS, NotBirdsEyeError, _check_birds_eye, _frames_and_times, _hsv, _mask,
 )
-from dv2s_gym.pipeline.dra_bev.detection import (
+from dv2s_gym.pipeline.dra.bev.detection import (
     _Frame, _detect_blobs, _detect_lines, _fix_border_position, _straight_segments,
 )
-from dv2s_gym.pipeline.dra_bev.tracking import (
+from dv2s_gym.pipeline.dra.bev.tracking import (
     Track, _facing_votes, _smooth, _stitch, _track, _unwrap_axis, _world_motion, _wrap,
 )
-from dv2s_gym.pipeline.dra_bev.road import LANE_WIDTH_M, _lane_of, _lines_lat, _road_type
-from dv2s_gym.pipeline.dra_bev.events import (
+from dv2s_gym.pipeline.dra.bev.road import LANE_WIDTH_M, _lane_of, _lines_lat, _road_type
+from dv2s_gym.pipeline.dra.bev.events import (
     _Ctx, _actor, _ego_actions, _facing, _kinematics, _orient_by_motion, ego_overtaken,
 )
-from dv2s_gym.pipeline.dra_bev.language import _answer, _describe
-from dv2s_gym.pipeline.dra_bev.scale import LANE_RULER_M, estimate_scale, is_long_vehicle, lane_width_scale
+from dv2s_gym.pipeline.dra.bev.language import _answer, _describe
+from dv2s_gym.pipeline.dra.bev.scale import LANE_RULER_M, estimate_scale, is_long_vehicle, lane_width_scale
 
 
 _VEHICLE_HUES = ("ego", "car", "truck", "yellow", "red")   # colour classes a vehicle body can have

@@ -47,8 +47,8 @@ Descriptions written by others (crash reports, test protocols, engineers' notes)
 * clause structure: fronted clauses ("After turning right, the ego ...") take the main clause's subject,
   relative pronouns the last actor, coordinated subjects ("two pedestrians and a cyclist cross") share
   the verb, reduced relatives ("a pedestrian crossing the road") own their participle;
-* :mod:`dv2s_gym.pipeline.semantics_lexicon` holds the word lists and patterns;
-  :mod:`dv2s_gym.pipeline.semantics_road`: road features (lanes, turn/parking lanes, shoulders, junction
+* :mod:`dv2s_gym.pipeline.semantics.lexicon` holds the word lists and patterns;
+  :mod:`dv2s_gym.pipeline.semantics.road`: road features (lanes, turn/parking lanes, shoulders, junction
   shape, ramps, signals), absences ("no other vehicles" -> ``absent``; "without an intersection" ->
   ``features["no_junction"]``), speeds and distances;
 * collisions carry ``with`` (the other actor); "a crash between A and B" gives both the collision;
@@ -70,12 +70,12 @@ import re
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
-from dv2s_gym.pipeline.semantics_road import distance_m, road_features, speed_kph, strip_absences, time_s
+from dv2s_gym.pipeline.semantics.road import distance_m, road_features, speed_kph, strip_absences, time_s
 from scenario_bank.elements import normalize_elements
 
 __all__ = ["Entity", "ParsedDescription", "parse_description", "elements_from_text", "ROAD_PATTERNS"]
 
-from dv2s_gym.pipeline.semantics_lexicon import (  # the parser's tables
+from dv2s_gym.pipeline.semantics.lexicon import (  # the parser's tables
     _NUMBERS,
     _NOUNS,
     _EGO,
@@ -166,7 +166,7 @@ class ParsedDescription:
     unknown_actors: List[str] = field(default_factory=list)
     unresolved: List[str] = field(default_factory=list)
     features: Dict[str, Any] = field(default_factory=dict)
-    """Road features said in the text (see :func:`dv2s_gym.pipeline.semantics_road.road_features`)."""
+    """Road features said in the text (see :func:`dv2s_gym.pipeline.semantics.road.road_features`)."""
     absent: List[str] = field(default_factory=list)
     """Participant kinds the text says are not there ("no other vehicles")."""
     absent_phrases: List[str] = field(default_factory=list)

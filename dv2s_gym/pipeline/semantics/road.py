@@ -3,7 +3,7 @@
 These are text-level facts that do not belong to one actor: the road's lanes,
 turn/parking lanes and shoulders, the shape of a junction, "without an
 intersection", "no other vehicles" and the speeds and distances a description
-gives. :mod:`dv2s_gym.pipeline.semantics` calls :func:`road_features`,
+gives. :mod:`dv2s_gym.pipeline.semantics.text` calls :func:`road_features`,
 :func:`strip_absences` and :func:`speed_kph` on lower-cased, hyphen-free text
 (its ``_normalize`` form).
 
