@@ -76,7 +76,7 @@ DEFAULT_OUT = "out/loop"
 DEFAULTS: Dict[str, Any] = {
     "rounds": 1,
     "budget": 80,
-    "sampler": "cross-entropy",
+    "sampler": "novelty-bandit",
     "fine_tune_steps": 30_000,
     "fine_tune_lr": None,
     "holdout_fraction": 0.5,
