@@ -10,7 +10,7 @@ from typing import List, Optional, Sequence
 
 from tqdm import tqdm
 
-__all__ = ["EpisodeSummary", "run_demo", "format_table"]
+__all__ = ["EpisodeSummary", "run_demo", "format_table", "record_scenario"]
 
 
 @dataclass
@@ -103,3 +103,32 @@ def format_table(rows: Sequence[EpisodeSummary]) -> str:
     out = [fmt.format(*header), fmt.format(*("-" * w for w in widths))]
     out += [fmt.format(*line) for line in lines]
     return "\n".join(out)
+
+
+def record_scenario(scenario: str, video: str | os.PathLike, *, config: dict, seed: int = 0, drive: bool = True,
+                    trusted: bool = False, bank_dir: Optional[str | os.PathLike] = None,
+                    trace: Optional[str | os.PathLike] = None) -> dict:
+    """Run one DV2S-v0 episode of ``scenario`` (bank name, .scenic path or ``tag:<tag>``) and record it to ``video``.
+
+    ``config`` is the env config (its ``ego_policy`` ``scenic`` lets the script drive the ego); otherwise the ego
+    is :class:`policies.CautiousDriver` when ``drive``, random actions when not. With ``trace``, the episode's
+    trace is saved there. Returns the recording summary with the episode's scenario, seed, collisions, lane
+    changes, minimum TTC, off-road flag and parameters.
+    """
+    import gymnasium as gym
+
+    import dv2s_gym  # noqa: F401  (registers DV2S-v0)
+    from envs.recording import record_episode
+    from policies import CautiousDriver
+
+    env = gym.make("dv2s_gym:DV2S-v0", scenario=scenario, config=config, render_mode="rgb_array",
+                   trusted=trusted, bank_dir=bank_dir)
+    policy = CautiousDriver(env) if drive and config.get("ego_policy") != "scenic" else None
+    result = record_episode(env, video, policy, seed=seed)
+    if trace:
+        env.unwrapped.save_trace(trace)
+    info = result.pop("info")
+    result.update({k: info[k] for k in ("scenario", "scene_seed", "collisions", "lane_changes", "min_ttc", "off_road")})
+    result["params"] = info["params"]
+    env.close()
+    return result

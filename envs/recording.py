@@ -11,7 +11,7 @@ import numpy as np
 
 from scenario_bank.atomic import atomic_path
 
-__all__ = ["VideoWriter", "record_episode", "video_codecs"]
+__all__ = ["VideoWriter", "record_episode", "video_codecs", "write_frames"]
 
 _CODECS = {".webm": "VP80", ".mp4": "avc1", ".avi": "MJPG", ".mkv": "VP80"}
 
@@ -138,3 +138,10 @@ def record_episode(
                 break
     return {"steps": steps, "return": total, "terminated": terminated, "truncated": truncated,
             "info": info, "frames": video.frames, "path": str(path)}
+
+
+def write_frames(path: Union[str, os.PathLike], frames, fps: float) -> None:
+    """Write rendered frames (``rgb_array`` images) to the video ``path`` at ``fps`` frames per second."""
+    with VideoWriter(path, fps=fps) as video:
+        for frame in frames:
+            video.write(frame)

@@ -6,8 +6,9 @@ env and the trace format do not import each other.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
-from typing import List, Optional
+from typing import List, Optional, Tuple
 
 import numpy as np
 
@@ -18,7 +19,7 @@ from envs.trace_bounds import check_map, check_values
 MAX_SCRIPT_BYTES = 1024 * 1024
 """The largest script a trace's ``scenario_path`` may name."""
 
-__all__ = ["replay_trace", "TraceMismatchError"]
+__all__ = ["replay_trace", "replay_trace_file", "TraceMismatchError"]
 
 
 # a trace file is data from anywhere: its config may choose the episode, not how long a step may run
@@ -84,6 +85,21 @@ def replay_trace(trace: EpisodeTrace, *, render_mode: Optional[str] = None, chec
         raise
     return env, env.trace
 
+
+def replay_trace_file(path: str | os.PathLike, *,
+                      video: Optional[str | os.PathLike] = None) -> Tuple[EpisodeTrace, EpisodeTrace]:
+    """Replay the trace saved at ``path`` (every actor state checked, see :func:`replay_trace`), writing the
+    replayed episode to ``video`` when given; returns ``(saved trace, replayed trace)``."""
+    trace = EpisodeTrace.load(path)
+    frames = [] if video else None
+    env, replayed = replay_trace(trace, render_mode="rgb_array" if video else None, frames=frames)
+    fps = env.unwrapped.config["policy_frequency"]
+    env.close()
+    if video:
+        from envs.recording import write_frames
+
+        write_frames(video, frames, fps)
+    return trace, replayed
 
 def _script_at(path: Path) -> Optional[str]:
     """The text of the script a trace says it ran (``None`` when it is no longer there): a regular ``.scenic``

@@ -222,11 +222,12 @@ def test_a_file_that_is_not_a_video_gives_one_line_and_no_ffmpeg_noise(tmp_path,
 def test_a_reader_that_goes_away_stops_the_command_quietly(monkeypatch, capsys):
     """`dv2s bank list | head -1`: the closed pipe ends the command without an error line."""
     import dv2s_gym.cli as cli
+    import dv2s_gym.cli.bank as bank_commands
 
     def closed_pipe(args):
         raise BrokenPipeError(32, "Broken pipe")
 
-    monkeypatch.setattr(cli, "_cmd_bank_list", closed_pipe)
+    monkeypatch.setattr(bank_commands, "run_list", closed_pipe)
     monkeypatch.setattr(cli, "_silence_stdout", lambda: None)  # the test's own stdout stays usable
     assert cli.main(["bank", "list"]) == 141
     assert capsys.readouterr().err == ""

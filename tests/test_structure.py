@@ -193,3 +193,16 @@ def test_every_project_error_derives_from_the_one_base():
                    if not q.endswith(".DV2SError") and not q.rpartition(".")[2].startswith("_")
                    and not any(reaches_base(b) for b in bases))
     assert not stray, f"errors outside the one base class: {stray}"
+
+
+def test_the_command_line_is_argument_handling_in_small_functions():
+    """Each function of the ``dv2s`` package fits on a screen and takes few parameters: the work is elsewhere."""
+    long = []
+    for path in sorted((ROOT / "dv2s_gym" / "cli").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                args = node.args
+                count = len(args.posonlyargs + args.args + args.kwonlyargs) + bool(args.vararg) + bool(args.kwarg)
+                if node.end_lineno - node.lineno + 1 > 80 or count > 8:
+                    long.append(f"{path.name}:{node.name} ({node.end_lineno - node.lineno + 1} lines, {count} parameters)")
+    assert not long, long

@@ -278,3 +278,19 @@ def test_states_round_trip_exactly(discrete_episode):
     for original, reloaded in zip(env.trace.states, loaded.states):
         for name, state in original.items():
             assert np.array_equal(np.array(state), np.array(reloaded[name]))
+
+
+def test_a_trace_file_replays_into_a_video_of_every_step(discrete_episode, tmp_path):
+    import cv2
+
+    from envs.replay import replay_trace_file
+
+    env, paths = discrete_episode
+    video = tmp_path / "replay.webm"
+    trace, replayed = replay_trace_file(paths["json.gz"], video=video)
+    assert trace == env.trace and replayed.states == trace.states
+    capture, frames = cv2.VideoCapture(str(video)), 0
+    while capture.read()[0]:
+        frames += 1
+    capture.release()
+    assert frames == len(trace.actions) + 1  # the reset, then every step

@@ -560,19 +560,17 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
             raise rejections[0]
 
         stage = "bank"
-        import datetime
+        from dv2s_gym.pipeline.convert import conversion_provenance
 
         result = record.get("result") or {}
         provenance = {
             "kind": "mined", "parent": record["scenario"], "seed": int(record["seed"]),
             "params": _portable_params(result.get("params") or record.get("params") or {}),
-            "video": ENTRY_VIDEO, "trace": ENTRY_TRACE, "generator": f"dra={dra},sg={sg}",
+            "video": ENTRY_VIDEO, "trace": ENTRY_TRACE, **conversion_provenance(dra, sg, generation, description),
             "backends": {"dra": dra, "sg": sg},
-            "model": generation.model or description.model,
-            "context_hash": generation.context_hash or description.prompt_hash,
             "policy": _policy_name(policy), "failure": source_failure, "cluster": cluster,
             "reproduction": out["reproduction"], "e2e_sc": out["e2e_sc"], "run": str(run_dir.resolve()),
-            "index": record.get("index"), "date": datetime.date.today().isoformat(),
+            "index": record.get("index"),
             "interaction": interaction, "judge": {"avoidability": out.get("avoidability"),
                                                   "interaction_shown": shown, "reproduced": reproduced},
             "replay_entry": replay["entry"],

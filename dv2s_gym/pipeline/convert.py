@@ -17,13 +17,14 @@ import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Mapping, Optional
 
 from dv2s_gym.pipeline.sg.openai import classify_failure
 from scenario_bank.atomic import atomic_write_text
 from dv2s_gym.pipeline.stages import Description, Generation, describe, generate
 
-__all__ = ["ScenarioCheck", "check_scenario", "classify_failure", "convert_video", "generate_to_folder", "label_for"]
+__all__ = ["ScenarioCheck", "add_converted", "check_scenario", "classify_failure", "conversion_provenance", "convert_video",
+           "generate_to_folder", "label_for"]
 
 
 @dataclass
@@ -174,3 +175,37 @@ def convert_video(video: str | os.PathLike, out: str | os.PathLike, *, dra: str 
     report["seconds_total"] = round(time.perf_counter() - start, 3)
     _write(Path(out), "report.json", json.dumps(report, indent=2, default=str) + "\n")
     return report
+
+
+def _field(record: Any, key: str) -> Any:
+    return record.get(key) if isinstance(record, Mapping) else getattr(record, key, None)
+
+
+def conversion_provenance(dra: str, sg: str, generation: Any, description: Any) -> Dict[str, Any]:
+    """The provenance fields every converted bank entry records: the backends (``generator``), the model and
+    prompt context that made the script (from the generation, else the description) and today's date.
+    ``generation`` and ``description`` are :class:`Generation` and :class:`Description` or their report dicts."""
+    import datetime
+
+    return {"generator": f"dra={dra},sg={sg}",
+            "model": _field(generation, "model") or _field(description, "model"),
+            "context_hash": _field(generation, "context_hash") or _field(description, "prompt_hash"),
+            "date": datetime.date.today().isoformat()}
+
+
+def add_converted(bank_dir: Optional[str | os.PathLike], video: str | os.PathLike, out: str | os.PathLike,
+                  report: Mapping[str, Any], *, seed: int, dra: str, sg: str) -> str:
+    """Add the scenario a conversion wrote to ``out`` to the bank in ``bank_dir`` (the shipped bank, read-only, when
+    None) with ``generated`` provenance; returns the entry's name, or a note saying why a conversion whose checks
+    failed was not added."""
+    from scenario_bank.bank import Bank
+
+    if not report.get("check", {}).get("ok"):
+        return f"(not added: {video} failed validation)"
+    description = report["description"]
+    provenance = {"kind": "generated", "video": str(video), "seed": seed,
+                  **conversion_provenance(dra, sg, report["generation"], description)}
+    script = (Path(out) / "scenario.scenic").read_text(encoding="utf-8")
+    entry = Bank(bank_dir).add(script, description["text"], elements=description["elements"],
+                               tags=["generated"], provenance=provenance, name=None)
+    return entry.name

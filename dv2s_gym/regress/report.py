@@ -82,7 +82,7 @@ import math
 import hashlib
 import os
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Union
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.errors import ReportMismatchError, RegressError
@@ -100,6 +100,7 @@ __all__ = [
     "bank_info",
     "build_report",
     "load_report",
+    "baseline_defaults",
     "check_baseline_report",
     "write_json",
     "write_markdown",
@@ -368,6 +369,17 @@ def _dv2s_version() -> str:
 
 
 # ---------------------------------------------------------------------- baseline reports
+def baseline_defaults(path: Union[str, os.PathLike], seed: Optional[int],
+                      env_config: Optional[Dict[str, Any]]) -> Tuple[Optional[int], Optional[Dict[str, Any]]]:
+    """The seed and env config of a run against the baseline report at ``path``: those given, else the report's
+    (by default a run repeats the episodes the baseline ran)."""
+    if seed is not None and env_config is not None:
+        return seed, env_config
+    old = load_report(path).get("settings") or {}
+    return (old.get("seed") if seed is None else seed,
+            old.get("env_config") if env_config is None else env_config)
+
+
 def load_report(path: Union[str, os.PathLike]) -> Dict[str, Any]:
     """Read a report written by ``dv2s regress`` and check its schema and version."""
     path = Path(path)

@@ -1,0 +1,73 @@
+"""The ``dv2s`` command: one CLI for the whole product.
+
+Each command group is a module holding its subcommands' arguments (``add_parser``) next to the functions
+that run them; :func:`build_parser` asks each to add its own, in the order ``dv2s --help`` lists them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from typing import List, Optional
+
+from dv2s_gym.cli import (bank, convert, demo, evaluate, loop, maps, mine, regress, replay, run, train)
+from dv2s_gym.cli.errors import report_error
+from dv2s_gym.cli.interrupts import SigintFlag, report_interrupted
+from dv2s_gym.cli.parser import Parser
+from scenario_bank.errors import DV2SError
+
+__all__ = ["main", "build_parser"]
+
+COMMAND_GROUPS = (demo, run, replay, maps, bank, convert, regress, mine, evaluate, train, loop)
+"""The modules whose ``add_parser(subparsers)`` add the subcommands, in the order of ``dv2s --help``."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``dv2s`` (every subcommand has ``--help``)."""
+    parser = Parser(prog="dv2s", description="dv2s-gym: turn driving videos into Scenic "
+                                    "scenarios and run them as Gymnasium episodes in highway-env.")
+    parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
+    parser.add_argument("--bank", default=None, help="bank folder (default: the bank shipped with dv2s-gym); "
+                        "also accepted after `bank` and after its subcommand")
+    subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for group in COMMAND_GROUPS:
+        group.add_parser(subparsers)
+    return parser
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """Entry point of the ``dv2s`` console command.
+
+    Exit status: 0 success, 1 a check failed (validation, generation; ``regress``: FAIL),
+    2 an error (one line on stderr; ``--debug`` prints the traceback), 3 ``regress``
+    INCONCLUSIVE, 4 ``regress`` ERROR (an episode ended in an error), 130 interrupted.
+    """
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    sigint = SigintFlag()
+    try:
+        with sigint:
+            return int(args.func(args) or 0)
+    except KeyboardInterrupt as stop:
+        return report_interrupted(args, getattr(stop, "note", None))
+    except BrokenPipeError:
+        # the reader of our output went away (`dv2s bank list | head`): stop quietly, as Unix tools do
+        _silence_stdout()
+        return 141
+    except DV2SError as error:  # the project's errors name the problem and the fix (a fault adds the --debug hint)
+        return report_interrupted(args) if sigint.received else report_error(args, error, explained=error.expected)
+    except Exception as error:  # any other error reaches the user as one line too, never a raw traceback
+        if sigint.received:  # e.g. a broken pipe to a worker that Ctrl-C stopped first
+            return report_interrupted(args)
+        # a bad value or a file problem from a library explains itself; anything else is unexpected
+        return report_error(args, error, explained=isinstance(error, (ValueError, OSError)))
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so Python's flush at exit does not fail again on the closed pipe."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass

@@ -1,0 +1,162 @@
+"""``dv2s bank``: list, show, add, remove, sample, export, import and count bank scenarios (validation:
+:mod:`dv2s_gym.cli.bank_validate`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from dv2s_gym.cli import bank_validate
+from dv2s_gym.cli.errors import UsageError
+from dv2s_gym.cli.inputs import json_argument, open_bank, read_input_file
+from dv2s_gym.cli.output import emit
+from dv2s_gym.cli.parser import bank_command, bank_option
+
+__all__ = ["add_parser", "run_add", "run_export", "run_import", "run_list", "run_rm", "run_sample", "run_show",
+           "run_stats"]
+
+
+def add_parser(subparsers) -> None:
+    """Add ``bank`` and its subcommands to the ``dv2s`` subcommands."""
+    bank = subparsers.add_parser("bank", help="list, add, validate, sample, export and import bank scenarios",
+                                 description="The scenario bank: versioned, validated, searchable Scenic scenarios.")
+    bank_option(bank)
+    bank_sub = bank.add_subparsers(dest="bank_command", required=True, metavar="BANK_COMMAND")
+    _add_read_commands(bank_sub)
+    _add_write_commands(bank_sub)
+    bank_validate.add_parser(bank_sub)
+    _add_exchange_commands(bank_sub)
+
+
+def _add_read_commands(bank_sub) -> None:
+    p = bank_command(bank_sub, "list", "list scenarios, optionally filtered", run_list)
+    p.add_argument("--tag", help="only scenarios with this tag")
+    p.add_argument("--text", help="substring of the name or description")
+    p.add_argument("--element", action="append", help="participant, action (car:cut_in), relation or road type")
+    p.add_argument("--map", help="only scenarios on this map")
+    p.add_argument("--source", choices=["hand-written", "generated", "mined"], help="only this source kind")
+    p = bank_command(bank_sub, "show", "show one scenario: metadata and script", run_show)
+    p.add_argument("name")
+
+
+def _add_write_commands(bank_sub) -> None:
+    p = bank_command(bank_sub, "add", "add a Scenic script with its description: safety-checked, then compiled, sampled and run once in the sandbox (atomic; duplicates and failures refused)", run_add)
+    p.add_argument("script", help="path to the .scenic file")
+    p.add_argument("--description", required=True, help="natural-language description")
+    p.add_argument("--name", help="entry name (default: from the description)")
+    p.add_argument("--elements", help="JSON file with the semantic elements")
+    p.add_argument("--tag", action="append", help="tag (repeatable)")
+    p.add_argument("--map", help="map name (default: read from `param map`)")
+    p.add_argument("--kind", default="hand-written", choices=["hand-written", "generated", "mined"])
+    p.add_argument("--video", help="source video (provenance)")
+    p.add_argument("--parent", help="parent scenario (provenance)")
+    p = bank_command(bank_sub, "rm", "remove scenarios", run_rm)
+    p.add_argument("name", nargs="+")
+
+
+def _add_exchange_commands(bank_sub) -> None:
+    p = bank_command(bank_sub, "sample", "draw scenarios by weight", run_sample)
+    p.add_argument("--count", type=int, default=1)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--tag", help="draw among scenarios with this tag")
+    p.add_argument("--weights", help='JSON object name -> weight, e.g. \'{"a": 2, "b": 1}\'')
+    p = bank_command(bank_sub, "export", "write scenarios to one .tar.gz archive", run_export)
+    p.add_argument("archive")
+    p.add_argument("--name", action="append", help="only this scenario (repeatable)")
+    p = bank_command(bank_sub, "import", "import an archive (all or nothing; every new script verified in the sandbox like add)", run_import)
+    p.add_argument("archive")
+    p.add_argument("--on-duplicate", choices=["skip", "error"], default="skip")
+    bank_command(bank_sub, "stats", "counts by map, source, road type, tag and participant", run_stats)
+
+
+def run_list(args: argparse.Namespace) -> int:
+    """``dv2s bank list``: the (filtered) scenarios, and the bank's problems."""
+    bank = open_bank(args)
+    entries = bank.list(tag=args.tag, text=args.text, element=args.element, map=args.map, source=args.source)
+    lines = [f"{e.name:<40} {e.map or '':<18} {e.source.get('kind', ''):<13} {', '.join(e.tags)}" for e in entries]
+    lines += [f"! {name}: {message}" for name, message in sorted(bank.problems.items())]
+    emit(args, {"scenarios": [e.summary() for e in entries], "problems": bank.problems},
+         "\n".join(lines) + f"\n{len(entries)} scenario(s)")
+    return 0
+
+
+def run_show(args: argparse.Namespace) -> int:
+    """``dv2s bank show``: one scenario's metadata, files and script."""
+    entry = open_bank(args).get(args.name)
+    missing = set(entry.missing_files())
+    files = [str(f) + (" (missing)" if str(f.relative_to(entry.folder)) in missing else "") for f in entry.files]
+    data = {**entry.meta, "path": str(entry.script_path), "script": entry.script, "files": files}
+    human = (f"{entry.name}  ({entry.map}, {entry.source.get('kind')})\n{entry.description}\n"
+             f"tags: {', '.join(entry.tags)}\nelements: {json.dumps(entry.elements)}\n"
+             f"source: {json.dumps(entry.source)}\npath: {entry.script_path}\n"
+             + "".join(f"file: {f}\n" for f in files) + f"\n{entry.script}")
+    emit(args, data, human)
+    return 0
+
+
+def run_add(args: argparse.Namespace) -> int:
+    """``dv2s bank add``: a Scenic script (Scenic 2 upgraded, the rewrites printed) with its description."""
+    from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES
+    from scenario_bank.scenic2 import upgrade_scenic2
+
+    try:
+        script = read_input_file(args.script, "script", MAX_SCRIPT_BYTES).decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise UsageError(f"the script {args.script} is not UTF-8 text ({error.reason}); save it as UTF-8") from None
+    upgrade = upgrade_scenic2(script)  # Scenic 2 syntax -> Scenic 3; Scenic 3 scripts come back unchanged
+    for line in upgrade.report() if upgrade.changed else []:
+        print(line, file=sys.stderr)
+    elements = (json_argument(read_input_file(args.elements, "elements file", MAX_SIDECAR_BYTES),
+                              f"the elements file {args.elements}") if args.elements else None)
+    provenance = {"kind": args.kind, "video": args.video, "parent": args.parent}
+    # Bank.add upgrades the same way (recording the rewrites in provenance), then its allowlist + sandbox checks
+    entry = open_bank(args).add(script, args.description, name=args.name, elements=elements, tags=args.tag or [],
+                                map=args.map, provenance=provenance, upgrade_scenic2=True)
+    summary = dict(entry.summary(), scenic2_rewrites=[str(r) for r in upgrade.rewrites])
+    emit(args, summary, f"added {entry.name} ({entry.script_path})")
+    return 0
+
+
+def run_rm(args: argparse.Namespace) -> int:
+    """``dv2s bank rm``: remove the named scenarios."""
+    bank = open_bank(args)
+    for name in args.name:
+        bank.remove(name)
+    emit(args, {"removed": args.name}, f"removed {', '.join(args.name)}")
+    return 0
+
+
+def run_sample(args: argparse.Namespace) -> int:
+    """``dv2s bank sample``: scenario names drawn by weight."""
+    bank = open_bank(args)
+    candidates = [e.name for e in bank.list(tag=args.tag)] if args.tag else None
+    weights = json_argument(args.weights, "--weights") if args.weights else None
+    if weights is not None and not (isinstance(weights, dict) and all(isinstance(v, (int, float)) for v in weights.values())):
+        raise UsageError('--weights must be a JSON object of scenario name -> number, e.g. \'{"a": 2, "b": 1}\'')
+    picks = [bank.sample(args.seed + k, weights=weights, candidates=candidates).name for k in range(args.count)]
+    emit(args, picks, "\n".join(picks))
+    return 0
+
+
+def run_export(args: argparse.Namespace) -> int:
+    """``dv2s bank export``: scenarios into one archive."""
+    path = open_bank(args).export(args.archive, names=args.name or None)
+    emit(args, {"archive": str(path)}, f"wrote {path}")
+    return 0
+
+
+def run_import(args: argparse.Namespace) -> int:
+    """``dv2s bank import``: an archive's scenarios, all or nothing."""
+    result = open_bank(args).import_archive(args.archive, on_duplicate=args.on_duplicate)
+    emit(args, result, f"added {len(result['added'])}: {', '.join(result['added']) or '-'}; "
+         f"skipped {len(result['skipped'])} duplicate(s): {', '.join(result['skipped']) or '-'}")
+    return 0
+
+
+def run_stats(args: argparse.Namespace) -> int:
+    """``dv2s bank stats``: counts by map, source, road type, tag and participant."""
+    stats = open_bank(args).stats()
+    human = "\n".join(f"{k}: {v}" for k, v in stats.items())
+    emit(args, stats, human)
+    return 0

@@ -1,0 +1,132 @@
+"""The D-V2S pipeline's commands: ``dv2s describe`` (DRA), ``dv2s generate`` (SG) and ``dv2s convert`` (both,
+video to validated scenario, optionally into the bank)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from dv2s_gym.cli.errors import UsageError
+from dv2s_gym.cli.inputs import llm_config
+from dv2s_gym.cli.output import emit
+from dv2s_gym.cli.parser import bank_option, llm_options, video_options
+
+__all__ = ["add_parser", "report_text", "run_convert", "run_describe", "run_generate"]
+
+
+def add_parser(subparsers) -> None:
+    """Add ``describe``, ``generate`` and ``convert`` to the ``dv2s`` subcommands."""
+    p = subparsers.add_parser("describe", help="describe a driving video (DRA)",
+                              description="Sample frames from a video and describe it in three sentences, with elements.")
+    p.add_argument("video")
+    video_options(p)
+    p.add_argument("--fps", type=float, default=2.0, help="frames sampled per second (default 2)")
+    p.add_argument("--max-frames", type=int, default=16, help="frame cap, spread over the whole video (default 16)")
+    p.add_argument("--max-pixels", type=int, default=448 * 448, help="pixel budget per frame (default 448*448)")
+    p.add_argument("--json", action="store_true")
+    llm_options(p)
+    p.set_defaults(func=run_describe)
+
+    p = subparsers.add_parser("generate", help="turn a description into a validated Scenic scenario (SG)",
+                              description="Generate a Scenic script from a description (in quotes or --from FILE), "
+                              "check it (safety, compile, sample, run) and render a preview.")
+    p.add_argument("description", nargs="?")
+    p.add_argument("--from", dest="from_file", help="read the description from this file (e.g. an edited description.txt)")
+    p.add_argument("--sg", choices=["rules", "openai"], default="rules")
+    p.add_argument("--out", default="out/generated", help="output folder")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seconds", type=float, default=10.0, help="simulated seconds of the check run")
+    p.add_argument("--json", action="store_true")
+    llm_options(p)
+    p.set_defaults(func=run_generate)
+
+    p = subparsers.add_parser("convert", help="video -> description -> Scenic scenario (D-V2S end to end)",
+                              description="Convert a video (or every video of a folder, in parallel) into a described, "
+                              "generated and validated Scenic scenario; optionally add it to the bank.")
+    p.add_argument("video", help="a video file or a folder of videos")
+    video_options(p)
+    p.add_argument("--sg", choices=["rules", "openai"], default="rules")
+    p.add_argument("--out", default="out/convert", help="output folder (one subfolder per video in batch mode)")
+    p.add_argument("--add-to-bank", action="store_true", help="add validated scenarios to the bank with provenance")
+    bank_option(p)
+    p.add_argument("--jobs", type=int, default=1, help="parallel processes in batch mode")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seconds", type=float, default=10.0)
+    p.add_argument("--json", action="store_true")
+    llm_options(p)
+    p.set_defaults(func=run_convert)
+
+
+def run_describe(args: argparse.Namespace) -> int:
+    """``dv2s describe``: the video's description and its elements."""
+    from dv2s_gym.pipeline.stages import describe
+
+    result = describe(args.video, backend=args.dra, camera=args.camera, question=args.question, fps=args.fps,
+                      max_frames=args.max_frames, max_pixels=args.max_pixels, llm_config=llm_config(args))
+    emit(args, result.as_dict(), f"{result.text}\n\nelements: {json.dumps(result.elements)}")
+    return 0
+
+
+def run_generate(args: argparse.Namespace) -> int:
+    """``dv2s generate``: a checked scenario from a description; exit 1 if its checks fail."""
+    from pathlib import Path
+
+    from dv2s_gym.pipeline.convert import generate_to_folder
+    from dv2s_gym.pipeline.semantics.text import elements_from_text
+    from dv2s_gym.pipeline.stages import Description
+
+    if args.from_file:
+        text = Path(args.from_file).read_text(encoding="utf-8")
+    elif args.description:
+        text = args.description
+    else:
+        raise UsageError("give a description in quotes or --from FILE")
+    description = Description(text.strip(), elements_from_text(text), backend="user")
+    report = generate_to_folder(description, Path(args.out), sg=args.sg, seed=args.seed,
+                                llm_config=llm_config(args), seconds=args.seconds)
+    emit(args, report, report_text(report, args.out))
+    return 0 if report.get("check", {}).get("ok") else 1
+
+
+def report_text(report, out) -> str:
+    """A conversion's report as text: the description, what failed, the checks, the scores and the files."""
+    generation = report.get("generation", {})
+    check = report.get("check", {})
+    lines = [f"description: {report['description']['text']}"]
+    if generation.get("warnings"):
+        lines.append("could not place: " + "; ".join(generation["warnings"]))
+    if "error" in generation:
+        lines.append(f"generation failed: {generation['error']}")
+    if check:
+        stages = " ".join(f"{k}={'ok' if check.get(k) else 'FAIL'}" for k in ("safe", "compiled", "sampled", "ran"))
+        lines.append(f"checks: {stages}" + (f" ({check['error']})" if check.get("error") else ""))
+    for key in ("sp", "e2e_sc"):
+        if key in report:
+            lines.append(f"{key.upper().replace('_', '-')}: {report[key]:.2f}")
+    files = report.get("files") or []
+    lines.append(f"written to {out}/ ({', '.join(files)})" if files else f"nothing written to {out}/")
+    return "\n".join(lines)
+
+
+def run_convert(args: argparse.Namespace) -> int:
+    """``dv2s convert``: each video to a checked scenario (added to the bank with ``--add-to-bank``); exit 1 if
+    any conversion's checks fail."""
+    from dv2s_gym.pipeline.batch_convert import convert_videos, videos_to_convert
+    from dv2s_gym.pipeline.convert import add_converted
+
+    pairs = videos_to_convert(args.video, args.out)
+    reports = convert_videos(pairs, jobs=args.jobs, progress=not args.json, dra=args.dra, sg=args.sg,
+                             camera=args.camera, question=args.question, seed=args.seed, llm_config=llm_config(args),
+                             seconds=args.seconds)
+    added = []
+    if args.add_to_bank:
+        added = [add_converted(args.bank, v, o, r, seed=args.seed, dra=args.dra, sg=args.sg)
+                 for (v, o), r in zip(pairs, reports)]
+    if args.json:
+        print(json.dumps({"reports": reports, "added": added}, indent=2, default=str))
+    else:
+        for (v, o), r in zip(pairs, reports):
+            print(f"== {v}\n{report_text(r, o)}")
+        for name in added:
+            print(f"added to bank: {name}")
+    return 0 if all(r.get("check", {}).get("ok") for r in reports) else 1

@@ -1,0 +1,127 @@
+"""``dv2s loop``: closed-loop failure mining: mine, add to the bank, fine-tune, measure, round after round."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from dv2s_gym.cli.errors import UsageError
+from dv2s_gym.cli.parser import bank_option
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(subparsers) -> None:
+    """Add ``loop`` to the ``dv2s`` subcommands."""
+    from dv2s_gym.mining.loop import DEFAULTS as LOOP
+
+    p = subparsers.add_parser("loop", help="mine a policy's failures, add them to the bank, fine-tune, measure (a round "
+                              "on embedded defaults that keeps scenarios took 45-55 minutes on 2 cores; --budget and "
+                              "--max-replays shorten it)",
+                              formatter_class=argparse.RawDescriptionHelpFormatter,
+                              description="Closed-loop failure mining. Each round: mine the policy's failures (dv2s mine) "
+                              "into new bank scenarios in a working bank (out/bank, a copy of the shipped bank, or --bank), "
+                              "split them by family (parent bank scenario) into a fine-tuning and a held-out part, "
+                              "evaluate the policy on the held-out scenarios (seeds 10000+), fine-tune it on the grown bank "
+                              "minus the held-out scenarios and their parents (mined ones upweighted), fine-tune a control "
+                              "the same way without any mined scenario, evaluate both on the same episodes (paired: "
+                              "relative drop, exact McNemar against the start and against the control), run all three on "
+                              "an untouched scenario set (Scenic's CARLA examples) and regression-test new against old on "
+                              "the starting bank (dv2s regress statistics). Writes report.json, report.md, report.html to --out; rerunning with the same "
+                              "--out and settings resumes (raise --rounds to add rounds).",
+                              epilog="examples:\n"
+                              "  dv2s loop                                   # one round on dv2s-ppo, out/loop\n"
+                              "  dv2s loop --budget 400 --fine-tune-steps 100000 --k-eval 10 --out out/loop-big\n"
+                              "  dv2s loop --policy ppo:out/train/my_ppo/model.zip --rounds 3")
+    p.add_argument("--policy", default="dv2s-ppo", help="starting policy: an SB3 checkpoint spec (default dv2s-ppo)")
+    p.add_argument("--rounds", type=int, default=LOOP["rounds"], help=f"rounds (default {LOOP['rounds']})")
+    bank_option(p)
+    p.add_argument("--scenarios", nargs="+", help="scenarios mined and regression-tested (default: the whole bank)")
+    p.add_argument("--budget", type=int, default=LOOP["budget"],
+                   help=f"mining episodes per round (default {LOOP['budget']})")
+    p.add_argument("--sampler", default=LOOP["sampler"], help=f"the miner's sampler: random, halton, cross-entropy, "
+                   f"bandit, split or novelty-bandit (default {LOOP['sampler']}; see dv2s mine --help)")
+    p.add_argument("--fine-tune-steps", type=int, default=LOOP["fine_tune_steps"],
+                   help=f"env steps of fine-tuning per round (default {LOOP['fine_tune_steps']})")
+    p.add_argument("--fine-tune-lr", type=float, default=LOOP["fine_tune_lr"],
+                   help="learning rate of the fine-tuning (default: the method's, ppo 1e-4, dagger 1e-3)")
+    p.add_argument("--holdout-fraction", type=float, default=LOOP["holdout_fraction"],
+                   help=f"share of the mined families (parent scenarios) held out (default {LOOP['holdout_fraction']})")
+    p.add_argument("--max-conversions", type=int, default=LOOP["max_conversions"],
+                   help="failure clusters converted into bank scenarios per round, largest first; 0 converts every "
+                   f"cluster (default {LOOP['max_conversions']})")
+    p.add_argument("--max-replays", default=str(LOOP["max_replays"]),
+                   help="failure clusters beyond the converted ones whose failing scene is kept as an exact replay "
+                   "entry (the parent scenario narrowed around the failure, checked to replay it step for step) per "
+                   f"round, largest first; 0 for none, 'all' for every cluster (default {LOOP['max_replays']})")
+    p.add_argument("--min-heldout-episodes", type=int, default=LOOP["min_heldout_episodes"],
+                   help="below this many held-out episodes a round reports rates only, no drop and no test "
+                   f"(default {LOOP['min_heldout_episodes']})")
+    p.add_argument("--no-control", action="store_true",
+                   help="skip the control arm (the same fine-tuning without the mined scenarios)")
+    p.add_argument("--untouched-seeds", type=int, default=LOOP["untouched_seeds"],
+                   help="seeds per scenario of the untouched set the loop never mines or fine-tunes on; 0 skips it "
+                   f"(default {LOOP['untouched_seeds']})")
+    p.add_argument("--k-eval", type=int, default=LOOP["k_eval"],
+                   help=f"evaluation seeds per held-out scenario (default {LOOP['k_eval']})")
+    p.add_argument("--regress-episodes", type=int, default=LOOP["regress_episodes"],
+                   help=f"seeds per scenario of the regression test (default {LOOP['regress_episodes']})")
+    p.add_argument("--mined-share", type=float, default=LOOP["mined_share"],
+                   help=f"probability of a mined scenario in fine-tuning (default {LOOP['mined_share']})")
+    p.add_argument("--fine-tune-reward", default=None, metavar="JSON",
+                   help="reward-term weights overriding the policy's own during fine-tuning only, e.g. "
+                   f"'{{\"standing\": -1.0, \"low_ttc\": -0.4}}' (default {json.dumps(LOOP['fine_tune_reward'])}; "
+                   "'{}' keeps the policy's reward; evaluation always uses the policy's own env config)")
+    p.add_argument("--fine-tune-method", choices=["ppo", "dagger"], default=LOOP["fine_tune_method"],
+                   help="ppo: continue PPO on the fine-tuning reward; dagger: imitate the rule-based reference "
+                   "driver on the policy's own states (DAgger; --fine-tune-reward unused) "
+                   f"(default {LOOP['fine_tune_method']})")
+    p.add_argument("--margin", type=float, default=LOOP["margin"],
+                   help=f"the regression test's non-inferiority margin (default {LOOP['margin']})")
+    p.add_argument("--seed", type=int, default=LOOP["seed"], help=f"seed (default {LOOP['seed']})")
+    p.add_argument("--workers", type=int, default=None, help="processes for mining and evaluation (default: every core)")
+    p.add_argument("--envs", type=int, default=2, help="training environments (default 2)")
+    p.add_argument("--out", default=None, help="loop folder (default out/loop; rerunning resumes it)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run (or resume) the loop in ``--out`` and print its report."""
+    from pathlib import Path
+
+    from dv2s_gym.mining.loop import DEFAULT_OUT, run_loop
+
+    options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr",
+                                                    "holdout_fraction", "k_eval", "regress_episodes", "mined_share",
+                                                    "margin", "seed", "workers", "scenarios",
+                                                    "fine_tune_method", "max_conversions", "min_heldout_episodes",
+                                                    "untouched_seeds")}
+    options["max_conversions"] = None if options["max_conversions"] == 0 else options["max_conversions"]
+    if args.max_replays == "all":
+        options["max_replays"] = None
+    else:
+        try:
+            options["max_replays"] = int(args.max_replays)
+        except ValueError:
+            raise UsageError(f"--max-replays must be a whole number of clusters or 'all', not {args.max_replays!r}") \
+                from None
+    options["control"] = not args.no_control
+    if args.fine_tune_reward is not None:
+        try:
+            options["fine_tune_reward"] = json.loads(args.fine_tune_reward)
+        except ValueError as error:
+            raise UsageError(f"--fine-tune-reward must be a JSON object of reward-term weights, e.g. "
+                             f"'{{\"standing\": -1.0}}'; {error}") from None
+        if not isinstance(options["fine_tune_reward"], dict):
+            raise UsageError("--fine-tune-reward must be a JSON object of reward-term weights, e.g. "
+                             "'{\"standing\": -1.0}' ('{}' keeps the policy's own reward)")
+    out = args.out or DEFAULT_OUT
+    report = run_loop(args.policy, out=out, bank_dir=getattr(args, "bank", None), n_envs=args.envs,
+                      progress=not args.no_progress, **options)
+    print((Path(out) / "report.md").read_text(encoding="utf-8") if (Path(out) / "report.md").is_file() else "")
+    print(f"final policy: {report.policy}")
+    for kind in ("json", "md", "html"):
+        if kind in report.paths:
+            print(f"report ({kind}): {report.paths[kind]}")
+    return 0

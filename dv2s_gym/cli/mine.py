@@ -1,0 +1,113 @@
+"""``dv2s mine``: a policy's failures found by sampling scenes, clustered and turned into bank scenarios."""
+
+from __future__ import annotations
+
+import argparse
+
+from dv2s_gym.cli.errors import UsageError
+from dv2s_gym.cli.inputs import json_option, llm_config
+from dv2s_gym.cli.parser import bank_option, llm_options
+from envs.errors import Interrupted
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(subparsers) -> None:
+    """Add ``mine`` to the ``dv2s`` subcommands."""
+    p = subparsers.add_parser(
+        "mine", help="mine a policy's failures: sample scenes, cluster failures, turn them into bank scenarios",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Sample scenes (a bank scenario and values of its Scenic parameters, drawn by a VerifAI "
+        "sampler that learns from the outcomes), run the policy on each in a local process pool or on Ray, and "
+        "detect failures: collision (with whom, and how), off road, time-to-collision under a threshold, stall. "
+        "Failures are clustered by scenario, failure class and region of parameter space; a failure counts "
+        "against the policy only if the reference driver avoids it in the same scene. With a writable --bank, "
+        "one failure per cluster is kept exactly (its parent scenario narrowed around the failing parameters, "
+        "with its seed: a 'replay' entry), and is recorded as a bird's-eye video, turned into a Scenic scenario by "
+        "the D-V2S pipeline, checked in the sandbox, kept if its runs show the failure's actor and manoeuvre, the "
+        "policy fails on it the same way and the reference driver avoids it, and added to the bank with its "
+        "provenance. Rerunning with the same --out resumes (a larger --budget continues the run).",
+        epilog="examples:\n"
+        "  dv2s mine --policy dv2s-ppo --budget 200 --bank my_bank --out out/mine\n"
+        "  dv2s mine --policy rule --sampler halton --scenarios tag:highway --budget 500 --no-convert\n"
+        "  dv2s mine --policy dv2s-ppo --backend ray --address HEAD:6379 --budget 5000 --bank /shared/bank")
+    p.add_argument("--policy", required=True, help="policy spec: rule, idm, keep_lane, random, dv2s-ppo, model.zip, "
+                   "ppo:PATH, module:attr, with ?key=value options")
+    bank_option(p)
+    p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank)")
+    p.add_argument("--budget", type=int, default=200, help="episodes to run (default 200)")
+    p.add_argument("--sampler", default="novelty-bandit",
+                   choices=["random", "halton", "cross-entropy", "bandit", "split", "novelty-bandit"],
+                   help="scene sampler (default novelty-bandit); split: VerifAI's cross-entropy over which scenario "
+                   "and a Halton sequence per scenario over its parameters; novelty-bandit: the scenarios that keep "
+                   "giving failures unlike earlier ones, mixed with uniform, parameters uniform (explore, prior_new, "
+                   "prior_old)")
+    p.add_argument("--sampler-options", default=None,
+                   help="VerifAI settings of cross-entropy/bandit as JSON: alpha (default 0.9), buckets (5), thres (0); "
+                   "split also takes chooser (cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy) "
+                   "and warmup (0), and against scenarios that stop yielding: forget, patience, floor, capacity, avoid "
+                   "(see dv2s_gym/mining/samplers.py)")
+    p.add_argument("--feedback", choices=["robustness", "novelty", "scenario-novelty", "state-novelty"], default=None,
+                   help="what adaptive samplers learn from: robustness (every failure), novelty (a failure in a "
+                   "parameter cell that already failed counts as an easy scene, to spread the search) or "
+                   "scenario-novelty (only each scenario's first failure counts) or state-novelty (a failure whose "
+                   "speeds and geometry at the failure are close to an earlier one's in the scenario counts as easy); "
+                   "default novelty for split, state-novelty for novelty-bandit, robustness for the others")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sampler and the episodes (default 0)")
+    p.add_argument("--reference", default="rule",
+                   help="driver deciding avoidability (default rule; 'none' skips the check)")
+    p.add_argument("--ttc-threshold", type=float, default=1.0, help="low-TTC failure threshold [s] (default 1)")
+    p.add_argument("--stall-seconds", type=float, default=5.0,
+                   help="seconds standing with nothing in the lane 40 m ahead that count as a stall (default 5)")
+    p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
+    p.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
+    p.add_argument("--address", default=None, help="with --backend ray: the cluster address")
+    p.add_argument("--timeout", type=float, default=None,
+                   help="seconds one episode may take before its worker counts as hung (default 600)")
+    p.add_argument("--batch", type=int, default=None,
+                   help="scenes drawn ahead of the outcomes fed back to the sampler: the sliding window of an "
+                        "adaptive sampler, the chunk of random/halton (default 4 per worker)")
+    p.add_argument("--config", help="DV2S-v0 config overrides as JSON (or a .json file)")
+    p.add_argument("--no-convert", action="store_true", help="only find and cluster failures; add nothing to a bank")
+    p.add_argument("--max-conversions", type=int, default=None,
+                   help="convert at most this many clusters, those with most avoidable failures first (default: all)")
+    p.add_argument("--dra", choices=["bev", "openai"], default="bev", help="DRA backend for failure videos")
+    p.add_argument("--sg", choices=["rules", "openai"], default="rules", help="SG backend")
+    llm_options(p)
+    p.add_argument("-k", type=int, default=10, dest="k",
+                   help="scenes the new scenario is run on to check it reproduces the failure (default 10)")
+    p.add_argument("--threshold", type=float, default=0.3,
+                   help="reproduction rate a new scenario needs to be kept (default 0.3)")
+    p.add_argument("--out", default=None, help="run folder (default out/mine)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Mine the policy's failures and print the run's summary and reports."""
+    from pathlib import Path
+
+    from dv2s_gym.mining.miner import mine
+
+    env_config = json_option(args.config, "--config")
+    if env_config is not None and not isinstance(env_config, dict):
+        raise UsageError("--config must be a JSON object of DV2S-v0 config overrides, e.g. '{\"duration\": 10}'")
+    out = Path(args.out or "out/mine")
+    convert_options = {"dra": args.dra, "sg": args.sg, "k": args.k, "threshold": args.threshold,
+                       "llm_config": llm_config(args)}
+    try:
+        run = mine(args.policy, out=out, budget=args.budget, sampler=args.sampler, scenarios=args.scenarios,
+                   bank_dir=args.bank, backend=args.backend, workers=args.workers, address=args.address,
+                   seed=args.seed, reference=None if args.reference == "none" else args.reference,
+                   batch=args.batch, timeout=args.timeout, progress=not args.no_progress, env_config=env_config,
+                   ttc_threshold=args.ttc_threshold, stall_seconds=args.stall_seconds,
+                   convert=not args.no_convert, convert_options=convert_options,
+                   max_conversions=args.max_conversions, feedback=args.feedback,
+                   sampler_options=json_option(args.sampler_options, "--sampler-options"))
+    except KeyboardInterrupt as stop:
+        raise Interrupted(getattr(stop, "note", None) or f"finished episodes are kept in "
+                          f"{out / 'episodes.jsonl'}; rerun the same command to resume") from None
+    print(run.summary())
+    if run.reports:
+        print(f"reports: {', '.join(str(p) for p in run.reports.values())}")
+    return 0

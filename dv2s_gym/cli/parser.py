@@ -1,0 +1,70 @@
+"""The argument parser class of ``dv2s`` and the option groups several commands share."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Callable, List
+
+__all__ = ["Parser", "bank_command", "bank_option", "llm_options", "video_options"]
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line in the words of the (sub)command the user typed.
+
+    argparse prints the whole usage block before a usage error and reports an unknown option of a
+    subcommand as the top-level command's; here the subcommand that received it names it, with the
+    closest option it has and where its help is.
+    """
+
+    def error(self, message: str):  # argparse's hook; never returns
+        self.exit(2, f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")
+
+    def parse_known_args(self, args=None, namespace=None):
+        leaf = not any(isinstance(action, argparse._SubParsersAction) for action in self._actions)
+        if leaf and args is not None:  # a mistyped option is named before "--policy is required" hides it
+            unknown = [token for token in args if token.startswith("--") and token != "--"
+                       and not any(flag.startswith(token.split("=", 1)[0]) for flag in self._option_string_actions)]
+            if unknown:
+                self.error(self._unrecognized(unknown))
+        namespace, extras = super().parse_known_args(args, namespace)
+        if extras and leaf:
+            self.error(self._unrecognized(extras))
+        return namespace, extras
+
+    def _unrecognized(self, extras: List[str]) -> str:
+        import difflib
+
+        message = f"unrecognized arguments: {' '.join(extras)}"
+        flags = [flag.split("=", 1)[0] for flag in extras if flag.startswith("-")]
+        close = difflib.get_close_matches(flags[0], list(self._option_string_actions), n=1) if flags else []
+        return message + (f"; did you mean {close[0]}?" if close else "")
+
+
+def bank_option(p: argparse.ArgumentParser) -> None:
+    """``--bank`` on a subcommand (the top-level parser has its own)."""
+    # SUPPRESS: given at several levels, the one the user wrote wins; not given, the top level's None stays
+    p.add_argument("--bank", default=argparse.SUPPRESS, help="bank folder (default: the bank shipped with dv2s-gym)")
+
+
+def bank_command(bank_sub, name: str, help_text: str, func: Callable[[argparse.Namespace], int]):
+    """A ``dv2s bank`` subcommand with ``--bank`` and ``--json``, running ``func``."""
+    p = bank_sub.add_parser(name, help=help_text, description=help_text)
+    bank_option(p)
+    p.add_argument("--json", action="store_true", help="print JSON instead of text")
+    p.set_defaults(func=func)
+    return p
+
+
+def llm_options(p: argparse.ArgumentParser) -> None:
+    """The OpenAI-compatible endpoint's settings."""
+    p.add_argument("--base-url", help="OpenAI-compatible endpoint (default: $DV2S_LLM_BASE_URL)")
+    p.add_argument("--model", help="model name (default: $DV2S_LLM_MODEL)")
+    p.add_argument("--api-key", help="API key (default: $OPENAI_API_KEY)")
+
+
+def video_options(p: argparse.ArgumentParser) -> None:
+    """How a video is described: the Driving Record Analyzer, the camera, a question."""
+    p.add_argument("--dra", choices=["bev", "openai"], default="bev",
+                   help="Driving Record Analyzer: bev (offline, bird's-eye renders) or openai (any VLM endpoint)")
+    p.add_argument("--camera", choices=["bev", "front", "rear", "chase"], default="bev", help="camera viewpoint")
+    p.add_argument("--question", help='video-specific question, e.g. "Why did the ego vehicle brake?"')

@@ -1,0 +1,130 @@
+"""``dv2s regress``: a candidate policy regression-tested against a baseline on paired episodes."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from dv2s_gym.cli.errors import UsageError
+from dv2s_gym.cli.parser import bank_option
+from envs.errors import Interrupted
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(subparsers) -> None:
+    """Add ``regress`` to the ``dv2s`` subcommands."""
+    p = subparsers.add_parser(
+        "regress", help="regression-test a policy against a baseline on paired episodes (PASS/FAIL/INCONCLUSIVE)",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Run the candidate policy (and the baseline, on the same scenario x seed pairs: episode k "
+        "uses seed S+k for both) over bank scenarios, in a local process pool or on Ray. Reports per scenario "
+        "and overall collision, off-road and success rates (Wilson intervals), minimum TTC, mean speed and "
+        "return (bootstrap intervals), and the paired difference in failure rate (Newcombe interval, exact "
+        "McNemar test) with a non-inferiority verdict against --margin. Every scenario is a test in its own "
+        "right, beside the pooled one, with the family-wise false-alarm rate at most --alpha. The episodes per "
+        "scenario are planned from --mde and --power unless --episodes is given; the report states the power "
+        "the run had. Writes "
+        "report.json (schema dv2s-regress v1), junit.xml, report.md, results.jsonl and traces/ of failed "
+        "episodes to --out; rerunning with the same --out and settings resumes.",
+        epilog="exit status: 0 PASS (or no baseline: measures only), 1 FAIL, 3 INCONCLUSIVE (too few episodes "
+        "to tell), 4 ERROR (an episode ended in an error: never green), 2 bad input.\n"
+        "examples:\n"
+        "  dv2s regress --policy ppo:model.zip --baseline rule --scenarios tag:highway --episodes 50\n"
+        "  dv2s regress --policy rule --out out/main          # measures only, keep report.json\n"
+        "  dv2s regress --policy new.zip --baseline-report out/main/report.json\n"
+        "  dv2s replay out/regress/report.json --episode highway_cut_in_from_left/3 --video ep.webm")
+    p.add_argument("--policy", required=True, help="candidate policy spec: rule, idm, keep_lane, random, dv2s-ppo, "
+                   "model.zip, ppo:PATH, module:attr, with ?key=value options (e.g. rule?action_noise=0.3)")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--baseline", help="baseline policy spec, run on the same episodes")
+    group.add_argument("--baseline-report", help="report.json of an earlier run: its episodes are the baseline "
+                       "(refused if its schema version, bank scenarios or env config differ)")
+    p.add_argument("--baseline-role", choices=["candidate", "baseline"], default="candidate",
+                   help="with --baseline-report: which of its policies is the baseline (default: the one it tested)")
+    p.add_argument("--accept-failed-baseline", action="store_true",
+                   help="with --baseline-report: use a report whose verdict was FAIL or ERROR (refused otherwise)")
+    bank_option(p)
+    p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank, or the "
+                   "baseline report's scenarios)")
+    p.add_argument("--episodes", type=int, default=None,
+                   help="seeds per scenario (default: planned from --mde and --power, at most those of the "
+                   "baseline report)")
+    p.add_argument("--mde", type=float, default=None,
+                   help="minimum detectable effect: the rise of one scenario's failure rate the run must FAIL "
+                   "(default 0.30: 30 points); with --power it chooses --episodes")
+    p.add_argument("--power", type=float, default=None,
+                   help="probability of FAIL at --mde (default 0.8)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="seed of the first episode (default 0, or the baseline report's)")
+    p.add_argument("--margin", type=float, default=0.02,
+                   help="non-inferiority margin on the failure rate (default 0.02: 2 points, as calibrated in bench/calibrate_regress.py)")
+    p.add_argument("--alpha", type=float, default=0.05, help="level of the FAIL test (default 0.05)")
+    p.add_argument("--failure", default=None,
+                   help="what counts as a failure: a comma-separated list of collision, off_road, stall (default: "
+                   "all three; stall: the ego stands with a free road ahead); each kind is also reported apart")
+    p.add_argument("--stall-seconds", type=float, default=5.0,
+                   help="seconds the ego must stand with a free road ahead for a stall (default 5)")
+    p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
+    p.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
+    p.add_argument("--address", default=None, help="with --backend ray: the cluster address")
+    p.add_argument("--timeout", type=float, default=None,
+                   help="seconds one episode may take before its worker counts as hung (default 600)")
+    p.add_argument("--sequential", action="store_true",
+                   help="stop as soon as a group-sequential test settles PASS or FAIL")
+    p.add_argument("--batch", type=int, default=None,
+                   help="with --sequential: seeds per look (default: a fifth of --episodes)")
+    p.add_argument("--config", help="DV2S-v0 config overrides as JSON (or a .json file), e.g. '{\"duration\": 10}' "
+                   "(default: none, or the baseline report's)")
+    p.add_argument("--out", default=None, help="output folder (default out/regress)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="print the report JSON instead of the table")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the regression test, print its summary (or the report JSON); the exit status is the verdict's."""
+    from pathlib import Path
+
+    from dv2s_gym.regress.report import baseline_defaults, exit_code, format_summary
+    from dv2s_gym.regress.runner import DEFAULT_OUT, run_regression
+
+    env_config = _env_config(args.config) if args.config else None
+    out = args.out or DEFAULT_OUT
+    episodes, seed = args.episodes, args.seed
+    if args.baseline_report:
+        seed, env_config = baseline_defaults(args.baseline_report, seed, env_config)
+    try:
+        report = run_regression(
+            args.policy, args.baseline, baseline_report=args.baseline_report, bank_dir=args.bank,
+            scenarios=args.scenarios, episodes=episodes, seed=seed or 0,
+            margin=args.margin, alpha=args.alpha, mde=args.mde, power=args.power,
+            backend=args.backend, workers=args.workers, address=args.address, out_dir=out,
+            sequential=args.sequential, env_config=env_config, progress=not args.no_progress and not args.json,
+            timeout=args.timeout, batch=args.batch, baseline_role=args.baseline_role, failure=args.failure,
+            stall_seconds=args.stall_seconds, accept_failed_baseline=args.accept_failed_baseline)
+    except KeyboardInterrupt as stop:
+        raise Interrupted(getattr(stop, "note", None) or f"finished episodes are kept in "
+                          f"{Path(out) / 'results.jsonl'}; rerun the same command to resume") from None
+    if args.json:
+        print(json.dumps(report, indent=1))
+    else:
+        print(format_summary(report))
+        names = ("report.json", "junit.xml", "report.md", "report.html")
+        print(f"reports: {', '.join(str(Path(out) / f) for f in names if (Path(out) / f).is_file())}")
+    return exit_code(report["verdict"])
+
+
+def _env_config(text: str) -> dict:
+    """``--config``: a JSON object inline, or a .json file holding one."""
+    from pathlib import Path
+
+    text = Path(text).read_text(encoding="utf-8") if text.endswith(".json") else text
+    try:
+        env_config = json.loads(text)
+    except ValueError as error:
+        raise UsageError(f"--config must be a JSON object of DV2S-v0 config overrides (or a .json file), e.g. "
+                         f"'{{\"duration\": 10}}'; {error}") from None
+    if not isinstance(env_config, dict):
+        raise UsageError("--config must be a JSON object of DV2S-v0 config overrides, e.g. '{\"duration\": 10}'")
+    return env_config
