@@ -17,8 +17,9 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser(
         "mine", help="mine a policy's failures: sample scenes, cluster failures, turn them into bank scenarios",
         formatter_class=argparse.RawDescriptionHelpFormatter,
-        description="Sample scenes (a bank scenario and values of its Scenic parameters, drawn by a VerifAI "
-        "sampler that learns from the outcomes), run the policy on each in a local process pool or on Ray, and "
+        description="Sample scenes (a bank scenario and values of its Scenic parameters, drawn by a sampler "
+        "that learns from the outcomes: by default novelty-bandit, which favours scenarios and behaviours not yet "
+        "seen; --sampler picks VerifAI's or uniform ones), run the policy on each in a local process pool or on Ray, and "
         "detect failures: collision (with whom, and how), off road, time-to-collision under a threshold, stall. "
         "Failures are clustered by scenario, failure class and region of parameter space; a failure counts "
         "against the policy only if the reference driver avoids it in the same scene. With a writable --bank, "

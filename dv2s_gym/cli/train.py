@@ -38,7 +38,8 @@ def add_parser(subparsers) -> None:
                    help="algorithm hyperparameter (repeatable; JSON values), e.g. --hp learning_rate=3e-4 --hp 'net_arch=[64,64]'")
     p.add_argument("--eval-freq", type=int, help="held-out evaluation every N env steps, 0 = off (default 10000)")
     p.add_argument("--eval-seeds", type=int, help="seeds per scenario of the periodic evaluation (default 2)")
-    p.add_argument("--card-seeds", type=int, help="seeds per scenario of the model card's evaluation, 0 = none (default 20)")
+    p.add_argument("--card-seeds", type=int, help="seeds per scenario of the model card's evaluation, 0 = none "
+                   "(default 20, or 3 for runs under 100000 steps)")
     p.add_argument("--baselines", nargs="*", metavar="POLICY",
                    help="policies evaluated on the card's episodes for paired comparisons (default: keep_lane rule)")
     p.add_argument("--eval-jobs", type=int, help="processes for the card's evaluation (default 2)")
