@@ -393,6 +393,33 @@ def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, *, policy
     return out
 
 
+def _stage_error(stage: str, error: BaseException) -> str:
+    """A stage's failure as a rejection reason: ``"<stage>: <message>"``, an unexpected error named by its type."""
+    if isinstance(error, _Rejected):
+        return str(error)
+    first = (str(error).strip().splitlines() or [""])[0]
+    return f"{stage}: {type(error).__name__}: {first}"[:500]
+
+
+def _replay_without_video(out: Dict[str, Any], video_error: str, record: Mapping[str, Any], bank, *,
+                          details: Dict[str, Any], **options: Any) -> None:
+    """After the video stage failed: keep the exact replay all the same (its own trace stands for the failure's)
+    and record both outcomes in ``out``: ``rejections`` holds the video's reason, then the replay's if it
+    failed too."""
+    out["rejections"] = [video_error]
+    try:
+        replay = _add_replay(record, None, bank, interaction=None, files=None, **options)
+    except SETUP_ERRORS:
+        raise
+    except Exception as error:
+        out["rejections"].append(_stage_error("replay", error))
+        return
+    out["replay_entry"] = replay["entry"]
+    details["replay"] = replay
+    if replay["entry"]:
+        _link(bank, replay["entry"], {"converted_rejections": list(out["rejections"])})
+
+
 def _portable_params(params: Mapping[str, Any]) -> Dict[str, Any]:
     """The sampled parameters as the bank keeps them: a map given by a path becomes its file name (the
     entry's ``map`` names it; shipped maps are found by name), so no path into this machine is kept."""
@@ -486,8 +513,18 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
 
         video = folder / "failure.webm"
         monitor = _monitor_options(run_dir, monitor)
-        written = write_failure_video(record, video, policy=policy, bank_dir=bank_dir, env_config=env_config,
-                                      before=before, after=after, stall_seconds=monitor.get("stall_seconds"))
+        try:
+            written = write_failure_video(record, video, policy=policy, bank_dir=bank_dir, env_config=env_config,
+                                          before=before, after=after, stall_seconds=monitor.get("stall_seconds"))
+        except SETUP_ERRORS:
+            raise
+        except Exception as error:  # no video, no conversion; the exact replay does not need one
+            lap("video")
+            _replay_without_video(out, _stage_error("video", error), record, bank, bank_dir=bank_dir,
+                                  policy=policy, env_config=env_config, monitor=monitor,
+                                  source_failure=source_failure, cluster=cluster, run_dir=run_dir, details=details)
+            lap("replay")
+            raise _Rejected("video", out["rejections"][0].split(": ", 1)[1])
         out["video"] = _rel(video, run_dir)
         source_trace = written.trace
         detected = _detect(written.result, source_trace, monitor)
