@@ -289,7 +289,7 @@ def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, poli
     without an ``interaction`` it is read from that trace."""
     import datetime
 
-    from dv2s_gym.mining.exact_replay import REPLAY_TAG, narrowed_script, replay_name, run_replay
+    from dv2s_gym.mining.exact_replay import REPLAY_TAG, narrowed_script, replay_name, replay_versions, run_replay
     from dv2s_gym.mining.interaction import interaction_sentence
     from dv2s_gym.pipeline.metrics import e2e_sc
     from dv2s_gym.pipeline.semantics.trace import elements_from_trace
@@ -321,7 +321,7 @@ def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, poli
             interaction = failure_interaction(trace, source_failure)
     files = dict(files or {})
     replay = {"params": params, "intervals": intervals, "seed": seed, "trajectory_hash": expected,
-              "policy": _policy_name(policy)}
+              "policy": _policy_name(policy), **replay_versions(policy)}
     out = {"entry": None, **replay, "failure": failure, "note": None,
            "e2e_sc": e2e_sc(elements_from_trace(source_trace), elements_from_trace(trace))}
     events = interaction_sentence(interaction)
