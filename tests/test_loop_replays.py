@@ -37,6 +37,7 @@ def test_a_failure_is_kept_as_its_exact_replay_without_a_video_or_a_script(recor
     assert again["replay_entry"] == out["replay_entry"] and len(bank) == len(Bank(tmp_path / "bank"))
 
 
+@pytest.mark.slow
 def test_a_replay_entry_records_what_it_depends_on_and_a_mismatch_says_why(record, tmp_path):
     from dv2s_gym.mining.exact_replay import replay_versions
     from dv2s_gym.regress.identity import dv2s_sources_sha256
