@@ -37,6 +37,51 @@ def test_a_failure_is_kept_as_its_exact_replay_without_a_video_or_a_script(recor
     assert again["replay_entry"] == out["replay_entry"] and len(bank) == len(Bank(tmp_path / "bank"))
 
 
+@pytest.mark.slow
+def test_a_replay_entry_records_what_it_depends_on_and_a_mismatch_says_why(record, tmp_path):
+    from dv2s_gym.mining.exact_replay import replay_versions
+    from dv2s_gym.regress.identity import dv2s_sources_sha256
+    from dv2s_gym.regress.report import _dv2s_version
+    from envs.trace import TRACE_VERSION
+    from policies.registry import SHIPPED_CHECKPOINT
+    from scenario_bank.atomic import file_sha256
+
+    out = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", policy="keep_lane",
+                               bank=tmp_path / "bank", monitor={})
+    bank = Bank(tmp_path / "bank")
+    name = out["replay_entry"]
+    replay = bank.get(name).source["replay"]
+    assert replay["policy"] == "keep_lane" and replay["policy_sha256"] is None  # a driver, no checkpoint
+    assert replay["dv2s_gym_version"] == _dv2s_version() and replay["trace_version"] == TRACE_VERSION
+    assert replay["dv2s_sources_sha256"] == dv2s_sources_sha256()
+    shipped = file_sha256(SHIPPED_CHECKPOINT)
+    assert replay_versions("dv2s-ppo")["policy_sha256"] == shipped
+    assert replay_versions(f"ppo:{SHIPPED_CHECKPOINT}")["policy_sha256"] == shipped
+    assert replay_versions(str(SHIPPED_CHECKPOINT.parent))["policy_sha256"] == shipped
+    matched = replay_failure(bank, name)
+    assert matched["matches"] and matched["reason"] is None
+
+    # another version of dv2s-gym recorded it: the episode differs, and the reason names the version
+    bank.update_source(name, {"replay": {**replay, "dv2s_gym_version": "0.0.1", "trajectory_hash": "0" * 64}})
+    moved = replay_failure(bank, name)
+    assert not moved["matches"] and f"dv2s-gym is version {_dv2s_version()} now, 0.0.1 when recorded" in moved["reason"]
+    assert "did not replay the recorded failing episode" in moved["reason"] and "checkpoint differs" not in moved["reason"]
+    # recorded with a checkpoint: replayed with another one (the shipped dv2s-ppo), the reason names the checkpoint
+    bank.update_source(name, {"replay": {**replay, "policy": "dv2s-ppo", "policy_sha256": "ab" * 32}})
+    other = replay_failure(bank, name)
+    assert not other["matches"]
+    assert f"the policy checkpoint differs from the one that failed (SHA-256 {shipped[:12]} now, abababababab when " \
+           "recorded)" in other["reason"] and "dv2s-gym is version" not in other["reason"]
+    # everything the same: a real divergence
+    bank.update_source(name, {"replay": {**replay, "trajectory_hash": "0" * 64}})
+    same = replay_failure(bank, name)
+    assert not same["matches"] and "a real divergence" in same["reason"]
+    # an entry from before the versions were recorded cannot tell
+    old = {k: v for k, v in replay.items() if k not in replay_versions("keep_lane")}
+    bank.update_source(name, {"replay": {**old, "trajectory_hash": "0" * 64}})
+    assert "records no policy checkpoint or dv2s-gym version" in replay_failure(bank, name)["reason"]
+
+
 def test_a_replay_that_does_not_match_the_recorded_episode_is_rejected_and_adds_nothing(record, tmp_path):
     tampered = json.loads(json.dumps(record))
     tampered["result"]["trajectory_hash"] = "0" * 64

@@ -355,13 +355,62 @@ def test_each_failed_check_of_the_judge_is_its_own_reason():
     reasons = [str(r) for r in _judge(out, interaction, {"type": "stall"}, 0.3)]
     assert [r.split(":")[0] for r in reasons] == ["interaction", "reproduction", "avoidability"]
     assert "car (brake, stop) in 1 of 10" in reasons[0] and "stall failure with a car in 2 of 10" in reasons[1]
-    assert "rule failed the same way in 6 of 10" in reasons[2]
+    assert "rule failed in 6 of 10" in reasons[2]
     passing = {"reproduction": {"k": 10, "reproduced": 3, "rate": 0.3, "interaction_shown": 3},
                "avoidability": {"reference": "rule", "k": 10, "failed": 4, "avoided_rate": 0.6}}
     assert _judge(passing, interaction, {"type": "stall"}, 0.3) == []
     # the reference avoiding it in half of the episodes is not "most"
     half = {**passing, "avoidability": {"reference": "rule", "k": 10, "failed": 5, "avoided_rate": 0.5}}
     assert [str(r).split(":")[0] for r in _judge(half, interaction, {"type": "stall"}, 0.3)] == ["avoidability"]
+
+
+def test_any_reference_failure_counts_against_the_new_scenario_whatever_its_class():
+    from dv2s_gym.mining.convert import _judge, reference_failed, reference_outcome
+
+    rear = {"type": "collision", "with_kind": "car", "collision_type": "rear_end"}
+    behind = {"type": "collision", "with_kind": "car", "collision_type": "struck_from_behind",
+              "kind": "collision:struck_from_behind"}
+    stall = {"type": "stall", "kind": "stall"}
+    near_miss = {"type": "low_ttc", "kind": "low_ttc"}
+    assert not same_failure_class(rear, behind)  # another class than the source's ...
+    assert reference_failed(rear, behind) and reference_failed(rear, stall)  # ... still a failure of the reference
+    assert reference_failed(rear, {"type": "off_road", "kind": "off_road"})
+    assert not reference_failed(rear, None) and not reference_failed(rear, near_miss)
+    assert reference_failed(near_miss, near_miss)  # the miner calls such a near miss unavoidable too
+    outcome = reference_outcome(rear, [{"failure": behind}, {"failure": behind}, {"failure": stall},
+                                       {"failure": near_miss}, {"failure": None}], "rule")
+    assert outcome == {"reference": "rule", "k": 5, "failed": 3, "avoided_rate": pytest.approx(0.4),
+                       "failures": {"collision:struck_from_behind": 2, "stall": 1}}
+    out = {"reproduction": {"k": 5, "reproduced": 5, "rate": 1.0, "interaction_shown": 5}, "avoidability": outcome}
+    reasons = [str(r) for r in _judge(out, {"kind": "car", "manoeuvres": ["stop"]}, rear, 0.3)]
+    assert reasons == ["avoidability: the reference driver rule failed in 3 of 5 episodes of the new scenario "
+                       "(collision:struck_from_behind 2, stall 1); it must drive most of them without any "
+                       "collision, off-road or stall"]
+
+
+@pytest.mark.slow
+def test_a_script_on_which_the_reference_fails_another_way_is_rejected(record, tmp_path, monkeypatch):
+    # the source failure: the ego ran into a car standing still ahead (rear end). The script adds a faster car
+    # 40 m behind the ego in its lane: the policy (constant speed) still runs into the stopped car first, while
+    # the reference driver, which stops behind it, is struck from behind: not the source's failure class, yet
+    # a scenario its reference cannot drive
+    chaser = Bank().get(SCENARIO).script + (
+        'chaser = new Car at egoLane.centerline.pointAlongBy(egoS - 40),\n    with name "chaser",\n'
+        "    with speed globalParameters.ego_speed + 5,\n"
+        "    with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed + 5)\n")
+    _patch_generator(monkeypatch, chaser)
+    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank", k=4)
+    assert out["status"] == "rejected" and out["stage"] == "avoidability", out
+    assert out["reproduction"]["reproduced"] == 4 and out["rejections"] == [out["reason"]]
+    avoid = out["avoidability"]
+    assert avoid["failed"] == 4 and avoid["avoided_rate"] == 0.0
+    assert avoid["failures"] == {"collision:struck_from_behind": 4}
+    assert "rule failed in 4 of 4" in out["reason"] and "collision:struck_from_behind 4" in out["reason"]
+    assert _converted(tmp_path / "bank") == []
+    report = json.loads((tmp_path / "run" / out["script"]).with_name("report.json").read_text())
+    assert [e["failure"]["collision_type"] for e in report["reference_episodes"]] == ["struck_from_behind"] * 4
+    replay = Bank(tmp_path / "bank").get(out["replay_entry"])  # the failing scene is kept exactly all the same
+    assert replay.source["converted_rejections"] == [out["reason"]]
 
 
 @pytest.mark.slow

@@ -23,13 +23,17 @@ conversion record of ``conversions.jsonl``:
    from the record's seed (``numpy.random.SeedSequence([seed, record seed])``); an episode reproduces the
    failure when it fails in the *same failure class* with the *same kind of actor*; each episode also says
    whether its trace shows the failure's interaction (the actor's kind doing one of its manoeuvres);
-8. ``avoidability``: the reference driver (``rule``) drives the same ``k`` scenes;
+8. ``avoidability``: the reference driver (``rule``) drives the same ``k`` scenes; an episode counts as a
+   reference failure when it has *any* collision, off-road or stall, whatever its class
+   (:func:`reference_failed`), as the miner calls a failure unavoidable when the reference fails in its
+   scene; the record counts the reference's failures by class (``failures``);
 9. ``e2e_sc``: E2E-SC between the source failure's trace (its elements are the ground truth) and each
    simulated trace of the reproduction, averaged over the ``k`` traces;
 10. the judge: the script is rejected, each reason with its own stage and every failed one listed in
     ``rejections``, when the interaction shows in fewer than ``threshold`` of the episodes
     (``interaction: ...``), the failure reproduces in fewer than ``threshold`` (``reproduction: ...``), or
-    the reference driver fails the same way in half of the episodes or more (``avoidability: ...``);
+    the reference driver fails in half of the episodes or more (``avoidability: ...``, naming its failures'
+    classes);
 11. ``bank``: :meth:`scenario_bank.bank.Bank.add_or_merge` adds the script with ``mined`` provenance,
     or merges the failure into the entry it (nearly) duplicates, a converted entry of the same family
     (parent and failure type) whose code differs in at most :data:`~scenario_bank.bank.NEAR_COPY_LINES`
@@ -69,7 +73,8 @@ SETUP_ERRORS = (EndpointUnreachableError, EndpointTimeoutError, EndpointHTTPErro
 :func:`convert_failure` raises them instead of rejecting the failure, so a run stops and can be resumed
 when the endpoint works, rather than rejecting every cluster."""
 
-__all__ = ["convert_failure", "replay_failure_entry", "same_failure_class", "reproduction_seeds", "cluster_slug", "CONVERSION_DIR", "ENTRY_VIDEO",
+__all__ = ["convert_failure", "replay_failure_entry", "same_failure_class", "reference_failed", "reference_outcome",
+           "reproduction_seeds", "cluster_slug", "CONVERSION_DIR", "ENTRY_VIDEO",
            "ENTRY_TRACE"]
 
 CONVERSION_DIR = "conversion"
@@ -96,6 +101,36 @@ def same_failure_class(source: Mapping[str, Any], candidate: Optional[Mapping[st
             if source.get(key) is not None and candidate.get(key) is not None and source[key] != candidate[key]:
                 return False
     return True
+
+
+def reference_failed(source: Mapping[str, Any], reference_failure: Optional[Mapping[str, Any]]) -> bool:
+    """Whether the reference driver's episode counts as failing the new scenario: any collision, off-road or
+    stall, whatever its class, and a near miss (``low_ttc``) when the source failure is no more severe than a
+    near miss (the miner's avoidability, :func:`dv2s_gym.mining.tasks.reference_avoids`, would then call the
+    source failure unavoidable too)."""
+    from dv2s_gym.mining.tasks import reference_avoids
+
+    if not reference_failure or not reference_failure.get("type"):
+        return False
+    if reference_failure["type"] != "low_ttc":
+        return True
+    return not reference_avoids(dict(source), dict(reference_failure))
+
+
+def reference_outcome(source: Mapping[str, Any], episodes: List[Mapping[str, Any]], reference: str) -> Dict[str, Any]:
+    """The avoidability check's record from the reference driver's ``episodes`` (each with its ``failure``):
+    ``{"reference", "k", "failed", "avoided_rate", "failures"}``, ``failures`` counting the failing episodes
+    by failure class (``"collision:struck_from_behind": 3``; :func:`reference_failed` says which fail)."""
+    failures: Dict[str, int] = {}
+    for episode in episodes:
+        failure = episode.get("failure")
+        if reference_failed(source, failure):
+            label = str(failure.get("kind") or failure["type"])
+            failures[label] = failures.get(label, 0) + 1
+    failed = sum(failures.values())
+    return {"reference": reference, "k": len(episodes), "failed": failed,
+            "avoided_rate": 1.0 - failed / len(episodes) if episodes else 0.0,
+            "failures": dict(sorted(failures.items(), key=lambda item: (-item[1], item[0])))}
 
 
 def reproduction_seeds(record_seed: int, k: int, seed: int = 0) -> List[int]:
@@ -201,8 +236,8 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
            threshold: float) -> List[_Rejected]:
     """The checks a converted script must pass, each failing one a rejection with its own stage:
     ``interaction`` (its runs show the failure's actor doing its manoeuvre), ``reproduction`` (the policy
-    fails the same way with the same kind of actor) and ``avoidability`` (the reference driver avoids it in
-    most episodes)."""
+    fails the same way with the same kind of actor) and ``avoidability`` (the reference driver drives most
+    episodes without any collision, off-road or stall)."""
     found: List[_Rejected] = []
     repro = out["reproduction"]
     k = repro["k"]
@@ -218,9 +253,12 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
                                                f"(rate {repro['rate']:.2f} < threshold {threshold:g})"))
     avoid = out.get("avoidability")
     if avoid and not avoid["avoided_rate"] > 0.5:
-        found.append(_Rejected("avoidability", f"the reference driver {avoid['reference']} failed the same way in "
-                                               f"{avoid['failed']} of {avoid['k']} episodes of the new scenario "
-                                               "(it must avoid the failure in most)"))
+        classes = ", ".join(f"{label} {n}" for label, n in (avoid.get("failures") or {}).items())
+        found.append(_Rejected("avoidability", f"the reference driver {avoid['reference']} failed in "
+                                               f"{avoid['failed']} of {avoid['k']} episodes of the new scenario"
+                                               + (f" ({classes})" if classes else "")
+                                               + "; it must drive most of them without any collision, "
+                                                 "off-road or stall"))
     return found
 
 
@@ -251,7 +289,7 @@ def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, poli
     without an ``interaction`` it is read from that trace."""
     import datetime
 
-    from dv2s_gym.mining.exact_replay import REPLAY_TAG, narrowed_script, replay_name, run_replay
+    from dv2s_gym.mining.exact_replay import REPLAY_TAG, narrowed_script, replay_name, replay_versions, run_replay
     from dv2s_gym.mining.interaction import interaction_sentence
     from dv2s_gym.pipeline.metrics import e2e_sc
     from dv2s_gym.pipeline.semantics.trace import elements_from_trace
@@ -283,7 +321,7 @@ def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, poli
             interaction = failure_interaction(trace, source_failure)
     files = dict(files or {})
     replay = {"params": params, "intervals": intervals, "seed": seed, "trajectory_hash": expected,
-              "policy": _policy_name(policy)}
+              "policy": _policy_name(policy), **replay_versions(policy)}
     out = {"entry": None, **replay, "failure": failure, "note": None,
            "e2e_sc": e2e_sc(elements_from_trace(source_trace), elements_from_trace(trace))}
     events = interaction_sentence(interaction)
@@ -353,6 +391,33 @@ def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, *, policy
         out["reason"] = f"replay: {type(error).__name__}: {first}"[:500]
     out["seconds"] = round(time.perf_counter() - start, 3)
     return out
+
+
+def _stage_error(stage: str, error: BaseException) -> str:
+    """A stage's failure as a rejection reason: ``"<stage>: <message>"``, an unexpected error named by its type."""
+    if isinstance(error, _Rejected):
+        return str(error)
+    first = (str(error).strip().splitlines() or [""])[0]
+    return f"{stage}: {type(error).__name__}: {first}"[:500]
+
+
+def _replay_without_video(out: Dict[str, Any], video_error: str, record: Mapping[str, Any], bank, *,
+                          details: Dict[str, Any], **options: Any) -> None:
+    """After the video stage failed: keep the exact replay all the same (its own trace stands for the failure's)
+    and record both outcomes in ``out``: ``rejections`` holds the video's reason, then the replay's if it
+    failed too."""
+    out["rejections"] = [video_error]
+    try:
+        replay = _add_replay(record, None, bank, interaction=None, files=None, **options)
+    except SETUP_ERRORS:
+        raise
+    except Exception as error:
+        out["rejections"].append(_stage_error("replay", error))
+        return
+    out["replay_entry"] = replay["entry"]
+    details["replay"] = replay
+    if replay["entry"]:
+        _link(bank, replay["entry"], {"converted_rejections": list(out["rejections"])})
 
 
 def _portable_params(params: Mapping[str, Any]) -> Dict[str, Any]:
@@ -448,8 +513,18 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
 
         video = folder / "failure.webm"
         monitor = _monitor_options(run_dir, monitor)
-        written = write_failure_video(record, video, policy=policy, bank_dir=bank_dir, env_config=env_config,
-                                      before=before, after=after, stall_seconds=monitor.get("stall_seconds"))
+        try:
+            written = write_failure_video(record, video, policy=policy, bank_dir=bank_dir, env_config=env_config,
+                                          before=before, after=after, stall_seconds=monitor.get("stall_seconds"))
+        except SETUP_ERRORS:
+            raise
+        except Exception as error:  # no video, no conversion; the exact replay does not need one
+            lap("video")
+            _replay_without_video(out, _stage_error("video", error), record, bank, bank_dir=bank_dir,
+                                  policy=policy, env_config=env_config, monitor=monitor,
+                                  source_failure=source_failure, cluster=cluster, run_dir=run_dir, details=details)
+            lap("replay")
+            raise _Rejected("video", out["rejections"][0].split(": ", 1)[1])
         out["video"] = _rel(video, run_dir)
         source_trace = written.trace
         detected = _detect(written.result, source_trace, monitor)
@@ -534,10 +609,7 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
             reference_episodes, _ = _reproduce(script_path, policy=reference, record_seed=int(record["seed"]),
                                                k=int(k), seed=seed, env_config=env_config,
                                                source_failure=source_failure, monitor=monitor)
-            failed_reference = sum(same_failure_class(source_failure, e["failure"]) for e in reference_episodes)
-            out["avoidability"] = {"reference": _policy_name(reference), "k": len(reference_episodes),
-                                   "failed": failed_reference,
-                                   "avoided_rate": 1.0 - failed_reference / len(reference_episodes)}
+            out["avoidability"] = reference_outcome(source_failure, reference_episodes, _policy_name(reference))
             details["reference_episodes"] = reference_episodes
         lap("avoidability")
 

@@ -4,10 +4,15 @@ A mined failure is kept exactly, whatever the D-V2S conversion makes of it: the 
 parent's Scenic script with every continuous mined parameter (``param x = Range(a, b)``) narrowed to
 :data:`NARROW` of its width on either side of the failing value (:func:`narrowed_script`; integer and
 choice parameters keep their values), and its provenance ``replay`` holds what pins the scene exactly:
-``{"params", "seed", "trajectory_hash", "policy"}``. Running the entry with those parameters and that seed
+``{"params", "seed", "trajectory_hash", "policy"}`` and what the episode depends on beyond the scene
+(:func:`replay_versions`): the policy checkpoint's SHA-256 (``policy_sha256``, ``None`` when the policy is
+no checkpoint), the dv2s-gym version, one SHA-256 of its simulator and policy sources (an edited install
+keeps its version) and the trace format's version. Running the entry with those parameters and that seed
 (:func:`replay_failure`) is the failing episode, step for step: Scenic draws nothing for a fixed parameter,
 so narrowing the ranges around the fixed values changes no other random draw of the scene. Run with other
-seeds and no fixed parameters, the entry samples the neighbourhood of the failure.
+seeds and no fixed parameters, the entry samples the neighbourhood of the failure. A replay that no longer
+matches says why it may not (:func:`mismatch_reason`): another checkpoint, another dv2s-gym, or, with
+everything the same, a real divergence.
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from pathlib import Path
 from typing import Any, Dict, Mapping, Optional, Tuple
 
 __all__ = ["NARROW", "REPLAY_TAG", "narrowed_script", "replay_name", "run_replay", "replay_failure",
-           "ReplayOutcome"]
+           "ReplayOutcome", "replay_versions", "mismatch_reason"]
 
 NARROW = 0.02
 """Share of a continuous parameter's range kept on either side of the failing value."""
@@ -63,9 +68,68 @@ def replay_name(parent: str, failure_type: str) -> str:
     return base[:90] or "replay"
 
 
+def replay_versions(policy: Any) -> Dict[str, Any]:
+    """What a replay depends on beyond its scene, as a replay entry records it: ``{"policy_sha256",
+    "dv2s_gym_version", "dv2s_sources_sha256", "trace_version"}``; ``policy_sha256`` is the SHA-256 of the
+    checkpoint a policy spec names (``dv2s-ppo``, ``model.zip``, ``ppo:PATH``, a folder), ``None`` for a
+    driver, a ``module:attribute`` or a policy object."""
+    from envs.trace import TRACE_VERSION
+
+    from dv2s_gym.regress.identity import dv2s_sources_sha256
+    from dv2s_gym.regress.report import _dv2s_version
+
+    return {"policy_sha256": _checkpoint_sha256(policy), "dv2s_gym_version": _dv2s_version(),
+            "dv2s_sources_sha256": dv2s_sources_sha256(), "trace_version": TRACE_VERSION}
+
+
+def _checkpoint_sha256(policy: Any) -> Optional[str]:
+    import os
+
+    from dv2s_gym.regress.identity import _checkpoint
+    from policies.registry import parse_spec
+    from scenario_bank.atomic import file_sha256
+
+    if not isinstance(policy, (str, os.PathLike)):
+        return None
+    try:
+        path = _checkpoint(parse_spec(os.fspath(policy))[0])
+    except ValueError:
+        return None
+    return file_sha256(path.resolve()) if path is not None and path.resolve().is_file() else None
+
+
+_VERSION_FACTS = (("policy_sha256", "the policy checkpoint differs from the one that failed (SHA-256 {now} now, "
+                                    "{then} when recorded)"),
+                  ("dv2s_gym_version", "dv2s-gym is version {now} now, {then} when recorded"),
+                  ("dv2s_sources_sha256", "dv2s-gym's simulator or policy sources changed since it was recorded "
+                                          "(an edited or updated install)"),
+                  ("trace_version", "the trace format is version {now} now, {then} when recorded"))
+
+
+def mismatch_reason(recorded: Mapping[str, Any], current: Mapping[str, Any]) -> str:
+    """Why a replay whose trajectory differs from ``recorded`` (a replay entry's provenance ``replay``) may not
+    match, given the ``current`` :func:`replay_versions`: what changed since, or, with everything the same, that
+    the episode really diverged."""
+    if not any(key in recorded for key, _ in _VERSION_FACTS):
+        return ("the entry records no policy checkpoint or dv2s-gym version (made by an older dv2s-gym), so the "
+                "cause cannot be told: another checkpoint, another dv2s-gym, or a real divergence")
+    changed = []
+    for key, text in _VERSION_FACTS:
+        then, now = recorded.get(key), current.get(key)
+        if key in recorded and then != now:
+            short = (lambda v: str(v)[:12]) if key.endswith("sha256") else str
+            changed.append(text.format(now=short(now), then=short(then)))
+    if changed:
+        return ("; ".join(changed) + ": replay with the checkpoint and dv2s-gym version the entry records to see "
+                "the failing episode again, or mine the new policy anew")
+    return ("the same policy checkpoint, dv2s-gym version and sources as when recorded: a real divergence (the "
+            "episode is not deterministic, or the entry's script or parameters were edited)")
+
+
 class ReplayOutcome(dict):
-    """What :func:`replay_failure` saw: ``{"trajectory_hash", "matches", "failure", "steps"}`` plus the trace
-    (attribute ``trace``, not serialised)."""
+    """What :func:`replay_failure` saw: ``{"trajectory_hash", "matches", "failure", "steps", "reason"}`` plus
+    the trace (attribute ``trace``, not serialised); ``reason`` is ``None`` for a match, else why the replay
+    may not match (:func:`mismatch_reason`)."""
 
     trace: Any = None
 
@@ -99,7 +163,8 @@ def replay_failure(bank: Any, name: str, *, policy: Optional[Any] = None,
                    monitor: Optional[Mapping[str, Any]] = None) -> ReplayOutcome:
     """Run replay entry ``name`` of ``bank`` (a :class:`~scenario_bank.bank.Bank` or folder) with the seed and
     parameters of its provenance ``replay`` and the policy that failed (or ``policy``); ``matches`` says
-    whether the episode is the recorded failing one (same trajectory hash)."""
+    whether the episode is the recorded failing one (same trajectory hash), and ``reason``, when it is not,
+    why it may not be (:func:`mismatch_reason`: the checkpoint or dv2s-gym changed, or a real divergence)."""
     from scenario_bank.bank import Bank, BankError
 
     bank = bank if isinstance(bank, Bank) else Bank(bank)
@@ -115,7 +180,12 @@ def replay_failure(bank: Any, name: str, *, policy: Optional[Any] = None,
     result, trace, failure = run_replay(str(entry.script_path), policy=policy,
                                         seed=int(replay["seed"]), params=replay.get("params") or {},
                                         env_config=env_config, monitor=monitor)
-    out = ReplayOutcome(trajectory_hash=result.trajectory_hash, matches=result.trajectory_hash == replay.get(
-        "trajectory_hash"), failure=failure, steps=result.steps)
+    matches = result.trajectory_hash == replay.get("trajectory_hash")
+    reason = None if matches else (f"replay entry {name!r} did not replay the recorded failing episode "
+                                   f"(trajectory hash {result.trajectory_hash[:12]} != recorded "
+                                   f"{str(replay.get('trajectory_hash'))[:12]}): "
+                                   + mismatch_reason(replay, replay_versions(policy)))
+    out = ReplayOutcome(trajectory_hash=result.trajectory_hash, matches=matches, failure=failure,
+                        steps=result.steps, reason=reason)
     out.trace = trace
     return out

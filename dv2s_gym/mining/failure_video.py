@@ -27,6 +27,7 @@ import os
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
 
+import gymnasium as gym
 import numpy as np
 
 from envs.errors import DV2SError
@@ -107,6 +108,23 @@ def _run_episode(env, policy, scenario: str, seed: int, params: Mapping[str, Any
     return run_episode(env, policy, scenario, seed, frames=frames, params=dict(params) or None)
 
 
+class _LastObservation(gym.Wrapper):
+    """The env, keeping the observation its last reset or step returned (:attr:`observation`): what the policy
+    acts on past the episode's end. Reading it from the simulator instead would need the in-process env; a
+    jailed env (:class:`~envs.jailed_env.JailedDV2SEnv`) only sends observations back from reset and step."""
+
+    observation: Any = None
+
+    def reset(self, **kwargs):
+        self.observation, info = self.env.reset(**kwargs)
+        return self.observation, info
+
+    def step(self, action):
+        result = self.env.step(action)
+        self.observation = result[0]
+        return result
+
+
 def rerun_failure(record: Mapping[str, Any], *, policy: Any, bank_dir: Optional[PathLike] = None,
                   env_config: Optional[Mapping[str, Any]] = None, render: bool = False,
                   extra_steps: int = 0) -> Tuple[Any, Any, List[np.ndarray]]:
@@ -129,7 +147,8 @@ def rerun_failure(record: Mapping[str, Any], *, policy: Any, bank_dir: Optional[
         bound = load_policy(policy)
         bound.bind([env])
         frames: Optional[List[np.ndarray]] = [] if render else None
-        result, trace = _run_episode(env, bound, record["scenario"], int(record["seed"]),
+        watched = _LastObservation(env)
+        result, trace = _run_episode(watched, bound, record["scenario"], int(record["seed"]),
                                      record.get("params") or {}, frames)
         expected = record["result"]["trajectory_hash"]
         if result.trajectory_hash != expected:
@@ -139,11 +158,9 @@ def rerun_failure(record: Mapping[str, Any], *, policy: Any, bank_dir: Optional[
                 "the mining run's policy, env config and dv2s-gym version")
         trace = dataclasses.replace(trace, actions=list(trace.actions), states=list(trace.states),
                                     events=list(trace.events))  # the episode as recorded, before extra steps
-        base = env.unwrapped
         for _ in range(extra_steps if render else 0):
-            observation = base.observation_type.observe()
-            action = bound.act(np.asarray(observation)[None], deterministic=True)[0]
-            env.step(action)
+            action = bound.act(np.asarray(watched.observation)[None], deterministic=True)[0]
+            watched.step(action)
             frames.append(env.render())
         return result, trace, frames or []
     finally:

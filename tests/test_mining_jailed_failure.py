@@ -1,0 +1,96 @@
+"""A failure mined in a scenario the package does not ship (a user's own, run in the jail): its failure video and
+its exact replay are made as for a shipped scenario, and the exact replay is kept even when the video fails."""
+
+from __future__ import annotations
+
+import pytest
+
+from dv2s_gym.mining.convert import convert_failure
+from dv2s_gym.mining.exact_replay import replay_failure
+from dv2s_gym.pipeline.video import read_video
+from envs.dv2s_env import DV2SEnv
+from scenario_bank.bank import Bank
+
+STOPPED_VAN = '''"""A van stands still in the ego's lane on a straight highway."""
+param map = 'highway_straight'
+model scenic.domains.driving.model
+
+param ego_speed = Range(18, 28)
+param van_gap = Range(40, 90)
+
+egoLane = Uniform(*network.lanes)
+ego = new Car at egoLane.centerline.pointAlongBy(Range(80, 900)),
+    with speed globalParameters.ego_speed
+van = new Car following roadDirection from ego for globalParameters.van_gap,
+    with name "van", with speed 0
+'''
+NAME = "user_stopped_van"
+
+
+@pytest.fixture(scope="module")
+def user_bank(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("user") / "bank"
+    Bank(folder).add(STOPPED_VAN, "A van stands still in the ego's lane.", name=NAME, tags=["user"])
+    return folder
+
+
+@pytest.fixture(scope="module")
+def record(user_bank) -> dict:
+    from dv2s_gym.mining.tasks import run_mine_task
+
+    env = DV2SEnv(scenario=NAME, bank_dir=str(user_bank))
+    try:
+        assert env.unwrapped.runs_in_jail  # a user's scenario: simulated in the jail
+    finally:
+        env.close()
+    record = run_mine_task({"kind": "mine", "role": "mine", "index": 0, "policy": "keep_lane", "reference": None,
+                            "scenario": NAME, "seed": 3, "params": {"ego_speed": 23.0, "van_gap": 60.0},
+                            "env_config": {}, "bank_dir": str(user_bank), "trace_dir": None, "ttc_threshold": 1.0,
+                            "stall_seconds": 5.0})
+    assert record["error"] is None and record["failure"]["type"] == "collision", record
+    return record
+
+
+@pytest.mark.slow
+def test_a_failure_in_a_jailed_scenario_gets_its_video_and_its_exact_replay(record, user_bank, tmp_path, monkeypatch):
+    from dv2s_gym.pipeline import stages
+
+    def no_description(*args, **kwargs):  # the stages after the replay are not what this test is about
+        raise RuntimeError("describing is not part of this test")
+
+    monkeypatch.setattr(stages, "describe", no_description)
+    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=user_bank, k=2, before=1.0, after=1.0)
+    assert out["stage"] == "describe", out  # past the video and the replay
+    assert out["timings"].keys() >= {"video", "interaction", "replay"}
+    clip = read_video(tmp_path / "run" / out["video"], fps=None, max_frames=1000, max_pixels=10**7)
+    k = record["failure"]["step"]
+    assert k + 5 > record["result"]["steps"]  # the last second was driven past the episode's end, in the jail
+    assert len(clip.frames) == 11  # 1 s before, the failure's frame, 1 s after at 5 frames per second
+    rerun = replay_failure(user_bank, out["replay_entry"])
+    assert rerun["matches"] and rerun["failure"]["type"] == "collision"
+
+
+@pytest.mark.slow
+def test_the_exact_replay_is_kept_when_the_video_stage_fails(record, user_bank, tmp_path, monkeypatch):
+    from dv2s_gym.mining import failure_video
+
+    def broken(*args, **kwargs):
+        raise OSError("no space left on device")
+
+    monkeypatch.setattr(failure_video, "write_failure_video", broken)
+    bank = tmp_path / "bank"
+    Bank(bank).add(STOPPED_VAN, "A van stands still in the ego's lane.", name=NAME)
+    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=bank, k=2)
+    assert out["status"] == "rejected" and out["stage"] == "video"
+    assert out["reason"] == "video: OSError: no space left on device" and out["rejections"] == [out["reason"]]
+    assert out["video"] is None and out["replay_entry"] is not None
+    entry = Bank(bank).get(out["replay_entry"])
+    assert entry.source["converted_rejections"] == [out["reason"]]
+    assert entry.source["video"] is None and entry.source["trace"] == "trace.json.gz"
+    assert replay_failure(bank, out["replay_entry"])["matches"]
+    # a replay that fails as well is recorded beside the video's reason
+    diverged = convert_failure({**record, "result": {**record["result"], "trajectory_hash": "0" * 64}},
+                               tmp_path / "run2", policy="keep_lane", bank=bank, k=2)
+    assert diverged["stage"] == "video" and diverged["replay_entry"] is None
+    assert [r.split(":")[0] for r in diverged["rejections"]] == ["video", "replay"]
+    assert "does not replay the failing episode" in diverged["rejections"][1]
