@@ -82,7 +82,8 @@ def _clause(actor: Dict[str, Any], count: int, ref: str) -> str:
     if kind == "pedestrian":
         if "cross" in acts:
             return f"{art} {noun} {verb('crosses', 'cross')} the road in front of {ref}"
-        return f"{art} {noun} {verb('waits', 'wait')}{at}"
+        # "waits" reads as a stop: only a pedestrian seen standing still is said to wait
+        return f"{art} {noun} {verb('waits', 'wait') if 'stop' in acts else verb('is', 'are')}{at}"
     if "merge" in acts:
         if side and "ahead_of" not in rels and "behind" not in rels:
             return join(f"{art} {noun} from the on-ramp {verb('merges', 'merge')} into the lane next to {ref} "
