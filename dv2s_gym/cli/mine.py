@@ -26,7 +26,8 @@ def add_parser(subparsers) -> None:
         "one failure per cluster is kept exactly (its parent scenario narrowed around the failing parameters, "
         "with its seed: a 'replay' entry), and is recorded as a bird's-eye video, turned into a Scenic scenario by "
         "the D-V2S pipeline, checked in the sandbox, kept if its runs show the failure's actor and manoeuvre, the "
-        "policy fails on it the same way and the reference driver avoids it, and added to the bank with its "
+        "policy fails on it the same way and the reference driver drives it without any collision, off-road "
+        "or stall, and added to the bank with its "
         "provenance. Rerunning with the same --out resumes (a larger --budget continues the run).",
         epilog="examples:\n"
         "  dv2s mine --policy dv2s-ppo --budget 200 --bank my_bank --out out/mine\n"
