@@ -157,6 +157,7 @@ class _State:
                 data = json.loads(path.read_text(encoding="utf-8"))
             except ValueError as error:
                 raise LoopError(f"{path} is not readable JSON ({error}); choose another --out") from error
+            _check_structure(data, path)
             recorded = data.get("settings", {})
             for key in IDENTITY:
                 value = recorded.get(key, _LEGACY.get(key))
@@ -181,6 +182,25 @@ class _State:
         while len(self.data["rounds"]) < number:
             self.data["rounds"].append({"round": len(self.data["rounds"]) + 1, "steps": {}, "timings": {}})
         return self.data["rounds"][number - 1]
+
+
+def _check_structure(data: Any, path: Path) -> None:
+    """Refuse a ``loop.json`` that is JSON but not a loop's record, in one line naming the file and the fix."""
+    problem = None
+    if not isinstance(data, dict):
+        problem = f"holds a {type(data).__name__}, not an object"
+    elif not isinstance(data.get("settings"), dict):
+        problem = "has no \"settings\" object"
+    elif not isinstance(data.get("rounds"), list) or not all(
+            isinstance(r, dict) and isinstance(r.get("steps", {}), dict) and isinstance(r.get("timings", {}), dict)
+            for r in data["rounds"]):
+        problem = "has no list of round objects under \"rounds\""
+    elif data.get("start") is not None and not (isinstance(data["start"], dict)
+                                                and isinstance(data["start"].get("scenarios"), list)):
+        problem = "has a \"start\" that is not an object with a list of scenarios"
+    if problem:
+        raise LoopError(f"{path} is not a dv2s loop record ({problem}); choose another --out, or delete the file "
+                        "to start the loop over")
 
 
 # --------------------------------------------------------------------------- helpers

@@ -232,6 +232,22 @@ _ADDED_DEFAULTS = {"sampler_options": None, "feedback": "robustness"}
 """Settings added after the first runs were written: a run without them had these values."""
 
 
+def _read_settings(path: Path) -> Optional[Dict[str, Any]]:
+    """A run folder's ``settings.json`` (``None`` when there is none); a damaged one is refused in one line
+    naming the file and the fix."""
+    if not path.is_file():
+        return None
+    try:
+        saved = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise MiningError(f"{path} is not readable JSON ({error}); restore it, or choose another --out "
+                          "(or delete the run folder) to start the run over") from None
+    if not isinstance(saved, dict) or not isinstance(saved.get("scenarios"), list):
+        raise MiningError(f"{path} is not a mining run's settings (no list of scenarios); restore it, or choose "
+                          "another --out (or delete the run folder) to start the run over")
+    return saved
+
+
 def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path) -> None:
     saved = {**_ADDED_DEFAULTS, **saved}
     different = [k for k in _RESUME_KEYS if saved.get(k) != settings.get(k)]
@@ -562,7 +578,7 @@ def _mine_in(out: Path, started: float, *, policy: str, budget: int, sampler: st
                                               default_workers())
     with _run_lock(out):
         settings_path = out / "settings.json"
-        saved = json.loads(settings_path.read_text()) if settings_path.is_file() else None
+        saved = _read_settings(settings_path)
         names = saved["scenarios"] if saved and scenarios is None else None
         space = SceneSpace(names or scenarios, bank_dir)
         batch = int(batch) if batch else (saved["batch"] if saved else 4 * n_workers)
