@@ -65,7 +65,7 @@ from dv2s_gym.mining.tasks import MINE
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 
-__all__ = ["MineRun", "mine", "read_records", "episode_seed", "SETTINGS_VERSION"]
+__all__ = ["MineRun", "mine", "read_records", "episode_seed", "error_warning", "SETTINGS_VERSION"]
 
 SETTINGS_VERSION = 1
 LOOKAHEAD_CHUNKS = 16
@@ -103,11 +103,22 @@ class MineRun:
         """Distinct failure clusters (behaviours, :mod:`dv2s_gym.mining.cluster`)."""
         return len(set(self.clusters.values()))
 
+    @property
+    def errors(self) -> List[Dict[str, Any]]:
+        """The episode records that ended in an error (they count in no failure figure)."""
+        return [r for r in self.records if r.get("error")]
+
+    @property
+    def all_errored(self) -> bool:
+        """Whether every episode ended in an error, so the run measured nothing (a command should fail)."""
+        return bool(self.records) and len(self.errors) == len(self.records)
+
     def summary(self) -> str:
-        """A few lines for the terminal: episodes, failures, clusters, conversions."""
+        """A few lines for the terminal: episodes, failures, clusters, conversions, and a WARNING line when
+        episodes ended in an error."""
         from collections import Counter
 
-        errors = sum(1 for r in self.records if r.get("error"))
+        errors = len(self.errors)
         restarted = sum(1 for r in self.records if r.get("worker_restarts"))
         failures = self.failures
         kinds = Counter(r["failure"]["kind"] for r in failures)
@@ -129,7 +140,18 @@ class MineRun:
         if self.conversions:
             lines.append(f"converted {len(self.conversions)}: kept {status.get('kept', 0)}, merged "
                          f"{status.get('merged', 0)}, rejected {status.get('rejected', 0)}")
+        if errors:
+            first = str(self.errors[0]["error"]).strip().splitlines()
+            lines.append(error_warning(errors, len(self.records), first[-1] if first else ""))
         return "\n".join(lines)
+
+
+def error_warning(errors: int, episodes: int, first: str) -> str:
+    """The loud line for a run with ``errors`` of its ``episodes`` ended in an error (``first``: one's message)."""
+    what = (f"all {episodes} episodes ended in an error: the run measured nothing" if errors == episodes else
+            f"{errors} of {episodes} episodes ended in an error and count in no failure figure")
+    return (f"WARNING: {what} (e.g. {first}); the report's Errors section lists them: fix the policy or scenario "
+            "and rerun")
 
 
 def episode_seed(seed: int, index: int) -> int:

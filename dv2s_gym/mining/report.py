@@ -476,7 +476,7 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
             "discovery": discovery,
         }
 
-    rate = rate_estimates(settings, ok)
+    rate = rate_estimates(settings, episodes)  # errored episodes are left out of the rate, counted as drawn
     # per scenario
     scenario_names = list(dict.fromkeys([*(settings.get("scenarios") or []),
                                          *sorted({str(r.get("scenario")) for r in episodes})]))
@@ -581,7 +581,17 @@ def headline(report: Mapping[str, Any]) -> str:
             f"{counts['avoidability_unknown']} unknown), {counts['clusters']} distinct behaviour(s) "
             f"({counts['avoidable_clusters']} avoidable); converted {counts['converted']}: kept {counts['kept']}, "
             f"merged {counts['merged']}, rejected {counts['rejected']}"
-            + (f"; {counts['errors']} error(s)" if counts["errors"] else ""))
+            + (f"; {counts['errors']} error(s)" if counts["errors"] else "")
+            + (f". {_error_alarm(report)}" if counts["errors"] else ""))
+
+
+def _error_alarm(report: Mapping[str, Any]) -> str:
+    from dv2s_gym.mining.miner import error_warning
+
+    errors = report.get("errors") or []
+    first = str(errors[0].get("error") or "").strip().splitlines() if errors else []
+    counts = report["counts"]
+    return error_warning(counts["errors"], counts["errors"] + counts["episodes"], first[-1] if first else "")
 
 
 def format_summary(report: Mapping[str, Any]) -> str:
