@@ -644,3 +644,18 @@ def test_a_second_round_never_holds_out_a_family_the_first_fine_tuned_on(tmp_pat
     assert second["split"]["held_out"] and not set(second["split"]["held_out_families"]) & trained
     assert set(first["split"]["fine_tune_families"]) <= set(second["split"]["fine_tune_families"])
     assert set(second["split"]["held_out_families"]) == set(first["split"]["held_out_families"])
+
+
+@pytest.mark.parametrize("content, problem", [
+    ('{"rounds": "x", "settings": 5}', 'has no "settings" object'),
+    ('{"rounds": "x", "settings": {}}', 'has no list of round objects under "rounds"'),
+    ('[1, 2]', "holds a list, not an object"),
+])
+def test_a_loop_json_of_the_wrong_structure_is_refused_in_one_line(tmp_path, content, problem):
+    (tmp_path / "loop").mkdir()
+    (tmp_path / "loop" / "loop.json").write_text(content)
+    with pytest.raises(LoopError) as error:
+        run_loop("dv2s-ppo", out=tmp_path / "loop", budget=8, log=lambda _: None, progress=False)
+    message = str(error.value)
+    assert "loop.json is not a dv2s loop record" in message and problem in message
+    assert "delete the file to start the loop over" in message and "\n" not in message

@@ -516,3 +516,26 @@ def test_the_rate_sentence_says_how_many_episodes_and_which_scenarios_were_never
     assert "from 6 episodes, as precise as 9.4 draws" in text
     assert "1 of 3 scenarios were never drawn" in text and "--budget" in text
     assert "never drawn" not in rate_text({**rate, "scenarios": {"a": drawn}})
+
+
+def test_a_run_whose_every_episode_errored_says_so_and_counts_them_as_drawn(tmp_path):
+    from dv2s_gym.mining.cluster import cluster_failures
+    from dv2s_gym.mining.miner import MineRun
+
+    out = tmp_path / "broken"
+    out.mkdir()
+    settings = {"policy": "boom", "sampler": "random", "seed": 0, "scenarios": ["A", "B"], "reference": None}
+    (out / "settings.json").write_text(json.dumps(settings))
+    records = [_record(i, "random", "A", 0.5, None, None, "Traceback ...\nRuntimeError: boom") for i in range(2)]
+    (out / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    report = build_report(out)
+    assert report["counts"]["errors"] == 2 and report["counts"]["episodes"] == 0
+    text = markdown(report)
+    assert "WARNING: all 2 episodes ended in an error: the run measured nothing (e.g. RuntimeError: boom)" in text
+    assert "1 of 2 scenarios were drawn (2 episode(s)) but every episode of them ended in an error" in text
+    assert "1 of 2 scenarios were never drawn" in text  # B
+    run = MineRun(out=out, settings=settings, records=records, clusters=cluster_failures(records))
+    assert run.all_errored and "WARNING: all 2 episodes ended in an error" in run.summary()
+    partial = MineRun(out=out, settings=settings, clusters={},
+                      records=records[:1] + [_record(1, "random", "A", 0.5, None, None, None)])
+    assert not partial.all_errored and "WARNING: 1 of 2 episodes ended in an error" in partial.summary()
