@@ -50,6 +50,7 @@ import numpy as np
 from dv2s_gym.mining.behaviour import backfill
 from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, group
 from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.family import record_family, scenario_family
 from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
 from dv2s_gym.mining.samplers import (
@@ -133,8 +134,8 @@ class MineRun:
             + (f"{len(self.avoidable)} avoidable by {self.settings['reference']}" if self.settings["reference"]
              else "avoidability not checked (no reference driver)"),
             f"{self.distinct_clusters} distinct behaviours, {len(avoidable_clusters)} with avoidable failures; "
-            f"{len({(r['scenario'], r['failure']['kind']) for r in failures})} (scenario, failure type) pairs, "
-            f"{len({r['scenario'] for r in failures})} scenarios with a failure; "
+            f"{len({(record_family(r), r['failure']['kind']) for r in failures})} (scenario family, failure type) "
+            f"pairs, {len({record_family(r) for r in failures})} scenario families with a failure; "
             f"{kinds_by_type.get('collision', 0)} collisions, {kinds_by_type.get('stall', 0)} stalls",
         ]
         if self.conversions:
@@ -657,7 +658,7 @@ def _task(index: int, spec, policy: str, reference: Optional[str], settings: Dic
     return {
         "kind": MINE, "role": "mine", "index": index, "id": f"{spec.scenario}/{seed}", "policy": policy,
         "reference": reference, "scenario": spec.scenario, "seed": seed, "params": spec.params,
-        "env_config": settings["env_config"], "bank_dir": settings["bank_dir"],
+        "family": scenario_family(str(spec.scenario), settings["bank_dir"]), "env_config": settings["env_config"], "bank_dir": settings["bank_dir"],
         "trace_dir": str(out / "traces"),
         "ttc_threshold": settings["ttc_threshold"], "stall_seconds": settings["stall_seconds"],
     }
@@ -675,7 +676,7 @@ def _complete(result: Dict[str, Any], task: Dict[str, Any], spec, sampler: str, 
     record = {
         "index": task["index"], "policy": task["policy"], "scenario": task["scenario"], "seed": task["seed"],
         "params": task["params"], "result": None, "failure": None, "rho": None, "reference": None,
-        "avoidable": None, "trace": None, "error": None,
+        "avoidable": None, "trace": None, "error": None, "family": task.get("family") or task["scenario"],
     }
     record.update({k: v for k, v in result.items() if k in record and k not in ("index", "params")})
     if result.get("behaviour") is not None:

@@ -44,8 +44,8 @@ def breadth(counts: Mapping[str, Any]) -> str:
     """How broad the failures found are: failures, distinct behaviours, (scenario, failure type) pairs, scenarios
     with a failure, and stalls apart from collisions."""
     return (f"{counts['failures']} failure(s): {counts.get('behaviours', counts['clusters'])} distinct behaviour(s), "
-            f"{counts.get('scenario_failure_types', 0)} (scenario, failure type) pair(s), "
-            f"{counts.get('scenarios_failing', 0)} scenario(s) with a failure; "
+            f"{counts.get('scenario_failure_types', 0)} (scenario family, failure type) pair(s), "
+            f"{counts.get('scenarios_failing', 0)} scenario famil(ies) with a failure; "
             f"{counts.get('collisions', 0)} collision(s), {counts.get('stalls', 0)} stall(s)")
 
 
