@@ -416,6 +416,7 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
     assert [r["seed"] for r in records] == [episode_seed(5, i) for i in range(10)]
     for record in records:
         assert record["scenario"] in (BRAKES, LEFT_TURN) and record["sampler"] == settings["sampler"]
+        assert record["family"] == record["scenario"]  # shipped scenarios are their own family
         assert (record["rho"] < 0) == (record["failure"] is not None)
         if record["failure"]:
             assert (out / record["trace"]).is_file() and record["reference"]["policy"] == "rule"
