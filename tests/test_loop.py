@@ -95,6 +95,46 @@ def test_family_split_keeps_a_family_held_out_once_held_out():
     assert family_of({"cluster": "s0/collision/r1", "parent": "p"}) == "p"
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_family_split_keeps_every_family_on_its_side_across_two_rounds(seed):
+    """The loop's per-round seeds (seed * 1000 + round); round 1 mines two families, round 2 six."""
+    def mined(families):
+        return [{"cluster": f"{f}/stall/none-none/ego-stopped", "scenario": f"replay_{f}", "parent": f}
+                for f in families]
+
+    first = split_by_family(mined(["fam_a", "fam_b"]), 0.5, seed * 1000 + 1)
+    assert len(first["held_out_families"]) == 1 and len(first["fine_tune_families"]) == 1
+    second = split_by_family(mined(["fam_a", "fam_b", "fam_c", "fam_d", "fam_e", "fam_f"]), 0.5, seed * 1000 + 2,
+                             first["held_out_families"], first["fine_tune_families"])
+    assert set(first["fine_tune_families"]) <= set(second["fine_tune_families"])
+    assert set(first["held_out_families"]) <= set(second["held_out_families"])
+    assert len(second["held_out_families"]) == 3 and second["moved_to_fine_tune"] == []
+    # a failure tying an earlier held-out family to an earlier fine-tuned one: it cannot stay held out
+    tied = mined(["fam_a", "fam_b", "fam_c"]) + [{"cluster": "fam_a/collision/x", "scenario": "replay_fam_b"}]
+    both = split_by_family(tied, 0.5, 7, held_families=["fam_a"], tuned_families=["fam_b"])
+    assert {"fam_a", "fam_b"} <= set(both["fine_tune_families"]) and both["moved_to_fine_tune"] == ["fam_a"]
+
+
+def test_heldout_comparison_needs_enough_families_as_well_as_episodes():
+    from dv2s_gym.mining.loop import heldout_comparison
+
+    def records(outcomes):
+        return [{"scenario": f"s{i % 4}", "seed": i, "failed": f, "error": None} for i, f in enumerate(outcomes)]
+
+    start, tuned = records([True] * 36 + [False] * 4), records([True] * 8 + [False] * 32)
+    two = {"s0": "fam_x", "s1": "fam_x", "s2": "fam_x", "s3": "fam_y"}
+    few = heldout_comparison(start, tuned, None, min_episodes=20, families=two, min_families=3)
+    assert few["pairs"] == 40 and few["heldout_families"] == 2 and few["heldout_scenarios"] == 4
+    assert "only 2 held-out families" in few["underpowered"] and "fewer than the 3 needed" in few["underpowered"]
+    assert few["relative_drop"] is None and few["mcnemar_p"] is None and few["after"]["k"] == 8
+    three = heldout_comparison(start, tuned, None, min_episodes=20, families={**two, "s2": "fam_z"}, min_families=3)
+    assert "underpowered" not in three and three["heldout_families"] == 3 and three["mcnemar_p"] < 0.01
+    from dv2s_gym.mining.loop_report import _heldout_lines, _round_row
+
+    assert "40 pairs from 2 families (4 scenarios)" in _heldout_lines(few)[1]
+    assert _round_row({"steps": {"after": few}})["drop"] == "not reported: 2 < 3 families"
+
+
 def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
     from dv2s_gym.mining.loop import heldout_comparison
 
@@ -360,7 +400,7 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
     stand = _StandIns(monkeypatch)
     lines = []
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=FakeMiner(WIRING["scenarios"], failures_per_round=6),
-                      min_heldout_episodes=1, log=lines.append, **WIRING)
+                      min_heldout_episodes=1, min_heldout_families=2, log=lines.append, **WIRING)
     steps = report.rounds[0]["steps"]
     split = steps["split"]
     assert split["by"] == "family" and split["groups"] == 3 and len(split["held_out_families"]) == 2
@@ -580,3 +620,42 @@ def test_a_round_whose_conversions_are_all_rejected_holds_out_replay_families(tm
     assert share == pytest.approx(0.5)
     evaluated = {scenario for role, _, episodes in stand.evaluations for scenario, _ in episodes}
     assert evaluated == set(split["held_out"])
+
+
+class _GrowingMiner(FakeMiner):
+    """Round 1 fails in two of the scenarios, round 2 in all of them."""
+
+    def __call__(self, policy, **options):
+        self.sources = list(WIRING["scenarios"][:2] if not self.calls else WIRING["scenarios"])
+        self.failures = len(self.sources)
+        return super().__call__(policy, **options)
+
+
+def test_a_second_round_never_holds_out_a_family_the_first_fine_tuned_on(tmp_path, monkeypatch):
+    """Round 2 wants two held-out families of three; only round 1's held-out one was never trained on."""
+    _StandIns(monkeypatch)
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=2, min_heldout_episodes=1, min_heldout_families=1,
+                      miner=_GrowingMiner(WIRING["scenarios"]), log=lambda _: None, **WIRING)
+    first, second = (r["steps"] for r in report.rounds)
+    assert len(first["split"]["held_out_families"]) == 1 and second["split"]["groups"] == 3
+    trained = set(first["split"]["fine_tune_families"]) | set(first["fine_tune"]["families"])
+    assert first["split"]["fine_tune_families"] and set(first["split"]["fine_tune_families"]) <= trained
+    assert not set(first["split"]["held_out_families"]) & trained  # the held-out parents stayed out of the mix
+    assert second["split"]["held_out"] and not set(second["split"]["held_out_families"]) & trained
+    assert set(first["split"]["fine_tune_families"]) <= set(second["split"]["fine_tune_families"])
+    assert set(second["split"]["held_out_families"]) == set(first["split"]["held_out_families"])
+
+
+@pytest.mark.parametrize("content, problem", [
+    ('{"rounds": "x", "settings": 5}', 'has no "settings" object'),
+    ('{"rounds": "x", "settings": {}}', 'has no list of round objects under "rounds"'),
+    ('[1, 2]', "holds a list, not an object"),
+])
+def test_a_loop_json_of_the_wrong_structure_is_refused_in_one_line(tmp_path, content, problem):
+    (tmp_path / "loop").mkdir()
+    (tmp_path / "loop" / "loop.json").write_text(content)
+    with pytest.raises(LoopError) as error:
+        run_loop("dv2s-ppo", out=tmp_path / "loop", budget=8, log=lambda _: None, progress=False)
+    message = str(error.value)
+    assert "loop.json is not a dv2s loop record" in message and problem in message
+    assert "delete the file to start the loop over" in message and "\n" not in message

@@ -416,6 +416,7 @@ def test_a_run_records_every_episode_with_its_scene(whole_run):
     assert [r["seed"] for r in records] == [episode_seed(5, i) for i in range(10)]
     for record in records:
         assert record["scenario"] in (BRAKES, LEFT_TURN) and record["sampler"] == settings["sampler"]
+        assert record["family"] == record["scenario"]  # shipped scenarios are their own family
         assert (record["rho"] < 0) == (record["failure"] is not None)
         if record["failure"]:
             assert (out / record["trace"]).is_file() and record["reference"]["policy"] == "rule"
@@ -752,3 +753,19 @@ def test_novelty_bandit_options_are_checked(small_space):
                        ({"alpha": 0.5}, "no option 'alpha'; it takes explore, prior_new, prior_old")):
         with pytest.raises(MiningError, match=match):
             make_sampler("novelty-bandit", small_space.feature_space, 0, bad)
+
+
+@pytest.mark.parametrize("content, needle", [
+    ('{"schema": "dv2s-mine", garbage', "settings.json is not readable JSON"),
+    ('[1, 2, 3]', "settings.json is not a mining run's settings"),
+])
+def test_a_damaged_settings_json_is_refused_in_one_line_naming_the_file_and_the_fix(tmp_path, content, needle):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "settings.json").write_text(content)
+    with pytest.raises(MiningError) as error:
+        mine("rule", out=out, budget=1, sampler="random", scenarios=[BRAKES], workers=1, progress=False,
+             reports=False, env_config=SHORT)
+    message = str(error.value)
+    assert needle in message and str(out / "settings.json") in message and "\n" not in message
+    assert "choose another --out" in message and (out / "settings.json").read_text() == content

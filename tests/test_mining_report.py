@@ -419,8 +419,8 @@ def test_breadth_counts_and_their_text(report):
     assert counts["scenario_failure_types"] == 5 and counts["scenarios_failing"] == 2
     assert (counts["collisions"], counts["stalls"]) == (5, 1)
     assert report["scenarios"]["A"]["failure_types"] == 2 and report["scenarios"]["B"]["failure_types"] == 3
-    line = ("10 failure(s): 5 distinct behaviour(s), 5 (scenario, failure type) pair(s), 2 scenario(s) with a "
-            "failure; 5 collision(s), 1 stall(s)")
+    line = ("10 failure(s): 5 distinct behaviour(s), 5 (scenario family, failure type) pair(s), 2 scenario "
+            "famil(ies) with a failure; 5 collision(s), 1 stall(s)")
     assert line in format_summary(report) and line in markdown(report)
 
 
@@ -459,8 +459,8 @@ def test_the_miner_s_summary_states_the_breadth(run_dir):
     settings = json.loads((_Path(run_dir) / "settings.json").read_text())
     run = MineRun(out=_Path(run_dir), settings=settings, records=records, clusters=cluster_failures(records))
     # the miner counts a failure of unknown avoidability (the low TTC) as avoidable
-    assert ("5 distinct behaviours, 4 with avoidable failures; 5 (scenario, failure type) pairs, 2 scenarios with a "
-            "failure; 5 collisions, 1 stalls") in run.summary()
+    assert ("5 distinct behaviours, 4 with avoidable failures; 5 (scenario family, failure type) pairs, 2 scenario "
+            "families with a failure; 5 collisions, 1 stalls") in run.summary()
 
 
 def test_a_plain_run_states_its_seed(report):
@@ -516,3 +516,68 @@ def test_the_rate_sentence_says_how_many_episodes_and_which_scenarios_were_never
     assert "from 6 episodes, as precise as 9.4 draws" in text
     assert "1 of 3 scenarios were never drawn" in text and "--budget" in text
     assert "never drawn" not in rate_text({**rate, "scenarios": {"a": drawn}})
+
+
+def test_a_run_whose_every_episode_errored_says_so_and_counts_them_as_drawn(tmp_path):
+    from dv2s_gym.mining.cluster import cluster_failures
+    from dv2s_gym.mining.miner import MineRun
+
+    out = tmp_path / "broken"
+    out.mkdir()
+    settings = {"policy": "boom", "sampler": "random", "seed": 0, "scenarios": ["A", "B"], "reference": None}
+    (out / "settings.json").write_text(json.dumps(settings))
+    records = [_record(i, "random", "A", 0.5, None, None, "Traceback ...\nRuntimeError: boom") for i in range(2)]
+    (out / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    report = build_report(out)
+    assert report["counts"]["errors"] == 2 and report["counts"]["episodes"] == 0
+    text = markdown(report)
+    assert "WARNING: all 2 episodes ended in an error: the run measured nothing (e.g. RuntimeError: boom)" in text
+    assert "1 of 2 scenarios were drawn (2 episode(s)) but every episode of them ended in an error" in text
+    assert "1 of 2 scenarios were never drawn" in text  # B
+    run = MineRun(out=out, settings=settings, records=records, clusters=cluster_failures(records))
+    assert run.all_errored and "WARNING: all 2 episodes ended in an error" in run.summary()
+    partial = MineRun(out=out, settings=settings, clusters={},
+                      records=records[:1] + [_record(1, "random", "A", 0.5, None, None, None)])
+    assert not partial.all_errored and "WARNING: 1 of 2 episodes ended in an error" in partial.summary()
+
+
+def test_one_behaviour_in_two_entries_of_one_family_is_one_behaviour(tmp_path):
+    """Clusters and breadth counts are per scenario family; the cluster still lists the entries."""
+    from dv2s_gym.mining.cluster import cluster_failures
+
+    out = tmp_path / "family"
+    out.mkdir()
+    (out / "settings.json").write_text(json.dumps({"policy": "rule", "sampler": "random", "seed": 0,
+                                                   "scenarios": ["mined_a", "replay_a"]}))
+    records = [{**_record(i, "random", name, 0.5, "collision", True, None), "family": "A"}
+               for i, name in enumerate(["mined_a", "replay_a", "mined_a"])]
+    (out / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    report = build_report(out)
+    counts = report["counts"]
+    assert counts["failures"] == 3 and counts["behaviours"] == 1
+    assert counts["scenario_failure_types"] == 1 and counts["scenarios_failing"] == 1
+    (cluster,) = report["clusters"]
+    assert cluster["id"].startswith("A/collision:rear_end/") and cluster["family"] == "A"
+    assert cluster["scenarios"] == ["mined_a", "replay_a"] and cluster["size"] == 3
+    assert report["scenarios"]["replay_a"]["clusters"] == report["scenarios"]["mined_a"]["clusters"] == 1
+    assert "`mined_a`, `replay_a`" in markdown(report)
+    legacy = [{k: v for k, v in r.items() if k != "family"} for r in records]  # runs recorded before families
+    assert len(set(cluster_failures(legacy).values())) == 2
+
+
+def test_a_scenario_s_family_follows_the_provenance_to_its_first_scenario(tmp_path):
+    from dv2s_gym.mining.family import scenario_family
+    from loop_helpers import add_mined_copy
+
+    bank = tmp_path / "bank"
+    bank.mkdir()
+    add_mined_copy(str(bank), "highway_cut_in_from_right", "mined_x", "c")
+    add_mined_copy(str(bank), "highway_cut_in_from_right", "replay_of_mined_x", "c")
+    meta_path = bank / "replay_of_mined_x" / "meta.json"
+    meta = json.loads(meta_path.read_text())
+    meta["source"]["parent"] = "mined_x"
+    meta_path.write_text(json.dumps(meta))
+    assert scenario_family("replay_of_mined_x", str(bank)) == "highway_cut_in_from_right"
+    assert scenario_family("mined_x", str(bank)) == "highway_cut_in_from_right"
+    assert scenario_family("highway_cut_in_from_right") == "highway_cut_in_from_right"  # shipped: no parent
+    assert scenario_family("not_an_entry", str(bank)) == "not_an_entry"

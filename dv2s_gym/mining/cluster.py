@@ -1,11 +1,13 @@
 """Grouping failures by behaviour, so a report counts distinct failures, not repeats of one.
 
-A failure's cluster is ``"<scenario>/<failure class>/<actor>-<its manoeuvre>/ego-<ego manoeuvre>"``, e.g.
-``"cut_in/collision:rear_end/car-braking/ego-keeping_lane"``: its scenario (the parent scenario of the
-failure family), its class (``collision:rear_end``, ``off_road``, ``stall``...;
+A failure's cluster is ``"<family>/<failure class>/<actor>-<its manoeuvre>/ego-<ego manoeuvre>"``, e.g.
+``"cut_in/collision:rear_end/car-braking/ego-keeping_lane"``: its scenario family (the bank scenario the
+episode's scenario goes back to through the provenance of mined and replay entries,
+:mod:`dv2s_gym.mining.family`; a record written without a ``family`` uses its scenario), its class (``collision:rear_end``, ``off_road``, ``stall``...;
 :attr:`~dv2s_gym.mining.monitors.Failure.kind`), the kind of the other actor involved and what it was doing,
 and what the ego was doing, in the seconds before the failure (:mod:`dv2s_gym.mining.behaviour`, kept in
-the episode record when it runs). The first two ``/``-parts are always the scenario and the failure class.
+the episode record when it runs). The first two ``/``-parts are always the family and the failure class; the
+entries a cluster's failures ran in are kept in its records (``scenario``) and listed in the reports.
 A cluster id depends on its own record only, so it is the same across a resumed run and across runs,
 and the conversion of a cluster is done once.
 
@@ -22,6 +24,7 @@ from collections import defaultdict
 from typing import Any, Dict, Iterable, List, Sequence
 
 from dv2s_gym.mining.behaviour import behaviour_of
+from dv2s_gym.mining.family import record_family
 
 __all__ = ["REGION_BINS", "region_of", "cluster_id", "cell_id", "cluster_failures", "group", "slug", "pair_of"]
 
@@ -37,7 +40,7 @@ def region_of(point: Sequence[float], bins: int = REGION_BINS) -> str:
 def cluster_id(record: Dict[str, Any]) -> str:
     """The behaviour cluster of a failed episode record (module docstring)."""
     behaviour = behaviour_of(record)
-    return (f"{record['scenario']}/{record['failure']['kind']}/{behaviour['actor']}-{behaviour['actor_manoeuvre']}"
+    return (f"{record_family(record)}/{record['failure']['kind']}/{behaviour['actor']}-{behaviour['actor_manoeuvre']}"
             f"/ego-{behaviour['ego_manoeuvre']}")
 
 
@@ -47,8 +50,8 @@ def cell_id(record: Dict[str, Any], bins: int = REGION_BINS) -> str:
 
 
 def pair_of(record: Dict[str, Any]) -> str:
-    """``"<scenario>/<failure class>"`` of a failed record."""
-    return f"{record['scenario']}/{record['failure']['kind']}"
+    """``"<family>/<failure class>"`` of a failed record."""
+    return f"{record_family(record)}/{record['failure']['kind']}"
 
 
 def cluster_failures(records: Iterable[Dict[str, Any]]) -> Dict[int, str]:

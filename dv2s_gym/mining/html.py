@@ -185,8 +185,8 @@ def _settings_table(report: Mapping[str, Any]) -> str:
 
 def _counts_table(report: Mapping[str, Any]) -> str:
     c = report.get("counts") or {}
-    head = ["episodes", "errors", "failures", "distinct behaviours", "(scenario, failure type) pairs",
-            "scenarios with a failure", "collisions", "stalls", "avoidable", "unavoidable", "unknown",
+    head = ["episodes", "errors", "failures", "distinct behaviours", "(scenario family, failure type) pairs",
+            "scenario families with a failure", "collisions", "stalls", "avoidable", "unavoidable", "unknown",
             "avoidable behaviours", "converted", "kept", "merged", "rejected"]
     keys = ["episodes", "errors", "failures", "behaviours", "scenario_failure_types", "scenarios_failing", "collisions",
             "stalls", "avoidable", "unavoidable", "avoidability_unknown", "avoidable_clusters", "converted", "kept",

@@ -84,6 +84,7 @@ DEFAULTS: Dict[str, Any] = {
     "max_conversions": 4,
     "max_replays": 16,
     "min_heldout_episodes": 20,
+    "min_heldout_families": 3,
     "control": True,
     "untouched_seeds": 2,
     "regress_episodes": 4,
@@ -156,6 +157,7 @@ class _State:
                 data = json.loads(path.read_text(encoding="utf-8"))
             except ValueError as error:
                 raise LoopError(f"{path} is not readable JSON ({error}); choose another --out") from error
+            _check_structure(data, path)
             recorded = data.get("settings", {})
             for key in IDENTITY:
                 value = recorded.get(key, _LEGACY.get(key))
@@ -180,6 +182,25 @@ class _State:
         while len(self.data["rounds"]) < number:
             self.data["rounds"].append({"round": len(self.data["rounds"]) + 1, "steps": {}, "timings": {}})
         return self.data["rounds"][number - 1]
+
+
+def _check_structure(data: Any, path: Path) -> None:
+    """Refuse a ``loop.json`` that is JSON but not a loop's record, in one line naming the file and the fix."""
+    problem = None
+    if not isinstance(data, dict):
+        problem = f"holds a {type(data).__name__}, not an object"
+    elif not isinstance(data.get("settings"), dict):
+        problem = "has no \"settings\" object"
+    elif not isinstance(data.get("rounds"), list) or not all(
+            isinstance(r, dict) and isinstance(r.get("steps", {}), dict) and isinstance(r.get("timings", {}), dict)
+            for r in data["rounds"]):
+        problem = "has no list of round objects under \"rounds\""
+    elif data.get("start") is not None and not (isinstance(data["start"], dict)
+                                                and isinstance(data["start"].get("scenarios"), list)):
+        problem = "has a \"start\" that is not an object with a list of scenarios"
+    if problem:
+        raise LoopError(f"{path} is not a dv2s loop record ({problem}); choose another --out, or delete the file "
+                        "to start the loop over")
 
 
 # --------------------------------------------------------------------------- helpers
@@ -339,7 +360,8 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
              fine_tune_lr: Optional[float] = DEFAULTS["fine_tune_lr"],
              max_conversions: Optional[int] = DEFAULTS["max_conversions"],
              max_replays: Optional[int] = DEFAULTS["max_replays"],
-             min_heldout_episodes: int = DEFAULTS["min_heldout_episodes"], control: bool = DEFAULTS["control"],
+             min_heldout_episodes: int = DEFAULTS["min_heldout_episodes"],
+             min_heldout_families: int = DEFAULTS["min_heldout_families"], control: bool = DEFAULTS["control"],
              untouched_seeds: int = DEFAULTS["untouched_seeds"],
              scenarios: Optional[Sequence[str]] = None, n_envs: int = 2, progress: bool = True,
              mine_options: Optional[Mapping[str, Any]] = None, miner: Optional[Callable[..., Any]] = None,
@@ -371,6 +393,8 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
             per round, largest first (:func:`dv2s_gym.mining.replays.replay_clusters`; ``None``: all, 0: none).
         min_heldout_episodes: below this many held-out episodes a round reports rates only, no drop and no
             test, and says so in the log and the reports.
+        min_heldout_families: likewise below this many held-out families (parent scenarios): the episodes of
+            one family are near-identical scenes, so the paired test needs several families, not only episodes.
         control: also fine-tune without the mined scenarios (the control arm) and compare on held-out.
         untouched_seeds: seeds per scenario of the untouched set (:data:`UNTOUCHED_BANK`); 0 skips it.
         workers: processes for mining and evaluation (default: every core).
@@ -385,6 +409,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
     for name, value, low in (("rounds", rounds, 1), ("budget", budget, 1), ("fine-tune-steps", fine_tune_steps, 1),
                              ("k-eval", k_eval, 1), ("regress-episodes", regress_episodes, 1),
                              ("min-heldout-episodes", min_heldout_episodes, 0),
+                             ("min-heldout-families", min_heldout_families, 0),
                              ("untouched-seeds", untouched_seeds, 0)):
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise LoopError(f"--{name} must be an integer >= {low}, not {value!r}")
@@ -434,7 +459,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                 "scenarios": list(scenarios) if scenarios is not None else None, "rounds": rounds,
                 "max_conversions": max_conversions, "max_replays": max_replays, "holdout_by": HOLDOUT_BY, "control": bool(control),
                 "untouched_seeds": untouched_seeds, "min_heldout_episodes": min_heldout_episodes,
-                "workers": workers, "n_envs": n_envs, "env_config": env_config,
+                "min_heldout_families": min_heldout_families, "workers": workers, "n_envs": n_envs, "env_config": env_config,
                 "fine_tune_env_config": fine_tune_config}
     state = _State(out / "loop.json", settings)
     settings = state.data["settings"]
@@ -503,11 +528,13 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                 + (f", {mined['clusters_not_kept']} neither converted nor replayed (--max-replays "
                    f"{'all' if max_replays is None else max_replays})" if mined.get("clusters_not_kept") else ""))
         if "split" not in steps:
-            held_families = sorted({f for earlier in state.data["rounds"][:number - 1]
-                                    for f in ((earlier.get("steps") or {}).get("split") or {}).get(
-                                        "held_out_families", [])})
+            held_families, tuned_families = _earlier_sides(state.data["rounds"][:number - 1])
             timed("split", lambda: _split(steps["mine"]["kept"], holdout_fraction, seed * 1000 + number, holdout_by,
-                                          bank, held_families))
+                                          bank, held_families, tuned_families))
+            if steps["split"].get("moved_to_fine_tune"):
+                log(f"round {number}: WARNING: earlier held-out famil(ies) "
+                    f"{', '.join(steps['split']['moved_to_fine_tune'])} now share a mined scenario with a family "
+                    "fine-tuned on earlier, so they are fine-tuned on from this round")
         split = steps["split"]
         held_out, tuned = split["held_out"], split["fine_tune"]
         if not tuned and not held_out:
@@ -529,7 +556,9 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         from policies.training import EVAL_SEED_BASE
 
         episodes = [(name, EVAL_SEED_BASE + i) for name in held_out for i in range(k_eval)]
-        shortfall = underpowered(len(episodes), min_heldout_episodes)
+        families = _families_of(steps["mine"]["kept"], held_out, bank)
+        shortfall = underpowered(len(episodes), min_heldout_episodes, len(set(families.values())),
+                                 min_heldout_families)
         if shortfall:
             log(f"round {number}: WARNING: {shortfall}")
         store_path = round_dir / "heldout.jsonl"
@@ -576,7 +605,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                                                        bank_dir=bank, env_config=env_config, workers=workers,
                                                        progress=progress)
                 return heldout_comparison(before, after, control_records, min_episodes=min_heldout_episodes,
-                                          seed=seed)
+                                          seed=seed, families=families, min_families=min_heldout_families)
 
             timed("after", do_after)
         if untouched_seeds and "untouched" not in steps:
@@ -607,13 +636,31 @@ _STAGE_NAMES = {"mine": "mining failures", "split": "splitting by family", "befo
                 "regress": "regression test on the starting bank"}
 
 
-def underpowered(episodes: int, minimum: int) -> Optional[str]:
-    """The warning for a round with fewer than ``minimum`` held-out episodes, or ``None``."""
-    if episodes >= minimum:
+def underpowered(episodes: int, minimum: int, families: Optional[int] = None,
+                 min_families: int = 0) -> Optional[str]:
+    """The warning for a round with fewer than ``minimum`` held-out episodes or fewer than ``min_families``
+    held-out families (``families``, when known), or ``None``."""
+    reasons = []
+    if episodes < minimum:
+        reasons.append(f"only {episodes} held-out episode(s), fewer than the {minimum} needed "
+                       "(--min-heldout-episodes)")
+    if families is not None and families < min_families:
+        reasons.append(f"only {families} held-out famil{'y' if families == 1 else 'ies'} (parent scenarios), fewer "
+                       f"than the {min_families} needed: episodes of one family are near-identical scenes, not "
+                       "independent trials")
+    if not reasons:
         return None
-    return (f"only {episodes} held-out episode(s), fewer than the {minimum} needed (--min-heldout-episodes): "
-            "this round reports held-out rates but no drop and no test; raise --k-eval, --max-conversions or "
-            "--budget for more held-out scenarios")
+    return ("; ".join(reasons) + ": this round reports held-out rates but no drop and no test; raise --k-eval, "
+            "--max-conversions, --max-replays or --budget for more held-out scenarios and families")
+
+
+def _families_of(kept: Sequence[Mapping[str, Any]], held_out: Sequence[str], bank: Optional[str]) -> Dict[str, str]:
+    """``{held-out scenario: its family}`` (:func:`dv2s_gym.mining.split.family_of`)."""
+    from dv2s_gym.mining.split import family_of
+
+    wanted = set(held_out)
+    families = {str(e["scenario"]): family_of(e) for e in _with_parents(kept, bank) if e["scenario"] in wanted}
+    return {name: families.get(name, name) for name in held_out}
 
 
 def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, *, with_mined: bool, label: str,
@@ -630,7 +677,8 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, *
     names = sorted(e.name for e in entries if with_mined or e.name not in mined)
     weights = fine_tune_weights(names, mined if with_mined else [], mined_share)
     common = {"scenarios": len(names), "mined_upweighted": len(mined) if with_mined else 0, "steps": steps,
-              "mined_left_out": 0 if with_mined else len(mined)}
+              "mined_left_out": 0 if with_mined else len(mined),
+              "families": sorted({str(e.source.get("parent") or e.name) for e in entries if e.name in names})}
     if method == "dagger":
         from policies.dagger_checkpoint import checkpoint_position, describe_position
         from policies.imitation import DAGGER_DEFAULTS, dagger_fine_tune
@@ -658,17 +706,24 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, *
 
 def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[str, Any]],
                        control: Optional[Sequence[Mapping[str, Any]]], *, min_episodes: int,
-                       seed: int = 0) -> Dict[str, Any]:
+                       seed: int = 0, families: Optional[Mapping[str, str]] = None,
+                       min_families: int = 0) -> Dict[str, Any]:
     """The ``after`` step: :func:`~dv2s_gym.mining.heldout.paired_summary` of fine-tuned against start, plus
     the control's rate and the paired fine-tuned-vs-control table and exact McNemar p (``vs_control``), and
     each policy's failures by type (``failure_types``: stalls apart from collisions and the rest).
 
-    Below ``min_episodes`` pairs the drop, its interval and both p-values are ``None`` and ``underpowered``
+    ``families`` maps each held-out scenario to its family (default: each scenario its own); ``heldout_families``
+    and ``heldout_scenarios`` count those the episodes came from. Below ``min_episodes`` pairs or
+    ``min_families`` families the drop, its interval and both p-values are ``None`` and ``underpowered``
     says why (the rates, with their wide intervals, stay)."""
     from dv2s_gym.mining.heldout import failure_types, paired_summary
 
     summary = paired_summary(before, after, seed=seed)
     summary["min_episodes"] = min_episodes
+    scenarios = sorted({str(r["scenario"]) for r in before})
+    summary["heldout_scenarios"] = len(scenarios)
+    summary["heldout_families"] = len({(families or {}).get(name, name) for name in scenarios})
+    summary["min_families"] = min_families
     summary["failure_types"] = {"start": failure_types(before), "fine_tuned": failure_types(after)}
     if control is not None:
         versus = paired_summary(control, after, seed=seed, bootstrap=0)
@@ -682,7 +737,7 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
                                  "mcnemar_p": versus["mcnemar_p"],
                                  "per_scenario": {name: row["before"]
                                                   for name, row in versus["per_scenario"].items()}}
-    shortfall = underpowered(summary["pairs"], min_episodes)
+    shortfall = underpowered(summary["pairs"], min_episodes, summary["heldout_families"], min_families)
     if shortfall:
         summary["underpowered"] = shortfall
         summary.update(relative_drop=None, relative_drop_interval=[None, None], mcnemar_p=None)
@@ -735,12 +790,28 @@ def _comparison(report: Mapping[str, Any], path: Path) -> Dict[str, Any]:
 
 
 def _split(kept: Sequence[Mapping[str, Any]], fraction: float, seed: int, by: str = HOLDOUT_BY,
-           bank: Optional[str] = None, held_families: Sequence[str] = ()) -> Dict[str, Any]:
+           bank: Optional[str] = None, held_families: Sequence[str] = (),
+           tuned_families: Sequence[str] = ()) -> Dict[str, Any]:
     from dv2s_gym.mining.split import split_by_cluster, split_by_family
 
     if by == "cluster":
         return split_by_cluster(kept, fraction, seed)
-    return split_by_family(_with_parents(kept, bank), fraction, seed, held_families)
+    return split_by_family(_with_parents(kept, bank), fraction, seed, held_families, tuned_families)
+
+
+def _earlier_sides(rounds: Sequence[Mapping[str, Any]]) -> tuple:
+    """``(held, tuned)``: the families earlier ``rounds`` held out, and those they fine-tuned on in any form
+    (their split's fine-tuning families and every family in a fine-tuning arm's mix, parents included)."""
+    held: set = set()
+    tuned: set = set()
+    for earlier in rounds:
+        steps = earlier.get("steps") or {}
+        split = steps.get("split") or {}
+        held.update(split.get("held_out_families", []))
+        tuned.update(split.get("fine_tune_families", []))
+        for arm in ("fine_tune", "control"):
+            tuned.update((steps.get(arm) or {}).get("families", []))
+    return sorted(held), sorted(tuned)
 
 
 def _with_parents(kept: Sequence[Mapping[str, Any]], bank: Optional[str]) -> List[Dict[str, Any]]:

@@ -12,11 +12,13 @@
                                     "kept": [{"cluster", "scenario", "reproduction", "replay" (exact replays:
                                               True), "parent" (exact replays)}], "folder"},
                            "split": {"by": "family", "fine_tune", "held_out", "fine_tune_clusters",
-                                     "held_out_clusters", "fine_tune_families", "held_out_families", "groups"}
+                                     "held_out_clusters", "fine_tune_families", "held_out_families", "groups",
+                                     "moved_to_fine_tune"}
                                     (loops recorded before the family split: no "by" and no families),
                            "before": {"episodes"},
                            "fine_tune" and "control": {"model", "method": "ppo" | "dagger", "scenarios",
-                                         "mined_upweighted", "mined_left_out", "steps",
+                                         "mined_upweighted", "mined_left_out", "steps", "families" (every
+                                         family in the arm's mix: later rounds keep them on the fine-tuning side),
                                          "reward_weights" (ppo; None for dagger),
                                          "env_config": the fine-tuning env's config,
                                          "reference", "agreement", "resumed" (dagger only)},
@@ -27,8 +29,10 @@
                                                     "fine_tuned_only", "control_only", "neither"}, "mcnemar_p",
                                                     "per_scenario": {scenario: control failures}},
                                      "failure_types": {"start" | "control" | "fine_tuned": {type: n}},
-                                     "min_episodes", "underpowered": why no drop or test is reported (only
-                                     below min_episodes pairs; then the drop and p-values are None)},
+                                     "min_episodes", "min_families", "heldout_families", "heldout_scenarios",
+                                     "underpowered": why no drop or test is reported (only below
+                                     min_episodes pairs or min_families families; then the drop and
+                                     p-values are None)},
                            "untouched": {"scenarios", "seeds", "policies": {"start" | "control" | "fine_tuned":
                                          {"episodes", "errors", "failure_rate", "stall_rate", "collision_rate",
                                           "mean_speed"}} (dv2s regress summaries), "fine_tuned_vs_start" and
@@ -168,7 +172,12 @@ def _round_row(record: Mapping[str, Any]) -> Dict[str, Any]:
     drop_text = "-" if drop is None else f"{drop:.0%}" + (
         f" [{interval[0]:.0%}, {interval[1]:.0%}]" if interval[0] is not None else "")
     if after.get("underpowered"):
-        drop_text = f"not reported: {after.get('pairs')} < {after.get('min_episodes')} episodes"
+        short = []
+        if (after.get("pairs") or 0) < (after.get("min_episodes") or 0):
+            short.append(f"{after.get('pairs')} < {after.get('min_episodes')} episodes")
+        if after.get("heldout_families") is not None and after["heldout_families"] < (after.get("min_families") or 0):
+            short.append(f"{after['heldout_families']} < {after['min_families']} families")
+        drop_text = "not reported: " + ", ".join(short or ["too few held-out episodes"])
     p_value = after.get("mcnemar_p")
     p_control = (after.get("vs_control") or {}).get("mcnemar_p")
     untouched = steps.get("untouched") or {}
@@ -235,6 +244,15 @@ def _untouched_lines(untouched: Mapping[str, Any]) -> List[str]:
     return lines
 
 
+def _sources_text(after: Mapping[str, Any]) -> str:
+    """`` from F families (S scenarios)`` of a held-out comparison, or nothing for one recorded without them."""
+    if after.get("heldout_families") is None:
+        return ""
+    families, scenarios = after["heldout_families"], after.get("heldout_scenarios")
+    return (f" from {families} famil{'y' if families == 1 else 'ies'} ({scenarios} scenario"
+            f"{'' if scenarios == 1 else 's'})")
+
+
 def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
     """The held-out comparison: start, control, fine-tuned, and what is (not) reported."""
     if not after:
@@ -245,8 +263,8 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
     if not after.get("pairs"):
         return lines + [f"- held-out episodes: none ran ({after.get('errors', 0)} with errors)"]
     table = after.get("table", {})
-    lines.append(f"- held-out episodes: {after.get('pairs')} pairs ({after.get('errors')} with errors left "
-                 f"out); start {_rate(after.get('before'))}"
+    lines.append(f"- held-out episodes: {after.get('pairs')} pairs{_sources_text(after)} ({after.get('errors')} with "
+                 f"errors left out); start {_rate(after.get('before'))}"
                  + (f", control {_rate(after.get('control'))}" if after.get("control") else "")
                  + f", fine-tuned {_rate(after.get('after'))}; paired fine-tuned vs start: both failed "
                  f"{table.get('both_fail')}, only start {table.get('before_only')}, only fine-tuned "
@@ -290,7 +308,8 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         f"{_replays_text(settings)}, "
         f"{settings.get('holdout_fraction')} of the mined {'families (parent scenarios)' if settings.get('holdout_by', 'cluster') == 'family' else 'clusters'} "
         f"held out, {settings.get('k_eval')} evaluation seeds per held-out scenario (at least "
-        f"{settings.get('min_heldout_episodes', 0)} held-out episodes for a drop or test), "
+        f"{settings.get('min_heldout_episodes', 0)} held-out episodes from at least "
+        f"{settings.get('min_heldout_families', 0)} families for a drop or test), "
         f"{'a control arm fine-tuned without the mined scenarios, ' if settings.get('control') else 'no control arm, '}"
         f"fine-tuning ({settings.get('fine_tune_method', 'ppo')}) "
         f"{settings.get('fine_tune_steps')} steps (mined scenarios drawn with "
@@ -548,7 +567,8 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
             f"{escape(_weights(settings.get('fine_tune_reward')))} overridden in training only), "
             f"{'with' if settings.get('control') else 'without'} a control arm, {settings.get('k_eval')} "
             f"evaluation seeds per held-out scenario (Wilson 95 % intervals; the drop's interval resamples "
-            f"scenarios; no drop or test below {settings.get('min_heldout_episodes', 0)} held-out episodes).</p>"
+            f"scenarios; no drop or test below {settings.get('min_heldout_episodes', 0)} held-out episodes or "
+            f"{settings.get('min_heldout_families', 0)} held-out families).</p>"
             f"<table>{head}{''.join(rows)}</table>{final_html}{''.join(details)}</body></html>\n")
 
 

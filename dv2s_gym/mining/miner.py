@@ -50,6 +50,7 @@ import numpy as np
 from dv2s_gym.mining.behaviour import backfill
 from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, group
 from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.family import record_family, scenario_family
 from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
 from dv2s_gym.mining.samplers import (
@@ -65,7 +66,7 @@ from dv2s_gym.mining.tasks import MINE
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 
-__all__ = ["MineRun", "mine", "read_records", "episode_seed", "SETTINGS_VERSION"]
+__all__ = ["MineRun", "mine", "read_records", "episode_seed", "error_warning", "SETTINGS_VERSION"]
 
 SETTINGS_VERSION = 1
 LOOKAHEAD_CHUNKS = 16
@@ -103,11 +104,22 @@ class MineRun:
         """Distinct failure clusters (behaviours, :mod:`dv2s_gym.mining.cluster`)."""
         return len(set(self.clusters.values()))
 
+    @property
+    def errors(self) -> List[Dict[str, Any]]:
+        """The episode records that ended in an error (they count in no failure figure)."""
+        return [r for r in self.records if r.get("error")]
+
+    @property
+    def all_errored(self) -> bool:
+        """Whether every episode ended in an error, so the run measured nothing (a command should fail)."""
+        return bool(self.records) and len(self.errors) == len(self.records)
+
     def summary(self) -> str:
-        """A few lines for the terminal: episodes, failures, clusters, conversions."""
+        """A few lines for the terminal: episodes, failures, clusters, conversions, and a WARNING line when
+        episodes ended in an error."""
         from collections import Counter
 
-        errors = sum(1 for r in self.records if r.get("error"))
+        errors = len(self.errors)
         restarted = sum(1 for r in self.records if r.get("worker_restarts"))
         failures = self.failures
         kinds = Counter(r["failure"]["kind"] for r in failures)
@@ -122,14 +134,25 @@ class MineRun:
             + (f"{len(self.avoidable)} avoidable by {self.settings['reference']}" if self.settings["reference"]
              else "avoidability not checked (no reference driver)"),
             f"{self.distinct_clusters} distinct behaviours, {len(avoidable_clusters)} with avoidable failures; "
-            f"{len({(r['scenario'], r['failure']['kind']) for r in failures})} (scenario, failure type) pairs, "
-            f"{len({r['scenario'] for r in failures})} scenarios with a failure; "
+            f"{len({(record_family(r), r['failure']['kind']) for r in failures})} (scenario family, failure type) "
+            f"pairs, {len({record_family(r) for r in failures})} scenario families with a failure; "
             f"{kinds_by_type.get('collision', 0)} collisions, {kinds_by_type.get('stall', 0)} stalls",
         ]
         if self.conversions:
             lines.append(f"converted {len(self.conversions)}: kept {status.get('kept', 0)}, merged "
                          f"{status.get('merged', 0)}, rejected {status.get('rejected', 0)}")
+        if errors:
+            first = str(self.errors[0]["error"]).strip().splitlines()
+            lines.append(error_warning(errors, len(self.records), first[-1] if first else ""))
         return "\n".join(lines)
+
+
+def error_warning(errors: int, episodes: int, first: str) -> str:
+    """The loud line for a run with ``errors`` of its ``episodes`` ended in an error (``first``: one's message)."""
+    what = (f"all {episodes} episodes ended in an error: the run measured nothing" if errors == episodes else
+            f"{errors} of {episodes} episodes ended in an error and count in no failure figure")
+    return (f"WARNING: {what} (e.g. {first}); the report's Errors section lists them: fix the policy or scenario "
+            "and rerun")
 
 
 def episode_seed(seed: int, index: int) -> int:
@@ -230,6 +253,22 @@ def _settings(policy: str, sampler: str, sampler_options: Optional[Dict[str, Any
 
 _ADDED_DEFAULTS = {"sampler_options": None, "feedback": "robustness"}
 """Settings added after the first runs were written: a run without them had these values."""
+
+
+def _read_settings(path: Path) -> Optional[Dict[str, Any]]:
+    """A run folder's ``settings.json`` (``None`` when there is none); a damaged one is refused in one line
+    naming the file and the fix."""
+    if not path.is_file():
+        return None
+    try:
+        saved = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as error:
+        raise MiningError(f"{path} is not readable JSON ({error}); restore it, or choose another --out "
+                          "(or delete the run folder) to start the run over") from None
+    if not isinstance(saved, dict) or not isinstance(saved.get("scenarios"), list):
+        raise MiningError(f"{path} is not a mining run's settings (no list of scenarios); restore it, or choose "
+                          "another --out (or delete the run folder) to start the run over")
+    return saved
 
 
 def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path) -> None:
@@ -562,7 +601,7 @@ def _mine_in(out: Path, started: float, *, policy: str, budget: int, sampler: st
                                               default_workers())
     with _run_lock(out):
         settings_path = out / "settings.json"
-        saved = json.loads(settings_path.read_text()) if settings_path.is_file() else None
+        saved = _read_settings(settings_path)
         names = saved["scenarios"] if saved and scenarios is None else None
         space = SceneSpace(names or scenarios, bank_dir)
         batch = int(batch) if batch else (saved["batch"] if saved else 4 * n_workers)
@@ -619,7 +658,7 @@ def _task(index: int, spec, policy: str, reference: Optional[str], settings: Dic
     return {
         "kind": MINE, "role": "mine", "index": index, "id": f"{spec.scenario}/{seed}", "policy": policy,
         "reference": reference, "scenario": spec.scenario, "seed": seed, "params": spec.params,
-        "env_config": settings["env_config"], "bank_dir": settings["bank_dir"],
+        "family": scenario_family(str(spec.scenario), settings["bank_dir"]), "env_config": settings["env_config"], "bank_dir": settings["bank_dir"],
         "trace_dir": str(out / "traces"),
         "ttc_threshold": settings["ttc_threshold"], "stall_seconds": settings["stall_seconds"],
     }
@@ -637,7 +676,7 @@ def _complete(result: Dict[str, Any], task: Dict[str, Any], spec, sampler: str, 
     record = {
         "index": task["index"], "policy": task["policy"], "scenario": task["scenario"], "seed": task["seed"],
         "params": task["params"], "result": None, "failure": None, "rho": None, "reference": None,
-        "avoidable": None, "trace": None, "error": None,
+        "avoidable": None, "trace": None, "error": None, "family": task.get("family") or task["scenario"],
     }
     record.update({k: v for k, v in result.items() if k in record and k not in ("index", "params")})
     if result.get("behaviour") is not None:

@@ -108,15 +108,21 @@ def failure_rate(records: Iterable[Mapping[str, Any]], *, scenarios: Optional[Se
         sampler: the run's sampler (for records that do not name theirs).
 
     Returns ``{"available": bool, "reason": why not | None, "collapsed": bool, "overall": estimate, "scenarios":
-    {name: estimate}}`` with each estimate as :func:`weighted_rate` returns it.
+    {name: estimate}, "errored": {name: episodes drawn that ended in an error}}`` with each estimate as
+    :func:`weighted_rate` returns it.
     """
+    records = list(records)
+    errored: Dict[str, int] = {}
+    for record in records:
+        if record.get("error"):
+            errored[str(record["scenario"])] = errored.get(str(record["scenario"]), 0) + 1
     records = [r for r in records if not r.get("error")]
     names = list(scenarios) if scenarios else sorted({str(r["scenario"]) for r in records})
     missing = [r for r in records if _proposal(r, sampler) is None]
     if missing:
         return {"available": False, "reason": f"{len(missing)} of {len(records)} episodes have no proposal density "
                 "(the sampler draws without one, e.g. bandit or split with cell avoidance)",
-                "collapsed": False, "overall": None, "scenarios": {}}
+                "collapsed": False, "overall": None, "scenarios": {}, "errored": errored}
     by_scenario: Dict[str, List[Mapping[str, Any]]] = {name: [] for name in names}
     for record in records:
         by_scenario.setdefault(str(record["scenario"]), []).append(record)
@@ -134,7 +140,7 @@ def failure_rate(records: Iterable[Mapping[str, Any]], *, scenarios: Optional[Se
     collapsed = any(float(_proposal(r, sampler).get("floor", 1.0)) < COLLAPSE_FLOOR for r in records)
     return {"available": True, "reason": None, "collapsed": collapsed,
             "overall": weighted_rate(outcomes, overall_weights, confidence),
-            "scenarios": estimates}
+            "scenarios": estimates, "errored": errored}
 
 
 def rate_estimates(settings: Mapping[str, Any], records: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:

@@ -20,8 +20,8 @@ JSON schema ``dv2s-mine-report``, version 3 (:data:`SCHEMA_VERSION`; a change to
         "avoidable": failures the reference driver avoided in the same scene (they count against the policy),
         "unavoidable": failures the reference driver had too, "avoidability_unknown": no reference outcome,
         "clusters": distinct clusters (behaviours, :mod:`dv2s_gym.mining.cluster`), "behaviours": the same count,
-        "scenario_failure_types": distinct (scenario, failure class) pairs, "scenarios_failing": scenarios with a
-        failure, "collisions", "stalls": failures of those types,
+        "scenario_failure_types": distinct (scenario family, failure class) pairs, "scenarios_failing": scenario
+        families with a failure (a family: :mod:`dv2s_gym.mining.family`), "collisions", "stalls": failures of those types,
         "avoidable_clusters": clusters with an avoidable failure,
         "unavoidable_clusters": clusters whose failures are all unavoidable,
         "converted": conversion records (one per converted cluster representative),
@@ -59,7 +59,8 @@ so its interval is a guide, not an exact guarantee.
 ``Estimate``: ``{"value" (capped at 1), "raw" (the importance-sampling estimate itself), "low", "high" (95 %), "ess"
 (effective sample size), "n", "failures"}``.
 
-``Cluster``: ``{"id", "scenario", "type", "kind", "region" (the id after scenario and class), "behaviour":
+``Cluster``: ``{"id", "scenario" (its representative's), "family" (the first part of the id),
+"scenarios" (every scenario its failures ran in), "type", "kind", "region" (the id after family and class), "behaviour":
 {"actor", "actor_manoeuvre", "ego_manoeuvre"}, "size", "avoidable", "unavoidable",
 "unknown", "samplers": {name: n}, "first_index", "params": {name: {"min", "max"} |
 {"values"}}`` (the parameter region its failures cover), ``"collision_types", "with_kinds",
@@ -69,7 +70,7 @@ so its interval is a guide, not an exact guarantee.
 "script", "conversion": the conversion record | null}``. A conversion belongs to the cluster
 of its representative episode (``index``); its own ``cluster`` id is kept in the record.
 
-``Failure``: ``{"index", "sampler", "scenario", "seed", "params", "type", "kind" (the type refined by the
+``Failure``: ``{"index", "sampler", "scenario", "family", "seed", "params", "type", "kind" (the type refined by the
 collision type, e.g. ``collision:rear_end``), "time", "with",
 "with_kind", "collision_type", "min_ttc", "rho", "avoidable", "reference", "cluster", "behaviour",
 "trace"}``; replay one exactly with ``dv2s replay RUN/TRACE``.
@@ -263,6 +264,7 @@ def _failure_entry(record: Mapping[str, Any], cluster: Optional[str], settings: 
         "index": int(record["index"]),
         "sampler": str(record.get("sampler") or settings.get("sampler") or "unknown"),
         "scenario": record.get("scenario"),
+        "family": str(record.get("family") or record.get("scenario")),
         "seed": record.get("seed"),
         "params": dict(record.get("params") or {}),
         "type": str(failure.get("type")),
@@ -370,6 +372,8 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
         cluster_entries.append({
             "id": cluster_id,
             "scenario": representative["scenario"],
+            "family": representative["family"],
+            "scenarios": sorted({str(m["scenario"]) for m in members}),
             "type": representative["type"],
             "kind": parts[1] if len(parts) == 3 else representative["kind"],
             "region": parts[2] if len(parts) == 3 else cluster_id,
@@ -422,8 +426,8 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
         "avoidability_unknown": sum(f["avoidable"] is None for f in failures),
         "clusters": len(cluster_entries),
         "behaviours": len(cluster_entries),
-        "scenario_failure_types": len({(str(f["scenario"]), str(f["kind"])) for f in failures}),
-        "scenarios_failing": len({str(f["scenario"]) for f in failures}),
+        "scenario_failure_types": len({(f["family"], str(f["kind"])) for f in failures}),
+        "scenarios_failing": len({f["family"] for f in failures}),
         "collisions": sum(f["type"] == "collision" for f in failures),
         "stalls": sum(f["type"] == "stall" for f in failures),
         "avoidable_clusters": sum(c["avoidable"] > 0 for c in cluster_entries),
@@ -476,7 +480,7 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
             "discovery": discovery,
         }
 
-    rate = rate_estimates(settings, ok)
+    rate = rate_estimates(settings, episodes)  # errored episodes are left out of the rate, counted as drawn
     # per scenario
     scenario_names = list(dict.fromkeys([*(settings.get("scenarios") or []),
                                          *sorted({str(r.get("scenario")) for r in episodes})]))
@@ -484,7 +488,7 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
     for name in scenario_names:
         ran = [r for r in ok if str(r.get("scenario")) == name]
         found = [f for f in failures if str(f["scenario"]) == name]
-        in_clusters = [c for c in cluster_entries if str(c["scenario"]) == name]
+        in_clusters = [c for c in cluster_entries if name in c["scenarios"]]
         scenarios[name] = {
             "episodes": len(ran),
             "errors": sum(1 for e in errors if str(e["scenario"]) == name),
@@ -581,7 +585,17 @@ def headline(report: Mapping[str, Any]) -> str:
             f"{counts['avoidability_unknown']} unknown), {counts['clusters']} distinct behaviour(s) "
             f"({counts['avoidable_clusters']} avoidable); converted {counts['converted']}: kept {counts['kept']}, "
             f"merged {counts['merged']}, rejected {counts['rejected']}"
-            + (f"; {counts['errors']} error(s)" if counts["errors"] else ""))
+            + (f"; {counts['errors']} error(s)" if counts["errors"] else "")
+            + (f". {_error_alarm(report)}" if counts["errors"] else ""))
+
+
+def _error_alarm(report: Mapping[str, Any]) -> str:
+    from dv2s_gym.mining.miner import error_warning
+
+    errors = report.get("errors") or []
+    first = str(errors[0].get("error") or "").strip().splitlines() if errors else []
+    counts = report["counts"]
+    return error_warning(counts["errors"], counts["errors"] + counts["episodes"], first[-1] if first else "")
 
 
 def format_summary(report: Mapping[str, Any]) -> str:
@@ -615,7 +629,8 @@ def _cluster_rows(clusters: Sequence[Mapping[str, Any]]) -> List[str]:
         rep = c["representative"]
         status = c["status"] + (f" into `{c['merged_into']}`" if c.get("merged_into") else "")
         video = f" [video]({c['video']})" if c.get("video") else ""
-        lines.append(f"| `{_cell(c['id'])}` | `{_cell(c['scenario'])}` | {_cell(_type_text(c))} | {c['size']} | "
+        entries = ", ".join(f"`{_cell(name)}`" for name in c.get("scenarios") or [c["scenario"]])
+        lines.append(f"| `{_cell(c['id'])}` | {entries} | {_cell(_type_text(c))} | {c['size']} | "
                      f"{c['avoidable']} | {_cell(_region_text(c['params']))} | #{rep['index']} seed {rep['seed']}"
                      f"{video} | {_cell(status)} | {_cell(c.get('bank_entry'))} | {_reproduction_text(c)} | "
                      f"{_num(c.get('e2e_sc'), 3)} |")

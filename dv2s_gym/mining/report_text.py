@@ -44,8 +44,8 @@ def breadth(counts: Mapping[str, Any]) -> str:
     """How broad the failures found are: failures, distinct behaviours, (scenario, failure type) pairs, scenarios
     with a failure, and stalls apart from collisions."""
     return (f"{counts['failures']} failure(s): {counts.get('behaviours', counts['clusters'])} distinct behaviour(s), "
-            f"{counts.get('scenario_failure_types', 0)} (scenario, failure type) pair(s), "
-            f"{counts.get('scenarios_failing', 0)} scenario(s) with a failure; "
+            f"{counts.get('scenario_failure_types', 0)} (scenario family, failure type) pair(s), "
+            f"{counts.get('scenarios_failing', 0)} scenario famil(ies) with a failure; "
             f"{counts.get('collisions', 0)} collision(s), {counts.get('stalls', 0)} stall(s)")
 
 
@@ -55,13 +55,19 @@ def rate_text(rate: Optional[Mapping[str, Any]]) -> str:
         reason = (rate or {}).get("reason") or "no episodes"
         return f"Failure rate under the scenarios' own parameter distributions: not estimated ({reason})."
     overall = rate.get("overall") or {}
-    unsampled = [name for name, estimate in (rate.get("scenarios") or {}).items() if not (estimate or {}).get("n")]
+    errored = rate.get("errored") or {}
+    empty = [name for name, estimate in (rate.get("scenarios") or {}).items() if not (estimate or {}).get("n")]
+    unsampled = [name for name in empty if not errored.get(name)]
+    broken = [name for name in empty if errored.get(name)]
     return ("Failure rate under the scenarios' own parameter distributions (importance-weighted, each scenario "
             f"equally likely): {percent_text(overall)} from {overall.get('n', 0)} episodes, as precise as "
             f"{number_text(overall.get('ess'))} draws of those distributions would be."
             + (f" {len(unsampled)} of {len(rate.get('scenarios') or {})} scenarios were never drawn: the figure "
                "speaks for them only as far as the drawn ones stand for the rest; a larger --budget covers them."
                if unsampled else "")
+            + (f" {len(broken)} of {len(rate.get('scenarios') or {})} scenarios were drawn "
+               f"({sum(errored[name] for name in broken)} episode(s)) but every episode of them ended in an error: "
+               "the figure says nothing about them; see the errors." if broken else "")
             + (" The sampler almost stopped drawing some regions, so failures there are missing from the estimate: "
                "it can be far too low; a random-sampler run estimates it without that risk." if rate.get("collapsed")
                else ""))

@@ -4,7 +4,9 @@
 family is its parent bank scenario (the sidecar's provenance ``parent``, else the first
 ``/``-part of its cluster id). No held-out scenario shares a parent with a fine-tuning one, and
 the loop also keeps the held-out families' parent scenarios out of fine-tuning, so the held-out
-failures come from scenarios the fine-tuning never drew in any form.
+failures come from scenarios the fine-tuning never drew in any form. Across rounds a family keeps its side:
+one held out earlier stays held out, and one an earlier round fine-tuned on (a mined scenario of it, or its
+parent scenario in the fine-tuning mix) stays on the fine-tuning side.
 
 :func:`split_by_cluster` (loops recorded before the family split) moves groups of tied clusters:
 
@@ -127,29 +129,34 @@ def family_groups(entries: Sequence[Mapping[str, Any]]) -> List[Dict[str, List[s
 
 
 def split_by_family(entries: Sequence[Mapping[str, Any]], fraction: float = 0.5, seed: int = 0,
-                    held_families: Sequence[str] = ()) -> Dict[str, Any]:
+                    held_families: Sequence[str] = (), tuned_families: Sequence[str] = ()) -> Dict[str, Any]:
     """Split mined entries (``{"cluster", "scenario"}`` and optionally ``"parent"``) by family.
 
     ``fraction`` of the family groups (rounded, at least one and at most all but one when there are two or
     more) go to the held-out part, chosen by a shuffle seeded with ``seed``. A group holding one of
-    ``held_families`` (families held out in an earlier round) is always held out, so a family never moves
-    to the fine-tuning side. Returns ``{"by": "family", "fine_tune", "held_out", "fine_tune_clusters",
-    "held_out_clusters", "fine_tune_families", "held_out_families", "groups"}``.
+    ``held_families`` (families held out in an earlier round) is held out, and a group holding one of
+    ``tuned_families`` (families an earlier round fine-tuned on, in any form) is fine-tuned on, so a family
+    never changes sides across rounds. When one group holds both (a failure tied an earlier held-out family to
+    an earlier fine-tuned one), it goes to the fine-tuning side: a held-out family must be one no round ever
+    trained on, and the tie already broke that. Such families are listed in ``"moved_to_fine_tune"``.
+    Returns ``{"by": "family", "fine_tune", "held_out", "fine_tune_clusters", "held_out_clusters",
+    "fine_tune_families", "held_out_families", "groups", "moved_to_fine_tune"}``.
     """
     if not 0.0 <= float(fraction) <= 1.0:
         raise ValueError(f"the held-out fraction must be in [0, 1], not {fraction}")
     groups = family_groups(entries)
-    forced = set(held_families)
+    forced, trained = set(held_families), set(tuned_families)
     order = [groups[i] for i in np.random.default_rng([int(seed), 11]).permutation(len(groups))]
     count = len(groups)
     target = int(round(fraction * count))
     if count >= 2 and 0.0 < fraction < 1.0:
         target = min(max(target, 1), count - 1)
-    held = [g for g in order if forced & set(g["families"])]
+    pinned = [g for g in order if trained & set(g["families"])]
+    held = [g for g in order if forced & set(g["families"]) and g not in pinned]
     for group in order:
         if len(held) >= target:
             break
-        if group not in held:
+        if group not in held and group not in pinned:
             held.append(group)
     tuned = [g for g in order if g not in held]
     return {
@@ -161,4 +168,5 @@ def split_by_family(entries: Sequence[Mapping[str, Any]], fraction: float = 0.5,
         "fine_tune_families": sorted(f for g in tuned for f in g["families"]),
         "held_out_families": sorted(f for g in held for f in g["families"]),
         "groups": count,
+        "moved_to_fine_tune": sorted(f for g in pinned for f in g["families"] if f in forced),
     }
