@@ -57,6 +57,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--min-heldout-episodes", type=int, default=LOOP["min_heldout_episodes"],
                    help="below this many held-out episodes a round reports rates only, no drop and no test "
                    f"(default {LOOP['min_heldout_episodes']})")
+    p.add_argument("--min-heldout-families", type=int, default=LOOP["min_heldout_families"],
+                   help="below this many held-out scenario families a round reports rates only, no drop and no "
+                   f"test (default {LOOP['min_heldout_families']})")
     p.add_argument("--no-control", action="store_true",
                    help="skip the control arm (the same fine-tuning without the mined scenarios)")
     p.add_argument("--untouched-seeds", type=int, default=LOOP["untouched_seeds"],
@@ -95,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
     options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr",
                                                     "holdout_fraction", "k_eval", "regress_episodes", "mined_share",
                                                     "margin", "seed", "workers", "scenarios",
-                                                    "fine_tune_method", "max_conversions", "min_heldout_episodes",
+                                                    "fine_tune_method", "max_conversions", "min_heldout_episodes", "min_heldout_families",
                                                     "untouched_seeds")}
     options["max_conversions"] = None if options["max_conversions"] == 0 else options["max_conversions"]
     if args.max_replays == "all":

@@ -21,7 +21,8 @@ def add_parser(subparsers) -> None:
         "that learns from the outcomes: by default novelty-bandit, which favours scenarios and behaviours not yet "
         "seen; --sampler picks VerifAI's or uniform ones), run the policy on each in a local process pool or on Ray, and "
         "detect failures: collision (with whom, and how), off road, time-to-collision under a threshold, stall. "
-        "Failures are clustered by scenario, failure class and region of parameter space; a failure counts "
+        "Failures are clustered by scenario family (a mined or replay entry counts with the bank scenario it "
+        "came from), failure class, the other actor's manoeuvre and the ego's; a failure counts "
         "against the policy only if the reference driver avoids it in the same scene. With a writable --bank, "
         "one failure per cluster is kept exactly (its parent scenario narrowed around the failing parameters, "
         "with its seed: a 'replay' entry), and is recorded as a bird's-eye video, turned into a Scenic scenario by "
@@ -112,4 +113,4 @@ def run(args: argparse.Namespace) -> int:
     print(run.summary())
     if run.reports:
         print(f"reports: {', '.join(str(p) for p in run.reports.values())}")
-    return 0
+    return 1 if run.all_errored else 0
