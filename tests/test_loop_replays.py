@@ -115,3 +115,20 @@ def test_every_cluster_of_a_mining_run_gets_its_replay_once(tmp_path):
     assert {e["scenario"] for e in entries} == kept and {e["parent"] for e in entries} == {SCENARIO}
     bank = Bank(tmp_path / "bank")
     assert all(replay_failure(bank, name).get("matches") for name in kept)
+
+
+@pytest.mark.slow
+def test_a_failure_in_a_scenario_without_free_parameters_says_why_it_has_no_replay_entry(tmp_path):
+    import re
+
+    script = Bank().get(SCENARIO).script
+    fixed = re.sub(r"Range\((\d+), (\d+)\)", lambda m: str((int(m[1]) + int(m[2])) // 2), script)
+    fixed = re.sub(r"Uniform\(('[^']*')[^)]*\)", r"\1", fixed)
+    bank = Bank(tmp_path / "bank")
+    bank.add(fixed, "A car stands still in the ego's lane ahead.", name="fixed_stopped_car",
+             elements=Bank().get(SCENARIO).elements)
+    record = make_record("fixed_stopped_car", 0, {}, bank_dir=str(bank.root))
+    out = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", policy="keep_lane", bank=bank,
+                               monitor={})
+    assert out["replay_entry"] is None and len(Bank(bank.root)) == 1
+    assert "'fixed_stopped_car' has no free parameters" in out["note"], out

@@ -345,6 +345,9 @@ def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, poli
         existing = bank.get(error.existing).source.get("replay") or {}
         if existing.get("seed") == seed and existing.get("params") == params:
             out["entry"] = error.existing  # this failing scene is in the bank already (a resumed run)
+        elif error.existing == record["scenario"]:
+            out["note"] = (f"no replay entry: {record['scenario']!r} has no free parameters to narrow, so the failing "
+                           f"scene is that scenario itself with seed {seed}")
         else:
             out["note"] = f"no replay entry: {error}"
     return out
