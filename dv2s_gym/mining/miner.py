@@ -53,6 +53,7 @@ from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.family import record_family, scenario_family
 from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
+from dv2s_gym.mining.report_text import error_warning
 from dv2s_gym.mining.samplers import (
     SAMPLERS,
     SceneSampler,
@@ -66,7 +67,7 @@ from dv2s_gym.mining.tasks import MINE
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 
-__all__ = ["MineRun", "mine", "read_records", "episode_seed", "error_warning", "SETTINGS_VERSION"]
+__all__ = ["MineRun", "mine", "read_records", "episode_seed", "SETTINGS_VERSION"]
 
 SETTINGS_VERSION = 1
 LOOKAHEAD_CHUNKS = 16
@@ -145,14 +146,6 @@ class MineRun:
             first = str(self.errors[0]["error"]).strip().splitlines()
             lines.append(error_warning(errors, len(self.records), first[-1] if first else ""))
         return "\n".join(lines)
-
-
-def error_warning(errors: int, episodes: int, first: str) -> str:
-    """The loud line for a run with ``errors`` of its ``episodes`` ended in an error (``first``: one's message)."""
-    what = (f"all {episodes} episodes ended in an error: the run measured nothing" if errors == episodes else
-            f"{errors} of {episodes} episodes ended in an error and count in no failure figure")
-    return (f"WARNING: {what} (e.g. {first}); the report's Errors section lists them: fix the policy or scenario "
-            "and rerun")
 
 
 def episode_seed(seed: int, index: int) -> int:

@@ -590,7 +590,7 @@ def headline(report: Mapping[str, Any]) -> str:
 
 
 def _error_alarm(report: Mapping[str, Any]) -> str:
-    from dv2s_gym.mining.miner import error_warning
+    from dv2s_gym.mining.report_text import error_warning
 
     errors = report.get("errors") or []
     first = str(errors[0].get("error") or "").strip().splitlines() if errors else []

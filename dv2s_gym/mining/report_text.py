@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping, Optional
 
-__all__ = ["breadth", "rate_text", "number_text", "percent_text", "seed_text"]
+__all__ = ["breadth", "rate_text", "number_text", "percent_text", "seed_text", "error_warning"]
 
 
 def number_text(value: Any, digits: int = 1) -> str:
@@ -71,3 +71,11 @@ def rate_text(rate: Optional[Mapping[str, Any]]) -> str:
             + (" The sampler almost stopped drawing some regions, so failures there are missing from the estimate: "
                "it can be far too low; a random-sampler run estimates it without that risk." if rate.get("collapsed")
                else ""))
+
+
+def error_warning(errors: int, episodes: int, first: str) -> str:
+    """The loud line for a run with ``errors`` of its ``episodes`` ended in an error (``first``: one's message)."""
+    what = (f"all {episodes} episodes ended in an error: the run measured nothing" if errors == episodes else
+            f"{errors} of {episodes} episodes ended in an error and count in no failure figure")
+    return (f"WARNING: {what} (e.g. {first}); the report's Errors section lists them: fix the policy or scenario "
+            "and rerun")
