@@ -326,12 +326,29 @@ def test_loop_refuses_a_policy_it_cannot_fine_tune(tmp_path):
         run_loop("rule", out=tmp_path / "loop", miner=FakeMiner(SOURCES), **TINY)
 
 
+@pytest.mark.parametrize("given, expected", [("0", 0), ("3", 3), ("all", None)])
+def test_cli_cluster_counts_read_0_as_none_and_all_as_every_cluster(tmp_path, capsys, monkeypatch, given, expected):
+    import dv2s_gym.mining.loop as loop_module
+
+    seen = {}
+
+    def fake_run_loop(policy, **options):
+        seen.update(options)
+        raise LoopError("stopped by the test")
+
+    monkeypatch.setattr(loop_module, "run_loop", fake_run_loop)
+    code, _, _ = run(capsys, "loop", "--out", tmp_path / "loop", "--no-progress", "--max-conversions", given,
+                     "--max-replays", given)
+    assert code == 2 and seen["max_conversions"] == expected and seen["max_replays"] == expected
+
+
 @pytest.mark.parametrize("argv, needle", [
     (["--policy", "rule"], "stable-baselines3 checkpoint"),
     (["--budget", "0"], "--budget must be an integer >= 1"),
     (["--holdout-fraction", "2"], "--holdout-fraction must be in [0, 1]"),
     (["--sampler", "no-such"], "--sampler must be one of random, halton"),  # it used to start round 1 first
-    (["--max-conversions", "-1"], "--max-conversions must be a positive integer (0 on the command line"),
+    (["--max-conversions", "-1"], "--max-conversions must be an integer >= 0"),
+    (["--max-conversions", "many"], "--max-conversions must be a whole number of clusters or 'all'"),
     (["--untouched-seeds", "-1"], "--untouched-seeds must be an integer >= 0"),
     (["--min-heldout-episodes", "-2"], "--min-heldout-episodes must be an integer >= 0"),
     (["--max-replays", "some"], "--max-replays must be a whole number of clusters or 'all'"),

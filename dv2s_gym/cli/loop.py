@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import Optional
 
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.parser import bank_option
@@ -47,9 +48,9 @@ def add_parser(subparsers) -> None:
                    help="learning rate of the fine-tuning (default: the method's, ppo 1e-4, dagger 1e-3)")
     p.add_argument("--holdout-fraction", type=float, default=LOOP["holdout_fraction"],
                    help=f"share of the mined families (parent scenarios) held out (default {LOOP['holdout_fraction']})")
-    p.add_argument("--max-conversions", type=int, default=LOOP["max_conversions"],
-                   help="failure clusters converted into bank scenarios per round, largest first; 0 converts every "
-                   f"cluster (default {LOOP['max_conversions']})")
+    p.add_argument("--max-conversions", default=str(LOOP["max_conversions"]),
+                   help="failure clusters converted into bank scenarios per round, largest first; 0 for none, 'all' "
+                   f"for every cluster (default {LOOP['max_conversions']})")
     p.add_argument("--max-replays", default=str(LOOP["max_replays"]),
                    help="failure clusters beyond the converted ones whose failing scene is kept as an exact replay "
                    "entry (the parent scenario narrowed around the failure, checked to replay it step for step) per "
@@ -100,15 +101,8 @@ def run(args: argparse.Namespace) -> int:
                                                     "margin", "seed", "workers", "scenarios",
                                                     "fine_tune_method", "max_conversions", "min_heldout_episodes", "min_heldout_families",
                                                     "untouched_seeds")}
-    options["max_conversions"] = None if options["max_conversions"] == 0 else options["max_conversions"]
-    if args.max_replays == "all":
-        options["max_replays"] = None
-    else:
-        try:
-            options["max_replays"] = int(args.max_replays)
-        except ValueError:
-            raise UsageError(f"--max-replays must be a whole number of clusters or 'all', not {args.max_replays!r}") \
-                from None
+    for flag in ("max_conversions", "max_replays"):
+        options[flag] = _count_or_all(getattr(args, flag), "--" + flag.replace("_", "-"))
     options["control"] = not args.no_control
     if args.fine_tune_reward is not None:
         try:
@@ -128,3 +122,13 @@ def run(args: argparse.Namespace) -> int:
         if kind in report.paths:
             print(f"report ({kind}): {report.paths[kind]}")
     return 0
+
+
+def _count_or_all(value: str, flag: str) -> Optional[int]:
+    """A ``--max-...`` value: a whole number of clusters, or ``None`` for ``all``."""
+    if value == "all":
+        return None
+    try:
+        return int(value)
+    except ValueError:
+        raise UsageError(f"{flag} must be a whole number of clusters or 'all', not {value!r}") from None

@@ -414,9 +414,9 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
         if isinstance(value, bool) or not isinstance(value, int) or value < low:
             raise LoopError(f"--{name} must be an integer >= {low}, not {value!r}")
     if max_conversions is not None and (isinstance(max_conversions, bool) or not isinstance(max_conversions, int)
-                                        or max_conversions < 1):
-        raise LoopError(f"--max-conversions must be a positive integer (0 on the command line: every cluster), "
-                        f"not {max_conversions!r}")
+                                        or max_conversions < 0):
+        raise LoopError(f"--max-conversions must be an integer >= 0 (0: no conversions, only exact replays; "
+                        f"'all' on the command line: every cluster), not {max_conversions!r}")
     if max_replays is not None and (isinstance(max_replays, bool) or not isinstance(max_replays, int)
                                     or max_replays < 0):
         raise LoopError(f"--max-replays must be an integer >= 0 (0: no replays beyond the converted clusters; "
@@ -524,7 +524,7 @@ def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out:
                 f"{len({e['scenario'] for e in mined['kept'] if not e.get('replay')})} converted scenarios and "
                 f"{len({e['scenario'] for e in mined['kept'] if e.get('replay')})} exact replays kept"
                 + (f"; {mined['clusters_not_converted']} clusters not converted (--max-conversions "
-                   f"{max_conversions})" if mined.get("clusters_not_converted") else "")
+                   f"{'all' if max_conversions is None else max_conversions})" if mined.get("clusters_not_converted") else "")
                 + (f", {mined['clusters_not_kept']} neither converted nor replayed (--max-replays "
                    f"{'all' if max_replays is None else max_replays})" if mined.get("clusters_not_kept") else ""))
         if "split" not in steps:

@@ -304,7 +304,7 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         "# dv2s loop", "",
         f"Started from `{settings.get('policy')}`; final policy `{report.get('policy')}`.", "",
         f"Per round: mining budget {settings.get('budget')} episodes ({settings.get('sampler')} sampler), at most "
-        f"{settings.get('max_conversions') or 'every'} cluster(s) converted, "
+        f"{'every' if settings.get('max_conversions') is None else settings.get('max_conversions')} cluster(s) converted, "
         f"{_replays_text(settings)}, "
         f"{settings.get('holdout_fraction')} of the mined {'families (parent scenarios)' if settings.get('holdout_by', 'cluster') == 'family' else 'clusters'} "
         f"held out, {settings.get('k_eval')} evaluation seeds per held-out scenario (at least "
@@ -560,7 +560,7 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
     return (f"<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>dv2s loop</title><style>{_CSS}</style>"
             f"</head><body><h1>dv2s loop</h1><p>Started from <code>{escape(str(settings.get('policy')))}</code>; "
             f"final policy <code>{escape(str(report.get('policy')))}</code>. Mining budget {settings.get('budget')} "
-            f"episodes per round, at most {escape(str(settings.get('max_conversions') or 'every'))} cluster(s) "
+            f"episodes per round, at most {escape(str('every' if settings.get('max_conversions') is None else settings.get('max_conversions')))} cluster(s) "
             f"converted, {escape(_replays_text(settings))}, "
             f"fine-tuning ({escape(str(settings.get('fine_tune_method', 'ppo')))}) "
             f"{settings.get('fine_tune_steps')} steps (reward terms "
