@@ -676,3 +676,24 @@ def test_a_loop_json_of_the_wrong_structure_is_refused_in_one_line(tmp_path, con
     message = str(error.value)
     assert "loop.json is not a dv2s loop record" in message and problem in message
     assert "delete the file to start the loop over" in message and "\n" not in message
+
+
+def test_the_held_out_split_groups_entries_by_the_family_they_were_clustered_by(tmp_path):
+    """An entry mined from a mined entry belongs to the first scenario of its provenance chain, as in clustering."""
+    from dv2s_gym.mining.family import scenario_family
+    from dv2s_gym.mining.loop import _with_parents
+    from loop_helpers import add_mined_copy
+
+    bank = tmp_path / "bank"
+    bank.mkdir()
+    add_mined_copy(str(bank), "highway_cut_in_from_right", "mined_x", "c")
+    add_mined_copy(str(bank), "highway_cut_in_from_right", "mined_of_mined_x", "c")
+    meta_path = bank / "mined_of_mined_x" / "meta.json"
+    meta = json.loads(meta_path.read_text())
+    meta["source"]["parent"] = "mined_x"
+    meta_path.write_text(json.dumps(meta))
+    kept = [{"cluster": "a", "scenario": "mined_x"}, {"cluster": "b", "scenario": "mined_of_mined_x"}]
+    parents = {e["scenario"]: e["parent"] for e in _with_parents(kept, str(bank))}
+    assert parents == {name: scenario_family(name, str(bank)) for name in parents} == {
+        "mined_x": "highway_cut_in_from_right", "mined_of_mined_x": "highway_cut_in_from_right"}
+    assert split_by_family(_with_parents(kept, str(bank)), 0.5, seed=0)["groups"] == 1

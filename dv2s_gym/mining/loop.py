@@ -815,18 +815,18 @@ def _earlier_sides(rounds: Sequence[Mapping[str, Any]]) -> tuple:
 
 
 def _with_parents(kept: Sequence[Mapping[str, Any]], bank: Optional[str]) -> List[Dict[str, Any]]:
-    """The kept entries with ``parent``: the bank sidecar's provenance parent when there is one."""
+    """The kept entries with ``parent``: the scenario family their bank provenance goes back to
+    (:func:`dv2s_gym.mining.family.scenario_family`, the family their failures were clustered by)."""
     entries = [dict(e) for e in kept]
     if bank is None:
         return entries
-    from scenario_bank.bank import Bank
+    from dv2s_gym.mining.family import scenario_family
 
-    opened = Bank(bank)
     for entry in entries:
-        if not entry.get("parent") and entry["scenario"] in opened:
-            parent = opened.get(entry["scenario"]).source.get("parent")
-            if parent:
-                entry["parent"] = str(parent)
+        if not entry.get("parent"):
+            family = scenario_family(str(entry["scenario"]), str(bank))
+            if family != entry["scenario"]:
+                entry["parent"] = family
     return entries
 
 
