@@ -178,9 +178,9 @@ def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Seque
     for result in results.values():
         apply_failure(result, failure)
     info = {"report": str(path.resolve()), "role": role, "spec": old[role].get("spec"), "card": old[role].get("card")}
-    from dv2s_gym.regress.report import _dv2s_version
+    from dv2s_gym.regress.identity import installed_version
 
-    theirs, ours = old.get("dv2s_version"), _dv2s_version()
+    theirs, ours = old.get("dv2s_version"), installed_version()
     if theirs != ours:
         info["warning"] = (f"baseline report {path} was made by dv2s-gym {theirs}, this is {ours}: the simulator or the "
                            "policies may have changed between them, so differences may not be the candidate's; "
