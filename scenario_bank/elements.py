@@ -39,6 +39,7 @@ __all__ = [
     "ACTIONS",
     "COLLISION_TYPES",
     "RELATIONS",
+    "CAN_DO",
     "ElementError",
     "normalize_elements",
     "element_set",
@@ -63,6 +64,17 @@ either ``lane_change_left`` or ``lane_change_right``, see :func:`with_undirected
 COLLISION_TYPES = ("collide_rear_end", "collide_side", "collide_head_on")
 """The collision-type actions (each comes with ``collide``)."""
 RELATIONS = ("ahead_of", "behind", "left_of", "right_of", "oncoming", "same_lane", "crossing_path")
+
+_VEHICLE_ACTIONS = frozenset(ACTIONS)
+CAN_DO: Dict[str, FrozenSet[str]] = {
+    "ego": _VEHICLE_ACTIONS - {"cross"},
+    **{kind: _VEHICLE_ACTIONS for kind in ("car", "truck", "bus", "motorcycle", "bicycle")},
+    "pedestrian": frozenset({"cross", "stop", "collide"} | set(COLLISION_TYPES)),
+    "obstacle": frozenset(),
+}
+"""Participant type -> the actions a participant of that type can do at all (whether a generator builds them
+or not). The ego does not ``cross``: crossing is what others do across the ego's path; a pedestrian only
+crosses, stops or collides; an obstacle does nothing."""
 
 Element = Tuple[Any, ...]
 
