@@ -48,10 +48,11 @@ def spawn_junction_vehicle(s: Script, spec: RoleSpec, t: JunctionTiming, ring: b
         if role == JunctionRole.ONCOMING and "oncoming" not in rels:
             rels.append("oncoming")
     start_speed = "0" if behavior.startswith("HoldStill") else speed
+    cls = CLASS[actor.kind]
     for i in range(actor.count):
         var = n if actor.count == 1 else f"{n}_{i + 1}"
         extra = "" if i == 0 else (f" + {12 * i}" if role == JunctionRole.AHEAD else f" - {12 * i}")
-        s.spawn += [f"{var} = new {CLASS[actor.kind]} at {n}Maneuver.startLane.centerline.pointAlongBy({along}{extra}),",
+        s.spawn += [f"{var} = new {cls} at {n}Maneuver.startLane.centerline.pointAlongBy({along}{extra}),",
                     f"    with speed {start_speed},",
                     f"    with behavior {behavior}"]
     acts = list(actor.actions)
