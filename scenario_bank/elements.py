@@ -67,14 +67,12 @@ RELATIONS = ("ahead_of", "behind", "left_of", "right_of", "oncoming", "same_lane
 
 _VEHICLE_ACTIONS = frozenset(ACTIONS)
 CAN_DO: Dict[str, FrozenSet[str]] = {
-    "ego": _VEHICLE_ACTIONS - {"cross"},
-    **{kind: _VEHICLE_ACTIONS for kind in ("car", "truck", "bus", "motorcycle", "bicycle")},
+    **{kind: _VEHICLE_ACTIONS for kind in ("ego", "car", "truck", "bus", "motorcycle", "bicycle")},
     "pedestrian": frozenset({"cross", "stop", "collide"} | set(COLLISION_TYPES)),
     "obstacle": frozenset(),
 }
-"""Participant type -> the actions a participant of that type can do at all (whether a generator builds them
-or not). The ego does not ``cross``: crossing is what others do across the ego's path; a pedestrian only
-crosses, stops or collides; an obstacle does nothing."""
+"""Participant type -> the actions a participant of that type can do at all, whether a generator builds them or
+not: the ego and every vehicle any action; a pedestrian only crosses, stops or collides; an obstacle nothing."""
 
 Element = Tuple[Any, ...]
 

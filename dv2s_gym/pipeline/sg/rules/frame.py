@@ -28,7 +28,7 @@ class ActorFrame:
     sudden: bool = False
     state_stop: bool = False
     cross_dirs: List[Tuple[str, int]] = field(default_factory=list)
-    role: str = ""
+    role: str = ""  # a roles.Role once the straight-road composer assigns it
     side: int = 0
     parked: bool = False
 
