@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Callable, Dict, List, Tuple
+
 from dv2s_gym.pipeline.sg.rules.frame import CLASS, ActorFrame
 from dv2s_gym.pipeline.sg.rules.junction_fit import RoleSpec
 from dv2s_gym.pipeline.sg.rules.junction_roles import MANEUVER_TYPES
@@ -20,7 +22,6 @@ def spawn_junction_vehicle(s: Script, spec: RoleSpec, t: JunctionTiming, ring: b
     actor, role, mtype = spec
     n = actor.name
     rels = list(actor.relations)
-    route = f"{n}Route"
     circulating = ring and (role == JunctionRole.FROM_LEFT and mtype in ("STRAIGHT", "LEFT_TURN") or
                             role == JunctionRole.RING_CUT)
     if circulating:
@@ -28,25 +29,8 @@ def spawn_junction_vehicle(s: Script, spec: RoleSpec, t: JunctionTiming, ring: b
                           reckless, cuts_in=role == JunctionRole.RING_CUT)
         return
     speed = s.param(f"{n}_speed", "Range(7, 11)" if role != JunctionRole.AHEAD else road_speed)
-    if role in (JunctionRole.AHEAD, JunctionRole.BEHIND):
-        gap = s.param(f"{n}_gap", "Range(10, 16)")
-        along = f"-({t.ego_dist} - {gap})" if role == JunctionRole.AHEAD else f"-({t.ego_dist} + {gap})"
-        behavior = junction_longitudinal(s, actor, speed, route, reckless)
-        want = "ahead_of" if role == JunctionRole.AHEAD else "behind"
-        if want not in rels:
-            rels.append(want)
-    elif role == JunctionRole.INTO_PATH:
-        wait = s.param(f"{n}_wait_position", "Range(2, 5)")
-        along = f"-{wait}"
-        trigger = s.param(f"{n}_trigger_time", "Range(2.2, 3.2)" if actor.sudden else "Range(3.2, 4.5)")
-        s.use("PullOutWhenEgoNear")
-        behavior = f"PullOutWhenEgoNear({speed}, {route}, egoEntry, {trigger})"
-        speed = "0"
-    else:
-        along = f"-(1 + {speed} * ({_arrival(s, actor, t)}))"
-        behavior = junction_longitudinal(s, actor, speed, route, reckless)
-        if role == JunctionRole.ONCOMING and "oncoming" not in rels:
-            rels.append("oncoming")
+    place = _STARTS.get(role, _timed_arrival)
+    along, behavior, speed = place(s, actor, role, t, speed, rels, reckless)
     start_speed = "0" if behavior.startswith("HoldStill") else speed
     cls = CLASS[actor.kind]
     for i in range(actor.count):
@@ -61,6 +45,51 @@ def spawn_junction_vehicle(s: Script, spec: RoleSpec, t: JunctionTiming, ring: b
     if role == JunctionRole.INTO_PATH and actor.has("merge") and "ahead_of" not in rels:
         rels.append("ahead_of")  # it joins the ego's road in front of the ego
     s.show(actor.kind, acts, list(dict.fromkeys(rels)), actor.count)
+
+
+Start = Tuple[str, str, str]
+"""Where a junction vehicle starts (Scenic distance along its start lane), its behaviour and its start speed."""
+
+
+def _in_the_ego_lane(s: Script, actor: ActorFrame, role: str, t: JunctionTiming, speed: str, rels: List[str],
+                     reckless: bool) -> Start:
+    """Ahead of (or behind) the ego on its approach."""
+    gap = s.param(f"{actor.name}_gap", "Range(10, 16)")
+    along = f"-({t.ego_dist} - {gap})" if role == JunctionRole.AHEAD else f"-({t.ego_dist} + {gap})"
+    behavior = junction_longitudinal(s, actor, speed, f"{actor.name}Route", reckless)
+    want = "ahead_of" if role == JunctionRole.AHEAD else "behind"
+    if want not in rels:
+        rels.append(want)
+    return along, behavior, speed
+
+
+def _waiting_to_pull_in(s: Script, actor: ActorFrame, role: str, t: JunctionTiming, speed: str, rels: List[str],
+                        reckless: bool) -> Start:
+    """Waiting at its entry, it pulls into the ego's way when the ego is near."""
+    n = actor.name
+    wait = s.param(f"{n}_wait_position", "Range(2, 5)")
+    trigger = s.param(f"{n}_trigger_time", "Range(2.2, 3.2)" if actor.sudden else "Range(3.2, 4.5)")
+    s.use("PullOutWhenEgoNear")
+    return f"-{wait}", f"PullOutWhenEgoNear({speed}, {n}Route, egoEntry, {trigger})", "0"
+
+
+def _timed_arrival(s: Script, actor: ActorFrame, role: str, t: JunctionTiming, speed: str, rels: List[str],
+                   reckless: bool) -> Start:
+    """From another approach, timed to get to the junction when the description says."""
+    along = f"-(1 + {speed} * ({_arrival(s, actor, t)}))"
+    behavior = junction_longitudinal(s, actor, speed, f"{actor.name}Route", reckless)
+    if role == JunctionRole.ONCOMING and "oncoming" not in rels:
+        rels.append("oncoming")
+    return along, behavior, speed
+
+
+_STARTS: Dict[str, Callable[..., Start]] = {
+    JunctionRole.AHEAD: _in_the_ego_lane,
+    JunctionRole.BEHIND: _in_the_ego_lane,
+    JunctionRole.INTO_PATH: _waiting_to_pull_in,
+}
+"""Junction role -> where its vehicle starts and how it moves; every other role arrives timed
+(:func:`_timed_arrival`)."""
 
 
 def _arrival(s: Script, actor: ActorFrame, t: JunctionTiming) -> str:
