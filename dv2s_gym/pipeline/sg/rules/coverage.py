@@ -14,6 +14,7 @@ from scenario_bank.elements import ACTIONS, CAN_DO, PARTICIPANTS, RELATIONS, ROA
 
 __all__ = ["check_main_event", "typed_collisions", "unbuilt_warnings", "absent_warnings", "unshown_warnings"]
 
+
 def _main_event(parsed: ParsedDescription) -> Optional[Tuple[Entity, str]]:
     """The first action of the first non-ego actor that has one, else the ego's first action.
 
@@ -94,7 +95,8 @@ def unbuilt_warnings(parsed: ParsedDescription, s: "Script", said: Sequence[str]
     for entity in parsed.entities:
         if entity.kind not in PARTICIPANTS:
             continue  # an unknown kind is warned about already
-        described.update(("participant", entity.kind, i + 1) for i in range(entity.count if entity.kind != "ego" else 1))
+        count = entity.count if entity.kind != "ego" else 1
+        described.update(("participant", entity.kind, i + 1) for i in range(count))
         described.update(("action", entity.kind, a) for a, _ in entity.actions if a in ACTIONS)
         described.update(("relation", entity.kind, r, o.kind) for r, o in entity.relations
                          if o is not entity and o.kind in PARTICIPANTS and r in RELATIONS)
@@ -128,7 +130,8 @@ def absent_warnings(parsed: ParsedDescription) -> List[str]:
     said = ", ".join(f"'{p}'" for p in getattr(parsed, "absent_phrases", []) or []) or "absent"
     kinds = list(dict.fromkeys(parsed.absent))
     present = sorted({e.kind for e in parsed.entities if e.kind in kinds})
-    note = (f"read {said}: the script adds no background traffic, so no {', '.join(k for k in kinds if k not in present)}"
+    missing = ", ".join(k for k in kinds if k not in present)
+    note = (f"read {said}: the script adds no background traffic, so no {missing}"
             " is placed")
     if present:
         note += f"; the text also describes a {' and a '.join(present)}, which is placed"

@@ -16,7 +16,7 @@ MAX_COUNT = 4
 """The most actors of one group a script places."""
 
 COLLISION_HINTS = {"collide_rear_end": ["ahead_of", "same_lane"], "collide_head_on": ["oncoming"],
-                    "collide_side": []}
+                   "collide_side": []}
 """Placement (relations to the ego) that gives a collision its geometry when the text places the actor nowhere."""
 
 

@@ -9,7 +9,7 @@ __all__ = ["VEHICLES", "CLASS", "KIND_SPEEDS", "ActorFrame", "ScenarioFrame", "S
 
 VEHICLES = ("car", "truck", "bus", "motorcycle", "bicycle")
 CLASS = {"car": "Car", "truck": "Truck", "bus": "Bus", "motorcycle": "Motorcycle", "bicycle": "Bicycle",
-          "pedestrian": "Pedestrian", "obstacle": "Obstacle"}
+         "pedestrian": "Pedestrian", "obstacle": "Obstacle"}
 KIND_SPEEDS = {"bicycle": "Range(4, 6)"}
 """Cruise speed (m/s) of a kind slower than the road's traffic; it replaces the road's speed range."""
 

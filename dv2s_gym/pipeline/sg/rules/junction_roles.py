@@ -12,7 +12,7 @@ from dv2s_gym.pipeline.sg.rules.roles import JunctionRole
 __all__ = ["JUNCTION_ACTIONS", "MANEUVER_TYPES", "Maneuvers", "role_condition", "junction_role"]
 
 JUNCTION_ACTIONS = {"brake", "stop", "accelerate", "turn_left", "turn_right", "go_straight", "cross", "collide",
-                     "keep_lane", "cut_in", "merge"}
+                    "keep_lane", "cut_in", "merge"}
 MANEUVER_TYPES = {"turn_left": "LEFT_TURN", "turn_right": "RIGHT_TURN", "go_straight": "STRAIGHT"}
 
 

@@ -12,6 +12,7 @@ from dv2s_gym.pipeline.sg.rules.script import Script, brake_params
 
 __all__ = ["conflict_actor", "spawn_circulating", "junction_longitudinal"]
 
+
 def conflict_actor(ego: ActorFrame, candidates: Sequence[ActorFrame]) -> Optional[ActorFrame]:
     """The vehicle the ego's stop waits for: the one its stop's trigger names (by kind), else the first
     vehicle crossing or meeting it at the junction."""
@@ -22,7 +23,7 @@ def conflict_actor(ego: ActorFrame, candidates: Sequence[ActorFrame]) -> Optiona
 
 
 def spawn_circulating(s: Script, actor: ActorFrame, mtype: Optional[str], ego_speed: str, ego_time: str,
-                       lead_first: bool, reckless: bool, cuts_in: bool = False) -> None:
+                      lead_first: bool, reckless: bool, cuts_in: bool = False) -> None:
     """A vehicle already on the roundabout's ring, coming from the ego's left: it starts just after its own entry
     and drives at the speed that brings it past the ego's entry (a quarter ring on) when the text says: 0.9-1.4 s
     ahead of the ego when it goes first (the ego, still on its approach, sees it cross its way), with the ego

@@ -8,6 +8,7 @@ from dv2s_gym.pipeline.sg.rules.script import Script
 
 __all__ = ["spawn_puller"]
 
+
 def spawn_puller(s: Script, actor: ActorFrame, ego_speed: str, two_way: bool) -> None:
     """A vehicle parked at the kerb (shoulder) right of the ego's lane, ahead of the ego: once the ego is near
     it backs up (when it reverses) and steers into the lane ahead of the ego."""
@@ -31,7 +32,7 @@ def spawn_puller(s: Script, actor: ActorFrame, ego_speed: str, two_way: bool) ->
     for i in range(actor.count):
         var = n if actor.count == 1 else f"{n}_{i + 1}"
         s.spawn += at_kerb(var, CLASS[actor.kind], f"egoS + {gap} + {12 * i}", kerb,
-                            f"PullOutWhenNear(egoLane.centerline, -{kerb}, {speed}, {trigger}, {back}, Range(2.2, 3.0))")
+                           f"PullOutWhenNear(egoLane.centerline, -{kerb}, {speed}, {trigger}, {back}, Range(2.2, 3.0))")
     shown = [a for a in actor.actions if a in ("pull_out", "reverse", "collide")]
     if "pull_out" not in shown:
         shown.append("pull_out")

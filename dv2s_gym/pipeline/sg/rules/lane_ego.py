@@ -11,8 +11,9 @@ from dv2s_gym.pipeline.sg.rules.script import Script, brake_params
 
 __all__ = ["ego_lane_behavior"]
 
+
 def ego_lane_behavior(s: Script, ego: ActorFrame, speed: str, reckless: bool, two_way: bool,
-                       frame: ScenarioFrame) -> Tuple[str, bool]:
+                      frame: ScenarioFrame) -> Tuple[str, bool]:
     """The ego's behaviour (used with ego_policy='scenic') and whether it can be spawned first."""
     cruise = "Cruise" if reckless else "CautiousCruise"
     if ego.has("overtake"):

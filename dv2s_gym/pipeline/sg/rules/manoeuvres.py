@@ -11,6 +11,7 @@ from dv2s_gym.pipeline.sg.rules.script import Script, brake_params
 
 __all__ = ["u_turn", "swerve", "drift", "longitudinal_behavior"]
 
+
 def u_turn(s: Script, speed: str) -> str:
     """Drive on for 1-2 s, slow to 3-4 m/s and turn round to the left (>= 150 degrees), then follow the lane
     it ends in (the opposite lane on a two-way street)."""

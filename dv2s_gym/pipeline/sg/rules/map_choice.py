@@ -9,6 +9,7 @@ from dv2s_gym.pipeline.sg.rules.roads import MULTILANE_STREET, ROAD_MAPS
 
 __all__ = ["choose_map"]
 
+
 def _needs_same_direction_lanes(ego: ActorFrame, actors: Sequence[ActorFrame]) -> bool:
     if ego.has("lane_change_left") or ego.has("lane_change_right") or ego.has("merge"):
         return True

@@ -12,6 +12,7 @@ from dv2s_gym.pipeline.sg.rules.script import Script
 
 __all__ = ["crossing_directions", "spawn_lane_pedestrians", "spawn_junction_pedestrians"]
 
+
 def crossing_directions(actor: ActorFrame, rng: random.Random) -> List[str]:
     """One crossing direction per pedestrian of the group."""
     out: List[str] = []

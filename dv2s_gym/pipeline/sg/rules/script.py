@@ -14,6 +14,7 @@ from scenario_bank.elements import CAN_DO
 
 __all__ = ["Script", "check_actions", "brake_params"]
 
+
 class Script:
     """Accumulates the four sections and what the script is meant to show."""
 
