@@ -33,8 +33,9 @@ archive is streamed into a private folder under caps before anything of it is us
 :class:`Bank` is the one interface; it is built of :mod:`scenario_bank.entries` (the entry folder, its sidecar
 and provenance, listing a folder), :mod:`scenario_bank.dedup` (when two scenarios are the same),
 :mod:`scenario_bank.admission` (the checks a script passes to enter), :mod:`scenario_bank.archives` (export and
-import) and :mod:`scenario_bank.errors`; every public name of those is importable from here too.
-It imports nothing outside ``scenario_bank``.
+import) and :mod:`scenario_bank.errors`. The names callers use (the errors, the size limits, the provenance
+fields, the duplicate checks: ``__all__``) are importable from here too. It imports nothing outside
+``scenario_bank``.
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@ from scenario_bank.story import StoryError, normalize_story
 __all__ = [
     "BANK_VERSION", "SIDECAR_VERSION", "SOURCE_KINDS", "SCRIPT", "SIDECAR", "MAX_SCRIPT_BYTES", "MAX_SIDECAR_BYTES",
     "MAX_FILE_BYTES", "MAX_JSON_DEPTH", "MINED_PROVENANCE_FIELDS", "ENTRY_FILE_KEYS", "ENTRY_FILES", "entry_files",
-    "entry_file_name", "ScenarioEntry", "validate_sidecar", "new_sidecar", "scan_entries", "entry_matches",
+    "entry_file_name", "ScenarioEntry", "Listing", "validate_sidecar", "new_sidecar", "scan_entries", "entry_matches",
 ]
 
 BANK_VERSION = 1
