@@ -277,6 +277,25 @@ def _ground_truth(name: str) -> Dict:
     return normalize_elements(data["elements"])
 
 
+def _record_bank_episode(name: str, seed: int, path: Path, seconds: float, size: int) -> dict:
+    """One episode of bank scenario ``name``, the ego driven by :class:`policies.CautiousDriver`, recorded to
+    ``path`` (``size`` x ``size`` frames, the ego at the centre): the recording summary with the episode's
+    collisions and trace (the clips of dv2s_gym/evalset are recorded so, by bench/evalsets/make_bev_clips.py)."""
+    from envs.dv2s_env import DV2SEnv
+    from envs.recording import record_episode
+    from policies import CautiousDriver
+
+    config = {"duration": float(seconds), "screen_width": int(size), "screen_height": int(size),
+              "offscreen_rendering": True, "show_trajectories": False, "ego_policy": "agent"}
+    env = DV2SEnv(scenario=name, config=config, render_mode="rgb_array")
+    try:
+        result = record_episode(env, path, CautiousDriver(env), seed=seed)
+        return {"frames": result["frames"], "fps": env.config["policy_frequency"],
+                "collisions": list(result["info"].get("collisions", [])), "trace": env.trace}
+    finally:
+        env.close()
+
+
 def _episode_plays_its_story(name: str, summary: dict, expected_frames: int) -> Optional[str]:
     if summary["collisions"]:
         return f"the episode has a collision ({summary['collisions']})"
@@ -293,13 +312,11 @@ def _episode_plays_its_story(name: str, summary: dict, expected_frames: int) -> 
 
 @pytest.fixture(scope="module")
 def bank_clips(tmp_path_factory):
-    from bench.evalsets.make_bev_clips import render_clip
-
     videos = tmp_path_factory.mktemp("bank_videos")        # holds the .webm files only
     clips = {}
     for clip, (name, seed, seconds, size) in USE_CASES.items():
         path = videos / f"{clip}.webm"
-        summary = render_clip(name, seed, path, seconds=seconds, size=size)
+        summary = _record_bank_episode(name, seed, path, seconds=seconds, size=size)
         problem = _episode_plays_its_story(name, summary, int(seconds * summary["fps"]) + 1)
         clips[clip] = (name, path, problem)
     return clips
@@ -394,13 +411,11 @@ def test_stock_highway_env(tmp_path):
 
 
 @pytest.mark.slow
-def test_make_bev_clips_is_deterministic(tmp_path):
-    from bench.evalsets.make_bev_clips import render_clip
-
+def test_a_recorded_bank_episode_is_deterministic(tmp_path):
     decoded = []
     for k in range(2):
         path = tmp_path / f"run{k}.webm"
-        summary = render_clip("highway_lead_vehicle_brakes", 3, path, seconds=2, size=160)
+        summary = _record_bank_episode("highway_lead_vehicle_brakes", 3, path, seconds=2, size=160)
         assert summary["frames"] == 11 and path.is_file()
         decoded.append(read_video(path, fps=None, max_frames=100).frames)
     assert len(decoded[0]) == len(decoded[1])

@@ -130,6 +130,20 @@ def test_layers_import_one_way():
     assert not wrong, "scenario_bank <- envs <- policies <- dv2s_gym is violated:\n" + "\n".join(wrong)
 
 
+def test_neither_the_product_nor_its_tests_import_the_benchmarks():
+    """bench/ is research code: what the product or its tests need lives in the packages; the tests of
+    benchmark code are under bench/tests/."""
+    files = [path for package in PACKAGES for path in (ROOT / package).rglob("*.py")]
+    files += sorted((ROOT / "tests").rglob("*.py"))
+    wrong = []
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else []
+            wrong += [f"{path.relative_to(ROOT)} imports {n}" for n in names if n.split(".")[0] == "bench"]
+    assert not wrong, "\n".join(wrong)
+
+
 _PIPELINE_FRONT = ("dv2s_gym.pipeline.stages", "dv2s_gym.pipeline.convert", "dv2s_gym.pipeline.evaluate")
 
 
