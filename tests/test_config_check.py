@@ -5,6 +5,7 @@ key keeps working."""
 from __future__ import annotations
 
 import inspect
+import re
 import sys
 from pathlib import Path
 
@@ -134,3 +135,23 @@ def test_a_valid_nested_key_takes_effect():
     obs, _ = env.reset(seed=0)
     assert obs.shape == (3, 5)  # highway-env's five default features, three vehicles
     env.close()
+
+
+@pytest.mark.parametrize("command", [
+    ["regress", "--policy", "rule", "--scenarios", BRAKES, "--episodes", "1"],
+    ["mine", "--policy", "rule", "--budget", "2", "--scenarios", BRAKES, "--no-convert"],
+    ["train", "--steps", "100"],
+], ids=lambda c: c[0])
+@pytest.mark.parametrize("config, message", MISTAKES[:4], ids=["reward", "observation", "action", "ego_policy"])
+def test_a_commands_config_gets_the_same_check_before_any_episode(command, config, message, tmp_path, capsys):
+    import json
+
+    from dv2s_gym.cli import main
+
+    out = tmp_path / "out"
+    code = main([*command, "--out", str(out), "--config", json.dumps(config)])
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert err.count("\n") == 0, err
+    assert re.search(message.lstrip("^"), err), err
+    assert not out.exists() or not any(out.iterdir())  # refused before a run folder was filled

@@ -528,8 +528,10 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "no
     feedback = feedback or default_feedback(sampler)
     if feedback not in FEEDBACKS:
         raise MiningError(f"unknown feedback {feedback!r}: use one of {', '.join(FEEDBACKS)}")
+    from envs.config_check import check_env_config
     from policies.registry import load_policy
 
+    check_env_config(env_config)  # a misspelt key fails here, in one line, not in every episode
     load_policy(policy)  # an unknown spec or broken checkpoint fails here, in one line, before any worker starts
     if reference:
         load_policy(reference)
