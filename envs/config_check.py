@@ -12,12 +12,15 @@ import difflib
 import inspect
 from typing import Any, Iterable, Mapping, Sequence
 
-from envs.errors import ACTION_TYPES, OBSERVATION_TYPES, UnknownConfigKeyError
+from envs.errors import ACTION_TYPES, OBSERVATION_TYPES, UnknownConfigKeyError, UnknownRenderModeError
 
-__all__ = ["EGO_POLICIES", "check_config", "check_env_config", "type_options"]
+__all__ = ["EGO_POLICIES", "RENDER_MODES", "check_config", "check_env_config", "check_render_mode", "type_options"]
 
 EGO_POLICIES = ("agent", "scenic")
 """Values of ``ego_policy``: the action drives the ego, or the script's ego behaviour does."""
+
+RENDER_MODES = ("human", "rgb_array")
+"""Values of ``render_mode`` besides ``None`` (no rendering)."""
 
 REQUIRED_OBSERVATION_KEYS = {
     "GrayscaleObservation": {"observation_shape": (128, 64), "stack_size": 4, "weights": [0.2989, 0.5870, 0.1140]},
@@ -158,3 +161,10 @@ def check_env_config(config: Any) -> None:
     from envs.dv2s_env import DV2SEnv
 
     check_config(config, DV2SEnv.default_config())
+
+
+def check_render_mode(render_mode: Any) -> None:
+    """Raise :class:`~envs.errors.UnknownRenderModeError` naming a ``render_mode`` DV2S-v0 does not have."""
+    if render_mode is not None and render_mode not in RENDER_MODES:
+        raise UnknownRenderModeError(f"unknown render_mode {render_mode!r}{_did_you_mean(render_mode, RENDER_MODES)}; "
+                                    f"DV2S-v0 renders {' or '.join(map(repr, RENDER_MODES))}, or nothing with None")

@@ -25,6 +25,7 @@ from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.envs.common.observation import KinematicObservation
 
 import envs.rendering  # noqa: F401  (sets SDL/XDG variables before any viewer starts pygame)
+from envs.config_check import RENDER_MODES, check_render_mode
 from envs.errors import InvalidActionError, check_config_keys
 from envs.hw_road import EventRoad
 from envs.observations import FastKinematicObservation
@@ -213,7 +214,7 @@ class DV2SEnv(AbstractEnv):
     :class:`~envs.jailed_env.JailedDV2SEnv` (same interface) instead.
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 15}
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": 15}
     runs_in_jail = False
 
     def __new__(
@@ -226,6 +227,7 @@ class DV2SEnv(AbstractEnv):
         jail: Optional[bool] = None,
         jail_limits: Any = None,
     ):
+        check_render_mode(render_mode)
         # Decide where the simulation runs before anything of the scripts is compiled:
         # the package's own scripts (by content hash) here, everything else in the jail.
         if trusted or os.environ.get("DV2S_IN_JAIL") == "1":

@@ -11,6 +11,7 @@ __all__ = [
     "SceneSamplingError",
     "InvalidActionError",
     "UnknownConfigKeyError",
+    "UnknownRenderModeError",
     "check_config_keys",
     "StepTimeoutError",
     "Interrupted",
@@ -50,6 +51,10 @@ class InvalidActionError(DV2SError, ValueError):
 
 class UnknownConfigKeyError(DV2SError, ValueError):
     """A ``config=`` key the env does not have, or a value it does not take (a typo would otherwise be ignored)."""
+
+
+class UnknownRenderModeError(DV2SError, ValueError):
+    """A ``render_mode=`` DV2S-v0 does not have."""
 
 
 OBSERVATION_TYPES = ("Kinematics", "OccupancyGrid", "TimeToCollision", "LidarObservation", "GrayscaleObservation")

@@ -155,3 +155,15 @@ def test_a_commands_config_gets_the_same_check_before_any_episode(command, confi
     assert err.count("\n") == 0, err
     assert re.search(message.lstrip("^"), err), err
     assert not out.exists() or not any(out.iterdir())  # refused before a run folder was filled
+
+
+@pytest.mark.parametrize("scenario", [BRAKES, "edited"])
+def test_an_unknown_render_mode_is_named_with_the_choices(scenario):
+    from envs.errors import UnknownRenderModeError
+
+    if scenario == "edited":  # a script the package does not ship: refused before the jail starts
+        scenario = (ROOT / "scenario_bank" / "scenarios" / BRAKES / "scenario.scenic").read_text() + "\n# edited\n"
+    with pytest.raises(UnknownRenderModeError, match=r"^unknown render_mode 'human2' \(did you mean 'human'\?\); "
+                                                     r"DV2S-v0 renders 'human' or 'rgb_array', or nothing with None$"):
+        gym.make("dv2s_gym:DV2S-v0", scenario=scenario, render_mode="human2")
+    gym.make("dv2s_gym:DV2S-v0", scenario=BRAKES, render_mode="rgb_array").close()
