@@ -122,7 +122,8 @@ def report_text(report, out, nothing_placed: bool = False) -> str:
         lines.append(f"checks: {stages}" + (f" ({check['error']})" if check.get("error") else ""))
     for key in ("sp", "e2e_sc"):
         if key in report and not nothing:
-            partial = key == "sp" and generation.get("warnings")
+            partial = key == "sp" and any(str(w).startswith("could not place")
+                                          for w in generation.get("warnings") or [])
             lines.append(f"{key.upper().replace('_', '-')}: {report[key]:.2f}"
                          + (" (of the parts of the description that were placed)" if partial else ""))
     files = report.get("files") or []
