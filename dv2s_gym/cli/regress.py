@@ -86,6 +86,9 @@ def run(args: argparse.Namespace) -> int:
     """Run the regression test, print its summary (or the report JSON); the exit status is the verdict's."""
     from pathlib import Path
 
+    from dv2s_gym.cli.name_checks import check_names
+
+    check_names(policies=(args.policy, args.baseline), scenarios=args.scenarios, bank=args.bank)  # before imports
     from dv2s_gym.regress.report import baseline_defaults, exit_code, format_summary
     from dv2s_gym.regress.runner import DEFAULT_OUT, run_regression
 
