@@ -16,7 +16,8 @@ def _is_bank_selector(item: str) -> bool:
 
 def check_names(*, policies: Iterable[Optional[str]] = (), scenarios: Union[None, str, Sequence[str]] = None,
                 bank: Optional[str] = None) -> None:
-    """Raise the error the command would raise later for an unknown policy name or bank scenario/tag."""
+    """Raise the error the command would raise later for an unknown policy name or bank scenario/tag (the
+    scenarios of a ``bank`` folder that does not exist yet are left to the command)."""
     from policies.registry import check_policy_spec
 
     for spec in policies:
@@ -24,7 +25,7 @@ def check_names(*, policies: Iterable[Optional[str]] = (), scenarios: Union[None
             check_policy_spec(spec)
     items = [scenarios] if isinstance(scenarios, str) else list(scenarios or [])
     names = [item.strip() for item in items if isinstance(item, str) and _is_bank_selector(item.strip())]
-    if names:
+    if names and (bank is None or os.path.isdir(bank)):  # a new --bank folder is made by the command (mine)
         from scenario_bank import select_scenarios
 
         select_scenarios(names, bank)
