@@ -15,7 +15,7 @@ __all__ = ["add_parser", "run"]
 def add_parser(subparsers) -> None:
     """Add ``regress`` to the ``dv2s`` subcommands."""
     p = subparsers.add_parser(
-        "regress", help="regression-test a policy against a baseline on paired episodes (PASS/FAIL/INCONCLUSIVE)",
+        "regress", help="regression-test a policy against a baseline on paired episodes (PASS/FAIL/INCONCLUSIVE/ERROR)",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Run the candidate policy (and the baseline, on the same scenario x seed pairs: episode k "
         "uses seed S+k for both) over bank scenarios, in a local process pool or on Ray. Reports per scenario "
