@@ -279,6 +279,10 @@ class DV2SEnv(AbstractEnv):
     def default_config(cls) -> dict:
         """Default configuration; every key can be overridden with ``config=``.
 
+        Every key given is checked, nested ones too (:func:`envs.config_check.check_config`): a misspelt
+        key, reward term or observation/action option is an error naming it and the choices. A section
+        given replaces the default one whole (highway-env's rule): a reward term left out weighs 0.
+
         - ``observation``: highway-env observation config; ``Kinematics`` (default),
           ``OccupancyGrid``, ``TimeToCollision``, ``LidarObservation`` and ``GrayscaleObservation`` work.
         - ``action``: highway-env action config; ``DiscreteMetaAction`` (default,

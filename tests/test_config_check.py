@@ -167,3 +167,9 @@ def test_an_unknown_render_mode_is_named_with_the_choices(scenario):
                                                      r"DV2S-v0 renders 'human' or 'rgb_array', or nothing with None$"):
         gym.make("dv2s_gym:DV2S-v0", scenario=scenario, render_mode="human2")
     gym.make("dv2s_gym:DV2S-v0", scenario=BRAKES, render_mode="rgb_array").close()
+
+
+def test_a_reward_weights_section_replaces_the_default_whole():
+    env = DV2SEnv(scenario=BRAKES, config={"duration": 1.0, "reward_weights": {"collision": -5}})
+    assert env.config["reward_weights"] == {"collision": -5}  # the other terms weigh 0, as the docs say
+    env.close()
