@@ -20,7 +20,7 @@ steps (one during training loses the iteration's training, not its collection).
 A run killed at any point restarts from the last commit and ends with the same model as an
 uninterrupted one (the envs are put back where they were by replaying the current episode's
 actions). A checkpoint whose identity differs from the new call's is refused
-(:class:`DAggerResumeError`), never mixed in.
+(:class:`~scenario_bank.run_identity.RunIdentityError`), never mixed in.
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
+from scenario_bank.run_identity import check_identity
 from policies.training import TrainingError
 from scenario_bank.atomic import file_sha256
 
@@ -54,7 +55,8 @@ _DERIVED = {"source_sha256": " (the source checkpoint's file changed)",
 
 
 class DAggerResumeError(TrainingError):
-    """A DAgger checkpoint that cannot be resumed: written with other settings, or unreadable."""
+    """A DAgger checkpoint that cannot be resumed because its files are unreadable (one written with other
+    settings is refused with :class:`~scenario_bank.run_identity.RunIdentityError`)."""
 
 
 @dataclasses.dataclass
@@ -125,11 +127,6 @@ def run_identity(*, source: str, source_checkpoint: Path, bank_dir: Optional[str
         "n_envs": int(n_envs)}, sort_keys=True))
 
 
-def _short(value: Any, limit: int = 80) -> str:
-    text = json.dumps(value, sort_keys=True)
-    return text if len(text) <= limit else text[:limit - 3] + "..."
-
-
 class DAggerCheckpoint:
     """The checkpoint folder of one DAgger run (module docstring); ``identity`` is the current call's."""
 
@@ -158,21 +155,18 @@ class DAggerCheckpoint:
         """The last committed iteration, or ``None`` when there is none (a fresh run).
 
         Raises:
-            DAggerResumeError: the checkpoint was written with other settings (the message names the
-                first one that differs and both values) or its files are unreadable.
+            RunIdentityError: the checkpoint was written with other settings (the message names the
+                settings that differ and both values).
+            DAggerResumeError: its files are unreadable.
         """
         data = self._progress()
         if data is None:
             return None
         recorded = data.get("identity") or {}
         keys = [key for key in IDENTITY_ORDER if key in recorded or key in self.identity]
-        for key in keys + sorted((set(recorded) | set(self.identity)) - set(keys)):
-            old, new = recorded.get(key), self.identity.get(key)
-            if json.dumps(old, sort_keys=True) != json.dumps(new, sort_keys=True):
-                what = _DERIVED.get(key, "")
-                raise DAggerResumeError(
-                    f"{self.folder} holds an unfinished DAgger run with {key}={_short(old)}, not {_short(new)}{what}; "
-                    f"pass the same settings to resume it, or delete {self.folder} to start over")
+        check_identity(recorded, self.identity, keys + sorted((set(recorded) | set(self.identity)) - set(keys)),
+                       run=f"{self.folder} holds an unfinished DAgger run", notes=_DERIVED,
+                       fix=f"pass the same settings to resume it, or delete {self.folder} to start over")
         iteration = int(data["iteration"])
         try:
             observations, labels, next_observations = [], [], None

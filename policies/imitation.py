@@ -267,7 +267,7 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
     ``checkpoint_every`` env steps (0: only finished iterations). Called again with the same
     ``out`` and settings, it continues from the last commit and ends with the same model and stats as an
     uninterrupted run (the card's ``fine_tune.resumed`` lists the resumes); with other settings it
-    raises :class:`~policies.dagger_checkpoint.DAggerResumeError` naming the difference. Called
+    raises :class:`~scenario_bank.run_identity.RunIdentityError` naming the differences. Called
     with an ``out`` that already holds the result, it returns at once (the checkpoint is removed
     once the result is written).
     """

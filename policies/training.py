@@ -650,11 +650,10 @@ def _resolve_names(config: TrainConfig) -> List[str]:
 
 
 def _check_resume(config: TrainConfig, recorded: TrainConfig) -> None:
-    for field in TrainConfig.IDENTITY:
-        mine, theirs = getattr(config, field), getattr(recorded, field)
-        if json.dumps(mine, sort_keys=True) != json.dumps(theirs, sort_keys=True):
-            raise TrainingError(f"{field} {mine!r} differs from the run being resumed ({theirs!r}); resume with the "
-                                f"run's own settings (omit the option) or start a new run in another --out")
+    from scenario_bank.run_identity import check_identity
+
+    check_identity(recorded.to_json(), config.to_json(), TrainConfig.IDENTITY, run=f"{config.out} holds a training run",
+                   fix="resume with the run's own settings (omit the option) or start a new run in another --out")
 
 
 def _new_model(config: TrainConfig, venv, tensorboard_log: str):

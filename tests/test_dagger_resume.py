@@ -11,6 +11,7 @@ import pytest
 import torch
 
 import policies.imitation as imitation
+from scenario_bank.run_identity import RunIdentityError
 from envs.dv2s_env import DV2SEnv
 from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, DAggerResumeError, checkpoint_position
 from policies.imitation import ReferenceLabels, dagger_fine_tune
@@ -116,9 +117,10 @@ def test_a_killed_dagger_run_resumes_to_the_same_model_and_refuses_other_setting
 
     # other settings: refused before any work, naming the setting and the fix; the checkpoint is untouched
     before = (out / CHECKPOINT_DIR / "progress.json").read_bytes()
-    for change, named in (({"learning_rate": 5e-4}, "learning_rate=0.001, not 0.0005"), ({"steps": 200}, "steps=440"),
-                          ({"seed": 4}, "seed=3, not 4"), ({"weights": {SOURCES[0]: 1.0}}, "weights=")):
-        with pytest.raises(DAggerResumeError, match=named) as error:
+    for change, named in (({"learning_rate": 5e-4}, "learning_rate: run has 0.001, asked 0.0005"),
+                          ({"steps": 200}, "steps: run has 440"), ({"seed": 4}, "seed: run has 3, asked 4"),
+                          ({"weights": {SOURCES[0]: 1.0}}, "weights: run has")):
+        with pytest.raises(RunIdentityError, match=named) as error:
             dagger_fine_tune("dv2s-ppo", out=out, log=lambda _: None, **{**RUN, **change})
         assert f"delete {out / CHECKPOINT_DIR}" in str(error.value) and "same settings" in str(error.value)
     assert (out / CHECKPOINT_DIR / "progress.json").read_bytes() == before

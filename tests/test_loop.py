@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, paired_summary
 from dv2s_gym.mining.loop import LoopError, fine_tune_weights, run_loop
 from dv2s_gym.mining.split import cluster_groups, family_of, split_by_cluster, split_by_family
@@ -284,7 +285,7 @@ def test_loop_resumes_without_redoing_steps_and_reports_every_field(tmp_path, mo
     assert len(lines_before) == 2 * TINY["k_eval"]
 
     monkeypatch.setattr(training, "fine_tune", real_fine_tune)
-    with pytest.raises(LoopError, match="budget"):
+    with pytest.raises(RunIdentityError, match="budget: run has 6, asked 7"):
         run_loop("dv2s-ppo", out=out, miner=miner, **{**TINY, "budget": 7})
     report = run_loop("dv2s-ppo", out=out, miner=miner, **TINY)
     assert len(miner.calls) == 1  # mining was not run again
@@ -504,7 +505,7 @@ def test_loop_resumes_the_control_arm_without_redoing_the_fine_tune(tmp_path, mo
     state = json.loads((out / "loop.json").read_text())
     assert set(state["rounds"][0]["steps"]) == {"mine", "split", "before", "fine_tune"}
     stand = _StandIns(monkeypatch)
-    with pytest.raises(LoopError, match="control=True"):
+    with pytest.raises(RunIdentityError, match="control: run has True, asked False"):
         run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, control=False, **WIRING)
     report = run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **WIRING)
     assert [call["out"][-len("control"):] for call in stand.fine_tunes] == ["control"]  # only the control ran

@@ -11,6 +11,7 @@ import pytest
 
 import policies.training as training
 from cli_helpers import one_line_error, run
+from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.mining.loop import DEFAULTS, LoopError, run_loop
 from loop_helpers import FakeMiner
 from policies.model_card import read_card
@@ -118,7 +119,7 @@ def test_loop_fine_tunes_with_its_reward_but_evaluates_with_the_policys_config(t
     assert "low_ttc -0.5, standing -0.7" in report.paths["md"].read_text()
     assert "low_ttc -0.5, standing -0.7" in report.paths["html"].read_text()
     # the reward is part of the loop's identity: resuming with another one is refused
-    with pytest.raises(LoopError, match="fine_tune_reward"):
+    with pytest.raises(RunIdentityError, match="fine_tune_reward: run has"):
         run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, fine_tune_method="ppo", budget=6,
                  fine_tune_steps=100, k_eval=2, regress_episodes=1, workers=1, n_envs=1, progress=False,
                  scenarios=SOURCES, min_heldout_episodes=1, untouched_seeds=0, log=lambda _: None)

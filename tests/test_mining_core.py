@@ -19,6 +19,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import NOVELTY_RADIUS, STATE_SIZE
 from dv2s_gym.mining.miner import episode_seed, mine, read_records
@@ -571,11 +572,11 @@ def test_resuming_with_other_settings_is_refused(whole_run, tmp_path):
                     {"feedback": "robustness" if (settings.get("feedback") or default_feedback(settings["sampler"]))
                      == "novelty" else "novelty"}]
     for change in changes:
-        with pytest.raises(MiningError) as error:
+        with pytest.raises(RunIdentityError) as error:
             mine(POLICY, out=copy, **{**settings, **change})
         message = str(error.value)
         assert "other settings" in message and "--out" in message and next(iter(change)) in message
-    with pytest.raises(MiningError, match="policy"):
+    with pytest.raises(RunIdentityError, match="policy: run has"):
         mine("rule", out=copy, **settings)
     assert (copy / "episodes.jsonl").read_bytes() == before
 

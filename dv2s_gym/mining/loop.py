@@ -65,6 +65,7 @@ from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 
 from dv2s_gym.mining.jsonl import read_rows
+from scenario_bank.run_identity import check_identity
 from envs.errors import DV2SError
 
 __all__ = ["LoopError", "LoopReport", "run_loop", "DEFAULT_OUT", "DEFAULTS", "mined_entries", "fine_tune_weights",
@@ -159,12 +160,8 @@ class _State:
                 raise LoopError(f"{path} is not readable JSON ({error}); choose another --out") from error
             _check_structure(data, path)
             recorded = data.get("settings", {})
-            for key in IDENTITY:
-                value = recorded.get(key, _LEGACY.get(key))
-                if json.dumps(value, sort_keys=True) != json.dumps(settings.get(key), sort_keys=True):
-                    raise LoopError(f"{path.parent} holds a loop with {key}={value!r}, not "
-                                    f"{settings.get(key)!r}; rerun with its settings to resume it, or choose "
-                                    "another --out")
+            check_identity(recorded, settings, IDENTITY, legacy=_LEGACY, run=f"{path.parent} holds a loop",
+                           fix="rerun with its settings to resume it, or choose another --out")
             data["settings"].update({k: settings[k] for k in settings if k not in IDENTITY and k not in _RECORDED})
             for key in _RECORDED:
                 data["settings"].setdefault(key, _LEGACY[key])

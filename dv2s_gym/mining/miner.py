@@ -265,12 +265,10 @@ def _read_settings(path: Path) -> Optional[Dict[str, Any]]:
 
 
 def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path) -> None:
-    saved = {**_ADDED_DEFAULTS, **saved}
-    different = [k for k in _RESUME_KEYS if saved.get(k) != settings.get(k)]
-    if different:
-        detail = "; ".join(f"{k}: run has {saved.get(k)!r}, asked {settings.get(k)!r}" for k in different[:3])
-        raise MiningError(f"{out} holds a mining run with other settings ({detail}); resume it with the same "
-                          "settings or pass another --out")
+    from scenario_bank.run_identity import check_identity
+
+    check_identity(saved, settings, _RESUME_KEYS, legacy=_ADDED_DEFAULTS, run=f"{out} holds a mining run",
+                   fix="resume it with the same settings or pass another --out")
 
 
 def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[int, Dict[str, Any]],
