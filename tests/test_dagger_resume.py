@@ -204,7 +204,7 @@ def test_an_unreadable_checkpoint_is_refused_with_the_fix(tmp_path):
 
 @pytest.mark.slow
 def test_the_loop_resumes_a_killed_dagger_fine_tune_and_says_so(tmp_path, monkeypatch):
-    from dv2s_gym.mining.loop import run_loop
+    from loop_helpers import run_loop
     from loop_helpers import FakeMiner
 
     out = tmp_path / "loop"

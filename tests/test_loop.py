@@ -10,10 +10,10 @@ import pytest
 
 from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, paired_summary
-from dv2s_gym.mining.loop import LoopError, fine_tune_weights, run_loop
+from dv2s_gym.mining.loop import LoopError, fine_tune_weights
 from dv2s_gym.mining.split import cluster_groups, family_of, split_by_cluster, split_by_family
 from cli_helpers import one_line_error, run
-from loop_helpers import FakeMiner
+from loop_helpers import FakeMiner, run_loop
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT, load_policy
 from policies.training import EVAL_SEED_BASE, TrainingError, fine_tune
@@ -333,8 +333,8 @@ def test_cli_cluster_counts_read_0_as_none_and_all_as_every_cluster(tmp_path, ca
 
     seen = {}
 
-    def fake_run_loop(policy, **options):
-        seen.update(options)
+    def fake_run_loop(policy, settings, **options):
+        seen.update(max_conversions=settings.max_conversions, max_replays=settings.max_replays)
         raise LoopError("stopped by the test")
 
     monkeypatch.setattr(loop_module, "run_loop", fake_run_loop)
@@ -643,10 +643,10 @@ def test_a_round_whose_conversions_are_all_rejected_holds_out_replay_families(tm
 class _GrowingMiner(FakeMiner):
     """Round 1 fails in two of the scenarios, round 2 in all of them."""
 
-    def __call__(self, policy, **options):
+    def __call__(self, policy, settings, **options):
         self.sources = list(WIRING["scenarios"][:2] if not self.calls else WIRING["scenarios"])
         self.failures = len(self.sources)
-        return super().__call__(policy, **options)
+        return super().__call__(policy, settings, **options)
 
 
 def test_a_second_round_never_holds_out_a_family_the_first_fine_tuned_on(tmp_path, monkeypatch):

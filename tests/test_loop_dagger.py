@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from scenario_bank.run_identity import RunIdentityError
-from dv2s_gym.mining.loop import LoopError, run_loop
+from dv2s_gym.mining.loop import LoopError
 from envs.dv2s_env import DV2SEnv
 from cli_helpers import run
-from loop_helpers import FakeMiner
+from loop_helpers import FakeMiner, run_loop
 from policies.imitation import ReferenceLabels, agreement, dagger_fine_tune
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT, load_policy

@@ -12,8 +12,8 @@ import pytest
 import policies.training as training
 from cli_helpers import one_line_error, run
 from scenario_bank.run_identity import RunIdentityError
-from dv2s_gym.mining.loop import DEFAULTS, LoopError, run_loop
-from loop_helpers import FakeMiner
+from dv2s_gym.mining.loop import DEFAULTS, LoopError
+from loop_helpers import FakeMiner, run_loop
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT
 from policies.training import TrainingError, fine_tune, with_reward_weights

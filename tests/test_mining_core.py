@@ -22,7 +22,8 @@ import pytest
 from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import NOVELTY_RADIUS, STATE_SIZE
-from dv2s_gym.mining.miner import episode_seed, mine, read_records
+from dv2s_gym.mining.miner import episode_seed, read_records
+from mining_helpers import mine
 from dv2s_gym.mining.monitors import (
     COLLISION_TYPES,
     DEFAULT_STALL_SECONDS,
@@ -635,7 +636,7 @@ def test_every_episode_crashing_still_completes_with_error_records(tmp_path):
 
 _HOLDER = """
 import sys
-from dv2s_gym.mining.miner import mine
+from mining_helpers import mine
 if __name__ == "__main__":
     mine("regress_misbehaving_policies:hang", out=sys.argv[1], budget=1, sampler="random",
          scenarios=[{brakes!r}], workers=1, reference=None, timeout=600, progress=False, reports=False)

@@ -163,7 +163,7 @@ def test_run_regression_on_the_cluster_equals_the_local_run(ray_address, tmp_pat
 @pytest.mark.slow
 def test_mining_on_ray_equals_mining_locally(ray_address, tmp_path):
     """``dv2s mine --backend ray``: the same records as the local pool, failed episodes' traces shipped back."""
-    from dv2s_gym.mining.miner import mine
+    from mining_helpers import mine
 
     common = dict(budget=8, sampler="cross-entropy", scenarios=["highway_lead_vehicle_brakes"], seed=5,
                   env_config={"duration": 5}, progress=False, reports=False, policy="keep_lane", batch=4)
