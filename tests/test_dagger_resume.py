@@ -14,7 +14,8 @@ import policies.imitation as imitation
 from scenario_bank.run_identity import RunIdentityError
 from envs.dv2s_env import DV2SEnv
 from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, DAggerResumeError, checkpoint_position
-from policies.imitation import ReferenceLabels, dagger_fine_tune
+from policies.imitation import ReferenceLabels
+from fine_tune_helpers import dagger_fine_tune
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT, load_policy
 from policies.training import ScenarioSchedule

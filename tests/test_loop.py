@@ -16,7 +16,8 @@ from cli_helpers import one_line_error, run
 from loop_helpers import FakeMiner, run_loop
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT, load_policy
-from policies.training import EVAL_SEED_BASE, TrainingError, fine_tune
+from policies.training import EVAL_SEED_BASE, TrainingError
+from fine_tune_helpers import fine_tune
 
 SOURCES = ["highway_lead_vehicle_brakes", "urban_pedestrian_crossing"]
 
@@ -375,12 +376,12 @@ class _StandIns:
 
         self.fine_tunes, self.evaluations, self.regressions = [], [], []
 
-        def fine_tune(policy, *, bank_dir, out, steps, weights, seed, learning_rate, **options):
-            if kill_in is not None and str(out).endswith(kill_in):
+        def fine_tune(policy, config, *, learning_rate, **options):
+            if kill_in is not None and str(config.out).endswith(kill_in):
                 raise _Kill()
-            self.fine_tunes.append({"out": str(out), "steps": steps, "weights": dict(weights), "seed": seed,
-                                    "learning_rate": learning_rate, "policy": policy})
-            folder = __import__("pathlib").Path(out)
+            self.fine_tunes.append({"out": str(config.out), "steps": config.steps, "weights": dict(config.weights),
+                                    "seed": config.seed, "learning_rate": learning_rate, "policy": policy})
+            folder = __import__("pathlib").Path(config.out)
             folder.mkdir(parents=True, exist_ok=True)
             for name in ("model.zip", "model_card.json"):
                 shutil.copyfile(SHIPPED_CHECKPOINT.parent / name, folder / name)

@@ -13,7 +13,8 @@ from dv2s_gym.mining.loop import LoopError
 from envs.dv2s_env import DV2SEnv
 from cli_helpers import run
 from loop_helpers import FakeMiner, run_loop
-from policies.imitation import ReferenceLabels, agreement, dagger_fine_tune
+from policies.imitation import ReferenceLabels, agreement
+from fine_tune_helpers import dagger_fine_tune
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT, load_policy
 from policies.rule_based import CautiousDriver

@@ -16,7 +16,8 @@ from dv2s_gym.mining.loop import DEFAULTS, LoopError
 from loop_helpers import FakeMiner, run_loop
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT
-from policies.training import TrainingError, fine_tune, with_reward_weights
+from policies.training import TrainingError, with_reward_weights
+from fine_tune_helpers import fine_tune
 
 SOURCES = ["highway_lead_vehicle_brakes", "urban_pedestrian_crossing"]
 SHIPPED_CONFIG = read_card(SHIPPED_CHECKPOINT)["env_config"]
@@ -64,7 +65,8 @@ def test_fine_tune_trains_with_the_overridden_reward_and_records_it(tmp_path, mo
 
 
 def _stub_fine_tune(calls):
-    def stub(spec, *, out, env_config=None, reward_weights=None, **kwargs):
+    def stub(spec, config, *, reward_weights=None, **kwargs):
+        out, env_config = config.out, config.env_config
         calls.append({"env_config": env_config, "reward_weights": reward_weights, "training_config":
                       with_reward_weights(env_config, reward_weights)})
         out = Path(out)

@@ -645,6 +645,13 @@ class _Arm:
     progress: bool
     log: Callable[[str], None]
 
+    def config(self, out: Path, weights: Mapping[str, float]):
+        """The arm's :class:`~policies.training.TrainConfig` into ``out``, drawing scenarios by ``weights``."""
+        from policies.training import TrainConfig
+
+        return TrainConfig.fine_tuning(out, steps=self.steps, weights=weights, bank_dir=self.bank, seed=self.seed,
+                                       n_envs=self.n_envs, env_config=self.env_config, progress_bar=self.progress)
+
 
 def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, arm: _Arm, *, with_mined: bool,
                    label: str) -> Dict[str, Any]:
@@ -665,9 +672,8 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, a
         return {"model": result.pop("model"), "method": "dagger", **common, **result}
     from policies.training import fine_tune
 
-    path = fine_tune(current, bank_dir=arm.bank, out=out, steps=arm.steps, weights=weights, seed=arm.seed,
-                     n_envs=arm.n_envs, env_config=arm.env_config, reward_weights=arm.reward,
-                     progress_bar=arm.progress, learning_rate=arm.learning_rate, log=arm.log)
+    path = fine_tune(current, arm.config(out, weights), reward_weights=arm.reward, learning_rate=arm.learning_rate,
+                     log=arm.log)
     return {"model": str(path.resolve()), "method": "ppo", **common, "reward_weights": dict(arm.reward),
             "env_config": arm.fine_tune_config}
 
@@ -675,16 +681,15 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, a
 def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, label: str) -> Dict[str, Any]:
     """A fine-tuning arm by DAgger (:func:`policies.imitation.dagger_fine_tune`); a killed one resumes."""
     from policies.dagger_checkpoint import checkpoint_position, describe_position
-    from policies.imitation import DAGGER_DEFAULTS, dagger_fine_tune
+    from policies.imitation import DAGGER_DEFAULTS, DaggerConfig, dagger_fine_tune
     from policies.registry import read_model_card
 
     position = checkpoint_position(out)
     if position is not None:
         arm.log(f"{label}: fine-tune (dagger) resumed from "
                 f"{describe_position(*position, DAGGER_DEFAULTS['iterations'])}")
-    path = dagger_fine_tune(current, bank_dir=arm.bank, out=out, steps=arm.steps, weights=weights, seed=arm.seed,
-                            n_envs=arm.n_envs, env_config=arm.env_config, learning_rate=arm.learning_rate,
-                            progress_bar=arm.progress, log=arm.log)
+    path = dagger_fine_tune(current, arm.config(out, weights), DaggerConfig(learning_rate=arm.learning_rate),
+                            log=arm.log)
     dagger = read_model_card(path).get("fine_tune") or {}
     return {"model": str(path.resolve()), "method": "dagger", "reward_weights": None,
             "env_config": arm.env_config, "reference": dagger.get("reference"), "agreement": dagger.get("agreement"),
