@@ -129,12 +129,13 @@ def main() -> None:
         result["dagger"] = {key: value for key, value in (read_model_card(path).get("fine_tune") or {}).items()
                             if key in ("agreement", "history", "iterations", "epochs", "beta_decay", "learning_rate")}
     if args.regress:
-        from dv2s_gym.regress.runner import run_regression
+        from dv2s_gym.regress.runner import RegressSettings, WorkerSettings, run_regression
 
         began = time.perf_counter()
-        report = run_regression(spec, policy, bank_dir=bank, scenarios=state["start"]["scenarios"],
-                                episodes=args.regress_episodes, seed=EVAL_SEED_BASE, margin=settings["margin"],
-                                workers=args.workers, out_dir=out / "regress", env_config=env_config, progress=False)
+        regress = RegressSettings(bank_dir=bank, scenarios=state["start"]["scenarios"], episodes=args.regress_episodes,
+                                  seed=EVAL_SEED_BASE, margin=settings["margin"], env_config=env_config)
+        report = run_regression(spec, policy, regress, workers=WorkerSettings(workers=args.workers),
+                                out_dir=out / "regress", progress=False)
         overall = report["overall"]
         result["regress"] = {"verdict": report["verdict"], "new": overall["candidate"]["failure_rate"],
                              "old": overall["baseline"]["failure_rate"],

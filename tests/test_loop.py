@@ -368,6 +368,7 @@ class _StandIns:
     the role) and the regression runs, recording every call: the loop's wiring runs in seconds."""
 
     def __init__(self, monkeypatch, kill_in=None):
+        import dataclasses
         import shutil
 
         import dv2s_gym.mining.heldout as heldout
@@ -393,12 +394,15 @@ class _StandIns:
             return [{"role": role, "scenario": s, "seed": seed, "failed": fails(i), "error": None}
                     for i, (s, seed) in enumerate(episodes)]
 
-        def regression(candidate, baseline=None, **options):
-            self.regressions.append({"candidate": candidate, "baseline": baseline, **options})
+        def regression(candidate, baseline=None, settings=None, **options):
+            report = baseline if isinstance(baseline, runner.BaselineReport) else None
+            self.regressions.append({"candidate": candidate, "baseline": None if report else baseline,
+                                     "baseline_role": report.role if report else None,
+                                     **dataclasses.asdict(settings), **options})
             rate = {"value": 0.5, "low": 0.1, "high": 0.9, "count": 1}
             per = {"candidate": {"failure_rate": rate, "stall_rate": rate}, "baseline": {"failure_rate": rate}}
             return {"verdict": "INCONCLUSIVE", "bank": {"scenarios": ["x"]},
-                    "scenarios": {name: per for name in options.get("scenarios") or []},
+                    "scenarios": {name: per for name in settings.scenarios or ()},
                     "overall": {"candidate": {"episodes": 2, "failure_rate": rate, "stall_rate": rate,
                                               "mean_speed": {"value": 3.0}},
                                 "baseline": {"episodes": 2, "failure_rate": rate},

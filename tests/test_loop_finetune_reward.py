@@ -91,8 +91,8 @@ def test_loop_fine_tunes_with_its_reward_but_evaluates_with_the_policys_config(t
         return [{"role": role, "scenario": s, "seed": seed, "failed": role == "before", "error": None}
                 for s, seed in episodes]
 
-    def fake_regression(candidate, baseline, *, env_config=None, **kwargs):
-        regressions.append(env_config)
+    def fake_regression(candidate, baseline, settings, **kwargs):
+        regressions.append(settings.env_config)
         return {"verdict": "PASS", "overall": {}}
 
     monkeypatch.setattr(heldout, "evaluate_heldout", fake_evaluate)

@@ -136,7 +136,7 @@ def test_the_command_names_an_unreachable_address_and_how_to_start_a_cluster(tmp
 def test_run_regression_on_the_cluster_equals_the_local_run(ray_address, tmp_path):
     """`run_regression(..., backend="ray", address=...)`: the same episodes, verdicts and trajectory
     hashes as the local process pool."""
-    from dv2s_gym.regress.runner import run_regression
+    from regress_call import run_regression
 
     common = dict(baseline="rule", scenarios=SCENARIOS, episodes=3, seed=0, env_config={"duration": 8},
                   workers=2, progress=False)

@@ -525,8 +525,9 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
         timed("after", lambda: _after_step(loop, policies, episodes, HeldOutStore(store_path), families))
     if s.untouched_seeds and "untouched" not in steps:
         timed("untouched", lambda: evaluate_untouched(
-            current, new_policy, control_policy, seeds=s.untouched_seeds, out=round_dir / "untouched",
-            env_config=loop.env_config, margin=s.margin, workers=loop.workers, progress=loop.progress))
+            current, new_policy, control_policy, settings=untouched_settings(s.untouched_seeds, loop.env_config,
+                                                                             s.margin),
+            out=round_dir / "untouched", workers=loop.workers, progress=loop.progress))
     if "regress" not in steps:
         timed("regress", lambda: _regress_step(loop, new_policy, current, round_dir, split))
     return new_policy
@@ -585,14 +586,14 @@ def _after_step(loop: _Loop, policies: Mapping[str, Optional[str]], episodes: Li
 def _regress_step(loop: _Loop, new_policy: str, current: str, round_dir: Path,
                   split: Mapping[str, Any]) -> Dict[str, Any]:
     """The ``regress`` step: the fine-tuned policy against the round's start on the starting bank's scenarios."""
-    from dv2s_gym.regress.runner import run_regression
+    from dv2s_gym.regress.runner import RegressSettings, WorkerSettings, run_regression
     from policies.training import EVAL_SEED_BASE
 
     s = loop.settings
-    report = run_regression(new_policy, current, bank_dir=loop.bank, scenarios=loop.start_names,
-                            episodes=s.regress_episodes, seed=EVAL_SEED_BASE, margin=s.margin,
-                            workers=loop.workers, out_dir=round_dir / "regress", env_config=loop.env_config,
-                            progress=loop.progress)
+    settings = RegressSettings(bank_dir=loop.bank, scenarios=loop.start_names, episodes=s.regress_episodes,
+                               seed=EVAL_SEED_BASE, margin=s.margin, env_config=loop.env_config)
+    report = run_regression(new_policy, current, settings, workers=WorkerSettings(workers=loop.workers),
+                            out_dir=round_dir / "regress", progress=loop.progress)
     return _regress_summary(report, round_dir / "regress" / "report.json", split.get("held_out_families", []))
 
 
@@ -738,31 +739,38 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     return summary
 
 
-def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, seeds: int, out: Path,
-                       env_config: Mapping[str, Any], margin: float, workers: int, progress: bool,
-                       bank_dir: Optional[os.PathLike | str] = None) -> Dict[str, Any]:
-    """Start, fine-tuned and control on the untouched scenario set (``bank_dir``, default
-    :data:`UNTOUCHED_BANK`), ``seeds`` seeds each from ``EVAL_SEED_BASE``, with ``dv2s regress``: fine-tuned
+def untouched_settings(seeds: int, env_config: Mapping[str, Any], margin: float,
+                       bank_dir: Optional[os.PathLike | str] = None):
+    """The regression settings of the untouched set: ``bank_dir`` (default :data:`UNTOUCHED_BANK`), ``seeds``
+    seeds per scenario from ``EVAL_SEED_BASE``, the policy's ``env_config`` and the loop's ``margin``."""
+    from dv2s_gym.regress.runner import RegressSettings
+    from policies.training import EVAL_SEED_BASE
+
+    return RegressSettings(bank_dir=str(Path(bank_dir or UNTOUCHED_BANK).resolve()), episodes=seeds,
+                           seed=EVAL_SEED_BASE, margin=margin, env_config=dict(env_config))
+
+
+def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, settings: Any, out: Path,
+                       workers: int, progress: bool) -> Dict[str, Any]:
+    """Start, fine-tuned and control on the untouched scenario set (:func:`untouched_settings`: its bank, its
+    seeds per scenario, the env config and margin) with ``dv2s regress``: fine-tuned
     against start (``out/vs_start``), then the control against the fine-tuned policy's episodes of that run
     (``out/vs_control``: only the control runs). Failure rates, stall rates and mean speeds per policy, and
     the two comparisons' verdicts, differences and p-values."""
-    from dv2s_gym.regress.runner import run_regression
-    from policies.training import EVAL_SEED_BASE
+    from dv2s_gym.regress.runner import BaselineReport, WorkerSettings, run_regression
 
-    bank_dir = str(Path(bank_dir or UNTOUCHED_BANK).resolve())
-    first = run_regression(fine_tuned, start, bank_dir=bank_dir, episodes=seeds, seed=EVAL_SEED_BASE, margin=margin,
-                           workers=workers, out_dir=out / "vs_start", env_config=dict(env_config), progress=progress)
+    first = run_regression(fine_tuned, start, settings, workers=WorkerSettings(workers=workers),
+                           out_dir=out / "vs_start", progress=progress)
     overall = first.get("overall") or {}
     result: Dict[str, Any] = {"scenarios": list((first.get("bank") or {}).get("scenarios") or []),
-                              "seeds": seeds, "policies": {"start": _measures(overall.get("baseline")),
+                              "seeds": settings.episodes, "policies": {"start": _measures(overall.get("baseline")),
                                                            "fine_tuned": _measures(overall.get("candidate"))},
                               "fine_tuned_vs_start": _comparison(first, out / "vs_start" / "report.json")}
     if control is not None:
         # a measurement, not a gate: the fine-tuned policy is the reference whatever its own verdict was
-        second = run_regression(control, baseline_report=out / "vs_start" / "report.json", baseline_role="candidate",
-                                accept_failed_baseline=True,
-                                bank_dir=bank_dir, episodes=seeds, seed=EVAL_SEED_BASE, margin=margin, workers=workers,
-                                out_dir=out / "vs_control", env_config=dict(env_config), progress=progress)
+        baseline = BaselineReport(out / "vs_start" / "report.json", role="candidate", accept_failed=True)
+        second = run_regression(control, baseline, settings, workers=WorkerSettings(workers=workers),
+                                out_dir=out / "vs_control", progress=progress)
         result["policies"]["control"] = _measures((second.get("overall") or {}).get("candidate"))
         result["control_vs_fine_tuned"] = _comparison(second, out / "vs_control" / "report.json")
     return result
