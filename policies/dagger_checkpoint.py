@@ -30,13 +30,17 @@ import io
 import json
 import shutil
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Optional, Tuple
+from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
 from scenario_bank.run_identity import check_identity
 from policies.training import TrainingError
 from scenario_bank.atomic import file_sha256
+
+if TYPE_CHECKING:
+    from policies.dagger_config import DaggerConfig
+    from policies.training import TrainConfig
 
 __all__ = ["CHECKPOINT_DIR", "DAggerResumeError", "DAggerCheckpoint", "SavedIteration", "PartialIteration",
            "run_identity", "checkpoint_position", "describe_position"]
@@ -108,23 +112,22 @@ def _scenario_hashes(bank_dir: Optional[str], names: List[str]) -> Dict[str, Opt
     return {name: (bank.get(name).content_hash or None) if name in bank else None for name in names}
 
 
-def run_identity(*, source: str, source_checkpoint: Path, bank_dir: Optional[str], weights: Mapping[str, float],
-                 env_config: Mapping[str, Any], steps: int, iterations: int, beta: float, beta_decay: float,
-                 epochs: int, batch_size: int, learning_rate: float, reference: str, seed: int,
-                 n_envs: int, slower_weight: float = 1.0) -> Dict[str, Any]:
+def run_identity(*, source: str, source_checkpoint: Path, config: "TrainConfig", dagger: "DaggerConfig",
+                 weights: Mapping[str, float], env_config: Mapping[str, Any]) -> Dict[str, Any]:
     """The settings a checkpoint must share with a call to resume it (JSON-safe): everything that changes
-    the result (the source checkpoint's bytes, the bank's scenario scripts, the schedule, the training),
-    not how it runs (``vec_env``, the progress bar)."""
-    names = sorted(weights)
+    the result (the source checkpoint's bytes, the bank's scenario scripts, the sampling ``weights``, the
+    ``env_config``, ``config``'s steps, seed and environments, every ``dagger`` setting but how often it
+    commits), not how it runs (``vec_env``, the progress bar)."""
+    names, bank_dir, d = sorted(weights), config.bank_dir, dagger
     return json.loads(json.dumps({
         "source": str(source), "source_sha256": file_sha256(source_checkpoint),
         "bank_dir": None if bank_dir is None else str(Path(bank_dir).resolve()),
         "weights": {name: float(weights[name]) for name in names},
         "scenario_hashes": _scenario_hashes(bank_dir, names), "env_config": dict(env_config),
-        "steps": int(steps), "iterations": int(iterations), "beta": float(beta), "beta_decay": float(beta_decay),
-        "epochs": int(epochs), "batch_size": int(batch_size), "learning_rate": float(learning_rate),
-        "reference": str(reference), "slower_weight": float(slower_weight), "seed": int(seed),
-        "n_envs": int(n_envs)}, sort_keys=True))
+        "steps": int(config.steps), "iterations": int(d.iterations), "beta": float(d.beta),
+        "beta_decay": float(d.beta_decay), "epochs": int(d.epochs), "batch_size": int(d.batch_size),
+        "learning_rate": float(d.learning_rate), "reference": str(d.reference), "slower_weight": float(d.slower_weight),
+        "seed": int(config.seed), "n_envs": int(config.n_envs)}, sort_keys=True))
 
 
 class DAggerCheckpoint:

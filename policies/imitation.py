@@ -291,14 +291,12 @@ class _DaggerRun:
                                 f"{algorithm}; use --fine-tune-method ppo")
         self.env_config = dict(self.source_card.get("env_config") or {}) if config.env_config is None \
             else config.env_config
-        d = dagger
         self.checkpoint = DAggerCheckpoint(self.out / CHECKPOINT_DIR, run_identity(
-            source=spec, source_checkpoint=self.source, bank_dir=config.bank_dir, weights=self.probabilities,
-            env_config=self.env_config, steps=config.steps, iterations=d.iterations, beta=d.beta,
-            beta_decay=d.beta_decay, epochs=d.epochs, batch_size=d.batch_size, learning_rate=float(d.learning_rate),
-            reference=d.reference, seed=int(config.seed), n_envs=config.n_envs, slower_weight=float(d.slower_weight)))
-        self.per_iteration = [config.steps // d.iterations + (1 if i < config.steps % d.iterations else 0)
-                              for i in range(d.iterations)]
+            source=spec, source_checkpoint=self.source, config=config, dagger=dagger, weights=self.probabilities,
+            env_config=self.env_config))
+        iterations = dagger.iterations
+        self.per_iteration = [config.steps // iterations + (1 if i < config.steps % iterations else 0)
+                              for i in range(iterations)]
 
     def restore(self, saved: Any) -> None:
         """The student, its optimizer and RNGs, and the data so far: fresh, or as ``saved`` (the last commit)."""
