@@ -28,8 +28,7 @@ from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tupl
 from dv2s_gym.regress import power as power_plan
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
-from dv2s_gym.regress.failures import (DEFAULT_FAILURE, DEFAULT_STALL_SECONDS, apply_failure, missing_facts,
-                                        parse_failure)
+from dv2s_gym.regress.failures import DEFAULT_FAILURE, DEFAULT_STALL_SECONDS, apply_failure, missing_facts
 from dv2s_gym.regress.report import (
     bank_info,
     build_report,
