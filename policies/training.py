@@ -728,38 +728,18 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         raise TrainingError(f"--out {out} is a file; choose a folder for the run")
     names = _resolve_names(config)
     run_path = out / "run.json"
-    checkpoint = latest_checkpoint(out)
-    record: Dict[str, Any] = {"config": config.to_json(), "segments": []}
-    if resume:
-        recorded, record = load_run_config(out)
-        _check_resume(config, recorded)
-        if checkpoint is None:
-            # stopped before its first checkpoint: nothing was kept, so the run starts over in place
-            log(f"{out} holds no checkpoint yet (the run stopped before its first one): starting from step 0")
-            resume, record = False, {"config": config.to_json(), "segments": []}
-        else:
-            record["config"] = config.to_json()
-    elif checkpoint is not None or run_path.exists():
-        at = f" (checkpoint at step {int(_CHECKPOINT.match(checkpoint.name).group(1))})" if checkpoint else ""
-        raise TrainingError(f"{out} already holds a training run{at}; pass --resume to continue it, "
-                            "or choose another --out")
+    resume, record, checkpoint = _open_record(config, resume, log)
 
     from stable_baselines3.common.callbacks import CallbackList
 
-    from policies.model_card import bank_version, write_card
+    from policies.model_card import write_card
     from scenario_bank.atomic import atomic_path, atomic_write_json
 
     import torch
 
     torch.set_num_threads(1)
     env_config = config.effective_env_config()
-    sampler = ScenarioSampler(names, config.sampler, config.weights, config.curriculum_floor, config.curriculum_window)
-    stream = 0
-    if resume:
-        sampler_state = checkpoint.with_suffix(".sampler.json")
-        if sampler_state.is_file():
-            sampler.load_state_dict(json.loads(sampler_state.read_text(encoding="utf-8")))
-        stream = int(_CHECKPOINT.match(checkpoint.name).group(1))
+    sampler, stream = _restored_sampler(config, names, checkpoint if resume else None)
     out.mkdir(parents=True, exist_ok=True)
     tensorboard_log = str(out / "tb")
     venv = make_vec_env(names, env_config, config.bank_dir, sampler.probabilities(), config.n_envs, config.seed,
@@ -808,10 +788,58 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
     model_path = out / "model.zip"
     with atomic_path(model_path, keep_suffix=True) as tmp:
         model.save(tmp)
+    card = _card(config, names, env_config, model, sampler, record)
+    _evaluate_for_card(config, names, card, model_path, log)
+    write_card(out, card)
+    log(f"wrote {model_path} and {out / 'model_card.json'} (step {model.num_timesteps}, last segment "
+        f"{segment['wall_time_s']:.0f} s)")
+    return card
+
+
+def _open_record(config: TrainConfig, resume: bool, log: Callable[[str], None]
+                 ) -> Tuple[bool, Dict[str, Any], Optional[Path]]:
+    """``(resume, run.json's record, the newest checkpoint)`` of the run in ``config.out``: a resumed run's
+    record (its settings checked against ``config``), or a new one (refused over an existing run)."""
+    out = Path(config.out)
+    checkpoint = latest_checkpoint(out)
+    record: Dict[str, Any] = {"config": config.to_json(), "segments": []}
+    if resume:
+        recorded, record = load_run_config(out)
+        _check_resume(config, recorded)
+        if checkpoint is None:
+            # stopped before its first checkpoint: nothing was kept, so the run starts over in place
+            log(f"{out} holds no checkpoint yet (the run stopped before its first one): starting from step 0")
+            resume, record = False, {"config": config.to_json(), "segments": []}
+        else:
+            record["config"] = config.to_json()
+    elif checkpoint is not None or (out / "run.json").exists():
+        at = f" (checkpoint at step {int(_CHECKPOINT.match(checkpoint.name).group(1))})" if checkpoint else ""
+        raise TrainingError(f"{out} already holds a training run{at}; pass --resume to continue it, "
+                            "or choose another --out")
+    return resume, record, checkpoint
+
+
+def _restored_sampler(config: TrainConfig, names: Sequence[str],
+                      checkpoint: Optional[Path]) -> Tuple[ScenarioSampler, int]:
+    """The run's scenario sampler and the workers' seed stream: fresh, or as saved beside ``checkpoint``."""
+    sampler = ScenarioSampler(names, config.sampler, config.weights, config.curriculum_floor, config.curriculum_window)
+    if checkpoint is None:
+        return sampler, 0
+    sampler_state = checkpoint.with_suffix(".sampler.json")
+    if sampler_state.is_file():
+        sampler.load_state_dict(json.loads(sampler_state.read_text(encoding="utf-8")))
+    return sampler, int(_CHECKPOINT.match(checkpoint.name).group(1))
+
+
+def _card(config: TrainConfig, names: Sequence[str], env_config: Dict[str, Any], model: Any,
+          sampler: ScenarioSampler, record: Mapping[str, Any]) -> Dict[str, Any]:
+    """The trained model's card, without its evaluation."""
+    from policies.model_card import bank_version
+
     wall = sum(s["wall_time_s"] for s in record["segments"])
     trained = sum(s["end_step"] - s["start_step"] for s in record["segments"])
-    card: Dict[str, Any] = {
-        "name": out.name,
+    return {
+        "name": Path(config.out).name,
         "algorithm": config.algo,
         "policy": config.effective_hyperparameters()["policy"],
         "hyperparameters": config.effective_hyperparameters(),
@@ -834,31 +862,36 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         },
         "versions": _versions(),
     }
-    card_seeds = config.card_seed_count()
-    if card_seeds > 0:
-        from policies.model_card import evaluate_for_card
 
-        specs = {config.algo: f"{config.algo}:{model_path.resolve()}", **{b: b for b in config.baselines}}
-        log(f"model card evaluation: {len(names)} scenarios x {card_seeds} held-out seeds x "
-            f"{len(specs)} policies ({', '.join(specs)}) = {len(names) * card_seeds * len(specs)} episodes; "
-            "--card-seeds N shortens it (0 skips it), Ctrl-C writes the card without it")
-        baseline_config = {k: v for k, v in env_config.items() if k != "action"}
-        configs = {label: (env_config if label == config.algo else baseline_config) for label in specs}
-        try:
-            card["evaluation"] = evaluate_for_card(specs, evaluation_episodes(names, card_seeds), configs,
-                                                   bank_dir=config.bank_dir, candidate=config.algo,
-                                                   seed_base=EVAL_SEED_BASE, seeds=card_seeds,
-                                                   jobs=config.eval_jobs, progress=config.progress_bar)
-        except KeyboardInterrupt:
-            card["evaluation"] = None
-            write_card(out, card)
-            raise Interrupted(f"stopped during the card's evaluation: {model_path} and {out / 'model_card.json'} "
-                              "are written without it; rerun the same command with --resume to evaluate") from None
-        card["evaluation"]["specs"][config.algo] = f"{config.algo}:model.zip (beside this card)"
-    write_card(out, card)
-    log(f"wrote {model_path} and {out / 'model_card.json'} (step {model.num_timesteps}, last segment "
-        f"{segment['wall_time_s']:.0f} s)")
-    return card
+
+def _evaluate_for_card(config: TrainConfig, names: Sequence[str], card: Dict[str, Any], model_path: Path,
+                       log: Callable[[str], None]) -> None:
+    """The card's ``evaluation``: the model and the baselines on held-out seeds (none when ``card_seeds`` is 0);
+    Ctrl-C writes the card without it."""
+    card_seeds = config.card_seed_count()
+    if card_seeds <= 0:
+        return
+    from policies.model_card import evaluate_for_card, write_card
+
+    env_config = card["env_config"]
+    specs = {config.algo: f"{config.algo}:{model_path.resolve()}", **{b: b for b in config.baselines}}
+    log(f"model card evaluation: {len(names)} scenarios x {card_seeds} held-out seeds x "
+        f"{len(specs)} policies ({', '.join(specs)}) = {len(names) * card_seeds * len(specs)} episodes; "
+        "--card-seeds N shortens it (0 skips it), Ctrl-C writes the card without it")
+    baseline_config = {k: v for k, v in env_config.items() if k != "action"}
+    configs = {label: (env_config if label == config.algo else baseline_config) for label in specs}
+    try:
+        card["evaluation"] = evaluate_for_card(specs, evaluation_episodes(names, card_seeds), configs,
+                                               bank_dir=config.bank_dir, candidate=config.algo,
+                                               seed_base=EVAL_SEED_BASE, seeds=card_seeds,
+                                               jobs=config.eval_jobs, progress=config.progress_bar)
+    except KeyboardInterrupt:
+        card["evaluation"] = None
+        write_card(Path(config.out), card)
+        raise Interrupted(f"stopped during the card's evaluation: {model_path} and "
+                          f"{Path(config.out) / 'model_card.json'} are written without it; rerun the same command "
+                          "with --resume to evaluate") from None
+    card["evaluation"]["specs"][config.algo] = f"{config.algo}:model.zip (beside this card)"
 
 
 # --------------------------------------------------------------------------- fine-tuning
