@@ -59,7 +59,8 @@ class MineSettings:
     stall_seconds: float = DEFAULT_STALL_SECONDS
     """Seconds standing with a free lane ahead that count as a stall."""
     convert: bool = False
-    """Turn one failure per avoidable cluster into a bank scenario (:mod:`dv2s_gym.mining.convert`)."""
+    """Turn one failure per avoidable cluster into a bank scenario (:mod:`dv2s_gym.mining.convert`); ``bank_dir``
+    must then be given and writable (a new or empty folder starts as a copy of the shipped bank)."""
     convert_options: Optional[Mapping[str, Any]] = None
     """Keyword arguments of :func:`~dv2s_gym.mining.convert.convert_failure` (DRA and SG backends, ``k``...)."""
     max_conversions: Optional[int] = None
