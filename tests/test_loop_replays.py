@@ -97,7 +97,8 @@ def test_a_replay_that_does_not_match_the_recorded_episode_is_rejected_and_adds_
 @pytest.mark.slow
 def test_every_cluster_of_a_mining_run_gets_its_replay_once(tmp_path):
     from dv2s_gym.mining.cluster import group
-    from dv2s_gym.mining.miner import mine, read_records
+    from dv2s_gym.mining.miner import read_records
+    from mining_helpers import mine
     from dv2s_gym.mining.replays import REPLAYS_FILE, replay_clusters, replay_entries
 
     run_dir = tmp_path / "run"

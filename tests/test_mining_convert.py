@@ -249,7 +249,7 @@ CONTRACT_KEYS = {"cluster", "index", "status", "reason", "video", "description",
 
 @pytest.mark.slow
 def test_the_miner_converts_a_cluster_into_the_bank(tmp_path):
-    from dv2s_gym.mining.miner import mine
+    from mining_helpers import mine
 
     run = mine("keep_lane", out=tmp_path / "run", budget=4, sampler="random", scenarios=[SCENARIO],
                bank_dir=str(tmp_path / "bank"), workers=1, reference=None, progress=False, convert=True,
@@ -272,7 +272,7 @@ def test_a_run_killed_between_the_bank_write_and_its_record_resumes_without_a_se
     # killed after Bank.add and before conversions.jsonl got the line: the resumed run used to convert the
     # cluster again and report it "merged" into the entry it had made itself (kept 0, merged 1)
     from dv2s_gym.mining import miner as miner_module
-    from dv2s_gym.mining.miner import mine
+    from mining_helpers import mine
 
     run = dict(out=tmp_path / "run", budget=4, sampler="random", scenarios=[SCENARIO], bank_dir=str(tmp_path / "bank"),
                workers=1, reference=None, progress=False, convert=True, max_conversions=1, reports=False)
@@ -310,7 +310,7 @@ def test_an_unreachable_model_endpoint_stops_converting_and_the_rerun_converts(t
     from llm_server import closed_port_url
 
     from dv2s_gym.mining.errors import MiningError
-    from dv2s_gym.mining.miner import mine
+    from mining_helpers import mine
 
     monkeypatch.setenv("DV2S_LLM_RETRIES", "0")
     run = dict(out=tmp_path / "run", budget=4, sampler="random", scenarios=[SCENARIO], bank_dir=str(tmp_path / "bank"),

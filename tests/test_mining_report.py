@@ -389,7 +389,8 @@ def test_chromium_reports_a_corrupt_failure_video_as_not_played(tmp_path):
 def test_the_report_of_a_real_mining_run_matches_its_records(tmp_path):
     """``mine`` writes the three reports at its end; their numbers are those of its episodes.jsonl."""
     from dv2s_gym.mining.cluster import cluster_failures
-    from dv2s_gym.mining.miner import mine, read_records
+    from dv2s_gym.mining.miner import read_records
+    from mining_helpers import mine
 
     out = tmp_path / "mine"
     run = mine("rule?action_noise=0.5", out=out, budget=8, sampler="random", workers=1, progress=False,

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from dv2s_gym.regress import RegressError, run_regression
+from dv2s_gym.regress import RegressError
+from regress_call import run_regression
 from dv2s_gym.regress.power import (
     ASSUMED_BASELINE_RATE,
     discordance,

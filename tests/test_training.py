@@ -167,7 +167,7 @@ def test_train_writes_model_card_logs_and_checkpoints_then_resumes(tmp_path, cap
     assert not (out / "tb" / "PPO_2").exists()
     # a resume with settings of another run is refused naming the setting
     code, _, err = run(capsys, "train", "--steps", 1024, "--seed", 5, "--out", out, "--resume", *TINY)
-    assert code == 2 and "seed 5 differs from the run being resumed" in one_line_error(err)
+    assert code == 2 and "holds a training run with other settings (seed: run has 1, asked 5)" in one_line_error(err)
 
 
 def _tiny_config(out: Path, algo: str, **kwargs) -> TrainConfig:

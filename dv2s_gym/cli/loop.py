@@ -15,6 +15,7 @@ __all__ = ["add_parser", "run"]
 def add_parser(subparsers) -> None:
     """Add ``loop`` to the ``dv2s`` subcommands."""
     from dv2s_gym.mining.loop import DEFAULTS as LOOP
+    from dv2s_gym.mining.loop_settings import LoopSettings
 
     p = subparsers.add_parser("loop", help="mine a policy's failures, add them to the bank, fine-tune, measure (a round "
                               "on embedded defaults that keeps scenarios took 45-55 minutes on 2 cores; --budget and "
@@ -84,7 +85,8 @@ def add_parser(subparsers) -> None:
                    help=f"the regression test's non-inferiority margin (default {LOOP['margin']})")
     p.add_argument("--seed", type=int, default=LOOP["seed"], help=f"seed (default {LOOP['seed']})")
     p.add_argument("--workers", type=int, default=None, help="processes for mining and evaluation (default: every core)")
-    p.add_argument("--envs", type=int, default=2, help="training environments (default 2)")
+    p.add_argument("--envs", type=int, default=LoopSettings.n_envs,
+                   help=f"training environments (default {LoopSettings.n_envs})")
     p.add_argument("--out", default=None, help="loop folder (default out/loop; rerunning resumes it)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
@@ -94,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     """Run (or resume) the loop in ``--out`` and print its report."""
     from pathlib import Path
 
-    from dv2s_gym.mining.loop import DEFAULT_OUT, run_loop
+    from dv2s_gym.mining.loop import DEFAULT_OUT, LoopSettings, run_loop
 
     options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr",
                                                     "holdout_fraction", "k_eval", "regress_episodes", "mined_share",
@@ -114,8 +116,8 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError("--fine-tune-reward must be a JSON object of reward-term weights, e.g. "
                              "'{\"standing\": -1.0}' ('{}' keeps the policy's own reward)")
     out = args.out or DEFAULT_OUT
-    report = run_loop(args.policy, out=out, bank_dir=getattr(args, "bank", None), n_envs=args.envs,
-                      progress=not args.no_progress, **options)
+    settings = LoopSettings(bank_dir=getattr(args, "bank", None), n_envs=args.envs, **options)
+    report = run_loop(args.policy, settings, out=out, progress=not args.no_progress)
     print((Path(out) / "report.md").read_text(encoding="utf-8") if (Path(out) / "report.md").is_file() else "")
     print(f"final policy: {report.policy}")
     for kind in ("json", "md", "html"):
