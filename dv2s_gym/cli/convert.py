@@ -111,9 +111,8 @@ def report_text(report, out, nothing_placed: bool = False) -> str:
     with ``nothing_placed``, the line saying so and how to fix it in place of the warnings and the SP."""
     generation = report.get("generation", {})
     check = report.get("check", {})
-    nothing = nothing_placed
     lines = [f"description: {report['description']['text']}"]
-    if not nothing:
+    if not nothing_placed:
         lines.extend(f"warning: {warning}" for warning in generation.get("warnings") or [])
     if "error" in generation:
         lines.append(f"generation failed: {generation['error']}")
@@ -121,14 +120,14 @@ def report_text(report, out, nothing_placed: bool = False) -> str:
         stages = " ".join(f"{k}={'ok' if check.get(k) else 'FAIL'}" for k in ("safe", "compiled", "sampled", "ran"))
         lines.append(f"checks: {stages}" + (f" ({check['error']})" if check.get("error") else ""))
     for key in ("sp", "e2e_sc"):
-        if key in report and not nothing:
+        if key in report and not nothing_placed:
             partial = key == "sp" and any(str(w).startswith("could not place")
                                           for w in generation.get("warnings") or [])
             lines.append(f"{key.upper().replace('_', '-')}: {report[key]:.2f}"
                          + (" (of the parts of the description that were placed)" if partial else ""))
     files = report.get("files") or []
     lines.append(f"written to {out}/ ({', '.join(files)})" if files else f"nothing written to {out}/")
-    if nothing:
+    if nothing_placed:
         lines.append(NOTHING_PLACED)
     return "\n".join(lines)
 
