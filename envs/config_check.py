@@ -14,7 +14,7 @@ from typing import Any, Iterable, Mapping, Sequence
 
 from envs.errors import ACTION_TYPES, OBSERVATION_TYPES, UnknownConfigKeyError, UnknownRenderModeError
 
-__all__ = ["EGO_POLICIES", "RENDER_MODES", "check_config", "check_env_config", "check_render_mode", "type_options"]
+__all__ = ["EGO_POLICIES", "RENDER_MODES", "check_config", "check_render_mode", "type_options"]
 
 EGO_POLICIES = ("agent", "scenic")
 """Values of ``ego_policy``: the action drives the ego, or the script's ego behaviour does."""
@@ -153,14 +153,6 @@ def check_config(config: Any, defaults: Mapping[str, Any]) -> None:
     _check_options(config, "action")
     _check_reward_weights(config, defaults)
     _check_ego_policy(config)
-
-
-def check_env_config(config: Any) -> None:
-    """:func:`check_config` against :meth:`DV2SEnv.default_config() <envs.dv2s_env.DV2SEnv.default_config>`:
-    the check a run that builds its envs in worker processes makes once, before any worker starts."""
-    from envs.dv2s_env import DV2SEnv
-
-    check_config(config, DV2SEnv.default_config())
 
 
 def check_render_mode(render_mode: Any) -> None:

@@ -25,8 +25,8 @@ from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.envs.common.observation import KinematicObservation
 
 import envs.rendering  # noqa: F401  (sets SDL/XDG variables before any viewer starts pygame)
-from envs.config_check import RENDER_MODES, check_render_mode
-from envs.errors import InvalidActionError, check_config_keys
+from envs.config_check import RENDER_MODES, check_config, check_render_mode
+from envs.errors import InvalidActionError
 from envs.hw_road import EventRoad
 from envs.observations import FastKinematicObservation
 from envs.safety_metrics import STANDING_SPEED, path_is_free, time_to_collision
@@ -43,7 +43,7 @@ from envs.scenic_highway import stepping
 from envs.scenic_highway.stepping import ExternalStepper, StepOutcome, StepOvertime, step_watchdog
 from envs.trace import EpisodeTrace, actor_state
 
-__all__ = ["DV2SEnv", "ScenarioRef"]
+__all__ = ["DV2SEnv", "ScenarioRef", "check_env_config"]
 
 if getattr(sys.excepthook, "__module__", "") == "scenic.core.errors":
     # Scenic replaces Python's default excepthook on import (only the default one); a user's own tracebacks
@@ -271,7 +271,7 @@ class DV2SEnv(AbstractEnv):
         self._step_events: List[Dict[str, Any]] = []
         self._reset_seed: Optional[int] = None
         self._running_compiled: Optional[CompiledScenario] = None
-        check_config_keys(config, self.default_config())
+        check_config(config, self.default_config())
         super().__init__(config, render_mode)
 
     # ------------------------------------------------------------------ config
@@ -754,3 +754,9 @@ class DV2SEnv(AbstractEnv):
             self._close_simulation()
         except Exception:
             pass
+
+
+def check_env_config(config: Any) -> None:
+    """:func:`envs.config_check.check_config` against :meth:`DV2SEnv.default_config`: the check a run that builds
+    its envs in worker processes makes once, before any worker starts."""
+    check_config(config, DV2SEnv.default_config())

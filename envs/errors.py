@@ -12,7 +12,6 @@ __all__ = [
     "InvalidActionError",
     "UnknownConfigKeyError",
     "UnknownRenderModeError",
-    "check_config_keys",
     "StepTimeoutError",
     "Interrupted",
     "OBSERVATION_TYPES",
@@ -62,14 +61,6 @@ OBSERVATION_TYPES = ("Kinematics", "OccupancyGrid", "TimeToCollision", "LidarObs
 
 ACTION_TYPES = ("DiscreteMetaAction", "ContinuousAction", "DiscreteAction")
 """highway-env action types DV2S-v0 supports."""
-
-
-def check_config_keys(config, defaults) -> None:
-    """Raise :class:`UnknownConfigKeyError` for the first key or value of ``config`` the env does not have
-    or take, nested ones included (:func:`envs.config_check.check_config`), with the choices and a suggestion."""
-    from envs.config_check import check_config
-
-    check_config(config, defaults)
 
 
 class ForeignConstructWarning(UserWarning):

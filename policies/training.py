@@ -55,7 +55,7 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from envs.config_check import check_env_config
+from envs.dv2s_env import check_env_config
 from envs.errors import DV2SError, Interrupted
 
 __all__ = [

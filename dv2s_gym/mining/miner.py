@@ -499,7 +499,7 @@ def _check_can_mine(policy: str, settings: MineSettings) -> None:
         raise MiningError("failure mining needs VerifAI's samplers, which the core install leaves out: "
                           "pip install 'dv2s-gym[mining]'")
     sampler_params(settings.sampler, dict(settings.sampler_options) if settings.sampler_options else None)
-    from envs.config_check import check_env_config
+    from envs.dv2s_env import check_env_config
     from policies.registry import load_policy
 
     check_env_config(settings.env_config)  # a misspelt key fails here, in one line, not in every episode
