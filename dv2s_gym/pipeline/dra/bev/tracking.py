@@ -13,7 +13,6 @@ from dv2s_gym.pipeline.dra.bev.detection import Blob, _Frame
 
 
 MAX_SPEED = 42.0            # m/s, fastest plausible world motion
-MAX_SHIFT_CANDIDATES = 24   # aliases of a periodic line pattern kept per frame interval
 
 
 @dataclass
@@ -264,7 +263,7 @@ def _shift_candidates(fa, fb, na: float, nb: float, shape, fft_shape, radius: in
                 sy += float(np.clip(0.5 * (u - dn) / den, -0.5, 0.5))
         cands.append((sx - radius, sy - radius, float(win[yy, xx])))
     cands.sort(key=lambda c: -c[2])
-    return cands[:MAX_SHIFT_CANDIDATES], best, False
+    return cands, best, False
 
 
 def _world_motion(frames: List[_Frame], tracks: List[Track], scale: float, heading: np.ndarray,
@@ -309,6 +308,8 @@ def _world_motion(frames: List[_Frame], tracks: List[Track], scale: float, headi
     line_intervals = 0
     for i in range(m):
         hv = (math.cos(heading[i]), -math.sin(heading[i]))  # the ego axis on screen (y down)
+        # the window is sized for the longest interval (a dropped frame doubles it): each interval keeps
+        # only the shifts the ego can make in its own time, and every alias among them
         reach = MAX_SPEED * float(dts[i]) * half_scale + 3
         cands, best, flat = _shift_candidates(inner_spectra[i], spectra[i + 1], inner_energies[i], energies[i + 1],
                                               (h, w), fft_shape, radius, hv, irfft2, reach)
