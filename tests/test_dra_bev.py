@@ -92,6 +92,34 @@ def _highway_lead_brakes(size: int = 400, seconds: float = 5.0, fps: float = 5.0
     return frames
 
 
+def _highway_ego_slows_behind(size: int = 480, seconds: float = 6.0, fps: float = 5.0,
+                              drop: Optional[int] = None) -> Tuple[List[np.ndarray], List[float], List[float]]:
+    """Ego in lane 2 of 4 at 25 m/s braking at 7.5 m/s^2 to the 12 m/s of the car 40 m ahead in its lane,
+    which holds its speed. ``drop``: that frame is lost (the interval around it lasts two frames, as in a
+    decoded video that skipped one). Returns the frames, their times and the ego's true speeds."""
+    frames, times, ego_speeds = [], [], []
+    cx = cy = size / 2
+    lane = 3.5 * SCALE
+    ys = [cy - 1.5 * lane + k * lane for k in range(5)]
+    ego_x, lead_x, v_e, v_l = 0.0, 40.0, 25.0, 12.0
+    dt = 1.0 / fps
+    for i in range(int(seconds * fps) + 1):
+        if i != drop:
+            img = np.full((size, size, 3), GREY, np.uint8)
+            for k, y in enumerate(ys):
+                _hline(img, y, 0, size, striped=0 < k < 4, phase_px=cx - ego_x * SCALE)
+            _vehicle(img, cx + (lead_x - ego_x) * SCALE, cy, CAR)
+            _vehicle(img, cx, cy, EGO)
+            frames.append(img)
+            times.append(i * dt)
+            ego_speeds.append(v_e)
+        v_next = max(v_l, v_e - 7.5 * dt)
+        ego_x += 0.5 * (v_e + v_next) * dt
+        lead_x += v_l * dt
+        v_e = v_next
+    return frames, times, ego_speeds
+
+
 def _junction(arms: Tuple[bool, bool, bool, bool], size: int = 400, n: int = 6) -> List[np.ndarray]:
     """A static junction of 1+1-lane roads (arms: left, right, up, down) with the ego on the left arm."""
     frames = []
@@ -169,6 +197,28 @@ def test_question_is_answered():
     assert result.answer and "brakes" in result.answer
     assert result.description.endswith(result.answer)
     assert analyze_bev(_clip(_highway_lead_brakes()), question="Did the ego vehicle crash?").answer.startswith("No")
+
+
+@pytest.mark.parametrize("drop", [None, 12])
+def test_ego_slowing_behind_a_steady_car(drop):
+    """Dashed lines repeat every 4.33 m, so at 5 frames/s the ego's speed is only known modulo 21.65 m/s
+    per interval (twice as many aliases over a lost frame): every alias the ego can reach must stay a
+    candidate, else the chosen speed jumps by a period and the steady car ahead seems to brake."""
+    frames, times, truth = _highway_ego_slows_behind(drop=drop)
+    clip = VideoClip(frames, times, 5.0, (frames[0].shape[1], frames[0].shape[0]), times[-1] + 0.2, "")
+    result = analyze_bev(clip)
+    measured = np.array([np.nan if s is None else s for s in result.debug["ego_speed"]], float)
+    lead = max(result.tracks, key=lambda trk: len(trk["frames"]))
+    car = np.array([np.nan if s is None else s for s in lead["speed"]], float)
+    scale = float(np.nanmedian(car)) / 12.0       # the measured scale's error, common to every speed
+    assert 0.85 < scale < 1.15
+    assert np.nanmax(np.abs(measured / scale - np.array(truth))) < 3.0, np.round(measured / scale, 1)
+    assert (np.nanmax(car) - np.nanmin(car)) / np.nanmedian(car) < 0.15, np.round(car, 1)
+    e = result.elements
+    assert not {a for k, a in e["actions"] if k == "car"} & {"brake", "stop", "accelerate"}, result.description
+    assert ["car", "keep_lane"] in e["actions"] and ["car", "ahead_of", "ego"] in e["relations"] and \
+        ["car", "same_lane", "ego"] in e["relations"], result.description
+    assert "slower car ahead of it in the same lane" in result.description
 
 
 @pytest.mark.parametrize("arms,road", [((True, True, True, True), "intersection"),
