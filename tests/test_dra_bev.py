@@ -470,3 +470,74 @@ def test_a_recorded_bank_episode_is_deterministic(tmp_path):
         decoded.append(read_video(path, fps=None, max_frames=100).frames)
     assert len(decoded[0]) == len(decoded[1])
     assert all(np.array_equal(a, b) for a, b in zip(*decoded))
+
+
+# ----------------------------------------------------------------------------- a car ahead holding its speed (slow)
+# Scenic scripts like the README's slow_car.scenic, driven with `dv2s run` (the rule driver, or the script's own
+# behaviour for the ego that speeds up) for the command's default 20 s; the truth is the run's trace.
+STEADY_LEAD_SCRIPT = """param map = 'highway_straight'
+model scenic.domains.driving.model
+
+lane = Uniform(*network.lanes)
+ego = new Car at lane.centerline.pointAlongBy(Range(100, 800)), with speed {ego}{ego_behavior}
+lead = new Car following roadDirection from ego for {gap},
+    with speed {car}, with behavior FollowLaneBehavior(target_speed={car})
+"""
+# name: (ego's speed, car's speed, gap, the ego's own target speed or None for the rule driver, seed,
+#        whether the ego closes in on the car)
+STEADY_LEAD_CASES = {
+    "readme_slow_car": (25, 12, "Range(30, 50)", None, 1, True),   # the README's script and command
+    "ego_brakes": (28, 15, 35, None, 2, True),
+    "ego_speeds_up": (14, 24, 45, 24, 1, False),
+    "ego_keeps_its_speed": (22, 22, 40, None, 3, False),
+}
+
+
+@pytest.fixture(scope="module")
+def steady_lead_runs(tmp_path_factory):
+    import contextlib
+    import gzip
+    import io
+
+    from dv2s_gym.cli import main
+
+    folder = tmp_path_factory.mktemp("steady_lead")
+    runs = {}
+    for name, (ego, car, gap, target, seed, closes_in) in STEADY_LEAD_CASES.items():
+        behavior = f",\n    with behavior FollowLaneBehavior(target_speed={target})" if target else ""
+        script = folder / f"{name}.scenic"
+        script.write_text(STEADY_LEAD_SCRIPT.format(ego=ego, car=car, gap=gap, ego_behavior=behavior))
+        video, trace = folder / f"{name}.webm", folder / f"{name}.json.gz"
+        argv = ["run", str(script), "--video", str(video), "--seed", str(seed), "--trace", str(trace)]
+        with contextlib.redirect_stdout(io.StringIO()):
+            assert main(argv + (["--ego-policy", "scenic"] if target else [])) == 0
+        with gzip.open(trace, "rt") as fh:
+            recorded = json.load(fh)
+        states = recorded["states"]                       # states[i][actor] = [x, y, heading, speed]
+        other = next(actor for actor in recorded["kinds"] if actor != "ego")
+        truth_ego = np.array([s["ego"][3] for s in states])
+        truth_car = np.array([s[other][3] for s in states if other in s])
+        assert np.ptp(truth_car) < 0.5   # the car holds its speed: the premise of these clips
+        runs[name] = (analyze_bev_file(video), truth_ego, float(truth_car[0]), closes_in)
+    return runs
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(STEADY_LEAD_CASES))
+def test_steady_car_ahead_holds_its_speed(steady_lead_runs, name):
+    result, truth_ego, truth_car, closes_in = steady_lead_runs[name]
+    lead = max(result.tracks, key=lambda trk: len(trk["frames"]))
+    car = np.array([np.nan if s is None else s for s in lead["speed"]], float)
+    measured = np.array([np.nan if s is None else s for s in result.debug["ego_speed"]], float)
+    scale = float(np.nanmedian(car)) / truth_car      # the measured scale's error, common to every speed
+    assert 0.8 < scale < 1.2, (scale, result.description)
+    n = min(len(measured), len(truth_ego))
+    # a wrong alias of the dashed lines is 21.65 m/s off at 5 frames/s; a frame or two of lag is ~1.5 m/s
+    assert np.nanmax(np.abs(measured[:n] / scale - truth_ego[:n])) < 3.0, np.round(measured[:n] / scale, 1)
+    assert (np.nanmax(car) - np.nanmin(car)) / np.nanmedian(car) < 0.15, np.round(car, 1)
+    e = result.elements
+    assert not {a for k, a in e["actions"] if k == "car"} & {"brake", "stop", "accelerate"}, result.description
+    if closes_in:
+        assert ["car", "keep_lane"] in e["actions"] and ["car", "ahead_of", "ego"] in e["relations"] and \
+            ["car", "same_lane", "ego"] in e["relations"], result.description
+        assert "a slower car ahead of it in the same lane keeps to its lane" in result.description
