@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import Optional
+from typing import Any, List, Mapping, Optional
 
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.parser import bank_option
@@ -31,7 +31,13 @@ def add_parser(subparsers) -> None:
                               "an untouched scenario set (Scenic's CARLA examples) and regression-test new against old on "
                               "the starting bank (dv2s regress statistics). Writes report.json, report.md, report.html to --out; rerunning with the same "
                               "--out and settings resumes (raise --rounds to add rounds).",
-                              epilog="examples:\n"
+                              epilog="exit status: 0 the last round's fine-tuned policy is ACCEPTED (its regression "
+                              "test on the rest of the bank PASSed and the control did not beat it on the held-out "
+                              "scenarios), 1 REJECTED (it regressed on the rest of the bank, or the control beat it: "
+                              "the loop recommends the last accepted policy, else the starting one), 3 NOT ACCEPTED "
+                              "(the regression test was INCONCLUSIVE or in ERROR, or no round fine-tuned a policy), "
+                              "2 bad input, 130 interrupted\n\n"
+                              "examples:\n"
                               "  dv2s loop                                   # one round on dv2s-ppo, out/loop\n"
                               "  dv2s loop --budget 400 --fine-tune-steps 100000 --k-eval 10 --out out/loop-big\n"
                               "  dv2s loop --policy ppo:out/train/my_ppo/model.zip --rounds 3")
@@ -118,12 +124,19 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or DEFAULT_OUT
     settings = LoopSettings(bank_dir=getattr(args, "bank", None), n_envs=args.envs, **options)
     report = run_loop(args.policy, settings, out=out, progress=not args.no_progress)
-    print((Path(out) / "report.md").read_text(encoding="utf-8") if (Path(out) / "report.md").is_file() else "")
-    print(f"final policy: {report.policy}")
-    for kind in ("json", "md", "html"):
-        if kind in report.paths:
-            print(f"report ({kind}): {report.paths[kind]}")
-    return 0
+    print("\n".join(summary_lines(report.to_json(), report.paths)))
+    return int(report.recommendation["exit_code"])
+
+
+def summary_lines(report: Mapping[str, Any], paths: Mapping[str, Any]) -> List[str]:
+    """The terminal's summary of a finished loop: one line per round, the verdict, where the reports are."""
+    from dv2s_gym.mining.loop_report import round_summary
+
+    lines = [round_summary(record) for record in report.get("rounds") or []]
+    verdict = report.get("recommendation") or {}
+    lines += ["", f"verdict: {verdict.get('sentence')}", f"recommended policy: {verdict.get('policy')}"]
+    lines += [f"report ({kind}): {paths[kind]}" for kind in ("html", "md", "json") if kind in paths]
+    return lines
 
 
 def _count_or_all(value: str, flag: str) -> Optional[int]:

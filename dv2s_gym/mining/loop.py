@@ -65,6 +65,7 @@ from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 
 from dv2s_gym.mining.jsonl import read_rows
+from dv2s_gym.mining.loop_verdict import recommendation
 from dv2s_gym.mining.loop_settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
 from scenario_bank.run_identity import check_identity
 
@@ -105,8 +106,14 @@ class LoopReport:
 
     def to_json(self) -> Dict[str, Any]:
         """A JSON-safe dict (the body of ``report.json``)."""
-        return {"schema": "dv2s-loop", "schema_version": 1, "out": str(self.out), "settings": self.settings,
+        body = {"schema": "dv2s-loop", "schema_version": 1, "out": str(self.out), "settings": self.settings,
                 "policy": self.policy, "rounds": self.rounds}
+        return {**body, "recommendation": recommendation(body)}
+
+    @property
+    def recommendation(self) -> Dict[str, Any]:
+        """Which policy to use and why (:func:`dv2s_gym.mining.loop_verdict.recommendation`)."""
+        return recommendation(self.to_json())
 
 
 # --------------------------------------------------------------------------- state
