@@ -100,8 +100,6 @@ def add_parser(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run (or resume) the loop in ``--out`` and print its report."""
-    from pathlib import Path
-
     from dv2s_gym.mining.loop import DEFAULT_OUT, LoopSettings, run_loop
 
     options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr",

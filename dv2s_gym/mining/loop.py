@@ -59,7 +59,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import sys
 import time
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
@@ -311,7 +310,9 @@ def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[st
 
 
 def _log_default(line: str) -> None:
-    print(line, file=sys.stderr)
+    from dv2s_gym.progress_lines import log_line
+
+    log_line(line)
 
 
 # --------------------------------------------------------------------------- the loop
@@ -688,14 +689,10 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, a
 
 def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, label: str) -> Dict[str, Any]:
     """A fine-tuning arm by DAgger (:func:`policies.imitation.dagger_fine_tune`); a killed one resumes."""
-    from policies.dagger_checkpoint import checkpoint_position, describe_position
-    from policies.imitation import DAGGER_DEFAULTS, DaggerConfig, dagger_fine_tune
+    from policies.imitation import DaggerConfig, dagger_fine_tune
     from policies.registry import read_model_card
 
-    position = checkpoint_position(out)
-    if position is not None:
-        arm.log(f"{label}: fine-tune (dagger) resumed from "
-                f"{describe_position(*position, DAGGER_DEFAULTS['iterations'])}")
+    # a resumed run says so itself ("DAgger: resumed from ...", after the step's own line naming the arm)
     path = dagger_fine_tune(current, arm.config(out, weights), DaggerConfig(learning_rate=arm.learning_rate),
                             log=arm.log)
     dagger = read_model_card(path).get("fine_tune") or {}
