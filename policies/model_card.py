@@ -329,6 +329,12 @@ def render_markdown(card: Mapping[str, Any]) -> str:
         "",
     ]
     evaluation = card.get("evaluation")
+    if "evaluation" in card and evaluation is None:
+        command = str(training.get("command") or "dv2s train --out FOLDER")
+        resume = command if "--resume" in command.split() else f"{command} --resume"
+        lines += ["## Evaluation", "",
+                  "**Not evaluated: the held-out evaluation was interrupted before it finished.** Complete it with "
+                  f"`{resume}`: the trained model is kept and only the evaluation runs.", ""]
     if evaluation:
         confidence = evaluation.get("confidence", 0.95)
         lines += [

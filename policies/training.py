@@ -705,6 +705,33 @@ def _resume_model(config: TrainConfig, checkpoint: Path, venv, tensorboard_log: 
     return model
 
 
+def planned_steps(model: Any, start: int, target: int) -> Tuple[int, Optional[str]]:
+    """``(the step count training to ``target`` from ``start`` ends at, a line saying so)``.
+
+    Stable-baselines3 stops at the first whole rollout that reaches ``target``: ``n_steps x n_envs`` env steps
+    for PPO/A2C, ``train_freq x n_envs`` for DQN/SAC with a step-counted ``train_freq``. The line is ``None``
+    when nothing is left to train or the rollout is counted in episodes (its end is not known ahead)."""
+    remaining = int(target) - int(start)
+    n_envs = int(getattr(model, "n_envs", 1) or 1)
+    if remaining <= 0:
+        return int(start), None
+    if getattr(model, "n_steps", None):
+        per_env, unit = int(model.n_steps), "rollouts"
+    else:
+        frequency = getattr(model, "train_freq", None)
+        if getattr(getattr(frequency, "unit", None), "value", "step") != "step":
+            return int(target), None
+        per_env, unit = int(getattr(frequency, "frequency", 1) or 1), "collection rounds"
+    rollout = per_env * n_envs
+    final = int(start) + -(-remaining // rollout) * rollout
+    origin = f" from step {start:,}" if start else ""
+    if final == int(target):
+        return final, (f"training {remaining:,} steps{origin}: {remaining // rollout:,} {unit} of {rollout:,} "
+                       f"({per_env} steps x {n_envs} env{'s' if n_envs != 1 else ''})")
+    return final, (f"{target:,} steps asked: trains to {final:,}{origin} (stable-baselines3 trains whole {unit} "
+                   f"of {rollout:,} = {per_env} steps x {n_envs} env{'s' if n_envs != 1 else ''})")
+
+
 def _versions() -> Dict[str, str]:
     from importlib import metadata
 
@@ -742,6 +769,9 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
     sampler, stream = _restored_sampler(config, names, checkpoint if resume else None)
     out.mkdir(parents=True, exist_ok=True)
     tensorboard_log = str(out / "tb")
+    log(f"starting {config.n_envs} training env{'s' if config.n_envs != 1 else ''} "
+        f"({'subprocesses' if config.vec_env != 'dummy' else 'in this process'}) on {len(names)} scenario"
+        f"{'s' if len(names) != 1 else ''}; the first reset compiles their first scenarios (up to a minute) ...")
     venv = make_vec_env(names, env_config, config.bank_dir, sampler.probabilities(), config.n_envs, config.seed,
                         stream=stream, vec_env=config.vec_env)
     try:
@@ -751,6 +781,9 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         else:
             model = _new_model(config, venv, tensorboard_log)
         start = int(model.num_timesteps)
+        planned, plan = planned_steps(model, start, config.steps)
+        if plan:
+            log(plan)
         atomic_write_json(run_path, record)
         curriculum = CurriculumCallback(sampler, config.curriculum_update)
         evaluation = HeldOutEvaluationCallback(evaluation_episodes(names, config.eval_seeds), env_config,
@@ -758,7 +791,7 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         saver = CheckpointSaver(out / "checkpoints", config.checkpoint_freq, sampler, config.keep_checkpoints)
         callbacks = [curriculum, evaluation, saver]
         if config.progress_bar:
-            callbacks.append(ProgressCallback(config.steps, f"{config.algo} {out.name}", evaluation))
+            callbacks.append(ProgressCallback(max(planned, config.steps), f"{config.algo} {out.name}", evaluation))
         began = time.perf_counter()
         remaining = config.steps - start
 

@@ -41,3 +41,61 @@ def test_ctrl_c_of_mine_before_its_first_episode_does_not_claim_a_missing_file(t
     code, _, err = run(capsys, "mine", "--policy", "rule", "--budget", "4", "--no-progress", "--no-convert",
                        "--out", tmp_path / "mine")
     assert code == 130 and "nothing was kept" in err and "episodes.jsonl" not in err
+
+
+_SLOW_TEARDOWN = r'''
+import atexit, multiprocessing, sys, time
+from pathlib import Path
+
+class SlowToCollect:  # stands for a run's big objects, slow to collect at the interpreter's teardown
+    def __del__(self):
+        time.sleep(60)
+
+def interrupted(*args, **options):
+    raise KeyboardInterrupt
+
+if __name__ == "__main__":
+    import dv2s_gym.mining.miner as miner
+    from dv2s_gym.cli import main
+
+    marker = Path(sys.argv[1])
+    atexit.register(marker.write_text, "exit handlers ran")
+    child = multiprocessing.get_context("spawn").Process(target=time.sleep, args=(120,), daemon=True)
+    child.start()
+    Path(sys.argv[2]).write_text(str(child.pid))
+    held = SlowToCollect()
+    miner.mine = interrupted
+    sys.argv = ["dv2s", "mine", "--policy", "rule", "--no-convert", "--no-progress", "--out", sys.argv[3]]
+    sys.exit(main())
+'''
+
+
+def test_an_interrupted_command_exits_at_once_with_its_exit_handlers_run_and_no_child_left(tmp_path):
+    import os
+    import subprocess
+    import time
+
+    script = tmp_path / "slow_teardown.py"
+    script.write_text(_SLOW_TEARDOWN)
+    marker, child_pid = tmp_path / "atexit.txt", tmp_path / "child.pid"
+    began = time.monotonic()
+    done = subprocess.run([sys.executable, str(script), str(marker), str(child_pid), str(tmp_path / "mine")],
+                          capture_output=True, text=True, timeout=120, env=dict(os.environ, OMP_NUM_THREADS="1"))
+    took = time.monotonic() - began
+    assert done.returncode == 130 and "dv2s: interrupted" in done.stderr, done.stderr
+    assert took < 40, f"{took:.0f} s: the interpreter's teardown ran"  # the object alone takes 60 s to collect
+    assert marker.read_text() == "exit handlers ran"
+    pid = int(child_pid.read_text())
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline and _alive(pid):
+        time.sleep(0.1)
+    assert not _alive(pid), "a worker process was left behind"
+
+
+def _alive(pid: int) -> bool:
+    from pathlib import Path
+
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
+    except OSError:
+        return False
