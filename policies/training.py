@@ -917,7 +917,7 @@ def _evaluate_for_card(config: TrainConfig, names: Sequence[str], card: Dict[str
         card["evaluation"] = evaluate_for_card(specs, evaluation_episodes(names, card_seeds), configs,
                                                bank_dir=config.bank_dir, candidate=config.algo,
                                                seed_base=EVAL_SEED_BASE, seeds=card_seeds,
-                                               jobs=config.eval_jobs, progress=config.progress_bar)
+                                               jobs=config.eval_jobs, progress=config.progress_bar, log=log)
     except KeyboardInterrupt:
         card["evaluation"] = None
         write_card(Path(config.out), card)
