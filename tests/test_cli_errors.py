@@ -233,6 +233,7 @@ def test_a_reader_that_goes_away_stops_the_command_quietly(monkeypatch, capsys):
     assert capsys.readouterr().err == ""
 
 
+@pytest.mark.slow
 def test_run_prints_a_summary_for_people_and_json_on_request(capsys, tmp_path):
     video = tmp_path / "episode.webm"
     code, out, err = run(capsys, "run", "highway_lead_vehicle_brakes", "--duration", "1", "--video", video,

@@ -191,6 +191,7 @@ def test_render_episode_video_errors_name_the_trace(tmp_path):
         render_episode_video(broken, tmp_path / "x.webm")
 
 
+@pytest.mark.slow
 def test_both_clips_of_a_pair_show_the_same_seconds_of_the_scene(report_dir, report, tmp_path):
     """The baseline's clip covers the seconds up to the candidate's failure, not the end of its own episode."""
     import numpy as np
@@ -219,6 +220,7 @@ def test_both_clips_of_a_pair_show_the_same_seconds_of_the_scene(report_dir, rep
     assert f"both from {first:.1f} s to {end / 5:.1f} s of the episode (the seconds up to the candidate" in pair
 
 
+@pytest.mark.slow
 def test_rendering_the_clips_shows_its_progress(report, report_dir, capsys):
     write_html(report, report_dir / "progress.html", max_videos=1, progress=True)
     err = capsys.readouterr().err.replace("\r", "\n")
