@@ -56,6 +56,8 @@ def test_ctrl_c_during_the_card_evaluation_keeps_the_model_and_says_how_to_resum
     lines = [line for line in err.read_text().replace("\r", "\n").splitlines() if line.startswith("dv2s:")]
     assert code == 130
     assert len(lines) == 1 and lines[0].startswith("dv2s: interrupted; ") and "--resume" in lines[0], lines
+    last = err.read_text().replace("\r", "\n").strip().splitlines()[-1]
+    assert last == lines[0], "the interrupted line is the last one: on a line of its own, no bar redrawn after it"
     card = json.loads((tmp_path / "run" / "model_card.json").read_text())
     assert (tmp_path / "run" / "model.zip").is_file() and card["evaluation"] is None
     deadline = time.monotonic() + 10

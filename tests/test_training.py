@@ -175,6 +175,13 @@ def _tiny_config(out: Path, algo: str, **kwargs) -> TrainConfig:
                        eval_freq=0, card_seeds=0, checkpoint_freq=0, progress_bar=False, vec_env="dummy", **kwargs)
 
 
+def _after_start_up(err: str) -> str:
+    """``err`` after the line saying the training envs start (the checkpoint is checked against their spaces)."""
+    first, _, rest = err.partition("\n")
+    assert first.startswith("starting 1 training env (subprocesses) on 1 scenario; "), err
+    return rest
+
+
 @pytest.mark.slow
 def test_resume_refuses_a_broken_checkpoint_and_one_of_other_spaces(tmp_path, capsys):
     from stable_baselines3 import PPO
@@ -186,11 +193,11 @@ def test_resume_refuses_a_broken_checkpoint_and_one_of_other_spaces(tmp_path, ca
     other = PPO("MlpPolicy", _spaces_env((5, 7)), n_steps=64, device="cpu")
     other.save(out / "checkpoints" / "step_000099999.zip")
     code, _, err = run(capsys, "train", "--steps", 200000, "--out", out, "--resume", "--no-progress")
-    line = one_line_error(err)
+    line = one_line_error(_after_start_up(err))
     assert code == 2 and "observation space" in line and "Box(-inf, inf, (5, 7)" in line
     (out / "checkpoints" / "step_000099999.zip").write_bytes(b"not a zip")
     code, _, err = run(capsys, "train", "--steps", 200000, "--out", out, "--resume", "--no-progress")
-    line = one_line_error(err)
+    line = one_line_error(_after_start_up(err))
     assert code == 2 and "does not load as an SB3 model" in line and "step_000099999.zip" in line
     assert newest.is_file()
 
