@@ -33,7 +33,8 @@ def add_parser(subparsers) -> None:
                               "--out and settings resumes (raise --rounds to add rounds).",
                               epilog="exit status: 0 the last round's fine-tuned policy is ACCEPTED (its regression "
                               "test on the rest of the bank PASSed and the control did not beat it on the held-out "
-                              "scenarios), 1 REJECTED (it regressed on the rest of the bank, or the control beat it: "
+                              "scenarios), 1 REJECTED (it regressed on the rest of the bank, or the control beat it, or over "
+                              "several rounds it regressed against the starting policy: "
                               "the loop recommends the last accepted policy, else the starting one), 3 NOT ACCEPTED "
                               "(the regression test was INCONCLUSIVE or in ERROR, or no round fine-tuned a policy), "
                               "2 bad input, 130 interrupted\n\n"
@@ -122,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or DEFAULT_OUT
     settings = LoopSettings(bank_dir=getattr(args, "bank", None), n_envs=args.envs, **options)
     report = run_loop(args.policy, settings, out=out, progress=not args.no_progress)
-    print("\n".join(summary_lines(report.to_json(), report.paths)))
+    print("\n".join(summary_lines({**report.to_json(), "recommendation": report.recommendation}, report.paths)))
     return int(report.recommendation["exit_code"])
 
 

@@ -111,7 +111,13 @@ class LoopReport:
 
     @property
     def recommendation(self) -> Dict[str, Any]:
-        """Which policy to use and why (:func:`dv2s_gym.mining.loop_verdict.recommendation`)."""
+        """Which policy to use and why (:func:`dv2s_gym.mining.loop_verdict.recommendation`), as ``report.json``
+        has it once written (with the final-vs-starting comparison of two or more rounds)."""
+        path = self.paths.get("json")
+        if path is not None and Path(path).is_file():
+            written = json.loads(Path(path).read_text(encoding="utf-8")).get("recommendation")
+            if written:
+                return written
         return recommendation(self.to_json())
 
 

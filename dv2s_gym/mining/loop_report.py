@@ -643,7 +643,10 @@ def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
     if "final_vs_start" not in report:
         final = final_vs_start(report, out)
         if final is not None:
+            from dv2s_gym.mining.loop_verdict import recommendation
+
             report = {**report, "final_vs_start": final}
+            report["recommendation"] = recommendation(report)
     paths = {"json": atomic_write_json(out / "report.json", dict(report), indent=1) or out / "report.json"}
     markdown = render_markdown(report)
     atomic_write_text(out / "report.md", markdown)

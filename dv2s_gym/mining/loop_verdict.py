@@ -4,8 +4,10 @@ A round's fine-tuned policy is *accepted* when the regression test on the rest o
 PASSed and the control arm (the same fine-tuning without the mined scenarios) did not beat it on the
 held-out episodes (exact McNemar p below :data:`CONTROL_ALPHA`, the control failing fewer). It is
 *rejected* when the regression test FAILed or the control beat it; any other outcome (INCONCLUSIVE or
-ERROR regression test, a skipped round) leaves it *not accepted*. The recommended policy is the last
-accepted one, else the starting policy.
+ERROR regression test, a skipped round) leaves it *not accepted*. Each round is tested against the policy it
+started from, so with two or more tested rounds a final policy that FAILs against the starting one
+(``final_vs_start``) is rejected too. The recommended policy is the last accepted one, else the starting
+policy.
 """
 
 from __future__ import annotations
@@ -67,6 +69,12 @@ def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
     record, judged = last
     candidate = record.get("new_policy") or report.get("policy")
     number = record.get("round")
+    final = report.get("final_vs_start") or {}
+    if judged["verdict"] == ACCEPTED and final.get("verdict") == "FAIL":  # each round passed against its own start
+        judged = {"verdict": REJECTED, "reason": f"over rounds {', '.join(map(str, final.get('rounds') or []))} "
+                                                 f"the policy regressed against the starting one on the starting "
+                                                 f"bank ({final.get('reason')})"}
+        recommended = start
     if judged["verdict"] == ACCEPTED:
         sentence = f"ACCEPTED: use the round {number} policy {candidate}: {judged['reason']}"
     else:
