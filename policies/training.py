@@ -55,6 +55,7 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from envs.dv2s_env import check_env_config
 from envs.errors import DV2SError, Interrupted
 
 __all__ = [
@@ -203,6 +204,7 @@ class TrainConfig:
             raise TrainingError(f"vec_env must be 'subproc' or 'dummy', not {self.vec_env!r}")
         if not isinstance(self.env_config, dict):
             raise TrainingError("the env config must be a JSON object of DV2S-v0 config overrides")
+        check_env_config(self.env_config)  # a misspelt key fails here, in one line, not in the env workers
         action = (self.env_config.get("action") or {}).get("type")
         allowed = _ACTION_TYPES[self.algo]
         if action is not None and allowed is not None and action not in allowed:

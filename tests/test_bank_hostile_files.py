@@ -310,7 +310,7 @@ def test_a_merge_never_writes_through_a_linked_folder(world, tmp_path, monkeypat
     import scenario_bank.bank as bank_module
 
     bank_dir, _, outside = world
-    monkeypatch.setattr(bank_module, "_verify_or_name_scenic2", lambda *args: None)  # no sandbox run needed here
+    monkeypatch.setattr(bank_module, "verify_or_name_scenic2", lambda *args: None)  # no sandbox run needed here
     os.symlink(outside, bank_dir / GOOD / "merged")
     video = tmp_path / "failure.webm"
     video.write_bytes(b"video")

@@ -22,7 +22,7 @@ def add_parser(subparsers) -> None:
                               "--max-replays shorten it)",
                               formatter_class=argparse.RawDescriptionHelpFormatter,
                               description="Closed-loop failure mining. Each round: mine the policy's failures (dv2s mine) "
-                              "into new bank scenarios in a working bank (out/bank, a copy of the shipped bank, or --bank), "
+                              "into new bank scenarios in a working bank (a copy of the shipped bank in the bank folder of --out, out/loop/bank by default; or --bank), "
                               "split them by family (parent bank scenario) into a fine-tuning and a held-out part, "
                               "evaluate the policy on the held-out scenarios (seeds 10000+), fine-tune it on the grown bank "
                               "minus the held-out scenarios and their parents (mined ones upweighted), fine-tune a control "

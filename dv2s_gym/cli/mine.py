@@ -100,6 +100,10 @@ def run(args: argparse.Namespace) -> int:
     """Mine the policy's failures and print the run's summary and reports."""
     from pathlib import Path
 
+    from dv2s_gym.cli.name_checks import check_names
+
+    check_names(policies=(args.policy, args.reference if args.reference != "none" else None),
+                scenarios=args.scenarios, bank=args.bank)  # a typo is reported before the slow imports
     from dv2s_gym.mining.miner import mine
 
     env_config = json_option(args.config, "--config")

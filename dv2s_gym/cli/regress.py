@@ -16,7 +16,7 @@ __all__ = ["add_parser", "run"]
 def add_parser(subparsers) -> None:
     """Add ``regress`` to the ``dv2s`` subcommands."""
     p = subparsers.add_parser(
-        "regress", help="regression-test a policy against a baseline on paired episodes (PASS/FAIL/INCONCLUSIVE)",
+        "regress", help="regression-test a policy against a baseline on paired episodes (PASS/FAIL/INCONCLUSIVE/ERROR)",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Run the candidate policy (and the baseline, on the same scenario x seed pairs: episode k "
         "uses seed S+k for both) over bank scenarios, in a local process pool or on Ray. Reports per scenario "
@@ -87,6 +87,9 @@ def run(args: argparse.Namespace) -> int:
     """Run the regression test, print its summary (or the report JSON); the exit status is the verdict's."""
     from pathlib import Path
 
+    from dv2s_gym.cli.name_checks import check_names
+
+    check_names(policies=(args.policy, args.baseline), scenarios=args.scenarios, bank=args.bank)  # before imports
     from dv2s_gym.regress.report import baseline_defaults, exit_code, format_summary
     from dv2s_gym.regress.runner import DEFAULT_OUT, BaselineReport, WorkerSettings, run_regression
 

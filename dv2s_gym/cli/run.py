@@ -35,6 +35,9 @@ def add_parser(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Record the episode and print its summary (as JSON with ``--json``)."""
+    from dv2s_gym.cli.name_checks import check_names
+
+    check_names(scenarios=args.scenario, bank=args.bank)  # a typo is reported before the slow imports
     from dv2s_gym.demo import record_scenario
 
     config = {"ego_policy": args.ego_policy}

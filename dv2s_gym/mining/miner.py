@@ -493,13 +493,16 @@ def mine(policy: str, settings: MineSettings, *, out: os.PathLike | str, workers
 
 
 def _check_can_mine(policy: str, settings: MineSettings) -> None:
-    """Refuse, before any work, a run that cannot start: no VerifAI, bad sampler options, an unknown policy."""
+    """Refuse, before any work, a run that cannot start: no VerifAI, bad sampler options, a misspelt env config key,
+    an unknown policy."""
     if importlib.util.find_spec("verifai") is None:  # the core install has no mining extra
         raise MiningError("failure mining needs VerifAI's samplers, which the core install leaves out: "
                           "pip install 'dv2s-gym[mining]'")
     sampler_params(settings.sampler, dict(settings.sampler_options) if settings.sampler_options else None)
+    from envs.dv2s_env import check_env_config
     from policies.registry import load_policy
 
+    check_env_config(settings.env_config)  # a misspelt key fails here, in one line, not in every episode
     load_policy(policy)  # an unknown spec or broken checkpoint fails here, in one line, before any worker starts
     if settings.reference:
         load_policy(settings.reference)

@@ -85,11 +85,12 @@ def _check_env_config(env_config: Dict[str, Any], failure: Sequence[str], stall_
     """Refuse env settings under which the gate cannot see failures: unknown keys, a non-positive episode
     duration, or a stall time the episodes are too short to reach."""
     from envs.dv2s_env import DV2SEnv
-    from envs.errors import UnknownConfigKeyError, check_config_keys
+    from envs.config_check import check_config
+    from envs.errors import UnknownConfigKeyError
 
     defaults = DV2SEnv.default_config()
     try:
-        check_config_keys(env_config, defaults)
+        check_config(env_config, defaults)
     except (UnknownConfigKeyError, ValueError) as error:
         raise RegressError(f"--config: {error}") from None
     duration = env_config.get("duration", defaults["duration"])
