@@ -52,3 +52,15 @@ def test_an_inconclusive_test_or_no_fine_tuned_policy_is_not_accepted():
     assert inconclusive["policy"] == "dv2s-ppo" and "keep the starting policy dv2s-ppo" in inconclusive["sentence"]
     skipped = recommendation(_report({"round": 1, "steps": {"skipped": "nothing kept"}}))
     assert skipped["verdict"] == "NOT ACCEPTED" and skipped["policy"] == "dv2s-ppo" and skipped["round"] is None
+
+
+def test_loop_help_documents_each_exit_status(capsys):
+    import pytest
+
+    from dv2s_gym.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["loop", "--help"])
+    text = capsys.readouterr().out
+    for line in ("  0  ACCEPTED: ", "  1  REJECTED: ", "  3  NOT ACCEPTED: ", "  2  bad input; 130 interrupted"):
+        assert line in text

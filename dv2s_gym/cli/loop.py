@@ -12,6 +12,22 @@ from dv2s_gym.cli.parser import bank_option
 __all__ = ["add_parser", "run"]
 
 
+EPILOG = """\
+exit status (the verdict on the last round's fine-tuned policy; the summary names the policy to use):
+  0  ACCEPTED: its regression test on the rest of the bank PASSed and the control did not beat it
+     on the held-out scenarios: use it
+  1  REJECTED: it regressed on the rest of the bank, the control beat it, or over several rounds it
+     regressed against the starting policy: keep the last accepted policy, else the starting one
+  3  NOT ACCEPTED: the regression test was INCONCLUSIVE or in ERROR, or no round fine-tuned a policy
+  2  bad input; 130 interrupted
+
+examples:
+  dv2s loop                                   # one round on dv2s-ppo, out/loop
+  dv2s loop --budget 400 --fine-tune-steps 100000 --k-eval 10 --out out/loop-big
+  dv2s loop --policy ppo:out/train/my_ppo/model.zip --rounds 3"""
+"""The end of ``dv2s loop --help``: what the exit status says, and examples."""
+
+
 def add_parser(subparsers) -> None:
     """Add ``loop`` to the ``dv2s`` subcommands."""
     from dv2s_gym.mining.loop import DEFAULTS as LOOP
@@ -31,17 +47,7 @@ def add_parser(subparsers) -> None:
                               "an untouched scenario set (Scenic's CARLA examples) and regression-test new against old on "
                               "the starting bank (dv2s regress statistics). Writes report.json, report.md, report.html to --out; rerunning with the same "
                               "--out and settings resumes (raise --rounds to add rounds).",
-                              epilog="exit status: 0 the last round's fine-tuned policy is ACCEPTED (its regression "
-                              "test on the rest of the bank PASSed and the control did not beat it on the held-out "
-                              "scenarios), 1 REJECTED (it regressed on the rest of the bank, or the control beat it, or over "
-                              "several rounds it regressed against the starting policy: "
-                              "the loop recommends the last accepted policy, else the starting one), 3 NOT ACCEPTED "
-                              "(the regression test was INCONCLUSIVE or in ERROR, or no round fine-tuned a policy), "
-                              "2 bad input, 130 interrupted\n\n"
-                              "examples:\n"
-                              "  dv2s loop                                   # one round on dv2s-ppo, out/loop\n"
-                              "  dv2s loop --budget 400 --fine-tune-steps 100000 --k-eval 10 --out out/loop-big\n"
-                              "  dv2s loop --policy ppo:out/train/my_ppo/model.zip --rounds 3")
+                              epilog=EPILOG)
     p.add_argument("--policy", default="dv2s-ppo", help="starting policy: an SB3 checkpoint spec (default dv2s-ppo)")
     p.add_argument("--rounds", type=int, default=LOOP["rounds"], help=f"rounds (default {LOOP['rounds']})")
     bank_option(p)
