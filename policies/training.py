@@ -812,6 +812,8 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
             except KeyboardInterrupt:
                 saved = saver.save(model)
                 close_segment("interrupted")
+                if getattr(model, "_logger", None) is not None:  # set once learning has started
+                    model.logger.close()  # TensorBoard's last events written now: an interrupted dv2s exits at once
                 raise Interrupted(f"training stopped at step {model.num_timesteps}: checkpoint {saved} is kept; "
                                   "rerun the same command with --resume to continue") from None
             saver.save(model)
