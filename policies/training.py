@@ -443,7 +443,17 @@ def make_vec_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Opti
                  for rank in range(n_envs)]
     if vec_env == "dummy":
         return DummyVecEnv(factories)
-    return SubprocVecEnv(factories)
+    return SubprocVecEnv([functools.partial(_worker_env, factory) for factory in factories])
+
+
+def _worker_env(factory: Callable[[], gym.Env]) -> gym.Env:
+    """``factory()`` in a vec-env worker process, which leaves Ctrl-C to the main process: a terminal's Ctrl-C
+    reaches the whole process group, and a worker stopped by it would cut the main process off mid-step before
+    it saves its checkpoint; the main process closes the workers itself."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return factory()
 
 
 def evaluation_episodes(names: Sequence[str], seeds: int) -> List[Tuple[str, int]]:
