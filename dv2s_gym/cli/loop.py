@@ -106,7 +106,8 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run (or resume) the loop in ``--out`` and print its report."""
+    """Run (or resume) the loop in ``--out``; print a summary, the verdict and the report paths. The exit status
+    is the verdict's (:data:`EPILOG`)."""
     from dv2s_gym.mining.loop import DEFAULT_OUT, LoopSettings, run_loop
 
     options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr",
