@@ -46,6 +46,7 @@ import json
 import os
 import re
 import shlex
+import sys
 import time
 from collections import deque
 from pathlib import Path
@@ -65,6 +66,7 @@ __all__ = [
     "TRAIN_SEED_LOW",
     "DEFAULT_HYPERPARAMETERS",
     "TrainingError",
+    "close_vec_env",
     "TrainConfig",
     "ScenarioSampler",
     "ScenarioSchedule",
@@ -444,6 +446,33 @@ def make_vec_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Opti
     if vec_env == "dummy":
         return DummyVecEnv(factories)
     return SubprocVecEnv([functools.partial(_worker_env, factory) for factory in factories])
+
+
+def close_vec_env(venv: Any) -> None:
+    """Close ``venv``; after Ctrl-C (an interrupt on its way out), without waiting for step results.
+
+    Ctrl-C can cut a ``SubprocVecEnv`` step between two workers' answers; its own ``close`` then waits for an
+    answer from every worker, and one that already answered sends none: the command would hang. Here the
+    unread answers are dropped and every worker is told to stop (stopped by force if it does not)."""
+    interrupted = isinstance(sys.exc_info()[1], KeyboardInterrupt)
+    processes = getattr(venv, "processes", None)
+    if interrupted and processes is not None and not venv.closed:
+        venv.waiting = False
+        for remote in venv.remotes:
+            try:
+                remote.send(("close", None))
+            except OSError:
+                pass
+        for process in processes:
+            process.join(5)
+            if process.is_alive():
+                process.terminate()
+                process.join(5)
+        for remote in venv.remotes:
+            remote.close()
+        venv.closed = True
+        return
+    venv.close()
 
 
 def _worker_env(factory: Callable[[], gym.Env]) -> gym.Env:
@@ -831,7 +860,7 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
             log(f"the model already has {start} steps (>= --steps {config.steps}); nothing to train")
         segment = close_segment("finished")
     finally:
-        venv.close()
+        close_vec_env(venv)
     model_path = out / "model.zip"
     with atomic_path(model_path, keep_suffix=True) as tmp:
         model.save(tmp)

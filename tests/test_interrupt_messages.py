@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+import pytest
 from tqdm import tqdm
 
 from dv2s_gym.cli.interrupts import episodes_kept_note, report_interrupted
@@ -99,3 +100,39 @@ def _alive(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"
     except OSError:
         return False
+
+
+@pytest.mark.slow
+def test_training_envs_cut_off_mid_step_by_ctrl_c_close_without_hanging():
+    """Ctrl-C between two workers' answers: closing must not wait for an answer the first worker already gave."""
+    import threading
+
+    import gymnasium as gym
+    import numpy as np
+    from stable_baselines3.common.vec_env import SubprocVecEnv
+
+    from policies.training import close_vec_env
+
+    venv = SubprocVecEnv([lambda: gym.make("CartPole-v1")] * 2)
+    venv.reset()
+    processes = list(venv.processes)
+    venv.step_async(np.zeros(2, dtype=int))
+    venv.remotes[0].recv()  # step_wait had read the first answer when Ctrl-C came
+
+    def interrupted_run():
+        try:
+            raise KeyboardInterrupt
+        finally:
+            close_vec_env(venv)
+
+    def run():
+        try:
+            interrupted_run()
+        except KeyboardInterrupt:
+            pass
+
+    closing = threading.Thread(target=run, daemon=True)
+    closing.start()
+    closing.join(30)
+    assert not closing.is_alive(), "closing the envs hangs"
+    assert venv.closed and not any(p.is_alive() for p in processes)
