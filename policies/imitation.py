@@ -334,7 +334,7 @@ class _DaggerRun:
 
     def iterate(self) -> None:
         """Run the iterations not committed yet, in training envs put back where the last commit left them."""
-        from policies.training import make_vec_env
+        from policies.training import close_vec_env, make_vec_env
 
         c, d = self.config, self.dagger
         venv = make_vec_env(self.scenarios, self.env_config, c.bank_dir, self.probabilities, c.n_envs, int(c.seed),
@@ -351,7 +351,7 @@ class _DaggerRun:
             for iteration in range(self.start, d.iterations):
                 obs = self._iteration(venv, obs, iteration, bar)
         finally:
-            venv.close()
+            close_vec_env(venv)
             if bar is not None:
                 bar.close()
 

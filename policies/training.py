@@ -46,6 +46,7 @@ import json
 import os
 import re
 import shlex
+import sys
 import time
 from collections import deque
 from pathlib import Path
@@ -65,6 +66,7 @@ __all__ = [
     "TRAIN_SEED_LOW",
     "DEFAULT_HYPERPARAMETERS",
     "TrainingError",
+    "close_vec_env",
     "TrainConfig",
     "ScenarioSampler",
     "ScenarioSchedule",
@@ -443,7 +445,44 @@ def make_vec_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Opti
                  for rank in range(n_envs)]
     if vec_env == "dummy":
         return DummyVecEnv(factories)
-    return SubprocVecEnv(factories)
+    return SubprocVecEnv([functools.partial(_worker_env, factory) for factory in factories])
+
+
+def close_vec_env(venv: Any) -> None:
+    """Close ``venv``; after Ctrl-C (an interrupt on its way out), without waiting for step results.
+
+    Ctrl-C can cut a ``SubprocVecEnv`` step between two workers' answers; its own ``close`` then waits for an
+    answer from every worker, and one that already answered sends none: the command would hang. Here the
+    unread answers are dropped and every worker is told to stop (stopped by force if it does not)."""
+    interrupted = isinstance(sys.exc_info()[1], KeyboardInterrupt)
+    processes = getattr(venv, "processes", None)
+    if interrupted and processes is not None and not venv.closed:
+        venv.waiting = False
+        for remote in venv.remotes:
+            try:
+                remote.send(("close", None))
+            except OSError:
+                pass
+        for process in processes:
+            process.join(5)
+            if process.is_alive():
+                process.terminate()
+                process.join(5)
+        for remote in venv.remotes:
+            remote.close()
+        venv.closed = True
+        return
+    venv.close()
+
+
+def _worker_env(factory: Callable[[], gym.Env]) -> gym.Env:
+    """``factory()`` in a vec-env worker process, which leaves Ctrl-C to the main process: a terminal's Ctrl-C
+    reaches the whole process group, and a worker stopped by it would cut the main process off mid-step before
+    it saves its checkpoint; the main process closes the workers itself."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return factory()
 
 
 def evaluation_episodes(names: Sequence[str], seeds: int) -> List[Tuple[str, int]]:
@@ -707,6 +746,33 @@ def _resume_model(config: TrainConfig, checkpoint: Path, venv, tensorboard_log: 
     return model
 
 
+def planned_steps(model: Any, start: int, target: int) -> Tuple[int, Optional[str]]:
+    """``(the step count training to ``target`` from ``start`` ends at, a line saying so)``.
+
+    Stable-baselines3 stops at the first whole rollout that reaches ``target``: ``n_steps x n_envs`` env steps
+    for PPO/A2C, ``train_freq x n_envs`` for DQN/SAC with a step-counted ``train_freq``. The line is ``None``
+    when nothing is left to train or the rollout is counted in episodes (its end is not known ahead)."""
+    remaining = int(target) - int(start)
+    n_envs = int(getattr(model, "n_envs", 1) or 1)
+    if remaining <= 0:
+        return int(start), None
+    if getattr(model, "n_steps", None):
+        per_env, unit = int(model.n_steps), "rollouts"
+    else:
+        frequency = getattr(model, "train_freq", None)
+        if getattr(getattr(frequency, "unit", None), "value", "step") != "step":
+            return int(target), None
+        per_env, unit = int(getattr(frequency, "frequency", 1) or 1), "collection rounds"
+    rollout = per_env * n_envs
+    final = int(start) + -(-remaining // rollout) * rollout
+    origin = f" from step {start:,}" if start else ""
+    if final == int(target):
+        return final, (f"training {remaining:,} steps{origin}: {remaining // rollout:,} {unit} of {rollout:,} "
+                       f"({per_env} steps x {n_envs} env{'s' if n_envs != 1 else ''})")
+    return final, (f"{target:,} steps asked: trains to {final:,}{origin} (stable-baselines3 trains whole {unit} "
+                   f"of {rollout:,} = {per_env} steps x {n_envs} env{'s' if n_envs != 1 else ''})")
+
+
 def _versions() -> Dict[str, str]:
     from importlib import metadata
 
@@ -744,6 +810,9 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
     sampler, stream = _restored_sampler(config, names, checkpoint if resume else None)
     out.mkdir(parents=True, exist_ok=True)
     tensorboard_log = str(out / "tb")
+    log(f"starting {config.n_envs} training env{'s' if config.n_envs != 1 else ''} "
+        f"({'subprocesses' if config.vec_env != 'dummy' else 'in this process'}) on {len(names)} scenario"
+        f"{'s' if len(names) != 1 else ''}; the first reset compiles their first scenarios (up to a minute) ...")
     venv = make_vec_env(names, env_config, config.bank_dir, sampler.probabilities(), config.n_envs, config.seed,
                         stream=stream, vec_env=config.vec_env)
     try:
@@ -753,6 +822,9 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         else:
             model = _new_model(config, venv, tensorboard_log)
         start = int(model.num_timesteps)
+        planned, plan = planned_steps(model, start, config.steps)
+        if plan:
+            log(plan)
         atomic_write_json(run_path, record)
         curriculum = CurriculumCallback(sampler, config.curriculum_update)
         evaluation = HeldOutEvaluationCallback(evaluation_episodes(names, config.eval_seeds), env_config,
@@ -760,7 +832,7 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         saver = CheckpointSaver(out / "checkpoints", config.checkpoint_freq, sampler, config.keep_checkpoints)
         callbacks = [curriculum, evaluation, saver]
         if config.progress_bar:
-            callbacks.append(ProgressCallback(config.steps, f"{config.algo} {out.name}", evaluation))
+            callbacks.append(ProgressCallback(max(planned, config.steps), f"{config.algo} {out.name}", evaluation))
         began = time.perf_counter()
         remaining = config.steps - start
 
@@ -779,6 +851,8 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
             except KeyboardInterrupt:
                 saved = saver.save(model)
                 close_segment("interrupted")
+                if getattr(model, "_logger", None) is not None:  # set once learning has started
+                    model.logger.close()  # TensorBoard's last events written now: an interrupted dv2s exits at once
                 raise Interrupted(f"training stopped at step {model.num_timesteps}: checkpoint {saved} is kept; "
                                   "rerun the same command with --resume to continue") from None
             saver.save(model)
@@ -786,7 +860,7 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
             log(f"the model already has {start} steps (>= --steps {config.steps}); nothing to train")
         segment = close_segment("finished")
     finally:
-        venv.close()
+        close_vec_env(venv)
     model_path = out / "model.zip"
     with atomic_path(model_path, keep_suffix=True) as tmp:
         model.save(tmp)
@@ -886,7 +960,7 @@ def _evaluate_for_card(config: TrainConfig, names: Sequence[str], card: Dict[str
         card["evaluation"] = evaluate_for_card(specs, evaluation_episodes(names, card_seeds), configs,
                                                bank_dir=config.bank_dir, candidate=config.algo,
                                                seed_base=EVAL_SEED_BASE, seeds=card_seeds,
-                                               jobs=config.eval_jobs, progress=config.progress_bar)
+                                               jobs=config.eval_jobs, progress=config.progress_bar, log=log)
     except KeyboardInterrupt:
         card["evaluation"] = None
         write_card(Path(config.out), card)

@@ -221,7 +221,8 @@ def test_the_loop_resumes_a_killed_dagger_fine_tune_and_says_so(tmp_path, monkey
     assert checkpoint_position(out / "round_1" / "policy") == (1, 0)
     lines = []
     report = run_loop("dv2s-ppo", out=out, miner=miner, log=lines.append, **tiny)
-    assert "round 1: fine-tune (dagger) resumed from iteration 1 of 4" in lines
+    resumed = [line for line in lines if "resumed from iteration 1 of 4" in line]
+    assert len(resumed) == 1 and resumed[0].startswith("DAgger: resumed from iteration 1 of 4")  # said once
     assert "DAgger iteration 1/4" not in "\n".join(lines)  # not redone
     tuned = report.rounds[0]["steps"]["fine_tune"]
     # subprocess envs put back where they were too

@@ -367,7 +367,7 @@ class _StandIns:
     """Stand-ins for fine-tuning (a copy of the shipped checkpoint), the held-out evaluation (outcome read from
     the role) and the regression runs, recording every call: the loop's wiring runs in seconds."""
 
-    def __init__(self, monkeypatch, kill_in=None):
+    def __init__(self, monkeypatch, kill_in=None, verdict="INCONCLUSIVE", fails=None):
         import dataclasses
         import shutil
 
@@ -390,8 +390,9 @@ class _StandIns:
 
         def evaluate(role, policy, episodes, **options):
             self.evaluations.append((role, policy, list(episodes)))
-            fails = {"before": lambda i: True, "control": lambda i: i % 2 == 0, "after": lambda i: i % 4 == 0}[role]
-            return [{"role": role, "scenario": s, "seed": seed, "failed": fails(i), "error": None}
+            outcome = {"before": lambda i: True, "control": lambda i: i % 2 == 0, "after": lambda i: i % 4 == 0,
+                       **(fails or {})}[role]
+            return [{"role": role, "scenario": s, "seed": seed, "failed": outcome(i), "error": None}
                     for i, (s, seed) in enumerate(episodes)]
 
         def regression(candidate, baseline=None, settings=None, **options):
@@ -401,7 +402,7 @@ class _StandIns:
                                      **dataclasses.asdict(settings), **options})
             rate = {"value": 0.5, "low": 0.1, "high": 0.9, "count": 1}
             per = {"candidate": {"failure_rate": rate, "stall_rate": rate}, "baseline": {"failure_rate": rate}}
-            return {"verdict": "INCONCLUSIVE", "bank": {"scenarios": ["x"]},
+            return {"verdict": verdict, "bank": {"scenarios": ["x"]},
                     "scenarios": {name: per for name in settings.scenarios or ()},
                     "overall": {"candidate": {"episodes": 2, "failure_rate": rate, "stall_rate": rate,
                                               "mean_speed": {"value": 3.0}},
@@ -703,3 +704,59 @@ def test_the_held_out_split_groups_entries_by_the_family_they_were_clustered_by(
     assert parents == {name: scenario_family(name, str(bank)) for name in parents} == {
         "mined_x": "highway_cut_in_from_right", "mined_of_mined_x": "highway_cut_in_from_right"}
     assert split_by_family(_with_parents(kept, str(bank)), 0.5, seed=0)["groups"] == 1
+
+
+# --------------------------------------------------------------------------- the verdict: which policy to use
+def _cli_loop(capsys, monkeypatch, out):
+    """``dv2s loop`` on the command line with the stand-in miner (the wiring's settings)."""
+    import dv2s_gym.mining.miner as miner_module
+
+    monkeypatch.setattr(miner_module, "mine", FakeMiner(WIRING["scenarios"], failures_per_round=6))
+    return run(capsys, "loop", "--out", out, "--no-progress", "--budget", "8", "--fine-tune-steps", "100",
+               "--k-eval", "3", "--regress-episodes", "1", "--workers", "1", "--envs", "1",
+               "--fine-tune-method", "ppo", "--untouched-seeds", "0", "--min-heldout-episodes", "1",
+               "--min-heldout-families", "1",
+               "--scenarios", *WIRING["scenarios"])
+
+
+def test_a_fine_tuned_policy_that_regressed_is_not_recommended_and_the_exit_status_says_so(tmp_path, capsys,
+                                                                                          monkeypatch):
+    _StandIns(monkeypatch, verdict="FAIL")
+    code, out, _ = _cli_loop(capsys, monkeypatch, tmp_path / "loop")
+    report = json.loads((tmp_path / "loop" / "report.json").read_text())
+    verdict = report["recommendation"]
+    assert code == 1 and verdict["verdict"] == "REJECTED" and verdict["policy"] == "dv2s-ppo"
+    assert verdict["candidate"] == report["rounds"][0]["new_policy"] != "dv2s-ppo"
+    assert "regressed on the rest of the bank" in verdict["sentence"] and "keep the starting policy" in verdict["sentence"]
+    assert f"verdict: {verdict['sentence']}" in out and "recommended policy: dv2s-ppo" in out
+    assert "final policy" not in out and "|---|" not in out  # a summary, not the Markdown report
+    assert f"report (html): {tmp_path / 'loop' / 'report.html'}" in out
+    markdown = (tmp_path / "loop" / "report.md").read_text()
+    assert verdict["sentence"] in markdown.split("## Round")[0] and "final policy" not in markdown
+    page = (tmp_path / "loop" / "report.html").read_text()
+    assert 'class="REJECTED"' in page and "final policy" not in page
+
+
+def test_a_fine_tuned_policy_the_control_beat_is_rejected(tmp_path, capsys, monkeypatch):
+    _StandIns(monkeypatch, verdict="PASS", fails={"control": lambda i: False, "after": lambda i: True})
+    code, out, _ = _cli_loop(capsys, monkeypatch, tmp_path / "loop")
+    verdict = json.loads((tmp_path / "loop" / "report.json").read_text())["recommendation"]
+    assert code == 1 and verdict["verdict"] == "REJECTED" and "the control" in verdict["reason"]
+    assert verdict["policy"] == "dv2s-ppo" and "recommended policy: dv2s-ppo" in out
+
+
+def test_an_accepted_policy_is_recommended_with_exit_status_0(tmp_path, capsys, monkeypatch):
+    _StandIns(monkeypatch, verdict="PASS")
+    code, out, _ = _cli_loop(capsys, monkeypatch, tmp_path / "loop")
+    report = json.loads((tmp_path / "loop" / "report.json").read_text())
+    assert code == 0 and report["recommendation"]["verdict"] == "ACCEPTED"
+    assert report["recommendation"]["policy"] == report["rounds"][0]["new_policy"] == report["policy"]
+    assert f"recommended policy: {report['policy']}" in out
+
+
+def test_an_inconclusive_regression_test_leaves_the_policy_not_accepted(tmp_path, capsys, monkeypatch):
+    _StandIns(monkeypatch)  # INCONCLUSIVE
+    code, out, _ = _cli_loop(capsys, monkeypatch, tmp_path / "loop")
+    verdict = json.loads((tmp_path / "loop" / "report.json").read_text())["recommendation"]
+    assert code == 3 and verdict["verdict"] == "NOT ACCEPTED" and "INCONCLUSIVE" in verdict["reason"]
+    assert verdict["policy"] == "dv2s-ppo"

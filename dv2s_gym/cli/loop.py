@@ -4,12 +4,28 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import Optional
+from typing import Any, List, Mapping, Optional
 
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.parser import bank_option
 
 __all__ = ["add_parser", "run"]
+
+
+EPILOG = """\
+exit status (the verdict on the last round's fine-tuned policy; the summary names the policy to use):
+  0  ACCEPTED: its regression test on the rest of the bank PASSed and the control did not beat it
+     on the held-out scenarios: use it
+  1  REJECTED: it regressed on the rest of the bank, the control beat it, or over several rounds it
+     regressed against the starting policy: keep the last accepted policy, else the starting one
+  3  NOT ACCEPTED: the regression test was INCONCLUSIVE or in ERROR, or no round fine-tuned a policy
+  2  bad input; 130 interrupted
+
+examples:
+  dv2s loop                                   # one round on dv2s-ppo, out/loop
+  dv2s loop --budget 400 --fine-tune-steps 100000 --k-eval 10 --out out/loop-big
+  dv2s loop --policy ppo:out/train/my_ppo/model.zip --rounds 3"""
+"""The end of ``dv2s loop --help``: what the exit status says, and examples."""
 
 
 def add_parser(subparsers) -> None:
@@ -31,10 +47,7 @@ def add_parser(subparsers) -> None:
                               "an untouched scenario set (Scenic's CARLA examples) and regression-test new against old on "
                               "the starting bank (dv2s regress statistics). Writes report.json, report.md, report.html to --out; rerunning with the same "
                               "--out and settings resumes (raise --rounds to add rounds).",
-                              epilog="examples:\n"
-                              "  dv2s loop                                   # one round on dv2s-ppo, out/loop\n"
-                              "  dv2s loop --budget 400 --fine-tune-steps 100000 --k-eval 10 --out out/loop-big\n"
-                              "  dv2s loop --policy ppo:out/train/my_ppo/model.zip --rounds 3")
+                              epilog=EPILOG)
     p.add_argument("--policy", default="dv2s-ppo", help="starting policy: an SB3 checkpoint spec (default dv2s-ppo)")
     p.add_argument("--rounds", type=int, default=LOOP["rounds"], help=f"rounds (default {LOOP['rounds']})")
     bank_option(p)
@@ -93,9 +106,8 @@ def add_parser(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run (or resume) the loop in ``--out`` and print its report."""
-    from pathlib import Path
-
+    """Run (or resume) the loop in ``--out``; print a summary, the verdict and the report paths. The exit status
+    is the verdict's (:data:`EPILOG`)."""
     from dv2s_gym.mining.loop import DEFAULT_OUT, LoopSettings, run_loop
 
     options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr",
@@ -118,12 +130,19 @@ def run(args: argparse.Namespace) -> int:
     out = args.out or DEFAULT_OUT
     settings = LoopSettings(bank_dir=getattr(args, "bank", None), n_envs=args.envs, **options)
     report = run_loop(args.policy, settings, out=out, progress=not args.no_progress)
-    print((Path(out) / "report.md").read_text(encoding="utf-8") if (Path(out) / "report.md").is_file() else "")
-    print(f"final policy: {report.policy}")
-    for kind in ("json", "md", "html"):
-        if kind in report.paths:
-            print(f"report ({kind}): {report.paths[kind]}")
-    return 0
+    print("\n".join(summary_lines({**report.to_json(), "recommendation": report.recommendation}, report.paths)))
+    return int(report.recommendation["exit_code"])
+
+
+def summary_lines(report: Mapping[str, Any], paths: Mapping[str, Any]) -> List[str]:
+    """The terminal's summary of a finished loop: one line per round, the verdict, where the reports are."""
+    from dv2s_gym.mining.loop_report import round_summary
+
+    lines = [round_summary(record) for record in report.get("rounds") or []]
+    verdict = report.get("recommendation") or {}
+    lines += ["", f"verdict: {verdict.get('sentence')}", f"recommended policy: {verdict.get('policy')}"]
+    lines += [f"report ({kind}): {paths[kind]}" for kind in ("html", "md", "json") if kind in paths]
+    return lines
 
 
 def _count_or_all(value: str, flag: str) -> Optional[int]:

@@ -9,6 +9,7 @@ from dv2s_gym.cli.inputs import json_option, llm_config
 from dv2s_gym.cli.parser import bank_option, llm_options
 from dv2s_gym.mining.settings import FEEDBACKS, MineSettings
 from dv2s_gym.workers.settings import BACKENDS, WorkerSettings
+from dv2s_gym.cli.interrupts import episodes_kept_note
 from envs.errors import Interrupted
 
 __all__ = ["add_parser", "run"]
@@ -114,8 +115,7 @@ def run(args: argparse.Namespace) -> int:
                    workers=WorkerSettings(backend=args.backend, workers=args.workers, address=args.address,
                                           timeout=args.timeout))
     except KeyboardInterrupt as stop:
-        raise Interrupted(getattr(stop, "note", None) or f"finished episodes are kept in "
-                          f"{out / 'episodes.jsonl'}; rerun the same command to resume") from None
+        raise Interrupted(getattr(stop, "note", None) or episodes_kept_note(Path(out) / "episodes.jsonl")) from None
     print(run.summary())
     if run.reports:
         print(f"reports: {', '.join(str(p) for p in run.reports.values())}")

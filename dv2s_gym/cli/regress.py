@@ -7,6 +7,7 @@ import json
 
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.parser import bank_option
+from dv2s_gym.cli.interrupts import episodes_kept_note
 from envs.errors import Interrupted
 
 __all__ = ["add_parser", "run"]
@@ -106,8 +107,7 @@ def run(args: argparse.Namespace) -> int:
                                    timeout=args.timeout),
             progress=not args.no_progress and not args.json)
     except KeyboardInterrupt as stop:
-        raise Interrupted(getattr(stop, "note", None) or f"finished episodes are kept in "
-                          f"{Path(out) / 'results.jsonl'}; rerun the same command to resume") from None
+        raise Interrupted(getattr(stop, "note", None) or episodes_kept_note(Path(out) / "results.jsonl")) from None
     if args.json:
         print(json.dumps(report, indent=1))
     else:

@@ -59,12 +59,12 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import sys
 import time
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 
 from dv2s_gym.mining.jsonl import read_rows
+from dv2s_gym.mining.loop_verdict import recommendation
 from dv2s_gym.mining.loop_settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
 from scenario_bank.run_identity import check_identity
 
@@ -105,8 +105,20 @@ class LoopReport:
 
     def to_json(self) -> Dict[str, Any]:
         """A JSON-safe dict (the body of ``report.json``)."""
-        return {"schema": "dv2s-loop", "schema_version": 1, "out": str(self.out), "settings": self.settings,
+        body = {"schema": "dv2s-loop", "schema_version": 1, "out": str(self.out), "settings": self.settings,
                 "policy": self.policy, "rounds": self.rounds}
+        return {**body, "recommendation": recommendation(body)}
+
+    @property
+    def recommendation(self) -> Dict[str, Any]:
+        """Which policy to use and why (:func:`dv2s_gym.mining.loop_verdict.recommendation`), as ``report.json``
+        has it once written (with the final-vs-starting comparison of two or more rounds)."""
+        path = self.paths.get("json")
+        if path is not None and Path(path).is_file():
+            written = json.loads(Path(path).read_text(encoding="utf-8")).get("recommendation")
+            if written:
+                return written
+        return recommendation(self.to_json())
 
 
 # --------------------------------------------------------------------------- state
@@ -304,7 +316,9 @@ def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[st
 
 
 def _log_default(line: str) -> None:
-    print(line, file=sys.stderr)
+    from dv2s_gym.progress_lines import log_line
+
+    log_line(line)
 
 
 # --------------------------------------------------------------------------- the loop
@@ -681,14 +695,10 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, a
 
 def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, label: str) -> Dict[str, Any]:
     """A fine-tuning arm by DAgger (:func:`policies.imitation.dagger_fine_tune`); a killed one resumes."""
-    from policies.dagger_checkpoint import checkpoint_position, describe_position
-    from policies.imitation import DAGGER_DEFAULTS, DaggerConfig, dagger_fine_tune
+    from policies.imitation import DaggerConfig, dagger_fine_tune
     from policies.registry import read_model_card
 
-    position = checkpoint_position(out)
-    if position is not None:
-        arm.log(f"{label}: fine-tune (dagger) resumed from "
-                f"{describe_position(*position, DAGGER_DEFAULTS['iterations'])}")
+    # a resumed run says so itself ("DAgger: resumed from ...", after the step's own line naming the arm)
     path = dagger_fine_tune(current, arm.config(out, weights), DaggerConfig(learning_rate=arm.learning_rate),
                             log=arm.log)
     dagger = read_model_card(path).get("fine_tune") or {}

@@ -231,7 +231,7 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
     report["hostname"] = socket.gethostname()
     report["timing"] = {name: round(value, 3) for name, value in episodes.timing.items()}
     report["duration"] = round(time.time() - started, 3)
-    write_reports(report, store.root)
+    write_reports(report, store.root, progress=progress)
     return report
 
 
