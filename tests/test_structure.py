@@ -166,7 +166,7 @@ def test_neither_the_product_nor_its_tests_import_the_benchmarks():
     assert not wrong, "\n".join(wrong)
 
 
-SUBSYSTEMS = ("__init__", "report_page", "workers", "pipeline", "story_check", "story", "bank_validate", "regress",
+SUBSYSTEMS = ("__init__", "progress_lines", "report_page", "workers", "pipeline", "story_check", "story", "bank_validate", "regress",
               "mining", "demo", "cli")
 """The parts of ``dv2s_gym/`` from the bottom up: each may import only those before it (and the lower packages)."""
 
