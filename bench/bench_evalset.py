@@ -38,8 +38,8 @@ MARGIN = 0.03
 
 # the in-house use cases under 0.80, with E2E-SC measured on 2026-11-27 (3 clips each) and what loses it
 KNOWN_E2E_MISSES = {
-    # the clip shows the two cars colliding as they merge (the script's own ego collides); the DRA describes the
-    # collision and not the two lane changes, so neither lane change is in the generated run
+    # the clips show the two cars colliding as they merge (the script's own ego collides); the DRA describes the
+    # collision and misses the lane changes (both in two clips, the ego's in the third), so the run lacks them
     "highway_simultaneous_merge_middle": 0.72,
     # the script's own ego collides with the oncoming car as it starts its turn, before the turn shows; the
     # generated run shows the collision, not the ego's left turn nor the crossing path
