@@ -5,8 +5,10 @@
 
 Runs ``python -m dv2s_gym.cli loop --out <fresh folder> --no-progress [extra options]`` as a child process (the
 same process a user starts with ``dv2s loop``: interpreter start, imports, the working bank's copy, every step,
-the reports) and prints its wall time, the machine's load average before and after, the core count, and the
-loop's own per-step timings and headline figures from ``loop.json``. Each run starts from an empty folder: a
+the reports) and prints its wall time, the machine's load average before, during (sampled every 10 s) and after,
+the core count, the CPU time of the process and the descendants it waited for (on idle cores the wall time lies
+between that CPU time spread over every core and the whole of it), and the loop's own per-step timings and
+headline figures from ``loop.json``. Each run starts from an empty folder: a
 resumed loop would skip finished steps. The round's log goes to ``<folder>/bench_loop.log``.
 """
 
@@ -16,6 +18,7 @@ import argparse
 import json
 import os
 import platform
+import resource
 import shutil
 import subprocess
 import sys
@@ -80,15 +83,26 @@ def main(argv: Optional[List[str]] = None) -> int:
     load_before = os.getloadavg()
     started = time.time()
     log_path = out.parent / f"{out.name}.bench_loop.log"
+    loads = []
     with open(log_path, "w", encoding="utf-8") as log:
-        code = subprocess.call(command, stdout=log, stderr=subprocess.STDOUT)
+        child = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
+        while True:
+            try:
+                code = child.wait(timeout=10)
+                break
+            except subprocess.TimeoutExpired:
+                loads.append(os.getloadavg()[0])
     wall = time.time() - started
     load_after = os.getloadavg()
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = usage.ru_utime + usage.ru_stime
     print(f"command: {' '.join(command)}")
     print(f"machine: {platform.platform()}, {os.cpu_count()} cores, Python {platform.python_version()}")
     print(f"date: {time.strftime('%Y-%m-%d %H:%M', time.gmtime(started))} UTC; load average before "
-          f"{load_before[0]:.1f}, after {load_after[0]:.1f} (1 min)")
-    print(f"exit status {code}; wall time {wall:.0f} s ({wall / 60:.1f} min); log {log_path}")
+          f"{load_before[0]:.1f}, during {min(loads, default=load_before[0]):.1f}-{max(loads, default=load_before[0]):.1f} "
+          f"(mean {sum(loads) / len(loads) if loads else load_before[0]:.1f}), after {load_after[0]:.1f} (1 min)")
+    print(f"exit status {code}; wall time {wall:.0f} s ({wall / 60:.1f} min); CPU time {cpu:.0f} s "
+          f"(over {os.cpu_count()} cores: {cpu / (os.cpu_count() or 1):.0f} s); log {log_path}")
     if (out / "loop.json").is_file():
         for line in summarize(out):
             print(line)
