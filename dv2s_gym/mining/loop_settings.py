@@ -41,7 +41,7 @@ class LoopSettings:
     """A writable bank to grow (``None``: a copy of the shipped bank in ``out/bank``)."""
     scenarios: Optional[Tuple[str, ...]] = None
     """The scenarios mined and regression-tested (``None``: the starting bank's)."""
-    budget: int = 40
+    budget: int = 32
     """The miner's episodes per round."""
     sampler: str = "novelty-bandit"
     """The miner's sampler (:data:`dv2s_gym.mining.samplers.SAMPLERS`)."""
@@ -54,7 +54,7 @@ class LoopSettings:
     """Share of the round's mined families held out from fine-tuning, in [0, 1]."""
     fine_tune_method: str = "dagger"
     """``ppo`` or ``dagger`` (:data:`FINE_TUNE_METHODS`)."""
-    fine_tune_steps: int = 8_000
+    fine_tune_steps: int = 6_000
     """Env steps of fine-tuning per round."""
     fine_tune_lr: Optional[float] = None
     """The fine-tuning's (constant) learning rate; ``None`` becomes the method's
