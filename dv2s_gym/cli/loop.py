@@ -34,7 +34,7 @@ def add_parser(subparsers) -> None:
     from dv2s_gym.mining.loop_settings import DEFAULT_PROFILE, DEFAULTS as LOOP, EVIDENCE, PROFILES, LoopSettings
 
     p = subparsers.add_parser("loop", help="mine a policy's failures, add them to the bank, fine-tune, measure (one round "
-                              "on the embedded defaults in about 5 minutes on 2 idle cores; --profile evidence for "
+                              "on the embedded defaults, sized for about 5 minutes on 2 idle cores; --profile evidence for "
                               "a round large enough to judge)",
                               formatter_class=argparse.RawDescriptionHelpFormatter,
                               description="Closed-loop failure mining. Each round: mine the policy's failures (dv2s mine) "
@@ -50,8 +50,8 @@ def add_parser(subparsers) -> None:
                               epilog=EPILOG)
     p.add_argument("--policy", default="dv2s-ppo", help="starting policy: an SB3 checkpoint spec (default dv2s-ppo)")
     p.add_argument("--profile", choices=list(PROFILES), default=DEFAULT_PROFILE,
-                   help="the settings every option below defaults to: quick (the embedded defaults: a round in about "
-                   "5 minutes on 2 idle cores, too small to judge the fine-tuned policy) or evidence (a round large "
+                   help="the settings every option below defaults to: quick (the embedded defaults: a round sized for "
+                   "about 5 minutes on 2 idle cores, too small to judge the fine-tuned policy) or evidence (a round large "
                    "enough to judge, an hour or more: " + ", ".join(f"--{k.replace('_', '-')} {v}"
                                                                     for k, v in EVIDENCE.items())
                    + "); options given explicitly override the profile's values")

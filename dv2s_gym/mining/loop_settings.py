@@ -28,7 +28,7 @@ class LoopError(DV2SError, ValueError):
 class LoopSettings:
     """The settings of a loop (:func:`dv2s_gym.mining.loop.run_loop`; module docstring of
     :mod:`dv2s_gym.mining.loop` for the steps). The embedded defaults (the ``quick`` profile of :data:`PROFILES`)
-    are small, for one round in about 5 minutes on 2 idle cores, mining, fine-tuning both arms and judging
+    are small, sized for one round in about 5 minutes on 2 idle cores, mining, fine-tuning both arms and judging
     (``python -m bench.bench_loop`` times a round and bench/RESULTS.md records it): too few held-out episodes and
     families for a drop or a test, which the round says. :meth:`evidence` (``dv2s loop --profile evidence``)
     gives the larger round whose numbers can be judged. ``loop.json`` records the resolved values; a resumed loop
