@@ -4,7 +4,8 @@
 
     {"schema": "dv2s-loop", "schema_version": 1, "out", "settings", "policy": the last fine-tuned policy's spec,
      "recommendation": {"policy": the spec to use, "verdict": ACCEPTED | REJECTED | NOT ACCEPTED, "round",
-                        "candidate", "reason", "sentence", "exit_code"} (:mod:`dv2s_gym.mining.loop_verdict`),
+                        "candidate", "reason", "sentence", "exit_code", "too_small": why the round was too small
+                        to judge, or None} (:mod:`dv2s_gym.mining.loop_verdict`),
      "rounds": [{"round", "policy": spec it started from, "new_policy": fine-tuned spec,
                  "next_policy": the spec the next round starts from (the one the verdict on the rounds so far
                  recommends), "next_policy_reason",

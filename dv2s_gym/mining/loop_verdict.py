@@ -71,7 +71,8 @@ def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
 
     Returns ``{"policy": the recommended spec, "verdict": the last fine-tuned policy's (ACCEPTED, REJECTED,
     NOT ACCEPTED), "round", "candidate": that policy's spec, "reason", "sentence": one line for people,
-    "exit_code"}``."""
+    "exit_code", "too_small": why a NOT ACCEPTED round was too small to judge (:func:`too_small`; the sentence
+    then points to the evidence profile) or ``None``}``."""
     start = (report.get("settings") or {}).get("policy")
     recommended, last = start, None
     for record in report.get("rounds") or []:
