@@ -14,6 +14,8 @@ from dv2s_gym.regress import (
     load_report,
 )
 from regress_call import run_regression
+from dv2s_gym.regress.html import MAX_VIDEOS
+from dv2s_gym.regress.outputs import write_reports
 from dv2s_gym.regress.report import SCHEMA, SCHEMA_VERSION
 from dv2s_gym.regress.replay import replay_episode
 from dv2s_gym.regress.tasks import KIND
@@ -91,6 +93,19 @@ def test_newly_failing_and_traces_of_failed_episodes(noisy_run):
                 assert result["trace"] is None
     expected = [e["id"] for e in report["episodes"] if e["candidate"]["failed"] and not e["baseline"]["failed"]]
     assert report["newly_failing"] == expected and expected  # the noisy copy crashes somewhere in 8 episodes
+
+
+def test_the_html_report_shows_newly_failing_pairs_as_clips_and_lists_them_without_when_clips_are_off(
+        noisy_run, tmp_path):
+    """The run's report.html plays both sides of every newly failing episode (the tests that never read the page
+    pass ``clips=False``); without clips the page lists the same pairs and says the clips were not rendered."""
+    out, report = noisy_run
+    shown = min(len(report["newly_failing"]), MAX_VIDEOS)
+    page = (out / "report.html").read_text()
+    assert shown and page.count('class="clip pair"') == shown and page.count("<video") == 2 * shown
+    plain = write_reports(report, tmp_path, clips=False)["html"].read_text()
+    assert plain.count('class="clip pair"') == shown and "<video" not in plain
+    assert plain.count("clips were not rendered") == 2 * shown
 
 
 def test_junit_xml_has_one_case_per_scenario_and_the_verdict_and_is_valid(noisy_run):
@@ -451,7 +466,7 @@ def test_noisy_policies_act_alike_on_the_same_episode_whatever_ran_before():
 @pytest.mark.slow
 def test_sequential_run_stops_as_soon_as_the_verdict_is_settled(tmp_path):
     report = run_regression(NOISY, "rule", scenarios=PAIR, episodes=30, batch=5, sequential=True, workers=2,
-                            out_dir=tmp_path, progress=False)
+                            out_dir=tmp_path, progress=False, clips=False)
     assert report["verdict"] == "FAIL" and report["stopped_early"]
     assert report["sequential"]["verdict"] == "FAIL"
     assert len(report["episodes"]) < 2 * 30 and len(report["episodes"]) % (2 * 5) == 0
@@ -475,7 +490,7 @@ def test_a_degraded_copy_fails_and_names_the_scenarios_that_regressed(tmp_path):
     # 0.3's 44): the noise raises several scenarios by more (obstacle in lane by 20 of its 24 pairs, the car
     # passing behind the slow truck by 15, with no pair the other way), so a regression to name is there
     report = run_regression("rule?action_noise=0.3", "rule", scenarios=["tag:highway"], mde=0.5, workers=2,
-                            out_dir=tmp_path, progress=False)
+                            out_dir=tmp_path, progress=False, clips=False)
     assert report["settings"]["episodes"] == 24
     assert report["verdict"] == "FAIL"
     assert report["regressed"]
@@ -484,7 +499,7 @@ def test_a_degraded_copy_fails_and_names_the_scenarios_that_regressed(tmp_path):
         assert table["candidate_only"] > table["baseline_only"]
     # the other way round the degraded copy is the baseline: never a FAIL of the candidate
     swapped = run_regression("rule", "rule?action_noise=0.3", scenarios=report["regressed"][:1], workers=2,
-                             out_dir=tmp_path / "swapped", progress=False)
+                             out_dir=tmp_path / "swapped", progress=False, clips=False)
     assert swapped["verdict"] != "FAIL"
 
 
