@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import xml.etree.ElementTree as ET
 
 import pytest
@@ -33,10 +34,11 @@ COMPARISON_KEYS = {"table", "difference", "p_value", "p_adjusted", "verdict", "r
 
 @pytest.fixture(scope="module")
 def noisy_run(tmp_path_factory):
-    """A degraded copy of the rule-based driver against the original: 2 scenarios x 4 seeds."""
+    """A degraded copy of the rule-based driver against the original: 2 scenarios x 4 seeds (the HTML report without
+    its clips: the test of the clips renders them)."""
     out = tmp_path_factory.mktemp("noisy")
     report = run_regression(NOISY, "rule", scenarios=PAIR, episodes=4, workers=2, out_dir=out, env_config=SHORT,
-                            progress=False)
+                            progress=False, clips=False)
     return out, report
 
 
@@ -95,15 +97,18 @@ def test_newly_failing_and_traces_of_failed_episodes(noisy_run):
     assert report["newly_failing"] == expected and expected  # the noisy copy crashes somewhere in 8 episodes
 
 
+@pytest.mark.slow
 def test_the_html_report_shows_newly_failing_pairs_as_clips_and_lists_them_without_when_clips_are_off(
         noisy_run, tmp_path):
-    """The run's report.html plays both sides of every newly failing episode (the tests that never read the page
-    pass ``clips=False``); without clips the page lists the same pairs and says the clips were not rendered."""
+    """report.html plays both sides of every newly failing episode, rendered by default (the tests that never read
+    the page pass ``clips=False``); without clips the page lists the same pairs and says the clips were not
+    rendered."""
     out, report = noisy_run
     shown = min(len(report["newly_failing"]), MAX_VIDEOS)
-    page = (out / "report.html").read_text()
+    shutil.copytree(out / "traces", tmp_path / "traces")  # the report names its traces relative to its folder
+    page = write_reports(report, tmp_path)["html"].read_text()
     assert shown and page.count('class="clip pair"') == shown and page.count("<video") == 2 * shown
-    plain = write_reports(report, tmp_path, clips=False)["html"].read_text()
+    plain = (out / "report.html").read_text()
     assert plain.count('class="clip pair"') == shown and "<video" not in plain
     assert plain.count("clips were not rendered") == 2 * shown
 
@@ -505,8 +510,6 @@ def test_a_degraded_copy_fails_and_names_the_scenarios_that_regressed(tmp_path):
 
 @pytest.mark.slow
 def test_a_changed_scenario_script_makes_an_old_report_another_bank_version(tmp_path):
-    import shutil
-
     from scenario_bank import scenario_path
 
     bank = tmp_path / "bank"
