@@ -13,12 +13,6 @@ from pathlib import Path
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("DV2S_CACHE_DIR", tempfile.mkdtemp(prefix="dv2s-test-cache-"))
 
-# PYTHONDONTWRITEBYTECODE=1 (set in some shells and CI images) keeps pytest from caching the test modules with
-# their asserts rewritten: every run and every xdist worker would rewrite all of them again, about 8 s of CPU
-# a worker. The test processes cache bytecode as a plain Python run does (in the ignored __pycache__ folders);
-# the subprocesses they start keep the user's setting.
-sys.dont_write_bytecode = False
-
 # DV2S_TEST_CPU_LOG=path records each test's CPU time (tests/cpu_time_plugin.py)
 pytest_plugins = ["cpu_time_plugin"]
 
