@@ -43,7 +43,7 @@ EGOS = ("scenic", "rule", "keep_lane", "idm")
 
 PROBE_EGOS: Dict[str, str] = {
     "hangback": "drives at 60% of its start speed and keeps a 3 s gap (policies.probe_drivers.HangbackEgo)",
-    "rush": "asks FASTER every step, up to 30 m/s, in its lane (policies.probe_drivers.RushEgo)",
+    "rush": "asks FASTER from the first step until its target is 10 m/s above its start speed (policies.probe_drivers.RushEgo)",
     "surge": "holds its start speed, then at 3 s raises its target by 10 m/s (policies.probe_drivers.SurgeEgo)",
     "weave": "changes lanes left and right every 3 s from 1 s on (policies.probe_drivers.WeaveEgo)",
 }

@@ -44,14 +44,24 @@ class HangbackEgo(IDMEgo):
 
 
 class RushEgo(StateDriver):
-    """Accelerates as hard as the action set allows, to the top target speed (30 m/s), and stays in its lane.
+    """Accelerates as hard as the action set allows to its top speed, whatever is ahead; never changes lanes.
 
-    ``FASTER`` every step, whatever is ahead.
+    Its top speed is 10 m/s above its start speed (at most 30 m/s, the top of the speed grid): ``FASTER``
+    on every policy step from the first one until its target speed reaches it, then ``IDLE``.
     """
 
+    RISE = 10.0
+
+    def __init__(self, env) -> None:
+        super().__init__(env)
+        self._top: Optional[float] = None
+
     def act(self) -> int:
-        """Always ``FASTER``."""
-        return FASTER
+        """``FASTER`` while the target speed is under the top speed, else ``IDLE``."""
+        vehicle = self.env.unwrapped.vehicle
+        if self._top is None:
+            self._top = min(30.0, float(vehicle.speed) + self.RISE)
+        return FASTER if float(vehicle.target_speed) < self._top - 1e-6 else IDLE
 
 
 class SurgeEgo(StateDriver):

@@ -122,3 +122,25 @@ def test_the_stopped_vehicle_stays_stopped(name, actor):
 @pytest.mark.parametrize("ego", EGOS)
 def test_the_blockers_box_the_ego_in_at_the_obstacle(ego):
     _count("highway_obstacle_in_lane", ego, boxed_in_at_the_obstacle)
+
+
+def brakes_only_ahead_in_the_ego_lane(actor, decel):
+    """When ``actor`` first decelerates at ``decel`` m/s^2 or more (over 0.6 s), the ego is behind it in its lane;
+    an episode that a collision of the ego ended before the actor braked does not count against it."""
+    def check(trace):
+        period = 1.0 / float(trace.config.get("policy_frequency", 5))
+        window = max(1, round(0.6 / period))
+        states = [s for s in trace.states if actor in s]
+        for before, state in zip(states, states[window:]):
+            if (before[actor][3] - state[actor][3]) / (window * period) >= decel:
+                # in the lead's frame: it keeps its lane, while a lane-changing ego's heading is off the road's
+                ahead, left = _frame(before[actor], before["ego"])
+                return ahead < -2.5 and abs(left) <= 1.75
+        return any(e.get("kind") == "collision" and "ego" in e.get("actors", []) for e in trace.events)
+    return check
+
+
+@pytest.mark.parametrize("name, decel", [("highway_lead_vehicle_brakes", 4.0), ("highway_lead_vehicle_decelerates", 2.0)])
+def test_the_lead_brakes_only_with_the_ego_behind_it_in_its_lane(name, decel):
+    # an ego that weaves between lanes: the lead waits until it is back behind it before braking
+    _count(name, "weave", brakes_only_ahead_in_the_ego_lane("lead", decel))
