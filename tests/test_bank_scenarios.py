@@ -215,11 +215,7 @@ def test_short_episode_runs(name, policy):
 STORY_SEEDS = range(10)
 STORY_THRESHOLD = 0.9  # at least 9 of 10 seeds, with every ego
 
-KNOWN_STORY_MISSES: dict = {
-    # the IDM ego slows down at the junction after the oncoming car has timed its arrival on it, which then
-    # enters its path 3.1-3.5 s ahead of it (seeds 4 and 6)
-    ("urban_left_turn_oncoming", "idm"): 0.8,
-}
+KNOWN_STORY_MISSES: dict = {}
 """Scenario and ego pairs under the threshold, with their rate on STORY_SEEDS: the test asserts exactly these
 miss, so it fails when one more falls under or when one of them is fixed (then remove it here)."""
 
@@ -251,7 +247,11 @@ PROBED_SCENARIOS = ("highway_lead_vehicle_brakes", "highway_lead_vehicle_deceler
 """Scenarios whose actors time or place their manoeuvre on the ego (its lane, its distance to a crossing point),
 run with the probe egos that hang back, rush, surge and weave (dv2s_gym/story.py: PROBE_EGOS)."""
 
-KNOWN_PROBE_MISSES: dict = {}
+KNOWN_PROBE_MISSES: dict = {
+    # the weaving ego changes lanes into the car driving beside it, which ends the episode before the lead's
+    # story (seed 1)
+    ("highway_lead_vehicle_decelerates", "weave"): 0.8,
+}
 """Probed scenario and probe ego pairs under the threshold, with their rate on PROBE_SEEDS; exact, as
 KNOWN_STORY_MISSES."""
 
