@@ -252,8 +252,7 @@ KNOWN_PROBE_MISSES: dict = {
     # story (seed 1)
     ("highway_lead_vehicle_decelerates", "weave"): 0.8,
     # the oncoming car crawls to the junction at 3 m/s at the slowest and crosses 4-7 s ahead of an ego that
-    # hangs back far behind (seeds 1, 2, 4); waiting longer would stall it against the rule-based ego, which
-    # waits for it
+    # hangs back far behind (seeds 1, 2, 4)
     ("urban_left_turn_oncoming", "hangback"): 0.4,
     # the rushing ego is already turning when the oncoming car reaches its path, so it is no longer oncoming
     # (seed 3)
