@@ -4,7 +4,8 @@ The story rate (tests/test_bank_scenarios.py::test_story_rate) checks what each 
 these tests pin, from the actors' raw tracks, what a scenario is for, so that a sidecar trimmed or a
 checker loosened cannot hide a scenario that stopped doing it: the on-ramp car merges in front of the
 ego, all three walkers cross in front of it, a stopped car or parked truck stays stopped, the cars
-that box the ego in are beside it when it reaches the obstacle. Each runs a fixed range of seeds
+that box the ego in are beside it when it reaches the obstacle, a lead car brakes only with the ego
+behind it in its lane (with an ego that weaves between lanes). Each runs a fixed range of seeds
 with the constant-speed keep-lane ego and the rule-based driver (which slows down and hangs back)
 and needs 9 of 10.
 
