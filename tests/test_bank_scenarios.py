@@ -244,20 +244,20 @@ def test_story_rate(name):
 
 # ------------------------------------------------- the story plays for probe egos
 
-PROBE_SEEDS = range(5)
+PROBE_SEEDS = range(10)
 PROBED_SCENARIOS = ("highway_lead_vehicle_brakes", "highway_lead_vehicle_decelerates", "urban_left_turn_oncoming")
 """Scenarios whose actors time or place their manoeuvre on the ego (its lane, its distance to a crossing point),
 run with the probe egos that hang back, rush, surge and weave (dv2s_gym/story.py: PROBE_EGOS)."""
 
 KNOWN_PROBE_MISSES: dict = {
     # the weaving ego changes lanes into the car driving beside it, which ends the episode before the lead's
-    # story (seed 1)
+    # story (seeds 1 and 8)
     ("highway_lead_vehicle_decelerates", "weave"): 0.8,
     # the oncoming car crawls to the junction at 3 m/s at the slowest and crosses 4-7 s ahead of an ego that
-    # hangs back far behind (seeds 1, 2, 4)
+    # hangs back far behind (seeds 1, 2, 4, 6, 7, 8)
     ("urban_left_turn_oncoming", "hangback"): 0.4,
     # the rushing ego is already turning when the oncoming car reaches its path, so it is no longer oncoming
-    # (seed 3)
+    # (seeds 3 and 7)
     ("urban_left_turn_oncoming", "rush"): 0.8,
 }
 """Probed scenario and probe ego pairs under the threshold, with their rate on PROBE_SEEDS; exact, as
