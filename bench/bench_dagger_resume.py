@@ -23,11 +23,12 @@ SCENARIOS = {"highway_lead_vehicle_brakes": 1.0, "urban_pedestrian_crossing": 3.
 
 
 def _run(out: Path, steps: int, **extra):
-    from policies.imitation import dagger_fine_tune
+    from policies.imitation import DaggerConfig, dagger_fine_tune
+    from policies.training import TrainConfig
 
     began = time.perf_counter()
-    path = dagger_fine_tune("dv2s-ppo", bank_dir=None, out=out, steps=steps, weights=SCENARIOS, seed=7, n_envs=2,
-                            progress_bar=False, log=lambda _: None, **extra)
+    config = TrainConfig.fine_tuning(out, steps=steps, weights=SCENARIOS, seed=7, n_envs=2, progress_bar=False)
+    path = dagger_fine_tune("dv2s-ppo", config, DaggerConfig(**extra), log=lambda _: None)
     return path, time.perf_counter() - began
 
 

@@ -1,18 +1,24 @@
-"""The offline backends' figures on the two whole evaluation sets, checked against the figures measured on them.
+"""The offline backends' figures on the two whole evaluation sets, checked against targets and measured figures.
 
     python -m bench.bench_evalset                    # both sets, DRA and end to end
     python -m bench.bench_evalset --set external     # only dv2s_gym/evalset_highway_env
     python -m bench.bench_evalset --stage dra        # only the DRA figures
 
-Sets: ``in-house`` is ``dv2s_gym/evalset`` (63 clips of the bank scenarios in DV2S-v0), ``external`` is
-``dv2s_gym/evalset_highway_env`` (66 clips rendered by stock highway-env). Backends: the bev DRA and the rules
-SG. Checks, with the floors below (a floor is a measured value less ``MARGIN``, a ceiling one plus it):
+Sets: ``in-house`` is ``dv2s_gym/evalset`` (96 clips: 3 of each of the 32 bank scenarios in DV2S-v0), ``external``
+is ``dv2s_gym/evalset_highway_env`` (66 clips rendered by stock highway-env). Backends: the bev DRA and the rules
+SG. Checks (the in-house ones are targets: the paper's figures to beat; the external ones are floors at a
+measured value less ``MARGIN``, ceilings at one plus it):
 
 * in-house DRA: every clip described, SCS >= 0.90 and HR <= 0.10 overall;
 * in-house end to end: every clip converted, E2E-SC >= 0.90 overall, >= 0.80 per use case except exactly the
   use cases in ``KNOWN_E2E_MISSES`` (each still >= 0.70), no generated script with a failure;
 * external DRA and end to end: the overall and per-use-case figures of ``EXTERNAL_DRA_MEASURED`` /
   ``EXTERNAL_E2E_MEASURED`` (``dv2s_gym/evalset_highway_env/README.md`` states them).
+
+Measured on 2026-11-27 (2 cores shared with other jobs, no GPU; 10 min 37 s wall): the in-house SCS (0.860), its
+E2E-SC (0.874) and the >= 0.70 floor of three known misses (the two cyclist use cases, the car passing behind
+the slow truck) fall short; every other check passes
+(``docs/results.md``, ``bench/RESULTS.md``).
 
 Prints each set's per-use-case table and one line per check; exits 1 when a check fails. The unit tests
 (tests/test_evalset.py, tests/test_external_evalset.py) run the same pipeline on one clip per use case.
@@ -30,15 +36,31 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 MARGIN = 0.03
 
+# the in-house use cases under 0.80, with E2E-SC measured on 2026-11-27 (3 clips each) and what loses it
 KNOWN_E2E_MISSES = {
-    # the script's own ego (it must change lanes) collides with the car merging into the middle lane
+    # the clips show the two cars colliding as they merge (the script's own ego collides); the DRA describes the
+    # collision and misses the lane changes (both in two clips, the ego's in the third), so the run lacks them
     "highway_simultaneous_merge_middle": 0.72,
-    # the script's own ego collides with the oncoming car as it starts its turn, before the turn shows
+    # the script's own ego collides with the oncoming car as it starts its turn, before the turn shows; the
+    # generated run shows the collision, not the ego's left turn nor the crossing path
     "left_turn_intersection_oncoming": 0.75,
+    # the car overtakes the ego before it cuts in; the DRA reads the cut-in (and a brake), not the overtake
+    "highway_cut_in_from_left": 0.78,
+    "highway_cut_in_from_right": 0.78,
+    # the DRA reads the car passing behind the slow truck as a cut-in that brakes, and not the truck at all
+    "highway_fast_car_passes_behind_slow_truck": 0.54,
+    # the ramp car's acceleration is read as a brake ("merges into the lane in front of it and suddenly brakes"),
+    # so the generated run has no acceleration
+    "insertion_highway": 0.78,
+    # the DRA sees no cyclist ("no other road user comes near the ego car"): no bicycle, crossing or go-straight
+    "urban_cyclist_crossing_paths": 0.50,
+    "urban_left_turn_across_cyclist": 0.43,
+    # the lead car is described as standing still ahead; its acceleration and its braking are not read
+    "urban_lead_vehicle_accelerates_then_stops": 0.75,
 }
 
-# measured on 2026-11-23 (bev DRA, rules SG) over the 66 clips (the 51 first ones and the 15 of stock
-# classes, scales, roundabout and stock traffic): per use case (SCS, HR) and E2E-SC
+# measured (bev DRA, rules SG) over the 66 clips (the 51 first ones and the 15 of stock classes, scales,
+# roundabout and stock traffic): per use case (SCS, HR) on 2026-11-23, the same on 2026-11-27; E2E-SC on 2026-11-27
 EXTERNAL_DRA_MEASURED = {
     "crossing_paths": (1.000, 0.000), "cut_in": (0.958, 0.000), "ego_lane_change": (1.000, 0.083),
     "ego_turn": (1.000, 0.000), "lead_vehicle_brakes": (1.000, 0.000), "lead_vehicle_stopped": (0.833, 0.000),
@@ -47,12 +69,12 @@ EXTERNAL_DRA_MEASURED = {
 }
 EXTERNAL_DRA_OVERALL = (0.941, 0.039)
 EXTERNAL_E2E_MEASURED = {
-    "crossing_paths": 1.000, "cut_in": 0.958, "ego_lane_change": 1.000, "ego_turn": 0.929,
+    "crossing_paths": 1.000, "cut_in": 0.958, "ego_lane_change": 1.000, "ego_turn": 1.000,
     "lead_vehicle_brakes": 1.000, "lead_vehicle_stopped": 0.944, "left_turn_oncoming": 1.000,
-    "obstacle_in_lane": 1.000, "on_ramp_merge": 0.500, "overtake": 0.500, "roundabout": 0.730,
+    "obstacle_in_lane": 1.000, "on_ramp_merge": 0.500, "overtake": 0.500, "roundabout": 0.738,
     "turn_into_path": 1.000,
 }
-EXTERNAL_E2E_OVERALL = 0.878
+EXTERNAL_E2E_OVERALL = 0.885
 
 Check = Tuple[str, bool]
 
@@ -73,7 +95,8 @@ def in_house_e2e_checks(report: Dict[str, Any]) -> List[Check]:
     return [("every clip converted", summary["overall"]["ok_rate"] == 1.0),
             (f"E2E-SC {overall:.3f} >= 0.90", overall >= 0.90),
             (f"use cases under 0.80 {sorted(low)} are the known ones", set(low) == set(KNOWN_E2E_MISSES)),
-            ("the known ones still >= 0.70", all(value >= 0.70 for value in low.values())),
+            (f"the known ones still >= 0.70 (under: {sorted(name for name, value in low.items() if value < 0.70)})",
+             all(value >= 0.70 for value in low.values())),
             (f"no generated script with a failure {failed}", not failed)]
 
 

@@ -69,7 +69,7 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
               sampler_options: Optional[Dict[str, Any]] = None, feedback: Optional[str] = "robustness"
               ) -> Dict[str, Any]:
     """One mining run in a fresh folder; its counts and wall time."""
-    from dv2s_gym.mining.miner import mine
+    from dv2s_gym.mining.miner import MineSettings, WorkerSettings, mine
 
     shutil.rmtree(out, ignore_errors=True)
     from dv2s_gym.mining.samplers import SAMPLER_OPTIONS
@@ -80,8 +80,9 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
     if feedback is not None:  # None: the sampler's own default (mine's)
         extra["feedback"] = feedback
     start = time.perf_counter()
-    run = mine(policy, out=out, budget=budget, sampler=sampler, seed=seed, workers=workers, reference=reference,
-               scenarios=scenarios, batch=batch, progress=False, reports=False, **extra)
+    settings = MineSettings(budget=budget, sampler=sampler, seed=seed, reference=reference, scenarios=scenarios,
+                            batch=batch, **extra)
+    run = mine(policy, settings, out=out, workers=WorkerSettings(workers=workers), progress=False, reports=False)
     seconds = time.perf_counter() - start
     failures = run.failures
     avoidable = [r for r in failures if r.get("avoidable") is True]
@@ -281,7 +282,7 @@ def bench_saturation(policies: Sequence[str], seed: int, budget: int, large: int
     and after ``large``. ``found / found_large`` above 1/2 means no sampler can find 2x random's at ``budget`` on
     that policy, unless it finds what ``large`` random episodes do not."""
     from dv2s_gym.mining.cluster import cluster_id, pair_of
-    from dv2s_gym.mining.miner import mine
+    from dv2s_gym.mining.miner import MineSettings, WorkerSettings, mine
 
     print(f"# saturation: random sampling, policies {list(policies)}, seed {seed}, {budget} against {large} episodes, "
           f"{workers} workers", flush=True)
@@ -289,8 +290,9 @@ def bench_saturation(policies: Sequence[str], seed: int, budget: int, large: int
     for index, policy in enumerate(policies):
         out = os.path.join(root, f"saturation-{index}")
         shutil.rmtree(out, ignore_errors=True)
-        run = mine(policy, out=out, budget=large, sampler="random", seed=seed, workers=workers, reference=None,
-                   scenarios=scenarios, batch=batch, progress=False, reports=False)
+        settings = MineSettings(budget=large, sampler="random", seed=seed, reference=None, scenarios=scenarios,
+                                batch=batch)
+        run = mine(policy, settings, out=out, workers=WorkerSettings(workers=workers), progress=False, reports=False)
         counts = {}
         for n in (budget, large):
             failed = [r for r in run.records[:n] if r.get("failure") and not r.get("error")]

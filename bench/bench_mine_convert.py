@@ -56,13 +56,13 @@ def main(argv=None) -> int:
 
     t0 = time.perf_counter()
     from dv2s_gym.mining.convert import convert_failure
-    from dv2s_gym.mining.miner import mine
+    from dv2s_gym.mining.miner import MineSettings, WorkerSettings, mine
     from dv2s_gym.pipeline.convert import convert_video
     imports = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    run = mine(args.policy, out=work / "run", budget=args.budget, sampler="random", workers=1, seed=args.seed,
-               reference=None, progress=False, convert=False, reports=False)
+    run = mine(args.policy, MineSettings(budget=args.budget, sampler="random", seed=args.seed, reference=None),
+               out=work / "run", workers=WorkerSettings(workers=1), progress=False, reports=False)
     mining = time.perf_counter() - t0
     failed = [r for r in sorted(run.records, key=lambda r: r["index"]) if r.get("failure") and not r.get("error")]
     chosen, seen = [], set()

@@ -77,13 +77,14 @@ def run_raw(episodes: Sequence[Tuple[str, int]]) -> Tuple[float, float]:
 def run_harness(count: int, workers: int) -> Tuple[float, float, float]:
     """``run_regression`` over the same episodes with ``workers`` processes: seconds end to end, from the
     first result to the last, and to the first result."""
-    from dv2s_gym.regress.runner import run_regression
+    from dv2s_gym.regress.runner import RegressSettings, WorkerSettings, run_regression
 
     ends: List[float] = []
     with tempfile.TemporaryDirectory(prefix="bench-regress-") as out:
         start = time.perf_counter()
-        report = run_regression(POLICY, scenarios=[SCENARIOS], episodes=count, workers=workers, out_dir=out,
-                                progress=False, on_result=lambda _: ends.append(time.perf_counter()))
+        report = run_regression(POLICY, None, RegressSettings(scenarios=[SCENARIOS], episodes=count),
+                                workers=WorkerSettings(workers=workers), out_dir=out, progress=False,
+                                on_result=lambda _: ends.append(time.perf_counter()))
         seconds = time.perf_counter() - start
     if report["errors"]:
         raise RuntimeError(f"benchmark episodes ended in errors: {report['errors'][:2]}")

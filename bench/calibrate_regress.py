@@ -1,11 +1,11 @@
-"""Monte Carlo calibration of the ``dv2s regress`` statistics (dv2s_gym/regress/stats.py).
+"""Monte Carlo calibration of the ``dv2s regress`` statistics (dv2s_gym/regress/stats.py and family.py).
 
     python -m bench.calibrate_regress            # full run (a few minutes on 2 cores)
     python -m bench.calibrate_regress --quick    # fewer repetitions
     python -m bench.calibrate_regress --only gate  # one section (fixed, sizes, sequential, gate, gate-sequential)
 
 Synthetic paired outcomes from the shared-difficulty model (a per-episode latent difficulty
-shared by both policies, latent correlation rho; see the module docstring), fed through the
+shared by both policies, latent correlation rho; bench/regress_montecarlo.py), fed through the
 actual decision rules. It prints:
 
 * the false-alarm rate (FAIL with identical policies) of ``compare`` at the documented episode
@@ -15,7 +15,7 @@ actual decision rules. It prints:
   and what the same count gives unpaired;
 * the episodes needed for 80 % power, paired against unpaired, analytic and simulated, for a
   few correlations;
-* the same checks for ``SequentialTest`` (5 looks);
+* the same checks for ``SequentialTest`` (5 looks, O'Brien-Fleming spending);
 * the gate over the bank's 21 scenarios (``compare_scenarios``: every scenario a test, the pooled test in
   the same family) at the default, power-planned, episodes and at 20: false alarms with identical
   policies, a single scenario going 0 % -> 30 % (with and without fixes elsewhere) and +20 pp, a
@@ -31,33 +31,33 @@ import time
 import numpy as np
 from scipy import stats
 
-from dv2s_gym.regress.family import gate_rejections
-from dv2s_gym.regress.power import plan_episodes, run_power
-
-from dv2s_gym.regress.stats import (
-    DEFAULT_ALPHA,
-    DEFAULT_CORRELATION,
-    DEFAULT_MARGIN,
+from bench.regress_montecarlo import (
     DOCUMENTED_BASELINE_RATE,
     DOCUMENTED_DELTA,
     DOCUMENTED_EPISODES,
     DOCUMENTED_POWER,
     MonteCarloRate,
-    PairedTable,
-    SequentialTest,
-    _newcombe_bounds,
-    Verdict,
-    compare_scenarios,
     discordant_probability,
     paired_cell_probabilities,
     paired_sample_size,
     simulate_false_alarm,
     simulate_paired_outcomes,
-    simulate_tables,
     simulate_unpaired_power,
     simulate_verdict_rates,
     simulated_sample_size,
     unpaired_sample_size,
+)
+from dv2s_gym.regress.family import DEFAULT_POOLED_WEIGHT, gate_rejections
+from dv2s_gym.regress.power import plan_episodes, run_power
+from dv2s_gym.regress.stats import (
+    DEFAULT_ALPHA,
+    DEFAULT_CORRELATION,
+    DEFAULT_MARGIN,
+    PairedTable,
+    SequentialTest,
+    Verdict,
+    _newcombe_bounds,
+    compare_scenarios,
 )
 
 P0 = DOCUMENTED_BASELINE_RATE
@@ -109,8 +109,7 @@ def sample_sizes(reps: int, seed: int) -> None:
               f"            {unpaired_analytic:6d}             {unpaired_simulated:6d}{mark}")
 
 
-def run_sequential(p_candidate: float, reps: int, rng: np.random.Generator, spending: str,
-                   looks: int = 5) -> tuple[dict, float]:
+def run_sequential(p_candidate: float, reps: int, rng: np.random.Generator, looks: int = 5) -> tuple[dict, float]:
     n_max = DOCUMENTED_EPISODES
     counts = {verdict: 0 for verdict in Verdict}
     used = 0
@@ -119,7 +118,7 @@ def run_sequential(p_candidate: float, reps: int, rng: np.random.Generator, spen
         cand, base = simulate_paired_outcomes(n_max, P0, p_candidate, DEFAULT_CORRELATION, size, rng)
         cells = np.stack([cand & base, cand & ~base, ~cand & base, ~cand & ~base], axis=-1).cumsum(axis=1)
         for r in range(size):
-            test = SequentialTest(DEFAULT_MARGIN, max_episodes=n_max, spending=spending)
+            test = SequentialTest(DEFAULT_MARGIN, max_episodes=n_max)
             for k in range(1, looks + 1):
                 n = n_max * k // looks
                 verdict = test.update(PairedTable(*map(int, cells[r, n - 1])))
@@ -131,16 +130,15 @@ def run_sequential(p_candidate: float, reps: int, rng: np.random.Generator, spen
 
 
 def sequential(reps: int, rng: np.random.Generator) -> None:
-    print(f"\n== SequentialTest, 5 looks every {DOCUMENTED_EPISODES // 5} paired episodes up to "
+    print(f"\n== SequentialTest (O'Brien-Fleming spending), 5 looks every {DOCUMENTED_EPISODES // 5} paired episodes up to "
           f"{DOCUMENTED_EPISODES}, {reps} repetitions each")
-    for spending in ("obrien-fleming", "pocock"):
-        for label, p_candidate, verdict in (("false alarm (FAIL), identical", P0, Verdict.FAIL),
-                                            ("P(PASS) at the margin", P0 + DEFAULT_MARGIN, Verdict.PASS),
-                                            (f"power (FAIL) at +{DOCUMENTED_DELTA * 100:.0f} pp", P1, Verdict.FAIL)):
-            counts, mean_used = run_sequential(p_candidate, reps, rng, spending)
-            print(f"    {spending:<14} {label:<32} {MonteCarloRate(counts[verdict], reps)}   "
-                  f"mean episodes {mean_used:5.0f}   (PASS/FAIL/INCONCLUSIVE "
-                  f"{counts[Verdict.PASS]}/{counts[Verdict.FAIL]}/{counts[Verdict.INCONCLUSIVE]})")
+    for label, p_candidate, verdict in (("false alarm (FAIL), identical", P0, Verdict.FAIL),
+                                        ("P(PASS) at the margin", P0 + DEFAULT_MARGIN, Verdict.PASS),
+                                        (f"power (FAIL) at +{DOCUMENTED_DELTA * 100:.0f} pp", P1, Verdict.FAIL)):
+        counts, mean_used = run_sequential(p_candidate, reps, rng)
+        print(f"    {label:<32} {MonteCarloRate(counts[verdict], reps)}   "
+              f"mean episodes {mean_used:5.0f}   (PASS/FAIL/INCONCLUSIVE "
+              f"{counts[Verdict.PASS]}/{counts[Verdict.FAIL]}/{counts[Verdict.INCONCLUSIVE]})")
 
 
 def simulate_scenario(n: int, p_baseline: float, p_candidate: float, reps: int, rng: np.random.Generator,
@@ -276,7 +274,7 @@ def gate_sequential(reps: int, rng: np.random.Generator, looks: int = 5) -> None
         cells = np.stack(episodes, axis=1)  # (reps, scenarios, n, 4) cumulative over seeds
         fails = hits = used = 0
         for r in range(reps):
-            test = SequentialTest(DEFAULT_MARGIN, DEFAULT_ALPHA * 0.5, max_episodes=n * BANK_SCENARIOS,
+            test = SequentialTest(DEFAULT_MARGIN, DEFAULT_ALPHA * DEFAULT_POOLED_WEIGHT, max_episodes=n * BANK_SCENARIOS,
                                   stop_for_pass=False)
             verdict, seeds = None, n
             for k in range(1, looks + 1):

@@ -31,7 +31,7 @@ def main() -> None:
     parser.add_argument("--out", required=True, help="folder for the regression report")
     args = parser.parse_args()
 
-    from dv2s_gym.regress.runner import run_regression
+    from dv2s_gym.regress.runner import RegressSettings, WorkerSettings, run_regression
 
     state_path = Path(args.loop) / "loop.json"
     if not state_path.is_file():
@@ -41,9 +41,10 @@ def main() -> None:
     candidate = args.candidate
     if candidate.endswith(".zip") and ":" not in candidate:
         candidate = f"ppo:{candidate}"
-    report = run_regression(candidate, settings["policy"], bank_dir=start["bank"], scenarios=start["scenarios"],
-                            episodes=args.episodes, seed=args.seed, workers=args.workers, out_dir=args.out,
-                            env_config=settings.get("env_config"), progress=False)
+    regress = RegressSettings(bank_dir=start["bank"], scenarios=start["scenarios"], episodes=args.episodes,
+                              seed=args.seed, env_config=settings.get("env_config"))
+    report = run_regression(candidate, settings["policy"], regress, workers=WorkerSettings(workers=args.workers),
+                            out_dir=args.out, progress=False)
     print(report["verdict"], "-", report["overall"]["comparison"].get("reason"))
     print(f"{'scenario':45s} candidate baseline (failures of {args.episodes})")
     for name, row in report["scenarios"].items():

@@ -58,7 +58,7 @@ def main() -> None:
 
     from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, failure_types, paired_summary
     from dv2s_gym.mining.loop import fine_tune_weights
-    from policies.training import EVAL_SEED_BASE, fine_tune
+    from policies.training import EVAL_SEED_BASE, TrainConfig, fine_tune
     from scenario_bank.bank import Bank
 
     loop = Path(args.loop)
@@ -88,18 +88,19 @@ def main() -> None:
     weights = fine_tune_weights(names, mined, args.share)
     def fine_tune_log(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
+    config = TrainConfig.fine_tuning(out / "policy", steps=args.steps, weights=weights, bank_dir=bank,
+                                     seed=settings["seed"] * 1000 + 1, n_envs=2, env_config=env_config,
+                                     progress_bar=False)
     if args.method == "dagger":
-        from policies.imitation import dagger_fine_tune
+        from policies.imitation import DaggerConfig, dagger_fine_tune
 
         extra = {key: getattr(args, key) for key in ("iterations", "epochs", "beta_decay", "slower_weight")
                  if getattr(args, key) is not None}
-        path = dagger_fine_tune(policy, bank_dir=bank, out=out / "policy", steps=args.steps, weights=weights,
-                                seed=settings["seed"] * 1000 + 1, n_envs=2, env_config=env_config,
-                                learning_rate=args.lr, progress_bar=False, log=fine_tune_log, **extra)
+        if args.lr is not None:
+            extra["learning_rate"] = args.lr
+        path = dagger_fine_tune(policy, config, DaggerConfig(**extra), log=fine_tune_log)
     else:
-        path = fine_tune(policy, bank_dir=bank, out=out / "policy", steps=args.steps, weights=weights,
-                         seed=settings["seed"] * 1000 + 1, n_envs=2, env_config=env_config,
-                         reward_weights=json.loads(args.reward), progress_bar=False, learning_rate=args.lr,
+        path = fine_tune(policy, config, reward_weights=json.loads(args.reward), learning_rate=args.lr,
                          log=lambda _: None)
     t_fine_tune = time.perf_counter() - began
     spec = f"ppo:{path.resolve()}"
@@ -128,12 +129,13 @@ def main() -> None:
         result["dagger"] = {key: value for key, value in (read_model_card(path).get("fine_tune") or {}).items()
                             if key in ("agreement", "history", "iterations", "epochs", "beta_decay", "learning_rate")}
     if args.regress:
-        from dv2s_gym.regress.runner import run_regression
+        from dv2s_gym.regress.runner import RegressSettings, WorkerSettings, run_regression
 
         began = time.perf_counter()
-        report = run_regression(spec, policy, bank_dir=bank, scenarios=state["start"]["scenarios"],
-                                episodes=args.regress_episodes, seed=EVAL_SEED_BASE, margin=settings["margin"],
-                                workers=args.workers, out_dir=out / "regress", env_config=env_config, progress=False)
+        regress = RegressSettings(bank_dir=bank, scenarios=state["start"]["scenarios"], episodes=args.regress_episodes,
+                                  seed=EVAL_SEED_BASE, margin=settings["margin"], env_config=env_config)
+        report = run_regression(spec, policy, regress, workers=WorkerSettings(workers=args.workers),
+                                out_dir=out / "regress", progress=False)
         overall = report["overall"]
         result["regress"] = {"verdict": report["verdict"], "new": overall["candidate"]["failure_rate"],
                              "old": overall["baseline"]["failure_rate"],

@@ -25,7 +25,8 @@ from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.envs.common.observation import KinematicObservation
 
 import envs.rendering  # noqa: F401  (sets SDL/XDG variables before any viewer starts pygame)
-from envs.errors import InvalidActionError, check_config_keys
+from envs.config_check import RENDER_MODES, check_config, check_render_mode
+from envs.errors import InvalidActionError
 from envs.hw_road import EventRoad
 from envs.observations import FastKinematicObservation
 from envs.safety_metrics import STANDING_SPEED, path_is_free, time_to_collision
@@ -42,7 +43,7 @@ from envs.scenic_highway import stepping
 from envs.scenic_highway.stepping import ExternalStepper, StepOutcome, StepOvertime, step_watchdog
 from envs.trace import EpisodeTrace, actor_state
 
-__all__ = ["DV2SEnv", "ScenarioRef"]
+__all__ = ["DV2SEnv", "ScenarioRef", "check_env_config"]
 
 if getattr(sys.excepthook, "__module__", "") == "scenic.core.errors":
     # Scenic replaces Python's default excepthook on import (only the default one); a user's own tracebacks
@@ -213,7 +214,7 @@ class DV2SEnv(AbstractEnv):
     :class:`~envs.jailed_env.JailedDV2SEnv` (same interface) instead.
     """
 
-    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 15}
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": 15}
     runs_in_jail = False
 
     def __new__(
@@ -226,6 +227,7 @@ class DV2SEnv(AbstractEnv):
         jail: Optional[bool] = None,
         jail_limits: Any = None,
     ):
+        check_render_mode(render_mode)
         # Decide where the simulation runs before anything of the scripts is compiled:
         # the package's own scripts (by content hash) here, everything else in the jail.
         if trusted or os.environ.get("DV2S_IN_JAIL") == "1":
@@ -269,13 +271,17 @@ class DV2SEnv(AbstractEnv):
         self._step_events: List[Dict[str, Any]] = []
         self._reset_seed: Optional[int] = None
         self._running_compiled: Optional[CompiledScenario] = None
-        check_config_keys(config, self.default_config())
+        check_config(config, self.default_config())
         super().__init__(config, render_mode)
 
     # ------------------------------------------------------------------ config
     @classmethod
     def default_config(cls) -> dict:
         """Default configuration; every key can be overridden with ``config=``.
+
+        Every key given is checked, nested ones too (:func:`envs.config_check.check_config`): a misspelt
+        key, reward term or observation/action option is an error naming it and the choices. A section
+        given replaces the default one whole (highway-env's rule): a reward term left out weighs 0.
 
         - ``observation``: highway-env observation config; ``Kinematics`` (default),
           ``OccupancyGrid``, ``TimeToCollision``, ``LidarObservation`` and ``GrayscaleObservation`` work.
@@ -748,3 +754,9 @@ class DV2SEnv(AbstractEnv):
             self._close_simulation()
         except Exception:
             pass
+
+
+def check_env_config(config: Any) -> None:
+    """:func:`envs.config_check.check_config` against :meth:`DV2SEnv.default_config`: the check a run that builds
+    its envs in worker processes makes once, before any worker starts."""
+    check_config(config, DV2SEnv.default_config())

@@ -21,7 +21,8 @@ import gymnasium as gym
 import numpy as np
 
 from envs.errors import DV2SError, InvalidActionError, ScenarioCompileError, SceneSamplingError, StepTimeoutError
-from envs.errors import UnsupportedConstructError, check_config_keys
+from envs.config_check import check_config
+from envs.errors import UnsupportedConstructError
 from envs.trace import EpisodeTrace
 from scenario_bank.jail import JailError, JailLimitError, JailLimits, JailedProcess
 from scenario_bank.jail.process import JailRemoteError
@@ -140,7 +141,7 @@ class JailedDV2SEnv(gym.Env):
         self._labels = {ref.name: ref.path for ref in refs}
         user_config = dict(config or {})
         if defaults:
-            check_config_keys(user_config, defaults)
+            check_config(user_config, defaults)
         payload = [self._scenario_payload(ref, text) for ref, text in zip(refs, texts)]
         self._host_map = None
         if user_config.get("map") is not None:

@@ -20,7 +20,7 @@ steps (one during training loses the iteration's training, not its collection).
 A run killed at any point restarts from the last commit and ends with the same model as an
 uninterrupted one (the envs are put back where they were by replaying the current episode's
 actions). A checkpoint whose identity differs from the new call's is refused
-(:class:`DAggerResumeError`), never mixed in.
+(:class:`~scenario_bank.run_identity.RunIdentityError`), never mixed in.
 """
 
 from __future__ import annotations
@@ -30,12 +30,17 @@ import io
 import json
 import shutil
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Optional, Tuple
+from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
+from scenario_bank.run_identity import check_identity
 from policies.training import TrainingError
 from scenario_bank.atomic import file_sha256
+
+if TYPE_CHECKING:
+    from policies.dagger_config import DaggerConfig
+    from policies.training import TrainConfig
 
 __all__ = ["CHECKPOINT_DIR", "DAggerResumeError", "DAggerCheckpoint", "SavedIteration", "PartialIteration",
            "run_identity", "checkpoint_position", "describe_position"]
@@ -54,7 +59,8 @@ _DERIVED = {"source_sha256": " (the source checkpoint's file changed)",
 
 
 class DAggerResumeError(TrainingError):
-    """A DAgger checkpoint that cannot be resumed: written with other settings, or unreadable."""
+    """A DAgger checkpoint that cannot be resumed because its files are unreadable (one written with other
+    settings is refused with :class:`~scenario_bank.run_identity.RunIdentityError`)."""
 
 
 @dataclasses.dataclass
@@ -106,28 +112,22 @@ def _scenario_hashes(bank_dir: Optional[str], names: List[str]) -> Dict[str, Opt
     return {name: (bank.get(name).content_hash or None) if name in bank else None for name in names}
 
 
-def run_identity(*, source: str, source_checkpoint: Path, bank_dir: Optional[str], weights: Mapping[str, float],
-                 env_config: Mapping[str, Any], steps: int, iterations: int, beta: float, beta_decay: float,
-                 epochs: int, batch_size: int, learning_rate: float, reference: str, seed: int,
-                 n_envs: int, slower_weight: float = 1.0) -> Dict[str, Any]:
+def run_identity(*, source: str, source_checkpoint: Path, config: "TrainConfig", dagger: "DaggerConfig",
+                 weights: Mapping[str, float], env_config: Mapping[str, Any]) -> Dict[str, Any]:
     """The settings a checkpoint must share with a call to resume it (JSON-safe): everything that changes
-    the result (the source checkpoint's bytes, the bank's scenario scripts, the schedule, the training),
-    not how it runs (``vec_env``, the progress bar)."""
-    names = sorted(weights)
+    the result (the source checkpoint's bytes, the bank's scenario scripts, the sampling ``weights``, the
+    ``env_config``, ``config``'s steps, seed and environments, every ``dagger`` setting but how often it
+    commits), not how it runs (``vec_env``, the progress bar)."""
+    names, bank_dir, d = sorted(weights), config.bank_dir, dagger
     return json.loads(json.dumps({
         "source": str(source), "source_sha256": file_sha256(source_checkpoint),
         "bank_dir": None if bank_dir is None else str(Path(bank_dir).resolve()),
         "weights": {name: float(weights[name]) for name in names},
         "scenario_hashes": _scenario_hashes(bank_dir, names), "env_config": dict(env_config),
-        "steps": int(steps), "iterations": int(iterations), "beta": float(beta), "beta_decay": float(beta_decay),
-        "epochs": int(epochs), "batch_size": int(batch_size), "learning_rate": float(learning_rate),
-        "reference": str(reference), "slower_weight": float(slower_weight), "seed": int(seed),
-        "n_envs": int(n_envs)}, sort_keys=True))
-
-
-def _short(value: Any, limit: int = 80) -> str:
-    text = json.dumps(value, sort_keys=True)
-    return text if len(text) <= limit else text[:limit - 3] + "..."
+        "steps": int(config.steps), "iterations": int(d.iterations), "beta": float(d.beta),
+        "beta_decay": float(d.beta_decay), "epochs": int(d.epochs), "batch_size": int(d.batch_size),
+        "learning_rate": float(d.learning_rate), "reference": str(d.reference), "slower_weight": float(d.slower_weight),
+        "seed": int(config.seed), "n_envs": int(config.n_envs)}, sort_keys=True))
 
 
 class DAggerCheckpoint:
@@ -158,21 +158,18 @@ class DAggerCheckpoint:
         """The last committed iteration, or ``None`` when there is none (a fresh run).
 
         Raises:
-            DAggerResumeError: the checkpoint was written with other settings (the message names the
-                first one that differs and both values) or its files are unreadable.
+            RunIdentityError: the checkpoint was written with other settings (the message names the
+                settings that differ and both values).
+            DAggerResumeError: its files are unreadable.
         """
         data = self._progress()
         if data is None:
             return None
         recorded = data.get("identity") or {}
         keys = [key for key in IDENTITY_ORDER if key in recorded or key in self.identity]
-        for key in keys + sorted((set(recorded) | set(self.identity)) - set(keys)):
-            old, new = recorded.get(key), self.identity.get(key)
-            if json.dumps(old, sort_keys=True) != json.dumps(new, sort_keys=True):
-                what = _DERIVED.get(key, "")
-                raise DAggerResumeError(
-                    f"{self.folder} holds an unfinished DAgger run with {key}={_short(old)}, not {_short(new)}{what}; "
-                    f"pass the same settings to resume it, or delete {self.folder} to start over")
+        check_identity(recorded, self.identity, keys + sorted((set(recorded) | set(self.identity)) - set(keys)),
+                       run=f"{self.folder} holds an unfinished DAgger run", notes=_DERIVED,
+                       fix=f"pass the same settings to resume it, or delete {self.folder} to start over")
         iteration = int(data["iteration"])
         try:
             observations, labels, next_observations = [], [], None

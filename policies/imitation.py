@@ -33,7 +33,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
-import os
 import time
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
@@ -42,21 +41,10 @@ import gymnasium as gym
 import numpy as np
 
 from policies.state_driver import SLOWER
-from policies.training import ScenarioSchedule, TrainingError, fine_tune_scenarios
+from policies.dagger_config import DAGGER_DEFAULTS, DaggerConfig
+from policies.training import ScenarioSchedule, TrainConfig, TrainingError, fine_tune_scenarios
 
-__all__ = ["ReferenceLabels", "DAGGER_DEFAULTS", "dagger_fine_tune", "agreement", "imitation_step"]
-
-DAGGER_DEFAULTS: Dict[str, Any] = {"iterations": 4, "beta": 1.0, "beta_decay": 0.5, "epochs": 8,
-                                   "batch_size": 256, "learning_rate": 1e-3, "reference": "rule", "slower_weight": 3.0}
-"""DAgger's settings when not given: 4 iterations, the reference drives the first one alone
-(beta 1) and half as often in each next one (0.5, 0.25, 0.125), 8 epochs over the aggregated
-data per iteration in minibatches of 256 with Adam at 1e-3, the ``rule`` driver as the
-reference, its SLOWER labels weighted 3x in the cross-entropy. Chosen on the seed-0 loop round in
-bench/RESULTS.md (4 epochs at 1e-4 underfit: agreement 0.69 and a bank regression; 8 at 1e-3:
-agreement 0.86). SLOWER is a rare label that decides episodes (the student rolled on where the
-reference braked for crossing pedestrians); unweighted, the 252-pair bank test failed, weighted 3x it
-passed on seeds 0 and 1."""
-
+__all__ = ["ReferenceLabels", "DAGGER_DEFAULTS", "DaggerConfig", "dagger_fine_tune", "agreement", "imitation_step"]
 
 class ReferenceLabels(gym.Wrapper):
     """Labels every step with the reference driver's action for the state the action is taken in.
@@ -243,23 +231,18 @@ def _restore_envs(venv: Any, snapshots: Sequence[Mapping[str, Any]], expected: n
     return obs, bool(np.array_equal(obs, expected))
 
 
-def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathLike | str, steps: int,
-                     weights: Mapping[str, float], seed: int = 0, n_envs: int = 2,
-                     scenarios: Optional[Sequence[str]] = None, env_config: Optional[Dict[str, Any]] = None,
-                     learning_rate: Optional[float] = None, iterations: int = DAGGER_DEFAULTS["iterations"],
-                     beta: float = DAGGER_DEFAULTS["beta"], beta_decay: float = DAGGER_DEFAULTS["beta_decay"],
-                     epochs: int = DAGGER_DEFAULTS["epochs"], batch_size: int = DAGGER_DEFAULTS["batch_size"],
-                     reference: str = DAGGER_DEFAULTS["reference"],
-                     slower_weight: float = DAGGER_DEFAULTS["slower_weight"], vec_env: str = "subproc",
-                     progress_bar: bool = True, log: Callable[[str], None] = print,
-                     checkpoint_every: int = 2000) -> Path:
-    """Fine-tune an SB3 checkpoint by DAgger toward ``reference`` (module docstring); returns ``out/model.zip``.
+def dagger_fine_tune(checkpoint_or_spec: str, config: TrainConfig, dagger: Optional[DaggerConfig] = None, *,
+                     log: Callable[[str], None] = print) -> Path:
+    """Fine-tune an SB3 checkpoint by DAgger toward a reference driver (module docstring); returns
+    ``config.out/model.zip``.
 
-    ``steps``: env steps collected in all (split evenly over ``iterations``); ``weights``:
-    scenario -> sampling weight (the scenarios are ``scenarios``, default every one with a
-    positive weight); ``env_config``: the env's config (default the checkpoint card's; the
-    reward plays no part); ``learning_rate``: Adam's (default ``DAGGER_DEFAULTS["learning_rate"]``);
-    ``slower_weight``: weight of the reference's SLOWER labels in the cross-entropy (1: unweighted).
+    ``config`` (:meth:`TrainConfig.fine_tuning <policies.training.TrainConfig.fine_tuning>`) says what to train
+    on: ``steps`` env steps collected in all (split evenly over the iterations), ``weights`` scenario ->
+    sampling weight (the scenarios are ``scenarios``, default every one with a positive weight), ``env_config``
+    the env's config (``None``: the checkpoint card's; the reward plays no part), ``seed``, ``n_envs``,
+    ``vec_env``, ``progress_bar``. ``dagger`` (:class:`~policies.dagger_config.DaggerConfig`, default its
+    defaults) says how to imitate: iterations, the reference's share, epochs, Adam's learning rate, the weight
+    of the reference's SLOWER labels, how often collected states are committed.
 
     Resumable: every finished iteration is committed to ``out/dagger_checkpoint/``
     (:mod:`policies.dagger_checkpoint`: the labelled states, the weights and Adam's state, the
@@ -267,163 +250,205 @@ def dagger_fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: o
     ``checkpoint_every`` env steps (0: only finished iterations). Called again with the same
     ``out`` and settings, it continues from the last commit and ends with the same model and stats as an
     uninterrupted run (the card's ``fine_tune.resumed`` lists the resumes); with other settings it
-    raises :class:`~policies.dagger_checkpoint.DAggerResumeError` naming the difference. Called
+    raises :class:`~scenario_bank.run_identity.RunIdentityError` naming the differences. Called
     with an ``out`` that already holds the result, it returns at once (the checkpoint is removed
     once the result is written).
     """
-    for name, value, low in (("steps", steps, 1), ("iterations", iterations, 1), ("epochs", epochs, 0),
-                             ("batch_size", batch_size, 1), ("n_envs", n_envs, 1),
-                             ("checkpoint_every", checkpoint_every, 0)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            raise TrainingError(f"DAgger {name} must be an integer >= {low}, not {value!r}")
-    if not 0.0 <= float(beta) <= 1.0 or not 0.0 <= float(beta_decay) <= 1.0:
-        raise TrainingError(f"DAgger beta and beta_decay must be in [0, 1], not {beta} and {beta_decay}")
-    if isinstance(slower_weight, bool) or not isinstance(slower_weight, (int, float)) or not slower_weight > 0:
-        raise TrainingError(f"DAgger slower_weight must be a number > 0, not {slower_weight!r}")
-    from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, describe_position, run_identity
-    from policies.model_card import write_card
+    dagger = dagger or DaggerConfig()
+    for name, value in (("steps", config.steps), ("n_envs", config.n_envs)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise TrainingError(f"DAgger {name} must be an integer >= 1, not {value!r}")
     from policies.registry import read_model_card
-    from policies.training import resolve_checkpoint
-    from scenario_bank.atomic import atomic_path
 
-    out = Path(out)
-    model_path = out / "model.zip"
+    model_path = Path(config.out) / "model.zip"
     if model_path.is_file() and (read_model_card(model_path).get("fine_tune") or {}).get("method") == "dagger":
         return model_path
-    weights, scenarios = fine_tune_scenarios(weights, scenarios)
-    scenarios = sorted(scenarios)
-    probabilities = {name: weights.get(name, 0.0) for name in scenarios}
-    if sum(probabilities.values()) <= 0:
-        raise TrainingError("fine-tuning needs at least one scenario with a positive weight")
-    algorithm, source, source_card = resolve_checkpoint(checkpoint_or_spec)
-    if algorithm != "ppo":
-        raise TrainingError(f"DAgger fine-tunes an actor-critic policy with an action distribution (ppo), not "
-                            f"{algorithm}; use --fine-tune-method ppo")
-    if env_config is None:
-        env_config = dict(source_card.get("env_config") or {})
-    lr = DAGGER_DEFAULTS["learning_rate"] if learning_rate is None else float(learning_rate)
-    checkpoint = DAggerCheckpoint(out / CHECKPOINT_DIR, run_identity(
-        source=checkpoint_or_spec, source_checkpoint=source, bank_dir=bank_dir, weights=probabilities,
-        env_config=env_config, steps=steps, iterations=iterations, beta=beta, beta_decay=beta_decay, epochs=epochs,
-        batch_size=batch_size, learning_rate=lr, reference=reference, seed=int(seed), n_envs=n_envs,
-        slower_weight=float(slower_weight)))
-    saved = checkpoint.load()  # refuses a checkpoint of other settings before any work
-    import stable_baselines3 as sb3
-    import torch
+    run = _DaggerRun(checkpoint_or_spec, config, dagger, log)
+    run.restore(run.checkpoint.load())  # refuses a checkpoint of other settings before any work
+    if run.start < dagger.iterations:
+        run.iterate()
+    return run.finish()
 
-    torch.manual_seed(int(seed))
-    model = sb3.PPO.load(str(source), device="cpu")
-    optimizer = torch.optim.Adam(model.policy.parameters(), lr=lr)
-    rng = np.random.default_rng([int(seed), 11])
-    per_iteration = [steps // iterations + (1 if i < steps % iterations else 0) for i in range(iterations)]
-    observations: List[np.ndarray] = []
-    labels: List[np.ndarray] = []
-    history: List[Dict[str, Any]] = []
-    resumes: List[Dict[str, Any]] = []
-    start, spent, partial = 0, 0.0, None
-    if saved is not None:
+
+class _DaggerRun:
+    """One DAgger fine-tuning: its settings, the student, the data aggregated so far and its checkpoint."""
+
+    def __init__(self, spec: str, config: TrainConfig, dagger: DaggerConfig, log: Callable[[str], None]) -> None:
+        from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, run_identity
+        from policies.training import resolve_checkpoint
+
+        self.spec, self.config, self.dagger, self.log = spec, config, dagger, log
+        self.out = Path(config.out)
+        weights, scenarios = fine_tune_scenarios(config.weights, config.scenarios)
+        self.scenarios = sorted(scenarios)
+        self.probabilities = {name: weights.get(name, 0.0) for name in self.scenarios}
+        if sum(self.probabilities.values()) <= 0:
+            raise TrainingError("fine-tuning needs at least one scenario with a positive weight")
+        algorithm, self.source, self.source_card = resolve_checkpoint(spec)
+        if algorithm != "ppo":
+            raise TrainingError(f"DAgger fine-tunes an actor-critic policy with an action distribution (ppo), not "
+                                f"{algorithm}; use --fine-tune-method ppo")
+        self.env_config = dict(self.source_card.get("env_config") or {}) if config.env_config is None \
+            else config.env_config
+        self.checkpoint = DAggerCheckpoint(self.out / CHECKPOINT_DIR, run_identity(
+            source=spec, source_checkpoint=self.source, config=config, dagger=dagger, weights=self.probabilities,
+            env_config=self.env_config))
+        iterations = dagger.iterations
+        self.per_iteration = [config.steps // iterations + (1 if i < config.steps % iterations else 0)
+                              for i in range(iterations)]
+
+    def restore(self, saved: Any) -> None:
+        """The student, its optimizer and RNGs, and the data so far: fresh, or as ``saved`` (the last commit)."""
+        import stable_baselines3 as sb3
+        import torch
+
+        torch.manual_seed(int(self.config.seed))
+        self.model = sb3.PPO.load(str(self.source), device="cpu")
+        self.optimizer = torch.optim.Adam(self.model.policy.parameters(), lr=float(self.dagger.learning_rate))
+        self.rng = np.random.default_rng([int(self.config.seed), 11])
+        self.observations: List[np.ndarray] = []
+        self.labels: List[np.ndarray] = []
+        self.history: List[Dict[str, Any]] = []
+        self.resumes: List[Dict[str, Any]] = []
+        self.start, self.spent, self.partial, self.saved = 0, 0.0, None, saved
+        self.began = time.perf_counter()
+        if saved is None:
+            return
+        from policies.dagger_checkpoint import describe_position
+
         if saved.weights is not None:
-            model.policy.load_state_dict(saved.weights["policy"])
-            optimizer.load_state_dict(saved.weights["optimizer"])
+            self.model.policy.load_state_dict(saved.weights["policy"])
+            self.optimizer.load_state_dict(saved.weights["optimizer"])
             torch.set_rng_state(saved.weights["torch_rng"])
-        rng.bit_generator.state = saved.rng_state
-        observations, labels, history = list(saved.observations), list(saved.labels), list(saved.history)
-        resumes, start, spent, partial = list(saved.resumes), saved.iteration, saved.wall_time_s, saved.partial
-        log(f"DAgger: resumed from {describe_position(start, partial.rows if partial else 0, iterations)} "
-            f"({sum(len(x) for x in labels) + (partial.rows if partial else 0)} labelled states from "
-            f"{checkpoint.folder})")
-    began = time.perf_counter()
-    if start < iterations:
-        from policies.training import make_vec_env
+        self.rng.bit_generator.state = saved.rng_state
+        self.observations, self.labels, self.history = list(saved.observations), list(saved.labels), list(saved.history)
+        self.resumes, self.start, self.spent = list(saved.resumes), saved.iteration, saved.wall_time_s
+        self.partial = saved.partial
+        rows = self.partial.rows if self.partial else 0
+        self.log(f"DAgger: resumed from {describe_position(self.start, rows, self.dagger.iterations)} "
+                 f"({sum(len(x) for x in self.labels) + rows} labelled states from {self.checkpoint.folder})")
 
-        venv = make_vec_env(scenarios, env_config, bank_dir, probabilities, n_envs, int(seed), vec_env=vec_env,
-                            wrap=functools.partial(_with_labels, reference=reference))
+    def elapsed(self) -> float:
+        """Wall time of the whole run so far, earlier runs included."""
+        return self.spent + time.perf_counter() - self.began
+
+    def iterate(self) -> None:
+        """Run the iterations not committed yet, in training envs put back where the last commit left them."""
+        from policies.training import close_vec_env, make_vec_env
+
+        c, d = self.config, self.dagger
+        venv = make_vec_env(self.scenarios, self.env_config, c.bank_dir, self.probabilities, c.n_envs, int(c.seed),
+                            vec_env=c.vec_env, wrap=functools.partial(_with_labels, reference=d.reference))
         bar = None
-        if progress_bar:
+        if c.progress_bar:
             from tqdm import tqdm
 
-            bar = tqdm(total=steps, initial=sum(per_iteration[:start]) + (partial.rows if partial else 0),
-                       desc="DAgger fine-tune", unit="step")
+            bar = tqdm(total=c.steps, initial=sum(self.per_iteration[:self.start])
+                       + (self.partial.rows if self.partial else 0), desc="DAgger fine-tune", unit="step")
         try:
-            venv.seed(int(seed))
-            obs = venv.reset()
-            if saved is not None and (partial is not None or start > 0):  # the envs back where they were
-                obs, reproduced = _restore_envs(venv, *((partial.envs, partial.next_observations) if partial
-                                                        else (saved.envs, saved.next_observations)))
-                resumes.append({"from_iteration": start, "steps_into_next": partial.rows if partial else 0,
-                                "envs_reproduced": reproduced})
-                if not reproduced:
-                    log("DAgger: warning: the restored envs do not show the checkpoint's observations (the env is "
-                        "not deterministic); the result may differ from an uninterrupted run")
-            for iteration in range(start, iterations):
-                budget = per_iteration[iteration]
-                mixture = float(beta) * float(beta_decay) ** iteration
-                venv.env_method("set_beta", mixture)
-                collected = _Collected()
-                if partial is not None and partial.iteration == iteration + 1:
-                    collected = _Collected([partial.observations], [partial.labels], partial.episodes,
-                                           partial.crashes)
-
-                def commit_partial(now: np.ndarray, number: int = iteration + 1, so_far: _Collected = collected):
-                    checkpoint.save_partial(
-                        iteration=number, observations=np.concatenate(so_far.observations),
-                        labels=np.concatenate(so_far.labels), next_observations=np.asarray(now),
-                        episodes=so_far.episodes, crashes=so_far.crashes, envs=venv.env_method("snapshot"), rng=rng,
-                        resumes=resumes, wall_time_s=spent + time.perf_counter() - began)
-
-                obs = _collect(venv, model, obs, budget, collected, checkpoint_every, commit_partial, bar)
-                batch_obs = np.concatenate(collected.observations)
-                batch_labels = np.concatenate(collected.labels)
-                episodes, crashes = collected.episodes, collected.crashes
-                on_policy = agreement(model, batch_obs, batch_labels)
-                observations.append(batch_obs)
-                labels.append(batch_labels)
-                all_obs, all_labels = np.concatenate(observations), np.concatenate(labels)
-                loss = _train(model, optimizer, all_obs, all_labels, epochs, batch_size, rng, float(slower_weight))
-                record = {"iteration": iteration + 1, "beta": mixture, "steps": int(len(batch_labels)),
-                          "episodes_finished": episodes, "episodes_failed": crashes,
-                          "agreement_before": round(on_policy, 4),
-                          "agreement_after": round(agreement(model, batch_obs, batch_labels), 4),
-                          "dataset": int(len(all_labels)), "loss": round(loss, 4)}
-                history.append(record)
-                checkpoint.save(iteration=iteration + 1, observations=batch_obs, labels=batch_labels,
-                                next_observations=np.asarray(obs), model=model, optimizer=optimizer, rng=rng,
-                                history=history, envs=venv.env_method("snapshot"),
-                                wall_time_s=spent + time.perf_counter() - began, resumes=resumes)
-                log(f"DAgger iteration {iteration + 1}/{iterations}: beta {mixture:.3g}, {record['steps']} labelled "
-                    f"steps, agreement with {reference} {on_policy:.3f} -> {record['agreement_after']:.3f}, "
-                    f"{crashes}/{episodes} finished episodes crashed or left the road")
+            venv.seed(int(c.seed))
+            obs = self._reset(venv)
+            for iteration in range(self.start, d.iterations):
+                obs = self._iteration(venv, obs, iteration, bar)
         finally:
-            venv.close()
+            close_vec_env(venv)
             if bar is not None:
                 bar.close()
-    wall = spent + time.perf_counter() - began
-    all_obs, all_labels = np.concatenate(observations), np.concatenate(labels)
-    source_model = sb3.PPO.load(str(source), device="cpu")
-    out.mkdir(parents=True, exist_ok=True)
-    with atomic_path(model_path, keep_suffix=True) as tmp:
-        model.save(tmp)
-    card = json.loads(json.dumps({k: v for k, v in source_card.items() if k != "evaluation"}))
-    card["env_config"] = dict(env_config)
-    card["sampler"] = {"mode": "weighted", "weights": probabilities}
-    card["training"] = {**dict(card.get("training") or {}), "command": "dv2s loop --fine-tune-method dagger",
-                        "steps": int(steps), "n_envs": n_envs, "seed": int(seed), "wall_time_s": round(wall, 1),
-                        "steps_per_s": round(steps / wall, 1) if wall > 0 else None, "segments": []}
-    card["fine_tune"] = {"method": "dagger", "source": str(checkpoint_or_spec), "source_checkpoint": str(source),
-                         "steps": int(steps), "weights": probabilities, "learning_rate": lr, "reference": reference,
-                         "iterations": iterations, "beta": float(beta), "beta_decay": float(beta_decay),
-                         "epochs": epochs, "batch_size": batch_size, "slower_weight": float(slower_weight),
-                         "history": history,
-                         "agreement": {"source": round(agreement(source_model, all_obs, all_labels), 4),
-                                       "fine_tuned": round(agreement(model, all_obs, all_labels), 4),
-                                       "states": int(len(all_labels))},
-                         "resumed": resumes}
-    card["description"] = (f"Fine-tuned from {checkpoint_or_spec} by DAgger toward the {reference} driver: {steps} "
-                           f"labelled env steps in {iterations} iterations on {len(scenarios)} scenarios with "
-                           "weighted sampling (see fine_tune).")
-    card["name"] = out.name
-    write_card(out, card)
-    checkpoint.remove()
-    log(f"wrote {model_path} (DAgger, agreement with {reference} on {len(all_labels)} labelled states: "
-        f"{card['fine_tune']['agreement']['source']:.3f} -> {card['fine_tune']['agreement']['fine_tuned']:.3f})")
-    return model_path
+
+    def _reset(self, venv: Any) -> np.ndarray:
+        obs = venv.reset()
+        saved, partial = self.saved, self.partial
+        if saved is not None and (partial is not None or self.start > 0):  # the envs back where they were
+            obs, reproduced = _restore_envs(venv, *((partial.envs, partial.next_observations) if partial
+                                                    else (saved.envs, saved.next_observations)))
+            self.resumes.append({"from_iteration": self.start, "steps_into_next": partial.rows if partial else 0,
+                                 "envs_reproduced": reproduced})
+            if not reproduced:
+                self.log("DAgger: warning: the restored envs do not show the checkpoint's observations (the env is "
+                         "not deterministic); the result may differ from an uninterrupted run")
+        return obs
+
+    def _iteration(self, venv: Any, obs: np.ndarray, iteration: int, bar: Any) -> np.ndarray:
+        """Collect iteration ``iteration``'s labelled states, train on everything so far, commit; the envs'
+        observations at the end."""
+        d, partial = self.dagger, self.partial
+        mixture = float(d.beta) * float(d.beta_decay) ** iteration
+        venv.env_method("set_beta", mixture)
+        collected = _Collected()
+        if partial is not None and partial.iteration == iteration + 1:
+            collected = _Collected([partial.observations], [partial.labels], partial.episodes, partial.crashes)
+
+        def commit_partial(now: np.ndarray, number: int = iteration + 1, so_far: _Collected = collected):
+            self.checkpoint.save_partial(
+                iteration=number, observations=np.concatenate(so_far.observations),
+                labels=np.concatenate(so_far.labels), next_observations=np.asarray(now),
+                episodes=so_far.episodes, crashes=so_far.crashes, envs=venv.env_method("snapshot"), rng=self.rng,
+                resumes=self.resumes, wall_time_s=self.elapsed())
+
+        obs = _collect(venv, self.model, obs, self.per_iteration[iteration], collected, d.checkpoint_every,
+                       commit_partial, bar)
+        batch_obs, batch_labels = np.concatenate(collected.observations), np.concatenate(collected.labels)
+        on_policy = agreement(self.model, batch_obs, batch_labels)
+        self.observations.append(batch_obs)
+        self.labels.append(batch_labels)
+        all_obs, all_labels = np.concatenate(self.observations), np.concatenate(self.labels)
+        loss = _train(self.model, self.optimizer, all_obs, all_labels, d.epochs, d.batch_size, self.rng,
+                      float(d.slower_weight))
+        record = {"iteration": iteration + 1, "beta": mixture, "steps": int(len(batch_labels)),
+                  "episodes_finished": collected.episodes, "episodes_failed": collected.crashes,
+                  "agreement_before": round(on_policy, 4),
+                  "agreement_after": round(agreement(self.model, batch_obs, batch_labels), 4),
+                  "dataset": int(len(all_labels)), "loss": round(loss, 4)}
+        self.history.append(record)
+        self.checkpoint.save(iteration=iteration + 1, observations=batch_obs, labels=batch_labels,
+                             next_observations=np.asarray(obs), model=self.model, optimizer=self.optimizer,
+                             rng=self.rng, history=self.history, envs=venv.env_method("snapshot"),
+                             wall_time_s=self.elapsed(), resumes=self.resumes)
+        self.log(f"DAgger iteration {iteration + 1}/{d.iterations}: beta {mixture:.3g}, {record['steps']} labelled "
+                 f"steps, agreement with {d.reference} {on_policy:.3f} -> {record['agreement_after']:.3f}, "
+                 f"{collected.crashes}/{collected.episodes} finished episodes crashed or left the road")
+        return obs
+
+    def finish(self) -> Path:
+        """Write the fine-tuned model and its card, remove the checkpoint; the model's path."""
+        import stable_baselines3 as sb3
+
+        from policies.model_card import write_card
+        from scenario_bank.atomic import atomic_path
+
+        wall = self.elapsed()
+        all_obs, all_labels = np.concatenate(self.observations), np.concatenate(self.labels)
+        source_model = sb3.PPO.load(str(self.source), device="cpu")
+        self.out.mkdir(parents=True, exist_ok=True)
+        model_path = self.out / "model.zip"
+        with atomic_path(model_path, keep_suffix=True) as tmp:
+            self.model.save(tmp)
+        card = self._card(wall, {"source": round(agreement(source_model, all_obs, all_labels), 4),
+                                 "fine_tuned": round(agreement(self.model, all_obs, all_labels), 4),
+                                 "states": int(len(all_labels))})
+        write_card(self.out, card)
+        self.checkpoint.remove()
+        self.log(f"wrote {model_path} (DAgger, agreement with {self.dagger.reference} on {len(all_labels)} labelled "
+                 f"states: {card['fine_tune']['agreement']['source']:.3f} -> "
+                 f"{card['fine_tune']['agreement']['fine_tuned']:.3f})")
+        return model_path
+
+    def _card(self, wall: float, agreements: Dict[str, Any]) -> Dict[str, Any]:
+        c, d, steps = self.config, self.dagger, self.config.steps
+        card = json.loads(json.dumps({k: v for k, v in self.source_card.items() if k != "evaluation"}))
+        card["env_config"] = dict(self.env_config)
+        card["sampler"] = {"mode": "weighted", "weights": self.probabilities}
+        card["training"] = {**dict(card.get("training") or {}), "command": "dv2s loop --fine-tune-method dagger",
+                            "steps": int(steps), "n_envs": c.n_envs, "seed": int(c.seed), "wall_time_s": round(wall, 1),
+                            "steps_per_s": round(steps / wall, 1) if wall > 0 else None, "segments": []}
+        card["fine_tune"] = {"method": "dagger", "source": str(self.spec), "source_checkpoint": str(self.source),
+                             "steps": int(steps), "weights": self.probabilities,
+                             "learning_rate": float(d.learning_rate), "reference": d.reference,
+                             "iterations": d.iterations, "beta": float(d.beta), "beta_decay": float(d.beta_decay),
+                             "epochs": d.epochs, "batch_size": d.batch_size, "slower_weight": float(d.slower_weight),
+                             "history": self.history, "agreement": agreements, "resumed": self.resumes}
+        card["description"] = (f"Fine-tuned from {self.spec} by DAgger toward the {d.reference} driver: {steps} "
+                               f"labelled env steps in {d.iterations} iterations on {len(self.scenarios)} scenarios "
+                               "with weighted sampling (see fine_tune).")
+        card["name"] = self.out.name
+        return card

@@ -44,6 +44,7 @@ __all__ = [
     "summarize_results",
     "compare_paired",
     "evaluation_section",
+    "TimeLeft",
     "summary_sentences",
     "write_card",
     "read_card",
@@ -329,6 +330,12 @@ def render_markdown(card: Mapping[str, Any]) -> str:
         "",
     ]
     evaluation = card.get("evaluation")
+    if "evaluation" in card and evaluation is None:
+        command = str(training.get("command") or "dv2s train --out FOLDER")
+        resume = command if "--resume" in command.split() else f"{command} --resume"
+        lines += ["## Evaluation", "",
+                  "**Not evaluated: the held-out evaluation was interrupted before it finished.** Complete it with "
+                  f"`{resume}`: the trained model is kept and only the evaluation runs.", ""]
     if evaluation:
         confidence = evaluation.get("confidence", 0.95)
         lines += [
@@ -427,23 +434,64 @@ def _evaluate_chunk_args(args: Tuple[str, List[Tuple[str, int]], Optional[Dict[s
     return _evaluate_chunk(*args)
 
 
+class TimeLeft:
+    """Says once, in one line, how long a run of ``total`` episodes has left: when a twentieth of them (at least
+    ten) are done, from their pace (it includes the workers' start-up, so the estimate errs long)."""
+
+    def __init__(self, total: int, log: Callable[[str], None], what: str) -> None:
+        import time
+
+        self.total, self.log, self.what = int(total), log, what
+        self.done, self.said, self.began = 0, False, time.perf_counter()
+
+    def update(self, count: int) -> None:
+        """``count`` more episodes are done."""
+        import time
+
+        self.done += int(count)
+        if self.said or self.done >= self.total or self.done < min(self.total, max(10, self.total // 20)):
+            return
+        self.said = True
+        elapsed = time.perf_counter() - self.began
+        left = elapsed / self.done * (self.total - self.done)
+        self.log(f"{self.what}: {self.done} of {self.total} episodes in {_duration(elapsed)}; about "
+                 f"{_duration(left)} left")
+
+
+def _duration(seconds: float) -> str:
+    """``seconds`` for people: ``45 s``, ``12 min``, ``1 h 05 min``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    minutes = round(seconds / 60)
+    return f"{minutes} min" if minutes < 60 else f"{minutes // 60} h {minutes % 60:02d} min"
+
+
 def evaluate_for_card(specs: Mapping[str, str], episodes: Sequence[Tuple[str, int]],
                       configs: Mapping[str, Optional[Dict[str, Any]]], bank_dir: Optional[str] = None,
                       candidate: str = "policy", seed_base: Optional[int] = None, seeds: Optional[int] = None,
-                      jobs: int = 2, confidence: float = 0.95, progress: bool = False) -> Dict[str, Any]:
+                      jobs: int = 2, confidence: float = 0.95, progress: bool = False,
+                      log: Optional[Callable[[str], None]] = None) -> Dict[str, Any]:
     """Run every policy of ``specs`` (label -> spec) on the same ``episodes`` and build the
     card's ``evaluation`` section (:func:`evaluation_section`); ``configs`` gives each
     label's env config (a baseline driving ``DiscreteMetaAction`` next to a continuous policy).
-    ``progress``: one progress bar on stderr over every policy's episodes."""
+    ``progress``: one progress bar on stderr over every policy's episodes; ``log``: gets one line with the
+    time left, estimated once the first episodes are done (:class:`TimeLeft`)."""
+    total = len(specs) * len(episodes)
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=len(specs) * len(episodes), desc="card evaluation", unit="episode", file=sys.stderr,
-                   dynamic_ncols=True)
+        bar = tqdm(total=total, desc="card evaluation", unit="episode", file=sys.stderr, dynamic_ncols=True)
+    time_left = TimeLeft(total, log, "model card evaluation") if log is not None else None
+
+    def on_done(count: int) -> None:
+        if bar is not None:
+            bar.update(count)
+        if time_left is not None:
+            time_left.update(count)
+
     try:
-        results = {label: evaluate_parallel(spec, episodes, configs.get(label), bank_dir, jobs,
-                                            on_done=None if bar is None else bar.update)
+        results = {label: evaluate_parallel(spec, episodes, configs.get(label), bank_dir, jobs, on_done=on_done)
                    for label, spec in specs.items()}
     finally:
         if bar is not None:

@@ -56,6 +56,7 @@ __all__ = [
     "SHIPPED_CHECKPOINT",
     "BUILTIN_POLICIES",
     "spec_from_file",
+    "check_policy_spec",
 ]
 
 SHIPPED_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "dv2s_ppo" / "model.zip"
@@ -441,9 +442,32 @@ def _load_base(base: str, options: Dict[str, Any]) -> Policy:
         return _load_sb3(base, algorithm=None, name=base, **options)
     if sep and "/" not in prefix and "\\" not in prefix:
         return _load_object(prefix, rest, base, options)
-    raise PolicyError(
-        f"unknown policy {base!r}: use one of {', '.join(registered_policies())}, an SB3 checkpoint "
-        f"(model.zip, or ppo:/dqn:/sac:PATH), or module:attribute")
+    raise _unknown_policy(base)
+
+
+def _unknown_policy(base: str) -> PolicyError:
+    import difflib
+
+    close = difflib.get_close_matches(base, registered_policies(), n=1)
+    return PolicyError(
+        f"unknown policy {base!r}" + (f" (did you mean {close[0]!r}?)" if close else "")
+        + f": use one of {', '.join(registered_policies())}, an SB3 checkpoint (model.zip, or ppo:/dqn:/sac:PATH), "
+        "or module:attribute")
+
+
+def check_policy_spec(spec: Union[str, os.PathLike]) -> None:
+    """Raise the :class:`PolicyError` :func:`load_policy` would for a spec whose shape names no policy (an
+    unknown name, with a suggestion) or whose options are not ``key=value``, without loading anything: a
+    command checks its specs this way before its slow start-up. A checkpoint or ``module:attribute`` is
+    only checked when it loads."""
+    base, _ = parse_spec(os.fspath(spec))
+    if base in _REGISTRY:
+        return
+    prefix, sep, _ = base.partition(":")
+    if (sep and (prefix.lower() in SB3_ALGORITHMS or ("/" not in prefix and "\\" not in prefix))) \
+            or Path(base).suffix == ".zip" or Path(base).is_dir():
+        return
+    raise _unknown_policy(base)
 
 
 def import_policy_module(module_name: str) -> Any:

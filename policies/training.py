@@ -46,6 +46,7 @@ import json
 import os
 import re
 import shlex
+import sys
 import time
 from collections import deque
 from pathlib import Path
@@ -55,6 +56,7 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
+from envs.dv2s_env import check_env_config
 from envs.errors import DV2SError, Interrupted
 
 __all__ = [
@@ -64,6 +66,7 @@ __all__ = [
     "TRAIN_SEED_LOW",
     "DEFAULT_HYPERPARAMETERS",
     "TrainingError",
+    "close_vec_env",
     "TrainConfig",
     "ScenarioSampler",
     "ScenarioSchedule",
@@ -203,6 +206,7 @@ class TrainConfig:
             raise TrainingError(f"vec_env must be 'subproc' or 'dummy', not {self.vec_env!r}")
         if not isinstance(self.env_config, dict):
             raise TrainingError("the env config must be a JSON object of DV2S-v0 config overrides")
+        check_env_config(self.env_config)  # a misspelt key fails here, in one line, not in the env workers
         action = (self.env_config.get("action") or {}).get("type")
         allowed = _ACTION_TYPES[self.algo]
         if action is not None and allowed is not None and action not in allowed:
@@ -259,6 +263,16 @@ class TrainConfig:
         parts += ["--out", self.out]
         return shlex.join(parts)
 
+    @classmethod
+    def fine_tuning(cls, out: os.PathLike | str, *, steps: int, weights: Mapping[str, float],
+                    **changes: Any) -> "TrainConfig":
+        """The config of a fine-tuning (:func:`fine_tune`, :func:`policies.imitation.dagger_fine_tune`): ``steps``
+        env steps on top of the checkpoint's, weighted sampling by ``weights``, the env config of the checkpoint's
+        card (``env_config=None``), no periodic or card evaluation and no baselines, unless ``changes`` say
+        otherwise (any other field: ``seed``, ``n_envs``, ``bank_dir``, ``scenarios``...)."""
+        options = {**_FINE_TUNE_DEFAULTS, **changes}
+        return cls(out=str(out), steps=steps, weights=dict(weights), sampler="weighted", **options)
+
     def to_json(self) -> Dict[str, Any]:
         """A JSON-safe dict of every field."""
         return dataclasses.asdict(self)
@@ -272,6 +286,11 @@ class TrainConfig:
             raise TrainingError(f"run settings name unknown field(s) {', '.join(sorted(unknown))}; "
                                 "was the run made by a newer dv2s-gym?")
         return cls(**dict(data))
+
+
+_FINE_TUNE_DEFAULTS: Dict[str, Any] = {"env_config": None, "eval_freq": 0, "eval_seeds": 1, "card_seeds": 0,
+                                       "baselines": []}
+"""What a fine-tuning does unless told otherwise (:meth:`TrainConfig.fine_tuning`)."""
 
 
 def _known_hyperparameters(algo: str) -> set:
@@ -426,7 +445,44 @@ def make_vec_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Opti
                  for rank in range(n_envs)]
     if vec_env == "dummy":
         return DummyVecEnv(factories)
-    return SubprocVecEnv(factories)
+    return SubprocVecEnv([functools.partial(_worker_env, factory) for factory in factories])
+
+
+def close_vec_env(venv: Any) -> None:
+    """Close ``venv``; after Ctrl-C (an interrupt on its way out), without waiting for step results.
+
+    Ctrl-C can cut a ``SubprocVecEnv`` step between two workers' answers; its own ``close`` then waits for an
+    answer from every worker, and one that already answered sends none: the command would hang. Here the
+    unread answers are dropped and every worker is told to stop (stopped by force if it does not)."""
+    interrupted = isinstance(sys.exc_info()[1], KeyboardInterrupt)
+    processes = getattr(venv, "processes", None)
+    if interrupted and processes is not None and not venv.closed:
+        venv.waiting = False
+        for remote in venv.remotes:
+            try:
+                remote.send(("close", None))
+            except OSError:
+                pass
+        for process in processes:
+            process.join(5)
+            if process.is_alive():
+                process.terminate()
+                process.join(5)
+        for remote in venv.remotes:
+            remote.close()
+        venv.closed = True
+        return
+    venv.close()
+
+
+def _worker_env(factory: Callable[[], gym.Env]) -> gym.Env:
+    """``factory()`` in a vec-env worker process, which leaves Ctrl-C to the main process: a terminal's Ctrl-C
+    reaches the whole process group, and a worker stopped by it would cut the main process off mid-step before
+    it saves its checkpoint; the main process closes the workers itself."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return factory()
 
 
 def evaluation_episodes(names: Sequence[str], seeds: int) -> List[Tuple[str, int]]:
@@ -650,11 +706,10 @@ def _resolve_names(config: TrainConfig) -> List[str]:
 
 
 def _check_resume(config: TrainConfig, recorded: TrainConfig) -> None:
-    for field in TrainConfig.IDENTITY:
-        mine, theirs = getattr(config, field), getattr(recorded, field)
-        if json.dumps(mine, sort_keys=True) != json.dumps(theirs, sort_keys=True):
-            raise TrainingError(f"{field} {mine!r} differs from the run being resumed ({theirs!r}); resume with the "
-                                f"run's own settings (omit the option) or start a new run in another --out")
+    from scenario_bank.run_identity import check_identity
+
+    check_identity(recorded.to_json(), config.to_json(), TrainConfig.IDENTITY, run=f"{config.out} holds a training run",
+                   fix="resume with the run's own settings (omit the option) or start a new run in another --out")
 
 
 def _new_model(config: TrainConfig, venv, tensorboard_log: str):
@@ -691,6 +746,33 @@ def _resume_model(config: TrainConfig, checkpoint: Path, venv, tensorboard_log: 
     return model
 
 
+def planned_steps(model: Any, start: int, target: int) -> Tuple[int, Optional[str]]:
+    """``(the step count training to ``target`` from ``start`` ends at, a line saying so)``.
+
+    Stable-baselines3 stops at the first whole rollout that reaches ``target``: ``n_steps x n_envs`` env steps
+    for PPO/A2C, ``train_freq x n_envs`` for DQN/SAC with a step-counted ``train_freq``. The line is ``None``
+    when nothing is left to train or the rollout is counted in episodes (its end is not known ahead)."""
+    remaining = int(target) - int(start)
+    n_envs = int(getattr(model, "n_envs", 1) or 1)
+    if remaining <= 0:
+        return int(start), None
+    if getattr(model, "n_steps", None):
+        per_env, unit = int(model.n_steps), "rollouts"
+    else:
+        frequency = getattr(model, "train_freq", None)
+        if getattr(getattr(frequency, "unit", None), "value", "step") != "step":
+            return int(target), None
+        per_env, unit = int(getattr(frequency, "frequency", 1) or 1), "collection rounds"
+    rollout = per_env * n_envs
+    final = int(start) + -(-remaining // rollout) * rollout
+    origin = f" from step {start:,}" if start else ""
+    if final == int(target):
+        return final, (f"training {remaining:,} steps{origin}: {remaining // rollout:,} {unit} of {rollout:,} "
+                       f"({per_env} steps x {n_envs} env{'s' if n_envs != 1 else ''})")
+    return final, (f"{target:,} steps asked: trains to {final:,}{origin} (stable-baselines3 trains whole {unit} "
+                   f"of {rollout:,} = {per_env} steps x {n_envs} env{'s' if n_envs != 1 else ''})")
+
+
 def _versions() -> Dict[str, str]:
     from importlib import metadata
 
@@ -714,40 +796,23 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         raise TrainingError(f"--out {out} is a file; choose a folder for the run")
     names = _resolve_names(config)
     run_path = out / "run.json"
-    checkpoint = latest_checkpoint(out)
-    record: Dict[str, Any] = {"config": config.to_json(), "segments": []}
-    if resume:
-        recorded, record = load_run_config(out)
-        _check_resume(config, recorded)
-        if checkpoint is None:
-            # stopped before its first checkpoint: nothing was kept, so the run starts over in place
-            log(f"{out} holds no checkpoint yet (the run stopped before its first one): starting from step 0")
-            resume, record = False, {"config": config.to_json(), "segments": []}
-        else:
-            record["config"] = config.to_json()
-    elif checkpoint is not None or run_path.exists():
-        at = f" (checkpoint at step {int(_CHECKPOINT.match(checkpoint.name).group(1))})" if checkpoint else ""
-        raise TrainingError(f"{out} already holds a training run{at}; pass --resume to continue it, "
-                            "or choose another --out")
+    resume, record, checkpoint = _open_record(config, resume, log)
 
     from stable_baselines3.common.callbacks import CallbackList
 
-    from policies.model_card import bank_version, write_card
+    from policies.model_card import write_card
     from scenario_bank.atomic import atomic_path, atomic_write_json
 
     import torch
 
     torch.set_num_threads(1)
     env_config = config.effective_env_config()
-    sampler = ScenarioSampler(names, config.sampler, config.weights, config.curriculum_floor, config.curriculum_window)
-    stream = 0
-    if resume:
-        sampler_state = checkpoint.with_suffix(".sampler.json")
-        if sampler_state.is_file():
-            sampler.load_state_dict(json.loads(sampler_state.read_text(encoding="utf-8")))
-        stream = int(_CHECKPOINT.match(checkpoint.name).group(1))
+    sampler, stream = _restored_sampler(config, names, checkpoint if resume else None)
     out.mkdir(parents=True, exist_ok=True)
     tensorboard_log = str(out / "tb")
+    log(f"starting {config.n_envs} training env{'s' if config.n_envs != 1 else ''} "
+        f"({'subprocesses' if config.vec_env != 'dummy' else 'in this process'}) on {len(names)} scenario"
+        f"{'s' if len(names) != 1 else ''}; the first reset compiles their first scenarios (up to a minute) ...")
     venv = make_vec_env(names, env_config, config.bank_dir, sampler.probabilities(), config.n_envs, config.seed,
                         stream=stream, vec_env=config.vec_env)
     try:
@@ -757,6 +822,9 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         else:
             model = _new_model(config, venv, tensorboard_log)
         start = int(model.num_timesteps)
+        planned, plan = planned_steps(model, start, config.steps)
+        if plan:
+            log(plan)
         atomic_write_json(run_path, record)
         curriculum = CurriculumCallback(sampler, config.curriculum_update)
         evaluation = HeldOutEvaluationCallback(evaluation_episodes(names, config.eval_seeds), env_config,
@@ -764,7 +832,7 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         saver = CheckpointSaver(out / "checkpoints", config.checkpoint_freq, sampler, config.keep_checkpoints)
         callbacks = [curriculum, evaluation, saver]
         if config.progress_bar:
-            callbacks.append(ProgressCallback(config.steps, f"{config.algo} {out.name}", evaluation))
+            callbacks.append(ProgressCallback(max(planned, config.steps), f"{config.algo} {out.name}", evaluation))
         began = time.perf_counter()
         remaining = config.steps - start
 
@@ -783,6 +851,8 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
             except KeyboardInterrupt:
                 saved = saver.save(model)
                 close_segment("interrupted")
+                if getattr(model, "_logger", None) is not None:  # set once learning has started
+                    model.logger.close()  # TensorBoard's last events written now: an interrupted dv2s exits at once
                 raise Interrupted(f"training stopped at step {model.num_timesteps}: checkpoint {saved} is kept; "
                                   "rerun the same command with --resume to continue") from None
             saver.save(model)
@@ -790,14 +860,62 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
             log(f"the model already has {start} steps (>= --steps {config.steps}); nothing to train")
         segment = close_segment("finished")
     finally:
-        venv.close()
+        close_vec_env(venv)
     model_path = out / "model.zip"
     with atomic_path(model_path, keep_suffix=True) as tmp:
         model.save(tmp)
+    card = _card(config, names, env_config, model, sampler, record)
+    _evaluate_for_card(config, names, card, model_path, log)
+    write_card(out, card)
+    log(f"wrote {model_path} and {out / 'model_card.json'} (step {model.num_timesteps}, last segment "
+        f"{segment['wall_time_s']:.0f} s)")
+    return card
+
+
+def _open_record(config: TrainConfig, resume: bool, log: Callable[[str], None]
+                 ) -> Tuple[bool, Dict[str, Any], Optional[Path]]:
+    """``(resume, run.json's record, the newest checkpoint)`` of the run in ``config.out``: a resumed run's
+    record (its settings checked against ``config``), or a new one (refused over an existing run)."""
+    out = Path(config.out)
+    checkpoint = latest_checkpoint(out)
+    record: Dict[str, Any] = {"config": config.to_json(), "segments": []}
+    if resume:
+        recorded, record = load_run_config(out)
+        _check_resume(config, recorded)
+        if checkpoint is None:
+            # stopped before its first checkpoint: nothing was kept, so the run starts over in place
+            log(f"{out} holds no checkpoint yet (the run stopped before its first one): starting from step 0")
+            resume, record = False, {"config": config.to_json(), "segments": []}
+        else:
+            record["config"] = config.to_json()
+    elif checkpoint is not None or (out / "run.json").exists():
+        at = f" (checkpoint at step {int(_CHECKPOINT.match(checkpoint.name).group(1))})" if checkpoint else ""
+        raise TrainingError(f"{out} already holds a training run{at}; pass --resume to continue it, "
+                            "or choose another --out")
+    return resume, record, checkpoint
+
+
+def _restored_sampler(config: TrainConfig, names: Sequence[str],
+                      checkpoint: Optional[Path]) -> Tuple[ScenarioSampler, int]:
+    """The run's scenario sampler and the workers' seed stream: fresh, or as saved beside ``checkpoint``."""
+    sampler = ScenarioSampler(names, config.sampler, config.weights, config.curriculum_floor, config.curriculum_window)
+    if checkpoint is None:
+        return sampler, 0
+    sampler_state = checkpoint.with_suffix(".sampler.json")
+    if sampler_state.is_file():
+        sampler.load_state_dict(json.loads(sampler_state.read_text(encoding="utf-8")))
+    return sampler, int(_CHECKPOINT.match(checkpoint.name).group(1))
+
+
+def _card(config: TrainConfig, names: Sequence[str], env_config: Dict[str, Any], model: Any,
+          sampler: ScenarioSampler, record: Mapping[str, Any]) -> Dict[str, Any]:
+    """The trained model's card, without its evaluation."""
+    from policies.model_card import bank_version
+
     wall = sum(s["wall_time_s"] for s in record["segments"])
     trained = sum(s["end_step"] - s["start_step"] for s in record["segments"])
-    card: Dict[str, Any] = {
-        "name": out.name,
+    return {
+        "name": Path(config.out).name,
         "algorithm": config.algo,
         "policy": config.effective_hyperparameters()["policy"],
         "hyperparameters": config.effective_hyperparameters(),
@@ -820,31 +938,36 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         },
         "versions": _versions(),
     }
-    card_seeds = config.card_seed_count()
-    if card_seeds > 0:
-        from policies.model_card import evaluate_for_card
 
-        specs = {config.algo: f"{config.algo}:{model_path.resolve()}", **{b: b for b in config.baselines}}
-        log(f"model card evaluation: {len(names)} scenarios x {card_seeds} held-out seeds x "
-            f"{len(specs)} policies ({', '.join(specs)}) = {len(names) * card_seeds * len(specs)} episodes; "
-            "--card-seeds N shortens it (0 skips it), Ctrl-C writes the card without it")
-        baseline_config = {k: v for k, v in env_config.items() if k != "action"}
-        configs = {label: (env_config if label == config.algo else baseline_config) for label in specs}
-        try:
-            card["evaluation"] = evaluate_for_card(specs, evaluation_episodes(names, card_seeds), configs,
-                                                   bank_dir=config.bank_dir, candidate=config.algo,
-                                                   seed_base=EVAL_SEED_BASE, seeds=card_seeds,
-                                                   jobs=config.eval_jobs, progress=config.progress_bar)
-        except KeyboardInterrupt:
-            card["evaluation"] = None
-            write_card(out, card)
-            raise Interrupted(f"stopped during the card's evaluation: {model_path} and {out / 'model_card.json'} "
-                              "are written without it; rerun the same command with --resume to evaluate") from None
-        card["evaluation"]["specs"][config.algo] = f"{config.algo}:model.zip (beside this card)"
-    write_card(out, card)
-    log(f"wrote {model_path} and {out / 'model_card.json'} (step {model.num_timesteps}, last segment "
-        f"{segment['wall_time_s']:.0f} s)")
-    return card
+
+def _evaluate_for_card(config: TrainConfig, names: Sequence[str], card: Dict[str, Any], model_path: Path,
+                       log: Callable[[str], None]) -> None:
+    """The card's ``evaluation``: the model and the baselines on held-out seeds (none when ``card_seeds`` is 0);
+    Ctrl-C writes the card without it."""
+    card_seeds = config.card_seed_count()
+    if card_seeds <= 0:
+        return
+    from policies.model_card import evaluate_for_card, write_card
+
+    env_config = card["env_config"]
+    specs = {config.algo: f"{config.algo}:{model_path.resolve()}", **{b: b for b in config.baselines}}
+    log(f"model card evaluation: {len(names)} scenarios x {card_seeds} held-out seeds x "
+        f"{len(specs)} policies ({', '.join(specs)}) = {len(names) * card_seeds * len(specs)} episodes; "
+        "--card-seeds N shortens it (0 skips it), Ctrl-C writes the card without it")
+    baseline_config = {k: v for k, v in env_config.items() if k != "action"}
+    configs = {label: (env_config if label == config.algo else baseline_config) for label in specs}
+    try:
+        card["evaluation"] = evaluate_for_card(specs, evaluation_episodes(names, card_seeds), configs,
+                                               bank_dir=config.bank_dir, candidate=config.algo,
+                                               seed_base=EVAL_SEED_BASE, seeds=card_seeds,
+                                               jobs=config.eval_jobs, progress=config.progress_bar, log=log)
+    except KeyboardInterrupt:
+        card["evaluation"] = None
+        write_card(Path(config.out), card)
+        raise Interrupted(f"stopped during the card's evaluation: {model_path} and "
+                          f"{Path(config.out) / 'model_card.json'} are written without it; rerun the same command "
+                          "with --resume to evaluate") from None
+    card["evaluation"]["specs"][config.algo] = f"{config.algo}:model.zip (beside this card)"
 
 
 # --------------------------------------------------------------------------- fine-tuning
@@ -921,25 +1044,23 @@ def fine_tune_scenarios(weights: Optional[Mapping[str, float]],
     return weights, list(scenarios)
 
 
-def fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathLike | str, steps: int,
-              weights: Mapping[str, float], seed: int = 0, n_envs: int = 2,
-              scenarios: Optional[Sequence[str]] = None, env_config: Optional[Dict[str, Any]] = None,
-              eval_freq: int = 0, eval_seeds: int = 1, card_seeds: int = 0, baselines: Sequence[str] = (),
-              eval_jobs: int = 2, checkpoint_freq: int = 10_000, progress_bar: bool = True,
-              vec_env: str = "subproc", learning_rate: Optional[float] = None,
-              reward_weights: Optional[Mapping[str, float]] = None,
-              log: Callable[[str], None] = print) -> Path:
-    """Continue training an SB3 checkpoint on a bank with weighted scenario sampling; returns ``out/model.zip``.
+def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, learning_rate: Optional[float] = None,
+              reward_weights: Optional[Mapping[str, float]] = None, log: Callable[[str], None] = print) -> Path:
+    """Continue training an SB3 checkpoint on a bank with weighted scenario sampling; returns ``config.out/model.zip``.
+
+    ``config`` (:meth:`TrainConfig.fine_tuning`) says what to train on: ``steps`` env steps of fine-tuning (on
+    top of the checkpoint's own), ``weights`` scenario -> sampling weight, the scenarios trained on
+    (``scenarios``, default every scenario with a positive weight, so scenarios left out, held-out ones, are
+    never drawn), ``env_config`` (``None``: the one on the checkpoint's model card, same reward), the seed,
+    the environments, the evaluations and checkpoints. Its ``algo``, ``sampler`` and ``hyperparameters`` are
+    the checkpoint's (weighted sampling).
 
     The checkpoint is copied into ``out/checkpoints/step_<n>.zip`` (``n``: its own step
     counter) and :func:`train` resumes from it with the ``weighted`` sampler, so the step
     counter, the optimizer state saved in the zip and the reset-seed ranges (training
     seeds >= :data:`TRAIN_SEED_LOW`, evaluation seeds :data:`EVAL_SEED_BASE`...) are those of
-    ``dv2s train``. ``weights`` maps scenario -> sampling weight; the scenarios trained on
-    are ``scenarios`` (default: every scenario with a positive weight), so scenarios left
-    out (held-out ones) are never drawn. The env config defaults to the one on the
-    checkpoint's model card (same reward). The card (``model_card.json``, ``README.md``)
-    gets a ``fine_tune`` section naming the source checkpoint and its step.
+    ``dv2s train``. The card (``model_card.json``, ``README.md``) gets a ``fine_tune`` section naming the
+    source checkpoint and its step.
     ``learning_rate`` (constant) replaces the checkpoint's own for the fine-tuning.
     ``reward_weights`` overrides single reward terms of that env config (e.g.
     ``{"standing": -1.0}``; the other terms keep their weights): the training env's
@@ -949,18 +1070,17 @@ def fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathL
     Restartable: called again with the same ``out`` it resumes from the newest checkpoint
     there, and returns at once when ``out/model.zip`` and its card are already written.
     """
+    steps = config.steps
     if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
         raise TrainingError(f"fine-tuning steps must be a positive integer, not {steps!r}")
-    out = Path(out)
-    weights, scenarios = fine_tune_scenarios(weights, scenarios)
+    out = Path(config.out)
+    weights, scenarios = fine_tune_scenarios(config.weights, config.scenarios)
     algorithm, source, source_card = resolve_checkpoint(checkpoint_or_spec)
-    if env_config is None:
-        env_config = dict(source_card.get("env_config") or {})
+    env_config = dict(source_card.get("env_config") or {}) if config.env_config is None else config.env_config
     env_config = with_reward_weights(env_config, reward_weights)
     hyperparameters = {k: v for k, v in (source_card.get("hyperparameters") or {}).items()
                        if k != "policy" and k in _known_hyperparameters(algorithm)}
     from policies.registry import read_model_card
-    from scenario_bank.atomic import atomic_path, atomic_write_json
 
     model_path = out / "model.zip"
     if model_path.is_file() and "fine_tune" in read_model_card(model_path):
@@ -968,37 +1088,46 @@ def fine_tune(checkpoint_or_spec: str, *, bank_dir: Optional[str], out: os.PathL
     import stable_baselines3 as sb3
 
     start_step = int(getattr(sb3, algorithm.upper()).load(str(source), device="cpu").num_timesteps)
-    config = TrainConfig(out=str(out), algo=algorithm, scenarios=sorted(scenarios), bank_dir=bank_dir,
-                         steps=start_step + steps, n_envs=n_envs, seed=seed, sampler="weighted",
-                         weights={name: weights.get(name, 0.0) for name in sorted(scenarios)},
-                         env_config=dict(env_config), hyperparameters=hyperparameters, eval_freq=eval_freq,
-                         eval_seeds=eval_seeds, card_seeds=card_seeds, baselines=list(baselines), eval_jobs=eval_jobs,
-                         checkpoint_freq=checkpoint_freq, progress_bar=progress_bar, vec_env=vec_env)
-    config.validate()
+    run_config = dataclasses.replace(
+        config, out=str(out), algo=algorithm, scenarios=sorted(scenarios), steps=start_step + steps,
+        sampler="weighted", weights={name: weights.get(name, 0.0) for name in sorted(scenarios)},
+        env_config=dict(env_config), hyperparameters=hyperparameters, baselines=list(config.baselines))
+    run_config.validate()
     if latest_checkpoint(out) is None:
-        if (out / "run.json").exists():
-            raise TrainingError(f"{out} holds a training run without a checkpoint; remove it or choose another out")
-        first = out / "checkpoints" / f"step_{start_step:09d}.zip"
-        first.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(first, keep_suffix=True) as tmp:
-            if learning_rate is None:
-                Path(tmp).write_bytes(source.read_bytes())
-            else:  # saved with the model: every resume of this run keeps it
-                model = getattr(sb3, algorithm.upper()).load(str(source), device="cpu")
-                model.learning_rate = float(learning_rate)
-                model._setup_lr_schedule()
-                model.save(tmp)
-        atomic_write_json(out / "run.json", {"config": config.to_json(), "segments": []})
-    card = train(config, resume=True, log=log)
+        _first_checkpoint(run_config, source, start_step, learning_rate)
+    card = train(run_config, resume=True, log=log)
     card["fine_tune"] = {"source": str(checkpoint_or_spec), "source_checkpoint": str(source),
                          "source_steps": start_step, "steps": int(card["training"]["steps"]) - start_step,
-                         "weights": config.weights, "learning_rate": learning_rate,
+                         "weights": run_config.weights, "learning_rate": learning_rate,
                          "reward_weights": dict(reward_weights) if reward_weights else None}
     card["description"] = (f"Fine-tuned from {checkpoint_or_spec} (step {start_step}) for "
-                           f"{card['fine_tune']['steps']} steps on {len(config.scenarios)} scenarios with weighted "
+                           f"{card['fine_tune']['steps']} steps on {len(run_config.scenarios)} scenarios with weighted "
                            "sampling (see sampler.weights).")
     card["name"] = out.name
     from policies.model_card import write_card
 
     write_card(out, card)
     return model_path
+
+
+def _first_checkpoint(config: TrainConfig, source: Path, start_step: int, learning_rate: Optional[float]) -> None:
+    """Start a fine-tuning run in ``config.out``: the source checkpoint as its first checkpoint (with
+    ``learning_rate`` saved in it when given) and a ``run.json`` with no segment yet."""
+    import stable_baselines3 as sb3
+
+    from scenario_bank.atomic import atomic_path, atomic_write_json
+
+    out = Path(config.out)
+    if (out / "run.json").exists():
+        raise TrainingError(f"{out} holds a training run without a checkpoint; remove it or choose another out")
+    first = out / "checkpoints" / f"step_{start_step:09d}.zip"
+    first.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_path(first, keep_suffix=True) as tmp:
+        if learning_rate is None:
+            Path(tmp).write_bytes(source.read_bytes())
+        else:  # saved with the model: every resume of this run keeps it
+            model = getattr(sb3, config.algo.upper()).load(str(source), device="cpu")
+            model.learning_rate = float(learning_rate)
+            model._setup_lr_schedule()
+            model.save(tmp)
+    atomic_write_json(out / "run.json", {"config": config.to_json(), "segments": []})

@@ -4,9 +4,25 @@ that runs untrusted Scenic.
 This is the bottom layer of dv2s-gym: it imports nothing else of the project. Each shipped
 scenario is a folder ``scenarios/<name>/`` holding ``scenario.scenic`` and its sidecar
 ``meta.json`` (description, elements, story, tags, map, source, content hash); a user's bank has
-the same layout. :mod:`scenario_bank.bank` reads and writes banks (atomically),
-:mod:`scenario_bank.catalog` finds scenarios by name, tag or path, :mod:`scenario_bank.jail`
-runs scripts in a child process under CPU, memory and time limits.
+the same layout. The modules:
+
+- :mod:`scenario_bank.bank`: :class:`~scenario_bank.bank.Bank`, the one interface that reads and writes
+  a bank folder (atomically, under a writers' lock; its index cached in :mod:`scenario_bank.cache`), built of
+  :mod:`scenario_bank.entries` (an entry folder, its sidecar and provenance, listing a bank folder),
+  :mod:`scenario_bank.dedup` (when two scenarios are the same or near-duplicates),
+  :mod:`scenario_bank.admission` (the checks a script passes to enter a bank) and
+  :mod:`scenario_bank.archives` (export and import of ``.tar.gz`` archives);
+- :mod:`scenario_bank.catalog` finds scenarios by name, tag or path;
+- :mod:`scenario_bank.errors` holds the one base error and the bank's errors;
+- :mod:`scenario_bank.atomic` (atomic file writes) and :mod:`scenario_bank.safe_files` (capped reads of
+  regular files, safe names, archive extraction) are what every bank write and read goes through;
+- :mod:`scenario_bank.elements` and :mod:`scenario_bank.story` are the vocabulary of a sidecar's elements and
+  story;
+- :mod:`scenario_bank.safety`, :mod:`scenario_bank.precheck`, :mod:`scenario_bank.scenic_parse` and
+  :mod:`scenario_bank.sandbox` check an untrusted script, and :mod:`scenario_bank.jail` runs it in a child
+  process under CPU, memory and time limits; :mod:`scenario_bank.shipped` pins the shipped scripts by hash;
+- :mod:`scenario_bank.scenic2` (with its rules, :mod:`scenario_bank.scenic2_rules`) upgrades Scenic 2 scripts;
+- :mod:`scenario_bank.map_cache` keeps Scenic's parsed maps (``maps/`` holds the OpenDRIVE maps).
 """
 
 from scenario_bank.catalog import (

@@ -60,7 +60,7 @@ def select_scenarios(selector: Union[None, str, Sequence[str]], bank_dir: Option
             tag = item[4:]
             tagged = [e.name for e in bank.list(tag=tag)]
             if not tagged:
-                near = difflib.get_close_matches(tag, bank.tags(), n=3, cutoff=0.5)
+                near = difflib.get_close_matches(tag, bank.tags(), n=3, cutoff=0.6)
                 hint = f" Did you mean {', '.join(repr(t) for t in near)}?" if near else ""
                 raise UnknownScenarioError(
                     f"no scenario carries tag {tag!r}.{hint} Tags in the bank: {', '.join(bank.tags()) or '(none)'}."

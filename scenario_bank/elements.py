@@ -39,6 +39,7 @@ __all__ = [
     "ACTIONS",
     "COLLISION_TYPES",
     "RELATIONS",
+    "CAN_DO",
     "ElementError",
     "normalize_elements",
     "element_set",
@@ -63,6 +64,15 @@ either ``lane_change_left`` or ``lane_change_right``, see :func:`with_undirected
 COLLISION_TYPES = ("collide_rear_end", "collide_side", "collide_head_on")
 """The collision-type actions (each comes with ``collide``)."""
 RELATIONS = ("ahead_of", "behind", "left_of", "right_of", "oncoming", "same_lane", "crossing_path")
+
+_VEHICLE_ACTIONS = frozenset(ACTIONS)
+CAN_DO: Dict[str, FrozenSet[str]] = {
+    **{kind: _VEHICLE_ACTIONS for kind in ("ego", "car", "truck", "bus", "motorcycle", "bicycle")},
+    "pedestrian": frozenset({"cross", "stop", "collide"} | set(COLLISION_TYPES)),
+    "obstacle": frozenset(),
+}
+"""Participant type -> the actions a participant of that type can do at all, whether a generator builds them or
+not: the ego and every vehicle any action; a pedestrian only crosses, stops or collides; an obstacle nothing."""
 
 Element = Tuple[Any, ...]
 

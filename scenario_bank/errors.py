@@ -1,13 +1,20 @@
-"""The one base class every dv2s-gym error derives from.
+"""The errors of the bottom layer: the one base class every dv2s-gym error derives from, and the bank's errors.
 
-It lives in the bottom layer (``scenario_bank``) so that every package can derive
+:class:`DV2SError` lives in the bottom layer (``scenario_bank``) so that every package can derive
 from it; ``envs.errors`` re-exports it. The ``dv2s`` command catches it once and
 prints its message as one line: a project error names the problem and the fix.
+The bank's errors (:class:`BankError` and its kinds) are raised by :mod:`scenario_bank.bank` and the modules it
+is built of, and re-exported there.
 """
 
 from __future__ import annotations
 
-__all__ = ["DV2SError"]
+import errno
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+__all__ = ["DV2SError", "BankError", "BankVersionError", "UnsafeBankInputError", "NotABankError",
+           "DuplicateScenarioError", "ScenarioRejectedError", "UnknownScenarioError", "bank_write_error"]
 
 
 class DV2SError(Exception):
@@ -18,3 +25,48 @@ class DV2SError(Exception):
     """
 
     expected: bool = True
+
+
+class BankError(DV2SError):
+    """A bank operation failed; the bank is unchanged."""
+
+
+class BankVersionError(BankError):
+    """The bank (or an entry) was written by a newer dv2s-gym."""
+
+
+class UnsafeBankInputError(BankError, ValueError):
+    """A bank folder, file, name or archive is malformed or hostile (a link, a FIFO, an unsafe name, too
+    large or too deeply nested); the message names it and the fix, and nothing was written."""
+
+
+class NotABankError(BankError, ValueError):
+    """The folder holds other things than scenario entries."""
+
+
+class DuplicateScenarioError(BankError):
+    """The script is already in the bank (byte for byte or semantically)."""
+
+    def __init__(self, message: str, existing: str) -> None:
+        super().__init__(message)
+        self.existing = existing
+
+
+class ScenarioRejectedError(BankError, ValueError):
+    """The script failed verification: the safety check (``stage == "safety"``, ``findings``) or its
+    compile, sample and run in the sandbox (``stage``; ``limit`` when a resource limit stopped it)."""
+
+    def __init__(self, message: str, stage: str, findings: Sequence[Any] = (), limit: Optional[str] = None) -> None:
+        super().__init__(message)
+        self.stage, self.findings, self.limit = stage, list(findings), limit
+
+
+class UnknownScenarioError(BankError, ValueError):
+    """A scenario name or tag that the bank does not hold."""
+
+
+def bank_write_error(error: OSError, where: Path) -> BankError:
+    """The :class:`BankError` for a write to ``where`` that failed with ``error`` (a full disk named as such)."""
+    if error.errno == errno.ENOSPC:
+        return BankError(f"the disk is full while writing to {where}; free some space and retry (the bank is unchanged)")
+    return BankError(f"could not write to {where}: {error.strerror or error}; the bank is unchanged")

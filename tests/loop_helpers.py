@@ -12,6 +12,8 @@ import json
 from pathlib import Path
 from typing import Any, Dict, List, Sequence
 
+from dv2s_gym.mining import loop as loop_module
+from dv2s_gym.mining import miner as miner_module
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
 
@@ -31,7 +33,8 @@ def add_mined_copy(bank_dir: str, source: str, name: str, cluster: str) -> str:
 
 
 class FakeMiner:
-    """Callable with :func:`dv2s_gym.mining.miner.mine`'s signature; ``calls`` counts real work done."""
+    """Callable with :func:`dv2s_gym.mining.miner.mine`'s signature; ``calls`` counts real work done (each call's
+    settings and options)."""
 
     def __init__(self, sources: Sequence[str], failures_per_round: int = 6, replays: bool = False,
                  replays_only: bool = False) -> None:
@@ -41,11 +44,12 @@ class FakeMiner:
         self.replays_only = replays_only  # every conversion rejected; the failures kept as replays.jsonl rows only
         self.calls: List[Dict[str, Any]] = []
 
-    def __call__(self, policy: str, *, out: str, budget: int, bank_dir: str, seed: int = 0, **options: Any):
+    def __call__(self, policy: str, settings: Any, *, out: str, **options: Any):
+        budget, bank_dir, seed = settings.budget, settings.bank_dir, settings.seed
         out_path = Path(out)
         if (out_path / "conversions.jsonl").is_file():
             return None
-        self.calls.append({"policy": policy, "out": out, "budget": budget, "seed": seed, **options})
+        self.calls.append({"policy": policy, "out": out, **settings.options(), **options})
         out_path.mkdir(parents=True, exist_ok=True)
         episodes, conversions, replayed = [], [], []
         for index in range(budget):
@@ -70,3 +74,17 @@ class FakeMiner:
             (out_path / "replays.jsonl").write_text("".join(json.dumps(r) + "\n" for r in replayed))
         (out_path / "conversions.jsonl").write_text("".join(json.dumps(c) + "\n" for c in conversions))
         return None
+
+
+def run_loop(policy: str = "dv2s-ppo", *, miner: Any = None, out: Any = loop_module.DEFAULT_OUT,
+             progress: bool = True, log: Any = None, **settings: Any) -> "loop_module.LoopReport":
+    """:func:`dv2s_gym.mining.loop.run_loop` with its :class:`~dv2s_gym.mining.loop.LoopSettings` as keywords (the
+    tests' shorthand), mining with ``miner`` (a :class:`FakeMiner`) in place of the real miner when given."""
+    from unittest import mock
+
+    options = {"out": out, "progress": progress, **({"log": log} if log is not None else {})}
+    loop_settings = loop_module.LoopSettings(**settings)
+    if miner is None:
+        return loop_module.run_loop(policy, loop_settings, **options)
+    with mock.patch.object(miner_module, "mine", miner):
+        return loop_module.run_loop(policy, loop_settings, **options)

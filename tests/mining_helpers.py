@@ -10,7 +10,20 @@ import numpy as np
 import pytest
 
 from dv2s_gym.mining import miner as miner_module
-from dv2s_gym.mining.miner import mine
+from dv2s_gym.mining.settings import MineSettings
+from dv2s_gym.workers.settings import WorkerSettings
+
+_WORKER_OPTIONS = ("backend", "workers", "address", "timeout")
+_RUN_OPTIONS = ("progress", "reports", "origin")
+
+
+def mine(policy: str, *, out: Any, **options: Any) -> "miner_module.MineRun":
+    """:func:`dv2s_gym.mining.miner.mine` with its settings as keywords (the tests' shorthand): the worker
+    options become a :class:`WorkerSettings`, ``progress``/``reports``/``origin`` are passed as they are and
+    the rest make the :class:`MineSettings`."""
+    workers = WorkerSettings(**{key: options.pop(key) for key in _WORKER_OPTIONS if key in options})
+    run = {key: options.pop(key) for key in _RUN_OPTIONS if key in options}
+    return miner_module.mine(policy, MineSettings(**options), out=out, workers=workers, **run)
 
 
 def mine_killed_after(policy: str, out: Path, stop_after: int, monkeypatch: Any, **run: Any) -> None:

@@ -1,13 +1,13 @@
 """Helpers of the rules-SG composition tests: generate from a hand-built parse, run a script."""
 
-from dv2s_gym.pipeline.sg import rules as sg_rules
 from dv2s_gym.pipeline.semantics.text import ParsedDescription
+from dv2s_gym.pipeline.sg.rules import generate as sg_generate
 
 
 def generate_from(monkeypatch, parsed: ParsedDescription, seed: int = 0):
     """``generate_rules`` on ``parsed`` as if the parser had read its text so."""
-    monkeypatch.setattr(sg_rules, "parse_description", lambda text: parsed)
-    return sg_rules.generate_rules(parsed.text, seed=seed)
+    monkeypatch.setattr(sg_generate, "parse_description", lambda text: parsed)
+    return sg_generate.generate_rules(parsed.text, seed=seed)
 
 
 def run_script(script, seconds: float, seed: int = 0):

@@ -91,3 +91,15 @@ def test_export_import_and_validate_exit_codes(bank, tmp_path, capsys):
     assert reports["good"]["acceptance_rate"] > 0 and reports["good"]["episodes"][0]["steps"] > 0
     assert not reports["broken"]["ok"] and "FollowLaneBehaviour" in reports["broken"]["error"]
     assert run(capsys, "bank", "--bank", bank, "validate", "good", "--samples", "1", "--seconds", "1")[0] == 0
+
+
+def test_bank_list_has_a_header_and_columns_as_wide_as_the_longest_name(capsys):
+    code, out, _ = run(capsys, "bank", "list")
+    lines = out.splitlines()
+    assert code == 0 and lines[0].split() == ["name", "map", "source", "tags"]
+    rows = lines[1:-1]
+    longest = max(len(line.split()[0]) for line in rows)
+    assert longest > 40  # names longer than the old fixed column
+    starts = {line.index(line.split()[1], len(line.split()[0])) for line in [lines[0], *rows]}
+    assert len(starts) == 1  # the map column starts at one place on every line, the header's included
+    assert lines[-1].endswith("scenario(s)")

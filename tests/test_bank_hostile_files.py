@@ -310,7 +310,7 @@ def test_a_merge_never_writes_through_a_linked_folder(world, tmp_path, monkeypat
     import scenario_bank.bank as bank_module
 
     bank_dir, _, outside = world
-    monkeypatch.setattr(bank_module, "_verify_or_name_scenic2", lambda *args: None)  # no sandbox run needed here
+    monkeypatch.setattr(bank_module, "verify_or_name_scenic2", lambda *args: None)  # no sandbox run needed here
     os.symlink(outside, bank_dir / GOOD / "merged")
     video = tmp_path / "failure.webm"
     video.write_bytes(b"video")
@@ -318,8 +318,8 @@ def test_a_merge_never_writes_through_a_linked_folder(world, tmp_path, monkeypat
     bank = Bank(bank_dir)
     entry = bank.get(GOOD)
     with pytest.raises(BankError, match="symbolic link"):
-        bank.add_or_merge(entry.script, "the same failure", elements=entry.elements, map=entry.map,
-                          provenance={"kind": "mined"}, files={"failure.webm": video})
+        bank.add(entry.script, "the same failure", elements=entry.elements, map=entry.map,
+                 provenance={"kind": "mined"}, files={"failure.webm": video}, on_duplicate="merge")
     assert snapshot(tmp_path) == before and list(outside.iterdir()) == [outside / "secret.txt"]
 
 

@@ -1,4 +1,5 @@
-"""Near-duplicate merging in the bank (``Bank.add_or_merge``) and several miners writing to one bank at once."""
+"""Near-duplicate merging in the bank (``Bank.add(..., on_duplicate="merge")``) and several miners writing to one
+bank at once."""
 
 from __future__ import annotations
 
@@ -48,18 +49,20 @@ def test_near_duplicate_needs_same_map_elements_and_overlapping_ranges():
 
 
 @pytest.mark.slow
-def test_add_or_merge_adds_then_merges_into_the_existing_sidecar(tmp_path):
+def test_add_with_merge_adds_then_merges_into_the_existing_sidecar(tmp_path):
     bank = Bank(tmp_path / "bank")
-    first = bank.add_or_merge(A, "A stopped car ahead.", name="mined_stop", elements=ELEMENTS, provenance=mined(1))
+    first = bank.add(A, "A stopped car ahead.", name="mined_stop", elements=ELEMENTS, provenance=mined(1),
+                     on_duplicate="merge")
     assert first.status == "added" and first.entry.name == "mined_stop"
     assert first.entry.source["kind"] == "mined" and first.entry.source["index"] == 1
     assert first.entry.source["reproduction"] is None  # every mined field is present, unknown ones None
-    near = bank.add_or_merge(A_NEAR, "A car stands still ahead.", name="mined_stop", elements=ELEMENTS,
-                             provenance=mined(2))
+    near = bank.add(A_NEAR, "A car stands still ahead.", name="mined_stop", elements=ELEMENTS,
+                    provenance=mined(2), on_duplicate="merge")
     assert near.status == "merged" and near.entry.name == "mined_stop" and "near-duplicate" in near.how
-    same = bank.add_or_merge(A, "The same script again.", elements=ELEMENTS, provenance=mined(3))
+    same = bank.add(A, "The same script again.", elements=ELEMENTS, provenance=mined(3), on_duplicate="merge")
     assert same.status == "merged" and "byte-for-byte" in same.how
-    far = bank.add_or_merge(B, "A stopped car far ahead.", name="mined_stop", elements=ELEMENTS, provenance=mined(4))
+    far = bank.add(B, "A stopped car far ahead.", name="mined_stop", elements=ELEMENTS, provenance=mined(4),
+                   on_duplicate="merge")
     assert far.status == "added" and far.entry.name == "mined_stop_2"
 
     reread = Bank(tmp_path / "bank")
@@ -81,7 +84,8 @@ def test_old_sidecars_load_and_take_merges(tmp_path):
     shutil.copytree(BANK_DIR / BASE, tmp_path / "bank" / BASE)  # a sidecar without any mined field
     bank = Bank(tmp_path / "bank")
     assert bank.names() == [BASE] and not bank.problems
-    outcome = bank.add_or_merge(A, "stopped car", elements=ELEMENTS, map="highway_straight", provenance=mined(9))
+    outcome = bank.add(A, "stopped car", elements=ELEMENTS, map="highway_straight", provenance=mined(9),
+                       on_duplicate="merge")
     assert outcome.status == "merged" and outcome.entry.name == BASE
     assert Bank(tmp_path / "bank").get(BASE).source["merged"][0]["index"] == 9
 
@@ -104,8 +108,8 @@ def _miner(bank_dir: str, order: list, start, results) -> None:
         start.wait(timeout=120)
         for index, label in order:
             script = {"A": A, "A_NEAR": A_NEAR, "B": B}[label]
-            outcome = bank.add_or_merge(script, f"scenario {label} from miner {index}", name="mined_stop",
-                                        elements=ELEMENTS, provenance=mined(index))
+            outcome = bank.add(script, f"scenario {label} from miner {index}", name="mined_stop",
+                               elements=ELEMENTS, provenance=mined(index), on_duplicate="merge")
             out.append((index, label, outcome.status, outcome.entry.name))
     except Exception as error:  # reported to the test, which fails on it
         out.append((-1, "error", f"{type(error).__name__}: {error}", None))
@@ -163,3 +167,12 @@ def test_update_source_sets_provenance_fields_atomically_and_refuses_the_structu
     with pytest.raises(UnknownScenarioError):
         bank.update_source("no_such_entry", {"converted": None})
     assert not list((tmp_path / "bank").glob(".staging-*")) and not Bank(tmp_path / "bank").problems
+
+
+def test_add_names_an_unknown_on_duplicate_and_a_near_copy_rule_without_merging(tmp_path):
+    bank = Bank(tmp_path / "bank")
+    with pytest.raises(ValueError, match="on_duplicate must be one of 'error', 'merge', not 'skip'"):
+        bank.add(A, "A stopped car ahead.", elements=ELEMENTS, on_duplicate="skip")
+    with pytest.raises(ValueError, match="near_copy_of only applies to on_duplicate='merge'"):
+        bank.add(A, "A stopped car ahead.", elements=ELEMENTS, near_copy_of=lambda entry: True)
+    assert not (tmp_path / "bank").exists()  # refused before anything was written

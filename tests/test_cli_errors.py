@@ -200,7 +200,7 @@ def test_run_takes_its_scenario_from_the_bank_given(capsys, tmp_path):
     bank.mkdir()
     shutil.copytree(BANK_DIR / "highway_lead_vehicle_brakes", bank / "only_in_this_bank")
     code, out, err = run(capsys, "--bank", bank, "run", "only_in_this_bank", "--duration", "1",
-                         "--video", tmp_path / "episode.webm")
+                         "--video", tmp_path / "episode.webm", "--json")
     assert code == 0, err
     assert json.loads(out)["scenario"] == "only_in_this_bank"
 
@@ -231,3 +231,18 @@ def test_a_reader_that_goes_away_stops_the_command_quietly(monkeypatch, capsys):
     monkeypatch.setattr(cli, "_silence_stdout", lambda: None)  # the test's own stdout stays usable
     assert cli.main(["bank", "list"]) == 141
     assert capsys.readouterr().err == ""
+
+
+@pytest.mark.slow
+def test_run_prints_a_summary_for_people_and_json_on_request(capsys, tmp_path):
+    video = tmp_path / "episode.webm"
+    code, out, err = run(capsys, "run", "highway_lead_vehicle_brakes", "--duration", "1", "--video", video,
+                         "--trace", tmp_path / "t.json.gz")
+    assert code == 0, err
+    lines = out.splitlines()
+    assert lines[0] == f"wrote {video} (6 frames)"
+    assert lines[1].startswith("highway_lead_vehicle_brakes, seed 0 (scene seed ") and "5 steps" in lines[1]
+    assert lines[2].startswith("outcome: no collision, on the road") and any(l.startswith("scene: ") for l in lines)
+    assert lines[-1] == f"trace: {tmp_path / 't.json.gz'}" and "{" not in out
+    code, out, _ = run(capsys, "run", "highway_lead_vehicle_brakes", "--duration", "1", "--video", video, "--json")
+    assert code == 0 and json.loads(out)["steps"] == 5

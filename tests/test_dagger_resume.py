@@ -11,9 +11,11 @@ import pytest
 import torch
 
 import policies.imitation as imitation
+from scenario_bank.run_identity import RunIdentityError
 from envs.dv2s_env import DV2SEnv
 from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, DAggerResumeError, checkpoint_position
-from policies.imitation import ReferenceLabels, dagger_fine_tune
+from policies.imitation import ReferenceLabels
+from fine_tune_helpers import dagger_fine_tune
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT, load_policy
 from policies.training import ScenarioSchedule
@@ -116,9 +118,10 @@ def test_a_killed_dagger_run_resumes_to_the_same_model_and_refuses_other_setting
 
     # other settings: refused before any work, naming the setting and the fix; the checkpoint is untouched
     before = (out / CHECKPOINT_DIR / "progress.json").read_bytes()
-    for change, named in (({"learning_rate": 5e-4}, "learning_rate=0.001, not 0.0005"), ({"steps": 200}, "steps=440"),
-                          ({"seed": 4}, "seed=3, not 4"), ({"weights": {SOURCES[0]: 1.0}}, "weights=")):
-        with pytest.raises(DAggerResumeError, match=named) as error:
+    for change, named in (({"learning_rate": 5e-4}, "learning_rate: run has 0.001, asked 0.0005"),
+                          ({"steps": 200}, "steps: run has 440"), ({"seed": 4}, "seed: run has 3, asked 4"),
+                          ({"weights": {SOURCES[0]: 1.0}}, "weights: run has")):
+        with pytest.raises(RunIdentityError, match=named) as error:
             dagger_fine_tune("dv2s-ppo", out=out, log=lambda _: None, **{**RUN, **change})
         assert f"delete {out / CHECKPOINT_DIR}" in str(error.value) and "same settings" in str(error.value)
     assert (out / CHECKPOINT_DIR / "progress.json").read_bytes() == before
@@ -202,7 +205,7 @@ def test_an_unreadable_checkpoint_is_refused_with_the_fix(tmp_path):
 
 @pytest.mark.slow
 def test_the_loop_resumes_a_killed_dagger_fine_tune_and_says_so(tmp_path, monkeypatch):
-    from dv2s_gym.mining.loop import run_loop
+    from loop_helpers import run_loop
     from loop_helpers import FakeMiner
 
     out = tmp_path / "loop"
@@ -218,7 +221,8 @@ def test_the_loop_resumes_a_killed_dagger_fine_tune_and_says_so(tmp_path, monkey
     assert checkpoint_position(out / "round_1" / "policy") == (1, 0)
     lines = []
     report = run_loop("dv2s-ppo", out=out, miner=miner, log=lines.append, **tiny)
-    assert "round 1: fine-tune (dagger) resumed from iteration 1 of 4" in lines
+    resumed = [line for line in lines if "resumed from iteration 1 of 4" in line]
+    assert len(resumed) == 1 and resumed[0].startswith("DAgger: resumed from iteration 1 of 4")  # said once
     assert "DAgger iteration 1/4" not in "\n".join(lines)  # not redone
     tuned = report.rounds[0]["steps"]["fine_tune"]
     # subprocess envs put back where they were too

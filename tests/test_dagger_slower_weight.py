@@ -38,5 +38,4 @@ def test_slower_labels_weigh_more_in_the_loss():
 def test_dagger_defaults_weight_slower_labels_and_refuse_a_bad_weight(tmp_path):
     assert imitation.DAGGER_DEFAULTS["slower_weight"] == 3.0
     with pytest.raises(imitation.TrainingError, match="slower_weight"):
-        imitation.dagger_fine_tune("dv2s-ppo", bank_dir=None, out=tmp_path, steps=10, weights={"x": 1.0},
-                                   slower_weight=0)
+        imitation.DaggerConfig(slower_weight=0)

@@ -20,10 +20,12 @@ API_PAGES = {  # page -> objects its docstrings must document
     "api/regress": ["dv2s_gym.regress.runner.run_regression"],
     "api/mining": ["dv2s_gym.mining.miner.mine", "dv2s_gym.mining.loop.run_loop"],
 }
-# Internal history a user cannot follow: issue numbers, work sessions, numbered work periods, met targets.
+# Internal history a user cannot follow: issue numbers, work sessions, numbered work periods, met targets,
+# versions of the code a user never had.
 HISTORY = re.compile(r"\bissue\s*#?\s*\d+|\bissues?\s+#\d+|#\d{1,3}\b(?![\w-])|\bbefore issue\b|\bnext issues?\b|"
                      r"\bwork (?:session|period)s?\b|\bperiod \d+\b|\bthe (?:issue's )?target is met\b|"
-                     r"\bthe earlier driver\b", re.IGNORECASE)
+                     r"\bthe\s+earlier\s+(?:driver|default)\b|\ban\s+older\s+version\b|\bbefore\s+its\s+author\b|"
+                     r"\bmeasured\s+with\s+different\s+versions\b", re.IGNORECASE)
 
 
 @pytest.fixture(scope="module")
@@ -104,3 +106,16 @@ def test_the_readme_regress_picture_is_made_by_the_command_above_it():
             continue
         made.append(arg)
     assert shown == made
+
+
+BANK_COUNT = re.compile(r"\b(\d+)[- ]scenario (?:shipped )?bank\b|\ball (\d+) scenarios\b|\bthe (\d+) scenarios\b",
+                        re.IGNORECASE)
+
+
+@pytest.mark.parametrize("page", list(_user_pages()), ids=lambda p: str(p.relative_to(ROOT)))
+def test_a_count_of_the_bank_is_the_shipped_banks(page):
+    from scenario_bank import list_scenarios
+
+    size = len(list_scenarios())
+    counts = [next(g for g in m.groups() if g) for m in BANK_COUNT.finditer(page.read_text(encoding="utf-8"))]
+    assert all(int(count) == size for count in counts), f"{page.relative_to(ROOT)} counts {counts}; the bank has {size}"

@@ -8,14 +8,16 @@ import json
 import numpy as np
 import pytest
 
+from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, paired_summary
-from dv2s_gym.mining.loop import LoopError, fine_tune_weights, run_loop
+from dv2s_gym.mining.loop import LoopError, fine_tune_weights
 from dv2s_gym.mining.split import cluster_groups, family_of, split_by_cluster, split_by_family
 from cli_helpers import one_line_error, run
-from loop_helpers import FakeMiner
+from loop_helpers import FakeMiner, run_loop
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT, load_policy
-from policies.training import EVAL_SEED_BASE, TrainingError, fine_tune
+from policies.training import EVAL_SEED_BASE, TrainingError
+from fine_tune_helpers import fine_tune
 
 SOURCES = ["highway_lead_vehicle_brakes", "urban_pedestrian_crossing"]
 
@@ -284,7 +286,7 @@ def test_loop_resumes_without_redoing_steps_and_reports_every_field(tmp_path, mo
     assert len(lines_before) == 2 * TINY["k_eval"]
 
     monkeypatch.setattr(training, "fine_tune", real_fine_tune)
-    with pytest.raises(LoopError, match="budget"):
+    with pytest.raises(RunIdentityError, match="budget: run has 6, asked 7"):
         run_loop("dv2s-ppo", out=out, miner=miner, **{**TINY, "budget": 7})
     report = run_loop("dv2s-ppo", out=out, miner=miner, **TINY)
     assert len(miner.calls) == 1  # mining was not run again
@@ -332,8 +334,8 @@ def test_cli_cluster_counts_read_0_as_none_and_all_as_every_cluster(tmp_path, ca
 
     seen = {}
 
-    def fake_run_loop(policy, **options):
-        seen.update(options)
+    def fake_run_loop(policy, settings, **options):
+        seen.update(max_conversions=settings.max_conversions, max_replays=settings.max_replays)
         raise LoopError("stopped by the test")
 
     monkeypatch.setattr(loop_module, "run_loop", fake_run_loop)
@@ -365,7 +367,8 @@ class _StandIns:
     """Stand-ins for fine-tuning (a copy of the shipped checkpoint), the held-out evaluation (outcome read from
     the role) and the regression runs, recording every call: the loop's wiring runs in seconds."""
 
-    def __init__(self, monkeypatch, kill_in=None):
+    def __init__(self, monkeypatch, kill_in=None, verdict="INCONCLUSIVE", fails=None):
+        import dataclasses
         import shutil
 
         import dv2s_gym.mining.heldout as heldout
@@ -374,12 +377,12 @@ class _StandIns:
 
         self.fine_tunes, self.evaluations, self.regressions = [], [], []
 
-        def fine_tune(policy, *, bank_dir, out, steps, weights, seed, learning_rate, **options):
-            if kill_in is not None and str(out).endswith(kill_in):
+        def fine_tune(policy, config, *, learning_rate, **options):
+            if kill_in is not None and str(config.out).endswith(kill_in):
                 raise _Kill()
-            self.fine_tunes.append({"out": str(out), "steps": steps, "weights": dict(weights), "seed": seed,
-                                    "learning_rate": learning_rate, "policy": policy})
-            folder = __import__("pathlib").Path(out)
+            self.fine_tunes.append({"out": str(config.out), "steps": config.steps, "weights": dict(config.weights),
+                                    "seed": config.seed, "learning_rate": learning_rate, "policy": policy})
+            folder = __import__("pathlib").Path(config.out)
             folder.mkdir(parents=True, exist_ok=True)
             for name in ("model.zip", "model_card.json"):
                 shutil.copyfile(SHIPPED_CHECKPOINT.parent / name, folder / name)
@@ -387,16 +390,20 @@ class _StandIns:
 
         def evaluate(role, policy, episodes, **options):
             self.evaluations.append((role, policy, list(episodes)))
-            fails = {"before": lambda i: True, "control": lambda i: i % 2 == 0, "after": lambda i: i % 4 == 0}[role]
-            return [{"role": role, "scenario": s, "seed": seed, "failed": fails(i), "error": None}
+            outcome = {"before": lambda i: True, "control": lambda i: i % 2 == 0, "after": lambda i: i % 4 == 0,
+                       **(fails or {})}[role]
+            return [{"role": role, "scenario": s, "seed": seed, "failed": outcome(i), "error": None}
                     for i, (s, seed) in enumerate(episodes)]
 
-        def regression(candidate, baseline=None, **options):
-            self.regressions.append({"candidate": candidate, "baseline": baseline, **options})
+        def regression(candidate, baseline=None, settings=None, **options):
+            report = baseline if isinstance(baseline, runner.BaselineReport) else None
+            self.regressions.append({"candidate": candidate, "baseline": None if report else baseline,
+                                     "baseline_role": report.role if report else None,
+                                     **dataclasses.asdict(settings), **options})
             rate = {"value": 0.5, "low": 0.1, "high": 0.9, "count": 1}
             per = {"candidate": {"failure_rate": rate, "stall_rate": rate}, "baseline": {"failure_rate": rate}}
-            return {"verdict": "INCONCLUSIVE", "bank": {"scenarios": ["x"]},
-                    "scenarios": {name: per for name in options.get("scenarios") or []},
+            return {"verdict": verdict, "bank": {"scenarios": ["x"]},
+                    "scenarios": {name: per for name in settings.scenarios or ()},
                     "overall": {"candidate": {"episodes": 2, "failure_rate": rate, "stall_rate": rate,
                                               "mean_speed": {"value": 3.0}},
                                 "baseline": {"episodes": 2, "failure_rate": rate},
@@ -504,7 +511,7 @@ def test_loop_resumes_the_control_arm_without_redoing_the_fine_tune(tmp_path, mo
     state = json.loads((out / "loop.json").read_text())
     assert set(state["rounds"][0]["steps"]) == {"mine", "split", "before", "fine_tune"}
     stand = _StandIns(monkeypatch)
-    with pytest.raises(LoopError, match="control=True"):
+    with pytest.raises(RunIdentityError, match="control: run has True, asked False"):
         run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, control=False, **WIRING)
     report = run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **WIRING)
     assert [call["out"][-len("control"):] for call in stand.fine_tunes] == ["control"]  # only the control ran
@@ -642,10 +649,10 @@ def test_a_round_whose_conversions_are_all_rejected_holds_out_replay_families(tm
 class _GrowingMiner(FakeMiner):
     """Round 1 fails in two of the scenarios, round 2 in all of them."""
 
-    def __call__(self, policy, **options):
+    def __call__(self, policy, settings, **options):
         self.sources = list(WIRING["scenarios"][:2] if not self.calls else WIRING["scenarios"])
         self.failures = len(self.sources)
-        return super().__call__(policy, **options)
+        return super().__call__(policy, settings, **options)
 
 
 def test_a_second_round_never_holds_out_a_family_the_first_fine_tuned_on(tmp_path, monkeypatch):
@@ -697,3 +704,59 @@ def test_the_held_out_split_groups_entries_by_the_family_they_were_clustered_by(
     assert parents == {name: scenario_family(name, str(bank)) for name in parents} == {
         "mined_x": "highway_cut_in_from_right", "mined_of_mined_x": "highway_cut_in_from_right"}
     assert split_by_family(_with_parents(kept, str(bank)), 0.5, seed=0)["groups"] == 1
+
+
+# --------------------------------------------------------------------------- the verdict: which policy to use
+def _cli_loop(capsys, monkeypatch, out):
+    """``dv2s loop`` on the command line with the stand-in miner (the wiring's settings)."""
+    import dv2s_gym.mining.miner as miner_module
+
+    monkeypatch.setattr(miner_module, "mine", FakeMiner(WIRING["scenarios"], failures_per_round=6))
+    return run(capsys, "loop", "--out", out, "--no-progress", "--budget", "8", "--fine-tune-steps", "100",
+               "--k-eval", "3", "--regress-episodes", "1", "--workers", "1", "--envs", "1",
+               "--fine-tune-method", "ppo", "--untouched-seeds", "0", "--min-heldout-episodes", "1",
+               "--min-heldout-families", "1",
+               "--scenarios", *WIRING["scenarios"])
+
+
+def test_a_fine_tuned_policy_that_regressed_is_not_recommended_and_the_exit_status_says_so(tmp_path, capsys,
+                                                                                          monkeypatch):
+    _StandIns(monkeypatch, verdict="FAIL")
+    code, out, _ = _cli_loop(capsys, monkeypatch, tmp_path / "loop")
+    report = json.loads((tmp_path / "loop" / "report.json").read_text())
+    verdict = report["recommendation"]
+    assert code == 1 and verdict["verdict"] == "REJECTED" and verdict["policy"] == "dv2s-ppo"
+    assert verdict["candidate"] == report["rounds"][0]["new_policy"] != "dv2s-ppo"
+    assert "regressed on the rest of the bank" in verdict["sentence"] and "keep the starting policy" in verdict["sentence"]
+    assert f"verdict: {verdict['sentence']}" in out and "recommended policy: dv2s-ppo" in out
+    assert "final policy" not in out and "|---|" not in out  # a summary, not the Markdown report
+    assert f"report (html): {tmp_path / 'loop' / 'report.html'}" in out
+    markdown = (tmp_path / "loop" / "report.md").read_text()
+    assert verdict["sentence"] in markdown.split("## Round")[0] and "final policy" not in markdown
+    page = (tmp_path / "loop" / "report.html").read_text()
+    assert 'class="REJECTED"' in page and "final policy" not in page
+
+
+def test_a_fine_tuned_policy_the_control_beat_is_rejected(tmp_path, capsys, monkeypatch):
+    _StandIns(monkeypatch, verdict="PASS", fails={"control": lambda i: False, "after": lambda i: True})
+    code, out, _ = _cli_loop(capsys, monkeypatch, tmp_path / "loop")
+    verdict = json.loads((tmp_path / "loop" / "report.json").read_text())["recommendation"]
+    assert code == 1 and verdict["verdict"] == "REJECTED" and "the control" in verdict["reason"]
+    assert verdict["policy"] == "dv2s-ppo" and "recommended policy: dv2s-ppo" in out
+
+
+def test_an_accepted_policy_is_recommended_with_exit_status_0(tmp_path, capsys, monkeypatch):
+    _StandIns(monkeypatch, verdict="PASS")
+    code, out, _ = _cli_loop(capsys, monkeypatch, tmp_path / "loop")
+    report = json.loads((tmp_path / "loop" / "report.json").read_text())
+    assert code == 0 and report["recommendation"]["verdict"] == "ACCEPTED"
+    assert report["recommendation"]["policy"] == report["rounds"][0]["new_policy"] == report["policy"]
+    assert f"recommended policy: {report['policy']}" in out
+
+
+def test_an_inconclusive_regression_test_leaves_the_policy_not_accepted(tmp_path, capsys, monkeypatch):
+    _StandIns(monkeypatch)  # INCONCLUSIVE
+    code, out, _ = _cli_loop(capsys, monkeypatch, tmp_path / "loop")
+    verdict = json.loads((tmp_path / "loop" / "report.json").read_text())["recommendation"]
+    assert code == 3 and verdict["verdict"] == "NOT ACCEPTED" and "INCONCLUSIVE" in verdict["reason"]
+    assert verdict["policy"] == "dv2s-ppo"

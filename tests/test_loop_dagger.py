@@ -8,11 +8,13 @@ import json
 import numpy as np
 import pytest
 
-from dv2s_gym.mining.loop import LoopError, run_loop
+from scenario_bank.run_identity import RunIdentityError
+from dv2s_gym.mining.loop import LoopError
 from envs.dv2s_env import DV2SEnv
 from cli_helpers import run
-from loop_helpers import FakeMiner
-from policies.imitation import ReferenceLabels, agreement, dagger_fine_tune
+from loop_helpers import FakeMiner, run_loop
+from policies.imitation import ReferenceLabels, agreement
+from fine_tune_helpers import dagger_fine_tune
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT, load_policy
 from policies.rule_based import CautiousDriver
@@ -144,7 +146,7 @@ def test_the_loop_runs_end_to_end_with_dagger(tmp_path):
     assert "(dagger)" in report.paths["html"].read_text()
     assert state["settings"]["fine_tune_lr"] == 1e-3  # DAgger's own learning rate when none is given
     # the method is part of the loop's identity
-    with pytest.raises(LoopError, match="fine_tune_method='dagger'"):
+    with pytest.raises(RunIdentityError, match="fine_tune_method: run has 'dagger', asked 'ppo'"):
         run_loop("dv2s-ppo", out=out, miner=miner, fine_tune_method="ppo", fine_tune_lr=1e-3, **tiny)
 
 
@@ -158,7 +160,7 @@ def test_a_loop_folder_from_before_the_method_existed_is_a_ppo_loop(tmp_path):
     legacy = {k: v for k, v in settings.items() if k != "fine_tune_method"}
     (out / "loop.json").write_text(json.dumps({"settings": legacy, "start": None, "rounds": []}))
     _State(out / "loop.json", {**settings, "fine_tune_method": "ppo"})  # resumes
-    with pytest.raises(LoopError, match="fine_tune_method='ppo'"):
+    with pytest.raises(RunIdentityError, match="fine_tune_method: run has 'ppo', asked 'dagger'"):
         _State(out / "loop.json", {**settings, "fine_tune_method": "dagger"})
 
 

@@ -19,10 +19,13 @@ def test_one_round_of_the_real_loop(tmp_path, capsys):
     code, stdout, err = run(capsys, "loop", "--policy", "dv2s-ppo", "--scenarios", *SCENARIOS, "--budget", "16",
                             "--fine-tune-steps", "256", "--k-eval", "2", "--regress-episodes", "1", "--workers", "2",
                             "--envs", "1", "--out", out, "--no-progress")
-    assert code == 0, err
+    assert code in (0, 1, 3), err  # the verdict on the fine-tuned policy: ACCEPTED, REJECTED, NOT ACCEPTED
     assert f"report (html): {out / 'report.html'}" in stdout
 
     report = json.loads((out / "report.json").read_text())
+    verdict = report["recommendation"]
+    assert code == verdict["exit_code"] and f"verdict: {verdict['sentence']}" in stdout
+    assert verdict["candidate"] == report["policy"] and f"recommended policy: {verdict['policy']}" in stdout
     steps = report["rounds"][0]["steps"]
     mine_dir = out / "round_1" / "mine"
     episodes = [json.loads(line) for line in (mine_dir / "episodes.jsonl").read_text().splitlines()]

@@ -11,11 +11,13 @@ import pytest
 
 import policies.training as training
 from cli_helpers import one_line_error, run
-from dv2s_gym.mining.loop import DEFAULTS, LoopError, run_loop
-from loop_helpers import FakeMiner
+from scenario_bank.run_identity import RunIdentityError
+from dv2s_gym.mining.loop import DEFAULTS, LoopError
+from loop_helpers import FakeMiner, run_loop
 from policies.model_card import read_card
 from policies.registry import SHIPPED_CHECKPOINT
-from policies.training import TrainingError, fine_tune, with_reward_weights
+from policies.training import TrainingError, with_reward_weights
+from fine_tune_helpers import fine_tune
 
 SOURCES = ["highway_lead_vehicle_brakes", "urban_pedestrian_crossing"]
 SHIPPED_CONFIG = read_card(SHIPPED_CHECKPOINT)["env_config"]
@@ -63,7 +65,8 @@ def test_fine_tune_trains_with_the_overridden_reward_and_records_it(tmp_path, mo
 
 
 def _stub_fine_tune(calls):
-    def stub(spec, *, out, env_config=None, reward_weights=None, **kwargs):
+    def stub(spec, config, *, reward_weights=None, **kwargs):
+        out, env_config = config.out, config.env_config
         calls.append({"env_config": env_config, "reward_weights": reward_weights, "training_config":
                       with_reward_weights(env_config, reward_weights)})
         out = Path(out)
@@ -88,8 +91,8 @@ def test_loop_fine_tunes_with_its_reward_but_evaluates_with_the_policys_config(t
         return [{"role": role, "scenario": s, "seed": seed, "failed": role == "before", "error": None}
                 for s, seed in episodes]
 
-    def fake_regression(candidate, baseline, *, env_config=None, **kwargs):
-        regressions.append(env_config)
+    def fake_regression(candidate, baseline, settings, **kwargs):
+        regressions.append(settings.env_config)
         return {"verdict": "PASS", "overall": {}}
 
     monkeypatch.setattr(heldout, "evaluate_heldout", fake_evaluate)
@@ -118,7 +121,7 @@ def test_loop_fine_tunes_with_its_reward_but_evaluates_with_the_policys_config(t
     assert "low_ttc -0.5, standing -0.7" in report.paths["md"].read_text()
     assert "low_ttc -0.5, standing -0.7" in report.paths["html"].read_text()
     # the reward is part of the loop's identity: resuming with another one is refused
-    with pytest.raises(LoopError, match="fine_tune_reward"):
+    with pytest.raises(RunIdentityError, match="fine_tune_reward: run has"):
         run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, fine_tune_method="ppo", budget=6,
                  fine_tune_steps=100, k_eval=2, regress_episodes=1, workers=1, n_envs=1, progress=False,
                  scenarios=SOURCES, min_heldout_episodes=1, untouched_seeds=0, log=lambda _: None)

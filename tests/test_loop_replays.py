@@ -41,7 +41,7 @@ def test_a_failure_is_kept_as_its_exact_replay_without_a_video_or_a_script(recor
 def test_a_replay_entry_records_what_it_depends_on_and_a_mismatch_says_why(record, tmp_path):
     from dv2s_gym.mining.exact_replay import replay_versions
     from dv2s_gym.regress.identity import dv2s_sources_sha256
-    from dv2s_gym.regress.report import _dv2s_version
+    from dv2s_gym.regress.identity import installed_version
     from envs.trace import TRACE_VERSION
     from policies.registry import SHIPPED_CHECKPOINT
     from scenario_bank.atomic import file_sha256
@@ -52,7 +52,7 @@ def test_a_replay_entry_records_what_it_depends_on_and_a_mismatch_says_why(recor
     name = out["replay_entry"]
     replay = bank.get(name).source["replay"]
     assert replay["policy"] == "keep_lane" and replay["policy_sha256"] is None  # a driver, no checkpoint
-    assert replay["dv2s_gym_version"] == _dv2s_version() and replay["trace_version"] == TRACE_VERSION
+    assert replay["dv2s_gym_version"] == installed_version() and replay["trace_version"] == TRACE_VERSION
     assert replay["dv2s_sources_sha256"] == dv2s_sources_sha256()
     shipped = file_sha256(SHIPPED_CHECKPOINT)
     assert replay_versions("dv2s-ppo")["policy_sha256"] == shipped
@@ -64,7 +64,7 @@ def test_a_replay_entry_records_what_it_depends_on_and_a_mismatch_says_why(recor
     # another version of dv2s-gym recorded it: the episode differs, and the reason names the version
     bank.update_source(name, {"replay": {**replay, "dv2s_gym_version": "0.0.1", "trajectory_hash": "0" * 64}})
     moved = replay_failure(bank, name)
-    assert not moved["matches"] and f"dv2s-gym is version {_dv2s_version()} now, 0.0.1 when recorded" in moved["reason"]
+    assert not moved["matches"] and f"dv2s-gym is version {installed_version()} now, 0.0.1 when recorded" in moved["reason"]
     assert "did not replay the recorded failing episode" in moved["reason"] and "checkpoint differs" not in moved["reason"]
     # recorded with a checkpoint: replayed with another one (the shipped dv2s-ppo), the reason names the checkpoint
     bank.update_source(name, {"replay": {**replay, "policy": "dv2s-ppo", "policy_sha256": "ab" * 32}})
@@ -97,7 +97,8 @@ def test_a_replay_that_does_not_match_the_recorded_episode_is_rejected_and_adds_
 @pytest.mark.slow
 def test_every_cluster_of_a_mining_run_gets_its_replay_once(tmp_path):
     from dv2s_gym.mining.cluster import group
-    from dv2s_gym.mining.miner import mine, read_records
+    from dv2s_gym.mining.miner import read_records
+    from mining_helpers import mine
     from dv2s_gym.mining.replays import REPLAYS_FILE, replay_clusters, replay_entries
 
     run_dir = tmp_path / "run"

@@ -167,7 +167,7 @@ def test_replay_reruns_a_mined_failure_and_writes_its_video(tmp_path, capsys):
 def test_mining_without_the_mining_extra_names_the_extra(tmp_path, monkeypatch):
     """The core install has no VerifAI: mining says which extra to install, in one line, before any work."""
     from dv2s_gym.mining.errors import MiningError
-    from dv2s_gym.mining.miner import mine
+    from mining_helpers import mine
 
     monkeypatch.setitem(sys.modules, "verifai", None)  # as if it were not installed
     with pytest.raises(MiningError, match=r"pip install 'dv2s-gym\[mining\]'"):

@@ -10,7 +10,8 @@ import pytest
 
 from dv2s_gym.mining.cluster import region_of
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.miner import mine, read_records
+from dv2s_gym.mining.miner import read_records
+from mining_helpers import mine
 from dv2s_gym.mining.samplers import SPLIT, SceneSampler, is_adaptive, make_sampler
 from dv2s_gym.mining.space import SceneSpace
 from dv2s_gym.mining.split_sampler import scenario_dimensions

@@ -9,7 +9,8 @@ import shutil
 import pytest
 
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.miner import episode_seed, mine, read_records
+from dv2s_gym.mining.miner import episode_seed, read_records
+from mining_helpers import mine
 from dv2s_gym.mining.samplers import make_sampler
 from dv2s_gym.mining.space import SceneSpace
 from mining_helpers import mine_killed_after

@@ -249,7 +249,7 @@ CONTRACT_KEYS = {"cluster", "index", "status", "reason", "video", "description",
 
 @pytest.mark.slow
 def test_the_miner_converts_a_cluster_into_the_bank(tmp_path):
-    from dv2s_gym.mining.miner import mine
+    from mining_helpers import mine
 
     run = mine("keep_lane", out=tmp_path / "run", budget=4, sampler="random", scenarios=[SCENARIO],
                bank_dir=str(tmp_path / "bank"), workers=1, reference=None, progress=False, convert=True,
@@ -272,7 +272,7 @@ def test_a_run_killed_between_the_bank_write_and_its_record_resumes_without_a_se
     # killed after Bank.add and before conversions.jsonl got the line: the resumed run used to convert the
     # cluster again and report it "merged" into the entry it had made itself (kept 0, merged 1)
     from dv2s_gym.mining import miner as miner_module
-    from dv2s_gym.mining.miner import mine
+    from mining_helpers import mine
 
     run = dict(out=tmp_path / "run", budget=4, sampler="random", scenarios=[SCENARIO], bank_dir=str(tmp_path / "bank"),
                workers=1, reference=None, progress=False, convert=True, max_conversions=1, reports=False)
@@ -310,7 +310,7 @@ def test_an_unreachable_model_endpoint_stops_converting_and_the_rerun_converts(t
     from llm_server import closed_port_url
 
     from dv2s_gym.mining.errors import MiningError
-    from dv2s_gym.mining.miner import mine
+    from mining_helpers import mine
 
     monkeypatch.setenv("DV2S_LLM_RETRIES", "0")
     run = dict(out=tmp_path / "run", budget=4, sampler="random", scenarios=[SCENARIO], bank_dir=str(tmp_path / "bank"),
@@ -427,21 +427,22 @@ def test_a_near_copy_of_a_mined_entry_of_the_same_family_is_merged(tmp_path):
     assert changed_code_lines(script, "# a comment\n" + script) == 0
     bank = Bank(tmp_path / "bank")
     source = {"kind": "mined", "parent": SCENARIO, "failure": {"type": "collision"}}
-    first = bank.add_or_merge(script, "a car stands still ahead", elements={"participants": ["ego", "car"]},
-                              provenance=source, name="mined_a", near_copy_of=_family(SCENARIO, "collision"))
+    first = bank.add(script, "a car stands still ahead", elements={"participants": ["ego", "car"]},
+                     provenance=source, name="mined_a", near_copy_of=_family(SCENARIO, "collision"),
+                     on_duplicate="merge")
     assert first.status == "added"
     # other elements, no overlapping range: not a near-duplicate by elements, but one line of code apart
     other = {"participants": ["ego", "car", "car"], "actions": [["car", "stop"]]}
     elsewhere = script.replace("param oncoming_distance = Range(40, 90)", "param oncoming_distance = Range(91, 120)")
-    stall = bank.add_or_merge(elsewhere, "another description", elements=other, name="mined_b",
-                              provenance={**source, "failure": {"type": "stall"}},
-                              near_copy_of=_family(SCENARIO, "stall"))
+    stall = bank.add(elsewhere, "another description", elements=other, name="mined_b",
+                     provenance={**source, "failure": {"type": "stall"}},
+                     near_copy_of=_family(SCENARIO, "stall"), on_duplicate="merge")
     assert stall.status == "added"  # another family (failure type): kept apart
-    copy = bank.add_or_merge(one_line, "another description", elements=other, name="mined_c", provenance=source,
-                             near_copy_of=_family(SCENARIO, "collision"))
+    copy = bank.add(one_line, "another description", elements=other, name="mined_c", provenance=source,
+                    near_copy_of=_family(SCENARIO, "collision"), on_duplicate="merge")
     assert copy.status == "merged" and copy.entry.name == first.entry.name and "1 changed line" in copy.how
-    apart = bank.add_or_merge(three_lines, "a third description", elements=other, name="mined_d",
-                              provenance=source, near_copy_of=_family(SCENARIO, "collision"))
+    apart = bank.add(three_lines, "a third description", elements=other, name="mined_d",
+                     provenance=source, near_copy_of=_family(SCENARIO, "collision"), on_duplicate="merge")
     assert apart.status == "added"
     assert sorted(Bank(tmp_path / "bank").names()) == ["mined_a", "mined_b", "mined_d"]
 

@@ -19,9 +19,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import NOVELTY_RADIUS, STATE_SIZE
-from dv2s_gym.mining.miner import episode_seed, mine, read_records
+from dv2s_gym.mining.miner import episode_seed, read_records
+from mining_helpers import mine
 from dv2s_gym.mining.monitors import (
     COLLISION_TYPES,
     DEFAULT_STALL_SECONDS,
@@ -571,11 +573,11 @@ def test_resuming_with_other_settings_is_refused(whole_run, tmp_path):
                     {"feedback": "robustness" if (settings.get("feedback") or default_feedback(settings["sampler"]))
                      == "novelty" else "novelty"}]
     for change in changes:
-        with pytest.raises(MiningError) as error:
+        with pytest.raises(RunIdentityError) as error:
             mine(POLICY, out=copy, **{**settings, **change})
         message = str(error.value)
         assert "other settings" in message and "--out" in message and next(iter(change)) in message
-    with pytest.raises(MiningError, match="policy"):
+    with pytest.raises(RunIdentityError, match="policy: run has"):
         mine("rule", out=copy, **settings)
     assert (copy / "episodes.jsonl").read_bytes() == before
 
@@ -634,7 +636,7 @@ def test_every_episode_crashing_still_completes_with_error_records(tmp_path):
 
 _HOLDER = """
 import sys
-from dv2s_gym.mining.miner import mine
+from mining_helpers import mine
 if __name__ == "__main__":
     mine("regress_misbehaving_policies:hang", out=sys.argv[1], budget=1, sampler="random",
          scenarios=[{brakes!r}], workers=1, reference=None, timeout=600, progress=False, reports=False)

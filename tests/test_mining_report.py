@@ -389,7 +389,8 @@ def test_chromium_reports_a_corrupt_failure_video_as_not_played(tmp_path):
 def test_the_report_of_a_real_mining_run_matches_its_records(tmp_path):
     """``mine`` writes the three reports at its end; their numbers are those of its episodes.jsonl."""
     from dv2s_gym.mining.cluster import cluster_failures
-    from dv2s_gym.mining.miner import mine, read_records
+    from dv2s_gym.mining.miner import read_records
+    from mining_helpers import mine
 
     out = tmp_path / "mine"
     run = mine("rule?action_noise=0.5", out=out, budget=8, sampler="random", workers=1, progress=False,
@@ -581,3 +582,14 @@ def test_a_scenario_s_family_follows_the_provenance_to_its_first_scenario(tmp_pa
     assert scenario_family("mined_x", str(bank)) == "highway_cut_in_from_right"
     assert scenario_family("highway_cut_in_from_right") == "highway_cut_in_from_right"  # shipped: no parent
     assert scenario_family("not_an_entry", str(bank)) == "not_an_entry"
+
+
+def test_a_family_asked_before_its_entry_was_added_is_read_again_after(tmp_path):
+    from dv2s_gym.mining.family import scenario_family
+    from loop_helpers import add_mined_copy
+
+    bank = tmp_path / "bank"
+    bank.mkdir()
+    assert scenario_family("mined_y", str(bank)) == "mined_y"  # not an entry yet: its own family
+    add_mined_copy(str(bank), "highway_cut_in_from_left", "mined_y", "c")
+    assert scenario_family("mined_y", str(bank)) == "highway_cut_in_from_left"

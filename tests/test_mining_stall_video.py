@@ -20,7 +20,7 @@ FPS = 5  # the env's default policy frequency
 
 @pytest.fixture(scope="module")
 def stall(tmp_path_factory) -> dict:
-    from dv2s_gym.mining.miner import mine
+    from mining_helpers import mine
 
     out = tmp_path_factory.mktemp("mine") / "run"
     mine("dv2s-ppo", out=out, budget=4, sampler="random", workers=1, reference=None, progress=False, reports=False,

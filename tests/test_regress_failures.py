@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 
 from dv2s_gym.cli import main
-from dv2s_gym.regress import RegressError, run_regression
+from dv2s_gym.regress import RegressError
+from regress_call import run_regression
 from dv2s_gym.regress.failures import apply_failure, parse_failure
 
 STOP = "regress_helpers:StopPolicy"

@@ -189,3 +189,41 @@ def test_render_episode_video_errors_name_the_trace(tmp_path):
     broken.write_bytes(b"\x1f\x8bnot gzip")
     with pytest.raises(ClipError, match="broken.json.gz"):
         render_episode_video(broken, tmp_path / "x.webm")
+
+
+@pytest.mark.slow
+def test_both_clips_of_a_pair_show_the_same_seconds_of_the_scene(report_dir, report, tmp_path):
+    """The baseline's clip covers the seconds up to the candidate's failure, not the end of its own episode."""
+    import numpy as np
+
+    from dv2s_gym.pipeline.video import read_video
+
+    def frames(path):
+        return read_video(path, fps=None, max_frames=10**6, max_pixels=10**9).frames
+
+    episode = next(e for e in report["episodes"] if e["id"] in report["newly_failing"]
+                   and e["baseline"]["steps"] > e["candidate"]["steps"] >= 10)
+    end = episode["candidate"]["steps"]
+    trace = report_dir / episode["baseline"]["trace"]
+    whole = frames(render_episode_video(trace, tmp_path / "whole.webm", seconds=1000, size=96))
+    window = frames(render_episode_video(trace, tmp_path / "window.webm", seconds=2.0, size=96, end_step=end))
+    assert len(window) == 10 and len(whole) == episode["baseline"]["steps"] + 1
+
+    def gap(a, b):
+        return float(np.abs(a.astype(float) - b.astype(float)).mean())
+
+    assert gap(window[-1], whole[end]) < gap(window[-1], whole[-1])  # the moment of the failure, not the end
+    assert gap(window[0], whole[end - 9]) < 3.0 and gap(window[-1], whole[end]) < 3.0
+    page = write_html(report, tmp_path / "r.html", render_videos=False).read_text()
+    pair = next(p for p in page.split('class="clip pair"')[1:] if f"<b>{episode['id']}</b>" in p)
+    first = max(0, end - 35 + 1) / 5
+    assert f"both from {first:.1f} s to {end / 5:.1f} s of the episode (the seconds up to the candidate" in pair
+
+
+@pytest.mark.slow
+def test_rendering_the_clips_shows_its_progress(report, report_dir, capsys):
+    write_html(report, report_dir / "progress.html", max_videos=1, progress=True)
+    err = capsys.readouterr().err.replace("\r", "\n")
+    assert "report clips: 100%" in err and "2/2" in err
+    write_html(report, report_dir / "quiet.html", max_videos=1)
+    assert "report clips" not in capsys.readouterr().err

@@ -8,7 +8,8 @@ import xml.etree.ElementTree as ET
 import pytest
 
 from dv2s_gym.cli import main
-from dv2s_gym.regress import ResumeMismatchError, run_regression
+from dv2s_gym.regress import ResumeMismatchError
+from regress_call import run_regression
 from policies.registry import PolicyError, load_policy
 
 SCENARIO = "highway_lead_vehicle_brakes"

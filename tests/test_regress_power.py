@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from dv2s_gym.regress import RegressError, run_regression
+from dv2s_gym.regress import RegressError
+from regress_call import run_regression
 from dv2s_gym.regress.power import (
     ASSUMED_BASELINE_RATE,
     discordance,
@@ -16,7 +17,6 @@ from dv2s_gym.regress.power import (
     scenario_level,
     smallest_detectable,
 )
-from dv2s_gym.regress.stats import discordant_probability
 
 SCENARIO = "highway_lead_vehicle_brakes"
 
@@ -32,7 +32,10 @@ def test_exact_power_matches_a_simulation_of_the_test():
 
 
 def test_discordance_follows_the_shared_difficulty_model():
-    assert discordance(0.05, 0.03) == pytest.approx(discordant_probability(0.05, 0.08), rel=1e-6)
+    # latent correlation 0.5: both fail with the bivariate normal probability beyond their two thresholds
+    both = stats.multivariate_normal.cdf([stats.norm.ppf(0.05), stats.norm.ppf(0.08)], mean=[0, 0],
+                                         cov=[[1, 0.5], [0.5, 1]], abseps=1e-10, releps=1e-10)
+    assert discordance(0.05, 0.03) == pytest.approx(0.05 + 0.08 - 2 * both, rel=1e-6)
     assert discordance(0.0, 0.3) == pytest.approx(0.3, abs=1e-3)  # a clean baseline: every failure is new
 
 

@@ -136,7 +136,7 @@ def test_the_command_names_an_unreachable_address_and_how_to_start_a_cluster(tmp
 def test_run_regression_on_the_cluster_equals_the_local_run(ray_address, tmp_path):
     """`run_regression(..., backend="ray", address=...)`: the same episodes, verdicts and trajectory
     hashes as the local process pool."""
-    from dv2s_gym.regress.runner import run_regression
+    from regress_call import run_regression
 
     common = dict(baseline="rule", scenarios=SCENARIOS, episodes=3, seed=0, env_config={"duration": 8},
                   workers=2, progress=False)
@@ -163,7 +163,7 @@ def test_run_regression_on_the_cluster_equals_the_local_run(ray_address, tmp_pat
 @pytest.mark.slow
 def test_mining_on_ray_equals_mining_locally(ray_address, tmp_path):
     """``dv2s mine --backend ray``: the same records as the local pool, failed episodes' traces shipped back."""
-    from dv2s_gym.mining.miner import mine
+    from mining_helpers import mine
 
     common = dict(budget=8, sampler="cross-entropy", scenarios=["highway_lead_vehicle_brakes"], seed=5,
                   env_config={"duration": 5}, progress=False, reports=False, policy="keep_lane", batch=4)

@@ -2,7 +2,7 @@
 
 import pytest
 
-from dv2s_gym.regress import run_regression
+from regress_call import run_regression
 from dv2s_gym.regress.runner import plan_tasks
 
 COUNTING = "regress_helpers:EpisodeCountingPolicy?slow=1"

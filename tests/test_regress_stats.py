@@ -1,6 +1,7 @@
-"""Statistics of ``dv2s regress`` (dv2s_gym/regress/stats.py): reference values, verdict rules and
-a Monte Carlo calibration with fixed seeds (each result sits several standard errors from its bound,
-so it does not hinge on the seed)."""
+"""Statistics of ``dv2s regress`` (dv2s_gym/regress/stats.py): reference values and verdict rules.
+
+Their Monte Carlo calibration (false alarms, P(PASS) at the margin, power, on the paired-outcome model) is
+bench/tests/test_regress_montecarlo.py."""
 
 from __future__ import annotations
 
@@ -13,13 +14,7 @@ from scipy import stats
 from dv2s_gym.regress.family import gate_rejections, smallest_p_value, tarone_level
 from dv2s_gym.regress.stats import (
     DEFAULT_ALPHA,
-    DEFAULT_CORRELATION,
     DEFAULT_MARGIN,
-    DOCUMENTED_BASELINE_RATE,
-    DOCUMENTED_DELTA,
-    DOCUMENTED_EPISODES,
-    DOCUMENTED_POWER,
-    MonteCarloRate,
     PairedTable,
     SequentialTest,
     Verdict,
@@ -28,22 +23,10 @@ from dv2s_gym.regress.stats import (
     cluster_bootstrap_rate,
     compare,
     compare_scenarios,
-    discordant_probability,
     holm,
     mcnemar_exact,
     obrien_fleming_spending,
-    paired_cell_probabilities,
     paired_difference_interval,
-    paired_sample_size,
-    pocock_spending,
-    simulate_false_alarm,
-    simulate_paired_outcomes,
-    simulate_power,
-    simulate_tables,
-    simulate_unpaired_power,
-    simulate_verdict_rates,
-    unpaired_sample_size,
-    verdicts_of_tables,
     weighted_holm,
     wilson_interval,
 )
@@ -239,18 +222,6 @@ def test_newcombe_properties():
     assert paired_difference_interval(PairedTable()) == (-1.0, 1.0)
 
 
-@pytest.mark.slow
-def test_newcombe_coverage_by_simulation():
-    # 95 % interval, one-sided misses at most ~2.5 % each side (allowing for its approximation)
-    rng = np.random.default_rng(11)
-    tables = simulate_tables(400, 0.05, 0.08, DEFAULT_CORRELATION, 4000, rng)
-    truth = 0.03
-    lows, highs = zip(*(paired_difference_interval(PairedTable(*map(int, row))) for row in tables))
-    below, above = np.mean(np.array(highs) < truth), np.mean(np.array(lows) > truth)
-    assert below < 0.04 and above < 0.04
-    assert 0.92 < 1 - below - above < 0.98
-
-
 # --- McNemar and Holm -------------------------------------------------------------------------
 
 
@@ -361,14 +332,6 @@ def test_holm_adjusted_p_can_turn_fail_into_inconclusive():
         compare(table, margin=-0.1)
 
 
-def test_vectorised_verdicts_equal_compare():
-    rng = np.random.default_rng(5)
-    tables = np.concatenate([rng.integers(0, 30, size=(300, 4)), [[0, 0, 0, 0], [0, 0, 0, 3], [0, 9, 0, 0]]])
-    for margin in (0.0, 0.02, 0.1):
-        vectorised = verdicts_of_tables(tables, margin)
-        assert vectorised == [compare(PairedTable(*map(int, row)), margin).verdict for row in tables]
-
-
 def test_compare_scenarios_tests_every_scenario_in_the_family():
     tables = {
         "cut_in": PairedTable(2, 14, 2, 82),  # p ~ 0.002
@@ -449,38 +412,15 @@ def test_compare_scenarios_pooled_regression_spread_over_scenarios_fails():
     assert overall.verdict is Verdict.FAIL and "all scenarios pooled" in overall.reason
 
 
-@pytest.mark.slow
-def test_compare_scenarios_overall_false_alarm_at_most_alpha():
-    # identical policies, 21 scenarios of 40 paired episodes with failure rates from 2 to 25 %
-    rng = np.random.default_rng(2026)
-    reps, rates = 600, np.linspace(0.02, 0.25, 21)
-    sims = [simulate_tables(40, p, p, DEFAULT_CORRELATION, reps, rng) for p in rates]
-    false_alarms = 0
-    for r in range(reps):
-        tables = {f"s{i}": PairedTable(*map(int, sims[i][r])) for i in range(len(rates))}
-        false_alarms += compare_scenarios(tables, DEFAULT_MARGIN)[1].verdict is Verdict.FAIL
-    assert MonteCarloRate(false_alarms, reps).interval()[0] <= DEFAULT_ALPHA
-
-
 # --- sequential test --------------------------------------------------------------------------
 
 
-def test_spending_functions():
-    for spend in (obrien_fleming_spending, pocock_spending):
-        values = [spend(t, 0.05) for t in np.linspace(0, 1, 11)]
-        assert values[0] == 0.0 and values[-1] == pytest.approx(0.05)
-        assert (np.diff(values) > 0).all()
-    assert obrien_fleming_spending(0.5, 0.05) < pocock_spending(0.5, 0.05)
+def test_spending_function():
+    values = [obrien_fleming_spending(t, 0.05) for t in np.linspace(0, 1, 11)]
+    assert values[0] == 0.0 and values[-1] == pytest.approx(0.05)
+    assert (np.diff(values) > 0).all()
     # O'Brien-Fleming at t = 0.5, alpha 0.05: 2 (1 - Phi(1.96 / sqrt(0.5)))
     assert obrien_fleming_spending(0.5, 0.05) == pytest.approx(2 * stats.norm.sf(Z95 / math.sqrt(0.5)))
-
-
-def test_sequential_single_look_is_compare():
-    rng = np.random.default_rng(8)
-    for row in simulate_tables(300, 0.05, 0.08, DEFAULT_CORRELATION, 200, rng):
-        table = PairedTable(*map(int, row))
-        test = SequentialTest(DEFAULT_MARGIN, max_episodes=300)
-        assert test.update(table) is compare(table, DEFAULT_MARGIN).verdict
 
 
 def test_sequential_stops_early_on_a_flagrant_regression_and_refuses_misuse():
@@ -491,7 +431,7 @@ def test_sequential_stops_early_on_a_flagrant_regression_and_refuses_misuse():
     assert test.looks[-1].fail_alpha_spent <= obrien_fleming_spending(320 / 800, 0.05)
     with pytest.raises(RuntimeError):
         test.update(PairedTable(2, 30, 4, 400))
-    test = SequentialTest(DEFAULT_MARGIN)
+    test = SequentialTest(DEFAULT_MARGIN, max_episodes=800)
     test.update(PairedTable(1, 4, 3, 152))
     with pytest.raises(ValueError, match="candidate_only went down"):
         test.update(PairedTable(1, 3, 3, 200))
@@ -500,8 +440,7 @@ def test_sequential_stops_early_on_a_flagrant_regression_and_refuses_misuse():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("spending", ["obrien-fleming", "pocock"])
-def test_sequential_fail_error_is_exact_given_the_discordant_counts(spending):
+def test_sequential_fail_error_is_exact_given_the_discordant_counts():
     # every sign sequence of 10 discordant pairs, seen at looks with 2, 5, 7, 10 of them: the
     # probability of a FAIL (fair coins) is the alpha the test says it spent, and at most alpha
     discordant, episodes = [2, 5, 7, 10], [40, 80, 120, 160]
@@ -509,7 +448,7 @@ def test_sequential_fail_error_is_exact_given_the_discordant_counts(spending):
     fails = 0
     for code in range(2**10):
         signs = [(code >> i) & 1 for i in range(10)]
-        test = SequentialTest(margin=0.0, alpha=alpha, max_episodes=160, spending=spending)
+        test = SequentialTest(margin=0.0, alpha=alpha, max_episodes=160)
         for m, n in zip(discordant, episodes):
             b = sum(signs[:m])
             verdict = test.update(PairedTable(0, b, m - b, n - m))
@@ -521,131 +460,3 @@ def test_sequential_fail_error_is_exact_given_the_discordant_counts(spending):
     # PASS needs the interval's upper end below 0, which these counts never reach at margin 0
     assert fails / 2**10 == pytest.approx(spent, abs=1e-12)
     assert 0.5 * alpha < spent <= alpha
-
-
-def run_sequential(p_candidate: float, repetitions: int, seed: int, looks: int = 5,
-                   episodes: int = DOCUMENTED_EPISODES, spending: str = "obrien-fleming") -> dict:
-    """Verdict counts and mean episodes used, batches of episodes / looks, shared-difficulty model."""
-    rng = np.random.default_rng(seed)
-    cand, base = simulate_paired_outcomes(episodes, DOCUMENTED_BASELINE_RATE, p_candidate, DEFAULT_CORRELATION,
-                                          repetitions, rng)
-    cells = np.stack([cand & base, cand & ~base, ~cand & base, ~cand & ~base], axis=-1).cumsum(axis=1)
-    counts = {verdict: 0 for verdict in Verdict}
-    used = 0
-    for r in range(repetitions):
-        test = SequentialTest(DEFAULT_MARGIN, max_episodes=episodes, spending=spending)
-        for k in range(1, looks + 1):
-            n = episodes * k // looks
-            verdict = test.update(PairedTable(*map(int, cells[r, n - 1])))
-            if verdict is not None:
-                break
-        counts[verdict] += 1
-        used += n
-    return {"counts": counts, "episodes": used / repetitions}
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("spending", ["obrien-fleming", "pocock"])
-def test_sequential_type_one_error_by_monte_carlo(spending):
-    reps = 1500
-    result = run_sequential(DOCUMENTED_BASELINE_RATE, reps, seed=17, spending=spending)
-    false_alarm = MonteCarloRate(result["counts"][Verdict.FAIL], reps)
-    # the exact boundaries spend nearly all of alpha (measured 0.04-0.048), so only the interval
-    # is compared with alpha: its lower end must not be above it
-    assert false_alarm.interval()[0] <= DEFAULT_ALPHA
-
-
-@pytest.mark.slow
-def test_sequential_false_pass_at_the_margin_by_monte_carlo():
-    reps = 1500
-    result = run_sequential(DOCUMENTED_BASELINE_RATE + DEFAULT_MARGIN, reps, seed=19)
-    false_pass = MonteCarloRate(result["counts"][Verdict.PASS], reps)
-    assert false_pass.interval()[0] <= DEFAULT_ALPHA and false_pass.rate <= DEFAULT_ALPHA
-
-
-@pytest.mark.slow
-def test_sequential_keeps_power_and_saves_episodes():
-    reps = 1000
-    result = run_sequential(DOCUMENTED_BASELINE_RATE + DOCUMENTED_DELTA, reps, seed=23)
-    assert result["counts"][Verdict.FAIL] / reps >= 0.75
-    assert result["episodes"] < 0.85 * DOCUMENTED_EPISODES
-
-
-# --- model, sample sizes and calibration ------------------------------------------------------
-
-
-def test_shared_difficulty_model_cells():
-    both, cand_only, base_only, neither = paired_cell_probabilities(0.05, 0.08, 0.0)
-    assert both == pytest.approx(0.05 * 0.08)
-    cells = paired_cell_probabilities(0.05, 0.08, 0.5)
-    assert sum(cells) == pytest.approx(1.0)
-    # both-fail probability from scipy's bivariate normal CDF
-    cov = [[1, 0.5], [0.5, 1]]
-    reference = stats.multivariate_normal(mean=[0, 0], cov=cov).cdf([stats.norm.ppf(0.05), stats.norm.ppf(0.08)])
-    assert cells[0] == pytest.approx(reference, abs=1e-5)
-    assert paired_cell_probabilities(0.05, 0.08, 1.0)[0] == pytest.approx(0.05)
-    # more correlation, fewer discordant pairs
-    assert discordant_probability(0.05, 0.08, 0.9) < discordant_probability(0.05, 0.08, 0.5) < 0.05 * 0.92 + 0.08 * 0.95
-
-
-def test_simulated_outcomes_follow_the_model():
-    rng = np.random.default_rng(4)
-    cand, base = simulate_paired_outcomes(2000, 0.05, 0.08, 0.5, 100, rng)
-    assert cand.shape == base.shape == (100, 2000)
-    observed = np.array([np.mean(cand & base), np.mean(cand & ~base), np.mean(~cand & base)])
-    assert observed == pytest.approx(paired_cell_probabilities(0.05, 0.08, 0.5)[:3], abs=0.001)
-
-
-def test_sample_size_formulas():
-    # Connor (1987): psi = 0.122 (independent policies) -> (1.645 sqrt(.122) + .8416 sqrt(.1211))^2 / .0009
-    z_a, z_b = stats.norm.isf(0.05), stats.norm.ppf(0.8)
-    psi = 0.05 * 0.92 + 0.08 * 0.95
-    expected = math.ceil((z_a * math.sqrt(psi) + z_b * math.sqrt(psi - 0.0009)) ** 2 / 0.0009)
-    assert paired_sample_size(0.05, 0.03, discordance=psi) == expected
-    assert paired_sample_size(0.05, 0.03, correlation=0.0) == expected
-    # independent pairs need about what an unpaired design needs; correlation cuts it down
-    unpaired = unpaired_sample_size(0.05, 0.03)
-    assert abs(unpaired - expected) <= 5
-    assert paired_sample_size(0.05, 0.03) < 0.85 * unpaired
-    assert paired_sample_size(0.05, 0.03, correlation=0.9) < paired_sample_size(0.05, 0.03, correlation=0.5)
-    # Fleiss without continuity correction, by hand for 5 % vs 8 %
-    mean = 0.065
-    by_hand = (z_a * math.sqrt(2 * mean * (1 - mean)) + z_b * math.sqrt(0.05 * 0.95 + 0.08 * 0.92)) ** 2 / 0.0009
-    assert unpaired == math.ceil(by_hand)
-    with pytest.raises(ValueError):
-        paired_sample_size(0.05, 0.03, discordance=0.1, correlation=0.5)
-    with pytest.raises(ValueError):
-        paired_sample_size(0.05, 0.03, discordance=0.02)  # fewer discordant pairs than the difference
-
-
-def test_calibration_false_alarm_at_most_alpha():
-    rng = np.random.default_rng(20261123)
-    false_alarm = simulate_false_alarm(DOCUMENTED_EPISODES, repetitions=3000, rng=rng)
-    assert false_alarm.interval()[0] <= DEFAULT_ALPHA
-    assert false_alarm.rate <= DEFAULT_ALPHA
-
-
-@pytest.mark.parametrize("n,p,rho", [(30, 0.2, 0.5), (120, 0.05, 0.0), (400, 0.1, 0.8)])
-def test_calibration_false_alarm_other_designs(n, p, rho):
-    rng = np.random.default_rng(n)
-    false_alarm = simulate_false_alarm(n, p, correlation=rho, repetitions=2000, rng=rng)
-    assert false_alarm.interval()[0] <= DEFAULT_ALPHA
-
-
-def test_calibration_no_pass_when_the_difference_is_the_margin():
-    rng = np.random.default_rng(1123)
-    rates = simulate_verdict_rates(DOCUMENTED_EPISODES, DOCUMENTED_BASELINE_RATE,
-                                   DOCUMENTED_BASELINE_RATE + DEFAULT_MARGIN, repetitions=3000, rng=rng)
-    false_pass = rates[Verdict.PASS]
-    assert false_pass.interval()[0] <= DEFAULT_ALPHA and false_pass.rate <= DEFAULT_ALPHA
-
-
-def test_calibration_power_at_the_documented_episode_count():
-    rng = np.random.default_rng(81123)
-    power = simulate_power(DOCUMENTED_EPISODES, DOCUMENTED_BASELINE_RATE, DOCUMENTED_DELTA,
-                           repetitions=3000, rng=rng)
-    assert power.rate >= DOCUMENTED_POWER
-    # the same episode count without pairing (each policy on its own scenes, Fisher's exact test) falls short
-    unpaired = simulate_unpaired_power(DOCUMENTED_EPISODES, DOCUMENTED_BASELINE_RATE, DOCUMENTED_DELTA,
-                                       repetitions=3000, rng=rng)
-    assert unpaired.interval()[1] < DOCUMENTED_POWER

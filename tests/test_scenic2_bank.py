@@ -43,9 +43,9 @@ def test_scenic3_script_with_the_option_is_stored_unchanged_without_scenic2_prov
     assert entry.script == scenic3 and "scenic2_rewrites" not in entry.source
 
 
-def test_add_or_merge_upgrades_too(tmp_path):
-    outcome = Bank(tmp_path / "bank").add_or_merge(HIGHWAY_SCENIC2, "A car ahead on a highway.", name="old",
-                                                    upgrade_scenic2=True)
+def test_add_with_merge_upgrades_too(tmp_path):
+    outcome = Bank(tmp_path / "bank").add(HIGHWAY_SCENIC2, "A car ahead on a highway.", name="old",
+                                           upgrade_scenic2=True, on_duplicate="merge")
     assert outcome.entry.source["scenic2_rewrites"] and "new Car" in outcome.entry.script
 
 

@@ -10,7 +10,7 @@ import pytest
 from dv2s_gym.pipeline.sg.rules import PARKING_STREET, generate_rules
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 from scenario_bank.maps import MAPS_DIR
-from scenario_bank.maps.build_maps import LANE_WIDTH, PARKING_WIDTH, SIDEWALK_WIDTH
+from scenario_bank.maps.dimensions import LANE_WIDTH, PARKING_WIDTH, SIDEWALK_WIDTH
 from sg_helpers import run_script
 
 PARKING_CENTRE = LANE_WIDTH + PARKING_WIDTH / 2  # lateral offset of a parking lane's centre from the road centre

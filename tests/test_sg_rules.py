@@ -126,6 +126,36 @@ def test_unplaceable_main_event_is_a_clear_error():
         generate_rules("The ego car turns left on the highway.", seed=0)
 
 
+def test_an_action_the_map_cannot_show_is_warned_and_the_main_event_still_decides():
+    """The ego can cross (elements.CAN_DO), but no map of the rules SG builds it: on a street it is warned about
+    and dropped; when it is the main event, the description is refused."""
+    from dv2s_gym.pipeline.errors import GenerationError
+
+    result = generate_rules("The ego crosses the street while a car brakes ahead.", seed=0)
+    assert "'ego cross' cannot be realised on map urban_two_way: not placed" in result.warnings
+    assert ("action", "car", "brake") in element_set(result.elements)
+    assert ("action", "ego", "cross") not in element_set(result.elements)
+    with pytest.raises(GenerationError, match="main event 'ego cross'"):
+        generate_rules("The ego car crosses the road.", seed=0)
+
+
+def test_every_lane_role_has_its_spawn_function():
+    from dv2s_gym.pipeline.sg.rules.lane_spawn import SPAWNERS
+    from dv2s_gym.pipeline.sg.rules.roles import Role
+
+    assert set(SPAWNERS) == set(Role)
+    assert Role.FAR_SIDE == "far_side" and f"{Role.FAR_SIDE}" == "far_side"  # warnings name roles by their string
+
+
+def test_the_capability_table_covers_every_participant_with_known_actions():
+    from scenario_bank.elements import ACTIONS, CAN_DO, PARTICIPANTS
+
+    assert set(CAN_DO) == set(PARTICIPANTS)
+    assert all(actions <= set(ACTIONS) for actions in CAN_DO.values())
+    assert CAN_DO["pedestrian"] == {"cross", "stop", "collide", "collide_rear_end", "collide_side", "collide_head_on"}
+    assert not CAN_DO["obstacle"]
+
+
 def test_deterministic_given_the_seed():
     for description in PAPER + VARIED[:4]:
         assert generate_rules(description, seed=3).script == generate_rules(description, seed=3).script

@@ -1,9 +1,9 @@
-"""Structure of the code base: no import cycles, and the layers import one way.
+"""Structure of the code base: no import cycles, and the layers (and the parts of ``dv2s_gym/``) import one way.
 
 Every module of the four packages is parsed (not imported); an import anywhere
 in a module, at its top or inside a function, is an edge to the project module
 it names (``from a.b import c`` is an edge to ``a.b.c`` when that is a module,
-else to ``a.b``). Function-level imports count: a deferred import still ties the
+else to ``a.b``), and so is a module loaded through ``importlib.import_module``. Function-level imports count: a deferred import still ties the
 two modules together, it only hides the cycle from Python's import machinery.
 """
 
@@ -58,8 +58,23 @@ def import_graph() -> Dict[str, Set[str]]:
                 resolved = _resolve(target, modules)
                 if resolved is not None and resolved != module:
                     edges.add(resolved)
+        edges |= _dynamic_imports(path, module, modules)
         graph[module] = edges
     return graph
+
+
+def _dynamic_imports(path: Path, module: str, modules: Dict[str, Path]) -> Set[str]:
+    """Project modules a module loads through ``importlib.import_module``: a literal argument, or, when the
+    argument is computed, every string in the module naming a project module (``"pkg.mod"`` or
+    ``"pkg.mod:attr"``, the tables such lazy loaders read)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    calls = [node for node in ast.walk(tree) if isinstance(node, ast.Call)
+             and (getattr(node.func, "id", None) or getattr(node.func, "attr", None)) == "import_module"]
+    names = [call.args[0].value for call in calls if call.args and isinstance(call.args[0], ast.Constant)]
+    if any(call.args and not isinstance(call.args[0], ast.Constant) for call in calls):
+        names += [node.value.partition(":")[0] for node in ast.walk(tree)
+                  if isinstance(node, ast.Constant) and isinstance(node.value, str)]
+    return {name for name in names if isinstance(name, str) and name in modules and name != module}
 
 
 def find_cycles(graph: Dict[str, Set[str]]) -> List[List[str]]:
@@ -116,6 +131,13 @@ def test_the_graph_sees_function_level_and_relative_imports():
 
 
 @pytest.mark.slow
+def test_the_graph_sees_imports_made_by_importlib():
+    graph = import_graph()
+    assert "envs.dv2s_env" in graph["dv2s_gym"]  # its lazy attribute table, read by import_module
+    assert "dv2s_gym.workers.ray_pool" in graph["dv2s_gym.workers.pool"]  # a literal module name
+
+
+@pytest.mark.slow
 def test_no_import_cycles():
     graph = {m: {t for t in ts if not _is_package_init_edge(m, t)} for m, ts in import_graph().items()}
     cycles = find_cycles(graph)
@@ -128,6 +150,41 @@ def test_layers_import_one_way():
     wrong = sorted(f"{m} imports {t}" for m, ts in import_graph().items() for t in ts
                    if LAYER[t.split(".")[0]] > LAYER[m.split(".")[0]])
     assert not wrong, "scenario_bank <- envs <- policies <- dv2s_gym is violated:\n" + "\n".join(wrong)
+
+
+def test_neither_the_product_nor_its_tests_import_the_benchmarks():
+    """bench/ is research code: what the product or its tests need lives in the packages; the tests of
+    benchmark code are under bench/tests/."""
+    files = [path for package in PACKAGES for path in (ROOT / package).rglob("*.py")]
+    files += sorted((ROOT / "tests").rglob("*.py"))
+    wrong = []
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else []
+            wrong += [f"{path.relative_to(ROOT)} imports {n}" for n in names if n.split(".")[0] == "bench"]
+    assert not wrong, "\n".join(wrong)
+
+
+SUBSYSTEMS = ("__init__", "progress_lines", "report_page", "workers", "pipeline", "story_check", "story", "bank_validate", "regress",
+              "mining", "demo", "cli")
+"""The parts of ``dv2s_gym/`` from the bottom up: each may import only those before it (and the lower packages)."""
+
+
+@pytest.mark.slow
+def test_the_parts_of_dv2s_gym_import_one_way():
+    def part(name: str):
+        pieces = name.split(".")
+        return None if pieces[0] != "dv2s_gym" else pieces[1] if len(pieces) > 1 else "__init__"
+
+    graph = import_graph()
+    parts = {part(m) for m in graph} - {None, "evalset", "evalset_highway_env"}  # the evaluation sets are data
+    assert parts == set(SUBSYSTEMS), f"a part of dv2s_gym/ without a place in SUBSYSTEMS: {parts ^ set(SUBSYSTEMS)}"
+    rank = {name: i for i, name in enumerate(SUBSYSTEMS)}
+    wrong = sorted(f"{m} imports {t}" for m, ts in graph.items() if part(m) in rank for t in ts
+                   if part(t) in rank and part(t) != part(m) and rank[part(t)] > rank[part(m)])
+    assert not wrong, f"dv2s_gym's parts import in the order {' <- '.join(SUBSYSTEMS)}; violated by:\n" + \
+        "\n".join(wrong)
 
 
 _PIPELINE_FRONT = ("dv2s_gym.pipeline.stages", "dv2s_gym.pipeline.convert", "dv2s_gym.pipeline.evaluate")

@@ -167,12 +167,19 @@ def test_train_writes_model_card_logs_and_checkpoints_then_resumes(tmp_path, cap
     assert not (out / "tb" / "PPO_2").exists()
     # a resume with settings of another run is refused naming the setting
     code, _, err = run(capsys, "train", "--steps", 1024, "--seed", 5, "--out", out, "--resume", *TINY)
-    assert code == 2 and "seed 5 differs from the run being resumed" in one_line_error(err)
+    assert code == 2 and "holds a training run with other settings (seed: run has 1, asked 5)" in one_line_error(err)
 
 
 def _tiny_config(out: Path, algo: str, **kwargs) -> TrainConfig:
     return TrainConfig(out=str(out), algo=algo, scenarios=SCENARIOS[:1], steps=kwargs.pop("steps", 300), n_envs=1,
                        eval_freq=0, card_seeds=0, checkpoint_freq=0, progress_bar=False, vec_env="dummy", **kwargs)
+
+
+def _after_start_up(err: str) -> str:
+    """``err`` after the line saying the training envs start (the checkpoint is checked against their spaces)."""
+    first, _, rest = err.partition("\n")
+    assert first.startswith("starting 1 training env (subprocesses) on 1 scenario; "), err
+    return rest
 
 
 @pytest.mark.slow
@@ -186,11 +193,11 @@ def test_resume_refuses_a_broken_checkpoint_and_one_of_other_spaces(tmp_path, ca
     other = PPO("MlpPolicy", _spaces_env((5, 7)), n_steps=64, device="cpu")
     other.save(out / "checkpoints" / "step_000099999.zip")
     code, _, err = run(capsys, "train", "--steps", 200000, "--out", out, "--resume", "--no-progress")
-    line = one_line_error(err)
+    line = one_line_error(_after_start_up(err))
     assert code == 2 and "observation space" in line and "Box(-inf, inf, (5, 7)" in line
     (out / "checkpoints" / "step_000099999.zip").write_bytes(b"not a zip")
     code, _, err = run(capsys, "train", "--steps", 200000, "--out", out, "--resume", "--no-progress")
-    line = one_line_error(err)
+    line = one_line_error(_after_start_up(err))
     assert code == 2 and "does not load as an SB3 model" in line and "step_000099999.zip" in line
     assert newest.is_file()
 
@@ -349,3 +356,57 @@ def test_the_same_settings_train_the_same_model(tmp_path):
         weights.append(load_policy(tmp_path / run_name / "model.zip").model.policy.state_dict())
     assert weights[0].keys() == weights[1].keys()
     assert all(torch.equal(weights[0][key], weights[1][key]) for key in weights[0])
+
+
+def test_the_steps_a_run_really_trains_are_said_before_it_starts():
+    from types import SimpleNamespace
+
+    from policies.training import planned_steps
+
+    ppo = SimpleNamespace(n_steps=512, n_envs=2)
+    assert planned_steps(ppo, 0, 2000) == (2048, "2,000 steps asked: trains to 2,048 (stable-baselines3 trains "
+                                                  "whole rollouts of 1,024 = 512 steps x 2 envs)")
+    assert planned_steps(ppo, 908, 2000)[0] == 2956 and "from step 908" in planned_steps(ppo, 908, 2000)[1]
+    assert planned_steps(ppo, 0, 2048) == (2048, "training 2,048 steps: 2 rollouts of 1,024 (512 steps x 2 envs)")
+    assert planned_steps(ppo, 4096, 2048) == (4096, None)  # nothing left to train
+
+
+@pytest.mark.slow
+def test_train_logs_its_start_up_and_the_steps_it_trains_to(tmp_path):
+    lines = []
+    card = train(_tiny_config(tmp_path / "run", "ppo", steps=300, hyperparameters={"n_steps": 128}), log=lines.append)
+    assert card["training"]["steps"] == 384
+    assert any(line.startswith("starting 1 training env (in this process) on 1 scenario") for line in lines), lines
+    assert "300 steps asked: trains to 384 (stable-baselines3 trains whole rollouts of 128 = 128 steps x 1 env)" \
+        in lines
+
+
+def test_a_card_whose_evaluation_was_interrupted_says_so_and_how_to_complete_it():
+    from policies.model_card import render_markdown
+
+    card = {"name": "run", "algorithm": "ppo", "evaluation": None,
+            "training": {"command": "dv2s train --steps 2000 --out out/train/run"}}
+    text = render_markdown(card)
+    assert "Not evaluated: the held-out evaluation was interrupted" in text
+    assert "`dv2s train --steps 2000 --out out/train/run --resume`" in text
+    assert "Not evaluated" not in render_markdown({k: v for k, v in card.items() if k != "evaluation"})  # skipped
+
+
+def test_the_card_evaluation_says_how_long_it_has_left_once_its_first_episodes_are_done(monkeypatch):
+    import time
+
+    from policies.model_card import TimeLeft
+
+    now = [100.0]
+    monkeypatch.setattr(time, "perf_counter", lambda: now[0])
+    lines = []
+    left = TimeLeft(288, lines.append, "model card evaluation")
+    for _ in range(3):
+        now[0] += 20.0
+        left.update(4)  # 12 episodes in 60 s: 14 of them (a twentieth) needed first
+    assert lines == []
+    now[0] += 10.0
+    left.update(4)
+    now[0] += 10.0
+    left.update(4)
+    assert lines == ["model card evaluation: 16 of 288 episodes in 70 s; about 20 min left"]

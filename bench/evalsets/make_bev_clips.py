@@ -49,7 +49,7 @@ def render_clip(
     scenic_status and the episode ``trace`` (:class:`envs.trace.EpisodeTrace`).
     """
     from envs.dv2s_env import DV2SEnv
-    from envs.recording import VideoWriter
+    from envs.recording import record_episode
     from policies import CautiousDriver
 
     config = {
@@ -62,24 +62,12 @@ def render_clip(
     }
     env = DV2SEnv(scenario=scenario, config=config, render_mode="rgb_array")
     try:
-        driver = CautiousDriver(env)
-        fps = env.config["policy_frequency"]
-        obs, info = env.reset(seed=int(seed))
-        frames = 0
-        steps = 0
-        with VideoWriter(path, fps=fps) as video:
-            video.write(env.render())
-            frames += 1
-            terminated = truncated = False
-            while not (terminated or truncated):
-                obs, reward, terminated, truncated, info = env.step(driver(obs, info))
-                steps += 1
-                video.write(env.render())
-                frames += 1
-        return {"scenario": scenario, "seed": int(seed), "frames": frames, "steps": steps, "fps": fps,
-                "path": str(path), "collisions": list(info.get("collisions", [])),
-                "off_road": bool(info.get("off_road")), "scenic_status": info.get("scenic_status"),
-                "trace": env.trace}
+        result = record_episode(env, path, CautiousDriver(env), seed=int(seed))
+        info = result["info"]
+        return {"scenario": scenario, "seed": int(seed), "frames": result["frames"], "steps": result["steps"],
+                "fps": env.config["policy_frequency"], "path": str(path),
+                "collisions": list(info.get("collisions", [])), "off_road": bool(info.get("off_road")),
+                "scenic_status": info.get("scenic_status"), "trace": env.trace}
     finally:
         env.close()
 

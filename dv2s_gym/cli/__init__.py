@@ -42,7 +42,35 @@ def main(argv: Optional[List[str]] = None) -> int:
     Exit status: 0 success, 1 a check failed (validation, generation; ``regress``: FAIL),
     2 an error (one line on stderr; ``--debug`` prints the traceback), 3 ``regress``
     INCONCLUSIVE, 4 ``regress`` ERROR (an episode ended in an error), 130 interrupted.
+
+    Run as the command (``argv`` ``None``), an interrupted run exits at once once it has said so
+    (:func:`_exit_at_once`); called with ``argv`` it returns the status like any other.
     """
+    code = _main(argv)
+    if code == 130 and argv is None:
+        _exit_at_once(code)
+    return code
+
+
+def _exit_at_once(code: int) -> None:
+    """Exit with ``code`` without the interpreter's teardown.
+
+    The exit handlers still run (multiprocessing's stops the worker processes, so none is left behind) and the
+    output is flushed; what is skipped is collecting every object of the run (a policy, its envs, DAgger's data),
+    which kept an interrupted command alive for seconds, tens of seconds on a loaded machine, after it had
+    said it was interrupted."""
+    import atexit
+
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)
+
+
+def _main(argv: Optional[List[str]]) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     sigint = SigintFlag()

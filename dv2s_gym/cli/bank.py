@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from typing import List
 
 from dv2s_gym.cli import bank_validate
 from dv2s_gym.cli.errors import UsageError
@@ -74,11 +75,21 @@ def run_list(args: argparse.Namespace) -> int:
     """``dv2s bank list``: the (filtered) scenarios, and the bank's problems."""
     bank = open_bank(args)
     entries = bank.list(tag=args.tag, text=args.text, element=args.element, map=args.map, source=args.source)
-    lines = [f"{e.name:<40} {e.map or '':<18} {e.source.get('kind', ''):<13} {', '.join(e.tags)}" for e in entries]
+    lines = _columns(["name", "map", "source", "tags"],
+                     [[e.name, e.map or "", str(e.source.get("kind", "")), ", ".join(e.tags)] for e in entries])
     lines += [f"! {name}: {message}" for name, message in sorted(bank.problems.items())]
     emit(args, {"scenarios": [e.summary() for e in entries], "problems": bank.problems},
          "\n".join(lines) + f"\n{len(entries)} scenario(s)")
     return 0
+
+
+def _columns(header: List[str], rows: List[List[str]]) -> List[str]:
+    """``rows`` under ``header`` in left-aligned columns as wide as their longest cell (the last one unpadded)."""
+    if not rows:
+        return []
+    widths = [max(len(cell) for cell in column) for column in zip(header, *rows)]
+    return ["  ".join(cell.ljust(width) for cell, width in zip(row[:-1], widths)) + "  " + row[-1]
+            for row in [header, *rows]]
 
 
 def run_show(args: argparse.Namespace) -> int:

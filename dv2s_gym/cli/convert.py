@@ -11,7 +11,7 @@ from dv2s_gym.cli.inputs import llm_config
 from dv2s_gym.cli.output import emit
 from dv2s_gym.cli.parser import bank_option, llm_options, video_options
 
-__all__ = ["add_parser", "report_text", "run_convert", "run_describe", "run_generate"]
+__all__ = ["add_parser", "placed_nothing", "report_text", "run_convert", "run_describe", "run_generate"]
 
 
 def add_parser(subparsers) -> None:
@@ -68,7 +68,8 @@ def run_describe(args: argparse.Namespace) -> int:
 
 
 def run_generate(args: argparse.Namespace) -> int:
-    """``dv2s generate``: a checked scenario from a description; exit 1 if its checks fail."""
+    """``dv2s generate``: a checked scenario from a description; exit 1 if its checks fail or nothing of the
+    description could be placed."""
     from pathlib import Path
 
     from dv2s_gym.pipeline.convert import generate_to_folder
@@ -84,27 +85,50 @@ def run_generate(args: argparse.Namespace) -> int:
     description = Description(text.strip(), elements_from_text(text), backend="user")
     report = generate_to_folder(description, Path(args.out), sg=args.sg, seed=args.seed,
                                 llm_config=llm_config(args), seconds=args.seconds)
-    emit(args, report, report_text(report, args.out))
-    return 0 if report.get("check", {}).get("ok") else 1
+    nothing = placed_nothing(report)
+    emit(args, report, report_text(report, args.out, nothing_placed=nothing))
+    return 0 if report.get("check", {}).get("ok") and not nothing else 1
 
 
-def report_text(report, out) -> str:
-    """A conversion's report as text: the description, what failed, the checks, the scores and the files."""
+NOTHING_PLACED = ("nothing of the description could be placed, so the script only has the ego driving: name the "
+                  "road and its road users (car, truck, pedestrian, cyclist, obstacle) and what they do, e.g. "
+                  "'on a highway, a car ahead of the ego brakes suddenly'")
+
+
+def placed_nothing(report) -> bool:
+    """Whether neither the description's elements nor the generated script hold anything but the ego: every
+    phrase was left out (a partial description, with warnings, still counts as generated)."""
+    described = report.get("description", {}).get("elements") or {}
+    intended = report.get("generation", {}).get("intended_elements") or {}
+    if "error" in report.get("generation", {}) or not intended:
+        return False
+    return (not any(described.get(key) for key in ("road", "participants", "actions", "relations"))
+            and set(intended.get("participants") or []) <= {"ego"} and not intended.get("actions"))
+
+
+def report_text(report, out, nothing_placed: bool = False) -> str:
+    """A conversion's report as text: the description, what failed, the checks, the scores and the files;
+    with ``nothing_placed``, the line saying so and how to fix it in place of the warnings and the SP."""
     generation = report.get("generation", {})
     check = report.get("check", {})
     lines = [f"description: {report['description']['text']}"]
-    if generation.get("warnings"):
-        lines.append("could not place: " + "; ".join(generation["warnings"]))
+    if not nothing_placed:
+        lines.extend(f"warning: {warning}" for warning in generation.get("warnings") or [])
     if "error" in generation:
         lines.append(f"generation failed: {generation['error']}")
     if check:
         stages = " ".join(f"{k}={'ok' if check.get(k) else 'FAIL'}" for k in ("safe", "compiled", "sampled", "ran"))
         lines.append(f"checks: {stages}" + (f" ({check['error']})" if check.get("error") else ""))
     for key in ("sp", "e2e_sc"):
-        if key in report:
-            lines.append(f"{key.upper().replace('_', '-')}: {report[key]:.2f}")
+        if key in report and not nothing_placed:
+            partial = key == "sp" and any(str(w).startswith("could not place")
+                                          for w in generation.get("warnings") or [])
+            lines.append(f"{key.upper().replace('_', '-')}: {report[key]:.2f}"
+                         + (" (of the parts of the description that were placed)" if partial else ""))
     files = report.get("files") or []
     lines.append(f"written to {out}/ ({', '.join(files)})" if files else f"nothing written to {out}/")
+    if nothing_placed:
+        lines.append(NOTHING_PLACED)
     return "\n".join(lines)
 
 

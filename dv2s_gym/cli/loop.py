@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import Optional
+from typing import Any, List, Mapping, Optional
 
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.parser import bank_option
@@ -12,16 +12,33 @@ from dv2s_gym.cli.parser import bank_option
 __all__ = ["add_parser", "run"]
 
 
+EPILOG = """\
+exit status (the verdict on the last round's fine-tuned policy; the summary names the policy to use):
+  0  ACCEPTED: its regression test on the rest of the bank PASSed and the control did not beat it
+     on the held-out scenarios: use it
+  1  REJECTED: it regressed on the rest of the bank, the control beat it, or over several rounds it
+     regressed against the starting policy: keep the last accepted policy, else the starting one
+  3  NOT ACCEPTED: the regression test was INCONCLUSIVE or in ERROR, or no round fine-tuned a policy
+  2  bad input; 130 interrupted
+
+examples:
+  dv2s loop                                   # one round on dv2s-ppo, out/loop
+  dv2s loop --budget 400 --fine-tune-steps 100000 --k-eval 10 --out out/loop-big
+  dv2s loop --policy ppo:out/train/my_ppo/model.zip --rounds 3"""
+"""The end of ``dv2s loop --help``: what the exit status says, and examples."""
+
+
 def add_parser(subparsers) -> None:
     """Add ``loop`` to the ``dv2s`` subcommands."""
     from dv2s_gym.mining.loop import DEFAULTS as LOOP
+    from dv2s_gym.mining.loop_settings import LoopSettings
 
     p = subparsers.add_parser("loop", help="mine a policy's failures, add them to the bank, fine-tune, measure (a round "
                               "on embedded defaults that keeps scenarios took 45-55 minutes on 2 cores; --budget and "
                               "--max-replays shorten it)",
                               formatter_class=argparse.RawDescriptionHelpFormatter,
                               description="Closed-loop failure mining. Each round: mine the policy's failures (dv2s mine) "
-                              "into new bank scenarios in a working bank (out/bank, a copy of the shipped bank, or --bank), "
+                              "into new bank scenarios in a working bank (a copy of the shipped bank in the bank folder of --out, out/loop/bank by default; or --bank), "
                               "split them by family (parent bank scenario) into a fine-tuning and a held-out part, "
                               "evaluate the policy on the held-out scenarios (seeds 10000+), fine-tune it on the grown bank "
                               "minus the held-out scenarios and their parents (mined ones upweighted), fine-tune a control "
@@ -30,10 +47,7 @@ def add_parser(subparsers) -> None:
                               "an untouched scenario set (Scenic's CARLA examples) and regression-test new against old on "
                               "the starting bank (dv2s regress statistics). Writes report.json, report.md, report.html to --out; rerunning with the same "
                               "--out and settings resumes (raise --rounds to add rounds).",
-                              epilog="examples:\n"
-                              "  dv2s loop                                   # one round on dv2s-ppo, out/loop\n"
-                              "  dv2s loop --budget 400 --fine-tune-steps 100000 --k-eval 10 --out out/loop-big\n"
-                              "  dv2s loop --policy ppo:out/train/my_ppo/model.zip --rounds 3")
+                              epilog=EPILOG)
     p.add_argument("--policy", default="dv2s-ppo", help="starting policy: an SB3 checkpoint spec (default dv2s-ppo)")
     p.add_argument("--rounds", type=int, default=LOOP["rounds"], help=f"rounds (default {LOOP['rounds']})")
     bank_option(p)
@@ -84,17 +98,17 @@ def add_parser(subparsers) -> None:
                    help=f"the regression test's non-inferiority margin (default {LOOP['margin']})")
     p.add_argument("--seed", type=int, default=LOOP["seed"], help=f"seed (default {LOOP['seed']})")
     p.add_argument("--workers", type=int, default=None, help="processes for mining and evaluation (default: every core)")
-    p.add_argument("--envs", type=int, default=2, help="training environments (default 2)")
+    p.add_argument("--envs", type=int, default=LoopSettings.n_envs,
+                   help=f"training environments (default {LoopSettings.n_envs})")
     p.add_argument("--out", default=None, help="loop folder (default out/loop; rerunning resumes it)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run (or resume) the loop in ``--out`` and print its report."""
-    from pathlib import Path
-
-    from dv2s_gym.mining.loop import DEFAULT_OUT, run_loop
+    """Run (or resume) the loop in ``--out``; print a summary, the verdict and the report paths. The exit status
+    is the verdict's (:data:`EPILOG`)."""
+    from dv2s_gym.mining.loop import DEFAULT_OUT, LoopSettings, run_loop
 
     options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr",
                                                     "holdout_fraction", "k_eval", "regress_episodes", "mined_share",
@@ -114,14 +128,21 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError("--fine-tune-reward must be a JSON object of reward-term weights, e.g. "
                              "'{\"standing\": -1.0}' ('{}' keeps the policy's own reward)")
     out = args.out or DEFAULT_OUT
-    report = run_loop(args.policy, out=out, bank_dir=getattr(args, "bank", None), n_envs=args.envs,
-                      progress=not args.no_progress, **options)
-    print((Path(out) / "report.md").read_text(encoding="utf-8") if (Path(out) / "report.md").is_file() else "")
-    print(f"final policy: {report.policy}")
-    for kind in ("json", "md", "html"):
-        if kind in report.paths:
-            print(f"report ({kind}): {report.paths[kind]}")
-    return 0
+    settings = LoopSettings(bank_dir=getattr(args, "bank", None), n_envs=args.envs, **options)
+    report = run_loop(args.policy, settings, out=out, progress=not args.no_progress)
+    print("\n".join(summary_lines({**report.to_json(), "recommendation": report.recommendation}, report.paths)))
+    return int(report.recommendation["exit_code"])
+
+
+def summary_lines(report: Mapping[str, Any], paths: Mapping[str, Any]) -> List[str]:
+    """The terminal's summary of a finished loop: one line per round, the verdict, where the reports are."""
+    from dv2s_gym.mining.loop_report import round_summary
+
+    lines = [round_summary(record) for record in report.get("rounds") or []]
+    verdict = report.get("recommendation") or {}
+    lines += ["", f"verdict: {verdict.get('sentence')}", f"recommended policy: {verdict.get('policy')}"]
+    lines += [f"report ({kind}): {paths[kind]}" for kind in ("html", "md", "json") if kind in paths]
+    return lines
 
 
 def _count_or_all(value: str, flag: str) -> Optional[int]:

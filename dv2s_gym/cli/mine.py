@@ -7,9 +7,15 @@ import argparse
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import json_option, llm_config
 from dv2s_gym.cli.parser import bank_option, llm_options
+from dv2s_gym.mining.settings import FEEDBACKS, MineSettings
+from dv2s_gym.workers.settings import BACKENDS, WorkerSettings
+from dv2s_gym.cli.interrupts import episodes_kept_note
 from envs.errors import Interrupted
 
 __all__ = ["add_parser", "run"]
+
+MINE = MineSettings()
+"""The defaults of every mining option."""
 
 
 def add_parser(subparsers) -> None:
@@ -38,10 +44,10 @@ def add_parser(subparsers) -> None:
                    "ppo:PATH, module:attr, with ?key=value options")
     bank_option(p)
     p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank)")
-    p.add_argument("--budget", type=int, default=200, help="episodes to run (default 200)")
-    p.add_argument("--sampler", default="novelty-bandit",
+    p.add_argument("--budget", type=int, default=MINE.budget, help=f"episodes to run (default {MINE.budget})")
+    p.add_argument("--sampler", default=MINE.sampler,
                    choices=["random", "halton", "cross-entropy", "bandit", "split", "novelty-bandit"],
-                   help="scene sampler (default novelty-bandit); split: VerifAI's cross-entropy over which scenario "
+                   help=f"scene sampler (default {MINE.sampler}); split: VerifAI's cross-entropy over which scenario "
                    "and a Halton sequence per scenario over its parameters; novelty-bandit: the scenarios that keep "
                    "giving failures unlike earlier ones, mixed with uniform, parameters uniform (explore, prior_new, "
                    "prior_old)")
@@ -50,19 +56,23 @@ def add_parser(subparsers) -> None:
                    "split also takes chooser (cross-entropy|ucb|epsilon-greedy), params (halton|random|bandit|cross-entropy) "
                    "and warmup (0), and against scenarios that stop yielding: forget, patience, floor, capacity, avoid "
                    "(see dv2s_gym/mining/samplers.py)")
-    p.add_argument("--feedback", choices=["robustness", "novelty", "scenario-novelty", "state-novelty"], default=None,
+    p.add_argument("--feedback", choices=list(FEEDBACKS), default=None,
                    help="what adaptive samplers learn from: robustness (every failure), novelty (a failure in a "
                    "parameter cell that already failed counts as an easy scene, to spread the search) or "
                    "scenario-novelty (only each scenario's first failure counts) or state-novelty (a failure whose "
                    "speeds and geometry at the failure are close to an earlier one's in the scenario counts as easy); "
                    "default novelty for split, state-novelty for novelty-bandit, robustness for the others")
-    p.add_argument("--seed", type=int, default=0, help="seed of the sampler and the episodes (default 0)")
-    p.add_argument("--reference", default="rule",
-                   help="driver deciding avoidability (default rule; 'none' skips the check)")
-    p.add_argument("--ttc-threshold", type=float, default=1.0, help="low-TTC failure threshold [s] (default 1)")
-    p.add_argument("--stall-seconds", type=float, default=5.0,
-                   help="seconds standing with nothing in the lane 40 m ahead that count as a stall (default 5)")
-    p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
+    p.add_argument("--seed", type=int, default=MINE.seed,
+                   help=f"seed of the sampler and the episodes (default {MINE.seed})")
+    p.add_argument("--reference", default=MINE.reference,
+                   help=f"driver deciding avoidability (default {MINE.reference}; 'none' skips the check)")
+    p.add_argument("--ttc-threshold", type=float, default=MINE.ttc_threshold,
+                   help=f"low-TTC failure threshold [s] (default {MINE.ttc_threshold:g})")
+    p.add_argument("--stall-seconds", type=float, default=MINE.stall_seconds,
+                   help="seconds standing with nothing in the lane 40 m ahead that count as a stall "
+                   f"(default {MINE.stall_seconds:g})")
+    p.add_argument("--backend", choices=list(BACKENDS), default=WorkerSettings.backend,
+                   help="local process pool or Ray")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
     p.add_argument("--address", default=None, help="with --backend ray: the cluster address")
     p.add_argument("--timeout", type=float, default=None,
@@ -90,27 +100,35 @@ def run(args: argparse.Namespace) -> int:
     """Mine the policy's failures and print the run's summary and reports."""
     from pathlib import Path
 
+    from dv2s_gym.cli.name_checks import check_names
+
+    check_names(policies=(args.policy, args.reference if args.reference != "none" else None),
+                scenarios=args.scenarios, bank=args.bank)  # a typo is reported before the slow imports
     from dv2s_gym.mining.miner import mine
 
     env_config = json_option(args.config, "--config")
     if env_config is not None and not isinstance(env_config, dict):
         raise UsageError("--config must be a JSON object of DV2S-v0 config overrides, e.g. '{\"duration\": 10}'")
     out = Path(args.out or "out/mine")
-    convert_options = {"dra": args.dra, "sg": args.sg, "k": args.k, "threshold": args.threshold,
-                       "llm_config": llm_config(args)}
     try:
-        run = mine(args.policy, out=out, budget=args.budget, sampler=args.sampler, scenarios=args.scenarios,
-                   bank_dir=args.bank, backend=args.backend, workers=args.workers, address=args.address,
-                   seed=args.seed, reference=None if args.reference == "none" else args.reference,
-                   batch=args.batch, timeout=args.timeout, progress=not args.no_progress, env_config=env_config,
-                   ttc_threshold=args.ttc_threshold, stall_seconds=args.stall_seconds,
-                   convert=not args.no_convert, convert_options=convert_options,
-                   max_conversions=args.max_conversions, feedback=args.feedback,
-                   sampler_options=json_option(args.sampler_options, "--sampler-options"))
+        run = mine(args.policy, _settings(args, env_config), out=out, progress=not args.no_progress,
+                   workers=WorkerSettings(backend=args.backend, workers=args.workers, address=args.address,
+                                          timeout=args.timeout))
     except KeyboardInterrupt as stop:
-        raise Interrupted(getattr(stop, "note", None) or f"finished episodes are kept in "
-                          f"{out / 'episodes.jsonl'}; rerun the same command to resume") from None
+        raise Interrupted(getattr(stop, "note", None) or episodes_kept_note(Path(out) / "episodes.jsonl")) from None
     print(run.summary())
     if run.reports:
         print(f"reports: {', '.join(str(p) for p in run.reports.values())}")
     return 1 if run.all_errored else 0
+
+
+def _settings(args: argparse.Namespace, env_config) -> MineSettings:
+    """The run's :class:`MineSettings` from the command line."""
+    return MineSettings(
+        budget=args.budget, sampler=args.sampler, scenarios=args.scenarios, bank_dir=args.bank, seed=args.seed,
+        reference=None if args.reference == "none" else args.reference, batch=args.batch,
+        env_config=env_config or {}, ttc_threshold=args.ttc_threshold, stall_seconds=args.stall_seconds,
+        convert=not args.no_convert, max_conversions=args.max_conversions, feedback=args.feedback,
+        sampler_options=json_option(args.sampler_options, "--sampler-options"),
+        convert_options={"dra": args.dra, "sg": args.sg, "k": args.k, "threshold": args.threshold,
+                         "llm_config": llm_config(args)})

@@ -7,6 +7,7 @@ import json
 
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.parser import bank_option
+from dv2s_gym.cli.interrupts import episodes_kept_note
 from envs.errors import Interrupted
 
 __all__ = ["add_parser", "run"]
@@ -15,7 +16,7 @@ __all__ = ["add_parser", "run"]
 def add_parser(subparsers) -> None:
     """Add ``regress`` to the ``dv2s`` subcommands."""
     p = subparsers.add_parser(
-        "regress", help="regression-test a policy against a baseline on paired episodes (PASS/FAIL/INCONCLUSIVE)",
+        "regress", help="regression-test a policy against a baseline on paired episodes (PASS/FAIL/INCONCLUSIVE/ERROR)",
         formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Run the candidate policy (and the baseline, on the same scenario x seed pairs: episode k "
         "uses seed S+k for both) over bank scenarios, in a local process pool or on Ray. Reports per scenario "
@@ -57,13 +58,13 @@ def add_parser(subparsers) -> None:
                    help="probability of FAIL at --mde (default 0.8)")
     p.add_argument("--seed", type=int, default=None,
                    help="seed of the first episode (default 0, or the baseline report's)")
-    p.add_argument("--margin", type=float, default=0.02,
+    p.add_argument("--margin", type=float, default=None,
                    help="non-inferiority margin on the failure rate (default 0.02: 2 points, as calibrated in bench/calibrate_regress.py)")
-    p.add_argument("--alpha", type=float, default=0.05, help="level of the FAIL test (default 0.05)")
+    p.add_argument("--alpha", type=float, default=None, help="level of the FAIL test (default 0.05)")
     p.add_argument("--failure", default=None,
                    help="what counts as a failure: a comma-separated list of collision, off_road, stall (default: "
                    "all three; stall: the ego stands with a free road ahead); each kind is also reported apart")
-    p.add_argument("--stall-seconds", type=float, default=5.0,
+    p.add_argument("--stall-seconds", type=float, default=None,
                    help="seconds the ego must stand with a free road ahead for a stall (default 5)")
     p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
@@ -86,8 +87,11 @@ def run(args: argparse.Namespace) -> int:
     """Run the regression test, print its summary (or the report JSON); the exit status is the verdict's."""
     from pathlib import Path
 
+    from dv2s_gym.cli.name_checks import check_names
+
+    check_names(policies=(args.policy, args.baseline), scenarios=args.scenarios, bank=args.bank)  # before imports
     from dv2s_gym.regress.report import baseline_defaults, exit_code, format_summary
-    from dv2s_gym.regress.runner import DEFAULT_OUT, run_regression
+    from dv2s_gym.regress.runner import DEFAULT_OUT, BaselineReport, WorkerSettings, run_regression
 
     env_config = _env_config(args.config) if args.config else None
     out = args.out or DEFAULT_OUT
@@ -95,17 +99,15 @@ def run(args: argparse.Namespace) -> int:
     if args.baseline_report:
         seed, env_config = baseline_defaults(args.baseline_report, seed, env_config)
     try:
+        baseline = args.baseline if not args.baseline_report else BaselineReport(
+            args.baseline_report, role=args.baseline_role, accept_failed=args.accept_failed_baseline)
         report = run_regression(
-            args.policy, args.baseline, baseline_report=args.baseline_report, bank_dir=args.bank,
-            scenarios=args.scenarios, episodes=episodes, seed=seed or 0,
-            margin=args.margin, alpha=args.alpha, mde=args.mde, power=args.power,
-            backend=args.backend, workers=args.workers, address=args.address, out_dir=out,
-            sequential=args.sequential, env_config=env_config, progress=not args.no_progress and not args.json,
-            timeout=args.timeout, batch=args.batch, baseline_role=args.baseline_role, failure=args.failure,
-            stall_seconds=args.stall_seconds, accept_failed_baseline=args.accept_failed_baseline)
+            args.policy, baseline, _settings(args, episodes, seed or 0, env_config), out_dir=out,
+            workers=WorkerSettings(backend=args.backend, workers=args.workers, address=args.address,
+                                   timeout=args.timeout),
+            progress=not args.no_progress and not args.json)
     except KeyboardInterrupt as stop:
-        raise Interrupted(getattr(stop, "note", None) or f"finished episodes are kept in "
-                          f"{Path(out) / 'results.jsonl'}; rerun the same command to resume") from None
+        raise Interrupted(getattr(stop, "note", None) or episodes_kept_note(Path(out) / "results.jsonl")) from None
     if args.json:
         print(json.dumps(report, indent=1))
     else:
@@ -128,3 +130,14 @@ def _env_config(text: str) -> dict:
     if not isinstance(env_config, dict):
         raise UsageError("--config must be a JSON object of DV2S-v0 config overrides, e.g. '{\"duration\": 10}'")
     return env_config
+
+
+def _settings(args: argparse.Namespace, episodes, seed: int, env_config):
+    """The run's :class:`~dv2s_gym.regress.settings.RegressSettings` from the command line (an option left out
+    keeps the settings' default)."""
+    from dv2s_gym.regress.settings import RegressSettings
+
+    given = {key: getattr(args, key) for key in ("margin", "alpha", "stall_seconds") if getattr(args, key) is not None}
+    return RegressSettings(bank_dir=args.bank, scenarios=args.scenarios, episodes=episodes, seed=seed, mde=args.mde,
+                           power=args.power, sequential=args.sequential, env_config=env_config, batch=args.batch,
+                           failure=args.failure, **given)

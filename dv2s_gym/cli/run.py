@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import Any, Mapping, Optional
 
 from dv2s_gym.cli.parser import bank_option
 
@@ -28,11 +29,15 @@ def add_parser(subparsers) -> None:
     p.add_argument("--trusted", action="store_true",
                    help="run the script in this process, without the jail: only for a script you wrote or "
                    "reviewed (scripts that ship with dv2s-gym always run in process)")
+    p.add_argument("--json", action="store_true", help="print the episode's summary as JSON (for programs)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Record the episode and print its summary as JSON."""
+    """Record the episode and print its summary (as JSON with ``--json``)."""
+    from dv2s_gym.cli.name_checks import check_names
+
+    check_names(scenarios=args.scenario, bank=args.bank)  # a typo is reported before the slow imports
     from dv2s_gym.demo import record_scenario
 
     config = {"ego_policy": args.ego_policy}
@@ -42,5 +47,34 @@ def run(args: argparse.Namespace) -> int:
         config["map"] = args.map
     result = record_scenario(args.scenario, args.video, config=config, seed=args.seed, drive=not args.random,
                              trusted=args.trusted, bank_dir=args.bank, trace=args.trace)
-    print(json.dumps(result, indent=2, default=str))
+    if args.json:
+        print(json.dumps(result, indent=2, default=str))
+    else:
+        from scenario_bank.jail.output import printable
+
+        print(printable(summary(result, seed=args.seed, trace=args.trace)))  # names and values come from the script
     return 0
+
+
+def summary(result: Mapping[str, Any], *, seed: int, trace: Optional[str] = None) -> str:
+    """A recorded episode in a few lines for people: where it went, how it ended, the scene's parameters."""
+    ending = "ended early (terminated)" if result.get("terminated") else "ran to its time limit"
+    collisions = result.get("collisions") or []
+    ttc = result.get("min_ttc")
+    ttc_text = "none (no vehicle on a collision course)" if ttc is None or ttc == float("inf") else f"{float(ttc):.2f} s"
+    outcome = [("collision with " + ", ".join(map(str, collisions))) if collisions else "no collision",
+               "off the road" if result.get("off_road") else "on the road",
+               f"{result.get('lane_changes', 0)} lane change{'s' if result.get('lane_changes') != 1 else ''}",
+               f"min TTC {ttc_text}"]
+    lines = [f"wrote {result.get('path')} ({result.get('frames')} frames)",
+             f"{result.get('scenario')}, seed {seed} (scene seed {result.get('scene_seed')}): {result.get('steps')} "
+             f"steps, {ending}, return {float(result.get('return') or 0):.2f}",
+             "outcome: " + ", ".join(outcome)]
+    params = {k: v for k, v in (result.get("params") or {}).items() if isinstance(v, (int, float, str))
+              and not isinstance(v, bool) and k != "map"}
+    if params:
+        lines.append("scene: " + ", ".join(f"{k} {v:.3g}" if isinstance(v, float) else f"{k} {v}"
+                                           for k, v in params.items()))
+    if trace:
+        lines.append(f"trace: {trace}")
+    return "\n".join(lines)

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 
 from dv2s_gym.cli.inputs import json_option
 from dv2s_gym.cli.parser import bank_option
+from dv2s_gym.progress_lines import log_line
 
 __all__ = ["add_parser", "run"]
 
@@ -83,5 +83,5 @@ def run(args: argparse.Namespace) -> int:
         settings = {**given, "out": args.out}
     settings["progress_bar"] = not args.no_progress
     settings["vec_env"] = args.vec_env
-    train(TrainConfig.from_json(settings), resume=args.resume, log=lambda line: print(line, file=sys.stderr))
+    train(TrainConfig.from_json(settings), resume=args.resume, log=log_line)
     return 0

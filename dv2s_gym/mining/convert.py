@@ -34,8 +34,8 @@ conversion record of ``conversions.jsonl``:
     (``interaction: ...``), the failure reproduces in fewer than ``threshold`` (``reproduction: ...``), or
     the reference driver fails in half of the episodes or more (``avoidability: ...``, naming its failures'
     classes);
-11. ``bank``: :meth:`scenario_bank.bank.Bank.add_or_merge` adds the script with ``mined`` provenance,
-    or merges the failure into the entry it (nearly) duplicates, a converted entry of the same family
+11. ``bank``: :meth:`scenario_bank.bank.Bank.add` with ``on_duplicate="merge"`` adds the script with ``mined``
+    provenance, or merges the failure into the entry it (nearly) duplicates, a converted entry of the same family
     (parent and failure type) whose code differs in at most :data:`~scenario_bank.bank.NEAR_COPY_LINES`
     lines included. The failure video and trace are copied into the entry's folder in the same atomic
     step (provenance ``video: "failure.webm"``, ``trace: "trace.json.gz"``, relative to the entry folder; a
@@ -651,12 +651,11 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
             "replay_entry": replay["entry"],
         }
         family = _family(record["scenario"], source_failure["type"])
-        outcome = bank.add_or_merge(generation.script, description.text, name=_mined_name(record["scenario"],
-                                                                                          source_failure["type"]),
-                                    elements=description.elements, tags=["mined", source_failure["type"]],
-                                    provenance=provenance,
-                                    files={ENTRY_VIDEO: video, ENTRY_TRACE: written.trace_path},
-                                    near_copy_of=family)
+        outcome = bank.add(generation.script, description.text,
+                           name=_mined_name(record["scenario"], source_failure["type"]),
+                           elements=description.elements, tags=["mined", source_failure["type"]],
+                           provenance=provenance, files={ENTRY_VIDEO: video, ENTRY_TRACE: written.trace_path},
+                           on_duplicate="merge", near_copy_of=family)
         if outcome.status == "added":
             out.update(status="kept", bank_entry=outcome.entry.name)
         else:

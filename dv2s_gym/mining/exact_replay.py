@@ -75,24 +75,23 @@ def replay_versions(policy: Any) -> Dict[str, Any]:
     driver, a ``module:attribute`` or a policy object."""
     from envs.trace import TRACE_VERSION
 
-    from dv2s_gym.regress.identity import dv2s_sources_sha256
-    from dv2s_gym.regress.report import _dv2s_version
+    from dv2s_gym.regress.identity import dv2s_sources_sha256, installed_version
 
-    return {"policy_sha256": _checkpoint_sha256(policy), "dv2s_gym_version": _dv2s_version(),
+    return {"policy_sha256": _checkpoint_sha256(policy), "dv2s_gym_version": installed_version(),
             "dv2s_sources_sha256": dv2s_sources_sha256(), "trace_version": TRACE_VERSION}
 
 
 def _checkpoint_sha256(policy: Any) -> Optional[str]:
     import os
 
-    from dv2s_gym.regress.identity import _checkpoint
+    from dv2s_gym.regress.identity import checkpoint_path
     from policies.registry import parse_spec
     from scenario_bank.atomic import file_sha256
 
     if not isinstance(policy, (str, os.PathLike)):
         return None
     try:
-        path = _checkpoint(parse_spec(os.fspath(policy))[0])
+        path = checkpoint_path(parse_spec(os.fspath(policy))[0])
     except ValueError:
         return None
     return file_sha256(path.resolve()) if path is not None and path.resolve().is_file() else None

@@ -8,16 +8,36 @@ bank (a shipped or user scenario). Failures are clustered and counted per family
 
 from __future__ import annotations
 
+import os
 from functools import lru_cache
-from typing import Any, Mapping, Optional
+from typing import Any, Mapping, Optional, Tuple
 
 __all__ = ["scenario_family", "record_family"]
 
 
-@lru_cache(maxsize=4096)
 def scenario_family(name: str, bank_dir: Optional[str] = None) -> str:
     """The family of bank scenario ``name`` in ``bank_dir`` (``None``: the shipped bank); ``name`` itself
     when it has no parent, or when it is not a bank entry (a script path or source text)."""
+    return _family(name, bank_dir, _bank_stamp(bank_dir))
+
+
+def _bank_stamp(bank_dir: Optional[str]) -> Tuple[int, ...]:
+    """Modification times of a writable bank's folders: an entry added, replaced or removed changes them, so a
+    family cached before is not reused after (the shipped bank never changes)."""
+    if not bank_dir:
+        return ()
+    stamps = []
+    try:
+        with os.scandir(bank_dir) as children:
+            stamps = [child.stat().st_mtime_ns for child in children if child.is_dir()]
+        stamps.append(os.stat(bank_dir).st_mtime_ns)
+    except OSError:
+        return (-1,)
+    return tuple(sorted(stamps))
+
+
+@lru_cache(maxsize=4096)
+def _family(name: str, bank_dir: Optional[str], stamp: Tuple[int, ...]) -> str:
     from scenario_bank.bank import Bank
 
     try:

@@ -59,44 +59,20 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import sys
 import time
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 
 from dv2s_gym.mining.jsonl import read_rows
-from envs.errors import DV2SError
+from dv2s_gym.mining.loop_verdict import recommendation
+from dv2s_gym.mining.loop_settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
+from scenario_bank.run_identity import check_identity
 
-__all__ = ["LoopError", "LoopReport", "run_loop", "DEFAULT_OUT", "DEFAULTS", "mined_entries", "fine_tune_weights",
-           "FINE_TUNE_METHODS"]
+__all__ = ["LoopError", "LoopReport", "LoopSettings", "run_loop", "DEFAULT_OUT", "DEFAULTS", "mined_entries",
+           "fine_tune_weights", "FINE_TUNE_METHODS", "METHOD_LEARNING_RATES"]
 
 DEFAULT_OUT = "out/loop"
 """Where ``dv2s loop`` writes when ``--out`` is not given (rerunning resumes it)."""
-
-DEFAULTS: Dict[str, Any] = {
-    "rounds": 1,
-    "budget": 80,
-    "sampler": "novelty-bandit",
-    "fine_tune_steps": 30_000,
-    "fine_tune_lr": None,
-    "holdout_fraction": 0.5,
-    "k_eval": 10,
-    "max_conversions": 4,
-    "max_replays": 16,
-    "min_heldout_episodes": 20,
-    "min_heldout_families": 3,
-    "control": True,
-    "untouched_seeds": 2,
-    "regress_episodes": 4,
-    "mined_share": 0.5,
-    "fine_tune_reward": {"standing": -0.3},
-    "fine_tune_method": "dagger",
-    "margin": 0.02,
-    "seed": 0,
-}
-"""Embedded defaults: small, for one round in minutes on 2 cores (a small mining budget, at most 4
-conversions, two short fine-tunes, a small evaluation; ``python -m bench.bench_loop`` times a round and
-bench/RESULTS.md records it). The other measurements in bench/RESULTS.md use larger ones."""
 
 IDENTITY = ("policy", "bank_dir", "budget", "sampler", "fine_tune_steps", "fine_tune_lr", "holdout_fraction", "k_eval",
             "regress_episodes", "mined_share", "fine_tune_reward", "margin", "seed", "scenarios", "fine_tune_method",
@@ -111,22 +87,9 @@ UNTOUCHED_BANK = Path(__file__).resolve().parent / "untouched"
 """The scenario set no loop mines or fine-tunes on: a bank folder of scripts written by others for Scenic's
 CARLA model (its ``SOURCES.md`` names them and their licence)."""
 
-FINE_TUNE_METHODS = ("ppo", "dagger")
-"""How the loop fine-tunes: ``ppo`` continues PPO on the fine-tuning reward
-(:func:`policies.training.fine_tune`); ``dagger`` imitates the reference driver on the
-policy's own states (:func:`policies.imitation.dagger_fine_tune`)."""
-
-METHOD_LEARNING_RATES = {"ppo": 1e-4, "dagger": 1e-3}
-"""The fine-tuning learning rate when none is given: PPO's constant rate (its own 5e-4 made the
-bank worse, bench/RESULTS.md) and DAgger's Adam rate."""
-
 _LEGACY = {"fine_tune_method": "ppo", "max_conversions": None, "holdout_by": "cluster", "control": False,
            "untouched_seeds": 0, "min_heldout_episodes": 0, "max_replays": 0}
 """Identity settings added later, with the value a ``loop.json`` written before them meant."""
-
-
-class LoopError(DV2SError, ValueError):
-    """Bad loop input, or an ``out`` folder holding a loop with other settings."""
 
 
 @dataclasses.dataclass
@@ -142,8 +105,20 @@ class LoopReport:
 
     def to_json(self) -> Dict[str, Any]:
         """A JSON-safe dict (the body of ``report.json``)."""
-        return {"schema": "dv2s-loop", "schema_version": 1, "out": str(self.out), "settings": self.settings,
+        body = {"schema": "dv2s-loop", "schema_version": 1, "out": str(self.out), "settings": self.settings,
                 "policy": self.policy, "rounds": self.rounds}
+        return {**body, "recommendation": recommendation(body)}
+
+    @property
+    def recommendation(self) -> Dict[str, Any]:
+        """Which policy to use and why (:func:`dv2s_gym.mining.loop_verdict.recommendation`), as ``report.json``
+        has it once written (with the final-vs-starting comparison of two or more rounds)."""
+        path = self.paths.get("json")
+        if path is not None and Path(path).is_file():
+            written = json.loads(Path(path).read_text(encoding="utf-8")).get("recommendation")
+            if written:
+                return written
+        return recommendation(self.to_json())
 
 
 # --------------------------------------------------------------------------- state
@@ -159,12 +134,8 @@ class _State:
                 raise LoopError(f"{path} is not readable JSON ({error}); choose another --out") from error
             _check_structure(data, path)
             recorded = data.get("settings", {})
-            for key in IDENTITY:
-                value = recorded.get(key, _LEGACY.get(key))
-                if json.dumps(value, sort_keys=True) != json.dumps(settings.get(key), sort_keys=True):
-                    raise LoopError(f"{path.parent} holds a loop with {key}={value!r}, not "
-                                    f"{settings.get(key)!r}; rerun with its settings to resume it, or choose "
-                                    "another --out")
+            check_identity(recorded, settings, IDENTITY, legacy=_LEGACY, run=f"{path.parent} holds a loop",
+                           fix="rerun with its settings to resume it, or choose another --out")
             data["settings"].update({k: settings[k] for k in settings if k not in IDENTITY and k not in _RECORDED})
             for key in _RECORDED:
                 data["settings"].setdefault(key, _LEGACY[key])
@@ -345,289 +316,299 @@ def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[st
 
 
 def _log_default(line: str) -> None:
-    print(line, file=sys.stderr)
+    from dv2s_gym.progress_lines import log_line
+
+    log_line(line)
 
 
 # --------------------------------------------------------------------------- the loop
-def run_loop(policy: str = "dv2s-ppo", *, rounds: int = DEFAULTS["rounds"], out: os.PathLike | str = DEFAULT_OUT,
-             bank_dir: Optional[os.PathLike | str] = None, budget: int = DEFAULTS["budget"],
-             sampler: str = DEFAULTS["sampler"], fine_tune_steps: int = DEFAULTS["fine_tune_steps"],
-             holdout_fraction: float = DEFAULTS["holdout_fraction"], k_eval: int = DEFAULTS["k_eval"],
-             regress_episodes: int = DEFAULTS["regress_episodes"], mined_share: float = DEFAULTS["mined_share"],
-             fine_tune_reward: Optional[Mapping[str, float]] = None,
-             fine_tune_method: str = DEFAULTS["fine_tune_method"],
-             margin: float = DEFAULTS["margin"], seed: int = DEFAULTS["seed"], workers: Optional[int] = None,
-             fine_tune_lr: Optional[float] = DEFAULTS["fine_tune_lr"],
-             max_conversions: Optional[int] = DEFAULTS["max_conversions"],
-             max_replays: Optional[int] = DEFAULTS["max_replays"],
-             min_heldout_episodes: int = DEFAULTS["min_heldout_episodes"],
-             min_heldout_families: int = DEFAULTS["min_heldout_families"], control: bool = DEFAULTS["control"],
-             untouched_seeds: int = DEFAULTS["untouched_seeds"],
-             scenarios: Optional[Sequence[str]] = None, n_envs: int = 2, progress: bool = True,
-             mine_options: Optional[Mapping[str, Any]] = None, miner: Optional[Callable[..., Any]] = None,
+def run_loop(policy: str = "dv2s-ppo", settings: Optional[LoopSettings] = None, *,
+             out: os.PathLike | str = DEFAULT_OUT, progress: bool = True,
              log: Callable[[str], None] = _log_default) -> LoopReport:
-    """Run ``rounds`` rounds of mine -> split -> evaluate -> fine-tune (+ control) -> evaluate -> regress
+    """Run ``settings.rounds`` rounds of mine -> split -> evaluate -> fine-tune (+ control) -> evaluate -> regress
     (module docstring).
 
     Args:
         policy: the starting policy, an SB3 checkpoint spec (``dv2s-ppo``, ``ppo:PATH``, a run folder).
-        rounds: rounds to have finished when it returns (a resumed loop runs only the missing ones).
+        settings: the loop's :class:`~dv2s_gym.mining.loop_settings.LoopSettings` (default: its defaults).
         out: the loop folder (resumable).
-        bank_dir: a writable bank to grow (default: a copy of the shipped bank in ``out/bank``).
-        budget / sampler: the miner's episodes per round and its sampler.
-        fine_tune_steps: env steps of fine-tuning per round.
-        fine_tune_lr: the fine-tuning's (constant) learning rate (``None``: the method's,
-            :data:`METHOD_LEARNING_RATES`).
-        holdout_fraction: share of the round's mined families held out from fine-tuning.
-        k_eval: evaluation seeds per held-out scenario.
-        regress_episodes: seeds per starting-bank scenario in the regression test.
-        mined_share: probability of drawing a mined fine-tuning scenario during fine-tuning.
-        fine_tune_reward: reward-term weights overriding the policy's own in the fine-tuning env
-            only (``None``: ``DEFAULTS["fine_tune_reward"]``; ``{}``: the policy's reward unchanged);
-            used by the ``ppo`` method only (imitation has no reward).
-        fine_tune_method: ``ppo`` or ``dagger`` (:data:`FINE_TUNE_METHODS`).
-        margin: the regression test's non-inferiority margin.
-        seed: seeds the miner, the split and the fine-tuning (each round derives its own).
-        max_conversions: clusters converted into bank scenarios per round, largest first (``None``: all).
-        max_replays: clusters beyond the converted ones whose failing scene is kept as an exact replay entry
-            per round, largest first (:func:`dv2s_gym.mining.replays.replay_clusters`; ``None``: all, 0: none).
-        min_heldout_episodes: below this many held-out episodes a round reports rates only, no drop and no
-            test, and says so in the log and the reports.
-        min_heldout_families: likewise below this many held-out families (parent scenarios): the episodes of
-            one family are near-identical scenes, so the paired test needs several families, not only episodes.
-        control: also fine-tune without the mined scenarios (the control arm) and compare on held-out.
-        untouched_seeds: seeds per scenario of the untouched set (:data:`UNTOUCHED_BANK`); 0 skips it.
-        workers: processes for mining and evaluation (default: every core).
-        scenarios: the scenarios mined and regression-tested (default: the starting bank's).
-        n_envs: training environments (subprocesses).
-        mine_options: extra keyword arguments for :func:`~dv2s_gym.mining.miner.mine`.
-        miner: the mining function (default :func:`dv2s_gym.mining.miner.mine`; tests pass a stand-in).
+        progress: progress bars on stderr.
+        log: where the progress lines go (default stderr).
 
     Returns:
         A :class:`LoopReport`; the reports are written to ``out`` after every round.
     """
-    for name, value, low in (("rounds", rounds, 1), ("budget", budget, 1), ("fine-tune-steps", fine_tune_steps, 1),
-                             ("k-eval", k_eval, 1), ("regress-episodes", regress_episodes, 1),
-                             ("min-heldout-episodes", min_heldout_episodes, 0),
-                             ("min-heldout-families", min_heldout_families, 0),
-                             ("untouched-seeds", untouched_seeds, 0)):
-        if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            raise LoopError(f"--{name} must be an integer >= {low}, not {value!r}")
-    if max_conversions is not None and (isinstance(max_conversions, bool) or not isinstance(max_conversions, int)
-                                        or max_conversions < 0):
-        raise LoopError(f"--max-conversions must be an integer >= 0 (0: no conversions, only exact replays; "
-                        f"'all' on the command line: every cluster), not {max_conversions!r}")
-    if max_replays is not None and (isinstance(max_replays, bool) or not isinstance(max_replays, int)
-                                    or max_replays < 0):
-        raise LoopError(f"--max-replays must be an integer >= 0 (0: no replays beyond the converted clusters; "
-                        f"'all' on the command line: every cluster), not {max_replays!r}")
-    if not 0.0 <= float(holdout_fraction) <= 1.0:
-        raise LoopError(f"--holdout-fraction must be in [0, 1], not {holdout_fraction}")
-    if not 0.0 < float(mined_share) < 1.0:
-        raise LoopError(f"--mined-share must be strictly between 0 and 1, not {mined_share}")
-    from dv2s_gym.mining.samplers import SAMPLERS
-
-    if sampler not in SAMPLERS:  # else round 1 starts (the working bank copied) before the miner refuses it
-        raise LoopError(f"--sampler must be one of {', '.join(SAMPLERS)}, not {sampler!r}")
-    if fine_tune_method not in FINE_TUNE_METHODS:
-        raise LoopError(f"--fine-tune-method must be one of {', '.join(FINE_TUNE_METHODS)}, not {fine_tune_method!r}")
-    if fine_tune_lr is None:
-        fine_tune_lr = METHOD_LEARNING_RATES[fine_tune_method]
-    if not float(fine_tune_lr) > 0:
-        raise LoopError(f"--fine-tune-lr must be a positive number, not {fine_tune_lr}")
-    from dv2s_gym.workers.pool import default_workers
-
-    workers = int(workers or default_workers())
+    settings = settings or LoopSettings()
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise LoopError(f"--out {out} is a file; choose a folder for the loop")
-    env_config = _policy_env_config(policy)
-    if fine_tune_reward is None:
-        fine_tune_reward = DEFAULTS["fine_tune_reward"]
+    loop = _open_loop(policy, settings, out, progress, log)
+    current = policy
+    for number in range(1, settings.rounds + 1):
+        current = _run_round(loop, number, current)
+    return _write(out, loop.state, current)
+
+
+@dataclasses.dataclass
+class _Loop:
+    """A loop being run: its settings, record, working bank and the env configs its steps use."""
+
+    settings: LoopSettings
+    state: "_State"
+    out: Path
+    bank: str
+    start_names: List[str]
+    env_config: Dict[str, Any]
+    fine_tune_config: Dict[str, Any]
+    workers: int
+    progress: bool
+    log: Callable[[str], None]
+
+    @property
+    def holdout_by(self) -> str:
+        return self.state.data["settings"].get("holdout_by", _LEGACY["holdout_by"])
+
+
+def _open_loop(policy: str, settings: LoopSettings, out: Path, progress: bool, log: Callable[[str], None]) -> _Loop:
+    """The loop in ``out``: a new one recorded in ``loop.json``, or the recorded one checked against ``settings``;
+    its working bank and starting scenarios."""
+    from dv2s_gym.workers.pool import default_workers
     from policies.training import TrainingError, with_reward_weights
 
+    workers = int(settings.workers or default_workers())
+    env_config = _policy_env_config(policy)
     try:
-        fine_tune_config = with_reward_weights(env_config, fine_tune_reward)
+        fine_tune_config = with_reward_weights(env_config, settings.fine_tune_reward)
     except TrainingError as error:
         raise LoopError(f"--fine-tune-reward: {error}") from None
-    settings = {"policy": policy, "bank_dir": None if bank_dir is None else str(Path(bank_dir).resolve()),
-                "budget": budget, "sampler": sampler, "fine_tune_steps": fine_tune_steps, "fine_tune_lr": fine_tune_lr,
-                "holdout_fraction": float(holdout_fraction), "k_eval": k_eval, "regress_episodes": regress_episodes,
-                "mined_share": float(mined_share), "fine_tune_reward": dict(fine_tune_reward),
-                "fine_tune_method": fine_tune_method,
-                "margin": float(margin), "seed": seed,
-                "scenarios": list(scenarios) if scenarios is not None else None, "rounds": rounds,
-                "max_conversions": max_conversions, "max_replays": max_replays, "holdout_by": HOLDOUT_BY, "control": bool(control),
-                "untouched_seeds": untouched_seeds, "min_heldout_episodes": min_heldout_episodes,
-                "min_heldout_families": min_heldout_families, "workers": workers, "n_envs": n_envs, "env_config": env_config,
-                "fine_tune_env_config": fine_tune_config}
-    state = _State(out / "loop.json", settings)
-    settings = state.data["settings"]
-    holdout_by = settings.get("holdout_by", _LEGACY["holdout_by"])
-    bank = _working_bank(out, settings["bank_dir"])
+    state = _State(out / "loop.json", _recorded_settings(policy, settings, workers, env_config, fine_tune_config))
+    bank = _working_bank(out, state.data["settings"]["bank_dir"])
     if state.data.get("start") is None:
         from scenario_bank import select_scenarios
 
-        names = sorted(select_scenarios(list(scenarios) if scenarios is not None else None, bank))
+        names = sorted(select_scenarios(list(settings.scenarios) if settings.scenarios is not None else None, bank))
         if not names:
             raise LoopError("the scenario selection is empty; name bank scenarios or tag:<tag>")
         state.data["start"] = {"bank": bank, "scenarios": names}
         state.save()
-    start_names: List[str] = state.data["start"]["scenarios"]
-    if miner is None:
-        from dv2s_gym.mining.miner import mine as miner
+    return _Loop(settings=settings, state=state, out=out, bank=bank, start_names=state.data["start"]["scenarios"],
+                 env_config=env_config, fine_tune_config=fine_tune_config, workers=workers, progress=progress, log=log)
 
-    current = policy
-    for number in range(1, rounds + 1):
-        record = state.round(number)
-        steps, timings = record["steps"], record["timings"]
-        record.setdefault("policy", current)
-        round_dir = out / f"round_{number}"
-        if "regress" in steps or steps.get("skipped"):
-            if record.get("new_policy"):
-                current = _round_spec(record["new_policy"], round_dir / "policy", out)
-            continue
-        log(f"round {number}: policy {current}")
-        stages = ["mine", "split", "before", "fine_tune"] + (["control"] if control else []) + ["after"] + (
-            ["untouched"] if untouched_seeds else []) + ["regress"]
 
-        def timed(step: str, function: Callable[[], Any]) -> Any:
-            log(f"round {number} [{stages.index(step) + 1}/{len(stages)}] {_STAGE_NAMES[step]} ...")
-            began = time.perf_counter()
-            value = function()
-            timings[step] = round(time.perf_counter() - began, 1)  # of the run that finished the step
-            steps[step] = value
-            state.save()
-            log(f"round {number} [{stages.index(step) + 1}/{len(stages)}] {_STAGE_NAMES[step]}: done in "
-                f"{timings[step]:.0f} s")
-            return value
+def _recorded_settings(policy: str, settings: LoopSettings, workers: int, env_config: Dict[str, Any],
+                       fine_tune_config: Dict[str, Any]) -> Dict[str, Any]:
+    """The ``settings`` of ``loop.json`` (the keys :data:`IDENTITY` names are the loop's identity)."""
+    s = settings
+    return {"policy": policy, "bank_dir": None if s.bank_dir is None else str(Path(s.bank_dir).resolve()),
+            "budget": s.budget, "sampler": s.sampler, "fine_tune_steps": s.fine_tune_steps,
+            "fine_tune_lr": s.fine_tune_lr, "holdout_fraction": float(s.holdout_fraction), "k_eval": s.k_eval,
+            "regress_episodes": s.regress_episodes, "mined_share": float(s.mined_share),
+            "fine_tune_reward": dict(s.fine_tune_reward), "fine_tune_method": s.fine_tune_method,
+            "margin": float(s.margin), "seed": s.seed,
+            "scenarios": list(s.scenarios) if s.scenarios is not None else None, "rounds": s.rounds,
+            "max_conversions": s.max_conversions, "max_replays": s.max_replays, "holdout_by": HOLDOUT_BY,
+            "control": bool(s.control), "untouched_seeds": s.untouched_seeds,
+            "min_heldout_episodes": s.min_heldout_episodes, "min_heldout_families": s.min_heldout_families,
+            "workers": workers, "n_envs": s.n_envs, "env_config": env_config, "fine_tune_env_config": fine_tune_config}
 
-        if "mine" not in steps:
-            def do_mine() -> Dict[str, Any]:
-                options = {"sampler": sampler, "scenarios": start_names, "bank_dir": bank, "workers": workers,
-                           "seed": seed * 1000 + number, "progress": progress, "env_config": env_config,
-                           "convert": True, "max_conversions": max_conversions,
-                           "origin": {"command": "dv2s loop", "seed": seed, "round": number},
-                           **dict(mine_options or {})}
-                miner(current, out=str(round_dir / "mine"), budget=budget, **options)
-                if max_replays != 0 and (round_dir / "mine" / "settings.json").is_file():  # a miner's run folder
-                    from dv2s_gym.mining.replays import replay_clusters
 
-                    replay_clusters(round_dir / "mine", bank_dir=bank, max_replays=max_replays, progress=progress)
-                return {**_mining_summary(round_dir / "mine"), "kept": mined_entries(round_dir / "mine"),
-                        "folder": str(round_dir / "mine")}
+class _Timed:
+    """Runs one step of a round: logs it, times it, records its value in ``loop.json``."""
 
-            timed("mine", do_mine)
-            mined = steps["mine"]
-            log(f"round {number}: mined {mined['failures']} failures in {mined['episodes']} episodes, "
-                f"{mined.get('clusters')} clusters, "
-                f"{len({e['scenario'] for e in mined['kept'] if not e.get('replay')})} converted scenarios and "
-                f"{len({e['scenario'] for e in mined['kept'] if e.get('replay')})} exact replays kept"
-                + (f"; {mined['clusters_not_converted']} clusters not converted (--max-conversions "
-                   f"{'all' if max_conversions is None else max_conversions})" if mined.get("clusters_not_converted") else "")
-                + (f", {mined['clusters_not_kept']} neither converted nor replayed (--max-replays "
-                   f"{'all' if max_replays is None else max_replays})" if mined.get("clusters_not_kept") else ""))
-        if "split" not in steps:
-            held_families, tuned_families = _earlier_sides(state.data["rounds"][:number - 1])
-            timed("split", lambda: _split(steps["mine"]["kept"], holdout_fraction, seed * 1000 + number, holdout_by,
-                                          bank, held_families, tuned_families))
-            if steps["split"].get("moved_to_fine_tune"):
-                log(f"round {number}: WARNING: earlier held-out famil(ies) "
-                    f"{', '.join(steps['split']['moved_to_fine_tune'])} now share a mined scenario with a family "
-                    "fine-tuned on earlier, so they are fine-tuned on from this round")
-        split = steps["split"]
-        held_out, tuned = split["held_out"], split["fine_tune"]
-        if not tuned and not held_out:
-            mined = steps["mine"]
-            tried = sum((mined.get("conversions") or {}).values())
-            replayed = sum((mined.get("replays") or {}).values())
-            steps["skipped"] = (f"no mined scenario was kept this round ({tried} conversion(s) tried"
-                                + (f", {replayed} exact replay(s) tried" if replayed else "")
-                                + (f", {mined['clusters_not_converted']} cluster(s) not converted: raise "
-                                   "--max-conversions, --max-replays or --budget"
-                                   if mined.get("clusters_not_converted") else "")
-                                + "): nothing to fine-tune on or to measure")
-            state.save()
-            log(f"round {number}: {steps['skipped']}")
-            _write(out, state, current)
-            continue
+    def __init__(self, loop: _Loop, number: int, record: Dict[str, Any]) -> None:
+        self.loop, self.number, self.record = loop, number, record
+        control, untouched = loop.settings.control, loop.settings.untouched_seeds
+        self.stages = ["mine", "split", "before", "fine_tune"] + (["control"] if control else []) + ["after"] + (
+            ["untouched"] if untouched else []) + ["regress"]
 
-        from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout
-        from policies.training import EVAL_SEED_BASE
+    def __call__(self, step: str, function: Callable[[], Any]) -> Any:
+        log, timings = self.loop.log, self.record["timings"]
+        where = f"round {self.number} [{self.stages.index(step) + 1}/{len(self.stages)}] {_STAGE_NAMES[step]}"
+        log(f"{where} ...")
+        began = time.perf_counter()
+        value = function()
+        timings[step] = round(time.perf_counter() - began, 1)  # of the run that finished the step
+        self.record["steps"][step] = value
+        self.loop.state.save()
+        log(f"{where}: done in {timings[step]:.0f} s")
+        return value
 
-        episodes = [(name, EVAL_SEED_BASE + i) for name in held_out for i in range(k_eval)]
-        families = _families_of(steps["mine"]["kept"], held_out, bank)
-        shortfall = underpowered(len(episodes), min_heldout_episodes, len(set(families.values())),
-                                 min_heldout_families)
-        if shortfall:
-            log(f"round {number}: WARNING: {shortfall}")
-        store_path = round_dir / "heldout.jsonl"
-        if "before" not in steps:
-            timed("before", lambda: {"episodes": len(episodes), "done": bool(evaluate_heldout(
-                "before", current, episodes, store=HeldOutStore(store_path), bank_dir=bank, env_config=env_config,
-                workers=workers, progress=progress))})
-        excluded = set(held_out) | set(split.get("held_out_families", []))
-        for earlier in state.data["rounds"][:number - 1]:
-            earlier_split = earlier.get("steps", {}).get("split") or {}
-            excluded.update(earlier_split.get("held_out", []))
-            excluded.update(earlier_split.get("held_out_families", []))
-        arm = dict(bank=bank, method=fine_tune_method, steps=fine_tune_steps, seed=seed * 1000 + number,
-                   n_envs=n_envs, env_config=env_config, fine_tune_config=fine_tune_config,
-                   reward=fine_tune_reward, learning_rate=fine_tune_lr, progress=progress, log=log)
-        if "fine_tune" not in steps:
-            timed("fine_tune", lambda: _fine_tune_arm(current, round_dir / "policy", excluded, mined_share,
-                                                      with_mined=True, label=f"round {number}", **arm))
-        from policies.training import resolve_checkpoint
 
-        def spec_of(model: str, folder: Path) -> str:
-            _round_spec(f"ppo:{model}", folder, out)  # loop.json is a file: only this round's own checkpoint
-            return f"{resolve_checkpoint(model)[0]}:{model}"
+def _run_round(loop: _Loop, number: int, current: str) -> str:
+    """Run (or finish) round ``number`` from policy ``current``; the policy the next round starts from."""
+    record = loop.state.round(number)
+    steps = record["steps"]
+    record.setdefault("policy", current)
+    round_dir = loop.out / f"round_{number}"
+    if "regress" in steps or steps.get("skipped"):
+        if record.get("new_policy"):
+            current = _round_spec(record["new_policy"], round_dir / "policy", loop.out)
+        return current
+    loop.log(f"round {number}: policy {current}")
+    timed = _Timed(loop, number, record)
+    if "mine" not in steps:
+        timed("mine", lambda: _mine_step(loop, number, current, round_dir))
+        _log_mined(loop, number, steps["mine"])
+    if "split" not in steps:
+        held_families, tuned_families = _earlier_sides(loop.state.data["rounds"][:number - 1])
+        timed("split", lambda: _split(steps["mine"]["kept"], loop.settings.holdout_fraction,
+                                      loop.settings.seed * 1000 + number, loop.holdout_by, loop.bank,
+                                      held_families, tuned_families))
+        if steps["split"].get("moved_to_fine_tune"):
+            loop.log(f"round {number}: WARNING: earlier held-out famil(ies) "
+                     f"{', '.join(steps['split']['moved_to_fine_tune'])} now share a mined scenario with a family "
+                     "fine-tuned on earlier, so they are fine-tuned on from this round")
+    if not steps["split"]["fine_tune"] and not steps["split"]["held_out"]:
+        _skip_round(loop, number, steps)
+        _write(loop.out, loop.state, current)
+        return current
+    new_policy = _tune_and_measure(loop, number, current, round_dir, timed)
+    _log_round(loop.log, number, steps)
+    _write(loop.out, loop.state, new_policy)
+    return new_policy
 
-        new_policy = spec_of(steps["fine_tune"]["model"], round_dir / "policy")
-        record["new_policy"] = new_policy
-        control_policy = None
-        if control:
-            if "control" not in steps:
-                timed("control", lambda: _fine_tune_arm(current, round_dir / "control", excluded, mined_share,
-                                                        with_mined=False, label=f"round {number} control", **arm))
-            control_policy = spec_of(steps["control"]["model"], round_dir / "control")
-            record["control_policy"] = control_policy
-        if "after" not in steps:
-            def do_after() -> Dict[str, Any]:
-                store = HeldOutStore(store_path)
-                before = evaluate_heldout("before", current, episodes, store=store, bank_dir=bank,
-                                          env_config=env_config, workers=workers, progress=False)
-                after = evaluate_heldout("after", new_policy, episodes, store=store, bank_dir=bank,
-                                         env_config=env_config, workers=workers, progress=progress)
-                control_records = None
-                if control_policy is not None:
-                    control_records = evaluate_heldout("control", control_policy, episodes, store=store,
-                                                       bank_dir=bank, env_config=env_config, workers=workers,
-                                                       progress=progress)
-                return heldout_comparison(before, after, control_records, min_episodes=min_heldout_episodes,
-                                          seed=seed, families=families, min_families=min_heldout_families)
 
-            timed("after", do_after)
-        if untouched_seeds and "untouched" not in steps:
-            timed("untouched", lambda: evaluate_untouched(
-                current, new_policy, control_policy, seeds=untouched_seeds, out=round_dir / "untouched",
-                env_config=env_config, margin=margin, workers=workers, progress=progress))
-        if "regress" not in steps:
-            def do_regress() -> Dict[str, Any]:
-                from dv2s_gym.regress.runner import run_regression
+def _mine_step(loop: _Loop, number: int, current: str, round_dir: Path) -> Dict[str, Any]:
+    """The ``mine`` step: mine ``current``'s failures into the working bank, keep exact replays of more."""
+    from dv2s_gym.mining.miner import MineSettings, WorkerSettings, mine
 
-                report = run_regression(new_policy, current, bank_dir=bank, scenarios=start_names,
-                                        episodes=regress_episodes, seed=EVAL_SEED_BASE, margin=margin,
-                                        workers=workers, out_dir=round_dir / "regress", env_config=env_config,
-                                        progress=progress)
-                return _regress_summary(report, round_dir / "regress" / "report.json",
-                                        split.get("held_out_families", []))
+    s = loop.settings
+    mine(current, MineSettings(budget=s.budget, sampler=s.sampler, scenarios=loop.start_names, bank_dir=loop.bank,
+                               seed=s.seed * 1000 + number, env_config=loop.env_config, convert=True,
+                               max_conversions=s.max_conversions),
+         out=str(round_dir / "mine"), workers=WorkerSettings(workers=loop.workers), progress=loop.progress,
+         origin={"command": "dv2s loop", "seed": s.seed, "round": number})
+    if s.max_replays != 0 and (round_dir / "mine" / "settings.json").is_file():  # a miner's run folder
+        from dv2s_gym.mining.replays import replay_clusters
 
-            timed("regress", do_regress)
-        _log_round(log, number, steps)
-        current = new_policy
-        _write(out, state, current)
-    return _write(out, state, current)
+        replay_clusters(round_dir / "mine", bank_dir=loop.bank, max_replays=s.max_replays, progress=loop.progress)
+    return {**_mining_summary(round_dir / "mine"), "kept": mined_entries(round_dir / "mine"),
+            "folder": str(round_dir / "mine")}
+
+
+def _log_mined(loop: _Loop, number: int, mined: Mapping[str, Any]) -> None:
+    s = loop.settings
+    loop.log(f"round {number}: mined {mined['failures']} failures in {mined['episodes']} episodes, "
+             f"{mined.get('clusters')} clusters, "
+             f"{len({e['scenario'] for e in mined['kept'] if not e.get('replay')})} converted scenarios and "
+             f"{len({e['scenario'] for e in mined['kept'] if e.get('replay')})} exact replays kept"
+             + (f"; {mined['clusters_not_converted']} clusters not converted (--max-conversions "
+                f"{'all' if s.max_conversions is None else s.max_conversions})"
+                if mined.get("clusters_not_converted") else "")
+             + (f", {mined['clusters_not_kept']} neither converted nor replayed (--max-replays "
+                f"{'all' if s.max_replays is None else s.max_replays})" if mined.get("clusters_not_kept") else ""))
+
+
+def _skip_round(loop: _Loop, number: int, steps: Dict[str, Any]) -> None:
+    """Record and log a round that kept no mined scenario (nothing to fine-tune on or to measure)."""
+    mined = steps["mine"]
+    tried = sum((mined.get("conversions") or {}).values())
+    replayed = sum((mined.get("replays") or {}).values())
+    steps["skipped"] = (f"no mined scenario was kept this round ({tried} conversion(s) tried"
+                        + (f", {replayed} exact replay(s) tried" if replayed else "")
+                        + (f", {mined['clusters_not_converted']} cluster(s) not converted: raise "
+                           "--max-conversions, --max-replays or --budget"
+                           if mined.get("clusters_not_converted") else "")
+                        + "): nothing to fine-tune on or to measure")
+    loop.state.save()
+    loop.log(f"round {number}: {steps['skipped']}")
+
+
+def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, timed: _Timed) -> str:
+    """The steps after the split: held-out before, fine-tune (+ control), held-out after, untouched set,
+    regression; the fine-tuned policy's spec."""
+    from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout
+    from policies.training import EVAL_SEED_BASE
+
+    s, record = loop.settings, timed.record
+    steps, split = record["steps"], record["steps"]["split"]
+    episodes = [(name, EVAL_SEED_BASE + i) for name in split["held_out"] for i in range(s.k_eval)]
+    families = _families_of(steps["mine"]["kept"], split["held_out"], loop.bank)
+    shortfall = underpowered(len(episodes), s.min_heldout_episodes, len(set(families.values())),
+                             s.min_heldout_families)
+    if shortfall:
+        loop.log(f"round {number}: WARNING: {shortfall}")
+    store_path = round_dir / "heldout.jsonl"
+    if "before" not in steps:
+        timed("before", lambda: {"episodes": len(episodes), "done": bool(evaluate_heldout(
+            "before", current, episodes, store=HeldOutStore(store_path), bank_dir=loop.bank,
+            env_config=loop.env_config, workers=loop.workers, progress=loop.progress))})
+    new_policy, control_policy = _fine_tune_arms(loop, number, current, round_dir, timed)
+    policies = {"before": current, "after": new_policy, "control": control_policy}
+    if "after" not in steps:
+        timed("after", lambda: _after_step(loop, policies, episodes, HeldOutStore(store_path), families))
+    if s.untouched_seeds and "untouched" not in steps:
+        timed("untouched", lambda: evaluate_untouched(
+            current, new_policy, control_policy, settings=untouched_settings(s.untouched_seeds, loop.env_config,
+                                                                             s.margin),
+            out=round_dir / "untouched", workers=loop.workers, progress=loop.progress))
+    if "regress" not in steps:
+        timed("regress", lambda: _regress_step(loop, new_policy, current, round_dir, split))
+    return new_policy
+
+
+def _fine_tune_arms(loop: _Loop, number: int, current: str, round_dir: Path, timed: _Timed) -> tuple:
+    """The ``fine_tune`` and ``control`` steps: ``(fine-tuned policy spec, control policy spec or None)``."""
+    from policies.training import resolve_checkpoint
+
+    s, record = loop.settings, timed.record
+    steps, split = record["steps"], record["steps"]["split"]
+    excluded = set(split["held_out"]) | set(split.get("held_out_families", []))
+    for earlier in loop.state.data["rounds"][:number - 1]:
+        earlier_split = earlier.get("steps", {}).get("split") or {}
+        excluded.update(earlier_split.get("held_out", []))
+        excluded.update(earlier_split.get("held_out_families", []))
+    arm = _Arm(bank=loop.bank, method=s.fine_tune_method, steps=s.fine_tune_steps, seed=s.seed * 1000 + number,
+               n_envs=s.n_envs, env_config=loop.env_config, fine_tune_config=loop.fine_tune_config,
+               reward=s.fine_tune_reward, learning_rate=s.fine_tune_lr, progress=loop.progress, log=loop.log)
+    if "fine_tune" not in steps:
+        timed("fine_tune", lambda: _fine_tune_arm(current, round_dir / "policy", excluded, s.mined_share, arm,
+                                                  with_mined=True, label=f"round {number}"))
+
+    def spec_of(model: str, folder: Path) -> str:
+        _round_spec(f"ppo:{model}", folder, loop.out)  # loop.json is a file: only this round's own checkpoint
+        return f"{resolve_checkpoint(model)[0]}:{model}"
+
+    record["new_policy"] = spec_of(steps["fine_tune"]["model"], round_dir / "policy")
+    control_policy = None
+    if s.control:
+        if "control" not in steps:
+            timed("control", lambda: _fine_tune_arm(current, round_dir / "control", excluded, s.mined_share, arm,
+                                                    with_mined=False, label=f"round {number} control"))
+        control_policy = spec_of(steps["control"]["model"], round_dir / "control")
+        record["control_policy"] = control_policy
+    return record["new_policy"], control_policy
+
+
+def _after_step(loop: _Loop, policies: Mapping[str, Optional[str]], episodes: List[tuple], store,
+                families: Mapping[str, str]) -> Dict[str, Any]:
+    """The ``after`` step: start, fine-tuned and control on the held-out episodes, compared pairwise."""
+    from dv2s_gym.mining.heldout import evaluate_heldout
+
+    common = dict(store=store, bank_dir=loop.bank, env_config=loop.env_config, workers=loop.workers)
+    before = evaluate_heldout("before", policies["before"], episodes, progress=False, **common)
+    after = evaluate_heldout("after", policies["after"], episodes, progress=loop.progress, **common)
+    control_records = None
+    if policies["control"] is not None:
+        control_records = evaluate_heldout("control", policies["control"], episodes, progress=loop.progress,
+                                           **common)
+    s = loop.settings
+    return heldout_comparison(before, after, control_records, min_episodes=s.min_heldout_episodes, seed=s.seed,
+                              families=families, min_families=s.min_heldout_families)
+
+
+def _regress_step(loop: _Loop, new_policy: str, current: str, round_dir: Path,
+                  split: Mapping[str, Any]) -> Dict[str, Any]:
+    """The ``regress`` step: the fine-tuned policy against the round's start on the starting bank's scenarios."""
+    from dv2s_gym.regress.runner import RegressSettings, WorkerSettings, run_regression
+    from policies.training import EVAL_SEED_BASE
+
+    s = loop.settings
+    settings = RegressSettings(bank_dir=loop.bank, scenarios=loop.start_names, episodes=s.regress_episodes,
+                               seed=EVAL_SEED_BASE, margin=s.margin, env_config=loop.env_config)
+    report = run_regression(new_policy, current, settings, workers=WorkerSettings(workers=loop.workers),
+                            out_dir=round_dir / "regress", progress=loop.progress)
+    return _regress_summary(report, round_dir / "regress" / "report.json", split.get("held_out_families", []))
 
 
 _STAGE_NAMES = {"mine": "mining failures", "split": "splitting by family", "before": "held-out: starting policy",
@@ -663,45 +644,67 @@ def _families_of(kept: Sequence[Mapping[str, Any]], held_out: Sequence[str], ban
     return {name: families.get(name, name) for name in held_out}
 
 
-def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, *, with_mined: bool, label: str,
-                   bank: str, method: str, steps: int, seed: int, n_envs: int, env_config: Dict[str, Any],
-                   fine_tune_config: Dict[str, Any], reward: Mapping[str, float], learning_rate: float,
-                   progress: bool, log: Callable[[str], None]) -> Dict[str, Any]:
+@dataclasses.dataclass(frozen=True)
+class _Arm:
+    """What the two fine-tuning arms of a round share (everything but the mined scenarios)."""
+
+    bank: str
+    method: str
+    steps: int
+    seed: int
+    n_envs: int
+    env_config: Dict[str, Any]
+    fine_tune_config: Dict[str, Any]
+    reward: Mapping[str, float]
+    learning_rate: float
+    progress: bool
+    log: Callable[[str], None]
+
+    def config(self, out: Path, weights: Mapping[str, float]):
+        """The arm's :class:`~policies.training.TrainConfig` into ``out``, drawing scenarios by ``weights``."""
+        from policies.training import TrainConfig
+
+        return TrainConfig.fine_tuning(out, steps=self.steps, weights=weights, bank_dir=self.bank, seed=self.seed,
+                                       n_envs=self.n_envs, env_config=self.env_config, progress_bar=self.progress)
+
+
+def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, arm: _Arm, *, with_mined: bool,
+                   label: str) -> Dict[str, Any]:
     """Fine-tune ``current`` into ``out`` on the working bank less ``excluded``: the mined scenarios upweighted
     (``with_mined``) or left out (the control arm); everything else identical between the two arms."""
     from scenario_bank.bank import Bank
 
     # a held-out family's every member stays out too: exact replays of its failures and entries of earlier rounds
-    entries = [e for e in Bank(bank) if e.name not in excluded and e.source.get("parent") not in excluded]
+    entries = [e for e in Bank(arm.bank) if e.name not in excluded and e.source.get("parent") not in excluded]
     mined = sorted(e.name for e in entries if e.source.get("kind") == "mined")
     names = sorted(e.name for e in entries if with_mined or e.name not in mined)
     weights = fine_tune_weights(names, mined if with_mined else [], mined_share)
-    common = {"scenarios": len(names), "mined_upweighted": len(mined) if with_mined else 0, "steps": steps,
+    common = {"scenarios": len(names), "mined_upweighted": len(mined) if with_mined else 0, "steps": arm.steps,
               "mined_left_out": 0 if with_mined else len(mined),
               "families": sorted({str(e.source.get("parent") or e.name) for e in entries if e.name in names})}
-    if method == "dagger":
-        from policies.dagger_checkpoint import checkpoint_position, describe_position
-        from policies.imitation import DAGGER_DEFAULTS, dagger_fine_tune
-        from policies.registry import read_model_card
-
-        position = checkpoint_position(out)
-        if position is not None:
-            log(f"{label}: fine-tune (dagger) resumed from "
-                f"{describe_position(*position, DAGGER_DEFAULTS['iterations'])}")
-        path = dagger_fine_tune(current, bank_dir=bank, out=out, steps=steps, weights=weights, seed=seed,
-                                n_envs=n_envs, env_config=env_config, learning_rate=learning_rate,
-                                progress_bar=progress, log=log)
-        dagger = read_model_card(path).get("fine_tune") or {}
-        return {"model": str(path.resolve()), "method": "dagger", **common, "reward_weights": None,
-                "env_config": env_config, "reference": dagger.get("reference"), "agreement": dagger.get("agreement"),
-                "resumed": dagger.get("resumed") or []}
+    if arm.method == "dagger":
+        result = _dagger_arm(current, out, weights, arm, label)
+        return {"model": result.pop("model"), "method": "dagger", **common, **result}
     from policies.training import fine_tune
 
-    path = fine_tune(current, bank_dir=bank, out=out, steps=steps, weights=weights, seed=seed, n_envs=n_envs,
-                     env_config=env_config, reward_weights=reward, progress_bar=progress,
-                     learning_rate=learning_rate, log=log)
-    return {"model": str(path.resolve()), "method": "ppo", **common, "reward_weights": dict(reward),
-            "env_config": fine_tune_config}
+    path = fine_tune(current, arm.config(out, weights), reward_weights=arm.reward, learning_rate=arm.learning_rate,
+                     log=arm.log)
+    return {"model": str(path.resolve()), "method": "ppo", **common, "reward_weights": dict(arm.reward),
+            "env_config": arm.fine_tune_config}
+
+
+def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, label: str) -> Dict[str, Any]:
+    """A fine-tuning arm by DAgger (:func:`policies.imitation.dagger_fine_tune`); a killed one resumes."""
+    from policies.imitation import DaggerConfig, dagger_fine_tune
+    from policies.registry import read_model_card
+
+    # a resumed run says so itself ("DAgger: resumed from ...", after the step's own line naming the arm)
+    path = dagger_fine_tune(current, arm.config(out, weights), DaggerConfig(learning_rate=arm.learning_rate),
+                            log=arm.log)
+    dagger = read_model_card(path).get("fine_tune") or {}
+    return {"model": str(path.resolve()), "method": "dagger", "reward_weights": None,
+            "env_config": arm.env_config, "reference": dagger.get("reference"), "agreement": dagger.get("agreement"),
+            "resumed": dagger.get("resumed") or []}
 
 
 def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[str, Any]],
@@ -746,31 +749,38 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     return summary
 
 
-def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, seeds: int, out: Path,
-                       env_config: Mapping[str, Any], margin: float, workers: int, progress: bool,
-                       bank_dir: Optional[os.PathLike | str] = None) -> Dict[str, Any]:
-    """Start, fine-tuned and control on the untouched scenario set (``bank_dir``, default
-    :data:`UNTOUCHED_BANK`), ``seeds`` seeds each from ``EVAL_SEED_BASE``, with ``dv2s regress``: fine-tuned
+def untouched_settings(seeds: int, env_config: Mapping[str, Any], margin: float,
+                       bank_dir: Optional[os.PathLike | str] = None):
+    """The regression settings of the untouched set: ``bank_dir`` (default :data:`UNTOUCHED_BANK`), ``seeds``
+    seeds per scenario from ``EVAL_SEED_BASE``, the policy's ``env_config`` and the loop's ``margin``."""
+    from dv2s_gym.regress.runner import RegressSettings
+    from policies.training import EVAL_SEED_BASE
+
+    return RegressSettings(bank_dir=str(Path(bank_dir or UNTOUCHED_BANK).resolve()), episodes=seeds,
+                           seed=EVAL_SEED_BASE, margin=margin, env_config=dict(env_config))
+
+
+def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, settings: Any, out: Path,
+                       workers: int, progress: bool) -> Dict[str, Any]:
+    """Start, fine-tuned and control on the untouched scenario set (:func:`untouched_settings`: its bank, its
+    seeds per scenario, the env config and margin) with ``dv2s regress``: fine-tuned
     against start (``out/vs_start``), then the control against the fine-tuned policy's episodes of that run
     (``out/vs_control``: only the control runs). Failure rates, stall rates and mean speeds per policy, and
     the two comparisons' verdicts, differences and p-values."""
-    from dv2s_gym.regress.runner import run_regression
-    from policies.training import EVAL_SEED_BASE
+    from dv2s_gym.regress.runner import BaselineReport, WorkerSettings, run_regression
 
-    bank_dir = str(Path(bank_dir or UNTOUCHED_BANK).resolve())
-    first = run_regression(fine_tuned, start, bank_dir=bank_dir, episodes=seeds, seed=EVAL_SEED_BASE, margin=margin,
-                           workers=workers, out_dir=out / "vs_start", env_config=dict(env_config), progress=progress)
+    first = run_regression(fine_tuned, start, settings, workers=WorkerSettings(workers=workers),
+                           out_dir=out / "vs_start", progress=progress)
     overall = first.get("overall") or {}
     result: Dict[str, Any] = {"scenarios": list((first.get("bank") or {}).get("scenarios") or []),
-                              "seeds": seeds, "policies": {"start": _measures(overall.get("baseline")),
+                              "seeds": settings.episodes, "policies": {"start": _measures(overall.get("baseline")),
                                                            "fine_tuned": _measures(overall.get("candidate"))},
                               "fine_tuned_vs_start": _comparison(first, out / "vs_start" / "report.json")}
     if control is not None:
         # a measurement, not a gate: the fine-tuned policy is the reference whatever its own verdict was
-        second = run_regression(control, baseline_report=out / "vs_start" / "report.json", baseline_role="candidate",
-                                accept_failed_baseline=True,
-                                bank_dir=bank_dir, episodes=seeds, seed=EVAL_SEED_BASE, margin=margin, workers=workers,
-                                out_dir=out / "vs_control", env_config=dict(env_config), progress=progress)
+        baseline = BaselineReport(out / "vs_start" / "report.json", role="candidate", accept_failed=True)
+        second = run_regression(control, baseline, settings, workers=WorkerSettings(workers=workers),
+                                out_dir=out / "vs_control", progress=progress)
         result["policies"]["control"] = _measures((second.get("overall") or {}).get("candidate"))
         result["control_vs_fine_tuned"] = _comparison(second, out / "vs_control" / "report.json")
     return result

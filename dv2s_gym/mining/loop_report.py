@@ -2,7 +2,9 @@
 
 ``report.json`` is :meth:`dv2s_gym.mining.loop.LoopReport.to_json`::
 
-    {"schema": "dv2s-loop", "schema_version": 1, "out", "settings", "policy": final policy spec,
+    {"schema": "dv2s-loop", "schema_version": 1, "out", "settings", "policy": the last fine-tuned policy's spec,
+     "recommendation": {"policy": the spec to use, "verdict": ACCEPTED | REJECTED | NOT ACCEPTED, "round",
+                        "candidate", "reason", "sentence", "exit_code"} (:mod:`dv2s_gym.mining.loop_verdict`),
      "rounds": [{"round", "policy": spec it started from, "new_policy": fine-tuned spec,
                  "timings": {step: seconds},
                  "control_policy": the control arm's spec (with a control),
@@ -62,7 +64,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional
 
-__all__ = ["write_loop_reports", "render_markdown", "render_html", "round_clips", "final_vs_start", "FINAL_VS_START_DIR"]
+__all__ = ["write_loop_reports", "render_markdown", "render_html", "round_summary", "round_clips", "final_vs_start", "FINAL_VS_START_DIR"]
 
 FINAL_VS_START_DIR = "final_vs_start"
 """Folder (in the loop folder) of the final-vs-starting-policy paired regression report."""
@@ -195,6 +197,17 @@ def _round_row(record: Mapping[str, Any]) -> Dict[str, Any]:
     }
 
 
+def round_summary(record: Mapping[str, Any]) -> str:
+    """One plain-text line on a round for the terminal: held-out failure rates and the regression verdict."""
+    row = _round_row(record)
+    steps = record.get("steps") or {}
+    if steps.get("skipped"):
+        return f"round {row['round']}: skipped: {steps['skipped']}"
+    return (f"round {row['round']}: {row['failures']} failures mined in {row['episodes']} episodes, {row['kept']} "
+            f"scenarios kept; held-out failure rate start {row['before']}, control {row['control']}, fine-tuned "
+            f"{row['after']}; rest of the bank: {row['verdict']}")
+
+
 def _replays_text(settings: Mapping[str, Any]) -> str:
     """How many clusters beyond the converted ones a round keeps as exact replays, in words."""
     count = settings.get("max_replays", 0)
@@ -297,12 +310,20 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
     return lines
 
 
+def _recommendation(report: Mapping[str, Any]) -> Mapping[str, Any]:
+    """The report's recommendation (worked out for a report written without one)."""
+    from dv2s_gym.mining.loop_verdict import recommendation
+
+    return report.get("recommendation") or recommendation(report)
+
+
 def render_markdown(report: Mapping[str, Any]) -> str:
     """The Markdown rendering of a loop report."""
     settings = report.get("settings", {})
     lines: List[str] = [
         "# dv2s loop", "",
-        f"Started from `{settings.get('policy')}`; final policy `{report.get('policy')}`.", "",
+        f"Started from `{settings.get('policy')}`; last fine-tuned policy `{report.get('policy')}`.", "",
+        f"**{_recommendation(report)['sentence']}**", "",
         f"Per round: mining budget {settings.get('budget')} episodes ({settings.get('sampler')} sampler), at most "
         f"{'every' if settings.get('max_conversions') is None else settings.get('max_conversions')} cluster(s) converted, "
         f"{_replays_text(settings)}, "
@@ -407,7 +428,8 @@ def render_markdown(report: Mapping[str, Any]) -> str:
 
 _CSS = ("body{font-family:system-ui,sans-serif;margin:2em;max-width:1100px}table{border-collapse:collapse;margin:1em 0}"
         "td,th{border:1px solid #ccc;padding:4px 8px;text-align:left}th{background:#f3f3f3}"
-        ".PASS{color:#186a1f;font-weight:bold}.FAIL{color:#a11;font-weight:bold}.INCONCLUSIVE{color:#a60}"
+        ".PASS,.ACCEPTED{color:#186a1f;font-weight:bold}.FAIL,.REJECTED{color:#a11;font-weight:bold}"
+        ".INCONCLUSIVE,.NOT_ACCEPTED{color:#a60}"
         "code{background:#f5f5f5;padding:1px 3px}.row{display:flex;flex-wrap:wrap;gap:8px}"
         "figure{margin:0}figcaption{font-size:small}")
 
@@ -559,7 +581,9 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
             details.append("<h3>Failure clips of the kept mined scenarios</h3>" + _clips_html(round_clips))
     return (f"<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>dv2s loop</title><style>{_CSS}</style>"
             f"</head><body><h1>dv2s loop</h1><p>Started from <code>{escape(str(settings.get('policy')))}</code>; "
-            f"final policy <code>{escape(str(report.get('policy')))}</code>. Mining budget {settings.get('budget')} "
+            f"last fine-tuned policy <code>{escape(str(report.get('policy')))}</code>.</p>"
+            f"<p class=\"{escape(_recommendation(report)['verdict'].replace(' ', '_'))}\"><b>"
+            f"{escape(_recommendation(report)['sentence'])}</b></p><p>Mining budget {settings.get('budget')} "
             f"episodes per round, at most {escape(str('every' if settings.get('max_conversions') is None else settings.get('max_conversions')))} cluster(s) "
             f"converted, {escape(_replays_text(settings))}, "
             f"fine-tuning ({escape(str(settings.get('fine_tune_method', 'ppo')))}) "
@@ -619,7 +643,10 @@ def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
     if "final_vs_start" not in report:
         final = final_vs_start(report, out)
         if final is not None:
+            from dv2s_gym.mining.loop_verdict import recommendation
+
             report = {**report, "final_vs_start": final}
+            report["recommendation"] = recommendation(report)
     paths = {"json": atomic_write_json(out / "report.json", dict(report), indent=1) or out / "report.json"}
     markdown = render_markdown(report)
     atomic_write_text(out / "report.md", markdown)

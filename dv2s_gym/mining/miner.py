@@ -52,22 +52,16 @@ from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, group
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.family import record_family, scenario_family
 from dv2s_gym.mining.jsonl import read_rows
-from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
 from dv2s_gym.mining.report_text import error_warning
-from dv2s_gym.mining.samplers import (
-    SAMPLERS,
-    SceneSampler,
-    default_feedback,
-    is_adaptive,
-    make_sampler,
-    sampler_params,
-    scene_proposal,
-)
+from dv2s_gym.mining.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
+from dv2s_gym.mining.settings import FEEDBACKS, MineSettings
 from dv2s_gym.mining.tasks import MINE
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
+from dv2s_gym.workers.settings import WorkerSettings
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 
-__all__ = ["MineRun", "mine", "read_records", "episode_seed", "SETTINGS_VERSION"]
+__all__ = ["MineRun", "MineSettings", "WorkerSettings", "FEEDBACKS", "mine", "read_records", "episode_seed",
+           "SETTINGS_VERSION"]
 
 SETTINGS_VERSION = 1
 LOOKAHEAD_CHUNKS = 16
@@ -230,17 +224,16 @@ class _Recorder:
             self.bar.set_postfix(failures=self.failed, clusters=len(self.found))
 
 
-def _settings(policy: str, sampler: str, sampler_options: Optional[Dict[str, Any]], feedback: str, seed: int,
-              batch: int, scenarios: List[str], bank_dir: Optional[str], env_config: Dict[str, Any],
-              reference: Optional[str], ttc_threshold: float, stall_seconds: float, budget: int,
+def _settings(policy: str, settings: MineSettings, batch: int, scenarios: List[str], bank_dir: Optional[str],
               space_description: Dict[str, Any]) -> Dict[str, Any]:
+    """The run's ``settings.json`` (the keys :data:`_RESUME_KEYS` name are its identity)."""
     return {
-        "schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, "sampler": sampler,
-        "sampler_options": dict(sampler_options) if sampler_options else None,
-        "feedback": feedback, "seed": int(seed),
-        "batch": int(batch), "scenarios": scenarios, "bank_dir": bank_dir, "env_config": env_config,
-        "reference": reference, "ttc_threshold": float(ttc_threshold), "stall_seconds": float(stall_seconds),
-        "budget": int(budget), "space": space_description,
+        "schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, "sampler": settings.sampler,
+        "sampler_options": dict(settings.sampler_options) if settings.sampler_options else None,
+        "feedback": settings.feedback, "seed": int(settings.seed),
+        "batch": int(batch), "scenarios": scenarios, "bank_dir": bank_dir, "env_config": dict(settings.env_config),
+        "reference": settings.reference, "ttc_threshold": float(settings.ttc_threshold),
+        "stall_seconds": float(settings.stall_seconds), "budget": int(settings.budget), "space": space_description,
     }
 
 
@@ -265,12 +258,10 @@ def _read_settings(path: Path) -> Optional[Dict[str, Any]]:
 
 
 def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path) -> None:
-    saved = {**_ADDED_DEFAULTS, **saved}
-    different = [k for k in _RESUME_KEYS if saved.get(k) != settings.get(k)]
-    if different:
-        detail = "; ".join(f"{k}: run has {saved.get(k)!r}, asked {settings.get(k)!r}" for k in different[:3])
-        raise MiningError(f"{out} holds a mining run with other settings ({detail}); resume it with the same "
-                          "settings or pass another --out")
+    from scenario_bank.run_identity import check_identity
+
+    check_identity(saved, settings, _RESUME_KEYS, legacy=_ADDED_DEFAULTS, run=f"{out} holds a mining run",
+                   fix="resume it with the same settings or pass another --out")
 
 
 def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[int, Dict[str, Any]],
@@ -435,16 +426,6 @@ def _run_window(window: WindowSchedule, pool, space, settings: Dict[str, Any], o
     more()  # the checkpoint of the finished run
 
 
-FEEDBACKS = ("robustness", "novelty", "scenario-novelty", "state-novelty")
-"""What the adaptive samplers are fed: ``robustness`` (each episode's robustness) or ``novelty`` (the same,
-except that a failure in a parameter cell an earlier episode already failed in with the same failure class,
-:func:`~dv2s_gym.mining.cluster.cell_id`, is fed as an easy scene). Novelty is over where in parameter space
-the sampler has found failures, not over the behaviour clusters the reports count. ``scenario-novelty``: only
-the first failure of each scenario is fed as a failure, later ones as easy scenes (the sampler keeps looking in
-scenarios that have not failed yet). ``state-novelty`` (``novelty-bandit``'s default): a failure is fed as one
-only when its failure-state descriptor (:mod:`dv2s_gym.mining.failure_state`, continuous: speeds, geometry and
-timing at the failure) is farther than :data:`~dv2s_gym.mining.failure_state.NOVELTY_RADIUS` from every earlier
-failure's in the same scenario."""
 _REPEAT = 9.0  # what a repeated failure is fed under "novelty": the robustness of a scene without a near miss
 
 
@@ -472,72 +453,29 @@ def _feedback(record: Dict[str, Any], seen: set, mode: str) -> float:
     return float(rho)
 
 
-def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "novelty-bandit",
-         scenarios: Optional[Sequence[str]] = None, bank_dir: Optional[str] = None, backend: str = "local",
-         workers: Optional[int] = None, address: Optional[str] = None, seed: int = 0,
-         reference: Optional[str] = "rule", batch: Optional[int] = None, timeout: Optional[float] = None,
-         progress: bool = True, env_config: Optional[Dict[str, Any]] = None,
-         ttc_threshold: float = DEFAULT_TTC_THRESHOLD, stall_seconds: float = DEFAULT_STALL_SECONDS,
-         convert: bool = False, convert_options: Optional[Dict[str, Any]] = None,
-         max_conversions: Optional[int] = None, reports: bool = True,
-         sampler_options: Optional[Dict[str, Any]] = None, feedback: Optional[str] = None,
-         origin: Optional[Mapping[str, Any]] = None) -> MineRun:
-    """Mine ``policy``'s failures over ``budget`` episodes; resumable (same ``out``).
+def mine(policy: str, settings: MineSettings, *, out: os.PathLike | str, workers: Optional[WorkerSettings] = None,
+         progress: bool = True, reports: bool = True, origin: Optional[Mapping[str, Any]] = None) -> MineRun:
+    """Mine ``policy``'s failures over ``settings.budget`` episodes; resumable (same ``out``).
 
     Args:
         policy: the policy spec (:func:`policies.registry.load_policy`).
+        settings: what the run mines (:class:`~dv2s_gym.mining.settings.MineSettings`: sampler, scenarios,
+            bank, seed, monitors, conversion).
         out: the run folder (created; an existing run with the same settings is resumed
             and may be given a larger budget).
-        budget: episodes to run in total.
-        sampler: one of :data:`~dv2s_gym.mining.samplers.SAMPLERS` (default ``novelty-bandit``: broader failures than
-            VerifAI's cross-entropy on the breadth bench, bench/RESULTS.md).
-        sampler_options: VerifAI parameters of an adaptive sampler (``alpha``, ``buckets``,
-            ``thres``; :func:`~dv2s_gym.mining.samplers.sampler_params`); ``None``: VerifAI's defaults.
-        feedback: what the adaptive samplers learn from (:data:`FEEDBACKS`): ``"robustness"`` (every
-            failure pulls the sampler towards its scene) or ``"novelty"`` (only a failure in a cluster not
-            found before does; a repeat is fed as an easy scene, so the sampler keeps looking for new ones);
-            ``None``: the sampler's default (:func:`~dv2s_gym.mining.samplers.default_feedback`: ``novelty``
-            for ``split``, ``robustness`` for the others).
-        scenarios: bank names or ``tag:<tag>`` (``None``: the whole bank).
-        bank_dir: the bank folder (``None``: the shipped bank).
-        backend, workers, address, timeout: where episodes run (as ``dv2s regress``:
-            a local process pool or Ray); a worker that crashes or hangs longer than
-            ``timeout`` seconds on one episode is replaced and the episode retried once.
-        seed: seeds the sampler and every episode.
-        reference: the driver that decides avoidability (``None``: skip the check).
-        batch: scenes drawn per chunk before outcomes are fed back (default 4 per worker).
-        env_config: DV2S-v0 config overrides.
-        ttc_threshold, stall_seconds: monitor settings (:mod:`dv2s_gym.mining.monitors`).
-        convert: turn one failure per avoidable cluster into a bank scenario
-            (:mod:`dv2s_gym.mining.convert`; ``convert_options`` are passed on). ``bank_dir``
-            must then be a writable bank; a new or empty folder starts as a copy of the shipped bank; at most ``max_conversions`` clusters, largest first.
+        workers: where episodes run (as ``dv2s regress``: a local process pool or Ray; default every core
+            of this machine); a worker that crashes or hangs longer than its ``timeout`` on one episode is
+            replaced and the episode retried once.
+        progress: progress bars on stderr.
         reports: write report.json, report.md and report.html at the end.
         origin: what started this run, shown beside the seed in its reports: ``dv2s loop`` passes
             ``{"command": "dv2s loop", "seed": S, "round": R}`` because it mines each round with a seed
             derived from its own. Not a setting: a resumed run may be given another.
     """
     started = time.perf_counter()
-    if importlib.util.find_spec("verifai") is None:  # the core install has no mining extra
-        raise MiningError("failure mining needs VerifAI's samplers, which the core install leaves out: "
-                          "pip install 'dv2s-gym[mining]'")
-    if int(budget) < 1:
-        raise MiningError(f"--budget must be at least 1 episode, not {budget}")
-    if sampler not in SAMPLERS:
-        raise MiningError(f"unknown sampler {sampler!r}: use one of {', '.join(SAMPLERS)}")
-    sampler_params(sampler, sampler_options)  # a bad option fails here, in one line
-    feedback = feedback or default_feedback(sampler)
-    if feedback not in FEEDBACKS:
-        raise MiningError(f"unknown feedback {feedback!r}: use one of {', '.join(FEEDBACKS)}")
-    from policies.registry import load_policy
-
-    load_policy(policy)  # an unknown spec or broken checkpoint fails here, in one line, before any worker starts
-    if reference:
-        load_policy(reference)
+    _check_can_mine(policy, settings)
     out = Path(out)
-    if convert and not bank_dir:
-        raise MiningError("converting failures adds scenarios to a bank, and the shipped bank is read-only: pass "
-                          "--bank DIR (a new folder starts as a copy of the shipped bank), or --no-convert")
-    for flag, folder in (("--out", out), ("--bank", Path(bank_dir) if bank_dir else None)):
+    for flag, folder in (("--out", out), ("--bank", Path(settings.bank_dir) if settings.bank_dir else None)):
         if folder is not None and folder.exists() and not folder.is_dir():
             raise MiningError(f"{flag} {folder} is a file, not a folder; pass a folder (a new one is created)")
     created = not out.exists()
@@ -547,16 +485,27 @@ def mine(policy: str, *, out: os.PathLike | str, budget: int, sampler: str = "no
     except OSError as error:
         raise MiningError(f"cannot create the run folder {out}: {error.strerror}; pass a writable --out") from None
     try:
-        return _mine_in(out, started, policy=policy, budget=budget, sampler=sampler, scenarios=scenarios,
-                        bank_dir=bank_dir, backend=backend, workers=workers, address=address, seed=seed,
-                        reference=reference, batch=batch, timeout=timeout, progress=progress, env_config=env_config,
-                        ttc_threshold=ttc_threshold, stall_seconds=stall_seconds, convert=convert,
-                        convert_options=convert_options, max_conversions=max_conversions, reports=reports,
-                        sampler_options=sampler_options, feedback=feedback, origin=origin)
+        return _mine_in(out, started, policy, settings, workers or WorkerSettings(), progress, reports, origin)
     except BaseException:
         if created:
             _remove_if_empty(out)  # bad input found late (an unknown scenario) leaves no empty run folder behind
         raise
+
+
+def _check_can_mine(policy: str, settings: MineSettings) -> None:
+    """Refuse, before any work, a run that cannot start: no VerifAI, bad sampler options, a misspelt env config key,
+    an unknown policy."""
+    if importlib.util.find_spec("verifai") is None:  # the core install has no mining extra
+        raise MiningError("failure mining needs VerifAI's samplers, which the core install leaves out: "
+                          "pip install 'dv2s-gym[mining]'")
+    sampler_params(settings.sampler, dict(settings.sampler_options) if settings.sampler_options else None)
+    from envs.dv2s_env import check_env_config
+    from policies.registry import load_policy
+
+    check_env_config(settings.env_config)  # a misspelt key fails here, in one line, not in every episode
+    load_policy(policy)  # an unknown spec or broken checkpoint fails here, in one line, before any worker starts
+    if settings.reference:
+        load_policy(settings.reference)
 
 
 def _remove_if_empty(out: Path) -> None:
@@ -574,75 +523,85 @@ def _remove_if_empty(out: Path) -> None:
         shutil.rmtree(out, ignore_errors=True)
 
 
-def _mine_in(out: Path, started: float, *, policy: str, budget: int, sampler: str,
-             scenarios: Optional[Sequence[str]], bank_dir: Optional[str], backend: str, workers: Optional[int],
-             address: Optional[str], seed: int, reference: Optional[str], batch: Optional[int],
-             timeout: Optional[float], progress: bool, env_config: Optional[Dict[str, Any]], ttc_threshold: float,
-             stall_seconds: float, convert: bool, convert_options: Optional[Dict[str, Any]],
-             max_conversions: Optional[int], reports: bool, sampler_options: Optional[Dict[str, Any]],
-             feedback: str, origin: Optional[Mapping[str, Any]] = None) -> MineRun:
+def _mine_in(out: Path, started: float, policy: str, settings: MineSettings, workers: WorkerSettings,
+             progress: bool, reports: bool, origin: Optional[Mapping[str, Any]]) -> MineRun:
     """The body of :func:`mine` once the input is checked and the run folder exists."""
-    from dv2s_gym.mining.space import SceneSpace
-    from dv2s_gym.workers.errors import WorkerError
-    from dv2s_gym.workers.pool import default_workers, get_backend
+    from dv2s_gym.workers.pool import default_workers
 
-    bank_dir = str(Path(bank_dir).resolve()) if bank_dir else None
-    if convert:
+    bank_dir = str(Path(settings.bank_dir).resolve()) if settings.bank_dir else None
+    if settings.convert:
         _own_bank(bank_dir)
-    env_config = dict(env_config or {})
-    n_workers = int(workers) if workers else (1 if backend == "local" and default_workers() < 2 else
-                                              default_workers())
+    n_workers = int(workers.workers) if workers.workers else (
+        1 if workers.backend == "local" and default_workers() < 2 else default_workers())
     with _run_lock(out):
-        settings_path = out / "settings.json"
-        saved = _read_settings(settings_path)
-        names = saved["scenarios"] if saved and scenarios is None else None
-        space = SceneSpace(names or scenarios, bank_dir)
-        batch = int(batch) if batch else (saved["batch"] if saved else 4 * n_workers)
-        if batch < 1:
-            raise MiningError(f"--batch must be at least 1, not {batch}")
-        settings = _settings(policy, sampler, sampler_options, feedback, seed, batch, space.scenarios, bank_dir,
-                             env_config, reference, ttc_threshold, stall_seconds, budget, space.describe())
-        if saved is not None:
-            _check_resume(saved, settings, out)
-        settings["schedule"] = _schedule(saved, sampler, out)
-        if origin:
-            settings["origin"] = dict(origin)
-        atomic_write_json(settings_path, settings)
+        recorded, space = _open_run(out, policy, settings, bank_dir, n_workers, origin)
         done = {int(r["index"]): r for r in read_records(out / "episodes.jsonl")}
-        window, scene_sampler = None, None
-        if settings["schedule"] == "window":
-            window = _restore_window(out, settings, space, done, batch, budget)
-        else:
-            scene_sampler = _restore_sampler(out, settings, space, done, batch)
-        appender = _Appender(out / "episodes.jsonl")
-        bar = _progress(progress, budget, len([i for i in done if i < budget]))
-        try:
-            pool = get_backend(backend, workers=n_workers, address=address, timeout=timeout)
-        except WorkerError as error:
-            appender.close()
-            raise MiningError(str(error)) from None
-        try:
-            with pool:
-                recorder = _Recorder(appender, done, sampler, out, bar)
-                if window is not None:
-                    _run_window(window, pool, space, settings, out, recorder, budget)
-                else:
-                    _run_chunks(scene_sampler, pool, space, settings, out, recorder, budget, batch)
-        finally:
-            appender.close()
-            if bar is not None:
-                bar.close()
-        records = [done[i] for i in sorted(done) if i < budget]
-        run = MineRun(out=out, settings=settings, records=records, clusters=cluster_failures(records))
-        if convert:
-            run.conversions = convert_clusters(run, bank_dir=bank_dir, options=convert_options or {},
-                                               progress=progress, max_conversions=max_conversions)
+        _run_episodes(out, recorded, space, done, workers, n_workers, progress)
+        records = [done[i] for i in sorted(done) if i < settings.budget]
+        run = MineRun(out=out, settings=recorded, records=records, clusters=cluster_failures(records))
+        if settings.convert:
+            run.conversions = convert_clusters(run, bank_dir=bank_dir, options=dict(settings.convert_options or {}),
+                                               progress=progress, max_conversions=settings.max_conversions)
         else:
             run.conversions = read_rows(out / "conversions.jsonl")
         run.seconds = time.perf_counter() - started
         if reports:
             run.reports = _write_reports(out)
     return run
+
+
+def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional[str], n_workers: int,
+              origin: Optional[Mapping[str, Any]]) -> tuple:
+    """``(settings.json's content, the scene space)`` of the run in ``out``: a new run's settings, or a resumed
+    run's checked against the ones asked (its own scenarios and batch when none are asked); written back."""
+    from dv2s_gym.mining.space import SceneSpace
+
+    settings_path = out / "settings.json"
+    saved = _read_settings(settings_path)
+    names = saved["scenarios"] if saved and settings.scenarios is None else None
+    asked = list(settings.scenarios) if settings.scenarios is not None else None
+    space = SceneSpace(names or asked, bank_dir)
+    batch = settings.batch or (saved["batch"] if saved else 4 * n_workers)
+    recorded = _settings(policy, settings, batch, space.scenarios, bank_dir, space.describe())
+    if saved is not None:
+        _check_resume(saved, recorded, out)
+    recorded["schedule"] = _schedule(saved, settings.sampler, out)
+    if origin:
+        recorded["origin"] = dict(origin)
+    atomic_write_json(settings_path, recorded)
+    return recorded, space
+
+
+def _run_episodes(out: Path, settings: Dict[str, Any], space, done: Dict[int, Dict[str, Any]],
+                  workers: WorkerSettings, n_workers: int, progress: bool) -> None:
+    """Run the episodes of the run's budget not in ``done`` (recorded into it), on its schedule."""
+    from dv2s_gym.workers.errors import WorkerError
+    from dv2s_gym.workers.pool import get_backend
+
+    budget, batch = settings["budget"], settings["batch"]
+    window, scene_sampler = None, None
+    if settings["schedule"] == "window":
+        window = _restore_window(out, settings, space, done, batch, budget)
+    else:
+        scene_sampler = _restore_sampler(out, settings, space, done, batch)
+    appender = _Appender(out / "episodes.jsonl")
+    bar = _progress(progress, budget, len([i for i in done if i < budget]))
+    try:
+        pool = get_backend(workers.backend, workers=n_workers, address=workers.address, timeout=workers.timeout)
+    except WorkerError as error:
+        appender.close()
+        raise MiningError(str(error)) from None
+    try:
+        with pool:
+            recorder = _Recorder(appender, done, settings["sampler"], out, bar)
+            if window is not None:
+                _run_window(window, pool, space, settings, out, recorder, budget)
+            else:
+                _run_chunks(scene_sampler, pool, space, settings, out, recorder, budget, batch)
+    finally:
+        appender.close()
+        if bar is not None:
+            bar.close()
 
 
 def _task(index: int, spec, policy: str, reference: Optional[str], settings: Dict[str, Any],

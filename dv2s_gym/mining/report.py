@@ -94,6 +94,7 @@ from dv2s_gym.mining.report_text import breadth, rate_text, seed_text
 from dv2s_gym.mining.report_text import number_text as _num
 from dv2s_gym.mining.report_text import percent_text as _pct
 from dv2s_gym.regress.stats import wilson_interval
+from dv2s_gym.regress.identity import installed_version
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 
 __all__ = [
@@ -510,7 +511,7 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
         "schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,
         "created": created or datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "dv2s_version": _dv2s_version(),
+        "dv2s_version": installed_version(),
         "run_dir": None,
         "settings": dict(settings),
         "counts": counts,
@@ -528,14 +529,6 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
     }
     return _clean(report)
 
-
-def _dv2s_version() -> str:
-    from importlib import metadata
-
-    try:
-        return metadata.version("dv2s-gym")
-    except metadata.PackageNotFoundError:  # pragma: no cover - running from a source tree
-        return "unknown"
 
 
 # ----------------------------------------------------------------------------------- text

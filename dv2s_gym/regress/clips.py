@@ -11,13 +11,13 @@ from __future__ import annotations
 import dataclasses
 import os
 from pathlib import Path
-from typing import Any, Dict, List, Union
+from typing import Any, Dict, List, Optional, Tuple, Union
 
 import numpy as np
 
 from envs.errors import DV2SError
 
-__all__ = ["ClipError", "render_episode_video", "render_policy_video", "DEFAULT_CLIP_CONFIG"]
+__all__ = ["ClipError", "render_episode_video", "render_policy_video", "clip_window", "DEFAULT_CLIP_CONFIG"]
 
 DEFAULT_CLIP_CONFIG: Dict[str, Any] = {
     "seconds": 7.0,
@@ -35,8 +35,10 @@ class ClipError(DV2SError, ValueError):
 def render_episode_video(trace_path: Union[str, os.PathLike], out_path: Union[str, os.PathLike], *,
                          seconds: float = DEFAULT_CLIP_CONFIG["seconds"],
                          size: int = DEFAULT_CLIP_CONFIG["size"],
-                         zoom: float = DEFAULT_CLIP_CONFIG["zoom"]) -> Path:
-    """Replay the trace at ``trace_path`` and write its last ``seconds`` to ``out_path`` (``.webm``).
+                         zoom: float = DEFAULT_CLIP_CONFIG["zoom"], end_step: Optional[int] = None) -> Path:
+    """Replay the trace at ``trace_path`` and write its last ``seconds`` to ``out_path`` (``.webm``); with
+    ``end_step``, the ``seconds`` up to that step instead (:func:`clip_window`: the same window of time in two
+    episodes of one scene).
 
     The view covers the ground of the episode's own rendering settings divided by
     ``zoom``, in ``size`` x ``size`` pixels; frames come at the policy frequency. The
@@ -69,13 +71,14 @@ def render_episode_video(trace_path: Union[str, os.PathLike], out_path: Union[st
     frames: List[np.ndarray] = []
     env, _ = replay_trace(dataclasses.replace(trace, config=config), render_mode="rgb_array", frames=frames)
     env.close()
-    return _write_last_seconds(frames, seconds, frequency, out_path, f"episode trace {trace_path}")
+    return _write_window(frames, seconds, frequency, out_path, f"episode trace {trace_path}", end_step)
 
 
 def render_policy_video(report: Dict[str, Any], result: Dict[str, Any], role: str, out_path: Union[str, os.PathLike], *,
                         seconds: float = DEFAULT_CLIP_CONFIG["seconds"], size: int = DEFAULT_CLIP_CONFIG["size"],
-                        zoom: float = DEFAULT_CLIP_CONFIG["zoom"]) -> Path:
-    """Re-run ``role``'s policy of a regression report on ``result``'s scene and write its last ``seconds``.
+                        zoom: float = DEFAULT_CLIP_CONFIG["zoom"], end_step: Optional[int] = None) -> Path:
+    """Re-run ``role``'s policy of a regression report on ``result``'s scene and write its last ``seconds``
+    (with ``end_step``: the ``seconds`` up to that step, as :func:`render_episode_video`).
 
     For an episode that kept no trace (one that did not fail): the policy spec, scenario, seed and env
     config of the report, rendered off-screen like :func:`render_episode_video`. The re-run must
@@ -124,15 +127,28 @@ def render_policy_video(report: Dict[str, Any], result: Dict[str, Any], role: st
         raise ClipError(f"the {role}'s run of {scenario}/{seed} did not reproduce (trajectory hash "
                         f"{rerun.trajectory_hash[:12]}, the report has {str(expected)[:12]}); the policy or the "
                         "simulator changed since the report was made")
-    return _write_last_seconds(frames, seconds, frequency, out_path, f"the {role}'s run of {scenario}/{seed}")
+    return _write_window(frames, seconds, frequency, out_path, f"the {role}'s run of {scenario}/{seed}", end_step)
 
 
-def _write_last_seconds(frames: List[np.ndarray], seconds: float, frequency: float,
-                        out_path: Union[str, os.PathLike], what: str) -> Path:
-    """Write the last ``seconds`` of ``frames`` as a video; :class:`ClipError` naming ``what`` if there are none."""
+def clip_window(end_step: int, seconds: float, frequency: float) -> Tuple[int, int]:
+    """``(first, last)`` step of a clip of ``seconds`` (as many frames as :func:`render_episode_video`'s last
+    ``seconds``) ending at step ``end_step``, both included; frame ``i`` shows the scene after ``i`` steps, at
+    ``i / frequency`` s: the same window in any episode of the scene."""
+    last = max(0, int(end_step))
+    return max(0, last - max(1, int(round(seconds * frequency))) + 1), last
+
+
+def _write_window(frames: List[np.ndarray], seconds: float, frequency: float,
+                  out_path: Union[str, os.PathLike], what: str, end_step: Optional[int] = None) -> Path:
+    """Write the last ``seconds`` of ``frames`` (with ``end_step``: the :func:`clip_window` up to that step) as a
+    video; :class:`ClipError` naming ``what`` if there are none."""
     from envs.recording import VideoWriter
 
-    frames = frames[-max(1, int(round(seconds * frequency))):]
+    if end_step is None:
+        frames = frames[-max(1, int(round(seconds * frequency))):]
+    else:
+        first, last = clip_window(end_step, seconds, frequency)
+        frames = frames[first:last + 1]
     if not frames:
         raise ClipError(f"{what} rendered no frames")
     with VideoWriter(out_path, fps=frequency) as video:

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 import tempfile
 from pathlib import Path
 from typing import Any, List, Mapping, Optional, Sequence, Tuple, Union
@@ -295,8 +296,10 @@ def _resolve_trace(trace: Any, base: Path) -> Optional[Path]:
 
 
 def _clip(report: Mapping[str, Any], episode: Mapping[str, Any], role: str, base: Path, scratch: Path,
-          given: Optional[VideoSource], render_videos: bool) -> Tuple[Optional[bytes], str]:
-    """One side of a pair: the given clip, the trace's replay, or (no trace) a re-run of the policy."""
+          given: Optional[VideoSource], render_videos: bool, end_step: Optional[int] = None
+          ) -> Tuple[Optional[bytes], str]:
+    """One side of a pair: the given clip, the trace's replay, or (no trace) a re-run of the policy; rendered
+    ones cover the clip's seconds up to ``end_step`` (default: the episode's end)."""
     result = episode.get(role)
     if given is not None:
         return _video_bytes(given), ""
@@ -308,18 +311,34 @@ def _clip(report: Mapping[str, Any], episode: Mapping[str, Any], role: str, base
     try:
         trace = _resolve_trace(result.get("trace"), base)
         if trace is not None:
-            return render_episode_video(trace, out).read_bytes(), ""
+            return render_episode_video(trace, out, end_step=end_step).read_bytes(), ""
         if role == "candidate":
             return None, "no trace was recorded for this episode"
-        return render_policy_video(dict(report), dict(result), role, out).read_bytes(), ""
+        return render_policy_video(dict(report), dict(result), role, out, end_step=end_step).read_bytes(), ""
     except (ClipError, OSError, AssertionError, ValueError) as error:
         return None, f"clip not available: {error}"
 
 
+def _pair_window(report: Mapping[str, Any], episode: Mapping[str, Any]) -> Tuple[Optional[int], str]:
+    """``(end step, the caption's words)`` of a pair of clips: both sides show the same seconds of the scene,
+    those up to the candidate's failure (its last step)."""
+    from dv2s_gym.regress.clips import DEFAULT_CLIP_CONFIG, clip_window
+
+    steps = _num((episode.get("candidate") or {}).get("steps")) if isinstance(episode.get("candidate"), Mapping) \
+        else None
+    if steps is None:
+        return None, ""
+    config = (report.get("settings") or {}).get("env_config") or {}
+    frequency = float(_num(config.get("policy_frequency")) or 5)
+    first, last = clip_window(int(steps), DEFAULT_CLIP_CONFIG["seconds"], frequency)
+    return int(steps), (f", both from {first / frequency:.1f} s to {last / frequency:.1f} s of the episode "
+                        "(the seconds up to the candidate's failure)")
+
+
 def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, VideoSource]],
-           render_videos: bool, max_videos: int) -> str:
+           render_videos: bool, max_videos: int, progress: bool = False) -> str:
     """The newly failing episodes, grouped by scenario (worst first): the candidate's clip beside the
-    baseline's run of the same scene."""
+    baseline's run of the same scene; ``progress``: a bar on stderr over the clips rendered."""
     newly = [str(i) for i in report.get("newly_failing") or []]
     if not newly:
         return '<p class="muted">No episode fails for the candidate that the baseline passes.</p>'
@@ -332,6 +351,13 @@ def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, 
         by_scenario.setdefault(scenario, []).append(episode_id)
     regressed = set(map(str, report.get("regressed") or []))
     out, shown, left = [], 0, []
+    bar = None
+    if progress and render_videos:
+        from tqdm import tqdm
+
+        pairs = min(len(newly), max_videos)
+        bar = tqdm(total=2 * pairs - sum(1 for i in newly[:pairs] for key in (i, f"{i}#baseline") if key in videos),
+                   desc="report clips", unit="clip", file=sys.stderr, dynamic_ncols=True)
     with tempfile.TemporaryDirectory(prefix="dv2s-clips-") as scratch:
         for scenario in sorted(by_scenario, key=lambda n: (n not in regressed, order.index(n) if n in order else 10**6)):
             ids = by_scenario[scenario]
@@ -343,18 +369,24 @@ def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, 
                     left.append(episode_id)
                     continue
                 episode = episodes.get(episode_id, {})
+                end_step, window = _pair_window(report, episode)
                 sides = []
                 for role in ("candidate", "baseline"):
                     given = videos.get(episode_id) if role == "candidate" else videos.get(f"{episode_id}#baseline")
-                    data, note = _clip(report, episode, role, Path(base), Path(scratch), given, render_videos)
+                    data, note = _clip(report, episode, role, Path(base), Path(scratch), given, render_videos,
+                                       end_step)
+                    if bar is not None and given is None:
+                        bar.update(1)
                     media = video_tag(data) if data is not None else f'<p class="muted">{_e(note)}</p>'
                     sides.append(f'<figure class="side {role}">{media}<figcaption><b>{role}</b>: '
                                  f"{_e(_outcome(episode.get(role)))}</figcaption></figure>")
                 out.append(f'<div class="clip pair" id="clip-{shown}"><p><b>{_e(episode_id)}</b> (seed '
-                           f'{_e(episode.get("seed", ""))}): the same scene, candidate beside baseline</p>'
-                           f'<div class="sides">{"".join(sides)}</div></div>')
+                           f'{_e(episode.get("seed", ""))}): the same scene, candidate beside baseline'
+                           f'{_e(window)}</p><div class="sides">{"".join(sides)}</div></div>')
                 shown += 1
             out.append("</div></section>")
+    if bar is not None:
+        bar.close()
     if left:
         out.append(f'<p class="muted">{len(left)} more not shown as clips: {_e(", ".join(left))}</p>')
     return "".join(out)
@@ -392,7 +424,7 @@ def _errors(report: Mapping[str, Any]) -> str:
 
 def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".",
                 videos: Optional[Mapping[str, VideoSource]] = None, render_videos: bool = True,
-                max_videos: int = MAX_VIDEOS) -> str:
+                max_videos: int = MAX_VIDEOS, progress: bool = False) -> str:
     """The report page as a string (see :func:`write_html`); relative trace paths resolve against ``base``."""
     title = f"dv2s regress: {(report.get('candidate') or {}).get('spec', '?')}"
     has_baseline = report.get("baseline") is not None
@@ -420,7 +452,7 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
         "<h2>Plots</h2>", figures,
         _aggregates(report),
         f"<h2>Newly failing episodes ({len(report.get('newly_failing') or [])})</h2>",
-        _clips(report, Path(base), videos, render_videos, max_videos),
+        _clips(report, Path(base), videos, render_videos, max_videos, progress),
         "<h2>Errors</h2>", _errors(report),
         f"<script>{SELFTEST}</script></body></html>",
     ]
@@ -429,7 +461,7 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
 
 def write_html(report: Mapping[str, Any], path: Union[str, os.PathLike], *,
                videos: Optional[Mapping[str, VideoSource]] = None, render_videos: bool = True,
-               max_videos: int = MAX_VIDEOS) -> Path:
+               max_videos: int = MAX_VIDEOS, progress: bool = False) -> Path:
     """Write the report as one self-contained HTML file at ``path`` (atomically); returns the path.
 
     Args:
@@ -440,11 +472,12 @@ def write_html(report: Mapping[str, Any], path: Union[str, os.PathLike], *,
         render_videos: render the clips ``videos`` lacks: from the traces, or by re-running the baseline
             policy on the scene when its run kept no trace (it must reproduce the report's trajectory hash).
         max_videos: at most this many clips; the other newly failing episodes are listed.
+        progress: a progress bar on stderr while the clips render (they take seconds each).
     """
     from scenario_bank.atomic import atomic_write_text
 
     path = Path(path)
     page = render_html(report, base=path.parent, videos=videos, render_videos=render_videos,
-                       max_videos=max_videos)
+                       max_videos=max_videos, progress=progress)
     path.parent.mkdir(parents=True, exist_ok=True)
     return atomic_write_text(path, page)

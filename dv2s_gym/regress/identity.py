@@ -31,7 +31,8 @@ from typing import Any, Dict, Iterable, List, Optional
 
 from scenario_bank.atomic import file_sha256
 
-__all__ = ["policy_fingerprint", "file_sha256", "dv2s_sources_sha256", "MAX_HELPER_FILES"]
+__all__ = ["policy_fingerprint", "checkpoint_path", "installed_version", "file_sha256", "dv2s_sources_sha256",
+           "MAX_HELPER_FILES"]
 
 MAX_HELPER_FILES = 500
 """At most this many ``.py`` files beside a policy module are hashed (a policy in a huge folder)."""
@@ -103,7 +104,19 @@ def _module_file(name: str) -> Optional[Path]:
     return None
 
 
-def _checkpoint(base: str) -> Optional[Path]:
+def installed_version() -> str:
+    """The installed dv2s-gym distribution's version (``"unknown"`` when run from a source tree without one)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("dv2s-gym")
+    except metadata.PackageNotFoundError:  # pragma: no cover - running from a source tree
+        return "unknown"
+
+
+def checkpoint_path(base: str) -> Optional[Path]:
+    """The checkpoint file a policy spec's base names (``dv2s-ppo``, ``model.zip``, ``ppo:PATH``, a folder holding
+    ``model.zip``), ``None`` for a driver or a ``module:attribute`` policy."""
     from policies.registry import SB3_ALGORITHMS, SHIPPED_CHECKPOINT
 
     if base == "dv2s-ppo":
@@ -121,15 +134,13 @@ def policy_fingerprint(spec: str) -> Dict[str, Any]:
     """``{description: value}`` facts of a policy spec (see the module docstring); every key names what it is."""
     from policies.registry import _REGISTRY, parse_spec
 
-    from dv2s_gym.regress.report import _dv2s_version
-
     base, options = parse_spec(spec)
     facts: Dict[str, Any] = {"options": json.dumps(options, sort_keys=True, default=str),
-                             "dv2s version": _dv2s_version(), "dv2s sources (SHA-256)": dv2s_sources_sha256()}
+                             "dv2s version": installed_version(), "dv2s sources (SHA-256)": dv2s_sources_sha256()}
     for key, value in sorted(options.items()):
         if isinstance(value, str) and value and Path(value).is_file():
             facts[f"option {key} file {value} (SHA-256)"] = file_sha256(Path(value))
-    checkpoint = _checkpoint(base)
+    checkpoint = checkpoint_path(base)
     if checkpoint is not None:
         resolved = checkpoint.resolve()
         facts[f"checkpoint {checkpoint} (SHA-256)"] = file_sha256(resolved) if resolved.is_file() else "missing"

@@ -13,14 +13,15 @@ from dv2s_gym.regress.report import write_json, write_markdown
 __all__ = ["write_reports"]
 
 
-def write_reports(report: Mapping[str, Any], out_dir: Union[str, os.PathLike]) -> Dict[str, Path]:
+def write_reports(report: Mapping[str, Any], out_dir: Union[str, os.PathLike],
+                  progress: bool = False) -> Dict[str, Path]:
     """Write ``report.json``, ``junit.xml``, ``report.md`` and ``report.html`` into ``out_dir``;
-    returns format -> path."""
+    returns format -> path. ``progress``: a bar on stderr while the HTML's clips render."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"json": write_json(report, out_dir / "report.json"),
              "junit": write_junit(report, out_dir / "junit.xml"),
              "markdown": write_markdown(report, out_dir / "report.md", "report.json")}
-    written = write_html(report, out_dir / "report.html")
+    written = write_html(report, out_dir / "report.html", progress=progress)
     paths["html"] = Path(written) if written is not None else out_dir / "report.html"
     return paths

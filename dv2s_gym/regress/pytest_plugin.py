@@ -107,12 +107,18 @@ def _out_dir(request: pytest.FixtureRequest, factory: pytest.TempPathFactory, su
 
 
 def _run(request: pytest.FixtureRequest, out: Path, arguments: Dict[str, Any]) -> RegressionReport:
-    from dv2s_gym.regress.runner import run_regression
+    from dv2s_gym.regress.errors import RegressError
+    from dv2s_gym.regress.runner import BaselineReport, RegressSettings, WorkerSettings, run_regression
 
     config = request.config
-    data = run_regression(**arguments, out_dir=out, workers=config.getoption("--dv2s-workers"),
-                          backend=config.getoption("--dv2s-backend"), address=config.getoption("--dv2s-address"),
-                          progress=False)
+    options = dict(arguments)
+    candidate, baseline, report = options.pop("candidate"), options.pop("baseline"), options.pop("baseline_report")
+    if baseline is not None and report is not None:
+        raise RegressError("give --baseline POLICY or --baseline-report REPORT, not both")
+    workers = WorkerSettings(backend=config.getoption("--dv2s-backend"), workers=config.getoption("--dv2s-workers"),
+                             address=config.getoption("--dv2s-address"), timeout=options.pop("timeout"))
+    data = run_regression(candidate, BaselineReport(report) if report is not None else baseline,
+                          RegressSettings(**options), workers=workers, out_dir=out, progress=False)
     return RegressionReport(data, out)
 
 

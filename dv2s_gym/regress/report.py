@@ -87,6 +87,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.errors import ReportMismatchError, RegressError
 from dv2s_gym.regress.store import describe_differences
+from dv2s_gym.regress.identity import installed_version
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 
 __all__ = [
@@ -326,7 +327,7 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         "schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,
         "created": created or datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "dv2s_version": dv2s_version or _dv2s_version(),
+        "dv2s_version": dv2s_version or installed_version(),
         "bank": dict(bank),
         "settings": dict(settings),
         "candidate": dict(candidate),
@@ -358,14 +359,6 @@ def _power(tables: Mapping[str, "stats.PairedTable"], margin: float, alpha: floa
     return run_power({name: table.n for name, table in tables.items()}, rates, margin=margin, alpha=alpha,
                      mde=float(settings.get("mde") or DEFAULT_MDE), power=float(settings.get("power") or DEFAULT_POWER))
 
-
-def _dv2s_version() -> str:
-    from importlib import metadata
-
-    try:
-        return metadata.version("dv2s-gym")
-    except metadata.PackageNotFoundError:  # pragma: no cover - running from a source tree
-        return "unknown"
 
 
 # ---------------------------------------------------------------------- baseline reports

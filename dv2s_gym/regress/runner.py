@@ -15,6 +15,7 @@ at the end, when every scenario has had its planned episodes.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import os
@@ -27,8 +28,7 @@ from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tupl
 from dv2s_gym.regress import power as power_plan
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
-from dv2s_gym.regress.failures import (DEFAULT_FAILURE, DEFAULT_STALL_SECONDS, apply_failure, missing_facts,
-                                        parse_failure)
+from dv2s_gym.regress.failures import DEFAULT_FAILURE, DEFAULT_STALL_SECONDS, apply_failure, missing_facts
 from dv2s_gym.regress.report import (
     bank_info,
     build_report,
@@ -39,15 +39,17 @@ from dv2s_gym.regress.report import (
 from dv2s_gym.regress.outputs import write_reports
 from dv2s_gym.regress.identity import policy_fingerprint
 from dv2s_gym.regress.store import RunStore
+from dv2s_gym.regress.settings import ROLES, BaselineReport, RegressSettings
 from dv2s_gym.regress.tasks import KIND
 from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.pool import get_backend
+from dv2s_gym.workers.settings import WorkerSettings
 from dv2s_gym.workers.tasks import task_id
 
-__all__ = ["run_regression", "bank_info", "plan_tasks", "DEFAULT_OUT", "ROLES"]
+__all__ = ["run_regression", "RegressSettings", "BaselineReport", "WorkerSettings", "bank_info", "plan_tasks",
+           "DEFAULT_OUT", "ROLES"]
 
 DEFAULT_OUT = "out/regress"
-ROLES = ("candidate", "baseline")
 Scenarios = Union[None, str, Sequence[str]]
 
 
@@ -79,28 +81,16 @@ def _policy_info(spec: str) -> Dict[str, Any]:
     return {"spec": spec, "card": card}
 
 
-def _check_settings(episodes: Optional[int], seed: int, margin: float, alpha: float, batch: Optional[int]) -> None:
-    if episodes is not None and (isinstance(episodes, bool) or not isinstance(episodes, int) or episodes < 1):
-        raise RegressError(f"--episodes must be a positive integer, not {episodes!r}")
-    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        raise RegressError(f"--seed must be a non-negative integer, not {seed!r}")
-    if not 0.0 <= float(margin) < 1.0:
-        raise RegressError(f"--margin is a failure-rate difference in [0, 1), e.g. 0.05 for 5 points; not {margin}")
-    if not 0.0 < float(alpha) < 1.0:
-        raise RegressError(f"--alpha must be strictly between 0 and 1, e.g. 0.05; not {alpha}")
-    if batch is not None and (not isinstance(batch, int) or batch < 1):
-        raise RegressError(f"the sequential batch must be a positive number of seeds, not {batch!r}")
-
-
 def _check_env_config(env_config: Dict[str, Any], failure: Sequence[str], stall_seconds: float) -> None:
     """Refuse env settings under which the gate cannot see failures: unknown keys, a non-positive episode
     duration, or a stall time the episodes are too short to reach."""
     from envs.dv2s_env import DV2SEnv
-    from envs.errors import UnknownConfigKeyError, check_config_keys
+    from envs.config_check import check_config
+    from envs.errors import UnknownConfigKeyError
 
     defaults = DV2SEnv.default_config()
     try:
-        check_config_keys(env_config, defaults)
+        check_config(env_config, defaults)
     except (UnknownConfigKeyError, ValueError) as error:
         raise RegressError(f"--config: {error}") from None
     duration = env_config.get("duration", defaults["duration"])
@@ -129,12 +119,12 @@ def _select(scenarios: Scenarios, bank_dir: Optional[str], fallback: Optional[Se
     return names
 
 
-def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Sequence[str], seeds: Sequence[int],
-                          bank: Dict[str, Any], env_config: Dict[str, Any], failure: Sequence[str],
-                          stall_seconds: float, accept_failed: bool = False
+def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: Sequence[int], bank: Dict[str, Any],
+                          env_config: Dict[str, Any], settings: RegressSettings
                           ) -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]], str]:
     """The baseline info, the baseline result per episode id, and the report file's SHA-256."""
-    path = Path(path)
+    path, role, failure = Path(report.path), report.role, list(settings.failure)
+    stall_seconds, accept_failed = float(settings.stall_seconds), report.accept_failed
     old = load_report(path)
     check_baseline_report(old, path=path, bank=bank, env_config=env_config)  # a report with errors: never
     if old.get("verdict") in ("FAIL", "ERROR") and not accept_failed:
@@ -178,9 +168,9 @@ def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Seque
     for result in results.values():
         apply_failure(result, failure)
     info = {"report": str(path.resolve()), "role": role, "spec": old[role].get("spec"), "card": old[role].get("card")}
-    from dv2s_gym.regress.report import _dv2s_version
+    from dv2s_gym.regress.identity import installed_version
 
-    theirs, ours = old.get("dv2s_version"), _dv2s_version()
+    theirs, ours = old.get("dv2s_version"), installed_version()
     if theirs != ours:
         info["warning"] = (f"baseline report {path} was made by dv2s-gym {theirs}, this is {ours}: the simulator or the "
                            "policies may have changed between them, so differences may not be the candidate's; "
@@ -188,222 +178,248 @@ def _baseline_from_report(path: Union[str, os.PathLike], role: str, names: Seque
     return info, results, hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def run_regression(candidate: str, baseline: Optional[str] = None, *,
-                   baseline_report: Optional[Union[str, os.PathLike]] = None,
-                   bank_dir: Optional[Union[str, os.PathLike]] = None, scenarios: Scenarios = None,
-                   episodes: Optional[int] = None, seed: int = 0, margin: float = stats.DEFAULT_MARGIN,
-                   alpha: float = 0.05, mde: Optional[float] = None, power: Optional[float] = None,
-                   backend: str = "local", workers: Optional[int] = None, address: Optional[str] = None,
-                   out_dir: Optional[Union[str, os.PathLike]] = None, sequential: bool = False,
-                   env_config: Optional[Dict[str, Any]] = None, progress: bool = True,
-                   timeout: Optional[float] = None, batch: Optional[int] = None,
-                   failure: Union[None, str, Sequence[str]] = None, stall_seconds: float = DEFAULT_STALL_SECONDS,
-                   baseline_role: str = "candidate", accept_failed_baseline: bool = False,
+def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = None,
+                   settings: Optional[RegressSettings] = None, *, workers: Optional[WorkerSettings] = None,
+                   out_dir: Optional[Union[str, os.PathLike]] = None, progress: bool = True,
                    on_result: Optional[Callable[[Dict[str, Any]], None]] = None) -> Dict[str, Any]:
     """Run ``candidate`` (and ``baseline``) on scenario x seed pairs and write the reports.
 
     Args:
         candidate: policy spec of the policy under test (:func:`policies.registry.load_policy`).
-        baseline: policy spec to compare against, run on the same episodes; or
-        baseline_report: an earlier ``report.json`` whose episodes (of its ``baseline_role``
-            policy, by default the one it tested) are the baseline: only the candidate runs.
-            Refused when its schema version, the bank scenarios' scripts or the env config differ, and
-            when its verdict was FAIL or ERROR unless ``accept_failed_baseline``.
-        bank_dir: bank folder (default: the shipped bank).
-        scenarios: bank names and/or ``tag:<tag>`` (default: the whole bank, or the baseline
-            report's scenarios); an empty selection is an error.
-        episodes: seeds per scenario; episode ``k`` uses env seed ``seed + k``. Default: planned from
-            ``mde`` and ``power`` (:func:`dv2s_gym.regress.power.plan_episodes`), with the baseline
-            report's failure rates when there is one (and at most the episodes it has).
-        mde / power: the regression of one scenario's failure rate the run must FAIL (default 0.30)
-            and the probability it does (default 0.8); they choose ``episodes``, so not with it.
-        margin: non-inferiority margin on the failure-rate difference (default 0.02 = 2 points, the margin the
-            statistics are calibrated at: bench/calibrate_regress.py).
-        alpha: level of the FAIL test (PASS is tested at ``alpha / 2``).
-        backend / workers / address: ``"local"`` process pool (``workers`` processes, default
-            every core) or ``"ray"`` (cluster ``address``).
+        baseline: policy spec to compare against, run on the same episodes; or a
+            :class:`~dv2s_gym.regress.settings.BaselineReport`: an earlier ``report.json`` whose episodes (of
+            one of its policies) are the baseline, so only the candidate runs; ``None``: no comparison.
+        settings: the scenarios, episodes, seeds, statistics and failure kinds
+            (:class:`~dv2s_gym.regress.settings.RegressSettings`; default its defaults).
+        workers: where episodes run: a ``"local"`` process pool (default every core) or ``"ray"``
+            (:class:`~dv2s_gym.workers.settings.WorkerSettings`); ``timeout``: seconds one episode may take before
+            its worker counts as hung (local backend).
         out_dir: output folder (default ``out/regress``): ``run.json``, ``results.jsonl``,
             ``traces/``, ``report.json``, ``junit.xml``, ``report.md``. Rerunning with the same
             folder and settings resumes: finished episodes are not run again.
-        sequential: stop as soon as a group-sequential test of the pooled table (spending the pooled
-            test's share of ``alpha``) settles FAIL, looking after every ``batch`` seeds (default: a
-            fifth of ``episodes``); PASS is decided at the end, so every scenario gets its planned
-            episodes. Needs a baseline.
-        env_config: ``DV2S-v0`` config overrides for every episode (default: none, or the
-            baseline report's).
         progress: a progress bar on stderr.
-        timeout: seconds one episode may take before its worker counts as hung (local backend).
         on_result: called in this process with each finished episode's result (after it is saved).
-        failure: what counts as a failure: kinds among ``collision``, ``off_road``, ``stall`` (a list or
-            ``"collision,stall"``; default all three); each kind is also reported apart.
-        stall_seconds: how long the ego must stand with a free road ahead for a stall.
 
     Returns:
         The report dict (schema: :mod:`dv2s_gym.regress.report`).
     """
     started = time.time()
-    _check_settings(episodes, seed, margin, alpha, batch)
-    failure = parse_failure(failure)
-    if not float(stall_seconds) > 0:
-        raise RegressError(f"--stall-seconds must be positive, not {stall_seconds}")
-    if baseline is not None and baseline_report is not None:
-        raise RegressError("give --baseline POLICY or --baseline-report REPORT, not both")
-    if sequential and baseline is None and baseline_report is None:
+    settings = settings or RegressSettings()
+    workers = workers or WorkerSettings()
+    plan = _prepare(candidate, baseline, settings)
+    store = RunStore(Path(out_dir if out_dir is not None else DEFAULT_OUT), _identity(plan, settings))
+    done = {key: result for key, result in store.open().items() if not result.get("error")}  # errors run again
+    policies = {"candidate": candidate, **({"baseline": plan.baseline_spec} if plan.baseline_spec else {})}
+    all_tasks = plan_tasks(policies, plan.names, plan.seeds, env_config=plan.env_config, bank_dir=plan.bank_dir,
+                           trace_dir=str(store.traces_dir.resolve()), failure=plan.failure,
+                           stall_seconds=float(settings.stall_seconds))
+    if any(":" in spec.partition("?")[0] for spec in policies.values()):
+        for task in all_tasks:  # module:attribute specs are found in this folder in the workers too
+            task["python_path"] = [os.getcwd()]
+    episodes = _Episodes(plan, store, on_result)
+    episodes.results.update({_task_key(t): done[_task_key(t)] for t in all_tasks if _task_key(t) in done})
+    episodes.bar = _progress(progress, total=len(all_tasks), initial=len(episodes.results))
+    report_settings = _report_settings(plan, settings, workers)
+    ran = _execute(plan, settings, workers, episodes, all_tasks, report_settings)
+    if plan.plan is not None:
+        report_settings["plan"] = plan.plan
+    report_settings["mde"] = float(settings.mde if settings.mde is not None else power_plan.DEFAULT_MDE)
+    report_settings["power"] = float(settings.power if settings.power is not None else power_plan.DEFAULT_POWER)
+    report = build_report(bank=plan.bank, settings=report_settings, candidate=plan.candidate_info,
+                          baseline=plan.baseline_info, episodes=episodes.paired(ran["seeds"]),
+                          stopped_early=ran["stopped_early"], sequential=ran["sequential"])
+    report["hostname"] = socket.gethostname()
+    report["timing"] = {name: round(value, 3) for name, value in episodes.timing.items()}
+    report["duration"] = round(time.time() - started, 3)
+    write_reports(report, store.root, progress=progress)
+    return report
+
+
+@dataclasses.dataclass
+class _Plan:
+    """What a regression run runs, worked out from its settings before any episode."""
+
+    candidate: str
+    baseline_spec: Optional[str]
+    report: Optional[BaselineReport]
+    bank_dir: Optional[str]
+    env_config: Dict[str, Any]
+    failure: List[str]
+    names: List[str]
+    bank: Dict[str, Any]
+    episodes: int
+    plan: Optional[Dict[str, Any]]
+    seeds: List[int]
+    batch: int
+    candidate_info: Dict[str, Any]
+    baseline_info: Optional[Dict[str, Any]]
+    old_results: Dict[str, Dict[str, Any]]
+    report_hash: Optional[str]
+
+
+def _prepare(candidate: str, baseline: Union[None, str, BaselineReport], settings: RegressSettings) -> _Plan:
+    """The run's plan; bad input (a spec, a selection, a baseline report that does not fit) is refused here."""
+    report = baseline if isinstance(baseline, BaselineReport) else None
+    spec = None if report is not None else baseline
+    if settings.sequential and baseline is None:
         raise RegressError("--sequential stops when the comparison is settled: it needs --baseline or "
                            "--baseline-report")
-    bank_dir = None if bank_dir is None else str(Path(bank_dir).resolve())  # workers may run elsewhere
-    fallback = None
-    if baseline_report is not None:
-        old = load_report(baseline_report)
+    bank_dir = None if settings.bank_dir is None else str(Path(settings.bank_dir).resolve())  # workers may run elsewhere
+    fallback, env_config = None, settings.env_config
+    if report is not None:
+        old = load_report(report.path)
         fallback = (old.get("bank") or {}).get("scenarios") or None
         if env_config is None:
             env_config = (old.get("settings") or {}).get("env_config")
     env_config = dict(env_config or {})
-    _check_env_config(env_config, failure, float(stall_seconds))
-    names = _select(scenarios, bank_dir, fallback)
+    failure = list(settings.failure)
+    _check_env_config(env_config, failure, float(settings.stall_seconds))
+    names = _select(list(settings.scenarios) if settings.scenarios is not None else None, bank_dir, fallback)
     bank = bank_info(names, bank_dir)
-    if episodes is not None and (mde is not None or power is not None):
+    if settings.episodes is not None and (settings.mde is not None or settings.power is not None):
         raise RegressError("give --episodes, or --mde and --power to choose the episodes per scenario; not both")
-    plan = None
+    episodes, planned = settings.episodes, None
     if episodes is None:
-        episodes, plan = _planned_episodes(names, baseline_report, baseline_role, seed, mde, power, alpha)
-    seeds = [seed + k for k in range(episodes)]
-
+        episodes, planned = _planned_episodes(names, report.path if report else None,
+                                              report.role if report else "candidate", settings.seed, settings.mde,
+                                              settings.power, settings.alpha)
+    seeds = [settings.seed + k for k in range(episodes)]
     candidate_info = _policy_info(candidate)
-    if baseline is not None:  # a bad baseline spec is bad input too, before any episode
-        baseline_info_early = _policy_info(baseline)
+    baseline_info = _policy_info(spec) if spec is not None else None  # a bad baseline spec is bad input too
     old_results: Dict[str, Dict[str, Any]] = {}
     report_hash = None
-    if baseline_report is not None:
-        baseline_info, old_results, report_hash = _baseline_from_report(baseline_report, baseline_role, names, seeds,
-                                                                        bank, env_config, failure, float(stall_seconds),
-                                                                        accept_failed=accept_failed_baseline)
-    elif baseline is not None:
-        baseline_info = baseline_info_early
-    else:
-        baseline_info = None
-    has_baseline = baseline_info is not None
+    if report is not None:
+        baseline_info, old_results, report_hash = _baseline_from_report(report, names, seeds, bank, env_config,
+                                                                        settings)
+    return _Plan(candidate=candidate, baseline_spec=spec, report=report, bank_dir=bank_dir, env_config=env_config,
+                 failure=failure, names=names, bank=bank, episodes=episodes, plan=planned, seeds=seeds,
+                 batch=settings.batch or max(1, math.ceil(episodes / 5)), candidate_info=candidate_info,
+                 baseline_info=baseline_info, old_results=old_results, report_hash=report_hash)
 
-    out = Path(out_dir if out_dir is not None else DEFAULT_OUT)
-    batch = batch or max(1, math.ceil(episodes / 5))
+
+def _identity(plan: _Plan, settings: RegressSettings) -> Dict[str, Any]:
+    """What a resumed run must share with the run in its folder (:class:`~dv2s_gym.regress.store.RunStore`)."""
     identity: Dict[str, Any] = {
-        "candidate": candidate, "baseline": baseline, "baseline_report": report_hash,
-        "baseline_role": baseline_role if baseline_report is not None else None,
-        "bank_version": bank["version"], "scenarios": names, "episodes": episodes, "seed": seed,
-        "env_config": env_config, "sequential": bool(sequential), "failure": failure,
-        "stall_seconds": float(stall_seconds),
+        "candidate": plan.candidate, "baseline": plan.baseline_spec, "baseline_report": plan.report_hash,
+        "baseline_role": plan.report.role if plan.report is not None else None,
+        "bank_version": plan.bank["version"], "scenarios": plan.names, "episodes": plan.episodes,
+        "seed": settings.seed, "env_config": plan.env_config, "sequential": bool(settings.sequential),
+        "failure": plan.failure, "stall_seconds": float(settings.stall_seconds),
     }
-    for role, spec in (("candidate", candidate), ("baseline", baseline)):
+    for role, spec in (("candidate", plan.candidate), ("baseline", plan.baseline_spec)):
         if spec is not None:  # what the policy is, not what it is called
             identity.update({f"{role} {key}": value for key, value in policy_fingerprint(spec).items()})
-    if sequential:  # the stopping point depends on these
-        identity.update(margin=float(margin), alpha=float(alpha), batch=batch)
-    settings = {"episodes": episodes, "seed": seed, "margin": float(margin), "alpha": float(alpha),
-                "sequential": bool(sequential), "env_config": env_config, "backend": backend,
-                "workers": workers, "timeout": timeout, "failure": failure, "stall_seconds": float(stall_seconds)}
-    if sequential:
-        settings["batch"] = batch
+    if settings.sequential:  # the stopping point depends on these
+        identity.update(margin=float(settings.margin), alpha=float(settings.alpha), batch=plan.batch)
+    return identity
 
-    store = RunStore(out, identity)
-    done = store.open()
-    done = {key: result for key, result in done.items() if not result.get("error")}  # errors run again
-    policies = {"candidate": candidate}
-    if baseline is not None:
-        policies["baseline"] = baseline
-    trace_dir = str(store.traces_dir.resolve())
 
-    def task_key(task: Dict[str, Any]) -> Tuple[str, str]:
-        return task_id(task["scenario"], task["seed"]), task["role"]
+def _report_settings(plan: _Plan, settings: RegressSettings, workers: WorkerSettings) -> Dict[str, Any]:
+    """The report's ``settings`` section (the workers are filled in once the backend has started)."""
+    recorded = {"episodes": plan.episodes, "seed": settings.seed, "margin": float(settings.margin),
+                "alpha": float(settings.alpha), "sequential": bool(settings.sequential), "env_config": plan.env_config,
+                "backend": workers.backend, "workers": workers.workers, "timeout": workers.timeout,
+                "failure": plan.failure, "stall_seconds": float(settings.stall_seconds)}
+    if settings.sequential:
+        recorded["batch"] = plan.batch
+    return recorded
 
-    all_tasks = plan_tasks(policies, names, seeds, env_config=env_config, bank_dir=bank_dir, trace_dir=trace_dir,
-                           failure=failure, stall_seconds=float(stall_seconds))
-    if any(":" in spec.partition("?")[0] for spec in policies.values()):
-        for task in all_tasks:  # module:attribute specs are found in this folder in the workers too
-            task["python_path"] = [os.getcwd()]
-    results: Dict[Tuple[str, str], Dict[str, Any]] = {task_key(t): done[task_key(t)] for t in all_tasks
-                                                      if task_key(t) in done}
-    bar = _progress(progress, total=len(all_tasks), initial=len(results))
 
-    timing: Dict[str, float] = {}
+def _task_key(task: Dict[str, Any]) -> Tuple[str, str]:
+    return task_id(task["scenario"], task["seed"]), task["role"]
 
-    def handle(result: Dict[str, Any]) -> None:
+
+class _Episodes:
+    """The run's results as they arrive (saved, counted on the progress bar, timed per scenario), and the
+    candidate/baseline pairs they make."""
+
+    def __init__(self, plan: _Plan, store: RunStore, on_result: Optional[Callable[[Dict[str, Any]], None]]) -> None:
+        self.plan, self.store, self.on_result = plan, store, on_result
+        self.results: Dict[Tuple[str, str], Dict[str, Any]] = {}
+        self.timing: Dict[str, float] = {}
+        self.bar = None
+
+    def handle(self, result: Dict[str, Any]) -> None:
         result = dict(result)
         seconds = result.pop("seconds", None)  # wall time varies: kept apart, so episodes compare equal
         if seconds is not None:
-            timing[result["scenario"]] = timing.get(result["scenario"], 0.0) + float(seconds)
-        result["trace"] = store.relative(result.get("trace"))
-        store.append(result)
-        results[(result["id"], result["role"])] = result
-        if bar is not None:
-            bar.update(1)
-        if on_result is not None:
-            on_result(result)
+            self.timing[result["scenario"]] = self.timing.get(result["scenario"], 0.0) + float(seconds)
+        result["trace"] = self.store.relative(result.get("trace"))
+        self.store.append(result)
+        self.results[(result["id"], result["role"])] = result
+        if self.bar is not None:
+            self.bar.update(1)
+        if self.on_result is not None:
+            self.on_result(result)
 
-    def paired(seed_list: Sequence[int]) -> List[Dict[str, Any]]:
+    def paired(self, seed_list: Sequence[int]) -> List[Dict[str, Any]]:
+        plan, has_baseline = self.plan, self.plan.baseline_info is not None
         episodes_out = []
         for k in seed_list:
-            for name in names:
+            for name in plan.names:
                 episode_id = task_id(name, k)
-                candidate_result = results.get((episode_id, "candidate"))
+                candidate_result = self.results.get((episode_id, "candidate"))
                 if candidate_result is None:
                     continue
-                baseline_result = (old_results.get(episode_id) if baseline_report is not None
-                                   else results.get((episode_id, "baseline")))
+                baseline_result = (plan.old_results.get(episode_id) if plan.report is not None
+                                   else self.results.get((episode_id, "baseline")))
                 episodes_out.append({"id": episode_id, "scenario": name, "seed": k, "candidate": candidate_result,
                                      "baseline": baseline_result if has_baseline else None})
         return episodes_out
 
+
+def _execute(plan: _Plan, settings: RegressSettings, workers: WorkerSettings, episodes: _Episodes,
+             all_tasks: List[Dict[str, Any]], report_settings: Dict[str, Any]) -> Dict[str, Any]:
+    """Run the episodes not done yet (all at once, or batch by batch until the sequential test settles);
+    ``{"seeds": the seeds the report covers, "stopped_early", "sequential": the sequential test's record}``."""
     runner = None
-    sequential_info = None
-    stopped_early = False
-    ran_seeds: List[int] = list(seeds)
+    ran: Dict[str, Any] = {"seeds": list(plan.seeds), "stopped_early": False, "sequential": None}
     try:
-        runner = get_backend(backend, workers=workers, address=address, timeout=timeout)
-        settings["workers"] = getattr(runner, "workers", workers)
-        if not sequential:
-            pending = [t for t in all_tasks if task_key(t) not in results]
+        runner = get_backend(workers.backend, workers=workers.workers, address=workers.address,
+                             timeout=workers.timeout)
+        report_settings["workers"] = getattr(runner, "workers", workers.workers)
+        if not settings.sequential:
+            pending = [t for t in all_tasks if _task_key(t) not in episodes.results]
             if pending:
-                runner.run(pending, handle)
+                runner.run(pending, episodes.handle)
         else:
-            test = stats.SequentialTest(float(margin), float(alpha) * stats.DEFAULT_POOLED_WEIGHT,
-                                        max_episodes=episodes * len(names), stop_for_pass=False)
-            looks, last_n, verdict = 0, 0, None
-            for start in range(0, episodes, batch):
-                chunk = seeds[start:start + batch]
-                pending = [t for t in all_tasks if t["seed"] in chunk and task_key(t) not in results]
-                if pending:
-                    runner.run(pending, handle)
-                pooled = stats.PairedTable.pooled(list(paired_tables(paired(seeds[:start + batch]), names).values()))
-                if pooled.n > last_n:
-                    verdict = test.update(pooled)
-                    looks, last_n = looks + 1, pooled.n
-                if verdict is not None:
-                    ran_seeds = seeds[:start + batch]
-                    stopped_early = len(ran_seeds) < len(seeds)
-                    break
-            sequential_info = {"looks": looks, "episodes": last_n, "max_episodes": episodes * len(names),
-                               "batch": batch, "spending": test.spending,
-                               "verdict": None if verdict is None else verdict.name}
+            ran = _run_sequential(plan, settings, runner, episodes, all_tasks)
     except WorkerError as error:  # bad backend settings, or workers that cannot start: an error of this run
         raise RegressError(str(error)) from None
     finally:
-        if bar is not None:
-            bar.close()
-        store.close()
+        if episodes.bar is not None:
+            episodes.bar.close()
+        episodes.store.close()
         if runner is not None:
             runner.close()
+    return ran
 
-    if plan is not None:
-        settings["plan"] = plan
-    settings["mde"] = float(mde if mde is not None else power_plan.DEFAULT_MDE)
-    settings["power"] = float(power if power is not None else power_plan.DEFAULT_POWER)
-    report = build_report(bank=bank, settings=settings, candidate=candidate_info, baseline=baseline_info,
-                          episodes=paired(ran_seeds), stopped_early=stopped_early, sequential=sequential_info)
-    report["hostname"] = socket.gethostname()
-    report["timing"] = {name: round(value, 3) for name, value in timing.items()}
-    report["duration"] = round(time.time() - started, 3)
-    write_reports(report, out)
-    return report
+
+def _run_sequential(plan: _Plan, settings: RegressSettings, runner: Any, episodes: _Episodes,
+                    all_tasks: List[Dict[str, Any]]) -> Dict[str, Any]:
+    """Run ``plan.batch`` seeds at a time, testing the pooled table after each, until it settles FAIL."""
+    seeds, batch, names = plan.seeds, plan.batch, plan.names
+    test = stats.SequentialTest(float(settings.margin), float(settings.alpha) * stats.DEFAULT_POOLED_WEIGHT,
+                                max_episodes=plan.episodes * len(names), stop_for_pass=False)
+    looks, last_n, verdict = 0, 0, None
+    ran_seeds, stopped_early = list(seeds), False
+    for start in range(0, plan.episodes, batch):
+        chunk = seeds[start:start + batch]
+        pending = [t for t in all_tasks if t["seed"] in chunk and _task_key(t) not in episodes.results]
+        if pending:
+            runner.run(pending, episodes.handle)
+        pooled = stats.PairedTable.pooled(list(paired_tables(episodes.paired(seeds[:start + batch]), names).values()))
+        if pooled.n > last_n:
+            verdict = test.update(pooled)
+            looks, last_n = looks + 1, pooled.n
+        if verdict is not None:
+            ran_seeds = seeds[:start + batch]
+            stopped_early = len(ran_seeds) < len(seeds)
+            break
+    return {"seeds": ran_seeds, "stopped_early": stopped_early,
+            "sequential": {"looks": looks, "episodes": last_n, "max_episodes": plan.episodes * len(names),
+                           "batch": batch, "spending": test.spending,
+                           "verdict": None if verdict is None else verdict.name}}
 
 
 def _planned_episodes(names: Sequence[str], baseline_report: Optional[Union[str, os.PathLike]], role: str,

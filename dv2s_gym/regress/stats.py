@@ -26,10 +26,10 @@ and a level ``alpha`` (default 0.05):
    the two-sided 95 % interval), so ``P(PASS) <= alpha / 2`` nominally when the true difference
    equals the margin; the Monte Carlo calibration checks ``P(PASS) <= alpha``.
 2. Otherwise **FAIL** when the candidate fails significantly more often: the one-sided exact
-   McNemar p-value (:func:`mcnemar_exact`, ``alternative="greater"``), Holm-adjusted over the
-   scenarios when ``adjusted_p`` is given, is below ``alpha``, and the difference is positive.
-   The exact conditional test never exceeds its level, so ``P(FAIL) <= alpha`` when the two
-   policies fail alike.
+   McNemar p-value (:func:`mcnemar_exact`, ``alternative="greater"``) is below ``alpha`` (for the
+   tables of a run, the family of tests of :func:`compare_scenarios` decides instead), and the
+   difference is positive. The exact conditional test never exceeds its level, so
+   ``P(FAIL) <= alpha`` when the two policies fail alike.
 3. Otherwise **INCONCLUSIVE**. A run too small to tell is INCONCLUSIVE, never PASS: with 3
    paired episodes and no failure at all, the interval's upper end is about 0.56.
 
@@ -42,7 +42,8 @@ Every scenario is a test in its own right: the scenarios' one-sided McNemar test
 table's (all scenarios together) form one family, tested by a step-down weighted Bonferroni
 procedure with Tarone's refinement for discrete tests (:mod:`dv2s_gym.regress.family`), so the
 family-wise false-alarm rate is at most ``alpha`` and a regression confined to one scenario cannot
-be averaged away by the others. The overall verdict is FAIL if any scenario FAILs or the pooled
+be averaged away by the others. The pooled test starts with half of ``alpha``
+(:data:`~dv2s_gym.regress.family.DEFAULT_POOLED_WEIGHT`), the scenarios share the other half. The overall verdict is FAIL if any scenario FAILs or the pooled
 comparison FAILs; PASS if the pooled comparison PASSes, no scenario FAILs and no scenario is
 significantly worse *on its own* (its unadjusted one-sided exact McNemar p-value below ``alpha`` with
 the candidate failing more: a regression too small for the adjusted test to confirm, but too clear
@@ -51,29 +52,25 @@ turns PASS into INCONCLUSIVE, so the false-FAIL rate is unchanged. Measured rate
 
 Early stopping (:class:`SequentialTest`)
 ----------------------------------------
-A group-sequential version of the same rule for batches of paired episodes, with an
-alpha-spending function (Lan-DeMets O'Brien-Fleming by default) over the information fraction
-``episodes / max_episodes``. The FAIL boundary is exact: under "the policies fail alike" the
+A group-sequential version of the same rule for batches of paired episodes, with the Lan-DeMets
+O'Brien-Fleming alpha-spending function over the information fraction ``episodes / max_episodes``
+(it spends almost nothing early, so a run that goes to the end keeps the fixed design's power). The FAIL boundary is exact: under "the policies fail alike" the
 signs of the discordant pairs are fair coin flips whatever their number, so the boundary at each
 look is computed by exact recursion on that coin sequence, conditional on the discordant counts
 seen so far, spending ``alpha`` in total. The PASS boundary spends ``alpha / 2`` (the level of
 :func:`compare`'s PASS) by Bonferroni over the looks: at a look that is allotted ``a_k`` of it,
 PASS needs the upper end of the two-sided ``1 - 2 a_k`` interval below the margin.
 
-Power and the paired-outcome model
-----------------------------------
-:func:`paired_sample_size` is Connor's (1987) normal approximation for McNemar's test,
-:func:`unpaired_sample_size` the usual two-proportion one (Fleiss, without continuity
-correction), both one-sided. The simulations (:func:`simulate_power`,
-:func:`simulate_false_alarm`) draw paired episodes from a shared-difficulty model: every episode
-(scene) has a latent difficulty ``D ~ N(0, 1)``, shared by both policies, and policy ``j`` fails
-when ``sqrt(rho) * D + sqrt(1 - rho) * E_j > Phi^-1(1 - p_j)`` with its own noise
-``E_j ~ N(0, 1)``. Each policy keeps its failure rate ``p_j``; ``rho`` (the latent, tetrachoric
-correlation) makes failures cluster on the same scenes. The default ``rho = 0.5``
-(:data:`DEFAULT_CORRELATION`) is a moderate choice: at 5 % vs 8 % failure rates it gives a phi
-correlation of about 0.22 between the paired outcomes and 9.6 % discordant pairs (12.2 % for
-independent policies). :data:`DOCUMENTED_EPISODES` paired episodes give at least 80 % power to
-FAIL a candidate at 8 % against a 5 % baseline under that model.
+``dv2s regress --sequential`` runs it on the pooled table with the pooled test's share of ``alpha``
+and without interim PASS (``stop_for_pass=False``): it stops early only for FAIL, and the gate
+(:func:`compare_scenarios`, with the pooled member decided by the sequential test) gives the verdict.
+
+Power
+-----
+:mod:`dv2s_gym.regress.power` plans a run's episodes and states its power. How these rules behave on
+synthetic paired outcomes (false alarms, P(PASS) at the margin, power, sample sizes, paired against
+unpaired) is measured by ``bench/calibrate_regress.py`` with the paired-outcome model of
+``bench/regress_montecarlo.py``; the figures are in ``bench/RESULTS.md``.
 """
 
 from __future__ import annotations
@@ -83,11 +80,11 @@ import enum
 import functools
 import math
 import operator
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import integrate, stats
+from scipy import stats
 
 from dv2s_gym.regress.family import DEFAULT_POOLED_WEIGHT  # noqa: F401 - the pooled test's share, re-exported
 
@@ -99,26 +96,9 @@ DEFAULT_MARGIN = 0.02
 
 
 DEFAULT_CORRELATION = 0.5
-"""Latent correlation ``rho`` of the shared-difficulty model used for power and sample sizes."""
-
-DOCUMENTED_BASELINE_RATE = 0.05
-"""Baseline failure rate of the documented power target."""
-
-DOCUMENTED_DELTA = 0.03
-"""Increase in the failure rate the documented episode count detects (+3 percentage points)."""
-
-DOCUMENTED_POWER = 0.8
-"""Power the documented episode count reaches."""
-
-DOCUMENTED_EPISODES = 800
-"""Paired episodes per policy for 80 % power to FAIL +3 pp from a 5 % baseline (rho = 0.5).
-
-Connor's normal approximation gives 661; the exact McNemar test is conservative, and by
-simulation :func:`compare` needs about 720 (740 in a smaller run); at 800 its power is 0.85 (Monte
-Carlo, 4000 runs), a margin that keeps the calibration test off its bound whatever the seed.
-Unpaired, the same detection needs 834 (normal) or about 890 (Fisher exact) episodes per policy.
-See ``bench/RESULTS.md``.
-"""
+"""Latent correlation ``rho`` of the shared-difficulty model (a scene's difficulty shared by both policies) that
+:mod:`dv2s_gym.regress.power` plans runs with: at 5 % vs 8 % failure rates it gives 9.6 % discordant pairs
+(12.2 % for independent policies)."""
 
 _FAIL, _PASS, _INCONCLUSIVE = 0, 1, 2
 
@@ -547,7 +527,8 @@ class Comparison:
         difference: Candidate minus baseline failure rate.
         interval: Newcombe interval of the difference at ``1 - alpha``.
         p_value: One-sided exact McNemar p-value (candidate fails more).
-        adjusted_p: Holm-adjusted p-value used for the decision (``p_value`` if unadjusted).
+        adjusted_p: The p-value after the gate's multiplicity adjustment (:func:`compare_scenarios`: the raw
+            p-value scaled by ``alpha`` over the level the family tested it at), ``p_value`` if unadjusted.
         verdict: PASS, FAIL or INCONCLUSIVE.
         reason: One line for humans.
     """
@@ -717,6 +698,10 @@ def compare_scenarios(
 # Sequential stopping
 
 
+SPENDING = "obrien-fleming"
+"""The alpha-spending function :class:`SequentialTest` uses (:func:`obrien_fleming_spending`), as reports name it."""
+
+
 def obrien_fleming_spending(fraction: float, alpha: float) -> float:
     """Lan-DeMets O'Brien-Fleming-type spending: ``2 (1 - Phi(z_{1-alpha/2} / sqrt(t)))``.
 
@@ -728,19 +713,6 @@ def obrien_fleming_spending(fraction: float, alpha: float) -> float:
     if fraction >= 1.0:
         return alpha
     return float(2.0 * stats.norm.sf(stats.norm.isf(alpha / 2.0) / math.sqrt(fraction)))
-
-
-def pocock_spending(fraction: float, alpha: float) -> float:
-    """Lan-DeMets Pocock-type spending: ``alpha * ln(1 + (e - 1) t)``; spends early looks more."""
-    if fraction <= 0.0:
-        return 0.0
-    return float(alpha * math.log1p((math.e - 1.0) * min(fraction, 1.0)))
-
-
-SPENDING_FUNCTIONS: dict[str, Callable[[float, float], float]] = {
-    "obrien-fleming": obrien_fleming_spending,
-    "pocock": pocock_spending,
-}
 
 
 @functools.lru_cache(maxsize=512)
@@ -784,7 +756,7 @@ class SequentialTest:
     each look the critical count is the smallest ``c`` whose exact probability of first
     crossing now - computed by recursion over the coin sequence, given the discordant counts
     at this and the earlier looks, and ignoring stops for PASS (non-binding) - is below the
-    alpha allotted so far by the spending function minus what the earlier looks spent. So the
+    alpha allotted so far by the O'Brien-Fleming spending function minus what the earlier looks spent. So the
     probability of a false FAIL is at most ``alpha`` for any discordance and any look schedule
     that does not depend on the outcomes. The last look spends all that is left; with a single
     look this is exactly :func:`compare`'s FAIL test.
@@ -799,7 +771,6 @@ class SequentialTest:
         margin: Non-inferiority margin on the failure-rate difference.
         alpha: Level of the FAIL test (PASS gets ``alpha / 2``).
         max_episodes: Paired episodes at the last look (the information fraction's unit).
-        spending: ``"obrien-fleming"`` (default) or ``"pocock"``.
         stop_for_pass: stop at an interim look that PASSes (default); when False, PASS is only
             decided at the last look, with the whole ``alpha / 2`` (as :func:`compare` does), so
             every planned episode runs unless a FAIL boundary is crossed.
@@ -809,12 +780,10 @@ class SequentialTest:
         self,
         margin: float,
         alpha: float = DEFAULT_ALPHA,
-        max_episodes: int = DOCUMENTED_EPISODES,
-        spending: str = "obrien-fleming",
+        *,
+        max_episodes: int,
         stop_for_pass: bool = True,
     ) -> None:
-        if spending not in SPENDING_FUNCTIONS:
-            raise ValueError(f"spending must be one of {sorted(SPENDING_FUNCTIONS)}, got {spending!r}")
         if not 0.0 <= margin < 1.0:
             raise ValueError(f"margin must be in [0, 1), got {margin}")
         if operator.index(max_episodes) < 1:
@@ -822,9 +791,9 @@ class SequentialTest:
         self.margin = float(margin)
         self.alpha = _check_level(alpha, "alpha")
         self.max_episodes = int(max_episodes)
-        self.spending = spending
+        self.spending = SPENDING
         self.stop_for_pass = bool(stop_for_pass)
-        self._spend = SPENDING_FUNCTIONS[spending]
+        self._spend = obrien_fleming_spending
         self._continuing = np.ones(1)  # P(S = s and no FAIL yet) for s candidate-only of m discordant
         self._fail_spent = 0.0
         self._pass_spent = 0.0
@@ -897,360 +866,3 @@ class SequentialTest:
         self._last = table
         self.verdict = verdict
         return verdict
-
-
-# ---------------------------------------------------------------------------------------------
-# Power, sample size and the paired-outcome model
-
-
-def _check_rates(p_baseline: float, p_candidate: float) -> None:
-    for name, value in (("p_baseline", p_baseline), ("p_candidate", p_candidate)):
-        if not 0.0 < value < 1.0:
-            raise ValueError(f"{name} must be strictly between 0 and 1, got {value}")
-
-
-def _check_correlation(correlation: float) -> float:
-    correlation = float(correlation)
-    if not 0.0 <= correlation <= 1.0:
-        raise ValueError(f"correlation (latent, shared difficulty) must be in [0, 1], got {correlation}")
-    return correlation
-
-
-def paired_cell_probabilities(
-    p_baseline: float, p_candidate: float, correlation: float = DEFAULT_CORRELATION
-) -> tuple[float, float, float, float]:
-    """Cell probabilities of the paired table under the shared-difficulty model.
-
-    Policy ``j`` fails when ``sqrt(rho) D + sqrt(1 - rho) E_j > Phi^-1(1 - p_j)``, with the
-    scene's difficulty ``D`` shared and ``D, E_1, E_2`` independent standard normals. The
-    probability that both fail is integrated over ``D``.
-
-    Args:
-        p_baseline: Baseline failure rate.
-        p_candidate: Candidate failure rate.
-        correlation: Latent correlation ``rho`` in ``[0, 1]``.
-
-    Returns:
-        ``(both_fail, candidate_only, baseline_only, neither)`` probabilities.
-    """
-    _check_rates(p_baseline, p_candidate)
-    rho = _check_correlation(correlation)
-    if rho == 0.0:
-        both = p_baseline * p_candidate
-    elif rho == 1.0:
-        both = min(p_baseline, p_candidate)
-    else:
-        shared, own = math.sqrt(rho), math.sqrt(1.0 - rho)
-        t_base, t_cand = stats.norm.isf(p_baseline), stats.norm.isf(p_candidate)
-
-        def integrand(difficulty: float) -> float:
-            return float(stats.norm.pdf(difficulty)
-                         * stats.norm.sf((t_base - shared * difficulty) / own)
-                         * stats.norm.sf((t_cand - shared * difficulty) / own))
-
-        both = integrate.quad(integrand, -np.inf, np.inf, epsabs=1e-12, epsrel=1e-10)[0]
-    return both, p_candidate - both, p_baseline - both, 1.0 - p_baseline - p_candidate + both
-
-
-def discordant_probability(
-    p_baseline: float, p_candidate: float, correlation: float = DEFAULT_CORRELATION
-) -> float:
-    """Probability that exactly one policy fails an episode, under the shared-difficulty model."""
-    _, candidate_only, baseline_only, _ = paired_cell_probabilities(p_baseline, p_candidate, correlation)
-    return candidate_only + baseline_only
-
-
-def _check_design(p_baseline: float, delta: float, alpha: float, power: float) -> tuple[float, float]:
-    _check_rates(p_baseline, p_baseline + delta)
-    if delta <= 0:
-        raise ValueError(f"delta (the increase in failure rate to detect) must be positive, got {delta}")
-    return float(stats.norm.isf(_check_level(alpha, "alpha"))), float(stats.norm.ppf(_check_level(power, "power")))
-
-
-def paired_sample_size(
-    p_baseline: float,
-    delta: float,
-    alpha: float = DEFAULT_ALPHA,
-    power: float = DOCUMENTED_POWER,
-    discordance: float | None = None,
-    correlation: float | None = None,
-) -> int:
-    """Paired episodes (per policy) for a one-sided McNemar test, Connor's (1987) formula.
-
-    ``n = (z_{1-alpha} sqrt(psi) + z_{power} sqrt(psi - delta^2))^2 / delta^2``, with ``psi`` the
-    probability of a discordant pair. Give ``psi`` directly as ``discordance``, or a latent
-    ``correlation`` for the shared-difficulty model (default :data:`DEFAULT_CORRELATION`).
-
-    Args:
-        p_baseline: Baseline failure rate.
-        delta: Increase of the candidate's failure rate to detect.
-        alpha: One-sided level.
-        power: Power to reach.
-        discordance: Probability of a discordant pair (at least ``delta``).
-        correlation: Latent correlation of the shared-difficulty model (if no discordance).
-
-    Returns:
-        Episodes needed, rounded up.
-    """
-    z_alpha, z_power = _check_design(p_baseline, delta, alpha, power)
-    if discordance is not None and correlation is not None:
-        raise ValueError("give either discordance or correlation, not both")
-    if discordance is None:
-        rho = DEFAULT_CORRELATION if correlation is None else correlation
-        psi = discordant_probability(p_baseline, p_baseline + delta, rho)
-    else:
-        psi = float(discordance)
-    if not delta <= psi <= 1.0:
-        raise ValueError(f"discordance must lie between delta={delta} and 1, got {psi}")
-    n = (z_alpha * math.sqrt(psi) + z_power * math.sqrt(psi - delta**2)) ** 2 / delta**2
-    return math.ceil(n - 1e-9)
-
-
-def unpaired_sample_size(
-    p_baseline: float, delta: float, alpha: float = DEFAULT_ALPHA, power: float = DOCUMENTED_POWER
-) -> int:
-    """Episodes per policy for a one-sided test of two independent proportions.
-
-    ``n = (z_{1-alpha} sqrt(2 pbar qbar) + z_{power} sqrt(p1 q1 + p2 q2))^2 / delta^2``
-    (normal approximation, pooled variance under H0, no continuity correction), i.e. what the
-    same detection needs when the two policies run on different scenes.
-
-    Args:
-        p_baseline: Baseline failure rate.
-        delta: Increase of the candidate's failure rate to detect.
-        alpha: One-sided level.
-        power: Power to reach.
-
-    Returns:
-        Episodes per policy, rounded up.
-    """
-    z_alpha, z_power = _check_design(p_baseline, delta, alpha, power)
-    p1, p2 = p_baseline, p_baseline + delta
-    mean = (p1 + p2) / 2.0
-    n = (z_alpha * math.sqrt(2.0 * mean * (1.0 - mean))
-         + z_power * math.sqrt(p1 * (1.0 - p1) + p2 * (1.0 - p2))) ** 2 / delta**2
-    return math.ceil(n - 1e-9)
-
-
-def simulate_paired_outcomes(
-    n_episodes: int,
-    p_baseline: float,
-    p_candidate: float,
-    correlation: float = DEFAULT_CORRELATION,
-    repetitions: int = 1,
-    rng: np.random.Generator | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Draw paired episode outcomes from the shared-difficulty model.
-
-    Args:
-        n_episodes: Paired episodes per repetition.
-        p_baseline: Baseline failure rate.
-        p_candidate: Candidate failure rate.
-        correlation: Latent correlation ``rho`` (shared difficulty of the scene).
-        repetitions: Independent runs to draw.
-        rng: numpy Generator (a fresh unseeded one if None).
-
-    Returns:
-        ``(candidate_failed, baseline_failed)``, boolean arrays of shape
-        ``(repetitions, n_episodes)``, paired along the last axis.
-    """
-    _check_rates(p_baseline, p_candidate)
-    rho = _check_correlation(correlation)
-    rng = np.random.default_rng() if rng is None else rng
-    shape = (repetitions, n_episodes)
-    difficulty = rng.standard_normal(shape)
-    shared, own = math.sqrt(rho), math.sqrt(1.0 - rho)
-    candidate = shared * difficulty + own * rng.standard_normal(shape) > stats.norm.isf(p_candidate)
-    baseline = shared * difficulty + own * rng.standard_normal(shape) > stats.norm.isf(p_baseline)
-    return candidate, baseline
-
-
-def simulate_tables(
-    n_episodes: int,
-    p_baseline: float,
-    p_candidate: float,
-    correlation: float = DEFAULT_CORRELATION,
-    repetitions: int = 1,
-    rng: np.random.Generator | None = None,
-    chunk: int = 500,
-) -> np.ndarray:
-    """Paired tables of simulated runs (episodes drawn by :func:`simulate_paired_outcomes`).
-
-    Returns:
-        Integer array ``(repetitions, 4)``: both_fail, candidate_only, baseline_only, neither.
-    """
-    rng = np.random.default_rng() if rng is None else rng
-    tables = np.empty((repetitions, 4), dtype=np.int64)
-    for start in range(0, repetitions, chunk):
-        size = min(chunk, repetitions - start)
-        cand, base = simulate_paired_outcomes(n_episodes, p_baseline, p_candidate, correlation, size, rng)
-        tables[start:start + size] = np.stack(
-            [(cand & base).sum(1), (cand & ~base).sum(1), (~cand & base).sum(1), (~cand & ~base).sum(1)],
-            axis=1,
-        )
-    return tables
-
-
-def verdicts_of_tables(tables: np.ndarray, margin: float, alpha: float = DEFAULT_ALPHA) -> list[Verdict]:
-    """:func:`compare`'s verdicts for many tables at once (rows of counts, as from :func:`simulate_tables`)."""
-    return [_VERDICT_OF_CODE[int(code)] for code in _verdict_codes(np.asarray(tables), margin, alpha)]
-
-
-def _verdict_codes(tables: np.ndarray, margin: float, alpha: float) -> np.ndarray:
-    a, b, c, d = tables.T
-    n = tables.sum(axis=1)
-    _, upper = _newcombe_bounds(a, b, c, d, _two_sided_z(1.0 - alpha))
-    difference = (b - c) / np.where(n > 0, n, 1)
-    return _decide(upper, difference, _mcnemar_greater(b, c), margin, alpha)
-
-
-@dataclass(frozen=True)
-class MonteCarloRate:
-    """How often an event happened in simulated runs.
-
-    Attributes:
-        count: Runs where it happened.
-        repetitions: Runs simulated.
-    """
-
-    count: int
-    repetitions: int
-
-    @property
-    def rate(self) -> float:
-        """Observed rate."""
-        return self.count / self.repetitions
-
-    def interval(self, confidence: float = 0.95) -> tuple[float, float]:
-        """Wilson interval of the rate."""
-        return wilson_interval(self.count, self.repetitions, confidence)
-
-    def __float__(self) -> float:
-        return self.rate
-
-    def __str__(self) -> str:
-        low, high = self.interval()
-        return f"{self.rate:.4f} (95% CI {low:.4f}-{high:.4f}, {self.count}/{self.repetitions})"
-
-
-def simulate_verdict_rates(
-    n_episodes: int,
-    p_baseline: float,
-    p_candidate: float,
-    margin: float = DEFAULT_MARGIN,
-    alpha: float = DEFAULT_ALPHA,
-    correlation: float = DEFAULT_CORRELATION,
-    repetitions: int = 2000,
-    rng: np.random.Generator | None = None,
-) -> dict[Verdict, MonteCarloRate]:
-    """How often :func:`compare` says PASS, FAIL and INCONCLUSIVE on simulated paired runs.
-
-    Each repetition draws ``n_episodes`` paired episodes from the shared-difficulty model
-    (:func:`simulate_paired_outcomes`) and applies the decision rule to their table.
-
-    Returns:
-        A :class:`MonteCarloRate` per verdict.
-    """
-    tables = simulate_tables(n_episodes, p_baseline, p_candidate, correlation, repetitions, rng)
-    codes = _verdict_codes(tables, margin, _check_level(alpha, "alpha"))
-    return {verdict: MonteCarloRate(int(np.sum(codes == code)), repetitions)
-            for code, verdict in _VERDICT_OF_CODE.items()}
-
-
-def simulate_power(
-    n_episodes: int = DOCUMENTED_EPISODES,
-    p_baseline: float = DOCUMENTED_BASELINE_RATE,
-    delta: float = DOCUMENTED_DELTA,
-    margin: float = DEFAULT_MARGIN,
-    alpha: float = DEFAULT_ALPHA,
-    correlation: float = DEFAULT_CORRELATION,
-    repetitions: int = 2000,
-    rng: np.random.Generator | None = None,
-) -> MonteCarloRate:
-    """Rate of FAIL verdicts when the candidate fails ``delta`` more often than the baseline."""
-    return simulate_verdict_rates(n_episodes, p_baseline, p_baseline + delta, margin, alpha, correlation,
-                                  repetitions, rng)[Verdict.FAIL]
-
-
-def simulate_false_alarm(
-    n_episodes: int = DOCUMENTED_EPISODES,
-    p_baseline: float = DOCUMENTED_BASELINE_RATE,
-    margin: float = DEFAULT_MARGIN,
-    alpha: float = DEFAULT_ALPHA,
-    correlation: float = DEFAULT_CORRELATION,
-    repetitions: int = 2000,
-    rng: np.random.Generator | None = None,
-) -> MonteCarloRate:
-    """Rate of FAIL verdicts when both policies have the same failure rate (a false alarm)."""
-    return simulate_verdict_rates(n_episodes, p_baseline, p_baseline, margin, alpha, correlation,
-                                  repetitions, rng)[Verdict.FAIL]
-
-
-def simulate_unpaired_power(
-    n_episodes: int,
-    p_baseline: float = DOCUMENTED_BASELINE_RATE,
-    delta: float = DOCUMENTED_DELTA,
-    alpha: float = DEFAULT_ALPHA,
-    repetitions: int = 2000,
-    rng: np.random.Generator | None = None,
-) -> MonteCarloRate:
-    """Power of the unpaired counterpart: each policy on its own ``n_episodes`` scenes.
-
-    The failure counts are independent binomials, tested by the one-sided Fisher exact test
-    (the unpaired exact analogue of the exact McNemar test).
-    """
-    _check_rates(p_baseline, p_baseline + delta)
-    rng = np.random.default_rng() if rng is None else rng
-    candidate = rng.binomial(n_episodes, p_baseline + delta, repetitions)
-    baseline = rng.binomial(n_episodes, p_baseline, repetitions)
-    # P(candidate failures >= observed | total failures), hypergeometric under H0
-    p_value = stats.hypergeom.sf(candidate - 1, 2 * n_episodes, candidate + baseline, n_episodes)
-    detected = (p_value < alpha) & (candidate > baseline)
-    return MonteCarloRate(int(detected.sum()), repetitions)
-
-
-def simulated_sample_size(
-    p_baseline: float = DOCUMENTED_BASELINE_RATE,
-    delta: float = DOCUMENTED_DELTA,
-    alpha: float = DEFAULT_ALPHA,
-    power: float = DOCUMENTED_POWER,
-    correlation: float | None = DEFAULT_CORRELATION,
-    margin: float = DEFAULT_MARGIN,
-    repetitions: int = 2000,
-    step: int = 10,
-    seed: int = 0,
-) -> int:
-    """Smallest episode count (a multiple of ``step``) whose simulated power reaches ``power``.
-
-    Bisection between half and twice the analytic size, assuming power grows with the
-    episode count; every candidate count is simulated with the same seed (common random
-    numbers), so the answer moves by about ``step`` from seed to seed, more when the power
-    curve is flat. Paired (``correlation`` given): FAIL rate of :func:`compare` under the
-    shared-difficulty model. Unpaired (``correlation=None``): one-sided Fisher exact test on
-    independent samples (:func:`simulate_unpaired_power`).
-    """
-    def reached(n: int) -> bool:
-        rng = np.random.default_rng(seed)
-        if correlation is None:
-            rate = simulate_unpaired_power(n, p_baseline, delta, alpha, repetitions, rng)
-        else:
-            rate = simulate_power(n, p_baseline, delta, margin, alpha, correlation, repetitions, rng)
-        return rate.rate >= power
-
-    if correlation is None:
-        analytic = unpaired_sample_size(p_baseline, delta, alpha, power)
-    else:
-        analytic = paired_sample_size(p_baseline, delta, alpha, power, correlation=correlation)
-    # in units of step; invariant: power not reached at low (0 episodes: never), reached at high
-    low, high = analytic // (2 * step), -(-2 * analytic // step)
-    if low > 0 and reached(low * step):
-        low = 0
-    while not reached(high * step):
-        low, high = high, high * 2
-    while high - low > 1:
-        middle = (low + high) // 2
-        if reached(middle * step):
-            high = middle
-        else:
-            low = middle
-    return high * step

@@ -26,52 +26,14 @@ from collections import deque
 from multiprocessing.connection import wait
 from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Set, Tuple
 
+from dv2s_gym.workers.base import DEFAULT_TIMEOUT, Backend, OnResult, default_workers
 from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.tasks import TaskFunction, function_for, gave_up_result, run_task, task_modules
 
 __all__ = ["Backend", "LocalBackend", "get_backend", "default_workers", "DEFAULT_TIMEOUT"]
 
-DEFAULT_TIMEOUT = 600.0
-"""Seconds a worker may spend on one episode (scenario compilation included) before it counts as hung."""
-
-OnResult = Callable[[Dict[str, Any]], None]
 _READY = "ready"
 _PRELOAD = ("dv2s_gym.workers.pool", "envs.dv2s_env", "policies.evaluation")
-
-
-def default_workers() -> int:
-    """The cores this process may use."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
-
-
-class Backend:
-    """Runs tasks and delivers their results as they finish.
-
-    Subclasses implement :meth:`run`; :meth:`close` releases workers (also on ``with``).
-    ``run`` may be called several times (the runner does so once per batch of a
-    sequential run); workers stay up in between.
-    """
-
-    name = "backend"
-    workers = 1
-    streams = False
-    """True when :meth:`run` takes ``more=`` (tasks added while it runs); :class:`LocalBackend` does."""
-
-    def run(self, tasks: Iterable[Dict[str, Any]], on_result: OnResult) -> None:
-        """Run every task; call ``on_result(result)`` in this process for each, as it finishes."""
-        raise NotImplementedError
-
-    def close(self) -> None:
-        """Stop the workers."""
-
-    def __enter__(self) -> "Backend":
-        return self
-
-    def __exit__(self, *exc: Any) -> None:
-        self.close()
 
 
 def _worker_main(connection) -> None:

@@ -29,7 +29,7 @@ import ray
 import ray.exceptions
 
 from dv2s_gym.workers.errors import WorkerError
-from dv2s_gym.workers.pool import DEFAULT_TIMEOUT, Backend
+from dv2s_gym.workers.base import DEFAULT_TIMEOUT, Backend
 from dv2s_gym.workers.tasks import TaskFunction, function_for, gave_up_result, run_task
 
 __all__ = ["RayBackend", "RayUnavailableError", "CONNECT_TIMEOUT"]

@@ -64,6 +64,9 @@ import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from typing import Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
+from scenario_bank.maps.dimensions import (LANE_WIDTH, PARKING_WIDTH, ROUNDABOUT_ARM_START,  # noqa: F401 (re-exported)
+                                           ROUNDABOUT_RING_RADIUS, SIDEWALK_WIDTH)
+
 __all__ = [
     "LANE_WIDTH",
     "PARKING_WIDTH",
@@ -84,12 +87,6 @@ __all__ = [
     "main",
 ]
 
-LANE_WIDTH = 3.5
-"""Default driving-lane width in metres."""
-
-SIDEWALK_WIDTH = 2.0
-PARKING_WIDTH = 2.5
-"""Width of a kerbside parking lane (``urban_parking``) in metres."""
 MARK_WIDTH = 0.15
 DEFAULT_OUT_DIR = pathlib.Path(__file__).resolve().parent
 
@@ -979,12 +976,6 @@ def build_urban_crossroads() -> OpenDriveMap:
 def build_urban_t_junction() -> OpenDriveMap:
     """T-junction (east, west and south arms), 150 m arms, 6 connecting roads."""
     return build_intersection("urban_t_junction", (0, 180, 270))
-
-
-ROUNDABOUT_RING_RADIUS = 12.0
-"""Radius [m] of the ring's reference line (the inner edge of its single lane, the central island's kerb)."""
-ROUNDABOUT_ARM_START = 24.0
-"""Distance [m] from the centre at which the approach arms start."""
 
 
 def build_urban_roundabout(

@@ -24,6 +24,9 @@ TURN_ANGLE = math.radians(50)
 PARTIAL_TURN = math.radians(8)
 NEAR = 45.0                 # m: actors never closer than this are left out
 TRAFFIC_NEAR = 25.0         # m: vehicles this close for a while are counted as traffic around the ego
+CLOSE_IN = 8.0              # m: the gap to a vehicle ahead in the ego's lane shrinks this much: a slower lead
+FOLLOW_GAP = 12.0           # m, and FOLLOW_HEADWAY s at the lead's speed: the least gap of an ego following
+FOLLOW_HEADWAY = 0.8        # a moving lead (closer, the two are more likely standing than driving)
 
 
 def _quick_reversals_dropped(changes: List[Tuple[int, int, int]], t: np.ndarray,
@@ -379,6 +382,15 @@ def _actor(ctx: _Ctx, trk: Track, ego_turn: Optional[str]) -> Optional[Dict[str,
     if not (acts - {"accelerate"}):
         acts.discard("accelerate")  # speeding up alone is not part of the scene's story
     close_oncoming = oncoming and bool(np.any((np.abs(lat) < 1.7 * lane_w) & (np.abs(lon) < 35)))
+    # a vehicle that holds its lane ahead of the ego while the ego closes in on it: a slower lead
+    ahead = in_lane & (lon > 0) & valid
+    slower_lead = (lead and vehicle and not oncoming and not crossing and not ctx.junction and not acts
+                   and moving and float(lon[ahead][0] - lon[ahead].min()) >= CLOSE_IN)
+    if slower_lead:
+        # a gap shorter than a follower keeps: a stopped car and the ego waiting behind it, its speed measured
+        # off by a whole period of the dashed lines (or not measured at all)
+        lead_speed = float(np.nanmedian(speed[ahead])) if np.isfinite(speed[ahead]).any() else 0.0
+        slower_lead = float(lon[ahead].min()) >= max(FOLLOW_GAP, FOLLOW_HEADWAY * lead_speed)
     seen = int(valid.sum())
     fully = any(not b.border for b in trk.blobs)
     if vehicle and not fully:
@@ -395,6 +407,10 @@ def _actor(ctx: _Ctx, trk: Track, ego_turn: Optional[str]) -> Optional[Dict[str,
     elif vehicle and not moving and np.isfinite(speed).any() and dist.min() < 25.0:
         role = "key"   # parked near the ego's path
         notes["parked"] = True
+    elif slower_lead and dist.min() < 40.0:
+        role = "key"
+        acts = {"keep_lane"}
+        notes["slower_lead"] = True
     elif seen >= 3 and vehicle:
         role = "traffic"   # any other vehicle in view: counted, not described
     else:

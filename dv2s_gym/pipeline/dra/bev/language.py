@@ -130,6 +130,9 @@ def _clause(actor: Dict[str, Any], count: int, ref: str) -> str:
     if actor.get("notes", {}).get("parked"):
         where_p = at.replace(f"ahead of {ref}", "ahead of the ego car").replace(f"behind {ref}", "behind the ego car")
         return f"{art} {noun} {verb('is', 'are')} parked{where_p}"
+    if actor.get("notes", {}).get("slower_lead") and acts == {"keep_lane"} and "ahead_of" in rels:
+        return (f"{'a' if not plural else n} slower {noun} ahead of {ref} in the same lane "
+                f"{verb('keeps', 'keep')} to {verb('its', 'their')} lane")
     if "same_lane" in rels:
         at = f" {'ahead of' if 'ahead_of' in rels else 'behind'} {ref} in the same lane"
         if acts == {"stop"} and "ahead_of" in rels:

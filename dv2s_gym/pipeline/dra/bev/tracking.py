@@ -210,8 +210,14 @@ def _stitch(tracks: List[Track], frames: List[_Frame], scale: float, heading: np
     return tracks
 
 
-def _shift_candidates(fa, fb, na: float, nb: float, shape, fft_shape, radius: int, axis_vec, irfft2):
-    """Screen shifts (dx, dy) of the half-resolution line layer between two frames, with scores."""
+def _shift_candidates(fa, fb, na: float, nb: float, shape, fft_shape, radius: int, axis_vec, irfft2,
+                      reach: Optional[float] = None):
+    """Screen shifts (dx, dy) of the half-resolution line layer between two frames, with scores.
+
+    ``reach`` (px, default ``radius``) bounds the shifts returned: the farthest the ego can move in this
+    interval. A periodic pattern (dashed lines) correlates equally well at every multiple of its period,
+    so every such alias within reach is returned, best first, for the caller to choose among.
+    """
     import cv2
 
     if na < 4.0 or nb < 4.0:
@@ -239,6 +245,9 @@ def _shift_candidates(fa, fb, na: float, nb: float, shape, fft_shape, radius: in
         if float(np.percentile(win[py, px], 10)) >= 0.9 * best:
             return [], best, True
     peaks = (win == cv2.dilate(win, np.ones((5, 5), np.uint8))) & (win >= 0.7 * best)
+    if reach is not None and reach < radius:
+        ks_y, ks_x = np.mgrid[-radius:radius + 1, -radius:radius + 1]
+        peaks &= np.hypot(ks_x, ks_y) <= reach
     cands = []
     for yy, xx in zip(*np.nonzero(peaks)):
         sx, sy = float(xx), float(yy)
@@ -254,7 +263,7 @@ def _shift_candidates(fa, fb, na: float, nb: float, shape, fft_shape, radius: in
                 sy += float(np.clip(0.5 * (u - dn) / den, -0.5, 0.5))
         cands.append((sx - radius, sy - radius, float(win[yy, xx])))
     cands.sort(key=lambda c: -c[2])
-    return cands[:8], best, False
+    return cands, best, False
 
 
 def _world_motion(frames: List[_Frame], tracks: List[Track], scale: float, heading: np.ndarray,
@@ -299,8 +308,11 @@ def _world_motion(frames: List[_Frame], tracks: List[Track], scale: float, headi
     line_intervals = 0
     for i in range(m):
         hv = (math.cos(heading[i]), -math.sin(heading[i]))  # the ego axis on screen (y down)
+        # the window is sized for the longest interval (a dropped frame doubles it): each interval keeps
+        # only the shifts the ego can make in its own time, and every alias among them
+        reach = MAX_SPEED * float(dts[i]) * half_scale + 3
         cands, best, flat = _shift_candidates(inner_spectra[i], spectra[i + 1], inner_energies[i], energies[i + 1],
-                                              (h, w), fft_shape, radius, hv, irfft2)
+                                              (h, w), fft_shape, radius, hv, irfft2, reach)
         opts: List[Tuple[np.ndarray, float]] = []
         for dx, dy, score in cands:
             # the lines' screen shift is minus the ego's displacement (y flipped to the map frame)

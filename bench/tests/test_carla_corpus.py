@@ -1,4 +1,5 @@
-"""The public CARLA-model Scenic corpus (tests/data/carla_corpus): each script runs in DV2S-v0 or fails clearly.
+"""The public CARLA-model Scenic corpus (tests/data/carla_corpus): each script runs in DV2S-v0 or fails clearly,
+as ``python -m bench.bench_carla_corpus`` classifies them (:func:`bench.bench_carla_corpus.failure_construct`).
 
 "Clearly" means a :class:`envs.errors.DV2SError` whose message names the construct in
 backticks (e.g. "unsupported construct `Debris`"), a :class:`SceneSamplingError` naming the

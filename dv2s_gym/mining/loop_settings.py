@@ -1,0 +1,140 @@
+"""What a ``dv2s loop`` runs: :class:`LoopSettings` (its options and their defaults, in one place)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Dict, Mapping, Optional, Tuple
+
+from envs.errors import DV2SError
+
+__all__ = ["LoopError", "LoopSettings", "DEFAULTS", "FINE_TUNE_METHODS", "METHOD_LEARNING_RATES"]
+
+FINE_TUNE_METHODS = ("ppo", "dagger")
+"""How the loop fine-tunes: ``ppo`` continues PPO on the fine-tuning reward
+(:func:`policies.training.fine_tune`); ``dagger`` imitates the reference driver on the
+policy's own states (:func:`policies.imitation.dagger_fine_tune`)."""
+
+METHOD_LEARNING_RATES = {"ppo": 1e-4, "dagger": 1e-3}
+"""The fine-tuning learning rate when none is given: PPO's constant rate (its own 5e-4 made the
+bank worse, bench/RESULTS.md) and DAgger's Adam rate."""
+
+
+class LoopError(DV2SError, ValueError):
+    """Bad loop input, or an ``out`` folder that holds no loop this version can resume."""
+
+
+@dataclasses.dataclass(frozen=True)
+class LoopSettings:
+    """The settings of a loop (:func:`dv2s_gym.mining.loop.run_loop`; module docstring of
+    :mod:`dv2s_gym.mining.loop` for the steps). The embedded defaults are small, for one round in minutes on 2
+    cores (``python -m bench.bench_loop`` times a round and bench/RESULTS.md records it); the other measurements
+    in bench/RESULTS.md use larger ones. ``loop.json`` records them; a resumed loop needs the same ones except
+    ``rounds`` (raise it to add rounds), ``min_heldout_families``, ``workers`` and ``n_envs``."""
+
+    rounds: int = 1
+    """Rounds to have finished when the loop returns (a resumed loop runs only the missing ones)."""
+    bank_dir: Optional[str] = None
+    """A writable bank to grow (``None``: a copy of the shipped bank in ``out/bank``)."""
+    scenarios: Optional[Tuple[str, ...]] = None
+    """The scenarios mined and regression-tested (``None``: the starting bank's)."""
+    budget: int = 80
+    """The miner's episodes per round."""
+    sampler: str = "novelty-bandit"
+    """The miner's sampler (:data:`dv2s_gym.mining.samplers.SAMPLERS`)."""
+    max_conversions: Optional[int] = 4
+    """Clusters converted into bank scenarios per round, largest first (``None``: all, 0: none)."""
+    max_replays: Optional[int] = 16
+    """Clusters beyond the converted ones whose failing scene is kept as an exact replay entry per round, largest
+    first (:func:`dv2s_gym.mining.replays.replay_clusters`; ``None``: all, 0: none)."""
+    holdout_fraction: float = 0.5
+    """Share of the round's mined families held out from fine-tuning, in [0, 1]."""
+    fine_tune_method: str = "dagger"
+    """``ppo`` or ``dagger`` (:data:`FINE_TUNE_METHODS`)."""
+    fine_tune_steps: int = 30_000
+    """Env steps of fine-tuning per round."""
+    fine_tune_lr: Optional[float] = None
+    """The fine-tuning's (constant) learning rate; ``None`` becomes the method's
+    (:data:`METHOD_LEARNING_RATES`)."""
+    fine_tune_reward: Optional[Mapping[str, float]] = dataclasses.field(
+        default_factory=lambda: {"standing": -0.3})
+    """Reward-term weights overriding the policy's own in the fine-tuning env only (``{}``: the policy's reward
+    unchanged; ``None``: the default); used by the ``ppo`` method only (imitation has no reward)."""
+    mined_share: float = 0.5
+    """Probability of drawing a mined fine-tuning scenario during fine-tuning, strictly between 0 and 1."""
+    control: bool = True
+    """Also fine-tune without the mined scenarios (the control arm) and compare on held-out."""
+    k_eval: int = 10
+    """Evaluation seeds per held-out scenario."""
+    min_heldout_episodes: int = 20
+    """Below this many held-out episodes a round reports rates only, no drop and no test."""
+    min_heldout_families: int = 3
+    """Likewise below this many held-out families (the episodes of one family are near-identical scenes)."""
+    untouched_seeds: int = 2
+    """Seeds per scenario of the untouched set (:data:`dv2s_gym.mining.loop.UNTOUCHED_BANK`); 0 skips it."""
+    regress_episodes: int = 4
+    """Seeds per starting-bank scenario in the regression test."""
+    margin: float = 0.02
+    """The regression test's non-inferiority margin."""
+    seed: int = 0
+    """Seeds the miner, the split and the fine-tuning (each round derives its own)."""
+    workers: Optional[int] = None
+    """Processes for mining and evaluation (``None``: every core)."""
+    n_envs: int = 2
+    """Training environments (subprocesses)."""
+
+    def __post_init__(self) -> None:
+        self._check_counts()
+        self._check_shares()
+        if self.scenarios is not None:
+            object.__setattr__(self, "scenarios", tuple(str(name) for name in self.scenarios))
+        if self.fine_tune_reward is None:
+            object.__setattr__(self, "fine_tune_reward", dict(DEFAULTS["fine_tune_reward"]))
+        from dv2s_gym.mining.samplers import SAMPLERS
+
+        if self.sampler not in SAMPLERS:  # else round 1 starts (the working bank copied) before the miner refuses it
+            raise LoopError(f"--sampler must be one of {', '.join(SAMPLERS)}, not {self.sampler!r}")
+        if self.fine_tune_method not in FINE_TUNE_METHODS:
+            raise LoopError(f"--fine-tune-method must be one of {', '.join(FINE_TUNE_METHODS)}, "
+                            f"not {self.fine_tune_method!r}")
+        if self.fine_tune_lr is None:
+            object.__setattr__(self, "fine_tune_lr", METHOD_LEARNING_RATES[self.fine_tune_method])
+        if not float(self.fine_tune_lr) > 0:
+            raise LoopError(f"--fine-tune-lr must be a positive number, not {self.fine_tune_lr}")
+
+    def _check_counts(self) -> None:
+        for name, low in (("rounds", 1), ("budget", 1), ("fine_tune_steps", 1), ("k_eval", 1),
+                          ("regress_episodes", 1), ("min_heldout_episodes", 0), ("min_heldout_families", 0),
+                          ("untouched_seeds", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise LoopError(f"--{name.replace('_', '-')} must be an integer >= {low}, not {value!r}")
+        for name, what in (("max_conversions", "no conversions, only exact replays"),
+                           ("max_replays", "no replays beyond the converted clusters")):
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 0):
+                raise LoopError(f"--{name.replace('_', '-')} must be an integer >= 0 (0: {what}; 'all' on the "
+                                f"command line: every cluster), not {value!r}")
+
+    def _check_shares(self) -> None:
+        if not 0.0 <= float(self.holdout_fraction) <= 1.0:
+            raise LoopError(f"--holdout-fraction must be in [0, 1], not {self.holdout_fraction}")
+        if not 0.0 < float(self.mined_share) < 1.0:
+            raise LoopError(f"--mined-share must be strictly between 0 and 1, not {self.mined_share}")
+
+    def replace(self, **changes: Any) -> "LoopSettings":
+        """A copy with ``changes`` (checked again)."""
+        return dataclasses.replace(self, **changes)
+
+
+def _defaults() -> Dict[str, Any]:
+    values: Dict[str, Any] = {}
+    for field in dataclasses.fields(LoopSettings):
+        if field.name in ("bank_dir", "scenarios", "workers", "n_envs"):
+            continue
+        values[field.name] = field.default_factory() if field.default is dataclasses.MISSING else field.default
+    return values
+
+
+DEFAULTS: Dict[str, Any] = _defaults()
+"""The default of every loop option the command line takes as a flag of its own (read from
+:class:`LoopSettings`)."""

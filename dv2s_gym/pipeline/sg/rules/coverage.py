@@ -1,0 +1,147 @@
+"""What a composed script shows against what the description says: the main event, typed collisions, and
+``not built`` / ``not shown`` warnings."""
+
+from __future__ import annotations
+
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+from dv2s_gym.pipeline.errors import GenerationError
+from dv2s_gym.pipeline.semantics.text import Entity, ParsedDescription
+from dv2s_gym.pipeline.sg.rules.describe import COLLISION_HINTS
+from dv2s_gym.pipeline.sg.rules.roads import MAP_ROADS
+from dv2s_gym.pipeline.sg.rules.script import Script
+from scenario_bank.elements import ACTIONS, CAN_DO, PARTICIPANTS, RELATIONS, ROADS, element_set, with_undirected
+
+__all__ = ["check_main_event", "typed_collisions", "unbuilt_warnings", "absent_warnings", "unshown_warnings"]
+
+
+def _main_event(parsed: ParsedDescription) -> Optional[Tuple[Entity, str]]:
+    """The first action of the first non-ego actor that has one, else the ego's first action.
+
+    Only actions a participant of that kind can do count (a parse such as 'pedestrian go straight' is already a
+    warning, not an event)."""
+    def first(entity: Entity) -> Optional[str]:
+        for action, _ in entity.actions:
+            if not action.endswith("_pending") and action in CAN_DO.get(entity.kind, ()):
+                return action
+        return None
+
+    for entity in parsed.entities:
+        if entity.kind != "ego" and first(entity):
+            return entity, first(entity)
+    ego = parsed.ego
+    if ego is not None and first(ego):
+        return ego, first(ego)
+    return None
+
+
+def check_main_event(parsed: ParsedDescription, s: Script) -> None:
+    """Raise :class:`GenerationError` when the script does not show the main event (what it was composed to
+    show, :attr:`Script.actions`)."""
+    main = _main_event(parsed)
+    if main is None:
+        return
+    entity, action = main
+    kind = "ego" if entity.kind == "ego" else entity.kind
+    shown = {a for k, a in s.actions if k == kind}
+    if action == "lane_change" or action == "merge" and kind == "ego" and s.merged_as_lane_change:
+        placed_it = bool(shown & {"lane_change_left", "lane_change_right"})
+    elif action in COLLISION_HINTS:
+        placed_it = "collide" in shown
+    elif action == "cut_in" and "swerve" in shown and "cut_in" not in shown:
+        placed_it = True  # a swerve toward the ego and back, built as a swerve (warned)
+    else:
+        placed_it = action in shown
+    if not placed_it:
+        noun = entity.attrs.get("noun", entity.kind) if entity.kind != "ego" else "ego"
+        raise GenerationError(
+            f"cannot place the main event '{noun} {action.replace('_', ' ')}' of the description: the rules SG "
+            f"has no block for it on the chosen road; describe it with a supported manoeuvre (e.g. brake, stop, "
+            f"lane change, cut in, turn, cross, collide) or another road")
+
+
+def typed_collisions(s: Script) -> None:
+    """The script means the collision type the text gives wherever it means the collision itself."""
+    for actor in [s.frame.ego, *s.frame.actors]:
+        kind = "ego" if actor.name == "ego" else actor.kind
+        typed = actor.details.get("collide", {}).get("type")
+        if typed and (kind, "collide") in s.actions:
+            s.actions.add((kind, typed))
+
+
+def _words(element: Tuple) -> str:
+    return " ".join(str(x) for x in element[1:] if not isinstance(x, int)).replace("_", " ")
+
+
+def unbuilt_warnings(parsed: ParsedDescription, s: "Script", said: Sequence[str] = ()) -> List[str]:
+    """One ``not built: <element> (<phrase>)`` warning per element of the parsed description that the
+    composed script does not mean to show (its :attr:`Script.actions`, relations and participants), unless a
+    warning in ``said`` already names it. The phrase is the text the parser read the element from (the actor's
+    noun when it has none)."""
+    meant = with_undirected(element_set({"road": MAP_ROADS.get(s.frame.map),
+                                         "participants": s.participants,
+                                         "actions": [list(a) for a in s.actions],
+                                         "relations": [list(r) for r in s.relations]}))
+    said_text = " ".join(w.lower().replace("_", " ") for w in said)
+    phrases: Dict[Tuple, str] = {}
+    for entity in parsed.entities:
+        noun = "ego" if entity.kind == "ego" else str(entity.attrs.get("noun", entity.kind))
+        for action, detail in entity.actions:
+            phrases.setdefault(("action", entity.kind, action), str(detail.get("phrase") or noun))
+        for rel, other in entity.relations:
+            phrases.setdefault(("relation", entity.kind, rel, other.kind), noun)
+    out: List[str] = []
+    described = set()
+    for entity in parsed.entities:
+        if entity.kind not in PARTICIPANTS:
+            continue  # an unknown kind is warned about already
+        count = entity.count if entity.kind != "ego" else 1
+        described.update(("participant", entity.kind, i + 1) for i in range(count))
+        described.update(("action", entity.kind, a) for a, _ in entity.actions if a in ACTIONS)
+        described.update(("relation", entity.kind, r, o.kind) for r, o in entity.relations
+                         if o is not entity and o.kind in PARTICIPANTS and r in RELATIONS)
+    if parsed.road in ROADS:
+        described.add(("road", parsed.road))
+    for element in sorted(described, key=str):
+        if element in meant:
+            continue
+        if element[0] == "road":
+            phrase = " ".join(parsed.road_words) or str(element[1])
+            built = MAP_ROADS.get(s.frame.map, s.frame.map).replace("_", " ")
+            out.append(f"not built: road {_words(element)} ('{phrase}'): the script uses map {s.frame.map} "
+                       f"(road type {built})")
+            continue
+        elif element[0] == "participant":
+            phrase = element[1]
+        else:
+            phrase = phrases.get(element, element[1])
+        words = _words(element)
+        if words in said_text or element[0] == "action" and f"{element[1]} {element[2].replace('_', ' ')}" in \
+                said_text or element[0] == "action" and f"'{element[2].replace('_', ' ')}'" in said_text:
+            continue
+        out.append(f"not built: {element[0]} {words} ('{phrase}')")
+    return out
+
+
+def absent_warnings(parsed: ParsedDescription) -> List[str]:
+    """What the script did with the participants the text says are not there ("no other vehicles")."""
+    if not parsed.absent:
+        return []
+    said = ", ".join(f"'{p}'" for p in getattr(parsed, "absent_phrases", []) or []) or "absent"
+    kinds = list(dict.fromkeys(parsed.absent))
+    present = sorted({e.kind for e in parsed.entities if e.kind in kinds})
+    missing = ", ".join(k for k in kinds if k not in present)
+    note = (f"read {said}: the script adds no background traffic, so no {missing}"
+            " is placed")
+    if present:
+        note += f"; the text also describes a {' and a '.join(present)}, which is placed"
+    return [note]
+
+
+def unshown_warnings(meant: Dict[str, Any], simulated: Dict[str, Any]) -> List[str]:
+    """One ``not shown in the simulated run: <element>`` warning per element the script was composed to show
+    (``meant``, :attr:`SGResult.elements`) that a simulated run of it did not show (``simulated``, from
+    :func:`dv2s_gym.pipeline.semantics.trace.elements_from_trace`)."""
+    shown = with_undirected(element_set(simulated or {}))
+    return [f"not shown in the simulated run: {e[0]} {_words(e)}"
+            for e in sorted(element_set(meant or {}), key=str) if e not in shown]

@@ -1,0 +1,61 @@
+"""What a script has to show: the frame of actors (kinds, counts, actions, relations, roles) and the result."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional, Tuple
+
+__all__ = ["VEHICLES", "CLASS", "KIND_SPEEDS", "ActorFrame", "ScenarioFrame", "SGResult"]
+
+VEHICLES = ("car", "truck", "bus", "motorcycle", "bicycle")
+CLASS = {"car": "Car", "truck": "Truck", "bus": "Bus", "motorcycle": "Motorcycle", "bicycle": "Bicycle",
+         "pedestrian": "Pedestrian", "obstacle": "Obstacle"}
+KIND_SPEEDS = {"bicycle": "Range(4, 6)"}
+"""Cruise speed (m/s) of a kind slower than the road's traffic; it replaces the road's speed range."""
+
+
+@dataclass
+class ActorFrame:
+    """One actor (or a group of same-type actors) the script places."""
+
+    name: str
+    kind: str
+    count: int = 1
+    actions: List[str] = field(default_factory=list)
+    details: Dict[str, Dict[str, Any]] = field(default_factory=dict)
+    relations: List[str] = field(default_factory=list)
+    lane: Optional[str] = None
+    sudden: bool = False
+    state_stop: bool = False
+    cross_dirs: List[Tuple[str, int]] = field(default_factory=list)
+    role: str = ""  # a roles.Role once the straight-road composer assigns it
+    side: int = 0
+    parked: bool = False
+
+    def has(self, action: str) -> bool:
+        return action in self.actions
+
+
+@dataclass
+class ScenarioFrame:
+    """What the script has to show: road/map, the ego and the other actors."""
+
+    description: str
+    road: Optional[str]
+    map: str
+    ego: ActorFrame
+    actors: List[ActorFrame]
+    ego_mentioned: bool
+    weather: str = "any"
+
+
+@dataclass
+class SGResult:
+    """A generated script with its frame, what could not be placed and what it is meant to show."""
+
+    script: str
+    frame: ScenarioFrame
+    warnings: List[str]
+    elements: Dict[str, Any]
+    backend: str = "rules"
+    context_hash: str = ""

@@ -1,0 +1,59 @@
+"""What a script passes to enter a bank: an optional upgrade from Scenic 2, then the safety check and a
+compile, sample and short run in the sandbox (:mod:`scenario_bank.sandbox`); a refusal is a
+:class:`~scenario_bank.errors.ScenarioRejectedError` naming the problem.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping, Optional, Tuple
+
+from scenario_bank.errors import ScenarioRejectedError
+from scenario_bank.safety import UnsafeScenarioError
+from scenario_bank.sandbox import SandboxError, verify_script
+
+__all__ = ["verify", "upgrade_if_asked", "verify_or_name_scenic2"]
+
+
+def verify(script: str, label: str) -> None:
+    """Safety-check, compile, sample and run ``script`` once in the sandbox; raise
+    :class:`ScenarioRejectedError` naming the problem. Passes are cached by content and code version."""
+    try:
+        verify_script(script, name=label)
+    except UnsafeScenarioError as error:
+        raise ScenarioRejectedError(f"not added: {error}", "safety", findings=error.findings) from None
+    except SandboxError as error:
+        raise ScenarioRejectedError(f"not added: {error}", error.stage, limit=error.limit) from None
+
+
+def upgrade_if_asked(script: str, provenance: Optional[Mapping[str, Any]],
+                     upgrade: bool) -> Tuple[str, Optional[Mapping[str, Any]]]:
+    """``script`` upgraded from Scenic 2 when ``upgrade`` is asked, its rewrites and notes added to ``provenance``."""
+    if not upgrade or not isinstance(script, str):
+        return script, provenance
+    from scenario_bank.scenic2 import upgrade_scenic2
+
+    result = upgrade_scenic2(script)
+    if not result.changed:
+        return script, provenance
+    provenance = dict(provenance or {})
+    provenance["scenic2_rewrites"] = [str(r) for r in result.rewrites]
+    provenance["scenic2_notes"] = list(result.notes)
+    return result.source, provenance
+
+
+def verify_or_name_scenic2(script: str, label: str, upgraded: bool) -> None:
+    """:func:`verify`; a refused script in Scenic 2 syntax (not upgraded) gets an error naming the construct."""
+    try:
+        verify(script, label)
+    except ScenarioRejectedError as error:
+        if not upgraded:
+            from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
+
+            if looks_like_scenic2(script, str(error)):
+                first = upgrade_scenic2(script, keep_scenic2_meaning=False).rewrites[0]  # refused in 3
+                raise ScenarioRejectedError(
+                    f"not added: {label} is Scenic 2: line {first.line}: `{first.before.strip()[:80]}` ({first.why}); "
+                    "pass upgrade_scenic2=True to Bank.add to upgrade it to Scenic 3 (each rewrite is recorded in "
+                    "the entry's provenance; `dv2s bank add` does this)", error.stage, findings=error.findings,
+                    limit=error.limit) from None
+        raise

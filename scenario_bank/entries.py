@@ -1,0 +1,449 @@
+"""A bank's entries: the layout of an entry folder, its sidecar (``meta.json``: checked, written), its provenance
+and the files it carries, and the listing of a bank folder's entries.
+
+An entry is a folder ``<name>/`` holding ``scenario.scenic`` and ``meta.json`` (description, elements, story,
+tags, map, provenance ``source``, content hash), and the files its provenance lists (:data:`ENTRY_FILES`).
+Every file is read through :mod:`scenario_bank.safe_files` (regular files only, never through a link,
+size-capped, JSON depth-capped) and every name read from a folder or a sidecar is checked against one safe pattern.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import re
+import stat
+import unicodedata
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+
+from scenario_bank.dedup import content_hash, semantic_key
+from scenario_bank.elements import ElementError, normalize_elements
+from scenario_bank.errors import BankError, BankVersionError, NotABankError, UnsafeBankInputError
+from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, is_entry_name, load_json_bounded,
+                                      read_in_folder, regular_file_in_folder, validate_relative_path)
+from scenario_bank.story import StoryError, normalize_story
+
+__all__ = [
+    "BANK_VERSION", "SIDECAR_VERSION", "SOURCE_KINDS", "SCRIPT", "SIDECAR", "MAX_SCRIPT_BYTES", "MAX_SIDECAR_BYTES",
+    "MAX_FILE_BYTES", "MAX_JSON_DEPTH", "MINED_PROVENANCE_FIELDS", "ENTRY_FILE_KEYS", "ENTRY_FILES", "entry_files",
+    "entry_file_name", "ScenarioEntry", "Listing", "validate_sidecar", "new_sidecar", "scan_entries", "entry_matches",
+]
+
+BANK_VERSION = 1
+"""Version of the bank folder format written by this code."""
+SIDECAR_VERSION = 1
+"""Version of the ``meta.json`` sidecar format written by this code."""
+SOURCE_KINDS = ("hand-written", "generated", "mined")
+SCRIPT = "scenario.scenic"
+SIDECAR = "meta.json"
+LEGACY_INDEX = "bank.json"  # written into the bank folder by dv2s-gym <= 0.1.0; still marks a bank
+NEW_ENTRY_NAME = re.compile(r"^[a-z0-9][a-z0-9_\-]{0,99}$")
+"""Names of new entries; an existing folder or an archive entry only needs a safe name (:func:`is_entry_name`)."""
+MAX_SCRIPT_BYTES = ArchiveLimits.max_script_bytes
+"""The largest ``scenario.scenic`` read from a bank folder or archive."""
+MAX_SIDECAR_BYTES = ArchiveLimits.max_sidecar_bytes
+"""The largest ``meta.json`` (or archive header) read from a bank folder or archive."""
+MAX_FILE_BYTES = ArchiveLimits.max_file_bytes
+"""The largest file an entry carries (a failure video, a trace) that is read for an export or a copy."""
+MAX_JSON_DEPTH = 64
+"""Deepest nesting of arrays and objects accepted in a sidecar."""
+PROVENANCE_FIELDS = ("kind", "video", "parent", "seed", "generator", "model", "context_hash", "date")
+MINED_PROVENANCE_FIELDS = ("params", "backends", "policy", "failure", "cluster", "reproduction", "e2e_sc", "run", "trace",
+                           "index", "merged", "interaction", "judge", "replay", "replay_entry", "converted")
+"""Extra provenance of ``kind == "mined"`` entries (failure mining): the parent's sampled parameters, the
+DRA/SG backends, the policy that failed, its failure and cluster, the reproduction rate and E2E-SC, the
+mining run and episode index, ``merged``: later failures merged into this entry (see ``Bank.add`` with
+``on_duplicate="merge"``), ``interaction``: the failure's actor and manoeuvre read from its trace, ``judge``: the
+checks the converted script passed, ``replay``: on an exact replay of the failing scene, the parameters, seed
+and trajectory hash that pin it, and the links between the two entries of one failure (``replay_entry`` on the
+converted script, ``converted`` on the replay). Sidecars without them (every older sidecar) load as before."""
+
+ENTRY_FILE_KEYS = ("video", "trace")
+"""Provenance fields that may name one of the entry's own files by its path relative to the entry folder (a
+mined failure's ``video: "failure.webm"``); a merge rewrites them to the merged copy's path."""
+ENTRY_FILES = "files"
+"""The provenance field listing the files an entry carries in its own folder (relative paths), in ``source``
+and in each ``source.merged`` record. They are added with the entry (``files=`` of ``Bank.add``), travel with
+``Bank.export``, ``Bank.import_archive`` and ``Bank.copy_to``, and ``dv2s bank validate`` reports one that is
+missing. Older sidecars have none."""
+_ENTRY_FILE = re.compile(r"^[A-Za-z0-9_\-][A-Za-z0-9_.\-]*(/[A-Za-z0-9_\-][A-Za-z0-9_.\-]*)*$")
+
+PathLike = Union[str, os.PathLike]
+
+
+def _is_entry_file(name: Any) -> bool:
+    """Whether ``name`` is a valid file name inside an entry folder (relative, at most 8 parts each a safe
+    name (:func:`~scenario_bank.safe_files.validate_relative_path`), no hidden parts, not the script or sidecar)."""
+    if not (isinstance(name, str) and bool(_ENTRY_FILE.match(name)) and name not in (SCRIPT, SIDECAR)):
+        return False
+    try:
+        validate_relative_path(name)
+    except UnsafeInputError:
+        return False
+    return True
+
+
+def entry_file_name(name: Any) -> str:
+    """``name`` if it is a valid file name inside an entry folder (:func:`_is_entry_file`), else a
+    :class:`BankError` saying so."""
+    if not _is_entry_file(name):
+        raise BankError(f"invalid entry file name {name!r}: use a relative path of letters, digits, '_', '-', "
+                        f"'.' and '/' (no '..', no hidden parts, not {SCRIPT} or {SIDECAR})")
+    return name
+
+
+def entry_files(source: Mapping[str, Any]) -> List[str]:
+    """The files a sidecar's ``source`` says the entry carries (:data:`ENTRY_FILES` of the source and of its
+    ``merged`` records; valid relative names only), in order, without repeats."""
+    records = [source] + [m for m in (source.get("merged") or []) if isinstance(m, Mapping)]
+    out: List[str] = []
+    for record in records:
+        listed = record.get(ENTRY_FILES)
+        for value in listed if isinstance(listed, list) else []:
+            if _is_entry_file(value) and value not in out:
+                out.append(value)
+    return out
+
+
+def unsafe_input(error: UnsafeInputError, suffix: str = "") -> UnsafeBankInputError:
+    """``error`` (from :mod:`scenario_bank.safe_files`) as the bank's :class:`UnsafeBankInputError`."""
+    return UnsafeBankInputError(f"{error}{suffix}")
+
+
+def read_text(folder: Path, relative: str, max_bytes: int) -> str:
+    """``folder/relative`` as UTF-8 text: a regular file (no part a symbolic link) of at most ``max_bytes``."""
+    data = read_in_folder(folder, relative, max_bytes)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise UnsafeInputError(f"{folder / relative} is not UTF-8 text ({error.reason} at byte {error.start}); "
+                               "rewrite it as UTF-8") from None
+
+
+def read_json(folder: Path, relative: str, max_bytes: int = MAX_SIDECAR_BYTES, shown: Optional[str] = None) -> Any:
+    """``folder/relative`` parsed as JSON, size and nesting capped (:func:`load_json_bounded`); ``shown`` names
+    it in errors (default: its path)."""
+    return load_json_bounded(read_in_folder(folder, relative, max_bytes), MAX_JSON_DEPTH,
+                             shown or str(folder / relative))
+
+
+@dataclass
+class ScenarioEntry:
+    """One scenario of a bank: its script path and its sidecar."""
+
+    name: str
+    folder: Path
+    meta: Dict[str, Any]
+
+    @property
+    def script_path(self) -> Path:
+        return self.folder / SCRIPT
+
+    @property
+    def script(self) -> str:
+        """The Scenic source: a regular file in the entry folder (never a link), at most
+        :data:`MAX_SCRIPT_BYTES`; :class:`UnsafeBankInputError` otherwise."""
+        try:
+            return read_text(self.folder.parent, f"{self.folder.name}/{SCRIPT}", MAX_SCRIPT_BYTES)
+        except UnsafeInputError as error:
+            raise unsafe_input(error) from None
+
+    @property
+    def description(self) -> str:
+        return self.meta.get("description", "")
+
+    @property
+    def elements(self) -> Dict[str, Any]:
+        return self.meta.get("elements") or {"road": None, "participants": [], "actions": [], "relations": []}
+
+    @property
+    def tags(self) -> List[str]:
+        return list(self.meta.get("tags", []))
+
+    @property
+    def map(self) -> Optional[str]:
+        return self.meta.get("map")
+
+    @property
+    def source(self) -> Dict[str, Any]:
+        return dict(self.meta.get("source") or {})
+
+    @property
+    def content_hash(self) -> str:
+        return self.meta.get("content_hash", "")
+
+    @property
+    def files(self) -> List[Path]:
+        """Absolute paths of the files the entry carries in its folder (:func:`entry_files`), whether or not
+        they exist."""
+        return [self.folder / name for name in entry_files(self.source)]
+
+    def missing_files(self) -> List[str]:
+        """The entry's files (relative names, :func:`entry_files`) that are not in its folder."""
+        return [name for name in entry_files(self.source)
+                if not regular_file_in_folder(self.folder.parent, f"{self.folder.name}/{name}")]
+
+    def summary(self) -> Dict[str, Any]:
+        """A JSON-ready record for listings."""
+        return {"name": self.name, "description": self.description, "tags": self.tags, "map": self.map,
+                "source": self.source.get("kind"), "elements": self.elements, "content_hash": self.content_hash,
+                "path": str(self.script_path)}
+
+
+def control_character_field(value: Any, where: str = "") -> Optional[str]:
+    """The first field of ``value`` (a sidecar or part of one) whose text holds a control character
+    other than a newline or a tab (terminal escape sequences start with one), or ``None``."""
+    if isinstance(value, str):
+        return where if any(unicodedata.category(c) == "Cc" and c not in "\n\t" for c in value) else None
+    if isinstance(value, dict):
+        items = [(str(k), v) for k, v in value.items()] + [(str(k), str(k)) for k in value]
+    elif isinstance(value, (list, tuple)):
+        items = [(f"[{k}]", v) for k, v in enumerate(value)]
+    else:
+        return None
+    for key, item in items:
+        found = control_character_field(item, f"{where}{key}" if key.startswith("[") or not where else f"{where}.{key}")
+        if found is not None:
+            return found
+    return None
+
+
+CONTROL_FIX = ("control characters (escape sequences, carriage returns, ...) are not allowed in a bank "
+                "entry's description, tags or other sidecar text; remove them")
+
+
+def validate_sidecar(meta: Any, folder: Path) -> Dict[str, Any]:
+    """Check a sidecar; return it or raise ``ValueError`` saying what is wrong."""
+    if not isinstance(meta, dict):
+        raise ValueError("sidecar is not a JSON object")
+    field_name = control_character_field(meta)
+    if field_name is not None:
+        raise ValueError(f"sidecar field {field_name!r} holds a control character: {CONTROL_FIX}")
+    version = meta.get("schema_version", 1)
+    if not isinstance(version, int) or version > SIDECAR_VERSION:
+        raise BankVersionError(
+            f"sidecar schema_version {version!r} is newer than this dv2s-gym supports ({SIDECAR_VERSION}); upgrade"
+        )
+    for key in ("description", "map"):
+        if not isinstance(meta.get(key), str) or not meta.get(key):
+            raise ValueError(f"sidecar field {key!r} is missing or not a non-empty string")
+    if not isinstance(meta.get("tags", []), list) or not all(isinstance(t, str) for t in meta.get("tags", [])):
+        raise ValueError("sidecar field 'tags' must be a list of strings")
+    try:
+        meta["elements"] = normalize_elements(meta.get("elements") or {})
+    except ElementError as error:
+        raise ValueError(f"sidecar elements: {error}") from None
+    if "story" in meta:
+        try:
+            normalize_story(meta["story"], "sidecar story")
+        except StoryError as error:
+            raise ValueError(str(error)) from None
+    source = meta.get("source") or {}
+    if source.get("kind") not in SOURCE_KINDS:
+        raise ValueError(f"sidecar source.kind must be one of {SOURCE_KINDS}, got {source.get('kind')!r}")
+    merged = source.get("merged")
+    if merged is not None and not (isinstance(merged, list) and all(isinstance(m, dict) for m in merged)):
+        raise ValueError("sidecar field 'source.merged' must be a list of objects (merged failures)")
+    if "name" in meta and not is_entry_name(meta["name"]):
+        raise ValueError(f"sidecar field 'name' {str(meta['name'])[:80]!r} is not a valid entry name; "
+                         "set it to the entry folder's name")
+    for where, record in [("source", source)] + [(f"source.merged[{k}]", m) for k, m in enumerate(merged or [])]:
+        listed = record.get(ENTRY_FILES)
+        if listed is None:
+            continue
+        if not isinstance(listed, list):
+            raise ValueError(f"sidecar field '{where}.{ENTRY_FILES}' must be a list of file names in the entry folder")
+        for file in listed:
+            if not _is_entry_file(file):
+                raise ValueError(f"sidecar field '{where}.{ENTRY_FILES}' names {str(file)[:80]!r}, which is not a "
+                                 "file inside the entry folder: list relative paths of letters, digits, '_', '-', "
+                                 "'.' and '/' only (no '..', not absolute)")
+    if not regular_file_in_folder(folder.parent, f"{folder.name}/{SCRIPT}"):
+        if os.path.lexists(folder / SCRIPT):
+            raise ValueError(f"the script {SCRIPT} is not a regular file (a link, a FIFO or a device?); "
+                             "replace it by the script itself")
+        raise ValueError(f"the script {SCRIPT} is missing")
+    return meta
+
+
+def _has_element(elements: Mapping[str, Any], wanted: str) -> bool:
+    if ":" in wanted:
+        who, what = wanted.split(":", 1)
+        return [who, what] in elements.get("actions", [])
+    return (
+        wanted == elements.get("road")
+        or wanted in elements.get("participants", [])
+        or any(a[1] == wanted for a in elements.get("actions", []))
+        or any(r[1] == wanted for r in elements.get("relations", []))
+    )
+
+
+def _printable(name: str) -> str:
+    """A folder name as it can be shown and used as a key: control and undecodable characters escaped."""
+    return name.encode("unicode_escape", "backslashreplace").decode("ascii")[:200]
+
+
+def _slug(text: str) -> str:
+    words = re.findall(r"[a-z0-9]+", text.lower())
+    stop = {"the", "a", "an", "of", "and", "in", "on", "is", "it", "its", "to", "car", "ego"}
+    slug = "_".join([w for w in words if w not in stop][:6]) or "scenario"
+    return slug[:60]
+
+
+def _check_is_bank(root: Path, visible: Sequence[os.DirEntry]) -> None:
+    """Raise :class:`NotABankError` unless ``root`` is empty or holds a bank entry (or the legacy index)."""
+    if not visible or any(d.name == LEGACY_INDEX for d in visible):
+        return
+    for d in visible:
+        if d.is_dir() and ((Path(d.path) / SCRIPT).exists() or (Path(d.path) / SIDECAR).exists()):
+            return
+    shown = ", ".join(sorted(d.name for d in visible)[:3]) + (", ..." if len(visible) > 3 else "")
+    raise NotABankError(
+        f"{root} is not a scenario bank: none of its subfolders holds a {SCRIPT} or {SIDECAR} "
+        f"(it holds {shown}). Pass a bank folder (its entries are <name>/{SCRIPT} + <name>/{SIDECAR}), "
+        "or a new or empty folder to start a bank there."
+    )
+
+
+def entry_matches(entry: ScenarioEntry, tag: Optional[str], needle: Optional[str], wanted: Sequence[str],
+                  map_name: Optional[str], source: Optional[str]) -> bool:
+    """Whether ``entry`` passes every given filter of a listing (``needle``: a lowercase substring of the name or
+    description; ``wanted``: elements it must all have)."""
+    if tag is not None and tag not in entry.meta.get("tags", ()):
+        return False
+    if map_name is not None and entry.meta.get("map") != map_name:
+        return False
+    if source is not None and (entry.meta.get("source") or {}).get("kind") != source:
+        return False
+    if needle is not None and needle not in entry.name.lower() \
+            and needle not in entry.meta.get("description", "").lower():
+        return False
+    return all(_has_element(entry.meta.get("elements") or {}, w) for w in wanted)
+
+
+@dataclass
+class Listing:
+    """What :func:`scan_entries` read of a bank folder: its ``entries`` (name -> entry), the ``problems`` of the
+    entries it could not load (name -> message), each entry's :func:`~scenario_bank.dedup.semantic_key`, and the
+    ``index`` records to cache (name -> sidecar stamp, sidecar and semantic key)."""
+
+    entries: Dict[str, ScenarioEntry]
+    problems: Dict[str, str]
+    semantic_keys: Dict[str, str]
+    index: Dict[str, Any]
+
+
+def scan_entries(root: Path, cached: Mapping[str, Any]) -> Listing:
+    """Every entry of the bank folder ``root`` (none if it does not exist), reading a sidecar only when
+    ``cached`` (an index written from an earlier :class:`Listing`) has no record of it with the same
+    modification time and size. :class:`~scenario_bank.errors.NotABankError` if ``root`` is not a bank."""
+    entries: Dict[str, ScenarioEntry] = {}
+    problems: Dict[str, str] = {}
+    fresh: Dict[str, Any] = {}
+    keys: Dict[str, str] = {}
+    if root.is_dir():
+        with os.scandir(root) as it:
+            visible = [d for d in it if not d.name.startswith(".")]
+        _check_is_bank(root, visible)
+        for d in sorted(visible, key=lambda d: d.name):
+            name = d.name
+            if d.is_symlink():
+                if d.is_dir():
+                    problems[_printable(name)] = (
+                        f"{_printable(name)} is a symbolic link to a folder; bank entries must be real folders "
+                        "inside the bank: replace the link by a copy of the entry")
+                continue
+            if not d.is_dir(follow_symlinks=False):
+                continue
+            if not is_entry_name(name):
+                problems[_printable(name)] = (
+                    f"the folder name {_printable(name)!r} is not a valid entry name (1 to 128 letters, digits, "
+                    "'_', '-' and '.', not starting with '.' or '-', no '..'); rename the folder")
+                continue
+            folder = root / name
+            try:
+                st = os.lstat(folder / SIDECAR)
+            except FileNotFoundError:
+                problems[name] = f"missing sidecar {name}/{SIDECAR}: re-add the scenario or restore the file"
+                continue
+            except OSError as error:
+                problems[name] = f"unreadable sidecar {name}/{SIDECAR}: {error.strerror or error}"
+                continue
+            stamp = [st.st_mtime_ns, st.st_size]
+            hit = cached.get(name)
+            if stat.S_ISREG(st.st_mode) and isinstance(hit, dict) and hit.get("stamp") == stamp \
+                    and "semantic_key" in hit:
+                meta, key = hit["meta"], hit["semantic_key"]
+            else:
+                try:
+                    meta = validate_sidecar(read_json(root, f"{name}/{SIDECAR}"), folder)
+                    key = semantic_key(meta["elements"], meta["map"],
+                                       read_text(root, f"{name}/{SCRIPT}", MAX_SCRIPT_BYTES))
+                except (ValueError, BankVersionError, OSError) as error:
+                    problems[name] = f"bad sidecar {name}/{SIDECAR}: {error}"
+                    continue
+            fresh[name] = {"stamp": stamp, "meta": meta, "semantic_key": key}
+            entries[name] = ScenarioEntry(name, folder, meta)
+            keys[name] = key
+    return Listing(entries, problems, keys, fresh)
+
+
+def entry_bytes(root: Path, entry: ScenarioEntry) -> List[Tuple[str, bytes]]:
+    """``(relative path, bytes)`` of an entry's script, sidecar and the files it lists that exist, each read
+    as a capped regular file with no part a link (:func:`~scenario_bank.safe_files.read_in_folder`)."""
+    out = [(SCRIPT, read_in_folder(root, f"{entry.name}/{SCRIPT}", MAX_SCRIPT_BYTES)),
+           (SIDECAR, read_in_folder(root, f"{entry.name}/{SIDECAR}", MAX_SIDECAR_BYTES))]
+    for file in entry_files(entry.source):
+        if regular_file_in_folder(root, f"{entry.name}/{file}"):
+            out.append((file, read_in_folder(root, f"{entry.name}/{file}", MAX_FILE_BYTES)))
+    return out
+
+
+def new_sidecar(script: str, description: str, name: Optional[str], elements: Optional[Mapping[str, Any]],
+                tags: Sequence[str], map_name: Optional[str], provenance: Optional[Mapping[str, Any]],
+                use_case: Optional[str]) -> Dict[str, Any]:
+    """The sidecar of a new entry, checked (:class:`~scenario_bank.errors.BankError` naming what is wrong): the
+    map read from ``param map`` when not given, the name made from the description when not given, the
+    provenance completed (:data:`PROVENANCE_FIELDS`, and :data:`MINED_PROVENANCE_FIELDS` for a mined entry;
+    ``kind`` hand-written and ``date`` today by default)."""
+    if not isinstance(script, str) or not script.strip():
+        raise BankError("the script is empty")
+    if not description or not description.strip():
+        raise BankError("a scenario needs a natural-language description")
+    if map_name is None:
+        match = re.search(r"^\s*param\s+map\s*=\s*['\"]([^'\"]+)['\"]", script, re.M)
+        map_name = Path(match.group(1)).stem if match else None
+    if not map_name:
+        raise BankError("could not tell the scenario's map: pass map=... or set `param map = '<name>'`")
+    name = name or _slug(description)
+    if not NEW_ENTRY_NAME.match(name):
+        raise BankError(f"invalid scenario name {name!r}: use lowercase letters, digits, '_' or '-'")
+    try:
+        elements = normalize_elements(elements or {})
+    except ElementError as error:
+        raise BankError(f"invalid elements: {error}") from None
+    source = {key: None for key in PROVENANCE_FIELDS}
+    if (provenance or {}).get("kind") == "mined":
+        source.update({key: None for key in MINED_PROVENANCE_FIELDS if key != "merged"})
+    source.update(dict(provenance or {}))
+    source["kind"] = source.get("kind") or "hand-written"
+    if source["kind"] not in SOURCE_KINDS:
+        raise BankError(f"provenance kind must be one of {SOURCE_KINDS}, got {source['kind']!r}")
+    source["date"] = source.get("date") or _dt.date.today().isoformat()
+    meta = {
+        "schema_version": SIDECAR_VERSION,
+        "name": name,
+        "description": description.strip(),
+        "elements": elements,
+        "tags": sorted(set(tags)),
+        "map": map_name,
+        "use_case": use_case,
+        "source": source,
+        "content_hash": content_hash(script),
+    }
+    field_name = control_character_field(meta)
+    if field_name is not None:
+        raise BankError(f"the scenario's {field_name} holds a control character: {CONTROL_FIX}")
+    return meta
