@@ -18,13 +18,14 @@ from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
 
 
-def add_mined_copy(bank_dir: str, source: str, name: str, cluster: str) -> str:
-    """Copy shipped scenario ``source`` into ``bank_dir`` as entry ``name`` (kind ``mined``)."""
+def add_mined_copy(bank_dir: str, source: str, name: str, cluster: str, parent: str | None = None) -> str:
+    """Copy shipped scenario ``source`` into ``bank_dir`` as entry ``name`` (kind ``mined``) whose provenance
+    names ``parent`` (default ``source``) as the scenario it was mined from."""
     entry = Bank().get(source)
     script = entry.script + f"\n# mined copy for cluster {cluster}\n"
     meta = json.loads(json.dumps(entry.meta))
     meta.update(name=name, content_hash=content_hash(script))
-    meta["source"] = {**meta["source"], "kind": "mined", "parent": source, "seed": 0}
+    meta["source"] = {**meta["source"], "kind": "mined", "parent": parent or source, "seed": 0}
     folder = Path(bank_dir) / name
     folder.mkdir(parents=True)
     atomic_write_text(folder / "scenario.scenic", script)

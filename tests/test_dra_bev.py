@@ -69,21 +69,27 @@ def _hline(img, y, x0, x1, striped, phase_px):
         x += period
 
 
-def _highway_lead_brakes(size: int = 400, seconds: float = 5.0, fps: float = 5.0) -> List[np.ndarray]:
-    """Ego in lane 2 of 4 at 22 m/s; the car 30 m ahead in its lane brakes from 22 to 12 m/s at t = 2 s."""
-    frames = []
+
+def _lead_frame(size: int, ego_x: float, lead_x: float) -> np.ndarray:
+    """One frame of a four-lane highway (dashed inner lines scrolling with the ego) with the ego at the centre, in
+    lane 2, and a car ``lead_x - ego_x`` metres ahead of it in its lane."""
     cx = cy = size / 2
     lane = 3.5 * SCALE
     ys = [cy - 1.5 * lane + k * lane for k in range(5)]      # ego between lines 1 and 2 (lane index 1)
+    img = np.full((size, size, 3), GREY, np.uint8)
+    for k, y in enumerate(ys):
+        _hline(img, y, 0, size, striped=0 < k < 4, phase_px=cx - ego_x * SCALE)
+    _vehicle(img, cx + (lead_x - ego_x) * SCALE, cy, CAR)
+    _vehicle(img, cx, cy, EGO)
+    return img
+
+def _highway_lead_brakes(size: int = 400, seconds: float = 5.0, fps: float = 5.0) -> List[np.ndarray]:
+    """Ego in lane 2 of 4 at 22 m/s; the car 30 m ahead in its lane brakes from 22 to 12 m/s at t = 2 s."""
+    frames = []
     ego_x, lead_x, v_e, v_l = 0.0, 30.0, 22.0, 22.0
     for i in range(int(seconds * fps) + 1):
         t = i / fps
-        img = np.full((size, size, 3), GREY, np.uint8)
-        for k, y in enumerate(ys):
-            _hline(img, y, 0, size, striped=0 < k < 4, phase_px=cx - ego_x * SCALE)
-        _vehicle(img, cx + (lead_x - ego_x) * SCALE, cy, CAR)
-        _vehicle(img, cx, cy, EGO)
-        frames.append(img)
+        frames.append(_lead_frame(size, ego_x, lead_x))
         dt = 1.0 / fps
         a_l = -5.0 if 2.0 <= t < 4.0 else 0.0
         ego_x += v_e * dt
@@ -98,19 +104,11 @@ def _highway_ego_slows_behind(size: int = 480, seconds: float = 6.0, fps: float 
     which holds its speed. ``drop``: that frame is lost (the interval around it lasts two frames, as in a
     decoded video that skipped one). Returns the frames, their times and the ego's true speeds."""
     frames, times, ego_speeds = [], [], []
-    cx = cy = size / 2
-    lane = 3.5 * SCALE
-    ys = [cy - 1.5 * lane + k * lane for k in range(5)]
     ego_x, lead_x, v_e, v_l = 0.0, 40.0, 25.0, 12.0
     dt = 1.0 / fps
     for i in range(int(seconds * fps) + 1):
         if i != drop:
-            img = np.full((size, size, 3), GREY, np.uint8)
-            for k, y in enumerate(ys):
-                _hline(img, y, 0, size, striped=0 < k < 4, phase_px=cx - ego_x * SCALE)
-            _vehicle(img, cx + (lead_x - ego_x) * SCALE, cy, CAR)
-            _vehicle(img, cx, cy, EGO)
-            frames.append(img)
+            frames.append(_lead_frame(size, ego_x, lead_x))
             times.append(i * dt)
             ego_speeds.append(v_e)
         v_next = max(v_l, v_e - 7.5 * dt)

@@ -694,11 +694,7 @@ def test_the_held_out_split_groups_entries_by_the_family_they_were_clustered_by(
     bank = tmp_path / "bank"
     bank.mkdir()
     add_mined_copy(str(bank), "highway_cut_in_from_right", "mined_x", "c")
-    add_mined_copy(str(bank), "highway_cut_in_from_right", "mined_of_mined_x", "c")
-    meta_path = bank / "mined_of_mined_x" / "meta.json"
-    meta = json.loads(meta_path.read_text())
-    meta["source"]["parent"] = "mined_x"
-    meta_path.write_text(json.dumps(meta))
+    add_mined_copy(str(bank), "highway_cut_in_from_right", "mined_of_mined_x", "c", parent="mined_x")
     kept = [{"cluster": "a", "scenario": "mined_x"}, {"cluster": "b", "scenario": "mined_of_mined_x"}]
     parents = {e["scenario"]: e["parent"] for e in _with_parents(kept, str(bank))}
     assert parents == {name: scenario_family(name, str(bank)) for name in parents} == {

@@ -573,11 +573,7 @@ def test_a_scenario_s_family_follows_the_provenance_to_its_first_scenario(tmp_pa
     bank = tmp_path / "bank"
     bank.mkdir()
     add_mined_copy(str(bank), "highway_cut_in_from_right", "mined_x", "c")
-    add_mined_copy(str(bank), "highway_cut_in_from_right", "replay_of_mined_x", "c")
-    meta_path = bank / "replay_of_mined_x" / "meta.json"
-    meta = json.loads(meta_path.read_text())
-    meta["source"]["parent"] = "mined_x"
-    meta_path.write_text(json.dumps(meta))
+    add_mined_copy(str(bank), "highway_cut_in_from_right", "replay_of_mined_x", "c", parent="mined_x")
     assert scenario_family("replay_of_mined_x", str(bank)) == "highway_cut_in_from_right"
     assert scenario_family("mined_x", str(bank)) == "highway_cut_in_from_right"
     assert scenario_family("highway_cut_in_from_right") == "highway_cut_in_from_right"  # shipped: no parent
