@@ -75,6 +75,7 @@ __all__ = [
     "CheckpointSaver",
     "ProgressCallback",
     "make_train_env",
+    "TrainEnvSpec",
     "make_vec_env",
     "evaluation_episodes",
     "latest_checkpoint",
@@ -409,40 +410,49 @@ class ScenarioSchedule(gym.Wrapper):
         return self.env.reset(seed=episode_seed, options=options)
 
 
-def _build_train_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Optional[str],
-                     probabilities: Mapping[str, float], seed: int, stream: int,
-                     wrap: Optional[Callable[[gym.Env, int, int], gym.Env]] = None) -> gym.Env:
+@dataclasses.dataclass(frozen=True)
+class TrainEnvSpec:
+    """What every training env of a run is: DV2S-v0 on ``names`` with ``config`` (scenarios from ``bank_dir``,
+    ``None``: the default bank), each episode's scenario drawn with ``probabilities``.
+
+    ``wrap(env, seed, stream)``, a picklable callable, replaces SB3's Monitor as the outer wrapper
+    (DAgger's reference labels, :mod:`policies.imitation`)."""
+
+    names: Sequence[str]
+    config: Mapping[str, Any]
+    bank_dir: Optional[str]
+    probabilities: Mapping[str, float]
+    wrap: Optional[Callable[[gym.Env, int, int], gym.Env]] = None
+
+    def __post_init__(self) -> None:  # plain containers: the spec is pickled into every worker process
+        object.__setattr__(self, "names", list(self.names))
+        object.__setattr__(self, "config", dict(self.config))
+        object.__setattr__(self, "probabilities", dict(self.probabilities))
+
+
+def _build_train_env(spec: TrainEnvSpec, seed: int, stream: int) -> gym.Env:
     os.environ["OMP_NUM_THREADS"] = "1"
     from stable_baselines3.common.monitor import Monitor
 
     from envs.dv2s_env import DV2SEnv
 
-    env = DV2SEnv(scenario=list(names), config=dict(config), bank_dir=bank_dir)
-    scheduled = ScenarioSchedule(env, probabilities, seed=seed, stream=stream)
-    return Monitor(scheduled) if wrap is None else wrap(scheduled, seed, stream)
+    env = DV2SEnv(scenario=list(spec.names), config=dict(spec.config), bank_dir=spec.bank_dir)
+    scheduled = ScenarioSchedule(env, spec.probabilities, seed=seed, stream=stream)
+    return Monitor(scheduled) if spec.wrap is None else spec.wrap(scheduled, seed, stream)
 
 
-def make_train_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Optional[str],
-                   probabilities: Mapping[str, float], seed: int, stream: int = 0,
-                   wrap: Optional[Callable[[gym.Env, int, int], gym.Env]] = None) -> Callable[[], gym.Env]:
-    """A picklable factory of one training env (DV2S-v0 in a :class:`ScenarioSchedule` and SB3's Monitor).
-
-    ``wrap(env, seed, stream)``, a picklable callable, replaces the Monitor as the outer wrapper
-    (DAgger's reference labels, :mod:`policies.imitation`)."""
-    return functools.partial(_build_train_env, list(names), dict(config), bank_dir, dict(probabilities), int(seed),
-                             int(stream), wrap)
+def make_train_env(spec: TrainEnvSpec, seed: int, stream: int = 0) -> Callable[[], gym.Env]:
+    """A picklable factory of one training env (DV2S-v0 in a :class:`ScenarioSchedule` and SB3's Monitor, or
+    ``spec.wrap``)."""
+    return functools.partial(_build_train_env, spec, int(seed), int(stream))
 
 
-def make_vec_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Optional[str],
-                 probabilities: Mapping[str, float], n_envs: int, seed: int, stream: int = 0,
-                 vec_env: str = "subproc", wrap: Optional[Callable[[gym.Env, int, int], gym.Env]] = None):
-    """``n_envs`` training envs in a ``SubprocVecEnv`` (or ``DummyVecEnv``); env ``i`` is seeded ``seed + i``
-    (``wrap``: see :func:`make_train_env`)."""
+def make_vec_env(spec: TrainEnvSpec, n_envs: int, seed: int, stream: int = 0, vec_env: str = "subproc"):
+    """``n_envs`` training envs in a ``SubprocVecEnv`` (or ``DummyVecEnv``); env ``i`` is seeded ``seed + i``."""
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     os.environ["OMP_NUM_THREADS"] = "1"  # inherited by the worker processes
-    factories = [make_train_env(names, config, bank_dir, probabilities, seed + rank, stream, wrap)
-                 for rank in range(n_envs)]
+    factories = [make_train_env(spec, seed + rank, stream) for rank in range(n_envs)]
     if vec_env == "dummy":
         return DummyVecEnv(factories)
     return SubprocVecEnv([functools.partial(_worker_env, factory) for factory in factories])
@@ -813,8 +823,8 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
     log(f"starting {config.n_envs} training env{'s' if config.n_envs != 1 else ''} "
         f"({'subprocesses' if config.vec_env != 'dummy' else 'in this process'}) on {len(names)} scenario"
         f"{'s' if len(names) != 1 else ''}; the first reset compiles their first scenarios (up to a minute) ...")
-    venv = make_vec_env(names, env_config, config.bank_dir, sampler.probabilities(), config.n_envs, config.seed,
-                        stream=stream, vec_env=config.vec_env)
+    venv = make_vec_env(TrainEnvSpec(names, env_config, config.bank_dir, sampler.probabilities()), config.n_envs,
+                        config.seed, stream=stream, vec_env=config.vec_env)
     try:
         if resume:
             model = _resume_model(config, checkpoint, venv, tensorboard_log)
