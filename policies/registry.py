@@ -27,6 +27,7 @@ before acting (the regression runner does this).
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import inspect
 import json
@@ -144,7 +145,16 @@ class Policy:
 
 
 def _check_options(name: str, driver_class: type, options: Mapping[str, Any]) -> None:
-    """Refuse options the driver does not take now, not in a worker's first episode."""
+    """Refuse options the driver does not take now, not in a worker's first episode (a driver with a ``SETTINGS``
+    dataclass takes its fields by name)."""
+    settings = getattr(driver_class, "SETTINGS", None)
+    if dataclasses.is_dataclass(settings):
+        accepted = [field.name for field in dataclasses.fields(settings)]
+        unknown = [key for key in options if key not in accepted]
+        if unknown:
+            raise PolicyError(f"policy {name!r} has no option {', '.join(map(repr, unknown))}; its options are "
+                              f"{', '.join(accepted)} (and action_noise, noise_seed)")
+        return
     try:
         signature = inspect.signature(driver_class)
     except (TypeError, ValueError):  # pragma: no cover - a builtin without a signature
