@@ -468,11 +468,11 @@ def _duration(seconds: float) -> str:
 
 def evaluate_for_card(specs: Mapping[str, str], episodes: Sequence[Tuple[str, int]],
                       configs: Mapping[str, Optional[Dict[str, Any]]], bank_dir: Optional[str] = None,
-                      candidate: str = "policy", seed_base: Optional[int] = None, seeds: Optional[int] = None,
-                      jobs: int = 2, confidence: float = 0.95, progress: bool = False,
-                      log: Optional[Callable[[str], None]] = None) -> Dict[str, Any]:
+                      jobs: int = 2, progress: bool = False, log: Optional[Callable[[str], None]] = None,
+                      **section: Any) -> Dict[str, Any]:
     """Run every policy of ``specs`` (label -> spec) on the same ``episodes`` and build the
-    card's ``evaluation`` section (:func:`evaluation_section`); ``configs`` gives each
+    card's ``evaluation`` section (:func:`evaluation_section`, which takes ``section``: ``candidate``,
+    ``confidence``, ``seed_base``, ``seeds``); ``configs`` gives each
     label's env config (a baseline driving ``DiscreteMetaAction`` next to a continuous policy).
     ``progress``: one progress bar on stderr over every policy's episodes; ``log``: gets one line with the
     time left, estimated once the first episodes are done (:class:`TimeLeft`)."""
@@ -496,5 +496,4 @@ def evaluate_for_card(specs: Mapping[str, str], episodes: Sequence[Tuple[str, in
     finally:
         if bar is not None:
             bar.close()
-    return evaluation_section(results, episodes, candidate=candidate, confidence=confidence, seed_base=seed_base,
-                              seeds=seeds, specs=specs)
+    return evaluation_section(results, episodes, specs=specs, **section)

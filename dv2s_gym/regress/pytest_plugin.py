@@ -36,7 +36,7 @@ import inspect
 import re
 import shutil
 from pathlib import Path
-from typing import Any, Callable, Dict, Optional, Sequence, Union
+from typing import Any, Callable, Dict, Optional
 
 import pytest
 
