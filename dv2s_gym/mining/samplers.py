@@ -427,14 +427,16 @@ def _scenario_dimensions(space: Any, feature_space: Any) -> list:
 
 
 def _make_split(space: Any, feature_space: Any, params: Dict[str, Any]):
-    from dv2s_gym.mining.split_sampler import ScenarioSplitSampler
+    from dv2s_gym.mining.chooser import LeaveSettings
+    from dv2s_gym.mining.split_sampler import AdaptSettings, ScenarioSplitSampler
 
     dimensions = _scenario_dimensions(space, feature_space)
-    return ScenarioSplitSampler(feature_space, dimensions, chooser=params["chooser"], params=params["params"],
-                                alpha=params["alpha"], thres=params["thres"], buckets=params["buckets"],
-                                warmup=params["warmup"], forget=params["forget"], patience=params["patience"],
-                                floor=params["floor"], capacity=params["capacity"],
-                                avoid=params["avoid"])
+    return ScenarioSplitSampler(
+        feature_space, dimensions, chooser=params["chooser"], params=params["params"],
+        adapt=AdaptSettings(alpha=params["alpha"], thres=params["thres"], buckets=params["buckets"]),
+        warmup=params["warmup"], avoid=params["avoid"],
+        leave=LeaveSettings(forget=params["forget"], patience=params["patience"], floor=params["floor"],
+                            capacity=params["capacity"]))
 
 
 def _make_novelty(space: Any, feature_space: Any, params: Dict[str, float]):
