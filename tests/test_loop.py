@@ -518,26 +518,6 @@ def test_loop_resumes_the_control_arm_without_redoing_the_fine_tune(tmp_path, mo
     assert len(miner.calls) == 1 and "control" in report.rounds[0]["steps"]
 
 
-def test_a_loop_recorded_before_the_family_split_and_the_control_resumes_as_it_was(tmp_path, monkeypatch):
-    out = tmp_path / "loop"
-    miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
-    _StandIns(monkeypatch, kill_in="round_1/policy")
-    with pytest.raises(_Kill):
-        run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **WIRING)
-    state = json.loads((out / "loop.json").read_text())
-    for key in ("holdout_by", "max_conversions", "control", "untouched_seeds", "min_heldout_episodes"):
-        del state["settings"][key]  # as an older dv2s wrote it
-    state["rounds"][0]["steps"] = {"mine": state["rounds"][0]["steps"]["mine"]}
-    (out / "loop.json").write_text(json.dumps(state))
-    stand = _StandIns(monkeypatch)
-    old = dict(WIRING, untouched_seeds=0)
-    report = run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, control=False, max_conversions=None,
-                      min_heldout_episodes=0, **{k: v for k, v in old.items()})
-    steps = report.rounds[0]["steps"]
-    assert "by" not in steps["split"] and "control" not in steps and "untouched" not in steps  # split by cluster
-    assert len(stand.fine_tunes) == 1 and report.settings["holdout_by"] == "cluster"
-
-
 def test_the_untouched_set_is_a_bank_of_the_corpus_scripts_with_their_licences():
     from pathlib import Path
 
@@ -673,6 +653,7 @@ def test_a_second_round_never_holds_out_a_family_the_first_fine_tuned_on(tmp_pat
 @pytest.mark.parametrize("content, problem", [
     ('{"rounds": "x", "settings": 5}', 'has no "settings" object'),
     ('{"rounds": "x", "settings": {}}', 'has no list of round objects under "rounds"'),
+    ('{"rounds": [], "settings": {}}', "records no holdout_by in its settings"),
     ('[1, 2]', "holds a list, not an object"),
 ])
 def test_a_loop_json_of_the_wrong_structure_is_refused_in_one_line(tmp_path, content, problem):

@@ -81,16 +81,11 @@ _RECORDED = ("holdout_by",)
 """Settings a loop keeps as first recorded (not chosen by the user, so never a reason to refuse a resume)."""
 
 HOLDOUT_BY = "family"
-"""How new loops split their mined scenarios (loops recorded before hold out by ``cluster``)."""
+"""How a loop splits its mined scenarios (recorded in ``loop.json``)."""
 
 UNTOUCHED_BANK = Path(__file__).resolve().parent / "untouched"
 """The scenario set no loop mines or fine-tunes on: a bank folder of scripts written by others for Scenic's
 CARLA model (its ``SOURCES.md`` names them and their licence)."""
-
-_LEGACY = {"fine_tune_method": "ppo", "max_conversions": None, "holdout_by": "cluster", "control": False,
-           "untouched_seeds": 0, "min_heldout_episodes": 0, "max_replays": 0}
-"""Identity settings added later, with the value a ``loop.json`` written before them meant."""
-
 
 @dataclasses.dataclass
 class LoopReport:
@@ -134,11 +129,9 @@ class _State:
                 raise LoopError(f"{path} is not readable JSON ({error}); choose another --out") from error
             _check_structure(data, path)
             recorded = data.get("settings", {})
-            check_identity(recorded, settings, IDENTITY, legacy=_LEGACY, run=f"{path.parent} holds a loop",
+            check_identity(recorded, settings, IDENTITY, run=f"{path.parent} holds a loop",
                            fix="rerun with its settings to resume it, or choose another --out")
             data["settings"].update({k: settings[k] for k in settings if k not in IDENTITY and k not in _RECORDED})
-            for key in _RECORDED:
-                data["settings"].setdefault(key, _LEGACY[key])
             self.data = data
         else:
             self.data = {"settings": settings, "start": None, "rounds": []}
@@ -169,6 +162,8 @@ def _check_structure(data: Any, path: Path) -> None:
     elif data.get("start") is not None and not (isinstance(data["start"], dict)
                                                 and isinstance(data["start"].get("scenarios"), list)):
         problem = "has a \"start\" that is not an object with a list of scenarios"
+    elif any(key not in data["settings"] for key in _RECORDED):
+        problem = f"records no {' or '.join(_RECORDED)} in its settings"
     if problem:
         raise LoopError(f"{path} is not a dv2s loop record ({problem}); choose another --out, or delete the file "
                         "to start the loop over")
@@ -366,7 +361,7 @@ class _Loop:
 
     @property
     def holdout_by(self) -> str:
-        return self.state.data["settings"].get("holdout_by", _LEGACY["holdout_by"])
+        return self.state.data["settings"]["holdout_by"]
 
 
 def _open_loop(policy: str, settings: LoopSettings, out: Path, progress: bool, log: Callable[[str], None]) -> _Loop:

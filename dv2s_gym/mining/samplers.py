@@ -240,13 +240,10 @@ class SceneSampler:
     def draw(self, count: int) -> List[Tuple[Any, Any]]:
         """The next ``count`` ``(point, info)`` pairs; ``info`` goes back with :meth:`feed`."""
         pairs = []
-        if not hasattr(self, "proposals"):  # a checkpoint from before proposals were kept: its draw count is unknown
-            self.proposals, self.drawn = {}, None
         for _ in range(count):
             point, info = self._swap(self._sampler.getSample)
-            if self.drawn is not None:
-                self.proposals[self.drawn] = proposal_density(self.name, self._sampler, point)
-                self.drawn += 1
+            self.proposals[self.drawn] = proposal_density(self.name, self._sampler, point)
+            self.drawn += 1
             pairs.append((point, info))
         return pairs
 

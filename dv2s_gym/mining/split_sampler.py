@@ -192,9 +192,8 @@ class ScenarioSplitSampler(FeatureSampler):
         index, choice, choice_info = self._scenario()
         self.drawn += 1
         own, own_info = self.param_samplers[index].getSample()
-        found = getattr(self, "found", None)  # a checkpoint from before the option has none
-        for _ in range(getattr(self, "avoid", 0)):  # the sampler's next points, past the cells already failing
-            if region_of(own[: self.dimensions[index]]) not in found[index]:
+        for _ in range(self.avoid):  # the sampler's next points, past the cells already failing
+            if region_of(own[: self.dimensions[index]]) not in self.found[index]:
                 break
             own, own_info = self.param_samplers[index].getSample()
         own = tuple(float(x) for x in own)
@@ -206,7 +205,7 @@ class ScenarioSplitSampler(FeatureSampler):
     def update(self, sample, info, rho) -> None:
         """Feed the outcome ``rho`` of a drawn point to the chooser and to its scenario's parameter sampler."""
         index, choice, choice_info, own, own_info = info
-        if rho < self.chooser.thres and getattr(self, "found", None) is not None:
+        if rho < self.chooser.thres:
             self.found[index].add(region_of(own[: self.dimensions[index]]))
         self.chooser.update(choice, choice_info, rho)
         self.param_samplers[index].update(own, own_info, rho)
