@@ -10,7 +10,7 @@ run goes (workers, progress bars) are not part of a run's identity.
 from __future__ import annotations
 
 import json
-from typing import Any, List, Mapping, Optional, Sequence
+from typing import Any, List, Mapping, Optional, Sequence, Type
 
 from scenario_bank.errors import DV2SError
 
@@ -55,12 +55,14 @@ def _show(value: Any, limit: int = 80) -> str:
 
 
 def check_identity(recorded: Mapping[str, Any], asked: Mapping[str, Any], keys: Sequence[str], *, run: str,
-                   fix: str, notes: Optional[Mapping[str, str]] = None) -> None:
+                   fix: str, notes: Optional[Mapping[str, str]] = None,
+                   error: Type[RunIdentityError] = RunIdentityError) -> None:
     """Refuse to resume ``run`` (e.g. ``"out/mine holds a mining run"``) when any of ``keys`` differs.
 
     Raises:
         RunIdentityError: ``"<run> with other settings (<key>: run has <old>, asked <new>; ...); <fix>"``;
-            ``notes`` adds a parenthesised why to a setting (a derived one, such as a file's hash).
+            ``notes`` adds a parenthesised why to a setting (a derived one, such as a file's hash). ``error``:
+            the subclass raised (a command's own, such as ``dv2s regress``'s ``ResumeMismatchError``).
     """
     keys_differing = differing(recorded, asked, keys)
     if not keys_differing:
@@ -70,4 +72,4 @@ def check_identity(recorded: Mapping[str, Any], asked: Mapping[str, Any], keys: 
              for key, old, new in differences[:_SHOWN]]
     if len(differences) > _SHOWN:
         shown.append(f"and {len(differences) - _SHOWN} more")
-    raise RunIdentityError(f"{run} with other settings ({'; '.join(shown)}); {fix}", differences)
+    raise error(f"{run} with other settings ({'; '.join(shown)}); {fix}", differences)
