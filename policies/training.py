@@ -820,9 +820,7 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
     sampler, stream = _restored_sampler(config, names, checkpoint if resume else None)
     out.mkdir(parents=True, exist_ok=True)
     tensorboard_log = str(out / "tb")
-    log(f"starting {config.n_envs} training env{'s' if config.n_envs != 1 else ''} "
-        f"({'subprocesses' if config.vec_env != 'dummy' else 'in this process'}) on {len(names)} scenario"
-        f"{'s' if len(names) != 1 else ''}; the first reset compiles their first scenarios (up to a minute) ...")
+    log(_starting(config, names))
     venv = make_vec_env(TrainEnvSpec(names, env_config, config.bank_dir, sampler.probabilities()), config.n_envs,
                         config.seed, stream=stream, vec_env=config.vec_env)
     try:
@@ -836,13 +834,7 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         if plan:
             log(plan)
         atomic_write_json(run_path, record)
-        curriculum = CurriculumCallback(sampler, config.curriculum_update)
-        evaluation = HeldOutEvaluationCallback(evaluation_episodes(names, config.eval_seeds), env_config,
-                                               config.bank_dir, config.eval_freq, out / "evaluations.jsonl")
-        saver = CheckpointSaver(out / "checkpoints", config.checkpoint_freq, sampler, config.keep_checkpoints)
-        callbacks = [curriculum, evaluation, saver]
-        if config.progress_bar:
-            callbacks.append(ProgressCallback(max(planned, config.steps), f"{config.algo} {out.name}", evaluation))
+        callbacks, saver = _callbacks(config, names, env_config, sampler, planned)
         began = time.perf_counter()
         remaining = config.steps - start
 
@@ -880,6 +872,28 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
     log(f"wrote {model_path} and {out / 'model_card.json'} (step {model.num_timesteps}, last segment "
         f"{segment['wall_time_s']:.0f} s)")
     return card
+
+
+def _starting(config: TrainConfig, names: Sequence[str]) -> str:
+    """The line that says what starts (the first reset takes a while)."""
+    return (f"starting {config.n_envs} training env{'s' if config.n_envs != 1 else ''} "
+            f"({'subprocesses' if config.vec_env != 'dummy' else 'in this process'}) on {len(names)} scenario"
+            f"{'s' if len(names) != 1 else ''}; the first reset compiles their first scenarios (up to a minute) ...")
+
+
+def _callbacks(config: TrainConfig, names: Sequence[str], env_config: Mapping[str, Any], sampler: "ScenarioSampler",
+               planned: int) -> Tuple[List[BaseCallback], "CheckpointSaver"]:
+    """The training callbacks (curriculum, held-out evaluation, checkpoints, progress bar) and the checkpoint
+    saver among them."""
+    out = Path(config.out)
+    curriculum = CurriculumCallback(sampler, config.curriculum_update)
+    evaluation = HeldOutEvaluationCallback(evaluation_episodes(names, config.eval_seeds), env_config,
+                                           config.bank_dir, config.eval_freq, out / "evaluations.jsonl")
+    saver = CheckpointSaver(out / "checkpoints", config.checkpoint_freq, sampler, config.keep_checkpoints)
+    callbacks: List[BaseCallback] = [curriculum, evaluation, saver]
+    if config.progress_bar:
+        callbacks.append(ProgressCallback(max(planned, config.steps), f"{config.algo} {out.name}", evaluation))
+    return callbacks, saver
 
 
 def _open_record(config: TrainConfig, resume: bool, log: Callable[[str], None]
