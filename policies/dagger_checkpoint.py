@@ -37,6 +37,7 @@ import numpy as np
 from scenario_bank.run_identity import check_identity
 from policies.training import TrainingError
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json, file_sha256
+from scenario_bank.bank import Bank
 
 if TYPE_CHECKING:
     from policies.dagger_config import DaggerConfig
@@ -124,8 +125,6 @@ class SavedIteration:
 
 def _scenario_hashes(bank_dir: Optional[str], names: List[str]) -> Dict[str, Optional[str]]:
     """Each scenario's script content hash in the bank (``None`` when the bank does not hold it)."""
-    from scenario_bank.bank import Bank
-
     bank = Bank(bank_dir) if bank_dir is not None else Bank()
     return {name: (bank.get(name).content_hash or None) if name in bank else None for name in names}
 

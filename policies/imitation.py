@@ -46,6 +46,9 @@ from policies.state_driver import SLOWER
 from policies.dagger_config import DAGGER_DEFAULTS, DaggerConfig
 from policies.training import (ScenarioSchedule, TrainConfig, TrainEnvSpec, TrainingError, close_vec_env,
                                fine_tune_scenarios, make_vec_env, resolve_checkpoint)
+from policies.model_card import write_card
+from policies.registry import load_policy, read_model_card
+from scenario_bank.atomic import atomic_path
 
 __all__ = ["ReferenceLabels", "DAGGER_DEFAULTS", "DaggerConfig", "dagger_fine_tune", "agreement", "imitation_step"]
 
@@ -62,7 +65,6 @@ class ReferenceLabels(gym.Wrapper):
     def __init__(self, env: gym.Env, reference: str = "rule", beta: float = 1.0, seed: int = 0,
                  stream: int = 0) -> None:
         super().__init__(env)
-        from policies.registry import load_policy
 
         self.reference = load_policy(reference)
         if not getattr(self.reference, "privileged", False):
@@ -261,7 +263,6 @@ def dagger_fine_tune(checkpoint_or_spec: str, config: TrainConfig, dagger: Optio
     for name, value in (("steps", config.steps), ("n_envs", config.n_envs)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise TrainingError(f"DAgger {name} must be an integer >= 1, not {value!r}")
-    from policies.registry import read_model_card
 
     model_path = Path(config.out) / "model.zip"
     if model_path.is_file() and (read_model_card(model_path).get("fine_tune") or {}).get("method") == "dagger":
@@ -410,9 +411,6 @@ class _DaggerRun:
     def finish(self) -> Path:
         """Write the fine-tuned model and its card, remove the checkpoint; the model's path."""
         import stable_baselines3 as sb3
-
-        from policies.model_card import write_card
-        from scenario_bank.atomic import atomic_path
 
         wall = self.elapsed()
         all_obs, all_labels = np.concatenate(self.observations), np.concatenate(self.labels)

@@ -35,6 +35,7 @@ import os
 import sys
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+import difflib
 
 import gymnasium as gym
 import numpy as np
@@ -456,8 +457,6 @@ def _load_base(base: str, options: Dict[str, Any]) -> Policy:
 
 
 def _unknown_policy(base: str) -> PolicyError:
-    import difflib
-
     close = difflib.get_close_matches(base, registered_policies(), n=1)
     return PolicyError(
         f"unknown policy {base!r}" + (f" (did you mean {close[0]!r}?)" if close else "")

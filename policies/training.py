@@ -42,13 +42,16 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import inspect
 import json
 import os
 import re
 import shlex
+import signal
 import sys
 import time
 from collections import deque
+from importlib import metadata
 from pathlib import Path
 from typing import Any, Callable, Deque, Dict, List, Mapping, Optional, Sequence, Tuple
 
@@ -56,8 +59,14 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from envs.dv2s_env import check_env_config
+from envs.dv2s_env import DV2SEnv, check_env_config
 from envs.errors import DV2SError, Interrupted
+from policies.evaluation import make_eval_env, run_episode
+from policies.model_card import bank_version, summarize_results, write_card
+from policies.registry import SB3Policy, load_policy, read_model_card
+from scenario_bank import select_scenarios
+from scenario_bank.atomic import atomic_path, atomic_write_json
+from scenario_bank.run_identity import check_identity
 
 __all__ = [
     "ALGORITHMS",
@@ -295,8 +304,6 @@ _FINE_TUNE_DEFAULTS: Dict[str, Any] = {"env_config": None, "eval_freq": 0, "eval
 
 
 def _known_hyperparameters(algo: str) -> set:
-    import inspect
-
     import stable_baselines3 as sb3
 
     parameters = set(inspect.signature(getattr(sb3, algo.upper()).__init__).parameters)
@@ -434,8 +441,6 @@ def _build_train_env(spec: TrainEnvSpec, seed: int, stream: int) -> gym.Env:
     os.environ["OMP_NUM_THREADS"] = "1"
     from stable_baselines3.common.monitor import Monitor
 
-    from envs.dv2s_env import DV2SEnv
-
     env = DV2SEnv(scenario=list(spec.names), config=dict(spec.config), bank_dir=spec.bank_dir)
     scheduled = ScenarioSchedule(env, spec.probabilities, seed=seed, stream=stream)
     return Monitor(scheduled) if spec.wrap is None else spec.wrap(scheduled, seed, stream)
@@ -489,8 +494,6 @@ def _worker_env(factory: Callable[[], gym.Env]) -> gym.Env:
     """``factory()`` in a vec-env worker process, which leaves Ctrl-C to the main process: a terminal's Ctrl-C
     reaches the whole process group, and a worker stopped by it would cut the main process off mid-step before
     it saves its checkpoint; the main process closes the workers itself."""
-    import signal
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     return factory()
 
@@ -575,10 +578,6 @@ class HeldOutEvaluationCallback(BaseCallback):
 
     def run(self) -> Dict[str, Any]:
         """Evaluate now; returns the overall rates."""
-        from policies.evaluation import make_eval_env, run_episode
-        from policies.model_card import summarize_results
-        from policies.registry import SB3Policy
-
         self._last = self.num_timesteps
         if self._env is None:
             self._env = make_eval_env(sorted({s for s, _ in self.episodes}), config=self.env_config,
@@ -627,8 +626,6 @@ class CheckpointSaver(BaseCallback):
         """Write a checkpoint of ``model`` (default: the model this callback is attached to) at its
         current step now; returns its path. ``model`` serves a run interrupted before SB3 attached
         the callbacks."""
-        from scenario_bank.atomic import atomic_path, atomic_write_json
-
         model = model if model is not None else self.model
         steps = int(model.num_timesteps)
         self._last = steps
@@ -707,8 +704,6 @@ def load_run_config(out: os.PathLike | str) -> Tuple[TrainConfig, Dict[str, Any]
 
 
 def _resolve_names(config: TrainConfig) -> List[str]:
-    from scenario_bank import select_scenarios
-
     names = select_scenarios(config.scenarios, config.bank_dir)
     if not names:
         raise TrainingError("the scenario selection is empty; name bank scenarios or tag:<tag> after --scenarios")
@@ -716,8 +711,6 @@ def _resolve_names(config: TrainConfig) -> List[str]:
 
 
 def _check_resume(config: TrainConfig, recorded: TrainConfig) -> None:
-    from scenario_bank.run_identity import check_identity
-
     check_identity(recorded.to_json(), config.to_json(), TrainConfig.IDENTITY, run=f"{config.out} holds a training run",
                    fix="resume with the run's own settings (omit the option) or start a new run in another --out")
 
@@ -741,8 +734,6 @@ def _new_model(config: TrainConfig, venv, tensorboard_log: str):
 
 def _resume_model(config: TrainConfig, checkpoint: Path, venv, tensorboard_log: str):
     import stable_baselines3 as sb3
-
-    from policies.registry import load_policy
 
     # The registry gives the clear errors: a checkpoint that does not load, or mismatched spaces.
     policy = load_policy(f"{config.algo}:{checkpoint}")
@@ -784,8 +775,6 @@ def planned_steps(model: Any, start: int, target: int) -> Tuple[int, Optional[st
 
 
 def _versions() -> Dict[str, str]:
-    from importlib import metadata
-
     versions = {}
     for package in ("dv2s-gym", "stable-baselines3", "torch", "highway-env", "gymnasium", "scenic"):
         try:
@@ -809,9 +798,6 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
     resume, record, checkpoint = _open_record(config, resume, log)
 
     from stable_baselines3.common.callbacks import CallbackList
-
-    from policies.model_card import write_card
-    from scenario_bank.atomic import atomic_path, atomic_write_json
 
     import torch
 
@@ -934,8 +920,6 @@ def _restored_sampler(config: TrainConfig, names: Sequence[str],
 def _card(config: TrainConfig, names: Sequence[str], env_config: Dict[str, Any], model: Any,
           sampler: ScenarioSampler, record: Mapping[str, Any]) -> Dict[str, Any]:
     """The trained model's card, without its evaluation."""
-    from policies.model_card import bank_version
-
     wall = sum(s["wall_time_s"] for s in record["segments"])
     trained = sum(s["end_step"] - s["start_step"] for s in record["segments"])
     return {
@@ -1040,7 +1024,6 @@ def with_reward_weights(env_config: Mapping[str, Any], reward_weights: Optional[
     config = json.loads(json.dumps(dict(env_config)))
     if not reward_weights:
         return config
-    from envs.dv2s_env import DV2SEnv
 
     defaults = DV2SEnv.default_config()["reward_weights"]
     unknown = sorted(set(reward_weights) - set(defaults))
@@ -1104,7 +1087,6 @@ def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, learning_rate: Op
     env_config = with_reward_weights(env_config, reward_weights)
     hyperparameters = {k: v for k, v in (source_card.get("hyperparameters") or {}).items()
                        if k != "policy" and k in _known_hyperparameters(algorithm)}
-    from policies.registry import read_model_card
 
     model_path = out / "model.zip"
     if model_path.is_file() and "fine_tune" in read_model_card(model_path):
@@ -1128,7 +1110,6 @@ def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, learning_rate: Op
                            f"{card['fine_tune']['steps']} steps on {len(run_config.scenarios)} scenarios with weighted "
                            "sampling (see sampler.weights).")
     card["name"] = out.name
-    from policies.model_card import write_card
 
     write_card(out, card)
     return model_path
@@ -1138,8 +1119,6 @@ def _first_checkpoint(config: TrainConfig, source: Path, start_step: int, learni
     """Start a fine-tuning run in ``config.out``: the source checkpoint as its first checkpoint (with
     ``learning_rate`` saved in it when given) and a ``run.json`` with no segment yet."""
     import stable_baselines3 as sb3
-
-    from scenario_bank.atomic import atomic_path, atomic_write_json
 
     out = Path(config.out)
     if (out / "run.json").exists():
