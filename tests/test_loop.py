@@ -12,6 +12,7 @@ from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, paired_summary
 from dv2s_gym.mining.loop import LoopError, fine_tune_weights
 from dv2s_gym.mining.split import cluster_groups, family_of, split_by_cluster, split_by_family
+from dv2s_gym.workers.settings import WorkerSettings
 from cli_helpers import one_line_error, run
 from loop_helpers import FakeMiner, run_loop
 from policies.model_card import read_card
@@ -213,7 +214,8 @@ def test_paired_evaluation_runs_identical_episodes_before_and_after(tmp_path):
     episodes = [(name, EVAL_SEED_BASE + i) for name in SOURCES for i in range(2)]
     store = HeldOutStore(tmp_path / "heldout.jsonl")
     before = evaluate_heldout("before", "keep_lane", episodes, store=store, bank_dir=None, progress=False)
-    after = evaluate_heldout("after", "keep_lane", episodes, store=store, bank_dir=None, workers=2, progress=False)
+    after = evaluate_heldout("after", "keep_lane", episodes, store=store, bank_dir=None, workers=WorkerSettings(workers=2),
+                             progress=False)
     assert [(r["scenario"], r["seed"]) for r in before] == [(r["scenario"], r["seed"]) for r in after] == episodes
     # same policy, same scene and seed: the very same trajectory, so the pairing is real
     assert [r["result"]["trajectory_hash"] for r in before] == [r["result"]["trajectory_hash"] for r in after]
@@ -231,11 +233,11 @@ def test_held_out_workers_that_crash_or_hang_give_error_records_not_failures(tmp
     episodes = [(SOURCES[0], EVAL_SEED_BASE), (SOURCES[1], EVAL_SEED_BASE)]
     store = HeldOutStore(tmp_path / "heldout.jsonl")
     crashed = evaluate_heldout("before", "regress_misbehaving_policies:crash", episodes, store=store, bank_dir=None,
-                               workers=2, progress=False)
+                               workers=WorkerSettings(workers=2), progress=False)
     assert [(r["scenario"], r["seed"]) for r in crashed] == episodes
     assert all("crashed" in r["error"] and "2 attempts" in r["error"] for r in crashed)
     hung = evaluate_heldout("after", "regress_misbehaving_policies:hang", episodes[:1], store=store, bank_dir=None,
-                            workers=2, timeout=3, progress=False)
+                            workers=WorkerSettings(workers=2, timeout=3), progress=False)
     assert "hung" in hung[0]["error"]
     # errors are left out of the pairs, never counted as failures, and run again on a reopened store
     assert paired_summary(crashed[:1], hung)["errors"] == 1

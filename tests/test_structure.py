@@ -267,8 +267,6 @@ NOT_YET_WITHIN_LIMITS = {
     "dv2s_gym/mining/convert.py:_reproduce", "dv2s_gym/mining/convert.py:_add_replay",
     "dv2s_gym/mining/convert.py:convert_failure",
     "dv2s_gym/mining/failure_video.py:record_failure_video", "dv2s_gym/mining/failure_video.py:write_failure_video",
-    # the held-out evaluation's episode settings next to its pool's (workers, timeout: WorkerSettings's)
-    "dv2s_gym/mining/heldout.py:evaluate_heldout",
     # long: reports rendered line by line
     "dv2s_gym/mining/loop_report.py:render_markdown", "dv2s_gym/mining/report.py:build_report_from_records",
     "dv2s_gym/mining/report.py:markdown",

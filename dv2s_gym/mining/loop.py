@@ -569,6 +569,7 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
     """The steps after the split: held-out before, fine-tune (+ control), held-out after, untouched set,
     regression; the fine-tuned policy's spec."""
     from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout
+    from dv2s_gym.workers.settings import WorkerSettings
     from policies.training import EVAL_SEED_BASE
 
     s, record = loop.settings, timed.record
@@ -583,7 +584,7 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
     if "before" not in steps:
         timed("before", lambda: {"episodes": len(episodes), "done": bool(evaluate_heldout(
             "before", current, episodes, store=HeldOutStore(store_path), bank_dir=loop.bank,
-            env_config=loop.env_config, workers=loop.workers, progress=loop.progress))},
+            env_config=loop.env_config, workers=WorkerSettings(workers=loop.workers), progress=loop.progress))},
               f"{len(episodes)} episodes ({len(split['held_out'])} held-out scenario(s) x {s.k_eval} seeds)")
     new_policy, control_policy = _fine_tune_arms(loop, number, current, round_dir, timed)
     policies = {"before": current, "after": new_policy, "control": control_policy}
@@ -644,8 +645,10 @@ def _after_step(loop: _Loop, policies: Mapping[str, Optional[str]], episodes: Li
                 families: Mapping[str, str]) -> Dict[str, Any]:
     """The ``after`` step: start, fine-tuned and control on the held-out episodes, compared pairwise."""
     from dv2s_gym.mining.heldout import evaluate_heldout
+    from dv2s_gym.workers.settings import WorkerSettings
 
-    common = dict(store=store, bank_dir=loop.bank, env_config=loop.env_config, workers=loop.workers)
+    common = dict(store=store, bank_dir=loop.bank, env_config=loop.env_config,
+                  workers=WorkerSettings(workers=loop.workers))
     before = evaluate_heldout("before", policies["before"], episodes, progress=False, **common)
     after = evaluate_heldout("after", policies["after"], episodes, progress=loop.progress, **common)
     control_records = None
