@@ -35,6 +35,14 @@ from __future__ import annotations
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
+from dv2s_gym.pipeline.semantics.trace import elements_from_trace
+from dv2s_gym.story_check import check_story
+from policies.baselines import IDMEgo, KeepLaneEgo
+from policies.probe_drivers import HangbackEgo, RushEgo, SurgeEgo, WeaveEgo
+from scenario_bank.bank import Bank
+from scenario_bank.elements import normalize_elements
+from scenario_bank.story import normalize_story
+
 __all__ = ["EGOS", "PROBE_EGOS", "ALL_EGOS", "STORY_SECONDS", "required_elements", "story_problem", "ego_collisions", "run_episode",
            "story_episodes", "missed_steps", "story_rate", "story_table"]
 
@@ -100,8 +108,6 @@ def _kind_of(name: str) -> str:
 
 
 def _driver(ego: str, env) -> Callable[[], int]:
-    from policies.baselines import IDMEgo, KeepLaneEgo
-    from policies.probe_drivers import HangbackEgo, RushEgo, SurgeEgo, WeaveEgo
     from policies.rule_based import IDLE, CautiousDriver
 
     if ego == "scenic":
@@ -142,12 +148,6 @@ def story_episodes(name: str, ego: str, seeds: Sequence[int], bank_root: Optiona
     pairs of the steps it did not play (a sidecar without a ``story`` block: ``[what is missing, ""]``);
     ``ego_hit`` the kinds the ego hit.
     """
-    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
-    from dv2s_gym.story_check import check_story
-    from scenario_bank.story import normalize_story
-    from scenario_bank.bank import Bank
-    from scenario_bank.elements import normalize_elements
-
     entry = Bank(bank_root).get(name)
     story = entry.meta.get("story")
     story = normalize_story(story, f"{name}: story") if story is not None else None

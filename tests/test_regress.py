@@ -277,7 +277,7 @@ def test_resume_after_an_interruption_loses_and_duplicates_nothing(tmp_path):
     with open(tmp_path / "results.jsonl", "a") as handle:
         handle.write('{"id": "highway_cut_in_from_left/3", "role": "cand')  # a line cut short by the kill
 
-    with pytest.raises(ResumeMismatchError, match="episodes: 5 here, 4 there"):
+    with pytest.raises(ResumeMismatchError, match="episodes: run has 4, asked 5"):
         run_regression("rule", "keep_lane", **{**options, "episodes": 5})
     rerun = []
     report = run_regression("rule", "keep_lane", on_result=lambda r: rerun.append((r["id"], r["role"])), **options)
@@ -523,3 +523,23 @@ def test_a_changed_scenario_script_makes_an_old_report_another_bank_version(tmp_
     with pytest.raises(ReportMismatchError, match="another bank version .*changed scenario highway_lead_vehicle_brakes"):
         run_regression("rule", baseline_report=tmp_path / "old" / "report.json", bank_dir=bank, episodes=1,
                        out_dir=tmp_path / "new", stall_seconds=1, progress=False)
+
+
+def test_a_folder_holding_another_run_is_refused_with_each_setting_both_values_and_the_fix(tmp_path):
+    from dv2s_gym.regress.store import RunStore
+    from scenario_bank.run_identity import RunIdentityError
+
+    with RunStore(tmp_path, {"episodes": 4, "seed": 0, "scenarios": ["a"]}) as store:
+        assert store.open() == {}
+    (tmp_path / "report.json").write_text("{}")
+    with pytest.raises(ResumeMismatchError) as error:
+        RunStore(tmp_path, {"episodes": 5, "seed": 1, "scenarios": ["a"]}).open()
+    assert isinstance(error.value, RunIdentityError)  # the resume check every resumable command shares
+    assert error.value.differences == [("episodes", 4, 5), ("seed", 0, 1)]
+    assert str(error.value) == (
+        f"{tmp_path} holds a regression run with other settings (episodes: run has 4, asked 5; seed: run has 0, "
+        "asked 1); its reports (report.json) are that run's, not this one's: nothing was written, so do not read "
+        f"them as this run's verdict; rerun with the same settings to resume it, or choose another --out (or "
+        f"delete {tmp_path}) for a new run")
+    with RunStore(tmp_path, {"episodes": 4, "seed": 0, "scenarios": ["a"]}) as same:
+        assert same.open() == {}
