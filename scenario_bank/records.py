@@ -45,7 +45,10 @@ checks the converted script passed, ``replay``: on an exact replay of the failin
 and trajectory hash that pin it, and the links between the two entries of one failure (``replay_entry`` on the
 converted script, ``converted`` on the replay). Sidecars without them (every older sidecar) load as before."""
 ENTRY_FILES = "files"
-"""The provenance field listing the files an entry carries in its own folder (relative paths)."""
+"""The provenance field listing the files an entry carries in its own folder (relative paths), in ``source``
+and in each ``source.merged`` record. They are added with the entry (``files=`` of ``Bank.add``), travel with
+``Bank.export``, ``Bank.import_archive`` and ``Bank.copy_to``, and ``dv2s bank validate`` reports one that is
+missing. Older sidecars have none."""
 
 
 class RecordError(DV2SError, ValueError):
@@ -87,8 +90,9 @@ class _Record(_MappingABC):
     _LISTS: ClassVar[Tuple[str, ...]] = ()
     _WHAT: ClassVar[str] = "record"
 
-    def _default_nulls(self) -> FrozenSet[str]:
-        """The fields written as ``null`` when ``None`` and :attr:`null_fields` was not given."""
+    def default_null_fields(self) -> FrozenSet[str]:
+        """The fields :meth:`to_dict` writes as ``null`` when they are ``None`` and ``null_fields`` is not given:
+        the ones the file format always writes."""
         return frozenset()
 
     @classmethod
@@ -128,7 +132,7 @@ class _Record(_MappingABC):
 
     def to_dict(self) -> Dict[str, Any]:
         """The JSON object of this record, as the files hold it (a new dict each call)."""
-        nulls = self._default_nulls() if self.null_fields is None else self.null_fields
+        nulls = self.default_null_fields() if self.null_fields is None else self.null_fields
         out: Dict[str, Any] = {}
         for key in self._KINDS:
             value = getattr(self, key)
@@ -230,10 +234,10 @@ class Provenance(_Record):
     def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
         kind = data.get("kind")
         if kind is not None and kind not in SOURCE_KINDS:
-            raise RecordError(f"provenance field 'kind' must be one of {SOURCE_KINDS}, not {_shown(kind)}")
+            raise RecordError(f"provenance kind (field 'kind') must be one of {SOURCE_KINDS}, not {_shown(kind)}")
         return {}
 
-    def _default_nulls(self) -> FrozenSet[str]:
+    def default_null_fields(self) -> FrozenSet[str]:
         mined = (key for key in MINED_PROVENANCE_FIELDS if key != "merged") if self.kind == "mined" else ()
         return frozenset(PROVENANCE_FIELDS) | frozenset(mined)
 
@@ -286,7 +290,7 @@ class Sidecar(_Record):
     _LISTS: ClassVar[Tuple[str, ...]] = ("tags",)
     _WHAT: ClassVar[str] = "sidecar"
 
-    def _default_nulls(self) -> FrozenSet[str]:
+    def default_null_fields(self) -> FrozenSet[str]:
         return frozenset(self._KINDS) - {"story"}
 
     @property
@@ -344,7 +348,7 @@ class EpisodeRecord(_Record):
     _LISTS: ClassVar[Tuple[str, ...]] = ("worker_restarts",)
     _WHAT: ClassVar[str] = "episode record"
 
-    def _default_nulls(self) -> FrozenSet[str]:
+    def default_null_fields(self) -> FrozenSet[str]:
         return frozenset(self._KINDS) - {"behaviour", "failure_state", "worker_restarts"}
 
     @property
