@@ -76,7 +76,9 @@ _RESUME_KEYS = ("policy", "sampler", "sampler_options", "feedback", "seed", "bat
 
 @dataclass
 class MineRun:
-    """What a mining run found (the run folder holds everything, this is a summary)."""
+    """What a mining run found (the run folder holds everything, this is a summary): its ``records``
+    (:class:`~scenario_bank.records.EpisodeRecord`, given as records or their JSON objects), the behaviour
+    cluster of each failure by index, the conversions and the reports written."""
 
     out: Path
     settings: Dict[str, Any]
@@ -85,6 +87,9 @@ class MineRun:
     conversions: List[Dict[str, Any]] = field(default_factory=list)
     reports: Dict[str, Path] = field(default_factory=dict)
     seconds: float = 0.0
+
+    def __post_init__(self) -> None:
+        self.records = [EpisodeRecord.from_dict(r) for r in self.records]  # records given as their JSON objects
 
     @property
     def failures(self) -> List[EpisodeRecord]:
