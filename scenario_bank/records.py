@@ -308,7 +308,8 @@ class EpisodeRecord(_Record):
     (:meth:`policies.evaluation.EpisodeResult.to_json`), its ``failure`` (``type``, ``kind``, ``time``, ...; ``None``
     when it drove safely), robustness ``rho``, the reference driver's outcome on the same scene (``reference``,
     ``avoidable``), the saved ``trace`` of a failed episode (relative to the run folder), ``error`` (the episode
-    could not run: no failure of the policy), a failure's ``behaviour`` and ``failure_state``, the
+    could not run: no failure of the policy), a failure's ``behaviour`` (who else was involved and what each side
+    was doing) and ``failure_state`` (the numbers describing the scene at the failure), the
     ``worker_restarts`` it survived, and the ``sampler`` with the ``point`` and ``proposal`` density it was drawn
     from. Other keys are kept in ``extra``.
 
@@ -330,7 +331,7 @@ class EpisodeRecord(_Record):
     error: Optional[str] = None
     family: Optional[str] = None
     behaviour: Optional[Mapping[str, Any]] = None
-    failure_state: Optional[Mapping[str, Any]] = None
+    failure_state: Optional[Tuple[float, ...]] = None
     worker_restarts: Optional[Tuple[Any, ...]] = None
     sampler: Optional[str] = None
     point: Optional[Any] = None
@@ -341,11 +342,11 @@ class EpisodeRecord(_Record):
     _KINDS: ClassVar[Dict[str, str]] = {
         "index": "int", "scenario": "str", "seed": "int", "policy": "str", "params": "object", "result": "object",
         "failure": "object", "rho": "number", "reference": "object", "avoidable": "bool", "trace": "str",
-        "error": "str", "family": "str", "behaviour": "object", "failure_state": "object",
+        "error": "str", "family": "str", "behaviour": "object", "failure_state": "list",
         "worker_restarts": "list", "sampler": "str", "point": "any", "proposal": "any",
     }
     _REQUIRED: ClassVar[Tuple[str, ...]] = ("index", "scenario", "seed")
-    _LISTS: ClassVar[Tuple[str, ...]] = ("worker_restarts",)
+    _LISTS: ClassVar[Tuple[str, ...]] = ("failure_state", "worker_restarts")
     _WHAT: ClassVar[str] = "episode record"
 
     def default_null_fields(self) -> FrozenSet[str]:

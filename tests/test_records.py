@@ -32,7 +32,7 @@ EPISODE = {
     "params": {"gap": 20.0}, "result": {"mean_speed": 21.5, "min_ttc": 0.4, "trajectory_hash": "ab"},
     "failure": {"type": "collision", "kind": "collision:rear_end"}, "rho": -1.0,
     "reference": {"policy": "rule", "failure": None}, "avoidable": True, "trace": "traces/000003.json.gz",
-    "error": None, "family": "highway_lead_vehicle_brakes", "behaviour": {"actor": "lead"},
+    "error": None, "family": "highway_lead_vehicle_brakes", "behaviour": {"actor": "lead"}, "failure_state": [0.5, 1.0],
     "sampler": "random", "point": [0.1, [0.2]], "proposal": None,
 }
 
@@ -148,7 +148,7 @@ def test_an_entry_hands_out_its_provenance_and_names_itself_when_it_is_malformed
 def test_an_episode_record_round_trips_and_reads_its_outcome():
     record = EpisodeRecord.from_dict(EPISODE)
     assert record.to_dict() == EPISODE and record == EPISODE
-    assert "failure_state" not in record and "worker_restarts" not in record.to_dict()
+    assert record.failure_state == (0.5, 1.0) and "worker_restarts" not in record.to_dict()
     assert record.id == "highway_lead_vehicle_brakes/1234" and record.failed and record.outcome == "failed"
     assert record.failure_type == "collision" and record.mean_speed == 21.5 and record.min_ttc == 0.4
     assert record["point"] == [0.1, [0.2]] and record.get("missing") is None
@@ -167,6 +167,7 @@ def test_an_episode_record_round_trips_and_reads_its_outcome():
     ({"rho": "low"}, "'rho' must be a number"),
     ({"avoidable": 1}, "'avoidable' must be true or false"),
     ({"worker_restarts": "twice"}, "'worker_restarts' must be a list"),
+    ({"failure_state": {"speed": 1.0}}, "'failure_state' must be a list"),
 ])
 def test_an_episode_record_field_of_the_wrong_kind_is_named(change, wanted):
     with pytest.raises(RecordError, match=f"episode record field {wanted}"):
