@@ -99,7 +99,7 @@ class MineRun:
     @property
     def avoidable(self) -> List[EpisodeRecord]:
         """Failures the reference driver avoided in the same scene (they count against the policy)."""
-        return [r for r in self.failures if r.get("avoidable") is not False]
+        return [r for r in self.failures if r.avoidable is not False]
 
     @property
     def distinct_clusters(self) -> int:
@@ -226,7 +226,7 @@ class _Recorder:
 
     def __init__(self, appender: _Appender, done: Dict[int, EpisodeRecord], sampler: str, out: Path, bar) -> None:
         self.appender, self.done, self.sampler, self.out, self.bar = appender, done, sampler, out, bar
-        counted = [r for r in done.values() if r.get("failure") and not r.get("error")]
+        counted = [r for r in done.values() if r.failed]
         self.found = {cluster_id(r) for r in counted}
         self.failed = len(counted)
 
