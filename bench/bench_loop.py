@@ -5,8 +5,11 @@
 
 Runs ``python -m dv2s_gym.cli loop --out <fresh folder> --no-progress [extra options]`` as a child process (the
 same process a user starts with ``dv2s loop``: interpreter start, imports, the working bank's copy, every step,
-the reports) and prints its wall time, the machine's load average before and after, the core count, and the
-loop's own per-step timings and headline figures from ``loop.json``. Each run starts from an empty folder: a
+the reports) and prints its wall time, the machine's load average before, during (sampled every 10 s) and after,
+the core count, the CPU time of the process tree (every descendant's user and system time read from ``/proc``
+every 2 s, so a process living less than that may be missed: a lower bound; on idle cores the wall time is at
+least that CPU time spread over every core), and the loop's own per-step timings and headline figures from
+``loop.json``. Each run starts from an empty folder: a
 resumed loop would skip finished steps. The round's log goes to ``<folder>/bench_loop.log``.
 """
 
@@ -29,6 +32,29 @@ def _rate(r: Optional[Dict[str, Any]]) -> str:
     if not r or r.get("rate") is None:
         return "-"
     return f"{r['k']}/{r['n']} = {r['rate']:.2f} [{r['low']:.2f}, {r['high']:.2f}]"
+
+
+def _tree_cpu(root: int, seen: Dict[int, float]) -> None:
+    """Record in ``seen`` (pid -> CPU seconds) the user + system time of ``root`` and its descendants now."""
+    parents: Dict[int, int] = {}
+    times: Dict[int, float] = {}
+    tick = os.sysconf("SC_CLK_TCK")
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/stat", encoding="utf-8") as handle:
+                fields = handle.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        parents[int(entry)] = int(fields[1])
+        times[int(entry)] = (int(fields[11]) + int(fields[12])) / tick
+    for pid, seconds in times.items():
+        ancestor, hops = pid, 0
+        while ancestor not in (root, 0, 1) and hops < 50:
+            ancestor, hops = parents.get(ancestor, 0), hops + 1
+        if ancestor == root:
+            seen[pid] = max(seen.get(pid, 0.0), seconds)
 
 
 def summarize(out: Path) -> List[str]:
@@ -80,15 +106,31 @@ def main(argv: Optional[List[str]] = None) -> int:
     load_before = os.getloadavg()
     started = time.time()
     log_path = out.parent / f"{out.name}.bench_loop.log"
+    loads: List[float] = []
+    cpu_seen: Dict[int, float] = {}
     with open(log_path, "w", encoding="utf-8") as log:
-        code = subprocess.call(command, stdout=log, stderr=subprocess.STDOUT)
+        child = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT)
+        ticks = 0
+        while True:
+            _tree_cpu(child.pid, cpu_seen)
+            try:
+                code = child.wait(timeout=2)
+                break
+            except subprocess.TimeoutExpired:
+                ticks += 1
+                if ticks % 5 == 0:
+                    loads.append(os.getloadavg()[0])
     wall = time.time() - started
     load_after = os.getloadavg()
+    cpu = sum(cpu_seen.values())
     print(f"command: {' '.join(command)}")
     print(f"machine: {platform.platform()}, {os.cpu_count()} cores, Python {platform.python_version()}")
     print(f"date: {time.strftime('%Y-%m-%d %H:%M', time.gmtime(started))} UTC; load average before "
-          f"{load_before[0]:.1f}, after {load_after[0]:.1f} (1 min)")
-    print(f"exit status {code}; wall time {wall:.0f} s ({wall / 60:.1f} min); log {log_path}")
+          f"{load_before[0]:.1f}, during {min(loads, default=load_before[0]):.1f}-{max(loads, default=load_before[0]):.1f} "
+          f"(mean {sum(loads) / len(loads) if loads else load_before[0]:.1f}), after {load_after[0]:.1f} (1 min)")
+    print(f"exit status {code}; wall time {wall:.0f} s ({wall / 60:.1f} min); CPU time of the process tree at "
+          f"least {cpu:.0f} s ({len(cpu_seen)} processes; over {os.cpu_count()} cores "
+          f"{cpu / (os.cpu_count() or 1):.0f} s); log {log_path}")
     if (out / "loop.json").is_file():
         for line in summarize(out):
             print(line)

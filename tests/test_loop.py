@@ -756,3 +756,41 @@ def test_an_inconclusive_regression_test_leaves_the_policy_not_accepted(tmp_path
     verdict = json.loads((tmp_path / "loop" / "report.json").read_text())["recommendation"]
     assert code == 3 and verdict["verdict"] == "NOT ACCEPTED" and "INCONCLUSIVE" in verdict["reason"]
     assert verdict["policy"] == "dv2s-ppo"
+
+
+def test_the_next_round_starts_from_the_policy_the_verdict_recommends(tmp_path, monkeypatch):
+    """Round 1 regresses (REJECTED): round 2 starts from the starting policy; round 2 passes (ACCEPTED): round 3
+    starts from round 2's policy; round 3 cannot tell (NOT ACCEPTED): round 2's stays the policy to use."""
+    import dv2s_gym.regress.runner as runner
+
+    stand = _StandIns(monkeypatch)
+    stand_in = runner.run_regression
+    verdicts = {"round_1": "FAIL", "round_2": "PASS", "round_3": "INCONCLUSIVE"}
+
+    def regression(candidate, baseline=None, settings=None, **options):
+        report = stand_in(candidate, baseline, settings, **options)
+        return {**report, "verdict": verdicts[__import__("pathlib").Path(options["out_dir"]).parent.name]}
+
+    monkeypatch.setattr(runner, "run_regression", regression)
+    miner, lines = FakeMiner(WIRING["scenarios"], failures_per_round=6), []
+    settings = {**WIRING, "untouched_seeds": 0, "min_heldout_episodes": 1, "min_heldout_families": 1}
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=3, miner=miner, log=lines.append, **settings)
+    first, second, third = report.rounds
+    assert [r["policy"] for r in report.rounds] == ["dv2s-ppo", "dv2s-ppo", second["new_policy"]]
+    assert [call["policy"] for call in miner.calls] == ["dv2s-ppo", "dv2s-ppo", second["new_policy"]]
+    tuned_from = [call["policy"] for call in stand.fine_tunes]
+    assert tuned_from == ["dv2s-ppo"] * 4 + [second["new_policy"]] * 2  # both arms of each round
+    assert first["next_policy"] == "dv2s-ppo" and first["next_policy_reason"].startswith("REJECTED")
+    assert second["next_policy"] == second["new_policy"] and second["next_policy_reason"].startswith("ACCEPTED")
+    assert third["next_policy"] == second["new_policy"] and third["next_policy_reason"].startswith("NOT ACCEPTED")
+    assert f"round 1: round 2 starts from dv2s-ppo: {first['next_policy_reason']}" in lines
+    assert any(line.startswith(f"round 2: round 3 starts from {second['new_policy']}: ACCEPTED") for line in lines)
+    verdict = json.loads(report.paths["json"].read_text())["recommendation"]
+    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["policy"] == second["new_policy"]
+    assert f"Policy to use: `{second['new_policy']}`" in report.paths["md"].read_text()
+    saved = json.loads((tmp_path / "loop" / "loop.json").read_text())["rounds"]
+    assert [r["next_policy"] for r in saved] == ["dv2s-ppo", second["new_policy"], second["new_policy"]]
+
+    again = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=3, miner=miner, log=lines.append, **settings)
+    assert len(miner.calls) == 3 and len(stand.fine_tunes) == 6  # resumed: nothing re-run, the same starts
+    assert [r["next_policy"] for r in again.rounds] == [r["next_policy"] for r in saved]

@@ -64,3 +64,15 @@ def test_loop_help_documents_each_exit_status(capsys):
     text = capsys.readouterr().out
     for line in ("  0  ACCEPTED: ", "  1  REJECTED: ", "  3  NOT ACCEPTED: ", "  2  bad input; 130 interrupted"):
         assert line in text
+
+
+def test_a_round_too_small_to_judge_says_so_and_points_to_the_evidence_profile():
+    small = _round(1, "INCONCLUSIVE")
+    small["steps"]["after"]["underpowered"] = "only 16 held-out episode(s)"
+    verdict = recommendation(_report(small))
+    assert verdict["verdict"] == "NOT ACCEPTED" and "too few held-out episodes" in verdict["too_small"]
+    assert "TOO SMALL TO JUDGE" in verdict["sentence"] and "dv2s loop --profile evidence" in verdict["sentence"]
+    judged = recommendation(_report(_round(1, "PASS")))
+    assert judged["too_small"] is None and "TOO SMALL" not in judged["sentence"]
+    failed = recommendation(_report(_round(1, "FAIL")))
+    assert failed["verdict"] == "REJECTED" and failed["too_small"] is None

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 
 import pytest
 
 from dv2s_gym.cli.parser import Parser
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.loop_settings import DEFAULTS, LoopError, LoopSettings
+from dv2s_gym.cli.loop import loop_settings
+from dv2s_gym.mining.loop_settings import DEFAULTS, EVIDENCE, LoopError, LoopSettings
 from dv2s_gym.mining.settings import MineSettings
 from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.settings import RegressSettings
@@ -31,11 +33,33 @@ def test_the_command_line_defaults_are_the_settings_defaults():
     settings = MineSettings()
     for key in ("budget", "sampler", "seed", "reference", "ttc_threshold", "stall_seconds", "batch", "max_conversions"):
         assert mine[key] == getattr(settings, key), key
+    assert loop["profile"] == "quick" and loop_settings(argparse.Namespace(**loop)) == LoopSettings()
     for key in ("rounds", "budget", "sampler", "fine_tune_steps", "holdout_fraction", "k_eval", "min_heldout_episodes",
                 "min_heldout_families", "untouched_seeds", "regress_episodes", "mined_share", "fine_tune_method",
-                "margin", "seed"):
-        assert loop[key] == DEFAULTS[key] == getattr(LoopSettings, key), key
+                "margin", "seed", "max_conversions", "max_replays"):
+        assert DEFAULTS[key] == getattr(LoopSettings, key), key
     assert loop["envs"] == LoopSettings().n_envs and DAGGER_DEFAULTS["iterations"] == DaggerConfig().iterations
+
+
+def _loop_args(*argv: str):
+    from dv2s_gym.cli import loop
+
+    parser = Parser(prog="dv2s")
+    loop.add_parser(parser.add_subparsers())
+    return loop_settings(parser.parse_args(["loop", *argv]))
+
+
+def test_a_loop_profile_sets_the_defaults_and_explicit_options_override_it():
+    evidence = _loop_args("--profile", "evidence")
+    assert evidence == LoopSettings.evidence() == LoopSettings(**EVIDENCE) != LoopSettings()
+    assert evidence.budget > LoopSettings().budget and evidence.k_eval > LoopSettings().k_eval
+    given = _loop_args("--profile", "evidence", "--budget", "7", "--max-replays", "all", "--no-control")
+    assert given == LoopSettings.evidence(budget=7, max_replays=None, control=False)
+    assert (given.budget, given.max_replays, given.control, given.fine_tune_steps) == (
+        7, None, False, EVIDENCE["fine_tune_steps"])
+    assert _loop_args("--k-eval", "9") == LoopSettings(k_eval=9)
+    with pytest.raises(LoopError, match="--profile must be one of quick, evidence, not 'huge'"):
+        LoopSettings.from_profile("huge")
 
 
 def test_settings_are_frozen_and_resolve_their_derived_defaults():

@@ -9,7 +9,7 @@ from typing import Any, List, Mapping, Optional
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.parser import bank_option
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "run", "loop_settings"]
 
 
 EPILOG = """\
@@ -22,20 +22,20 @@ exit status (the verdict on the last round's fine-tuned policy; the summary name
   2  bad input; 130 interrupted
 
 examples:
-  dv2s loop                                   # one round on dv2s-ppo, out/loop
-  dv2s loop --budget 400 --fine-tune-steps 100000 --k-eval 10 --out out/loop-big
+  dv2s loop                                   # one quick round on dv2s-ppo, out/loop
+  dv2s loop --profile evidence --out out/loop-evidence   # a round large enough to judge
+  dv2s loop --profile evidence --rounds 3 --budget 400 --out out/loop-big   # options override the profile
   dv2s loop --policy ppo:out/train/my_ppo/model.zip --rounds 3"""
 """The end of ``dv2s loop --help``: what the exit status says, and examples."""
 
 
 def add_parser(subparsers) -> None:
     """Add ``loop`` to the ``dv2s`` subcommands."""
-    from dv2s_gym.mining.loop import DEFAULTS as LOOP
-    from dv2s_gym.mining.loop_settings import LoopSettings
+    from dv2s_gym.mining.loop_settings import DEFAULT_PROFILE, DEFAULTS as LOOP, EVIDENCE, PROFILES, LoopSettings
 
-    p = subparsers.add_parser("loop", help="mine a policy's failures, add them to the bank, fine-tune, measure (a round "
-                              "on embedded defaults that keeps scenarios took 45-55 minutes on 2 cores; --budget and "
-                              "--max-replays shorten it)",
+    p = subparsers.add_parser("loop", help="mine a policy's failures, add them to the bank, fine-tune, measure (one round "
+                              "on the embedded defaults, sized for about 5 minutes on 2 idle cores; --profile evidence for "
+                              "a round large enough to judge)",
                               formatter_class=argparse.RawDescriptionHelpFormatter,
                               description="Closed-loop failure mining. Each round: mine the policy's failures (dv2s mine) "
                               "into new bank scenarios in a working bank (a copy of the shipped bank in the bank folder of --out, out/loop/bank by default; or --bank), "
@@ -49,54 +49,61 @@ def add_parser(subparsers) -> None:
                               "--out and settings resumes (raise --rounds to add rounds).",
                               epilog=EPILOG)
     p.add_argument("--policy", default="dv2s-ppo", help="starting policy: an SB3 checkpoint spec (default dv2s-ppo)")
-    p.add_argument("--rounds", type=int, default=LOOP["rounds"], help=f"rounds (default {LOOP['rounds']})")
+    p.add_argument("--profile", choices=list(PROFILES), default=DEFAULT_PROFILE,
+                   help="the settings every option below defaults to: quick (the embedded defaults: a round sized for "
+                   "about 5 minutes on 2 idle cores, too small to judge the fine-tuned policy) or evidence (a round large "
+                   "enough to judge, an hour or more: " + ", ".join(f"--{k.replace('_', '-')} {v}"
+                                                                    for k, v in EVIDENCE.items())
+                   + "); options given explicitly override the profile's values")
+    p.add_argument("--rounds", type=int, default=None, help=_default("rounds", "rounds"))
     bank_option(p)
     p.add_argument("--scenarios", nargs="+", help="scenarios mined and regression-tested (default: the whole bank)")
-    p.add_argument("--budget", type=int, default=LOOP["budget"],
-                   help=f"mining episodes per round (default {LOOP['budget']})")
-    p.add_argument("--sampler", default=LOOP["sampler"], help=f"the miner's sampler: random, halton, cross-entropy, "
-                   f"bandit, split or novelty-bandit (default {LOOP['sampler']}; see dv2s mine --help)")
-    p.add_argument("--fine-tune-steps", type=int, default=LOOP["fine_tune_steps"],
-                   help=f"env steps of fine-tuning per round (default {LOOP['fine_tune_steps']})")
-    p.add_argument("--fine-tune-lr", type=float, default=LOOP["fine_tune_lr"],
+    p.add_argument("--budget", type=int, default=None, help=_default("budget", "mining episodes per round"))
+    p.add_argument("--sampler", default=None, help=_default("sampler", "the miner's sampler: random, halton, "
+                   "cross-entropy, bandit, split or novelty-bandit (see dv2s mine --help)"))
+    p.add_argument("--fine-tune-steps", type=int, default=None,
+                   help=_default("fine_tune_steps", "env steps of fine-tuning per round, each arm"))
+    p.add_argument("--fine-tune-lr", type=float, default=None,
                    help="learning rate of the fine-tuning (default: the method's, ppo 1e-4, dagger 1e-3)")
-    p.add_argument("--holdout-fraction", type=float, default=LOOP["holdout_fraction"],
-                   help=f"share of the mined families (parent scenarios) held out (default {LOOP['holdout_fraction']})")
-    p.add_argument("--max-conversions", default=str(LOOP["max_conversions"]),
-                   help="failure clusters converted into bank scenarios per round, largest first; 0 for none, 'all' "
-                   f"for every cluster (default {LOOP['max_conversions']})")
-    p.add_argument("--max-replays", default=str(LOOP["max_replays"]),
-                   help="failure clusters beyond the converted ones whose failing scene is kept as an exact replay "
-                   "entry (the parent scenario narrowed around the failure, checked to replay it step for step) per "
-                   f"round, largest first; 0 for none, 'all' for every cluster (default {LOOP['max_replays']})")
-    p.add_argument("--min-heldout-episodes", type=int, default=LOOP["min_heldout_episodes"],
-                   help="below this many held-out episodes a round reports rates only, no drop and no test "
-                   f"(default {LOOP['min_heldout_episodes']})")
-    p.add_argument("--min-heldout-families", type=int, default=LOOP["min_heldout_families"],
-                   help="below this many held-out scenario families a round reports rates only, no drop and no "
-                   f"test (default {LOOP['min_heldout_families']})")
+    p.add_argument("--holdout-fraction", type=float, default=None,
+                   help=_default("holdout_fraction", "share of the mined families (parent scenarios) held out"))
+    p.add_argument("--max-conversions", default=None,
+                   help=_default("max_conversions", "failure clusters converted into bank scenarios per round, "
+                                 "largest first; 0 for none, 'all' for every cluster; the clusters not converted are "
+                                 "counted in the log and the reports"))
+    p.add_argument("--max-replays", default=None,
+                   help=_default("max_replays", "failure clusters beyond the converted ones whose failing scene is "
+                                 "kept as an exact replay entry (the parent scenario narrowed around the failure, "
+                                 "checked to replay it step for step) per round, largest first; 0 for none, 'all' "
+                                 "for every cluster"))
+    p.add_argument("--min-heldout-episodes", type=int, default=None,
+                   help=_default("min_heldout_episodes", "below this many held-out episodes a round reports rates "
+                                 "only, no drop and no test"))
+    p.add_argument("--min-heldout-families", type=int, default=None,
+                   help=_default("min_heldout_families", "below this many held-out scenario families a round "
+                                 "reports rates only, no drop and no test"))
     p.add_argument("--no-control", action="store_true",
                    help="skip the control arm (the same fine-tuning without the mined scenarios)")
-    p.add_argument("--untouched-seeds", type=int, default=LOOP["untouched_seeds"],
-                   help="seeds per scenario of the untouched set the loop never mines or fine-tunes on; 0 skips it "
-                   f"(default {LOOP['untouched_seeds']})")
-    p.add_argument("--k-eval", type=int, default=LOOP["k_eval"],
-                   help=f"evaluation seeds per held-out scenario (default {LOOP['k_eval']})")
-    p.add_argument("--regress-episodes", type=int, default=LOOP["regress_episodes"],
-                   help=f"seeds per scenario of the regression test (default {LOOP['regress_episodes']})")
-    p.add_argument("--mined-share", type=float, default=LOOP["mined_share"],
-                   help=f"probability of a mined scenario in fine-tuning (default {LOOP['mined_share']})")
+    p.add_argument("--untouched-seeds", type=int, default=None,
+                   help=_default("untouched_seeds", "seeds per scenario of the untouched set the loop never mines "
+                                 "or fine-tunes on; 0 skips it"))
+    p.add_argument("--k-eval", type=int, default=None,
+                   help=_default("k_eval", "evaluation seeds per held-out scenario"))
+    p.add_argument("--regress-episodes", type=int, default=None,
+                   help=_default("regress_episodes", "seeds per scenario of the regression test"))
+    p.add_argument("--mined-share", type=float, default=None,
+                   help=_default("mined_share", "probability of a mined scenario in fine-tuning"))
     p.add_argument("--fine-tune-reward", default=None, metavar="JSON",
                    help="reward-term weights overriding the policy's own during fine-tuning only, e.g. "
                    f"'{{\"standing\": -1.0, \"low_ttc\": -0.4}}' (default {json.dumps(LOOP['fine_tune_reward'])}; "
                    "'{}' keeps the policy's reward; evaluation always uses the policy's own env config)")
-    p.add_argument("--fine-tune-method", choices=["ppo", "dagger"], default=LOOP["fine_tune_method"],
-                   help="ppo: continue PPO on the fine-tuning reward; dagger: imitate the rule-based reference "
-                   "driver on the policy's own states (DAgger; --fine-tune-reward unused) "
-                   f"(default {LOOP['fine_tune_method']})")
-    p.add_argument("--margin", type=float, default=LOOP["margin"],
-                   help=f"the regression test's non-inferiority margin (default {LOOP['margin']})")
-    p.add_argument("--seed", type=int, default=LOOP["seed"], help=f"seed (default {LOOP['seed']})")
+    p.add_argument("--fine-tune-method", choices=["ppo", "dagger"], default=None,
+                   help=_default("fine_tune_method", "ppo: continue PPO on the fine-tuning reward; dagger: imitate "
+                                 "the rule-based reference driver on the policy's own states (DAgger; "
+                                 "--fine-tune-reward unused)"))
+    p.add_argument("--margin", type=float, default=None,
+                   help=_default("margin", "the regression test's non-inferiority margin"))
+    p.add_argument("--seed", type=int, default=None, help=_default("seed", "seed"))
     p.add_argument("--workers", type=int, default=None, help="processes for mining and evaluation (default: every core)")
     p.add_argument("--envs", type=int, default=LoopSettings.n_envs,
                    help=f"training environments (default {LoopSettings.n_envs})")
@@ -108,16 +115,31 @@ def add_parser(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run (or resume) the loop in ``--out``; print a summary, the verdict and the report paths. The exit status
     is the verdict's (:data:`EPILOG`)."""
-    from dv2s_gym.mining.loop import DEFAULT_OUT, LoopSettings, run_loop
+    from dv2s_gym.mining.loop import DEFAULT_OUT, run_loop
 
-    options = {key: getattr(args, key) for key in ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr",
-                                                    "holdout_fraction", "k_eval", "regress_episodes", "mined_share",
-                                                    "margin", "seed", "workers", "scenarios",
-                                                    "fine_tune_method", "max_conversions", "min_heldout_episodes", "min_heldout_families",
-                                                    "untouched_seeds")}
+    out = args.out or DEFAULT_OUT
+    report = run_loop(args.policy, loop_settings(args), out=out, progress=not args.no_progress)
+    print("\n".join(summary_lines({**report.to_json(), "recommendation": report.recommendation}, report.paths)))
+    return int(report.recommendation["exit_code"])
+
+
+_VALUED = ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr", "holdout_fraction", "k_eval",
+           "regress_episodes", "mined_share", "margin", "seed", "workers", "scenarios", "fine_tune_method",
+           "min_heldout_episodes", "min_heldout_families", "untouched_seeds")
+"""The options whose value, when given, overrides the profile's (an option not given is ``None``)."""
+
+
+def loop_settings(args: argparse.Namespace):
+    """The :class:`~dv2s_gym.mining.loop_settings.LoopSettings` of ``dv2s loop``'s arguments: ``--profile``'s
+    values with every option given explicitly on top."""
+    from dv2s_gym.mining.loop_settings import LoopSettings
+
+    options = {key: getattr(args, key) for key in _VALUED if getattr(args, key) is not None}
     for flag in ("max_conversions", "max_replays"):
-        options[flag] = _count_or_all(getattr(args, flag), "--" + flag.replace("_", "-"))
-    options["control"] = not args.no_control
+        if getattr(args, flag) is not None:
+            options[flag] = _count_or_all(getattr(args, flag), "--" + flag.replace("_", "-"))
+    if args.no_control:
+        options["control"] = False
     if args.fine_tune_reward is not None:
         try:
             options["fine_tune_reward"] = json.loads(args.fine_tune_reward)
@@ -127,11 +149,19 @@ def run(args: argparse.Namespace) -> int:
         if not isinstance(options["fine_tune_reward"], dict):
             raise UsageError("--fine-tune-reward must be a JSON object of reward-term weights, e.g. "
                              "'{\"standing\": -1.0}' ('{}' keeps the policy's own reward)")
-    out = args.out or DEFAULT_OUT
-    settings = LoopSettings(bank_dir=getattr(args, "bank", None), n_envs=args.envs, **options)
-    report = run_loop(args.policy, settings, out=out, progress=not args.no_progress)
-    print("\n".join(summary_lines({**report.to_json(), "recommendation": report.recommendation}, report.paths)))
-    return int(report.recommendation["exit_code"])
+    return LoopSettings.from_profile(getattr(args, "profile", None) or "quick", bank_dir=getattr(args, "bank", None),
+                                     n_envs=args.envs, **options)
+
+
+def _default(key: str, text: str) -> str:
+    """``text`` with the option's default and, where it differs, the evidence profile's value."""
+    from dv2s_gym.mining.loop_settings import DEFAULTS, EVIDENCE
+
+    def shown(value: Any) -> str:
+        return "all" if value is None and key in ("max_conversions", "max_replays") else str(value)
+
+    evidence = f"; --profile evidence: {shown(EVIDENCE[key])}" if key in EVIDENCE else ""
+    return f"{text} (default {shown(DEFAULTS[key])}{evidence})"
 
 
 def summary_lines(report: Mapping[str, Any], paths: Mapping[str, Any]) -> List[str]:

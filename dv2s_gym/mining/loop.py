@@ -44,7 +44,10 @@ e'. **untouched**: start, control and fine-tuned run on the scenario set the loo
    (failure rates, stalls apart, mean speed; fine-tuned vs start and control vs fine-tuned);
 f. **regress**: :func:`dv2s_gym.regress.runner.run_regression` new against old on the starting
    bank's scenarios (PASS / FAIL / INCONCLUSIVE against ``margin``);
-g. the next round starts from the new policy.
+g. the next round starts from the policy the verdict on this round recommends
+   (:func:`dv2s_gym.mining.loop_verdict.recommendation` over the rounds so far): the fine-tuned policy when it
+   was ACCEPTED, else the last accepted one, else the starting policy (``next_policy`` and
+   ``next_policy_reason`` in the round's record).
 
 Everything lives under ``out``: ``loop.json`` (settings and every finished step, written
 atomically after each), ``bank/``, ``round_<r>/{mine,heldout.jsonl,policy,control,untouched,regress}`` and the
@@ -99,7 +102,8 @@ class LoopReport:
     out: Path
     rounds: List[Dict[str, Any]]
     policy: str
-    """The spec of the last round's fine-tuned policy (the starting policy if no round fine-tuned)."""
+    """The spec of the last round's fine-tuned policy (the starting policy if no round fine-tuned); the policy to
+    use is :attr:`recommendation`'s."""
     paths: Dict[str, Path]
     settings: Dict[str, Any]
 
@@ -346,7 +350,7 @@ def run_loop(policy: str = "dv2s-ppo", settings: Optional[LoopSettings] = None, 
     current = policy
     for number in range(1, settings.rounds + 1):
         current = _run_round(loop, number, current)
-    return _write(out, loop.state, current)
+    return _write(out, loop.state)
 
 
 @dataclasses.dataclass
@@ -421,10 +425,11 @@ class _Timed:
         self.stages = ["mine", "split", "before", "fine_tune"] + (["control"] if control else []) + ["after"] + (
             ["untouched"] if untouched else []) + ["regress"]
 
-    def __call__(self, step: str, function: Callable[[], Any]) -> Any:
+    def __call__(self, step: str, function: Callable[[], Any], plan: str = "") -> Any:
+        """Run ``function`` as ``step``; ``plan`` says what it will do (its size), in the step's opening line."""
         log, timings = self.loop.log, self.record["timings"]
         where = f"round {self.number} [{self.stages.index(step) + 1}/{len(self.stages)}] {_STAGE_NAMES[step]}"
-        log(f"{where} ...")
+        log(f"{where}: {plan} ..." if plan else f"{where} ...")
         began = time.perf_counter()
         value = function()
         timings[step] = round(time.perf_counter() - began, 1)  # of the run that finished the step
@@ -438,34 +443,70 @@ def _run_round(loop: _Loop, number: int, current: str) -> str:
     """Run (or finish) round ``number`` from policy ``current``; the policy the next round starts from."""
     record = loop.state.round(number)
     steps = record["steps"]
+    if steps and record.get("policy") not in (None, current):  # begun by an earlier version from another policy
+        current = _earlier_round_spec(record["policy"], loop, number)
     record.setdefault("policy", current)
     round_dir = loop.out / f"round_{number}"
     if "regress" in steps or steps.get("skipped"):
-        if record.get("new_policy"):
-            current = _round_spec(record["new_policy"], round_dir / "policy", loop.out)
-        return current
+        return _next_start(loop, number, current)
     loop.log(f"round {number}: policy {current}")
     timed = _Timed(loop, number, record)
     if "mine" not in steps:
-        timed("mine", lambda: _mine_step(loop, number, current, round_dir))
+        timed("mine", lambda: _mine_step(loop, number, current, round_dir), _mine_plan(loop))
         _log_mined(loop, number, steps["mine"])
     if "split" not in steps:
         held_families, tuned_families = _earlier_sides(loop.state.data["rounds"][:number - 1])
         timed("split", lambda: _split(steps["mine"]["kept"], loop.settings.holdout_fraction,
                                       loop.settings.seed * 1000 + number, loop.holdout_by, loop.bank,
-                                      held_families, tuned_families))
+                                      held_families, tuned_families),
+              f"{len(steps['mine']['kept'])} kept mined scenario(s) into fine-tuning and held-out families")
         if steps["split"].get("moved_to_fine_tune"):
             loop.log(f"round {number}: WARNING: earlier held-out famil(ies) "
                      f"{', '.join(steps['split']['moved_to_fine_tune'])} now share a mined scenario with a family "
                      "fine-tuned on earlier, so they are fine-tuned on from this round")
     if not steps["split"]["fine_tune"] and not steps["split"]["held_out"]:
         _skip_round(loop, number, steps)
-        _write(loop.out, loop.state, current)
-        return current
-    new_policy = _tune_and_measure(loop, number, current, round_dir, timed)
-    _log_round(loop.log, number, steps)
-    _write(loop.out, loop.state, new_policy)
-    return new_policy
+    else:
+        _tune_and_measure(loop, number, current, round_dir, timed)
+        _log_round(loop.log, number, steps)
+    following = _next_start(loop, number, current)
+    if number < loop.settings.rounds:
+        loop.log(f"round {number}: round {number + 1} starts from {following}: {record['next_policy_reason']}")
+    _write(loop.out, loop.state)
+    return following
+
+
+def _next_start(loop: _Loop, number: int, current: str) -> str:
+    """The policy round ``number + 1`` starts from: the one the verdict on rounds 1..``number`` recommends
+    (:func:`~dv2s_gym.mining.loop_verdict.recommendation`: never a REJECTED or NOT ACCEPTED fine-tuned policy),
+    recorded in round ``number``'s ``next_policy`` and ``next_policy_reason``."""
+    rounds = loop.state.data["rounds"][:number]
+    record = rounds[-1]
+    start = loop.state.data["settings"]["policy"]
+    advice = recommendation({"settings": {"policy": start}, "rounds": rounds})
+    if record.get("new_policy") is None and "fine_tune" not in record["steps"]:
+        following, reason = current, "this round fine-tuned no policy"
+    else:
+        following, reason = advice["policy"], advice["sentence"]
+        if following != start:
+            following = _earlier_round_spec(following, loop, number + 1)
+    if (record.get("next_policy"), record.get("next_policy_reason")) != (following, reason):
+        record["next_policy"], record["next_policy_reason"] = following, reason
+        loop.state.save()
+    return following
+
+
+def _earlier_round_spec(spec: Any, loop: _Loop, number: int) -> str:
+    """``spec`` read back from ``loop.json`` as the starting policy or the fine-tuned checkpoint of a round
+    before ``number`` (anything else is refused, as :func:`_round_spec` does)."""
+    if spec == loop.state.data["settings"]["policy"]:
+        return spec
+    for earlier in range(number - 1, 0, -1):
+        try:
+            return _round_spec(spec, loop.out / f"round_{earlier}" / "policy", loop.out)
+        except LoopError:
+            continue
+    return _round_spec(spec, loop.out / f"round_{max(number - 1, 1)}" / "policy", loop.out)  # raises, naming it
 
 
 def _mine_step(loop: _Loop, number: int, current: str, round_dir: Path) -> Dict[str, Any]:
@@ -484,6 +525,21 @@ def _mine_step(loop: _Loop, number: int, current: str, round_dir: Path) -> Dict[
         replay_clusters(round_dir / "mine", bank_dir=loop.bank, max_replays=s.max_replays, progress=loop.progress)
     return {**_mining_summary(round_dir / "mine"), "kept": mined_entries(round_dir / "mine"),
             "folder": str(round_dir / "mine")}
+
+
+def _mine_plan(loop: _Loop) -> str:
+    """What the ``mine`` step will do, in words."""
+    s = loop.settings
+
+    def most(count: Optional[int], what: str) -> str:
+        return f"every cluster {what}" if count is None else f"at most {count} cluster(s) {what}"
+
+    return (f"{s.budget} episodes on {len(loop.start_names)} scenarios ({s.sampler} sampler), then "
+            f"{most(s.max_conversions, 'converted')} and {most(s.max_replays, 'kept as exact replays')}")
+
+
+def _count_scripts(bank: Path) -> int:
+    return sum(1 for _ in Path(bank).glob("*/scenario.scenic"))
 
 
 def _log_mined(loop: _Loop, number: int, mined: Mapping[str, Any]) -> None:
@@ -532,18 +588,24 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
     if "before" not in steps:
         timed("before", lambda: {"episodes": len(episodes), "done": bool(evaluate_heldout(
             "before", current, episodes, store=HeldOutStore(store_path), bank_dir=loop.bank,
-            env_config=loop.env_config, workers=loop.workers, progress=loop.progress))})
+            env_config=loop.env_config, workers=loop.workers, progress=loop.progress))},
+              f"{len(episodes)} episodes ({len(split['held_out'])} held-out scenario(s) x {s.k_eval} seeds)")
     new_policy, control_policy = _fine_tune_arms(loop, number, current, round_dir, timed)
     policies = {"before": current, "after": new_policy, "control": control_policy}
     if "after" not in steps:
-        timed("after", lambda: _after_step(loop, policies, episodes, HeldOutStore(store_path), families))
+        timed("after", lambda: _after_step(loop, policies, episodes, HeldOutStore(store_path), families),
+              f"{len(episodes)} episodes for the fine-tuned policy" + (" and as many for the control"
+                                                                       if control_policy else ""))
     if s.untouched_seeds and "untouched" not in steps:
         timed("untouched", lambda: evaluate_untouched(
             current, new_policy, control_policy, settings=untouched_settings(s.untouched_seeds, loop.env_config,
                                                                              s.margin),
-            out=round_dir / "untouched", workers=loop.workers, progress=loop.progress))
+            out=round_dir / "untouched", workers=loop.workers, progress=loop.progress),
+              f"{_count_scripts(UNTOUCHED_BANK)} scripts x {s.untouched_seeds} seed(s) for the starting, fine-tuned"
+              + (" and control policies" if control_policy else " policies"))
     if "regress" not in steps:
-        timed("regress", lambda: _regress_step(loop, new_policy, current, round_dir, split))
+        timed("regress", lambda: _regress_step(loop, new_policy, current, round_dir, split),
+              f"{len(loop.start_names)} scenarios x {s.regress_episodes} seed(s), fine-tuned against starting policy")
     return new_policy
 
 
@@ -563,7 +625,9 @@ def _fine_tune_arms(loop: _Loop, number: int, current: str, round_dir: Path, tim
                reward=s.fine_tune_reward, learning_rate=s.fine_tune_lr, progress=loop.progress, log=loop.log)
     if "fine_tune" not in steps:
         timed("fine_tune", lambda: _fine_tune_arm(current, round_dir / "policy", excluded, s.mined_share, arm,
-                                                  with_mined=True, label=f"round {number}"))
+                                                  with_mined=True, label=f"round {number}"),
+              f"{s.fine_tune_method} {s.fine_tune_steps} steps, the mined scenarios drawn with probability "
+              f"{s.mined_share}")
 
     def spec_of(model: str, folder: Path) -> str:
         _round_spec(f"ppo:{model}", folder, loop.out)  # loop.json is a file: only this round's own checkpoint
@@ -574,7 +638,8 @@ def _fine_tune_arms(loop: _Loop, number: int, current: str, round_dir: Path, tim
     if s.control:
         if "control" not in steps:
             timed("control", lambda: _fine_tune_arm(current, round_dir / "control", excluded, s.mined_share, arm,
-                                                    with_mined=False, label=f"round {number} control"))
+                                                    with_mined=False, label=f"round {number} control"),
+                  f"{s.fine_tune_method} {s.fine_tune_steps} steps without the mined scenarios")
         control_policy = spec_of(steps["control"]["model"], round_dir / "control")
         record["control_policy"] = control_policy
     return record["new_policy"], control_policy
@@ -632,7 +697,8 @@ def underpowered(episodes: int, minimum: int, families: Optional[int] = None,
     if not reasons:
         return None
     return ("; ".join(reasons) + ": this round reports held-out rates but no drop and no test; raise --k-eval, "
-            "--max-conversions, --max-replays or --budget for more held-out scenarios and families")
+            "--max-conversions, --max-replays or --budget for more held-out scenarios and families, or run "
+            "`dv2s loop --profile evidence`")
 
 
 def _families_of(kept: Sequence[Mapping[str, Any]], held_out: Sequence[str], bank: Optional[str]) -> Dict[str, str]:
@@ -875,9 +941,11 @@ def _log_round(log: Callable[[str], None], number: int, steps: Mapping[str, Any]
     log(f"round {number}: rest of the bank: {regress.get('verdict')} ({regress.get('reason')})")
 
 
-def _write(out: Path, state: _State, current: str) -> LoopReport:
+def _write(out: Path, state: _State) -> LoopReport:
     from dv2s_gym.mining.loop_report import write_loop_reports
 
-    report = LoopReport(out=out, rounds=state.data["rounds"], policy=current, paths={}, settings=state.data["settings"])
+    tuned = [r["new_policy"] for r in state.data["rounds"] if r.get("new_policy")]
+    last = tuned[-1] if tuned else state.data["settings"]["policy"]
+    report = LoopReport(out=out, rounds=state.data["rounds"], policy=last, paths={}, settings=state.data["settings"])
     report.paths = write_loop_reports(report.to_json(), out)
     return report

@@ -4,8 +4,11 @@
 
     {"schema": "dv2s-loop", "schema_version": 1, "out", "settings", "policy": the last fine-tuned policy's spec,
      "recommendation": {"policy": the spec to use, "verdict": ACCEPTED | REJECTED | NOT ACCEPTED, "round",
-                        "candidate", "reason", "sentence", "exit_code"} (:mod:`dv2s_gym.mining.loop_verdict`),
+                        "candidate", "reason", "sentence", "exit_code", "too_small": why the round was too small
+                        to judge, or None} (:mod:`dv2s_gym.mining.loop_verdict`),
      "rounds": [{"round", "policy": spec it started from, "new_policy": fine-tuned spec,
+                 "next_policy": the spec the next round starts from (the one the verdict on the rounds so far
+                 recommends), "next_policy_reason",
                  "timings": {step: seconds},
                  "control_policy": the control arm's spec (with a control),
                  "steps": {"mine": {"episodes", "errors", "failures", "failures_against_policy", "clusters",
@@ -324,6 +327,7 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         "# dv2s loop", "",
         f"Started from `{settings.get('policy')}`; last fine-tuned policy `{report.get('policy')}`.", "",
         f"**{_recommendation(report)['sentence']}**", "",
+        f"Policy to use: `{_recommendation(report)['policy']}`.", "",
         f"Per round: mining budget {settings.get('budget')} episodes ({settings.get('sampler')} sampler), at most "
         f"{'every' if settings.get('max_conversions') is None else settings.get('max_conversions')} cluster(s) converted, "
         f"{_replays_text(settings)}, "
@@ -368,7 +372,10 @@ def render_markdown(report: Mapping[str, Any]) -> str:
                          f"in all, {mine.get('errors')} episode errors"
                          + (f"; **{mine['clusters_not_converted']} clusters not converted** (at most "
                             f"{settings.get('max_conversions')} per round)" if mine.get("clusters_not_converted")
-                            else ""))
+                            else "")
+                         + (f"; **{mine['clusters_not_kept']} clusters skipped**, neither converted nor replayed "
+                            f"(at most {settings.get('max_replays')} exact replays per round)"
+                            if mine.get("clusters_not_kept") else ""))
             for reason in mine.get("rejected_reasons", [])[:5]:
                 lines.append(f"  - rejected: {reason}")
         split = steps.get("split") or {}
@@ -423,6 +430,9 @@ def render_markdown(report: Mapping[str, Any]) -> str:
                              f"{_summary_rate(row['old'].get('failure_rate'))}; stall rate new "
                              f"{_summary_rate(row['new'].get('stall_rate'))}, old "
                              f"{_summary_rate(row['old'].get('stall_rate'))}")
+        if record.get("next_policy"):
+            lines.append(f"- the next round starts from `{record['next_policy']}` "
+                         f"({record.get('next_policy_reason')})")
     return "\n".join(lines) + "\n"
 
 
@@ -583,7 +593,8 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
             f"</head><body><h1>dv2s loop</h1><p>Started from <code>{escape(str(settings.get('policy')))}</code>; "
             f"last fine-tuned policy <code>{escape(str(report.get('policy')))}</code>.</p>"
             f"<p class=\"{escape(_recommendation(report)['verdict'].replace(' ', '_'))}\"><b>"
-            f"{escape(_recommendation(report)['sentence'])}</b></p><p>Mining budget {settings.get('budget')} "
+            f"{escape(_recommendation(report)['sentence'])}</b></p><p>Policy to use: <code>"
+            f"{escape(str(_recommendation(report)['policy']))}</code></p><p>Mining budget {settings.get('budget')} "
             f"episodes per round, at most {escape(str('every' if settings.get('max_conversions') is None else settings.get('max_conversions')))} cluster(s) "
             f"converted, {escape(_replays_text(settings))}, "
             f"fine-tuning ({escape(str(settings.get('fine_tune_method', 'ppo')))}) "

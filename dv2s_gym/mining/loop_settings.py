@@ -7,7 +7,8 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 from envs.errors import DV2SError
 
-__all__ = ["LoopError", "LoopSettings", "DEFAULTS", "FINE_TUNE_METHODS", "METHOD_LEARNING_RATES"]
+__all__ = ["LoopError", "LoopSettings", "DEFAULTS", "FINE_TUNE_METHODS", "METHOD_LEARNING_RATES", "PROFILES",
+           "DEFAULT_PROFILE", "EVIDENCE"]
 
 FINE_TUNE_METHODS = ("ppo", "dagger")
 """How the loop fine-tunes: ``ppo`` continues PPO on the fine-tuning reward
@@ -26,10 +27,13 @@ class LoopError(DV2SError, ValueError):
 @dataclasses.dataclass(frozen=True)
 class LoopSettings:
     """The settings of a loop (:func:`dv2s_gym.mining.loop.run_loop`; module docstring of
-    :mod:`dv2s_gym.mining.loop` for the steps). The embedded defaults are small, for one round in minutes on 2
-    cores (``python -m bench.bench_loop`` times a round and bench/RESULTS.md records it); the other measurements
-    in bench/RESULTS.md use larger ones. ``loop.json`` records them; a resumed loop needs the same ones except
-    ``rounds`` (raise it to add rounds), ``min_heldout_families``, ``workers`` and ``n_envs``."""
+    :mod:`dv2s_gym.mining.loop` for the steps). The embedded defaults (the ``quick`` profile of :data:`PROFILES`)
+    are small, sized for one round in about 5 minutes on 2 idle cores, mining, fine-tuning both arms and judging
+    (``python -m bench.bench_loop`` times a round and bench/RESULTS.md records it): too few held-out episodes and
+    families for a drop or a test, which the round says. :meth:`evidence` (``dv2s loop --profile evidence``)
+    gives the larger round whose numbers can be judged. ``loop.json`` records the resolved values; a resumed loop
+    needs the same ones except ``rounds`` (raise it to add rounds), ``min_heldout_families``, ``workers`` and
+    ``n_envs``."""
 
     rounds: int = 1
     """Rounds to have finished when the loop returns (a resumed loop runs only the missing ones)."""
@@ -37,20 +41,20 @@ class LoopSettings:
     """A writable bank to grow (``None``: a copy of the shipped bank in ``out/bank``)."""
     scenarios: Optional[Tuple[str, ...]] = None
     """The scenarios mined and regression-tested (``None``: the starting bank's)."""
-    budget: int = 80
+    budget: int = 32
     """The miner's episodes per round."""
     sampler: str = "novelty-bandit"
     """The miner's sampler (:data:`dv2s_gym.mining.samplers.SAMPLERS`)."""
-    max_conversions: Optional[int] = 4
+    max_conversions: Optional[int] = 1
     """Clusters converted into bank scenarios per round, largest first (``None``: all, 0: none)."""
-    max_replays: Optional[int] = 16
+    max_replays: Optional[int] = 6
     """Clusters beyond the converted ones whose failing scene is kept as an exact replay entry per round, largest
     first (:func:`dv2s_gym.mining.replays.replay_clusters`; ``None``: all, 0: none)."""
     holdout_fraction: float = 0.5
     """Share of the round's mined families held out from fine-tuning, in [0, 1]."""
     fine_tune_method: str = "dagger"
     """``ppo`` or ``dagger`` (:data:`FINE_TUNE_METHODS`)."""
-    fine_tune_steps: int = 30_000
+    fine_tune_steps: int = 6_000
     """Env steps of fine-tuning per round."""
     fine_tune_lr: Optional[float] = None
     """The fine-tuning's (constant) learning rate; ``None`` becomes the method's
@@ -63,15 +67,15 @@ class LoopSettings:
     """Probability of drawing a mined fine-tuning scenario during fine-tuning, strictly between 0 and 1."""
     control: bool = True
     """Also fine-tune without the mined scenarios (the control arm) and compare on held-out."""
-    k_eval: int = 10
+    k_eval: int = 4
     """Evaluation seeds per held-out scenario."""
     min_heldout_episodes: int = 20
     """Below this many held-out episodes a round reports rates only, no drop and no test."""
     min_heldout_families: int = 3
     """Likewise below this many held-out families (the episodes of one family are near-identical scenes)."""
-    untouched_seeds: int = 2
+    untouched_seeds: int = 1
     """Seeds per scenario of the untouched set (:data:`dv2s_gym.mining.loop.UNTOUCHED_BANK`); 0 skips it."""
-    regress_episodes: int = 4
+    regress_episodes: int = 1
     """Seeds per starting-bank scenario in the regression test."""
     margin: float = 0.02
     """The regression test's non-inferiority margin."""
@@ -125,6 +129,18 @@ class LoopSettings:
         """A copy with ``changes`` (checked again)."""
         return dataclasses.replace(self, **changes)
 
+    @classmethod
+    def from_profile(cls, name: str = "quick", **overrides: Any) -> "LoopSettings":
+        """The settings of profile ``name`` (:data:`PROFILES`), with ``overrides`` (explicit values) on top."""
+        if name not in PROFILES:
+            raise LoopError(f"--profile must be one of {', '.join(PROFILES)}, not {name!r}")
+        return cls(**{**PROFILES[name], **overrides})
+
+    @classmethod
+    def evidence(cls, **overrides: Any) -> "LoopSettings":
+        """The ``evidence`` profile (:data:`EVIDENCE`): a round large enough to judge, with ``overrides``."""
+        return cls.from_profile("evidence", **overrides)
+
 
 def _defaults() -> Dict[str, Any]:
     values: Dict[str, Any] = {}
@@ -138,3 +154,17 @@ def _defaults() -> Dict[str, Any]:
 DEFAULTS: Dict[str, Any] = _defaults()
 """The default of every loop option the command line takes as a flag of its own (read from
 :class:`LoopSettings`)."""
+
+
+EVIDENCE: Dict[str, Any] = {"budget": 240, "max_conversions": 4, "max_replays": 16, "fine_tune_steps": 40_000,
+                            "k_eval": 10, "untouched_seeds": 5, "regress_episodes": 4}
+"""The ``evidence`` profile's values where they differ from the defaults: the scale of the loop measurements in
+bench/RESULTS.md (240 mining episodes, 40k DAgger steps per arm, 10 seeds per held-out scenario, 4 per bank
+scenario), 4 conversions and 16 exact replays per round for held-out families, 5 seeds per untouched scenario.
+Roughly an hour or more per round on 2 cores."""
+
+PROFILES: Dict[str, Dict[str, Any]] = {"quick": {}, "evidence": EVIDENCE}
+"""``dv2s loop --profile NAME``: the values each profile sets (``quick``: the embedded defaults as they are)."""
+
+DEFAULT_PROFILE = "quick"
+"""The profile of ``dv2s loop`` without ``--profile``."""

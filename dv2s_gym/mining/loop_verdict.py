@@ -14,13 +14,32 @@ from __future__ import annotations
 
 from typing import Any, Dict, Mapping, Optional
 
-__all__ = ["ACCEPTED", "REJECTED", "NOT_ACCEPTED", "EXIT_CODES", "CONTROL_ALPHA", "judge_round", "recommendation"]
+__all__ = ["ACCEPTED", "REJECTED", "NOT_ACCEPTED", "EXIT_CODES", "CONTROL_ALPHA", "EVIDENCE_HINT", "judge_round",
+           "too_small", "recommendation"]
 
 ACCEPTED, REJECTED, NOT_ACCEPTED = "ACCEPTED", "REJECTED", "NOT ACCEPTED"
 EXIT_CODES = {ACCEPTED: 0, REJECTED: 1, NOT_ACCEPTED: 3}
 """``dv2s loop``'s exit status for the verdict on the last round's fine-tuned policy."""
 CONTROL_ALPHA = 0.05
 """Below this McNemar p, a control failing fewer held-out episodes than the fine-tuned policy beats it."""
+
+
+EVIDENCE_HINT = "run `dv2s loop --profile evidence` for a round large enough to judge"
+"""What a round too small to judge its policy tells the user to do (the profile of
+:data:`dv2s_gym.mining.loop_settings.EVIDENCE`)."""
+
+
+def too_small(record: Mapping[str, Any]) -> Optional[str]:
+    """Why round ``record`` was too small to judge its fine-tuned policy, or ``None``: too few held-out episodes
+    or families for a drop or a test, or a regression test that could not tell."""
+    steps = record.get("steps") or {}
+    reasons = []
+    if (steps.get("after") or {}).get("underpowered"):
+        reasons.append("too few held-out episodes or families for a drop or a test")
+    if (steps.get("regress") or {}).get("verdict") == "INCONCLUSIVE":
+        reasons.append(f"the regression test on {(steps.get('regress') or {}).get('episodes')} paired episodes "
+                       "could not tell")
+    return "; ".join(reasons) or None
 
 
 def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
@@ -52,7 +71,8 @@ def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
 
     Returns ``{"policy": the recommended spec, "verdict": the last fine-tuned policy's (ACCEPTED, REJECTED,
     NOT ACCEPTED), "round", "candidate": that policy's spec, "reason", "sentence": one line for people,
-    "exit_code"}``."""
+    "exit_code", "too_small": why a NOT ACCEPTED round was too small to judge (:func:`too_small`; the sentence
+    then points to the evidence profile) or ``None``}``."""
     start = (report.get("settings") or {}).get("policy")
     recommended, last = start, None
     for record in report.get("rounds") or []:
@@ -64,7 +84,7 @@ def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
             recommended = record.get("new_policy") or report.get("policy")
     if last is None:
         return {"policy": start, "verdict": NOT_ACCEPTED, "round": None, "candidate": None,
-                "reason": "no round fine-tuned a policy", "exit_code": EXIT_CODES[NOT_ACCEPTED],
+                "reason": "no round fine-tuned a policy", "exit_code": EXIT_CODES[NOT_ACCEPTED], "too_small": None,
                 "sentence": f"NOT ACCEPTED: no round fine-tuned a policy; keep the starting policy {start}"}
     record, judged = last
     candidate = record.get("new_policy") or report.get("policy")
@@ -81,5 +101,9 @@ def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
         keep = "the starting policy" if recommended == start else "the last accepted policy"
         sentence = (f"{judged['verdict']}: keep {keep} {recommended}, not the round {number} policy {candidate}: "
                     f"{judged['reason']}")
+    small = too_small(record) if judged["verdict"] == NOT_ACCEPTED else None
+    if small:
+        sentence += f". TOO SMALL TO JUDGE ({small}): {EVIDENCE_HINT}"
     return {"policy": recommended, "verdict": judged["verdict"], "round": number, "candidate": candidate,
-            "reason": judged["reason"], "exit_code": EXIT_CODES[judged["verdict"]], "sentence": sentence}
+            "reason": judged["reason"], "exit_code": EXIT_CODES[judged["verdict"]], "too_small": small,
+            "sentence": sentence}
