@@ -112,6 +112,12 @@ class LoopSettings:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise LoopError(f"--{name.replace('_', '-')} must be an integer >= {low}, not {value!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int):
+            raise LoopError(f"--seed must be an integer, not {self.seed!r}")
+        for name, flag in (("n_envs", "envs"), ("workers", "workers")):
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
+                raise LoopError(f"--{flag} must be an integer >= 1, not {value!r}")
         for name, what in (("max_conversions", "no conversions, only exact replays"),
                            ("max_replays", "no replays beyond the converted clusters")):
             value = getattr(self, name)
@@ -120,6 +126,12 @@ class LoopSettings:
                                 f"command line: every cluster), not {value!r}")
 
     def _check_shares(self) -> None:
+        # the same range as the regression test's (RegressSettings), checked here because the loop reaches its
+        # regression step only after a round's mining and fine-tuning, and ``margin`` is part of its identity
+        if not (isinstance(self.margin, (int, float)) and not isinstance(self.margin, bool)
+                and 0.0 <= self.margin < 1.0):
+            raise LoopError(f"--margin is a failure-rate difference in [0, 1), e.g. 0.05 for 5 points; "
+                            f"not {self.margin!r}")
         if not 0.0 <= float(self.holdout_fraction) <= 1.0:
             raise LoopError(f"--holdout-fraction must be in [0, 1], not {self.holdout_fraction}")
         if not 0.0 < float(self.mined_share) < 1.0:
