@@ -85,7 +85,7 @@ def test_settings_are_frozen_and_resolve_their_derived_defaults():
     (lambda: LoopSettings(margin=2.0), LoopError, r"--margin is a failure-rate difference in \[0, 1\)"),
     (lambda: LoopSettings(margin=float("nan")), LoopError, "--margin is a failure-rate difference"),
     (lambda: LoopSettings(n_envs=0), LoopError, "--envs must be an integer >= 1"),
-    (lambda: LoopSettings(workers=-3), LoopError, "--workers must be an integer >= 1"),
+    (lambda: LoopSettings(workers=-3), LoopError, "--workers must be an integer >= 0"),
     (lambda: LoopSettings(seed="7"), LoopError, "--seed must be an integer"),
     (lambda: RegressSettings(margin=1.5), RegressError, "--margin is a failure-rate difference"),
     (lambda: RegressSettings(stall_seconds=0), RegressError, "--stall-seconds must be positive"),

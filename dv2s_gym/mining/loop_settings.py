@@ -114,10 +114,10 @@ class LoopSettings:
                 raise LoopError(f"--{name.replace('_', '-')} must be an integer >= {low}, not {value!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int):
             raise LoopError(f"--seed must be an integer, not {self.seed!r}")
-        for name, flag in (("n_envs", "envs"), ("workers", "workers")):
+        for name, flag, low in (("n_envs", "envs", 1), ("workers", "workers", 0)):  # workers 0: every core
             value = getattr(self, name)
-            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
-                raise LoopError(f"--{flag} must be an integer >= 1, not {value!r}")
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < low):
+                raise LoopError(f"--{flag} must be an integer >= {low}, not {value!r}")
         for name, what in (("max_conversions", "no conversions, only exact replays"),
                            ("max_replays", "no replays beyond the converted clusters")):
             value = getattr(self, name)
