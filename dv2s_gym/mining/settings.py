@@ -87,6 +87,10 @@ class MineSettings:
                                                  or self.max_conversions < 0):
             raise MiningError(f"--max-conversions must be a whole number >= 0 or left out for all, "
                               f"not {self.max_conversions!r}")
+        for name, value in (("ttc-threshold", self.ttc_threshold), ("stall-seconds", self.stall_seconds)):
+            # a NaN threshold would silently detect no failure, a negative one a stall at every standstill
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
+                raise MiningError(f"--{name} must be a positive number of seconds, not {value!r}")
         if self.convert and not self.bank_dir:
             raise MiningError("converting failures adds scenarios to a bank, and the shipped bank is read-only: "
                               "pass --bank DIR (a new folder starts as a copy of the shipped bank), or --no-convert")
