@@ -121,7 +121,7 @@ class TrainingError(DV2SError, ValueError):
 
 
 # --------------------------------------------------------------------------- configuration
-@dataclasses.dataclass
+@dataclasses.dataclass(frozen=True)
 class TrainConfig:
     """Everything a training run is made of (recorded in ``run.json`` and the model card).
 

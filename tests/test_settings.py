@@ -73,6 +73,9 @@ def test_settings_are_frozen_and_resolve_their_derived_defaults():
     config = TrainConfig.fine_tuning("out", steps=10, weights={"a": 1.0})
     assert (config.sampler, config.eval_freq, config.card_seeds, config.baselines, config.env_config) == \
         ("weighted", 0, 0, [], None)
+    for frozen in (LoopSettings(), RegressSettings(), DaggerConfig(), config):
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            setattr(frozen, dataclasses.fields(frozen)[0].name, None)
 
 
 @pytest.mark.parametrize("make, error, match", [
