@@ -59,7 +59,10 @@ def check_number(error: Type[DV2SError], name: str, value: Any, *, low: Optional
           and (low is None or (value > low if low_open else value >= low))
           and (high is None or (value < high if high_open else value <= high)))
     if not ok:
-        allowed = f"a number {_range_text(low, high, low_open, high_open)}"
+        if low == 0 and high is None:
+            allowed = "a positive number" if low_open else "a number >= 0"
+        else:
+            allowed = f"a number {_range_text(low, high, low_open, high_open)}"
         allowed += " or left out" if optional else ""
         allowed += f", {example}" if example else ""
         raise _refuse(error, name, allowed, value)

@@ -79,7 +79,7 @@ def test_settings_are_frozen_and_resolve_their_derived_defaults():
 
 
 @pytest.mark.parametrize("make, error, match", [
-    (lambda: MineSettings(budget=0), MiningError, "--budget must be at least 1"),
+    (lambda: MineSettings(budget=0), MiningError, "--budget must be an integer >= 1"),
     (lambda: MineSettings(feedback="curious"), MiningError, "unknown feedback 'curious'"),
     (lambda: MineSettings(convert=True), MiningError, "pass --bank DIR"),
     (lambda: MineSettings(ttc_threshold=float("nan")), MiningError, "--ttc-threshold must be a positive number"),
@@ -94,8 +94,8 @@ def test_settings_are_frozen_and_resolve_their_derived_defaults():
     (lambda: LoopSettings(workers=-3), LoopError, "--workers must be an integer >= 0"),
     (lambda: LoopSettings(seed="7"), LoopError, "--seed must be an integer"),
     (lambda: RegressSettings(margin=1.5), RegressError, "--margin is a failure-rate difference"),
-    (lambda: RegressSettings(stall_seconds=0), RegressError, "--stall-seconds must be positive"),
-    (lambda: DaggerConfig(beta=2.0), TrainingError, r"beta and beta_decay must be in \[0, 1\]"),
+    (lambda: RegressSettings(stall_seconds=0), RegressError, "--stall-seconds must be a positive number"),
+    (lambda: DaggerConfig(beta=2.0), TrainingError, r"DAgger beta must be a number in \[0, 1\], not 2.0"),
     (lambda: DaggerConfig(batch_size=0), TrainingError, "batch_size must be an integer >= 1"),
 ])
 def test_bad_settings_are_refused_naming_the_setting(make, error, match):
