@@ -74,6 +74,8 @@ class MineSettings:
             raise MiningError(f"unknown sampler {self.sampler!r}: use one of {', '.join(SAMPLERS)}")
         check_mapping(MiningError, "--sampler-options", self.sampler_options, optional=True,
                       what="a JSON object of sampler parameters")
+        if self.feedback is not None and not isinstance(self.feedback, str):
+            raise MiningError(f"--feedback must be one of {', '.join(FEEDBACKS)} or left out, not {self.feedback!r}")
         object.__setattr__(self, "feedback", self.feedback or default_feedback(self.sampler))
         if self.feedback not in FEEDBACKS:
             raise MiningError(f"unknown feedback {self.feedback!r}: use one of {', '.join(FEEDBACKS)}")
@@ -89,7 +91,7 @@ class MineSettings:
             object.__setattr__(self, "batch", None)
         check_int(MiningError, "--batch", self.batch, low=1, optional=True, none_means="4 per worker")
         check_bool(MiningError, "convert (--no-convert)", self.convert)
-        check_mapping(MiningError, "the conversion options", self.convert_options, optional=True,
+        check_mapping(MiningError, "convert_options", self.convert_options, optional=True,
                       what="keyword arguments of convert_failure")
         check_int(MiningError, "--max-conversions", self.max_conversions, low=0, optional=True,
                   none_means="all")

@@ -56,7 +56,7 @@ class RegressSettings:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "scenarios", check_names(RegressError, "--scenarios", self.scenarios))
-        check_path(RegressError, "the bank folder", self.bank_dir, optional=True)
+        check_path(RegressError, "--bank", self.bank_dir, optional=True)
         check_int(RegressError, "--episodes", self.episodes, low=1, optional=True, none_means="planned from --mde")
         check_int(RegressError, "--seed", self.seed, low=0)
         check_number(RegressError, "--margin", self.margin, low=0, high=1, high_open=True,
@@ -70,6 +70,8 @@ class RegressSettings:
         check_int(RegressError, "--batch", self.batch, low=1, optional=True, none_means="a fifth of the episodes")
         check_mapping(RegressError, "--config", self.env_config, optional=True,
                       what="a JSON object of DV2S-v0 config overrides")
+        if self.failure is not None and not isinstance(self.failure, str):
+            check_names(RegressError, "--failure", self.failure, optional=False)
         object.__setattr__(self, "failure", tuple(parse_failure(self.failure)))
         check_number(RegressError, "--stall-seconds", self.stall_seconds, low=0, low_open=True)
 
