@@ -205,7 +205,8 @@ class TrainConfig:
         for name, weight in (self.weights or {}).items():
             check_number(TrainingError, f"--weights {name!r}", weight, low=0)
         check_number(TrainingError, "--curriculum-floor", self.curriculum_floor, low=0, high=1)
-        check_mapping(TrainingError, "--config", self.env_config, what="a JSON object of DV2S-v0 config overrides")
+        check_mapping(TrainingError, "--config", self.env_config, optional=True,  # None: a fine-tuning's source
+                      what="a JSON object of DV2S-v0 config overrides")
         check_mapping(TrainingError, "--hp", self.hyperparameters, what="a JSON object of hyperparameters")
         check_names(TrainingError, "--baselines", self.baselines, optional=False)
         check_bool(TrainingError, "progress_bar (--no-progress)", self.progress_bar)
