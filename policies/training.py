@@ -196,8 +196,8 @@ class TrainConfig:
                                  ("--checkpoint-freq", self.checkpoint_freq, 0),
                                  ("--keep-checkpoints", self.keep_checkpoints, 1)):
             check_int(TrainingError, flag, value, low=low)
-        check_int(TrainingError, "--eval-seeds", self.eval_seeds, low=0, high=1000)
-        check_int(TrainingError, "--card-seeds", self.card_seeds, low=0, high=1000, optional=True,
+        check_int(TrainingError, "--eval-seeds", self.eval_seeds, low=0)  # the 1000 cap: validate()'s, with its why
+        check_int(TrainingError, "--card-seeds", self.card_seeds, low=0, optional=True,
                   none_means="the default for --steps")
         check_choice(TrainingError, "--sampler", self.sampler, SAMPLERS)
         check_mapping(TrainingError, "--weights", self.weights, optional=True,
