@@ -47,9 +47,9 @@ def main() -> None:
     originals = {name: getattr(DAggerCheckpoint, name) for name in ("save", "save_partial")}
 
     def timed(name):
-        def wrapper(self, **kwargs):
+        def wrapper(self, *args, **kwargs):
             began = time.perf_counter()
-            originals[name](self, **kwargs)
+            originals[name](self, *args, **kwargs)
             spent[name] += time.perf_counter() - began
             spent["calls"] += 1
         return wrapper

@@ -51,14 +51,14 @@ def build_settings():
     """``name -> (model, venv)`` for the three settings."""
     from stable_baselines3.common.vec_env import SubprocVecEnv
 
-    from policies.training import make_vec_env
+    from policies.training import TrainEnvSpec, make_vec_env
     from scenario_bank import select_scenarios
 
     names = select_scenarios(None)
     uniform = {name: 1.0 / len(names) for name in names}
     settings = {}
     for label, n_envs in (("dv2s x1", 1), ("dv2s x2", 2)):
-        venv = make_vec_env(names, {}, None, uniform, n_envs=n_envs, seed=0)
+        venv = make_vec_env(TrainEnvSpec(names, {}, None, uniform), n_envs=n_envs, seed=0)
         settings[label] = (_model(venv), venv)
     venv = SubprocVecEnv([_highway_fast])
     settings["highway-fast x1"] = (_model(venv), venv)

@@ -57,6 +57,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, failure_types, paired_summary
+    from dv2s_gym.workers.settings import WorkerSettings
     from dv2s_gym.mining.loop import fine_tune_weights
     from policies.training import EVAL_SEED_BASE, TrainConfig, fine_tune
     from scenario_bank.bank import Bank
@@ -77,7 +78,8 @@ def main() -> None:
     else:
         before_store = HeldOutStore(base / "before.jsonl")
     before = evaluate_heldout("before", policy, episodes, store=before_store, bank_dir=bank,
-                              env_config=env_config, workers=args.workers, progress=False)
+                              env_config=env_config,
+                             workers=WorkerSettings(workers=args.workers), progress=False)
     t_before = time.perf_counter() - began
     excluded = set(held) | set(steps["split"].get("held_out_families") or [])
     entries = [e for e in Bank(bank) if e.name not in excluded and e.source.get("parent") not in excluded]
@@ -106,7 +108,8 @@ def main() -> None:
     spec = f"ppo:{path.resolve()}"
     began = time.perf_counter()
     after = evaluate_heldout("after", spec, episodes, store=HeldOutStore(out / "heldout.jsonl"), bank_dir=bank,
-                             env_config=env_config, workers=args.workers, progress=False)
+                             env_config=env_config,
+                             workers=WorkerSettings(workers=args.workers), progress=False)
     t_after = time.perf_counter() - began
     summary = paired_summary(before, after, seed=settings["seed"])
     result = {"name": args.name, "args": vars(args), "before": summary["before"], "after": summary["after"],

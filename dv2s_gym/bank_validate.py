@@ -7,6 +7,10 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from typing import Any, Dict, List, Optional, Sequence
 
+from scenario_bank.bank import Bank, content_hash
+from scenario_bank.sandbox import check_in_jail
+from scenario_bank.shipped import is_shipped_text
+
 __all__ = ["EntryReport", "validate_entry", "validate_bank"]
 
 
@@ -48,9 +52,6 @@ def _outcome(info: Dict[str, Any], terminated: bool, truncated: bool) -> str:
 def validate_entry(bank_root: Optional[str], name: str, samples: int = 3, seconds: float = 3.0) -> EntryReport:
     """Safety check, sidecar check, compile, sample ``samples`` scenes, run each ``seconds`` in DV2S-v0."""
     from envs.dv2s_env import DV2SEnv, ScenarioRef
-    from scenario_bank.bank import Bank, content_hash
-    from scenario_bank.sandbox import check_in_jail
-    from scenario_bank.shipped import is_shipped_text
 
     report = EntryReport(name)
     try:

@@ -8,7 +8,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import List, Optional, Sequence
 
+import gymnasium as gym
 from tqdm import tqdm
+
+from envs.recording import record_episode
+from scenario_bank import list_scenarios
 
 __all__ = ["EpisodeSummary", "run_demo", "format_table", "record_scenario"]
 
@@ -52,12 +56,7 @@ def run_demo(
 
     Writes ``<out_dir>/<scenario>_seed<seed>.webm`` per episode, returns the summaries.
     """
-    import gymnasium as gym
-
-    import dv2s_gym  # noqa: F401  (registers DV2S-v0)
-    from envs.recording import record_episode
     from policies import CautiousDriver
-    from scenario_bank import list_scenarios
 
     names = list(scenarios) if scenarios else list_scenarios()
     out = Path(out_dir)
@@ -115,10 +114,6 @@ def record_scenario(scenario: str, video: str | os.PathLike, *, config: dict, se
     trace is saved there. Returns the recording summary with the episode's scenario, seed, collisions, lane
     changes, minimum TTC, off-road flag and parameters.
     """
-    import gymnasium as gym
-
-    import dv2s_gym  # noqa: F401  (registers DV2S-v0)
-    from envs.recording import record_episode
     from policies import CautiousDriver
 
     env = gym.make("dv2s_gym:DV2S-v0", scenario=scenario, config=config, render_mode="rgb_array",

@@ -24,6 +24,10 @@ Egos (:data:`EGOS`): ``scenic`` (the script's ego behaviour), ``rule``
 (:class:`policies.baselines.KeepLaneEgo`, constant speed) and ``idm``
 (:class:`policies.baselines.IDMEgo`). Episodes use the env's default duration
 unless the scenario needs longer (:data:`STORY_SECONDS`).
+
+Probe egos (:data:`PROBE_EGOS`, selectable by name, not part of the :data:`EGOS` the 90% contract is
+stated on) drive unlike traffic on purpose, to check that a scenario's actors adapt to the ego:
+``hangback``, ``rush``, ``surge`` and ``weave`` (:mod:`policies.probe_drivers`).
 """
 
 from __future__ import annotations
@@ -31,11 +35,30 @@ from __future__ import annotations
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
-__all__ = ["EGOS", "STORY_SECONDS", "required_elements", "story_problem", "ego_collisions", "run_episode",
+from dv2s_gym.pipeline.semantics.trace import elements_from_trace
+from dv2s_gym.story_check import check_story
+from policies.baselines import IDMEgo, KeepLaneEgo
+from policies.probe_drivers import HangbackEgo, RushEgo, SurgeEgo, WeaveEgo
+from scenario_bank.bank import Bank
+from scenario_bank.elements import normalize_elements
+from scenario_bank.story import normalize_story
+
+__all__ = ["EGOS", "PROBE_EGOS", "ALL_EGOS", "STORY_SECONDS", "required_elements", "story_problem", "ego_collisions", "run_episode",
            "story_episodes", "missed_steps", "story_rate", "story_table"]
 
 EGOS = ("scenic", "rule", "keep_lane", "idm")
 """Ego drivers a story is checked against."""
+
+PROBE_EGOS: Dict[str, str] = {
+    "hangback": "drives at 60% of its start speed and keeps a 3 s gap (policies.probe_drivers.HangbackEgo)",
+    "rush": "asks FASTER from the first step until its target is 10 m/s above its start speed (policies.probe_drivers.RushEgo)",
+    "surge": "holds its start speed, then at 3 s raises its target by 10 m/s (policies.probe_drivers.SurgeEgo)",
+    "weave": "changes lanes left and right every 3 s from 1 s on (policies.probe_drivers.WeaveEgo)",
+}
+"""Extra egos that probe how a scenario's actors adapt to the ego, by name, with how each drives."""
+
+ALL_EGOS = EGOS + tuple(PROBE_EGOS)
+"""Every ego name :func:`story_table` and :func:`run_episode` accept."""
 
 STORY_SECONDS: Dict[str, float] = {}
 """Episode lengths that differ from the env's default duration, per scenario."""
@@ -85,14 +108,14 @@ def _kind_of(name: str) -> str:
 
 
 def _driver(ego: str, env) -> Callable[[], int]:
-    from policies.baselines import IDMEgo, KeepLaneEgo
     from policies.rule_based import IDLE, CautiousDriver
 
     if ego == "scenic":
         return lambda: IDLE  # ignored: the script's behaviour drives the ego
-    drivers = {"rule": CautiousDriver, "keep_lane": KeepLaneEgo, "idm": IDMEgo}
+    drivers = {"rule": CautiousDriver, "keep_lane": KeepLaneEgo, "idm": IDMEgo,
+               "hangback": HangbackEgo, "rush": RushEgo, "surge": SurgeEgo, "weave": WeaveEgo}
     if ego not in drivers:
-        raise ValueError(f"unknown ego {ego!r}; choose from {', '.join(EGOS)}")
+        raise ValueError(f"unknown ego {ego!r}; choose from {', '.join(ALL_EGOS)}")
     return drivers[ego](env).act
 
 
@@ -125,12 +148,6 @@ def story_episodes(name: str, ego: str, seeds: Sequence[int], bank_root: Optiona
     pairs of the steps it did not play (a sidecar without a ``story`` block: ``[what is missing, ""]``);
     ``ego_hit`` the kinds the ego hit.
     """
-    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
-    from dv2s_gym.story_check import check_story
-    from scenario_bank.story import normalize_story
-    from scenario_bank.bank import Bank
-    from scenario_bank.elements import normalize_elements
-
     entry = Bank(bank_root).get(name)
     story = entry.meta.get("story")
     story = normalize_story(story, f"{name}: story") if story is not None else None
@@ -201,9 +218,9 @@ def story_table(names: Sequence[str], egos: Sequence[str] = EGOS, seeds: Sequenc
     """
     from tqdm import tqdm
 
-    unknown = [e for e in egos if e not in EGOS]
+    unknown = [e for e in egos if e not in ALL_EGOS]
     if unknown:
-        raise ValueError(f"unknown ego(s) {', '.join(unknown)}; choose from {', '.join(EGOS)}")
+        raise ValueError(f"unknown ego(s) {', '.join(unknown)}; choose from {', '.join(ALL_EGOS)}")
     tasks = [(n, e, list(seeds), bank_root) for n in names for e in egos]
     table: Dict[str, Dict[str, Dict[str, Any]]] = {n: {} for n in names}
     bar = tqdm(total=len(tasks), desc="story rate", unit="run", disable=not progress)

@@ -69,10 +69,12 @@ import math
 import re
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
+from types import SimpleNamespace
 
 import numpy as np
 
 from scenario_bank.story import StoryError, normalize_story, step_label
+from dv2s_gym.pipeline.semantics.trace import _map_view, collision_type, elements_from_trace
 
 __all__ = ["StoryError", "StoryResult", "normalize_story", "check_story", "resolve_actors", "step_label",
            "MIN_GAP_SPEED"]
@@ -582,8 +584,6 @@ class _Detector:
         return self._whole_track(name, action, first, last)
 
     def _collision_type(self, name: str, other: str, i: int) -> Optional[str]:
-        from dv2s_gym.pipeline.semantics.trace import collision_type
-
         for k in range(i, -1, -1):
             if self.e.present(name, k) and self.e.present(other, k):
                 return collision_type(self.e.tracks[name][k], self.e.tracks[other][k])
@@ -602,8 +602,6 @@ class _Detector:
         return event
 
     def _in_junction(self, name: str) -> np.ndarray:
-        from dv2s_gym.pipeline.semantics.trace import _map_view
-
         view = _map_view(self.e.trace)
         track = self.e.tracks[name]
         inside = np.zeros(self.e.n, dtype=bool)
@@ -651,10 +649,6 @@ class _Detector:
 
 def _actor_elements(trace, name: str) -> set:
     """Actions the trace semantics read for actor ``name`` alone (the trace cut down to it and the ego)."""
-    from types import SimpleNamespace
-
-    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
-
     kinds = dict(getattr(trace, "kinds", {}) or {})
     marker = "story_actor"
     states = [{k: v for k, v in s.items() if k in ("ego", name)} for s in trace.states]

@@ -42,6 +42,12 @@ from envs.scenic_highway.simulator import ActorEvent, HighwayEnvSimulator
 from envs.scenic_highway import stepping
 from envs.scenic_highway.stepping import ExternalStepper, StepOutcome, StepOvertime, step_watchdog
 from envs.trace import EpisodeTrace, actor_state
+from envs.jailed_env import JailedDV2SEnv
+from envs.road_network import load_road_network
+from scenario_bank import scenario_path, select_scenarios
+from scenario_bank.jail import require_jail
+from scenario_bank.maps import list_maps
+from scenario_bank.shipped import is_shipped_text
 
 __all__ = ["DV2SEnv", "ScenarioRef", "check_env_config"]
 
@@ -71,8 +77,6 @@ def resolve_scenarios(spec: ScenarioSpec, bank_dir: Optional[str] = None) -> Lis
     ``None`` is the whole bank; a string is a bank name, ``tag:<tag>``, a path to a
     ``.scenic`` file or Scenic source text; a list combines names and tags.
     """
-    from scenario_bank import scenario_path, select_scenarios
-
     if isinstance(spec, (list, tuple)) and spec and all(isinstance(item, ScenarioRef) for item in spec):
         return list(spec)
     if isinstance(spec, os.PathLike):
@@ -101,9 +105,6 @@ def resolve_scenarios(spec: ScenarioSpec, bank_dir: Optional[str] = None) -> Lis
 
 
 def _all_shipped(texts: Sequence[str], config: Optional[dict]) -> bool:
-    from scenario_bank.maps import list_maps
-    from scenario_bank.shipped import is_shipped_text
-
     map_override = (config or {}).get("map")
     if map_override is not None and map_override not in list_maps():
         return False  # a map file of the user's is parsed by Scenic: in the jail
@@ -111,8 +112,6 @@ def _all_shipped(texts: Sequence[str], config: Optional[dict]) -> bool:
 
 
 def _is_shipped(text: str) -> bool:
-    from scenario_bank.shipped import is_shipped_text
-
     return is_shipped_text(text)
 
 
@@ -239,8 +238,6 @@ class DV2SEnv(AbstractEnv):
             env = super().__new__(cls)
             env._frozen_refs = frozen  # the text checked is the text compiled: files are not read again
             return env
-        from envs.jailed_env import JailedDV2SEnv
-        from scenario_bank.jail import require_jail
 
         require_jail(f"scenario {refs[0].name!r}" if len(refs) == 1 else f"{len(refs)} scenarios")
         return JailedDV2SEnv(frozen, texts, config=config, render_mode=render_mode, limits=jail_limits,
@@ -520,8 +517,6 @@ class DV2SEnv(AbstractEnv):
         return self._compiled[ref]
 
     def _network_for(self, compiled: CompiledScenario):
-        from envs.road_network import load_road_network
-
         self._converted = load_road_network(compiled.map_path)
         return self._converted.hw_network
 

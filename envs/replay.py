@@ -15,6 +15,7 @@ import numpy as np
 from envs.dv2s_env import DV2SEnv
 from envs.trace import EpisodeTrace, TraceMismatchError
 from envs.trace_bounds import check_map, check_values
+from scenario_bank.safe_files import read_regular_file
 
 MAX_SCRIPT_BYTES = 1024 * 1024
 """The largest script a trace's ``scenario_path`` may name."""
@@ -104,8 +105,6 @@ def replay_trace_file(path: str | os.PathLike, *,
 def _script_at(path: Path) -> Optional[str]:
     """The text of the script a trace says it ran (``None`` when it is no longer there): a regular ``.scenic``
     file of at most :data:`MAX_SCRIPT_BYTES`, not a symbolic link; anything else is refused."""
-    from scenario_bank.safe_files import read_regular_file
-
     if not isinstance(path, Path) or path.suffix != ".scenic":
         raise ValueError(f"the trace's scenario_path {str(path)[:200]!r} is not a .scenic file: the trace is "
                          "damaged or was not written by env.save_trace()")

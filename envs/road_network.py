@@ -109,6 +109,7 @@ from envs.coordinates import (
     scenic_to_hw_heading,
 )
 from envs.errors import DV2SError
+from scenario_bank.map_cache import load_network
 
 if TYPE_CHECKING:  # pragma: no cover - typing only
     from scenic.domains.driving.roads import Lane, Network
@@ -949,8 +950,6 @@ def _read_speed_limits(path: Path) -> Dict[str, float]:
 
 
 def _load_scenic_network(path: Path) -> "Network":
-    from scenario_bank.map_cache import load_network
-
     return load_network(path)
 
 

@@ -18,12 +18,17 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple
+import stat
 
 import numpy as np
 
 from envs.errors import ScenarioCompileError, UntrustedScenarioError, SceneSamplingError, StepTimeoutError, UnsupportedConstructError
 from scenario_bank.safety import UnsafeScenarioError, check_script
 from scenario_bank.scenic_parse import install_parse_cache
+from envs.scenic_imports import no_folder_imports
+from scenario_bank.maps import resolve_map
+from scenario_bank.precheck import MAX_SCRIPT_BYTES, precheck_text
+from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
 
 __all__ = ["MODEL", "CompiledScenario", "ParamRange", "parameter_ranges", "compile_scenario", "model_for", "FOREIGN_MODELS", "looks_like_source", "runtime_construct_error", "step_timeout_error"]
 
@@ -269,10 +274,8 @@ def compile_scenario(
                 "process; untrusted Scenic runs only in the jail (DV2SEnv / gym.make run it there). "
                 "Pass trusted=True only for a script you wrote or reviewed")
     import scenic
-    from scenario_bank.maps import resolve_map
 
     from envs.scenic_highway.stepping import release_veneer
-    from envs.scenic_imports import no_folder_imports
 
     overrides = dict(params or {})
     if map_override is not None:
@@ -412,7 +415,6 @@ def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompile
             path=label,
             line=line,
         )
-    from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
 
     if looks_like_scenic2(source, message):
         first = upgrade_scenic2(source, keep_scenic2_meaning=False).rewrites[0]  # a construct Scenic 3 refuses
@@ -475,10 +477,6 @@ def read_scenario_file(path: str | os.PathLike) -> str:
     The bytes then pass :func:`~scenario_bank.precheck.precheck_text` (strict UTF-8, no coding
     declaration but UTF-8, bounded lines and nesting).
     """
-    import stat
-
-    from scenario_bank.precheck import MAX_SCRIPT_BYTES, precheck_text
-
     file = Path(path)
     if not file.is_file():
         raise FileNotFoundError(f"scenario file {str(file)!r} does not exist")

@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 from typing import Any, Dict, Mapping
+import stat
 
 from envs.errors import ACTION_TYPES, OBSERVATION_TYPES
 from scenario_bank.errors import DV2SError
@@ -207,7 +208,6 @@ def check_map(value: Any) -> None:
         info = path.lstat()
     except OSError:
         _fail("map", value, "no such file")
-    import stat
 
     if not stat.S_ISREG(info.st_mode):
         _fail("map", value, "not a regular file (a symbolic link, a folder or a device)")

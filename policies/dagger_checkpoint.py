@@ -36,13 +36,14 @@ import numpy as np
 
 from scenario_bank.run_identity import check_identity
 from policies.training import TrainingError
-from scenario_bank.atomic import file_sha256
+from scenario_bank.atomic import atomic_write_bytes, atomic_write_json, file_sha256
+from scenario_bank.bank import Bank
 
 if TYPE_CHECKING:
     from policies.dagger_config import DaggerConfig
     from policies.training import TrainConfig
 
-__all__ = ["CHECKPOINT_DIR", "DAggerResumeError", "DAggerCheckpoint", "SavedIteration", "PartialIteration",
+__all__ = ["CHECKPOINT_DIR", "DAggerResumeError", "DAggerCheckpoint", "LabelledBatch", "SavedIteration", "PartialIteration",
            "run_identity", "checkpoint_position", "describe_position"]
 
 CHECKPOINT_DIR = "dagger_checkpoint"
@@ -61,6 +62,24 @@ _DERIVED = {"source_sha256": " (the source checkpoint's file changed)",
 class DAggerResumeError(TrainingError):
     """A DAgger checkpoint that cannot be resumed because its files are unreadable (one written with other
     settings is refused with :class:`~scenario_bank.run_identity.RunIdentityError`)."""
+
+
+@dataclasses.dataclass
+class LabelledBatch:
+    """The states one iteration labelled, as committed when it finishes."""
+
+    iteration: int
+    """The iteration (1-based)."""
+    observations: np.ndarray
+    labels: np.ndarray
+    next_observations: np.ndarray
+    """The training envs' observations when the iteration ended."""
+
+
+def _npz_bytes(batch: "LabelledBatch | PartialIteration") -> bytes:
+    buffer = io.BytesIO()
+    np.savez(buffer, observations=batch.observations, labels=batch.labels, next_observations=batch.next_observations)
+    return buffer.getvalue()
 
 
 @dataclasses.dataclass
@@ -106,8 +125,6 @@ class SavedIteration:
 
 def _scenario_hashes(bank_dir: Optional[str], names: List[str]) -> Dict[str, Optional[str]]:
     """Each scenario's script content hash in the bank (``None`` when the bank does not hold it)."""
-    from scenario_bank.bank import Bank
-
     bank = Bank(bank_dir) if bank_dir is not None else Bank()
     return {name: (bank.get(name).content_hash or None) if name in bank else None for name in names}
 
@@ -201,19 +218,16 @@ class DAggerCheckpoint:
                               wall_time_s=float(data.get("wall_time_s", 0.0)), resumes=list(data.get("resumes", [])),
                               partial=partial)
 
-    def save(self, *, iteration: int, observations: np.ndarray, labels: np.ndarray, next_observations: np.ndarray,
-             model: Any, optimizer: Any, rng: np.random.Generator, history: List[Dict[str, Any]],
-             envs: List[Dict[str, Any]], wall_time_s: float, resumes: List[Dict[str, Any]]) -> None:
-        """Commit iteration ``iteration`` (its new labelled states, the weights after its training, the RNGs,
-        the envs' positions); a kill at any point leaves the previous commit intact."""
+    def save(self, batch: LabelledBatch, *, model: Any, optimizer: Any, rng: np.random.Generator,
+             history: List[Dict[str, Any]], envs: List[Dict[str, Any]], wall_time_s: float,
+             resumes: List[Dict[str, Any]]) -> None:
+        """Commit iteration ``batch.iteration`` (its new labelled states, the weights after its training, the
+        RNGs, the envs' positions); a kill at any point leaves the previous commit intact."""
         import torch
 
-        from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
-
+        iteration = batch.iteration
         self.folder.mkdir(parents=True, exist_ok=True)
-        buffer = io.BytesIO()
-        np.savez(buffer, observations=observations, labels=labels, next_observations=next_observations)
-        atomic_write_bytes(self.folder / f"iteration_{iteration}.npz", buffer.getvalue())
+        atomic_write_bytes(self.folder / f"iteration_{iteration}.npz", _npz_bytes(batch))
         buffer = io.BytesIO()
         torch.save({"policy": model.policy.state_dict(), "optimizer": optimizer.state_dict(),
                     "torch_rng": torch.get_rng_state()}, buffer)
@@ -225,25 +239,20 @@ class DAggerCheckpoint:
         (self.folder / f"weights_{iteration - 1}.pt").unlink(missing_ok=True)
         self._remove_partials(keep=None)
 
-    def save_partial(self, *, iteration: int, observations: np.ndarray, labels: np.ndarray,
-                     next_observations: np.ndarray, episodes: int, crashes: int, envs: List[Dict[str, Any]],
-                     rng: np.random.Generator, resumes: List[Dict[str, Any]], wall_time_s: float) -> None:
-        """Commit the states iteration ``iteration`` (1-based, still collecting) has labelled so far, with
-        the envs' positions; the last finished iteration's commit stays as it was."""
-        from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
-
+    def save_partial(self, partial: PartialIteration, *, rng: np.random.Generator, resumes: List[Dict[str, Any]],
+                     wall_time_s: float) -> None:
+        """Commit the states iteration ``partial.iteration`` (1-based, still collecting) has labelled so far,
+        with the envs' positions; the last finished iteration's commit stays as it was."""
         self.folder.mkdir(parents=True, exist_ok=True)
-        name = f"partial_{iteration}_{len(labels)}.npz"
-        buffer = io.BytesIO()
-        np.savez(buffer, observations=observations, labels=labels, next_observations=next_observations)
-        atomic_write_bytes(self.folder / name, buffer.getvalue())
+        name = f"partial_{partial.iteration}_{partial.rows}.npz"
+        atomic_write_bytes(self.folder / name, _npz_bytes(partial))
         committed = self._committed or {
             "schema": SCHEMA, "schema_version": 1, "identity": self.identity, "iteration": 0, "history": [],
             "rng": rng.bit_generator.state, "envs": []}
         atomic_write_json(self.progress_path, {
             **committed, "wall_time_s": round(float(wall_time_s), 3), "resumes": resumes,
-            "partial": {"iteration": int(iteration), "file": name, "rows": int(len(labels)),
-                        "episodes": int(episodes), "crashes": int(crashes), "envs": envs}})
+            "partial": {"iteration": int(partial.iteration), "file": name, "rows": partial.rows,
+                        "episodes": int(partial.episodes), "crashes": int(partial.crashes), "envs": partial.envs}})
         self._remove_partials(keep=name)
 
     def _remove_partials(self, keep: Optional[str]) -> None:

@@ -40,9 +40,15 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 import gymnasium as gym
 import numpy as np
 
+from policies.dagger_checkpoint import (CHECKPOINT_DIR, DAggerCheckpoint, LabelledBatch, PartialIteration,
+                                        describe_position, run_identity)
 from policies.state_driver import SLOWER
 from policies.dagger_config import DAGGER_DEFAULTS, DaggerConfig
-from policies.training import ScenarioSchedule, TrainConfig, TrainingError, fine_tune_scenarios
+from policies.training import (ScenarioSchedule, TrainConfig, TrainEnvSpec, TrainingError, close_vec_env,
+                               fine_tune_scenarios, make_vec_env, resolve_checkpoint)
+from policies.model_card import write_card
+from policies.registry import load_policy, read_model_card
+from scenario_bank.atomic import atomic_path
 
 __all__ = ["ReferenceLabels", "DAGGER_DEFAULTS", "DaggerConfig", "dagger_fine_tune", "agreement", "imitation_step"]
 
@@ -59,7 +65,6 @@ class ReferenceLabels(gym.Wrapper):
     def __init__(self, env: gym.Env, reference: str = "rule", beta: float = 1.0, seed: int = 0,
                  stream: int = 0) -> None:
         super().__init__(env)
-        from policies.registry import load_policy
 
         self.reference = load_policy(reference)
         if not getattr(self.reference, "privileged", False):
@@ -258,7 +263,6 @@ def dagger_fine_tune(checkpoint_or_spec: str, config: TrainConfig, dagger: Optio
     for name, value in (("steps", config.steps), ("n_envs", config.n_envs)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise TrainingError(f"DAgger {name} must be an integer >= 1, not {value!r}")
-    from policies.registry import read_model_card
 
     model_path = Path(config.out) / "model.zip"
     if model_path.is_file() and (read_model_card(model_path).get("fine_tune") or {}).get("method") == "dagger":
@@ -274,9 +278,6 @@ class _DaggerRun:
     """One DAgger fine-tuning: its settings, the student, the data aggregated so far and its checkpoint."""
 
     def __init__(self, spec: str, config: TrainConfig, dagger: DaggerConfig, log: Callable[[str], None]) -> None:
-        from policies.dagger_checkpoint import CHECKPOINT_DIR, DAggerCheckpoint, run_identity
-        from policies.training import resolve_checkpoint
-
         self.spec, self.config, self.dagger, self.log = spec, config, dagger, log
         self.out = Path(config.out)
         weights, scenarios = fine_tune_scenarios(config.weights, config.scenarios)
@@ -314,7 +315,6 @@ class _DaggerRun:
         self.began = time.perf_counter()
         if saved is None:
             return
-        from policies.dagger_checkpoint import describe_position
 
         if saved.weights is not None:
             self.model.policy.load_state_dict(saved.weights["policy"])
@@ -334,11 +334,11 @@ class _DaggerRun:
 
     def iterate(self) -> None:
         """Run the iterations not committed yet, in training envs put back where the last commit left them."""
-        from policies.training import close_vec_env, make_vec_env
 
         c, d = self.config, self.dagger
-        venv = make_vec_env(self.scenarios, self.env_config, c.bank_dir, self.probabilities, c.n_envs, int(c.seed),
-                            vec_env=c.vec_env, wrap=functools.partial(_with_labels, reference=d.reference))
+        spec = TrainEnvSpec(self.scenarios, self.env_config, c.bank_dir, self.probabilities,
+                            wrap=functools.partial(_with_labels, reference=d.reference))
+        venv = make_vec_env(spec, c.n_envs, int(c.seed), vec_env=c.vec_env)
         bar = None
         if c.progress_bar:
             from tqdm import tqdm
@@ -380,10 +380,10 @@ class _DaggerRun:
 
         def commit_partial(now: np.ndarray, number: int = iteration + 1, so_far: _Collected = collected):
             self.checkpoint.save_partial(
-                iteration=number, observations=np.concatenate(so_far.observations),
-                labels=np.concatenate(so_far.labels), next_observations=np.asarray(now),
-                episodes=so_far.episodes, crashes=so_far.crashes, envs=venv.env_method("snapshot"), rng=self.rng,
-                resumes=self.resumes, wall_time_s=self.elapsed())
+                PartialIteration(iteration=number, observations=np.concatenate(so_far.observations),
+                                 labels=np.concatenate(so_far.labels), next_observations=np.asarray(now),
+                                 episodes=so_far.episodes, crashes=so_far.crashes, envs=venv.env_method("snapshot")),
+                rng=self.rng, resumes=self.resumes, wall_time_s=self.elapsed())
 
         obs = _collect(venv, self.model, obs, self.per_iteration[iteration], collected, d.checkpoint_every,
                        commit_partial, bar)
@@ -400,10 +400,9 @@ class _DaggerRun:
                   "agreement_after": round(agreement(self.model, batch_obs, batch_labels), 4),
                   "dataset": int(len(all_labels)), "loss": round(loss, 4)}
         self.history.append(record)
-        self.checkpoint.save(iteration=iteration + 1, observations=batch_obs, labels=batch_labels,
-                             next_observations=np.asarray(obs), model=self.model, optimizer=self.optimizer,
-                             rng=self.rng, history=self.history, envs=venv.env_method("snapshot"),
-                             wall_time_s=self.elapsed(), resumes=self.resumes)
+        self.checkpoint.save(LabelledBatch(iteration + 1, batch_obs, batch_labels, np.asarray(obs)),
+                             model=self.model, optimizer=self.optimizer, rng=self.rng, history=self.history,
+                             envs=venv.env_method("snapshot"), wall_time_s=self.elapsed(), resumes=self.resumes)
         self.log(f"DAgger iteration {iteration + 1}/{d.iterations}: beta {mixture:.3g}, {record['steps']} labelled "
                  f"steps, agreement with {d.reference} {on_policy:.3f} -> {record['agreement_after']:.3f}, "
                  f"{collected.crashes}/{collected.episodes} finished episodes crashed or left the road")
@@ -412,9 +411,6 @@ class _DaggerRun:
     def finish(self) -> Path:
         """Write the fine-tuned model and its card, remove the checkpoint; the model's path."""
         import stable_baselines3 as sb3
-
-        from policies.model_card import write_card
-        from scenario_bank.atomic import atomic_path
 
         wall = self.elapsed()
         all_obs, all_labels = np.concatenate(self.observations), np.concatenate(self.labels)

@@ -28,9 +28,14 @@ import os
 import sys
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+import multiprocessing
+import signal
+import time
 
 from envs.errors import DV2SError
-from policies.evaluation import EpisodeResult
+from policies.evaluation import EpisodeResult, evaluate
+from scenario_bank.atomic import atomic_write_json, atomic_write_text
+from scenario_bank.catalog import open_bank
 
 __all__ = [
     "CARD_NAME",
@@ -75,8 +80,6 @@ def bank_version(names: Sequence[str], bank_dir: Optional[Union[str, os.PathLike
     Returns ``{"version": hex, "scenarios": {name: content_hash}}``; the version changes
     when a scenario is added, removed or its script edited.
     """
-    from scenario_bank.catalog import open_bank
-
     bank = open_bank(bank_dir)
     hashes = {name: bank.get(name).content_hash for name in sorted(set(names))}
     payload = json.dumps(sorted(hashes.items()), separators=(",", ":"))
@@ -279,8 +282,6 @@ def _card_path(location: Union[str, os.PathLike]) -> Path:
 def write_card(directory: Union[str, os.PathLike], card: Mapping[str, Any]) -> Path:
     """Write ``card`` as ``model_card.json`` and its rendering as ``README.md`` in
     ``directory`` (both atomic); returns the JSON path."""
-    from scenario_bank.atomic import atomic_write_json, atomic_write_text
-
     directory = Path(directory)
     data = json.loads(json.dumps({"card_version": CARD_VERSION, **dict(card)}, default=str, sort_keys=True))
     path = atomic_write_json(directory / CARD_NAME, data, indent=1)
@@ -378,8 +379,6 @@ def _evaluate_chunk(spec: str, episodes: List[Tuple[str, int]], config: Optional
     os.environ["OMP_NUM_THREADS"] = "1"
     import torch
 
-    from policies.evaluation import evaluate
-
     torch.set_num_threads(1)
     return evaluate(spec, episodes, config=config, bank_dir=bank_dir)
 
@@ -405,7 +404,6 @@ def evaluate_parallel(spec: str, episodes: Sequence[Tuple[str, int]], config: Op
             if on_done is not None:
                 on_done(len(chunk))
         return results
-    import multiprocessing
 
     # workers leave Ctrl-C to this process, which stops them: one line to the user, no worker tracebacks
     pool = multiprocessing.get_context("forkserver").Pool(jobs, initializer=_ignore_interrupts)
@@ -424,8 +422,6 @@ def evaluate_parallel(spec: str, episodes: Sequence[Tuple[str, int]], config: Op
 
 
 def _ignore_interrupts() -> None:
-    import signal
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
@@ -439,15 +435,11 @@ class TimeLeft:
     ten) are done, from their pace (it includes the workers' start-up, so the estimate errs long)."""
 
     def __init__(self, total: int, log: Callable[[str], None], what: str) -> None:
-        import time
-
         self.total, self.log, self.what = int(total), log, what
         self.done, self.said, self.began = 0, False, time.perf_counter()
 
     def update(self, count: int) -> None:
         """``count`` more episodes are done."""
-        import time
-
         self.done += int(count)
         if self.said or self.done >= self.total or self.done < min(self.total, max(10, self.total // 20)):
             return
@@ -468,11 +460,11 @@ def _duration(seconds: float) -> str:
 
 def evaluate_for_card(specs: Mapping[str, str], episodes: Sequence[Tuple[str, int]],
                       configs: Mapping[str, Optional[Dict[str, Any]]], bank_dir: Optional[str] = None,
-                      candidate: str = "policy", seed_base: Optional[int] = None, seeds: Optional[int] = None,
-                      jobs: int = 2, confidence: float = 0.95, progress: bool = False,
-                      log: Optional[Callable[[str], None]] = None) -> Dict[str, Any]:
+                      jobs: int = 2, progress: bool = False, log: Optional[Callable[[str], None]] = None,
+                      **section: Any) -> Dict[str, Any]:
     """Run every policy of ``specs`` (label -> spec) on the same ``episodes`` and build the
-    card's ``evaluation`` section (:func:`evaluation_section`); ``configs`` gives each
+    card's ``evaluation`` section (:func:`evaluation_section`, which takes ``section``: ``candidate``,
+    ``confidence``, ``seed_base``, ``seeds``); ``configs`` gives each
     label's env config (a baseline driving ``DiscreteMetaAction`` next to a continuous policy).
     ``progress``: one progress bar on stderr over every policy's episodes; ``log``: gets one line with the
     time left, estimated once the first episodes are done (:class:`TimeLeft`)."""
@@ -496,5 +488,4 @@ def evaluate_for_card(specs: Mapping[str, str], episodes: Sequence[Tuple[str, in
     finally:
         if bar is not None:
             bar.close()
-    return evaluation_section(results, episodes, candidate=candidate, confidence=confidence, seed_base=seed_base,
-                              seeds=seeds, specs=specs)
+    return evaluation_section(results, episodes, specs=specs, **section)

@@ -27,6 +27,7 @@ before acting (the regression runner does this).
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import inspect
 import json
@@ -34,6 +35,7 @@ import os
 import sys
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+import difflib
 
 import gymnasium as gym
 import numpy as np
@@ -144,7 +146,16 @@ class Policy:
 
 
 def _check_options(name: str, driver_class: type, options: Mapping[str, Any]) -> None:
-    """Refuse options the driver does not take now, not in a worker's first episode."""
+    """Refuse options the driver does not take now, not in a worker's first episode (a driver with a ``SETTINGS``
+    dataclass takes its fields by name)."""
+    settings = getattr(driver_class, "SETTINGS", None)
+    if dataclasses.is_dataclass(settings):
+        accepted = [field.name for field in dataclasses.fields(settings)]
+        unknown = [key for key in options if key not in accepted]
+        if unknown:
+            raise PolicyError(f"policy {name!r} has no option {', '.join(map(repr, unknown))}; its options are "
+                              f"{', '.join(accepted)} (and action_noise, noise_seed)")
+        return
     try:
         signature = inspect.signature(driver_class)
     except (TypeError, ValueError):  # pragma: no cover - a builtin without a signature
@@ -446,8 +457,6 @@ def _load_base(base: str, options: Dict[str, Any]) -> Policy:
 
 
 def _unknown_policy(base: str) -> PolicyError:
-    import difflib
-
     close = difflib.get_close_matches(base, registered_policies(), n=1)
     return PolicyError(
         f"unknown policy {base!r}" + (f" (did you mean {close[0]!r}?)" if close else "")

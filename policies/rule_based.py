@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import math
+import dataclasses
 from dataclasses import dataclass
-from typing import Iterator, List, Optional, Tuple
+from typing import Any, Iterator, List, Optional, Tuple
 
 import numpy as np
 
@@ -13,7 +14,7 @@ from envs.scenic_highway.actors import Pedestrian
 from policies.state_driver import FASTER, IDLE, LANE_LEFT, LANE_RIGHT, SLOWER, StateDriver
 
 __all__ = [
-    "CautiousDriver", "ConflictZone", "conflict_zone", "gap_accepted", "road_left", "travel_time",
+    "CautiousDriver", "CautiousSettings", "ConflictZone", "conflict_zone", "gap_accepted", "road_left", "travel_time",
     "LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER",
 ]
 
@@ -126,12 +127,13 @@ class ConflictZone:
 
 
 def conflict_zone(
-    path: np.ndarray, arc: np.ndarray, ego_length: float, ego_width: float,
-    position: np.ndarray, heading: float, length: float, width: float,
+    path: np.ndarray, arc: np.ndarray, ego_size: Tuple[float, float],
+    position: np.ndarray, heading: float, size: Tuple[float, float],
     margin: float = 0.5, min_angle: float = math.radians(20.0),
 ) -> Optional[ConflictZone]:
     """The first zone where the ego's path (centres ``path`` at arc lengths ``arc``) crosses
-    the band swept by a road user at ``position`` moving straight along ``heading``.
+    the band swept by a road user at ``position`` moving straight along ``heading``; ``ego_size``
+    and ``size`` are the two footprints' ``(length, width)`` [m].
 
     Only *crossing* paths count: where the two headings differ by at least ``min_angle``
     and by at most ``pi - min_angle`` (traffic ahead in the same lane, traffic cutting in at a
@@ -141,6 +143,7 @@ def conflict_zone(
     """
     if len(path) < 2:
         return None
+    (ego_length, ego_width), (length, width) = ego_size, size
     direction = np.array([math.cos(heading), math.sin(heading)])
     normal = np.array([-direction[1], direction[0]])
     rel = path - np.asarray(position, dtype=float)
@@ -183,6 +186,44 @@ def gap_accepted(
     return ego_clear + margin <= other_arrival
 
 
+@dataclass(frozen=True)
+class CautiousSettings:
+    """The thresholds of :class:`CautiousDriver` (its docstring says which rule uses which)."""
+
+    cruise_speed: Optional[float] = None
+    """Speed to hold on a free road [m/s]; ``None`` keeps the speed the scenario gave the ego at the start of the
+    episode."""
+    ttc_brake: float = 4.0
+    """Slow down when time-to-collision falls below this [s]."""
+    headway: float = 1.5
+    """Slow down when the gap ahead is shorter than this many seconds of travel."""
+    yield_horizon: float = 3.0
+    """Prediction horizon of the yielding rule [s]."""
+    conflict_radius: float = 2.8
+    """Centre distance counted as a conflict by the yielding rule [m] (under a lane width, so traffic passing in
+    the next lane is not one)."""
+    gap_margin: float = 1.0
+    """Seconds the ego must have cleared a crossing zone before a road user could reach it."""
+    other_speed_up: float = 1.5
+    """Factor on a crossing road user's speed for the fastest it may go."""
+    vehicle_max_speed: float = 14.0
+    """Speed a crossing vehicle may reach whatever its speed now [m/s]."""
+    vehicle_accel: float = 3.0
+    """Acceleration assumed for a crossing vehicle speeding up [m/s²]."""
+    pedestrian_accel: float = 1.0
+    """The same for a pedestrian [m/s²]."""
+    ego_accel: float = 2.0
+    """Acceleration the ego counts on to clear a zone [m/s²]."""
+    comfort_braking: float = 3.0
+    """Deceleration at which the ego starts braking for a stop [m/s²]."""
+    max_braking: float = 6.0
+    """Deceleration beyond which the ego can no longer stop before a zone and commits to it [m/s²]."""
+    stop_buffer: float = 1.0
+    """Distance kept between the ego's footprint and a zone it waits at [m]."""
+    lookahead: float = 50.0
+    """Length of the ego's planned path searched for crossing zones [m]."""
+
+
 class CautiousDriver(StateDriver):
     """A defensive reference driver: keep lane, hold a cruise speed, brake for what is ahead,
     and cross other road users' paths only with an accepted gap.
@@ -213,50 +254,17 @@ class CautiousDriver(StateDriver):
 
     Args:
         env: the DV2S env (wrapped or not) this driver controls.
-        cruise_speed: speed to hold on a free road [m/s]; ``None`` keeps the speed
-            the scenario gave the ego at the start of the episode.
-        ttc_brake: slow down when time-to-collision falls below this [s].
-        headway: slow down when the gap ahead is shorter than this many seconds of travel.
-        yield_horizon: prediction horizon of the yielding rule [s].
-        conflict_radius: centre distance counted as a conflict by the yielding rule [m] (under
-            a lane width, so traffic passing in the next lane is not one).
-        gap_margin: seconds the ego must have cleared a crossing zone before a road user could
-            reach it.
-        other_speed_up: factor on a crossing road user's speed for the fastest it may go.
-        vehicle_max_speed: speed a crossing vehicle may reach whatever its speed now [m/s].
-        vehicle_accel: acceleration assumed for a crossing vehicle speeding up [m/s²].
-        pedestrian_accel: the same for a pedestrian [m/s²].
-        ego_accel: acceleration the ego counts on to clear a zone [m/s²].
-        comfort_braking: deceleration at which the ego starts braking for a stop [m/s²].
-        max_braking: deceleration beyond which the ego can no longer stop before a zone and
-            commits to it [m/s²].
-        stop_buffer: distance kept between the ego's footprint and a zone it waits at [m].
-        lookahead: length of the ego's planned path searched for crossing zones [m].
+        settings: the driver's thresholds (:class:`CautiousSettings`; default: its defaults).
+        **options: single settings by name, over ``settings`` (``CautiousDriver(env, cruise_speed=8.0)``;
+            the options of the ``rule`` policy spec, ``rule?ttc_brake=3``).
     """
 
-    def __init__(
-        self, env, cruise_speed: Optional[float] = None, ttc_brake: float = 4.0, headway: float = 1.5,
-        yield_horizon: float = 3.0, conflict_radius: float = 2.8, gap_margin: float = 1.0,
-        other_speed_up: float = 1.5, vehicle_max_speed: float = 14.0, vehicle_accel: float = 3.0,
-        pedestrian_accel: float = 1.0, ego_accel: float = 2.0, comfort_braking: float = 3.0,
-        max_braking: float = 6.0, stop_buffer: float = 1.0, lookahead: float = 50.0,
-    ) -> None:
+    SETTINGS = CautiousSettings
+    """The settings the driver takes by name (the policy registry checks a spec's options against them)."""
+
+    def __init__(self, env, settings: Optional[CautiousSettings] = None, **options: Any) -> None:
         super().__init__(env)
-        self.cruise_speed = cruise_speed
-        self.ttc_brake = ttc_brake
-        self.headway = headway
-        self.yield_horizon = yield_horizon
-        self.conflict_radius = conflict_radius
-        self.gap_margin = gap_margin
-        self.other_speed_up = other_speed_up
-        self.vehicle_max_speed = vehicle_max_speed
-        self.vehicle_accel = vehicle_accel
-        self.pedestrian_accel = pedestrian_accel
-        self.ego_accel = ego_accel
-        self.comfort_braking = comfort_braking
-        self.max_braking = max_braking
-        self.stop_buffer = stop_buffer
-        self.lookahead = lookahead
+        self.settings = dataclasses.replace(settings or CautiousSettings(), **options)
         self._cruise: Optional[float] = None
 
     def act(self) -> int:
@@ -265,13 +273,14 @@ class CautiousDriver(StateDriver):
         ego = base.vehicle
         others = base.road.vehicles + base.road.objects
         if base.steps == 0 or self._cruise is None:
-            self._cruise = self.cruise_speed if self.cruise_speed is not None else max(ego.speed, 5.0)
+            cruise = self.settings.cruise_speed
+            self._cruise = cruise if cruise is not None else max(ego.speed, 5.0)
         zones = self._crossing_zones(ego, others)
         committed = {id(other) for other, zone in zones if self._committed(ego, zone)}
         rest = [other for other in others if id(other) not in committed]
         ttc, _ = time_to_collision(ego, rest, horizon=10.0, ahead_only=True)
         gap = self._gap_ahead(ego, rest)
-        if ttc < self.ttc_brake or gap < max(6.0, self.headway * ego.speed):
+        if ttc < self.settings.ttc_brake or gap < max(6.0, self.settings.headway * ego.speed):
             return SLOWER
         if self._must_stop_for_road_end(ego):
             return SLOWER
@@ -288,7 +297,7 @@ class CautiousDriver(StateDriver):
 
     def _crossing_zones(self, ego, others) -> List[Tuple[object, ConflictZone]]:
         """The moving road users whose straight-ahead path crosses the ego's planned path, with the zone."""
-        arc = np.arange(0.0, self.lookahead + 1e-9, 0.5)
+        arc = np.arange(0.0, self.settings.lookahead + 1e-9, 0.5)
         path = _planned_path(ego, arc, speed=1.0)
         if path is None:
             return []
@@ -298,8 +307,8 @@ class CautiousDriver(StateDriver):
                 continue
             velocity = np.asarray(other.velocity, dtype=float)
             zone = conflict_zone(
-                path, arc, ego.LENGTH, ego.WIDTH, np.asarray(other.position, dtype=float),
-                math.atan2(velocity[1], velocity[0]), other.LENGTH, other.WIDTH,
+                path, arc, (ego.LENGTH, ego.WIDTH), np.asarray(other.position, dtype=float),
+                math.atan2(velocity[1], velocity[0]), (other.LENGTH, other.WIDTH),
             )
             if zone is not None:
                 zones.append((other, zone))
@@ -312,10 +321,10 @@ class CautiousDriver(StateDriver):
             pedestrian = isinstance(other, Pedestrian)
             speed = float(other.speed)
             accepted = gap_accepted(
-                zone, ego.speed, self.ego_accel, max(self._cruise, ego.speed),
-                speed, self.pedestrian_accel if pedestrian else self.vehicle_accel,
-                self.other_speed_up * speed if pedestrian else max(self.other_speed_up * speed, self.vehicle_max_speed),
-                self.gap_margin,
+                zone, ego.speed, self.settings.ego_accel, max(self._cruise, ego.speed),
+                speed, self.settings.pedestrian_accel if pedestrian else self.settings.vehicle_accel,
+                self.settings.other_speed_up * speed if pedestrian else max(self.settings.other_speed_up * speed, self.settings.vehicle_max_speed),
+                self.settings.gap_margin,
             )
             if not accepted:
                 blocking.append((zone.ego_entry, zone.other_entry <= 0.0, zone))
@@ -327,8 +336,8 @@ class CautiousDriver(StateDriver):
             return SLOWER if occupied else clear
         if not occupied and self._committed(ego, zone):
             return clear  # too close to stop before the zone: never stop inside it
-        stop_at = entry - self.stop_buffer  # distance left to where the ego waits
-        if stop_at < 0.5 or ego.speed ** 2 > 2.0 * self.comfort_braking * stop_at:
+        stop_at = entry - self.settings.stop_buffer  # distance left to where the ego waits
+        if stop_at < 0.5 or ego.speed ** 2 > 2.0 * self.settings.comfort_braking * stop_at:
             return SLOWER
         if ego.speed < 3.0 and stop_at > 4.0:  # creep up to where it waits
             return FASTER
@@ -336,12 +345,12 @@ class CautiousDriver(StateDriver):
 
     def _committed(self, ego, zone: ConflictZone) -> bool:
         """Whether the ego is inside ``zone`` or too close to stop before it."""
-        return zone.ego_entry <= 0.0 or ego.speed ** 2 / (2.0 * self.max_braking) > zone.ego_entry
+        return zone.ego_entry <= 0.0 or ego.speed ** 2 / (2.0 * self.settings.max_braking) > zone.ego_entry
 
     def _must_stop_for_road_end(self, ego) -> bool:
         """Whether the ego must brake now to stop ``stop_buffer`` metres before the end of its road."""
-        left = road_left(ego, self.lookahead) - ego.LENGTH / 2 - self.stop_buffer
-        return left < 0.5 or ego.speed ** 2 > 2.0 * self.comfort_braking * left
+        left = road_left(ego, self.settings.lookahead) - ego.LENGTH / 2 - self.settings.stop_buffer
+        return left < 0.5 or ego.speed ** 2 > 2.0 * self.settings.comfort_braking * left
 
     @staticmethod
     def _gap_ahead(ego, others) -> float:
@@ -359,7 +368,7 @@ class CautiousDriver(StateDriver):
 
     def _path_conflict(self, ego, others) -> bool:
         """Whether anything ahead of the ego's rear comes near the ego's planned path in time."""
-        times = np.arange(0.0, self.yield_horizon + 1e-9, 0.25)
+        times = np.arange(0.0, self.settings.yield_horizon + 1e-9, 0.25)
         path = _planned_path(ego, times, speed=max(ego.speed, 2.0))
         if path is None:
             return False
@@ -371,6 +380,6 @@ class CautiousDriver(StateDriver):
             if float(rel @ heading) < -ego.LENGTH / 2:
                 continue  # behind the ego: braking would not help
             future = np.asarray(other.position, dtype=float) + np.outer(times, np.asarray(other.velocity, dtype=float))
-            if np.min(np.linalg.norm(future - path, axis=1)) < self.conflict_radius:
+            if np.min(np.linalg.norm(future - path, axis=1)) < self.settings.conflict_radius:
                 return True
         return False

@@ -42,13 +42,16 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import inspect
 import json
 import os
 import re
 import shlex
+import signal
 import sys
 import time
 from collections import deque
+from importlib import metadata
 from pathlib import Path
 from typing import Any, Callable, Deque, Dict, List, Mapping, Optional, Sequence, Tuple
 
@@ -56,10 +59,16 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
 
-from envs.dv2s_env import check_env_config
+from envs.dv2s_env import DV2SEnv, check_env_config
 from envs.errors import DV2SError, Interrupted
+from policies.evaluation import make_eval_env, run_episode
+from policies.model_card import bank_version, summarize_results, write_card
+from policies.registry import SB3Policy, load_policy, read_model_card
+from scenario_bank import select_scenarios
+from scenario_bank.atomic import atomic_path, atomic_write_json
 from scenario_bank.field_checks import (check_bool, check_choice, check_int, check_mapping, check_names,
                                         check_number, check_path)
+from scenario_bank.run_identity import check_identity
 
 __all__ = [
     "ALGORITHMS",
@@ -77,6 +86,7 @@ __all__ = [
     "CheckpointSaver",
     "ProgressCallback",
     "make_train_env",
+    "TrainEnvSpec",
     "make_vec_env",
     "evaluation_episodes",
     "latest_checkpoint",
@@ -327,8 +337,6 @@ _FINE_TUNE_DEFAULTS: Dict[str, Any] = {"env_config": None, "eval_freq": 0, "eval
 
 
 def _known_hyperparameters(algo: str) -> set:
-    import inspect
-
     import stable_baselines3 as sb3
 
     parameters = set(inspect.signature(getattr(sb3, algo.upper()).__init__).parameters)
@@ -442,40 +450,47 @@ class ScenarioSchedule(gym.Wrapper):
         return self.env.reset(seed=episode_seed, options=options)
 
 
-def _build_train_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Optional[str],
-                     probabilities: Mapping[str, float], seed: int, stream: int,
-                     wrap: Optional[Callable[[gym.Env, int, int], gym.Env]] = None) -> gym.Env:
+@dataclasses.dataclass(frozen=True)
+class TrainEnvSpec:
+    """What every training env of a run is: DV2S-v0 on ``names`` with ``config`` (scenarios from ``bank_dir``,
+    ``None``: the default bank), each episode's scenario drawn with ``probabilities``.
+
+    ``wrap(env, seed, stream)``, a picklable callable, replaces SB3's Monitor as the outer wrapper
+    (DAgger's reference labels, :mod:`policies.imitation`)."""
+
+    names: Sequence[str]
+    config: Mapping[str, Any]
+    bank_dir: Optional[str]
+    probabilities: Mapping[str, float]
+    wrap: Optional[Callable[[gym.Env, int, int], gym.Env]] = None
+
+    def __post_init__(self) -> None:  # plain containers: the spec is pickled into every worker process
+        object.__setattr__(self, "names", list(self.names))
+        object.__setattr__(self, "config", dict(self.config))
+        object.__setattr__(self, "probabilities", dict(self.probabilities))
+
+
+def _build_train_env(spec: TrainEnvSpec, seed: int, stream: int) -> gym.Env:
     os.environ["OMP_NUM_THREADS"] = "1"
     from stable_baselines3.common.monitor import Monitor
 
-    from envs.dv2s_env import DV2SEnv
-
-    env = DV2SEnv(scenario=list(names), config=dict(config), bank_dir=bank_dir)
-    scheduled = ScenarioSchedule(env, probabilities, seed=seed, stream=stream)
-    return Monitor(scheduled) if wrap is None else wrap(scheduled, seed, stream)
+    env = DV2SEnv(scenario=list(spec.names), config=dict(spec.config), bank_dir=spec.bank_dir)
+    scheduled = ScenarioSchedule(env, spec.probabilities, seed=seed, stream=stream)
+    return Monitor(scheduled) if spec.wrap is None else spec.wrap(scheduled, seed, stream)
 
 
-def make_train_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Optional[str],
-                   probabilities: Mapping[str, float], seed: int, stream: int = 0,
-                   wrap: Optional[Callable[[gym.Env, int, int], gym.Env]] = None) -> Callable[[], gym.Env]:
-    """A picklable factory of one training env (DV2S-v0 in a :class:`ScenarioSchedule` and SB3's Monitor).
-
-    ``wrap(env, seed, stream)``, a picklable callable, replaces the Monitor as the outer wrapper
-    (DAgger's reference labels, :mod:`policies.imitation`)."""
-    return functools.partial(_build_train_env, list(names), dict(config), bank_dir, dict(probabilities), int(seed),
-                             int(stream), wrap)
+def make_train_env(spec: TrainEnvSpec, seed: int, stream: int = 0) -> Callable[[], gym.Env]:
+    """A picklable factory of one training env (DV2S-v0 in a :class:`ScenarioSchedule` and SB3's Monitor, or
+    ``spec.wrap``)."""
+    return functools.partial(_build_train_env, spec, int(seed), int(stream))
 
 
-def make_vec_env(names: Sequence[str], config: Mapping[str, Any], bank_dir: Optional[str],
-                 probabilities: Mapping[str, float], n_envs: int, seed: int, stream: int = 0,
-                 vec_env: str = "subproc", wrap: Optional[Callable[[gym.Env, int, int], gym.Env]] = None):
-    """``n_envs`` training envs in a ``SubprocVecEnv`` (or ``DummyVecEnv``); env ``i`` is seeded ``seed + i``
-    (``wrap``: see :func:`make_train_env`)."""
+def make_vec_env(spec: TrainEnvSpec, n_envs: int, seed: int, stream: int = 0, vec_env: str = "subproc"):
+    """``n_envs`` training envs in a ``SubprocVecEnv`` (or ``DummyVecEnv``); env ``i`` is seeded ``seed + i``."""
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     os.environ["OMP_NUM_THREADS"] = "1"  # inherited by the worker processes
-    factories = [make_train_env(names, config, bank_dir, probabilities, seed + rank, stream, wrap)
-                 for rank in range(n_envs)]
+    factories = [make_train_env(spec, seed + rank, stream) for rank in range(n_envs)]
     if vec_env == "dummy":
         return DummyVecEnv(factories)
     return SubprocVecEnv([functools.partial(_worker_env, factory) for factory in factories])
@@ -512,8 +527,6 @@ def _worker_env(factory: Callable[[], gym.Env]) -> gym.Env:
     """``factory()`` in a vec-env worker process, which leaves Ctrl-C to the main process: a terminal's Ctrl-C
     reaches the whole process group, and a worker stopped by it would cut the main process off mid-step before
     it saves its checkpoint; the main process closes the workers itself."""
-    import signal
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     return factory()
 
@@ -598,10 +611,6 @@ class HeldOutEvaluationCallback(BaseCallback):
 
     def run(self) -> Dict[str, Any]:
         """Evaluate now; returns the overall rates."""
-        from policies.evaluation import make_eval_env, run_episode
-        from policies.model_card import summarize_results
-        from policies.registry import SB3Policy
-
         self._last = self.num_timesteps
         if self._env is None:
             self._env = make_eval_env(sorted({s for s, _ in self.episodes}), config=self.env_config,
@@ -650,8 +659,6 @@ class CheckpointSaver(BaseCallback):
         """Write a checkpoint of ``model`` (default: the model this callback is attached to) at its
         current step now; returns its path. ``model`` serves a run interrupted before SB3 attached
         the callbacks."""
-        from scenario_bank.atomic import atomic_path, atomic_write_json
-
         model = model if model is not None else self.model
         steps = int(model.num_timesteps)
         self._last = steps
@@ -730,8 +737,6 @@ def load_run_config(out: os.PathLike | str) -> Tuple[TrainConfig, Dict[str, Any]
 
 
 def _resolve_names(config: TrainConfig) -> List[str]:
-    from scenario_bank import select_scenarios
-
     names = select_scenarios(config.scenarios, config.bank_dir)
     if not names:
         raise TrainingError("the scenario selection is empty; name bank scenarios or tag:<tag> after --scenarios")
@@ -739,8 +744,6 @@ def _resolve_names(config: TrainConfig) -> List[str]:
 
 
 def _check_resume(config: TrainConfig, recorded: TrainConfig) -> None:
-    from scenario_bank.run_identity import check_identity
-
     check_identity(recorded.to_json(), config.to_json(), TrainConfig.IDENTITY, run=f"{config.out} holds a training run",
                    fix="resume with the run's own settings (omit the option) or start a new run in another --out")
 
@@ -764,8 +767,6 @@ def _new_model(config: TrainConfig, venv, tensorboard_log: str):
 
 def _resume_model(config: TrainConfig, checkpoint: Path, venv, tensorboard_log: str):
     import stable_baselines3 as sb3
-
-    from policies.registry import load_policy
 
     # The registry gives the clear errors: a checkpoint that does not load, or mismatched spaces.
     policy = load_policy(f"{config.algo}:{checkpoint}")
@@ -807,8 +808,6 @@ def planned_steps(model: Any, start: int, target: int) -> Tuple[int, Optional[st
 
 
 def _versions() -> Dict[str, str]:
-    from importlib import metadata
-
     versions = {}
     for package in ("dv2s-gym", "stable-baselines3", "torch", "highway-env", "gymnasium", "scenic"):
         try:
@@ -833,9 +832,6 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
 
     from stable_baselines3.common.callbacks import CallbackList
 
-    from policies.model_card import write_card
-    from scenario_bank.atomic import atomic_path, atomic_write_json
-
     import torch
 
     torch.set_num_threads(1)
@@ -843,11 +839,9 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
     sampler, stream = _restored_sampler(config, names, checkpoint if resume else None)
     out.mkdir(parents=True, exist_ok=True)
     tensorboard_log = str(out / "tb")
-    log(f"starting {config.n_envs} training env{'s' if config.n_envs != 1 else ''} "
-        f"({'subprocesses' if config.vec_env != 'dummy' else 'in this process'}) on {len(names)} scenario"
-        f"{'s' if len(names) != 1 else ''}; the first reset compiles their first scenarios (up to a minute) ...")
-    venv = make_vec_env(names, env_config, config.bank_dir, sampler.probabilities(), config.n_envs, config.seed,
-                        stream=stream, vec_env=config.vec_env)
+    log(_starting(config, names))
+    venv = make_vec_env(TrainEnvSpec(names, env_config, config.bank_dir, sampler.probabilities()), config.n_envs,
+                        config.seed, stream=stream, vec_env=config.vec_env)
     try:
         if resume:
             model = _resume_model(config, checkpoint, venv, tensorboard_log)
@@ -859,13 +853,7 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
         if plan:
             log(plan)
         atomic_write_json(run_path, record)
-        curriculum = CurriculumCallback(sampler, config.curriculum_update)
-        evaluation = HeldOutEvaluationCallback(evaluation_episodes(names, config.eval_seeds), env_config,
-                                               config.bank_dir, config.eval_freq, out / "evaluations.jsonl")
-        saver = CheckpointSaver(out / "checkpoints", config.checkpoint_freq, sampler, config.keep_checkpoints)
-        callbacks = [curriculum, evaluation, saver]
-        if config.progress_bar:
-            callbacks.append(ProgressCallback(max(planned, config.steps), f"{config.algo} {out.name}", evaluation))
+        callbacks, saver = _callbacks(config, names, env_config, sampler, planned)
         began = time.perf_counter()
         remaining = config.steps - start
 
@@ -903,6 +891,28 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
     log(f"wrote {model_path} and {out / 'model_card.json'} (step {model.num_timesteps}, last segment "
         f"{segment['wall_time_s']:.0f} s)")
     return card
+
+
+def _starting(config: TrainConfig, names: Sequence[str]) -> str:
+    """The line that says what starts (the first reset takes a while)."""
+    return (f"starting {config.n_envs} training env{'s' if config.n_envs != 1 else ''} "
+            f"({'subprocesses' if config.vec_env != 'dummy' else 'in this process'}) on {len(names)} scenario"
+            f"{'s' if len(names) != 1 else ''}; the first reset compiles their first scenarios (up to a minute) ...")
+
+
+def _callbacks(config: TrainConfig, names: Sequence[str], env_config: Mapping[str, Any], sampler: "ScenarioSampler",
+               planned: int) -> Tuple[List[BaseCallback], "CheckpointSaver"]:
+    """The training callbacks (curriculum, held-out evaluation, checkpoints, progress bar) and the checkpoint
+    saver among them."""
+    out = Path(config.out)
+    curriculum = CurriculumCallback(sampler, config.curriculum_update)
+    evaluation = HeldOutEvaluationCallback(evaluation_episodes(names, config.eval_seeds), env_config,
+                                           config.bank_dir, config.eval_freq, out / "evaluations.jsonl")
+    saver = CheckpointSaver(out / "checkpoints", config.checkpoint_freq, sampler, config.keep_checkpoints)
+    callbacks: List[BaseCallback] = [curriculum, evaluation, saver]
+    if config.progress_bar:
+        callbacks.append(ProgressCallback(max(planned, config.steps), f"{config.algo} {out.name}", evaluation))
+    return callbacks, saver
 
 
 def _open_record(config: TrainConfig, resume: bool, log: Callable[[str], None]
@@ -943,8 +953,6 @@ def _restored_sampler(config: TrainConfig, names: Sequence[str],
 def _card(config: TrainConfig, names: Sequence[str], env_config: Dict[str, Any], model: Any,
           sampler: ScenarioSampler, record: Mapping[str, Any]) -> Dict[str, Any]:
     """The trained model's card, without its evaluation."""
-    from policies.model_card import bank_version
-
     wall = sum(s["wall_time_s"] for s in record["segments"])
     trained = sum(s["end_step"] - s["start_step"] for s in record["segments"])
     return {
@@ -1049,7 +1057,6 @@ def with_reward_weights(env_config: Mapping[str, Any], reward_weights: Optional[
     config = json.loads(json.dumps(dict(env_config)))
     if not reward_weights:
         return config
-    from envs.dv2s_env import DV2SEnv
 
     defaults = DV2SEnv.default_config()["reward_weights"]
     unknown = sorted(set(reward_weights) - set(defaults))
@@ -1113,7 +1120,6 @@ def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, learning_rate: Op
     env_config = with_reward_weights(env_config, reward_weights)
     hyperparameters = {k: v for k, v in (source_card.get("hyperparameters") or {}).items()
                        if k != "policy" and k in _known_hyperparameters(algorithm)}
-    from policies.registry import read_model_card
 
     model_path = out / "model.zip"
     if model_path.is_file() and "fine_tune" in read_model_card(model_path):
@@ -1137,7 +1143,6 @@ def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, learning_rate: Op
                            f"{card['fine_tune']['steps']} steps on {len(run_config.scenarios)} scenarios with weighted "
                            "sampling (see sampler.weights).")
     card["name"] = out.name
-    from policies.model_card import write_card
 
     write_card(out, card)
     return model_path
@@ -1147,8 +1152,6 @@ def _first_checkpoint(config: TrainConfig, source: Path, start_step: int, learni
     """Start a fine-tuning run in ``config.out``: the source checkpoint as its first checkpoint (with
     ``learning_rate`` saved in it when given) and a ``run.json`` with no segment yet."""
     import stable_baselines3 as sb3
-
-    from scenario_bank.atomic import atomic_path, atomic_write_json
 
     out = Path(config.out)
     if (out / "run.json").exists():

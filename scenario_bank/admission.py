@@ -10,6 +10,7 @@ from typing import Any, Mapping, Optional, Tuple
 from scenario_bank.errors import ScenarioRejectedError
 from scenario_bank.safety import UnsafeScenarioError
 from scenario_bank.sandbox import SandboxError, verify_script
+from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
 
 __all__ = ["verify", "upgrade_if_asked", "verify_or_name_scenic2"]
 
@@ -30,7 +31,6 @@ def upgrade_if_asked(script: str, provenance: Optional[Mapping[str, Any]],
     """``script`` upgraded from Scenic 2 when ``upgrade`` is asked, its rewrites and notes added to ``provenance``."""
     if not upgrade or not isinstance(script, str):
         return script, provenance
-    from scenario_bank.scenic2 import upgrade_scenic2
 
     result = upgrade_scenic2(script)
     if not result.changed:
@@ -47,8 +47,6 @@ def verify_or_name_scenic2(script: str, label: str, upgraded: bool) -> None:
         verify(script, label)
     except ScenarioRejectedError as error:
         if not upgraded:
-            from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
-
             if looks_like_scenic2(script, str(error)):
                 first = upgrade_scenic2(script, keep_scenic2_meaning=False).rewrites[0]  # refused in 3
                 raise ScenarioRejectedError(

@@ -56,6 +56,30 @@ def export_archive(bank: Any, archive: PathLike, names: Optional[Iterable[str]] 
     return archive
 
 
+def _check_header(header: Dict[str, Any], archive: PathLike) -> None:
+    """Refuse an archive without the bank archive header, or of a newer format than this dv2s-gym reads."""
+    version = header.get("dv2s_bank_archive")
+    if not isinstance(version, int):
+        raise BankError(f"{archive} is not a dv2s bank archive (no {ARCHIVE_HEADER} header)")
+    if version > BANK_VERSION:
+        raise BankVersionError(f"{archive} was written by a newer dv2s-gym (format {version}); upgrade")
+
+
+def _read_entry(unpack: Path, n: str, limits: ArchiveLimits) -> Tuple[Dict[str, Any], str]:
+    """``(sidecar, script)`` of the unpacked archive entry ``n``, checked (readable, valid, the script the
+    sidecar's content hash names)."""
+    try:
+        meta = validate_sidecar(read_json(unpack, f"{n}/{SIDECAR}", limits.max_sidecar_bytes,
+                                          shown=f"its {SIDECAR}"), unpack / n)
+        script = read_text(unpack, f"{n}/{SCRIPT}", limits.max_script_bytes)
+    except (OSError, ValueError) as error:
+        message = error.strerror if isinstance(error, OSError) and error.strerror else error
+        raise UnsafeBankInputError(f"archive entry {n!r} is broken: {message}; nothing was imported") from None
+    if meta.get("content_hash") != content_hash(script):
+        raise BankError(f"archive entry {n!r}: script does not match its content_hash; nothing was imported")
+    return meta, script
+
+
 def import_archive(bank: Any, archive: PathLike, on_duplicate: str = "skip",
                    limits: Optional[ArchiveLimits] = None) -> Dict[str, List[str]]:
     """Import into ``bank`` (a :class:`~scenario_bank.bank.Bank`) an archive written by :func:`export_archive`; all or nothing.
@@ -86,25 +110,12 @@ def import_archive(bank: Any, archive: PathLike, on_duplicate: str = "skip",
                 header, entries = _unpack_archive(Path(archive), unpack, limits)
             except UnsafeInputError as error:
                 raise unsafe_input(error, "; nothing was imported") from None
-            version = header.get("dv2s_bank_archive")
-            if not isinstance(version, int):
-                raise BankError(f"{archive} is not a dv2s bank archive (no {ARCHIVE_HEADER} header)")
-            if version > BANK_VERSION:
-                raise BankVersionError(f"{archive} was written by a newer dv2s-gym (format {version}); upgrade")
+            _check_header(header, archive)
             journal = bank.root / f".journal-{uuid.uuid4().hex[:12]}.json"
             try:
                 for n in entries:
                     folder = unpack / n
-                    try:
-                        meta = validate_sidecar(read_json(unpack, f"{n}/{SIDECAR}", limits.max_sidecar_bytes,
-                                                            shown=f"its {SIDECAR}"), folder)
-                        script = read_text(unpack, f"{n}/{SCRIPT}", limits.max_script_bytes)
-                    except (OSError, ValueError) as error:
-                        message = error.strerror if isinstance(error, OSError) and error.strerror else error
-                        raise UnsafeBankInputError(f"archive entry {n!r} is broken: {message}; nothing was "
-                                                   "imported") from None
-                    if meta.get("content_hash") != content_hash(script):
-                        raise BankError(f"archive entry {n!r}: script does not match its content_hash; nothing was imported")
+                    meta, script = _read_entry(unpack, n, limits)
                     duplicate = bank.find_duplicate(script, meta["elements"], meta["map"])
                     if duplicate is None:
                         duplicate = next(((a, "identical to another archive entry") for a, s in staged

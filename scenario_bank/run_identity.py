@@ -10,7 +10,7 @@ run goes (workers, progress bars) are not part of a run's identity.
 from __future__ import annotations
 
 import json
-from typing import Any, List, Mapping, Optional, Sequence
+from typing import Any, List, Mapping, Optional, Sequence, Type
 
 from scenario_bank.errors import DV2SError
 
@@ -43,15 +43,10 @@ def _same(recorded: Any, asked: Any) -> bool:
     return json.dumps(recorded, sort_keys=True, default=str) == json.dumps(asked, sort_keys=True, default=str)
 
 
-def differing(recorded: Mapping[str, Any], asked: Mapping[str, Any], keys: Sequence[str],
-              legacy: Optional[Mapping[str, Any]] = None) -> List[str]:
-    """The ``keys`` whose values differ between ``recorded`` and ``asked``, in ``keys``' order.
-
-    ``legacy`` gives the value a setting had in runs recorded before the setting existed (a recorded run
-    without it is read as having that value).
-    """
-    legacy = legacy or {}
-    return [key for key in keys if not _same(recorded.get(key, legacy.get(key)), asked.get(key))]
+def differing(recorded: Mapping[str, Any], asked: Mapping[str, Any], keys: Sequence[str]) -> List[str]:
+    """The ``keys`` whose values differ between ``recorded`` and ``asked``, in ``keys``' order (a setting one
+    of them lacks is ``None`` there)."""
+    return [key for key in keys if not _same(recorded.get(key), asked.get(key))]
 
 
 def _show(value: Any, limit: int = 80) -> str:
@@ -60,21 +55,21 @@ def _show(value: Any, limit: int = 80) -> str:
 
 
 def check_identity(recorded: Mapping[str, Any], asked: Mapping[str, Any], keys: Sequence[str], *, run: str,
-                   fix: str, legacy: Optional[Mapping[str, Any]] = None,
-                   notes: Optional[Mapping[str, str]] = None) -> None:
+                   fix: str, notes: Optional[Mapping[str, str]] = None,
+                   error: Type[RunIdentityError] = RunIdentityError) -> None:
     """Refuse to resume ``run`` (e.g. ``"out/mine holds a mining run"``) when any of ``keys`` differs.
 
     Raises:
         RunIdentityError: ``"<run> with other settings (<key>: run has <old>, asked <new>; ...); <fix>"``;
-            ``notes`` adds a parenthesised why to a setting (a derived one, such as a file's hash).
+            ``notes`` adds a parenthesised why to a setting (a derived one, such as a file's hash). ``error``:
+            the subclass raised (a command's own, such as ``dv2s regress``'s ``ResumeMismatchError``).
     """
-    legacy = legacy or {}
-    keys_differing = differing(recorded, asked, keys, legacy)
+    keys_differing = differing(recorded, asked, keys)
     if not keys_differing:
         return
-    differences = [(key, recorded.get(key, legacy.get(key)), asked.get(key)) for key in keys_differing]
+    differences = [(key, recorded.get(key), asked.get(key)) for key in keys_differing]
     shown = [f"{key}: run has {_show(old)}, asked {_show(new)}{(notes or {}).get(key, '')}"
              for key, old, new in differences[:_SHOWN]]
     if len(differences) > _SHOWN:
         shown.append(f"and {len(differences) - _SHOWN} more")
-    raise RunIdentityError(f"{run} with other settings ({'; '.join(shown)}); {fix}", differences)
+    raise error(f"{run} with other settings ({'; '.join(shown)}); {fix}", differences)

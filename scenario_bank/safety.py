@@ -56,6 +56,7 @@ import re
 from typing import Callable, Iterator, List, Tuple, Union
 
 from scenario_bank.precheck import PrecheckError, SafetyFinding, UnsafeScenarioError, precheck_text
+from scenario_bank.scenic_parse import parse_scenic
 
 __all__ = [
     "SAFE_BUILTINS",
@@ -320,7 +321,6 @@ def check_script(source: Union[str, bytes], *, absolute_maps: bool = False) -> L
     ``syntax`` finding.
     """
     # The parse (the costly part) is shared with the compiler and with repeated checks of one text.
-    from scenario_bank.scenic_parse import parse_scenic
 
     try:
         source = precheck_text(source)

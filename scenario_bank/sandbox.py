@@ -23,6 +23,9 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence
+import resource
+
+import numpy as np
 
 from scenario_bank.atomic import atomic_write_text
 from scenario_bank.jail import JailedProcess, JailError, JailLimitError, JailLimits
@@ -124,8 +127,6 @@ def run_in_sandbox(
     happened. Raises :class:`~scenario_bank.jail.JailUnavailableError` when the
     jail cannot be created here.
     """
-    import numpy as np
-
     limits = limits or SandboxLimits.from_env()
     jail_limits = JailLimits.from_env(cpu_seconds=limits.cpu_seconds, memory_bytes=limits.memory_bytes,
                                       file_bytes=limits.file_bytes, request_seconds=limits.wall_seconds,
@@ -215,8 +216,6 @@ def _with_output(message: str, output: str) -> str:
 
 
 def _children_cpu() -> float:
-    import resource
-
     usage = resource.getrusage(resource.RUSAGE_CHILDREN)
     return usage.ru_utime + usage.ru_stime
 

@@ -26,6 +26,7 @@ import pickle
 from collections import OrderedDict
 from pathlib import Path
 from typing import Any, Optional
+from importlib.metadata import version
 
 from scenario_bank.atomic import atomic_write_bytes
 
@@ -100,8 +101,6 @@ def _is_library_file(filename: str) -> bool:
 
 
 def _disk_key(source: str) -> str:
-    from importlib.metadata import version
-
     try:
         scenic_version = version("scenic")
     except Exception:  # pragma: no cover - scenic installed without metadata

@@ -8,7 +8,7 @@ from typing import Any, Dict
 from dv2s_gym.regress import runner
 
 _WORKER_OPTIONS = ("backend", "workers", "address", "timeout")
-_RUN_OPTIONS = ("out_dir", "progress", "on_result")
+_RUN_OPTIONS = ("out_dir", "progress", "on_result", "clips")
 
 
 def run_regression(candidate: str, baseline: Any = None, **options: Any) -> Dict[str, Any]:

@@ -4,7 +4,8 @@ The story rate (tests/test_bank_scenarios.py::test_story_rate) checks what each 
 these tests pin, from the actors' raw tracks, what a scenario is for, so that a sidecar trimmed or a
 checker loosened cannot hide a scenario that stopped doing it: the on-ramp car merges in front of the
 ego, all three walkers cross in front of it, a stopped car or parked truck stays stopped, the cars
-that box the ego in are beside it when it reaches the obstacle. Each runs a fixed range of seeds
+that box the ego in are beside it when it reaches the obstacle, a lead car brakes only with the ego
+behind it in its lane (with an ego that weaves between lanes). Each runs a fixed range of seeds
 with the constant-speed keep-lane ego and the rule-based driver (which slows down and hangs back)
 and needs 9 of 10.
 
@@ -122,3 +123,25 @@ def test_the_stopped_vehicle_stays_stopped(name, actor):
 @pytest.mark.parametrize("ego", EGOS)
 def test_the_blockers_box_the_ego_in_at_the_obstacle(ego):
     _count("highway_obstacle_in_lane", ego, boxed_in_at_the_obstacle)
+
+
+def brakes_only_ahead_in_the_ego_lane(actor, decel):
+    """When ``actor`` first decelerates at ``decel`` m/s^2 or more (over 0.6 s), the ego is behind it in its lane;
+    an episode that a collision of the ego ended before the actor braked does not count against it."""
+    def check(trace):
+        period = 1.0 / float(trace.config.get("policy_frequency", 5))
+        window = max(1, round(0.6 / period))
+        states = [s for s in trace.states if actor in s]
+        for before, state in zip(states, states[window:]):
+            if (before[actor][3] - state[actor][3]) / (window * period) >= decel:
+                # in the lead's frame: it keeps its lane, while a lane-changing ego's heading is off the road's
+                ahead, left = _frame(before[actor], before["ego"])
+                return ahead < -2.5 and abs(left) <= 1.75
+        return any(e.get("kind") == "collision" and "ego" in e.get("actors", []) for e in trace.events)
+    return check
+
+
+@pytest.mark.parametrize("name, decel", [("highway_lead_vehicle_brakes", 4.0), ("highway_lead_vehicle_decelerates", 2.0)])
+def test_the_lead_brakes_only_with_the_ego_behind_it_in_its_lane(name, decel):
+    # an ego that weaves between lanes: the lead waits until it is back behind it before braking
+    _count(name, "weave", brakes_only_ahead_in_the_ego_lane("lead", decel))

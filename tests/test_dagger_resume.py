@@ -145,11 +145,11 @@ def test_a_run_killed_while_collecting_resumes_from_its_last_partial_commit(tmp_
     run = {**RUN, "checkpoint_every": 60}  # partial commits at 60, 120, 180 steps of each 220-step iteration
     original, calls = DAggerCheckpoint.save_partial, [0]
 
-    def save_partial(self, **kwargs):
+    def save_partial(self, *args, **kwargs):
         calls[0] += 1
         if calls[0] == killed_at_call:  # killed mid-collection, 60 steps after the last partial commit
             raise KeyboardInterrupt
-        original(self, **kwargs)
+        original(self, *args, **kwargs)
 
     monkeypatch.setattr(DAggerCheckpoint, "save_partial", save_partial)
     out = tmp_path / "killed"

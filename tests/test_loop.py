@@ -12,6 +12,7 @@ from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, paired_summary
 from dv2s_gym.mining.loop import LoopError, fine_tune_weights
 from dv2s_gym.mining.split import cluster_groups, family_of, split_by_cluster, split_by_family
+from dv2s_gym.workers.settings import WorkerSettings
 from cli_helpers import one_line_error, run
 from loop_helpers import FakeMiner, run_loop
 from policies.model_card import read_card
@@ -213,7 +214,8 @@ def test_paired_evaluation_runs_identical_episodes_before_and_after(tmp_path):
     episodes = [(name, EVAL_SEED_BASE + i) for name in SOURCES for i in range(2)]
     store = HeldOutStore(tmp_path / "heldout.jsonl")
     before = evaluate_heldout("before", "keep_lane", episodes, store=store, bank_dir=None, progress=False)
-    after = evaluate_heldout("after", "keep_lane", episodes, store=store, bank_dir=None, workers=2, progress=False)
+    after = evaluate_heldout("after", "keep_lane", episodes, store=store, bank_dir=None, workers=WorkerSettings(workers=2),
+                             progress=False)
     assert [(r["scenario"], r["seed"]) for r in before] == [(r["scenario"], r["seed"]) for r in after] == episodes
     # same policy, same scene and seed: the very same trajectory, so the pairing is real
     assert [r["result"]["trajectory_hash"] for r in before] == [r["result"]["trajectory_hash"] for r in after]
@@ -231,11 +233,11 @@ def test_held_out_workers_that_crash_or_hang_give_error_records_not_failures(tmp
     episodes = [(SOURCES[0], EVAL_SEED_BASE), (SOURCES[1], EVAL_SEED_BASE)]
     store = HeldOutStore(tmp_path / "heldout.jsonl")
     crashed = evaluate_heldout("before", "regress_misbehaving_policies:crash", episodes, store=store, bank_dir=None,
-                               workers=2, progress=False)
+                               workers=WorkerSettings(workers=2), progress=False)
     assert [(r["scenario"], r["seed"]) for r in crashed] == episodes
     assert all("crashed" in r["error"] and "2 attempts" in r["error"] for r in crashed)
     hung = evaluate_heldout("after", "regress_misbehaving_policies:hang", episodes[:1], store=store, bank_dir=None,
-                            workers=2, timeout=3, progress=False)
+                            workers=WorkerSettings(workers=2, timeout=3), progress=False)
     assert "hung" in hung[0]["error"]
     # errors are left out of the pairs, never counted as failures, and run again on a reopened store
     assert paired_summary(crashed[:1], hung)["errors"] == 1
@@ -518,26 +520,6 @@ def test_loop_resumes_the_control_arm_without_redoing_the_fine_tune(tmp_path, mo
     assert len(miner.calls) == 1 and "control" in report.rounds[0]["steps"]
 
 
-def test_a_loop_recorded_before_the_family_split_and_the_control_resumes_as_it_was(tmp_path, monkeypatch):
-    out = tmp_path / "loop"
-    miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
-    _StandIns(monkeypatch, kill_in="round_1/policy")
-    with pytest.raises(_Kill):
-        run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **WIRING)
-    state = json.loads((out / "loop.json").read_text())
-    for key in ("holdout_by", "max_conversions", "control", "untouched_seeds", "min_heldout_episodes"):
-        del state["settings"][key]  # as an older dv2s wrote it
-    state["rounds"][0]["steps"] = {"mine": state["rounds"][0]["steps"]["mine"]}
-    (out / "loop.json").write_text(json.dumps(state))
-    stand = _StandIns(monkeypatch)
-    old = dict(WIRING, untouched_seeds=0)
-    report = run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, control=False, max_conversions=None,
-                      min_heldout_episodes=0, **{k: v for k, v in old.items()})
-    steps = report.rounds[0]["steps"]
-    assert "by" not in steps["split"] and "control" not in steps and "untouched" not in steps  # split by cluster
-    assert len(stand.fine_tunes) == 1 and report.settings["holdout_by"] == "cluster"
-
-
 def test_the_untouched_set_is_a_bank_of_the_corpus_scripts_with_their_licences():
     from pathlib import Path
 
@@ -673,6 +655,7 @@ def test_a_second_round_never_holds_out_a_family_the_first_fine_tuned_on(tmp_pat
 @pytest.mark.parametrize("content, problem", [
     ('{"rounds": "x", "settings": 5}', 'has no "settings" object'),
     ('{"rounds": "x", "settings": {}}', 'has no list of round objects under "rounds"'),
+    ('{"rounds": [], "settings": {}}', "records no holdout_by in its settings"),
     ('[1, 2]', "holds a list, not an object"),
 ])
 def test_a_loop_json_of_the_wrong_structure_is_refused_in_one_line(tmp_path, content, problem):

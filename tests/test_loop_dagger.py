@@ -150,20 +150,6 @@ def test_the_loop_runs_end_to_end_with_dagger(tmp_path):
         run_loop("dv2s-ppo", out=out, miner=miner, fine_tune_method="ppo", fine_tune_lr=1e-3, **tiny)
 
 
-def test_a_loop_folder_from_before_the_method_existed_is_a_ppo_loop(tmp_path):
-    out = tmp_path / "loop"
-    out.mkdir()
-    from dv2s_gym.mining.loop import DEFAULTS, _State
-
-    settings = {key: DEFAULTS.get(key) for key in DEFAULTS}
-    settings.update(policy="dv2s-ppo", bank_dir=None, scenarios=None)
-    legacy = {k: v for k, v in settings.items() if k != "fine_tune_method"}
-    (out / "loop.json").write_text(json.dumps({"settings": legacy, "start": None, "rounds": []}))
-    _State(out / "loop.json", {**settings, "fine_tune_method": "ppo"})  # resumes
-    with pytest.raises(RunIdentityError, match="fine_tune_method: run has 'ppo', asked 'dagger'"):
-        _State(out / "loop.json", {**settings, "fine_tune_method": "dagger"})
-
-
 def test_cli_refuses_an_unknown_method_in_one_line(tmp_path, capsys):
     with pytest.raises(SystemExit):
         run(capsys, "loop", "--out", tmp_path / "loop", "--no-progress", "--fine-tune-method", "bc")

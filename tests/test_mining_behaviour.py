@@ -3,14 +3,10 @@ clusters built from it (``dv2s_gym.mining.cluster``)."""
 
 from __future__ import annotations
 
-import gzip
-import json
 import math
 from types import SimpleNamespace
 
-import pytest
-
-from dv2s_gym.mining.behaviour import UNKNOWN, backfill, extract_behaviour
+from dv2s_gym.mining.behaviour import UNKNOWN, extract_behaviour
 from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, pair_of
 
 FREQUENCY = 5  # steps per second
@@ -104,20 +100,3 @@ def test_clusters_are_behaviours_not_parameter_cells():
     assert all(c.split("/")[:2] == pair_of(records[i]).split("/") for i, c in clusters.items())
     assert cell_id(records[0]) == cell_id(records[2]) != cell_id(records[1])  # novelty feedback's cells
     assert cluster_id(_record(5, "a", "off_road", None, [])) == "a/off_road/unknown-unknown/ego-unknown"
-
-
-def test_old_records_get_their_behaviour_from_their_traces(tmp_path):
-    trace = _trace({"ego": _cruise(0.0, 25.0), "car1": lambda s: [30.0 + 22.0 * s / FREQUENCY,
-                                                                  max(0.0, 4.0 - 0.4 * max(0, s - 10)), 0.0, 22.0]})
-    (tmp_path / "traces").mkdir()
-    data = {"states": trace.states, "kinds": {"car1": "car"}, "config": trace.config}
-    (tmp_path / "traces" / "000003.json.gz").write_bytes(gzip.compress(json.dumps(data).encode()))
-    (tmp_path / "traces" / "000004.json.gz").write_bytes(b"not a trace")
-    old = {"index": 3, "scenario": "s", "failure": _collision(), "trace": "traces/000003.json.gz", "error": None}
-    broken = {"index": 4, "scenario": "s", "failure": _collision(), "trace": "traces/000004.json.gz", "error": None}
-    kept = {"index": 5, "scenario": "s", "failure": _collision(), "trace": None, "error": None,
-            "behaviour": {"actor": "truck", "actor_manoeuvre": "steady", "ego_manoeuvre": "braking"}}
-    assert backfill([old, broken, kept], tmp_path) == 1
-    assert old["behaviour"]["actor_manoeuvre"] == "cut_in"
-    assert "behaviour" not in broken and kept["behaviour"]["actor"] == "truck"
-    assert cluster_id(broken).endswith("/unknown-unknown/ego-unknown")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import xml.etree.ElementTree as ET
 
 import pytest
@@ -14,6 +15,8 @@ from dv2s_gym.regress import (
     load_report,
 )
 from regress_call import run_regression
+from dv2s_gym.regress.html import MAX_VIDEOS
+from dv2s_gym.regress.outputs import write_reports
 from dv2s_gym.regress.report import SCHEMA, SCHEMA_VERSION
 from dv2s_gym.regress.replay import replay_episode
 from dv2s_gym.regress.tasks import KIND
@@ -31,10 +34,11 @@ COMPARISON_KEYS = {"table", "difference", "p_value", "p_adjusted", "verdict", "r
 
 @pytest.fixture(scope="module")
 def noisy_run(tmp_path_factory):
-    """A degraded copy of the rule-based driver against the original: 2 scenarios x 4 seeds."""
+    """A degraded copy of the rule-based driver against the original: 2 scenarios x 4 seeds (the HTML report without
+    its clips: the test of the clips renders them)."""
     out = tmp_path_factory.mktemp("noisy")
     report = run_regression(NOISY, "rule", scenarios=PAIR, episodes=4, workers=2, out_dir=out, env_config=SHORT,
-                            progress=False)
+                            progress=False, clips=False)
     return out, report
 
 
@@ -91,6 +95,22 @@ def test_newly_failing_and_traces_of_failed_episodes(noisy_run):
                 assert result["trace"] is None
     expected = [e["id"] for e in report["episodes"] if e["candidate"]["failed"] and not e["baseline"]["failed"]]
     assert report["newly_failing"] == expected and expected  # the noisy copy crashes somewhere in 8 episodes
+
+
+@pytest.mark.slow
+def test_the_html_report_shows_newly_failing_pairs_as_clips_and_lists_them_without_when_clips_are_off(
+        noisy_run, tmp_path):
+    """report.html plays both sides of every newly failing episode, rendered by default (the tests that never read
+    the page pass ``clips=False``); without clips the page lists the same pairs and says the clips were not
+    rendered."""
+    out, report = noisy_run
+    shown = min(len(report["newly_failing"]), MAX_VIDEOS)
+    shutil.copytree(out / "traces", tmp_path / "traces")  # the report names its traces relative to its folder
+    page = write_reports(report, tmp_path)["html"].read_text()
+    assert shown and page.count('class="clip pair"') == shown and page.count("<video") == 2 * shown
+    plain = (out / "report.html").read_text()
+    assert plain.count('class="clip pair"') == shown and "<video" not in plain
+    assert plain.count("clips were not rendered") == 2 * shown
 
 
 def test_junit_xml_has_one_case_per_scenario_and_the_verdict_and_is_valid(noisy_run):
@@ -257,7 +277,7 @@ def test_resume_after_an_interruption_loses_and_duplicates_nothing(tmp_path):
     with open(tmp_path / "results.jsonl", "a") as handle:
         handle.write('{"id": "highway_cut_in_from_left/3", "role": "cand')  # a line cut short by the kill
 
-    with pytest.raises(ResumeMismatchError, match="episodes: 5 here, 4 there"):
+    with pytest.raises(ResumeMismatchError, match="episodes: run has 4, asked 5"):
         run_regression("rule", "keep_lane", **{**options, "episodes": 5})
     rerun = []
     report = run_regression("rule", "keep_lane", on_result=lambda r: rerun.append((r["id"], r["role"])), **options)
@@ -451,7 +471,7 @@ def test_noisy_policies_act_alike_on_the_same_episode_whatever_ran_before():
 @pytest.mark.slow
 def test_sequential_run_stops_as_soon_as_the_verdict_is_settled(tmp_path):
     report = run_regression(NOISY, "rule", scenarios=PAIR, episodes=30, batch=5, sequential=True, workers=2,
-                            out_dir=tmp_path, progress=False)
+                            out_dir=tmp_path, progress=False, clips=False)
     assert report["verdict"] == "FAIL" and report["stopped_early"]
     assert report["sequential"]["verdict"] == "FAIL"
     assert len(report["episodes"]) < 2 * 30 and len(report["episodes"]) % (2 * 5) == 0
@@ -475,7 +495,7 @@ def test_a_degraded_copy_fails_and_names_the_scenarios_that_regressed(tmp_path):
     # 0.3's 44): the noise raises several scenarios by more (obstacle in lane by 20 of its 24 pairs, the car
     # passing behind the slow truck by 15, with no pair the other way), so a regression to name is there
     report = run_regression("rule?action_noise=0.3", "rule", scenarios=["tag:highway"], mde=0.5, workers=2,
-                            out_dir=tmp_path, progress=False)
+                            out_dir=tmp_path, progress=False, clips=False)
     assert report["settings"]["episodes"] == 24
     assert report["verdict"] == "FAIL"
     assert report["regressed"]
@@ -484,14 +504,12 @@ def test_a_degraded_copy_fails_and_names_the_scenarios_that_regressed(tmp_path):
         assert table["candidate_only"] > table["baseline_only"]
     # the other way round the degraded copy is the baseline: never a FAIL of the candidate
     swapped = run_regression("rule", "rule?action_noise=0.3", scenarios=report["regressed"][:1], workers=2,
-                             out_dir=tmp_path / "swapped", progress=False)
+                             out_dir=tmp_path / "swapped", progress=False, clips=False)
     assert swapped["verdict"] != "FAIL"
 
 
 @pytest.mark.slow
 def test_a_changed_scenario_script_makes_an_old_report_another_bank_version(tmp_path):
-    import shutil
-
     from scenario_bank import scenario_path
 
     bank = tmp_path / "bank"
@@ -505,3 +523,23 @@ def test_a_changed_scenario_script_makes_an_old_report_another_bank_version(tmp_
     with pytest.raises(ReportMismatchError, match="another bank version .*changed scenario highway_lead_vehicle_brakes"):
         run_regression("rule", baseline_report=tmp_path / "old" / "report.json", bank_dir=bank, episodes=1,
                        out_dir=tmp_path / "new", stall_seconds=1, progress=False)
+
+
+def test_a_folder_holding_another_run_is_refused_with_each_setting_both_values_and_the_fix(tmp_path):
+    from dv2s_gym.regress.store import RunStore
+    from scenario_bank.run_identity import RunIdentityError
+
+    with RunStore(tmp_path, {"episodes": 4, "seed": 0, "scenarios": ["a"]}) as store:
+        assert store.open() == {}
+    (tmp_path / "report.json").write_text("{}")
+    with pytest.raises(ResumeMismatchError) as error:
+        RunStore(tmp_path, {"episodes": 5, "seed": 1, "scenarios": ["a"]}).open()
+    assert isinstance(error.value, RunIdentityError)  # the resume check every resumable command shares
+    assert error.value.differences == [("episodes", 4, 5), ("seed", 0, 1)]
+    assert str(error.value) == (
+        f"{tmp_path} holds a regression run with other settings (episodes: run has 4, asked 5; seed: run has 0, "
+        "asked 1); its reports (report.json) are that run's, not this one's: nothing was written, so do not read "
+        f"them as this run's verdict; rerun with the same settings to resume it, or choose another --out (or "
+        f"delete {tmp_path}) for a new run")
+    with RunStore(tmp_path, {"episodes": 4, "seed": 0, "scenarios": ["a"]}) as same:
+        assert same.open() == {}

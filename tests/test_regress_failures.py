@@ -30,7 +30,7 @@ def test_failure_kinds_are_parsed_and_applied():
 @pytest.mark.slow
 def test_a_policy_that_stands_still_fails_by_stalling(tmp_path):
     report = run_regression(STOP, "rule", scenarios=[FREE_ROAD], episodes=6, workers=2, out_dir=tmp_path / "stall",
-                            env_config=CONFIG, progress=False)
+                            env_config=CONFIG, progress=False, clips=False)
     candidate = report["scenarios"][FREE_ROAD]["candidate"]
     assert candidate["stall_rate"]["value"] == 1.0 and candidate["collision_rate"]["value"] == 0.0
     assert candidate["failure_rate"]["value"] == 1.0

@@ -137,3 +137,19 @@ def test_failure_messages_from_a_report_dict(tmp_path):
     assert inconclusive.failure_message() is None
     assert "INCONCLUSIVE" in inconclusive.failure_message(allow_inconclusive=False)
     assert "without a baseline" in RegressionReport(dict(data, verdict=None, baseline=None)).failure_message()
+
+
+def test_the_arguments_of_a_check_are_the_regression_settings():
+    from dv2s_gym.regress.pytest_plugin import regression_arguments
+    from dv2s_gym.regress.settings import RegressSettings
+
+    arguments = regression_arguments("rule", "rule", scenarios="a", episodes=3, margin=0.05)
+    assert arguments == {"candidate": "rule", "baseline": "rule", "baseline_report": None, "timeout": None,
+                         "scenarios": ["a"], "episodes": 3, "margin": 0.05}
+    settings = RegressSettings(**{k: v for k, v in arguments.items()
+                                  if k not in ("candidate", "baseline", "baseline_report", "timeout")})
+    assert settings.episodes == 3 and settings.margin == 0.05 and settings.stall_seconds == 5.0
+    with pytest.raises(TypeError, match="unexpected keyword argument 'episode'"):
+        regression_arguments("rule", "rule", episode=3)
+    with pytest.raises(pytest.UsageError, match="give baseline="):
+        regression_arguments("rule", episodes=3)

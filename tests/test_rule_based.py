@@ -97,7 +97,7 @@ def _crossing_zone_straight(other_position, other_heading, ego_x=0.0):
     """The zone where a 50 m straight ego path along +x meets a car (5 x 2 m) moving along ``other_heading``."""
     arc = np.arange(0.0, 50.01, 0.5)
     path = np.stack([ego_x + arc, np.zeros_like(arc)], axis=1)
-    return conflict_zone(path, arc, 5.0, 2.0, np.asarray(other_position, dtype=float), other_heading, 5.0, 2.0)
+    return conflict_zone(path, arc, (5.0, 2.0), np.asarray(other_position, dtype=float), other_heading, (5.0, 2.0))
 
 
 def test_conflict_zone_of_a_perpendicular_crossing_counts_both_footprints():
@@ -163,7 +163,7 @@ def test_waits_before_the_zone_for_a_creeping_car_and_clears_it_once_inside():
     [(_, zone)] = driver._crossing_zones(ego, road.vehicles)
     assert zone.other_entry > 0.0  # the car has not reached the zone yet ...
     assert ego.speed < 0.5  # ... and the ego stands ...
-    assert driver.stop_buffer - 0.5 < zone.ego_entry < driver.stop_buffer + 2.5  # ... a few metres before the zone
+    assert driver.settings.stop_buffer - 0.5 < zone.ego_entry < driver.settings.stop_buffer + 2.5  # ... a few metres before the zone
     # the same car, the ego already inside the zone: it drives on to clear it, it does not stop there
     road = _left_turn_road()
     ego = MDPVehicle(road, [48.0, -4.0], heading=-1.2, speed=5.0)  # on the arc, across the car's path

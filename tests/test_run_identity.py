@@ -26,10 +26,10 @@ def test_every_difference_is_named_with_both_values_and_the_fix():
     assert isinstance(error.value, DV2SError) and isinstance(error.value, ValueError)
 
 
-def test_a_setting_recorded_before_it_existed_reads_as_its_legacy_value():
+def test_a_setting_the_run_did_not_record_differs_from_any_asked_value():
     keys = ("seed", "control")
-    assert differing({"seed": 1}, {"seed": 1, "control": False}, keys, legacy={"control": False}) == []
-    assert differing({"seed": 1}, {"seed": 1, "control": True}, keys, legacy={"control": False}) == ["control"]
+    assert differing({"seed": 1}, {"seed": 1, "control": False}, keys) == ["control"]
+    assert differing({"seed": 1}, {"seed": 1}, keys) == []
 
 
 def test_many_differences_are_counted_past_the_first_three_and_notes_say_why():

@@ -10,7 +10,7 @@ import pytest
 from verifai.features import DiscreteBox
 from verifai.samplers.cross_entropy import DiscreteCrossEntropySampler
 
-from dv2s_gym.mining.chooser import ForgetfulCrossEntropySampler
+from dv2s_gym.mining.chooser import ForgetfulCrossEntropySampler, LeaveSettings
 from dv2s_gym.mining.cluster import region_of
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.samplers import SPLIT, SceneSampler, make_sampler
@@ -27,8 +27,9 @@ def space():
     return SceneSpace([BRAKES, LEFT_TURN])
 
 
-def _chooser(**kwargs):
-    return ForgetfulCrossEntropySampler(DiscreteBox([0, 3]), alpha=0.9, thres=0.0, **kwargs)
+def _chooser(cells=None, **leave):
+    return ForgetfulCrossEntropySampler(DiscreteBox([0, 3]), alpha=0.9, thres=0.0, leave=LeaveSettings(**leave),
+                                        cells=cells)
 
 
 def test_non_failures_on_one_scenario_move_its_probability_to_the_others():

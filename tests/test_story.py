@@ -126,3 +126,57 @@ def test_cli_story_table_and_exit_code(tmp_path, capsys):
     assert "missed stopped turn_left in 2/2 seeds, e.g. seed 0: not seen" in out
     assert main(argv + ["nosuch"]) == 2
     assert "unknown scenario 'nosuch'" in capsys.readouterr().err
+
+
+def test_probe_egos_drive_as_their_docstrings_say():
+    from policies.probe_drivers import HangbackEgo, RushEgo, SurgeEgo, WeaveEgo
+    from policies.state_driver import LANE_LEFT, LANE_RIGHT
+
+    # hangback: slows down from its start speed towards 60% of it
+    assert HangbackEgo(_fake_env(20.0)).act() == SLOWER
+    # rush: FASTER until its target is 10 m/s above its start speed, then holds it
+    env = _fake_env(22.0)
+    env.vehicle.target_speed = 22.0
+    rush = RushEgo(env)
+    actions = []
+    for _ in range(4):
+        actions.append(rush.act())
+        if actions[-1] == FASTER:
+            env.vehicle.target_speed = 5.0 * (env.vehicle.target_speed // 5.0 + 1)  # the next speed of the grid
+    assert actions == [FASTER, FASTER, IDLE, IDLE] and env.vehicle.target_speed == 30.0
+    # surge: IDLE until 3 s, FASTER on two steps, then IDLE
+    env = _fake_env(20.0)
+    surge = SurgeEgo(env)
+    actions = []
+    for step in range(25):
+        env.time = step * 0.2
+        actions.append(surge.act())
+    assert actions == [IDLE] * 15 + [FASTER] * 2 + [IDLE] * 8
+    # weave: left at 1 s, back right at 4 s; from the leftmost lane right at once instead, back left at 4 s
+    for leftmost, expected in ((0, {5: LANE_LEFT, 20: LANE_RIGHT}), (1, {5: LANE_LEFT, 6: LANE_RIGHT, 20: LANE_LEFT})):
+        env = _fake_env(20.0)
+        env.vehicle.target_lane_index = ("a", "b", 1)
+        weave = WeaveEgo(env)
+        asked = {}
+        for step in range(22):
+            env.time = step * 0.2
+            action = weave.act()
+            if action != IDLE:
+                asked[step] = action
+                lane = env.vehicle.target_lane_index[2] + (-1 if action == LANE_LEFT else 1)
+                if lane >= leftmost:  # highway-env leaves the target lane as it is when there is no lane there
+                    env.vehicle.target_lane_index = ("a", "b", lane)
+        assert asked == expected
+
+
+def test_story_table_and_the_cli_refuse_an_unknown_ego(capsys):
+    from dv2s_gym.cli import main
+    from dv2s_gym.story import ALL_EGOS, EGOS, PROBE_EGOS, story_table
+
+    assert set(PROBE_EGOS) == {"hangback", "rush", "surge", "weave"} and not set(PROBE_EGOS) & set(EGOS)
+    assert ALL_EGOS == EGOS + tuple(PROBE_EGOS)
+    with pytest.raises(ValueError, match="unknown ego.*nosuch.*choose from scenic"):
+        story_table(["highway_lead_vehicle_stopped"], ["nosuch"], range(1), progress=False)
+    assert main(["bank", "validate", "--story", "--egos", "keep_lane,nosuch", "--", "highway_lead_vehicle_stopped"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown ego 'nosuch'" in err and "hangback" in err

@@ -10,6 +10,7 @@ two modules together, it only hides the cycle from Python's import machinery.
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 from typing import Dict, List, Set
 
@@ -38,7 +39,13 @@ def _resolve(name: str, modules: Dict[str, Path]) -> str | None:
 
 
 def import_graph() -> Dict[str, Set[str]]:
-    """Module -> project modules it imports (anywhere in its body)."""
+    """Module -> project modules it imports (anywhere in its body); a fresh copy for each caller."""
+    return {module: set(targets) for module, targets in _parsed_import_graph().items()}
+
+
+@functools.lru_cache(maxsize=1)
+def _parsed_import_graph() -> Dict[str, Set[str]]:
+    """:func:`import_graph`, parsed once a run (about 2 s of CPU; ten tests read it)."""
     modules = _modules()
     graph: Dict[str, Set[str]] = {}
     for module, path in modules.items():
@@ -127,7 +134,7 @@ def test_the_detector_finds_a_cycle():
 def test_the_graph_sees_function_level_and_relative_imports():
     graph = import_graph()
     assert "scenario_bank.bank" in graph["scenario_bank.catalog"]
-    assert "envs.road_network" in graph["envs.scenic_highway.simulator"]  # imported inside a method
+    assert "envs.dv2s_env" in graph["dv2s_gym.bank_validate"]  # imported inside a function
 
 
 @pytest.mark.slow
@@ -250,6 +257,90 @@ def test_every_project_error_derives_from_the_one_base():
                    if not q.endswith(".DV2SError") and not q.rpartition(".")[2].startswith("_")
                    and not any(reaches_base(b) for b in bases))
     assert not stray, f"errors outside the one base class: {stray}"
+
+
+MAX_PARAMETERS = 8
+"""Parameters a function takes at most (``self`` and ``cls`` not counted; keyword-only, ``*args`` and ``**kwargs``
+count): more are grouped into a settings dataclass."""
+MAX_LINES = 80
+"""Lines a function spans at most, from ``def`` to its last line (nested functions count in their parent)."""
+
+NOT_YET_WITHIN_LIMITS = {
+    # Bank.add's keyword arguments are a bank entry's fields; they become one typed record with the entry types
+    # (scenario_bank.records) rather than a second grouping here
+    "scenario_bank/bank.py:Bank.add",
+    # the failure-to-scenario conversion takes its options one by one down to the replay entry; its settings
+    # become one dataclass together with the mining records' types
+    "dv2s_gym/mining/convert.py:_reproduce", "dv2s_gym/mining/convert.py:_add_replay",
+    "dv2s_gym/mining/convert.py:convert_failure",
+    "dv2s_gym/mining/failure_video.py:record_failure_video", "dv2s_gym/mining/failure_video.py:write_failure_video",
+    # long: reports rendered line by line
+    "dv2s_gym/mining/loop_report.py:render_markdown", "dv2s_gym/mining/report.py:build_report_from_records",
+    "dv2s_gym/mining/report.py:markdown",
+    # long: the bird's-eye-view analyzer's and the description reader's rule tables, one branch per case
+    "dv2s_gym/pipeline/dra/bev/analyze.py:analyze_bev", "dv2s_gym/pipeline/dra/bev/events.py:_actor",
+    "dv2s_gym/pipeline/dra/bev/language.py:_clause", "dv2s_gym/pipeline/dra/bev/tracking.py:_world_motion",
+    "dv2s_gym/pipeline/semantics/text.py:_Parser._mentions", "dv2s_gym/pipeline/semantics/text.py:_Parser._clause",
+    "dv2s_gym/pipeline/semantics/text.py:_Parser._record_action",
+    "dv2s_gym/pipeline/semantics/text.py:_Parser._finish",
+    # long: the script pre-check's one-pass character scanner (its state is a dozen locals of one loop)
+    "scenario_bank/precheck.py:_scan",
+    # long: a map's roads written out one by one, and the OpenDRIVE-to-highway-env conversion
+    "scenario_bank/maps/build_maps.py:build_highway_onramp", "envs/road_network.py:convert_network",
+}
+"""Functions over the limits that are still to be split or regrouped (each still over them: the list only
+shrinks). Nothing outside the command line's argument parsing is over them on purpose."""
+
+
+def _functions(path: Path):
+    """``(qualified name, node)`` of every function of a module, ``@overload`` stubs left out."""
+    def walk(node: ast.AST, prefix: str):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                if not any(getattr(d, "id", getattr(d, "attr", None)) == "overload" for d in child.decorator_list):
+                    yield prefix + child.name, child
+                yield from walk(child, prefix + child.name + ".")
+            elif isinstance(child, ast.ClassDef):
+                yield from walk(child, prefix + child.name + ".")
+            else:
+                yield from walk(child, prefix)
+
+    yield from walk(ast.parse(path.read_text(encoding="utf-8"), str(path)), "")
+
+
+def _parameters(node: ast.AST) -> int:
+    args = node.args
+    names = [a.arg for a in args.posonlyargs + args.args + args.kwonlyargs]
+    return len([n for n in names if n not in ("self", "cls")]) + bool(args.vararg) + bool(args.kwarg)
+
+
+def over_the_limits() -> Dict[str, str]:
+    """``path:Qualified.name`` -> why, for every function of the four packages over the limits."""
+    found = {}
+    for package in PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            for name, node in _functions(path):
+                lines, count = node.end_lineno - node.lineno + 1, _parameters(node)
+                if lines > MAX_LINES or count > MAX_PARAMETERS:
+                    found[f"{path.relative_to(ROOT)}:{name}"] = f"{lines} lines, {count} parameters"
+    return found
+
+
+def test_the_limits_count_what_they_say():
+    tree = ast.parse("class A:\n    def f(self, a, b=1, *c, d, **e):\n        pass\n")
+    method = tree.body[0].body[0]
+    assert _parameters(method) == 5  # a, b, *c, d, **e; not self
+    assert [name for name, _ in _functions(ROOT / "scenario_bank" / "run_identity.py")][:2] == [
+        "RunIdentityError.__init__", "identity_of"]
+
+
+def test_functions_take_few_parameters_and_fit_on_a_screen():
+    found = over_the_limits()
+    new = {name: why for name, why in found.items() if name not in NOT_YET_WITHIN_LIMITS}
+    assert not new, (f"functions over {MAX_PARAMETERS} parameters or {MAX_LINES} lines (group parameters into a "
+                     f"settings dataclass, split long functions): {new}")
+    done = sorted(NOT_YET_WITHIN_LIMITS - set(found))
+    assert not done, f"within the limits now: take them off NOT_YET_WITHIN_LIMITS: {done}"
 
 
 def test_the_command_line_is_argument_handling_in_small_functions():

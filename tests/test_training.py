@@ -20,6 +20,7 @@ from policies.training import (
     ScenarioSampler,
     ScenarioSchedule,
     TrainConfig,
+    TrainEnvSpec,
     TrainingError,
     latest_checkpoint,
     make_vec_env,
@@ -108,7 +109,7 @@ def test_schedule_draws_scenarios_by_probability_and_seeds_outside_the_evaluatio
 
 
 def test_probabilities_reach_the_worker_envs():
-    venv = make_vec_env(SCENARIOS, {}, None, {SCENARIOS[0]: 0.5, SCENARIOS[1]: 0.5}, n_envs=2, seed=0,
+    venv = make_vec_env(TrainEnvSpec(SCENARIOS, {}, None, {SCENARIOS[0]: 0.5, SCENARIOS[1]: 0.5}), n_envs=2, seed=0,
                         vec_env="dummy")
     try:
         venv.env_method("set_scenario_probabilities", {SCENARIOS[0]: 0.9, SCENARIOS[1]: 0.1})

@@ -27,8 +27,9 @@ def add_parser(bank_sub) -> None:
     p.add_argument("--seeds", type=int, default=20, help="with --story: seeds per scenario and ego (default 20)")
     p.add_argument("--threshold", type=float, default=0.9,
                    help="with --story: lowest acceptable story rate (default 0.9); exit 1 below it")
-    p.add_argument("--egos", nargs="+", choices=["scenic", "rule", "keep_lane", "idm"],
-                   help="with --story: egos to drive (default: all four)")
+    p.add_argument("--egos", nargs="+",
+                   help="with --story: egos to drive, space- or comma-separated (default: scenic, rule, keep_lane, "
+                        "idm); the probe egos hangback, rush, surge and weave drive unlike traffic on purpose")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -63,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_story(args: argparse.Namespace) -> int:
-    from dv2s_gym.story import EGOS, story_table
+    from dv2s_gym.story import ALL_EGOS, EGOS, story_table
 
     known = open_bank(args).names()
     unknown = [n for n in args.name if n not in known]
@@ -72,7 +73,11 @@ def _run_story(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     names = args.name or known
-    egos = args.egos or list(EGOS)
+    egos = [e for item in args.egos or [] for e in item.split(",") if e] or list(EGOS)
+    unknown = [e for e in egos if e not in ALL_EGOS]
+    if unknown:
+        print(f"dv2s: unknown ego {unknown[0]!r}; choose from {', '.join(ALL_EGOS)}", file=sys.stderr)
+        return 2
     table = story_table(names, egos, range(args.seeds), bank_root=args.bank, jobs=args.jobs,
                         progress=not args.json)
     under = sorted(n for n, row in table.items() if any(cell["rate"] < args.threshold for cell in row.values()))

@@ -136,12 +136,12 @@ def run_convert(args: argparse.Namespace) -> int:
     """``dv2s convert``: each video to a checked scenario (added to the bank with ``--add-to-bank``); exit 1 if
     any conversion's checks fail."""
     from dv2s_gym.pipeline.batch_convert import convert_videos, videos_to_convert
-    from dv2s_gym.pipeline.convert import add_converted
+    from dv2s_gym.pipeline.convert import ConvertSettings, add_converted
 
     pairs = videos_to_convert(args.video, args.out)
-    reports = convert_videos(pairs, jobs=args.jobs, progress=not args.json, dra=args.dra, sg=args.sg,
-                             camera=args.camera, question=args.question, seed=args.seed, llm_config=llm_config(args),
-                             seconds=args.seconds)
+    settings = ConvertSettings(dra=args.dra, sg=args.sg, camera=args.camera, question=args.question, seed=args.seed,
+                               llm_config=llm_config(args), seconds=args.seconds)
+    reports = convert_videos(pairs, settings, jobs=args.jobs, progress=not args.json)
     added = []
     if args.add_to_bank:
         added = [add_converted(args.bank, v, o, r, seed=args.seed, dra=args.dra, sg=args.sg)

@@ -31,7 +31,7 @@ examples:
 
 def add_parser(subparsers) -> None:
     """Add ``loop`` to the ``dv2s`` subcommands."""
-    from dv2s_gym.mining.loop_settings import DEFAULT_PROFILE, DEFAULTS as LOOP, EVIDENCE, PROFILES, LoopSettings
+    from dv2s_gym.mining.loop_settings import DEFAULT_PROFILE, EVIDENCE, PROFILES
 
     p = subparsers.add_parser("loop", help="mine a policy's failures, add them to the bank, fine-tune, measure (one round "
                               "on the embedded defaults, sized for about 5 minutes on 2 idle cores; --profile evidence for "
@@ -82,6 +82,14 @@ def add_parser(subparsers) -> None:
     p.add_argument("--min-heldout-families", type=int, default=None,
                    help=_default("min_heldout_families", "below this many held-out scenario families a round "
                                  "reports rates only, no drop and no test"))
+    _add_arms_and_run_arguments(p)
+    p.set_defaults(func=run)
+
+
+def _add_arms_and_run_arguments(p: argparse.ArgumentParser) -> None:
+    """``dv2s loop``'s options from ``--no-control`` on (the arms, the evaluation, the fine-tuning, the run)."""
+    from dv2s_gym.mining.loop_settings import DEFAULTS as LOOP, LoopSettings
+
     p.add_argument("--no-control", action="store_true",
                    help="skip the control arm (the same fine-tuning without the mined scenarios)")
     p.add_argument("--untouched-seeds", type=int, default=None,
@@ -109,7 +117,6 @@ def add_parser(subparsers) -> None:
                    help=f"training environments (default {LoopSettings.n_envs})")
     p.add_argument("--out", default=None, help="loop folder (default out/loop; rerunning resumes it)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:

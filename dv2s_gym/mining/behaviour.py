@@ -23,22 +23,14 @@ Sideways motion is measured across the heading at the start of the window, so on
 long window can read as a lane change; the bank's roads are mostly straight or gently curved over
 two seconds. A failure without another actor (``off_road``, ``stall``) has actor ``"none"``.
 
-Records written before the behaviour existed have none; :func:`backfill` fills it from the failed
-episode's trace in the run folder (every failed episode's trace is kept), so old runs cluster the
-same way as new ones.
 """
 
 from __future__ import annotations
 
-import gzip
-import json
 import math
-import zlib
-from pathlib import Path
-from types import SimpleNamespace
-from typing import Any, Dict, Iterable, List, Mapping, Optional
+from typing import Any, Dict, List, Mapping, Optional
 
-__all__ = ["extract_behaviour", "behaviour_of", "backfill", "UNKNOWN", "WINDOW_SECONDS", "LATERAL_METRES",
+__all__ = ["extract_behaviour", "behaviour_of", "UNKNOWN", "WINDOW_SECONDS", "LATERAL_METRES",
            "BRAKING_DROP", "ACTOR_MANOEUVRES", "EGO_MANOEUVRES"]
 
 WINDOW_SECONDS = 2.0
@@ -141,47 +133,3 @@ def behaviour_of(record: Mapping[str, Any]) -> Dict[str, str]:
     return {key: str(found.get(key) or UNKNOWN[key]) for key in UNKNOWN}
 
 
-_MAX_TRACE_BYTES = 64 * 2**20
-
-
-def _read_trace(path: Path) -> Optional[SimpleNamespace]:
-    """The states, kinds and config of a saved trace (read without the env package), or ``None`` when the file
-    is missing or damaged."""
-    try:
-        with open(path, "rb") as handle:
-            raw = handle.read(_MAX_TRACE_BYTES + 1)
-            if raw[:2] == b"\x1f\x8b":
-                handle.seek(0)
-                with gzip.GzipFile(fileobj=handle) as unzipped:
-                    raw = unzipped.read(_MAX_TRACE_BYTES + 1)
-        if len(raw) > _MAX_TRACE_BYTES:
-            return None
-        data = json.loads(raw.decode("utf-8"))
-    except (OSError, EOFError, zlib.error, UnicodeDecodeError, ValueError):
-        return None
-    if not isinstance(data, dict) or not isinstance(data.get("states"), list):
-        return None
-    return SimpleNamespace(states=data["states"], kinds=data.get("kinds") or {}, config=data.get("config") or {})
-
-
-def backfill(records: Iterable[Dict[str, Any]], run_dir: Optional[Path]) -> int:
-    """Give every failed record without a behaviour the one its trace in ``run_dir`` shows (in place);
-    how many were filled. A record whose trace is missing or unreadable keeps none (it clusters as
-    ``unknown``)."""
-    if run_dir is None:
-        return 0
-    filled = 0
-    for record in records:
-        if not record.get("failure") or record.get("error") or isinstance(record.get("behaviour"), Mapping):
-            continue
-        trace_path = record.get("trace")
-        if not trace_path:
-            continue
-        path = Path(trace_path)
-        path = path if path.is_absolute() else Path(run_dir) / path
-        trace = _read_trace(path)
-        if trace is None:
-            continue
-        record["behaviour"] = extract_behaviour(trace, record["failure"])
-        filled += 1
-    return filled

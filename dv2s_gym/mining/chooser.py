@@ -27,12 +27,32 @@ Every change keeps the distribution summing to 1; the draws are VerifAI's (``get
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Optional, Sequence
 
 import numpy as np
 from verifai.samplers.cross_entropy import DiscreteCrossEntropySampler
 
-__all__ = ["ForgetfulCrossEntropySampler"]
+__all__ = ["ForgetfulCrossEntropySampler", "LeaveSettings"]
+
+
+@dataclass(frozen=True)
+class LeaveSettings:
+    """How the chooser leaves scenarios that stop yielding failures (module docstring); all off: VerifAI's sampler."""
+
+    forget: float = 0.0
+    """Fraction of the drawn index's probability moved to the others on a non-failure."""
+    patience: int = 0
+    """Draws of an index without a failure before its probability is cut to ``floor / count``."""
+    floor: float = 0.5
+    """The cut, as a fraction of the uniform share."""
+    capacity: float = 0.0
+    """Draws per cell of an index after which its non-failures cut it to the floor; 0: off."""
+
+    @property
+    def active(self) -> bool:
+        """Whether any of forgetting, restarts or capacity is on."""
+        return bool(self.forget or self.patience or self.capacity)
 
 
 class ForgetfulCrossEntropySampler(DiscreteCrossEntropySampler):
@@ -42,27 +62,23 @@ class ForgetfulCrossEntropySampler(DiscreteCrossEntropySampler):
         domain: a one-dimensional VerifAI ``DiscreteBox`` (the scenario index).
         alpha, thres: VerifAI's (a failure is ``rho < thres``; each failure multiplies the distribution by
             ``alpha`` and adds ``1 - alpha`` to the drawn index).
-        forget: fraction of the drawn index's probability moved to the others on a non-failure.
-        patience: draws of an index without a failure before its probability is cut to ``floor / count``.
-        floor: the cut, as a fraction of the uniform share.
-        capacity, cells: draws per cell (``capacity``) of an index with ``cells[i]`` cells after which its
-            non-failures cut it to the floor; ``capacity`` 0 or no ``cells``: off.
+        leave: forgetting, stagnation restarts and capacity (:class:`LeaveSettings`).
+        cells: each index's cell count, for ``leave.capacity`` (no ``cells``: capacity off).
     """
 
-    def __init__(self, domain, alpha: float, thres: float, forget: float = 0.0, patience: int = 0,
-                 floor: float = 0.5, capacity: float = 0.0, cells: Optional[Sequence[int]] = None,
-                 dist: Optional[Any] = None) -> None:
+    def __init__(self, domain, alpha: float, thres: float, leave: LeaveSettings = LeaveSettings(),
+                 cells: Optional[Sequence[int]] = None, dist: Optional[Any] = None) -> None:
         super().__init__(domain, alpha=alpha, thres=thres, dist=dist)
         if len(self.dist) != 1:
             raise ValueError("ForgetfulCrossEntropySampler chooses one index; give it a one-dimensional DiscreteBox")
-        self.forget = float(forget)
-        self.patience = int(patience)
-        self.floor = float(floor)
+        self.forget = float(leave.forget)
+        self.patience = int(leave.patience)
+        self.floor = float(leave.floor)
         self.dry = np.zeros(len(self.dist[0]), dtype=int)
         """Per index: draws fed since its last failure."""
         self.restarts = 0
         """How many stagnation restarts (and capacity cuts) happened."""
-        self.capacity = float(capacity)
+        self.capacity = float(leave.capacity)
         count = len(self.dist[0])
         self.cells = np.array(list(cells) if cells is not None else [0] * count, dtype=float)
         if len(self.cells) != count:

@@ -25,6 +25,7 @@ __all__ = ["HeldOutStore", "heldout_task", "evaluate_heldout", "paired_summary",
 
 from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.mining.tasks import HELDOUT, heldout_task
+from dv2s_gym.workers.settings import WorkerSettings
 
 Episode = Tuple[str, int]
 
@@ -58,16 +59,17 @@ class HeldOutStore:
 
 
 def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, store: HeldOutStore,
-                     bank_dir: Optional[str], env_config: Optional[Dict[str, Any]] = None, workers: int = 1,
-                     ttc_threshold: float = 1.0, timeout: Optional[float] = None,
+                     bank_dir: Optional[str], env_config: Optional[Dict[str, Any]] = None,
+                     workers: WorkerSettings = WorkerSettings(workers=1),
                      progress: bool = True) -> List[Dict[str, Any]]:
     """Run ``policy`` as ``role`` on every episode not yet in ``store``; returns the records in episode order.
 
-    ``timeout``: seconds one episode may take on a worker before it counts as hung (with
-    ``workers`` > 1; default that of :class:`~dv2s_gym.workers.pool.LocalBackend`).
+    ``workers``: local worker processes (``workers`` 1: in this process) and the seconds one episode may take on a
+    worker before it counts as hung (``timeout``; default that of :class:`~dv2s_gym.workers.pool.LocalBackend`).
     """
+    count = workers.workers if workers.workers is not None else (os.cpu_count() or 1)
     tasks = [{"kind": HELDOUT, "role": role, "policy": policy, "scenario": scenario, "seed": int(seed),
-              "bank_dir": bank_dir, "env_config": dict(env_config or {}), "ttc_threshold": ttc_threshold}
+              "bank_dir": bank_dir, "env_config": dict(env_config or {}), "ttc_threshold": 1.0}
              for scenario, seed in episodes if store.get(role, scenario, seed) is None]
     bar = None
     if progress:
@@ -76,7 +78,7 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
         bar = tqdm(total=len(episodes), initial=len(episodes) - len(tasks), desc=f"held-out {role}", unit="episode",
                    file=sys.stderr, dynamic_ncols=True)
     try:
-        if tasks and workers <= 1:
+        if tasks and count <= 1:
             for task in tasks:
                 store.append(heldout_task(task))
                 if bar is not None:
@@ -89,7 +91,7 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
                 if bar is not None:
                     bar.update(1)
 
-            with LocalBackend(workers=workers, timeout=timeout) as backend:
+            with LocalBackend(workers=count, timeout=workers.timeout) as backend:
                 backend.run(tasks, finished)
     finally:
         if bar is not None:

@@ -84,16 +84,11 @@ _RECORDED = ("holdout_by",)
 """Settings a loop keeps as first recorded (not chosen by the user, so never a reason to refuse a resume)."""
 
 HOLDOUT_BY = "family"
-"""How new loops split their mined scenarios (loops recorded before hold out by ``cluster``)."""
+"""How a loop splits its mined scenarios (recorded in ``loop.json``)."""
 
 UNTOUCHED_BANK = Path(__file__).resolve().parent / "untouched"
 """The scenario set no loop mines or fine-tunes on: a bank folder of scripts written by others for Scenic's
 CARLA model (its ``SOURCES.md`` names them and their licence)."""
-
-_LEGACY = {"fine_tune_method": "ppo", "max_conversions": None, "holdout_by": "cluster", "control": False,
-           "untouched_seeds": 0, "min_heldout_episodes": 0, "max_replays": 0}
-"""Identity settings added later, with the value a ``loop.json`` written before them meant."""
-
 
 @dataclasses.dataclass
 class LoopReport:
@@ -138,11 +133,9 @@ class _State:
                 raise LoopError(f"{path} is not readable JSON ({error}); choose another --out") from error
             _check_structure(data, path)
             recorded = data.get("settings", {})
-            check_identity(recorded, settings, IDENTITY, legacy=_LEGACY, run=f"{path.parent} holds a loop",
+            check_identity(recorded, settings, IDENTITY, run=f"{path.parent} holds a loop",
                            fix="rerun with its settings to resume it, or choose another --out")
             data["settings"].update({k: settings[k] for k in settings if k not in IDENTITY and k not in _RECORDED})
-            for key in _RECORDED:
-                data["settings"].setdefault(key, _LEGACY[key])
             self.data = data
         else:
             self.data = {"settings": settings, "start": None, "rounds": []}
@@ -173,6 +166,8 @@ def _check_structure(data: Any, path: Path) -> None:
     elif data.get("start") is not None and not (isinstance(data["start"], dict)
                                                 and isinstance(data["start"].get("scenarios"), list)):
         problem = "has a \"start\" that is not an object with a list of scenarios"
+    elif any(key not in data["settings"] for key in _RECORDED):
+        problem = f"records no {' or '.join(_RECORDED)} in its settings"
     if problem:
         raise LoopError(f"{path} is not a dv2s loop record ({problem}); choose another --out, or delete the file "
                         "to start the loop over")
@@ -370,7 +365,7 @@ class _Loop:
 
     @property
     def holdout_by(self) -> str:
-        return self.state.data["settings"].get("holdout_by", _LEGACY["holdout_by"])
+        return self.state.data["settings"]["holdout_by"]
 
 
 def _open_loop(policy: str, settings: LoopSettings, out: Path, progress: bool, log: Callable[[str], None]) -> _Loop:
@@ -574,6 +569,7 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
     """The steps after the split: held-out before, fine-tune (+ control), held-out after, untouched set,
     regression; the fine-tuned policy's spec."""
     from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout
+    from dv2s_gym.workers.settings import WorkerSettings
     from policies.training import EVAL_SEED_BASE
 
     s, record = loop.settings, timed.record
@@ -588,7 +584,7 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
     if "before" not in steps:
         timed("before", lambda: {"episodes": len(episodes), "done": bool(evaluate_heldout(
             "before", current, episodes, store=HeldOutStore(store_path), bank_dir=loop.bank,
-            env_config=loop.env_config, workers=loop.workers, progress=loop.progress))},
+            env_config=loop.env_config, workers=WorkerSettings(workers=loop.workers), progress=loop.progress))},
               f"{len(episodes)} episodes ({len(split['held_out'])} held-out scenario(s) x {s.k_eval} seeds)")
     new_policy, control_policy = _fine_tune_arms(loop, number, current, round_dir, timed)
     policies = {"before": current, "after": new_policy, "control": control_policy}
@@ -649,8 +645,10 @@ def _after_step(loop: _Loop, policies: Mapping[str, Optional[str]], episodes: Li
                 families: Mapping[str, str]) -> Dict[str, Any]:
     """The ``after`` step: start, fine-tuned and control on the held-out episodes, compared pairwise."""
     from dv2s_gym.mining.heldout import evaluate_heldout
+    from dv2s_gym.workers.settings import WorkerSettings
 
-    common = dict(store=store, bank_dir=loop.bank, env_config=loop.env_config, workers=loop.workers)
+    common = dict(store=store, bank_dir=loop.bank, env_config=loop.env_config,
+                  workers=WorkerSettings(workers=loop.workers))
     before = evaluate_heldout("before", policies["before"], episodes, progress=False, **common)
     after = evaluate_heldout("after", policies["after"], episodes, progress=loop.progress, **common)
     control_records = None

@@ -20,8 +20,8 @@ such as Ray, runs the window's outstanding scenes call after call: the same reco
 an idle tail per call). Every draw and record depends on the seed and ``batch`` only, not
 on the number of workers or the timing.
 
-Non-adaptive samplers (random, halton), and adaptive runs written before the window
-schedule existed (``"schedule": "chunks"``, or no schedule in settings.json), run in chunks
+Non-adaptive samplers (random, halton), and adaptive runs on the chunk schedule
+(``"schedule": "chunks"``, for comparison in ``bench/``), run in chunks
 of ``batch`` scenes: the sampler draws a chunk, the backend runs it, and the outcomes are
 fed back in index order before the next chunk is drawn (a non-adaptive sampler sends up
 to :data:`LOOKAHEAD_CHUNKS` chunks at once: its draws do not depend on outcomes).
@@ -47,7 +47,6 @@ from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence
 
 import numpy as np
 
-from dv2s_gym.mining.behaviour import backfill
 from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, group
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.family import record_family, scenario_family
@@ -163,9 +162,7 @@ def read_records(path: Path) -> List[Dict[str, Any]]:
                 continue
             raise MiningError(f"{path}, line {number + 1} is corrupt; remove that line to resume the run") from None
         records[int(record["index"])] = record
-    ordered = [records[i] for i in sorted(records)]
-    backfill(ordered, path.parent)  # records from before the behaviour was kept: read it from their traces
-    return ordered
+    return [records[i] for i in sorted(records)]
 
 
 @contextmanager
@@ -237,7 +234,6 @@ def _settings(policy: str, settings: MineSettings, batch: int, scenarios: List[s
     }
 
 
-_ADDED_DEFAULTS = {"sampler_options": None, "feedback": "robustness"}
 """Settings added after the first runs were written: a run without them had these values."""
 
 
@@ -260,7 +256,7 @@ def _read_settings(path: Path) -> Optional[Dict[str, Any]]:
 def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path) -> None:
     from scenario_bank.run_identity import check_identity
 
-    check_identity(saved, settings, _RESUME_KEYS, legacy=_ADDED_DEFAULTS, run=f"{out} holds a mining run",
+    check_identity(saved, settings, _RESUME_KEYS, run=f"{out} holds a mining run",
                    fix="resume it with the same settings or pass another --out")
 
 
@@ -296,10 +292,10 @@ def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[i
 
 def _schedule(saved: Optional[Dict[str, Any]], sampler: str, out: Path) -> str:
     """The run's schedule: a new adaptive run streams with a sliding window, anything else runs in chunks;
-    a run folder keeps the schedule it was written with (runs from before ``schedule`` existed: chunks)."""
+    a run folder keeps the schedule it was written with."""
     if saved is None:
         return ADAPTIVE_SCHEDULE if is_adaptive(sampler) else "chunks"
-    schedule = saved.get("schedule", "chunks")
+    schedule = saved.get("schedule")
     if schedule not in SCHEDULES:
         raise MiningError(f"{out}/settings.json has an unknown schedule {schedule!r} (known: {', '.join(SCHEDULES)}); "
                           "it was written by another version: pass another --out")

@@ -188,10 +188,7 @@ def read_run(run_dir: PathLike) -> Tuple[Dict[str, Any], List[Dict[str, Any]], L
         latest[str(record.get("cluster"))] = record
     skipped = {name: n for name, n in (("episodes.jsonl", skipped_episodes),
                                        ("conversions.jsonl", skipped_conversions)) if n}
-    from dv2s_gym.mining.behaviour import backfill
-
     ordered = [by_index[i] for i in sorted(by_index)]
-    backfill(ordered, run_dir)  # records from before the behaviour was kept: read it from their traces
     return settings, ordered, list(latest.values()), skipped
 
 

@@ -240,13 +240,10 @@ class SceneSampler:
     def draw(self, count: int) -> List[Tuple[Any, Any]]:
         """The next ``count`` ``(point, info)`` pairs; ``info`` goes back with :meth:`feed`."""
         pairs = []
-        if not hasattr(self, "proposals"):  # a checkpoint from before proposals were kept: its draw count is unknown
-            self.proposals, self.drawn = {}, None
         for _ in range(count):
             point, info = self._swap(self._sampler.getSample)
-            if self.drawn is not None:
-                self.proposals[self.drawn] = proposal_density(self.name, self._sampler, point)
-                self.drawn += 1
+            self.proposals[self.drawn] = proposal_density(self.name, self._sampler, point)
+            self.drawn += 1
             pairs.append((point, info))
         return pairs
 
@@ -427,14 +424,16 @@ def _scenario_dimensions(space: Any, feature_space: Any) -> list:
 
 
 def _make_split(space: Any, feature_space: Any, params: Dict[str, Any]):
-    from dv2s_gym.mining.split_sampler import ScenarioSplitSampler
+    from dv2s_gym.mining.chooser import LeaveSettings
+    from dv2s_gym.mining.split_sampler import AdaptSettings, ScenarioSplitSampler
 
     dimensions = _scenario_dimensions(space, feature_space)
-    return ScenarioSplitSampler(feature_space, dimensions, chooser=params["chooser"], params=params["params"],
-                                alpha=params["alpha"], thres=params["thres"], buckets=params["buckets"],
-                                warmup=params["warmup"], forget=params["forget"], patience=params["patience"],
-                                floor=params["floor"], capacity=params["capacity"],
-                                avoid=params["avoid"])
+    return ScenarioSplitSampler(
+        feature_space, dimensions, chooser=params["chooser"], params=params["params"],
+        adapt=AdaptSettings(alpha=params["alpha"], thres=params["thres"], buckets=params["buckets"]),
+        warmup=params["warmup"], avoid=params["avoid"],
+        leave=LeaveSettings(forget=params["forget"], patience=params["patience"], floor=params["floor"],
+                            capacity=params["capacity"]))
 
 
 def _make_novelty(space: Any, feature_space: Any, params: Dict[str, float]):

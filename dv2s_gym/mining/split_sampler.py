@@ -42,14 +42,16 @@ redraws off, the earlier preset (2.56x the distinct failure clusters of random s
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, List, Optional, Sequence, Tuple
 
 import numpy as np
 from verifai.samplers.feature_sampler import FeatureSampler
 
+from dv2s_gym.mining.chooser import ForgetfulCrossEntropySampler, LeaveSettings
 from dv2s_gym.mining.cluster import REGION_BINS, region_of
 
-__all__ = ["ScenarioSplitSampler", "CHOOSERS", "PARAM_SAMPLERS", "scenario_dimensions"]
+__all__ = ["AdaptSettings", "ScenarioSplitSampler", "CHOOSERS", "PARAM_SAMPLERS", "scenario_dimensions"]
 
 CHOOSERS = ("cross-entropy", "ucb", "epsilon-greedy")
 """VerifAI samplers that can pick the scenario."""
@@ -67,17 +69,26 @@ def scenario_dimensions(space) -> List[int]:
     return [len(space.param_ranges(name)) for name in space.scenarios]
 
 
-def _make_chooser(kind: str, count: int, alpha: float, thres: float, forget: float = 0.0, patience: int = 0,
-                  floor: float = 0.5, capacity: float = 0.0, cells: Optional[Sequence[int]] = None):
+@dataclass(frozen=True)
+class AdaptSettings:
+    """VerifAI's parameters of the adaptive samplers."""
+
+    alpha: float = 0.9
+    thres: float = 0.0
+    """A failure is ``rho < thres``."""
+    buckets: int = 3
+    """Per parameter, for the ``bandit`` and ``cross-entropy`` parameter samplers."""
+
+
+def _make_chooser(kind: str, count: int, adapt: AdaptSettings, leave: LeaveSettings,
+                  cells: Optional[Sequence[int]] = None):
     from verifai.features import Box, DiscreteBox
 
+    alpha, thres = adapt.alpha, adapt.thres
     if kind == "cross-entropy":
-        if forget or patience or capacity:
-            from dv2s_gym.mining.chooser import ForgetfulCrossEntropySampler
-
+        if leave.active:
             return ForgetfulCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=alpha, thres=thres,
-                                                forget=forget, patience=patience, floor=floor, capacity=capacity,
-                                                cells=cells)
+                                                leave=leave, cells=cells)
         from verifai.samplers.cross_entropy import DiscreteCrossEntropySampler
 
         return DiscreteCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=alpha, thres=thres)
@@ -122,33 +133,32 @@ class ScenarioSplitSampler(FeatureSampler):
         space: the VerifAI ``FeatureSpace`` of the mining space (``scenario``, ``u``).
         dimensions: each scenario's parameter count, in index order (:func:`scenario_dimensions`).
         chooser: :data:`CHOOSERS`; ``params``: :data:`PARAM_SAMPLERS`.
-        alpha, thres, buckets: VerifAI's parameters of the adaptive parts (``buckets``: per parameter,
-            for the ``bandit`` and ``cross-entropy`` parameter samplers).
+        adapt: VerifAI's parameters of the adaptive parts (:class:`AdaptSettings`).
         warmup: the first ``warmup * len(dimensions)`` scenes try every scenario ``warmup`` times (each
             round in a seeded order) and are fed to the chooser like its own draws; 0: none.
         avoid: up to this many further points of the scenario's parameter sampler are drawn while the point
             falls in a cell of the cluster grid where a failure (``rho < thres``; under novelty feedback a new
             cluster) was already found in that scenario; 0: the sampler's first point.
-        forget, patience, floor, capacity: the ``cross-entropy`` chooser leaves scenarios that stop yielding failures
-            (:class:`~dv2s_gym.mining.chooser.ForgetfulCrossEntropySampler`); ``forget=0, patience=0``: VerifAI's
-            ``DiscreteCrossEntropySampler`` as it is.
+        leave: how the ``cross-entropy`` chooser leaves scenarios that stop yielding failures
+            (:class:`~dv2s_gym.mining.chooser.LeaveSettings`); all off: VerifAI's ``DiscreteCrossEntropySampler``
+            as it is.
 
     Build it with the generators seeded (the Halton starts are drawn here); then draw with
     ``getSample`` and feed with ``update`` like any VerifAI feature sampler.
     """
 
     def __init__(self, space, dimensions: Sequence[int], chooser: str = "cross-entropy", params: str = "halton",
-                 alpha: float = 0.9, thres: float = 0.0, buckets: int = 3, warmup: int = 0, forget: float = 0.0,
-                 patience: int = 0, floor: float = 0.5, capacity: float = 0.0, avoid: int = 0) -> None:
+                 adapt: AdaptSettings = AdaptSettings(), warmup: int = 0, leave: LeaveSettings = LeaveSettings(),
+                 avoid: int = 0) -> None:
         super().__init__(space)
         self.width = max([int(d) for d in dimensions] + [1])
         """Coordinates of ``u`` in the feature space (the largest parameter count)."""
         self.dimensions = [int(d) for d in dimensions]
         self.chooser_kind, self.params_kind = chooser, params
         cells = [REGION_BINS ** d for d in self.dimensions]  # the cluster grid's cells of each scenario
-        self.chooser = _make_chooser(chooser, len(self.dimensions), alpha, thres, forget, patience, floor, capacity,
-                                     cells)
-        self.param_samplers = [_make_params(params, d, alpha, thres, buckets) for d in self.dimensions]
+        self.chooser = _make_chooser(chooser, len(self.dimensions), adapt, leave, cells)
+        self.param_samplers = [_make_params(params, d, adapt.alpha, adapt.thres, adapt.buckets)
+                               for d in self.dimensions]
         self.draws = [0] * len(self.dimensions)
         """Scenes drawn per scenario."""
         count = len(self.dimensions)
@@ -182,9 +192,8 @@ class ScenarioSplitSampler(FeatureSampler):
         index, choice, choice_info = self._scenario()
         self.drawn += 1
         own, own_info = self.param_samplers[index].getSample()
-        found = getattr(self, "found", None)  # a checkpoint from before the option has none
-        for _ in range(getattr(self, "avoid", 0)):  # the sampler's next points, past the cells already failing
-            if region_of(own[: self.dimensions[index]]) not in found[index]:
+        for _ in range(self.avoid):  # the sampler's next points, past the cells already failing
+            if region_of(own[: self.dimensions[index]]) not in self.found[index]:
                 break
             own, own_info = self.param_samplers[index].getSample()
         own = tuple(float(x) for x in own)
@@ -196,7 +205,7 @@ class ScenarioSplitSampler(FeatureSampler):
     def update(self, sample, info, rho) -> None:
         """Feed the outcome ``rho`` of a drawn point to the chooser and to its scenario's parameter sampler."""
         index, choice, choice_info, own, own_info = info
-        if rho < self.chooser.thres and getattr(self, "found", None) is not None:
+        if rho < self.chooser.thres:
             self.found[index].add(region_of(own[: self.dimensions[index]]))
         self.chooser.update(choice, choice_info, rho)
         self.param_samplers[index].update(own, own_info, rho)

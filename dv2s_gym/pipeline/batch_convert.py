@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Dict, List, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
-from dv2s_gym.pipeline.convert import convert_video
+from dv2s_gym.pipeline.convert import ConvertSettings, convert_video
 from dv2s_gym.pipeline.evaluate import VIDEO_SUFFIXES
 
 __all__ = ["convert_videos", "videos_to_convert"]
@@ -24,14 +24,10 @@ def videos_to_convert(source: str | os.PathLike, out: str | os.PathLike) -> List
     return [(video, Path(out) / video.stem) for video in videos]
 
 
-def _convert_one(video: str, out: str, options: Dict[str, Any]) -> Dict[str, Any]:
-    return convert_video(video, out, **options)
-
-
-def convert_videos(pairs: List[Tuple[Path, Path]], *, jobs: int = 1, progress: bool = True,
-                   **options: Any) -> List[Dict[str, Any]]:
-    """:func:`convert_video` for each (video, output folder) pair, in ``jobs`` processes when there are several;
-    returns the reports in the order of ``pairs``. ``options`` are :func:`convert_video`'s keyword arguments."""
+def convert_videos(pairs: List[Tuple[Path, Path]], settings: Optional[ConvertSettings] = None, *, jobs: int = 1,
+                   progress: bool = True) -> List[Dict[str, Any]]:
+    """:func:`convert_video` with ``settings`` for each (video, output folder) pair, in ``jobs`` processes when
+    there are several; returns the reports in the order of ``pairs``."""
     from concurrent.futures import ProcessPoolExecutor
 
     from tqdm import tqdm
@@ -40,12 +36,12 @@ def convert_videos(pairs: List[Tuple[Path, Path]], *, jobs: int = 1, progress: b
     with tqdm(total=len(pairs), desc="converting", unit="video", disable=not progress or len(pairs) == 1) as bar:
         if jobs > 1 and len(pairs) > 1:
             with ProcessPoolExecutor(max_workers=jobs) as pool:
-                futures = [pool.submit(_convert_one, str(v), str(o), options) for v, o in pairs]
+                futures = [pool.submit(convert_video, str(v), str(o), settings) for v, o in pairs]
                 for future in futures:
                     reports.append(future.result())
                     bar.update()
         else:
             for v, o in pairs:
-                reports.append(_convert_one(str(v), str(o), options))
+                reports.append(convert_video(str(v), str(o), settings))
                 bar.update()
     return reports

@@ -23,7 +23,7 @@ from dv2s_gym.pipeline.sg.openai import classify_failure
 from scenario_bank.atomic import atomic_write_text
 from dv2s_gym.pipeline.stages import Description, Generation, describe, generate
 
-__all__ = ["ScenarioCheck", "add_converted", "check_scenario", "classify_failure", "conversion_provenance", "convert_video",
+__all__ = ["ConvertSettings", "ScenarioCheck", "add_converted", "check_scenario", "classify_failure", "conversion_provenance", "convert_video",
            "generate_to_folder", "label_for"]
 
 
@@ -163,15 +163,35 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
     return report
 
 
-def convert_video(video: str | os.PathLike, out: str | os.PathLike, *, dra: str = "bev", sg: str = "rules",
-                  camera: str = "bev", question: Optional[str] = None, seed: int = 0,
-                  llm_config: Optional[Dict[str, Any]] = None, seconds: float = 10.0) -> Dict[str, Any]:
-    """The whole pipeline for one video; returns the report written to ``out/report.json``."""
+@dataclass(frozen=True)
+class ConvertSettings:
+    """How a video is converted (``dv2s convert``'s options; these defaults are its defaults)."""
+
+    dra: str = "bev"
+    """The Driving Record Analyzer backend (:func:`~dv2s_gym.pipeline.stages.describe`)."""
+    sg: str = "rules"
+    """The Scenario Generator backend (:func:`~dv2s_gym.pipeline.stages.generate`)."""
+    camera: str = "bev"
+    """What the video shows (``bev``: a bird's-eye view)."""
+    question: Optional[str] = None
+    """The question put to a VLM analyzer (``None``: its default)."""
+    seed: int = 0
+    """Seed of the generation and of the preview episode."""
+    llm_config: Optional[Dict[str, Any]] = None
+    """Model settings of the LLM/VLM backends."""
+    seconds: float = 10.0
+    """Length of the preview episode [s]."""
+
+
+def convert_video(video: str | os.PathLike, out: str | os.PathLike,
+                  settings: Optional[ConvertSettings] = None) -> Dict[str, Any]:
+    """The whole pipeline for one video (with ``settings``, default :class:`ConvertSettings`); returns the report
+    written to ``out/report.json``."""
     start = time.perf_counter()
-    video = Path(video)
-    description = describe(video, backend=dra, camera=camera, question=question, llm_config=llm_config)
-    report = generate_to_folder(description, Path(out), sg=sg, seed=seed, llm_config=llm_config,
-                                labels=label_for(video), seconds=seconds)
+    video, s = Path(video), settings or ConvertSettings()
+    description = describe(video, backend=s.dra, camera=s.camera, question=s.question, llm_config=s.llm_config)
+    report = generate_to_folder(description, Path(out), sg=s.sg, seed=s.seed, llm_config=s.llm_config,
+                                labels=label_for(video), seconds=s.seconds)
     report["seconds_total"] = round(time.perf_counter() - start, 3)
     _write(Path(out), "report.json", json.dumps(report, indent=2, default=str) + "\n")
     return report

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from envs.errors import DV2SError
+from scenario_bank.run_identity import RunIdentityError
 
 __all__ = ["RegressError", "ReportMismatchError", "ResumeMismatchError"]
 
@@ -15,5 +16,7 @@ class ReportMismatchError(RegressError):
     """A baseline report that cannot be compared with this run (schema, bank or env config differ)."""
 
 
-class ResumeMismatchError(RegressError):
-    """An output folder holding a run with other settings than the one asked for."""
+class ResumeMismatchError(RegressError, RunIdentityError):
+    """An output folder holding a run with other settings than the one asked for (the resume check every
+    resumable command shares, :mod:`scenario_bank.run_identity`; ``differences`` lists every setting that
+    differs)."""

@@ -14,14 +14,15 @@ __all__ = ["write_reports"]
 
 
 def write_reports(report: Mapping[str, Any], out_dir: Union[str, os.PathLike],
-                  progress: bool = False) -> Dict[str, Path]:
+                  progress: bool = False, *, clips: bool = True) -> Dict[str, Path]:
     """Write ``report.json``, ``junit.xml``, ``report.md`` and ``report.html`` into ``out_dir``;
-    returns format -> path. ``progress``: a bar on stderr while the HTML's clips render."""
+    returns format -> path. ``progress``: a bar on stderr while the HTML's clips render; ``clips=False``: the
+    HTML lists the newly failing episodes without rendering their clips (each takes seconds)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = {"json": write_json(report, out_dir / "report.json"),
              "junit": write_junit(report, out_dir / "junit.xml"),
              "markdown": write_markdown(report, out_dir / "report.md", "report.json")}
-    written = write_html(report, out_dir / "report.html", progress=progress)
+    written = write_html(report, out_dir / "report.html", render_videos=clips, progress=progress)
     paths["html"] = Path(written) if written is not None else out_dir / "report.html"
     return paths

@@ -36,7 +36,7 @@ import inspect
 import re
 import shutil
 from pathlib import Path
-from typing import Any, Callable, Dict, Optional, Sequence, Union
+from typing import Any, Callable, Dict, Optional
 
 import pytest
 
@@ -49,23 +49,27 @@ _REPORT = pytest.StashKey[RegressionReport]()
 _ALLOW = pytest.StashKey[bool]()
 
 
+_SETTINGS = ("scenarios", "episodes", "seed", "margin", "alpha", "mde", "power", "sequential", "env_config",
+             "bank_dir", "failure", "stall_seconds")
+"""The :class:`~dv2s_gym.regress.settings.RegressSettings` a check takes by name (its defaults apply)."""
+
+
 def regression_arguments(policy: str, baseline: Optional[str] = None, *, baseline_report: Optional[str] = None,
-                         scenarios: Union[str, Sequence[str], None] = None, episodes: Optional[int] = None,
-                         seed: int = 0, margin: float = 0.02, alpha: float = 0.05, mde: Optional[float] = None,
-                         power: Optional[float] = None, sequential: bool = False,
-                         env_config: Optional[Dict[str, Any]] = None, bank_dir: Optional[str] = None,
-                         timeout: Optional[float] = None, failure: Union[str, Sequence[str], None] = None,
-                         stall_seconds: float = 5.0) -> Dict[str, Any]:
-    """The keyword arguments of :func:`~dv2s_gym.regress.runner.run_regression` for one check."""
+                         timeout: Optional[float] = None, **settings: Any) -> Dict[str, Any]:
+    """The keyword arguments of :func:`~dv2s_gym.regress.runner.run_regression` for one check: the candidate
+    ``policy``, ``baseline`` or ``baseline_report``, the ``timeout`` per episode, and any of ``_SETTINGS``
+    (``scenarios`` may be one name); an unknown argument is a ``TypeError``."""
+    unknown = sorted(set(settings) - set(_SETTINGS))
+    if unknown:
+        raise TypeError(f"got an unexpected keyword argument {unknown[0]!r} (the settings: {', '.join(_SETTINGS)})")
     if baseline is None and baseline_report is None:
         raise pytest.UsageError(f"{MARKER}: give baseline= (a policy spec) or baseline_report= (a report.json) "
                                 f"to compare {policy!r} against")
-    if isinstance(scenarios, str):
-        scenarios = [scenarios]
-    return dict(candidate=policy, baseline=baseline, baseline_report=baseline_report,
-                scenarios=None if scenarios is None else list(scenarios), episodes=episodes, seed=seed,
-                margin=margin, alpha=alpha, mde=mde, power=power, sequential=sequential, env_config=env_config, bank_dir=bank_dir,
-                timeout=timeout, failure=failure, stall_seconds=stall_seconds)
+    if isinstance(settings.get("scenarios"), str):
+        settings["scenarios"] = [settings["scenarios"]]
+    elif settings.get("scenarios") is not None:
+        settings["scenarios"] = list(settings["scenarios"])
+    return dict(candidate=policy, baseline=baseline, baseline_report=baseline_report, timeout=timeout, **settings)
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
@@ -132,9 +136,9 @@ def _dv2s_regression_marker(request: pytest.FixtureRequest, tmp_path_factory: py
     allow = bool(kwargs.pop("allow_inconclusive", True))
     try:
         inspect.signature(regression_arguments).bind(*marker.args, **kwargs)
+        arguments = regression_arguments(*marker.args, **kwargs)
     except TypeError as error:
         raise pytest.UsageError(f"@pytest.mark.{MARKER} on {request.node.nodeid}: {error}") from None
-    arguments = regression_arguments(*marker.args, **kwargs)
     request.node.stash[_REPORT] = _run(request, _out_dir(request, tmp_path_factory), arguments)
     request.node.stash[_ALLOW] = allow
 

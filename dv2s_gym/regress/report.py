@@ -76,6 +76,7 @@ whatever the other episodes show, and such a report cannot serve as a baseline.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime
 import json
 import math
@@ -85,6 +86,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.regress import stats
+from dv2s_gym.regress.aggregates import return_aggregates
 from dv2s_gym.regress.errors import ReportMismatchError, RegressError
 from dv2s_gym.regress.store import describe_differences
 from dv2s_gym.regress.identity import installed_version
@@ -247,8 +249,7 @@ def bank_info(scenarios: Sequence[str], bank_dir: Optional[Union[str, os.PathLik
 
 def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: Dict[str, Any],
                  baseline: Optional[Dict[str, Any]], episodes: Sequence[Dict[str, Any]],
-                 stopped_early: bool = False, sequential: Optional[Dict[str, Any]] = None,
-                 dv2s_version: Optional[str] = None, created: Optional[str] = None) -> Dict[str, Any]:
+                 stopped_early: bool = False, sequential: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
     """The report dict (schema in the module docstring) from the paired episodes.
 
     Args:
@@ -263,7 +264,6 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
     scenarios = list(bank["scenarios"])
     episodes = sorted(episodes, key=lambda e: (scenarios.index(e["scenario"]) if e["scenario"] in scenarios
                                                else len(scenarios), e["scenario"], int(e["seed"])))
-    margin, alpha = float(settings["margin"]), float(settings["alpha"])
     has_baseline = baseline is not None
     by_scenario: Dict[str, List[Dict[str, Any]]] = {name: [] for name in scenarios}
     for episode in episodes:
@@ -274,44 +274,13 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
 
     errors = [{"id": e["id"], "role": role, "error": e[role]["error"]} for e in episodes
               for role in ("candidate", "baseline") if e.get(role) is not None and e[role].get("error")]
-    errors_in = {name: sum(1 for e in by_scenario[name] for role in ("candidate", "baseline")
-                           if e.get(role) is not None and e[role].get("error")) for name in by_scenario}
-
     report_scenarios: Dict[str, Any] = {}
-    overall_comparison = None
-    verdict = None
-    regressed: List[str] = []
-    newly_failing: List[str] = []
-    comparisons: Dict[str, Any] = {}
-    power = aggregates = None
+    compared = _Compared()
     if has_baseline:
-        tables = paired_tables(episodes, list(by_scenario))
-        pooled_rejected = None
-        if sequential and sequential.get("verdict") is not None:  # the pooled member was tested sequentially
-            pooled_rejected = sequential["verdict"] == "FAIL"
-        per_scenario, overall = stats.compare_scenarios(tables, margin, alpha, pooled_rejected=pooled_rejected)
-        for name, comparison in per_scenario.items():
-            scenario_verdict, reason = _verdict(comparison.verdict), comparison.reason
-            if errors_in[name]:
-                scenario_verdict, reason = "ERROR", f"{_errors_note(errors_in[name])}; {reason}"
-            comparisons[name] = comparison_json(comparison, verdict=scenario_verdict, reason=reason)
-        regressed = [name for name, c in comparisons.items() if c["verdict"] == "FAIL"]
-        verdict, reason = _verdict(overall.verdict), overall.reason
-        if sequential and sequential.get("verdict") is not None:
-            reason = (f"sequential test of the pooled table ({sequential.get('looks')} looks, "
-                      f"{sequential.get('episodes')} of {sequential.get('max_episodes')} paired episodes): "
-                      f"{sequential['verdict']}; {reason}")
-        if errors:
-            verdict, reason = "ERROR", f"{_error_reason(errors)}; without them: {verdict}, {reason}"
-        overall_comparison = comparison_json(overall, verdict=verdict, reason=reason)
-        newly_failing = [e["id"] for e in episodes if e.get("baseline") is not None
-                         and not e["candidate"].get("error") and not e["baseline"].get("error")
-                         and e["candidate"].get("failed") and not e["baseline"].get("failed")]
-        power = _power(tables, margin, alpha, settings)
-        from dv2s_gym.regress.aggregates import return_aggregates
-
-        aggregates = return_aggregates(episodes)
-
+        compared = _compare(episodes, by_scenario, errors, settings, sequential)
+    comparisons, verdict = compared.per_scenario, compared.verdict
+    overall_comparison, regressed, newly_failing = compared.overall, compared.regressed, compared.newly_failing
+    power, aggregates = compared.power, compared.aggregates
     for name in by_scenario:
         report_scenarios[name] = {
             "candidate": summarize(results(name, "candidate")),
@@ -326,8 +295,8 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
     report = {
         "schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,
-        "created": created or datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "dv2s_version": dv2s_version or installed_version(),
+        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "dv2s_version": installed_version(),
         "bank": dict(bank),
         "settings": dict(settings),
         "candidate": dict(candidate),
@@ -348,6 +317,54 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         report["verdict"] = "ERROR"
         report["error_reason"] = _error_reason(errors)
     return report
+
+
+@dataclasses.dataclass
+class _Compared:
+    """The candidate against the baseline: each scenario's comparison and the pooled verdict (empty without a
+    baseline)."""
+
+    per_scenario: Dict[str, Any] = dataclasses.field(default_factory=dict)
+    overall: Optional[Dict[str, Any]] = None
+    verdict: Optional[str] = None
+    regressed: List[str] = dataclasses.field(default_factory=list)
+    newly_failing: List[str] = dataclasses.field(default_factory=list)
+    power: Optional[Dict[str, Any]] = None
+    aggregates: Optional[Dict[str, Any]] = None
+
+
+def _compare(episodes: List[Dict[str, Any]], by_scenario: Dict[str, List[Dict[str, Any]]],
+             errors: List[Dict[str, Any]], settings: Mapping[str, Any],
+             sequential: Optional[Mapping[str, Any]]) -> _Compared:
+    """The paired comparisons of :func:`build_report` (a scenario with an errored episode is an ERROR)."""
+    margin, alpha = float(settings["margin"]), float(settings["alpha"])
+    errors_in = {name: sum(1 for e in by_scenario[name] for role in ("candidate", "baseline")
+                           if e.get(role) is not None and e[role].get("error")) for name in by_scenario}
+    comparisons: Dict[str, Any] = {}
+    tables = paired_tables(episodes, list(by_scenario))
+    pooled_rejected = None
+    if sequential and sequential.get("verdict") is not None:  # the pooled member was tested sequentially
+        pooled_rejected = sequential["verdict"] == "FAIL"
+    per_scenario, overall = stats.compare_scenarios(tables, margin, alpha, pooled_rejected=pooled_rejected)
+    for name, comparison in per_scenario.items():
+        scenario_verdict, reason = _verdict(comparison.verdict), comparison.reason
+        if errors_in[name]:
+            scenario_verdict, reason = "ERROR", f"{_errors_note(errors_in[name])}; {reason}"
+        comparisons[name] = comparison_json(comparison, verdict=scenario_verdict, reason=reason)
+    verdict, reason = _verdict(overall.verdict), overall.reason
+    if sequential and sequential.get("verdict") is not None:
+        reason = (f"sequential test of the pooled table ({sequential.get('looks')} looks, "
+                  f"{sequential.get('episodes')} of {sequential.get('max_episodes')} paired episodes): "
+                  f"{sequential['verdict']}; {reason}")
+    if errors:
+        verdict, reason = "ERROR", f"{_error_reason(errors)}; without them: {verdict}, {reason}"
+    newly_failing = [e["id"] for e in episodes if e.get("baseline") is not None
+                     and not e["candidate"].get("error") and not e["baseline"].get("error")
+                     and e["candidate"].get("failed") and not e["baseline"].get("failed")]
+    return _Compared(per_scenario=comparisons, overall=comparison_json(overall, verdict=verdict, reason=reason),
+                     verdict=verdict, regressed=[name for name, c in comparisons.items() if c["verdict"] == "FAIL"],
+                     newly_failing=newly_failing, power=_power(tables, margin, alpha, settings),
+                     aggregates=return_aggregates(episodes))
 
 
 def _power(tables: Mapping[str, "stats.PairedTable"], margin: float, alpha: float,

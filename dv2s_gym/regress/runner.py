@@ -181,7 +181,8 @@ def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: S
 def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = None,
                    settings: Optional[RegressSettings] = None, *, workers: Optional[WorkerSettings] = None,
                    out_dir: Optional[Union[str, os.PathLike]] = None, progress: bool = True,
-                   on_result: Optional[Callable[[Dict[str, Any]], None]] = None) -> Dict[str, Any]:
+                   on_result: Optional[Callable[[Dict[str, Any]], None]] = None,
+                   clips: bool = True) -> Dict[str, Any]:
     """Run ``candidate`` (and ``baseline``) on scenario x seed pairs and write the reports.
 
     Args:
@@ -199,6 +200,8 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
             folder and settings resumes: finished episodes are not run again.
         progress: a progress bar on stderr.
         on_result: called in this process with each finished episode's result (after it is saved).
+        clips: render the HTML report's clips of the newly failing episodes (seconds each); ``False`` lists
+            those episodes without clips.
 
     Returns:
         The report dict (schema: :mod:`dv2s_gym.regress.report`).
@@ -231,7 +234,7 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
     report["hostname"] = socket.gethostname()
     report["timing"] = {name: round(value, 3) for name, value in episodes.timing.items()}
     report["duration"] = round(time.time() - started, 3)
-    write_reports(report, store.root, progress=progress)
+    write_reports(report, store.root, progress=progress, clips=clips)
     return report
 
 

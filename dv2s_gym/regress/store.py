@@ -22,6 +22,7 @@ from typing import Any, Dict, Optional, Tuple, Union
 
 from dv2s_gym.regress.errors import RegressError, ResumeMismatchError
 from scenario_bank.atomic import atomic_write_json
+from scenario_bank.run_identity import check_identity
 
 __all__ = ["RunStore", "RUN_FILE", "RESULTS_FILE", "TRACES_DIR", "describe_differences"]
 
@@ -84,20 +85,24 @@ class RunStore:
             there = stored.get("settings") if isinstance(stored, dict) else None
             if not isinstance(there, dict) or stored.get("schema") != _RUN_SCHEMA:
                 raise RegressError(f"{run_file} was not written by dv2s regress; choose another --out")
-            if there != self.settings:
-                stale = [n for n in ("junit.xml", "report.html", "report.md", "report.json")
-                         if (self.root / n).is_file()]
-                warning = (f"; its reports ({', '.join(stale)}) are that run's, not this one's: nothing was "
-                           "written, so do not read them as this run's verdict" if stale else "")
-                raise ResumeMismatchError(
-                    f"{self.root} holds a regression run with other settings "
-                    f"({describe_differences(self.settings, there)}){warning}; rerun with the same settings to "
-                    f"resume it, or choose another --out (or delete {self.root}) for a new run")
+            self._check_same_run(there)
         elif self.results_path.exists():
             raise RegressError(f"{self.results_path} exists without {RUN_FILE}; choose another --out or delete it")
         else:
             atomic_write_json(run_file, {"schema": _RUN_SCHEMA, "version": _RUN_VERSION, "settings": self.settings})
         return self._read()
+
+    def _check_same_run(self, there: Dict[str, Any]) -> None:
+        """Refuse a folder whose ``run.json`` holds other settings, naming each difference and the fix."""
+        if there == self.settings:
+            return
+        stale = [n for n in ("junit.xml", "report.html", "report.md", "report.json") if (self.root / n).is_file()]
+        warning = (f"its reports ({', '.join(stale)}) are that run's, not this one's: nothing was written, so do "
+                   "not read them as this run's verdict; " if stale else "")
+        check_identity(there, self.settings, sorted(set(there) | set(self.settings)),
+                       run=f"{self.root} holds a regression run", error=ResumeMismatchError,
+                       fix=f"{warning}rerun with the same settings to resume it, or choose another --out (or delete "
+                           f"{self.root}) for a new run")
 
     def _read(self) -> Dict[Key, Dict[str, Any]]:
         done: Dict[Key, Dict[str, Any]] = {}

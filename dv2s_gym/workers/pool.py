@@ -222,34 +222,13 @@ class LocalBackend(Backend):
                 wait_for = max(0.0, min(deadlines) - time.monotonic()) if deadlines else None
                 ready = wait([x for w in self._pool for x in (w.connection, w.process.sentinel)], timeout=wait_for)
                 for worker in list(self._pool):
-                    problem = None
-                    if worker.connection in ready:
-                        try:
-                            message = worker.connection.recv()
-                        except (EOFError, OSError):
-                            problem = "crashed"
-                        else:
-                            if message == _READY:
-                                worker.ready = True
-                                continue
-                            _, result = message
-                            if worker.busy[0] in failures:  # finished on a retry: say what happened before
-                                result = dict(result, worker_restarts=list(failures[worker.busy[0]]))
-                            worker.busy = None
-                            remaining -= 1
-                            finished.append(result)
-                            continue
-                    elif worker.process.sentinel in ready:
-                        problem = "crashed"
-                    elif worker.busy is not None and time.monotonic() - worker.busy[1] >= self.timeout:
-                        problem = "hung"
+                    problem, result = self._receive(worker, ready, failures)
+                    if result is not None:
+                        remaining -= 1
+                        finished.append(result)
                     if problem is None:
                         continue
-                    worker.process.join(0.5)
-                    code = worker.process.exitcode
-                    worker.kill()
-                    self._pool.remove(worker)
-                    self._pool.append(_Worker(self._context))
+                    code = self._replace(worker)
                     if worker.busy is None:  # died before taking a task: the process cannot start
                         failed_starts += 1
                         if failed_starts > 2 * self.workers:
@@ -282,6 +261,38 @@ class LocalBackend(Backend):
         except BaseException:
             self.close()  # an interrupted run leaves no worker behind
             raise
+
+    def _receive(self, worker: "_Worker", ready: List[Any], failures: Dict[int, List[str]]
+                 ) -> Tuple[Optional[str], Optional[Dict[str, Any]]]:
+        """``(problem, result)`` of one worker after a wait: the result of the task it finished, or its problem
+        (``"crashed"``, ``"hung"``), or neither (it started, or is still at work)."""
+        if worker.connection in ready:
+            try:
+                message = worker.connection.recv()
+            except (EOFError, OSError):
+                return "crashed", None
+            if message == _READY:
+                worker.ready = True
+                return None, None
+            _, result = message
+            if worker.busy[0] in failures:  # finished on a retry: say what happened before
+                result = dict(result, worker_restarts=list(failures[worker.busy[0]]))
+            worker.busy = None
+            return None, result
+        if worker.process.sentinel in ready:
+            return "crashed", None
+        if worker.busy is not None and time.monotonic() - worker.busy[1] >= self.timeout:
+            return "hung", None
+        return None, None
+
+    def _replace(self, worker: "_Worker") -> Optional[int]:
+        """Kill a crashed or hung worker and start another in its place; the old one's exit code."""
+        worker.process.join(0.5)
+        code = worker.process.exitcode
+        worker.kill()
+        self._pool.remove(worker)
+        self._pool.append(_Worker(self._context))
+        return code
 
     def _dispatch(self, queue: "_ScenarioQueue", tasks: List[Dict[str, Any]], functions: List[TaskFunction],
                   attempts: Dict[int, int]) -> None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 
 from scenic.core.simulators import Action
 from scenic.core.vectors import Vector
@@ -16,6 +17,9 @@ from scenic.domains.driving import actions as _driving_actions
 from scenic.domains.driving.actions import WalkingAction
 
 from scenario_bank.errors import DV2SError
+from envs.errors import UnsupportedConstructError
+from scenario_bank.map_cache import install_network_cache
+from scenario_bank.maps import resolve_map
 
 __all__ = [
     "resolve_map_parameter",
@@ -40,8 +44,6 @@ def resolve_map_parameter() -> None:
     script file-system methods (``globalParameters.map.replace(...)`` moves the file).
     """
     import scenic.syntax.veneer as veneer
-    from scenario_bank.map_cache import install_network_cache
-    from scenario_bank.maps import resolve_map
 
     install_network_cache()  # the driving model's Network.fromFile caches outside the package
 
@@ -206,8 +208,6 @@ class NoCarlaActor:
 
     @property
     def carlaActor(self):
-        from envs.errors import UnsupportedConstructError
-
         raise UnsupportedConstructError(
             "unsupported construct `carlaActor`: it is the CARLA actor of an object in "
             "Scenic's CARLA interface (scenic.simulators.carla) and has no highway-env "
@@ -223,8 +223,6 @@ def install_driving_behavior_support() -> None:
     ``RegulatedControlAction`` (used by the lane-following, turning and lane
     changing behaviours) with the braking fix above.
     """
-    import sys
-
     behaviors = sys.modules.get("scenic.domains.driving.behaviors")
     if behaviors is None:
         return
@@ -242,8 +240,6 @@ class NoMetaDriveActor:
 
     @property
     def metaDriveActor(self):
-        from envs.errors import UnsupportedConstructError
-
         raise UnsupportedConstructError(
             "unsupported construct `metaDriveActor`: it is the MetaDrive object behind a Scenic object in "
             "Scenic's MetaDrive interface (scenic.simulators.metadrive) and has no highway-env equivalent. "

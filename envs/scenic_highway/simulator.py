@@ -40,6 +40,8 @@ from envs.coordinates import (
 from envs.hw_road import EventRoad
 from envs.scenic_highway.actors import Pedestrian, Prop, ScenicVehicle
 from envs.scenic_highway.readback import update_objects
+from envs.errors import UnsupportedConstructError
+from envs.road_network import load_road_network
 
 __all__ = [
     "EgoDriver",
@@ -100,8 +102,6 @@ class HighwayEnvSimulator(DrivingSimulator):
         self.ego_driver = ego_driver
 
     def _default_road(self, scene) -> EventRoad:
-        from envs.road_network import load_road_network
-
         converted = load_road_network(scene.params["map"])
         return EventRoad(network=converted.hw_network, np_random=np.random.default_rng(0))
 
@@ -487,8 +487,6 @@ _CARLA_ONLY_PROPERTIES = {
 
 def _reject_carla_only_properties(obj) -> None:
     """Fail clearly on properties only Scenic's CARLA interface understands (``with blueprint ...``)."""
-    from envs.errors import UnsupportedConstructError
-
     if _facade_kind(obj) is not None:
         return  # a class of the CARLA/MetaDrive façade (envs/scenic_highway/carla): blueprint maps to size and kind
     for name, meaning in _CARLA_ONLY_PROPERTIES.items():

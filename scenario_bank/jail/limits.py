@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass, replace
 from typing import Optional
+import math
+import resource
 
 __all__ = ["JailLimits", "START_CPU_SECONDS", "start_charging_cpu"]
 
@@ -88,8 +90,6 @@ class JailLimits:
         :func:`start_charging_cpu` once started); 0 for a worker forked by the zygote, which starts
         with the simulator imported and its CPU time at zero.
         """
-        import resource
-
         cpu = max(1, int(self.cpu_seconds)) + start_cpu_seconds
         return [
             (resource.RLIMIT_CPU, cpu, cpu + 2),  # SIGXCPU at the soft limit, SIGKILL 2 s later
@@ -112,9 +112,6 @@ def start_charging_cpu() -> None:
     The budget is what :meth:`JailLimits.rlimits` set beyond ``START_CPU_SECONDS``; a worker can
     only lower its limits, so this cannot grant more than the parent allowed.
     """
-    import math
-    import resource
-
     soft, hard = resource.getrlimit(resource.RLIMIT_CPU)
     if soft == resource.RLIM_INFINITY:
         return

@@ -11,6 +11,7 @@ import sys
 import threading
 import time
 from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+import resource
 
 from scenario_bank.jail import bwrap, seccomp, wire, zygote
 from scenario_bank.jail.errors import (
@@ -237,8 +238,6 @@ class JailedProcess:
         self.requests = 0
 
     def _apply_limits(self) -> None:  # between fork and exec of bwrap: inherited by the worker
-        import resource
-
         for which, soft, hard in self.limits.rlimits():
             try:
                 resource.setrlimit(which, (soft, hard))

@@ -592,28 +592,41 @@ def town_street_section(center_mark: RoadMark, lanes_per_direction: int = 1, par
     return LaneSection(s=0.0, left=side(1), right=side(-1), center_mark=center_mark)
 
 
+@dataclass(frozen=True)
+class LaneEnd:
+    """Lane ``lane`` of road ``road`` at its ``contact`` end (``"start"`` or ``"end"``)."""
+
+    road: int
+    contact: str
+    lane: int
+
+
+@dataclass(frozen=True)
+class JunctionLink:
+    """What a connecting road of junction ``junction`` joins: ``lanes`` lanes side by side from ``source`` on."""
+
+    junction: int
+    source: LaneEnd
+    target: LaneEnd
+    lanes: int = 1
+
+
 def connecting_road(
     road_id: int,
     name: str,
-    junction_id: int,
     start: Pose,
     segment: Segment,
+    link: JunctionLink,
     *,
-    from_road: int,
-    from_contact: str,
-    from_lane: int,
-    to_road: int,
-    to_contact: str,
-    to_lane: int,
-    lanes: int = 1,
     road_type: str = "town",
     speed_kmh: Optional[float] = None,
 ) -> Road:
-    """Road inside a junction whose right lanes -1..-``lanes`` link lane
-    ``from_lane - k`` of ``from_road`` to lane ``to_lane - k`` of ``to_road``
+    """Road inside junction ``link.junction`` whose right lanes -1..-``link.lanes`` link lane
+    ``from_lane - k`` of the source road to lane ``to_lane - k`` of the target road
     (k = 0, 1, ...; lane ids count outward so this keeps lanes side by side)."""
+    from_lane, to_lane = link.source.lane, link.target.lane
     right = []
-    for k in range(lanes):
+    for k in range(link.lanes):
         sign_from = -1 if from_lane < 0 else 1
         sign_to = -1 if to_lane < 0 else 1
         right.append(
@@ -632,9 +645,9 @@ def connecting_road(
         start=start,
         segments=(segment,),
         sections=(LaneSection(s=0.0, right=tuple(right)),),
-        predecessor=Link("road", from_road, from_contact),
-        successor=Link("road", to_road, to_contact),
-        junction=junction_id,
+        predecessor=Link("road", link.source.road, link.source.contact),
+        successor=Link("road", link.target.road, link.target.contact),
+        junction=link.junction,
         road_type=road_type,
         speed_kmh=speed_kmh,
     )
@@ -706,16 +719,9 @@ def build_highway_onramp() -> OpenDriveMap:
     main_link = connecting_road(
         101,
         "highway_through_junction",
-        junction_id,
         before.end_pose(),
         Line(junction_len),
-        from_road=1,
-        from_contact="end",
-        from_lane=-1,
-        to_road=2,
-        to_contact="start",
-        to_lane=-1,
-        lanes=3,
+        JunctionLink(junction_id, LaneEnd(1, "end", -1), LaneEnd(2, "start", -1), lanes=3),
         **motorway,
     )
     assert_poses_meet(main_link.end_pose(), merge_start, "junction 10 main line")
@@ -734,15 +740,9 @@ def build_highway_onramp() -> OpenDriveMap:
     ramp_link = connecting_road(
         102,
         "ramp_into_acceleration_lane",
-        junction_id,
         ramp_conn_start,
         Arc(length=radius * ramp_angle, curvature=-1.0 / radius),
-        from_road=4,
-        from_contact="end",
-        from_lane=-1,
-        to_road=2,
-        to_contact="start",
-        to_lane=-4,
+        JunctionLink(junction_id, LaneEnd(4, "end", -1), LaneEnd(2, "start", -4)),
         **motorway,
     )
     assert_poses_meet(
@@ -950,15 +950,9 @@ def build_intersection(
             conn = connecting_road(
                 next_id,
                 f"{arm_names[from_id]}_to_{arm_names[to_id]}_{kind}",
-                junction_id,
                 entry,
                 turn_segment(turn, radius=d, straight_length=2 * d),
-                from_road=from_id,
-                from_contact="start",
-                from_lane=1,
-                to_road=to_id,
-                to_contact="start",
-                to_lane=-1,
+                JunctionLink(junction_id, LaneEnd(from_id, "start", 1), LaneEnd(to_id, "start", -1)),
                 speed_kmh=URBAN_SPEED,
             )
             assert_poses_meet(conn.end_pose(), to_start, f"{name} {conn.name}")

@@ -15,6 +15,7 @@ frames are scaled down so their longer side is at most ``max_side`` pixels.
 from __future__ import annotations
 
 import base64
+from dataclasses import dataclass, replace
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -22,7 +23,7 @@ import numpy as np
 from dv2s_gym.pipeline.errors import MalformedResponseError
 from dv2s_gym.pipeline.prompts import normalize_camera, dra_prompt, prompt_hash
 
-__all__ = ["describe_with_vlm", "frame_to_data_url", "select_frames"]
+__all__ = ["VLMSettings", "describe_with_vlm", "frame_to_data_url", "select_frames"]
 
 
 def _as_rgb_uint8(frame: Any, index: int) -> np.ndarray:
@@ -64,18 +65,21 @@ def select_frames(count: int, max_frames: int) -> List[int]:
     return sorted({int(round(i)) for i in np.linspace(0, count - 1, max_frames)})
 
 
-def describe_with_vlm(
-    clip_frames: Sequence[Any],
-    client: Any,
-    camera: str = "front",
-    question: Optional[str] = None,
-    *,
-    max_frames: int = 16,
-    max_side: Optional[int] = 768,
-    jpeg_quality: int = 85,
-    max_tokens: int = 400,
-    temperature: float = 0,
-) -> Tuple[str, Dict[str, Any]]:
+@dataclass(frozen=True)
+class VLMSettings:
+    """What :func:`describe_with_vlm` sends: how many frames, how large, and the reply's limits."""
+
+    max_frames: int = 16
+    """Frames sent at most, spread evenly over the clip (:func:`select_frames`)."""
+    max_side: Optional[int] = 768
+    """Longest side of a sent frame [px] (``None``: as recorded)."""
+    jpeg_quality: int = 85
+    max_tokens: int = 400
+    temperature: float = 0
+
+
+def describe_with_vlm(clip_frames: Sequence[Any], client: Any, camera: str = "front", question: Optional[str] = None,
+                      *, settings: Optional[VLMSettings] = None, **options: Any) -> Tuple[str, Dict[str, Any]]:
     """Describe a clip with a VLM; returns ``(description, provenance)``.
 
     Args:
@@ -84,11 +88,15 @@ def describe_with_vlm(
         camera: ``front``, ``rear``, ``chase`` or ``bev`` (or an alias of
             :data:`~dv2s_gym.pipeline.prompts.CAMERA_ALIASES`).
         question: the video-specific question about the event of interest.
+        settings: frames and reply limits (:class:`VLMSettings`; default: its defaults).
+        **options: single fields of :class:`VLMSettings` by name, over ``settings`` (``max_frames=8``).
 
     The provenance holds ``backend`` ("openai"), ``model`` (as the server named
     it), ``prompt_hash``, ``camera``, ``question``, ``frames`` (how many were
     sent), ``endpoint`` and ``usage``.
     """
+    settings = replace(settings or VLMSettings(), **options)
+    max_frames = settings.max_frames
     frames = list(clip_frames) if clip_frames is not None else []
     if not frames:
         raise ValueError("the clip has no frames to describe")
@@ -100,9 +108,10 @@ def describe_with_vlm(
     content: List[Dict[str, Any]] = [{"type": "text", "text": prompt}]
     for index in chosen:
         _as_rgb_uint8(frames[index], index)  # names the bad frame before encoding
-        url = frame_to_data_url(frames[index], quality=jpeg_quality, max_side=max_side)
+        url = frame_to_data_url(frames[index], quality=settings.jpeg_quality, max_side=settings.max_side)
         content.append({"type": "image_url", "image_url": {"url": url}})
-    reply = client.chat([{"role": "user", "content": content}], temperature=temperature, max_tokens=max_tokens)
+    reply = client.chat([{"role": "user", "content": content}], temperature=settings.temperature,
+                        max_tokens=settings.max_tokens)
     description = " ".join(reply.text.split())
     if not description:
         raise MalformedResponseError(

@@ -33,7 +33,7 @@ import os
 import re
 import threading
 from collections import Counter
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
@@ -47,6 +47,7 @@ __all__ = [
     "Example",
     "ExampleRetriever",
     "SGResult",
+    "SGSettings",
     "ScriptFailure",
     "bank_examples",
     "classify_failure",
@@ -425,9 +426,7 @@ def _try_scenic2_upgrade(
     failure: ScriptFailure,
     result: SGResult,
     attempt: int,
-    sample_seeds: Sequence[int],
-    run_seconds: float,
-    max_sample_iterations: int,
+    settings: "SGSettings",
 ) -> Tuple[str, Optional[ScriptFailure]]:
     """A reply in Scenic 2 syntax that fails to compile is upgraded and checked again, without a repair round.
 
@@ -440,8 +439,8 @@ def _try_scenic2_upgrade(
         return script, failure
     upgrade = upgrade_scenic2(script)
     again = validate_script(upgrade.source, name=f"<sg attempt {attempt}, Scenic 2 upgraded>",
-                            sample_seeds=sample_seeds, run_seconds=run_seconds,
-                            max_sample_iterations=max_sample_iterations)
+                            sample_seeds=settings.sample_seeds, run_seconds=settings.run_seconds,
+                            max_sample_iterations=settings.max_sample_iterations)
     if again is not None:
         log.info("SG: attempt %d upgraded from Scenic 2 still fails at %s: %s", attempt, again.stage,
                  again.message[:200])
@@ -462,37 +461,44 @@ def _retriever_for(bank: Any) -> ExampleRetriever:
     return _RETRIEVERS[key]
 
 
-def generate_with_llm(
-    description: str,
-    client: Any,
-    bank: Any = None,
-    k: int = 3,
-    max_attempts: int = 4,
-    *,
-    retriever: Optional[ExampleRetriever] = None,
-    run_seconds: float = 3.0,
-    sample_seeds: Sequence[int] = (0, 1),
-    temperature: float = 0,
-    max_tokens: int = 2048,
-    max_sample_iterations: int = 2000,
-    raise_on_failure: bool = True,
-) -> SGResult:
+@dataclass(frozen=True)
+class SGSettings:
+    """How :func:`generate_with_llm` asks for a script and checks each reply."""
+
+    k: int = 3
+    """How many few-shot pairs to show."""
+    max_attempts: int = 4
+    """Replies to try, the first included."""
+    run_seconds: float = 3.0
+    """Length of the short run each reply's scenario must survive [s] (:func:`validate_script`)."""
+    sample_seeds: Sequence[int] = (0, 1)
+    """Seeds each reply's scenario must sample with."""
+    temperature: float = 0
+    max_tokens: int = 2048
+    max_sample_iterations: int = 2000
+    """Rejection-sampling iterations allowed per sample."""
+    raise_on_failure: bool = True
+    """Raise when no attempt passed (else return the failed result)."""
+
+
+def generate_with_llm(description: str, client: Any, bank: Any = None, *, retriever: Optional[ExampleRetriever] = None,
+                      settings: Optional[SGSettings] = None, **options: Any) -> SGResult:
     """Turn a description into a checked Scenic script with an LLM; see the module docstring.
 
     Args:
         description: the scenario in natural language (the DRA's output).
         client: a :class:`~dv2s_gym.pipeline.llm_client.ChatClient`.
         bank: where few-shot examples come from (a ``Bank`` or bank folder; the shipped bank by default).
-        k: how many few-shot pairs to show.
-        max_attempts: replies to try, the first included.
         retriever: an :class:`ExampleRetriever` to use instead of building one from ``bank``.
-        run_seconds, sample_seeds, max_sample_iterations: how each reply is checked
-            (:func:`validate_script`).
+        settings: the attempts and checks (:class:`SGSettings`; default: its defaults).
+        **options: single fields of :class:`SGSettings` by name, over ``settings`` (``max_attempts=2``).
 
     Raises :class:`~dv2s_gym.pipeline.errors.GenerationFailedError` (with the
     result attached) when no attempt passed and ``raise_on_failure``; endpoint
     errors of the client propagate unchanged.
     """
+    settings = replace(settings or SGSettings(), **options)
+    k, max_attempts = settings.k, settings.max_attempts
     if max_attempts < 1:
         raise ValueError("max_attempts must be at least 1")
     if retriever is None:
@@ -511,21 +517,21 @@ def generate_with_llm(
     log.info("SG: %d example(s) by %s retrieval: %s", len(chosen), retriever.backend, ", ".join(result.examples))
     for attempt in range(1, max_attempts + 1):
         result.attempts = attempt
-        reply = client.chat(messages, temperature=temperature, max_tokens=max_tokens)
+        reply = client.chat(messages, temperature=settings.temperature, max_tokens=settings.max_tokens)
         result.model = reply.model or client.model
         script = extract_scenic_block(reply.text)
         if script is None:
             cut = " (the reply was cut off: finish_reason=length; raise max_tokens)" if reply.finish_reason == "length" else ""
             failure = ScriptFailure("extract", "no_script", f"the reply has no ```scenic code block{cut}")
         else:
-            failure = validate_script(script, name=f"<sg attempt {attempt}>", sample_seeds=sample_seeds,
-                                      run_seconds=run_seconds, max_sample_iterations=max_sample_iterations)
+            failure = validate_script(script, name=f"<sg attempt {attempt}>", sample_seeds=settings.sample_seeds,
+                                      run_seconds=settings.run_seconds,
+                                      max_sample_iterations=settings.max_sample_iterations)
             if failure is not None and failure.stage == "compile":
-                script, failure = _try_scenic2_upgrade(script, failure, result, attempt, sample_seeds,
-                                                       run_seconds, max_sample_iterations)
+                script, failure = _try_scenic2_upgrade(script, failure, result, attempt, settings)
         if failure is None:
             result.script = script
-            log.info("SG: attempt %d passed safety, compile, sampling and a %g s run", attempt, run_seconds)
+            log.info("SG: attempt %d passed safety, compile, sampling and a %g s run", attempt, settings.run_seconds)
             return result
         log.info("SG: attempt %d failed at %s (%s): %s", attempt, failure.stage, failure.category,
                  failure.message[:200])
@@ -535,7 +541,7 @@ def generate_with_llm(
             {"role": "assistant", "content": reply.text},
             repair_message(attempt, failure.stage, failure.category, failure.message),
         ]
-    if raise_on_failure:
+    if settings.raise_on_failure:
         counts = ", ".join(f"{c}: {n}" for c, n in result.failure_counts().items())
         last = result.failures[-1]
         raise GenerationFailedError(

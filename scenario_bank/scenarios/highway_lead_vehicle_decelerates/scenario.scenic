@@ -15,14 +15,16 @@ param decel_strength = Range(0.35, 0.55)
 # 2. Adversarial behaviours
 behavior PaceThenDecelerate(lowSpeed, minCruise, headway, maxWait, strength):
     # keep pace with the ego (easing off while it hangs back more than 2.5 s behind), then brake down to
-    # lowSpeed once it is within `headway` seconds (or, after maxWait seconds, within 2.5 s)
+    # lowSpeed once it is within `headway` seconds behind in this lane, its centre within 1 m of the lane's (or,
+    # after maxWait seconds, within 2.5 s); an ego in another lane (changing lanes, weaving) is paced until it is back
     lonControl, latControl = simulation().getLaneFollowingControllers(self)
     line = self.lane.centerline
     pastSteer = 0
     elapsed = 0
     while True:
-        egoHeadway = ((distance from self to ego) - 5) / max(ego.speed, 1)
-        if elapsed >= minCruise and (egoHeadway <= headway or (elapsed >= maxWait and egoHeadway <= 2.5)):
+        egoHeadway = ((distance past ego of self) - 5) / max(ego.speed, 1)
+        egoBehind = abs(line.signedDistanceTo(ego.position)) < 1 and (distance past ego of self) > 0
+        if elapsed >= minCruise and egoBehind and (egoHeadway <= headway or (elapsed >= maxWait and egoHeadway <= 2.5)):
             break
         target = ego.speed - 2 if egoHeadway > 2.5 else ego.speed
         throttle = lonControl.run_step(target - self.speed)

@@ -210,9 +210,10 @@ def _stitch(tracks: List[Track], frames: List[_Frame], scale: float, heading: np
     return tracks
 
 
-def _shift_candidates(fa, fb, na: float, nb: float, shape, fft_shape, radius: int, axis_vec, irfft2,
+def _shift_candidates(first: Tuple[Any, float], second: Tuple[Any, float], fft_shape, radius: int, axis_vec, irfft2,
                       reach: Optional[float] = None):
-    """Screen shifts (dx, dy) of the half-resolution line layer between two frames, with scores.
+    """Screen shifts (dx, dy) of the half-resolution line layer between two frames, with scores; ``first`` and
+    ``second`` are each frame's line-layer spectrum and line energy.
 
     ``reach`` (px, default ``radius``) bounds the shifts returned: the farthest the ego can move in this
     interval. A periodic pattern (dashed lines) correlates equally well at every multiple of its period,
@@ -220,9 +221,9 @@ def _shift_candidates(fa, fb, na: float, nb: float, shape, fft_shape, radius: in
     """
     import cv2
 
+    (fa, na), (fb, nb) = first, second
     if na < 4.0 or nb < 4.0:
         return [], 0.0, True   # too few line pixels to tell a shift
-    h, w = shape
     H, W = fft_shape
     # fa: the first frame's lines away from the borders (so nothing enters or leaves the view within the
     # search radius); fb: the whole next frame. Score 1: all of the first frame's lines found again.
@@ -311,8 +312,8 @@ def _world_motion(frames: List[_Frame], tracks: List[Track], scale: float, headi
         # the window is sized for the longest interval (a dropped frame doubles it): each interval keeps
         # only the shifts the ego can make in its own time, and every alias among them
         reach = MAX_SPEED * float(dts[i]) * half_scale + 3
-        cands, best, flat = _shift_candidates(inner_spectra[i], spectra[i + 1], inner_energies[i], energies[i + 1],
-                                              (h, w), fft_shape, radius, hv, irfft2, reach)
+        cands, best, flat = _shift_candidates((inner_spectra[i], inner_energies[i]), (spectra[i + 1], energies[i + 1]),
+                                              fft_shape, radius, hv, irfft2, reach)
         opts: List[Tuple[np.ndarray, float]] = []
         for dx, dy, score in cands:
             # the lines' screen shift is minus the ego's displacement (y flipped to the map frame)
