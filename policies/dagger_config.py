@@ -49,8 +49,8 @@ class DaggerConfig:
             check_int(TrainingError, f"DAgger {name}", getattr(self, name), low=low)
         check_number(TrainingError, "DAgger beta", self.beta, low=0, high=1)
         check_number(TrainingError, "DAgger beta_decay", self.beta_decay, low=0, high=1)
-        check_number(TrainingError, "DAgger slower_weight", self.slower_weight, low=0, low_open=True)
-        check_number(TrainingError, "DAgger learning_rate", self.learning_rate, low=0, low_open=True)
+        check_number(TrainingError, "DAgger slower_weight", self.slower_weight, low=0, interval="(]")
+        check_number(TrainingError, "DAgger learning_rate", self.learning_rate, low=0, interval="(]")
         check_text(TrainingError, "DAgger reference", self.reference, what="a driver's policy spec (e.g. rule)")
 
     def replace(self, **changes: Any) -> "DaggerConfig":

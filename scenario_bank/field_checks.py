@@ -29,7 +29,7 @@ def _range_text(low: Optional[float], high: Optional[float], low_open: bool, hig
         return f"{'>' if low_open else '>='} {low:g}"
     if high is not None:
         return f"{'<' if high_open else '<='} {high:g}"
-    return "finite"
+    return ""
 
 
 def check_int(error: Type[DV2SError], name: str, value: Any, *, low: Optional[int] = None,
@@ -49,17 +49,23 @@ def check_int(error: Type[DV2SError], name: str, value: Any, *, low: Optional[in
 
 
 def check_number(error: Type[DV2SError], name: str, value: Any, *, low: Optional[float] = None,
-                 high: Optional[float] = None, low_open: bool = False, high_open: bool = False,
-                 optional: bool = False, example: str = "") -> Optional[float]:
-    """``value`` as a finite real number within the bounds (``low_open``/``high_open``: the bound itself is
-    excluded); ``None`` when ``optional``. ``example`` is appended to the message (``"e.g. 0.05"``)."""
+                 high: Optional[float] = None, interval: str = "[]", optional: bool = False,
+                 example: str = "") -> Optional[float]:
+    """``value`` as a finite real number within the bounds; ``interval`` says which bounds are excluded, as the
+    brackets of an interval (``"[)"``: ``low <= value < high``, ``"(]"``: ``low < value``); ``None`` when
+    ``optional``. ``example`` is appended to the message (``"e.g. 0.05"``)."""
+    if interval not in ("[]", "(]", "[)", "()"):
+        raise ValueError(f"interval must be one of [], (], [), (), not {interval!r}")
     if value is None and optional:
         return None
+    low_open, high_open = interval[0] == "(", interval[1] == ")"
     ok = (not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
           and (low is None or (value > low if low_open else value >= low))
           and (high is None or (value < high if high_open else value <= high)))
     if not ok:
-        if low == 0 and high is None:
+        if low is None and high is None:
+            allowed = "a finite number"
+        elif low == 0 and high is None:
             allowed = "a positive number" if low_open else "a number >= 0"
         else:
             allowed = f"a number {_range_text(low, high, low_open, high_open)}"

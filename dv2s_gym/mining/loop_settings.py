@@ -107,7 +107,7 @@ class LoopSettings:
         check_choice(LoopError, "--fine-tune-method", self.fine_tune_method, FINE_TUNE_METHODS)
         if self.fine_tune_lr is None:
             object.__setattr__(self, "fine_tune_lr", METHOD_LEARNING_RATES[self.fine_tune_method])
-        check_number(LoopError, "--fine-tune-lr", self.fine_tune_lr, low=0, low_open=True)
+        check_number(LoopError, "--fine-tune-lr", self.fine_tune_lr, low=0, interval="(]")
 
     def _check_counts(self) -> None:
         for name, low in (("rounds", 1), ("budget", 1), ("fine_tune_steps", 1), ("k_eval", 1),
@@ -125,10 +125,10 @@ class LoopSettings:
     def _check_shares(self) -> None:
         # the same range as the regression test's (RegressSettings), checked here because the loop reaches its
         # regression step only after a round's mining and fine-tuning, and ``margin`` is part of its identity
-        check_number(LoopError, "--margin", self.margin, low=0, high=1, high_open=True,
+        check_number(LoopError, "--margin", self.margin, low=0, high=1, interval="[)",
                      example="a failure-rate difference, e.g. 0.05 for 5 points")
         check_number(LoopError, "--holdout-fraction", self.holdout_fraction, low=0, high=1)
-        check_number(LoopError, "--mined-share", self.mined_share, low=0, high=1, low_open=True, high_open=True)
+        check_number(LoopError, "--mined-share", self.mined_share, low=0, high=1, interval="()")
 
     def replace(self, **changes: Any) -> "LoopSettings":
         """A copy with ``changes`` (checked again)."""

@@ -96,8 +96,8 @@ class MineSettings:
         check_int(MiningError, "--max-conversions", self.max_conversions, low=0, optional=True,
                   none_means="all")
         # a NaN threshold would silently detect no failure, a negative one a stall at every standstill
-        check_number(MiningError, "--ttc-threshold", self.ttc_threshold, low=0, low_open=True, example="seconds")
-        check_number(MiningError, "--stall-seconds", self.stall_seconds, low=0, low_open=True, example="seconds")
+        check_number(MiningError, "--ttc-threshold", self.ttc_threshold, low=0, interval="(]", example="seconds")
+        check_number(MiningError, "--stall-seconds", self.stall_seconds, low=0, interval="(]", example="seconds")
         if self.convert and not self.bank_dir:
             raise MiningError("converting failures adds scenarios to a bank, and the shipped bank is read-only: "
                               "pass --bank DIR (a new folder starts as a copy of the shipped bank), or --no-convert")

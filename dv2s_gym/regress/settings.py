@@ -59,12 +59,12 @@ class RegressSettings:
         check_path(RegressError, "--bank", self.bank_dir, optional=True)
         check_int(RegressError, "--episodes", self.episodes, low=1, optional=True, none_means="planned from --mde")
         check_int(RegressError, "--seed", self.seed, low=0)
-        check_number(RegressError, "--margin", self.margin, low=0, high=1, high_open=True,
+        check_number(RegressError, "--margin", self.margin, low=0, high=1, interval="[)",
                      example="a failure-rate difference, e.g. 0.05 for 5 points")
-        check_number(RegressError, "--alpha", self.alpha, low=0, high=1, low_open=True, high_open=True,
+        check_number(RegressError, "--alpha", self.alpha, low=0, high=1, interval="()",
                      example="e.g. 0.05")
-        check_number(RegressError, "--mde", self.mde, low=0, high=1, low_open=True, high_open=True, optional=True)
-        check_number(RegressError, "--power", self.power, low=0, high=1, low_open=True, high_open=True,
+        check_number(RegressError, "--mde", self.mde, low=0, high=1, interval="()", optional=True)
+        check_number(RegressError, "--power", self.power, low=0, high=1, interval="()",
                      optional=True)
         check_bool(RegressError, "--sequential", self.sequential)
         check_int(RegressError, "--batch", self.batch, low=1, optional=True, none_means="a fifth of the episodes")
@@ -73,7 +73,7 @@ class RegressSettings:
         if self.failure is not None and not isinstance(self.failure, str):
             check_names(RegressError, "--failure", self.failure, optional=False)
         object.__setattr__(self, "failure", tuple(parse_failure(self.failure)))
-        check_number(RegressError, "--stall-seconds", self.stall_seconds, low=0, low_open=True)
+        check_number(RegressError, "--stall-seconds", self.stall_seconds, low=0, interval="(]")
 
     def replace(self, **changes: Any) -> "RegressSettings":
         """A copy with ``changes`` (checked again)."""

@@ -36,4 +36,4 @@ class WorkerSettings:
             object.__setattr__(self, "workers", None)
         check_int(WorkerError, "--workers", self.workers, low=1, optional=True, none_means="every core")
         check_text(WorkerError, "--address", self.address, optional=True, what="a Ray cluster address")
-        check_number(WorkerError, "--timeout", self.timeout, low=0, low_open=True, optional=True)
+        check_number(WorkerError, "--timeout", self.timeout, low=0, interval="(]", optional=True)
