@@ -116,8 +116,8 @@ def check_path(error: Type[DV2SError], name: str, value: Any, *, optional: bool 
 
 
 def check_names(error: Type[DV2SError], name: str, value: Any, *, optional: bool = True) -> Optional[Tuple[str, ...]]:
-    """``value`` as a tuple of non-empty names: one string is one name, a list or tuple of strings its names;
-    ``None`` when ``optional``."""
+    """``value`` as a tuple of names: one string is one name, a list or tuple of strings its names; ``None`` when
+    ``optional``. Blank names are left to the selection that reads them (which reports an empty one)."""
     if value is None and optional:
         return None
     if isinstance(value, str):
@@ -126,7 +126,7 @@ def check_names(error: Type[DV2SError], name: str, value: Any, *, optional: bool
     if not isinstance(value, (list, tuple)):
         raise _refuse(error, name, allowed, value)
     for item in value:
-        if not isinstance(item, str) or not item.strip():
+        if not isinstance(item, str):
             raise error(f"{name} must be {allowed}; {item!r} in {list(value)!r} is not a name")
     return tuple(value)
 

@@ -30,7 +30,7 @@ POSITIVE = [0, -1.0, NAN, INF, True, "1", None]
 SHARE_CLOSED = [-0.1, 1.5, NAN, INF, True, "0.5", None]  # [0, 1]
 SHARE_OPEN = [0, 1, -0.1, NAN, True, "0.5", None]  # (0, 1)
 MARGIN = [1, 1.5, -0.1, NAN, INF, True, "0.02", None]  # [0, 1)
-NAMES = [0, [1], [""], {"a": 1}]
+NAMES = [0, [1], ["a", None], {"a": 1}]
 MAPPING = [0, "x", [1], {1: 2}]
 PATH = [0, "", ["a"]]
 BOOL = ["yes", 1, 0, None]
@@ -79,7 +79,7 @@ BAD = {
         "untouched_seeds": ("--untouched-seeds", COUNT_FROM_0),
         "regress_episodes": ("--regress-episodes", COUNT_FROM_1),
         "margin": ("--margin", MARGIN),
-        "seed": ("--seed", [1.5, True, "0", None]),  # any integer: each round derives its own
+        "seed": ("--seed", SEED),
         "workers": ("--workers", OPTIONAL_COUNT_FROM_0),
         "n_envs": ("--envs", COUNT_FROM_1),
     },
@@ -170,7 +170,7 @@ def test_the_defaults_and_the_edges_of_each_range_stay_valid(cls):
     cls(**base)
     edges = {MineSettings: dict(budget=1, seed=0, batch=0, max_conversions=0, reference=None, feedback="novelty",
                                 scenarios="one", env_config=None, ttc_threshold=0.5, stall_seconds=1),
-             LoopSettings: dict(margin=0, holdout_fraction=1.0, seed=-3, workers=0, max_replays=None,
+             LoopSettings: dict(margin=0, holdout_fraction=1.0, seed=0, workers=0, max_replays=None,
                                 fine_tune_reward={}, min_heldout_episodes=0),
              RegressSettings: dict(margin=0.0, episodes=1, batch=1, failure=["stall"], mde=0.5, power=0.9,
                                    env_config={}, scenarios=("a", "tag:b")),

@@ -114,7 +114,8 @@ class LoopSettings:
                           ("regress_episodes", 1), ("min_heldout_episodes", 0), ("min_heldout_families", 0),
                           ("untouched_seeds", 0)):
             check_int(LoopError, f"--{name.replace('_', '-')}", getattr(self, name), low=low)
-        check_int(LoopError, "--seed", self.seed)
+        # >= 0: each round seeds its miner and fine-tuning with seed * 1000 + round, which must not be negative
+        check_int(LoopError, "--seed", self.seed, low=0)
         check_int(LoopError, "--envs", self.n_envs, low=1)
         check_int(LoopError, "--workers", self.workers, low=0, optional=True, none_means="every core")  # 0: every core
         check_int(LoopError, "--max-conversions", self.max_conversions, low=0, optional=True,
