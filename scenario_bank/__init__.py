@@ -12,6 +12,8 @@ the same layout. The modules:
   :mod:`scenario_bank.dedup` (when two scenarios are the same or near-duplicates),
   :mod:`scenario_bank.admission` (the checks a script passes to enter a bank) and
   :mod:`scenario_bank.archives` (export and import of ``.tar.gz`` archives);
+- :mod:`scenario_bank.records` holds the typed records the subsystems hand each other (a sidecar, its
+  provenance, a mining run's episode record), each read from and written back to exactly its JSON;
 - :mod:`scenario_bank.catalog` finds scenarios by name, tag or path;
 - :mod:`scenario_bank.errors` holds the one base error and the bank's errors;
 - :mod:`scenario_bank.atomic` (atomic file writes) and :mod:`scenario_bank.safe_files` (capped reads of

@@ -65,6 +65,7 @@ from scenario_bank.entries import (BANK_VERSION, ENTRY_FILE_KEYS, ENTRY_FILES, L
                                    NEW_ENTRY_NAME, SCRIPT, SIDECAR, SIDECAR_VERSION, SOURCE_KINDS, CONTROL_FIX,
                                    PathLike, ScenarioEntry, control_character_field, entry_bytes, entry_file_name,
                                    entry_files, entry_matches, new_sidecar, read_json, scan_entries, unsafe_input)
+from scenario_bank.records import Provenance, Sidecar
 from scenario_bank.errors import (BankError, BankVersionError, DuplicateScenarioError, NotABankError,
                                   ScenarioRejectedError, UnknownScenarioError, UnsafeBankInputError, bank_write_error)
 from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, is_entry_name, load_json_bounded,
@@ -79,6 +80,8 @@ __all__ = [
     "SIDECAR_VERSION",
     "Bank",
     "ScenarioEntry",
+    "Provenance",
+    "Sidecar",
     "BankDiff",
     "BankError",
     "BankVersionError",
@@ -383,14 +386,14 @@ class Bank:
     @overload
     def add(self, script: str, description: str, *, name: Optional[str] = ...,
             elements: Optional[Mapping[str, Any]] = ..., tags: Sequence[str] = ..., map: Optional[str] = ...,
-            provenance: Optional[Mapping[str, Any]] = ..., use_case: Optional[str] = ..., upgrade_scenic2: bool = ...,
+            provenance: Union[None, Provenance, Mapping[str, Any]] = ..., use_case: Optional[str] = ..., upgrade_scenic2: bool = ...,
             files: Optional[Mapping[str, PathLike]] = ..., on_duplicate: Literal["error"] = ...,
             near_copy_of: None = ...) -> ScenarioEntry: ...
 
     @overload
     def add(self, script: str, description: str, *, name: Optional[str] = ...,
             elements: Optional[Mapping[str, Any]] = ..., tags: Sequence[str] = ..., map: Optional[str] = ...,
-            provenance: Optional[Mapping[str, Any]] = ..., use_case: Optional[str] = ..., upgrade_scenic2: bool = ...,
+            provenance: Union[None, Provenance, Mapping[str, Any]] = ..., use_case: Optional[str] = ..., upgrade_scenic2: bool = ...,
             files: Optional[Mapping[str, PathLike]] = ..., on_duplicate: Literal["merge"],
             near_copy_of: Optional[Callable[[ScenarioEntry], bool]] = ...) -> AddOutcome: ...
 
@@ -403,7 +406,7 @@ class Bank:
         elements: Optional[Mapping[str, Any]] = None,
         tags: Sequence[str] = (),
         map: Optional[str] = None,
-        provenance: Optional[Mapping[str, Any]] = None,
+        provenance: Union[None, Provenance, Mapping[str, Any]] = None,
         use_case: Optional[str] = None,
         upgrade_scenic2: bool = False,
         files: Optional[Mapping[str, PathLike]] = None,
@@ -414,7 +417,8 @@ class Bank:
 
         Every script is verified first: a script failing the safety check or its compile, sample and short run in
         the sandbox (:mod:`scenario_bank.sandbox`, with CPU, memory and wall-clock limits) is refused
-        (:class:`ScenarioRejectedError`). ``provenance`` keys: kind (hand-written, generated, mined), video,
+        (:class:`ScenarioRejectedError`). ``provenance`` (a :class:`~scenario_bank.records.Provenance`, or a
+        mapping of its fields) keys: kind (hand-written, generated, mined), video,
         parent, seed, generator, model, context_hash, date; mined entries also :data:`MINED_PROVENANCE_FIELDS`.
 
         ``on_duplicate`` says what happens to a script the bank already holds:
@@ -453,7 +457,7 @@ class Bank:
         self._check_writable("add a scenario")
         files = _check_files(files)
         script, provenance = upgrade_if_asked(script, provenance, upgrade_scenic2)
-        meta = new_sidecar(script, description, name, elements, tags, map, provenance, use_case)
+        meta = new_sidecar(script, description, name, elements, tags, map, provenance, use_case).to_dict()
         # before the lock: other writers do not wait for it
         verify_or_name_scenic2(script, f"scenario {meta['name']!r}", upgrade_scenic2)
         with self._lock():

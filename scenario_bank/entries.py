@@ -21,6 +21,8 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 from scenario_bank.dedup import content_hash, semantic_key
 from scenario_bank.elements import ElementError, normalize_elements
 from scenario_bank.errors import BankError, BankVersionError, NotABankError, UnsafeBankInputError
+from scenario_bank.records import (ENTRY_FILES, MINED_PROVENANCE_FIELDS, PROVENANCE_FIELDS, SIDECAR_VERSION,
+                                   SOURCE_KINDS, Provenance, RecordError, Sidecar)
 from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, is_entry_name, load_json_bounded,
                                       read_in_folder, regular_file_in_folder, validate_relative_path)
 from scenario_bank.story import StoryError, normalize_story
@@ -28,14 +30,12 @@ from scenario_bank.story import StoryError, normalize_story
 __all__ = [
     "BANK_VERSION", "SIDECAR_VERSION", "SOURCE_KINDS", "SCRIPT", "SIDECAR", "MAX_SCRIPT_BYTES", "MAX_SIDECAR_BYTES",
     "MAX_FILE_BYTES", "MAX_JSON_DEPTH", "MINED_PROVENANCE_FIELDS", "ENTRY_FILE_KEYS", "ENTRY_FILES", "entry_files",
-    "entry_file_name", "ScenarioEntry", "Listing", "validate_sidecar", "new_sidecar", "scan_entries", "entry_matches",
+    "entry_file_name", "ScenarioEntry", "Listing", "validate_sidecar", "new_sidecar", "new_provenance", "scan_entries",
+    "entry_matches", "Provenance", "Sidecar",
 ]
 
 BANK_VERSION = 1
 """Version of the bank folder format written by this code."""
-SIDECAR_VERSION = 1
-"""Version of the ``meta.json`` sidecar format written by this code."""
-SOURCE_KINDS = ("hand-written", "generated", "mined")
 SCRIPT = "scenario.scenic"
 SIDECAR = "meta.json"
 LEGACY_INDEX = "bank.json"  # written into the bank folder by dv2s-gym <= 0.1.0; still marks a bank
@@ -49,25 +49,9 @@ MAX_FILE_BYTES = ArchiveLimits.max_file_bytes
 """The largest file an entry carries (a failure video, a trace) that is read for an export or a copy."""
 MAX_JSON_DEPTH = 64
 """Deepest nesting of arrays and objects accepted in a sidecar."""
-PROVENANCE_FIELDS = ("kind", "video", "parent", "seed", "generator", "model", "context_hash", "date")
-MINED_PROVENANCE_FIELDS = ("params", "backends", "policy", "failure", "cluster", "reproduction", "e2e_sc", "run", "trace",
-                           "index", "merged", "interaction", "judge", "replay", "replay_entry", "converted")
-"""Extra provenance of ``kind == "mined"`` entries (failure mining): the parent's sampled parameters, the
-DRA/SG backends, the policy that failed, its failure and cluster, the reproduction rate and E2E-SC, the
-mining run and episode index, ``merged``: later failures merged into this entry (see ``Bank.add`` with
-``on_duplicate="merge"``), ``interaction``: the failure's actor and manoeuvre read from its trace, ``judge``: the
-checks the converted script passed, ``replay``: on an exact replay of the failing scene, the parameters, seed
-and trajectory hash that pin it, and the links between the two entries of one failure (``replay_entry`` on the
-converted script, ``converted`` on the replay). Sidecars without them (every older sidecar) load as before."""
-
 ENTRY_FILE_KEYS = ("video", "trace")
 """Provenance fields that may name one of the entry's own files by its path relative to the entry folder (a
 mined failure's ``video: "failure.webm"``); a merge rewrites them to the merged copy's path."""
-ENTRY_FILES = "files"
-"""The provenance field listing the files an entry carries in its own folder (relative paths), in ``source``
-and in each ``source.merged`` record. They are added with the entry (``files=`` of ``Bank.add``), travel with
-``Bank.export``, ``Bank.import_archive`` and ``Bank.copy_to``, and ``dv2s bank validate`` reports one that is
-missing. Older sidecars have none."""
 _ENTRY_FILE = re.compile(r"^[A-Za-z0-9_\-][A-Za-z0-9_.\-]*(/[A-Za-z0-9_\-][A-Za-z0-9_.\-]*)*$")
 
 PathLike = Union[str, os.PathLike]
@@ -173,6 +157,25 @@ class ScenarioEntry:
     @property
     def content_hash(self) -> str:
         return self.meta.get("content_hash", "")
+
+    @property
+    def sidecar(self) -> Sidecar:
+        """The entry's sidecar as a typed record (:class:`~scenario_bank.records.Sidecar`); a
+        :class:`~scenario_bank.errors.BankError` naming the entry and the field when a field has the wrong kind."""
+        return self._record(Sidecar, self.meta)
+
+    @property
+    def provenance(self) -> Provenance:
+        """Where the entry came from (its sidecar's ``source``) as a typed record
+        (:class:`~scenario_bank.records.Provenance`); a :class:`~scenario_bank.errors.BankError` naming the entry
+        and the field when a field has the wrong kind."""
+        return self._record(Provenance, self.meta.get("source") or {})
+
+    def _record(self, kind: Any, data: Mapping[str, Any]) -> Any:
+        try:
+            return kind.from_dict(data)
+        except RecordError as error:
+            raise BankError(f"bank entry {self.name!r}: {error}; correct it in {self.name}/{SIDECAR}") from None
 
     @property
     def files(self) -> List[Path]:
@@ -402,12 +405,12 @@ def entry_bytes(root: Path, entry: ScenarioEntry) -> List[Tuple[str, bytes]]:
 
 
 def new_sidecar(script: str, description: str, name: Optional[str], elements: Optional[Mapping[str, Any]],
-                tags: Sequence[str], map_name: Optional[str], provenance: Optional[Mapping[str, Any]],
-                use_case: Optional[str]) -> Dict[str, Any]:
+                tags: Sequence[str], map_name: Optional[str],
+                provenance: Union[None, Provenance, Mapping[str, Any]], use_case: Optional[str]) -> Sidecar:
     """The sidecar of a new entry, checked (:class:`~scenario_bank.errors.BankError` naming what is wrong): the
     map read from ``param map`` when not given, the name made from the description when not given, the
     provenance completed (:data:`PROVENANCE_FIELDS`, and :data:`MINED_PROVENANCE_FIELDS` for a mined entry;
-    ``kind`` hand-written and ``date`` today by default)."""
+    ``kind`` hand-written and ``date`` today by default: :func:`new_provenance`)."""
     if not isinstance(script, str) or not script.strip():
         raise BankError("the script is empty")
     if not description or not description.strip():
@@ -424,26 +427,29 @@ def new_sidecar(script: str, description: str, name: Optional[str], elements: Op
         elements = normalize_elements(elements or {})
     except ElementError as error:
         raise BankError(f"invalid elements: {error}") from None
-    source = {key: None for key in PROVENANCE_FIELDS}
-    if (provenance or {}).get("kind") == "mined":
-        source.update({key: None for key in MINED_PROVENANCE_FIELDS if key != "merged"})
-    source.update(dict(provenance or {}))
-    source["kind"] = source.get("kind") or "hand-written"
-    if source["kind"] not in SOURCE_KINDS:
-        raise BankError(f"provenance kind must be one of {SOURCE_KINDS}, got {source['kind']!r}")
-    source["date"] = source.get("date") or _dt.date.today().isoformat()
-    meta = {
-        "schema_version": SIDECAR_VERSION,
-        "name": name,
-        "description": description.strip(),
-        "elements": elements,
-        "tags": sorted(set(tags)),
-        "map": map_name,
-        "use_case": use_case,
-        "source": source,
-        "content_hash": content_hash(script),
-    }
-    field_name = control_character_field(meta)
+    source = new_provenance(provenance)
+    meta = Sidecar(
+        schema_version=SIDECAR_VERSION, name=name, description=description.strip(), elements=elements,
+        tags=tuple(sorted(set(tags))), map=map_name, use_case=use_case, source=source,
+        content_hash=content_hash(script),
+    )
+    field_name = control_character_field(meta.to_dict())
     if field_name is not None:
         raise BankError(f"the scenario's {field_name} holds a control character: {CONTROL_FIX}")
     return meta
+
+
+def new_provenance(provenance: Union[None, Provenance, Mapping[str, Any]]) -> Provenance:
+    """The provenance of a new entry, checked (:class:`~scenario_bank.errors.BankError` naming a bad field) and
+    completed: every :data:`PROVENANCE_FIELDS` written (``null`` when unknown), a mined entry's
+    :data:`MINED_PROVENANCE_FIELDS` too, ``kind`` hand-written and ``date`` today by default."""
+    given = provenance.to_dict() if isinstance(provenance, Provenance) else dict(provenance or {})
+    for key in ("kind", "date"):
+        if not given.get(key):
+            given.pop(key, None)
+    try:
+        record = Provenance.from_dict(given)
+    except RecordError as error:
+        raise BankError(str(error)) from None
+    record = record.replace(kind=record.kind or "hand-written", date=record.date or _dt.date.today().isoformat())
+    return record.replace(null_fields=record.null_fields | Provenance(kind=given.get("kind")).default_null_fields())

@@ -15,7 +15,9 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 API_PAGES = {  # page -> objects its docstrings must document
     "api/envs": ["envs.dv2s_env.DV2SEnv", "envs.dv2s_env.DV2SEnv.default_config"],
-    "api/bank": ["scenario_bank.bank.Bank", "scenario_bank.bank.Bank.add", "scenario_bank.list_scenarios"],
+    "api/bank": ["scenario_bank.bank.Bank", "scenario_bank.bank.Bank.add", "scenario_bank.list_scenarios",
+                 "scenario_bank.records.Sidecar", "scenario_bank.records.Provenance",
+                 "scenario_bank.records.EpisodeRecord"],
     "api/policies": ["policies.registry.load_policy", "policies.registry.register_policy"],
     "api/regress": ["dv2s_gym.regress.runner.run_regression"],
     "api/mining": ["dv2s_gym.mining.miner.mine", "dv2s_gym.mining.loop.run_loop"],

@@ -578,7 +578,7 @@ def test_mined_entries_include_the_exact_replays_with_their_parent(tmp_path):
 
     run_dir = tmp_path / "mine"
     run_dir.mkdir()
-    episodes = [{"index": 0, "scenario": "a"}, {"index": 1, "scenario": "b"}, {"index": 2, "scenario": "c"}]
+    episodes = [{"index": i, "scenario": s, "seed": i} for i, s in enumerate("abc")]
     conversions = [{"cluster": "a/collision/x", "index": 0, "status": "kept", "bank_entry": "mined_a",
                     "replay_entry": "replay_a", "reproduction": {"rate": 0.4}},
                    {"cluster": "b/stall/y", "index": 1, "status": "rejected", "bank_entry": None,

@@ -114,7 +114,7 @@ RUN = dict(budget=12, sampler=SPLIT, scenarios=[BRAKES, LEFT_TURN], batch=4, see
 
 
 def _stable(records):
-    return [json.dumps(r, sort_keys=True) for r in records]
+    return [json.dumps(r.to_dict(), sort_keys=True) for r in records]  # episode records, as their file lines
 
 
 @pytest.mark.slow

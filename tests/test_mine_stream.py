@@ -26,7 +26,7 @@ RUN = dict(budget=12, sampler="cross-entropy", scenarios=[BRAKES, LEFT_TURN], ba
 
 
 def _stable(records):
-    return [json.dumps(r, sort_keys=True) for r in records]
+    return [json.dumps(r.to_dict(), sort_keys=True) for r in records]  # episode records, as their file lines
 
 
 # --- the schedule on its own ----------------------------------------------------------------------------------------
@@ -132,7 +132,7 @@ def test_resume_from_records_alone_and_with_a_larger_budget_equals_an_uninterrup
     shutil.copytree(out, copy)
     records = read_records(copy / "episodes.jsonl")
     kept = [r for r in records if r["index"] not in (4, 7, 8, 11)]  # holes: finished out of order, then killed
-    (copy / "episodes.jsonl").write_text("".join(json.dumps(r, sort_keys=True) + "\n" for r in kept))
+    (copy / "episodes.jsonl").write_text("".join(json.dumps(r.to_dict(), sort_keys=True) + "\n" for r in kept))
     (copy / "sampler.pkl").unlink()
     resumed = mine(POLICY, out=copy, workers=2, **RUN)
     assert _stable(resumed.records) == _stable(whole.records)

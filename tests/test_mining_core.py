@@ -389,7 +389,7 @@ POLICY = "rule?action_noise=0.4"  # a degraded driver: some failures, and the ru
 
 
 def _stable(records):
-    return [json.dumps(r, sort_keys=True) for r in records]
+    return [json.dumps(r.to_dict(), sort_keys=True) for r in records]  # episode records, as their file lines
 
 
 RUNS = {

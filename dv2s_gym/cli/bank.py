@@ -108,7 +108,7 @@ def run_show(args: argparse.Namespace) -> int:
 
 def run_add(args: argparse.Namespace) -> int:
     """``dv2s bank add``: a Scenic script (Scenic 2 upgraded, the rewrites printed) with its description."""
-    from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES
+    from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, Provenance
     from scenario_bank.scenic2 import upgrade_scenic2
 
     try:
@@ -120,7 +120,7 @@ def run_add(args: argparse.Namespace) -> int:
         print(line, file=sys.stderr)
     elements = (json_argument(read_input_file(args.elements, "elements file", MAX_SIDECAR_BYTES),
                               f"the elements file {args.elements}") if args.elements else None)
-    provenance = {"kind": args.kind, "video": args.video, "parent": args.parent}
+    provenance = Provenance(kind=args.kind, video=args.video, parent=args.parent)
     # Bank.add upgrades the same way (recording the rewrites in provenance), then its allowlist + sandbox checks
     entry = open_bank(args).add(script, args.description, name=args.name, elements=elements, tags=args.tag or [],
                                 map=args.map, provenance=provenance, upgrade_scenic2=True)

@@ -67,6 +67,7 @@ import numpy as np
 
 from dv2s_gym.pipeline.errors import (EndpointHTTPError, EndpointTimeoutError, EndpointUnreachableError,
                                       MissingAPIKeyError)
+from scenario_bank.records import Provenance
 
 SETUP_ERRORS = (EndpointUnreachableError, EndpointTimeoutError, EndpointHTTPError, MissingAPIKeyError)
 """Errors of the model backends' setup (no connection, no answer, an HTTP error, no API key):
@@ -265,9 +266,9 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
 def _family(parent: str, failure_type: str):
     """Whether a bank entry is a converted (not replay) mined entry from ``parent`` with a ``failure_type`` failure."""
     def same(entry) -> bool:
-        source = entry.source
-        return (source.get("kind") == "mined" and not source.get("replay") and source.get("parent") == parent
-                and (source.get("failure") or {}).get("type") == failure_type)
+        source = entry.provenance
+        return (source.mined and not source.is_replay and source.parent == parent
+                and source.failure_type == failure_type)
     return same
 
 
@@ -327,12 +328,12 @@ def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, poli
     events = interaction_sentence(interaction)
     description = (f"{parent.description.strip()} Exact replay of a failure of {_policy_name(policy)}: seed {seed}, "
                    f"parameters narrowed around the failing values." + (f" {events}" if events else ""))
-    provenance = {"kind": "mined", "parent": record["scenario"], "seed": seed, "params": params,
-                  "video": ENTRY_VIDEO if ENTRY_VIDEO in files else None,
-                  "trace": ENTRY_TRACE if ENTRY_TRACE in files else None, "generator": "exact replay",
-                  "policy": _policy_name(policy), "failure": dict(source_failure), "cluster": cluster,
-                  "run": str(run_dir.resolve()), "index": record.get("index"), "interaction": dict(interaction),
-                  "replay": replay, "e2e_sc": out["e2e_sc"], "date": datetime.date.today().isoformat()}
+    provenance = Provenance(kind="mined", parent=record["scenario"], seed=seed, params=params,
+                            video=ENTRY_VIDEO if ENTRY_VIDEO in files else None,
+                            trace=ENTRY_TRACE if ENTRY_TRACE in files else None, generator="exact replay",
+                            policy=_policy_name(policy), failure=dict(source_failure), cluster=cluster,
+                            run=str(run_dir.resolve()), index=record.get("index"), interaction=dict(interaction),
+                            replay=replay, e2e_sc=out["e2e_sc"], date=datetime.date.today().isoformat())
     base = replay_name(record["scenario"], source_failure["type"])
     name, n = base, 2
     while name in bank:
@@ -342,7 +343,7 @@ def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, poli
                          tags=["mined", REPLAY_TAG, source_failure["type"]], provenance=provenance, files=files)
         out["entry"] = entry.name
     except DuplicateScenarioError as error:
-        existing = bank.get(error.existing).source.get("replay") or {}
+        existing = bank.get(error.existing).provenance.replay or {}
         if existing.get("seed") == seed and existing.get("params") == params:
             out["entry"] = error.existing  # this failing scene is in the bank already (a resumed run)
         elif error.existing == record["scenario"]:
@@ -638,18 +639,18 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         from dv2s_gym.pipeline.convert import conversion_provenance
 
         result = record.get("result") or {}
-        provenance = {
-            "kind": "mined", "parent": record["scenario"], "seed": int(record["seed"]),
-            "params": _portable_params(result.get("params") or record.get("params") or {}),
-            "video": ENTRY_VIDEO, "trace": ENTRY_TRACE, **conversion_provenance(dra, sg, generation, description),
-            "backends": {"dra": dra, "sg": sg},
-            "policy": _policy_name(policy), "failure": source_failure, "cluster": cluster,
-            "reproduction": out["reproduction"], "e2e_sc": out["e2e_sc"], "run": str(run_dir.resolve()),
-            "index": record.get("index"),
-            "interaction": interaction, "judge": {"avoidability": out.get("avoidability"),
-                                                  "interaction_shown": shown, "reproduced": reproduced},
-            "replay_entry": replay["entry"],
-        }
+        provenance = Provenance(
+            kind="mined", parent=record["scenario"], seed=int(record["seed"]),
+            params=_portable_params(result.get("params") or record.get("params") or {}),
+            video=ENTRY_VIDEO, trace=ENTRY_TRACE, **conversion_provenance(dra, sg, generation, description),
+            backends={"dra": dra, "sg": sg},
+            policy=_policy_name(policy), failure=source_failure, cluster=cluster,
+            reproduction=out["reproduction"], e2e_sc=out["e2e_sc"], run=str(run_dir.resolve()),
+            index=record.get("index"),
+            interaction=interaction, judge={"avoidability": out.get("avoidability"),
+                                            "interaction_shown": shown, "reproduced": reproduced},
+            replay_entry=replay["entry"],
+        )
         family = _family(record["scenario"], source_failure["type"])
         outcome = bank.add(generation.script, description.text,
                            name=_mined_name(record["scenario"], source_failure["type"]),

@@ -168,7 +168,7 @@ def replay_failure(bank: Any, name: str, *, policy: Optional[Any] = None,
 
     bank = bank if isinstance(bank, Bank) else Bank(bank)
     entry = bank.get(name)
-    replay = entry.source.get("replay")
+    replay = entry.provenance.replay
     if not isinstance(replay, Mapping) or replay.get("seed") is None:
         raise BankError(f"bank entry {name!r} is no replay of a mined failure (its provenance has no 'replay'); "
                         "replay entries are tagged 'replay'")

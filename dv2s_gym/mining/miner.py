@@ -3,7 +3,8 @@
 The run is a folder (``out``)::
 
     settings.json     what the run mines (policy, sampler, seed, scenarios, bank, env config, monitors)
-    episodes.jsonl    one record per finished episode, appended and fsynced as it arrives
+    episodes.jsonl    one record per finished episode (:class:`~scenario_bank.records.EpisodeRecord`), appended and
+                      fsynced as it arrives
     sampler.pkl       the sampler's state: after the last chunk whose outcomes it was fed (chunk schedule),
                       or the window schedule with its drawn, not yet fed scenes (window schedule)
     traces/           the trace of every failed episode
@@ -58,6 +59,7 @@ from dv2s_gym.mining.tasks import MINE
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
 from dv2s_gym.workers.settings import WorkerSettings
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
+from scenario_bank.records import EpisodeRecord, RecordError
 
 __all__ = ["MineRun", "MineSettings", "WorkerSettings", "FEEDBACKS", "mine", "read_records", "episode_seed",
            "SETTINGS_VERSION"]
@@ -73,25 +75,30 @@ _RESUME_KEYS = ("policy", "sampler", "sampler_options", "feedback", "seed", "bat
 
 @dataclass
 class MineRun:
-    """What a mining run found (the run folder holds everything, this is a summary)."""
+    """What a mining run found (the run folder holds everything, this is a summary): its ``records``
+    (:class:`~scenario_bank.records.EpisodeRecord`, given as records or their JSON objects), the behaviour
+    cluster of each failure by index, the conversions and the reports written."""
 
     out: Path
     settings: Dict[str, Any]
-    records: List[Dict[str, Any]]
+    records: List[EpisodeRecord]
     clusters: Dict[int, str]
     conversions: List[Dict[str, Any]] = field(default_factory=list)
     reports: Dict[str, Path] = field(default_factory=dict)
     seconds: float = 0.0
 
-    @property
-    def failures(self) -> List[Dict[str, Any]]:
-        """Records of failed episodes."""
-        return [r for r in self.records if r.get("failure") and not r.get("error")]
+    def __post_init__(self) -> None:
+        self.records = [EpisodeRecord.from_dict(r) for r in self.records]  # records given as their JSON objects
 
     @property
-    def avoidable(self) -> List[Dict[str, Any]]:
+    def failures(self) -> List[EpisodeRecord]:
+        """Records of failed episodes."""
+        return [r for r in self.records if r.failed]
+
+    @property
+    def avoidable(self) -> List[EpisodeRecord]:
         """Failures the reference driver avoided in the same scene (they count against the policy)."""
-        return [r for r in self.failures if r.get("avoidable") is not False]
+        return [r for r in self.failures if r.avoidable is not False]
 
     @property
     def distinct_clusters(self) -> int:
@@ -99,9 +106,9 @@ class MineRun:
         return len(set(self.clusters.values()))
 
     @property
-    def errors(self) -> List[Dict[str, Any]]:
+    def errors(self) -> List[EpisodeRecord]:
         """The episode records that ended in an error (they count in no failure figure)."""
-        return [r for r in self.records if r.get("error")]
+        return [r for r in self.records if r.error]
 
     @property
     def all_errored(self) -> bool:
@@ -146,9 +153,10 @@ def episode_seed(seed: int, index: int) -> int:
     return int(np.random.SeedSequence([int(seed), int(index), 0x6D696E65]).generate_state(1)[0] % (2**31 - 1))
 
 
-def read_records(path: Path) -> List[Dict[str, Any]]:
-    """The records of an ``episodes.jsonl`` (a torn last line, left by a kill mid-write, is dropped)."""
-    records: Dict[int, Dict[str, Any]] = {}
+def read_records(path: Path) -> List[EpisodeRecord]:
+    """The records of an ``episodes.jsonl`` (a torn last line, left by a kill mid-write, is dropped), in index
+    order; a line that is not an episode record is a :class:`MiningError` naming it and its bad field."""
+    rows: Dict[int, Dict[str, Any]] = {}
     if not path.is_file():
         return []
     lines = path.read_bytes().split(b"\n")
@@ -156,13 +164,23 @@ def read_records(path: Path) -> List[Dict[str, Any]]:
         if not line.strip():
             continue
         try:
-            record = json.loads(line)
+            row = json.loads(line)
         except json.JSONDecodeError:
             if number >= len(lines) - 2:  # the last line: an interrupted append
                 continue
             raise MiningError(f"{path}, line {number + 1} is corrupt; remove that line to resume the run") from None
-        records[int(record["index"])] = record
-    return [records[i] for i in sorted(records)]
+        if not isinstance(row, dict) or not isinstance(row.get("index"), int):
+            raise MiningError(f"{path}, line {number + 1} is not an episode record (no integer 'index'); "
+                              "remove that line to resume the run")
+        rows[int(row["index"])] = row
+    ordered = [rows[i] for i in sorted(rows)]
+    records = []
+    for row in ordered:
+        try:
+            records.append(EpisodeRecord.from_dict(row))
+        except RecordError as error:
+            raise MiningError(f"{path}, episode {row['index']}: {error}; remove that line to resume the run") from None
+    return records
 
 
 @contextmanager
@@ -190,7 +208,8 @@ class _Appender:
                     handle.truncate(data.rfind(b"\n") + 1)
         self._handle = open(path, "ab")
 
-    def append(self, record: Dict[str, Any]) -> None:
+    def append(self, record: Mapping[str, Any]) -> None:
+        record = record.to_dict() if isinstance(record, EpisodeRecord) else record
         self._handle.write(json.dumps(record, sort_keys=True, default=str).encode("utf-8") + b"\n")
         self._handle.flush()
         os.fsync(self._handle.fileno())
@@ -203,17 +222,17 @@ class _Recorder:
     """Turns finished results into records: appended to ``episodes.jsonl``, kept in ``done``, counted on
     the progress bar (failures and distinct clusters)."""
 
-    def __init__(self, appender: _Appender, done: Dict[int, Dict[str, Any]], sampler: str, out: Path, bar) -> None:
+    def __init__(self, appender: _Appender, done: Dict[int, EpisodeRecord], sampler: str, out: Path, bar) -> None:
         self.appender, self.done, self.sampler, self.out, self.bar = appender, done, sampler, out, bar
-        counted = [r for r in done.values() if r.get("failure") and not r.get("error")]
+        counted = [r for r in done.values() if r.failed]
         self.found = {cluster_id(r) for r in counted}
         self.failed = len(counted)
 
     def add(self, result: Dict[str, Any], task: Dict[str, Any], spec) -> None:
         record = _complete(result, task, spec, self.sampler, self.out)
         self.appender.append(record)
-        self.done[record["index"]] = record
-        if record.get("failure") and not record.get("error"):
+        self.done[record.index] = record
+        if record.failed:
             self.found.add(cluster_id(record))
             self.failed += 1
         if self.bar is not None:
@@ -260,7 +279,7 @@ def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path) ->
                    fix="resume it with the same settings or pass another --out")
 
 
-def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[int, Dict[str, Any]],
+def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[int, EpisodeRecord],
                      batch: int) -> SceneSampler:
     """The sampler after every complete chunk already in ``records``: from its checkpoint when that is
     current, else rebuilt by drawing the chunks again and feeding their recorded outcomes."""
@@ -302,7 +321,7 @@ def _schedule(saved: Optional[Dict[str, Any]], sampler: str, out: Path) -> str:
     return schedule
 
 
-def _restore_window(out: Path, settings: Dict[str, Any], space, records: Dict[int, Dict[str, Any]], batch: int,
+def _restore_window(out: Path, settings: Dict[str, Any], space, records: Dict[int, EpisodeRecord], batch: int,
                     budget: int) -> WindowSchedule:
     """The window schedule after feeding every recorded outcome it can: from its checkpoint when that is
     usable, else from a fresh sampler; either way the remaining recorded outcomes are fed in the schedule's
@@ -568,7 +587,7 @@ def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional
     return recorded, space
 
 
-def _run_episodes(out: Path, settings: Dict[str, Any], space, done: Dict[int, Dict[str, Any]],
+def _run_episodes(out: Path, settings: Dict[str, Any], space, done: Dict[int, EpisodeRecord],
                   workers: WorkerSettings, n_workers: int, progress: bool) -> None:
     """Run the episodes of the run's budget not in ``done`` (recorded into it), on its schedule."""
     from dv2s_gym.workers.errors import WorkerError
@@ -619,27 +638,23 @@ def _with_proposal(spec, proposal: Optional[Dict[str, Any]]):
     return spec
 
 
-def _complete(result: Dict[str, Any], task: Dict[str, Any], spec, sampler: str, out: Path) -> Dict[str, Any]:
+def _complete(result: Dict[str, Any], task: Dict[str, Any], spec, sampler: str, out: Path) -> EpisodeRecord:
     """The episode record from a worker's result (or a backend's error result for a crashed or hung worker)."""
-    record = {
+    taken = {k: v for k, v in result.items()
+             if k in ("policy", "scenario", "seed", "result", "failure", "rho", "reference", "avoidable", "trace",
+                      "error", "family")}
+    trace = taken.get("trace")
+    return EpisodeRecord.from_dict({
         "index": task["index"], "policy": task["policy"], "scenario": task["scenario"], "seed": task["seed"],
         "params": task["params"], "result": None, "failure": None, "rho": None, "reference": None,
         "avoidable": None, "trace": None, "error": None, "family": task.get("family") or task["scenario"],
-    }
-    record.update({k: v for k, v in result.items() if k in record and k not in ("index", "params")})
-    if result.get("behaviour") is not None:
-        record["behaviour"] = result["behaviour"]
-    if result.get("failure_state") is not None:
-        record["failure_state"] = result["failure_state"]
-    record.pop("role", None)
-    if result.get("worker_restarts"):  # a worker crashed or hung on this episode, then a new one finished it
-        record["worker_restarts"] = list(result["worker_restarts"])
-    record["sampler"] = sampler
-    record["point"] = spec.point
-    record["proposal"] = getattr(spec, "proposal", None)
-    if record.get("trace"):
-        record["trace"] = os.path.relpath(record["trace"], out)
-    return record
+        **taken,
+        "behaviour": result.get("behaviour"), "failure_state": result.get("failure_state"),
+        # a worker crashed or hung on this episode, then a new one finished it
+        "worker_restarts": list(result["worker_restarts"]) if result.get("worker_restarts") else None,
+        "sampler": sampler, "point": spec.point, "proposal": getattr(spec, "proposal", None),
+    }).replace(trace=os.path.relpath(trace, out) if trace else trace,
+               null_fields=None)
 
 
 def _own_bank(bank_dir: os.PathLike | str) -> None:
@@ -734,10 +749,10 @@ def _reached_bank(bank, out: Path, cluster: str) -> Optional[Dict[str, Any]]:
     resumed run neither converts the cluster again nor reports it merged into the entry it made itself."""
     run = str(Path(out).resolve())
     for entry in bank:
-        source = entry.source
-        if source.get("replay"):
+        source = entry.provenance
+        if source.is_replay:
             continue  # the exact replay of a failure is written before its converted script is judged
-        found = [("kept", source)] + [("merged", merged) for merged in source.get("merged") or []]
+        found = [("kept", source)] + [("merged", merged) for merged in source.merged or ()]
         for status, provenance in found:
             if provenance.get("run") != run or provenance.get("cluster") != cluster:
                 continue

@@ -218,13 +218,13 @@ def add_converted(bank_dir: Optional[str | os.PathLike], video: str | os.PathLik
     """Add the scenario a conversion wrote to ``out`` to the bank in ``bank_dir`` (the shipped bank, read-only, when
     None) with ``generated`` provenance; returns the entry's name, or a note saying why a conversion whose checks
     failed was not added."""
-    from scenario_bank.bank import Bank
+    from scenario_bank.bank import Bank, Provenance
 
     if not report.get("check", {}).get("ok"):
         return f"(not added: {video} failed validation)"
     description = report["description"]
-    provenance = {"kind": "generated", "video": str(video), "seed": seed,
-                  **conversion_provenance(dra, sg, report["generation"], description)}
+    provenance = Provenance(kind="generated", video=str(video), seed=seed,
+                            **conversion_provenance(dra, sg, report["generation"], description))
     script = (Path(out) / "scenario.scenic").read_text(encoding="utf-8")
     entry = Bank(bank_dir).add(script, description["text"], elements=description["elements"],
                                tags=["generated"], provenance=provenance, name=None)

@@ -1,0 +1,386 @@
+"""Typed records of what travels between the bank, the miner, the regression runner and the policies.
+
+Three records stand for the JSON objects the subsystems hand each other and write to disk:
+
+- :class:`Provenance`: where a bank entry came from (a sidecar's ``source``: its kind, video, parent scenario,
+  seed, generator; for a mined entry also the failure, cluster, reproduction rate, E2E-SC and replay parameters).
+- :class:`Sidecar`: a bank entry's ``meta.json`` (description, elements, story, tags, map, provenance, hash).
+- :class:`EpisodeRecord`: one episode of a failure-mining run, a line of its ``episodes.jsonl`` (the scene, the
+  policy's result and failure, the reference driver's outcome, the sampler's point).
+
+Each is a frozen dataclass with :meth:`from_dict` (checks every field it knows; a :class:`RecordError` names the
+bad one and what it should hold) and :meth:`to_dict`, which gives back exactly the JSON object the files hold:
+the fields a record does not know travel in ``extra``, and a field that is ``None`` is written as ``null`` only
+when the file format always writes it (or the object read had it as ``null``: ``null_fields``), so reading a
+file and writing it back changes no byte. A record is also a read-only mapping over that JSON object
+(``record["seed"]``, ``record.get("failure")``), so code that reads the dict form reads the record alike.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping as _MappingABC
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Dict, FrozenSet, Iterator, Mapping, Optional, Tuple
+
+from scenario_bank.errors import DV2SError
+
+__all__ = ["RecordError", "Provenance", "Sidecar", "EpisodeRecord", "SOURCE_KINDS", "PROVENANCE_FIELDS",
+           "MINED_PROVENANCE_FIELDS", "ENTRY_FILES", "SIDECAR_VERSION"]
+
+SIDECAR_VERSION = 1
+"""Version of the ``meta.json`` sidecar format written by this code."""
+SOURCE_KINDS = ("hand-written", "generated", "mined")
+"""The kinds of bank entries: written by hand, generated from a video, mined from a policy's failure."""
+PROVENANCE_FIELDS = ("kind", "video", "parent", "seed", "generator", "model", "context_hash", "date")
+"""Provenance every new sidecar writes (``null`` when unknown)."""
+MINED_PROVENANCE_FIELDS = ("params", "backends", "policy", "failure", "cluster", "reproduction", "e2e_sc", "run", "trace",
+                           "index", "merged", "interaction", "judge", "replay", "replay_entry", "converted")
+"""Extra provenance of ``kind == "mined"`` entries (failure mining): the parent's sampled parameters, the
+DRA/SG backends, the policy that failed, its failure and cluster, the reproduction rate and E2E-SC, the
+mining run and episode index, ``merged``: later failures merged into this entry (see ``Bank.add`` with
+``on_duplicate="merge"``), ``interaction``: the failure's actor and manoeuvre read from its trace, ``judge``: the
+checks the converted script passed, ``replay``: on an exact replay of the failing scene, the parameters, seed
+and trajectory hash that pin it, and the links between the two entries of one failure (``replay_entry`` on the
+converted script, ``converted`` on the replay). Sidecars without them (every older sidecar) load as before."""
+ENTRY_FILES = "files"
+"""The provenance field listing the files an entry carries in its own folder (relative paths), in ``source``
+and in each ``source.merged`` record. They are added with the entry (``files=`` of ``Bank.add``), travel with
+``Bank.export``, ``Bank.import_archive`` and ``Bank.copy_to``, and ``dv2s bank validate`` reports one that is
+missing. Older sidecars have none."""
+
+
+class RecordError(DV2SError, ValueError):
+    """A record read from a file or handed over by other code has a field of the wrong kind; the message names
+    the record, the field and what it should hold."""
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+_CHECKS = {
+    "str": (lambda v: isinstance(v, str), "a string"),
+    "int": (_is_int, "an integer"),
+    "number": (_is_number, "a number"),
+    "bool": (lambda v: isinstance(v, bool), "true or false"),
+    "object": (lambda v: isinstance(v, Mapping), "a JSON object"),
+    "list": (lambda v: isinstance(v, (list, tuple)), "a list"),
+    "strings": (lambda v: isinstance(v, (list, tuple)) and all(isinstance(s, str) for s in v), "a list of strings"),
+    "objects": (lambda v: isinstance(v, (list, tuple)) and all(isinstance(s, Mapping) for s in v),
+                "a list of JSON objects"),
+    "any": (lambda v: True, "anything"),
+}
+
+
+class _Record(_MappingABC):
+    """What the three records share: the JSON form (:meth:`to_dict`), reading from it (:meth:`from_dict`) and
+    read-only mapping access to it. Subclasses list their fields' JSON kinds in ``_KINDS`` (a field missing
+    from it is the record's ``extra`` or ``null_fields``), the fields :meth:`from_dict` needs in ``_REQUIRED``
+    and the fields nested records fill in ``_NESTED``."""
+
+    _KINDS: ClassVar[Dict[str, str]] = {}
+    _REQUIRED: ClassVar[Tuple[str, ...]] = ()
+    _NESTED: ClassVar[Dict[str, type]] = {}
+    _LISTS: ClassVar[Tuple[str, ...]] = ()
+    _WHAT: ClassVar[str] = "record"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        """The fields :meth:`to_dict` writes as ``null`` when they are ``None`` and ``null_fields`` is not given:
+        the ones the file format always writes."""
+        return frozenset()
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]):
+        """The record of ``data`` (a JSON object as the files hold it), every known field checked;
+        :class:`RecordError` names a field of the wrong kind or a required one that is missing."""
+        if isinstance(data, cls):
+            return data
+        if not isinstance(data, Mapping):
+            raise RecordError(f"a {cls._WHAT} must be a JSON object, not {type(data).__name__}")
+        for key in cls._REQUIRED:
+            if data.get(key) is None:
+                raise RecordError(f"{cls._WHAT} field {key!r} is missing; "
+                                  f"every {cls._WHAT} has {', '.join(repr(k) for k in cls._REQUIRED)}")
+        values: Dict[str, Any] = {}
+        for key, kind in cls._KINDS.items():
+            if key not in data or data[key] is None:
+                continue
+            value = data[key]
+            check, wanted = _CHECKS[kind]
+            if not check(value):
+                raise RecordError(f"{cls._WHAT} field {key!r} must be {wanted}, not {_shown(value)}")
+            if key in cls._NESTED:
+                value = cls._NESTED[key].from_dict(value)
+            elif key in cls._LISTS:
+                value = tuple(value)
+            values[key] = value
+        values.update(cls._check_extra(data))
+        values["extra"] = {k: v for k, v in data.items() if k not in cls._KINDS}
+        values["null_fields"] = frozenset(k for k in cls._KINDS if k in data and data[k] is None)
+        return cls(**values)
+
+    @classmethod
+    def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
+        """Checks of a subclass beyond the fields' kinds; the values they replace."""
+        return {}
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The JSON object of this record, as the files hold it (a new dict each call)."""
+        nulls = self.default_null_fields() if self.null_fields is None else self.null_fields
+        out: Dict[str, Any] = {}
+        for key in self._KINDS:
+            value = getattr(self, key)
+            if value is None:
+                if key in nulls:
+                    out[key] = None
+                continue
+            if isinstance(value, _Record):
+                value = value.to_dict()
+            elif key in self._LISTS:
+                value = list(value)
+            out[key] = value
+        out.update(self.extra)
+        return out
+
+    def _json(self) -> Dict[str, Any]:
+        cached = self.__dict__.get("_cached_json")
+        if cached is None:
+            cached = self.to_dict()
+            object.__setattr__(self, "_cached_json", cached)
+        return cached
+
+    def __getitem__(self, key: str) -> Any:
+        return self._json()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._json())
+
+    def __len__(self) -> int:
+        return len(self._json())
+
+    def replace(self, **changes: Any):
+        """A copy with ``changes`` (field names) applied; the record is frozen."""
+        return dataclasses.replace(self, **changes)
+
+
+def _shown(value: Any) -> str:
+    text = repr(value)
+    return f"{type(value).__name__} {text[:60] + '...' if len(text) > 60 else text}"
+
+
+@dataclass(frozen=True, eq=False)
+class Provenance(_Record):
+    """Where a bank entry came from: a sidecar's ``source``.
+
+    ``kind`` is one of :data:`SOURCE_KINDS`; ``video``, ``parent`` (the bank scenario a mined or converted entry
+    derives from), ``seed``, ``generator`` (the backends that wrote the script), ``model``, ``context_hash``
+    (the prompt context) and ``date`` are what every entry records (:data:`PROVENANCE_FIELDS`). A mined entry
+    adds :data:`MINED_PROVENANCE_FIELDS`: the failing scene's ``params``, ``backends``, ``policy``, its
+    ``failure`` and ``cluster``, ``reproduction`` and ``e2e_sc`` (how well the new script replays the failure),
+    the mining ``run`` and episode ``index``, its ``trace``, ``interaction``, the ``judge``'s checks, the
+    ``replay`` parameters that pin an exact replay, the ``replay_entry``/``converted`` links between the two
+    entries of one failure and ``merged`` (later failures merged into the entry). ``files`` lists the files the
+    entry carries in its folder. Other keys (``scenic2_rewrites``, links added later) are kept in ``extra``.
+
+    ``null_fields``: the fields written as ``null`` when ``None``; by default :data:`PROVENANCE_FIELDS`, and a
+    mined entry's :data:`MINED_PROVENANCE_FIELDS` but ``merged``, as a new sidecar writes them.
+    """
+
+    kind: Optional[str] = None
+    video: Optional[str] = None
+    parent: Optional[str] = None
+    seed: Optional[int] = None
+    generator: Optional[str] = None
+    model: Optional[str] = None
+    context_hash: Optional[str] = None
+    date: Optional[str] = None
+    params: Optional[Mapping[str, Any]] = None
+    backends: Optional[Mapping[str, Any]] = None
+    policy: Optional[str] = None
+    failure: Optional[Mapping[str, Any]] = None
+    cluster: Optional[str] = None
+    reproduction: Optional[Mapping[str, Any]] = None
+    e2e_sc: Optional[Any] = None
+    run: Optional[str] = None
+    trace: Optional[str] = None
+    index: Optional[int] = None
+    merged: Optional[Tuple[Mapping[str, Any], ...]] = None
+    interaction: Optional[Mapping[str, Any]] = None
+    judge: Optional[Mapping[str, Any]] = None
+    replay: Optional[Mapping[str, Any]] = None
+    replay_entry: Optional[str] = None
+    converted: Optional[str] = None
+    files: Optional[Tuple[str, ...]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "kind": "str", "video": "str", "parent": "str", "seed": "int", "generator": "str", "model": "str",
+        "context_hash": "str", "date": "str", "params": "object", "backends": "object", "policy": "str",
+        "failure": "object", "cluster": "str", "reproduction": "object", "e2e_sc": "any", "run": "str",
+        "trace": "str", "index": "int", "merged": "objects", "interaction": "object", "judge": "object",
+        "replay": "object", "replay_entry": "str", "converted": "str", ENTRY_FILES: "strings",
+    }
+    _LISTS: ClassVar[Tuple[str, ...]] = ("merged", ENTRY_FILES)
+    _WHAT: ClassVar[str] = "provenance"
+
+    @classmethod
+    def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
+        kind = data.get("kind")
+        if kind is not None and kind not in SOURCE_KINDS:
+            raise RecordError(f"provenance kind (field 'kind') must be one of {SOURCE_KINDS}, not {_shown(kind)}")
+        return {}
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        mined = (key for key in MINED_PROVENANCE_FIELDS if key != "merged") if self.kind == "mined" else ()
+        return frozenset(PROVENANCE_FIELDS) | frozenset(mined)
+
+    @property
+    def mined(self) -> bool:
+        """Whether the entry was mined from a policy's failure."""
+        return self.kind == "mined"
+
+    @property
+    def failure_type(self) -> Optional[str]:
+        """The type of the mined failure (``"collision"``, ``"off_road"``, ...), or ``None``."""
+        return (self.failure or {}).get("type")
+
+    @property
+    def is_replay(self) -> bool:
+        """Whether the entry is an exact replay of a failing scene (it carries ``replay`` parameters)."""
+        return bool(self.replay)
+
+
+@dataclass(frozen=True, eq=False)
+class Sidecar(_Record):
+    """A bank entry's ``meta.json``: ``description`` (natural language), ``elements`` (road, participants,
+    actions, relations), optional ``story`` (the phases of the scenario), ``tags``, ``map``, ``use_case``,
+    its provenance ``source`` (:class:`Provenance`), the script's ``content_hash``, the entry ``name`` and the
+    format's ``schema_version``. Other keys are kept in ``extra``.
+
+    ``null_fields``: the fields written as ``null`` when ``None``; by default every field a new sidecar writes
+    (all but ``story``).
+    """
+
+    description: str = ""
+    map: str = ""
+    name: Optional[str] = None
+    schema_version: Optional[int] = None
+    elements: Optional[Mapping[str, Any]] = None
+    story: Optional[Any] = None
+    tags: Tuple[str, ...] = ()
+    use_case: Optional[str] = None
+    source: Optional[Provenance] = None
+    content_hash: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "schema_version": "int", "name": "str", "description": "str", "elements": "object", "story": "any",
+        "tags": "strings", "map": "str", "use_case": "str", "source": "object", "content_hash": "str",
+    }
+    _REQUIRED: ClassVar[Tuple[str, ...]] = ("description", "map")
+    _NESTED: ClassVar[Dict[str, type]] = {"source": Provenance}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("tags",)
+    _WHAT: ClassVar[str] = "sidecar"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS) - {"story"}
+
+    @property
+    def provenance(self) -> Provenance:
+        """The entry's provenance (an empty one when the sidecar has none)."""
+        return self.source if self.source is not None else Provenance(null_fields=frozenset())
+
+
+@dataclass(frozen=True, eq=False)
+class EpisodeRecord(_Record):
+    """One episode of a failure-mining run: a line of the run's ``episodes.jsonl``.
+
+    The scene: episode ``index``, ``scenario`` (and its ``family``: the bank scenario it derives from), env
+    ``seed`` and the script's sampled ``params``; the ``policy`` run on it and its ``result``
+    (:meth:`policies.evaluation.EpisodeResult.to_json`), its ``failure`` (``type``, ``kind``, ``time``, ...; ``None``
+    when it drove safely), robustness ``rho``, the reference driver's outcome on the same scene (``reference``,
+    ``avoidable``), the saved ``trace`` of a failed episode (relative to the run folder), ``error`` (the episode
+    could not run: no failure of the policy), a failure's ``behaviour`` (who else was involved and what each side
+    was doing) and ``failure_state`` (the numbers describing the scene at the failure), the
+    ``worker_restarts`` it survived, and the ``sampler`` with the ``point`` and ``proposal`` density it was drawn
+    from. Other keys are kept in ``extra``.
+
+    ``null_fields``: the fields written as ``null`` when ``None``; by default every field but ``behaviour``,
+    ``failure_state`` and ``worker_restarts`` (written only when there is one), as the miner writes them.
+    """
+
+    index: int
+    scenario: str
+    seed: int
+    policy: Optional[str] = None
+    params: Optional[Mapping[str, Any]] = None
+    result: Optional[Mapping[str, Any]] = None
+    failure: Optional[Mapping[str, Any]] = None
+    rho: Optional[float] = None
+    reference: Optional[Mapping[str, Any]] = None
+    avoidable: Optional[bool] = None
+    trace: Optional[str] = None
+    error: Optional[str] = None
+    family: Optional[str] = None
+    behaviour: Optional[Mapping[str, Any]] = None
+    failure_state: Optional[Tuple[float, ...]] = None
+    worker_restarts: Optional[Tuple[Any, ...]] = None
+    sampler: Optional[str] = None
+    point: Optional[Any] = None
+    proposal: Optional[Any] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "index": "int", "scenario": "str", "seed": "int", "policy": "str", "params": "object", "result": "object",
+        "failure": "object", "rho": "number", "reference": "object", "avoidable": "bool", "trace": "str",
+        "error": "str", "family": "str", "behaviour": "object", "failure_state": "list",
+        "worker_restarts": "list", "sampler": "str", "point": "any", "proposal": "any",
+    }
+    _REQUIRED: ClassVar[Tuple[str, ...]] = ("index", "scenario", "seed")
+    _LISTS: ClassVar[Tuple[str, ...]] = ("failure_state", "worker_restarts")
+    _WHAT: ClassVar[str] = "episode record"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS) - {"behaviour", "failure_state", "worker_restarts"}
+
+    @property
+    def id(self) -> str:
+        """``"<scenario>/<seed>"``, the episode's name in reports."""
+        return f"{self.scenario}/{int(self.seed)}"
+
+    @property
+    def failed(self) -> bool:
+        """Whether the policy failed (an episode that could not run did not fail)."""
+        return bool(self.failure) and not self.error
+
+    @property
+    def outcome(self) -> str:
+        """``"error"``, ``"failed"`` or ``"passed"``."""
+        return "error" if self.error else "failed" if self.failure else "passed"
+
+    @property
+    def failure_type(self) -> Optional[str]:
+        """The failure's type (``"collision"``, ``"off_road"``, ``"stall"``, ``"low_ttc"``), or ``None``."""
+        return (self.failure or {}).get("type") if not self.error else None
+
+    @property
+    def mean_speed(self) -> Optional[float]:
+        """The ego's mean speed over the episode (m/s), from its result; ``None`` without one."""
+        value = (self.result or {}).get("mean_speed")
+        return float(value) if _is_number(value) else None
+
+    @property
+    def min_ttc(self) -> float:
+        """The episode's smallest time to collision (s); infinite when nothing came close or without a result."""
+        value = (self.result or {}).get("min_ttc")
+        return float(value) if _is_number(value) else math.inf
+
