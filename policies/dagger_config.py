@@ -6,6 +6,7 @@ import dataclasses
 from typing import Any, Dict
 
 from policies.training import TrainingError
+from scenario_bank.field_checks import check_int, check_number, check_text
 
 __all__ = ["DaggerConfig", "DAGGER_DEFAULTS"]
 
@@ -45,17 +46,12 @@ class DaggerConfig:
 
     def __post_init__(self) -> None:
         for name, low in (("iterations", 1), ("epochs", 0), ("batch_size", 1), ("checkpoint_every", 0)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise TrainingError(f"DAgger {name} must be an integer >= {low}, not {value!r}")
-        if not 0.0 <= float(self.beta) <= 1.0 or not 0.0 <= float(self.beta_decay) <= 1.0:
-            raise TrainingError(f"DAgger beta and beta_decay must be in [0, 1], not {self.beta} and {self.beta_decay}")
-        if isinstance(self.slower_weight, bool) or not isinstance(self.slower_weight, (int, float)) or \
-                not self.slower_weight > 0:
-            raise TrainingError(f"DAgger slower_weight must be a number > 0, not {self.slower_weight!r}")
-        if isinstance(self.learning_rate, bool) or not isinstance(self.learning_rate, (int, float)) or \
-                not self.learning_rate > 0:
-            raise TrainingError(f"DAgger learning_rate must be a number > 0, not {self.learning_rate!r}")
+            check_int(TrainingError, f"DAgger {name}", getattr(self, name), low=low)
+        check_number(TrainingError, "DAgger beta", self.beta, low=0, high=1)
+        check_number(TrainingError, "DAgger beta_decay", self.beta_decay, low=0, high=1)
+        check_number(TrainingError, "DAgger slower_weight", self.slower_weight, low=0, interval="(]")
+        check_number(TrainingError, "DAgger learning_rate", self.learning_rate, low=0, interval="(]")
+        check_text(TrainingError, "DAgger reference", self.reference, what="a driver's policy spec (e.g. rule)")
 
     def replace(self, **changes: Any) -> "DaggerConfig":
         """A copy with ``changes`` (checked again)."""

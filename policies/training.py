@@ -66,6 +66,8 @@ from policies.model_card import bank_version, summarize_results, write_card
 from policies.registry import SB3Policy, load_policy, read_model_card
 from scenario_bank import select_scenarios
 from scenario_bank.atomic import atomic_path, atomic_write_json
+from scenario_bank.field_checks import (check_bool, check_choice, check_int, check_mapping, check_names,
+                                        check_number, check_path)
 from scenario_bank.run_identity import check_identity
 
 __all__ = [
@@ -131,7 +133,7 @@ class TrainingError(DV2SError, ValueError):
 
 
 # --------------------------------------------------------------------------- configuration
-@dataclasses.dataclass
+@dataclasses.dataclass(frozen=True)
 class TrainConfig:
     """Everything a training run is made of (recorded in ``run.json`` and the model card).
 
@@ -188,6 +190,37 @@ class TrainConfig:
     # settings a resumed run must share with the run it continues
     IDENTITY = ("algo", "scenarios", "bank_dir", "seed", "sampler", "weights", "curriculum_floor",
                 "curriculum_window", "env_config", "hyperparameters")
+
+    def __post_init__(self) -> None:
+        # each field's type and range, on construction (one line naming the flag); what needs the bank, the env
+        # or the algorithm (the selection, the env config's keys, the hyperparameters) is :meth:`validate`'s
+        check_path(TrainingError, "--out", self.out)
+        check_choice(TrainingError, "--algo", self.algo, ALGORITHMS)
+        if self.scenarios is not None:
+            check_names(TrainingError, "--scenarios", self.scenarios)
+        check_path(TrainingError, "--bank", self.bank_dir, optional=True)
+        for flag, value, low in (("--steps", self.steps, 1), ("--envs", self.n_envs, 1), ("--seed", self.seed, 0),
+                                 ("--curriculum-window", self.curriculum_window, 1),
+                                 ("--curriculum-update", self.curriculum_update, 1),
+                                 ("--eval-freq", self.eval_freq, 0), ("--eval-jobs", self.eval_jobs, 1),
+                                 ("--checkpoint-freq", self.checkpoint_freq, 0),
+                                 ("--keep-checkpoints", self.keep_checkpoints, 1)):
+            check_int(TrainingError, flag, value, low=low)
+        check_int(TrainingError, "--eval-seeds", self.eval_seeds, low=0)  # the 1000 cap: validate()'s, with its why
+        check_int(TrainingError, "--card-seeds", self.card_seeds, low=0, optional=True,
+                  none_means="the default for --steps")
+        check_choice(TrainingError, "--sampler", self.sampler, SAMPLERS)
+        check_mapping(TrainingError, "--weights", self.weights, optional=True,
+                      what="a JSON object of scenario weights")
+        for name, weight in (self.weights or {}).items():
+            check_number(TrainingError, f"--weights {name!r}", weight, low=0)
+        check_number(TrainingError, "--curriculum-floor", self.curriculum_floor, low=0, high=1)
+        check_mapping(TrainingError, "--config", self.env_config, optional=True,  # None: a fine-tuning's source
+                      what="a JSON object of DV2S-v0 config overrides")
+        check_mapping(TrainingError, "--hp", self.hyperparameters, what="a JSON object of hyperparameters")
+        check_names(TrainingError, "--baselines", self.baselines, optional=False)
+        check_bool(TrainingError, "progress_bar (--no-progress)", self.progress_bar)
+        check_choice(TrainingError, "--vec-env", self.vec_env, ("subproc", "dummy"))
 
     def validate(self) -> None:
         """Raise :class:`TrainingError` for settings that cannot train."""

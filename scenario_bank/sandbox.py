@@ -39,7 +39,6 @@ __all__ = ["SandboxLimits", "SandboxResult", "SandboxError", "run_in_sandbox", "
 
 CODE_ROOT = Path(__file__).resolve().parents[1]
 """The folder holding ``scenario_bank`` and ``envs``: the child imports this code, not an installed copy."""
-RUNNER = "envs.sandbox_runner"
 _GIB = 2**30
 
 

@@ -349,7 +349,7 @@ def test_cli_cluster_counts_read_0_as_none_and_all_as_every_cluster(tmp_path, ca
 @pytest.mark.parametrize("argv, needle", [
     (["--policy", "rule"], "stable-baselines3 checkpoint"),
     (["--budget", "0"], "--budget must be an integer >= 1"),
-    (["--holdout-fraction", "2"], "--holdout-fraction must be in [0, 1]"),
+    (["--holdout-fraction", "2"], "--holdout-fraction must be a number in [0, 1]"),
     (["--sampler", "no-such"], "--sampler must be one of random, halton"),  # it used to start round 1 first
     (["--max-conversions", "-1"], "--max-conversions must be an integer >= 0"),
     (["--max-conversions", "many"], "--max-conversions must be a whole number of clusters or 'all'"),

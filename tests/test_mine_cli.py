@@ -53,7 +53,7 @@ def test_mine_writes_records_settings_and_a_summary(tmp_path, capsys):
 
 @pytest.mark.parametrize("argv, message", [
     (["--policy", "rule", "--budget", "4"], "pass --bank DIR"),
-    (["--policy", "rule", "--budget", "0", "--no-convert"], "--budget must be at least 1"),
+    (["--policy", "rule", "--budget", "0", "--no-convert"], "--budget must be an integer >= 1"),
     (["--policy", "no-such-policy", "--budget", "4", "--no-convert"], "unknown policy 'no-such-policy'"),
     (["--policy", "rule", "--budget", "4", "--no-convert", "--scenarios", "no_such_scenario"], "no_such_scenario"),
 ])

@@ -430,7 +430,7 @@ def test_empty_scenario_selection_and_bad_settings_are_refused(tmp_path):
         run_regression("rule", "rule", scenarios=["", " "], out_dir=tmp_path, progress=False)
     with pytest.raises(ValueError, match="no scenario carries tag 'nothing-has-this'"):
         run_regression("rule", "rule", scenarios=["tag:nothing-has-this"], out_dir=tmp_path, progress=False)
-    with pytest.raises(RegressError, match="--episodes must be a positive integer"):
+    with pytest.raises(RegressError, match="--episodes must be an integer >= 1"):
         run_regression("rule", "rule", episodes=0, out_dir=tmp_path, progress=False)
     with pytest.raises(RegressError, match="--margin"):
         run_regression("rule", "rule", margin=1.5, out_dir=tmp_path, progress=False)
@@ -449,7 +449,7 @@ def test_ray_backend_missing_is_a_clear_error(monkeypatch, tmp_path):
         get_backend("ray", workers=2)
     with pytest.raises(WorkerError, match="unknown backend 'slurm'"):
         get_backend("slurm")
-    with pytest.raises(RegressError, match="unknown backend 'slurm'"):  # run_regression reports it as its own
+    with pytest.raises(WorkerError, match="--backend must be one of local, ray, not 'slurm'"):  # refused as given
         run_regression("rule", backend="slurm", episodes=1, progress=False, out_dir=tmp_path)
 
 

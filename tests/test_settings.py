@@ -73,18 +73,29 @@ def test_settings_are_frozen_and_resolve_their_derived_defaults():
     config = TrainConfig.fine_tuning("out", steps=10, weights={"a": 1.0})
     assert (config.sampler, config.eval_freq, config.card_seeds, config.baselines, config.env_config) == \
         ("weighted", 0, 0, [], None)
+    for frozen in (LoopSettings(), RegressSettings(), DaggerConfig(), config):
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            setattr(frozen, dataclasses.fields(frozen)[0].name, None)
 
 
 @pytest.mark.parametrize("make, error, match", [
-    (lambda: MineSettings(budget=0), MiningError, "--budget must be at least 1"),
+    (lambda: MineSettings(budget=0), MiningError, "--budget must be an integer >= 1"),
     (lambda: MineSettings(feedback="curious"), MiningError, "unknown feedback 'curious'"),
     (lambda: MineSettings(convert=True), MiningError, "pass --bank DIR"),
+    (lambda: MineSettings(ttc_threshold=float("nan")), MiningError, "--ttc-threshold must be a positive number"),
+    (lambda: MineSettings(stall_seconds=-5.0), MiningError, "--stall-seconds must be a positive number"),
+    (lambda: MineSettings(stall_seconds="5"), MiningError, "--stall-seconds must be a positive number"),
     (lambda: LoopSettings(k_eval=0), LoopError, "--k-eval must be an integer >= 1"),
-    (lambda: LoopSettings(mined_share=1.0), LoopError, "--mined-share must be strictly between 0 and 1"),
+    (lambda: LoopSettings(mined_share=1.0), LoopError, r"--mined-share must be a number in \(0, 1\)"),
     (lambda: LoopSettings(max_replays=-1), LoopError, "--max-replays must be an integer >= 0"),
-    (lambda: RegressSettings(margin=1.5), RegressError, "--margin is a failure-rate difference"),
-    (lambda: RegressSettings(stall_seconds=0), RegressError, "--stall-seconds must be positive"),
-    (lambda: DaggerConfig(beta=2.0), TrainingError, r"beta and beta_decay must be in \[0, 1\]"),
+    (lambda: LoopSettings(margin=2.0), LoopError, r"--margin must be a number in \[0, 1\), a failure-rate difference"),
+    (lambda: LoopSettings(margin=float("nan")), LoopError, "--margin must be a number in"),
+    (lambda: LoopSettings(n_envs=0), LoopError, "--envs must be an integer >= 1"),
+    (lambda: LoopSettings(workers=-3), LoopError, "--workers must be an integer >= 0"),
+    (lambda: LoopSettings(seed="7"), LoopError, "--seed must be an integer"),
+    (lambda: RegressSettings(margin=1.5), RegressError, r"--margin must be a number in \[0, 1\)"),
+    (lambda: RegressSettings(stall_seconds=0), RegressError, "--stall-seconds must be a positive number"),
+    (lambda: DaggerConfig(beta=2.0), TrainingError, r"DAgger beta must be a number in \[0, 1\], not 2.0"),
     (lambda: DaggerConfig(batch_size=0), TrainingError, "batch_size must be an integer >= 1"),
 ])
 def test_bad_settings_are_refused_naming_the_setting(make, error, match):

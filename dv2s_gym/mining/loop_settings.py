@@ -6,6 +6,8 @@ import dataclasses
 from typing import Any, Dict, Mapping, Optional, Tuple
 
 from envs.errors import DV2SError
+from scenario_bank.field_checks import (check_bool, check_choice, check_int, check_mapping, check_names,
+                                        check_number, check_path)
 
 __all__ = ["LoopError", "LoopSettings", "DEFAULTS", "FINE_TUNE_METHODS", "METHOD_LEARNING_RATES", "PROFILES",
            "DEFAULT_PROFILE", "EVIDENCE"]
@@ -89,41 +91,45 @@ class LoopSettings:
     def __post_init__(self) -> None:
         self._check_counts()
         self._check_shares()
-        if self.scenarios is not None:
-            object.__setattr__(self, "scenarios", tuple(str(name) for name in self.scenarios))
+        object.__setattr__(self, "scenarios", check_names(LoopError, "--scenarios", self.scenarios))
+        check_path(LoopError, "--bank", self.bank_dir, optional=True)
         if self.fine_tune_reward is None:
             object.__setattr__(self, "fine_tune_reward", dict(DEFAULTS["fine_tune_reward"]))
+        check_mapping(LoopError, "--fine-tune-reward", self.fine_tune_reward,
+                      what="a JSON object of reward-term weights")
+        for term, weight in self.fine_tune_reward.items():
+            check_number(LoopError, f"--fine-tune-reward {term!r}", weight)
+        check_bool(LoopError, "control (--no-control)", self.control)
         from dv2s_gym.mining.samplers import SAMPLERS
 
-        if self.sampler not in SAMPLERS:  # else round 1 starts (the working bank copied) before the miner refuses it
-            raise LoopError(f"--sampler must be one of {', '.join(SAMPLERS)}, not {self.sampler!r}")
-        if self.fine_tune_method not in FINE_TUNE_METHODS:
-            raise LoopError(f"--fine-tune-method must be one of {', '.join(FINE_TUNE_METHODS)}, "
-                            f"not {self.fine_tune_method!r}")
+        # else round 1 starts (the working bank copied) before the miner refuses it
+        check_choice(LoopError, "--sampler", self.sampler, SAMPLERS)
+        check_choice(LoopError, "--fine-tune-method", self.fine_tune_method, FINE_TUNE_METHODS)
         if self.fine_tune_lr is None:
             object.__setattr__(self, "fine_tune_lr", METHOD_LEARNING_RATES[self.fine_tune_method])
-        if not float(self.fine_tune_lr) > 0:
-            raise LoopError(f"--fine-tune-lr must be a positive number, not {self.fine_tune_lr}")
+        check_number(LoopError, "--fine-tune-lr", self.fine_tune_lr, low=0, interval="(]")
 
     def _check_counts(self) -> None:
         for name, low in (("rounds", 1), ("budget", 1), ("fine_tune_steps", 1), ("k_eval", 1),
                           ("regress_episodes", 1), ("min_heldout_episodes", 0), ("min_heldout_families", 0),
                           ("untouched_seeds", 0)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise LoopError(f"--{name.replace('_', '-')} must be an integer >= {low}, not {value!r}")
-        for name, what in (("max_conversions", "no conversions, only exact replays"),
-                           ("max_replays", "no replays beyond the converted clusters")):
-            value = getattr(self, name)
-            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 0):
-                raise LoopError(f"--{name.replace('_', '-')} must be an integer >= 0 (0: {what}; 'all' on the "
-                                f"command line: every cluster), not {value!r}")
+            check_int(LoopError, f"--{name.replace('_', '-')}", getattr(self, name), low=low)
+        # >= 0: each round seeds its miner and fine-tuning with seed * 1000 + round, which must not be negative
+        check_int(LoopError, "--seed", self.seed, low=0)
+        check_int(LoopError, "--envs", self.n_envs, low=1)
+        check_int(LoopError, "--workers", self.workers, low=0, optional=True, none_means="every core")  # 0: every core
+        check_int(LoopError, "--max-conversions", self.max_conversions, low=0, optional=True,
+                  none_means="every cluster; 0: no conversions, only exact replays")
+        check_int(LoopError, "--max-replays", self.max_replays, low=0, optional=True,
+                  none_means="every cluster; 0: no replays beyond the converted clusters")
 
     def _check_shares(self) -> None:
-        if not 0.0 <= float(self.holdout_fraction) <= 1.0:
-            raise LoopError(f"--holdout-fraction must be in [0, 1], not {self.holdout_fraction}")
-        if not 0.0 < float(self.mined_share) < 1.0:
-            raise LoopError(f"--mined-share must be strictly between 0 and 1, not {self.mined_share}")
+        # the same range as the regression test's (RegressSettings), checked here because the loop reaches its
+        # regression step only after a round's mining and fine-tuning, and ``margin`` is part of its identity
+        check_number(LoopError, "--margin", self.margin, low=0, high=1, interval="[)",
+                     example="a failure-rate difference, e.g. 0.05 for 5 points")
+        check_number(LoopError, "--holdout-fraction", self.holdout_fraction, low=0, high=1)
+        check_number(LoopError, "--mined-share", self.mined_share, low=0, high=1, interval="()")
 
     def replace(self, **changes: Any) -> "LoopSettings":
         """A copy with ``changes`` (checked again)."""

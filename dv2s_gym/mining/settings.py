@@ -8,6 +8,8 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
 from dv2s_gym.mining.samplers import SAMPLERS, default_feedback
+from scenario_bank.field_checks import (check_bool, check_int, check_mapping, check_names,
+                                        check_number, check_path, check_text)
 
 __all__ = ["FEEDBACKS", "MineSettings"]
 
@@ -67,26 +69,35 @@ class MineSettings:
     """At most this many clusters are converted, largest first (``None``: all)."""
 
     def __post_init__(self) -> None:
-        if isinstance(self.budget, bool) or not isinstance(self.budget, int) or self.budget < 1:
-            raise MiningError(f"--budget must be at least 1 episode, not {self.budget}")
+        check_int(MiningError, "--budget", self.budget, low=1)
         if self.sampler not in SAMPLERS:
             raise MiningError(f"unknown sampler {self.sampler!r}: use one of {', '.join(SAMPLERS)}")
+        check_mapping(MiningError, "--sampler-options", self.sampler_options, optional=True,
+                      what="a JSON object of sampler parameters")
+        if self.feedback is not None and not isinstance(self.feedback, str):
+            raise MiningError(f"--feedback must be one of {', '.join(FEEDBACKS)} or left out, not {self.feedback!r}")
         object.__setattr__(self, "feedback", self.feedback or default_feedback(self.sampler))
         if self.feedback not in FEEDBACKS:
             raise MiningError(f"unknown feedback {self.feedback!r}: use one of {', '.join(FEEDBACKS)}")
-        if self.scenarios is not None:
-            object.__setattr__(self, "scenarios", tuple(str(name) for name in self.scenarios))
+        object.__setattr__(self, "scenarios", check_names(MiningError, "--scenarios", self.scenarios))
+        check_path(MiningError, "--bank", self.bank_dir, optional=True)
+        check_int(MiningError, "--seed", self.seed, low=0)
+        check_text(MiningError, "--reference", self.reference, optional=True,
+                   what="a driver's policy spec (e.g. rule)")
+        check_mapping(MiningError, "--config", self.env_config, optional=True,
+                      what="a JSON object of DV2S-v0 config overrides")
         object.__setattr__(self, "env_config", dict(self.env_config or {}))
-        if self.batch == 0:  # as the command line has always read it: the default
+        if self.batch == 0 and not isinstance(self.batch, bool):  # as the command line has always read it: the default
             object.__setattr__(self, "batch", None)
-        if self.batch is not None and (isinstance(self.batch, bool) or not isinstance(self.batch, int)
-                                       or self.batch < 1):
-            raise MiningError(f"--batch must be at least 1, not {self.batch}")
-        if self.max_conversions is not None and (isinstance(self.max_conversions, bool)
-                                                 or not isinstance(self.max_conversions, int)
-                                                 or self.max_conversions < 0):
-            raise MiningError(f"--max-conversions must be a whole number >= 0 or left out for all, "
-                              f"not {self.max_conversions!r}")
+        check_int(MiningError, "--batch", self.batch, low=1, optional=True, none_means="4 per worker")
+        check_bool(MiningError, "convert (--no-convert)", self.convert)
+        check_mapping(MiningError, "convert_options", self.convert_options, optional=True,
+                      what="keyword arguments of convert_failure")
+        check_int(MiningError, "--max-conversions", self.max_conversions, low=0, optional=True,
+                  none_means="all")
+        # a NaN threshold would silently detect no failure, a negative one a stall at every standstill
+        check_number(MiningError, "--ttc-threshold", self.ttc_threshold, low=0, interval="(]", example="seconds")
+        check_number(MiningError, "--stall-seconds", self.stall_seconds, low=0, interval="(]", example="seconds")
         if self.convert and not self.bank_dir:
             raise MiningError("converting failures adds scenarios to a bank, and the shipped bank is read-only: "
                               "pass --bank DIR (a new folder starts as a copy of the shipped bank), or --no-convert")

@@ -10,6 +10,7 @@ from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.failures import DEFAULT_STALL_SECONDS, parse_failure
+from scenario_bank.field_checks import check_bool, check_int, check_mapping, check_names, check_number, check_path
 
 __all__ = ["RegressSettings", "BaselineReport", "ROLES"]
 
@@ -54,25 +55,25 @@ class RegressSettings:
     """How long the ego must stand with a free road ahead for a stall."""
 
     def __post_init__(self) -> None:
-        if self.episodes is not None and (isinstance(self.episodes, bool) or not isinstance(self.episodes, int)
-                                          or self.episodes < 1):
-            raise RegressError(f"--episodes must be a positive integer, not {self.episodes!r}")
-        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
-            raise RegressError(f"--seed must be a non-negative integer, not {self.seed!r}")
-        if not 0.0 <= float(self.margin) < 1.0:
-            raise RegressError(f"--margin is a failure-rate difference in [0, 1), e.g. 0.05 for 5 points; "
-                               f"not {self.margin}")
-        if not 0.0 < float(self.alpha) < 1.0:
-            raise RegressError(f"--alpha must be strictly between 0 and 1, e.g. 0.05; not {self.alpha}")
-        if self.batch is not None and (not isinstance(self.batch, int) or self.batch < 1):
-            raise RegressError(f"the sequential batch must be a positive number of seeds, not {self.batch!r}")
+        object.__setattr__(self, "scenarios", check_names(RegressError, "--scenarios", self.scenarios))
+        check_path(RegressError, "--bank", self.bank_dir, optional=True)
+        check_int(RegressError, "--episodes", self.episodes, low=1, optional=True, none_means="planned from --mde")
+        check_int(RegressError, "--seed", self.seed, low=0)
+        check_number(RegressError, "--margin", self.margin, low=0, high=1, interval="[)",
+                     example="a failure-rate difference, e.g. 0.05 for 5 points")
+        check_number(RegressError, "--alpha", self.alpha, low=0, high=1, interval="()",
+                     example="e.g. 0.05")
+        check_number(RegressError, "--mde", self.mde, low=0, high=1, interval="()", optional=True)
+        check_number(RegressError, "--power", self.power, low=0, high=1, interval="()",
+                     optional=True)
+        check_bool(RegressError, "--sequential", self.sequential)
+        check_int(RegressError, "--batch", self.batch, low=1, optional=True, none_means="a fifth of the episodes")
+        check_mapping(RegressError, "--config", self.env_config, optional=True,
+                      what="a JSON object of DV2S-v0 config overrides")
+        if self.failure is not None and not isinstance(self.failure, str):
+            check_names(RegressError, "--failure", self.failure, optional=False)
         object.__setattr__(self, "failure", tuple(parse_failure(self.failure)))
-        if not float(self.stall_seconds) > 0:
-            raise RegressError(f"--stall-seconds must be positive, not {self.stall_seconds}")
-        if isinstance(self.scenarios, str):
-            object.__setattr__(self, "scenarios", (self.scenarios,))
-        elif self.scenarios is not None:
-            object.__setattr__(self, "scenarios", tuple(self.scenarios))
+        check_number(RegressError, "--stall-seconds", self.stall_seconds, low=0, interval="(]")
 
     def replace(self, **changes: Any) -> "RegressSettings":
         """A copy with ``changes`` (checked again)."""

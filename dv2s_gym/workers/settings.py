@@ -5,6 +5,9 @@ from __future__ import annotations
 import dataclasses
 from typing import Optional
 
+from dv2s_gym.workers.errors import WorkerError
+from scenario_bank.field_checks import check_choice, check_int, check_number, check_text
+
 __all__ = ["BACKENDS", "WorkerSettings"]
 
 BACKENDS = ("local", "ray")
@@ -15,14 +18,22 @@ BACKENDS = ("local", "ray")
 class WorkerSettings:
     """Where episodes run; none of it changes what a run records (a resumed run may use other workers).
 
-    The pool that starts from them checks them (:func:`dv2s_gym.workers.pool.get_backend`), so a command reports
-    a bad backend as its own error."""
+    Checked on construction (:class:`~dv2s_gym.workers.errors.WorkerError` naming the flag); ``workers=0`` is read
+    as ``None`` (every core), as the loop and the miner always read it."""
 
     backend: str = "local"
     """``"local"`` (a process pool on this machine) or ``"ray"`` (a Ray cluster at ``address``)."""
     workers: Optional[int] = None
-    """Worker processes (``None``: every core)."""
+    """Worker processes (``None`` or 0: every core)."""
     address: Optional[str] = None
     """With ``backend="ray"``: the cluster's address (``None``: start or join a local one)."""
     timeout: Optional[float] = None
     """Seconds one episode may take before its worker counts as hung and is replaced (``None``: the pool's)."""
+
+    def __post_init__(self) -> None:
+        check_choice(WorkerError, "--backend", self.backend, BACKENDS)
+        if self.workers == 0 and not isinstance(self.workers, bool):
+            object.__setattr__(self, "workers", None)
+        check_int(WorkerError, "--workers", self.workers, low=1, optional=True, none_means="every core")
+        check_text(WorkerError, "--address", self.address, optional=True, what="a Ray cluster address")
+        check_number(WorkerError, "--timeout", self.timeout, low=0, interval="(]", optional=True)
