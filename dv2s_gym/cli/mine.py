@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from dv2s_gym.cli.backend_options import dra_option, sg_option
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import json_option, llm_config
 from dv2s_gym.cli.parser import bank_option, llm_options
@@ -84,8 +85,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--no-convert", action="store_true", help="only find and cluster failures; add nothing to a bank")
     p.add_argument("--max-conversions", type=int, default=None,
                    help="convert at most this many clusters, those with most avoidable failures first (default: all)")
-    p.add_argument("--dra", choices=["bev", "openai"], default="bev", help="DRA backend for failure videos")
-    p.add_argument("--sg", choices=["rules", "openai"], default="rules", help="SG backend")
+    dra_option(p, help="DRA backend for failure videos")
+    sg_option(p, help="SG backend")
     llm_options(p)
     p.add_argument("-k", type=int, default=10, dest="k",
                    help="scenes the new scenario is run on to check it reproduces the failure (default 10)")
