@@ -1,44 +1,19 @@
-"""``--dra`` and ``--sg``: one definition of the pipeline backend options every command uses.
+"""``--dra``, ``--sg`` and ``--backend``: one definition of the backend options every command uses.
 
-Their choices are the pipeline's registries (:func:`~dv2s_gym.pipeline.stages.register_dra`,
-:func:`~dv2s_gym.pipeline.stages.register_sg`), read when the command line is parsed, so a backend a
-plugin registers before :func:`dv2s_gym.cli.main` runs is accepted by every command.
+Their choices are registries (:func:`~dv2s_gym.pipeline.stages.register_dra`,
+:func:`~dv2s_gym.pipeline.stages.register_sg`, :func:`~dv2s_gym.workers.backends.register_backend`), read when
+the command line is parsed, so a backend a plugin registers before :func:`dv2s_gym.cli.main` runs is accepted
+by every command.
 """
 
 from __future__ import annotations
 
 import argparse
-from typing import Callable, Iterator, List, Optional, Sequence
+from typing import Optional
 
-__all__ = ["RegisteredNames", "dra_option", "sg_option"]
+from dv2s_gym.registered_names import RegisteredNames
 
-
-class RegisteredNames:
-    """The names a registry holds when asked (argparse's ``choices``): checked and listed at parse time,
-    not when the parser was built."""
-
-    def __init__(self, names: Callable[[], Sequence[str]], shipped: Sequence[str]):
-        self._names = names
-        self._shipped = tuple(shipped)
-
-    def _current(self) -> List[str]:
-        # the shipped backends first, in their documented order, then the registered ones
-        registered = list(self._names())
-        return [name for name in self._shipped if name in registered] + \
-            [name for name in registered if name not in self._shipped]
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._current())
-
-    def __contains__(self, name: object) -> bool:
-        return name in self._names()
-
-    def __len__(self) -> int:
-        return len(self._current())
-
-    def extras(self) -> List[str]:
-        """The registered names that do not ship with dv2s-gym."""
-        return [name for name in self._current() if name not in self._shipped]
+__all__ = ["dra_option", "sg_option", "worker_backend_option"]
 
 
 def _help(base: Optional[str], choices: RegisteredNames) -> Optional[str]:
@@ -63,3 +38,12 @@ def sg_option(p: argparse.ArgumentParser, help: Optional[str] = None) -> None:
 
     choices = RegisteredNames(registered_sgs, SG_BACKENDS)
     p.add_argument("--sg", choices=choices, default="rules", help=_help(help, choices))
+
+
+def worker_backend_option(p: argparse.ArgumentParser, help: Optional[str] = None) -> None:
+    """``--backend`` (default ``local``): where episodes run, a worker backend by its registered name."""
+    from dv2s_gym.workers.backends import backend_choices
+    from dv2s_gym.workers.settings import WorkerSettings
+
+    choices = backend_choices()
+    p.add_argument("--backend", choices=choices, default=WorkerSettings.backend, help=_help(help, choices))
