@@ -8,8 +8,9 @@ from dv2s_gym.cli.backend_options import dra_option, sg_option, worker_backend_o
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import json_option, llm_config
 from dv2s_gym.cli.parser import bank_option, llm_options
-from dv2s_gym.mining.samplers import SAMPLERS
+from dv2s_gym.mining.samplers import SAMPLERS, registered_samplers
 from dv2s_gym.mining.settings import FEEDBACKS, MineSettings
+from dv2s_gym.registered_names import RegisteredNames
 from dv2s_gym.workers.settings import WorkerSettings
 from dv2s_gym.cli.interrupts import episodes_kept_note
 from envs.errors import Interrupted
@@ -48,7 +49,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank)")
     p.add_argument("--budget", type=int, default=MINE.budget, help=f"episodes to run (default {MINE.budget})")
     p.add_argument("--sampler", default=MINE.sampler,
-                   choices=list(SAMPLERS),
+                   choices=RegisteredNames(registered_samplers, SAMPLERS),
                    help=f"scene sampler (default {MINE.sampler}); split: VerifAI's cross-entropy over which scenario "
                    "and a Halton sequence per scenario over its parameters; novelty-bandit: the scenarios that keep "
                    "giving failures unlike earlier ones, mixed with uniform, parameters uniform (explore, prior_new, "

@@ -93,10 +93,10 @@ class LoopSettings:
             object.__setattr__(self, "scenarios", tuple(str(name) for name in self.scenarios))
         if self.fine_tune_reward is None:
             object.__setattr__(self, "fine_tune_reward", dict(DEFAULTS["fine_tune_reward"]))
-        from dv2s_gym.mining.samplers import SAMPLERS
+        from dv2s_gym.mining.samplers import registered_samplers
 
-        if self.sampler not in SAMPLERS:  # else round 1 starts (the working bank copied) before the miner refuses it
-            raise LoopError(f"--sampler must be one of {', '.join(SAMPLERS)}, not {self.sampler!r}")
+        if self.sampler not in registered_samplers():  # else round 1 starts (bank copied) before the miner refuses
+            raise LoopError(f"--sampler must be one of {', '.join(registered_samplers())}, not {self.sampler!r}")
         if self.fine_tune_method not in FINE_TUNE_METHODS:
             raise LoopError(f"--fine-tune-method must be one of {', '.join(FINE_TUNE_METHODS)}, "
                             f"not {self.fine_tune_method!r}")

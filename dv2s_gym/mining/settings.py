@@ -7,7 +7,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
-from dv2s_gym.mining.samplers import SAMPLERS, default_feedback
+from dv2s_gym.mining.samplers import default_feedback, registered_samplers
 
 __all__ = ["FEEDBACKS", "MineSettings"]
 
@@ -69,8 +69,8 @@ class MineSettings:
     def __post_init__(self) -> None:
         if isinstance(self.budget, bool) or not isinstance(self.budget, int) or self.budget < 1:
             raise MiningError(f"--budget must be at least 1 episode, not {self.budget}")
-        if self.sampler not in SAMPLERS:
-            raise MiningError(f"unknown sampler {self.sampler!r}: use one of {', '.join(SAMPLERS)}")
+        if self.sampler not in registered_samplers():
+            raise MiningError(f"unknown sampler {self.sampler!r}: use one of {', '.join(registered_samplers())}")
         object.__setattr__(self, "feedback", self.feedback or default_feedback(self.sampler))
         if self.feedback not in FEEDBACKS:
             raise MiningError(f"unknown feedback {self.feedback!r}: use one of {', '.join(FEEDBACKS)}")
