@@ -185,10 +185,10 @@ class _ChunkOnly(LocalBackend):
 @pytest.mark.slow
 def test_a_backend_that_does_not_stream_runs_the_window_call_by_call_to_the_same_records(streamed, tmp_path,
                                                                                            monkeypatch):
-    from dv2s_gym.workers import pool
+    from dv2s_gym.workers import backends
 
     out, whole = streamed
-    monkeypatch.setattr(pool, "get_backend", lambda name, workers=None, address=None, timeout=None:
+    monkeypatch.setattr(backends, "get_backend", lambda name, workers=None, address=None, timeout=None:
                         _ChunkOnly(workers, timeout=timeout))
     run = mine(POLICY, out=tmp_path / "chunked", workers=2, **RUN)
     assert _stable(run.records) == _stable(whole.records)

@@ -21,7 +21,8 @@ from dv2s_gym.regress.report import SCHEMA, SCHEMA_VERSION
 from dv2s_gym.regress.replay import replay_episode
 from dv2s_gym.regress.tasks import KIND
 from dv2s_gym.workers.errors import WorkerError
-from dv2s_gym.workers.pool import LocalBackend, get_backend
+from dv2s_gym.workers.backends import get_backend
+from dv2s_gym.workers.pool import LocalBackend
 from regress_junit_schema import junit_problems
 
 NOISY = "rule?action_noise=0.5"

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from dv2s_gym.cli.backend_options import sg_option
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import llm_config
 from dv2s_gym.cli.output import emit
@@ -32,7 +33,7 @@ def add_parser(subparsers) -> None:
                               "check it (safety, compile, sample, run) and render a preview.")
     p.add_argument("description", nargs="?")
     p.add_argument("--from", dest="from_file", help="read the description from this file (e.g. an edited description.txt)")
-    p.add_argument("--sg", choices=["rules", "openai"], default="rules")
+    sg_option(p)
     p.add_argument("--out", default="out/generated", help="output folder")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--seconds", type=float, default=10.0, help="simulated seconds of the check run")
@@ -45,7 +46,7 @@ def add_parser(subparsers) -> None:
                               "generated and validated Scenic scenario; optionally add it to the bank.")
     p.add_argument("video", help="a video file or a folder of videos")
     video_options(p)
-    p.add_argument("--sg", choices=["rules", "openai"], default="rules")
+    sg_option(p)
     p.add_argument("--out", default="out/convert", help="output folder (one subfolder per video in batch mode)")
     p.add_argument("--add-to-bank", action="store_true", help="add validated scenarios to the bank with provenance")
     bank_option(p)

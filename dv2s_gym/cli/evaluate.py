@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from dv2s_gym.cli.backend_options import dra_option, sg_option
 from dv2s_gym.cli.inputs import llm_config
 from dv2s_gym.cli.output import emit
 from dv2s_gym.cli.parser import llm_options
@@ -18,8 +19,8 @@ def add_parser(subparsers) -> None:
                               "files; prints mean ± sd per use case and overall.")
     p.add_argument("stage", choices=["dra", "sg", "e2e"])
     p.add_argument("folder", nargs="?", default=None, help="labeled folder (default: the shipped evaluation set)")
-    p.add_argument("--dra", choices=["bev", "openai"], default="bev")
-    p.add_argument("--sg", choices=["rules", "openai"], default="rules")
+    dra_option(p)
+    sg_option(p)
     p.add_argument("--jobs", type=int, default=1)
     p.add_argument("--seconds", type=float, default=10.0)
     p.add_argument("--json", action="store_true")

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import argparse
 
+from dv2s_gym.cli.backend_options import dra_option, sg_option, worker_backend_option
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import json_option, llm_config
 from dv2s_gym.cli.parser import bank_option, llm_options
+from dv2s_gym.mining.samplers import SAMPLERS, registered_samplers
 from dv2s_gym.mining.settings import FEEDBACKS, MineSettings
-from dv2s_gym.workers.settings import BACKENDS, WorkerSettings
+from dv2s_gym.registered_names import RegisteredNames
+from dv2s_gym.workers.settings import WorkerSettings
 from dv2s_gym.cli.interrupts import episodes_kept_note
 from envs.errors import Interrupted
 
@@ -46,7 +49,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--scenarios", nargs="+", help="bank names and/or tag:<tag> (default: the whole bank)")
     p.add_argument("--budget", type=int, default=MINE.budget, help=f"episodes to run (default {MINE.budget})")
     p.add_argument("--sampler", default=MINE.sampler,
-                   choices=["random", "halton", "cross-entropy", "bandit", "split", "novelty-bandit"],
+                   choices=RegisteredNames(registered_samplers, SAMPLERS),
                    help=f"scene sampler (default {MINE.sampler}); split: VerifAI's cross-entropy over which scenario "
                    "and a Halton sequence per scenario over its parameters; novelty-bandit: the scenarios that keep "
                    "giving failures unlike earlier ones, mixed with uniform, parameters uniform (explore, prior_new, "
@@ -71,8 +74,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--stall-seconds", type=float, default=MINE.stall_seconds,
                    help="seconds standing with nothing in the lane 40 m ahead that count as a stall "
                    f"(default {MINE.stall_seconds:g})")
-    p.add_argument("--backend", choices=list(BACKENDS), default=WorkerSettings.backend,
-                   help="local process pool or Ray")
+    worker_backend_option(p, help="local process pool or Ray")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
     p.add_argument("--address", default=None, help="with --backend ray: the cluster address")
     p.add_argument("--timeout", type=float, default=None,
@@ -84,8 +86,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--no-convert", action="store_true", help="only find and cluster failures; add nothing to a bank")
     p.add_argument("--max-conversions", type=int, default=None,
                    help="convert at most this many clusters, those with most avoidable failures first (default: all)")
-    p.add_argument("--dra", choices=["bev", "openai"], default="bev", help="DRA backend for failure videos")
-    p.add_argument("--sg", choices=["rules", "openai"], default="rules", help="SG backend")
+    dra_option(p, help="DRA backend for failure videos")
+    sg_option(p, help="SG backend")
     llm_options(p)
     p.add_argument("-k", type=int, default=10, dest="k",
                    help="scenes the new scenario is run on to check it reproduces the failure (default 10)")

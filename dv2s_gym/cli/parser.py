@@ -31,6 +31,17 @@ class Parser(argparse.ArgumentParser):
             self.error(self._unrecognized(extras))
         return namespace, extras
 
+    def _check_value(self, action: argparse.Action, value) -> None:  # argparse's hook for ``choices``
+        try:
+            super()._check_value(action, value)
+        except argparse.ArgumentError as error:
+            import difflib
+
+            close = difflib.get_close_matches(str(value), [str(choice) for choice in action.choices], n=1)
+            if not close:
+                raise
+            raise argparse.ArgumentError(action, f"{error.message}; did you mean {close[0]!r}?") from None
+
     def _unrecognized(self, extras: List[str]) -> str:
         import difflib
 
@@ -64,7 +75,8 @@ def llm_options(p: argparse.ArgumentParser) -> None:
 
 def video_options(p: argparse.ArgumentParser) -> None:
     """How a video is described: the Driving Record Analyzer, the camera, a question."""
-    p.add_argument("--dra", choices=["bev", "openai"], default="bev",
-                   help="Driving Record Analyzer: bev (offline, bird's-eye renders) or openai (any VLM endpoint)")
+    from dv2s_gym.cli.backend_options import dra_option
+
+    dra_option(p, help="Driving Record Analyzer: bev (offline, bird's-eye renders) or openai (any VLM endpoint)")
     p.add_argument("--camera", choices=["bev", "front", "rear", "chase"], default="bev", help="camera viewpoint")
     p.add_argument("--question", help='video-specific question, e.g. "Why did the ego vehicle brake?"')

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from dv2s_gym.cli.backend_options import worker_backend_option
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.parser import bank_option
 from dv2s_gym.cli.interrupts import episodes_kept_note
@@ -66,7 +67,7 @@ def add_parser(subparsers) -> None:
                    "all three; stall: the ego stands with a free road ahead); each kind is also reported apart")
     p.add_argument("--stall-seconds", type=float, default=None,
                    help="seconds the ego must stand with a free road ahead for a stall (default 5)")
-    p.add_argument("--backend", choices=["local", "ray"], default="local", help="local process pool or Ray")
+    worker_backend_option(p, help="local process pool or Ray")
     p.add_argument("--workers", type=int, default=None, help="worker processes (default: every core)")
     p.add_argument("--address", default=None, help="with --backend ray: the cluster address")
     p.add_argument("--timeout", type=float, default=None,

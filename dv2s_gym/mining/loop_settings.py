@@ -100,10 +100,10 @@ class LoopSettings:
         for term, weight in self.fine_tune_reward.items():
             check_number(LoopError, f"--fine-tune-reward {term!r}", weight)
         check_bool(LoopError, "control (--no-control)", self.control)
-        from dv2s_gym.mining.samplers import SAMPLERS
+        from dv2s_gym.mining.samplers import registered_samplers
 
         # else round 1 starts (the working bank copied) before the miner refuses it
-        check_choice(LoopError, "--sampler", self.sampler, SAMPLERS)
+        check_choice(LoopError, "--sampler", self.sampler, registered_samplers())
         check_choice(LoopError, "--fine-tune-method", self.fine_tune_method, FINE_TUNE_METHODS)
         if self.fine_tune_lr is None:
             object.__setattr__(self, "fine_tune_lr", METHOD_LEARNING_RATES[self.fine_tune_method])

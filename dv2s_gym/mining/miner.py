@@ -591,7 +591,7 @@ def _run_episodes(out: Path, settings: Dict[str, Any], space, done: Dict[int, Ep
                   workers: WorkerSettings, n_workers: int, progress: bool) -> None:
     """Run the episodes of the run's budget not in ``done`` (recorded into it), on its schedule."""
     from dv2s_gym.workers.errors import WorkerError
-    from dv2s_gym.workers.pool import get_backend
+    from dv2s_gym.workers.backends import get_backend
 
     budget, batch = settings["budget"], settings["batch"]
     window, scene_sampler = None, None

@@ -30,16 +30,15 @@ from __future__ import annotations
 import math
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence
 
+from dv2s_gym.mining.samplers import is_uniform
 from dv2s_gym.regress.stats import wilson_interval
 
-__all__ = ["failure_rate", "weighted_rate", "rate_estimates", "UNIFORM_SAMPLERS", "COLLAPSE_FLOOR"]
+__all__ = ["failure_rate", "weighted_rate", "rate_estimates", "COLLAPSE_FLOOR"]
 
 COLLAPSE_FLOOR = 0.01
 """A draw whose proposal gave some scenario or parameter bucket under this share of its uniform share marks the
 estimate ``collapsed``."""
 
-UNIFORM_SAMPLERS = ("random", "halton")
-"""Samplers whose scenes are uniform over the scenarios and their unit boxes (weight 1 without a record of it)."""
 
 
 def weighted_rate(outcomes: Sequence[float], weights: Sequence[float], confidence: float = 0.95) -> Dict[str, Any]:
@@ -93,7 +92,7 @@ def _proposal(record: Mapping[str, Any], sampler: str) -> Optional[Mapping[str, 
     proposal = record.get("proposal")
     if isinstance(proposal, Mapping) and proposal.get("scenario") and proposal.get("params"):
         return proposal
-    if str(record.get("sampler") or sampler) in UNIFORM_SAMPLERS:
+    if is_uniform(str(record.get("sampler") or sampler)):  # weight 1 without a record of it
         return {"scenario": None, "params": 1.0, "floor": 1.0}
     return None
 

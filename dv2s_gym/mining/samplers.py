@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import io
 import random
+from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
@@ -59,18 +60,37 @@ import numpy as np
 from dv2s_gym.mining.errors import MiningError
 
 __all__ = ["proposal_density", "scene_proposal", "SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "NOVELTY",
-           "SceneSampler", "default_feedback", "make_sampler", "sampler_params", "is_adaptive"]
+           "SceneSampler", "SamplerRecord", "default_feedback", "make_sampler", "sampler_params", "is_adaptive",
+           "is_uniform", "register_sampler", "registered_samplers"]
 
 
-def _factories() -> Dict[str, Callable]:
-    from verifai.samplers.feature_sampler import FeatureSampler
+@dataclass(frozen=True)
+class SamplerRecord:
+    """One scene sampler: how it is built and what a mining run needs to know of it."""
 
-    return {
-        "random": FeatureSampler.randomSamplerFor,
-        "halton": FeatureSampler.haltonSamplerFor,
-        "cross-entropy": FeatureSampler.crossEntropySamplerFor,
-        "bandit": FeatureSampler.multiArmedBanditSamplerFor,
-    }
+    build: Callable[[Any, Any, Any], Any]
+    """``build(space, feature_space, params)``: the VerifAI-style sampler (``nextSample``, ``update``) over the
+    space; called with the sampler's seed set on Python's and NumPy's global generators."""
+    params: Callable[[Dict[str, Any]], Any] = lambda options: None
+    """``params(options)``: the checked settings ``build`` gets (the option names are checked before)."""
+    options: Tuple[str, ...] = ()
+    """The options it takes (``--sampler-options``)."""
+    default_feedback: str = "robustness"
+    """What it learns from when the run does not say (``mine(feedback=None)``)."""
+    adaptive: bool = False
+    """Its next draws depend on the outcomes fed back (the miner streams episodes through a window)."""
+    uniform: bool = False
+    """Its scenes are uniform over the scenarios and their unit boxes (importance weight 1 without a record)."""
+
+
+def _verifai(method: str, with_params: bool) -> Callable[[Any, Any, Any], Any]:
+    def build(space: Any, feature_space: Any, params: Any):
+        from verifai.samplers.feature_sampler import FeatureSampler
+
+        factory = getattr(FeatureSampler, method)
+        return factory(feature_space, params) if with_params else factory(feature_space)
+
+    return build
 
 
 SPLIT = "split"
@@ -81,33 +101,43 @@ NOVELTY = "novelty-bandit"
 """The sampler that spreads the budget over scenarios by their rate of new failures
 (:mod:`dv2s_gym.mining.novelty_sampler`)."""
 
-SAMPLERS = ("random", "halton", "cross-entropy", "bandit", SPLIT, NOVELTY)
-"""Names :func:`make_sampler` accepts."""
-
-SAMPLER_OPTIONS = {"cross-entropy": ("alpha", "buckets", "thres"), "bandit": ("alpha", "buckets", "thres"),
-                   SPLIT: ("alpha", "buckets", "thres", "chooser", "params", "warmup", "forget", "patience", "floor", "capacity", "avoid"),
-                   NOVELTY: ("explore", "prior_new", "prior_old")}
-"""The options each sampler takes (the others take none)."""
-
 SPLIT_DEFAULTS: Dict[str, Any] = {"chooser": "cross-entropy", "params": "halton", "alpha": 0.9, "thres": 0.0,
                                   "buckets": 3, "warmup": 0, "forget": 0.0, "patience": 0, "floor": 0.5, "capacity": 0.0, "avoid": 81}
 """The settings of :data:`SPLIT` when no option is given."""
 
-DEFAULT_FEEDBACK = {SPLIT: "novelty", NOVELTY: "state-novelty"}
-"""What a sampler learns from when the run does not say (``mine(feedback=None)``); ``robustness`` otherwise."""
-
-_VERIFAI_KIND = {"cross-entropy": "ce", "bandit": "mab"}
 
 
 def default_feedback(name: str) -> str:
     """The feedback (:data:`dv2s_gym.mining.miner.FEEDBACKS`) sampler ``name`` gets unless told otherwise."""
-    return DEFAULT_FEEDBACK.get(name, "robustness")
+    record = _REGISTRY.get(name)
+    return record.default_feedback if record else "robustness"
 
 
 def is_adaptive(name: str) -> bool:
     """True for samplers whose next draws depend on the outcomes fed back (``cross-entropy``, ``bandit``,
     ``split``, ``novelty-bandit``)."""
-    return name in _VERIFAI_KIND or name in (SPLIT, NOVELTY)
+    record = _REGISTRY.get(name)
+    return bool(record and record.adaptive)
+
+
+def is_uniform(name: str) -> bool:
+    """True for samplers whose scenes are uniform over the scenarios and their unit boxes (``random``, ``halton``)."""
+    record = _REGISTRY.get(name)
+    return bool(record and record.uniform)
+
+
+def register_sampler(name: str, record: SamplerRecord, overwrite: bool = False) -> None:
+    """Make ``make_sampler(name, ...)`` (and ``--sampler name``) build ``record``'s sampler."""
+    if not isinstance(name, str) or not name:
+        raise MiningError(f"sampler name {name!r} must be a non-empty string")
+    if name in _REGISTRY and not overwrite:
+        raise MiningError(f"a sampler named {name!r} is already registered; pass overwrite=True to replace it")
+    _REGISTRY[name] = record
+
+
+def registered_samplers() -> List[str]:
+    """The sampler names :func:`make_sampler` accepts, the shipped ones (:data:`SAMPLERS`) first."""
+    return list(_REGISTRY)
 
 
 def sampler_params(name: str, options: Optional[Dict[str, Any]] = None):
@@ -116,20 +146,24 @@ def sampler_params(name: str, options: Optional[Dict[str, Any]] = None):
     Raises :class:`MiningError` for an option the sampler does not take or a value out of range.
     """
     options = dict(options or {})
-    allowed = SAMPLER_OPTIONS.get(name, ())
+    record = _REGISTRY.get(name)
+    allowed = record.options if record else ()
     unknown = sorted(set(options) - set(allowed))
     if unknown:
         takes = f"it takes {', '.join(allowed)}" if allowed else "it takes none"
         raise MiningError(f"sampler {name!r} has no option {', '.join(map(repr, unknown))}; {takes}")
-    if name == SPLIT:
-        return _split_params(options)
-    if name == NOVELTY:
-        return _novelty_params(options)
-    if name not in _VERIFAI_KIND:
-        return None
+    return record.params(options) if record else None
+
+
+def _verifai_params(kind: str) -> Callable[[Dict[str, Any]], Any]:
+    """The parameters of VerifAI's adaptive sampler ``kind`` (``ce``, ``mab``) with the options applied."""
+    return lambda options: _apply_verifai_options(kind, options)
+
+
+def _apply_verifai_options(kind: str, options: Dict[str, Any]):
     from verifai.samplers.feature_sampler import default_sampler_params
 
-    params = default_sampler_params(_VERIFAI_KIND[name])
+    params = default_sampler_params(kind)
     _check_numbers(options)
     if "alpha" in options:
         params.alpha = float(options["alpha"])
@@ -388,23 +422,15 @@ def make_sampler(name: str, space: Any, seed: int, options: Optional[Dict[str, A
     (then ``split`` gives every scenario the full width of the unit box). ``options``: VerifAI
     parameters of the adaptive samplers (see the module docstring).
     """
-    factories = _factories()
-    if name not in factories and name not in (SPLIT, NOVELTY):
-        raise MiningError(f"unknown sampler {name!r}: use one of {', '.join(SAMPLERS)}")
+    if name not in _REGISTRY:
+        raise MiningError(f"unknown sampler {name!r}: use one of {', '.join(_REGISTRY)}")
     params = sampler_params(name, options)
     feature_space = getattr(space, "feature_space", space)
     saved_py, saved_np = random.getstate(), np.random.get_state()
     random.seed(seed)
     np.random.seed(seed % (2**32))
     try:  # some samplers draw while they are built
-        if name == SPLIT:
-            inner = _make_split(space, feature_space, params)
-        elif name == NOVELTY:
-            inner = _make_novelty(space, feature_space, params)
-        elif params is None:
-            inner = factories[name](feature_space)
-        else:
-            inner = factories[name](feature_space, params)
+        inner = _REGISTRY[name].build(space, feature_space, params)
     finally:
         random.setstate(saved_py)
         np.random.set_state(saved_np)
@@ -440,3 +466,24 @@ def _make_novelty(space: Any, feature_space: Any, params: Dict[str, float]):
     from dv2s_gym.mining.novelty_sampler import NoveltyBanditSampler
 
     return NoveltyBanditSampler(feature_space, _scenario_dimensions(space, feature_space), **params)
+
+
+_REGISTRY: Dict[str, SamplerRecord] = {
+    "random": SamplerRecord(_verifai("randomSamplerFor", False), uniform=True),
+    "halton": SamplerRecord(_verifai("haltonSamplerFor", False), uniform=True),
+    "cross-entropy": SamplerRecord(_verifai("crossEntropySamplerFor", True), _verifai_params("ce"),
+                                   ("alpha", "buckets", "thres"), adaptive=True),
+    "bandit": SamplerRecord(_verifai("multiArmedBanditSamplerFor", True), _verifai_params("mab"),
+                            ("alpha", "buckets", "thres"), adaptive=True),
+    SPLIT: SamplerRecord(_make_split, _split_params, ("alpha", "buckets", "thres", "chooser", "params", "warmup",
+                                                      "forget", "patience", "floor", "capacity", "avoid"),
+                         default_feedback="novelty", adaptive=True),
+    NOVELTY: SamplerRecord(_make_novelty, _novelty_params, ("explore", "prior_new", "prior_old"),
+                           default_feedback="state-novelty", adaptive=True),
+}
+
+SAMPLERS = tuple(_REGISTRY)
+"""The samplers that ship with dv2s-gym (:func:`registered_samplers`: with those registered since)."""
+
+SAMPLER_OPTIONS = {name: record.options for name, record in _REGISTRY.items() if record.options}
+"""The options each shipped sampler takes (the others take none)."""

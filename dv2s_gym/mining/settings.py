@@ -7,7 +7,7 @@ from typing import Any, Dict, Mapping, Optional, Tuple
 
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
-from dv2s_gym.mining.samplers import SAMPLERS, default_feedback
+from dv2s_gym.mining.samplers import default_feedback, registered_samplers
 from scenario_bank.field_checks import (check_bool, check_int, check_mapping, check_names,
                                         check_number, check_path, check_text)
 
@@ -70,8 +70,8 @@ class MineSettings:
 
     def __post_init__(self) -> None:
         check_int(MiningError, "--budget", self.budget, low=1)
-        if self.sampler not in SAMPLERS:
-            raise MiningError(f"unknown sampler {self.sampler!r}: use one of {', '.join(SAMPLERS)}")
+        if self.sampler not in registered_samplers():
+            raise MiningError(f"unknown sampler {self.sampler!r}: use one of {', '.join(registered_samplers())}")
         check_mapping(MiningError, "--sampler-options", self.sampler_options, optional=True,
                       what="a JSON object of sampler parameters")
         if self.feedback is not None and not isinstance(self.feedback, str):

@@ -27,7 +27,7 @@ The statistics and verdicts are those of ``dv2s regress``.
 
 Options: ``--dv2s-workers N`` (processes per regression; default every core),
 ``--dv2s-report-dir DIR`` (reports in ``DIR/<test>/``; default pytest's temporary folder),
-``--dv2s-backend local|ray`` and ``--dv2s-address`` (a Ray cluster).
+``--dv2s-backend local|ray`` (or a backend registered in :mod:`dv2s_gym.workers.backends`) and ``--dv2s-address`` (a Ray cluster).
 """
 
 from __future__ import annotations
@@ -41,6 +41,7 @@ from typing import Any, Callable, Dict, Optional
 import pytest
 
 from dv2s_gym.regress.assertions import RegressionFailed, RegressionReport
+from dv2s_gym.workers.backends import backend_choices
 
 __all__ = ["RegressionReport", "RegressionFailed", "MARKER"]
 
@@ -78,7 +79,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
                     help="worker processes per regression (default: every core)")
     group.addoption("--dv2s-report-dir", default=None, metavar="DIR",
                     help="write each test's regression report to DIR/<test>/ (default: pytest's temporary folder)")
-    group.addoption("--dv2s-backend", choices=["local", "ray"], default="local",
+    group.addoption("--dv2s-backend", choices=backend_choices(), default="local",
                     help="where regression episodes run (default: local processes)")
     group.addoption("--dv2s-address", default=None, metavar="HOST:PORT",
                     help="with --dv2s-backend ray: the Ray cluster's address")

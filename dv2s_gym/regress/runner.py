@@ -42,7 +42,7 @@ from dv2s_gym.regress.store import RunStore
 from dv2s_gym.regress.settings import ROLES, BaselineReport, RegressSettings
 from dv2s_gym.regress.tasks import KIND
 from dv2s_gym.workers.errors import WorkerError
-from dv2s_gym.workers.pool import get_backend
+from dv2s_gym.workers.backends import get_backend
 from dv2s_gym.workers.settings import WorkerSettings
 from dv2s_gym.workers.tasks import task_id
 

@@ -5,7 +5,9 @@
   import neither of them.
 - :mod:`dv2s_gym.workers.pool`: the :class:`~dv2s_gym.workers.pool.Backend` interface, the local
   process pool (:class:`~dv2s_gym.workers.pool.LocalBackend`: per-episode timeout, crashed or hung
-  workers replaced, tasks retried) and :func:`~dv2s_gym.workers.pool.get_backend`.
+  workers replaced, tasks retried).
+- :mod:`dv2s_gym.workers.backends`: the backends by name, :func:`~dv2s_gym.workers.backends.get_backend`
+  and :func:`~dv2s_gym.workers.backends.register_backend` (``--backend`` of the commands reads them).
 - :mod:`dv2s_gym.workers.ray_pool`: the same on a Ray cluster (``--backend ray``).
 - :mod:`dv2s_gym.workers.errors`: the errors of the pools.
 """

@@ -10,14 +10,12 @@ result within the per-episode timeout is killed and replaced; its task is retrie
 never silently dropped; a task that finishes on a retry carries ``"worker_restarts"``, the
 problems of its earlier attempts.
 
-:func:`get_backend` picks one by name (``"local"`` or ``"ray"``; the Ray backend lives in
-:mod:`dv2s_gym.workers.ray_pool`).
+:func:`dv2s_gym.workers.backends.get_backend` picks one by name (``"local"``, ``"ray"``: the Ray backend lives
+in :mod:`dv2s_gym.workers.ray_pool`, or one registered there).
 """
 
 from __future__ import annotations
 
-import importlib
-import inspect
 import multiprocessing
 import os
 import time
@@ -30,7 +28,7 @@ from dv2s_gym.workers.base import DEFAULT_TIMEOUT, Backend, OnResult, default_wo
 from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.tasks import TaskFunction, function_for, gave_up_result, run_task, task_modules
 
-__all__ = ["Backend", "LocalBackend", "get_backend", "default_workers", "DEFAULT_TIMEOUT"]
+__all__ = ["Backend", "LocalBackend", "default_workers", "DEFAULT_TIMEOUT"]
 
 _READY = "ready"
 _PRELOAD = ("dv2s_gym.workers.pool", "envs.dv2s_env", "policies.evaluation")
@@ -315,26 +313,3 @@ class LocalBackend(Backend):
                 worker.kill()
             else:
                 worker.stop()
-
-
-def get_backend(name: str, workers: Optional[int] = None, address: Optional[str] = None,
-                timeout: Optional[float] = None) -> Backend:
-    """The backend called ``name``: ``"local"`` (process pool) or ``"ray"`` (a Ray cluster at ``address``)."""
-    if name == "local":
-        if address:
-            raise WorkerError("--address is for --backend ray; the local backend runs on this machine")
-        return LocalBackend(workers, timeout=timeout)
-    if name == "ray":
-        try:
-            module = importlib.import_module("dv2s_gym.workers.ray_pool")
-        except ModuleNotFoundError as error:
-            if error.name not in ("dv2s_gym.workers.ray_pool", "ray"):
-                raise
-            missing = "the ray package" if error.name == "ray" else "dv2s_gym.workers.ray_pool"
-            raise WorkerError(f"--backend ray needs {missing}, which is not installed; "
-                               "install ray (pip install 'ray[default]') or use --backend local") from None
-        options: Dict[str, Any] = {"workers": workers, "address": address}
-        if timeout is not None and "timeout" in inspect.signature(module.RayBackend).parameters:
-            options["timeout"] = timeout
-        return module.RayBackend(**options)
-    raise WorkerError(f"unknown backend {name!r}: use 'local' or 'ray'")

@@ -1,0 +1,81 @@
+"""``--dra``/``--sg`` accept every backend in the pipeline's registries, on every command that has them."""
+
+import json
+
+import pytest
+
+from dv2s_gym.cli import build_parser, main
+from dv2s_gym.pipeline import stages
+from dv2s_gym.pipeline.evaluate import EVALSET_DIR
+
+CLIP = EVALSET_DIR / "highway_lead_vehicle_brakes_seed0.webm"
+TEXT = "A car ahead of the ego brakes on a highway."
+
+
+@pytest.fixture
+def fixed_dra(monkeypatch):
+    """A DRA backend ``fixed`` registered (as a plugin would) before ``main`` runs; the registries restored after."""
+    monkeypatch.setattr(stages, "_DRA_REGISTRY", dict(stages._DRA_REGISTRY))
+    monkeypatch.setattr(stages, "_SG_REGISTRY", dict(stages._SG_REGISTRY))
+    calls = []
+
+    def fixed(clip, *, camera, question, llm_config):
+        calls.append((len(clip.frames), camera, question))
+        return TEXT, {"model": "fixed-1"}
+
+    stages.register_dra("fixed", fixed)
+    return calls
+
+
+def _usage_error(capsys, argv):
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and err.count("\n") == 1, err
+    return err
+
+
+def test_describe_runs_a_registered_dra_backend(capsys, fixed_dra):
+    code = main(["describe", str(CLIP), "--dra", "fixed", "--camera", "front", "--max-frames", "3", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 0
+    assert fixed_dra == [(3, "front", None)]
+    assert (out["text"], out["backend"], out["model"]) == (TEXT, "fixed", "fixed-1")
+    assert out["elements"]["road"] == "highway"
+
+
+def test_a_misspelt_registered_backend_is_one_line_with_a_suggestion(capsys, fixed_dra):
+    err = _usage_error(capsys, ["describe", str(CLIP), "--dra", "fixd"])
+    assert err.startswith("dv2s describe: error: argument --dra: invalid choice: 'fixd' "
+                          "(choose from 'bev', 'openai', 'fixed'); did you mean 'fixed'?")
+    err = _usage_error(capsys, ["eval", "sg", "--sg", "rule"])
+    assert "invalid choice: 'rule'" in err and "did you mean 'rules'?" in err
+    err = _usage_error(capsys, ["mine", "--policy", "rule", "--dra", "zzz"])
+    assert "invalid choice: 'zzz'" in err and "did you mean" not in err
+
+
+def test_an_unregistered_backend_is_refused(capsys):
+    err = _usage_error(capsys, ["describe", str(CLIP), "--dra", "fixed"])
+    assert "invalid choice: 'fixed' (choose from 'bev', 'openai')" in err
+
+
+@pytest.mark.parametrize("command", [["describe"], ["convert"], ["eval"], ["mine"], ["generate"]])
+def test_every_command_lists_the_registered_backends(command, fixed_dra):
+    stages.register_sg("mine-sg", lambda description, **options: None)
+    help_text = _help(command)
+    if command != ["generate"]:
+        assert "--dra {bev,openai,fixed}" in help_text and "also registered: fixed" in help_text
+    if command != ["describe"]:
+        assert "--sg {rules,openai,mine-sg}" in help_text and "also registered: mine-sg" in help_text
+
+
+def test_the_choices_are_read_when_the_command_line_is_parsed(fixed_dra):
+    parser = build_parser()
+    stages.register_dra("later", lambda clip, **options: ("", {}))
+    assert parser.parse_args(["describe", "v.mp4", "--dra", "later"]).dra == "later"
+
+
+def _help(command):
+    parser = build_parser()
+    sub = next(action for action in parser._actions if action.dest == "command")
+    return " ".join(sub.choices[command[0]].format_help().split())  # unwrapped
