@@ -230,6 +230,7 @@ _WRITER = textwrap.dedent(
     """
     import sys, time
     sys.path.insert(0, {root!r})
+    import envs  # the simulator the bank checks the script in
     from scenario_bank.bank import Bank
     import scenario_bank.bank as bank_module
     bank = Bank({bank!r})
