@@ -41,6 +41,7 @@ import gymnasium as gym
 import numpy as np
 
 from envs.errors import DV2SError
+from scenario_bank.named_registry import register_named
 
 __all__ = [
     "Policy",
@@ -325,9 +326,7 @@ def register_policy(name: str, factory: Callable[..., Any], overwrite: bool = Fa
     """
     if not name or any(ch in name for ch in "?:/\\") or name.endswith(".zip"):
         raise PolicyError(f"policy name {name!r} must not be empty or contain '?', ':', '/' or end in .zip")
-    if name in _REGISTRY and not overwrite:
-        raise PolicyError(f"a policy named {name!r} is already registered; pass overwrite=True to replace it")
-    _REGISTRY[name] = factory
+    register_named(_REGISTRY, name, factory, what="policy", error=PolicyError, overwrite=overwrite)
 
 
 def registered_policies() -> List[str]:

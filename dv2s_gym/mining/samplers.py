@@ -58,6 +58,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 import numpy as np
 
 from dv2s_gym.mining.errors import MiningError
+from scenario_bank.named_registry import register_named
 
 __all__ = ["proposal_density", "scene_proposal", "SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "NOVELTY",
            "SceneSampler", "SamplerRecord", "default_feedback", "make_sampler", "sampler_params", "is_adaptive",
@@ -128,11 +129,7 @@ def is_uniform(name: str) -> bool:
 
 def register_sampler(name: str, record: SamplerRecord, overwrite: bool = False) -> None:
     """Make ``make_sampler(name, ...)`` (and ``--sampler name``) build ``record``'s sampler."""
-    if not isinstance(name, str) or not name:
-        raise MiningError(f"sampler name {name!r} must be a non-empty string")
-    if name in _REGISTRY and not overwrite:
-        raise MiningError(f"a sampler named {name!r} is already registered; pass overwrite=True to replace it")
-    _REGISTRY[name] = record
+    register_named(_REGISTRY, name, record, what="sampler", error=MiningError, overwrite=overwrite)
 
 
 def registered_samplers() -> List[str]:

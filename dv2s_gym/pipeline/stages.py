@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 from dv2s_gym.pipeline.errors import BackendResultError, PipelineError, UnknownBackendError
+from scenario_bank.named_registry import register_named
 
 __all__ = ["Description", "Generation", "describe", "generate", "DRA_BACKENDS", "SG_BACKENDS",
            "register_dra", "register_sg", "registered_dras", "registered_sgs"]
@@ -93,12 +94,7 @@ _SG_REGISTRY: Dict[str, SGBackend] = {}
 
 def _register(registry: Dict[str, Callable[..., Any]], stage: str, name: str, backend: Callable[..., Any],
               overwrite: bool) -> None:
-    if not isinstance(name, str) or not name:
-        raise PipelineError(f"{stage} backend name {name!r} must be a non-empty string")
-    if name in registry and not overwrite:
-        raise PipelineError(f"a {stage} backend named {name!r} is already registered; "
-                            "pass overwrite=True to replace it")
-    registry[name] = backend
+    register_named(registry, name, backend, what=f"{stage} backend", error=PipelineError, overwrite=overwrite)
 
 
 def register_dra(name: str, backend: DRABackend, overwrite: bool = False) -> None:

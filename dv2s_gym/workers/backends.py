@@ -14,6 +14,7 @@ from typing import Any, Callable, Dict, List, Optional
 
 from dv2s_gym.registered_names import RegisteredNames
 from dv2s_gym.workers.errors import WorkerError
+from scenario_bank.named_registry import register_named
 
 __all__ = ["BACKENDS", "BackendFactory", "register_backend", "registered_backends", "backend_factory", "backend_choices", "get_backend"]
 
@@ -53,11 +54,7 @@ BACKENDS = tuple(_FACTORIES)
 def register_backend(name: str, factory: BackendFactory, overwrite: bool = False) -> None:
     """Make ``get_backend(name, ...)`` (and ``--backend name``) call ``factory(workers=..., address=..., timeout=...)``,
     which returns a :class:`~dv2s_gym.workers.base.Backend`."""
-    if not isinstance(name, str) or not name:
-        raise WorkerError(f"worker backend name {name!r} must be a non-empty string")
-    if name in _FACTORIES and not overwrite:
-        raise WorkerError(f"a worker backend named {name!r} is already registered; pass overwrite=True to replace it")
-    _FACTORIES[name] = factory
+    register_named(_FACTORIES, name, factory, what="worker backend", error=WorkerError, overwrite=overwrite)
 
 
 def registered_backends() -> List[str]:
