@@ -578,7 +578,7 @@ def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional
     settings_path = out / "settings.json"
     saved = _read_settings(settings_path)
     batch = settings.batch or (saved["batch"] if saved else 4 * n_workers)
-    if saved is not None:  # a changed seed, policy, ... is refused in a second, not after the space is built
+    if saved is not None:  # a changed seed, policy, ... is refused before the space is built, not minutes later
         before_space = _settings(policy, settings, batch, saved["scenarios"], bank_dir, {})
         _check_resume(saved, before_space, out, [key for key in _RESUME_KEYS if key not in _SPACE_KEYS])
     names = saved["scenarios"] if saved and settings.scenarios is None else None
