@@ -7,12 +7,15 @@ from typing import Iterable, Optional, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["time_to_collision", "path_is_free", "first_stall_step", "total_stall_step", "FREE_PATH", "STANDING_SPEED"]
+__all__ = ["time_to_collision", "path_is_free", "first_stall_step", "total_stall_step", "FREE_PATH", "STANDING_SPEED",
+           "DEFAULT_STALL_SECONDS"]
 
 FREE_PATH = 40.0
 """Metres ahead of the ego that must be empty for its path to count as free."""
 STANDING_SPEED = 0.5
 """m/s under which a vehicle counts as standing."""
+DEFAULT_STALL_SECONDS = 5.0
+"""Seconds the ego must stand with a free path ahead for a stall (the miner's monitors and ``dv2s regress``)."""
 
 
 def time_to_collision(

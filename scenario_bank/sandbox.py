@@ -32,13 +32,15 @@ from scenario_bank.jail import JailedProcess, JailError, JailLimitError, JailLim
 from scenario_bank.jail.process import JailRemoteError
 from scenario_bank.precheck import precheck_text
 from scenario_bank.safety import SafetyFinding, UnsafeScenarioError
+from scenario_bank.simulator_worker import simulator_worker
 from scenario_bank.errors import DV2SError
 
 __all__ = ["SandboxLimits", "SandboxResult", "SandboxError", "run_in_sandbox", "verify_script", "check_in_jail",
            "bounded_precheck", "cache_dir"]
 
 CODE_ROOT = Path(__file__).resolve().parents[1]
-"""The folder holding ``scenario_bank`` and ``envs``: the child imports this code, not an installed copy."""
+"""The folder holding ``scenario_bank`` and the simulator's package: the child imports this code, not an installed
+copy."""
 _GIB = 2**30
 
 
@@ -125,8 +127,10 @@ def run_in_sandbox(
     ``files`` are the files beside the script it may need (``localPath`` maps), by
     relative name. Never raises for a failure of the script: the result says what
     happened. Raises :class:`~scenario_bank.jail.JailUnavailableError` when the
-    jail cannot be created here.
+    jail cannot be created here, :class:`~scenario_bank.simulator_worker.NoSimulatorError` when no simulator
+    layer is loaded (:mod:`scenario_bank.simulator_worker`).
     """
+    worker_module = simulator_worker()
     limits = limits or SandboxLimits.from_env()
     jail_limits = JailLimits.from_env(cpu_seconds=limits.cpu_seconds, memory_bytes=limits.memory_bytes,
                                       file_bytes=limits.file_bytes, request_seconds=limits.wall_seconds,
@@ -136,7 +140,7 @@ def run_in_sandbox(
     payload = {name_: np.frombuffer(data, dtype=np.uint8) for name_, data in (files or {}).items()}
     stage = "import"
     try:
-        with JailedProcess("envs.jail_worker", limits=jail_limits, name=name) as worker:
+        with JailedProcess(worker_module, limits=jail_limits, name=name) as worker:
             stage = "compile"
             data = worker.call("verify", script=script, name=name, seeds=[int(s) for s in seeds],
                                run_seconds=float(run_seconds), max_sample_iterations=int(max_sample_iterations),
@@ -201,7 +205,7 @@ def bounded_precheck(script: Any, name: str = "<script>") -> None:
 def check_in_jail(script: str, *, name: str = "<script>", absolute_maps: bool = False) -> List[SafetyFinding]:
     """The allowlist's findings for ``script``, computed in a fresh jailed worker (empty list: it passed)."""
     bounded_precheck(script, name)
-    with JailedProcess("envs.jail_worker", name=name) as worker:
+    with JailedProcess(simulator_worker(), name=name) as worker:
         return _findings(worker.call("check", script=script, absolute_maps=absolute_maps))
 
 
@@ -232,11 +236,13 @@ _CODE_VERSION: Optional[str] = None
 
 
 def code_version() -> str:
-    """A digest of the code a sandboxed check runs (envs, the safety check, the sandbox, Scenic's version)."""
+    """A digest of the code a sandboxed check runs (the simulator's package, the safety check, the sandbox,
+    Scenic's version)."""
     global _CODE_VERSION
     if _CODE_VERSION is None:
         digest = hashlib.sha256()
-        files = sorted([*(CODE_ROOT / "envs").rglob("*.py"), *(CODE_ROOT / "envs").rglob("*.scenic"),
+        simulator = CODE_ROOT / simulator_worker().partition(".")[0]
+        files = sorted([*simulator.rglob("*.py"), *simulator.rglob("*.scenic"),
                         *(CODE_ROOT / "scenario_bank").rglob("*.py"), *(CODE_ROOT / "scenario_bank" / "maps").glob("*.xodr")])
         for path in files:
             digest.update(str(path.relative_to(CODE_ROOT)).encode())

@@ -3,9 +3,10 @@
 import pytest
 
 from dv2s_gym.pipeline import stages
-from dv2s_gym.pipeline.errors import PipelineError
+from dv2s_gym.pipeline.errors import BackendResultError, PipelineError, UnknownBackendError
 from dv2s_gym.pipeline.evaluate import EVALSET_DIR
 from dv2s_gym.pipeline.semantics.text import elements_from_text
+from scenario_bank.errors import DV2SError
 from scenario_bank.safety import UnsafeScenarioError
 
 CLIP = EVALSET_DIR / "highway_lead_vehicle_brakes_seed0.webm"
@@ -24,10 +25,42 @@ def test_the_shipped_backends_are_registered():
 
 
 def test_an_unknown_backend_names_the_known_ones():
-    with pytest.raises(ValueError, match=r"^unknown DRA backend 'bevv'; use one of \('bev', 'openai'\)$"):
+    with pytest.raises(UnknownBackendError, match=r"^unknown DRA backend 'bevv'; use one of \('bev', 'openai'\)$"):
         stages.describe(CLIP, backend="bevv")
-    with pytest.raises(ValueError, match=r"^unknown SG backend 'rule'; use one of \('rules', 'openai'\)$"):
+    with pytest.raises(UnknownBackendError, match=r"^unknown SG backend 'rule'; use one of \('rules', 'openai'\)$"):
         stages.generate("A car brakes ahead of the ego.", backend="rule")
+
+
+def test_an_unknown_backend_is_a_project_error_the_command_line_reports():
+    with pytest.raises(DV2SError) as raised:
+        stages.describe(CLIP, backend="bevv")
+    assert isinstance(raised.value, PipelineError) and isinstance(raised.value, ValueError)
+
+
+@pytest.mark.parametrize("returned, got", [
+    (("a car brakes", {}, "extra"), "a tuple of 3 items"),
+    ("a car brakes", "a str"),
+    (None, "None"),
+    ((b"a car brakes", {}), r"\(a bytes, a dict\)"),
+    (("a car brakes", None), r"\(a str, None\)"),
+])
+def test_a_dra_backend_returning_the_wrong_shape_is_named(registries, returned, got):
+    stages.register_dra("broken", lambda clip, **options: returned)
+    with pytest.raises(BackendResultError, match=rf"^DRA backend 'broken' returned {got}; a DRA backend returns a "
+                                                 r"pair \(text, provenance\): the description as a str and a dict"):
+        stages.describe(CLIP, backend="broken", max_frames=2)
+
+
+@pytest.mark.parametrize("returned, got", [
+    ("param x = 1\n", "a str"),
+    (("param x = 1\n", []), "a tuple of 2 items"),
+    (stages.Generation(None, "broken"), "a Generation whose script is None"),
+])
+def test_an_sg_backend_returning_the_wrong_shape_is_named(registries, returned, got):
+    stages.register_sg("broken", lambda description, **options: returned)
+    with pytest.raises(BackendResultError, match=rf"^SG backend 'broken' returned {got}; an SG backend returns a "
+                                                 r"dv2s_gym.pipeline.stages.Generation whose script"):
+        stages.generate("anything", backend="broken")
 
 
 def test_a_registered_dra_backend_describes_and_its_text_gives_the_elements(registries):
@@ -45,7 +78,7 @@ def test_a_registered_dra_backend_describes_and_its_text_gives_the_elements(regi
     assert (description.text, description.backend, description.model, description.prompt_hash,
             description.video) == (text, "fixed", "fixed-1", "abc", str(CLIP))
     assert description.elements == elements_from_text(text) and description.elements["road"] == "highway"
-    with pytest.raises(ValueError, match=r"use one of \('bev', 'openai', 'fixed'\)"):
+    with pytest.raises(UnknownBackendError, match=r"use one of \('bev', 'openai', 'fixed'\)"):
         stages.describe(CLIP, backend="nope")
 
 

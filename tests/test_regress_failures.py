@@ -50,3 +50,15 @@ def test_an_unknown_failure_kind_is_bad_input_before_any_episode(tmp_path, capsy
                  "--failure", "collision,crashes", "--out", str(tmp_path), "--no-progress"])
     assert code == 2 and "unknown failure kind 'crashes'" in capsys.readouterr().err
     assert not (tmp_path / "results.jsonl").exists()
+
+
+def test_regress_and_the_miner_share_one_stall_default():
+    """One stall duration, defined with the stall measure: a change there moves both tools' default."""
+    import envs.safety_metrics as measure
+    from dv2s_gym.mining import monitors
+    from dv2s_gym.mining.settings import MineSettings
+    from dv2s_gym.regress import failures
+
+    assert failures.DEFAULT_STALL_SECONDS is measure.DEFAULT_STALL_SECONDS
+    assert monitors.DEFAULT_STALL_SECONDS is measure.DEFAULT_STALL_SECONDS
+    assert MineSettings().stall_seconds == measure.DEFAULT_STALL_SECONDS == 5.0

@@ -3,7 +3,9 @@
 Every module of the four packages is parsed (not imported); an import anywhere
 in a module, at its top or inside a function, is an edge to the project module
 it names (``from a.b import c`` is an edge to ``a.b.c`` when that is a module,
-else to ``a.b``), and so is a module loaded through ``importlib.import_module``. Function-level imports count: a deferred import still ties the
+else to ``a.b``), and so is a module loaded by name: through ``importlib.import_module`` (or an alias of it),
+``__import__``, ``runpy.run_module``, a jailed worker (``JailedProcess("pkg.mod")``) or a ``python -m pkg.mod``
+command. Function-level imports count: a deferred import still ties the
 two modules together, it only hides the cycle from Python's import machinery.
 """
 
@@ -11,6 +13,8 @@ from __future__ import annotations
 
 import ast
 import functools
+import re
+import textwrap
 from pathlib import Path
 from typing import Dict, List, Set
 
@@ -38,13 +42,17 @@ def _resolve(name: str, modules: Dict[str, Path]) -> str | None:
     return name or None
 
 
-def import_graph() -> Dict[str, Set[str]]:
-    """Module -> project modules it imports (anywhere in its body); a fresh copy for each caller."""
-    return {module: set(targets) for module, targets in _parsed_import_graph().items()}
+def import_graph(processes: bool = True) -> Dict[str, Set[str]]:
+    """Module -> project modules it imports (anywhere in its body); a fresh copy for each caller.
+
+    ``processes``: with the modules it starts in a child process (a jailed worker, a ``python -m`` command).
+    Such a module must be there (the layers count it) but is not imported into the caller's process: a
+    worker that builds the env which starts it is not an import cycle."""
+    return {module: set(targets) for module, targets in _parsed_import_graph(processes).items()}
 
 
-@functools.lru_cache(maxsize=1)
-def _parsed_import_graph() -> Dict[str, Set[str]]:
+@functools.lru_cache(maxsize=2)
+def _parsed_import_graph(processes: bool) -> Dict[str, Set[str]]:
     """:func:`import_graph`, parsed once a run (about 2 s of CPU; ten tests read it)."""
     modules = _modules()
     graph: Dict[str, Set[str]] = {}
@@ -65,23 +73,61 @@ def _parsed_import_graph() -> Dict[str, Set[str]]:
                 resolved = _resolve(target, modules)
                 if resolved is not None and resolved != module:
                     edges.add(resolved)
-        edges |= _dynamic_imports(path, module, modules)
+        edges |= _dynamic_imports(path, module, modules, processes)
         graph[module] = edges
     return graph
 
 
-def _dynamic_imports(path: Path, module: str, modules: Dict[str, Path]) -> Set[str]:
-    """Project modules a module loads through ``importlib.import_module``: a literal argument, or, when the
-    argument is computed, every string in the module naming a project module (``"pkg.mod"`` or
-    ``"pkg.mod:attr"``, the tables such lazy loaders read)."""
+_LOADERS = {"import_module", "__import__", "run_module"}
+"""Calls whose first argument names a module they load: ``importlib.import_module``, ``__import__``,
+``runpy.run_module``."""
+_STARTERS = {"JailedProcess"}
+"""Calls whose first argument names a module they run in a child process (the jail's worker)."""
+
+
+def _dynamic_imports(path: Path, module: str, modules: Dict[str, Path], processes: bool = True) -> Set[str]:
+    """Project modules a module loads by name rather than by an import statement.
+
+    - a call of a loader (:data:`_LOADERS`, under its own name or an alias such as
+      ``from importlib import import_module as load``): a literal argument, or, when the argument is
+      computed, every string in the module naming a project module (``"pkg.mod"`` or ``"pkg.mod:attr"``,
+      the tables such lazy loaders read);
+    - with ``processes``, a jailed worker (``JailedProcess("pkg.mod")``, the same way) and a command that runs
+      a module (``[sys.executable, "-m", "pkg.mod", ...]``, or ``"python -m pkg.mod"``
+      in a string that is not a docstring).
+    """
     tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    loaders = _LOADERS | (_STARTERS if processes else set())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            loaders |= {alias.asname for alias in node.names if alias.name in loaders and alias.asname}
     calls = [node for node in ast.walk(tree) if isinstance(node, ast.Call)
-             and (getattr(node.func, "id", None) or getattr(node.func, "attr", None)) == "import_module"]
+             and (getattr(node.func, "id", None) or getattr(node.func, "attr", None)) in loaders]
     names = [call.args[0].value for call in calls if call.args and isinstance(call.args[0], ast.Constant)]
     if any(call.args and not isinstance(call.args[0], ast.Constant) for call in calls):
         names += [node.value.partition(":")[0] for node in ast.walk(tree)
                   if isinstance(node, ast.Constant) and isinstance(node.value, str)]
+    names += _modules_run_by_commands(tree) if processes else []
     return {name for name in names if isinstance(name, str) and name in modules and name != module}
+
+
+_RUN_MODULE = re.compile(r"\bpython[\w.]*(?:\s+-\w+)*\s+-m\s+([\w.]+)")
+
+
+def _modules_run_by_commands(tree: ast.AST) -> List[str]:
+    """Module names after ``"-m"`` in a literal argument list, or in a ``python -m NAME`` command string."""
+    docstrings = {id(node.value) for node in ast.walk(tree)
+                  if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)}
+    names: List[str] = []
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.List, ast.Tuple)):
+            items = node.elts
+            names += [after.value for flag, after in zip(items, items[1:])
+                      if isinstance(flag, ast.Constant) and flag.value == "-m"
+                      and isinstance(after, ast.Constant) and isinstance(after.value, str)]
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
+            names += _RUN_MODULE.findall(node.value)
+    return names
 
 
 def find_cycles(graph: Dict[str, Set[str]]) -> List[List[str]]:
@@ -137,6 +183,36 @@ def test_the_graph_sees_function_level_and_relative_imports():
     assert "envs.dv2s_env" in graph["dv2s_gym.bank_validate"]  # imported inside a function
 
 
+def test_the_graph_sees_modules_loaded_by_name(tmp_path):
+    """A module named in a string still ties the two layers together: a jailed worker, a ``python -m``
+    command, ``__import__`` and an aliased ``import_module`` are edges (a docstring naming one is not)."""
+    source = tmp_path / "loader.py"
+    source.write_text(textwrap.dedent('''
+        """Started like ``python -m pkg.documented``."""
+        import sys
+        from importlib import import_module as load
+        from scenario_bank.jail import JailedProcess
+
+        def run():
+            JailedProcess("pkg.jailed", name="worker")
+            argv = [sys.executable, "-s", "-m", "pkg.commanded", "3", "4"]
+            shell = "python3 -u -m pkg.shelled --flag"
+            return __import__("pkg.dunder"), load("pkg.aliased")
+        '''), encoding="utf-8")
+    names = ("jailed", "commanded", "shelled", "dunder", "aliased", "documented", "unnamed")
+    modules = {f"pkg.{name}": source for name in names}
+    assert _dynamic_imports(source, "pkg.loader", modules) == {
+        "pkg.jailed", "pkg.commanded", "pkg.shelled", "pkg.dunder", "pkg.aliased"}
+    assert _dynamic_imports(source, "pkg.loader", modules, processes=False) == {"pkg.dunder", "pkg.aliased"}
+
+
+@pytest.mark.slow
+def test_the_graph_sees_the_worker_the_bank_checks_scripts_in():
+    assert "scenario_bank.simulator_worker" in import_graph()["envs"]  # envs names its worker to the bank
+    assert "envs.jail_worker" in import_graph()["envs.jailed_env"]  # JailedProcess("envs.jail_worker")
+    assert "scenario_bank.jail.zygote_server" in import_graph()["scenario_bank.jail.zygote"]  # "-m" argv
+
+
 @pytest.mark.slow
 def test_the_graph_sees_imports_made_by_importlib():
     graph = import_graph()
@@ -146,7 +222,7 @@ def test_the_graph_sees_imports_made_by_importlib():
 
 @pytest.mark.slow
 def test_no_import_cycles():
-    graph = {m: {t for t in ts if not _is_package_init_edge(m, t)} for m, ts in import_graph().items()}
+    graph = {m: {t for t in ts if not _is_package_init_edge(m, t)} for m, ts in import_graph(processes=False).items()}
     cycles = find_cycles(graph)
     assert not cycles, "import cycles (break them by moving the shared code down a layer):\n" + "\n".join(
         " <-> ".join(c) for c in cycles)

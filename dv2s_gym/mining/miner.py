@@ -71,6 +71,9 @@ ADAPTIVE_SCHEDULE = "window"
 """The schedule of a new adaptive run (``"chunks"``: the chunk schedule, for comparison in ``bench/``)."""
 _RESUME_KEYS = ("policy", "sampler", "sampler_options", "feedback", "seed", "batch", "scenarios", "bank_dir",
                 "env_config", "reference", "ttc_threshold", "stall_seconds")
+_SPACE_KEYS = ("scenarios",)
+"""Identity keys known only once the scene space is built (the scenario names it resolved); the others are compared
+before building it, which takes minutes on a loaded machine."""
 
 
 @dataclass
@@ -272,10 +275,11 @@ def _read_settings(path: Path) -> Optional[Dict[str, Any]]:
     return saved
 
 
-def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path) -> None:
+def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path,
+                  keys: Sequence[str] = _RESUME_KEYS) -> None:
     from scenario_bank.run_identity import check_identity
 
-    check_identity(saved, settings, _RESUME_KEYS, run=f"{out} holds a mining run",
+    check_identity(saved, settings, keys, run=f"{out} holds a mining run",
                    fix="resume it with the same settings or pass another --out")
 
 
@@ -573,10 +577,13 @@ def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional
 
     settings_path = out / "settings.json"
     saved = _read_settings(settings_path)
+    batch = settings.batch or (saved["batch"] if saved else 4 * n_workers)
+    if saved is not None:  # a changed seed, policy, ... is refused before the space is built, not minutes later
+        before_space = _settings(policy, settings, batch, saved["scenarios"], bank_dir, {})
+        _check_resume(saved, before_space, out, [key for key in _RESUME_KEYS if key not in _SPACE_KEYS])
     names = saved["scenarios"] if saved and settings.scenarios is None else None
     asked = list(settings.scenarios) if settings.scenarios is not None else None
     space = SceneSpace(names or asked, bank_dir)
-    batch = settings.batch or (saved["batch"] if saved else 4 * n_workers)
     recorded = _settings(policy, settings, batch, space.scenarios, bank_dir, space.describe())
     if saved is not None:
         _check_resume(saved, recorded, out)

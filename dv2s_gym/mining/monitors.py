@@ -22,7 +22,7 @@ import math
 from dataclasses import asdict, dataclass
 from typing import Any, Dict, List, Optional
 
-from envs.safety_metrics import FREE_PATH, STANDING_SPEED, first_stall_step
+from envs.safety_metrics import DEFAULT_STALL_SECONDS, FREE_PATH, STANDING_SPEED, first_stall_step
 
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "detect_failure", "detect_stall", "robustness",
            "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
@@ -33,7 +33,6 @@ COLLISION_TYPES = ("rear_end", "struck_from_behind", "side", "head_on", "pedestr
 STALL_SPEED = STANDING_SPEED
 """m/s under which the ego counts as standing."""
 DEFAULT_TTC_THRESHOLD = 1.0
-DEFAULT_STALL_SECONDS = 5.0
 
 
 @dataclass

@@ -12,6 +12,8 @@ Hierarchy::
     │   ├── EndpointHTTPError            non-2xx answer (has .status and .body)
     │   └── MalformedResponseError       2xx answer that is not a chat completion
     ├── MissingAPIKeyError               api.openai.com without a key
+    ├── UnknownBackendError              a stage asked for a backend no one registered (also a ValueError)
+    ├── BackendResultError               a registered backend returned something of the wrong shape
     ├── GenerationFailedError            no generated script passed the checks (has .result)
     └── GenerationError                  the rules SG cannot place the ego or the main event (also a DV2SError)
 """
@@ -30,6 +32,8 @@ __all__ = [
     "EndpointHTTPError",
     "MalformedResponseError",
     "MissingAPIKeyError",
+    "UnknownBackendError",
+    "BackendResultError",
     "GenerationFailedError",
     "GenerationError",
 ]
@@ -66,6 +70,15 @@ class EndpointHTTPError(EndpointError):
 
 class MalformedResponseError(EndpointError):
     """The endpoint answered 2xx, but not with a usable chat completion."""
+
+
+class UnknownBackendError(PipelineError, ValueError):
+    """A stage was asked for a backend name that is not registered; the message lists the registered ones."""
+
+
+class BackendResultError(PipelineError):
+    """A registered backend returned something its stage cannot use; the message names the backend and what it
+    must return."""
 
 
 class MissingAPIKeyError(PipelineError):

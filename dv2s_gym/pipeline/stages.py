@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import os
 from dataclasses import asdict, dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
-from dv2s_gym.pipeline.errors import PipelineError
+from dv2s_gym.pipeline.errors import BackendResultError, PipelineError, UnknownBackendError
 from scenario_bank.named_registry import register_named
 
 __all__ = ["Description", "Generation", "describe", "generate", "DRA_BACKENDS", "SG_BACKENDS",
@@ -181,9 +181,10 @@ def describe(
     from dv2s_gym.pipeline.video import read_video
 
     if backend not in _DRA_REGISTRY:
-        raise ValueError(f"unknown DRA backend {backend!r}; use one of {tuple(_DRA_REGISTRY)}")
+        raise UnknownBackendError(f"unknown DRA backend {backend!r}; use one of {tuple(_DRA_REGISTRY)}")
     clip = read_video(video, fps=fps, max_frames=max_frames, max_pixels=max_pixels)
-    text, provenance = _DRA_REGISTRY[backend](clip, camera=camera, question=question, llm_config=llm_config)
+    text, provenance = _description_of(backend, _DRA_REGISTRY[backend](clip, camera=camera, question=question,
+                                                                       llm_config=llm_config))
     return Description(text, elements_from_text(text), backend, model=provenance.get("model"),
                        prompt_hash=provenance.get("prompt_hash"), video=str(video))
 
@@ -200,7 +201,31 @@ def generate(
     from scenario_bank.safety import assert_safe
 
     if backend not in _SG_REGISTRY:
-        raise ValueError(f"unknown SG backend {backend!r}; use one of {tuple(_SG_REGISTRY)}")
+        raise UnknownBackendError(f"unknown SG backend {backend!r}; use one of {tuple(_SG_REGISTRY)}")
     generation = _SG_REGISTRY[backend](description, seed=seed, llm_config=llm_config, max_attempts=max_attempts)
+    if not isinstance(generation, Generation) or not isinstance(generation.script, str):
+        got = (f"a Generation whose script is {_kind(generation.script)}" if isinstance(generation, Generation)
+               else _kind(generation))
+        raise BackendResultError(f"SG backend {backend!r} returned {got}; an SG backend returns a "
+                                 "dv2s_gym.pipeline.stages.Generation whose script is the Scenic text (a str)")
     assert_safe(generation.script, "generated script")
     return generation
+
+
+def _description_of(backend: str, returned: Any) -> Tuple[str, Mapping[str, Any]]:
+    """A DRA backend's ``(text, provenance)``; :class:`BackendResultError` naming the backend for any other shape."""
+    if (isinstance(returned, (tuple, list)) and len(returned) == 2 and isinstance(returned[0], str)
+            and isinstance(returned[1], Mapping)):
+        return returned[0], returned[1]
+    got = (f"({_kind(returned[0])}, {_kind(returned[1])})"
+           if isinstance(returned, (tuple, list)) and len(returned) == 2 else _kind(returned))
+    raise BackendResultError(f"DRA backend {backend!r} returned {got}; a DRA backend returns a pair (text, "
+                             "provenance): the description as a str and a dict, which may name 'model' and "
+                             "'prompt_hash' (or is empty)")
+
+
+def _kind(value: Any) -> str:
+    """How an error names a value a backend returned: its type, and its length when it is a tuple or list."""
+    if isinstance(value, (tuple, list)):
+        return f"a {type(value).__name__} of {len(value)} items"
+    return "None" if value is None else f"a {type(value).__name__}"

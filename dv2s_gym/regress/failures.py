@@ -13,6 +13,7 @@ from __future__ import annotations
 from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.regress.errors import RegressError
+from envs.safety_metrics import DEFAULT_STALL_SECONDS
 
 __all__ = ["FAILURE_KINDS", "DEFAULT_FAILURE", "DEFAULT_STALL_SECONDS", "parse_failure", "apply_failure", "missing_facts"]
 
@@ -21,10 +22,6 @@ FAILURE_KINDS: Dict[str, str] = {"collision": "collided", "off_road": "off_road"
 
 DEFAULT_FAILURE: Tuple[str, ...] = ("collision", "off_road", "stall")
 """A failure is any of these unless the run says otherwise (``--failure``)."""
-
-DEFAULT_STALL_SECONDS = 5.0
-"""Seconds the ego must stand with a free road ahead for a stall."""
-
 
 def parse_failure(value: Union[None, str, Iterable[str]]) -> List[str]:
     """``"collision,stall"`` or a list of kinds -> the kinds in canonical order; None: the default.
