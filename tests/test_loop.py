@@ -4,6 +4,7 @@ resuming a killed loop without redoing finished steps, and the report of a whole
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -637,12 +638,29 @@ class _GrowingMiner(FakeMiner):
         return super().__call__(policy, settings, **options)
 
 
+def _regression_verdicts(monkeypatch, verdicts):
+    """The stand-in regression test, its verdict per round folder (``{"round_1": "PASS", ...}``)."""
+    import dv2s_gym.regress.runner as runner
+
+    stand_in = runner.run_regression
+
+    def regression(candidate, baseline=None, settings=None, **options):
+        report = stand_in(candidate, baseline, settings, **options)
+        folder = Path(options["out_dir"])
+        return {**report, "verdict": verdicts[next(p.name for p in folder.parents if p.name.startswith("round_"))]}
+
+    monkeypatch.setattr(runner, "run_regression", regression)
+
+
 def test_a_second_round_never_holds_out_a_family_the_first_fine_tuned_on(tmp_path, monkeypatch):
-    """Round 2 wants two held-out families of three; only round 1's held-out one was never trained on."""
+    """Round 1 is ACCEPTED, so round 2 starts from its policy: round 2 wants two held-out families of three, and
+    only round 1's held-out one was never trained on by the policy it evaluates."""
     _StandIns(monkeypatch)
+    _regression_verdicts(monkeypatch, {"round_1": "PASS", "round_2": "PASS"})
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=2, min_heldout_episodes=1, min_heldout_families=1,
                       miner=_GrowingMiner(WIRING["scenarios"]), log=lambda _: None, **WIRING)
     first, second = (r["steps"] for r in report.rounds)
+    assert report.rounds[1]["policy"] == report.rounds[0]["new_policy"]
     assert len(first["split"]["held_out_families"]) == 1 and second["split"]["groups"] == 3
     trained = set(first["split"]["fine_tune_families"]) | set(first["fine_tune"]["families"])
     assert first["split"]["fine_tune_families"] and set(first["split"]["fine_tune_families"]) <= trained
@@ -650,6 +668,21 @@ def test_a_second_round_never_holds_out_a_family_the_first_fine_tuned_on(tmp_pat
     assert second["split"]["held_out"] and not set(second["split"]["held_out_families"]) & trained
     assert set(first["split"]["fine_tune_families"]) <= set(second["split"]["fine_tune_families"])
     assert set(second["split"]["held_out_families"]) == set(first["split"]["held_out_families"])
+
+
+def test_a_discarded_rounds_fine_tuning_does_not_keep_its_families_out_of_the_next_held_out_set(tmp_path, monkeypatch):
+    """Round 1 is REJECTED, so round 2 starts again from the starting policy, which never trained on round 1's
+    mix: round 2 holds out two families of three, one of which round 1 fine-tuned on."""
+    _StandIns(monkeypatch)
+    _regression_verdicts(monkeypatch, {"round_1": "FAIL", "round_2": "PASS"})
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=2, min_heldout_episodes=1, min_heldout_families=1,
+                      miner=_GrowingMiner(WIRING["scenarios"]), log=lambda _: None, **WIRING)
+    first, second = (r["steps"] for r in report.rounds)
+    assert report.rounds[1]["policy"] == "dv2s-ppo"
+    trained = set(first["split"]["fine_tune_families"]) | set(first["fine_tune"]["families"])
+    assert second["split"]["groups"] == 3 and len(second["split"]["held_out_families"]) == 2
+    assert set(second["split"]["held_out_families"]) & trained
+    assert set(first["split"]["held_out_families"]) <= set(second["split"]["held_out_families"])
 
 
 @pytest.mark.parametrize("content, problem", [
@@ -777,3 +810,16 @@ def test_the_next_round_starts_from_the_policy_the_verdict_recommends(tmp_path, 
     again = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=3, miner=miner, log=lines.append, **settings)
     assert len(miner.calls) == 3 and len(stand.fine_tunes) == 6  # resumed: nothing re-run, the same starts
     assert [r["next_policy"] for r in again.rounds] == [r["next_policy"] for r in saved]
+
+
+@pytest.mark.parametrize("change, named", [({"n_envs": 2}, "n_envs: run has 1, asked 2"),
+                                           ({"min_heldout_families": 1}, "min_heldout_families: run has 2, asked 1")])
+def test_a_resume_refuses_other_training_envs_or_another_held_out_family_minimum(tmp_path, monkeypatch, change, named):
+    """The number of training envs changes the fine-tuned model, and the family minimum decides whether a round is
+    judged: a resumed loop keeps both."""
+    _StandIns(monkeypatch)
+    miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
+    settings = {**WIRING, "min_heldout_episodes": 1, "min_heldout_families": 2}
+    run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, log=lambda _: None, **settings)
+    with pytest.raises(RunIdentityError, match=named):
+        run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, log=lambda _: None, **{**settings, **change})

@@ -79,7 +79,8 @@ DEFAULT_OUT = "out/loop"
 
 IDENTITY = ("policy", "bank_dir", "budget", "sampler", "fine_tune_steps", "fine_tune_lr", "holdout_fraction", "k_eval",
             "regress_episodes", "mined_share", "fine_tune_reward", "margin", "seed", "scenarios", "fine_tune_method",
-            "max_conversions", "control", "untouched_seeds", "min_heldout_episodes", "max_replays")
+            "max_conversions", "control", "untouched_seeds", "min_heldout_episodes", "min_heldout_families",
+            "max_replays", "n_envs")
 _RECORDED = ("holdout_by",)
 """Settings a loop keeps as first recorded (not chosen by the user, so never a reason to refuse a resume)."""
 
@@ -450,15 +451,7 @@ def _run_round(loop: _Loop, number: int, current: str) -> str:
         timed("mine", lambda: _mine_step(loop, number, current, round_dir), _mine_plan(loop))
         _log_mined(loop, number, steps["mine"])
     if "split" not in steps:
-        held_families, tuned_families = _earlier_sides(loop.state.data["rounds"][:number - 1])
-        timed("split", lambda: _split(steps["mine"]["kept"], loop.settings.holdout_fraction,
-                                      loop.settings.seed * 1000 + number, loop.holdout_by, loop.bank,
-                                      held_families, tuned_families),
-              f"{len(steps['mine']['kept'])} kept mined scenario(s) into fine-tuning and held-out families")
-        if steps["split"].get("moved_to_fine_tune"):
-            loop.log(f"round {number}: WARNING: earlier held-out famil(ies) "
-                     f"{', '.join(steps['split']['moved_to_fine_tune'])} now share a mined scenario with a family "
-                     "fine-tuned on earlier, so they are fine-tuned on from this round")
+        _split_step(loop, number, current, timed)
     if not steps["split"]["fine_tune"] and not steps["split"]["held_out"]:
         _skip_round(loop, number, steps)
     else:
@@ -469,6 +462,29 @@ def _run_round(loop: _Loop, number: int, current: str) -> str:
         loop.log(f"round {number}: round {number + 1} starts from {following}: {record['next_policy_reason']}")
     _write(loop.out, loop.state)
     return following
+
+
+def _split_step(loop: _Loop, number: int, current: str, timed: "_Timed") -> None:
+    """Split the round's kept scenarios into fine-tuning and held-out families. Families an earlier round held
+    out stay held out where they can; families fine-tuned on by a round ``current`` descends from
+    (:func:`_lineage`) cannot be held out; a discarded round's fine-tuning does not count."""
+    steps = timed.record["steps"]
+    earlier = loop.state.data["rounds"][:number - 1]
+    held_families, _ = _earlier_sides(earlier)
+    _, tuned_families = _earlier_sides(_lineage(loop, earlier, current))
+    kept = steps["mine"]["kept"]
+    timed("split", lambda: _split(kept, loop.settings.holdout_fraction, loop.settings.seed * 1000 + number,
+                                  loop.holdout_by, loop.bank, held_families, tuned_families),
+          f"{len(kept)} kept mined scenario(s) into fine-tuning and held-out families")
+    families = {str(entry.get("parent") or entry.get("scenario")) for entry in _with_parents(kept, loop.bank)}
+    locked = sorted(families & set(tuned_families) - set(held_families))
+    if kept and not steps["split"]["held_out"] and locked == sorted(families):
+        loop.log(f"round {number}: WARNING: nothing can be held out: every kept scenario's family "
+                 f"({', '.join(locked)}) was fine-tuned on by an earlier round that {current} descends from")
+    if steps["split"].get("moved_to_fine_tune"):
+        loop.log(f"round {number}: WARNING: earlier held-out famil(ies) "
+                 f"{', '.join(steps['split']['moved_to_fine_tune'])} now share a mined scenario with a family "
+                 "fine-tuned on earlier, so they are fine-tuned on from this round")
 
 
 def _next_start(loop: _Loop, number: int, current: str) -> str:
@@ -871,6 +887,24 @@ def _split(kept: Sequence[Mapping[str, Any]], fraction: float, seed: int, by: st
     if by == "cluster":
         return split_by_cluster(kept, fraction, seed)
     return split_by_family(_with_parents(kept, bank), fraction, seed, held_families, tuned_families)
+
+
+def _lineage(loop: _Loop, rounds: Sequence[Mapping[str, Any]], current: str) -> List[Mapping[str, Any]]:
+    """The earlier ``rounds`` whose fine-tuned policy ``current`` descends from, latest first: a round whose
+    policy was not adopted (REJECTED, NOT ACCEPTED) trained nothing the next rounds start from."""
+    chain: List[Mapping[str, Any]] = []
+    for number in range(len(rounds), 0, -1):
+        record = rounds[number - 1]
+        if record.get("new_policy") is None:
+            continue
+        try:
+            spec = _earlier_round_spec(record["new_policy"], loop, number + 1)
+        except LoopError:
+            continue
+        if spec == current:
+            chain.append(record)
+            current = record.get("policy")
+    return chain
 
 
 def _earlier_sides(rounds: Sequence[Mapping[str, Any]]) -> tuple:

@@ -34,8 +34,8 @@ class LoopSettings:
     (``python -m bench.bench_loop`` times a round and bench/RESULTS.md records it): too few held-out episodes and
     families for a drop or a test, which the round says. :meth:`evidence` (``dv2s loop --profile evidence``)
     gives the larger round whose numbers can be judged. ``loop.json`` records the resolved values; a resumed loop
-    needs the same ones except ``rounds`` (raise it to add rounds), ``min_heldout_families``, ``workers`` and
-    ``n_envs``."""
+    needs the same ones except ``rounds`` (raise it to add rounds) and ``workers`` (runs are the same whatever
+    the number of workers)."""
 
     rounds: int = 1
     """Rounds to have finished when the loop returns (a resumed loop runs only the missing ones)."""
