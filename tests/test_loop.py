@@ -352,12 +352,12 @@ def test_cli_cluster_counts_read_0_as_none_and_all_as_every_cluster(tmp_path, ca
     (["--budget", "0"], "--budget must be an integer >= 1"),
     (["--holdout-fraction", "2"], "--holdout-fraction must be a number in [0, 1]"),
     (["--sampler", "no-such"], "--sampler must be one of random, halton"),  # it used to start round 1 first
-    (["--max-conversions", "-1"], "--max-conversions must be an integer >= 0"),
-    (["--max-conversions", "many"], "--max-conversions must be a whole number of clusters or 'all'"),
+    (["--max-conversions", "-1"], "--max-conversions must be a whole number of clusters (0 or more) or 'all'"),
+    (["--max-conversions", "many"], "--max-conversions must be a whole number of clusters (0 or more) or 'all'"),
     (["--untouched-seeds", "-1"], "--untouched-seeds must be an integer >= 0"),
     (["--min-heldout-episodes", "-2"], "--min-heldout-episodes must be an integer >= 0"),
-    (["--max-replays", "some"], "--max-replays must be a whole number of clusters or 'all'"),
-    (["--max-replays", "-1"], "--max-replays must be an integer >= 0"),
+    (["--max-replays", "some"], "--max-replays must be a whole number of clusters (0 or more) or 'all'"),
+    (["--max-replays", "-1"], "--max-replays must be a whole number of clusters (0 or more) or 'all'"),
 ])
 def test_cli_refuses_bad_input_in_one_line(tmp_path, capsys, argv, needle):
     code, _, err = run(capsys, "loop", "--out", tmp_path / "loop", "--no-progress", *argv)

@@ -187,6 +187,9 @@ def _count_or_all(value: str, flag: str) -> Optional[int]:
     if value == "all":
         return None
     try:
-        return int(value)
+        count = int(value)
     except ValueError:
-        raise UsageError(f"{flag} must be a whole number of clusters or 'all', not {value!r}") from None
+        count = -1
+    if count < 0:  # said here: the settings' own message speaks of leaving the value out, which means the default
+        raise UsageError(f"{flag} must be a whole number of clusters (0 or more) or 'all', not {value!r}")
+    return count
