@@ -172,12 +172,12 @@ def test_a_run_killed_while_collecting_resumes_from_its_last_partial_commit(tmp_
 def test_a_run_killed_after_its_last_iteration_only_writes_the_result(tmp_path, monkeypatch):
     run = {**RUN, "steps": 120}
     whole = dagger_fine_tune("dv2s-ppo", out=tmp_path / "whole", log=lambda _: None, **run)
-    import policies.model_card as model_card
+    import policies.imitation as imitation
 
     def killed(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(model_card, "write_card", killed)
+    monkeypatch.setattr(imitation, "write_card", killed)
     with pytest.raises(KeyboardInterrupt):
         dagger_fine_tune("dv2s-ppo", out=tmp_path / "late", log=lambda _: None, **run)
     monkeypatch.undo()
@@ -186,9 +186,7 @@ def test_a_run_killed_after_its_last_iteration_only_writes_the_result(tmp_path, 
     def no_envs(*args, **kwargs):
         raise AssertionError("a finished run built training envs")
 
-    import policies.training as training
-
-    monkeypatch.setattr(training, "make_vec_env", no_envs)
+    monkeypatch.setattr(imitation, "make_vec_env", no_envs)
     resumed = dagger_fine_tune("dv2s-ppo", out=tmp_path / "late", log=lambda _: None, **run)
     _same_model(whole, resumed)
     assert _stats(resumed) == _stats(whole)

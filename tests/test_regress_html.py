@@ -201,8 +201,11 @@ def test_both_clips_of_a_pair_show_the_same_seconds_of_the_scene(report_dir, rep
     def frames(path):
         return read_video(path, fps=None, max_frames=10**6, max_pixels=10**9).frames
 
-    episode = next(e for e in report["episodes"] if e["id"] in report["newly_failing"]
-                   and e["baseline"]["steps"] > e["candidate"]["steps"] >= 10)
+    # the pair whose baseline drives on longest after the candidate's failure: its last frame is farthest from
+    # the failure's moment, so the window's end can be told from the episode's end
+    episode = max((e for e in report["episodes"] if e["id"] in report["newly_failing"]
+                   and e["baseline"]["steps"] > e["candidate"]["steps"] >= 10),
+                  key=lambda e: e["baseline"]["steps"] - e["candidate"]["steps"])
     end = episode["candidate"]["steps"]
     trace = report_dir / episode["baseline"]["trace"]
     whole = frames(render_episode_video(trace, tmp_path / "whole.webm", seconds=1000, size=96))
