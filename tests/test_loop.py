@@ -777,17 +777,8 @@ def test_an_inconclusive_regression_test_leaves_the_policy_not_accepted(tmp_path
 def test_the_next_round_starts_from_the_policy_the_verdict_recommends(tmp_path, monkeypatch):
     """Round 1 regresses (REJECTED): round 2 starts from the starting policy; round 2 passes (ACCEPTED): round 3
     starts from round 2's policy; round 3 cannot tell (NOT ACCEPTED): round 2's stays the policy to use."""
-    import dv2s_gym.regress.runner as runner
-
     stand = _StandIns(monkeypatch)
-    stand_in = runner.run_regression
-    verdicts = {"round_1": "FAIL", "round_2": "PASS", "round_3": "INCONCLUSIVE"}
-
-    def regression(candidate, baseline=None, settings=None, **options):
-        report = stand_in(candidate, baseline, settings, **options)
-        return {**report, "verdict": verdicts[__import__("pathlib").Path(options["out_dir"]).parent.name]}
-
-    monkeypatch.setattr(runner, "run_regression", regression)
+    _regression_verdicts(monkeypatch, {"round_1": "FAIL", "round_2": "PASS", "round_3": "INCONCLUSIVE"})
     miner, lines = FakeMiner(WIRING["scenarios"], failures_per_round=6), []
     settings = {**WIRING, "untouched_seeds": 0, "min_heldout_episodes": 1, "min_heldout_families": 1}
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=3, miner=miner, log=lines.append, **settings)
