@@ -476,11 +476,10 @@ def _split_step(loop: _Loop, number: int, current: str, timed: "_Timed") -> None
     timed("split", lambda: _split(kept, loop.settings.holdout_fraction, loop.settings.seed * 1000 + number,
                                   loop.holdout_by, loop.bank, held_families, tuned_families),
           f"{len(kept)} kept mined scenario(s) into fine-tuning and held-out families")
-    families = {str(entry.get("parent") or entry.get("scenario")) for entry in _with_parents(kept, loop.bank)}
-    locked = sorted(families & set(tuned_families) - set(held_families))
-    if kept and not steps["split"]["held_out"] and locked == sorted(families):
+    families = set(steps["split"].get("fine_tune_families", []))  # every kept family, when none is held out
+    if kept and not steps["split"]["held_out"] and families and families <= set(tuned_families) - set(held_families):
         loop.log(f"round {number}: WARNING: nothing can be held out: every kept scenario's family "
-                 f"({', '.join(locked)}) was fine-tuned on by an earlier round that {current} descends from")
+                 f"({', '.join(sorted(families))}) was fine-tuned on by an earlier round that {current} descends from")
     if steps["split"].get("moved_to_fine_tune"):
         loop.log(f"round {number}: WARNING: earlier held-out famil(ies) "
                  f"{', '.join(steps['split']['moved_to_fine_tune'])} now share a mined scenario with a family "
