@@ -28,6 +28,8 @@ import time
 from pathlib import PurePosixPath
 from typing import Any, Dict, List, Optional
 
+__all__ = ["SCRATCH", "preload", "serve", "main"]
+
 SCRATCH = "/tmp/scenarios"
 _DRIVER_MODULES = ("policies.",)
 

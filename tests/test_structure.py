@@ -16,7 +16,7 @@ import functools
 import re
 import textwrap
 from pathlib import Path
-from typing import Dict, List, Set
+from typing import Dict, List, Optional, Set
 
 import pytest
 
@@ -430,3 +430,62 @@ def test_the_command_line_is_argument_handling_in_small_functions():
                 if node.end_lineno - node.lineno + 1 > 80 or count > 8:
                     long.append(f"{path.name}:{node.name} ({node.end_lineno - node.lineno + 1} lines, {count} parameters)")
     assert not long, long
+
+
+def _public_definitions(tree: ast.Module) -> List[str]:
+    """Names of a module's public top-level functions and classes."""
+    return [node.name for node in tree.body
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) and not node.name.startswith("_")]
+
+
+def _declared_all(tree: ast.Module) -> Optional[List[str]]:
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "__all__" for t in node.targets):
+            # a computed __all__ (e.g. built from a registry) is declared; only a literal one is read
+            return [elt.value for elt in getattr(node.value, "elts", ()) if isinstance(elt, ast.Constant)]
+    return None
+
+
+def test_the_public_api_check_sees_a_missing_or_wrong_all():
+    assert _declared_all(ast.parse("def f():\n    pass\n")) is None
+    tree = ast.parse('__all__ = ["f", "g"]\ndef f():\n    pass\n')
+    assert _declared_all(tree) == ["f", "g"] and _public_definitions(tree) == ["f"]
+
+
+def test_every_module_names_its_public_api():
+    """A module that defines public functions or classes says which are its API in ``__all__``, and every name
+    there exists (a star import or the API docs never meet a missing one)."""
+    missing, dangling = [], {}
+    for package in PACKAGES:
+        for path in sorted((ROOT / package).rglob("*.py")):
+            tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+            declared = _declared_all(tree)
+            if declared is None:
+                if _public_definitions(tree) and path.name != "__main__.py":
+                    missing.append(str(path.relative_to(ROOT)))
+                continue
+            defined = {n for node in ast.walk(tree) for n in _bound_names(node)}
+            if "__getattr__" in defined:  # names loaded lazily on first access are checked by importing them
+                continue
+            absent = sorted(set(declared) - defined)
+            if absent:
+                dangling[str(path.relative_to(ROOT))] = absent
+    assert not missing, f"modules without __all__: {missing}"
+    assert not dangling, f"names in __all__ the module does not define or import: {dangling}"
+
+
+def _bound_names(node: ast.AST) -> List[str]:
+    if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+        return [node.name]
+    if isinstance(node, (ast.Import, ast.ImportFrom)):
+        return [(a.asname or a.name).split(".")[0] for a in node.names]
+    if isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+        return [node.id]
+    return []
+
+
+def test_the_names_the_package_loads_lazily_all_load():
+    import dv2s_gym
+
+    missing = [name for name in dv2s_gym.__all__ if getattr(dv2s_gym, name, None) is None]
+    assert not missing, f"dv2s_gym.__all__ names that do not load: {missing}"

@@ -88,6 +88,11 @@ from scipy import stats
 
 from dv2s_gym.regress.family import DEFAULT_POOLED_WEIGHT  # noqa: F401 - the pooled test's share, re-exported
 
+__all__ = ["DEFAULT_ALPHA", "DEFAULT_MARGIN", "DEFAULT_CORRELATION", "Verdict", "wilson_interval",
+           "clopper_pearson_interval", "cluster_bootstrap_mean", "cluster_bootstrap_rate", "PairedTable",
+           "paired_difference_interval", "mcnemar_exact", "holm", "weighted_holm", "Comparison", "compare",
+           "compare_scenarios", "SPENDING", "obrien_fleming_spending", "Look", "SequentialTest"]
+
 DEFAULT_ALPHA = 0.05
 """Level of the FAIL test (one-sided); PASS is tested at ``alpha / 2``."""
 

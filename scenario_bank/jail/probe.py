@@ -16,6 +16,8 @@ import sys
 import time
 from typing import List
 
+__all__ = ["preload", "serve", "main"]
+
 
 def preload() -> None:
     """Nothing to import ahead: the probe needs only the standard library."""

@@ -10,6 +10,8 @@ from __future__ import annotations
 import re
 from typing import Dict, List, Sequence, Tuple
 
+__all__ = ["UNKNOWN_ACTORS", "ROAD_PATTERNS", "COLLISION_KINDS"]
+
 
 # --------------------------------------------------------------------------- lexicon
 

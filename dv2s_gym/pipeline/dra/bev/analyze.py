@@ -27,6 +27,8 @@ from dv2s_gym.pipeline.dra.bev.events import (
 from dv2s_gym.pipeline.dra.bev.language import _answer, _describe
 from dv2s_gym.pipeline.dra.bev.scale import LANE_RULER_M, estimate_scale, is_long_vehicle, lane_width_scale
 
+__all__ = ["BevAnalysis", "analyze_bev", "analyze_bev_file"]
+
 
 _VEHICLE_HUES = ("ego", "car", "truck", "yellow", "red")   # colour classes a vehicle body can have
 

@@ -12,6 +12,8 @@ import numpy as np
 
 from dv2s_gym.pipeline.dra.bev.frames import _mask
 
+__all__ = ["Blob", "Lines"]
+
 
 _KINDS = ("none", "red", "ped", "yellow", "ego", "car", "truck")
 # every hue belongs to a colour class (no gaps): a vehicle of any colour is found; the class only hints

@@ -15,6 +15,9 @@ from dv2s_gym.pipeline.dra.bev.tracking import (
 )
 from dv2s_gym.pipeline.dra.bev.road import _lane_changes, _lane_of, _lines_lat
 
+__all__ = ["BRAKE_DROP", "BRAKE_RATE", "ACCEL_RISE", "STOP_SPEED", "TURN_ANGLE", "PARTIAL_TURN", "NEAR",
+           "TRAFFIC_NEAR", "CLOSE_IN", "FOLLOW_GAP", "FOLLOW_HEADWAY", "ego_overtaken"]
+
 
 BRAKE_DROP = 3.5            # m/s lost ...
 BRAKE_RATE = 1.8            # ... at this many m/s^2 or more

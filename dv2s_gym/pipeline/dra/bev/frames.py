@@ -10,6 +10,8 @@ import numpy as np
 
 from scenario_bank.errors import DV2SError
 
+__all__ = ["BEV_READ_OPTIONS", "MIN_RESAMPLE_FPS", "NotBirdsEyeError"]
+
 
 BEV_READ_OPTIONS = {"fps": 5.0, "max_frames": 100, "max_pixels": 448 * 448}
 """:func:`~dv2s_gym.pipeline.video.read_video` arguments that suit this backend."""

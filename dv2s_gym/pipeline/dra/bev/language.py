@@ -6,6 +6,8 @@ from __future__ import annotations
 import re
 from typing import Any, Dict, List, Optional, Tuple
 
+__all__ = ["ROAD_PHRASES", "ROAD_SCENES"]
+
 
 ROAD_PHRASES = {
     "highway": "a straight multi-lane highway",

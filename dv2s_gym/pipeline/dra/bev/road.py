@@ -10,6 +10,8 @@ import numpy as np
 
 from dv2s_gym.pipeline.dra.bev.detection import _Frame
 
+__all__ = ["LANE_WIDTH_M"]
+
 
 LANE_WIDTH_M = 3.5          # lane width when no lines are seen
 

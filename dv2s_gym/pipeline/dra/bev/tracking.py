@@ -11,6 +11,8 @@ import numpy as np
 
 from dv2s_gym.pipeline.dra.bev.detection import Blob, _Frame
 
+__all__ = ["MAX_SPEED", "Track"]
+
 
 MAX_SPEED = 42.0            # m/s, fastest plausible world motion
 
