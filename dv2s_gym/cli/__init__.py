@@ -12,7 +12,7 @@ import sys
 from typing import List, Optional
 
 from dv2s_gym.cli import (bank, convert, demo, evaluate, loop, maps, mine, regress, replay, run, train)
-from dv2s_gym.cli.errors import report_error
+from dv2s_gym.cli.errors import missing_extra, report_error
 from dv2s_gym.cli.interrupts import SigintFlag, report_interrupted
 from dv2s_gym.cli.parser import Parser
 from scenario_bank.errors import DV2SError
@@ -89,7 +89,7 @@ def _main(argv: Optional[List[str]]) -> int:
         if sigint.received:  # e.g. a broken pipe to a worker that Ctrl-C stopped first
             return report_interrupted(args)
         # a bad value or a file problem from a library explains itself; anything else is unexpected
-        return report_error(args, error, explained=isinstance(error, (ValueError, OSError)))
+        return report_error(args, error, explained=isinstance(error, (ValueError, OSError)) or bool(missing_extra(error)))
 
 
 def _silence_stdout() -> None:
