@@ -53,7 +53,7 @@ The relation ``crossing_path`` holds when, between 1 s before the event and the 
 the actor enters the ego's path ahead of it (with ``within_s``: within that time gap), or, for a vehicle, when its
 path crosses the ego's at 20 to 160 degrees with a post-encroachment time (how far apart in time the two
 pass the crossing point, whichever first) within ``within_s`` (an oncoming car that strikes the side of
-a car turning across its path crossed it); the others hold at the event: ``ahead_of``/``behind`` (more than 2 m along the other's heading), ``left_of``/``right_of``/
+a car turning across its path crossed it), or when the two collide with both in the junction area; the others hold at the event: ``ahead_of``/``behind`` (more than 2 m along the other's heading), ``left_of``/``right_of``/
 ``same_lane`` (beyond / within half a lane sideways), ``oncoming`` (heading more than 135 degrees off).
 
 A collision of the ego with a story actor stands in for that actor's remaining steps when the
@@ -350,7 +350,7 @@ class _Detector:
                     continue
                 if e.kinds.get(name) != "pedestrian":
                     pet = self._encroachment(ref, name)
-                    if pet is not None and (within is None or pet <= within):
+                    if pet is not None and (within is None or pet <= within) or self._met_in_junction(ref, name):
                         continue
                     if pet is not None:
                         return (f"{when}: crosses the path of {other} {pet:.1f} s apart from it "
@@ -370,6 +370,15 @@ class _Detector:
         if step.get("hold") and not self._holds(step["action"], name, at):
             return f"{when}: does not last to the end of the episode"
         return None
+
+    def _met_in_junction(self, ref: str, name: str) -> bool:
+        """Whether ``name`` collided with ``ref`` while both were in the junction area: their paths met there with
+        no time between them, whatever the angle (a car barely into its turn is struck almost head-on)."""
+        hits = [i for i, other in self.e.collisions.get(name, []) if other == ref]
+        if not hits:
+            return False
+        inside_a, inside_b = self._in_junction(ref), self._in_junction(name)
+        return any(inside_a[i] and inside_b[i] for i in hits)
 
     def _encroachment(self, ref: str, name: str) -> Optional[float]:
         """Post-encroachment time [s] where the paths of ``name`` and ``ref`` cross (at 20 to 160 degrees): how

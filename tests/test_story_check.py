@@ -204,6 +204,34 @@ def test_a_car_crossing_just_behind_the_ego_crossed_its_path_but_a_walker_did_no
                                                kinds={"other": "pedestrian"})).played
 
 
+def _turning_ego_and_oncoming(shift_x: float):
+    """An ego slowing into a left turn (heading 17 degrees into it) and an oncoming car going straight that strikes
+    its front corner at step 26, the meeting point ``shift_x`` metres along the main road of the T-junction map."""
+    ego, oncoming = [], []
+    x, speed, heading = 40.5 + shift_x, 7.4, math.pi
+    for i in range(N):
+        if i > 20:
+            speed, heading = max(0.9, speed * 0.7), min(heading + 0.05, math.pi + 0.3)
+        ego.append([x, -1.8 + (0.0 if i <= 20 else min(1.1, 0.2 * (i - 20))), heading, speed] if i <= 26 else None)
+        x -= speed * DT
+        oncoming.append([-42.1 + shift_x + 8.4 * i * DT, 1.8, 0.0, 8.4] if i <= 26 else None)
+    return {"ego": ego, "oncoming": oncoming}
+
+
+def test_an_oncoming_car_that_strikes_the_turning_ego_in_the_junction_crossed_its_path():
+    story = {"actors": {"oncoming": "car"},
+             "steps": [{"actor": "oncoming", "action": "keep_lane",
+                        "relations": [["crossing_path", "ego"]], "within_s": 3.0}]}
+    params = {"map": "urban_t_junction.xodr"}
+    in_junction = trace(_turning_ego_and_oncoming(0.0), events=[collision("oncoming", 26)])
+    in_junction.params = params
+    assert check_story(story, in_junction).played
+    # the same near head-on collision 80 m down the main road, outside the junction, is no crossing
+    on_the_road = trace(_turning_ego_and_oncoming(80.0), events=[collision("oncoming", 26)])
+    on_the_road.params = params
+    assert not check_story(story, on_the_road).played
+
+
 # ---------------------------------------------------------- every actor
 
 

@@ -9,9 +9,9 @@ model scenic.domains.driving.model
 param ego_speed = Range(9, 12)
 param ego_distance = Range(60, 80)
 param time_gap = Range(1.8, 2.5)
-param brake_distance = Range(10, 16)
+param brake_distance = Range(5, 9)
 param brake_strength = Range(0.6, 0.9)
-param turn_speed = Range(3, 4.5)
+param turn_speed = Range(4, 5.5)
 
 # 2. Adversarial behaviours
 behavior LeadEgo(line, timeGap):
