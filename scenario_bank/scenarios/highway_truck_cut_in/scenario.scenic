@@ -29,12 +29,27 @@ behavior SlideToLane(section, speed, duration):
         take RegulatedControlAction(throttle, steer, pastSteer)
         pastSteer = steer
 
+behavior StaySlowerThanEgo(speed, trigger, duration):
+    # keep right at `speed`, or slower when the ego hangs back, so that the ego closes in, until it is
+    # within `trigger` metres behind (at most 2 s of its speed) or would reach the truck before a lane
+    # change could end (distance past ego of self: how far self is ahead of the ego)
+    lonControl, latControl = simulation().getLaneFollowingControllers(self)
+    line = self.lane.centerline
+    pastSteer = 0
+    while (distance past ego of self) >= max(min(trigger, 2 * ego.speed), (ego.speed - self.speed) * (duration + 1)):
+        wanted = max(5, min(speed, ego.speed - 5))
+        throttle = lonControl.run_step(wanted - self.speed)
+        steer = latControl.run_step(line.signedDistanceTo(self.position))
+        take RegulatedControlAction(throttle, steer, pastSteer)
+        pastSteer = steer
+
 behavior PullOutInFrontOf(speed, trigger, duration):
-    # keep right until the faster ego is within `trigger` metres behind, then move into its lane
-    # (distance past ego of self: how far self is ahead of the ego along self's heading)
-    do FollowLaneBehavior(target_speed=speed) until (distance past ego of self) < trigger
-    do SlideToLane(self.laneSection.laneToLeft, speed, duration)
-    do FollowLaneBehavior(target_speed=speed)
+    # keep right until the faster ego is within `trigger` metres behind, then move into its lane at the
+    # speed it has then
+    do StaySlowerThanEgo(speed, trigger, duration)
+    cutSpeed = max(5, min(speed, self.speed))
+    do SlideToLane(self.laneSection.laneToLeft, cutSpeed, duration)
+    do FollowLaneBehavior(target_speed=cutSpeed)
 
 # 3. Road geometry: a straight multi-lane highway; the ego's lane and the lane to its right
 lanePairs = [(lane, lane.sections[0]._laneToRight.lane) for lane in network.lanes
