@@ -71,6 +71,20 @@ behavior PassAndMoveIn(truck, extraSpeed, moveInGap, duration, brakeDistance, st
         take SetThrottleAction(0), SetBrakeAction(strength)
     do FollowLaneBehavior(target_speed=truck.speed)
 
+behavior SlowTruck(speed):
+    # drive on at `speed`, but while the ego is more than 60 m behind, slower than the ego (an ego that hangs
+    # back still comes up behind the truck)
+    lonControl, latControl = simulation().getLaneFollowingControllers(self)
+    wanted = speed
+    pastSteer = 0
+    while True:
+        if (distance past ego of self) > 60:
+            wanted = max(5, min(speed, ego.speed - 4))
+        throttle = lonControl.run_step(wanted - self.speed)
+        steer = latControl.run_step(self.lane.centerline.signedDistanceTo(self.position))
+        take RegulatedControlAction(throttle, steer, pastSteer)
+        pastSteer = steer
+
 # 3. Road geometry: a straight multi-lane highway; the ego's lane and the lane to its left
 lanePairs = [(lane, lane.sections[0]._laneToLeft.lane) for lane in network.lanes
              if lane.sections[0]._laneToLeft is not None]
@@ -87,7 +101,7 @@ ego = new Car at egoLane.centerline.pointAlongBy(egoS),
 truck = new Truck at egoLane.centerline.pointAlongBy(egoS + globalParameters.truck_gap),
     with name "truck",
     with speed truckSpeed,
-    with behavior FollowLaneBehavior(target_speed=truckSpeed)
+    with behavior SlowTruck(truckSpeed)
 passer = new Car at passLane.centerline.pointAlongBy(egoS - globalParameters.passer_start_gap),
     with name "passer",
     with speed globalParameters.ego_speed + globalParameters.passer_extra_speed,
