@@ -245,7 +245,8 @@ def test_story_rate(name):
 # ------------------------------------------------- the story plays for probe egos
 
 PROBE_SEEDS = range(10)
-PROBED_SCENARIOS = ("highway_lead_vehicle_brakes", "highway_lead_vehicle_decelerates", "urban_left_turn_oncoming")
+PROBED_SCENARIOS = ("highway_lead_vehicle_brakes", "highway_lead_vehicle_decelerates", "urban_left_turn_oncoming",
+                    "highway_truck_cut_in", "highway_fast_car_passes_behind_slow_truck", "urban_lead_vehicle_turns")
 """Scenarios whose actors time or place their manoeuvre on the ego (its lane, its distance to a crossing point),
 run with the probe egos that hang back, rush, surge and weave (dv2s_gym/story.py: PROBE_EGOS)."""
 
@@ -259,6 +260,19 @@ KNOWN_PROBE_MISSES: dict = {
     # the rushing ego is already turning when the oncoming car reaches its path, so it is no longer oncoming
     # (seeds 3 and 7)
     ("urban_left_turn_oncoming", "rush"): 0.8,
+    # the ego that hangs back keeps a 3 s gap to anything entering its lane, so the truck ends its move 3.6-3.8 s
+    # ahead of it (seeds 2, 8, 9)
+    ("highway_truck_cut_in", "hangback"): 0.7,
+    # the weaving ego pulls out at 1 s into the car coming up beside it: the very collision the scenario warns of,
+    # before the passing car's story (every seed)
+    ("highway_fast_car_passes_behind_slow_truck", "weave"): 0.0,
+    # an ego that hangs back or speeds up mid-episode meets the lead braking for the junction from further back or
+    # nearer than the lead planned for, and the turn comes after the episode ends or after the ego hit it
+    # (hangback seeds 6 and 9; surge seeds 4, 5, 7)
+    ("urban_lead_vehicle_turns", "hangback"): 0.8,
+    ("urban_lead_vehicle_turns", "surge"): 0.7,
+    # the rushing ego ignores what is ahead and runs into the lead as it brakes for the junction, before it turns
+    ("urban_lead_vehicle_turns", "rush"): 0.0,
 }
 """Probed scenario and probe ego pairs under the threshold, with their rate on PROBE_SEEDS; exact, as
 KNOWN_STORY_MISSES."""

@@ -21,7 +21,7 @@ behavior LeadEgo(line, timeGap):
     pastSteer = 0
     while True:
         gap = (distance past ego of self) - 5
-        wanted = max(2, ego.speed + 0.5 * (gap - timeGap * max(ego.speed, 3)))
+        wanted = max(2, ego.speed - 0.5 * (gap - timeGap * max(ego.speed, 3)))
         throttle = lonControl.run_step(min(wanted, 16) - self.speed)
         steer = latControl.run_step(line.signedDistanceTo(self.position))
         take RegulatedControlAction(throttle, steer, pastSteer)
