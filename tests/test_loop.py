@@ -803,6 +803,40 @@ def test_the_next_round_starts_from_the_policy_the_verdict_recommends(tmp_path, 
     assert [r["next_policy"] for r in again.rounds] == [r["next_policy"] for r in saved]
 
 
+@pytest.mark.parametrize("over_all_rounds, starts_from", [("FAIL", "start"), ("PASS", "fine-tuned")])
+def test_the_next_round_follows_the_policy_to_use_when_the_rounds_are_judged_against_the_start(
+        tmp_path, monkeypatch, over_all_rounds, starts_from):
+    """Rounds 1 and 2 each pass against the policy they started from. Judged over both rounds against the starting
+    policy (as the report judges them), the fine-tuned policy is either rejected (round 3 starts from the starting
+    policy, the policy to use) or not (round 3 starts from round 2's fine-tuned policy, the policy to use)."""
+    from dv2s_gym.mining import loop_report
+
+    _StandIns(monkeypatch)
+    _regression_verdicts(monkeypatch, {"round_1": "PASS", "round_2": "PASS", "round_3": "PASS"})
+    judged = []
+
+    def over_rounds(report, out=None):
+        tested = [r for r in report.get("rounds", []) if (r.get("steps") or {}).get("regress")]
+        if len(tested) < 2:
+            return None
+        judged.append(len(tested))
+        return {"start": "dv2s-ppo", "final": tested[-1].get("new_policy"), "rounds": [1, tested[-1]["round"]],
+                "verdict": over_all_rounds, "reason": f"stand-in {over_all_rounds}", "episodes": 8}
+
+    monkeypatch.setattr(loop_report, "final_vs_start", over_rounds)
+    miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
+    settings = {**WIRING, "untouched_seeds": 0, "min_heldout_episodes": 1, "min_heldout_families": 1}
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=3, miner=miner, log=lambda _: None, **settings)
+    first, second, third = report.rounds
+    assert second["policy"] == first["new_policy"] and judged  # round 1 alone: ACCEPTED, round 2 starts from it
+    expected = "dv2s-ppo" if starts_from == "start" else second["new_policy"]
+    assert second["next_policy"] == third["policy"] == expected
+    assert miner.calls[2]["policy"] == expected
+    written = json.loads((tmp_path / "loop" / "loop.json").read_text())["rounds"][1]
+    assert written["next_policy"] == expected
+    assert second["next_policy_reason"].startswith("REJECTED" if over_all_rounds == "FAIL" else "ACCEPTED")
+
+
 @pytest.mark.parametrize("change, named", [({"n_envs": 2}, "n_envs: run has 1, asked 2"),
                                            ({"min_heldout_families": 1}, "min_heldout_families: run has 2, asked 1")])
 def test_a_resume_refuses_other_training_envs_or_another_held_out_family_minimum(tmp_path, monkeypatch, change, named):

@@ -490,16 +490,24 @@ def _next_start(loop: _Loop, number: int, current: str) -> str:
     """The policy round ``number + 1`` starts from: the one the verdict on rounds 1..``number`` recommends
     (:func:`~dv2s_gym.mining.loop_verdict.recommendation`: never a REJECTED or NOT ACCEPTED fine-tuned policy),
     recorded in round ``number``'s ``next_policy`` and ``next_policy_reason``."""
+    from dv2s_gym.mining import loop_report
+
     rounds = loop.state.data["rounds"][:number]
     record = rounds[-1]
     start = loop.state.data["settings"]["policy"]
-    advice = recommendation({"settings": {"policy": start}, "rounds": rounds})
+    body: Dict[str, Any] = {"settings": {"policy": start}, "rounds": rounds}
+    final = loop_report.final_vs_start(body)  # as the report judges it: with two or more tested rounds
+    if final is not None:
+        body["final_vs_start"] = final
+    advice = recommendation(body)
+    # the policy to use, exactly as the report recommends it: the fine-tuned one only when it is the recommendation
+    following = advice["policy"]
     if record.get("new_policy") is None and "fine_tune" not in record["steps"]:
-        following, reason = current, "this round fine-tuned no policy"
+        reason = f"this round fine-tuned no policy; {advice['sentence']}"
     else:
-        following, reason = advice["policy"], advice["sentence"]
-        if following != start:
-            following = _earlier_round_spec(following, loop, number + 1)
+        reason = advice["sentence"]
+    if following != start:
+        following = _earlier_round_spec(following, loop, number + 1)
     if (record.get("next_policy"), record.get("next_policy_reason")) != (following, reason):
         record["next_policy"], record["next_policy_reason"] = following, reason
         loop.state.save()
