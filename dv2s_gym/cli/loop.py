@@ -74,7 +74,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--max-replays", default=None,
                    help=_default("max_replays", "failure clusters beyond the converted ones whose failing scene is "
                                  "kept as an exact replay entry (the parent scenario narrowed around the failure, "
-                                 "checked to replay it step for step) per round, largest first; 0 for none, 'all' "
+                                 "checked to replay it step for step) per round, the scenario families taking turns, "
+                                 "each its largest cluster first; 0 for none, 'all' "
                                  "for every cluster"))
     p.add_argument("--min-heldout-episodes", type=int, default=None,
                    help=_default("min_heldout_episodes", "below this many held-out episodes a round reports rates "

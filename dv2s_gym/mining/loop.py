@@ -8,8 +8,8 @@ a. **mine**: :func:`dv2s_gym.mining.miner.mine` runs ``P`` on sampled scenes of 
    the D-V2S pipeline and adds the kept scenarios to the *working bank* (``out/bank``, a copy
    of the shipped bank, or the ``bank_dir`` given); every converted failure's scene is also kept
    exactly (its *exact replay* entry: the parent scenario narrowed around the failing parameters),
-   and so is that of up to ``max_replays`` more clusters, largest first
-   (:func:`dv2s_gym.mining.replays.replay_clusters`: no video, description or script, only the narrowed
+   and so is that of up to ``max_replays`` more clusters, the scenario families taking turns, each its largest
+   cluster first (:func:`dv2s_gym.mining.replays.replay_clusters`: no video, description or script, only the narrowed
    parent checked to replay the failing episode step for step): these are mined scenarios of the
    round too, so a round whose conversions are all rejected still has families to split;
 b. **split**: the newly kept scenarios (converted scripts and exact replays) are split by *family* (their parent bank scenario,
