@@ -740,13 +740,15 @@ def test_a_fine_tuned_policy_that_regressed_is_not_recommended_and_the_exit_stat
     assert code == 1 and verdict["verdict"] == "REJECTED" and verdict["policy"] == "dv2s-ppo"
     assert verdict["candidate"] == report["rounds"][0]["new_policy"] != "dv2s-ppo"
     assert "regressed on the rest of the bank" in verdict["sentence"] and "keep the starting policy" in verdict["sentence"]
-    assert f"verdict: {verdict['sentence']}" in out and "recommended policy: dv2s-ppo" in out
-    assert "final policy" not in out and "|---|" not in out  # a summary, not the Markdown report
+    assert f"verdict: {verdict['sentence']}" in out and "policy to use: dv2s-ppo" in out
+    assert "final policy" not in out.lower() and "|---|" not in out  # a summary, not the Markdown report
     assert f"report (html): {tmp_path / 'loop' / 'report.html'}" in out
     markdown = (tmp_path / "loop" / "report.md").read_text()
-    assert verdict["sentence"] in markdown.split("## Round")[0] and "final policy" not in markdown
+    assert verdict["sentence"] in markdown.split("## Round")[0] and "final policy" not in markdown.lower()
     page = (tmp_path / "loop" / "report.html").read_text()
-    assert 'class="REJECTED"' in page and "final policy" not in page
+    assert 'class="REJECTED"' in page and "final policy" not in page.lower()
+    assert "not the round 1 fine-tuned policy" in verdict["sentence"] and "Policy to use: `dv2s-ppo`" in markdown
+    assert "- policy: `dv2s-ppo` -> fine-tuned policy `" in markdown
 
 
 def test_a_fine_tuned_policy_the_control_beat_is_rejected(tmp_path, capsys, monkeypatch):
@@ -754,7 +756,7 @@ def test_a_fine_tuned_policy_the_control_beat_is_rejected(tmp_path, capsys, monk
     code, out, _ = _cli_loop(capsys, monkeypatch, tmp_path / "loop")
     verdict = json.loads((tmp_path / "loop" / "report.json").read_text())["recommendation"]
     assert code == 1 and verdict["verdict"] == "REJECTED" and "the control" in verdict["reason"]
-    assert verdict["policy"] == "dv2s-ppo" and "recommended policy: dv2s-ppo" in out
+    assert verdict["policy"] == "dv2s-ppo" and "policy to use: dv2s-ppo" in out
 
 
 def test_an_accepted_policy_is_recommended_with_exit_status_0(tmp_path, capsys, monkeypatch):
@@ -763,7 +765,7 @@ def test_an_accepted_policy_is_recommended_with_exit_status_0(tmp_path, capsys, 
     report = json.loads((tmp_path / "loop" / "report.json").read_text())
     assert code == 0 and report["recommendation"]["verdict"] == "ACCEPTED"
     assert report["recommendation"]["policy"] == report["rounds"][0]["new_policy"] == report["policy"]
-    assert f"recommended policy: {report['policy']}" in out
+    assert f"policy to use: {report['policy']}" in out and "recommended policy" not in out
 
 
 def test_an_inconclusive_regression_test_leaves_the_policy_not_accepted(tmp_path, capsys, monkeypatch):

@@ -29,14 +29,14 @@ def test_an_accepted_last_round_is_used():
     verdict = recommendation(_report(_round(1, "FAIL"), _round(2, "PASS")))
     assert verdict["verdict"] == "ACCEPTED" and verdict["exit_code"] == 0
     assert verdict["policy"] == "ppo:round_2/policy/model.zip"
-    assert verdict["sentence"].startswith("ACCEPTED: use the round 2 policy ppo:round_2/policy/model.zip")
+    assert verdict["sentence"].startswith("ACCEPTED: use the round 2 fine-tuned policy ppo:round_2/policy/model.zip")
 
 
 def test_rounds_that_each_pass_but_regress_against_the_start_over_all_rounds_are_rejected():
     final = {"verdict": "FAIL", "rounds": [1, 2], "reason": "fails more often"}
     verdict = recommendation(_report(_round(1, "PASS"), _round(2, "PASS"), final_vs_start=final))
     assert verdict["verdict"] == "REJECTED" and verdict["policy"] == "dv2s-ppo"
-    assert "over rounds 1, 2 the policy regressed against the starting one" in verdict["reason"]
+    assert "over rounds 1, 2 the fine-tuned policy regressed against the starting one" in verdict["reason"]
 
 
 def test_a_control_that_fails_significantly_fewer_held_out_episodes_rejects_the_policy():

@@ -178,7 +178,7 @@ def summary_lines(report: Mapping[str, Any], paths: Mapping[str, Any]) -> List[s
 
     lines = [round_summary(record) for record in report.get("rounds") or []]
     verdict = report.get("recommendation") or {}
-    lines += ["", f"verdict: {verdict.get('sentence')}", f"recommended policy: {verdict.get('policy')}"]
+    lines += ["", f"verdict: {verdict.get('sentence')}", f"policy to use: {verdict.get('policy')}"]
     lines += [f"report ({kind}): {paths[kind]}" for kind in ("html", "md", "json") if kind in paths]
     return lines
 

@@ -145,16 +145,18 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None) -> Opt
 
 
 def _final_line(final: Optional[Mapping[str, Any]]) -> Optional[str]:
-    """One sentence on the final policy against the starting one (None when there is no such comparison)."""
+    """One sentence on the last fine-tuned policy against the starting one (None when there is no such
+    comparison)."""
     if not final:
         return None
     if final.get("error"):
-        return f"Final against starting policy on the starting bank: not compared ({final['error']})."
+        return f"Fine-tuned policy against the starting policy on the starting bank: not compared ({final['error']})."
     rounds = final.get("rounds") or ["?", "?"]
-    return (f"Final policy `{final.get('final')}` against starting policy `{final.get('start')}` on the starting "
+    return (f"Round {rounds[1]}'s fine-tuned policy `{final.get('final')}` against the starting policy "
+            f"`{final.get('start')}` on the starting "
             f"bank ({final.get('episodes')} paired episodes: round {rounds[0]}'s baseline episodes with round "
             f"{rounds[1]}'s candidate episodes, same scenarios and seeds): **{final.get('verdict')}** - "
-            f"{final.get('reason')}; failure rate final {_summary_rate(final.get('new_failure_rate'))}, start "
+            f"{final.get('reason')}; failure rate fine-tuned {_summary_rate(final.get('new_failure_rate'))}, start "
             f"{_summary_rate(final.get('old_failure_rate'))}"
             + (f"; regressed: {', '.join(final['regressed'])}" if final.get("regressed") else "")
             + (f"; report `{final['report']}`" if final.get("report") else "") + ".")
@@ -358,7 +360,7 @@ def render_markdown(report: Mapping[str, Any]) -> str:
     for record in report.get("rounds", []):
         steps = record.get("steps", {})
         lines += ["", f"## Round {record.get('round')}", "",
-                  f"- policy: `{record.get('policy')}` -> `{record.get('new_policy', '-')}`",
+                  f"- policy: `{record.get('policy')}` -> fine-tuned policy `{record.get('new_policy', '-')}`",
                   f"- timings: {_seconds(record.get('timings', {}))}"]
         if steps.get("skipped"):
             lines.append(f"- skipped: {steps['skipped']}")

@@ -92,15 +92,16 @@ def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
     final = report.get("final_vs_start") or {}
     if judged["verdict"] == ACCEPTED and final.get("verdict") == "FAIL":  # each round passed against its own start
         judged = {"verdict": REJECTED, "reason": f"over rounds {', '.join(map(str, final.get('rounds') or []))} "
-                                                 f"the policy regressed against the starting one on the starting "
+                                                 f"the fine-tuned policy regressed against the starting one on the "
+                                                 f"starting "
                                                  f"bank ({final.get('reason')})"}
         recommended = start
     if judged["verdict"] == ACCEPTED:
-        sentence = f"ACCEPTED: use the round {number} policy {candidate}: {judged['reason']}"
+        sentence = f"ACCEPTED: use the round {number} fine-tuned policy {candidate}: {judged['reason']}"
     else:
         keep = "the starting policy" if recommended == start else "the last accepted policy"
-        sentence = (f"{judged['verdict']}: keep {keep} {recommended}, not the round {number} policy {candidate}: "
-                    f"{judged['reason']}")
+        sentence = (f"{judged['verdict']}: keep {keep} {recommended}, not the round {number} fine-tuned policy "
+                    f"{candidate}: {judged['reason']}")
     small = too_small(record) if judged["verdict"] == NOT_ACCEPTED else None
     if small:
         sentence += f". TOO SMALL TO JUDGE ({small}): {EVIDENCE_HINT}"
