@@ -14,11 +14,13 @@ __all__ = ["add_parser", "run", "loop_settings"]
 
 EPILOG = """\
 exit status (the verdict on the last round's fine-tuned policy; the summary names the policy to use):
-  0  ACCEPTED: its regression test on the rest of the bank PASSed and the control did not beat it
-     on the held-out scenarios: use it
-  1  REJECTED: it regressed on the rest of the bank, the control beat it, or over several rounds it
-     regressed against the starting policy: keep the last accepted policy, else the starting one
-  3  NOT ACCEPTED: the regression test was INCONCLUSIVE or in ERROR, or no round fine-tuned a policy
+  0  ACCEPTED: its regression test on the rest of the bank PASSed and on the held-out families it is
+     significantly worse neither than the starting policy nor than the control: use it
+  1  REJECTED: it regressed on the rest of the bank, it is significantly worse than the starting policy or
+     the control on the held-out families, or over several rounds it regressed against the starting
+     policy: keep the last accepted policy, else the starting one
+  3  NOT ACCEPTED: the regression test was INCONCLUSIVE or in ERROR, the held-out tests could not run (too
+     few held-out episodes or families), or no round fine-tuned a policy
   2  bad input; 130 interrupted
 
 examples:

@@ -805,7 +805,10 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     ``families`` maps each held-out scenario to its family (default: each scenario its own); ``heldout_families``
     and ``heldout_scenarios`` count those the episodes came from. Below ``min_episodes`` pairs or
     ``min_families`` families the drop, its interval and both p-values are ``None`` and ``underpowered``
-    says why (the rates, with their wide intervals, stay)."""
+    says why (the rates, with their wide intervals, stay). ``significantly_worse`` holds, for ``start`` and
+    ``control``, whether the fine-tuned policy is significantly worse on the held-out families
+    (:func:`dv2s_gym.mining.loop_verdict.heldout_worse`, the verdict's held-out tests; ``None`` when not tested:
+    below the minimums, or no control)."""
     from dv2s_gym.mining.heldout import failure_types, paired_summary
 
     summary = paired_summary(before, after, seed=seed)
@@ -833,7 +836,36 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
         summary.update(relative_drop=None, relative_drop_interval=[None, None], mcnemar_p=None)
         if "vs_control" in summary:
             summary["vs_control"].update(relative_drop=None, mcnemar_p=None)
+    # is the fine-tuned policy significantly worse than the start / the control on the held-out families
+    # (loop_verdict.heldout_worse: the dv2s regress gate over the families); not tested below the minimums
+    from dv2s_gym.mining.loop_verdict import heldout_worse
+
+    summary["significantly_worse"] = {
+        "start": None if shortfall else heldout_worse(_family_tables(before, after, families), "start"),
+        "control": None if shortfall or control is None else heldout_worse(
+            _family_tables(control, after, families), "control")}
     return summary
+
+
+def _family_tables(baseline: Sequence[Mapping[str, Any]], candidate: Sequence[Mapping[str, Any]],
+                   families: Optional[Mapping[str, str]]) -> Dict[str, Any]:
+    """``{held-out family: PairedTable}`` of ``candidate`` against ``baseline`` records, paired by (scenario, seed);
+    a pair with an error on either side is left out."""
+    from dv2s_gym.mining.heldout import episode_failed
+    from dv2s_gym.regress.stats import PairedTable
+
+    twins = {(r["scenario"], int(r["seed"])): r for r in candidate}
+    outcomes: Dict[str, tuple] = {}
+    for record in baseline:
+        twin = twins.get((record["scenario"], int(record["seed"])))
+        old, new = episode_failed(record), episode_failed(twin) if twin is not None else None
+        if old is None or new is None:
+            continue
+        family = (families or {}).get(str(record["scenario"]), str(record["scenario"]))
+        pair = outcomes.setdefault(family, ([], []))
+        pair[0].append(new)
+        pair[1].append(old)
+    return {family: PairedTable.from_outcomes(new, old) for family, (new, old) in sorted(outcomes.items())}
 
 
 def untouched_settings(seeds: int, env_config: Mapping[str, Any], margin: float,

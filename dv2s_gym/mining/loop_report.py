@@ -4,8 +4,9 @@
 
     {"schema": "dv2s-loop", "schema_version": 1, "out", "settings", "policy": the last fine-tuned policy's spec,
      "recommendation": {"policy": the spec to use, "verdict": ACCEPTED | REJECTED | NOT ACCEPTED, "round",
-                        "candidate", "reason", "sentence", "exit_code", "too_small": why the round was too small
-                        to judge, or None} (:mod:`dv2s_gym.mining.loop_verdict`),
+                        "candidate", "reason", "decided_by": the test that decided, "sentence", "exit_code",
+                        "too_small": why the round was too small to judge, or None}
+                        (:mod:`dv2s_gym.mining.loop_verdict`),
      "rounds": [{"round", "policy": spec it started from, "new_policy": fine-tuned spec,
                  "next_policy": the spec the next round starts from (the one the verdict on the rounds so far
                  recommends), "next_policy_reason",
@@ -37,7 +38,12 @@
                                      "min_episodes", "min_families", "heldout_families", "heldout_scenarios",
                                      "underpowered": why no drop or test is reported (only below
                                      min_episodes pairs or min_families families; then the drop and
-                                     p-values are None)},
+                                     p-values are None),
+                                     "significantly_worse": {"start" | "control": is the fine-tuned policy
+                                         significantly worse on the held-out families
+                                         (:func:`dv2s_gym.mining.loop_verdict.heldout_worse`: {"against", "test",
+                                         "worse", "families", "pairs", "fine_tuned_only", "other_only", "p_value",
+                                         "worse_families", "reason"}; None when not tested)}},
                            "untouched": {"scenarios", "seeds", "policies": {"start" | "control" | "fine_tuned":
                                          {"episodes", "errors", "failure_rate", "stall_rate", "collision_rate",
                                           "mean_speed"}} (dv2s regress summaries), "fine_tuned_vs_start" and
@@ -305,6 +311,12 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
                         else f", relative drop against the control {versus['relative_drop']:.0%}"))
     elif not after.get("control"):
         lines.append("- no control arm in this round: a drop cannot be credited to the mined scenarios")
+    for key, label in (("start", "the starting policy"), ("control", "the control")):
+        test = (after.get("significantly_worse") or {}).get(key)
+        if test:
+            lines.append(f"- fine-tuned policy against {label} on the held-out families: "
+                         f"**{'significantly worse' if test.get('worse') else 'not significantly worse'}** "
+                         f"({test.get('reason')}; {test.get('test')})")
     per = after.get("per_scenario") or {}
     if per:
         controls = versus.get("per_scenario") or {}
