@@ -850,3 +850,73 @@ def test_a_resume_refuses_other_training_envs_or_another_held_out_family_minimum
     run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, log=lambda _: None, **settings)
     with pytest.raises(RunIdentityError, match=named):
         run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, log=lambda _: None, **{**settings, **change})
+
+
+def test_errored_episodes_are_counted_per_step_and_named_in_the_log_the_record_and_the_reports(tmp_path, monkeypatch):
+    """A scene the sampler cannot produce is an errored episode, counted in no rate: each step that had some says
+    how many, in which scenarios and why, in the log, ``loop.json`` and both reports."""
+    import dv2s_gym.mining.heldout as heldout
+    import dv2s_gym.regress.runner as runner
+
+    _StandIns(monkeypatch)
+    evaluate, regression = heldout.evaluate_heldout, runner.run_regression
+    unsampleable = "SceneSamplingError: scenario 'x': no scene satisfied its requirements in 2000 sampling iterations"
+
+    def held_out(role, policy, episodes, **options):
+        records = evaluate(role, policy, episodes, **options)
+        if role == "after":  # the fine-tuned policy's first held-out episode errors
+            records[0] = {**records[0], "failed": None, "error": unsampleable}
+        return records
+
+    def regress(candidate, baseline=None, settings=None, **options):
+        report = regression(candidate, baseline, settings, **options)
+        name = (settings.scenarios or ["urban_pedestrian_crossing"])[0]
+        return {**report, "episodes": [{"id": f"{name}:0", "scenario": name, "seed": 0,
+                                        "candidate": {"error": unsampleable}, "baseline": {"error": None}},
+                                       {"id": f"{name}:1", "scenario": name, "seed": 1,
+                                        "candidate": {"error": None}, "baseline": {"error": None}}]}
+
+    monkeypatch.setattr(heldout, "evaluate_heldout", held_out)
+    monkeypatch.setattr(runner, "run_regression", regress)
+
+    class ErroringMiner(FakeMiner):
+        def __call__(self, policy, settings, *, out, **options):
+            result = super().__call__(policy, settings, out=out, **options)
+            with open(Path(out) / "episodes.jsonl", "a") as handle:  # one scene the sampler could not produce
+                handle.write(json.dumps({"index": settings.budget, "scenario": "urban_pedestrian_crossing",
+                                         "seed": 7, "params": {"kerb_offset": 3.1}, "failure": None,
+                                         "avoidable": None, "error": unsampleable}) + "\n")
+            return result
+
+    lines = []
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=ErroringMiner(WIRING["scenarios"], failures_per_round=6),
+                      min_heldout_episodes=1, min_heldout_families=1, log=lines.append, **WIRING)
+    steps = json.loads((tmp_path / "loop" / "loop.json").read_text())["rounds"][0]["steps"]
+    assert steps["mine"]["errored"]["scenarios"] == {"urban_pedestrian_crossing": 1}
+    assert unsampleable in steps["mine"]["errored"]["examples"]["urban_pedestrian_crossing"]
+    held = steps["split"]["held_out"][0]
+    assert steps["before"]["errored"]["episodes"] == 0
+    assert steps["after"]["errored"]["fine_tuned"]["scenarios"] == {held: 1}
+    assert steps["after"]["errored"]["control"]["episodes"] == 0 and steps["after"]["errors"] == 1
+    first = sorted(WIRING["scenarios"])[0]
+    assert steps["regress"]["errored"]["fine_tuned"]["scenarios"] == {first: 1}
+    assert steps["regress"]["errored"]["start"]["episodes"] == 0
+    assert steps["untouched"]["errored"]["fine_tuned"]["episodes"] == 1
+    warnings = [line for line in lines if "WARNING: episodes that errored" in line]
+    assert len(warnings) == 4  # mining, held-out after, untouched set, regression test
+    assert "mining step" in warnings[0] and "tests): 1 (urban_pedestrian_crossing 1)" in warnings[0]
+    assert unsampleable in warnings[0]
+    assert f"fine-tuned policy 1 ({held} 1)" in warnings[1]
+    markdown = report.paths["md"].read_text()
+    assert ("errored episodes (counted in no rate or test): **mining: 1 (urban_pedestrian_crossing 1); "
+            f"held-out: fine-tuned policy 1 ({held} 1)") in markdown
+    assert f"regression test: fine-tuned policy 1 ({first} 1)**" in markdown
+    assert "3 episode(s) errored" not in markdown and "5 episode(s) errored (see the report)" in report_summary(report)
+    assert f"- `urban_pedestrian_crossing`: {unsampleable}" in markdown
+    assert "errored" in report.paths["html"].read_text()
+
+
+def report_summary(report):
+    from dv2s_gym.mining.loop_report import round_summary
+
+    return round_summary(report.rounds[0])

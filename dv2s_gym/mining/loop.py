@@ -261,11 +261,39 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
     replayed: Dict[str, int] = {}
     for row in read_rows(mine_out / REPLAYS_FILE):
         replayed[row.get("status", "?")] = replayed.get(row.get("status", "?"), 0) + 1
-    return {"replays": replayed, "episodes": episodes, "errors": errors, "failures": failures, "failures_against_policy": counted,
+    return {"replays": replayed, "episodes": episodes, "errors": errors, "errored": errored_episodes(records),
+            "failures": failures, "failures_against_policy": counted,
             "clusters": clusters, "conversions": statuses, "rejected_reasons": reasons[:20],
             "clusters_not_converted": None if clusters is None else max(0, clusters - converted),
             "clusters_not_kept": None if clusters is None else max(0, clusters - converted
                                                                    - sum(replayed.values()))}
+
+
+def errored_episodes(records: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
+    """The episodes of ``records`` that errored (an ``error`` set: a scene that could not be sampled, a crashed or
+    hung worker...), which no rate counts: ``{"episodes": n, "scenarios": {scenario: n}, "examples": {scenario:
+    its first error, cut to 300 characters}}``."""
+    scenarios: Dict[str, int] = {}
+    examples: Dict[str, str] = {}
+    for record in records:
+        error = record.get("error")
+        if not error:
+            continue
+        name = str(record.get("scenario"))
+        scenarios[name] = scenarios.get(name, 0) + 1
+        examples.setdefault(name, str(error).strip().splitlines()[0][:300] if str(error).strip() else "error")
+    return {"episodes": sum(scenarios.values()), "scenarios": dict(sorted(scenarios.items())),
+            "examples": dict(sorted(examples.items()))}
+
+
+def _regress_errored(report: Mapping[str, Any], roles: Mapping[str, str]) -> Dict[str, Dict[str, Any]]:
+    """The errored episodes of a ``dv2s regress`` report per policy: ``roles`` maps its roles (``candidate``,
+    ``baseline``) to the loop's names for them (:func:`errored_episodes`' form)."""
+    found: Dict[str, Dict[str, Any]] = {}
+    for role, name in roles.items():
+        found[name] = errored_episodes([{"scenario": e.get("scenario"), "error": (e.get(role) or {}).get("error")}
+                                        for e in report.get("episodes") or [] if e.get(role) is not None])
+    return found
 
 
 def fine_tune_weights(names: Sequence[str], mined: Sequence[str], mined_share: float) -> Dict[str, float]:
@@ -450,6 +478,7 @@ def _run_round(loop: _Loop, number: int, current: str) -> str:
     if "mine" not in steps:
         timed("mine", lambda: _mine_step(loop, number, current, round_dir), _mine_plan(loop))
         _log_mined(loop, number, steps["mine"])
+        _log_errored(loop, number, "mining", {"mine": steps["mine"].get("errored") or {}})
     if "split" not in steps:
         _split_step(loop, number, current, timed)
     if not steps["split"]["fine_tune"] and not steps["split"]["held_out"]:
@@ -560,6 +589,28 @@ def _count_scripts(bank: Path) -> int:
     return sum(1 for _ in Path(bank).glob("*/scenario.scenic"))
 
 
+def errored_text(errored: Mapping[str, Mapping[str, Any]]) -> str:
+    """``"fine-tuned policy 3 (urban_pedestrian_crossing 3), control 1 (...)"``: errored episodes per policy (the
+    mining step's without a policy's name), in words; empty when none errored."""
+    labels = {"start": "starting policy ", "fine_tuned": "fine-tuned policy ", "control": "control ", "mine": ""}
+    parts = []
+    for role, found in errored.items():
+        if found and found.get("episodes"):
+            names = ", ".join(f"{name} {count}" for name, count in (found.get("scenarios") or {}).items())
+            parts.append(f"{labels.get(role, role + ' ')}{found['episodes']}" + (f" ({names})" if names else ""))
+    return ", ".join(parts)
+
+
+def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Mapping[str, Any]]) -> None:
+    """Say loudly when a step's episodes errored: they count in no rate and no test."""
+    text = errored_text(errored)
+    if not text:
+        return
+    examples = {name: why for found in errored.values() if found for name, why in (found.get("examples") or {}).items()}
+    loop.log(f"round {number}: WARNING: episodes that errored in the {stage} step (left out of its rates and "
+             f"tests): {text}" + "".join(f"; {name}: {why}" for name, why in sorted(examples.items())))
+
+
 def _log_mined(loop: _Loop, number: int, mined: Mapping[str, Any]) -> None:
     s = loop.settings
     loop.log(f"round {number}: mined {mined['failures']} failures in {mined['episodes']} episodes, "
@@ -605,16 +656,22 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
         loop.log(f"round {number}: WARNING: {shortfall}")
     store_path = round_dir / "heldout.jsonl"
     if "before" not in steps:
-        timed("before", lambda: {"episodes": len(episodes), "done": bool(evaluate_heldout(
-            "before", current, episodes, store=HeldOutStore(store_path), bank_dir=loop.bank,
-            env_config=loop.env_config, workers=WorkerSettings(workers=loop.workers), progress=loop.progress))},
+        def before_step() -> Dict[str, Any]:
+            records = evaluate_heldout("before", current, episodes, store=HeldOutStore(store_path), bank_dir=loop.bank,
+                                       env_config=loop.env_config, workers=WorkerSettings(workers=loop.workers),
+                                       progress=loop.progress)
+            return {"episodes": len(episodes), "done": bool(records), "errored": errored_episodes(records)}
+
+        timed("before", before_step,
               f"{len(episodes)} episodes ({len(split['held_out'])} held-out scenario(s) x {s.k_eval} seeds)")
+        _log_errored(loop, number, "held-out: starting policy", {"start": steps["before"]["errored"]})
     new_policy, control_policy = _fine_tune_arms(loop, number, current, round_dir, timed)
     policies = {"before": current, "after": new_policy, "control": control_policy}
     if "after" not in steps:
         timed("after", lambda: _after_step(loop, policies, episodes, HeldOutStore(store_path), families),
               f"{len(episodes)} episodes for the fine-tuned policy" + (" and as many for the control"
                                                                        if control_policy else ""))
+        _log_errored(loop, number, "held-out: fine-tuned and control", steps["after"].get("errored") or {})
     if s.untouched_seeds and "untouched" not in steps:
         timed("untouched", lambda: evaluate_untouched(
             current, new_policy, control_policy, settings=untouched_settings(s.untouched_seeds, loop.env_config,
@@ -622,9 +679,11 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
             out=round_dir / "untouched", workers=loop.workers, progress=loop.progress),
               f"{_count_scripts(UNTOUCHED_BANK)} scripts x {s.untouched_seeds} seed(s) for the starting, fine-tuned"
               + (" and control policies" if control_policy else " policies"))
+        _log_errored(loop, number, "untouched scenario set", steps["untouched"].get("errored") or {})
     if "regress" not in steps:
         timed("regress", lambda: _regress_step(loop, new_policy, current, round_dir, split),
               f"{len(loop.start_names)} scenarios x {s.regress_episodes} seed(s), fine-tuned against starting policy")
+        _log_errored(loop, number, "regression test", steps["regress"].get("errored") or {})
     return new_policy
 
 
@@ -679,8 +738,11 @@ def _after_step(loop: _Loop, policies: Mapping[str, Optional[str]], episodes: Li
         control_records = evaluate_heldout("control", policies["control"], episodes, progress=loop.progress,
                                            **common)
     s = loop.settings
-    return heldout_comparison(before, after, control_records, min_episodes=s.min_heldout_episodes, seed=s.seed,
-                              families=families, min_families=s.min_heldout_families)
+    summary = heldout_comparison(before, after, control_records, min_episodes=s.min_heldout_episodes, seed=s.seed,
+                                 families=families, min_families=s.min_heldout_families)
+    summary["errored"] = {"fine_tuned": errored_episodes(after),
+                          **({"control": errored_episodes(control_records)} if control_records is not None else {})}
+    return summary
 
 
 def _regress_step(loop: _Loop, new_policy: str, current: str, round_dir: Path,
@@ -694,7 +756,9 @@ def _regress_step(loop: _Loop, new_policy: str, current: str, round_dir: Path,
                                seed=EVAL_SEED_BASE, margin=s.margin, env_config=loop.env_config)
     report = run_regression(new_policy, current, settings, workers=WorkerSettings(workers=loop.workers),
                             out_dir=round_dir / "regress", progress=loop.progress)
-    return _regress_summary(report, round_dir / "regress" / "report.json", split.get("held_out_families", []))
+    summary = _regress_summary(report, round_dir / "regress" / "report.json", split.get("held_out_families", []))
+    summary["errored"] = _regress_errored(report, {"baseline": "start", "candidate": "fine_tuned"})
+    return summary
 
 
 _STAGE_NAMES = {"mine": "mining failures", "split": "splitting by family", "before": "held-out: starting policy",
@@ -894,7 +958,8 @@ def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, s
     result: Dict[str, Any] = {"scenarios": list((first.get("bank") or {}).get("scenarios") or []),
                               "seeds": settings.episodes, "policies": {"start": _measures(overall.get("baseline")),
                                                            "fine_tuned": _measures(overall.get("candidate"))},
-                              "fine_tuned_vs_start": _comparison(first, out / "vs_start" / "report.json")}
+                              "fine_tuned_vs_start": _comparison(first, out / "vs_start" / "report.json"),
+                              "errored": _regress_errored(first, {"baseline": "start", "candidate": "fine_tuned"})}
     if control is not None:
         # a measurement, not a gate: the fine-tuned policy is the reference whatever its own verdict was
         baseline = BaselineReport(out / "vs_start" / "report.json", role="candidate", accept_failed=True)
@@ -902,6 +967,7 @@ def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, s
                                 out_dir=out / "vs_control", progress=progress)
         result["policies"]["control"] = _measures((second.get("overall") or {}).get("candidate"))
         result["control_vs_fine_tuned"] = _comparison(second, out / "vs_control" / "report.json")
+        result["errored"].update(_regress_errored(second, {"candidate": "control"}))
     return result
 
 

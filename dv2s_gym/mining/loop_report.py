@@ -12,7 +12,7 @@
                  recommends), "next_policy_reason",
                  "timings": {step: seconds},
                  "control_policy": the control arm's spec (with a control),
-                 "steps": {"mine": {"episodes", "errors", "failures", "failures_against_policy", "clusters",
+                 "steps": {"mine": {"episodes", "errors", "errored", "failures", "failures_against_policy", "clusters",
                                     "clusters_not_converted", "clusters_not_kept", "conversions": {status: n},
                                     "replays": {status: n}, "rejected_reasons",
                                     "kept": [{"cluster", "scenario", "reproduction", "replay" (exact replays:
@@ -21,7 +21,7 @@
                                      "held_out_clusters", "fine_tune_families", "held_out_families", "groups",
                                      "moved_to_fine_tune"}
                                     (loops recorded before the family split: no "by" and no families),
-                           "before": {"episodes"},
+                           "before": {"episodes", "errored"},
                            "fine_tune" and "control": {"model", "method": "ppo" | "dagger", "scenarios",
                                          "mined_upweighted", "mined_left_out", "steps", "families" (every
                                          family in the arm's mix: later rounds keep them on the fine-tuning side),
@@ -62,6 +62,12 @@ anything: each round's regression test runs the same starting-bank scenarios and
 round's baseline episodes (the starting policy) are paired with the last tested round's candidate episodes
 (the final policy) and judged by the regression test's own rule (:func:`final_vs_start`); the paired report is
 ``final_vs_start/report.json`` in the loop folder.
+
+``errored`` counts the episodes that errored (no rate or test counts them; e.g. a scene the scenario's
+sampler could not produce): in ``mine`` and ``before`` ``{"episodes", "scenarios": {scenario: n}, "examples":
+{scenario: its first error}}`` (:func:`dv2s_gym.mining.loop.errored_episodes`); in ``after`` the same per policy
+(``fine_tuned``, ``control``), in ``untouched`` and ``regress`` per policy (``start``, ``fine_tuned``, and
+``control`` in ``untouched``). The log warns of them after each step and ``report.md`` lists them per round.
 
 ``Rate`` is ``{"k", "n", "rate", "low", "high"}`` (Wilson 95 %). ``report.html`` also shows, per round, the
 failure clips of the kept mined scenarios (the mining run's and the bank entry's videos) beside each other. A round missing a step has not
@@ -208,15 +214,62 @@ def _round_row(record: Mapping[str, Any]) -> Dict[str, Any]:
     }
 
 
+def errored_by_stage(record: Mapping[str, Any]) -> List[tuple]:
+    """``[(stage label, {policy: errored})]``: the round's errored episodes per step that ran
+    (:func:`dv2s_gym.mining.loop.errored_episodes`' form; a mining step recorded without them gives its count)."""
+    steps = record.get("steps") or {}
+    found = []
+    mine = steps.get("mine") or {}
+    if mine:
+        found.append(("mining", {"mine": mine.get("errored") or {"episodes": mine.get("errors") or 0}}))
+    held: Dict[str, Any] = {}
+    if (steps.get("before") or {}).get("errored") is not None:
+        held["start"] = steps["before"]["errored"]
+    held.update((steps.get("after") or {}).get("errored") or {})
+    if held:
+        found.append(("held-out", held))
+    for key, label in (("untouched", "untouched set"), ("regress", "regression test")):
+        errored = (steps.get(key) or {}).get("errored")
+        if errored:
+            found.append((label, errored))
+    return found
+
+
+def _errored_total(record: Mapping[str, Any]) -> int:
+    return sum(int((found or {}).get("episodes") or 0) for _, by in errored_by_stage(record) for found in by.values())
+
+
+def _errored_lines(record: Mapping[str, Any]) -> List[str]:
+    """The round's errored episodes per step and policy, naming the scenarios and their first error."""
+    from dv2s_gym.mining.loop import errored_text
+
+    stages = errored_by_stage(record)
+    if not stages:
+        return []
+    parts = [f"{label}: {errored_text(by) or 'none'}" for label, by in stages]
+    total = _errored_total(record)
+    lines = [f"- errored episodes (counted in no rate or test): " + ("**" if total else "") + "; ".join(parts)
+             + ("**" if total else "")]
+    examples: Dict[str, str] = {}
+    for _, by in stages:
+        for found in by.values():
+            for name, why in ((found or {}).get("examples") or {}).items():
+                examples.setdefault(name, why)
+    lines += [f"  - `{name}`: {why}" for name, why in sorted(examples.items())]
+    return lines
+
+
 def round_summary(record: Mapping[str, Any]) -> str:
     """One plain-text line on a round for the terminal: held-out failure rates and the regression verdict."""
     row = _round_row(record)
     steps = record.get("steps") or {}
     if steps.get("skipped"):
         return f"round {row['round']}: skipped: {steps['skipped']}"
+    errored = _errored_total(record)
     return (f"round {row['round']}: {row['failures']} failures mined in {row['episodes']} episodes, {row['kept']} "
             f"scenarios kept; held-out failure rate start {row['before']}, control {row['control']}, fine-tuned "
-            f"{row['after']}; rest of the bank: {row['verdict']}")
+            f"{row['after']}; rest of the bank: {row['verdict']}"
+            + (f"; {errored} episode(s) errored (see the report)" if errored else ""))
 
 
 def _replays_text(settings: Mapping[str, Any]) -> str:
@@ -374,6 +427,7 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         lines += ["", f"## Round {record.get('round')}", "",
                   f"- policy: `{record.get('policy')}` -> fine-tuned policy `{record.get('new_policy', '-')}`",
                   f"- timings: {_seconds(record.get('timings', {}))}"]
+        lines += _errored_lines(record)
         if steps.get("skipped"):
             lines.append(f"- skipped: {steps['skipped']}")
         mine = steps.get("mine") or {}
