@@ -920,3 +920,22 @@ def report_summary(report):
     from dv2s_gym.mining.loop_report import round_summary
 
     return round_summary(report.rounds[0])
+
+
+def test_the_round_record_and_report_list_every_reason_a_conversion_was_rejected_for(tmp_path):
+    from dv2s_gym.mining.loop import _mining_summary
+    from dv2s_gym.mining.loop_report import render_markdown
+
+    reasons = ["actors: the failure's scene has 2 actors (car 2), the new scenario's 1 actor (car 1): 1 car fewer",
+               "parameters: the new scenario's ranges do not contain the failing values: ego_speed = 12.9 outside 8..12"]
+    (tmp_path / "conversions.jsonl").write_text(json.dumps({"cluster": "c", "index": 0, "status": "rejected",
+                                                            "reason": reasons[0], "rejections": reasons}) + "\n"
+                                                + json.dumps({"cluster": "d", "index": 1, "status": "rejected",
+                                                              "reason": "check: compile failed"}) + "\n")
+    (tmp_path / "episodes.jsonl").write_text("")
+    mined = _mining_summary(tmp_path)
+    assert mined["rejected_reasons"] == reasons + ["check: compile failed"] and mined["rejected_reason_count"] == 3
+    markdown = render_markdown({"settings": {"policy": "dv2s-ppo"}, "rounds": [
+        {"round": 1, "steps": {"mine": {**mined, "kept": [], "folder": str(tmp_path)}}}]})
+    for reason in mined["rejected_reasons"]:
+        assert f"  - rejected: {reason}" in markdown

@@ -253,8 +253,8 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
     reasons: List[str] = []
     for record in read_rows(mine_out / "conversions.jsonl"):
         statuses[record.get("status", "?")] = statuses.get(record.get("status", "?"), 0) + 1
-        if record.get("status") == "rejected" and record.get("reason"):
-            reasons.append(str(record["reason"]))
+        if record.get("status") == "rejected" and (record.get("rejections") or record.get("reason")):
+            reasons += [str(r) for r in record.get("rejections") or [record["reason"]]]  # every failed check
     converted = sum(statuses.values())
     from dv2s_gym.mining.replays import REPLAYS_FILE
 
@@ -263,7 +263,8 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
         replayed[row.get("status", "?")] = replayed.get(row.get("status", "?"), 0) + 1
     return {"replays": replayed, "episodes": episodes, "errors": errors, "errored": errored_episodes(records),
             "failures": failures, "failures_against_policy": counted,
-            "clusters": clusters, "conversions": statuses, "rejected_reasons": reasons[:20],
+            "clusters": clusters, "conversions": statuses, "rejected_reasons": reasons[:40],
+            "rejected_reason_count": len(reasons),
             "clusters_not_converted": None if clusters is None else max(0, clusters - converted),
             "clusters_not_kept": None if clusters is None else max(0, clusters - converted
                                                                    - sum(replayed.values()))}
@@ -589,20 +590,10 @@ def _count_scripts(bank: Path) -> int:
     return sum(1 for _ in Path(bank).glob("*/scenario.scenic"))
 
 
-def errored_text(errored: Mapping[str, Mapping[str, Any]]) -> str:
-    """``"fine-tuned policy 3 (urban_pedestrian_crossing 3), control 1 (...)"``: errored episodes per policy (the
-    mining step's without a policy's name), in words; empty when none errored."""
-    labels = {"start": "starting policy ", "fine_tuned": "fine-tuned policy ", "control": "control ", "mine": ""}
-    parts = []
-    for role, found in errored.items():
-        if found and found.get("episodes"):
-            names = ", ".join(f"{name} {count}" for name, count in (found.get("scenarios") or {}).items())
-            parts.append(f"{labels.get(role, role + ' ')}{found['episodes']}" + (f" ({names})" if names else ""))
-    return ", ".join(parts)
-
-
 def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Mapping[str, Any]]) -> None:
     """Say loudly when a step's episodes errored: they count in no rate and no test."""
+    from dv2s_gym.mining.loop_report import errored_text
+
     text = errored_text(errored)
     if not text:
         return

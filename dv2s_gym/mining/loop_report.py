@@ -14,7 +14,8 @@
                  "control_policy": the control arm's spec (with a control),
                  "steps": {"mine": {"episodes", "errors", "errored", "failures", "failures_against_policy", "clusters",
                                     "clusters_not_converted", "clusters_not_kept", "conversions": {status: n},
-                                    "replays": {status: n}, "rejected_reasons",
+                                    "replays": {status: n}, "rejected_reasons" (every failed check of each
+                                    rejected conversion, at most 40), "rejected_reason_count",
                                     "kept": [{"cluster", "scenario", "reproduction", "replay" (exact replays:
                                               True), "parent" (exact replays)}], "folder"},
                            "split": {"by": "family", "fine_tune", "held_out", "fine_tune_clusters",
@@ -214,6 +215,18 @@ def _round_row(record: Mapping[str, Any]) -> Dict[str, Any]:
     }
 
 
+def errored_text(errored: Mapping[str, Mapping[str, Any]]) -> str:
+    """``"fine-tuned policy 3 (urban_pedestrian_crossing 3), control 1 (...)"``: errored episodes per policy (the
+    mining step's without a policy's name), in words; empty when none errored."""
+    labels = {"start": "starting policy ", "fine_tuned": "fine-tuned policy ", "control": "control ", "mine": ""}
+    parts = []
+    for role, found in errored.items():
+        if found and found.get("episodes"):
+            names = ", ".join(f"{name} {count}" for name, count in (found.get("scenarios") or {}).items())
+            parts.append(f"{labels.get(role, role + ' ')}{found['episodes']}" + (f" ({names})" if names else ""))
+    return ", ".join(parts)
+
+
 def errored_by_stage(record: Mapping[str, Any]) -> List[tuple]:
     """``[(stage label, {policy: errored})]``: the round's errored episodes per step that ran
     (:func:`dv2s_gym.mining.loop.errored_episodes`' form; a mining step recorded without them gives its count)."""
@@ -241,8 +254,6 @@ def _errored_total(record: Mapping[str, Any]) -> int:
 
 def _errored_lines(record: Mapping[str, Any]) -> List[str]:
     """The round's errored episodes per step and policy, naming the scenarios and their first error."""
-    from dv2s_gym.mining.loop import errored_text
-
     stages = errored_by_stage(record)
     if not stages:
         return []
@@ -444,8 +455,12 @@ def render_markdown(report: Mapping[str, Any]) -> str:
                          + (f"; **{mine['clusters_not_kept']} clusters skipped**, neither converted nor replayed "
                             f"(at most {settings.get('max_replays')} exact replays per round)"
                             if mine.get("clusters_not_kept") else ""))
-            for reason in mine.get("rejected_reasons", [])[:5]:
+            reasons = mine.get("rejected_reasons") or []
+            for reason in reasons:  # every failed check of the conversion judge, each its own reason
                 lines.append(f"  - rejected: {reason}")
+            if (mine.get("rejected_reason_count") or 0) > len(reasons):
+                lines.append(f"  - and {mine['rejected_reason_count'] - len(reasons)} more rejection reasons "
+                             f"(conversions.jsonl in {mine.get('folder')})")
         split = steps.get("split") or {}
         if split:
             if split.get("by") == "family":
