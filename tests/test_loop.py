@@ -740,13 +740,15 @@ def test_a_fine_tuned_policy_that_regressed_is_not_recommended_and_the_exit_stat
     assert code == 1 and verdict["verdict"] == "REJECTED" and verdict["policy"] == "dv2s-ppo"
     assert verdict["candidate"] == report["rounds"][0]["new_policy"] != "dv2s-ppo"
     assert "regressed on the rest of the bank" in verdict["sentence"] and "keep the starting policy" in verdict["sentence"]
-    assert f"verdict: {verdict['sentence']}" in out and "recommended policy: dv2s-ppo" in out
-    assert "final policy" not in out and "|---|" not in out  # a summary, not the Markdown report
+    assert f"verdict: {verdict['sentence']}" in out and "policy to use: dv2s-ppo" in out
+    assert "final policy" not in out.lower() and "|---|" not in out  # a summary, not the Markdown report
     assert f"report (html): {tmp_path / 'loop' / 'report.html'}" in out
     markdown = (tmp_path / "loop" / "report.md").read_text()
-    assert verdict["sentence"] in markdown.split("## Round")[0] and "final policy" not in markdown
+    assert verdict["sentence"] in markdown.split("## Round")[0] and "final policy" not in markdown.lower()
     page = (tmp_path / "loop" / "report.html").read_text()
-    assert 'class="REJECTED"' in page and "final policy" not in page
+    assert 'class="REJECTED"' in page and "final policy" not in page.lower()
+    assert "not the round 1 fine-tuned policy" in verdict["sentence"] and "Policy to use: `dv2s-ppo`" in markdown
+    assert "- policy: `dv2s-ppo` -> fine-tuned policy `" in markdown
 
 
 def test_a_fine_tuned_policy_the_control_beat_is_rejected(tmp_path, capsys, monkeypatch):
@@ -754,7 +756,7 @@ def test_a_fine_tuned_policy_the_control_beat_is_rejected(tmp_path, capsys, monk
     code, out, _ = _cli_loop(capsys, monkeypatch, tmp_path / "loop")
     verdict = json.loads((tmp_path / "loop" / "report.json").read_text())["recommendation"]
     assert code == 1 and verdict["verdict"] == "REJECTED" and "the control" in verdict["reason"]
-    assert verdict["policy"] == "dv2s-ppo" and "recommended policy: dv2s-ppo" in out
+    assert verdict["policy"] == "dv2s-ppo" and "policy to use: dv2s-ppo" in out
 
 
 def test_an_accepted_policy_is_recommended_with_exit_status_0(tmp_path, capsys, monkeypatch):
@@ -763,7 +765,7 @@ def test_an_accepted_policy_is_recommended_with_exit_status_0(tmp_path, capsys, 
     report = json.loads((tmp_path / "loop" / "report.json").read_text())
     assert code == 0 and report["recommendation"]["verdict"] == "ACCEPTED"
     assert report["recommendation"]["policy"] == report["rounds"][0]["new_policy"] == report["policy"]
-    assert f"recommended policy: {report['policy']}" in out
+    assert f"policy to use: {report['policy']}" in out and "recommended policy" not in out
 
 
 def test_an_inconclusive_regression_test_leaves_the_policy_not_accepted(tmp_path, capsys, monkeypatch):
@@ -803,6 +805,40 @@ def test_the_next_round_starts_from_the_policy_the_verdict_recommends(tmp_path, 
     assert [r["next_policy"] for r in again.rounds] == [r["next_policy"] for r in saved]
 
 
+@pytest.mark.parametrize("over_all_rounds, starts_from", [("FAIL", "start"), ("PASS", "fine-tuned")])
+def test_the_next_round_follows_the_policy_to_use_when_the_rounds_are_judged_against_the_start(
+        tmp_path, monkeypatch, over_all_rounds, starts_from):
+    """Rounds 1 and 2 each pass against the policy they started from. Judged over both rounds against the starting
+    policy (as the report judges them), the fine-tuned policy is either rejected (round 3 starts from the starting
+    policy, the policy to use) or not (round 3 starts from round 2's fine-tuned policy, the policy to use)."""
+    from dv2s_gym.mining import loop_report
+
+    _StandIns(monkeypatch)
+    _regression_verdicts(monkeypatch, {"round_1": "PASS", "round_2": "PASS", "round_3": "PASS"})
+    judged = []
+
+    def over_rounds(report, out=None):
+        tested = [r for r in report.get("rounds", []) if (r.get("steps") or {}).get("regress")]
+        if len(tested) < 2:
+            return None
+        judged.append(len(tested))
+        return {"start": "dv2s-ppo", "final": tested[-1].get("new_policy"), "rounds": [1, tested[-1]["round"]],
+                "verdict": over_all_rounds, "reason": f"stand-in {over_all_rounds}", "episodes": 8}
+
+    monkeypatch.setattr(loop_report, "final_vs_start", over_rounds)
+    miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
+    settings = {**WIRING, "untouched_seeds": 0, "min_heldout_episodes": 1, "min_heldout_families": 1}
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=3, miner=miner, log=lambda _: None, **settings)
+    first, second, third = report.rounds
+    assert second["policy"] == first["new_policy"] and judged  # round 1 alone: ACCEPTED, round 2 starts from it
+    expected = "dv2s-ppo" if starts_from == "start" else second["new_policy"]
+    assert second["next_policy"] == third["policy"] == expected
+    assert miner.calls[2]["policy"] == expected
+    written = json.loads((tmp_path / "loop" / "loop.json").read_text())["rounds"][1]
+    assert written["next_policy"] == expected
+    assert second["next_policy_reason"].startswith("REJECTED" if over_all_rounds == "FAIL" else "ACCEPTED")
+
+
 @pytest.mark.parametrize("change, named", [({"n_envs": 2}, "n_envs: run has 1, asked 2"),
                                            ({"min_heldout_families": 1}, "min_heldout_families: run has 2, asked 1")])
 def test_a_resume_refuses_other_training_envs_or_another_held_out_family_minimum(tmp_path, monkeypatch, change, named):
@@ -814,3 +850,92 @@ def test_a_resume_refuses_other_training_envs_or_another_held_out_family_minimum
     run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, log=lambda _: None, **settings)
     with pytest.raises(RunIdentityError, match=named):
         run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, log=lambda _: None, **{**settings, **change})
+
+
+def test_errored_episodes_are_counted_per_step_and_named_in_the_log_the_record_and_the_reports(tmp_path, monkeypatch):
+    """A scene the sampler cannot produce is an errored episode, counted in no rate: each step that had some says
+    how many, in which scenarios and why, in the log, ``loop.json`` and both reports."""
+    import dv2s_gym.mining.heldout as heldout
+    import dv2s_gym.regress.runner as runner
+
+    _StandIns(monkeypatch)
+    evaluate, regression = heldout.evaluate_heldout, runner.run_regression
+    unsampleable = "SceneSamplingError: scenario 'x': no scene satisfied its requirements in 2000 sampling iterations"
+
+    def held_out(role, policy, episodes, **options):
+        records = evaluate(role, policy, episodes, **options)
+        if role == "after":  # the fine-tuned policy's first held-out episode errors
+            records[0] = {**records[0], "failed": None, "error": unsampleable}
+        return records
+
+    def regress(candidate, baseline=None, settings=None, **options):
+        report = regression(candidate, baseline, settings, **options)
+        name = (settings.scenarios or ["urban_pedestrian_crossing"])[0]
+        return {**report, "episodes": [{"id": f"{name}:0", "scenario": name, "seed": 0,
+                                        "candidate": {"error": unsampleable}, "baseline": {"error": None}},
+                                       {"id": f"{name}:1", "scenario": name, "seed": 1,
+                                        "candidate": {"error": None}, "baseline": {"error": None}}]}
+
+    monkeypatch.setattr(heldout, "evaluate_heldout", held_out)
+    monkeypatch.setattr(runner, "run_regression", regress)
+
+    class ErroringMiner(FakeMiner):
+        def __call__(self, policy, settings, *, out, **options):
+            result = super().__call__(policy, settings, out=out, **options)
+            with open(Path(out) / "episodes.jsonl", "a") as handle:  # one scene the sampler could not produce
+                handle.write(json.dumps({"index": settings.budget, "scenario": "urban_pedestrian_crossing",
+                                         "seed": 7, "params": {"kerb_offset": 3.1}, "failure": None,
+                                         "avoidable": None, "error": unsampleable}) + "\n")
+            return result
+
+    lines = []
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=ErroringMiner(WIRING["scenarios"], failures_per_round=6),
+                      min_heldout_episodes=1, min_heldout_families=1, log=lines.append, **WIRING)
+    steps = json.loads((tmp_path / "loop" / "loop.json").read_text())["rounds"][0]["steps"]
+    assert steps["mine"]["errored"]["scenarios"] == {"urban_pedestrian_crossing": 1}
+    assert unsampleable in steps["mine"]["errored"]["examples"]["urban_pedestrian_crossing"]
+    held = steps["split"]["held_out"][0]
+    assert steps["before"]["errored"]["episodes"] == 0
+    assert steps["after"]["errored"]["fine_tuned"]["scenarios"] == {held: 1}
+    assert steps["after"]["errored"]["control"]["episodes"] == 0 and steps["after"]["errors"] == 1
+    first = sorted(WIRING["scenarios"])[0]
+    assert steps["regress"]["errored"]["fine_tuned"]["scenarios"] == {first: 1}
+    assert steps["regress"]["errored"]["start"]["episodes"] == 0
+    assert steps["untouched"]["errored"]["fine_tuned"]["episodes"] == 1
+    warnings = [line for line in lines if "WARNING: episodes that errored" in line]
+    assert len(warnings) == 4  # mining, held-out after, untouched set, regression test
+    assert "mining step" in warnings[0] and "tests): 1 (urban_pedestrian_crossing 1)" in warnings[0]
+    assert unsampleable in warnings[0]
+    assert f"fine-tuned policy 1 ({held} 1)" in warnings[1]
+    markdown = report.paths["md"].read_text()
+    assert ("errored episodes (counted in no rate or test): **mining: 1 (urban_pedestrian_crossing 1); "
+            f"held-out: fine-tuned policy 1 ({held} 1)") in markdown
+    assert f"regression test: fine-tuned policy 1 ({first} 1)**" in markdown
+    assert "3 episode(s) errored" not in markdown and "5 episode(s) errored (see the report)" in report_summary(report)
+    assert f"- `urban_pedestrian_crossing`: {unsampleable}" in markdown
+    assert "errored" in report.paths["html"].read_text()
+
+
+def report_summary(report):
+    from dv2s_gym.mining.loop_report import round_summary
+
+    return round_summary(report.rounds[0])
+
+
+def test_the_round_record_and_report_list_every_reason_a_conversion_was_rejected_for(tmp_path):
+    from dv2s_gym.mining.loop import _mining_summary
+    from dv2s_gym.mining.loop_report import render_markdown
+
+    reasons = ["actors: the failure's scene has 2 actors (car 2), the new scenario's 1 actor (car 1): 1 car fewer",
+               "parameters: the new scenario's ranges do not contain the failing values: ego_speed = 12.9 outside 8..12"]
+    (tmp_path / "conversions.jsonl").write_text(json.dumps({"cluster": "c", "index": 0, "status": "rejected",
+                                                            "reason": reasons[0], "rejections": reasons}) + "\n"
+                                                + json.dumps({"cluster": "d", "index": 1, "status": "rejected",
+                                                              "reason": "check: compile failed"}) + "\n")
+    (tmp_path / "episodes.jsonl").write_text("")
+    mined = _mining_summary(tmp_path)
+    assert mined["rejected_reasons"] == reasons + ["check: compile failed"] and mined["rejected_reason_count"] == 3
+    markdown = render_markdown({"settings": {"policy": "dv2s-ppo"}, "rounds": [
+        {"round": 1, "steps": {"mine": {**mined, "kept": [], "folder": str(tmp_path)}}}]})
+    for reason in mined["rejected_reasons"]:
+        assert f"  - rejected: {reason}" in markdown

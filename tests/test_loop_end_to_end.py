@@ -25,7 +25,7 @@ def test_one_round_of_the_real_loop(tmp_path, capsys):
     report = json.loads((out / "report.json").read_text())
     verdict = report["recommendation"]
     assert code == verdict["exit_code"] and f"verdict: {verdict['sentence']}" in stdout
-    assert verdict["candidate"] == report["policy"] and f"recommended policy: {verdict['policy']}" in stdout
+    assert verdict["candidate"] == report["policy"] and f"policy to use: {verdict['policy']}" in stdout
     steps = report["rounds"][0]["steps"]
     mine_dir = out / "round_1" / "mine"
     episodes = [json.loads(line) for line in (mine_dir / "episodes.jsonl").read_text().splitlines()]

@@ -1,4 +1,4 @@
-"""The loop report compares the final policy with the starting one on the starting bank.
+"""The loop report compares the last fine-tuned policy with the starting one on the starting bank.
 
 The rounds' regression reports are made from hand-written episode results (two scenarios x four seeds) with
 the regression test's own report builder, as ``dv2s loop`` writes them: round 1 tests P1 against the start
@@ -63,8 +63,10 @@ def test_the_report_shows_the_comparison_only_with_two_tested_rounds(tmp_path):
     data = json.loads(paths["json"].read_text())
     assert data["final_vs_start"]["verdict"] == "FAIL"
     markdown = paths["md"].read_text()
-    assert "Final policy `p2` against starting policy `p0`" in markdown and "**FAIL**" in markdown
-    assert "Final policy" in paths["html"].read_text()
+    assert "Round 2's fine-tuned policy `p2` against the starting policy `p0`" in markdown and "**FAIL**" in markdown
+    assert "failure rate fine-tuned " in markdown and "Round 2&#x27;s fine-tuned policy" in paths["html"].read_text()
+    for text in (markdown, paths["html"].read_text()):  # "final" is no name for a policy the user reads
+        assert "final policy" not in text.lower() and "failure rate final" not in text
 
     (tmp_path / "one").mkdir()
     paths = write_loop_reports(_loop(tmp_path / "one", 1), tmp_path / "one")

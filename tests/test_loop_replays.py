@@ -135,3 +135,52 @@ def test_a_failure_in_a_scenario_without_free_parameters_says_why_it_has_no_repl
                                monitor={})
     assert out["replay_entry"] is None and len(Bank(bank.root)) == 1
     assert "'fixed_stopped_car' has no free parameters" in out["note"], out
+
+
+def _failed(index, family, actor, rho=0.0):
+    return {"index": index, "scenario": family, "family": family, "seed": 1000 + index, "params": {}, "rho": rho,
+            "failure": {"type": "collision", "kind": "collision:rear_end"}, "avoidable": True, "error": None,
+            "behaviour": {"actor": actor, "actor_manoeuvre": "braking", "ego_manoeuvre": "keeping_lane"}}
+
+
+def test_exact_replays_take_the_families_in_turn_largest_cluster_first(tmp_path, monkeypatch):
+    """Family ``a`` has the three largest clusters (5, 4 and 3 failures), ``b`` one of 2 and ``c`` one of 1: three
+    replays are one cluster of each family, not all three of ``a``; the rest follow family by family, and a resumed
+    call goes on in the same order."""
+    import dv2s_gym.mining.convert as convert
+    from dv2s_gym.mining.cluster import group
+    from dv2s_gym.mining.replays import REPLAYS_FILE, replay_clusters
+
+    sizes = [("a", "car", 5), ("a", "truck", 4), ("a", "bicycle", 3), ("b", "car", 2), ("c", "car", 1)]
+    records, index = [], 0
+    for family, actor, size in sizes:
+        for _ in range(size):
+            records.append(_failed(index, family, actor, rho=-index))
+            index += 1
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    (run_dir / "settings.json").write_text(json.dumps({"policy": "dv2s-ppo", "bank_dir": None}))
+    (run_dir / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    replayed = []
+
+    def stand_in(record, run_dir, *, cluster, **options):
+        replayed.append(cluster)
+        return {"cluster": cluster, "index": record["index"], "scenario": record["scenario"], "status": "kept",
+                "replay_entry": f"replay_{len(replayed)}", "reason": None}
+
+    monkeypatch.setattr(convert, "replay_failure_entry", stand_in)
+    cluster = {(family, actor): f"{family}/collision:rear_end/{actor}-braking/ego-keeping_lane"
+               for family, actor, _ in sizes}
+    rows = replay_clusters(run_dir, bank_dir=tmp_path / "bank", max_replays=3, progress=False)
+    assert [r["cluster"] for r in rows] == [cluster["a", "car"], cluster["b", "car"], cluster["c", "car"]]
+    rows = replay_clusters(run_dir, bank_dir=tmp_path / "bank", max_replays=4, progress=False)  # resumed
+    assert [r["cluster"] for r in rows][3:] == [cluster["a", "truck"]]
+    rows = replay_clusters(run_dir, bank_dir=tmp_path / "bank", progress=False)
+    assert [r["cluster"] for r in rows][4:] == [cluster["a", "bicycle"]]
+    assert len((run_dir / REPLAYS_FILE).read_text().splitlines()) == len(replayed) == 5
+    from dv2s_gym.mining.replays import replay_order
+
+    # deterministic, and the representative is the failure a conversion would take (lowest robustness)
+    order = replay_order(group(records))
+    assert order == replay_order(dict(reversed(list(group(records).items()))))
+    assert [r["index"] for _, r in order] == [4, 13, 14, 8, 11]

@@ -5,10 +5,14 @@ from __future__ import annotations
 from dv2s_gym.mining.loop_verdict import recommendation
 
 
-def _round(number, verdict, *, control_only=0, fine_tuned_only=0, p=None):
+def _round(number, verdict, *, control_only=0, fine_tuned_only=0, p=1.0):
+    """A round as a loop recorded it before the held-out tests were recorded (its tables and p-values only): the
+    fine-tuned policy failed 2 held-out episodes the start passed and passed 6 the start failed."""
     return {"round": number, "policy": f"p{number - 1}", "new_policy": f"ppo:round_{number}/policy/model.zip",
             "steps": {"fine_tune": {}, "regress": {"verdict": verdict, "reason": f"reason {number}"},
-                      "after": {"vs_control": {"table": {"control_only": control_only,
+                      "after": {"pairs": 20, "mcnemar_p": 0.29, "control": {"k": 5, "n": 20},
+                                "table": {"both_fail": 2, "after_only": 2, "before_only": 6, "neither": 10},
+                                "vs_control": {"table": {"control_only": control_only, "both_fail": 0, "neither": 10,
                                                          "fine_tuned_only": fine_tuned_only}, "mcnemar_p": p}}}}
 
 
@@ -22,28 +26,30 @@ def test_the_last_accepted_policy_is_recommended_and_a_later_regression_is_not()
     assert verdict["verdict"] == "REJECTED" and verdict["exit_code"] == 1
     assert verdict["policy"] == "ppo:round_1/policy/model.zip" and verdict["candidate"].startswith("ppo:round_2")
     assert "keep the last accepted policy ppo:round_1/policy/model.zip" in verdict["sentence"]
-    assert "regressed on the rest of the bank (reason 2)" in verdict["sentence"]
+    assert "regressed on the rest of the bank" in verdict["sentence"] and "FAILed (reason 2)" in verdict["sentence"]
+    assert verdict["decided_by"] == "regression"
 
 
 def test_an_accepted_last_round_is_used():
     verdict = recommendation(_report(_round(1, "FAIL"), _round(2, "PASS")))
     assert verdict["verdict"] == "ACCEPTED" and verdict["exit_code"] == 0
     assert verdict["policy"] == "ppo:round_2/policy/model.zip"
-    assert verdict["sentence"].startswith("ACCEPTED: use the round 2 policy ppo:round_2/policy/model.zip")
+    assert verdict["sentence"].startswith("ACCEPTED: use the round 2 fine-tuned policy ppo:round_2/policy/model.zip")
 
 
 def test_rounds_that_each_pass_but_regress_against_the_start_over_all_rounds_are_rejected():
     final = {"verdict": "FAIL", "rounds": [1, 2], "reason": "fails more often"}
     verdict = recommendation(_report(_round(1, "PASS"), _round(2, "PASS"), final_vs_start=final))
     assert verdict["verdict"] == "REJECTED" and verdict["policy"] == "dv2s-ppo"
-    assert "over rounds 1, 2 the policy regressed against the starting one" in verdict["reason"]
+    assert "over rounds 1, 2 the fine-tuned policy regressed against the starting one" in verdict["reason"]
 
 
 def test_a_control_that_fails_significantly_fewer_held_out_episodes_rejects_the_policy():
     beaten = recommendation(_report(_round(1, "PASS", control_only=0, fine_tuned_only=8, p=0.008)))
     assert beaten["verdict"] == "REJECTED" and "the control" in beaten["reason"] and beaten["policy"] == "dv2s-ppo"
+    assert beaten["decided_by"] == "heldout_vs_control" and "one-sided exact McNemar" in beaten["reason"]
     untested = recommendation(_report(_round(1, "PASS", control_only=0, fine_tuned_only=4, p=None)))
-    assert untested["verdict"] == "ACCEPTED" and "not tested" in untested["reason"]
+    assert untested["verdict"] == "NOT ACCEPTED" and "did not run" in untested["reason"]  # no test, no acceptance
 
 
 def test_an_inconclusive_test_or_no_fine_tuned_policy_is_not_accepted():
@@ -76,3 +82,70 @@ def test_a_round_too_small_to_judge_says_so_and_points_to_the_evidence_profile()
     assert judged["too_small"] is None and "TOO SMALL" not in judged["sentence"]
     failed = recommendation(_report(_round(1, "FAIL")))
     assert failed["verdict"] == "REJECTED" and failed["too_small"] is None
+
+
+# --------------------------------------------------------------------------- the held-out tests, as the loop records them
+def _episodes(failing):
+    """Held-out records of 4 families x 2 scenarios x 4 seeds; ``failing(family, scenario, seed)`` says which fail."""
+    return [{"scenario": f"f{f}_s{s}", "seed": seed, "failed": bool(failing(f, s, seed)), "error": None}
+            for f in range(4) for s in range(2) for seed in range(4)]
+
+
+def _judged(before, after, control, regress="PASS", **minimums):
+    from dv2s_gym.mining.loop import heldout_comparison
+
+    families = {f"f{f}_s{s}": f"family_{f}" for f in range(4) for s in range(2)}
+    summary = heldout_comparison(_episodes(before), _episodes(after), None if control is None else _episodes(control),
+                                 min_episodes=minimums.get("min_episodes", 8), families=families,
+                                 min_families=minimums.get("min_families", 3))
+    record = {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
+              "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": regress, "reason": "stand-in"}}}
+    return recommendation(_report(record)), summary
+
+
+def test_a_fine_tuned_policy_significantly_worse_than_the_start_on_the_held_out_families_is_rejected():
+    """The regression test PASSed and the control does worse still, but the fine-tuned policy fails 12 held-out
+    episodes the starting policy passed (and passes none it failed): not accepted on non-inferiority alone."""
+    verdict, summary = _judged(before=lambda f, s, seed: False, after=lambda f, s, seed: seed < 2 and f < 3,
+                               control=lambda f, s, seed: True)
+    worse = summary["significantly_worse"]
+    assert worse["start"]["worse"] and not worse["control"]["worse"] and worse["start"]["families"] == 4
+    assert verdict["verdict"] == "REJECTED" and verdict["policy"] == "dv2s-ppo"
+    assert verdict["decided_by"] == "heldout_vs_start"
+    assert "significantly worse than the starting policy on the held-out families" in verdict["reason"]
+    assert "one-sided exact McNemar tests per held-out family and pooled" in verdict["reason"]
+
+
+def test_a_harm_confined_to_one_held_out_family_is_not_averaged_away():
+    """Against the control the fine-tuned policy is better in three families and worse in every episode of the
+    fourth; pooled the two cancel out, the family's own test finds it."""
+    control = lambda f, s, seed: f < 3  # noqa: E731
+    after = lambda f, s, seed: f == 3  # noqa: E731
+    verdict, summary = _judged(before=lambda f, s, seed: True, after=after, control=control)
+    test = summary["significantly_worse"]["control"]
+    assert test["worse"] and test["worse_families"] == ["family_3"] and test["fine_tuned_only"] == 8
+    assert verdict["verdict"] == "REJECTED" and verdict["decided_by"] == "heldout_vs_control"
+    assert "family_3" in verdict["reason"] and "the control" in verdict["reason"]
+
+
+def test_an_accepted_policy_passed_every_test_and_the_reason_names_them():
+    verdict, summary = _judged(before=lambda f, s, seed: seed < 2, after=lambda f, s, seed: False,
+                               control=lambda f, s, seed: seed < 1)
+    assert not summary["significantly_worse"]["start"]["worse"]
+    assert verdict["verdict"] == "ACCEPTED" and verdict["decided_by"] == "all"
+    for text in ("regression test on the rest of the bank", "PASSed", "not significantly worse than the starting "
+                 "policy", "not significantly worse than the control", "one-sided exact McNemar"):
+        assert text in verdict["reason"], text
+    without_control, summary = _judged(before=lambda f, s, seed: seed < 2, after=lambda f, s, seed: False,
+                                       control=None)
+    assert summary["significantly_worse"]["control"] is None
+    assert without_control["verdict"] == "ACCEPTED" and "no control arm" in without_control["reason"]
+
+
+def test_held_out_tests_that_could_not_run_leave_the_policy_not_accepted():
+    """Below the held-out minimums no test runs, so the regression test's PASS alone does not accept the policy."""
+    verdict, summary = _judged(before=lambda f, s, seed: seed < 2, after=lambda f, s, seed: False,
+                               control=lambda f, s, seed: seed < 1, min_families=5)
+    assert summary["significantly_worse"] == {"start": None, "control": None} and summary["underpowered"]
+    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "heldout_vs_start"
+    assert "did not run" in verdict["reason"] and "TOO SMALL TO JUDGE" in verdict["sentence"]

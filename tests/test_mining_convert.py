@@ -195,6 +195,16 @@ def _converted(bank_dir) -> list:
     return [e.name for e in Bank(bank_dir) if e.source.get("kind") == "mined" and not e.source.get("replay")]
 
 
+def _generator_speeds_as_the_scenario(monkeypatch) -> None:
+    """The rule-based generator draws the ego's speed on this scenario's map from its own range (8..12 m/s), the
+    scenario from 8..13 m/s: a failure at over 12 m/s gives a script whose range leaves the failing speed out,
+    which the judge rejects (``parameters``; :func:`test_the_miner_converts_a_cluster_into_the_bank`). Tests of
+    what happens around a kept conversion give the generator the scenario's range."""
+    from dv2s_gym.pipeline.sg.rules import lanes
+
+    monkeypatch.setattr(lanes, "speed_ranges", lambda map_name: (8, 13))
+
+
 def _patch_generator(monkeypatch, script: str) -> None:
     from dv2s_gym.pipeline import stages
 
@@ -257,11 +267,29 @@ def test_the_miner_converts_a_cluster_into_the_bank(tmp_path):
     rows = [json.loads(line) for line in (tmp_path / "run" / "conversions.jsonl").read_text().splitlines()]
     assert len(rows) == 1 and rows[0] == run.conversions[0]
     row = rows[0]
-    assert CONTRACT_KEYS <= set(row) and row["status"] == "kept", row
+    assert CONTRACT_KEYS <= set(row), row
     assert (tmp_path / "run" / row["video"]).is_file() and (tmp_path / "run" / row["script"]).is_file()
-    entry = Bank(tmp_path / "bank").get(row["bank_entry"])
-    assert entry.source["cluster"] == row["cluster"] and entry.source["index"] == row["index"]
-    assert entry.source["run"] == str((tmp_path / "run").resolve())
+    # the judge keeps the script only if its ranges hold the failing values of the parameters of the same name (the
+    # rule-based generator draws the ego's speed from its own range for the map, which may leave the failing one out)
+    from scenario_bank.dedup import param_ranges
+
+    failing = next(json.loads(line) for line in (tmp_path / "run" / "episodes.jsonl").read_text().splitlines()
+                   if json.loads(line)["index"] == row["index"])["result"]["params"]
+    ranges = param_ranges((tmp_path / "run" / row["script"]).read_text())
+    outside = sorted(name for name, value in failing.items() if name in ranges and isinstance(value, float)
+                     and not ranges[name][0] <= value <= ranges[name][1])
+    assert row["parameters"]["outside"] == outside
+    if outside:
+        assert row["status"] == "rejected" and row["bank_entry"] is None, row
+        assert any(r.startswith("parameters: ") and all(f"{name} = {failing[name]:g} outside" in r for name in outside)
+                   for r in row["rejections"])
+    else:
+        assert row["status"] == "kept", row
+    for name in filter(None, [row["bank_entry"], row["replay_entry"]]):  # the failing scene is kept either way
+        entry = Bank(tmp_path / "bank").get(name)
+        assert entry.source["cluster"] == row["cluster"] and entry.source["index"] == row["index"]
+        assert entry.source["run"] == str((tmp_path / "run").resolve())
+    assert row["replay_entry"]
     settings = json.loads((tmp_path / "run" / "settings.json").read_text())
     report = json.loads((tmp_path / "run" / row["script"]).with_name("report.json").read_text())
     assert report["reproduction"] == row["reproduction"] and settings["ttc_threshold"] == 1.0
@@ -274,6 +302,7 @@ def test_a_run_killed_between_the_bank_write_and_its_record_resumes_without_a_se
     from dv2s_gym.mining import miner as miner_module
     from mining_helpers import mine
 
+    _generator_speeds_as_the_scenario(monkeypatch)
     run = dict(out=tmp_path / "run", budget=4, sampler="random", scenarios=[SCENARIO], bank_dir=str(tmp_path / "bank"),
                workers=1, reference=None, progress=False, convert=True, max_conversions=1, reports=False)
     original = miner_module._Appender.append
@@ -313,6 +342,7 @@ def test_an_unreachable_model_endpoint_stops_converting_and_the_rerun_converts(t
     from mining_helpers import mine
 
     monkeypatch.setenv("DV2S_LLM_RETRIES", "0")
+    _generator_speeds_as_the_scenario(monkeypatch)
     run = dict(out=tmp_path / "run", budget=4, sampler="random", scenarios=[SCENARIO], bank_dir=str(tmp_path / "bank"),
                workers=1, reference=None, progress=False, convert=True, max_conversions=1, reports=False)
     down = {"dra": "openai", "llm_config": {"base_url": closed_port_url(), "model": "m"}}
@@ -365,6 +395,55 @@ def test_each_failed_check_of_the_judge_is_its_own_reason():
     assert [str(r).split(":")[0] for r in _judge(half, interaction, {"type": "stall"}, 0.3)] == ["avoidability"]
 
 
+def test_the_judge_rejects_a_script_whose_actors_or_parameter_ranges_are_not_the_failures():
+    """The failure: the ego ran into a car cutting in while a pedestrian crossed (two actors, the adversary a car).
+    A script that reproduces it and that the reference avoids is still rejected, each problem its own reason,
+    when its actors differ from the failure's or its ranges leave out the failing values."""
+    from dv2s_gym.mining.convert import _judge, compare_actors, compare_parameters
+
+    interaction = {"kind": "car", "manoeuvres": ["cut_in"]}
+    failure = {"type": "collision", "with_kind": "car"}
+    passing = {"reproduction": {"k": 10, "reproduced": 6, "rate": 0.6, "interaction_shown": 6},
+               "avoidability": {"reference": "rule", "k": 10, "failed": 0, "avoided_rate": 1.0}}
+    source = {"car": 1, "pedestrian": 1}
+    same = compare_actors(source, [{"car": 1, "pedestrian": 1}] * 3 + [{"car": 1}], "car")
+    assert same["same"] and same["script"] == source  # the runs' most frequent census is the script's
+    script = ("param ego_speed = Range(8, 12)\nparam cut_gap = Range(4.0, 9.0)\nparam weather = Uniform('a', 'b')\n"
+              "param walking_speed = 1.5\n")
+    inside = compare_parameters({"ego_speed": 11.2, "cut_gap": 4.0, "walking_speed": 1.5, "weather": "a",
+                                 "kerb_offset": 2.9}, script)
+    assert inside["outside"] == [] and inside["not_in_script"] == ["kerb_offset"]
+    assert inside["compared"]["cut_gap"] == {"value": 4.0, "range": [4.0, 9.0]}
+    assert _judge({**passing, "actors": same, "parameters": inside}, interaction, failure, 0.3) == []
+
+    no_adversary = compare_actors(source, [{"pedestrian": 1}], "car")
+    fewer = compare_actors(source, [{"car": 1}], "car")
+    more = compare_actors(source, [{"car": 2, "pedestrian": 1}], "car")
+    outside = compare_parameters({"ego_speed": 12.5, "cut_gap": 3.2}, script)
+    assert outside["outside"] == ["cut_gap", "ego_speed"]
+    reasons = [str(r) for r in _judge({**passing, "actors": no_adversary, "parameters": outside}, interaction,
+                                      failure, 0.3)]
+    assert reasons == ["actors: the failure's scene has 2 actors (car 1, pedestrian 1), the new scenario's 1 actor "
+                       "(pedestrian 1): the failure's adversary, a car, is missing",
+                       "parameters: the new scenario's ranges do not contain the failing values: cut_gap = 3.2 "
+                       "outside 4..9, ego_speed = 12.5 outside 8..12"]
+    assert [str(r) for r in _judge({**passing, "actors": fewer}, interaction, failure, 0.3)] == [
+        "actors: the failure's scene has 2 actors (car 1, pedestrian 1), the new scenario's 1 actor (car 1): "
+        "1 pedestrian fewer"]
+    assert [str(r) for r in _judge({**passing, "actors": more}, interaction, failure, 0.3)] == [
+        "actors: the failure's scene has 2 actors (car 1, pedestrian 1), the new scenario's 3 actors (car 2, "
+        "pedestrian 1): 1 car more"]
+
+
+def test_the_actor_census_of_a_trace_counts_every_actor_but_the_ego_by_kind():
+    from dv2s_gym.mining.convert import actor_census
+
+    trace = EpisodeTrace(scenario="s", source="", seed=0, scene_seed=0, params={}, config={},
+                         states=[{"ego": [0, 0], "lead": [1, 0]}, {"ego": [0, 0], "lead": [1, 0], "walker": [2, 2]}],
+                         kinds={"lead": "truck", "walker": "pedestrian", "parked": "car"})
+    assert actor_census(trace) == {"car": 1, "pedestrian": 1, "truck": 1}
+
+
 def test_any_reference_failure_counts_against_the_new_scenario_whatever_its_class():
     from dv2s_gym.mining.convert import _judge, reference_failed, reference_outcome
 
@@ -402,7 +481,10 @@ def test_a_script_on_which_the_reference_fails_another_way_is_rejected(record, t
     _patch_generator(monkeypatch, chaser)
     out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank", k=4)
     assert out["status"] == "rejected" and out["stage"] == "avoidability", out
-    assert out["reproduction"]["reproduced"] == 4 and out["rejections"] == [out["reason"]]
+    # the chaser is also a car the failure's scene did not have: the judge names that too
+    assert out["reproduction"]["reproduced"] == 4 and out["rejections"] == [
+        out["reason"], "actors: the failure's scene has 2 actors (car 2), the new scenario's 3 actors (car 3): "
+                       "1 car more"]
     avoid = out["avoidability"]
     assert avoid["failed"] == 4 and avoid["avoided_rate"] == 0.0
     assert avoid["failures"] == {"collision:struck_from_behind": 4}
@@ -411,7 +493,7 @@ def test_a_script_on_which_the_reference_fails_another_way_is_rejected(record, t
     report = json.loads((tmp_path / "run" / out["script"]).with_name("report.json").read_text())
     assert [e["failure"]["collision_type"] for e in report["reference_episodes"]] == ["struck_from_behind"] * 4
     replay = Bank(tmp_path / "bank").get(out["replay_entry"])  # the failing scene is kept exactly all the same
-    assert replay.source["converted_rejections"] == [out["reason"]]
+    assert replay.source["converted_rejections"] == out["rejections"]
 
 
 @pytest.mark.slow

@@ -589,3 +589,25 @@ def test_a_family_asked_before_its_entry_was_added_is_read_again_after(tmp_path)
     assert scenario_family("mined_y", str(bank)) == "mined_y"  # not an entry yet: its own family
     add_mined_copy(str(bank), "highway_cut_in_from_left", "mined_y", "c")
     assert scenario_family("mined_y", str(bank)) == "highway_cut_in_from_left"
+
+
+def test_every_reason_the_judge_rejected_a_conversion_for_is_in_the_reports(tmp_path):
+    """A conversion the judge rejected for three reasons (its first is ``reason``) shows all three, in the report's
+    JSON, Markdown and HTML."""
+    import html
+
+    run = make_run(tmp_path / "run", clips=False)
+    rows = [json.loads(line) for line in (run / "conversions.jsonl").read_text().splitlines()]
+    reasons = [rows[1]["reason"],
+               "actors: the failure's scene has 2 actors (car 1, pedestrian 1), the new scenario's 1 actor (car 1): "
+               "1 pedestrian fewer",
+               "parameters: the new scenario's ranges do not contain the failing values: ego_speed = 31.5 outside 20..25"]
+    rows[1]["rejections"] = reasons
+    (run / "conversions.jsonl").write_text("".join(json.dumps(row) + "\n" for row in rows))
+    paths = write_reports(run)
+    rejected = {r["cluster"]: r for r in json.loads(paths["json"].read_text())["rejected"]}
+    assert rejected[B_COLLISION]["rejections"] == reasons and rejected[B_COLLISION]["stage"] == "reproduction"
+    assert rejected[B_STALL]["rejections"] == [rows[2]["reason"]]  # a failed check before the judge: its one reason
+    markdown, page = paths["markdown"].read_text(), paths["html"].read_text()
+    for reason in reasons:
+        assert reason in markdown and html.escape(reason, quote=True) in page, reason

@@ -14,11 +14,13 @@ __all__ = ["add_parser", "run", "loop_settings"]
 
 EPILOG = """\
 exit status (the verdict on the last round's fine-tuned policy; the summary names the policy to use):
-  0  ACCEPTED: its regression test on the rest of the bank PASSed and the control did not beat it
-     on the held-out scenarios: use it
-  1  REJECTED: it regressed on the rest of the bank, the control beat it, or over several rounds it
-     regressed against the starting policy: keep the last accepted policy, else the starting one
-  3  NOT ACCEPTED: the regression test was INCONCLUSIVE or in ERROR, or no round fine-tuned a policy
+  0  ACCEPTED: its regression test on the rest of the bank PASSed and on the held-out families it is
+     significantly worse neither than the starting policy nor than the control: use it
+  1  REJECTED: it regressed on the rest of the bank, it is significantly worse than the starting policy or
+     the control on the held-out families, or over several rounds it regressed against the starting
+     policy: keep the last accepted policy, else the starting one
+  3  NOT ACCEPTED: the regression test was INCONCLUSIVE or in ERROR, the held-out tests could not run (too
+     few held-out episodes or families), or no round fine-tuned a policy
   2  bad input; 130 interrupted
 
 examples:
@@ -74,7 +76,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--max-replays", default=None,
                    help=_default("max_replays", "failure clusters beyond the converted ones whose failing scene is "
                                  "kept as an exact replay entry (the parent scenario narrowed around the failure, "
-                                 "checked to replay it step for step) per round, largest first; 0 for none, 'all' "
+                                 "checked to replay it step for step) per round, the scenario families taking turns, "
+                                 "each its largest cluster first; 0 for none, 'all' "
                                  "for every cluster"))
     p.add_argument("--min-heldout-episodes", type=int, default=None,
                    help=_default("min_heldout_episodes", "below this many held-out episodes a round reports rates "
@@ -177,7 +180,7 @@ def summary_lines(report: Mapping[str, Any], paths: Mapping[str, Any]) -> List[s
 
     lines = [round_summary(record) for record in report.get("rounds") or []]
     verdict = report.get("recommendation") or {}
-    lines += ["", f"verdict: {verdict.get('sentence')}", f"recommended policy: {verdict.get('policy')}"]
+    lines += ["", f"verdict: {verdict.get('sentence')}", f"policy to use: {verdict.get('policy')}"]
     lines += [f"report ({kind}): {paths[kind]}" for kind in ("html", "md", "json") if kind in paths]
     return lines
 

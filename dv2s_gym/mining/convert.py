@@ -33,7 +33,9 @@ conversion record of ``conversions.jsonl``:
     ``rejections``, when the interaction shows in fewer than ``threshold`` of the episodes
     (``interaction: ...``), the failure reproduces in fewer than ``threshold`` (``reproduction: ...``), or
     the reference driver fails in half of the episodes or more (``avoidability: ...``, naming its failures'
-    classes);
+    classes), the new scenario's actors differ from the failure's, kind for kind (``actors: ...``: fewer actors,
+    the adversary missing, or more; the failure's trace against the reproduction runs' traces), or a range of
+    the new script does not contain the failing value of the parameter of its name (``parameters: ...``);
 11. ``bank``: :meth:`scenario_bank.bank.Bank.add` with ``on_duplicate="merge"`` adds the script with ``mined``
     provenance, or merges the failure into the entry it (nearly) duplicates, a converted entry of the same family
     (parent and failure type) whose code differs in at most :data:`~scenario_bank.bank.NEAR_COPY_LINES`
@@ -233,12 +235,75 @@ def _actor_kind(trace, name: str) -> str:
     return _kind(name, dict(getattr(trace, "kinds", {}) or {}))
 
 
+def actor_census(trace: Any) -> Dict[str, int]:
+    """The actors of an episode's trace besides the ego, counted by kind (``{"car": 2, "pedestrian": 1}``)."""
+    names = set(getattr(trace, "kinds", {}) or {})
+    for state in getattr(trace, "states", None) or []:
+        names.update(state)
+    names.discard("ego")
+    census: Dict[str, int] = {}
+    for name in names:
+        kind = _actor_kind(trace, name)
+        census[kind] = census.get(kind, 0) + 1
+    return dict(sorted(census.items()))
+
+
+def compare_actors(source: Mapping[str, int], scripts: List[Mapping[str, int]],
+                   adversary: Optional[str]) -> Dict[str, Any]:
+    """The failure's actors (``source``, :func:`actor_census` of its trace) against the new scenario's (the census
+    of each reproduction episode; the most frequent one is the script's): ``{"failure", "script", "missing",
+    "extra", "adversary", "same"}``; ``missing`` and ``extra`` count per kind what the script lacks or adds,
+    ``same`` is whether the two agree kind for kind."""
+    script: Dict[str, int] = {}
+    if scripts:
+        keys = [json.dumps(dict(sorted(c.items()))) for c in scripts]
+        script = json.loads(max(sorted(set(keys)), key=keys.count))
+    kinds = sorted(set(source) | set(script))
+    missing = {k: source.get(k, 0) - script.get(k, 0) for k in kinds if source.get(k, 0) > script.get(k, 0)}
+    extra = {k: script.get(k, 0) - source.get(k, 0) for k in kinds if script.get(k, 0) > source.get(k, 0)}
+    return {"failure": dict(source), "script": script, "missing": missing, "extra": extra, "adversary": adversary,
+            "same": not missing and not extra}
+
+
+def compare_parameters(failing: Mapping[str, Any], script: str) -> Dict[str, Any]:
+    """The failing parameter values against the ranges of the new script's global parameters of the same name
+    (``param x = Range(a, b)`` and the other numeric forms :func:`scenario_bank.dedup.param_ranges` reads):
+    ``{"compared": {name: {"value", "range": [low, high]}}, "outside": [names whose range does not contain the
+    failing value], "not_in_script": [failing parameters the script does not define as numbers]}``."""
+    from scenario_bank.dedup import param_ranges
+
+    ranges = param_ranges(script)
+    compared: Dict[str, Any] = {}
+    outside: List[str] = []
+    absent: List[str] = []
+    for name, value in sorted(failing.items()):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+            continue
+        if name not in ranges:
+            absent.append(name)
+            continue
+        low, high = (float(v) for v in ranges[name])
+        compared[name] = {"value": float(value), "range": [low, high]}
+        if not low - 1e-9 <= float(value) <= high + 1e-9:
+            outside.append(name)
+    return {"compared": compared, "outside": outside, "not_in_script": absent}
+
+
+def _census_text(census: Mapping[str, int]) -> str:
+    total = sum(census.values())
+    return f"{total} actor{'' if total == 1 else 's'}" + (
+        f" ({', '.join(f'{kind} {n}' for kind, n in census.items())})" if census else "")
+
+
 def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failure: Mapping[str, Any],
            threshold: float) -> List[_Rejected]:
     """The checks a converted script must pass, each failing one a rejection with its own stage:
     ``interaction`` (its runs show the failure's actor doing its manoeuvre), ``reproduction`` (the policy
-    fails the same way with the same kind of actor) and ``avoidability`` (the reference driver drives most
-    episodes without any collision, off-road or stall)."""
+    fails the same way with the same kind of actor), ``avoidability`` (the reference driver drives most
+    episodes without any collision, off-road or stall), ``actors`` (the script's actors are the failure's, kind
+    for kind: none missing, the adversary above all, none added; ``out["actors"]``, :func:`compare_actors`) and
+    ``parameters`` (the script's ranges of the failure's parameters contain the failing values;
+    ``out["parameters"]``, :func:`compare_parameters`)."""
     found: List[_Rejected] = []
     repro = out["reproduction"]
     k = repro["k"]
@@ -260,6 +325,22 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
                                                + (f" ({classes})" if classes else "")
                                                + "; it must drive most of them without any collision, "
                                                  "off-road or stall"))
+    actors = out.get("actors")
+    if actors and not actors.get("same"):
+        adversary = actors.get("adversary")
+        problems = []
+        if adversary and adversary in actors.get("missing", {}) and not actors["script"].get(adversary):
+            problems.append(f"the failure's adversary, a {adversary}, is missing")
+        problems += [f"{n} {kind} fewer" for kind, n in actors.get("missing", {}).items()
+                     if not (kind == adversary and not actors["script"].get(adversary))]
+        problems += [f"{n} {kind} more" for kind, n in actors.get("extra", {}).items()]
+        found.append(_Rejected("actors", f"the failure's scene has {_census_text(actors['failure'])}, the new "
+                                         f"scenario's {_census_text(actors['script'])}: {', '.join(problems)}"))
+    parameters = out.get("parameters")
+    if parameters and parameters.get("outside"):
+        found.append(_Rejected("parameters", "the new scenario's ranges do not contain the failing values: " + ", ".join(
+            f"{name} = {parameters['compared'][name]['value']:g} outside {parameters['compared'][name]['range'][0]:g}"
+            f"..{parameters['compared'][name]['range'][1]:g}" for name in parameters["outside"])))
     return found
 
 
@@ -472,7 +553,9 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
 
     Returns ``{"cluster", "index", "status": "kept"|"merged"|"rejected", "reason", "stage", "video",
     "description", "script", "reproduction", "e2e_sc", "bank_entry", "merged_into", "seconds",
-    "timings", "interaction", "replay_entry", "avoidability", "rejections"}`` (paths relative to ``run_dir``;
+    "timings", "interaction", "replay_entry", "avoidability", "rejections", "actors", "parameters"}`` (paths
+    relative to ``run_dir``; ``actors`` and ``parameters``: the judge's comparisons of the failure with the new
+    script, :func:`compare_actors` and :func:`compare_parameters`;
     ``timings``: seconds per stage; ``status`` is the converted script's; ``replay_entry``: the exact replay's
     bank entry, kept whatever the script's fate; ``rejections``: every judge check that failed, the first
     one is ``reason``).
@@ -488,7 +571,7 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
                            "stage": None, "video": None, "description": None, "script": None,
                            "reproduction": None, "e2e_sc": None, "bank_entry": None, "merged_into": None,
                            "seconds": None, "timings": {}, "interaction": None, "replay_entry": None,
-                           "avoidability": None, "rejections": []}
+                           "avoidability": None, "rejections": [], "actors": None, "parameters": None}
     details: Dict[str, Any] = {}
     timings: Dict[str, float] = out["timings"]
     stage_start = [time.perf_counter()]
@@ -626,6 +709,13 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         out["e2e_sc"] = float(np.mean(scores))
         details["source_elements"] = truth
         lap("e2e_sc")
+
+        # what the judge compares beyond the runs: the actors of the failure's scene and of the new scenario's
+        # runs, and the failing parameter values against the new script's ranges
+        out["actors"] = compare_actors(actor_census(source_trace), [actor_census(t) for t in traces],
+                                       interaction.get("kind"))
+        out["parameters"] = compare_parameters((record.get("result") or {}).get("params") or record.get("params")
+                                               or {}, generation.script)
 
         # the judge: every check that failed is recorded; the first one is the rejection's stage
         rejections = _judge(out, interaction, source_failure, threshold)

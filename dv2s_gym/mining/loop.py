@@ -8,8 +8,8 @@ a. **mine**: :func:`dv2s_gym.mining.miner.mine` runs ``P`` on sampled scenes of 
    the D-V2S pipeline and adds the kept scenarios to the *working bank* (``out/bank``, a copy
    of the shipped bank, or the ``bank_dir`` given); every converted failure's scene is also kept
    exactly (its *exact replay* entry: the parent scenario narrowed around the failing parameters),
-   and so is that of up to ``max_replays`` more clusters, largest first
-   (:func:`dv2s_gym.mining.replays.replay_clusters`: no video, description or script, only the narrowed
+   and so is that of up to ``max_replays`` more clusters, the scenario families taking turns, each its largest
+   cluster first (:func:`dv2s_gym.mining.replays.replay_clusters`: no video, description or script, only the narrowed
    parent checked to replay the failing episode step for step): these are mined scenarios of the
    round too, so a round whose conversions are all rejected still has families to split;
 b. **split**: the newly kept scenarios (converted scripts and exact replays) are split by *family* (their parent bank scenario,
@@ -253,19 +253,48 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
     reasons: List[str] = []
     for record in read_rows(mine_out / "conversions.jsonl"):
         statuses[record.get("status", "?")] = statuses.get(record.get("status", "?"), 0) + 1
-        if record.get("status") == "rejected" and record.get("reason"):
-            reasons.append(str(record["reason"]))
+        if record.get("status") == "rejected" and (record.get("rejections") or record.get("reason")):
+            reasons += [str(r) for r in record.get("rejections") or [record["reason"]]]  # every failed check
     converted = sum(statuses.values())
     from dv2s_gym.mining.replays import REPLAYS_FILE
 
     replayed: Dict[str, int] = {}
     for row in read_rows(mine_out / REPLAYS_FILE):
         replayed[row.get("status", "?")] = replayed.get(row.get("status", "?"), 0) + 1
-    return {"replays": replayed, "episodes": episodes, "errors": errors, "failures": failures, "failures_against_policy": counted,
-            "clusters": clusters, "conversions": statuses, "rejected_reasons": reasons[:20],
+    return {"replays": replayed, "episodes": episodes, "errors": errors, "errored": errored_episodes(records),
+            "failures": failures, "failures_against_policy": counted,
+            "clusters": clusters, "conversions": statuses, "rejected_reasons": reasons[:40],
+            "rejected_reason_count": len(reasons),
             "clusters_not_converted": None if clusters is None else max(0, clusters - converted),
             "clusters_not_kept": None if clusters is None else max(0, clusters - converted
                                                                    - sum(replayed.values()))}
+
+
+def errored_episodes(records: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
+    """The episodes of ``records`` that errored (an ``error`` set: a scene that could not be sampled, a crashed or
+    hung worker...), which no rate counts: ``{"episodes": n, "scenarios": {scenario: n}, "examples": {scenario:
+    its first error, cut to 300 characters}}``."""
+    scenarios: Dict[str, int] = {}
+    examples: Dict[str, str] = {}
+    for record in records:
+        error = record.get("error")
+        if not error:
+            continue
+        name = str(record.get("scenario"))
+        scenarios[name] = scenarios.get(name, 0) + 1
+        examples.setdefault(name, str(error).strip().splitlines()[0][:300] if str(error).strip() else "error")
+    return {"episodes": sum(scenarios.values()), "scenarios": dict(sorted(scenarios.items())),
+            "examples": dict(sorted(examples.items()))}
+
+
+def _regress_errored(report: Mapping[str, Any], roles: Mapping[str, str]) -> Dict[str, Dict[str, Any]]:
+    """The errored episodes of a ``dv2s regress`` report per policy: ``roles`` maps its roles (``candidate``,
+    ``baseline``) to the loop's names for them (:func:`errored_episodes`' form)."""
+    found: Dict[str, Dict[str, Any]] = {}
+    for role, name in roles.items():
+        found[name] = errored_episodes([{"scenario": e.get("scenario"), "error": (e.get(role) or {}).get("error")}
+                                        for e in report.get("episodes") or [] if e.get(role) is not None])
+    return found
 
 
 def fine_tune_weights(names: Sequence[str], mined: Sequence[str], mined_share: float) -> Dict[str, float]:
@@ -450,6 +479,7 @@ def _run_round(loop: _Loop, number: int, current: str) -> str:
     if "mine" not in steps:
         timed("mine", lambda: _mine_step(loop, number, current, round_dir), _mine_plan(loop))
         _log_mined(loop, number, steps["mine"])
+        _log_errored(loop, number, "mining", {"mine": steps["mine"].get("errored") or {}})
     if "split" not in steps:
         _split_step(loop, number, current, timed)
     if not steps["split"]["fine_tune"] and not steps["split"]["held_out"]:
@@ -490,16 +520,24 @@ def _next_start(loop: _Loop, number: int, current: str) -> str:
     """The policy round ``number + 1`` starts from: the one the verdict on rounds 1..``number`` recommends
     (:func:`~dv2s_gym.mining.loop_verdict.recommendation`: never a REJECTED or NOT ACCEPTED fine-tuned policy),
     recorded in round ``number``'s ``next_policy`` and ``next_policy_reason``."""
+    from dv2s_gym.mining import loop_report
+
     rounds = loop.state.data["rounds"][:number]
     record = rounds[-1]
     start = loop.state.data["settings"]["policy"]
-    advice = recommendation({"settings": {"policy": start}, "rounds": rounds})
+    body: Dict[str, Any] = {"settings": {"policy": start}, "rounds": rounds}
+    final = loop_report.final_vs_start(body)  # as the report judges it: with two or more tested rounds
+    if final is not None:
+        body["final_vs_start"] = final
+    advice = recommendation(body)
+    # the policy to use, exactly as the report recommends it: the fine-tuned one only when it is the recommendation
+    following = advice["policy"]
     if record.get("new_policy") is None and "fine_tune" not in record["steps"]:
-        following, reason = current, "this round fine-tuned no policy"
+        reason = f"this round fine-tuned no policy; {advice['sentence']}"
     else:
-        following, reason = advice["policy"], advice["sentence"]
-        if following != start:
-            following = _earlier_round_spec(following, loop, number + 1)
+        reason = advice["sentence"]
+    if following != start:
+        following = _earlier_round_spec(following, loop, number + 1)
     if (record.get("next_policy"), record.get("next_policy_reason")) != (following, reason):
         record["next_policy"], record["next_policy_reason"] = following, reason
         loop.state.save()
@@ -552,6 +590,18 @@ def _count_scripts(bank: Path) -> int:
     return sum(1 for _ in Path(bank).glob("*/scenario.scenic"))
 
 
+def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Mapping[str, Any]]) -> None:
+    """Say loudly when a step's episodes errored: they count in no rate and no test."""
+    from dv2s_gym.mining.loop_report import errored_text
+
+    text = errored_text(errored)
+    if not text:
+        return
+    examples = {name: why for found in errored.values() if found for name, why in (found.get("examples") or {}).items()}
+    loop.log(f"round {number}: WARNING: episodes that errored in the {stage} step (left out of its rates and "
+             f"tests): {text}" + "".join(f"; {name}: {why}" for name, why in sorted(examples.items())))
+
+
 def _log_mined(loop: _Loop, number: int, mined: Mapping[str, Any]) -> None:
     s = loop.settings
     loop.log(f"round {number}: mined {mined['failures']} failures in {mined['episodes']} episodes, "
@@ -597,16 +647,22 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
         loop.log(f"round {number}: WARNING: {shortfall}")
     store_path = round_dir / "heldout.jsonl"
     if "before" not in steps:
-        timed("before", lambda: {"episodes": len(episodes), "done": bool(evaluate_heldout(
-            "before", current, episodes, store=HeldOutStore(store_path), bank_dir=loop.bank,
-            env_config=loop.env_config, workers=WorkerSettings(workers=loop.workers), progress=loop.progress))},
+        def before_step() -> Dict[str, Any]:
+            records = evaluate_heldout("before", current, episodes, store=HeldOutStore(store_path), bank_dir=loop.bank,
+                                       env_config=loop.env_config, workers=WorkerSettings(workers=loop.workers),
+                                       progress=loop.progress)
+            return {"episodes": len(episodes), "done": bool(records), "errored": errored_episodes(records)}
+
+        timed("before", before_step,
               f"{len(episodes)} episodes ({len(split['held_out'])} held-out scenario(s) x {s.k_eval} seeds)")
+        _log_errored(loop, number, "held-out: starting policy", {"start": steps["before"]["errored"]})
     new_policy, control_policy = _fine_tune_arms(loop, number, current, round_dir, timed)
     policies = {"before": current, "after": new_policy, "control": control_policy}
     if "after" not in steps:
         timed("after", lambda: _after_step(loop, policies, episodes, HeldOutStore(store_path), families),
               f"{len(episodes)} episodes for the fine-tuned policy" + (" and as many for the control"
                                                                        if control_policy else ""))
+        _log_errored(loop, number, "held-out: fine-tuned and control", steps["after"].get("errored") or {})
     if s.untouched_seeds and "untouched" not in steps:
         timed("untouched", lambda: evaluate_untouched(
             current, new_policy, control_policy, settings=untouched_settings(s.untouched_seeds, loop.env_config,
@@ -614,9 +670,11 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
             out=round_dir / "untouched", workers=loop.workers, progress=loop.progress),
               f"{_count_scripts(UNTOUCHED_BANK)} scripts x {s.untouched_seeds} seed(s) for the starting, fine-tuned"
               + (" and control policies" if control_policy else " policies"))
+        _log_errored(loop, number, "untouched scenario set", steps["untouched"].get("errored") or {})
     if "regress" not in steps:
         timed("regress", lambda: _regress_step(loop, new_policy, current, round_dir, split),
               f"{len(loop.start_names)} scenarios x {s.regress_episodes} seed(s), fine-tuned against starting policy")
+        _log_errored(loop, number, "regression test", steps["regress"].get("errored") or {})
     return new_policy
 
 
@@ -671,8 +729,11 @@ def _after_step(loop: _Loop, policies: Mapping[str, Optional[str]], episodes: Li
         control_records = evaluate_heldout("control", policies["control"], episodes, progress=loop.progress,
                                            **common)
     s = loop.settings
-    return heldout_comparison(before, after, control_records, min_episodes=s.min_heldout_episodes, seed=s.seed,
-                              families=families, min_families=s.min_heldout_families)
+    summary = heldout_comparison(before, after, control_records, min_episodes=s.min_heldout_episodes, seed=s.seed,
+                                 families=families, min_families=s.min_heldout_families)
+    summary["errored"] = {"fine_tuned": errored_episodes(after),
+                          **({"control": errored_episodes(control_records)} if control_records is not None else {})}
+    return summary
 
 
 def _regress_step(loop: _Loop, new_policy: str, current: str, round_dir: Path,
@@ -686,7 +747,9 @@ def _regress_step(loop: _Loop, new_policy: str, current: str, round_dir: Path,
                                seed=EVAL_SEED_BASE, margin=s.margin, env_config=loop.env_config)
     report = run_regression(new_policy, current, settings, workers=WorkerSettings(workers=loop.workers),
                             out_dir=round_dir / "regress", progress=loop.progress)
-    return _regress_summary(report, round_dir / "regress" / "report.json", split.get("held_out_families", []))
+    summary = _regress_summary(report, round_dir / "regress" / "report.json", split.get("held_out_families", []))
+    summary["errored"] = _regress_errored(report, {"baseline": "start", "candidate": "fine_tuned"})
+    return summary
 
 
 _STAGE_NAMES = {"mine": "mining failures", "split": "splitting by family", "before": "held-out: starting policy",
@@ -797,7 +860,10 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     ``families`` maps each held-out scenario to its family (default: each scenario its own); ``heldout_families``
     and ``heldout_scenarios`` count those the episodes came from. Below ``min_episodes`` pairs or
     ``min_families`` families the drop, its interval and both p-values are ``None`` and ``underpowered``
-    says why (the rates, with their wide intervals, stay)."""
+    says why (the rates, with their wide intervals, stay). ``significantly_worse`` holds, for ``start`` and
+    ``control``, whether the fine-tuned policy is significantly worse on the held-out families
+    (:func:`dv2s_gym.mining.loop_verdict.heldout_worse`, the verdict's held-out tests; ``None`` when not tested:
+    below the minimums, or no control)."""
     from dv2s_gym.mining.heldout import failure_types, paired_summary
 
     summary = paired_summary(before, after, seed=seed)
@@ -825,7 +891,36 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
         summary.update(relative_drop=None, relative_drop_interval=[None, None], mcnemar_p=None)
         if "vs_control" in summary:
             summary["vs_control"].update(relative_drop=None, mcnemar_p=None)
+    # is the fine-tuned policy significantly worse than the start / the control on the held-out families
+    # (loop_verdict.heldout_worse: the dv2s regress gate over the families); not tested below the minimums
+    from dv2s_gym.mining.loop_verdict import heldout_worse
+
+    summary["significantly_worse"] = {
+        "start": None if shortfall else heldout_worse(_family_tables(before, after, families), "start"),
+        "control": None if shortfall or control is None else heldout_worse(
+            _family_tables(control, after, families), "control")}
     return summary
+
+
+def _family_tables(baseline: Sequence[Mapping[str, Any]], candidate: Sequence[Mapping[str, Any]],
+                   families: Optional[Mapping[str, str]]) -> Dict[str, Any]:
+    """``{held-out family: PairedTable}`` of ``candidate`` against ``baseline`` records, paired by (scenario, seed);
+    a pair with an error on either side is left out."""
+    from dv2s_gym.mining.heldout import episode_failed
+    from dv2s_gym.regress.stats import PairedTable
+
+    twins = {(r["scenario"], int(r["seed"])): r for r in candidate}
+    outcomes: Dict[str, tuple] = {}
+    for record in baseline:
+        twin = twins.get((record["scenario"], int(record["seed"])))
+        old, new = episode_failed(record), episode_failed(twin) if twin is not None else None
+        if old is None or new is None:
+            continue
+        family = (families or {}).get(str(record["scenario"]), str(record["scenario"]))
+        pair = outcomes.setdefault(family, ([], []))
+        pair[0].append(new)
+        pair[1].append(old)
+    return {family: PairedTable.from_outcomes(new, old) for family, (new, old) in sorted(outcomes.items())}
 
 
 def untouched_settings(seeds: int, env_config: Mapping[str, Any], margin: float,
@@ -854,7 +949,8 @@ def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, s
     result: Dict[str, Any] = {"scenarios": list((first.get("bank") or {}).get("scenarios") or []),
                               "seeds": settings.episodes, "policies": {"start": _measures(overall.get("baseline")),
                                                            "fine_tuned": _measures(overall.get("candidate"))},
-                              "fine_tuned_vs_start": _comparison(first, out / "vs_start" / "report.json")}
+                              "fine_tuned_vs_start": _comparison(first, out / "vs_start" / "report.json"),
+                              "errored": _regress_errored(first, {"baseline": "start", "candidate": "fine_tuned"})}
     if control is not None:
         # a measurement, not a gate: the fine-tuned policy is the reference whatever its own verdict was
         baseline = BaselineReport(out / "vs_start" / "report.json", role="candidate", accept_failed=True)
@@ -862,6 +958,7 @@ def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, s
                                 out_dir=out / "vs_control", progress=progress)
         result["policies"]["control"] = _measures((second.get("overall") or {}).get("candidate"))
         result["control_vs_fine_tuned"] = _comparison(second, out / "vs_control" / "report.json")
+        result["errored"].update(_regress_errored(second, {"candidate": "control"}))
     return result
 
 

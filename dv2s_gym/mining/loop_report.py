@@ -4,23 +4,25 @@
 
     {"schema": "dv2s-loop", "schema_version": 1, "out", "settings", "policy": the last fine-tuned policy's spec,
      "recommendation": {"policy": the spec to use, "verdict": ACCEPTED | REJECTED | NOT ACCEPTED, "round",
-                        "candidate", "reason", "sentence", "exit_code", "too_small": why the round was too small
-                        to judge, or None} (:mod:`dv2s_gym.mining.loop_verdict`),
+                        "candidate", "reason", "decided_by": the test that decided, "sentence", "exit_code",
+                        "too_small": why the round was too small to judge, or None}
+                        (:mod:`dv2s_gym.mining.loop_verdict`),
      "rounds": [{"round", "policy": spec it started from, "new_policy": fine-tuned spec,
                  "next_policy": the spec the next round starts from (the one the verdict on the rounds so far
                  recommends), "next_policy_reason",
                  "timings": {step: seconds},
                  "control_policy": the control arm's spec (with a control),
-                 "steps": {"mine": {"episodes", "errors", "failures", "failures_against_policy", "clusters",
+                 "steps": {"mine": {"episodes", "errors", "errored", "failures", "failures_against_policy", "clusters",
                                     "clusters_not_converted", "clusters_not_kept", "conversions": {status: n},
-                                    "replays": {status: n}, "rejected_reasons",
+                                    "replays": {status: n}, "rejected_reasons" (every failed check of each
+                                    rejected conversion, at most 40), "rejected_reason_count",
                                     "kept": [{"cluster", "scenario", "reproduction", "replay" (exact replays:
                                               True), "parent" (exact replays)}], "folder"},
                            "split": {"by": "family", "fine_tune", "held_out", "fine_tune_clusters",
                                      "held_out_clusters", "fine_tune_families", "held_out_families", "groups",
                                      "moved_to_fine_tune"}
                                     (loops recorded before the family split: no "by" and no families),
-                           "before": {"episodes"},
+                           "before": {"episodes", "errored"},
                            "fine_tune" and "control": {"model", "method": "ppo" | "dagger", "scenarios",
                                          "mined_upweighted", "mined_left_out", "steps", "families" (every
                                          family in the arm's mix: later rounds keep them on the fine-tuning side),
@@ -37,7 +39,12 @@
                                      "min_episodes", "min_families", "heldout_families", "heldout_scenarios",
                                      "underpowered": why no drop or test is reported (only below
                                      min_episodes pairs or min_families families; then the drop and
-                                     p-values are None)},
+                                     p-values are None),
+                                     "significantly_worse": {"start" | "control": is the fine-tuned policy
+                                         significantly worse on the held-out families
+                                         (:func:`dv2s_gym.mining.loop_verdict.heldout_worse`: {"against", "test",
+                                         "worse", "families", "pairs", "fine_tuned_only", "other_only", "p_value",
+                                         "worse_families", "reason"}; None when not tested)}},
                            "untouched": {"scenarios", "seeds", "policies": {"start" | "control" | "fine_tuned":
                                          {"episodes", "errors", "failure_rate", "stall_rate", "collision_rate",
                                           "mean_speed"}} (dv2s regress summaries), "fine_tuned_vs_start" and
@@ -56,6 +63,12 @@ anything: each round's regression test runs the same starting-bank scenarios and
 round's baseline episodes (the starting policy) are paired with the last tested round's candidate episodes
 (the final policy) and judged by the regression test's own rule (:func:`final_vs_start`); the paired report is
 ``final_vs_start/report.json`` in the loop folder.
+
+``errored`` counts the episodes that errored (no rate or test counts them; e.g. a scene the scenario's
+sampler could not produce): in ``mine`` and ``before`` ``{"episodes", "scenarios": {scenario: n}, "examples":
+{scenario: its first error}}`` (:func:`dv2s_gym.mining.loop.errored_episodes`); in ``after`` the same per policy
+(``fine_tuned``, ``control``), in ``untouched`` and ``regress`` per policy (``start``, ``fine_tuned``, and
+``control`` in ``untouched``). The log warns of them after each step and ``report.md`` lists them per round.
 
 ``Rate`` is ``{"k", "n", "rate", "low", "high"}`` (Wilson 95 %). ``report.html`` also shows, per round, the
 failure clips of the kept mined scenarios (the mining run's and the bank entry's videos) beside each other. A round missing a step has not
@@ -145,16 +158,18 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None) -> Opt
 
 
 def _final_line(final: Optional[Mapping[str, Any]]) -> Optional[str]:
-    """One sentence on the final policy against the starting one (None when there is no such comparison)."""
+    """One sentence on the last fine-tuned policy against the starting one (None when there is no such
+    comparison)."""
     if not final:
         return None
     if final.get("error"):
-        return f"Final against starting policy on the starting bank: not compared ({final['error']})."
+        return f"Fine-tuned policy against the starting policy on the starting bank: not compared ({final['error']})."
     rounds = final.get("rounds") or ["?", "?"]
-    return (f"Final policy `{final.get('final')}` against starting policy `{final.get('start')}` on the starting "
+    return (f"Round {rounds[1]}'s fine-tuned policy `{final.get('final')}` against the starting policy "
+            f"`{final.get('start')}` on the starting "
             f"bank ({final.get('episodes')} paired episodes: round {rounds[0]}'s baseline episodes with round "
             f"{rounds[1]}'s candidate episodes, same scenarios and seeds): **{final.get('verdict')}** - "
-            f"{final.get('reason')}; failure rate final {_summary_rate(final.get('new_failure_rate'))}, start "
+            f"{final.get('reason')}; failure rate fine-tuned {_summary_rate(final.get('new_failure_rate'))}, start "
             f"{_summary_rate(final.get('old_failure_rate'))}"
             + (f"; regressed: {', '.join(final['regressed'])}" if final.get("regressed") else "")
             + (f"; report `{final['report']}`" if final.get("report") else "") + ".")
@@ -200,15 +215,72 @@ def _round_row(record: Mapping[str, Any]) -> Dict[str, Any]:
     }
 
 
+def errored_text(errored: Mapping[str, Mapping[str, Any]]) -> str:
+    """``"fine-tuned policy 3 (urban_pedestrian_crossing 3), control 1 (...)"``: errored episodes per policy (the
+    mining step's without a policy's name), in words; empty when none errored."""
+    labels = {"start": "starting policy ", "fine_tuned": "fine-tuned policy ", "control": "control ", "mine": ""}
+    parts = []
+    for role, found in errored.items():
+        if found and found.get("episodes"):
+            names = ", ".join(f"{name} {count}" for name, count in (found.get("scenarios") or {}).items())
+            parts.append(f"{labels.get(role, role + ' ')}{found['episodes']}" + (f" ({names})" if names else ""))
+    return ", ".join(parts)
+
+
+def errored_by_stage(record: Mapping[str, Any]) -> List[tuple]:
+    """``[(stage label, {policy: errored})]``: the round's errored episodes per step that ran
+    (:func:`dv2s_gym.mining.loop.errored_episodes`' form; a mining step recorded without them gives its count)."""
+    steps = record.get("steps") or {}
+    found = []
+    mine = steps.get("mine") or {}
+    if mine:
+        found.append(("mining", {"mine": mine.get("errored") or {"episodes": mine.get("errors") or 0}}))
+    held: Dict[str, Any] = {}
+    if (steps.get("before") or {}).get("errored") is not None:
+        held["start"] = steps["before"]["errored"]
+    held.update((steps.get("after") or {}).get("errored") or {})
+    if held:
+        found.append(("held-out", held))
+    for key, label in (("untouched", "untouched set"), ("regress", "regression test")):
+        errored = (steps.get(key) or {}).get("errored")
+        if errored:
+            found.append((label, errored))
+    return found
+
+
+def _errored_total(record: Mapping[str, Any]) -> int:
+    return sum(int((found or {}).get("episodes") or 0) for _, by in errored_by_stage(record) for found in by.values())
+
+
+def _errored_lines(record: Mapping[str, Any]) -> List[str]:
+    """The round's errored episodes per step and policy, naming the scenarios and their first error."""
+    stages = errored_by_stage(record)
+    if not stages:
+        return []
+    parts = [f"{label}: {errored_text(by) or 'none'}" for label, by in stages]
+    total = _errored_total(record)
+    lines = [f"- errored episodes (counted in no rate or test): " + ("**" if total else "") + "; ".join(parts)
+             + ("**" if total else "")]
+    examples: Dict[str, str] = {}
+    for _, by in stages:
+        for found in by.values():
+            for name, why in ((found or {}).get("examples") or {}).items():
+                examples.setdefault(name, why)
+    lines += [f"  - `{name}`: {why}" for name, why in sorted(examples.items())]
+    return lines
+
+
 def round_summary(record: Mapping[str, Any]) -> str:
     """One plain-text line on a round for the terminal: held-out failure rates and the regression verdict."""
     row = _round_row(record)
     steps = record.get("steps") or {}
     if steps.get("skipped"):
         return f"round {row['round']}: skipped: {steps['skipped']}"
+    errored = _errored_total(record)
     return (f"round {row['round']}: {row['failures']} failures mined in {row['episodes']} episodes, {row['kept']} "
             f"scenarios kept; held-out failure rate start {row['before']}, control {row['control']}, fine-tuned "
-            f"{row['after']}; rest of the bank: {row['verdict']}")
+            f"{row['after']}; rest of the bank: {row['verdict']}"
+            + (f"; {errored} episode(s) errored (see the report)" if errored else ""))
 
 
 def _replays_text(settings: Mapping[str, Any]) -> str:
@@ -303,6 +375,12 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
                         else f", relative drop against the control {versus['relative_drop']:.0%}"))
     elif not after.get("control"):
         lines.append("- no control arm in this round: a drop cannot be credited to the mined scenarios")
+    for key, label in (("start", "the starting policy"), ("control", "the control")):
+        test = (after.get("significantly_worse") or {}).get(key)
+        if test:
+            lines.append(f"- fine-tuned policy against {label} on the held-out families: "
+                         f"**{'significantly worse' if test.get('worse') else 'not significantly worse'}** "
+                         f"({test.get('reason')}; {test.get('test')})")
     per = after.get("per_scenario") or {}
     if per:
         controls = versus.get("per_scenario") or {}
@@ -358,8 +436,9 @@ def render_markdown(report: Mapping[str, Any]) -> str:
     for record in report.get("rounds", []):
         steps = record.get("steps", {})
         lines += ["", f"## Round {record.get('round')}", "",
-                  f"- policy: `{record.get('policy')}` -> `{record.get('new_policy', '-')}`",
+                  f"- policy: `{record.get('policy')}` -> fine-tuned policy `{record.get('new_policy', '-')}`",
                   f"- timings: {_seconds(record.get('timings', {}))}"]
+        lines += _errored_lines(record)
         if steps.get("skipped"):
             lines.append(f"- skipped: {steps['skipped']}")
         mine = steps.get("mine") or {}
@@ -376,8 +455,12 @@ def render_markdown(report: Mapping[str, Any]) -> str:
                          + (f"; **{mine['clusters_not_kept']} clusters skipped**, neither converted nor replayed "
                             f"(at most {settings.get('max_replays')} exact replays per round)"
                             if mine.get("clusters_not_kept") else ""))
-            for reason in mine.get("rejected_reasons", [])[:5]:
+            reasons = mine.get("rejected_reasons") or []
+            for reason in reasons:  # every failed check of the conversion judge, each its own reason
                 lines.append(f"  - rejected: {reason}")
+            if (mine.get("rejected_reason_count") or 0) > len(reasons):
+                lines.append(f"  - and {mine['rejected_reason_count'] - len(reasons)} more rejection reasons "
+                             f"(conversions.jsonl in {mine.get('folder')})")
         split = steps.get("split") or {}
         if split:
             if split.get("by") == "family":

@@ -50,8 +50,9 @@ class LoopSettings:
     max_conversions: Optional[int] = 1
     """Clusters converted into bank scenarios per round, largest first (``None``: all, 0: none)."""
     max_replays: Optional[int] = 6
-    """Clusters beyond the converted ones whose failing scene is kept as an exact replay entry per round, largest
-    first (:func:`dv2s_gym.mining.replays.replay_clusters`; ``None``: all, 0: none)."""
+    """Clusters beyond the converted ones whose failing scene is kept as an exact replay entry per round, the
+    families taking turns, each its largest cluster first (:func:`dv2s_gym.mining.replays.replay_order`; ``None``:
+    all, 0: none)."""
     holdout_fraction: float = 0.5
     """Share of the round's mined families held out from fine-tuning, in [0, 1]."""
     fine_tune_method: str = "dagger"

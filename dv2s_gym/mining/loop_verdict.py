@@ -1,27 +1,38 @@
 """Which policy a ``dv2s loop`` run recommends, and why: its verdict and exit status.
 
-A round's fine-tuned policy is *accepted* when the regression test on the rest of the starting bank
-PASSed and the control arm (the same fine-tuning without the mined scenarios) did not beat it on the
-held-out episodes (exact McNemar p below :data:`CONTROL_ALPHA`, the control failing fewer). It is
-*rejected* when the regression test FAILed or the control beat it; any other outcome (INCONCLUSIVE or
-ERROR regression test, a skipped round) leaves it *not accepted*. Each round is tested against the policy it
-started from, so with two or more tested rounds a final policy that FAILs against the starting one
-(``final_vs_start``) is rejected too. The recommended policy is the last accepted one, else the starting
-policy.
+A round's fine-tuned policy is *accepted* when three tests say so: the regression test on the rest of the
+starting bank (``dv2s regress``'s paired non-inferiority test against the policy the round started from)
+PASSed, and on the held-out families it is significantly worse neither than the policy it started from nor
+than the control arm (the same fine-tuning without the mined scenarios). "Significantly worse" is
+``dv2s regress``'s gate on the held-out pairs (:func:`heldout_worse`): one-sided exact McNemar tests per
+held-out family and pooled, family-wise level :data:`HELDOUT_ALPHA` (:func:`dv2s_gym.regress.stats.compare_scenarios`
+with no margin), so a harm confined to one family is not averaged away. It is *rejected* when the regression test
+FAILed or either held-out test found it worse; it is *not accepted* when the regression test is INCONCLUSIVE or
+in ERROR, when the round skipped, or when the held-out tests did not run (too few held-out episodes or families:
+no test, no acceptance). Without a control arm only the test against the start is required. Each round is
+tested against the policy it started from, so with two or more tested rounds a fine-tuned policy that FAILs
+against the starting one (``final_vs_start``) is rejected too. The verdict's reason names the test that decided
+it. The recommended policy (the policy to use) is the last accepted one, else the starting policy.
 """
 
 from __future__ import annotations
 
 from typing import Any, Dict, Mapping, Optional
 
-__all__ = ["ACCEPTED", "REJECTED", "NOT_ACCEPTED", "EXIT_CODES", "CONTROL_ALPHA", "EVIDENCE_HINT", "judge_round",
-           "too_small", "recommendation"]
+__all__ = ["ACCEPTED", "REJECTED", "NOT_ACCEPTED", "EXIT_CODES", "CONTROL_ALPHA", "HELDOUT_ALPHA", "HELDOUT_TEST",
+           "EVIDENCE_HINT", "judge_round", "heldout_worse", "too_small", "recommendation"]
 
 ACCEPTED, REJECTED, NOT_ACCEPTED = "ACCEPTED", "REJECTED", "NOT ACCEPTED"
 EXIT_CODES = {ACCEPTED: 0, REJECTED: 1, NOT_ACCEPTED: 3}
 """``dv2s loop``'s exit status for the verdict on the last round's fine-tuned policy."""
-CONTROL_ALPHA = 0.05
-"""Below this McNemar p, a control failing fewer held-out episodes than the fine-tuned policy beats it."""
+HELDOUT_ALPHA = 0.05
+"""Family-wise level of the held-out tests: is the fine-tuned policy significantly worse than the start, or than
+the control, on the held-out families (:func:`heldout_worse`)."""
+CONTROL_ALPHA = HELDOUT_ALPHA
+"""The level of the held-out test against the control (the same as :data:`HELDOUT_ALPHA`)."""
+HELDOUT_TEST = (f"one-sided exact McNemar tests per held-out family and pooled, family-wise level {HELDOUT_ALPHA:g} "
+                "(the dv2s regress gate)")
+"""The held-out tests in words, as the verdict's reason and the reports name them."""
 
 
 EVIDENCE_HINT = "run `dv2s loop --profile evidence` for a round large enough to judge"
@@ -42,28 +53,102 @@ def too_small(record: Mapping[str, Any]) -> Optional[str]:
     return "; ".join(reasons) or None
 
 
+def heldout_worse(tables: Mapping[str, Any], against: str) -> Optional[Dict[str, Any]]:
+    """Whether the fine-tuned policy is significantly worse than ``against`` (``"start"`` or ``"control"``) on
+    the held-out families: ``tables`` maps each held-out family to its paired table of fine-tuned (candidate)
+    against ``against`` (baseline), a :class:`~dv2s_gym.regress.stats.PairedTable` or its dict
+    (``both_fail``, ``candidate_only``, ``baseline_only``, ``neither``). ``dv2s regress``'s gate decides
+    (:func:`dv2s_gym.regress.stats.compare_scenarios` with no margin, family-wise level :data:`HELDOUT_ALPHA`):
+    worse when a family's or the pooled one-sided exact McNemar test rejects "no worse" with the fine-tuned policy
+    failing more. Returns ``{"against", "test", "worse", "families", "pairs", "fine_tuned_only",
+    "other_only", "p_value" (pooled, unadjusted), "worse_families", "reason"}``, or ``None`` without pairs."""
+    from dv2s_gym.regress.stats import PairedTable, Verdict, compare_scenarios
+
+    tables = {str(name): t if isinstance(t, PairedTable) else PairedTable(**dict(t)) for name, t in tables.items()}
+    tables = {name: t for name, t in sorted(tables.items()) if t.n}
+    if not tables:
+        return None
+    per, overall = compare_scenarios(tables, margin=0.0, alpha=HELDOUT_ALPHA)
+    pooled = PairedTable.pooled(list(tables.values()))
+    failed = [name for name, comparison in per.items() if comparison.verdict is Verdict.FAIL]
+    worse = overall.verdict is Verdict.FAIL
+    label = "the starting policy" if against == "start" else "the control"
+    where = (f" (in famil{'y' if len(failed) == 1 else 'ies'} {', '.join(failed)})" if failed else "")
+    reason = (f"{pooled.n} held-out pairs from {len(tables)} famil{'y' if len(tables) == 1 else 'ies'}: only the "
+              f"fine-tuned policy failed {pooled.candidate_only}, only {label} {pooled.baseline_only}; pooled "
+              f"one-sided p = {overall.p_value:.3g}; "
+              + (f"significantly worse{where}" if worse else "not significantly worse"))
+    return {"against": against, "test": HELDOUT_TEST, "worse": worse, "families": len(tables), "pairs": pooled.n,
+            "fine_tuned_only": pooled.candidate_only, "other_only": pooled.baseline_only,
+            "p_value": overall.p_value, "worse_families": failed, "reason": reason}
+
+
+def _heldout_tests(after: Mapping[str, Any]) -> Dict[str, Optional[Dict[str, Any]]]:
+    """The held-out tests of a round's ``after`` step: as recorded (``significantly_worse``), else, for a round
+    recorded before they were, the same test on its pooled tables (one family); ``None`` where none ran."""
+    if "significantly_worse" in after:
+        recorded = after.get("significantly_worse") or {}
+        return {"start": recorded.get("start"), "control": recorded.get("control")}
+    found: Dict[str, Optional[Dict[str, Any]]] = {"start": None, "control": None}
+    if after.get("mcnemar_p") is not None and after.get("table"):
+        t = after["table"]
+        found["start"] = heldout_worse({"held-out": {"both_fail": t.get("both_fail", 0),
+                                                     "candidate_only": t.get("after_only", 0),
+                                                     "baseline_only": t.get("before_only", 0),
+                                                     "neither": t.get("neither", 0)}}, "start")
+    versus = after.get("vs_control") or {}
+    if versus.get("mcnemar_p") is not None and versus.get("table"):
+        t = versus["table"]
+        found["control"] = heldout_worse({"held-out": {"both_fail": t.get("both_fail", 0),
+                                                       "candidate_only": t.get("fine_tuned_only", 0),
+                                                       "baseline_only": t.get("control_only", 0),
+                                                       "neither": t.get("neither", 0)}}, "control")
+    return found
+
+
 def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
-    """``{"verdict", "reason"}`` on round ``record``'s fine-tuned policy; ``None`` when the round fine-tuned none."""
+    """``{"verdict", "reason", "decided_by"}`` on round ``record``'s fine-tuned policy (module docstring);
+    ``None`` when the round fine-tuned none. ``decided_by`` names the test that decided (``regression``,
+    ``heldout_vs_control``, ``heldout_vs_start``, ``all`` when every test agreed on ACCEPTED), or the missing
+    one."""
     steps = record.get("steps") or {}
     if not record.get("new_policy") and "fine_tune" not in steps:
         return None
     regress = steps.get("regress") or {}
     verdict = regress.get("verdict")
-    versus = (steps.get("after") or {}).get("vs_control") or {}
-    table, p = versus.get("table") or {}, versus.get("mcnemar_p")
+    after = steps.get("after") or {}
+    tests = _heldout_tests(after)
+    regression = "the regression test on the rest of the bank (paired non-inferiority against the round's start)"
     if verdict == "FAIL":
-        return {"verdict": REJECTED, "reason": f"the fine-tuned policy regressed on the rest of the bank "
-                                               f"({regress.get('reason')})"}
-    if p is not None and p < CONTROL_ALPHA and table.get("fine_tuned_only", 0) > table.get("control_only", 0):
-        return {"verdict": REJECTED, "reason": f"the control (the same fine-tuning without the mined scenarios) "
-                                               f"failed fewer held-out episodes (McNemar p = {p:.3g})"}
-    if verdict == "PASS":
-        return {"verdict": ACCEPTED, "reason": f"no regression on the rest of the bank ({regress.get('reason')})"
-                + ("" if p is not None or not versus else "; the held-out comparison with the control was not tested")}
+        return {"verdict": REJECTED, "decided_by": "regression",
+                "reason": f"the fine-tuned policy regressed on the rest of the bank: {regression} FAILed "
+                          f"({regress.get('reason')})"}
+    for key, label in (("control", "the control (the same fine-tuning without the mined scenarios)"),
+                       ("start", "the starting policy")):
+        test = tests.get(key)
+        if test and test.get("worse"):
+            return {"verdict": REJECTED, "decided_by": f"heldout_vs_{key}",
+                    "reason": f"the fine-tuned policy is significantly worse than {label} on the held-out families "
+                              f"({test.get('test')}: {test.get('reason')})"}
     if not regress:
-        return {"verdict": NOT_ACCEPTED, "reason": "the round has no regression test yet"}
-    return {"verdict": NOT_ACCEPTED, "reason": f"the regression test on the rest of the bank is {verdict}, so "
-                                               f"no regression is ruled out ({regress.get('reason')})"}
+        return {"verdict": NOT_ACCEPTED, "decided_by": "regression", "reason": "the round has no regression test yet"}
+    if verdict != "PASS":
+        return {"verdict": NOT_ACCEPTED, "decided_by": "regression",
+                "reason": f"{regression} is {verdict}, so no regression is ruled out ({regress.get('reason')})"}
+    missing = [key for key in ("start", "control") if tests.get(key) is None
+               and (key == "start" or after.get("control") or "vs_control" in after)]
+    if missing:
+        why = after.get("underpowered") or ("no held-out pair ran" if not after.get("pairs") else "not recorded")
+        return {"verdict": NOT_ACCEPTED, "decided_by": f"heldout_vs_{missing[0]}",
+                "reason": f"{regression} PASSed, but the held-out test against "
+                          f"{' and '.join('the starting policy' if k == 'start' else 'the control' for k in missing)}"
+                          f" did not run ({why}), so a harm on the held-out families is not ruled out"}
+    parts = [f"not significantly worse than {'the starting policy' if key == 'start' else 'the control'} "
+             f"(p = {tests[key]['p_value']:.3g})" for key in ("start", "control") if tests.get(key)]
+    control_note = "" if tests.get("control") else "; no control arm to compare with"
+    return {"verdict": ACCEPTED, "decided_by": "all",
+            "reason": f"no regression on the rest of the bank ({regression} PASSed: {regress.get('reason')}); on "
+                      f"the held-out families {' and '.join(parts)} ({HELDOUT_TEST}){control_note}"}
 
 
 def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
@@ -71,7 +156,8 @@ def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
 
     Returns ``{"policy": the recommended spec, "verdict": the last fine-tuned policy's (ACCEPTED, REJECTED,
     NOT ACCEPTED), "round", "candidate": that policy's spec, "reason", "sentence": one line for people,
-    "exit_code", "too_small": why a NOT ACCEPTED round was too small to judge (:func:`too_small`; the sentence
+    "decided_by": the test that decided (:func:`judge_round`; ``final_vs_start`` for the comparison over the
+    rounds), "exit_code", "too_small": why a NOT ACCEPTED round was too small to judge (:func:`too_small`; the sentence
     then points to the evidence profile) or ``None``}``."""
     start = (report.get("settings") or {}).get("policy")
     recommended, last = start, None
@@ -84,26 +170,28 @@ def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
             recommended = record.get("new_policy") or report.get("policy")
     if last is None:
         return {"policy": start, "verdict": NOT_ACCEPTED, "round": None, "candidate": None,
-                "reason": "no round fine-tuned a policy", "exit_code": EXIT_CODES[NOT_ACCEPTED], "too_small": None,
+                "reason": "no round fine-tuned a policy", "decided_by": None, "exit_code": EXIT_CODES[NOT_ACCEPTED],
+                "too_small": None,
                 "sentence": f"NOT ACCEPTED: no round fine-tuned a policy; keep the starting policy {start}"}
     record, judged = last
     candidate = record.get("new_policy") or report.get("policy")
     number = record.get("round")
     final = report.get("final_vs_start") or {}
     if judged["verdict"] == ACCEPTED and final.get("verdict") == "FAIL":  # each round passed against its own start
-        judged = {"verdict": REJECTED, "reason": f"over rounds {', '.join(map(str, final.get('rounds') or []))} "
-                                                 f"the policy regressed against the starting one on the starting "
-                                                 f"bank ({final.get('reason')})"}
+        judged = {"verdict": REJECTED, "decided_by": "final_vs_start",
+                  "reason": f"over rounds {', '.join(map(str, final.get('rounds') or []))} the fine-tuned policy "
+                            f"regressed against the starting one on the starting bank: the regression test of the "
+                            f"fine-tuned against the starting policy FAILed ({final.get('reason')})"}
         recommended = start
     if judged["verdict"] == ACCEPTED:
-        sentence = f"ACCEPTED: use the round {number} policy {candidate}: {judged['reason']}"
+        sentence = f"ACCEPTED: use the round {number} fine-tuned policy {candidate}: {judged['reason']}"
     else:
         keep = "the starting policy" if recommended == start else "the last accepted policy"
-        sentence = (f"{judged['verdict']}: keep {keep} {recommended}, not the round {number} policy {candidate}: "
-                    f"{judged['reason']}")
+        sentence = (f"{judged['verdict']}: keep {keep} {recommended}, not the round {number} fine-tuned policy "
+                    f"{candidate}: {judged['reason']}")
     small = too_small(record) if judged["verdict"] == NOT_ACCEPTED else None
     if small:
         sentence += f". TOO SMALL TO JUDGE ({small}): {EVIDENCE_HINT}"
     return {"policy": recommended, "verdict": judged["verdict"], "round": number, "candidate": candidate,
-            "reason": judged["reason"], "exit_code": EXIT_CODES[judged["verdict"]], "too_small": small,
-            "sentence": sentence}
+            "reason": judged["reason"], "decided_by": judged.get("decided_by"),
+            "exit_code": EXIT_CODES[judged["verdict"]], "too_small": small, "sentence": sentence}

@@ -4,7 +4,8 @@ Converting a failure through D-V2S (video, description, script, judge) is slow a
 converts at most a few clusters. The exact replay of a failing scene (:mod:`dv2s_gym.mining.exact_replay`) needs
 none of that: the parent script narrowed around the failing parameters, one episode to check that it replays
 the recorded one step for step, and a bank add. :func:`replay_clusters` keeps one for each avoidable cluster
-that no conversion has tried yet (a conversion makes its own replay first), largest clusters first, and appends
+that no conversion has tried yet (a conversion makes its own replay first), taking the scenario families in turn
+(:func:`replay_order`: each family's largest cluster, then each one's next), and appends
 a row per cluster to the run's ``replays.jsonl`` (:data:`REPLAYS_FILE`), so a resumed call replays only the
 clusters left. :func:`replay_entries` reads the replay entries of a run back, from both files.
 """
@@ -14,11 +15,11 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from dv2s_gym.mining.jsonl import read_rows
 
-__all__ = ["REPLAYS_FILE", "replay_clusters", "replay_entries"]
+__all__ = ["REPLAYS_FILE", "replay_clusters", "replay_order", "replay_entries"]
 
 REPLAYS_FILE = "replays.jsonl"
 """The rows of :func:`replay_clusters` in a mining run folder (one JSON object a line)."""
@@ -28,7 +29,8 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
                     max_replays: Optional[int] = None, progress: bool = True) -> List[Dict[str, Any]]:
     """Add the exact replay of one failure per avoidable cluster of the mining run in ``run_dir`` to the bank in
     ``bank_dir`` (the loop's working bank; the parent scripts come from the bank the run mined), skipping clusters a conversion or an earlier call has tried;
-    at most ``max_replays`` rows in ``replays.jsonl`` (``None``: every cluster). The representative failure is the
+    at most ``max_replays`` rows in ``replays.jsonl`` (``None``: every cluster), the clusters taken round-robin over
+    the families (:func:`replay_order`). The representative failure is the
     one the conversion would take (lowest robustness, then lowest index). Returns every row of the run's
     ``replays.jsonl`` (:func:`dv2s_gym.mining.convert.replay_failure_entry`'s records)."""
     from dv2s_gym.mining.cluster import group
@@ -45,24 +47,20 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
             from None
     path = run_dir / REPLAYS_FILE
     existing = read_rows(path)
-    tried = {str(row.get("cluster")) for row in existing + read_rows(run_dir / "conversions.jsonl")}
-    candidates = []
-    for cluster, members in sorted(group(read_records(run_dir / "episodes.jsonl")).items()):
-        avoidable = [r for r in members if r.get("avoidable") is not False]
-        if cluster in tried or not avoidable:
-            continue
-        representative = min(avoidable, key=lambda r: (float(r.get("rho") or 0.0), int(r["index"])))
-        candidates.append((-len(avoidable), cluster, representative))
-    candidates.sort(key=lambda c: (c[0], c[1]))
+    converted = {str(row.get("cluster")) for row in read_rows(run_dir / "conversions.jsonl")}
+    replayed = {str(row.get("cluster")) for row in existing}
+    groups = group(read_records(run_dir / "episodes.jsonl"))
     room = None if max_replays is None else max(0, int(max_replays) - len(existing))
-    todo = candidates[:room]
+    # the order over every cluster no conversion tried, so a resumed call goes on where a first call stopped
+    order = replay_order({cluster: members for cluster, members in groups.items() if cluster not in converted})
+    todo = [(cluster, record) for cluster, record in order if cluster not in replayed][:room]
     if not todo:
         return existing
     bank = Bank(bank_dir)
     appender = _Appender(path)
     bar = _progress(progress, len(todo), 0, desc="exact replays")
     try:
-        for _, cluster, record in todo:
+        for cluster, record in todo:
             row = replay_failure_entry(dict(record, cluster=cluster), run_dir, policy=settings["policy"], bank=bank,
                                        env_config=settings.get("env_config"), cluster=cluster,
                                        bank_dir=settings.get("bank_dir"),  # the bank the run mined (the parents')
@@ -77,6 +75,36 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
         if bar is not None:
             bar.close()
     return existing
+
+
+def replay_order(groups: Mapping[str, Sequence[Mapping[str, Any]]]) -> List[Tuple[str, Dict[str, Any]]]:
+    """``[(cluster, representative failure)]``: the order in which the clusters of ``groups`` (failed records by
+    cluster, :func:`dv2s_gym.mining.cluster.group`) get their exact replay, round-robin over the scenario
+    families, so that a round's few replays spread over its families instead of all coming from the family with
+    the most failures. The families take turns in the order of their largest cluster (most avoidable failures,
+    then the family's name); each turn gives a family its largest cluster not yet taken (most avoidable
+    failures, then the cluster id). Clusters without an avoidable failure get none. The representative is the
+    failure a conversion would take (lowest robustness, then lowest index). Deterministic: a function of
+    ``groups`` only."""
+    from dv2s_gym.mining.family import record_family
+
+    by_family: Dict[str, List[Tuple[int, str, Dict[str, Any]]]] = {}
+    for cluster, members in groups.items():
+        avoidable = [r for r in members if r.get("avoidable") is not False]
+        if not avoidable:
+            continue
+        representative = min(avoidable, key=lambda r: (float(r.get("rho") or 0.0), int(r["index"])))
+        family = record_family(representative)
+        by_family.setdefault(family, []).append((len(avoidable), str(cluster), dict(representative)))
+    queues = []
+    for family, clusters in by_family.items():
+        clusters.sort(key=lambda c: (-c[0], c[1]))
+        queues.append((-clusters[0][0], family, clusters))
+    queues.sort(key=lambda q: (q[0], q[1]))
+    order: List[Tuple[str, Dict[str, Any]]] = []
+    for turn in range(max((len(q[2]) for q in queues), default=0)):
+        order += [(q[2][turn][1], q[2][turn][2]) for q in queues if turn < len(q[2])]
+    return order
 
 
 def replay_entries(run_dir: os.PathLike | str) -> List[Dict[str, Any]]:

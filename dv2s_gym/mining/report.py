@@ -37,7 +37,8 @@ JSON schema ``dv2s-mine-report``, version 3 (:data:`SCHEMA_VERSION`; a change to
       "unavoidable_clusters": [Cluster]   clusters whose failures the reference driver had too,
       "failures": [Failure]               failures not known to be unavoidable (avoidable or unknown),
       "unavoidable": [Failure]            unavoidable failures, with the reference driver's outcome,
-      "rejected": [{"cluster", "index", "stage", "reason"}],
+      "rejected": [{"cluster", "index", "stage", "reason": every failed check's reason, "; "-joined,
+                    "rejections": those reasons}],
       "errors": [{"index", "sampler", "scenario", "seed", "error"}],
       "worker_restarts": [{"index", "scenario", "seed", "problems": [what happened to each earlier attempt]}],
       "skipped_lines": {file: n}          truncated last lines left out (a run killed mid-write)
@@ -404,8 +405,11 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
 
     # counts
     statuses = Counter(str(c.get("status")) for c in conversions)
+    # every check the judge failed is a reason of its own (``rejections``; the first is ``reason``)
     rejected = [{"cluster": c.get("cluster"), "index": c.get("index"), "stage": c.get("stage") or _stage(c.get("reason")),
-                 "reason": c.get("reason")} for c in conversions if c.get("status") == "rejected"]
+                 "reason": "; ".join(c.get("rejections") or []) or c.get("reason"),
+                 "rejections": list(c.get("rejections") or ([c["reason"]] if c.get("reason") else []))}
+                for c in conversions if c.get("status") == "rejected"]
     seconds = [float(c["seconds"]) for c in conversions
                if isinstance(c.get("seconds"), (int, float)) and math.isfinite(float(c["seconds"]))]
     stage_seconds: Dict[str, List[float]] = {}
