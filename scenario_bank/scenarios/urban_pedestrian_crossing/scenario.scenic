@@ -8,7 +8,7 @@ model scenic.domains.driving.model
 param ego_speed = Range(8, 13)
 param crossing_distance = Range(35, 55)
 param entry_gap = Range(1.2, 2.0)
-param kerb_offset = Range(2.6, 3.2)
+param kerb_offset = Range(2.6, 3.0)
 param walking_speed = Range(1.0, 2.0)
 
 # 2. Adversarial behaviours
