@@ -4,14 +4,20 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 PY=${PYTHON:-python3.11}
 command -v "$PY" >/dev/null 2>&1 || PY=python3
+step() { echo "setup: $*" >&2; }
+step "1/4 creating .venv with $PY (if it does not exist yet)"
 [ -x .venv/bin/python ] || "$PY" -m venv .venv
 . .venv/bin/activate
 python -m pip install -q --upgrade pip
 # torch first, pinned: an unpinned torch pulls a multi-GB CUDA build.
+step "2/4 installing PyTorch 2.13.0 (the CPU build)"
 python -m pip install -q "torch==2.13.0"
 # Editable: edits to the checkout take effect without reinstalling. Every extra: the tests, the LLM
 # generator's retrieval, training, failure mining, Ray, and the documentation site (mkdocs).
-python -m pip install -q -e ".[test,llm,rl,mining,ray,docs]"
+# setuptools' notice about editable installs (a folder named like a package shadows it) is about this
+# checkout, which is the package: it is silenced.
+step "3/4 installing dv2s-gym and every extra (editable; a few minutes)"
+PYTHONWARNINGS="ignore:Editable installation" python -m pip install -q -e ".[test,llm,rl,mining,ray,docs]"
 # Scenic needs opencv-python; a second OpenCV distribution (e.g. -headless, pulled by
 # some extras) would share the cv2/ folder. Keep exactly one.
 for other in opencv-python-headless opencv-contrib-python opencv-contrib-python-headless; do
@@ -23,6 +29,7 @@ done
 # System packages are installed with apt-get only when run as root, each announced first;
 # DV2S_SETUP_SYSTEM=0 skips them (and prints the command to run instead).
 SYSTEM=${DV2S_SETUP_SYSTEM:-1}
+step "4/4 checking the system packages: bubblewrap, libseccomp2, chromium"
 # The jail for untrusted Scenic: bubblewrap (unprivileged user namespaces) and libseccomp.
 if ! command -v bwrap >/dev/null 2>&1; then
     if [ "$SYSTEM" != 0 ] && [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
