@@ -516,9 +516,12 @@ def test_loop_resumes_the_control_arm_without_redoing_the_fine_tune(tmp_path, mo
     stand = _StandIns(monkeypatch)
     with pytest.raises(RunIdentityError, match="control: run has True, asked False"):
         run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, control=False, **WIRING)
-    report = run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **WIRING)
+    lines = []
+    report = run_loop("dv2s-ppo", out=out, miner=miner, log=lines.append, **WIRING)
     assert [call["out"][-len("control"):] for call in stand.fine_tunes] == ["control"]  # only the control ran
     assert len(miner.calls) == 1 and "control" in report.rounds[0]["steps"]
+    resumed = [line for line in lines if "resuming" in line]
+    assert len(resumed) == 1 and "4 of" in resumed[0] and "mining failures" in resumed[0], lines
 
 
 def test_the_untouched_set_is_a_bank_of_the_corpus_scripts_with_their_licences():

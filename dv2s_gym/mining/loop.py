@@ -476,6 +476,10 @@ def _run_round(loop: _Loop, number: int, current: str) -> str:
         return _next_start(loop, number, current)
     loop.log(f"round {number}: policy {current}")
     timed = _Timed(loop, number, record)
+    done = [_STAGE_NAMES[step] for step in timed.stages if step in steps]
+    if done:
+        loop.log(f"round {number}: resuming: {len(done)} of {len(timed.stages)} steps already done and kept "
+                 f"({', '.join(done)}); an interrupted step carries on from what it had kept")
     if "mine" not in steps:
         timed("mine", lambda: _mine_step(loop, number, current, round_dir), _mine_plan(loop))
         _log_mined(loop, number, steps["mine"])
