@@ -284,11 +284,6 @@ KNOWN_PROBE_MISSES: dict = {
     # the weaving ego pulls out at 1 s into the car coming up beside it: the very collision the scenario warns of,
     # before the passing car's story (every seed)
     ("highway_fast_car_passes_behind_slow_truck", "weave"): 0.0,
-    # an ego that hangs back or speeds up mid-episode meets the lead braking for the junction from further back or
-    # nearer than the lead planned for, and the turn comes after the episode ends or after the ego hit it
-    # (hangback seeds 6 and 9; surge seeds 4, 5, 7)
-    ("urban_lead_vehicle_turns", "hangback"): 0.8,
-    ("urban_lead_vehicle_turns", "surge"): 0.7,
     # the rushing ego ignores what is ahead and runs into the lead as it brakes for the junction, before it turns
     ("urban_lead_vehicle_turns", "rush"): 0.0,
 }

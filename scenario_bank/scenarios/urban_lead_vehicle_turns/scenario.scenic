@@ -14,23 +14,24 @@ param brake_strength = Range(0.6, 0.9)
 param turn_speed = Range(4, 5.5)
 
 # 2. Adversarial behaviours
-behavior LeadEgo(line, timeGap):
+behavior LeadEgo(line, timeGap, floor):
     # drive ahead of the ego keeping about `timeGap` seconds of its speed between them (an ego that
-    # hangs back or rushes keeps the same gap to a lead that adapts)
+    # hangs back or rushes keeps the same gap to a lead that adapts), never slower than `floor`
     lonControl, latControl = simulation().getLaneFollowingControllers(self)
     pastSteer = 0
     while True:
         gap = (distance past ego of self) - 5
-        wanted = max(2, ego.speed - 0.5 * (gap - timeGap * max(ego.speed, 3)))
+        wanted = max(floor, ego.speed - 0.5 * (gap - timeGap * max(ego.speed, 3)))
         throttle = lonControl.run_step(min(wanted, 16) - self.speed)
         steer = latControl.run_step(line.signedDistanceTo(self.position))
         take RegulatedControlAction(throttle, steer, pastSteer)
         pastSteer = steer
 
 behavior SlowDownAndTurn(route, timeGap, brakeDistance, strength, turnSpeed):
-    # lead the ego toward the junction, brake hard `brakeDistance` metres before it, then turn
+    # lead the ego toward the junction (at least 4 m/s faster than the turn, so that its braking is
+    # sharp even behind an ego that slows down), brake hard `brakeDistance` metres before it, then turn
     entry = route[0].centerline.end
-    do LeadEgo(route[0].centerline, timeGap) until (distance from self to entry) < brakeDistance
+    do LeadEgo(route[0].centerline, timeGap, turnSpeed + 4) until (distance from self to entry) < brakeDistance
     while self.speed > turnSpeed:
         take SetThrottleAction(0), SetBrakeAction(strength)
     do FollowTrajectoryBehavior(target_speed=turnSpeed, trajectory=route, turn_speed=turnSpeed)
