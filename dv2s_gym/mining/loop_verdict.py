@@ -89,21 +89,18 @@ def _heldout_tests(after: Mapping[str, Any]) -> Dict[str, Optional[Dict[str, Any
     if "significantly_worse" in after:
         recorded = after.get("significantly_worse") or {}
         return {"start": recorded.get("start"), "control": recorded.get("control")}
-    found: Dict[str, Optional[Dict[str, Any]]] = {"start": None, "control": None}
-    if after.get("mcnemar_p") is not None and after.get("table"):
-        t = after["table"]
-        found["start"] = heldout_worse({"held-out": {"both_fail": t.get("both_fail", 0),
-                                                     "candidate_only": t.get("after_only", 0),
-                                                     "baseline_only": t.get("before_only", 0),
-                                                     "neither": t.get("neither", 0)}}, "start")
-    versus = after.get("vs_control") or {}
-    if versus.get("mcnemar_p") is not None and versus.get("table"):
-        t = versus["table"]
-        found["control"] = heldout_worse({"held-out": {"both_fail": t.get("both_fail", 0),
-                                                       "candidate_only": t.get("fine_tuned_only", 0),
-                                                       "baseline_only": t.get("control_only", 0),
-                                                       "neither": t.get("neither", 0)}}, "control")
-    return found
+    return {"start": _pooled_test(after, "after_only", "before_only", "start"),
+            "control": _pooled_test(after.get("vs_control") or {}, "fine_tuned_only", "control_only", "control")}
+
+
+def _pooled_test(comparison: Mapping[str, Any], fine_tuned_key: str, other_key: str,
+                 against: str) -> Optional[Dict[str, Any]]:
+    """:func:`heldout_worse` on a comparison's pooled paired table, read with its own key names."""
+    t = comparison.get("table")
+    if comparison.get("mcnemar_p") is None or not t:
+        return None
+    return heldout_worse({"held-out": {"both_fail": t.get("both_fail", 0), "candidate_only": t.get(fine_tuned_key, 0),
+                                       "baseline_only": t.get(other_key, 0), "neither": t.get("neither", 0)}}, against)
 
 
 def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
