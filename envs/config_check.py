@@ -37,8 +37,13 @@ _CLASS_NAMES = {
 """The highway-env class each supported type name builds (``observation_factory`` / ``action_factory``)."""
 
 
-def _did_you_mean(value: Any, choices: Iterable[str]) -> str:
-    close = difflib.get_close_matches(str(value), [str(c) for c in choices], n=1)
+def _did_you_mean(value: Any, choices: Iterable[str], *, prefix: bool = False) -> str:
+    """`` (did you mean 'x'?)`` with the closest choice, or nothing; with ``prefix``, a choice that starts with
+    ``value`` is close too (``rgb`` for ``rgb_array``, too short a part of it for difflib)."""
+    choices = [str(c) for c in choices]
+    close = difflib.get_close_matches(str(value), choices, n=1)
+    if not close and prefix and len(str(value)) >= 2:
+        close = [c for c in choices if c.startswith(str(value))][:1]
     return f" (did you mean {close[0]!r}?)" if close else ""
 
 
@@ -225,5 +230,6 @@ def check_config(config: Any, defaults: Mapping[str, Any]) -> None:
 def check_render_mode(render_mode: Any) -> None:
     """Raise :class:`~envs.errors.UnknownRenderModeError` naming a ``render_mode`` DV2S-v0 does not have."""
     if render_mode is not None and render_mode not in RENDER_MODES:
-        raise UnknownRenderModeError(f"unknown render_mode {render_mode!r}{_did_you_mean(render_mode, RENDER_MODES)}; "
+        hint = _did_you_mean(render_mode, RENDER_MODES, prefix=True)
+        raise UnknownRenderModeError(f"unknown render_mode {render_mode!r}{hint}; "
                                     f"DV2S-v0 renders {' or '.join(map(repr, RENDER_MODES))}, or nothing with None")

@@ -215,6 +215,29 @@ def test_an_unknown_render_mode_is_named_with_the_choices(scenario):
     gym.make("dv2s_gym:DV2S-v0", scenario=BRAKES, render_mode="rgb_array").close()
 
 
+def test_a_render_mode_close_to_a_choice_is_refused_before_gymnasium_warns_with_a_suggestion():
+    import warnings
+
+    from envs.errors import UnknownRenderModeError
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        message = (r"^unknown render_mode 'rgb' \(did you mean 'rgb_array'\?\); DV2S-v0 renders 'human' or "
+                   r"'rgb_array', or nothing with None$")
+        with pytest.raises(UnknownRenderModeError, match=message):
+            gym.make("dv2s_gym:DV2S-v0", scenario=BRAKES, render_mode="rgb")
+    assert [str(w.message) for w in caught] == []
+
+
+def test_a_list_render_mode_still_collects_the_frames():
+    env = gym.make("dv2s_gym:DV2S-v0", scenario=BRAKES, config={"duration": 1.0}, render_mode="rgb_array_list")
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    frames = env.render()
+    assert len(frames) == 2 and frames[0].ndim == 3
+    env.close()
+
+
 def test_a_reward_weights_section_replaces_the_default_whole():
     env = DV2SEnv(scenario=BRAKES, config={"duration": 1.0, "reward_weights": {"collision": -5}})
     assert env.config["reward_weights"] == {"collision": -5}  # the other terms weigh 0, as the docs say
