@@ -246,3 +246,17 @@ def test_run_prints_a_summary_for_people_and_json_on_request(capsys, tmp_path):
     assert lines[-1] == f"trace: {tmp_path / 't.json.gz'}" and "{" not in out
     code, out, _ = run(capsys, "run", "highway_lead_vehicle_brakes", "--duration", "1", "--video", video, "--json")
     assert code == 0 and json.loads(out)["steps"] == 5
+
+
+@pytest.mark.slow
+def test_a_seeded_random_run_is_the_same_every_time(capsys, tmp_path):
+    """`dv2s run --random --seed 5` twice: the same random actions, so the same episode."""
+    results = []
+    for k in range(2):
+        code, out, err = run(capsys, "run", "highway_lead_vehicle_brakes", "--random", "--seed", "5", "--duration", "2",
+                             "--video", tmp_path / f"episode{k}.webm", "--json")
+        assert code == 0, err
+        result = json.loads(out)
+        results.append({key: value for key, value in result.items() if key != "path"})
+    assert results[0]["steps"] == 10
+    assert results[0] == results[1]
