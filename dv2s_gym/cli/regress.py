@@ -110,7 +110,9 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt as stop:
         raise Interrupted(getattr(stop, "note", None) or episodes_kept_note(Path(out) / "results.jsonl")) from None
     if args.json:
-        print(json.dumps(report, indent=1))
+        from dv2s_gym.cli.output import json_text
+
+        print(json_text(report, indent=1))
     else:
         print(format_summary(report))
         names = ("report.json", "junit.xml", "report.md", "report.html")
