@@ -166,6 +166,25 @@ def test_usage_errors_are_one_line_from_the_subcommand(capsys, argv, named, hint
     assert named in err and hint in err and err.startswith(f"dv2s {argv[0]}")
 
 
+@pytest.mark.parametrize("argv, named", [
+    (["describe", "x.webm", "--sg", "rules"],
+     "unrecognized arguments: --sg; `--sg` is an option of `dv2s generate`, `dv2s convert`, `dv2s mine`, `dv2s eval`, "
+     "not of `dv2s describe` (see `dv2s describe --help`)"),
+    (["regress", "--policy", "rule", "--budget", "5"],
+     "unrecognized arguments: --budget; `--budget` is an option of `dv2s mine`, `dv2s loop`, not of `dv2s regress`"),
+    (["run", "x", "--debug"], "`--debug` is an option of `dv2s` (before the command), not of `dv2s run`"),
+    (["regress", "--policy", "rule", "--frobnicate"], "unrecognized arguments: --frobnicate (see"),
+])
+def test_an_option_of_another_subcommand_is_named_as_theirs_not_given_a_far_fetched_suggestion(capsys, argv, named):
+    with pytest.raises(SystemExit) as stop:
+        from dv2s_gym.cli import main
+
+        main(argv)
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and err.count("\n") == 1
+    assert named in err and "did you mean" not in err, err
+
+
 STUCK_COMPILING = """param map = 'highway_straight'
 model scenic.domains.driving.model
 ego = new Car
