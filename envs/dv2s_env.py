@@ -200,8 +200,10 @@ class DV2SEnv(AbstractEnv):
         config: overrides of :meth:`default_config`.
         render_mode: ``"rgb_array"`` (headless) or ``"human"``.
         bank_dir: a bank folder other than the shipped one.
-        trusted: run the scripts in this process without the jail. Only for scripts you
-            wrote or reviewed: a Scenic script is Python and can do anything you can.
+        trusted: run the scripts in this process, skipping the jail. Only for scripts you
+            wrote or reviewed: a Scenic script is Python and can do anything you can. The
+            allowlist check of what a script may use (:mod:`scenario_bank.safety`) is not
+            skipped: every script passes it, trusted or not.
         jail: ``True`` runs even the shipped scenarios in the jail; ``None`` (default)
             runs the package's own scripts (recognised by content hash) here and every
             other script in the jail, where it cannot reach this process, your files,

@@ -28,8 +28,10 @@ def add_parser(subparsers) -> None:
                    help="agent: rule-based driver; scenic: the script's ego behaviour")
     p.add_argument("--random", action="store_true", help="drive with random actions")
     p.add_argument("--trusted", action="store_true",
-                   help="run the script in this process, without the jail: only for a script you wrote or "
-                   "reviewed (scripts that ship with dv2s-gym always run in process)")
+                   help="run the script in this process, skipping the jail (the operating-system sandbox): only for "
+                   "a script you wrote or reviewed; it does not skip the allowlist check of what a script may use "
+                   "(imports, file access, ...), which every script passes (scripts that ship with dv2s-gym always "
+                   "run in process)")
     p.add_argument("--json", action="store_true",
                    help="print the episode's summary as strict JSON (for programs; a number that is not finite, such "
                    "as min_ttc with no vehicle on a collision course, is null)")
