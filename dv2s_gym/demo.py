@@ -112,7 +112,7 @@ def record_scenario(scenario: str, video: str | os.PathLike, *, config: dict, se
     ``config`` is the env config (its ``ego_policy`` ``scenic`` lets the script drive the ego); otherwise the ego
     is :class:`policies.CautiousDriver` when ``drive``, random actions when not. With ``trace``, the episode's
     trace is saved there. Returns the recording summary with the episode's scenario, seed, collisions, lane
-    changes, minimum TTC, off-road flag and parameters.
+    changes, minimum TTC, off-road flag, parameters and ``driver``: ``rule-based``, ``random`` or ``scenic``.
     """
     from policies import CautiousDriver
 
@@ -125,5 +125,6 @@ def record_scenario(scenario: str, video: str | os.PathLike, *, config: dict, se
     info = result.pop("info")
     result.update({k: info[k] for k in ("scenario", "scene_seed", "collisions", "lane_changes", "min_ttc", "off_road")})
     result["params"] = info["params"]
+    result["driver"] = "scenic" if config.get("ego_policy") == "scenic" else "rule-based" if drive else "random"
     env.close()
     return result

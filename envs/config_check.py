@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import difflib
 import inspect
+import math
 from typing import Any, Iterable, Mapping, Sequence
 
 from envs.errors import ACTION_TYPES, OBSERVATION_TYPES, UnknownConfigKeyError, UnknownRenderModeError
 
-__all__ = ["EGO_POLICIES", "RENDER_MODES", "check_config", "check_render_mode", "type_options"]
+__all__ = ["EGO_POLICIES", "NUMBERS", "RENDER_MODES", "check_config", "check_render_mode", "type_options"]
 
 EGO_POLICIES = ("agent", "scenic")
 """Values of ``ego_policy``: the action drives the ego, or the script's ego behaviour does."""
@@ -36,8 +37,13 @@ _CLASS_NAMES = {
 """The highway-env class each supported type name builds (``observation_factory`` / ``action_factory``)."""
 
 
-def _did_you_mean(value: Any, choices: Iterable[str]) -> str:
-    close = difflib.get_close_matches(str(value), [str(c) for c in choices], n=1)
+def _did_you_mean(value: Any, choices: Iterable[str], *, prefix: bool = False) -> str:
+    """`` (did you mean 'x'?)`` with the closest choice, or nothing; with ``prefix``, a choice that starts with
+    ``value`` is close too (``rgb`` for ``rgb_array``, too short a part of it for difflib)."""
+    choices = [str(c) for c in choices]
+    close = difflib.get_close_matches(str(value), choices, n=1)
+    if not close and prefix and len(str(value)) >= 2:
+        close = [c for c in choices if c.startswith(str(value))][:1]
     return f" (did you mean {close[0]!r}?)" if close else ""
 
 
@@ -134,12 +140,77 @@ def _check_ego_policy(config: Mapping[str, Any]) -> None:
                                     f"{' or '.join(map(repr, EGO_POLICIES))}")
 
 
+NUMBERS = {
+    "simulation_frequency": ("a number of Hz", 0, False),
+    "policy_frequency": ("a number of Hz", 0, False),
+    "duration": ("a number of seconds", 0, False),
+    "step_time_limit": ("a number of seconds (or None for no limit)", 0, False),
+    "ttc_threshold": ("a number of seconds", 0, True),
+    "off_road_margin": ("a number of metres", 0, True),
+    "scaling": ("a number of pixels per metre", 0, False),
+    "max_sample_iterations": ("a whole number", 0, False),
+    "screen_width": ("a whole number of pixels", 0, False),
+    "screen_height": ("a whole number of pixels", 0, False),
+}
+"""Numeric config keys: what the value is, the bound and whether the bound itself is allowed (``> 0`` or
+``>= 0``). A wrong type would fail only at the first ``step`` and a negative duration would end the episode
+after one step without a word."""
+
+_WHOLE = ("max_sample_iterations", "screen_width", "screen_height")
+_SECTION_COUNTS = {"observation": ("vehicles_count", "stack_size", "cells")}
+"""Counts inside a section (whole numbers > 0) that would otherwise fail deep inside highway-env."""
+_PAIRS = {"reward_speed_range": "[low, high] speeds in m/s with low < high", "centering_position": "[x, y] fractions"}
+
+
+def _is_number(value: Any) -> bool:
+    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+
+
+def _bad_value(key: str, value: Any, expected: str, defaults: Mapping[str, Any]) -> UnknownConfigKeyError:
+    return UnknownConfigKeyError(f"config[{key!r}] is {value!r}; it must be {expected}, e.g. {defaults[key]!r} "
+                                 "(the default)")
+
+
+def _check_numbers(config: Mapping[str, Any], defaults: Mapping[str, Any]) -> None:
+    for key, (what, bound, inclusive) in NUMBERS.items():
+        if key not in config or key not in defaults or (key == "step_time_limit" and config[key] is None):
+            continue
+        value = config[key]
+        whole = key in _WHOLE
+        sign = ">=" if inclusive else ">"
+        expected = f"{what} {sign} {bound}"
+        if not _is_number(value) or (whole and not isinstance(value, int)) \
+                or (value < bound if inclusive else value <= bound):
+            raise _bad_value(key, value, expected, defaults)
+    for key, expected in _PAIRS.items():
+        if key not in config or key not in defaults:
+            continue
+        value = config[key]
+        if not isinstance(value, (list, tuple)) or len(value) != 2 or not all(_is_number(v) for v in value) \
+                or (key == "reward_speed_range" and not value[0] < value[1]):
+            raise _bad_value(key, value, expected, defaults)
+    for section, keys in _SECTION_COUNTS.items():
+        given = config.get(section) or {}
+        for key in keys:
+            value = given.get(key) if isinstance(given, Mapping) else None
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value <= 0):
+                raise UnknownConfigKeyError(f"config[{section!r}][{key!r}] is {value!r}; it must be a whole number "
+                                            "> 0")
+    simulation = config.get("simulation_frequency", defaults.get("simulation_frequency"))
+    policy = config.get("policy_frequency", defaults.get("policy_frequency"))
+    if _is_number(simulation) and _is_number(policy) and policy > simulation:
+        raise UnknownConfigKeyError(f"config['policy_frequency'] is {policy!r}, above the simulation_frequency "
+                                    f"{simulation!r}; an agent cannot decide more often than the simulation steps: "
+                                    "lower policy_frequency or raise simulation_frequency")
+
+
 def check_config(config: Any, defaults: Mapping[str, Any]) -> None:
     """Raise :class:`~envs.errors.UnknownConfigKeyError` (one line, with a did-you-mean) for the first
     problem of ``config``: a key not in ``defaults``, an observation or action type DV2S-v0 does not
     support or an option its highway-env type does not take, a reward term not in
     ``defaults["reward_weights"]`` or a weight that is not a finite number, an ``ego_policy`` that is not
-    ``agent`` or ``scenic``."""
+    ``agent`` or ``scenic``, a numeric value (:data:`NUMBERS`, ``reward_speed_range``, ``centering_position``)
+    of the wrong type or out of range, a policy frequency above the simulation frequency."""
     config = config or {}
     _check_type(config, "observation", OBSERVATION_TYPES)
     _check_type(config, "action", ACTION_TYPES)
@@ -153,10 +224,12 @@ def check_config(config: Any, defaults: Mapping[str, Any]) -> None:
     _check_options(config, "action")
     _check_reward_weights(config, defaults)
     _check_ego_policy(config)
+    _check_numbers(config, defaults)
 
 
 def check_render_mode(render_mode: Any) -> None:
     """Raise :class:`~envs.errors.UnknownRenderModeError` naming a ``render_mode`` DV2S-v0 does not have."""
     if render_mode is not None and render_mode not in RENDER_MODES:
-        raise UnknownRenderModeError(f"unknown render_mode {render_mode!r}{_did_you_mean(render_mode, RENDER_MODES)}; "
+        hint = _did_you_mean(render_mode, RENDER_MODES, prefix=True)
+        raise UnknownRenderModeError(f"unknown render_mode {render_mode!r}{hint}; "
                                     f"DV2S-v0 renders {' or '.join(map(repr, RENDER_MODES))}, or nothing with None")

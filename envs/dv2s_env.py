@@ -200,8 +200,10 @@ class DV2SEnv(AbstractEnv):
         config: overrides of :meth:`default_config`.
         render_mode: ``"rgb_array"`` (headless) or ``"human"``.
         bank_dir: a bank folder other than the shipped one.
-        trusted: run the scripts in this process without the jail. Only for scripts you
-            wrote or reviewed: a Scenic script is Python and can do anything you can.
+        trusted: run the scripts in this process, skipping the jail. Only for scripts you
+            wrote or reviewed: a Scenic script is Python and can do anything you can. The
+            allowlist check of what a script may use (:mod:`scenario_bank.safety`) is not
+            skipped: every script passes it, trusted or not.
         jail: ``True`` runs even the shipped scenarios in the jail; ``None`` (default)
             runs the package's own scripts (recognised by content hash) here and every
             other script in the jail, where it cannot reach this process, your files,
@@ -268,16 +270,24 @@ class DV2SEnv(AbstractEnv):
         self._step_events: List[Dict[str, Any]] = []
         self._reset_seed: Optional[int] = None
         self._running_compiled: Optional[CompiledScenario] = None
-        check_config(config, self.default_config())
-        super().__init__(config, render_mode)
+        super().__init__(config, render_mode)  # configure() checks config before anything is built
 
     # ------------------------------------------------------------------ config
+    def configure(self, config: Optional[dict]) -> None:
+        """highway-env's ``configure`` (update the config), after :func:`envs.config_check.check_config`: a
+        misspelt key or a value of the wrong type or range is refused here, not at the first ``step``."""
+        check_config({**config, **_frequencies(self.config, config)} if isinstance(config, dict) else config,
+                     self.default_config())
+        super().configure(config)
+
     @classmethod
     def default_config(cls) -> dict:
         """Default configuration; every key can be overridden with ``config=``.
 
         Every key given is checked, nested ones too (:func:`envs.config_check.check_config`): a misspelt
-        key, reward term or observation/action option is an error naming it and the choices. A section
+        key, reward term or observation/action option is an error naming it and the choices, and so is a
+        numeric value of the wrong type or range (a duration or frequency that is not a positive number, a
+        policy frequency above the simulation frequency), here and in ``configure``. A section
         given replaces the default one whole (highway-env's rule): a reward term left out weighs 0.
 
         - ``observation``: highway-env observation config; ``Kinematics`` (default),
@@ -749,6 +759,15 @@ class DV2SEnv(AbstractEnv):
             self._close_simulation()
         except Exception:
             pass
+
+
+def _frequencies(current: Optional[dict], given: Optional[dict]) -> dict:
+    """The simulation and policy frequencies ``given`` leaves as they are in ``current``, so that a
+    ``configure`` of one of them is checked against the other's value in force."""
+    if not current or not isinstance(given, dict) or not ({"simulation_frequency", "policy_frequency"} & set(given)):
+        return {}
+    return {key: current[key] for key in ("simulation_frequency", "policy_frequency")
+            if key in current and key not in given}
 
 
 def check_env_config(config: Any) -> None:

@@ -116,7 +116,8 @@ def record_episode(
 ) -> dict:
     """Run one episode of an ``rgb_array`` env and write it to ``path``.
 
-    ``policy(obs, info) -> action``; default samples the action space. Frames are
+    ``policy(obs, info) -> action``; default samples the action space, seeded with ``seed`` so that a
+    seeded random episode is the same every time. Frames are
     captured at the simulation frequency for smooth video. Returns a summary
     (steps, return, termination, info of the last step, frames written).
     """
@@ -125,6 +126,8 @@ def record_episode(
         raise ValueError("record_episode needs an env made with render_mode='rgb_array'")
     fps = base.config.get("policy_frequency", 5)
     obs, info = env.reset(seed=seed)
+    if policy is None and seed is not None:
+        env.action_space.seed(seed)  # the reset seeds the scene, not the space the random actions come from
     total, steps, terminated, truncated = 0.0, 0, False, False
     with VideoWriter(path, fps=fps) as video:
         video.write(env.render())

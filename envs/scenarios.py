@@ -364,7 +364,8 @@ def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompile
     line = getattr(error, "lineno", None)
     if line is None:
         line = _innermost_script_line(error, label)
-    where = f"{label}, line {line}" if line else label
+    column, quoted = _syntax_position(error, line)
+    where = (f"{label}, line {line}" + (f", column {column}" if column else "")) if line else label
     if isinstance(error, MissingMapError):
         return ScenarioCompileError(f"{where}: {message}", path=label, line=line)
     if isinstance(error, FileNotFoundError) or type(error).__name__ == "UnknownMapError":
@@ -426,10 +427,27 @@ def _compile_error(error: Exception, source: str, label: str) -> ScenarioCompile
             line=line,
         )
     return ScenarioCompileError(
-        f"{where}: Scenic could not compile the scenario: {type(error).__name__}: {message}",
+        f"{where}: Scenic could not compile the scenario: {type(error).__name__}: {message}{quoted}",
         path=label,
         line=line,
     )
+
+
+def _syntax_position(error: Exception, line: Optional[int]) -> Tuple[Optional[int], str]:
+    """The column (1-based) of a syntax error and `` (the line: `...`; at `...`)`` quoting the script's line,
+    when the parser gives them (``offset``, ``text``, ``end_offset`` of a ``SyntaxError``-like error)."""
+    offset, text = getattr(error, "offset", None), getattr(error, "text", None)
+    if not line or not isinstance(offset, int) or isinstance(offset, bool) or offset < 1:
+        return None, ""
+    if not isinstance(text, str) or not text.strip():
+        return offset, ""
+    raw = text.rstrip("\r\n")
+    shown = " ".join(raw.split())[:120]
+    end = getattr(error, "end_offset", None)
+    part = ""
+    if isinstance(end, int) and getattr(error, "end_lineno", line) == line and offset < end <= len(raw) + 1:
+        part = " ".join(raw[offset - 1:end - 1].split())[:60]
+    return offset, f" (the line: `{shown}`" + (f"; at `{part}`" if part else "") + ")"
 
 
 def _source_line(source: str, line: Optional[int]) -> str:

@@ -93,9 +93,10 @@ class UnsafeScenarioError(DV2SError, ValueError):
         lines = "; ".join(str(f) for f in findings[:5])
         more = f" (and {len(findings) - 5} more)" if len(findings) > 5 else ""
         super().__init__(
-            f"{label} failed the safety check: {lines}{more}. Generated Scenic may only use Scenic's driving "
-            "domain and world models, math and a few safe builtins: no imports beyond Scenic models and math, "
-            "no file/process/network access, no exec/eval/getattr, no names or attributes starting with '_'."
+            f"{label} failed the safety check: {lines}{more}. Scenic scripts run by dv2s-gym may only use Scenic's "
+            "driving domain and world models, math and a few safe builtins: no imports beyond Scenic models and "
+            "math, no file/process/network access, no exec/eval/getattr, no names or attributes starting with '_'; "
+            "rewrite the lines named (the check applies to every script, trusted or not)."
         )
 
 

@@ -166,6 +166,25 @@ def test_usage_errors_are_one_line_from_the_subcommand(capsys, argv, named, hint
     assert named in err and hint in err and err.startswith(f"dv2s {argv[0]}")
 
 
+@pytest.mark.parametrize("argv, named", [
+    (["describe", "x.webm", "--sg", "rules"],
+     "unrecognized arguments: --sg; `--sg` is an option of `dv2s generate`, `dv2s convert`, `dv2s mine`, `dv2s eval`, "
+     "not of `dv2s describe` (see `dv2s describe --help`)"),
+    (["regress", "--policy", "rule", "--budget", "5"],
+     "unrecognized arguments: --budget; `--budget` is an option of `dv2s mine`, `dv2s loop`, not of `dv2s regress`"),
+    (["run", "x", "--debug"], "`--debug` is an option of `dv2s` (before the command), not of `dv2s run`"),
+    (["regress", "--policy", "rule", "--frobnicate"], "unrecognized arguments: --frobnicate (see"),
+])
+def test_an_option_of_another_subcommand_is_named_as_theirs_not_given_a_far_fetched_suggestion(capsys, argv, named):
+    with pytest.raises(SystemExit) as stop:
+        from dv2s_gym.cli import main
+
+        main(argv)
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and err.count("\n") == 1
+    assert named in err and "did you mean" not in err, err
+
+
 STUCK_COMPILING = """param map = 'highway_straight'
 model scenic.domains.driving.model
 ego = new Car
@@ -242,7 +261,70 @@ def test_run_prints_a_summary_for_people_and_json_on_request(capsys, tmp_path):
     lines = out.splitlines()
     assert lines[0] == f"wrote {video} (6 frames)"
     assert lines[1].startswith("highway_lead_vehicle_brakes, seed 0 (scene seed ") and "5 steps" in lines[1]
+    assert "), driven by the rule-based driver: 5 steps" in lines[1]
     assert lines[2].startswith("outcome: no collision, on the road") and any(l.startswith("scene: ") for l in lines)
     assert lines[-1] == f"trace: {tmp_path / 't.json.gz'}" and "{" not in out
     code, out, _ = run(capsys, "run", "highway_lead_vehicle_brakes", "--duration", "1", "--video", video, "--json")
-    assert code == 0 and json.loads(out)["steps"] == 5
+    result = strict_json(out)
+    assert code == 0 and result["steps"] == 5 and result["driver"] == "rule-based"
+    assert result["min_ttc"] is None or isinstance(result["min_ttc"], float)
+
+
+def strict_json(text: str):
+    """``text`` parsed as strict JSON: ``Infinity``, ``-Infinity`` and ``NaN`` are refused."""
+    def refuse(constant):
+        raise ValueError(f"{constant} is not JSON")
+
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_json_text_is_strict_json_with_non_finite_numbers_as_null():
+    import numpy as np
+
+    from dv2s_gym.cli.output import json_text
+
+    data = {"min_ttc": float("inf"), "nested": [{"x": float("nan")}, (1, -float("inf"))], "f32": np.float32("inf"),
+            "ok": 2.5, "n": 3, "flag": True, "path": Path("a/b")}
+    assert strict_json(json_text(data)) == {"min_ttc": None, "nested": [{"x": None}, [1, None]], "f32": None,
+                                            "ok": 2.5, "n": 3, "flag": True, "path": "a/b"}
+
+
+def test_every_json_output_of_the_cli_goes_through_the_strict_helper():
+    """`print(json.dumps(...))` would let Infinity and NaN through; the CLI prints JSON with json_text only."""
+    import re
+
+    package = Path(__file__).resolve().parents[1] / "dv2s_gym" / "cli"
+    offenders = [f"{path.name}:{number}" for path in sorted(package.glob("*.py")) if path.name != "output.py"
+                 for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+                 if re.search(r"print\(json\.dumps", line)]
+    assert offenders == []
+
+
+def test_runs_seed_option_says_what_it_does():
+    run_help = next(a.help for a in _run_parser()._actions if "--seed" in a.option_strings)
+    assert run_help and "same seed gives the same episode" in run_help
+
+
+def _run_parser():
+    import argparse
+
+    from dv2s_gym.cli import run as run_command
+    from dv2s_gym.cli.parser import Parser
+
+    sub = Parser(prog="dv2s").add_subparsers()
+    run_command.add_parser(sub)
+    return sub.choices["run"]
+
+
+@pytest.mark.slow
+def test_a_seeded_random_run_is_the_same_every_time(capsys, tmp_path):
+    """`dv2s run --random --seed 5` twice: the same random actions, so the same episode."""
+    results = []
+    for k in range(2):
+        code, out, err = run(capsys, "run", "highway_lead_vehicle_brakes", "--random", "--seed", "5", "--duration", "2",
+                             "--video", tmp_path / f"episode{k}.webm", "--json")
+        assert code == 0, err
+        result = json.loads(out)
+        results.append({key: value for key, value in result.items() if key != "path"})
+    assert results[0]["steps"] == 10 and results[0]["driver"] == "random"
+    assert results[0] == results[1]

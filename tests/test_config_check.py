@@ -96,6 +96,52 @@ def test_every_documented_option_of_a_type_is_accepted(section, kind):
     check_config(config, DEFAULTS)
 
 
+VALUE_MISTAKES = [
+    ({"duration": "ten"}, r"^config\['duration'\] is 'ten'; it must be a number of seconds > 0, e\.g\. 20\.0 "
+                          r"\(the default\)$"),
+    ({"duration": -5}, r"^config\['duration'\] is -5; it must be a number of seconds > 0"),
+    ({"duration": float("nan")}, r"^config\['duration'\] is nan; it must be a number"),
+    ({"duration": True}, r"^config\['duration'\] is True; it must be a number"),
+    ({"simulation_frequency": 0}, r"^config\['simulation_frequency'\] is 0; it must be a number of Hz > 0"),
+    ({"policy_frequency": "5"}, r"^config\['policy_frequency'\] is '5'; it must be a number of Hz > 0"),
+    ({"policy_frequency": 30}, r"^config\['policy_frequency'\] is 30, above the simulation_frequency 15; .*: "
+                               r"lower policy_frequency or raise simulation_frequency$"),
+    ({"max_sample_iterations": 2.5}, r"^config\['max_sample_iterations'\] is 2\.5; it must be a whole number > 0"),
+    ({"step_time_limit": -1}, r"^config\['step_time_limit'\] is -1; it must be a number of seconds \(or None"),
+    ({"ttc_threshold": -0.5}, r"^config\['ttc_threshold'\] is -0\.5; it must be a number of seconds >= 0"),
+    ({"screen_width": "600"}, r"^config\['screen_width'\] is '600'; it must be a whole number of pixels > 0"),
+    ({"reward_speed_range": [30, 10]}, r"^config\['reward_speed_range'\] is \[30, 10\]; it must be \[low, high\]"),
+    ({"observation": {"type": "Kinematics", "vehicles_count": "ten"}},
+     r"^config\['observation'\]\['vehicles_count'\] is 'ten'; it must be a whole number > 0$"),
+    ({"observation": {"type": "Kinematics", "vehicles_count": -2}},
+     r"^config\['observation'\]\['vehicles_count'\] is -2; it must be a whole number > 0$"),
+]
+
+
+@pytest.mark.parametrize("config, message", VALUE_MISTAKES, ids=lambda v: str(v)[:40] if isinstance(v, dict) else None)
+def test_a_numeric_value_of_the_wrong_type_or_range_is_one_line_naming_key_value_and_expectation(config, message):
+    with pytest.raises(UnknownConfigKeyError, match=message) as caught:
+        check_config(config, DEFAULTS)
+    assert "\n" not in str(caught.value)
+
+
+@pytest.mark.parametrize("config, message", VALUE_MISTAKES[:2], ids=["type", "sign"])
+def test_the_env_refuses_a_wrong_numeric_value_at_make_not_at_the_first_step(config, message):
+    with pytest.raises(UnknownConfigKeyError, match=message):
+        gym.make("dv2s_gym:DV2S-v0", scenario=BRAKES, config=config)
+
+
+def test_configure_checks_the_values_it_sets():
+    env = DV2SEnv(scenario=BRAKES, config={"duration": 1.0})
+    with pytest.raises(UnknownConfigKeyError, match=r"^config\['duration'\] is 'ten'"):
+        env.configure({"duration": "ten"})
+    with pytest.raises(UnknownConfigKeyError, match=r"above the simulation_frequency 15"):
+        env.configure({"policy_frequency": 20})
+    env.configure({"duration": 2, "step_time_limit": None})
+    assert env.config["duration"] == 2 and env.config["step_time_limit"] is None
+    env.close()
+
+
 def test_the_default_config_and_every_reward_term_pass():
     check_config(DEFAULTS, DEFAULTS)
     check_config({"reward_weights": {term: 0.5 for term in DEFAULTS["reward_weights"]}, "ego_policy": "scenic"},
@@ -167,6 +213,29 @@ def test_an_unknown_render_mode_is_named_with_the_choices(scenario):
                                                      r"DV2S-v0 renders 'human' or 'rgb_array', or nothing with None$"):
         gym.make("dv2s_gym:DV2S-v0", scenario=scenario, render_mode="human2")
     gym.make("dv2s_gym:DV2S-v0", scenario=BRAKES, render_mode="rgb_array").close()
+
+
+def test_a_render_mode_close_to_a_choice_is_refused_before_gymnasium_warns_with_a_suggestion():
+    import warnings
+
+    from envs.errors import UnknownRenderModeError
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        message = (r"^unknown render_mode 'rgb' \(did you mean 'rgb_array'\?\); DV2S-v0 renders 'human' or "
+                   r"'rgb_array', or nothing with None$")
+        with pytest.raises(UnknownRenderModeError, match=message):
+            gym.make("dv2s_gym:DV2S-v0", scenario=BRAKES, render_mode="rgb")
+    assert [str(w.message) for w in caught] == []
+
+
+def test_a_list_render_mode_still_collects_the_frames():
+    env = gym.make("dv2s_gym:DV2S-v0", scenario=BRAKES, config={"duration": 1.0}, render_mode="rgb_array_list")
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    frames = env.render()
+    assert len(frames) == 2 and frames[0].ndim == 3
+    env.close()
 
 
 def test_a_reward_weights_section_replaces_the_default_whole():

@@ -101,6 +101,15 @@ def test_error_while_running_the_script_names_file_and_line(tmp_path):
     assert "ZeroDivisionError" in str(info.value) and f"{path}, line 5" in str(info.value)
 
 
+def test_syntax_error_names_the_column_and_quotes_the_line(tmp_path):
+    path = script(tmp_path, HEADER + "ego = new Car\nlead = new Car ahead of ego by 10 10\n")
+    with pytest.raises(ScenarioCompileError) as info:
+        DV2SEnv(scenario=path)
+    message = str(info.value)
+    assert message.startswith(f"{path}, line 4, column 32: Scenic could not compile the scenario: ScenicParseError: ")
+    assert message.endswith(" (the line: `lead = new Car ahead of ego by 10 10`; at `10 10`)") and "\n" not in message
+
+
 def test_compile_error_in_source_text():
     with pytest.raises(ScenarioCompileError, match="<string>, line 3"):
         DV2SEnv(scenario=HEADER + "ego = new Car with speed\n")

@@ -298,3 +298,21 @@ def test_foreign_script_idioms_pass_but_what_they_could_reach_stays_refused():
                "globalParameters.sumo_map.touch()\nhere = localPath('y')\n_.__class__\n_x = 1\nego = new Car\n")
     assert sorted(f.construct for f in check_script(hostile)) == [".__class__", ".touch", "_x", "globalParameters.sumo_map",
                                                                  "localPath"]
+
+
+def test_a_trusted_hand_written_script_still_gets_the_allowlist_check_in_the_words_of_any_script(tmp_path):
+    """`--trusted` skips the jail, not the check; the refusal speaks of every script dv2s-gym runs, and
+    --trusted's help says what it skips and what it does not."""
+    from dv2s_gym.cli import build_parser
+    from envs.dv2s_env import DV2SEnv
+
+    script = tmp_path / "mine.scenic"
+    script.write_text("import os\n" + (BANK_SCRIPTS[0]).read_text(encoding="utf-8"), encoding="utf-8")
+    with pytest.raises(UnsafeScenarioError) as caught:
+        DV2SEnv(scenario=str(script), trusted=True).reset(seed=0)
+    message = str(caught.value)
+    assert "Scenic scripts run by dv2s-gym may only use" in message and "Generated" not in message
+    assert "the check applies to every script, trusted or not" in message and "\n" not in message
+    run = next(a for a in build_parser()._actions if a.dest == "command").choices["run"]
+    trusted = next(a.help for a in run._actions if "--trusted" in a.option_strings)
+    assert "skipping the jail" in trusted and "does not skip the allowlist check" in trusted

@@ -119,4 +119,4 @@ def test_import_registers_the_env():
     import dv2s_gym  # noqa: F401
 
     assert "DV2S-v0" in gym.registry
-    assert gym.registry["DV2S-v0"].entry_point == "envs.dv2s_env:DV2SEnv"
+    assert gym.registry["DV2S-v0"].entry_point == "envs.registration:make_env"

@@ -4,6 +4,7 @@ resuming a killed loop without redoing finished steps, and the report of a whole
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -905,6 +906,9 @@ def test_errored_episodes_are_counted_per_step_and_named_in_the_log_the_record_a
     assert steps["regress"]["errored"]["fine_tuned"]["scenarios"] == {first: 1}
     assert steps["regress"]["errored"]["start"]["episodes"] == 0
     assert steps["untouched"]["errored"]["fine_tuned"]["episodes"] == 1
+    mined = next(line for line in lines if line.startswith("round 1: mined "))
+    assert re.search(r"failures in \d+ episodes \(1 episode errored: urban_pedestrian_crossing 1\), ", mined), mined
+    assert "episodes (1 episode errored: urban_pedestrian_crossing 1), " in report_summary(report)
     warnings = [line for line in lines if "WARNING: episodes that errored" in line]
     assert len(warnings) == 4  # mining, held-out after, untouched set, regression test
     assert "mining step" in warnings[0] and "tests): 1 (urban_pedestrian_crossing 1)" in warnings[0]

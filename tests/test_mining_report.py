@@ -540,6 +540,8 @@ def test_a_run_whose_every_episode_errored_says_so_and_counts_them_as_drawn(tmp_
     partial = MineRun(out=out, settings=settings, clusters={},
                       records=records[:1] + [_record(1, "random", "A", 0.5, None, None, None)])
     assert not partial.all_errored and "WARNING: 1 of 2 episodes ended in an error" in partial.summary()
+    assert partial.summary().startswith("2 episodes of boom (random sampler), 1 error (A 1), ")
+    assert run.summary().startswith("2 episodes of boom (random sampler), 2 errors (A 2), ")
 
 
 def test_one_behaviour_in_two_entries_of_one_family_is_one_behaviour(tmp_path):

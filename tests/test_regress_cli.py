@@ -89,8 +89,24 @@ def test_no_baseline_exits_0_and_json_prints_the_report(tmp_path, capsys):
     code = regress("--policy", "rule", "--scenarios", "highway_lead_vehicle_brakes", "--episodes", "2",
                    "--workers", "1", "--out", str(tmp_path), "--json", *QUICK)
     assert code == 0
-    report = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)  # the opening line goes to stderr: stdout is the report's alone
     assert report["verdict"] is None and report["schema"] == "dv2s-regress"
+    assert captured.err.startswith("measuring rule alone (no baseline: no verdict): 2 episodes, 1 scenario x 2 seeds; "
+                                   "to compare, add --baseline POLICY"), captured.err
+
+
+def test_a_run_without_baseline_opens_by_saying_it_measures_the_policy_alone():
+    from dv2s_gym.cli.regress import opening_line
+
+    from dv2s_gym.regress.runner import RegressSettings, run_size
+
+    assert opening_line("keep_lane", 40, 40) == ("measuring keep_lane alone (no baseline: no verdict): 1600 episodes, "
+                                                 "40 scenarios x 40 seeds; to compare, add --baseline POLICY (e.g. "
+                                                 "--baseline rule) or --baseline-report REPORT.json")
+    assert run_size(RegressSettings(scenarios=["tag:highway"], episodes=3))[1] == 3
+    scenarios, seeds = run_size(RegressSettings())  # the whole bank, seeds planned from --mde and --power
+    assert scenarios > 10 and seeds > 1
 
 
 @pytest.mark.slow

@@ -325,7 +325,9 @@ def test_holm_adjusted_p_can_turn_fail_into_inconclusive():
     assert compare(table, 0.02).verdict is Verdict.FAIL
     adjusted = compare(table, 0.02, adjusted_p=0.09)
     assert adjusted.verdict is Verdict.INCONCLUSIVE and adjusted.adjusted_p == 0.09
-    assert "adjusted for the scenarios 0.09" in adjusted.reason
+    assert "p = 0.0147 (Holm-adjusted over the tests of the run: 0.09)" in adjusted.reason
+    in_family = compare(table, 0.02, adjusted_p=0.09, family=1)
+    assert "(Holm-adjusted over 1 scenario and the pooled test: 0.09)" in in_family.reason
     with pytest.raises(ValueError):
         compare(table, 0.02, adjusted_p=0.001)  # below the raw p-value
     with pytest.raises(ValueError):

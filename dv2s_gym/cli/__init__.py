@@ -33,6 +33,7 @@ def build_parser() -> argparse.ArgumentParser:
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for group in COMMAND_GROUPS:
         group.add_parser(subparsers)
+    parser.index_options()  # an option given to the wrong subcommand is named as the one of its command
     return parser
 
 

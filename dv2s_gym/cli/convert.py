@@ -9,7 +9,7 @@ import json
 from dv2s_gym.cli.backend_options import sg_option
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import llm_config
-from dv2s_gym.cli.output import emit
+from dv2s_gym.cli.output import emit, json_text
 from dv2s_gym.cli.parser import bank_option, llm_options, video_options
 
 __all__ = ["add_parser", "placed_nothing", "report_text", "run_convert", "run_describe", "run_generate"]
@@ -148,7 +148,7 @@ def run_convert(args: argparse.Namespace) -> int:
         added = [add_converted(args.bank, v, o, r, seed=args.seed, dra=args.dra, sg=args.sg)
                  for (v, o), r in zip(pairs, reports)]
     if args.json:
-        print(json.dumps({"reports": reports, "added": added}, indent=2, default=str))
+        print(json_text({"reports": reports, "added": added}))
     else:
         for (v, o), r in zip(pairs, reports):
             print(f"== {v}\n{report_text(r, o)}")

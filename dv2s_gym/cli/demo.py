@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from dataclasses import asdict
 
 __all__ = ["add_parser", "run"]
@@ -30,7 +29,9 @@ def run(args: argparse.Namespace) -> int:
     rows = run_demo(args.out, scenarios=args.scenario or None, episodes=args.episodes, seed=args.seed,
                     duration=args.duration)
     if args.json:
-        print(json.dumps([asdict(r) for r in rows], indent=2, default=str))
+        from dv2s_gym.cli.output import json_text
+
+        print(json_text([asdict(r) for r in rows]))
     else:
         print(format_table(rows))
     return 0

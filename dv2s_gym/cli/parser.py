@@ -13,8 +13,35 @@ class Parser(argparse.ArgumentParser):
 
     argparse prints the whole usage block before a usage error and reports an unknown option of a
     subcommand as the top-level command's; here the subcommand that received it names it, with the
-    closest option it has and where its help is.
+    closest option it has (only a really close one) and where its help is; an option of other
+    subcommands (after :meth:`index_options`) is named as theirs.
     """
+
+    CLOSE = 0.75
+    """How alike (difflib's ratio) a mistyped option and an option of the command must be to be suggested."""
+
+    _option_owners: dict = {}
+
+    def index_options(self) -> None:
+        """Tell every parser of the tree which (sub)commands take each option, for :meth:`_unrecognized`."""
+        owners: dict = {}
+        parsers = list(self._tree())
+        for parser in parsers:
+            for flag in parser._option_string_actions:
+                if flag.startswith("--") and flag != "--help":
+                    owners.setdefault(flag, []).append(parser.prog)
+        for parser in parsers:
+            parser._option_owners = owners
+
+    def _tree(self):
+        yield self
+        seen = set()
+        for action in self._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for child in action.choices.values():
+                    if id(child) not in seen and isinstance(child, Parser):  # aliases share a parser
+                        seen.add(id(child))
+                        yield from child._tree()
 
     def error(self, message: str):  # argparse's hook; never returns
         self.exit(2, f"{self.prog}: error: {message} (see `{self.prog} --help`)\n")
@@ -47,8 +74,18 @@ class Parser(argparse.ArgumentParser):
 
         message = f"unrecognized arguments: {' '.join(extras)}"
         flags = [flag.split("=", 1)[0] for flag in extras if flag.startswith("-")]
-        close = difflib.get_close_matches(flags[0], list(self._option_string_actions), n=1) if flags else []
-        return message + (f"; did you mean {close[0]}?" if close else "")
+        if not flags:
+            return message
+        close = difflib.get_close_matches(flags[0], list(self._option_string_actions), n=1, cutoff=self.CLOSE)
+        if close:
+            message += f"; did you mean {close[0]}?"
+        owners = [prog for prog in self._option_owners.get(flags[0], []) if prog != self.prog]
+        if owners:
+            named = ", ".join(f"`{prog}`" + (" (before the command)" if " " not in prog else "")
+                              for prog in owners[:4])
+            more = f" and {len(owners) - 4} more" if len(owners) > 4 else ""
+            message += f"; `{flags[0]}` is an option of {named}{more}, not of `{self.prog}`"
+        return message
 
 
 def bank_option(p: argparse.ArgumentParser) -> None:

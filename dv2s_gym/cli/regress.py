@@ -92,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
 
     check_names(policies=(args.policy, args.baseline), scenarios=args.scenarios, bank=args.bank)  # before imports
     from dv2s_gym.regress.report import baseline_defaults, exit_code, format_summary
-    from dv2s_gym.regress.runner import DEFAULT_OUT, BaselineReport, WorkerSettings, run_regression
+    from dv2s_gym.regress.runner import DEFAULT_OUT, BaselineReport, WorkerSettings, run_regression, run_size
 
     env_config = _env_config(args.config) if args.config else None
     out = args.out or DEFAULT_OUT
@@ -102,20 +102,40 @@ def run(args: argparse.Namespace) -> int:
     try:
         baseline = args.baseline if not args.baseline_report else BaselineReport(
             args.baseline_report, role=args.baseline_role, accept_failed=args.accept_failed_baseline)
+        settings = _settings(args, episodes, seed or 0, env_config)
+        if baseline is None:
+            _announce(args.policy, *run_size(settings), json=args.json)
         report = run_regression(
-            args.policy, baseline, _settings(args, episodes, seed or 0, env_config), out_dir=out,
+            args.policy, baseline, settings, out_dir=out,
             workers=WorkerSettings(backend=args.backend, workers=args.workers, address=args.address,
                                    timeout=args.timeout),
             progress=not args.no_progress and not args.json)
     except KeyboardInterrupt as stop:
         raise Interrupted(getattr(stop, "note", None) or episodes_kept_note(Path(out) / "results.jsonl")) from None
     if args.json:
-        print(json.dumps(report, indent=1))
+        from dv2s_gym.cli.output import json_text
+
+        print(json_text(report, indent=1))
     else:
         print(format_summary(report))
         names = ("report.json", "junit.xml", "report.md", "report.html")
         print(f"reports: {', '.join(str(Path(out) / f) for f in names if (Path(out) / f).is_file())}")
     return exit_code(report["verdict"])
+
+
+def opening_line(policy: str, scenarios: int, seeds: int) -> str:
+    """What a run without a baseline does, said before its episodes: it measures the policy alone and gives no
+    verdict, how many episodes it runs, and how to compare instead."""
+    return (f"measuring {policy} alone (no baseline: no verdict): {scenarios * seeds} episodes, "
+            f"{scenarios} scenario{'s' if scenarios != 1 else ''} x {seeds} seed{'s' if seeds != 1 else ''}; "
+            "to compare, add --baseline POLICY (e.g. --baseline rule) or --baseline-report REPORT.json")
+
+
+def _announce(policy: str, scenarios: int, seeds: int, *, json: bool) -> None:
+    import sys
+
+    # with --json, stdout is the report's alone
+    print(opening_line(policy, scenarios, seeds), file=sys.stderr if json else sys.stdout, flush=True)
 
 
 def _env_config(text: str) -> dict:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from typing import Any, Mapping, Optional
 
 from dv2s_gym.cli.parser import bank_option
@@ -20,16 +19,22 @@ def add_parser(subparsers) -> None:
     bank_option(p)
     p.add_argument("--video", default="out/episode.webm", help="video path (.webm VP8; .mp4/.avi also work)")
     p.add_argument("--trace", default=None, help="also save the episode trace here (.json or .json.gz)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0,
+                   help="episode seed: it chooses the scene (and the actions of --random); the same seed gives the "
+                   "same episode (default: 0)")
     p.add_argument("--duration", type=float, default=None, help="episode length in seconds")
     p.add_argument("--map", default=None, help="override the script's map (name or .xodr path)")
     p.add_argument("--ego-policy", choices=["agent", "scenic"], default="agent",
                    help="agent: rule-based driver; scenic: the script's ego behaviour")
     p.add_argument("--random", action="store_true", help="drive with random actions")
     p.add_argument("--trusted", action="store_true",
-                   help="run the script in this process, without the jail: only for a script you wrote or "
-                   "reviewed (scripts that ship with dv2s-gym always run in process)")
-    p.add_argument("--json", action="store_true", help="print the episode's summary as JSON (for programs)")
+                   help="run the script in this process, skipping the jail (the operating-system sandbox): only for "
+                   "a script you wrote or reviewed; it does not skip the allowlist check of what a script may use "
+                   "(imports, file access, ...), which every script passes (scripts that ship with dv2s-gym always "
+                   "run in process)")
+    p.add_argument("--json", action="store_true",
+                   help="print the episode's summary as strict JSON (for programs; a number that is not finite, such "
+                   "as min_ttc with no vehicle on a collision course, is null)")
     p.set_defaults(func=run)
 
 
@@ -48,12 +53,19 @@ def run(args: argparse.Namespace) -> int:
     result = record_scenario(args.scenario, args.video, config=config, seed=args.seed, drive=not args.random,
                              trusted=args.trusted, bank_dir=args.bank, trace=args.trace)
     if args.json:
-        print(json.dumps(result, indent=2, default=str))
+        from dv2s_gym.cli.output import json_text
+
+        print(json_text(result))
     else:
         from scenario_bank.jail.output import printable
 
         print(printable(summary(result, seed=args.seed, trace=args.trace)))  # names and values come from the script
     return 0
+
+
+DRIVERS = {"rule-based": "the rule-based driver", "random": "random actions",
+           "scenic": "the script's ego behaviour"}
+"""How the summary names the ``driver`` of :func:`dv2s_gym.demo.record_scenario`'s result."""
 
 
 def summary(result: Mapping[str, Any], *, seed: int, trace: Optional[str] = None) -> str:
@@ -66,9 +78,10 @@ def summary(result: Mapping[str, Any], *, seed: int, trace: Optional[str] = None
                "off the road" if result.get("off_road") else "on the road",
                f"{result.get('lane_changes', 0)} lane change{'s' if result.get('lane_changes') != 1 else ''}",
                f"min TTC {ttc_text}"]
+    driver = DRIVERS.get(result.get("driver"), str(result.get("driver")))
     lines = [f"wrote {result.get('path')} ({result.get('frames')} frames)",
-             f"{result.get('scenario')}, seed {seed} (scene seed {result.get('scene_seed')}): {result.get('steps')} "
-             f"steps, {ending}, return {float(result.get('return') or 0):.2f}",
+             f"{result.get('scenario')}, seed {seed} (scene seed {result.get('scene_seed')}), driven by {driver}: "
+             f"{result.get('steps')} steps, {ending}, return {float(result.get('return') or 0):.2f}",
              "outcome: " + ", ".join(outcome)]
     params = {k: v for k, v in (result.get("params") or {}).items() if isinstance(v, (int, float, str))
               and not isinstance(v, bool) and k != "map"}

@@ -607,8 +607,11 @@ def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Map
 
 
 def _log_mined(loop: _Loop, number: int, mined: Mapping[str, Any]) -> None:
+    from dv2s_gym.mining.loop_report import errored_note
+
     s = loop.settings
-    loop.log(f"round {number}: mined {mined['failures']} failures in {mined['episodes']} episodes, "
+    loop.log(f"round {number}: mined {mined['failures']} failures in {mined['episodes']} episodes"
+             f"{errored_note(mined.get('errored') or {})}, "
              f"{mined.get('clusters')} clusters, "
              f"{len({e['scenario'] for e in mined['kept'] if not e.get('replay')})} converted scenarios and "
              f"{len({e['scenario'] for e in mined['kept'] if e.get('replay')})} exact replays kept"

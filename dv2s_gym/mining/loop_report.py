@@ -227,6 +227,16 @@ def errored_text(errored: Mapping[str, Mapping[str, Any]]) -> str:
     return ", ".join(parts)
 
 
+def errored_note(errored: Mapping[str, Any]) -> str:
+    """`` (3 episodes errored: urban_pedestrian_crossing 2, highway_cut_in_from_left 1)`` after an episode count
+    that includes them (:func:`dv2s_gym.mining.loop.errored_episodes`' form); empty when none errored."""
+    count = int((errored or {}).get("episodes") or 0)
+    if not count:
+        return ""
+    names = ", ".join(f"{name} {n}" for name, n in ((errored or {}).get("scenarios") or {}).items())
+    return f" ({count} episode{'s' if count != 1 else ''} errored" + (f": {names})" if names else ")")
+
+
 def errored_by_stage(record: Mapping[str, Any]) -> List[tuple]:
     """``[(stage label, {policy: errored})]``: the round's errored episodes per step that ran
     (:func:`dv2s_gym.mining.loop.errored_episodes`' form; a mining step recorded without them gives its count)."""
@@ -277,8 +287,9 @@ def round_summary(record: Mapping[str, Any]) -> str:
     if steps.get("skipped"):
         return f"round {row['round']}: skipped: {steps['skipped']}"
     errored = _errored_total(record)
-    return (f"round {row['round']}: {row['failures']} failures mined in {row['episodes']} episodes, {row['kept']} "
-            f"scenarios kept; held-out failure rate start {row['before']}, control {row['control']}, fine-tuned "
+    mined = errored_note((steps.get("mine") or {}).get("errored") or {})
+    return (f"round {row['round']}: {row['failures']} failures mined in {row['episodes']} episodes{mined}, "
+            f"{row['kept']} scenarios kept; held-out failure rate start {row['before']}, control {row['control']}, fine-tuned "
             f"{row['after']}; rest of the bank: {row['verdict']}"
             + (f"; {errored} episode(s) errored (see the report)" if errored else ""))
 

@@ -118,6 +118,13 @@ class MineRun:
         """Whether every episode ended in an error, so the run measured nothing (a command should fail)."""
         return bool(self.records) and len(self.errors) == len(self.records)
 
+    def _errored_scenarios(self) -> str:
+        """`` (scenario A 2, scenario B 1)``: where the errored episodes were; empty when none errored."""
+        from collections import Counter
+
+        counts = Counter(str(r.get("scenario")) for r in self.errors)
+        return f" ({', '.join(f'{name} {n}' for name, n in sorted(counts.items()))})" if counts else ""
+
     def summary(self) -> str:
         """A few lines for the terminal: episodes, failures, clusters, conversions, and a WARNING line when
         episodes ended in an error."""
@@ -132,8 +139,9 @@ class MineRun:
         status = Counter(c.get("status") for c in self.conversions)
         lines = [
             f"{len(self.records)} episodes of {self.settings['policy']} ({self.settings['sampler']} sampler), "
-            f"{errors} errors, " + (f"{restarted} finished after their worker crashed or hung and was "
-                                    f"replaced, " if restarted else "") + f"{self.seconds:.0f} s",
+            f"{errors} error{'s' if errors != 1 else ''}{self._errored_scenarios()}, "
+            + (f"{restarted} finished after their worker crashed or hung and was replaced, " if restarted else "")
+            + f"{self.seconds:.0f} s",
             f"{len(failures)} failures ({', '.join(f'{k} {n}' for k, n in kinds.most_common()) or 'none'}); "
             + (f"{len(self.avoidable)} avoidable by {self.settings['reference']}" if self.settings["reference"]
              else "avoidability not checked (no reference driver)"),

@@ -46,8 +46,8 @@ from dv2s_gym.workers.backends import get_backend
 from dv2s_gym.workers.settings import WorkerSettings
 from dv2s_gym.workers.tasks import task_id
 
-__all__ = ["run_regression", "RegressSettings", "BaselineReport", "WorkerSettings", "bank_info", "plan_tasks",
-           "DEFAULT_OUT", "ROLES"]
+__all__ = ["run_regression", "run_size", "RegressSettings", "BaselineReport", "WorkerSettings", "bank_info",
+           "plan_tasks", "DEFAULT_OUT", "ROLES"]
 
 DEFAULT_OUT = "out/regress"
 Scenarios = Union[None, str, Sequence[str]]
@@ -277,15 +277,8 @@ def _prepare(candidate: str, baseline: Union[None, str, BaselineReport], setting
     env_config = dict(env_config or {})
     failure = list(settings.failure)
     _check_env_config(env_config, failure, float(settings.stall_seconds))
-    names = _select(list(settings.scenarios) if settings.scenarios is not None else None, bank_dir, fallback)
+    names, episodes, planned = _size(settings, bank_dir, fallback, report)
     bank = bank_info(names, bank_dir)
-    if settings.episodes is not None and (settings.mde is not None or settings.power is not None):
-        raise RegressError("give --episodes, or --mde and --power to choose the episodes per scenario; not both")
-    episodes, planned = settings.episodes, None
-    if episodes is None:
-        episodes, planned = _planned_episodes(names, report.path if report else None,
-                                              report.role if report else "candidate", settings.seed, settings.mde,
-                                              settings.power, settings.alpha)
     seeds = [settings.seed + k for k in range(episodes)]
     candidate_info = _policy_info(candidate)
     baseline_info = _policy_info(spec) if spec is not None else None  # a bad baseline spec is bad input too
@@ -298,6 +291,28 @@ def _prepare(candidate: str, baseline: Union[None, str, BaselineReport], setting
                  failure=failure, names=names, bank=bank, episodes=episodes, plan=planned, seeds=seeds,
                  batch=settings.batch or max(1, math.ceil(episodes / 5)), candidate_info=candidate_info,
                  baseline_info=baseline_info, old_results=old_results, report_hash=report_hash)
+
+
+def _size(settings: RegressSettings, bank_dir: Optional[str], fallback: Optional[Sequence[str]],
+          report: Optional[BaselineReport]) -> Tuple[List[str], int, Optional[Dict[str, Any]]]:
+    """The scenarios, the episodes per scenario and the power plan that chose them (``None`` when given)."""
+    names = _select(list(settings.scenarios) if settings.scenarios is not None else None, bank_dir, fallback)
+    if settings.episodes is not None and (settings.mde is not None or settings.power is not None):
+        raise RegressError("give --episodes, or --mde and --power to choose the episodes per scenario; not both")
+    episodes, planned = settings.episodes, None
+    if episodes is None:
+        episodes, planned = _planned_episodes(names, report.path if report else None,
+                                              report.role if report else "candidate", settings.seed, settings.mde,
+                                              settings.power, settings.alpha)
+    return names, episodes, planned
+
+
+def run_size(settings: RegressSettings) -> Tuple[int, int]:
+    """``(scenarios, episodes per scenario)`` of a run with ``settings`` and no baseline report, as
+    :func:`run_regression` plans it (no policy is loaded): what a command says before it starts."""
+    bank_dir = None if settings.bank_dir is None else str(Path(settings.bank_dir).resolve())
+    names, episodes, _ = _size(settings, bank_dir, None, None)
+    return len(names), episodes
 
 
 def _identity(plan: _Plan, settings: RegressSettings) -> Dict[str, Any]:

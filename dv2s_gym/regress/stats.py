@@ -565,14 +565,21 @@ def _pp(value: float) -> str:
     return f"{100 * value:+.1f} pp"
 
 
+def _family_text(family: int | None) -> str:
+    """The family an adjusted p-value was adjusted over, in words: ``3 scenarios and the pooled test``."""
+    if family is None:
+        return "the tests of the run"
+    return f"{family} scenario{'s' if family != 1 else ''} and the pooled test"
+
+
 def _reason(table: PairedTable, verdict: Verdict, interval: tuple[float, float], p_value: float,
-            adjusted_p: float, margin: float, alpha: float) -> str:
+            adjusted_p: float, margin: float, alpha: float, family: int | None = None) -> str:
     rates = (f"{table.n} paired episodes, failure rate {100 * table.candidate_rate:.1f}% vs "
              f"{100 * table.baseline_rate:.1f}% ({_pp(table.difference)}, "
              f"{100 * (1 - alpha):g}% CI {_pp(interval[0])} to {_pp(interval[1])})")
     p_text = f"one-sided exact McNemar p = {p_value:.3g}"
     if adjusted_p != p_value:
-        p_text += f" (adjusted for the scenarios {adjusted_p:.3g})"
+        p_text += f" (Holm-adjusted over {_family_text(family)}: {adjusted_p:.3g})"
     if verdict is Verdict.PASS:
         return f"not worse by {_pp(margin)} or more: {rates}; CI upper end below the margin"
     if verdict is Verdict.FAIL:
@@ -583,7 +590,7 @@ def _reason(table: PairedTable, verdict: Verdict, interval: tuple[float, float],
 
 def compare(
     table: PairedTable, margin: float, alpha: float = DEFAULT_ALPHA, adjusted_p: float | None = None,
-    rejected: bool | None = None,
+    rejected: bool | None = None, family: int | None = None,
 ) -> Comparison:
     """Verdict on one paired table (see the module docstring for the rule).
 
@@ -599,6 +606,8 @@ def compare(
             tests); must not be below the raw one-sided p-value.
         rejected: The multiplicity procedure's decision on "the candidate does not fail more often",
             when it made one: it replaces ``adjusted_p < alpha`` in the FAIL rule.
+        family: How many scenarios the adjustment's family held (beside the pooled test), for the reason's
+            words; ``None``: not known.
 
     Returns:
         The :class:`Comparison`.
@@ -617,7 +626,7 @@ def compare(
     return Comparison(
         table=table, margin=margin, alpha=alpha, difference=table.difference, interval=interval,
         p_value=p_value, adjusted_p=float(adjusted_p), verdict=verdict,
-        reason=_reason(table, verdict, interval, p_value, float(adjusted_p), margin, alpha),
+        reason=_reason(table, verdict, interval, p_value, float(adjusted_p), margin, alpha, family),
     )
 
 
@@ -667,13 +676,13 @@ def compare_scenarios(
                                alpha, pooled_weight)
     adjusted, pooled_adjusted = decision.scaled_p(raw, pooled_raw, alpha)
     per_scenario = {
-        name: compare(tables[name], margin, alpha, adjusted_p=max(p_adj, p_raw), rejected=hit)
+        name: compare(tables[name], margin, alpha, adjusted_p=max(p_adj, p_raw), rejected=hit, family=len(names))
         for name, p_raw, p_adj, hit in zip(names, raw, adjusted, decision.scenarios)
     }
     if pooled_rejected is not None:
         pooled_adjusted = pooled_raw
     pooled = compare(pooled_table, margin, alpha, adjusted_p=max(pooled_adjusted, pooled_raw),
-                     rejected=decision.pooled)
+                     rejected=decision.pooled, family=len(names))
     failed = [name for name in names if per_scenario[name].verdict is Verdict.FAIL]
     # a regression the family's adjustment cannot confirm still blocks PASS: see the module docstring
     flagged = [name for name, p_raw in zip(names, raw) if p_raw < alpha and tables[name].difference > 0]
