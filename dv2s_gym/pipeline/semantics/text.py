@@ -276,6 +276,104 @@ _GROUP_REF = re.compile(r"\b(?:the (?:other|remaining) (?P<n1>two|three|four|\d+
                         r"that|coming)\b)|each of them|both of them|all of them|all three|all two|both)\b")
 
 
+def _free(taken: List[Tuple[int, int]], a: int, b: int) -> bool:
+    """Whether the span ``a:b`` overlaps none of the spans already read as mentions."""
+    return all(b <= s or a >= e for s, e in taken)
+
+
+def _prep_before(clause: str, start: int) -> bool:
+    """Whether the mention at ``start`` is the object of a preposition ("in front of the car"): the word that
+    governs it, past determiners, numbers and adjectives, is a preposition."""
+    before = clause[:start].split()
+    # skip determiners/adjectives/numbers back to the governing word
+    i = len(before) - 1
+    while i >= 0 and (before[i] in _NUMBERS or before[i] in ("the", "a", "an", "another", "other", "its",
+                                                             "their", "his", "her", "this", "that")
+                      or before[i] in _COLORS or before[i] in _ORDINALS
+                      or re.fullmatch(r"\w+(?:er|ed|ing|ary|ant|ing|ive|y|ow|ast|ig|all|ed)", before[i])
+                      and before[i] not in _PLACE_NOUNS
+                      and before[i] not in _PREPOSITIONS):
+        i -= 1
+    if i >= 1 and before[i] == "of" and before[i - 1] in ("front", "rear", "back", "side", "nose", "driver",
+                                                             "tail") and i - 1 <= 3:
+        return False  # "the front of V2 impacted ...": V2 is the subject
+    return i >= 0 and before[i] in _PREPOSITIONS
+
+
+@dataclass
+class _NounPhrase:
+    """What the words of a noun phrase say: the actor kind, the noun as written, the count, whether it is
+    definite ("the car"), new ("another car"), and its colour/ordinal descriptors."""
+
+    kind: str
+    plural: bool
+    surface: str
+    count: int
+    definite: bool
+    descriptors: set
+    new: bool
+
+
+def _noun_phrase(clause: str, m: re.Match) -> _NounPhrase:
+    """The noun phrase of the actor noun ``m``, read from at most four words before it (cut at a conjunction,
+    "with", "than", "by", "of" or a comma: "a Ford F-150 and a bus": the count belongs to its own phrase)."""
+    group = next(k for k, v in m.groupdict().items() if v)
+    kind, number = group.split("_")[0], group.split("_")[1]
+    plural = number == "p"
+    before = clause[:m.start()].split()
+    window = before[-4:]
+    for cut in range(len(window) - 1, -1, -1):
+        if window[cut] in ("and", "or", "with", "than", "by", "of") or window[cut].endswith(","):
+            window = window[cut + 1:]
+            break
+    count = None
+    definite = False
+    descriptors = set()
+    new = False
+    for w in window:
+        if w in _NUMBERS and w not in ("a", "an"):
+            count = _NUMBERS[w]
+        elif w.isdigit() and 0 < int(w) <= 30:
+            count = int(w)
+        if w in ("the", "this", "that", "these", "those", "its", "their"):
+            definite = True
+        if w in ("a", "an"):
+            definite = False
+            count = count or 1
+            new = True
+        if w in ("another", "second", "third", "fourth"):
+            new = True
+        if w in _COLORS or w in _ORDINALS:
+            descriptors.add(w)
+    # words right before the noun only: descriptors that follow "the"/"a"
+    if window and window[-1] in ("another",):
+        new = True
+    if plural and count is None:
+        count = 2
+    if count is None:
+        count = 1
+    surface = re.sub(r"(?:'s|s')$", "", m.group(0))
+    return _NounPhrase(kind, plural, surface, count, definite, descriptors, new)
+
+
+def _state_before_noun(before: str, entity: Entity) -> None:
+    """Words right before an actor noun that say what it does: "a crossing pedestrian" crosses, "a crossing
+    vehicle" crosses the ego's path, "a stopped / stalled / broken down car" stands still."""
+    if entity.kind in ("pedestrian", "bicycle") and re.search(r"\bcrossing\s+$", before) and \
+            not _NEGATION.search(before):
+        entity.add_action("cross", sudden=False, directions=[])
+    elif entity.kind in _MOTOR and re.search(r"\b(?:crossing|cross traffic)\s+$", before):
+        pending = entity.attrs.setdefault("pending_relations", [])
+        if "crossing_path" not in pending:
+            pending.append("crossing_path")  # "a crossing vehicle" crosses the ego's path
+    # adjectives of state before the noun: stopped car, parked truck, broken down car
+    if entity.kind not in ("ego", "obstacle") and re.search(
+            r"\b(?:stopped|stationary|broken down|stalled|standing|disabled|idle|halted)\s+"
+            r"(?:\w+\s+)?$", before):
+        if not _NEGATION.search(before):
+            entity.add_action("stop")
+
+
 class _Parser:
     def __init__(self, text: str) -> None:
         self.raw = text
@@ -358,30 +456,24 @@ class _Parser:
 
     # ---------------------------------------------------------------- mentions
     def _mentions(self, clause: str, base_subject: Optional[Entity]) -> List[_Mention]:
+        """The actor mentions of a clause, in text order: the ego, nouns, "another", group references and
+        pronouns (a pronoun the clause subject resolves is left ``("pending", start)``); each span is read once."""
         mentions: List[_Mention] = []
         taken: List[Tuple[int, int]] = []
+        self._ego_mentions(clause, mentions, taken)
+        for m in _NOUN_RE.finditer(clause):
+            if _free(taken, m.start(), m.end()):
+                self._noun_mention(clause, m, mentions, taken)
+        self._another_mentions(clause, mentions, taken)
+        self._group_mentions(clause, mentions, taken)
+        self._pronoun_mentions(clause, base_subject, mentions, taken)
+        mentions.sort(key=lambda mm: mm.start)
+        return mentions
 
-        def free(a: int, b: int) -> bool:
-            return all(b <= s or a >= e for s, e in taken)
-
-        def prep_before(start: int) -> bool:
-            before = clause[:start].split()
-            # skip determiners/adjectives/numbers back to the governing word
-            i = len(before) - 1
-            while i >= 0 and (before[i] in _NUMBERS or before[i] in ("the", "a", "an", "another", "other", "its",
-                                                                     "their", "his", "her", "this", "that")
-                              or before[i] in _COLORS or before[i] in _ORDINALS
-                              or re.fullmatch(r"\w+(?:er|ed|ing|ary|ant|ing|ive|y|ow|ast|ig|all|ed)", before[i])
-                              and before[i] not in _PLACE_NOUNS
-                              and before[i] not in _PREPOSITIONS):
-                i -= 1
-            if i >= 1 and before[i] == "of" and before[i - 1] in ("front", "rear", "back", "side", "nose", "driver",
-                                                                     "tail") and i - 1 <= 3:
-                return False  # "the front of V2 impacted ...": V2 is the subject
-            return i >= 0 and before[i] in _PREPOSITIONS
-
+    def _ego_mentions(self, clause: str, mentions: List[_Mention], taken: List[Tuple[int, int]]) -> None:
+        """The ego named in the clause ("the ego vehicle", "our car", "us"): its mentions and its noun."""
         for m in _EGO_RE.finditer(clause):
-            if not free(m.start(), m.end()):
+            if not _free(taken, m.start(), m.end()):
                 continue
             possessive = m.group(0).endswith("'s") or clause[m.end():m.end() + 2] == "'s"
             taken.append((m.start(), m.end()))
@@ -389,97 +481,63 @@ class _Parser:
             self._mention_log.append((self._sentence_index, len(self._mention_log), ego_entity))
             ego_entity.attrs.setdefault("noun", re.sub(r"^(?:the|an|a|our|my) |'s$", "", m.group(0)))
             mentions.append(_Mention(m.start(), m.end(), ego_entity,
-                                     prep_before(m.start()) or m.group(0) == "us", possessive))
-        for m in _NOUN_RE.finditer(clause):
-            if not free(m.start(), m.end()):
-                continue
-            group = next(k for k, v in m.groupdict().items() if v)
-            kind, number = group.split("_")[0], group.split("_")[1]
-            plural = number == "p"
-            before = clause[:m.start()].split()
-            window = before[-4:]
-            for cut in range(len(window) - 1, -1, -1):
-                if window[cut] in ("and", "or", "with", "than", "by", "of") or window[cut].endswith(","):
-                    window = window[cut + 1:]  # "a Ford F-150 and a bus": the count belongs to its own phrase
-                    break
-            count = None
-            definite = False
-            descriptors = set()
-            new = False
-            for w in window:
-                if w in _NUMBERS and w not in ("a", "an"):
-                    count = _NUMBERS[w]
-                elif w.isdigit() and 0 < int(w) <= 30:
-                    count = int(w)
-                if w in ("the", "this", "that", "these", "those", "its", "their"):
-                    definite = True
-                if w in ("a", "an"):
-                    definite = False
-                    count = count or 1
-                    new = True
-                if w in ("another", "second", "third", "fourth"):
-                    new = True
-                if w in _COLORS or w in _ORDINALS:
-                    descriptors.add(w)
-            # words right before the noun only: descriptors that follow "the"/"a"
-            if window and window[-1] in ("another",):
-                new = True
-            if plural and count is None:
-                count = 2
-            if count is None:
-                count = 1
-            surface = re.sub(r"(?:'s|s')$", "", m.group(0))
-            if kind == "obstacle" and re.search(r"'s\s+(?:\w+\s+)?$", clause[:m.start()]):
-                continue  # "the ego vehicle's tire": a part of a vehicle, not an obstacle
-            if surface == "vehicle" and re.search(r"\bthe\s+$", clause[:m.start()]) and self.out.ego is not None and \
-                    str(self.out.ego.attrs.get("noun", "")).endswith("vehicle") and \
-                    not any(e.kind == "car" for e in self.out.entities):
-                mentions.append(_Mention(m.start(), m.end(), self.out.ego, prep_before(m.start()), False))
-                taken.append((m.start(), m.end()))
-                continue  # "the test vehicle ... the vehicle approaches": the ego
-            named = re.fullmatch(r"v([2-9])|vehicle ([2-9])|(npc|agent|actor|adversary|adv|car) ?([1-9])", surface)
-            if named:
-                key = "v" + (named.group(1) or named.group(2)) if not named.group(3) else \
-                    named.group(3) + named.group(4)
-                entity = self._named.get(key)
-                if entity is None:
-                    entity = self._named[key] = self._new("car", 1, {key})
-            elif kind == "car" and self._is_ego_alias(clause, m.start()):
-                entity = self._entity_for("ego", 1, True, set(), False)
-            elif plural and definite and self.last_group is not None and self.last_group.kind == kind:
-                entity = self.last_group
-            else:
-                entity = self._entity_for(kind, count, definite, descriptors, new)
-                if plural and entity.count < count:
-                    entity.count = count
-            possessive = m.group(0).endswith("'s") or m.group(0).endswith("s'")
+                                     _prep_before(clause, m.start()) or m.group(0) == "us", possessive))
+
+    def _noun_mention(self, clause: str, m: re.Match, mentions: List[_Mention], taken: List[Tuple[int, int]]) -> None:
+        """One actor noun: the entity it names (new or known), what the words around it say of that entity."""
+        phrase = _noun_phrase(clause, m)
+        if phrase.kind == "obstacle" and re.search(r"'s\s+(?:\w+\s+)?$", clause[:m.start()]):
+            return  # "the ego vehicle's tire": a part of a vehicle, not an obstacle
+        if self._names_the_ego_vehicle(clause, m, phrase):
+            mentions.append(_Mention(m.start(), m.end(), self.out.ego, _prep_before(clause, m.start()), False))
             taken.append((m.start(), m.end()))
-            entity.attrs.setdefault("noun", surface)
-            if kind == "obstacle" and re.fullmatch(r"(?:deer|animals?|dogs?|cats?|cows?|horses?|moose|sheep|birds?|elks?|"
-                                                   r"kangaroos?|fox|boar|wild boar)", surface):
-                entity.attrs["animal"] = True
-            self._mention_log.append((self._sentence_index, len(self._mention_log), entity))
-            if kind == "car" and surface in ("vehicles", "vehicle") and \
-                    (count > 1 or re.match(r"\s*(?:crash|collision|pile ?up|accident)", clause[m.end():])):
-                entity.attrs["generic"] = True
-            mentions.append(_Mention(m.start(), m.end(), entity, prep_before(m.start()), possessive))
-            if entity.kind in ("pedestrian", "bicycle") and re.search(r"\bcrossing\s+$", clause[:m.start()]) and \
-                    not _NEGATION.search(clause[:m.start()]):
-                entity.add_action("cross", sudden=False, directions=[])
-            elif entity.kind in _MOTOR and re.search(r"\b(?:crossing|cross traffic)\s+$", clause[:m.start()]):
-                pending = entity.attrs.setdefault("pending_relations", [])
-                if "crossing_path" not in pending:
-                    pending.append("crossing_path")  # "a crossing vehicle" crosses the ego's path
-            # adjectives of state before the noun: stopped car, parked truck, broken down car
-            if entity.kind not in ("ego", "obstacle") and re.search(
-                    r"\b(?:stopped|stationary|broken down|stalled|standing|disabled|idle|halted)\s+"
-                    r"(?:\w+\s+)?$", clause[:m.start()]):
-                if not _NEGATION.search(clause[:m.start()]):
-                    entity.add_action("stop")
+            return  # "the test vehicle ... the vehicle approaches": the ego
+        entity = self._noun_entity(clause, m, phrase)
+        possessive = m.group(0).endswith("'s") or m.group(0).endswith("s'")
+        taken.append((m.start(), m.end()))
+        entity.attrs.setdefault("noun", phrase.surface)
+        if phrase.kind == "obstacle" and re.fullmatch(r"(?:deer|animals?|dogs?|cats?|cows?|horses?|moose|sheep|"
+                                                      r"birds?|elks?|kangaroos?|fox|boar|wild boar)", phrase.surface):
+            entity.attrs["animal"] = True
+        self._mention_log.append((self._sentence_index, len(self._mention_log), entity))
+        if phrase.kind == "car" and phrase.surface in ("vehicles", "vehicle") and \
+                (phrase.count > 1 or re.match(r"\s*(?:crash|collision|pile ?up|accident)", clause[m.end():])):
+            entity.attrs["generic"] = True
+        mentions.append(_Mention(m.start(), m.end(), entity, _prep_before(clause, m.start()), possessive))
+        _state_before_noun(clause[:m.start()], entity)
+
+    def _names_the_ego_vehicle(self, clause: str, m: re.Match, phrase: "_NounPhrase") -> bool:
+        """"The vehicle" after a text that calls the ego "the test vehicle" and names no car: the ego."""
+        return phrase.surface == "vehicle" and bool(re.search(r"\bthe\s+$", clause[:m.start()])) and \
+            self.out.ego is not None and str(self.out.ego.attrs.get("noun", "")).endswith("vehicle") and \
+            not any(e.kind == "car" for e in self.out.entities)
+
+    def _noun_entity(self, clause: str, m: re.Match, phrase: "_NounPhrase") -> Entity:
+        """The entity a noun names: a numbered crash-report vehicle ("V2"), the ego by an alias ("our car"),
+        the last group ("the pedestrians"), else a known or a new entity of its kind."""
+        named = re.fullmatch(r"v([2-9])|vehicle ([2-9])|(npc|agent|actor|adversary|adv|car) ?([1-9])", phrase.surface)
+        if named:
+            key = "v" + (named.group(1) or named.group(2)) if not named.group(3) else \
+                named.group(3) + named.group(4)
+            entity = self._named.get(key)
+            if entity is None:
+                entity = self._named[key] = self._new("car", 1, {key})
+            return entity
+        if phrase.kind == "car" and self._is_ego_alias(clause, m.start()):
+            return self._entity_for("ego", 1, True, set(), False)
+        if phrase.plural and phrase.definite and self.last_group is not None and self.last_group.kind == phrase.kind:
+            return self.last_group
+        entity = self._entity_for(phrase.kind, phrase.count, phrase.definite, phrase.descriptors, phrase.new)
+        if phrase.plural and entity.count < phrase.count:
+            entity.count = phrase.count
+        return entity
+
+    def _another_mentions(self, clause: str, mentions: List[_Mention], taken: List[Tuple[int, int]]) -> None:
+        """"A car in the left lane and another in the right lane": "another" is a second actor of the last kind
+        named."""
         for m in re.finditer(r"\b(?:another|a second|one more)\b(?= (?:in|on|from|at|to|that|which|who|behind|ahead|"
                              r"coming|approaching|travel\w*|driv\w*|is|was)\b)", clause):
-            # "a car in the left lane and another in the right lane": a second actor of the last kind named
-            if not free(m.start(), m.end()):
+            if not _free(taken, m.start(), m.end()):
                 continue
             last = next((mm.entity for mm in reversed(mentions) if mm.start < m.start() and not isinstance(mm.entity, tuple)
                          and mm.entity.kind != "ego"), None) or \
@@ -490,9 +548,12 @@ class _Parser:
             entity.attrs["noun"] = last.attrs.get("noun", last.kind)
             taken.append((m.start(), m.end()))
             self._mention_log.append((self._sentence_index, len(self._mention_log), entity))
-            mentions.append(_Mention(m.start(), m.end(), entity, prep_before(m.start()), False))
+            mentions.append(_Mention(m.start(), m.end(), entity, _prep_before(clause, m.start()), False))
+
+    def _group_mentions(self, clause: str, mentions: List[_Mention], taken: List[Tuple[int, int]]) -> None:
+        """References to part of the last group ("one of them", "the two others", "both"), with their size."""
         for m in _GROUP_REF.finditer(clause):
-            if not free(m.start(), m.end()) or self.last_group is None:
+            if not _free(taken, m.start(), m.end()) or self.last_group is None:
                 continue
             taken.append((m.start(), m.end()))
             word = m.group(0)
@@ -506,14 +567,19 @@ class _Parser:
             else:
                 size = None  # "the others": whoever is left
             mentions.append(_Mention(m.start(), m.end(), self.last_group, False, False, pronoun=True, size=size))
+
+    def _pronoun_mentions(self, clause: str, base_subject: Optional[Entity], mentions: List[_Mention],
+                          taken: List[Tuple[int, int]]) -> None:
+        """Pronouns: a subject pronoun is the clause's inherited subject; an object or possessive one is left
+        pending for the caller to resolve against the clause subject."""
         for m in _PRONOUN_RE.finditer(clause):
-            if not free(m.start(), m.end()):
+            if not _free(taken, m.start(), m.end()):
                 continue
             word = m.group(0)
             entity = None
             possessive = word in ("its", "their", "his")
-            objective = word in ("them", "him") or possessive or prep_before(m.start())
-            if word in ("it", "they", "he", "she") and not prep_before(m.start()) and not possessive:
+            objective = word in ("them", "him") or possessive or _prep_before(clause, m.start())
+            if word in ("it", "they", "he", "she") and not _prep_before(clause, m.start()) and not possessive:
                 entity = base_subject or self.last_subject
                 objective = False
                 # "it" right after a verb is an object
@@ -526,8 +592,6 @@ class _Parser:
                 entity = ("pending", m.start())  # resolved by the caller with the clause subject
             taken.append((m.start(), m.end()))
             mentions.append(_Mention(m.start(), m.end(), entity, objective, possessive, pronoun=True))
-        mentions.sort(key=lambda mm: mm.start)
-        return mentions
 
     def _is_ego_alias(self, clause: str, start: int) -> bool:
         return bool(re.search(r"\b(?:ego|our|my|host|subject)\s+$", clause[:start]))
