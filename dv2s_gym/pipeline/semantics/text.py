@@ -756,15 +756,39 @@ class _Parser:
         return not words
 
     def _clause(self, clause: str, inherited: Optional[Entity]) -> Optional[Entity]:
+        """Read one clause: its subject (said, inherited or none), then its lanes, relations, actions and speed;
+        returns the subject, which the clauses after it inherit."""
         lead = re.match(r"(?:and|while|whilst|whereas|but|as|when|then|so|after|before|until|because|although|"
                         r"though|where|meanwhile|which|who|also|suddenly|finally|eventually|later|"
                         r"immediately|quickly)\b\s*", clause)
         body_start = lead.end() if lead else 0
-        subordinate = bool(lead) and lead.group(0).strip() in ("which", "who")
+        lead_word = lead.group(0).strip() if lead else ""
         mentions = self._mentions(clause, inherited)
-        # clause subject: first actor mention that is not a prepositional object / possessive
-        subject = None
-        explicit = False
+        subject = self._said_subject(clause, mentions, body_start)
+        if subject is None:
+            subject = self._unsaid_subject(clause, body_start, lead_word in ("which", "who"), inherited)
+        mentions = self._resolved_mentions(mentions, subject)
+        if lead_word == "before":
+            self._ahead_until_reached(clause, inherited)
+        if lead_word in ("when", "once", "as") and self._trigger_of_inherited(clause, inherited):
+            return inherited
+        self._lanes(clause, mentions, subject)
+        self._relations(clause, mentions, subject)
+        before_actions = [a for a, _ in subject.actions] if subject is not None else []
+        self._actions(clause, mentions, subject)
+        self._coordinated(clause, mentions, subject, before_actions)
+        self._done_by_all(clause, subject, before_actions)
+        real = [mm for mm in mentions if not isinstance(mm.entity, tuple)]
+        if real:
+            self._last_mentioned = real[-1].entity
+        self._clause_speed(clause, mentions, subject)
+        self._crossing_directions(clause, mentions, subject)
+        return subject
+
+    @staticmethod
+    def _said_subject(clause: str, mentions: List[_Mention], body_start: int) -> Optional[Entity]:
+        """The subject the clause names: its first actor mention (after the leading conjunction, before the first
+        verb) when that is not the object of a preposition or a possessive; else None."""
         first_verb = min((m.start() for _, rx in _COMPILED_ACTIONS for m in rx.finditer(clause)
                           if m.start() >= body_start), default=len(clause))
         for mm in mentions:
@@ -775,25 +799,32 @@ class _Parser:
             if isinstance(mm.entity, tuple):
                 continue
             if not mm.prep_object and not mm.possessive:
-                subject = mm.entity
-                explicit = True
-                break
+                return mm.entity
             break
-        if subject is None:
-            first_action = min((m.start() for _, rx in _COMPILED_ACTIONS for m in rx.finditer(clause)),
-                               default=len(clause))
-            head = clause[body_start:first_action]
-            first = (clause[body_start:].split() or [""])[0]
-            verb_first = bool(re.fullmatch(r"[a-z]+(?:s|ed|ing)", first)) and not _NOUN_RE.fullmatch(first) \
-                and first not in ("this", "his", "its", "as", "is", "was", "has", "does", "thus", "always")
-            if subordinate and self._last_mentioned is not None:
-                subject = self._last_mentioned  # "..., a jaywalker who runs across": the jaywalker
-            elif subordinate or verb_first or not _DETERMINER_OR_NOUN.search(head) or \
-                    re.match(r"\s*(?:it|they|he|she)\b", head):
-                subject = inherited
-            else:
-                subject = None  # a non-actor subject ("the traffic dynamics cause ...")
-        # resolve pending pronouns: objects -> last other actor mentioned
+        return None
+
+    def _unsaid_subject(self, clause: str, body_start: int, subordinate: bool,
+                        inherited: Optional[Entity]) -> Optional[Entity]:
+        """The subject of a clause that names none: a relative clause's is the actor named last ("a jaywalker
+        who runs across"); a clause that starts with its verb or a pronoun inherits the previous subject; a
+        clause whose subject is not an actor ("the traffic dynamics cause ...") has none."""
+        first_action = min((m.start() for _, rx in _COMPILED_ACTIONS for m in rx.finditer(clause)),
+                           default=len(clause))
+        head = clause[body_start:first_action]
+        first = (clause[body_start:].split() or [""])[0]
+        verb_first = bool(re.fullmatch(r"[a-z]+(?:s|ed|ing)", first)) and not _NOUN_RE.fullmatch(first) \
+            and first not in ("this", "his", "its", "as", "is", "was", "has", "does", "thus", "always")
+        if subordinate and self._last_mentioned is not None:
+            return self._last_mentioned
+        if subordinate or verb_first or not _DETERMINER_OR_NOUN.search(head) or \
+                re.match(r"\s*(?:it|they|he|she)\b", head):
+            return inherited
+        return None
+
+    def _resolved_mentions(self, mentions: List[_Mention], subject: Optional[Entity]) -> List[_Mention]:
+        """The clause's mentions with their pending pronouns resolved (an object pronoun is the last other
+        actor mentioned, else the subject; one left unresolved is dropped); every actor mentioned, and the
+        subject, becomes the most recent."""
         for mm in mentions:
             if isinstance(mm.entity, tuple):
                 mm.entity = self._other_than(subject) or subject
@@ -802,40 +833,50 @@ class _Parser:
             self._touch(mm.entity)
         if subject is not None:
             self._touch(subject)
-        if lead and lead.group(0).strip() == "before" and inherited is not None and inherited.kind != "ego" and \
+        return mentions
+
+    def _ahead_until_reached(self, clause: str, inherited: Optional[Entity]) -> None:
+        """"... before the ego reaches it": the actor of the clause before is ahead of the ego."""
+        if inherited is not None and inherited.kind != "ego" and \
                 re.match(r"before (?:the ego(?: car| vehicle)?|it) (?:reaches|catches up with|gets to) (?:it|them)\b",
                          clause):
             ego = self.out.ego
             if ego is not None:
                 self._relate(inherited, "ahead_of", ego)
-        if lead and lead.group(0).strip() in ("when", "once", "as") and inherited is not None and inherited.actions \
-                and not any(rx.search(clause) for _, rx in _COMPILED_ACTIONS):
-            dist, sec = distance_m(clause), time_s(clause)
-            if dist is not None or sec is not None:
-                detail = inherited.actions[-1][1]
-                detail.setdefault("trigger", {"kind": "distance", "meters": dist} if dist is not None
-                                  else {"kind": "time", "seconds": sec})
-                self._placed += 1
-                return inherited
-        self._lanes(clause, mentions, subject)
-        self._relations(clause, mentions, subject)
-        before_actions = [a for a, _ in subject.actions] if subject is not None else []
-        self._actions(clause, mentions, subject)
-        self._coordinated(clause, mentions, subject, before_actions)
-        if subject is not None and re.search(r"\b(?:both|all of them|each of them|all three|both of them)\b", clause):
-            # "a car in the left lane and another in the right lane both cut in": every one of them does
-            new = [(a, d) for a, d in subject.actions if a not in before_actions]
-            same = [e for s_, _, e in self._mention_log if s_ == self._sentence_index and e.kind == subject.kind
-                    and e is not subject]
-            for e in same:
-                for a, d in new:
-                    if a.startswith("lane_change") or a in ("cut_in",):
-                        e.add_action(a, **{k: v for k, v in d.items() if k not in ("side", "with")})
-                    else:
-                        e.add_action(a, **{k: v for k, v in d.items() if k != "with"})
-        real = [mm for mm in mentions if not isinstance(mm.entity, tuple)]
-        if real:
-            self._last_mentioned = real[-1].entity
+
+    def _trigger_of_inherited(self, clause: str, inherited: Optional[Entity]) -> bool:
+        """"... brakes when it is 20 m away": a when/once/as clause with no action of its own and a distance or
+        a time is the trigger of the previous subject's last action. Whether the clause was that."""
+        if inherited is None or not inherited.actions or any(rx.search(clause) for _, rx in _COMPILED_ACTIONS):
+            return False
+        dist, sec = distance_m(clause), time_s(clause)
+        if dist is None and sec is None:
+            return False
+        detail = inherited.actions[-1][1]
+        detail.setdefault("trigger", {"kind": "distance", "meters": dist} if dist is not None
+                          else {"kind": "time", "seconds": sec})
+        self._placed += 1
+        return True
+
+    def _done_by_all(self, clause: str, subject: Optional[Entity], before_actions: List[str]) -> None:
+        """"A car in the left lane and another in the right lane both cut in": every actor of the subject's kind
+        named in the sentence does what the clause gave the subject (without its side or partner)."""
+        if subject is None or not re.search(r"\b(?:both|all of them|each of them|all three|both of them)\b", clause):
+            return
+        new = [(a, d) for a, d in subject.actions if a not in before_actions]
+        same = [e for s_, _, e in self._mention_log if s_ == self._sentence_index and e.kind == subject.kind
+                and e is not subject]
+        for e in same:
+            for a, d in new:
+                if a.startswith("lane_change") or a in ("cut_in",):
+                    e.add_action(a, **{k: v for k, v in d.items() if k not in ("side", "with")})
+                else:
+                    e.add_action(a, **{k: v for k, v in d.items() if k != "with"})
+
+    @staticmethod
+    def _clause_speed(clause: str, mentions: List[_Mention], subject: Optional[Entity]) -> None:
+        """A speed said in the clause belongs to its subject (else the first actor that is no preposition's
+        object) and to the actions it has."""
         kph = speed_kph(clause)
         if kph is not None:
             owner = subject or next((mm.entity for mm in mentions if not mm.prep_object), None)
@@ -843,8 +884,6 @@ class _Parser:
                 owner.attrs.setdefault("speed_kph", kph)
                 for _, d in owner.actions:
                     d.setdefault("speed_kph", kph)
-        self._crossing_directions(clause, mentions, subject)
-        return subject if (explicit or subject is not None) else None
 
     def _crossing_directions(self, clause: str, mentions: List[_Mention], subject: Optional[Entity]) -> None:
         """"one going from left to right and the two others from right to left": sizes and directions."""
