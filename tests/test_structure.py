@@ -356,7 +356,6 @@ NOT_YET_WITHIN_LIMITS = {
     # long: the bird's-eye-view analyzer's and the description reader's rule tables, one branch per case
     "dv2s_gym/pipeline/dra/bev/analyze.py:analyze_bev", "dv2s_gym/pipeline/dra/bev/events.py:_actor",
     "dv2s_gym/pipeline/dra/bev/language.py:_clause", "dv2s_gym/pipeline/dra/bev/tracking.py:_world_motion",
-    "dv2s_gym/pipeline/semantics/text.py:_Parser._record_action",
     "dv2s_gym/pipeline/semantics/text.py:_Parser._finish",
     # long: the script pre-check's one-pass character scanner (its state is a dozen locals of one loop)
     "scenario_bank/precheck.py:_scan",

@@ -374,6 +374,28 @@ def _state_before_noun(before: str, entity: Entity) -> None:
             entity.add_action("stop")
 
 
+def _action_window(clause: str, m: re.Match) -> str:
+    """The words around an action phrase (30 characters before it, 25 after) that say "suddenly" or "unprotected"."""
+    return clause[max(0, m.start() - 30):m.end() + 25]
+
+
+def _crossing_direction(clause: str, groups: Dict[str, Optional[str]]) -> Optional[str]:
+    """The way a pedestrian crosses: "from left to right" in the clause, the side the phrase says it comes from
+    ("from the left": left to right), "from the far side", else None."""
+    dm = _CROSS_DIR.search(clause)
+    if dm:
+        return f"{dm.group('from')}_to_{dm.group('to')}"
+    if groups.get("from"):
+        return f"{groups['from']}_to_{'right' if groups['from'] == 'left' else 'left'}"
+    fm = _CROSS_FROM.search(clause)
+    if fm and (fm.group("from") or fm.group("from2")) in ("left", "right"):
+        f = fm.group("from") or fm.group("from2")
+        return f"{f}_to_{'right' if f == 'left' else 'left'}"
+    if fm and (fm.group("from") in ("far", "other", "opposite")):
+        return "far_side"
+    return None
+
+
 class _Parser:
     def __init__(self, text: str) -> None:
         self.raw = text
@@ -1189,152 +1211,198 @@ class _Parser:
                 detail.setdefault("phrase", m.group(0))
 
     def _record_action(self, owner: Entity, action: str, m: re.Match, clause: str) -> None:
+        """Record one action phrase read for ``owner``. An action read onto a static object is not placed; a rule
+        per action (:attr:`_ACTION_RULES`) records what the phrase means; without one (or when the rule leaves it),
+        the action is recorded as read, with whether it was sudden."""
         self._placed += 1
-        window = clause[max(0, m.start() - 30):m.end() + 25]
-        sudden = bool(_SUDDEN.search(window))
-        kind = owner.kind
-        if kind == "obstacle" and not (owner.attrs.get("animal") and action in ("cross", "emerge", "stop")) and \
-                not action.startswith("collide"):
-            if clause not in self._unplaced_phrases:
-                self._unplaced_phrases.append(clause)  # an action read onto a static object: not placed
+        sudden = bool(_SUDDEN.search(_action_window(clause, m)))
+        if self._static_object_acts(owner, action, clause):
             return
-        groups = m.groupdict()
-        if action in ("lane_change", "cut_in") and m.group(0).startswith("merg") and kind != "pedestrian":
+        if action in ("lane_change", "cut_in") and m.group(0).startswith("merg") and owner.kind != "pedestrian":
             owner.add_action("merge", sudden=sudden)  # "merges left", "merged into its lane": the text says merge
-        if action == "lane_change" and not (groups.get("dir") or groups.get("dir2")):
-            if kind == "pedestrian":
-                return
+        rule = self._ACTION_RULES.get("collide" if action.startswith("collide") else action)
+        if rule is None or not rule(self, owner, action, m, clause, sudden):
+            owner.add_action(action, sudden=sudden)
+
+    def _static_object_acts(self, owner: Entity, action: str, clause: str) -> bool:
+        """Whether ``action`` was read onto a static object (an obstacle that does not collide, and is no animal
+        crossing, emerging or stopping): then the clause is listed as not placed."""
+        if owner.kind == "obstacle" and not (owner.attrs.get("animal") and action in ("cross", "emerge", "stop")) \
+                and not action.startswith("collide"):
+            if clause not in self._unplaced_phrases:
+                self._unplaced_phrases.append(clause)
+            return True
+        return False
+
+    # Each rule below reads one action phrase of ``owner`` and returns whether it recorded it (False: the action is
+    # recorded as read).
+
+    def _lane_change_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A lane change: to the side said (left/right, or a lane named: "the middle lane" waits for the lane the
+        actor is on); undirected (``weave`` for weaving) when no side is said; a pedestrian changes no lane."""
+        groups = m.groupdict()
+        d = groups.get("dir") or groups.get("dir2")
+        if not d:
+            if owner.kind == "pedestrian":
+                return True
             if groups.get("weave"):
                 owner.add_action("lane_change", sudden=sudden, weave=True)
             else:
                 owner.add_action("lane_change", sudden=sudden)
-            return
-        if action == "swerve":
-            if kind == "pedestrian":
-                return
-            owner.add_action("swerve", sudden=True, side=groups.get("dir"))
-            return
-        if action == "pull_out":
-            if any(groups.get(g) is not None for g in ("generic", "generic2", "generic3")) and not (
-                    "parked" in owner.descriptors or re.search(
-                        r"\b(?:park\w*|curb|kerb|driveway|shoulder|roadside|side of the road|lay by)\b",
-                        self._sentence_text if groups.get("generic3") is not None else clause)):
-                self._unplaced_phrases.append(clause)
-                return
-            if kind == "pedestrian":
-                return
-            owner.actions = [(a, d) for a, d in owner.actions if a != "stop"]
-            owner.add_action("pull_out", sudden=sudden)
-            if re.match(r"(?:back|revers)", m.group(0)):
-                owner.add_action("reverse")
-            return
-        if action == "emerge":
-            behind = None
-            bm = re.search(r"\bfrom behind\b", clause[m.start():])
-            if bm:
-                behind = self._next_mention(clause, m.start() + bm.end(), self._clause_mentions, exclude=owner)
+            return True
+        side = _LANE_WORD.get(d, d) if d in _LANE_WORD else d
+        if d in ("left", "right") and "side" not in m.group(0):
+            owner.add_action(f"lane_change_{d}", sudden=sudden, target=d)
+        elif side == "middle":
+            owner.add_action("lane_change_pending", sudden=sudden, target="middle")
+        elif side in ("left", "right"):
+            owner.add_action(f"lane_change_{side}", sudden=sudden, target=side)
+        return True
+
+    def _swerve_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A swerve is always sudden, to the side said; a pedestrian does not swerve."""
+        if owner.kind != "pedestrian":
+            owner.add_action("swerve", sudden=True, side=m.groupdict().get("dir"))
+        return True
+
+    def _pull_out_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """Pulling out (from a parking place, the kerb, a driveway): it ends a stop; backing out also reverses.
+        A generic "pulls out" with no parked actor or parking place near it is not placed."""
+        groups = m.groupdict()
+        if any(groups.get(g) is not None for g in ("generic", "generic2", "generic3")) and not (
+                "parked" in owner.descriptors or re.search(
+                    r"\b(?:park\w*|curb|kerb|driveway|shoulder|roadside|side of the road|lay by)\b",
+                    self._sentence_text if groups.get("generic3") is not None else clause)):
+            self._unplaced_phrases.append(clause)
+            return True
+        if owner.kind == "pedestrian":
+            return True
+        owner.actions = [(a, d) for a, d in owner.actions if a != "stop"]
+        owner.add_action("pull_out", sudden=sudden)
+        if re.match(r"(?:back|revers)", m.group(0)):
+            owner.add_action("reverse")
+        return True
+
+    def _emerge_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """Emerging (from behind an occluder, which is kept): a pedestrian, cyclist or animal that emerges
+        crosses, suddenly when it dashes or runs."""
+        behind = None
+        bm = re.search(r"\bfrom behind\b", clause[m.start():])
+        if bm:
+            behind = self._next_mention(clause, m.start() + bm.end(), self._clause_mentions, exclude=owner)
+        if behind is not None:
+            owner.attrs["from_behind"] = behind
+        if owner.kind in ("pedestrian", "bicycle") or owner.attrs.get("animal"):
+            quick = bool(re.match(r"(?:dash|dart|rush|sprint|run|ran|jump|leap|burst|pop)", m.group(0)))
+            owner.add_action("cross", sudden=sudden or quick, directions=[])
             if behind is not None:
-                owner.attrs["from_behind"] = behind
-            if kind in ("pedestrian", "bicycle") or owner.attrs.get("animal"):
-                quick = bool(re.match(r"(?:dash|dart|rush|sprint|run|ran|jump|leap|burst|pop)", m.group(0)))
-                owner.add_action("cross", sudden=sudden or quick, directions=[])
-                if behind is not None:
-                    owner.detail("cross")["from_behind"] = behind
-            return
-        if action == "brake_stop":
-            owner.add_action("brake", sudden=sudden)
+                owner.detail("cross")["from_behind"] = behind
+        return True
+
+    def _brake_stop_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """Braking to a stop: both."""
+        owner.add_action("brake", sudden=sudden)
+        owner.add_action("stop", sudden=sudden)
+        return True
+
+    def _pull_over_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """Pulling over: a lane change to the right and a stop (not for a pedestrian)."""
+        if owner.kind != "pedestrian":
+            owner.add_action("lane_change_right", sudden=sudden)
             owner.add_action("stop", sudden=sudden)
-            return
-        if action == "pull_over":
-            if kind != "pedestrian":
-                owner.add_action("lane_change_right", sudden=sudden)
-                owner.add_action("stop", sudden=sudden)
-            return
-        if action == "stop" or action == "brake":
-            self._trigger(owner, action, m, clause)
-        if action == "lane_change":
-            d = groups.get("dir") or groups.get("dir2")
-            side = _LANE_WORD.get(d, d) if d in _LANE_WORD else d
-            if d in ("left", "right") and "side" not in m.group(0):
-                owner.add_action(f"lane_change_{d}", sudden=sudden, target=d)
-            elif side == "middle":
-                owner.add_action("lane_change_pending", sudden=sudden, target="middle")
-            elif side in ("left", "right"):
-                owner.add_action(f"lane_change_{side}", sudden=sudden, target=side)
-            return
-        if action == "turn":
-            d = groups.get("dir")
-            if kind in ("pedestrian",):
-                return
-            owner.add_action(f"turn_{d}", sudden=sudden)
-            if groups.get("unprot") == "unprotected" or re.search(r"\bunprotected\b", window):
-                owner.detail(f"turn_{d}")["unprotected"] = True
-            return
-        if action == "cross":
-            if kind == "pedestrian":
-                direction = None
-                dm = _CROSS_DIR.search(clause)
-                if dm:
-                    direction = f"{dm.group('from')}_to_{dm.group('to')}"
-                elif groups.get("from"):
-                    direction = f"{groups['from']}_to_{'right' if groups['from'] == 'left' else 'left'}"
-                else:
-                    fm = _CROSS_FROM.search(clause)
-                    if fm and (fm.group("from") or fm.group("from2")) in ("left", "right"):
-                        f = fm.group("from") or fm.group("from2")
-                        direction = f"{f}_to_{'right' if f == 'left' else 'left'}"
-                    elif fm and (fm.group("from") in ("far", "other", "opposite")):
-                        direction = "far_side"
-                d = owner.detail("cross")
-                if owner.has("cross") and direction:
-                    d.setdefault("directions", []).append(direction)
-                else:
-                    owner.add_action("cross", sudden=sudden, directions=[direction] if direction else [])
-                return
-            if kind in ("car", "truck", "bus", "motorcycle", "bicycle", "ego"):
-                if re.match(r"cross(?:es|ed|ing)? (?:the |a )?(?:road|street|lanes?|highway)\b", m.group(0) +
-                            clause[m.end():m.end() + 20].lstrip().join([" ", ""])) or kind == "bicycle":
-                    owner.add_action("cross", sudden=sudden)  # (a cyclist crossing in front: like a pedestrian)
-                elif clause not in self._unplaced_phrases:
-                    self._unplaced_phrases.append(clause)  # "crosses" of a vehicle that says not what: warned
-                return
-        if action == "cut_in":
-            side = None
-            sm = re.search(r"\bfrom the (left|right)\b|\bfrom (?:its|the) (left|right)\b", clause)
-            if sm:
-                side = sm.group(1) or sm.group(2)
-            owner.add_action("cut_in", sudden=sudden, side=side, back="back" in m.group(0))
-            return
-        if action == "overtake":
-            side = None
-            sm = re.search(r"\bon the (left|right)\b|\bvia the (left|right)\b|\bon (?:its|the ego's) (left|right)\b",
-                           clause)
-            if sm:
-                side = next(g for g in sm.groups() if g)
-            owner.add_action("overtake", sudden=sudden, side=side,
-                             around=" around" in m.group(0), via_pass=m.group(0).startswith("pass"))
-            return
-        if action == "drift":
-            owner.add_action("drift", sudden=sudden)
-            side = _drift_side(clause[m.start():m.end() + 60])
-            if side and not owner.detail("drift").get("side"):
-                owner.detail("drift")["side"] = side
-            return
-        if action == "stop" and re.match(r"park", m.group(0)) and kind == "ego":
-            return
-        if action == "merge" and kind == "pedestrian":
-            return
-        if action.startswith("collide"):
-            other = self._next_mention(clause, m.end(), self._clause_mentions, exclude=owner, limit=40)
-            if other is None and self._clause_subject is not None and self._clause_subject is not owner:
-                other = self._clause_subject  # "the ego ... is struck by a van": the van hits the ego
-            owner.add_action("collide", sudden=sudden)
-            if other is not None and not owner.detail("collide").get("with"):
-                owner.detail("collide")["with"] = other
-            if action != "collide":
-                owner.add_action(action)
-            return
-        owner.add_action(action, sudden=sudden)
+        return True
+
+    def _stop_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A stop, with its trigger; the ego parking is not one."""
+        self._trigger(owner, action, m, clause)
+        return bool(re.match(r"park", m.group(0))) and owner.kind == "ego"
+
+    def _brake_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A brake, with its trigger."""
+        self._trigger(owner, action, m, clause)
+        return False
+
+    def _turn_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A turn to the side said, ``unprotected`` when the words around say so; a pedestrian does not turn."""
+        d = m.groupdict().get("dir")
+        if owner.kind in ("pedestrian",):
+            return True
+        owner.add_action(f"turn_{d}", sudden=sudden)
+        if m.groupdict().get("unprot") == "unprotected" or re.search(r"\bunprotected\b", _action_window(clause, m)):
+            owner.detail(f"turn_{d}")["unprotected"] = True
+        return True
+
+    def _cross_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A pedestrian crosses in the directions said (each phrase adds one); a vehicle crosses when the road,
+        street or lanes are said (a cyclist always), else the clause is not placed; others as read."""
+        if owner.kind == "pedestrian":
+            direction = _crossing_direction(clause, m.groupdict())
+            d = owner.detail("cross")
+            if owner.has("cross") and direction:
+                d.setdefault("directions", []).append(direction)
+            else:
+                owner.add_action("cross", sudden=sudden, directions=[direction] if direction else [])
+            return True
+        if owner.kind in ("car", "truck", "bus", "motorcycle", "bicycle", "ego"):
+            if re.match(r"cross(?:es|ed|ing)? (?:the |a )?(?:road|street|lanes?|highway)\b", m.group(0) +
+                        clause[m.end():m.end() + 20].lstrip().join([" ", ""])) or owner.kind == "bicycle":
+                owner.add_action("cross", sudden=sudden)  # (a cyclist crossing in front: like a pedestrian)
+            elif clause not in self._unplaced_phrases:
+                self._unplaced_phrases.append(clause)  # "crosses" of a vehicle that says not what: warned
+            return True
+        return False
+
+    def _cut_in_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A cut-in, from the side said, ``back`` when it pulls back in."""
+        side = None
+        sm = re.search(r"\bfrom the (left|right)\b|\bfrom (?:its|the) (left|right)\b", clause)
+        if sm:
+            side = sm.group(1) or sm.group(2)
+        owner.add_action("cut_in", sudden=sudden, side=side, back="back" in m.group(0))
+        return True
+
+    def _overtake_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """An overtake, on the side said; ``around`` (an obstacle) and ``via_pass`` ("passes") as worded."""
+        side = None
+        sm = re.search(r"\bon the (left|right)\b|\bvia the (left|right)\b|\bon (?:its|the ego's) (left|right)\b",
+                       clause)
+        if sm:
+            side = next(g for g in sm.groups() if g)
+        owner.add_action("overtake", sudden=sudden, side=side,
+                         around=" around" in m.group(0), via_pass=m.group(0).startswith("pass"))
+        return True
+
+    def _drift_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A drift, to the side the words after it say (see :func:`_drift_side`)."""
+        owner.add_action("drift", sudden=sudden)
+        side = _drift_side(clause[m.start():m.end() + 60])
+        if side and not owner.detail("drift").get("side"):
+            owner.detail("drift")["side"] = side
+        return True
+
+    def _merge_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A pedestrian does not merge."""
+        return owner.kind == "pedestrian"
+
+    def _collide_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A collision (and its type when said), with the next actor named after it, else the clause subject
+        ("the ego ... is struck by a van": the van hits the ego)."""
+        other = self._next_mention(clause, m.end(), self._clause_mentions, exclude=owner, limit=40)
+        if other is None and self._clause_subject is not None and self._clause_subject is not owner:
+            other = self._clause_subject
+        owner.add_action("collide", sudden=sudden)
+        if other is not None and not owner.detail("collide").get("with"):
+            owner.detail("collide")["with"] = other
+        if action != "collide":
+            owner.add_action(action)
+        return True
+
+    _ACTION_RULES = {"lane_change": _lane_change_rule, "swerve": _swerve_rule, "pull_out": _pull_out_rule,
+                     "emerge": _emerge_rule, "brake_stop": _brake_stop_rule, "pull_over": _pull_over_rule,
+                     "stop": _stop_rule, "brake": _brake_rule, "turn": _turn_rule, "cross": _cross_rule,
+                     "cut_in": _cut_in_rule, "overtake": _overtake_rule, "drift": _drift_rule, "merge": _merge_rule,
+                     "collide": _collide_rule}
+    """Action -> the rule that records its phrase (every ``collide*`` action has the collision rule)."""
 
     def _collisions(self) -> None:
         """Every participant of a collision collides, with one type (scenario_bank.elements): the type said,
