@@ -396,6 +396,35 @@ def _crossing_direction(clause: str, groups: Dict[str, Optional[str]]) -> Option
     return None
 
 
+def _cut_in_side_from_relations(e: Entity) -> None:
+    """A cut-in with no side said comes from the side ``e`` is on (the last of its left/right relations)."""
+    if e.has("cut_in") and not e.detail("cut_in").get("side"):
+        for rel, j in e.relations:
+            if rel in ("left_of", "right_of"):
+                e.detail("cut_in")["side"] = rel.split("_")[0]
+
+
+def _cut_in_lane_changes(e: Entity, rels: set) -> None:
+    """The lane changes a cut-in makes: a merge ahead of the ego is a cut-in; an overtake said as "passes" and
+    a cut-in that is no pulling back are one cut-in; pulling back after an overtake is out and back; a cut-in
+    from a side changes lanes toward the other."""
+    if e.has("merge") and "ahead_of" in rels and not e.has("cut_in"):
+        e.add_action("cut_in")
+    if e.has("cut_in") and e.has("overtake") and e.detail("overtake").get("via_pass") \
+            and not e.detail("cut_in").get("back"):
+        e.actions = [(a, d) for a, d in e.actions if a != "overtake"]
+    if e.has("cut_in"):
+        side = e.detail("cut_in").get("side") or ("left" if "left_of" in rels else
+                                                  "right" if "right_of" in rels else None)
+        if e.has("overtake") and e.detail("cut_in").get("back"):
+            out_side = e.detail("overtake").get("side") or "left"
+            back_side = "right" if out_side == "left" else "left"
+            e.add_action(f"lane_change_{out_side}")
+            e.add_action(f"lane_change_{back_side}")
+        elif side in ("left", "right") and not e.has("merge"):
+            e.add_action(f"lane_change_{'right' if side == 'left' else 'left'}")
+
+
 class _Parser:
     def __init__(self, text: str) -> None:
         self.raw = text
@@ -1456,65 +1485,23 @@ class _Parser:
                     self._relate(e, "right_of", ego)
 
     def _finish(self) -> None:
+        """What the whole text settles once every sentence is read: lanes to relations, collisions, lane changes
+        to the middle lane, cut-in sides, relations to the ego that actions imply, conflicts, occluders, cross
+        traffic at junctions, and animals that are no driving scene."""
         self._absolute_lanes()  # first, so cut-ins get their side from it
         self._collisions()
         ego = self.out.ego
         for e in self.out.entities:
-            # "switches to the middle lane": direction from the lane it is on
-            for i, (a, d) in enumerate(list(e.actions)):
-                if a == "lane_change_pending":
-                    direction = {"left": "right", "right": "left"}.get(e.lane or "")
-                    if direction is None and ego is not None and e is not ego:
-                        for rel, j in e.relations:
-                            if rel in ("left_of", "right_of") and j is ego:
-                                direction = "right" if rel == "left_of" else "left"
-                    e.actions.pop(i)
-                    if direction:
-                        e.add_action(f"lane_change_{direction}", **d)
-                    else:
-                        self.out.unresolved.append(f"{e.kind}: lane change to the middle lane from an unknown lane")
-                    break
+            self._middle_lane_direction(e, ego)
             if e.kind == "pedestrian" and e.has("cross"):
                 e.actions = [(a, d) for a, d in e.actions if a not in ("stop",) or d.get("keep")]
-            # cut-in side from the relation
-            if e.has("cut_in") and not e.detail("cut_in").get("side"):
-                for rel, j in e.relations:
-                    if rel in ("left_of", "right_of"):
-                        e.detail("cut_in")["side"] = rel.split("_")[0]
+            _cut_in_side_from_relations(e)
         for e in self.out.entities:
             if e.kind == "ego" or ego is None:
                 continue
-            for rel in e.attrs.pop("pending_relations", []):
-                self._relate(e, rel, ego)
-            rels = {r for r, j in e.relations if j is ego}
-            if e.lane == "ramp" and not rels & {"left_of", "right_of"}:
-                self._relate(e, "right_of", ego)
-                rels.add("right_of")
-            if e.has("merge") and "ahead_of" in rels and not e.has("cut_in"):
-                e.add_action("cut_in")
-            if e.has("cut_in") and e.has("overtake") and e.detail("overtake").get("via_pass") \
-                    and not e.detail("cut_in").get("back"):
-                e.actions = [(a, d) for a, d in e.actions if a != "overtake"]
-            if e.has("cut_in"):
-                side = e.detail("cut_in").get("side") or ("left" if "left_of" in rels else
-                                                          "right" if "right_of" in rels else None)
-                if e.has("overtake") and e.detail("cut_in").get("back"):
-                    out_side = e.detail("overtake").get("side") or "left"
-                    back_side = "right" if out_side == "left" else "left"
-                    e.add_action(f"lane_change_{out_side}")
-                    e.add_action(f"lane_change_{back_side}")
-                elif side in ("left", "right") and not e.has("merge"):
-                    e.add_action(f"lane_change_{'right' if side == 'left' else 'left'}")
-            if e.kind in _MOTOR and "ahead_of" in rels and not rels & {"left_of", "right_of", "oncoming"} \
-                    and not (e.has("cut_in") and not e.detail("cut_in").get("back")) and not e.has("merge"):
-                self._relate(e, "same_lane", ego)
-            if e.kind == "obstacle" and "same_lane" in rels:
-                self._relate(e, "ahead_of", ego)
-            if (e.kind in ("pedestrian", "bicycle") or e.attrs.get("animal")) and e.has("cross"):
-                self._relate(e, "ahead_of", ego)
-                self._relate(e, "crossing_path", ego)
-            if e.kind in _MOTOR + ("bicycle",) and "oncoming" in rels and ego.has("turn_left"):
-                self._relate(e, "crossing_path", ego)
+            rels = self._relations_said_to_ego(e, ego)
+            _cut_in_lane_changes(e, rels)
+            self._relations_implied_to_ego(e, ego, rels)
         for e in self.out.entities:
             # an undirected lane change said next to a directed one adds nothing
             if e.has("lane_change") and (e.has("lane_change_left") or e.has("lane_change_right")) and \
@@ -1526,6 +1513,63 @@ class _Parser:
                 if a in ("stop", "brake") and trig and trig.get("kind") == "conflict" and trig.get("with") is None:
                     trig["with"] = self._conflict_partner(e)
         self._absolute_lanes()
+        self._occluders_ahead(ego)
+        self._cross_traffic(ego)
+        # animals alone in a text with no road and no vehicle are not a driving scene ("the lazy dog")
+        if self.out.road is None and all(e.attrs.get("animal") or e.kind == "pedestrian" for e in self.out.entities):
+            self.out.entities = [e for e in self.out.entities if not e.attrs.get("animal")]
+        # a pedestrian crossing in front of the ego; "one ... and the two others" count directions
+        for e in self.out.entities:
+            if e.kind == "pedestrian" and e.has("cross"):
+                dirs = e.detail("cross").get("directions") or []
+                e.detail("cross")["directions"] = dirs
+
+    def _middle_lane_direction(self, e: Entity, ego: Optional[Entity]) -> None:
+        """"Switches to the middle lane": a lane change to the left or right from the lane ``e`` is on (or its
+        side of the ego); unresolved when neither is known."""
+        for i, (a, d) in enumerate(list(e.actions)):
+            if a == "lane_change_pending":
+                direction = {"left": "right", "right": "left"}.get(e.lane or "")
+                if direction is None and ego is not None and e is not ego:
+                    for rel, j in e.relations:
+                        if rel in ("left_of", "right_of") and j is ego:
+                            direction = "right" if rel == "left_of" else "left"
+                e.actions.pop(i)
+                if direction:
+                    e.add_action(f"lane_change_{direction}", **d)
+                else:
+                    self.out.unresolved.append(f"{e.kind}: lane change to the middle lane from an unknown lane")
+                break
+
+    def _relations_said_to_ego(self, e: Entity, ego: Entity) -> set:
+        """``e``'s relations to the ego: those its words left pending ("a crossing vehicle"), and right of the
+        ego for an actor on the ramp that has no side yet."""
+        for rel in e.attrs.pop("pending_relations", []):
+            self._relate(e, rel, ego)
+        rels = {r for r, j in e.relations if j is ego}
+        if e.lane == "ramp" and not rels & {"left_of", "right_of"}:
+            self._relate(e, "right_of", ego)
+            rels.add("right_of")
+        return rels
+
+    def _relations_implied_to_ego(self, e: Entity, ego: Entity, rels: set) -> None:
+        """Relations to the ego that ``e``'s kind, actions and other relations (``rels``) imply: a vehicle ahead
+        and on no side is in the same lane, an obstacle in the lane is ahead, a crossing pedestrian, cyclist or
+        animal is ahead and across the path, oncoming traffic crosses the path of an ego turning left."""
+        if e.kind in _MOTOR and "ahead_of" in rels and not rels & {"left_of", "right_of", "oncoming"} \
+                and not (e.has("cut_in") and not e.detail("cut_in").get("back")) and not e.has("merge"):
+            self._relate(e, "same_lane", ego)
+        if e.kind == "obstacle" and "same_lane" in rels:
+            self._relate(e, "ahead_of", ego)
+        if (e.kind in ("pedestrian", "bicycle") or e.attrs.get("animal")) and e.has("cross"):
+            self._relate(e, "ahead_of", ego)
+            self._relate(e, "crossing_path", ego)
+        if e.kind in _MOTOR + ("bicycle",) and "oncoming" in rels and ego.has("turn_left"):
+            self._relate(e, "crossing_path", ego)
+
+    def _occluders_ahead(self, ego: Optional[Entity]) -> None:
+        """An actor something emerges from behind is ahead of the ego, on the emerging actor's side; the one that
+        emerges is no longer behind it."""
         for e in self.out.entities:
             occluder = e.attrs.get("from_behind")
             if ego is None or occluder is None or occluder is ego or e is ego:
@@ -1535,30 +1579,27 @@ class _Parser:
                 if j is ego and rel in ("left_of", "right_of"):
                     self._relate(occluder, rel, ego)
             e.relations = [(r, j) for r, j in e.relations if not (r == "behind" and j is occluder)]
-        # cross traffic at a junction: from the left or right, not oncoming, not changing lanes
-        if ego is not None and self.out.road in ("intersection", "t_junction", "three_way", "roundabout"):
-            for e in self.out.entities:
-                if e is ego or e.kind not in _MOTOR + ("bicycle",):
-                    continue
-                rels = {r for r, j in e.relations if j is ego}
-                lane_moves = ("cut_in", "lane_change", "lane_change_left", "lane_change_right", "overtake", "merge")
-                joins = "right_of" in rels and e.has("turn_right")  # a right turn from the right joins the ego's way
-                if rels & {"left_of", "right_of"} and "oncoming" not in rels and not any(e.has(a) for a in lane_moves) \
-                        and not joins \
-                        and (e.attrs.get("side_road") or any(e.has(a) for a in ("go_straight", "turn_left",
-                                                                                  "turn_right", "collide"))
-                             or not e.actions):
-                    self._relate(e, "crossing_path", ego)
-                if "oncoming" in rels and e.has("turn_left") and not ego.has("turn_left"):
-                    self._relate(e, "crossing_path", ego)
-        # animals alone in a text with no road and no vehicle are not a driving scene ("the lazy dog")
-        if self.out.road is None and all(e.attrs.get("animal") or e.kind == "pedestrian" for e in self.out.entities):
-            self.out.entities = [e for e in self.out.entities if not e.attrs.get("animal")]
-        # a pedestrian crossing in front of the ego; "one ... and the two others" count directions
+
+    def _cross_traffic(self, ego: Optional[Entity]) -> None:
+        """Cross traffic at a junction: a vehicle from the left or right, not oncoming, not changing lanes, not
+        joining the ego's way by a right turn, crosses the ego's path; so does an oncoming one turning left
+        when the ego does not."""
+        if ego is None or self.out.road not in ("intersection", "t_junction", "three_way", "roundabout"):
+            return
         for e in self.out.entities:
-            if e.kind == "pedestrian" and e.has("cross"):
-                dirs = e.detail("cross").get("directions") or []
-                e.detail("cross")["directions"] = dirs
+            if e is ego or e.kind not in _MOTOR + ("bicycle",):
+                continue
+            rels = {r for r, j in e.relations if j is ego}
+            lane_moves = ("cut_in", "lane_change", "lane_change_left", "lane_change_right", "overtake", "merge")
+            joins = "right_of" in rels and e.has("turn_right")  # a right turn from the right joins the ego's way
+            if rels & {"left_of", "right_of"} and "oncoming" not in rels and not any(e.has(a) for a in lane_moves) \
+                    and not joins \
+                    and (e.attrs.get("side_road") or any(e.has(a) for a in ("go_straight", "turn_left",
+                                                                              "turn_right", "collide"))
+                         or not e.actions):
+                self._relate(e, "crossing_path", ego)
+            if "oncoming" in rels and e.has("turn_left") and not ego.has("turn_left"):
+                self._relate(e, "crossing_path", ego)
 
 
 def _conflict_partner_of(entities: List[Entity], who: Entity) -> Optional[Entity]:
