@@ -353,8 +353,6 @@ NOT_YET_WITHIN_LIMITS = {
     # long: reports rendered line by line
     "dv2s_gym/mining/loop_report.py:render_markdown", "dv2s_gym/mining/report.py:build_report_from_records",
     "dv2s_gym/mining/report.py:markdown",
-    # long: the bird's-eye-view analyzer's rule tables, one branch per case
-    "dv2s_gym/pipeline/dra/bev/analyze.py:analyze_bev",
     # long: the script pre-check's one-pass character scanner (its state is a dozen locals of one loop)
     "scenario_bank/precheck.py:_scan",
     # long: a map's roads written out one by one, and the OpenDRIVE-to-highway-env conversion
