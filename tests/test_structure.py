@@ -353,12 +353,6 @@ NOT_YET_WITHIN_LIMITS = {
     # long: reports rendered line by line
     "dv2s_gym/mining/loop_report.py:render_markdown", "dv2s_gym/mining/report.py:build_report_from_records",
     "dv2s_gym/mining/report.py:markdown",
-    # long: the bird's-eye-view analyzer's and the description reader's rule tables, one branch per case
-    "dv2s_gym/pipeline/dra/bev/analyze.py:analyze_bev", "dv2s_gym/pipeline/dra/bev/events.py:_actor",
-    "dv2s_gym/pipeline/dra/bev/language.py:_clause", "dv2s_gym/pipeline/dra/bev/tracking.py:_world_motion",
-    "dv2s_gym/pipeline/semantics/text.py:_Parser._mentions", "dv2s_gym/pipeline/semantics/text.py:_Parser._clause",
-    "dv2s_gym/pipeline/semantics/text.py:_Parser._record_action",
-    "dv2s_gym/pipeline/semantics/text.py:_Parser._finish",
     # long: the script pre-check's one-pass character scanner (its state is a dozen locals of one loop)
     "scenario_bank/precheck.py:_scan",
     # long: a map's roads written out one by one, and the OpenDRIVE-to-highway-env conversion

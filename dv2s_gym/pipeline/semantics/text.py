@@ -276,6 +276,155 @@ _GROUP_REF = re.compile(r"\b(?:the (?:other|remaining) (?P<n1>two|three|four|\d+
                         r"that|coming)\b)|each of them|both of them|all of them|all three|all two|both)\b")
 
 
+def _free(taken: List[Tuple[int, int]], a: int, b: int) -> bool:
+    """Whether the span ``a:b`` overlaps none of the spans already read as mentions."""
+    return all(b <= s or a >= e for s, e in taken)
+
+
+def _prep_before(clause: str, start: int) -> bool:
+    """Whether the mention at ``start`` is the object of a preposition ("in front of the car"): the word that
+    governs it, past determiners, numbers and adjectives, is a preposition."""
+    before = clause[:start].split()
+    # skip determiners/adjectives/numbers back to the governing word
+    i = len(before) - 1
+    while i >= 0 and (before[i] in _NUMBERS or before[i] in ("the", "a", "an", "another", "other", "its",
+                                                             "their", "his", "her", "this", "that")
+                      or before[i] in _COLORS or before[i] in _ORDINALS
+                      or re.fullmatch(r"\w+(?:er|ed|ing|ary|ant|ing|ive|y|ow|ast|ig|all|ed)", before[i])
+                      and before[i] not in _PLACE_NOUNS
+                      and before[i] not in _PREPOSITIONS):
+        i -= 1
+    if i >= 1 and before[i] == "of" and before[i - 1] in ("front", "rear", "back", "side", "nose", "driver",
+                                                             "tail") and i - 1 <= 3:
+        return False  # "the front of V2 impacted ...": V2 is the subject
+    return i >= 0 and before[i] in _PREPOSITIONS
+
+
+@dataclass
+class _NounPhrase:
+    """What the words of a noun phrase say: the actor kind, the noun as written, the count, whether it is
+    definite ("the car"), new ("another car"), and its colour/ordinal descriptors."""
+
+    kind: str
+    plural: bool
+    surface: str
+    count: int
+    definite: bool
+    descriptors: set
+    new: bool
+
+
+def _noun_phrase(clause: str, m: re.Match) -> _NounPhrase:
+    """The noun phrase of the actor noun ``m``, read from at most four words before it (cut at a conjunction,
+    "with", "than", "by", "of" or a comma: "a Ford F-150 and a bus": the count belongs to its own phrase)."""
+    group = next(k for k, v in m.groupdict().items() if v)
+    kind, number = group.split("_")[0], group.split("_")[1]
+    plural = number == "p"
+    before = clause[:m.start()].split()
+    window = before[-4:]
+    for cut in range(len(window) - 1, -1, -1):
+        if window[cut] in ("and", "or", "with", "than", "by", "of") or window[cut].endswith(","):
+            window = window[cut + 1:]
+            break
+    count = None
+    definite = False
+    descriptors = set()
+    new = False
+    for w in window:
+        if w in _NUMBERS and w not in ("a", "an"):
+            count = _NUMBERS[w]
+        elif w.isdigit() and 0 < int(w) <= 30:
+            count = int(w)
+        if w in ("the", "this", "that", "these", "those", "its", "their"):
+            definite = True
+        if w in ("a", "an"):
+            definite = False
+            count = count or 1
+            new = True
+        if w in ("another", "second", "third", "fourth"):
+            new = True
+        if w in _COLORS or w in _ORDINALS:
+            descriptors.add(w)
+    # words right before the noun only: descriptors that follow "the"/"a"
+    if window and window[-1] in ("another",):
+        new = True
+    if plural and count is None:
+        count = 2
+    if count is None:
+        count = 1
+    surface = re.sub(r"(?:'s|s')$", "", m.group(0))
+    return _NounPhrase(kind, plural, surface, count, definite, descriptors, new)
+
+
+def _state_before_noun(before: str, entity: Entity) -> None:
+    """Words right before an actor noun that say what it does: "a crossing pedestrian" crosses, "a crossing
+    vehicle" crosses the ego's path, "a stopped / stalled / broken down car" stands still."""
+    if entity.kind in ("pedestrian", "bicycle") and re.search(r"\bcrossing\s+$", before) and \
+            not _NEGATION.search(before):
+        entity.add_action("cross", sudden=False, directions=[])
+    elif entity.kind in _MOTOR and re.search(r"\b(?:crossing|cross traffic)\s+$", before):
+        pending = entity.attrs.setdefault("pending_relations", [])
+        if "crossing_path" not in pending:
+            pending.append("crossing_path")  # "a crossing vehicle" crosses the ego's path
+    # adjectives of state before the noun: stopped car, parked truck, broken down car
+    if entity.kind not in ("ego", "obstacle") and re.search(
+            r"\b(?:stopped|stationary|broken down|stalled|standing|disabled|idle|halted)\s+"
+            r"(?:\w+\s+)?$", before):
+        if not _NEGATION.search(before):
+            entity.add_action("stop")
+
+
+def _action_window(clause: str, m: re.Match) -> str:
+    """The words around an action phrase (30 characters before it, 25 after) that say "suddenly" or "unprotected"."""
+    return clause[max(0, m.start() - 30):m.end() + 25]
+
+
+def _crossing_direction(clause: str, groups: Dict[str, Optional[str]]) -> Optional[str]:
+    """The way a pedestrian crosses: "from left to right" in the clause, the side the phrase says it comes from
+    ("from the left": left to right), "from the far side", else None."""
+    dm = _CROSS_DIR.search(clause)
+    if dm:
+        return f"{dm.group('from')}_to_{dm.group('to')}"
+    if groups.get("from"):
+        return f"{groups['from']}_to_{'right' if groups['from'] == 'left' else 'left'}"
+    fm = _CROSS_FROM.search(clause)
+    if fm and (fm.group("from") or fm.group("from2")) in ("left", "right"):
+        f = fm.group("from") or fm.group("from2")
+        return f"{f}_to_{'right' if f == 'left' else 'left'}"
+    if fm and (fm.group("from") in ("far", "other", "opposite")):
+        return "far_side"
+    return None
+
+
+def _cut_in_side_from_relations(e: Entity) -> None:
+    """A cut-in with no side said comes from the side ``e`` is on (the last of its left/right relations)."""
+    if e.has("cut_in") and not e.detail("cut_in").get("side"):
+        for rel, j in e.relations:
+            if rel in ("left_of", "right_of"):
+                e.detail("cut_in")["side"] = rel.split("_")[0]
+
+
+def _cut_in_lane_changes(e: Entity, rels: set) -> None:
+    """The lane changes a cut-in makes: a merge ahead of the ego is a cut-in; an overtake said as "passes" and
+    a cut-in that is no pulling back are one cut-in; pulling back after an overtake is out and back; a cut-in
+    from a side changes lanes toward the other."""
+    if e.has("merge") and "ahead_of" in rels and not e.has("cut_in"):
+        e.add_action("cut_in")
+    if e.has("cut_in") and e.has("overtake") and e.detail("overtake").get("via_pass") \
+            and not e.detail("cut_in").get("back"):
+        e.actions = [(a, d) for a, d in e.actions if a != "overtake"]
+    if e.has("cut_in"):
+        side = e.detail("cut_in").get("side") or ("left" if "left_of" in rels else
+                                                  "right" if "right_of" in rels else None)
+        if e.has("overtake") and e.detail("cut_in").get("back"):
+            out_side = e.detail("overtake").get("side") or "left"
+            back_side = "right" if out_side == "left" else "left"
+            e.add_action(f"lane_change_{out_side}")
+            e.add_action(f"lane_change_{back_side}")
+        elif side in ("left", "right") and not e.has("merge"):
+            e.add_action(f"lane_change_{'right' if side == 'left' else 'left'}")
+
+
 class _Parser:
     def __init__(self, text: str) -> None:
         self.raw = text
@@ -358,30 +507,24 @@ class _Parser:
 
     # ---------------------------------------------------------------- mentions
     def _mentions(self, clause: str, base_subject: Optional[Entity]) -> List[_Mention]:
+        """The actor mentions of a clause, in text order: the ego, nouns, "another", group references and
+        pronouns (a pronoun the clause subject resolves is left ``("pending", start)``); each span is read once."""
         mentions: List[_Mention] = []
         taken: List[Tuple[int, int]] = []
+        self._ego_mentions(clause, mentions, taken)
+        for m in _NOUN_RE.finditer(clause):
+            if _free(taken, m.start(), m.end()):
+                self._noun_mention(clause, m, mentions, taken)
+        self._another_mentions(clause, mentions, taken)
+        self._group_mentions(clause, mentions, taken)
+        self._pronoun_mentions(clause, base_subject, mentions, taken)
+        mentions.sort(key=lambda mm: mm.start)
+        return mentions
 
-        def free(a: int, b: int) -> bool:
-            return all(b <= s or a >= e for s, e in taken)
-
-        def prep_before(start: int) -> bool:
-            before = clause[:start].split()
-            # skip determiners/adjectives/numbers back to the governing word
-            i = len(before) - 1
-            while i >= 0 and (before[i] in _NUMBERS or before[i] in ("the", "a", "an", "another", "other", "its",
-                                                                     "their", "his", "her", "this", "that")
-                              or before[i] in _COLORS or before[i] in _ORDINALS
-                              or re.fullmatch(r"\w+(?:er|ed|ing|ary|ant|ing|ive|y|ow|ast|ig|all|ed)", before[i])
-                              and before[i] not in _PLACE_NOUNS
-                              and before[i] not in _PREPOSITIONS):
-                i -= 1
-            if i >= 1 and before[i] == "of" and before[i - 1] in ("front", "rear", "back", "side", "nose", "driver",
-                                                                     "tail") and i - 1 <= 3:
-                return False  # "the front of V2 impacted ...": V2 is the subject
-            return i >= 0 and before[i] in _PREPOSITIONS
-
+    def _ego_mentions(self, clause: str, mentions: List[_Mention], taken: List[Tuple[int, int]]) -> None:
+        """The ego named in the clause ("the ego vehicle", "our car", "us"): its mentions and its noun."""
         for m in _EGO_RE.finditer(clause):
-            if not free(m.start(), m.end()):
+            if not _free(taken, m.start(), m.end()):
                 continue
             possessive = m.group(0).endswith("'s") or clause[m.end():m.end() + 2] == "'s"
             taken.append((m.start(), m.end()))
@@ -389,97 +532,63 @@ class _Parser:
             self._mention_log.append((self._sentence_index, len(self._mention_log), ego_entity))
             ego_entity.attrs.setdefault("noun", re.sub(r"^(?:the|an|a|our|my) |'s$", "", m.group(0)))
             mentions.append(_Mention(m.start(), m.end(), ego_entity,
-                                     prep_before(m.start()) or m.group(0) == "us", possessive))
-        for m in _NOUN_RE.finditer(clause):
-            if not free(m.start(), m.end()):
-                continue
-            group = next(k for k, v in m.groupdict().items() if v)
-            kind, number = group.split("_")[0], group.split("_")[1]
-            plural = number == "p"
-            before = clause[:m.start()].split()
-            window = before[-4:]
-            for cut in range(len(window) - 1, -1, -1):
-                if window[cut] in ("and", "or", "with", "than", "by", "of") or window[cut].endswith(","):
-                    window = window[cut + 1:]  # "a Ford F-150 and a bus": the count belongs to its own phrase
-                    break
-            count = None
-            definite = False
-            descriptors = set()
-            new = False
-            for w in window:
-                if w in _NUMBERS and w not in ("a", "an"):
-                    count = _NUMBERS[w]
-                elif w.isdigit() and 0 < int(w) <= 30:
-                    count = int(w)
-                if w in ("the", "this", "that", "these", "those", "its", "their"):
-                    definite = True
-                if w in ("a", "an"):
-                    definite = False
-                    count = count or 1
-                    new = True
-                if w in ("another", "second", "third", "fourth"):
-                    new = True
-                if w in _COLORS or w in _ORDINALS:
-                    descriptors.add(w)
-            # words right before the noun only: descriptors that follow "the"/"a"
-            if window and window[-1] in ("another",):
-                new = True
-            if plural and count is None:
-                count = 2
-            if count is None:
-                count = 1
-            surface = re.sub(r"(?:'s|s')$", "", m.group(0))
-            if kind == "obstacle" and re.search(r"'s\s+(?:\w+\s+)?$", clause[:m.start()]):
-                continue  # "the ego vehicle's tire": a part of a vehicle, not an obstacle
-            if surface == "vehicle" and re.search(r"\bthe\s+$", clause[:m.start()]) and self.out.ego is not None and \
-                    str(self.out.ego.attrs.get("noun", "")).endswith("vehicle") and \
-                    not any(e.kind == "car" for e in self.out.entities):
-                mentions.append(_Mention(m.start(), m.end(), self.out.ego, prep_before(m.start()), False))
-                taken.append((m.start(), m.end()))
-                continue  # "the test vehicle ... the vehicle approaches": the ego
-            named = re.fullmatch(r"v([2-9])|vehicle ([2-9])|(npc|agent|actor|adversary|adv|car) ?([1-9])", surface)
-            if named:
-                key = "v" + (named.group(1) or named.group(2)) if not named.group(3) else \
-                    named.group(3) + named.group(4)
-                entity = self._named.get(key)
-                if entity is None:
-                    entity = self._named[key] = self._new("car", 1, {key})
-            elif kind == "car" and self._is_ego_alias(clause, m.start()):
-                entity = self._entity_for("ego", 1, True, set(), False)
-            elif plural and definite and self.last_group is not None and self.last_group.kind == kind:
-                entity = self.last_group
-            else:
-                entity = self._entity_for(kind, count, definite, descriptors, new)
-                if plural and entity.count < count:
-                    entity.count = count
-            possessive = m.group(0).endswith("'s") or m.group(0).endswith("s'")
+                                     _prep_before(clause, m.start()) or m.group(0) == "us", possessive))
+
+    def _noun_mention(self, clause: str, m: re.Match, mentions: List[_Mention], taken: List[Tuple[int, int]]) -> None:
+        """One actor noun: the entity it names (new or known), what the words around it say of that entity."""
+        phrase = _noun_phrase(clause, m)
+        if phrase.kind == "obstacle" and re.search(r"'s\s+(?:\w+\s+)?$", clause[:m.start()]):
+            return  # "the ego vehicle's tire": a part of a vehicle, not an obstacle
+        if self._names_the_ego_vehicle(clause, m, phrase):
+            mentions.append(_Mention(m.start(), m.end(), self.out.ego, _prep_before(clause, m.start()), False))
             taken.append((m.start(), m.end()))
-            entity.attrs.setdefault("noun", surface)
-            if kind == "obstacle" and re.fullmatch(r"(?:deer|animals?|dogs?|cats?|cows?|horses?|moose|sheep|birds?|elks?|"
-                                                   r"kangaroos?|fox|boar|wild boar)", surface):
-                entity.attrs["animal"] = True
-            self._mention_log.append((self._sentence_index, len(self._mention_log), entity))
-            if kind == "car" and surface in ("vehicles", "vehicle") and \
-                    (count > 1 or re.match(r"\s*(?:crash|collision|pile ?up|accident)", clause[m.end():])):
-                entity.attrs["generic"] = True
-            mentions.append(_Mention(m.start(), m.end(), entity, prep_before(m.start()), possessive))
-            if entity.kind in ("pedestrian", "bicycle") and re.search(r"\bcrossing\s+$", clause[:m.start()]) and \
-                    not _NEGATION.search(clause[:m.start()]):
-                entity.add_action("cross", sudden=False, directions=[])
-            elif entity.kind in _MOTOR and re.search(r"\b(?:crossing|cross traffic)\s+$", clause[:m.start()]):
-                pending = entity.attrs.setdefault("pending_relations", [])
-                if "crossing_path" not in pending:
-                    pending.append("crossing_path")  # "a crossing vehicle" crosses the ego's path
-            # adjectives of state before the noun: stopped car, parked truck, broken down car
-            if entity.kind not in ("ego", "obstacle") and re.search(
-                    r"\b(?:stopped|stationary|broken down|stalled|standing|disabled|idle|halted)\s+"
-                    r"(?:\w+\s+)?$", clause[:m.start()]):
-                if not _NEGATION.search(clause[:m.start()]):
-                    entity.add_action("stop")
+            return  # "the test vehicle ... the vehicle approaches": the ego
+        entity = self._noun_entity(clause, m, phrase)
+        possessive = m.group(0).endswith("'s") or m.group(0).endswith("s'")
+        taken.append((m.start(), m.end()))
+        entity.attrs.setdefault("noun", phrase.surface)
+        if phrase.kind == "obstacle" and re.fullmatch(r"(?:deer|animals?|dogs?|cats?|cows?|horses?|moose|sheep|"
+                                                      r"birds?|elks?|kangaroos?|fox|boar|wild boar)", phrase.surface):
+            entity.attrs["animal"] = True
+        self._mention_log.append((self._sentence_index, len(self._mention_log), entity))
+        if phrase.kind == "car" and phrase.surface in ("vehicles", "vehicle") and \
+                (phrase.count > 1 or re.match(r"\s*(?:crash|collision|pile ?up|accident)", clause[m.end():])):
+            entity.attrs["generic"] = True
+        mentions.append(_Mention(m.start(), m.end(), entity, _prep_before(clause, m.start()), possessive))
+        _state_before_noun(clause[:m.start()], entity)
+
+    def _names_the_ego_vehicle(self, clause: str, m: re.Match, phrase: "_NounPhrase") -> bool:
+        """"The vehicle" after a text that calls the ego "the test vehicle" and names no car: the ego."""
+        return phrase.surface == "vehicle" and bool(re.search(r"\bthe\s+$", clause[:m.start()])) and \
+            self.out.ego is not None and str(self.out.ego.attrs.get("noun", "")).endswith("vehicle") and \
+            not any(e.kind == "car" for e in self.out.entities)
+
+    def _noun_entity(self, clause: str, m: re.Match, phrase: "_NounPhrase") -> Entity:
+        """The entity a noun names: a numbered crash-report vehicle ("V2"), the ego by an alias ("our car"),
+        the last group ("the pedestrians"), else a known or a new entity of its kind."""
+        named = re.fullmatch(r"v([2-9])|vehicle ([2-9])|(npc|agent|actor|adversary|adv|car) ?([1-9])", phrase.surface)
+        if named:
+            key = "v" + (named.group(1) or named.group(2)) if not named.group(3) else \
+                named.group(3) + named.group(4)
+            entity = self._named.get(key)
+            if entity is None:
+                entity = self._named[key] = self._new("car", 1, {key})
+            return entity
+        if phrase.kind == "car" and self._is_ego_alias(clause, m.start()):
+            return self._entity_for("ego", 1, True, set(), False)
+        if phrase.plural and phrase.definite and self.last_group is not None and self.last_group.kind == phrase.kind:
+            return self.last_group
+        entity = self._entity_for(phrase.kind, phrase.count, phrase.definite, phrase.descriptors, phrase.new)
+        if phrase.plural and entity.count < phrase.count:
+            entity.count = phrase.count
+        return entity
+
+    def _another_mentions(self, clause: str, mentions: List[_Mention], taken: List[Tuple[int, int]]) -> None:
+        """"A car in the left lane and another in the right lane": "another" is a second actor of the last kind
+        named."""
         for m in re.finditer(r"\b(?:another|a second|one more)\b(?= (?:in|on|from|at|to|that|which|who|behind|ahead|"
                              r"coming|approaching|travel\w*|driv\w*|is|was)\b)", clause):
-            # "a car in the left lane and another in the right lane": a second actor of the last kind named
-            if not free(m.start(), m.end()):
+            if not _free(taken, m.start(), m.end()):
                 continue
             last = next((mm.entity for mm in reversed(mentions) if mm.start < m.start() and not isinstance(mm.entity, tuple)
                          and mm.entity.kind != "ego"), None) or \
@@ -490,9 +599,12 @@ class _Parser:
             entity.attrs["noun"] = last.attrs.get("noun", last.kind)
             taken.append((m.start(), m.end()))
             self._mention_log.append((self._sentence_index, len(self._mention_log), entity))
-            mentions.append(_Mention(m.start(), m.end(), entity, prep_before(m.start()), False))
+            mentions.append(_Mention(m.start(), m.end(), entity, _prep_before(clause, m.start()), False))
+
+    def _group_mentions(self, clause: str, mentions: List[_Mention], taken: List[Tuple[int, int]]) -> None:
+        """References to part of the last group ("one of them", "the two others", "both"), with their size."""
         for m in _GROUP_REF.finditer(clause):
-            if not free(m.start(), m.end()) or self.last_group is None:
+            if not _free(taken, m.start(), m.end()) or self.last_group is None:
                 continue
             taken.append((m.start(), m.end()))
             word = m.group(0)
@@ -506,14 +618,19 @@ class _Parser:
             else:
                 size = None  # "the others": whoever is left
             mentions.append(_Mention(m.start(), m.end(), self.last_group, False, False, pronoun=True, size=size))
+
+    def _pronoun_mentions(self, clause: str, base_subject: Optional[Entity], mentions: List[_Mention],
+                          taken: List[Tuple[int, int]]) -> None:
+        """Pronouns: a subject pronoun is the clause's inherited subject; an object or possessive one is left
+        pending for the caller to resolve against the clause subject."""
         for m in _PRONOUN_RE.finditer(clause):
-            if not free(m.start(), m.end()):
+            if not _free(taken, m.start(), m.end()):
                 continue
             word = m.group(0)
             entity = None
             possessive = word in ("its", "their", "his")
-            objective = word in ("them", "him") or possessive or prep_before(m.start())
-            if word in ("it", "they", "he", "she") and not prep_before(m.start()) and not possessive:
+            objective = word in ("them", "him") or possessive or _prep_before(clause, m.start())
+            if word in ("it", "they", "he", "she") and not _prep_before(clause, m.start()) and not possessive:
                 entity = base_subject or self.last_subject
                 objective = False
                 # "it" right after a verb is an object
@@ -526,8 +643,6 @@ class _Parser:
                 entity = ("pending", m.start())  # resolved by the caller with the clause subject
             taken.append((m.start(), m.end()))
             mentions.append(_Mention(m.start(), m.end(), entity, objective, possessive, pronoun=True))
-        mentions.sort(key=lambda mm: mm.start)
-        return mentions
 
     def _is_ego_alias(self, clause: str, start: int) -> bool:
         return bool(re.search(r"\b(?:ego|our|my|host|subject)\s+$", clause[:start]))
@@ -692,15 +807,39 @@ class _Parser:
         return not words
 
     def _clause(self, clause: str, inherited: Optional[Entity]) -> Optional[Entity]:
+        """Read one clause: its subject (said, inherited or none), then its lanes, relations, actions and speed;
+        returns the subject, which the clauses after it inherit."""
         lead = re.match(r"(?:and|while|whilst|whereas|but|as|when|then|so|after|before|until|because|although|"
                         r"though|where|meanwhile|which|who|also|suddenly|finally|eventually|later|"
                         r"immediately|quickly)\b\s*", clause)
         body_start = lead.end() if lead else 0
-        subordinate = bool(lead) and lead.group(0).strip() in ("which", "who")
+        lead_word = lead.group(0).strip() if lead else ""
         mentions = self._mentions(clause, inherited)
-        # clause subject: first actor mention that is not a prepositional object / possessive
-        subject = None
-        explicit = False
+        subject = self._said_subject(clause, mentions, body_start)
+        if subject is None:
+            subject = self._unsaid_subject(clause, body_start, lead_word in ("which", "who"), inherited)
+        mentions = self._resolved_mentions(mentions, subject)
+        if lead_word == "before":
+            self._ahead_until_reached(clause, inherited)
+        if lead_word in ("when", "once", "as") and self._trigger_of_inherited(clause, inherited):
+            return inherited
+        self._lanes(clause, mentions, subject)
+        self._relations(clause, mentions, subject)
+        before_actions = [a for a, _ in subject.actions] if subject is not None else []
+        self._actions(clause, mentions, subject)
+        self._coordinated(clause, mentions, subject, before_actions)
+        self._done_by_all(clause, subject, before_actions)
+        real = [mm for mm in mentions if not isinstance(mm.entity, tuple)]
+        if real:
+            self._last_mentioned = real[-1].entity
+        self._clause_speed(clause, mentions, subject)
+        self._crossing_directions(clause, mentions, subject)
+        return subject
+
+    @staticmethod
+    def _said_subject(clause: str, mentions: List[_Mention], body_start: int) -> Optional[Entity]:
+        """The subject the clause names: its first actor mention (after the leading conjunction, before the first
+        verb) when that is not the object of a preposition or a possessive; else None."""
         first_verb = min((m.start() for _, rx in _COMPILED_ACTIONS for m in rx.finditer(clause)
                           if m.start() >= body_start), default=len(clause))
         for mm in mentions:
@@ -711,25 +850,32 @@ class _Parser:
             if isinstance(mm.entity, tuple):
                 continue
             if not mm.prep_object and not mm.possessive:
-                subject = mm.entity
-                explicit = True
-                break
+                return mm.entity
             break
-        if subject is None:
-            first_action = min((m.start() for _, rx in _COMPILED_ACTIONS for m in rx.finditer(clause)),
-                               default=len(clause))
-            head = clause[body_start:first_action]
-            first = (clause[body_start:].split() or [""])[0]
-            verb_first = bool(re.fullmatch(r"[a-z]+(?:s|ed|ing)", first)) and not _NOUN_RE.fullmatch(first) \
-                and first not in ("this", "his", "its", "as", "is", "was", "has", "does", "thus", "always")
-            if subordinate and self._last_mentioned is not None:
-                subject = self._last_mentioned  # "..., a jaywalker who runs across": the jaywalker
-            elif subordinate or verb_first or not _DETERMINER_OR_NOUN.search(head) or \
-                    re.match(r"\s*(?:it|they|he|she)\b", head):
-                subject = inherited
-            else:
-                subject = None  # a non-actor subject ("the traffic dynamics cause ...")
-        # resolve pending pronouns: objects -> last other actor mentioned
+        return None
+
+    def _unsaid_subject(self, clause: str, body_start: int, subordinate: bool,
+                        inherited: Optional[Entity]) -> Optional[Entity]:
+        """The subject of a clause that names none: a relative clause's is the actor named last ("a jaywalker
+        who runs across"); a clause that starts with its verb or a pronoun inherits the previous subject; a
+        clause whose subject is not an actor ("the traffic dynamics cause ...") has none."""
+        first_action = min((m.start() for _, rx in _COMPILED_ACTIONS for m in rx.finditer(clause)),
+                           default=len(clause))
+        head = clause[body_start:first_action]
+        first = (clause[body_start:].split() or [""])[0]
+        verb_first = bool(re.fullmatch(r"[a-z]+(?:s|ed|ing)", first)) and not _NOUN_RE.fullmatch(first) \
+            and first not in ("this", "his", "its", "as", "is", "was", "has", "does", "thus", "always")
+        if subordinate and self._last_mentioned is not None:
+            return self._last_mentioned
+        if subordinate or verb_first or not _DETERMINER_OR_NOUN.search(head) or \
+                re.match(r"\s*(?:it|they|he|she)\b", head):
+            return inherited
+        return None
+
+    def _resolved_mentions(self, mentions: List[_Mention], subject: Optional[Entity]) -> List[_Mention]:
+        """The clause's mentions with their pending pronouns resolved (an object pronoun is the last other
+        actor mentioned, else the subject; one left unresolved is dropped); every actor mentioned, and the
+        subject, becomes the most recent."""
         for mm in mentions:
             if isinstance(mm.entity, tuple):
                 mm.entity = self._other_than(subject) or subject
@@ -738,40 +884,50 @@ class _Parser:
             self._touch(mm.entity)
         if subject is not None:
             self._touch(subject)
-        if lead and lead.group(0).strip() == "before" and inherited is not None and inherited.kind != "ego" and \
+        return mentions
+
+    def _ahead_until_reached(self, clause: str, inherited: Optional[Entity]) -> None:
+        """"... before the ego reaches it": the actor of the clause before is ahead of the ego."""
+        if inherited is not None and inherited.kind != "ego" and \
                 re.match(r"before (?:the ego(?: car| vehicle)?|it) (?:reaches|catches up with|gets to) (?:it|them)\b",
                          clause):
             ego = self.out.ego
             if ego is not None:
                 self._relate(inherited, "ahead_of", ego)
-        if lead and lead.group(0).strip() in ("when", "once", "as") and inherited is not None and inherited.actions \
-                and not any(rx.search(clause) for _, rx in _COMPILED_ACTIONS):
-            dist, sec = distance_m(clause), time_s(clause)
-            if dist is not None or sec is not None:
-                detail = inherited.actions[-1][1]
-                detail.setdefault("trigger", {"kind": "distance", "meters": dist} if dist is not None
-                                  else {"kind": "time", "seconds": sec})
-                self._placed += 1
-                return inherited
-        self._lanes(clause, mentions, subject)
-        self._relations(clause, mentions, subject)
-        before_actions = [a for a, _ in subject.actions] if subject is not None else []
-        self._actions(clause, mentions, subject)
-        self._coordinated(clause, mentions, subject, before_actions)
-        if subject is not None and re.search(r"\b(?:both|all of them|each of them|all three|both of them)\b", clause):
-            # "a car in the left lane and another in the right lane both cut in": every one of them does
-            new = [(a, d) for a, d in subject.actions if a not in before_actions]
-            same = [e for s_, _, e in self._mention_log if s_ == self._sentence_index and e.kind == subject.kind
-                    and e is not subject]
-            for e in same:
-                for a, d in new:
-                    if a.startswith("lane_change") or a in ("cut_in",):
-                        e.add_action(a, **{k: v for k, v in d.items() if k not in ("side", "with")})
-                    else:
-                        e.add_action(a, **{k: v for k, v in d.items() if k != "with"})
-        real = [mm for mm in mentions if not isinstance(mm.entity, tuple)]
-        if real:
-            self._last_mentioned = real[-1].entity
+
+    def _trigger_of_inherited(self, clause: str, inherited: Optional[Entity]) -> bool:
+        """"... brakes when it is 20 m away": a when/once/as clause with no action of its own and a distance or
+        a time is the trigger of the previous subject's last action. Whether the clause was that."""
+        if inherited is None or not inherited.actions or any(rx.search(clause) for _, rx in _COMPILED_ACTIONS):
+            return False
+        dist, sec = distance_m(clause), time_s(clause)
+        if dist is None and sec is None:
+            return False
+        detail = inherited.actions[-1][1]
+        detail.setdefault("trigger", {"kind": "distance", "meters": dist} if dist is not None
+                          else {"kind": "time", "seconds": sec})
+        self._placed += 1
+        return True
+
+    def _done_by_all(self, clause: str, subject: Optional[Entity], before_actions: List[str]) -> None:
+        """"A car in the left lane and another in the right lane both cut in": every actor of the subject's kind
+        named in the sentence does what the clause gave the subject (without its side or partner)."""
+        if subject is None or not re.search(r"\b(?:both|all of them|each of them|all three|both of them)\b", clause):
+            return
+        new = [(a, d) for a, d in subject.actions if a not in before_actions]
+        same = [e for s_, _, e in self._mention_log if s_ == self._sentence_index and e.kind == subject.kind
+                and e is not subject]
+        for e in same:
+            for a, d in new:
+                if a.startswith("lane_change") or a in ("cut_in",):
+                    e.add_action(a, **{k: v for k, v in d.items() if k not in ("side", "with")})
+                else:
+                    e.add_action(a, **{k: v for k, v in d.items() if k != "with"})
+
+    @staticmethod
+    def _clause_speed(clause: str, mentions: List[_Mention], subject: Optional[Entity]) -> None:
+        """A speed said in the clause belongs to its subject (else the first actor that is no preposition's
+        object) and to the actions it has."""
         kph = speed_kph(clause)
         if kph is not None:
             owner = subject or next((mm.entity for mm in mentions if not mm.prep_object), None)
@@ -779,8 +935,6 @@ class _Parser:
                 owner.attrs.setdefault("speed_kph", kph)
                 for _, d in owner.actions:
                     d.setdefault("speed_kph", kph)
-        self._crossing_directions(clause, mentions, subject)
-        return subject if (explicit or subject is not None) else None
 
     def _crossing_directions(self, clause: str, mentions: List[_Mention], subject: Optional[Entity]) -> None:
         """"one going from left to right and the two others from right to left": sizes and directions."""
@@ -1086,152 +1240,198 @@ class _Parser:
                 detail.setdefault("phrase", m.group(0))
 
     def _record_action(self, owner: Entity, action: str, m: re.Match, clause: str) -> None:
+        """Record one action phrase read for ``owner``. An action read onto a static object is not placed; a rule
+        per action (:attr:`_ACTION_RULES`) records what the phrase means; without one (or when the rule leaves it),
+        the action is recorded as read, with whether it was sudden."""
         self._placed += 1
-        window = clause[max(0, m.start() - 30):m.end() + 25]
-        sudden = bool(_SUDDEN.search(window))
-        kind = owner.kind
-        if kind == "obstacle" and not (owner.attrs.get("animal") and action in ("cross", "emerge", "stop")) and \
-                not action.startswith("collide"):
-            if clause not in self._unplaced_phrases:
-                self._unplaced_phrases.append(clause)  # an action read onto a static object: not placed
+        sudden = bool(_SUDDEN.search(_action_window(clause, m)))
+        if self._static_object_acts(owner, action, clause):
             return
-        groups = m.groupdict()
-        if action in ("lane_change", "cut_in") and m.group(0).startswith("merg") and kind != "pedestrian":
+        if action in ("lane_change", "cut_in") and m.group(0).startswith("merg") and owner.kind != "pedestrian":
             owner.add_action("merge", sudden=sudden)  # "merges left", "merged into its lane": the text says merge
-        if action == "lane_change" and not (groups.get("dir") or groups.get("dir2")):
-            if kind == "pedestrian":
-                return
+        rule = self._ACTION_RULES.get("collide" if action.startswith("collide") else action)
+        if rule is None or not rule(self, owner, action, m, clause, sudden):
+            owner.add_action(action, sudden=sudden)
+
+    def _static_object_acts(self, owner: Entity, action: str, clause: str) -> bool:
+        """Whether ``action`` was read onto a static object (an obstacle that does not collide, and is no animal
+        crossing, emerging or stopping): then the clause is listed as not placed."""
+        if owner.kind == "obstacle" and not (owner.attrs.get("animal") and action in ("cross", "emerge", "stop")) \
+                and not action.startswith("collide"):
+            if clause not in self._unplaced_phrases:
+                self._unplaced_phrases.append(clause)
+            return True
+        return False
+
+    # Each rule below reads one action phrase of ``owner`` and returns whether it recorded it (False: the action is
+    # recorded as read).
+
+    def _lane_change_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A lane change: to the side said (left/right, or a lane named: "the middle lane" waits for the lane the
+        actor is on); undirected (``weave`` for weaving) when no side is said; a pedestrian changes no lane."""
+        groups = m.groupdict()
+        d = groups.get("dir") or groups.get("dir2")
+        if not d:
+            if owner.kind == "pedestrian":
+                return True
             if groups.get("weave"):
                 owner.add_action("lane_change", sudden=sudden, weave=True)
             else:
                 owner.add_action("lane_change", sudden=sudden)
-            return
-        if action == "swerve":
-            if kind == "pedestrian":
-                return
-            owner.add_action("swerve", sudden=True, side=groups.get("dir"))
-            return
-        if action == "pull_out":
-            if any(groups.get(g) is not None for g in ("generic", "generic2", "generic3")) and not (
-                    "parked" in owner.descriptors or re.search(
-                        r"\b(?:park\w*|curb|kerb|driveway|shoulder|roadside|side of the road|lay by)\b",
-                        self._sentence_text if groups.get("generic3") is not None else clause)):
-                self._unplaced_phrases.append(clause)
-                return
-            if kind == "pedestrian":
-                return
-            owner.actions = [(a, d) for a, d in owner.actions if a != "stop"]
-            owner.add_action("pull_out", sudden=sudden)
-            if re.match(r"(?:back|revers)", m.group(0)):
-                owner.add_action("reverse")
-            return
-        if action == "emerge":
-            behind = None
-            bm = re.search(r"\bfrom behind\b", clause[m.start():])
-            if bm:
-                behind = self._next_mention(clause, m.start() + bm.end(), self._clause_mentions, exclude=owner)
+            return True
+        side = _LANE_WORD.get(d, d) if d in _LANE_WORD else d
+        if d in ("left", "right") and "side" not in m.group(0):
+            owner.add_action(f"lane_change_{d}", sudden=sudden, target=d)
+        elif side == "middle":
+            owner.add_action("lane_change_pending", sudden=sudden, target="middle")
+        elif side in ("left", "right"):
+            owner.add_action(f"lane_change_{side}", sudden=sudden, target=side)
+        return True
+
+    def _swerve_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A swerve is always sudden, to the side said; a pedestrian does not swerve."""
+        if owner.kind != "pedestrian":
+            owner.add_action("swerve", sudden=True, side=m.groupdict().get("dir"))
+        return True
+
+    def _pull_out_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """Pulling out (from a parking place, the kerb, a driveway): it ends a stop; backing out also reverses.
+        A generic "pulls out" with no parked actor or parking place near it is not placed."""
+        groups = m.groupdict()
+        if any(groups.get(g) is not None for g in ("generic", "generic2", "generic3")) and not (
+                "parked" in owner.descriptors or re.search(
+                    r"\b(?:park\w*|curb|kerb|driveway|shoulder|roadside|side of the road|lay by)\b",
+                    self._sentence_text if groups.get("generic3") is not None else clause)):
+            self._unplaced_phrases.append(clause)
+            return True
+        if owner.kind == "pedestrian":
+            return True
+        owner.actions = [(a, d) for a, d in owner.actions if a != "stop"]
+        owner.add_action("pull_out", sudden=sudden)
+        if re.match(r"(?:back|revers)", m.group(0)):
+            owner.add_action("reverse")
+        return True
+
+    def _emerge_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """Emerging (from behind an occluder, which is kept): a pedestrian, cyclist or animal that emerges
+        crosses, suddenly when it dashes or runs."""
+        behind = None
+        bm = re.search(r"\bfrom behind\b", clause[m.start():])
+        if bm:
+            behind = self._next_mention(clause, m.start() + bm.end(), self._clause_mentions, exclude=owner)
+        if behind is not None:
+            owner.attrs["from_behind"] = behind
+        if owner.kind in ("pedestrian", "bicycle") or owner.attrs.get("animal"):
+            quick = bool(re.match(r"(?:dash|dart|rush|sprint|run|ran|jump|leap|burst|pop)", m.group(0)))
+            owner.add_action("cross", sudden=sudden or quick, directions=[])
             if behind is not None:
-                owner.attrs["from_behind"] = behind
-            if kind in ("pedestrian", "bicycle") or owner.attrs.get("animal"):
-                quick = bool(re.match(r"(?:dash|dart|rush|sprint|run|ran|jump|leap|burst|pop)", m.group(0)))
-                owner.add_action("cross", sudden=sudden or quick, directions=[])
-                if behind is not None:
-                    owner.detail("cross")["from_behind"] = behind
-            return
-        if action == "brake_stop":
-            owner.add_action("brake", sudden=sudden)
+                owner.detail("cross")["from_behind"] = behind
+        return True
+
+    def _brake_stop_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """Braking to a stop: both."""
+        owner.add_action("brake", sudden=sudden)
+        owner.add_action("stop", sudden=sudden)
+        return True
+
+    def _pull_over_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """Pulling over: a lane change to the right and a stop (not for a pedestrian)."""
+        if owner.kind != "pedestrian":
+            owner.add_action("lane_change_right", sudden=sudden)
             owner.add_action("stop", sudden=sudden)
-            return
-        if action == "pull_over":
-            if kind != "pedestrian":
-                owner.add_action("lane_change_right", sudden=sudden)
-                owner.add_action("stop", sudden=sudden)
-            return
-        if action == "stop" or action == "brake":
-            self._trigger(owner, action, m, clause)
-        if action == "lane_change":
-            d = groups.get("dir") or groups.get("dir2")
-            side = _LANE_WORD.get(d, d) if d in _LANE_WORD else d
-            if d in ("left", "right") and "side" not in m.group(0):
-                owner.add_action(f"lane_change_{d}", sudden=sudden, target=d)
-            elif side == "middle":
-                owner.add_action("lane_change_pending", sudden=sudden, target="middle")
-            elif side in ("left", "right"):
-                owner.add_action(f"lane_change_{side}", sudden=sudden, target=side)
-            return
-        if action == "turn":
-            d = groups.get("dir")
-            if kind in ("pedestrian",):
-                return
-            owner.add_action(f"turn_{d}", sudden=sudden)
-            if groups.get("unprot") == "unprotected" or re.search(r"\bunprotected\b", window):
-                owner.detail(f"turn_{d}")["unprotected"] = True
-            return
-        if action == "cross":
-            if kind == "pedestrian":
-                direction = None
-                dm = _CROSS_DIR.search(clause)
-                if dm:
-                    direction = f"{dm.group('from')}_to_{dm.group('to')}"
-                elif groups.get("from"):
-                    direction = f"{groups['from']}_to_{'right' if groups['from'] == 'left' else 'left'}"
-                else:
-                    fm = _CROSS_FROM.search(clause)
-                    if fm and (fm.group("from") or fm.group("from2")) in ("left", "right"):
-                        f = fm.group("from") or fm.group("from2")
-                        direction = f"{f}_to_{'right' if f == 'left' else 'left'}"
-                    elif fm and (fm.group("from") in ("far", "other", "opposite")):
-                        direction = "far_side"
-                d = owner.detail("cross")
-                if owner.has("cross") and direction:
-                    d.setdefault("directions", []).append(direction)
-                else:
-                    owner.add_action("cross", sudden=sudden, directions=[direction] if direction else [])
-                return
-            if kind in ("car", "truck", "bus", "motorcycle", "bicycle", "ego"):
-                if re.match(r"cross(?:es|ed|ing)? (?:the |a )?(?:road|street|lanes?|highway)\b", m.group(0) +
-                            clause[m.end():m.end() + 20].lstrip().join([" ", ""])) or kind == "bicycle":
-                    owner.add_action("cross", sudden=sudden)  # (a cyclist crossing in front: like a pedestrian)
-                elif clause not in self._unplaced_phrases:
-                    self._unplaced_phrases.append(clause)  # "crosses" of a vehicle that says not what: warned
-                return
-        if action == "cut_in":
-            side = None
-            sm = re.search(r"\bfrom the (left|right)\b|\bfrom (?:its|the) (left|right)\b", clause)
-            if sm:
-                side = sm.group(1) or sm.group(2)
-            owner.add_action("cut_in", sudden=sudden, side=side, back="back" in m.group(0))
-            return
-        if action == "overtake":
-            side = None
-            sm = re.search(r"\bon the (left|right)\b|\bvia the (left|right)\b|\bon (?:its|the ego's) (left|right)\b",
-                           clause)
-            if sm:
-                side = next(g for g in sm.groups() if g)
-            owner.add_action("overtake", sudden=sudden, side=side,
-                             around=" around" in m.group(0), via_pass=m.group(0).startswith("pass"))
-            return
-        if action == "drift":
-            owner.add_action("drift", sudden=sudden)
-            side = _drift_side(clause[m.start():m.end() + 60])
-            if side and not owner.detail("drift").get("side"):
-                owner.detail("drift")["side"] = side
-            return
-        if action == "stop" and re.match(r"park", m.group(0)) and kind == "ego":
-            return
-        if action == "merge" and kind == "pedestrian":
-            return
-        if action.startswith("collide"):
-            other = self._next_mention(clause, m.end(), self._clause_mentions, exclude=owner, limit=40)
-            if other is None and self._clause_subject is not None and self._clause_subject is not owner:
-                other = self._clause_subject  # "the ego ... is struck by a van": the van hits the ego
-            owner.add_action("collide", sudden=sudden)
-            if other is not None and not owner.detail("collide").get("with"):
-                owner.detail("collide")["with"] = other
-            if action != "collide":
-                owner.add_action(action)
-            return
-        owner.add_action(action, sudden=sudden)
+        return True
+
+    def _stop_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A stop, with its trigger; the ego parking is not one."""
+        self._trigger(owner, action, m, clause)
+        return bool(re.match(r"park", m.group(0))) and owner.kind == "ego"
+
+    def _brake_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A brake, with its trigger."""
+        self._trigger(owner, action, m, clause)
+        return False
+
+    def _turn_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A turn to the side said, ``unprotected`` when the words around say so; a pedestrian does not turn."""
+        d = m.groupdict().get("dir")
+        if owner.kind in ("pedestrian",):
+            return True
+        owner.add_action(f"turn_{d}", sudden=sudden)
+        if m.groupdict().get("unprot") == "unprotected" or re.search(r"\bunprotected\b", _action_window(clause, m)):
+            owner.detail(f"turn_{d}")["unprotected"] = True
+        return True
+
+    def _cross_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A pedestrian crosses in the directions said (each phrase adds one); a vehicle crosses when the road,
+        street or lanes are said (a cyclist always), else the clause is not placed; others as read."""
+        if owner.kind == "pedestrian":
+            direction = _crossing_direction(clause, m.groupdict())
+            d = owner.detail("cross")
+            if owner.has("cross") and direction:
+                d.setdefault("directions", []).append(direction)
+            else:
+                owner.add_action("cross", sudden=sudden, directions=[direction] if direction else [])
+            return True
+        if owner.kind in ("car", "truck", "bus", "motorcycle", "bicycle", "ego"):
+            if re.match(r"cross(?:es|ed|ing)? (?:the |a )?(?:road|street|lanes?|highway)\b", m.group(0) +
+                        clause[m.end():m.end() + 20].lstrip().join([" ", ""])) or owner.kind == "bicycle":
+                owner.add_action("cross", sudden=sudden)  # (a cyclist crossing in front: like a pedestrian)
+            elif clause not in self._unplaced_phrases:
+                self._unplaced_phrases.append(clause)  # "crosses" of a vehicle that says not what: warned
+            return True
+        return False
+
+    def _cut_in_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A cut-in, from the side said, ``back`` when it pulls back in."""
+        side = None
+        sm = re.search(r"\bfrom the (left|right)\b|\bfrom (?:its|the) (left|right)\b", clause)
+        if sm:
+            side = sm.group(1) or sm.group(2)
+        owner.add_action("cut_in", sudden=sudden, side=side, back="back" in m.group(0))
+        return True
+
+    def _overtake_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """An overtake, on the side said; ``around`` (an obstacle) and ``via_pass`` ("passes") as worded."""
+        side = None
+        sm = re.search(r"\bon the (left|right)\b|\bvia the (left|right)\b|\bon (?:its|the ego's) (left|right)\b",
+                       clause)
+        if sm:
+            side = next(g for g in sm.groups() if g)
+        owner.add_action("overtake", sudden=sudden, side=side,
+                         around=" around" in m.group(0), via_pass=m.group(0).startswith("pass"))
+        return True
+
+    def _drift_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A drift, to the side the words after it say (see :func:`_drift_side`)."""
+        owner.add_action("drift", sudden=sudden)
+        side = _drift_side(clause[m.start():m.end() + 60])
+        if side and not owner.detail("drift").get("side"):
+            owner.detail("drift")["side"] = side
+        return True
+
+    def _merge_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A pedestrian does not merge."""
+        return owner.kind == "pedestrian"
+
+    def _collide_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
+        """A collision (and its type when said), with the next actor named after it, else the clause subject
+        ("the ego ... is struck by a van": the van hits the ego)."""
+        other = self._next_mention(clause, m.end(), self._clause_mentions, exclude=owner, limit=40)
+        if other is None and self._clause_subject is not None and self._clause_subject is not owner:
+            other = self._clause_subject
+        owner.add_action("collide", sudden=sudden)
+        if other is not None and not owner.detail("collide").get("with"):
+            owner.detail("collide")["with"] = other
+        if action != "collide":
+            owner.add_action(action)
+        return True
+
+    _ACTION_RULES = {"lane_change": _lane_change_rule, "swerve": _swerve_rule, "pull_out": _pull_out_rule,
+                     "emerge": _emerge_rule, "brake_stop": _brake_stop_rule, "pull_over": _pull_over_rule,
+                     "stop": _stop_rule, "brake": _brake_rule, "turn": _turn_rule, "cross": _cross_rule,
+                     "cut_in": _cut_in_rule, "overtake": _overtake_rule, "drift": _drift_rule, "merge": _merge_rule,
+                     "collide": _collide_rule}
+    """Action -> the rule that records its phrase (every ``collide*`` action has the collision rule)."""
 
     def _collisions(self) -> None:
         """Every participant of a collision collides, with one type (scenario_bank.elements): the type said,
@@ -1285,65 +1485,23 @@ class _Parser:
                     self._relate(e, "right_of", ego)
 
     def _finish(self) -> None:
+        """What the whole text settles once every sentence is read: lanes to relations, collisions, lane changes
+        to the middle lane, cut-in sides, relations to the ego that actions imply, conflicts, occluders, cross
+        traffic at junctions, and animals that are no driving scene."""
         self._absolute_lanes()  # first, so cut-ins get their side from it
         self._collisions()
         ego = self.out.ego
         for e in self.out.entities:
-            # "switches to the middle lane": direction from the lane it is on
-            for i, (a, d) in enumerate(list(e.actions)):
-                if a == "lane_change_pending":
-                    direction = {"left": "right", "right": "left"}.get(e.lane or "")
-                    if direction is None and ego is not None and e is not ego:
-                        for rel, j in e.relations:
-                            if rel in ("left_of", "right_of") and j is ego:
-                                direction = "right" if rel == "left_of" else "left"
-                    e.actions.pop(i)
-                    if direction:
-                        e.add_action(f"lane_change_{direction}", **d)
-                    else:
-                        self.out.unresolved.append(f"{e.kind}: lane change to the middle lane from an unknown lane")
-                    break
+            self._middle_lane_direction(e, ego)
             if e.kind == "pedestrian" and e.has("cross"):
                 e.actions = [(a, d) for a, d in e.actions if a not in ("stop",) or d.get("keep")]
-            # cut-in side from the relation
-            if e.has("cut_in") and not e.detail("cut_in").get("side"):
-                for rel, j in e.relations:
-                    if rel in ("left_of", "right_of"):
-                        e.detail("cut_in")["side"] = rel.split("_")[0]
+            _cut_in_side_from_relations(e)
         for e in self.out.entities:
             if e.kind == "ego" or ego is None:
                 continue
-            for rel in e.attrs.pop("pending_relations", []):
-                self._relate(e, rel, ego)
-            rels = {r for r, j in e.relations if j is ego}
-            if e.lane == "ramp" and not rels & {"left_of", "right_of"}:
-                self._relate(e, "right_of", ego)
-                rels.add("right_of")
-            if e.has("merge") and "ahead_of" in rels and not e.has("cut_in"):
-                e.add_action("cut_in")
-            if e.has("cut_in") and e.has("overtake") and e.detail("overtake").get("via_pass") \
-                    and not e.detail("cut_in").get("back"):
-                e.actions = [(a, d) for a, d in e.actions if a != "overtake"]
-            if e.has("cut_in"):
-                side = e.detail("cut_in").get("side") or ("left" if "left_of" in rels else
-                                                          "right" if "right_of" in rels else None)
-                if e.has("overtake") and e.detail("cut_in").get("back"):
-                    out_side = e.detail("overtake").get("side") or "left"
-                    back_side = "right" if out_side == "left" else "left"
-                    e.add_action(f"lane_change_{out_side}")
-                    e.add_action(f"lane_change_{back_side}")
-                elif side in ("left", "right") and not e.has("merge"):
-                    e.add_action(f"lane_change_{'right' if side == 'left' else 'left'}")
-            if e.kind in _MOTOR and "ahead_of" in rels and not rels & {"left_of", "right_of", "oncoming"} \
-                    and not (e.has("cut_in") and not e.detail("cut_in").get("back")) and not e.has("merge"):
-                self._relate(e, "same_lane", ego)
-            if e.kind == "obstacle" and "same_lane" in rels:
-                self._relate(e, "ahead_of", ego)
-            if (e.kind in ("pedestrian", "bicycle") or e.attrs.get("animal")) and e.has("cross"):
-                self._relate(e, "ahead_of", ego)
-                self._relate(e, "crossing_path", ego)
-            if e.kind in _MOTOR + ("bicycle",) and "oncoming" in rels and ego.has("turn_left"):
-                self._relate(e, "crossing_path", ego)
+            rels = self._relations_said_to_ego(e, ego)
+            _cut_in_lane_changes(e, rels)
+            self._relations_implied_to_ego(e, ego, rels)
         for e in self.out.entities:
             # an undirected lane change said next to a directed one adds nothing
             if e.has("lane_change") and (e.has("lane_change_left") or e.has("lane_change_right")) and \
@@ -1355,6 +1513,63 @@ class _Parser:
                 if a in ("stop", "brake") and trig and trig.get("kind") == "conflict" and trig.get("with") is None:
                     trig["with"] = self._conflict_partner(e)
         self._absolute_lanes()
+        self._occluders_ahead(ego)
+        self._cross_traffic(ego)
+        # animals alone in a text with no road and no vehicle are not a driving scene ("the lazy dog")
+        if self.out.road is None and all(e.attrs.get("animal") or e.kind == "pedestrian" for e in self.out.entities):
+            self.out.entities = [e for e in self.out.entities if not e.attrs.get("animal")]
+        # a pedestrian crossing in front of the ego; "one ... and the two others" count directions
+        for e in self.out.entities:
+            if e.kind == "pedestrian" and e.has("cross"):
+                dirs = e.detail("cross").get("directions") or []
+                e.detail("cross")["directions"] = dirs
+
+    def _middle_lane_direction(self, e: Entity, ego: Optional[Entity]) -> None:
+        """"Switches to the middle lane": a lane change to the left or right from the lane ``e`` is on (or its
+        side of the ego); unresolved when neither is known."""
+        for i, (a, d) in enumerate(list(e.actions)):
+            if a == "lane_change_pending":
+                direction = {"left": "right", "right": "left"}.get(e.lane or "")
+                if direction is None and ego is not None and e is not ego:
+                    for rel, j in e.relations:
+                        if rel in ("left_of", "right_of") and j is ego:
+                            direction = "right" if rel == "left_of" else "left"
+                e.actions.pop(i)
+                if direction:
+                    e.add_action(f"lane_change_{direction}", **d)
+                else:
+                    self.out.unresolved.append(f"{e.kind}: lane change to the middle lane from an unknown lane")
+                break
+
+    def _relations_said_to_ego(self, e: Entity, ego: Entity) -> set:
+        """``e``'s relations to the ego: those its words left pending ("a crossing vehicle"), and right of the
+        ego for an actor on the ramp that has no side yet."""
+        for rel in e.attrs.pop("pending_relations", []):
+            self._relate(e, rel, ego)
+        rels = {r for r, j in e.relations if j is ego}
+        if e.lane == "ramp" and not rels & {"left_of", "right_of"}:
+            self._relate(e, "right_of", ego)
+            rels.add("right_of")
+        return rels
+
+    def _relations_implied_to_ego(self, e: Entity, ego: Entity, rels: set) -> None:
+        """Relations to the ego that ``e``'s kind, actions and other relations (``rels``) imply: a vehicle ahead
+        and on no side is in the same lane, an obstacle in the lane is ahead, a crossing pedestrian, cyclist or
+        animal is ahead and across the path, oncoming traffic crosses the path of an ego turning left."""
+        if e.kind in _MOTOR and "ahead_of" in rels and not rels & {"left_of", "right_of", "oncoming"} \
+                and not (e.has("cut_in") and not e.detail("cut_in").get("back")) and not e.has("merge"):
+            self._relate(e, "same_lane", ego)
+        if e.kind == "obstacle" and "same_lane" in rels:
+            self._relate(e, "ahead_of", ego)
+        if (e.kind in ("pedestrian", "bicycle") or e.attrs.get("animal")) and e.has("cross"):
+            self._relate(e, "ahead_of", ego)
+            self._relate(e, "crossing_path", ego)
+        if e.kind in _MOTOR + ("bicycle",) and "oncoming" in rels and ego.has("turn_left"):
+            self._relate(e, "crossing_path", ego)
+
+    def _occluders_ahead(self, ego: Optional[Entity]) -> None:
+        """An actor something emerges from behind is ahead of the ego, on the emerging actor's side; the one that
+        emerges is no longer behind it."""
         for e in self.out.entities:
             occluder = e.attrs.get("from_behind")
             if ego is None or occluder is None or occluder is ego or e is ego:
@@ -1364,30 +1579,27 @@ class _Parser:
                 if j is ego and rel in ("left_of", "right_of"):
                     self._relate(occluder, rel, ego)
             e.relations = [(r, j) for r, j in e.relations if not (r == "behind" and j is occluder)]
-        # cross traffic at a junction: from the left or right, not oncoming, not changing lanes
-        if ego is not None and self.out.road in ("intersection", "t_junction", "three_way", "roundabout"):
-            for e in self.out.entities:
-                if e is ego or e.kind not in _MOTOR + ("bicycle",):
-                    continue
-                rels = {r for r, j in e.relations if j is ego}
-                lane_moves = ("cut_in", "lane_change", "lane_change_left", "lane_change_right", "overtake", "merge")
-                joins = "right_of" in rels and e.has("turn_right")  # a right turn from the right joins the ego's way
-                if rels & {"left_of", "right_of"} and "oncoming" not in rels and not any(e.has(a) for a in lane_moves) \
-                        and not joins \
-                        and (e.attrs.get("side_road") or any(e.has(a) for a in ("go_straight", "turn_left",
-                                                                                  "turn_right", "collide"))
-                             or not e.actions):
-                    self._relate(e, "crossing_path", ego)
-                if "oncoming" in rels and e.has("turn_left") and not ego.has("turn_left"):
-                    self._relate(e, "crossing_path", ego)
-        # animals alone in a text with no road and no vehicle are not a driving scene ("the lazy dog")
-        if self.out.road is None and all(e.attrs.get("animal") or e.kind == "pedestrian" for e in self.out.entities):
-            self.out.entities = [e for e in self.out.entities if not e.attrs.get("animal")]
-        # a pedestrian crossing in front of the ego; "one ... and the two others" count directions
+
+    def _cross_traffic(self, ego: Optional[Entity]) -> None:
+        """Cross traffic at a junction: a vehicle from the left or right, not oncoming, not changing lanes, not
+        joining the ego's way by a right turn, crosses the ego's path; so does an oncoming one turning left
+        when the ego does not."""
+        if ego is None or self.out.road not in ("intersection", "t_junction", "three_way", "roundabout"):
+            return
         for e in self.out.entities:
-            if e.kind == "pedestrian" and e.has("cross"):
-                dirs = e.detail("cross").get("directions") or []
-                e.detail("cross")["directions"] = dirs
+            if e is ego or e.kind not in _MOTOR + ("bicycle",):
+                continue
+            rels = {r for r, j in e.relations if j is ego}
+            lane_moves = ("cut_in", "lane_change", "lane_change_left", "lane_change_right", "overtake", "merge")
+            joins = "right_of" in rels and e.has("turn_right")  # a right turn from the right joins the ego's way
+            if rels & {"left_of", "right_of"} and "oncoming" not in rels and not any(e.has(a) for a in lane_moves) \
+                    and not joins \
+                    and (e.attrs.get("side_road") or any(e.has(a) for a in ("go_straight", "turn_left",
+                                                                              "turn_right", "collide"))
+                         or not e.actions):
+                self._relate(e, "crossing_path", ego)
+            if "oncoming" in rels and e.has("turn_left") and not ego.has("turn_left"):
+                self._relate(e, "crossing_path", ego)
 
 
 def _conflict_partner_of(entities: List[Entity], who: Entity) -> Optional[Entity]:

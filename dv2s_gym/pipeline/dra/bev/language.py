@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from typing import Any, Dict, List, Optional, Tuple
 
 __all__ = ["ROAD_PHRASES", "ROAD_SCENES"]
@@ -42,19 +43,47 @@ def _noun(kind: str, count: int = 1) -> str:
     return {"pedestrian": "pedestrians", "obstacle": "obstacles", "truck": "trucks"}.get(kind, kind + "s")
 
 
-def _clause(actor: Dict[str, Any], count: int, ref: str) -> str:
-    """Subject and predicate for ``count`` identical actors; ``ref`` names the ego ("it" or "the ego car")."""
+@dataclass
+class _Words:
+    """The words the clause templates of one group of identical actors share."""
+
+    kind: str
+    acts: set
+    rels: set
+    ref: str
+    """The ego: "it" or "the ego car"."""
+    poss: str
+    """The ego's: "its" or "the ego car's"."""
+    lane: str
+    """The ego's lane: "its lane" or "the ego's lane"."""
+    plural: bool
+    n: str
+    """The count in words ("two")."""
+    noun: str
+    art: str
+    """"a"/"an", or the count of a group."""
+    side: Optional[str]
+    """The side of the ego the actor is on ("left", "right"), if any."""
+    at: str
+    """Where the actor is relative to the ego (" ahead of it on its left"), or ""."""
+    extra: List[str]
+    """What it does besides its main action ("suddenly brakes", "accelerates", "stands still", "crashes")."""
+
+    def verb(self, singular: str, plural_form: str) -> str:
+        """The verb form for the group's number."""
+        return plural_form if self.plural else singular
+
+    def join(self, head: str) -> str:
+        """``head`` and what the actor does besides."""
+        return " and ".join([head] + self.extra)
+
+
+def _words(actor: Dict[str, Any], count: int, ref: str) -> _Words:
+    """The shared words for ``count`` identical actors like ``actor``; ``ref`` names the ego."""
     kind, acts, rels = actor["kind"], actor["actions"], actor["relations"]
-    poss = "its" if ref == "it" else "the ego car's"
-    lane = "its lane" if ref == "it" else "the ego's lane"
     plural = count > 1
     n = _COUNT.get(count, str(count))
-    noun = _noun(kind, count)
-    art = ("an" if kind[0] in "aeiou" else "a") if not plural else n
-
-    def verb(singular: str, plural_form: str) -> str:
-        return plural_form if plural else singular
-
+    poss = "its" if ref == "it" else "the ego car's"
     side = "left" if "left_of" in rels else "right" if "right_of" in rels else None
     where = []
     if "ahead_of" in rels:
@@ -63,99 +92,176 @@ def _clause(actor: Dict[str, Any], count: int, ref: str) -> str:
         where.append(f"behind {ref}")
     if side:
         where.append(f"on {poss} {side}")
-    at = (" " + " ".join(where)) if where else ""
-    extra: List[str] = []
+    words = _Words(kind=kind, acts=acts, rels=rels, ref=ref, poss=poss,
+                   lane="its lane" if ref == "it" else "the ego's lane", plural=plural, n=n,
+                   noun=_noun(kind, count), art=("an" if kind[0] in "aeiou" else "a") if not plural else n,
+                   side=side, at=(" " + " ".join(where)) if where else "", extra=[])
     if "brake" in acts:
-        extra.append(verb("suddenly brakes", "suddenly brake"))
+        words.extra.append(words.verb("suddenly brakes", "suddenly brake"))
     if "accelerate" in acts:
-        extra.append(verb("accelerates", "accelerate"))
+        words.extra.append(words.verb("accelerates", "accelerate"))
     if "stop" in acts:
-        extra.append(verb("stands still", "stand still"))
+        words.extra.append(words.verb("stands still", "stand still"))
     if "collide" in acts and not actor.get("hits_ego"):
-        extra.append(verb("crashes", "crash"))
+        words.extra.append(words.verb("crashes", "crash"))
+    return words
 
-    def join(head: str, more: List[str]) -> str:
-        return " and ".join([head] + more)
 
-    if kind == "obstacle":
-        if "same_lane" in rels:
-            return f"{art} {noun} {verb('lies', 'lie')} in the ego's lane ahead"
-        return f"{art} {noun} {verb('lies', 'lie')}{at}"
-    if kind == "pedestrian":
-        if "cross" in acts:
-            return f"{art} {noun} {verb('crosses', 'cross')} the road in front of {ref}"
-        # "waits" reads as a stop: only a pedestrian seen standing still is said to wait
-        return f"{art} {noun} {verb('waits', 'wait') if 'stop' in acts else verb('is', 'are')}{at}"
-    if "merge" in acts:
-        if side and "ahead_of" not in rels and "behind" not in rels:
-            return join(f"{art} {noun} from the on-ramp {verb('merges', 'merge')} into the lane next to {ref} "
-                        f"on {poss} {side}", extra)
-        if "ahead_of" in rels:
-            return join(f"{art} {noun} from the on-ramp {verb('merges', 'merge')} into the lane in front of {ref}",
-                        extra)
-        return join(f"{art} {noun} from the on-ramp {verb('merges', 'merge')} onto the highway behind {ref}", extra)
-    if "cut_in" in acts and "overtake" in acts:
-        return join(f"a faster {noun} {verb('overtakes', 'overtake')} the ego car and "
-                    f"{verb('pulls', 'pull')} back into the ego's lane just ahead of {ref}", extra)
-    if "cut_in" in acts:
-        origin = f" in the lane to the {side} of the ego car" if side else ""
-        return join(f"{art} {noun}{origin} {verb('cuts', 'cut')} into the ego's lane just ahead of {ref}", extra)
-    if "oncoming" in rels:
-        head = f"{'an' if not plural else n} oncoming {noun}"
-        if "drift" in acts:
-            main = f"{verb('drifts', 'drift')} across the centre line into the ego's lane"
-        elif "go_straight" in acts:
-            main = f"{verb('goes', 'go')} straight on"
-        elif "turn_left" in acts or "turn_right" in acts:
-            main = f"{verb('turns', 'turn')} {'left' if 'turn_left' in acts else 'right'}"
-            if "crossing_path" in rels:
-                main += f" and {verb('crosses', 'cross')} the ego's path"
-        elif "keep_lane" in acts:
-            main = f"{verb('keeps', 'keep')} to its lane and {verb('passes', 'pass')} by on the other side"
-        else:
-            main = f"{verb('passes', 'pass')} by in the other lane"
-        return join(f"{head} {main}", extra)
-    if "crossing_path" in rels and actor.get("notes", {}).get("ring_ahead") and not {"turn_left", "turn_right"} & acts:
-        return join(f"{art} {noun} circling the roundabout {verb('crosses', 'cross')} the ego's path ahead of {ref}",
-                    extra)
-    if "crossing_path" in rels:
-        then = (f"{verb('turns', 'turn')} {'left' if 'turn_left' in acts else 'right'}"
-                if {"turn_left", "turn_right"} & acts else f"{verb('goes', 'go')} straight on")
-        return join(f"{art} {noun} {verb('crosses', 'cross')} the ego's path and {then}", extra)
-    if "turn_left" in acts or "turn_right" in acts:
-        d = "left" if "turn_left" in acts else "right"
-        origin = f" from the side road on {poss} {side}" if side else ""
-        into = f" into the ego's lane just ahead of {ref}" if "ahead_of" in rels else ""
-        return join(f"{art} {noun}{origin} {verb('turns', 'turn')} {d}{into}", extra)
-    if "keep_lane" in acts and side:
-        return f"{art} {noun} {verb('drives', 'drive')} alongside the ego car in the lane to {poss} {side}"
-    if actor.get("notes", {}).get("parked"):
-        where_p = at.replace(f"ahead of {ref}", "ahead of the ego car").replace(f"behind {ref}", "behind the ego car")
-        return f"{art} {noun} {verb('is', 'are')} parked{where_p}"
-    if actor.get("notes", {}).get("slower_lead") and acts == {"keep_lane"} and "ahead_of" in rels:
-        return (f"{'a' if not plural else n} slower {noun} ahead of {ref} in the same lane "
-                f"{verb('keeps', 'keep')} to {verb('its', 'their')} lane")
-    if "same_lane" in rels:
-        at = f" {'ahead of' if 'ahead_of' in rels else 'behind'} {ref} in the same lane"
-        if acts == {"stop"} and "ahead_of" in rels:
-            return f"{art} {noun} {verb('stands', 'stand')} still in {lane} ahead"
+def _obstacle_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
+    """An obstacle lies in the ego's lane ahead, or where it is."""
+    if w.kind != "obstacle":
+        return None
+    if "same_lane" in w.rels:
+        return f"{w.art} {w.noun} {w.verb('lies', 'lie')} in the ego's lane ahead"
+    return f"{w.art} {w.noun} {w.verb('lies', 'lie')}{w.at}"
+
+
+def _pedestrian_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
+    """A pedestrian crosses in front of the ego, waits (only when seen standing still: "waits" reads as a stop)
+    or is where it is."""
+    if w.kind != "pedestrian":
+        return None
+    if "cross" in w.acts:
+        return f"{w.art} {w.noun} {w.verb('crosses', 'cross')} the road in front of {w.ref}"
+    return f"{w.art} {w.noun} {w.verb('waits', 'wait') if 'stop' in w.acts else w.verb('is', 'are')}{w.at}"
+
+
+def _merge_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
+    """A vehicle from the on-ramp merges: into the lane beside the ego, in front of it, or behind it."""
+    if "merge" not in w.acts:
+        return None
+    head = f"{w.art} {w.noun} from the on-ramp {w.verb('merges', 'merge')}"
+    if w.side and "ahead_of" not in w.rels and "behind" not in w.rels:
+        return w.join(f"{head} into the lane next to {w.ref} on {w.poss} {w.side}")
+    if "ahead_of" in w.rels:
+        return w.join(f"{head} into the lane in front of {w.ref}")
+    return w.join(f"{head} onto the highway behind {w.ref}")
+
+
+def _cut_in_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
+    """A cut-in just ahead of the ego: after overtaking it, or from the lane on a side."""
+    if "cut_in" not in w.acts:
+        return None
+    if "overtake" in w.acts:
+        return w.join(f"a faster {w.noun} {w.verb('overtakes', 'overtake')} the ego car and "
+                      f"{w.verb('pulls', 'pull')} back into the ego's lane just ahead of {w.ref}")
+    origin = f" in the lane to the {w.side} of the ego car" if w.side else ""
+    return w.join(f"{w.art} {w.noun}{origin} {w.verb('cuts', 'cut')} into the ego's lane just ahead of {w.ref}")
+
+
+def _oncoming_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
+    """Oncoming traffic: drifts across the centre line, goes straight, turns (across the ego's path), keeps to its
+    lane, or passes by."""
+    if "oncoming" not in w.rels:
+        return None
+    head = f"{'an' if not w.plural else w.n} oncoming {w.noun}"
+    if "drift" in w.acts:
+        main = f"{w.verb('drifts', 'drift')} across the centre line into the ego's lane"
+    elif "go_straight" in w.acts:
+        main = f"{w.verb('goes', 'go')} straight on"
+    elif "turn_left" in w.acts or "turn_right" in w.acts:
+        main = f"{w.verb('turns', 'turn')} {'left' if 'turn_left' in w.acts else 'right'}"
+        if "crossing_path" in w.rels:
+            main += f" and {w.verb('crosses', 'cross')} the ego's path"
+    elif "keep_lane" in w.acts:
+        main = f"{w.verb('keeps', 'keep')} to its lane and {w.verb('passes', 'pass')} by on the other side"
+    else:
+        main = f"{w.verb('passes', 'pass')} by in the other lane"
+    return w.join(f"{head} {main}")
+
+
+def _crossing_path_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
+    """Traffic across the ego's path: circling a roundabout ahead, else crossing and turning or going straight."""
+    if "crossing_path" not in w.rels:
+        return None
+    turns = {"turn_left", "turn_right"} & w.acts
+    if actor.get("notes", {}).get("ring_ahead") and not turns:
+        return w.join(f"{w.art} {w.noun} circling the roundabout {w.verb('crosses', 'cross')} the ego's path ahead "
+                      f"of {w.ref}")
+    then = (f"{w.verb('turns', 'turn')} {'left' if 'turn_left' in w.acts else 'right'}"
+            if turns else f"{w.verb('goes', 'go')} straight on")
+    return w.join(f"{w.art} {w.noun} {w.verb('crosses', 'cross')} the ego's path and {then}")
+
+
+def _turn_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
+    """A turn, from the side road on a side of the ego, into the ego's lane when it ends up ahead."""
+    if "turn_left" not in w.acts and "turn_right" not in w.acts:
+        return None
+    d = "left" if "turn_left" in w.acts else "right"
+    origin = f" from the side road on {w.poss} {w.side}" if w.side else ""
+    into = f" into the ego's lane just ahead of {w.ref}" if "ahead_of" in w.rels else ""
+    return w.join(f"{w.art} {w.noun}{origin} {w.verb('turns', 'turn')} {d}{into}")
+
+
+def _alongside_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
+    """A vehicle keeping its lane on a side of the ego drives alongside it."""
+    if "keep_lane" not in w.acts or not w.side:
+        return None
+    return f"{w.art} {w.noun} {w.verb('drives', 'drive')} alongside the ego car in the lane to {w.poss} {w.side}"
+
+
+def _parked_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
+    """A parked vehicle is parked where it is (relative to "the ego car", whatever the reference)."""
+    if not actor.get("notes", {}).get("parked"):
+        return None
+    where = w.at.replace(f"ahead of {w.ref}", "ahead of the ego car").replace(f"behind {w.ref}", "behind the ego car")
+    return f"{w.art} {w.noun} {w.verb('is', 'are')} parked{where}"
+
+
+def _slower_lead_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
+    """A slower vehicle ahead in the ego's lane that only keeps its lane."""
+    if not (actor.get("notes", {}).get("slower_lead") and w.acts == {"keep_lane"} and "ahead_of" in w.rels):
+        return None
+    return (f"{'a' if not w.plural else w.n} slower {w.noun} ahead of {w.ref} in the same lane "
+            f"{w.verb('keeps', 'keep')} to {w.verb('its', 'their')} lane")
+
+
+def _standing_clause(actor: Dict[str, Any], w: _Words) -> Optional[str]:
+    """A vehicle that only stands still ahead in the ego's lane."""
+    if not ("same_lane" in w.rels and w.acts == {"stop"} and "ahead_of" in w.rels):
+        return None
+    return f"{w.art} {w.noun} {w.verb('stands', 'stand')} still in {w.lane} ahead"
+
+
+_CLAUSE_RULES = (_obstacle_clause, _pedestrian_clause, _merge_clause, _cut_in_clause, _oncoming_clause,
+                 _crossing_path_clause, _turn_clause, _alongside_clause, _parked_clause, _slower_lead_clause,
+                 _standing_clause)
+"""The clause templates of the cases, in order: the first that applies to an actor writes its clause."""
+
+
+def _moves_clause(actor: Dict[str, Any], w: _Words) -> str:
+    """Any other vehicle: where it is (in the same lane ahead of or behind the ego, else as placed) and what it
+    does: lane changes, overtaking, going straight, drifting, braking...; else it follows or drives on."""
+    at = f" {'ahead of' if 'ahead_of' in w.rels else 'behind'} {w.ref} in the same lane" if "same_lane" in w.rels \
+        else w.at
     main: List[str] = []
-    if "lane_change_left" in acts and "lane_change_right" in acts:
-        main.append(f"{verb('changes', 'change')} to the left lane and back to the right lane")
-    elif "lane_change_left" in acts:
-        main.append(f"{verb('changes', 'change')} to the left lane")
-    elif "lane_change_right" in acts:
-        main.append(f"{verb('changes', 'change')} to the right lane")
-    if "overtake" in acts:
-        main.append(f"{verb('overtakes', 'overtake')} the ego car")
-    if "go_straight" in acts:
-        main.append(f"{verb('goes', 'go')} straight on")
-    if "drift" in acts:
-        main.append(f"{verb('drifts', 'drift')} across the centre line")
-    main += extra
+    if "lane_change_left" in w.acts and "lane_change_right" in w.acts:
+        main.append(f"{w.verb('changes', 'change')} to the left lane and back to the right lane")
+    elif "lane_change_left" in w.acts:
+        main.append(f"{w.verb('changes', 'change')} to the left lane")
+    elif "lane_change_right" in w.acts:
+        main.append(f"{w.verb('changes', 'change')} to the right lane")
+    if "overtake" in w.acts:
+        main.append(f"{w.verb('overtakes', 'overtake')} the ego car")
+    if "go_straight" in w.acts:
+        main.append(f"{w.verb('goes', 'go')} straight on")
+    if "drift" in w.acts:
+        main.append(f"{w.verb('drifts', 'drift')} across the centre line")
+    main += w.extra
     if not main:
-        main.append(verb("follows", "follow") if "behind" in rels and "same_lane" in rels else verb("drives on", "drive on"))
-    return f"{art} {noun}{at} " + " and ".join(main)
+        main.append(w.verb("follows", "follow") if "behind" in w.rels and "same_lane" in w.rels
+                    else w.verb("drives on", "drive on"))
+    return f"{w.art} {w.noun}{at} " + " and ".join(main)
+
+
+def _clause(actor: Dict[str, Any], count: int, ref: str) -> str:
+    """Subject and predicate for ``count`` identical actors; ``ref`` names the ego ("it" or "the ego car")."""
+    w = _words(actor, count, ref)
+    for rule in _CLAUSE_RULES:
+        clause = rule(actor, w)
+        if clause is not None:
+            return clause
+    return _moves_clause(actor, w)
 
 
 def _groups(actors: List[Dict[str, Any]]) -> List[Tuple[Dict[str, Any], int]]:

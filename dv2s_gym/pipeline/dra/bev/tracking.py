@@ -269,31 +269,37 @@ def _shift_candidates(first: Tuple[Any, float], second: Tuple[Any, float], fft_s
     return cands, best, False
 
 
-def _world_motion(frames: List[_Frame], tracks: List[Track], scale: float, heading: np.ndarray,
-                  speed_prior: float) -> Tuple[np.ndarray, np.ndarray, Dict[str, Any]]:
-    """Ego velocity (map frame, m/s) over each frame interval, and which intervals are measured."""
-    n = len(frames)
-    m = max(0, n - 1)
-    vel = np.full((m, 2), np.nan)
-    known = np.zeros(m, bool)
-    if m == 0:
-        return vel, known, {}
-    rfft2, irfft2, next_len = _fft()
-    half_scale = scale / 2.0
-    dts = np.array([max(1e-3, frames[i + 1].t - frames[i].t) for i in range(m)])
+@dataclass
+class _Spectra:
+    """The frames' line masks in the frequency domain, for correlating consecutive frames: each whole mask and
+    its inner part (a border of ``radius`` cleared), with their energies."""
+
+    whole: List[Any]
+    inner: List[Any]
+    energies: List[float]
+    inner_energies: List[float]
+    shape: Tuple[int, int]
+    radius: int
+
+
+def _line_spectra(frames: List[_Frame], radius: int, fft_shape: Tuple[int, int], rfft2) -> _Spectra:
+    """The spectra of every frame's soft line mask (whole, and with a border of ``radius`` cleared)."""
     h, w = frames[0].soft.shape
-    radius = int(min(MAX_SPEED * float(dts.max()) * half_scale + 3, min(h, w) // 3))
-    fft_shape = (next_len(h + radius + 1, real=True), next_len(w + radius + 1, real=True))
-    spectra, inner_spectra, energies, inner_energies = [], [], [], []
+    spectra = _Spectra([], [], [], [], fft_shape, radius)
     for fr in frames:
         inner = np.zeros_like(fr.soft)
         inner[radius:h - radius, radius:w - radius] = fr.soft[radius:h - radius, radius:w - radius]
-        spectra.append(rfft2(fr.soft, s=fft_shape))
-        inner_spectra.append(rfft2(inner, s=fft_shape))
-        energies.append(float((fr.soft * fr.soft).sum()))
-        inner_energies.append(float((inner * inner).sum()))
-    # static anchors: props and (slow) pedestrians move by the ego's displacement, reversed
-    anchor: List[List[Tuple[np.ndarray, float]]] = [[] for _ in range(m)]
+        spectra.whole.append(rfft2(fr.soft, s=fft_shape))
+        spectra.inner.append(rfft2(inner, s=fft_shape))
+        spectra.energies.append(float((fr.soft * fr.soft).sum()))
+        spectra.inner_energies.append(float((inner * inner).sum()))
+    return spectra
+
+
+def _static_anchors(tracks: List[Track], heading: np.ndarray, dts: np.ndarray) -> List[List[Tuple[np.ndarray, float]]]:
+    """Per frame interval, the ego velocities static things tell, with their tolerance: props and (slow)
+    pedestrians move by the ego's displacement, reversed (a crossing pedestrian only along the ego's heading)."""
+    anchor: List[List[Tuple[np.ndarray, float]]] = [[] for _ in range(len(dts))]
     for trk in tracks:
         if trk.kind not in ("obstacle", "pedestrian"):
             continue
@@ -307,15 +313,24 @@ def _world_motion(frames: List[_Frame], tracks: List[Track], scale: float, headi
                     hv = np.array([math.cos(heading[i0]), math.sin(heading[i0])])
                     v = float(v @ hv) * hv
                 anchor[i0].append((v, walk + 0.35 / dts[i0]))
+    return anchor
+
+
+def _velocity_options(spectra: _Spectra, irfft2, heading: np.ndarray, dts: np.ndarray, half_scale: float,
+                      anchor: List[List[Tuple[np.ndarray, float]]]) -> Tuple[List[List[Tuple[np.ndarray, float]]], int]:
+    """Per frame interval, the ego velocities the lane lines' shift allows (every alias the ego can reach in that
+    interval, with a cost from its correlation) plus the static anchors none of them agrees with; and how many
+    intervals the lines measured."""
     states: List[List[Tuple[np.ndarray, float]]] = []
     line_intervals = 0
-    for i in range(m):
+    for i in range(len(dts)):
         hv = (math.cos(heading[i]), -math.sin(heading[i]))  # the ego axis on screen (y down)
         # the window is sized for the longest interval (a dropped frame doubles it): each interval keeps
         # only the shifts the ego can make in its own time, and every alias among them
         reach = MAX_SPEED * float(dts[i]) * half_scale + 3
-        cands, best, flat = _shift_candidates((inner_spectra[i], inner_energies[i]), (spectra[i + 1], energies[i + 1]),
-                                              fft_shape, radius, hv, irfft2, reach)
+        cands, best, flat = _shift_candidates((spectra.inner[i], spectra.inner_energies[i]),
+                                              (spectra.whole[i + 1], spectra.energies[i + 1]),
+                                              spectra.shape, spectra.radius, hv, irfft2, reach)
         opts: List[Tuple[np.ndarray, float]] = []
         for dx, dy, score in cands:
             # the lines' screen shift is minus the ego's displacement (y flipped to the map frame)
@@ -327,8 +342,13 @@ def _world_motion(frames: List[_Frame], tracks: List[Track], scale: float, headi
             if all(float(np.hypot(*(o[0] - v))) > tol for o in opts):
                 opts.append((v, 0.5 if opts else 0.0))
         states.append(opts)
-    # vehicles with a reliable facing must not drive backwards
-    veh: List[List[Tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(m)]
+    return states, line_intervals
+
+
+def _facing_vehicle_motion(tracks: List[Track], dts: np.ndarray) -> List[List[Tuple[np.ndarray, np.ndarray]]]:
+    """Per frame interval, the screen motion and heading of each vehicle with a reliable facing (they must not
+    drive backwards)."""
+    veh: List[List[Tuple[np.ndarray, np.ndarray]]] = [[] for _ in range(len(dts))]
     for trk in tracks:
         hd = trk.info.get("headings")
         if trk.kind not in ("car", "truck") or hd is None or not trk.info.get("facing_sure"):
@@ -338,6 +358,14 @@ def _world_motion(frames: List[_Frame], tracks: List[Track], scale: float, headi
             if i1 == i0 + 1 and not trk.blobs[k].border and not trk.blobs[k - 1].border:
                 d = np.subtract(trk.rel[k], trk.rel[k - 1]) / dts[i0]
                 veh[i0].append((d, np.array([math.cos(hd[k]), math.sin(hd[k])])))
+    return veh
+
+
+def _option_costs(states: List[List[Tuple[np.ndarray, float]]], heading: np.ndarray, speed_prior: float,
+                  veh: List[List[Tuple[np.ndarray, np.ndarray]]],
+                  anchor: List[List[Tuple[np.ndarray, float]]]) -> List[np.ndarray]:
+    """The cost of each velocity option: its own, plus driving backwards, the speed prior (a tie-breaker),
+    speeds no traffic here reaches, vehicles seen driving backwards, and disagreement with the anchors."""
     costs: List[np.ndarray] = []
     for i, opts in enumerate(states):
         c = np.zeros(len(opts))
@@ -354,31 +382,42 @@ def _world_motion(frames: List[_Frame], tracks: List[Track], scale: float, headi
                 cost += min(3.0, max(0.0, float(np.hypot(*(v - va))) - tol) / max(tol, 0.5))
             c[j] = cost
         costs.append(c)
-    # Viterbi over the measured intervals (gaps bridged: a longer gap allows a larger change of speed)
-    total_cost = 0.0
-    order = [k for k in range(m) if states[k]]
-    if order:
-        acc = costs[order[0]].copy()
-        back = []
-        for a, b in zip(order, order[1:]):
-            prev_v = np.array([o[0] for o in states[a]])
-            cur_v = np.array([o[0] for o in states[b]])
-            dv = np.linalg.norm(cur_v[:, None, :] - prev_v[None, :, :], axis=2)
-            elapsed = float(frames[b].t - frames[a].t)
-            trans = (dv / (9.0 * elapsed + 0.8)) ** 2
-            total = acc[None, :] + trans
-            arg = total.argmin(axis=1)
-            back.append(arg)
-            acc = total[np.arange(len(cur_v)), arg] + costs[b]
-        seq = [int(acc.argmin())]
-        total_cost = float(acc.min())
-        for arg in reversed(back):
-            seq.append(int(arg[seq[-1]]))
-        seq.reverse()
-        for k, sidx in zip(order, seq):
-            vel[k] = states[k][sidx][0]
-            known[k] = True
-    # isolated jumps (a wrong alias or a confusing frame pair): replace by the local median
+    return costs
+
+
+def _smoothest_velocities(frames: List[_Frame], states: List[List[Tuple[np.ndarray, float]]],
+                          costs: List[np.ndarray], vel: np.ndarray, known: np.ndarray) -> float:
+    """Viterbi over the measured intervals (gaps bridged: a longer gap allows a larger change of speed): the
+    sequence of options of least cost and speed change is written into ``vel`` and ``known``; its total cost."""
+    order = [k for k in range(len(states)) if states[k]]
+    if not order:
+        return 0.0
+    acc = costs[order[0]].copy()
+    back = []
+    for a, b in zip(order, order[1:]):
+        prev_v = np.array([o[0] for o in states[a]])
+        cur_v = np.array([o[0] for o in states[b]])
+        dv = np.linalg.norm(cur_v[:, None, :] - prev_v[None, :, :], axis=2)
+        elapsed = float(frames[b].t - frames[a].t)
+        trans = (dv / (9.0 * elapsed + 0.8)) ** 2
+        total = acc[None, :] + trans
+        arg = total.argmin(axis=1)
+        back.append(arg)
+        acc = total[np.arange(len(cur_v)), arg] + costs[b]
+    seq = [int(acc.argmin())]
+    total_cost = float(acc.min())
+    for arg in reversed(back):
+        seq.append(int(arg[seq[-1]]))
+    seq.reverse()
+    for k, sidx in zip(order, seq):
+        vel[k] = states[k][sidx][0]
+        known[k] = True
+    return total_cost
+
+
+def _cleaned_velocities(vel: np.ndarray, known: np.ndarray, heading: np.ndarray) -> np.ndarray:
+    """Isolated jumps (a wrong alias or a confusing frame pair) replaced by the local median; the sideways part
+    limited, as a car moves along its heading (pedestrian anchors walk across the road)."""
     if known.sum() >= 5:
         idx = np.nonzero(known)[0]
         fixed = vel.copy()
@@ -388,7 +427,6 @@ def _world_motion(frames: List[_Frame], tracks: List[Track], scale: float, headi
             if float(np.hypot(*(vel[k] - med))) > 3.0:
                 fixed[k] = med
         vel = fixed
-    # a car moves along its heading: limit the sideways part (pedestrian anchors walk across the road)
     for k in np.nonzero(known)[0]:
         c, s_ = math.cos(heading[k]), math.sin(heading[k])
         lon_v = vel[k, 0] * c + vel[k, 1] * s_
@@ -396,8 +434,12 @@ def _world_motion(frames: List[_Frame], tracks: List[Track], scale: float, headi
         cap = 0.1 * abs(lon_v) + 0.3
         lat_v = max(-cap, min(cap, lat_v))
         vel[k] = (lon_v * c - lat_v * s_, lon_v * s_ + lat_v * c)
-    measured = known.copy()
-    # short gaps: interpolate
+    return vel
+
+
+def _interpolate_gaps(vel: np.ndarray, known: np.ndarray) -> None:
+    """Short gaps between measured intervals (up to 6, or up to 30 when the speed barely changes across them) are
+    interpolated, in place."""
     if known.any() and not known.all():
         idx = np.nonzero(known)[0]
         for k in np.nonzero(~known)[0]:
@@ -408,6 +450,31 @@ def _world_motion(frames: List[_Frame], tracks: List[Track], scale: float, headi
                 u = (k - a) / float(b - a)
                 vel[k] = (1 - u) * vel[a] + u * vel[b]
                 known[k] = True
+
+
+def _world_motion(frames: List[_Frame], tracks: List[Track], scale: float, heading: np.ndarray,
+                  speed_prior: float) -> Tuple[np.ndarray, np.ndarray, Dict[str, Any]]:
+    """Ego velocity (map frame, m/s) over each frame interval, and which intervals are measured."""
+    n = len(frames)
+    m = max(0, n - 1)
+    vel = np.full((m, 2), np.nan)
+    known = np.zeros(m, bool)
+    if m == 0:
+        return vel, known, {}
+    rfft2, irfft2, next_len = _fft()
+    half_scale = scale / 2.0
+    dts = np.array([max(1e-3, frames[i + 1].t - frames[i].t) for i in range(m)])
+    h, w = frames[0].soft.shape
+    radius = int(min(MAX_SPEED * float(dts.max()) * half_scale + 3, min(h, w) // 3))
+    fft_shape = (next_len(h + radius + 1, real=True), next_len(w + radius + 1, real=True))
+    spectra = _line_spectra(frames, radius, fft_shape, rfft2)
+    anchor = _static_anchors(tracks, heading, dts)
+    states, line_intervals = _velocity_options(spectra, irfft2, heading, dts, half_scale, anchor)
+    costs = _option_costs(states, heading, speed_prior, _facing_vehicle_motion(tracks, dts), anchor)
+    total_cost = _smoothest_velocities(frames, states, costs, vel, known)
+    vel = _cleaned_velocities(vel, known, heading)
+    measured = known.copy()
+    _interpolate_gaps(vel, known)
     return vel, known, {"line_intervals": line_intervals, "anchor_intervals": int(sum(1 for a in anchor if a)),
                         "measured_intervals": int(measured.sum()), "interpolated_intervals":
                         int(known.sum() - measured.sum()), "intervals": m, "cost": round(total_cost, 3),
