@@ -285,10 +285,8 @@ class DV2SEnv(AbstractEnv):
         """Default configuration; every key can be overridden with ``config=``.
 
         Every key given is checked, nested ones too (:func:`envs.config_check.check_config`): a misspelt
-        key, reward term or observation/action option is an error naming it and the choices, and so is a
-        numeric value of the wrong type or range (a duration or frequency that is not a positive number, a
-        policy frequency above the simulation frequency), here and in ``configure``. A section
-        given replaces the default one whole (highway-env's rule): a reward term left out weighs 0.
+        key, reward term or observation/action option is an error naming it and the choices, and so is a number
+        of the wrong type or range. A section given replaces the default one whole (a reward term left out weighs 0).
 
         - ``observation``: highway-env observation config; ``Kinematics`` (default),
           ``OccupancyGrid``, ``TimeToCollision``, ``LidarObservation`` and ``GrayscaleObservation`` work.

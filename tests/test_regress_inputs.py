@@ -158,8 +158,8 @@ def test_resume_is_refused_when_a_helper_module_of_the_policy_changed(tmp_path, 
 
 def test_degenerate_episode_settings_are_refused_before_any_episode(tmp_path, capsys):
     out = tmp_path / "out"
-    for config, stall, message in (('{"duration": -5}', "1", "duration must be a positive number of seconds"),
-                                   ('{"duration": 0}', "1", "duration must be a positive number of seconds"),
+    for config, stall, message in (('{"duration": -5}', "1", "config['duration'] is -5; it must be a number of seconds > 0"),
+                                   ('{"duration": 0}', "1", "config['duration'] is 0; it must be a number of seconds > 0"),
                                    ('{"duration": 4}', "5", "--stall-seconds 5 is not shorter than the episodes (4 s)"),
                                    ('{"duration": 4}', "4", "--stall-seconds 4 is not shorter than the episodes (4 s)"),
                                    ('{"durration": 4}', "1", "unknown config key(s) 'durration' (did you mean 'duration'?)")):
