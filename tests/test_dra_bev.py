@@ -396,8 +396,6 @@ def test_use_case_plays_its_story(bank_results, clip_name):
 # Known misses of the bev DRA on these fixed clips, recorded as strict xfails: the test fails the
 # day they pass, so the entry must then be removed.
 KNOWN_DRA_MISSES = {
-    "urban_pedestrian_crossing_seed0": "the walker's crossing is not detected; it is described as standing "
-                                       "ahead on the right (SCS 0.78)",
     "highway_onramp_insertion_seed0": "the merging car is not detected on the ramp (SCS 0.25)",
     "highway_onramp_insertion_seed1": "the merging car is not detected on the ramp (SCS 0.25)",
 }
