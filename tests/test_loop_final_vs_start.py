@@ -81,3 +81,34 @@ def test_a_changed_starting_bank_is_not_compared(tmp_path):
     missing = _loop(tmp_path, 2)
     Path(missing["rounds"][0]["steps"]["regress"]["report"]).unlink()
     assert final_vs_start(missing)["error"].startswith("cannot read the rounds' regression reports")
+
+
+def _accepted(record: dict) -> dict:
+    """``record`` as a round whose own tests accepted its policy (regression PASS, held-out no worse)."""
+    from dv2s_gym.mining.loop_verdict import heldout_worse
+
+    fine = {"f1": {"both_fail": 0, "candidate_only": 0, "baseline_only": 2, "neither": 28},
+            "f2": {"both_fail": 0, "candidate_only": 0, "baseline_only": 2, "neither": 28}}
+    steps = {**record["steps"], "fine_tune": {}, "regress": {**record["steps"]["regress"], "verdict": "PASS"},
+             "after": {"pairs": 60, "significantly_worse": {"start": heldout_worse(fine, "start"), "control": None}}}
+    return {**record, "steps": steps}
+
+
+def test_the_next_round_and_the_report_never_use_a_policy_the_cross_round_check_rejected(tmp_path):
+    from types import SimpleNamespace
+
+    from dv2s_gym.mining import loop as loop_module
+
+    body = _loop(tmp_path, 2)
+    rounds = [_accepted(record) for record in body["rounds"]]  # round 2 passes against P1 but P2 FAILs against P0
+    state = SimpleNamespace(data={"settings": {"policy": "p0"}, "rounds": rounds}, save=lambda: None)
+    loop = SimpleNamespace(state=state, out=tmp_path)
+    assert loop_module._next_start(loop, 2, "p1") == "p0"
+    # round 3 starts from p0 and its own regression test FAILs
+    rounds.append({"round": 3, "policy": "p0", "new_policy": "p3", "steps": {"fine_tune": {}, "regress": {
+        "verdict": "FAIL", "report": _regress(tmp_path / "r3.json", "p3", "p0", P2_FAILS, P0_FAILS)}}})
+    assert loop_module._next_start(loop, 3, "p0") == "p0"
+    paths = write_loop_reports({**body, "policy": "p3", "rounds": rounds}, tmp_path / "loop")
+    data = json.loads(paths["json"].read_text())
+    assert data["rounds"][1]["final_vs_start"]["verdict"] == "FAIL"
+    assert data["recommendation"]["policy"] == "p0" and "Policy to use: `p0`" in paths["md"].read_text()

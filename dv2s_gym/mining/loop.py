@@ -529,10 +529,8 @@ def _next_start(loop: _Loop, number: int, current: str) -> str:
     rounds = loop.state.data["rounds"][:number]
     record = rounds[-1]
     start = loop.state.data["settings"]["policy"]
-    body: Dict[str, Any] = {"settings": {"policy": start}, "rounds": rounds}
-    final = loop_report.final_vs_start(body)  # as the report judges it: with two or more tested rounds
-    if final is not None:
-        body["final_vs_start"] = final
+    # as the report judges it: the cross-round check on each accepted round's policy
+    body = loop_report.with_cross_round_checks({"settings": {"policy": start}, "rounds": rounds})
     advice = recommendation(body)
     # the policy to use, exactly as the report recommends it: the fine-tuned one only when it is the recommendation
     following = advice["policy"]

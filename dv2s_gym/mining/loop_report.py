@@ -80,7 +80,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional
 
-__all__ = ["write_loop_reports", "render_markdown", "render_html", "round_summary", "round_clips", "final_vs_start", "FINAL_VS_START_DIR"]
+__all__ = ["write_loop_reports", "render_markdown", "render_html", "round_summary", "round_clips", "final_vs_start",
+           "with_cross_round_checks", "FINAL_VS_START_DIR"]
 
 FINAL_VS_START_DIR = "final_vs_start"
 """Folder (in the loop folder) of the final-vs-starting-policy paired regression report."""
@@ -155,6 +156,26 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None) -> Opt
             "old_failure_rate": (overall.get("baseline") or {}).get("failure_rate"),
             "difference": comparison.get("difference"), "p_value": comparison.get("p_value"),
             "regressed": paired.get("regressed") or [], "report": str(path) if path is not None else None}
+
+
+def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = None) -> Dict[str, Any]:
+    """``report`` with the cross-round check (:func:`final_vs_start` over the rounds up to it) recorded in each
+    round that its own tests accepted (``None`` before two rounds were regression-tested), and, with two or more
+    tested rounds, the report's own ``final_vs_start`` (its paired report written under ``out``). A policy the
+    check rejected is never the policy to use (:func:`dv2s_gym.mining.loop_verdict.recommendation`)."""
+    from dv2s_gym.mining.loop_verdict import ACCEPTED, judge_round
+
+    rounds = [dict(record) for record in report.get("rounds") or []]
+    for index, record in enumerate(rounds):
+        judged = judge_round(record)
+        if judged is not None and judged["verdict"] == ACCEPTED and "final_vs_start" not in record:
+            record["final_vs_start"] = final_vs_start({"rounds": rounds[:index + 1]})
+    body = {**report, "rounds": rounds}
+    if "final_vs_start" not in body:
+        final = final_vs_start(body, out)
+        if final is not None:
+            body["final_vs_start"] = final
+    return body
 
 
 def _final_line(final: Optional[Mapping[str, Any]]) -> Optional[str]:
@@ -729,18 +750,16 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
 def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
     """Write ``report.json``, ``report.md`` (and ``report.html`` when available) atomically; returns their paths.
 
-    With two or more regression-tested rounds, ``final_vs_start`` (:func:`final_vs_start`) is added to them."""
+    With two or more regression-tested rounds, ``final_vs_start`` (:func:`final_vs_start`) is added to them, and to
+    each accepted round the same check over the rounds up to it (:func:`with_cross_round_checks`)."""
     from scenario_bank.atomic import atomic_write_json, atomic_write_text
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    if "final_vs_start" not in report:
-        final = final_vs_start(report, out)
-        if final is not None:
-            from dv2s_gym.mining.loop_verdict import recommendation
+    from dv2s_gym.mining.loop_verdict import recommendation
 
-            report = {**report, "final_vs_start": final}
-            report["recommendation"] = recommendation(report)
+    report = with_cross_round_checks(report, out)
+    report["recommendation"] = recommendation(report)
     paths = {"json": atomic_write_json(out / "report.json", dict(report), indent=1) or out / "report.json"}
     markdown = render_markdown(report)
     atomic_write_text(out / "report.md", markdown)
