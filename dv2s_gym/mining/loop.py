@@ -337,7 +337,7 @@ def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[st
     return {"verdict": report.get("verdict"), "reason": comparison.get("reason"),
             "episodes": comparison.get("n"), "new_failure_rate": rate("candidate"), "old_failure_rate": rate("baseline"),
             "difference": comparison.get("difference"), "p_value": comparison.get("p_value"),
-            "regressed": report.get("regressed") or [], "report": str(path),
+            "regressed": report.get("regressed") or [], "report": str(Path(path).resolve()),
             "held_out_parents": {name: {role: {key: ((per_scenario[name].get(side) or {}).get(key))
                                                for key in ("failure_rate", "stall_rate", "mean_speed")}
                                         for role, side in (("new", "candidate"), ("old", "baseline"))}
@@ -530,7 +530,7 @@ def _next_start(loop: _Loop, number: int, current: str) -> str:
     record = rounds[-1]
     start = loop.state.data["settings"]["policy"]
     # as the report judges it: the cross-round check on each accepted round's policy
-    body = loop_report.with_cross_round_checks({"settings": {"policy": start}, "rounds": rounds})
+    body = loop_report.with_cross_round_checks({"settings": {"policy": start}, "rounds": rounds}, folder=loop.out)
     advice = recommendation(body)
     # the policy to use, exactly as the report recommends it: the fine-tuned one only when it is the recommendation
     following = advice["policy"]
@@ -974,7 +974,8 @@ def _measures(summary: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
 def _comparison(report: Mapping[str, Any], path: Path) -> Dict[str, Any]:
     comparison = (report.get("overall") or {}).get("comparison") or {}
     return {"verdict": report.get("verdict"), "reason": comparison.get("reason"), "episodes": comparison.get("n"),
-            "difference": comparison.get("difference"), "p_value": comparison.get("p_value"), "report": str(path)}
+            "difference": comparison.get("difference"), "p_value": comparison.get("p_value"),
+            "report": str(Path(path).resolve())}
 
 
 def _split(kept: Sequence[Mapping[str, Any]], fraction: float, seed: int, by: str = HOLDOUT_BY,

@@ -77,6 +77,7 @@ finished it yet (the loop was stopped; rerunning resumes it).
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional
 
@@ -107,7 +108,22 @@ def _weights(weights: Optional[Mapping[str, Any]]) -> str:
     return ", ".join(f"{name} {float(value):g}" for name, value in sorted(weights.items()))
 
 
-def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None) -> Optional[Dict[str, Any]]:
+def _regress_report_path(stored: str, folder: Optional[Path]) -> Path:
+    """Where a round's regression report is: ``stored`` as ``loop.json`` has it (absolute; older loops recorded it
+    relative to the working directory the loop ran in), read in the loop folder ``folder`` when given (its
+    ``round_<n>/...`` part), so that the report does not depend on the working directory it is read from."""
+    path = Path(stored)
+    if folder is None:
+        return path
+    parts = path.parts
+    rounds = [index for index, part in enumerate(parts) if re.fullmatch(r"round_\d+", part)]
+    candidates = ([Path(folder).joinpath(*parts[rounds[-1]:])] if rounds else []) + (
+        [path] if path.is_absolute() else [Path(folder) / path])
+    return next((candidate for candidate in candidates if candidate.is_file()), candidates[0])
+
+
+def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
+                   folder: Optional[Path] = None) -> Optional[Dict[str, Any]]:
     """The final policy against the starting policy on the starting bank, from the rounds' regression reports.
 
     ``None`` unless two or more rounds finished their regression test. The first tested round's baseline
@@ -115,7 +131,8 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None) -> Opt
     (the final policy) ran the same scenarios and seeds; their episodes are paired by id and judged as
     ``dv2s regress`` does (:func:`dv2s_gym.regress.report.build_report`). With ``out`` the paired report is
     written to ``out/final_vs_start/report.json``. A report that cannot be read, or a starting-bank scenario
-    that changed between the rounds, gives ``{"error": reason}`` instead.
+    that changed between the rounds, gives ``{"error": reason}`` instead (and the verdict is then NOT ACCEPTED).
+    ``folder``: the loop folder the reports are read from (default ``out``; see :func:`_regress_report_path`).
     """
     from dv2s_gym.regress.report import build_report, load_report
 
@@ -124,8 +141,9 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None) -> Opt
         return None
     first, last = tested[0], tested[-1]
     try:
-        start = load_report(first["steps"]["regress"]["report"])
-        final = load_report(last["steps"]["regress"]["report"])
+        folder = folder if folder is not None else out
+        start = load_report(_regress_report_path(first["steps"]["regress"]["report"], folder))
+        final = load_report(_regress_report_path(last["steps"]["regress"]["report"], folder))
     except Exception as error:  # noqa: BLE001 - a missing or foreign report is a line of the loop report
         return {"error": f"cannot read the rounds' regression reports: {(str(error).splitlines() or [''])[0]}"}
     names = list((start.get("bank") or {}).get("scenarios") or [])
@@ -158,7 +176,8 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None) -> Opt
             "regressed": paired.get("regressed") or [], "report": str(path) if path is not None else None}
 
 
-def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = None) -> Dict[str, Any]:
+def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = None,
+                            folder: Optional[Path] = None) -> Dict[str, Any]:
     """``report`` with the cross-round check (:func:`final_vs_start` over the rounds up to it) recorded in each
     round that its own tests accepted (``None`` before two rounds were regression-tested), and, with two or more
     tested rounds, the report's own ``final_vs_start`` (its paired report written under ``out``). A policy the
@@ -169,10 +188,10 @@ def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = Non
     for index, record in enumerate(rounds):
         judged = judge_round(record)
         if judged is not None and judged["verdict"] == ACCEPTED and "final_vs_start" not in record:
-            record["final_vs_start"] = final_vs_start({"rounds": rounds[:index + 1]})
+            record["final_vs_start"] = final_vs_start({"rounds": rounds[:index + 1]}, folder=folder or out)
     body = {**report, "rounds": rounds}
     if "final_vs_start" not in body:
-        final = final_vs_start(body, out)
+        final = final_vs_start(body, out, folder)
         if final is not None:
             body["final_vs_start"] = final
     return body

@@ -11,7 +11,8 @@ FAILed or either held-out test found it worse; it is *not accepted* when the reg
 in ERROR, when the round skipped, or when the held-out tests did not run (too few held-out episodes or families:
 no test, no acceptance). Without a control arm only the test against the start is required. Each round is
 tested against the policy it started from, so with two or more tested rounds a fine-tuned policy that FAILs
-against the starting one (``final_vs_start``) is rejected too. The verdict's reason names the test that decided
+against the starting one (``final_vs_start``) is rejected too, and is not accepted when that comparison
+cannot run. The verdict's reason names the test that decided
 it. The recommended policy (the policy to use) is the last accepted one, else the starting policy; every
 round's policy meets the cross-round check over the rounds up to it, and one that check rejected sends the
 recommendation back to the starting policy, so it is never the policy to use.
@@ -152,10 +153,16 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
 
 def _with_cross_round_check(judged: Dict[str, str], final: Optional[Mapping[str, Any]]) -> Dict[str, str]:
     """``judged`` (an ACCEPTED round's verdict) after the cross-round check on its policy (``final_vs_start`` over
-    the rounds up to it): REJECTED when that check FAILed."""
+    the rounds up to it): REJECTED when that check FAILed, NOT ACCEPTED when it could not run (an error):
+    a check that cannot run never counts as passed."""
     if judged["verdict"] != ACCEPTED or not final:
         return judged
     rounds = ", ".join(map(str, final.get("rounds") or []))
+    if final.get("error"):
+        return {"verdict": NOT_ACCEPTED, "decided_by": "final_vs_start",
+                "reason": f"the regression test of the fine-tuned against the starting policy on the starting bank, "
+                          f"over the rounds so far, could not run ({final['error']}), so a regression against the "
+                          f"starting policy is not ruled out"}
     if final.get("verdict") == "FAIL":  # each round passed against its own start
         return {"verdict": REJECTED, "decided_by": "final_vs_start",
                 "reason": f"over rounds {rounds} the fine-tuned policy regressed against the starting one on the "
