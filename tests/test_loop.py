@@ -942,3 +942,30 @@ def test_the_round_record_and_report_list_every_reason_a_conversion_was_rejected
         {"round": 1, "steps": {"mine": {**mined, "kept": [], "folder": str(tmp_path)}}}]})
     for reason in mined["rejected_reasons"]:
         assert f"  - rejected: {reason}" in markdown
+
+
+def test_a_held_out_family_whose_episodes_all_errored_does_not_count_toward_the_minimum():
+    from dv2s_gym.mining.loop import heldout_comparison
+    from dv2s_gym.mining.loop_verdict import judge_round
+
+    families = {"a1": "famA", "b1": "famB", "c1": "famC"}
+    start = [{"scenario": s, "seed": seed, "failed": s == "c1" and seed < 2, "error": None}
+             for s in families for seed in range(10)]
+    control = [dict(r) for r in start]
+    tuned = [{"scenario": s, "seed": seed, "failed": False, "error": "RuntimeError: NaN action" if s == "c1" else None}
+             for s in families for seed in range(10)]
+    summary = heldout_comparison(start, tuned, control, min_episodes=20, families=families, min_families=3)
+    assert summary["pairs"] == 20 and summary["heldout_families"] == 2 and summary["sampled_families"] == 3
+    assert "only 2 held-out families (parent scenarios) with a tested pair" in summary["underpowered"]
+    assert summary["significantly_worse"] == {"start": None, "control": None}
+    record = {"round": 1, "new_policy": "ppo:x", "steps": {"fine_tune": {}, "after": summary,
+                                                            "regress": {"verdict": "PASS", "reason": "r"}}}
+    assert judge_round(record)["verdict"] == "NOT ACCEPTED"
+    from dv2s_gym.mining.loop_report import _heldout_lines
+
+    assert "from 2 families (3 scenarios, 1 more with no tested pair)" in "\n".join(_heldout_lines(summary))
+    # with every family tested the same round is judged, and the sentence gives the pairs beside p
+    tuned = [{**r, "error": None} for r in tuned]
+    summary = heldout_comparison(start, tuned, control, min_episodes=20, families=families, min_families=3)
+    judged = judge_round({**record, "steps": {**record["steps"], "after": summary}})
+    assert judged["verdict"] == "ACCEPTED" and "on 30 held-out pairs from 3 families)" in judged["reason"]

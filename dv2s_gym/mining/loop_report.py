@@ -36,7 +36,8 @@
                                                     "fine_tuned_only", "control_only", "neither"}, "mcnemar_p",
                                                     "per_scenario": {scenario: control failures}},
                                      "failure_types": {"start" | "control" | "fine_tuned": {type: n}},
-                                     "min_episodes", "min_families", "heldout_families", "heldout_scenarios",
+                                     "min_episodes", "min_families", "heldout_families" (with a tested pair),
+                                     "sampled_families", "heldout_scenarios",
                                      "underpowered": why no drop or test is reported (only below
                                      min_episodes pairs or min_families families; then the drop and
                                      p-values are None),
@@ -377,8 +378,11 @@ def _sources_text(after: Mapping[str, Any]) -> str:
     if after.get("heldout_families") is None:
         return ""
     families, scenarios = after["heldout_families"], after.get("heldout_scenarios")
+    sampled = after.get("sampled_families")
+    untested = (f", {sampled - families} more with no tested pair" if sampled is not None and sampled > families
+                else "")
     return (f" from {families} famil{'y' if families == 1 else 'ies'} ({scenarios} scenario"
-            f"{'' if scenarios == 1 else 's'})")
+            f"{'' if scenarios == 1 else 's'}{untested})")
 
 
 def _heldout_lines(after: Mapping[str, Any]) -> List[str]:

@@ -144,7 +144,9 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
                           f"{' and '.join('the starting policy' if k == 'start' else 'the control' for k in missing)}"
                           f" did not run ({why}), so a harm on the held-out families is not ruled out"}
     parts = [f"not significantly worse than {'the starting policy' if key == 'start' else 'the control'} "
-             f"(p = {tests[key]['p_value']:.3g})" for key in ("start", "control") if tests.get(key)]
+             f"(p = {tests[key]['p_value']:.3g} on {tests[key].get('pairs')} held-out pairs from "
+             f"{tests[key].get('families')} famil{'y' if tests[key].get('families') == 1 else 'ies'})"
+             for key in ("start", "control") if tests.get(key)]
     control_note = "" if tests.get("control") else "; no control arm to compare with"
     return {"verdict": ACCEPTED, "decided_by": "all",
             "reason": f"no regression on the rest of the bank ({regression} PASSed: {regress.get('reason')}); on "
