@@ -241,9 +241,10 @@ def test_held_out_workers_that_crash_or_hang_give_error_records_not_failures(tmp
     hung = evaluate_heldout("after", "regress_misbehaving_policies:hang", episodes[:1], store=store, bank_dir=None,
                             workers=WorkerSettings(workers=2, timeout=3), progress=False)
     assert "hung" in hung[0]["error"]
-    # errors are left out of the pairs, never counted as failures, and run again on a reopened store
+    # errors are left out of the pairs, never counted as failures, and stay errors on a reopened store
     assert paired_summary(crashed[:1], hung)["errors"] == 1
-    assert HeldOutStore(tmp_path / "heldout.jsonl").records == {}
+    reopened = HeldOutStore(tmp_path / "heldout.jsonl").records
+    assert len(reopened) == 3 and all(record["error"] for record in reopened.values())
 
 
 def test_paired_summary_counts_and_drop():
@@ -946,3 +947,58 @@ def test_the_round_record_and_report_list_every_reason_a_conversion_was_rejected
         {"round": 1, "steps": {"mine": {**mined, "kept": [], "folder": str(tmp_path)}}}]})
     for reason in mined["rejected_reasons"]:
         assert f"  - rejected: {reason}" in markdown
+
+
+def test_a_held_out_family_whose_episodes_all_errored_does_not_count_toward_the_minimum():
+    from dv2s_gym.mining.loop import heldout_comparison
+    from dv2s_gym.mining.loop_verdict import judge_round
+
+    families = {"a1": "famA", "b1": "famB", "c1": "famC"}
+    start = [{"scenario": s, "seed": seed, "failed": s == "c1" and seed < 2, "error": None}
+             for s in families for seed in range(10)]
+    control = [dict(r) for r in start]
+    tuned = [{"scenario": s, "seed": seed, "failed": False, "error": "RuntimeError: NaN action" if s == "c1" else None}
+             for s in families for seed in range(10)]
+    summary = heldout_comparison(start, tuned, control, min_episodes=20, families=families, min_families=3)
+    assert summary["pairs"] == 20 and summary["heldout_families"] == 2 and summary["sampled_families"] == 3
+    assert "only 2 held-out families (parent scenarios) with a tested pair" in summary["underpowered"]
+    assert summary["significantly_worse"] == {"start": None, "control": None}
+    record = {"round": 1, "new_policy": "ppo:x", "steps": {"fine_tune": {}, "after": summary,
+                                                            "regress": {"verdict": "PASS", "reason": "r"}}}
+    assert judge_round(record)["verdict"] == "NOT ACCEPTED"
+    from dv2s_gym.mining.loop_report import _heldout_lines
+
+    assert "from 2 families (3 scenarios, 1 more with no tested pair)" in "\n".join(_heldout_lines(summary))
+    # with every family tested the same round is judged, and the sentence gives the pairs beside p
+    tuned = [{**r, "error": None} for r in tuned]
+    summary = heldout_comparison(start, tuned, control, min_episodes=20, families=families, min_families=3)
+    judged = judge_round({**record, "steps": {**record["steps"], "after": summary}})
+    assert judged["verdict"] == "ACCEPTED" and "on 30 held-out pairs from 3 families)" in judged["reason"]
+
+
+def test_a_starting_policy_episode_that_errored_before_stays_out_of_the_after_steps_test(tmp_path, monkeypatch):
+    """The `after` step reads the starting policy's held-out episodes back from the store: one that errored in the
+    `before` step is not run again there, so its pair is in no rate or test, as the report says."""
+    import dv2s_gym.mining.heldout as heldout
+    from dv2s_gym.mining.loop import errored_episodes, heldout_comparison
+
+    runs = []
+
+    def task(t):
+        runs.append((t["role"], t["scenario"], t["seed"]))
+        if (t["role"], t["scenario"], t["seed"]) == ("before", "s1", 0):
+            return {**t, "failed": None, "failure": None, "error": "TimeoutError: worker hung"}
+        return {**t, "failed": t["role"] == "after" and t["seed"] == 0, "failure": None, "error": None}
+
+    monkeypatch.setattr(heldout, "heldout_task", task)
+    path = tmp_path / "heldout.jsonl"
+    episodes = [("s1", 0), ("s1", 1), ("s2", 0), ("s2", 1)]
+    settings = dict(bank_dir=None, workers=WorkerSettings(workers=1), progress=False)
+    first = evaluate_heldout("before", "P0", episodes, store=HeldOutStore(path), **settings)
+    assert errored_episodes(first)["episodes"] == 1
+    store = HeldOutStore(path)  # as the `after` step opens it
+    before = evaluate_heldout("before", "P0", episodes, store=store, **settings)
+    after = evaluate_heldout("after", "P1", episodes, store=store, **settings)
+    assert runs.count(("before", "s1", 0)) == 1 and before == first
+    summary = heldout_comparison(before, after, None, min_episodes=0, seed=0)
+    assert summary["pairs"] == 3 and summary["errors"] == 1

@@ -81,3 +81,74 @@ def test_a_changed_starting_bank_is_not_compared(tmp_path):
     missing = _loop(tmp_path, 2)
     Path(missing["rounds"][0]["steps"]["regress"]["report"]).unlink()
     assert final_vs_start(missing)["error"].startswith("cannot read the rounds' regression reports")
+
+
+def _accepted(record: dict) -> dict:
+    """``record`` as a round whose own tests accepted its policy (regression PASS, held-out no worse)."""
+    from dv2s_gym.mining.loop_verdict import heldout_worse
+
+    fine = {"f1": {"both_fail": 0, "candidate_only": 0, "baseline_only": 2, "neither": 28},
+            "f2": {"both_fail": 0, "candidate_only": 0, "baseline_only": 2, "neither": 28}}
+    steps = {**record["steps"], "fine_tune": {}, "regress": {**record["steps"]["regress"], "verdict": "PASS"},
+             "after": {"pairs": 60, "significantly_worse": {"start": heldout_worse(fine, "start"), "control": None}}}
+    return {**record, "steps": steps}
+
+
+def test_the_next_round_and_the_report_never_use_a_policy_the_cross_round_check_rejected(tmp_path):
+    from types import SimpleNamespace
+
+    from dv2s_gym.mining import loop as loop_module
+
+    body = _loop(tmp_path, 2)
+    rounds = [_accepted(record) for record in body["rounds"]]  # round 2 passes against P1 but P2 FAILs against P0
+    state = SimpleNamespace(data={"settings": {"policy": "p0"}, "rounds": rounds}, save=lambda: None)
+    loop = SimpleNamespace(state=state, out=tmp_path)
+    assert loop_module._next_start(loop, 2, "p1") == "p0"
+    # round 3 starts from p0 and its own regression test FAILs
+    rounds.append({"round": 3, "policy": "p0", "new_policy": "p3", "steps": {"fine_tune": {}, "regress": {
+        "verdict": "FAIL", "report": _regress(tmp_path / "r3.json", "p3", "p0", P2_FAILS, P0_FAILS)}}})
+    assert loop_module._next_start(loop, 3, "p0") == "p0"
+    paths = write_loop_reports({**body, "policy": "p3", "rounds": rounds}, tmp_path / "loop")
+    data = json.loads(paths["json"].read_text())
+    assert data["rounds"][1]["final_vs_start"]["verdict"] == "FAIL"
+    assert data["recommendation"]["policy"] == "p0" and "Policy to use: `p0`" in paths["md"].read_text()
+
+
+def test_the_cross_round_check_reads_the_loop_folder_from_any_working_directory(tmp_path, monkeypatch):
+    from types import SimpleNamespace
+
+    from dv2s_gym.mining import loop as loop_module
+    from dv2s_gym.mining.loop_verdict import recommendation
+
+    monkeypatch.chdir(tmp_path)
+    folder = Path("out/loop")  # --out as typed, relative to the folder the loop ran in
+    rounds = []
+    for number, (policy, fails, base_fails) in enumerate((("p0", P1_FAILS, P0_FAILS), ("p1", P2_FAILS, P1_FAILS)), 1):
+        stored = folder / f"round_{number}" / "regress" / "report.json"  # as older loops recorded it
+        _regress(stored, f"p{number}", policy, fails, base_fails)
+        rounds.append(_accepted({"round": number, "policy": policy, "new_policy": f"p{number}",
+                                 "steps": {"regress": {"report": str(stored)}}}))
+    body = {"settings": {"policy": "p0"}, "policy": "p2", "rounds": rounds}
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    given = Path("../out/loop")  # the same loop folder, typed from another working directory
+    assert final_vs_start(body, folder=given)["verdict"] == "FAIL"
+    paths = write_loop_reports(body, given)
+    assert json.loads(paths["json"].read_text())["recommendation"]["policy"] == "p0"
+    state = SimpleNamespace(data={"settings": {"policy": "p0"}, "rounds": [dict(r) for r in rounds]}, save=lambda: None)
+    assert loop_module._next_start(SimpleNamespace(state=state, out=given), 2, "p1") == "p0"
+    # a cross-round check that cannot run (here: no loop folder to read the reports from) never accepts
+    unread = final_vs_start(body)
+    assert "cannot read" in unread["error"]
+    verdict = recommendation({**body, "final_vs_start": unread})
+    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["exit_code"] == 3 and verdict["policy"] == "p1"
+    assert "could not run" in verdict["reason"]
+
+
+def test_the_loop_records_regression_report_paths_that_do_not_depend_on_the_working_directory(tmp_path, monkeypatch):
+    from dv2s_gym.mining.loop import _regress_summary
+
+    monkeypatch.chdir(tmp_path)
+    summary = _regress_summary({"verdict": "PASS"}, Path("out/loop/round_1/regress/report.json"))
+    assert summary["report"] == str(tmp_path.resolve() / "out/loop/round_1/regress/report.json")

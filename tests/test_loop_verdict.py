@@ -149,3 +149,16 @@ def test_held_out_tests_that_could_not_run_leave_the_policy_not_accepted():
     assert summary["significantly_worse"] == {"start": None, "control": None} and summary["underpowered"]
     assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "heldout_vs_start"
     assert "did not run" in verdict["reason"] and "TOO SMALL TO JUDGE" in verdict["sentence"]
+
+
+def test_a_policy_the_cross_round_check_rejected_is_never_the_policy_to_use():
+    # rounds 1 and 2 each pass against their own start, but over rounds 1-2 round 2's policy regressed against the
+    # starting one (recorded with round 2); round 3 then starts from the starting policy and fails its own test
+    second = {**_round(2, "PASS"), "final_vs_start": {"verdict": "FAIL", "rounds": [1, 2], "reason": "worse"}}
+    final = {"verdict": "PASS", "rounds": [1, 3], "reason": "no worse"}
+    for last in ("FAIL", "INCONCLUSIVE"):
+        verdict = recommendation(_report(_round(1, "PASS"), second, _round(3, last), final_vs_start=final))
+        assert verdict["policy"] == "dv2s-ppo" and "keep the starting policy dv2s-ppo" in verdict["sentence"]
+    # a later accepted round that passes the check is used again
+    verdict = recommendation(_report(_round(1, "PASS"), second, _round(3, "PASS"), final_vs_start=final))
+    assert verdict["verdict"] == "ACCEPTED" and verdict["policy"] == "ppo:round_3/policy/model.zip"

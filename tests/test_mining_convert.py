@@ -542,3 +542,22 @@ def test_the_replay_script_narrows_only_the_continuous_ranges_around_the_failing
         assert kept in narrowed
     with pytest.raises(ValueError, match="outside its range"):
         narrowed_script(script, {"gap": 41.0})
+
+
+def test_the_judge_compares_parameter_names_without_case_and_never_prints_an_outside_value_as_inside():
+    from dv2s_gym.mining.convert import _judge, compare_parameters
+
+    passing = {"reproduction": {"k": 10, "reproduced": 10, "rate": 1.0, "interaction_shown": 10},
+               "avoidability": {"reference": "rule", "k": 10, "failed": 0, "avoided_rate": 1.0}}
+    judged = compare_parameters({"lead_speed": 12.0}, "param Lead_Speed = Range(5, 10)\n")
+    assert judged["outside"] == ["lead_speed"] and judged["not_in_script"] == []
+    assert [str(r) for r in _judge({**passing, "parameters": judged}, {}, {"type": "collision"}, 0.3)] == [
+        "parameters: the new scenario's ranges do not contain the failing values: lead_speed (the script's "
+        "Lead_Speed) = 12 outside 5..10"]
+    just_past = compare_parameters({"lead_speed": 10.00001}, "param lead_speed = Range(5, 10)\n")
+    assert [str(r) for r in _judge({**passing, "parameters": just_past}, {}, {"type": "collision"}, 0.3)] == [
+        "parameters: the new scenario's ranges do not contain the failing values: lead_speed = 10.00001 "
+        "outside 5..10"]
+    below = compare_parameters({"gap": 5.0000001}, "param gap = Range(5.0000002, 9)\n")
+    assert "gap = 5.0000001 outside 5.0000002..9" in str(_judge({**passing, "parameters": below}, {},
+                                                                {"type": "collision"}, 0.3)[0])

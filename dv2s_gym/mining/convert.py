@@ -266,27 +266,48 @@ def compare_actors(source: Mapping[str, int], scripts: List[Mapping[str, int]],
 
 
 def compare_parameters(failing: Mapping[str, Any], script: str) -> Dict[str, Any]:
-    """The failing parameter values against the ranges of the new script's global parameters of the same name
-    (``param x = Range(a, b)`` and the other numeric forms :func:`scenario_bank.dedup.param_ranges` reads):
-    ``{"compared": {name: {"value", "range": [low, high]}}, "outside": [names whose range does not contain the
-    failing value], "not_in_script": [failing parameters the script does not define as numbers]}``."""
+    """The failing parameter values against the ranges of the new script's global parameters of the same name,
+    compared without regard to case (``param x = Range(a, b)`` and the other numeric forms
+    :func:`scenario_bank.dedup.param_ranges` reads): ``{"compared": {name: {"value", "range": [low, high]}}
+    (plus ``"script_name"`` when the script spells it differently), "outside": [names whose range does not contain
+    the failing value], "not_in_script": [failing parameters the script does not define as numbers]}``."""
     from scenario_bank.dedup import param_ranges
 
     ranges = param_ranges(script)
+    folded: Dict[str, str] = {}
+    for script_name in sorted(ranges):
+        folded.setdefault(script_name.casefold(), script_name)
     compared: Dict[str, Any] = {}
     outside: List[str] = []
     absent: List[str] = []
     for name, value in sorted(failing.items()):
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
             continue
-        if name not in ranges:
+        script_name = name if name in ranges else folded.get(str(name).casefold())
+        if script_name is None:
             absent.append(name)
             continue
-        low, high = (float(v) for v in ranges[name])
+        low, high = (float(v) for v in ranges[script_name])
         compared[name] = {"value": float(value), "range": [low, high]}
+        if script_name != name:
+            compared[name]["script_name"] = script_name
         if not low - 1e-9 <= float(value) <= high + 1e-9:
             outside.append(name)
     return {"compared": compared, "outside": outside, "not_in_script": absent}
+
+
+def _outside_text(name: str, comparison: Mapping[str, Any]) -> str:
+    """``name = value outside low..high``, every number exact (10.00001 against 5..10 is not "10"), so a value
+    outside never prints as one inside."""
+    low, high = comparison["range"]
+    spelled = f" (the script's {comparison['script_name']})" if comparison.get("script_name") else ""
+    return f"{name}{spelled} = {_exact(float(comparison['value']))} outside {_exact(float(low))}..{_exact(float(high))}"
+
+
+def _exact(number: float) -> str:
+    """``number`` short (``10``) when that is exact, else every digit it takes (a range end is never rounded)."""
+    short = f"{number:g}"
+    return short if float(short) == number else repr(number)
 
 
 def _census_text(census: Mapping[str, int]) -> str:
@@ -339,8 +360,7 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
     parameters = out.get("parameters")
     if parameters and parameters.get("outside"):
         found.append(_Rejected("parameters", "the new scenario's ranges do not contain the failing values: " + ", ".join(
-            f"{name} = {parameters['compared'][name]['value']:g} outside {parameters['compared'][name]['range'][0]:g}"
-            f"..{parameters['compared'][name]['range'][1]:g}" for name in parameters["outside"])))
+            _outside_text(name, parameters["compared"][name]) for name in parameters["outside"])))
     return found
 
 

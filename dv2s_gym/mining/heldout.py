@@ -11,6 +11,8 @@ and fsynced), so an interrupted evaluation rerun with the same store runs only w
 missing. Several workers run on the local process pool (:class:`dv2s_gym.workers.pool.LocalBackend`:
 each worker keeps its env and loaded policies between episodes; a worker that crashes or
 hangs past ``timeout`` is replaced and its episode run once more, then recorded as an error).
+An errored episode stays an error in the store (it is not run again on resume, nor when the ``after`` step reads
+the starting policy's episodes back), so its pair is left out of every rate and test, as the loop report says.
 """
 
 from __future__ import annotations
@@ -40,9 +42,11 @@ class HeldOutStore:
     def __init__(self, path: os.PathLike | str) -> None:
         self.path = Path(path)
         self.records: Dict[Tuple[str, str, int], Dict[str, Any]] = {}
-        for record in read_rows(self.path):  # a line cut by a kill is left out: its episode runs again
-            if not record.get("error"):
-                self.records[(record["role"], record["scenario"], int(record["seed"]))] = record
+        # a line cut by a kill is left out: its episode runs again. An episode that errored is finished too (its
+        # error is its outcome): running only the errored episodes again would give one policy a second draw on
+        # exactly those episodes, and the report, which counts them in no rate or test, would not say so
+        for record in read_rows(self.path):
+            self.records[(record["role"], record["scenario"], int(record["seed"]))] = record
 
     def append(self, record: Mapping[str, Any]) -> None:
         """Save one finished episode (fsynced)."""

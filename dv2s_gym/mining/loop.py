@@ -337,7 +337,7 @@ def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[st
     return {"verdict": report.get("verdict"), "reason": comparison.get("reason"),
             "episodes": comparison.get("n"), "new_failure_rate": rate("candidate"), "old_failure_rate": rate("baseline"),
             "difference": comparison.get("difference"), "p_value": comparison.get("p_value"),
-            "regressed": report.get("regressed") or [], "report": str(path),
+            "regressed": report.get("regressed") or [], "report": str(Path(path).resolve()),
             "held_out_parents": {name: {role: {key: ((per_scenario[name].get(side) or {}).get(key))
                                                for key in ("failure_rate", "stall_rate", "mean_speed")}
                                         for role, side in (("new", "candidate"), ("old", "baseline"))}
@@ -529,10 +529,8 @@ def _next_start(loop: _Loop, number: int, current: str) -> str:
     rounds = loop.state.data["rounds"][:number]
     record = rounds[-1]
     start = loop.state.data["settings"]["policy"]
-    body: Dict[str, Any] = {"settings": {"policy": start}, "rounds": rounds}
-    final = loop_report.final_vs_start(body)  # as the report judges it: with two or more tested rounds
-    if final is not None:
-        body["final_vs_start"] = final
+    # as the report judges it: the cross-round check on each accepted round's policy
+    body = loop_report.with_cross_round_checks({"settings": {"policy": start}, "rounds": rounds}, folder=loop.out)
     advice = recommendation(body)
     # the policy to use, exactly as the report recommends it: the fine-tuned one only when it is the recommendation
     following = advice["policy"]
@@ -766,15 +764,16 @@ _STAGE_NAMES = {"mine": "mining failures", "split": "splitting by family", "befo
 
 
 def underpowered(episodes: int, minimum: int, families: Optional[int] = None,
-                 min_families: int = 0) -> Optional[str]:
+                 min_families: int = 0, tested: bool = False) -> Optional[str]:
     """The warning for a round with fewer than ``minimum`` held-out episodes or fewer than ``min_families``
-    held-out families (``families``, when known), or ``None``."""
+    held-out families (``families``, when known; ``tested``: families with a tested pair), or ``None``."""
     reasons = []
     if episodes < minimum:
         reasons.append(f"only {episodes} held-out episode(s), fewer than the {minimum} needed "
                        "(--min-heldout-episodes)")
     if families is not None and families < min_families:
-        reasons.append(f"only {families} held-out famil{'y' if families == 1 else 'ies'} (parent scenarios), fewer "
+        reasons.append(f"only {families} held-out famil{'y' if families == 1 else 'ies'} (parent scenarios)"
+                       f"{' with a tested pair' if tested else ''}, fewer "
                        f"than the {min_families} needed: episodes of one family are near-identical scenes, not "
                        "independent trials")
     if not reasons:
@@ -864,8 +863,9 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     the control's rate and the paired fine-tuned-vs-control table and exact McNemar p (``vs_control``), and
     each policy's failures by type (``failure_types``: stalls apart from collisions and the rest).
 
-    ``families`` maps each held-out scenario to its family (default: each scenario its own); ``heldout_families``
-    and ``heldout_scenarios`` count those the episodes came from. Below ``min_episodes`` pairs or
+    ``families`` maps each held-out scenario to its family (default: each scenario its own); ``heldout_scenarios``
+    and ``sampled_families`` count those the episodes came from, ``heldout_families`` the families with at least
+    one tested pair (no error on either side) against the start and, with a control, against the control too. Below ``min_episodes`` pairs or
     ``min_families`` families the drop, its interval and both p-values are ``None`` and ``underpowered``
     says why (the rates, with their wide intervals, stay). ``significantly_worse`` holds, for ``start`` and
     ``control``, whether the fine-tuned policy is significantly worse on the held-out families
@@ -877,7 +877,16 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     summary["min_episodes"] = min_episodes
     scenarios = sorted({str(r["scenario"]) for r in before})
     summary["heldout_scenarios"] = len(scenarios)
-    summary["heldout_families"] = len({(families or {}).get(name, name) for name in scenarios})
+    # a family counts only with a tested pair (no error on either side) in each held-out test: one whose episodes
+    # all errored tests nothing, so it never makes a round large enough to judge
+    def tested_families(baseline: Sequence[Mapping[str, Any]]) -> set:
+        return {family for family, table in _family_tables(baseline, after, families).items() if table.n}
+
+    tested = tested_families(before)
+    if control is not None:
+        tested &= tested_families(control)
+    summary["heldout_families"] = len(tested)
+    summary["sampled_families"] = len({(families or {}).get(name, name) for name in scenarios})
     summary["min_families"] = min_families
     summary["failure_types"] = {"start": failure_types(before), "fine_tuned": failure_types(after)}
     if control is not None:
@@ -892,7 +901,7 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
                                  "mcnemar_p": versus["mcnemar_p"],
                                  "per_scenario": {name: row["before"]
                                                   for name, row in versus["per_scenario"].items()}}
-    shortfall = underpowered(summary["pairs"], min_episodes, summary["heldout_families"], min_families)
+    shortfall = underpowered(summary["pairs"], min_episodes, summary["heldout_families"], min_families, tested=True)
     if shortfall:
         summary["underpowered"] = shortfall
         summary.update(relative_drop=None, relative_drop_interval=[None, None], mcnemar_p=None)
@@ -979,7 +988,8 @@ def _measures(summary: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
 def _comparison(report: Mapping[str, Any], path: Path) -> Dict[str, Any]:
     comparison = (report.get("overall") or {}).get("comparison") or {}
     return {"verdict": report.get("verdict"), "reason": comparison.get("reason"), "episodes": comparison.get("n"),
-            "difference": comparison.get("difference"), "p_value": comparison.get("p_value"), "report": str(path)}
+            "difference": comparison.get("difference"), "p_value": comparison.get("p_value"),
+            "report": str(Path(path).resolve())}
 
 
 def _split(kept: Sequence[Mapping[str, Any]], fraction: float, seed: int, by: str = HOLDOUT_BY,

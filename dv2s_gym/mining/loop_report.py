@@ -36,7 +36,8 @@
                                                     "fine_tuned_only", "control_only", "neither"}, "mcnemar_p",
                                                     "per_scenario": {scenario: control failures}},
                                      "failure_types": {"start" | "control" | "fine_tuned": {type: n}},
-                                     "min_episodes", "min_families", "heldout_families", "heldout_scenarios",
+                                     "min_episodes", "min_families", "heldout_families" (with a tested pair),
+                                     "sampled_families", "heldout_scenarios",
                                      "underpowered": why no drop or test is reported (only below
                                      min_episodes pairs or min_families families; then the drop and
                                      p-values are None),
@@ -77,10 +78,12 @@ finished it yet (the loop was stopped; rerunning resumes it).
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional
 
-__all__ = ["write_loop_reports", "render_markdown", "render_html", "round_summary", "round_clips", "final_vs_start", "FINAL_VS_START_DIR"]
+__all__ = ["write_loop_reports", "render_markdown", "render_html", "round_summary", "round_clips", "final_vs_start",
+           "with_cross_round_checks", "FINAL_VS_START_DIR"]
 
 FINAL_VS_START_DIR = "final_vs_start"
 """Folder (in the loop folder) of the final-vs-starting-policy paired regression report."""
@@ -106,7 +109,22 @@ def _weights(weights: Optional[Mapping[str, Any]]) -> str:
     return ", ".join(f"{name} {float(value):g}" for name, value in sorted(weights.items()))
 
 
-def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None) -> Optional[Dict[str, Any]]:
+def _regress_report_path(stored: str, folder: Optional[Path]) -> Path:
+    """Where a round's regression report is: ``stored`` as ``loop.json`` has it (absolute; older loops recorded it
+    relative to the working directory the loop ran in), read in the loop folder ``folder`` when given (its
+    ``round_<n>/...`` part), so that the report does not depend on the working directory it is read from."""
+    path = Path(stored)
+    if folder is None:
+        return path
+    parts = path.parts
+    rounds = [index for index, part in enumerate(parts) if re.fullmatch(r"round_\d+", part)]
+    candidates = ([Path(folder).joinpath(*parts[rounds[-1]:])] if rounds else []) + (
+        [path] if path.is_absolute() else [Path(folder) / path])
+    return next((candidate for candidate in candidates if candidate.is_file()), candidates[0])
+
+
+def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
+                   folder: Optional[Path] = None) -> Optional[Dict[str, Any]]:
     """The final policy against the starting policy on the starting bank, from the rounds' regression reports.
 
     ``None`` unless two or more rounds finished their regression test. The first tested round's baseline
@@ -114,7 +132,8 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None) -> Opt
     (the final policy) ran the same scenarios and seeds; their episodes are paired by id and judged as
     ``dv2s regress`` does (:func:`dv2s_gym.regress.report.build_report`). With ``out`` the paired report is
     written to ``out/final_vs_start/report.json``. A report that cannot be read, or a starting-bank scenario
-    that changed between the rounds, gives ``{"error": reason}`` instead.
+    that changed between the rounds, gives ``{"error": reason}`` instead (and the verdict is then NOT ACCEPTED).
+    ``folder``: the loop folder the reports are read from (default ``out``; see :func:`_regress_report_path`).
     """
     from dv2s_gym.regress.report import build_report, load_report
 
@@ -123,8 +142,9 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None) -> Opt
         return None
     first, last = tested[0], tested[-1]
     try:
-        start = load_report(first["steps"]["regress"]["report"])
-        final = load_report(last["steps"]["regress"]["report"])
+        folder = folder if folder is not None else out
+        start = load_report(_regress_report_path(first["steps"]["regress"]["report"], folder))
+        final = load_report(_regress_report_path(last["steps"]["regress"]["report"], folder))
     except Exception as error:  # noqa: BLE001 - a missing or foreign report is a line of the loop report
         return {"error": f"cannot read the rounds' regression reports: {(str(error).splitlines() or [''])[0]}"}
     names = list((start.get("bank") or {}).get("scenarios") or [])
@@ -155,6 +175,27 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None) -> Opt
             "old_failure_rate": (overall.get("baseline") or {}).get("failure_rate"),
             "difference": comparison.get("difference"), "p_value": comparison.get("p_value"),
             "regressed": paired.get("regressed") or [], "report": str(path) if path is not None else None}
+
+
+def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = None,
+                            folder: Optional[Path] = None) -> Dict[str, Any]:
+    """``report`` with the cross-round check (:func:`final_vs_start` over the rounds up to it) recorded in each
+    round that its own tests accepted (``None`` before two rounds were regression-tested), and, with two or more
+    tested rounds, the report's own ``final_vs_start`` (its paired report written under ``out``). A policy the
+    check rejected is never the policy to use (:func:`dv2s_gym.mining.loop_verdict.recommendation`)."""
+    from dv2s_gym.mining.loop_verdict import ACCEPTED, judge_round
+
+    rounds = [dict(record) for record in report.get("rounds") or []]
+    for index, record in enumerate(rounds):
+        judged = judge_round(record)
+        if judged is not None and judged["verdict"] == ACCEPTED and "final_vs_start" not in record:
+            record["final_vs_start"] = final_vs_start({"rounds": rounds[:index + 1]}, folder=folder or out)
+    body = {**report, "rounds": rounds}
+    if "final_vs_start" not in body:
+        final = final_vs_start(body, out, folder)
+        if final is not None:
+            body["final_vs_start"] = final
+    return body
 
 
 def _final_line(final: Optional[Mapping[str, Any]]) -> Optional[str]:
@@ -348,8 +389,11 @@ def _sources_text(after: Mapping[str, Any]) -> str:
     if after.get("heldout_families") is None:
         return ""
     families, scenarios = after["heldout_families"], after.get("heldout_scenarios")
+    sampled = after.get("sampled_families")
+    untested = (f", {sampled - families} more with no tested pair" if sampled is not None and sampled > families
+                else "")
     return (f" from {families} famil{'y' if families == 1 else 'ies'} ({scenarios} scenario"
-            f"{'' if scenarios == 1 else 's'})")
+            f"{'' if scenarios == 1 else 's'}{untested})")
 
 
 def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
@@ -740,18 +784,16 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
 def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
     """Write ``report.json``, ``report.md`` (and ``report.html`` when available) atomically; returns their paths.
 
-    With two or more regression-tested rounds, ``final_vs_start`` (:func:`final_vs_start`) is added to them."""
+    With two or more regression-tested rounds, ``final_vs_start`` (:func:`final_vs_start`) is added to them, and to
+    each accepted round the same check over the rounds up to it (:func:`with_cross_round_checks`)."""
     from scenario_bank.atomic import atomic_write_json, atomic_write_text
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    if "final_vs_start" not in report:
-        final = final_vs_start(report, out)
-        if final is not None:
-            from dv2s_gym.mining.loop_verdict import recommendation
+    from dv2s_gym.mining.loop_verdict import recommendation
 
-            report = {**report, "final_vs_start": final}
-            report["recommendation"] = recommendation(report)
+    report = with_cross_round_checks(report, out)
+    report["recommendation"] = recommendation(report)
     paths = {"json": atomic_write_json(out / "report.json", dict(report), indent=1) or out / "report.json"}
     markdown = render_markdown(report)
     atomic_write_text(out / "report.md", markdown)

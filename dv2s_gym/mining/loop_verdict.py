@@ -11,8 +11,11 @@ FAILed or either held-out test found it worse; it is *not accepted* when the reg
 in ERROR, when the round skipped, or when the held-out tests did not run (too few held-out episodes or families:
 no test, no acceptance). Without a control arm only the test against the start is required. Each round is
 tested against the policy it started from, so with two or more tested rounds a fine-tuned policy that FAILs
-against the starting one (``final_vs_start``) is rejected too. The verdict's reason names the test that decided
-it. The recommended policy (the policy to use) is the last accepted one, else the starting policy.
+against the starting one (``final_vs_start``) is rejected too, and is not accepted when that comparison
+cannot run. The verdict's reason names the test that decided
+it. The recommended policy (the policy to use) is the last accepted one, else the starting policy; every
+round's policy meets the cross-round check over the rounds up to it, and one that check rejected sends the
+recommendation back to the starting policy, so it is never the policy to use.
 """
 
 from __future__ import annotations
@@ -141,11 +144,33 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
                           f"{' and '.join('the starting policy' if k == 'start' else 'the control' for k in missing)}"
                           f" did not run ({why}), so a harm on the held-out families is not ruled out"}
     parts = [f"not significantly worse than {'the starting policy' if key == 'start' else 'the control'} "
-             f"(p = {tests[key]['p_value']:.3g})" for key in ("start", "control") if tests.get(key)]
+             f"(p = {tests[key]['p_value']:.3g} on {tests[key].get('pairs')} held-out pairs from "
+             f"{tests[key].get('families')} famil{'y' if tests[key].get('families') == 1 else 'ies'})"
+             for key in ("start", "control") if tests.get(key)]
     control_note = "" if tests.get("control") else "; no control arm to compare with"
     return {"verdict": ACCEPTED, "decided_by": "all",
             "reason": f"no regression on the rest of the bank ({regression} PASSed: {regress.get('reason')}); on "
                       f"the held-out families {' and '.join(parts)} ({HELDOUT_TEST}){control_note}"}
+
+
+def _with_cross_round_check(judged: Dict[str, str], final: Optional[Mapping[str, Any]]) -> Dict[str, str]:
+    """``judged`` (an ACCEPTED round's verdict) after the cross-round check on its policy (``final_vs_start`` over
+    the rounds up to it): REJECTED when that check FAILed, NOT ACCEPTED when it could not run (an error):
+    a check that cannot run never counts as passed."""
+    if judged["verdict"] != ACCEPTED or not final:
+        return judged
+    rounds = ", ".join(map(str, final.get("rounds") or []))
+    if final.get("error"):
+        return {"verdict": NOT_ACCEPTED, "decided_by": "final_vs_start",
+                "reason": f"the regression test of the fine-tuned against the starting policy on the starting bank, "
+                          f"over the rounds so far, could not run ({final['error']}), so a regression against the "
+                          f"starting policy is not ruled out"}
+    if final.get("verdict") == "FAIL":  # each round passed against its own start
+        return {"verdict": REJECTED, "decided_by": "final_vs_start",
+                "reason": f"over rounds {rounds} the fine-tuned policy regressed against the starting one on the "
+                          f"starting bank: the regression test of the fine-tuned against the starting policy FAILed "
+                          f"({final.get('reason')})"}
+    return judged
 
 
 def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
@@ -157,29 +182,28 @@ def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
     rounds), "exit_code", "too_small": why a NOT ACCEPTED round was too small to judge (:func:`too_small`; the sentence
     then points to the evidence profile) or ``None``}``."""
     start = (report.get("settings") or {}).get("policy")
-    recommended, last = start, None
-    for record in report.get("rounds") or []:
-        judged = judge_round(record)
-        if judged is None:
-            continue
-        last = (record, judged)
-        if judged["verdict"] == ACCEPTED:
-            recommended = record.get("new_policy") or report.get("policy")
-    if last is None:
+    judged_rounds = [(record, judged) for record in report.get("rounds") or []
+                     for judged in [judge_round(record)] if judged is not None]
+    if not judged_rounds:
         return {"policy": start, "verdict": NOT_ACCEPTED, "round": None, "candidate": None,
                 "reason": "no round fine-tuned a policy", "decided_by": None, "exit_code": EXIT_CODES[NOT_ACCEPTED],
                 "too_small": None,
                 "sentence": f"NOT ACCEPTED: no round fine-tuned a policy; keep the starting policy {start}"}
-    record, judged = last
+    recommended = start
+    for index, (record, judged) in enumerate(judged_rounds):
+        # the cross-round check on this round's policy: the report's own for the last round, else the one
+        # recorded with the round (the check over the rounds up to it)
+        final = (report.get("final_vs_start") if index == len(judged_rounds) - 1 and "final_vs_start" in report
+                 else record.get("final_vs_start"))
+        judged = _with_cross_round_check(judged, final)
+        judged_rounds[index] = (record, judged)
+        if judged["verdict"] == ACCEPTED:
+            recommended = record.get("new_policy") or report.get("policy")
+        elif judged.get("decided_by") == "final_vs_start" and judged["verdict"] == REJECTED:
+            recommended = start  # the lineage regressed against the starting policy: back to it
+    record, judged = judged_rounds[-1]
     candidate = record.get("new_policy") or report.get("policy")
     number = record.get("round")
-    final = report.get("final_vs_start") or {}
-    if judged["verdict"] == ACCEPTED and final.get("verdict") == "FAIL":  # each round passed against its own start
-        judged = {"verdict": REJECTED, "decided_by": "final_vs_start",
-                  "reason": f"over rounds {', '.join(map(str, final.get('rounds') or []))} the fine-tuned policy "
-                            f"regressed against the starting one on the starting bank: the regression test of the "
-                            f"fine-tuned against the starting policy FAILed ({final.get('reason')})"}
-        recommended = start
     if judged["verdict"] == ACCEPTED:
         sentence = f"ACCEPTED: use the round {number} fine-tuned policy {candidate}: {judged['reason']}"
     else:
