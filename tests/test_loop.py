@@ -784,8 +784,16 @@ def test_an_inconclusive_regression_test_leaves_the_policy_not_accepted(tmp_path
 def test_the_next_round_starts_from_the_policy_the_verdict_recommends(tmp_path, monkeypatch):
     """Round 1 regresses (REJECTED): round 2 starts from the starting policy; round 2 passes (ACCEPTED): round 3
     starts from round 2's policy; round 3 cannot tell (NOT ACCEPTED): round 2's stays the policy to use."""
+    from dv2s_gym.mining import loop_report
+
     stand = _StandIns(monkeypatch)
     _regression_verdicts(monkeypatch, {"round_1": "FAIL", "round_2": "PASS", "round_3": "INCONCLUSIVE"})
+
+    def over_rounds(report, out=None, folder=None):  # the stand-in regression test writes no report to pair
+        tested = [r for r in report.get("rounds", []) if (r.get("steps") or {}).get("regress")]
+        return None if len(tested) < 2 else {"rounds": [1, tested[-1]["round"]], "verdict": "PASS", "reason": "ok"}
+
+    monkeypatch.setattr(loop_report, "final_vs_start", over_rounds)
     miner, lines = FakeMiner(WIRING["scenarios"], failures_per_round=6), []
     settings = {**WIRING, "untouched_seeds": 0, "min_heldout_episodes": 1, "min_heldout_families": 1}
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=3, miner=miner, log=lines.append, **settings)
@@ -822,7 +830,7 @@ def test_the_next_round_follows_the_policy_to_use_when_the_rounds_are_judged_aga
     _regression_verdicts(monkeypatch, {"round_1": "PASS", "round_2": "PASS", "round_3": "PASS"})
     judged = []
 
-    def over_rounds(report, out=None):
+    def over_rounds(report, out=None, folder=None):
         tested = [r for r in report.get("rounds", []) if (r.get("steps") or {}).get("regress")]
         if len(tested) < 2:
             return None
