@@ -11,7 +11,7 @@ import json
 import numpy as np
 import pytest
 
-from dv2s_gym.mining.convert import convert_failure, reproduction_seeds, same_failure_class
+from dv2s_gym.mining.convert import _exact, convert_failure, reproduction_seeds, same_failure_class
 from dv2s_gym.mining.exact_replay import replay_failure
 from dv2s_gym.mining.failure_video import FailureReplayError, record_failure_video, write_failure_video
 from dv2s_gym.pipeline.video import read_video
@@ -281,7 +281,7 @@ def test_the_miner_converts_a_cluster_into_the_bank(tmp_path):
     assert row["parameters"]["outside"] == outside
     if outside:
         assert row["status"] == "rejected" and row["bank_entry"] is None, row
-        assert any(r.startswith("parameters: ") and all(f"{name} = {failing[name]:g} outside" in r for name in outside)
+        assert any(r.startswith("parameters: ") and all(f"{name} = {_exact(failing[name])} outside" in r for name in outside)
                    for r in row["rejections"])
     else:
         assert row["status"] == "kept", row
