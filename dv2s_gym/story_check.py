@@ -312,6 +312,7 @@ class _Detector:
     def __init__(self, episode: _Episode, names: Mapping[str, Optional[str]]) -> None:
         self.e = episode
         self.names = names
+        self._junction_masks: Dict[str, np.ndarray] = {}
 
     # ------------------------------------------------------------------ steps
     def find(self, step: Mapping[str, Any], after: int, at: Optional[int] = None) -> Tuple[Optional[int], str]:
@@ -611,13 +612,16 @@ class _Detector:
         return event
 
     def _in_junction(self, name: str) -> np.ndarray:
+        """Per step, whether the actor is in the map's junction area (read once per actor; callers do not write it)."""
+        if name in self._junction_masks:
+            return self._junction_masks[name]
         view = _map_view(self.e.trace)
         track = self.e.tracks[name]
         inside = np.zeros(self.e.n, dtype=bool)
-        if view is None:
-            return inside
-        valid = ~np.isnan(track[:, 0])
-        inside[valid] = view.in_junction(track[valid])
+        if view is not None:
+            valid = ~np.isnan(track[:, 0])
+            inside[valid] = view.in_junction(track[valid])
+        self._junction_masks[name] = inside
         return inside
 
     def _junction_way(self, name: str, action: str, first: int, last: int) -> List[_Occurrence]:
