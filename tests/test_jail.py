@@ -602,6 +602,28 @@ def test_the_shipped_manifest_lists_exactly_the_shipped_scripts():
     assert MANIFEST.read_text(encoding="ascii") == manifest_text(), "run python -m scenario_bank.shipped"
 
 
+def test_every_shipped_sidecar_hash_is_its_script(tmp_path, monkeypatch):
+    import shutil
+
+    from scenario_bank import shipped
+
+    assert shipped.stale_sidecars() == [], "run python -m scenario_bank.shipped"
+    # On a copy: an edited script makes its sidecar stale, and the refresh mends that field only.
+    copy = tmp_path / "scenarios"
+    shutil.copytree(shipped._SCENARIOS / SHIPPED, copy / SHIPPED)
+    monkeypatch.setattr(shipped, "_SCENARIOS", copy)
+    script = copy / SHIPPED / "scenario.scenic"
+    sidecar = copy / SHIPPED / "meta.json"
+    before = json.loads(sidecar.read_text())
+    script.write_text(script.read_text() + "# edited\n")
+    assert shipped.stale_sidecars() == [sidecar]
+    assert shipped.refresh_sidecars() == [sidecar]
+    after = json.loads(sidecar.read_text())
+    assert after.pop("content_hash") == shipped.text_digest(script.read_text())
+    before.pop("content_hash")
+    assert after == before and shipped.stale_sidecars() == []
+
+
 @pytest.mark.slow
 def test_compiling_a_shipped_scenario_imports_nothing_from_the_current_folder(tmp_path):
     # Scenic puts the current folder first on sys.path while it compiles, and its driving domain
