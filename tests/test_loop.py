@@ -662,8 +662,9 @@ def test_a_second_round_never_holds_out_a_family_the_first_fine_tuned_on(tmp_pat
     only round 1's held-out one was never trained on by the policy it evaluates."""
     _StandIns(monkeypatch)
     _regression_verdicts(monkeypatch, {"round_1": "PASS", "round_2": "PASS"})
+    # 6 seeds: the fewest held-out pairs a round is judged on (loop_verdict.EVIDENCE_FLOOR)
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", rounds=2, min_heldout_episodes=1, min_heldout_families=1,
-                      miner=_GrowingMiner(WIRING["scenarios"]), log=lambda _: None, **WIRING)
+                      miner=_GrowingMiner(WIRING["scenarios"]), log=lambda _: None, **{**WIRING, "k_eval": 6})
     first, second = (r["steps"] for r in report.rounds)
     assert report.rounds[1]["policy"] == report.rounds[0]["new_policy"]
     assert len(first["split"]["held_out_families"]) == 1 and second["split"]["groups"] == 3

@@ -162,3 +162,75 @@ def test_a_policy_the_cross_round_check_rejected_is_never_the_policy_to_use():
     # a later accepted round that passes the check is used again
     verdict = recommendation(_report(_round(1, "PASS"), second, _round(3, "PASS"), final_vs_start=final))
     assert verdict["verdict"] == "ACCEPTED" and verdict["policy"] == "ppo:round_3/policy/model.zip"
+
+
+# --------------------------------------------------------------------------- the evidence floor
+def test_the_evidence_floor_is_the_fewest_pairs_an_exact_mcnemar_test_can_be_significant_with():
+    from dv2s_gym.mining.loop_verdict import EVIDENCE_FLOOR, fewest_significant_pairs
+    from dv2s_gym.regress.stats import PairedTable, mcnemar_exact
+
+    assert EVIDENCE_FLOOR == fewest_significant_pairs(0.05) == 6
+    # every pair discordant the one way: 5 cannot reach p < 0.05, 6 can
+    assert mcnemar_exact(PairedTable(candidate_only=5)) >= 0.05 > mcnemar_exact(PairedTable(candidate_only=6))
+
+
+def test_minimums_of_zero_do_not_let_a_single_held_out_pair_be_judged():
+    """``--min-heldout-episodes 0 --min-heldout-families 0``: one tested pair (both policies pass) is too small to
+    judge, not an ACCEPTED policy; the tests do not run and the verdict says why."""
+    from dv2s_gym.mining.loop import heldout_comparison
+
+    one = [{"scenario": "f0_s0", "seed": 0, "failed": False, "error": None}]
+    summary = heldout_comparison(one, one, one, min_episodes=0, families={"f0_s0": "family_0"}, min_families=0)
+    assert summary["pairs"] == 1 and summary["heldout_families"] == 1
+    assert summary["significantly_worse"] == {"start": None, "control": None}
+    assert "fewer than 6" in summary["underpowered"] and "cannot reach p < 0.05" in summary["underpowered"]
+    record = {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
+              "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
+    verdict = recommendation(_report(record))
+    assert verdict["verdict"] == "NOT ACCEPTED" and "TOO SMALL TO JUDGE" in verdict["sentence"]
+    # five pairs are still too few; six (all one family) are judged
+    five = [{"scenario": "f0_s0", "seed": seed, "failed": False, "error": None} for seed in range(5)]
+    assert heldout_comparison(five, five, None, min_episodes=0, min_families=0)["underpowered"]
+    six = five + [{"scenario": "f0_s0", "seed": 5, "failed": False, "error": None}]
+    judged = heldout_comparison(six, six, None, min_episodes=0, min_families=0)
+    assert "underpowered" not in judged and judged["significantly_worse"]["start"]["pairs"] == 6
+
+
+def test_a_round_recorded_with_tests_on_fewer_pairs_than_the_floor_is_not_accepted():
+    """A round recorded by a loop that ran its held-out tests on a single pair: the tests count for nothing."""
+    from dv2s_gym.mining.loop_verdict import heldout_worse
+
+    table = {"family_0": {"both_fail": 0, "candidate_only": 0, "baseline_only": 0, "neither": 1}}
+    record = {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
+              "steps": {"fine_tune": {}, "regress": {"verdict": "PASS", "reason": "stand-in"},
+                        "after": {"pairs": 1, "heldout_families": 1,
+                                  "significantly_worse": {"start": heldout_worse(table, "start"), "control": None}}}}
+    verdict = recommendation(_report(record))
+    assert verdict["verdict"] == "NOT ACCEPTED" and "count for nothing" in verdict["reason"]
+    assert "only 1 tested held-out pair" in verdict["too_small"] and "TOO SMALL TO JUDGE" in verdict["sentence"]
+
+
+def test_a_minimum_that_can_never_give_evidence_is_flagged_in_the_help_the_log_and_the_report():
+    from dv2s_gym.mining.loop_report import render_markdown
+    from dv2s_gym.mining.loop_verdict import evidence_floor_note
+
+    assert evidence_floor_note(20, 3) is None and evidence_floor_note(6, 1) is None
+    note = evidence_floor_note(0, 0)
+    assert "--min-heldout-episodes 0 is below 6" in note and "--min-heldout-families 0" in note
+    text = render_markdown({"settings": {"policy": "dv2s-ppo", "min_heldout_episodes": 1, "min_heldout_families": 3},
+                            "policy": "dv2s-ppo", "rounds": []})
+    assert "WARNING: --min-heldout-episodes 1 is below 6" in text and "can never" not in text.split("WARNING")[0]
+    assert "WARNING" not in render_markdown({"settings": {"policy": "dv2s-ppo", "min_heldout_episodes": 20,
+                                                          "min_heldout_families": 3}, "policy": "dv2s-ppo",
+                                             "rounds": []})
+
+
+def test_loop_help_says_below_what_minimum_no_test_can_be_significant(capsys):
+    import pytest
+
+    from dv2s_gym.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["loop", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "never fewer than 6 tested pairs" in text and "cannot reach p < 0.05" in text

@@ -79,12 +79,18 @@ def add_parser(subparsers) -> None:
                                  "checked to replay it step for step) per round, the scenario families taking turns, "
                                  "each its largest cluster first; 0 for none, 'all' "
                                  "for every cluster"))
+    from dv2s_gym.mining.loop_verdict import EVIDENCE_FLOOR as FLOOR, HELDOUT_ALPHA as ALPHA
+
     p.add_argument("--min-heldout-episodes", type=int, default=None,
                    help=_default("min_heldout_episodes", "below this many held-out episodes a round reports rates "
-                                 "only, no drop and no test"))
+                                 f"only, no drop and no test; never fewer than {FLOOR} tested pairs, whatever this "
+                                 f"says: below {FLOOR} discordant pairs the exact McNemar test cannot reach "
+                                 f"p < {ALPHA:g}, so a smaller minimum is flagged as one that can never give "
+                                 "evidence"))
     p.add_argument("--min-heldout-families", type=int, default=None,
                    help=_default("min_heldout_families", "below this many held-out scenario families a round "
-                                 "reports rates only, no drop and no test"))
+                                 "reports rates only, no drop and no test (a family counts only with a tested pair; "
+                                 "never fewer than 1)"))
     _add_arms_and_run_arguments(p)
     p.set_defaults(func=run)
 

@@ -372,6 +372,11 @@ def run_loop(policy: str = "dv2s-ppo", settings: Optional[LoopSettings] = None, 
     if out.exists() and not out.is_dir():
         raise LoopError(f"--out {out} is a file; choose a folder for the loop")
     loop = _open_loop(policy, settings, out, progress, log)
+    from dv2s_gym.mining.loop_verdict import evidence_floor_note
+
+    note = evidence_floor_note(settings.min_heldout_episodes, settings.min_heldout_families)
+    if note:
+        log(f"WARNING: {note}")
     current = policy
     for number in range(1, settings.rounds + 1):
         current = _run_round(loop, number, current)
@@ -766,16 +771,23 @@ _STAGE_NAMES = {"mine": "mining failures", "split": "splitting by family", "befo
 def underpowered(episodes: int, minimum: int, families: Optional[int] = None,
                  min_families: int = 0, tested: bool = False) -> Optional[str]:
     """The warning for a round with fewer than ``minimum`` held-out episodes or fewer than ``min_families``
-    held-out families (``families``, when known; ``tested``: families with a tested pair), or ``None``."""
+    held-out families (``families``, when known; ``tested``: families with a tested pair), or ``None``. Whatever the
+    minimums, a round needs :data:`~dv2s_gym.mining.loop_verdict.EVIDENCE_FLOOR` episodes (below that no exact
+    McNemar test can be significant) and one family."""
+    from dv2s_gym.mining.loop_verdict import EVIDENCE_FLOOR, HELDOUT_ALPHA
+
     reasons = []
-    if episodes < minimum:
+    if episodes < max(minimum, EVIDENCE_FLOOR):
         reasons.append(f"only {episodes} held-out episode(s), fewer than the {minimum} needed "
-                       "(--min-heldout-episodes)")
-    if families is not None and families < min_families:
+                       "(--min-heldout-episodes)" if episodes < minimum else
+                       f"only {episodes} held-out episode(s), fewer than {EVIDENCE_FLOOR}: below {EVIDENCE_FLOOR} "
+                       f"discordant pairs the exact McNemar test cannot reach p < {HELDOUT_ALPHA:g}, so the loop "
+                       "judges no round on so few whatever --min-heldout-episodes says")
+    if families is not None and families < max(min_families, 1):
         reasons.append(f"only {families} held-out famil{'y' if families == 1 else 'ies'} (parent scenarios)"
                        f"{' with a tested pair' if tested else ''}, fewer "
-                       f"than the {min_families} needed: episodes of one family are near-identical scenes, not "
-                       "independent trials")
+                       f"than the {max(min_families, 1)} needed: episodes of one family are near-identical scenes, "
+                       "not independent trials")
     if not reasons:
         return None
     return ("; ".join(reasons) + ": this round reports held-out rates but no drop and no test; raise --k-eval, "

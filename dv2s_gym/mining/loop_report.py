@@ -453,6 +453,15 @@ def _recommendation(report: Mapping[str, Any]) -> Mapping[str, Any]:
     return report.get("recommendation") or recommendation(report)
 
 
+def _floor_lines(settings: Mapping[str, Any]) -> List[str]:
+    """The report's loud line when the held-out minimums are below what can ever give evidence, or none."""
+    from dv2s_gym.mining.loop_verdict import evidence_floor_note
+
+    note = evidence_floor_note(int(settings.get("min_heldout_episodes", 0) or 0),
+                               int(settings.get("min_heldout_families", 0) or 0))
+    return [f"**WARNING: {note}.**", ""] if note else []
+
+
 def render_markdown(report: Mapping[str, Any]) -> str:
     """The Markdown rendering of a loop report."""
     settings = report.get("settings", {})
@@ -474,6 +483,7 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         f"probability {settings.get('mined_share')}, reward terms {_weights(settings.get('fine_tune_reward'))} "
         f"overriding the policy's own in training only), regression test on the starting bank with "
         f"{settings.get('regress_episodes')} seeds per scenario (margin {settings.get('margin')}).", "",
+        *_floor_lines(settings),
         "| round | failures mined (against the policy) / episodes | clusters | kept | fine-tune / held-out scenarios "
         "| held-out failure rate start | control | fine-tuned | relative drop | McNemar p vs start | vs control "
         "| untouched failure rate start / control / fine-tuned | rest of the bank |",
@@ -742,6 +752,7 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
             f"evaluation seeds per held-out scenario (Wilson 95 % intervals; the drop's interval resamples "
             f"scenarios; no drop or test below {settings.get('min_heldout_episodes', 0)} held-out episodes or "
             f"{settings.get('min_heldout_families', 0)} held-out families).</p>"
+            + "".join(f"<p><strong>{escape(line.strip('*'))}</strong></p>" for line in _floor_lines(settings)[:1]) +
             f"<table>{head}{''.join(rows)}</table>{final_html}{''.join(details)}</body></html>\n")
 
 

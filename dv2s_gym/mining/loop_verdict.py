@@ -23,7 +23,8 @@ from __future__ import annotations
 from typing import Any, Dict, Mapping, Optional
 
 __all__ = ["ACCEPTED", "REJECTED", "NOT_ACCEPTED", "EXIT_CODES", "CONTROL_ALPHA", "HELDOUT_ALPHA", "HELDOUT_TEST",
-           "EVIDENCE_HINT", "judge_round", "heldout_worse", "too_small", "recommendation"]
+           "EVIDENCE_HINT", "EVIDENCE_FLOOR", "fewest_significant_pairs", "evidence_floor_note", "judge_round",
+           "heldout_worse", "too_small", "recommendation"]
 
 ACCEPTED, REJECTED, NOT_ACCEPTED = "ACCEPTED", "REJECTED", "NOT ACCEPTED"
 EXIT_CODES = {ACCEPTED: 0, REJECTED: 1, NOT_ACCEPTED: 3}
@@ -38,6 +39,40 @@ HELDOUT_TEST = (f"one-sided exact McNemar tests per held-out family and pooled, 
 """The held-out tests in words, as the verdict's reason and the reports name them."""
 
 
+def fewest_significant_pairs(alpha: float = HELDOUT_ALPHA) -> int:
+    """The fewest paired episodes with which the exact McNemar test can reach ``p < alpha`` at all: ``m`` discordant
+    pairs, all one way, give a two-sided p of ``2 * 0.5 ** m`` (so 6 at 0.05), and there are never more discordant
+    pairs than pairs. The held-out gate's pooled one-sided test, which starts at half the level, needs as many."""
+    m = 1
+    while min(1.0, 2.0 * 0.5 ** m) >= alpha:
+        m += 1
+    return m
+
+
+EVIDENCE_FLOOR = fewest_significant_pairs()
+"""The fewest tested held-out pairs (no error on either side) a round needs before its held-out tests count, and so
+before its fine-tuned policy can be ACCEPTED or REJECTED on them, whatever ``--min-heldout-episodes`` says: below it
+no held-out test can ever reach significance, so a harm could never be found. A round also needs at least one family
+with a tested pair (each family it counts has one)."""
+
+
+def evidence_floor_note(min_episodes: int, min_families: int) -> Optional[str]:
+    """The warning for held-out minimums below what can ever give evidence (:data:`EVIDENCE_FLOOR` pairs, one
+    family), or ``None``."""
+    low = []
+    if min_episodes < EVIDENCE_FLOOR:
+        low.append(f"--min-heldout-episodes {min_episodes} is below {EVIDENCE_FLOOR}: with fewer than "
+                   f"{EVIDENCE_FLOOR} discordant pairs the exact McNemar test cannot reach p < {HELDOUT_ALPHA:g}, so "
+                   "no held-out test could ever show a harm")
+    if min_families < 1:
+        low.append(f"--min-heldout-families {min_families} counts no family: a test needs at least one family with "
+                   "a tested pair")
+    if not low:
+        return None
+    return ("; ".join(low) + f"; the loop judges no round on fewer than {EVIDENCE_FLOOR} tested held-out pairs or on "
+            "no family with a tested pair (such a round is TOO SMALL TO JUDGE)")
+
+
 EVIDENCE_HINT = "run `dv2s loop --profile evidence` for a round large enough to judge"
 """What a round too small to judge its policy tells the user to do (the profile of
 :data:`dv2s_gym.mining.loop_settings.EVIDENCE`)."""
@@ -48,12 +83,29 @@ def too_small(record: Mapping[str, Any]) -> Optional[str]:
     or families for a drop or a test, or a regression test that could not tell."""
     steps = record.get("steps") or {}
     reasons = []
-    if (steps.get("after") or {}).get("underpowered"):
+    after = steps.get("after") or {}
+    if after.get("underpowered"):
         reasons.append("too few held-out episodes or families for a drop or a test")
+    elif _below_floor(after):
+        reasons.append(_below_floor(after))
     if (steps.get("regress") or {}).get("verdict") == "INCONCLUSIVE":
         reasons.append(f"the regression test on {(steps.get('regress') or {}).get('episodes')} paired episodes "
                        "could not tell")
     return "; ".join(reasons) or None
+
+
+def _below_floor(after: Mapping[str, Any]) -> Optional[str]:
+    """Why a round's held-out tests count for nothing (fewer than :data:`EVIDENCE_FLOOR` tested pairs, or no family
+    with a tested pair), as a round recorded before that floor may have them; ``None`` when they count."""
+    pairs, families = after.get("pairs"), after.get("heldout_families")
+    if not after or pairs is None:
+        return None
+    if pairs < EVIDENCE_FLOOR:
+        return (f"only {pairs} tested held-out pair(s), fewer than {EVIDENCE_FLOOR}: no held-out test can reach "
+                f"p < {HELDOUT_ALPHA:g} below {EVIDENCE_FLOOR} discordant pairs")
+    if families is not None and families < 1:
+        return "no held-out family with a tested pair"
+    return None
 
 
 def heldout_worse(tables: Mapping[str, Any], against: str) -> Optional[Dict[str, Any]]:
@@ -135,6 +187,11 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
     if verdict != "PASS":
         return {"verdict": NOT_ACCEPTED, "decided_by": "regression",
                 "reason": f"{regression} is {verdict}, so no regression is ruled out ({regress.get('reason')})"}
+    floor = _below_floor(after)
+    if floor and not after.get("underpowered"):
+        return {"verdict": NOT_ACCEPTED, "decided_by": "heldout_vs_start",
+                "reason": f"{regression} PASSed, but the held-out tests count for nothing ({floor}), so a harm on "
+                          "the held-out families is not ruled out"}
     missing = [key for key in ("start", "control") if tests.get(key) is None
                and (key == "start" or after.get("control") or "vs_control" in after)]
     if missing:
