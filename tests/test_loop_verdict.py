@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from dv2s_gym.mining.loop_verdict import recommendation
 
 
@@ -234,3 +236,77 @@ def test_loop_help_says_below_what_minimum_no_test_can_be_significant(capsys):
         main(["loop", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "never fewer than 6 tested pairs" in text and "cannot reach p < 0.05" in text
+
+
+# --------------------------------------------------------------------------- the held-out families' harm rule
+def test_a_harm_in_one_family_the_gate_calls_inconclusive_is_not_accepted():
+    """The fine-tuned policy fails 3 of family_3's 8 pairs that the starting policy passed (+37.5 pp) and matches it
+    everywhere else: one-sided p = 0.125, so no test finds it significantly worse, but its estimate is worse than the
+    margin, so the round is not accepted (and the control, failing everything, changes nothing)."""
+    after = lambda f, s, seed: f == 3 and s * 4 + seed < 3  # noqa: E731
+    verdict, summary = _judged(before=lambda f, s, seed: False, after=after, control=lambda f, s, seed: True)
+    start = summary["significantly_worse"]["start"]
+    assert not start["worse"] and start["family_harm"]["harmed"] == ["family_3"]
+    row = start["family_harm"]["families"]["family_3"]
+    assert row["difference"] == pytest.approx(3 / 8) and not row["non_inferior"] and row["interval"][0] < 0
+    assert not summary["significantly_worse"]["control"]["family_harm"]["harmed"]
+    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "heldout_families_vs_start"
+    assert "in family family_3 the fine-tuned policy failed 3 of 8 pairs" in verdict["reason"]
+    assert "Holm" in verdict["reason"] and verdict["policy"] == "dv2s-ppo"
+    # the same round judged at a margin the harm stays within is accepted
+    from dv2s_gym.mining.loop import heldout_comparison
+
+    families = {f"f{f}_s{s}": f"family_{f}" for f in range(4) for s in range(2)}
+    wide = heldout_comparison(_episodes(lambda f, s, seed: False), _episodes(after), None, min_episodes=8,
+                              families=families, min_families=3, margin=0.4)
+    record = {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
+              "steps": {"fine_tune": {}, "after": wide, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
+    assert recommendation(_report(record))["verdict"] == "ACCEPTED"
+
+
+def test_a_harm_in_one_family_against_the_control_is_not_accepted_either():
+    after = lambda f, s, seed: f == 0 and seed < 2  # noqa: E731  4 of family_0's 8 pairs
+    verdict, summary = _judged(before=lambda f, s, seed: True, after=after, control=lambda f, s, seed: f > 0)
+    assert not summary["significantly_worse"]["control"]["worse"]
+    assert summary["significantly_worse"]["control"]["family_harm"]["harmed"] == ["family_0"]
+    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "heldout_families_vs_control"
+
+
+def test_a_round_no_worse_in_any_family_is_still_accepted():
+    """Discordant pairs both ways that cancel out in every family (estimate 0, within the margin, though too few
+    pairs to show non-inferiority): the harm rule does not block it."""
+    before = lambda f, s, seed: s == 0 and seed == 0  # noqa: E731
+    after = lambda f, s, seed: s == 1 and seed == 0  # noqa: E731
+    verdict, summary = _judged(before=before, after=after, control=None)
+    harm = summary["significantly_worse"]["start"]["family_harm"]
+    assert harm["harmed"] == [] and harm["non_inferior"] == []  # 8 pairs per family cannot show it at 2 pp
+    assert all(row["difference"] == 0 for row in harm["families"].values())
+    assert verdict["verdict"] == "ACCEPTED" and "no held-out family worse for the fine-tuned policy" in verdict["reason"]
+
+
+def test_non_inferiority_p_is_below_the_level_exactly_when_the_interval_is_below_the_margin():
+    from dv2s_gym.mining.loop_verdict import family_harm, non_inferiority_p
+    from dv2s_gym.regress.stats import PairedTable, paired_difference_interval
+
+    for table in (PairedTable(neither=400), PairedTable(neither=150), PairedTable(both_fail=5, baseline_only=3,
+                                                                                  neither=300),
+                  PairedTable(candidate_only=1, neither=20), PairedTable(candidate_only=3, neither=5)):
+        p = non_inferiority_p(table, 0.02)
+        assert (p < 0.025) == (paired_difference_interval(table, 0.95)[1] < 0.02), table
+    assert non_inferiority_p(PairedTable(candidate_only=3, neither=5), 0.02) == 1.0
+    # Holm over the families: two families each shown alone at 2.5 % may not both be shown together
+    big = PairedTable(neither=400)
+    alone = non_inferiority_p(big, 0.02)
+    both = family_harm({"a": big, "b": big}, 0.02)
+    assert both["families"]["a"]["holm_p"] == pytest.approx(min(1.0, 2 * alone))
+    assert both["non_inferior"] == (["a", "b"] if 2 * alone < 0.025 else [])
+
+
+def test_a_round_recorded_without_the_family_harm_check_is_not_accepted():
+    verdict, summary = _judged(before=lambda f, s, seed: seed < 2, after=lambda f, s, seed: False, control=None)
+    assert verdict["verdict"] == "ACCEPTED"
+    del summary["significantly_worse"]["start"]["family_harm"]
+    record = {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
+              "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
+    old = recommendation(_report(record))
+    assert old["verdict"] == "NOT ACCEPTED" and "recorded without the held-out families' harm check" in old["reason"]

@@ -740,7 +740,7 @@ def _after_step(loop: _Loop, policies: Mapping[str, Optional[str]], episodes: Li
                                            **common)
     s = loop.settings
     summary = heldout_comparison(before, after, control_records, min_episodes=s.min_heldout_episodes, seed=s.seed,
-                                 families=families, min_families=s.min_heldout_families)
+                                 families=families, min_families=s.min_heldout_families, margin=s.margin)
     summary["errored"] = {"fine_tuned": errored_episodes(after),
                           **({"control": errored_episodes(control_records)} if control_records is not None else {})}
     return summary
@@ -870,7 +870,7 @@ def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, l
 def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[str, Any]],
                        control: Optional[Sequence[Mapping[str, Any]]], *, min_episodes: int,
                        seed: int = 0, families: Optional[Mapping[str, str]] = None,
-                       min_families: int = 0) -> Dict[str, Any]:
+                       min_families: int = 0, margin: Optional[float] = None) -> Dict[str, Any]:
     """The ``after`` step: :func:`~dv2s_gym.mining.heldout.paired_summary` of fine-tuned against start, plus
     the control's rate and the paired fine-tuned-vs-control table and exact McNemar p (``vs_control``), and
     each policy's failures by type (``failure_types``: stalls apart from collisions and the rest).
@@ -882,7 +882,8 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     says why (the rates, with their wide intervals, stay). ``significantly_worse`` holds, for ``start`` and
     ``control``, whether the fine-tuned policy is significantly worse on the held-out families
     (:func:`dv2s_gym.mining.loop_verdict.heldout_worse`, the verdict's held-out tests; ``None`` when not tested:
-    below the minimums, or no control)."""
+    below the minimums, or no control), each with its held-out families' harm rule at ``margin`` (default: the
+    loop's default margin; :func:`dv2s_gym.mining.loop_verdict.family_harm`)."""
     from dv2s_gym.mining.heldout import failure_types, paired_summary
 
     summary = paired_summary(before, after, seed=seed)
@@ -923,10 +924,12 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     # (loop_verdict.heldout_worse: the dv2s regress gate over the families); not tested below the minimums
     from dv2s_gym.mining.loop_verdict import heldout_worse
 
+    margin = DEFAULTS["margin"] if margin is None else float(margin)
+    summary["margin"] = margin
     summary["significantly_worse"] = {
-        "start": None if shortfall else heldout_worse(_family_tables(before, after, families), "start"),
+        "start": None if shortfall else heldout_worse(_family_tables(before, after, families), "start", margin),
         "control": None if shortfall or control is None else heldout_worse(
-            _family_tables(control, after, families), "control")}
+            _family_tables(control, after, families), "control", margin)}
     return summary
 
 

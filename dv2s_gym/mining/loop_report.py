@@ -45,7 +45,10 @@
                                          significantly worse on the held-out families
                                          (:func:`dv2s_gym.mining.loop_verdict.heldout_worse`: {"against", "test",
                                          "worse", "families", "pairs", "fine_tuned_only", "other_only", "p_value",
-                                         "worse_families", "reason"}; None when not tested)}},
+                                         "worse_families", "reason", "family_harm": the held-out families'
+                                         harm rule at the margin (:func:`dv2s_gym.mining.loop_verdict.family_harm`:
+                                         {"margin", "rule", "families", "harmed", "non_inferior"})}; None when
+                                         not tested), "margin": the margin of that rule},
                            "untouched": {"scenarios", "seeds", "policies": {"start" | "control" | "fine_tuned":
                                          {"episodes", "errors", "failure_rate", "stall_rate", "collision_rate",
                                           "mean_speed"}} (dv2s regress summaries), "fine_tuned_vs_start" and
@@ -436,6 +439,17 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
             lines.append(f"- fine-tuned policy against {label} on the held-out families: "
                          f"**{'significantly worse' if test.get('worse') else 'not significantly worse'}** "
                          f"({test.get('reason')}; {test.get('test')})")
+            harm = test.get("family_harm")
+            if harm:
+                rows = harm.get("families") or {}
+                lines.append(f"- held-out families against {label}, non-inferiority at the margin "
+                             f"{100 * harm['margin']:+.1f} pp (Holm over the families): "
+                             + ("**harm not ruled out in " + ", ".join(harm["harmed"]) + "**; " if harm["harmed"]
+                                else "no family worse by more than the margin; ")
+                             + "; ".join(f"{name} {100 * row['difference']:+.1f} pp (95% CI "
+                                         f"{100 * row['interval'][0]:+.1f} to {100 * row['interval'][1]:+.1f}, "
+                                         f"{'non-inferior' if row['non_inferior'] else 'not shown'})"
+                                         for name, row in rows.items()))
     per = after.get("per_scenario") or {}
     if per:
         controls = versus.get("per_scenario") or {}

@@ -9,7 +9,13 @@ held-out family and pooled, family-wise level :data:`HELDOUT_ALPHA` (:func:`dv2s
 with no margin), so a harm confined to one family is not averaged away. It is *rejected* when the regression test
 FAILed or either held-out test found it worse; it is *not accepted* when the regression test is INCONCLUSIVE or
 in ERROR, when the round skipped, or when the held-out tests did not run (too few held-out episodes or families:
-no test, no acceptance). Without a control arm only the test against the start is required. Each round is
+no test, no acceptance; never fewer than :data:`EVIDENCE_FLOOR` tested pairs and one family, below which no exact
+McNemar test can be significant). It is not accepted either when a harm confined to one held-out family is not ruled
+out (:func:`family_harm`, the rule a regulator applies to subgroups): per held-out family, non-inferiority at the
+loop's margin is tested one-sided by Newcombe's paired interval, Holm-adjusted over the families; a family whose point
+estimate is worse for the fine-tuned policy (than the start, or than the control) by more than the margin cannot show
+non-inferiority, so it blocks ACCEPTED even when the significance gate calls it inconclusive. A family that merely
+fails to show non-inferiority with an estimate within the margin (too few pairs to tell) does not block. Without a control arm only the test against the start is required. Each round is
 tested against the policy it started from, so with two or more tested rounds a fine-tuned policy that FAILs
 against the starting one (``final_vs_start``) is rejected too, and is not accepted when that comparison
 cannot run. The verdict's reason names the test that decided
@@ -23,6 +29,7 @@ from __future__ import annotations
 from typing import Any, Dict, Mapping, Optional
 
 __all__ = ["ACCEPTED", "REJECTED", "NOT_ACCEPTED", "EXIT_CODES", "CONTROL_ALPHA", "HELDOUT_ALPHA", "HELDOUT_TEST",
+           "FAMILY_RULE", "family_harm", "non_inferiority_p",
            "EVIDENCE_HINT", "EVIDENCE_FLOOR", "fewest_significant_pairs", "evidence_floor_note", "judge_round",
            "heldout_worse", "too_small", "recommendation"]
 
@@ -94,6 +101,77 @@ def too_small(record: Mapping[str, Any]) -> Optional[str]:
     return "; ".join(reasons) or None
 
 
+FAMILY_RULE = ("per held-out family, non-inferiority at the margin: the one-sided test of \"the fine-tuned policy "
+               "fails at least the margin more often\" (Newcombe's paired interval), Holm-adjusted over the families "
+               f"at one-sided {HELDOUT_ALPHA / 2:g}; a family whose point estimate is worse for the fine-tuned policy "
+               "by more than the margin cannot show non-inferiority, and blocks ACCEPTED")
+"""The held-out families' harm rule in words (:func:`family_harm`), as the verdict's reason and the reports name it."""
+
+
+def non_inferiority_p(table: Any, margin: float) -> float:
+    """One-sided p-value of ``H0: the candidate's failure rate exceeds the baseline's by at least margin`` on a paired
+    table: the smallest one-sided level ``a`` at which the upper end of the two-sided ``1 - 2a`` Newcombe interval of
+    the difference (:func:`dv2s_gym.regress.stats.paired_difference_interval`) is below ``margin`` (so ``p < 0.025``
+    exactly when the 95 % interval's upper end is below it, ``dv2s regress``'s PASS); 1.0 when the point estimate
+    reaches the margin (an interval always contains its estimate) or the table is empty."""
+    from dv2s_gym.regress.stats import paired_difference_interval
+
+    if not table.n or table.difference >= margin:
+        return 1.0
+
+    def shown(level: float) -> bool:
+        return paired_difference_interval(table, 1.0 - 2.0 * level)[1] < margin
+
+    low, high = 1e-12, 0.5 - 1e-9
+    if shown(low):
+        return 0.0
+    if not shown(high):
+        return 1.0
+    for _ in range(60):
+        middle = (low + high) / 2.0
+        low, high = (low, middle) if shown(middle) else (middle, high)
+    return high
+
+
+def family_harm(tables: Mapping[str, Any], margin: float) -> Dict[str, Any]:
+    """The held-out families' harm rule (:data:`FAMILY_RULE`) on ``{family: PairedTable}`` of the fine-tuned policy
+    (candidate) against another (baseline): per family the difference in failure rate with its two-sided 95 %
+    Newcombe interval, the one-sided non-inferiority p-value at ``margin`` (:func:`non_inferiority_p`) and its Holm
+    adjustment over the families, ``non_inferior`` (shown: adjusted p below :data:`HELDOUT_ALPHA` / 2) and
+    ``harm``: the point estimate worse for the fine-tuned policy by more than ``margin`` and non-inferiority not
+    shown. Returns ``{"margin", "rule", "families": {name: ...}, "harmed": [families with harm], "non_inferior":
+    [families shown non-inferior]}``."""
+    from dv2s_gym.regress.stats import holm, paired_difference_interval
+
+    names = [name for name in sorted(tables) if tables[name].n]
+    raw = [non_inferiority_p(tables[name], margin) for name in names]
+    adjusted = holm(raw) if raw else []
+    families: Dict[str, Any] = {}
+    for name, p, q in zip(names, raw, adjusted):
+        t = tables[name]
+        low, high = paired_difference_interval(t, 1.0 - HELDOUT_ALPHA)
+        shown = q < HELDOUT_ALPHA / 2.0
+        families[name] = {"pairs": t.n, "fine_tuned_only": t.candidate_only, "other_only": t.baseline_only,
+                          "difference": t.difference, "interval": [low, high], "non_inferiority_p": p,
+                          "holm_p": q, "non_inferior": shown, "harm": t.difference > margin and not shown}
+    return {"margin": margin, "rule": FAMILY_RULE, "families": families,
+            "harmed": [name for name in names if families[name]["harm"]],
+            "non_inferior": [name for name in names if families[name]["non_inferior"]]}
+
+
+def _harm_text(harm: Mapping[str, Any], label: str) -> str:
+    """The harmed families of :func:`family_harm`, in words."""
+    parts = []
+    for name in harm.get("harmed") or []:
+        f = harm["families"][name]
+        parts.append(f"in family {name} the fine-tuned policy failed {f['fine_tuned_only']} of {f['pairs']} pairs "
+                     f"that {label} passed and passed {f['other_only']} it failed ({100 * f['difference']:+.1f} pp, "
+                     f"95% CI {100 * f['interval'][0]:+.1f} to {100 * f['interval'][1]:+.1f} pp, worse than the "
+                     f"margin {100 * harm['margin']:+.1f} pp; non-inferiority not shown, Holm-adjusted one-sided "
+                     f"p = {f['holm_p']:.3g})")
+    return "; ".join(parts)
+
+
 def _below_floor(after: Mapping[str, Any]) -> Optional[str]:
     """Why a round's held-out tests count for nothing (fewer than :data:`EVIDENCE_FLOOR` tested pairs, or no family
     with a tested pair), as a round recorded before that floor may have them; ``None`` when they count."""
@@ -108,7 +186,7 @@ def _below_floor(after: Mapping[str, Any]) -> Optional[str]:
     return None
 
 
-def heldout_worse(tables: Mapping[str, Any], against: str) -> Optional[Dict[str, Any]]:
+def heldout_worse(tables: Mapping[str, Any], against: str, margin: Optional[float] = None) -> Optional[Dict[str, Any]]:
     """Whether the fine-tuned policy is significantly worse than ``against`` (``"start"`` or ``"control"``) on
     the held-out families: ``tables`` maps each held-out family to its paired table of fine-tuned (candidate)
     against ``against`` (baseline), a :class:`~dv2s_gym.regress.stats.PairedTable` or its dict
@@ -116,7 +194,9 @@ def heldout_worse(tables: Mapping[str, Any], against: str) -> Optional[Dict[str,
     (:func:`dv2s_gym.regress.stats.compare_scenarios` with no margin, family-wise level :data:`HELDOUT_ALPHA`):
     worse when a family's or the pooled one-sided exact McNemar test rejects "no worse" with the fine-tuned policy
     failing more. Returns ``{"against", "test", "worse", "families", "pairs", "fine_tuned_only",
-    "other_only", "p_value" (pooled, unadjusted), "worse_families", "reason"}``, or ``None`` without pairs."""
+    "other_only", "p_value" (pooled, unadjusted), "worse_families", "reason", "family_harm"}``, or ``None`` without
+    pairs; ``family_harm`` is :func:`family_harm` of the same tables at ``margin`` (default: the loop's default
+    margin)."""
     from dv2s_gym.regress.stats import PairedTable, Verdict, compare_scenarios
 
     tables = {str(name): t if isinstance(t, PairedTable) else PairedTable(**dict(t)) for name, t in tables.items()}
@@ -135,7 +215,14 @@ def heldout_worse(tables: Mapping[str, Any], against: str) -> Optional[Dict[str,
               + (f"significantly worse{where}" if worse else "not significantly worse"))
     return {"against": against, "test": HELDOUT_TEST, "worse": worse, "families": len(tables), "pairs": pooled.n,
             "fine_tuned_only": pooled.candidate_only, "other_only": pooled.baseline_only,
-            "p_value": overall.p_value, "worse_families": failed, "reason": reason}
+            "p_value": overall.p_value, "worse_families": failed, "reason": reason,
+            "family_harm": family_harm(tables, _default_margin() if margin is None else float(margin))}
+
+
+def _default_margin() -> float:
+    from dv2s_gym.mining.loop_settings import DEFAULTS
+
+    return float(DEFAULTS["margin"])
 
 
 def _heldout_tests(after: Mapping[str, Any]) -> Dict[str, Optional[Dict[str, Any]]]:
@@ -144,18 +231,21 @@ def _heldout_tests(after: Mapping[str, Any]) -> Dict[str, Optional[Dict[str, Any
     if "significantly_worse" in after:
         recorded = after.get("significantly_worse") or {}
         return {"start": recorded.get("start"), "control": recorded.get("control")}
-    return {"start": _pooled_test(after, "after_only", "before_only", "start"),
-            "control": _pooled_test(after.get("vs_control") or {}, "fine_tuned_only", "control_only", "control")}
+    margin = after.get("margin")
+    return {"start": _pooled_test(after, "after_only", "before_only", "start", margin),
+            "control": _pooled_test(after.get("vs_control") or {}, "fine_tuned_only", "control_only", "control",
+                                    margin)}
 
 
 def _pooled_test(comparison: Mapping[str, Any], fine_tuned_key: str, other_key: str,
-                 against: str) -> Optional[Dict[str, Any]]:
+                 against: str, margin: Optional[float] = None) -> Optional[Dict[str, Any]]:
     """:func:`heldout_worse` on a comparison's pooled paired table, read with its own key names."""
     t = comparison.get("table")
     if comparison.get("mcnemar_p") is None or not t:
         return None
     return heldout_worse({"held-out": {"both_fail": t.get("both_fail", 0), "candidate_only": t.get(fine_tuned_key, 0),
-                                       "baseline_only": t.get(other_key, 0), "neither": t.get("neither", 0)}}, against)
+                                       "baseline_only": t.get(other_key, 0), "neither": t.get("neither", 0)}}, against,
+                         margin)
 
 
 def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
@@ -200,11 +290,30 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
                 "reason": f"{regression} PASSed, but the held-out test against "
                           f"{' and '.join('the starting policy' if k == 'start' else 'the control' for k in missing)}"
                           f" did not run ({why}), so a harm on the held-out families is not ruled out"}
+    for key, label in (("start", "the starting policy"), ("control", "the control")):
+        test = tests.get(key)
+        if not test:
+            continue
+        harm = test.get("family_harm")
+        if harm is None:
+            return {"verdict": NOT_ACCEPTED, "decided_by": f"heldout_families_vs_{key}",
+                    "reason": f"{regression} PASSed, but the round was recorded without the held-out families' harm "
+                              f"check against {label} ({FAMILY_RULE}), so a harm confined to one family is not "
+                              "ruled out"}
+        if harm.get("harmed"):
+            return {"verdict": NOT_ACCEPTED, "decided_by": f"heldout_families_vs_{key}",
+                    "reason": f"{regression} PASSed and the fine-tuned policy is not significantly worse than "
+                              f"{label} on the held-out families, but a harm there is not ruled out: "
+                              f"{_harm_text(harm, label)} ({FAMILY_RULE})"}
     parts = [f"not significantly worse than {'the starting policy' if key == 'start' else 'the control'} "
              f"(p = {tests[key]['p_value']:.3g} on {tests[key].get('pairs')} held-out pairs from "
              f"{tests[key].get('families')} famil{'y' if tests[key].get('families') == 1 else 'ies'})"
              for key in ("start", "control") if tests.get(key)]
     control_note = "" if tests.get("control") else "; no control arm to compare with"
+    harms = [tests[key]["family_harm"] for key in ("start", "control") if tests.get(key)]
+    margin = harms[0]["margin"] if harms else None
+    control_note += (f"; no held-out family worse for the fine-tuned policy by more than the margin "
+                     f"{100 * margin:+.1f} pp ({FAMILY_RULE})" if margin is not None else "")
     return {"verdict": ACCEPTED, "decided_by": "all",
             "reason": f"no regression on the rest of the bank ({regression} PASSed: {regress.get('reason')}); on "
                       f"the held-out families {' and '.join(parts)} ({HELDOUT_TEST}){control_note}"}
