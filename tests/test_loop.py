@@ -1011,3 +1011,31 @@ def test_a_starting_policy_episode_that_errored_before_stays_out_of_the_after_st
     assert runs.count(("before", "s1", 0)) == 1 and before == first
     summary = heldout_comparison(before, after, None, min_episodes=0, seed=0)
     assert summary["pairs"] == 3 and summary["errors"] == 1
+
+
+def test_every_distinct_error_of_a_scenario_is_kept_with_its_count_the_most_frequent_first():
+    """Errored episodes of one scenario with seven distinct messages: the five most frequent are kept with their
+    counts (not only the first one seen), the rest counted, in the record, the log line and the report."""
+    from dv2s_gym.mining.loop import errored_episodes, merged_messages, messages_text
+    from dv2s_gym.mining.loop_report import render_markdown
+
+    errors = (["scene not sampled"] + ["worker hung"] * 3 + ["worker crashed\nTraceback ..."] * 2
+              + ["a", "b", "c", "d"] + ["c"])
+    records = [{"scenario": "s1", "seed": i, "error": e} for i, e in enumerate(errors)]
+    records.append({"scenario": "s2", "seed": 0, "error": None, "failed": True})
+    found = errored_episodes(records)
+    assert found["episodes"] == 11 and found["scenarios"] == {"s1": 11}
+    assert found["messages"]["s1"] == [{"message": "worker hung", "count": 3},
+                                       {"message": "worker crashed", "count": 2}, {"message": "c", "count": 2},
+                                       {"message": "scene not sampled", "count": 1}, {"message": "a", "count": 1}]
+    assert found["unlisted"] == {"s1": {"messages": 2, "episodes": 2}}  # b and d
+    assert found["examples"] == {"s1": "scene not sampled"}
+    text = messages_text(found["messages"], found["unlisted"], "s1")
+    assert text.startswith("worker hung (3 episodes); worker crashed (2 episodes); c (2 episodes)")
+    assert text.endswith("and 2 more distinct message(s) in 2 episode(s)")
+    # a later step's errors add up; a step recorded with its first error only counts it once
+    merged = merged_messages([found, {"episodes": 1, "examples": {"s1": "worker hung"}}])
+    assert merged["messages"]["s1"][0] == {"message": "worker hung", "count": 4}
+    record = {"round": 1, "steps": {"mine": {"episodes": 20, "errors": 11, "errored": found}}}
+    markdown = render_markdown({"settings": {"policy": "dv2s-ppo"}, "policy": "dv2s-ppo", "rounds": [record]})
+    assert "- `s1`: worker hung (3 episodes); worker crashed (2 episodes); c (2 episodes)" in markdown

@@ -69,8 +69,10 @@ round's baseline episodes (the starting policy) are paired with the last tested 
 ``final_vs_start/report.json`` in the loop folder.
 
 ``errored`` counts the episodes that errored (no rate or test counts them; e.g. a scene the scenario's
-sampler could not produce): in ``mine`` and ``before`` ``{"episodes", "scenarios": {scenario: n}, "examples":
-{scenario: its first error}}`` (:func:`dv2s_gym.mining.loop.errored_episodes`); in ``after`` the same per policy
+sampler could not produce): in ``mine`` and ``before`` ``{"episodes", "scenarios": {scenario: n}, "messages":
+{scenario: [{"message", "count"}]: its distinct errors, the 5 most frequent}, "unlisted": {scenario: {"messages",
+"episodes"} beyond those}, "examples": {scenario: its first error}}`` (:func:`dv2s_gym.mining.loop.errored_episodes`);
+in ``after`` the same per policy
 (``fine_tuned``, ``control``), in ``untouched`` and ``regress`` per policy (``start``, ``fine_tuned``, and
 ``control`` in ``untouched``). The log warns of them after each step and ``report.md`` lists them per round.
 
@@ -307,7 +309,9 @@ def _errored_total(record: Mapping[str, Any]) -> int:
 
 
 def _errored_lines(record: Mapping[str, Any]) -> List[str]:
-    """The round's errored episodes per step and policy, naming the scenarios and their first error."""
+    """The round's errored episodes per step and policy, naming the scenarios and, for each, its distinct error
+    messages with their counts over the round's steps (the most frequent first, at most
+    :data:`dv2s_gym.mining.loop.ERROR_MESSAGES_KEPT` listed per step)."""
     stages = errored_by_stage(record)
     if not stages:
         return []
@@ -315,12 +319,11 @@ def _errored_lines(record: Mapping[str, Any]) -> List[str]:
     total = _errored_total(record)
     lines = [f"- errored episodes (counted in no rate or test): " + ("**" if total else "") + "; ".join(parts)
              + ("**" if total else "")]
-    examples: Dict[str, str] = {}
-    for _, by in stages:
-        for found in by.values():
-            for name, why in ((found or {}).get("examples") or {}).items():
-                examples.setdefault(name, why)
-    lines += [f"  - `{name}`: {why}" for name, why in sorted(examples.items())]
+    from dv2s_gym.mining.loop import merged_messages, messages_text
+
+    merged = merged_messages([found for _, by in stages for found in by.values() if found])
+    lines += [f"  - `{name}`: {messages_text(merged['messages'], merged['unlisted'], name)}"
+              for name in merged["messages"]]
     return lines
 
 
