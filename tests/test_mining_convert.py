@@ -561,3 +561,120 @@ def test_the_judge_compares_parameter_names_without_case_and_never_prints_an_out
     below = compare_parameters({"gap": 5.0000001}, "param gap = Range(5.0000002, 9)\n")
     assert "gap = 5.0000001 outside 5.0000002..9" in str(_judge({**passing, "parameters": below}, {},
                                                                 {"type": "collision"}, 0.3)[0])
+
+
+# --------------------------------------------------------------------------- the parameters, compared by meaning
+_PARENT = '''param ego_speed = Range(18, 25)
+param cutter_extra_speed = Range(4, 8)
+param start_offset = Range(-12, -2)
+param cut_in_gap = Range(5, 11)
+param speed_after_cut_in = Range(-3, 1)
+param crossing_distance = Range(35, 55)
+param kerb_offset = Range(2.6, 3.0)
+
+behavior CutIn(extraSpeed, gap, speedAfter):
+    wait
+
+ego = new Car at egoLane.centerline.pointAlongBy(egoS),
+    with speed globalParameters.ego_speed
+cutter = new Car at leftLane.centerline.pointAlongBy(egoS + globalParameters.start_offset),
+    with speed globalParameters.ego_speed + globalParameters.cutter_extra_speed,
+    with behavior CutIn(globalParameters.cutter_extra_speed, globalParameters.cut_in_gap,
+                        globalParameters.speed_after_cut_in)
+traffic = new Car at egoLane.centerline.pointAlongBy(egoS + 60), with speed globalParameters.ego_speed + 2
+spot = new OrientedPoint following roadDirection from ego for globalParameters.crossing_distance
+walker = new Pedestrian right of spot by globalParameters.kerb_offset
+'''
+
+_GENERATED = '''param ego_speed = Range(20, 26)
+param car1_start = Range(7, 11)
+param car1_extra_speed = Range(4, 7)
+param car1_cut_gap = Range(10, 15)
+param pedestrian1_distance = Range(30, 42)
+
+behavior CutInWhenAhead(side, speed, gap, speedAfter):
+    wait
+
+ego = new Car at egoLane.centerline.pointAlongBy(egoS),
+    with speed globalParameters.ego_speed
+car1 = new Car at leftLane.centerline.pointAlongBy(egoS + globalParameters.car1_start),
+    with speed globalParameters.ego_speed + globalParameters.car1_extra_speed,
+    with behavior CutInWhenAhead(-1, globalParameters.ego_speed + globalParameters.car1_extra_speed,
+                                 globalParameters.car1_cut_gap, globalParameters.ego_speed + Range(-1, 2))
+pedestrian1Spot = new OrientedPoint at egoLane.centerline.pointAlongBy(egoS + globalParameters.pedestrian1_distance)
+pedestrian1 = new Pedestrian left of pedestrian1Spot by Range(5.5, 6.2)
+'''
+
+
+def test_the_judge_compares_a_failing_parameter_with_the_generated_one_that_sets_the_same_quantity():
+    """The generated script names its parameters anew: the cutter's gap is ``car1_cut_gap``, its start
+    ``car1_start``, its extra speed ``car1_extra_speed``, the crossing's distance ``pedestrian1_distance``. Each is
+    paired by the actor it feeds and the quantity it sets; what the new script sets with no parameter (the speed after
+    the cut-in, the kerb offset) is listed as not compared, with why."""
+    from dv2s_gym.mining.convert import _judge, compare_parameters
+
+    failing = {"ego_speed": 21.0, "cutter_extra_speed": 5.0, "start_offset": -6.0, "cut_in_gap": 8.0,
+               "speed_after_cut_in": 0.0, "crossing_distance": 40.0, "kerb_offset": 2.8, "weather": "a"}
+    by_name = compare_parameters(failing, _GENERATED)
+    assert list(by_name["compared"]) == ["ego_speed"] and len(by_name["not_in_script"]) == 6
+    judged = compare_parameters(failing, _GENERATED, parent=_PARENT)
+    paired = {name: c["script_name"] for name, c in judged["compared"].items() if c.get("by") == "meaning"}
+    assert paired == {"cut_in_gap": "car1_cut_gap", "start_offset": "car1_start",
+                      "cutter_extra_speed": "car1_extra_speed", "crossing_distance": "pedestrian1_distance"}
+    assert judged["compared"]["cut_in_gap"]["basis"] == ("the Car car1's behaviour argument gap (cutter in the "
+                                                         "parent)")
+    assert set(judged["not_comparable"]) == {"speed_after_cut_in", "kerb_offset"}
+    assert judged["not_in_script"] == ["kerb_offset", "speed_after_cut_in"]
+    assert judged["outside"] == ["cut_in_gap", "start_offset"]  # 8 outside 10..15, -6 outside 7..11
+    passing = {"reproduction": {"k": 10, "reproduced": 10, "rate": 1.0, "interaction_shown": 10},
+               "avoidability": {"reference": "rule", "k": 10, "failed": 0, "avoided_rate": 1.0}}
+    (reason,) = [str(r) for r in _judge({**passing, "parameters": judged}, {}, {"type": "collision"}, 0.3)]
+    assert reason.startswith("parameters: the new scenario's ranges do not contain the failing values: cut_in_gap "
+                             "(the script's car1_cut_gap: the Car car1's behaviour argument gap (cutter in the "
+                             "parent)) = 8 outside 10..15")
+    assert "(not compared, no parameter of the new script means the same: kerb_offset, speed_after_cut_in)" in reason
+
+
+def test_parameters_that_cannot_be_paired_one_to_one_are_not_compared_but_listed():
+    """Two unnamed parameters that together place the lead car (``egoS + a + b``), and a generated script with two
+    cars of the same behaviour the parent's car could be: nothing is guessed."""
+    from dv2s_gym.mining.param_meaning import meaning_map
+
+    parent = ("param a = Range(1, 2)\nparam b = Range(1, 2)\nparam s = Range(1, 2)\n"
+              "lead = new Car at lane.centerline.pointAlongBy(egoS + globalParameters.a + globalParameters.b),\n"
+              "    with speed globalParameters.s\n")
+    generated = ("param g1 = Range(1, 2)\nparam v1 = Range(1, 2)\nparam v2 = Range(1, 2)\n"
+                 "car1 = new Car at lane.centerline.pointAlongBy(egoS + globalParameters.g1),\n"
+                 "    with speed globalParameters.v1\n"
+                 "car2 = new Car at lane.centerline.pointAlongBy(egoS + globalParameters.g2), "
+                 "with speed globalParameters.v2\n")
+    mapped = meaning_map(parent, generated, ["a", "b", "s"], ["g1", "g2", "v1", "v2"])
+    assert mapped["pairs"] == {}
+    # car1 and car2 share as many of the lead's slots: neither is its counterpart
+    assert all("no counterpart" in mapped["unpaired"][name] for name in ("a", "b", "s"))
+    # with a single car of its kind the lead's speed pairs; the sum still does not
+    single = meaning_map(parent, generated.split("car2 =")[0], ["a", "b", "s"], ["g1", "v1"])
+    assert single["pairs"]["s"]["target"] == "v1" and set(single["unpaired"]) == {"a", "b"}
+    assert "together with other parameters" in single["unpaired"]["a"]
+
+
+def test_a_parameter_scaled_in_one_script_and_added_in_the_other_is_not_paired():
+    from dv2s_gym.mining.param_meaning import meaning_map
+
+    parent = "param share = Range(0.5, 0.8)\nlead = new Car ahead of ego by 20, with speed globalParameters.v * (globalParameters.share)\n"
+    generated = "param low = Range(5, 10)\ncar1 = new Car ahead of ego by 20, with speed globalParameters.v - globalParameters.low\n"
+    mapped = meaning_map(parent, generated, ["share"], ["low"])
+    assert mapped["pairs"] == {} and "no parameter" in mapped["unpaired"]["share"]
+
+
+def test_the_mining_report_counts_the_failing_parameters_the_judge_could_not_compare():
+    from dv2s_gym.mining.report import build_report_from_records, markdown
+
+    conversions = [{"cluster": "c1", "index": 0, "status": "rejected", "reason": "parameters: x", "stage": "parameters",
+                    "parameters": {"compared": {"a": {}, "b": {}}, "outside": ["a"],
+                                   "not_comparable": {"c": "why", "d": "why"}}},
+                   {"cluster": "c2", "index": 1, "status": "kept",
+                    "parameters": {"compared": {"a": {}}, "outside": [], "not_in_script": ["e"]}}]
+    report = build_report_from_records({"policy": "p", "sampler": "uniform"}, [], conversions, {})
+    assert report["counts"]["parameters_compared"] == 3 and report["counts"]["parameters_not_compared"] == 3
+    assert "3 failing parameter value(s) compared with the new scripts' ranges, 3 not compared" in markdown(report)

@@ -35,7 +35,9 @@ conversion record of ``conversions.jsonl``:
     the reference driver fails in half of the episodes or more (``avoidability: ...``, naming its failures'
     classes), the new scenario's actors differ from the failure's, kind for kind (``actors: ...``: fewer actors,
     the adversary missing, or more; the failure's trace against the reproduction runs' traces), or a range of
-    the new script does not contain the failing value of the parameter of its name (``parameters: ...``);
+    the new script does not contain the failing value of the parameter that means the same (``parameters: ...``:
+    by name, else by the quantity of the same actor it sets, :mod:`dv2s_gym.mining.param_meaning`; the failing
+    parameters it could pair with none are listed in the record's ``parameters.not_comparable``, with why);
 11. ``bank``: :meth:`scenario_bank.bank.Bank.add` with ``on_duplicate="merge"`` adds the script with ``mined``
     provenance, or merges the failure into the entry it (nearly) duplicates, a converted entry of the same family
     (parent and failure type) whose code differs in at most :data:`~scenario_bank.bank.NEAR_COPY_LINES`
@@ -265,12 +267,15 @@ def compare_actors(source: Mapping[str, int], scripts: List[Mapping[str, int]],
             "same": not missing and not extra}
 
 
-def compare_parameters(failing: Mapping[str, Any], script: str) -> Dict[str, Any]:
-    """The failing parameter values against the ranges of the new script's global parameters of the same name,
-    compared without regard to case (``param x = Range(a, b)`` and the other numeric forms
-    :func:`scenario_bank.dedup.param_ranges` reads): ``{"compared": {name: {"value", "range": [low, high]}}
-    (plus ``"script_name"`` when the script spells it differently), "outside": [names whose range does not contain
-    the failing value], "not_in_script": [failing parameters the script does not define as numbers]}``."""
+def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional[str] = None) -> Dict[str, Any]:
+    """The failing parameter values against the ranges of the new script's global parameters that mean the same:
+    first by name, without regard to case (``param x = Range(a, b)`` and the other numeric forms
+    :func:`scenario_bank.dedup.param_ranges` reads), then, given the ``parent`` script the failure ran, by meaning
+    for the rest (:func:`dv2s_gym.mining.param_meaning.meaning_map`: the same quantity of the same actor, read
+    from the two scripts' structure). Returns ``{"compared": {name: {"value", "range": [low, high]}} (plus
+    ``"script_name"`` when the script spells it differently, and ``"by": "meaning"`` with ``"basis"`` when paired
+    by meaning), "outside": [names whose range does not contain the failing value], "not_comparable": {failing
+    parameter: why it could not be compared}, "not_in_script": [the same names]}``."""
     from scenario_bank.dedup import param_ranges
 
     ranges = param_ranges(script)
@@ -280,20 +285,60 @@ def compare_parameters(failing: Mapping[str, Any], script: str) -> Dict[str, Any
     compared: Dict[str, Any] = {}
     outside: List[str] = []
     absent: List[str] = []
-    for name, value in sorted(failing.items()):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-            continue
+    numeric = {name: value for name, value in sorted(failing.items())
+               if not isinstance(value, bool) and isinstance(value, (int, float)) and np.isfinite(value)}
+    for name, value in numeric.items():
         script_name = name if name in ranges else folded.get(str(name).casefold())
         if script_name is None:
             absent.append(name)
             continue
-        low, high = (float(v) for v in ranges[script_name])
-        compared[name] = {"value": float(value), "range": [low, high]}
+        compared[name] = {"value": float(value), "range": [float(v) for v in ranges[script_name]]}
         if script_name != name:
             compared[name]["script_name"] = script_name
-        if not low - 1e-9 <= float(value) <= high + 1e-9:
+    why = {name: "the new script defines no numeric parameter of that name" for name in absent}
+    if parent is not None and absent:
+        from dv2s_gym.mining.param_meaning import meaning_map
+
+        named = {compared[name].get("script_name", name) for name in compared}
+        mapped = meaning_map(parent, script, absent, [n for n in sorted(ranges) if n not in named])
+        for name, pair in mapped["pairs"].items():
+            compared[name] = {"value": float(numeric[name]), "range": [float(v) for v in ranges[pair["target"]]],
+                              "script_name": pair["target"], "by": "meaning",
+                              "basis": _basis_text(pair)}
+        why = {name: f"no parameter of the new script means the same ({reason})"
+               for name, reason in mapped["unpaired"].items()}
+        why.update({name: "the new script defines no numeric parameter of that name" for name in absent
+                    if name not in mapped["pairs"] and name not in mapped["unpaired"]})
+    for name in sorted(compared):
+        low, high = compared[name]["range"]
+        if not low - 1e-9 <= compared[name]["value"] <= high + 1e-9:
             outside.append(name)
-    return {"compared": compared, "outside": outside, "not_in_script": absent}
+    not_comparable = {name: why[name] for name in sorted(why) if name not in compared}
+    return {"compared": dict(sorted(compared.items())), "outside": outside, "not_comparable": not_comparable,
+            "not_in_script": list(not_comparable)}
+
+
+def _parent_script(record: Mapping[str, Any], bank_dir: Optional[PathLike]) -> Optional[str]:
+    """The script of the bank scenario the failure ran (``None`` when it cannot be read: the judge then compares by
+    name only)."""
+    from scenario_bank.bank import Bank
+
+    try:
+        return (Bank(bank_dir) if bank_dir else Bank()).get(record["scenario"]).script
+    except Exception:  # the comparison by meaning is an addition; without the parent, names only
+        return None
+
+
+def _basis_text(pair: Mapping[str, Any]) -> str:
+    """What a parameter paired by meaning sets, in words: ``"the car's behaviour argument gap (car1; cutter in the
+    parent)"``."""
+    slot = str(pair["slot"])
+    quantity = (f"behaviour argument {slot.split(':', 1)[1]}" if slot.startswith("behavior:")
+                else f"{slot.split(':', 1)[1]} property" if slot.startswith("with:") else f"{slot} placement"
+                if slot in ("longitudinal", "lateral", "offset", "position") else slot)
+    what = "the ego" if pair["object"] == "ego" else f"the {pair['kind']} {pair['object']}"
+    parent = "" if pair["object"] == "ego" else f" ({pair['source_object']} in the parent)"
+    return f"{what}'s {quantity}{parent}" + (", as a factor" if pair["how"] == "scaled" else "")
 
 
 def _outside_text(name: str, comparison: Mapping[str, Any]) -> str:
@@ -301,6 +346,8 @@ def _outside_text(name: str, comparison: Mapping[str, Any]) -> str:
     outside never prints as one inside."""
     low, high = comparison["range"]
     spelled = f" (the script's {comparison['script_name']})" if comparison.get("script_name") else ""
+    if comparison.get("by") == "meaning":
+        spelled = f" (the script's {comparison['script_name']}: {comparison.get('basis')})"
     return f"{name}{spelled} = {_exact(float(comparison['value']))} outside {_exact(float(low))}..{_exact(float(high))}"
 
 
@@ -359,8 +406,11 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
                                          f"scenario's {_census_text(actors['script'])}: {', '.join(problems)}"))
     parameters = out.get("parameters")
     if parameters and parameters.get("outside"):
+        unchecked = list(parameters.get("not_comparable") or {})
         found.append(_Rejected("parameters", "the new scenario's ranges do not contain the failing values: " + ", ".join(
-            _outside_text(name, parameters["compared"][name]) for name in parameters["outside"])))
+            _outside_text(name, parameters["compared"][name]) for name in parameters["outside"])
+            + (f" (not compared, no parameter of the new script means the same: {', '.join(unchecked)})"
+               if unchecked else "")))
     return found
 
 
@@ -735,7 +785,7 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
         out["actors"] = compare_actors(actor_census(source_trace), [actor_census(t) for t in traces],
                                        interaction.get("kind"))
         out["parameters"] = compare_parameters((record.get("result") or {}).get("params") or record.get("params")
-                                               or {}, generation.script)
+                                               or {}, generation.script, parent=_parent_script(record, bank_dir))
 
         # the judge: every check that failed is recorded; the first one is the rejection's stage
         rejections = _judge(out, interaction, source_failure, threshold)

@@ -27,7 +27,9 @@ JSON schema ``dv2s-mine-report``, version 3 (:data:`SCHEMA_VERSION`; a change to
         "converted": conversion records (one per converted cluster representative),
         "kept", "merged", "rejected": by conversion status, "rejected_by_stage": {stage: n},
         "conversion_seconds": {"n", "median", "max", "total"},
-        "conversion_stage_seconds": {stage: median seconds} (from the conversions' ``timings``)},
+        "conversion_stage_seconds": {stage: median seconds} (from the conversions' ``timings``),
+        "parameters_compared", "parameters_not_compared": failing parameter values the conversion judge compared
+        with the new scripts' ranges, and those it could pair with no parameter of the new script},
       "samplers": {name: Sampler},
       "scenarios": {name: Scenario},
       "failure_rate": {"available", "reason", "overall": Estimate, "scenarios": {name: Estimate}}
@@ -442,6 +444,11 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
         "conversion_seconds": {"n": len(seconds), "median": statistics.median(seconds) if seconds else None,
                                "max": max(seconds) if seconds else None, "total": sum(seconds)},
         "conversion_stage_seconds": {stage: statistics.median(values) for stage, values in stage_seconds.items()},
+        # the judge's parameter check: failing parameters compared with the new script's ranges, and not
+        "parameters_compared": sum(len((c.get("parameters") or {}).get("compared") or {}) for c in conversions),
+        "parameters_not_compared": sum(len((c.get("parameters") or {}).get("not_comparable")
+                                           or (c.get("parameters") or {}).get("not_in_script") or [])
+                                       for c in conversions),
     }
 
     # per sampler
@@ -687,6 +694,11 @@ def markdown(report: Mapping[str, Any]) -> str:
                          f"{c.get('script') or '-'}")
             if c.get("description"):
                 lines.append(f"  > {_cell(c['description'])}")
+    if counts.get("parameters_compared") or counts.get("parameters_not_compared"):
+        lines += ["", f"Parameter check of the conversions: {counts['parameters_compared']} failing parameter value(s) "
+                      f"compared with the new scripts' ranges, {counts['parameters_not_compared']} not compared (no "
+                      "parameter of the new script means the same; each conversion record lists them under "
+                      "`parameters.not_comparable`)."]
     if report["rejected"]:
         lines += ["", f"### Rejected conversions ({len(report['rejected'])})", "",
                   "By stage: " + ", ".join(f"{s} {n}" for s, n in counts["rejected_by_stage"].items()), "",

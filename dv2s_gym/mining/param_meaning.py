@@ -1,0 +1,295 @@
+"""Which global parameter of one Scenic script means the same as one of another, read from the scripts' structure.
+
+A generated script names its parameters anew (``car1_cut_gap`` for the parent's ``cut_in_gap``), so the conversion
+judge (:func:`dv2s_gym.mining.convert.compare_parameters`) cannot find most of a failure's parameters by name. Here a
+parameter's *meaning* is where it goes: which object it feeds (the ego, or another actor, with its kind) and which
+quantity of it it sets (its *slot*):
+
+- ``speed``: the object's ``with speed``; ``with:<property>``: another ``with`` specifier;
+- ``behavior:<argument>``: an argument of the object's behaviour, by the behaviour's own name for it (positional
+  arguments read against the ``behavior NAME(...)`` definition in the script, case and underscores ignored);
+- ``longitudinal`` (``at ...pointAlongBy(...)``, ``following ... for``, ``ahead of``, ``behind``), ``lateral``
+  (``left of``, ``right of``), ``offset``, ``heading`` (``facing``) and ``position`` (any other placement);
+
+and how it enters the expression there (``scaled`` next to ``*`` or ``/``, ``subtracted`` after a minus, else
+``additive``: alone or added, as a distance from a reference point is either way; ``derived ...`` when the
+parameter reaches the object only through a top-level variable's computation). A point that only
+places an actor (``spot = new OrientedPoint ...`` then ``new Pedestrian right of spot``) and a top-level variable
+hand their parameters on to the actor that uses them.
+
+:func:`meaning_map` pairs the parameters one script does not share by name with the other's: the objects are paired
+first (the ego with the ego; another actor with the only one of its kind that has such parameters, else the one whose
+slots it shares most, when that is unique), then a parameter with the only parameter of the paired object that has
+one of its (slot, how) pairs, counting only the uses where no other unpaired parameter shares the expression (in
+``egoS + a + b`` neither ``a`` nor ``b`` alone sets the placement). A pairing that is not one to one (two parameters claiming one, or one matching two) is
+left out: what cannot be paired reliably is reported as not comparable, never guessed.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
+
+__all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS"]
+
+PLACEMENT_KINDS = ("OrientedPoint", "Point")
+"""Classes that place actors but are not actors themselves."""
+
+_PARAM = re.compile(r"globalParameters\.(\w+)")
+_OBJECT = re.compile(r"^(?:(\w+)\s*=\s*)?new\s+(\w+)\b(.*)$", re.S)
+_ASSIGN = re.compile(r"^(\w+)\s*=\s*(.+)$", re.S)
+_BEHAVIOR = re.compile(r"^behavior\s+(\w+)\s*\(([^)]*)\)\s*:", re.M)
+_SKIP = ("behavior", "def", "param", "model", "import", "from", "require", "monitor", "scenario", "terminate",
+         "record", "mutate", "#", '"""', "'''")
+
+Use = Tuple[str, str, str, str, frozenset]
+"""``(object name, its kind, slot, how, the parameters in the same expression)``."""
+
+
+def _norm(name: str) -> str:
+    return name.replace("_", "").casefold()
+
+
+def _statements(script: str) -> List[str]:
+    """The script's top-level statements: a line at column 0 and the indented or bracketed lines that follow it,
+    comments removed."""
+    statements: List[str] = []
+    depth = 0
+    in_doc = False
+    for raw in script.splitlines():
+        if raw.count('"""') % 2 == 1 or raw.count("'''") % 2 == 1:
+            in_doc = not in_doc
+            continue
+        if in_doc:
+            continue
+        line = re.sub(r"#.*$", "", raw).rstrip()
+        if not line.strip():
+            continue
+        if depth == 0 and not line[0].isspace():
+            statements.append(line)
+        elif statements:
+            statements[-1] += " " + line.strip()
+        depth = max(0, depth + line.count("(") + line.count("[") - line.count(")") - line.count("]"))
+    return statements
+
+
+def _split_top(text: str, sep: str = ",") -> List[str]:
+    """``text`` split at ``sep`` outside brackets and strings."""
+    parts, depth, quote, current = [], 0, None, []
+    for char in text:
+        if quote:
+            quote = None if char == quote else quote
+        elif char in "'\"":
+            quote = char
+        elif char in "([{":
+            depth += 1
+        elif char in ")]}":
+            depth -= 1
+        elif char == sep and depth == 0:
+            parts.append("".join(current).strip())
+            current = []
+            continue
+        current.append(char)
+    if "".join(current).strip():
+        parts.append("".join(current).strip())
+    return parts
+
+
+def _how(expression: str, name: str) -> str:
+    """How parameter ``name`` enters ``expression``: ``scaled`` when it, or a bracketed group around it, sits next to
+    ``*`` or ``/``; else ``subtracted`` when it, or such a group, follows a minus; else ``additive`` (alone, or
+    added, as a distance from a reference point is either way). A function call's brackets end the search (the
+    parameter is that call's argument)."""
+    found = "additive"
+    for match in re.finditer(rf"globalParameters\.{name}\b", expression):
+        begin, end = match.start(), match.end()
+        how = "additive"
+        while True:
+            before = expression[:begin].rstrip()
+            after = expression[end:].lstrip()
+            if before.endswith(("*", "/")) or after.startswith(("*", "/")):
+                how = "scaled"
+                break
+            if before.endswith("-") and how == "additive":
+                how = "subtracted"
+            if not before.endswith("(") or re.search(r"[\w\]\)]\s*\($", before):
+                break  # no group around it, or a call's argument list
+            opened = len(before) - 1
+            depth, close = 0, None
+            for index in range(opened, len(expression)):
+                depth += {"(": 1, ")": -1}.get(expression[index], 0)
+                if depth == 0:
+                    close = index
+                    break
+            if close is None:
+                break
+            begin, end = opened, close + 1
+        if how == "scaled" or (how == "subtracted" and found == "additive"):
+            found = how
+    return found
+
+
+def _behaviors(script: str) -> Dict[str, List[str]]:
+    """``{behaviour name: its argument names}`` of the script's ``behavior`` definitions."""
+    found = {}
+    for name, formals in _BEHAVIOR.findall(script):
+        found[name] = [f.split("=")[0].strip() for f in _split_top(formals) if f.strip()]
+    return found
+
+
+def _slots(specifier: str, behaviors: Mapping[str, List[str]]) -> List[Tuple[str, str]]:
+    """``[(slot, expression)]`` of one specifier of a ``new`` statement."""
+    text = specifier.strip()
+    match = re.match(r"with\s+behavior\s+(\w+)\s*\((.*)\)\s*$", text, re.S)
+    if match:
+        formals = behaviors.get(match.group(1), [])
+        out = []
+        for index, argument in enumerate(_split_top(match.group(2))):
+            keyword = re.match(r"^(\w+)\s*=(?!=)\s*(.*)$", argument, re.S)
+            if keyword:
+                out.append((f"behavior:{_norm(keyword.group(1))}", keyword.group(2)))
+            elif index < len(formals):
+                out.append((f"behavior:{_norm(formals[index])}", argument))
+        return out
+    match = re.match(r"with\s+(\w+)\s+(.*)$", text, re.S)
+    if match:
+        prop = match.group(1)
+        return [("speed" if prop == "speed" else f"with:{_norm(prop)}", match.group(2))]
+    for pattern, slot in ((r"at\b.*pointAlongBy", "longitudinal"), (r"following\b", "longitudinal"),
+                          (r"(ahead of|behind)\b", "longitudinal"), (r"(left of|right of)\b", "lateral"),
+                          (r"offset\s+(by|along)\b", "offset"), (r"facing\b", "heading")):
+        if re.match(pattern, text, re.S):
+            return [(slot, text)]
+    return [("position", text)]
+
+
+def parameter_uses(script: str) -> Dict[str, Set[Use]]:
+    """``{parameter: {(object, kind, slot, how, parameters in the same expression)}}``: where each global parameter
+    of ``script`` goes (module docstring); a parameter that feeds no object (a ``require``, a behaviour's body) has
+    no use."""
+    behaviors = _behaviors(script)
+    uses: Dict[str, Set[Use]] = {}
+    carried: Dict[str, List[Tuple[str, str, str]]] = {}  # variable or placement -> [(param, slot, how)]
+
+    def carried_by(expression: str) -> List[Tuple[str, str, str]]:
+        return [item for name, items in carried.items() if re.search(rf"\b{re.escape(name)}\b", expression)
+                for item in items]
+
+    for statement in _statements(script):
+        if statement.startswith(_SKIP):
+            continue
+        found = _OBJECT.match(statement)
+        if found is None:
+            assign = _ASSIGN.match(statement)
+            if assign and "new " not in assign.group(2):
+                expression = assign.group(2)
+                # a parameter that reaches an object through a variable is part of a computation: "derived"
+                carried[assign.group(1)] = ([(p, "position", "derived " + _how(expression, p))
+                                             for p in _PARAM.findall(expression)]
+                                            + [(p, s, how if how.startswith("derived") else "derived " + how)
+                                               for p, s, how in carried_by(expression)])
+            continue
+        name, kind, rest = found.group(1) or f"<{found.group(2)}>", found.group(2), found.group(3)
+        items: List[Tuple[str, str, str]] = []
+        for specifier in _split_top(rest):
+            for slot, expression in _slots(specifier, behaviors):
+                here = [(p, slot, _how(expression, p)) for p in _PARAM.findall(expression)]
+                here += [(p, slot if s == "position" else s, how) for p, s, how in carried_by(expression)]
+                items += [(p, s, how, frozenset(q for q, t, _ in here if t == s)) for p, s, how in here]
+        if kind in PLACEMENT_KINDS:
+            carried[name] = [(p, s, how) for p, s, how, _ in items]  # handed on to the actor it places
+            continue
+        for param, slot, how, together in items:
+            uses.setdefault(param, set()).add((name, kind, slot, how, together))
+    return uses
+
+
+def _actor_slots(uses: Mapping[str, Set[Use]], params: Sequence[str]) -> Dict[Tuple[str, str], Set[Tuple[str, str]]]:
+    """``{(object, kind): {(slot, how)}}`` over ``params``."""
+    actors: Dict[Tuple[str, str], Set[Tuple[str, str]]] = {}
+    for param in params:
+        for name, kind, slot, how, _ in uses.get(param, ()):
+            actors.setdefault((name, kind), set()).add((slot, how))
+    return actors
+
+
+def _pair_actors(source: Mapping[Tuple[str, str], Set[Tuple[str, str]]],
+                 target: Mapping[Tuple[str, str], Set[Tuple[str, str]]]) -> Dict[Tuple[str, str], Tuple[str, str]]:
+    """Each source object with its target object: the ego with the ego; another with the only target object of its
+    kind, else the one sharing the most slots when that is unique; one to one."""
+    pairs: Dict[Tuple[str, str], Tuple[str, str]] = {}
+    for actor, slots in source.items():
+        if actor[0] == "ego":
+            if ("ego", actor[1]) in target:
+                pairs[actor] = ("ego", actor[1])
+            continue
+        same_kind = [other for other in target if other[1] == actor[1] and other[0] != "ego"]
+        if len(same_kind) == 1:
+            pairs[actor] = same_kind[0]
+            continue
+        names = {slot for slot, _ in slots}
+        scores = sorted(((len(names & {slot for slot, _ in target[o]}), o) for o in same_kind), reverse=True)
+        if scores and scores[0][0] > 0 and (len(scores) == 1 or scores[1][0] < scores[0][0]):
+            pairs[actor] = scores[0][1]
+    claimed: Dict[Tuple[str, str], int] = {}
+    for other in pairs.values():
+        claimed[other] = claimed.get(other, 0) + 1
+    return {actor: other for actor, other in pairs.items() if claimed[other] == 1}
+
+
+def meaning_map(source_script: str, target_script: str, source_params: Sequence[str],
+                target_params: Sequence[str]) -> Dict[str, Any]:
+    """Pair each of ``source_params`` (parameters of ``source_script``, e.g. a failure's parent, not found by name in
+    the other script) with one of ``target_params`` (the other script's, not named like any source parameter) by
+    meaning (module docstring). Returns ``{"pairs": {source: {"target", "object", "kind", "slot", "how"}},
+    "unpaired": {source: why}}``."""
+    open_source, open_target = set(source_params), set(target_params)
+
+    def own(uses: Mapping[str, Set[Use]], free: Set[str]) -> Dict[str, Set[Tuple[str, str, str, str]]]:
+        # a use counts only where no other unpaired parameter shares its expression: in ``egoS + a + b`` neither
+        # a nor b alone sets the placement
+        return {param: {(o, k, slot, how) for o, k, slot, how, together in found if not (together - {param}) & free}
+                for param, found in uses.items()}
+
+    source_all, target_all = parameter_uses(source_script), parameter_uses(target_script)
+    source_uses, target_uses = own(source_all, open_source), own(target_all, open_target)
+    actors = _pair_actors(_actor_slots(source_all, source_params), _actor_slots(target_all, target_params))
+    candidates: Dict[str, List[Tuple[str, Tuple[str, str, str, str]]]] = {}
+    unpaired: Dict[str, str] = {}
+    for param in source_params:
+        if not source_all.get(param):
+            unpaired[param] = "feeds no object of its script (a behaviour's body, a requirement or unused)"
+            continue
+        found: Dict[str, Tuple[str, str, str, str]] = {}
+        for name, kind, slot, how in sorted(source_uses.get(param, ())):
+            other = actors.get((name, kind))
+            if other is None:
+                continue
+            for target in target_params:
+                if target not in found and (other[0], other[1], slot, how) in target_uses.get(target, ()):
+                    found[target] = (other[0], other[1], slot, how)
+        if not any(actors.get((name, kind)) for name, kind, _, _, _ in source_all[param]):
+            unpaired[param] = "its object has no counterpart in the other script"
+        elif not source_uses.get(param):
+            unpaired[param] = "it sets its object's quantities only together with other parameters"
+        elif not found:
+            unpaired[param] = "no parameter of the other script sets the same quantity of that object"
+        elif len(found) > 1:
+            unpaired[param] = f"ambiguous: {', '.join(sorted(found))} set the same quantity"
+        else:
+            candidates[param] = list(found.items())
+    claimed: Dict[str, List[str]] = {}
+    for param, found in candidates.items():
+        claimed.setdefault(found[0][0], []).append(param)
+    pairs: Dict[str, Any] = {}
+    for target, params in claimed.items():
+        if len(params) > 1:
+            for param in params:
+                unpaired[param] = f"ambiguous: {', '.join(sorted(params))} all match {target}"
+            continue
+        name, kind, slot, how = candidates[params[0]][0][1]
+        source = next(actor for actor, _, s, h in sorted(source_uses[params[0]])
+                      if actors.get((actor, kind)) == (name, kind) and (s, h) == (slot, how))
+        pairs[params[0]] = {"target": target, "object": name, "source_object": source, "kind": kind, "slot": slot,
+                            "how": how}
+    return {"pairs": dict(sorted(pairs.items())), "unpaired": dict(sorted(unpaired.items()))}
