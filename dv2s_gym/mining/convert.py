@@ -808,7 +808,9 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
             reproduction=out["reproduction"], e2e_sc=out["e2e_sc"], run=str(run_dir.resolve()),
             index=record.get("index"),
             interaction=interaction, judge={"avoidability": out.get("avoidability"),
-                                            "interaction_shown": shown, "reproduced": reproduced},
+                                            "interaction_shown": shown, "reproduced": reproduced,
+                                            "parameters_not_compared": dict(
+                                                (out.get("parameters") or {}).get("not_comparable") or {})},
             replay_entry=replay["entry"],
         )
         family = _family(record["scenario"], source_failure["type"])
