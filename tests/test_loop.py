@@ -1016,7 +1016,7 @@ def test_a_starting_policy_episode_that_errored_before_stays_out_of_the_after_st
 def test_every_distinct_error_of_a_scenario_is_kept_with_its_count_the_most_frequent_first():
     """Errored episodes of one scenario with seven distinct messages: the five most frequent are kept with their
     counts (not only the first one seen), the rest counted, in the record, the log line and the report."""
-    from dv2s_gym.mining.loop import errored_episodes, merged_messages, messages_text
+    from dv2s_gym.mining.errored import errored_episodes, merged_messages, messages_text
     from dv2s_gym.mining.loop_report import render_markdown
 
     errors = (["scene not sampled"] + ["worker hung"] * 3 + ["worker crashed\nTraceback ..."] * 2

@@ -345,11 +345,6 @@ NOT_YET_WITHIN_LIMITS = {
     # Bank.add's keyword arguments are a bank entry's fields; they become one typed record with the entry types
     # (scenario_bank.records) rather than a second grouping here
     "scenario_bank/bank.py:Bank.add",
-    # the failure-to-scenario conversion takes its options one by one down to the replay entry; its settings
-    # become one dataclass together with the mining records' types
-    "dv2s_gym/mining/convert.py:_reproduce", "dv2s_gym/mining/convert.py:_add_replay",
-    "dv2s_gym/mining/convert.py:convert_failure",
-    "dv2s_gym/mining/failure_video.py:record_failure_video", "dv2s_gym/mining/failure_video.py:write_failure_video",
     # long: reports rendered line by line
     "dv2s_gym/mining/loop_report.py:render_markdown", "dv2s_gym/mining/report.py:build_report_from_records",
     "dv2s_gym/mining/report.py:markdown",

@@ -60,6 +60,7 @@ Nothing raises out of :func:`convert_failure` for a bad failure: every rejection
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import re
@@ -78,7 +79,7 @@ SETUP_ERRORS = (EndpointUnreachableError, EndpointTimeoutError, EndpointHTTPErro
 :func:`convert_failure` raises them instead of rejecting the failure, so a run stops and can be resumed
 when the endpoint works, rather than rejecting every cluster."""
 
-__all__ = ["convert_failure", "replay_failure_entry", "same_failure_class", "reference_failed", "reference_outcome",
+__all__ = ["ConversionSettings", "convert_failure", "replay_failure_entry", "same_failure_class", "reference_failed", "reference_outcome",
            "reproduction_seeds", "cluster_slug", "CONVERSION_DIR", "ENTRY_VIDEO",
            "ENTRY_TRACE"]
 
@@ -191,44 +192,93 @@ def _rel(path: Path, root: Path) -> str:
         return str(path)
 
 
-def _reproduce(script_path: Path, *, policy: Any, record_seed: int, k: int, seed: int,
-               env_config: Optional[Mapping[str, Any]], source_failure: Mapping[str, Any],
-               monitor: Mapping[str, Any], interaction: Optional[Mapping[str, Any]] = None
+@dataclasses.dataclass(frozen=True)
+class ConversionSettings:
+    """How :func:`convert_failure` converts and judges a failure: the deterministic ``policy`` that failed (a spec or
+    a :class:`~policies.registry.Policy`), the D-V2S backends (``dra``: ``bev``/``openai``, ``sg``:
+    ``rules``/``openai``) and their ``llm_config``, the reproduction check's ``k`` episodes and ``threshold`` (the
+    smallest reproduction rate that keeps the scenario), ``seed`` (the SG's seed and the reproduction seeds' salt),
+    the mining run's ``env_config``, the bank holding the record's scenario (``bank_dir``; default the bank converted
+    into when it holds it, else the shipped bank), the failure ``monitor``'s options (``ttc_threshold``,
+    ``stall_seconds``; default those of the run's ``settings.json``, else the monitors' defaults), the seconds of
+    video ``before`` and ``after`` the failure, the ``reference`` driver that must avoid the failure on the new
+    script (``None``: not checked) and ``describe_events`` (add the trace's account of the failure to the
+    description)."""
+
+    policy: Any = None
+    dra: str = "bev"
+    sg: str = "rules"
+    llm_config: Optional[Dict[str, Any]] = None
+    k: int = 10
+    threshold: float = 0.3
+    seed: int = 0
+    env_config: Optional[Mapping[str, Any]] = None
+    bank_dir: Optional[PathLike] = None
+    monitor: Optional[Mapping[str, Any]] = None
+    before: float = 4.0
+    after: float = 1.0
+    reference: Optional[Any] = "rule"
+    describe_events: bool = True
+
+    def replace(self, **changes: Any) -> "ConversionSettings":
+        """A copy with ``changes``."""
+        return dataclasses.replace(self, **changes)
+
+    def video(self):
+        """The settings of the failure's video (:class:`~dv2s_gym.mining.failure_video.VideoSettings`)."""
+        from dv2s_gym.mining.failure_video import VideoSettings
+
+        return VideoSettings(policy=self.policy, bank_dir=self.bank_dir, env_config=self.env_config,
+                             before=self.before, after=self.after,
+                             stall_seconds=(self.monitor or {}).get("stall_seconds"))
+
+
+def _reproduce(script_path: Path, policy: Any, settings: ConversionSettings, record_seed: int,
+               source_failure: Mapping[str, Any], interaction: Optional[Mapping[str, Any]] = None
                ) -> Tuple[List[Dict[str, Any]], List[Any]]:
-    """Run ``policy`` on the new scenario over ``k`` derived seeds; per episode its seed, failure, the kind of
+    """Run ``policy`` on the new scenario over the settings' ``k`` seeds derived from ``record_seed`` (with the
+    settings' ``env_config`` and ``monitor``); per episode its seed, failure, the kind of
     the actor its failure involved (``actor_kind``, :func:`~dv2s_gym.mining.interaction.key_actor`), whether it
     shows the source failure's interaction (``interaction``) and ``reproduced``: the same failure class with
     the same kind of actor."""
-    from dv2s_gym.mining.interaction import key_actor, shows_interaction
-    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
     from envs.dv2s_env import DV2SEnv
     from policies.evaluation import run_episode
     from policies.registry import load_policy
 
-    env = DV2SEnv(scenario=str(script_path), config=dict(env_config or {}))
+    env = DV2SEnv(scenario=str(script_path), config=dict(settings.env_config or {}))
     try:
         bound = load_policy(policy)
         bound.bind([env])
         name = script_path.parent.name if script_path.name == "scenario.scenic" else script_path.stem
         episodes, traces = [], []
-        for scene_seed in reproduction_seeds(record_seed, k, seed):
+        for scene_seed in reproduction_seeds(record_seed, settings.k, settings.seed):
             result, trace = run_episode(env, bound, name, scene_seed)
-            failure = _detect(result, trace, monitor)
-            actor = key_actor(trace, failure) if failure else None
-            actor_kind = None
-            if actor is not None:
-                actor_kind = (failure.get("with_kind") if failure.get("with") == actor and failure.get("with_kind")
-                              else _actor_kind(trace, actor))
-            wanted_kind = (interaction or {}).get("kind")
-            same = same_failure_class(source_failure, failure) and (wanted_kind is None or actor_kind == wanted_kind)
-            shown = shows_interaction(interaction, elements_from_trace(trace)) if interaction else None
-            episodes.append({"seed": scene_seed, "failure": failure, "steps": result.steps,
-                             "trajectory_hash": result.trajectory_hash, "actor_kind": actor_kind,
-                             "interaction": shown, "reproduced": same})
+            episodes.append(_reproduction_episode(scene_seed, result, trace, settings.monitor or {}, source_failure,
+                                                  interaction))
             traces.append(trace)
         return episodes, traces
     finally:
         env.close()
+
+
+def _reproduction_episode(scene_seed: int, result: Any, trace: Any, monitor: Mapping[str, Any],
+                          source_failure: Mapping[str, Any], interaction: Optional[Mapping[str, Any]]
+                          ) -> Dict[str, Any]:
+    """One episode of :func:`_reproduce`, judged."""
+    from dv2s_gym.mining.interaction import key_actor, shows_interaction
+    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
+
+    failure = _detect(result, trace, monitor)
+    actor = key_actor(trace, failure) if failure else None
+    actor_kind = None
+    if actor is not None:
+        actor_kind = (failure.get("with_kind") if failure.get("with") == actor and failure.get("with_kind")
+                      else _actor_kind(trace, actor))
+    wanted_kind = (interaction or {}).get("kind")
+    same = same_failure_class(source_failure, failure) and (wanted_kind is None or actor_kind == wanted_kind)
+    shown = shows_interaction(interaction, elements_from_trace(trace)) if interaction else None
+    return {"seed": scene_seed, "failure": failure, "steps": result.steps, "trajectory_hash": result.trajectory_hash,
+            "actor_kind": actor_kind, "interaction": shown, "reproduced": same}
 
 
 def _actor_kind(trace, name: str) -> str:
@@ -427,64 +477,104 @@ def _link(bank, name: str, fields: Mapping[str, Any]) -> None:
     bank.update_source(name, dict(fields))
 
 
-def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, policy: Any,
-                env_config: Optional[Mapping[str, Any]], monitor: Mapping[str, Any],
-                source_failure: Mapping[str, Any], cluster: Optional[str], run_dir: Path,
-                interaction: Optional[Mapping[str, Any]], files: Optional[Mapping[str, Path]]) -> Dict[str, Any]:
+@dataclasses.dataclass
+class _ReplaySource:
+    """The failure an exact replay keeps: its failure dict, cluster, the mining run folder, and what the conversion
+    read from it so far (its trace, interaction and files: ``None`` when no video was made)."""
+
+    source_failure: Mapping[str, Any]
+    cluster: Optional[str]
+    run_dir: Path
+    source_trace: Any = None
+    interaction: Optional[Mapping[str, Any]] = None
+    files: Optional[Mapping[str, Path]] = None
+
+
+def _add_replay(record: Mapping[str, Any], bank, settings: ConversionSettings, source: _ReplaySource
+                ) -> Dict[str, Any]:
     """Add the exact replay of the failing scene to ``bank`` (:mod:`dv2s_gym.mining.exact_replay`): the parent
-    script narrowed around the failing parameters, checked to replay the recorded episode step for step.
+    script (in the settings' ``bank_dir``) narrowed around the failing parameters, checked to replay the recorded
+    episode step for step with the settings' ``policy``, ``env_config`` and ``monitor``.
     Returns ``{"entry", "params", "intervals", "seed", "trajectory_hash", "e2e_sc", "note"}`` (``entry`` None,
     with a ``note``, when the narrowed script is the parent itself and the parent is in ``bank``).
 
     Without a ``source_trace`` (no failure video was made), the replay's own trace stands for it once its
     trajectory hash matches the record's, and is what the entry keeps (``files``: the trace only, no video);
     without an ``interaction`` it is read from that trace."""
-    import datetime
-
-    from dv2s_gym.mining.exact_replay import REPLAY_TAG, narrowed_script, replay_name, replay_versions, run_replay
-    from dv2s_gym.mining.interaction import interaction_sentence
+    from dv2s_gym.mining.exact_replay import replay_versions
     from dv2s_gym.pipeline.metrics import e2e_sc
     from dv2s_gym.pipeline.semantics.trace import elements_from_trace
-    from scenario_bank.bank import Bank, DuplicateScenarioError
+    from scenario_bank.bank import Bank
 
-    parent = (Bank(bank_dir) if bank_dir else Bank()).get(record["scenario"])
+    parent = (Bank(settings.bank_dir) if settings.bank_dir else Bank()).get(record["scenario"])
     params = dict(record.get("params") or {})
+    script, intervals, trace, failure, source = _run_narrowed(record, parent, params, settings, source)
+    replay = {"params": params, "intervals": intervals, "seed": int(record["seed"]),
+              "trajectory_hash": record["result"]["trajectory_hash"],
+              "policy": _policy_name(settings.policy), **replay_versions(settings.policy)}
+    out = {"entry": None, **replay, "failure": failure, "note": None,
+           "e2e_sc": e2e_sc(elements_from_trace(source.source_trace), elements_from_trace(trace))}
+    _bank_replay(out, record, bank, parent, script, replay, settings, source)
+    return out
+
+
+def _run_narrowed(record: Mapping[str, Any], parent: Any, params: Dict[str, Any], settings: ConversionSettings,
+                  source: _ReplaySource) -> tuple:
+    """Write the parent narrowed around the failing ``params`` and replay the recorded episode on it:
+    ``(script, intervals, trace, failure, source)``, ``source`` completed from the replay when it had no trace.
+    A replay that diverges is a ``replay`` rejection."""
+    from dv2s_gym.mining.exact_replay import narrowed_script, run_replay
+
     script, intervals = narrowed_script(parent.script, params)
     seed = int(record["seed"])
     expected = record["result"]["trajectory_hash"]
-    folder = run_dir / "failures" / cluster_slug(cluster, record.get("index")) / CONVERSION_DIR
+    folder = source.run_dir / "failures" / cluster_slug(source.cluster, record.get("index")) / CONVERSION_DIR
     path = folder / "replay.scenic"
     _write(path, script)
-    result, trace, failure = run_replay(path, policy=policy, seed=seed, params=params, env_config=env_config,
-                                        monitor=monitor)
+    result, trace, failure = run_replay(path, policy=settings.policy, seed=seed, params=params,
+                                        env_config=settings.env_config, monitor=settings.monitor)
     if result.trajectory_hash != expected:
         raise _Rejected("replay", f"the parent {record['scenario']!r} narrowed around the failing parameters does not "
                                   f"replay the failing episode (trajectory hash {result.trajectory_hash[:12]} != "
                                   f"recorded {expected[:12]})")
-    if source_trace is None:  # the same episode step for step: its trace is the failure's own
+    if source.source_trace is None:  # the same episode step for step: its trace is the failure's own
         from dv2s_gym.mining.interaction import failure_interaction
 
-        source_trace = trace
         trace.save(folder / ENTRY_TRACE)
-        files = {ENTRY_TRACE: folder / ENTRY_TRACE}
+        source_failure = source.source_failure
         if failure and failure.get("type") == source_failure.get("type"):
             source_failure = {**failure, **{k: v for k, v in source_failure.items() if v is not None}}
+        interaction = source.interaction
         if interaction is None:
             interaction = failure_interaction(trace, source_failure)
-    files = dict(files or {})
-    replay = {"params": params, "intervals": intervals, "seed": seed, "trajectory_hash": expected,
-              "policy": _policy_name(policy), **replay_versions(policy)}
-    out = {"entry": None, **replay, "failure": failure, "note": None,
-           "e2e_sc": e2e_sc(elements_from_trace(source_trace), elements_from_trace(trace))}
-    events = interaction_sentence(interaction)
+        source = dataclasses.replace(source, source_trace=trace, files={ENTRY_TRACE: folder / ENTRY_TRACE},
+                                     source_failure=source_failure, interaction=interaction)
+    return script, intervals, trace, failure, source
+
+
+def _bank_replay(out: Dict[str, Any], record: Mapping[str, Any], bank, parent: Any, script: str,
+                 replay: Mapping[str, Any], settings: ConversionSettings, source: _ReplaySource) -> None:
+    """Add the narrowed script to ``bank`` as the failure's exact replay entry (``out["entry"]``), or say in
+    ``out["note"]`` why there is none."""
+    import datetime
+
+    from dv2s_gym.mining.exact_replay import REPLAY_TAG, replay_name
+    from dv2s_gym.mining.interaction import interaction_sentence
+    from scenario_bank.bank import DuplicateScenarioError
+
+    files = dict(source.files or {})
+    seed, params, policy = replay["seed"], replay["params"], settings.policy
+    source_failure = source.source_failure
+    events = interaction_sentence(source.interaction)
     description = (f"{parent.description.strip()} Exact replay of a failure of {_policy_name(policy)}: seed {seed}, "
                    f"parameters narrowed around the failing values." + (f" {events}" if events else ""))
     provenance = Provenance(kind="mined", parent=record["scenario"], seed=seed, params=params,
                             video=ENTRY_VIDEO if ENTRY_VIDEO in files else None,
                             trace=ENTRY_TRACE if ENTRY_TRACE in files else None, generator="exact replay",
-                            policy=_policy_name(policy), failure=dict(source_failure), cluster=cluster,
-                            run=str(run_dir.resolve()), index=record.get("index"), interaction=dict(interaction),
-                            replay=replay, e2e_sc=out["e2e_sc"], date=datetime.date.today().isoformat())
+                            policy=_policy_name(policy), failure=dict(source_failure), cluster=source.cluster,
+                            run=str(source.run_dir.resolve()), index=record.get("index"),
+                            interaction=dict(source.interaction), replay=dict(replay), e2e_sc=out["e2e_sc"],
+                            date=datetime.date.today().isoformat())
     base = replay_name(record["scenario"], source_failure["type"])
     name, n = base, 2
     while name in bank:
@@ -502,7 +592,6 @@ def _add_replay(record: Mapping[str, Any], source_trace, bank, *, bank_dir, poli
                            f"scene is that scenario itself with seed {seed}")
         else:
             out["note"] = f"no replay entry: {error}"
-    return out
 
 
 def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any, bank: Any,
@@ -533,9 +622,9 @@ def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, *, policy
             bank = Bank(bank)
         if bank_dir is None and getattr(bank, "root", None) is not None and record.get("scenario") in bank:
             bank_dir = bank.root
-        replay = _add_replay(record, None, bank, bank_dir=bank_dir, policy=policy, env_config=env_config,
-                             monitor=_monitor_options(run_dir, monitor), source_failure=failure, cluster=cluster,
-                             run_dir=run_dir, interaction=None, files=None)
+        settings = ConversionSettings(policy=policy, env_config=env_config, bank_dir=bank_dir,
+                                      monitor=_monitor_options(run_dir, monitor))
+        replay = _add_replay(record, bank, settings, _ReplaySource(failure, cluster, run_dir))
         out.update(status="kept", replay_entry=replay["entry"], note=replay["note"])
     except _Rejected as rejection:
         out["reason"] = str(rejection)
@@ -556,14 +645,14 @@ def _stage_error(stage: str, error: BaseException) -> str:
     return f"{stage}: {type(error).__name__}: {first}"[:500]
 
 
-def _replay_without_video(out: Dict[str, Any], video_error: str, record: Mapping[str, Any], bank, *,
-                          details: Dict[str, Any], **options: Any) -> None:
+def _replay_without_video(out: Dict[str, Any], video_error: str, record: Mapping[str, Any], bank,
+                          details: Dict[str, Any], settings: ConversionSettings, source: _ReplaySource) -> None:
     """After the video stage failed: keep the exact replay all the same (its own trace stands for the failure's)
     and record both outcomes in ``out``: ``rejections`` holds the video's reason, then the replay's if it
     failed too."""
     out["rejections"] = [video_error]
     try:
-        replay = _add_replay(record, None, bank, interaction=None, files=None, **options)
+        replay = _add_replay(record, bank, settings, source)
     except SETUP_ERRORS:
         raise
     except Exception as error:
@@ -589,37 +678,24 @@ def _mined_name(parent: str, failure_type: str) -> str:
     return base[:90] or "mined"
 
 
-def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any, bank: Any, dra: str = "bev",
-                    sg: str = "rules", llm_config: Optional[Dict[str, Any]] = None, k: int = 10,
-                    threshold: float = 0.3, seed: int = 0, env_config: Optional[Mapping[str, Any]] = None,
-                    bank_dir: Optional[PathLike] = None, cluster: Optional[str] = None,
-                    monitor: Optional[Mapping[str, Any]] = None, before: float = 4.0,
-                    after: float = 1.0, reference: Optional[Any] = "rule",
-                    describe_events: bool = True) -> Dict[str, Any]:
+def convert_failure(record: Mapping[str, Any], run_dir: PathLike, settings: Optional[ConversionSettings] = None, *,
+                    bank: Any, cluster: Optional[str] = None, **options: Any) -> Dict[str, Any]:
     """Turn one failure record into a bank entry; returns the conversion record (never raises for a bad failure).
 
     Args:
         record: an episode record of the miner with a ``failure`` (see the mining contract).
         run_dir: the mining run folder; files go to ``failures/<cluster slug>/`` (``failure.webm``,
             ``trace.json.gz``, ``conversion/{description.txt, elements.json, scenario.scenic, report.json}``).
-        policy: the deterministic policy that failed (a spec or a :class:`~policies.registry.Policy`).
+        settings: the :class:`ConversionSettings` (the policy that failed, the backends, the reproduction check,
+            the video window, the reference driver...); ``options``: its fields given one by one as keywords
+            (``policy=``, ``k=``...), on top of ``settings``. The video covers ``before`` seconds before the failure
+            and ``after`` after it (a stall's clip covers the stall, up to the monitor's ``stall_seconds``, between
+            them: :func:`~dv2s_gym.mining.failure_video.write_failure_video`).
         bank: the bank to add to (a :class:`~scenario_bank.bank.Bank` or its folder).
-        dra, sg, llm_config: the D-V2S backends (``bev``/``openai``, ``rules``/``openai``) and LLM settings.
-        k, threshold: reproduction episodes, and the smallest reproduction rate that keeps the scenario.
-        seed: the SG's seed and the reproduction seeds' salt.
-        env_config: the mining run's env config (the re-run and the reproduction use it).
-        bank_dir: the bank holding the record's scenario (default: ``bank`` when it holds it, else the shipped bank).
         cluster: the failure's cluster id (default ``record["cluster"]``).
-        monitor: options of the failure monitors (``ttc_threshold``, ``stall_seconds``); default: those in
-            ``run_dir/settings.json``, else the monitors' defaults.
-        before, after: seconds of video before and after the failure (a stall's clip covers the stall, up to
-            the monitor's ``stall_seconds``, between them: :func:`~dv2s_gym.mining.failure_video.write_failure_video`).
-        reference: the reference driver that must avoid the failure on the new script (``None``: not checked).
-        describe_events: add to the DRA's description the failure's actor and manoeuvre read from the trace
-            (:func:`~dv2s_gym.mining.interaction.interaction_sentence`), so the description names what caused
-            the failure even when the clip does not show it.
 
-    Raises the model backends' setup errors (:data:`SETUP_ERRORS`); every other problem is a rejection.
+    Raises the model backends' setup errors (:data:`SETUP_ERRORS`), and ``TypeError`` without a policy; every
+    other problem is a rejection.
 
     Returns ``{"cluster", "index", "status": "kept"|"merged"|"rejected", "reason", "stage", "video",
     "description", "script", "reproduction", "e2e_sc", "bank_entry", "merged_into", "seconds",
@@ -630,215 +706,264 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any
     bank entry, kept whatever the script's fate; ``rejections``: every judge check that failed, the first
     one is ``reason``).
     """
-    from scenario_bank.bank import Bank
+    settings = (settings or ConversionSettings()).replace(**options)
+    if settings.policy is None:
+        raise TypeError("convert_failure needs the policy that failed (policy=...)")
+    return _Conversion(record, Path(run_dir), settings, bank, cluster).run()
 
-    start = time.perf_counter()
-    run_dir = Path(run_dir)
-    cluster = cluster if cluster is not None else record.get("cluster")
-    folder = run_dir / "failures" / cluster_slug(cluster, record.get("index"))
-    conversion = folder / CONVERSION_DIR
-    out: Dict[str, Any] = {"cluster": cluster, "index": record.get("index"), "status": "rejected", "reason": None,
-                           "stage": None, "video": None, "description": None, "script": None,
-                           "reproduction": None, "e2e_sc": None, "bank_entry": None, "merged_into": None,
-                           "seconds": None, "timings": {}, "interaction": None, "replay_entry": None,
-                           "avoidability": None, "rejections": [], "actors": None, "parameters": None}
-    details: Dict[str, Any] = {}
-    timings: Dict[str, float] = out["timings"]
-    stage_start = [time.perf_counter()]
 
-    def lap(stage: str) -> None:
+class _Conversion:
+    """One run of :func:`convert_failure`: its stages in order (each a method, timed), the record being built
+    (``out``) and what goes only into ``report.json`` (``details``)."""
+
+    def __init__(self, record: Mapping[str, Any], run_dir: Path, settings: ConversionSettings, bank: Any,
+                 cluster: Optional[str]) -> None:
+        self.record, self.run_dir, self.settings, self.bank = record, run_dir, settings, bank
+        self.cluster = cluster if cluster is not None else record.get("cluster")
+        self.folder = run_dir / "failures" / cluster_slug(self.cluster, record.get("index"))
+        self.conversion = self.folder / CONVERSION_DIR
+        self.out: Dict[str, Any] = {
+            "cluster": self.cluster, "index": record.get("index"), "status": "rejected", "reason": None,
+            "stage": None, "video": None, "description": None, "script": None, "reproduction": None,
+            "e2e_sc": None, "bank_entry": None, "merged_into": None, "seconds": None, "timings": {},
+            "interaction": None, "replay_entry": None, "avoidability": None, "rejections": [], "actors": None,
+            "parameters": None}
+        self.details: Dict[str, Any] = {}
+        self.stage = "input"
+        self._stage_start = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
         now = time.perf_counter()
-        timings[stage] = round(now - stage_start[0], 4)
-        stage_start[0] = now
+        self.out["timings"][stage] = round(now - self._stage_start, 4)
+        self._stage_start = now
 
-    stage = "input"
-    try:
-        source_failure = dict(record.get("failure") or {})
-        if not source_failure.get("type"):
+    def run(self) -> Dict[str, Any]:
+        start = time.perf_counter()
+        out = self.out
+        try:
+            for step in (self._input, self._video, self._interaction, self._replay, self._describe, self._generate,
+                         self._check, self._reproduction, self._avoidability, self._e2e_sc, self._judge,
+                         self._add_to_bank):
+                step()
+        except _Rejected as rejection:
+            out.update(stage=rejection.stage, reason=str(rejection))
+        except SETUP_ERRORS:
+            raise  # the endpoint's or its configuration's fault, not the failure's: not a rejection
+        except Exception as error:  # a bad failure is a rejection with its stage, never an exception
+            first = (str(error).strip().splitlines() or [""])[0]
+            out.update(stage=self.stage, reason=f"{self.stage}: {type(error).__name__}: {first}"[:500])
+        if out["stage"] is not None and out["stage"] not in out["timings"]:
+            self.lap(out["stage"])
+        out["seconds"] = round(time.perf_counter() - start, 3)
+        try:
+            self.conversion.mkdir(parents=True, exist_ok=True)
+            _write(self.conversion / "report.json", json.dumps({**out, **self.details}, indent=2, default=str) + "\n")
+        except OSError:
+            pass
+        return out
+
+    def _input(self) -> None:
+        from scenario_bank.bank import Bank
+
+        self.stage = "input"
+        self.source_failure = dict(self.record.get("failure") or {})
+        k, threshold = self.settings.k, self.settings.threshold
+        if not self.source_failure.get("type"):
             raise _Rejected("input", "the record holds no failure (record['failure'] is empty)")
         if int(k) < 1 or not 0.0 <= float(threshold) <= 1.0:
             raise _Rejected("input", f"the reproduction check needs k >= 1 and 0 <= threshold <= 1, not k={k}, "
                                      f"threshold={threshold}")
-        if isinstance(bank, (str, os.PathLike)):
-            bank = Bank(bank)
-        if bank_dir is None and getattr(bank, "root", None) is not None and record.get("scenario") in bank:
-            bank_dir = bank.root
-        conversion.mkdir(parents=True, exist_ok=True)
+        if isinstance(self.bank, (str, os.PathLike)):
+            self.bank = Bank(self.bank)
+        if (self.settings.bank_dir is None and getattr(self.bank, "root", None) is not None
+                and self.record.get("scenario") in self.bank):
+            self.settings = self.settings.replace(bank_dir=self.bank.root)
+        self.conversion.mkdir(parents=True, exist_ok=True)
 
-        stage = "video"
+    def _video(self) -> None:
+        self.stage = "video"
         from dv2s_gym.mining.failure_video import write_failure_video
 
-        video = folder / "failure.webm"
-        monitor = _monitor_options(run_dir, monitor)
+        self.video = self.folder / "failure.webm"
+        self.settings = self.settings.replace(monitor=_monitor_options(self.run_dir, self.settings.monitor))
         try:
-            written = write_failure_video(record, video, policy=policy, bank_dir=bank_dir, env_config=env_config,
-                                          before=before, after=after, stall_seconds=monitor.get("stall_seconds"))
+            self.written = write_failure_video(self.record, self.video, self.settings.video())
         except SETUP_ERRORS:
             raise
         except Exception as error:  # no video, no conversion; the exact replay does not need one
-            lap("video")
-            _replay_without_video(out, _stage_error("video", error), record, bank, bank_dir=bank_dir,
-                                  policy=policy, env_config=env_config, monitor=monitor,
-                                  source_failure=source_failure, cluster=cluster, run_dir=run_dir, details=details)
-            lap("replay")
-            raise _Rejected("video", out["rejections"][0].split(": ", 1)[1])
-        out["video"] = _rel(video, run_dir)
-        source_trace = written.trace
-        detected = _detect(written.result, source_trace, monitor)
-        details["source_failure_detected"] = detected
-        if detected and detected.get("type") == source_failure["type"]:
+            self.lap("video")
+            _replay_without_video(self.out, _stage_error("video", error), self.record, self.bank, self.details,
+                                  self.settings, _ReplaySource(self.source_failure, self.cluster, self.run_dir))
+            self.lap("replay")
+            raise _Rejected("video", self.out["rejections"][0].split(": ", 1)[1])
+        self.out["video"] = _rel(self.video, self.run_dir)
+        self.source_trace = self.written.trace
+        detected = _detect(self.written.result, self.source_trace, self.settings.monitor)
+        self.details["source_failure_detected"] = detected
+        if detected and detected.get("type") == self.source_failure["type"]:
             for key, value in detected.items():  # fill what a minimal failure record leaves out
-                if source_failure.get(key) is None:
-                    source_failure[key] = value
-        lap("video")
+                if self.source_failure.get(key) is None:
+                    self.source_failure[key] = value
+        self.lap("video")
 
-        stage = "interaction"
-        from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence
+    def _interaction(self) -> None:
+        self.stage = "interaction"
+        from dv2s_gym.mining.interaction import failure_interaction
 
-        interaction = failure_interaction(source_trace, source_failure)
-        out["interaction"] = interaction
-        lap("interaction")
+        self.interaction = failure_interaction(self.source_trace, self.source_failure)
+        self.out["interaction"] = self.interaction
+        self.lap("interaction")
 
-        stage = "replay"
-        replay = _add_replay(record, source_trace, bank, bank_dir=bank_dir, policy=policy, env_config=env_config,
-                             monitor=monitor, source_failure=source_failure, cluster=cluster, run_dir=run_dir,
-                             interaction=interaction, files={ENTRY_VIDEO: video, ENTRY_TRACE: written.trace_path})
-        out["replay_entry"] = replay["entry"]
-        details["replay"] = replay
-        lap("replay")
+    def _replay(self) -> None:
+        self.stage = "replay"
+        source = _ReplaySource(self.source_failure, self.cluster, self.run_dir, source_trace=self.source_trace,
+                               interaction=self.interaction,
+                               files={ENTRY_VIDEO: self.video, ENTRY_TRACE: self.written.trace_path})
+        self.replay = _add_replay(self.record, self.bank, self.settings, source)
+        self.out["replay_entry"] = self.replay["entry"]
+        self.details["replay"] = self.replay
+        self.lap("replay")
 
-        stage = "describe"
+    def _describe(self) -> None:
+        self.stage = "describe"
+        from dv2s_gym.mining.interaction import interaction_sentence
         from dv2s_gym.pipeline.semantics.text import elements_from_text
-        from dv2s_gym.pipeline.stages import describe, generate
+        from dv2s_gym.pipeline.stages import describe
 
-        description = describe(video, backend=dra, llm_config=llm_config)
-        details["dra_description"] = description.text
-        events = interaction_sentence(interaction, known=description.elements) if describe_events else ""
+        s = self.settings
+        description = describe(self.video, backend=s.dra, llm_config=s.llm_config)
+        self.details["dra_description"] = description.text
+        events = interaction_sentence(self.interaction, known=description.elements) if s.describe_events else ""
         if events:  # what the trace says caused the failure, even where the clip does not show it
             description.text = f"{description.text.strip()} {events}"
             description.elements = elements_from_text(description.text)
-        out["description"] = description.text
-        _write(conversion / "description.txt", description.text.strip() + "\n")
-        _write(conversion / "elements.json", json.dumps(description.elements, indent=2) + "\n")
-        details["description"] = description.as_dict()
-        lap("describe")
+        self.out["description"] = description.text
+        _write(self.conversion / "description.txt", description.text.strip() + "\n")
+        _write(self.conversion / "elements.json", json.dumps(description.elements, indent=2) + "\n")
+        self.details["description"] = description.as_dict()
+        self.description = description
+        self.lap("describe")
 
-        stage = "generate"
-        generation = generate(description.text, backend=sg, seed=seed, llm_config=llm_config)
-        script_path = conversion / "scenario.scenic"
-        _write(script_path, generation.script)
-        out["script"] = _rel(script_path, run_dir)
-        details["generation"] = generation.as_dict()
-        lap("generate")
+    def _generate(self) -> None:
+        self.stage = "generate"
+        from dv2s_gym.pipeline.stages import generate
 
-        stage = "check"
+        s = self.settings
+        self.generation = generate(self.description.text, backend=s.sg, seed=s.seed, llm_config=s.llm_config)
+        self.script_path = self.conversion / "scenario.scenic"
+        _write(self.script_path, self.generation.script)
+        self.out["script"] = _rel(self.script_path, self.run_dir)
+        self.details["generation"] = self.generation.as_dict()
+        self.lap("generate")
+
+    def _check(self) -> None:
+        self.stage = "check"
         from dataclasses import asdict
 
         from dv2s_gym.pipeline.convert import check_scenario
 
-        check = check_scenario(generation.script, seed=seed, name=f"mined failure {record.get('index')}",
-                               in_process=False)
-        details["check"] = {**asdict(check), "ok": check.ok}
-        lap("check")
+        check = check_scenario(self.generation.script, seed=self.settings.seed,
+                               name=f"mined failure {self.record.get('index')}", in_process=False)
+        self.details["check"] = {**asdict(check), "ok": check.ok}
+        self.lap("check")
         if not check.ok:
             failed = next(s for s in ("safety", "compile", "sample", "run")
                           if not {"safety": check.safe, "compile": check.compiled, "sample": check.sampled,
                                   "run": check.ran}[s])
             raise _Rejected("check", f"{failed} failed: {check.error}")
 
-        stage = "reproduction"
+    def _reproduction(self) -> None:
+        self.stage = "reproduction"
         from dv2s_gym.regress.stats import wilson_interval
 
-        episodes, traces = _reproduce(script_path, policy=policy, record_seed=int(record["seed"]), k=int(k),
-                                      seed=seed, env_config=env_config, source_failure=source_failure,
-                                      monitor=monitor, interaction=interaction)
-        reproduced = sum(e["reproduced"] for e in episodes)
-        shown = sum(bool(e["interaction"]) for e in episodes)
-        low, high = wilson_interval(reproduced, len(episodes))
-        out["reproduction"] = {"k": len(episodes), "reproduced": reproduced, "rate": reproduced / len(episodes),
-                               "interval": [low, high], "threshold": float(threshold),
-                               "interaction_shown": shown, "actor_kind": interaction.get("kind")}
-        details["reproduction_episodes"] = episodes
-        lap("reproduction")
+        episodes, self.traces = _reproduce(self.script_path, self.settings.policy, self.settings,
+                                           int(self.record["seed"]), self.source_failure, self.interaction)
+        self.reproduced = sum(e["reproduced"] for e in episodes)
+        self.shown = sum(bool(e["interaction"]) for e in episodes)
+        low, high = wilson_interval(self.reproduced, len(episodes))
+        self.out["reproduction"] = {"k": len(episodes), "reproduced": self.reproduced,
+                                    "rate": self.reproduced / len(episodes), "interval": [low, high],
+                                    "threshold": float(self.settings.threshold), "interaction_shown": self.shown,
+                                    "actor_kind": self.interaction.get("kind")}
+        self.details["reproduction_episodes"] = episodes
+        self.lap("reproduction")
 
-        stage = "avoidability"
+    def _avoidability(self) -> None:
+        self.stage = "avoidability"
+        reference = self.settings.reference
         if reference:
-            reference_episodes, _ = _reproduce(script_path, policy=reference, record_seed=int(record["seed"]),
-                                               k=int(k), seed=seed, env_config=env_config,
-                                               source_failure=source_failure, monitor=monitor)
-            out["avoidability"] = reference_outcome(source_failure, reference_episodes, _policy_name(reference))
-            details["reference_episodes"] = reference_episodes
-        lap("avoidability")
+            reference_episodes, _ = _reproduce(self.script_path, reference, self.settings, int(self.record["seed"]),
+                                               self.source_failure)
+            self.out["avoidability"] = reference_outcome(self.source_failure, reference_episodes,
+                                                         _policy_name(reference))
+            self.details["reference_episodes"] = reference_episodes
+        self.lap("avoidability")
 
-        stage = "e2e_sc"
+    def _e2e_sc(self) -> None:
+        self.stage = "e2e_sc"
         from dv2s_gym.pipeline.metrics import e2e_sc
         from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 
-        truth = elements_from_trace(source_trace)
-        scores = [e2e_sc(truth, elements_from_trace(trace)) for trace in traces]
-        out["e2e_sc"] = float(np.mean(scores))
-        details["source_elements"] = truth
-        lap("e2e_sc")
+        truth = elements_from_trace(self.source_trace)
+        scores = [e2e_sc(truth, elements_from_trace(trace)) for trace in self.traces]
+        self.out["e2e_sc"] = float(np.mean(scores))
+        self.details["source_elements"] = truth
+        self.lap("e2e_sc")
 
+    def _judge(self) -> None:
         # what the judge compares beyond the runs: the actors of the failure's scene and of the new scenario's
         # runs, and the failing parameter values against the new script's ranges
-        out["actors"] = compare_actors(actor_census(source_trace), [actor_census(t) for t in traces],
-                                       interaction.get("kind"))
+        out, record = self.out, self.record
+        out["actors"] = compare_actors(actor_census(self.source_trace), [actor_census(t) for t in self.traces],
+                                       self.interaction.get("kind"))
         out["parameters"] = compare_parameters((record.get("result") or {}).get("params") or record.get("params")
-                                               or {}, generation.script, parent=_parent_script(record, bank_dir))
-
+                                               or {}, self.generation.script,
+                                               parent=_parent_script(record, self.settings.bank_dir))
         # the judge: every check that failed is recorded; the first one is the rejection's stage
-        rejections = _judge(out, interaction, source_failure, threshold)
+        rejections = _judge(out, self.interaction, self.source_failure, self.settings.threshold)
         out["rejections"] = [str(r) for r in rejections]
-        if replay["entry"]:
-            _link(bank, replay["entry"], {"converted_e2e_sc": out["e2e_sc"], "converted_rejections": out["rejections"]})
+        if self.replay["entry"]:
+            _link(self.bank, self.replay["entry"], {"converted_e2e_sc": out["e2e_sc"],
+                                                    "converted_rejections": out["rejections"]})
         if rejections:
             raise rejections[0]
 
-        stage = "bank"
-        from dv2s_gym.pipeline.convert import conversion_provenance
-
-        result = record.get("result") or {}
-        provenance = Provenance(
-            kind="mined", parent=record["scenario"], seed=int(record["seed"]),
-            params=_portable_params(result.get("params") or record.get("params") or {}),
-            video=ENTRY_VIDEO, trace=ENTRY_TRACE, **conversion_provenance(dra, sg, generation, description),
-            backends={"dra": dra, "sg": sg},
-            policy=_policy_name(policy), failure=source_failure, cluster=cluster,
-            reproduction=out["reproduction"], e2e_sc=out["e2e_sc"], run=str(run_dir.resolve()),
-            index=record.get("index"),
-            interaction=interaction, judge={"avoidability": out.get("avoidability"),
-                                            "interaction_shown": shown, "reproduced": reproduced,
-                                            "parameters_not_compared": dict(
-                                                (out.get("parameters") or {}).get("not_comparable") or {})},
-            replay_entry=replay["entry"],
-        )
-        family = _family(record["scenario"], source_failure["type"])
-        outcome = bank.add(generation.script, description.text,
-                           name=_mined_name(record["scenario"], source_failure["type"]),
-                           elements=description.elements, tags=["mined", source_failure["type"]],
-                           provenance=provenance, files={ENTRY_VIDEO: video, ENTRY_TRACE: written.trace_path},
-                           on_duplicate="merge", near_copy_of=family)
+    def _add_to_bank(self) -> None:
+        self.stage = "bank"
+        out, record = self.out, self.record
+        outcome = self.bank.add(self.generation.script, self.description.text,
+                                name=_mined_name(record["scenario"], self.source_failure["type"]),
+                                elements=self.description.elements, tags=["mined", self.source_failure["type"]],
+                                provenance=self._provenance(),
+                                files={ENTRY_VIDEO: self.video, ENTRY_TRACE: self.written.trace_path},
+                                on_duplicate="merge", near_copy_of=_family(record["scenario"],
+                                                                           self.source_failure["type"]))
         if outcome.status == "added":
             out.update(status="kept", bank_entry=outcome.entry.name)
         else:
             out.update(status="merged", merged_into=outcome.entry.name, merge_reason=outcome.how)
-        if replay["entry"]:
-            _link(bank, replay["entry"], {"converted": outcome.entry.name})
-        lap("bank")
-    except _Rejected as rejection:
-        out.update(stage=rejection.stage, reason=str(rejection))
-    except SETUP_ERRORS:
-        raise  # the endpoint's or its configuration's fault, not the failure's: not a rejection
-    except Exception as error:  # a bad failure is a rejection with its stage, never an exception
-        first = (str(error).strip().splitlines() or [""])[0]
-        out.update(stage=stage, reason=f"{stage}: {type(error).__name__}: {first}"[:500])
-    if out["stage"] is not None and out["stage"] not in timings:
-        lap(out["stage"])
-    out["seconds"] = round(time.perf_counter() - start, 3)
-    try:
-        conversion.mkdir(parents=True, exist_ok=True)
-        _write(conversion / "report.json", json.dumps({**out, **details}, indent=2, default=str) + "\n")
-    except OSError:
-        pass
-    return out
+        if self.replay["entry"]:
+            _link(self.bank, self.replay["entry"], {"converted": outcome.entry.name})
+        self.lap("bank")
+
+    def _provenance(self) -> Provenance:
+        """The kept script's ``mined`` provenance."""
+        from dv2s_gym.pipeline.convert import conversion_provenance
+
+        out, record, s = self.out, self.record, self.settings
+        result = record.get("result") or {}
+        return Provenance(
+            kind="mined", parent=record["scenario"], seed=int(record["seed"]),
+            params=_portable_params(result.get("params") or record.get("params") or {}),
+            video=ENTRY_VIDEO, trace=ENTRY_TRACE,
+            **conversion_provenance(s.dra, s.sg, self.generation, self.description),
+            backends={"dra": s.dra, "sg": s.sg},
+            policy=_policy_name(s.policy), failure=self.source_failure, cluster=self.cluster,
+            reproduction=out["reproduction"], e2e_sc=out["e2e_sc"], run=str(self.run_dir.resolve()),
+            index=record.get("index"),
+            interaction=self.interaction, judge={"avoidability": out.get("avoidability"),
+                                                 "interaction_shown": self.shown, "reproduced": self.reproduced,
+                                                 "parameters_not_compared": dict(
+                                                     (out.get("parameters") or {}).get("not_comparable") or {})},
+            replay_entry=self.replay["entry"],
+        )

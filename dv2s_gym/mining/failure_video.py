@@ -32,8 +32,8 @@ import numpy as np
 
 from envs.errors import DV2SError
 
-__all__ = ["FailureReplayError", "FailureVideo", "VIDEO_CONFIG", "failure_step", "record_failure_video",
-           "rerun_failure", "stall_end", "write_failure_video"]
+__all__ = ["FailureReplayError", "FailureVideo", "VIDEO_CONFIG", "VideoSettings", "failure_step",
+           "record_failure_video", "rerun_failure", "stall_end", "write_failure_video"]
 
 VIDEO_CONFIG: Dict[str, Any] = {"screen_width": 480, "screen_height": 480, "scaling": 5.5,
                                 "offscreen_rendering": True, "show_trajectories": False}
@@ -201,17 +201,36 @@ class FailureVideo:
         return self.last - self.first + 1
 
 
-def record_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike], out_path: PathLike, *,
-                         policy: Any = None, bank_dir: Optional[PathLike] = None,
-                         env_config: Optional[Mapping[str, Any]] = None, before: float = 4.0,
-                         after: float = 1.0, trace_path: Optional[PathLike] = None,
-                         stall_seconds: Optional[float] = None) -> Path:
+@dataclasses.dataclass(frozen=True)
+class VideoSettings:
+    """How :func:`write_failure_video` re-runs and films a failure: the deterministic ``policy`` that failed (not
+    needed to replay a trace), the bank holding the scenario (``bank_dir``; default the shipped bank), the episode's
+    ``env_config``, the seconds of video ``before`` and ``after`` the failure, and ``stall_seconds``, the longest
+    stall a clip covers (default the monitors' ``DEFAULT_STALL_SECONDS``)."""
+
+    policy: Any = None
+    bank_dir: Optional[PathLike] = None
+    env_config: Optional[Mapping[str, Any]] = None
+    before: float = 4.0
+    after: float = 1.0
+    stall_seconds: Optional[float] = None
+
+    @classmethod
+    def of(cls, settings: Optional["VideoSettings"], options: Mapping[str, Any]) -> "VideoSettings":
+        """``settings`` (default: the defaults) with ``options`` (its fields by name) on top."""
+        return dataclasses.replace(settings or cls(), **dict(options))
+
+
+def record_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike], out_path: PathLike,
+                         settings: Optional[VideoSettings] = None, *, trace_path: Optional[PathLike] = None,
+                         **options: Any) -> Path:
     """Write the bird's-eye video of a failure (``.webm``) and its trace; returns the video's path.
 
-    ``record_or_trace`` is an episode record of the miner (re-run with ``policy``, which must be the
+    ``record_or_trace`` is an episode record of the miner (re-run with the settings' ``policy``, which must be the
     deterministic policy that failed, and checked against the record's trajectory hash) or an
     :class:`~envs.trace.EpisodeTrace` or trace file (replayed with its recorded actions; ``policy`` is
-    not needed, and the clip cannot run past the trace's end). The clip holds the frames from
+    not needed, and the clip cannot run past the trace's end). ``settings`` (:class:`VideoSettings`), or its
+    fields given one by one as keywords (``policy=``, ``before=``...). The clip holds the frames from
     ``before`` seconds before the failure (``record["failure"]``; for a trace, its first ego
     collision or off-road event) through ``after`` seconds after it, at the policy frequency:
     ``round(before * f) + round(after * f) + 1`` frames unless the episode started less than
@@ -220,61 +239,77 @@ def record_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike
     ``stall_seconds`` after the start; default the monitors' ``DEFAULT_STALL_SECONDS``) plus ``after``
     seconds. The trace is saved to ``trace_path`` (default ``trace.json.gz`` beside the video).
     """
-    return write_failure_video(record_or_trace, out_path, policy=policy, bank_dir=bank_dir, env_config=env_config,
-                               before=before, after=after, trace_path=trace_path,
-                               stall_seconds=stall_seconds).path
+    return write_failure_video(record_or_trace, out_path, settings, trace_path=trace_path, **options).path
 
 
-def write_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike], out_path: PathLike, *,
-                        policy: Any = None, bank_dir: Optional[PathLike] = None,
-                        env_config: Optional[Mapping[str, Any]] = None, before: float = 4.0,
-                        after: float = 1.0, trace_path: Optional[PathLike] = None,
-                        stall_seconds: Optional[float] = None) -> FailureVideo:
+def write_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike], out_path: PathLike,
+                        settings: Optional[VideoSettings] = None, *, trace_path: Optional[PathLike] = None,
+                        **options: Any) -> FailureVideo:
     """:func:`record_failure_video`, returning a :class:`FailureVideo` (window, result, trace)."""
     from envs.recording import VideoWriter
-    from envs.trace import EpisodeTrace
 
-    from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS
-
-    if before < 0 or after < 0:
-        raise FailureReplayError(f"before and after must be >= 0 seconds, not {before} and {after}")
-    stall_seconds = DEFAULT_STALL_SECONDS if stall_seconds is None else float(stall_seconds)
-    if not stall_seconds > 0:
-        raise FailureReplayError(f"stall_seconds must be > 0, not {stall_seconds}")
-    stall = False
+    settings = VideoSettings.of(settings, options)
+    stall_seconds = _check_window(settings)
     out_path = Path(out_path)
     trace_path = Path(trace_path) if trace_path is not None else out_path.parent / "trace.json.gz"
     if isinstance(record_or_trace, Mapping):
-        record = record_or_trace
-        if policy is None:
-            raise FailureReplayError("re-running a failure record needs the policy that failed (policy=...)")
-        frequency = _frequency({**VIDEO_CONFIG, **dict(env_config or {})})
-        steps = int((record.get("result") or {}).get("steps") or 0)
-        k = failure_step(record.get("failure"), steps, frequency)
-        stall = (record.get("failure") or {}).get("type") == "stall"
-        span = int(math.ceil(stall_seconds * frequency)) if stall else 0  # an upper bound of the stall's frames
-        end = k + span + int(round(after * frequency))
-        result, trace, frames = rerun_failure(record, policy=policy, bank_dir=bank_dir, env_config=env_config,
-                                         render=True, extra_steps=max(0, end - steps))
-        frequency = _frequency(trace.config)
-        k = failure_step(record.get("failure"), len(trace.actions), frequency)
+        clip = _record_clip(record_or_trace, settings, stall_seconds)
     else:
-        trace = record_or_trace if isinstance(record_or_trace, EpisodeTrace) else None
-        if trace is None:
-            try:
-                trace = EpisodeTrace.load(record_or_trace)
-            except (OSError, ValueError) as error:
-                raise FailureReplayError(f"cannot read the failure trace {record_or_trace}: {error}") from None
-        frames = _replay_trace_frames(trace)
-        result = None
-        frequency = _frequency(trace.config)
-        k = failure_step(_trace_failure(trace), len(trace.actions), frequency)
-    start = max(0, k - int(round(before * frequency)))
+        clip = _trace_clip(record_or_trace)
+    frames, result, trace, frequency, k, stall = clip
+    start = max(0, k - int(round(settings.before * frequency)))
     last = stall_end(trace, k, int(math.ceil(stall_seconds * frequency))) if stall else k
-    end = min(len(frames) - 1, last + int(round(after * frequency)))
+    end = min(len(frames) - 1, last + int(round(settings.after * frequency)))
     out_path.parent.mkdir(parents=True, exist_ok=True)
     with VideoWriter(out_path, fps=frequency) as video:
         for frame in frames[start:end + 1]:
             video.write(frame)
     trace.save(trace_path)
     return FailureVideo(out_path, trace_path, start, end, k, frequency, result, trace)
+
+
+def _check_window(settings: VideoSettings) -> float:
+    """The settings' ``stall_seconds`` (its default filled in), once ``before``, ``after`` and it are checked."""
+    from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS
+
+    if settings.before < 0 or settings.after < 0:
+        raise FailureReplayError(f"before and after must be >= 0 seconds, not {settings.before} and {settings.after}")
+    stall_seconds = DEFAULT_STALL_SECONDS if settings.stall_seconds is None else float(settings.stall_seconds)
+    if not stall_seconds > 0:
+        raise FailureReplayError(f"stall_seconds must be > 0, not {stall_seconds}")
+    return stall_seconds
+
+
+def _record_clip(record: Mapping[str, Any], settings: VideoSettings, stall_seconds: float) -> tuple:
+    """``(frames, result, trace, frequency, failure frame, stall)`` of an episode record, re-run far enough past
+    its end to show ``after`` seconds (and a stall's standing frames) past the failure."""
+    if settings.policy is None:
+        raise FailureReplayError("re-running a failure record needs the policy that failed (policy=...)")
+    frequency = _frequency({**VIDEO_CONFIG, **dict(settings.env_config or {})})
+    steps = int((record.get("result") or {}).get("steps") or 0)
+    k = failure_step(record.get("failure"), steps, frequency)
+    stall = (record.get("failure") or {}).get("type") == "stall"
+    span = int(math.ceil(stall_seconds * frequency)) if stall else 0  # an upper bound of the stall's frames
+    end = k + span + int(round(settings.after * frequency))
+    result, trace, frames = rerun_failure(record, policy=settings.policy, bank_dir=settings.bank_dir,
+                                          env_config=settings.env_config, render=True,
+                                          extra_steps=max(0, end - steps))
+    frequency = _frequency(trace.config)
+    k = failure_step(record.get("failure"), len(trace.actions), frequency)
+    return frames, result, trace, frequency, k, stall
+
+
+def _trace_clip(source: Any) -> tuple:
+    """``(frames, None, trace, frequency, failure frame, False)`` of a saved trace (or its file), replayed with its
+    recorded actions."""
+    from envs.trace import EpisodeTrace
+
+    trace = source if isinstance(source, EpisodeTrace) else None
+    if trace is None:
+        try:
+            trace = EpisodeTrace.load(source)
+        except (OSError, ValueError) as error:
+            raise FailureReplayError(f"cannot read the failure trace {source}: {error}") from None
+    frames = _replay_trace_frames(trace)
+    frequency = _frequency(trace.config)
+    return frames, None, trace, frequency, failure_step(_trace_failure(trace), len(trace.actions), frequency), False

@@ -71,7 +71,7 @@ round's baseline episodes (the starting policy) are paired with the last tested 
 ``errored`` counts the episodes that errored (no rate or test counts them; e.g. a scene the scenario's
 sampler could not produce): in ``mine`` and ``before`` ``{"episodes", "scenarios": {scenario: n}, "messages":
 {scenario: [{"message", "count"}]: its distinct errors, the 5 most frequent}, "unlisted": {scenario: {"messages",
-"episodes"} beyond those}, "examples": {scenario: its first error}}`` (:func:`dv2s_gym.mining.loop.errored_episodes`);
+"episodes"} beyond those}, "examples": {scenario: its first error}}`` (:func:`dv2s_gym.mining.errored.errored_episodes`);
 in ``after`` the same per policy
 (``fine_tuned``, ``control``), in ``untouched`` and ``regress`` per policy (``start``, ``fine_tuned``, and
 ``control`` in ``untouched``). The log warns of them after each step and ``report.md`` lists them per round.
@@ -275,7 +275,7 @@ def errored_text(errored: Mapping[str, Mapping[str, Any]]) -> str:
 
 def errored_note(errored: Mapping[str, Any]) -> str:
     """`` (3 episodes errored: urban_pedestrian_crossing 2, highway_cut_in_from_left 1)`` after an episode count
-    that includes them (:func:`dv2s_gym.mining.loop.errored_episodes`' form); empty when none errored."""
+    that includes them (:func:`dv2s_gym.mining.errored.errored_episodes`' form); empty when none errored."""
     count = int((errored or {}).get("episodes") or 0)
     if not count:
         return ""
@@ -285,7 +285,7 @@ def errored_note(errored: Mapping[str, Any]) -> str:
 
 def errored_by_stage(record: Mapping[str, Any]) -> List[tuple]:
     """``[(stage label, {policy: errored})]``: the round's errored episodes per step that ran
-    (:func:`dv2s_gym.mining.loop.errored_episodes`' form; a mining step recorded without them gives its count)."""
+    (:func:`dv2s_gym.mining.errored.errored_episodes`' form; a mining step recorded without them gives its count)."""
     steps = record.get("steps") or {}
     found = []
     mine = steps.get("mine") or {}
@@ -311,7 +311,7 @@ def _errored_total(record: Mapping[str, Any]) -> int:
 def _errored_lines(record: Mapping[str, Any]) -> List[str]:
     """The round's errored episodes per step and policy, naming the scenarios and, for each, its distinct error
     messages with their counts over the round's steps (the most frequent first, at most
-    :data:`dv2s_gym.mining.loop.ERROR_MESSAGES_KEPT` listed per step)."""
+    :data:`dv2s_gym.mining.errored.ERROR_MESSAGES_KEPT` listed per step)."""
     stages = errored_by_stage(record)
     if not stages:
         return []
@@ -319,7 +319,7 @@ def _errored_lines(record: Mapping[str, Any]) -> List[str]:
     total = _errored_total(record)
     lines = [f"- errored episodes (counted in no rate or test): " + ("**" if total else "") + "; ".join(parts)
              + ("**" if total else "")]
-    from dv2s_gym.mining.loop import merged_messages, messages_text
+    from dv2s_gym.mining.errored import merged_messages, messages_text
 
     merged = merged_messages([found for _, by in stages for found in by.values() if found])
     lines += [f"  - `{name}`: {messages_text(merged['messages'], merged['unlisted'], name)}"
