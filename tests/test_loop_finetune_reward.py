@@ -100,7 +100,7 @@ def test_loop_fine_tunes_with_its_reward_but_evaluates_with_the_policys_config(t
     miner = FakeMiner(SOURCES, failures_per_round=4)
     reward = {"standing": -0.7, "low_ttc": -0.5}
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, fine_tune_method="ppo", budget=6,
-                      fine_tune_steps=100, k_eval=2, regress_episodes=1, workers=1, n_envs=1, progress=False,
+                      fine_tune_steps=100, k_eval=3, regress_episodes=1, workers=1, n_envs=1, progress=False,
                       scenarios=SOURCES, fine_tune_reward=reward, min_heldout_episodes=1, min_heldout_families=1,
                       untouched_seeds=0,
                       log=lambda _: None)
