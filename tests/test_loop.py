@@ -908,6 +908,8 @@ def test_errored_episodes_are_counted_per_step_and_named_in_the_log_the_record_a
     steps = json.loads((tmp_path / "loop" / "loop.json").read_text())["rounds"][0]["steps"]
     assert steps["mine"]["errored"]["scenarios"] == {"urban_pedestrian_crossing": 1}
     assert unsampleable in steps["mine"]["errored"]["examples"]["urban_pedestrian_crossing"]
+    assert steps["mine"]["errored"]["messages"] == {"urban_pedestrian_crossing": [{"message": unsampleable,
+                                                                                    "count": 1}]}
     held = steps["split"]["held_out"][0]
     assert steps["before"]["errored"]["episodes"] == 0
     assert steps["after"]["errored"]["fine_tuned"]["scenarios"] == {held: 1}
@@ -922,7 +924,7 @@ def test_errored_episodes_are_counted_per_step_and_named_in_the_log_the_record_a
     warnings = [line for line in lines if "WARNING: episodes that errored" in line]
     assert len(warnings) == 4  # mining, held-out after, untouched set, regression test
     assert "mining step" in warnings[0] and "tests): 1 (urban_pedestrian_crossing 1)" in warnings[0]
-    assert unsampleable in warnings[0]
+    assert unsampleable in warnings[0] and f"urban_pedestrian_crossing: {unsampleable} (1 episode)" in warnings[0]
     assert f"fine-tuned policy 1 ({held} 1)" in warnings[1]
     markdown = report.paths["md"].read_text()
     assert ("errored episodes (counted in no rate or test): **mining: 1 (urban_pedestrian_crossing 1); "

@@ -253,6 +253,12 @@ def test_a_harm_in_one_family_the_gate_calls_inconclusive_is_not_accepted():
     assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "heldout_families_vs_start"
     assert "in family family_3 the fine-tuned policy failed 3 of 8 pairs" in verdict["reason"]
     assert "Holm" in verdict["reason"] and verdict["policy"] == "dv2s-ppo"
+    from dv2s_gym.mining.loop_report import render_markdown
+
+    record = {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
+              "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
+    markdown = render_markdown(_report(record))
+    assert "**harm not ruled out in family_3**" in markdown and "family_3 +37.5 pp" in markdown
     # the same round judged at a margin the harm stays within is accepted
     from dv2s_gym.mining.loop import heldout_comparison
 
