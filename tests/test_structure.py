@@ -353,8 +353,6 @@ NOT_YET_WITHIN_LIMITS = {
     # long: reports rendered line by line
     "dv2s_gym/mining/loop_report.py:render_markdown", "dv2s_gym/mining/report.py:build_report_from_records",
     "dv2s_gym/mining/report.py:markdown",
-    # long: the script pre-check's one-pass character scanner (its state is a dozen locals of one loop)
-    "scenario_bank/precheck.py:_scan",
     # long: a map's roads written out one by one, and the OpenDRIVE-to-highway-env conversion
     "scenario_bank/maps/build_maps.py:build_highway_onramp", "envs/road_network.py:convert_network",
 }
