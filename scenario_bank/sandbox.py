@@ -28,6 +28,7 @@ import resource
 import numpy as np
 
 from scenario_bank.atomic import atomic_write_text
+from scenario_bank.cache import cache_dir as user_cache_dir
 from scenario_bank.jail import JailedProcess, JailError, JailLimitError, JailLimits
 from scenario_bank.jail.process import JailRemoteError
 from scenario_bank.precheck import precheck_text
@@ -227,9 +228,7 @@ def _children_cpu() -> float:
 # ---------------------------------------------------------------- verification with a cache
 def cache_dir() -> Path:
     """Where verified-script records live: ``sandbox/`` in :func:`scenario_bank.cache.cache_dir`."""
-    from scenario_bank.cache import cache_dir as root
-
-    return root() / "sandbox"
+    return user_cache_dir() / "sandbox"
 
 
 _CODE_VERSION: Optional[str] = None
