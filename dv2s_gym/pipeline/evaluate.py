@@ -28,6 +28,9 @@ from typing import Any, Dict, List, Optional, Sequence
 
 from dv2s_gym.pipeline.labels import LABEL_SUFFIX, read_label
 from dv2s_gym.pipeline.metrics import e2e_sc, hallucination_rate, mean_sd, scs, semantic_preservation
+from dv2s_gym.pipeline.convert import check_scenario
+from dv2s_gym.pipeline.semantics.text import elements_from_text
+from dv2s_gym.pipeline.stages import describe, generate
 
 __all__ = ["EvalItem", "EVALSET_DIR", "collect_items", "evaluate", "format_results"]
 
@@ -92,10 +95,6 @@ def collect_items(folder: str | Path, *, unlabeled_descriptions: bool = False) -
 
 def _evaluate_item(stage: str, item: EvalItem, dra: str, sg: str, llm_config: Optional[Dict[str, Any]],
                    seconds: float) -> ItemResult:
-    from dv2s_gym.pipeline.convert import check_scenario
-    from dv2s_gym.pipeline.semantics.text import elements_from_text
-    from dv2s_gym.pipeline.stages import describe, generate
-
     result = ItemResult(item.stem, item.use_case)
     start = time.perf_counter()
     try:

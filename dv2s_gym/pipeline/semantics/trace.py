@@ -64,6 +64,7 @@ from typing import Any, Dict, List, Optional, Set, Tuple
 import numpy as np
 
 from scenario_bank.elements import normalize_elements
+from scenario_bank.maps import MAPS_DIR
 
 __all__ = ["elements_from_trace", "collision_type", "MAP_ROAD_TYPES", "KEEP_LANE_MIN_M"]
 
@@ -195,8 +196,6 @@ def _map_view(trace) -> Optional[_MapView]:
         return None
     if map_path not in _MAP_VIEWS:
         from envs.road_network import load_road_network
-        from scenario_bank.maps import MAPS_DIR
-
         candidates = [Path(map_path), MAPS_DIR / Path(map_path).name]
         view = None
         for candidate in candidates:
