@@ -34,6 +34,8 @@ from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH,
                                   fmt_interval as _interval, interval_mark as _interval_mark, legend as _legend,
                                   row_label as _row_label, svg as _svg, video_bytes as _video_bytes, video_tag,
                                   x_scale as _x_scale)
+from dv2s_gym.regress.clips import clip_window, DEFAULT_CLIP_CONFIG
+from scenario_bank.atomic import atomic_write_text
 
 __all__ = ["write_html", "render_html", "render_episode_video", "MAX_VIDEOS"]
 
@@ -322,8 +324,6 @@ def _clip(report: Mapping[str, Any], episode: Mapping[str, Any], role: str, base
 def _pair_window(report: Mapping[str, Any], episode: Mapping[str, Any]) -> Tuple[Optional[int], str]:
     """``(end step, the caption's words)`` of a pair of clips: both sides show the same seconds of the scene,
     those up to the candidate's failure (its last step)."""
-    from dv2s_gym.regress.clips import DEFAULT_CLIP_CONFIG, clip_window
-
     steps = _num((episode.get("candidate") or {}).get("steps")) if isinstance(episode.get("candidate"), Mapping) \
         else None
     if steps is None:
@@ -474,8 +474,6 @@ def write_html(report: Mapping[str, Any], path: Union[str, os.PathLike], *,
         max_videos: at most this many clips; the other newly failing episodes are listed.
         progress: a progress bar on stderr while the clips render (they take seconds each).
     """
-    from scenario_bank.atomic import atomic_write_text
-
     path = Path(path)
     page = render_html(report, base=path.parent, videos=videos, render_videos=render_videos,
                        max_videos=max_videos, progress=progress)

@@ -16,6 +16,9 @@ from typing import Any, Dict, List, Optional, Union
 
 from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.report import bank_info, load_report
+from envs.recording import VideoWriter
+from envs.trace import EpisodeTrace
+from envs.trace_bounds import check_file_config
 
 __all__ = ["find_episode", "replay_episode"]
 
@@ -81,8 +84,6 @@ def replay_episode(report_path: Union[str, os.PathLike], episode_id: str, role: 
         source = "policy"
     written = None
     if video:
-        from envs.recording import VideoWriter
-
         with VideoWriter(video, fps=fps) as writer:
             for frame in frames or []:
                 writer.write(frame)
@@ -94,7 +95,6 @@ def replay_episode(report_path: Union[str, os.PathLike], episode_id: str, role: 
 
 def _from_trace(path: str, frames: Optional[List[Any]]):
     from envs.replay import replay_trace
-    from envs.trace import EpisodeTrace
     from policies.evaluation import trajectory_hash
 
     trace = EpisodeTrace.load(path)
@@ -108,8 +108,6 @@ def _from_trace(path: str, frames: Optional[List[Any]]):
 def _from_policy(report: Dict[str, Any], result: Dict[str, Any], spec: str, frames: Optional[List[Any]]):
     from policies.evaluation import make_eval_env, run_episode
     from policies.registry import load_policy
-
-    from envs.trace_bounds import check_file_config
 
     config = check_file_config((report.get("settings") or {}).get("env_config"), "the report")
     bank = report.get("bank") or {}

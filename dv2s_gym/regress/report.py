@@ -91,6 +91,7 @@ from dv2s_gym.regress.errors import ReportMismatchError, RegressError
 from dv2s_gym.regress.store import describe_differences
 from dv2s_gym.regress.identity import installed_version
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
+from scenario_bank.bank import Bank, content_hash
 
 __all__ = [
     "SCHEMA",
@@ -238,8 +239,6 @@ def _errors_note(count: int) -> str:
 # ---------------------------------------------------------------------------------- report
 def bank_info(scenarios: Sequence[str], bank_dir: Optional[Union[str, os.PathLike]] = None) -> Dict[str, Any]:
     """``{"path", "version", "scenarios", "hashes"}``: the version is a SHA-256 over the scenarios' names and scripts."""
-    from scenario_bank.bank import Bank, content_hash
-
     bank = Bank(bank_dir)
     hashes = {name: content_hash(bank.get(name).script) for name in scenarios}
     payload = "\n".join(f"{name}:{hashes[name]}" for name in sorted(hashes))
