@@ -18,6 +18,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Union
+import warnings
 
 import numpy as np
 from highway_env import utils as hw_utils
@@ -511,8 +512,6 @@ class DV2SEnv(AbstractEnv):
             if self.config.get("upgrade_scenic2"):
                 upgrade = upgrade_scenic2(text)
                 if upgrade.changed or upgrade.notes:
-                    import warnings
-
                     warnings.warn(f"scenario {ref.name!r}: " + "; ".join(upgrade.report()), UserWarning, stacklevel=3)
                 if upgrade.changed:  # compile the upgraded text, not the file (localPath still resolves there)
                     text, path, origin = upgrade.source, None, ref.path

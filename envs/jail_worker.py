@@ -23,15 +23,19 @@ from __future__ import annotations
 
 import importlib
 import os
+import resource
 import sys
 import time
+from dataclasses import asdict
 from pathlib import PurePosixPath
 from typing import Any, Dict, List, Optional
 
+import numpy as np
+
 import envs.scenarios as envs_scenarios
+from envs.sandbox_checks import check_compiles_and_runs
 from scenario_bank.jail import wire
 from scenario_bank.jail.limits import start_charging_cpu
-from envs.sandbox_checks import check_compiles_and_runs
 from scenario_bank.safety import check_script
 
 __all__ = ["SCRATCH", "preload", "serve", "main"]
@@ -49,8 +53,6 @@ class _Worker:
     # ------------------------------------------------------------------ files
     def _write_files(self, index: int, files: Dict[str, Any]) -> str:
         """Write a scenario's files (script folder layout) under the scratch folder; return the folder."""
-        import numpy as np
-
         folder = os.path.join(SCRATCH, str(index))
         os.makedirs(folder, exist_ok=True)
         for relative, data in (files or {}).items():
@@ -108,8 +110,6 @@ class _Worker:
         return self.env.render()
 
     def trace(self) -> Optional[dict]:
-        from dataclasses import asdict
-
         trace = self.env.trace
         return None if trace is None else asdict(trace)
 
@@ -128,8 +128,6 @@ class _Worker:
     # ------------------------------------------------------------------ checks
     def verify(self, script: str, name: str, seeds: List[int], run_seconds: float, max_sample_iterations: int,
                files: Optional[dict] = None, filename: Optional[str] = None) -> dict:
-        import resource
-
         folder = self._write_files(0, files or {})
         path = os.path.join(folder, filename or "scenario.scenic")
         with open(path, "w", encoding="utf-8") as handle:
@@ -155,8 +153,6 @@ class _Worker:
 
 
 def _jsonable(value: Any, depth: int = 0) -> Any:
-    import numpy as np
-
     if depth > 40:
         return str(value)[:200]
     if value is None or isinstance(value, (bool, int, str)):

@@ -24,6 +24,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence
 import resource
+from importlib.metadata import version
 
 import numpy as np
 
@@ -247,8 +248,6 @@ def code_version() -> str:
             digest.update(str(path.relative_to(CODE_ROOT)).encode())
             digest.update(path.read_bytes())
         try:
-            from importlib.metadata import version
-
             digest.update(f"scenic {version('scenic')} highway-env {version('highway-env')}".encode())
         except Exception:  # metadata missing: the file digest alone still tracks our code
             pass
