@@ -32,6 +32,8 @@ import multiprocessing
 import signal
 import time
 
+from tqdm import tqdm
+
 from envs.errors import DV2SError
 from policies.evaluation import EpisodeResult, evaluate
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
@@ -471,8 +473,6 @@ def evaluate_for_card(specs: Mapping[str, str], episodes: Sequence[Tuple[str, in
     total = len(specs) * len(episodes)
     bar = None
     if progress:
-        from tqdm import tqdm
-
         bar = tqdm(total=total, desc="card evaluation", unit="episode", file=sys.stderr, dynamic_ncols=True)
     time_left = TimeLeft(total, log, "model card evaluation") if log is not None else None
 
