@@ -7,6 +7,8 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from typing import Any, Dict, List, Optional, Sequence
 
+from tqdm import tqdm
+
 from scenario_bank.bank import Bank, content_hash
 from scenario_bank.sandbox import check_in_jail
 from scenario_bank.shipped import is_shipped_text
@@ -103,8 +105,6 @@ def validate_bank(
     progress: bool = True,
 ) -> List[EntryReport]:
     """Validate entries (all by default), in ``jobs`` processes; broken sidecars are reported too."""
-    from tqdm import tqdm
-
     bank = Bank(bank_root)
     chosen = list(names) if names else bank.names()
     reports: List[EntryReport] = [EntryReport(n, error=msg) for n, msg in sorted(bank.problems.items())
