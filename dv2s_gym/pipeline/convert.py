@@ -18,6 +18,7 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional
+import datetime
 
 from dv2s_gym.pipeline.sg.openai import classify_failure
 from scenario_bank.atomic import atomic_write_text
@@ -203,8 +204,6 @@ def conversion_provenance(dra: str, sg: str, generation: Any, description: Any) 
     """The provenance fields every converted bank entry records: the backends (``generator``), the model and
     prompt context that made the script (from the generation, else the description) and today's date.
     ``generation`` and ``description`` are :class:`Generation` and :class:`Description` or their report dicts."""
-    import datetime
-
     return {"generator": f"dra={dra},sg={sg}",
             "model": _field(generation, "model") or _field(description, "model"),
             "context_hash": _field(generation, "context_hash") or _field(description, "prompt_hash"),

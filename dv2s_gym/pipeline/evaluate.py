@@ -26,6 +26,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence
 
+from tqdm import tqdm
+
 from dv2s_gym.pipeline.labels import LABEL_SUFFIX, read_label
 from dv2s_gym.pipeline.metrics import e2e_sc, hallucination_rate, mean_sd, scs, semantic_preservation
 from dv2s_gym.pipeline.convert import check_scenario
@@ -140,8 +142,6 @@ def evaluate(stage: str, folder: str | Path, *, dra: str = "bev", sg: str = "rul
              llm_config: Optional[Dict[str, Any]] = None, jobs: int = 1, seconds: float = 10.0,
              progress: bool = True) -> Dict[str, Any]:
     """Run one evaluation; returns per-item results and the per-use-case / overall summary."""
-    from tqdm import tqdm
-
     if stage not in ("dra", "sg", "e2e"):
         raise ValueError(f"unknown evaluation {stage!r}; use dra, sg or e2e")
     items = collect_items(folder, unlabeled_descriptions=stage == "sg")
