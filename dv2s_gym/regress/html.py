@@ -28,6 +28,8 @@ import tempfile
 from pathlib import Path
 from typing import Any, List, Mapping, Optional, Sequence, Tuple, Union
 
+from tqdm import tqdm
+
 from dv2s_gym.regress.clips import ClipError, render_episode_video, render_policy_video
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, VideoSource,
                                   axis as _axis, escape as _e, finite as _num, fmt as _fmt,
@@ -353,8 +355,6 @@ def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, 
     out, shown, left = [], 0, []
     bar = None
     if progress and render_videos:
-        from tqdm import tqdm
-
         pairs = min(len(newly), max_videos)
         bar = tqdm(total=2 * pairs - sum(1 for i in newly[:pairs] for key in (i, f"{i}#baseline") if key in videos),
                    desc="report clips", unit="clip", file=sys.stderr, dynamic_ncols=True)

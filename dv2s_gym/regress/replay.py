@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Union
+import difflib
 
 from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.report import bank_info, load_report
@@ -29,8 +30,6 @@ def find_episode(report: Dict[str, Any], episode_id: str, role: str = "candidate
         raise RegressError(f"--policy must be 'candidate' or 'baseline', not {role!r}")
     episodes = {e["id"]: e for e in report.get("episodes") or []}
     if episode_id not in episodes:
-        import difflib
-
         near = difflib.get_close_matches(episode_id, list(episodes), n=3, cutoff=0.6)
         hint = f" Did you mean {', '.join(near)}?" if near else ""
         failing = report.get("newly_failing") or [e for e in episodes if (episodes[e]["candidate"] or {}).get("failed")]

@@ -25,6 +25,8 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
+from tqdm import tqdm
+
 from dv2s_gym.regress import power as power_plan
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
@@ -470,6 +472,4 @@ def _planned_episodes(names: Sequence[str], baseline_report: Optional[Union[str,
 def _progress(enabled: bool, total: int, initial: int):
     if not enabled:
         return None
-    from tqdm import tqdm
-
     return tqdm(total=total, initial=initial, desc="regress", unit="episode", file=sys.stderr, dynamic_ncols=True)
