@@ -19,6 +19,7 @@ from envs.errors import DV2SError
 from envs.trace import EpisodeTrace
 from envs.trace_bounds import check_file_config, TraceConfigError
 from envs.recording import VideoWriter
+from dv2s_gym.regress.replay import _bank_for
 
 __all__ = ["ClipError", "render_episode_video", "render_policy_video", "clip_window", "DEFAULT_CLIP_CONFIG"]
 
@@ -87,8 +88,6 @@ def render_policy_video(report: Dict[str, Any], result: Dict[str, Any], role: st
     """
     from policies.evaluation import make_eval_env, run_episode
     from policies.registry import load_policy
-
-    from dv2s_gym.regress.replay import _bank_for
 
     spec = (report.get(role) or {}).get("spec")
     if not spec:

@@ -38,6 +38,7 @@ from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH,
                                   x_scale as _x_scale)
 from dv2s_gym.regress.clips import clip_window, DEFAULT_CLIP_CONFIG
 from scenario_bank.atomic import atomic_write_text
+from dv2s_gym.regress.report import scenarios_by_severity, warnings
 
 __all__ = ["write_html", "render_html", "render_episode_video", "MAX_VIDEOS"]
 
@@ -148,8 +149,6 @@ def _bin_label(low: float, high: float) -> str:
 
 def _scenario_rows(report: Mapping[str, Any]) -> List[Tuple[str, Mapping[str, Any], bool]]:
     """Scenarios worst first (:func:`~dv2s_gym.regress.report.scenarios_by_severity`), then overall."""
-    from dv2s_gym.regress.report import scenarios_by_severity
-
     scenarios = {name: entry for name, entry in (report.get("scenarios") or {}).items() if isinstance(entry, Mapping)}
     try:
         order = scenarios_by_severity({"scenarios": scenarios})
@@ -218,8 +217,6 @@ def _banner(report: Mapping[str, Any]) -> str:
         detail.append("stopped early (sequential test)")
     small = f"<small>{'; '.join(detail)}</small>" if detail else ""
     banner = f'<div class="banner {css}" id="verdict">{head}{small}</div>'
-    from dv2s_gym.regress.report import warnings
-
     for number, warning in enumerate(warnings(report)):  # before the verdict is trusted: as prominent as it
         banner += f'<div class="banner INCONCLUSIVE" id="warning-{number}">warning: {_e(warning)}</div>'
     return banner
