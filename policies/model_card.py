@@ -32,6 +32,7 @@ import multiprocessing
 import signal
 import time
 
+from scipy.stats import binomtest
 from tqdm import tqdm
 
 from envs.errors import DV2SError
@@ -96,8 +97,6 @@ def bank_version(names: Sequence[str], bank_dir: Optional[Union[str, os.PathLike
 def _wilson(k: int, n: int, confidence: float) -> Tuple[float, float]:
     if n == 0:
         return 0.0, 1.0
-    from scipy.stats import binomtest
-
     interval = binomtest(int(k), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
     return float(interval.low), float(interval.high)
 
@@ -108,8 +107,6 @@ def _mcnemar(candidate_only: int, baseline_only: int, alternative: str) -> float
     discordant = candidate_only + baseline_only
     if discordant == 0:
         return 1.0
-    from scipy.stats import binomtest
-
     return float(min(1.0, binomtest(candidate_only, discordant, 0.5, alternative=alternative).pvalue))
 
 
