@@ -30,15 +30,15 @@ from typing import Any, List, Mapping, Optional, Sequence, Tuple, Union
 
 from tqdm import tqdm
 
-from dv2s_gym.regress.clips import ClipError, render_episode_video, render_policy_video
+from dv2s_gym.regress.clips import (DEFAULT_CLIP_CONFIG, ClipError, clip_window, render_episode_video,
+                                    render_policy_video)
+from dv2s_gym.regress.report import scenarios_by_severity, warnings as report_warnings
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, VideoSource,
                                   axis as _axis, escape as _e, finite as _num, fmt as _fmt,
                                   fmt_interval as _interval, interval_mark as _interval_mark, legend as _legend,
                                   row_label as _row_label, svg as _svg, video_bytes as _video_bytes, video_tag,
                                   x_scale as _x_scale)
-from dv2s_gym.regress.clips import clip_window, DEFAULT_CLIP_CONFIG
 from scenario_bank.atomic import atomic_write_text
-from dv2s_gym.regress.report import scenarios_by_severity, warnings
 
 __all__ = ["write_html", "render_html", "render_episode_video", "MAX_VIDEOS"]
 
@@ -217,7 +217,7 @@ def _banner(report: Mapping[str, Any]) -> str:
         detail.append("stopped early (sequential test)")
     small = f"<small>{'; '.join(detail)}</small>" if detail else ""
     banner = f'<div class="banner {css}" id="verdict">{head}{small}</div>'
-    for number, warning in enumerate(warnings(report)):  # before the verdict is trusted: as prominent as it
+    for number, warning in enumerate(report_warnings(report)):  # before the verdict is trusted: as prominent as it
         banner += f'<div class="banner INCONCLUSIVE" id="warning-{number}">warning: {_e(warning)}</div>'
     return banner
 
