@@ -7,9 +7,12 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from typing import Any, Dict, List, Optional, Sequence
 
+from tqdm import tqdm
+
 from scenario_bank.bank import Bank, content_hash
 from scenario_bank.sandbox import check_in_jail
 from scenario_bank.shipped import is_shipped_text
+from scenario_bank.maps import list_maps
 
 __all__ = ["EntryReport", "validate_entry", "validate_bank"]
 
@@ -63,7 +66,6 @@ def validate_entry(bank_root: Optional[str], name: str, samples: int = 3, second
         for missing in entry.missing_files():
             report.sidecar.append(f"the provenance names {missing!r}, which is not in the entry folder "
                                   "(restore it, or re-add the entry with its files)")
-        from scenario_bank.maps import list_maps
 
         if entry.map not in list_maps() and not entry.map.endswith(".xodr"):
             report.sidecar.append(f"map {entry.map!r} is not a shipped map")
@@ -103,10 +105,6 @@ def validate_bank(
     progress: bool = True,
 ) -> List[EntryReport]:
     """Validate entries (all by default), in ``jobs`` processes; broken sidecars are reported too."""
-    from tqdm import tqdm
-
-    from scenario_bank.bank import Bank
-
     bank = Bank(bank_root)
     chosen = list(names) if names else bank.names()
     reports: List[EntryReport] = [EntryReport(n, error=msg) for n, msg in sorted(bank.problems.items())

@@ -13,6 +13,7 @@ from tqdm import tqdm
 
 from envs.recording import record_episode
 from scenario_bank import list_scenarios
+from policies import CautiousDriver
 
 __all__ = ["EpisodeSummary", "run_demo", "format_table", "record_scenario"]
 
@@ -56,8 +57,6 @@ def run_demo(
 
     Writes ``<out_dir>/<scenario>_seed<seed>.webm`` per episode, returns the summaries.
     """
-    from policies import CautiousDriver
-
     names = list(scenarios) if scenarios else list_scenarios()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -114,8 +113,6 @@ def record_scenario(scenario: str, video: str | os.PathLike, *, config: dict, se
     trace is saved there. Returns the recording summary with the episode's scenario, seed, collisions, lane
     changes, minimum TTC, off-road flag, parameters and ``driver``: ``rule-based``, ``random`` or ``scenic``.
     """
-    from policies import CautiousDriver
-
     env = gym.make("dv2s_gym:DV2S-v0", scenario=scenario, config=config, render_mode="rgb_array",
                    trusted=trusted, bank_dir=bank_dir)
     policy = CautiousDriver(env) if drive and config.get("ego_policy") != "scenic" else None

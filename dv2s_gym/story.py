@@ -35,6 +35,8 @@ from __future__ import annotations
 from concurrent.futures import ProcessPoolExecutor
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
+from tqdm import tqdm
+
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 from dv2s_gym.story_check import check_story
 from policies.baselines import IDMEgo, KeepLaneEgo
@@ -216,8 +218,6 @@ def story_table(names: Sequence[str], egos: Sequence[str] = EGOS, seeds: Sequenc
     before the trace showed all of it; ``missed``: per step not played, how often, the first seed that
     missed it and why (:func:`missed_steps`).
     """
-    from tqdm import tqdm
-
     unknown = [e for e in egos if e not in ALL_EGOS]
     if unknown:
         raise ValueError(f"unknown ego(s) {', '.join(unknown)}; choose from {', '.join(ALL_EGOS)}")

@@ -18,6 +18,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence, Union
+import warnings
 
 import numpy as np
 from highway_env import utils as hw_utils
@@ -48,6 +49,7 @@ from scenario_bank import scenario_path, select_scenarios
 from scenario_bank.jail import require_jail
 from scenario_bank.maps import list_maps
 from scenario_bank.shipped import is_shipped_text
+from scenario_bank.scenic2 import upgrade_scenic2
 
 __all__ = ["DV2SEnv", "ScenarioRef", "check_env_config"]
 
@@ -498,7 +500,6 @@ class DV2SEnv(AbstractEnv):
                     f"reset(options={{'scenario': {name!r}}}): this env was made with "
                     f"{', '.join(repr(r.name) for r in self._scenario_refs)}; a scenario it was not made with "
                     f"needs its own env: gym.make('DV2S-v0', scenario={name!r})")
-            from scenario_bank import scenario_path
 
             return ScenarioRef(name=name, path=str(scenario_path(name, self._bank_dir)))
         if len(self._scenario_refs) == 1:
@@ -509,12 +510,8 @@ class DV2SEnv(AbstractEnv):
         if ref not in self._compiled:
             text, path, origin = ref.text(), ref.path, None
             if self.config.get("upgrade_scenic2"):
-                from scenario_bank.scenic2 import upgrade_scenic2
-
                 upgrade = upgrade_scenic2(text)
                 if upgrade.changed or upgrade.notes:
-                    import warnings
-
                     warnings.warn(f"scenario {ref.name!r}: " + "; ".join(upgrade.report()), UserWarning, stacklevel=3)
                 if upgrade.changed:  # compile the upgraded text, not the file (localPath still resolves there)
                     text, path, origin = upgrade.source, None, ref.path

@@ -23,10 +23,20 @@ from __future__ import annotations
 
 import importlib
 import os
+import resource
 import sys
 import time
+from dataclasses import asdict
 from pathlib import PurePosixPath
 from typing import Any, Dict, List, Optional
+
+import numpy as np
+
+import envs.scenarios as envs_scenarios
+from envs.sandbox_checks import check_compiles_and_runs
+from scenario_bank.jail import wire
+from scenario_bank.jail.limits import start_charging_cpu
+from scenario_bank.safety import check_script
 
 __all__ = ["SCRATCH", "preload", "serve", "main"]
 
@@ -43,8 +53,6 @@ class _Worker:
     # ------------------------------------------------------------------ files
     def _write_files(self, index: int, files: Dict[str, Any]) -> str:
         """Write a scenario's files (script folder layout) under the scratch folder; return the folder."""
-        import numpy as np
-
         folder = os.path.join(SCRATCH, str(index))
         os.makedirs(folder, exist_ok=True)
         for relative, data in (files or {}).items():
@@ -102,8 +110,6 @@ class _Worker:
         return self.env.render()
 
     def trace(self) -> Optional[dict]:
-        from dataclasses import asdict
-
         trace = self.env.trace
         return None if trace is None else asdict(trace)
 
@@ -122,10 +128,6 @@ class _Worker:
     # ------------------------------------------------------------------ checks
     def verify(self, script: str, name: str, seeds: List[int], run_seconds: float, max_sample_iterations: int,
                files: Optional[dict] = None, filename: Optional[str] = None) -> dict:
-        from envs.sandbox_checks import check_compiles_and_runs
-
-        import resource
-
         folder = self._write_files(0, files or {})
         path = os.path.join(folder, filename or "scenario.scenic")
         with open(path, "w", encoding="utf-8") as handle:
@@ -138,25 +140,19 @@ class _Worker:
 
     def parameter_ranges(self, name: str, text: str, files: Optional[dict] = None,
                          filename: Optional[str] = None) -> dict:
-        from envs.scenarios import compile_scenario
-
         self.folders += 1
         folder = self._write_files(1000 + self.folders, files or {})  # apart from the env's scenario folders
         path = os.path.join(folder, filename or "scenario.scenic")
         with open(path, "w", encoding="utf-8") as handle:
             handle.write(text)
-        compiled = compile_scenario(text, name=name, path=path)
+        compiled = envs_scenarios.compile_scenario(text, name=name, path=path)
         return {k: v.as_dict() for k, v in compiled.parameter_ranges().items()}
 
     def check(self, script: str, absolute_maps: bool = False) -> list:
-        from scenario_bank.safety import check_script
-
         return [_finding(f) for f in check_script(script, absolute_maps=absolute_maps)]
 
 
 def _jsonable(value: Any, depth: int = 0) -> Any:
-    import numpy as np
-
     if depth > 40:
         return str(value)[:200]
     if value is None or isinstance(value, (bool, int, str)):
@@ -203,8 +199,6 @@ def preload() -> None:
 def serve(inbound_fd: int, outbound_fd: int, started: float) -> int:
     """Say hello (``started``: :func:`time.perf_counter` when starting began), then answer requests until
     ``exit`` or the end of the input; the exit status."""
-    from scenario_bank.jail import wire
-
     inbound = os.fdopen(inbound_fd, "rb", buffering=0)
     outbound = os.fdopen(outbound_fd, "wb", buffering=0)
     wire.write_message(outbound, {"ok": True, "value": {"import_seconds": time.perf_counter() - started}})
@@ -234,8 +228,6 @@ def serve(inbound_fd: int, outbound_fd: int, started: float) -> int:
 
 def main(argv: List[str]) -> int:
     """``python -m envs.jail_worker IN_FD OUT_FD``: import the simulator, then :func:`serve`."""
-    from scenario_bank.jail.limits import start_charging_cpu
-
     start = time.perf_counter()
     preload()  # before hello, so starting includes it
     start_charging_cpu()

@@ -24,9 +24,14 @@ from envs.errors import DV2SError, InvalidActionError, ScenarioCompileError, Sce
 from envs.config_check import check_config
 from envs.errors import UnsupportedConstructError
 from envs.trace import EpisodeTrace
-from scenario_bank.jail import JailError, JailLimitError, JailLimits, JailedProcess
+import envs.scenarios as envs_scenarios
+from scenario_bank.jail import JailError, JailLimitError, JailLimits, JailedProcess, require_jail
 from scenario_bank.jail.process import JailRemoteError
 from scenario_bank.safe_files import read_in_folder, read_regular_file
+from envs.scenarios import ParamRange, read_scenario_file
+from scenario_bank.shipped import is_shipped_text
+from scenario_bank.maps import list_maps, resolve_map, UnknownMapError
+from scenario_bank.safety import UnsafeScenarioError
 
 __all__ = ["JailedDV2SEnv", "space_to_data", "data_to_space", "parameter_ranges_of", "MAX_MAP_BYTES"]
 
@@ -145,8 +150,6 @@ class JailedDV2SEnv(gym.Env):
         payload = [self._scenario_payload(ref, text) for ref, text in zip(refs, texts)]
         self._host_map = None
         if user_config.get("map") is not None:
-            from scenario_bank.maps import list_maps, resolve_map
-
             path = resolve_map(user_config["map"])  # the shipped maps' rules and errors, nothing read yet
             if str(user_config["map"]) not in list_maps():  # a file of the user's: its bytes go in, not its path
                 user_config["map_file"] = {"name": path.name, "data": np.frombuffer(
@@ -213,15 +216,11 @@ class JailedDV2SEnv(gym.Env):
             if error.output:
                 message += f"\n--- the script's output (last {len(error.output)} characters) ---\n{error.output}"
             if error.error_type == "UnsafeScenarioError":
-                from scenario_bank.safety import UnsafeScenarioError
-
                 unsafe = UnsafeScenarioError.__new__(UnsafeScenarioError)
                 ValueError.__init__(unsafe, message)
                 unsafe.findings = list(error.details.get("findings") or [])
                 raise unsafe from None
             if error.error_type == "UnknownMapError":
-                from scenario_bank.maps import UnknownMapError
-
                 raise UnknownMapError(message) from None
             if error.error_type == "FileNotFoundError":
                 raise FileNotFoundError(message) from None
@@ -388,20 +387,15 @@ def parameter_ranges_of(refs: Sequence[Any]) -> Dict[str, Dict[str, Any]]:
     The package's own scripts are compiled here; every other script in one jailed
     worker, which sends back only the ranges (checked: kinds, numbers, constants).
     """
-    from envs.scenarios import ParamRange, compile_scenario, read_scenario_file
-    from scenario_bank.shipped import is_shipped_text
-
     result: Dict[str, Dict[str, Any]] = {}
     untrusted = []
     for ref in refs:
         text = ref.source if ref.source is not None else read_scenario_file(ref.path)
         if is_shipped_text(text):
-            result[ref.name] = compile_scenario(text, name=ref.name, path=ref.path).parameter_ranges()
+            result[ref.name] = envs_scenarios.compile_scenario(text, name=ref.name, path=ref.path).parameter_ranges()
         else:
             untrusted.append((ref, text))
     if untrusted:
-        from scenario_bank.jail import require_jail
-
         require_jail(f"scenario {untrusted[0][0].name!r}")
         with JailedProcess("envs.jail_worker", name=f"scenario {untrusted[0][0].name!r}") as worker:
             for ref, text in untrusted:

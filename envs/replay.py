@@ -16,6 +16,7 @@ from envs.dv2s_env import DV2SEnv
 from envs.trace import EpisodeTrace, TraceMismatchError
 from envs.trace_bounds import check_map, check_values
 from scenario_bank.safe_files import read_regular_file
+from envs.recording import write_frames
 
 MAX_SCRIPT_BYTES = 1024 * 1024
 """The largest script a trace's ``scenario_path`` may name."""
@@ -97,8 +98,6 @@ def replay_trace_file(path: str | os.PathLike, *,
     fps = env.unwrapped.config["policy_frequency"]
     env.close()
     if video:
-        from envs.recording import write_frames
-
         write_frames(video, frames, fps)
     return trace, replayed
 

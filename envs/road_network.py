@@ -714,20 +714,50 @@ def convert_network(
     """
     lanes, connecting = _collect_lanes(network)
     problems: List[str] = []
+    infos = _lane_infos(lanes, connecting, speed_limits, problems)
+    uf, groups, successors_of = _join_group_ends(infos, problems)
+    edge_of_group = _number_nodes(network, uf, groups)
+    hw_network, lane_index_of, scenic_lane_of = _place_lanes(infos, edge_of_group)
 
-    # --- per-lane geometry -------------------------------------------------
+    for message in problems:
+        logger.debug("road network conversion: %s", message)
+
+    return ConvertedNetwork(
+        hw_network=hw_network,
+        scenic_network=network,
+        lane_index_of=lane_index_of,
+        scenic_lane_of=scenic_lane_of,
+        edge_of_group=edge_of_group,
+        connecting_lanes=connecting,
+        successors_of=successors_of,
+        source=source,
+        warnings=tuple(problems),
+        _lanes_by_uid={uid: info.lane for uid, info in infos.items()},
+    )
+
+
+def _lane_polyline(lane: Any, problems: List[str]) -> _Polyline:
+    """A lane's centerline as a polyline; a degenerate one (all vertices coincide) becomes a tiny stub along
+    the lane's heading, noted in ``problems``."""
+    pts = _centerline_points(lane)
+    if len(pts) < 2:  # all vertices coincide: keep a tiny stub along the lane heading
+        first = lane.centerline.lineString.coords[0]
+        heading = scenic_to_hw_heading(lane.orientation[(first[0], first[1])].yaw)
+        p0 = pts[0] if len(pts) else np.zeros(2)
+        pts = np.array([p0, p0 + _MIN_LENGTH * np.array([math.cos(heading), math.sin(heading)])])
+        problems.append(f"lane {lane.uid} has a degenerate centerline; using a {_MIN_LENGTH} m stub")
+    return _Polyline(pts)
+
+
+def _lane_infos(lanes: List[Any], connecting: FrozenSet[str], speed_limits: Optional[Dict[str, float]],
+                problems: List[str]) -> Dict[str, _LaneInfo]:
+    """Per-lane geometry: each Scenic lane's polyline, width profile and mean width, whether it spans its
+    lane group's start and end, and its speed limit (by lane uid, in Scenic's lane order)."""
     infos: Dict[str, _LaneInfo] = {}
     section_cache: Dict[int, Tuple[Dict[int, int], int]] = {}
     for lane in lanes:
         group = lane.group
-        pts = _centerline_points(lane)
-        if len(pts) < 2:  # all vertices coincide: keep a tiny stub along the lane heading
-            first = lane.centerline.lineString.coords[0]
-            heading = scenic_to_hw_heading(lane.orientation[(first[0], first[1])].yaw)
-            p0 = pts[0] if len(pts) else np.zeros(2)
-            pts = np.array([p0, p0 + _MIN_LENGTH * np.array([math.cos(heading), math.sin(heading)])])
-            problems.append(f"lane {lane.uid} has a degenerate centerline; using a {_MIN_LENGTH} m stub")
-        polyline = _Polyline(pts)
+        polyline = _lane_polyline(lane, problems)
         width_s, width_v = _width_profile(lane, polyline.length)
         mean_width = float(np.trapezoid(width_v, width_s) / polyline.length) if polyline.length > 0 else float(width_v.mean())
         road = lane.road
@@ -748,8 +778,16 @@ def convert_network(
             at_end=at_end,
             speed_limit=_speed_limit(lane, speed_limits),
         )
+    return infos
 
-    # --- nodes: union group ends along lane links ---------------------------
+
+def _join_group_ends(infos: Dict[str, _LaneInfo], problems: List[str]
+                     ) -> Tuple["_UnionFind", Dict[str, Any], Dict[str, Tuple[str, ...]]]:
+    """Which lane-group ends are one node: a lane's end joins its successor's start when they meet (within
+    :data:`LINK_TOLERANCE`) at the ends of both groups; other links are noted in ``problems``.
+
+    Returns the union-find of ``(group uid, "start" | "end")``, the groups by uid and each lane's successors.
+    """
     uf = _UnionFind()
     groups: Dict[str, Any] = {}
     for info in infos.values():
@@ -775,7 +813,12 @@ def convert_network(
                     )
                 continue  # e.g. a lane merging into its neighbour half-way along the group
             uf.union((info.group.uid, "end"), (sinfo.group.uid, "start"))
+    return uf, groups, successors_of
 
+
+def _number_nodes(network: "Network", uf: "_UnionFind", groups: Dict[str, Any]) -> Dict[str, Tuple[str, str]]:
+    """Each lane group's edge ``(start node, end node)``, nodes numbered "0", "1", ... in Scenic's lane-group
+    order (deterministic)."""
     node_names: Dict[Any, str] = {}
 
     def node(key: Tuple[str, str]) -> str:
@@ -784,14 +827,18 @@ def convert_network(
             node_names[root] = str(len(node_names))
         return node_names[root]
 
-    # deterministic node numbering: Scenic's lane-group order
     group_order = [g.uid for g in getattr(network, "laneGroups", ())] + sorted(groups)
     edge_of_group: Dict[str, Tuple[str, str]] = {}
     for guid in group_order:
         if guid in groups and guid not in edge_of_group:
             edge_of_group[guid] = (node((guid, "start")), node((guid, "end")))
+    return edge_of_group
 
-    # --- edges: order lanes left -> right -----------------------------------
+
+def _place_lanes(infos: Dict[str, _LaneInfo], edge_of_group: Dict[str, Tuple[str, str]]
+                 ) -> Tuple["IndexedRoadNetwork", Dict[str, LaneIndex], Dict[LaneIndex, str]]:
+    """The highway-env network: each edge's lanes ordered left to right (by lateral offset from the edge's
+    longest lane), with their line types; and the lane-index look-ups both ways."""
     edges: Dict[Tuple[str, str], List[str]] = {}
     for uid, info in infos.items():
         edges.setdefault(edge_of_group[info.group.uid], []).append(uid)
@@ -815,22 +862,7 @@ def convert_network(
             hw_network.add_lane(edge[0], edge[1], hw_lane)
             lane_index_of[uid] = index
             scenic_lane_of[index] = uid
-
-    for message in problems:
-        logger.debug("road network conversion: %s", message)
-
-    return ConvertedNetwork(
-        hw_network=hw_network,
-        scenic_network=network,
-        lane_index_of=lane_index_of,
-        scenic_lane_of=scenic_lane_of,
-        edge_of_group=edge_of_group,
-        connecting_lanes=connecting,
-        successors_of=successors_of,
-        source=source,
-        warnings=tuple(problems),
-        _lanes_by_uid={uid: info.lane for uid, info in infos.items()},
-    )
+    return hw_network, lane_index_of, scenic_lane_of
 
 
 def _line_types(

@@ -6,6 +6,9 @@ import math
 import time
 from typing import Any, Dict, List
 
+import envs.scenarios as envs_scenarios
+from envs.errors import SceneSamplingError
+
 __all__ = ["check_compiles_and_runs"]
 
 
@@ -24,14 +27,12 @@ def check_compiles_and_runs(script: str, name: str, path: str, seeds: List[int],
     for a scene that cannot be sampled; any other failure raises (the worker reports it with its stage).
     """
     from envs.dv2s_env import DV2SEnv, ScenarioRef
-    from envs.errors import SceneSamplingError
-    from envs.scenarios import compile_scenario
 
     timings: Dict[str, float] = {}
     stage = "compile"
     try:
         start = time.perf_counter()
-        compiled = compile_scenario(script, name=name, path=path)
+        compiled = envs_scenarios.compile_scenario(script, name=name, path=path)
         timings["compile"] = time.perf_counter() - start
         stage = "sample"
         start = time.perf_counter()

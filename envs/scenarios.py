@@ -29,6 +29,7 @@ from envs.scenic_imports import no_folder_imports
 from scenario_bank.maps import resolve_map
 from scenario_bank.precheck import MAX_SCRIPT_BYTES, precheck_text
 from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
+from scenario_bank.shipped import is_shipped_text
 
 __all__ = ["MODEL", "CompiledScenario", "ParamRange", "parameter_ranges", "compile_scenario", "model_for", "FOREIGN_MODELS", "looks_like_source", "runtime_construct_error", "step_timeout_error"]
 
@@ -266,8 +267,6 @@ def compile_scenario(
     something only another simulator provides.
     """
     if not (trusted or os.environ.get("DV2S_IN_JAIL") == "1"):
-        from scenario_bank.shipped import is_shipped_text
-
         if not is_shipped_text(source):
             raise UntrustedScenarioError(
                 f"{path or origin or name}: refusing to compile a script that does not ship with dv2s-gym in this "

@@ -39,6 +39,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 
 import gymnasium as gym
 import numpy as np
+from tqdm import tqdm
 
 from policies.dagger_checkpoint import (CHECKPOINT_DIR, DAggerCheckpoint, LabelledBatch, PartialIteration,
                                         describe_position, run_identity)
@@ -341,8 +342,6 @@ class _DaggerRun:
         venv = make_vec_env(spec, c.n_envs, int(c.seed), vec_env=c.vec_env)
         bar = None
         if c.progress_bar:
-            from tqdm import tqdm
-
             bar = tqdm(total=c.steps, initial=sum(self.per_iteration[:self.start])
                        + (self.partial.rows if self.partial else 0), desc="DAgger fine-tune", unit="step")
         try:

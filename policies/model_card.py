@@ -32,6 +32,9 @@ import multiprocessing
 import signal
 import time
 
+from scipy.stats import binomtest
+from tqdm import tqdm
+
 from envs.errors import DV2SError
 from policies.evaluation import EpisodeResult, evaluate
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
@@ -94,8 +97,6 @@ def bank_version(names: Sequence[str], bank_dir: Optional[Union[str, os.PathLike
 def _wilson(k: int, n: int, confidence: float) -> Tuple[float, float]:
     if n == 0:
         return 0.0, 1.0
-    from scipy.stats import binomtest
-
     interval = binomtest(int(k), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
     return float(interval.low), float(interval.high)
 
@@ -106,8 +107,6 @@ def _mcnemar(candidate_only: int, baseline_only: int, alternative: str) -> float
     discordant = candidate_only + baseline_only
     if discordant == 0:
         return 1.0
-    from scipy.stats import binomtest
-
     return float(min(1.0, binomtest(candidate_only, discordant, 0.5, alternative=alternative).pvalue))
 
 
@@ -471,8 +470,6 @@ def evaluate_for_card(specs: Mapping[str, str], episodes: Sequence[Tuple[str, in
     total = len(specs) * len(episodes)
     bar = None
     if progress:
-        from tqdm import tqdm
-
         bar = tqdm(total=total, desc="card evaluation", unit="episode", file=sys.stderr, dynamic_ncols=True)
     time_left = TimeLeft(total, log, "model card evaluation") if log is not None else None
 

@@ -58,6 +58,7 @@ from typing import Any, Callable, Deque, Dict, List, Mapping, Optional, Sequence
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
+from tqdm import tqdm
 
 from envs.dv2s_env import DV2SEnv, check_env_config
 from envs.errors import DV2SError, Interrupted
@@ -686,8 +687,6 @@ class ProgressCallback(BaseCallback):
         self._shown = None
 
     def _on_training_start(self) -> None:
-        from tqdm import tqdm
-
         self.bar = tqdm(total=self.total, initial=self.num_timesteps, unit="step", desc=self.description,
                         dynamic_ncols=True, smoothing=0.05)
 

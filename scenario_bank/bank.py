@@ -108,6 +108,7 @@ __all__ = [
     "entry_files",
     "entry_file_name",
     "ON_DUPLICATE",
+    "NEW_ENTRY_FIELDS",
     "verify",
 ]
 
@@ -384,14 +385,14 @@ class Bank:
                 "Bank(DIR) in Python, DV2S-v0 with bank_dir=DIR")
 
     @overload
-    def add(self, script: str, description: str, *, name: Optional[str] = ...,
+    def add(self, script: str, description: Union[str, Sidecar], *, name: Optional[str] = ...,
             elements: Optional[Mapping[str, Any]] = ..., tags: Sequence[str] = ..., map: Optional[str] = ...,
             provenance: Union[None, Provenance, Mapping[str, Any]] = ..., use_case: Optional[str] = ..., upgrade_scenic2: bool = ...,
             files: Optional[Mapping[str, PathLike]] = ..., on_duplicate: Literal["error"] = ...,
             near_copy_of: None = ...) -> ScenarioEntry: ...
 
     @overload
-    def add(self, script: str, description: str, *, name: Optional[str] = ...,
+    def add(self, script: str, description: Union[str, Sidecar], *, name: Optional[str] = ...,
             elements: Optional[Mapping[str, Any]] = ..., tags: Sequence[str] = ..., map: Optional[str] = ...,
             provenance: Union[None, Provenance, Mapping[str, Any]] = ..., use_case: Optional[str] = ..., upgrade_scenic2: bool = ...,
             files: Optional[Mapping[str, PathLike]] = ..., on_duplicate: Literal["merge"],
@@ -400,26 +401,27 @@ class Bank:
     def add(
         self,
         script: str,
-        description: str,
+        description: Union[str, Sidecar],
         *,
-        name: Optional[str] = None,
-        elements: Optional[Mapping[str, Any]] = None,
-        tags: Sequence[str] = (),
-        map: Optional[str] = None,
-        provenance: Union[None, Provenance, Mapping[str, Any]] = None,
-        use_case: Optional[str] = None,
         upgrade_scenic2: bool = False,
         files: Optional[Mapping[str, PathLike]] = None,
         on_duplicate: str = "error",
         near_copy_of: Optional[Callable[[ScenarioEntry], bool]] = None,
+        **fields: Any,
     ) -> Union[ScenarioEntry, AddOutcome]:
         """Add a scenario atomically, in one step under the writers' lock.
 
+        The new entry's fields are a :class:`~scenario_bank.records.Sidecar` (its ``description``, ``name``,
+        ``elements``, ``tags``, ``map``, ``use_case`` and provenance ``source``), or ``description`` and the
+        others as keywords (:data:`NEW_ENTRY_FIELDS`: ``name``, ``elements``, ``tags``, ``map``, ``provenance``,
+        ``use_case``). ``map`` is read from the script's ``param map`` when not given, ``name`` made from the
+        description. ``provenance`` (a :class:`~scenario_bank.records.Provenance`, or a mapping of its fields)
+        keys: kind (hand-written, generated, mined), video, parent, seed, generator, model, context_hash, date;
+        mined entries also :data:`MINED_PROVENANCE_FIELDS`.
+
         Every script is verified first: a script failing the safety check or its compile, sample and short run in
         the sandbox (:mod:`scenario_bank.sandbox`, with CPU, memory and wall-clock limits) is refused
-        (:class:`ScenarioRejectedError`). ``provenance`` (a :class:`~scenario_bank.records.Provenance`, or a
-        mapping of its fields) keys: kind (hand-written, generated, mined), video,
-        parent, seed, generator, model, context_hash, date; mined entries also :data:`MINED_PROVENANCE_FIELDS`.
+        (:class:`ScenarioRejectedError`).
 
         ``on_duplicate`` says what happens to a script the bank already holds:
 
@@ -448,33 +450,36 @@ class Bank:
         position) and the merged record's provenance values naming them are rewritten to those paths, so every
         merged source keeps its own files.
         """
-        if on_duplicate not in ON_DUPLICATE:
-            raise ValueError(f"on_duplicate must be one of {', '.join(repr(o) for o in ON_DUPLICATE)}, "
-                             f"not {on_duplicate!r}")
-        if near_copy_of is not None and on_duplicate != "merge":
-            raise ValueError("near_copy_of only applies to on_duplicate='merge' (near-copies are merged into, "
-                             "never refused); pass on_duplicate='merge' or drop near_copy_of")
+        entry = _new_entry_fields(description, fields)
+        _check_add_options(on_duplicate, near_copy_of)
         self._check_writable("add a scenario")
         files = _check_files(files)
-        script, provenance = upgrade_if_asked(script, provenance, upgrade_scenic2)
-        meta = new_sidecar(script, description, name, elements, tags, map, provenance, use_case).to_dict()
+        script, provenance = upgrade_if_asked(script, entry["provenance"], upgrade_scenic2)
+        meta = new_sidecar(script, entry["description"], entry["name"], entry["elements"], entry["tags"],
+                           entry["map"], provenance, entry["use_case"]).to_dict()
         # before the lock: other writers do not wait for it
         verify_or_name_scenic2(script, f"scenario {meta['name']!r}", upgrade_scenic2)
         with self._lock():
             self._load(locked=True)
             if on_duplicate == "merge":
                 return self._add_or_merge_locked(script, meta, files, near_copy_of)
-            name = meta["name"] = self._free_name(meta["name"], explicit=name is not None)
-            duplicate = self.find_duplicate(script, meta["elements"], meta["map"])
-            if duplicate is not None:
-                existing, how = duplicate
-                raise DuplicateScenarioError(
-                    f"not added: the script is {how} to bank entry {existing!r}; use that entry or change the script",
-                    existing,
-                )
-            if files:
-                meta["source"][ENTRY_FILES] = list(files)
-            return self._add_locked(name, script, meta, files)
+            return self._add_new_locked(script, meta, files, explicit_name=entry["name"] is not None)
+
+    def _add_new_locked(self, script: str, meta: Dict[str, Any], files: Dict[str, Path], *,
+                        explicit_name: bool) -> ScenarioEntry:
+        """:meth:`add` with ``on_duplicate="error"`` once verified, under the lock: refuse a name taken (when
+        given) or a duplicate script, else write the entry."""
+        name = meta["name"] = self._free_name(meta["name"], explicit=explicit_name)
+        duplicate = self.find_duplicate(script, meta["elements"], meta["map"])
+        if duplicate is not None:
+            existing, how = duplicate
+            raise DuplicateScenarioError(
+                f"not added: the script is {how} to bank entry {existing!r}; use that entry or change the script",
+                existing,
+            )
+        if files:
+            meta["source"][ENTRY_FILES] = list(files)
+        return self._add_locked(name, script, meta, files)
 
     def _add_or_merge_locked(self, script: str, meta: Dict[str, Any], files: Dict[str, Path],
                              near_copy_of: Optional[Callable[[ScenarioEntry], bool]]) -> AddOutcome:
@@ -687,6 +692,42 @@ def _copy_synced(origin: Path, dest: Path) -> None:
     shutil.copyfile(origin, dest)
     with open(dest, "rb") as handle:
         os.fsync(handle.fileno())
+
+
+NEW_ENTRY_FIELDS = ("name", "elements", "tags", "map", "provenance", "use_case")
+"""The keyword arguments of :meth:`Bank.add` that are the new entry's fields (with its ``description``)."""
+
+
+def _new_entry_fields(description: Union[str, Sidecar], fields: Mapping[str, Any]) -> Dict[str, Any]:
+    """The new entry's fields for :meth:`Bank.add`: from a :class:`Sidecar` (``source`` is its provenance; an
+    empty ``map`` is read from the script), or ``description`` and the keywords of :data:`NEW_ENTRY_FIELDS`
+    (the defaults for those not given). A keyword that is not a field is a :class:`TypeError`, as for any
+    function; so is one given beside a sidecar, and a sidecar holding what a new entry cannot take."""
+    unknown = sorted(set(fields) - set(NEW_ENTRY_FIELDS))
+    if unknown:
+        raise TypeError(f"Bank.add() got an unexpected keyword argument {unknown[0]!r}")
+    if not isinstance(description, Sidecar):
+        return dict({"name": None, "elements": None, "tags": (), "map": None, "provenance": None,
+                     "use_case": None}, description=description, **fields)
+    if fields:
+        raise TypeError(f"Bank.add() takes the entry's fields in the sidecar or as keywords, not both: "
+                        f"{', '.join(sorted(fields))} given beside a Sidecar")
+    if description.story is not None or description.extra:
+        raise TypeError("Bank.add() writes a new entry's sidecar from its description, name, elements, tags, map, "
+                        "use_case and source; a story or other keys would be lost: leave them out")
+    return {"description": description.description, "name": description.name, "elements": description.elements,
+            "tags": description.tags, "map": description.map or None, "provenance": description.source,
+            "use_case": description.use_case}
+
+
+def _check_add_options(on_duplicate: str, near_copy_of: Optional[Callable[[ScenarioEntry], bool]]) -> None:
+    """Refuse an ``on_duplicate`` that :meth:`Bank.add` does not know, and ``near_copy_of`` without a merge."""
+    if on_duplicate not in ON_DUPLICATE:
+        raise ValueError(f"on_duplicate must be one of {', '.join(repr(o) for o in ON_DUPLICATE)}, "
+                         f"not {on_duplicate!r}")
+    if near_copy_of is not None and on_duplicate != "merge":
+        raise ValueError("near_copy_of only applies to on_duplicate='merge' (near-copies are merged into, "
+                         "never refused); pass on_duplicate='merge' or drop near_copy_of")
 
 
 def _check_files(files: Optional[Mapping[str, PathLike]]) -> Dict[str, Path]:

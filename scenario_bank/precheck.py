@@ -160,102 +160,157 @@ def _check_character(char: str, line: int, label: str) -> None:
                       "differ from the code run; delete it")
 
 
+@dataclass
+class _ScanState:
+    """Where the scanner is and what it is inside of: a string, a comment, brackets, a statement."""
+
+    label: str
+    line: int = 1
+    column: int = 0
+    logical_start: int = 0  # index where the current statement began
+    depth: int = 0  # bracket nesting
+    quote: str = ""  # the open string's quote ("" outside strings)
+    fstring_base: int = -1  # depth where the open f-string began (-1: not in an f-string)
+    comment: bool = False
+    escaped: bool = False  # the previous character in a string was a backslash
+    continued: bool = False  # a backslash continues the line
+    operator_run: int = 0  # prefix operators in a row
+    word: str = ""  # the name or keyword being read
+    last: str = ""  # the line's last character of code
+
+
 def _scan(text: str, label: str) -> None:
     """One pass: characters, line lengths, logical-line length, bracket nesting and prefix-operator runs."""
-    line, column, logical_start = 1, 0, 0
-    depth, max_seen = 0, 0
-    quote, fstring_base = "", -1  # the open string's quote ("" outside strings); depth where an f-string began
-    comment, escaped, continued = False, False, False
-    operator_run, word, last = 0, "", ""  # last: the line's last character of code
+    state = _ScanState(label)
     i, n = 0, len(text)
     while i < n:
         char = text[i]
-        _check_character(char, line, label)
+        _check_character(char, state.line, label)
         if char == "\n":
-            if column > MAX_LINE_CHARS:
-                raise _refuse(label, line, f"{column} characters", f"lines may be at most {MAX_LINE_CHARS} "
-                              "characters; break the line")
-            # Scenic continues a statement after a trailing comma (``new Car at p,`` / ``with speed 3``)
-            ends_statement = not quote.startswith(("'''", '"""')) and depth == 0 and not continued \
-                and last != ","
-            if quote and len(quote) == 1 and escaped:
-                pass  # a backslash continues a one-line string on the next line
-            elif quote and len(quote) == 1:
-                quote, fstring_base = "", -1  # an unterminated one-line string: the parser will report it
-                ends_statement = depth == 0 and not continued
-            if ends_statement:
-                logical_start = i + 1
-            line, column, comment, escaped, continued, last = line + 1, 0, False, False, False, ""
+            _end_line(state, i)
             i += 1
             continue
-        if char == "\r" and not text.startswith("\r\n", i):
-            raise _refuse(label, line, "carriage return", "a carriage return not followed by a line feed ends a "
-                          "line for Python but not for most readers; use \\n or \\r\\n line ends")
-        column += 1
-        if i - logical_start > MAX_LOGICAL_LINE_CHARS:
-            raise _refuse(label, line, "statement", f"one statement may span at most {MAX_LOGICAL_LINE_CHARS} "
-                          "characters (huge expressions make the parser take minutes); split it into several "
-                          "statements")
-        if comment:
+        _count_column(state, text, i)
+        if state.comment:
             i += 1
-            continue
-        if quote:
-            if escaped:
-                escaped = False
-            elif char == "\\":
-                escaped = True
-            elif text.startswith(quote, i):
-                i += len(quote)
-                quote = ""
-                if fstring_base >= 0:
-                    depth, fstring_base = fstring_base, -1
-                continue
-            elif fstring_base >= 0 and char in _OPEN:
-                depth += 1  # an f-string's fields are code the parser nests into
-            elif fstring_base >= 0 and char in _CLOSE and depth > fstring_base:
-                depth -= 1
-            i += 1
-            max_seen = max(max_seen, depth)
-            if depth > MAX_NESTING:
-                raise _nesting(label, line)
-            continue
-        continued = False
-        if not char.isspace() and char != "#":
-            last = char
-        if char == "#":
-            comment = True
-        elif char == "\\":
-            continued = True
-        elif char in "'\"":
-            quote = text[i:i + 3] if text.startswith(char * 3, i) else char
-            if "f" in word.lower() and _STRING_PREFIX.match(word):
-                fstring_base = depth
-            word = ""
-            i += len(quote)
-            continue
-        elif char in _OPEN:
-            depth += 1
-            if depth > MAX_NESTING:
-                raise _nesting(label, line)
-        elif char in _CLOSE:
-            depth = max(0, depth - 1)
-        if char.isalnum() or char == "_":
-            word += char
+        elif state.quote:
+            i = _step_in_string(state, text, i)
         else:
-            if word:
-                operator_run = operator_run + 1 if word == "not" else 0
-                word = ""
-            if char in _PREFIX_OPERATORS:
-                operator_run += 1
-            elif not char.isspace() and char not in "([{":
-                operator_run = 0
-        if operator_run > MAX_OPERATOR_RUN:
-            raise _refuse(label, line, "operator run", f"more than {MAX_OPERATOR_RUN} prefix operators in a row "
-                          "(-, +, ~, not) overflow the parser; simplify the expression")
-        i += 1
-    if column > MAX_LINE_CHARS:
-        raise _refuse(label, line, f"{column} characters", f"lines may be at most {MAX_LINE_CHARS} characters; "
-                      "break the line")
+            i = _step_in_code(state, text, i)
+    _check_line_length(state)
+
+
+def _check_line_length(state: _ScanState) -> None:
+    """Refuse the line just read if it is longer than :data:`MAX_LINE_CHARS`."""
+    if state.column > MAX_LINE_CHARS:
+        raise _refuse(state.label, state.line, f"{state.column} characters", f"lines may be at most "
+                      f"{MAX_LINE_CHARS} characters; break the line")
+
+
+def _end_line(state: _ScanState, i: int) -> None:
+    """At a line feed (index ``i``): check the line's length, decide whether the statement ends here, and
+    start the next line (an unterminated one-line string ends; a backslash in one continues it)."""
+    _check_line_length(state)
+    # Scenic continues a statement after a trailing comma (``new Car at p,`` / ``with speed 3``)
+    ends_statement = not state.quote.startswith(("'''", '"""')) and state.depth == 0 and not state.continued \
+        and state.last != ","
+    if state.quote and len(state.quote) == 1 and state.escaped:
+        pass  # a backslash continues a one-line string on the next line
+    elif state.quote and len(state.quote) == 1:
+        state.quote, state.fstring_base = "", -1  # an unterminated one-line string: the parser will report it
+        ends_statement = state.depth == 0 and not state.continued
+    if ends_statement:
+        state.logical_start = i + 1
+    state.line, state.column = state.line + 1, 0
+    state.comment, state.escaped, state.continued, state.last = False, False, False, ""
+
+
+def _count_column(state: _ScanState, text: str, i: int) -> None:
+    """A character other than a line feed: refuse a lone carriage return and a statement grown longer than
+    :data:`MAX_LOGICAL_LINE_CHARS`; count the column."""
+    if text[i] == "\r" and not text.startswith("\r\n", i):
+        raise _refuse(state.label, state.line, "carriage return", "a carriage return not followed by a line feed "
+                      "ends a line for Python but not for most readers; use \\n or \\r\\n line ends")
+    state.column += 1
+    if i - state.logical_start > MAX_LOGICAL_LINE_CHARS:
+        raise _refuse(state.label, state.line, "statement", f"one statement may span at most "
+                      f"{MAX_LOGICAL_LINE_CHARS} characters (huge expressions make the parser take minutes); "
+                      "split it into several statements")
+
+
+def _step_in_string(state: _ScanState, text: str, i: int) -> int:
+    """Read one character inside a string (escapes, its closing quote, an f-string field's brackets); the
+    index of the next character to read."""
+    char = text[i]
+    if state.escaped:
+        state.escaped = False
+    elif char == "\\":
+        state.escaped = True
+    elif text.startswith(state.quote, i):
+        i += len(state.quote)
+        state.quote = ""
+        if state.fstring_base >= 0:
+            state.depth, state.fstring_base = state.fstring_base, -1
+        return i
+    elif state.fstring_base >= 0 and char in _OPEN:
+        state.depth += 1  # an f-string's fields are code the parser nests into
+    elif state.fstring_base >= 0 and char in _CLOSE and state.depth > state.fstring_base:
+        state.depth -= 1
+    if state.depth > MAX_NESTING:
+        raise _nesting(state.label, state.line)
+    return i + 1
+
+
+def _step_in_code(state: _ScanState, text: str, i: int) -> int:
+    """Read one character of code (a comment's start, a continuation backslash, a string's opening quote,
+    brackets, prefix operators); the index of the next character to read."""
+    char = text[i]
+    state.continued = False
+    if not char.isspace() and char != "#":
+        state.last = char
+    if char in "'\"":
+        return _open_string(state, text, i)
+    if char == "#":
+        state.comment = True
+    elif char == "\\":
+        state.continued = True
+    elif char in _OPEN:
+        state.depth += 1
+        if state.depth > MAX_NESTING:
+            raise _nesting(state.label, state.line)
+    elif char in _CLOSE:
+        state.depth = max(0, state.depth - 1)
+    _count_operators(state, char)
+    return i + 1
+
+
+def _open_string(state: _ScanState, text: str, i: int) -> int:
+    """A quote in code opens a string (triple-quoted if the quote is tripled; an f-string if the word before
+    it is a string prefix with ``f``); the index after the opening quote."""
+    char = text[i]
+    state.quote = text[i:i + 3] if text.startswith(char * 3, i) else char
+    if "f" in state.word.lower() and _STRING_PREFIX.match(state.word):
+        state.fstring_base = state.depth
+    state.word = ""
+    return i + len(state.quote)
+
+
+def _count_operators(state: _ScanState, char: str) -> None:
+    """Count prefix operators (``-``, ``+``, ``~``, ``not``) in a row; refuse more than
+    :data:`MAX_OPERATOR_RUN`."""
+    if char.isalnum() or char == "_":
+        state.word += char
+    else:
+        if state.word:
+            state.operator_run = state.operator_run + 1 if state.word == "not" else 0
+            state.word = ""
+        if char in _PREFIX_OPERATORS:
+            state.operator_run += 1
+        elif not char.isspace() and char not in "([{":
+            state.operator_run = 0
+    if state.operator_run > MAX_OPERATOR_RUN:
+        raise _refuse(state.label, state.line, "operator run", f"more than {MAX_OPERATOR_RUN} prefix operators "
+                      "in a row (-, +, ~, not) overflow the parser; simplify the expression")
 
 
 def _nesting(label: str, line: int) -> PrecheckError:

@@ -24,10 +24,12 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence
 import resource
+from importlib.metadata import version
 
 import numpy as np
 
 from scenario_bank.atomic import atomic_write_text
+from scenario_bank.cache import cache_dir as user_cache_dir
 from scenario_bank.jail import JailedProcess, JailError, JailLimitError, JailLimits
 from scenario_bank.jail.process import JailRemoteError
 from scenario_bank.precheck import precheck_text
@@ -227,9 +229,7 @@ def _children_cpu() -> float:
 # ---------------------------------------------------------------- verification with a cache
 def cache_dir() -> Path:
     """Where verified-script records live: ``sandbox/`` in :func:`scenario_bank.cache.cache_dir`."""
-    from scenario_bank.cache import cache_dir as root
-
-    return root() / "sandbox"
+    return user_cache_dir() / "sandbox"
 
 
 _CODE_VERSION: Optional[str] = None
@@ -248,8 +248,6 @@ def code_version() -> str:
             digest.update(str(path.relative_to(CODE_ROOT)).encode())
             digest.update(path.read_bytes())
         try:
-            from importlib.metadata import version
-
             digest.update(f"scenic {version('scenic')} highway-env {version('highway-env')}".encode())
         except Exception:  # metadata missing: the file digest alone still tracks our code
             pass

@@ -29,6 +29,7 @@ from typing import Any, Optional
 from importlib.metadata import version
 
 from scenario_bank.atomic import atomic_write_bytes
+from scenario_bank.cache import cache_dir as user_cache_dir
 
 __all__ = ["parse_scenic", "install_parse_cache", "cache_dir"]
 
@@ -80,9 +81,7 @@ class _TreeUnpickler(pickle.Unpickler):
 
 def cache_dir() -> Path:
     """Folder of the on-disk parse cache: ``scenic-parse/`` in :func:`scenario_bank.cache.cache_dir`."""
-    from scenario_bank.cache import cache_dir as root
-
-    return root() / "scenic-parse"
+    return user_cache_dir() / "scenic-parse"
 
 
 def _library_roots():

@@ -10,6 +10,7 @@ import shutil
 import pytest
 
 from scenario_bank.bank import BANK_DIR, WRITERS_LOCK, Bank, near_duplicate, param_ranges
+from scenario_bank.records import Provenance, Sidecar
 from scenario_bank.sandbox import verify_script
 
 BASE = "highway_lead_vehicle_stopped"
@@ -175,4 +176,31 @@ def test_add_names_an_unknown_on_duplicate_and_a_near_copy_rule_without_merging(
         bank.add(A, "A stopped car ahead.", elements=ELEMENTS, on_duplicate="skip")
     with pytest.raises(ValueError, match="near_copy_of only applies to on_duplicate='merge'"):
         bank.add(A, "A stopped car ahead.", elements=ELEMENTS, near_copy_of=lambda entry: True)
+    assert not (tmp_path / "bank").exists()  # refused before anything was written
+
+
+@pytest.mark.slow
+def test_add_takes_the_entry_fields_as_one_sidecar_or_as_keywords_alike(tmp_path):
+    """The new entry's fields may come as one :class:`Sidecar` (``source``: the provenance); the entry written is
+    the one the same fields as keywords write, byte for byte."""
+    fields = Sidecar(description="A stopped car ahead.", name="stop", elements=ELEMENTS, tags=("b", "a"),
+                     use_case="braking", source=Provenance(kind="mined", parent=BASE, seed=3, date="2026-01-02"))
+    by_record = Bank(tmp_path / "record").add(A, fields)
+    by_keywords = Bank(tmp_path / "keywords").add(A, "A stopped car ahead.", name="stop", elements=ELEMENTS,
+                                                  tags=["b", "a"], use_case="braking",
+                                                  provenance={"kind": "mined", "parent": BASE, "seed": 3,
+                                                              "date": "2026-01-02"})
+    assert by_record.name == by_keywords.name == "stop"
+    assert (by_record.folder / "meta.json").read_bytes() == (by_keywords.folder / "meta.json").read_bytes()
+    assert by_record.map == "highway_straight"  # an empty map in the record is read from the script
+
+
+def test_add_refuses_an_unknown_field_and_fields_given_twice(tmp_path):
+    bank = Bank(tmp_path / "bank")
+    with pytest.raises(TypeError, match="unexpected keyword argument 'colour'"):
+        bank.add(A, "A stopped car ahead.", colour="red")
+    with pytest.raises(TypeError, match="not both: name given beside a Sidecar"):
+        bank.add(A, Sidecar(description="A stopped car ahead."), name="stop")
+    with pytest.raises(TypeError, match="a story or other keys would be lost"):
+        bank.add(A, Sidecar(description="A stopped car ahead.", story=["brake"]))
     assert not (tmp_path / "bank").exists()  # refused before anything was written

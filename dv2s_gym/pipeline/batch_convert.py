@@ -5,6 +5,9 @@ from __future__ import annotations
 import os
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Tuple
+from concurrent.futures import ProcessPoolExecutor
+
+from tqdm import tqdm
 
 from dv2s_gym.pipeline.convert import ConvertSettings, convert_video
 from dv2s_gym.pipeline.evaluate import VIDEO_SUFFIXES
@@ -28,10 +31,6 @@ def convert_videos(pairs: List[Tuple[Path, Path]], settings: Optional[ConvertSet
                    progress: bool = True) -> List[Dict[str, Any]]:
     """:func:`convert_video` with ``settings`` for each (video, output folder) pair, in ``jobs`` processes when
     there are several; returns the reports in the order of ``pairs``."""
-    from concurrent.futures import ProcessPoolExecutor
-
-    from tqdm import tqdm
-
     reports = []
     with tqdm(total=len(pairs), desc="converting", unit="video", disable=not progress or len(pairs) == 1) as bar:
         if jobs > 1 and len(pairs) > 1:

@@ -18,10 +18,18 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional
+import datetime
 
 from dv2s_gym.pipeline.sg.openai import classify_failure
 from scenario_bank.atomic import atomic_write_text
 from dv2s_gym.pipeline.stages import Description, Generation, describe, generate
+from dv2s_gym.pipeline.semantics.trace import elements_from_trace
+from envs.recording import VideoWriter
+from scenario_bank.safety import UnsafeScenarioError
+from scenario_bank.sandbox import SandboxError, verify_script
+from dv2s_gym.pipeline.labels import label_path_for, read_label
+from dv2s_gym.pipeline.metrics import e2e_sc, semantic_preservation
+from scenario_bank.bank import Bank, Provenance
 
 __all__ = ["ConvertSettings", "ScenarioCheck", "add_converted", "check_scenario", "classify_failure", "conversion_provenance", "convert_video",
            "generate_to_folder", "label_for"]
@@ -53,12 +61,7 @@ def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview
     The script is compiled, sampled and run once in the sandbox (:mod:`scenario_bank.sandbox`) before
     it runs in this process. ``in_process=False`` stops after the sandbox (which compiled, sampled and
     ran it): for callers that run the scenario themselves next (no preview, no simulated elements)."""
-    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
     from envs.dv2s_env import DV2SEnv
-    from envs.recording import VideoWriter
-    from scenario_bank.safety import UnsafeScenarioError
-    from scenario_bank.sandbox import SandboxError, verify_script
-
     check = ScenarioCheck()
     try:  # the allowlist, compilation, sampling and a short run, all in the jail (cached by script hash)
         verify_script(script, name=name)
@@ -112,8 +115,6 @@ def check_scenario(script: str, *, seed: int = 0, seconds: float = 10.0, preview
 def label_for(video: Path) -> Optional[Dict[str, Any]]:
     """Ground-truth elements stored beside a video as ``<video stem>.label.json`` (either label
     format, see :mod:`dv2s_gym.pipeline.labels`), if any; a malformed label raises ``LabelError``."""
-    from dv2s_gym.pipeline.labels import label_path_for, read_label
-
     path = label_path_for(video)
     if not path.is_file():
         return None
@@ -132,8 +133,6 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
                        llm_config: Optional[Dict[str, Any]] = None, labels: Optional[Dict[str, Any]] = None,
                        seconds: float = 10.0) -> Dict[str, Any]:
     """SG + validation for a description; writes the folder's files and returns the report."""
-    from dv2s_gym.pipeline.metrics import e2e_sc, semantic_preservation
-
     out.mkdir(parents=True, exist_ok=True)
     for stale in ("scenario.scenic", "preview.webm"):  # a failed run must not leave an earlier run's result
         (out / stale).unlink(missing_ok=True)
@@ -205,8 +204,6 @@ def conversion_provenance(dra: str, sg: str, generation: Any, description: Any) 
     """The provenance fields every converted bank entry records: the backends (``generator``), the model and
     prompt context that made the script (from the generation, else the description) and today's date.
     ``generation`` and ``description`` are :class:`Generation` and :class:`Description` or their report dicts."""
-    import datetime
-
     return {"generator": f"dra={dra},sg={sg}",
             "model": _field(generation, "model") or _field(description, "model"),
             "context_hash": _field(generation, "context_hash") or _field(description, "prompt_hash"),
@@ -218,8 +215,6 @@ def add_converted(bank_dir: Optional[str | os.PathLike], video: str | os.PathLik
     """Add the scenario a conversion wrote to ``out`` to the bank in ``bank_dir`` (the shipped bank, read-only, when
     None) with ``generated`` provenance; returns the entry's name, or a note saying why a conversion whose checks
     failed was not added."""
-    from scenario_bank.bank import Bank, Provenance
-
     if not report.get("check", {}).get("ok"):
         return f"(not added: {video} failed validation)"
     description = report["description"]

@@ -26,8 +26,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Sequence
 
+from tqdm import tqdm
+
 from dv2s_gym.pipeline.labels import LABEL_SUFFIX, read_label
 from dv2s_gym.pipeline.metrics import e2e_sc, hallucination_rate, mean_sd, scs, semantic_preservation
+from dv2s_gym.pipeline.convert import check_scenario
+from dv2s_gym.pipeline.semantics.text import elements_from_text
+from dv2s_gym.pipeline.stages import describe, generate
 
 __all__ = ["EvalItem", "EVALSET_DIR", "collect_items", "evaluate", "format_results"]
 
@@ -92,10 +97,6 @@ def collect_items(folder: str | Path, *, unlabeled_descriptions: bool = False) -
 
 def _evaluate_item(stage: str, item: EvalItem, dra: str, sg: str, llm_config: Optional[Dict[str, Any]],
                    seconds: float) -> ItemResult:
-    from dv2s_gym.pipeline.convert import check_scenario
-    from dv2s_gym.pipeline.semantics.text import elements_from_text
-    from dv2s_gym.pipeline.stages import describe, generate
-
     result = ItemResult(item.stem, item.use_case)
     start = time.perf_counter()
     try:
@@ -141,8 +142,6 @@ def evaluate(stage: str, folder: str | Path, *, dra: str = "bev", sg: str = "rul
              llm_config: Optional[Dict[str, Any]] = None, jobs: int = 1, seconds: float = 10.0,
              progress: bool = True) -> Dict[str, Any]:
     """Run one evaluation; returns per-item results and the per-use-case / overall summary."""
-    from tqdm import tqdm
-
     if stage not in ("dra", "sg", "e2e"):
         raise ValueError(f"unknown evaluation {stage!r}; use dra, sg or e2e")
     items = collect_items(folder, unlabeled_descriptions=stage == "sg")

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import hashlib
 from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
+import json
+
 
 __all__ = [
     "CAMERA_VIEWPOINTS",
@@ -298,7 +300,5 @@ def repair_message(attempt: int, stage: str, category: str, message: str) -> Dic
 def prompt_hash(text: str | Iterable[Mapping[str, object]], length: int = 12) -> str:
     """Short SHA-256 of a prompt (a string, or a list of chat messages) for provenance."""
     if not isinstance(text, str):
-        import json
-
         text = json.dumps(list(text), sort_keys=True, ensure_ascii=False)
     return hashlib.sha256(text.encode("utf-8")).hexdigest()[:length]

@@ -19,6 +19,8 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 from dv2s_gym.pipeline.errors import BackendResultError, PipelineError, UnknownBackendError
 from scenario_bank.named_registry import register_named
+from scenario_bank.bank import Bank
+from scenario_bank.safety import assert_safe
 
 __all__ = ["Description", "Generation", "describe", "generate", "DRA_BACKENDS", "SG_BACKENDS",
            "register_dra", "register_sg", "registered_dras", "registered_sgs"]
@@ -150,8 +152,6 @@ def _generate_openai(description: str, *, seed: int, llm_config: Optional[Dict[s
                      max_attempts: int) -> Generation:
     from dv2s_gym.pipeline.llm_client import ChatClient
     from dv2s_gym.pipeline.sg.openai import generate_with_llm
-    from scenario_bank.bank import Bank
-
     client = ChatClient.from_config(llm_config)
     result = generate_with_llm(description, client, bank=Bank(), max_attempts=max_attempts)
     return Generation(result.script, "openai", failures=list(result.failures),
@@ -198,8 +198,6 @@ def generate(
     max_attempts: int = 4,
 ) -> Generation:
     """Turn a description into a Scenic script that passed the safety check."""
-    from scenario_bank.safety import assert_safe
-
     if backend not in _SG_REGISTRY:
         raise UnknownBackendError(f"unknown SG backend {backend!r}; use one of {tuple(_SG_REGISTRY)}")
     generation = _SG_REGISTRY[backend](description, seed=seed, llm_config=llm_config, max_attempts=max_attempts)

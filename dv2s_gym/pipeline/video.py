@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import List, Optional, Sequence, Tuple, Union
 
 import numpy as np
+from PIL import Image, ImageSequence, UnidentifiedImageError
 
 from scenario_bank.errors import DV2SError
 
@@ -231,8 +232,6 @@ def _as_rgb(frame: np.ndarray) -> np.ndarray:
 
 
 def _read_gif(path: Path, fps, max_frames, max_pixels) -> VideoClip:
-    from PIL import Image, ImageSequence, UnidentifiedImageError
-
     try:
         image = Image.open(path)
     except Image.DecompressionBombError as error:

@@ -16,6 +16,10 @@ from typing import Any, Dict, List, Optional, Tuple, Union
 import numpy as np
 
 from envs.errors import DV2SError
+from envs.trace import EpisodeTrace
+from envs.trace_bounds import check_file_config, TraceConfigError
+from envs.recording import VideoWriter
+from dv2s_gym.regress.replay import _bank_for
 
 __all__ = ["ClipError", "render_episode_video", "render_policy_video", "clip_window", "DEFAULT_CLIP_CONFIG"]
 
@@ -47,8 +51,6 @@ def render_episode_video(trace_path: Union[str, os.PathLike], out_path: Union[st
     :class:`~envs.trace.TraceMismatchError`). Returns ``out_path``.
     """
     from envs.replay import replay_trace
-    from envs.trace import EpisodeTrace
-
     trace_path = Path(trace_path)
     if not trace_path.is_file():
         raise ClipError(f"episode trace {trace_path} does not exist; run the regression again to record traces")
@@ -87,8 +89,6 @@ def render_policy_video(report: Dict[str, Any], result: Dict[str, Any], role: st
     from policies.evaluation import make_eval_env, run_episode
     from policies.registry import load_policy
 
-    from dv2s_gym.regress.replay import _bank_for
-
     spec = (report.get(role) or {}).get("spec")
     if not spec:
         raise ClipError(f"the report names no {role} policy to re-run")
@@ -103,8 +103,6 @@ def render_policy_video(report: Dict[str, Any], result: Dict[str, Any], role: st
         raise ClipError(f"a clip needs seconds > 0, size >= 16 px and zoom > 0, "
                         f"not seconds={seconds}, size={size}, zoom={zoom}")
     scenario, seed = result["scenario"], int(result["seed"])
-    from envs.trace_bounds import TraceConfigError, check_file_config
-
     try:
         config = check_file_config((report.get("settings") or {}).get("env_config"), "the report")
     except TraceConfigError as error:
@@ -142,8 +140,6 @@ def _write_window(frames: List[np.ndarray], seconds: float, frequency: float,
                   out_path: Union[str, os.PathLike], what: str, end_step: Optional[int] = None) -> Path:
     """Write the last ``seconds`` of ``frames`` (with ``end_step``: the :func:`clip_window` up to that step) as a
     video; :class:`ClipError` naming ``what`` if there are none."""
-    from envs.recording import VideoWriter
-
     if end_step is None:
         frames = frames[-max(1, int(round(seconds * frequency))):]
     else:

@@ -28,12 +28,17 @@ import tempfile
 from pathlib import Path
 from typing import Any, List, Mapping, Optional, Sequence, Tuple, Union
 
-from dv2s_gym.regress.clips import ClipError, render_episode_video, render_policy_video
+from tqdm import tqdm
+
+from dv2s_gym.regress.clips import (DEFAULT_CLIP_CONFIG, ClipError, clip_window, render_episode_video,
+                                    render_policy_video)
+from dv2s_gym.regress.report import scenarios_by_severity, warnings as report_warnings
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, VideoSource,
                                   axis as _axis, escape as _e, finite as _num, fmt as _fmt,
                                   fmt_interval as _interval, interval_mark as _interval_mark, legend as _legend,
                                   row_label as _row_label, svg as _svg, video_bytes as _video_bytes, video_tag,
                                   x_scale as _x_scale)
+from scenario_bank.atomic import atomic_write_text
 
 __all__ = ["write_html", "render_html", "render_episode_video", "MAX_VIDEOS"]
 
@@ -144,8 +149,6 @@ def _bin_label(low: float, high: float) -> str:
 
 def _scenario_rows(report: Mapping[str, Any]) -> List[Tuple[str, Mapping[str, Any], bool]]:
     """Scenarios worst first (:func:`~dv2s_gym.regress.report.scenarios_by_severity`), then overall."""
-    from dv2s_gym.regress.report import scenarios_by_severity
-
     scenarios = {name: entry for name, entry in (report.get("scenarios") or {}).items() if isinstance(entry, Mapping)}
     try:
         order = scenarios_by_severity({"scenarios": scenarios})
@@ -214,9 +217,7 @@ def _banner(report: Mapping[str, Any]) -> str:
         detail.append("stopped early (sequential test)")
     small = f"<small>{'; '.join(detail)}</small>" if detail else ""
     banner = f'<div class="banner {css}" id="verdict">{head}{small}</div>'
-    from dv2s_gym.regress.report import warnings
-
-    for number, warning in enumerate(warnings(report)):  # before the verdict is trusted: as prominent as it
+    for number, warning in enumerate(report_warnings(report)):  # before the verdict is trusted: as prominent as it
         banner += f'<div class="banner INCONCLUSIVE" id="warning-{number}">warning: {_e(warning)}</div>'
     return banner
 
@@ -322,8 +323,6 @@ def _clip(report: Mapping[str, Any], episode: Mapping[str, Any], role: str, base
 def _pair_window(report: Mapping[str, Any], episode: Mapping[str, Any]) -> Tuple[Optional[int], str]:
     """``(end step, the caption's words)`` of a pair of clips: both sides show the same seconds of the scene,
     those up to the candidate's failure (its last step)."""
-    from dv2s_gym.regress.clips import DEFAULT_CLIP_CONFIG, clip_window
-
     steps = _num((episode.get("candidate") or {}).get("steps")) if isinstance(episode.get("candidate"), Mapping) \
         else None
     if steps is None:
@@ -353,8 +352,6 @@ def _clips(report: Mapping[str, Any], base: Path, videos: Optional[Mapping[str, 
     out, shown, left = [], 0, []
     bar = None
     if progress and render_videos:
-        from tqdm import tqdm
-
         pairs = min(len(newly), max_videos)
         bar = tqdm(total=2 * pairs - sum(1 for i in newly[:pairs] for key in (i, f"{i}#baseline") if key in videos),
                    desc="report clips", unit="clip", file=sys.stderr, dynamic_ncols=True)
@@ -474,8 +471,6 @@ def write_html(report: Mapping[str, Any], path: Union[str, os.PathLike], *,
         max_videos: at most this many clips; the other newly failing episodes are listed.
         progress: a progress bar on stderr while the clips render (they take seconds each).
     """
-    from scenario_bank.atomic import atomic_write_text
-
     path = Path(path)
     page = render_html(report, base=path.parent, videos=videos, render_videos=render_videos,
                        max_videos=max_videos, progress=progress)

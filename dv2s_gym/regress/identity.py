@@ -28,6 +28,7 @@ import sys
 import sysconfig
 from pathlib import Path
 from typing import Any, Dict, Iterable, List, Optional
+from importlib import metadata
 
 from scenario_bank.atomic import file_sha256
 
@@ -106,8 +107,6 @@ def _module_file(name: str) -> Optional[Path]:
 
 def installed_version() -> str:
     """The installed dv2s-gym distribution's version (``"unknown"`` when run from a source tree without one)."""
-    from importlib import metadata
-
     try:
         return metadata.version("dv2s-gym")
     except metadata.PackageNotFoundError:  # pragma: no cover - running from a source tree

@@ -31,6 +31,7 @@ import numpy as np
 from scipy import stats
 
 from dv2s_gym.regress.family import DEFAULT_POOLED_WEIGHT
+from dv2s_gym.regress.stats import DEFAULT_CORRELATION
 
 __all__ = ["ASSUMED_BASELINE_RATE", "DEFAULT_MDE", "DEFAULT_POWER", "MAX_PLANNED_EPISODES",
            "discordance", "mcnemar_power", "plan_episodes", "run_power", "scenario_level", "smallest_detectable"]
@@ -68,8 +69,6 @@ _WEIGHTS = _WEIGHTS / _WEIGHTS.sum()
 
 @functools.lru_cache(maxsize=4096)
 def _discordance(p_baseline: float, delta: float) -> float:
-    from dv2s_gym.regress.stats import DEFAULT_CORRELATION
-
     low = 1e-4
     p0 = min(max(p_baseline, low), 1.0 - delta - low)
     if p0 <= 0 or delta <= 0:
@@ -187,8 +186,6 @@ def plan_episodes(scenarios: Sequence[str], *, mde: float = DEFAULT_MDE, power: 
 
 
 def _assumption(per: Mapping[str, Mapping[str, Any]]) -> str:
-    from dv2s_gym.regress.stats import DEFAULT_CORRELATION
-
     sources = {v["source"] for v in per.values()}
     if sources == {"assumed"}:
         rates = f"an assumed baseline failure rate of {100 * ASSUMED_BASELINE_RATE:g}% in every scenario"

@@ -42,6 +42,7 @@ import pytest
 
 from dv2s_gym.regress.assertions import RegressionFailed, RegressionReport
 from dv2s_gym.workers.backends import backend_choices
+from dv2s_gym.regress.errors import RegressError
 
 __all__ = ["RegressionReport", "RegressionFailed", "MARKER"]
 
@@ -112,7 +113,6 @@ def _out_dir(request: pytest.FixtureRequest, factory: pytest.TempPathFactory, su
 
 
 def _run(request: pytest.FixtureRequest, out: Path, arguments: Dict[str, Any]) -> RegressionReport:
-    from dv2s_gym.regress.errors import RegressError
     from dv2s_gym.regress.runner import BaselineReport, RegressSettings, WorkerSettings, run_regression
 
     config = request.config

@@ -13,9 +13,13 @@ from __future__ import annotations
 import os
 from pathlib import Path
 from typing import Any, Dict, List, Optional, Union
+import difflib
 
 from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.report import bank_info, load_report
+from envs.recording import VideoWriter
+from envs.trace import EpisodeTrace
+from envs.trace_bounds import check_file_config
 
 __all__ = ["find_episode", "replay_episode"]
 
@@ -26,8 +30,6 @@ def find_episode(report: Dict[str, Any], episode_id: str, role: str = "candidate
         raise RegressError(f"--policy must be 'candidate' or 'baseline', not {role!r}")
     episodes = {e["id"]: e for e in report.get("episodes") or []}
     if episode_id not in episodes:
-        import difflib
-
         near = difflib.get_close_matches(episode_id, list(episodes), n=3, cutoff=0.6)
         hint = f" Did you mean {', '.join(near)}?" if near else ""
         failing = report.get("newly_failing") or [e for e in episodes if (episodes[e]["candidate"] or {}).get("failed")]
@@ -81,8 +83,6 @@ def replay_episode(report_path: Union[str, os.PathLike], episode_id: str, role: 
         source = "policy"
     written = None
     if video:
-        from envs.recording import VideoWriter
-
         with VideoWriter(video, fps=fps) as writer:
             for frame in frames or []:
                 writer.write(frame)
@@ -94,7 +94,6 @@ def replay_episode(report_path: Union[str, os.PathLike], episode_id: str, role: 
 
 def _from_trace(path: str, frames: Optional[List[Any]]):
     from envs.replay import replay_trace
-    from envs.trace import EpisodeTrace
     from policies.evaluation import trajectory_hash
 
     trace = EpisodeTrace.load(path)
@@ -108,8 +107,6 @@ def _from_trace(path: str, frames: Optional[List[Any]]):
 def _from_policy(report: Dict[str, Any], result: Dict[str, Any], spec: str, frames: Optional[List[Any]]):
     from policies.evaluation import make_eval_env, run_episode
     from policies.registry import load_policy
-
-    from envs.trace_bounds import check_file_config
 
     config = check_file_config((report.get("settings") or {}).get("env_config"), "the report")
     bank = report.get("bank") or {}

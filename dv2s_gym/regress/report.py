@@ -91,6 +91,8 @@ from dv2s_gym.regress.errors import ReportMismatchError, RegressError
 from dv2s_gym.regress.store import describe_differences
 from dv2s_gym.regress.identity import installed_version
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
+from scenario_bank.bank import Bank, content_hash
+from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
 
 __all__ = [
     "SCHEMA",
@@ -238,8 +240,6 @@ def _errors_note(count: int) -> str:
 # ---------------------------------------------------------------------------------- report
 def bank_info(scenarios: Sequence[str], bank_dir: Optional[Union[str, os.PathLike]] = None) -> Dict[str, Any]:
     """``{"path", "version", "scenarios", "hashes"}``: the version is a SHA-256 over the scenarios' names and scripts."""
-    from scenario_bank.bank import Bank, content_hash
-
     bank = Bank(bank_dir)
     hashes = {name: content_hash(bank.get(name).script) for name in scenarios}
     payload = "\n".join(f"{name}:{hashes[name]}" for name in sorted(hashes))
@@ -370,8 +370,6 @@ def _compare(episodes: List[Dict[str, Any]], by_scenario: Dict[str, List[Dict[st
 def _power(tables: Mapping[str, "stats.PairedTable"], margin: float, alpha: float,
            settings: Mapping[str, Any]) -> Dict[str, Any]:
     """The power the run had (:func:`dv2s_gym.regress.power.run_power`), from its baseline's observed failure rates."""
-    from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
-
     rates = {name: (table.baseline_rate if table.n else None) for name, table in tables.items()}
     return run_power({name: table.n for name, table in tables.items()}, rates, margin=margin, alpha=alpha,
                      mde=float(settings.get("mde") or DEFAULT_MDE), power=float(settings.get("power") or DEFAULT_POWER))

@@ -25,6 +25,8 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
+from tqdm import tqdm
+
 from dv2s_gym.regress import power as power_plan
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
@@ -37,7 +39,7 @@ from dv2s_gym.regress.report import (
     paired_tables,
 )
 from dv2s_gym.regress.outputs import write_reports
-from dv2s_gym.regress.identity import policy_fingerprint
+from dv2s_gym.regress.identity import policy_fingerprint, installed_version
 from dv2s_gym.regress.store import RunStore
 from dv2s_gym.regress.settings import ROLES, BaselineReport, RegressSettings
 from dv2s_gym.regress.tasks import KIND
@@ -45,6 +47,9 @@ from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.backends import get_backend
 from dv2s_gym.workers.settings import WorkerSettings
 from dv2s_gym.workers.tasks import task_id
+from envs.config_check import check_config
+from envs.errors import UnknownConfigKeyError
+from scenario_bank import select_scenarios
 
 __all__ = ["run_regression", "run_size", "RegressSettings", "BaselineReport", "WorkerSettings", "bank_info",
            "plan_tasks", "DEFAULT_OUT", "ROLES"]
@@ -85,9 +90,6 @@ def _check_env_config(env_config: Dict[str, Any], failure: Sequence[str], stall_
     """Refuse env settings under which the gate cannot see failures: unknown keys, a non-positive episode
     duration, or a stall time the episodes are too short to reach."""
     from envs.dv2s_env import DV2SEnv
-    from envs.config_check import check_config
-    from envs.errors import UnknownConfigKeyError
-
     defaults = DV2SEnv.default_config()
     try:
         check_config(env_config, defaults)
@@ -104,8 +106,6 @@ def _check_env_config(env_config: Dict[str, Any], failure: Sequence[str], stall_
 
 
 def _select(scenarios: Scenarios, bank_dir: Optional[str], fallback: Optional[Sequence[str]]) -> List[str]:
-    from scenario_bank import select_scenarios
-
     if isinstance(scenarios, str):
         scenarios = [scenarios]
     if scenarios is not None:
@@ -168,8 +168,6 @@ def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: S
     for result in results.values():
         apply_failure(result, failure)
     info = {"report": str(path.resolve()), "role": role, "spec": old[role].get("spec"), "card": old[role].get("card")}
-    from dv2s_gym.regress.identity import installed_version
-
     theirs, ours = old.get("dv2s_version"), installed_version()
     if theirs != ours:
         info["warning"] = (f"baseline report {path} was made by dv2s-gym {theirs}, this is {ours}: the simulator or the "
@@ -474,6 +472,4 @@ def _planned_episodes(names: Sequence[str], baseline_report: Optional[Union[str,
 def _progress(enabled: bool, total: int, initial: int):
     if not enabled:
         return None
-    from tqdm import tqdm
-
     return tqdm(total=total, initial=initial, desc="regress", unit="episode", file=sys.stderr, dynamic_ncols=True)

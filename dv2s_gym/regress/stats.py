@@ -86,7 +86,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from dv2s_gym.regress.family import DEFAULT_POOLED_WEIGHT  # noqa: F401 - the pooled test's share, re-exported
+from dv2s_gym.regress.family import DEFAULT_POOLED_WEIGHT, gate_rejections
 
 __all__ = ["DEFAULT_ALPHA", "DEFAULT_MARGIN", "DEFAULT_CORRELATION", "Verdict", "wilson_interval",
            "clopper_pearson_interval", "cluster_bootstrap_mean", "cluster_bootstrap_rate", "PairedTable",
@@ -663,8 +663,6 @@ def compare_scenarios(
     Returns:
         ``(per_scenario, overall)``.
     """
-    from dv2s_gym.regress.family import gate_rejections
-
     if not tables:
         raise ValueError("compare_scenarios needs at least one scenario")
     names = list(tables)

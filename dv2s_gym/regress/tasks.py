@@ -36,6 +36,9 @@ from pathlib import Path
 from typing import Any, Dict
 
 from dv2s_gym.workers.tasks import error_result, register, task_id
+from policies import worker_cache
+from dv2s_gym.regress.failures import apply_failure, DEFAULT_STALL_SECONDS, parse_failure
+from envs.safety_metrics import total_stall_step
 
 __all__ = ["KIND", "run_regress_task", "trace_filename"]
 
@@ -51,28 +54,24 @@ def trace_filename(role: str, scenario: str, seed: int) -> str:
 def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
     """Run one episode described by ``task`` (see the module docstring) and return its result dict."""
     from policies.evaluation import run_episode
-    from policies.worker_cache import drop_env, env_for, policy_for
 
     for folder in task.get("python_path") or []:  # where a module:attribute policy is found
         if folder not in sys.path:
             sys.path.append(folder)
     env_key = None
     try:
-        env_key, env = env_for(task.get("bank_dir"), task.get("env_config"))
-        policy = policy_for(task["policy"], env_key, env, owner=task["role"])  # one instance per role
+        env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
+        policy = worker_cache.policy_for(task["policy"], env_key, env, owner=task["role"])  # one instance per role
         started = time.perf_counter()
         result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
         seconds = time.perf_counter() - started
     except Exception as error:  # reported as an error episode, never dropped
         if env_key is not None:
-            drop_env(env_key)
+            worker_cache.drop_env(env_key)
         message = " ".join(f"{type(error).__name__}: {error}".split())
         if os.environ.get("DV2S_DEBUG"):
             message += "\n" + traceback.format_exc()
         return error_result(task, message)
-    from dv2s_gym.regress.failures import DEFAULT_STALL_SECONDS, apply_failure, parse_failure
-    from envs.safety_metrics import total_stall_step
-
     data = result.to_json()
     stall = total_stall_step(trace, float(task.get("stall_seconds") or DEFAULT_STALL_SECONDS))
     period = 1.0 / float(trace.config.get("policy_frequency", 5))

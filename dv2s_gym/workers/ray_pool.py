@@ -31,6 +31,7 @@ import ray.exceptions
 from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.base import DEFAULT_TIMEOUT, Backend
 from dv2s_gym.workers.tasks import TaskFunction, function_for, gave_up_result, run_task
+from scenario_bank.atomic import atomic_write_bytes
 
 __all__ = ["RayBackend", "RayUnavailableError", "CONNECT_TIMEOUT"]
 
@@ -245,8 +246,6 @@ class RayBackend(Backend):
     @staticmethod
     def _deliver(task: Dict[str, Any], result: Dict[str, Any], trace: Optional[bytes]) -> Dict[str, Any]:
         if trace is not None and task.get("trace_dir"):
-            from scenario_bank.atomic import atomic_write_bytes
-
             path = Path(task["trace_dir"]) / Path(result["trace"]).name
             path.parent.mkdir(parents=True, exist_ok=True)
             atomic_write_bytes(path, trace)

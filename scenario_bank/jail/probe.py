@@ -16,17 +16,17 @@ import sys
 import time
 from typing import List
 
+from scenario_bank.jail import wire
+
 __all__ = ["preload", "serve", "main"]
 
 
 def preload() -> None:
-    """Nothing to import ahead: the probe needs only the standard library."""
+    """Nothing to import ahead: the probe needs only the standard library and the wire format."""
 
 
 def serve(inbound_fd: int, outbound_fd: int, started: float) -> int:
     """Say hello, then run each request's code; the exit status."""
-    from scenario_bank.jail import wire
-
     inbound = os.fdopen(inbound_fd, "rb", buffering=0)
     outbound = os.fdopen(outbound_fd, "wb", buffering=0)
     wire.write_message(outbound, {"ok": True, "value": {"import_seconds": time.perf_counter() - started}})

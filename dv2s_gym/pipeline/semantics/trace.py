@@ -62,8 +62,11 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional, Set, Tuple
 
 import numpy as np
+import shapely
+from shapely.affinity import scale
 
 from scenario_bank.elements import normalize_elements
+from scenario_bank.maps import MAPS_DIR
 
 __all__ = ["elements_from_trace", "collision_type", "MAP_ROAD_TYPES", "KEEP_LANE_MIN_M"]
 
@@ -167,9 +170,6 @@ class _MapView:
     """The bits of a map the semantics need: the lane network and the junction area (highway-env frame)."""
 
     def __init__(self, converted) -> None:
-        import shapely
-        from shapely.affinity import scale
-
         self.network = converted.hw_network
         polygons = [scale(i.polygon, 1.0, -1.0, origin=(0, 0)) for i in converted.scenic_network.intersections]
         self.junction = shapely.union_all(polygons) if polygons else None
@@ -178,8 +178,6 @@ class _MapView:
 
     def in_junction(self, track: np.ndarray) -> np.ndarray:
         """Per row of ``track``: whether the actor's centre is inside the junction area."""
-        import shapely
-
         if self.junction is None:
             return np.zeros(len(track), dtype=bool)
         return shapely.contains_xy(self.junction, track[:, 0], track[:, 1])
@@ -195,8 +193,6 @@ def _map_view(trace) -> Optional[_MapView]:
         return None
     if map_path not in _MAP_VIEWS:
         from envs.road_network import load_road_network
-        from scenario_bank.maps import MAPS_DIR
-
         candidates = [Path(map_path), MAPS_DIR / Path(map_path).name]
         view = None
         for candidate in candidates:

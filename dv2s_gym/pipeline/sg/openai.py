@@ -41,6 +41,11 @@ import numpy as np
 
 from dv2s_gym.pipeline.errors import GenerationFailedError
 from dv2s_gym.pipeline.prompts import prompt_hash, repair_message, sg_context, sg_messages
+from scenario_bank.safety import check_script, UnsafeScenarioError
+from scenario_bank.bank import Bank
+from envs.errors import SceneSamplingError
+from scenario_bank.sandbox import SandboxError, verify_script
+from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
 
 __all__ = [
     "FAILURE_CATEGORIES",
@@ -104,11 +109,7 @@ def bank_examples(bank: Any = None) -> List[Example]:
     the description coming from the sidecar or the script's docstring. Scripts
     failing the safety check are left out: they are never shown to the model.
     """
-    from scenario_bank.safety import check_script
-
     if bank is None or isinstance(bank, (str, os.PathLike)):
-        from scenario_bank.bank import Bank
-
         bank = Bank(bank)
     found: List[Example] = []
     entries = list(bank)
@@ -318,9 +319,6 @@ def classify_failure(error: Any, stage: Optional[str] = None) -> str:
     ``stage`` is ``extract``, ``safety``, ``compile``, ``sample`` or ``run``;
     ``error`` an exception or its message.
     """
-    from envs.errors import SceneSamplingError
-    from scenario_bank.safety import UnsafeScenarioError
-
     if stage == "extract":
         return "no_script"
     if stage == "safety" or isinstance(error, UnsafeScenarioError):
@@ -366,9 +364,6 @@ def validate_script(
     process with CPU, memory and wall-clock limits, so a reply that loops or allocates without end
     fails with the limit it hit instead of hanging the generator. Passes are cached by content.
     """
-    from scenario_bank.safety import UnsafeScenarioError
-    from scenario_bank.sandbox import SandboxError, verify_script
-
     try:
         verify_script(script, name=name, seeds=sample_seeds, run_seconds=run_seconds,
                       max_sample_iterations=max_sample_iterations)
@@ -433,8 +428,6 @@ def _try_scenic2_upgrade(
     Returns the upgraded script and None when it passes every check (its rewrites recorded in
     ``result.scenic2_rewrites``), else the original script and failure.
     """
-    from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
-
     if not looks_like_scenic2(script, failure.message):
         return script, failure
     upgrade = upgrade_scenic2(script)

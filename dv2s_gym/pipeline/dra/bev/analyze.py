@@ -26,6 +26,7 @@ from dv2s_gym.pipeline.dra.bev.events import (
 )
 from dv2s_gym.pipeline.dra.bev.language import _answer, _describe
 from dv2s_gym.pipeline.dra.bev.scale import LANE_RULER_M, estimate_scale, is_long_vehicle, lane_width_scale
+from dv2s_gym.pipeline.video import read_video
 
 __all__ = ["BevAnalysis", "analyze_bev", "analyze_bev_file"]
 
@@ -410,8 +411,6 @@ def analyze_bev(clip, question: Optional[str] = None) -> BevAnalysis:
 
 def analyze_bev_file(path, question: Optional[str] = None, **read_options) -> BevAnalysis:
     """Read ``path`` with :data:`BEV_READ_OPTIONS` (``read_options`` override them) and analyse it."""
-    from dv2s_gym.pipeline.video import read_video
-
     options = dict(BEV_READ_OPTIONS)
     options.update(read_options)
     return analyze_bev(read_video(path, **options), question)

@@ -9,6 +9,7 @@ from typing import Any, Dict, List, Sequence, Tuple
 import numpy as np
 
 from scenario_bank.errors import DV2SError
+from dv2s_gym.pipeline.video import read_video
 
 __all__ = ["BEV_READ_OPTIONS", "MIN_RESAMPLE_FPS", "NotBirdsEyeError"]
 
@@ -78,8 +79,6 @@ def _frames_and_times(clip) -> Tuple[List[np.ndarray], np.ndarray, str, Dict[str
     rate = (len(times) - 1) / (times[-1] - times[0]) if len(times) > 1 and times[-1] > times[0] else 0.0
     source_fps = float(getattr(clip, "source_fps", 0.0) or 0.0)
     if rate < MIN_RESAMPLE_FPS and source_fps > rate + 0.5 and path and os.path.isfile(path):
-        from dv2s_gym.pipeline.video import read_video
-
         options = dict(BEV_READ_OPTIONS)
         if frames:
             h, w = frames[0].shape[:2]

@@ -9,6 +9,11 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+try:
+    import scipy.fft as sfft
+except Exception:  # pragma: no cover - numpy's FFT instead
+    sfft = None
+
 from dv2s_gym.pipeline.dra.bev.detection import Blob, _Frame
 
 __all__ = ["MAX_SPEED", "Track"]
@@ -89,14 +94,12 @@ def _smooth(t: np.ndarray, y: np.ndarray, half: float = 0.4) -> np.ndarray:
 
 
 def _fft():
-    try:
-        import scipy.fft as sfft
-
+    if sfft is not None:
         return sfft.rfft2, sfft.irfft2, sfft.next_fast_len
-    except Exception:  # pragma: no cover - numpy fallback
-        def next_len(n, real=True):
-            return int(2 ** math.ceil(math.log2(max(2, n))))
-        return np.fft.rfft2, np.fft.irfft2, next_len
+
+    def next_len(n, real=True):  # pragma: no cover - numpy fallback
+        return int(2 ** math.ceil(math.log2(max(2, n))))
+    return np.fft.rfft2, np.fft.irfft2, next_len
 
 
 def _vehicle_kind(kind: str) -> bool:

@@ -8,6 +8,8 @@ from typing import Any, Callable, Dict, Optional, Tuple
 
 from dv2s_gym.pipeline.sg.rules.frame import ActorFrame
 from dv2s_gym.pipeline.sg.rules.roles import JunctionRole
+from scenario_bank.map_cache import load_network
+from scenario_bank.maps import resolve_map
 
 __all__ = ["JUNCTION_ACTIONS", "MANEUVER_TYPES", "Maneuvers", "role_condition", "junction_role"]
 
@@ -23,9 +25,6 @@ class Maneuvers:
 
     def __init__(self, map_name: str) -> None:
         if map_name not in self._cache:
-            from scenario_bank.map_cache import load_network
-            from scenario_bank.maps import resolve_map
-
             self._cache[map_name] = load_network(resolve_map(map_name))
         self.network = self._cache[map_name]
         self.maneuvers = [m for j in self.network.intersections for m in j.maneuvers]
