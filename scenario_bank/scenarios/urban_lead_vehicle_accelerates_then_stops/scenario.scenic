@@ -19,28 +19,33 @@ behavior HoldStill():
     while True:
         take SetThrottleAction(0), SetBrakeAction(1)
 
-behavior LeadEgo(line, timeGap):
-    # drive ahead of the ego keeping about `timeGap` seconds of its speed between them (an ego that
-    # hangs back or rushes keeps the same gap to a lead that adapts)
+behavior LeadEgo(line, timeGap, seconds):
+    # drive ahead of the ego for `seconds`, keeping about `timeGap` seconds of its speed between them (an ego
+    # that hangs back or rushes keeps the same gap to a lead that adapts); end early when the ego closes in
+    # so fast that it would reach the lead within 2 s
     lonControl, latControl = simulation().getLaneFollowingControllers(self)
     pastSteer = 0
-    while True:
+    for step in range(int(seconds / simulation().timestep)):
         gap = (distance past ego of self) - 5
-        wanted = max(3, ego.speed + 0.5 * (gap - timeGap * max(ego.speed, 3)))
+        if gap < 2 * (ego.speed - self.speed):
+            break
+        wanted = max(3, ego.speed + 0.5 * (timeGap * max(ego.speed, 3) - gap))
         throttle = lonControl.run_step(min(wanted, 15) - self.speed)
         steer = latControl.run_step(line.signedDistanceTo(self.position))
         take RegulatedControlAction(throttle, steer, pastSteer)
         pastSteer = steer
 
 behavior DriveOffThenStop(startGap, throttle, followGap, followFor, strength):
-    # wait until the ego is `startGap` seconds away (never closer than 12 m), drive off hard until
-    # faster than the ego, lead it for a moment, then brake to a standstill in front of it
+    # wait until the ego is `startGap` seconds away (never closer than 12 m), or near and nearly stopped (an
+    # ego that hangs back), drive off hard until faster than the ego (at most 14 m/s), lead it for a moment,
+    # then brake to a standstill in front of it
     line = self.laneSection.centerline
-    while (distance past ego of self) > max(12, startGap * ego.speed):
+    while ((distance past ego of self) > max(12, startGap * ego.speed)
+           and not ((distance past ego of self) < 40 and ego.speed < 2)):
         take SetThrottleAction(0), SetBrakeAction(1)
-    while self.speed < max(ego.speed, 4) + 2:
+    while self.speed < min(max(ego.speed, 4) + 2, 14):
         take SetThrottleAction(throttle), SetBrakeAction(0), SetSteerAction(0)
-    do LeadEgo(line, followGap) for followFor seconds
+    do LeadEgo(line, followGap, followFor)
     while self.speed > 0.1:
         take SetThrottleAction(0), SetBrakeAction(strength)
     do HoldStill()
