@@ -167,6 +167,36 @@ def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
     assert kinds == {"start": {"stall": 1, "collision": 1}, "fine_tuned": {"stall": 1}, "control": {}}
 
 
+def test_the_control_test_needs_the_minimums_and_the_floor_on_its_own_pairs():
+    """A control that errored on all but one episode per family: 20 tested pairs against the start, 4 against the
+    control. The control test does not run and the round is not accepted."""
+    from dv2s_gym.mining.loop import heldout_comparison
+    from dv2s_gym.mining.loop_verdict import judge_round
+
+    families = {f"F{i}_replay": f"F{i}" for i in range(4)}
+    before, after, control = [], [], []
+    for name in families:
+        for seed in range(10000, 10005):
+            key = {"scenario": name, "seed": seed}
+            before.append({**key, "failed": True, "error": None})
+            after.append({**key, "failed": False, "error": None})
+            control.append({**key, "failed": False, "error": None} if seed == 10000 else
+                           {**key, "failed": None, "error": "RuntimeError: worker hung"})
+    summary = heldout_comparison(before, after, control, min_episodes=20, families=families, min_families=3)
+    assert summary["pairs"] == 20 and summary["vs_control"]["pairs"] == 4 and "underpowered" not in summary
+    assert summary["significantly_worse"]["control"] is None and summary["vs_control"]["mcnemar_p"] is None
+    assert "against the control: only 4 held-out episode(s)" in summary["vs_control"]["underpowered"]
+    record = {"round": 1, "new_policy": "ppo:x", "steps": {"fine_tune": {}, "after": summary,
+                                                           "regress": {"verdict": "PASS", "reason": "stand-in"}}}
+    judged = judge_round(record)
+    assert judged["verdict"] == "NOT ACCEPTED" and judged["decided_by"] == "heldout_vs_control"
+    assert "against the control did not run (against the control: only 4" in judged["reason"]
+    # with minimums of zero the floor still holds for the control's pairs
+    low = heldout_comparison(before, after, control, min_episodes=0, families=families, min_families=0)
+    assert low["significantly_worse"]["start"] is not None and low["significantly_worse"]["control"] is None
+    assert "fewer than 6" in low["vs_control"]["underpowered"]
+
+
 def test_fine_tune_weights_keep_the_bank_in_the_mix():
     weights = fine_tune_weights(["a", "b", "c", "m1", "m2"], ["m1", "m2"], 0.5)
     assert weights["m1"] == pytest.approx(0.25) and weights["a"] == pytest.approx(0.5 / 3)

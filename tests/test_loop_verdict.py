@@ -212,6 +212,25 @@ def test_a_round_recorded_with_tests_on_fewer_pairs_than_the_floor_is_not_accept
     assert "only 1 tested held-out pair" in verdict["too_small"] and "TOO SMALL TO JUDGE" in verdict["sentence"]
 
 
+def test_a_round_recorded_with_a_control_test_on_fewer_pairs_than_the_floor_is_not_accepted():
+    """A round recorded before the floor held for the control's pairs: its control test on 4 pairs counts not."""
+    from dv2s_gym.mining.loop_verdict import heldout_worse
+
+    start = {f"family_{i}": {"both_fail": 0, "candidate_only": 0, "baseline_only": 5, "neither": 0} for i in range(4)}
+    control = {f"family_{i}": {"both_fail": 0, "candidate_only": 0, "baseline_only": 0, "neither": 1} for i in range(4)}
+    record = {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
+              "steps": {"fine_tune": {}, "regress": {"verdict": "PASS", "reason": "stand-in"},
+                        "after": {"pairs": 20, "heldout_families": 4, "control": {"k": 0, "n": 4},
+                                  "vs_control": {"pairs": 4, "table": {"both_fail": 0, "fine_tuned_only": 0,
+                                                                       "control_only": 0, "neither": 4}},
+                                  "significantly_worse": {"start": heldout_worse(start, "start"),
+                                                          "control": heldout_worse(control, "control")}}}}
+    verdict = recommendation(_report(record))
+    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "heldout_vs_control"
+    assert "against the control did not run" in verdict["reason"] and "only 4 tested held-out pair" in verdict["reason"]
+    assert "test against the control" in verdict["too_small"]
+
+
 def test_a_minimum_that_can_never_give_evidence_is_flagged_in_the_help_the_log_and_the_report():
     from dv2s_gym.mining.loop_report import render_markdown
     from dv2s_gym.mining.loop_verdict import evidence_floor_note

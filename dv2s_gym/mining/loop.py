@@ -905,6 +905,12 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
         summary.update(relative_drop=None, relative_drop_interval=[None, None], mcnemar_p=None)
         if "vs_control" in summary:
             summary["vs_control"].update(relative_drop=None, mcnemar_p=None)
+    # the test against the control needs the same evidence on its own pairs: a control that errored on most
+    # episodes leaves few tested pairs against it, and a test on those says nothing
+    control_shortfall = None if control is None else _control_shortfall(summary["vs_control"]["pairs"], tested,
+                                                                        min_episodes, min_families)
+    if control_shortfall:
+        summary["vs_control"].update(underpowered=control_shortfall, relative_drop=None, mcnemar_p=None)
     # is the fine-tuned policy significantly worse than the start / the control on the held-out families
     # (loop_verdict.heldout_worse: the dv2s regress gate over the families); not tested below the minimums
     from dv2s_gym.mining.loop_verdict import heldout_worse
@@ -913,9 +919,16 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     summary["margin"] = margin
     summary["significantly_worse"] = {
         "start": None if shortfall else heldout_worse(_family_tables(before, after, families), "start", margin),
-        "control": None if shortfall or control is None else heldout_worse(
+        "control": None if shortfall or control_shortfall or control is None else heldout_worse(
             _family_tables(control, after, families), "control", margin)}
     return summary
+
+
+def _control_shortfall(pairs: int, families: set, min_episodes: int, min_families: int) -> Optional[str]:
+    """Why the held-out test against the control does not run (too few tested pairs against the control, or too
+    few families with one: :func:`underpowered`'s minimums and evidence floor), or ``None``."""
+    shortfall = underpowered(pairs, min_episodes, len(families), min_families, tested=True)
+    return None if shortfall is None else "against the control: " + shortfall
 
 
 def _family_tables(baseline: Sequence[Mapping[str, Any]], candidate: Sequence[Mapping[str, Any]],

@@ -95,6 +95,8 @@ def too_small(record: Mapping[str, Any]) -> Optional[str]:
         reasons.append("too few held-out episodes or families for a drop or a test")
     elif _below_floor(after):
         reasons.append(_below_floor(after))
+    elif _control_below_floor(after):
+        reasons.append("too few held-out episodes or families for the test against the control")
     if (steps.get("regress") or {}).get("verdict") == "INCONCLUSIVE":
         reasons.append(f"the regression test on {(steps.get('regress') or {}).get('episodes')} paired episodes "
                        "could not tell")
@@ -230,11 +232,33 @@ def _heldout_tests(after: Mapping[str, Any]) -> Dict[str, Optional[Dict[str, Any
     recorded before they were, the same test on its pooled tables (one family); ``None`` where none ran."""
     if "significantly_worse" in after:
         recorded = after.get("significantly_worse") or {}
-        return {"start": recorded.get("start"), "control": recorded.get("control")}
-    margin = after.get("margin")
-    return {"start": _pooled_test(after, "after_only", "before_only", "start", margin),
-            "control": _pooled_test(after.get("vs_control") or {}, "fine_tuned_only", "control_only", "control",
-                                    margin)}
+        tests = {"start": recorded.get("start"), "control": recorded.get("control")}
+    else:
+        margin = after.get("margin")
+        tests = {"start": _pooled_test(after, "after_only", "before_only", "start", margin),
+                 "control": _pooled_test(after.get("vs_control") or {}, "fine_tuned_only", "control_only", "control",
+                                         margin)}
+    if _control_below_floor(after):  # a test on fewer pairs than the floor (a round recorded before it) counts not
+        tests["control"] = None
+    return tests
+
+
+def _control_below_floor(after: Mapping[str, Any]) -> Optional[str]:
+    """Why the held-out test against the control does not count: recorded as not run (``vs_control``'s
+    ``underpowered``), or on fewer than :data:`EVIDENCE_FLOOR` tested pairs against the control; ``None`` when it
+    counts or there is no control."""
+    versus = after.get("vs_control") or {}
+    if not versus:
+        return None
+    if versus.get("underpowered"):
+        return str(versus["underpowered"])
+    pairs = versus.get("pairs")
+    if pairs is None and versus.get("table"):
+        pairs = sum(int(v or 0) for v in versus["table"].values())
+    if pairs is not None and pairs < EVIDENCE_FLOOR:
+        return (f"against the control: only {pairs} tested held-out pair(s), fewer than {EVIDENCE_FLOOR}: no "
+                f"held-out test can reach p < {HELDOUT_ALPHA:g} below {EVIDENCE_FLOOR} discordant pairs")
+    return None
 
 
 def _pooled_test(comparison: Mapping[str, Any], fine_tuned_key: str, other_key: str,
@@ -285,7 +309,8 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
     missing = [key for key in ("start", "control") if tests.get(key) is None
                and (key == "start" or after.get("control") or "vs_control" in after)]
     if missing:
-        why = after.get("underpowered") or ("no held-out pair ran" if not after.get("pairs") else "not recorded")
+        why = (after.get("underpowered") or (_control_below_floor(after) if missing == ["control"] else None)
+               or ("no held-out pair ran" if not after.get("pairs") else "not recorded"))
         return {"verdict": NOT_ACCEPTED, "decided_by": f"heldout_vs_{missing[0]}",
                 "reason": f"{regression} PASSed, but the held-out test against "
                           f"{' and '.join('the starting policy' if k == 'start' else 'the control' for k in missing)}"
