@@ -520,6 +520,43 @@ def test_no_member_of_a_held_out_family_reaches_either_arm(tmp_path, monkeypatch
         assert not family & set(arm["weights"])
 
 
+def test_a_held_out_familys_grandchild_stays_out_of_the_fine_tuning_mix(tmp_path, monkeypatch):
+    """An entry two generations below a held-out family's root (its immediate parent not held out by name) is of
+    that family: neither arm trains on it, and the arm records root families only."""
+    import shutil
+
+    from dv2s_gym.mining import loop as loop_module
+    from scenario_bank.bank import Bank
+
+    shipped = Bank()
+    bank = tmp_path / "bank"
+    for root in ("highway_cut_in_from_left", "urban_lead_vehicle_stopped"):
+        shutil.copytree(shipped.root / root, bank / root)
+    for name, parent, like in (("m_cutin", "highway_cut_in_from_left", "highway_cut_in_from_left"),
+                               ("m_cutin_child", "m_cutin", "highway_cut_in_from_left"),
+                               ("m_lead", "urban_lead_vehicle_stopped", "urban_lead_vehicle_stopped")):
+        shutil.copytree(shipped.root / like, bank / name)
+        meta = json.loads((bank / name / "meta.json").read_text())
+        meta["name"] = name
+        meta["source"] = {**(meta.get("source") or {}), "parent": parent, "kind": "mined"}
+        (bank / name / "meta.json").write_text(json.dumps(meta))
+    assert Bank(bank).get("m_cutin_child").provenance.parent == "m_cutin"
+    captured = {}
+
+    def fake_dagger(current, out, weights, arm, label):
+        captured.update(weights)
+        return {"model": "stand-in"}
+
+    monkeypatch.setattr(loop_module, "_dagger_arm", fake_dagger)
+    arm = loop_module._Arm(bank=str(bank), method="dagger", steps=1, seed=0, n_envs=1, env_config={},
+                           fine_tune_config={}, reward={}, learning_rate=1e-3, progress=False, log=lambda _: None)
+    # the held-out scenario is a replay of the cut-in family whose immediate parent is m_cutin
+    excluded = {"m_cutin_replay", "highway_cut_in_from_left"}
+    record = loop_module._fine_tune_arm("dv2s-ppo", tmp_path / "arm", excluded, 0.5, arm, with_mined=True, label="x")
+    assert set(captured) == {"urban_lead_vehicle_stopped", "m_lead"}
+    assert record["families"] == ["urban_lead_vehicle_stopped"]
+
+
 def test_loop_says_loudly_when_too_few_episodes_are_held_out(tmp_path, monkeypatch):
     _StandIns(monkeypatch)
     lines = []

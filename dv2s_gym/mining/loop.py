@@ -817,16 +817,20 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, a
                    label: str) -> Dict[str, Any]:
     """Fine-tune ``current`` into ``out`` on the working bank less ``excluded``: the mined scenarios upweighted
     (``with_mined``) or left out (the control arm); everything else identical between the two arms."""
+    from dv2s_gym.mining.family import scenario_family
     from scenario_bank.bank import Bank
 
-    # a held-out family's every member stays out too: exact replays of its failures and entries of earlier rounds
-    entries = [e for e in Bank(arm.bank) if e.name not in excluded and e.provenance.parent not in excluded]
+    # a held-out family's every member stays out too: exact replays of its failures and entries of earlier rounds,
+    # at any depth (a member's family is the root of its provenance chain, not its immediate parent)
+    roots = {e.name: scenario_family(e.name, arm.bank) for e in Bank(arm.bank)}
+    entries = [e for e in Bank(arm.bank) if e.name not in excluded and e.provenance.parent not in excluded
+               and roots[e.name] not in excluded]
     mined = sorted(e.name for e in entries if e.provenance.mined)
     names = sorted(e.name for e in entries if with_mined or e.name not in mined)
     weights = fine_tune_weights(names, mined if with_mined else [], mined_share)
     common = {"scenarios": len(names), "mined_upweighted": len(mined) if with_mined else 0, "steps": arm.steps,
               "mined_left_out": 0 if with_mined else len(mined),
-              "families": sorted({e.provenance.parent or e.name for e in entries if e.name in names})}
+              "families": sorted({roots[e.name] for e in entries if e.name in names})}
     if arm.method == "dagger":
         result = _dagger_arm(current, out, weights, arm, label)
         return {"model": result.pop("model"), "method": "dagger", **common, **result}
