@@ -768,3 +768,17 @@ def test_one_actor_of_the_new_script_cannot_stand_for_two_of_the_parent():
     assert "car_b would stand for the parent's lead and oncoming" in compared["not_comparable"]["lead_speed"]
     assert len(rejections) == 1 and "only 0 of the failure's 2 parameters" in rejections[0]
 
+
+def test_the_failures_actors_must_be_the_scene_in_a_majority_of_the_runs():
+    """Four of ten runs with the failure's one car, three with a pedestrian too, three with two cars: the most
+    common set is the failure's, but not in most runs."""
+    from dv2s_gym.mining.convert import _judge, compare_actors
+
+    split = compare_actors({"car": 1}, [{"car": 1}] * 4 + [{"car": 1, "pedestrian": 1}] * 3 + [{"car": 2}] * 3, "car")
+    assert split["script"] == {"car": 1} and split["runs_matching"] == 4 and not split["same"]
+    (reason,) = [str(r) for r in _judge({**_PASSING, "actors": split}, {}, {"type": "collision"}, 0.3)]
+    assert reason.startswith("actors:") and "in only 4 of 10 runs (a majority needed)" in reason
+    tie = compare_actors({"car": 1}, [{"car": 1}] * 5 + [{"car": 1, "pedestrian": 1}] * 5, "car")
+    assert not tie["same"]
+    most = compare_actors({"car": 1}, [{"car": 1}] * 6 + [{"car": 2}] * 4, "car")
+    assert most["same"] and not _judge({**_PASSING, "actors": most}, {}, {"type": "collision"}, 0.3)

@@ -305,7 +305,8 @@ def compare_actors(source: Mapping[str, int], scripts: List[Mapping[str, int]],
     """The failure's actors (``source``, :func:`actor_census` of its trace) against the new scenario's (the census
     of each reproduction episode; the most frequent one is the script's): ``{"failure", "script", "missing",
     "extra", "adversary", "same"}``; ``missing`` and ``extra`` count per kind what the script lacks or adds,
-    ``same`` is whether the two agree kind for kind."""
+    ``same`` is whether the two agree kind for kind and the failure's actors are the scene in a majority of the runs
+    (``runs_matching`` of ``runs``)."""
     script: Dict[str, int] = {}
     if scripts:
         keys = [json.dumps(dict(sorted(c.items()))) for c in scripts]
@@ -313,8 +314,11 @@ def compare_actors(source: Mapping[str, int], scripts: List[Mapping[str, int]],
     kinds = sorted(set(source) | set(script))
     missing = {k: source.get(k, 0) - script.get(k, 0) for k in kinds if source.get(k, 0) > script.get(k, 0)}
     extra = {k: script.get(k, 0) - source.get(k, 0) for k in kinds if script.get(k, 0) > source.get(k, 0)}
+    # the failure's actors must be the scene in most reproduction runs, not only in the most common of several sets
+    matching = sum(1 for c in scripts if {k: n for k, n in c.items() if n} == {k: n for k, n in source.items() if n})
+    majority = not scripts or 2 * matching > len(scripts)
     return {"failure": dict(source), "script": script, "missing": missing, "extra": extra, "adversary": adversary,
-            "same": not missing and not extra}
+            "runs": len(scripts), "runs_matching": matching, "same": not missing and not extra and majority}
 
 
 def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional[str] = None) -> Dict[str, Any]:
@@ -502,6 +506,9 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
         problems += [f"{n} {kind} fewer" for kind, n in actors.get("missing", {}).items()
                      if not (kind == adversary and not actors["script"].get(adversary))]
         problems += [f"{n} {kind} more" for kind, n in actors.get("extra", {}).items()]
+        if not problems and actors.get("runs") and 2 * actors.get("runs_matching", 0) <= actors["runs"]:
+            problems.append(f"the failure's actors, kind for kind, in only {actors['runs_matching']} of "
+                            f"{actors['runs']} runs (a majority needed)")
         found.append(_Rejected("actors", f"the failure's scene has {_census_text(actors['failure'])}, the new "
                                          f"scenario's {_census_text(actors['script'])}: {', '.join(problems)}"))
     parameters = out.get("parameters")
