@@ -335,3 +335,46 @@ def test_a_round_recorded_without_the_family_harm_check_is_not_accepted():
               "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
     old = recommendation(_report(record))
     assert old["verdict"] == "NOT ACCEPTED" and "recorded without the held-out families' harm check" in old["reason"]
+
+
+def _accepted_round():
+    """A round every test accepts: 20 held-out pairs from 4 families, the fine-tuned policy failing none the start
+    or the control passed."""
+    from dv2s_gym.mining.loop import heldout_comparison
+
+    families = {f"F{i}_replay": f"F{i}" for i in range(4)}
+    before = [{"scenario": n, "seed": s, "failed": True, "error": None} for n in families for s in range(5)]
+    after = [{"scenario": n, "seed": s, "failed": False, "error": None} for n in families for s in range(5)]
+    summary = heldout_comparison(before, after, after, min_episodes=20, families=families, min_families=3)
+    return {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
+            "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
+
+
+def test_a_fine_tuned_policy_that_fails_on_the_untouched_set_is_not_accepted():
+    record = _accepted_round()
+    assert recommendation(_report(record))["verdict"] == "ACCEPTED"
+    record["steps"]["untouched"] = {"fine_tuned_vs_start": {"verdict": "FAIL", "reason": "fails more often: +73 pp"}}
+    verdict = recommendation(_report(record))
+    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "untouched"
+    assert "untouched scenario set" in verdict["reason"] and "(fails more often: +73 pp)" in verdict["reason"]
+    assert verdict["policy"] == "dv2s-ppo"
+    record["steps"]["untouched"]["fine_tuned_vs_start"]["verdict"] = "PASS"
+    assert recommendation(_report(record))["verdict"] == "ACCEPTED"
+
+
+def test_an_inconclusive_cross_round_check_is_named_in_the_reason():
+    first, second = _accepted_round(), _accepted_round()
+    second.update(round=2, policy=first["new_policy"], new_policy="ppo:round_2/policy/model.zip")
+    final = {"verdict": "INCONCLUSIVE", "reason": "+6.0 pp, 95% CI -1 to +13 pp", "rounds": [1, 2]}
+    verdict = recommendation(_report(first, second, final_vs_start=final))
+    assert "over rounds 1, 2" in verdict["reason"] and "was INCONCLUSIVE (+6.0 pp, 95% CI -1 to +13 pp)" in verdict["reason"]
+    assert "INCONCLUSIVE" in verdict["sentence"]
+
+
+def test_loop_help_names_the_family_harm_rule_and_the_untouched_set(capsys):
+    from dv2s_gym.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["loop", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "(per-family harm rule)" in text and "untouched scenario set" in text

@@ -18,7 +18,9 @@ non-inferiority, so it blocks ACCEPTED even when the significance gate calls it 
 fails to show non-inferiority with an estimate within the margin (too few pairs to tell) does not block. Without a control arm only the test against the start is required. Each round is
 tested against the policy it started from, so with two or more tested rounds a fine-tuned policy that FAILs
 against the starting one (``final_vs_start``) is rejected too, and is not accepted when that comparison
-cannot run. The verdict's reason names the test that decided
+cannot run; when that comparison is INCONCLUSIVE the reason says so. A fine-tuned policy that FAILs against the
+starting policy on the untouched scenario set (never mined, never fine-tuned on) is not accepted either. The verdict's
+reason names the test that decided
 it. The recommended policy (the policy to use) is the last accepted one, else the starting policy; every
 round's policy meets the cross-round check over the rounds up to it, and one that check rejected sends the
 recommendation back to the starting policy, so it is never the policy to use.
@@ -330,6 +332,10 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
                     "reason": f"{regression} PASSed and the fine-tuned policy is not significantly worse than "
                               f"{label} on the held-out families, but a harm there is not ruled out: "
                               f"{_harm_text(harm, label)} ({FAMILY_RULE})"}
+    untouched = _untouched_fail(steps)
+    if untouched:
+        return {"verdict": NOT_ACCEPTED, "decided_by": "untouched",
+                "reason": f"{regression} PASSed and the held-out tests found no harm, but {untouched}"}
     parts = [f"not significantly worse than {'the starting policy' if key == 'start' else 'the control'} "
              f"(p = {tests[key]['p_value']:.3g} on {tests[key].get('pairs')} held-out pairs from "
              f"{tests[key].get('families')} famil{'y' if tests[key].get('families') == 1 else 'ies'})"
@@ -342,6 +348,16 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
     return {"verdict": ACCEPTED, "decided_by": "all",
             "reason": f"no regression on the rest of the bank ({regression} PASSed: {regress.get('reason')}); on "
                       f"the held-out families {' and '.join(parts)} ({HELDOUT_TEST}){control_note}"}
+
+
+def _untouched_fail(steps: Mapping[str, Any]) -> Optional[str]:
+    """Why the untouched scenario set blocks ACCEPTED (the fine-tuned policy FAILed against the start there:
+    significantly worse), or ``None``."""
+    versus = (steps.get("untouched") or {}).get("fine_tuned_vs_start") or {}
+    if versus.get("verdict") != "FAIL":
+        return None
+    return (f"on the untouched scenario set (never mined or fine-tuned on) the fine-tuned policy FAILed against the "
+            f"starting policy ({versus.get('reason')}), so it harms scenes the loop did not touch")
 
 
 def _with_cross_round_check(judged: Dict[str, str], final: Optional[Mapping[str, Any]]) -> Dict[str, str]:
@@ -361,6 +377,11 @@ def _with_cross_round_check(judged: Dict[str, str], final: Optional[Mapping[str,
                 "reason": f"over rounds {rounds} the fine-tuned policy regressed against the starting one on the "
                           f"starting bank: the regression test of the fine-tuned against the starting policy FAILed "
                           f"({final.get('reason')})"}
+    if final.get("verdict") == "INCONCLUSIVE":
+        return {**judged, "reason": f"{judged['reason']}; but over rounds {rounds} the regression test of the "
+                                    f"fine-tuned against the starting policy on the starting bank was INCONCLUSIVE "
+                                    f"({final.get('reason')}): no regression against the starting policy over the "
+                                    "rounds is shown, nor ruled out"}
     return judged
 
 
