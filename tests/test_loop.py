@@ -167,6 +167,36 @@ def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
     assert kinds == {"start": {"stall": 1, "collision": 1}, "fine_tuned": {"stall": 1}, "control": {}}
 
 
+def test_the_control_test_needs_the_minimums_and_the_floor_on_its_own_pairs():
+    """A control that errored on all but one episode per family: 20 tested pairs against the start, 4 against the
+    control. The control test does not run and the round is not accepted."""
+    from dv2s_gym.mining.loop import heldout_comparison
+    from dv2s_gym.mining.loop_verdict import judge_round
+
+    families = {f"F{i}_replay": f"F{i}" for i in range(4)}
+    before, after, control = [], [], []
+    for name in families:
+        for seed in range(10000, 10005):
+            key = {"scenario": name, "seed": seed}
+            before.append({**key, "failed": True, "error": None})
+            after.append({**key, "failed": False, "error": None})
+            control.append({**key, "failed": False, "error": None} if seed == 10000 else
+                           {**key, "failed": None, "error": "RuntimeError: worker hung"})
+    summary = heldout_comparison(before, after, control, min_episodes=20, families=families, min_families=3)
+    assert summary["pairs"] == 20 and summary["vs_control"]["pairs"] == 4 and "underpowered" not in summary
+    assert summary["significantly_worse"]["control"] is None and summary["vs_control"]["mcnemar_p"] is None
+    assert "against the control: only 4 held-out episode(s)" in summary["vs_control"]["underpowered"]
+    record = {"round": 1, "new_policy": "ppo:x", "steps": {"fine_tune": {}, "after": summary,
+                                                           "regress": {"verdict": "PASS", "reason": "stand-in"}}}
+    judged = judge_round(record)
+    assert judged["verdict"] == "NOT ACCEPTED" and judged["decided_by"] == "heldout_vs_control"
+    assert "against the control did not run (against the control: only 4" in judged["reason"]
+    # with minimums of zero the floor still holds for the control's pairs
+    low = heldout_comparison(before, after, control, min_episodes=0, families=families, min_families=0)
+    assert low["significantly_worse"]["start"] is not None and low["significantly_worse"]["control"] is None
+    assert "fewer than 6" in low["vs_control"]["underpowered"]
+
+
 def test_fine_tune_weights_keep_the_bank_in_the_mix():
     weights = fine_tune_weights(["a", "b", "c", "m1", "m2"], ["m1", "m2"], 0.5)
     assert weights["m1"] == pytest.approx(0.25) and weights["a"] == pytest.approx(0.5 / 3)
@@ -488,6 +518,43 @@ def test_no_member_of_a_held_out_family_reaches_either_arm(tmp_path, monkeypatch
     assert any(name.startswith("replay_") for name in family)
     for arm in stand.fine_tunes:
         assert not family & set(arm["weights"])
+
+
+def test_a_held_out_familys_grandchild_stays_out_of_the_fine_tuning_mix(tmp_path, monkeypatch):
+    """An entry two generations below a held-out family's root (its immediate parent not held out by name) is of
+    that family: neither arm trains on it, and the arm records root families only."""
+    import shutil
+
+    from dv2s_gym.mining import loop as loop_module
+    from scenario_bank.bank import Bank
+
+    shipped = Bank()
+    bank = tmp_path / "bank"
+    for root in ("highway_cut_in_from_left", "urban_lead_vehicle_stopped"):
+        shutil.copytree(shipped.root / root, bank / root)
+    for name, parent, like in (("m_cutin", "highway_cut_in_from_left", "highway_cut_in_from_left"),
+                               ("m_cutin_child", "m_cutin", "highway_cut_in_from_left"),
+                               ("m_lead", "urban_lead_vehicle_stopped", "urban_lead_vehicle_stopped")):
+        shutil.copytree(shipped.root / like, bank / name)
+        meta = json.loads((bank / name / "meta.json").read_text())
+        meta["name"] = name
+        meta["source"] = {**(meta.get("source") or {}), "parent": parent, "kind": "mined"}
+        (bank / name / "meta.json").write_text(json.dumps(meta))
+    assert Bank(bank).get("m_cutin_child").provenance.parent == "m_cutin"
+    captured = {}
+
+    def fake_dagger(current, out, weights, arm, label):
+        captured.update(weights)
+        return {"model": "stand-in"}
+
+    monkeypatch.setattr(loop_module, "_dagger_arm", fake_dagger)
+    arm = loop_module._Arm(bank=str(bank), method="dagger", steps=1, seed=0, n_envs=1, env_config={},
+                           fine_tune_config={}, reward={}, learning_rate=1e-3, progress=False, log=lambda _: None)
+    # the held-out scenario is a replay of the cut-in family whose immediate parent is m_cutin
+    excluded = {"m_cutin_replay", "highway_cut_in_from_left"}
+    record = loop_module._fine_tune_arm("dv2s-ppo", tmp_path / "arm", excluded, 0.5, arm, with_mined=True, label="x")
+    assert set(captured) == {"urban_lead_vehicle_stopped", "m_lead"}
+    assert record["families"] == ["urban_lead_vehicle_stopped"]
 
 
 def test_loop_says_loudly_when_too_few_episodes_are_held_out(tmp_path, monkeypatch):

@@ -212,6 +212,25 @@ def test_a_round_recorded_with_tests_on_fewer_pairs_than_the_floor_is_not_accept
     assert "only 1 tested held-out pair" in verdict["too_small"] and "TOO SMALL TO JUDGE" in verdict["sentence"]
 
 
+def test_a_round_recorded_with_a_control_test_on_fewer_pairs_than_the_floor_is_not_accepted():
+    """A round recorded before the floor held for the control's pairs: its control test on 4 pairs counts not."""
+    from dv2s_gym.mining.loop_verdict import heldout_worse
+
+    start = {f"family_{i}": {"both_fail": 0, "candidate_only": 0, "baseline_only": 5, "neither": 0} for i in range(4)}
+    control = {f"family_{i}": {"both_fail": 0, "candidate_only": 0, "baseline_only": 0, "neither": 1} for i in range(4)}
+    record = {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
+              "steps": {"fine_tune": {}, "regress": {"verdict": "PASS", "reason": "stand-in"},
+                        "after": {"pairs": 20, "heldout_families": 4, "control": {"k": 0, "n": 4},
+                                  "vs_control": {"pairs": 4, "table": {"both_fail": 0, "fine_tuned_only": 0,
+                                                                       "control_only": 0, "neither": 4}},
+                                  "significantly_worse": {"start": heldout_worse(start, "start"),
+                                                          "control": heldout_worse(control, "control")}}}}
+    verdict = recommendation(_report(record))
+    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "heldout_vs_control"
+    assert "against the control did not run" in verdict["reason"] and "only 4 tested held-out pair" in verdict["reason"]
+    assert "test against the control" in verdict["too_small"]
+
+
 def test_a_minimum_that_can_never_give_evidence_is_flagged_in_the_help_the_log_and_the_report():
     from dv2s_gym.mining.loop_report import render_markdown
     from dv2s_gym.mining.loop_verdict import evidence_floor_note
@@ -316,3 +335,46 @@ def test_a_round_recorded_without_the_family_harm_check_is_not_accepted():
               "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
     old = recommendation(_report(record))
     assert old["verdict"] == "NOT ACCEPTED" and "recorded without the held-out families' harm check" in old["reason"]
+
+
+def _accepted_round():
+    """A round every test accepts: 20 held-out pairs from 4 families, the fine-tuned policy failing none the start
+    or the control passed."""
+    from dv2s_gym.mining.loop import heldout_comparison
+
+    families = {f"F{i}_replay": f"F{i}" for i in range(4)}
+    before = [{"scenario": n, "seed": s, "failed": True, "error": None} for n in families for s in range(5)]
+    after = [{"scenario": n, "seed": s, "failed": False, "error": None} for n in families for s in range(5)]
+    summary = heldout_comparison(before, after, after, min_episodes=20, families=families, min_families=3)
+    return {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
+            "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
+
+
+def test_a_fine_tuned_policy_that_fails_on_the_untouched_set_is_not_accepted():
+    record = _accepted_round()
+    assert recommendation(_report(record))["verdict"] == "ACCEPTED"
+    record["steps"]["untouched"] = {"fine_tuned_vs_start": {"verdict": "FAIL", "reason": "fails more often: +73 pp"}}
+    verdict = recommendation(_report(record))
+    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "untouched"
+    assert "untouched scenario set" in verdict["reason"] and "(fails more often: +73 pp)" in verdict["reason"]
+    assert verdict["policy"] == "dv2s-ppo"
+    record["steps"]["untouched"]["fine_tuned_vs_start"]["verdict"] = "PASS"
+    assert recommendation(_report(record))["verdict"] == "ACCEPTED"
+
+
+def test_an_inconclusive_cross_round_check_is_named_in_the_reason():
+    first, second = _accepted_round(), _accepted_round()
+    second.update(round=2, policy=first["new_policy"], new_policy="ppo:round_2/policy/model.zip")
+    final = {"verdict": "INCONCLUSIVE", "reason": "+6.0 pp, 95% CI -1 to +13 pp", "rounds": [1, 2]}
+    verdict = recommendation(_report(first, second, final_vs_start=final))
+    assert "over rounds 1, 2" in verdict["reason"] and "was INCONCLUSIVE (+6.0 pp, 95% CI -1 to +13 pp)" in verdict["reason"]
+    assert "INCONCLUSIVE" in verdict["sentence"]
+
+
+def test_loop_help_names_the_family_harm_rule_and_the_untouched_set(capsys):
+    from dv2s_gym.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["loop", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "(per-family harm rule)" in text and "untouched scenario set" in text

@@ -678,3 +678,107 @@ def test_the_mining_report_counts_the_failing_parameters_the_judge_could_not_com
     report = build_report_from_records({"policy": "p", "sampler": "uniform"}, [], conversions, {})
     assert report["counts"]["parameters_compared"] == 3 and report["counts"]["parameters_not_compared"] == 3
     assert "3 failing parameter value(s) compared with the new scripts' ranges, 3 not compared" in markdown(report)
+
+
+# --------------------------------------------------------------------------- a name match must match in meaning
+_CUT_PARENT = '''param ego_speed = Range(18, 25)
+param cut_in_gap = Range(5, 11)
+param lane_change_duration = Range(1.8, 3.0)
+
+behavior CutIn(gap, duration):
+    wait
+
+ego = new Car at lane.centerline.pointAlongBy(egoS),
+    with speed globalParameters.ego_speed
+cutter = new Car at lane.centerline.pointAlongBy(egoS + 10),
+    with speed 25,
+    with behavior CutIn(globalParameters.cut_in_gap, globalParameters.lane_change_duration)
+'''
+_CUT_FAILING = {"ego_speed": 20.0, "cut_in_gap": 6.0, "lane_change_duration": 2.0}
+_PASSING = {"reproduction": {"k": 10, "reproduced": 10, "rate": 1.0, "interaction_shown": 10}}
+
+
+def _judged(generated, parent=_CUT_PARENT, failing=_CUT_FAILING):
+    from dv2s_gym.mining.convert import _judge, compare_parameters
+
+    compared = compare_parameters(failing, generated, parent=parent)
+    return compared, [str(r) for r in _judge({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3)]
+
+
+def test_parameters_named_alike_but_swapped_are_not_compared_and_the_judge_rejects():
+    swapped = _CUT_PARENT.replace("Range(5, 11)", "Range(1.5, 8)").replace(
+        "CutIn(globalParameters.cut_in_gap, globalParameters.lane_change_duration)",
+        "CutIn(gap=globalParameters.lane_change_duration, duration=globalParameters.cut_in_gap)")
+    compared, rejections = _judged(swapped)
+    assert list(compared["compared"]) == ["ego_speed"]
+    assert "named alike but not the same meaning" in compared["not_comparable"]["cut_in_gap"]
+    (reason,) = rejections
+    assert reason.startswith("parameters: only 1 of the failure's 3 parameters could be compared") and "fewer than half" in reason
+
+
+def test_parameters_named_alike_that_reach_no_object_are_not_compared():
+    decoy = _CUT_PARENT.replace("with speed globalParameters.ego_speed", "with speed 30").replace(
+        "CutIn(globalParameters.cut_in_gap, globalParameters.lane_change_duration)", "CutIn(40, 6.0)")
+    compared, rejections = _judged(decoy)
+    assert compared["compared"] == {}
+    assert compared["not_comparable"]["cut_in_gap"] == "the new script's cut_in_gap reaches no object of the scene"
+    assert len(rejections) == 1 and "only 0 of the failure's 3 parameters" in rejections[0]
+
+
+def test_a_constant_term_a_factor_or_another_direction_changes_the_meaning():
+    from dv2s_gym.mining.param_meaning import meaning_map
+
+    renamed = _CUT_PARENT.replace("cut_in_gap", "g").replace("lane_change_duration", "dur")
+    offset = renamed.replace("CutIn(globalParameters.g,", "CutIn(globalParameters.g + 10,")
+    compared, _ = _judged(offset)
+    assert compared["compared"]["lane_change_duration"]["script_name"] == "dur"
+    assert "cut_in_gap" in compared["not_comparable"]
+    ahead = ("param lead_gap = Range(5, 11)\nparam ped_offset = Range(2, 4)\nego = new Car on lane.centerline\n"
+             "lead = new Car ahead of ego by globalParameters.lead_gap\n"
+             "ped = new Pedestrian right of lead by globalParameters.ped_offset\n")
+    behind = ("param g = Range(5, 11)\nparam side = Range(2, 4)\nego = new Car on lane.centerline\n"
+              "other = new Car behind ego by globalParameters.g\n"
+              "walker = new Pedestrian left of other by globalParameters.side\n")
+    assert meaning_map(ahead, behind, ["lead_gap", "ped_offset"], ["g", "side"])["pairs"] == {}
+    same = behind.replace("behind ego", "ahead of ego").replace("left of other", "right of other")
+    assert set(meaning_map(ahead, same, ["lead_gap", "ped_offset"], ["g", "side"])["pairs"]) == {"lead_gap",
+                                                                                               "ped_offset"}
+
+
+def test_a_counterpart_with_a_distribution_the_judge_cannot_read_is_not_comparable_with_that_reason():
+    opaque = (_CUT_PARENT.replace("cut_in_gap = Range(5, 11)", "g = Normal(30, 1)")
+              .replace("lane_change_duration = Range(1.8, 3.0)", "dur = Range(8, 9) * 1")
+              .replace("globalParameters.cut_in_gap", "globalParameters.g")
+              .replace("globalParameters.lane_change_duration", "globalParameters.dur"))
+    compared, rejections = _judged(opaque)
+    assert "cannot read as an interval (Normal(30, 1))" in compared["not_comparable"]["cut_in_gap"]
+    assert "cannot read as an interval (Range(8, 9) * 1)" in compared["not_comparable"]["lane_change_duration"]
+    assert len(rejections) == 1 and "fewer than half" in rejections[0]
+
+
+def test_one_actor_of_the_new_script_cannot_stand_for_two_of_the_parent():
+    parent = ("param lead_speed = Range(2, 6)\nparam oncoming_gap = Range(30, 60)\nego = new Car on lane.centerline\n"
+              "lead = new Car ahead of ego by 20, with speed globalParameters.lead_speed\n"
+              "oncoming = new Car ahead of ego by globalParameters.oncoming_gap, with speed 12\n")
+    generated = ("param v = Range(2, 15)\nparam oncoming_gap = Range(30, 60)\nego = new Car on lane.centerline\n"
+                 "car_a = new Car ahead of ego by 20, with speed 20\n"
+                 "car_b = new Car ahead of ego by globalParameters.oncoming_gap, with speed globalParameters.v\n")
+    compared, rejections = _judged(generated, parent, {"lead_speed": 3.0, "oncoming_gap": 40.0})
+    assert compared["compared"] == {}
+    assert "car_b would stand for the parent's lead and oncoming" in compared["not_comparable"]["lead_speed"]
+    assert len(rejections) == 1 and "only 0 of the failure's 2 parameters" in rejections[0]
+
+
+def test_the_failures_actors_must_be_the_scene_in_a_majority_of_the_runs():
+    """Four of ten runs with the failure's one car, three with a pedestrian too, three with two cars: the most
+    common set is the failure's, but not in most runs."""
+    from dv2s_gym.mining.convert import _judge, compare_actors
+
+    split = compare_actors({"car": 1}, [{"car": 1}] * 4 + [{"car": 1, "pedestrian": 1}] * 3 + [{"car": 2}] * 3, "car")
+    assert split["script"] == {"car": 1} and split["runs_matching"] == 4 and not split["same"]
+    (reason,) = [str(r) for r in _judge({**_PASSING, "actors": split}, {}, {"type": "collision"}, 0.3)]
+    assert reason.startswith("actors:") and "in only 4 of 10 runs (a majority needed)" in reason
+    tie = compare_actors({"car": 1}, [{"car": 1}] * 5 + [{"car": 1, "pedestrian": 1}] * 5, "car")
+    assert not tie["same"]
+    most = compare_actors({"car": 1}, [{"car": 1}] * 6 + [{"car": 2}] * 4, "car")
+    assert most["same"] and not _judge({**_PASSING, "actors": most}, {}, {"type": "collision"}, 0.3)

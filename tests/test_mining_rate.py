@@ -23,7 +23,9 @@ def test_an_unfair_proposal_is_reweighted_to_the_true_rate():
     assert estimate["low"] <= 0.1 <= estimate["high"]
     assert estimate["value"] == pytest.approx(0.1, abs=0.01)
     assert estimate["high"] - estimate["low"] < 0.03
-    assert estimate["ess"] > n  # drawing the failure region more often is worth more than n uniform draws
+    # drawing the failure region more often could be worth more than n uniform draws, but the interval never
+    # claims more than Kish's effective sample size of the weights (a rare small-weight failure would fake it)
+    assert estimate["ess"] <= n
     assert estimate["failures"] == int(outcomes.sum()) and estimate["n"] == n
 
 
@@ -179,3 +181,30 @@ def test_an_estimate_pushed_past_one_by_heavy_weights_keeps_a_wide_interval():
     assert estimate["raw"] > 1.0 and estimate["value"] == 1.0 and estimate["high"] == 1.0
     assert estimate["low"] < 0.75
     assert estimate["ess"] < 20  # Kish's: a few heavy weights are worth a few draws
+
+
+def test_the_effective_sample_size_never_exceeds_kish_s_or_the_episode_count():
+    """One failure with a small weight among 99 clean draws: p (1 - p) / variance would claim about 10,000
+    effective episodes and an interval up to 0.06 %; capped at Kish's, the interval is about as wide as 99 clean
+    draws'."""
+    one = weighted_rate([1.0] + [0.0] * 99, [0.01] + [1.0] * 99)
+    kish = (0.01 + 99) ** 2 / (0.01 ** 2 + 99)
+    assert one["ess"] == pytest.approx(kish) and one["ess"] <= one["n"]
+    assert one["high"] > 0.03
+
+
+def test_the_interval_covers_the_truth_when_the_proposal_piles_onto_one_small_failing_region():
+    """A proposal drawing a fifth of its scenes in a tiny failing region while another, larger one fails too: the
+    nominal 95 % interval covers the true rate in at least 93 % of 600 runs (it covered about 78 % before its
+    effective sample size was capped)."""
+    a, b, mix, n = 1e-4, 0.02, 0.2, 100
+    rng = np.random.default_rng(12345)
+    covered, runs = 0, 600
+    for _ in range(runs):
+        x = np.where(rng.random(n) < mix, rng.random(n) * a, rng.random(n))
+        density = (1 - mix) + mix * (x < a) / a
+        y = ((x < a) | ((x >= 0.5) & (x < 0.5 + b))).astype(float)
+        est = weighted_rate(list(y), list(1.0 / density))
+        covered += est["low"] <= a + b <= est["high"]
+        assert est["ess"] <= n + 1e-9
+    assert covered / runs >= 0.93

@@ -14,13 +14,17 @@ __all__ = ["add_parser", "run", "loop_settings"]
 
 EPILOG = """\
 exit status (the verdict on the last round's fine-tuned policy; the summary names the policy to use):
-  0  ACCEPTED: its regression test on the rest of the bank PASSed and on the held-out families it is
-     significantly worse neither than the starting policy nor than the control: use it
+  0  ACCEPTED: its regression test on the rest of the bank PASSed, on the held-out families it is
+     significantly worse neither than the starting policy nor than the control, no held-out family is
+     worse for it by more than the margin (per-family harm rule), and on the untouched scenario set it
+     did not FAIL against the starting policy: use it
   1  REJECTED: it regressed on the rest of the bank, it is significantly worse than the starting policy or
      the control on the held-out families, or over several rounds it regressed against the starting
      policy: keep the last accepted policy, else the starting one
   3  NOT ACCEPTED: the regression test was INCONCLUSIVE or in ERROR, the held-out tests could not run (too
-     few held-out episodes or families), or no round fine-tuned a policy
+     few held-out episodes or families, against the start or the control), a held-out family is worse for
+     it by more than the margin (per-family harm rule), it FAILed against the starting policy on the
+     untouched scenario set, or no round fine-tuned a policy
   2  bad input; 130 interrupted
 
 examples:

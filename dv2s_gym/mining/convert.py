@@ -305,7 +305,8 @@ def compare_actors(source: Mapping[str, int], scripts: List[Mapping[str, int]],
     """The failure's actors (``source``, :func:`actor_census` of its trace) against the new scenario's (the census
     of each reproduction episode; the most frequent one is the script's): ``{"failure", "script", "missing",
     "extra", "adversary", "same"}``; ``missing`` and ``extra`` count per kind what the script lacks or adds,
-    ``same`` is whether the two agree kind for kind."""
+    ``same`` is whether the two agree kind for kind and the failure's actors are the scene in a majority of the runs
+    (``runs_matching`` of ``runs``)."""
     script: Dict[str, int] = {}
     if scripts:
         keys = [json.dumps(dict(sorted(c.items()))) for c in scripts]
@@ -313,8 +314,11 @@ def compare_actors(source: Mapping[str, int], scripts: List[Mapping[str, int]],
     kinds = sorted(set(source) | set(script))
     missing = {k: source.get(k, 0) - script.get(k, 0) for k in kinds if source.get(k, 0) > script.get(k, 0)}
     extra = {k: script.get(k, 0) - source.get(k, 0) for k in kinds if script.get(k, 0) > source.get(k, 0)}
+    # the failure's actors must be the scene in most reproduction runs, not only in the most common of several sets
+    matching = sum(1 for c in scripts if {k: n for k, n in c.items() if n} == {k: n for k, n in source.items() if n})
+    majority = not scripts or 2 * matching > len(scripts)
     return {"failure": dict(source), "script": script, "missing": missing, "extra": extra, "adversary": adversary,
-            "same": not missing and not extra}
+            "runs": len(scripts), "runs_matching": matching, "same": not missing and not extra and majority}
 
 
 def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional[str] = None) -> Dict[str, Any]:
@@ -346,19 +350,8 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
         if script_name != name:
             compared[name]["script_name"] = script_name
     why = {name: "the new script defines no numeric parameter of that name" for name in absent}
-    if parent is not None and absent:
-        from dv2s_gym.mining.param_meaning import meaning_map
-
-        named = {compared[name].get("script_name", name) for name in compared}
-        mapped = meaning_map(parent, script, absent, [n for n in sorted(ranges) if n not in named])
-        for name, pair in mapped["pairs"].items():
-            compared[name] = {"value": float(numeric[name]), "range": [float(v) for v in ranges[pair["target"]]],
-                              "script_name": pair["target"], "by": "meaning",
-                              "basis": _basis_text(pair)}
-        why = {name: f"no parameter of the new script means the same ({reason})"
-               for name, reason in mapped["unpaired"].items()}
-        why.update({name: "the new script defines no numeric parameter of that name" for name in absent
-                    if name not in mapped["pairs"] and name not in mapped["unpaired"]})
+    if parent is not None:
+        why = _by_meaning(parent, script, numeric, compared, absent, ranges)
     for name in sorted(compared):
         low, high = compared[name]["range"]
         if not low - 1e-9 <= compared[name]["value"] <= high + 1e-9:
@@ -366,6 +359,67 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     not_comparable = {name: why[name] for name in sorted(why) if name not in compared}
     return {"compared": dict(sorted(compared.items())), "outside": outside, "not_comparable": not_comparable,
             "not_in_script": list(not_comparable)}
+
+
+def _by_meaning(parent: str, script: str, numeric: Mapping[str, float], compared: Dict[str, Any],
+                absent: List[str], ranges: Mapping[str, Any]) -> Dict[str, str]:
+    """:func:`compare_parameters` given the parent script: a name match that does not mean the same (another actor,
+    quantity, direction or constant term, or reaching no object) is not comparable; the rest are paired by meaning
+    (their counterpart must be read as an interval); no object of the new script may stand for two parent actors.
+    Updates ``compared``; returns ``{failing parameter: why it is not comparable}``."""
+    from dv2s_gym.mining.param_meaning import meaning_map, name_mismatch, script_parameters
+
+    declared = script_parameters(script)
+    why: Dict[str, str] = {}
+    for name in list(compared):
+        mismatch = name_mismatch(parent, script, name, compared[name].get("script_name", name))
+        if mismatch:
+            why[name] = mismatch
+            del compared[name]
+    folded = {n.casefold(): n for n in declared}
+    for name in list(absent):
+        other = name if name in declared else folded.get(str(name).casefold())
+        if other is not None:
+            why[name] = (f"its counterpart {other} in the new script has a distribution the judge cannot read as an "
+                         f"interval ({declared[other]})")
+            absent.remove(name)
+    named = {compared[name].get("script_name", name) for name in compared} | {
+        folded.get(str(n).casefold(), n) for n in why}
+    mapped = meaning_map(parent, script, absent, [n for n in sorted(declared) if n not in named])
+    for name, pair in mapped["pairs"].items():
+        if pair["target"] not in ranges:
+            why[name] = (f"its counterpart {pair['target']} in the new script ({_basis_text(pair)}) has a "
+                         f"distribution the judge cannot read as an interval ({declared[pair['target']]})")
+            continue
+        compared[name] = {"value": float(numeric[name]), "range": [float(v) for v in ranges[pair["target"]]],
+                          "script_name": pair["target"], "by": "meaning", "basis": _basis_text(pair)}
+    why.update({name: f"no parameter of the new script means the same ({reason})"
+                for name, reason in mapped["unpaired"].items()})
+    why.update({name: "the new script defines no numeric parameter of that name" for name in absent
+                if name not in mapped["pairs"] and name not in mapped["unpaired"]})
+    why.update(_tied_twice(parent, script, compared))
+    return why
+
+
+def _tied_twice(parent: str, script: str, compared: Dict[str, Any]) -> Dict[str, str]:
+    """The compared parameters whose object in the new script is tied (by another compared parameter) to another
+    actor of the parent too: one actor cannot stand for two; they leave ``compared``, each with why."""
+    from dv2s_gym.mining.param_meaning import tied_objects
+
+    ties: Dict[str, Dict[str, List[str]]] = {}
+    for name, comparison in compared.items():
+        for old, new in tied_objects(parent, script, name, comparison.get("script_name", name)):
+            ties.setdefault(new, {}).setdefault(old, []).append(name)
+    why: Dict[str, str] = {}
+    for new, olds in ties.items():
+        if len(olds) > 1:
+            for names in olds.values():
+                for name in names:
+                    why[name] = (f"the new script's {new} would stand for the parent's {' and '.join(sorted(olds))}: "
+                                 "one actor cannot be two")
+    for name in why:
+        compared.pop(name, None)
+    return why
 
 
 def _parent_script(record: Mapping[str, Any], bank_dir: Optional[PathLike]) -> Optional[str]:
@@ -452,9 +506,15 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
         problems += [f"{n} {kind} fewer" for kind, n in actors.get("missing", {}).items()
                      if not (kind == adversary and not actors["script"].get(adversary))]
         problems += [f"{n} {kind} more" for kind, n in actors.get("extra", {}).items()]
+        if not problems and actors.get("runs") and 2 * actors.get("runs_matching", 0) <= actors["runs"]:
+            problems.append(f"the failure's actors, kind for kind, in only {actors['runs_matching']} of "
+                            f"{actors['runs']} runs (a majority needed)")
         found.append(_Rejected("actors", f"the failure's scene has {_census_text(actors['failure'])}, the new "
                                          f"scenario's {_census_text(actors['script'])}: {', '.join(problems)}"))
     parameters = out.get("parameters")
+    few = _too_few_compared(parameters)
+    if few:
+        found.append(_Rejected("parameters", few))
     if parameters and parameters.get("outside"):
         unchecked = list(parameters.get("not_comparable") or {})
         found.append(_Rejected("parameters", "the new scenario's ranges do not contain the failing values: " + ", ".join(
@@ -462,6 +522,24 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
             + (f" (not compared, no parameter of the new script means the same: {', '.join(unchecked)})"
                if unchecked else "")))
     return found
+
+
+COMPARED_SHARE = 0.5
+"""The judge rejects a new scenario when it could compare fewer than this share of the failure's parameters with
+the new script's ranges: with most of them unchecked, a script could drop or change what made the scene fail and
+still pass (docs/mining.md)."""
+
+
+def _too_few_compared(parameters: Optional[Mapping[str, Any]]) -> Optional[str]:
+    """The rejection for a comparison of fewer than :data:`COMPARED_SHARE` of the failing parameters, or ``None``."""
+    if not parameters:
+        return None
+    compared, unchecked = parameters.get("compared") or {}, parameters.get("not_comparable") or {}
+    total = len(compared) + len(unchecked)
+    if not total or len(compared) >= COMPARED_SHARE * total:
+        return None
+    return (f"only {len(compared)} of the failure's {total} parameters could be compared with the new script, fewer "
+            f"than half: " + "; ".join(f"{name}: {reason}" for name, reason in sorted(unchecked.items())))
 
 
 def _family(parent: str, failure_type: str):

@@ -817,16 +817,20 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, a
                    label: str) -> Dict[str, Any]:
     """Fine-tune ``current`` into ``out`` on the working bank less ``excluded``: the mined scenarios upweighted
     (``with_mined``) or left out (the control arm); everything else identical between the two arms."""
+    from dv2s_gym.mining.family import scenario_family
     from scenario_bank.bank import Bank
 
-    # a held-out family's every member stays out too: exact replays of its failures and entries of earlier rounds
-    entries = [e for e in Bank(arm.bank) if e.name not in excluded and e.provenance.parent not in excluded]
+    # a held-out family's every member stays out too: exact replays of its failures and entries of earlier rounds,
+    # at any depth (a member's family is the root of its provenance chain, not its immediate parent)
+    roots = {e.name: scenario_family(e.name, arm.bank) for e in Bank(arm.bank)}
+    entries = [e for e in Bank(arm.bank) if e.name not in excluded and e.provenance.parent not in excluded
+               and roots[e.name] not in excluded]
     mined = sorted(e.name for e in entries if e.provenance.mined)
     names = sorted(e.name for e in entries if with_mined or e.name not in mined)
     weights = fine_tune_weights(names, mined if with_mined else [], mined_share)
     common = {"scenarios": len(names), "mined_upweighted": len(mined) if with_mined else 0, "steps": arm.steps,
               "mined_left_out": 0 if with_mined else len(mined),
-              "families": sorted({e.provenance.parent or e.name for e in entries if e.name in names})}
+              "families": sorted({roots[e.name] for e in entries if e.name in names})}
     if arm.method == "dagger":
         result = _dagger_arm(current, out, weights, arm, label)
         return {"model": result.pop("model"), "method": "dagger", **common, **result}
@@ -905,6 +909,12 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
         summary.update(relative_drop=None, relative_drop_interval=[None, None], mcnemar_p=None)
         if "vs_control" in summary:
             summary["vs_control"].update(relative_drop=None, mcnemar_p=None)
+    # the test against the control needs the same evidence on its own pairs: a control that errored on most
+    # episodes leaves few tested pairs against it, and a test on those says nothing
+    control_shortfall = None if control is None else _control_shortfall(summary["vs_control"]["pairs"], tested,
+                                                                        min_episodes, min_families)
+    if control_shortfall:
+        summary["vs_control"].update(underpowered=control_shortfall, relative_drop=None, mcnemar_p=None)
     # is the fine-tuned policy significantly worse than the start / the control on the held-out families
     # (loop_verdict.heldout_worse: the dv2s regress gate over the families); not tested below the minimums
     from dv2s_gym.mining.loop_verdict import heldout_worse
@@ -913,9 +923,16 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     summary["margin"] = margin
     summary["significantly_worse"] = {
         "start": None if shortfall else heldout_worse(_family_tables(before, after, families), "start", margin),
-        "control": None if shortfall or control is None else heldout_worse(
+        "control": None if shortfall or control_shortfall or control is None else heldout_worse(
             _family_tables(control, after, families), "control", margin)}
     return summary
+
+
+def _control_shortfall(pairs: int, families: set, min_episodes: int, min_families: int) -> Optional[str]:
+    """Why the held-out test against the control does not run (too few tested pairs against the control, or too
+    few families with one: :func:`underpowered`'s minimums and evidence floor), or ``None``."""
+    shortfall = underpowered(pairs, min_episodes, len(families), min_families, tested=True)
+    return None if shortfall is None else "against the control: " + shortfall
 
 
 def _family_tables(baseline: Sequence[Mapping[str, Any]], candidate: Sequence[Mapping[str, Any]],

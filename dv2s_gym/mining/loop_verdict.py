@@ -18,7 +18,9 @@ non-inferiority, so it blocks ACCEPTED even when the significance gate calls it 
 fails to show non-inferiority with an estimate within the margin (too few pairs to tell) does not block. Without a control arm only the test against the start is required. Each round is
 tested against the policy it started from, so with two or more tested rounds a fine-tuned policy that FAILs
 against the starting one (``final_vs_start``) is rejected too, and is not accepted when that comparison
-cannot run. The verdict's reason names the test that decided
+cannot run; when that comparison is INCONCLUSIVE the reason says so. A fine-tuned policy that FAILs against the
+starting policy on the untouched scenario set (never mined, never fine-tuned on) is not accepted either. The verdict's
+reason names the test that decided
 it. The recommended policy (the policy to use) is the last accepted one, else the starting policy; every
 round's policy meets the cross-round check over the rounds up to it, and one that check rejected sends the
 recommendation back to the starting policy, so it is never the policy to use.
@@ -95,6 +97,8 @@ def too_small(record: Mapping[str, Any]) -> Optional[str]:
         reasons.append("too few held-out episodes or families for a drop or a test")
     elif _below_floor(after):
         reasons.append(_below_floor(after))
+    elif _control_below_floor(after):
+        reasons.append("too few held-out episodes or families for the test against the control")
     if (steps.get("regress") or {}).get("verdict") == "INCONCLUSIVE":
         reasons.append(f"the regression test on {(steps.get('regress') or {}).get('episodes')} paired episodes "
                        "could not tell")
@@ -230,11 +234,33 @@ def _heldout_tests(after: Mapping[str, Any]) -> Dict[str, Optional[Dict[str, Any
     recorded before they were, the same test on its pooled tables (one family); ``None`` where none ran."""
     if "significantly_worse" in after:
         recorded = after.get("significantly_worse") or {}
-        return {"start": recorded.get("start"), "control": recorded.get("control")}
-    margin = after.get("margin")
-    return {"start": _pooled_test(after, "after_only", "before_only", "start", margin),
-            "control": _pooled_test(after.get("vs_control") or {}, "fine_tuned_only", "control_only", "control",
-                                    margin)}
+        tests = {"start": recorded.get("start"), "control": recorded.get("control")}
+    else:
+        margin = after.get("margin")
+        tests = {"start": _pooled_test(after, "after_only", "before_only", "start", margin),
+                 "control": _pooled_test(after.get("vs_control") or {}, "fine_tuned_only", "control_only", "control",
+                                         margin)}
+    if _control_below_floor(after):  # a test on fewer pairs than the floor (a round recorded before it) counts not
+        tests["control"] = None
+    return tests
+
+
+def _control_below_floor(after: Mapping[str, Any]) -> Optional[str]:
+    """Why the held-out test against the control does not count: recorded as not run (``vs_control``'s
+    ``underpowered``), or on fewer than :data:`EVIDENCE_FLOOR` tested pairs against the control; ``None`` when it
+    counts or there is no control."""
+    versus = after.get("vs_control") or {}
+    if not versus:
+        return None
+    if versus.get("underpowered"):
+        return str(versus["underpowered"])
+    pairs = versus.get("pairs")
+    if pairs is None and versus.get("table"):
+        pairs = sum(int(v or 0) for v in versus["table"].values())
+    if pairs is not None and pairs < EVIDENCE_FLOOR:
+        return (f"against the control: only {pairs} tested held-out pair(s), fewer than {EVIDENCE_FLOOR}: no "
+                f"held-out test can reach p < {HELDOUT_ALPHA:g} below {EVIDENCE_FLOOR} discordant pairs")
+    return None
 
 
 def _pooled_test(comparison: Mapping[str, Any], fine_tuned_key: str, other_key: str,
@@ -285,7 +311,8 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
     missing = [key for key in ("start", "control") if tests.get(key) is None
                and (key == "start" or after.get("control") or "vs_control" in after)]
     if missing:
-        why = after.get("underpowered") or ("no held-out pair ran" if not after.get("pairs") else "not recorded")
+        why = (after.get("underpowered") or (_control_below_floor(after) if missing == ["control"] else None)
+               or ("no held-out pair ran" if not after.get("pairs") else "not recorded"))
         return {"verdict": NOT_ACCEPTED, "decided_by": f"heldout_vs_{missing[0]}",
                 "reason": f"{regression} PASSed, but the held-out test against "
                           f"{' and '.join('the starting policy' if k == 'start' else 'the control' for k in missing)}"
@@ -305,6 +332,10 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
                     "reason": f"{regression} PASSed and the fine-tuned policy is not significantly worse than "
                               f"{label} on the held-out families, but a harm there is not ruled out: "
                               f"{_harm_text(harm, label)} ({FAMILY_RULE})"}
+    untouched = _untouched_fail(steps)
+    if untouched:
+        return {"verdict": NOT_ACCEPTED, "decided_by": "untouched",
+                "reason": f"{regression} PASSed and the held-out tests found no harm, but {untouched}"}
     parts = [f"not significantly worse than {'the starting policy' if key == 'start' else 'the control'} "
              f"(p = {tests[key]['p_value']:.3g} on {tests[key].get('pairs')} held-out pairs from "
              f"{tests[key].get('families')} famil{'y' if tests[key].get('families') == 1 else 'ies'})"
@@ -317,6 +348,16 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
     return {"verdict": ACCEPTED, "decided_by": "all",
             "reason": f"no regression on the rest of the bank ({regression} PASSed: {regress.get('reason')}); on "
                       f"the held-out families {' and '.join(parts)} ({HELDOUT_TEST}){control_note}"}
+
+
+def _untouched_fail(steps: Mapping[str, Any]) -> Optional[str]:
+    """Why the untouched scenario set blocks ACCEPTED (the fine-tuned policy FAILed against the start there:
+    significantly worse), or ``None``."""
+    versus = (steps.get("untouched") or {}).get("fine_tuned_vs_start") or {}
+    if versus.get("verdict") != "FAIL":
+        return None
+    return (f"on the untouched scenario set (never mined or fine-tuned on) the fine-tuned policy FAILed against the "
+            f"starting policy ({versus.get('reason')}), so it harms scenes the loop did not touch")
 
 
 def _with_cross_round_check(judged: Dict[str, str], final: Optional[Mapping[str, Any]]) -> Dict[str, str]:
@@ -336,6 +377,11 @@ def _with_cross_round_check(judged: Dict[str, str], final: Optional[Mapping[str,
                 "reason": f"over rounds {rounds} the fine-tuned policy regressed against the starting one on the "
                           f"starting bank: the regression test of the fine-tuned against the starting policy FAILed "
                           f"({final.get('reason')})"}
+    if final.get("verdict") == "INCONCLUSIVE":
+        return {**judged, "reason": f"{judged['reason']}; but over rounds {rounds} the regression test of the "
+                                    f"fine-tuned against the starting policy on the starting bank was INCONCLUSIVE "
+                                    f"({final.get('reason')}): no regression against the starting policy over the "
+                                    "rounds is shown, nor ruled out"}
     return judged
 
 

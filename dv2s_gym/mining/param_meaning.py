@@ -30,7 +30,8 @@ from __future__ import annotations
 import re
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
-__all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS"]
+__all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
+           "script_parameters"]
 
 PLACEMENT_KINDS = ("OrientedPoint", "Point")
 """Classes that place actors but are not actors themselves."""
@@ -126,7 +127,22 @@ def _how(expression: str, name: str) -> str:
             begin, end = opened, close + 1
         if how == "scaled" or (how == "subtracted" and found == "additive"):
             found = how
-    return found
+    return found + _constant_terms(expression)
+
+
+_CONSTANT = re.compile(r"([-+*/])\s*(?<![\w.])(\d+(?:\.\d+)?)(?![\w.])|(?<![\w.])(\d+(?:\.\d+)?)(?![\w.])\s*([-+*/])")
+
+
+def _constant_terms(expression: str) -> str:
+    """The constant terms an expression adds or multiplies (``" +10"``, ``" *2"``), as part of a parameter's meaning:
+    ``gap + 10`` does not set the same quantity as ``gap``; ``""`` without any."""
+    terms = []
+    for match in _CONSTANT.finditer(expression):
+        operator, number = (match.group(1), match.group(2)) if match.group(1) else (match.group(4), match.group(3))
+        if (operator in "+-" and float(number) == 0.0) or (operator in "*/" and float(number) == 1.0):
+            continue  # adding 0 or multiplying by 1 changes nothing
+        terms.append(f"{operator}{float(number):g}")
+    return (" " + " ".join(sorted(terms))) if terms else ""
 
 
 def _behaviors(script: str) -> Dict[str, List[str]]:
@@ -156,7 +172,8 @@ def _slots(specifier: str, behaviors: Mapping[str, List[str]]) -> List[Tuple[str
         prop = match.group(1)
         return [("speed" if prop == "speed" else f"with:{_norm(prop)}", match.group(2))]
     for pattern, slot in ((r"at\b.*pointAlongBy", "longitudinal"), (r"following\b", "longitudinal"),
-                          (r"(ahead of|behind)\b", "longitudinal"), (r"(left of|right of)\b", "lateral"),
+                          (r"ahead of\b", "longitudinal"), (r"behind\b", "longitudinal:behind"),
+                          (r"left of\b", "lateral:left"), (r"right of\b", "lateral:right"),
                           (r"offset\s+(by|along)\b", "offset"), (r"facing\b", "heading")):
         if re.match(pattern, text, re.S):
             return [(slot, text)]
@@ -293,3 +310,48 @@ def meaning_map(source_script: str, target_script: str, source_params: Sequence[
         pairs[params[0]] = {"target": target, "object": name, "source_object": source, "kind": kind, "slot": slot,
                             "how": how}
     return {"pairs": dict(sorted(pairs.items())), "unpaired": dict(sorted(unpaired.items()))}
+
+
+def script_parameters(script: str) -> Dict[str, str]:
+    """``{name: its distribution's text}`` of every ``param NAME = ...`` of ``script`` (also those not read as an
+    interval: a ``Normal(...)``, an arithmetic expression)."""
+    return {name: text.strip() for name, text in re.findall(r"^param\s+(\w+)\s*=\s*(.+)$", script, re.M)}
+
+
+def _meaning_of(uses: Set[Use]) -> Set[Tuple[bool, str, str, str]]:
+    """The meaning of a parameter's uses without the objects' names: (the ego?, kind, slot, how)."""
+    return {(name == "ego", kind, slot, how) for name, kind, slot, how, _ in uses}
+
+
+def name_mismatch(source_script: str, target_script: str, source_name: str, target_name: str) -> Optional[str]:
+    """Why ``target_name`` of ``target_script``, named like ``source_name`` of ``source_script``, does not mean the
+    same, or ``None`` when it does (or when the source parameter feeds no object, so its meaning is unknown): it
+    reaches no object of the scene, or no use of it sets the same kind of object's same quantity, in the same
+    direction and with the same constant terms, as a use of the source parameter does."""
+    source = parameter_uses(source_script).get(source_name) or set()
+    if not source:
+        return None
+    target = parameter_uses(target_script).get(target_name) or set()
+    if not target:
+        return f"the new script's {target_name} reaches no object of the scene"
+    if not _meaning_of(source) & _meaning_of(target):
+        def words(uses: Set[Use]) -> str:
+            return ", ".join(sorted(f"{name} ({kind}) {slot} {how}" for name, kind, slot, how, _ in uses))
+        return f"named alike but not the same meaning: the parent's sets {words(source)}, the new script's {words(target)}"
+    return None
+
+
+def tied_objects(source_script: str, target_script: str, source_name: str, target_name: str) -> Set[Tuple[str, str]]:
+    """``{(source object, target object)}`` (other than the ego) that the two parameters tie together: a meaning
+    (kind, slot, how) set on exactly one object in each script by that parameter."""
+    source = parameter_uses(source_script).get(source_name) or set()
+    target = parameter_uses(target_script).get(target_name) or set()
+    ties = set()
+    for meaning in _meaning_of(source) & _meaning_of(target):
+        if meaning[0]:
+            continue
+        old = {name for name, kind, slot, how, _ in source if (name == "ego", kind, slot, how) == meaning}
+        new = {name for name, kind, slot, how, _ in target if (name == "ego", kind, slot, how) == meaning}
+        if len(old) == 1 and len(new) == 1:
+            ties.add((next(iter(old)), next(iter(new))))
+    return ties

@@ -12,8 +12,9 @@ run, with every mined scenario equally likely, ``(1 / S) / (scenario * params)``
 :func:`weighted_rate` is the plain importance-sampling estimate ``mean(w * y)`` (``y`` = 1 for a failed
 episode): unbiased also when the proposal adapts to earlier outcomes, as long as it gives every region
 some chance. Its 95 % interval is Wilson's at the estimate's effective sample size
-``p (1 - p) / Var(estimate)`` (for equal weights: the number of episodes, and the usual Wilson interval);
-without a failure, at Kish's effective sample size of the weights; when heavy weights push the estimate to 1
+``p (1 - p) / Var(estimate)`` (for equal weights: the number of episodes, and the usual Wilson interval), capped
+at Kish's effective sample size of the weights (never more than the number of episodes: a single failure with a
+small weight would otherwise claim an effective sample far larger than the run); without a failure, at Kish's; when heavy weights push the estimate to 1
 or past it, the normal interval of the estimate cut at 1, with Kish's effective sample size. A per-scenario estimate averages
 ``y / params`` over the scenario's episodes.
 
@@ -68,6 +69,9 @@ def weighted_rate(outcomes: Sequence[float], weights: Sequence[float], confidenc
         return {"value": shown, "raw": value, "low": max(0.0, value - z * math.sqrt(variance)), "high": 1.0,
                 "ess": kish, "n": n, "failures": failures}
     ess = shown * (1.0 - shown) / variance if failures and variance > 0.0 else kish
+    # never more than Kish's effective sample size of the weights (itself at most the n episodes): a rare
+    # failure with a small weight makes the variance tiny and p (1 - p) / variance far larger than n
+    ess = min(ess, kish, float(n))
     low, high = _wilson(shown, ess, confidence)
     return {"value": shown, "raw": value, "low": low, "high": high, "ess": ess, "n": n, "failures": failures}
 
