@@ -479,14 +479,20 @@ def _floor_lines(settings: Mapping[str, Any]) -> List[str]:
     return [f"**WARNING: {note}.**", ""] if note else []
 
 
-def render_markdown(report: Mapping[str, Any]) -> str:
-    """The Markdown rendering of a loop report."""
+def _heading_lines(report: Mapping[str, Any]) -> List[str]:
+    """The report's title, where the loop started and ended, and its recommendation."""
     settings = report.get("settings", {})
-    lines: List[str] = [
+    return [
         "# dv2s loop", "",
         f"Started from `{settings.get('policy')}`; last fine-tuned policy `{report.get('policy')}`.", "",
         f"**{_recommendation(report)['sentence']}**", "",
         f"Policy to use: `{_recommendation(report)['policy']}`.", "",
+    ]
+
+
+def _settings_lines(settings: Mapping[str, Any]) -> List[str]:
+    """The loop's settings in one paragraph (what each round does), and the loud line on too low minimums."""
+    return [
         f"Per round: mining budget {settings.get('budget')} episodes ({settings.get('sampler')} sampler), at most "
         f"{'every' if settings.get('max_conversions') is None else settings.get('max_conversions')} cluster(s) converted, "
         f"{_replays_text(settings)}, "
@@ -501,6 +507,12 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         f"overriding the policy's own in training only), regression test on the starting bank with "
         f"{settings.get('regress_episodes')} seeds per scenario (margin {settings.get('margin')}).", "",
         *_floor_lines(settings),
+    ]
+
+
+def _rounds_table_lines(report: Mapping[str, Any]) -> List[str]:
+    """The table of the rounds, one line each, and the final policy against the starting one under it."""
+    lines = [
         "| round | failures mined (against the policy) / episodes | clusters | kept | fine-tune / held-out scenarios "
         "| held-out failure rate start | control | fine-tuned | relative drop | McNemar p vs start | vs control "
         "| untouched failure rate start / control / fine-tuned | rest of the bank |",
@@ -515,89 +527,126 @@ def render_markdown(report: Mapping[str, Any]) -> str:
     final_line = _final_line(report.get("final_vs_start"))
     if final_line:
         lines += ["", final_line]
+    return lines
+
+
+def _mining_lines(mine: Mapping[str, Any], settings: Mapping[str, Any]) -> List[str]:
+    """A round's mining step: what was found, converted and kept, and every reason a conversion was rejected."""
+    if not mine:
+        return []
+    lines = [f"- mining ({mine.get('folder')}): {mine.get('episodes')} episodes, {mine.get('failures')} "
+             f"failures ({mine.get('failures_against_policy')} avoidable by the reference driver), "
+             f"{mine.get('clusters')} clusters, conversions {mine.get('conversions')}, "
+             f"exact replays of other clusters {mine.get('replays') or {}}, "
+             f"{sum(1 for e in mine.get('kept') or [] if e.get('replay'))} exact replay entries kept "
+             f"in all, {mine.get('errors')} episode errors"
+             + (f"; **{mine['clusters_not_converted']} clusters not converted** (at most "
+                f"{settings.get('max_conversions')} per round)" if mine.get("clusters_not_converted")
+                else "")
+             + (f"; **{mine['clusters_not_kept']} clusters skipped**, neither converted nor replayed "
+                f"(at most {settings.get('max_replays')} exact replays per round)"
+                if mine.get("clusters_not_kept") else "")]
+    reasons = mine.get("rejected_reasons") or []
+    for reason in reasons:  # every failed check of the conversion judge, each its own reason
+        lines.append(f"  - rejected: {reason}")
+    if (mine.get("rejected_reason_count") or 0) > len(reasons):
+        lines.append(f"  - and {mine['rejected_reason_count'] - len(reasons)} more rejection reasons "
+                     f"(conversions.jsonl in {mine.get('folder')})")
+    return lines
+
+
+def _split_lines(split: Mapping[str, Any]) -> List[str]:
+    """A round's split of the mined scenarios into fine-tuning and held-out ones (by family or by cluster)."""
+    if not split:
+        return []
+    if split.get("by") == "family":
+        return [f"- split by family ({split.get('groups')} family groups): fine-tune families "
+                f"{', '.join(split.get('fine_tune_families', [])) or 'none'} "
+                f"({', '.join(split.get('fine_tune', [])) or 'no scenario'}); held-out families "
+                f"{', '.join(split.get('held_out_families', [])) or 'none'} "
+                f"({', '.join(split.get('held_out', [])) or 'no scenario'}; their parents are not "
+                "fine-tuned on either)"]
+    return [f"- split by cluster ({split.get('groups')} groups): fine-tune "
+            f"{', '.join(split.get('fine_tune', [])) or 'none'}; held out "
+            f"{', '.join(split.get('held_out', [])) or 'none'}"]
+
+
+def _fine_tuning_lines(steps: Mapping[str, Any]) -> List[str]:
+    """A round's fine-tuning (by PPO or DAgger) and its control arm, one line each."""
+    lines = []
+    for key in ("fine_tune", "control"):
+        tuned = steps.get(key) or {}
+        if not tuned:
+            continue
+        if key == "control":
+            lines.append(f"- control arm: the same fine-tuning ({tuned.get('method')}, {tuned.get('steps')} "
+                         f"steps, same seed) on {tuned.get('scenarios')} scenarios, the "
+                         f"{tuned.get('mined_left_out')} mined scenario(s) left out: `{tuned.get('model')}`")
+            continue
+        if tuned.get("method") == "dagger":
+            agreement = tuned.get("agreement") or {}
+            lines.append(f"- fine-tuned by DAgger ({tuned.get('steps')} labelled steps, imitating "
+                         f"`{tuned.get('reference')}` on the policy's own states) on {tuned.get('scenarios')} "
+                         f"scenarios ({tuned.get('mined_upweighted')} mined, upweighted); agreement with the "
+                         f"reference on the {agreement.get('states')} labelled states "
+                         f"{agreement.get('source')} -> {agreement.get('fine_tuned')}"
+                         + "".join(f", resumed from iteration {r.get('from_iteration')}"
+                                   + (f" (+{r['steps_into_next']} steps)" if r.get("steps_into_next") else "")
+                                   for r in tuned.get("resumed") or [])
+                         + f": `{tuned.get('model')}`")
+        else:
+            lines.append(f"- fine-tuned by PPO {tuned.get('steps')} steps on {tuned.get('scenarios')} scenarios "
+                         f"({tuned.get('mined_upweighted')} mined, upweighted), training reward weights "
+                         f"{_weights((tuned.get('env_config') or {}).get('reward_weights'))}: "
+                         f"`{tuned.get('model')}`")
+    return lines
+
+
+def _regression_lines(regress: Mapping[str, Any]) -> List[str]:
+    """A round's regression test on the starting bank, and the held-out families' parents in it."""
+    if not regress:
+        return []
+    lines = [f"- regression test on the starting bank ({regress.get('episodes')} paired episodes): "
+             f"**{regress.get('verdict')}** - {regress.get('reason')}; failure rate new "
+             f"{_summary_rate(regress.get('new_failure_rate'))}, old "
+             f"{_summary_rate(regress.get('old_failure_rate'))}; report `{regress.get('report')}`"]
+    for name, row in (regress.get("held_out_parents") or {}).items():
+        lines.append(f"- held-out family's parent `{name}` (never fine-tuned on) in the regression test: "
+                     f"failure rate new {_summary_rate(row['new'].get('failure_rate'))}, old "
+                     f"{_summary_rate(row['old'].get('failure_rate'))}; stall rate new "
+                     f"{_summary_rate(row['new'].get('stall_rate'))}, old "
+                     f"{_summary_rate(row['old'].get('stall_rate'))}")
+    return lines
+
+
+def _round_lines(record: Mapping[str, Any], settings: Mapping[str, Any]) -> List[str]:
+    """A round's section: its policies and timings, then each step it ran, then where the next round starts."""
+    steps = record.get("steps", {})
+    lines = ["", f"## Round {record.get('round')}", "",
+             f"- policy: `{record.get('policy')}` -> fine-tuned policy `{record.get('new_policy', '-')}`",
+             f"- timings: {_seconds(record.get('timings', {}))}"]
+    lines += _errored_lines(record)
+    if steps.get("skipped"):
+        lines.append(f"- skipped: {steps['skipped']}")
+    lines += _mining_lines(steps.get("mine") or {}, settings)
+    lines += _split_lines(steps.get("split") or {})
+    lines += _fine_tuning_lines(steps)
+    lines += _heldout_lines(steps.get("after") or {})
+    lines += _untouched_lines(steps.get("untouched") or {})
+    lines += _regression_lines(steps.get("regress") or {})
+    if record.get("next_policy"):
+        lines.append(f"- the next round starts from `{record['next_policy']}` "
+                     f"({record.get('next_policy_reason')})")
+    return lines
+
+
+def render_markdown(report: Mapping[str, Any]) -> str:
+    """The Markdown rendering of a loop report: heading and recommendation, settings, the rounds' table, and a
+    section per round."""
+    settings = report.get("settings", {})
+    lines: List[str] = _heading_lines(report) + _settings_lines(settings) + _rounds_table_lines(report)
     for record in report.get("rounds", []):
-        steps = record.get("steps", {})
-        lines += ["", f"## Round {record.get('round')}", "",
-                  f"- policy: `{record.get('policy')}` -> fine-tuned policy `{record.get('new_policy', '-')}`",
-                  f"- timings: {_seconds(record.get('timings', {}))}"]
-        lines += _errored_lines(record)
-        if steps.get("skipped"):
-            lines.append(f"- skipped: {steps['skipped']}")
-        mine = steps.get("mine") or {}
-        if mine:
-            lines.append(f"- mining ({mine.get('folder')}): {mine.get('episodes')} episodes, {mine.get('failures')} "
-                         f"failures ({mine.get('failures_against_policy')} avoidable by the reference driver), "
-                         f"{mine.get('clusters')} clusters, conversions {mine.get('conversions')}, "
-                         f"exact replays of other clusters {mine.get('replays') or {}}, "
-                         f"{sum(1 for e in mine.get('kept') or [] if e.get('replay'))} exact replay entries kept "
-                         f"in all, {mine.get('errors')} episode errors"
-                         + (f"; **{mine['clusters_not_converted']} clusters not converted** (at most "
-                            f"{settings.get('max_conversions')} per round)" if mine.get("clusters_not_converted")
-                            else "")
-                         + (f"; **{mine['clusters_not_kept']} clusters skipped**, neither converted nor replayed "
-                            f"(at most {settings.get('max_replays')} exact replays per round)"
-                            if mine.get("clusters_not_kept") else ""))
-            reasons = mine.get("rejected_reasons") or []
-            for reason in reasons:  # every failed check of the conversion judge, each its own reason
-                lines.append(f"  - rejected: {reason}")
-            if (mine.get("rejected_reason_count") or 0) > len(reasons):
-                lines.append(f"  - and {mine['rejected_reason_count'] - len(reasons)} more rejection reasons "
-                             f"(conversions.jsonl in {mine.get('folder')})")
-        split = steps.get("split") or {}
-        if split:
-            if split.get("by") == "family":
-                lines.append(f"- split by family ({split.get('groups')} family groups): fine-tune families "
-                             f"{', '.join(split.get('fine_tune_families', [])) or 'none'} "
-                             f"({', '.join(split.get('fine_tune', [])) or 'no scenario'}); held-out families "
-                             f"{', '.join(split.get('held_out_families', [])) or 'none'} "
-                             f"({', '.join(split.get('held_out', [])) or 'no scenario'}; their parents are not "
-                             "fine-tuned on either)")
-            else:
-                lines.append(f"- split by cluster ({split.get('groups')} groups): fine-tune "
-                             f"{', '.join(split.get('fine_tune', [])) or 'none'}; held out "
-                             f"{', '.join(split.get('held_out', [])) or 'none'}")
-        for key in ("fine_tune", "control"):
-            tuned = steps.get(key) or {}
-            if not tuned:
-                continue
-            if key == "control":
-                lines.append(f"- control arm: the same fine-tuning ({tuned.get('method')}, {tuned.get('steps')} "
-                             f"steps, same seed) on {tuned.get('scenarios')} scenarios, the "
-                             f"{tuned.get('mined_left_out')} mined scenario(s) left out: `{tuned.get('model')}`")
-                continue
-            if tuned.get("method") == "dagger":
-                agreement = tuned.get("agreement") or {}
-                lines.append(f"- fine-tuned by DAgger ({tuned.get('steps')} labelled steps, imitating "
-                             f"`{tuned.get('reference')}` on the policy's own states) on {tuned.get('scenarios')} "
-                             f"scenarios ({tuned.get('mined_upweighted')} mined, upweighted); agreement with the "
-                             f"reference on the {agreement.get('states')} labelled states "
-                             f"{agreement.get('source')} -> {agreement.get('fine_tuned')}"
-                             + "".join(f", resumed from iteration {r.get('from_iteration')}"
-                                       + (f" (+{r['steps_into_next']} steps)" if r.get("steps_into_next") else "")
-                                       for r in tuned.get("resumed") or [])
-                             + f": `{tuned.get('model')}`")
-            else:
-                lines.append(f"- fine-tuned by PPO {tuned.get('steps')} steps on {tuned.get('scenarios')} scenarios "
-                             f"({tuned.get('mined_upweighted')} mined, upweighted), training reward weights "
-                             f"{_weights((tuned.get('env_config') or {}).get('reward_weights'))}: "
-                             f"`{tuned.get('model')}`")
-        lines += _heldout_lines(steps.get("after") or {})
-        lines += _untouched_lines(steps.get("untouched") or {})
-        regress = steps.get("regress") or {}
-        if regress:
-            lines.append(f"- regression test on the starting bank ({regress.get('episodes')} paired episodes): "
-                         f"**{regress.get('verdict')}** - {regress.get('reason')}; failure rate new "
-                         f"{_summary_rate(regress.get('new_failure_rate'))}, old "
-                         f"{_summary_rate(regress.get('old_failure_rate'))}; report `{regress.get('report')}`")
-            for name, row in (regress.get("held_out_parents") or {}).items():
-                lines.append(f"- held-out family's parent `{name}` (never fine-tuned on) in the regression test: "
-                             f"failure rate new {_summary_rate(row['new'].get('failure_rate'))}, old "
-                             f"{_summary_rate(row['old'].get('failure_rate'))}; stall rate new "
-                             f"{_summary_rate(row['new'].get('stall_rate'))}, old "
-                             f"{_summary_rate(row['old'].get('stall_rate'))}")
-        if record.get("next_policy"):
-            lines.append(f"- the next round starts from `{record['next_policy']}` "
-                         f"({record.get('next_policy_reason')})")
+        lines += _round_lines(record, settings)
     return "\n".join(lines) + "\n"
 
 
