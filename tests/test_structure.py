@@ -482,7 +482,7 @@ HEAVY_DEPENDENCIES = frozenset({
 simulator, a GUI, video decoding, the LLM client: a third of a second and more). A module imports them inside
 the function that needs them, and so may a module import a project module that imports one of them."""
 
-STILL_TO_CLEAN = ("dv2s_gym.mining",)
+STILL_TO_CLEAN: tuple = ()
 """Parts whose imports inside functions are still to be moved to the top of the module (not checked yet)."""
 LAZY_BY_DESIGN = ("dv2s_gym.cli",)
 """Parts that import inside functions on purpose: the command line loads a command's modules when it runs."""

@@ -83,8 +83,15 @@ finished it yet (the loop was stopped; rerunning resumes it).
 
 from __future__ import annotations
 
+import os
 import re
+from dv2s_gym.mining.convert import cluster_slug
+from dv2s_gym.mining.errored import merged_messages, messages_text
+from dv2s_gym.mining.loop_verdict import ACCEPTED, evidence_floor_note, judge_round, recommendation
+from dv2s_gym.regress.report import build_report, load_report, write_json
+from html import escape
 from pathlib import Path
+from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from typing import Any, Dict, List, Mapping, Optional
 
 __all__ = ["write_loop_reports", "render_markdown", "render_html", "round_summary", "round_clips", "final_vs_start",
@@ -140,8 +147,6 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
     that changed between the rounds, gives ``{"error": reason}`` instead (and the verdict is then NOT ACCEPTED).
     ``folder``: the loop folder the reports are read from (default ``out``; see :func:`_regress_report_path`).
     """
-    from dv2s_gym.regress.report import build_report, load_report
-
     tested = [r for r in report.get("rounds", []) if ((r.get("steps") or {}).get("regress") or {}).get("report")]
     if len(tested) < 2:
         return None
@@ -168,8 +173,6 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
                           baseline=start["baseline"], episodes=episodes)
     path = None
     if out is not None:
-        from dv2s_gym.regress.report import write_json
-
         path = write_json(paired, Path(out) / FINAL_VS_START_DIR / "report.json")
     overall = paired.get("overall") or {}
     comparison = overall.get("comparison") or {}
@@ -188,8 +191,6 @@ def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = Non
     round that its own tests accepted (``None`` before two rounds were regression-tested), and, with two or more
     tested rounds, the report's own ``final_vs_start`` (its paired report written under ``out``). A policy the
     check rejected is never the policy to use (:func:`dv2s_gym.mining.loop_verdict.recommendation`)."""
-    from dv2s_gym.mining.loop_verdict import ACCEPTED, judge_round
-
     rounds = [dict(record) for record in report.get("rounds") or []]
     for index, record in enumerate(rounds):
         judged = judge_round(record)
@@ -319,7 +320,6 @@ def _errored_lines(record: Mapping[str, Any]) -> List[str]:
     total = _errored_total(record)
     lines = [f"- errored episodes (counted in no rate or test): " + ("**" if total else "") + "; ".join(parts)
              + ("**" if total else "")]
-    from dv2s_gym.mining.errored import merged_messages, messages_text
 
     merged = merged_messages([found for _, by in stages for found in by.values() if found])
     lines += [f"  - `{name}`: {messages_text(merged['messages'], merged['unlisted'], name)}"
@@ -465,15 +465,11 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
 
 def _recommendation(report: Mapping[str, Any]) -> Mapping[str, Any]:
     """The report's recommendation (worked out for a report written without one)."""
-    from dv2s_gym.mining.loop_verdict import recommendation
-
     return report.get("recommendation") or recommendation(report)
 
 
 def _floor_lines(settings: Mapping[str, Any]) -> List[str]:
     """The report's loud line when the held-out minimums are below what can ever give evidence, or none."""
-    from dv2s_gym.mining.loop_verdict import evidence_floor_note
-
     note = evidence_floor_note(int(settings.get("min_heldout_episodes", 0) or 0),
                                int(settings.get("min_heldout_families", 0) or 0))
     return [f"**WARNING: {note}.**", ""] if note else []
@@ -660,9 +656,6 @@ _CSS = ("body{font-family:system-ui,sans-serif;margin:2em;max-width:1100px}table
 
 def _markdown_to_html(lines: List[str]) -> str:
     """The few Markdown forms the round details use (headings, bullets, tables, bold) as HTML."""
-    import re
-    from html import escape
-
     def inline(text: str) -> str:
         text = escape(text)
         text = re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", text)
@@ -709,8 +702,6 @@ def _markdown_to_html(lines: List[str]) -> str:
 
 def _clips_html(clips: Mapping[str, Any]) -> str:
     """Each kept mined scenario's videos side by side (paths relative to the loop folder)."""
-    from html import escape
-
     parts = []
     for scenario, videos in clips.items():
         if not videos:
@@ -725,8 +716,6 @@ def _clips_html(clips: Mapping[str, Any]) -> str:
 def _rates_svg(title: str, bars: List[tuple]) -> str:
     """An inline SVG bar chart of failure rates with their 95 % intervals: ``bars`` = ``[(label, rate, low,
     high)]`` (``rate`` ``None``: no bar)."""
-    from html import escape
-
     bars = [b for b in bars if b[1] is not None]
     if not bars:
         return ""
@@ -773,8 +762,6 @@ def _round_figures(record: Mapping[str, Any]) -> str:
 def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[str, Any]]] = None) -> str:
     """A self-contained HTML page (inline CSS, nothing fetched) of the loop report; ``clips``: round -> scenario ->
     ``[{"path", "label"}]`` videos shown per round (:func:`round_clips`)."""
-    from html import escape
-
     settings = report.get("settings", {})
     rows = []
     for record in report.get("rounds", []):
@@ -826,8 +813,6 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
     """Per round, each kept mined scenario's failure clips, as paths relative to ``out``: the bank entry's own
     (``failure.webm`` and those of failures merged into it), else the mining run's
     (``failures/<cluster slug>/*.webm``)."""
-    import os
-
     settings = report.get("settings") or {}
     bank = Path(settings.get("bank_dir") or Path(out) / "bank")
     found: Dict[int, Dict[str, List[Dict[str, str]]]] = {}
@@ -845,8 +830,6 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
                       else f"failure merged into it ({video.parent.relative_to(entry_folder)})"
                       for video in found_videos]
             if not found_videos and mine.get("folder"):  # the bank entry is gone: the mining run's copy
-                from dv2s_gym.mining.convert import cluster_slug
-
                 folder = Path(mine["folder"]) / "failures" / cluster_slug(entry.get("cluster"), None)
                 found_videos = sorted(folder.glob("*.webm")) if folder.is_dir() else []
                 labels = [f"failure of cluster {entry.get('cluster')} (mining run)"] * len(found_videos)
@@ -863,11 +846,8 @@ def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
 
     With two or more regression-tested rounds, ``final_vs_start`` (:func:`final_vs_start`) is added to them, and to
     each accepted round the same check over the rounds up to it (:func:`with_cross_round_checks`)."""
-    from scenario_bank.atomic import atomic_write_json, atomic_write_text
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    from dv2s_gym.mining.loop_verdict import recommendation
 
     report = with_cross_round_checks(report, out)
     report["recommendation"] = recommendation(report)

@@ -91,13 +91,15 @@ from pathlib import Path
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.mining.behaviour import behaviour_of
+from dv2s_gym.mining.cluster import cluster_failures
 from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.html import write_html
 from dv2s_gym.mining.rate import rate_estimates
-from dv2s_gym.mining.report_text import breadth, rate_text, seed_text
+from dv2s_gym.mining.report_text import breadth, error_warning, rate_text, seed_text
 from dv2s_gym.mining.report_text import number_text as _num
 from dv2s_gym.mining.report_text import percent_text as _pct
-from dv2s_gym.regress.stats import wilson_interval
 from dv2s_gym.regress.identity import installed_version
+from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 
 __all__ = [
@@ -303,8 +305,6 @@ def _representative(members: Sequence[Dict[str, Any]], conversion: Optional[Mapp
 
 def _cluster_of(records: Sequence[Dict[str, Any]]) -> Dict[int, str]:
     """Cluster id of every failed episode, from the mining core's clustering."""
-    from dv2s_gym.mining.cluster import cluster_failures
-
     mapping = cluster_failures(list(records))
     return {int(index): str(cluster) for index, cluster in dict(mapping).items()}
 
@@ -660,8 +660,6 @@ def headline(report: Mapping[str, Any]) -> str:
 
 
 def _error_alarm(report: Mapping[str, Any]) -> str:
-    from dv2s_gym.mining.report_text import error_warning
-
     errors = report.get("errors") or []
     first = str(errors[0].get("error") or "").strip().splitlines() if errors else []
     counts = report["counts"]
@@ -875,8 +873,6 @@ def write_reports(run_dir: PathLike, report: Optional[Mapping[str, Any]] = None,
     Returns:
         ``{"json": path, "markdown": path, "html": path}``.
     """
-    from dv2s_gym.mining.html import write_html
-
     run_dir = Path(run_dir)
     report = dict(report) if report is not None else build_report(run_dir)
     return {"json": atomic_write_json(run_dir / "report.json", report),
