@@ -7,6 +7,7 @@ that run them; :func:`build_parser` asks each to add its own, in the order ``dv2
 from __future__ import annotations
 
 import argparse
+import atexit
 import os
 import sys
 from typing import List, Optional
@@ -60,8 +61,6 @@ def _exit_at_once(code: int) -> None:
     output is flushed; what is skipped is collecting every object of the run (a policy, its envs, DAgger's data),
     which kept an interrupted command alive for seconds, tens of seconds on a loaded machine, after it had
     said it was interrupted."""
-    import atexit
-
     atexit._run_exitfuncs()
     for stream in (sys.stdout, sys.stderr):
         try:

@@ -11,7 +11,10 @@ from __future__ import annotations
 import argparse
 from typing import Optional
 
+from dv2s_gym.pipeline.stages import DRA_BACKENDS, registered_dras, registered_sgs, SG_BACKENDS
 from dv2s_gym.registered_names import RegisteredNames
+from dv2s_gym.workers.backends import backend_choices
+from dv2s_gym.workers.settings import WorkerSettings
 
 __all__ = ["dra_option", "sg_option", "worker_backend_option"]
 
@@ -26,24 +29,17 @@ def _help(base: Optional[str], choices: RegisteredNames) -> Optional[str]:
 
 def dra_option(p: argparse.ArgumentParser, help: Optional[str] = None) -> None:
     """``--dra`` (default ``bev``): a Driving Record Analyzer backend by its registered name."""
-    from dv2s_gym.pipeline.stages import DRA_BACKENDS, registered_dras
-
     choices = RegisteredNames(registered_dras, DRA_BACKENDS)
     p.add_argument("--dra", choices=choices, default="bev", help=_help(help, choices))
 
 
 def sg_option(p: argparse.ArgumentParser, help: Optional[str] = None) -> None:
     """``--sg`` (default ``rules``): a Scenario Generator backend by its registered name."""
-    from dv2s_gym.pipeline.stages import SG_BACKENDS, registered_sgs
-
     choices = RegisteredNames(registered_sgs, SG_BACKENDS)
     p.add_argument("--sg", choices=choices, default="rules", help=_help(help, choices))
 
 
 def worker_backend_option(p: argparse.ArgumentParser, help: Optional[str] = None) -> None:
     """``--backend`` (default ``local``): where episodes run, a worker backend by its registered name."""
-    from dv2s_gym.workers.backends import backend_choices
-    from dv2s_gym.workers.settings import WorkerSettings
-
     choices = backend_choices()
     p.add_argument("--backend", choices=choices, default=WorkerSettings.backend, help=_help(help, choices))

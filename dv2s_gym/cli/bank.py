@@ -13,6 +13,8 @@ from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import json_argument, open_bank, read_input_file
 from dv2s_gym.cli.output import emit
 from dv2s_gym.cli.parser import bank_command, bank_option
+from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, Provenance
+from scenario_bank.scenic2 import upgrade_scenic2
 
 __all__ = ["add_parser", "run_add", "run_export", "run_import", "run_list", "run_rm", "run_sample", "run_show",
            "run_stats"]
@@ -108,9 +110,6 @@ def run_show(args: argparse.Namespace) -> int:
 
 def run_add(args: argparse.Namespace) -> int:
     """``dv2s bank add``: a Scenic script (Scenic 2 upgraded, the rewrites printed) with its description."""
-    from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, Provenance
-    from scenario_bank.scenic2 import upgrade_scenic2
-
     try:
         script = read_input_file(args.script, "script", MAX_SCRIPT_BYTES).decode("utf-8")
     except UnicodeDecodeError as error:

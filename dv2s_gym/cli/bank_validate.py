@@ -10,6 +10,8 @@ from typing import Dict, List
 from dv2s_gym.cli.inputs import open_bank
 from dv2s_gym.cli.output import emit
 from dv2s_gym.cli.parser import bank_command
+from scenario_bank.bank import UnsafeBankInputError
+from scenario_bank.safe_files import UnsafeInputError, validate_entry_name
 
 __all__ = ["add_parser", "run"]
 
@@ -37,8 +39,6 @@ def run(args: argparse.Namespace) -> int:
     if args.story:
         return _run_story(args)
     from dv2s_gym.bank_validate import validate_bank
-    from scenario_bank.bank import UnsafeBankInputError
-    from scenario_bank.safe_files import UnsafeInputError, validate_entry_name
 
     bank = open_bank(args)  # a --bank that does not exist is an error, not "0/0 scenarios valid"
     for name in args.name or []:

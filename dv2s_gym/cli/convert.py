@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 from dv2s_gym.cli.backend_options import sg_option
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import llm_config
 from dv2s_gym.cli.output import emit, json_text
 from dv2s_gym.cli.parser import bank_option, llm_options, video_options
+from dv2s_gym.pipeline.stages import describe, Description
 
 __all__ = ["add_parser", "placed_nothing", "report_text", "run_convert", "run_describe", "run_generate"]
 
@@ -60,8 +62,6 @@ def add_parser(subparsers) -> None:
 
 def run_describe(args: argparse.Namespace) -> int:
     """``dv2s describe``: the video's description and its elements."""
-    from dv2s_gym.pipeline.stages import describe
-
     result = describe(args.video, backend=args.dra, camera=args.camera, question=args.question, fps=args.fps,
                       max_frames=args.max_frames, max_pixels=args.max_pixels, llm_config=llm_config(args))
     emit(args, result.as_dict(), f"{result.text}\n\nelements: {json.dumps(result.elements)}")
@@ -71,11 +71,8 @@ def run_describe(args: argparse.Namespace) -> int:
 def run_generate(args: argparse.Namespace) -> int:
     """``dv2s generate``: a checked scenario from a description; exit 1 if its checks fail or nothing of the
     description could be placed."""
-    from pathlib import Path
-
     from dv2s_gym.pipeline.convert import generate_to_folder
     from dv2s_gym.pipeline.semantics.text import elements_from_text
-    from dv2s_gym.pipeline.stages import Description
 
     if args.from_file:
         text = Path(args.from_file).read_text(encoding="utf-8")

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from dataclasses import asdict
 
+from dv2s_gym.cli.output import json_text
+
 __all__ = ["add_parser", "run"]
 
 
@@ -29,8 +31,6 @@ def run(args: argparse.Namespace) -> int:
     rows = run_demo(args.out, scenarios=args.scenario or None, episodes=args.episodes, seed=args.seed,
                     duration=args.duration)
     if args.json:
-        from dv2s_gym.cli.output import json_text
-
         print(json_text([asdict(r) for r in rows]))
     else:
         print(format_table(rows))

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import traceback
 
 from scenario_bank.errors import DV2SError
 
@@ -51,8 +52,6 @@ def report_error(args: argparse.Namespace, error: BaseException, *, explained: b
 
     ``explained``: the message says what is wrong and the fix; otherwise the line adds the ``--debug`` hint."""
     if args.debug:
-        import traceback
-
         traceback.print_exc()
     hint = "" if explained or args.debug else " (an unexpected error: rerun with --debug for the traceback)"
     print(f"dv2s: error: {error_line(error)}{hint}", file=sys.stderr)

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 from typing import Optional
 
 from dv2s_gym.cli.errors import UsageError
+from scenario_bank.bank import Bank, BankError, MAX_JSON_DEPTH, MAX_SIDECAR_BYTES, UnsafeBankInputError
+from scenario_bank.safe_files import load_json_bounded, read_regular_file, UnsafeInputError
 
 __all__ = ["json_argument", "json_option", "llm_config", "open_bank", "read_input_file"]
 
@@ -14,10 +17,6 @@ __all__ = ["json_argument", "json_option", "llm_config", "open_bank", "read_inpu
 def open_bank(args: argparse.Namespace):
     """The :class:`~scenario_bank.bank.Bank` of ``--bank`` (the shipped one by default); a ``--bank`` folder that
     does not exist is an error unless the command writes to it."""
-    from pathlib import Path
-
-    from scenario_bank.bank import Bank, BankError
-
     writes = getattr(args, "bank_command", None) in ("add", "import") or getattr(args, "add_to_bank", False)
     if args.bank is not None and not writes and not Path(args.bank).exists():
         raise BankError(f"there is no bank at {args.bank} (the folder does not exist); check the path, or create "
@@ -28,9 +27,6 @@ def open_bank(args: argparse.Namespace):
 def read_input_file(path: str, what: str, max_bytes: int) -> bytes:
     """A file named on the command line: a regular file (a FIFO or device is refused, never waited on) of at
     most ``max_bytes``."""
-    from scenario_bank.bank import UnsafeBankInputError
-    from scenario_bank.safe_files import UnsafeInputError, read_regular_file
-
     try:
         return read_regular_file(path, max_bytes, follow_symlinks=True)
     except UnsafeInputError as error:
@@ -39,9 +35,6 @@ def read_input_file(path: str, what: str, max_bytes: int) -> bytes:
 
 def json_argument(text: str, what: str):
     """A JSON value given on the command line (or in a file), size and nesting capped."""
-    from scenario_bank.bank import MAX_JSON_DEPTH, MAX_SIDECAR_BYTES, UnsafeBankInputError
-    from scenario_bank.safe_files import UnsafeInputError, load_json_bounded
-
     data = text.encode("utf-8", "surrogateescape") if isinstance(text, str) else text
     if len(data) > MAX_SIDECAR_BYTES:
         raise UnsafeBankInputError(f"{what} is larger than {MAX_SIDECAR_BYTES} bytes; shorten it")
@@ -59,8 +52,6 @@ def llm_config(args: argparse.Namespace):
 
 def json_option(text: Optional[str], what: str):
     """A JSON value given inline or as a path to a .json file."""
-    from pathlib import Path
-
     if text is None:
         return None
     source = Path(text).read_text(encoding="utf-8") if text.endswith(".json") and Path(text).is_file() else text

@@ -8,6 +8,8 @@ from typing import Any, List, Mapping, Optional
 
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.parser import bank_option
+from dv2s_gym.mining.loop_settings import DEFAULT_PROFILE, DEFAULTS, EVIDENCE, PROFILES, LoopSettings
+from dv2s_gym.mining.loop_verdict import EVIDENCE_FLOOR as FLOOR, HELDOUT_ALPHA as ALPHA
 
 __all__ = ["add_parser", "run", "loop_settings"]
 
@@ -37,8 +39,6 @@ examples:
 
 def add_parser(subparsers) -> None:
     """Add ``loop`` to the ``dv2s`` subcommands."""
-    from dv2s_gym.mining.loop_settings import DEFAULT_PROFILE, EVIDENCE, PROFILES
-
     p = subparsers.add_parser("loop", help="mine a policy's failures, add them to the bank, fine-tune, measure (one round "
                               "on the embedded defaults, sized for about 5 minutes on 2 idle cores; --profile evidence for "
                               "a round large enough to judge)",
@@ -83,7 +83,6 @@ def add_parser(subparsers) -> None:
                                  "checked to replay it step for step) per round, the scenario families taking turns, "
                                  "each its largest cluster first; 0 for none, 'all' "
                                  "for every cluster"))
-    from dv2s_gym.mining.loop_verdict import EVIDENCE_FLOOR as FLOOR, HELDOUT_ALPHA as ALPHA
 
     p.add_argument("--min-heldout-episodes", type=int, default=None,
                    help=_default("min_heldout_episodes", "below this many held-out episodes a round reports rates "
@@ -101,8 +100,6 @@ def add_parser(subparsers) -> None:
 
 def _add_arms_and_run_arguments(p: argparse.ArgumentParser) -> None:
     """``dv2s loop``'s options from ``--no-control`` on (the arms, the evaluation, the fine-tuning, the run)."""
-    from dv2s_gym.mining.loop_settings import DEFAULTS as LOOP, LoopSettings
-
     p.add_argument("--no-control", action="store_true",
                    help="skip the control arm (the same fine-tuning without the mined scenarios)")
     p.add_argument("--untouched-seeds", type=int, default=None,
@@ -116,7 +113,7 @@ def _add_arms_and_run_arguments(p: argparse.ArgumentParser) -> None:
                    help=_default("mined_share", "probability of a mined scenario in fine-tuning"))
     p.add_argument("--fine-tune-reward", default=None, metavar="JSON",
                    help="reward-term weights overriding the policy's own during fine-tuning only, e.g. "
-                   f"'{{\"standing\": -1.0, \"low_ttc\": -0.4}}' (default {json.dumps(LOOP['fine_tune_reward'])}; "
+                   f"'{{\"standing\": -1.0, \"low_ttc\": -0.4}}' (default {json.dumps(DEFAULTS['fine_tune_reward'])}; "
                    "'{}' keeps the policy's reward; evaluation always uses the policy's own env config)")
     p.add_argument("--fine-tune-method", choices=["ppo", "dagger"], default=None,
                    help=_default("fine_tune_method", "ppo: continue PPO on the fine-tuning reward; dagger: imitate "
@@ -152,8 +149,6 @@ _VALUED = ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr", "ho
 def loop_settings(args: argparse.Namespace):
     """The :class:`~dv2s_gym.mining.loop_settings.LoopSettings` of ``dv2s loop``'s arguments: ``--profile``'s
     values with every option given explicitly on top."""
-    from dv2s_gym.mining.loop_settings import LoopSettings
-
     options = {key: getattr(args, key) for key in _VALUED if getattr(args, key) is not None}
     for flag in ("max_conversions", "max_replays"):
         if getattr(args, flag) is not None:
@@ -175,8 +170,6 @@ def loop_settings(args: argparse.Namespace):
 
 def _default(key: str, text: str) -> str:
     """``text`` with the option's default and, where it differs, the evidence profile's value."""
-    from dv2s_gym.mining.loop_settings import DEFAULTS, EVIDENCE
-
     def shown(value: Any) -> str:
         return "all" if value is None and key in ("max_conversions", "max_replays") else str(value)
 

@@ -3,16 +3,17 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from dv2s_gym.cli.backend_options import dra_option, sg_option, worker_backend_option
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import json_option, llm_config
+from dv2s_gym.cli.interrupts import episodes_kept_note
 from dv2s_gym.cli.parser import bank_option, llm_options
 from dv2s_gym.mining.samplers import SAMPLERS, registered_samplers
 from dv2s_gym.mining.settings import FEEDBACKS, MineSettings
 from dv2s_gym.registered_names import RegisteredNames
 from dv2s_gym.workers.settings import WorkerSettings
-from dv2s_gym.cli.interrupts import episodes_kept_note
 from envs.errors import Interrupted
 
 __all__ = ["add_parser", "run"]
@@ -100,8 +101,6 @@ def add_parser(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Mine the policy's failures and print the run's summary and reports."""
-    from pathlib import Path
-
     from dv2s_gym.cli.name_checks import check_names
 
     check_names(policies=(args.policy, args.reference if args.reference != "none" else None),

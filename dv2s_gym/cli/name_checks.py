@@ -6,6 +6,8 @@ from __future__ import annotations
 import os
 from typing import Iterable, Optional, Sequence, Union
 
+from scenario_bank import select_scenarios
+
 __all__ = ["check_names"]
 
 
@@ -26,6 +28,4 @@ def check_names(*, policies: Iterable[Optional[str]] = (), scenarios: Union[None
     items = [scenarios] if isinstance(scenarios, str) else list(scenarios or [])
     names = [item.strip() for item in items if isinstance(item, str) and _is_bank_selector(item.strip())]
     if names and (bank is None or os.path.isdir(bank)):  # a new --bank folder is made by the command (mine)
-        from scenario_bank import select_scenarios
-
         select_scenarios(names, bank)

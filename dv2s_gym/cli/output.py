@@ -12,6 +12,8 @@ import math
 import numbers
 from typing import Any
 
+from scenario_bank.jail.output import printable
+
 __all__ = ["emit", "json_text", "strict_json_value"]
 
 
@@ -34,7 +36,5 @@ def json_text(data: Any, *, indent: int = 2) -> str:
 
 def emit(args: argparse.Namespace, data, human: str) -> None:
     """Print ``data`` as strict JSON (:func:`json_text`) when ``--json`` was given, else the text ``human``."""
-    from scenario_bank.jail.output import printable
-
     # bank text comes from folders and archives of others: no escape sequence reaches the terminal
     print(json_text(data) if args.json else printable(human))

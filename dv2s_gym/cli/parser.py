@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import difflib
 from typing import Callable, List
+
+from dv2s_gym.cli.backend_options import dra_option
 
 __all__ = ["Parser", "bank_command", "bank_option", "llm_options", "video_options"]
 
@@ -62,16 +65,12 @@ class Parser(argparse.ArgumentParser):
         try:
             super()._check_value(action, value)
         except argparse.ArgumentError as error:
-            import difflib
-
             close = difflib.get_close_matches(str(value), [str(choice) for choice in action.choices], n=1)
             if not close:
                 raise
             raise argparse.ArgumentError(action, f"{error.message}; did you mean {close[0]!r}?") from None
 
     def _unrecognized(self, extras: List[str]) -> str:
-        import difflib
-
         message = f"unrecognized arguments: {' '.join(extras)}"
         flags = [flag.split("=", 1)[0] for flag in extras if flag.startswith("-")]
         if not flags:
@@ -112,8 +111,6 @@ def llm_options(p: argparse.ArgumentParser) -> None:
 
 def video_options(p: argparse.ArgumentParser) -> None:
     """How a video is described: the Driving Record Analyzer, the camera, a question."""
-    from dv2s_gym.cli.backend_options import dra_option
-
     dra_option(p, help="Driving Record Analyzer: bev (offline, bird's-eye renders) or openai (any VLM endpoint)")
     p.add_argument("--camera", choices=["bev", "front", "rear", "chase"], default="bev", help="camera viewpoint")
     p.add_argument("--question", help='video-specific question, e.g. "Why did the ego vehicle brake?"')

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
+from pathlib import Path
 
 from dv2s_gym.cli.backend_options import worker_backend_option
 from dv2s_gym.cli.errors import UsageError
-from dv2s_gym.cli.parser import bank_option
 from dv2s_gym.cli.interrupts import episodes_kept_note
+from dv2s_gym.cli.output import json_text
+from dv2s_gym.cli.parser import bank_option
 from envs.errors import Interrupted
 
 __all__ = ["add_parser", "run"]
@@ -86,8 +89,6 @@ def add_parser(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the regression test, print its summary (or the report JSON); the exit status is the verdict's."""
-    from pathlib import Path
-
     from dv2s_gym.cli.name_checks import check_names
 
     check_names(policies=(args.policy, args.baseline), scenarios=args.scenarios, bank=args.bank)  # before imports
@@ -113,8 +114,6 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt as stop:
         raise Interrupted(getattr(stop, "note", None) or episodes_kept_note(Path(out) / "results.jsonl")) from None
     if args.json:
-        from dv2s_gym.cli.output import json_text
-
         print(json_text(report, indent=1))
     else:
         print(format_summary(report))
@@ -132,16 +131,12 @@ def opening_line(policy: str, scenarios: int, seeds: int) -> str:
 
 
 def _announce(policy: str, scenarios: int, seeds: int, *, json: bool) -> None:
-    import sys
-
     # with --json, stdout is the report's alone
     print(opening_line(policy, scenarios, seeds), file=sys.stderr if json else sys.stdout, flush=True)
 
 
 def _env_config(text: str) -> dict:
     """``--config``: a JSON object inline, or a .json file holding one."""
-    from pathlib import Path
-
     text = Path(text).read_text(encoding="utf-8") if text.endswith(".json") else text
     try:
         env_config = json.loads(text)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 
 from dv2s_gym.cli.errors import UsageError
 
@@ -39,8 +40,6 @@ def add_parser(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Replay what ``trace`` names (a trace file, a regress report.json or a mining run folder) and say so."""
-    from pathlib import Path
-
     from dv2s_gym.mining.report import SCHEMA as MINE_SCHEMA
     from dv2s_gym.regress.report import SCHEMA
 
@@ -74,8 +73,6 @@ def _replay_mined(args: argparse.Namespace, folder) -> int:
 
 def _json_schema(path: str):
     """The ``schema`` of a JSON file (None for anything else: a gzip trace, not JSON, no schema)."""
-    from pathlib import Path
-
     try:
         with open(path, "rb") as handle:
             if handle.read(2) == b"\x1f\x8b":

@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 from typing import Any, Mapping, Optional
 
+from dv2s_gym.cli.output import json_text
 from dv2s_gym.cli.parser import bank_option
+from scenario_bank.jail.output import printable
 
 __all__ = ["add_parser", "run"]
 
@@ -53,12 +55,8 @@ def run(args: argparse.Namespace) -> int:
     result = record_scenario(args.scenario, args.video, config=config, seed=args.seed, drive=not args.random,
                              trusted=args.trusted, bank_dir=args.bank, trace=args.trace)
     if args.json:
-        from dv2s_gym.cli.output import json_text
-
         print(json_text(result))
     else:
-        from scenario_bank.jail.output import printable
-
         print(printable(summary(result, seed=args.seed, trace=args.trace)))  # names and values come from the script
     return 0
 

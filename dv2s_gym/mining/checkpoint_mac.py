@@ -13,6 +13,7 @@ import hmac
 import os
 import secrets
 from pathlib import Path
+from platformdirs import user_state_dir
 from typing import Optional
 
 __all__ = ["MAGIC", "key_path", "seal", "unseal"]
@@ -24,8 +25,6 @@ _KEY_BYTES = 32
 
 def state_dir() -> Path:
     """The user's dv2s-gym state folder (where the checkpoint key lives)."""
-    from platformdirs import user_state_dir
-
     return Path(user_state_dir("dv2s-gym"))
 
 

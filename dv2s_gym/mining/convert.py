@@ -61,17 +61,33 @@ Nothing raises out of :func:`convert_failure` for a bad failure: every rejection
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import json
 import os
 import re
 import time
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
 
 import numpy as np
 
+from dv2s_gym.mining.exact_replay import narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
+from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence, key_actor, shows_interaction
+from dv2s_gym.mining.monitors import detect_failure
+from dv2s_gym.mining.param_meaning import meaning_map, name_mismatch, script_parameters, tied_objects
+from dv2s_gym.mining.tasks import reference_avoids
+from dv2s_gym.pipeline import stages
+from dv2s_gym.pipeline.convert import check_scenario, conversion_provenance
 from dv2s_gym.pipeline.errors import (EndpointHTTPError, EndpointTimeoutError, EndpointUnreachableError,
                                       MissingAPIKeyError)
+from dv2s_gym.pipeline.metrics import e2e_sc
+from dv2s_gym.pipeline.semantics.text import elements_from_text
+from dv2s_gym.pipeline.semantics.trace import _kind, elements_from_trace
+from dv2s_gym.regress.stats import wilson_interval
+from scenario_bank.atomic import atomic_write_text
+from scenario_bank.bank import Bank, DuplicateScenarioError
+from scenario_bank.dedup import param_ranges
 from scenario_bank.records import Provenance
 
 SETUP_ERRORS = (EndpointUnreachableError, EndpointTimeoutError, EndpointHTTPError, MissingAPIKeyError)
@@ -114,8 +130,6 @@ def reference_failed(source: Mapping[str, Any], reference_failure: Optional[Mapp
     stall, whatever its class, and a near miss (``low_ttc``) when the source failure is no more severe than a
     near miss (the miner's avoidability, :func:`dv2s_gym.mining.tasks.reference_avoids`, would then call the
     source failure unavoidable too)."""
-    from dv2s_gym.mining.tasks import reference_avoids
-
     if not reference_failure or not reference_failure.get("type"):
         return False
     if reference_failure["type"] != "low_ttc":
@@ -155,8 +169,6 @@ def cluster_slug(cluster: Optional[str], index: Any) -> str:
 
 def _detect(result, trace, options: Mapping[str, Any]) -> Optional[Dict[str, Any]]:
     """The episode's failure as a dict (the miner's monitors, :func:`dv2s_gym.mining.monitors.detect_failure`)."""
-    from dv2s_gym.mining.monitors import detect_failure
-
     found = detect_failure(result, trace, **dict(options))
     return None if found is None else found.to_json()
 
@@ -180,8 +192,6 @@ def _policy_name(policy: Any) -> str:
 
 
 def _write(path: Path, text: str) -> None:
-    from scenario_bank.atomic import atomic_write_text
-
     atomic_write_text(path, text, fsync=False)
 
 
@@ -265,9 +275,6 @@ def _reproduction_episode(scene_seed: int, result: Any, trace: Any, monitor: Map
                           source_failure: Mapping[str, Any], interaction: Optional[Mapping[str, Any]]
                           ) -> Dict[str, Any]:
     """One episode of :func:`_reproduce`, judged."""
-    from dv2s_gym.mining.interaction import key_actor, shows_interaction
-    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
-
     failure = _detect(result, trace, monitor)
     actor = key_actor(trace, failure) if failure else None
     actor_kind = None
@@ -282,8 +289,6 @@ def _reproduction_episode(scene_seed: int, result: Any, trace: Any, monitor: Map
 
 
 def _actor_kind(trace, name: str) -> str:
-    from dv2s_gym.pipeline.semantics.trace import _kind
-
     return _kind(name, dict(getattr(trace, "kinds", {}) or {}))
 
 
@@ -330,8 +335,6 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     ``"script_name"`` when the script spells it differently, and ``"by": "meaning"`` with ``"basis"`` when paired
     by meaning), "outside": [names whose range does not contain the failing value], "not_comparable": {failing
     parameter: why it could not be compared}, "not_in_script": [the same names]}``."""
-    from scenario_bank.dedup import param_ranges
-
     ranges = param_ranges(script)
     folded: Dict[str, str] = {}
     for script_name in sorted(ranges):
@@ -367,7 +370,6 @@ def _by_meaning(parent: str, script: str, numeric: Mapping[str, float], compared
     quantity, direction or constant term, or reaching no object) is not comparable; the rest are paired by meaning
     (their counterpart must be read as an interval); no object of the new script may stand for two parent actors.
     Updates ``compared``; returns ``{failing parameter: why it is not comparable}``."""
-    from dv2s_gym.mining.param_meaning import meaning_map, name_mismatch, script_parameters
 
     declared = script_parameters(script)
     why: Dict[str, str] = {}
@@ -404,7 +406,6 @@ def _by_meaning(parent: str, script: str, numeric: Mapping[str, float], compared
 def _tied_twice(parent: str, script: str, compared: Dict[str, Any]) -> Dict[str, str]:
     """The compared parameters whose object in the new script is tied (by another compared parameter) to another
     actor of the parent too: one actor cannot stand for two; they leave ``compared``, each with why."""
-    from dv2s_gym.mining.param_meaning import tied_objects
 
     ties: Dict[str, Dict[str, List[str]]] = {}
     for name, comparison in compared.items():
@@ -425,8 +426,6 @@ def _tied_twice(parent: str, script: str, compared: Dict[str, Any]) -> Dict[str,
 def _parent_script(record: Mapping[str, Any], bank_dir: Optional[PathLike]) -> Optional[str]:
     """The script of the bank scenario the failure ran (``None`` when it cannot be read: the judge then compares by
     name only)."""
-    from scenario_bank.bank import Bank
-
     try:
         return (Bank(bank_dir) if bank_dir else Bank()).get(record["scenario"]).script
     except Exception:  # the comparison by meaning is an addition; without the parent, names only
@@ -579,11 +578,6 @@ def _add_replay(record: Mapping[str, Any], bank, settings: ConversionSettings, s
     Without a ``source_trace`` (no failure video was made), the replay's own trace stands for it once its
     trajectory hash matches the record's, and is what the entry keeps (``files``: the trace only, no video);
     without an ``interaction`` it is read from that trace."""
-    from dv2s_gym.mining.exact_replay import replay_versions
-    from dv2s_gym.pipeline.metrics import e2e_sc
-    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
-    from scenario_bank.bank import Bank
-
     parent = (Bank(settings.bank_dir) if settings.bank_dir else Bank()).get(record["scenario"])
     params = dict(record.get("params") or {})
     script, intervals, trace, failure, source = _run_narrowed(record, parent, params, settings, source)
@@ -601,8 +595,6 @@ def _run_narrowed(record: Mapping[str, Any], parent: Any, params: Dict[str, Any]
     """Write the parent narrowed around the failing ``params`` and replay the recorded episode on it:
     ``(script, intervals, trace, failure, source)``, ``source`` completed from the replay when it had no trace.
     A replay that diverges is a ``replay`` rejection."""
-    from dv2s_gym.mining.exact_replay import narrowed_script, run_replay
-
     script, intervals = narrowed_script(parent.script, params)
     seed = int(record["seed"])
     expected = record["result"]["trajectory_hash"]
@@ -616,8 +608,6 @@ def _run_narrowed(record: Mapping[str, Any], parent: Any, params: Dict[str, Any]
                                   f"replay the failing episode (trajectory hash {result.trajectory_hash[:12]} != "
                                   f"recorded {expected[:12]})")
     if source.source_trace is None:  # the same episode step for step: its trace is the failure's own
-        from dv2s_gym.mining.interaction import failure_interaction
-
         trace.save(folder / ENTRY_TRACE)
         source_failure = source.source_failure
         if failure and failure.get("type") == source_failure.get("type"):
@@ -634,12 +624,6 @@ def _bank_replay(out: Dict[str, Any], record: Mapping[str, Any], bank, parent: A
                  replay: Mapping[str, Any], settings: ConversionSettings, source: _ReplaySource) -> None:
     """Add the narrowed script to ``bank`` as the failure's exact replay entry (``out["entry"]``), or say in
     ``out["note"]`` why there is none."""
-    import datetime
-
-    from dv2s_gym.mining.exact_replay import REPLAY_TAG, replay_name
-    from dv2s_gym.mining.interaction import interaction_sentence
-    from scenario_bank.bank import DuplicateScenarioError
-
     files = dict(source.files or {})
     seed, params, policy = replay["seed"], replay["params"], settings.policy
     source_failure = source.source_failure
@@ -683,8 +667,6 @@ def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, *, policy
     "note", "seconds"}``: ``kept`` with the entry's name, or ``rejected`` with the reason (a replay that
     diverges from the recorded episode, a bad record); ``kept`` with no entry and a ``note`` when the bank
     holds the scene already under another name."""
-    from scenario_bank.bank import Bank
-
     start = time.perf_counter()
     run_dir = Path(run_dir)
     cluster = cluster if cluster is not None else record.get("cluster")
@@ -841,8 +823,6 @@ class _Conversion:
         return out
 
     def _input(self) -> None:
-        from scenario_bank.bank import Bank
-
         self.stage = "input"
         self.source_failure = dict(self.record.get("failure") or {})
         k, threshold = self.settings.k, self.settings.threshold
@@ -886,7 +866,6 @@ class _Conversion:
 
     def _interaction(self) -> None:
         self.stage = "interaction"
-        from dv2s_gym.mining.interaction import failure_interaction
 
         self.interaction = failure_interaction(self.source_trace, self.source_failure)
         self.out["interaction"] = self.interaction
@@ -904,12 +883,9 @@ class _Conversion:
 
     def _describe(self) -> None:
         self.stage = "describe"
-        from dv2s_gym.mining.interaction import interaction_sentence
-        from dv2s_gym.pipeline.semantics.text import elements_from_text
-        from dv2s_gym.pipeline.stages import describe
 
         s = self.settings
-        description = describe(self.video, backend=s.dra, llm_config=s.llm_config)
+        description = stages.describe(self.video, backend=s.dra, llm_config=s.llm_config)
         self.details["dra_description"] = description.text
         events = interaction_sentence(self.interaction, known=description.elements) if s.describe_events else ""
         if events:  # what the trace says caused the failure, even where the clip does not show it
@@ -924,10 +900,9 @@ class _Conversion:
 
     def _generate(self) -> None:
         self.stage = "generate"
-        from dv2s_gym.pipeline.stages import generate
 
         s = self.settings
-        self.generation = generate(self.description.text, backend=s.sg, seed=s.seed, llm_config=s.llm_config)
+        self.generation = stages.generate(self.description.text, backend=s.sg, seed=s.seed, llm_config=s.llm_config)
         self.script_path = self.conversion / "scenario.scenic"
         _write(self.script_path, self.generation.script)
         self.out["script"] = _rel(self.script_path, self.run_dir)
@@ -936,9 +911,7 @@ class _Conversion:
 
     def _check(self) -> None:
         self.stage = "check"
-        from dataclasses import asdict
 
-        from dv2s_gym.pipeline.convert import check_scenario
 
         check = check_scenario(self.generation.script, seed=self.settings.seed,
                                name=f"mined failure {self.record.get('index')}", in_process=False)
@@ -952,7 +925,6 @@ class _Conversion:
 
     def _reproduction(self) -> None:
         self.stage = "reproduction"
-        from dv2s_gym.regress.stats import wilson_interval
 
         episodes, self.traces = _reproduce(self.script_path, self.settings.policy, self.settings,
                                            int(self.record["seed"]), self.source_failure, self.interaction)
@@ -979,8 +951,6 @@ class _Conversion:
 
     def _e2e_sc(self) -> None:
         self.stage = "e2e_sc"
-        from dv2s_gym.pipeline.metrics import e2e_sc
-        from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 
         truth = elements_from_trace(self.source_trace)
         scores = [e2e_sc(truth, elements_from_trace(trace)) for trace in self.traces]
@@ -1026,8 +996,6 @@ class _Conversion:
 
     def _provenance(self) -> Provenance:
         """The kept script's ``mined`` provenance."""
-        from dv2s_gym.pipeline.convert import conversion_provenance
-
         out, record, s = self.out, self.record, self.settings
         result = record.get("result") or {}
         return Provenance(

@@ -9,6 +9,7 @@ from typing import Any, Dict, Optional, Tuple, Union
 
 from dv2s_gym.mining.failure_video import rerun_failure, write_failure_video
 from dv2s_gym.mining.miner import read_records
+from envs.recording import write_frames
 from envs.trace_bounds import check_file_config
 
 __all__ = ["replay_mined_episode"]
@@ -52,7 +53,5 @@ def replay_mined_episode(folder: PathLike, episode: Optional[str], *, policy: Op
     else:
         _, _, frames = rerun_failure(record, render=bool(video), **options)
         if video:
-            from envs.recording import write_frames
-
             write_frames(video, frames, (settings.get("env_config") or {}).get("policy_frequency", 5))
     return record, policy

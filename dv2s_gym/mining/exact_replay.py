@@ -17,8 +17,15 @@ everything the same, a real divergence.
 
 from __future__ import annotations
 
+import os
 import re
+from dv2s_gym.mining.monitors import detect_failure
+from dv2s_gym.regress import identity
+from dv2s_gym.regress.identity import checkpoint_path, installed_version
+from envs.trace import TRACE_VERSION
 from pathlib import Path
+from scenario_bank.atomic import file_sha256
+from scenario_bank.bank import Bank, BankError, param_ranges
 from typing import Any, Dict, Mapping, Optional, Tuple
 
 __all__ = ["NARROW", "REPLAY_TAG", "narrowed_script", "replay_name", "run_replay", "replay_failure",
@@ -37,8 +44,6 @@ def narrowed_script(script: str, params: Mapping[str, Any], narrow: float = NARR
     of numbers rewritten to ``Range(lo, hi)``, ``narrow`` of the width on either side of its value; returns
     the script and the new intervals ``{name: [lo, hi]}``. Other parameters are left as they are. Raises
     ``ValueError`` for a value outside its range."""
-    from scenario_bank.bank import param_ranges
-
     intervals: Dict[str, list] = {}
     lines = script.splitlines(keepends=True)
     for i, line in enumerate(lines):
@@ -73,20 +78,12 @@ def replay_versions(policy: Any) -> Dict[str, Any]:
     "dv2s_gym_version", "dv2s_sources_sha256", "trace_version"}``; ``policy_sha256`` is the SHA-256 of the
     checkpoint a policy spec names (``dv2s-ppo``, ``model.zip``, ``ppo:PATH``, a folder), ``None`` for a
     driver, a ``module:attribute`` or a policy object."""
-    from envs.trace import TRACE_VERSION
-
-    from dv2s_gym.regress.identity import dv2s_sources_sha256, installed_version
-
     return {"policy_sha256": _checkpoint_sha256(policy), "dv2s_gym_version": installed_version(),
-            "dv2s_sources_sha256": dv2s_sources_sha256(), "trace_version": TRACE_VERSION}
+            "dv2s_sources_sha256": identity.dv2s_sources_sha256(), "trace_version": TRACE_VERSION}
 
 
 def _checkpoint_sha256(policy: Any) -> Optional[str]:
-    import os
-
-    from dv2s_gym.regress.identity import checkpoint_path
     from policies.registry import parse_spec
-    from scenario_bank.atomic import file_sha256
 
     if not isinstance(policy, (str, os.PathLike)):
         return None
@@ -139,7 +136,6 @@ def run_replay(scenario: Any, *, policy: Any, seed: int, params: Mapping[str, An
     """Run ``policy`` on ``scenario`` (a bank name or a ``.scenic`` path) with ``seed`` and ``params`` fixed;
     returns ``(EpisodeResult, EpisodeTrace, failure dict or None)`` (the miner's monitors)."""
     from envs.dv2s_env import DV2SEnv
-    from dv2s_gym.mining.monitors import detect_failure
     from policies.evaluation import run_episode
     from policies.registry import load_policy
 
@@ -164,8 +160,6 @@ def replay_failure(bank: Any, name: str, *, policy: Optional[Any] = None,
     parameters of its provenance ``replay`` and the policy that failed (or ``policy``); ``matches`` says
     whether the episode is the recorded failing one (same trajectory hash), and ``reason``, when it is not,
     why it may not be (:func:`mismatch_reason`: the checkpoint or dv2s-gym changed, or a real divergence)."""
-    from scenario_bank.bank import Bank, BankError
-
     bank = bank if isinstance(bank, Bank) else Bank(bank)
     entry = bank.get(name)
     replay = entry.provenance.replay

@@ -30,7 +30,11 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
 import gymnasium as gym
 import numpy as np
 
+from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, STALL_SPEED
 from envs.errors import DV2SError
+from envs.recording import VideoWriter
+from envs.safety_metrics import path_is_free
+from envs.trace import EpisodeTrace, TraceMismatchError
 
 __all__ = ["FailureReplayError", "FailureVideo", "VIDEO_CONFIG", "VideoSettings", "failure_step",
            "record_failure_video", "rerun_failure", "stall_end", "write_failure_video"]
@@ -69,9 +73,6 @@ def stall_end(trace, start: int, max_frames: int) -> int:
     """The last frame (0 = the reset) of the stall starting at frame ``start``: the ego stands (speed below
     the monitors' stall speed) with a free path ahead (:func:`envs.safety_metrics.path_is_free`) from
     ``start`` through it; at most ``start + max_frames - 1``, at least ``start``, within the trace."""
-    from dv2s_gym.mining.monitors import STALL_SPEED
-    from envs.safety_metrics import path_is_free
-
     last = start
     for k in range(start, min(len(trace.states), start + max(1, int(max_frames)))):
         states = trace.states[k]
@@ -169,7 +170,6 @@ def rerun_failure(record: Mapping[str, Any], *, policy: Any, bank_dir: Optional[
 
 def _replay_trace_frames(trace) -> List[np.ndarray]:
     from envs.replay import replay_trace
-    from envs.trace import TraceMismatchError
 
     config = {**trace.config, **VIDEO_CONFIG}
     frames: List[np.ndarray] = []
@@ -246,8 +246,6 @@ def write_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike]
                         settings: Optional[VideoSettings] = None, *, trace_path: Optional[PathLike] = None,
                         **options: Any) -> FailureVideo:
     """:func:`record_failure_video`, returning a :class:`FailureVideo` (window, result, trace)."""
-    from envs.recording import VideoWriter
-
     settings = VideoSettings.of(settings, options)
     stall_seconds = _check_window(settings)
     out_path = Path(out_path)
@@ -270,8 +268,6 @@ def write_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike]
 
 def _check_window(settings: VideoSettings) -> float:
     """The settings' ``stall_seconds`` (its default filled in), once ``before``, ``after`` and it are checked."""
-    from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS
-
     if settings.before < 0 or settings.after < 0:
         raise FailureReplayError(f"before and after must be >= 0 seconds, not {settings.before} and {settings.after}")
     stall_seconds = DEFAULT_STALL_SECONDS if settings.stall_seconds is None else float(settings.stall_seconds)
@@ -302,8 +298,6 @@ def _record_clip(record: Mapping[str, Any], settings: VideoSettings, stall_secon
 def _trace_clip(source: Any) -> tuple:
     """``(frames, None, trace, frequency, failure frame, False)`` of a saved trace (or its file), replayed with its
     recorded actions."""
-    from envs.trace import EpisodeTrace
-
     trace = source if isinstance(source, EpisodeTrace) else None
     if trace is None:
         try:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 from functools import lru_cache
+from scenario_bank.bank import Bank
 from typing import Any, Mapping, Optional, Tuple
 
 __all__ = ["scenario_family", "record_family"]
@@ -38,8 +39,6 @@ def _bank_stamp(bank_dir: Optional[str]) -> Tuple[int, ...]:
 
 @lru_cache(maxsize=4096)
 def _family(name: str, bank_dir: Optional[str], stamp: Tuple[int, ...]) -> str:
-    from scenario_bank.bank import Bank
-
     try:
         bank = Bank(bank_dir) if bank_dir else Bank()
     except Exception:  # noqa: BLE001 - no readable bank: every scenario is its own family

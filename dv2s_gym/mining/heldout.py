@@ -21,12 +21,16 @@ import json
 import os
 import sys
 from pathlib import Path
+from tqdm import tqdm
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 __all__ = ["HeldOutStore", "heldout_task", "evaluate_heldout", "paired_summary", "episode_failed"]
 
+import numpy as np
 from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.mining.tasks import HELDOUT, heldout_task
+from dv2s_gym.regress.stats import mcnemar_exact, PairedTable, wilson_interval
+from dv2s_gym.workers.pool import LocalBackend
 from dv2s_gym.workers.settings import WorkerSettings
 
 Episode = Tuple[str, int]
@@ -77,8 +81,6 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
              for scenario, seed in episodes if store.get(role, scenario, seed) is None]
     bar = None
     if progress:
-        from tqdm import tqdm
-
         bar = tqdm(total=len(episodes), initial=len(episodes) - len(tasks), desc=f"held-out {role}", unit="episode",
                    file=sys.stderr, dynamic_ncols=True)
     try:
@@ -88,8 +90,6 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
                 if bar is not None:
                     bar.update(1)
         elif tasks:
-            from dv2s_gym.workers.pool import LocalBackend
-
             def finished(record: Dict[str, Any]) -> None:
                 store.append({"policy": policy, "failed": None, "failure": None, "result": None, **record})
                 if bar is not None:
@@ -106,8 +106,6 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
 
 
 def _rate(k: int, n: int) -> Dict[str, Any]:
-    from dv2s_gym.regress.stats import wilson_interval
-
     low, high = wilson_interval(k, n)
     return {"k": k, "n": n, "rate": (k / n) if n else None, "low": low, "high": high}
 
@@ -123,10 +121,6 @@ def paired_summary(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[
 
     Pairs are matched by (scenario, seed); a pair with an error on either side is left out.
     """
-    from dv2s_gym.regress.stats import PairedTable, mcnemar_exact
-
-    import numpy as np
-
     after_by = {(r["scenario"], int(r["seed"])): r for r in after}
     pairs: List[Tuple[str, bool, bool]] = []
     errors = 0

@@ -24,6 +24,7 @@ from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 from dv2s_gym.mining.report_text import breadth, rate_text, seed_text
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, axis, escape, finite,
                                   fmt, fmt_interval, interval_mark, legend, row_label, svg, video_tag, x_scale)
+from scenario_bank.atomic import atomic_write_text
 
 __all__ = ["write_html", "render_html", "MAX_VIDEOS", "MAX_SCRIPT_CHARS"]
 
@@ -472,8 +473,6 @@ def write_html(report: Mapping[str, Any], path: Union[str, os.PathLike], *,
         embed_videos: embed up to ``max_videos`` failure videos as data URIs; the others are
             linked relative to the page.
     """
-    from scenario_bank.atomic import atomic_write_text
-
     path = Path(path)
     base = Path(base) if base is not None else Path(report.get("run_dir") or path.parent)
     page = render_html(report, base=base, page_dir=path.parent, embed_videos=embed_videos, max_videos=max_videos)

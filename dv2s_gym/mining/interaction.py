@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from dv2s_gym.pipeline.semantics.trace import _kind as semantic_kind, elements_from_trace
 from typing import Any, Dict, List, Mapping, Optional
 
 __all__ = ["MANOEUVRES", "LOOKBACK_S", "key_actor", "actor_manoeuvres", "failure_interaction", "shows_interaction",
@@ -39,8 +40,6 @@ _LANE_CHANGES = {"lane_change_left", "lane_change_right"}
 
 
 def _kind(trace, name: str) -> str:
-    from dv2s_gym.pipeline.semantics.trace import _kind as semantic_kind
-
     return semantic_kind(name, dict(getattr(trace, "kinds", {}) or {}))
 
 
@@ -99,8 +98,6 @@ def key_actor(trace, failure: Optional[Mapping[str, Any]]) -> Optional[str]:
 def actor_manoeuvres(trace, name: str) -> List[str]:
     """The :data:`MANOEUVRES` actor ``name`` performs in ``trace``, judged alone with the ego by the trace
     semantics' rules (in :data:`MANOEUVRES` order)."""
-    from dv2s_gym.pipeline.semantics.trace import elements_from_trace
-
     keep = {"ego", name}
     alone = dataclasses.replace(
         trace, states=[{k: v for k, v in step.items() if k in keep} for step in trace.states],

@@ -66,10 +66,28 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 
+from dv2s_gym.mining import heldout, loop_report, miner
+from dv2s_gym.mining.cluster import cluster_failures
 from dv2s_gym.mining.errored import errored_episodes, merged_messages, messages_text
+from dv2s_gym.mining.family import scenario_family
+from dv2s_gym.mining.heldout import episode_failed, failure_types, HeldOutStore, paired_summary
 from dv2s_gym.mining.jsonl import read_rows
-from dv2s_gym.mining.loop_verdict import recommendation
+from dv2s_gym.mining.loop_report import errored_note, errored_text, write_loop_reports
 from dv2s_gym.mining.loop_settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
+from dv2s_gym.mining.loop_verdict import (
+    EVIDENCE_FLOOR, evidence_floor_note, HELDOUT_ALPHA, heldout_worse, recommendation)
+from dv2s_gym.mining.miner import MineSettings
+from dv2s_gym.mining.replays import replay_clusters, replay_entries, REPLAYS_FILE
+from dv2s_gym.mining.split import family_of, split_by_cluster, split_by_family
+from dv2s_gym.progress_lines import log_line
+from dv2s_gym.regress import runner
+from dv2s_gym.regress.runner import BaselineReport, RegressSettings
+from dv2s_gym.regress.stats import PairedTable
+from dv2s_gym.workers.pool import default_workers
+from dv2s_gym.workers.settings import WorkerSettings
+from scenario_bank import select_scenarios
+from scenario_bank.atomic import atomic_write_json
+from scenario_bank.bank import Bank
 from scenario_bank.run_identity import check_identity
 
 __all__ = ["LoopError", "LoopReport", "LoopSettings", "run_loop", "DEFAULT_OUT", "DEFAULTS", "mined_entries",
@@ -143,8 +161,6 @@ class _State:
             self.data = {"settings": settings, "start": None, "rounds": []}
 
     def save(self) -> None:
-        from scenario_bank.atomic import atomic_write_json
-
         self.path.parent.mkdir(parents=True, exist_ok=True)
         atomic_write_json(self.path, self.data, indent=1)
 
@@ -200,7 +216,6 @@ def _working_bank(out: Path, bank_dir: Optional[str]) -> str:
     """The bank the loop adds to: ``bank_dir`` itself, or a copy of the shipped bank in ``out/bank``."""
     if bank_dir is not None:
         return str(Path(bank_dir).resolve())
-    from scenario_bank.bank import Bank
 
     target = out / "bank"
     if not target.is_dir() or not any(target.iterdir()):
@@ -228,7 +243,6 @@ def mined_entries(mine_out: os.PathLike | str, replays: bool = True) -> List[Dic
     converted = [entries[key] for key in sorted(entries)]
     if not replays:
         return converted
-    from dv2s_gym.mining.replays import replay_entries
 
     return converted + replay_entries(mine_out)
 
@@ -245,8 +259,6 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
             counted += record.get("avoidable") is not False  # as MineRun.avoidable
     clusters = None
     try:
-        from dv2s_gym.mining.cluster import cluster_failures
-
         clusters = len(set(cluster_failures(records).values()))
     except Exception:  # the count is informative; the loop goes on without it
         pass
@@ -257,7 +269,6 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
         if record.get("status") == "rejected" and (record.get("rejections") or record.get("reason")):
             reasons += [str(r) for r in record.get("rejections") or [record["reason"]]]  # every failed check
     converted = sum(statuses.values())
-    from dv2s_gym.mining.replays import REPLAYS_FILE
 
     replayed: Dict[str, int] = {}
     for row in read_rows(mine_out / REPLAYS_FILE):
@@ -329,8 +340,6 @@ def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[st
 
 
 def _log_default(line: str) -> None:
-    from dv2s_gym.progress_lines import log_line
-
     log_line(line)
 
 
@@ -356,7 +365,6 @@ def run_loop(policy: str = "dv2s-ppo", settings: Optional[LoopSettings] = None, 
     if out.exists() and not out.is_dir():
         raise LoopError(f"--out {out} is a file; choose a folder for the loop")
     loop = _open_loop(policy, settings, out, progress, log)
-    from dv2s_gym.mining.loop_verdict import evidence_floor_note
 
     note = evidence_floor_note(settings.min_heldout_episodes, settings.min_heldout_families)
     if note:
@@ -390,7 +398,6 @@ class _Loop:
 def _open_loop(policy: str, settings: LoopSettings, out: Path, progress: bool, log: Callable[[str], None]) -> _Loop:
     """The loop in ``out``: a new one recorded in ``loop.json``, or the recorded one checked against ``settings``;
     its working bank and starting scenarios."""
-    from dv2s_gym.workers.pool import default_workers
     from policies.training import TrainingError, with_reward_weights
 
     workers = int(settings.workers or default_workers())
@@ -402,8 +409,6 @@ def _open_loop(policy: str, settings: LoopSettings, out: Path, progress: bool, l
     state = _State(out / "loop.json", _recorded_settings(policy, settings, workers, env_config, fine_tune_config))
     bank = _working_bank(out, state.data["settings"]["bank_dir"])
     if state.data.get("start") is None:
-        from scenario_bank import select_scenarios
-
         names = sorted(select_scenarios(list(settings.scenarios) if settings.scenarios is not None else None, bank))
         if not names:
             raise LoopError("the scenario selection is empty; name bank scenarios or tag:<tag>")
@@ -513,8 +518,6 @@ def _next_start(loop: _Loop, number: int, current: str) -> str:
     """The policy round ``number + 1`` starts from: the one the verdict on rounds 1..``number`` recommends
     (:func:`~dv2s_gym.mining.loop_verdict.recommendation`: never a REJECTED or NOT ACCEPTED fine-tuned policy),
     recorded in round ``number``'s ``next_policy`` and ``next_policy_reason``."""
-    from dv2s_gym.mining import loop_report
-
     rounds = loop.state.data["rounds"][:number]
     record = rounds[-1]
     start = loop.state.data["settings"]["policy"]
@@ -550,17 +553,13 @@ def _earlier_round_spec(spec: Any, loop: _Loop, number: int) -> str:
 
 def _mine_step(loop: _Loop, number: int, current: str, round_dir: Path) -> Dict[str, Any]:
     """The ``mine`` step: mine ``current``'s failures into the working bank, keep exact replays of more."""
-    from dv2s_gym.mining.miner import MineSettings, WorkerSettings, mine
-
     s = loop.settings
-    mine(current, MineSettings(budget=s.budget, sampler=s.sampler, scenarios=loop.start_names, bank_dir=loop.bank,
-                               seed=s.seed * 1000 + number, env_config=loop.env_config, convert=True,
-                               max_conversions=s.max_conversions),
-         out=str(round_dir / "mine"), workers=WorkerSettings(workers=loop.workers), progress=loop.progress,
-         origin={"command": "dv2s loop", "seed": s.seed, "round": number})
+    miner.mine(current, MineSettings(budget=s.budget, sampler=s.sampler, scenarios=loop.start_names,
+                                     bank_dir=loop.bank, seed=s.seed * 1000 + number, env_config=loop.env_config,
+                                     convert=True, max_conversions=s.max_conversions),
+               out=str(round_dir / "mine"), workers=WorkerSettings(workers=loop.workers), progress=loop.progress,
+               origin={"command": "dv2s loop", "seed": s.seed, "round": number})
     if s.max_replays != 0 and (round_dir / "mine" / "settings.json").is_file():  # a miner's run folder
-        from dv2s_gym.mining.replays import replay_clusters
-
         replay_clusters(round_dir / "mine", bank_dir=loop.bank, max_replays=s.max_replays, progress=loop.progress)
     return {**_mining_summary(round_dir / "mine"), "kept": mined_entries(round_dir / "mine"),
             "folder": str(round_dir / "mine")}
@@ -583,8 +582,6 @@ def _count_scripts(bank: Path) -> int:
 
 def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Mapping[str, Any]]) -> None:
     """Say loudly when a step's episodes errored: they count in no rate and no test."""
-    from dv2s_gym.mining.loop_report import errored_text
-
     text = errored_text(errored)
     if not text:
         return
@@ -595,8 +592,6 @@ def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Map
 
 
 def _log_mined(loop: _Loop, number: int, mined: Mapping[str, Any]) -> None:
-    from dv2s_gym.mining.loop_report import errored_note
-
     s = loop.settings
     loop.log(f"round {number}: mined {mined['failures']} failures in {mined['episodes']} episodes"
              f"{errored_note(mined.get('errored') or {})}, "
@@ -628,8 +623,6 @@ def _skip_round(loop: _Loop, number: int, steps: Dict[str, Any]) -> None:
 def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, timed: _Timed) -> str:
     """The steps after the split: held-out before, fine-tune (+ control), held-out after, untouched set,
     regression; the fine-tuned policy's spec."""
-    from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout
-    from dv2s_gym.workers.settings import WorkerSettings
     from policies.training import EVAL_SEED_BASE
 
     s, record = loop.settings, timed.record
@@ -643,9 +636,9 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
     store_path = round_dir / "heldout.jsonl"
     if "before" not in steps:
         def before_step() -> Dict[str, Any]:
-            records = evaluate_heldout("before", current, episodes, store=HeldOutStore(store_path), bank_dir=loop.bank,
-                                       env_config=loop.env_config, workers=WorkerSettings(workers=loop.workers),
-                                       progress=loop.progress)
+            records = heldout.evaluate_heldout("before", current, episodes, store=HeldOutStore(store_path),
+                                               bank_dir=loop.bank, env_config=loop.env_config,
+                                               workers=WorkerSettings(workers=loop.workers), progress=loop.progress)
             return {"episodes": len(episodes), "done": bool(records), "errored": errored_episodes(records)}
 
         timed("before", before_step,
@@ -712,17 +705,14 @@ def _fine_tune_arms(loop: _Loop, number: int, current: str, round_dir: Path, tim
 def _after_step(loop: _Loop, policies: Mapping[str, Optional[str]], episodes: List[tuple], store,
                 families: Mapping[str, str]) -> Dict[str, Any]:
     """The ``after`` step: start, fine-tuned and control on the held-out episodes, compared pairwise."""
-    from dv2s_gym.mining.heldout import evaluate_heldout
-    from dv2s_gym.workers.settings import WorkerSettings
-
     common = dict(store=store, bank_dir=loop.bank, env_config=loop.env_config,
                   workers=WorkerSettings(workers=loop.workers))
-    before = evaluate_heldout("before", policies["before"], episodes, progress=False, **common)
-    after = evaluate_heldout("after", policies["after"], episodes, progress=loop.progress, **common)
+    before = heldout.evaluate_heldout("before", policies["before"], episodes, progress=False, **common)
+    after = heldout.evaluate_heldout("after", policies["after"], episodes, progress=loop.progress, **common)
     control_records = None
     if policies["control"] is not None:
-        control_records = evaluate_heldout("control", policies["control"], episodes, progress=loop.progress,
-                                           **common)
+        control_records = heldout.evaluate_heldout("control", policies["control"], episodes, progress=loop.progress,
+                                                   **common)
     s = loop.settings
     summary = heldout_comparison(before, after, control_records, min_episodes=s.min_heldout_episodes, seed=s.seed,
                                  families=families, min_families=s.min_heldout_families, margin=s.margin)
@@ -734,14 +724,13 @@ def _after_step(loop: _Loop, policies: Mapping[str, Optional[str]], episodes: Li
 def _regress_step(loop: _Loop, new_policy: str, current: str, round_dir: Path,
                   split: Mapping[str, Any]) -> Dict[str, Any]:
     """The ``regress`` step: the fine-tuned policy against the round's start on the starting bank's scenarios."""
-    from dv2s_gym.regress.runner import RegressSettings, WorkerSettings, run_regression
     from policies.training import EVAL_SEED_BASE
 
     s = loop.settings
     settings = RegressSettings(bank_dir=loop.bank, scenarios=loop.start_names, episodes=s.regress_episodes,
                                seed=EVAL_SEED_BASE, margin=s.margin, env_config=loop.env_config)
-    report = run_regression(new_policy, current, settings, workers=WorkerSettings(workers=loop.workers),
-                            out_dir=round_dir / "regress", progress=loop.progress)
+    report = runner.run_regression(new_policy, current, settings, workers=WorkerSettings(workers=loop.workers),
+                                   out_dir=round_dir / "regress", progress=loop.progress)
     summary = _regress_summary(report, round_dir / "regress" / "report.json", split.get("held_out_families", []))
     summary["errored"] = _regress_errored(report, {"baseline": "start", "candidate": "fine_tuned"})
     return summary
@@ -759,8 +748,6 @@ def underpowered(episodes: int, minimum: int, families: Optional[int] = None,
     held-out families (``families``, when known; ``tested``: families with a tested pair), or ``None``. Whatever the
     minimums, a round needs :data:`~dv2s_gym.mining.loop_verdict.EVIDENCE_FLOOR` episodes (below that no exact
     McNemar test can be significant) and one family."""
-    from dv2s_gym.mining.loop_verdict import EVIDENCE_FLOOR, HELDOUT_ALPHA
-
     reasons = []
     if episodes < max(minimum, EVIDENCE_FLOOR):
         reasons.append(f"only {episodes} held-out episode(s), fewer than the {minimum} needed "
@@ -782,8 +769,6 @@ def underpowered(episodes: int, minimum: int, families: Optional[int] = None,
 
 def _families_of(kept: Sequence[Mapping[str, Any]], held_out: Sequence[str], bank: Optional[str]) -> Dict[str, str]:
     """``{held-out scenario: its family}`` (:func:`dv2s_gym.mining.split.family_of`)."""
-    from dv2s_gym.mining.split import family_of
-
     wanted = set(held_out)
     families = {str(e["scenario"]): family_of(e) for e in _with_parents(kept, bank) if e["scenario"] in wanted}
     return {name: families.get(name, name) for name in held_out}
@@ -817,8 +802,6 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, a
                    label: str) -> Dict[str, Any]:
     """Fine-tune ``current`` into ``out`` on the working bank less ``excluded``: the mined scenarios upweighted
     (``with_mined``) or left out (the control arm); everything else identical between the two arms."""
-    from dv2s_gym.mining.family import scenario_family
-    from scenario_bank.bank import Bank
 
     # a held-out family's every member stays out too: exact replays of its failures and entries of earlier rounds,
     # at any depth (a member's family is the root of its provenance chain, not its immediate parent)
@@ -873,8 +856,6 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     (:func:`dv2s_gym.mining.loop_verdict.heldout_worse`, the verdict's held-out tests; ``None`` when not tested:
     below the minimums, or no control), each with its held-out families' harm rule at ``margin`` (default: the
     loop's default margin; :func:`dv2s_gym.mining.loop_verdict.family_harm`)."""
-    from dv2s_gym.mining.heldout import failure_types, paired_summary
-
     summary = paired_summary(before, after, seed=seed)
     summary["min_episodes"] = min_episodes
     scenarios = sorted({str(r["scenario"]) for r in before})
@@ -917,7 +898,6 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
         summary["vs_control"].update(underpowered=control_shortfall, relative_drop=None, mcnemar_p=None)
     # is the fine-tuned policy significantly worse than the start / the control on the held-out families
     # (loop_verdict.heldout_worse: the dv2s regress gate over the families); not tested below the minimums
-    from dv2s_gym.mining.loop_verdict import heldout_worse
 
     margin = DEFAULTS["margin"] if margin is None else float(margin)
     summary["margin"] = margin
@@ -939,9 +919,6 @@ def _family_tables(baseline: Sequence[Mapping[str, Any]], candidate: Sequence[Ma
                    families: Optional[Mapping[str, str]]) -> Dict[str, Any]:
     """``{held-out family: PairedTable}`` of ``candidate`` against ``baseline`` records, paired by (scenario, seed);
     a pair with an error on either side is left out."""
-    from dv2s_gym.mining.heldout import episode_failed
-    from dv2s_gym.regress.stats import PairedTable
-
     twins = {(r["scenario"], int(r["seed"])): r for r in candidate}
     outcomes: Dict[str, tuple] = {}
     for record in baseline:
@@ -960,7 +937,6 @@ def untouched_settings(seeds: int, env_config: Mapping[str, Any], margin: float,
                        bank_dir: Optional[os.PathLike | str] = None):
     """The regression settings of the untouched set: ``bank_dir`` (default :data:`UNTOUCHED_BANK`), ``seeds``
     seeds per scenario from ``EVAL_SEED_BASE``, the policy's ``env_config`` and the loop's ``margin``."""
-    from dv2s_gym.regress.runner import RegressSettings
     from policies.training import EVAL_SEED_BASE
 
     return RegressSettings(bank_dir=str(Path(bank_dir or UNTOUCHED_BANK).resolve()), episodes=seeds,
@@ -974,10 +950,8 @@ def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, s
     against start (``out/vs_start``), then the control against the fine-tuned policy's episodes of that run
     (``out/vs_control``: only the control runs). Failure rates, stall rates and mean speeds per policy, and
     the two comparisons' verdicts, differences and p-values."""
-    from dv2s_gym.regress.runner import BaselineReport, WorkerSettings, run_regression
-
-    first = run_regression(fine_tuned, start, settings, workers=WorkerSettings(workers=workers),
-                           out_dir=out / "vs_start", progress=progress)
+    first = runner.run_regression(fine_tuned, start, settings, workers=WorkerSettings(workers=workers),
+                                  out_dir=out / "vs_start", progress=progress)
     overall = first.get("overall") or {}
     result: Dict[str, Any] = {"scenarios": list((first.get("bank") or {}).get("scenarios") or []),
                               "seeds": settings.episodes, "policies": {"start": _measures(overall.get("baseline")),
@@ -987,8 +961,8 @@ def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, s
     if control is not None:
         # a measurement, not a gate: the fine-tuned policy is the reference whatever its own verdict was
         baseline = BaselineReport(out / "vs_start" / "report.json", role="candidate", accept_failed=True)
-        second = run_regression(control, baseline, settings, workers=WorkerSettings(workers=workers),
-                                out_dir=out / "vs_control", progress=progress)
+        second = runner.run_regression(control, baseline, settings, workers=WorkerSettings(workers=workers),
+                                       out_dir=out / "vs_control", progress=progress)
         result["policies"]["control"] = _measures((second.get("overall") or {}).get("candidate"))
         result["control_vs_fine_tuned"] = _comparison(second, out / "vs_control" / "report.json")
         result["errored"].update(_regress_errored(second, {"candidate": "control"}))
@@ -1012,8 +986,6 @@ def _comparison(report: Mapping[str, Any], path: Path) -> Dict[str, Any]:
 def _split(kept: Sequence[Mapping[str, Any]], fraction: float, seed: int, by: str = HOLDOUT_BY,
            bank: Optional[str] = None, held_families: Sequence[str] = (),
            tuned_families: Sequence[str] = ()) -> Dict[str, Any]:
-    from dv2s_gym.mining.split import split_by_cluster, split_by_family
-
     if by == "cluster":
         return split_by_cluster(kept, fraction, seed)
     return split_by_family(_with_parents(kept, bank), fraction, seed, held_families, tuned_families)
@@ -1058,7 +1030,6 @@ def _with_parents(kept: Sequence[Mapping[str, Any]], bank: Optional[str]) -> Lis
     entries = [dict(e) for e in kept]
     if bank is None:
         return entries
-    from dv2s_gym.mining.family import scenario_family
 
     for entry in entries:
         if not entry.get("parent"):
@@ -1104,8 +1075,6 @@ def _log_round(log: Callable[[str], None], number: int, steps: Mapping[str, Any]
 
 
 def _write(out: Path, state: _State) -> LoopReport:
-    from dv2s_gym.mining.loop_report import write_loop_reports
-
     tuned = [r["new_policy"] for r in state.data["rounds"] if r.get("new_policy")]
     last = tuned[-1] if tuned else state.data["settings"]["policy"]
     report = LoopReport(out=out, rounds=state.data["rounds"], policy=last, paths={}, settings=state.data["settings"])

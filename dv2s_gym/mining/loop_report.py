@@ -83,8 +83,15 @@ finished it yet (the loop was stopped; rerunning resumes it).
 
 from __future__ import annotations
 
+import os
 import re
+from dv2s_gym.mining.convert import cluster_slug
+from dv2s_gym.mining.errored import merged_messages, messages_text
+from dv2s_gym.mining.loop_verdict import ACCEPTED, evidence_floor_note, judge_round, recommendation
+from dv2s_gym.regress.report import build_report, load_report, write_json
+from html import escape
 from pathlib import Path
+from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from typing import Any, Dict, List, Mapping, Optional
 
 __all__ = ["write_loop_reports", "render_markdown", "render_html", "round_summary", "round_clips", "final_vs_start",
@@ -140,8 +147,6 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
     that changed between the rounds, gives ``{"error": reason}`` instead (and the verdict is then NOT ACCEPTED).
     ``folder``: the loop folder the reports are read from (default ``out``; see :func:`_regress_report_path`).
     """
-    from dv2s_gym.regress.report import build_report, load_report
-
     tested = [r for r in report.get("rounds", []) if ((r.get("steps") or {}).get("regress") or {}).get("report")]
     if len(tested) < 2:
         return None
@@ -168,8 +173,6 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
                           baseline=start["baseline"], episodes=episodes)
     path = None
     if out is not None:
-        from dv2s_gym.regress.report import write_json
-
         path = write_json(paired, Path(out) / FINAL_VS_START_DIR / "report.json")
     overall = paired.get("overall") or {}
     comparison = overall.get("comparison") or {}
@@ -188,8 +191,6 @@ def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = Non
     round that its own tests accepted (``None`` before two rounds were regression-tested), and, with two or more
     tested rounds, the report's own ``final_vs_start`` (its paired report written under ``out``). A policy the
     check rejected is never the policy to use (:func:`dv2s_gym.mining.loop_verdict.recommendation`)."""
-    from dv2s_gym.mining.loop_verdict import ACCEPTED, judge_round
-
     rounds = [dict(record) for record in report.get("rounds") or []]
     for index, record in enumerate(rounds):
         judged = judge_round(record)
@@ -319,7 +320,6 @@ def _errored_lines(record: Mapping[str, Any]) -> List[str]:
     total = _errored_total(record)
     lines = [f"- errored episodes (counted in no rate or test): " + ("**" if total else "") + "; ".join(parts)
              + ("**" if total else "")]
-    from dv2s_gym.mining.errored import merged_messages, messages_text
 
     merged = merged_messages([found for _, by in stages for found in by.values() if found])
     lines += [f"  - `{name}`: {messages_text(merged['messages'], merged['unlisted'], name)}"
@@ -465,28 +465,30 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
 
 def _recommendation(report: Mapping[str, Any]) -> Mapping[str, Any]:
     """The report's recommendation (worked out for a report written without one)."""
-    from dv2s_gym.mining.loop_verdict import recommendation
-
     return report.get("recommendation") or recommendation(report)
 
 
 def _floor_lines(settings: Mapping[str, Any]) -> List[str]:
     """The report's loud line when the held-out minimums are below what can ever give evidence, or none."""
-    from dv2s_gym.mining.loop_verdict import evidence_floor_note
-
     note = evidence_floor_note(int(settings.get("min_heldout_episodes", 0) or 0),
                                int(settings.get("min_heldout_families", 0) or 0))
     return [f"**WARNING: {note}.**", ""] if note else []
 
 
-def render_markdown(report: Mapping[str, Any]) -> str:
-    """The Markdown rendering of a loop report."""
+def _heading_lines(report: Mapping[str, Any]) -> List[str]:
+    """The report's title, where the loop started and ended, and its recommendation."""
     settings = report.get("settings", {})
-    lines: List[str] = [
+    return [
         "# dv2s loop", "",
         f"Started from `{settings.get('policy')}`; last fine-tuned policy `{report.get('policy')}`.", "",
         f"**{_recommendation(report)['sentence']}**", "",
         f"Policy to use: `{_recommendation(report)['policy']}`.", "",
+    ]
+
+
+def _settings_lines(settings: Mapping[str, Any]) -> List[str]:
+    """The loop's settings in one paragraph (what each round does), and the loud line on too low minimums."""
+    return [
         f"Per round: mining budget {settings.get('budget')} episodes ({settings.get('sampler')} sampler), at most "
         f"{'every' if settings.get('max_conversions') is None else settings.get('max_conversions')} cluster(s) converted, "
         f"{_replays_text(settings)}, "
@@ -501,6 +503,12 @@ def render_markdown(report: Mapping[str, Any]) -> str:
         f"overriding the policy's own in training only), regression test on the starting bank with "
         f"{settings.get('regress_episodes')} seeds per scenario (margin {settings.get('margin')}).", "",
         *_floor_lines(settings),
+    ]
+
+
+def _rounds_table_lines(report: Mapping[str, Any]) -> List[str]:
+    """The table of the rounds, one line each, and the final policy against the starting one under it."""
+    lines = [
         "| round | failures mined (against the policy) / episodes | clusters | kept | fine-tune / held-out scenarios "
         "| held-out failure rate start | control | fine-tuned | relative drop | McNemar p vs start | vs control "
         "| untouched failure rate start / control / fine-tuned | rest of the bank |",
@@ -515,89 +523,126 @@ def render_markdown(report: Mapping[str, Any]) -> str:
     final_line = _final_line(report.get("final_vs_start"))
     if final_line:
         lines += ["", final_line]
+    return lines
+
+
+def _mining_lines(mine: Mapping[str, Any], settings: Mapping[str, Any]) -> List[str]:
+    """A round's mining step: what was found, converted and kept, and every reason a conversion was rejected."""
+    if not mine:
+        return []
+    lines = [f"- mining ({mine.get('folder')}): {mine.get('episodes')} episodes, {mine.get('failures')} "
+             f"failures ({mine.get('failures_against_policy')} avoidable by the reference driver), "
+             f"{mine.get('clusters')} clusters, conversions {mine.get('conversions')}, "
+             f"exact replays of other clusters {mine.get('replays') or {}}, "
+             f"{sum(1 for e in mine.get('kept') or [] if e.get('replay'))} exact replay entries kept "
+             f"in all, {mine.get('errors')} episode errors"
+             + (f"; **{mine['clusters_not_converted']} clusters not converted** (at most "
+                f"{settings.get('max_conversions')} per round)" if mine.get("clusters_not_converted")
+                else "")
+             + (f"; **{mine['clusters_not_kept']} clusters skipped**, neither converted nor replayed "
+                f"(at most {settings.get('max_replays')} exact replays per round)"
+                if mine.get("clusters_not_kept") else "")]
+    reasons = mine.get("rejected_reasons") or []
+    for reason in reasons:  # every failed check of the conversion judge, each its own reason
+        lines.append(f"  - rejected: {reason}")
+    if (mine.get("rejected_reason_count") or 0) > len(reasons):
+        lines.append(f"  - and {mine['rejected_reason_count'] - len(reasons)} more rejection reasons "
+                     f"(conversions.jsonl in {mine.get('folder')})")
+    return lines
+
+
+def _split_lines(split: Mapping[str, Any]) -> List[str]:
+    """A round's split of the mined scenarios into fine-tuning and held-out ones (by family or by cluster)."""
+    if not split:
+        return []
+    if split.get("by") == "family":
+        return [f"- split by family ({split.get('groups')} family groups): fine-tune families "
+                f"{', '.join(split.get('fine_tune_families', [])) or 'none'} "
+                f"({', '.join(split.get('fine_tune', [])) or 'no scenario'}); held-out families "
+                f"{', '.join(split.get('held_out_families', [])) or 'none'} "
+                f"({', '.join(split.get('held_out', [])) or 'no scenario'}; their parents are not "
+                "fine-tuned on either)"]
+    return [f"- split by cluster ({split.get('groups')} groups): fine-tune "
+            f"{', '.join(split.get('fine_tune', [])) or 'none'}; held out "
+            f"{', '.join(split.get('held_out', [])) or 'none'}"]
+
+
+def _fine_tuning_lines(steps: Mapping[str, Any]) -> List[str]:
+    """A round's fine-tuning (by PPO or DAgger) and its control arm, one line each."""
+    lines = []
+    for key in ("fine_tune", "control"):
+        tuned = steps.get(key) or {}
+        if not tuned:
+            continue
+        if key == "control":
+            lines.append(f"- control arm: the same fine-tuning ({tuned.get('method')}, {tuned.get('steps')} "
+                         f"steps, same seed) on {tuned.get('scenarios')} scenarios, the "
+                         f"{tuned.get('mined_left_out')} mined scenario(s) left out: `{tuned.get('model')}`")
+            continue
+        if tuned.get("method") == "dagger":
+            agreement = tuned.get("agreement") or {}
+            lines.append(f"- fine-tuned by DAgger ({tuned.get('steps')} labelled steps, imitating "
+                         f"`{tuned.get('reference')}` on the policy's own states) on {tuned.get('scenarios')} "
+                         f"scenarios ({tuned.get('mined_upweighted')} mined, upweighted); agreement with the "
+                         f"reference on the {agreement.get('states')} labelled states "
+                         f"{agreement.get('source')} -> {agreement.get('fine_tuned')}"
+                         + "".join(f", resumed from iteration {r.get('from_iteration')}"
+                                   + (f" (+{r['steps_into_next']} steps)" if r.get("steps_into_next") else "")
+                                   for r in tuned.get("resumed") or [])
+                         + f": `{tuned.get('model')}`")
+        else:
+            lines.append(f"- fine-tuned by PPO {tuned.get('steps')} steps on {tuned.get('scenarios')} scenarios "
+                         f"({tuned.get('mined_upweighted')} mined, upweighted), training reward weights "
+                         f"{_weights((tuned.get('env_config') or {}).get('reward_weights'))}: "
+                         f"`{tuned.get('model')}`")
+    return lines
+
+
+def _regression_lines(regress: Mapping[str, Any]) -> List[str]:
+    """A round's regression test on the starting bank, and the held-out families' parents in it."""
+    if not regress:
+        return []
+    lines = [f"- regression test on the starting bank ({regress.get('episodes')} paired episodes): "
+             f"**{regress.get('verdict')}** - {regress.get('reason')}; failure rate new "
+             f"{_summary_rate(regress.get('new_failure_rate'))}, old "
+             f"{_summary_rate(regress.get('old_failure_rate'))}; report `{regress.get('report')}`"]
+    for name, row in (regress.get("held_out_parents") or {}).items():
+        lines.append(f"- held-out family's parent `{name}` (never fine-tuned on) in the regression test: "
+                     f"failure rate new {_summary_rate(row['new'].get('failure_rate'))}, old "
+                     f"{_summary_rate(row['old'].get('failure_rate'))}; stall rate new "
+                     f"{_summary_rate(row['new'].get('stall_rate'))}, old "
+                     f"{_summary_rate(row['old'].get('stall_rate'))}")
+    return lines
+
+
+def _round_lines(record: Mapping[str, Any], settings: Mapping[str, Any]) -> List[str]:
+    """A round's section: its policies and timings, then each step it ran, then where the next round starts."""
+    steps = record.get("steps", {})
+    lines = ["", f"## Round {record.get('round')}", "",
+             f"- policy: `{record.get('policy')}` -> fine-tuned policy `{record.get('new_policy', '-')}`",
+             f"- timings: {_seconds(record.get('timings', {}))}"]
+    lines += _errored_lines(record)
+    if steps.get("skipped"):
+        lines.append(f"- skipped: {steps['skipped']}")
+    lines += _mining_lines(steps.get("mine") or {}, settings)
+    lines += _split_lines(steps.get("split") or {})
+    lines += _fine_tuning_lines(steps)
+    lines += _heldout_lines(steps.get("after") or {})
+    lines += _untouched_lines(steps.get("untouched") or {})
+    lines += _regression_lines(steps.get("regress") or {})
+    if record.get("next_policy"):
+        lines.append(f"- the next round starts from `{record['next_policy']}` "
+                     f"({record.get('next_policy_reason')})")
+    return lines
+
+
+def render_markdown(report: Mapping[str, Any]) -> str:
+    """The Markdown rendering of a loop report: heading and recommendation, settings, the rounds' table, and a
+    section per round."""
+    settings = report.get("settings", {})
+    lines: List[str] = _heading_lines(report) + _settings_lines(settings) + _rounds_table_lines(report)
     for record in report.get("rounds", []):
-        steps = record.get("steps", {})
-        lines += ["", f"## Round {record.get('round')}", "",
-                  f"- policy: `{record.get('policy')}` -> fine-tuned policy `{record.get('new_policy', '-')}`",
-                  f"- timings: {_seconds(record.get('timings', {}))}"]
-        lines += _errored_lines(record)
-        if steps.get("skipped"):
-            lines.append(f"- skipped: {steps['skipped']}")
-        mine = steps.get("mine") or {}
-        if mine:
-            lines.append(f"- mining ({mine.get('folder')}): {mine.get('episodes')} episodes, {mine.get('failures')} "
-                         f"failures ({mine.get('failures_against_policy')} avoidable by the reference driver), "
-                         f"{mine.get('clusters')} clusters, conversions {mine.get('conversions')}, "
-                         f"exact replays of other clusters {mine.get('replays') or {}}, "
-                         f"{sum(1 for e in mine.get('kept') or [] if e.get('replay'))} exact replay entries kept "
-                         f"in all, {mine.get('errors')} episode errors"
-                         + (f"; **{mine['clusters_not_converted']} clusters not converted** (at most "
-                            f"{settings.get('max_conversions')} per round)" if mine.get("clusters_not_converted")
-                            else "")
-                         + (f"; **{mine['clusters_not_kept']} clusters skipped**, neither converted nor replayed "
-                            f"(at most {settings.get('max_replays')} exact replays per round)"
-                            if mine.get("clusters_not_kept") else ""))
-            reasons = mine.get("rejected_reasons") or []
-            for reason in reasons:  # every failed check of the conversion judge, each its own reason
-                lines.append(f"  - rejected: {reason}")
-            if (mine.get("rejected_reason_count") or 0) > len(reasons):
-                lines.append(f"  - and {mine['rejected_reason_count'] - len(reasons)} more rejection reasons "
-                             f"(conversions.jsonl in {mine.get('folder')})")
-        split = steps.get("split") or {}
-        if split:
-            if split.get("by") == "family":
-                lines.append(f"- split by family ({split.get('groups')} family groups): fine-tune families "
-                             f"{', '.join(split.get('fine_tune_families', [])) or 'none'} "
-                             f"({', '.join(split.get('fine_tune', [])) or 'no scenario'}); held-out families "
-                             f"{', '.join(split.get('held_out_families', [])) or 'none'} "
-                             f"({', '.join(split.get('held_out', [])) or 'no scenario'}; their parents are not "
-                             "fine-tuned on either)")
-            else:
-                lines.append(f"- split by cluster ({split.get('groups')} groups): fine-tune "
-                             f"{', '.join(split.get('fine_tune', [])) or 'none'}; held out "
-                             f"{', '.join(split.get('held_out', [])) or 'none'}")
-        for key in ("fine_tune", "control"):
-            tuned = steps.get(key) or {}
-            if not tuned:
-                continue
-            if key == "control":
-                lines.append(f"- control arm: the same fine-tuning ({tuned.get('method')}, {tuned.get('steps')} "
-                             f"steps, same seed) on {tuned.get('scenarios')} scenarios, the "
-                             f"{tuned.get('mined_left_out')} mined scenario(s) left out: `{tuned.get('model')}`")
-                continue
-            if tuned.get("method") == "dagger":
-                agreement = tuned.get("agreement") or {}
-                lines.append(f"- fine-tuned by DAgger ({tuned.get('steps')} labelled steps, imitating "
-                             f"`{tuned.get('reference')}` on the policy's own states) on {tuned.get('scenarios')} "
-                             f"scenarios ({tuned.get('mined_upweighted')} mined, upweighted); agreement with the "
-                             f"reference on the {agreement.get('states')} labelled states "
-                             f"{agreement.get('source')} -> {agreement.get('fine_tuned')}"
-                             + "".join(f", resumed from iteration {r.get('from_iteration')}"
-                                       + (f" (+{r['steps_into_next']} steps)" if r.get("steps_into_next") else "")
-                                       for r in tuned.get("resumed") or [])
-                             + f": `{tuned.get('model')}`")
-            else:
-                lines.append(f"- fine-tuned by PPO {tuned.get('steps')} steps on {tuned.get('scenarios')} scenarios "
-                             f"({tuned.get('mined_upweighted')} mined, upweighted), training reward weights "
-                             f"{_weights((tuned.get('env_config') or {}).get('reward_weights'))}: "
-                             f"`{tuned.get('model')}`")
-        lines += _heldout_lines(steps.get("after") or {})
-        lines += _untouched_lines(steps.get("untouched") or {})
-        regress = steps.get("regress") or {}
-        if regress:
-            lines.append(f"- regression test on the starting bank ({regress.get('episodes')} paired episodes): "
-                         f"**{regress.get('verdict')}** - {regress.get('reason')}; failure rate new "
-                         f"{_summary_rate(regress.get('new_failure_rate'))}, old "
-                         f"{_summary_rate(regress.get('old_failure_rate'))}; report `{regress.get('report')}`")
-            for name, row in (regress.get("held_out_parents") or {}).items():
-                lines.append(f"- held-out family's parent `{name}` (never fine-tuned on) in the regression test: "
-                             f"failure rate new {_summary_rate(row['new'].get('failure_rate'))}, old "
-                             f"{_summary_rate(row['old'].get('failure_rate'))}; stall rate new "
-                             f"{_summary_rate(row['new'].get('stall_rate'))}, old "
-                             f"{_summary_rate(row['old'].get('stall_rate'))}")
-        if record.get("next_policy"):
-            lines.append(f"- the next round starts from `{record['next_policy']}` "
-                         f"({record.get('next_policy_reason')})")
+        lines += _round_lines(record, settings)
     return "\n".join(lines) + "\n"
 
 
@@ -611,9 +656,6 @@ _CSS = ("body{font-family:system-ui,sans-serif;margin:2em;max-width:1100px}table
 
 def _markdown_to_html(lines: List[str]) -> str:
     """The few Markdown forms the round details use (headings, bullets, tables, bold) as HTML."""
-    import re
-    from html import escape
-
     def inline(text: str) -> str:
         text = escape(text)
         text = re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", text)
@@ -660,8 +702,6 @@ def _markdown_to_html(lines: List[str]) -> str:
 
 def _clips_html(clips: Mapping[str, Any]) -> str:
     """Each kept mined scenario's videos side by side (paths relative to the loop folder)."""
-    from html import escape
-
     parts = []
     for scenario, videos in clips.items():
         if not videos:
@@ -676,8 +716,6 @@ def _clips_html(clips: Mapping[str, Any]) -> str:
 def _rates_svg(title: str, bars: List[tuple]) -> str:
     """An inline SVG bar chart of failure rates with their 95 % intervals: ``bars`` = ``[(label, rate, low,
     high)]`` (``rate`` ``None``: no bar)."""
-    from html import escape
-
     bars = [b for b in bars if b[1] is not None]
     if not bars:
         return ""
@@ -724,8 +762,6 @@ def _round_figures(record: Mapping[str, Any]) -> str:
 def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[str, Any]]] = None) -> str:
     """A self-contained HTML page (inline CSS, nothing fetched) of the loop report; ``clips``: round -> scenario ->
     ``[{"path", "label"}]`` videos shown per round (:func:`round_clips`)."""
-    from html import escape
-
     settings = report.get("settings", {})
     rows = []
     for record in report.get("rounds", []):
@@ -777,8 +813,6 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
     """Per round, each kept mined scenario's failure clips, as paths relative to ``out``: the bank entry's own
     (``failure.webm`` and those of failures merged into it), else the mining run's
     (``failures/<cluster slug>/*.webm``)."""
-    import os
-
     settings = report.get("settings") or {}
     bank = Path(settings.get("bank_dir") or Path(out) / "bank")
     found: Dict[int, Dict[str, List[Dict[str, str]]]] = {}
@@ -796,8 +830,6 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
                       else f"failure merged into it ({video.parent.relative_to(entry_folder)})"
                       for video in found_videos]
             if not found_videos and mine.get("folder"):  # the bank entry is gone: the mining run's copy
-                from dv2s_gym.mining.convert import cluster_slug
-
                 folder = Path(mine["folder"]) / "failures" / cluster_slug(entry.get("cluster"), None)
                 found_videos = sorted(folder.glob("*.webm")) if folder.is_dir() else []
                 labels = [f"failure of cluster {entry.get('cluster')} (mining run)"] * len(found_videos)
@@ -814,11 +846,8 @@ def write_loop_reports(report: Mapping[str, Any], out: Path) -> Dict[str, Path]:
 
     With two or more regression-tested rounds, ``final_vs_start`` (:func:`final_vs_start`) is added to them, and to
     each accepted round the same check over the rounds up to it (:func:`with_cross_round_checks`)."""
-    from scenario_bank.atomic import atomic_write_json, atomic_write_text
-
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    from dv2s_gym.mining.loop_verdict import recommendation
 
     report = with_cross_round_checks(report, out)
     report["recommendation"] = recommendation(report)

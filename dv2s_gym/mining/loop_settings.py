@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Dict, Mapping, Optional, Tuple
 
+from dv2s_gym.mining.samplers import registered_samplers
 from envs.errors import DV2SError
 from scenario_bank.field_checks import (check_bool, check_choice, check_int, check_mapping, check_names,
                                         check_number, check_path)
@@ -101,7 +102,6 @@ class LoopSettings:
         for term, weight in self.fine_tune_reward.items():
             check_number(LoopError, f"--fine-tune-reward {term!r}", weight)
         check_bool(LoopError, "control (--no-control)", self.control)
-        from dv2s_gym.mining.samplers import registered_samplers
 
         # else round 1 starts (the working bank copied) before the miner refuses it
         check_choice(LoopError, "--sampler", self.sampler, registered_samplers())

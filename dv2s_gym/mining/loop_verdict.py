@@ -28,6 +28,7 @@ recommendation back to the starting policy, so it is never the policy to use.
 
 from __future__ import annotations
 
+from dv2s_gym.mining.loop_settings import DEFAULTS
 from typing import Any, Dict, Mapping, Optional
 
 __all__ = ["ACCEPTED", "REJECTED", "NOT_ACCEPTED", "EXIT_CODES", "CONTROL_ALPHA", "HELDOUT_ALPHA", "HELDOUT_TEST",
@@ -224,8 +225,6 @@ def heldout_worse(tables: Mapping[str, Any], against: str, margin: Optional[floa
 
 
 def _default_margin() -> float:
-    from dv2s_gym.mining.loop_settings import DEFAULTS
-
     return float(DEFAULTS["margin"])
 
 

@@ -41,25 +41,36 @@ import json
 import os
 import shutil
 import time
+from collections import Counter
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence
 
 import numpy as np
+from tqdm.auto import tqdm
 
+from dv2s_gym.mining import space as space_module
 from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, group
+from dv2s_gym.mining.convert import cluster_slug, CONVERSION_DIR, convert_failure, SETUP_ERRORS
 from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.failure_state import is_novel
 from dv2s_gym.mining.family import record_family, scenario_family
 from dv2s_gym.mining.jsonl import read_rows
+from dv2s_gym.mining.report import write_reports
 from dv2s_gym.mining.report_text import error_warning
 from dv2s_gym.mining.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
 from dv2s_gym.mining.settings import FEEDBACKS, MineSettings
 from dv2s_gym.mining.tasks import MINE
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
+from dv2s_gym.workers import backends
+from dv2s_gym.workers.errors import WorkerError
+from dv2s_gym.workers.pool import default_workers
 from dv2s_gym.workers.settings import WorkerSettings
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
+from scenario_bank.bank import Bank, BankError
 from scenario_bank.records import EpisodeRecord, RecordError
+from scenario_bank.run_identity import check_identity
 
 __all__ = ["MineRun", "MineSettings", "WorkerSettings", "FEEDBACKS", "mine", "read_records", "episode_seed",
            "SETTINGS_VERSION"]
@@ -120,16 +131,12 @@ class MineRun:
 
     def _errored_scenarios(self) -> str:
         """`` (scenario A 2, scenario B 1)``: where the errored episodes were; empty when none errored."""
-        from collections import Counter
-
         counts = Counter(str(r.get("scenario")) for r in self.errors)
         return f" ({', '.join(f'{name} {n}' for name, n in sorted(counts.items()))})" if counts else ""
 
     def summary(self) -> str:
         """A few lines for the terminal: episodes, failures, clusters, conversions, and a WARNING line when
         episodes ended in an error."""
-        from collections import Counter
-
         errors = len(self.errors)
         restarted = sum(1 for r in self.records if r.get("worker_restarts"))
         failures = self.failures
@@ -285,8 +292,6 @@ def _read_settings(path: Path) -> Optional[Dict[str, Any]]:
 
 def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path,
                   keys: Sequence[str] = _RESUME_KEYS) -> None:
-    from scenario_bank.run_identity import check_identity
-
     check_identity(saved, settings, keys, run=f"{out} holds a mining run",
                    fix="resume it with the same settings or pass another --out")
 
@@ -463,8 +468,6 @@ def _feedback(record: Dict[str, Any], seen: set, mode: str) -> float:
     if rho is None or record.get("error"):
         return 1.0
     if record.get("failure") and mode == "state-novelty":
-        from dv2s_gym.mining.failure_state import is_novel
-
         state = record.get("failure_state")
         scenario = str(record["scenario"])
         archive = [entry[2:] for entry in seen if isinstance(entry, tuple) and entry[:2] == ("state", scenario)]
@@ -553,8 +556,6 @@ def _remove_if_empty(out: Path) -> None:
 def _mine_in(out: Path, started: float, policy: str, settings: MineSettings, workers: WorkerSettings,
              progress: bool, reports: bool, origin: Optional[Mapping[str, Any]]) -> MineRun:
     """The body of :func:`mine` once the input is checked and the run folder exists."""
-    from dv2s_gym.workers.pool import default_workers
-
     bank_dir = str(Path(settings.bank_dir).resolve()) if settings.bank_dir else None
     if settings.convert:
         _own_bank(bank_dir)
@@ -581,8 +582,6 @@ def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional
               origin: Optional[Mapping[str, Any]]) -> tuple:
     """``(settings.json's content, the scene space)`` of the run in ``out``: a new run's settings, or a resumed
     run's checked against the ones asked (its own scenarios and batch when none are asked); written back."""
-    from dv2s_gym.mining.space import SceneSpace
-
     settings_path = out / "settings.json"
     saved = _read_settings(settings_path)
     batch = settings.batch or (saved["batch"] if saved else 4 * n_workers)
@@ -591,7 +590,7 @@ def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional
         _check_resume(saved, before_space, out, [key for key in _RESUME_KEYS if key not in _SPACE_KEYS])
     names = saved["scenarios"] if saved and settings.scenarios is None else None
     asked = list(settings.scenarios) if settings.scenarios is not None else None
-    space = SceneSpace(names or asked, bank_dir)
+    space = space_module.SceneSpace(names or asked, bank_dir)
     recorded = _settings(policy, settings, batch, space.scenarios, bank_dir, space.describe())
     if saved is not None:
         _check_resume(saved, recorded, out)
@@ -605,9 +604,6 @@ def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional
 def _run_episodes(out: Path, settings: Dict[str, Any], space, done: Dict[int, EpisodeRecord],
                   workers: WorkerSettings, n_workers: int, progress: bool) -> None:
     """Run the episodes of the run's budget not in ``done`` (recorded into it), on its schedule."""
-    from dv2s_gym.workers.errors import WorkerError
-    from dv2s_gym.workers.backends import get_backend
-
     budget, batch = settings["budget"], settings["batch"]
     window, scene_sampler = None, None
     if settings["schedule"] == "window":
@@ -617,7 +613,8 @@ def _run_episodes(out: Path, settings: Dict[str, Any], space, done: Dict[int, Ep
     appender = _Appender(out / "episodes.jsonl")
     bar = _progress(progress, budget, len([i for i in done if i < budget]))
     try:
-        pool = get_backend(workers.backend, workers=n_workers, address=workers.address, timeout=workers.timeout)
+        pool = backends.get_backend(workers.backend, workers=n_workers, address=workers.address,
+                                    timeout=workers.timeout)
     except WorkerError as error:
         appender.close()
         raise MiningError(str(error)) from None
@@ -678,8 +675,6 @@ def _own_bank(bank_dir: os.PathLike | str) -> None:
     Miners started at the same moment on one new folder all copy; the first copy lands (atomically) and
     the others, refused because the folder is no longer empty, use it.
     """
-    from scenario_bank.bank import Bank, BankError
-
     if _has_entries(Path(bank_dir)):
         return
     try:
@@ -702,9 +697,6 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
     ``max_conversions`` conversions are made in the run (``None``: every cluster). Each conversion is appended to ``conversions.jsonl`` when it ends, so a
     resumed run converts the remaining clusters only.
     """
-    from dv2s_gym.mining.convert import SETUP_ERRORS, convert_failure
-    from scenario_bank.bank import Bank
-
     if bank_dir is None:
         raise MiningError("converting failures adds scenarios to a bank: pass a writable bank folder "
                           "(--bank DIR); the shipped bank is read-only")
@@ -771,7 +763,6 @@ def _reached_bank(bank, out: Path, cluster: str) -> Optional[Dict[str, Any]]:
         for status, provenance in found:
             if provenance.get("run") != run or provenance.get("cluster") != cluster:
                 continue
-            from dv2s_gym.mining.convert import CONVERSION_DIR, cluster_slug
 
             folder = Path(out) / "failures" / cluster_slug(cluster, provenance.get("index"))
             video, script = folder / "failure.webm", folder / CONVERSION_DIR / "scenario.scenic"
@@ -788,16 +779,11 @@ def _reached_bank(bank, out: Path, cluster: str) -> Optional[Dict[str, Any]]:
 
 
 def _write_reports(out: Path) -> Dict[str, Path]:
-    try:
-        from dv2s_gym.mining.report import write_reports
-    except ImportError:  # the report module is optional while it is being built
-        return {}
     return write_reports(out)
 
 
 def _progress(enabled: bool, total: int, initial: int, desc: str = "mining"):
     if not enabled:
         return None
-    from tqdm.auto import tqdm
 
     return tqdm(total=total, initial=initial, desc=desc, unit="ep", dynamic_ncols=True)

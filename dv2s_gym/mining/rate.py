@@ -29,6 +29,7 @@ Records without a proposal density (a sampler that has none, or a run written be
 from __future__ import annotations
 
 import math
+from statistics import NormalDist
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence
 
 from dv2s_gym.mining.samplers import is_uniform
@@ -63,8 +64,6 @@ def weighted_rate(outcomes: Sequence[float], weights: Sequence[float], confidenc
     if failures and variance > 0.0 and shown >= 1.0:
         # heavy weights pushed the estimate to 1 or past it: p (1 - p) says nothing there, so the interval is the
         # normal one of the estimate itself (cut at 1) and the effective sample size Kish's
-        from statistics import NormalDist
-
         z = NormalDist().inv_cdf(0.5 + confidence / 2)
         return {"value": shown, "raw": value, "low": max(0.0, value - z * math.sqrt(variance)), "high": 1.0,
                 "ess": kish, "n": n, "failures": failures}
@@ -84,7 +83,6 @@ def _wilson(p: float, n: float, confidence: float) -> tuple:
     if float(n).is_integer() and (p * n).is_integer() and confidence == 0.95:
         low, high = wilson_interval(int(round(p * n)), int(n))
         return float(low), float(high)
-    from statistics import NormalDist
 
     z = NormalDist().inv_cdf(0.5 + confidence / 2)
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)

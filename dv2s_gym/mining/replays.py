@@ -17,7 +17,13 @@ import os
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
+from dv2s_gym.mining import convert
+from dv2s_gym.mining.cluster import group
+from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.family import record_family
 from dv2s_gym.mining.jsonl import read_rows
+from dv2s_gym.mining.miner import _Appender, _progress, read_records
+from scenario_bank.bank import Bank
 
 __all__ = ["REPLAYS_FILE", "replay_clusters", "replay_order", "replay_entries"]
 
@@ -33,12 +39,6 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
     the families (:func:`replay_order`). The representative failure is the
     one the conversion would take (lowest robustness, then lowest index). Returns every row of the run's
     ``replays.jsonl`` (:func:`dv2s_gym.mining.convert.replay_failure_entry`'s records)."""
-    from dv2s_gym.mining.cluster import group
-    from dv2s_gym.mining.convert import replay_failure_entry
-    from dv2s_gym.mining.errors import MiningError
-    from dv2s_gym.mining.miner import _Appender, _progress, read_records
-    from scenario_bank.bank import Bank
-
     run_dir = Path(run_dir)
     try:
         settings = json.loads((run_dir / "settings.json").read_text(encoding="utf-8"))
@@ -61,11 +61,11 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
     bar = _progress(progress, len(todo), 0, desc="exact replays")
     try:
         for cluster, record in todo:
-            row = replay_failure_entry(dict(record, cluster=cluster), run_dir, policy=settings["policy"], bank=bank,
-                                       env_config=settings.get("env_config"), cluster=cluster,
-                                       bank_dir=settings.get("bank_dir"),  # the bank the run mined (the parents')
-                                       monitor={key: settings[key] for key in ("ttc_threshold", "stall_seconds")
-                                                if settings.get(key) is not None})
+            row = convert.replay_failure_entry(dict(record, cluster=cluster), run_dir, policy=settings["policy"],
+                                               bank=bank, env_config=settings.get("env_config"), cluster=cluster,
+                                               bank_dir=settings.get("bank_dir"),  # the bank the run mined (the parents')
+                                               monitor={key: settings[key] for key in ("ttc_threshold", "stall_seconds")
+                                                        if settings.get(key) is not None})
             appender.append(row)
             existing.append(row)
             if bar is not None:
@@ -86,8 +86,6 @@ def replay_order(groups: Mapping[str, Sequence[Mapping[str, Any]]]) -> List[Tupl
     failures, then the cluster id). Clusters without an avoidable failure get none. The representative is the
     failure a conversion would take (lowest robustness, then lowest index). Deterministic: a function of
     ``groups`` only."""
-    from dv2s_gym.mining.family import record_family
-
     by_family: Dict[str, List[Tuple[int, str, Dict[str, Any]]]] = {}
     for cluster, members in groups.items():
         avoidable = [r for r in members if r.get("avoidable") is not False]
@@ -120,8 +118,6 @@ def replay_entries(run_dir: os.PathLike | str) -> List[Dict[str, Any]]:
         parent = row.get("scenario")
         if not parent:  # conversion rows do not name the parent: the failing episode does
             if episodes is None:
-                from dv2s_gym.mining.miner import read_records
-
                 episodes = {r.get("index"): r for r in read_records(run_dir / "episodes.jsonl")}
             parent = (episodes.get(row.get("index")) or {}).get("scenario")
         found[name] = {"cluster": str(row.get("cluster")), "scenario": name, "parent": parent, "reproduction": None,

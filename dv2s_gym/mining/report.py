@@ -91,13 +91,15 @@ from pathlib import Path
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.mining.behaviour import behaviour_of
+from dv2s_gym.mining.cluster import cluster_failures
 from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.html import write_html
 from dv2s_gym.mining.rate import rate_estimates
-from dv2s_gym.mining.report_text import breadth, rate_text, seed_text
+from dv2s_gym.mining.report_text import breadth, error_warning, rate_text, seed_text
 from dv2s_gym.mining.report_text import number_text as _num
 from dv2s_gym.mining.report_text import percent_text as _pct
-from dv2s_gym.regress.stats import wilson_interval
 from dv2s_gym.regress.identity import installed_version
+from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 
 __all__ = [
@@ -303,8 +305,6 @@ def _representative(members: Sequence[Dict[str, Any]], conversion: Optional[Mapp
 
 def _cluster_of(records: Sequence[Dict[str, Any]]) -> Dict[int, str]:
     """Cluster id of every failed episode, from the mining core's clustering."""
-    from dv2s_gym.mining.cluster import cluster_failures
-
     mapping = cluster_failures(list(records))
     return {int(index): str(cluster) for index, cluster in dict(mapping).items()}
 
@@ -325,101 +325,119 @@ def build_report(run_dir: PathLike, *, created: Optional[str] = None) -> Dict[st
     return report
 
 
-def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Mapping[str, Any]],
-                              conversions: Sequence[Mapping[str, Any]], clusters: Mapping[int, str], *,
-                              created: Optional[str] = None) -> Dict[str, Any]:
-    """The report dict from records already read: ``clusters`` maps each failed episode's index to its cluster id.
+def _episode_errors(episodes: Sequence[Mapping[str, Any]], default_sampler: str) -> List[Dict[str, Any]]:
+    """The episodes that errored: index, sampler, scenario, seed and the error."""
+    return [{"index": int(r["index"]), "sampler": str(r.get("sampler") or default_sampler),
+             "scenario": r.get("scenario"), "seed": r.get("seed"), "error": str(r["error"])}
+            for r in episodes if r.get("error")]
+
+
+def _worker_restarts(episodes: Sequence[Mapping[str, Any]]) -> List[Dict[str, Any]]:
+    """The episodes a new worker finished (their worker crashed or hung), with what happened to it."""
+    return [{"index": int(r["index"]), "scenario": r.get("scenario"), "seed": r.get("seed"),
+             "problems": [str(p) for p in r["worker_restarts"]]} for r in episodes if r.get("worker_restarts")]
+
+
+def _failures(ok: Sequence[Mapping[str, Any]], clusters: Mapping[int, str],
+              settings: Mapping[str, Any]) -> List[Dict[str, Any]]:
+    """An entry for each failed episode of those that ran, with its cluster id.
 
     Raises :class:`MiningReportError` when a failed episode has no cluster id.
     """
-    default_sampler = str(settings.get("sampler") or "unknown")
-    episodes = sorted(episodes, key=lambda r: int(r["index"]))
-    ok = [r for r in episodes if not r.get("error")]
-    errors = [{"index": int(r["index"]), "sampler": str(r.get("sampler") or default_sampler),
-               "scenario": r.get("scenario"), "seed": r.get("seed"), "error": str(r["error"])}
-              for r in episodes if r.get("error")]
-    restarts = [{"index": int(r["index"]), "scenario": r.get("scenario"), "seed": r.get("seed"),
-                 "problems": [str(p) for p in r["worker_restarts"]]} for r in episodes if r.get("worker_restarts")]
     failed = [r for r in ok if r.get("failure")]
     missing = [int(r["index"]) for r in failed if int(r["index"]) not in clusters]
     if missing:
         raise MiningReportError(f"the clustering gave no cluster to failed episode(s) {missing[:10]}; "
                                 "this is a bug in dv2s_gym.mining.cluster.cluster_failures, please report it")
-    failures = [_failure_entry(r, clusters[int(r["index"])], settings) for r in failed]
+    return [_failure_entry(r, clusters[int(r["index"])], settings) for r in failed]
 
-    # conversions, attached to the cluster of their representative episode
-    by_cluster_conversions: Dict[str, List[Mapping[str, Any]]] = {}
+
+def _conversions_by_cluster(conversions: Sequence[Mapping[str, Any]],
+                            clusters: Mapping[int, str]) -> Dict[str, List[Mapping[str, Any]]]:
+    """The conversions, attached to the cluster of their representative episode."""
+    by_cluster: Dict[str, List[Mapping[str, Any]]] = {}
     for conversion in conversions:
         index = conversion.get("index")
         cluster = clusters.get(int(index)) if isinstance(index, int) else None
         cluster = cluster or str(conversion.get("cluster"))
-        by_cluster_conversions.setdefault(cluster, []).append(conversion)
+        by_cluster.setdefault(cluster, []).append(conversion)
+    return by_cluster
+
+
+def _primary_conversion(found: Sequence[Mapping[str, Any]]) -> Optional[Mapping[str, Any]]:
+    """The conversion of a cluster that counts: kept before merged before rejected, else the first."""
     status_rank = {s: i for i, s in enumerate(STATUS_ORDER)}
+    return min(found, key=lambda c: status_rank.get(c.get("status"), len(STATUS_ORDER))) if found else None
 
-    def primary(cluster: str) -> Optional[Mapping[str, Any]]:
-        found = by_cluster_conversions.get(cluster) or []
-        return min(found, key=lambda c: status_rank.get(c.get("status"), len(STATUS_ORDER))) if found else None
 
+def _cluster_entry(cluster_id: str, members: Sequence[Dict[str, Any]],
+                   conversion: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
+    """A cluster's entry: its representative, its members' counts and parameter region, and its conversion."""
+    representative = _representative(members, conversion)
+    parts = cluster_id.split("/", 2)
+    behaviour = behaviour_of(representative)
+    reproduction = (conversion or {}).get("reproduction")
+    return {
+        "id": cluster_id,
+        "scenario": representative["scenario"],
+        "family": representative["family"],
+        "scenarios": sorted({str(m["scenario"]) for m in members}),
+        "type": representative["type"],
+        "kind": parts[1] if len(parts) == 3 else representative["kind"],
+        "region": parts[2] if len(parts) == 3 else cluster_id,
+        "behaviour": behaviour,
+        "size": len(members),
+        "avoidable": sum(m["avoidable"] is True for m in members),
+        "unavoidable": sum(m["avoidable"] is False for m in members),
+        "unknown": sum(m["avoidable"] is None for m in members),
+        "samplers": dict(sorted(Counter(m["sampler"] for m in members).items())),
+        "first_index": min(m["index"] for m in members),
+        "params": _param_region(members),
+        "collision_types": dict(sorted(Counter(str(m["collision_type"]) for m in members
+                                               if m["collision_type"]).items())),
+        "with_kinds": dict(sorted(Counter(str(m["with_kind"]) for m in members if m["with_kind"]).items())),
+        "representative": representative,
+        "video": (conversion or {}).get("video"),
+        "status": (conversion or {}).get("status") or NOT_CONVERTED,
+        "reason": (conversion or {}).get("reason"),
+        "bank_entry": (conversion or {}).get("bank_entry"),
+        "merged_into": (conversion or {}).get("merged_into"),
+        "reproduction": reproduction,
+        "reproduction_rate": (reproduction or {}).get("rate") if isinstance(reproduction, Mapping) else None,
+        "e2e_sc": (conversion or {}).get("e2e_sc"),
+        "description": (conversion or {}).get("description"),
+        "script": (conversion or {}).get("script"),
+        "conversion": dict(conversion) if conversion is not None else None,
+    }
+
+
+def _cluster_entries(failures: Sequence[Dict[str, Any]], conversions: Sequence[Mapping[str, Any]],
+                     clusters: Mapping[int, str]) -> List[Dict[str, Any]]:
+    """Every cluster's entry, the most avoidable failures first, then the largest, then the first found."""
+    by_cluster_conversions = _conversions_by_cluster(conversions, clusters)
     members_of: Dict[str, List[Dict[str, Any]]] = {}
     for failure in failures:
         members_of.setdefault(failure["cluster"], []).append(failure)
-    cluster_entries: List[Dict[str, Any]] = []
-    for cluster_id, members in members_of.items():
-        conversion = primary(cluster_id)
-        representative = _representative(members, conversion)
-        parts = cluster_id.split("/", 2)
-        behaviour = behaviour_of(representative)
-        reproduction = (conversion or {}).get("reproduction")
-        cluster_entries.append({
-            "id": cluster_id,
-            "scenario": representative["scenario"],
-            "family": representative["family"],
-            "scenarios": sorted({str(m["scenario"]) for m in members}),
-            "type": representative["type"],
-            "kind": parts[1] if len(parts) == 3 else representative["kind"],
-            "region": parts[2] if len(parts) == 3 else cluster_id,
-            "behaviour": behaviour,
-            "size": len(members),
-            "avoidable": sum(m["avoidable"] is True for m in members),
-            "unavoidable": sum(m["avoidable"] is False for m in members),
-            "unknown": sum(m["avoidable"] is None for m in members),
-            "samplers": dict(sorted(Counter(m["sampler"] for m in members).items())),
-            "first_index": min(m["index"] for m in members),
-            "params": _param_region(members),
-            "collision_types": dict(sorted(Counter(str(m["collision_type"]) for m in members
-                                                   if m["collision_type"]).items())),
-            "with_kinds": dict(sorted(Counter(str(m["with_kind"]) for m in members if m["with_kind"]).items())),
-            "representative": representative,
-            "video": (conversion or {}).get("video"),
-            "status": (conversion or {}).get("status") or NOT_CONVERTED,
-            "reason": (conversion or {}).get("reason"),
-            "bank_entry": (conversion or {}).get("bank_entry"),
-            "merged_into": (conversion or {}).get("merged_into"),
-            "reproduction": reproduction,
-            "reproduction_rate": (reproduction or {}).get("rate") if isinstance(reproduction, Mapping) else None,
-            "e2e_sc": (conversion or {}).get("e2e_sc"),
-            "description": (conversion or {}).get("description"),
-            "script": (conversion or {}).get("script"),
-            "conversion": dict(conversion) if conversion is not None else None,
-        })
-    cluster_entries.sort(key=lambda c: (-c["avoidable"], -c["size"], c["first_index"]))
-    unavoidable_ids = {c["id"] for c in cluster_entries if c["unavoidable"] == c["size"]}
+    entries = [_cluster_entry(cluster_id, members, _primary_conversion(by_cluster_conversions.get(cluster_id) or []))
+               for cluster_id, members in members_of.items()]
+    entries.sort(key=lambda c: (-c["avoidable"], -c["size"], c["first_index"]))
+    return entries
 
-    # counts
-    statuses = Counter(str(c.get("status")) for c in conversions)
-    # every check the judge failed is a reason of its own (``rejections``; the first is ``reason``)
-    rejected = [{"cluster": c.get("cluster"), "index": c.get("index"), "stage": c.get("stage") or _stage(c.get("reason")),
-                 "reason": "; ".join(c.get("rejections") or []) or c.get("reason"),
-                 "rejections": list(c.get("rejections") or ([c["reason"]] if c.get("reason") else []))}
-                for c in conversions if c.get("status") == "rejected"]
-    seconds = [float(c["seconds"]) for c in conversions
-               if isinstance(c.get("seconds"), (int, float)) and math.isfinite(float(c["seconds"]))]
-    stage_seconds: Dict[str, List[float]] = {}
-    for conversion in conversions:
-        for stage, value in (conversion.get("timings") or {}).items():
-            if isinstance(value, (int, float)) and math.isfinite(float(value)):
-                stage_seconds.setdefault(str(stage), []).append(float(value))
-    counts = {
+
+def _rejected_conversions(conversions: Sequence[Mapping[str, Any]]) -> List[Dict[str, Any]]:
+    """The rejected conversions: every check the judge failed is a reason of its own (``rejections``; the first
+    is ``reason``)."""
+    return [{"cluster": c.get("cluster"), "index": c.get("index"), "stage": c.get("stage") or _stage(c.get("reason")),
+             "reason": "; ".join(c.get("rejections") or []) or c.get("reason"),
+             "rejections": list(c.get("rejections") or ([c["reason"]] if c.get("reason") else []))}
+            for c in conversions if c.get("status") == "rejected"]
+
+
+def _failure_counts(ok: Sequence[Mapping[str, Any]], errors: Sequence[Mapping[str, Any]],
+                    restarts: Sequence[Mapping[str, Any]], failures: Sequence[Mapping[str, Any]],
+                    cluster_entries: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
+    """The counts of episodes, failures and clusters."""
+    return {
         "episodes": len(ok),
         "errors": len(errors),
         "worker_restarts": len(restarts),
@@ -435,7 +453,22 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
         "collisions": sum(f["type"] == "collision" for f in failures),
         "stalls": sum(f["type"] == "stall" for f in failures),
         "avoidable_clusters": sum(c["avoidable"] > 0 for c in cluster_entries),
-        "unavoidable_clusters": len(unavoidable_ids),
+        "unavoidable_clusters": len({c["id"] for c in cluster_entries if c["unavoidable"] == c["size"]}),
+    }
+
+
+def _conversion_counts(conversions: Sequence[Mapping[str, Any]],
+                       rejected: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
+    """The counts of conversions by status and stage, their times, and the judge's parameter check."""
+    statuses = Counter(str(c.get("status")) for c in conversions)
+    seconds = [float(c["seconds"]) for c in conversions
+               if isinstance(c.get("seconds"), (int, float)) and math.isfinite(float(c["seconds"]))]
+    stage_seconds: Dict[str, List[float]] = {}
+    for conversion in conversions:
+        for stage, value in (conversion.get("timings") or {}).items():
+            if isinstance(value, (int, float)) and math.isfinite(float(value)):
+                stage_seconds.setdefault(str(stage), []).append(float(value))
+    return {
         "converted": len(conversions),
         "kept": statuses["kept"],
         "merged": statuses["merged"],
@@ -451,46 +484,59 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
                                        for c in conversions),
     }
 
-    # per sampler
-    names = sorted({str(r.get("sampler") or default_sampler) for r in episodes} | {default_sampler})
-    samplers: Dict[str, Any] = {}
-    for name in names:
-        mine = [r for r in episodes if str(r.get("sampler") or default_sampler) == name]
-        ran = [r for r in mine if not r.get("error")]
-        found = [f for f in failures if f["sampler"] == name]
-        avoidable = [f for f in found if f["avoidable"] is True]
-        seen: set = set()
-        discovery: List[List[int]] = []
-        first_failure = None
-        for position, record in enumerate(ran, 1):
-            if record.get("failure"):
-                first_failure = first_failure or position
-                cluster = clusters[int(record["index"])]
-                if cluster not in seen:
-                    seen.add(cluster)
-                    discovery.append([position, len(seen)])
-        if ran and (not discovery or discovery[-1][0] != len(ran)):
-            discovery.append([len(ran), len(seen)])
-        n = len(ran)
-        distinct = len({f["cluster"] for f in found})
-        distinct_avoidable = len({f["cluster"] for f in avoidable})
-        samplers[name] = {
-            "episodes": n,
-            "errors": len(mine) - n,
-            "failures": len(found),
-            "avoidable_failures": len(avoidable),
-            "failures_per_100": _per_100(len(found), n),
-            "avoidable_failures_per_100": _per_100(len(avoidable), n),
-            "clusters": distinct,
-            "avoidable_clusters": distinct_avoidable,
-            "clusters_per_100": 100.0 * distinct / n if n else None,
-            "avoidable_clusters_per_100": 100.0 * distinct_avoidable / n if n else None,
-            "episodes_to_first_failure": first_failure,
-            "discovery": discovery,
-        }
 
-    rate = rate_estimates(settings, episodes)  # errored episodes are left out of the rate, counted as drawn
-    # per scenario
+def _sampler_entry(mine: Sequence[Mapping[str, Any]], found: Sequence[Mapping[str, Any]],
+                   clusters: Mapping[int, str]) -> Dict[str, Any]:
+    """One sampler's episodes (``mine``) and failures (``found``): rates per 100 episodes and its discovery curve
+    (``[episode, distinct clusters so far]`` at each new cluster and at the last episode)."""
+    ran = [r for r in mine if not r.get("error")]
+    avoidable = [f for f in found if f["avoidable"] is True]
+    seen: set = set()
+    discovery: List[List[int]] = []
+    first_failure = None
+    for position, record in enumerate(ran, 1):
+        if record.get("failure"):
+            first_failure = first_failure or position
+            cluster = clusters[int(record["index"])]
+            if cluster not in seen:
+                seen.add(cluster)
+                discovery.append([position, len(seen)])
+    if ran and (not discovery or discovery[-1][0] != len(ran)):
+        discovery.append([len(ran), len(seen)])
+    n = len(ran)
+    distinct = len({f["cluster"] for f in found})
+    distinct_avoidable = len({f["cluster"] for f in avoidable})
+    return {
+        "episodes": n,
+        "errors": len(mine) - n,
+        "failures": len(found),
+        "avoidable_failures": len(avoidable),
+        "failures_per_100": _per_100(len(found), n),
+        "avoidable_failures_per_100": _per_100(len(avoidable), n),
+        "clusters": distinct,
+        "avoidable_clusters": distinct_avoidable,
+        "clusters_per_100": 100.0 * distinct / n if n else None,
+        "avoidable_clusters_per_100": 100.0 * distinct_avoidable / n if n else None,
+        "episodes_to_first_failure": first_failure,
+        "discovery": discovery,
+    }
+
+
+def _per_sampler(episodes: Sequence[Mapping[str, Any]], failures: Sequence[Mapping[str, Any]],
+                 clusters: Mapping[int, str], default_sampler: str) -> Dict[str, Any]:
+    """:func:`_sampler_entry` of every sampler that drew episodes (and of the run's own sampler), by name."""
+    names = sorted({str(r.get("sampler") or default_sampler) for r in episodes} | {default_sampler})
+    return {name: _sampler_entry([r for r in episodes if str(r.get("sampler") or default_sampler) == name],
+                                 [f for f in failures if f["sampler"] == name], clusters)
+            for name in names}
+
+
+def _per_scenario(settings: Mapping[str, Any], episodes: Sequence[Mapping[str, Any]],
+                  errors: Sequence[Mapping[str, Any]], failures: Sequence[Mapping[str, Any]],
+                  cluster_entries: Sequence[Mapping[str, Any]], rate: Mapping[str, Any]) -> Dict[str, Any]:
+    """Per scenario (the run's own, then any other an episode ran): its episodes, failures, failure rates (sampled
+    and estimated), clusters and conversions."""
+    ok = [r for r in episodes if not r.get("error")]
     scenario_names = list(dict.fromkeys([*(settings.get("scenarios") or []),
                                          *sorted({str(r.get("scenario")) for r in episodes})]))
     scenarios: Dict[str, Any] = {}
@@ -514,7 +560,30 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
             "converted": sum(c["conversion"] is not None for c in in_clusters),
             "kept": sum(c["status"] == "kept" for c in in_clusters),
         }
+    return scenarios
 
+
+def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Mapping[str, Any]],
+                              conversions: Sequence[Mapping[str, Any]], clusters: Mapping[int, str], *,
+                              created: Optional[str] = None) -> Dict[str, Any]:
+    """The report dict from records already read: ``clusters`` maps each failed episode's index to its cluster id.
+
+    Raises :class:`MiningReportError` when a failed episode has no cluster id.
+    """
+    default_sampler = str(settings.get("sampler") or "unknown")
+    episodes = sorted(episodes, key=lambda r: int(r["index"]))
+    ok = [r for r in episodes if not r.get("error")]
+    errors = _episode_errors(episodes, default_sampler)
+    restarts = _worker_restarts(episodes)
+    failures = _failures(ok, clusters, settings)
+    cluster_entries = _cluster_entries(failures, conversions, clusters)
+    unavoidable_ids = {c["id"] for c in cluster_entries if c["unavoidable"] == c["size"]}
+    rejected = _rejected_conversions(conversions)
+    counts = {**_failure_counts(ok, errors, restarts, failures, cluster_entries),
+              **_conversion_counts(conversions, rejected)}
+    samplers = _per_sampler(episodes, failures, clusters, default_sampler)
+    rate = rate_estimates(settings, episodes)  # errored episodes are left out of the rate, counted as drawn
+    scenarios = _per_scenario(settings, episodes, errors, failures, cluster_entries, rate)
     report = {
         "schema": SCHEMA,
         "schema_version": SCHEMA_VERSION,
@@ -591,8 +660,6 @@ def headline(report: Mapping[str, Any]) -> str:
 
 
 def _error_alarm(report: Mapping[str, Any]) -> str:
-    from dv2s_gym.mining.report_text import error_warning
-
     errors = report.get("errors") or []
     first = str(errors[0].get("error") or "").strip().splitlines() if errors else []
     counts = report["counts"]
@@ -638,8 +705,9 @@ def _cluster_rows(clusters: Sequence[Mapping[str, Any]]) -> List[str]:
     return lines
 
 
-def markdown(report: Mapping[str, Any]) -> str:
-    """The report as Markdown: summary, per sampler, per scenario, clusters, conversions, unavoidable, errors."""
+def _summary_lines(report: Mapping[str, Any]) -> List[str]:
+    """The report's title, headline, breadth and failure rate, the table of counts, failures by type and the
+    conversions' times."""
     counts = report["counts"]
     lines = [f"## dv2s mine: {counts['avoidable_clusters']} avoidable failure cluster(s)", "", headline(report), "",
              breadth(counts) + ".", "", rate_text(report.get("failure_rate")), ""]
@@ -657,31 +725,54 @@ def markdown(report: Mapping[str, Any]) -> str:
         lines += [f"Conversion time: median {seconds['median']:.2f} s, max {seconds['max']:.2f} s over "
                   f"{seconds['n']} conversion(s)" + ("; median per stage: " + ", ".join(
                       f"{stage} {value:.2f} s" for stage, value in stages.items()) if stages else "") + ".", ""]
-    lines += ["### Per sampler", "",
-              "Failures per 100 episodes with Wilson 95% intervals (an adaptive sampler's episodes are not "
-              "independent, so the interval is a guide).", "",
-              "| sampler | episodes | failures | failures per 100 | avoidable per 100 | clusters | clusters per 100 | "
-              "avoidable clusters | first failure at episode |",
-              "|---|---:|---:|---|---|---:|---:|---:|---:|"]
+    return lines
+
+
+def _sampler_lines(report: Mapping[str, Any]) -> List[str]:
+    """The per-sampler section: failures and clusters per 100 episodes, and the first failure."""
+    lines = ["### Per sampler", "",
+             "Failures per 100 episodes with Wilson 95% intervals (an adaptive sampler's episodes are not "
+             "independent, so the interval is a guide).", "",
+             "| sampler | episodes | failures | failures per 100 | avoidable per 100 | clusters | clusters per 100 | "
+             "avoidable clusters | first failure at episode |",
+             "|---|---:|---:|---|---|---:|---:|---:|---:|"]
     for name, s in report["samplers"].items():
         lines.append(f"| {_cell(name)} | {s['episodes']} | {s['failures']} | {_per_100_text(s['failures_per_100'])} | "
                      f"{_per_100_text(s['avoidable_failures_per_100'])} | {s['clusters']} | "
                      f"{_num(s['clusters_per_100'])} | {s['avoidable_clusters']} | "
                      f"{_cell(s['episodes_to_first_failure'])} |")
-    lines += ["", "### Per scenario", "",
-              "Sampled failure rate: failures per episode as the sampler drew them; estimated: under the scenario's "
-              "own parameter distribution (importance-weighted; effective sample size in brackets).", "",
-              "| scenario | episodes | failures | sampled failure rate [95% CI] | estimated rate [95% CI] (ESS) | "
-              "failure types | avoidable | unavoidable | behaviours | converted | kept |",
-              "|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|"]
+    return lines
+
+
+def _scenario_lines(report: Mapping[str, Any]) -> List[str]:
+    """The per-scenario section: sampled and estimated failure rates, failure types, behaviours and conversions."""
+    lines = ["", "### Per scenario", "",
+             "Sampled failure rate: failures per episode as the sampler drew them; estimated: under the scenario's "
+             "own parameter distribution (importance-weighted; effective sample size in brackets).", "",
+             "| scenario | episodes | failures | sampled failure rate [95% CI] | estimated rate [95% CI] (ESS) | "
+             "failure types | avoidable | unavoidable | behaviours | converted | kept |",
+             "|---|---:|---:|---|---|---:|---:|---:|---:|---:|---:|"]
     for name, s in report["scenarios"].items():
         estimate = s.get("estimated_rate")
         estimated = f"{_pct(estimate)} ({_num((estimate or {}).get('ess'))})" if estimate else "-"
         lines.append(f"| `{_cell(name)}` | {s['episodes']} | {s['failures']} | {_pct(s['failure_rate'])} | "
                      f"{estimated} | {s.get('failure_types', '-')} | "
                      f"{s['avoidable']} | {s['unavoidable']} | {s['clusters']} | {s['converted']} | {s['kept']} |")
-    lines += ["", f"### Failure clusters ({len(report['clusters'])})", ""]
+    return lines
+
+
+def _cluster_lines(report: Mapping[str, Any]) -> List[str]:
+    """The failure clusters' section: a table of the clusters that count against the policy."""
+    lines = ["", f"### Failure clusters ({len(report['clusters'])})", ""]
     lines += _cluster_rows(report["clusters"]) if report["clusters"] else ["None."]
+    return lines
+
+
+def _converted_lines(report: Mapping[str, Any]) -> List[str]:
+    """The converted failures' section (kept first, then merged: where each went, its reproduction, video and
+    script), and the count of the conversions' parameter check."""
+    counts = report["counts"]
+    lines: List[str] = []
     converted = [c for c in report["clusters"] + report["unavoidable_clusters"] if c.get("conversion")]
     described = sorted((c for c in converted if c["status"] in ("kept", "merged")), key=lambda c: c["status"] != "kept")
     if described:
@@ -699,14 +790,25 @@ def markdown(report: Mapping[str, Any]) -> str:
                       f"compared with the new scripts' ranges, {counts['parameters_not_compared']} not compared (no "
                       "parameter of the new script means the same; each conversion record lists them under "
                       "`parameters.not_comparable`)."]
-    if report["rejected"]:
-        lines += ["", f"### Rejected conversions ({len(report['rejected'])})", "",
-                  "By stage: " + ", ".join(f"{s} {n}" for s, n in counts["rejected_by_stage"].items()), "",
-                  "| cluster | episode | stage | reason |", "|---|---:|---|---|"]
-        lines += [f"| `{_cell(r['cluster'])}` | {_cell(r['index'])} | {_cell(r['stage'])} | {_cell(r['reason'])} |"
-                  for r in report["rejected"]]
-    lines += ["", f"### Unavoidable failures ({len(report['unavoidable'])})", "",
-              "The reference driver failed in the same scene too; these do not count against the policy."]
+    return lines
+
+
+def _rejected_lines(report: Mapping[str, Any]) -> List[str]:
+    """The rejected conversions' section: counts by stage and a table of each with its reason (none: nothing)."""
+    if not report["rejected"]:
+        return []
+    lines = ["", f"### Rejected conversions ({len(report['rejected'])})", "",
+             "By stage: " + ", ".join(f"{s} {n}" for s, n in report["counts"]["rejected_by_stage"].items()), "",
+             "| cluster | episode | stage | reason |", "|---|---:|---|---|"]
+    lines += [f"| `{_cell(r['cluster'])}` | {_cell(r['index'])} | {_cell(r['stage'])} | {_cell(r['reason'])} |"
+              for r in report["rejected"]]
+    return lines
+
+
+def _unavoidable_lines(report: Mapping[str, Any]) -> List[str]:
+    """The unavoidable failures' section: their clusters' table and a line per failure (the first 50)."""
+    lines = ["", f"### Unavoidable failures ({len(report['unavoidable'])})", "",
+             "The reference driver failed in the same scene too; these do not count against the policy."]
     if report["unavoidable_clusters"]:
         lines += [""] + _cluster_rows(report["unavoidable_clusters"])
     if report["unavoidable"]:
@@ -715,11 +817,24 @@ def markdown(report: Mapping[str, Any]) -> str:
                          f"cluster `{_cell(f['cluster'])}`" for f in report["unavoidable"][:50]]
         if len(report["unavoidable"]) > 50:
             lines.append(f"- ... and {len(report['unavoidable']) - 50} more (see report.json)")
-    if report["failures"]:
-        example = next((f for f in report["failures"] if f.get("trace")), None)
-        if example:
-            lines += ["", f"Replay a failure exactly from its trace: `dv2s replay {report.get('run_dir') or '.'}/"
-                          f"{example['trace']} --video failure.webm`."]
+    return lines
+
+
+def _replay_lines(report: Mapping[str, Any]) -> List[str]:
+    """The command that replays a failure exactly from its trace (none without a failure that has one)."""
+    if not report["failures"]:
+        return []
+    example = next((f for f in report["failures"] if f.get("trace")), None)
+    if not example:
+        return []
+    return ["", f"Replay a failure exactly from its trace: `dv2s replay {report.get('run_dir') or '.'}/"
+                f"{example['trace']} --video failure.webm`."]
+
+
+def _trouble_lines(report: Mapping[str, Any]) -> List[str]:
+    """What went wrong while mining: the episodes that errored (the first 20), those a new worker finished, and
+    the truncated lines of a killed run left out."""
+    lines: List[str] = []
     if report["errors"]:
         lines += ["", f"### Errors ({len(report['errors'])})", ""]
         lines += [f"- #{e['index']} `{_cell(e['scenario'])}` seed {e['seed']}: {_cell(e['error'].splitlines()[0] if e['error'] else '')}"
@@ -734,6 +849,14 @@ def markdown(report: Mapping[str, Any]) -> str:
     if report.get("skipped_lines"):
         lines += ["", "Left out (truncated last lines of a killed run): "
                   + ", ".join(f"{name} {n}" for name, n in report["skipped_lines"].items())]
+    return lines
+
+
+def markdown(report: Mapping[str, Any]) -> str:
+    """The report as Markdown: summary, per sampler, per scenario, clusters, conversions, unavoidable, errors."""
+    lines = (_summary_lines(report) + _sampler_lines(report) + _scenario_lines(report) + _cluster_lines(report)
+             + _converted_lines(report) + _rejected_lines(report) + _unavoidable_lines(report)
+             + _replay_lines(report) + _trouble_lines(report))
     lines.append("")
     return "\n".join(lines)
 
@@ -750,8 +873,6 @@ def write_reports(run_dir: PathLike, report: Optional[Mapping[str, Any]] = None,
     Returns:
         ``{"json": path, "markdown": path, "html": path}``.
     """
-    from dv2s_gym.mining.html import write_html
-
     run_dir = Path(run_dir)
     report = dict(report) if report is not None else build_report(run_dir)
     return {"json": atomic_write_json(run_dir / "report.json", report),

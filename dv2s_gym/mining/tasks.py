@@ -29,6 +29,7 @@ from dv2s_gym.mining.behaviour import extract_behaviour
 from dv2s_gym.mining.failure_state import failure_state
 from dv2s_gym.mining.monitors import FAILURE_TYPES, detect_failure, robustness
 from dv2s_gym.workers.tasks import register
+from policies import worker_cache
 
 __all__ = ["MINE", "HELDOUT", "run_mine_task", "heldout_task", "reference_avoids", "trace_name"]
 
@@ -53,17 +54,16 @@ def reference_avoids(failure: Optional[Dict[str, Any]], reference_failure: Optio
 
 
 def _episode(task: Dict[str, Any], spec: str):
-    from policies.worker_cache import drop_env, env_for, policy_for
     from policies.evaluation import run_episode
 
     env_key = None
     try:
-        env_key, env = env_for(task.get("bank_dir"), task.get("env_config"))
-        policy = policy_for(spec, env_key, env)
+        env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
+        policy = worker_cache.policy_for(spec, env_key, env)
         return run_episode(env, policy, task["scenario"], int(task["seed"]), params=task.get("params") or None)
     except Exception:
         if env_key is not None:
-            drop_env(env_key)
+            worker_cache.drop_env(env_key)
         raise
 
 
@@ -123,15 +123,14 @@ def heldout_task(task: Mapping[str, Any]) -> Dict[str, Any]:
     env_key = None
     try:
         from policies.evaluation import run_episode
-        from policies.worker_cache import drop_env, env_for, policy_for
 
-        env_key, env = env_for(task.get("bank_dir"), task.get("env_config"))
-        policy = policy_for(task["policy"], env_key, env)
+        env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
+        policy = worker_cache.policy_for(task["policy"], env_key, env)
         result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
         failure = _heldout_failure(result, trace, float(task.get("ttc_threshold", 1.0)))
     except Exception as error:  # reported, never counted as a failure of the policy
         if env_key is not None:
-            drop_env(env_key)
+            worker_cache.drop_env(env_key)
         record["error"] = " ".join(f"{type(error).__name__}: {error}".split())
         return record
     record.update(failed=failure is not None, failure=failure, result=result.to_json())
