@@ -83,7 +83,7 @@ def test_dagger_moves_the_policy_toward_the_reference_and_saves_a_loadable_check
     weights = {SOURCES[0]: 1.0, SOURCES[1]: 3.0}
     # plain DAgger (SLOWER not up-weighted): the claim checked is agreement with the reference, which the
     # default weighting trades for caution; three iterations, so the last one's states are mostly the student's
-    path = dagger_fine_tune("dv2s-ppo", bank_dir=None, out=out, steps=1800, weights=weights, n_envs=1,
+    path = dagger_fine_tune("dv2s-ppo", bank_dir=None, out=out, steps=3600, weights=weights, n_envs=1,
                             vec_env="dummy", iterations=3, epochs=8, learning_rate=1e-3, slower_weight=1.0,
                             progress_bar=False, log=lambda _: None)
     # a normal SB3 checkpoint: loads through the registry and the loop's resolver, acts in Discrete(5)
@@ -92,9 +92,9 @@ def test_dagger_moves_the_policy_toward_the_reference_and_saves_a_loadable_check
     assert type(policy.model).__name__ == "PPO"
     card = read_card(path)
     tuned = card["fine_tune"]
-    assert tuned["method"] == "dagger" and tuned["reference"] == "rule" and tuned["steps"] == 1800
+    assert tuned["method"] == "dagger" and tuned["reference"] == "rule" and tuned["steps"] == 3600
     assert [h["beta"] for h in tuned["history"]] == [1.0, 0.5, 0.25]
-    assert sum(h["steps"] for h in tuned["history"]) == tuned["agreement"]["states"] == 1800
+    assert sum(h["steps"] for h in tuned["history"]) == tuned["agreement"]["states"] == 3600
     assert card["env_config"] == SHIPPED_CONFIG and "evaluation" not in card
     assert "DAgger" in (out / "README.md").read_text()
     # on the states it was trained on, the greedy action agrees with the reference far more often than before
@@ -106,7 +106,7 @@ def test_dagger_moves_the_policy_toward_the_reference_and_saves_a_loadable_check
     assert np.mean(after) >= np.mean(before) + 0.15, (before, after)
     # finished: called again it returns the same file without training
     stamp = path.stat().st_mtime_ns
-    assert dagger_fine_tune("dv2s-ppo", bank_dir=None, out=out, steps=1800, weights=weights, n_envs=1,
+    assert dagger_fine_tune("dv2s-ppo", bank_dir=None, out=out, steps=3600, weights=weights, n_envs=1,
                             vec_env="dummy", progress_bar=False, log=lambda _: None) == path
     assert path.stat().st_mtime_ns == stamp
 
