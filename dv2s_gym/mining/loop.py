@@ -805,8 +805,9 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, a
 
     # a held-out family's every member stays out too: exact replays of its failures and entries of earlier rounds,
     # at any depth (a member's family is the root of its provenance chain, not its immediate parent)
-    roots = {e.name: scenario_family(e.name, arm.bank) for e in Bank(arm.bank)}
-    entries = [e for e in Bank(arm.bank) if e.name not in excluded and e.provenance.parent not in excluded
+    bank = list(Bank(arm.bank))
+    roots = {e.name: scenario_family(e.name, arm.bank) for e in bank}
+    entries = [e for e in bank if e.name not in excluded and e.provenance.parent not in excluded
                and roots[e.name] not in excluded]
     mined = sorted(e.name for e in entries if e.provenance.mined)
     names = sorted(e.name for e in entries if with_mined or e.name not in mined)
