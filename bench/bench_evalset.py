@@ -15,8 +15,8 @@ measured value less ``MARGIN``, ceilings at one plus it):
 * external DRA and end to end: the overall and per-use-case figures of ``EXTERNAL_DRA_MEASURED`` /
   ``EXTERNAL_E2E_MEASURED`` (``dv2s_gym/evalset_highway_env/README.md`` states them).
 
-Measured on 2026-11-27 (2 cores shared with other jobs, no GPU; 10 min 37 s wall): the in-house SCS (0.860), its
-E2E-SC (0.874) and the >= 0.70 floor of three known misses (the two cyclist use cases, the car passing behind
+Measured on 2026-11-27 (2 cores shared with other jobs, no GPU; in-house set 6 min 54 s wall): the in-house SCS
+(0.860), its E2E-SC (0.879) and the >= 0.70 floor of three known misses (the two cyclist use cases, the car passing behind
 the slow truck) fall short; every other check passes
 (``docs/results.md``, ``bench/RESULTS.md``).
 
@@ -41,9 +41,6 @@ KNOWN_E2E_MISSES = {
     # the clips show the two cars colliding as they merge (the script's own ego collides); the DRA describes the
     # collision and misses the lane changes (both in two clips, the ego's in the third), so the run lacks them
     "highway_simultaneous_merge_middle": 0.72,
-    # the script's own ego collides with the oncoming car as it starts its turn, before the turn shows; the
-    # generated run shows the collision, not the ego's left turn nor the crossing path
-    "left_turn_intersection_oncoming": 0.75,
     # the car overtakes the ego before it cuts in; the DRA reads the cut-in (and a brake), not the overtake
     "highway_cut_in_from_left": 0.78,
     "highway_cut_in_from_right": 0.78,
