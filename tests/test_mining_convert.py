@@ -729,7 +729,9 @@ def test_a_constant_term_a_factor_or_another_direction_changes_the_meaning():
     from dv2s_gym.mining.param_meaning import meaning_map
 
     renamed = _CUT_PARENT.replace("cut_in_gap", "g").replace("lane_change_duration", "dur")
-    offset = renamed.replace("CutIn(globalParameters.g,", "CutIn(globalParameters.g + 10,")
+    # a constant term on a parameter that sets the quantity alone is read through (the tests below); beside
+    # another sampled value it still changes the meaning
+    offset = renamed.replace("CutIn(globalParameters.g,", "CutIn(globalParameters.g + egoS + 10,")
     compared, _ = _judged(offset)
     assert compared["compared"]["lane_change_duration"]["script_name"] == "dur"
     assert "cut_in_gap" in compared["not_comparable"]
@@ -752,8 +754,12 @@ def test_a_counterpart_with_a_distribution_the_judge_cannot_read_is_not_comparab
               .replace("globalParameters.lane_change_duration", "globalParameters.dur"))
     compared, rejections = _judged(opaque)
     assert "cannot read as an interval (Normal(30, 1))" in compared["not_comparable"]["cut_in_gap"]
-    assert "cannot read as an interval (Range(8, 9) * 1)" in compared["not_comparable"]["lane_change_duration"]
-    assert len(rejections) == 1 and "fewer than half" in rejections[0]
+    assert "cannot read as an interval (Range(8, 9) + Range(0, 1))" in _judged(
+        opaque.replace("Range(8, 9) * 1", "Range(8, 9) + Range(0, 1)"))[0]["not_comparable"]["lane_change_duration"]
+    # Range(8, 9) * 1 is read as the interval 8..9, which does not contain the failing 2
+    assert compared["compared"]["lane_change_duration"]["range"] == [8.0, 9.0]
+    assert len(rejections) == 1 and "lane_change_duration (the script's dur" in rejections[0]
+    assert "= 2 outside 8..9" in rejections[0]
 
 
 def test_one_actor_of_the_new_script_cannot_stand_for_two_of_the_parent():
@@ -782,3 +788,76 @@ def test_the_failures_actors_must_be_the_scene_in_a_majority_of_the_runs():
     assert not tie["same"]
     most = compare_actors({"car": 1}, [{"car": 1}] * 6 + [{"car": 2}] * 4, "car")
     assert most["same"] and not _judge({**_PASSING, "actors": most}, {}, {"type": "collision"}, 0.3)
+
+
+# --------------------------------------------------------------------------- a counterpart through an affine expression
+def _cut_script(gap_param, gap_range, gap_expression, name="car1"):
+    return (_CUT_PARENT.replace("cut_in_gap = Range(5, 11)", f"{gap_param} = {gap_range}")
+            .replace("cutter = new Car", f"{name} = new Car")
+            .replace("CutIn(globalParameters.cut_in_gap,", f"CutIn({gap_expression},"))
+
+
+@pytest.mark.parametrize("gap_range, expression, interval, inside", [
+    ("Range(-6, 1)", "globalParameters.g + 10", [4.0, 11.0], True),       # an offset that still covers 6
+    ("Range(5, 11)", "globalParameters.g + 10", [15.0, 21.0], False),     # an offset that no longer does
+    ("Range(2.5, 5.5)", "2 * globalParameters.g", [5.0, 11.0], True),     # scaled, covering
+    ("Range(5, 11)", "globalParameters.g * 2", [10.0, 22.0], False),      # scaled, not covering
+    ("Range(5, 11)", "globalParameters.g / 2", [2.5, 5.5], False),        # a quotient by a number
+    ("Range(-11, -5)", "-globalParameters.g", [5.0, 11.0], True),         # unary minus
+    ("Range(1, 3)", "-(2 * (1 - globalParameters.g)) / 2 + 5", [5.0, 7.0], True),   # nested
+    ("Range(1, 3)", "-(2 * (1 - globalParameters.g)) / 2 + 6", [6.0, 8.0], True),   # nested, at the edge
+    ("Range(1, 3)", "-(2 * (1 - globalParameters.g)) / 2 + 6.5", [6.5, 8.5], False),
+    ("Range(1, 2) * 3", "globalParameters.g + 1", [4.0, 7.0], True),      # the declaration scaled too
+    ("Uniform(5, 7, 9) - 10", "globalParameters.g + 5", [0.0, 4.0], False),
+])
+def test_a_counterpart_set_through_an_affine_expression_is_compared_by_the_interval_it_produces(
+        gap_range, expression, interval, inside):
+    """The generated script's gap is ``g + 10``, ``2 * g``, ...: the failing gap (6) must lie in the interval that
+    expression produces over g's range, not in g's own range; the reason quotes the expression and the interval."""
+    compared, rejections = _judged(_cut_script("g", gap_range, expression))
+    gap = compared["compared"]["cut_in_gap"]
+    assert gap["script_name"] == "g" and gap["by"] == "meaning"
+    assert gap["interval"] == interval and gap["quantity"] == 6.0 and gap["expression"] == expression
+    if inside:
+        assert compared["outside"] == [] and rejections == []
+    else:
+        assert compared["outside"] == ["cut_in_gap"]
+        (reason,) = rejections
+        low, high = (f"{v:g}" for v in interval)
+        assert f"cut_in_gap (the script's g: " in reason and f"= 6 outside {low}..{high}" in reason
+        assert f"the new script's {expression} takes with g in" in reason
+
+
+def test_a_counterpart_named_alike_is_compared_through_its_expression_and_the_parents_own():
+    """Named like the parent's parameter, or set through an expression in the parent too: the failing value's
+    quantity in the parent against the new expression's interval."""
+    compared, rejections = _judged(_cut_script("cut_in_gap", "Range(5, 11)", "globalParameters.cut_in_gap + 10"))
+    gap = compared["compared"]["cut_in_gap"]
+    assert "by" not in gap and gap["interval"] == [15.0, 21.0] and compared["outside"] == ["cut_in_gap"]
+    assert len(rejections) == 1 and "= 6 outside 15..21" in rejections[0]
+    # the parent sets the gap to 2 * cut_in_gap = 12: g + 10 over 0..3 (10..13) covers it, 0..1 (10..11) does not
+    parent = _CUT_PARENT.replace("CutIn(globalParameters.cut_in_gap,", "CutIn(2 * globalParameters.cut_in_gap,")
+    compared, rejections = _judged(_cut_script("g", "Range(0, 3)", "globalParameters.g + 10"), parent=parent)
+    assert compared["compared"]["cut_in_gap"]["quantity"] == 12.0 and rejections == []
+    compared, rejections = _judged(_cut_script("g", "Range(0, 1)", "globalParameters.g + 10"), parent=parent)
+    assert compared["outside"] == ["cut_in_gap"]
+    assert "= 6, which the parent's 2 * globalParameters.cut_in_gap makes 12, outside 10..11" in rejections[0]
+
+
+def test_an_expression_the_judge_cannot_read_stays_not_comparable():
+    for expression in ("globalParameters.g * globalParameters.g", "globalParameters.g + egoS + 10",
+                       "globalParameters.g * egoS", "globalParameters.g ** 2"):
+        compared, _ = _judged(_cut_script("g", "Range(5, 11)", expression))
+        assert "cut_in_gap" in compared["not_comparable"] and "cut_in_gap" not in compared["compared"]
+
+
+def test_an_affine_placement_distance_is_read_through():
+    from dv2s_gym.mining.convert import compare_parameters
+
+    parent = ("param lead_gap = Range(5, 11)\nego = new Car on lane.centerline\n"
+              "lead = new Car ahead of ego by globalParameters.lead_gap\n")
+    generated = ("param d = Range(1, 4)\nego = new Car on lane.centerline\n"
+                 "other = new Car ahead of ego by globalParameters.d * 2 + 3\n")
+    compared = compare_parameters({"lead_gap": 12.0}, generated, parent=parent)
+    assert compared["compared"]["lead_gap"]["interval"] == [5.0, 11.0] and compared["outside"] == ["lead_gap"]
+    assert compare_parameters({"lead_gap": 10.0}, generated, parent=parent)["outside"] == []

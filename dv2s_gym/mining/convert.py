@@ -75,7 +75,8 @@ import numpy as np
 from dv2s_gym.mining.exact_replay import narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
 from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence, key_actor, shows_interaction
 from dv2s_gym.mining.monitors import detect_failure
-from dv2s_gym.mining.param_meaning import meaning_map, name_mismatch, script_parameters, tied_objects
+from dv2s_gym.mining.param_meaning import (affine_uses, meaning_map, name_mismatch, read_interval, script_parameters,
+                                           tied_objects)
 from dv2s_gym.mining.tasks import reference_avoids
 from dv2s_gym.pipeline import stages
 from dv2s_gym.pipeline.convert import check_scenario, conversion_provenance
@@ -334,8 +335,16 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     from the two scripts' structure). Returns ``{"compared": {name: {"value", "range": [low, high]}} (plus
     ``"script_name"`` when the script spells it differently, and ``"by": "meaning"`` with ``"basis"`` when paired
     by meaning), "outside": [names whose range does not contain the failing value], "not_comparable": {failing
-    parameter: why it could not be compared}, "not_in_script": [the same names]}``."""
-    ranges = param_ranges(script)
+    parameter: why it could not be compared}, "not_in_script": [the same names]}``.
+
+    A distribution built from ``Range``/``Uniform`` and numbers by sums, differences, products and quotients with
+    numbers and unary minus (``Range(2, 4) * 2 + 1``) is read as the interval it produces
+    (:func:`~dv2s_gym.mining.param_meaning.read_interval`). Given the parent, a counterpart that sets the quantity
+    through an affine expression of itself alone (``CutIn(globalParameters.g + 10)``) is compared through that
+    expression: the quantity the failing value set in the parent (through the parent's own expression) against
+    the interval the new expression produces over the counterpart's range (``"expression"``, ``"interval"``,
+    ``"quantity"`` in its comparison; ``"parent_expression"`` when the parent's is not the bare parameter)."""
+    ranges = _script_ranges(script)
     folded: Dict[str, str] = {}
     for script_name in sorted(ranges):
         folded.setdefault(script_name.casefold(), script_name)
@@ -356,12 +365,65 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     if parent is not None:
         why = _by_meaning(parent, script, numeric, compared, absent, ranges)
     for name in sorted(compared):
-        low, high = compared[name]["range"]
-        if not low - 1e-9 <= compared[name]["value"] <= high + 1e-9:
+        low, high = compared[name].get("interval") or compared[name]["range"]
+        if not low - 1e-9 <= compared[name].get("quantity", compared[name]["value"]) <= high + 1e-9:
             outside.append(name)
     not_comparable = {name: why[name] for name in sorted(why) if name not in compared}
     return {"compared": dict(sorted(compared.items())), "outside": outside, "not_comparable": not_comparable,
             "not_in_script": list(not_comparable)}
+
+
+def _script_ranges(script: str) -> Dict[str, Tuple[float, float]]:
+    """``{parameter: (low, high)}`` of the script's numeric parameters: :func:`scenario_bank.dedup.param_ranges`'s
+    forms, and the affine expressions of ``Range``/``Uniform``/numbers
+    :func:`~dv2s_gym.mining.param_meaning.read_interval` reads."""
+    ranges: Dict[str, Tuple[float, float]] = {}
+    for name, text in script_parameters(script).items():
+        interval = read_interval(text)
+        if interval is not None:
+            ranges[name] = interval
+    ranges.update(param_ranges(script))
+    return ranges
+
+
+def _through_expressions(parent: str, script: str, compared: Dict[str, Any]) -> None:
+    """Each compared parameter whose counterpart, or itself in the parent, sets a quantity through an affine
+    expression (:func:`~dv2s_gym.mining.param_meaning.affine_uses`) is compared through it: for a quantity (the
+    same kind of object, the ego or not, and slot) that one object sets in each script, the failing value's quantity
+    in the parent against the interval of the new expression over the counterpart's range. The first quantity
+    outside, else the first compared, is kept in the comparison (``expression``, ``interval``, ``quantity``,
+    ``parent_expression``); with bare parameters on both sides nothing changes."""
+    old_forms, new_forms = affine_uses(parent), affine_uses(script)
+
+    def by_meaning(forms: Mapping[Tuple[str, str, str], Any]) -> Dict[Tuple[bool, str, str], List[Any]]:
+        keyed: Dict[Tuple[bool, str, str], List[Any]] = {}
+        for (name, kind, slot), form in sorted(forms.items()):
+            keyed.setdefault((name == "ego", kind, slot), []).append(form)
+        return keyed
+
+    for name, comparison in compared.items():
+        target = comparison.get("script_name", name)
+        old, new = by_meaning(old_forms.get(name, {})), by_meaning(new_forms.get(target, {}))
+        low, high = comparison["range"]
+        chosen = None
+        for key in sorted(set(old) & set(new)):
+            if len(old[key]) != 1 or len(new[key]) != 1:
+                continue  # more than one object of that kind sets it: which is which is not known
+            (old_scale, old_offset, old_text), (scale, offset, text) = old[key][0], new[key][0]
+            if (old_scale, old_offset, scale, offset) == (1.0, 0.0, 1.0, 0.0):
+                continue
+            quantity = old_scale * comparison["value"] + old_offset
+            ends = sorted((scale * low + offset, scale * high + offset))
+            found = {"expression": text, "interval": ends, "quantity": quantity}
+            if (old_scale, old_offset) != (1.0, 0.0):
+                found["parent_expression"] = old_text
+            inside = ends[0] - 1e-9 <= quantity <= ends[1] + 1e-9
+            if chosen is None or not inside:
+                chosen = found
+            if not inside:
+                break
+        if chosen is not None:
+            comparison.update(chosen)
 
 
 def _by_meaning(parent: str, script: str, numeric: Mapping[str, float], compared: Dict[str, Any],
@@ -400,6 +462,7 @@ def _by_meaning(parent: str, script: str, numeric: Mapping[str, float], compared
     why.update({name: "the new script defines no numeric parameter of that name" for name in absent
                 if name not in mapped["pairs"] and name not in mapped["unpaired"]})
     why.update(_tied_twice(parent, script, compared))
+    _through_expressions(parent, script, compared)
     return why
 
 
@@ -451,6 +514,14 @@ def _outside_text(name: str, comparison: Mapping[str, Any]) -> str:
     spelled = f" (the script's {comparison['script_name']})" if comparison.get("script_name") else ""
     if comparison.get("by") == "meaning":
         spelled = f" (the script's {comparison['script_name']}: {comparison.get('basis')})"
+    if comparison.get("interval"):
+        own = comparison.get("script_name", name)
+        parent = (f", which the parent's {comparison['parent_expression']} makes "
+                  f"{_exact(float(comparison['quantity']))}," if comparison.get("parent_expression") else "")
+        start, end = comparison["interval"]
+        return (f"{name}{spelled} = {_exact(float(comparison['value']))}{parent} outside "
+                f"{_exact(float(start))}..{_exact(float(end))}, the interval the new script's "
+                f"{comparison['expression']} takes with {own} in {_exact(float(low))}..{_exact(float(high))}")
     return f"{name}{spelled} = {_exact(float(comparison['value']))} outside {_exact(float(low))}..{_exact(float(high))}"
 
 
