@@ -70,8 +70,9 @@ round's baseline episodes (the starting policy) are paired with the last tested 
 
 ``errored`` counts the episodes that errored (no rate or test counts them; e.g. a scene the scenario's
 sampler could not produce): in ``mine`` and ``before`` ``{"episodes", "scenarios": {scenario: n}, "messages":
-{scenario: [{"message", "count"}]: its distinct errors, the 5 most frequent}, "unlisted": {scenario: {"messages",
-"episodes"} beyond those}, "examples": {scenario: its first error}}`` (:func:`dv2s_gym.mining.errored.errored_episodes`);
+{scenario: [{"message", "count"}]: every distinct error, the most frequent first; the reports list 5 and count
+the rest}, "examples": {scenario: its first error}}`` (a record written when only 5 were kept has ``"unlisted":
+{scenario: {"messages", "episodes"}}`` for the rest) (:func:`dv2s_gym.mining.errored.errored_episodes`);
 in ``after`` the same per policy
 (``fine_tuned``, ``control``), in ``untouched`` and ``regress`` per policy (``start``, ``fine_tuned``, and
 ``control`` in ``untouched``). The log warns of them after each step and ``report.md`` lists them per round.
@@ -312,7 +313,7 @@ def _errored_total(record: Mapping[str, Any]) -> int:
 def _errored_lines(record: Mapping[str, Any]) -> List[str]:
     """The round's errored episodes per step and policy, naming the scenarios and, for each, its distinct error
     messages with their counts over the round's steps (the most frequent first, at most
-    :data:`dv2s_gym.mining.errored.ERROR_MESSAGES_KEPT` listed per step)."""
+    :data:`dv2s_gym.mining.errored.ERROR_MESSAGES_KEPT` listed, the rest counted)."""
     stages = errored_by_stage(record)
     if not stages:
         return []
