@@ -632,7 +632,7 @@ def test_the_judge_compares_a_failing_parameter_with_the_generated_one_that_sets
     assert reason.startswith("parameters: the new scenario's ranges do not contain the failing values: cut_in_gap "
                              "(the script's car1_cut_gap: the Car car1's behaviour argument gap (cutter in the "
                              "parent)) = 8 outside 10..15")
-    assert "(not compared, no parameter of the new script means the same: kerb_offset, speed_after_cut_in)" in reason
+    assert "(not compared: kerb_offset, speed_after_cut_in with no counterpart in the new script)" in reason
 
 
 def test_parameters_that_cannot_be_paired_one_to_one_are_not_compared_but_listed():
@@ -678,6 +678,43 @@ def test_the_mining_report_counts_the_failing_parameters_the_judge_could_not_com
     report = build_report_from_records({"policy": "p", "sampler": "uniform"}, [], conversions, {})
     assert report["counts"]["parameters_compared"] == 3 and report["counts"]["parameters_not_compared"] == 3
     assert "3 failing parameter value(s) compared with the new scripts' ranges, 3 not compared" in markdown(report)
+
+
+def test_the_reports_name_each_reason_a_parameter_was_not_compared_with_its_count(tmp_path):
+    """The judge could not compare parameters for several reasons (no counterpart, a distribution that is not an
+    interval, a name match that reaches no object, one actor for two); the judge's reason, report.md and report.html
+    name each with its count instead of calling them all "no parameter means the same"."""
+    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.html import render_html
+    from dv2s_gym.mining.report import build_report_from_records, markdown
+
+    opaque = (_CUT_PARENT.replace("cut_in_gap = Range(5, 11)", "g = Normal(30, 1)")
+              .replace("globalParameters.cut_in_gap", "globalParameters.g")
+              .replace("lane_change_duration = Range(1.8, 3.0)", "lane_change_duration = Range(8, 9)"))
+    failing = {**_CUT_FAILING, "kerb_offset": 2.8}
+    judged = compare_parameters(failing, opaque, parent=_CUT_PARENT + "param kerb_offset = Range(2, 3)\n")
+    assert judged["outside"] == ["lane_change_duration"]
+    (reason,) = [str(r) for r in _judge({**_PASSING, "parameters": judged}, {}, {"type": "collision"}, 0.3)]
+    assert reason.endswith("(not compared: cut_in_gap whose counterpart's distribution is not an interval the judge "
+                           "can read; kerb_offset feeding no object of the parent script)")
+    decoy = _CUT_PARENT.replace("CutIn(globalParameters.cut_in_gap, globalParameters.lane_change_duration)",
+                                "CutIn(40, 6.0)")
+    conversions = [{"cluster": "c1", "index": 0, "status": "rejected", "stage": "parameters", "reason": reason,
+                    "parameters": judged},
+                   {"cluster": "c2", "index": 1, "status": "rejected", "stage": "parameters", "reason": "x",
+                    "parameters": compare_parameters(_CUT_FAILING, decoy, parent=_CUT_PARENT)},
+                   {"cluster": "c3", "index": 2, "status": "kept",  # a record listing names only
+                    "parameters": {"compared": {"a": {}}, "outside": [], "not_in_script": ["e", "f"]}}]
+    report = build_report_from_records({"policy": "p", "sampler": "uniform"}, [], conversions, {})
+    counts = report["counts"]
+    assert counts["parameters_not_compared"] == 6
+    assert counts["parameters_not_compared_by_reason"] == {"no_counterpart": 2, "not_interval": 1,
+                                                           "reaches_no_object": 2, "feeds_no_object": 1}
+    expected = ("6 not compared: 2 with no counterpart in the new script, 1 whose counterpart's distribution is not "
+                "an interval the judge can read, 2 named alike in the new script, where it reaches no object, 1 "
+                "feeding no object of the parent script")
+    assert expected in markdown(report) and "no parameter of the new script means the same" not in markdown(report)
+    assert expected.replace("'", "&#x27;") in render_html(report, embed_videos=False)
 
 
 # --------------------------------------------------------------------------- a name match must match in meaning

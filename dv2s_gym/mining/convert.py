@@ -75,6 +75,7 @@ import numpy as np
 from dv2s_gym.mining.exact_replay import narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
 from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence, key_actor, shows_interaction
 from dv2s_gym.mining.monitors import detect_failure
+from dv2s_gym.mining.report_text import not_compared_names_text
 from dv2s_gym.mining.param_meaning import (affine_uses, meaning_map, name_mismatch, read_interval, script_parameters,
                                            tied_objects)
 from dv2s_gym.mining.tasks import reference_avoids
@@ -586,11 +587,10 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
     if few:
         found.append(_Rejected("parameters", few))
     if parameters and parameters.get("outside"):
-        unchecked = list(parameters.get("not_comparable") or {})
+        unchecked = parameters.get("not_comparable") or {}
         found.append(_Rejected("parameters", "the new scenario's ranges do not contain the failing values: " + ", ".join(
             _outside_text(name, parameters["compared"][name]) for name in parameters["outside"])
-            + (f" (not compared, no parameter of the new script means the same: {', '.join(unchecked)})"
-               if unchecked else "")))
+            + (f" (not compared: {not_compared_names_text(unchecked)})" if unchecked else "")))
     return found
 
 

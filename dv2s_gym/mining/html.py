@@ -21,7 +21,7 @@ import os
 from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 
-from dv2s_gym.mining.report_text import breadth, rate_text, seed_text
+from dv2s_gym.mining.report_text import breadth, parameter_check_text, rate_text, seed_text
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, axis, escape, finite,
                                   fmt, fmt_interval, interval_mark, legend, row_label, svg, video_tag, x_scale)
 from scenario_bank.atomic import atomic_write_text
@@ -205,6 +205,8 @@ def _counts_table(report: Mapping[str, Any]) -> str:
         notes.append(f"Conversion time: median {fmt(seconds.get('median'))} s, max {fmt(seconds.get('max'))} s over "
                      f"{escape(seconds['n'])} conversion(s)" + ("; median per stage: " + ", ".join(
                          f"{escape(stage)} {fmt(value)} s" for stage, value in stages.items()) if stages else ""))
+    if c.get("parameters_compared") or c.get("parameters_not_compared"):
+        notes.append(escape(parameter_check_text(c)))
     return table + "".join(f"<p>{n}.</p>" for n in notes)
 
 
