@@ -133,7 +133,17 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     report = json.loads((folder / "conversion" / "report.json").read_text())
     assert report["status"] == "kept" and len(report["reproduction_episodes"]) == 10
     assert set(out["timings"]) == {"video", "interaction", "replay", "describe", "generate", "check", "reproduction",
-                                   "avoidability", "e2e_sc", "bank"}
+                                   "avoidability", "e2e_sc", "clip", "bank"}
+    # the converted script driven by the same policy, filmed on a reproduction episode that failed the same way
+    clip = repro["clip"]
+    chosen = next(e for e in report["reproduction_episodes"] if e["reproduced"])
+    assert clip["seed"] == chosen["seed"] and clip["reproduced"] and clip["failed"]
+    assert clip["failure"]["type"] == "collision" and clip["file"] == "converted.webm" and "error" not in clip
+    assert out["converted_video"] == f"failures/{SCENARIO}__collision__0/conversion/converted.webm"
+    frames = read_video(folder / "conversion" / "converted.webm", fps=None, max_frames=1000, max_pixels=10**7).frames
+    # 4 s before the collision (or from the reset when it came sooner), 1 s after, at 5 Hz
+    assert len(frames) == min(chosen["failure"]["step"], 4 * 5) + 5 + 1 and frames[0].shape[:2] == (480, 480)
+    assert _red_pixels(frames[0]) == 0 and _red_pixels(frames[-1]) > 20  # the crash shows
     # the judge: the stopped car the ego ran into shows in the runs, the policy fails on it the same way, and
     # the reference driver avoids it
     assert out["interaction"]["kind"] == "car" and out["interaction"]["manoeuvres"] == ["stop"]
@@ -167,11 +177,15 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     assert entry.description == out["description"] and "mined" in entry.tags
     assert entry.script == (folder / "conversion" / "scenario.scenic").read_text()
     assert source["replay_entry"] == out["replay_entry"] and source["interaction"] == out["interaction"]
+    assert source["converted_video"] == "converted.webm" and "converted.webm" in source["files"]
+    assert (entry.folder / "converted.webm").read_bytes() == (folder / "conversion" / "converted.webm").read_bytes()
 
     again = convert_failure({**record, "index": 5}, tmp_path / "run2", policy="keep_lane", bank=bank)
     assert again["status"] == "merged" and again["merged_into"] == out["bank_entry"], again["reason"]
     merged = Bank(tmp_path / "bank").get(out["bank_entry"]).source["merged"]
     assert len(merged) == 1 and merged[0]["index"] == 5 and merged[0]["parent"] == SCENARIO
+    assert merged[0]["converted_video"] == "merged/1/converted.webm"
+    assert (entry.folder / "merged" / "1" / "converted.webm").is_file()
     assert again["replay_entry"] == out["replay_entry"]  # the same failing scene: its replay is not added twice
     assert Bank(tmp_path / "bank").names() == sorted([out["bank_entry"], out["replay_entry"]])
 

@@ -99,7 +99,7 @@ when the endpoint works, rather than rejecting every cluster."""
 
 __all__ = ["ConversionSettings", "convert_failure", "replay_failure_entry", "same_failure_class", "reference_failed", "reference_outcome",
            "reproduction_seeds", "cluster_slug", "CONVERSION_DIR", "ENTRY_VIDEO",
-           "ENTRY_TRACE"]
+           "ENTRY_TRACE", "ENTRY_CONVERTED_VIDEO", "clip_episode"]
 
 CONVERSION_DIR = "conversion"
 ENTRY_VIDEO = "failure.webm"
@@ -107,6 +107,10 @@ ENTRY_VIDEO = "failure.webm"
 ``merged/<n>/failure.webm``)."""
 ENTRY_TRACE = "trace.json.gz"
 """The source episode's trace in a kept entry's bank folder (its provenance ``trace``)."""
+ENTRY_CONVERTED_VIDEO = "converted.webm"
+"""The clip of the converted script driven by the policy (one reproduction episode) in a kept entry's bank folder
+(its provenance ``converted_video``; a merged failure's is ``merged/<n>/converted.webm``) and in the mining run's
+``failures/<cluster>/conversion/`` folder."""
 PathLike = Union[str, os.PathLike]
 
 
@@ -288,6 +292,18 @@ def _reproduction_episode(scene_seed: int, result: Any, trace: Any, monitor: Map
     shown = shows_interaction(interaction, elements_from_trace(trace)) if interaction else None
     return {"seed": scene_seed, "failure": failure, "steps": result.steps, "trajectory_hash": result.trajectory_hash,
             "actor_kind": actor_kind, "interaction": shown, "reproduced": same}
+
+
+def clip_episode(episodes: List[Mapping[str, Any]]) -> Tuple[Mapping[str, Any], str]:
+    """The reproduction episode to film and why it was chosen: the first that reproduced the failure (the same
+    class with the same kind of actor), else the first that failed at all, else the first."""
+    for episode in episodes:
+        if episode.get("reproduced"):
+            return episode, "the first reproduction episode that failed the same way"
+    for episode in episodes:
+        if episode.get("failure"):
+            return episode, "no reproduction episode failed the same way; the first that failed"
+    return episodes[0], "no reproduction episode failed; the first"
 
 
 def _actor_kind(trace, name: str) -> str:
@@ -858,7 +874,7 @@ class _Conversion:
             "stage": None, "video": None, "description": None, "script": None, "reproduction": None,
             "e2e_sc": None, "bank_entry": None, "merged_into": None, "seconds": None, "timings": {},
             "interaction": None, "replay_entry": None, "avoidability": None, "rejections": [], "actors": None,
-            "parameters": None}
+            "parameters": None, "converted_video": None}
         self.details: Dict[str, Any] = {}
         self.stage = "input"
         self._stage_start = time.perf_counter()
@@ -874,7 +890,7 @@ class _Conversion:
         try:
             for step in (self._input, self._video, self._interaction, self._replay, self._describe, self._generate,
                          self._check, self._reproduction, self._avoidability, self._e2e_sc, self._judge,
-                         self._add_to_bank):
+                         self._clip, self._add_to_bank):
                 step()
         except _Rejected as rejection:
             out.update(stage=rejection.stage, reason=str(rejection))
@@ -1047,14 +1063,50 @@ class _Conversion:
         if rejections:
             raise rejections[0]
 
+    def _clip(self) -> None:
+        """One reproduction episode of the converted script (:func:`clip_episode`: one that failed the same way
+        when there is one) filmed as the failure was, so a reader sees whether the script plays the failure. The
+        clip is extra: when it cannot be made, the record says why and the conversion goes on without it."""
+        self.stage = "clip"
+        from dv2s_gym.mining.failure_video import write_script_episode_video
+
+        episodes = self.details.get("reproduction_episodes") or []
+        self.clip_path: Optional[Path] = None
+        if not episodes:
+            return
+        episode, chosen = clip_episode(episodes)
+        failure = episode.get("failure") or None
+        clip = {"seed": int(episode["seed"]), "failed": bool(failure), "reproduced": bool(episode.get("reproduced")),
+                "failure": ({key: failure.get(key) for key in ("type", "collision_type", "with_kind")
+                             if failure.get(key) is not None} if failure else None),
+                "chosen": chosen, "file": ENTRY_CONVERTED_VIDEO}
+        path = self.conversion / ENTRY_CONVERTED_VIDEO
+        try:
+            write_script_episode_video(self.script_path, int(episode["seed"]), path, self.settings.video(),
+                                       episode_steps=int(episode["steps"]), failure=failure,
+                                       centre=self.written.failure_frame,
+                                       trajectory_hash=episode.get("trajectory_hash"))
+        except SETUP_ERRORS:
+            raise
+        except Exception as error:  # the clip is extra: the conversion goes on without it
+            clip = {**clip, "file": None, "error": _stage_error("clip", error)}
+        else:
+            self.clip_path = path
+            self.out["converted_video"] = _rel(path, self.run_dir)
+        self.out["reproduction"]["clip"] = clip
+        self.lap("clip")
+
     def _add_to_bank(self) -> None:
         self.stage = "bank"
         out, record = self.out, self.record
+        files = {ENTRY_VIDEO: self.video, ENTRY_TRACE: self.written.trace_path}
+        if self.clip_path is not None:
+            files[ENTRY_CONVERTED_VIDEO] = self.clip_path
         outcome = self.bank.add(self.generation.script, self.description.text,
                                 name=_mined_name(record["scenario"], self.source_failure["type"]),
                                 elements=self.description.elements, tags=["mined", self.source_failure["type"]],
                                 provenance=self._provenance(),
-                                files={ENTRY_VIDEO: self.video, ENTRY_TRACE: self.written.trace_path},
+                                files=files,
                                 on_duplicate="merge", near_copy_of=_family(record["scenario"],
                                                                            self.source_failure["type"]))
         if outcome.status == "added":
@@ -1083,4 +1135,5 @@ class _Conversion:
                                                  "parameters_not_compared": dict(
                                                      (out.get("parameters") or {}).get("not_comparable") or {})},
             replay_entry=self.replay["entry"],
+            converted_video=ENTRY_CONVERTED_VIDEO if self.clip_path is not None else None,
         )
