@@ -180,6 +180,8 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     assert source["converted_video"] == "converted.webm" and "converted.webm" in source["files"]
     assert (entry.folder / "converted.webm").read_bytes() == (folder / "conversion" / "converted.webm").read_bytes()
 
+    _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_path)
+
     again = convert_failure({**record, "index": 5}, tmp_path / "run2", policy="keep_lane", bank=bank)
     assert again["status"] == "merged" and again["merged_into"] == out["bank_entry"], again["reason"]
     merged = Bank(tmp_path / "bank").get(out["bank_entry"]).source["merged"]
@@ -188,6 +190,43 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     assert (entry.folder / "merged" / "1" / "converted.webm").is_file()
     assert again["replay_entry"] == out["replay_entry"]  # the same failing scene: its replay is not added twice
     assert Bank(tmp_path / "bank").names() == sorted([out["bank_entry"], out["replay_entry"]])
+
+
+def _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_path):
+    """The loop's report.html shows the kept entry's failure clip with its converted script's clip beside it (one
+    row), captioned with the scenario, seed and outcome; the exact replay shows its failure clip alone, saying why;
+    the mining report's card shows both clips too."""
+    from dv2s_gym.mining.html import render_html
+    from dv2s_gym.mining.loop_report import render_html as loop_html
+    from dv2s_gym.mining.loop_report import round_clips
+    from dv2s_gym.mining.report import build_report_from_records
+
+    seed = out["reproduction"]["clip"]["seed"]
+    loop = {"settings": {"bank_dir": str(tmp_path / "bank"), "policy": "keep_lane"}, "policy": "keep_lane",
+            "rounds": [{"round": 1, "steps": {"mine": {"folder": str(tmp_path / "run"), "kept": [
+                {"cluster": out["cluster"], "scenario": out["bank_entry"]},
+                {"cluster": out["cluster"], "scenario": out["replay_entry"], "replay": True}]}}}]}
+    clips = round_clips(loop, tmp_path)[1]
+    converted = clips[f"{out['bank_entry']} (fine-tuned on)"]
+    assert [c["path"] for c in converted] == [f"bank/{out['bank_entry']}/failure.webm",
+                                              f"bank/{out['bank_entry']}/converted.webm"]
+    assert converted[0]["group"] == converted[1]["group"]
+    assert converted[1]["label"] == (f"generated scenario {out['bank_entry']} (the converted script) driven by "
+                                     f"keep_lane, seed {seed}: it failed, collision (rear_end) with a car, the same "
+                                     "way as the source failure")
+    (replay,) = clips[f"{out['replay_entry']} (fine-tuned on)"]
+    assert replay["path"] == f"bank/{out['replay_entry']}/failure.webm" and "no converted script" in replay["note"]
+    page = loop_html(loop, {1: clips})
+    row = page.split(f'<video src="bank/{out["bank_entry"]}/failure.webm"')[1].split("</div>")[0]
+    assert f'<video src="bank/{out["bank_entry"]}/converted.webm"' in row and f"seed {seed}: it failed" in row
+    assert "it has no converted script, so only the failure clip is shown" in page
+
+    mining = build_report_from_records({"policy": "keep_lane", "sampler": "uniform"}, [record], [out],
+                                       {record["index"]: out["cluster"]})
+    card = render_html(mining, base=tmp_path / "run", page_dir=tmp_path / "run", embed_videos=False)
+    card = card.split(f'id="card-{out["cluster"]}"')[1].split('class="text"')[0]
+    assert f'src="failures/{SCENARIO}__collision__0/failure.webm"' in card
+    assert f'src="failures/{SCENARIO}__collision__0/conversion/converted.webm"' in card and f"seed {seed}" in card
 
 
 @pytest.mark.slow

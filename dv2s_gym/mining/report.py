@@ -68,7 +68,8 @@ so its interval is a guide, not an exact guarantee.
 {"actor", "actor_manoeuvre", "ego_manoeuvre"}, "size", "avoidable", "unavoidable",
 "unknown", "samplers": {name: n}, "first_index", "params": {name: {"min", "max"} |
 {"values"}}`` (the parameter region its failures cover), ``"collision_types", "with_kinds",
-"representative": Failure, "video": path relative to the run folder | null, "status":
+"representative": Failure, "video": path relative to the run folder | null, "converted_video": the clip of the
+converted script driven by the policy (one reproduction episode; ``reproduction["clip"]`` says which) | null, "status":
 "kept" | "merged" | "rejected" | "not converted", "reason", "bank_entry", "merged_into",
 "reproduction": the conversion's record | null, "reproduction_rate", "e2e_sc", "description",
 "script", "conversion": the conversion record | null}``. A conversion belongs to the cluster
@@ -400,6 +401,7 @@ def _cluster_entry(cluster_id: str, members: Sequence[Dict[str, Any]],
         "with_kinds": dict(sorted(Counter(str(m["with_kind"]) for m in members if m["with_kind"]).items())),
         "representative": representative,
         "video": (conversion or {}).get("video"),
+        "converted_video": (conversion or {}).get("converted_video"),
         "status": (conversion or {}).get("status") or NOT_CONVERTED,
         "reason": (conversion or {}).get("reason"),
         "bank_entry": (conversion or {}).get("bank_entry"),

@@ -7,7 +7,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 __all__ = ["breadth", "rate_text", "number_text", "percent_text", "seed_text", "error_warning",
            "NOT_COMPARED_REASONS", "not_compared_reason", "not_compared_counts", "not_compared_text",
-           "not_compared_names_text", "parameter_check_text"]
+           "not_compared_names_text", "parameter_check_text", "clip_caption"]
 
 NOT_COMPARED_REASONS: Tuple[Tuple[str, Tuple[str, ...], str], ...] = (
     ("no_counterpart", ("defines no numeric parameter of that name", "sets the same quantity of that object"),
@@ -150,3 +150,25 @@ def parameter_check_text(counts: Mapping[str, Any]) -> str:
             f"compared with the new scripts' ranges, {counts.get('parameters_not_compared', 0)} not compared")
     reasons = not_compared_text(counts.get("parameters_not_compared_by_reason") or {})
     return text + (f": {reasons}" if reasons else "")
+
+
+def clip_caption(scenario: str, source: Mapping[str, Any]) -> str:
+    """The caption of a converted script's clip from its provenance (or conversion record): the scenario, the
+    policy, the seed, and whether the episode failed and how."""
+    clip = (source.get("reproduction") or {}).get("clip") or {}
+    policy = source.get("policy")
+    text = f"generated scenario {scenario} (the converted script) driven by {policy or 'the policy'}"
+    if clip.get("seed") is not None:
+        text += f", seed {clip['seed']}"
+    failure = clip.get("failure") or {}
+    if not clip:
+        return text
+    if not clip.get("failed"):
+        return text + ": it did not fail"
+    how = str(failure.get("type") or "failed")
+    if failure.get("collision_type"):
+        how += f" ({failure['collision_type']})"
+    if failure.get("with_kind"):
+        how += f" with a {failure['with_kind']}"
+    same = "the same way as the source failure" if clip.get("reproduced") else "another way than the source failure"
+    return text + f": it failed, {how}, {same}"
