@@ -75,8 +75,8 @@ def merged_messages(found: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
     return {"messages": _ranked(counts), "unlisted": beyond}
 
 
-def messages_text(messages: Mapping[str, Sequence[Mapping[str, Any]]], unlisted: Optional[Mapping[str, Mapping[str, int]]],
-                  name: str, kept: int = ERROR_MESSAGES_KEPT) -> str:
+def messages_text(messages: Mapping[str, Sequence[Mapping[str, Any]]],
+                  unlisted: Optional[Mapping[str, Mapping[str, int]]], name: str, kept: int = ERROR_MESSAGES_KEPT) -> str:
     """Scenario ``name``'s error messages in words, the ``kept`` most frequent: ``"scene not sampled (3 episodes);
     worker hung (1 episode)"``, and how many more distinct messages there were in how many episodes (with those an
     older record counted without their text, ``unlisted``)."""

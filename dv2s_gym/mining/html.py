@@ -41,7 +41,8 @@ EXTRA_CSS = """
 .cards{display:flex;flex-direction:column;gap:14px}.card{border:1px solid #d0d7de;border-radius:6px;padding:10px;display:flex;gap:16px}
 .card video{width:360px;height:360px;background:#000;display:block;flex:none}.card .novideo{width:360px;flex:none}
 .card .text{flex:1;min-width:0}.card .media{display:flex;flex-direction:column;gap:8px;flex:none}
-.card figure{margin:0}.card figcaption{font-size:12px;width:360px}.card h3{font-size:15px;margin:0 0 6px}.card blockquote{margin:6px 0;padding:6px 10px;
+.card figure{margin:0}.card figcaption{font-size:12px;width:360px}
+.card h3{font-size:15px;margin:0 0 6px}.card blockquote{margin:6px 0;padding:6px 10px;
 border-left:4px solid #0b63c5;background:#f6f8fa;white-space:pre-wrap}
 pre{background:#f6f8fa;padding:8px;overflow:auto;max-height:420px;font-size:12px}
 .s-kept{color:#1a7f37;font-weight:600}.s-merged{color:#8250df;font-weight:600}.s-rejected{color:#cf222e;font-weight:600}

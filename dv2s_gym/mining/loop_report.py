@@ -723,7 +723,8 @@ def _clips_html(clips: Mapping[str, Any]) -> str:
             "<div class=\"row\">" + "".join(
                 f"<figure><video src=\"{escape(v['path'])}\" controls muted loop preload=\"metadata\" "
                 f"width=\"320\"></video><figcaption>{escape(v['label'])}</figcaption></figure>" for v in row)
-            + "".join(f"<p class=\"note\">{escape(note)}</p>" for note in {v.get('note') for v in row} if note)
+            + "".join(f"<p class=\"note\">{escape(note)}</p>"
+                      for note in dict.fromkeys(v.get("note") for v in row) if note)
             + "</div>" for row in rows)
         parts.append(f"<div class=\"clips\"><h3>{escape(scenario)}</h3>{cells}</div>")
     return "".join(parts)
