@@ -49,9 +49,10 @@ MAX_FILE_BYTES = ArchiveLimits.max_file_bytes
 """The largest file an entry carries (a failure video, a trace) that is read for an export or a copy."""
 MAX_JSON_DEPTH = 64
 """Deepest nesting of arrays and objects accepted in a sidecar."""
-ENTRY_FILE_KEYS = ("video", "trace")
+ENTRY_FILE_KEYS = ("video", "trace", "converted_video")
 """Provenance fields that may name one of the entry's own files by its path relative to the entry folder (a
-mined failure's ``video: "failure.webm"``); a merge rewrites them to the merged copy's path."""
+mined failure's ``video: "failure.webm"``, its converted script's clip ``converted_video: "converted.webm"``); a
+merge rewrites them to the merged copy's path."""
 _ENTRY_FILE = re.compile(r"^[A-Za-z0-9_\-][A-Za-z0-9_.\-]*(/[A-Za-z0-9_\-][A-Za-z0-9_.\-]*)*$")
 
 PathLike = Union[str, os.PathLike]

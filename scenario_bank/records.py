@@ -186,7 +186,9 @@ class Provenance(_Record):
     the mining ``run`` and episode ``index``, its ``trace``, ``interaction``, the ``judge``'s checks, the
     ``replay`` parameters that pin an exact replay, the ``replay_entry``/``converted`` links between the two
     entries of one failure and ``merged`` (later failures merged into the entry). ``files`` lists the files the
-    entry carries in its folder. Other keys (``scenic2_rewrites``, links added later) are kept in ``extra``.
+    entry carries in its folder; ``converted_video`` names the one of them that films the converted script driven
+    by the policy that failed (one reproduction episode, described by ``reproduction["clip"]``), written only when
+    there is one. Other keys (``scenic2_rewrites``, links added later) are kept in ``extra``.
 
     ``null_fields``: the fields written as ``null`` when ``None``; by default :data:`PROVENANCE_FIELDS`, and a
     mined entry's :data:`MINED_PROVENANCE_FIELDS` but ``merged``, as a new sidecar writes them.
@@ -217,6 +219,7 @@ class Provenance(_Record):
     replay_entry: Optional[str] = None
     converted: Optional[str] = None
     files: Optional[Tuple[str, ...]] = None
+    converted_video: Optional[str] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
@@ -226,6 +229,7 @@ class Provenance(_Record):
         "failure": "object", "cluster": "str", "reproduction": "object", "e2e_sc": "any", "run": "str",
         "trace": "str", "index": "int", "merged": "objects", "interaction": "object", "judge": "object",
         "replay": "object", "replay_entry": "str", "converted": "str", ENTRY_FILES: "strings",
+        "converted_video": "str",
     }
     _LISTS: ClassVar[Tuple[str, ...]] = ("merged", ENTRY_FILES)
     _WHAT: ClassVar[str] = "provenance"

@@ -1083,8 +1083,8 @@ def test_a_starting_policy_episode_that_errored_before_stays_out_of_the_after_st
 
 
 def test_every_distinct_error_of_a_scenario_is_kept_with_its_count_the_most_frequent_first():
-    """Errored episodes of one scenario with seven distinct messages: the five most frequent are kept with their
-    counts (not only the first one seen), the rest counted, in the record, the log line and the report."""
+    """Errored episodes of one scenario with seven distinct messages: all are kept with their counts in the record,
+    the most frequent first; the log line and the report list the five most frequent and count the rest."""
     from dv2s_gym.mining.errored import errored_episodes, merged_messages, messages_text
     from dv2s_gym.mining.loop_report import render_markdown
 
@@ -1096,10 +1096,11 @@ def test_every_distinct_error_of_a_scenario_is_kept_with_its_count_the_most_freq
     assert found["episodes"] == 11 and found["scenarios"] == {"s1": 11}
     assert found["messages"]["s1"] == [{"message": "worker hung", "count": 3},
                                        {"message": "worker crashed", "count": 2}, {"message": "c", "count": 2},
-                                       {"message": "scene not sampled", "count": 1}, {"message": "a", "count": 1}]
-    assert found["unlisted"] == {"s1": {"messages": 2, "episodes": 2}}  # b and d
+                                       {"message": "scene not sampled", "count": 1}, {"message": "a", "count": 1},
+                                       {"message": "b", "count": 1}, {"message": "d", "count": 1}]
+    assert "unlisted" not in found
     assert found["examples"] == {"s1": "scene not sampled"}
-    text = messages_text(found["messages"], found["unlisted"], "s1")
+    text = messages_text(found["messages"], None, "s1")
     assert text.startswith("worker hung (3 episodes); worker crashed (2 episodes); c (2 episodes)")
     assert text.endswith("and 2 more distinct message(s) in 2 episode(s)")
     # a later step's errors add up; a step recorded with its first error only counts it once
@@ -1108,3 +1109,26 @@ def test_every_distinct_error_of_a_scenario_is_kept_with_its_count_the_most_freq
     record = {"round": 1, "steps": {"mine": {"episodes": 20, "errors": 11, "errored": found}}}
     markdown = render_markdown({"settings": {"policy": "dv2s-ppo"}, "policy": "dv2s-ppo", "rounds": [record]})
     assert "- `s1`: worker hung (3 episodes); worker crashed (2 episodes); c (2 episodes)" in markdown
+    assert "a (1 episode); and 2 more distinct message(s) in 2 episode(s)" in markdown
+
+
+def test_merging_the_steps_error_messages_counts_each_distinct_message_once():
+    """Two steps of one scenario: seven distinct messages in the first (one twice), and in the second one of those
+    beyond its five most frequent. Merged, there are still seven distinct messages: five listed, two more (not
+    three: the one the second step repeats is the same message), and its count adds up."""
+    from dv2s_gym.mining.errored import errored_episodes, merged_messages, messages_text
+
+    first = errored_episodes([{"scenario": "s1", "error": f"scene rejected by requirement {i}"} for i in range(7)]
+                             + [{"scenario": "s1", "error": "scene rejected by requirement 0"}])
+    second = errored_episodes([{"scenario": "s1", "error": "scene rejected by requirement 6"}])
+    merged = merged_messages([first, second])
+    assert len(merged["messages"]["s1"]) == 7 and sum(r["count"] for r in merged["messages"]["s1"]) == 9
+    assert merged["messages"]["s1"][:2] == [{"message": "scene rejected by requirement 0", "count": 2},
+                                            {"message": "scene rejected by requirement 6", "count": 2}]
+    text = messages_text(merged["messages"], merged["unlisted"], "s1")
+    assert text.endswith("scene rejected by requirement 3 (1 episode); and 2 more distinct message(s) in 2 episode(s)")
+    # a step recorded when only five were kept brings its anonymous rest as it was counted
+    legacy = {"messages": {"s1": [{"message": "x", "count": 4}]}, "unlisted": {"s1": {"messages": 3, "episodes": 5}}}
+    merged = merged_messages([second, legacy])
+    assert messages_text(merged["messages"], merged["unlisted"], "s1") == (
+        "x (4 episodes); scene rejected by requirement 6 (1 episode); and 3 more distinct message(s) in 5 episode(s)")

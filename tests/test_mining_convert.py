@@ -133,7 +133,17 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     report = json.loads((folder / "conversion" / "report.json").read_text())
     assert report["status"] == "kept" and len(report["reproduction_episodes"]) == 10
     assert set(out["timings"]) == {"video", "interaction", "replay", "describe", "generate", "check", "reproduction",
-                                   "avoidability", "e2e_sc", "bank"}
+                                   "avoidability", "e2e_sc", "clip", "bank"}
+    # the converted script driven by the same policy, filmed on a reproduction episode that failed the same way
+    clip = repro["clip"]
+    chosen = next(e for e in report["reproduction_episodes"] if e["reproduced"])
+    assert clip["seed"] == chosen["seed"] and clip["reproduced"] and clip["failed"]
+    assert clip["failure"]["type"] == "collision" and clip["file"] == "converted.webm" and "error" not in clip
+    assert out["converted_video"] == f"failures/{SCENARIO}__collision__0/conversion/converted.webm"
+    frames = read_video(folder / "conversion" / "converted.webm", fps=None, max_frames=1000, max_pixels=10**7).frames
+    # 4 s before the collision (or from the reset when it came sooner), 1 s after, at 5 Hz
+    assert len(frames) == min(chosen["failure"]["step"], 4 * 5) + 5 + 1 and frames[0].shape[:2] == (480, 480)
+    assert _red_pixels(frames[0]) == 0 and _red_pixels(frames[-1]) > 20  # the crash shows
     # the judge: the stopped car the ego ran into shows in the runs, the policy fails on it the same way, and
     # the reference driver avoids it
     assert out["interaction"]["kind"] == "car" and out["interaction"]["manoeuvres"] == ["stop"]
@@ -167,13 +177,56 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     assert entry.description == out["description"] and "mined" in entry.tags
     assert entry.script == (folder / "conversion" / "scenario.scenic").read_text()
     assert source["replay_entry"] == out["replay_entry"] and source["interaction"] == out["interaction"]
+    assert source["converted_video"] == "converted.webm" and "converted.webm" in source["files"]
+    assert (entry.folder / "converted.webm").read_bytes() == (folder / "conversion" / "converted.webm").read_bytes()
+
+    _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_path)
 
     again = convert_failure({**record, "index": 5}, tmp_path / "run2", policy="keep_lane", bank=bank)
     assert again["status"] == "merged" and again["merged_into"] == out["bank_entry"], again["reason"]
     merged = Bank(tmp_path / "bank").get(out["bank_entry"]).source["merged"]
     assert len(merged) == 1 and merged[0]["index"] == 5 and merged[0]["parent"] == SCENARIO
+    assert merged[0]["converted_video"] == "merged/1/converted.webm"
+    assert (entry.folder / "merged" / "1" / "converted.webm").is_file()
     assert again["replay_entry"] == out["replay_entry"]  # the same failing scene: its replay is not added twice
     assert Bank(tmp_path / "bank").names() == sorted([out["bank_entry"], out["replay_entry"]])
+
+
+def _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_path):
+    """The loop's report.html shows the kept entry's failure clip with its converted script's clip beside it (one
+    row), captioned with the scenario, seed and outcome; the exact replay shows its failure clip alone, saying why;
+    the mining report's card shows both clips too."""
+    from dv2s_gym.mining.html import render_html
+    from dv2s_gym.mining.loop_report import render_html as loop_html
+    from dv2s_gym.mining.loop_report import round_clips
+    from dv2s_gym.mining.report import build_report_from_records
+
+    seed = out["reproduction"]["clip"]["seed"]
+    loop = {"settings": {"bank_dir": str(tmp_path / "bank"), "policy": "keep_lane"}, "policy": "keep_lane",
+            "rounds": [{"round": 1, "steps": {"mine": {"folder": str(tmp_path / "run"), "kept": [
+                {"cluster": out["cluster"], "scenario": out["bank_entry"]},
+                {"cluster": out["cluster"], "scenario": out["replay_entry"], "replay": True}]}}}]}
+    clips = round_clips(loop, tmp_path)[1]
+    converted = clips[f"{out['bank_entry']} (fine-tuned on)"]
+    assert [c["path"] for c in converted] == [f"bank/{out['bank_entry']}/failure.webm",
+                                              f"bank/{out['bank_entry']}/converted.webm"]
+    assert converted[0]["group"] == converted[1]["group"]
+    assert converted[1]["label"] == (f"generated scenario {out['bank_entry']} (the converted script) driven by "
+                                     f"keep_lane, seed {seed}: it failed, collision (rear_end) with a car, the same "
+                                     "way as the source failure")
+    (replay,) = clips[f"{out['replay_entry']} (fine-tuned on)"]
+    assert replay["path"] == f"bank/{out['replay_entry']}/failure.webm" and "no converted script" in replay["note"]
+    page = loop_html(loop, {1: clips})
+    row = page.split(f'<video src="bank/{out["bank_entry"]}/failure.webm"')[1].split("</div>")[0]
+    assert f'<video src="bank/{out["bank_entry"]}/converted.webm"' in row and f"seed {seed}: it failed" in row
+    assert "it has no converted script, so only the failure clip is shown" in page
+
+    mining = build_report_from_records({"policy": "keep_lane", "sampler": "uniform"}, [record], [out],
+                                       {record["index"]: out["cluster"]})
+    card = render_html(mining, base=tmp_path / "run", page_dir=tmp_path / "run", embed_videos=False)
+    card = card.split(f'id="card-{out["cluster"]}"')[1].split('class="text"')[0]
+    assert f'src="failures/{SCENARIO}__collision__0/failure.webm"' in card
+    assert f'src="failures/{SCENARIO}__collision__0/conversion/converted.webm"' in card and f"seed {seed}" in card
 
 
 @pytest.mark.slow
@@ -632,7 +685,7 @@ def test_the_judge_compares_a_failing_parameter_with_the_generated_one_that_sets
     assert reason.startswith("parameters: the new scenario's ranges do not contain the failing values: cut_in_gap "
                              "(the script's car1_cut_gap: the Car car1's behaviour argument gap (cutter in the "
                              "parent)) = 8 outside 10..15")
-    assert "(not compared, no parameter of the new script means the same: kerb_offset, speed_after_cut_in)" in reason
+    assert "(not compared: kerb_offset, speed_after_cut_in with no counterpart in the new script)" in reason
 
 
 def test_parameters_that_cannot_be_paired_one_to_one_are_not_compared_but_listed():
@@ -678,6 +731,43 @@ def test_the_mining_report_counts_the_failing_parameters_the_judge_could_not_com
     report = build_report_from_records({"policy": "p", "sampler": "uniform"}, [], conversions, {})
     assert report["counts"]["parameters_compared"] == 3 and report["counts"]["parameters_not_compared"] == 3
     assert "3 failing parameter value(s) compared with the new scripts' ranges, 3 not compared" in markdown(report)
+
+
+def test_the_reports_name_each_reason_a_parameter_was_not_compared_with_its_count(tmp_path):
+    """The judge could not compare parameters for several reasons (no counterpart, a distribution that is not an
+    interval, a name match that reaches no object, one actor for two); the judge's reason, report.md and report.html
+    name each with its count instead of calling them all "no parameter means the same"."""
+    from dv2s_gym.mining.convert import _judge, compare_parameters
+    from dv2s_gym.mining.html import render_html
+    from dv2s_gym.mining.report import build_report_from_records, markdown
+
+    opaque = (_CUT_PARENT.replace("cut_in_gap = Range(5, 11)", "g = Normal(30, 1)")
+              .replace("globalParameters.cut_in_gap", "globalParameters.g")
+              .replace("lane_change_duration = Range(1.8, 3.0)", "lane_change_duration = Range(8, 9)"))
+    failing = {**_CUT_FAILING, "kerb_offset": 2.8}
+    judged = compare_parameters(failing, opaque, parent=_CUT_PARENT + "param kerb_offset = Range(2, 3)\n")
+    assert judged["outside"] == ["lane_change_duration"]
+    (reason,) = [str(r) for r in _judge({**_PASSING, "parameters": judged}, {}, {"type": "collision"}, 0.3)]
+    assert reason.endswith("(not compared: cut_in_gap whose counterpart's distribution is not an interval the judge "
+                           "can read; kerb_offset feeding no object of the parent script)")
+    decoy = _CUT_PARENT.replace("CutIn(globalParameters.cut_in_gap, globalParameters.lane_change_duration)",
+                                "CutIn(40, 6.0)")
+    conversions = [{"cluster": "c1", "index": 0, "status": "rejected", "stage": "parameters", "reason": reason,
+                    "parameters": judged},
+                   {"cluster": "c2", "index": 1, "status": "rejected", "stage": "parameters", "reason": "x",
+                    "parameters": compare_parameters(_CUT_FAILING, decoy, parent=_CUT_PARENT)},
+                   {"cluster": "c3", "index": 2, "status": "kept",  # a record listing names only
+                    "parameters": {"compared": {"a": {}}, "outside": [], "not_in_script": ["e", "f"]}}]
+    report = build_report_from_records({"policy": "p", "sampler": "uniform"}, [], conversions, {})
+    counts = report["counts"]
+    assert counts["parameters_not_compared"] == 6
+    assert counts["parameters_not_compared_by_reason"] == {"no_counterpart": 2, "not_interval": 1,
+                                                           "reaches_no_object": 2, "feeds_no_object": 1}
+    expected = ("6 not compared: 2 with no counterpart in the new script, 1 whose counterpart's distribution is not "
+                "an interval the judge can read, 2 named alike in the new script, where it reaches no object, 1 "
+                "feeding no object of the parent script")
+    assert expected in markdown(report) and "no parameter of the new script means the same" not in markdown(report)
+    assert expected.replace("'", "&#x27;") in render_html(report, embed_videos=False)
 
 
 # --------------------------------------------------------------------------- a name match must match in meaning
@@ -729,7 +819,9 @@ def test_a_constant_term_a_factor_or_another_direction_changes_the_meaning():
     from dv2s_gym.mining.param_meaning import meaning_map
 
     renamed = _CUT_PARENT.replace("cut_in_gap", "g").replace("lane_change_duration", "dur")
-    offset = renamed.replace("CutIn(globalParameters.g,", "CutIn(globalParameters.g + 10,")
+    # a constant term on a parameter that sets the quantity alone is read through (the tests below); beside
+    # another sampled value it still changes the meaning
+    offset = renamed.replace("CutIn(globalParameters.g,", "CutIn(globalParameters.g + egoS + 10,")
     compared, _ = _judged(offset)
     assert compared["compared"]["lane_change_duration"]["script_name"] == "dur"
     assert "cut_in_gap" in compared["not_comparable"]
@@ -752,8 +844,12 @@ def test_a_counterpart_with_a_distribution_the_judge_cannot_read_is_not_comparab
               .replace("globalParameters.lane_change_duration", "globalParameters.dur"))
     compared, rejections = _judged(opaque)
     assert "cannot read as an interval (Normal(30, 1))" in compared["not_comparable"]["cut_in_gap"]
-    assert "cannot read as an interval (Range(8, 9) * 1)" in compared["not_comparable"]["lane_change_duration"]
-    assert len(rejections) == 1 and "fewer than half" in rejections[0]
+    assert "cannot read as an interval (Range(8, 9) + Range(0, 1))" in _judged(
+        opaque.replace("Range(8, 9) * 1", "Range(8, 9) + Range(0, 1)"))[0]["not_comparable"]["lane_change_duration"]
+    # Range(8, 9) * 1 is read as the interval 8..9, which does not contain the failing 2
+    assert compared["compared"]["lane_change_duration"]["range"] == [8.0, 9.0]
+    assert len(rejections) == 1 and "lane_change_duration (the script's dur" in rejections[0]
+    assert "= 2 outside 8..9" in rejections[0]
 
 
 def test_one_actor_of_the_new_script_cannot_stand_for_two_of_the_parent():
@@ -782,3 +878,76 @@ def test_the_failures_actors_must_be_the_scene_in_a_majority_of_the_runs():
     assert not tie["same"]
     most = compare_actors({"car": 1}, [{"car": 1}] * 6 + [{"car": 2}] * 4, "car")
     assert most["same"] and not _judge({**_PASSING, "actors": most}, {}, {"type": "collision"}, 0.3)
+
+
+# --------------------------------------------------------------------------- a counterpart through an affine expression
+def _cut_script(gap_param, gap_range, gap_expression, name="car1"):
+    return (_CUT_PARENT.replace("cut_in_gap = Range(5, 11)", f"{gap_param} = {gap_range}")
+            .replace("cutter = new Car", f"{name} = new Car")
+            .replace("CutIn(globalParameters.cut_in_gap,", f"CutIn({gap_expression},"))
+
+
+@pytest.mark.parametrize("gap_range, expression, interval, inside", [
+    ("Range(-6, 1)", "globalParameters.g + 10", [4.0, 11.0], True),       # an offset that still covers 6
+    ("Range(5, 11)", "globalParameters.g + 10", [15.0, 21.0], False),     # an offset that no longer does
+    ("Range(2.5, 5.5)", "2 * globalParameters.g", [5.0, 11.0], True),     # scaled, covering
+    ("Range(5, 11)", "globalParameters.g * 2", [10.0, 22.0], False),      # scaled, not covering
+    ("Range(5, 11)", "globalParameters.g / 2", [2.5, 5.5], False),        # a quotient by a number
+    ("Range(-11, -5)", "-globalParameters.g", [5.0, 11.0], True),         # unary minus
+    ("Range(1, 3)", "-(2 * (1 - globalParameters.g)) / 2 + 5", [5.0, 7.0], True),   # nested
+    ("Range(1, 3)", "-(2 * (1 - globalParameters.g)) / 2 + 6", [6.0, 8.0], True),   # nested, at the edge
+    ("Range(1, 3)", "-(2 * (1 - globalParameters.g)) / 2 + 6.5", [6.5, 8.5], False),
+    ("Range(1, 2) * 3", "globalParameters.g + 1", [4.0, 7.0], True),      # the declaration scaled too
+    ("Uniform(5, 7, 9) - 10", "globalParameters.g + 5", [0.0, 4.0], False),
+])
+def test_a_counterpart_set_through_an_affine_expression_is_compared_by_the_interval_it_produces(
+        gap_range, expression, interval, inside):
+    """The generated script's gap is ``g + 10``, ``2 * g``, ...: the failing gap (6) must lie in the interval that
+    expression produces over g's range, not in g's own range; the reason quotes the expression and the interval."""
+    compared, rejections = _judged(_cut_script("g", gap_range, expression))
+    gap = compared["compared"]["cut_in_gap"]
+    assert gap["script_name"] == "g" and gap["by"] == "meaning"
+    assert gap["interval"] == interval and gap["quantity"] == 6.0 and gap["expression"] == expression
+    if inside:
+        assert compared["outside"] == [] and rejections == []
+    else:
+        assert compared["outside"] == ["cut_in_gap"]
+        (reason,) = rejections
+        low, high = (f"{v:g}" for v in interval)
+        assert f"cut_in_gap (the script's g: " in reason and f"= 6 outside {low}..{high}" in reason
+        assert f"the new script's {expression} takes with g in" in reason
+
+
+def test_a_counterpart_named_alike_is_compared_through_its_expression_and_the_parents_own():
+    """Named like the parent's parameter, or set through an expression in the parent too: the failing value's
+    quantity in the parent against the new expression's interval."""
+    compared, rejections = _judged(_cut_script("cut_in_gap", "Range(5, 11)", "globalParameters.cut_in_gap + 10"))
+    gap = compared["compared"]["cut_in_gap"]
+    assert "by" not in gap and gap["interval"] == [15.0, 21.0] and compared["outside"] == ["cut_in_gap"]
+    assert len(rejections) == 1 and "= 6 outside 15..21" in rejections[0]
+    # the parent sets the gap to 2 * cut_in_gap = 12: g + 10 over 0..3 (10..13) covers it, 0..1 (10..11) does not
+    parent = _CUT_PARENT.replace("CutIn(globalParameters.cut_in_gap,", "CutIn(2 * globalParameters.cut_in_gap,")
+    compared, rejections = _judged(_cut_script("g", "Range(0, 3)", "globalParameters.g + 10"), parent=parent)
+    assert compared["compared"]["cut_in_gap"]["quantity"] == 12.0 and rejections == []
+    compared, rejections = _judged(_cut_script("g", "Range(0, 1)", "globalParameters.g + 10"), parent=parent)
+    assert compared["outside"] == ["cut_in_gap"]
+    assert "= 6, which the parent's 2 * globalParameters.cut_in_gap makes 12, outside 10..11" in rejections[0]
+
+
+def test_an_expression_the_judge_cannot_read_stays_not_comparable():
+    for expression in ("globalParameters.g * globalParameters.g", "globalParameters.g + egoS + 10",
+                       "globalParameters.g * egoS", "globalParameters.g ** 2"):
+        compared, _ = _judged(_cut_script("g", "Range(5, 11)", expression))
+        assert "cut_in_gap" in compared["not_comparable"] and "cut_in_gap" not in compared["compared"]
+
+
+def test_an_affine_placement_distance_is_read_through():
+    from dv2s_gym.mining.convert import compare_parameters
+
+    parent = ("param lead_gap = Range(5, 11)\nego = new Car on lane.centerline\n"
+              "lead = new Car ahead of ego by globalParameters.lead_gap\n")
+    generated = ("param d = Range(1, 4)\nego = new Car on lane.centerline\n"
+                 "other = new Car ahead of ego by globalParameters.d * 2 + 3\n")
+    compared = compare_parameters({"lead_gap": 12.0}, generated, parent=parent)
+    assert compared["compared"]["lead_gap"]["interval"] == [5.0, 11.0] and compared["outside"] == ["lead_gap"]
+    assert compare_parameters({"lead_gap": 10.0}, generated, parent=parent)["outside"] == []

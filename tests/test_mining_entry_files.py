@@ -48,9 +48,15 @@ def test_a_kept_and_a_merged_entry_keep_their_videos_once_the_runs_are_deleted(r
     assert source["video"] == "failure.webm" and source["trace"] == "trace.json.gz"
     assert source["merged"][0]["video"] == "merged/1/failure.webm"
     assert source["merged"][0]["trace"] == "merged/1/trace.json.gz"
-    assert source["files"] == ["failure.webm", "trace.json.gz"]
-    assert source["merged"][0]["files"] == ["merged/1/failure.webm", "merged/1/trace.json.gz"]
-    assert entry_files(source) == ["failure.webm", "trace.json.gz", "merged/1/failure.webm", "merged/1/trace.json.gz"]
+    # and the clip of the converted script driven by the policy (one reproduction episode)
+    assert source["files"] == ["failure.webm", "trace.json.gz", "converted.webm"]
+    assert source["converted_video"] == "converted.webm"
+    assert source["merged"][0]["files"] == ["merged/1/failure.webm", "merged/1/trace.json.gz",
+                                            "merged/1/converted.webm"]
+    assert source["merged"][0]["converted_video"] == "merged/1/converted.webm"
+    assert entry_files(source) == ["failure.webm", "trace.json.gz", "converted.webm", "merged/1/failure.webm",
+                                   "merged/1/trace.json.gz", "merged/1/converted.webm"]
+    assert (entry.folder / "converted.webm").stat().st_size > 0
     assert entry.missing_files() == []
     clip = read_video(entry.folder / "failure.webm", fps=None, max_frames=1000, max_pixels=10**7)
     assert len(clip.frames) == frames > 0

@@ -75,7 +75,9 @@ import numpy as np
 from dv2s_gym.mining.exact_replay import narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
 from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence, key_actor, shows_interaction
 from dv2s_gym.mining.monitors import detect_failure
-from dv2s_gym.mining.param_meaning import meaning_map, name_mismatch, script_parameters, tied_objects
+from dv2s_gym.mining.report_text import not_compared_names_text
+from dv2s_gym.mining.param_meaning import (affine_uses, meaning_map, name_mismatch, read_interval, script_parameters,
+                                           tied_objects)
 from dv2s_gym.mining.tasks import reference_avoids
 from dv2s_gym.pipeline import stages
 from dv2s_gym.pipeline.convert import check_scenario, conversion_provenance
@@ -97,7 +99,7 @@ when the endpoint works, rather than rejecting every cluster."""
 
 __all__ = ["ConversionSettings", "convert_failure", "replay_failure_entry", "same_failure_class", "reference_failed", "reference_outcome",
            "reproduction_seeds", "cluster_slug", "CONVERSION_DIR", "ENTRY_VIDEO",
-           "ENTRY_TRACE"]
+           "ENTRY_TRACE", "ENTRY_CONVERTED_VIDEO", "clip_episode"]
 
 CONVERSION_DIR = "conversion"
 ENTRY_VIDEO = "failure.webm"
@@ -105,6 +107,10 @@ ENTRY_VIDEO = "failure.webm"
 ``merged/<n>/failure.webm``)."""
 ENTRY_TRACE = "trace.json.gz"
 """The source episode's trace in a kept entry's bank folder (its provenance ``trace``)."""
+ENTRY_CONVERTED_VIDEO = "converted.webm"
+"""The clip of the converted script driven by the policy (one reproduction episode) in a kept entry's bank folder
+(its provenance ``converted_video``; a merged failure's is ``merged/<n>/converted.webm``) and in the mining run's
+``failures/<cluster>/conversion/`` folder."""
 PathLike = Union[str, os.PathLike]
 
 
@@ -288,6 +294,18 @@ def _reproduction_episode(scene_seed: int, result: Any, trace: Any, monitor: Map
             "actor_kind": actor_kind, "interaction": shown, "reproduced": same}
 
 
+def clip_episode(episodes: List[Mapping[str, Any]]) -> Tuple[Mapping[str, Any], str]:
+    """The reproduction episode to film and why it was chosen: the first that reproduced the failure (the same
+    class with the same kind of actor), else the first that failed at all, else the first."""
+    for episode in episodes:
+        if episode.get("reproduced"):
+            return episode, "the first reproduction episode that failed the same way"
+    for episode in episodes:
+        if episode.get("failure"):
+            return episode, "no reproduction episode failed the same way; the first that failed"
+    return episodes[0], "no reproduction episode failed; the first"
+
+
 def _actor_kind(trace, name: str) -> str:
     return _kind(name, dict(getattr(trace, "kinds", {}) or {}))
 
@@ -334,8 +352,16 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     from the two scripts' structure). Returns ``{"compared": {name: {"value", "range": [low, high]}} (plus
     ``"script_name"`` when the script spells it differently, and ``"by": "meaning"`` with ``"basis"`` when paired
     by meaning), "outside": [names whose range does not contain the failing value], "not_comparable": {failing
-    parameter: why it could not be compared}, "not_in_script": [the same names]}``."""
-    ranges = param_ranges(script)
+    parameter: why it could not be compared}, "not_in_script": [the same names]}``.
+
+    A distribution built from ``Range``/``Uniform`` and numbers by sums, differences, products and quotients with
+    numbers and unary minus (``Range(2, 4) * 2 + 1``) is read as the interval it produces
+    (:func:`~dv2s_gym.mining.param_meaning.read_interval`). Given the parent, a counterpart that sets the quantity
+    through an affine expression of itself alone (``CutIn(globalParameters.g + 10)``) is compared through that
+    expression: the quantity the failing value set in the parent (through the parent's own expression) against
+    the interval the new expression produces over the counterpart's range (``"expression"``, ``"interval"``,
+    ``"quantity"`` in its comparison; ``"parent_expression"`` when the parent's is not the bare parameter)."""
+    ranges = _script_ranges(script)
     folded: Dict[str, str] = {}
     for script_name in sorted(ranges):
         folded.setdefault(script_name.casefold(), script_name)
@@ -356,12 +382,65 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     if parent is not None:
         why = _by_meaning(parent, script, numeric, compared, absent, ranges)
     for name in sorted(compared):
-        low, high = compared[name]["range"]
-        if not low - 1e-9 <= compared[name]["value"] <= high + 1e-9:
+        low, high = compared[name].get("interval") or compared[name]["range"]
+        if not low - 1e-9 <= compared[name].get("quantity", compared[name]["value"]) <= high + 1e-9:
             outside.append(name)
     not_comparable = {name: why[name] for name in sorted(why) if name not in compared}
     return {"compared": dict(sorted(compared.items())), "outside": outside, "not_comparable": not_comparable,
             "not_in_script": list(not_comparable)}
+
+
+def _script_ranges(script: str) -> Dict[str, Tuple[float, float]]:
+    """``{parameter: (low, high)}`` of the script's numeric parameters: :func:`scenario_bank.dedup.param_ranges`'s
+    forms, and the affine expressions of ``Range``/``Uniform``/numbers
+    :func:`~dv2s_gym.mining.param_meaning.read_interval` reads."""
+    ranges: Dict[str, Tuple[float, float]] = {}
+    for name, text in script_parameters(script).items():
+        interval = read_interval(text)
+        if interval is not None:
+            ranges[name] = interval
+    ranges.update(param_ranges(script))
+    return ranges
+
+
+def _through_expressions(parent: str, script: str, compared: Dict[str, Any]) -> None:
+    """Each compared parameter whose counterpart, or itself in the parent, sets a quantity through an affine
+    expression (:func:`~dv2s_gym.mining.param_meaning.affine_uses`) is compared through it: for a quantity (the
+    same kind of object, the ego or not, and slot) that one object sets in each script, the failing value's quantity
+    in the parent against the interval of the new expression over the counterpart's range. The first quantity
+    outside, else the first compared, is kept in the comparison (``expression``, ``interval``, ``quantity``,
+    ``parent_expression``); with bare parameters on both sides nothing changes."""
+    old_forms, new_forms = affine_uses(parent), affine_uses(script)
+
+    def by_meaning(forms: Mapping[Tuple[str, str, str], Any]) -> Dict[Tuple[bool, str, str], List[Any]]:
+        keyed: Dict[Tuple[bool, str, str], List[Any]] = {}
+        for (name, kind, slot), form in sorted(forms.items()):
+            keyed.setdefault((name == "ego", kind, slot), []).append(form)
+        return keyed
+
+    for name, comparison in compared.items():
+        target = comparison.get("script_name", name)
+        old, new = by_meaning(old_forms.get(name, {})), by_meaning(new_forms.get(target, {}))
+        low, high = comparison["range"]
+        chosen = None
+        for key in sorted(set(old) & set(new)):
+            if len(old[key]) != 1 or len(new[key]) != 1:
+                continue  # more than one object of that kind sets it: which is which is not known
+            (old_scale, old_offset, old_text), (scale, offset, text) = old[key][0], new[key][0]
+            if (old_scale, old_offset, scale, offset) == (1.0, 0.0, 1.0, 0.0):
+                continue
+            quantity = old_scale * comparison["value"] + old_offset
+            ends = sorted((scale * low + offset, scale * high + offset))
+            found = {"expression": text, "interval": ends, "quantity": quantity}
+            if (old_scale, old_offset) != (1.0, 0.0):
+                found["parent_expression"] = old_text
+            inside = ends[0] - 1e-9 <= quantity <= ends[1] + 1e-9
+            if chosen is None or not inside:
+                chosen = found
+            if not inside:
+                break
+        if chosen is not None:
+            comparison.update(chosen)
 
 
 def _by_meaning(parent: str, script: str, numeric: Mapping[str, float], compared: Dict[str, Any],
@@ -400,6 +479,7 @@ def _by_meaning(parent: str, script: str, numeric: Mapping[str, float], compared
     why.update({name: "the new script defines no numeric parameter of that name" for name in absent
                 if name not in mapped["pairs"] and name not in mapped["unpaired"]})
     why.update(_tied_twice(parent, script, compared))
+    _through_expressions(parent, script, compared)
     return why
 
 
@@ -451,6 +531,14 @@ def _outside_text(name: str, comparison: Mapping[str, Any]) -> str:
     spelled = f" (the script's {comparison['script_name']})" if comparison.get("script_name") else ""
     if comparison.get("by") == "meaning":
         spelled = f" (the script's {comparison['script_name']}: {comparison.get('basis')})"
+    if comparison.get("interval"):
+        own = comparison.get("script_name", name)
+        parent = (f", which the parent's {comparison['parent_expression']} makes "
+                  f"{_exact(float(comparison['quantity']))}," if comparison.get("parent_expression") else "")
+        start, end = comparison["interval"]
+        return (f"{name}{spelled} = {_exact(float(comparison['value']))}{parent} outside "
+                f"{_exact(float(start))}..{_exact(float(end))}, the interval the new script's "
+                f"{comparison['expression']} takes with {own} in {_exact(float(low))}..{_exact(float(high))}")
     return f"{name}{spelled} = {_exact(float(comparison['value']))} outside {_exact(float(low))}..{_exact(float(high))}"
 
 
@@ -515,11 +603,10 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
     if few:
         found.append(_Rejected("parameters", few))
     if parameters and parameters.get("outside"):
-        unchecked = list(parameters.get("not_comparable") or {})
+        unchecked = parameters.get("not_comparable") or {}
         found.append(_Rejected("parameters", "the new scenario's ranges do not contain the failing values: " + ", ".join(
             _outside_text(name, parameters["compared"][name]) for name in parameters["outside"])
-            + (f" (not compared, no parameter of the new script means the same: {', '.join(unchecked)})"
-               if unchecked else "")))
+            + (f" (not compared: {not_compared_names_text(unchecked)})" if unchecked else "")))
     return found
 
 
@@ -787,7 +874,7 @@ class _Conversion:
             "stage": None, "video": None, "description": None, "script": None, "reproduction": None,
             "e2e_sc": None, "bank_entry": None, "merged_into": None, "seconds": None, "timings": {},
             "interaction": None, "replay_entry": None, "avoidability": None, "rejections": [], "actors": None,
-            "parameters": None}
+            "parameters": None, "converted_video": None}
         self.details: Dict[str, Any] = {}
         self.stage = "input"
         self._stage_start = time.perf_counter()
@@ -803,7 +890,7 @@ class _Conversion:
         try:
             for step in (self._input, self._video, self._interaction, self._replay, self._describe, self._generate,
                          self._check, self._reproduction, self._avoidability, self._e2e_sc, self._judge,
-                         self._add_to_bank):
+                         self._clip, self._add_to_bank):
                 step()
         except _Rejected as rejection:
             out.update(stage=rejection.stage, reason=str(rejection))
@@ -976,14 +1063,50 @@ class _Conversion:
         if rejections:
             raise rejections[0]
 
+    def _clip(self) -> None:
+        """One reproduction episode of the converted script (:func:`clip_episode`: one that failed the same way
+        when there is one) filmed as the failure was, so a reader sees whether the script plays the failure. The
+        clip is extra: when it cannot be made, the record says why and the conversion goes on without it."""
+        self.stage = "clip"
+        from dv2s_gym.mining.failure_video import write_script_episode_video
+
+        episodes = self.details.get("reproduction_episodes") or []
+        self.clip_path: Optional[Path] = None
+        if not episodes:
+            return
+        episode, chosen = clip_episode(episodes)
+        failure = episode.get("failure") or None
+        clip = {"seed": int(episode["seed"]), "failed": bool(failure), "reproduced": bool(episode.get("reproduced")),
+                "failure": ({key: failure.get(key) for key in ("type", "collision_type", "with_kind")
+                             if failure.get(key) is not None} if failure else None),
+                "chosen": chosen, "file": ENTRY_CONVERTED_VIDEO}
+        path = self.conversion / ENTRY_CONVERTED_VIDEO
+        try:
+            write_script_episode_video(self.script_path, int(episode["seed"]), path, self.settings.video(),
+                                       episode_steps=int(episode["steps"]), failure=failure,
+                                       centre=self.written.failure_frame,
+                                       trajectory_hash=episode.get("trajectory_hash"))
+        except SETUP_ERRORS:
+            raise
+        except Exception as error:  # the clip is extra: the conversion goes on without it
+            clip = {**clip, "file": None, "error": _stage_error("clip", error)}
+        else:
+            self.clip_path = path
+            self.out["converted_video"] = _rel(path, self.run_dir)
+        self.out["reproduction"]["clip"] = clip
+        self.lap("clip")
+
     def _add_to_bank(self) -> None:
         self.stage = "bank"
         out, record = self.out, self.record
+        files = {ENTRY_VIDEO: self.video, ENTRY_TRACE: self.written.trace_path}
+        if self.clip_path is not None:
+            files[ENTRY_CONVERTED_VIDEO] = self.clip_path
         outcome = self.bank.add(self.generation.script, self.description.text,
                                 name=_mined_name(record["scenario"], self.source_failure["type"]),
                                 elements=self.description.elements, tags=["mined", self.source_failure["type"]],
                                 provenance=self._provenance(),
-                                files={ENTRY_VIDEO: self.video, ENTRY_TRACE: self.written.trace_path},
+                                files=files,
                                 on_duplicate="merge", near_copy_of=_family(record["scenario"],
                                                                            self.source_failure["type"]))
         if outcome.status == "added":
@@ -1012,4 +1135,5 @@ class _Conversion:
                                                  "parameters_not_compared": dict(
                                                      (out.get("parameters") or {}).get("not_comparable") or {})},
             replay_entry=self.replay["entry"],
+            converted_video=ENTRY_CONVERTED_VIDEO if self.clip_path is not None else None,
         )

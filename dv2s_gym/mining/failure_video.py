@@ -37,7 +37,7 @@ from envs.safety_metrics import path_is_free
 from envs.trace import EpisodeTrace, TraceMismatchError
 
 __all__ = ["FailureReplayError", "FailureVideo", "VIDEO_CONFIG", "VideoSettings", "failure_step",
-           "record_failure_video", "rerun_failure", "stall_end", "write_failure_video"]
+           "record_failure_video", "rerun_failure", "stall_end", "write_failure_video", "write_script_episode_video"]
 
 VIDEO_CONFIG: Dict[str, Any] = {"screen_width": 480, "screen_height": 480, "scaling": 5.5,
                                 "offscreen_rendering": True, "show_trajectories": False}
@@ -136,7 +136,6 @@ def rerun_failure(record: Mapping[str, Any], *, policy: Any, bank_dir: Optional[
     :class:`FailureReplayError` when the trajectory hash differs from the record's.
     """
     from policies.evaluation import make_eval_env
-    from policies.registry import load_policy
 
     _check_record(record)
     config = dict(env_config or {})
@@ -144,19 +143,29 @@ def rerun_failure(record: Mapping[str, Any], *, policy: Any, bank_dir: Optional[
         config.update(VIDEO_CONFIG)
     env = make_eval_env([record["scenario"]], config=config, bank_dir=str(bank_dir) if bank_dir else None,
                         render_mode="rgb_array" if render else None)
+    expected = record["result"]["trajectory_hash"]
+    return _checked_run(env, policy, record["scenario"], int(record["seed"]), record.get("params") or {}, render,
+                        extra_steps, expected,
+                        lambda got: (f"the replay of episode {record.get('index', '?')} ({record['scenario']}, seed "
+                                     f"{record['seed']}) diverged: trajectory hash {got[:12]} != recorded "
+                                     f"{expected[:12]}; re-run with the mining run's policy, env config and "
+                                     "dv2s-gym version"))
+
+
+def _checked_run(env, policy: Any, scenario: str, seed: int, params: Mapping[str, Any], render: bool,
+                 extra_steps: int, expected: Optional[str], diverged) -> Tuple[Any, Any, List[np.ndarray]]:
+    """One episode of ``policy`` on ``env`` (closed afterwards), its trajectory hash checked against ``expected``
+    (``diverged(hash)`` is the error's message), then ``extra_steps`` rendered steps past its end."""
+    from policies.registry import load_policy
+
     try:
         bound = load_policy(policy)
         bound.bind([env])
         frames: Optional[List[np.ndarray]] = [] if render else None
         watched = _LastObservation(env)
-        result, trace = _run_episode(watched, bound, record["scenario"], int(record["seed"]),
-                                     record.get("params") or {}, frames)
-        expected = record["result"]["trajectory_hash"]
-        if result.trajectory_hash != expected:
-            raise FailureReplayError(
-                f"the replay of episode {record.get('index', '?')} ({record['scenario']}, seed {record['seed']}) "
-                f"diverged: trajectory hash {result.trajectory_hash[:12]} != recorded {expected[:12]}; re-run with "
-                "the mining run's policy, env config and dv2s-gym version")
+        result, trace = _run_episode(watched, bound, scenario, seed, params, frames)
+        if expected is not None and result.trajectory_hash != expected:
+            raise FailureReplayError(diverged(result.trajectory_hash))
         trace = dataclasses.replace(trace, actions=list(trace.actions), states=list(trace.states),
                                     events=list(trace.events))  # the episode as recorded, before extra steps
         for _ in range(extra_steps if render else 0):
@@ -188,7 +197,7 @@ class FailureVideo:
     and the episode's :class:`~policies.evaluation.EpisodeResult` (None for a trace replay) and trace."""
 
     path: Path
-    trace_path: Path
+    trace_path: Optional[Path]
     first: int
     last: int
     failure_frame: int
@@ -307,3 +316,49 @@ def _trace_clip(source: Any) -> tuple:
     frames = _replay_trace_frames(trace)
     frequency = _frequency(trace.config)
     return frames, None, trace, frequency, failure_step(_trace_failure(trace), len(trace.actions), frequency), False
+
+
+def write_script_episode_video(script_path: PathLike, seed: int, out_path: PathLike,
+                               settings: Optional[VideoSettings] = None, *, episode_steps: int,
+                               failure: Optional[Mapping[str, Any]] = None, centre: Optional[int] = None,
+                               trajectory_hash: Optional[str] = None, scenario: Optional[str] = None,
+                               **options: Any) -> FailureVideo:
+    """Run the settings' ``policy`` on the scene ``seed`` of a Scenic script file (a converted script; in the jail
+    unless the package ships it) with the settings' ``env_config``, rendered as failure videos are
+    (:data:`VIDEO_CONFIG`, which changes only the pixels), and write the clip of one episode that already ran
+    (``episode_steps`` long, its ``trajectory_hash`` checked when given: a rendered run that diverges raises
+    :class:`FailureReplayError`). The clip is the window from ``before`` seconds before to ``after`` seconds
+    after the episode's ``failure`` (as the monitors found it: its ``step`` or ``time`` and ``type``; a stall's
+    window covers the stall), or, when it did not fail, around frame ``centre`` (e.g. where the original failure
+    happened; default the episode's end), at the policy frequency; past the episode's end the policy drives on.
+    ``scenario``: the name the episode ran under (default the script's folder name for a ``scenario.scenic``, else
+    its stem). No trace is written (:attr:`FailureVideo.trace_path` is ``None``)."""
+    from envs.dv2s_env import DV2SEnv
+
+    settings = VideoSettings.of(settings, options)
+    if settings.policy is None:
+        raise FailureReplayError("running a script's episode needs the policy (policy=...)")
+    stall_seconds = _check_window(settings)
+    script_path, out_path = Path(script_path), Path(out_path)
+    name = scenario or (script_path.parent.name if script_path.name == "scenario.scenic" else script_path.stem)
+    config = {**dict(settings.env_config or {}), **VIDEO_CONFIG}
+    frequency = _frequency(config)
+    episode_steps = int(episode_steps)
+    stall = (failure or {}).get("type") == "stall"
+    k = (failure_step(failure, episode_steps, frequency) if failure
+         else max(0, min(episode_steps, episode_steps if centre is None else int(centre))))
+    span = int(math.ceil(stall_seconds * frequency)) if stall else 0  # an upper bound of the stall's frames
+    end = k + span + int(round(settings.after * frequency))
+    env = DV2SEnv(scenario=str(script_path), config=config, render_mode="rgb_array")
+    result, trace, frames = _checked_run(
+        env, settings.policy, name, int(seed), {}, True, max(0, end - episode_steps), trajectory_hash,
+        lambda got: (f"the rendered run of {script_path} (seed {seed}) diverged from its episode: trajectory hash "
+                     f"{got[:12]} != {str(trajectory_hash)[:12]}"))
+    start = max(0, k - int(round(settings.before * frequency)))
+    last = stall_end(trace, k, int(math.ceil(stall_seconds * frequency))) if stall else k
+    stop = min(len(frames) - 1, last + int(round(settings.after * frequency)))
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    with VideoWriter(out_path, fps=frequency) as video:
+        for frame in frames[start:stop + 1]:
+            video.write(frame)
+    return FailureVideo(out_path, None, start, stop, k, frequency, result, trace)

@@ -5,7 +5,8 @@ single file: a summary banner, the settings, plots drawn as inline SVG (failures
 episodes per sampler with their Wilson intervals, distinct clusters found over the run per
 sampler, the failure rate per scenario with its interval), the per-sampler, per-scenario
 and cluster tables, then each converted cluster's failure video beside the description the
-pipeline generated from it (the generated Scenic script collapsed below), the rejected
+pipeline generated from it (the generated Scenic script collapsed below; a kept conversion's clip of the converted
+script driven by the same policy below the failure's), the rejected
 conversions with their reasons, the unavoidable failures apart, and the errors.
 
 Videos are embedded as ``data:video/webm`` URIs (up to ``max_videos``; the rest, or all
@@ -21,7 +22,7 @@ import os
 from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 
-from dv2s_gym.mining.report_text import breadth, rate_text, seed_text
+from dv2s_gym.mining.report_text import breadth, clip_caption, parameter_check_text, rate_text, seed_text
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, axis, escape, finite,
                                   fmt, fmt_interval, interval_mark, legend, row_label, svg, video_tag, x_scale)
 from scenario_bank.atomic import atomic_write_text
@@ -39,7 +40,9 @@ SAMPLER_COLOURS = ("#0b63c5", "#cf222e", "#1a7f37", "#b07800", "#8250df", "#5760
 EXTRA_CSS = """
 .cards{display:flex;flex-direction:column;gap:14px}.card{border:1px solid #d0d7de;border-radius:6px;padding:10px;display:flex;gap:16px}
 .card video{width:360px;height:360px;background:#000;display:block;flex:none}.card .novideo{width:360px;flex:none}
-.card .text{flex:1;min-width:0}.card h3{font-size:15px;margin:0 0 6px}.card blockquote{margin:6px 0;padding:6px 10px;
+.card .text{flex:1;min-width:0}.card .media{display:flex;flex-direction:column;gap:8px;flex:none}
+.card figure{margin:0}.card figcaption{font-size:12px;width:360px}
+.card h3{font-size:15px;margin:0 0 6px}.card blockquote{margin:6px 0;padding:6px 10px;
 border-left:4px solid #0b63c5;background:#f6f8fa;white-space:pre-wrap}
 pre{background:#f6f8fa;padding:8px;overflow:auto;max-height:420px;font-size:12px}
 .s-kept{color:#1a7f37;font-weight:600}.s-merged{color:#8250df;font-weight:600}.s-rejected{color:#cf222e;font-weight:600}
@@ -205,6 +208,8 @@ def _counts_table(report: Mapping[str, Any]) -> str:
         notes.append(f"Conversion time: median {fmt(seconds.get('median'))} s, max {fmt(seconds.get('max'))} s over "
                      f"{escape(seconds['n'])} conversion(s)" + ("; median per stage: " + ", ".join(
                          f"{escape(stage)} {fmt(value)} s" for stage, value in stages.items()) if stages else ""))
+    if c.get("parameters_compared") or c.get("parameters_not_compared"):
+        notes.append(escape(parameter_check_text(c)))
     return table + "".join(f"<p>{n}.</p>" for n in notes)
 
 
@@ -341,7 +346,8 @@ def _behaviour_text(behaviour: Mapping[str, Any]) -> str:
     return f"{other}; ego {behaviour.get('ego_manoeuvre') or 'unknown'}"
 
 
-def _cards(clusters: Sequence[Mapping[str, Any]], videos: _Videos, base: Path) -> str:
+def _cards(clusters: Sequence[Mapping[str, Any]], videos: _Videos, base: Path,
+           report_settings: Optional[Mapping[str, Any]] = None) -> str:
     if not clusters:
         return '<p class="muted">None.</p>'
     out = ['<div class="cards">']
@@ -365,7 +371,15 @@ def _cards(clusters: Sequence[Mapping[str, Any]], videos: _Videos, base: Path) -
         description = c.get("description")
         text = (f"<blockquote>{escape(description)}</blockquote>" if description
                 else '<p class="muted">No description was generated.</p>')
-        out.append(f'<div class="card" id="card-{escape(c.get("id"))}">{videos.tag(c.get("video"))}'
+        media = videos.tag(c.get("video"))
+        if c.get("converted_video"):  # the failure beside its converted script driven by the same policy
+            caption = clip_caption(str(c.get("bank_entry") or c.get("merged_into") or "-"),
+                                   {"policy": (report_settings or {}).get("policy"),
+                                    "reproduction": c.get("reproduction") or {}})
+            media = (f'<div class="media"><figure>{media}<figcaption>the failure ({escape(c.get("scenario"))}, seed '
+                     f'{escape(rep.get("seed"))})</figcaption></figure><figure>{videos.tag(c["converted_video"])}'
+                     f'<figcaption>{escape(caption)}</figcaption></figure></div>')
+        out.append(f'<div class="card" id="card-{escape(c.get("id"))}">{media}'
                    f'<div class="text"><h3><code>{escape(c.get("id"))}</code></h3>'
                    f'<p>{"<br>".join(facts)}</p><p><b>Generated description</b></p>{text}'
                    f'{_script(base, c.get("script"))}</div></div>')
@@ -446,13 +460,14 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
         "unavoidable clusters are listed apart below.</p>", _cluster_table(clusters),
         f"<h2>Converted failures ({len(converted)})</h2>",
         '<p class="muted">Each converted cluster\'s failure video (bird\'s-eye, the seconds before and through the '
-        "failure) beside the description the pipeline generated from it.</p>",
-        _cards(converted, videos, base),
+        "failure) beside the description the pipeline generated from it; below it, where the conversion was kept, "
+        "the converted script driven by the same policy on one of its reproduction episodes.</p>",
+        _cards(converted, videos, base, report.get("settings")),
         f"<h2>Rejected conversions ({len(report.get('rejected') or [])})</h2>", _rejected(report),
         f"<h2>Unavoidable failures ({len(report.get('unavoidable') or [])})</h2>",
         '<p class="muted">The reference driver failed in the same scene too; these do not count against the '
         "policy.</p>", _cluster_table(unavoidable),
-        _cards(unavoidable_converted, videos, base) if unavoidable_converted else "",
+        _cards(unavoidable_converted, videos, base, report.get("settings")) if unavoidable_converted else "",
         _failure_rows(report.get("unavoidable") or []),
         "<h2>Errors and worker restarts</h2>", _errors(report),
         f"<script>{SELFTEST}</script></body></html>",

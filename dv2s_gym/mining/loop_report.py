@@ -70,23 +70,29 @@ round's baseline episodes (the starting policy) are paired with the last tested 
 
 ``errored`` counts the episodes that errored (no rate or test counts them; e.g. a scene the scenario's
 sampler could not produce): in ``mine`` and ``before`` ``{"episodes", "scenarios": {scenario: n}, "messages":
-{scenario: [{"message", "count"}]: its distinct errors, the 5 most frequent}, "unlisted": {scenario: {"messages",
-"episodes"} beyond those}, "examples": {scenario: its first error}}`` (:func:`dv2s_gym.mining.errored.errored_episodes`);
+{scenario: [{"message", "count"}]: every distinct error, the most frequent first; the reports list 5 and count
+the rest}, "examples": {scenario: its first error}}`` (a record written when only 5 were kept has ``"unlisted":
+{scenario: {"messages", "episodes"}}`` for the rest) (:func:`dv2s_gym.mining.errored.errored_episodes`);
 in ``after`` the same per policy
 (``fine_tuned``, ``control``), in ``untouched`` and ``regress`` per policy (``start``, ``fine_tuned``, and
 ``control`` in ``untouched``). The log warns of them after each step and ``report.md`` lists them per round.
 
 ``Rate`` is ``{"k", "n", "rate", "low", "high"}`` (Wilson 95 %). ``report.html`` also shows, per round, the
-failure clips of the kept mined scenarios (the mining run's and the bank entry's videos) beside each other. A round missing a step has not
+clips of the kept mined scenarios (the bank entry's videos, else the mining run's): each failure's clip beside a
+clip of its converted script driven by the same policy on one reproduction episode, captioned with the scenario,
+the seed and whether (and how) that episode failed; an exact replay has no converted script and shows only its
+failure clip, saying so. A round missing a step has not
 finished it yet (the loop was stopped; rerunning resumes it).
 """
 
 from __future__ import annotations
 
+import json
 import os
 import re
 from dv2s_gym.mining.convert import cluster_slug
 from dv2s_gym.mining.errored import merged_messages, messages_text
+from dv2s_gym.mining.report_text import clip_caption
 from dv2s_gym.mining.loop_verdict import ACCEPTED, evidence_floor_note, judge_round, recommendation
 from dv2s_gym.regress.report import build_report, load_report, write_json
 from html import escape
@@ -312,7 +318,7 @@ def _errored_total(record: Mapping[str, Any]) -> int:
 def _errored_lines(record: Mapping[str, Any]) -> List[str]:
     """The round's errored episodes per step and policy, naming the scenarios and, for each, its distinct error
     messages with their counts over the round's steps (the most frequent first, at most
-    :data:`dv2s_gym.mining.errored.ERROR_MESSAGES_KEPT` listed per step)."""
+    :data:`dv2s_gym.mining.errored.ERROR_MESSAGES_KEPT` listed, the rest counted)."""
     stages = errored_by_stage(record)
     if not stages:
         return []
@@ -701,15 +707,26 @@ def _markdown_to_html(lines: List[str]) -> str:
 
 
 def _clips_html(clips: Mapping[str, Any]) -> str:
-    """Each kept mined scenario's videos side by side (paths relative to the loop folder)."""
+    """Each kept mined scenario's videos (paths relative to the loop folder): a failure's clip beside the clip of
+    its converted script (the videos of one ``group`` in one row)."""
     parts = []
     for scenario, videos in clips.items():
         if not videos:
             continue
-        cells = "".join(f"<figure><video src=\"{escape(v['path'])}\" controls muted loop preload=\"metadata\" "
-                        f"width=\"320\"></video><figcaption>{escape(v['label'])}</figcaption></figure>"
-                        for v in videos)
-        parts.append(f"<div class=\"clips\"><h3>{escape(scenario)}</h3><div class=\"row\">{cells}</div></div>")
+        rows: List[List[Mapping[str, Any]]] = []
+        for video in videos:
+            if rows and video.get("group") is not None and rows[-1][0].get("group") == video.get("group"):
+                rows[-1].append(video)
+            else:
+                rows.append([video])
+        cells = "".join(
+            "<div class=\"row\">" + "".join(
+                f"<figure><video src=\"{escape(v['path'])}\" controls muted loop preload=\"metadata\" "
+                f"width=\"320\"></video><figcaption>{escape(v['label'])}</figcaption></figure>" for v in row)
+            + "".join(f"<p class=\"note\">{escape(note)}</p>"
+                      for note in dict.fromkeys(v.get("note") for v in row) if note)
+            + "</div>" for row in rows)
+        parts.append(f"<div class=\"clips\"><h3>{escape(scenario)}</h3>{cells}</div>")
     return "".join(parts)
 
 
@@ -789,7 +806,8 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
             details.append(_round_figures(report["rounds"][position]))
         round_clips = (clips or {}).get(number) or {}
         if any(round_clips.values()):
-            details.append("<h3>Failure clips of the kept mined scenarios</h3>" + _clips_html(round_clips))
+            details.append("<h3>Clips of the kept mined scenarios: each failure beside its converted script driven "
+                           "by the same policy</h3>" + _clips_html(round_clips))
     return (f"<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>dv2s loop</title><style>{_CSS}</style>"
             f"</head><body><h1>dv2s loop</h1><p>Started from <code>{escape(str(settings.get('policy')))}</code>; "
             f"last fine-tuned policy <code>{escape(str(report.get('policy')))}</code>.</p>"
@@ -810,9 +828,12 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
 
 
 def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, List[Dict[str, str]]]]:
-    """Per round, each kept mined scenario's failure clips, as paths relative to ``out``: the bank entry's own
-    (``failure.webm`` and those of failures merged into it), else the mining run's
-    (``failures/<cluster slug>/*.webm``)."""
+    """Per round, each kept mined scenario's clips, as paths relative to ``out``: ``[{"path", "label", "group",
+    "note"}]``, each failure's clip followed by the clip of its converted script driven by the policy (one
+    reproduction episode, :data:`dv2s_gym.mining.convert.ENTRY_CONVERTED_VIDEO`), the two of one ``group`` shown
+    side by side. The bank entry's own (its provenance ``video`` and ``converted_video``, and those of failures
+    merged into it), else the mining run's (``failures/<cluster slug>/``). An exact replay has no converted script:
+    only its failure clip, and its ``note`` says so."""
     settings = report.get("settings") or {}
     bank = Path(settings.get("bank_dir") or Path(out) / "bank")
     found: Dict[int, Dict[str, List[Dict[str, str]]]] = {}
@@ -824,20 +845,86 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
         for entry in mine.get("kept") or []:
             scenario = str(entry["scenario"])
             videos = clips.setdefault(f"{scenario} ({'held out' if scenario in held else 'fine-tuned on'})", [])
-            entry_folder = bank / scenario
-            found_videos = sorted(entry_folder.rglob("*.webm")) if entry_folder.is_dir() else []
-            labels = [f"failure of cluster {entry.get('cluster')}" if video.parent == entry_folder
-                      else f"failure merged into it ({video.parent.relative_to(entry_folder)})"
-                      for video in found_videos]
-            if not found_videos and mine.get("folder"):  # the bank entry is gone: the mining run's copy
-                folder = Path(mine["folder"]) / "failures" / cluster_slug(entry.get("cluster"), None)
-                found_videos = sorted(folder.glob("*.webm")) if folder.is_dir() else []
-                labels = [f"failure of cluster {entry.get('cluster')} (mining run)"] * len(found_videos)
-            for video, label in zip(found_videos, labels):
+            for video, label, group, note in _entry_clips(entry, bank / scenario, mine):
                 path = os.path.relpath(video.resolve(), Path(out).resolve())
                 if all(v["path"] != path for v in videos):
-                    videos.append({"path": path, "label": label})
+                    videos.append({"path": path, "label": label, "group": f"{scenario}/{group}",
+                                   **({"note": note} if note else {})})
         found[int(record.get("round") or 0)] = clips
+    return found
+
+
+def _entry_source(folder: Path) -> Dict[str, Any]:
+    """The provenance (``source``) of the bank entry in ``folder``; ``{}`` when it cannot be read."""
+    from scenario_bank.entries import SIDECAR, read_json
+
+    try:
+        meta = read_json(folder, SIDECAR)
+    except Exception:  # the clips are extra: without the sidecar, the files alone
+        return {}
+    source = meta.get("source") if isinstance(meta, Mapping) else None
+    return dict(source) if isinstance(source, Mapping) else {}
+
+
+def _own_file(folder: Path, named: Any, default: str) -> Path:
+    """The entry's own file a provenance value names (a relative path inside the entry folder), else
+    ``default``'s."""
+    relative = str(named) if isinstance(named, str) and named else default
+    if Path(relative).is_absolute() or ".." in Path(relative).parts:
+        relative = default
+    return folder / relative
+
+
+def _entry_clips(entry: Mapping[str, Any], folder: Path, mine: Mapping[str, Any]) -> List[tuple]:
+    """``[(video, label, group, note)]`` of one kept mined scenario (:func:`round_clips`)."""
+    from dv2s_gym.mining.convert import CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_VIDEO
+
+    scenario, cluster = str(entry["scenario"]), entry.get("cluster")
+    replay_note = ("an exact replay of the failing scene: it has no converted script, so only the failure clip "
+                   "is shown")
+    found: List[tuple] = []
+    if folder.is_dir():
+        source = _entry_source(folder)
+        replay = bool(entry.get("replay") or source.get("replay"))
+        records = [("", source)] + [(f"merged/{n}/", merged) for n, merged in
+                                    enumerate(source.get("merged") or [], start=1) if isinstance(merged, Mapping)]
+        for prefix, provenance in records:
+            failure = _own_file(folder, provenance.get("video"), prefix + ENTRY_VIDEO)
+            converted = _own_file(folder, provenance.get("converted_video"), prefix + ENTRY_CONVERTED_VIDEO)
+            label = (f"failure of cluster {provenance.get('cluster') or cluster}" if not prefix
+                     else f"failure merged into it ({prefix.rstrip('/')})")
+            if provenance.get("parent") and provenance.get("seed") is not None:
+                label += f" ({provenance['parent']}, seed {provenance['seed']})"
+            note = replay_note if replay else None
+            if not replay and not converted.is_file():
+                clip = (provenance.get("reproduction") or {}).get("clip") or {}
+                note = (f"no clip of the converted script ({clip['error']})" if clip.get("error")
+                        else "no clip of the converted script was recorded")
+            if failure.is_file():
+                found.append((failure, label, prefix, note))
+            if not replay and converted.is_file():
+                found.append((converted, clip_caption(scenario, provenance), prefix, None))
+        listed = {video for video, *_ in found}
+        for video in sorted(folder.rglob("*.webm")):  # files no provenance names (an older entry's)
+            if video not in listed and video.name != ENTRY_CONVERTED_VIDEO:
+                where = video.parent.relative_to(folder)
+                found.append((video, f"failure of cluster {cluster}" if video.parent == folder
+                              else f"failure merged into it ({where})", str(where), None))
+        if found:
+            return found
+    if mine.get("folder"):  # the bank entry is gone: the mining run's copy
+        run = Path(mine["folder"]) / "failures" / cluster_slug(cluster, None)
+        for video in sorted(run.glob("*.webm")) if run.is_dir() else []:
+            found.append((video, f"failure of cluster {cluster} (mining run)", "run",
+                          replay_note if entry.get("replay") else None))
+        converted = run / CONVERSION_DIR / ENTRY_CONVERTED_VIDEO
+        if found and not entry.get("replay") and converted.is_file():
+            try:
+                conversion = json.loads((run / CONVERSION_DIR / "report.json").read_text())
+            except (OSError, ValueError):
+                conversion = {}
+            found.append((converted, clip_caption(scenario, {"policy": conversion.get("policy"), **conversion})
+                          + " (mining run)", "run", None))
     return found
 
 

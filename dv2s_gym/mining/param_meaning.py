@@ -13,7 +13,11 @@ quantity of it it sets (its *slot*):
 
 and how it enters the expression there (``scaled`` next to ``*`` or ``/``, ``subtracted`` after a minus, else
 ``additive``: alone or added, as a distance from a reference point is either way; ``derived ...`` when the
-parameter reaches the object only through a top-level variable's computation). A point that only
+parameter reaches the object only through a top-level variable's computation). An expression that is an affine
+function of the one parameter alone (``globalParameters.g + 10``, ``2 * globalParameters.h``,
+``-(globalParameters.d - 1) / 2``: numbers, ``+ - * /`` by numbers and unary minus, nested) sets the quantity to a
+known function of it: such a use counts as ``additive`` and :func:`affine_uses` keeps the function, so the judge
+compares the interval the expression produces rather than the parameter's own range. A point that only
 places an actor (``spot = new OrientedPoint ...`` then ``new Pedestrian right of spot``) and a top-level variable
 hand their parameters on to the actor that uses them.
 
@@ -27,11 +31,12 @@ left out: what cannot be paired reliably is reported as not comparable, never gu
 
 from __future__ import annotations
 
+import ast
 import re
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 __all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
-           "script_parameters"]
+           "script_parameters", "affine_uses", "affine_form", "read_interval", "Affine"]
 
 PLACEMENT_KINDS = ("OrientedPoint", "Point")
 """Classes that place actors but are not actors themselves."""
@@ -45,6 +50,102 @@ _SKIP = ("behavior", "def", "param", "model", "import", "from", "require", "moni
 
 Use = Tuple[str, str, str, str, frozenset]
 """``(object name, its kind, slot, how, the parameters in the same expression)``."""
+
+Affine = Tuple[float, float, str]
+"""``(scale, offset, the expression's text)``: a quantity set to ``scale * parameter + offset``."""
+
+_INTERVAL_CALLS = ("Range", "Uniform")
+
+
+def _affine_node(node: ast.AST, param: Optional[str]) -> Optional[Tuple[float, float]]:
+    """``(scale, offset)`` of ``node`` as ``scale * globalParameters.<param> + offset``; ``None`` when it is built
+    from anything but that parameter, numbers, ``+ - * /`` (a product or quotient by a number only) and unary
+    minus or plus."""
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+        return 0.0, float(node.value)
+    if (param is not None and isinstance(node, ast.Attribute) and node.attr == param
+            and isinstance(node.value, ast.Name) and node.value.id == "globalParameters"):
+        return 1.0, 0.0
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+        inner = _affine_node(node.operand, param)
+        if inner is None:
+            return None
+        return (-inner[0], -inner[1]) if isinstance(node.op, ast.USub) else inner
+    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
+        left, right = _affine_node(node.left, param), _affine_node(node.right, param)
+        if left is None or right is None:
+            return None
+        if isinstance(node.op, ast.Add):
+            return left[0] + right[0], left[1] + right[1]
+        if isinstance(node.op, ast.Sub):
+            return left[0] - right[0], left[1] - right[1]
+        if isinstance(node.op, ast.Mult):
+            if left[0] and right[0]:
+                return None  # the parameter times itself: not affine
+            return (left[0] * right[1] + right[0] * left[1], left[1] * right[1])
+        if right[0] or right[1] == 0.0:
+            return None  # a quotient by the parameter, or by zero
+        return left[0] / right[1], left[1] / right[1]
+    return None
+
+
+def _parse(text: str) -> Optional[ast.AST]:
+    try:
+        return ast.parse(text.strip(), mode="eval").body
+    except (SyntaxError, ValueError):
+        return None
+
+
+def affine_form(expression: str, param: str) -> Optional[Tuple[float, float]]:
+    """``(scale, offset)`` when ``expression`` is ``scale * globalParameters.<param> + offset`` built from that
+    parameter, numbers, sums and differences, products and quotients by numbers and unary minus (nested, in
+    brackets), the parameter appearing with a non-zero scale; else ``None``."""
+    node = _parse(expression)
+    form = _affine_node(node, param) if node is not None else None
+    return form if form is not None and form[0] != 0.0 else None
+
+
+def _interval_node(node: ast.AST) -> Optional[Tuple[float, float]]:
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+        return float(node.value), float(node.value)
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _INTERVAL_CALLS \
+            and node.args and not node.keywords:
+        bounds = [_interval_node(arg) for arg in node.args]
+        if any(b is None or b[0] != b[1] for b in bounds) or (node.func.id == "Range" and len(bounds) != 2):
+            return None  # bounds must be numbers
+        return min(b[0] for b in bounds), max(b[1] for b in bounds)
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+        inner = _interval_node(node.operand)
+        if inner is None:
+            return None
+        return (-inner[1], -inner[0]) if isinstance(node.op, ast.USub) else inner
+    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
+        left, right = _interval_node(node.left), _interval_node(node.right)
+        if left is None or right is None:
+            return None
+        if left[0] != left[1] and right[0] != right[1]:
+            return None  # two sampled values: only constants may offset or scale a sampled one
+        if isinstance(node.op, ast.Add):
+            return left[0] + right[0], left[1] + right[1]
+        if isinstance(node.op, ast.Sub):
+            return left[0] - right[1], left[1] - right[0]
+        if isinstance(node.op, ast.Mult):
+            ends = [a * b for a in left for b in right]
+            return min(ends), max(ends)
+        if right[0] != right[1] or right[0] == 0.0:
+            return None  # a quotient by a sampled value, or by zero
+        ends = [a / right[0] for a in left]
+        return min(ends), max(ends)
+    return None
+
+
+def read_interval(expression: str) -> Optional[Tuple[float, float]]:
+    """``(low, high)`` a parameter's distribution ranges over when it is built from ``Range(a, b)``,
+    ``Uniform(...)`` of numbers and numbers by sums and differences with numbers, products and quotients by numbers
+    and unary minus (nested): ``Range(2, 4) * 2 + 1`` is ``(5, 9)``; ``None`` for anything else (a ``Normal``, two
+    sampled values combined)."""
+    node = _parse(expression.split("#", 1)[0])
+    return _interval_node(node) if node is not None else None
 
 
 def _norm(name: str) -> str:
@@ -180,12 +281,36 @@ def _slots(specifier: str, behaviors: Mapping[str, List[str]]) -> List[Tuple[str
     return [("position", text)]
 
 
+def _value_part(slot: str, expression: str) -> str:
+    """The part of a slot's expression that is the quantity: a behaviour argument or a ``with`` value whole, the
+    distance after ``by`` of ``ahead of``/``behind``/``left of``/``right of`` and after ``for`` of ``following``;
+    ``""`` for other placements."""
+    if slot.startswith(("behavior:", "with:")) or slot == "speed":
+        return expression
+    match = re.match(r"^(?:ahead of|behind|left of|right of)\s+[\w.]+\s+by\s+(.+)$", expression.strip(), re.S)
+    if match is None:
+        match = re.match(r"^following\b.*?\bfor\s+(.+)$", expression.strip(), re.S)
+    return match.group(1) if match else ""
+
+
 def parameter_uses(script: str) -> Dict[str, Set[Use]]:
     """``{parameter: {(object, kind, slot, how, parameters in the same expression)}}``: where each global parameter
     of ``script`` goes (module docstring); a parameter that feeds no object (a ``require``, a behaviour's body) has
     no use."""
+    return _read_uses(script)[0]
+
+
+def affine_uses(script: str) -> Dict[str, Dict[Tuple[str, str, str], Affine]]:
+    """``{parameter: {(object, kind, slot): (scale, offset, expression)}}``: the uses of each global parameter of
+    ``script`` whose quantity is an affine function of that parameter alone (:func:`affine_form`; the bare
+    parameter is ``(1, 0, ...)``), read directly on the object (not through a variable or a placing point)."""
+    return _read_uses(script)[1]
+
+
+def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]], Dict[str, Dict[Tuple[str, str, str], Affine]]]:
     behaviors = _behaviors(script)
     uses: Dict[str, Set[Use]] = {}
+    forms: Dict[str, Dict[Tuple[str, str, str], Affine]] = {}
     carried: Dict[str, List[Tuple[str, str, str]]] = {}  # variable or placement -> [(param, slot, how)]
 
     def carried_by(expression: str) -> List[Tuple[str, str, str]]:
@@ -208,9 +333,18 @@ def parameter_uses(script: str) -> Dict[str, Set[Use]]:
             continue
         name, kind, rest = found.group(1) or f"<{found.group(2)}>", found.group(2), found.group(3)
         items: List[Tuple[str, str, str]] = []
+        found_forms: Dict[str, Dict[str, Affine]] = {}
         for specifier in _split_top(rest):
             for slot, expression in _slots(specifier, behaviors):
-                here = [(p, slot, _how(expression, p)) for p in _PARAM.findall(expression)]
+                value = _value_part(slot, expression)
+                here = []
+                for p in _PARAM.findall(expression):
+                    form = affine_form(value, p) if value else None
+                    if form is None:
+                        here.append((p, slot, _how(expression, p)))
+                    else:  # a known function of p alone: compared through the interval it produces
+                        here.append((p, slot, "additive"))
+                        found_forms.setdefault(p, {})[slot] = (form[0], form[1], " ".join(value.split()))
                 here += [(p, slot if s == "position" else s, how) for p, s, how in carried_by(expression)]
                 items += [(p, s, how, frozenset(q for q, t, _ in here if t == s)) for p, s, how in here]
         if kind in PLACEMENT_KINDS:
@@ -218,7 +352,10 @@ def parameter_uses(script: str) -> Dict[str, Set[Use]]:
             continue
         for param, slot, how, together in items:
             uses.setdefault(param, set()).add((name, kind, slot, how, together))
-    return uses
+        for param, by_slot in found_forms.items():
+            for slot, form in by_slot.items():
+                forms.setdefault(param, {})[(name, kind, slot)] = form
+    return uses, forms
 
 
 def _actor_slots(uses: Mapping[str, Set[Use]], params: Sequence[str]) -> Dict[Tuple[str, str], Set[Tuple[str, str]]]:

@@ -29,7 +29,8 @@ JSON schema ``dv2s-mine-report``, version 3 (:data:`SCHEMA_VERSION`; a change to
         "conversion_seconds": {"n", "median", "max", "total"},
         "conversion_stage_seconds": {stage: median seconds} (from the conversions' ``timings``),
         "parameters_compared", "parameters_not_compared": failing parameter values the conversion judge compared
-        with the new scripts' ranges, and those it could pair with no parameter of the new script},
+        with the new scripts' ranges, and those it could not compare, "parameters_not_compared_by_reason": {reason:
+        n} of those (:data:`dv2s_gym.mining.report_text.NOT_COMPARED_REASONS`)},
       "samplers": {name: Sampler},
       "scenarios": {name: Scenario},
       "failure_rate": {"available", "reason", "overall": Estimate, "scenarios": {name: Estimate}}
@@ -67,7 +68,8 @@ so its interval is a guide, not an exact guarantee.
 {"actor", "actor_manoeuvre", "ego_manoeuvre"}, "size", "avoidable", "unavoidable",
 "unknown", "samplers": {name: n}, "first_index", "params": {name: {"min", "max"} |
 {"values"}}`` (the parameter region its failures cover), ``"collision_types", "with_kinds",
-"representative": Failure, "video": path relative to the run folder | null, "status":
+"representative": Failure, "video": path relative to the run folder | null, "converted_video": the clip of the
+converted script driven by the policy (one reproduction episode; ``reproduction["clip"]`` says which) | null, "status":
 "kept" | "merged" | "rejected" | "not converted", "reason", "bank_entry", "merged_into",
 "reproduction": the conversion's record | null, "reproduction_rate", "e2e_sc", "description",
 "script", "conversion": the conversion record | null}``. A conversion belongs to the cluster
@@ -95,7 +97,8 @@ from dv2s_gym.mining.cluster import cluster_failures
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.html import write_html
 from dv2s_gym.mining.rate import rate_estimates
-from dv2s_gym.mining.report_text import breadth, error_warning, rate_text, seed_text
+from dv2s_gym.mining.report_text import (NOT_COMPARED_REASONS, breadth, error_warning, not_compared_counts,
+                                         parameter_check_text, rate_text, seed_text)
 from dv2s_gym.mining.report_text import number_text as _num
 from dv2s_gym.mining.report_text import percent_text as _pct
 from dv2s_gym.regress.identity import installed_version
@@ -398,6 +401,7 @@ def _cluster_entry(cluster_id: str, members: Sequence[Dict[str, Any]],
         "with_kinds": dict(sorted(Counter(str(m["with_kind"]) for m in members if m["with_kind"]).items())),
         "representative": representative,
         "video": (conversion or {}).get("video"),
+        "converted_video": (conversion or {}).get("converted_video"),
         "status": (conversion or {}).get("status") or NOT_CONVERTED,
         "reason": (conversion or {}).get("reason"),
         "bank_entry": (conversion or {}).get("bank_entry"),
@@ -468,6 +472,12 @@ def _conversion_counts(conversions: Sequence[Mapping[str, Any]],
         for stage, value in (conversion.get("timings") or {}).items():
             if isinstance(value, (int, float)) and math.isfinite(float(value)):
                 stage_seconds.setdefault(str(stage), []).append(float(value))
+    not_compared: Dict[str, int] = {}
+    for c in conversions:
+        parameters = c.get("parameters") or {}
+        for key, n in not_compared_counts(parameters.get("not_comparable") or parameters.get("not_in_script")).items():
+            not_compared[key] = not_compared.get(key, 0) + n
+    not_compared = {key: not_compared[key] for key, _, _ in NOT_COMPARED_REASONS if key in not_compared}
     return {
         "converted": len(conversions),
         "kept": statuses["kept"],
@@ -479,9 +489,8 @@ def _conversion_counts(conversions: Sequence[Mapping[str, Any]],
         "conversion_stage_seconds": {stage: statistics.median(values) for stage, values in stage_seconds.items()},
         # the judge's parameter check: failing parameters compared with the new script's ranges, and not
         "parameters_compared": sum(len((c.get("parameters") or {}).get("compared") or {}) for c in conversions),
-        "parameters_not_compared": sum(len((c.get("parameters") or {}).get("not_comparable")
-                                           or (c.get("parameters") or {}).get("not_in_script") or [])
-                                       for c in conversions),
+        "parameters_not_compared": sum(not_compared.values()),
+        "parameters_not_compared_by_reason": not_compared,
     }
 
 
@@ -786,10 +795,8 @@ def _converted_lines(report: Mapping[str, Any]) -> List[str]:
             if c.get("description"):
                 lines.append(f"  > {_cell(c['description'])}")
     if counts.get("parameters_compared") or counts.get("parameters_not_compared"):
-        lines += ["", f"Parameter check of the conversions: {counts['parameters_compared']} failing parameter value(s) "
-                      f"compared with the new scripts' ranges, {counts['parameters_not_compared']} not compared (no "
-                      "parameter of the new script means the same; each conversion record lists them under "
-                      "`parameters.not_comparable`)."]
+        lines += ["", parameter_check_text(counts) + " (each conversion record lists the parameters not compared, "
+                      "with why, under `parameters.not_comparable`)."]
     return lines
 
 

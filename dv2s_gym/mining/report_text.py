@@ -3,9 +3,70 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Mapping, Optional
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
-__all__ = ["breadth", "rate_text", "number_text", "percent_text", "seed_text", "error_warning"]
+__all__ = ["breadth", "rate_text", "number_text", "percent_text", "seed_text", "error_warning",
+           "NOT_COMPARED_REASONS", "not_compared_reason", "not_compared_counts", "not_compared_text",
+           "not_compared_names_text", "parameter_check_text", "clip_caption"]
+
+NOT_COMPARED_REASONS: Tuple[Tuple[str, Tuple[str, ...], str], ...] = (
+    ("no_counterpart", ("defines no numeric parameter of that name", "sets the same quantity of that object"),
+     "with no counterpart in the new script"),
+    ("actor_missing", ("its object has no counterpart",), "whose actor has no counterpart in the new script"),
+    ("not_interval", ("cannot read as an interval",),
+     "whose counterpart's distribution is not an interval the judge can read"),
+    ("reaches_no_object", ("reaches no object",), "named alike in the new script, where it reaches no object"),
+    ("feeds_no_object", ("feeds no object of its script",), "feeding no object of the parent script"),
+    ("other_meaning", ("named alike but not the same meaning",),
+     "named alike in the new script, where it means something else"),
+    ("together", ("only together with other parameters",),
+     "setting their object's quantities only together with other parameters"),
+    ("ambiguous", ("ambiguous:",), "with more than one possible counterpart"),
+    ("two_actors", ("one actor cannot be two",), "whose counterpart's actor would stand for two of the parent's"),
+    ("other", (), "for another reason"),
+)
+"""``(key, phrases of the conversion judge's reasons, words)`` of each reason a failing parameter was not compared
+with the new script (:func:`dv2s_gym.mining.convert.compare_parameters`' ``not_comparable``), in the order the
+reports list them."""
+
+
+def not_compared_reason(why: Any) -> str:
+    """The key of :data:`NOT_COMPARED_REASONS` a judge's reason for not comparing a parameter falls under (``None``,
+    as in a record listing only names, is ``no_counterpart``: the name was not in the new script)."""
+    if why is None:
+        return "no_counterpart"
+    text = str(why)
+    for key, phrases, _ in NOT_COMPARED_REASONS:
+        if any(phrase in text for phrase in phrases):
+            return key
+    return "other"
+
+
+def not_compared_counts(not_compared: Union[Mapping[str, Any], Sequence[str], None]) -> Dict[str, int]:
+    """``{reason key: n}`` of a conversion's ``not_comparable`` (``{name: why}``; an older record's list of names
+    counts as ``no_counterpart``), in :data:`NOT_COMPARED_REASONS`' order."""
+    reasons = (not_compared or {}) if isinstance(not_compared, Mapping) else {name: None for name in not_compared or []}
+    found: Dict[str, int] = {}
+    for why in reasons.values():
+        key = not_compared_reason(why)
+        found[key] = found.get(key, 0) + 1
+    return {key: found[key] for key, _, _ in NOT_COMPARED_REASONS if key in found}
+
+
+def not_compared_text(counts: Mapping[str, int]) -> str:
+    """``"2 with no counterpart in the new script, 1 whose counterpart's distribution is not an interval the judge
+    can read"``: :func:`not_compared_counts` in words, each reason with its count."""
+    words = {key: text for key, _, text in NOT_COMPARED_REASONS}
+    return ", ".join(f"{n} {words.get(key, key)}" for key, n in counts.items() if n)
+
+
+def not_compared_names_text(not_compared: Mapping[str, Any]) -> str:
+    """``"kerb_offset, speed_after_cut_in with no counterpart in the new script; cut_in_gap whose ..."``: the
+    parameters of one conversion that were not compared, grouped by reason."""
+    groups: Dict[str, List[str]] = {}
+    for name in sorted(not_compared):
+        groups.setdefault(not_compared_reason(not_compared[name]), []).append(str(name))
+    return "; ".join(f"{', '.join(groups[key])} {text}" for key, _, text in NOT_COMPARED_REASONS if key in groups)
 
 
 def number_text(value: Any, digits: int = 1) -> str:
@@ -79,3 +140,35 @@ def error_warning(errors: int, episodes: int, first: str) -> str:
             f"{errors} of {episodes} episodes ended in an error and count in no failure figure")
     return (f"WARNING: {what} (e.g. {first}); the report's Errors section lists them: fix the policy or scenario "
             "and rerun")
+
+
+def parameter_check_text(counts: Mapping[str, Any]) -> str:
+    """``"Parameter check of the conversions: 3 failing parameter value(s) compared with the new scripts' ranges, 3
+    not compared: 2 with no counterpart in the new script, 1 ..."``, from a mining report's ``counts`` (a report
+    written before the reasons were counted says only how many)."""
+    text = (f"Parameter check of the conversions: {counts.get('parameters_compared', 0)} failing parameter value(s) "
+            f"compared with the new scripts' ranges, {counts.get('parameters_not_compared', 0)} not compared")
+    reasons = not_compared_text(counts.get("parameters_not_compared_by_reason") or {})
+    return text + (f": {reasons}" if reasons else "")
+
+
+def clip_caption(scenario: str, source: Mapping[str, Any]) -> str:
+    """The caption of a converted script's clip from its provenance (or conversion record): the scenario, the
+    policy, the seed, and whether the episode failed and how."""
+    clip = (source.get("reproduction") or {}).get("clip") or {}
+    policy = source.get("policy")
+    text = f"generated scenario {scenario} (the converted script) driven by {policy or 'the policy'}"
+    if clip.get("seed") is not None:
+        text += f", seed {clip['seed']}"
+    failure = clip.get("failure") or {}
+    if not clip:
+        return text
+    if not clip.get("failed"):
+        return text + ": it did not fail"
+    how = str(failure.get("type") or "failed")
+    if failure.get("collision_type"):
+        how += f" ({failure['collision_type']})"
+    if failure.get("with_kind"):
+        how += f" with a {failure['with_kind']}"
+    same = "the same way as the source failure" if clip.get("reproduced") else "another way than the source failure"
+    return text + f": it failed, {how}, {same}"
