@@ -168,7 +168,7 @@ EVIDENCE: Dict[str, Any] = {"budget": 240, "max_conversions": 4, "max_replays": 
 """The ``evidence`` profile's values where they differ from the defaults: the scale of the loop measurements in
 bench/RESULTS.md (240 mining episodes, 40k DAgger steps per arm, 10 seeds per held-out scenario, 4 per bank
 scenario), 4 conversions and 16 exact replays per round for held-out families, 5 seeds per untouched scenario.
-Roughly an hour or more per round on 2 cores."""
+About 23 minutes for one round on 2 shared cores (load 4-8), as measured in bench/RESULTS.md."""
 
 PROFILES: Dict[str, Dict[str, Any]] = {"quick": {}, "evidence": EVIDENCE}
 """``dv2s loop --profile NAME``: the values each profile sets (``quick``: the embedded defaults as they are)."""
