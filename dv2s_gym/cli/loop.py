@@ -58,7 +58,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--profile", choices=list(PROFILES), default=DEFAULT_PROFILE,
                    help="the settings every option below defaults to: quick (the embedded defaults: a round sized for "
                    "about 5 minutes on 2 idle cores, too small to judge the fine-tuned policy) or evidence (a round large "
-                   "enough to judge, an hour or more: " + ", ".join(f"--{k.replace('_', '-')} {v}"
+                   "enough to judge, about 25 minutes on 2 cores: " + ", ".join(f"--{k.replace('_', '-')} {v}"
                                                                     for k, v in EVIDENCE.items())
                    + "); options given explicitly override the profile's values")
     p.add_argument("--rounds", type=int, default=None, help=_default("rounds", "rounds"))
