@@ -1082,10 +1082,8 @@ class _Conversion:
                 "chosen": chosen, "file": ENTRY_CONVERTED_VIDEO}
         path = self.conversion / ENTRY_CONVERTED_VIDEO
         try:
-            write_script_episode_video(self.script_path, int(episode["seed"]), path, self.settings.video(),
-                                       episode_steps=int(episode["steps"]), failure=failure,
-                                       centre=self.written.failure_frame,
-                                       trajectory_hash=episode.get("trajectory_hash"))
+            write_script_episode_video(self.script_path, episode, path, self.settings.video(),
+                                       centre=self.written.failure_frame)
         except SETUP_ERRORS:
             raise
         except Exception as error:  # the clip is extra: the conversion goes on without it

@@ -25,7 +25,7 @@ import dataclasses
 import math
 import os
 from pathlib import Path
-from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
+from typing import Any, Dict, List, Mapping, NamedTuple, Optional, Tuple, Union
 
 import gymnasium as gym
 import numpy as np
@@ -144,18 +144,26 @@ def rerun_failure(record: Mapping[str, Any], *, policy: Any, bank_dir: Optional[
     env = make_eval_env([record["scenario"]], config=config, bank_dir=str(bank_dir) if bank_dir else None,
                         render_mode="rgb_array" if render else None)
     expected = record["result"]["trajectory_hash"]
-    return _checked_run(env, policy, record["scenario"], int(record["seed"]), record.get("params") or {}, render,
-                        extra_steps, expected,
+    scene = _Scene(record["scenario"], int(record["seed"]), record.get("params") or {})
+    return _checked_run(env, policy, scene, render, extra_steps, expected,
                         lambda got: (f"the replay of episode {record.get('index', '?')} ({record['scenario']}, seed "
                                      f"{record['seed']}) diverged: trajectory hash {got[:12]} != recorded "
                                      f"{expected[:12]}; re-run with the mining run's policy, env config and "
                                      "dv2s-gym version"))
 
 
-def _checked_run(env, policy: Any, scenario: str, seed: int, params: Mapping[str, Any], render: bool,
-                 extra_steps: int, expected: Optional[str], diverged) -> Tuple[Any, Any, List[np.ndarray]]:
-    """One episode of ``policy`` on ``env`` (closed afterwards), its trajectory hash checked against ``expected``
-    (``diverged(hash)`` is the error's message), then ``extra_steps`` rendered steps past its end."""
+class _Scene(NamedTuple):
+    """The scene an episode runs: the scenario's name, the env seed and the script's sampled parameters."""
+
+    scenario: str
+    seed: int
+    params: Mapping[str, Any]
+
+
+def _checked_run(env, policy: Any, scene: _Scene, render: bool, extra_steps: int, expected: Optional[str],
+                 diverged) -> Tuple[Any, Any, List[np.ndarray]]:
+    """One episode of ``policy`` on ``env`` (closed afterwards) in ``scene``, its trajectory hash checked against
+    ``expected`` (``diverged(hash)`` is the error's message), then ``extra_steps`` rendered steps past its end."""
     from policies.registry import load_policy
 
     try:
@@ -163,7 +171,7 @@ def _checked_run(env, policy: Any, scenario: str, seed: int, params: Mapping[str
         bound.bind([env])
         frames: Optional[List[np.ndarray]] = [] if render else None
         watched = _LastObservation(env)
-        result, trace = _run_episode(watched, bound, scenario, seed, params, frames)
+        result, trace = _run_episode(watched, bound, scene.scenario, scene.seed, scene.params, frames)
         if expected is not None and result.trajectory_hash != expected:
             raise FailureReplayError(diverged(result.trajectory_hash))
         trace = dataclasses.replace(trace, actions=list(trace.actions), states=list(trace.states),
@@ -318,19 +326,18 @@ def _trace_clip(source: Any) -> tuple:
     return frames, None, trace, frequency, failure_step(_trace_failure(trace), len(trace.actions), frequency), False
 
 
-def write_script_episode_video(script_path: PathLike, seed: int, out_path: PathLike,
-                               settings: Optional[VideoSettings] = None, *, episode_steps: int,
-                               failure: Optional[Mapping[str, Any]] = None, centre: Optional[int] = None,
-                               trajectory_hash: Optional[str] = None, scenario: Optional[str] = None,
-                               **options: Any) -> FailureVideo:
-    """Run the settings' ``policy`` on the scene ``seed`` of a Scenic script file (a converted script; in the jail
-    unless the package ships it) with the settings' ``env_config``, rendered as failure videos are
-    (:data:`VIDEO_CONFIG`, which changes only the pixels), and write the clip of one episode that already ran
-    (``episode_steps`` long, its ``trajectory_hash`` checked when given: a rendered run that diverges raises
+def write_script_episode_video(script_path: PathLike, episode: Mapping[str, Any], out_path: PathLike,
+                               settings: Optional[VideoSettings] = None, *, centre: Optional[int] = None,
+                               scenario: Optional[str] = None, **options: Any) -> FailureVideo:
+    """Run the settings' ``policy`` on a scene of a Scenic script file (a converted script; in the jail unless the
+    package ships it) with the settings' ``env_config``, rendered as failure videos are (:data:`VIDEO_CONFIG`,
+    which changes only the pixels), and write the clip of one ``episode`` that already ran on it: its ``seed``,
+    ``steps`` (its length), ``failure`` (as the monitors found it: its ``step`` or ``time`` and ``type``; ``None``
+    when it drove safely) and ``trajectory_hash`` (checked when present: a rendered run that diverges raises
     :class:`FailureReplayError`). The clip is the window from ``before`` seconds before to ``after`` seconds
-    after the episode's ``failure`` (as the monitors found it: its ``step`` or ``time`` and ``type``; a stall's
-    window covers the stall), or, when it did not fail, around frame ``centre`` (e.g. where the original failure
-    happened; default the episode's end), at the policy frequency; past the episode's end the policy drives on.
+    after the failure (a stall's window covers the stall), or, when it did not fail, around frame ``centre``
+    (e.g. where the original failure happened; default the episode's end), at the policy frequency; past the
+    episode's end the policy drives on.
     ``scenario``: the name the episode ran under (default the script's folder name for a ``scenario.scenic``, else
     its stem). No trace is written (:attr:`FailureVideo.trace_path` is ``None``)."""
     from envs.dv2s_env import DV2SEnv
@@ -343,7 +350,8 @@ def write_script_episode_video(script_path: PathLike, seed: int, out_path: PathL
     name = scenario or (script_path.parent.name if script_path.name == "scenario.scenic" else script_path.stem)
     config = {**dict(settings.env_config or {}), **VIDEO_CONFIG}
     frequency = _frequency(config)
-    episode_steps = int(episode_steps)
+    seed, episode_steps = int(episode["seed"]), int(episode["steps"])
+    failure, trajectory_hash = episode.get("failure") or None, episode.get("trajectory_hash")
     stall = (failure or {}).get("type") == "stall"
     k = (failure_step(failure, episode_steps, frequency) if failure
          else max(0, min(episode_steps, episode_steps if centre is None else int(centre))))
@@ -351,7 +359,7 @@ def write_script_episode_video(script_path: PathLike, seed: int, out_path: PathL
     end = k + span + int(round(settings.after * frequency))
     env = DV2SEnv(scenario=str(script_path), config=config, render_mode="rgb_array")
     result, trace, frames = _checked_run(
-        env, settings.policy, name, int(seed), {}, True, max(0, end - episode_steps), trajectory_hash,
+        env, settings.policy, _Scene(name, seed, {}), True, max(0, end - episode_steps), trajectory_hash,
         lambda got: (f"the rendered run of {script_path} (seed {seed}) diverged from its episode: trajectory hash "
                      f"{got[:12]} != {str(trajectory_hash)[:12]}"))
     start = max(0, k - int(round(settings.before * frequency)))

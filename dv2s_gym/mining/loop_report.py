@@ -90,7 +90,7 @@ from __future__ import annotations
 import json
 import os
 import re
-from dv2s_gym.mining.convert import cluster_slug
+from dv2s_gym.mining.convert import CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_VIDEO, cluster_slug
 from dv2s_gym.mining.errored import merged_messages, messages_text
 from dv2s_gym.mining.report_text import clip_caption
 from dv2s_gym.mining.loop_verdict import ACCEPTED, evidence_floor_note, judge_round, recommendation
@@ -98,6 +98,7 @@ from dv2s_gym.regress.report import build_report, load_report, write_json
 from html import escape
 from pathlib import Path
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
+from scenario_bank.entries import SIDECAR, read_json
 from typing import Any, Dict, List, Mapping, Optional
 
 __all__ = ["write_loop_reports", "render_markdown", "render_html", "round_summary", "round_clips", "final_vs_start",
@@ -856,8 +857,6 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
 
 def _entry_source(folder: Path) -> Dict[str, Any]:
     """The provenance (``source``) of the bank entry in ``folder``; ``{}`` when it cannot be read."""
-    from scenario_bank.entries import SIDECAR, read_json
-
     try:
         meta = read_json(folder, SIDECAR)
     except Exception:  # the clips are extra: without the sidecar, the files alone
@@ -877,8 +876,6 @@ def _own_file(folder: Path, named: Any, default: str) -> Path:
 
 def _entry_clips(entry: Mapping[str, Any], folder: Path, mine: Mapping[str, Any]) -> List[tuple]:
     """``[(video, label, group, note)]`` of one kept mined scenario (:func:`round_clips`)."""
-    from dv2s_gym.mining.convert import CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_VIDEO
-
     scenario, cluster = str(entry["scenario"]), entry.get("cluster")
     replay_note = ("an exact replay of the failing scene: it has no converted script, so only the failure clip "
                    "is shown")
