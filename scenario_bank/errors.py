@@ -14,7 +14,8 @@ from pathlib import Path
 from typing import Any, Optional, Sequence
 
 __all__ = ["DV2SError", "BankError", "BankVersionError", "UnsafeBankInputError", "NotABankError",
-           "DuplicateScenarioError", "ScenarioRejectedError", "UnknownScenarioError", "bank_write_error"]
+           "DuplicateScenarioError", "ScenarioRejectedError", "UnknownScenarioError", "BankOptionError",
+           "bank_write_error"]
 
 
 class DV2SError(Exception):
@@ -63,6 +64,11 @@ class ScenarioRejectedError(BankError, ValueError):
 
 class UnknownScenarioError(BankError, ValueError):
     """A scenario name or tag that the bank does not hold."""
+
+
+class BankOptionError(BankError, ValueError):
+    """A bank operation was given an option it does not take (an ``on_duplicate`` value it does not know, an option
+    that only applies with another); the message names the values it takes."""
 
 
 def bank_write_error(error: OSError, where: Path) -> BankError:

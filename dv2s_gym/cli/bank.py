@@ -13,6 +13,7 @@ from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import json_argument, open_bank, read_input_file
 from dv2s_gym.cli.output import emit
 from dv2s_gym.cli.parser import bank_command, bank_option
+from scenario_bank.admission import ON_DUPLICATE_OF
 from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, Provenance
 from scenario_bank.scenic2 import upgrade_scenic2
 
@@ -69,7 +70,8 @@ def _add_exchange_commands(bank_sub) -> None:
     p.add_argument("--name", action="append", help="only this scenario (repeatable)")
     p = bank_command(bank_sub, "import", "import an archive (all or nothing; every new script verified in the sandbox like add)", run_import)
     p.add_argument("archive")
-    p.add_argument("--on-duplicate", choices=["skip", "error"], default="skip")
+    p.add_argument("--on-duplicate", choices=ON_DUPLICATE_OF["import"], default="skip",
+                   help="what to do with an archive entry the bank already holds (default: skip it)")
     bank_command(bank_sub, "stats", "counts by map, source, road type, tag and participant", run_stats)
 
 
