@@ -20,7 +20,7 @@ from typing import Any, Dict, List, Optional, Union
 from scenario_bank.atomic import atomic_write_bytes
 from scenario_bank.errors import DV2SError
 
-__all__ = ["EpisodeTrace", "actor_state", "TraceMismatchError", "TRACE_VERSION"]
+__all__ = ["EpisodeTrace", "actor_state", "TraceMismatchError", "TRACE_VERSION", "saved_file_schema"]
 
 TRACE_VERSION = 1
 
@@ -110,3 +110,18 @@ class EpisodeTrace:
                 "save it again with env.save_trace()"
             ) from None
         return cls.from_dict(data, str(path))
+
+
+def saved_file_schema(path: Union[str, os.PathLike]) -> Optional[str]:
+    """The ``schema`` a saved dv2s JSON file names (a regression report's, a mining run's report), or ``None`` for
+    an episode trace (gzip-compressed, or JSON without one) and for anything else (not JSON, unreadable): which
+    kind of file ``dv2s replay`` was given."""
+    try:
+        with open(path, "rb") as handle:
+            if handle.read(2) == b"\x1f\x8b":
+                return None
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    schema = data.get("schema") if isinstance(data, dict) else None
+    return schema if isinstance(schema, str) else None

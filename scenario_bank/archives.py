@@ -21,7 +21,7 @@ from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple
 from scenario_bank.admission import check_on_duplicate, verify
 from scenario_bank.atomic import atomic_path
 from scenario_bank.dedup import content_hash
-from scenario_bank.entries import (BANK_VERSION, MAX_JSON_DEPTH, MAX_SCRIPT_BYTES, SCRIPT, SIDECAR, PathLike,
+from scenario_bank.entries import (BANK_VERSION, MAX_JSON_DEPTH, SCRIPT, SIDECAR, PathLike,
                                    entry_bytes, entry_files, read_json, read_text, unsafe_input, validate_sidecar)
 from scenario_bank.errors import (BankError, BankVersionError, DuplicateScenarioError, ScenarioRejectedError,
                                   UnsafeBankInputError, bank_write_error)

@@ -13,7 +13,6 @@ import datetime as _dt
 import os
 import re
 import stat
-import unicodedata
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
@@ -25,8 +24,7 @@ from scenario_bank.records import (CONTROL_FIX, ENTRY_FILES, MINED_PROVENANCE_FI
                                    SIDECAR, SIDECAR_VERSION, SOURCE_KINDS, Provenance, RecordError, Sidecar,
                                    control_character_field, is_entry_file)
 from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, is_entry_name, load_json_bounded,
-                                      read_in_folder, regular_file_in_folder, validate_relative_path)
-from scenario_bank.story import StoryError, normalize_story
+                                      read_in_folder, regular_file_in_folder)
 
 __all__ = [
     "BANK_VERSION", "SIDECAR_VERSION", "SOURCE_KINDS", "SCRIPT", "SIDECAR", "MAX_SCRIPT_BYTES", "MAX_SIDECAR_BYTES",
