@@ -23,7 +23,7 @@ from scenario_bank.atomic import atomic_path
 from scenario_bank.dedup import content_hash
 from scenario_bank.entries import (BANK_VERSION, MAX_JSON_DEPTH, SCRIPT, SIDECAR, PathLike,
                                    entry_bytes, entry_files, read_json, read_text, unsafe_input, validate_sidecar)
-from scenario_bank.errors import (BankError, BankVersionError, DuplicateScenarioError, ScenarioRejectedError,
+from scenario_bank.errors import (BankError, BankVersionError, DuplicateScenarioError, MissingFileError, ScenarioRejectedError,
                                   UnsafeBankInputError, bank_write_error)
 from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, extract_archive, load_json_bounded,
                                       read_in_folder, regular_file_in_folder, validate_entry_name)
@@ -154,7 +154,8 @@ def _unpack_archive(archive: Path, dest: Path, limits: ArchiveLimits) -> Tuple[D
     try:
         sizes = extract_archive(archive, dest, _member_cap(limits), limits)
     except FileNotFoundError:
-        raise FileNotFoundError(errno.ENOENT, f"archive {str(archive)!r} does not exist", str(archive)) from None
+        raise MissingFileError(f"archive {str(archive)!r} does not exist; check the path (`dv2s bank export` writes "
+                               "an archive)") from None
     except (tarfile.TarError, EOFError, OSError, zlib.error, lzma.LZMAError) as error:
         if isinstance(error, OSError) and error.errno == errno.ENOSPC:
             raise bank_write_error(error, dest) from None

@@ -15,7 +15,7 @@ from typing import Any, Optional, Sequence
 
 __all__ = ["DV2SError", "BankError", "BankVersionError", "UnsafeBankInputError", "NotABankError",
            "DuplicateScenarioError", "ScenarioRejectedError", "UnknownScenarioError", "BankOptionError",
-           "bank_write_error"]
+           "MissingFileError", "WrongFileError", "SettingError", "bank_write_error"]
 
 
 class DV2SError(Exception):
@@ -26,6 +26,20 @@ class DV2SError(Exception):
     """
 
     expected: bool = True
+
+
+class MissingFileError(DV2SError, FileNotFoundError):
+    """A file or folder the user named does not exist (or holds nothing the operation reads); the message names it
+    and what to pass instead. A :class:`FileNotFoundError`, so code catching that keeps working."""
+
+
+class WrongFileError(DV2SError, ValueError):
+    """A file the user named is not of the kind the operation reads (not an OpenDRIVE map, ...)."""
+
+
+class SettingError(DV2SError, ValueError):
+    """A setting (an option, a keyword, an environment variable) holds a value that cannot be used; the message
+    names the setting and the values it takes."""
 
 
 class BankError(DV2SError):
