@@ -50,7 +50,7 @@ from scenario_bank.jail import require_jail
 from scenario_bank.maps import list_maps
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.scenic2 import upgrade_scenic2
-from scenario_bank.errors import MissingFileError
+from scenario_bank.errors import MissingFileError, SettingError
 
 __all__ = ["DV2SEnv", "ScenarioRef", "check_env_config"]
 
@@ -497,7 +497,7 @@ class DV2SEnv(AbstractEnv):
                 if ref.name == name:
                     return ref
             if not self._trusted:
-                raise ValueError(
+                raise SettingError(
                     f"reset(options={{'scenario': {name!r}}}): this env was made with "
                     f"{', '.join(repr(r.name) for r in self._scenario_refs)}; a scenario it was not made with "
                     f"needs its own env: gym.make('DV2S-v0', scenario={name!r})")
