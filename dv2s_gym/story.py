@@ -33,6 +33,7 @@ stated on) drive unlike traffic on purpose, to check that a scenario's actors ad
 from __future__ import annotations
 
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from tqdm import tqdm
@@ -43,10 +44,11 @@ from policies.baselines import IDMEgo, KeepLaneEgo
 from policies.probe_drivers import HangbackEgo, RushEgo, SurgeEgo, WeaveEgo
 from scenario_bank.bank import Bank
 from scenario_bank.elements import normalize_elements
+from scenario_bank.errors import DV2SError, UnknownScenarioError
 from scenario_bank.story import normalize_story
 
 __all__ = ["EGOS", "PROBE_EGOS", "ALL_EGOS", "STORY_SECONDS", "required_elements", "story_problem", "ego_collisions", "run_episode",
-           "story_episodes", "missed_steps", "story_rate", "story_table"]
+           "story_episodes", "missed_steps", "story_rate", "story_table", "UnknownEgoError", "StoryCheck", "check_stories"]
 
 EGOS = ("scenic", "rule", "keep_lane", "idm")
 """Ego drivers a story is checked against."""
@@ -61,6 +63,18 @@ PROBE_EGOS: Dict[str, str] = {
 
 ALL_EGOS = EGOS + tuple(PROBE_EGOS)
 """Every ego name :func:`story_table` and :func:`run_episode` accept."""
+
+
+
+class UnknownEgoError(DV2SError, ValueError):
+    """An ego name that is not one of :data:`ALL_EGOS`; the message lists them."""
+
+
+def _check_egos(egos: Sequence[str]) -> None:
+    unknown = [e for e in egos if e not in ALL_EGOS]
+    if unknown:
+        raise UnknownEgoError(f"unknown ego {unknown[0]!r}; choose from {', '.join(ALL_EGOS)}")
+
 
 STORY_SECONDS: Dict[str, float] = {}
 """Episode lengths that differ from the env's default duration, per scenario."""
@@ -117,7 +131,7 @@ def _driver(ego: str, env) -> Callable[[], int]:
     drivers = {"rule": CautiousDriver, "keep_lane": KeepLaneEgo, "idm": IDMEgo,
                "hangback": HangbackEgo, "rush": RushEgo, "surge": SurgeEgo, "weave": WeaveEgo}
     if ego not in drivers:
-        raise ValueError(f"unknown ego {ego!r}; choose from {', '.join(ALL_EGOS)}")
+        _check_egos([ego])
     return drivers[ego](env).act
 
 
@@ -218,9 +232,7 @@ def story_table(names: Sequence[str], egos: Sequence[str] = EGOS, seeds: Sequenc
     before the trace showed all of it; ``missed``: per step not played, how often, the first seed that
     missed it and why (:func:`missed_steps`).
     """
-    unknown = [e for e in egos if e not in ALL_EGOS]
-    if unknown:
-        raise ValueError(f"unknown ego(s) {', '.join(unknown)}; choose from {', '.join(ALL_EGOS)}")
+    _check_egos(egos)
     tasks = [(n, e, list(seeds), bank_root) for n in names for e in egos]
     table: Dict[str, Dict[str, Dict[str, Any]]] = {n: {} for n in names}
     bar = tqdm(total=len(tasks), desc="story rate", unit="run", disable=not progress)
@@ -236,3 +248,42 @@ def story_table(names: Sequence[str], egos: Sequence[str] = EGOS, seeds: Sequenc
         pool.shutdown()
     bar.close()
     return table
+
+
+@dataclass
+class StoryCheck:
+    """The story rates of scenarios (:func:`check_stories`): ``table`` as :func:`story_table` gives it and the
+    scenarios with a rate under ``threshold`` for some ego (``under``)."""
+
+    names: List[str]
+    egos: List[str]
+    seeds: int
+    threshold: float
+    table: Dict[str, Dict[str, Dict[str, Any]]]
+    under: List[str]
+
+    @property
+    def ok(self) -> bool:
+        """Whether every scenario plays its story at least at the threshold rate with every ego."""
+        return not self.under
+
+    def as_dict(self) -> Dict[str, Any]:
+        return {"seeds": self.seeds, "threshold": self.threshold, "egos": self.egos, "table": self.table,
+                "under_threshold": self.under}
+
+
+def check_stories(names: Sequence[str] = (), egos: Sequence[str] = EGOS, seeds: int = 20, threshold: float = 0.9,
+                  bank_root: Optional[str] = None, jobs: int = 1, progress: bool = True) -> StoryCheck:
+    """The story rate of the bank's scenarios ``names`` (all by default) with each of ``egos`` over ``seeds`` seeds,
+    and which are under ``threshold``. A name the bank does not hold is an :class:`UnknownScenarioError`, an ego
+    that does not exist an :class:`UnknownEgoError`, both before any episode runs."""
+    known = Bank(bank_root).names()
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise UnknownScenarioError(f"unknown scenario {unknown[0]!r} in the bank; `dv2s bank list` shows its "
+                                   "scenarios")
+    _check_egos(egos)
+    names = list(names) or known
+    table = story_table(names, egos, range(seeds), bank_root=bank_root, jobs=jobs, progress=progress)
+    under = sorted(n for n, row in table.items() if any(cell["rate"] < threshold for cell in row.values()))
+    return StoryCheck(names, list(egos), seeds, threshold, table, under)

@@ -27,7 +27,7 @@ from highway_env.envs.common.observation import KinematicObservation
 
 import envs.rendering  # noqa: F401  (sets SDL/XDG variables before any viewer starts pygame)
 from envs.config_check import RENDER_MODES, check_config, check_render_mode
-from envs.errors import InvalidActionError
+from envs.errors import InvalidActionError, SceneSamplingError
 from envs.hw_road import EventRoad
 from envs.observations import FastKinematicObservation
 from envs.safety_metrics import STANDING_SPEED, path_is_free, time_to_collision
@@ -50,6 +50,7 @@ from scenario_bank.jail import require_jail
 from scenario_bank.maps import list_maps
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.scenic2 import upgrade_scenic2
+from scenario_bank.errors import MissingFileError, SettingError
 
 __all__ = ["DV2SEnv", "ScenarioRef", "check_env_config"]
 
@@ -89,7 +90,7 @@ def resolve_scenarios(spec: ScenarioSpec, bank_dir: Optional[str] = None) -> Lis
         if spec.endswith(".scenic") or os.sep in spec:
             path = Path(spec)
             if not path.is_file():
-                raise FileNotFoundError(
+                raise MissingFileError(
                     f"scenario file {spec!r} does not exist; pass an existing .scenic path, "
                     "a bank name or Scenic source text"
                 )
@@ -442,7 +443,7 @@ class DV2SEnv(AbstractEnv):
             # A requirement failed at time 0: this scene is invalid, draw another.
             scene_seed = int(np.random.default_rng(scene_seed).integers(0, 2**31 - 1))
         else:
-            raise RuntimeError(
+            raise SceneSamplingError(
                 f"scenario {ref.name!r}: 20 sampled scenes were all rejected when the simulation "
                 f"started ({outcome.reason}); check the script's `require` statements"
             )
@@ -496,7 +497,7 @@ class DV2SEnv(AbstractEnv):
                 if ref.name == name:
                     return ref
             if not self._trusted:
-                raise ValueError(
+                raise SettingError(
                     f"reset(options={{'scenario': {name!r}}}): this env was made with "
                     f"{', '.join(repr(r.name) for r in self._scenario_refs)}; a scenario it was not made with "
                     f"needs its own env: gym.make('DV2S-v0', scenario={name!r})")

@@ -32,6 +32,8 @@ from envs.scenarios import ParamRange, read_scenario_file
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.maps import list_maps, resolve_map, UnknownMapError
 from scenario_bank.safety import UnsafeScenarioError
+from scenario_bank.errors import MissingFileError
+from scenario_bank.safe_files import UnsafeInputError
 
 __all__ = ["JailedDV2SEnv", "space_to_data", "data_to_space", "parameter_ranges_of", "MAX_MAP_BYTES"]
 
@@ -194,14 +196,14 @@ class JailedDV2SEnv(gym.Env):
             if key in files or key.startswith("..") or key == ".":
                 continue  # one copy per file however it is spelt; outside the script's folder: refused there
             if len(files) >= MAX_MAP_FILES:
-                raise ValueError(f"{ref.path}: names more than {MAX_MAP_FILES} map files; a scenario uses one")
+                raise UnsafeInputError(f"{ref.path}: names more than {MAX_MAP_FILES} map files; a scenario uses one")
             try:
                 data = read_in_folder(folder, key, MAX_MAP_BYTES)  # no symbolic link followed at any level
             except FileNotFoundError:
                 continue  # Scenic reports the missing map, in the jail
             total += len(data)
             if total > MAX_MAP_BYTES:
-                raise ValueError(f"{ref.path}: its map files add up to over {MAX_MAP_BYTES // 2**20} MiB")
+                raise UnsafeInputError(f"{ref.path}: its map files add up to over {MAX_MAP_BYTES // 2**20} MiB")
             files[key] = np.frombuffer(data, dtype=np.uint8)
         name = Path(ref.path).name if ref.path else "scenario.scenic"
         return {"name": ref.name, "text": text, "filename": name if name.endswith(".scenic") else "scenario.scenic",
@@ -223,7 +225,7 @@ class JailedDV2SEnv(gym.Env):
             if error.error_type == "UnknownMapError":
                 raise UnknownMapError(message) from None
             if error.error_type == "FileNotFoundError":
-                raise FileNotFoundError(message) from None
+                raise MissingFileError(message) from None
             if cls is None:
                 raise ScenarioCompileError(f"{error.error_type} in the jailed simulation: {message}") from None
             if issubclass(cls, ScenarioCompileError):

@@ -10,8 +10,17 @@ from typing import Callable, Optional, Union
 import numpy as np
 
 from scenario_bank.atomic import atomic_path
+from scenario_bank.errors import DV2SError
 
-__all__ = ["VideoWriter", "record_episode", "video_codecs", "write_frames"]
+__all__ = ["VideoWriter", "VideoFormatError", "VideoEncoderError", "record_episode", "video_codecs", "write_frames"]
+
+class VideoFormatError(DV2SError, ValueError):
+    """A video path whose extension no codec here writes; the message lists the ones that work."""
+
+
+class VideoEncoderError(DV2SError, RuntimeError):
+    """OpenCV on this machine cannot encode the video format asked for; the message names one it can."""
+
 
 _CODECS = {".webm": "VP80", ".mp4": "avc1", ".avi": "MJPG", ".mkv": "VP80"}
 
@@ -57,7 +66,7 @@ class VideoWriter:
 
         suffix = self.path.suffix.lower()
         if suffix not in _CODECS:
-            raise ValueError(f"unsupported video extension {suffix!r}; use one of {sorted(_CODECS)}")
+            raise VideoFormatError(f"unsupported video extension {suffix!r}; use one of {sorted(_CODECS)}")
         self._target = ExitStack()
         tmp = self._target.enter_context(atomic_path(self.path, keep_suffix=True))
         for fourcc in ([_CODECS[suffix], "mp4v"] if suffix == ".mp4" else [_CODECS[suffix]]):
@@ -66,7 +75,7 @@ class VideoWriter:
             if writer.isOpened():
                 return writer
         self._abandon()
-        raise RuntimeError(f"OpenCV cannot encode {suffix} here; write .webm (VP8) instead")
+        raise VideoEncoderError(f"OpenCV cannot encode {suffix} here; write .webm (VP8) instead")
 
     def write(self, frame: np.ndarray) -> None:
         """Append one ``HxWx3`` uint8 RGB frame."""

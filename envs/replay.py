@@ -17,6 +17,7 @@ from envs.trace import EpisodeTrace, TraceMismatchError
 from envs.trace_bounds import check_map, check_values
 from scenario_bank.safe_files import read_regular_file
 from envs.recording import write_frames
+from envs.trace import TraceFileError
 
 MAX_SCRIPT_BYTES = 1024 * 1024
 """The largest script a trace's ``scenario_path`` may name."""
@@ -33,18 +34,18 @@ def trace_config(trace: EpisodeTrace) -> dict:
     and this machine's step time limit (never the trace's)."""
     defaults = DV2SEnv.default_config()
     if not isinstance(trace.config, dict):
-        raise ValueError("the trace's config is not a mapping: the trace is damaged or was not written by "
+        raise TraceFileError("the trace's config is not a mapping: the trace is damaged or was not written by "
                          "env.save_trace()")
     config = {k: v for k, v in trace.config.items() if k in defaults and k != "step_time_limit"}
     check_values(config)
     for key, (low, high) in _BOUNDS.items():
         value = config.get(key, defaults[key])
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high:
-            raise ValueError(f"the trace's config has {key}={value!r}, outside [{low}, {high}]: the trace is "
+            raise TraceFileError(f"the trace's config has {key}={value!r}, outside [{low}, {high}]: the trace is "
                              "damaged or was not written by env.save_trace()")
     if config.get("policy_frequency", defaults["policy_frequency"]) > config.get(
             "simulation_frequency", defaults["simulation_frequency"]):
-        raise ValueError("the trace's config has a policy frequency above its simulation frequency: the trace "
+        raise TraceFileError("the trace's config has a policy frequency above its simulation frequency: the trace "
                          "is damaged or was not written by env.save_trace()")
     return config
 
@@ -105,17 +106,17 @@ def _script_at(path: Path) -> Optional[str]:
     """The text of the script a trace says it ran (``None`` when it is no longer there): a regular ``.scenic``
     file of at most :data:`MAX_SCRIPT_BYTES`, not a symbolic link; anything else is refused."""
     if not isinstance(path, Path) or path.suffix != ".scenic":
-        raise ValueError(f"the trace's scenario_path {str(path)[:200]!r} is not a .scenic file: the trace is "
+        raise TraceFileError(f"the trace's scenario_path {str(path)[:200]!r} is not a .scenic file: the trace is "
                          "damaged or was not written by env.save_trace()")
     try:
         data = read_regular_file(path, MAX_SCRIPT_BYTES)
     except FileNotFoundError:
         return None
     except OSError as error:
-        raise ValueError(f"the trace's scenario_path {str(path)[:200]!r} cannot be read ({error}); move the "
+        raise TraceFileError(f"the trace's scenario_path {str(path)[:200]!r} cannot be read ({error}); move the "
                          "trace away from it or remove scenario_path from the trace") from None
     except ValueError as error:
-        raise ValueError(f"the trace's scenario_path is refused: {error}; the trace replays from the script it "
+        raise TraceFileError(f"the trace's scenario_path is refused: {error}; the trace replays from the script it "
                          "holds once scenario_path is removed from it") from None
     try:
         return data.decode("utf-8")

@@ -30,6 +30,7 @@ from scenario_bank.maps import resolve_map
 from scenario_bank.precheck import MAX_SCRIPT_BYTES, precheck_text
 from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
 from scenario_bank.shipped import is_shipped_text
+from scenario_bank.errors import MissingFileError
 
 __all__ = ["MODEL", "CompiledScenario", "ParamRange", "parameter_ranges", "compile_scenario", "model_for", "FOREIGN_MODELS", "looks_like_source", "runtime_construct_error", "step_timeout_error"]
 
@@ -496,11 +497,11 @@ def read_scenario_file(path: str | os.PathLike) -> str:
     """
     file = Path(path)
     if not file.is_file():
-        raise FileNotFoundError(f"scenario file {str(file)!r} does not exist")
+        raise MissingFileError(f"scenario file {str(file)!r} does not exist")
     # O_NONBLOCK: a FIFO swapped in after is_file() does not block the open
     fd = os.open(file, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
     with os.fdopen(fd, "rb") as stream:
         if not stat.S_ISREG(os.fstat(stream.fileno()).st_mode):
-            raise FileNotFoundError(f"scenario file {str(file)!r} is not a regular file")
+            raise MissingFileError(f"scenario file {str(file)!r} is not a regular file")
         data = stream.read(MAX_SCRIPT_BYTES + 1)
     return precheck_text(data, str(file))

@@ -18,9 +18,9 @@ from pathlib import Path
 from typing import Any, Dict, List, Optional, Union
 
 from scenario_bank.atomic import atomic_write_bytes
-from scenario_bank.errors import DV2SError
+from scenario_bank.errors import DV2SError, MissingFileError
 
-__all__ = ["EpisodeTrace", "actor_state", "TraceMismatchError", "TRACE_VERSION"]
+__all__ = ["EpisodeTrace", "actor_state", "TraceFileError", "TraceMismatchError", "TRACE_VERSION", "saved_file_schema"]
 
 TRACE_VERSION = 1
 
@@ -28,6 +28,11 @@ TRACE_VERSION = 1
 def actor_state(vehicle) -> List[float]:
     """``[x, y, heading, speed]`` of a highway-env object (full precision)."""
     return [float(vehicle.position[0]), float(vehicle.position[1]), float(vehicle.heading), float(vehicle.speed)]
+
+
+class TraceFileError(DV2SError, ValueError):
+    """A file given as an episode trace is not one (missing fields, corrupt, too large, damaged settings, written by
+    a newer dv2s-gym); the message names the file and the fix."""
 
 
 class TraceMismatchError(DV2SError, AssertionError):
@@ -73,13 +78,13 @@ class EpisodeTrace:
         required = {f.name for f in fields(cls) if f.default is MISSING and f.default_factory is MISSING}
         if not isinstance(data, dict) or not required <= data.keys():
             missing = sorted(required - data.keys()) if isinstance(data, dict) else sorted(required)
-            raise ValueError(
+            raise TraceFileError(
                 f"{source} is not a dv2s episode trace: missing fields {', '.join(missing)}; "
                 "traces are written by env.save_trace()"
             )
         version = data.get("version", 0)
         if version > TRACE_VERSION:
-            raise ValueError(
+            raise TraceFileError(
                 f"{source} was written by a newer dv2s-gym (trace version {version} > {TRACE_VERSION}); upgrade"
             )
         return cls(**{k: v for k, v in data.items() if k in names})
@@ -95,18 +100,33 @@ class EpisodeTrace:
                     with gzip.GzipFile(fileobj=handle) as unzipped:  # streamed: a small bomb stays small
                         raw = unzipped.read(MAX_TRACE_BYTES + 1)
         except FileNotFoundError:
-            raise FileNotFoundError(f"no trace file {path}") from None
+            raise MissingFileError(f"no trace file {path}") from None
         except (OSError, EOFError, zlib.error) as error:
-            raise ValueError(f"{path} is not a dv2s episode trace (corrupt or truncated file: {error}); "
+            raise TraceFileError(f"{path} is not a dv2s episode trace (corrupt or truncated file: {error}); "
                              "save it again with env.save_trace()") from None
         if len(raw) > MAX_TRACE_BYTES:
-            raise ValueError(f"{path}: a trace over {MAX_TRACE_BYTES // 2**20} MiB (uncompressed) is refused; "
+            raise TraceFileError(f"{path}: a trace over {MAX_TRACE_BYTES // 2**20} MiB (uncompressed) is refused; "
                              "a dv2s episode trace is far smaller: is this the right file?")
         try:
             data = json.loads(raw.decode("utf-8"))
         except (OSError, EOFError, zlib.error, UnicodeDecodeError, json.JSONDecodeError) as error:
-            raise ValueError(
+            raise TraceFileError(
                 f"{path} is not a dv2s episode trace (corrupt or truncated file: {error}); "
                 "save it again with env.save_trace()"
             ) from None
         return cls.from_dict(data, str(path))
+
+
+def saved_file_schema(path: Union[str, os.PathLike]) -> Optional[str]:
+    """The ``schema`` a saved dv2s JSON file names (a regression report's, a mining run's report), or ``None`` for
+    an episode trace (gzip-compressed, or JSON without one) and for anything else (not JSON, unreadable): which
+    kind of file ``dv2s replay`` was given."""
+    try:
+        with open(path, "rb") as handle:
+            if handle.read(2) == b"\x1f\x8b":
+                return None
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    schema = data.get("schema") if isinstance(data, dict) else None
+    return schema if isinstance(schema, str) else None

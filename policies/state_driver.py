@@ -5,11 +5,17 @@ from __future__ import annotations
 from typing import Any, Optional, Tuple
 
 import numpy as np
+from scenario_bank.errors import DV2SError
 
-__all__ = ["StateDriver", "LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER"]
+__all__ = ["DriverConfigError", "StateDriver", "LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER"]
 
 # highway-env DiscreteMetaAction indices
 LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = 0, 1, 2, 3, 4
+
+
+class DriverConfigError(DV2SError, ValueError):
+    """A driver was given an env whose settings it cannot drive with (its action type); the message names the
+    setting to use."""
 
 
 class StateDriver:
@@ -29,7 +35,7 @@ class StateDriver:
         self.env = env
         action_type = env.unwrapped.config["action"]["type"]
         if action_type != "DiscreteMetaAction":
-            raise ValueError(f"{type(self).__name__} drives with DiscreteMetaAction, not {action_type}; "
+            raise DriverConfigError(f"{type(self).__name__} drives with DiscreteMetaAction, not {action_type}; "
                              "set config['action'] = {'type': 'DiscreteMetaAction'}")
 
     def act(self) -> int:  # pragma: no cover - overridden

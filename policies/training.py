@@ -92,6 +92,7 @@ __all__ = [
     "evaluation_episodes",
     "latest_checkpoint",
     "load_run_config",
+    "run_settings",
     "train",
     "resolve_checkpoint",
     "fine_tune",
@@ -733,6 +734,17 @@ def load_run_config(out: os.PathLike | str) -> Tuple[TrainConfig, Dict[str, Any]
         return TrainConfig.from_json(record["config"]), record
     except (OSError, ValueError, KeyError, TypeError) as error:
         raise TrainingError(f"{path} is not a readable run record ({error}); start a new run in another --out") from error
+
+
+def run_settings(out: os.PathLike | str, given: Mapping[str, Any], resume: bool = False) -> TrainConfig:
+    """The settings of the run in ``out``: ``given`` (settings by :class:`TrainConfig` field; ``None`` values are
+    not given) over, when resuming, the settings the run recorded (:func:`load_run_config`), so a resumed run
+    keeps what it was started with unless told otherwise."""
+    settings = {key: value for key, value in given.items() if value is not None}
+    if resume:
+        recorded, _ = load_run_config(out)
+        settings = {**recorded.to_json(), **settings}
+    return TrainConfig.from_json({**settings, "out": str(out) if isinstance(out, Path) else out})
 
 
 def _resolve_names(config: TrainConfig) -> List[str]:

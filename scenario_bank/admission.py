@@ -7,12 +7,36 @@ from __future__ import annotations
 
 from typing import Any, Mapping, Optional, Tuple
 
-from scenario_bank.errors import ScenarioRejectedError
+from scenario_bank.errors import BankOptionError, ScenarioRejectedError
 from scenario_bank.safety import UnsafeScenarioError
 from scenario_bank.sandbox import SandboxError, verify_script
 from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
 
-__all__ = ["verify", "upgrade_if_asked", "verify_or_name_scenic2"]
+__all__ = ["ON_DUPLICATE", "ON_DUPLICATE_OF", "check_on_duplicate", "verify", "upgrade_if_asked",
+           "verify_or_name_scenic2"]
+
+ON_DUPLICATE = {
+    "error": "refuse it (DuplicateScenarioError naming the entry it duplicates); an import then imports nothing",
+    "merge": "merge it into the entry it duplicates or nearly duplicates: its provenance is appended to that "
+             "entry's source.merged",
+    "skip": "leave it out and go on with the other entries: an archive entry the bank already holds",
+}
+"""What may happen to a script the bank already holds (``on_duplicate``), one set for every way into a bank."""
+ON_DUPLICATE_OF = {"add": ("error", "merge"), "import": ("skip", "error")}
+"""The :data:`ON_DUPLICATE` values each way into a bank takes: ``Bank.add`` (one script: refuse or merge) and
+``Bank.import_archive`` (several entries, all or nothing: refuse or skip the ones already held)."""
+
+
+def check_on_duplicate(value: str, operation: str) -> str:
+    """``value`` when ``operation`` (a key of :data:`ON_DUPLICATE_OF`) takes it, else a :class:`BankOptionError`
+    naming the values it takes."""
+    allowed = ON_DUPLICATE_OF[operation]
+    if value not in allowed:
+        other = [op for op, values in ON_DUPLICATE_OF.items() if value in values]
+        hint = f" ({value!r} applies to {other[0]})" if other else ""
+        raise BankOptionError(f"on_duplicate must be one of {', '.join(repr(o) for o in allowed)}, not {value!r}"
+                              f"{hint}")
+    return value
 
 
 def verify(script: str, label: str) -> None:

@@ -14,17 +14,16 @@ import lzma
 import shutil
 import tarfile
 import tempfile
-import uuid
 import zlib
 from pathlib import Path
 from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple
 
-from scenario_bank.admission import verify
+from scenario_bank.admission import check_on_duplicate, verify
 from scenario_bank.atomic import atomic_path
 from scenario_bank.dedup import content_hash
-from scenario_bank.entries import (BANK_VERSION, MAX_JSON_DEPTH, MAX_SCRIPT_BYTES, SCRIPT, SIDECAR, PathLike,
+from scenario_bank.entries import (BANK_VERSION, MAX_JSON_DEPTH, SCRIPT, SIDECAR, PathLike,
                                    entry_bytes, entry_files, read_json, read_text, unsafe_input, validate_sidecar)
-from scenario_bank.errors import (BankError, BankVersionError, DuplicateScenarioError, ScenarioRejectedError,
+from scenario_bank.errors import (BankError, BankVersionError, DuplicateScenarioError, MissingFileError, ScenarioRejectedError,
                                   UnsafeBankInputError, bank_write_error)
 from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, extract_archive, load_json_bounded,
                                       read_in_folder, regular_file_in_folder, validate_entry_name)
@@ -82,12 +81,14 @@ def _read_entry(unpack: Path, n: str, limits: ArchiveLimits) -> Tuple[Dict[str, 
 
 def import_archive(bank: Any, archive: PathLike, on_duplicate: str = "skip",
                    limits: Optional[ArchiveLimits] = None) -> Dict[str, List[str]]:
-    """Import into ``bank`` (a :class:`~scenario_bank.bank.Bank`) an archive written by :func:`export_archive`; all or nothing.
+    """Import into ``bank`` (a :class:`~scenario_bank.bank.Bank`) an archive written by :func:`export_archive`; all or
+    nothing, through :meth:`Bank.add_together <scenario_bank.bank.Bank.add_together>`.
 
-    Entries identical to existing ones are skipped (``on_duplicate="skip"``)
-    or abort the import (``"error"``). Every new entry is verified like
-    :meth:`Bank.add <scenario_bank.bank.Bank.add>` (safety check, compile, sample and run in the sandbox); one
-    failure (:class:`ScenarioRejectedError`) imports nothing. Returns ``{"added": [...], "skipped": [...]}``.
+    ``on_duplicate`` (of :data:`~scenario_bank.admission.ON_DUPLICATE`, the values an import takes): entries
+    identical to existing ones (or to another entry of the archive) are skipped (``"skip"``) or abort the import
+    (``"error"``). Every new entry is verified like :meth:`Bank.add <scenario_bank.bank.Bank.add>` (safety check,
+    compile, sample and run in the sandbox); one failure (:class:`ScenarioRejectedError`) imports nothing. Returns
+    ``{"added": [...], "skipped": [...]}``.
 
     The archive may come from anyone: its members are streamed into a private folder with the number of
     members, each file's size and the total capped while decompressing (``limits``, default
@@ -95,15 +96,10 @@ def import_archive(bank: Any, archive: PathLike, on_duplicate: str = "skip",
     are accepted. A link, a device, an unsafe name (in a member, in the header or in a sidecar), a
     too large or too deeply nested file is one :class:`UnsafeBankInputError`, and nothing is imported.
     """
-    if on_duplicate not in ("skip", "error"):
-        raise ValueError("on_duplicate must be 'skip' or 'error'")
-    bank._check_writable("import scenarios")
+    check_on_duplicate(on_duplicate, "import")
     limits = limits or ArchiveLimits()
-    staged: List[Tuple[str, Path]] = []
-    added: List[str] = []
     skipped: List[str] = []
-    with bank._lock():
-        bank._load(locked=True)
+    with bank.add_together("import scenarios", duplicate_label="archive entry") as batch:
         unpack = Path(tempfile.mkdtemp(dir=bank.root, prefix=".import-"))
         try:
             try:
@@ -111,52 +107,27 @@ def import_archive(bank: Any, archive: PathLike, on_duplicate: str = "skip",
             except UnsafeInputError as error:
                 raise unsafe_input(error, "; nothing was imported") from None
             _check_header(header, archive)
-            journal = bank.root / f".journal-{uuid.uuid4().hex[:12]}.json"
-            try:
-                for n in entries:
-                    folder = unpack / n
-                    meta, script = _read_entry(unpack, n, limits)
-                    duplicate = bank.find_duplicate(script, meta["elements"], meta["map"])
-                    if duplicate is None:
-                        duplicate = next(((a, "identical to another archive entry") for a, s in staged
-                                          if content_hash(read_text(s, SCRIPT, MAX_SCRIPT_BYTES))
-                                          == meta["content_hash"]), None)
-                    if duplicate is not None:
-                        if on_duplicate == "error":
-                            raise DuplicateScenarioError(
-                                f"archive entry {n!r} is {duplicate[1]} to {duplicate[0]!r}; nothing was imported",
-                                duplicate[0])
-                        skipped.append(n)
-                        continue
-                    try:
-                        verify(script, f"archive entry {n!r}")
-                    except ScenarioRejectedError as error:
-                        error.args = (f"{error}; nothing was imported",)
-                        raise
-                    target = bank._free_name(n, explicit=False)
-                    while target in [t for t, _ in staged]:
-                        target = f"{target}_i"
-                    meta["name"] = target
-                    carried = {f: folder / f for f in entry_files(meta.get("source") or {})
-                               if regular_file_in_folder(unpack, f"{n}/{f}")}
-                    staged.append((target, bank._stage_entry(target, script, meta, carried)))
-                bank._write_json_atomic(journal, {"adding": [t for t, _ in staged]})
-                for target, staging in staged:
-                    bank._commit(staging, target)
-                    added.append(target)
-                journal.unlink()
-            except BaseException:
-                for target in added:  # roll back what was renamed in
-                    shutil.rmtree(bank.root / target, ignore_errors=True)
-                for _, staging in staged:
-                    shutil.rmtree(staging, ignore_errors=True)
-                if journal.exists():
-                    journal.unlink()
-                raise
+            for n in entries:
+                meta, script = _read_entry(unpack, n, limits)
+                duplicate = batch.duplicate_of(script, meta["elements"], meta["map"])
+                if duplicate is not None:
+                    if on_duplicate == "error":
+                        raise DuplicateScenarioError(
+                            f"archive entry {n!r} is {duplicate[1]} to {duplicate[0]!r}; nothing was imported",
+                            duplicate[0])
+                    skipped.append(n)
+                    continue
+                try:
+                    verify(script, f"archive entry {n!r}")
+                except ScenarioRejectedError as error:
+                    error.args = (f"{error}; nothing was imported",)
+                    raise
+                carried = {f: unpack / n / f for f in entry_files(meta.get("source") or {})
+                           if regular_file_in_folder(unpack, f"{n}/{f}")}
+                batch.stage(script, meta, carried)
         finally:
             shutil.rmtree(unpack, ignore_errors=True)
-        bank._load(locked=True)
-    return {"added": added, "skipped": skipped}
+    return {"added": batch.names, "skipped": skipped}
 
 
 def _add_bytes(tar: tarfile.TarFile, name: str, data: bytes) -> None:
@@ -183,7 +154,8 @@ def _unpack_archive(archive: Path, dest: Path, limits: ArchiveLimits) -> Tuple[D
     try:
         sizes = extract_archive(archive, dest, _member_cap(limits), limits)
     except FileNotFoundError:
-        raise FileNotFoundError(errno.ENOENT, f"archive {str(archive)!r} does not exist", str(archive)) from None
+        raise MissingFileError(f"archive {str(archive)!r} does not exist; check the path (`dv2s bank export` writes "
+                               "an archive)") from None
     except (tarfile.TarError, EOFError, OSError, zlib.error, lzma.LZMAError) as error:
         if isinstance(error, OSError) and error.errno == errno.ENOSPC:
             raise bank_write_error(error, dest) from None

@@ -54,7 +54,7 @@ from pathlib import Path
 from typing import (Any, Callable, Dict, Iterable, Iterator, List, Literal, Mapping, Optional, Sequence, Tuple, Union,
                     overload)
 
-from scenario_bank.admission import upgrade_if_asked, verify, verify_or_name_scenic2
+from scenario_bank.admission import ON_DUPLICATE, check_on_duplicate, upgrade_if_asked, verify, verify_or_name_scenic2
 from scenario_bank.archives import export_archive, import_archive
 from scenario_bank.atomic import atomic_path, atomic_write_json, atomic_write_text
 from scenario_bank.cache import keyed_cache_dir
@@ -66,7 +66,7 @@ from scenario_bank.entries import (BANK_VERSION, ENTRY_FILE_KEYS, ENTRY_FILES, L
                                    PathLike, ScenarioEntry, control_character_field, entry_bytes, entry_file_name,
                                    entry_files, entry_matches, new_sidecar, read_json, scan_entries, unsafe_input)
 from scenario_bank.records import Provenance, Sidecar
-from scenario_bank.errors import (BankError, BankVersionError, DuplicateScenarioError, NotABankError,
+from scenario_bank.errors import (BankError, BankOptionError, BankVersionError, DuplicateScenarioError, NotABankError,
                                   ScenarioRejectedError, UnknownScenarioError, UnsafeBankInputError, bank_write_error)
 from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, is_entry_name, load_json_bounded,
                                       read_regular_file, real_folder_in, validate_entry_name)
@@ -99,6 +99,7 @@ __all__ = [
     "SOURCE_KINDS",
     "MINED_PROVENANCE_FIELDS",
     "AddOutcome",
+    "EntryBatch",
     "param_ranges",
     "near_duplicate",
     "changed_code_lines",
@@ -116,8 +117,6 @@ INDEX = "index.json"
 WRITERS_LOCK = ".dv2s-writers.lock"
 """The file writers of a bank lock (``flock``), in the bank folder itself."""
 _MAX_INDEX_BYTES = 256 << 20
-ON_DUPLICATE = ("error", "merge")
-"""What :meth:`Bank.add` may do with a script the bank already holds: refuse it, or merge it into that entry."""
 
 
 @dataclass
@@ -634,6 +633,25 @@ class Bank:
             shutil.rmtree(trash, ignore_errors=True)
             self._load(locked=True)
 
+    @contextmanager
+    def add_together(self, what: str, duplicate_label: str = "entry added with it") -> Iterator["EntryBatch"]:
+        """Add several entries in one all-or-nothing step, under the writers' lock: the body stages entries on the
+        :class:`EntryBatch` it is given; when it returns they are all renamed into the bank (a journal lets a crash
+        be rolled back by the next writer), when it raises none is. ``what`` names the operation in the error of
+        a read-only bank; ``duplicate_label`` names a staged entry in :meth:`EntryBatch.duplicate_of`.
+        :meth:`import_archive` adds an archive's entries this way."""
+        self._check_writable(what)
+        with self._lock():
+            self._load(locked=True)
+            batch = EntryBatch(self, duplicate_label)
+            try:
+                yield batch
+                batch._commit_all()
+            except BaseException:
+                batch._roll_back()
+                raise
+            self._load(locked=True)
+
     # ------------------------------------------------------- export/import
     def export(self, archive: PathLike, names: Optional[Iterable[str]] = None) -> Path:
         """Write entries (all by default) to one ``.tar.gz`` archive; returns its path
@@ -686,6 +704,62 @@ class Bank:
         return out
 
 
+class EntryBatch:
+    """The entries staged by one :meth:`Bank.add_together`: checked against the bank and each other, written into
+    hidden staging folders, renamed into the bank together when the block ends."""
+
+    def __init__(self, bank: Bank, duplicate_label: str) -> None:
+        self.bank = bank
+        self._label = duplicate_label
+        self._staged: List[Tuple[str, Path, str]] = []  # (name, staging folder, content hash)
+        self._added: List[str] = []
+        self._journal = bank.root / f".journal-{uuid.uuid4().hex[:12]}.json"
+
+    @property
+    def names(self) -> List[str]:
+        """The names the staged entries get, in staging order."""
+        return [name for name, _, _ in self._staged]
+
+    def duplicate_of(self, script: str, elements: Optional[Mapping[str, Any]],
+                     map_name: Optional[str]) -> Optional[Tuple[str, str]]:
+        """``(name, how)`` of a bank entry this script duplicates (:meth:`Bank.find_duplicate`) or of an entry staged
+        before with the same script, or ``None``."""
+        found = self.bank.find_duplicate(script, elements, map_name)
+        if found is None:
+            digest = content_hash(script)
+            found = next(((name, f"identical to another {self._label}") for name, _, staged in self._staged
+                          if staged == digest), None)
+        return found
+
+    def stage(self, script: str, meta: Union[Mapping[str, Any], Sidecar],
+              files: Optional[Mapping[str, PathLike]] = None) -> str:
+        """Stage a verified entry (its sidecar ``meta``, the ``files`` it carries, already listed in its
+        provenance) under its name, or the next free one (``_2``, ...; ``_i`` appended while another staged entry
+        has it); returns the name. The entry enters the bank when the :meth:`Bank.add_together` block ends."""
+        meta = meta.to_dict() if isinstance(meta, Sidecar) else dict(meta)
+        name = self.bank._free_name(meta["name"], explicit=False)
+        while name in self.names:
+            name = f"{name}_i"
+        meta["name"] = name
+        self._staged.append((name, self.bank._stage_entry(name, script, meta, files), content_hash(script)))
+        return name
+
+    def _commit_all(self) -> None:
+        self.bank._write_json_atomic(self._journal, {"adding": self.names})
+        for name, staging, _ in self._staged:
+            self.bank._commit(staging, name)
+            self._added.append(name)
+        self._journal.unlink()
+
+    def _roll_back(self) -> None:
+        for name in self._added:  # roll back what was renamed in
+            shutil.rmtree(self.bank.root / name, ignore_errors=True)
+        for _, staging, _ in self._staged:
+            shutil.rmtree(staging, ignore_errors=True)
+        if self._journal.exists():
+            self._journal.unlink()
+
+
 def _copy_synced(origin: Path, dest: Path) -> None:
     """Copy ``origin`` to ``dest`` (parents made) and flush it to disk."""
     dest.parent.mkdir(parents=True, exist_ok=True)
@@ -722,11 +796,9 @@ def _new_entry_fields(description: Union[str, Sidecar], fields: Mapping[str, Any
 
 def _check_add_options(on_duplicate: str, near_copy_of: Optional[Callable[[ScenarioEntry], bool]]) -> None:
     """Refuse an ``on_duplicate`` that :meth:`Bank.add` does not know, and ``near_copy_of`` without a merge."""
-    if on_duplicate not in ON_DUPLICATE:
-        raise ValueError(f"on_duplicate must be one of {', '.join(repr(o) for o in ON_DUPLICATE)}, "
-                         f"not {on_duplicate!r}")
+    check_on_duplicate(on_duplicate, "add")
     if near_copy_of is not None and on_duplicate != "merge":
-        raise ValueError("near_copy_of only applies to on_duplicate='merge' (near-copies are merged into, "
+        raise BankOptionError("near_copy_of only applies to on_duplicate='merge' (near-copies are merged into, "
                          "never refused); pass on_duplicate='merge' or drop near_copy_of")
 
 

@@ -13,7 +13,6 @@ import datetime as _dt
 import os
 import re
 import stat
-import unicodedata
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
@@ -21,11 +20,11 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 from scenario_bank.dedup import content_hash, semantic_key
 from scenario_bank.elements import ElementError, normalize_elements
 from scenario_bank.errors import BankError, BankVersionError, NotABankError, UnsafeBankInputError
-from scenario_bank.records import (ENTRY_FILES, MINED_PROVENANCE_FIELDS, PROVENANCE_FIELDS, SIDECAR_VERSION,
-                                   SOURCE_KINDS, Provenance, RecordError, Sidecar)
+from scenario_bank.records import (CONTROL_FIX, ENTRY_FILES, MINED_PROVENANCE_FIELDS, PROVENANCE_FIELDS, SCRIPT,
+                                   SIDECAR, SIDECAR_VERSION, SOURCE_KINDS, Provenance, RecordError, Sidecar,
+                                   control_character_field, is_entry_file)
 from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, is_entry_name, load_json_bounded,
-                                      read_in_folder, regular_file_in_folder, validate_relative_path)
-from scenario_bank.story import StoryError, normalize_story
+                                      read_in_folder, regular_file_in_folder)
 
 __all__ = [
     "BANK_VERSION", "SIDECAR_VERSION", "SOURCE_KINDS", "SCRIPT", "SIDECAR", "MAX_SCRIPT_BYTES", "MAX_SIDECAR_BYTES",
@@ -36,8 +35,6 @@ __all__ = [
 
 BANK_VERSION = 1
 """Version of the bank folder format written by this code."""
-SCRIPT = "scenario.scenic"
-SIDECAR = "meta.json"
 LEGACY_INDEX = "bank.json"  # written into the bank folder by dv2s-gym <= 0.1.0; still marks a bank
 NEW_ENTRY_NAME = re.compile(r"^[a-z0-9][a-z0-9_\-]{0,99}$")
 """Names of new entries; an existing folder or an archive entry only needs a safe name (:func:`is_entry_name`)."""
@@ -53,27 +50,14 @@ ENTRY_FILE_KEYS = ("video", "trace", "converted_video")
 """Provenance fields that may name one of the entry's own files by its path relative to the entry folder (a
 mined failure's ``video: "failure.webm"``, its converted script's clip ``converted_video: "converted.webm"``); a
 merge rewrites them to the merged copy's path."""
-_ENTRY_FILE = re.compile(r"^[A-Za-z0-9_\-][A-Za-z0-9_.\-]*(/[A-Za-z0-9_\-][A-Za-z0-9_.\-]*)*$")
 
 PathLike = Union[str, os.PathLike]
 
 
-def _is_entry_file(name: Any) -> bool:
-    """Whether ``name`` is a valid file name inside an entry folder (relative, at most 8 parts each a safe
-    name (:func:`~scenario_bank.safe_files.validate_relative_path`), no hidden parts, not the script or sidecar)."""
-    if not (isinstance(name, str) and bool(_ENTRY_FILE.match(name)) and name not in (SCRIPT, SIDECAR)):
-        return False
-    try:
-        validate_relative_path(name)
-    except UnsafeInputError:
-        return False
-    return True
-
-
 def entry_file_name(name: Any) -> str:
-    """``name`` if it is a valid file name inside an entry folder (:func:`_is_entry_file`), else a
+    """``name`` if it is a valid file name inside an entry folder (:func:`is_entry_file`), else a
     :class:`BankError` saying so."""
-    if not _is_entry_file(name):
+    if not is_entry_file(name):
         raise BankError(f"invalid entry file name {name!r}: use a relative path of letters, digits, '_', '-', "
                         f"'.' and '/' (no '..', no hidden parts, not {SCRIPT} or {SIDECAR})")
     return name
@@ -87,7 +71,7 @@ def entry_files(source: Mapping[str, Any]) -> List[str]:
     for record in records:
         listed = record.get(ENTRY_FILES)
         for value in listed if isinstance(listed, list) else []:
-            if _is_entry_file(value) and value not in out:
+            if is_entry_file(value) and value not in out:
                 out.append(value)
     return out
 
@@ -196,79 +180,17 @@ class ScenarioEntry:
                 "path": str(self.script_path)}
 
 
-def control_character_field(value: Any, where: str = "") -> Optional[str]:
-    """The first field of ``value`` (a sidecar or part of one) whose text holds a control character
-    other than a newline or a tab (terminal escape sequences start with one), or ``None``."""
-    if isinstance(value, str):
-        return where if any(unicodedata.category(c) == "Cc" and c not in "\n\t" for c in value) else None
-    if isinstance(value, dict):
-        items = [(str(k), v) for k, v in value.items()] + [(str(k), str(k)) for k in value]
-    elif isinstance(value, (list, tuple)):
-        items = [(f"[{k}]", v) for k, v in enumerate(value)]
-    else:
-        return None
-    for key, item in items:
-        found = control_character_field(item, f"{where}{key}" if key.startswith("[") or not where else f"{where}.{key}")
-        if found is not None:
-            return found
-    return None
-
-
-CONTROL_FIX = ("control characters (escape sequences, carriage returns, ...) are not allowed in a bank "
-                "entry's description, tags or other sidecar text; remove them")
-
-
 def validate_sidecar(meta: Any, folder: Path) -> Dict[str, Any]:
-    """Check a sidecar; return it or raise ``ValueError`` saying what is wrong."""
-    if not isinstance(meta, dict):
-        raise ValueError("sidecar is not a JSON object")
-    field_name = control_character_field(meta)
-    if field_name is not None:
-        raise ValueError(f"sidecar field {field_name!r} holds a control character: {CONTROL_FIX}")
-    version = meta.get("schema_version", 1)
-    if not isinstance(version, int) or version > SIDECAR_VERSION:
-        raise BankVersionError(
-            f"sidecar schema_version {version!r} is newer than this dv2s-gym supports ({SIDECAR_VERSION}); upgrade"
-        )
-    for key in ("description", "map"):
-        if not isinstance(meta.get(key), str) or not meta.get(key):
-            raise ValueError(f"sidecar field {key!r} is missing or not a non-empty string")
-    if not isinstance(meta.get("tags", []), list) or not all(isinstance(t, str) for t in meta.get("tags", [])):
-        raise ValueError("sidecar field 'tags' must be a list of strings")
-    try:
-        meta["elements"] = normalize_elements(meta.get("elements") or {})
-    except ElementError as error:
-        raise ValueError(f"sidecar elements: {error}") from None
-    if "story" in meta:
-        try:
-            normalize_story(meta["story"], "sidecar story")
-        except StoryError as error:
-            raise ValueError(str(error)) from None
-    source = meta.get("source") or {}
-    if source.get("kind") not in SOURCE_KINDS:
-        raise ValueError(f"sidecar source.kind must be one of {SOURCE_KINDS}, got {source.get('kind')!r}")
-    merged = source.get("merged")
-    if merged is not None and not (isinstance(merged, list) and all(isinstance(m, dict) for m in merged)):
-        raise ValueError("sidecar field 'source.merged' must be a list of objects (merged failures)")
-    if "name" in meta and not is_entry_name(meta["name"]):
-        raise ValueError(f"sidecar field 'name' {str(meta['name'])[:80]!r} is not a valid entry name; "
-                         "set it to the entry folder's name")
-    for where, record in [("source", source)] + [(f"source.merged[{k}]", m) for k, m in enumerate(merged or [])]:
-        listed = record.get(ENTRY_FILES)
-        if listed is None:
-            continue
-        if not isinstance(listed, list):
-            raise ValueError(f"sidecar field '{where}.{ENTRY_FILES}' must be a list of file names in the entry folder")
-        for file in listed:
-            if not _is_entry_file(file):
-                raise ValueError(f"sidecar field '{where}.{ENTRY_FILES}' names {str(file)[:80]!r}, which is not a "
-                                 "file inside the entry folder: list relative paths of letters, digits, '_', '-', "
-                                 "'.' and '/' only (no '..', not absolute)")
+    """Check a sidecar read from ``folder`` (its format: :class:`~scenario_bank.records.Sidecar`, which raises a
+    :class:`~scenario_bank.records.RecordError` naming the field, or a :class:`BankVersionError`) and that the
+    folder holds its script; return it with its elements in canonical form."""
+    Sidecar.from_dict(meta)
+    meta["elements"] = normalize_elements(meta.get("elements") or {})
     if not regular_file_in_folder(folder.parent, f"{folder.name}/{SCRIPT}"):
         if os.path.lexists(folder / SCRIPT):
-            raise ValueError(f"the script {SCRIPT} is not a regular file (a link, a FIFO or a device?); "
-                             "replace it by the script itself")
-        raise ValueError(f"the script {SCRIPT} is missing")
+            raise UnsafeBankInputError(f"the script {SCRIPT} is not a regular file (a link, a FIFO or a device?); "
+                            "replace it by the script itself")
+        raise UnsafeBankInputError(f"the script {SCRIPT} is missing")
     return meta
 
 

@@ -14,7 +14,8 @@ from pathlib import Path
 from typing import Any, Optional, Sequence
 
 __all__ = ["DV2SError", "BankError", "BankVersionError", "UnsafeBankInputError", "NotABankError",
-           "DuplicateScenarioError", "ScenarioRejectedError", "UnknownScenarioError", "bank_write_error"]
+           "DuplicateScenarioError", "ScenarioRejectedError", "UnknownScenarioError", "BankOptionError",
+           "MissingFileError", "WrongFileError", "SettingError", "bank_write_error"]
 
 
 class DV2SError(Exception):
@@ -25,6 +26,20 @@ class DV2SError(Exception):
     """
 
     expected: bool = True
+
+
+class MissingFileError(DV2SError, FileNotFoundError):
+    """A file or folder the user named does not exist (or holds nothing the operation reads); the message names it
+    and what to pass instead. A :class:`FileNotFoundError`, so code catching that keeps working."""
+
+
+class WrongFileError(DV2SError, ValueError):
+    """A file the user named is not of the kind the operation reads (not an OpenDRIVE map, ...)."""
+
+
+class SettingError(DV2SError, ValueError):
+    """A setting (an option, a keyword, an environment variable) holds a value that cannot be used; the message
+    names the setting and the values it takes."""
 
 
 class BankError(DV2SError):
@@ -63,6 +78,11 @@ class ScenarioRejectedError(BankError, ValueError):
 
 class UnknownScenarioError(BankError, ValueError):
     """A scenario name or tag that the bank does not hold."""
+
+
+class BankOptionError(BankError, ValueError):
+    """A bank operation was given an option it does not take (an ``on_duplicate`` value it does not know, an option
+    that only applies with another); the message names the values it takes."""
 
 
 def bank_write_error(error: OSError, where: Path) -> BankError:

@@ -20,14 +20,25 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
+import unicodedata
 from collections.abc import Mapping as _MappingABC
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Dict, FrozenSet, Iterator, Mapping, Optional, Tuple
 
-from scenario_bank.errors import DV2SError
+from scenario_bank.elements import ElementError, normalize_elements
+from scenario_bank.errors import BankVersionError, DV2SError
+from scenario_bank.safe_files import UnsafeInputError, is_entry_name, validate_relative_path
+from scenario_bank.story import StoryError, normalize_story
 
 __all__ = ["RecordError", "Provenance", "Sidecar", "EpisodeRecord", "SOURCE_KINDS", "PROVENANCE_FIELDS",
-           "MINED_PROVENANCE_FIELDS", "ENTRY_FILES", "SIDECAR_VERSION"]
+           "MINED_PROVENANCE_FIELDS", "ENTRY_FILES", "SIDECAR_VERSION", "SCRIPT", "SIDECAR", "CONTROL_FIX",
+           "control_character_field", "is_entry_file"]
+
+SCRIPT = "scenario.scenic"
+"""A bank entry's script, in its folder."""
+SIDECAR = "meta.json"
+"""A bank entry's sidecar (:class:`Sidecar`), in its folder."""
 
 SIDECAR_VERSION = 1
 """Version of the ``meta.json`` sidecar format written by this code."""
@@ -49,6 +60,43 @@ ENTRY_FILES = "files"
 and in each ``source.merged`` record. They are added with the entry (``files=`` of ``Bank.add``), travel with
 ``Bank.export``, ``Bank.import_archive`` and ``Bank.copy_to``, and ``dv2s bank validate`` reports one that is
 missing. Older sidecars have none."""
+
+
+_ENTRY_FILE = re.compile(r"^[A-Za-z0-9_\-][A-Za-z0-9_.\-]*(/[A-Za-z0-9_\-][A-Za-z0-9_.\-]*)*$")
+
+
+def is_entry_file(name: Any) -> bool:
+    """Whether ``name`` is a valid file name inside an entry folder (relative, at most 8 parts each a safe
+    name (:func:`~scenario_bank.safe_files.validate_relative_path`), no hidden parts, not the script or sidecar)."""
+    if not (isinstance(name, str) and bool(_ENTRY_FILE.match(name)) and name not in (SCRIPT, SIDECAR)):
+        return False
+    try:
+        validate_relative_path(name)
+    except UnsafeInputError:
+        return False
+    return True
+
+
+def control_character_field(value: Any, where: str = "") -> Optional[str]:
+    """The first field of ``value`` (a sidecar or part of one) whose text holds a control character
+    other than a newline or a tab (terminal escape sequences start with one), or ``None``."""
+    if isinstance(value, str):
+        return where if any(unicodedata.category(c) == "Cc" and c not in "\n\t" for c in value) else None
+    if isinstance(value, dict):
+        items = [(str(k), v) for k, v in value.items()] + [(str(k), str(k)) for k in value]
+    elif isinstance(value, (list, tuple)):
+        items = [(f"[{k}]", v) for k, v in enumerate(value)]
+    else:
+        return None
+    for key, item in items:
+        found = control_character_field(item, f"{where}{key}" if key.startswith("[") or not where else f"{where}.{key}")
+        if found is not None:
+            return found
+    return None
+
+
+CONTROL_FIX = ("control characters (escape sequences, carriage returns, ...) are not allowed in a bank "
+                "entry's description, tags or other sidecar text; remove them")
 
 
 class RecordError(DV2SError, ValueError):
@@ -116,7 +164,7 @@ class _Record(_MappingABC):
             if not check(value):
                 raise RecordError(f"{cls._WHAT} field {key!r} must be {wanted}, not {_shown(value)}")
             if key in cls._NESTED:
-                value = cls._NESTED[key].from_dict(value)
+                value = cls._nested(key, value)
             elif key in cls._LISTS:
                 value = tuple(value)
             values[key] = value
@@ -124,6 +172,18 @@ class _Record(_MappingABC):
         values["extra"] = {k: v for k, v in data.items() if k not in cls._KINDS}
         values["null_fields"] = frozenset(k for k in cls._KINDS if k in data and data[k] is None)
         return cls(**values)
+
+    @classmethod
+    def _nested(cls, key: str, value: Mapping[str, Any]) -> Any:
+        """The nested record of field ``key``; its errors name the field from this record (``source.kind``)."""
+        nested = cls._NESTED[key]
+        try:
+            return nested.from_dict(value)
+        except RecordError as error:
+            text, inner = str(error), f"{nested._WHAT} field '"
+            if text.startswith(inner):
+                raise RecordError(f"{cls._WHAT} field '{key}.{text[len(inner):]}") from None
+            raise RecordError(f"{cls._WHAT} field {key!r}: {text}") from None
 
     @classmethod
     def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
@@ -296,6 +356,55 @@ class Sidecar(_Record):
 
     def default_null_fields(self) -> FrozenSet[str]:
         return frozenset(self._KINDS) - {"story"}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "Sidecar":
+        """The sidecar of ``data``, its format checked (the one place it is): a JSON object with no control
+        character in its text, of a ``schema_version`` this dv2s-gym reads (:class:`BankVersionError`
+        otherwise), a non-empty ``description`` and ``map``, valid elements and story, a provenance of a known
+        ``kind``, a valid entry ``name`` and entry files inside the entry folder; a :class:`RecordError` names what
+        is wrong."""
+        if isinstance(data, cls):
+            return data
+        if not isinstance(data, Mapping):
+            raise RecordError(f"a sidecar must be a JSON object, not {type(data).__name__}")
+        field_name = control_character_field(dict(data))
+        if field_name is not None:
+            raise RecordError(f"sidecar field {field_name!r} holds a control character: {CONTROL_FIX}")
+        version = data.get("schema_version", 1)
+        if not _is_int(version) or version > SIDECAR_VERSION:
+            raise BankVersionError(
+                f"sidecar schema_version {version!r} is newer than this dv2s-gym supports ({SIDECAR_VERSION}); upgrade")
+        for key in ("description", "map"):
+            if not isinstance(data.get(key), str) or not data.get(key):
+                raise RecordError(f"sidecar field {key!r} is missing or not a non-empty string")
+        return super().from_dict(data)
+
+    @classmethod
+    def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
+        try:
+            normalize_elements(data.get("elements") or {})
+        except ElementError as error:
+            raise RecordError(f"sidecar elements: {error}") from None
+        if "story" in data:
+            try:
+                normalize_story(data["story"], "sidecar story")
+            except StoryError as error:
+                raise RecordError(str(error)) from None
+        source = data.get("source") or {}
+        if source.get("kind") not in SOURCE_KINDS:
+            raise RecordError(f"sidecar source.kind must be one of {SOURCE_KINDS}, got {source.get('kind')!r}")
+        if "name" in data and not is_entry_name(data["name"]):
+            raise RecordError(f"sidecar field 'name' {str(data['name'])[:80]!r} is not a valid entry name; "
+                              "set it to the entry folder's name")
+        merged = source.get("merged") or []
+        for where, record in [("source", source)] + [(f"source.merged[{k}]", m) for k, m in enumerate(merged)]:
+            for file in record.get(ENTRY_FILES) or []:
+                if not is_entry_file(file):
+                    raise RecordError(f"sidecar field '{where}.{ENTRY_FILES}' names {str(file)[:80]!r}, which is not "
+                                      "a file inside the entry folder: list relative paths of letters, digits, '_', "
+                                      "'-', '.' and '/' only (no '..', not absolute)")
+        return {}
 
     @property
     def provenance(self) -> Provenance:

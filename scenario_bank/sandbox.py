@@ -36,6 +36,7 @@ from scenario_bank.precheck import precheck_text
 from scenario_bank.safety import SafetyFinding, UnsafeScenarioError
 from scenario_bank.simulator_worker import simulator_worker
 from scenario_bank.errors import DV2SError
+from scenario_bank.errors import SettingError
 
 __all__ = ["SandboxLimits", "SandboxResult", "SandboxError", "run_in_sandbox", "verify_script", "check_in_jail",
            "bounded_precheck", "cache_dir"]
@@ -74,7 +75,7 @@ class SandboxLimits:
                 wall_seconds=float(os.environ.get("DV2S_SANDBOX_WALL", base.wall_seconds)),
             )
         except ValueError as error:
-            raise ValueError(f"bad DV2S_SANDBOX_* limit: {error}; give whole seconds and megabytes") from None
+            raise SettingError(f"bad DV2S_SANDBOX_* limit: {error}; give whole seconds and megabytes") from None
 
     def describe_memory(self) -> str:
         value = self.memory_bytes / _GIB

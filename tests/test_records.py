@@ -109,7 +109,7 @@ def test_a_sidecar_names_a_missing_or_wrong_field_and_one_of_its_provenance():
         Sidecar.from_dict({k: v for k, v in meta.items() if k != "map"})
     with pytest.raises(RecordError, match="sidecar field 'tags' must be a list of strings"):
         Sidecar.from_dict({**meta, "tags": "highway"})
-    with pytest.raises(RecordError, match="provenance field 'seed' must be an integer"):
+    with pytest.raises(RecordError, match="sidecar field 'source.seed' must be an integer"):
         Sidecar.from_dict({**meta, "source": {"kind": "mined", "seed": "x"}})
 
 

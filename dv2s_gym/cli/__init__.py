@@ -88,8 +88,10 @@ def _main(argv: Optional[List[str]]) -> int:
     except Exception as error:  # any other error reaches the user as one line too, never a raw traceback
         if sigint.received:  # e.g. a broken pipe to a worker that Ctrl-C stopped first
             return report_interrupted(args)
-        # a bad value or a file problem from a library explains itself; anything else is unexpected
-        return report_error(args, error, explained=isinstance(error, (ValueError, OSError)) or bool(missing_extra(error)))
+        # OSError is expected: the operating system names the problem (a full disk, a permission, a file that went
+        # away) and the file. A missing optional dependency names the extra to install. Anything else, a ValueError
+        # included, is a fault of dv2s-gym or of a library (bad input is a DV2SError), so the --debug hint is added.
+        return report_error(args, error, explained=isinstance(error, OSError) or bool(missing_extra(error)))
 
 
 def _silence_stdout() -> None:

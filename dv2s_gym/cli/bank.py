@@ -13,8 +13,8 @@ from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import json_argument, open_bank, read_input_file
 from dv2s_gym.cli.output import emit
 from dv2s_gym.cli.parser import bank_command, bank_option
+from scenario_bank.admission import ON_DUPLICATE_OF
 from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, Provenance
-from scenario_bank.scenic2 import upgrade_scenic2
 
 __all__ = ["add_parser", "run_add", "run_export", "run_import", "run_list", "run_rm", "run_sample", "run_show",
            "run_stats"]
@@ -69,7 +69,8 @@ def _add_exchange_commands(bank_sub) -> None:
     p.add_argument("--name", action="append", help="only this scenario (repeatable)")
     p = bank_command(bank_sub, "import", "import an archive (all or nothing; every new script verified in the sandbox like add)", run_import)
     p.add_argument("archive")
-    p.add_argument("--on-duplicate", choices=["skip", "error"], default="skip")
+    p.add_argument("--on-duplicate", choices=ON_DUPLICATE_OF["import"], default="skip",
+                   help="what to do with an archive entry the bank already holds (default: skip it)")
     bank_command(bank_sub, "stats", "counts by map, source, road type, tag and participant", run_stats)
 
 
@@ -114,16 +115,17 @@ def run_add(args: argparse.Namespace) -> int:
         script = read_input_file(args.script, "script", MAX_SCRIPT_BYTES).decode("utf-8")
     except UnicodeDecodeError as error:
         raise UsageError(f"the script {args.script} is not UTF-8 text ({error.reason}); save it as UTF-8") from None
-    upgrade = upgrade_scenic2(script)  # Scenic 2 syntax -> Scenic 3; Scenic 3 scripts come back unchanged
-    for line in upgrade.report() if upgrade.changed else []:
-        print(line, file=sys.stderr)
     elements = (json_argument(read_input_file(args.elements, "elements file", MAX_SIDECAR_BYTES),
                               f"the elements file {args.elements}") if args.elements else None)
     provenance = Provenance(kind=args.kind, video=args.video, parent=args.parent)
-    # Bank.add upgrades the same way (recording the rewrites in provenance), then its allowlist + sandbox checks
+    # Bank.add upgrades Scenic 2 syntax to Scenic 3 (recording the rewrites and notes in the provenance), then its
+    # allowlist + sandbox checks
     entry = open_bank(args).add(script, args.description, name=args.name, elements=elements, tags=args.tag or [],
                                 map=args.map, provenance=provenance, upgrade_scenic2=True)
-    summary = dict(entry.summary(), scenic2_rewrites=[str(r) for r in upgrade.rewrites])
+    rewrites = list(entry.source.get("scenic2_rewrites") or [])
+    for line in [f"scenic2: {r}" for r in rewrites] + [f"scenic2 note: {n}" for n in entry.source.get("scenic2_notes") or []]:
+        print(line, file=sys.stderr)
+    summary = dict(entry.summary(), scenic2_rewrites=rewrites)
     emit(args, summary, f"added {entry.name} ({entry.script_path})")
     return 0
 

@@ -4,7 +4,6 @@ each one plays its story."""
 from __future__ import annotations
 
 import argparse
-import sys
 from typing import Dict, List
 
 from dv2s_gym.cli.inputs import open_bank
@@ -64,26 +63,14 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_story(args: argparse.Namespace) -> int:
-    from dv2s_gym.story import ALL_EGOS, EGOS, story_table
+    from dv2s_gym.story import EGOS, check_stories
 
-    known = open_bank(args).names()
-    unknown = [n for n in args.name if n not in known]
-    if unknown:
-        print(f"dv2s: unknown scenario {unknown[0]!r} in the bank; `dv2s bank list` shows its scenarios",
-              file=sys.stderr)
-        return 2
-    names = args.name or known
+    open_bank(args)  # a --bank that does not exist is an error
     egos = [e for item in args.egos or [] for e in item.split(",") if e] or list(EGOS)
-    unknown = [e for e in egos if e not in ALL_EGOS]
-    if unknown:
-        print(f"dv2s: unknown ego {unknown[0]!r}; choose from {', '.join(ALL_EGOS)}", file=sys.stderr)
-        return 2
-    table = story_table(names, egos, range(args.seeds), bank_root=args.bank, jobs=args.jobs,
-                        progress=not args.json)
-    under = sorted(n for n, row in table.items() if any(cell["rate"] < args.threshold for cell in row.values()))
-    emit(args, {"seeds": args.seeds, "threshold": args.threshold, "egos": egos, "table": table,
-                "under_threshold": under}, "\n".join(_story_lines(args, names, table, egos, under)))
-    return 1 if under else 0
+    result = check_stories(args.name, egos, args.seeds, args.threshold, bank_root=args.bank, jobs=args.jobs,
+                           progress=not args.json)
+    emit(args, result.as_dict(), "\n".join(_story_lines(args, result.names, result.table, egos, result.under)))
+    return 0 if result.ok else 1
 
 
 def _story_lines(args: argparse.Namespace, names: List[str], table: Dict[str, Dict[str, dict]], egos: List[str],

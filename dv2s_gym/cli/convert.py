@@ -14,7 +14,7 @@ from dv2s_gym.cli.output import emit, json_text
 from dv2s_gym.cli.parser import bank_option, llm_options, video_options
 from dv2s_gym.pipeline.stages import describe, Description
 
-__all__ = ["add_parser", "placed_nothing", "report_text", "run_convert", "run_describe", "run_generate"]
+__all__ = ["add_parser", "report_text", "run_convert", "run_describe", "run_generate"]
 
 
 def add_parser(subparsers) -> None:
@@ -71,7 +71,7 @@ def run_describe(args: argparse.Namespace) -> int:
 def run_generate(args: argparse.Namespace) -> int:
     """``dv2s generate``: a checked scenario from a description; exit 1 if its checks fail or nothing of the
     description could be placed."""
-    from dv2s_gym.pipeline.convert import generate_to_folder
+    from dv2s_gym.pipeline.convert import generate_to_folder, generated, placed_nothing
     from dv2s_gym.pipeline.semantics.text import elements_from_text
 
     if args.from_file:
@@ -83,25 +83,13 @@ def run_generate(args: argparse.Namespace) -> int:
     description = Description(text.strip(), elements_from_text(text), backend="user")
     report = generate_to_folder(description, Path(args.out), sg=args.sg, seed=args.seed,
                                 llm_config=llm_config(args), seconds=args.seconds)
-    nothing = placed_nothing(report)
-    emit(args, report, report_text(report, args.out, nothing_placed=nothing))
-    return 0 if report.get("check", {}).get("ok") and not nothing else 1
+    emit(args, report, report_text(report, args.out, nothing_placed=placed_nothing(report)))
+    return 0 if generated(report) else 1
 
 
 NOTHING_PLACED = ("nothing of the description could be placed, so the script only has the ego driving: name the "
                   "road and its road users (car, truck, pedestrian, cyclist, obstacle) and what they do, e.g. "
                   "'on a highway, a car ahead of the ego brakes suddenly'")
-
-
-def placed_nothing(report) -> bool:
-    """Whether neither the description's elements nor the generated script hold anything but the ego: every
-    phrase was left out (a partial description, with warnings, still counts as generated)."""
-    described = report.get("description", {}).get("elements") or {}
-    intended = report.get("generation", {}).get("intended_elements") or {}
-    if "error" in report.get("generation", {}) or not intended:
-        return False
-    return (not any(described.get(key) for key in ("road", "participants", "actions", "relations"))
-            and set(intended.get("participants") or []) <= {"ego"} and not intended.get("actions"))
 
 
 def report_text(report, out, nothing_placed: bool = False) -> str:
@@ -134,7 +122,7 @@ def run_convert(args: argparse.Namespace) -> int:
     """``dv2s convert``: each video to a checked scenario (added to the bank with ``--add-to-bank``); exit 1 if
     any conversion's checks fail."""
     from dv2s_gym.pipeline.batch_convert import convert_videos, videos_to_convert
-    from dv2s_gym.pipeline.convert import ConvertSettings, add_converted
+    from dv2s_gym.pipeline.convert import ConvertSettings, add_converted, checks_passed
 
     pairs = videos_to_convert(args.video, args.out)
     settings = ConvertSettings(dra=args.dra, sg=args.sg, camera=args.camera, question=args.question, seed=args.seed,
@@ -151,4 +139,4 @@ def run_convert(args: argparse.Namespace) -> int:
             print(f"== {v}\n{report_text(r, o)}")
         for name in added:
             print(f"added to bank: {name}")
-    return 0 if all(r.get("check", {}).get("ok") for r in reports) else 1
+    return 0 if all(checks_passed(r) for r in reports) else 1

@@ -11,7 +11,7 @@ from dv2s_gym.cli.errors import UsageError
 from scenario_bank.bank import Bank, BankError, MAX_JSON_DEPTH, MAX_SIDECAR_BYTES, UnsafeBankInputError
 from scenario_bank.safe_files import load_json_bounded, read_regular_file, UnsafeInputError
 
-__all__ = ["json_argument", "json_option", "llm_config", "open_bank", "read_input_file"]
+__all__ = ["env_config_option", "json_argument", "json_option", "llm_config", "open_bank", "read_input_file"]
 
 
 def open_bank(args: argparse.Namespace):
@@ -48,6 +48,28 @@ def llm_config(args: argparse.Namespace):
     """The LLM endpoint settings given (``--base-url``, ``--model``, ``--api-key``), or None."""
     config = {k: getattr(args, k, None) for k in ("base_url", "model", "api_key")}
     return {k: v for k, v in config.items() if v} or None
+
+
+CONFIG_EXAMPLE = "'{\"duration\": 10}'"
+
+
+def env_config_option(text: Optional[str], what: str = "--config") -> Optional[dict]:
+    """``--config``: DV2S-v0 config overrides, a JSON object given inline or as a path to a .json file holding
+    one (``None`` when not given); every command that takes one reads it here."""
+    if text is None:
+        return None
+    if text.endswith(".json") and not Path(text).is_file():
+        raise UsageError(f"{what}: there is no file {text}; pass a JSON object of DV2S-v0 config overrides, e.g. "
+                         f"{CONFIG_EXAMPLE}, or the path of a .json file holding one")
+    source = Path(text).read_text(encoding="utf-8") if text.endswith(".json") else text
+    try:
+        value = json.loads(source)
+    except ValueError as error:
+        raise UsageError(f"{what} must be a JSON object of DV2S-v0 config overrides (or a .json file), e.g. "
+                         f"{CONFIG_EXAMPLE}; {error}") from None
+    if not isinstance(value, dict):
+        raise UsageError(f"{what} must be a JSON object of DV2S-v0 config overrides, e.g. {CONFIG_EXAMPLE}")
+    return value
 
 
 def json_option(text: Optional[str], what: str):

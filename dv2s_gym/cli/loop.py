@@ -8,7 +8,7 @@ from typing import Any, List, Mapping, Optional
 
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.parser import bank_option
-from dv2s_gym.mining.loop_settings import DEFAULT_PROFILE, DEFAULTS, EVIDENCE, PROFILES, LoopSettings
+from dv2s_gym.mining.loop_settings import DEFAULT_PROFILE, DEFAULTS, EVIDENCE, FINE_TUNE_METHODS, PROFILES, LoopSettings
 from dv2s_gym.mining.loop_verdict import EVIDENCE_FLOOR as FLOOR, HELDOUT_ALPHA as ALPHA
 
 __all__ = ["add_parser", "run", "loop_settings"]
@@ -115,7 +115,7 @@ def _add_arms_and_run_arguments(p: argparse.ArgumentParser) -> None:
                    help="reward-term weights overriding the policy's own during fine-tuning only, e.g. "
                    f"'{{\"standing\": -1.0, \"low_ttc\": -0.4}}' (default {json.dumps(DEFAULTS['fine_tune_reward'])}; "
                    "'{}' keeps the policy's reward; evaluation always uses the policy's own env config)")
-    p.add_argument("--fine-tune-method", choices=["ppo", "dagger"], default=None,
+    p.add_argument("--fine-tune-method", choices=FINE_TUNE_METHODS, default=None,
                    help=_default("fine_tune_method", "ppo: continue PPO on the fine-tuning reward; dagger: imitate "
                                  "the rule-based reference driver on the policy's own states (DAgger; "
                                  "--fine-tune-reward unused)"))

@@ -6,8 +6,7 @@ import argparse
 from pathlib import Path
 
 from dv2s_gym.cli.backend_options import dra_option, sg_option, worker_backend_option
-from dv2s_gym.cli.errors import UsageError
-from dv2s_gym.cli.inputs import json_option, llm_config
+from dv2s_gym.cli.inputs import env_config_option, json_option, llm_config
 from dv2s_gym.cli.interrupts import episodes_kept_note
 from dv2s_gym.cli.parser import bank_option, llm_options
 from dv2s_gym.mining.samplers import SAMPLERS, registered_samplers
@@ -107,9 +106,7 @@ def run(args: argparse.Namespace) -> int:
                 scenarios=args.scenarios, bank=args.bank)  # a typo is reported before the slow imports
     from dv2s_gym.mining.miner import mine
 
-    env_config = json_option(args.config, "--config")
-    if env_config is not None and not isinstance(env_config, dict):
-        raise UsageError("--config must be a JSON object of DV2S-v0 config overrides, e.g. '{\"duration\": 10}'")
+    env_config = env_config_option(args.config)
     out = Path(args.out or "out/mine")
     try:
         run = mine(args.policy, _settings(args, env_config), out=out, progress=not args.no_progress,

@@ -7,6 +7,7 @@ import difflib
 from typing import Callable, List
 
 from dv2s_gym.cli.backend_options import dra_option
+from dv2s_gym.pipeline.prompts import CAMERA_VIEWPOINTS
 
 __all__ = ["Parser", "bank_command", "bank_option", "llm_options", "video_options"]
 
@@ -112,5 +113,6 @@ def llm_options(p: argparse.ArgumentParser) -> None:
 def video_options(p: argparse.ArgumentParser) -> None:
     """How a video is described: the Driving Record Analyzer, the camera, a question."""
     dra_option(p, help="Driving Record Analyzer: bev (offline, bird's-eye renders) or openai (any VLM endpoint)")
-    p.add_argument("--camera", choices=["bev", "front", "rear", "chase"], default="bev", help="camera viewpoint")
+    cameras = sorted(CAMERA_VIEWPOINTS, key=lambda camera: camera != "bev")  # the default first
+    p.add_argument("--camera", choices=cameras, default="bev", help="camera viewpoint")
     p.add_argument("--question", help='video-specific question, e.g. "Why did the ego vehicle brake?"')

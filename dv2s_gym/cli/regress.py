@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from dv2s_gym.cli.backend_options import worker_backend_option
-from dv2s_gym.cli.errors import UsageError
+from dv2s_gym.cli.inputs import env_config_option
 from dv2s_gym.cli.interrupts import episodes_kept_note
 from dv2s_gym.cli.output import json_text
 from dv2s_gym.cli.parser import bank_option
@@ -95,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
     from dv2s_gym.regress.report import baseline_defaults, exit_code, format_summary
     from dv2s_gym.regress.runner import DEFAULT_OUT, BaselineReport, WorkerSettings, run_regression, run_size
 
-    env_config = _env_config(args.config) if args.config else None
+    env_config = env_config_option(args.config)
     out = args.out or DEFAULT_OUT
     episodes, seed = args.episodes, args.seed
     if args.baseline_report:
@@ -133,19 +133,6 @@ def opening_line(policy: str, scenarios: int, seeds: int) -> str:
 def _announce(policy: str, scenarios: int, seeds: int, *, json: bool) -> None:
     # with --json, stdout is the report's alone
     print(opening_line(policy, scenarios, seeds), file=sys.stderr if json else sys.stdout, flush=True)
-
-
-def _env_config(text: str) -> dict:
-    """``--config``: a JSON object inline, or a .json file holding one."""
-    text = Path(text).read_text(encoding="utf-8") if text.endswith(".json") else text
-    try:
-        env_config = json.loads(text)
-    except ValueError as error:
-        raise UsageError(f"--config must be a JSON object of DV2S-v0 config overrides (or a .json file), e.g. "
-                         f"'{{\"duration\": 10}}'; {error}") from None
-    if not isinstance(env_config, dict):
-        raise UsageError("--config must be a JSON object of DV2S-v0 config overrides, e.g. '{\"duration\": 10}'")
-    return env_config
 
 
 def _settings(args: argparse.Namespace, episodes, seed: int, env_config):

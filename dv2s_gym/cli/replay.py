@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from dv2s_gym.cli.errors import UsageError
@@ -42,10 +41,12 @@ def run(args: argparse.Namespace) -> int:
     """Replay what ``trace`` names (a trace file, a regress report.json or a mining run folder) and say so."""
     from dv2s_gym.mining.report import SCHEMA as MINE_SCHEMA
     from dv2s_gym.regress.report import SCHEMA
+    from envs.trace import saved_file_schema
 
-    if _json_schema(args.trace) == SCHEMA:
+    schema = None if Path(args.trace).is_dir() else saved_file_schema(args.trace)
+    if schema == SCHEMA:
         return _replay_report(args)
-    if Path(args.trace).is_dir() or _json_schema(args.trace) == MINE_SCHEMA:
+    if Path(args.trace).is_dir() or schema == MINE_SCHEMA:
         folder = Path(args.trace) if Path(args.trace).is_dir() else Path(args.trace).parent
         return _replay_mined(args, folder)
     if args.episode:
@@ -69,18 +70,6 @@ def _replay_mined(args: argparse.Namespace, folder) -> int:
           + (f"; failure {failure.get('kind')} at {failure.get('time')} s" if failure else "")
           + (f"; video {args.video}" if args.video else ""))
     return 0
-
-
-def _json_schema(path: str):
-    """The ``schema`` of a JSON file (None for anything else: a gzip trace, not JSON, no schema)."""
-    try:
-        with open(path, "rb") as handle:
-            if handle.read(2) == b"\x1f\x8b":
-                return None
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError):
-        return None
-    return data.get("schema") if isinstance(data, dict) else None
 
 
 def _replay_report(args: argparse.Namespace) -> int:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from dv2s_gym.cli.inputs import json_option
+from dv2s_gym.cli.inputs import env_config_option, json_option
 from dv2s_gym.cli.parser import bank_option
 from dv2s_gym.progress_lines import log_line
 
@@ -53,16 +53,16 @@ def add_parser(subparsers) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Train (or resume) the run in ``--out``; progress lines go to stderr."""
-    from policies.training import TrainConfig, TrainingError, load_run_config, train
+    from policies.training import TrainingError, run_settings, train
 
     given = {
         "algo": args.algo, "scenarios": args.scenarios, "bank_dir": getattr(args, "bank", None), "seed": args.seed,
         "sampler": args.sampler, "weights": json_option(args.weights, "--weights"),
-        "env_config": json_option(args.config, "--config"), "steps": args.steps, "n_envs": args.envs,
+        "env_config": env_config_option(args.config), "steps": args.steps, "n_envs": args.envs,
         "eval_freq": args.eval_freq, "eval_seeds": args.eval_seeds, "card_seeds": args.card_seeds,
         "baselines": args.baselines, "eval_jobs": args.eval_jobs, "checkpoint_freq": args.checkpoint_freq,
         "curriculum_floor": args.curriculum_floor, "curriculum_window": args.curriculum_window,
-        "curriculum_update": args.curriculum_update,
+        "curriculum_update": args.curriculum_update, "progress_bar": not args.no_progress, "vec_env": args.vec_env,
     }
     if args.hp:
         hyperparameters = {}
@@ -75,13 +75,5 @@ def run(args: argparse.Namespace) -> int:
             except ValueError:
                 hyperparameters[key] = value
         given["hyperparameters"] = hyperparameters
-    given = {key: value for key, value in given.items() if value is not None}
-    if args.resume:
-        recorded, _ = load_run_config(args.out)
-        settings = {**recorded.to_json(), **given, "out": args.out}
-    else:
-        settings = {**given, "out": args.out}
-    settings["progress_bar"] = not args.no_progress
-    settings["vec_env"] = args.vec_env
-    train(TrainConfig.from_json(settings), resume=args.resume, log=log_line)
+    train(run_settings(args.out, given, resume=args.resume), resume=args.resume, log=log_line)
     return 0

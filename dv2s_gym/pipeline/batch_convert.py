@@ -11,6 +11,7 @@ from tqdm import tqdm
 
 from dv2s_gym.pipeline.convert import ConvertSettings, convert_video
 from dv2s_gym.pipeline.evaluate import VIDEO_SUFFIXES
+from scenario_bank.errors import MissingFileError
 
 __all__ = ["convert_videos", "videos_to_convert"]
 
@@ -23,7 +24,7 @@ def videos_to_convert(source: str | os.PathLike, out: str | os.PathLike) -> List
         return [(source, Path(out))]
     videos = sorted(p for p in source.iterdir() if p.suffix.lower() in VIDEO_SUFFIXES)
     if not videos:
-        raise FileNotFoundError(f"no videos ({', '.join(VIDEO_SUFFIXES)}) in {source}")
+        raise MissingFileError(f"no videos ({', '.join(VIDEO_SUFFIXES)}) in {source}")
     return [(video, Path(out) / video.stem) for video in videos]
 
 

@@ -31,7 +31,7 @@ from dv2s_gym.pipeline.labels import label_path_for, read_label
 from dv2s_gym.pipeline.metrics import e2e_sc, semantic_preservation
 from scenario_bank.bank import Bank, Provenance
 
-__all__ = ["ConvertSettings", "ScenarioCheck", "add_converted", "check_scenario", "classify_failure", "conversion_provenance", "convert_video",
+__all__ = ["ConvertSettings", "ScenarioCheck", "add_converted", "check_scenario", "checks_passed", "classify_failure", "generated", "placed_nothing", "conversion_provenance", "convert_video",
            "generate_to_folder", "label_for"]
 
 
@@ -160,6 +160,29 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
     report["files"] = [name for name in OUTPUT_FILES if name == "report.json" or (out / name).is_file()]
     _write(out, "report.json", json.dumps(report, indent=2, default=str) + "\n")
     return report
+
+
+def checks_passed(report: Mapping[str, Any]) -> bool:
+    """Whether a conversion's script passed its checks (safe, compiled, sampled, ran): what ``dv2s convert``'s
+    exit status says."""
+    return bool(report.get("check", {}).get("ok"))
+
+
+def placed_nothing(report: Mapping[str, Any]) -> bool:
+    """Whether neither the description's elements nor the generated script hold anything but the ego: every
+    phrase was left out (a partial description, with warnings, still counts as generated)."""
+    described = report.get("description", {}).get("elements") or {}
+    intended = report.get("generation", {}).get("intended_elements") or {}
+    if "error" in report.get("generation", {}) or not intended:
+        return False
+    return (not any(described.get(key) for key in ("road", "participants", "actions", "relations"))
+            and set(intended.get("participants") or []) <= {"ego"} and not intended.get("actions"))
+
+
+def generated(report: Mapping[str, Any]) -> bool:
+    """Whether a generation from a description succeeded (what ``dv2s generate``'s exit status says): its script
+    passed its checks and something of the description was placed (:func:`placed_nothing`)."""
+    return checks_passed(report) and not placed_nothing(report)
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,8 @@ __all__ = [
     "EndpointHTTPError",
     "MalformedResponseError",
     "MissingAPIKeyError",
+    "LLMConfigError",
+    "EmptyDescriptionError",
     "UnknownBackendError",
     "BackendResultError",
     "GenerationFailedError",
@@ -79,6 +81,15 @@ class UnknownBackendError(PipelineError, ValueError):
 class BackendResultError(PipelineError):
     """A registered backend returned something its stage cannot use; the message names the backend and what it
     must return."""
+
+
+class LLMConfigError(PipelineError, ValueError):
+    """The LLM/VLM endpoint's settings (base URL, model, timeout, retries, config keys) hold a value that cannot be
+    used; the message names the setting and an example."""
+
+
+class EmptyDescriptionError(PipelineError, ValueError):
+    """The description to turn into a scenario is empty."""
 
 
 class MissingAPIKeyError(PipelineError):

@@ -33,6 +33,7 @@ from dv2s_gym.pipeline.metrics import e2e_sc, hallucination_rate, mean_sd, scs, 
 from dv2s_gym.pipeline.convert import check_scenario
 from dv2s_gym.pipeline.semantics.text import elements_from_text
 from dv2s_gym.pipeline.stages import describe, generate
+from scenario_bank.errors import MissingFileError, SettingError
 
 __all__ = ["EvalItem", "EVALSET_DIR", "collect_items", "evaluate", "format_results"]
 
@@ -74,7 +75,7 @@ def collect_items(folder: str | Path, *, unlabeled_descriptions: bool = False) -
     """
     folder = Path(folder)
     if not folder.is_dir():
-        raise FileNotFoundError(f"evaluation folder {str(folder)!r} does not exist")
+        raise MissingFileError(f"evaluation folder {str(folder)!r} does not exist")
     items = []
     for label_path in sorted(folder.glob(f"*{LABEL_SUFFIX}")):
         stem = label_path.name[: -len(LABEL_SUFFIX)]
@@ -91,7 +92,7 @@ def collect_items(folder: str | Path, *, unlabeled_descriptions: bool = False) -
         items.sort(key=lambda item: item.stem)
     if not items:
         wanted = "<name>.label.json or <name>.txt" if unlabeled_descriptions else "<name>.label.json"
-        raise FileNotFoundError(f"no {wanted} files in {folder}; see `dv2s eval --help` for the format")
+        raise MissingFileError(f"no {wanted} files in {folder}; see `dv2s eval --help` for the format")
     return items
 
 
@@ -102,7 +103,7 @@ def _evaluate_item(stage: str, item: EvalItem, dra: str, sg: str, llm_config: Op
     try:
         if stage in ("dra", "e2e"):
             if item.video is None:
-                raise FileNotFoundError(f"{item.stem}: no video beside its label")
+                raise MissingFileError(f"{item.stem}: no video beside its label")
             description = describe(item.video, backend=dra, llm_config=llm_config)
             text, described = description.text, description.elements
             result.detail["description"] = text
@@ -110,7 +111,7 @@ def _evaluate_item(stage: str, item: EvalItem, dra: str, sg: str, llm_config: Op
                 result.metrics = {"SCS": scs(item.elements, described), "HR": hallucination_rate(item.elements, described)}
         else:
             if not item.description:
-                raise FileNotFoundError(f"{item.stem}: no description (.txt or label 'description')")
+                raise MissingFileError(f"{item.stem}: no description (.txt or label 'description')")
             text = item.description
             # S_de: the labelled elements; the description's parse only where there is no label
             if item.elements is not None:
@@ -143,7 +144,7 @@ def evaluate(stage: str, folder: str | Path, *, dra: str = "bev", sg: str = "rul
              progress: bool = True) -> Dict[str, Any]:
     """Run one evaluation; returns per-item results and the per-use-case / overall summary."""
     if stage not in ("dra", "sg", "e2e"):
-        raise ValueError(f"unknown evaluation {stage!r}; use dra, sg or e2e")
+        raise SettingError(f"unknown evaluation {stage!r}; use dra, sg or e2e")
     items = collect_items(folder, unlabeled_descriptions=stage == "sg")
     bar = tqdm(total=len(items), desc=f"eval {stage}", unit="item", disable=not progress)
     results: List[ItemResult] = []

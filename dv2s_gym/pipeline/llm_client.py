@@ -48,6 +48,7 @@ from dv2s_gym.pipeline.errors import (
     MalformedResponseError,
     MissingAPIKeyError,
 )
+from dv2s_gym.pipeline.errors import LLMConfigError
 
 __all__ = ["ChatClient", "ChatReply", "DEFAULT_BASE_URL", "DEFAULT_MODEL", "CONFIG_KEYS"]
 
@@ -126,19 +127,19 @@ class ChatClient:
         kind: str = "llm",
     ) -> None:
         if not base_url or not isinstance(base_url, str):
-            raise ValueError("base_url must be the endpoint's URL, e.g. 'http://localhost:8000/v1'")
+            raise LLMConfigError("base_url must be the endpoint's URL, e.g. 'http://localhost:8000/v1'")
         parsed = urllib.parse.urlsplit(base_url.strip())
         if parsed.scheme not in ("http", "https") or not parsed.hostname:
-            raise ValueError(
+            raise LLMConfigError(
                 f"base_url {base_url!r} is not an http(s) URL; use e.g. 'http://localhost:8000/v1' "
                 "or 'https://api.openai.com/v1'"
             )
         if not model or not isinstance(model, str):
-            raise ValueError(f"model must name a model served at {base_url} (e.g. 'gpt-4o')")
+            raise LLMConfigError(f"model must name a model served at {base_url} (e.g. 'gpt-4o')")
         if timeout <= 0:
-            raise ValueError("timeout must be a positive number of seconds")
+            raise LLMConfigError("timeout must be a positive number of seconds")
         if retries < 0:
-            raise ValueError("retries must not be negative")
+            raise LLMConfigError("retries must not be negative")
         self.base_url = base_url.strip()
         self.endpoint = _endpoint_url(self.base_url)
         self.model = model
@@ -180,7 +181,7 @@ class ChatClient:
         config.update(nested.get(kind, {}))
         unknown = sorted(set(config) - set(CONFIG_KEYS))
         if unknown:
-            raise ValueError(f"unknown LLM config keys {unknown}; allowed: {', '.join(CONFIG_KEYS)}")
+            raise LLMConfigError(f"unknown LLM config keys {unknown}; allowed: {', '.join(CONFIG_KEYS)}")
         prefixes = ["DV2S_VLM_", "DV2S_LLM_"] if kind == "vlm" else ["DV2S_LLM_"]
 
         def env(name: str) -> Optional[str]:
@@ -199,7 +200,7 @@ class ChatClient:
             timeout = float(pick("timeout", 60))
             retries = int(pick("retries", 3))
         except (TypeError, ValueError) as error:
-            raise ValueError(f"timeout and retries must be numbers: {error}") from None
+            raise LLMConfigError(f"timeout and retries must be numbers: {error}") from None
         return cls(pick("base_url", DEFAULT_BASE_URL), pick("model", DEFAULT_MODEL), api_key=api_key,
                    timeout=timeout, retries=retries, kind=kind)
 

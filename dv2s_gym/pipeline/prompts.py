@@ -19,6 +19,8 @@ from __future__ import annotations
 import hashlib
 from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 import json
+from scenario_bank.errors import SettingError
+from dv2s_gym.pipeline.errors import EmptyDescriptionError
 
 
 __all__ = [
@@ -74,7 +76,7 @@ def normalize_camera(camera: str) -> str:
     key = CAMERA_ALIASES.get(key, key)
     if key not in CAMERA_VIEWPOINTS:
         names = sorted(set(CAMERA_VIEWPOINTS) | set(CAMERA_ALIASES))
-        raise ValueError(f"unknown camera {camera!r}; use one of: {', '.join(names)}")
+        raise SettingError(f"unknown camera {camera!r}; use one of: {', '.join(names)}")
     return key
 
 
@@ -276,7 +278,7 @@ def sg_context(examples: Sequence[Tuple[str, str]] = ()) -> List[Dict[str, str]]
 def sg_messages(description: str, examples: Sequence[Tuple[str, str]] = ()) -> List[Dict[str, str]]:
     """The full first SG request: fixed context, then the description to translate."""
     if not description or not description.strip():
-        raise ValueError("the description to turn into a scenario is empty")
+        raise EmptyDescriptionError("the description to turn into a scenario is empty")
     return sg_context(examples) + [
         {"role": "user", "content": SG_REQUEST.format(description=description.strip())}
     ]

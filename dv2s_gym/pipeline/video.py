@@ -401,11 +401,11 @@ def read_video(
             a container or codec that cannot be decoded here.
     """
     if fps is not None and not (fps > 0):
-        raise ValueError(f"fps must be a positive number of frames per second or None, got {fps!r}")
+        raise VideoError(f"fps must be a positive number of frames per second or None, got {fps!r}")
     if int(max_frames) < 1:
-        raise ValueError(f"max_frames must be at least 1, got {max_frames!r}")
+        raise VideoError(f"max_frames must be at least 1, got {max_frames!r}")
     if int(max_pixels) < 1:
-        raise ValueError(f"max_pixels must be at least 1, got {max_pixels!r}")
+        raise VideoError(f"max_pixels must be at least 1, got {max_pixels!r}")
     p = Path(os.fspath(path)).expanduser()
     suffix = _check_file(p)
     if suffix == ".gif":
@@ -423,7 +423,7 @@ def frames_to_data_urls(frames: Sequence[np.ndarray], fmt: str = "jpeg", quality
 
     key = fmt.lower()
     if key not in _FORMATS:
-        raise ValueError(f"unsupported image format {fmt!r}; use one of {sorted(set(_FORMATS) - {'jpg'})}")
+        raise VideoError(f"unsupported image format {fmt!r}; use one of {sorted(set(_FORMATS) - {'jpg'})}")
     ext, mime = _FORMATS[key]
     params: List[int] = []
     if ext == ".jpg":
@@ -438,6 +438,6 @@ def frames_to_data_urls(frames: Sequence[np.ndarray], fmt: str = "jpeg", quality
         bgr = cv2.cvtColor(np.ascontiguousarray(array[..., :3], dtype=np.uint8), cv2.COLOR_RGB2BGR)
         ok, data = cv2.imencode(ext, bgr, params)
         if not ok:
-            raise ValueError(f"OpenCV could not encode a frame as {fmt}")
+            raise VideoError(f"OpenCV could not encode a frame as {fmt}")
         urls.append(f"data:{mime};base64,{base64.b64encode(data.tobytes()).decode('ascii')}")
     return urls

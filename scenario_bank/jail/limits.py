@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 from typing import Optional
 import math
 import resource
+from scenario_bank.errors import SettingError
 
 __all__ = ["JailLimits", "START_CPU_SECONDS", "start_charging_cpu"]
 
@@ -74,7 +75,7 @@ class JailLimits:
             if "DV2S_JAIL_COMPILE_SECONDS" in os.environ:
                 values["compile_seconds"] = float(os.environ["DV2S_JAIL_COMPILE_SECONDS"])
         except ValueError as error:
-            raise ValueError(f"bad DV2S_JAIL_* limit: {error}; give whole seconds and megabytes") from None
+            raise SettingError(f"bad DV2S_JAIL_* limit: {error}; give whole seconds and megabytes") from None
         values.update(overrides)
         return replace(base, **values)
 

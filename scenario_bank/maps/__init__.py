@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import List, Union
 
 from scenario_bank.errors import DV2SError
+from scenario_bank.errors import MissingFileError, WrongFileError
 
 __all__ = ["MAPS_DIR", "MAP_SUFFIX", "UnknownMapError", "list_maps", "resolve_map"]
 
@@ -108,14 +109,14 @@ def resolve_map(name_or_path: Union[str, os.PathLike]) -> Path:
         hint = ""
         if path.stem in available:
             hint = f" (to use the shipped map, pass its short name {path.stem!r})"
-        raise FileNotFoundError(
+        raise MissingFileError(
             f"map file {str(path)!r} does not exist{hint}; pass a shipped map name "
             f"({', '.join(available)}) or the path of an existing {MAP_SUFFIX} file"
         )
     if not path.is_file():
-        raise FileNotFoundError(f"map path {str(path)!r} is not a file")
+        raise MissingFileError(f"map path {str(path)!r} is not a file")
     if path.suffix.lower() != MAP_SUFFIX:
-        raise ValueError(
+        raise WrongFileError(
             f"map file {str(path)!r} is not an OpenDRIVE map: expected a {MAP_SUFFIX} file"
         )
     return path.resolve()

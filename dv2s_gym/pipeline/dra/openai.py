@@ -22,6 +22,8 @@ import numpy as np
 
 from dv2s_gym.pipeline.errors import MalformedResponseError
 from dv2s_gym.pipeline.prompts import normalize_camera, dra_prompt, prompt_hash
+from scenario_bank.errors import SettingError
+from dv2s_gym.pipeline.video import VideoError
 
 __all__ = ["VLMSettings", "describe_with_vlm", "frame_to_data_url", "select_frames"]
 
@@ -99,9 +101,9 @@ def describe_with_vlm(clip_frames: Sequence[Any], client: Any, camera: str = "fr
     max_frames = settings.max_frames
     frames = list(clip_frames) if clip_frames is not None else []
     if not frames:
-        raise ValueError("the clip has no frames to describe")
+        raise VideoError("the clip has no frames to describe")
     if max_frames < 1:
-        raise ValueError("max_frames must be at least 1")
+        raise SettingError("max_frames must be at least 1")
     camera_key = normalize_camera(camera)
     prompt = dra_prompt(camera_key, question)
     chosen = select_frames(len(frames), max_frames)

@@ -71,7 +71,7 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
 from dv2s_gym.pipeline.semantics.road import distance_m, road_features, speed_kph, strip_absences, time_s
-from scenario_bank.elements import normalize_elements
+from scenario_bank.elements import CAN_DO, normalize_elements
 
 __all__ = ["Entity", "ParsedDescription", "parse_description", "elements_from_text", "ROAD_PATTERNS"]
 
@@ -1204,8 +1204,7 @@ class _Parser:
                     isinstance(mm.entity, tuple) or mm.entity is subject:
                 break
             for a, d in new:
-                if mm.entity.kind == "pedestrian" and a not in ("cross", "stop", "collide") and \
-                        not a.startswith("collide"):
+                if mm.entity.kind == "pedestrian" and a not in CAN_DO["pedestrian"]:
                     continue
                 mm.entity.add_action(a, **{k: v for k, v in d.items() if k != "with"})
 

@@ -46,6 +46,7 @@ from scenario_bank.bank import Bank
 from envs.errors import SceneSamplingError
 from scenario_bank.sandbox import SandboxError, verify_script
 from scenario_bank.scenic2 import looks_like_scenic2, upgrade_scenic2
+from scenario_bank.errors import SettingError
 
 __all__ = [
     "FAILURE_CATEGORIES",
@@ -230,7 +231,7 @@ def load_embedder(backend: str = "auto"):
     if backend == "auto":
         backend = os.environ.get("DV2S_EMBEDDING", "auto").strip().lower() or "auto"
     if backend not in ("auto", "minilm", "tfidf"):
-        raise ValueError(f"unknown embedding backend {backend!r}; use 'auto', 'minilm' or 'tfidf'")
+        raise SettingError(f"unknown embedding backend {backend!r}; use 'auto', 'minilm' or 'tfidf'")
     if backend == "tfidf":
         return TfidfEmbedder()
     if backend == "minilm":
@@ -493,7 +494,7 @@ def generate_with_llm(description: str, client: Any, bank: Any = None, *, retrie
     settings = replace(settings or SGSettings(), **options)
     k, max_attempts = settings.k, settings.max_attempts
     if max_attempts < 1:
-        raise ValueError("max_attempts must be at least 1")
+        raise SettingError("max_attempts must be at least 1")
     if retriever is None:
         retriever = _retriever_for(bank)
     chosen = retriever.top_k(description, k) if k > 0 else []

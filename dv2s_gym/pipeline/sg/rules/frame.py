@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
+from dv2s_gym.pipeline.sg.rules.roles import Role
+
 __all__ = ["VEHICLES", "CLASS", "KIND_SPEEDS", "ActorFrame", "ScenarioFrame", "SGResult"]
 
 VEHICLES = ("car", "truck", "bus", "motorcycle", "bicycle")
@@ -28,7 +30,8 @@ class ActorFrame:
     sudden: bool = False
     state_stop: bool = False
     cross_dirs: List[Tuple[str, int]] = field(default_factory=list)
-    role: str = ""  # a roles.Role once the straight-road composer assigns it
+    role: Optional[Role] = None
+    """The role on a straight road, once the straight-road composer assigns it (None at a junction)."""
     side: int = 0
     parked: bool = False
 

@@ -15,6 +15,7 @@ from dv2s_gym.pipeline.sg.rules.lanes import compose_lanes
 from dv2s_gym.pipeline.sg.rules.roads import JUNCTION_MAPS, MAP_ROADS
 from dv2s_gym.pipeline.sg.rules.script import Script
 from scenario_bank.elements import normalize_elements
+from dv2s_gym.pipeline.errors import EmptyDescriptionError
 
 __all__ = ["generate_rules"]
 
@@ -22,7 +23,7 @@ __all__ = ["generate_rules"]
 def generate_rules(description: str, seed: Optional[int] = None) -> SGResult:
     """Compose a Scenic script (four sections) for ``description``; deterministic given ``seed``."""
     if not isinstance(description, str) or not description.strip():
-        raise ValueError("the description is empty: describe the road, the ego and what the other actors do")
+        raise EmptyDescriptionError("the description is empty: describe the road, the ego and what the other actors do")
     rng = random.Random(0 if seed is None else int(seed))
     parsed = parse_description(description)
     warnings: List[str] = []

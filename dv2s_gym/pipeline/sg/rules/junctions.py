@@ -17,6 +17,7 @@ from dv2s_gym.pipeline.sg.rules.pedestrians import spawn_junction_pedestrians
 from dv2s_gym.pipeline.sg.rules.roads import RING_MAP, speed_ranges
 from dv2s_gym.pipeline.sg.rules.roles import JunctionRole
 from dv2s_gym.pipeline.sg.rules.script import Script, check_actions
+from scenario_bank.elements import CAN_DO
 
 __all__ = ["compose_junction"]
 
@@ -68,7 +69,7 @@ def _roles(s: Script) -> List[RoleSpec]:
         if a.kind in VEHICLES:
             check_actions(a, s, JUNCTION_ACTIONS)
         elif a.kind == "pedestrian":
-            check_actions(a, s, {"cross", "stop", "collide"})
+            check_actions(a, s, set(CAN_DO["pedestrian"]))
         else:
             a.actions = []
     roles: List[RoleSpec] = [(a,) + junction_role(a, frame.ego, s.rng) for a in vehicles]

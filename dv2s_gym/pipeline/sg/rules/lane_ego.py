@@ -7,6 +7,7 @@ from typing import Tuple
 
 from dv2s_gym.pipeline.sg.rules.frame import KIND_SPEEDS, ActorFrame, ScenarioFrame
 from dv2s_gym.pipeline.sg.rules.manoeuvres import drift, swerve, u_turn
+from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script, brake_params
 
 __all__ = ["ego_lane_behavior"]
@@ -17,9 +18,9 @@ def ego_lane_behavior(s: Script, ego: ActorFrame, speed: str, reckless: bool, tw
     """The ego's behaviour (used with ego_policy='scenic') and whether it can be spawned first."""
     cruise = "Cruise" if reckless else "CautiousCruise"
     if ego.has("overtake"):
-        target = next((a for a in frame.actors if a.role == "slow_lead"), None)
+        target = next((a for a in frame.actors if a.role == Role.SLOW_LEAD), None)
         if target is None:  # bypassing something that stands in the ego's lane
-            target = next((a for a in frame.actors if a.role == "obstacle" and a.side == 0 and a.count == 1), None)
+            target = next((a for a in frame.actors if a.role == Role.OBSTACLE and a.side == 0 and a.count == 1), None)
         if target is not None:
             s.use("OvertakeAndReturn")
             side = -1 if ego.details.get("overtake", {}).get("side") == "right" and not two_way else 1
@@ -27,7 +28,7 @@ def ego_lane_behavior(s: Script, ego: ActorFrame, speed: str, reckless: bool, tw
                     f"Range(2.0, 2.8), {speed})"), False
         s.warnings.append("the ego overtakes, but nothing to overtake was described: the overtake is not placed")
         ego.actions.remove("overtake")
-    passer = next((a for a in frame.actors if a.role == "follower" and a.has("collide") and a.count == 1), None)
+    passer = next((a for a in frame.actors if a.role == Role.FOLLOWER and a.has("collide") and a.count == 1), None)
     if (ego.has("pull_out") or ego.has("reverse")) and ego.has("collide") and passer is not None and two_way:
         # it backs up, then pulls out into the side of the vehicle coming along the lane from behind
         s.use("BackUpThenPullOutInto")
@@ -57,7 +58,7 @@ def ego_lane_behavior(s: Script, ego: ActorFrame, speed: str, reckless: bool, tw
     if ego.has("swerve"):
         return swerve(s, speed, ego), True
     if ego.has("drift"):
-        oncoming = any(a.role == "oncoming" for a in frame.actors)
+        oncoming = any(a.role == Role.ONCOMING for a in frame.actors)
         if two_way and oncoming and ego.details.get("drift", {}).get("side") != "right":
             # across the centre line into the oncoming vehicle's path
             s.use("DriftAndReturn")
@@ -77,4 +78,4 @@ def ego_lane_behavior(s: Script, ego: ActorFrame, speed: str, reckless: bool, tw
 
 
 def _something_stops_ego(frame: ScenarioFrame) -> bool:
-    return any(a.kind == "obstacle" and a.side == 0 or a.role == "lead" and a.has("stop") for a in frame.actors)
+    return any(a.kind == "obstacle" and a.side == 0 or a.role == Role.LEAD and a.has("stop") for a in frame.actors)

@@ -5,12 +5,13 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import Dict, List, Optional
+from typing import Callable, Dict, List, Optional, Tuple, Union
 
 from dv2s_gym.pipeline.sg.rules.frame import VEHICLES, ActorFrame, ScenarioFrame
 from dv2s_gym.pipeline.sg.rules.roads import MULTILANE_STREET, PARKING_STREET, SHOULDER_HIGHWAY, STREET_MAPS
 from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script, check_actions
+from scenario_bank.elements import CAN_DO
 
 __all__ = ["LANE_ACTIONS", "LaneRoad", "assign_lane_roles", "lanes_needed"]
 
@@ -75,7 +76,7 @@ def _check_lane_actions(s: Script, actor: ActorFrame, road: LaneRoad) -> None:
     elif actor.kind in VEHICLES:
         check_actions(actor, s, LANE_ACTIONS - {"cross"} | ({"merge"} if road.onramp else set()))
     elif actor.kind == "pedestrian":
-        check_actions(actor, s, {"cross", "stop", "collide"})
+        check_actions(actor, s, set(CAN_DO["pedestrian"]))
     else:
         actor.actions = []
 
@@ -92,39 +93,72 @@ def _reconcile(s: Script, actor: ActorFrame) -> None:
         s.warnings.append(f"the {actor.kind} swerves and returns to its lane: its cut-in is built as a swerve")
 
 
+@dataclass(frozen=True)
+class _Asked:
+    """What :data:`_ROLE_RULES` look at for one actor: the script, the actor, the road and its relations as
+    described."""
+
+    s: Script
+    actor: ActorFrame
+    road: LaneRoad
+    rels: frozenset
+
+
+def _obstacle_role(q: _Asked) -> Role:
+    two_way, rels = q.road.two_way, q.rels
+    q.actor.side = 1 if "left_of" in rels and not two_way else -1 if "right_of" in rels and not two_way else 0
+    return Role.OBSTACLE
+
+
+def _slow_lead(q: _Asked) -> bool:
+    """The ego overtakes: the first actor ahead in its lane (no other said to be placed) is the one it passes."""
+    frame = q.s.frame
+    return frame.ego.has("overtake") and not (q.rels & {"left_of", "right_of", "behind"}) and not any(
+        a.role == Role.SLOW_LEAD for a in frame.actors)
+
+
+def _beside(q: _Asked) -> bool:
+    """Said to be left or right of the ego, or in a lane the text names that is not the ego's (in "the right
+    lane", the ego's lane not said: beside the ego on that side)."""
+    actor, ego, two_way, rels = q.actor, q.s.frame.ego, q.road.two_way, q.rels
+    return "left_of" in rels or "right_of" in rels or actor.lane == "adjacent" and not two_way or \
+        actor.lane in ("left", "right", "middle") and \
+        ego.lane in ("left", "right", "middle") and actor.lane != ego.lane or \
+        actor.lane in ("left", "right") and ego.lane is None and not two_way and "same_lane" not in rels
+
+
+def _rams_from_behind(q: _Asked) -> bool:
+    actor = q.actor
+    return actor.has("collide") and "ahead_of" not in q.rels and not actor.has("brake") and not actor.has("stop")
+
+
+_ROLE_RULES: Tuple[Tuple[Callable[[_Asked], bool], Union[Role, Callable[[_Asked], Role]]], ...] = (
+    (lambda q: q.actor.kind == "obstacle", _obstacle_role),
+    (lambda q: q.actor.kind == "pedestrian" and (q.actor.has("cross") or q.actor.has("collide")), Role.CROSSER),
+    (lambda q: q.actor.kind == "pedestrian", Role.ROADSIDE),
+    (lambda q: q.actor.kind == "bicycle" and q.actor.has("cross"), Role.CROSSER),
+    # parked at the kerb (or on the shoulder) beside the ego's lane
+    (lambda q: q.actor.has("pull_out") or q.actor.has("reverse"), Role.PULLER),
+    (lambda q: q.actor.has("merge") and q.road.onramp, Role.RAMP),
+    (lambda q: q.actor.has("drift") or "oncoming" in q.rels,
+     lambda q: _drifting_or_oncoming_role(q.s, q.actor, q.road, set(q.rels))),
+    (lambda q: q.actor.has("overtake") and not q.actor.details.get("overtake", {}).get("around"), Role.OVERTAKER),
+    (lambda q: q.actor.has("cut_in") or (q.actor.has("merge") and not q.road.onramp), Role.CUTTER),
+    (_slow_lead, Role.SLOW_LEAD),
+    (_beside, Role.ADJACENT),
+    (lambda q: "behind" in q.rels, Role.FOLLOWER),
+    (_rams_from_behind, Role.FOLLOWER),
+)
+"""The straight road's role rules, in order: (condition, role or the function that settles it); the first whose
+condition holds gives the role, else :attr:`Role.LEAD`."""
+
+
 def _first_role(s: Script, actor: ActorFrame, road: LaneRoad, rels: set) -> Role:
-    """The role the actor's kind, actions and relations give it (the first that applies, in this order)."""
-    frame, ego = s.frame, s.frame.ego
-    two_way, onramp = road.two_way, road.onramp
-    if actor.kind == "obstacle":
-        actor.side = 1 if "left_of" in rels and not two_way else -1 if "right_of" in rels and not two_way else 0
-        return Role.OBSTACLE
-    if actor.kind == "pedestrian":
-        return Role.CROSSER if actor.has("cross") or actor.has("collide") else Role.ROADSIDE
-    if actor.kind == "bicycle" and actor.has("cross"):
-        return Role.CROSSER
-    if actor.has("pull_out") or actor.has("reverse"):
-        return Role.PULLER  # parked at the kerb (or on the shoulder) beside the ego's lane
-    if actor.has("merge") and onramp:
-        return Role.RAMP
-    if actor.has("drift") or ("oncoming" in rels):
-        return _drifting_or_oncoming_role(s, actor, road, rels)
-    if actor.has("overtake") and not actor.details.get("overtake", {}).get("around"):
-        return Role.OVERTAKER
-    if actor.has("cut_in") or (actor.has("merge") and not onramp):
-        return Role.CUTTER
-    if ego.has("overtake") and not (rels & {"left_of", "right_of", "behind"}) and not any(
-            a.role == Role.SLOW_LEAD for a in frame.actors):
-        return Role.SLOW_LEAD
-    if "left_of" in rels or "right_of" in rels or actor.lane == "adjacent" and not two_way or \
-            actor.lane in ("left", "right", "middle") and \
-            ego.lane in ("left", "right", "middle") and actor.lane != ego.lane or \
-            actor.lane in ("left", "right") and ego.lane is None and not two_way and "same_lane" not in rels:
-        return Role.ADJACENT  # (in "the right lane", the ego's lane not said: beside the ego on that side)
-    if "behind" in rels:
-        return Role.FOLLOWER
-    if actor.has("collide") and not (rels & {"ahead_of"}) and not actor.has("brake") and not actor.has("stop"):
-        return Role.FOLLOWER
+    """The role the actor's kind, actions and relations give it: the first of :data:`_ROLE_RULES` that applies."""
+    asked = _Asked(s, actor, road, frozenset(rels))
+    for applies, role in _ROLE_RULES:
+        if applies(asked):
+            return role if isinstance(role, Role) else role(asked)
     return Role.LEAD
 
 

@@ -52,4 +52,4 @@ def spawn_lane_actor(s: Script, actor: ActorFrame, ctx: LaneContext) -> None:
     speed = ctx.ego_speed
     if actor.kind in KIND_SPEEDS:  # a slow kind does not ride at the ego's speed
         speed = s.param(f"{actor.name}_speed", KIND_SPEEDS[actor.kind])
-    SPAWNERS[Role(actor.role)](s, actor, ctx, speed)
+    SPAWNERS[actor.role](s, actor, ctx, speed)

@@ -7,6 +7,7 @@ from typing import Optional
 
 from dv2s_gym.pipeline.sg.rules.frame import ActorFrame
 from dv2s_gym.pipeline.sg.rules.roads import HIGHWAY_MAPS
+from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script, brake_params
 
 __all__ = ["u_turn", "swerve", "drift", "longitudinal_behavior"]
@@ -69,7 +70,7 @@ def longitudinal_behavior(s: Script, actor: ActorFrame, speed: str) -> str:
     if actor.has("stop") and not actor.has("brake") and (actor.state_stop or not actor.sudden):
         s.use("HoldStill")
         return "HoldStill()"
-    if actor.has("brake") or actor.has("stop") or (actor.has("collide") and actor.role == "lead"):
+    if actor.has("brake") or actor.has("stop") or (actor.has("collide") and actor.role == Role.LEAD):
         after, low, strength = brake_params(s, actor)
         s.use("BrakeLater")
         return f"BrakeLater({speed}, {after}, {low}, {strength})"

@@ -8,6 +8,7 @@ from typing import List
 
 from dv2s_gym.pipeline.sg.rules.frame import CLASS, ActorFrame
 from dv2s_gym.pipeline.sg.rules.roads import MULTILANE_STREET, PARKING_STREET, STREET_LANES
+from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script
 
 __all__ = ["crossing_directions", "spawn_lane_pedestrians", "spawn_junction_pedestrians"]
@@ -41,10 +42,10 @@ def crossing_directions(actor: ActorFrame, rng: random.Random) -> List[str]:
 
 def spawn_lane_pedestrians(s: Script, actor: ActorFrame, ego_speed: str, two_way: bool, reckless: bool) -> None:
     n = actor.name
-    crossing = actor.role == "crosser"
+    crossing = actor.role == Role.CROSSER
     hit_any = actor.has("collide") or reckless and s.frame.ego.has("collide")
     dist = s.param(f"{n}_distance", "Range(55, 65)" if hit_any and crossing else "Range(30, 42)")
-    parked = next((a for a in s.frame.actors if a.role == "far_side"), None)
+    parked = next((a for a in s.frame.actors if a.role == Role.FAR_SIDE), None)
     if crossing and parked is not None:
         # a parked vehicle on the far kerb: the pedestrian steps out just in front of it, not through it
         dist = s.param(f"{parked.name}_gap", "Range(25, 40)") + " + Range(6.5, 8.0)"

@@ -1,0 +1,88 @@
+"""The command line parses and prints; the decisions are the product modules': what a conversion's report means,
+which story check failed, a resumed run's settings, which kind of file replay was given, the lists of choices."""
+
+import argparse
+import json
+from pathlib import Path
+
+import pytest
+
+from dv2s_gym.cli import build_parser
+from dv2s_gym.cli.errors import UsageError
+from dv2s_gym.cli.inputs import env_config_option
+from dv2s_gym.mining.loop_settings import FINE_TUNE_METHODS
+from dv2s_gym.pipeline.convert import checks_passed, generated, placed_nothing
+from dv2s_gym.pipeline.prompts import CAMERA_VIEWPOINTS
+from dv2s_gym.story import UnknownEgoError, check_stories
+from envs.trace import saved_file_schema
+from scenario_bank.errors import UnknownScenarioError
+
+CLI = Path(build_parser.__code__.co_filename).parent
+
+
+def _choices(argv, option):
+    parser = build_parser()
+    sub = parser._subparsers._group_actions[0].choices[argv[0]]
+    for name in argv[1:]:
+        sub = sub._subparsers._group_actions[0].choices[name]
+    return next(a.choices for a in sub._actions if option in a.option_strings)
+
+
+def test_a_generation_report_decides_its_own_outcome():
+    nothing = {"description": {"elements": {"road": None, "participants": [], "actions": [], "relations": []}},
+               "generation": {"intended_elements": {"participants": ["ego"], "actions": []}}, "check": {"ok": True}}
+    assert placed_nothing(nothing) and checks_passed(nothing) and not generated(nothing)
+    placed = {**nothing, "description": {"elements": {"road": "highway"}}}
+    assert generated(placed) and not generated({**placed, "check": {"ok": False}})
+    assert not hasattr(__import__("dv2s_gym.cli.convert", fromlist=["x"]), "placed_nothing")
+
+
+def test_a_story_check_names_an_unknown_scenario_or_ego_as_a_project_error():
+    with pytest.raises(UnknownScenarioError, match="unknown scenario 'nosuch' in the bank"):
+        check_stories(["nosuch"], ["idm"], seeds=1)
+    with pytest.raises(UnknownEgoError, match="unknown ego 'nosuch'; choose from scenic"):
+        check_stories(["highway_lead_vehicle_stopped"], ["nosuch"], seeds=1)
+    text = (CLI / "bank_validate.py").read_text()
+    assert "check_stories(" in text and "story_table(" not in text and "ALL_EGOS" not in text
+
+
+def test_a_resumed_run_keeps_its_recorded_settings_unless_told_otherwise(tmp_path):
+    training = pytest.importorskip("policies.training")
+    recorded = training.TrainConfig.from_json({"out": str(tmp_path), "steps": 5000, "seed": 3, "n_envs": 1})
+    (tmp_path / "run.json").write_text(json.dumps({"config": recorded.to_json()}))
+    resumed = training.run_settings(str(tmp_path), {"steps": 9000, "seed": None}, resume=True)
+    assert (resumed.steps, resumed.seed, resumed.n_envs) == (9000, 3, 1)
+    fresh = training.run_settings(str(tmp_path), {"steps": 9000}, resume=False)
+    assert fresh.seed != 3 or fresh.n_envs != 1
+    assert "load_run_config" not in (CLI / "train.py").read_text()
+
+
+def test_replay_asks_the_trace_module_which_kind_of_file_it_was_given(tmp_path):
+    (tmp_path / "r.json").write_text(json.dumps({"schema": "dv2s-regress-report"}))
+    (tmp_path / "t.json").write_text(json.dumps({"scenario": "x"}))
+    (tmp_path / "z.gz").write_bytes(b"\x1f\x8b rest")
+    assert saved_file_schema(tmp_path / "r.json") == "dv2s-regress-report"
+    assert saved_file_schema(tmp_path / "t.json") is None and saved_file_schema(tmp_path / "z.gz") is None
+    assert saved_file_schema(tmp_path / "missing.json") is None
+    assert "json.loads" not in (CLI / "replay.py").read_text()
+
+
+def test_choices_come_from_the_product_lists():
+    assert sorted(_choices(["convert"], "--camera")) == sorted(CAMERA_VIEWPOINTS)
+    assert tuple(_choices(["loop"], "--fine-tune-method")) == FINE_TUNE_METHODS
+
+
+def test_one_parser_reads_every_config_option(tmp_path):
+    assert env_config_option('{"duration": 3}') == {"duration": 3}
+    (tmp_path / "c.json").write_text('{"duration": 4}')
+    assert env_config_option(str(tmp_path / "c.json")) == {"duration": 4}
+    for bad in ("{duration: 3", "[1]", str(tmp_path / "none.json")):
+        with pytest.raises(UsageError, match="--config"):
+            env_config_option(bad)
+    for module in ("mine.py", "regress.py", "train.py"):
+        text = (CLI / module).read_text()
+        assert "env_config_option(args.config)" in text and 'json_option(args.config' not in text, module
+
+
+def test_bank_add_upgrades_scenic2_once():
+    assert "upgrade_scenic2(" not in (CLI / "bank.py").read_text()
