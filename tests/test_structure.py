@@ -852,3 +852,46 @@ def test_the_import_rule_sees_an_import_planted_in_a_function(tmp_path, target, 
     modules[target] = copy
     wrong = misplaced_imports(modules, heavy, startup)
     assert [line.rpartition(": ")[2] for line in wrong] == [planted]
+
+
+def _pictured_tree() -> List[tuple]:
+    """``(depth, name)`` of every entry of the layout picture in the README (its ``## Layout`` code block):
+    depth 0 for a top-level folder, 1 for what is in it; a name as written (``pipeline/``, ``demo.py``)."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = text.partition("\n## Layout\n")[2]
+    block = section.partition("```\n")[2].partition("```")[0]
+    entries = []
+    for line in block.splitlines()[1:]:  # the first line names the repository
+        match = re.match(r"^((?:│   |    )*)[├└]── (\S+)", line)
+        assert match, f"a line of the README's layout picture that is not an entry: {line!r}"
+        entries.append((len(match.group(1)) // 4, match.group(2)))
+    return entries
+
+
+def test_the_readme_pictures_the_layout():
+    """The README's picture of the tree: every folder and module it names exists, the packages appear in their
+    layers' order and the parts of ``dv2s_gym/`` in the order of :data:`SUBSYSTEMS` (the evaluation sets, data,
+    after them), every part of ``dv2s_gym/`` and every package of ``bench/`` is named."""
+    entries = _pictured_tree()
+    top = [name for depth, name in entries if depth == 0]
+    children: Dict[str, List[str]] = {}
+    parent = None
+    for depth, name in entries:
+        if depth == 0:
+            parent = name
+        else:
+            assert depth == 1, f"the picture goes one level deep: {name}"
+            children.setdefault(parent, []).append(name)
+    missing = [f"{folder}{name}" for folder in [""] + list(children) for name in
+               (top if not folder else children[folder]) if not (ROOT / folder / name).exists()]
+    assert not missing, f"the README's layout picture names what is not there: {missing}"
+    assert top[:4] == [f"{package}/" for package in PACKAGES], "the four layers, bottom first"
+    assert {"bench/", "scripts/", "tests/", "docs/"} <= set(top)
+    parts = [name.rstrip("/").removesuffix(".py") for name in children["dv2s_gym/"]]
+    assert parts == list(SUBSYSTEMS) + ["evalset", "evalset_highway_env"], \
+        f"dv2s_gym's parts in the picture, against SUBSYSTEMS and the two evaluation sets: {parts}"
+    on_disk = {path.name for path in (ROOT / "dv2s_gym").iterdir()
+               if path.suffix == ".py" or (path.is_dir() and (path / "__init__.py").exists())} - {"__main__.py"}
+    assert on_disk <= set(children["dv2s_gym/"]) | {name.rstrip("/") for name in children["dv2s_gym/"]}
+    bench = {f"{path.parent.name}/" for path in (ROOT / "bench").glob("*/__init__.py")}
+    assert bench <= set(children["bench/"]), f"bench/'s packages not in the picture: {bench - set(children['bench/'])}"
