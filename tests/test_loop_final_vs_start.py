@@ -153,3 +153,16 @@ def test_the_loop_records_regression_report_paths_that_do_not_depend_on_the_work
     monkeypatch.chdir(tmp_path)
     summary = _regress_summary({"verdict": "PASS"}, Path("out/loop/round_1/regress/report.json"))
     assert summary["report"] == str(tmp_path.resolve() / "out/loop/round_1/regress/report.json")
+
+
+def test_a_round_begun_from_another_policy_than_the_rounds_before_it_recommend_is_refused(tmp_path):
+    import pytest
+    from types import SimpleNamespace
+
+    from dv2s_gym.mining import loop as loop_module
+
+    record = {"round": 2, "policy": "p0", "steps": {"mine": {"kept": []}}}  # begun from p0 ...
+    loop = SimpleNamespace(state=SimpleNamespace(round=lambda number: record), out=tmp_path)
+    with pytest.raises(loop_module.LoopError, match="round 2 .* was begun from p0, not from p1.*--out"):
+        loop_module._run_round(loop, 2, "p1")  # ... where round 1 recommends p1
+    assert record["policy"] == "p0" and list(record["steps"]) == ["mine"]
