@@ -19,7 +19,7 @@ counted for the target; ``scenic2/``: Scenic 2 syntax, counted apart) it tries
 A script *runs* in a simulator when it compiles, samples and steps for every seed without an
 exception. Each attempt is a child process with a time limit (a timeout is a failure). A DV2S
 failure is *clear* when it is a ``DV2SError`` that names its cause (see :func:`failure_construct`).
-Prints the per-script table and both counts, writes ``bench/carla_corpus_results.json``.
+Prints the per-script table and both counts, writes ``bench/research/carla_corpus_results.json``.
 """
 
 from __future__ import annotations
@@ -270,7 +270,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--timeout", type=float, default=300.0)
     parser.add_argument("--only", default=None, help="regular expression on script names")
-    parser.add_argument("--out", default=str(ROOT / "bench" / "carla_corpus_results.json"))
+    parser.add_argument("--out", default=str(ROOT / "bench" / "research" / "carla_corpus_results.json"))
     parser.add_argument("--child", nargs=2, metavar=("KIND", "PATH"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:

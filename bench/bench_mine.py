@@ -38,8 +38,7 @@ budget, which bounds the ratio any sampler can reach on that policy.
 the same load; episodes per minute end to end (scene space and worker pool start included) and the ratio
 (target >= 1.8x). A non-adaptive sampler also runs with 2 workers one chunk at a time (what the miner did
 before it sent whole chunks ahead, and still does for adaptive samplers): the cost of the idle worker at the
-end of each chunk. An adaptive sampler (streamed on the sliding-window schedule, ``dv2s_gym/mining/window.py``)
-also runs with 2 workers on the chunk schedule it used before (``miner.ADAPTIVE_SCHEDULE = "chunks"``). The
+end of each chunk (an adaptive sampler streams on the sliding-window schedule, ``dv2s_gym/mining/window.py``). The
 machine's parallel capacity (a busy loop in 2 processes against 1, from ``bench.bench_regress``)
 is measured in the same rounds: other processes on a shared machine bound the ratio by it.
 """
@@ -311,9 +310,8 @@ def bench_throughput(policy: str, sampler: str, seed: int, budget: int, repeats:
                      scenarios: Optional[List[str]], batch: Optional[int], root: str) -> Dict[str, float]:
     """1 worker against 2 on the same run, alternating; medians of episodes/min and of the per-round ratios.
 
-    A non-adaptive sampler is also run with 2 workers one chunk at a time (``LOOKAHEAD_CHUNKS = 1``), an
-    adaptive one with 2 workers on the chunk schedule instead of the streamed window: the difference is what
-    the idle workers at the end of each chunk cost.
+    A non-adaptive sampler is also run with 2 workers one chunk at a time (``LOOKAHEAD_CHUNKS = 1``): the
+    difference is what the idle workers at the end of each chunk cost.
     """
     from bench.bench_regress import parallel_capacity
     from dv2s_gym.mining import miner
@@ -322,9 +320,7 @@ def bench_throughput(policy: str, sampler: str, seed: int, budget: int, repeats:
     shipped = miner.LOOKAHEAD_CHUNKS
     batch = batch or 8  # the same for 1 and 2 workers: both run the same episodes (the miner's default: 4 per worker)
     configs = [("1 worker", 1, shipped, batch), ("2 workers", 2, shipped, batch)]
-    if is_adaptive(sampler):  # the window schedule streams; the chunk schedule waits for each chunk's last episode
-        configs.append(("2 workers, chunk schedule", 2, shipped, batch))
-    else:
+    if not is_adaptive(sampler):  # an adaptive sampler streams on the window schedule: no chunks
         configs.append(("2 workers, chunk by chunk", 2, 1, batch))
     print(f"# throughput: policy {policy}, sampler {sampler}, seed {seed}, budget {budget}, reference "
           f"{reference or 'none'}, batch {batch}, {repeats} rounds", flush=True)
@@ -339,9 +335,8 @@ def bench_throughput(policy: str, sampler: str, seed: int, budget: int, repeats:
             order = configs if round_ % 2 == 0 else configs[::-1]
             for label, workers, lookahead, size in order:
                 miner.LOOKAHEAD_CHUNKS = lookahead
-                miner.ADAPTIVE_SCHEDULE = "chunks" if "chunk schedule" in label else "window"
                 row = mine_once(policy, sampler, seed, budget, workers, reference, scenarios, size,
-                                os.path.join(root, f"throughput-{workers}-{lookahead}-{size}-{miner.ADAPTIVE_SCHEDULE}"))
+                                os.path.join(root, f"throughput-{workers}-{lookahead}-{size}"))
                 seconds[label] = row["seconds"]
                 rates[label].append(60.0 * row["episodes"] / row["seconds"])
                 if row["errors"]:
@@ -353,7 +348,6 @@ def bench_throughput(policy: str, sampler: str, seed: int, budget: int, repeats:
                   + f"; parallel capacity {capacity[-1]:.2f}x; load {load} -> {_load()}", flush=True)
     finally:
         miner.LOOKAHEAD_CHUNKS = shipped
-        miner.ADAPTIVE_SCHEDULE = "window"
     result = {"rates": {k: statistics.median(v) for k, v in rates.items()},
               "ratios": {k: statistics.median(v) for k, v in ratios.items()},
               "capacity": statistics.median(capacity)}

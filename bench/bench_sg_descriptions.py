@@ -1,7 +1,7 @@
 """SP of an SG on the labelled description set, and what it loses.
 
     python -m bench.bench_sg_descriptions [--jobs 2] [--sg rules] [--report REPORT.json] [--top 25]
-                                          [--save SCORES.json] [--compare bench/sg_descriptions_baseline.json]
+                                          [--save SCORES.json] [--compare bench/research/sg_descriptions_baseline.json]
 
 Runs ``dv2s eval sg dv2s_gym/evalset/descriptions`` (or reads a report written by
 ``dv2s eval sg ... --json`` with ``--report``) and prints SP mean ± sd per source group and overall,
@@ -10,7 +10,7 @@ the share of descriptions whose script compiles and runs, the labelled elements 
 lost elements without any warning (silent drops) and how many lost elements no warning names (their words,
 e.g. ``action ego collide side``, appear in none of the description's warnings). ``--save`` writes the per-description scores
 (stem -> use case, SP, runs); ``--compare`` prints SP before/after on the descriptions both score, and
-which got worse (the shipped baseline, ``bench/sg_descriptions_baseline.json``, is today's rules SG).
+which got worse (the shipped baseline, ``bench/research/sg_descriptions_baseline.json``, is today's rules SG).
 """
 
 from __future__ import annotations

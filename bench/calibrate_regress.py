@@ -5,7 +5,7 @@
     python -m bench.calibrate_regress --only gate  # one section (fixed, sizes, sequential, gate, gate-sequential)
 
 Synthetic paired outcomes from the shared-difficulty model (a per-episode latent difficulty
-shared by both policies, latent correlation rho; bench/regress_montecarlo.py), fed through the
+shared by both policies, latent correlation rho; bench/research/regress_montecarlo.py), fed through the
 actual decision rules. It prints:
 
 * the false-alarm rate (FAIL with identical policies) of ``compare`` at the documented episode
@@ -31,7 +31,7 @@ import time
 import numpy as np
 from scipy import stats
 
-from bench.regress_montecarlo import (
+from bench.research.regress_montecarlo import (
     DOCUMENTED_BASELINE_RATE,
     DOCUMENTED_DELTA,
     DOCUMENTED_EPISODES,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from envs.config_check import RENDER_MODES, check_render_mode
+
 __all__ = ["register_envs", "make_env", "ENV_ID"]
 
 ENV_ID = "DV2S-v0"
@@ -22,7 +24,6 @@ def make_env(**kwargs):
     env's error (with its did-you-mean) could say it; a function has no metadata for it to check. A
     ``<mode>_list`` render mode collects the frames (``gymnasium.wrappers.RenderCollection``), as Gymnasium does.
     """
-    from envs.config_check import RENDER_MODES, check_render_mode
     from envs.dv2s_env import DV2SEnv
 
     mode = kwargs.get("render_mode")

@@ -60,7 +60,7 @@ from scenario_bank.atomic import atomic_path, atomic_write_json, atomic_write_te
 from scenario_bank.cache import keyed_cache_dir
 from scenario_bank.dedup import (NEAR_COPY_LINES, changed_code_lines, content_hash, find_duplicate, find_near_copy,
                                  find_near_duplicate, near_duplicate, param_ranges, semantic_key)
-from scenario_bank.entries import (BANK_VERSION, ENTRY_FILE_KEYS, ENTRY_FILES, LEGACY_INDEX, MAX_FILE_BYTES,
+from scenario_bank.entries import (BANK_VERSION, ENTRY_FILE_KEYS, ENTRY_FILES, MAX_FILE_BYTES,
                                    MAX_JSON_DEPTH, MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, MINED_PROVENANCE_FIELDS,
                                    NEW_ENTRY_NAME, SCRIPT, SIDECAR, SIDECAR_VERSION, SOURCE_KINDS, CONTROL_FIX,
                                    PathLike, ScenarioEntry, control_character_field, entry_bytes, entry_file_name,
@@ -170,17 +170,6 @@ class Bank:
         return keyed_cache_dir("banks", self.root)
 
     def _read_index(self) -> Dict[str, Any]:
-        legacy = self.root / LEGACY_INDEX
-        if os.path.lexists(legacy):  # the folder's own format version, as written by dv2s-gym <= 0.1.0
-            try:
-                version = read_json(self.root, LEGACY_INDEX, _MAX_INDEX_BYTES).get("version", 0)
-            except (OSError, ValueError, AttributeError):
-                version = 0
-            if not isinstance(version, int) or version > BANK_VERSION:
-                raise BankVersionError(
-                    f"the bank at {self.root} has format version {version!r}, newer than this dv2s-gym "
-                    f"supports ({BANK_VERSION}); upgrade dv2s-gym to read it"
-                )
         try:
             index_path = self._cache_folder() / INDEX
         except OSError:
@@ -603,8 +592,6 @@ class Bank:
                     target = staging / entry.name / relative
                     target.parent.mkdir(parents=True, exist_ok=True)
                     target.write_bytes(data)
-            if os.path.lexists(self.root / LEGACY_INDEX):
-                (staging / LEGACY_INDEX).write_bytes(read_regular_file(self.root / LEGACY_INDEX, MAX_SIDECAR_BYTES))
             if dest.exists():
                 dest.rmdir()
             os.rename(staging, dest)

@@ -18,6 +18,8 @@ import os
 from pathlib import Path
 from typing import Union
 
+from platformdirs import user_cache_dir
+
 __all__ = ["CACHE_ENV", "cache_dir", "keyed_cache_dir", "keyed_cache_file"]
 
 CACHE_ENV = "DV2S_CACHE_DIR"
@@ -29,8 +31,6 @@ def cache_dir() -> Path:
     override = os.environ.get(CACHE_ENV)
     if override:
         return Path(override).expanduser()
-    from platformdirs import user_cache_dir
-
     return Path(user_cache_dir("dv2s-gym", appauthor=False))
 
 

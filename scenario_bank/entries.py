@@ -35,7 +35,6 @@ __all__ = [
 
 BANK_VERSION = 1
 """Version of the bank folder format written by this code."""
-LEGACY_INDEX = "bank.json"  # written into the bank folder by dv2s-gym <= 0.1.0; still marks a bank
 NEW_ENTRY_NAME = re.compile(r"^[a-z0-9][a-z0-9_\-]{0,99}$")
 """Names of new entries; an existing folder or an archive entry only needs a safe name (:func:`is_entry_name`)."""
 MAX_SCRIPT_BYTES = ArchiveLimits.max_script_bytes
@@ -219,8 +218,8 @@ def _slug(text: str) -> str:
 
 
 def _check_is_bank(root: Path, visible: Sequence[os.DirEntry]) -> None:
-    """Raise :class:`NotABankError` unless ``root`` is empty or holds a bank entry (or the legacy index)."""
-    if not visible or any(d.name == LEGACY_INDEX for d in visible):
+    """Raise :class:`NotABankError` unless ``root`` is empty or holds a bank entry."""
+    if not visible:
         return
     for d in visible:
         if d.is_dir() and ((Path(d.path) / SCRIPT).exists() or (Path(d.path) / SIDECAR).exists()):

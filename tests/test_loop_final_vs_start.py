@@ -114,25 +114,26 @@ def test_the_next_round_and_the_report_never_use_a_policy_the_cross_round_check_
     assert data["recommendation"]["policy"] == "p0" and "Policy to use: `p0`" in paths["md"].read_text()
 
 
-def test_the_cross_round_check_reads_the_loop_folder_from_any_working_directory(tmp_path, monkeypatch):
+def test_the_cross_round_check_reads_a_moved_loop_folder_from_any_working_directory(tmp_path, monkeypatch):
     from types import SimpleNamespace
 
     from dv2s_gym.mining import loop as loop_module
     from dv2s_gym.mining.loop_verdict import recommendation
 
     monkeypatch.chdir(tmp_path)
-    folder = Path("out/loop")  # --out as typed, relative to the folder the loop ran in
+    folder = tmp_path / "out" / "loop"
     rounds = []
     for number, (policy, fails, base_fails) in enumerate((("p0", P1_FAILS, P0_FAILS), ("p1", P2_FAILS, P1_FAILS)), 1):
-        stored = folder / f"round_{number}" / "regress" / "report.json"  # as older loops recorded it
+        stored = folder / f"round_{number}" / "regress" / "report.json"  # absolute, as the loop records it
         _regress(stored, f"p{number}", policy, fails, base_fails)
         rounds.append(_accepted({"round": number, "policy": policy, "new_policy": f"p{number}",
                                  "steps": {"regress": {"report": str(stored)}}}))
     body = {"settings": {"policy": "p0"}, "policy": "p2", "rounds": rounds}
+    (tmp_path / "out").rename(tmp_path / "moved")  # the loop folder moved after the run
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     monkeypatch.chdir(elsewhere)
-    given = Path("../out/loop")  # the same loop folder, typed from another working directory
+    given = Path("../moved/loop")  # the moved loop folder, typed from another working directory
     assert final_vs_start(body, folder=given)["verdict"] == "FAIL"
     paths = write_loop_reports(body, given)
     assert json.loads(paths["json"].read_text())["recommendation"]["policy"] == "p0"
@@ -152,3 +153,16 @@ def test_the_loop_records_regression_report_paths_that_do_not_depend_on_the_work
     monkeypatch.chdir(tmp_path)
     summary = _regress_summary({"verdict": "PASS"}, Path("out/loop/round_1/regress/report.json"))
     assert summary["report"] == str(tmp_path.resolve() / "out/loop/round_1/regress/report.json")
+
+
+def test_a_round_begun_from_another_policy_than_the_rounds_before_it_recommend_is_refused(tmp_path):
+    import pytest
+    from types import SimpleNamespace
+
+    from dv2s_gym.mining import loop as loop_module
+
+    record = {"round": 2, "policy": "p0", "steps": {"mine": {"kept": []}}}  # begun from p0 ...
+    loop = SimpleNamespace(state=SimpleNamespace(round=lambda number: record), out=tmp_path)
+    with pytest.raises(loop_module.LoopError, match="round 2 .* was begun from p0, not from p1.*--out"):
+        loop_module._run_round(loop, 2, "p1")  # ... where round 1 recommends p1
+    assert record["policy"] == "p0" and list(record["steps"]) == ["mine"]

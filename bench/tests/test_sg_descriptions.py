@@ -49,6 +49,6 @@ def test_bench_compare_lists_worse_descriptions():
 
 
 def test_shipped_baseline_scores_every_description():
-    baseline = json.loads((ROOT / "bench" / "sg_descriptions_baseline.json").read_text())
+    baseline = json.loads((ROOT / "bench" / "research" / "sg_descriptions_baseline.json").read_text())
     assert set(baseline) <= _stems(".txt") and len(baseline) >= 130  # no stale stem; batch 1 + 2 scored
     assert all(0.0 <= row["SP"] <= 1.0 for row in baseline.values())

@@ -63,7 +63,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--seed", type=int, default=None,
                    help="seed of the first episode (default 0, or the baseline report's)")
     p.add_argument("--margin", type=float, default=None,
-                   help="non-inferiority margin on the failure rate (default 0.02: 2 points, as calibrated in bench/calibrate_regress.py)")
+                   help="non-inferiority margin on the failure rate (default 0.02: 2 points)")
     p.add_argument("--alpha", type=float, default=None, help="level of the FAIL test (default 0.05)")
     p.add_argument("--failure", default=None,
                    help="what counts as a failure: a comma-separated list of collision, off_road, stall (default: "

@@ -462,8 +462,9 @@ def _run_round(loop: _Loop, number: int, current: str) -> str:
     """Run (or finish) round ``number`` from policy ``current``; the policy the next round starts from."""
     record = loop.state.round(number)
     steps = record["steps"]
-    if steps and record.get("policy") not in (None, current):  # begun by an earlier version from another policy
-        current = _earlier_round_spec(record["policy"], loop, number)
+    if steps and record.get("policy") not in (None, current):
+        raise LoopError(f"round {number} in {loop.out / 'loop.json'} was begun from {record['policy']}, not from "
+                        f"{current}, the policy the rounds before it recommend; choose another --out")
     record.setdefault("policy", current)
     round_dir = loop.out / f"round_{number}"
     if "regress" in steps or steps.get("skipped"):

@@ -129,16 +129,15 @@ def _weights(weights: Optional[Mapping[str, Any]]) -> str:
 
 
 def _regress_report_path(stored: str, folder: Optional[Path]) -> Path:
-    """Where a round's regression report is: ``stored`` as ``loop.json`` has it (absolute; older loops recorded it
-    relative to the working directory the loop ran in), read in the loop folder ``folder`` when given (its
-    ``round_<n>/...`` part), so that the report does not depend on the working directory it is read from."""
+    """Where a round's regression report is: ``stored`` as ``loop.json`` has it (an absolute path), read in the
+    loop folder ``folder`` when given (its ``round_<n>/...`` part), so that a loop folder moved elsewhere is read
+    where it is now."""
     path = Path(stored)
     if folder is None:
         return path
     parts = path.parts
     rounds = [index for index, part in enumerate(parts) if re.fullmatch(r"round_\d+", part)]
-    candidates = ([Path(folder).joinpath(*parts[rounds[-1]:])] if rounds else []) + (
-        [path] if path.is_absolute() else [Path(folder) / path])
+    candidates = ([Path(folder).joinpath(*parts[rounds[-1]:])] if rounds else []) + [path]
     return next((candidate for candidate in candidates if candidate.is_file()), candidates[0])
 
 

@@ -21,8 +21,7 @@ such as Ray, runs the window's outstanding scenes call after call: the same reco
 an idle tail per call). Every draw and record depends on the seed and ``batch`` only, not
 on the number of workers or the timing.
 
-Non-adaptive samplers (random, halton), and adaptive runs on the chunk schedule
-(``"schedule": "chunks"``, for comparison in ``bench/``), run in chunks
+Non-adaptive samplers (random, halton) run on the chunk schedule (``"schedule": "chunks"``), in chunks
 of ``batch`` scenes: the sampler draws a chunk, the backend runs it, and the outcomes are
 fed back in index order before the next chunk is drawn (a non-adaptive sampler sends up
 to :data:`LOOKAHEAD_CHUNKS` chunks at once: its draws do not depend on outcomes).
@@ -78,8 +77,6 @@ __all__ = ["MineRun", "MineSettings", "WorkerSettings", "FEEDBACKS", "mine", "re
 SETTINGS_VERSION = 1
 LOOKAHEAD_CHUNKS = 16
 """Whole chunks a non-adaptive sampler (random, halton) sends to the workers at once."""
-ADAPTIVE_SCHEDULE = "window"
-"""The schedule of a new adaptive run (``"chunks"``: the chunk schedule, for comparison in ``bench/``)."""
 _RESUME_KEYS = ("policy", "sampler", "sampler_options", "feedback", "seed", "batch", "scenarios", "bank_dir",
                 "env_config", "reference", "ttc_threshold", "stall_seconds")
 _SPACE_KEYS = ("scenarios",)
@@ -271,9 +268,6 @@ def _settings(policy: str, settings: MineSettings, batch: int, scenarios: List[s
     }
 
 
-"""Settings added after the first runs were written: a run without them had these values."""
-
-
 def _read_settings(path: Path) -> Optional[Dict[str, Any]]:
     """A run folder's ``settings.json`` (``None`` when there is none); a damaged one is refused in one line
     naming the file and the fix."""
@@ -327,14 +321,13 @@ def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[i
 
 
 def _schedule(saved: Optional[Dict[str, Any]], sampler: str, out: Path) -> str:
-    """The run's schedule: a new adaptive run streams with a sliding window, anything else runs in chunks;
-    a run folder keeps the schedule it was written with."""
-    if saved is None:
-        return ADAPTIVE_SCHEDULE if is_adaptive(sampler) else "chunks"
-    schedule = saved.get("schedule")
-    if schedule not in SCHEDULES:
-        raise MiningError(f"{out}/settings.json has an unknown schedule {schedule!r} (known: {', '.join(SCHEDULES)}); "
-                          "it was written by another version: pass another --out")
+    """The run's schedule: an adaptive sampler streams with a sliding window, a non-adaptive one runs in chunks;
+    a run folder recorded with another schedule is refused."""
+    schedule = "window" if is_adaptive(sampler) else "chunks"
+    if saved is not None and saved.get("schedule") != schedule:
+        raise MiningError(f"{out}/settings.json records the schedule {saved.get('schedule')!r}, not {schedule!r} "
+                          f"(the {', '.join(SCHEDULES)} schedules are those of the adaptive and the non-adaptive "
+                          "samplers); it was not written by this dv2s-gym: pass another --out")
     return schedule
 
 

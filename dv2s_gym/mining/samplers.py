@@ -57,6 +57,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 
+from dv2s_gym.mining.checkpoint_mac import seal, unseal
 from dv2s_gym.mining.errors import MiningError
 from scenario_bank.named_registry import register_named
 
@@ -297,8 +298,6 @@ class SceneSampler:
         user's MAC (:mod:`~dv2s_gym.mining.checkpoint_mac`)."""
         import dill
 
-        from dv2s_gym.mining.checkpoint_mac import seal
-
         buffer = io.BytesIO()
         dill.dump(self, buffer)
         return seal(buffer.getvalue())
@@ -308,8 +307,6 @@ class SceneSampler:
         """Inverse of :meth:`dumps`; :class:`MiningError` (nothing unpickled) unless ``data`` carries this user's
         MAC."""
         import dill
-
-        from dv2s_gym.mining.checkpoint_mac import unseal
 
         payload = unseal(data)
         if payload is None:

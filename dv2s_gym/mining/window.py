@@ -31,7 +31,7 @@ __all__ = ["WindowSchedule", "SCHEDULES"]
 
 SCHEDULES = ("window", "chunks")
 """``window``: this module (adaptive samplers); ``chunks``: draw ``batch`` scenes, feed them all, draw again
-(non-adaptive samplers, whose draws do not depend on outcomes, and adaptive runs written before ``window``)."""
+(non-adaptive samplers, whose draws do not depend on outcomes)."""
 
 Feedback = Callable[[Dict[str, Any], set], float]
 

@@ -70,7 +70,7 @@ Power
 :mod:`dv2s_gym.regress.power` plans a run's episodes and states its power. How these rules behave on
 synthetic paired outcomes (false alarms, P(PASS) at the margin, power, sample sizes, paired against
 unpaired) is measured by ``bench/calibrate_regress.py`` with the paired-outcome model of
-``bench/regress_montecarlo.py``; the figures are in ``bench/RESULTS.md``.
+``bench/research/regress_montecarlo.py``; the figures are in ``bench/RESULTS.md``.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Outcome of a policy on every starting bank scenario, one letter per seed (C collision, O off road, S success, s stall).
 
-    python -m bench.rule_bank_outcomes --policy rule --episodes 12 --out /tmp/rule.json
+    python -m bench.research.rule_bank_outcomes --policy rule --episodes 12 --out /tmp/rule.json
 
 How the reference driver ``rule`` was measured before and after its gap acceptance
 (bench/RESULTS.md): seeds 10000.. per scenario, ``policies.evaluation.run_episode`` on the

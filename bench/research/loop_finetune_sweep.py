@@ -1,10 +1,10 @@
 """Re-run only the fine-tuning half of a finished ``dv2s loop`` round with other fine-tuning settings.
 
-    python -m bench.loop_finetune_sweep --loop out/loop-seed0 --name s03_100k --steps 100000 \\
+    python -m bench.research.loop_finetune_sweep --loop out/loop-seed0 --name s03_100k --steps 100000 \\
         --reward '{"standing": -0.3}' --regress
-    python -m bench.loop_finetune_sweep --loop out/loop-seed0 --name dagger_40k --method dagger --steps 40000 \
+    python -m bench.research.loop_finetune_sweep --loop out/loop-seed0 --name dagger_40k --method dagger --steps 40000 \
         --lr 3e-4 --regress
-    python -m bench.loop_finetune_sweep --loop out/loop-seed0 --name dagger_w3 --method dagger --steps 40000 \
+    python -m bench.research.loop_finetune_sweep --loop out/loop-seed0 --name dagger_w3 --method dagger --steps 40000 \
         --lr 1e-3 --epochs 8 --slower-weight 3 --regress
 
 Reuses the round-1 mining run, working bank and split of ``--loop`` (so settings are

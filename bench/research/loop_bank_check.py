@@ -1,6 +1,6 @@
 """A fine-tuned policy against the loop's starting policy on the starting bank, with many seeds per scenario.
 
-    python -m bench.loop_bank_check --loop out/loop-seed0 --candidate out/sweep/NAME/policy/model.zip \
+    python -m bench.research.loop_bank_check --loop out/loop-seed0 --candidate out/sweep/NAME/policy/model.zip \
         --episodes 12 --out /tmp/bank12
 
 The loop's own regression test runs ``--regress-episodes`` (default 4) seeds per starting scenario,
