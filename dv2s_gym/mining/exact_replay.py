@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import re
+from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import detect_failure
 from dv2s_gym.regress import identity
 from dv2s_gym.regress.identity import checkpoint_path, installed_version
@@ -58,7 +59,7 @@ def narrowed_script(script: str, params: Mapping[str, Any], narrow: float = NARR
         low, high = bounds
         value = float(params[name])
         if not low - 1e-9 <= value <= high + 1e-9:
-            raise ValueError(f"parameter {name}={value} lies outside its range {low:g}..{high:g}")
+            raise MiningError(f"parameter {name}={value} lies outside its range {low:g}..{high:g}")
         width = narrow * (high - low)
         lo, hi = max(low, value - width), min(high, value + width)
         intervals[name] = [lo, hi]

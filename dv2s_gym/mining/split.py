@@ -26,6 +26,8 @@ from typing import Any, Dict, List, Mapping, Sequence
 
 import numpy as np
 
+from dv2s_gym.mining.errors import MiningError
+
 __all__ = ["split_by_family", "split_by_cluster", "cluster_groups", "family_of"]
 
 
@@ -78,7 +80,7 @@ def split_by_cluster(entries: Sequence[Mapping[str, Any]], fraction: float = 0.5
     [scenarios], "fine_tune_clusters": [...], "held_out_clusters": [...], "groups": n}``.
     """
     if not 0.0 <= float(fraction) <= 1.0:
-        raise ValueError(f"the held-out fraction must be in [0, 1], not {fraction}")
+        raise MiningError(f"the held-out fraction must be in [0, 1], not {fraction}")
     groups = cluster_groups(entries)
     order = np.random.default_rng([int(seed), 9]).permutation(len(groups))
     shuffled = sorted((groups[i] for i in order), key=_kind)  # stable: shuffled within each kind
@@ -143,7 +145,7 @@ def split_by_family(entries: Sequence[Mapping[str, Any]], fraction: float = 0.5,
     "fine_tune_families", "held_out_families", "groups", "moved_to_fine_tune"}``.
     """
     if not 0.0 <= float(fraction) <= 1.0:
-        raise ValueError(f"the held-out fraction must be in [0, 1], not {fraction}")
+        raise MiningError(f"the held-out fraction must be in [0, 1], not {fraction}")
     groups = family_groups(entries)
     forced, trained = set(held_families), set(tuned_families)
     order = [groups[i] for i in np.random.default_rng([int(seed), 11]).permutation(len(groups))]

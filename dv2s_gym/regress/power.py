@@ -30,6 +30,7 @@ from typing import Any, Optional
 import numpy as np
 from scipy import stats
 
+from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.family import DEFAULT_POOLED_WEIGHT
 from dv2s_gym.regress.stats import DEFAULT_CORRELATION
 
@@ -163,14 +164,14 @@ def plan_episodes(scenarios: Sequence[str], *, mde: float = DEFAULT_MDE, power: 
         "discordance", "episodes"}}, "assumption"}``.
 
     Raises:
-        ValueError: when ``mde`` or ``power`` is out of range, or no run of at most
+        RegressError: (a ValueError) when ``mde`` or ``power`` is out of range, or no run of at most
             :data:`MAX_PLANNED_EPISODES` episodes per scenario reaches the power.
     """
     if not 0.0 < float(mde) < 1.0:
-        raise ValueError(f"--mde is an increase of one scenario's failure rate in (0, 1), e.g. 0.3 for 30 points; "
+        raise RegressError(f"--mde is an increase of one scenario's failure rate in (0, 1), e.g. 0.3 for 30 points; "
                          f"not {mde}")
     if not 0.0 < float(power) < 1.0:
-        raise ValueError(f"--power must be strictly between 0 and 1, e.g. 0.8; not {power}")
+        raise RegressError(f"--power must be strictly between 0 and 1, e.g. 0.8; not {power}")
     level = scenario_level(alpha, len(scenarios), pooled_weight)
     per: dict[str, Any] = {}
     for name in scenarios:
@@ -178,7 +179,7 @@ def plan_episodes(scenarios: Sequence[str], *, mde: float = DEFAULT_MDE, power: 
         p0 = min(p0, 1.0 - mde - 1e-4)
         n = _smallest_n(p0, mde, power, level)
         if n is None:
-            raise ValueError(f"no run of up to {MAX_PLANNED_EPISODES} episodes per scenario detects a {100 * mde:g}-point "
+            raise RegressError(f"no run of up to {MAX_PLANNED_EPISODES} episodes per scenario detects a {100 * mde:g}-point "
                              f"regression in {name} with power {power:g}; give a larger --mde or a lower --power")
         per[name] = {"baseline_rate": p0, "source": source, "discordance": discordance(p0, mde), "episodes": n}
     return {"episodes": max(v["episodes"] for v in per.values()), "mde": float(mde), "power": float(power),
