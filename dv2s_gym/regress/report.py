@@ -78,21 +78,22 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import hashlib
 import json
 import math
-import hashlib
 import os
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.aggregates import return_aggregates
-from dv2s_gym.regress.errors import ReportMismatchError, RegressError
-from dv2s_gym.regress.store import describe_differences
+from dv2s_gym.regress.errors import RegressError, ReportMismatchError
+from dv2s_gym.regress.failures import FAILURE_BEFORE_CHOICE, FAILURE_KINDS
 from dv2s_gym.regress.identity import installed_version
+from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
+from dv2s_gym.regress.store import describe_differences
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
-from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
 
 __all__ = [
     "SCHEMA",
@@ -115,8 +116,9 @@ __all__ = [
 SCHEMA = "dv2s-regress"
 SCHEMA_VERSION = 1
 CONFIDENCE = 0.95
-RATES = (("collision_rate", "collided"), ("off_road_rate", "off_road"), ("stall_rate", "stalled"),
-         ("failure_rate", "failed"), ("success_rate", "success"))
+RATES = tuple((f"{kind}_rate", field) for kind, field in FAILURE_KINDS.items()) + (
+    ("failure_rate", "failed"), ("success_rate", "success"))
+"""A summary's rates and the result field each counts: one per failure kind, then any failure and success."""
 MEANS = (("min_ttc", "min_ttc"), ("mean_speed", "mean_speed"), ("return", "episode_return"))
 
 EXIT_CODES = {"PASS": 0, "FAIL": 1, "INCONCLUSIVE": 3, "ERROR": 4, None: 0}
@@ -477,7 +479,7 @@ def _headline(report: Mapping[str, Any], base: Optional[Path] = None) -> str:
     against = ("" if baseline is None else f" vs baseline `{baseline.get('spec')}`" + (
         f" (the {baseline.get('role') or 'candidate'} policy of {_relative(baseline['report'], base)})"
         if baseline.get("report") else ""))
-    failure = ", ".join(settings.get("failure") or ["collision", "off_road"])
+    failure = ", ".join(settings.get("failure") or FAILURE_BEFORE_CHOICE)
     return (f"candidate `{report['candidate']['spec']}`{against}; failure: {failure}; "
             f"{len(report['scenarios'])} scenario(s) x "
             f"{settings['episodes']} episode(s) from seed {settings['seed']}; margin {100 * settings['margin']:g} pp, "
@@ -626,7 +628,7 @@ def _markdown(report: Mapping[str, Any], report_path: str = "report.json", base:
     lines = [f"## dv2s regress: {verdict or 'measures (no baseline)'} - candidate `{report['candidate']['spec']}`{against}",
              "", _verdict_line(report), ""]
     facts = [f"{len(report['scenarios'])} scenario(s) x {settings['episodes']} episode(s) from seed {settings['seed']}; "
-             f"failure: {', '.join(settings.get('failure') or ['collision', 'off_road'])}; margin "
+             f"failure: {', '.join(settings.get('failure') or FAILURE_BEFORE_CHOICE)}; margin "
              f"{100 * settings['margin']:g} pp, alpha {settings['alpha']:g}"]
     if report["newly_failing"]:
         facts.append(f"{len(report['newly_failing'])} newly failing episode(s) (candidate fails, baseline does not)")
