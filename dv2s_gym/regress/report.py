@@ -36,11 +36,13 @@ bumps it, and ``--baseline-report`` refuses a report of another version)::
 planned ``mde``, and the smallest increase it detected with the planned power. ``settings`` also
 holds ``mde``, ``power`` and, for a run sized by them, ``plan``.
 
-``Episode`` is :meth:`policies.evaluation.EpisodeResult.to_json` (scenario, seed, scene_seed,
+``Episode`` is the JSON object of a :class:`~scenario_bank.records.RegressEpisode`, as ``results.jsonl``
+holds it: :meth:`policies.evaluation.EpisodeResult.to_json` (scenario, seed, scene_seed,
 sampled ``params``, collided, collisions, off_road, success, failed, min_ttc (null when no
 vehicle was ever on a collision course), mean_speed, distance, episode_return, steps,
-trajectory_hash, error, extra) plus ``role``, ``id`` and ``trace`` (path of the saved trace,
-relative to the report's folder, for failed episodes; else null). An episode that produced no
+trajectory_hash, error, extra) plus ``role``, ``id``, ``trace`` (path of the saved trace,
+relative to the report's folder, for failed episodes; else null), ``stalled``, ``stall_time`` and
+``failure_kinds``. An episode that produced no
 result (an exception, or a worker that crashed or hung twice) is
 ``{"id", "role", "scenario", "seed", "error", "trace": null}``.
 
@@ -94,6 +96,7 @@ from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
 from dv2s_gym.regress.store import describe_differences
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
+from scenario_bank.records import RegressEpisode
 
 __all__ = [
     "SCHEMA",
@@ -258,8 +261,8 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         bank: ``{"path", "version", "scenarios", "hashes"}``.
         settings: the run's settings (``margin`` and ``alpha`` decide the verdicts).
         candidate / baseline: ``{"spec", "card", ...}``; ``baseline`` None for a run without one.
-        episodes: ``{"id", "scenario", "seed", "candidate": result, "baseline": result | None}``
-            (results as returned by :func:`~dv2s_gym.regress.tasks.run_regress_task`).
+        episodes: ``{"id", "scenario", "seed", "candidate": result, "baseline": result | None}``, each result a
+            :class:`~scenario_bank.records.RegressEpisode` or its JSON object (the report holds the JSON objects).
         stopped_early / sequential: the sequential test's outcome (``sequential["verdict"]``,
             when set, is the overall verdict of a sequential run; a scenario FAIL still FAILs).
     """
@@ -303,7 +306,7 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         "settings": dict(settings),
         "candidate": dict(candidate),
         "baseline": dict(baseline) if baseline is not None else None,
-        "episodes": list(episodes),
+        "episodes": [_episode_json(episode) for episode in episodes],
         "scenarios": report_scenarios,
         "overall": overall_summary,
         "verdict": verdict,
@@ -319,6 +322,11 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         report["verdict"] = "ERROR"
         report["error_reason"] = _error_reason(errors)
     return report
+
+
+def _episode_json(episode: Mapping[str, Any]) -> Dict[str, Any]:
+    """A paired episode as the report holds it: its results as their JSON objects."""
+    return {key: value.to_dict() if isinstance(value, RegressEpisode) else value for key, value in episode.items()}
 
 
 @dataclasses.dataclass
