@@ -39,7 +39,7 @@ from dv2s_gym.regress.report import (
     paired_tables,
 )
 from dv2s_gym.regress.outputs import write_reports
-from dv2s_gym.regress.identity import policy_fingerprint, installed_version
+from dv2s_gym.regress.identity import installed_version, policy_fingerprint
 from dv2s_gym.regress.store import RunStore
 from dv2s_gym.regress.settings import ROLES, BaselineReport, RegressSettings
 from dv2s_gym.regress.tasks import KIND

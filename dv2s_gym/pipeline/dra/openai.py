@@ -21,7 +21,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from dv2s_gym.pipeline.errors import MalformedResponseError
-from dv2s_gym.pipeline.prompts import normalize_camera, dra_prompt, prompt_hash
+from dv2s_gym.pipeline.prompts import dra_prompt, normalize_camera, prompt_hash
 
 __all__ = ["VLMSettings", "describe_with_vlm", "frame_to_data_url", "select_frames"]
 
