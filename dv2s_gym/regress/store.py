@@ -1,9 +1,8 @@
 """The run's output folder as a resumable log: settings in ``run.json``, episodes in ``results.jsonl``.
 
 Every finished episode (a :class:`~scenario_bank.records.RegressEpisode`) is appended to ``results.jsonl`` as
-one JSON line (flushed and
-synced before the next one), so a run that is interrupted - Ctrl-C, a killed process, a
-lost machine - keeps every episode that finished. Rerunning with the same output folder
+one JSON line (flushed and synced before the next one), so a run that is interrupted - Ctrl-C, a killed
+process, a lost machine - keeps every episode that finished. Rerunning with the same output folder
 and settings reads the log and runs only what is missing; an episode is never run twice
 and never counted twice (a line cut short by the interruption is dropped and rewritten).
 Episodes that ended in an error are run again on resume (the error may have been
