@@ -25,7 +25,7 @@ from envs.config_check import check_config
 from envs.errors import UnsupportedConstructError
 from envs.trace import EpisodeTrace
 import envs.scenarios as envs_scenarios
-from scenario_bank.jail import JailError, JailLimitError, JailLimits, JailedProcess, require_jail
+from scenario_bank.jail import JailedProcess, JailError, JailLimitError, JailLimits, require_jail
 from scenario_bank.jail.process import JailRemoteError
 from scenario_bank.safe_files import read_in_folder, read_regular_file
 from envs.scenarios import ParamRange, read_scenario_file

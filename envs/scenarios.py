@@ -22,7 +22,7 @@ import stat
 
 import numpy as np
 
-from envs.errors import ScenarioCompileError, UntrustedScenarioError, SceneSamplingError, StepTimeoutError, UnsupportedConstructError
+from envs.errors import ScenarioCompileError, SceneSamplingError, StepTimeoutError, UnsupportedConstructError, UntrustedScenarioError
 from scenario_bank.safety import UnsafeScenarioError, check_script
 from scenario_bank.scenic_parse import install_parse_cache
 from envs.scenic_imports import no_folder_imports

@@ -41,6 +41,7 @@ import gymnasium as gym
 import numpy as np
 
 from envs.errors import DV2SError
+from scenario_bank.extras import extra_of, missing_extra_message
 from scenario_bank.named_registry import register_named
 
 __all__ = [
@@ -554,8 +555,10 @@ def _load_sb3(path: str, algorithm: Optional[str], name: str, **options: Any) ->
     algorithm = (algorithm or card.get("algorithm") or "").lower() or None
     try:
         import stable_baselines3 as sb3
-    except ImportError as error:  # pragma: no cover - the rl extra is part of the install
-        raise PolicyError("loading SB3 checkpoints needs stable-baselines3: pip install 'dv2s-gym[rl]'") from error
+    except ImportError as error:  # the core install has no rl extra
+        missing = error.name if isinstance(error, ModuleNotFoundError) and extra_of(error.name or "") else \
+            "stable_baselines3"
+        raise PolicyError(missing_extra_message(missing, "loading SB3 checkpoints")) from error
     candidates = [algorithm] if algorithm else list(SB3_ALGORITHMS)
     errors = []
     for candidate in candidates:

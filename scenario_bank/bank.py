@@ -60,11 +60,11 @@ from scenario_bank.atomic import atomic_path, atomic_write_json, atomic_write_te
 from scenario_bank.cache import keyed_cache_dir
 from scenario_bank.dedup import (NEAR_COPY_LINES, changed_code_lines, content_hash, find_duplicate, find_near_copy,
                                  find_near_duplicate, near_duplicate, param_ranges, semantic_key)
-from scenario_bank.entries import (BANK_VERSION, ENTRY_FILE_KEYS, ENTRY_FILES, MAX_FILE_BYTES,
-                                   MAX_JSON_DEPTH, MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, MINED_PROVENANCE_FIELDS,
-                                   NEW_ENTRY_NAME, SCRIPT, SIDECAR, SIDECAR_VERSION, SOURCE_KINDS, CONTROL_FIX,
-                                   PathLike, ScenarioEntry, control_character_field, entry_bytes, entry_file_name,
-                                   entry_files, entry_matches, new_sidecar, read_json, scan_entries, unsafe_input)
+from scenario_bank.entries import (BANK_VERSION, CONTROL_FIX, ENTRY_FILE_KEYS, ENTRY_FILES, MAX_FILE_BYTES,
+                                   MAX_JSON_DEPTH, MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, MINED_PROVENANCE_FIELDS, NEW_ENTRY_NAME, SCRIPT, SIDECAR, SIDECAR_VERSION,
+                                   SOURCE_KINDS, PathLike, ScenarioEntry, control_character_field, entry_bytes,
+                                   entry_file_name, entry_files, entry_matches, new_sidecar, read_json, scan_entries,
+                                   unsafe_input)
 from scenario_bank.records import Provenance, Sidecar
 from scenario_bank.errors import (BankError, BankOptionError, BankVersionError, DuplicateScenarioError, NotABankError,
                                   ScenarioRejectedError, UnknownScenarioError, UnsafeBankInputError, bank_write_error)

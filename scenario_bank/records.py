@@ -1,12 +1,14 @@
 """Typed records of what travels between the bank, the miner, the regression runner and the policies.
 
-Three records stand for the JSON objects the subsystems hand each other and write to disk:
+Four records stand for the JSON objects the subsystems hand each other and write to disk:
 
 - :class:`Provenance`: where a bank entry came from (a sidecar's ``source``: its kind, video, parent scenario,
   seed, generator; for a mined entry also the failure, cluster, reproduction rate, E2E-SC and replay parameters).
 - :class:`Sidecar`: a bank entry's ``meta.json`` (description, elements, story, tags, map, provenance, hash).
 - :class:`EpisodeRecord`: one episode of a failure-mining run, a line of its ``episodes.jsonl`` (the scene, the
   policy's result and failure, the reference driver's outcome, the sampler's point).
+- :class:`RegressEpisode`: one policy's episode of a regression run, a line of its ``results.jsonl`` and a result
+  in its report (the episode's outcome measures, the failure kinds it counts, its trace, or the error it ended in).
 
 Each is a frozen dataclass with :meth:`from_dict` (checks every field it knows; a :class:`RecordError` names the
 bad one and what it should hold) and :meth:`to_dict`, which gives back exactly the JSON object the files hold:
@@ -31,9 +33,9 @@ from scenario_bank.errors import BankVersionError, DV2SError
 from scenario_bank.safe_files import UnsafeInputError, is_entry_name, validate_relative_path
 from scenario_bank.story import StoryError, normalize_story
 
-__all__ = ["RecordError", "Provenance", "Sidecar", "EpisodeRecord", "SOURCE_KINDS", "PROVENANCE_FIELDS",
-           "MINED_PROVENANCE_FIELDS", "ENTRY_FILES", "SIDECAR_VERSION", "SCRIPT", "SIDECAR", "CONTROL_FIX",
-           "control_character_field", "is_entry_file"]
+__all__ = ["RecordError", "Provenance", "Sidecar", "EpisodeRecord", "RegressEpisode", "SOURCE_KINDS",
+           "PROVENANCE_FIELDS", "MINED_PROVENANCE_FIELDS", "ENTRY_FILES", "SIDECAR_VERSION", "SCRIPT", "SIDECAR",
+           "CONTROL_FIX", "control_character_field", "is_entry_file"]
 
 SCRIPT = "scenario.scenic"
 """A bank entry's script, in its folder."""
@@ -127,12 +129,14 @@ _CHECKS = {
 
 
 class _Record(_MappingABC):
-    """What the three records share: the JSON form (:meth:`to_dict`), reading from it (:meth:`from_dict`) and
+    """What the records share: the JSON form (:meth:`to_dict`), reading from it (:meth:`from_dict`) and
     read-only mapping access to it. Subclasses list their fields' JSON kinds in ``_KINDS`` (a field missing
-    from it is the record's ``extra`` or ``null_fields``), the fields :meth:`from_dict` needs in ``_REQUIRED``
-    and the fields nested records fill in ``_NESTED``."""
+    from it is the record's ``extra`` or ``null_fields``), the fields :meth:`from_dict` needs in ``_REQUIRED``,
+    the fields nested records fill in ``_NESTED`` and, in ``_ATTRIBUTES``, a JSON key held by an attribute of
+    another name (a key that is also one of the record's own attribute names)."""
 
     _KINDS: ClassVar[Dict[str, str]] = {}
+    _ATTRIBUTES: ClassVar[Dict[str, str]] = {}
     _REQUIRED: ClassVar[Tuple[str, ...]] = ()
     _NESTED: ClassVar[Dict[str, type]] = {}
     _LISTS: ClassVar[Tuple[str, ...]] = ()
@@ -167,7 +171,7 @@ class _Record(_MappingABC):
                 value = cls._nested(key, value)
             elif key in cls._LISTS:
                 value = tuple(value)
-            values[key] = value
+            values[cls._ATTRIBUTES.get(key, key)] = value
         values.update(cls._check_extra(data))
         values["extra"] = {k: v for k, v in data.items() if k not in cls._KINDS}
         values["null_fields"] = frozenset(k for k in cls._KINDS if k in data and data[k] is None)
@@ -195,7 +199,7 @@ class _Record(_MappingABC):
         nulls = self.default_null_fields() if self.null_fields is None else self.null_fields
         out: Dict[str, Any] = {}
         for key in self._KINDS:
-            value = getattr(self, key)
+            value = getattr(self, self._ATTRIBUTES.get(key, key))
             if value is None:
                 if key in nulls:
                     out[key] = None
@@ -497,3 +501,71 @@ class EpisodeRecord(_Record):
         value = (self.result or {}).get("min_ttc")
         return float(value) if _is_number(value) else math.inf
 
+
+
+@dataclass(frozen=True, eq=False)
+class RegressEpisode(_Record):
+    """One policy's episode of a regression run (``dv2s regress``): a line of the run's ``results.jsonl``, and a
+    ``candidate`` or ``baseline`` result of its report's ``episodes``.
+
+    The episode: its ``id`` (``"<scenario>/<seed>"``), the ``role`` of the policy (``"candidate"`` or
+    ``"baseline"``), ``scenario`` and env ``seed``; the outcome measures of
+    :meth:`policies.evaluation.EpisodeResult.to_json` (``scene_seed``, the script's sampled ``params``,
+    ``collided`` and with whom (``collisions``), ``off_road``, ``success``, ``min_ttc`` (``None`` when nothing
+    ever closed in), ``mean_speed``, ``distance``, ``episode_return``, ``steps``, ``trajectory_hash``, and its
+    ``extra``, held here as ``result_extra``); whether the ego ``stalled`` and when (``stall_time``); the failure
+    kinds of the run that happened (``failure_kinds``, from :data:`scenario_bank.failure_types.FAILURE_TABLE`)
+    and whether any did (``failed``); the saved ``trace`` of a failed episode (relative to the run's folder).
+    An episode that produced no result has only ``id``, ``role``, ``scenario``, ``seed``, its ``error`` and a
+    ``null`` trace. Other keys are kept in ``extra``.
+
+    ``null_fields``: the fields written as ``null`` when ``None``; by default ``trace`` and, for an episode
+    that ran, ``error``, ``min_ttc`` and ``stall_time``, as the runner writes them.
+    """
+
+    id: str
+    role: str
+    scenario: str
+    seed: int
+    scene_seed: Optional[int] = None
+    params: Optional[Mapping[str, Any]] = None
+    collided: Optional[bool] = None
+    collisions: Optional[Tuple[Any, ...]] = None
+    off_road: Optional[bool] = None
+    success: Optional[bool] = None
+    failed: Optional[bool] = None
+    min_ttc: Optional[float] = None
+    mean_speed: Optional[float] = None
+    distance: Optional[float] = None
+    episode_return: Optional[float] = None
+    steps: Optional[int] = None
+    trajectory_hash: Optional[str] = None
+    error: Optional[str] = None
+    result_extra: Optional[Mapping[str, Any]] = None
+    """The result's own ``extra`` (when and with whom the smallest time to collision came)."""
+    trace: Optional[str] = None
+    stalled: Optional[bool] = None
+    stall_time: Optional[float] = None
+    failure_kinds: Optional[Tuple[str, ...]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "id": "str", "role": "str", "scenario": "str", "seed": "int", "scene_seed": "int", "params": "object",
+        "collided": "bool", "collisions": "list", "off_road": "bool", "success": "bool", "failed": "bool",
+        "min_ttc": "number", "mean_speed": "number", "distance": "number", "episode_return": "number",
+        "steps": "int", "trajectory_hash": "str", "error": "str", "extra": "object", "trace": "str",
+        "stalled": "bool", "stall_time": "number", "failure_kinds": "strings",
+    }
+    _ATTRIBUTES: ClassVar[Dict[str, str]] = {"extra": "result_extra"}
+    _REQUIRED: ClassVar[Tuple[str, ...]] = ("id", "role", "scenario", "seed")
+    _LISTS: ClassVar[Tuple[str, ...]] = ("collisions", "failure_kinds")
+    _WHAT: ClassVar[str] = "regression result"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"trace"} if self.error else {"trace", "error", "min_ttc", "stall_time"})
+
+    @property
+    def key(self) -> Tuple[str, str]:
+        """``(id, role)``: the episode's place in the run (one result each)."""
+        return self.id, self.role

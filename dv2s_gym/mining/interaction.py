@@ -24,8 +24,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dv2s_gym.pipeline.semantics.trace import _kind as semantic_kind, elements_from_trace
 from typing import Any, Dict, List, Mapping, Optional
+
+from dv2s_gym.pipeline.semantics.trace import _kind as semantic_kind, elements_from_trace
+from scenario_bank.failure_types import failure_type
 
 __all__ = ["MANOEUVRES", "LOOKBACK_S", "key_actor", "actor_manoeuvres", "failure_interaction", "shows_interaction",
            "interaction_sentence"]
@@ -74,7 +76,8 @@ def key_actor(trace, failure: Optional[Mapping[str, Any]]) -> Optional[str]:
             if event.get("kind") == "collision" and "ego" in event.get("actors", []):
                 partner = next((a for a in event["actors"] if a != "ego"), None)
                 break
-    if partner is not None and partner in names and failure.get("type") in ("collision", "low_ttc"):
+    row = failure_type(str(failure.get("type")))
+    if partner is not None and partner in names and row is not None and row.with_actor:
         return partner
     k = _failure_step(trace, failure)
     first = max(0, k - int(round(LOOKBACK_S * _frequency(trace))))

@@ -68,6 +68,7 @@ from dv2s_gym.workers.pool import default_workers
 from dv2s_gym.workers.settings import WorkerSettings
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 from scenario_bank.bank import Bank, BankError
+from scenario_bank.extras import missing_extra_message
 from scenario_bank.records import EpisodeRecord, RecordError
 from scenario_bank.run_identity import check_identity
 
@@ -519,8 +520,7 @@ def _check_can_mine(policy: str, settings: MineSettings) -> None:
     """Refuse, before any work, a run that cannot start: no VerifAI, bad sampler options, a misspelt env config key,
     an unknown policy."""
     if importlib.util.find_spec("verifai") is None:  # the core install has no mining extra
-        raise MiningError("failure mining needs VerifAI's samplers, which the core install leaves out: "
-                          "pip install 'dv2s-gym[mining]'")
+        raise MiningError(missing_extra_message("verifai", "failure mining"))
     sampler_params(settings.sampler, dict(settings.sampler_options) if settings.sampler_options else None)
     from envs.dv2s_env import check_env_config
     from policies.registry import load_policy

@@ -23,12 +23,11 @@ from dataclasses import asdict, dataclass
 from typing import Any, Dict, List, Optional
 
 from envs.safety_metrics import DEFAULT_STALL_SECONDS, FREE_PATH, STANDING_SPEED, first_stall_step
+from scenario_bank.failure_types import FAILURE_TYPES
 
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "detect_failure", "detect_stall", "robustness",
            "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
 
-FAILURE_TYPES = ("collision", "off_road", "low_ttc", "stall")
-"""Failure types, most severe first."""
 COLLISION_TYPES = ("rear_end", "struck_from_behind", "side", "head_on", "pedestrian", "obstacle")
 STALL_SPEED = STANDING_SPEED
 """m/s under which the ego counts as standing."""

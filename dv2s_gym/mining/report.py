@@ -90,7 +90,7 @@ import os
 import statistics
 from collections import Counter
 from pathlib import Path
-from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.mining.behaviour import behaviour_of
 from dv2s_gym.mining.cluster import cluster_failures
@@ -104,6 +104,7 @@ from dv2s_gym.mining.report_text import percent_text as _pct
 from dv2s_gym.regress.identity import installed_version
 from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
+from scenario_bank.failure_types import FAILURE_TYPES, severity_order
 
 __all__ = [
     "SCHEMA", "SCHEMA_VERSION", "FAILURE_ORDER", "MiningReportError", "read_jsonl", "read_run",
@@ -113,8 +114,9 @@ __all__ = [
 SCHEMA = "dv2s-mine-report"
 SCHEMA_VERSION = 3
 CONFIDENCE = 0.95
-FAILURE_ORDER = ("collision", "off_road", "low_ttc", "stall")
-"""Failure types in the order the report lists them (other types follow, sorted)."""
+FAILURE_ORDER = FAILURE_TYPES
+"""Failure types in the order the report lists them (other types follow, sorted):
+:data:`scenario_bank.failure_types.FAILURE_TYPES`."""
 STATUS_ORDER = ("kept", "merged", "rejected")
 NOT_CONVERTED = "not converted"
 
@@ -227,14 +229,9 @@ def _rate(count: int, n: int) -> Dict[str, Any]:
     return {"value": count / n, "low": low, "high": high, "count": count}
 
 
-def _type_order(types: Iterable[str]) -> List[str]:
-    types = set(types)
-    return [t for t in FAILURE_ORDER if t in types] + sorted(t for t in types if t not in FAILURE_ORDER)
-
-
 def _by_type(failures: Sequence[Mapping[str, Any]]) -> Dict[str, int]:
     counts = Counter(str(f["type"]) for f in failures)
-    return {t: counts[t] for t in _type_order(counts)}
+    return {t: counts[t] for t in severity_order(counts)}
 
 
 def _stage(reason: Any) -> str:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 import os
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Tuple, Union
+from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
 
 import numpy as np
 
@@ -76,14 +76,16 @@ def render_episode_video(trace_path: Union[str, os.PathLike], out_path: Union[st
     return _write_window(frames, seconds, frequency, out_path, f"episode trace {trace_path}", end_step)
 
 
-def render_policy_video(report: Dict[str, Any], result: Dict[str, Any], role: str, out_path: Union[str, os.PathLike], *,
+def render_policy_video(report: Dict[str, Any], result: Mapping[str, Any], role: str,
+                        out_path: Union[str, os.PathLike], *,
                         seconds: float = DEFAULT_CLIP_CONFIG["seconds"], size: int = DEFAULT_CLIP_CONFIG["size"],
                         zoom: float = DEFAULT_CLIP_CONFIG["zoom"], end_step: Optional[int] = None) -> Path:
     """Re-run ``role``'s policy of a regression report on ``result``'s scene and write its last ``seconds``
     (with ``end_step``: the ``seconds`` up to that step, as :func:`render_episode_video`).
 
     For an episode that kept no trace (one that did not fail): the policy spec, scenario, seed and env
-    config of the report, rendered off-screen like :func:`render_episode_video`. The re-run must
+    config of the report, rendered off-screen like :func:`render_episode_video`. ``result`` is the episode's
+    result in the report (a :class:`~scenario_bank.records.RegressEpisode` or its JSON object). The re-run must
     reproduce the report's trajectory hash, so the clip shows the very episode the report counted.
     """
     from policies.evaluation import make_eval_env, run_episode

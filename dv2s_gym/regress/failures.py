@@ -14,14 +14,20 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.regress.errors import RegressError
 from envs.safety_metrics import DEFAULT_STALL_SECONDS
+from scenario_bank.failure_types import FAILURE_TABLE
 
-__all__ = ["FAILURE_KINDS", "DEFAULT_FAILURE", "DEFAULT_STALL_SECONDS", "parse_failure", "apply_failure", "missing_facts"]
+__all__ = ["FAILURE_KINDS", "DEFAULT_FAILURE", "FAILURE_BEFORE_CHOICE", "DEFAULT_STALL_SECONDS", "parse_failure",
+           "apply_failure", "missing_facts"]
 
-FAILURE_KINDS: Dict[str, str] = {"collision": "collided", "off_road": "off_road", "stall": "stalled"}
-"""Failure kind -> the episode result's field that says it happened."""
+FAILURE_KINDS: Dict[str, str] = {row.name: row.result_field for row in FAILURE_TABLE if row.result_field}
+"""Failure kind -> the episode result's field that says it happened: the failure types
+(:data:`scenario_bank.failure_types.FAILURE_TABLE`) that results record, most severe first."""
 
-DEFAULT_FAILURE: Tuple[str, ...] = ("collision", "off_road", "stall")
+DEFAULT_FAILURE: Tuple[str, ...] = tuple(row.name for row in FAILURE_TABLE if row.regress_default)
 """A failure is any of these unless the run says otherwise (``--failure``)."""
+
+FAILURE_BEFORE_CHOICE: Tuple[str, ...] = tuple(row.name for row in FAILURE_TABLE if row.counted_before_choice)
+"""The failure kinds of a report that has no ``failure`` setting (made before runs chose their kinds)."""
 
 def parse_failure(value: Union[None, str, Iterable[str]]) -> List[str]:
     """``"collision,stall"`` or a list of kinds -> the kinds in canonical order; None: the default.

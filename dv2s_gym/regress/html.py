@@ -32,6 +32,7 @@ from tqdm import tqdm
 
 from dv2s_gym.regress.clips import (DEFAULT_CLIP_CONFIG, ClipError, clip_window, render_episode_video,
                                     render_policy_video)
+from dv2s_gym.regress.failures import FAILURE_BEFORE_CHOICE
 from dv2s_gym.regress.report import scenarios_by_severity, warnings as report_warnings
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, VideoSource,
                                   axis as _axis, escape as _e, finite as _num, fmt as _fmt,
@@ -39,6 +40,7 @@ from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH,
                                   row_label as _row_label, svg as _svg, video_bytes as _video_bytes, video_tag,
                                   x_scale as _x_scale)
 from scenario_bank.atomic import atomic_write_text
+from scenario_bank.failure_types import FAILURE_TABLE
 
 __all__ = ["write_html", "render_html", "render_episode_video", "MAX_VIDEOS"]
 
@@ -264,20 +266,21 @@ def _scenario_table(report: Mapping[str, Any]) -> str:
     return "".join(out) + "</table>"
 
 
+def _outcome_detail(kind: str, result: Mapping[str, Any]) -> str:
+    """What an episode's outcome says after a failure kind's label: whom it collided with, when it stalled."""
+    if kind == "collision" and result.get("collisions"):
+        return f" with {', '.join(map(str, result.get('collisions') or []))}"
+    stall = _num(result.get("stall_time")) if kind == "stall" else None
+    return f" from {stall:.1f} s" if stall is not None else ""
+
+
 def _outcome(result: Any) -> str:
     if not isinstance(result, Mapping):
         return "not run"
     if result.get("error"):
         return f"error: {result['error']}"
-    parts = []
-    if result.get("collided"):
-        parts.append("collision" + (f" with {', '.join(map(str, result.get('collisions') or []))}"
-                                    if result.get("collisions") else ""))
-    if result.get("off_road"):
-        parts.append("off road")
-    if result.get("stalled"):
-        stall = _num(result.get("stall_time"))
-        parts.append("stall" + (f" from {stall:.1f} s" if stall is not None else ""))
+    parts = [row.label + _outcome_detail(row.name, result) for row in FAILURE_TABLE
+             if row.label and row.result_field and result.get(row.result_field)]
     if not parts:
         parts.append("success" if result.get("success") else "no failure")
     ttc = _num(result.get("min_ttc"))
@@ -425,7 +428,7 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
     """The report page as a string (see :func:`write_html`); relative trace paths resolve against ``base``."""
     title = f"dv2s regress: {(report.get('candidate') or {}).get('spec', '?')}"
     has_baseline = report.get("baseline") is not None
-    failure = ", ".join((report.get("settings") or {}).get("failure") or ["collision", "off_road"])
+    failure = ", ".join((report.get("settings") or {}).get("failure") or FAILURE_BEFORE_CHOICE)
     plots = [(f"Failure ({failure}) rate per scenario, 95% intervals",
               rate_plot(report, "failure_rate", "Failure rate")),
              ("Collision rate per scenario, 95% intervals", rate_plot(report, "collision_rate", "Collision rate"))]

@@ -36,11 +36,13 @@ bumps it, and ``--baseline-report`` refuses a report of another version)::
 planned ``mde``, and the smallest increase it detected with the planned power. ``settings`` also
 holds ``mde``, ``power`` and, for a run sized by them, ``plan``.
 
-``Episode`` is :meth:`policies.evaluation.EpisodeResult.to_json` (scenario, seed, scene_seed,
+``Episode`` is the JSON object of a :class:`~scenario_bank.records.RegressEpisode`, as ``results.jsonl``
+holds it: :meth:`policies.evaluation.EpisodeResult.to_json` (scenario, seed, scene_seed,
 sampled ``params``, collided, collisions, off_road, success, failed, min_ttc (null when no
 vehicle was ever on a collision course), mean_speed, distance, episode_return, steps,
-trajectory_hash, error, extra) plus ``role``, ``id`` and ``trace`` (path of the saved trace,
-relative to the report's folder, for failed episodes; else null). An episode that produced no
+trajectory_hash, error, extra) plus ``role``, ``id``, ``trace`` (path of the saved trace,
+relative to the report's folder, for failed episodes; else null), ``stalled``, ``stall_time`` and
+``failure_kinds``. An episode that produced no
 result (an exception, or a worker that crashed or hung twice) is
 ``{"id", "role", "scenario", "seed", "error", "trace": null}``.
 
@@ -78,21 +80,23 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import hashlib
 import json
 import math
-import hashlib
 import os
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.aggregates import return_aggregates
-from dv2s_gym.regress.errors import ReportMismatchError, RegressError
-from dv2s_gym.regress.store import describe_differences
+from dv2s_gym.regress.errors import RegressError, ReportMismatchError
+from dv2s_gym.regress.failures import FAILURE_BEFORE_CHOICE, FAILURE_KINDS
 from dv2s_gym.regress.identity import installed_version
+from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
+from dv2s_gym.regress.store import describe_differences
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
-from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
+from scenario_bank.records import RegressEpisode
 
 __all__ = [
     "SCHEMA",
@@ -115,8 +119,9 @@ __all__ = [
 SCHEMA = "dv2s-regress"
 SCHEMA_VERSION = 1
 CONFIDENCE = 0.95
-RATES = (("collision_rate", "collided"), ("off_road_rate", "off_road"), ("stall_rate", "stalled"),
-         ("failure_rate", "failed"), ("success_rate", "success"))
+RATES = tuple((f"{kind}_rate", field) for kind, field in FAILURE_KINDS.items()) + (
+    ("failure_rate", "failed"), ("success_rate", "success"))
+"""A summary's rates and the result field each counts: one per failure kind, then any failure and success."""
 MEANS = (("min_ttc", "min_ttc"), ("mean_speed", "mean_speed"), ("return", "episode_return"))
 
 EXIT_CODES = {"PASS": 0, "FAIL": 1, "INCONCLUSIVE": 3, "ERROR": 4, None: 0}
@@ -256,8 +261,8 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         bank: ``{"path", "version", "scenarios", "hashes"}``.
         settings: the run's settings (``margin`` and ``alpha`` decide the verdicts).
         candidate / baseline: ``{"spec", "card", ...}``; ``baseline`` None for a run without one.
-        episodes: ``{"id", "scenario", "seed", "candidate": result, "baseline": result | None}``
-            (results as returned by :func:`~dv2s_gym.regress.tasks.run_regress_task`).
+        episodes: ``{"id", "scenario", "seed", "candidate": result, "baseline": result | None}``, each result a
+            :class:`~scenario_bank.records.RegressEpisode` or its JSON object (the report holds the JSON objects).
         stopped_early / sequential: the sequential test's outcome (``sequential["verdict"]``,
             when set, is the overall verdict of a sequential run; a scenario FAIL still FAILs).
     """
@@ -301,7 +306,7 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         "settings": dict(settings),
         "candidate": dict(candidate),
         "baseline": dict(baseline) if baseline is not None else None,
-        "episodes": list(episodes),
+        "episodes": [_episode_json(episode) for episode in episodes],
         "scenarios": report_scenarios,
         "overall": overall_summary,
         "verdict": verdict,
@@ -317,6 +322,11 @@ def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: D
         report["verdict"] = "ERROR"
         report["error_reason"] = _error_reason(errors)
     return report
+
+
+def _episode_json(episode: Mapping[str, Any]) -> Dict[str, Any]:
+    """A paired episode as the report holds it: its results as their JSON objects."""
+    return {key: value.to_dict() if isinstance(value, RegressEpisode) else value for key, value in episode.items()}
 
 
 @dataclasses.dataclass
@@ -477,7 +487,7 @@ def _headline(report: Mapping[str, Any], base: Optional[Path] = None) -> str:
     against = ("" if baseline is None else f" vs baseline `{baseline.get('spec')}`" + (
         f" (the {baseline.get('role') or 'candidate'} policy of {_relative(baseline['report'], base)})"
         if baseline.get("report") else ""))
-    failure = ", ".join(settings.get("failure") or ["collision", "off_road"])
+    failure = ", ".join(settings.get("failure") or FAILURE_BEFORE_CHOICE)
     return (f"candidate `{report['candidate']['spec']}`{against}; failure: {failure}; "
             f"{len(report['scenarios'])} scenario(s) x "
             f"{settings['episodes']} episode(s) from seed {settings['seed']}; margin {100 * settings['margin']:g} pp, "
@@ -626,7 +636,7 @@ def _markdown(report: Mapping[str, Any], report_path: str = "report.json", base:
     lines = [f"## dv2s regress: {verdict or 'measures (no baseline)'} - candidate `{report['candidate']['spec']}`{against}",
              "", _verdict_line(report), ""]
     facts = [f"{len(report['scenarios'])} scenario(s) x {settings['episodes']} episode(s) from seed {settings['seed']}; "
-             f"failure: {', '.join(settings.get('failure') or ['collision', 'off_road'])}; margin "
+             f"failure: {', '.join(settings.get('failure') or FAILURE_BEFORE_CHOICE)}; margin "
              f"{100 * settings['margin']:g} pp, alpha {settings['alpha']:g}"]
     if report["newly_failing"]:
         facts.append(f"{len(report['newly_failing'])} newly failing episode(s) (candidate fails, baseline does not)")

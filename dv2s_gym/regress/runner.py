@@ -39,7 +39,7 @@ from dv2s_gym.regress.report import (
     paired_tables,
 )
 from dv2s_gym.regress.outputs import write_reports
-from dv2s_gym.regress.identity import policy_fingerprint, installed_version
+from dv2s_gym.regress.identity import installed_version, policy_fingerprint
 from dv2s_gym.regress.store import RunStore
 from dv2s_gym.regress.settings import ROLES, BaselineReport, RegressSettings
 from dv2s_gym.regress.tasks import KIND
@@ -50,6 +50,7 @@ from dv2s_gym.workers.tasks import task_id
 from envs.config_check import check_config
 from envs.errors import UnknownConfigKeyError
 from scenario_bank import select_scenarios
+from scenario_bank.records import RecordError, RegressEpisode
 
 __all__ = ["run_regression", "run_size", "RegressSettings", "BaselineReport", "WorkerSettings", "bank_info",
            "plan_tasks", "DEFAULT_OUT", "ROLES"]
@@ -121,7 +122,7 @@ def _select(scenarios: Scenarios, bank_dir: Optional[str], fallback: Optional[Se
 
 def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: Sequence[int], bank: Dict[str, Any],
                           env_config: Dict[str, Any], settings: RegressSettings
-                          ) -> Tuple[Dict[str, Any], Dict[str, Dict[str, Any]], str]:
+                          ) -> Tuple[Dict[str, Any], Dict[str, RegressEpisode], str]:
     """The baseline info, the baseline result per episode id, and the report file's SHA-256."""
     path, role, failure = Path(report.path), report.role, list(settings.failure)
     stall_seconds, accept_failed = float(settings.stall_seconds), report.accept_failed
@@ -167,19 +168,29 @@ def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: S
                                   f"{stall_seconds:g} s; use the same stall time, or rerun the baseline")
     for result in results.values():
         apply_failure(result, failure)
+    records = {episode_id: _baseline_record(path, result) for episode_id, result in results.items()}
     info = {"report": str(path.resolve()), "role": role, "spec": old[role].get("spec"), "card": old[role].get("card")}
     theirs, ours = old.get("dv2s_version"), installed_version()
     if theirs != ours:
         info["warning"] = (f"baseline report {path} was made by dv2s-gym {theirs}, this is {ours}: the simulator or the "
                            "policies may have changed between them, so differences may not be the candidate's; "
                            "rerun the baseline with this version to be sure")
-    return info, results, hashlib.sha256(path.read_bytes()).hexdigest()
+    return info, records, hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _baseline_record(path: Path, result: Dict[str, Any]) -> RegressEpisode:
+    """A baseline report's result as a record; one that is no regression result is refused, naming its field."""
+    try:
+        return RegressEpisode.from_dict(result)
+    except RecordError as error:
+        raise ReportMismatchError(f"baseline report {path}, episode {result.get('id')}: {error}; give the report.json "
+                                  "of an earlier `dv2s regress` run") from None
 
 
 def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = None,
                    settings: Optional[RegressSettings] = None, *, workers: Optional[WorkerSettings] = None,
                    out_dir: Optional[Union[str, os.PathLike]] = None, progress: bool = True,
-                   on_result: Optional[Callable[[Dict[str, Any]], None]] = None,
+                   on_result: Optional[Callable[[RegressEpisode], None]] = None,
                    clips: bool = True) -> Dict[str, Any]:
     """Run ``candidate`` (and ``baseline``) on scenario x seed pairs and write the reports.
 
@@ -197,7 +208,8 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
             ``traces/``, ``report.json``, ``junit.xml``, ``report.md``. Rerunning with the same
             folder and settings resumes: finished episodes are not run again.
         progress: a progress bar on stderr.
-        on_result: called in this process with each finished episode's result (after it is saved).
+        on_result: called in this process with each finished episode's result (after it is saved), a
+            :class:`~scenario_bank.records.RegressEpisode`.
         clips: render the HTML report's clips of the newly failing episodes (seconds each); ``False`` lists
             those episodes without clips.
 
@@ -254,7 +266,7 @@ class _Plan:
     batch: int
     candidate_info: Dict[str, Any]
     baseline_info: Optional[Dict[str, Any]]
-    old_results: Dict[str, Dict[str, Any]]
+    old_results: Dict[str, RegressEpisode]
     report_hash: Optional[str]
 
 
@@ -280,7 +292,7 @@ def _prepare(candidate: str, baseline: Union[None, str, BaselineReport], setting
     seeds = [settings.seed + k for k in range(episodes)]
     candidate_info = _policy_info(candidate)
     baseline_info = _policy_info(spec) if spec is not None else None  # a bad baseline spec is bad input too
-    old_results: Dict[str, Dict[str, Any]] = {}
+    old_results: Dict[str, RegressEpisode] = {}
     report_hash = None
     if report is not None:
         baseline_info, old_results, report_hash = _baseline_from_report(report, names, seeds, bank, env_config,
@@ -349,24 +361,26 @@ class _Episodes:
     """The run's results as they arrive (saved, counted on the progress bar, timed per scenario), and the
     candidate/baseline pairs they make."""
 
-    def __init__(self, plan: _Plan, store: RunStore, on_result: Optional[Callable[[Dict[str, Any]], None]]) -> None:
+    def __init__(self, plan: _Plan, store: RunStore, on_result: Optional[Callable[[RegressEpisode], None]]) -> None:
         self.plan, self.store, self.on_result = plan, store, on_result
-        self.results: Dict[Tuple[str, str], Dict[str, Any]] = {}
+        self.results: Dict[Tuple[str, str], RegressEpisode] = {}
         self.timing: Dict[str, float] = {}
         self.bar = None
 
     def handle(self, result: Dict[str, Any]) -> None:
+        """Take a worker's result (:func:`~dv2s_gym.regress.tasks.run_regress_task`): time it, save it, count it."""
         result = dict(result)
         seconds = result.pop("seconds", None)  # wall time varies: kept apart, so episodes compare equal
         if seconds is not None:
             self.timing[result["scenario"]] = self.timing.get(result["scenario"], 0.0) + float(seconds)
         result["trace"] = self.store.relative(result.get("trace"))
-        self.store.append(result)
-        self.results[(result["id"], result["role"])] = result
+        record = RegressEpisode.from_dict(result)
+        self.store.append(record)
+        self.results[record.key] = record
         if self.bar is not None:
             self.bar.update(1)
         if self.on_result is not None:
-            self.on_result(result)
+            self.on_result(record)
 
     def paired(self, seed_list: Sequence[int]) -> List[Dict[str, Any]]:
         plan, has_baseline = self.plan, self.plan.baseline_info is not None

@@ -1,8 +1,8 @@
 """The run's output folder as a resumable log: settings in ``run.json``, episodes in ``results.jsonl``.
 
-Every finished episode is appended to ``results.jsonl`` as one JSON line (flushed and
-synced before the next one), so a run that is interrupted - Ctrl-C, a killed process, a
-lost machine - keeps every episode that finished. Rerunning with the same output folder
+Every finished episode (a :class:`~scenario_bank.records.RegressEpisode`) is appended to ``results.jsonl`` as
+one JSON line (flushed and synced before the next one), so a run that is interrupted - Ctrl-C, a killed
+process, a lost machine - keeps every episode that finished. Rerunning with the same output folder
 and settings reads the log and runs only what is missing; an episode is never run twice
 and never counted twice (a line cut short by the interruption is dropped and rewritten).
 Episodes that ended in an error are run again on resume (the error may have been
@@ -18,10 +18,11 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any, Dict, Optional, Tuple, Union
+from typing import Any, Dict, Mapping, Optional, Tuple, Union
 
 from dv2s_gym.regress.errors import RegressError, ResumeMismatchError
 from scenario_bank.atomic import atomic_write_json
+from scenario_bank.records import RecordError, RegressEpisode
 from scenario_bank.run_identity import check_identity
 
 __all__ = ["RunStore", "RUN_FILE", "RESULTS_FILE", "TRACES_DIR", "describe_differences"]
@@ -70,7 +71,7 @@ class RunStore:
         self._handle = None
 
     # ------------------------------------------------------------------ open
-    def open(self) -> Dict[Key, Dict[str, Any]]:
+    def open(self) -> Dict[Key, RegressEpisode]:
         """Check or write ``run.json`` and return the episodes already finished, by (id, role)."""
         if self.root.exists() and not self.root.is_dir():
             raise RegressError(f"--out {self.root} is a file; give a folder for the run's reports")
@@ -104,8 +105,8 @@ class RunStore:
                        fix=f"{warning}rerun with the same settings to resume it, or choose another --out (or delete "
                            f"{self.root}) for a new run")
 
-    def _read(self) -> Dict[Key, Dict[str, Any]]:
-        done: Dict[Key, Dict[str, Any]] = {}
+    def _read(self) -> Dict[Key, RegressEpisode]:
+        done: Dict[Key, RegressEpisode] = {}
         if not self.results_path.is_file():
             return done
         raw = self.results_path.read_bytes()
@@ -127,19 +128,27 @@ class RunStore:
                                    f"damaged: delete {self.root} and run again") from None
             if last:
                 break  # no newline yet: the write was cut short
-            done[key] = record
+            done[key] = self._record(record, number)
             good += len(line) + 1
         if good < len(raw):
             with open(self.results_path, "r+b") as handle:  # drop the cut-short tail before appending
                 handle.truncate(good)
         return done
 
+    def _record(self, data: Dict[str, Any], number: int) -> RegressEpisode:
+        try:
+            return RegressEpisode.from_dict(data)
+        except RecordError as error:
+            raise RegressError(f"{self.results_path} line {number} is not a result record ({error}); the file is "
+                               f"damaged: delete {self.root} and run again") from None
+
     # ---------------------------------------------------------------- append
-    def append(self, result: Dict[str, Any]) -> None:
-        """Append one finished episode (one JSON line, flushed and synced)."""
+    def append(self, result: Union[RegressEpisode, Mapping[str, Any]]) -> None:
+        """Append one finished episode (one JSON line, flushed and synced): a record, or its JSON object."""
         if self._handle is None:
             self._handle = open(self.results_path, "a", encoding="utf-8")
-        self._handle.write(json.dumps(result, sort_keys=True, default=str) + "\n")
+        data = result.to_dict() if isinstance(result, RegressEpisode) else result
+        self._handle.write(json.dumps(data, sort_keys=True, default=str) + "\n")
         self._handle.flush()
         if self.fsync:
             os.fsync(self._handle.fileno())

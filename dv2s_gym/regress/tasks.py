@@ -16,7 +16,8 @@ A task is a plain dict, so any pool of :mod:`dv2s_gym.workers` (local processes,
 (``"<scenario>/<seed>"``), ``trace`` (the saved trace's path or ``None``) and ``seconds`` (the
 episode's wall time; the runner keeps it apart from the result), ``stalled`` and ``stall_time`` (when the ego's total standing time on a free road reached
 ``stall_seconds``: :func:`envs.safety_metrics.total_stall_step`), with ``failed``
-and ``failure_kinds`` set from the task's failure kinds. An
+and ``failure_kinds`` set from the task's failure kinds; the runner reads the dict (``seconds`` set
+apart) as a :class:`~scenario_bank.records.RegressEpisode`. An
 exception inside the episode comes back as an error result (``{"id", "role",
 "scenario", "seed", "error", "trace": None}``) instead of propagating: it is kept in
 the report, never dropped.

@@ -14,6 +14,7 @@ from typing import Any, Callable, Dict, List, Optional
 
 from dv2s_gym.registered_names import RegisteredNames
 from dv2s_gym.workers.errors import WorkerError
+from scenario_bank.extras import missing_extra_message
 from scenario_bank.named_registry import register_named
 
 __all__ = ["BACKENDS", "BackendFactory", "register_backend", "registered_backends", "backend_factory", "backend_choices", "get_backend"]
@@ -36,8 +37,9 @@ def _ray(*, workers: Optional[int], address: Optional[str], timeout: Optional[fl
     except ModuleNotFoundError as error:
         if error.name not in ("dv2s_gym.workers.ray_pool", "ray"):
             raise
-        missing = "the ray package" if error.name == "ray" else "dv2s_gym.workers.ray_pool"
-        raise WorkerError(f"--backend ray needs {missing}, which is not installed; "
+        if error.name == "ray":  # the optional dependency
+            raise WorkerError(f"{missing_extra_message('ray', '--backend ray')}; or use --backend local") from None
+        raise WorkerError("--backend ray needs dv2s_gym.workers.ray_pool, which is not installed; "
                           "install ray (pip install 'ray[default]') or use --backend local") from None
     options: Dict[str, Any] = {"workers": workers, "address": address}
     if timeout is not None and "timeout" in inspect.signature(module.RayBackend).parameters:

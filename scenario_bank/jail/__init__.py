@@ -23,7 +23,7 @@ carries data, never objects.
 This package imports nothing else of dv2s-gym, so every layer can use it.
 """
 
-from scenario_bank.jail.errors import JailError, JailUnavailableError, JailLimitError, JailCrashError, JailProtocolError
+from scenario_bank.jail.errors import JailCrashError, JailError, JailLimitError, JailProtocolError, JailUnavailableError
 from scenario_bank.jail.limits import JailLimits
 from scenario_bank.jail.process import JailedProcess, jail_status, require_jail
 

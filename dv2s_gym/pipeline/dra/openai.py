@@ -21,9 +21,9 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from dv2s_gym.pipeline.errors import MalformedResponseError
-from dv2s_gym.pipeline.prompts import normalize_camera, dra_prompt, prompt_hash
-from scenario_bank.errors import SettingError
+from dv2s_gym.pipeline.prompts import dra_prompt, normalize_camera, prompt_hash
 from dv2s_gym.pipeline.video import VideoError
+from scenario_bank.errors import SettingError
 
 __all__ = ["VLMSettings", "describe_with_vlm", "frame_to_data_url", "select_frames"]
 

@@ -1,0 +1,68 @@
+"""The failure types of an episode, in one table: :data:`FAILURE_TABLE`.
+
+Each row (:class:`FailureType`) says what the rest of the project reads about a type: its ``name`` (as mining
+records and regression results write it), its ``severity`` (0 is the most severe; the table is in that order),
+the field of a regression result that says it happened (``result_field``), whether ``dv2s regress`` counts it
+as a failure by default (``regress_default``), whether a regression report written before runs chose their
+failure kinds counted it (``counted_before_choice``), whether the failure names the actor it met
+(``with_actor``) and the ``label`` reports show for it (``None``: reports show none).
+
+The failure miner detects all four types (:mod:`dv2s_gym.mining.monitors`), and its reports list them in
+severity order; ``dv2s regress`` counts the types that have a result field (:mod:`dv2s_gym.regress.failures`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Dict, Iterable, List, Optional, Tuple
+
+__all__ = ["FailureType", "FAILURE_TABLE", "FAILURE_TYPES", "failure_type", "severity_order"]
+
+
+@dataclass(frozen=True)
+class FailureType:
+    """One failure type: one row of :data:`FAILURE_TABLE` (see the module docstring for the columns)."""
+
+    name: str
+    severity: int
+    """0 for the most severe type, then 1, 2, ...: the order the miner prefers and its reports list."""
+    result_field: Optional[str]
+    """The regression result's field that is true when the type happened; ``None``: results do not record it."""
+    regress_default: bool
+    """Whether ``dv2s regress`` counts the type as a failure unless ``--failure`` says otherwise."""
+    counted_before_choice: bool
+    """Whether a regression report without a ``failure`` setting (made before runs chose their failure kinds)
+    counted the type as a failure."""
+    with_actor: bool
+    """Whether the failure names the actor it met (a mined failure's ``with``)."""
+    label: Optional[str]
+    """What reports call the type; ``None`` when they show no label of their own."""
+
+
+FAILURE_TABLE: Tuple[FailureType, ...] = (
+    FailureType("collision", severity=0, result_field="collided", regress_default=True, counted_before_choice=True,
+                with_actor=True, label="collision"),
+    FailureType("off_road", severity=1, result_field="off_road", regress_default=True, counted_before_choice=True,
+                with_actor=False, label="off road"),
+    FailureType("low_ttc", severity=2, result_field=None, regress_default=False, counted_before_choice=False,
+                with_actor=True, label=None),
+    FailureType("stall", severity=3, result_field="stalled", regress_default=True, counted_before_choice=False,
+                with_actor=False, label="stall"),
+)
+"""Every failure type, most severe first."""
+
+FAILURE_TYPES: Tuple[str, ...] = tuple(row.name for row in FAILURE_TABLE)
+"""The failure types' names, most severe first."""
+
+_BY_NAME: Dict[str, FailureType] = {row.name: row for row in FAILURE_TABLE}
+
+
+def failure_type(name: str) -> Optional[FailureType]:
+    """The row of the failure type ``name``, or ``None`` for a name that is no failure type."""
+    return _BY_NAME.get(name)
+
+
+def severity_order(names: Iterable[str]) -> List[str]:
+    """The distinct ``names``: failure types most severe first, then any other names sorted."""
+    names = set(names)
+    return [n for n in FAILURE_TYPES if n in names] + sorted(n for n in names if n not in _BY_NAME)
