@@ -1087,7 +1087,9 @@ class _Conversion:
         except SETUP_ERRORS:
             raise
         except Exception as error:  # the clip is extra: the conversion goes on without it
-            clip = {**clip, "file": None, "error": _stage_error("clip", error)}
+            # the record names files inside the run folder, not this machine's paths
+            where = str(self.run_dir).rstrip(os.sep) + os.sep
+            clip = {**clip, "file": None, "error": _stage_error("clip", error).replace(where, "")}
         else:
             self.clip_path = path
             self.out["converted_video"] = _rel(path, self.run_dir)
