@@ -11,6 +11,7 @@ import json
 import numpy as np
 import pytest
 
+import dv2s_gym.mining.failure_video as failure_video
 from dv2s_gym.mining.convert import _exact, convert_failure, reproduction_seeds, same_failure_class
 from dv2s_gym.mining.exact_replay import replay_failure
 from dv2s_gym.mining.failure_video import FailureReplayError, record_failure_video, write_failure_video
@@ -951,3 +952,20 @@ def test_an_affine_placement_distance_is_read_through():
     compared = compare_parameters({"lead_gap": 12.0}, generated, parent=parent)
     assert compared["compared"]["lead_gap"]["interval"] == [5.0, 11.0] and compared["outside"] == ["lead_gap"]
     assert compare_parameters({"lead_gap": 10.0}, generated, parent=parent)["outside"] == []
+
+
+@pytest.mark.slow
+def test_a_clip_that_cannot_be_written_is_recorded_without_this_machines_paths(record, tmp_path, monkeypatch):
+    """The converted script's clip is extra: when writing it fails (a full disk here), the conversion is kept, the
+    record says why, and the reason names the file inside the run folder, not the absolute path it had here."""
+    def full_disk(script_path, episode, out_path, *args, **kwargs):
+        raise OSError(28, "No space left on device", str(out_path))
+
+    monkeypatch.setattr(failure_video, "write_script_episode_video", full_disk)
+    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=Bank(tmp_path / "bank"),
+                          cluster=f"{SCENARIO}/collision/0")
+    assert out["status"] == "kept", out["reason"]
+    clip = out["reproduction"]["clip"]
+    assert clip["file"] is None and "No space left on device" in clip["error"]
+    assert f"failures/{SCENARIO}__collision__0/conversion/converted.webm" in clip["error"]
+    assert str(tmp_path) not in clip["error"]
