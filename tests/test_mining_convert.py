@@ -1061,3 +1061,41 @@ def test_the_absolute_value_of_an_expression_of_the_parameter_is_read_exactly(ga
     compared, _ = _judged(_cut_script("g", gap_range, expression))
     gap = compared["compared"]["cut_in_gap"]
     assert gap["interval"] == interval and compared["outside"] == ([] if inside else ["cut_in_gap"])
+
+
+# --------------------------------------------------------------------------- a distribution that is not one interval
+@pytest.mark.parametrize("gap_range, failing_gap, inside, values", [
+    ("Uniform(4, 10)", 6.0, False, "4, 10"),                 # only 4 or 10
+    ("Uniform(4, 6, 10)", 6.0, True, None),
+    ("DiscreteRange(3, 8)", 6.5, False, "the integers 3..8"),
+    ("DiscreteRange(3, 8)", 6.0, True, None),
+    ("Uniform(Range(2, 3), 50)", 6.0, False, "50 or 2..3"),
+    ("Uniform(Range(5, 7), 50)", 6.0, True, None),
+    ("Options([2, 12])", 6.0, False, "2, 12"),
+    ("DiscreteRange(1, 4) * 2", 6.0, True, None),            # 2, 4, 6, 8
+    ("DiscreteRange(1, 4) * 2 + 1", 6.0, False, "3 to 9 in steps of 2"),
+])
+def test_a_discrete_distribution_must_take_the_failing_value(gap_range, failing_gap, inside, values):
+    """``Uniform`` of numbers takes only those numbers, ``DiscreteRange`` only integers, a ``Uniform`` of parts any
+    value of one of them: the failing value must be one of them, not only between the smallest and the largest."""
+    failing = {**_CUT_FAILING, "cut_in_gap": failing_gap}
+    for generated in (_cut_script("g", gap_range, "globalParameters.g"),
+                      _cut_script("cut_in_gap", gap_range, "globalParameters.cut_in_gap")):
+        compared, rejections = _judged(generated, failing=failing)
+        assert "cut_in_gap" in compared["compared"]
+        assert compared["outside"] == ([] if inside else ["cut_in_gap"])
+        if not inside:
+            assert f"= {failing_gap:g} not among the values" in rejections[0] and f"({values})" in rejections[0]
+    from dv2s_gym.mining.convert import compare_parameters
+    by_name = compare_parameters(failing, _cut_script("cut_in_gap", gap_range, "globalParameters.cut_in_gap"))
+    assert by_name["outside"] == ([] if inside else ["cut_in_gap"])
+
+
+def test_a_discrete_distribution_is_compared_through_the_new_scripts_expression():
+    """g takes -5, -3 or -1; ``g + 9`` then takes 4, 6 or 8 (the failing 6 among them), ``g + 8`` 3, 5 or 7."""
+    compared, rejections = _judged(_cut_script("g", "Uniform(5, 7, 9) - 10", "globalParameters.g + 9"))
+    assert compared["outside"] == [] and rejections == []
+    compared, rejections = _judged(_cut_script("g", "Uniform(5, 7, 9) - 10", "globalParameters.g + 8"))
+    assert compared["compared"]["cut_in_gap"]["interval"] == [3.0, 7.0] and compared["outside"] == ["cut_in_gap"]
+    assert "= 6 not among the values the new script's globalParameters.g + 8 takes with g one of -5, -3, -1" in (
+        rejections[0])

@@ -17,9 +17,12 @@ parameter reaches the object only through a top-level variable's computation). A
 function of the one parameter alone (``globalParameters.g + 10``, ``2 * globalParameters.h``,
 ``-(globalParameters.d - 1) / 2``: numbers, ``+ - * /`` by numbers and unary minus, nested) sets the quantity to a
 known function of it: such a use counts as ``additive`` and :func:`affine_uses` keeps the function, so the judge
-compares the interval the expression produces rather than the parameter's own range. A point that only
-places an actor (``spot = new OrientedPoint ...`` then ``new Pedestrian right of spot``) and a top-level variable
-hand their parameters on to the actor that uses them.
+compares the interval the expression produces rather than the parameter's own range; :func:`quantity_uses` lists
+every use with the quantity it sets as such a function (``abs(...)`` of one read exactly too) or ``None`` when it
+cannot be read so (another sampled value or reference point beside the parameter, a call, ``%``, a conditional).
+A point that only places an actor (``spot = new OrientedPoint ...`` then ``new Pedestrian right of spot``) and a
+top-level variable hand their parameters on to the actor that uses them; the point hands on its expression too
+(``d + 30``), a variable does not (its computation is not read).
 
 :func:`meaning_map` pairs the parameters one script does not share by name with the other's: the objects are paired
 first (the ego with the ego; another actor with the only one of its kind that has such parameters, else the one whose
@@ -37,7 +40,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 __all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
            "script_parameters", "affine_uses", "affine_form", "read_interval", "Affine", "Quantity", "quantity_of",
-           "quantity_uses"]
+           "quantity_uses", "read_support", "support_contains", "support_text"]
 
 PLACEMENT_KINDS = ("OrientedPoint", "Point")
 """Classes that place actors but are not actors themselves."""
@@ -255,6 +258,132 @@ def read_interval(expression: str) -> Optional[Tuple[float, float]]:
     sampled values combined)."""
     node = _parse(expression.split("#", 1)[0])
     return _interval_node(node) if node is not None else None
+
+
+_DISCRETE_RANGES = ("DiscreteRange", "VerifaiDiscreteRange")
+_CHOICES = ("Uniform", "Options", "Discrete", "VerifaiOptions")
+_GRID_LIMIT = 100000
+
+Part = Tuple[Any, ...]
+"""A part of the values a distribution takes: ``("interval", low, high)``, ``("points", [v, ...])`` or
+``("grid", start, step, count)`` (``start + k * step`` for ``k`` in ``0..count-1``: integers, offset or scaled)."""
+
+
+def _support_node(node: ast.AST) -> Optional[List[Part]]:
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+        return [("points", [float(node.value)])]
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.args and not node.keywords:
+        call = node.func.id
+        if call in ("Range", "VerifaiRange") + _DISCRETE_RANGES:
+            bounds = [_interval_node(arg) for arg in node.args]
+            if len(bounds) != 2 or any(b is None or b[0] != b[1] for b in bounds):
+                return None
+            low, high = sorted((bounds[0][0], bounds[1][0]))
+            if call in _DISCRETE_RANGES:
+                if not (float(low).is_integer() and float(high).is_integer()):
+                    return None
+                return [("grid", low, 1.0, int(high - low) + 1)]
+            return [("interval", low, high)]
+        if call in _CHOICES:
+            args = list(node.args)
+            if len(args) == 1 and isinstance(args[0], (ast.List, ast.Tuple)):
+                args = list(args[0].elts)
+            elif len(args) == 1 and isinstance(args[0], ast.Dict):
+                args = [key for key in args[0].keys if key is not None]
+            parts: List[Part] = []
+            points: List[float] = []
+            for arg in args:
+                inner = _support_node(arg)
+                if inner is None:
+                    return None
+                parts += [part for part in inner if part[0] != "points"]
+                points += [v for part in inner if part[0] == "points" for v in part[1]]
+            return ([("points", sorted(set(points)))] if points else []) + parts or None
+        return None
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+        inner = _support_node(node.operand)
+        return None if inner is None else [_scaled(p, -1.0 if isinstance(node.op, ast.USub) else 1.0, 0.0)
+                                           for p in inner]
+    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
+        left, right = _support_node(node.left), _support_node(node.right)
+        if left is None or right is None:
+            return None
+        number = lambda parts: (parts[0][1][0] if len(parts) == 1 and parts[0][0] == "points"  # noqa: E731
+                                and len(parts[0][1]) == 1 else None)
+        a, b = number(left), number(right)
+        if isinstance(node.op, ast.Add):
+            return [_scaled(p, 1.0, b) for p in left] if b is not None else (
+                [_scaled(p, 1.0, a) for p in right] if a is not None else None)
+        if isinstance(node.op, ast.Sub):
+            return [_scaled(p, 1.0, -b) for p in left] if b is not None else (
+                [_scaled(p, -1.0, a) for p in right] if a is not None else None)
+        if isinstance(node.op, ast.Mult):
+            if b is not None and b != 0.0:
+                return [_scaled(p, b, 0.0) for p in left]
+            return [_scaled(p, a, 0.0) for p in right] if a is not None and a != 0.0 else None
+        return [_scaled(p, 1.0 / b, 0.0) for p in left] if b is not None and b != 0.0 else None
+    return None
+
+
+def _scaled(part: Part, scale: float, offset: float) -> Part:
+    if part[0] == "interval":
+        ends = sorted((scale * part[1] + offset, scale * part[2] + offset))
+        return ("interval", ends[0], ends[1])
+    if part[0] == "points":
+        return ("points", [scale * v + offset for v in part[1]])
+    return ("grid", scale * part[1] + offset, scale * part[2], part[3])
+
+
+def read_support(expression: str) -> Optional[List[Part]]:
+    """The values a parameter's distribution takes, part by part (:data:`Part`), when it is built from numbers,
+    ``Range``, ``DiscreteRange`` (integers), ``Uniform``/``Options``/``Discrete`` of those (their union), offset
+    or scaled by numbers: ``Uniform(5, 9)`` is the points 5 and 9, ``Uniform(Range(1, 2), 100)`` the interval 1..2
+    and the point 100; ``None`` for anything else."""
+    node = _parse(expression.split("#", 1)[0])
+    return _support_node(node) if node is not None else None
+
+
+def support_contains(parts: Sequence[Part], quantity: float, function: Optional["Quantity"] = None) -> bool:
+    """Whether ``quantity`` is a value the distribution ``parts`` takes, or, given ``function``, one that
+    ``function`` of such a value takes (a grid of more than 100000 values is read as its interval)."""
+    close = lambda v: abs(v - quantity) <= 1e-9 * max(1.0, abs(quantity))  # noqa: E731
+    at = (lambda v: v) if function is None else function.at
+    for part in parts:
+        if part[0] == "interval":
+            low, high = (part[1], part[2]) if function is None else function.over(part[1], part[2])
+            if low - 1e-9 <= quantity <= high + 1e-9:
+                return True
+        elif part[0] == "points":
+            if any(close(at(v)) for v in part[1]):
+                return True
+        elif part[3] > _GRID_LIMIT:
+            ends = sorted((part[1], part[1] + part[2] * (part[3] - 1)))
+            low, high = ends if function is None else function.over(*ends)
+            if low - 1e-9 <= quantity <= high + 1e-9:
+                return True
+        elif any(close(at(part[1] + k * part[2])) for k in range(part[3])):
+            return True
+    return False
+
+
+def support_text(parts: Sequence[Part]) -> str:
+    """``"5, 9"``, ``"1..2 or 100"``, ``"the integers 5..9"``: the values of :func:`read_support`'s parts."""
+    def number(v: float) -> str:
+        short = f"{v:g}"
+        return short if float(short) == v else repr(v)
+
+    words = []
+    for part in parts:
+        if part[0] == "interval":
+            words.append(f"{number(part[1])}..{number(part[2])}")
+        elif part[0] == "points":
+            words.append(", ".join(number(v) for v in part[1]))
+        elif part[2] == 1.0:
+            words.append(f"the integers {number(part[1])}..{number(part[1] + part[3] - 1)}")
+        else:
+            words.append(f"{number(part[1])} to {number(part[1] + part[2] * (part[3] - 1))} in steps of "
+                         f"{number(part[2])}")
+    return " or ".join(words)
 
 
 def _norm(name: str) -> str:
