@@ -1035,9 +1035,11 @@ def test_a_quantity_read_as_a_function_in_one_script_only_is_not_comparable():
     why = compared["not_comparable"]["extra"]
     assert "the parent sets it by globalParameters.ego_speed + globalParameters.extra" in why
     assert "the new script by globalParameters.e + 50" in why
-    compared, _ = _judged(parent.replace("param extra", "param e").replace("globalParameters.extra", "globalParameters.e"),
-                          parent=generated.replace("param e ", "param extra ").replace(
-                              "globalParameters.e ", "globalParameters.extra "), failing=failing)
+    # the parent's rival at extra + 50 (read), the new one's at ego_speed + e (not read)
+    reversed_new = parent.replace("param extra", "param e").replace("globalParameters.extra", "globalParameters.e")
+    reversed_parent = generated.replace("param e ", "param extra ").replace("globalParameters.e ",
+                                                                           "globalParameters.extra ")
+    compared, _ = _judged(reversed_new, parent=reversed_parent, failing=failing)
     assert "extra" in compared["not_comparable"] and "extra" not in compared["compared"]
 
 
