@@ -954,6 +954,156 @@ def test_an_affine_placement_distance_is_read_through():
     assert compare_parameters({"lead_gap": 10.0}, generated, parent=parent)["outside"] == []
 
 
+# --------------------------------------------------------------------------- every quantity a parameter sets is checked
+_TWO_USES_PARENT = _CUT_PARENT.replace("    with speed 25,\n", "    with speed globalParameters.ego_speed + 3,\n")
+
+
+def test_every_quantity_a_parameter_sets_is_checked_the_bare_ones_too():
+    """ego_speed sets the ego's speed bare and the cutter's as ``ego_speed + 3``. A new script whose ego never
+    drives the failing 20 (30..36) is rejected although its cutter's ``ego_speed - 12`` (18..24) covers the parent's
+    23; the reason names the ego's speed. With the ego's range covering 20 too, it passes."""
+    generated = (_TWO_USES_PARENT.replace("param ego_speed = Range(18, 25)", "param ego_speed = Range(30, 36)")
+                 .replace("globalParameters.ego_speed + 3", "globalParameters.ego_speed - 12"))
+    compared, rejections = _judged(generated, parent=_TWO_USES_PARENT)
+    assert compared["outside"] == ["ego_speed"]
+    (reason,) = rejections
+    assert "ego_speed = 20 outside 30..36 (as the ego's speed)" in reason
+    covering = (_TWO_USES_PARENT.replace("param ego_speed = Range(18, 25)", "param ego_speed = Range(20, 36)")
+                .replace("globalParameters.ego_speed + 3", "globalParameters.ego_speed + 1"))
+    compared, rejections = _judged(covering, parent=_TWO_USES_PARENT)
+    assert compared["outside"] == [] and rejections == []
+    assert compared["compared"]["ego_speed"]["interval"] == [21.0, 37.0]  # the cutter's, 23 inside
+    # both quantities on one object: its speed g + 10 covers the parent's 6, its behaviour's gap g (-4..0) does not
+    one_object = _cut_script("g", "Range(-4, 0)", "globalParameters.g").replace(
+        "    with speed 25,\n", "    with speed globalParameters.g + 10,\n")
+    parent = _CUT_PARENT.replace("    with speed 25,\n", "    with speed globalParameters.cut_in_gap,\n")
+    compared, rejections = _judged(one_object, parent=parent)
+    assert compared["outside"] == ["cut_in_gap"] and "behaviour argument gap" in rejections[0]
+
+
+_CROSSING_PARENT = '''param ego_speed = Range(8, 12)
+param crossing_distance = Range(35, 55)
+param kerb = Range(2, 4)
+ego = new Car on lane.centerline, with speed globalParameters.ego_speed
+spot = new OrientedPoint following roadDirection from ego for globalParameters.crossing_distance
+walker = new Pedestrian left of spot by globalParameters.kerb
+'''
+
+
+@pytest.mark.parametrize("placement, outside", [
+    ("following roadDirection from ego for globalParameters.d - 15", False),       # 35..45 covers 40
+    ("following roadDirection from ego for globalParameters.d + 12", True),        # 62..72
+    ("following roadDirection from ego for 3 * globalParameters.d", True),         # 150..180
+    ("at lane.centerline.pointAlongBy(egoS + globalParameters.d + 25)", True),     # 75..85 from the ego
+    ("at lane.centerline.pointAlongBy(egoS + globalParameters.d - 15)", False),
+])
+def test_a_point_that_places_the_actor_hands_on_its_expression(placement, outside):
+    """The crossing point is placed through an expression of d (50..60 here); the pedestrian it places is at that
+    distance, so the failing 40 is compared with the interval the expression takes, not with d's own range."""
+    generated = (_CROSSING_PARENT.replace("param crossing_distance = Range(35, 55)", "param d = Range(50, 60)")
+                 .replace("following roadDirection from ego for globalParameters.crossing_distance", placement)
+                 .replace("param kerb =", "param side =").replace("globalParameters.kerb", "globalParameters.side"))
+    failing = {"ego_speed": 10.0, "crossing_distance": 40.0, "kerb": 3.0}
+    compared, rejections = _judged(generated, parent=_CROSSING_PARENT, failing=failing)
+    crossing = compared["compared"]["crossing_distance"]
+    assert crossing["script_name"] == "d" and crossing["quantity"] == 40.0
+    assert compared["outside"] == (["crossing_distance"] if outside else [])
+    if outside:
+        assert "crossing_distance (the script's d: the Pedestrian walker's longitudinal placement" in rejections[0]
+
+
+def test_an_actor_placed_along_the_points_direction_does_not_take_the_points_distance():
+    """``ahead of spot by 30`` adds to the point's distance: that placement is not read as the point's."""
+    generated = _CROSSING_PARENT.replace("walker = new Pedestrian left of spot by globalParameters.kerb",
+                                         "walker = new Pedestrian ahead of spot by 30")
+    compared = _judged(generated, parent=_CROSSING_PARENT.replace(
+        "walker = new Pedestrian left of spot by globalParameters.kerb", "walker = new Pedestrian ahead of spot by 0"),
+        failing={"ego_speed": 10.0, "crossing_distance": 40.0})[0]
+    assert "crossing_distance" in compared["not_comparable"]
+
+
+def test_a_quantity_read_as_a_function_in_one_script_only_is_not_comparable():
+    """The parent's speed is ``ego_speed + extra`` (not a function of extra alone), the new one's ``e + 50``
+    (never the parent's 25 for any e in 4..8, so not "the same quantity" either): extra is not comparable, with
+    the two expressions in the reason; and the other way round."""
+    parent = ("param ego_speed = Range(18, 25)\nparam extra = Range(4, 8)\nego = new Car on lane.centerline, "
+              "with speed globalParameters.ego_speed\nrival = new Car ahead of ego by 20, "
+              "with speed globalParameters.ego_speed + globalParameters.extra\n")
+    generated = parent.replace("param extra", "param e").replace(
+        "globalParameters.ego_speed + globalParameters.extra", "globalParameters.e + 50")
+    failing = {"ego_speed": 20.0, "extra": 5.0}
+    compared, _ = _judged(generated, parent=parent, failing=failing)
+    why = compared["not_comparable"]["extra"]
+    assert "the parent sets it by globalParameters.ego_speed + globalParameters.extra" in why
+    assert "the new script by globalParameters.e + 50" in why
+    # the parent's rival at extra + 50 (read), the new one's at ego_speed + e (not read)
+    reversed_new = parent.replace("param extra", "param e").replace("globalParameters.extra", "globalParameters.e")
+    reversed_parent = generated.replace("param e ", "param extra ").replace("globalParameters.e ",
+                                                                           "globalParameters.extra ")
+    compared, _ = _judged(reversed_new, parent=reversed_parent, failing=failing)
+    assert "extra" in compared["not_comparable"] and "extra" not in compared["compared"]
+
+
+@pytest.mark.parametrize("expression", [
+    "min(globalParameters.g, 3)", "max(globalParameters.g, 20)", "globalParameters.g % 5",
+    "globalParameters.g if globalParameters.g < 3 else 20", "globalParameters.g + Range(20, 30)",
+    "globalParameters.g + egoS", "round(globalParameters.g)"])
+def test_a_function_of_the_parameter_the_judge_cannot_read_is_not_comparable(expression):
+    compared, _ = _judged(_cut_script("g", "Range(5, 11)", expression))
+    assert "cut_in_gap" not in compared["compared"]
+    assert "cannot read both as the same known function" in compared["not_comparable"]["cut_in_gap"]
+
+
+@pytest.mark.parametrize("gap_range, expression, interval, inside", [
+    ("Range(-11, -5)", "abs(globalParameters.g)", [5.0, 11.0], True),
+    ("Range(-3, 1)", "abs(globalParameters.g)", [0.0, 3.0], False),
+    ("Range(0, 4)", "abs(globalParameters.g - 2) * 2 + 3", [3.0, 7.0], True),
+])
+def test_the_absolute_value_of_an_expression_of_the_parameter_is_read_exactly(gap_range, expression, interval,
+                                                                               inside):
+    compared, _ = _judged(_cut_script("g", gap_range, expression))
+    gap = compared["compared"]["cut_in_gap"]
+    assert gap["interval"] == interval and compared["outside"] == ([] if inside else ["cut_in_gap"])
+
+
+# --------------------------------------------------------------------------- a distribution that is not one interval
+@pytest.mark.parametrize("gap_range, failing_gap, inside, values", [
+    ("Uniform(4, 10)", 6.0, False, "4, 10"),                 # only 4 or 10
+    ("Uniform(4, 6, 10)", 6.0, True, None),
+    ("DiscreteRange(3, 8)", 6.5, False, "the integers 3..8"),
+    ("DiscreteRange(3, 8)", 6.0, True, None),
+    ("Uniform(Range(2, 3), 50)", 6.0, False, "50 or 2..3"),
+    ("Uniform(Range(5, 7), 50)", 6.0, True, None),
+    ("Options([2, 12])", 6.0, False, "2, 12"),
+    ("DiscreteRange(1, 4) * 2", 6.0, True, None),            # 2, 4, 6, 8
+    ("DiscreteRange(1, 4) * 2 + 1", 6.0, False, "3 to 9 in steps of 2"),
+])
+def test_a_discrete_distribution_must_take_the_failing_value(gap_range, failing_gap, inside, values):
+    """``Uniform`` of numbers takes only those numbers, ``DiscreteRange`` only integers, a ``Uniform`` of parts any
+    value of one of them: the failing value must be one of them, not only between the smallest and the largest."""
+    failing = {**_CUT_FAILING, "cut_in_gap": failing_gap}
+    for generated in (_cut_script("g", gap_range, "globalParameters.g"),
+                      _cut_script("cut_in_gap", gap_range, "globalParameters.cut_in_gap")):
+        compared, rejections = _judged(generated, failing=failing)
+        assert "cut_in_gap" in compared["compared"]
+        assert compared["outside"] == ([] if inside else ["cut_in_gap"])
+        if not inside:
+            assert f"= {failing_gap:g} not among the values" in rejections[0] and f"({values})" in rejections[0]
+    from dv2s_gym.mining.convert import compare_parameters
+    by_name = compare_parameters(failing, _cut_script("cut_in_gap", gap_range, "globalParameters.cut_in_gap"))
+    assert by_name["outside"] == ([] if inside else ["cut_in_gap"])
+
+
+def test_a_discrete_distribution_is_compared_through_the_new_scripts_expression():
+    """g takes -5, -3 or -1; ``g + 9`` then takes 4, 6 or 8 (the failing 6 among them), ``g + 8`` 3, 5 or 7."""
+    compared, rejections = _judged(_cut_script("g", "Uniform(5, 7, 9) - 10", "globalParameters.g + 9"))
+    assert compared["outside"] == [] and rejections == []
+    compared, rejections = _judged(_cut_script("g", "Uniform(5, 7, 9) - 10", "globalParameters.g + 8"))
+    assert compared["compared"]["cut_in_gap"]["interval"] == [3.0, 7.0] and compared["outside"] == ["cut_in_gap"]
+    assert "= 6 not among the values the new script's globalParameters.g + 8 takes with g one of -5, -3, -1" in (
+        rejections[0])
+
+
 @pytest.mark.slow
 def test_a_clip_that_cannot_be_written_is_recorded_without_this_machines_paths(record, tmp_path, monkeypatch):
     """The converted script's clip is extra: when writing it fails (a full disk here), the conversion is kept, the

@@ -76,7 +76,8 @@ from dv2s_gym.mining.exact_replay import narrowed_script, replay_name, REPLAY_TA
 from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence, key_actor, shows_interaction
 from dv2s_gym.mining.monitors import detect_failure
 from dv2s_gym.mining.report_text import not_compared_names_text
-from dv2s_gym.mining.param_meaning import (affine_uses, meaning_map, name_mismatch, read_interval, script_parameters,
+from dv2s_gym.mining.param_meaning import (meaning_map, name_mismatch, quantity_of, quantity_uses, read_interval,
+                                           read_support, script_parameters, support_contains, support_text,
                                            tied_objects)
 from dv2s_gym.mining.tasks import reference_avoids
 from dv2s_gym.pipeline import stages
@@ -360,8 +361,12 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     through an affine expression of itself alone (``CutIn(globalParameters.g + 10)``) is compared through that
     expression: the quantity the failing value set in the parent (through the parent's own expression) against
     the interval the new expression produces over the counterpart's range (``"expression"``, ``"interval"``,
-    ``"quantity"`` in its comparison; ``"parent_expression"`` when the parent's is not the bare parameter)."""
-    ranges = _script_ranges(script)
+    ``"quantity"`` in its comparison; ``"parent_expression"`` when the parent's is not the bare parameter), on every
+    quantity the parameter sets in both scripts (``"where"`` names the one kept when there are several). A
+    distribution that is not one interval (``Uniform(5, 9)``, ``DiscreteRange(5, 9)``, ``Uniform(Range(1, 2),
+    100)``) keeps its values in ``"support"`` (:func:`~dv2s_gym.mining.param_meaning.read_support`): the failing
+    value must be one of them."""
+    ranges, supports = _script_ranges(script), _script_supports(script)
     folded: Dict[str, str] = {}
     for script_name in sorted(ranges):
         folded.setdefault(script_name.casefold(), script_name)
@@ -376,14 +381,15 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
             absent.append(name)
             continue
         compared[name] = {"value": float(value), "range": [float(v) for v in ranges[script_name]]}
+        if script_name in supports:
+            compared[name]["support"] = supports[script_name]
         if script_name != name:
             compared[name]["script_name"] = script_name
     why = {name: "the new script defines no numeric parameter of that name" for name in absent}
     if parent is not None:
         why = _by_meaning(parent, script, numeric, compared, absent, ranges)
     for name in sorted(compared):
-        low, high = compared[name].get("interval") or compared[name]["range"]
-        if not low - 1e-9 <= compared[name].get("quantity", compared[name]["value"]) <= high + 1e-9:
+        if not _contains(name, compared[name]):
             outside.append(name)
     not_comparable = {name: why[name] for name in sorted(why) if name not in compared}
     return {"compared": dict(sorted(compared.items())), "outside": outside, "not_comparable": not_comparable,
@@ -400,47 +406,172 @@ def _script_ranges(script: str) -> Dict[str, Tuple[float, float]]:
         if interval is not None:
             ranges[name] = interval
     ranges.update(param_ranges(script))
+    for name, parts in _script_supports(script).items():
+        ranges.setdefault(name, _hull(parts))
     return ranges
 
 
-def _through_expressions(parent: str, script: str, compared: Dict[str, Any]) -> None:
-    """Each compared parameter whose counterpart, or itself in the parent, sets a quantity through an affine
-    expression (:func:`~dv2s_gym.mining.param_meaning.affine_uses`) is compared through it: for a quantity (the
-    same kind of object, the ego or not, and slot) that one object sets in each script, the failing value's quantity
-    in the parent against the interval of the new expression over the counterpart's range. The first quantity
-    outside, else the first compared, is kept in the comparison (``expression``, ``interval``, ``quantity``,
-    ``parent_expression``); with bare parameters on both sides nothing changes."""
-    old_forms, new_forms = affine_uses(parent), affine_uses(script)
+def _script_supports(script: str) -> Dict[str, List[Any]]:
+    """``{parameter: its values part by part}`` (:func:`~dv2s_gym.mining.param_meaning.read_support`) of the
+    script's parameters whose distribution is not one interval: ``Uniform(5, 9)`` takes 5 or 9, never 6;
+    ``DiscreteRange(5, 9)`` integers only."""
+    supports: Dict[str, List[Any]] = {}
+    for name, text in script_parameters(script).items():
+        parts = read_support(text)
+        if parts is None:
+            continue
+        single = len(parts) == 1 and (parts[0][0] == "interval" or (parts[0][0] == "points" and len(parts[0][1]) == 1)
+                                      or (parts[0][0] == "grid" and parts[0][3] == 1))
+        if not single:
+            supports[name] = [list(part[:1]) + list(part[1:]) for part in parts]
+    return supports
 
-    def by_meaning(forms: Mapping[Tuple[str, str, str], Any]) -> Dict[Tuple[bool, str, str], List[Any]]:
+
+def _hull(parts: Sequence[Any]) -> Tuple[float, float]:
+    ends: List[float] = []
+    for part in parts:
+        if part[0] == "interval":
+            ends += [part[1], part[2]]
+        elif part[0] == "points":
+            ends += list(part[1])
+        else:
+            ends += [part[1], part[1] + part[2] * (part[3] - 1)]
+    return min(ends), max(ends)
+
+
+def _contains(name: str, comparison: Mapping[str, Any]) -> bool:
+    """Whether the comparison's quantity (the failing value, or its quantity in the parent) is one the new script
+    produces: inside the interval (``interval`` or ``range``) and, for a distribution that is not one interval
+    (``support``), among its values (through the new script's ``expression`` when there is one)."""
+    low, high = comparison.get("interval") or comparison["range"]
+    quantity = float(comparison.get("quantity", comparison["value"]))
+    if not low - 1e-9 <= quantity <= high + 1e-9:
+        return False
+    support = comparison.get("support")
+    if not support:
+        return True
+    function = None
+    if comparison.get("expression"):
+        function = quantity_of(comparison["expression"], comparison.get("script_name", name))
+        if function is None:
+            return True  # read at the comparison; unreachable
+    return support_contains([tuple(part) for part in support], quantity, function)
+
+
+def _through_quantities(parent: str, script: str, compared: Dict[str, Any]) -> Dict[str, str]:
+    """Each compared parameter is checked on every quantity it sets in both scripts (the same kind of object, the
+    ego or not, and slot; :func:`~dv2s_gym.mining.param_meaning.quantity_uses`), bare uses included: the failing
+    value's quantity in the parent (through the parent's own expression) against the interval the new script's
+    expression takes over the counterpart's range. A quantity the judge cannot read on one side but can on the
+    other (``ego_speed + extra`` against ``e + 100``, ``g`` against ``min(g, 3)``), that neither side reads and
+    the two set differently, or that several objects of a kind set with different expressions, cannot be
+    compared. The first quantity outside is kept in the comparison (``expression``, ``interval``, ``quantity``,
+    ``parent_expression``, ``where``), else, with every quantity inside, the first set through an expression;
+    with none outside and one that cannot be compared, the parameter leaves ``compared``. Returns ``{parameter:
+    why it is not comparable}``."""
+    old_all, new_all = quantity_uses(parent), quantity_uses(script)
+
+    def by_meaning(found: Mapping[Tuple[str, str, str], Any]) -> Dict[Tuple[bool, str, str], List[Any]]:
         keyed: Dict[Tuple[bool, str, str], List[Any]] = {}
-        for (name, kind, slot), form in sorted(forms.items()):
-            keyed.setdefault((name == "ego", kind, slot), []).append(form)
+        for (name, kind, slot), items in sorted(found.items()):
+            keyed.setdefault((name == "ego", kind, slot), []).extend((name,) + tuple(item) for item in items)
         return keyed
 
-    for name, comparison in compared.items():
+    why: Dict[str, str] = {}
+    for name, comparison in list(compared.items()):
         target = comparison.get("script_name", name)
-        old, new = by_meaning(old_forms.get(name, {})), by_meaning(new_forms.get(target, {}))
+        old, new = by_meaning(old_all.get(name, {})), by_meaning(new_all.get(target, {}))
         low, high = comparison["range"]
-        chosen = None
-        for key in sorted(set(old) & set(new)):
-            if len(old[key]) != 1 or len(new[key]) != 1:
-                continue  # more than one object of that kind sets it: which is which is not known
-            (old_scale, old_offset, old_text), (scale, offset, text) = old[key][0], new[key][0]
-            if (old_scale, old_offset, scale, offset) == (1.0, 0.0, 1.0, 0.0):
+        outside, shown, unreadable, ambiguous, checked = None, None, None, None, False
+        shared = sorted(set(old) & set(new))
+        for key in shared:
+            where = _quantity_words(key, new[key])
+            checks, problem = _quantity_checks(old[key], new[key], name, comparison)
+            if problem in (AMBIGUOUS, SET_OTHERWISE):  # left aside when another quantity is checked
+                ambiguous = ambiguous or f"the {where}: {problem}"
                 continue
-            quantity = old_scale * comparison["value"] + old_offset
-            ends = sorted((scale * low + offset, scale * high + offset))
-            found = {"expression": text, "interval": ends, "quantity": quantity}
-            if (old_scale, old_offset) != (1.0, 0.0):
-                found["parent_expression"] = old_text
-            inside = ends[0] - 1e-9 <= quantity <= ends[1] + 1e-9
-            if chosen is None or not inside:
-                chosen = found
-            if not inside:
-                break
-        if chosen is not None:
-            comparison.update(chosen)
+            if problem is not None:
+                unreadable = unreadable or f"the {where}: {problem}"
+                continue
+            checked = True
+            for found, inside in checks:
+                if len(shared) > 1:  # which of its quantities, in the reason
+                    found["where"] = where
+                if not inside and outside is None:
+                    outside = found
+                if inside and shown is None and "expression" in found:
+                    shown = found
+        if outside is not None:
+            comparison.update(outside)
+        elif unreadable is not None or (ambiguous is not None and not checked):
+            why[name] = f"the quantity it sets cannot be compared: {unreadable or ambiguous}"
+            del compared[name]
+        elif shown is not None:
+            comparison.update(shown)
+    return why
+
+
+def _quantity_checks(old: Sequence[Tuple[Any, ...]], new: Sequence[Tuple[Any, ...]], name: str,
+                     comparison: Mapping[str, Any]) -> Tuple[List[Tuple[Dict[str, Any], bool]], Optional[str]]:
+    """``([(comparison fields, inside?)], None)`` for one quantity the parameter sets in both scripts (``old`` and
+    ``new``: ``(object, how, quantity or None, text)`` of each use there), or ``([], why it cannot be compared)``:
+    one object on each side whose expressions the judge reads, or does not read but sets it the same way (the
+    parameter's own range then); several objects of the kind, or several expressions, only when both scripts set
+    it with the same expressions (each then checked)."""
+    def keys(uses: Sequence[Tuple[Any, ...]]) -> Dict[Any, Any]:
+        return {(q.key if q is not None else ("unread", how)): q for _, how, q, _ in uses}
+
+    value, (low, high) = comparison["value"], comparison["range"]
+    old_keys, new_keys = keys(old), keys(new)
+    if len(old_keys) == 1 and len(new_keys) == 1:
+        pairs = [(next(iter(old_keys.items())), next(iter(new_keys.items())))]
+    elif set(old_keys) == set(new_keys):
+        pairs = [((k, old_keys[k]), (k, new_keys[k])) for k in sorted(old_keys, key=repr)]
+    elif len({use[0] for use in old}) > 1 or len({use[0] for use in new}) > 1:
+        return [], AMBIGUOUS
+    else:
+        pairs = []
+    checks: List[Tuple[Dict[str, Any], bool]] = []
+    for (old_key, before), (new_key, after) in pairs:
+        if before is None and after is None and old_key == new_key:
+            # neither read, set the same way (the same direction and constant terms): the parameter's own range
+            checks.append(({}, _contains(name, comparison)))
+            continue
+        if before is None and after is None:
+            return [], SET_OTHERWISE  # neither read, set differently: left aside when another quantity is checked
+        if before is None or after is None:
+            pairs = []
+            break
+        quantity = before.at(value)
+        start, end = after.over(low, high)
+        found: Dict[str, Any] = {}
+        if (before.key, after.key) != (_BARE, _BARE):
+            found = {"expression": after.text, "interval": [start, end], "quantity": quantity}
+            if before.key != _BARE:
+                found["parent_expression"] = before.text
+        checks.append((found, _contains(name, {**comparison, **found})))
+    if not pairs:
+        shown = lambda uses: "; ".join(sorted({text for _, _, _, text in uses}))  # noqa: E731
+        return [], (f"the parent sets it by {shown(old)}, the new script by {shown(new)}, and the judge cannot "
+                    "read both as the same known function of the parameter")
+    return checks, None
+
+
+_BARE = ("affine", 1.0, 0.0)
+AMBIGUOUS = ("several objects of that kind set it with different expressions: which stands for which is not "
+             "known")
+SET_OTHERWISE = ("the two scripts compute it differently, each with more than the parameter, and the judge reads "
+                 "neither")
+
+
+def _quantity_words(key: Tuple[bool, str, str], uses: Sequence[Tuple[Any, ...]]) -> str:
+    """``"ego's speed"``, ``"Car car1's behaviour argument gap"``: the quantity ``key`` names in the new script."""
+    ego, kind, slot = key
+    quantity = (f"behaviour argument {slot.split(':', 1)[1]}" if slot.startswith("behavior:")
+                else f"{slot.split(':', 1)[1]} property" if slot.startswith("with:") else f"{slot} placement"
+                if slot in ("longitudinal", "lateral", "offset", "position") else slot)
+    names = sorted({use[0] for use in uses})
+    return f"ego's {quantity}" if ego else f"{kind} {', '.join(names)}'s {quantity}"
 
 
 def _by_meaning(parent: str, script: str, numeric: Mapping[str, float], compared: Dict[str, Any],
@@ -450,7 +581,7 @@ def _by_meaning(parent: str, script: str, numeric: Mapping[str, float], compared
     (their counterpart must be read as an interval); no object of the new script may stand for two parent actors.
     Updates ``compared``; returns ``{failing parameter: why it is not comparable}``."""
 
-    declared = script_parameters(script)
+    declared, supports = script_parameters(script), _script_supports(script)
     why: Dict[str, str] = {}
     for name in list(compared):
         mismatch = name_mismatch(parent, script, name, compared[name].get("script_name", name))
@@ -474,12 +605,14 @@ def _by_meaning(parent: str, script: str, numeric: Mapping[str, float], compared
             continue
         compared[name] = {"value": float(numeric[name]), "range": [float(v) for v in ranges[pair["target"]]],
                           "script_name": pair["target"], "by": "meaning", "basis": _basis_text(pair)}
+        if pair["target"] in supports:
+            compared[name]["support"] = supports[pair["target"]]
     why.update({name: f"no parameter of the new script means the same ({reason})"
                 for name, reason in mapped["unpaired"].items()})
     why.update({name: "the new script defines no numeric parameter of that name" for name in absent
                 if name not in mapped["pairs"] and name not in mapped["unpaired"]})
     why.update(_tied_twice(parent, script, compared))
-    _through_expressions(parent, script, compared)
+    why.update(_through_quantities(parent, script, compared))
     return why
 
 
@@ -531,15 +664,24 @@ def _outside_text(name: str, comparison: Mapping[str, Any]) -> str:
     spelled = f" (the script's {comparison['script_name']})" if comparison.get("script_name") else ""
     if comparison.get("by") == "meaning":
         spelled = f" (the script's {comparison['script_name']}: {comparison.get('basis')})"
+    where = f" (as the {comparison['where']})" if comparison.get("where") else ""
     if comparison.get("interval"):
         own = comparison.get("script_name", name)
         parent = (f", which the parent's {comparison['parent_expression']} makes "
                   f"{_exact(float(comparison['quantity']))}," if comparison.get("parent_expression") else "")
         start, end = comparison["interval"]
+        if comparison.get("support") and start - 1e-9 <= float(comparison["quantity"]) <= end + 1e-9:
+            return (f"{name}{spelled} = {_exact(float(comparison['value']))}{parent} not among the values the new "
+                    f"script's {comparison['expression']} takes with {own} one of "
+                    f"{support_text(comparison['support'])}{where}")
         return (f"{name}{spelled} = {_exact(float(comparison['value']))}{parent} outside "
                 f"{_exact(float(start))}..{_exact(float(end))}, the interval the new script's "
-                f"{comparison['expression']} takes with {own} in {_exact(float(low))}..{_exact(float(high))}")
-    return f"{name}{spelled} = {_exact(float(comparison['value']))} outside {_exact(float(low))}..{_exact(float(high))}"
+                f"{comparison['expression']} takes with {own} in {_exact(float(low))}..{_exact(float(high))}{where}")
+    if comparison.get("support") and low - 1e-9 <= float(comparison["value"]) <= high + 1e-9:
+        return (f"{name}{spelled} = {_exact(float(comparison['value']))} not among the values "
+                f"{comparison.get('script_name', name)} takes ({support_text(comparison['support'])}){where}")
+    return (f"{name}{spelled} = {_exact(float(comparison['value']))} outside "
+            f"{_exact(float(low))}..{_exact(float(high))}{where}")
 
 
 def _exact(number: float) -> str:

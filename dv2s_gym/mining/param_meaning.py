@@ -17,9 +17,12 @@ parameter reaches the object only through a top-level variable's computation). A
 function of the one parameter alone (``globalParameters.g + 10``, ``2 * globalParameters.h``,
 ``-(globalParameters.d - 1) / 2``: numbers, ``+ - * /`` by numbers and unary minus, nested) sets the quantity to a
 known function of it: such a use counts as ``additive`` and :func:`affine_uses` keeps the function, so the judge
-compares the interval the expression produces rather than the parameter's own range. A point that only
-places an actor (``spot = new OrientedPoint ...`` then ``new Pedestrian right of spot``) and a top-level variable
-hand their parameters on to the actor that uses them.
+compares the interval the expression produces rather than the parameter's own range; :func:`quantity_uses` lists
+every use with the quantity it sets as such a function (``abs(...)`` of one read exactly too) or ``None`` when it
+cannot be read so (another sampled value or reference point beside the parameter, a call, ``%``, a conditional).
+A point that only places an actor (``spot = new OrientedPoint ...`` then ``new Pedestrian right of spot``) and a
+top-level variable hand their parameters on to the actor that uses them; the point hands on its expression too
+(``d + 30``), a variable does not (its computation is not read).
 
 :func:`meaning_map` pairs the parameters one script does not share by name with the other's: the objects are paired
 first (the ego with the ego; another actor with the only one of its kind that has such parameters, else the one whose
@@ -36,7 +39,8 @@ import re
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 __all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
-           "script_parameters", "affine_uses", "affine_form", "read_interval", "Affine"]
+           "script_parameters", "affine_uses", "affine_form", "read_interval", "Affine", "Quantity", "quantity_of",
+           "quantity_uses", "read_support", "support_contains", "support_text"]
 
 PLACEMENT_KINDS = ("OrientedPoint", "Point")
 """Classes that place actors but are not actors themselves."""
@@ -105,6 +109,114 @@ def affine_form(expression: str, param: str) -> Optional[Tuple[float, float]]:
     return form if form is not None and form[0] != 0.0 else None
 
 
+class Quantity:
+    """A quantity an expression sets as a known function of one parameter: ``at(value)`` is the quantity a value of
+    the parameter gives, ``over(low, high)`` the interval it takes with the parameter in ``low..high``; ``key``
+    identifies the function whatever the parameter is called (two scripts' ``g + 10`` and ``gap + 10`` are the same
+    function), ``text`` is the expression."""
+
+    def __init__(self, text: str, key: Tuple[Any, ...], node: ast.AST, param: str):
+        self.text, self.key, self._node, self._param = text, key, node, param
+
+    def at(self, value: float) -> float:
+        return self.over(value, value)[0]
+
+    def over(self, low: float, high: float) -> Tuple[float, float]:
+        if self.key[0] == "affine":
+            scale, offset = self.key[1], self.key[2]
+            ends = sorted((scale * low + offset, scale * high + offset))
+            return ends[0], ends[1]
+        image = _image(self._node, self._param, low, high)
+        assert image is not None  # read at construction
+        return image
+
+    def __repr__(self) -> str:
+        return f"Quantity({self.text!r})"
+
+
+def _is_param(node: ast.AST, param: str) -> bool:
+    return (isinstance(node, ast.Attribute) and node.attr == param and isinstance(node.value, ast.Name)
+            and node.value.id == "globalParameters")
+
+
+def _image(node: ast.AST, param: str, low: float, high: float) -> Optional[Tuple[float, float]]:
+    """The interval ``node`` takes with the parameter in ``low..high``, by interval arithmetic (exact when the
+    parameter occurs once): numbers, the parameter, ``+ -``, ``* /`` by a non-zero number, unary minus or plus and
+    ``abs``; ``None`` for anything else."""
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+        return float(node.value), float(node.value)
+    if _is_param(node, param):
+        return low, high
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+        inner = _image(node.operand, param, low, high)
+        if inner is None:
+            return None
+        return (-inner[1], -inner[0]) if isinstance(node.op, ast.USub) else inner
+    if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "abs"
+            and len(node.args) == 1 and not node.keywords):
+        inner = _image(node.args[0], param, low, high)
+        if inner is None:
+            return None
+        if inner[0] >= 0:
+            return inner
+        if inner[1] <= 0:
+            return -inner[1], -inner[0]
+        return 0.0, max(-inner[0], inner[1])
+    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
+        left, right = _image(node.left, param, low, high), _image(node.right, param, low, high)
+        if left is None or right is None:
+            return None
+        if isinstance(node.op, ast.Add):
+            return left[0] + right[0], left[1] + right[1]
+        if isinstance(node.op, ast.Sub):
+            return left[0] - right[1], left[1] - right[0]
+        number = right if isinstance(node.op, ast.Div) or left[0] != left[1] else left
+        if number[0] != number[1] or number[0] == 0.0 or not all(map(_finite, number)):
+            return None  # a product of two sampled values, by zero, or a quotient by a sampled value or zero
+        if isinstance(node.op, ast.Mult):
+            ends = [a * b for a in left for b in right]
+        else:
+            ends = [a / right[0] for a in left]
+        return min(ends), max(ends)
+    return None
+
+
+def _finite(number: float) -> bool:
+    return number == number and abs(number) != float("inf")
+
+
+def _mentions(node: ast.AST, param: str) -> int:
+    return sum(1 for child in ast.walk(node) if _is_param(child, param))
+
+
+class _Renamed(ast.NodeTransformer):
+    def __init__(self, param: str):
+        self.param = param
+
+    def visit_Attribute(self, node: ast.Attribute) -> ast.AST:
+        return ast.Name(id="_parameter_", ctx=ast.Load()) if _is_param(node, self.param) else node
+
+
+def quantity_of(expression: str, param: str) -> Optional[Quantity]:
+    """The quantity ``expression`` sets as a known function of ``globalParameters.<param>`` alone: an affine one
+    (:func:`affine_form`), or one the parameter occurs in once built from numbers, ``+ - * /`` by numbers, unary
+    minus and ``abs`` (its interval read exactly); ``None`` for anything else (another sampled value, a call, ``%``,
+    a conditional, a reference point)."""
+    node = _parse(expression)
+    if node is None:
+        return None
+    text = " ".join(expression.split())
+    form = affine_form(expression, param)
+    if form is not None:
+        return Quantity(text, ("affine", form[0], form[1]), node, param)
+    if _mentions(node, param) != 1 or not any(isinstance(n, ast.Call) for n in ast.walk(node)):
+        return None
+    probe = [_image(node, param, low, high) for low, high in ((-1.0, 1.0), (2.0, 3.0))]
+    if any(p is None or not all(map(_finite, p)) or p[0] == p[1] for p in probe):
+        return None  # unreadable, or a constant however the parameter varies
+    return Quantity(text, ("exact", ast.dump(_Renamed(param).visit(_parse(expression)))), node, param)
+
+
 def _interval_node(node: ast.AST) -> Optional[Tuple[float, float]]:
     if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
         return float(node.value), float(node.value)
@@ -146,6 +258,132 @@ def read_interval(expression: str) -> Optional[Tuple[float, float]]:
     sampled values combined)."""
     node = _parse(expression.split("#", 1)[0])
     return _interval_node(node) if node is not None else None
+
+
+_DISCRETE_RANGES = ("DiscreteRange", "VerifaiDiscreteRange")
+_CHOICES = ("Uniform", "Options", "Discrete", "VerifaiOptions")
+_GRID_LIMIT = 100000
+
+Part = Tuple[Any, ...]
+"""A part of the values a distribution takes: ``("interval", low, high)``, ``("points", [v, ...])`` or
+``("grid", start, step, count)`` (``start + k * step`` for ``k`` in ``0..count-1``: integers, offset or scaled)."""
+
+
+def _support_node(node: ast.AST) -> Optional[List[Part]]:
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+        return [("points", [float(node.value)])]
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.args and not node.keywords:
+        call = node.func.id
+        if call in ("Range", "VerifaiRange") + _DISCRETE_RANGES:
+            bounds = [_interval_node(arg) for arg in node.args]
+            if len(bounds) != 2 or any(b is None or b[0] != b[1] for b in bounds):
+                return None
+            low, high = sorted((bounds[0][0], bounds[1][0]))
+            if call in _DISCRETE_RANGES:
+                if not (float(low).is_integer() and float(high).is_integer()):
+                    return None
+                return [("grid", low, 1.0, int(high - low) + 1)]
+            return [("interval", low, high)]
+        if call in _CHOICES:
+            args = list(node.args)
+            if len(args) == 1 and isinstance(args[0], (ast.List, ast.Tuple)):
+                args = list(args[0].elts)
+            elif len(args) == 1 and isinstance(args[0], ast.Dict):
+                args = [key for key in args[0].keys if key is not None]
+            parts: List[Part] = []
+            points: List[float] = []
+            for arg in args:
+                inner = _support_node(arg)
+                if inner is None:
+                    return None
+                parts += [part for part in inner if part[0] != "points"]
+                points += [v for part in inner if part[0] == "points" for v in part[1]]
+            return ([("points", sorted(set(points)))] if points else []) + parts or None
+        return None
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+        inner = _support_node(node.operand)
+        return None if inner is None else [_scaled(p, -1.0 if isinstance(node.op, ast.USub) else 1.0, 0.0)
+                                           for p in inner]
+    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
+        left, right = _support_node(node.left), _support_node(node.right)
+        if left is None or right is None:
+            return None
+        number = lambda parts: (parts[0][1][0] if len(parts) == 1 and parts[0][0] == "points"  # noqa: E731
+                                and len(parts[0][1]) == 1 else None)
+        a, b = number(left), number(right)
+        if isinstance(node.op, ast.Add):
+            return [_scaled(p, 1.0, b) for p in left] if b is not None else (
+                [_scaled(p, 1.0, a) for p in right] if a is not None else None)
+        if isinstance(node.op, ast.Sub):
+            return [_scaled(p, 1.0, -b) for p in left] if b is not None else (
+                [_scaled(p, -1.0, a) for p in right] if a is not None else None)
+        if isinstance(node.op, ast.Mult):
+            if b is not None and b != 0.0:
+                return [_scaled(p, b, 0.0) for p in left]
+            return [_scaled(p, a, 0.0) for p in right] if a is not None and a != 0.0 else None
+        return [_scaled(p, 1.0 / b, 0.0) for p in left] if b is not None and b != 0.0 else None
+    return None
+
+
+def _scaled(part: Part, scale: float, offset: float) -> Part:
+    if part[0] == "interval":
+        ends = sorted((scale * part[1] + offset, scale * part[2] + offset))
+        return ("interval", ends[0], ends[1])
+    if part[0] == "points":
+        return ("points", [scale * v + offset for v in part[1]])
+    return ("grid", scale * part[1] + offset, scale * part[2], part[3])
+
+
+def read_support(expression: str) -> Optional[List[Part]]:
+    """The values a parameter's distribution takes, part by part (:data:`Part`), when it is built from numbers,
+    ``Range``, ``DiscreteRange`` (integers), ``Uniform``/``Options``/``Discrete`` of those (their union), offset
+    or scaled by numbers: ``Uniform(5, 9)`` is the points 5 and 9, ``Uniform(Range(1, 2), 100)`` the interval 1..2
+    and the point 100; ``None`` for anything else."""
+    node = _parse(expression.split("#", 1)[0])
+    return _support_node(node) if node is not None else None
+
+
+def support_contains(parts: Sequence[Part], quantity: float, function: Optional["Quantity"] = None) -> bool:
+    """Whether ``quantity`` is a value the distribution ``parts`` takes, or, given ``function``, one that
+    ``function`` of such a value takes (a grid of more than 100000 values is read as its interval)."""
+    close = lambda v: abs(v - quantity) <= 1e-9 * max(1.0, abs(quantity))  # noqa: E731
+    at = (lambda v: v) if function is None else function.at
+    for part in parts:
+        if part[0] == "interval":
+            low, high = (part[1], part[2]) if function is None else function.over(part[1], part[2])
+            if low - 1e-9 <= quantity <= high + 1e-9:
+                return True
+        elif part[0] == "points":
+            if any(close(at(v)) for v in part[1]):
+                return True
+        elif part[3] > _GRID_LIMIT:
+            ends = sorted((part[1], part[1] + part[2] * (part[3] - 1)))
+            low, high = ends if function is None else function.over(*ends)
+            if low - 1e-9 <= quantity <= high + 1e-9:
+                return True
+        elif any(close(at(part[1] + k * part[2])) for k in range(part[3])):
+            return True
+    return False
+
+
+def support_text(parts: Sequence[Part]) -> str:
+    """``"5, 9"``, ``"1..2 or 100"``, ``"the integers 5..9"``: the values of :func:`read_support`'s parts."""
+    def number(v: float) -> str:
+        short = f"{v:g}"
+        return short if float(short) == v else repr(v)
+
+    words = []
+    for part in parts:
+        if part[0] == "interval":
+            words.append(f"{number(part[1])}..{number(part[2])}")
+        elif part[0] == "points":
+            words.append(", ".join(number(v) for v in part[1]))
+        elif part[2] == 1.0:
+            words.append(f"the integers {number(part[1])}..{number(part[1] + part[3] - 1)}")
+        else:
+            words.append(f"{number(part[1])} to {number(part[1] + part[2] * (part[3] - 1))} in steps of "
+                         f"{number(part[2])}")
+    return " or ".join(words)
 
 
 def _norm(name: str) -> str:
@@ -287,10 +525,54 @@ def _value_part(slot: str, expression: str) -> str:
     ``""`` for other placements."""
     if slot.startswith(("behavior:", "with:")) or slot == "speed":
         return expression
+    if slot == "longitudinal" and "pointAlongBy" in expression:
+        return _along(expression)
     match = re.match(r"^(?:ahead of|behind|left of|right of)\s+[\w.]+\s+by\s+(.+)$", expression.strip(), re.S)
     if match is None:
         match = re.match(r"^following\b.*?\bfor\s+(.+)$", expression.strip(), re.S)
     return match.group(1) if match else ""
+
+
+def _along(expression: str) -> str:
+    """The distance a ``pointAlongBy(...)`` placement sets from its reference point: the argument without the one
+    name it adds (``egoS + globalParameters.gap + 10`` -> ``globalParameters.gap + 10``); ``""`` when the argument
+    is not read so (no single reference point added)."""
+    match = re.search(r"pointAlongBy\s*\(", expression)
+    if match is None:
+        return ""
+    depth, start = 1, match.end()
+    for index in range(start, len(expression)):
+        depth += {"(": 1, ")": -1}.get(expression[index], 0)
+        if depth == 0:
+            break
+    else:
+        return ""
+    node = _parse(expression[start:index])
+    if node is None:
+        return ""
+    terms: List[Tuple[int, ast.AST]] = []
+
+    def flatten(part: ast.AST, sign: int) -> None:
+        if isinstance(part, ast.BinOp) and isinstance(part.op, (ast.Add, ast.Sub)):
+            flatten(part.left, sign)
+            flatten(part.right, sign if isinstance(part.op, ast.Add) else -sign)
+        else:
+            terms.append((sign, part))
+
+    flatten(node, 1)
+    references = [index for index, (sign, part) in enumerate(terms) if isinstance(part, ast.Name)]
+    if len(references) > 1 or (references and terms[references[0]][0] < 0):
+        return ""
+    rest = [term for index, term in enumerate(terms) if index not in references]
+    if not rest:
+        return ""
+    built: Optional[ast.AST] = None
+    for sign, part in rest:
+        if built is None:
+            built = part if sign > 0 else ast.UnaryOp(op=ast.USub(), operand=part)
+        else:
+            built = ast.BinOp(left=built, op=ast.Add() if sign > 0 else ast.Sub(), right=part)
+    return ast.unparse(built)
 
 
 def parameter_uses(script: str) -> Dict[str, Set[Use]]:
@@ -300,20 +582,47 @@ def parameter_uses(script: str) -> Dict[str, Set[Use]]:
     return _read_uses(script)[0]
 
 
-def affine_uses(script: str) -> Dict[str, Dict[Tuple[str, str, str], Affine]]:
-    """``{parameter: {(object, kind, slot): (scale, offset, expression)}}``: the uses of each global parameter of
-    ``script`` whose quantity is an affine function of that parameter alone (:func:`affine_form`; the bare
-    parameter is ``(1, 0, ...)``), read directly on the object (not through a variable or a placing point)."""
+QuantityUse = Tuple[str, Optional[Quantity], str]
+"""``(how, the quantity as a known function of the parameter or None, the expression's text)``."""
+
+
+def quantity_uses(script: str) -> Dict[str, Dict[Tuple[str, str, str], List[QuantityUse]]]:
+    """``{parameter: {(object, kind, slot): [(how, quantity, expression)]}}``: every use of each global parameter
+    of ``script`` on an object (those :func:`parameter_uses` lists), with the quantity it sets as a known function
+    of that parameter alone (:func:`quantity_of`; the bare parameter is ``g``, affine) or ``None`` when the judge
+    cannot read it so (another sampled value or reference point beside it, a call, a variable's computation). A
+    point that places the actor hands its function on: ``spot`` at ``d + 30`` places the actor at ``d + 30``; an
+    actor placed along the same direction from the point (``ahead of spot by 5``) adds to it, so that use is not
+    read (and its ``how`` says so)."""
     return _read_uses(script)[1]
 
 
-def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]], Dict[str, Dict[Tuple[str, str, str], Affine]]]:
+def affine_uses(script: str) -> Dict[str, Dict[Tuple[str, str, str], Affine]]:
+    """``{parameter: {(object, kind, slot): (scale, offset, expression)}}``: the uses of :func:`quantity_uses`
+    whose quantity is an affine function of the parameter alone (the bare parameter is ``(1, 0, ...)``), one per
+    object and slot."""
+    out: Dict[str, Dict[Tuple[str, str, str], Affine]] = {}
+    for param, by_slot in quantity_uses(script).items():
+        for where, found in by_slot.items():
+            for _, quantity, text in found:
+                if quantity is not None and quantity.key[0] == "affine":
+                    out.setdefault(param, {})[where] = (quantity.key[1], quantity.key[2], text)
+    return out
+
+
+def _slot_base(slot: str) -> str:
+    return slot.split(":", 1)[0]
+
+
+def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
+                                     Dict[str, Dict[Tuple[str, str, str], List[QuantityUse]]]]:
     behaviors = _behaviors(script)
     uses: Dict[str, Set[Use]] = {}
-    forms: Dict[str, Dict[Tuple[str, str, str], Affine]] = {}
-    carried: Dict[str, List[Tuple[str, str, str]]] = {}  # variable or placement -> [(param, slot, how)]
+    quantities: Dict[str, Dict[Tuple[str, str, str], List[QuantityUse]]] = {}
+    # variable or placement -> [(param, slot, how, quantity, text)]
+    carried: Dict[str, List[Tuple[str, str, str, Optional[Quantity], str]]] = {}
 
-    def carried_by(expression: str) -> List[Tuple[str, str, str]]:
+    def carried_by(expression: str) -> List[Tuple[str, str, str, Optional[Quantity], str]]:
         return [item for name, items in carried.items() if re.search(rf"\b{re.escape(name)}\b", expression)
                 for item in items]
 
@@ -325,37 +634,47 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]], Dict[str, Dict[Tuple[s
             assign = _ASSIGN.match(statement)
             if assign and "new " not in assign.group(2):
                 expression = assign.group(2)
-                # a parameter that reaches an object through a variable is part of a computation: "derived"
-                carried[assign.group(1)] = ([(p, "position", "derived " + _how(expression, p))
+                text = " ".join(expression.split())
+                # a parameter that reaches an object through a variable is part of a computation: "derived", and
+                # the quantity it sets is not read
+                carried[assign.group(1)] = ([(p, "position", "derived " + _how(expression, p), None, text)
                                              for p in _PARAM.findall(expression)]
-                                            + [(p, s, how if how.startswith("derived") else "derived " + how)
-                                               for p, s, how in carried_by(expression)])
+                                            + [(p, s, how if how.startswith("derived") else "derived " + how, None, t)
+                                               for p, s, how, _, t in carried_by(expression)])
             continue
         name, kind, rest = found.group(1) or f"<{found.group(2)}>", found.group(2), found.group(3)
-        items: List[Tuple[str, str, str]] = []
-        found_forms: Dict[str, Dict[str, Affine]] = {}
+        items: List[Tuple[str, str, str, frozenset, Optional[Quantity], str]] = []
         for specifier in _split_top(rest):
             for slot, expression in _slots(specifier, behaviors):
                 value = _value_part(slot, expression)
-                here = []
-                for p in _PARAM.findall(expression):
-                    form = affine_form(value, p) if value else None
-                    if form is None:
-                        here.append((p, slot, _how(expression, p)))
+                here: List[Tuple[str, str, str, Optional[Quantity], str]] = []
+                for p in dict.fromkeys(_PARAM.findall(expression)):
+                    quantity = quantity_of(value, p) if value else None
+                    if quantity is None:
+                        here.append((p, slot, _how(expression, p), None, " ".join(expression.split())))
                     else:  # a known function of p alone: compared through the interval it produces
-                        here.append((p, slot, "additive"))
-                        found_forms.setdefault(p, {})[slot] = (form[0], form[1], " ".join(value.split()))
-                here += [(p, slot if s == "position" else s, how) for p, s, how in carried_by(expression)]
-                items += [(p, s, how, frozenset(q for q, t, _ in here if t == s)) for p, s, how in here]
+                        here.append((p, slot, "additive", quantity, quantity.text))
+                for p, s, how, quantity, text in carried_by(expression):
+                    if s == "position":
+                        here.append((p, slot, how, quantity, text))
+                    elif value and _slot_base(s) == _slot_base(slot):
+                        # placed along the same direction from the point: the distances add up
+                        here.append((p, s, f"{how} then {slot} by {' '.join(value.split())}", None,
+                                     f"{text}, then {' '.join(expression.split())}"))
+                    else:
+                        here.append((p, s, how, quantity, text))
+                items += [(p, s, how, frozenset(q for q, t, _, _, _ in here if t == s), quantity, text)
+                          for p, s, how, quantity, text in here]
         if kind in PLACEMENT_KINDS:
-            carried[name] = [(p, s, how) for p, s, how, _ in items]  # handed on to the actor it places
-            continue
-        for param, slot, how, together in items:
+            carried[name] = [(p, s, how, quantity, text) for p, s, how, _, quantity, text in items]
+            continue  # handed on to the actor it places
+        for param, slot, how, together, quantity, text in items:
             uses.setdefault(param, set()).add((name, kind, slot, how, together))
-        for param, by_slot in found_forms.items():
-            for slot, form in by_slot.items():
-                forms.setdefault(param, {})[(name, kind, slot)] = form
-    return uses, forms
+            listed = quantities.setdefault(param, {}).setdefault((name, kind, slot), [])
+            if not any(h == how and (q.key if q else t) == (quantity.key if quantity else text)
+                       for h, q, t in listed):
+                listed.append((how, quantity, text))
+    return uses, quantities
 
 
 def _actor_slots(uses: Mapping[str, Set[Use]], params: Sequence[str]) -> Dict[Tuple[str, str], Set[Tuple[str, str]]]:

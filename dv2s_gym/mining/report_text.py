@@ -23,6 +23,8 @@ NOT_COMPARED_REASONS: Tuple[Tuple[str, Tuple[str, ...], str], ...] = (
      "setting their object's quantities only together with other parameters"),
     ("ambiguous", ("ambiguous:",), "with more than one possible counterpart"),
     ("two_actors", ("one actor cannot be two",), "whose counterpart's actor would stand for two of the parent's"),
+    ("unread_quantity", ("the quantity it sets cannot be compared",),
+     "setting a quantity the judge cannot compare between the two scripts (an expression it cannot read in one)"),
     ("other", (), "for another reason"),
 )
 """``(key, phrases of the conversion judge's reasons, words)`` of each reason a failing parameter was not compared
