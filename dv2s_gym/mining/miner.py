@@ -80,8 +80,8 @@ LOOKAHEAD_CHUNKS = 16
 """Whole chunks a non-adaptive sampler (random, halton) sends to the workers at once."""
 ADAPTIVE_SCHEDULE = "window"
 """The schedule of a new adaptive run (``"chunks"``: the chunk schedule, for comparison in ``bench/``)."""
-_RESUME_KEYS = ("policy", "sampler", "sampler_options", "feedback", "seed", "batch", "scenarios", "bank_dir",
-                "env_config", "reference", "ttc_threshold", "stall_seconds")
+_RESUME_KEYS = ("policy",) + MineSettings.resume_keys()
+"""The keys of ``settings.json`` a resumed run must share with the recorded ones."""
 _SPACE_KEYS = ("scenarios",)
 """Identity keys known only once the scene space is built (the scenario names it resolved); the others are compared
 before building it, which takes minutes on a loaded machine."""
@@ -260,15 +260,10 @@ class _Recorder:
 
 def _settings(policy: str, settings: MineSettings, batch: int, scenarios: List[str], bank_dir: Optional[str],
               space_description: Dict[str, Any]) -> Dict[str, Any]:
-    """The run's ``settings.json`` (the keys :data:`_RESUME_KEYS` name are its identity)."""
-    return {
-        "schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, "sampler": settings.sampler,
-        "sampler_options": dict(settings.sampler_options) if settings.sampler_options else None,
-        "feedback": settings.feedback, "seed": int(settings.seed),
-        "batch": int(batch), "scenarios": scenarios, "bank_dir": bank_dir, "env_config": dict(settings.env_config),
-        "reference": settings.reference, "ttc_threshold": float(settings.ttc_threshold),
-        "stall_seconds": float(settings.stall_seconds), "budget": int(settings.budget), "space": space_description,
-    }
+    """The run's ``settings.json``: :meth:`MineSettings.recorded` with the policy and the resolved batch, scenarios
+    and bank (the keys :data:`_RESUME_KEYS` name are its identity)."""
+    return {"schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, **settings.recorded(),
+            "batch": int(batch), "scenarios": scenarios, "bank_dir": bank_dir, "space": space_description}
 
 
 """Settings added after the first runs were written: a run without them had these values."""

@@ -10,6 +10,7 @@ from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOL
 from dv2s_gym.mining.samplers import default_feedback, registered_samplers
 from scenario_bank.field_checks import (check_bool, check_int, check_mapping, check_names,
                                         check_number, check_path, check_text)
+from scenario_bank.run_identity import recorded_settings, resume_keys, setting
 
 __all__ = ["FEEDBACKS", "MineSettings"]
 
@@ -29,16 +30,17 @@ failure's in the same scenario."""
 class MineSettings:
     """The settings of a mining run (:func:`dv2s_gym.mining.miner.mine`); the command line's defaults are these.
 
-    A run folder records them (``settings.json``); resuming it needs the same ones except ``budget`` (a larger
-    one continues the run), ``convert``, ``convert_options`` and ``max_conversions``.
+    A run folder records them (``settings.json``, :meth:`recorded`); resuming it needs the same ones
+    (:meth:`resume_keys`) except ``budget`` (a larger one continues the run), ``convert``, ``convert_options`` and
+    ``max_conversions`` (not recorded).
     """
 
-    budget: int = 200
+    budget: int = setting(200, resume=False)
     """Episodes to run in total (at least 1)."""
     sampler: str = "novelty-bandit"
     """One of :data:`~dv2s_gym.mining.samplers.SAMPLERS` (``novelty-bandit``: broader failures than VerifAI's
     cross-entropy on the breadth bench, bench/RESULTS.md)."""
-    sampler_options: Optional[Mapping[str, Any]] = None
+    sampler_options: Optional[Mapping[str, Any]] = setting(None, record=lambda options: dict(options or {}) or None)
     """Parameters of an adaptive sampler (VerifAI's ``alpha``, ``buckets``, ``thres``;
     :func:`~dv2s_gym.mining.samplers.sampler_params`); ``None``: the sampler's defaults."""
     feedback: Optional[str] = None
@@ -60,12 +62,12 @@ class MineSettings:
     """Time-to-collision [s] under which an episode is a low-TTC failure (:mod:`dv2s_gym.mining.monitors`)."""
     stall_seconds: float = DEFAULT_STALL_SECONDS
     """Seconds standing with a free lane ahead that count as a stall."""
-    convert: bool = False
+    convert: bool = setting(False, resume=False, record=False)
     """Turn one failure per avoidable cluster into a bank scenario (:mod:`dv2s_gym.mining.convert`); ``bank_dir``
     must then be given and writable (a new or empty folder starts as a copy of the shipped bank)."""
-    convert_options: Optional[Mapping[str, Any]] = None
+    convert_options: Optional[Mapping[str, Any]] = setting(None, resume=False, record=False)
     """Keyword arguments of :func:`~dv2s_gym.mining.convert.convert_failure` (DRA and SG backends, ``k``...)."""
-    max_conversions: Optional[int] = None
+    max_conversions: Optional[int] = setting(None, resume=False, record=False)
     """At most this many clusters are converted, largest first (``None``: all)."""
 
     def __post_init__(self) -> None:
@@ -105,6 +107,16 @@ class MineSettings:
     def replace(self, **changes: Any) -> "MineSettings":
         """A copy with ``changes`` (checked again)."""
         return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def resume_keys(cls) -> Tuple[str, ...]:
+        """The settings a resumed run must share with the run it continues (every recorded one but ``budget``)."""
+        return resume_keys(cls)
+
+    def recorded(self) -> Dict[str, Any]:
+        """The settings as ``settings.json`` records them (JSON values; ``sampler_options`` ``None`` when empty;
+        the miner records the resolved ``batch``, ``scenarios`` and ``bank_dir`` over these)."""
+        return recorded_settings(self)
 
     def options(self) -> Dict[str, Any]:
         """The settings as keyword arguments of :class:`MineSettings` (``scenarios`` as a list)."""
