@@ -72,10 +72,12 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
 
 import numpy as np
 
+from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.exact_replay import narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
 from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence, key_actor, shows_interaction
 from dv2s_gym.mining.monitors import detect_failure
 from dv2s_gym.mining.report_text import not_compared_names_text
+from dv2s_gym.mining.settings import read_run_settings
 from dv2s_gym.mining.param_meaning import (affine_uses, meaning_map, name_mismatch, read_interval, script_parameters,
                                            tied_objects)
 from dv2s_gym.mining.tasks import reference_avoids
@@ -184,11 +186,10 @@ def _monitor_options(run_dir: Path, monitor: Optional[Mapping[str, Any]]) -> Dic
     if monitor is not None:
         return dict(monitor)
     try:
-        settings = json.loads((run_dir / "settings.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        settings = read_run_settings(run_dir)
+    except MiningError:
         return {}
-    return {key: settings[key] for key in ("ttc_threshold", "stall_seconds")
-            if isinstance(settings, dict) and settings.get(key) is not None}
+    return {} if settings is None else settings.monitor
 
 
 def _policy_name(policy: Any) -> str:

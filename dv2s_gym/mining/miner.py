@@ -60,7 +60,7 @@ from dv2s_gym.mining.jsonl import read_rows
 from dv2s_gym.mining.report import write_reports
 from dv2s_gym.mining.report_text import error_warning
 from dv2s_gym.mining.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
-from dv2s_gym.mining.settings import FEEDBACKS, MineSettings
+from dv2s_gym.mining.settings import FEEDBACKS, MineSettings, read_run_settings, RunSettings, SETTINGS_FILE
 from dv2s_gym.mining.tasks import MINE
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
 from dv2s_gym.workers import backends
@@ -269,18 +269,12 @@ def _settings(policy: str, settings: MineSettings, batch: int, scenarios: List[s
 """Settings added after the first runs were written: a run without them had these values."""
 
 
-def _read_settings(path: Path) -> Optional[Dict[str, Any]]:
-    """A run folder's ``settings.json`` (``None`` when there is none); a damaged one is refused in one line
+def _read_settings(out: Path) -> Optional[RunSettings]:
+    """The run folder's ``settings.json`` (``None`` when there is none); a damaged one is refused in one line
     naming the file and the fix."""
-    if not path.is_file():
-        return None
-    try:
-        saved = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as error:
-        raise MiningError(f"{path} is not readable JSON ({error}); restore it, or choose another --out "
-                          "(or delete the run folder) to start the run over") from None
-    if not isinstance(saved, dict) or not isinstance(saved.get("scenarios"), list):
-        raise MiningError(f"{path} is not a mining run's settings (no list of scenarios); restore it, or choose "
+    saved = read_run_settings(out)
+    if saved is not None and not isinstance(saved.get("scenarios"), list):
+        raise MiningError(f"{saved.path} is not a mining run's settings (no list of scenarios); restore it, or choose "
                           "another --out (or delete the run folder) to start the run over")
     return saved
 
@@ -577,8 +571,8 @@ def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional
               origin: Optional[Mapping[str, Any]]) -> tuple:
     """``(settings.json's content, the scene space)`` of the run in ``out``: a new run's settings, or a resumed
     run's checked against the ones asked (its own scenarios and batch when none are asked); written back."""
-    settings_path = out / "settings.json"
-    saved = _read_settings(settings_path)
+    settings_path = out / SETTINGS_FILE
+    saved = _read_settings(out)
     batch = settings.batch or (saved["batch"] if saved else 4 * n_workers)
     if saved is not None:  # a changed seed, policy, ... is refused before the space is built, not minutes later
         before_space = _settings(policy, settings, batch, saved["scenarios"], bank_dir, {})

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Dict, Mapping, Optional, Tuple
+import json
+import os
+from pathlib import Path
+from typing import Any, Dict, Iterator, Mapping, Optional, Tuple, Type, Union
 
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
@@ -12,7 +15,11 @@ from scenario_bank.field_checks import (check_bool, check_int, check_mapping, ch
                                         check_number, check_path, check_text)
 from scenario_bank.run_identity import recorded_settings, resume_keys, setting
 
-__all__ = ["FEEDBACKS", "MineSettings"]
+__all__ = ["FEEDBACKS", "MineSettings", "SETTINGS_FILE", "RunSettings", "read_run_settings"]
+
+SETTINGS_FILE = "settings.json"
+"""The file of a mining run folder that records what the run mines (:meth:`MineSettings.recorded` and the run's
+resolved values)."""
 
 FEEDBACKS = ("robustness", "novelty", "scenario-novelty", "state-novelty")
 """What the adaptive samplers are fed: ``robustness`` (each episode's robustness) or ``novelty`` (the same,
@@ -123,3 +130,65 @@ class MineSettings:
         values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         values["scenarios"] = list(self.scenarios) if self.scenarios is not None else None
         return values
+
+
+class RunSettings(Mapping[str, Any]):
+    """A mining run's ``settings.json`` as read back (:func:`read_run_settings`): every recorded value by its key
+    (a read-only mapping: :meth:`MineSettings.recorded` with the policy, the resolved batch, scenarios and bank,
+    the scene space and the schedule) and, typed, those the run's later steps use."""
+
+    def __init__(self, path: Path, values: Mapping[str, Any]) -> None:
+        self.path = path
+        """The ``settings.json`` read."""
+        self._values = dict(values)
+
+    def __getitem__(self, key: str) -> Any:
+        return self._values[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._values)
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def __repr__(self) -> str:
+        return f"RunSettings({str(self.path)!r}, {self._values!r})"
+
+    @property
+    def policy(self) -> Optional[str]:
+        """The policy spec the run mined (data read from a file: check it before loading a policy from it)."""
+        return self._values.get("policy")
+
+    @property
+    def bank_dir(self) -> Optional[str]:
+        """The bank the run mined (``None``: the shipped bank)."""
+        return self._values.get("bank_dir")
+
+    @property
+    def env_config(self) -> Any:
+        """The DV2S-v0 config overrides the run recorded, as read (check them before use)."""
+        return self._values.get("env_config")
+
+    @property
+    def monitor(self) -> Dict[str, Any]:
+        """The failure monitors' settings the run recorded (``ttc_threshold``, ``stall_seconds``; those absent
+        are left out, so the monitors' defaults apply)."""
+        return {key: self._values[key] for key in ("ttc_threshold", "stall_seconds")
+                if self._values.get(key) is not None}
+
+
+def read_run_settings(run_dir: Union[str, os.PathLike], *,
+                      error: Type[MiningError] = MiningError) -> Optional[RunSettings]:
+    """The ``settings.json`` of the mining run in ``run_dir`` (``None`` when there is none); one that is not
+    readable JSON or not a JSON object is refused with ``error`` in one line naming the file and the fix."""
+    path = Path(run_dir) / SETTINGS_FILE
+    if not path.is_file():
+        return None
+    fix = "restore it, or choose another --out (or delete the run folder) to start the run over"
+    try:
+        values = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as problem:
+        raise error(f"{path} is not readable JSON ({problem}); {fix}") from None
+    if not isinstance(values, dict):
+        raise error(f"{path} is not a mining run's settings (a JSON {type(values).__name__}, not an object); {fix}")
+    return RunSettings(path, values)
