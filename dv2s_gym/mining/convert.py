@@ -87,7 +87,7 @@ from dv2s_gym.pipeline.errors import (EndpointHTTPError, EndpointTimeoutError, E
                                       MissingAPIKeyError)
 from dv2s_gym.pipeline.metrics import e2e_sc
 from dv2s_gym.pipeline.semantics.text import elements_from_text
-from dv2s_gym.pipeline.semantics.trace import _kind, elements_from_trace
+from dv2s_gym.pipeline.semantics.trace import elements_from_trace, trace_actor_kind
 from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.atomic import atomic_write_text
 from scenario_bank.bank import Bank, DuplicateScenarioError
@@ -287,7 +287,7 @@ def _reproduction_episode(scene_seed: int, result: Any, trace: Any, monitor: Map
     actor_kind = None
     if actor is not None:
         actor_kind = (failure.get("with_kind") if failure.get("with") == actor and failure.get("with_kind")
-                      else _actor_kind(trace, actor))
+                      else trace_actor_kind(trace, actor))
     wanted_kind = (interaction or {}).get("kind")
     same = same_failure_class(source_failure, failure) and (wanted_kind is None or actor_kind == wanted_kind)
     shown = shows_interaction(interaction, elements_from_trace(trace)) if interaction else None
@@ -307,10 +307,6 @@ def clip_episode(episodes: List[Mapping[str, Any]]) -> Tuple[Mapping[str, Any], 
     return episodes[0], "no reproduction episode failed; the first"
 
 
-def _actor_kind(trace, name: str) -> str:
-    return _kind(name, dict(getattr(trace, "kinds", {}) or {}))
-
-
 def actor_census(trace: Any) -> Dict[str, int]:
     """The actors of an episode's trace besides the ego, counted by kind (``{"car": 2, "pedestrian": 1}``)."""
     names = set(getattr(trace, "kinds", {}) or {})
@@ -319,7 +315,7 @@ def actor_census(trace: Any) -> Dict[str, int]:
     names.discard("ego")
     census: Dict[str, int] = {}
     for name in names:
-        kind = _actor_kind(trace, name)
+        kind = trace_actor_kind(trace, name)
         census[kind] = census.get(kind, 0) + 1
     return dict(sorted(census.items()))
 

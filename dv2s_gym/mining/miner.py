@@ -56,7 +56,7 @@ from dv2s_gym.mining.convert import cluster_slug, CONVERSION_DIR, convert_failur
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import is_novel
 from dv2s_gym.mining.family import record_family, scenario_family
-from dv2s_gym.mining.jsonl import read_rows
+from dv2s_gym.mining.jsonl import JsonlAppender, read_rows
 from dv2s_gym.mining.report import write_reports
 from dv2s_gym.mining.report_text import error_warning
 from dv2s_gym.mining.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
@@ -214,33 +214,11 @@ def _run_lock(out: Path) -> Iterator[None]:
         handle.close()
 
 
-class _Appender:
-    """Appends JSON lines to a file, each flushed and fsynced before it counts as written."""
-
-    def __init__(self, path: Path) -> None:
-        self._path = path
-        if path.is_file() and path.stat().st_size:
-            with open(path, "rb+") as handle:  # drop a torn last line so the next record starts clean
-                data = handle.read()
-                if not data.endswith(b"\n"):
-                    handle.truncate(data.rfind(b"\n") + 1)
-        self._handle = open(path, "ab")
-
-    def append(self, record: Mapping[str, Any]) -> None:
-        record = record.to_dict() if isinstance(record, EpisodeRecord) else record
-        self._handle.write(json.dumps(record, sort_keys=True, default=str).encode("utf-8") + b"\n")
-        self._handle.flush()
-        os.fsync(self._handle.fileno())
-
-    def close(self) -> None:
-        self._handle.close()
-
-
 class _Recorder:
     """Turns finished results into records: appended to ``episodes.jsonl``, kept in ``done``, counted on
     the progress bar (failures and distinct clusters)."""
 
-    def __init__(self, appender: _Appender, done: Dict[int, EpisodeRecord], sampler: str, out: Path, bar) -> None:
+    def __init__(self, appender: JsonlAppender, done: Dict[int, EpisodeRecord], sampler: str, out: Path, bar) -> None:
         self.appender, self.done, self.sampler, self.out, self.bar = appender, done, sampler, out, bar
         counted = [r for r in done.values() if r.failed]
         self.found = {cluster_id(r) for r in counted}
@@ -599,8 +577,8 @@ def _run_episodes(out: Path, settings: Dict[str, Any], space, done: Dict[int, Ep
         window = _restore_window(out, settings, space, done, batch, budget)
     else:
         scene_sampler = _restore_sampler(out, settings, space, done, batch)
-    appender = _Appender(out / "episodes.jsonl")
-    bar = _progress(progress, budget, len([i for i in done if i < budget]))
+    appender = JsonlAppender(out / "episodes.jsonl")
+    bar = progress_bar(progress, budget, len([i for i in done if i < budget]))
     try:
         pool = backends.get_backend(workers.backend, workers=n_workers, address=workers.address,
                                     timeout=workers.timeout)
@@ -704,8 +682,8 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
     room = None if max_conversions is None else max(0, int(max_conversions) - len(existing))
     todo = [(cluster, record) for _, cluster, record in candidates][:room]
     bank = Bank(bank_dir)
-    appender = _Appender(path)
-    bar = _progress(progress, len(todo), 0, desc="converting")
+    appender = JsonlAppender(path)
+    bar = progress_bar(progress, len(todo), 0, desc="converting")
     try:
         for cluster, record in todo:
             row = _reached_bank(bank, run.out, cluster)  # killed after the bank write, before its line
@@ -771,7 +749,8 @@ def _write_reports(out: Path) -> Dict[str, Path]:
     return write_reports(out)
 
 
-def _progress(enabled: bool, total: int, initial: int, desc: str = "mining"):
+def progress_bar(enabled: bool, total: int, initial: int, desc: str = "mining"):
+    """A progress bar on stderr counting ``total`` episodes from ``initial`` (``None`` when not ``enabled``)."""
     if not enabled:
         return None
 

@@ -20,8 +20,8 @@ from dv2s_gym.mining import convert
 from dv2s_gym.mining.cluster import group
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.family import record_family
-from dv2s_gym.mining.jsonl import read_rows
-from dv2s_gym.mining.miner import _Appender, _progress, read_records
+from dv2s_gym.mining.jsonl import JsonlAppender, read_rows
+from dv2s_gym.mining.miner import progress_bar, read_records
 from dv2s_gym.mining.settings import read_run_settings, SETTINGS_FILE
 from scenario_bank.bank import Bank
 
@@ -55,8 +55,8 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
     if not todo:
         return existing
     bank = Bank(bank_dir)
-    appender = _Appender(path)
-    bar = _progress(progress, len(todo), 0, desc="exact replays")
+    appender = JsonlAppender(path)
+    bar = progress_bar(progress, len(todo), 0, desc="exact replays")
     try:
         for cluster, record in todo:
             row = convert.replay_failure_entry(dict(record, cluster=cluster), run_dir, policy=settings["policy"],
