@@ -1,8 +1,8 @@
 """No project module reaches into another module's private names (a leading underscore): what another module needs
 is public there (named without the underscore, with a docstring) or lives where it is used.
 
-Both ways in are checked: ``from module import _name`` and ``module._name`` on a module imported by name. The few
-pairs of modules that may share private names are listed below with the reason.
+Both ways in are checked: ``from module import _name`` and ``module._name`` on a module imported by name. The modules
+that may share private names are listed below with the reason.
 """
 
 from __future__ import annotations
@@ -19,9 +19,6 @@ SHARED_PRIVATE_NAMES: Dict[Tuple[str, str], str] = {
         "the bird's-eye analyzer is one algorithm split into files by stage (frames, detection, tracking, road, "
         "events, language, analyze); its underscore helpers are shared by those files only, and the package's "
         "interface is analyze's public functions",
-    ("dv2s_gym.pipeline.semantics.text", "dv2s_gym.pipeline.semantics.lexicon"):
-        "lexicon holds the word tables of the description reader in text.py, moved out of it for size; text.py "
-        "is their only reader",
 }
 """``(importing module, imported module)`` -> why the first may use the second's private names; a name ending in a
 dot stands for every module of that package."""
