@@ -60,3 +60,27 @@ def test_loop_options_named_like_their_setting_reach_the_settings():
     given = build_parser().parse_args(["loop", "--rounds", "3", "--k-eval", "7", "--seed", "5", "--workers", "1"])
     settings = loop_settings(given)
     assert (settings.rounds, settings.k_eval, settings.seed, settings.workers) == (3, 7, 5, 1)
+
+
+def test_a_run_folder_s_settings_are_read_in_one_place(tmp_path):
+    import pytest
+
+    from dv2s_gym.mining.errors import MiningError
+    from dv2s_gym.mining.report import MiningReportError
+    from dv2s_gym.mining.settings import read_run_settings
+
+    assert read_run_settings(tmp_path) is None
+    values = {"policy": "rule", "bank_dir": "/b", "env_config": {"duration": 5}, "ttc_threshold": 1.5,
+              "stall_seconds": None, "scenarios": ["a"]}
+    (tmp_path / "settings.json").write_text(json.dumps(values))
+    settings = read_run_settings(tmp_path)
+    assert settings == values and dict(settings) == values  # a mapping: code reading a dict keeps working
+    assert (settings.policy, settings.bank_dir, settings.env_config) == ("rule", "/b", {"duration": 5})
+    assert settings.monitor == {"ttc_threshold": 1.5}  # an absent or null monitor setting: the default applies
+    assert settings.path == tmp_path / "settings.json"
+    for content, needle in (("{garbage", "is not readable JSON"), ("[1]", "is not a mining run's settings")):
+        (tmp_path / "settings.json").write_text(content)
+        with pytest.raises(MiningError, match=needle):
+            read_run_settings(tmp_path)
+        with pytest.raises(MiningReportError, match=needle):
+            read_run_settings(tmp_path, error=MiningReportError)
