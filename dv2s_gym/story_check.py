@@ -74,7 +74,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from scenario_bank.story import StoryError, normalize_story, step_label
-from dv2s_gym.pipeline.semantics.trace import _map_view, collision_type, elements_from_trace
+from dv2s_gym.pipeline.semantics.trace import map_view, collision_type, elements_from_trace
 
 __all__ = ["StoryError", "StoryResult", "normalize_story", "check_story", "resolve_actors", "step_label",
            "MIN_GAP_SPEED"]
@@ -615,7 +615,7 @@ class _Detector:
         """Per step, whether the actor is in the map's junction area (read once per actor; callers do not write it)."""
         if name in self._junction_masks:
             return self._junction_masks[name]
-        view = _map_view(self.e.trace)
+        view = map_view(self.e.trace)
         track = self.e.tracks[name]
         inside = np.zeros(self.e.n, dtype=bool)
         if view is not None:

@@ -150,7 +150,7 @@ class _SceneStepper(ExternalStepper):
         return super()._run()
 
     def _install(self) -> None:
-        resuming = stepping._installed is not self
+        resuming = stepping.installed_stepper() is not self
         super()._install()
         if resuming and self._running_states is not None:
             for x, state in zip(self._shared, self._running_states):

@@ -55,6 +55,7 @@ __all__ = [
     "ActionNoise",
     "register_policy",
     "registered_policies",
+    "registered_policy_module",
     "load_policy",
     "parse_spec",
     "SHIPPED_CHECKPOINT",
@@ -333,6 +334,18 @@ def register_policy(name: str, factory: Callable[..., Any], overwrite: bool = Fa
 def registered_policies() -> List[str]:
     """The names :func:`load_policy` knows, sorted."""
     return sorted(_REGISTRY)
+
+
+def registered_policy_module(name: str) -> Optional[str]:
+    """The module whose code the policy registered as ``name`` runs (a state driver's class module, else the
+    factory's); ``None`` when none is registered by that name or its factory names no module."""
+    factory = _REGISTRY.get(name)
+    if factory is None:
+        return None
+    module = getattr(factory, "__module__", None)
+    closure = [c.cell_contents for c in (getattr(factory, "__closure__", None) or [])]
+    paths = [c for c in closure if isinstance(c, str) and ":" in c]  # a state driver's class path
+    return paths[0].split(":")[0] if paths else module
 
 
 def _state_driver(name: str, class_path: str) -> Callable[..., Policy]:

@@ -9,12 +9,14 @@ run goes (workers, progress bars) are not part of a run's identity.
 
 from __future__ import annotations
 
+import dataclasses
 import json
-from typing import Any, List, Mapping, Optional, Sequence, Type
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Type, Union
 
 from scenario_bank.errors import DV2SError
 
-__all__ = ["RunIdentityError", "identity_of", "differing", "check_identity"]
+__all__ = ["RunIdentityError", "identity_of", "differing", "check_identity", "setting", "resume_keys",
+           "recorded_settings"]
 
 _SHOWN = 3
 """Differences spelled out in a refusal (the rest are counted)."""
@@ -73,3 +75,54 @@ def check_identity(recorded: Mapping[str, Any], asked: Mapping[str, Any], keys: 
     if len(differences) > _SHOWN:
         shown.append(f"and {len(differences) - _SHOWN} more")
     raise error(f"{run} with other settings ({'; '.join(shown)}); {fix}", differences)
+
+
+# --------------------------------------------------------------------------- settings dataclasses
+_RESUME = "resume"
+_RECORD = "record"
+_CASTS = {"float": float, "int": int, "bool": bool}
+
+
+def setting(default: Any = dataclasses.MISSING, *, default_factory: Any = dataclasses.MISSING, resume: bool = True,
+            record: Union[bool, Callable[[Any], Any]] = True) -> Any:
+    """A field of a run's settings dataclass, saying how a run treats it (a plain field is part of the run's
+    identity and recorded as its JSON value).
+
+    ``resume=False``: a resumed run may ask another value (it is not part of the run's identity, :func:`resume_keys`).
+    ``record``: ``False`` when the run folder does not record the setting, or the function giving its recorded value
+    (instead of :func:`recorded_settings`' plain JSON form)."""
+    return dataclasses.field(default=default, default_factory=default_factory,
+                             metadata={_RESUME: resume, _RECORD: record})
+
+
+def resume_keys(settings_class: type) -> Tuple[str, ...]:
+    """The fields of a settings dataclass a resumed run must share with the run it continues, in field order
+    (every field but those declared with ``setting(resume=False)``)."""
+    return tuple(f.name for f in dataclasses.fields(settings_class) if f.metadata.get(_RESUME, True))
+
+
+def recorded_settings(settings: Any) -> Dict[str, Any]:
+    """The fields of a settings dataclass as its run folder records them (JSON values), in field order: a tuple as a
+    list, a mapping as a dict, a value of a ``float``, ``int`` or ``bool`` field as that type (``1`` as ``1.0``);
+    a field declared with ``setting(record=...)`` through its function, or left out with ``record=False``."""
+    values: Dict[str, Any] = {}
+    for field in dataclasses.fields(settings):
+        record = field.metadata.get(_RECORD, True)
+        if record is False:
+            continue
+        value = getattr(settings, field.name)
+        values[field.name] = record(value) if callable(record) else _json_value(field, value)
+    return values
+
+
+def _json_value(field: dataclasses.Field, value: Any) -> Any:
+    if value is None:
+        return None
+    cast = _CASTS.get(field.type if isinstance(field.type, str) else getattr(field.type, "__name__", ""))
+    if cast is not None:
+        return cast(value)
+    if isinstance(value, tuple):
+        return list(value)
+    if isinstance(value, Mapping):
+        return dict(value)
+    return value

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from dv2s_gym.mining import miner as miner_module
+from dv2s_gym.mining.jsonl import JsonlAppender
 from dv2s_gym.mining.settings import MineSettings
 from dv2s_gym.workers.settings import WorkerSettings
 
@@ -30,7 +31,7 @@ def mine_killed_after(policy: str, out: Path, stop_after: int, monkeypatch: Any,
     """Run ``mine(policy, out=out, **run)`` and kill it (``KeyboardInterrupt``) as it is about to record
     episode number ``stop_after``: the first ``stop_after`` episode records are on disk, others may be in
     flight. The recorder is restored afterwards."""
-    original = miner_module._Appender.append
+    original = JsonlAppender.append
     count = [0]
 
     def append(self, record):
@@ -40,10 +41,10 @@ def mine_killed_after(policy: str, out: Path, stop_after: int, monkeypatch: Any,
             count[0] += 1
         original(self, record)
 
-    monkeypatch.setattr(miner_module._Appender, "append", append)
+    monkeypatch.setattr(JsonlAppender, "append", append)
     with pytest.raises(KeyboardInterrupt):
         mine(policy, out=out, **run)
-    monkeypatch.setattr(miner_module._Appender, "append", original)
+    monkeypatch.setattr(JsonlAppender, "append", original)
 
 
 def global_draws() -> Tuple[float, float]:

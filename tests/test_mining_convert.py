@@ -353,23 +353,23 @@ def test_the_miner_converts_a_cluster_into_the_bank(tmp_path):
 def test_a_run_killed_between_the_bank_write_and_its_record_resumes_without_a_self_merge(tmp_path, monkeypatch):
     # killed after Bank.add and before conversions.jsonl got the line: the resumed run used to convert the
     # cluster again and report it "merged" into the entry it had made itself (kept 0, merged 1)
-    from dv2s_gym.mining import miner as miner_module
+    from dv2s_gym.mining.jsonl import JsonlAppender
     from mining_helpers import mine
 
     _generator_speeds_as_the_scenario(monkeypatch)
     run = dict(out=tmp_path / "run", budget=4, sampler="random", scenarios=[SCENARIO], bank_dir=str(tmp_path / "bank"),
                workers=1, reference=None, progress=False, convert=True, max_conversions=1, reports=False)
-    original = miner_module._Appender.append
+    original = JsonlAppender.append
 
     def killed(self, record):
         if self._path.name == "conversions.jsonl":
             raise KeyboardInterrupt
         original(self, record)
 
-    monkeypatch.setattr(miner_module._Appender, "append", killed)
+    monkeypatch.setattr(JsonlAppender, "append", killed)
     with pytest.raises(KeyboardInterrupt):
         mine("keep_lane", **run)
-    monkeypatch.setattr(miner_module._Appender, "append", original)
+    monkeypatch.setattr(JsonlAppender, "append", original)
     mined = _converted(tmp_path / "bank")
     assert len(mined) == 1 and not (tmp_path / "run" / "conversions.jsonl").read_text().strip()
     replays = [e.name for e in Bank(tmp_path / "bank") if e.source.get("replay")]

@@ -176,10 +176,11 @@ def test_an_episode_record_field_of_the_wrong_kind_is_named(change, wanted):
 
 def test_the_miner_writes_and_reads_its_records_as_episode_records(tmp_path):
     from dv2s_gym.mining.errors import MiningError
-    from dv2s_gym.mining.miner import _Appender, read_records
+    from dv2s_gym.mining.jsonl import JsonlAppender
+    from dv2s_gym.mining.miner import read_records
 
     path = tmp_path / "episodes.jsonl"
-    appender = _Appender(path)
+    appender = JsonlAppender(path)
     appender.append(EpisodeRecord.from_dict(EPISODE))
     appender.append({**EPISODE, "index": 4, "behaviour": None})
     appender.close()

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from dv2s_gym.pipeline.sg.rules import generate_rules, unshown_warnings
-from dv2s_gym.pipeline.semantics.trace import _map_view, elements_from_trace
+from dv2s_gym.pipeline.semantics.trace import map_view, elements_from_trace
 from sg_helpers import run_script
 
 STOP_THEN_STRAIGHT = ("At a four-way intersection the ego stops at the stop sign for a car crossing from the right, "
@@ -23,7 +23,7 @@ def test_the_ego_stops_for_the_crossing_car_then_goes_straight_after_it_has_pass
     assert {"stop", "go_straight"} <= ego
     assert ("car", "go_straight") in {tuple(a) for a in elements["actions"]}
     # it waited: the ego enters the junction only after the car has left it
-    view = _map_view(trace)
+    view = map_view(trace)
     track = {name: np.array([step[name] for step in trace.states]) for name in ("ego", "Car1")}
     inside = {name: np.flatnonzero(view.in_junction(t)) for name, t in track.items()}
     assert inside["ego"].size and inside["Car1"].size and inside["ego"][0] > inside["Car1"][-1]

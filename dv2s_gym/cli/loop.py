@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from typing import Any, List, Mapping, Optional
 
@@ -140,10 +141,12 @@ def run(args: argparse.Namespace) -> int:
     return int(report.recommendation["exit_code"])
 
 
-_VALUED = ("rounds", "budget", "sampler", "fine_tune_steps", "fine_tune_lr", "holdout_fraction", "k_eval",
-           "regress_episodes", "mined_share", "margin", "seed", "workers", "scenarios", "fine_tune_method",
-           "min_heldout_episodes", "min_heldout_families", "untouched_seeds")
-"""The options whose value, when given, overrides the profile's (an option not given is ``None``)."""
+_PARSED_HERE = ("bank_dir", "n_envs", "control", "fine_tune_reward", "max_conversions", "max_replays")
+"""The settings whose option has another name or is read by :func:`loop_settings` itself."""
+
+_VALUED = tuple(field.name for field in dataclasses.fields(LoopSettings) if field.name not in _PARSED_HERE)
+"""The settings whose option has their name and whose value, when given, overrides the profile's (an option not
+given is ``None``)."""
 
 
 def loop_settings(args: argparse.Namespace):

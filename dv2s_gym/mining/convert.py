@@ -72,6 +72,7 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
 
 import numpy as np
 
+from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.exact_replay import narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
 from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence, key_actor, shows_interaction
 from dv2s_gym.mining.monitors import detect_failure
@@ -79,6 +80,7 @@ from dv2s_gym.mining.report_text import not_compared_names_text
 from dv2s_gym.mining.param_meaning import (meaning_map, name_mismatch, quantity_of, quantity_uses, read_interval,
                                            read_support, script_parameters, support_contains, support_text,
                                            tied_objects)
+from dv2s_gym.mining.settings import read_run_settings
 from dv2s_gym.mining.tasks import reference_avoids
 from dv2s_gym.pipeline import stages
 from dv2s_gym.pipeline.convert import check_scenario, conversion_provenance
@@ -86,7 +88,7 @@ from dv2s_gym.pipeline.errors import (EndpointHTTPError, EndpointTimeoutError, E
                                       MissingAPIKeyError)
 from dv2s_gym.pipeline.metrics import e2e_sc
 from dv2s_gym.pipeline.semantics.text import elements_from_text
-from dv2s_gym.pipeline.semantics.trace import _kind, elements_from_trace
+from dv2s_gym.pipeline.semantics.trace import elements_from_trace, trace_actor_kind
 from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.atomic import atomic_write_text
 from scenario_bank.bank import Bank, DuplicateScenarioError
@@ -185,11 +187,10 @@ def _monitor_options(run_dir: Path, monitor: Optional[Mapping[str, Any]]) -> Dic
     if monitor is not None:
         return dict(monitor)
     try:
-        settings = json.loads((run_dir / "settings.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+        settings = read_run_settings(run_dir)
+    except MiningError:
         return {}
-    return {key: settings[key] for key in ("ttc_threshold", "stall_seconds")
-            if isinstance(settings, dict) and settings.get(key) is not None}
+    return {} if settings is None else settings.monitor
 
 
 def _policy_name(policy: Any) -> str:
@@ -287,7 +288,7 @@ def _reproduction_episode(scene_seed: int, result: Any, trace: Any, monitor: Map
     actor_kind = None
     if actor is not None:
         actor_kind = (failure.get("with_kind") if failure.get("with") == actor and failure.get("with_kind")
-                      else _actor_kind(trace, actor))
+                      else trace_actor_kind(trace, actor))
     wanted_kind = (interaction or {}).get("kind")
     same = same_failure_class(source_failure, failure) and (wanted_kind is None or actor_kind == wanted_kind)
     shown = shows_interaction(interaction, elements_from_trace(trace)) if interaction else None
@@ -307,10 +308,6 @@ def clip_episode(episodes: List[Mapping[str, Any]]) -> Tuple[Mapping[str, Any], 
     return episodes[0], "no reproduction episode failed; the first"
 
 
-def _actor_kind(trace, name: str) -> str:
-    return _kind(name, dict(getattr(trace, "kinds", {}) or {}))
-
-
 def actor_census(trace: Any) -> Dict[str, int]:
     """The actors of an episode's trace besides the ego, counted by kind (``{"car": 2, "pedestrian": 1}``)."""
     names = set(getattr(trace, "kinds", {}) or {})
@@ -319,7 +316,7 @@ def actor_census(trace: Any) -> Dict[str, int]:
     names.discard("ego")
     census: Dict[str, int] = {}
     for name in names:
-        kind = _actor_kind(trace, name)
+        kind = trace_actor_kind(trace, name)
         census[kind] = census.get(kind, 0) + 1
     return dict(sorted(census.items()))
 

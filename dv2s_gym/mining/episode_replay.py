@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
-from typing import Any, Dict, Optional, Tuple, Union
+from typing import Optional, Tuple, Union
 
 from dv2s_gym.mining.failure_video import rerun_failure, write_failure_video
 from dv2s_gym.mining.miner import read_records
+from dv2s_gym.mining.settings import read_run_settings, SETTINGS_FILE
 from envs.recording import write_frames
 from envs.trace_bounds import check_file_config
+from scenario_bank.records import EpisodeRecord
 
 __all__ = ["replay_mined_episode"]
 
@@ -18,25 +19,25 @@ PathLike = Union[str, os.PathLike]
 
 
 def replay_mined_episode(folder: PathLike, episode: Optional[str], *, policy: Optional[str] = None,
-                         video: Optional[PathLike] = None) -> Tuple[Dict[str, Any], str]:
+                         video: Optional[PathLike] = None) -> Tuple[EpisodeRecord, str]:
     """Re-run episode ``episode`` (its index) of the ``dv2s mine`` run in ``folder`` with the recorded scenario,
     parameters and seed, checking its trajectory hash (:func:`~dv2s_gym.mining.failure_video.rerun_failure`);
     with ``video``, also write it (a failure's video with its trace beside it, see
     :func:`~dv2s_gym.mining.failure_video.write_failure_video`).
 
     ``policy`` replaces the run's policy spec (needed for one that is not built in: a file's spec is loaded only
-    if it is). Returns ``(episode record, policy spec)``; a folder that is not a mining run, or an episode that
+    if it is). Returns ``(the episode's record, policy spec)``; a folder that is not a mining run, or an episode that
     did not finish, raises ``ValueError`` naming the fix.
     """
     folder = Path(folder)
-    settings_file = folder / "settings.json"
-    if not settings_file.is_file():
-        raise ValueError(f"{folder} is not a `dv2s mine` run folder (no settings.json); pass a trace file, a "
+    settings = read_run_settings(folder)
+    if settings is None:
+        raise ValueError(f"{folder} is not a `dv2s mine` run folder (no {SETTINGS_FILE}); pass a trace file, a "
                          "regress report.json or a mining run folder")
     if episode is None or not str(episode).isdigit():
         raise ValueError(f"{folder} is a mining run: name the episode with --episode INDEX (report.md lists the "
                          "failures and their indices)")
-    settings = json.loads(settings_file.read_text(encoding="utf-8"))
+    settings_file = str(settings.path)
     records = {int(r["index"]): r for r in read_records(folder / "episodes.jsonl")}
     record = records.get(int(episode))
     if record is None or record.get("error") or not record.get("result"):
@@ -45,13 +46,13 @@ def replay_mined_episode(folder: PathLike, episode: Optional[str], *, policy: Op
     if not policy:
         from policies.registry import spec_from_file
 
-        policy = spec_from_file(settings.get("policy"), str(settings_file), "--policy-spec SPEC")
-    options = {"policy": policy, "bank_dir": settings.get("bank_dir"),
-               "env_config": check_file_config(settings.get("env_config"), str(settings_file))}
+        policy = spec_from_file(settings.policy, settings_file, "--policy-spec SPEC")
+    options = {"policy": policy, "bank_dir": settings.bank_dir,
+               "env_config": check_file_config(settings.env_config, settings_file)}
     if video and record.get("failure"):
         write_failure_video(record, video, trace_path=Path(video).with_suffix(".json.gz"), **options)
     else:
         _, _, frames = rerun_failure(record, render=bool(video), **options)
         if video:
-            write_frames(video, frames, (settings.get("env_config") or {}).get("policy_frequency", 5))
+            write_frames(video, frames, options["env_config"].get("policy_frequency", 5))
     return record, policy

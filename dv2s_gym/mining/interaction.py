@@ -26,7 +26,7 @@ import dataclasses
 import math
 from typing import Any, Dict, List, Mapping, Optional
 
-from dv2s_gym.pipeline.semantics.trace import _kind as semantic_kind, elements_from_trace
+from dv2s_gym.pipeline.semantics.trace import elements_from_trace, trace_actor_kind
 from scenario_bank.failure_types import failure_type
 
 __all__ = ["MANOEUVRES", "LOOKBACK_S", "key_actor", "actor_manoeuvres", "failure_interaction", "shows_interaction",
@@ -39,10 +39,6 @@ LOOKBACK_S = 6.0
 """Seconds before the failure searched for the actor the ego reacted to (stalls, leaving the road)."""
 _SAME_LANE_M = 2.0   # |lateral offset| [m] within which an actor is in the ego's lane
 _LANE_CHANGES = {"lane_change_left", "lane_change_right"}
-
-
-def _kind(trace, name: str) -> str:
-    return semantic_kind(name, dict(getattr(trace, "kinds", {}) or {}))
 
 
 def _frequency(trace) -> float:
@@ -105,7 +101,7 @@ def actor_manoeuvres(trace, name: str) -> List[str]:
     alone = dataclasses.replace(
         trace, states=[{k: v for k, v in step.items() if k in keep} for step in trace.states],
         events=[e for e in trace.events if set(e.get("actors") or []) <= keep])
-    kind = _kind(trace, name)
+    kind = trace_actor_kind(trace, name)
     found = {action for who, action in elements_from_trace(alone)["actions"] if who == kind}
     return [m for m in MANOEUVRES if m in found]
 
@@ -127,7 +123,8 @@ def failure_interaction(trace, failure: Optional[Mapping[str, Any]]) -> Dict[str
         return out
     known = dict(getattr(trace, "kinds", {}) or {})
     out["kind"] = known[name] if name in known else (
-        failure.get("with_kind") if failure.get("with") == name and failure.get("with_kind") else _kind(trace, name))
+        failure.get("with_kind") if failure.get("with") == name and failure.get("with_kind")
+        else trace_actor_kind(trace, name))
     out["manoeuvres"] = actor_manoeuvres(trace, name)
     k = _failure_step(trace, failure)
     first = max(0, k - int(round(LOOKBACK_S * _frequency(trace))))

@@ -1,12 +1,40 @@
-"""Rows of the mining run's append-only JSON-lines files, read back after a possible kill."""
+"""The mining run's append-only JSON-lines files: rows appended so that a kill leaves at most a torn last line
+(:class:`JsonlAppender`), and read back after a possible kill (:func:`read_rows`)."""
 
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
-from typing import Any, Dict, List
+from typing import Any, Dict, List, Mapping
 
-__all__ = ["read_rows"]
+from scenario_bank.records import EpisodeRecord
+
+__all__ = ["JsonlAppender", "read_rows"]
+
+
+class JsonlAppender:
+    """Appends JSON lines to a file, each flushed and fsynced before it counts as written (a torn last line, left
+    by a kill mid-write, is dropped when the file is opened again)."""
+
+    def __init__(self, path: Path) -> None:
+        self._path = path
+        if path.is_file() and path.stat().st_size:
+            with open(path, "rb+") as handle:  # drop a torn last line so the next record starts clean
+                data = handle.read()
+                if not data.endswith(b"\n"):
+                    handle.truncate(data.rfind(b"\n") + 1)
+        self._handle = open(path, "ab")
+
+    def append(self, record: Mapping[str, Any]) -> None:
+        """Write ``record`` (a JSON object, or an :class:`~scenario_bank.records.EpisodeRecord`) as one line."""
+        record = record.to_dict() if isinstance(record, EpisodeRecord) else record
+        self._handle.write(json.dumps(record, sort_keys=True, default=str).encode("utf-8") + b"\n")
+        self._handle.flush()
+        os.fsync(self._handle.fileno())
+
+    def close(self) -> None:
+        self._handle.close()
 
 
 def read_rows(path: Path) -> List[Dict[str, Any]]:

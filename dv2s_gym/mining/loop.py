@@ -96,10 +96,8 @@ __all__ = ["LoopError", "LoopReport", "LoopSettings", "run_loop", "DEFAULT_OUT",
 DEFAULT_OUT = "out/loop"
 """Where ``dv2s loop`` writes when ``--out`` is not given (rerunning resumes it)."""
 
-IDENTITY = ("policy", "bank_dir", "budget", "sampler", "fine_tune_steps", "fine_tune_lr", "holdout_fraction", "k_eval",
-            "regress_episodes", "mined_share", "fine_tune_reward", "margin", "seed", "scenarios", "fine_tune_method",
-            "max_conversions", "control", "untouched_seeds", "min_heldout_episodes", "min_heldout_families",
-            "max_replays", "n_envs")
+IDENTITY = ("policy",) + LoopSettings.resume_keys()
+"""The settings of ``loop.json`` a resumed loop must share with the recorded ones."""
 _RECORDED = ("holdout_by",)
 """Settings a loop keeps as first recorded (not chosen by the user, so never a reason to refuse a resume)."""
 
@@ -420,19 +418,11 @@ def _open_loop(policy: str, settings: LoopSettings, out: Path, progress: bool, l
 
 def _recorded_settings(policy: str, settings: LoopSettings, workers: int, env_config: Dict[str, Any],
                        fine_tune_config: Dict[str, Any]) -> Dict[str, Any]:
-    """The ``settings`` of ``loop.json`` (the keys :data:`IDENTITY` names are the loop's identity)."""
-    s = settings
-    return {"policy": policy, "bank_dir": None if s.bank_dir is None else str(Path(s.bank_dir).resolve()),
-            "budget": s.budget, "sampler": s.sampler, "fine_tune_steps": s.fine_tune_steps,
-            "fine_tune_lr": s.fine_tune_lr, "holdout_fraction": float(s.holdout_fraction), "k_eval": s.k_eval,
-            "regress_episodes": s.regress_episodes, "mined_share": float(s.mined_share),
-            "fine_tune_reward": dict(s.fine_tune_reward), "fine_tune_method": s.fine_tune_method,
-            "margin": float(s.margin), "seed": s.seed,
-            "scenarios": list(s.scenarios) if s.scenarios is not None else None, "rounds": s.rounds,
-            "max_conversions": s.max_conversions, "max_replays": s.max_replays, "holdout_by": HOLDOUT_BY,
-            "control": bool(s.control), "untouched_seeds": s.untouched_seeds,
-            "min_heldout_episodes": s.min_heldout_episodes, "min_heldout_families": s.min_heldout_families,
-            "workers": workers, "n_envs": s.n_envs, "env_config": env_config, "fine_tune_env_config": fine_tune_config}
+    """The ``settings`` of ``loop.json``: :meth:`LoopSettings.recorded` with the policy, the resolved number of
+    workers, how mined scenarios are held out and the env configs (the keys :data:`IDENTITY` names are the loop's
+    identity)."""
+    return {"policy": policy, **settings.recorded(), "workers": workers, "holdout_by": HOLDOUT_BY,
+            "env_config": env_config, "fine_tune_env_config": fine_tune_config}
 
 
 class _Timed:

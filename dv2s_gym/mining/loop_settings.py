@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 from typing import Any, Dict, Mapping, Optional, Tuple
 
 from dv2s_gym.mining.samplers import registered_samplers
 from envs.errors import DV2SError
+from scenario_bank.run_identity import recorded_settings, resume_keys, setting
 from scenario_bank.field_checks import (check_bool, check_choice, check_int, check_mapping, check_names,
                                         check_number, check_path)
 
@@ -38,9 +40,9 @@ class LoopSettings:
     needs the same ones except ``rounds`` (raise it to add rounds) and ``workers`` (runs are the same whatever
     the number of workers)."""
 
-    rounds: int = 1
+    rounds: int = setting(1, resume=False)
     """Rounds to have finished when the loop returns (a resumed loop runs only the missing ones)."""
-    bank_dir: Optional[str] = None
+    bank_dir: Optional[str] = setting(None, record=lambda path: None if path is None else str(Path(path).resolve()))
     """A writable bank to grow (``None``: a copy of the shipped bank in ``out/bank``)."""
     scenarios: Optional[Tuple[str, ...]] = None
     """The scenarios mined and regression-tested (``None``: the starting bank's)."""
@@ -85,7 +87,7 @@ class LoopSettings:
     """The regression test's non-inferiority margin."""
     seed: int = 0
     """Seeds the miner, the split and the fine-tuning (each round derives its own)."""
-    workers: Optional[int] = None
+    workers: Optional[int] = setting(None, resume=False)
     """Processes for mining and evaluation (``None``: every core)."""
     n_envs: int = 2
     """Training environments (subprocesses)."""
@@ -135,6 +137,15 @@ class LoopSettings:
     def replace(self, **changes: Any) -> "LoopSettings":
         """A copy with ``changes`` (checked again)."""
         return dataclasses.replace(self, **changes)
+
+    @classmethod
+    def resume_keys(cls) -> Tuple[str, ...]:
+        """The settings a resumed loop must share with the loop it continues: all but ``rounds`` and ``workers``."""
+        return resume_keys(cls)
+
+    def recorded(self) -> Dict[str, Any]:
+        """The settings as ``loop.json`` records them (JSON values; ``bank_dir`` resolved to an absolute path)."""
+        return recorded_settings(self)
 
     @classmethod
     def from_profile(cls, name: str = "quick", **overrides: Any) -> "LoopSettings":

@@ -55,11 +55,11 @@ from dv2s_gym.mining.convert import cluster_slug, CONVERSION_DIR, convert_failur
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import is_novel
 from dv2s_gym.mining.family import record_family, scenario_family
-from dv2s_gym.mining.jsonl import read_rows
+from dv2s_gym.mining.jsonl import JsonlAppender, read_rows
 from dv2s_gym.mining.report import write_reports
 from dv2s_gym.mining.report_text import error_warning
 from dv2s_gym.mining.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
-from dv2s_gym.mining.settings import FEEDBACKS, MineSettings
+from dv2s_gym.mining.settings import FEEDBACKS, MineSettings, read_run_settings, RunSettings, SETTINGS_FILE
 from dv2s_gym.mining.tasks import MINE
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
 from dv2s_gym.workers import backends
@@ -78,8 +78,8 @@ __all__ = ["MineRun", "MineSettings", "WorkerSettings", "FEEDBACKS", "mine", "re
 SETTINGS_VERSION = 1
 LOOKAHEAD_CHUNKS = 16
 """Whole chunks a non-adaptive sampler (random, halton) sends to the workers at once."""
-_RESUME_KEYS = ("policy", "sampler", "sampler_options", "feedback", "seed", "batch", "scenarios", "bank_dir",
-                "env_config", "reference", "ttc_threshold", "stall_seconds")
+_RESUME_KEYS = ("policy",) + MineSettings.resume_keys()
+"""The keys of ``settings.json`` a resumed run must share with the recorded ones."""
 _SPACE_KEYS = ("scenarios",)
 """Identity keys known only once the scene space is built (the scenario names it resolved); the others are compared
 before building it, which takes minutes on a loaded machine."""
@@ -212,33 +212,11 @@ def _run_lock(out: Path) -> Iterator[None]:
         handle.close()
 
 
-class _Appender:
-    """Appends JSON lines to a file, each flushed and fsynced before it counts as written."""
-
-    def __init__(self, path: Path) -> None:
-        self._path = path
-        if path.is_file() and path.stat().st_size:
-            with open(path, "rb+") as handle:  # drop a torn last line so the next record starts clean
-                data = handle.read()
-                if not data.endswith(b"\n"):
-                    handle.truncate(data.rfind(b"\n") + 1)
-        self._handle = open(path, "ab")
-
-    def append(self, record: Mapping[str, Any]) -> None:
-        record = record.to_dict() if isinstance(record, EpisodeRecord) else record
-        self._handle.write(json.dumps(record, sort_keys=True, default=str).encode("utf-8") + b"\n")
-        self._handle.flush()
-        os.fsync(self._handle.fileno())
-
-    def close(self) -> None:
-        self._handle.close()
-
-
 class _Recorder:
     """Turns finished results into records: appended to ``episodes.jsonl``, kept in ``done``, counted on
     the progress bar (failures and distinct clusters)."""
 
-    def __init__(self, appender: _Appender, done: Dict[int, EpisodeRecord], sampler: str, out: Path, bar) -> None:
+    def __init__(self, appender: JsonlAppender, done: Dict[int, EpisodeRecord], sampler: str, out: Path, bar) -> None:
         self.appender, self.done, self.sampler, self.out, self.bar = appender, done, sampler, out, bar
         counted = [r for r in done.values() if r.failed]
         self.found = {cluster_id(r) for r in counted}
@@ -258,29 +236,18 @@ class _Recorder:
 
 def _settings(policy: str, settings: MineSettings, batch: int, scenarios: List[str], bank_dir: Optional[str],
               space_description: Dict[str, Any]) -> Dict[str, Any]:
-    """The run's ``settings.json`` (the keys :data:`_RESUME_KEYS` name are its identity)."""
-    return {
-        "schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, "sampler": settings.sampler,
-        "sampler_options": dict(settings.sampler_options) if settings.sampler_options else None,
-        "feedback": settings.feedback, "seed": int(settings.seed),
-        "batch": int(batch), "scenarios": scenarios, "bank_dir": bank_dir, "env_config": dict(settings.env_config),
-        "reference": settings.reference, "ttc_threshold": float(settings.ttc_threshold),
-        "stall_seconds": float(settings.stall_seconds), "budget": int(settings.budget), "space": space_description,
-    }
+    """The run's ``settings.json``: :meth:`MineSettings.recorded` with the policy and the resolved batch, scenarios
+    and bank (the keys :data:`_RESUME_KEYS` name are its identity)."""
+    return {"schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, **settings.recorded(),
+            "batch": int(batch), "scenarios": scenarios, "bank_dir": bank_dir, "space": space_description}
 
 
-def _read_settings(path: Path) -> Optional[Dict[str, Any]]:
-    """A run folder's ``settings.json`` (``None`` when there is none); a damaged one is refused in one line
+def _read_settings(out: Path) -> Optional[RunSettings]:
+    """The run folder's ``settings.json`` (``None`` when there is none); a damaged one is refused in one line
     naming the file and the fix."""
-    if not path.is_file():
-        return None
-    try:
-        saved = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as error:
-        raise MiningError(f"{path} is not readable JSON ({error}); restore it, or choose another --out "
-                          "(or delete the run folder) to start the run over") from None
-    if not isinstance(saved, dict) or not isinstance(saved.get("scenarios"), list):
-        raise MiningError(f"{path} is not a mining run's settings (no list of scenarios); restore it, or choose "
+    saved = read_run_settings(out)
+    if saved is not None and not isinstance(saved.get("scenarios"), list):
+        raise MiningError(f"{saved.path} is not a mining run's settings (no list of scenarios); restore it, or choose "
                           "another --out (or delete the run folder) to start the run over")
     return saved
 
@@ -575,8 +542,8 @@ def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional
               origin: Optional[Mapping[str, Any]]) -> tuple:
     """``(settings.json's content, the scene space)`` of the run in ``out``: a new run's settings, or a resumed
     run's checked against the ones asked (its own scenarios and batch when none are asked); written back."""
-    settings_path = out / "settings.json"
-    saved = _read_settings(settings_path)
+    settings_path = out / SETTINGS_FILE
+    saved = _read_settings(out)
     batch = settings.batch or (saved["batch"] if saved else 4 * n_workers)
     if saved is not None:  # a changed seed, policy, ... is refused before the space is built, not minutes later
         before_space = _settings(policy, settings, batch, saved["scenarios"], bank_dir, {})
@@ -603,8 +570,8 @@ def _run_episodes(out: Path, settings: Dict[str, Any], space, done: Dict[int, Ep
         window = _restore_window(out, settings, space, done, batch, budget)
     else:
         scene_sampler = _restore_sampler(out, settings, space, done, batch)
-    appender = _Appender(out / "episodes.jsonl")
-    bar = _progress(progress, budget, len([i for i in done if i < budget]))
+    appender = JsonlAppender(out / "episodes.jsonl")
+    bar = progress_bar(progress, budget, len([i for i in done if i < budget]))
     try:
         pool = backends.get_backend(workers.backend, workers=n_workers, address=workers.address,
                                     timeout=workers.timeout)
@@ -708,8 +675,8 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
     room = None if max_conversions is None else max(0, int(max_conversions) - len(existing))
     todo = [(cluster, record) for _, cluster, record in candidates][:room]
     bank = Bank(bank_dir)
-    appender = _Appender(path)
-    bar = _progress(progress, len(todo), 0, desc="converting")
+    appender = JsonlAppender(path)
+    bar = progress_bar(progress, len(todo), 0, desc="converting")
     try:
         for cluster, record in todo:
             row = _reached_bank(bank, run.out, cluster)  # killed after the bank write, before its line
@@ -775,7 +742,8 @@ def _write_reports(out: Path) -> Dict[str, Path]:
     return write_reports(out)
 
 
-def _progress(enabled: bool, total: int, initial: int, desc: str = "mining"):
+def progress_bar(enabled: bool, total: int, initial: int, desc: str = "mining"):
+    """A progress bar on stderr counting ``total`` episodes from ``initial`` (``None`` when not ``enabled``)."""
     if not enabled:
         return None
 

@@ -12,7 +12,6 @@ clusters left. :func:`replay_entries` reads the replay entries of a run back, fr
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
@@ -21,8 +20,9 @@ from dv2s_gym.mining import convert
 from dv2s_gym.mining.cluster import group
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.family import record_family
-from dv2s_gym.mining.jsonl import read_rows
-from dv2s_gym.mining.miner import _Appender, _progress, read_records
+from dv2s_gym.mining.jsonl import JsonlAppender, read_rows
+from dv2s_gym.mining.miner import progress_bar, read_records
+from dv2s_gym.mining.settings import read_run_settings, SETTINGS_FILE
 from scenario_bank.bank import Bank
 
 __all__ = ["REPLAYS_FILE", "replay_clusters", "replay_order", "replay_entries"]
@@ -40,11 +40,9 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
     one the conversion would take (lowest robustness, then lowest index). Returns every row of the run's
     ``replays.jsonl`` (:func:`dv2s_gym.mining.convert.replay_failure_entry`'s records)."""
     run_dir = Path(run_dir)
-    try:
-        settings = json.loads((run_dir / "settings.json").read_text(encoding="utf-8"))
-    except (OSError, ValueError) as error:
-        raise MiningError(f"{run_dir} holds no readable mining run (settings.json: {error}); mine into it first") \
-            from None
+    settings = read_run_settings(run_dir)
+    if settings is None:
+        raise MiningError(f"{run_dir} holds no mining run (no {SETTINGS_FILE}); mine into it first")
     path = run_dir / REPLAYS_FILE
     existing = read_rows(path)
     converted = {str(row.get("cluster")) for row in read_rows(run_dir / "conversions.jsonl")}
@@ -57,15 +55,14 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
     if not todo:
         return existing
     bank = Bank(bank_dir)
-    appender = _Appender(path)
-    bar = _progress(progress, len(todo), 0, desc="exact replays")
+    appender = JsonlAppender(path)
+    bar = progress_bar(progress, len(todo), 0, desc="exact replays")
     try:
         for cluster, record in todo:
             row = convert.replay_failure_entry(dict(record, cluster=cluster), run_dir, policy=settings["policy"],
-                                               bank=bank, env_config=settings.get("env_config"), cluster=cluster,
-                                               bank_dir=settings.get("bank_dir"),  # the bank the run mined (the parents')
-                                               monitor={key: settings[key] for key in ("ttc_threshold", "stall_seconds")
-                                                        if settings.get(key) is not None})
+                                               bank=bank, env_config=settings.env_config, cluster=cluster,
+                                               bank_dir=settings.bank_dir,  # the bank the run mined (the parents')
+                                               monitor=settings.monitor)
             appender.append(row)
             existing.append(row)
             if bar is not None:

@@ -100,6 +100,7 @@ from dv2s_gym.mining.rate import rate_estimates
 from dv2s_gym.mining.report_text import (NOT_COMPARED_REASONS, breadth, error_warning, not_compared_counts,
                                          parameter_check_text, rate_text, seed_text)
 from dv2s_gym.mining.report_text import number_text as _num
+from dv2s_gym.mining.settings import read_run_settings, RunSettings, SETTINGS_FILE
 from dv2s_gym.mining.report_text import percent_text as _pct
 from dv2s_gym.regress.identity import installed_version
 from dv2s_gym.regress.stats import wilson_interval
@@ -162,8 +163,9 @@ def read_jsonl(path: PathLike) -> Tuple[List[Dict[str, Any]], int]:
     return records, skipped
 
 
-def read_run(run_dir: PathLike) -> Tuple[Dict[str, Any], List[Dict[str, Any]], List[Dict[str, Any]], Dict[str, int]]:
-    """``(settings, episodes, conversions, skipped_lines)`` of a run folder.
+def read_run(run_dir: PathLike) -> Tuple[RunSettings, List[Dict[str, Any]], List[Dict[str, Any]], Dict[str, int]]:
+    """``(settings, episodes, conversions, skipped_lines)`` of a run folder (``settings``: its ``settings.json``,
+    :func:`~dv2s_gym.mining.settings.read_run_settings`).
 
     Episodes are sorted by index, one per index (the first record of an index wins);
     conversions keep the last record of each cluster id.
@@ -171,18 +173,10 @@ def read_run(run_dir: PathLike) -> Tuple[Dict[str, Any], List[Dict[str, Any]], L
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise MiningReportError(f"run folder {run_dir} does not exist; give the --out folder of a `dv2s mine` run")
-    settings_path = run_dir / "settings.json"
-    if not settings_path.is_file():
-        raise MiningReportError(f"{run_dir} has no settings.json, so it is not a `dv2s mine` run folder; give the "
+    settings = read_run_settings(run_dir, error=MiningReportError)
+    if settings is None:
+        raise MiningReportError(f"{run_dir} has no {SETTINGS_FILE}, so it is not a `dv2s mine` run folder; give the "
                                 "--out folder of a mining run")
-    try:
-        settings = json.loads(settings_path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, ValueError) as error:
-        raise MiningReportError(f"{settings_path} is not readable JSON ({error}); restore it or start the run "
-                                "again in a new folder") from None
-    if not isinstance(settings, dict):
-        raise MiningReportError(f"{settings_path} holds a JSON {type(settings).__name__}, not the run's settings "
-                                "object; restore it or start the run again in a new folder")
     episodes, skipped_episodes = read_jsonl(run_dir / "episodes.jsonl")
     conversions, skipped_conversions = read_jsonl(run_dir / "conversions.jsonl")
     by_index: Dict[int, Dict[str, Any]] = {}

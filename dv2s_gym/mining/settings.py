@@ -3,15 +3,23 @@
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Dict, Mapping, Optional, Tuple
+import json
+import os
+from pathlib import Path
+from typing import Any, Dict, Iterator, Mapping, Optional, Tuple, Type, Union
 
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
 from dv2s_gym.mining.samplers import default_feedback, registered_samplers
 from scenario_bank.field_checks import (check_bool, check_int, check_mapping, check_names,
                                         check_number, check_path, check_text)
+from scenario_bank.run_identity import recorded_settings, resume_keys, setting
 
-__all__ = ["FEEDBACKS", "MineSettings"]
+__all__ = ["FEEDBACKS", "MineSettings", "SETTINGS_FILE", "RunSettings", "read_run_settings"]
+
+SETTINGS_FILE = "settings.json"
+"""The file of a mining run folder that records what the run mines (:meth:`MineSettings.recorded` and the run's
+resolved values)."""
 
 FEEDBACKS = ("robustness", "novelty", "scenario-novelty", "state-novelty")
 """What the adaptive samplers are fed: ``robustness`` (each episode's robustness) or ``novelty`` (the same,
@@ -29,16 +37,17 @@ failure's in the same scenario."""
 class MineSettings:
     """The settings of a mining run (:func:`dv2s_gym.mining.miner.mine`); the command line's defaults are these.
 
-    A run folder records them (``settings.json``); resuming it needs the same ones except ``budget`` (a larger
-    one continues the run), ``convert``, ``convert_options`` and ``max_conversions``.
+    A run folder records them (``settings.json``, :meth:`recorded`); resuming it needs the same ones
+    (:meth:`resume_keys`) except ``budget`` (a larger one continues the run), ``convert``, ``convert_options`` and
+    ``max_conversions`` (not recorded).
     """
 
-    budget: int = 200
+    budget: int = setting(200, resume=False)
     """Episodes to run in total (at least 1)."""
     sampler: str = "novelty-bandit"
     """One of :data:`~dv2s_gym.mining.samplers.SAMPLERS` (``novelty-bandit``: broader failures than VerifAI's
     cross-entropy on the breadth bench, bench/RESULTS.md)."""
-    sampler_options: Optional[Mapping[str, Any]] = None
+    sampler_options: Optional[Mapping[str, Any]] = setting(None, record=lambda options: dict(options or {}) or None)
     """Parameters of an adaptive sampler (VerifAI's ``alpha``, ``buckets``, ``thres``;
     :func:`~dv2s_gym.mining.samplers.sampler_params`); ``None``: the sampler's defaults."""
     feedback: Optional[str] = None
@@ -60,12 +69,12 @@ class MineSettings:
     """Time-to-collision [s] under which an episode is a low-TTC failure (:mod:`dv2s_gym.mining.monitors`)."""
     stall_seconds: float = DEFAULT_STALL_SECONDS
     """Seconds standing with a free lane ahead that count as a stall."""
-    convert: bool = False
+    convert: bool = setting(False, resume=False, record=False)
     """Turn one failure per avoidable cluster into a bank scenario (:mod:`dv2s_gym.mining.convert`); ``bank_dir``
     must then be given and writable (a new or empty folder starts as a copy of the shipped bank)."""
-    convert_options: Optional[Mapping[str, Any]] = None
+    convert_options: Optional[Mapping[str, Any]] = setting(None, resume=False, record=False)
     """Keyword arguments of :func:`~dv2s_gym.mining.convert.convert_failure` (DRA and SG backends, ``k``...)."""
-    max_conversions: Optional[int] = None
+    max_conversions: Optional[int] = setting(None, resume=False, record=False)
     """At most this many clusters are converted, largest first (``None``: all)."""
 
     def __post_init__(self) -> None:
@@ -106,8 +115,80 @@ class MineSettings:
         """A copy with ``changes`` (checked again)."""
         return dataclasses.replace(self, **changes)
 
+    @classmethod
+    def resume_keys(cls) -> Tuple[str, ...]:
+        """The settings a resumed run must share with the run it continues (every recorded one but ``budget``)."""
+        return resume_keys(cls)
+
+    def recorded(self) -> Dict[str, Any]:
+        """The settings as ``settings.json`` records them (JSON values; ``sampler_options`` ``None`` when empty;
+        the miner records the resolved ``batch``, ``scenarios`` and ``bank_dir`` over these)."""
+        return recorded_settings(self)
+
     def options(self) -> Dict[str, Any]:
         """The settings as keyword arguments of :class:`MineSettings` (``scenarios`` as a list)."""
         values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         values["scenarios"] = list(self.scenarios) if self.scenarios is not None else None
         return values
+
+
+class RunSettings(Mapping[str, Any]):
+    """A mining run's ``settings.json`` as read back (:func:`read_run_settings`): every recorded value by its key
+    (a read-only mapping: :meth:`MineSettings.recorded` with the policy, the resolved batch, scenarios and bank,
+    the scene space and the schedule) and, typed, those the run's later steps use."""
+
+    def __init__(self, path: Path, values: Mapping[str, Any]) -> None:
+        self.path = path
+        """The ``settings.json`` read."""
+        self._values = dict(values)
+
+    def __getitem__(self, key: str) -> Any:
+        return self._values[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._values)
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def __repr__(self) -> str:
+        return f"RunSettings({str(self.path)!r}, {self._values!r})"
+
+    @property
+    def policy(self) -> Optional[str]:
+        """The policy spec the run mined (data read from a file: check it before loading a policy from it)."""
+        return self._values.get("policy")
+
+    @property
+    def bank_dir(self) -> Optional[str]:
+        """The bank the run mined (``None``: the shipped bank)."""
+        return self._values.get("bank_dir")
+
+    @property
+    def env_config(self) -> Any:
+        """The DV2S-v0 config overrides the run recorded, as read (check them before use)."""
+        return self._values.get("env_config")
+
+    @property
+    def monitor(self) -> Dict[str, Any]:
+        """The failure monitors' settings the run recorded (``ttc_threshold``, ``stall_seconds``; those absent
+        are left out, so the monitors' defaults apply)."""
+        return {key: self._values[key] for key in ("ttc_threshold", "stall_seconds")
+                if self._values.get(key) is not None}
+
+
+def read_run_settings(run_dir: Union[str, os.PathLike], *,
+                      error: Type[MiningError] = MiningError) -> Optional[RunSettings]:
+    """The ``settings.json`` of the mining run in ``run_dir`` (``None`` when there is none); one that is not
+    readable JSON or not a JSON object is refused with ``error`` in one line naming the file and the fix."""
+    path = Path(run_dir) / SETTINGS_FILE
+    if not path.is_file():
+        return None
+    fix = "restore it, or choose another --out (or delete the run folder) to start the run over"
+    try:
+        values = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as problem:
+        raise error(f"{path} is not readable JSON ({problem}); {fix}") from None
+    if not isinstance(values, dict):
+        raise error(f"{path} is not a mining run's settings (a JSON {type(values).__name__}, not an object); {fix}")
+    return RunSettings(path, values)

@@ -25,12 +25,6 @@ from scenario_bank.safety import assert_safe
 __all__ = ["Description", "Generation", "describe", "generate", "DRA_BACKENDS", "SG_BACKENDS",
            "register_dra", "register_sg", "registered_dras", "registered_sgs"]
 
-DRA_BACKENDS = ("bev", "openai")
-"""The Driving Record Analyzer backends that ship with dv2s-gym."""
-SG_BACKENDS = ("rules", "openai")
-"""The Scenario Generator backends that ship with dv2s-gym."""
-
-
 @dataclass
 class Description:
     """What the Driving Record Analyzer said about a video."""
@@ -162,6 +156,12 @@ register_dra("bev", _describe_bev)
 register_dra("openai", _describe_openai)
 register_sg("rules", _generate_rules)
 register_sg("openai", _generate_openai)
+
+DRA_BACKENDS: Tuple[str, ...] = tuple(_DRA_REGISTRY)
+"""The Driving Record Analyzer backends that ship with dv2s-gym, in the order registered above (the order
+``--help`` lists them in)."""
+SG_BACKENDS: Tuple[str, ...] = tuple(_SG_REGISTRY)
+"""The Scenario Generator backends that ship with dv2s-gym, in the order registered above."""
 
 
 # --------------------------------------------------------------------------- the stages

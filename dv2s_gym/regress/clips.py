@@ -19,7 +19,7 @@ from envs.errors import DV2SError
 from envs.trace import EpisodeTrace
 from envs.trace_bounds import check_file_config, TraceConfigError
 from envs.recording import VideoWriter
-from dv2s_gym.regress.replay import _bank_for
+from dv2s_gym.regress.replay import bank_for_scenario
 
 __all__ = ["ClipError", "render_episode_video", "render_policy_video", "clip_window", "DEFAULT_CLIP_CONFIG"]
 
@@ -109,7 +109,7 @@ def render_policy_video(report: Dict[str, Any], result: Mapping[str, Any], role:
         config = check_file_config((report.get("settings") or {}).get("env_config"), "the report")
     except TraceConfigError as error:
         raise ClipError(str(error)) from None
-    env = make_eval_env(None, config=config, bank_dir=_bank_for(report.get("bank") or {}, scenario),
+    env = make_eval_env(None, config=config, bank_dir=bank_for_scenario(report.get("bank") or {}, scenario),
                         render_mode="rgb_array")
     frames: List[np.ndarray] = []
     try:

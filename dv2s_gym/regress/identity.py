@@ -131,7 +131,7 @@ def checkpoint_path(base: str) -> Optional[Path]:
 
 def policy_fingerprint(spec: str) -> Dict[str, Any]:
     """``{description: value}`` facts of a policy spec (see the module docstring); every key names what it is."""
-    from policies.registry import _REGISTRY, parse_spec
+    from policies.registry import parse_spec, registered_policies, registered_policy_module
 
     base, options = parse_spec(spec)
     facts: Dict[str, Any] = {"options": json.dumps(options, sort_keys=True, default=str),
@@ -146,13 +146,8 @@ def policy_fingerprint(spec: str) -> Dict[str, Any]:
         card = resolved.parent / "model_card.json"
         if card.is_file():
             facts[f"model card {card} (SHA-256)"] = file_sha256(card)
-    elif base in _REGISTRY:
-        factory = _REGISTRY[base]
-        module = getattr(factory, "__module__", None)
-        closure = [c.cell_contents for c in (getattr(factory, "__closure__", None) or [])]
-        paths = [c for c in closure if isinstance(c, str) and ":" in c]  # a state driver's class path
-        if paths:
-            module = paths[0].split(":")[0]
+    elif base in registered_policies():
+        module = registered_policy_module(base)
         found = _module_file(module) if module else None
         if found is not None:
             facts[f"module {module} source (SHA-256)"] = file_sha256(found)

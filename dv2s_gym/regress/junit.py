@@ -15,7 +15,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any, Mapping, Optional, Union
 
-from dv2s_gym.regress.report import _failures, _headline, power_lines, warnings
+from dv2s_gym.regress.report import failures_text, headline, power_lines, warnings
 from scenario_bank.atomic import atomic_write_text
 
 __all__ = ["write_junit", "junit_tree"]
@@ -71,8 +71,8 @@ def junit_tree(report: Mapping[str, Any]) -> ET.ElementTree:
             detail += "\nnewly failing: " + ", ".join(failing)
         if errors:
             detail += "\n" + "\n".join(f"{e['id']} ({e['role']}): {e['error']}" for e in errors)
-        out = (f"candidate failures {_failures(entry['candidate'])}, baseline failures "
-               f"{_failures(entry.get('baseline'))}; {reason}")
+        out = (f"candidate failures {failures_text(entry['candidate'])}, baseline failures "
+               f"{failures_text(entry.get('baseline'))}; {reason}")
         seconds = _seconds(report, name)
         cases.append(_case(name, "dv2s.regress.scenario", seconds, verdict, reason, detail, out))
     verdict = report.get("verdict")
@@ -83,7 +83,7 @@ def junit_tree(report: Mapping[str, Any]) -> ET.ElementTree:
         detail += "\nregressed: " + ", ".join(report["regressed"])
     if report["errors"]:
         detail += "\n" + "\n".join(f"{e['id']} ({e['role']}): {e['error']}" for e in report["errors"][:50])
-    out = "\n".join([_headline(report), f"verdict: {verdict or 'none (measures only)'}"] + power_lines(report))
+    out = "\n".join([headline(report), f"verdict: {verdict or 'none (measures only)'}"] + power_lines(report))
     cases.append(_case("overall verdict", "dv2s.regress", _seconds(report), verdict, reason, detail, out))
     counts = {key: str(sum(1 for c in cases if c.find(key) is not None)) for key in ("failure", "error", "skipped")}
     total = f"{float(report.get('duration') or _seconds(report)):.3f}"

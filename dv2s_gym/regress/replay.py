@@ -21,7 +21,7 @@ from envs.recording import VideoWriter
 from envs.trace import EpisodeTrace
 from envs.trace_bounds import check_file_config
 
-__all__ = ["find_episode", "replay_episode"]
+__all__ = ["find_episode", "replay_episode", "bank_for_scenario"]
 
 
 def find_episode(report: Dict[str, Any], episode_id: str, role: str = "candidate") -> Dict[str, Any]:
@@ -111,7 +111,7 @@ def _from_policy(report: Dict[str, Any], result: Dict[str, Any], spec: str, fram
     config = check_file_config((report.get("settings") or {}).get("env_config"), "the report")
     bank = report.get("bank") or {}
     scenario = result["scenario"]
-    bank_dir = _bank_for(bank, scenario)
+    bank_dir = bank_for_scenario(bank, scenario)
     env = make_eval_env(None, config=config, bank_dir=bank_dir,
                         render_mode="rgb_array" if frames is not None else None)
     try:
@@ -123,7 +123,7 @@ def _from_policy(report: Dict[str, Any], result: Dict[str, Any], spec: str, fram
         env.close()
 
 
-def _bank_for(bank: Dict[str, Any], scenario: str) -> Optional[str]:
+def bank_for_scenario(bank: Dict[str, Any], scenario: str) -> Optional[str]:
     """The report's bank folder, or the shipped bank when that folder is not on this machine, as long as
     the scenario's script is the one the report ran."""
     expected = (bank.get("hashes") or {}).get(scenario)

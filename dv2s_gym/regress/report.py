@@ -474,14 +474,17 @@ def _pp(entry: Mapping[str, Any]) -> str:
     return (f"{100 * entry['value']:+.1f} pp [{100 * entry['low']:+.1f}, {100 * entry['high']:+.1f}]")
 
 
-def _failures(summary: Optional[Mapping[str, Any]]) -> str:
+def failures_text(summary: Optional[Mapping[str, Any]]) -> str:
+    """A policy's failures in a report's summary as ``count/episodes (percent)`` (``-`` without a summary)."""
     if not summary:
         return "-"
     rate = summary["failure_rate"]
     return f"{rate['count']}/{summary['episodes']} ({_pct(rate['value'])})"
 
 
-def _headline(report: Mapping[str, Any], base: Optional[Path] = None) -> str:
+def headline(report: Mapping[str, Any], base: Optional[Path] = None) -> str:
+    """The one line that says what a report compared: the policies, the failure classes, the scenarios and
+    episodes, the margin and alpha, the bank version (a baseline report's path relative to ``base``)."""
     settings = report["settings"]
     baseline = report.get("baseline")
     against = ("" if baseline is None else f" vs baseline `{baseline.get('spec')}`" + (
@@ -561,13 +564,13 @@ def format_summary(report: Mapping[str, Any]) -> str:
     ordered = [(name, report["scenarios"][name]) for name in scenarios_by_severity(report)]
     for name, entry in ordered + [("OVERALL", report["overall"])]:
         comparison = entry.get("comparison")
-        rows.append((name, str(entry["candidate"]["episodes"]), _failures(entry["candidate"]),
-                     _failures(entry.get("baseline")),
+        rows.append((name, str(entry["candidate"]["episodes"]), failures_text(entry["candidate"]),
+                     failures_text(entry.get("baseline")),
                      _pp(comparison["difference"]) if comparison else "-",
                      f"{comparison['p_adjusted']:.3g}" if comparison else "-",
                      comparison["verdict"] if comparison else "-"))
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
-    lines = [_headline(report)]
+    lines = [headline(report)]
     lines += ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
     if report.get("error_reason"):
         lines.append(f"verdict: ERROR ({report['error_reason']})")
@@ -617,7 +620,7 @@ def _verdict_line(report: Mapping[str, Any]) -> str:
         for name in [n for n in scenarios_by_severity(report) if n in report["regressed"]]:
             entry = report["scenarios"][name]
             parts.append(f"`{name}` {_pp(entry['comparison']['difference'])} "
-                         f"({_failures(entry['baseline'])} -> {_failures(entry['candidate'])})")
+                         f"({failures_text(entry['baseline'])} -> {failures_text(entry['candidate'])})")
         pooled = " and in all scenarios pooled" if "all scenarios pooled" in comparison["reason"] else ""
         return f"**FAIL**: the candidate fails more often in {'; '.join(parts)}{pooled}."
     if verdict == "ERROR":
@@ -654,7 +657,7 @@ def _markdown(report: Mapping[str, Any], report_path: str = "report.json", base:
         for name, entry in [(n, report["scenarios"][n]) for n in order] + [("**overall**", report["overall"])]:
             c = entry["comparison"]
             table.append(f"| {name if name.startswith('**') else f'`{name}`'} | {c['n']} | "
-                         f"{_failures(entry['candidate'])} | {_failures(entry['baseline'])} | {_pp(c['difference'])} | "
+                         f"{failures_text(entry['candidate'])} | {failures_text(entry['baseline'])} | {_pp(c['difference'])} | "
                          f"{c['p_adjusted']:.3g} | {c['verdict']} |")
         lines += _details("Scenarios, worst first", table)
     if report["newly_failing"]:
@@ -682,7 +685,7 @@ def _markdown(report: Mapping[str, Any], report_path: str = "report.json", base:
     if context:
         lines += _details("Context: interquartile mean of return and probability of improvement (not the verdict)",
                           context)
-    more = power_lines(report)[2:] + [_headline(report, base)]
+    more = power_lines(report)[2:] + [headline(report, base)]
     lines += _details("Power and settings", [f"- {line}" for line in more])
     if report["errors"]:
         errors = [f"- `{e['id']}` ({e['role']}): {str(e['error']).splitlines()[0][:300]}" for e in report["errors"][:20]]

@@ -28,7 +28,8 @@ from scenic.core.dynamics import RejectSimulationException
 from scenario_bank.errors import DV2SError
 
 
-__all__ = ["StepOutcome", "ExternalStepper", "release_veneer", "StepOvertime", "step_watchdog"]
+__all__ = ["StepOutcome", "ExternalStepper", "installed_stepper", "release_veneer", "StepOvertime",
+           "step_watchdog"]
 
 _FIELDS = (
     "currentSimulation",
@@ -40,6 +41,11 @@ _FIELDS = (
 )
 
 _installed: Optional["ExternalStepper"] = None
+
+
+def installed_stepper() -> Optional["ExternalStepper"]:
+    """The stepped simulation whose globals are installed now (``None``: none)."""
+    return _installed
 
 
 def release_veneer() -> None:

@@ -298,8 +298,8 @@ class JailedProcess:
         raise JailRemoteError(error_type, text, error, self._output_text())
 
     def _read_message(self, deadline: float) -> Any:
-        prefix = self._read_exactly(wire._PREFIX.size, deadline)
-        magic, header_size, count = wire._PREFIX.unpack(prefix)
+        prefix = self._read_exactly(wire.PREFIX.size, deadline)
+        magic, header_size, count = wire.PREFIX.unpack(prefix)
         if magic != wire.MAGIC or count > wire.MAX_BUFFERS:
             raise JailProtocolError("not a message")
         if header_size > wire.MAX_HEADER_BYTES:

@@ -25,7 +25,7 @@ import numpy as np
 
 from scenario_bank.jail.errors import JailProtocolError
 
-__all__ = ["encode", "decode", "write_message", "read_message", "MAX_DEPTH"]
+__all__ = ["encode", "decode", "write_message", "read_message", "MAX_DEPTH", "PREFIX"]
 
 MAGIC = b"DV2S"
 MAX_DEPTH = 64
@@ -34,7 +34,8 @@ MAX_BUFFERS = 4096
 # bulk data travels in the array buffers, which cost their size and no more
 MAX_HEADER_BYTES = 8 * 2**20
 _ALLOWED_KINDS = "biuf"  # bool, signed and unsigned integers, floats
-_PREFIX = struct.Struct("<4sII")
+PREFIX = struct.Struct("<4sII")
+"""The fixed start of every message: :data:`MAGIC`, the header's size, the number of array buffers."""
 
 
 def _encode(value: Any, buffers: List[bytes], depth: int) -> Any:
@@ -125,7 +126,7 @@ def decode(header: bytes, buffers: List[bytes]) -> Any:
 def write_message(stream: BinaryIO, value: Any) -> None:
     """Write ``value`` as one message and flush."""
     header, buffers = encode(value)
-    parts = [_PREFIX.pack(MAGIC, len(header), len(buffers))]
+    parts = [PREFIX.pack(MAGIC, len(header), len(buffers))]
     parts.append(struct.pack(f"<{len(buffers)}Q", *(len(b) for b in buffers)))
     parts.append(header)
     parts.extend(buffers)
@@ -146,7 +147,7 @@ def _read_exactly(stream: BinaryIO, size: int) -> bytes:
 
 def read_message(stream: BinaryIO, max_bytes: int) -> Any:
     """Read one message of at most ``max_bytes``; raises :class:`EOFError` when the stream ends."""
-    magic, header_size, count = _PREFIX.unpack(_read_exactly(stream, _PREFIX.size))
+    magic, header_size, count = PREFIX.unpack(_read_exactly(stream, PREFIX.size))
     if magic != MAGIC:
         raise JailProtocolError("the worker sent something that is not a message")
     if header_size > min(max_bytes, MAX_HEADER_BYTES):

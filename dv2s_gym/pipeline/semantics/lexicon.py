@@ -10,19 +10,25 @@ from __future__ import annotations
 import re
 from typing import Dict, List, Sequence, Tuple
 
-__all__ = ["UNKNOWN_ACTORS", "ROAD_PATTERNS", "COLLISION_KINDS"]
+__all__ = ["UNKNOWN_ACTORS", "ROAD_PATTERNS", "COLLISION_KINDS",
+           # the tables the description reader (text.py) reads
+           "NUMBERS", "NOUNS", "EGO", "NOT_ACTOR_AFTER", "COLORS", "ORDINALS",
+           "COMPILED_ACTIONS", "FRONTED", "NEUTRAL_WORDS", "MOTOR", "PLACE_NOUNS", "ON_RAMP",
+           "NEGATION", "SUDDEN", "PASSIVE_HIT", "REL_PATTERNS", "REL_IMPLICIT", "LANE_POS",
+           "LANE_WORD", "CROSS_DIR", "CROSS_FROM", "CLAUSE_SPLIT", "SENTENCE_SPLIT", "DETERMINER_OR_NOUN",
+           "PREPOSITIONS"]
 
 
 # --------------------------------------------------------------------------- lexicon
 
-_NUMBERS = {
+NUMBERS = {
     "a": 1, "an": 1, "one": 1, "single": 1, "two": 2, "three": 3, "four": 4, "five": 5, "six": 6,
     "seven": 7, "eight": 8, "nine": 9, "ten": 10, "both": 2, "several": 3, "multiple": 2,
     "couple": 2, "pair": 2, "few": 3, "some": 2, "many": 3,
 }
 
 # head nouns of each participant type: (singular/plural regex, is_plural)
-_NOUNS: Dict[str, List[Tuple[str, bool]]] = {
+NOUNS: Dict[str, List[Tuple[str, bool]]] = {
     "car": [
         (r"cars", True), (r"vehicles", True), (r"sedans", True), (r"suvs", True), (r"vans", True),
         (r"taxis", True), (r"pickups", True), (r"jeeps", True), (r"minivans", True),
@@ -94,7 +100,7 @@ _NOUNS: Dict[str, List[Tuple[str, bool]]] = {
         (r"barricade", False), (r"crate", False), (r"pallet", False), (r"road works", False),
     ],
 }
-_EGO = (r"(?:the |an |our |my |a )?(?:ego(?:[ ](?:car|vehicle|agent|driver|truck))?(?:'s)?|"
+EGO = (r"(?:the |an |our |my |a )?(?:ego(?:[ ](?:car|vehicle|agent|driver|truck))?(?:'s)?|"
         r"(?:test|subject|host|tested|instrumented) (?:car|vehicle|truck)(?:'s)?|av(?:'s)?|adv(?:'s)?|"
         r"(?:automated|driverless|robotic) (?:car|vehicle|truck)(?:'s)?|robotaxi(?:'s)?|v1(?:'s)?|"
         r"vehicle (?:1|one)(?:'s)?|we|us|(?:vehicle|car|system) under test(?:'s)?|vut(?:'s)?|sut(?:'s)?|"
@@ -105,12 +111,12 @@ UNKNOWN_ACTORS = (
     "helicopter", "airplane", "aeroplane", "plane", "drone", "tram", "streetcar", "train", "boat",
     "carriage", "ufo", "rocket", "tank",
 )
-_NOT_ACTOR_AFTER = (r"(?! (?:lanes?(?! (?:splitting|splits|split|filtering|filters|changing|changes|change)\b)|stop|park|parks|light|lights|wash|seat|door|line|crossings|path|paths|"
+NOT_ACTOR_AFTER = (r"(?! (?:lanes?(?! (?:splitting|splits|split|filtering|filters|changing|changes|change)\b)|stop|park|parks|light|lights|wash|seat|door|line|crossings|path|paths|"
                     r"rack|racks|route|shelter|station|bay|bays|dealership)\b)")
 
-_COLORS = ("red", "blue", "white", "black", "silver", "grey", "gray", "green", "yellow", "orange", "brown",
+COLORS = ("red", "blue", "white", "black", "silver", "grey", "gray", "green", "yellow", "orange", "brown",
            "purple", "dark", "gold")
-_ORDINALS = ("first", "second", "third", "fourth", "last", "lead", "leading", "front", "rear", "following",
+ORDINALS = ("first", "second", "third", "fourth", "last", "lead", "leading", "front", "rear", "following",
              "other", "parked", "oncoming", "merging", "overtaking")
 
 # --------------------------------------------------------------------------- roads
@@ -294,10 +300,10 @@ _ACTION_PATTERNS = tuple(_ACTION_PATTERNS) + (
     ("swerve", r"\bswerv(?:e|es|ed|ing)\b|\bevasive (?:steering|manoeuvre|maneuver|swerve)\b|"
                r"\bjerk(?:s|ed|ing)? (?:the wheel|sideways)\b"),
 )
-_COMPILED_ACTIONS = [(a, re.compile(p)) for a, p in _ACTION_PATTERNS]
-_FRONTED = re.compile(r"(?:after|before|while|when|upon|once|having|on|since|whilst)\s+(?:\w+ly\s+)?\w+(?:ing|ed)\b|"
+COMPILED_ACTIONS = [(a, re.compile(p)) for a, p in _ACTION_PATTERNS]
+FRONTED = re.compile(r"(?:after|before|while|when|upon|once|having|on|since|whilst)\s+(?:\w+ly\s+)?\w+(?:ing|ed)\b|"
                       r"\w+ing\b(?! (?:car|vehicle|truck|bus|traffic|pedestrian|cyclist)s?\b)")
-_NEUTRAL_WORDS = frozenset("""
+NEUTRAL_WORDS = frozenset("""
 a an the this that these those its their his her our my it they he she there here is are was were be been being
 has have had does do did will would can could may might must should also then and or but while whilst as when so
 after before until because although though where meanwhile which who just still now already
@@ -320,22 +326,22 @@ stand stands standing ride rides riding first green red amber yellow signal sign
 unsignalized unsignalised controlled uncontrolled already inside outside next no
 involved involving hidden concealed obscured static
 """.split())
-_MOTOR = ("car", "truck", "bus", "motorcycle")
-_PLACE_NOUNS = frozenset(("highway", "motorway", "freeway", "expressway", "roadway", "way", "alley", "driveway",
+MOTOR = ("car", "truck", "bus", "motorcycle")
+PLACE_NOUNS = frozenset(("highway", "motorway", "freeway", "expressway", "roadway", "way", "alley", "driveway",
                           "parkway", "causeway", "gateway", "entryway", "byway", "interstate", "city", "valley"))
 COLLISION_KINDS = ("collide_rear_end", "collide_head_on", "collide_side")
-_ON_RAMP = re.compile(r"\b(?:on ramp|onramp|slip road|entry ramp|entrance ramp|acceleration lane|ramp)\b")
-_NEGATION = re.compile(
+ON_RAMP = re.compile(r"\b(?:on ramp|onramp|slip road|entry ramp|entrance ramp|acceleration lane|ramp)\b")
+NEGATION = re.compile(
     r"\b(?:not|never|no|avoid|avoids|avoided|avoiding|without|nearly|almost|narrowly|prevent|prevents|"
     r"prevented|preventing|fail|fails|failed|failing|instead of|rather than|refus\w+|unable to|doesn't|didn't|"
     r"don't|isn't|wasn't|can't|cannot|risk of|about to|would have)\b(?:\s+\w+){0,2}\s*$")
-_SUDDEN = re.compile(r"\b(?:sudden(?:ly)?|abrupt(?:ly)?|hard|harsh(?:ly)?|sharp(?:ly)?|emergency|quick(?:ly)?|"
+SUDDEN = re.compile(r"\b(?:sudden(?:ly)?|abrupt(?:ly)?|hard|harsh(?:ly)?|sharp(?:ly)?|emergency|quick(?:ly)?|"
                      r"unexpected(?:ly)?|without warning|aggressive(?:ly)?|rapid(?:ly)?|heavily|violently)\b")
-_PASSIVE_HIT = re.compile(r"\b(?:is|was|were|are|gets?|got|being|been) (?:\w+ )?(?:hit|struck|rear ?ended|run over|"
+PASSIVE_HIT = re.compile(r"\b(?:is|was|were|are|gets?|got|being|been) (?:\w+ )?(?:hit|struck|rear ?ended|run over|"
                           r"crashed into|collided with|t ?boned|sideswiped|broadsided) by\b")
 
 # --------------------------------------------------------------------------- relations
-_REL_PATTERNS: Sequence[Tuple[str, str]] = (
+REL_PATTERNS: Sequence[Tuple[str, str]] = (
     ("ahead_of", r"\b(?:in front of|ahead of|just ahead of|right in front of|in the path of|before) "),
     ("behind", r"\b(?:is|are|was|were|been|keeps) (?:closely )?(?:following|tailgating|trailing) "),
     ("follow", r"\bfollow(?:s|ed|ing)? (?=(?:a|an|the)\b)"),
@@ -345,7 +351,7 @@ _REL_PATTERNS: Sequence[Tuple[str, str]] = (
     ("left_of", r"\b(?:to|on|at|in) the left (?:side )?of |\bleft of "),
     ("right_of", r"\b(?:to|on|at|in) the right (?:side )?of |\bright of "),
 )
-_REL_IMPLICIT: Sequence[Tuple[str, str]] = (
+REL_IMPLICIT: Sequence[Tuple[str, str]] = (
     ("ahead_of", r"\b(?:in front|ahead|up ahead|further ahead)\b(?! of)"),
     ("ahead_of", r"\b(?:lead|leading|preceding|front) (?=(?:\w+ )?(?:car|vehicle|truck|sedan|suv|van|lorry|bus))"),
     ("behind", r"\b(?:from behind|behind)\b(?! (?:it|the|a|an|him|her|them|us|me|ego|our)\b)"),
@@ -372,23 +378,23 @@ _REL_IMPLICIT: Sequence[Tuple[str, str]] = (
     ("crossing_path", r"\b(?:cross(?:es|ed|ing)?|cut(?:s|ting)? across|across|into|in|through|block(?:s|ed|ing)?) "
                       r"(?:the ego(?: vehicle| car)?'s|its|our|my) (?:path|way|trajectory)\b|\bcrossing paths\b"),
 )
-_LANE_POS = re.compile(r"\b(?:on|in|from|of|at|along|using|occupying) the (?P<pos>left|leftmost|middle|center|centre|"
+LANE_POS = re.compile(r"\b(?:on|in|from|of|at|along|using|occupying) the (?P<pos>left|leftmost|middle|center|centre|"
                        r"right|rightmost|fast|slow|passing|inner|outer)(?:most)? lane\b")
-_LANE_WORD = {"left": "left", "leftmost": "left", "fast": "left", "passing": "left", "inner": "left",
+LANE_WORD = {"left": "left", "leftmost": "left", "fast": "left", "passing": "left", "inner": "left",
               "middle": "middle", "center": "middle", "centre": "middle",
               "right": "right", "rightmost": "right", "slow": "right", "outer": "right"}
-_CROSS_DIR = re.compile(r"\bfrom (?:the )?(?P<from>left|right)(?: side| sidewalk| curb| kerb| pavement)?"
+CROSS_DIR = re.compile(r"\bfrom (?:the )?(?P<from>left|right)(?: side| sidewalk| curb| kerb| pavement)?"
                         r"(?: of the (?:road|street))? to (?:the )?(?P<to>left|right)\b")
-_CROSS_FROM = re.compile(r"\bfrom the (?P<from>left|right|far|near|other|opposite) (?:side|sidewalk|curb|kerb|"
+CROSS_FROM = re.compile(r"\bfrom the (?P<from>left|right|far|near|other|opposite) (?:side|sidewalk|curb|kerb|"
                          r"pavement)\b|\bfrom (?:the )?(?P<from2>left|right)\b")
 
-_CLAUSE_SPLIT = re.compile(
+CLAUSE_SPLIT = re.compile(
     r"\s*(?:,|;|:|\(|\))\s*|\s+(?=(?:and|while|whilst|whereas|but|as|when|then|so|after|before|until|"
     r"because|although|though|where|meanwhile|which|who)\b)")
-_SENTENCE_SPLIT = re.compile(r"(?<=[.!?])\s+|\n+")
-_DETERMINER_OR_NOUN = re.compile(r"\b(?:the|a|an|this|that|these|those|another|its|their|his|her|some|each|"
+SENTENCE_SPLIT = re.compile(r"(?<=[.!?])\s+|\n+")
+DETERMINER_OR_NOUN = re.compile(r"\b(?:the|a|an|this|that|these|those|another|its|their|his|her|some|each|"
                                  r"[a-z]+s)\b")
-_PREPOSITIONS = ("of", "by", "to", "around", "with", "past", "from", "into", "toward", "towards", "than", "behind",
+PREPOSITIONS = ("of", "by", "to", "around", "with", "past", "from", "into", "toward", "towards", "than", "behind",
                  "beside", "for", "at", "near", "onto", "between", "like", "alongside", "overtakes", "passes",
                  "hits", "follows", "over", "under", "in", "on", "avoid", "approaches", "approaching", "reaches",
                  "reaching", "overtaking", "passing", "hitting", "following")

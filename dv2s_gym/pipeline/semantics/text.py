@@ -76,34 +76,34 @@ from scenario_bank.elements import CAN_DO, normalize_elements
 __all__ = ["Entity", "ParsedDescription", "parse_description", "elements_from_text", "ROAD_PATTERNS"]
 
 from dv2s_gym.pipeline.semantics.lexicon import (  # the parser's tables
-    _NUMBERS,
-    _NOUNS,
-    _EGO,
+    NUMBERS,
+    NOUNS,
+    EGO,
     UNKNOWN_ACTORS,
-    _NOT_ACTOR_AFTER,
-    _COLORS,
-    _ORDINALS,
+    NOT_ACTOR_AFTER,
+    COLORS,
+    ORDINALS,
     ROAD_PATTERNS,
-    _COMPILED_ACTIONS,
-    _FRONTED,
-    _NEUTRAL_WORDS,
-    _MOTOR,
-    _PLACE_NOUNS,
+    COMPILED_ACTIONS,
+    FRONTED,
+    NEUTRAL_WORDS,
+    MOTOR,
+    PLACE_NOUNS,
     COLLISION_KINDS,
-    _ON_RAMP,
-    _NEGATION,
-    _SUDDEN,
-    _PASSIVE_HIT,
-    _REL_PATTERNS,
-    _REL_IMPLICIT,
-    _LANE_POS,
-    _LANE_WORD,
-    _CROSS_DIR,
-    _CROSS_FROM,
-    _CLAUSE_SPLIT,
-    _SENTENCE_SPLIT,
-    _DETERMINER_OR_NOUN,
-    _PREPOSITIONS,
+    ON_RAMP,
+    NEGATION,
+    SUDDEN,
+    PASSIVE_HIT,
+    REL_PATTERNS,
+    REL_IMPLICIT,
+    LANE_POS,
+    LANE_WORD,
+    CROSS_DIR,
+    CROSS_FROM,
+    CLAUSE_SPLIT,
+    SENTENCE_SPLIT,
+    DETERMINER_OR_NOUN,
+    PREPOSITIONS,
 )
 
 @dataclass
@@ -261,14 +261,14 @@ def _normalize(text: str) -> str:
 
 def _noun_regex() -> re.Pattern:
     parts = []
-    for kind, nouns in _NOUNS.items():
+    for kind, nouns in NOUNS.items():
         for noun, plural in nouns:
             parts.append(f"(?P<{kind}_{'p' if plural else 's'}_{len(parts)}>{noun})")
-    return re.compile(r"\b(?:" + "|".join(parts) + r")(?:'s|s')?\b" + _NOT_ACTOR_AFTER)
+    return re.compile(r"\b(?:" + "|".join(parts) + r")(?:'s|s')?\b" + NOT_ACTOR_AFTER)
 
 
 _NOUN_RE = _noun_regex()
-_EGO_RE = re.compile(r"\b" + _EGO + r"\b")
+_EGO_RE = re.compile(r"\b" + EGO + r"\b")
 _PRONOUN_RE = re.compile(r"\b(?:it|its|they|them|their|him|his|her|he|she)\b")
 _GROUP_REF = re.compile(r"\b(?:the (?:other|remaining) (?P<n1>two|three|four|\d+)|(?:the )?(?P<n2>two|three|four|\d+) "
                         r"others?|the others|the other one|one of them|(?:the )?(?:first|second|third) one|"
@@ -287,17 +287,17 @@ def _prep_before(clause: str, start: int) -> bool:
     before = clause[:start].split()
     # skip determiners/adjectives/numbers back to the governing word
     i = len(before) - 1
-    while i >= 0 and (before[i] in _NUMBERS or before[i] in ("the", "a", "an", "another", "other", "its",
+    while i >= 0 and (before[i] in NUMBERS or before[i] in ("the", "a", "an", "another", "other", "its",
                                                              "their", "his", "her", "this", "that")
-                      or before[i] in _COLORS or before[i] in _ORDINALS
+                      or before[i] in COLORS or before[i] in ORDINALS
                       or re.fullmatch(r"\w+(?:er|ed|ing|ary|ant|ing|ive|y|ow|ast|ig|all|ed)", before[i])
-                      and before[i] not in _PLACE_NOUNS
-                      and before[i] not in _PREPOSITIONS):
+                      and before[i] not in PLACE_NOUNS
+                      and before[i] not in PREPOSITIONS):
         i -= 1
     if i >= 1 and before[i] == "of" and before[i - 1] in ("front", "rear", "back", "side", "nose", "driver",
                                                              "tail") and i - 1 <= 3:
         return False  # "the front of V2 impacted ...": V2 is the subject
-    return i >= 0 and before[i] in _PREPOSITIONS
+    return i >= 0 and before[i] in PREPOSITIONS
 
 
 @dataclass
@@ -331,8 +331,8 @@ def _noun_phrase(clause: str, m: re.Match) -> _NounPhrase:
     descriptors = set()
     new = False
     for w in window:
-        if w in _NUMBERS and w not in ("a", "an"):
-            count = _NUMBERS[w]
+        if w in NUMBERS and w not in ("a", "an"):
+            count = NUMBERS[w]
         elif w.isdigit() and 0 < int(w) <= 30:
             count = int(w)
         if w in ("the", "this", "that", "these", "those", "its", "their"):
@@ -343,7 +343,7 @@ def _noun_phrase(clause: str, m: re.Match) -> _NounPhrase:
             new = True
         if w in ("another", "second", "third", "fourth"):
             new = True
-        if w in _COLORS or w in _ORDINALS:
+        if w in COLORS or w in ORDINALS:
             descriptors.add(w)
     # words right before the noun only: descriptors that follow "the"/"a"
     if window and window[-1] in ("another",):
@@ -360,9 +360,9 @@ def _state_before_noun(before: str, entity: Entity) -> None:
     """Words right before an actor noun that say what it does: "a crossing pedestrian" crosses, "a crossing
     vehicle" crosses the ego's path, "a stopped / stalled / broken down car" stands still."""
     if entity.kind in ("pedestrian", "bicycle") and re.search(r"\bcrossing\s+$", before) and \
-            not _NEGATION.search(before):
+            not NEGATION.search(before):
         entity.add_action("cross", sudden=False, directions=[])
-    elif entity.kind in _MOTOR and re.search(r"\b(?:crossing|cross traffic)\s+$", before):
+    elif entity.kind in MOTOR and re.search(r"\b(?:crossing|cross traffic)\s+$", before):
         pending = entity.attrs.setdefault("pending_relations", [])
         if "crossing_path" not in pending:
             pending.append("crossing_path")  # "a crossing vehicle" crosses the ego's path
@@ -370,7 +370,7 @@ def _state_before_noun(before: str, entity: Entity) -> None:
     if entity.kind not in ("ego", "obstacle") and re.search(
             r"\b(?:stopped|stationary|broken down|stalled|standing|disabled|idle|halted)\s+"
             r"(?:\w+\s+)?$", before):
-        if not _NEGATION.search(before):
+        if not NEGATION.search(before):
             entity.add_action("stop")
 
 
@@ -382,12 +382,12 @@ def _action_window(clause: str, m: re.Match) -> str:
 def _crossing_direction(clause: str, groups: Dict[str, Optional[str]]) -> Optional[str]:
     """The way a pedestrian crosses: "from left to right" in the clause, the side the phrase says it comes from
     ("from the left": left to right), "from the far side", else None."""
-    dm = _CROSS_DIR.search(clause)
+    dm = CROSS_DIR.search(clause)
     if dm:
         return f"{dm.group('from')}_to_{dm.group('to')}"
     if groups.get("from"):
         return f"{groups['from']}_to_{'right' if groups['from'] == 'left' else 'left'}"
-    fm = _CROSS_FROM.search(clause)
+    fm = CROSS_FROM.search(clause)
     if fm and (fm.group("from") or fm.group("from2")) in ("left", "right"):
         f = fm.group("from") or fm.group("from2")
         return f"{f}_to_{'right' if f == 'left' else 'left'}"
@@ -457,8 +457,8 @@ class _Parser:
         if not new and same:
             if definite or count == 1 and not descriptors:
                 candidates = same
-                colors = descriptors & set(_COLORS)
-                roles = descriptors & set(_ORDINALS)
+                colors = descriptors & set(COLORS)
+                roles = descriptors & set(ORDINALS)
                 if "other" in descriptors:
                     last = next((e for e in reversed(self.recent) if e.kind == kind), None)
                     others = [e for e in same if e is not last]
@@ -470,9 +470,9 @@ class _Parser:
                     match = [e for e in same if e.descriptors & colors]
                     if match:
                         return match[-1]
-                    if all(e.descriptors & set(_COLORS) for e in same):
+                    if all(e.descriptors & set(COLORS) for e in same):
                         return self._new(kind, count, descriptors)
-                    candidates = [e for e in same if not (e.descriptors & set(_COLORS))]
+                    candidates = [e for e in same if not (e.descriptors & set(COLORS))]
                 if roles - {"other"}:
                     match = [e for e in candidates if e.descriptors & (roles - {"other"})]
                     if match:
@@ -610,7 +610,7 @@ class _Parser:
             word = m.group(0)
             number = m.group("n1") or m.group("n2")
             if number:
-                size = _NUMBERS.get(number) or (int(number) if number.isdigit() else None)
+                size = NUMBERS.get(number) or (int(number) if number.isdigit() else None)
             elif re.search(r"\bone\b", word) and "them" not in word or word.startswith("one"):
                 size = 1
             elif word in ("both", "both of them") or word.startswith("all") or word.startswith("each"):
@@ -657,7 +657,7 @@ class _Parser:
             if road == "merge" and re.search(r"\b(?:off ramp|exit ramp|offramp)\b", text) and not re.search(
                     r"\b(?:on ramp|onramp|entry ramp|entrance ramp|acceleration lane)\b", text):
                 continue  # leaving the motorway: the road is the motorway
-            if road == "merge" and not _ON_RAMP.search(text) and re.search(
+            if road == "merge" and not ON_RAMP.search(text) and re.search(
                     r"\b(?:lanes? merg\w*|merg\w* lanes?|lane (?:ends|drop)|road narrows|merg\w* (?:in)?to one|"
                     r"zipper merge)\b", text):
                 continue  # two lanes becoming one: not an on-ramp
@@ -673,7 +673,7 @@ class _Parser:
         for word in UNKNOWN_ACTORS:
             if re.search(rf"\b{word}s?\b", text):
                 self.out.unknown_actors.append(word)
-        for sentence in _SENTENCE_SPLIT.split(text):
+        for sentence in SENTENCE_SPLIT.split(text):
             sentence = sentence.strip(" .!?")
             if sentence:
                 self._sentence(sentence)
@@ -722,10 +722,10 @@ class _Parser:
     def _sentence(self, sentence: str) -> None:
         self._sentence_text = sentence
         head = re.match(r"([^:;,.]{1,60}):\s+", sentence)
-        if head and not any(rx.search(head.group(1)) for _, rx in _COMPILED_ACTIONS) and len(head.group(1).split()) >= 2 \
-                and not re.fullmatch(r"\s*(?:the )?(?:" + _EGO + r"|\w+ ?\d)\s*", head.group(1)):
+        if head and not any(rx.search(head.group(1)) for _, rx in COMPILED_ACTIONS) and len(head.group(1).split()) >= 2 \
+                and not re.fullmatch(r"\s*(?:the )?(?:" + EGO + r"|\w+ ?\d)\s*", head.group(1)):
             sentence = sentence[head.end():]  # a title ("Obstacle avoidance without prior action: ..."), not actors
-        clauses = [c.strip() for c in _CLAUSE_SPLIT.split(sentence) if c and c.strip()]
+        clauses = [c.strip() for c in CLAUSE_SPLIT.split(sentence) if c and c.strip()]
         for i in range(len(clauses) - 2, -1, -1):
             if re.search(r"\b(?:between|involving)\s+(?:\S+\s+){0,4}\S+$", clauses[i]) and \
                     clauses[i + 1].startswith("and "):
@@ -734,7 +734,7 @@ class _Parser:
             if clauses[i + 1].startswith("and ") and self._noun_phrase_only(clauses[i]):
                 clauses[i:i + 2] = [clauses[i] + " " + clauses[i + 1]]  # "two pedestrians and a dog cross ..."
         previous_subject = self.last_subject
-        if len(clauses) > 1 and _FRONTED.match(clauses[0]):
+        if len(clauses) > 1 and FRONTED.match(clauses[0]):
             # "After turning right, the ego ...": the fronted clause's subject is the main clause's
             clauses = [clauses[1], clauses[0]] + clauses[2:]
         previous_clause = ""
@@ -754,7 +754,7 @@ class _Parser:
     def _apposition(self, previous: str, clause: str) -> bool:
         """"V2, a Ford F-150 pickup, ...": the noun phrase names the vehicle before it (and may give its kind)."""
         if not re.match(r"(?:an?|the) ", clause) or len(clause.split()) > 7 or re.search(r"\b(?:and|or)\b", clause) or \
-                any(rx.search(clause) for _, rx in _COMPILED_ACTIONS):
+                any(rx.search(clause) for _, rx in COMPILED_ACTIONS):
             return False
         named = re.search(r"\b(?:v[1-9]|vehicle [1-9]|npc ?[1-9]|ego|the ego|the av|the subject vehicle)\s*$", previous)
         if not named:
@@ -778,11 +778,11 @@ class _Parser:
         """A clause that only names actors ("two pedestrians", "the ego car"): no verb of its own."""
         if not (_NOUN_RE.search(clause) or _EGO_RE.search(clause)):
             return False
-        if any(rx.search(clause) for _, rx in _COMPILED_ACTIONS):
+        if any(rx.search(clause) for _, rx in COMPILED_ACTIONS):
             return False
         rest = _NOUN_RE.sub(" ", _EGO_RE.sub(" ", clause))
         words = re.findall(r"[a-z']+", rest)
-        return all(w in _NUMBERS or w in _COLORS or w in _ORDINALS or
+        return all(w in NUMBERS or w in COLORS or w in ORDINALS or
                    w in ("the", "a", "an", "and", "another", "other", "both", "each", "some", "white", "small",
                          "large", "big", "red", "parked") for w in words)
 
@@ -802,8 +802,8 @@ class _Parser:
         rest = _NOUN_RE.sub(" ", _EGO_RE.sub(" ", clause))
         for _, pattern in ROAD_PATTERNS:
             rest = re.sub(pattern, " ", rest)
-        words = [w for w in re.findall(r"[a-z']+", rest) if w not in _NEUTRAL_WORDS and w not in _NUMBERS
-                 and w not in _COLORS and w not in _ORDINALS]
+        words = [w for w in re.findall(r"[a-z']+", rest) if w not in NEUTRAL_WORDS and w not in NUMBERS
+                 and w not in COLORS and w not in ORDINALS]
         return not words
 
     def _clause(self, clause: str, inherited: Optional[Entity]) -> Optional[Entity]:
@@ -840,7 +840,7 @@ class _Parser:
     def _said_subject(clause: str, mentions: List[_Mention], body_start: int) -> Optional[Entity]:
         """The subject the clause names: its first actor mention (after the leading conjunction, before the first
         verb) when that is not the object of a preposition or a possessive; else None."""
-        first_verb = min((m.start() for _, rx in _COMPILED_ACTIONS for m in rx.finditer(clause)
+        first_verb = min((m.start() for _, rx in COMPILED_ACTIONS for m in rx.finditer(clause)
                           if m.start() >= body_start), default=len(clause))
         for mm in mentions:
             if mm.start < body_start:
@@ -859,7 +859,7 @@ class _Parser:
         """The subject of a clause that names none: a relative clause's is the actor named last ("a jaywalker
         who runs across"); a clause that starts with its verb or a pronoun inherits the previous subject; a
         clause whose subject is not an actor ("the traffic dynamics cause ...") has none."""
-        first_action = min((m.start() for _, rx in _COMPILED_ACTIONS for m in rx.finditer(clause)),
+        first_action = min((m.start() for _, rx in COMPILED_ACTIONS for m in rx.finditer(clause)),
                            default=len(clause))
         head = clause[body_start:first_action]
         first = (clause[body_start:].split() or [""])[0]
@@ -867,7 +867,7 @@ class _Parser:
             and first not in ("this", "his", "its", "as", "is", "was", "has", "does", "thus", "always")
         if subordinate and self._last_mentioned is not None:
             return self._last_mentioned
-        if subordinate or verb_first or not _DETERMINER_OR_NOUN.search(head) or \
+        if subordinate or verb_first or not DETERMINER_OR_NOUN.search(head) or \
                 re.match(r"\s*(?:it|they|he|she)\b", head):
             return inherited
         return None
@@ -898,7 +898,7 @@ class _Parser:
     def _trigger_of_inherited(self, clause: str, inherited: Optional[Entity]) -> bool:
         """"... brakes when it is 20 m away": a when/once/as clause with no action of its own and a distance or
         a time is the trigger of the previous subject's last action. Whether the clause was that."""
-        if inherited is None or not inherited.actions or any(rx.search(clause) for _, rx in _COMPILED_ACTIONS):
+        if inherited is None or not inherited.actions or any(rx.search(clause) for _, rx in COMPILED_ACTIONS):
             return False
         dist, sec = distance_m(clause), time_s(clause)
         if dist is None and sec is None:
@@ -938,7 +938,7 @@ class _Parser:
 
     def _crossing_directions(self, clause: str, mentions: List[_Mention], subject: Optional[Entity]) -> None:
         """"one going from left to right and the two others from right to left": sizes and directions."""
-        for m in _CROSS_DIR.finditer(clause):
+        for m in CROSS_DIR.finditer(clause):
             direction = f"{m.group('from')}_to_{m.group('to')}"
             if m.group("from") == m.group("to"):
                 continue
@@ -991,13 +991,13 @@ class _Parser:
         return None
 
     def _lanes(self, clause: str, mentions: List[_Mention], subject: Optional[Entity]) -> None:
-        for m in _LANE_POS.finditer(clause):
+        for m in LANE_POS.finditer(clause):
             preceding = clause[:m.start()]
             if re.search(r"\b(?:to|into|towards?)\s*$", preceding):
                 continue
             owner = self._attach(m.start(), mentions, subject)
             if owner is not None and owner.lane is None:
-                owner.lane = _LANE_WORD[m.group("pos")]
+                owner.lane = LANE_WORD[m.group("pos")]
         for m in re.finditer(r"\b(?:in|on|along|using) (?:the |a |an )?(?:neighbou?ring|adjacent|next|other|nearby|"
                              r"side) lanes?\b", clause):
             owner = self._attach(m.start(), mentions, subject, allow_ego=False)
@@ -1016,7 +1016,7 @@ class _Parser:
 
     def _relations(self, clause: str, mentions: List[_Mention], subject: Optional[Entity]) -> None:
         ego = self.out.ego
-        for rel, pattern in _REL_PATTERNS:
+        for rel, pattern in REL_PATTERNS:
             for m in re.finditer(pattern, clause):
                 target = self._object_at(clause, m.end(), mentions)
                 if target is None:
@@ -1051,7 +1051,7 @@ class _Parser:
                     self._relate(target, "ahead_of" if rel == "behind" else "behind", owner)
                     continue
                 self._relate(owner, rel, target)
-        for rel, pattern in _REL_IMPLICIT:
+        for rel, pattern in REL_IMPLICIT:
             for m in re.finditer(pattern, clause):
                 if rel == "oncoming":
                     owner = self._attach_forward(m, clause, mentions, subject)
@@ -1100,12 +1100,12 @@ class _Parser:
         self._clause_mentions = mentions
         self._clause_subject = subject
         spans: List[Tuple[int, int]] = []
-        for action, rx in _COMPILED_ACTIONS:
+        for action, rx in COMPILED_ACTIONS:
             for m in rx.finditer(clause):
                 if any(not (m.end() <= s or m.start() >= e) for s, e in spans):
                     continue
                 before = clause[:m.start()]
-                if _NEGATION.search(before[-45:]):
+                if NEGATION.search(before[-45:]):
                     spans.append((m.start(), m.end()))
                     self._negated += 1  # understood: said not to happen
                     continue
@@ -1125,7 +1125,7 @@ class _Parser:
                     if agent is not None:
                         owner = agent  # "the ego is cut off by a van"
                 if action.startswith("collide"):
-                    passive = _PASSIVE_HIT.search(clause[max(0, m.start() - 25):m.end() + 4])
+                    passive = PASSIVE_HIT.search(clause[max(0, m.start() - 25):m.end() + 4])
                     late_by = re.match(r"(?:\s+\w+){0,5}?\s+by\b", clause[m.end():])
                     if not passive and late_by and re.search(r"\b(?:is|was|were|are|gets?|got|being|been) (?:\w+ )?$",
                                                              before):
@@ -1243,7 +1243,7 @@ class _Parser:
         per action (:attr:`_ACTION_RULES`) records what the phrase means; without one (or when the rule leaves it),
         the action is recorded as read, with whether it was sudden."""
         self._placed += 1
-        sudden = bool(_SUDDEN.search(_action_window(clause, m)))
+        sudden = bool(SUDDEN.search(_action_window(clause, m)))
         if self._static_object_acts(owner, action, clause):
             return
         if action in ("lane_change", "cut_in") and m.group(0).startswith("merg") and owner.kind != "pedestrian":
@@ -1278,7 +1278,7 @@ class _Parser:
             else:
                 owner.add_action("lane_change", sudden=sudden)
             return True
-        side = _LANE_WORD.get(d, d) if d in _LANE_WORD else d
+        side = LANE_WORD.get(d, d) if d in LANE_WORD else d
         if d in ("left", "right") and "side" not in m.group(0):
             owner.add_action(f"lane_change_{d}", sudden=sudden, target=d)
         elif side == "middle":
@@ -1555,7 +1555,7 @@ class _Parser:
         """Relations to the ego that ``e``'s kind, actions and other relations (``rels``) imply: a vehicle ahead
         and on no side is in the same lane, an obstacle in the lane is ahead, a crossing pedestrian, cyclist or
         animal is ahead and across the path, oncoming traffic crosses the path of an ego turning left."""
-        if e.kind in _MOTOR and "ahead_of" in rels and not rels & {"left_of", "right_of", "oncoming"} \
+        if e.kind in MOTOR and "ahead_of" in rels and not rels & {"left_of", "right_of", "oncoming"} \
                 and not (e.has("cut_in") and not e.detail("cut_in").get("back")) and not e.has("merge"):
             self._relate(e, "same_lane", ego)
         if e.kind == "obstacle" and "same_lane" in rels:
@@ -1563,7 +1563,7 @@ class _Parser:
         if (e.kind in ("pedestrian", "bicycle") or e.attrs.get("animal")) and e.has("cross"):
             self._relate(e, "ahead_of", ego)
             self._relate(e, "crossing_path", ego)
-        if e.kind in _MOTOR + ("bicycle",) and "oncoming" in rels and ego.has("turn_left"):
+        if e.kind in MOTOR + ("bicycle",) and "oncoming" in rels and ego.has("turn_left"):
             self._relate(e, "crossing_path", ego)
 
     def _occluders_ahead(self, ego: Optional[Entity]) -> None:
@@ -1586,7 +1586,7 @@ class _Parser:
         if ego is None or self.out.road not in ("intersection", "t_junction", "three_way", "roundabout"):
             return
         for e in self.out.entities:
-            if e is ego or e.kind not in _MOTOR + ("bicycle",):
+            if e is ego or e.kind not in MOTOR + ("bicycle",):
                 continue
             rels = {r for r, j in e.relations if j is ego}
             lane_moves = ("cut_in", "lane_change", "lane_change_left", "lane_change_right", "overtake", "merge")

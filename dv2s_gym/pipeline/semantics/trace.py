@@ -68,7 +68,7 @@ from shapely.affinity import scale
 from scenario_bank.elements import normalize_elements
 from scenario_bank.maps import MAPS_DIR
 
-__all__ = ["elements_from_trace", "collision_type", "MAP_ROAD_TYPES", "KEEP_LANE_MIN_M"]
+__all__ = ["elements_from_trace", "collision_type", "trace_actor_kind", "map_view", "MAP_ROAD_TYPES", "KEEP_LANE_MIN_M"]
 
 MAP_ROAD_TYPES = {
     "highway_straight": "highway",
@@ -124,6 +124,12 @@ def _kind(name: str, kinds: Dict[str, str]) -> str:
         if word in lowered:
             return kind
     return "car"
+
+
+def trace_actor_kind(trace, name: str) -> str:
+    """The kind of actor ``name`` of ``trace`` (car, truck, pedestrian, obstacle...): the kind the trace recorded
+    for it, else the one its name says (``car`` when it says none)."""
+    return _kind(name, dict(getattr(trace, "kinds", {}) or {}))
 
 
 def _wrap(a: np.ndarray) -> np.ndarray:
@@ -186,8 +192,9 @@ class _MapView:
 _MAP_VIEWS: Dict[str, Optional[_MapView]] = {}
 
 
-def _map_view(trace) -> Optional[_MapView]:
-    """The map of a trace (its recorded path, else the shipped map of that name); None if it cannot be loaded."""
+def map_view(trace) -> Optional[_MapView]:
+    """The map of a trace, for its actors' lanes and road positions (its recorded path, else the shipped map of
+    that name); None if it cannot be loaded."""
     map_path = str((trace.params or {}).get("map", "") or "")
     if not map_path:
         return None
@@ -296,7 +303,7 @@ def elements_from_trace(trace) -> Dict[str, Any]:
                 if typed:
                     actions.add((_kind(actor, kinds), typed))
     road = _road_type(trace, ego)
-    view = _map_view(trace)
+    view = map_view(trace)
     for name, changes in list(lane_changes.items()):
         # a drift across a lane line is no lane change (the env logs one whenever the nearest lane changes)
         track = tracks.get(name)
