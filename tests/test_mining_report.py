@@ -5,6 +5,7 @@ conversions and rejections, Markdown tables, the JSON schema, and the HTML page 
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import re
@@ -318,6 +319,20 @@ def test_the_report_loads_neither_scenic_nor_highway_env(run_dir):
 
 
 # ------------------------------------------------------------------------------ HTML
+def test_a_kept_conversion_without_its_converted_clip_says_why(run_dir, report, tmp_path):
+    """A kept or merged conversion whose converted script's clip is missing says why on its card: the error
+    recorded when it could not be made, else that none was recorded."""
+    page = write_html(report, tmp_path / "report.html", base=run_dir).read_text()
+    assert page.count("converted script's clip: none (none was recorded for this conversion)") == 2  # kept, merged
+    damaged = copy.deepcopy(report)
+    kept = next(c for c in damaged["clusters"] if c.get("status") == "kept")
+    kept["reproduction"] = {**(kept.get("reproduction") or {}),
+                            "clip": {"file": None, "error": "clip: OSError: [Errno 28] No space left on device"}}
+    page = write_html(damaged, tmp_path / "damaged.html", base=run_dir).read_text()
+    assert "converted script's clip: none (it could not be made: clip: OSError: [Errno 28] No space left" in page
+    assert page.count("converted script's clip: none") == 2
+
+
 def test_the_page_embeds_videos_descriptions_and_scripts(run_dir, report, tmp_path):
     page = write_html(report, tmp_path / "report.html", base=run_dir).read_text()
     assert page.startswith("<!DOCTYPE html>")

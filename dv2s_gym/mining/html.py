@@ -365,6 +365,8 @@ def _cards(clusters: Sequence[Mapping[str, Any]], videos: _Videos, base: Path,
                  f"reproduction: {escape(_reproduction(c))}; E2E-SC {escape(fmt(c.get('e2e_sc'), 3))}"]
         if c.get("reason"):
             facts.append(f"reason: {escape(c['reason'])}")
+        if c.get("status") in ("kept", "merged") and not c.get("converted_video"):
+            facts.append(f"converted script's clip: none ({escape(_missing_clip_reason(c))})")
         merge_reason = (c.get("conversion") or {}).get("merge_reason")
         if merge_reason:
             facts.append(f"merged because: {escape(merge_reason)}")
@@ -384,6 +386,16 @@ def _cards(clusters: Sequence[Mapping[str, Any]], videos: _Videos, base: Path,
                    f'<p>{"<br>".join(facts)}</p><p><b>Generated description</b></p>{text}'
                    f'{_script(base, c.get("script"))}</div></div>')
     return "".join(out) + "</div>"
+
+
+def _missing_clip_reason(cluster: Mapping[str, Any]) -> str:
+    """Why a kept or merged conversion shows no clip of its converted script: the error recorded when it could not
+    be made, else that none was recorded (a run from before clips were made, or no reproduction episode)."""
+    reproduction = cluster.get("reproduction")
+    clip = reproduction.get("clip") if isinstance(reproduction, Mapping) else None
+    if isinstance(clip, Mapping) and clip.get("error"):
+        return f"it could not be made: {clip['error']}"
+    return "none was recorded for this conversion"
 
 
 def _rejected(report: Mapping[str, Any]) -> str:
