@@ -839,13 +839,14 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
     found: Dict[int, Dict[str, List[Dict[str, str]]]] = {}
     for record in report.get("rounds", []):
         mine = (record.get("steps") or {}).get("mine") or {}
+        policy = record.get("policy") or report.get("policy")
         split = (record.get("steps") or {}).get("split") or {}
         held = set(split.get("held_out") or [])
         clips: Dict[str, List[Dict[str, str]]] = {}
         for entry in mine.get("kept") or []:
             scenario = str(entry["scenario"])
             videos = clips.setdefault(f"{scenario} ({'held out' if scenario in held else 'fine-tuned on'})", [])
-            for video, label, group, note in _entry_clips(entry, bank / scenario, mine):
+            for video, label, group, note in _entry_clips(entry, bank / scenario, mine, policy):
                 path = os.path.relpath(video.resolve(), Path(out).resolve())
                 if all(v["path"] != path for v in videos):
                     videos.append({"path": path, "label": label, "group": f"{scenario}/{group}",
@@ -873,8 +874,10 @@ def _own_file(folder: Path, named: Any, default: str) -> Path:
     return folder / relative
 
 
-def _entry_clips(entry: Mapping[str, Any], folder: Path, mine: Mapping[str, Any]) -> List[tuple]:
-    """``[(video, label, group, note)]`` of one kept mined scenario (:func:`round_clips`)."""
+def _entry_clips(entry: Mapping[str, Any], folder: Path, mine: Mapping[str, Any],
+                 policy: Optional[str]) -> List[tuple]:
+    """``[(video, label, group, note)]`` of one kept mined scenario (:func:`round_clips`); ``policy``: the round's,
+    named in a caption when the clip's own record does not name it."""
     scenario, cluster = str(entry["scenario"]), entry.get("cluster")
     replay_note = ("an exact replay of the failing scene: it has no converted script, so only the failure clip "
                    "is shown")
@@ -919,8 +922,8 @@ def _entry_clips(entry: Mapping[str, Any], folder: Path, mine: Mapping[str, Any]
                 conversion = json.loads((run / CONVERSION_DIR / "report.json").read_text())
             except (OSError, ValueError):
                 conversion = {}
-            found.append((converted, clip_caption(scenario, {"policy": conversion.get("policy"), **conversion})
-                          + " (mining run)", "run", None))
+            caption = clip_caption(scenario, {**conversion, "policy": conversion.get("policy") or policy})
+            found.append((converted, caption + " (mining run)", "run", None))
     return found
 
 
