@@ -259,12 +259,11 @@ def record_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike
     return write_failure_video(record_or_trace, out_path, settings, trace_path=trace_path, **options).path
 
 
-def _write_window(out_path: Path, frames: List[np.ndarray], trace, k: int,
-                  timing: Tuple[float, Optional[float]], settings: VideoSettings) -> Tuple[int, int]:
-    """Write the frames from ``before`` seconds before frame ``k`` to ``after`` seconds after it (after a stall's
-    end when ``timing``'s stall seconds are given) to ``out_path``; ``timing`` is (frames per second, stall
-    seconds or ``None``). Returns the first and last frame written."""
-    frequency, stall_seconds = timing
+def _write_window(out_path: Path, frames: List[np.ndarray], trace, k: int, frequency: float,
+                  stall_seconds: Optional[float], settings: VideoSettings) -> Tuple[int, int]:
+    """Write the frames (``frequency`` per second) from ``before`` seconds before frame ``k`` to ``after`` seconds
+    after it (after the stall's end when ``stall_seconds`` is given) to ``out_path``. Returns the first and last
+    frame written."""
     start = max(0, k - int(round(settings.before * frequency)))
     last = stall_end(trace, k, int(math.ceil(stall_seconds * frequency))) if stall_seconds is not None else k
     end = min(len(frames) - 1, last + int(round(settings.after * frequency)))
@@ -288,7 +287,8 @@ def write_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike]
     else:
         clip = _trace_clip(record_or_trace)
     frames, result, trace, frequency, k, stall = clip
-    start, end = _write_window(out_path, frames, trace, k, (frequency, stall_seconds if stall else None), settings)
+    start, end = _write_window(out_path, frames, trace, k, frequency, stall_seconds if stall else None,
+                               settings)
     trace.save(trace_path)
     return FailureVideo(out_path, trace_path, start, end, k, frequency, result, trace)
 
@@ -372,5 +372,6 @@ def write_script_episode_video(script_path: PathLike, episode: Mapping[str, Any]
         env, settings.policy, _Scene(name, seed, {}), True, max(0, end - episode_steps), trajectory_hash,
         lambda got: (f"the rendered run of {script_path} (seed {seed}) diverged from its episode: trajectory hash "
                      f"{got[:12]} != {str(trajectory_hash)[:12]}"))
-    start, stop = _write_window(out_path, frames, trace, k, (frequency, stall_seconds if stall else None), settings)
+    start, stop = _write_window(out_path, frames, trace, k, frequency, stall_seconds if stall else None,
+                               settings)
     return FailureVideo(out_path, None, start, stop, k, frequency, result, trace)
