@@ -78,8 +78,8 @@ from dv2s_gym.mining.interaction import failure_interaction, interaction_sentenc
 from dv2s_gym.mining.monitors import detect_failure
 from dv2s_gym.mining.report_text import not_compared_names_text
 from dv2s_gym.mining.param_meaning import (meaning_map, name_mismatch, quantity_of, quantity_uses, read_interval,
-                                           read_support, script_parameters, support_contains, support_text,
-                                           tied_objects)
+                                           read_support, script_parameters, support_contains, support_hull,
+                                           support_text, tied_objects)
 from dv2s_gym.mining.settings import read_run_settings
 from dv2s_gym.mining.tasks import reference_avoids
 from dv2s_gym.pipeline import stages
@@ -404,7 +404,7 @@ def _script_ranges(script: str) -> Dict[str, Tuple[float, float]]:
             ranges[name] = interval
     ranges.update(param_ranges(script))
     for name, parts in _script_supports(script).items():
-        ranges.setdefault(name, _hull(parts))
+        ranges.setdefault(name, support_hull(parts))
     return ranges
 
 
@@ -420,20 +420,8 @@ def _script_supports(script: str) -> Dict[str, List[Any]]:
         single = len(parts) == 1 and (parts[0][0] == "interval" or (parts[0][0] == "points" and len(parts[0][1]) == 1)
                                       or (parts[0][0] == "grid" and parts[0][3] == 1))
         if not single:
-            supports[name] = [list(part[:1]) + list(part[1:]) for part in parts]
+            supports[name] = [list(part) for part in parts]
     return supports
-
-
-def _hull(parts: Sequence[Any]) -> Tuple[float, float]:
-    ends: List[float] = []
-    for part in parts:
-        if part[0] == "interval":
-            ends += [part[1], part[2]]
-        elif part[0] == "points":
-            ends += list(part[1])
-        else:
-            ends += [part[1], part[1] + part[2] * (part[3] - 1)]
-    return min(ends), max(ends)
 
 
 def _contains(name: str, comparison: Mapping[str, Any]) -> bool:

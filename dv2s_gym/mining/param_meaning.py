@@ -40,7 +40,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 __all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
            "script_parameters", "affine_uses", "affine_form", "read_interval", "Affine", "Quantity", "quantity_of",
-           "quantity_uses", "read_support", "support_contains", "support_text"]
+           "quantity_uses", "read_support", "support_contains", "support_hull", "support_text"]
 
 PLACEMENT_KINDS = ("OrientedPoint", "Point")
 """Classes that place actors but are not actors themselves."""
@@ -343,6 +343,21 @@ def read_support(expression: str) -> Optional[List[Part]]:
     return _support_node(node) if node is not None else None
 
 
+def _ends(part: Part) -> Tuple[float, float]:
+    """The smallest and largest value of one :data:`Part`."""
+    if part[0] == "interval":
+        return part[1], part[2]
+    if part[0] == "points":
+        return min(part[1]), max(part[1])
+    return tuple(sorted((part[1], part[1] + part[2] * (part[3] - 1))))
+
+
+def support_hull(parts: Sequence[Part]) -> Tuple[float, float]:
+    """The smallest interval holding every value of :func:`read_support`'s ``parts``."""
+    ends = [end for part in parts for end in _ends(part)]
+    return min(ends), max(ends)
+
+
 def support_contains(parts: Sequence[Part], quantity: float, function: Optional["Quantity"] = None) -> bool:
     """Whether ``quantity`` is a value the distribution ``parts`` takes, or, given ``function``, one that
     ``function`` of such a value takes (a grid of more than 100000 values is read as its interval)."""
@@ -357,7 +372,7 @@ def support_contains(parts: Sequence[Part], quantity: float, function: Optional[
             if any(close(at(v)) for v in part[1]):
                 return True
         elif part[3] > _GRID_LIMIT:
-            ends = sorted((part[1], part[1] + part[2] * (part[3] - 1)))
+            ends = _ends(part)
             low, high = ends if function is None else function.over(*ends)
             if low - 1e-9 <= quantity <= high + 1e-9:
                 return True
