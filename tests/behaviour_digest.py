@@ -22,17 +22,28 @@ Text (every string above, Markdown, JUnit XML, HTML, the command's standard outp
   - the installed version after ``dv2s version`` becomes ``<version>``;
   - the episodes line's wall time (``N errors, T s``) becomes ``N errors, <seconds>``.
 
-Anything else, binary files included, is digested as it is.
+Videos (``.webm`` files, and the ``data:video/webm;base64,...`` clips a report page embeds): the container holds a
+random segment id and its writing date, so a video's digest is that of its decoded frames (count, shape, pixels).
+
+A mining run's sampler checkpoint (``sampler.pkl``) is sealed with a MAC keyed by the user's own secret: its
+digest is that of the pickle behind the seal. The runs set ``PYTHONHASHSEED=0``, so that the sets a checkpoint
+pickles are written in one order.
+
+Anything else is digested as it is.
 """
 
 from __future__ import annotations
 
+import base64
 import gzip
 import hashlib
 import json
 import re
+import tempfile
 from pathlib import Path
 from typing import Any, Dict, Mapping
+
+import cv2
 
 VOLATILE_KEYS = frozenset({"created", "duration", "timing", "timings", "seconds", "conversion_seconds",
                            "conversion_stage_seconds", "hostname", "dv2s_version"})
@@ -50,9 +61,34 @@ _TEXT_RULES = (
 )
 
 
+_EMBEDDED_VIDEO = re.compile(r"data:video/webm;base64,([A-Za-z0-9+/=]+)")
+_SEAL = len(b"DV2S-HMAC-SHA256\n") + 32
+
+
+def video_digest(raw: bytes) -> str:
+    """``frames:N:SHA-256`` of a video's decoded frames (shape and pixels of each)."""
+    with tempfile.NamedTemporaryFile(suffix=".webm") as handle:
+        handle.write(raw)
+        handle.flush()
+        capture = cv2.VideoCapture(handle.name)
+        frames, hasher = 0, hashlib.sha256()
+        try:
+            while True:
+                ok, frame = capture.read()
+                if not ok:
+                    break
+                frames += 1
+                hasher.update(repr(frame.shape).encode() + frame.tobytes())
+        finally:
+            capture.release()
+    return f"frames:{frames}:{hasher.hexdigest()}"
+
+
 def normalise_text(text: str, places: Mapping[str, str]) -> str:
-    """``text`` with the folders in ``places`` (``{absolute path: placeholder}``, longest first) and the volatile
-    spans of the module docstring's text rules replaced."""
+    """``text`` with the folders in ``places`` (``{absolute path: placeholder}``, longest first), embedded videos
+    (by their frames) and the volatile spans of the module docstring's text rules replaced."""
+    text = _EMBEDDED_VIDEO.sub(lambda found: "data:video/webm;" + video_digest(base64.b64decode(found.group(1))),
+                               text)
     for path in sorted(places, key=len, reverse=True):
         text = text.replace(path, places[path])
     for pattern, replacement in _TEXT_RULES:
@@ -85,6 +121,10 @@ def file_digests(path: Path, places: Mapping[str, str]) -> Any:
     as they are."""
     raw = path.read_bytes()
     name = path.name
+    if name.endswith(".webm"):
+        return video_digest(raw)
+    if name == "sampler.pkl" and raw.startswith(b"DV2S-HMAC-SHA256\n"):
+        return digest(raw[_SEAL:])
     if name.endswith(".gz"):
         raw, name = gzip.decompress(raw), name[:-3]
     if name.endswith(".jsonl"):

@@ -5,8 +5,8 @@ scenarios, one worker), the exit status and SHA-256 digests of the command's sta
 writes: each JSON file's top-level fields one digest each, each JSON-lines file one digest per line, a trace's JSON
 inside its gzip, other text and binary files whole. The mining run that converts also records the entries it adds
 to its (copied) bank. What changes from run to run (times, durations, the machine, the installed version, digests
-of the code, absolute paths) is taken out first by the normaliser in ``tests/behaviour_digest.py``, whose
-docstring lists its rules.
+of the code, absolute paths, a video container's id and date, a checkpoint's MAC) is taken out first by the
+normaliser in ``tests/behaviour_digest.py``, whose docstring lists its rules; the runs set ``PYTHONHASHSEED=0``.
 
 A refactor must leave every digest as it is; a change of behaviour meant to be one changes them, and is recorded
 by writing them again:
@@ -53,7 +53,7 @@ def _run(name: str, argv: list, work: Path) -> Dict[str, Any]:
     shutil.copytree(SHIPPED_BANK, bank)
     shipped = {entry.name for entry in bank.iterdir()}
     argv = [part.format(bank=bank) for part in argv] + ["--workers", "1", "--no-progress", "--out", str(out)]
-    environment = dict(os.environ, PYTHONPATH=str(ROOT), OMP_NUM_THREADS="1")
+    environment = dict(os.environ, PYTHONPATH=str(ROOT), OMP_NUM_THREADS="1", PYTHONHASHSEED="0")
     done = subprocess.run([sys.executable, "-m", "dv2s_gym.cli", *argv], cwd=work, env=environment,
                           capture_output=True, text=True, timeout=900)
     places = {str(out): "<out>", str(bank): "<bank>", str(ROOT): "<repo>"}
