@@ -5,18 +5,21 @@ and of the files ``dv2s regress`` and ``dv2s mine`` write; a refactor must leave
 writes that is not behaviour is taken out first, by these rules and no others:
 
 JSON (``.json``, every line of ``.jsonl``, the JSON inside ``.json.gz``):
-  - the keys in :data:`VOLATILE_KEYS` are dropped wherever they are: when a file was written (``created``), how long
-    something took (``duration``, ``timing``, ``timings``, ``seconds``, ``conversion_seconds``,
-    ``conversion_stage_seconds``), the machine (``hostname``) and the installed version (``dv2s_version``);
+  - the keys in :data:`VOLATILE_KEYS` are dropped wherever they are: when a file or an entry was written
+    (``created``, ``date``), how long something took (``timing``, ``timings``, ``seconds``, ``conversion_seconds``,
+    ``conversion_stage_seconds``), the machine (``hostname``) and the installed version (``dv2s_version``,
+    ``dv2s_gym_version``); ``duration`` is dropped at a file's top level only (a regression run's wall time; the
+    env config's ``duration`` is behaviour and stays);
   - keys naming a digest of the code itself are dropped (:data:`CODE_IDENTITY`: ``dv2s version``,
-    ``dv2s sources (SHA-256)``, ``module ... source (SHA-256)``, ``module file ... (SHA-256)``): a regression run
-    records them so that it resumes only on the same code, and a refactor changes them by definition;
+    ``dv2s sources (SHA-256)``, ``dv2s_sources_sha256``, ``module ... source (SHA-256)``, ``module file ...
+    (SHA-256)``): a regression run and an exact replay record them so that they resume or replay only on the same
+    code, and a refactor changes them by definition;
   - every string goes through the text rules below.
 
 Text (every string above, Markdown, JUnit XML, HTML, the command's standard output):
   - the run's own absolute folders become placeholders: the output folder ``<out>``, the bank folder ``<bank>``,
     the checkout ``<repo>`` (:func:`normalise_text`'s ``places``);
-  - ISO-8601 date-times become ``<time>``;
+  - ISO-8601 date-times become ``<time>``, dates alone ``<date>``;
   - JUnit's ``time``, ``timestamp`` and ``hostname`` attributes become ``<masked>``;
   - the mining report's sentence of conversion times (``Conversion time: ...``) becomes ``Conversion time: <masked>``;
   - the installed version after ``dv2s version`` becomes ``<version>``;
@@ -45,15 +48,20 @@ from typing import Any, Dict, Mapping
 
 import cv2
 
-VOLATILE_KEYS = frozenset({"created", "duration", "timing", "timings", "seconds", "conversion_seconds",
-                           "conversion_stage_seconds", "hostname", "dv2s_version"})
+VOLATILE_KEYS = frozenset({"created", "date", "timing", "timings", "seconds", "conversion_seconds",
+                           "conversion_stage_seconds", "hostname", "dv2s_version", "dv2s_gym_version"})
 """Keys dropped from JSON wherever they occur: when, how long, on which machine, which installed version."""
 
-CODE_IDENTITY = re.compile(r"dv2s version$|dv2s sources \(SHA-256\)$|^(?:\w+ )?module .*\(SHA-256\)$")
+VOLATILE_TOP_KEYS = frozenset({"duration"})
+"""Keys dropped from a file's top-level object only (a run's wall time; deeper, ``duration`` is the env's)."""
+
+CODE_IDENTITY = re.compile(r"dv2s version$|dv2s sources \(SHA-256\)$|^dv2s_sources_sha256$|"
+                           r"^(?:\w+ )?module .*\(SHA-256\)$")
 """Keys naming a digest of the code (or its version): a regression run's resume identity, changed by any edit."""
 
 _TEXT_RULES = (
     (re.compile(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(?:\.\d+)?(?:[+-]\d\d:\d\d|Z)?"), "<time>"),
+    (re.compile(r"\b\d{4}-\d\d-\d\d\b"), "<date>"),
     (re.compile(r'\b(time|timestamp|hostname)="[^"]*"'), r'\1="<masked>"'),
     (re.compile(r"Conversion time: [^<\n]*"), "Conversion time: <masked>"),
     (re.compile(r"(dv2s version(?:</th><td>|\W)*)\d[\w.+-]*"), r"\1<version>"),
@@ -96,6 +104,13 @@ def normalise_text(text: str, places: Mapping[str, str]) -> str:
     return text
 
 
+def normalise_document(value: Any, places: Mapping[str, str]) -> Any:
+    """A whole file's JSON value normalised: :func:`normalise`, and its top-level volatile keys dropped."""
+    if isinstance(value, dict):
+        value = {key: item for key, item in value.items() if key not in VOLATILE_TOP_KEYS}
+    return normalise(value, places)
+
+
 def normalise(value: Any, places: Mapping[str, str]) -> Any:
     """A JSON value with the volatile keys dropped and every string (keys included) normalised as text."""
     if isinstance(value, dict):
@@ -128,9 +143,9 @@ def file_digests(path: Path, places: Mapping[str, str]) -> Any:
     if name.endswith(".gz"):
         raw, name = gzip.decompress(raw), name[:-3]
     if name.endswith(".jsonl"):
-        return [digest(normalise(json.loads(line), places)) for line in raw.decode("utf-8").splitlines() if line]
+        return [digest(normalise_document(json.loads(line), places)) for line in raw.decode("utf-8").splitlines() if line]
     if name.endswith(".json"):
-        data = normalise(json.loads(raw.decode("utf-8")), places)
+        data = normalise_document(json.loads(raw.decode("utf-8")), places)
         if isinstance(data, dict):
             return {key: digest(item) for key, item in sorted(data.items())}
         return digest(data)
