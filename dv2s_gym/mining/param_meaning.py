@@ -22,11 +22,18 @@ every use with the quantity it sets as such a function (``abs(...)`` of one read
 cannot be read so (another sampled value or reference point beside the parameter, a call, ``%``, a conditional).
 A point that only places an actor (``spot = new OrientedPoint ...`` then ``new Pedestrian right of spot``) and a
 top-level variable hand their parameters on to the actor that uses them; the point hands on its expression too
-(``d + 30``), a variable does not (its computation is not read).
+(``d + 30``). A variable that is a computation on parameters alone (``x = globalParameters.g + 20``: parameters,
+numbers, operators, calls of plain functions) is followed like an expression: where it is used, it stands for its
+expression in brackets (``with speed x`` sets the speed to ``g + 20``); any other variable (``crossS = egoS +
+globalParameters.d``) hands its parameters on as ``derived`` uses whose quantity is not read.
+
+:func:`key_parameters` names the parameters that set a quantity of the failure's interaction: the ego's or the
+adversary's (an actor of the failure's kind).
 
 :func:`meaning_map` pairs the parameters one script does not share by name with the other's: the objects are paired
 first (the ego with the ego; another actor with the only one of its kind that has such parameters, else the one whose
-slots it shares most, when that is unique), then a parameter with the only parameter of the paired object that has
+slots it shares most, ties broken by the slots set the same way and then by the fewest slots on one side only, when
+that is unique), then a parameter with the only parameter of the paired object that has
 one of its (slot, how) pairs, counting only the uses where no other unpaired parameter shares the expression (in
 ``egoS + a + b`` neither ``a`` nor ``b`` alone sets the placement). A pairing that is not one to one (two parameters claiming one, or one matching two) is
 left out: what cannot be paired reliably is reported as not comparable, never guessed.
@@ -40,7 +47,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 __all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
            "script_parameters", "affine_uses", "affine_form", "read_interval", "Affine", "Quantity", "quantity_of",
-           "quantity_uses", "read_support", "support_contains", "support_hull", "support_text"]
+           "quantity_uses", "read_support", "support_contains", "support_hull", "support_text", "key_parameters", "key_uses", "actor_objects", "counterpart_objects"]
 
 PLACEMENT_KINDS = ("OrientedPoint", "Point")
 """Classes that place actors but are not actors themselves."""
@@ -641,14 +648,21 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
         return [item for name, items in carried.items() if re.search(rf"\b{re.escape(name)}\b", expression)
                 for item in items]
 
+    numbers: Dict[str, str] = {}  # variable -> its expression, when it is a computation on parameters
     for statement in _statements(script):
         if statement.startswith(_SKIP):
             continue
+        statement = _followed(statement, numbers)
         found = _OBJECT.match(statement)
         if found is None:
             assign = _ASSIGN.match(statement)
             if assign and "new " not in assign.group(2):
                 expression = assign.group(2)
+                if _is_computation(expression):  # followed where it is used, as if written there
+                    numbers[assign.group(1)] = " ".join(expression.split())
+                    carried.pop(assign.group(1), None)
+                    continue
+                numbers.pop(assign.group(1), None)
                 text = " ".join(expression.split())
                 # a parameter that reaches an object through a variable is part of a computation: "derived", and
                 # the quantity it sets is not read
@@ -692,6 +706,41 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
     return uses, quantities
 
 
+def _is_computation(expression: str) -> bool:
+    """Whether a top-level variable's ``expression`` is a computation on global parameters alone: it mentions one
+    and, besides ``globalParameters.<name>``, holds only numbers, operators and calls of plain functions (``min``,
+    ``Range``...), so where the variable is used it stands for that expression (``x = globalParameters.g + 20``, then
+    ``with speed x``, sets the speed to ``g + 20``)."""
+    node = _parse(expression.split("#", 1)[0])
+    if node is None or not _PARAM.search(expression):
+        return False
+    calls = {id(n.func) for n in ast.walk(node) if isinstance(n, ast.Call)}
+    for child in ast.walk(node):
+        if isinstance(child, ast.Attribute):
+            if not (isinstance(child.value, ast.Name) and child.value.id == "globalParameters"):
+                return False
+        elif isinstance(child, ast.Name):
+            if child.id != "globalParameters" and id(child) not in calls:
+                return False
+        elif isinstance(child, (ast.Lambda, ast.ListComp, ast.GeneratorExp, ast.DictComp, ast.SetComp,
+                                ast.Starred, ast.NamedExpr)):
+            return False
+    return True
+
+
+def _followed(statement: str, numbers: Mapping[str, str]) -> str:
+    """``statement`` with each use of a variable :func:`_is_computation` read (not an attribute, a keyword or the
+    name it assigns) replaced by its expression in brackets."""
+    if not numbers:
+        return statement
+    assigned = _ASSIGN.match(statement)
+    head, body = ((statement[:assigned.start(2)], statement[assigned.start(2):]) if assigned
+                  else ("", statement))
+    pattern = re.compile(r"(?<![\w.])(" + "|".join(map(re.escape, sorted(numbers, key=len, reverse=True)))
+                         + r")(?![\w])(?!\s*=(?!=))")
+    return head + pattern.sub(lambda m: f"({numbers[m.group(1)]})", body)
+
+
 def _actor_slots(uses: Mapping[str, Set[Use]], params: Sequence[str]) -> Dict[Tuple[str, str], Set[Tuple[str, str]]]:
     """``{(object, kind): {(slot, how)}}`` over ``params``."""
     actors: Dict[Tuple[str, str], Set[Tuple[str, str]]] = {}
@@ -704,7 +753,8 @@ def _actor_slots(uses: Mapping[str, Set[Use]], params: Sequence[str]) -> Dict[Tu
 def _pair_actors(source: Mapping[Tuple[str, str], Set[Tuple[str, str]]],
                  target: Mapping[Tuple[str, str], Set[Tuple[str, str]]]) -> Dict[Tuple[str, str], Tuple[str, str]]:
     """Each source object with its target object: the ego with the ego; another with the only target object of its
-    kind, else the one sharing the most slots when that is unique; one to one."""
+    kind, else the one sharing the most slots when that is unique (ties broken by the slots set the same way, then by
+    the fewest slots on one side only); one to one."""
     pairs: Dict[Tuple[str, str], Tuple[str, str]] = {}
     for actor, slots in source.items():
         if actor[0] == "ego":
@@ -716,8 +766,14 @@ def _pair_actors(source: Mapping[Tuple[str, str], Set[Tuple[str, str]]],
             pairs[actor] = same_kind[0]
             continue
         names = {slot for slot, _ in slots}
-        scores = sorted(((len(names & {slot for slot, _ in target[o]}), o) for o in same_kind), reverse=True)
-        if scores and scores[0][0] > 0 and (len(scores) == 1 or scores[1][0] < scores[0][0]):
+
+        def score(other: Tuple[str, str]) -> Tuple[int, int, int]:
+            # the slots shared, then the (slot, how) pairs shared, then the fewest slots on one side only
+            theirs = {slot for slot, _ in target[other]}
+            return len(names & theirs), len(slots & target[other]), -len(names ^ theirs)
+
+        scores = sorted(((score(o), o) for o in same_kind), reverse=True)
+        if scores and scores[0][0][0] > 0 and (len(scores) == 1 or scores[1][0] < scores[0][0]):
             pairs[actor] = scores[0][1]
     claimed: Dict[Tuple[str, str], int] = {}
     for other in pairs.values():
@@ -781,6 +837,92 @@ def meaning_map(source_script: str, target_script: str, source_params: Sequence[
         pairs[params[0]] = {"target": target, "object": name, "source_object": source, "kind": kind, "slot": slot,
                             "how": how}
     return {"pairs": dict(sorted(pairs.items())), "unpaired": dict(sorted(unpaired.items()))}
+
+
+def key_parameters(script: str, kind: Optional[str] = None, actor: Optional[str] = None) -> Dict[str, str]:
+    """``{parameter: the quantity it sets, in words}`` of the parameters of ``script`` that set a quantity of the
+    failure's interaction (:func:`key_uses`)."""
+    return {param: where[0][3] for param, where in key_uses(script, kind, actor).items()}
+
+
+def key_uses(script: str, kind: Optional[str] = None,
+             actor: Optional[str] = None) -> Dict[str, List[Tuple[str, str, str, str]]]:
+    """``{parameter: [(object, kind, slot, the quantity in words)]}``: the quantities of the failure's interaction, the
+    ones the failure depends on, each parameter of ``script`` sets: any quantity (speed, placement, behaviour
+    argument, ``with`` property; directly, through a placing point or a variable) of the ego or of the failure's
+    key actor (:func:`dv2s_gym.mining.interaction.failure_interaction`'s ``actor`` and ``kind``). The key actor is
+    the object of ``script`` the simulation names ``actor`` (:func:`actor_objects`: its ``with name``, else its
+    class and rank, ``Car2``); when no object is found so, every actor of the ``kind`` (``"car"``,
+    ``"pedestrian"``: Scenic's class name, case ignored); when that is unknown too or no actor is of it, every
+    actor. A parameter that sets only other actors' quantities (traffic beside the interaction) or feeds no object (a
+    requirement, a behaviour's body) has none. The ego's quantities come first."""
+    uses = parameter_uses(script)
+    chosen = actor_objects(script).get(actor) if actor else None
+    wanted = (kind or "").casefold()
+    present = {k.casefold() for found in uses.values() for name, k, _, _, _ in found if name != "ego"}
+    match = bool(wanted) and wanted in present
+
+    def is_key(name: str, k: str) -> bool:
+        if name == "ego":
+            return True
+        if chosen is not None:
+            return name == chosen
+        return not match or k.casefold() == wanted
+
+    key: Dict[str, List[Tuple[str, str, str, str]]] = {}
+    for param, found in sorted(uses.items()):
+        where = sorted({(name, k, slot) for name, k, slot, _, _ in found if is_key(name, k)},
+                       key=lambda use: (use[0] != "ego", use[2] != "speed") + use)
+        if where:
+            key[param] = [(name, k, slot, ("the ego" if name == "ego" else f"the {k} {name}")
+                           + f"'s {_slot_words(slot)}") for name, k, slot in where]
+    return key
+
+
+def counterpart_objects(source_script: str, target_script: str) -> Dict[Tuple[str, str], Tuple[str, str]]:
+    """``{(object, kind) of source_script: (object, kind) of target_script}``: the objects paired as
+    :func:`meaning_map` pairs them, over every parameter of the two scripts."""
+    source, target = parameter_uses(source_script), parameter_uses(target_script)
+    return _pair_actors(_actor_slots(source, list(source)), _actor_slots(target, list(target)))
+
+
+def actor_objects(script: str) -> Dict[str, str]:
+    """``{the name a simulation gives an actor: the script's object}`` (the object's variable, or ``<Class>``), as
+    the simulator names them: the ego ``ego``; another object its ``with name "..."`` when no other object has that
+    name, else its name or class and its rank among those in the script's order (``Car1``, ``Car2``; two objects
+    named "walker": ``walker1``, ``walker2``). Objects made in a loop or a condition are not known here."""
+    objects: List[Tuple[str, str]] = []  # (object, label)
+    named: List[Optional[str]] = []
+    for statement in _statements(script):
+        if statement.startswith(_SKIP):
+            continue
+        found = _OBJECT.match(statement)
+        if found is None or found.group(2) in PLACEMENT_KINDS:
+            continue
+        name = found.group(1) or f"<{found.group(2)}>"
+        if name == "ego":
+            continue
+        given = re.search(r"\bwith\s+name\s+(['\"])(.+?)\1", found.group(3))
+        named.append(given.group(2) if given else None)
+        objects.append((name, given.group(2) if given else found.group(2)))
+    out: Dict[str, str] = {}
+    counts: Dict[str, int] = {}
+    for name, label in objects:
+        counts[label] = counts.get(label, 0) + 1
+        out[f"{label}{counts[label]}"] = name
+    taken = set(out) | {"ego"}
+    for (name, _), given in zip(objects, named):
+        if given and given != "ego" and named.count(given) == 1 and given not in taken:
+            out[given] = name
+            taken.add(given)
+    return out
+
+
+def _slot_words(slot: str) -> str:
+    """``"speed"``, ``"behaviour argument gap"``, ``"longitudinal placement"``: a slot in words."""
+    return (f"behaviour argument {slot.split(':', 1)[1]}" if slot.startswith("behavior:")
+            else f"{slot.split(':', 1)[1]} property" if slot.startswith("with:") else f"{slot} placement"
+            if slot in ("longitudinal", "lateral", "offset", "position") else slot)
 
 
 def script_parameters(script: str) -> Dict[str, str]:
