@@ -72,7 +72,7 @@ def _affine_node(node: ast.AST, param: Optional[str]) -> Optional[Tuple[float, f
     """``(scale, offset)`` of ``node`` as ``scale * globalParameters.<param> + offset``; ``None`` when it is built
     from anything but that parameter, numbers, ``+ - * /`` (a product or quotient by a number only) and unary
     minus or plus."""
-    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool) and _plain(node.value):
         return 0.0, float(node.value)
     if (param is not None and isinstance(node, ast.Attribute) and node.attr == param
             and isinstance(node.value, ast.Name) and node.value.id == "globalParameters"):
@@ -86,6 +86,8 @@ def _affine_node(node: ast.AST, param: Optional[str]) -> Optional[Tuple[float, f
         left, right = _affine_node(node.left, param), _affine_node(node.right, param)
         if left is None or right is None:
             return None
+        if not all(map(_plain, left + right)):
+            return None  # a part beyond LARGEST: rounding may cancel the parameter
         if isinstance(node.op, ast.Add):
             return left[0] + right[0], left[1] + right[1]
         if isinstance(node.op, ast.Sub):
@@ -98,6 +100,17 @@ def _affine_node(node: ast.AST, param: Optional[str]) -> Optional[Tuple[float, f
             return None  # a quotient by the parameter, or by zero
         return left[0] / right[1], left[1] / right[1]
     return None
+
+
+LARGEST = 1e6
+"""The largest number (in absolute value) the judge reads in an expression: Scenic computes in floating point, and
+beside a larger one a parameter's value is rounded away (``(g + 1e16) - 1e16`` is not ``g``: 6 becomes 6 or 8);
+an expression holding one, or whose affine form reaches one, is not read (not comparable). A scene's quantities
+(metres, seconds, m/s) stay far below it, where the rounding is below the judge's tolerance of 1e-9."""
+
+
+def _plain(number: float) -> bool:
+    return abs(number) <= LARGEST
 
 
 def _parse(text: str) -> Optional[ast.AST]:
@@ -113,6 +126,8 @@ def affine_form(expression: str, param: str) -> Optional[Tuple[float, float]]:
     brackets), the parameter appearing with a non-zero scale; else ``None``."""
     node = _parse(expression)
     form = _affine_node(node, param) if node is not None else None
+    if form is not None and not all(map(_plain, form)):
+        return None  # beyond what floating point keeps exact enough (LARGEST)
     return form if form is not None and form[0] != 0.0 else None
 
 
@@ -150,7 +165,7 @@ def _image(node: ast.AST, param: str, low: float, high: float) -> Optional[Tuple
     """The interval ``node`` takes with the parameter in ``low..high``, by interval arithmetic (exact when the
     parameter occurs once): numbers, the parameter, ``+ -``, ``* /`` by a non-zero number, unary minus or plus and
     ``abs``; ``None`` for anything else."""
-    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool) and _plain(node.value):
         return float(node.value), float(node.value)
     if _is_param(node, param):
         return low, high
@@ -225,7 +240,7 @@ def quantity_of(expression: str, param: str) -> Optional[Quantity]:
 
 
 def _interval_node(node: ast.AST) -> Optional[Tuple[float, float]]:
-    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool) and _plain(node.value):
         return float(node.value), float(node.value)
     if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _INTERVAL_CALLS \
             and node.args and not node.keywords:
@@ -277,7 +292,7 @@ Part = Tuple[Any, ...]
 
 
 def _support_node(node: ast.AST) -> Optional[List[Part]]:
-    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool) and _plain(node.value):
         return [("points", [float(node.value)])]
     if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.args and not node.keywords:
         call = node.func.id
