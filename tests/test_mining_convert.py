@@ -1012,6 +1012,8 @@ def test_a_point_that_places_the_actor_hands_on_its_expression(placement, outsid
     generated = (_CROSSING_PARENT.replace("param crossing_distance = Range(35, 55)", "param d = Range(50, 60)")
                  .replace("following roadDirection from ego for globalParameters.crossing_distance", placement)
                  .replace("param kerb =", "param side =").replace("globalParameters.kerb", "globalParameters.side"))
+    if "egoS" in placement:  # a distance along the lane from the ego's own point
+        generated = generated.replace("ego = new Car on lane.centerline", "ego = new Car at lane.centerline.pointAlongBy(egoS)")
     failing = {"ego_speed": 10.0, "crossing_distance": 40.0, "kerb": 3.0}
     compared, rejections = _judged(generated, parent=_CROSSING_PARENT, failing=failing)
     crossing = compared["compared"]["crossing_distance"]
@@ -1253,3 +1255,22 @@ def test_a_number_beyond_what_floating_point_keeps_makes_the_expression_unread(e
                                    .replace("CutIn(globalParameters.cut_in_gap,", f"CutIn({expression},"))
     assert "cut_in_gap" in compared["not_comparable"] and "cut_in_gap" not in compared["compared"]
     assert rejections and rejections[0].startswith("parameters: a key parameter")
+
+
+@pytest.mark.parametrize("reference, compared_by_distance", [("egoS", True), ("otherS", False), ("", False)])
+def test_a_distance_along_the_lane_is_read_only_from_the_egos_point(reference, compared_by_distance):
+    """``pointAlongBy(egoS + g)`` places the actor ``g`` ahead of the ego (the ego is at ``pointAlongBy(egoS)``);
+    from another point (``otherS + g``) or from the lane's start (``g``) the same number is another distance: the
+    judge does not read it as the parent's distance from the ego (the key quantity is then not comparable)."""
+    from dv2s_gym.mining.convert import compare_parameters
+
+    parent = ("param lead_gap = Range(10, 20)\negoS = Range(50, 400)\notherS = Range(0, 600)\n"
+              "ego = new Car at lane.centerline.pointAlongBy(egoS)\n"
+              "lead = new Car at lane.centerline.pointAlongBy(egoS + globalParameters.lead_gap), with speed 0\n")
+    start = f"{reference} + " if reference else ""
+    generated = (parent.replace("lead_gap = Range(10, 20)", "g = Range(10, 20)")
+                 .replace("pointAlongBy(egoS + globalParameters.lead_gap)", f"pointAlongBy({start}globalParameters.g)"))
+    compared = compare_parameters({"lead_gap": 15.0}, generated, parent=parent)
+    assert ("lead_gap" in compared["compared"]) is compared_by_distance
+    if not compared_by_distance:
+        assert list(compared["key_not_compared"]) == ["lead_gap"]

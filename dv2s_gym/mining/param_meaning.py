@@ -556,24 +556,26 @@ def _slots(specifier: str, behaviors: Mapping[str, List[str]]) -> List[Tuple[str
     return [("position", text)]
 
 
-def _value_part(slot: str, expression: str) -> str:
+def _value_part(slot: str, expression: str, reference: Optional[str] = None) -> str:
     """The part of a slot's expression that is the quantity: a behaviour argument or a ``with`` value whole, the
     distance after ``by`` of ``ahead of``/``behind``/``left of``/``right of`` and after ``for`` of ``following``;
     ``""`` for other placements."""
     if slot.startswith(("behavior:", "with:")) or slot == "speed":
         return expression
     if slot == "longitudinal" and "pointAlongBy" in expression:
-        return _along(expression)
+        return _along(expression, reference)
     match = re.match(r"^(?:ahead of|behind|left of|right of)\s+[\w.]+\s+by\s+(.+)$", expression.strip(), re.S)
     if match is None:
         match = re.match(r"^following\b.*?\bfor\s+(.+)$", expression.strip(), re.S)
     return match.group(1) if match else ""
 
 
-def _along(expression: str) -> str:
+def _along(expression: str, reference: Optional[str] = None) -> str:
     """The distance a ``pointAlongBy(...)`` placement sets from its reference point: the argument without the one
     name it adds (``egoS + globalParameters.gap + 10`` -> ``globalParameters.gap + 10``); ``""`` when the argument
-    is not read so (no single reference point added)."""
+    is not read so: no single reference point added, or one that is not ``reference`` (the name the ego is placed at,
+    ``pointAlongBy(egoS)``): a distance from another point (``otherS + gap``) or from the lane's start is not a
+    distance from the ego, whatever its value."""
     match = re.search(r"pointAlongBy\s*\(", expression)
     if match is None:
         return ""
@@ -598,7 +600,7 @@ def _along(expression: str) -> str:
 
     flatten(node, 1)
     references = [index for index, (sign, part) in enumerate(terms) if isinstance(part, ast.Name)]
-    if len(references) > 1 or (references and terms[references[0]][0] < 0):
+    if len(references) != 1 or terms[references[0]][0] < 0 or terms[references[0]][1].id != reference:
         return ""
     rest = [term for index, term in enumerate(terms) if index not in references]
     if not rest:
@@ -664,6 +666,8 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
                 for item in items]
 
     numbers: Dict[str, str] = {}  # variable -> its expression, when it is a computation on parameters
+    ego_point = next((m.group(1) for m in (re.match(r"ego\s*=\s*new\s+\w+\s+at\s+.*?pointAlongBy\s*\(\s*(\w+)\s*\)",
+                                                     statement, re.S) for statement in _statements(script)) if m), None)
     for statement in _statements(script):
         if statement.startswith(_SKIP):
             continue
@@ -690,7 +694,7 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
         items: List[Tuple[str, str, str, frozenset, Optional[Quantity], str]] = []
         for specifier in _split_top(rest):
             for slot, expression in _slots(specifier, behaviors):
-                value = _value_part(slot, expression)
+                value = _value_part(slot, expression, ego_point)
                 here: List[Tuple[str, str, str, Optional[Quantity], str]] = []
                 for p in dict.fromkeys(_PARAM.findall(expression)):
                     quantity = quantity_of(value, p) if value else None
