@@ -101,3 +101,20 @@ def test_a_workers_give_up_messages_count_by_kind_with_a_seed_as_example():
     assert merged["messages"]["s"][0]["message"] == kind and merged["messages"]["s"][0]["count"] == 5
     lines = _errored_lines({"steps": {"mine": {"errored": old}, "regress": {"errored": {"fine_tuned": found}}}})
     assert lines[-1] == f"  - `s`: {kind} (5 episodes, e.g. seed 4); scene not sampled (1 episode)"
+
+
+def test_rejection_reasons_name_files_in_the_run_folder_by_their_relative_path(tmp_path):
+    from dv2s_gym.mining.convert import convert_failure, replay_failure_entry
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "failures").write_text("not a folder")  # the conversion cannot make its folder there
+    record = {"scenario": "urban_lead_vehicle_stopped", "seed": 0, "index": 3, "params": {},
+              "failure": {"type": "collision"}, "result": {"trajectory_hash": "0" * 16}}
+    out = convert_failure(record, run, policy="keep_lane", bank=tmp_path / "bank", k=1)
+    assert out["status"] == "rejected" and out["stage"] == "input"
+    assert "failures/episode-000003/conversion" in out["reason"] and str(tmp_path) not in out["reason"]
+    (run / "settings.json").mkdir()  # nor read the run's settings
+    out = replay_failure_entry(record, run, policy="keep_lane", bank=tmp_path / "bank")
+    assert out["status"] == "rejected" and out["reason"].startswith("replay: ")
+    assert str(tmp_path) not in out["reason"] and "failures/" in out["reason"]

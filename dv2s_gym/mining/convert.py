@@ -210,6 +210,14 @@ def _rel(path: Path, root: Path) -> str:
         return str(path)
 
 
+def _in_run(text: str, run_dir: Path) -> str:
+    """``text`` (a rejection reason, a clip's error) naming files inside the run folder ``run_dir`` by their path
+    relative to it, not by this machine's absolute path (the record travels with the run folder)."""
+    for where in dict.fromkeys((str(run_dir), str(run_dir.absolute()), str(run_dir.resolve()))):
+        text = text.replace(where.rstrip(os.sep) + os.sep, "")
+    return text
+
+
 @dataclasses.dataclass(frozen=True)
 class ConversionSettings:
     """How :func:`convert_failure` converts and judges a failure: the deterministic ``policy`` that failed (a spec or
@@ -976,6 +984,8 @@ def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, *, policy
     except Exception as error:  # a bad failure is a rejection, never an exception
         first = (str(error).strip().splitlines() or [""])[0]
         out["reason"] = f"replay: {type(error).__name__}: {first}"[:500]
+    if out["reason"]:
+        out["reason"] = _in_run(out["reason"], run_dir)
     out["seconds"] = round(time.perf_counter() - start, 3)
     return out
 
@@ -993,13 +1003,13 @@ def _replay_without_video(out: Dict[str, Any], video_error: str, record: Mapping
     """After the video stage failed: keep the exact replay all the same (its own trace stands for the failure's)
     and record both outcomes in ``out``: ``rejections`` holds the video's reason, then the replay's if it
     failed too."""
-    out["rejections"] = [video_error]
+    out["rejections"] = [_in_run(video_error, source.run_dir)]
     try:
         replay = _add_replay(record, bank, settings, source)
     except SETUP_ERRORS:
         raise
     except Exception as error:
-        out["rejections"].append(_stage_error("replay", error))
+        out["rejections"].append(_in_run(_stage_error("replay", error), source.run_dir))
         return
     out["replay_entry"] = replay["entry"]
     details["replay"] = replay
@@ -1095,6 +1105,9 @@ class _Conversion:
         except Exception as error:  # a bad failure is a rejection with its stage, never an exception
             first = (str(error).strip().splitlines() or [""])[0]
             out.update(stage=self.stage, reason=f"{self.stage}: {type(error).__name__}: {first}"[:500])
+        if out["reason"]:
+            out["reason"] = _in_run(out["reason"], self.run_dir)
+        out["rejections"] = [_in_run(str(why), self.run_dir) for why in out["rejections"]]
         if out["stage"] is not None and out["stage"] not in out["timings"]:
             self.lap(out["stage"])
         out["seconds"] = round(time.perf_counter() - start, 3)
@@ -1253,7 +1266,7 @@ class _Conversion:
                                                interaction=self.interaction)
         # the judge: every check that failed is recorded; the first one is the rejection's stage
         rejections = _judge(out, self.interaction, self.source_failure, self.settings.threshold)
-        out["rejections"] = [str(r) for r in rejections]
+        out["rejections"] = [_in_run(str(r), self.run_dir) for r in rejections]
         if self.replay["entry"]:
             _link(self.bank, self.replay["entry"], {"converted_e2e_sc": out["e2e_sc"],
                                                     "converted_rejections": out["rejections"]})
@@ -1284,9 +1297,7 @@ class _Conversion:
         except SETUP_ERRORS:
             raise
         except Exception as error:  # the clip is extra: the conversion goes on without it
-            # the record names files inside the run folder, not this machine's paths
-            where = str(self.run_dir).rstrip(os.sep) + os.sep
-            clip = {**clip, "file": None, "error": _stage_error("clip", error).replace(where, "")}
+            clip = {**clip, "file": None, "error": _in_run(_stage_error("clip", error), self.run_dir)}
         else:
             self.clip_path = path
             self.out["converted_video"] = _rel(path, self.run_dir)
