@@ -118,3 +118,14 @@ def test_rejection_reasons_name_files_in_the_run_folder_by_their_relative_path(t
     out = replay_failure_entry(record, run, policy="keep_lane", bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["reason"].startswith("replay: ")
     assert str(tmp_path) not in out["reason"] and "failures/" in out["reason"]
+
+
+def test_the_loop_html_shows_a_kind_with_its_seed_mark_escaped():
+    from dv2s_gym.mining.errored import errored_episodes
+    from dv2s_gym.mining.loop_report import _errored_lines, _markdown_to_html
+    from dv2s_gym.workers.tasks import gave_up_result
+
+    found = errored_episodes([gave_up_result({"scenario": "s", "seed": seed, "role": "eval", "policy": "p"},
+                                             ["the worker hung (no result after 5 s)"], 1) for seed in (3, 8)])
+    page = _markdown_to_html(_errored_lines({"steps": {"mine": {"errored": found}}}))
+    assert "on s seed &lt;seed&gt; (1 attempts) (2 episodes, e.g. seed 3)" in page
