@@ -753,7 +753,9 @@ def test_the_reports_name_each_reason_a_parameter_was_not_compared_with_its_coun
     failing = {**_CUT_FAILING, "kerb_offset": 2.8}
     judged = compare_parameters(failing, opaque, parent=_CUT_PARENT + "param kerb_offset = Range(2, 3)\n")
     assert judged["outside"] == ["lane_change_duration"]
-    (reason,) = [str(r) for r in _judge({**_PASSING, "parameters": judged}, {}, {"type": "collision"}, 0.3)]
+    key, reason = [str(r) for r in _judge({**_PASSING, "parameters": judged}, {}, {"type": "collision"}, 0.3)]
+    # the cutter's gap is a quantity of the failure's interaction the new script sets by its own g: a rejection too
+    assert key.startswith("parameters: a key parameter") and "cut_in_gap (the Car cutter's behaviour argument" in key
     assert reason.endswith("(not compared: cut_in_gap whose counterpart's distribution is not an interval the judge "
                            "can read; kerb_offset feeding no object of the parent script)")
     decoy = _CUT_PARENT.replace("CutIn(globalParameters.cut_in_gap, globalParameters.lane_change_duration)",
@@ -808,7 +810,8 @@ def test_parameters_named_alike_but_swapped_are_not_compared_and_the_judge_rejec
     compared, rejections = _judged(swapped)
     assert list(compared["compared"]) == ["ego_speed"]
     assert "named alike but not the same meaning" in compared["not_comparable"]["cut_in_gap"]
-    (reason,) = rejections
+    key, reason = rejections  # the cutter's gap and duration, set by the new script's own (swapped) parameters
+    assert key.startswith("parameters: a key parameter") and "cut_in_gap (" in key and "lane_change_duration (" in key
     assert reason.startswith("parameters: only 1 of the failure's 3 parameters could be compared") and "fewer than half" in reason
 
 
@@ -854,8 +857,9 @@ def test_a_counterpart_with_a_distribution_the_judge_cannot_read_is_not_comparab
         opaque.replace("Range(8, 9) * 1", "Range(8, 9) + Range(0, 1)"))[0]["not_comparable"]["lane_change_duration"]
     # Range(8, 9) * 1 is read as the interval 8..9, which does not contain the failing 2
     assert compared["compared"]["lane_change_duration"]["range"] == [8.0, 9.0]
-    assert len(rejections) == 1 and "lane_change_duration (the script's dur" in rejections[0]
-    assert "= 2 outside 8..9" in rejections[0]
+    key, outside = rejections  # the gap, a quantity of the failure's interaction, is set by the new script's own g
+    assert key.startswith("parameters: a key parameter") and "cut_in_gap (" in key and "Normal(30, 1)" in key
+    assert "lane_change_duration (the script's dur" in outside and "= 2 outside 8..9" in outside
 
 
 def test_one_actor_of_the_new_script_cannot_stand_for_two_of_the_parent():
@@ -1008,6 +1012,8 @@ def test_a_point_that_places_the_actor_hands_on_its_expression(placement, outsid
     generated = (_CROSSING_PARENT.replace("param crossing_distance = Range(35, 55)", "param d = Range(50, 60)")
                  .replace("following roadDirection from ego for globalParameters.crossing_distance", placement)
                  .replace("param kerb =", "param side =").replace("globalParameters.kerb", "globalParameters.side"))
+    if "egoS" in placement:  # a distance along the lane from the ego's own point
+        generated = generated.replace("ego = new Car on lane.centerline", "ego = new Car at lane.centerline.pointAlongBy(egoS)")
     failing = {"ego_speed": 10.0, "crossing_distance": 40.0, "kerb": 3.0}
     compared, rejections = _judged(generated, parent=_CROSSING_PARENT, failing=failing)
     crossing = compared["compared"]["crossing_distance"]
@@ -1124,3 +1130,147 @@ def test_a_clip_that_cannot_be_written_is_recorded_without_this_machines_paths(r
     assert clip["file"] is None and "No space left on device" in clip["error"]
     assert f"failures/{SCENARIO}__collision__0/conversion/converted.webm" in clip["error"]
     assert str(tmp_path) not in clip["error"]
+
+
+_KEY_PARENT = '''param ego_speed = Range(18, 25)
+param gap = Range(5, 11)
+param dur = Range(1.8, 3.0)
+param traffic_speed = Range(20, 30)
+
+behavior Merge(gap, duration):
+    wait
+
+ego = new Car at lane.centerline.pointAlongBy(egoS),
+    with speed globalParameters.ego_speed
+merger = new Car at lane.centerline.pointAlongBy(egoS + 10),
+    with name "merger",
+    with speed 25,
+    with behavior Merge(globalParameters.gap, globalParameters.dur)
+walker = new Pedestrian ahead of ego by 60,
+    with speed globalParameters.traffic_speed
+'''
+_KEY_FAILING = {"ego_speed": 20.0, "gap": 6.0, "dur": 2.0, "traffic_speed": 25.0}
+
+
+def _key_script(gap_expression, extra=""):
+    return (_KEY_PARENT.replace("param gap = Range(5, 11)", "param g = Range(5, 11)" + extra)
+            .replace("Merge(globalParameters.gap,", f"Merge({gap_expression},")
+            .replace('    with name "merger",\n', ""))
+
+
+@pytest.mark.parametrize("gap_expression, extra", [
+    ("globalParameters.g * globalParameters.g", ""), ("10 / globalParameters.g", ""),
+    ("min(globalParameters.g, 3)", ""), ("globalParameters.g % 5", ""), ("globalParameters.g + Range(20, 30)", ""),
+    ("globalParameters.g + egoS", ""), ("globalParameters.g", "\nparam h = Range(1, 2)\nx = 1")])
+def test_a_key_parameter_the_new_script_sets_by_its_own_parameter_must_be_compared(gap_expression, extra):
+    """The merger's gap is a quantity of the failure's interaction (the key actor's): when the new script sets it by
+    a parameter of its own the judge cannot compare, the script is rejected for that, though 3 of the failure's 4
+    parameters compare (the half rule alone let it pass)."""
+    from dv2s_gym.mining.convert import _judge, compare_parameters
+
+    interaction = {"actor": "merger", "kind": "car"}
+    compared = compare_parameters(_KEY_FAILING, _key_script(gap_expression, extra), parent=_KEY_PARENT,
+                                  interaction=interaction)
+    assert compared["key"] == {"ego_speed": "the ego's speed", "gap": "the Car merger's behaviour argument gap",
+                               "dur": "the Car merger's behaviour argument duration"}
+    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
+    if gap_expression == "globalParameters.g":  # the control: the same script, gap set by g alone
+        assert reasons == [] and compared["compared"]["gap"]["script_name"] == "g"
+        return
+    assert "gap" in compared["not_comparable"] and list(compared["key_not_compared"]) == ["gap"]
+    (reason,) = reasons
+    assert reason.startswith("parameters: a key parameter (it sets a quantity of the failure's interaction) that the "
+                             "new script sets with a parameter of its own must be compared, and the judge could not: "
+                             "gap (the Car merger's behaviour argument gap, which the new script sets by ")
+    assert "(its own parameter g)" in reason
+
+
+def test_a_parameter_of_an_actor_beside_the_interaction_stays_within_the_half_rule():
+    """The walker is no part of the failure with the merger: its speed set by the new script's own unreadable
+    parameter is not compared, and with the other 3 compared the script passes."""
+    from dv2s_gym.mining.convert import _judge, compare_parameters
+
+    interaction = {"actor": "merger", "kind": "car"}
+    generated = (_KEY_PARENT.replace("param traffic_speed = Range(20, 30)", "param w = Range(4, 6)")
+                 .replace("globalParameters.traffic_speed", "globalParameters.w * globalParameters.w"))
+    compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction=interaction)
+    assert "traffic_speed" in compared["not_comparable"] and "traffic_speed" not in compared["key"]
+    assert _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3) == []
+    # with the key actor unknown, every actor's quantities are key: the walker's speed too
+    unknown = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT)
+    assert list(unknown["key_not_compared"]) == ["traffic_speed"]
+
+
+def test_a_key_quantity_the_new_script_fixes_without_a_parameter_counts_within_the_half_rule():
+    """A generated script parameterises the scene its own way: a key quantity it fixes with a number is no
+    comparison the judge failed (the rule-based generator leaves most behaviour timings fixed)."""
+    from dv2s_gym.mining.convert import _judge, compare_parameters
+
+    generated = _key_script("7").replace("param g = Range(5, 11)\n", "")
+    compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction={"actor": "merger"})
+    assert "gap" in compared["not_comparable"] and compared["key_not_compared"] == {}
+    assert _judge({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3) == []
+
+
+@pytest.mark.parametrize("assignment, inside", [("x = globalParameters.g + 20", False),
+                                                ("x = globalParameters.g", True),
+                                                ("x = (globalParameters.g - 1) * 2 - 4", True)])
+def test_a_variable_computed_from_a_parameter_is_followed_like_an_expression(assignment, inside):
+    """``x = g + 20`` then ``Merge(x, ...)`` sets the gap to ``g + 20`` (25..31, never the failing 6): compared
+    through that expression; ``x = g`` is ``g`` itself."""
+    compared, rejections = _judged(_CUT_PARENT.replace("param cut_in_gap = Range(5, 11)",
+                                                       f"param g = Range(5, 11)\n{assignment}")
+                                   .replace("CutIn(globalParameters.cut_in_gap,", "CutIn(x,"))
+    gap = compared["compared"]["cut_in_gap"]
+    assert gap["script_name"] == "g"
+    assert (rejections == []) is inside
+    if not inside:
+        assert gap["interval"] == [25.0, 31.0] and "= 6 outside 25..31" in rejections[0]
+
+
+def test_each_bank_scenario_judged_against_itself_compares_every_parameter():
+    """The judge on a shipped scenario and itself (failing values in the middle of each range): every parameter is
+    compared, none outside, no rejection, whatever the key actor."""
+    from dv2s_gym.mining.convert import _judge, _script_ranges, compare_parameters
+
+    bank = Bank()
+    for name in sorted(bank.names()):
+        script = bank.get(name).script
+        failing = {p: (low + high) / 2 for p, (low, high) in _script_ranges(script).items()}
+        compared = compare_parameters(failing, script, parent=script)
+        assert compared["not_comparable"] == {} and compared["outside"] == [], name
+        assert len(compared["compared"]) == len(failing), name
+        assert _judge({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3) == [], name
+
+
+@pytest.mark.parametrize("expression", ["(globalParameters.g + 1e16) - 1e16", "globalParameters.g + 1e400",
+                                        "globalParameters.g * 1e9 / 1e9"])
+def test_a_number_beyond_what_floating_point_keeps_makes_the_expression_unread(expression):
+    """Scenic computes ``(g + 1e16) - 1e16`` in floating point (6 becomes 6 or 8): the judge does not read it as
+    ``g``; the key quantity is then not comparable and the script rejected."""
+    from dv2s_gym.mining.param_meaning import affine_form
+
+    assert affine_form(expression, "g") is None
+    compared, rejections = _judged(_CUT_PARENT.replace("param cut_in_gap = Range(5, 11)", "param g = Range(5, 11)")
+                                   .replace("CutIn(globalParameters.cut_in_gap,", f"CutIn({expression},"))
+    assert "cut_in_gap" in compared["not_comparable"] and "cut_in_gap" not in compared["compared"]
+    assert rejections and rejections[0].startswith("parameters: a key parameter")
+
+
+@pytest.mark.parametrize("reference, compared_by_distance", [("egoS", True), ("otherS", False), ("", False)])
+def test_a_distance_along_the_lane_is_read_only_from_the_egos_point(reference, compared_by_distance):
+    """``pointAlongBy(egoS + g)`` places the actor ``g`` ahead of the ego (the ego is at ``pointAlongBy(egoS)``);
+    from another point (``otherS + g``) or from the lane's start (``g``) the same number is another distance: the
+    judge does not read it as the parent's distance from the ego (the key quantity is then not comparable)."""
+    from dv2s_gym.mining.convert import compare_parameters
+
+    parent = ("param lead_gap = Range(10, 20)\negoS = Range(50, 400)\notherS = Range(0, 600)\n"
+              "ego = new Car at lane.centerline.pointAlongBy(egoS)\n"
+              "lead = new Car at lane.centerline.pointAlongBy(egoS + globalParameters.lead_gap), with speed 0\n")
+    start = f"{reference} + " if reference else ""
+    generated = (parent.replace("lead_gap = Range(10, 20)", "g = Range(10, 20)")
+                 .replace("pointAlongBy(egoS + globalParameters.lead_gap)", f"pointAlongBy({start}globalParameters.g)"))
+    compared = compare_parameters({"lead_gap": 15.0}, generated, parent=parent)
+    assert ("lead_gap" in compared["compared"]) is compared_by_distance
+    if not compared_by_distance:
+        assert list(compared["key_not_compared"]) == ["lead_gap"]

@@ -77,7 +77,7 @@ from dv2s_gym.mining.exact_replay import narrowed_script, replay_name, REPLAY_TA
 from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence, key_actor, shows_interaction
 from dv2s_gym.mining.monitors import detect_failure
 from dv2s_gym.mining.report_text import not_compared_names_text
-from dv2s_gym.mining.param_meaning import (meaning_map, name_mismatch, quantity_of, quantity_uses, read_interval,
+from dv2s_gym.mining.param_meaning import (counterpart_objects, key_uses, meaning_map, name_mismatch, quantity_of, quantity_uses, read_interval,
                                            read_support, script_parameters, support_contains, support_hull,
                                            support_text, tied_objects)
 from dv2s_gym.mining.settings import read_run_settings
@@ -208,6 +208,14 @@ def _rel(path: Path, root: Path) -> str:
         return str(path.resolve().relative_to(root.resolve()))
     except ValueError:
         return str(path)
+
+
+def _in_run(text: str, run_dir: Path) -> str:
+    """``text`` (a rejection reason, a clip's error) naming files inside the run folder ``run_dir`` by their path
+    relative to it, not by this machine's absolute path (the record travels with the run folder)."""
+    for where in dict.fromkeys((str(run_dir), str(run_dir.absolute()), str(run_dir.resolve()))):
+        text = text.replace(where.rstrip(os.sep) + os.sep, "")
+    return text
 
 
 @dataclasses.dataclass(frozen=True)
@@ -342,7 +350,8 @@ def compare_actors(source: Mapping[str, int], scripts: List[Mapping[str, int]],
             "runs": len(scripts), "runs_matching": matching, "same": not missing and not extra and majority}
 
 
-def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional[str] = None) -> Dict[str, Any]:
+def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional[str] = None,
+                       interaction: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
     """The failing parameter values against the ranges of the new script's global parameters that mean the same:
     first by name, without regard to case (``param x = Range(a, b)`` and the other numeric forms
     :func:`scenario_bank.dedup.param_ranges` reads), then, given the ``parent`` script the failure ran, by meaning
@@ -362,7 +371,13 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     quantity the parameter sets in both scripts (``"where"`` names the one kept when there are several). A
     distribution that is not one interval (``Uniform(5, 9)``, ``DiscreteRange(5, 9)``, ``Uniform(Range(1, 2),
     100)``) keeps its values in ``"support"`` (:func:`~dv2s_gym.mining.param_meaning.read_support`): the failing
-    value must be one of them."""
+    value must be one of them.
+
+    Given the parent, ``"key"`` holds ``{failing parameter: the quantity it sets}`` for the numeric failing parameters
+    that set a quantity of the failure's interaction in the parent (the ego's or the key actor's, the
+    ``interaction``'s ``actor``, else an actor's of its ``kind``, every actor's when neither is known:
+    :func:`~dv2s_gym.mining.param_meaning.key_parameters`): the judge requires each of them compared
+    (:func:`_judge`)."""
     ranges, supports = _script_ranges(script), _script_supports(script)
     folded: Dict[str, str] = {}
     for script_name in sorted(ranges):
@@ -389,8 +404,48 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
         if not _contains(name, compared[name]):
             outside.append(name)
     not_comparable = {name: why[name] for name in sorted(why) if name not in compared}
-    return {"compared": dict(sorted(compared.items())), "outside": outside, "not_comparable": not_comparable,
-            "not_in_script": list(not_comparable)}
+    out = {"compared": dict(sorted(compared.items())), "outside": outside, "not_comparable": not_comparable,
+           "not_in_script": list(not_comparable)}
+    if parent is not None:
+        interaction = interaction or {}
+        keyed = {name: where for name, where in key_uses(parent, interaction.get("kind"),
+                                                         interaction.get("actor")).items() if name in numeric}
+        out["key"] = {name: where[0][3] for name, where in keyed.items()}
+        out["key_not_compared"] = _key_set_otherwise(parent, script, keyed, out)
+    return out
+
+
+def _key_set_otherwise(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
+                       out: Mapping[str, Any]) -> Dict[str, str]:
+    """``{key parameter not comparable: the quantity and how the new script sets it}`` for each key parameter the
+    judge could not compare although the new script sets one of its key quantities (the same quantity of the paired
+    object) with a parameter of its own, one that stands for no compared failing parameter (``g * g``, ``10 / g``,
+    ``min(g, 3)``, ``e + 100``, a ``Normal``): the new script then decides that quantity by a parameter the judge
+    cannot check. A key quantity the new script sets with no parameter of its own (a number, a random term, a
+    compared parameter alone) or not at all is not listed: it is no comparison the judge failed, it counts within
+    :data:`COMPARED_SHARE`."""
+    unchecked = out["not_comparable"]
+    if not any(name in unchecked for name in keyed):
+        return {}
+    paired = {comparison.get("script_name", name) for name, comparison in out["compared"].items()}
+    objects = counterpart_objects(parent, script)
+    new_uses = quantity_uses(script)
+    found: Dict[str, str] = {}
+    for name in sorted(keyed):
+        if name not in unchecked:
+            continue
+        for obj, kind, slot, words in keyed[name]:
+            other = objects.get((obj, kind))
+            if other is None:
+                continue
+            own = sorted({(param, text) for param, by_slot in new_uses.items() if param not in paired
+                          for (o, k, s), items in by_slot.items() if (o, k, s) == (other[0], other[1], slot)
+                          for _, _, text in items})
+            if own:
+                found[name] = (f"{words}, which the new script sets by {own[0][1]} (its own parameter "
+                               f"{own[0][0]}): {unchecked[name]}")
+                break
+    return found
 
 
 def _script_ranges(script: str) -> Dict[str, Tuple[float, float]]:
@@ -726,6 +781,9 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
         found.append(_Rejected("actors", f"the failure's scene has {_census_text(actors['failure'])}, the new "
                                          f"scenario's {_census_text(actors['script'])}: {', '.join(problems)}"))
     parameters = out.get("parameters")
+    unchecked_key = _key_not_compared(parameters)
+    if unchecked_key:
+        found.append(_Rejected("parameters", unchecked_key))
     few = _too_few_compared(parameters)
     if few:
         found.append(_Rejected("parameters", few))
@@ -740,7 +798,26 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
 COMPARED_SHARE = 0.5
 """The judge rejects a new scenario when it could compare fewer than this share of the failure's parameters with
 the new script's ranges: with most of them unchecked, a script could drop or change what made the scene fail and
-still pass (docs/mining.md)."""
+still pass (docs/mining.md). Whatever the share, a key parameter (one that sets a quantity of the failure's
+interaction: the ego's or the key actor's, ``compare_parameters``' ``"key"``) that the new script sets with a
+parameter of its own must be compared and contain the failing value: one not comparable is a rejection with its
+reason (``"key_not_compared"``, :func:`_key_not_compared`). Within the share may go unchecked: parameters of other
+actors (traffic beside the interaction), and key quantities the new script fixes without a parameter of its own or
+leaves out (a generated script parameterises a scene its own way: the rule-based generator leaves most behaviour
+timings fixed)."""
+
+
+def _key_not_compared(parameters: Optional[Mapping[str, Any]]) -> Optional[str]:
+    """The rejection for key parameters (``parameters["key"]``) the judge could not compare, each with the quantity
+    it sets and why, or ``None``."""
+    if not parameters:
+        return None
+    missing = parameters.get("key_not_compared") or {}
+    if not missing:
+        return None
+    return ("a key parameter (it sets a quantity of the failure's interaction) that the new script sets with a "
+            "parameter of its own must be compared, and the judge could not: " + "; ".join(
+                f"{name} ({why})" for name, why in sorted(missing.items())))
 
 
 def _too_few_compared(parameters: Optional[Mapping[str, Any]]) -> Optional[str]:
@@ -907,6 +984,8 @@ def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, *, policy
     except Exception as error:  # a bad failure is a rejection, never an exception
         first = (str(error).strip().splitlines() or [""])[0]
         out["reason"] = f"replay: {type(error).__name__}: {first}"[:500]
+    if out["reason"]:
+        out["reason"] = _in_run(out["reason"], run_dir)
     out["seconds"] = round(time.perf_counter() - start, 3)
     return out
 
@@ -924,13 +1003,13 @@ def _replay_without_video(out: Dict[str, Any], video_error: str, record: Mapping
     """After the video stage failed: keep the exact replay all the same (its own trace stands for the failure's)
     and record both outcomes in ``out``: ``rejections`` holds the video's reason, then the replay's if it
     failed too."""
-    out["rejections"] = [video_error]
+    out["rejections"] = [_in_run(video_error, source.run_dir)]
     try:
         replay = _add_replay(record, bank, settings, source)
     except SETUP_ERRORS:
         raise
     except Exception as error:
-        out["rejections"].append(_stage_error("replay", error))
+        out["rejections"].append(_in_run(_stage_error("replay", error), source.run_dir))
         return
     out["replay_entry"] = replay["entry"]
     details["replay"] = replay
@@ -1026,6 +1105,9 @@ class _Conversion:
         except Exception as error:  # a bad failure is a rejection with its stage, never an exception
             first = (str(error).strip().splitlines() or [""])[0]
             out.update(stage=self.stage, reason=f"{self.stage}: {type(error).__name__}: {first}"[:500])
+        if out["reason"]:
+            out["reason"] = _in_run(out["reason"], self.run_dir)
+        out["rejections"] = [_in_run(str(why), self.run_dir) for why in out["rejections"]]
         if out["stage"] is not None and out["stage"] not in out["timings"]:
             self.lap(out["stage"])
         out["seconds"] = round(time.perf_counter() - start, 3)
@@ -1180,10 +1262,11 @@ class _Conversion:
                                        self.interaction.get("kind"))
         out["parameters"] = compare_parameters((record.get("result") or {}).get("params") or record.get("params")
                                                or {}, self.generation.script,
-                                               parent=_parent_script(record, self.settings.bank_dir))
+                                               parent=_parent_script(record, self.settings.bank_dir),
+                                               interaction=self.interaction)
         # the judge: every check that failed is recorded; the first one is the rejection's stage
         rejections = _judge(out, self.interaction, self.source_failure, self.settings.threshold)
-        out["rejections"] = [str(r) for r in rejections]
+        out["rejections"] = [_in_run(str(r), self.run_dir) for r in rejections]
         if self.replay["entry"]:
             _link(self.bank, self.replay["entry"], {"converted_e2e_sc": out["e2e_sc"],
                                                     "converted_rejections": out["rejections"]})
@@ -1214,9 +1297,7 @@ class _Conversion:
         except SETUP_ERRORS:
             raise
         except Exception as error:  # the clip is extra: the conversion goes on without it
-            # the record names files inside the run folder, not this machine's paths
-            where = str(self.run_dir).rstrip(os.sep) + os.sep
-            clip = {**clip, "file": None, "error": _stage_error("clip", error).replace(where, "")}
+            clip = {**clip, "file": None, "error": _in_run(_stage_error("clip", error), self.run_dir)}
         else:
             self.clip_path = path
             self.out["converted_video"] = _rel(path, self.run_dir)

@@ -7,13 +7,19 @@ reports, each scenario with its distinct error messages and how many episodes en
 
 from __future__ import annotations
 
+import re
 from typing import Any, Dict, List, Mapping, Optional, Sequence
 
-__all__ = ["ERROR_MESSAGES_KEPT", "error_message", "errored_episodes", "merged_messages", "messages_text"]
+__all__ = ["ERROR_MESSAGES_KEPT", "error_message", "message_kind", "errored_episodes", "merged_messages",
+           "messages_text"]
 
 ERROR_MESSAGES_KEPT = 5
 """How many distinct error messages a report lists per scenario (the most frequent, with counts; the rest are
 counted). The record keeps them all, so the steps of a round add up exactly (:func:`merged_messages`)."""
+
+_SEED = re.compile(r"\bseed (-?\d+)\b")
+SEED_MARK = "seed <seed>"
+"""What stands for an episode's seed in a message's kind (:func:`message_kind`)."""
 
 
 def error_message(error: Any) -> str:
@@ -22,15 +28,25 @@ def error_message(error: Any) -> str:
     return text.splitlines()[0][:300] if text else "error"
 
 
+def message_kind(message: str) -> str:
+    """The kind of an error message: the message with each seed it names (``seed 17``) replaced by
+    :data:`SEED_MARK`, so that the same trouble on different seeds (a worker that hung on each of them) counts as
+    one message."""
+    return _SEED.sub(SEED_MARK, str(message))
+
+
 def errored_episodes(records: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
     """The episodes of ``records`` that errored (an ``error`` set: a scene that could not be sampled, a crashed or
     hung worker...), which no rate counts: ``{"episodes": n, "scenarios": {scenario: n}, "messages": {scenario:
-    [{"message", "count"}]}, "examples": {scenario: its first error}}``. ``messages`` holds every distinct error of
-    each scenario (:func:`error_message`) with how many episodes ended in it, the most frequent first (ties in the
-    order they came); :func:`messages_text` lists the :data:`ERROR_MESSAGES_KEPT` most frequent and counts the
-    rest."""
+    [{"message", "count"[, "example"]}]}, "examples": {scenario: its first error}}``. ``messages`` holds every
+    distinct kind of error of each scenario (:func:`message_kind` of :func:`error_message`: the seed out of it) with
+    how many episodes ended in it and, when the kind differs from the message, the first message of that kind as its
+    ``example``; the most frequent first (ties in the order they came); :func:`messages_text` lists the
+    :data:`ERROR_MESSAGES_KEPT` most frequent and counts the rest."""
     scenarios: Dict[str, int] = {}
     counts: Dict[str, Dict[str, int]] = {}
+    examples: Dict[str, Dict[str, str]] = {}
+    firsts: Dict[str, str] = {}
     for record in records:
         error = record.get("error")
         if not error:
@@ -39,53 +55,99 @@ def errored_episodes(records: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
         scenarios[name] = scenarios.get(name, 0) + 1
         found = counts.setdefault(name, {})
         message = error_message(error)
-        found[message] = found.get(message, 0) + 1
+        firsts.setdefault(name, message)
+        kind = message_kind(message)
+        found[kind] = found.get(kind, 0) + 1
+        if kind != message:
+            examples.setdefault(name, {}).setdefault(kind, message)
     return {"episodes": sum(scenarios.values()), "scenarios": dict(sorted(scenarios.items())),
-            "messages": _ranked(counts), "examples": {name: next(iter(counts[name])) for name in sorted(counts)}}
+            "messages": _ranked(counts, examples), "examples": {name: firsts[name] for name in sorted(firsts)}}
 
 
-def _ranked(counts: Mapping[str, Mapping[str, int]]) -> Dict[str, List[Dict[str, Any]]]:
-    """``{scenario: [{"message", "count"}]}`` from ``{scenario: {message: count}}``, every message, the most
-    frequent first (ties keep the order they came in)."""
-    return {name: [{"message": text, "count": n}
+def _ranked(counts: Mapping[str, Mapping[str, int]],
+            examples: Optional[Mapping[str, Mapping[str, str]]] = None) -> Dict[str, List[Dict[str, Any]]]:
+    """``{scenario: [{"message", "count"[, "example"]}]}`` from ``{scenario: {message: count}}`` (and the
+    ``{scenario: {message: example}}`` of the kinds that have one), every message, the most frequent first (ties
+    keep the order they came in)."""
+    examples = examples or {}
+    return {name: [{"message": text, "count": n,
+                    **({"example": examples[name][text]} if text in examples.get(name, {}) else {})}
                    for text, n in sorted(counts[name].items(), key=lambda item: -item[1])]
             for name in sorted(counts)}
 
 
 def merged_messages(found: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
     """The ``messages`` of several :func:`errored_episodes` (steps, policies) added up per scenario, every distinct
-    message with its total count. One recorded before messages were counted gives its example once; one recorded
-    when only the five most frequent were kept brings its ``unlisted`` count of the rest, which is added to
-    ``unlisted`` as it is (its messages unknown, they cannot be matched with those listed elsewhere)."""
+    kind of message (:func:`message_kind`: a message recorded with its seed counts with the others of its kind) with
+    its total count. One recorded when only the five most frequent were kept brings its ``unlisted`` count of the
+    rest, which is added to ``unlisted`` as it is (its messages unknown, they cannot be matched with those listed
+    elsewhere). The episodes a record counts for a scenario beyond those its messages account for (one recorded
+    before messages were counted keeps only its first error) are added to ``unlisted[scenario]["unrecorded"]``:
+    their messages are not known. Every scenario with an errored episode is in ``messages``, if only with ``[]``."""
     counts: Dict[str, Dict[str, int]] = {}
+    examples: Dict[str, Dict[str, str]] = {}
     beyond: Dict[str, Dict[str, int]] = {}
     for errored in found:
         errored = errored or {}
         listed = errored.get("messages")
         if listed is None:  # recorded with its first error only
             listed = {name: [{"message": why, "count": 1}] for name, why in (errored.get("examples") or {}).items()}
+        accounted: Dict[str, int] = {}
         for name, rows in listed.items():
             into = counts.setdefault(name, {})
             for row in rows:
-                into[row["message"]] = into.get(row["message"], 0) + int(row.get("count") or 0)
+                kind = message_kind(row["message"])
+                into[kind] = into.get(kind, 0) + int(row.get("count") or 0)
+                accounted[name] = accounted.get(name, 0) + int(row.get("count") or 0)
+                example = row.get("example") or (row["message"] if kind != row["message"] else None)
+                if example:
+                    examples.setdefault(name, {}).setdefault(kind, example)
         for name, more in (errored.get("unlisted") or {}).items():
+            counts.setdefault(name, {})
             into = beyond.setdefault(name, {"messages": 0, "episodes": 0})
             into["messages"] += int(more.get("messages") or 0)
             into["episodes"] += int(more.get("episodes") or 0)
-    return {"messages": _ranked(counts), "unlisted": beyond}
+            into["unrecorded"] = into.get("unrecorded", 0) + int(more.get("unrecorded") or 0)
+            accounted[name] = accounted.get(name, 0) + int(more.get("episodes") or 0)
+        for name, n in (errored.get("scenarios") or {}).items():
+            missing = int(n or 0) - accounted.get(name, 0)
+            if missing > 0:
+                counts.setdefault(name, {})
+                into = beyond.setdefault(name, {"messages": 0, "episodes": 0})
+                into["unrecorded"] = into.get("unrecorded", 0) + missing
+    return {"messages": _ranked(counts, examples), "unlisted": beyond}
+
+
+def _episodes(n: int) -> str:
+    return f"{n} episode{'s' if n != 1 else ''}"
+
+
+def _row_text(row: Mapping[str, Any]) -> str:
+    """``"worker hung ... seed <seed> (4 episodes, e.g. seed 17)"``: one kind of message with its count and, when
+    the kind stands for several seeds, the first one's seed."""
+    seed = _SEED.search(str(row.get("example") or ""))
+    return f"{row['message']} ({_episodes(int(row['count']))}" + (f", e.g. seed {seed.group(1)})" if seed else ")")
 
 
 def messages_text(messages: Mapping[str, Sequence[Mapping[str, Any]]],
                   unlisted: Optional[Mapping[str, Mapping[str, int]]], name: str, kept: int = ERROR_MESSAGES_KEPT) -> str:
     """Scenario ``name``'s error messages in words, the ``kept`` most frequent: ``"scene not sampled (3 episodes);
-    worker hung (1 episode)"``, and how many more distinct messages there were in how many episodes (with those an
-    older record counted without their text, ``unlisted``)."""
+    worker hung ... seed <seed> (2 episodes, e.g. seed 17)"``, how many more distinct messages there were in how
+    many episodes (with those an older record counted without their text, ``unlisted``), and how many episodes
+    errored with a message that was not recorded (``unlisted[name]["unrecorded"]``)."""
     rows = sorted(messages.get(name) or [], key=lambda row: -int(row["count"]))  # stable: ties keep their order
-    parts = [f"{row['message']} ({row['count']} episode{'s' if row['count'] != 1 else ''})" for row in rows[:kept]]
+    parts = [_row_text(row) for row in rows[:kept]]
     rest = rows[kept:]
     more = {"messages": len(rest), "episodes": sum(int(row["count"]) for row in rest)}
     for key, value in ((unlisted or {}).get(name) or {}).items():
         more[key] = more.get(key, 0) + int(value or 0)
+    lead = "and " if parts else ""
     if more["messages"]:
-        parts.append(f"and {more['messages']} more distinct message(s) in {more['episodes']} episode(s)")
+        parts.append(f"{lead}{more['messages']} {'more ' if parts else ''}distinct message(s) "
+                     f"{'' if parts else 'not listed '}in {more['episodes']} episode(s)")
+    elif more["episodes"]:
+        parts.append(f"{lead}{more['episodes']} {'more ' if parts else ''}episode(s) whose messages are not listed")
+    if more.get("unrecorded"):
+        parts.append(f"{'and ' if parts else ''}{_episodes(more['unrecorded'])} whose message was not recorded "
+                     "(only the first error was)")
     return "; ".join(parts)

@@ -377,7 +377,8 @@ def _cards(clusters: Sequence[Mapping[str, Any]], videos: _Videos, base: Path,
         if c.get("converted_video"):  # the failure beside its converted script driven by the same policy
             caption = clip_caption(str(c.get("bank_entry") or c.get("merged_into") or "-"),
                                    {"policy": (report_settings or {}).get("policy"),
-                                    "reproduction": c.get("reproduction") or {}})
+                                    "reproduction": c.get("reproduction") or {}},
+                                   merged=not c.get("bank_entry") and bool(c.get("merged_into")))
             media = (f'<div class="media"><figure>{media}<figcaption>the failure ({escape(c.get("scenario"))}, seed '
                      f'{escape(rep.get("seed"))})</figcaption></figure><figure>{videos.tag(c["converted_video"])}'
                      f'<figcaption>{escape(caption)}</figcaption></figure></div>')

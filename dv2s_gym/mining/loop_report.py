@@ -902,7 +902,7 @@ def _entry_clips(entry: Mapping[str, Any], folder: Path, mine: Mapping[str, Any]
             if failure.is_file():
                 found.append((failure, label, prefix, note))
             if not replay and converted.is_file():
-                found.append((converted, clip_caption(scenario, provenance), prefix, None))
+                found.append((converted, clip_caption(scenario, provenance, merged=bool(prefix)), prefix, None))
         listed = {video for video, *_ in found}
         for video in sorted(folder.rglob("*.webm")):  # files no provenance names (an older entry's)
             if video not in listed and video.name != ENTRY_CONVERTED_VIDEO:
@@ -922,7 +922,8 @@ def _entry_clips(entry: Mapping[str, Any], folder: Path, mine: Mapping[str, Any]
                 conversion = json.loads((run / CONVERSION_DIR / "report.json").read_text())
             except (OSError, ValueError):
                 conversion = {}
-            caption = clip_caption(scenario, {**conversion, "policy": conversion.get("policy") or policy})
+            caption = clip_caption(scenario, {**conversion, "policy": conversion.get("policy") or policy},
+                                   merged=conversion.get("status") == "merged")
             found.append((converted, caption + " (mining run)", "run", None))
     return found
 

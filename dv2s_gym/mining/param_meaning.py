@@ -22,11 +22,18 @@ every use with the quantity it sets as such a function (``abs(...)`` of one read
 cannot be read so (another sampled value or reference point beside the parameter, a call, ``%``, a conditional).
 A point that only places an actor (``spot = new OrientedPoint ...`` then ``new Pedestrian right of spot``) and a
 top-level variable hand their parameters on to the actor that uses them; the point hands on its expression too
-(``d + 30``), a variable does not (its computation is not read).
+(``d + 30``). A variable that is a computation on parameters alone (``x = globalParameters.g + 20``: parameters,
+numbers, operators, calls of plain functions) is followed like an expression: where it is used, it stands for its
+expression in brackets (``with speed x`` sets the speed to ``g + 20``); any other variable (``crossS = egoS +
+globalParameters.d``) hands its parameters on as ``derived`` uses whose quantity is not read.
+
+:func:`key_parameters` names the parameters that set a quantity of the failure's interaction: the ego's or the
+adversary's (an actor of the failure's kind).
 
 :func:`meaning_map` pairs the parameters one script does not share by name with the other's: the objects are paired
 first (the ego with the ego; another actor with the only one of its kind that has such parameters, else the one whose
-slots it shares most, when that is unique), then a parameter with the only parameter of the paired object that has
+slots it shares most, ties broken by the slots set the same way and then by the fewest slots on one side only, when
+that is unique), then a parameter with the only parameter of the paired object that has
 one of its (slot, how) pairs, counting only the uses where no other unpaired parameter shares the expression (in
 ``egoS + a + b`` neither ``a`` nor ``b`` alone sets the placement). A pairing that is not one to one (two parameters claiming one, or one matching two) is
 left out: what cannot be paired reliably is reported as not comparable, never guessed.
@@ -40,7 +47,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 __all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
            "script_parameters", "affine_uses", "affine_form", "read_interval", "Affine", "Quantity", "quantity_of",
-           "quantity_uses", "read_support", "support_contains", "support_hull", "support_text"]
+           "quantity_uses", "read_support", "support_contains", "support_hull", "support_text", "key_parameters", "key_uses", "actor_objects", "counterpart_objects"]
 
 PLACEMENT_KINDS = ("OrientedPoint", "Point")
 """Classes that place actors but are not actors themselves."""
@@ -65,7 +72,7 @@ def _affine_node(node: ast.AST, param: Optional[str]) -> Optional[Tuple[float, f
     """``(scale, offset)`` of ``node`` as ``scale * globalParameters.<param> + offset``; ``None`` when it is built
     from anything but that parameter, numbers, ``+ - * /`` (a product or quotient by a number only) and unary
     minus or plus."""
-    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool) and _plain(node.value):
         return 0.0, float(node.value)
     if (param is not None and isinstance(node, ast.Attribute) and node.attr == param
             and isinstance(node.value, ast.Name) and node.value.id == "globalParameters"):
@@ -79,6 +86,8 @@ def _affine_node(node: ast.AST, param: Optional[str]) -> Optional[Tuple[float, f
         left, right = _affine_node(node.left, param), _affine_node(node.right, param)
         if left is None or right is None:
             return None
+        if not all(map(_plain, left + right)):
+            return None  # a part beyond LARGEST: rounding may cancel the parameter
         if isinstance(node.op, ast.Add):
             return left[0] + right[0], left[1] + right[1]
         if isinstance(node.op, ast.Sub):
@@ -91,6 +100,17 @@ def _affine_node(node: ast.AST, param: Optional[str]) -> Optional[Tuple[float, f
             return None  # a quotient by the parameter, or by zero
         return left[0] / right[1], left[1] / right[1]
     return None
+
+
+LARGEST = 1e6
+"""The largest number (in absolute value) the judge reads in an expression: Scenic computes in floating point, and
+beside a larger one a parameter's value is rounded away (``(g + 1e16) - 1e16`` is not ``g``: 6 becomes 6 or 8);
+an expression holding one, or whose affine form reaches one, is not read (not comparable). A scene's quantities
+(metres, seconds, m/s) stay far below it, where the rounding is below the judge's tolerance of 1e-9."""
+
+
+def _plain(number: float) -> bool:
+    return abs(number) <= LARGEST
 
 
 def _parse(text: str) -> Optional[ast.AST]:
@@ -106,6 +126,8 @@ def affine_form(expression: str, param: str) -> Optional[Tuple[float, float]]:
     brackets), the parameter appearing with a non-zero scale; else ``None``."""
     node = _parse(expression)
     form = _affine_node(node, param) if node is not None else None
+    if form is not None and not all(map(_plain, form)):
+        return None  # beyond what floating point keeps exact enough (LARGEST)
     return form if form is not None and form[0] != 0.0 else None
 
 
@@ -143,7 +165,7 @@ def _image(node: ast.AST, param: str, low: float, high: float) -> Optional[Tuple
     """The interval ``node`` takes with the parameter in ``low..high``, by interval arithmetic (exact when the
     parameter occurs once): numbers, the parameter, ``+ -``, ``* /`` by a non-zero number, unary minus or plus and
     ``abs``; ``None`` for anything else."""
-    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool) and _plain(node.value):
         return float(node.value), float(node.value)
     if _is_param(node, param):
         return low, high
@@ -218,7 +240,7 @@ def quantity_of(expression: str, param: str) -> Optional[Quantity]:
 
 
 def _interval_node(node: ast.AST) -> Optional[Tuple[float, float]]:
-    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool) and _plain(node.value):
         return float(node.value), float(node.value)
     if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _INTERVAL_CALLS \
             and node.args and not node.keywords:
@@ -270,7 +292,7 @@ Part = Tuple[Any, ...]
 
 
 def _support_node(node: ast.AST) -> Optional[List[Part]]:
-    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool) and _plain(node.value):
         return [("points", [float(node.value)])]
     if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.args and not node.keywords:
         call = node.func.id
@@ -534,24 +556,26 @@ def _slots(specifier: str, behaviors: Mapping[str, List[str]]) -> List[Tuple[str
     return [("position", text)]
 
 
-def _value_part(slot: str, expression: str) -> str:
+def _value_part(slot: str, expression: str, reference: Optional[str] = None) -> str:
     """The part of a slot's expression that is the quantity: a behaviour argument or a ``with`` value whole, the
     distance after ``by`` of ``ahead of``/``behind``/``left of``/``right of`` and after ``for`` of ``following``;
     ``""`` for other placements."""
     if slot.startswith(("behavior:", "with:")) or slot == "speed":
         return expression
     if slot == "longitudinal" and "pointAlongBy" in expression:
-        return _along(expression)
+        return _along(expression, reference)
     match = re.match(r"^(?:ahead of|behind|left of|right of)\s+[\w.]+\s+by\s+(.+)$", expression.strip(), re.S)
     if match is None:
         match = re.match(r"^following\b.*?\bfor\s+(.+)$", expression.strip(), re.S)
     return match.group(1) if match else ""
 
 
-def _along(expression: str) -> str:
+def _along(expression: str, reference: Optional[str] = None) -> str:
     """The distance a ``pointAlongBy(...)`` placement sets from its reference point: the argument without the one
     name it adds (``egoS + globalParameters.gap + 10`` -> ``globalParameters.gap + 10``); ``""`` when the argument
-    is not read so (no single reference point added)."""
+    is not read so: no single reference point added, or one that is not ``reference`` (the name the ego is placed at,
+    ``pointAlongBy(egoS)``): a distance from another point (``otherS + gap``) or from the lane's start is not a
+    distance from the ego, whatever its value."""
     match = re.search(r"pointAlongBy\s*\(", expression)
     if match is None:
         return ""
@@ -576,7 +600,7 @@ def _along(expression: str) -> str:
 
     flatten(node, 1)
     references = [index for index, (sign, part) in enumerate(terms) if isinstance(part, ast.Name)]
-    if len(references) > 1 or (references and terms[references[0]][0] < 0):
+    if len(references) != 1 or terms[references[0]][0] < 0 or terms[references[0]][1].id != reference:
         return ""
     rest = [term for index, term in enumerate(terms) if index not in references]
     if not rest:
@@ -641,14 +665,23 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
         return [item for name, items in carried.items() if re.search(rf"\b{re.escape(name)}\b", expression)
                 for item in items]
 
+    numbers: Dict[str, str] = {}  # variable -> its expression, when it is a computation on parameters
+    ego_point = next((m.group(1) for m in (re.match(r"ego\s*=\s*new\s+\w+\s+at\s+.*?pointAlongBy\s*\(\s*(\w+)\s*\)",
+                                                     statement, re.S) for statement in _statements(script)) if m), None)
     for statement in _statements(script):
         if statement.startswith(_SKIP):
             continue
+        statement = _followed(statement, numbers)
         found = _OBJECT.match(statement)
         if found is None:
             assign = _ASSIGN.match(statement)
             if assign and "new " not in assign.group(2):
                 expression = assign.group(2)
+                if _is_computation(expression):  # followed where it is used, as if written there
+                    numbers[assign.group(1)] = " ".join(expression.split())
+                    carried.pop(assign.group(1), None)
+                    continue
+                numbers.pop(assign.group(1), None)
                 text = " ".join(expression.split())
                 # a parameter that reaches an object through a variable is part of a computation: "derived", and
                 # the quantity it sets is not read
@@ -661,7 +694,7 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
         items: List[Tuple[str, str, str, frozenset, Optional[Quantity], str]] = []
         for specifier in _split_top(rest):
             for slot, expression in _slots(specifier, behaviors):
-                value = _value_part(slot, expression)
+                value = _value_part(slot, expression, ego_point)
                 here: List[Tuple[str, str, str, Optional[Quantity], str]] = []
                 for p in dict.fromkeys(_PARAM.findall(expression)):
                     quantity = quantity_of(value, p) if value else None
@@ -692,6 +725,41 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
     return uses, quantities
 
 
+def _is_computation(expression: str) -> bool:
+    """Whether a top-level variable's ``expression`` is a computation on global parameters alone: it mentions one
+    and, besides ``globalParameters.<name>``, holds only numbers, operators and calls of plain functions (``min``,
+    ``Range``...), so where the variable is used it stands for that expression (``x = globalParameters.g + 20``, then
+    ``with speed x``, sets the speed to ``g + 20``)."""
+    node = _parse(expression.split("#", 1)[0])
+    if node is None or not _PARAM.search(expression):
+        return False
+    calls = {id(n.func) for n in ast.walk(node) if isinstance(n, ast.Call)}
+    for child in ast.walk(node):
+        if isinstance(child, ast.Attribute):
+            if not (isinstance(child.value, ast.Name) and child.value.id == "globalParameters"):
+                return False
+        elif isinstance(child, ast.Name):
+            if child.id != "globalParameters" and id(child) not in calls:
+                return False
+        elif isinstance(child, (ast.Lambda, ast.ListComp, ast.GeneratorExp, ast.DictComp, ast.SetComp,
+                                ast.Starred, ast.NamedExpr)):
+            return False
+    return True
+
+
+def _followed(statement: str, numbers: Mapping[str, str]) -> str:
+    """``statement`` with each use of a variable :func:`_is_computation` read (not an attribute, a keyword or the
+    name it assigns) replaced by its expression in brackets."""
+    if not numbers:
+        return statement
+    assigned = _ASSIGN.match(statement)
+    head, body = ((statement[:assigned.start(2)], statement[assigned.start(2):]) if assigned
+                  else ("", statement))
+    pattern = re.compile(r"(?<![\w.])(" + "|".join(map(re.escape, sorted(numbers, key=len, reverse=True)))
+                         + r")(?![\w])(?!\s*=(?!=))")
+    return head + pattern.sub(lambda m: f"({numbers[m.group(1)]})", body)
+
+
 def _actor_slots(uses: Mapping[str, Set[Use]], params: Sequence[str]) -> Dict[Tuple[str, str], Set[Tuple[str, str]]]:
     """``{(object, kind): {(slot, how)}}`` over ``params``."""
     actors: Dict[Tuple[str, str], Set[Tuple[str, str]]] = {}
@@ -704,7 +772,8 @@ def _actor_slots(uses: Mapping[str, Set[Use]], params: Sequence[str]) -> Dict[Tu
 def _pair_actors(source: Mapping[Tuple[str, str], Set[Tuple[str, str]]],
                  target: Mapping[Tuple[str, str], Set[Tuple[str, str]]]) -> Dict[Tuple[str, str], Tuple[str, str]]:
     """Each source object with its target object: the ego with the ego; another with the only target object of its
-    kind, else the one sharing the most slots when that is unique; one to one."""
+    kind, else the one sharing the most slots when that is unique (ties broken by the slots set the same way, then by
+    the fewest slots on one side only); one to one."""
     pairs: Dict[Tuple[str, str], Tuple[str, str]] = {}
     for actor, slots in source.items():
         if actor[0] == "ego":
@@ -716,8 +785,14 @@ def _pair_actors(source: Mapping[Tuple[str, str], Set[Tuple[str, str]]],
             pairs[actor] = same_kind[0]
             continue
         names = {slot for slot, _ in slots}
-        scores = sorted(((len(names & {slot for slot, _ in target[o]}), o) for o in same_kind), reverse=True)
-        if scores and scores[0][0] > 0 and (len(scores) == 1 or scores[1][0] < scores[0][0]):
+
+        def score(other: Tuple[str, str]) -> Tuple[int, int, int]:
+            # the slots shared, then the (slot, how) pairs shared, then the fewest slots on one side only
+            theirs = {slot for slot, _ in target[other]}
+            return len(names & theirs), len(slots & target[other]), -len(names ^ theirs)
+
+        scores = sorted(((score(o), o) for o in same_kind), reverse=True)
+        if scores and scores[0][0][0] > 0 and (len(scores) == 1 or scores[1][0] < scores[0][0]):
             pairs[actor] = scores[0][1]
     claimed: Dict[Tuple[str, str], int] = {}
     for other in pairs.values():
@@ -781,6 +856,92 @@ def meaning_map(source_script: str, target_script: str, source_params: Sequence[
         pairs[params[0]] = {"target": target, "object": name, "source_object": source, "kind": kind, "slot": slot,
                             "how": how}
     return {"pairs": dict(sorted(pairs.items())), "unpaired": dict(sorted(unpaired.items()))}
+
+
+def key_parameters(script: str, kind: Optional[str] = None, actor: Optional[str] = None) -> Dict[str, str]:
+    """``{parameter: the quantity it sets, in words}`` of the parameters of ``script`` that set a quantity of the
+    failure's interaction (:func:`key_uses`)."""
+    return {param: where[0][3] for param, where in key_uses(script, kind, actor).items()}
+
+
+def key_uses(script: str, kind: Optional[str] = None,
+             actor: Optional[str] = None) -> Dict[str, List[Tuple[str, str, str, str]]]:
+    """``{parameter: [(object, kind, slot, the quantity in words)]}``: the quantities of the failure's interaction, the
+    ones the failure depends on, each parameter of ``script`` sets: any quantity (speed, placement, behaviour
+    argument, ``with`` property; directly, through a placing point or a variable) of the ego or of the failure's
+    key actor (:func:`dv2s_gym.mining.interaction.failure_interaction`'s ``actor`` and ``kind``). The key actor is
+    the object of ``script`` the simulation names ``actor`` (:func:`actor_objects`: its ``with name``, else its
+    class and rank, ``Car2``); when no object is found so, every actor of the ``kind`` (``"car"``,
+    ``"pedestrian"``: Scenic's class name, case ignored); when that is unknown too or no actor is of it, every
+    actor. A parameter that sets only other actors' quantities (traffic beside the interaction) or feeds no object (a
+    requirement, a behaviour's body) has none. The ego's quantities come first."""
+    uses = parameter_uses(script)
+    chosen = actor_objects(script).get(actor) if actor else None
+    wanted = (kind or "").casefold()
+    present = {k.casefold() for found in uses.values() for name, k, _, _, _ in found if name != "ego"}
+    match = bool(wanted) and wanted in present
+
+    def is_key(name: str, k: str) -> bool:
+        if name == "ego":
+            return True
+        if chosen is not None:
+            return name == chosen
+        return not match or k.casefold() == wanted
+
+    key: Dict[str, List[Tuple[str, str, str, str]]] = {}
+    for param, found in sorted(uses.items()):
+        where = sorted({(name, k, slot) for name, k, slot, _, _ in found if is_key(name, k)},
+                       key=lambda use: (use[0] != "ego", use[2] != "speed") + use)
+        if where:
+            key[param] = [(name, k, slot, ("the ego" if name == "ego" else f"the {k} {name}")
+                           + f"'s {_slot_words(slot)}") for name, k, slot in where]
+    return key
+
+
+def counterpart_objects(source_script: str, target_script: str) -> Dict[Tuple[str, str], Tuple[str, str]]:
+    """``{(object, kind) of source_script: (object, kind) of target_script}``: the objects paired as
+    :func:`meaning_map` pairs them, over every parameter of the two scripts."""
+    source, target = parameter_uses(source_script), parameter_uses(target_script)
+    return _pair_actors(_actor_slots(source, list(source)), _actor_slots(target, list(target)))
+
+
+def actor_objects(script: str) -> Dict[str, str]:
+    """``{the name a simulation gives an actor: the script's object}`` (the object's variable, or ``<Class>``), as
+    the simulator names them: the ego ``ego``; another object its ``with name "..."`` when no other object has that
+    name, else its name or class and its rank among those in the script's order (``Car1``, ``Car2``; two objects
+    named "walker": ``walker1``, ``walker2``). Objects made in a loop or a condition are not known here."""
+    objects: List[Tuple[str, str]] = []  # (object, label)
+    named: List[Optional[str]] = []
+    for statement in _statements(script):
+        if statement.startswith(_SKIP):
+            continue
+        found = _OBJECT.match(statement)
+        if found is None or found.group(2) in PLACEMENT_KINDS:
+            continue
+        name = found.group(1) or f"<{found.group(2)}>"
+        if name == "ego":
+            continue
+        given = re.search(r"\bwith\s+name\s+(['\"])(.+?)\1", found.group(3))
+        named.append(given.group(2) if given else None)
+        objects.append((name, given.group(2) if given else found.group(2)))
+    out: Dict[str, str] = {}
+    counts: Dict[str, int] = {}
+    for name, label in objects:
+        counts[label] = counts.get(label, 0) + 1
+        out[f"{label}{counts[label]}"] = name
+    taken = set(out) | {"ego"}
+    for (name, _), given in zip(objects, named):
+        if given and given != "ego" and named.count(given) == 1 and given not in taken:
+            out[given] = name
+            taken.add(given)
+    return out
+
+
+def _slot_words(slot: str) -> str:
+    """``"speed"``, ``"behaviour argument gap"``, ``"longitudinal placement"``: a slot in words."""
+    return (f"behaviour argument {slot.split(':', 1)[1]}" if slot.startswith("behavior:")
+            else f"{slot.split(':', 1)[1]} property" if slot.startswith("with:") else f"{slot} placement"
+            if slot in ("longitudinal", "lateral", "offset", "position") else slot)
 
 
 def script_parameters(script: str) -> Dict[str, str]:

@@ -154,12 +154,16 @@ def parameter_check_text(counts: Mapping[str, Any]) -> str:
     return text + (f": {reasons}" if reasons else "")
 
 
-def clip_caption(scenario: str, source: Mapping[str, Any]) -> str:
+def clip_caption(scenario: str, source: Mapping[str, Any], *, merged: bool = False) -> str:
     """The caption of a converted script's clip from its provenance (or conversion record): the scenario, the
-    policy, the seed, and whether the episode failed and how."""
+    policy, the seed, and whether the episode failed and how. ``merged``: the clip is of the script converted from
+    a failure merged into the bank entry ``scenario`` (the bank kept the entry's own script, not this one)."""
     clip = (source.get("reproduction") or {}).get("clip") or {}
     policy = source.get("policy")
-    text = f"generated scenario {scenario} (the converted script) driven by {policy or 'the policy'}"
+    what = (f"the script converted from a failure merged into {scenario} (a copy or near-copy of its script; the "
+            f"bank keeps the entry's own script, not this one)" if merged
+            else f"generated scenario {scenario} (the converted script)")
+    text = f"{what} driven by {policy or 'the policy'}"
     if clip.get("seed") is not None:
         text += f", seed {clip['seed']}"
     failure = clip.get("failure") or {}

@@ -1,0 +1,131 @@
+"""The mining and loop reports read from records: a merged failure's clip captions, error-message counts of
+every record generation, a worker's give-up messages counted by kind, and rejection reasons free of this
+machine's paths. Fast: no episode is run."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from dv2s_gym.mining.html import _cards, _Videos
+from dv2s_gym.mining.loop_report import _entry_clips
+
+CLIP = {"seed": 7, "failed": True, "reproduced": True, "failure": {"type": "collision"}, "chosen": "reproduced",
+        "file": "converted.webm"}
+
+
+def _entry_folder(root: Path) -> Path:
+    """A bank entry holding its own failure and converted clip, and a failure merged into it with its own two."""
+    folder = root / "urban_lead_vehicle_stopped_mined_collision"
+    (folder / "merged" / "1").mkdir(parents=True)
+    for name in ("failure.webm", "converted.webm", "merged/1/failure.webm", "merged/1/converted.webm"):
+        (folder / name).write_bytes(b"webm")
+    merged = {"kind": "mined", "parent": "urban_lead_vehicle_stopped", "seed": 11, "cluster": "c/1",
+              "video": "merged/1/failure.webm", "converted_video": "merged/1/converted.webm", "policy": "keep_lane",
+              "reproduction": {"clip": {**CLIP, "seed": 9}}}
+    source = {"kind": "mined", "parent": "urban_lead_vehicle_stopped", "seed": 3, "cluster": "c/0",
+              "video": "failure.webm", "converted_video": "converted.webm", "policy": "keep_lane",
+              "reproduction": {"clip": CLIP}, "merged": [merged]}
+    (folder / "meta.json").write_text(json.dumps({"name": folder.name, "source": source}))
+    return folder
+
+
+def test_a_merged_failures_clip_is_captioned_as_that_failures_script_in_the_loop_report(tmp_path):
+    folder = _entry_folder(tmp_path)
+    clips = _entry_clips({"scenario": folder.name, "cluster": "c/0"}, folder, {}, "keep_lane")
+    captions = {str(video.relative_to(folder)): label for video, label, _, _ in clips}
+    assert captions["converted.webm"].startswith(f"generated scenario {folder.name} (the converted script) "
+                                                 "driven by keep_lane, seed 7")
+    merged = captions["merged/1/converted.webm"]
+    assert "(the converted script)" not in merged
+    assert merged.startswith(f"the script converted from a failure merged into {folder.name}")
+    assert "the bank keeps the entry's own script, not this one" in merged and ", seed 9" in merged
+
+
+def test_a_merged_clusters_clip_is_captioned_as_its_own_script_in_the_mining_report(tmp_path):
+    (tmp_path / "failures").mkdir()
+    for name in ("failure.webm", "converted.webm"):
+        (tmp_path / "failures" / name).write_bytes(b"webm")
+    cluster = {"id": "s/collision/0", "type": "collision", "scenario": "s", "size": 1, "avoidable": 1,
+               "representative": {"index": 0, "seed": 4}, "status": "merged", "merged_into": "s_mined_collision",
+               "bank_entry": None, "video": "failures/failure.webm", "converted_video": "failures/converted.webm",
+               "reproduction": {"clip": CLIP}, "conversion": {"merge_reason": "a near-copy"}}
+    page = _cards([cluster], _Videos(tmp_path, tmp_path, False, 0), tmp_path, {"policy": "keep_lane"})
+    assert "generated scenario s_mined_collision (the converted script)" not in page
+    assert "the script converted from a failure merged into s_mined_collision" in page
+    kept = {**cluster, "status": "kept", "bank_entry": "s_mined_collision", "merged_into": None}
+    page = _cards([kept], _Videos(tmp_path, tmp_path, False, 0), tmp_path, {"policy": "keep_lane"})
+    assert "generated scenario s_mined_collision (the converted script) driven by keep_lane" in page
+
+
+def test_a_record_keeping_only_its_first_error_counts_every_errored_episode():
+    from dv2s_gym.mining.errored import merged_messages, messages_text
+
+    # a step recorded before messages were counted: 5 episodes errored, only the first one's message kept
+    oldest = {"episodes": 5, "scenarios": {"s": 5}, "examples": {"s": "scene not sampled"}}
+    merged = merged_messages([oldest])
+    text = messages_text(merged["messages"], merged["unlisted"], "s")
+    assert text == ("scene not sampled (1 episode); and 4 episodes whose message was not recorded (only the first "
+                    "error was)")
+    # an older record listing fewer episodes than it counted (the rest without text) shows them too
+    older = {"episodes": 3, "scenarios": {"s": 3}, "messages": {"s": [{"message": "a", "count": 1}]},
+             "unlisted": {"s": {"messages": 0, "episodes": 2}}}
+    merged = merged_messages([older])
+    assert messages_text(merged["messages"], merged["unlisted"], "s") == (
+        "a (1 episode); and 2 more episode(s) whose messages are not listed")
+    # a scenario whose messages are all unlisted is still named
+    only = {"episodes": 4, "scenarios": {"s": 4}, "messages": {}, "unlisted": {"s": {"messages": 3, "episodes": 4}}}
+    merged = merged_messages([only])
+    assert messages_text(merged["messages"], merged["unlisted"], "s") == "3 distinct message(s) not listed in 4 episode(s)"
+
+
+def test_a_workers_give_up_messages_count_by_kind_with_a_seed_as_example():
+    from dv2s_gym.mining.errored import errored_episodes, merged_messages, messages_text
+    from dv2s_gym.mining.loop_report import _errored_lines
+    from dv2s_gym.workers.tasks import gave_up_result
+
+    hung = ["the worker hung (no result after 60 s)"] * 2
+    records = [gave_up_result({"scenario": "s", "seed": seed, "role": "eval", "policy": "keep_lane"}, hung, 2)
+               for seed in (17, 4, 99)]
+    records.append({"scenario": "s", "error": "scene not sampled"})
+    found = errored_episodes(records)
+    kind = ("the worker hung (no result after 60 s); then the worker hung (no result after 60 s) running eval "
+            "'keep_lane' on s seed <seed> (2 attempts)")
+    assert found["messages"]["s"] == [{"message": kind, "count": 3, "example": records[0]["error"]},
+                                      {"message": "scene not sampled", "count": 1}]
+    assert messages_text(found["messages"], None, "s") == f"{kind} (3 episodes, e.g. seed 17); scene not sampled (1 episode)"
+    # a step recorded with one message per seed adds up with a new one by kind
+    old = {"episodes": 2, "scenarios": {"s": 2},
+           "messages": {"s": [{"message": records[1]["error"], "count": 1}, {"message": records[2]["error"], "count": 1}]}}
+    merged = merged_messages([old, found])
+    assert merged["messages"]["s"][0]["message"] == kind and merged["messages"]["s"][0]["count"] == 5
+    lines = _errored_lines({"steps": {"mine": {"errored": old}, "regress": {"errored": {"fine_tuned": found}}}})
+    assert lines[-1] == f"  - `s`: {kind} (5 episodes, e.g. seed 4); scene not sampled (1 episode)"
+
+
+def test_rejection_reasons_name_files_in_the_run_folder_by_their_relative_path(tmp_path):
+    from dv2s_gym.mining.convert import convert_failure, replay_failure_entry
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "failures").write_text("not a folder")  # the conversion cannot make its folder there
+    record = {"scenario": "urban_lead_vehicle_stopped", "seed": 0, "index": 3, "params": {},
+              "failure": {"type": "collision"}, "result": {"trajectory_hash": "0" * 16}}
+    out = convert_failure(record, run, policy="keep_lane", bank=tmp_path / "bank", k=1)
+    assert out["status"] == "rejected" and out["stage"] == "input"
+    assert "failures/episode-000003/conversion" in out["reason"] and str(tmp_path) not in out["reason"]
+    (run / "settings.json").mkdir()  # nor read the run's settings
+    out = replay_failure_entry(record, run, policy="keep_lane", bank=tmp_path / "bank")
+    assert out["status"] == "rejected" and out["reason"].startswith("replay: ")
+    assert str(tmp_path) not in out["reason"] and "failures/" in out["reason"]
+
+
+def test_the_loop_html_shows_a_kind_with_its_seed_mark_escaped():
+    from dv2s_gym.mining.errored import errored_episodes
+    from dv2s_gym.mining.loop_report import _errored_lines, _markdown_to_html
+    from dv2s_gym.workers.tasks import gave_up_result
+
+    found = errored_episodes([gave_up_result({"scenario": "s", "seed": seed, "role": "eval", "policy": "p"},
+                                             ["the worker hung (no result after 5 s)"], 1) for seed in (3, 8)])
+    page = _markdown_to_html(_errored_lines({"steps": {"mine": {"errored": found}}}))
+    assert "on s seed &lt;seed&gt; (1 attempts) (2 episodes, e.g. seed 3)" in page
