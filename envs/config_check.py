@@ -145,7 +145,7 @@ def _check_kinematic_features(config: Mapping[str, Any]) -> None:
     """A ``Kinematics`` feature name highway-env does not compute would be a column of NaN: refused, like a
     misspelt key."""
     observation = config.get("observation") or {}
-    if observation.get("type") != "Kinematics" or "features" not in observation:
+    if observation.get("type") != "Kinematics" or observation.get("features") is None:  # None: highway-env's own
         return
     from envs.observations import KINEMATIC_FEATURES
 
