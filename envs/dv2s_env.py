@@ -291,18 +291,8 @@ class DV2SEnv(AbstractEnv):
         key, reward term or observation/action option is an error naming it and the choices, and so is a number
         of the wrong type or range. A section given replaces the default one whole (a reward term left out weighs 0).
 
-        - ``observation``: highway-env observation config; ``Kinematics`` (default),
+        - ``observation``: highway-env's; ``Kinematics`` (default; route features: :mod:`envs.observations`),
           ``OccupancyGrid``, ``TimeToCollision``, ``LidarObservation`` and ``GrayscaleObservation`` work.
-          ``Kinematics`` ``features`` are highway-env's (``presence``, ``x``, ``y``, ``vx``, ``vy``,
-          ``heading``, ``cos_h``, ``sin_h``, ``cos_d``, ``sin_d``, ``long_off``, ``lat_off``, ``ang_off``) and
-          two of the ego's route, where the scenario means it to go (``with route`` in the script), in the ego's
-          frame, positive to the left (:mod:`envs.observations`): ``route_turn``, the heading change to the
-          end of the route over 180 degrees (+0.5 before a left turn, -0.5 before a right one, 0 straight on
-          or without a route), and ``route_bearing``, the direction to the route's end over 180 degrees. Only
-          the ego's row carries them (0 in other vehicles' rows). The default features are
-          ``presence, x, y, vx, vy, cos_h, sin_h``; add ``route_turn`` and ``route_bearing`` to them for a policy
-          that knows where it is going. A policy trained with one observation runs only with it (its model
-          card's ``env_config``; another one is an error naming the difference).
         - ``action``: highway-env action config; ``DiscreteMetaAction`` (default,
           target speeds 0-30 m/s), ``ContinuousAction`` or ``DiscreteAction``.
         - ``simulation_frequency`` / ``policy_frequency`` [Hz]: physics steps and
