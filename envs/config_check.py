@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import difflib
 import inspect
+import json
 import math
 from typing import Any, Iterable, Mapping, Sequence
 
@@ -97,8 +98,6 @@ def observation_in_force(config: Any, defaults: Mapping[str, Any]) -> dict:
     """The observation a config runs: its ``observation`` section (a section given replaces the default whole),
     else the default's, every option it leaves out filled with its highway-env class's default, as plain JSON
     values (two configs observe alike exactly when these are equal)."""
-    import json
-
     section = (config or {}).get("observation") if isinstance(config, Mapping) else None
     section = dict(section if section is not None else defaults["observation"])
     class_name = _CLASS_NAMES["observation"].get(section.get("type"))

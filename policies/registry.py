@@ -40,6 +40,7 @@ import difflib
 import gymnasium as gym
 import numpy as np
 
+from envs.config_check import observation_in_force
 from envs.errors import DV2SError
 from scenario_bank.extras import extra_of, missing_extra_message
 from scenario_bank.named_registry import register_named
@@ -287,7 +288,6 @@ class SB3Policy(Policy):
         ``env_config`` (a bare checkpoint) is checked by the observation space's shape only."""
         if "env_config" not in self.card:
             return
-        from envs.config_check import observation_in_force
         from envs.dv2s_env import DV2SEnv
 
         defaults = DV2SEnv.default_config()
