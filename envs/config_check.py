@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import difflib
 import inspect
+import json
 import math
 from typing import Any, Iterable, Mapping, Sequence
 
 from envs.errors import ACTION_TYPES, OBSERVATION_TYPES, UnknownConfigKeyError, UnknownRenderModeError
 
-__all__ = ["EGO_POLICIES", "NUMBERS", "RENDER_MODES", "check_config", "check_render_mode", "type_options"]
+__all__ = ["EGO_POLICIES", "NUMBERS", "RENDER_MODES", "check_config", "check_render_mode", "observation_in_force",
+           "type_options"]
 
 EGO_POLICIES = ("agent", "scenic")
 """Values of ``ego_policy``: the action drives the ego, or the script's ego behaviour does."""
@@ -92,6 +94,28 @@ def type_options(section: str, type_name: str) -> set:
     return keys
 
 
+def observation_in_force(config: Any, defaults: Mapping[str, Any]) -> dict:
+    """The observation a config runs: its ``observation`` section (a section given replaces the default whole),
+    else the default's, every option it leaves out filled with its highway-env class's default, as plain JSON
+    values (two configs observe alike exactly when these are equal)."""
+    section = (config or {}).get("observation") if isinstance(config, Mapping) else None
+    section = dict(section if section is not None else defaults["observation"])
+    class_name = _CLASS_NAMES["observation"].get(section.get("type"))
+    if class_name is not None:
+        from highway_env.envs.common import observation as module
+
+        for klass in getattr(module, class_name).__mro__:
+            init = klass.__dict__.get("__init__")
+            if init is None:
+                continue
+            for parameter in list(inspect.signature(init).parameters.values())[1:]:
+                if parameter.default is not inspect.Parameter.empty and parameter.name not in section:
+                    section[parameter.name] = parameter.default
+            if not _forwards_keywords(init):
+                break
+    return json.loads(json.dumps(section, sort_keys=True, default=str))
+
+
 def _check_options(config: Mapping[str, Any], section: str) -> None:
     given = config.get(section)
     if given is None:
@@ -114,6 +138,30 @@ def _check_required_observation_keys(config: Mapping[str, Any]) -> None:
         example = {"type": observation["type"], **needed}
         raise UnknownConfigKeyError(f"the {observation['type']} observation needs {', '.join(map(repr, missing))}; "
                                     f"e.g. config['observation'] = {example!r}")
+
+
+def _check_kinematic_features(config: Mapping[str, Any]) -> None:
+    """A ``Kinematics`` feature name highway-env does not compute would be a column of NaN: refused, like a
+    misspelt key."""
+    observation = config.get("observation") or {}
+    if observation.get("type") != "Kinematics" or observation.get("features") is None:  # None: highway-env's own
+        return
+    from envs.observations import KINEMATIC_FEATURES
+
+    features = observation["features"]
+    if isinstance(features, str) or not isinstance(features, Sequence) or not features \
+            or not all(isinstance(f, str) for f in features):
+        raise UnknownConfigKeyError(f"config['observation']['features'] must be a non-empty list of feature names "
+                                    f"(of {', '.join(KINEMATIC_FEATURES)}); got {features!r}")
+    for feature in features:
+        if feature not in KINEMATIC_FEATURES:
+            raise UnknownConfigKeyError(
+                f"unknown Kinematics feature {feature!r}{_did_you_mean(feature, KINEMATIC_FEATURES)} in "
+                f"config['observation']['features']; the features are {', '.join(KINEMATIC_FEATURES)}")
+    repeated = sorted({f for f in features if list(features).count(f) > 1})
+    if repeated:
+        raise UnknownConfigKeyError(f"config['observation']['features'] names {', '.join(map(repr, repeated))} "
+                                    "more than once")
 
 
 def _check_reward_weights(config: Mapping[str, Any], defaults: Mapping[str, Any]) -> None:
@@ -207,7 +255,8 @@ def _check_numbers(config: Mapping[str, Any], defaults: Mapping[str, Any]) -> No
 def check_config(config: Any, defaults: Mapping[str, Any]) -> None:
     """Raise :class:`~envs.errors.UnknownConfigKeyError` (one line, with a did-you-mean) for the first
     problem of ``config``: a key not in ``defaults``, an observation or action type DV2S-v0 does not
-    support or an option its highway-env type does not take, a reward term not in
+    support or an option its highway-env type does not take, a ``Kinematics`` feature it does not compute
+    (:data:`envs.observations.KINEMATIC_FEATURES`), a reward term not in
     ``defaults["reward_weights"]`` or a weight that is not a finite number, an ``ego_policy`` that is not
     ``agent`` or ``scenic``, a numeric value (:data:`NUMBERS`, ``reward_speed_range``, ``centering_position``)
     of the wrong type or out of range, a policy frequency above the simulation frequency."""
@@ -222,6 +271,7 @@ def check_config(config: Any, defaults: Mapping[str, Any]) -> None:
                                     "the keys")
     _check_options(config, "observation")
     _check_options(config, "action")
+    _check_kinematic_features(config)
     _check_reward_weights(config, defaults)
     _check_ego_policy(config)
     _check_numbers(config, defaults)

@@ -291,7 +291,7 @@ class DV2SEnv(AbstractEnv):
         key, reward term or observation/action option is an error naming it and the choices, and so is a number
         of the wrong type or range. A section given replaces the default one whole (a reward term left out weighs 0).
 
-        - ``observation``: highway-env observation config; ``Kinematics`` (default),
+        - ``observation``: highway-env's; ``Kinematics`` (default; route features: :mod:`envs.observations`),
           ``OccupancyGrid``, ``TimeToCollision``, ``LidarObservation`` and ``GrayscaleObservation`` work.
         - ``action``: highway-env action config; ``DiscreteMetaAction`` (default,
           target speeds 0-30 m/s), ``ContinuousAction`` or ``DiscreteAction``.

@@ -45,8 +45,8 @@ from policies.dagger_checkpoint import (CHECKPOINT_DIR, DAggerCheckpoint, Labell
                                         describe_position, run_identity)
 from policies.state_driver import SLOWER
 from policies.dagger_config import DAGGER_DEFAULTS, DaggerConfig
-from policies.training import (ScenarioSchedule, TrainConfig, TrainEnvSpec, TrainingError, close_vec_env,
-                               fine_tune_scenarios, make_vec_env, resolve_checkpoint)
+from policies.training import (ScenarioSchedule, TrainConfig, TrainEnvSpec, TrainingError, check_source_observation,
+                               close_vec_env, fine_tune_scenarios, make_vec_env, resolve_checkpoint)
 from policies.model_card import write_card
 from policies.registry import load_policy, read_model_card
 from scenario_bank.atomic import atomic_path
@@ -292,6 +292,7 @@ class _DaggerRun:
                                 f"{algorithm}; use --fine-tune-method ppo")
         self.env_config = dict(self.source_card.get("env_config") or {}) if config.env_config is None \
             else config.env_config
+        check_source_observation(self.source_card, self.env_config, spec)
         self.checkpoint = DAggerCheckpoint(self.out / CHECKPOINT_DIR, run_identity(
             source=spec, source_checkpoint=self.source, config=config, dagger=dagger, weights=self.probabilities,
             env_config=self.env_config))

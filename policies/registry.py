@@ -40,6 +40,7 @@ import difflib
 import gymnasium as gym
 import numpy as np
 
+from envs.config_check import observation_in_force
 from envs.errors import DV2SError
 from scenario_bank.extras import extra_of, missing_extra_message
 from scenario_bank.named_registry import register_named
@@ -99,7 +100,14 @@ class Policy:
             raise PolicyError(f"policy {self.name!r}: bind() needs at least one env")
         for env in envs:
             self.check_spaces(env.observation_space, env.action_space)
+            config = getattr(getattr(env, "unwrapped", env), "config", None)
+            if isinstance(config, Mapping) and "observation" in config:
+                self.check_env_config(config)
         self.envs = list(envs)
+
+    def check_env_config(self, env_config: Optional[Mapping[str, Any]]) -> None:
+        """Raise :class:`PolicySpaceError` when the env config (DV2S-v0 overrides, or a whole config) observes
+        otherwise than the policy was made for (a policy that adapts to any env accepts every config)."""
 
     def reset(self, index: Optional[int] = None) -> None:
         """Forget per-episode state for batch row ``index`` (all rows when ``None``)."""
@@ -274,9 +282,37 @@ class SB3Policy(Policy):
         self.observation_space = model.observation_space
         self.action_space = model.action_space
 
+    def check_env_config(self, env_config: Optional[Mapping[str, Any]]) -> None:
+        """The env must observe as the env the model was trained in, by its card's ``env_config`` (no
+        ``observation`` there: the default one): same type, features and options. A card without an
+        ``env_config`` (a bare checkpoint) is checked by the observation space's shape only."""
+        if "env_config" not in self.card:
+            return
+        from envs.dv2s_env import DV2SEnv
+
+        defaults = DV2SEnv.default_config()
+        trained = observation_in_force(self.card.get("env_config") or {}, defaults)
+        given = observation_in_force(env_config or {}, defaults)
+        if trained != given:
+            differ = sorted(key for key in set(trained) | set(given) if trained.get(key) != given.get(key))
+            detail = "; ".join(f"{key}: trained {trained.get(key)!r}, env {given.get(key)!r}" for key in differ)
+            raise PolicySpaceError(
+                f"policy {self.name!r} was trained with another observation than this env's ({detail}); run it "
+                f"with the env config of its model card (config['observation'] = {trained_section(self.card)!r})")
+
     def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
         actions, _ = self.model.predict(np.asarray(observations, dtype=np.float32), deterministic=deterministic)
         return np.asarray(actions)
+
+
+def trained_section(card: Mapping[str, Any]) -> Dict[str, Any]:
+    """The ``observation`` section a model card's policy was trained with (the default's when it names none)."""
+    section = (card.get("env_config") or {}).get("observation")
+    if section is None:
+        from envs.dv2s_env import DV2SEnv
+
+        section = DV2SEnv.default_config()["observation"]
+    return dict(section)
 
 
 class ActionNoise(Policy):
@@ -299,6 +335,9 @@ class ActionNoise(Policy):
         self.inner.bind(envs)
         self.envs = list(envs)
         self.space = envs[0].action_space
+
+    def check_env_config(self, env_config: Optional[Mapping[str, Any]]) -> None:
+        self.inner.check_env_config(env_config)
 
     def reset(self, index: Optional[int] = None) -> None:
         self.inner.reset(index)

@@ -1059,6 +1059,20 @@ def resolve_checkpoint(spec: str) -> Tuple[str, Path, Dict[str, Any]]:
     return algorithm, path.resolve(), card
 
 
+def check_source_observation(source_card: Mapping[str, Any], env_config: Mapping[str, Any], spec: str) -> None:
+    """Refuse to fine-tune a checkpoint in envs that observe otherwise than the ones it was trained in (its card's
+    ``env_config``; a card without one is checked by the observation space's shape only)."""
+    from policies.registry import PolicySpaceError, SB3Policy
+
+    class _Card:  # the check needs the card only, not the model
+        observation_space = action_space = None
+
+    try:
+        SB3Policy(str(spec), _Card(), source_card).check_env_config(env_config)
+    except PolicySpaceError as error:
+        raise TrainingError(f"cannot fine-tune here: {error}") from None
+
+
 def with_reward_weights(env_config: Mapping[str, Any], reward_weights: Optional[Mapping[str, float]]) -> Dict[str, Any]:
     """A copy of ``env_config`` whose ``reward_weights`` are updated term by term with ``reward_weights``.
 
@@ -1129,6 +1143,7 @@ def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, learning_rate: Op
     algorithm, source, source_card = resolve_checkpoint(checkpoint_or_spec)
     env_config = dict(source_card.get("env_config") or {}) if config.env_config is None else config.env_config
     env_config = with_reward_weights(env_config, reward_weights)
+    check_source_observation(source_card, env_config, checkpoint_or_spec)
     hyperparameters = {k: v for k, v in (source_card.get("hyperparameters") or {}).items()
                        if k != "policy" and k in _known_hyperparameters(algorithm)}
 

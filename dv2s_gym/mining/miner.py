@@ -493,7 +493,9 @@ def _check_can_mine(policy: str, settings: MineSettings) -> None:
     from policies.registry import load_policy
 
     check_env_config(settings.env_config)  # a misspelt key fails here, in one line, not in every episode
-    load_policy(policy)  # an unknown spec or broken checkpoint fails here, in one line, before any worker starts
+    # an unknown spec or broken checkpoint fails here, in one line, before any worker starts; so does a checkpoint
+    # trained with another observation than the env config's
+    load_policy(policy).check_env_config(settings.env_config)
     if settings.reference:
         load_policy(settings.reference)
 

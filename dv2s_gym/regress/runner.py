@@ -75,11 +75,16 @@ def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterab
     return tasks
 
 
-def _policy_info(spec: str) -> Dict[str, Any]:
-    """Load the policy here once: a bad spec fails before any worker starts; the model card goes in the report."""
-    from policies.registry import load_policy
+def _policy_info(spec: str, env_config: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+    """Load the policy here once: a bad spec, or a checkpoint trained with another observation than ``env_config``'s,
+    fails before any worker starts; the model card goes in the report."""
+    from policies.registry import PolicySpaceError, load_policy
 
     policy = load_policy(spec)
+    try:
+        policy.check_env_config(env_config or {})
+    except PolicySpaceError as error:
+        raise RegressError(f"--config: {error}") from None
     card = None
     while policy is not None and card is None:
         card = getattr(policy, "card", None) or None
@@ -290,8 +295,8 @@ def _prepare(candidate: str, baseline: Union[None, str, BaselineReport], setting
     names, episodes, planned = _size(settings, bank_dir, fallback, report)
     bank = bank_info(names, bank_dir)
     seeds = [settings.seed + k for k in range(episodes)]
-    candidate_info = _policy_info(candidate)
-    baseline_info = _policy_info(spec) if spec is not None else None  # a bad baseline spec is bad input too
+    candidate_info = _policy_info(candidate, env_config)
+    baseline_info = _policy_info(spec, env_config) if spec is not None else None  # a bad baseline spec is bad input too
     old_results: Dict[str, RegressEpisode] = {}
     report_hash = None
     if report is not None:
