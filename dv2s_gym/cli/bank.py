@@ -14,7 +14,7 @@ from dv2s_gym.cli.inputs import json_argument, open_bank, read_input_file
 from dv2s_gym.cli.output import emit
 from dv2s_gym.cli.parser import bank_command, bank_option
 from scenario_bank.admission import ON_DUPLICATE_OF
-from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, Provenance
+from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, Provenance, Sidecar
 
 __all__ = ["add_parser", "run_add", "run_export", "run_import", "run_list", "run_rm", "run_sample", "run_show",
            "run_stats"]
@@ -120,8 +120,9 @@ def run_add(args: argparse.Namespace) -> int:
     provenance = Provenance(kind=args.kind, video=args.video, parent=args.parent)
     # Bank.add upgrades Scenic 2 syntax to Scenic 3 (recording the rewrites and notes in the provenance), then its
     # allowlist + sandbox checks
-    entry = open_bank(args).add(script, args.description, name=args.name, elements=elements, tags=args.tag or [],
-                                map=args.map, provenance=provenance, upgrade_scenic2=True)
+    fields = Sidecar(description=args.description, name=args.name, elements=elements, tags=tuple(args.tag or ()),
+                     map=args.map or "", source=provenance)
+    entry = open_bank(args).add(script, fields, upgrade_scenic2=True)
     rewrites = list(entry.source.get("scenic2_rewrites") or [])
     for line in [f"scenic2: {r}" for r in rewrites] + [f"scenic2 note: {n}" for n in entry.source.get("scenic2_notes") or []]:
         print(line, file=sys.stderr)

@@ -29,7 +29,7 @@ from scenario_bank.safety import UnsafeScenarioError
 from scenario_bank.sandbox import SandboxError, verify_script
 from dv2s_gym.pipeline.labels import label_path_for, read_label
 from dv2s_gym.pipeline.metrics import e2e_sc, semantic_preservation
-from scenario_bank.bank import Bank, Provenance
+from scenario_bank.bank import Bank, Provenance, Sidecar
 
 __all__ = ["ConvertSettings", "ScenarioCheck", "add_converted", "check_scenario", "checks_passed", "classify_failure", "generated", "placed_nothing", "conversion_provenance", "convert_video",
            "generate_to_folder", "label_for"]
@@ -244,6 +244,6 @@ def add_converted(bank_dir: Optional[str | os.PathLike], video: str | os.PathLik
     provenance = Provenance(kind="generated", video=str(video), seed=seed,
                             **conversion_provenance(dra, sg, report["generation"], description))
     script = (Path(out) / "scenario.scenic").read_text(encoding="utf-8")
-    entry = Bank(bank_dir).add(script, description["text"], elements=description["elements"],
-                               tags=["generated"], provenance=provenance, name=None)
+    entry = Bank(bank_dir).add(script, Sidecar(description=description["text"], elements=description["elements"],
+                                               tags=("generated",), source=provenance))
     return entry.name
