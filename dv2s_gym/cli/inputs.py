@@ -8,11 +8,12 @@ from pathlib import Path
 from typing import Any, Optional, Union
 
 from dv2s_gym.cli.errors import UsageError
+from dv2s_gym.pipeline.llm_config import LLMConfig
 from scenario_bank.bank import Bank, BankError, MAX_JSON_DEPTH, MAX_SIDECAR_BYTES, UnsafeBankInputError
 from scenario_bank.safe_files import nests_deeper_than, read_regular_file, UnsafeInputError
 
-__all__ = ["CONFIG_EXAMPLE", "WEIGHTS", "WEIGHTS_EXAMPLE", "env_config_option", "json_error", "json_option", "json_value", "llm_config", "open_bank",
-           "read_input_file"]
+__all__ = ["CONFIG_EXAMPLE", "WEIGHTS", "WEIGHTS_EXAMPLE", "env_config_option", "json_error", "json_option",
+           "json_value", "llm_config", "open_bank", "read_input_file"]
 
 
 def open_bank(args: argparse.Namespace):
@@ -34,10 +35,10 @@ def read_input_file(path: str, what: str, max_bytes: int) -> bytes:
         raise UnsafeBankInputError(f"the {what} {error}") from None
 
 
-def llm_config(args: argparse.Namespace):
+def llm_config(args: argparse.Namespace) -> Optional[LLMConfig]:
     """The LLM endpoint settings given (``--base-url``, ``--model``, ``--api-key``), or None."""
     config = {k: getattr(args, k, None) for k in ("base_url", "model", "api_key")}
-    return {k: v for k, v in config.items() if v} or None
+    return LLMConfig.of({k: v for k, v in config.items() if v}) if any(config.values()) else None
 
 
 CONFIG_EXAMPLE = "'{\"duration\": 10}'"

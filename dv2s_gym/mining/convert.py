@@ -86,6 +86,7 @@ from dv2s_gym.pipeline import stages
 from dv2s_gym.pipeline.convert import check_scenario, conversion_provenance
 from dv2s_gym.pipeline.errors import (EndpointHTTPError, EndpointTimeoutError, EndpointUnreachableError,
                                       MissingAPIKeyError)
+from dv2s_gym.pipeline.llm_config import LLMConfig
 from dv2s_gym.pipeline.metrics import e2e_sc
 from dv2s_gym.pipeline.semantics.text import elements_from_text
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace, trace_actor_kind
@@ -226,7 +227,7 @@ class ConversionSettings:
     policy: Any = None
     dra: str = "bev"
     sg: str = "rules"
-    llm_config: Optional[Dict[str, Any]] = None
+    llm_config: Optional[LLMConfig] = None
     k: int = 10
     threshold: float = 0.3
     seed: int = 0
@@ -237,6 +238,9 @@ class ConversionSettings:
     after: float = 1.0
     reference: Optional[Any] = "rule"
     describe_events: bool = True
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "llm_config", LLMConfig.of(self.llm_config))  # a mapping's keys checked once, here
 
     def replace(self, **changes: Any) -> "ConversionSettings":
         """A copy with ``changes``."""
