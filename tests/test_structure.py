@@ -1197,3 +1197,46 @@ def test_the_readme_pictures_the_layout():
     assert on_disk <= set(children["dv2s_gym/"]) | {name.rstrip("/") for name in children["dv2s_gym/"]}
     bench = {f"{path.parent.name}/" for path in (ROOT / "bench").glob("*/__init__.py")}
     assert bench <= set(children["bench/"]), f"bench/'s packages not in the picture: {bench - set(children['bench/'])}"
+
+
+_KIND_NAMES = frozenset({"kind", "role", "noun"})
+"""Names (a variable, an attribute, the key of ``getattr(x, "kind", ...)``) that hold an actor's kind or role."""
+
+
+def kind_strings_compared(tree: ast.AST, kinds: frozenset) -> List[str]:
+    """``"line: code"`` of each comparison of an actor's kind or role (:data:`_KIND_NAMES`) with a string literal
+    that is one of ``kinds`` (the enum's values are the names to compare with)."""
+    def names_kind(node: ast.AST) -> bool:
+        if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "getattr" and len(node.args) > 1:
+            return isinstance(node.args[1], ast.Constant) and node.args[1].value in _KIND_NAMES
+        return (getattr(node, "id", None) or getattr(node, "attr", None)) in _KIND_NAMES
+
+    def literal(node: ast.AST) -> bool:
+        if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+            return any(literal(e) for e in node.elts)
+        return isinstance(node, ast.Constant) and node.value in kinds
+
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Compare):
+            sides = [node.left, *node.comparators]
+            if any(names_kind(a) and literal(b) or literal(a) and names_kind(b) for a, b in zip(sides, sides[1:])):
+                found.append(f"{node.lineno}: {ast.unparse(node)}")
+    return found
+
+
+def test_the_scenario_rules_compare_kinds_and_roles_with_their_enums():
+    """In the rule-based Scenario Generator an actor's kind is compared with ``ActorKind`` (the table of the elements'
+    participants) and its role with ``Role``/``JunctionRole``, never with a string spelled out."""
+    from dv2s_gym.pipeline.sg.rules.roles import ActorKind, JunctionRole, Role
+    from scenario_bank.elements import PARTICIPANTS
+
+    assert tuple(ActorKind) == PARTICIPANTS
+    kinds = frozenset(ActorKind) | frozenset(Role) | frozenset(JunctionRole)
+    found = {str(path.relative_to(ROOT)): lines for path in sorted((ROOT / "dv2s_gym/pipeline/sg/rules").glob("*.py"))
+             if (lines := kind_strings_compared(_parsed(path), frozenset(str(k) for k in kinds)))}
+    assert not found, f"kinds or roles compared with a string (use ActorKind, Role, JunctionRole): {found}"
+    planted = ast.parse('if actor.kind == "truck" or role != "lead" or getattr(a, "kind", "") in ("ego", "x"):\n'
+                        '    pass\nif actor.kind == ActorKind.TRUCK and name == "ego":\n    pass\n')
+    assert [line.partition(":")[0] for line in kind_strings_compared(planted, frozenset({"truck", "lead", "ego"}))] \
+        == ["1", "1", "1"]  # the three comparisons of line 1; line 3 compares the enum, and a name that is no kind
