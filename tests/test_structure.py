@@ -1225,15 +1225,22 @@ def kind_strings_compared(tree: ast.AST, kinds: frozenset) -> List[str]:
     return found
 
 
-def test_the_scenario_rules_compare_kinds_and_roles_with_their_enums():
-    """In the rule-based Scenario Generator an actor's kind is compared with ``ActorKind`` (the table of the elements'
-    participants) and its role with ``Role``/``JunctionRole``, never with a string spelled out."""
-    from dv2s_gym.pipeline.sg.rules.roles import ActorKind, JunctionRole, Role
-    from scenario_bank.elements import PARTICIPANTS
+KINDS_BY_ENUM = ("dv2s_gym/pipeline/sg/rules", "dv2s_gym/pipeline/semantics", "dv2s_gym/mining", "dv2s_gym/regress",
+                 "envs", "policies", "scenario_bank")
+"""Where an actor's kind is compared with ``scenario_bank.elements.ActorKind`` only (the bird's-eye analyzer,
+``dv2s_gym/pipeline/dra/bev``, names the blobs it detects in a vocabulary of its own: colours and kinds)."""
+
+
+def test_kinds_and_roles_are_compared_with_their_enums():
+    """An actor's kind is compared with ``ActorKind`` (the table of the elements' participants) and, in the rule-based
+    Scenario Generator, its role with ``Role``/``JunctionRole``; never with a string spelled out."""
+    from dv2s_gym.pipeline.sg.rules.roles import JunctionRole, Role
+    from scenario_bank.elements import PARTICIPANTS, ActorKind
 
     assert tuple(ActorKind) == PARTICIPANTS
     kinds = frozenset(ActorKind) | frozenset(Role) | frozenset(JunctionRole)
-    found = {str(path.relative_to(ROOT)): lines for path in sorted((ROOT / "dv2s_gym/pipeline/sg/rules").glob("*.py"))
+    paths = [path for part in KINDS_BY_ENUM for path in sorted((ROOT / part).rglob("*.py"))]
+    found = {str(path.relative_to(ROOT)): lines for path in paths
              if (lines := kind_strings_compared(_parsed(path), frozenset(str(k) for k in kinds)))}
     assert not found, f"kinds or roles compared with a string (use ActorKind, Role, JunctionRole): {found}"
     planted = ast.parse('if actor.kind == "truck" or role != "lead" or getattr(a, "kind", "") in ("ego", "x"):\n'

@@ -9,9 +9,9 @@ from dv2s_gym.pipeline.errors import GenerationError
 from dv2s_gym.pipeline.semantics.text import Entity, ParsedDescription
 from dv2s_gym.pipeline.sg.rules.describe import COLLISION_HINTS
 from dv2s_gym.pipeline.sg.rules.roads import MAP_ROADS
-from dv2s_gym.pipeline.sg.rules.roles import ActorKind
 from dv2s_gym.pipeline.sg.rules.script import Script
-from scenario_bank.elements import ACTIONS, CAN_DO, PARTICIPANTS, RELATIONS, ROADS, element_set, with_undirected
+from scenario_bank.elements import (ACTIONS, CAN_DO, PARTICIPANTS, RELATIONS, ROADS, ActorKind, element_set,
+                                    with_undirected)
 
 __all__ = ["check_main_event", "typed_collisions", "unbuilt_warnings", "absent_warnings", "unshown_warnings"]
 

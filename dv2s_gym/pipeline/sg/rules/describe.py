@@ -9,7 +9,7 @@ from dv2s_gym.pipeline.semantics.text import Entity, ParsedDescription, parse_de
 from dv2s_gym.pipeline.sg.rules.frame import CLASS, VEHICLES, ActorFrame, ScenarioFrame
 from dv2s_gym.pipeline.sg.rules.map_choice import choose_map
 from dv2s_gym.pipeline.sg.rules.roads import PARKING_STREET
-from dv2s_gym.pipeline.sg.rules.roles import ActorKind
+from scenario_bank.elements import ActorKind
 
 __all__ = ["COLLISION_HINTS", "MAX_COUNT", "build_frame"]
 

@@ -15,9 +15,9 @@ from dv2s_gym.pipeline.sg.rules.junction_spawn import spawn_junction_obstacle, s
 from dv2s_gym.pipeline.sg.rules.junction_timing import junction_timing
 from dv2s_gym.pipeline.sg.rules.pedestrians import spawn_junction_pedestrians
 from dv2s_gym.pipeline.sg.rules.roads import RING_MAP, speed_ranges
-from dv2s_gym.pipeline.sg.rules.roles import ActorKind, JunctionRole
+from dv2s_gym.pipeline.sg.rules.roles import JunctionRole
 from dv2s_gym.pipeline.sg.rules.script import Script, check_actions
-from scenario_bank.elements import CAN_DO
+from scenario_bank.elements import CAN_DO, ActorKind
 
 __all__ = ["compose_junction"]
 

@@ -7,8 +7,9 @@ from typing import Tuple
 
 from dv2s_gym.pipeline.sg.rules.frame import KIND_SPEEDS, ActorFrame, ScenarioFrame
 from dv2s_gym.pipeline.sg.rules.manoeuvres import drift, swerve, u_turn
-from dv2s_gym.pipeline.sg.rules.roles import ActorKind, Role
+from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script, brake_params
+from scenario_bank.elements import ActorKind
 
 __all__ = ["ego_lane_behavior"]
 

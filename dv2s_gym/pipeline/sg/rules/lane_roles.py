@@ -9,9 +9,9 @@ from typing import Callable, Dict, List, Optional, Tuple, Union
 
 from dv2s_gym.pipeline.sg.rules.frame import VEHICLES, ActorFrame, ScenarioFrame
 from dv2s_gym.pipeline.sg.rules.roads import MULTILANE_STREET, PARKING_STREET, SHOULDER_HIGHWAY, STREET_MAPS
-from dv2s_gym.pipeline.sg.rules.roles import ActorKind, Role
+from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script, check_actions
-from scenario_bank.elements import CAN_DO
+from scenario_bank.elements import CAN_DO, ActorKind
 
 __all__ = ["LANE_ACTIONS", "LaneRoad", "assign_lane_roles", "lanes_needed"]
 

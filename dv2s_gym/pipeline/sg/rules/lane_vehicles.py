@@ -7,8 +7,8 @@ from dv2s_gym.pipeline.sg.rules.frame import ActorFrame
 from dv2s_gym.pipeline.sg.rules.lane_context import LaneContext
 from dv2s_gym.pipeline.sg.rules.manoeuvres import longitudinal_behavior
 from dv2s_gym.pipeline.sg.rules.placement import Placement
-from dv2s_gym.pipeline.sg.rules.roles import ActorKind
 from dv2s_gym.pipeline.sg.rules.script import Script
+from scenario_bank.elements import ActorKind
 
 __all__ = ["place_ramp", "place_oncoming", "place_cutter", "place_overtaker"]
 

@@ -7,8 +7,9 @@ from typing import Optional
 
 from dv2s_gym.pipeline.sg.rules.frame import ActorFrame
 from dv2s_gym.pipeline.sg.rules.roads import HIGHWAY_MAPS
-from dv2s_gym.pipeline.sg.rules.roles import ActorKind, Role
+from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script, brake_params
+from scenario_bank.elements import ActorKind
 
 __all__ = ["u_turn", "swerve", "drift", "longitudinal_behavior"]
 

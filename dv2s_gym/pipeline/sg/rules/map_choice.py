@@ -6,7 +6,7 @@ from typing import List, Optional, Sequence
 
 from dv2s_gym.pipeline.sg.rules.frame import VEHICLES, ActorFrame
 from dv2s_gym.pipeline.sg.rules.roads import MULTILANE_STREET, ROAD_MAPS
-from dv2s_gym.pipeline.sg.rules.roles import ActorKind
+from scenario_bank.elements import ActorKind
 
 __all__ = ["choose_map"]
 

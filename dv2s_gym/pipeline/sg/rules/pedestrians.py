@@ -8,8 +8,9 @@ from typing import List
 
 from dv2s_gym.pipeline.sg.rules.frame import CLASS, ActorFrame
 from dv2s_gym.pipeline.sg.rules.roads import MULTILANE_STREET, PARKING_STREET, STREET_LANES
-from dv2s_gym.pipeline.sg.rules.roles import ActorKind, Role
+from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script
+from scenario_bank.elements import ActorKind
 
 __all__ = ["crossing_directions", "spawn_lane_pedestrians", "spawn_junction_pedestrians"]
 

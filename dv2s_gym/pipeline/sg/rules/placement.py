@@ -8,8 +8,9 @@ from typing import Callable, List, Optional
 
 from dv2s_gym.pipeline.sg.rules.frame import CLASS, ActorFrame
 from dv2s_gym.pipeline.sg.rules.lane_context import LaneContext
-from dv2s_gym.pipeline.sg.rules.roles import ActorKind, Role
+from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script
+from scenario_bank.elements import ActorKind
 
 __all__ = ["Placement", "Placer", "driving"]
 

@@ -1,30 +1,14 @@
-"""The roles an actor plays in a composed script: where it is placed and how it moves relative to the ego; and the
-kinds of actor.
+"""The roles an actor plays in a composed script: where it is placed and how it moves relative to the ego.
 
-The enums are ``str``-valued: a role compares equal to its name as a plain string (``Role.LEAD == "lead"``)
-and formats as that string in warnings; so does a kind (``ActorKind.EGO == "ego"``), which is how the parsed
-description names it.
+Both enums are ``str``-valued: a role compares equal to its name as a plain string (``Role.LEAD == "lead"``)
+and formats as that string in warnings (an actor's kind is a ``scenario_bank.elements.ActorKind``).
 """
 
 from __future__ import annotations
 
 from enum import StrEnum
 
-__all__ = ["ActorKind", "Role", "JunctionRole"]
-
-
-class ActorKind(StrEnum):
-    """The kind of an actor: the participants of a scenario's elements (``scenario_bank.elements.PARTICIPANTS``, in
-    its order)."""
-
-    EGO = "ego"
-    CAR = "car"
-    TRUCK = "truck"
-    BUS = "bus"
-    MOTORCYCLE = "motorcycle"
-    BICYCLE = "bicycle"
-    PEDESTRIAN = "pedestrian"
-    OBSTACLE = "obstacle"
+__all__ = ["Role", "JunctionRole"]
 
 
 class Role(StrEnum):
