@@ -109,7 +109,6 @@ __all__ = [
     "entry_files",
     "entry_file_name",
     "ON_DUPLICATE",
-    "NEW_ENTRY_FIELDS",
     "verify",
 ]
 
@@ -345,8 +344,11 @@ class Bank:
     def _write_json_atomic(path: Path, data: Any) -> None:
         atomic_write_json(path, data)
 
-    def _stage_entry(self, name: str, script: str, meta: Dict[str, Any],
+    def _stage_entry(self, name: str, script: str, meta: Union[Sidecar, Dict[str, Any]],
                      files: Optional[Mapping[str, PathLike]] = None) -> Path:
+        """Write an entry (its script, its sidecar ``meta``: written as JSON here, and the ``files`` it carries) into
+        a hidden staging folder of the bank; the folder."""
+        meta = meta.to_dict() if isinstance(meta, Sidecar) else meta
         field_name = control_character_field(meta)
         if field_name is not None:  # every write passes here, whatever built the sidecar
             raise BankError(f"the sidecar field {field_name!r} of {name} holds a control character: {CONTROL_FIX}")
@@ -373,39 +375,33 @@ class Bank:
                 "Bank(DIR) in Python, DV2S-v0 with bank_dir=DIR")
 
     @overload
-    def add(self, script: str, description: Union[str, Sidecar], *, name: Optional[str] = ...,
-            elements: Optional[Mapping[str, Any]] = ..., tags: Sequence[str] = ..., map: Optional[str] = ...,
-            provenance: Union[None, Provenance, Mapping[str, Any]] = ..., use_case: Optional[str] = ..., upgrade_scenic2: bool = ...,
+    def add(self, script: str, entry: Union[str, Sidecar], *, upgrade_scenic2: bool = ...,
             files: Optional[Mapping[str, PathLike]] = ..., on_duplicate: Literal["error"] = ...,
             near_copy_of: None = ...) -> ScenarioEntry: ...
 
     @overload
-    def add(self, script: str, description: Union[str, Sidecar], *, name: Optional[str] = ...,
-            elements: Optional[Mapping[str, Any]] = ..., tags: Sequence[str] = ..., map: Optional[str] = ...,
-            provenance: Union[None, Provenance, Mapping[str, Any]] = ..., use_case: Optional[str] = ..., upgrade_scenic2: bool = ...,
+    def add(self, script: str, entry: Union[str, Sidecar], *, upgrade_scenic2: bool = ...,
             files: Optional[Mapping[str, PathLike]] = ..., on_duplicate: Literal["merge"],
             near_copy_of: Optional[Callable[[ScenarioEntry], bool]] = ...) -> AddOutcome: ...
 
     def add(
         self,
         script: str,
-        description: Union[str, Sidecar],
+        entry: Union[str, Sidecar],
         *,
         upgrade_scenic2: bool = False,
         files: Optional[Mapping[str, PathLike]] = None,
         on_duplicate: str = "error",
         near_copy_of: Optional[Callable[[ScenarioEntry], bool]] = None,
-        **fields: Any,
     ) -> Union[ScenarioEntry, AddOutcome]:
         """Add a scenario atomically, in one step under the writers' lock.
 
-        The new entry's fields are a :class:`~scenario_bank.records.Sidecar` (its ``description``, ``name``,
-        ``elements``, ``tags``, ``map``, ``use_case`` and provenance ``source``), or ``description`` and the
-        others as keywords (:data:`NEW_ENTRY_FIELDS`: ``name``, ``elements``, ``tags``, ``map``, ``provenance``,
-        ``use_case``). ``map`` is read from the script's ``param map`` when not given, ``name`` made from the
-        description. ``provenance`` (a :class:`~scenario_bank.records.Provenance`, or a mapping of its fields)
-        keys: kind (hand-written, generated, mined), video, parent, seed, generator, model, context_hash, date;
-        mined entries also :data:`MINED_PROVENANCE_FIELDS`.
+        ``entry``: the new entry's fields, a :class:`~scenario_bank.records.Sidecar` (its ``description``,
+        ``name``, ``elements``, ``tags``, ``map``, ``use_case`` and provenance ``source``), or its description
+        alone (a string). ``map`` is read from the script's ``param map`` when not given, ``name`` made from the
+        description. The provenance ``source`` (a :class:`~scenario_bank.records.Provenance`) fields: kind
+        (hand-written, generated, mined), video, parent, seed, generator, model, context_hash, date; mined
+        entries also :data:`MINED_PROVENANCE_FIELDS`.
 
         Every script is verified first: a script failing the safety check or its compile, sample and short run in
         the sandbox (:mod:`scenario_bank.sandbox`, with CPU, memory and wall-clock limits) is refused
@@ -438,51 +434,47 @@ class Bank:
         position) and the merged record's provenance values naming them are rewritten to those paths, so every
         merged source keeps its own files.
         """
-        entry = _new_entry_fields(description, fields)
+        given = _new_entry(entry)
         _check_add_options(on_duplicate, near_copy_of)
         self._check_writable("add a scenario")
         files = _check_files(files)
-        script, provenance = upgrade_if_asked(script, entry["provenance"], upgrade_scenic2)
-        meta = new_sidecar(script, entry["description"], entry["name"], entry["elements"], entry["tags"],
-                           entry["map"], provenance, entry["use_case"]).to_dict()
+        script, provenance = upgrade_if_asked(script, given.source, upgrade_scenic2)
+        meta = new_sidecar(script, given.description, given.name, given.elements, given.tags,
+                           given.map or None, provenance, given.use_case)
         # before the lock: other writers do not wait for it
-        verify_or_name_scenic2(script, f"scenario {meta['name']!r}", upgrade_scenic2)
+        verify_or_name_scenic2(script, f"scenario {meta.name!r}", upgrade_scenic2)
         with self._lock():
             self._load(locked=True)
             if on_duplicate == "merge":
                 return self._add_or_merge_locked(script, meta, files, near_copy_of)
-            return self._add_new_locked(script, meta, files, explicit_name=entry["name"] is not None)
+            return self._add_new_locked(script, meta, files, explicit_name=given.name is not None)
 
-    def _add_new_locked(self, script: str, meta: Dict[str, Any], files: Dict[str, Path], *,
+    def _add_new_locked(self, script: str, meta: Sidecar, files: Dict[str, Path], *,
                         explicit_name: bool) -> ScenarioEntry:
         """:meth:`add` with ``on_duplicate="error"`` once verified, under the lock: refuse a name taken (when
         given) or a duplicate script, else write the entry."""
-        name = meta["name"] = self._free_name(meta["name"], explicit=explicit_name)
-        duplicate = self.find_duplicate(script, meta["elements"], meta["map"])
+        meta = meta.replace(name=self._free_name(meta.name, explicit=explicit_name))
+        duplicate = self.find_duplicate(script, meta.elements, meta.map)
         if duplicate is not None:
             existing, how = duplicate
             raise DuplicateScenarioError(
                 f"not added: the script is {how} to bank entry {existing!r}; use that entry or change the script",
                 existing,
             )
-        if files:
-            meta["source"][ENTRY_FILES] = list(files)
-        return self._add_locked(name, script, meta, files)
+        return self._add_locked(meta.name, script, _listing_files(meta, files), files)
 
-    def _add_or_merge_locked(self, script: str, meta: Dict[str, Any], files: Dict[str, Path],
+    def _add_or_merge_locked(self, script: str, meta: Sidecar, files: Dict[str, Path],
                              near_copy_of: Optional[Callable[[ScenarioEntry], bool]]) -> AddOutcome:
         """:meth:`add` with ``on_duplicate="merge"`` once verified, under the lock."""
-        found = self.find_near_duplicate(script, meta["elements"], meta["map"])
+        found = self.find_near_duplicate(script, meta.elements, meta.map)
         if found is None and near_copy_of is not None:
             found = find_near_copy(self._entries, script, near_copy_of)
         if found is None:
-            name = meta["name"] = self._free_name(meta["name"], explicit=False)
-            if files:
-                meta["source"][ENTRY_FILES] = list(files)
-            return AddOutcome("added", self._add_locked(name, script, meta, files))
+            meta = meta.replace(name=self._free_name(meta.name, explicit=False))
+            return AddOutcome("added", self._add_locked(meta.name, script, _listing_files(meta, files), files))
         existing, how = found
-        merged = {key: value for key, value in meta["source"].items() if value is not None and key != "merged"}
-        merged.update(description=meta["description"], content_hash=meta["content_hash"], how=how)
+        merged = {key: value for key, value in meta.source.to_dict().items() if value is not None and key != "merged"}
+        merged.update(description=meta.description, content_hash=meta.content_hash, how=how)
         if files:
             prefix = f"merged/{len(self._entries[existing].source.get('merged') or []) + 1}/"
             folder = self._entries[existing].folder
@@ -504,7 +496,7 @@ class Bank:
         self._append_merged(existing, merged)
         return AddOutcome("merged", self._entries[existing], how)
 
-    def _add_locked(self, name: str, script: str, meta: Dict[str, Any],
+    def _add_locked(self, name: str, script: str, meta: Sidecar,
                     files: Optional[Mapping[str, PathLike]] = None) -> ScenarioEntry:
         staging = self._stage_entry(name, script, meta, files)
         self._commit(staging, name)
@@ -755,30 +747,24 @@ def _copy_synced(origin: Path, dest: Path) -> None:
         os.fsync(handle.fileno())
 
 
-NEW_ENTRY_FIELDS = ("name", "elements", "tags", "map", "provenance", "use_case")
-"""The keyword arguments of :meth:`Bank.add` that are the new entry's fields (with its ``description``)."""
-
-
-def _new_entry_fields(description: Union[str, Sidecar], fields: Mapping[str, Any]) -> Dict[str, Any]:
-    """The new entry's fields for :meth:`Bank.add`: from a :class:`Sidecar` (``source`` is its provenance; an
-    empty ``map`` is read from the script), or ``description`` and the keywords of :data:`NEW_ENTRY_FIELDS`
-    (the defaults for those not given). A keyword that is not a field is a :class:`TypeError`, as for any
-    function; so is one given beside a sidecar, and a sidecar holding what a new entry cannot take."""
-    unknown = sorted(set(fields) - set(NEW_ENTRY_FIELDS))
-    if unknown:
-        raise TypeError(f"Bank.add() got an unexpected keyword argument {unknown[0]!r}")
-    if not isinstance(description, Sidecar):
-        return dict({"name": None, "elements": None, "tags": (), "map": None, "provenance": None,
-                     "use_case": None}, description=description, **fields)
-    if fields:
-        raise TypeError(f"Bank.add() takes the entry's fields in the sidecar or as keywords, not both: "
-                        f"{', '.join(sorted(fields))} given beside a Sidecar")
-    if description.story is not None or description.extra:
+def _new_entry(entry: Union[str, Sidecar]) -> Sidecar:
+    """The new entry's fields for :meth:`Bank.add`: a :class:`Sidecar` as given, or one holding only the
+    description given as a string. A sidecar holding what a new entry cannot take (a ``story``, other keys) is a
+    :class:`TypeError`, as is anything else than a string or a sidecar."""
+    if isinstance(entry, str):
+        return Sidecar(description=entry)
+    if not isinstance(entry, Sidecar):
+        raise TypeError(f"Bank.add() takes the new entry as a Sidecar or its description as a string, not "
+                        f"{type(entry).__name__}")
+    if entry.story is not None or entry.extra:
         raise TypeError("Bank.add() writes a new entry's sidecar from its description, name, elements, tags, map, "
                         "use_case and source; a story or other keys would be lost: leave them out")
-    return {"description": description.description, "name": description.name, "elements": description.elements,
-            "tags": description.tags, "map": description.map or None, "provenance": description.source,
-            "use_case": description.use_case}
+    return entry
+
+
+def _listing_files(meta: Sidecar, files: Mapping[str, Path]) -> Sidecar:
+    """A new entry's sidecar with the ``files`` it carries listed in its provenance (:data:`ENTRY_FILES`)."""
+    return meta.replace(source=meta.source.replace(files=tuple(files))) if files else meta
 
 
 def _check_add_options(on_duplicate: str, near_copy_of: Optional[Callable[[ScenarioEntry], bool]]) -> None:

@@ -29,11 +29,13 @@ matter), ``("action", type, action)`` and ``("relation", a, rel, b)``.
 
 from __future__ import annotations
 
+from enum import StrEnum
 from typing import Any, Dict, FrozenSet, Iterable, List, Mapping, Tuple
 
 from scenario_bank.errors import DV2SError
 
 __all__ = [
+    "ActorKind",
     "ROADS",
     "PARTICIPANTS",
     "ACTIONS",
@@ -50,6 +52,21 @@ __all__ = [
 ROADS = ("highway", "straight_road", "intersection", "t_junction", "three_way", "roundabout", "merge")
 PARTICIPANTS = ("ego", "car", "truck", "bus", "motorcycle", "bicycle", "pedestrian", "obstacle")
 """Vans, SUVs and pickups are ``car``; scooters and cyclists ride a ``bicycle``; a motorcyclist a ``motorcycle``."""
+
+
+class ActorKind(StrEnum):
+    """The kind of an actor, one of :data:`PARTICIPANTS` (in its order); ``str``-valued, so a kind compares equal to
+    its name as the elements spell it (``ActorKind.EGO == "ego"``): code compares kinds with these, never with a
+    string spelled out."""
+
+    EGO = "ego"
+    CAR = "car"
+    TRUCK = "truck"
+    BUS = "bus"
+    MOTORCYCLE = "motorcycle"
+    BICYCLE = "bicycle"
+    PEDESTRIAN = "pedestrian"
+    OBSTACLE = "obstacle"
 ACTIONS = (
     "brake", "stop", "accelerate", "lane_change_left", "lane_change_right", "cut_in", "merge",
     "turn_left", "turn_right", "cross", "collide", "keep_lane", "go_straight", "overtake", "drift",

@@ -38,6 +38,7 @@ from scenario_bank.errors import DV2SError
 
 __all__ = [
     "ENTRY_NAME_PATTERN",
+    "nests_deeper_than",
     "UnsafeInputError",
     "ArchiveLimits",
     "validate_entry_name",
@@ -214,7 +215,7 @@ def real_folder_in(folder: PathLike, relative: str) -> bool:
     return True
 
 
-def _max_depth_exceeded(text: str, max_depth: int) -> bool:
+def nests_deeper_than(text: str, max_depth: int) -> bool:
     """Whether the brackets of JSON ``text`` (outside strings) nest deeper than ``max_depth``; one pass, no
     recursion, stopping at the first too deep bracket."""
     depth = 0
@@ -254,7 +255,7 @@ def load_json_bounded(data: bytes, max_depth: int = 64, what: str = "JSON file")
     except UnicodeDecodeError as error:
         raise UnsafeInputError(f"{what} is not UTF-8 text ({error.reason} at byte {error.start}); "
                                "rewrite it as UTF-8 JSON") from None
-    if _max_depth_exceeded(text, max_depth):
+    if nests_deeper_than(text, max_depth):
         raise UnsafeInputError(f"{what} nests arrays and objects deeper than {max_depth} levels; "
                                "it cannot be a bank file: rewrite it")
     try:

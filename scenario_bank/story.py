@@ -25,7 +25,7 @@ from __future__ import annotations
 import re
 from typing import Any, Dict, Mapping
 
-from scenario_bank.elements import ACTIONS, PARTICIPANTS, RELATIONS
+from scenario_bank.elements import ACTIONS, PARTICIPANTS, RELATIONS, ActorKind
 from scenario_bank.errors import DV2SError
 
 __all__ = ["StoryError", "normalize_story", "step_label", "STEP_KEYS"]
@@ -56,7 +56,7 @@ def normalize_story(story: Any, where: str = "story") -> Dict[str, Any]:
         if not isinstance(name, str) or not re.fullmatch(r"[A-Za-z_]\w*", name) or name == "ego":
             raise StoryError(f"{where}.actors: {name!r} is not a script object name (letters, digits, '_'; "
                              "not 'ego', which is always there)")
-        if kind not in PARTICIPANTS or kind == "ego":
+        if kind not in PARTICIPANTS or kind == ActorKind.EGO:
             raise StoryError(f"{where}.actors.{name}: unknown kind {kind!r}; use one of "
                              f"{', '.join(p for p in PARTICIPANTS if p != 'ego')}")
     steps = story.get("steps")

@@ -19,6 +19,7 @@ from scenario_bank.bank import (
     DuplicateScenarioError,
     WRITERS_LOCK,
     UnknownScenarioError,
+    Sidecar,
     content_hash,
 )
 from scenario_bank.cache import CACHE_ENV
@@ -47,7 +48,9 @@ def script(speed: int = 15, extra: str = "") -> str:
 def add(bank: Bank, name: str, speed: int = 15, **kw) -> object:
     kw.setdefault("elements", ELEMENTS)
     kw.setdefault("tags", ["highway", "test"])
-    return bank.add(script(speed, kw.pop("extra", "")), f"A car ahead of the ego ({name}).", name=name, **kw)
+    extra = kw.pop("extra", "")
+    kw["source"] = kw.pop("provenance", None)
+    return bank.add(script(speed, extra), Sidecar(description=f"A car ahead of the ego ({name}).", name=name, **kw))
 
 
 @pytest.fixture
@@ -82,28 +85,28 @@ def test_add_get_list_filter_remove(bank):
 def test_duplicates_are_refused_with_the_existing_name(bank):
     add(bank, "original")
     with pytest.raises(DuplicateScenarioError, match="original") as exc:
-        bank.add(script(), "same bytes", name="copy", elements=ELEMENTS)
+        bank.add(script(), Sidecar(description="same bytes", name="copy", elements=ELEMENTS))
     assert exc.value.existing == "original"
     # Same elements and same parameter ranges, different text (speed literal, comment): semantic duplicate.
     with pytest.raises(DuplicateScenarioError, match="semantically identical.*original"):
-        bank.add(script(16, "# another comment\n"), "reworded", name="reworded", elements=ELEMENTS)
+        bank.add(script(16, "# another comment\n"), Sidecar(description="reworded", name="reworded", elements=ELEMENTS))
     # Different parameter range: a new scenario.
     other = script().replace("Range(10, 30)", "Range(5, 12)")
-    assert bank.add(other, "closer lead", name="closer", elements=ELEMENTS).name == "closer"
+    assert bank.add(other, Sidecar(description="closer lead", name="closer", elements=ELEMENTS)).name == "closer"
 
 
 @pytest.mark.slow
 def test_bad_input_to_add(bank):
     with pytest.raises(BankError, match="description"):
-        bank.add(script(), " ", name="x")
+        bank.add(script(), Sidecar(description=" ", name="x"))
     with pytest.raises(BankError, match="unknown action"):
-        bank.add(script(), "d", name="x", elements={"actions": [["car", "fly"]]})
+        bank.add(script(), Sidecar(description="d", name="x", elements={"actions": [["car", "fly"]]}))
     with pytest.raises(BankError, match="invalid scenario name"):
-        bank.add(script(), "d", name="Bad Name!")
+        bank.add(script(), Sidecar(description="d", name="Bad Name!"))
     with pytest.raises(BankError, match="provenance kind"):
-        bank.add(script(), "d", name="x", provenance={"kind": "stolen"})
+        bank.add(script(), Sidecar(description="d", name="x", source={"kind": "stolen"}))
     with pytest.raises(ValueError, match="safety check.*import os"):
-        bank.add(script(extra="import os\n"), "d", name="x")
+        bank.add(script(extra="import os\n"), Sidecar(description="d", name="x"))
     assert len(Bank(bank.root)) == 0
 
 
@@ -225,7 +228,7 @@ _WRITER = textwrap.dedent(
     import sys, time
     sys.path.insert(0, {root!r})
     import envs  # the simulator the bank checks the script in
-    from scenario_bank.bank import Bank
+    from scenario_bank.bank import Bank, Sidecar
     import scenario_bank.bank as bank_module
     bank = Bank({bank!r})
     real_commit = bank_module.Bank._commit
@@ -234,7 +237,7 @@ _WRITER = textwrap.dedent(
         time.sleep(30)  # killed here, between writing the entry and renaming it in
         real_commit(self, staging, name)
     bank_module.Bank._commit = slow_commit
-    bank.add({script!r}, "killed while adding", name="victim")
+    bank.add({script!r}, Sidecar(description="killed while adding", name="victim"))
     """
 )
 
@@ -263,7 +266,7 @@ def _parallel_writer(root: str, worker: int, count: int) -> None:
     bank = Bank(root)
     for k in range(count):
         text = script(worker * 100 + k, f"param w{worker}_{k} = Range({worker}, {k + worker + 1})\n")
-        bank.add(text, f"worker {worker} entry {k}", name=f"w{worker}_{k}", elements=ELEMENTS)
+        bank.add(text, Sidecar(description=f"worker {worker} entry {k}", name=f"w{worker}_{k}", elements=ELEMENTS))
 
 
 @pytest.mark.slow

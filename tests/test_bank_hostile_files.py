@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from scenario_bank.bank import BANK_DIR, WRITERS_LOCK, Bank, BankError, UnknownScenarioError
+from scenario_bank.bank import BANK_DIR, WRITERS_LOCK, Bank, BankError, Sidecar, UnknownScenarioError
 from scenario_bank.safe_files import (UnsafeInputError, load_json_bounded, read_in_folder, read_regular_file,
                                       validate_entry_name, validate_relative_path)
 
@@ -318,8 +318,8 @@ def test_a_merge_never_writes_through_a_linked_folder(world, tmp_path, monkeypat
     bank = Bank(bank_dir)
     entry = bank.get(GOOD)
     with pytest.raises(BankError, match="symbolic link"):
-        bank.add(entry.script, "the same failure", elements=entry.elements, map=entry.map,
-                 provenance={"kind": "mined"}, files={"failure.webm": video}, on_duplicate="merge")
+        bank.add(entry.script, Sidecar(description="the same failure", elements=entry.elements, map=entry.map,
+                                       source={"kind": "mined"}), files={"failure.webm": video}, on_duplicate="merge")
     assert snapshot(tmp_path) == before and list(outside.iterdir()) == [outside / "secret.txt"]
 
 
@@ -346,7 +346,7 @@ def test_escape_sequences_in_sidecars_are_refused_and_never_printed(world, tmp_p
     assert Bank(bank_dir).names() == [GOOD]
 
     with pytest.raises(BankError, match="description holds a control character"):
-        Bank(bank_dir).add(Bank().get(GOOD).script, description="brakes " + ESCAPES, name="evil_added")
+        Bank(bank_dir).add(Bank().get(GOOD).script, Sidecar(description="brakes " + ESCAPES, name="evil_added"))
 
     shutil.copytree(evil, bank_dir / "evil_entry")  # a folder edited by hand
     for argv in (("list",), ("show", "evil_entry"), ("show", GOOD)):

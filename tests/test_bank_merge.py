@@ -52,18 +52,19 @@ def test_near_duplicate_needs_same_map_elements_and_overlapping_ranges():
 @pytest.mark.slow
 def test_add_with_merge_adds_then_merges_into_the_existing_sidecar(tmp_path):
     bank = Bank(tmp_path / "bank")
-    first = bank.add(A, "A stopped car ahead.", name="mined_stop", elements=ELEMENTS, provenance=mined(1),
-                     on_duplicate="merge")
+    first = bank.add(A, Sidecar(description="A stopped car ahead.", name="mined_stop", elements=ELEMENTS,
+                                source=mined(1)), on_duplicate="merge")
     assert first.status == "added" and first.entry.name == "mined_stop"
     assert first.entry.source["kind"] == "mined" and first.entry.source["index"] == 1
     assert first.entry.source["reproduction"] is None  # every mined field is present, unknown ones None
-    near = bank.add(A_NEAR, "A car stands still ahead.", name="mined_stop", elements=ELEMENTS,
-                    provenance=mined(2), on_duplicate="merge")
+    near = bank.add(A_NEAR, Sidecar(description="A car stands still ahead.", name="mined_stop", elements=ELEMENTS,
+                                    source=mined(2)), on_duplicate="merge")
     assert near.status == "merged" and near.entry.name == "mined_stop" and "near-duplicate" in near.how
-    same = bank.add(A, "The same script again.", elements=ELEMENTS, provenance=mined(3), on_duplicate="merge")
+    same = bank.add(A, Sidecar(description="The same script again.", elements=ELEMENTS, source=mined(3)),
+                    on_duplicate="merge")
     assert same.status == "merged" and "byte-for-byte" in same.how
-    far = bank.add(B, "A stopped car far ahead.", name="mined_stop", elements=ELEMENTS, provenance=mined(4),
-                   on_duplicate="merge")
+    far = bank.add(B, Sidecar(description="A stopped car far ahead.", name="mined_stop", elements=ELEMENTS,
+                              source=mined(4)), on_duplicate="merge")
     assert far.status == "added" and far.entry.name == "mined_stop_2"
 
     reread = Bank(tmp_path / "bank")
@@ -77,7 +78,7 @@ def test_add_with_merge_adds_then_merges_into_the_existing_sidecar(tmp_path):
     from scenario_bank.bank import DuplicateScenarioError
 
     with pytest.raises(DuplicateScenarioError):
-        bank.add(A, "again", elements=ELEMENTS)
+        bank.add(A, Sidecar(description="again", elements=ELEMENTS))
 
 
 @pytest.mark.slow
@@ -85,8 +86,8 @@ def test_old_sidecars_load_and_take_merges(tmp_path):
     shutil.copytree(BANK_DIR / BASE, tmp_path / "bank" / BASE)  # a sidecar without any mined field
     bank = Bank(tmp_path / "bank")
     assert bank.names() == [BASE] and not bank.problems
-    outcome = bank.add(A, "stopped car", elements=ELEMENTS, map="highway_straight", provenance=mined(9),
-                       on_duplicate="merge")
+    outcome = bank.add(A, Sidecar(description="stopped car", elements=ELEMENTS, map="highway_straight",
+                                  source=mined(9)), on_duplicate="merge")
     assert outcome.status == "merged" and outcome.entry.name == BASE
     assert Bank(tmp_path / "bank").get(BASE).source["merged"][0]["index"] == 9
 
@@ -109,8 +110,8 @@ def _miner(bank_dir: str, order: list, start, results) -> None:
         start.wait(timeout=120)
         for index, label in order:
             script = {"A": A, "A_NEAR": A_NEAR, "B": B}[label]
-            outcome = bank.add(script, f"scenario {label} from miner {index}", name="mined_stop",
-                               elements=ELEMENTS, provenance=mined(index), on_duplicate="merge")
+            outcome = bank.add(script, Sidecar(description=f"scenario {label} from miner {index}", name="mined_stop",
+                                               elements=ELEMENTS, source=mined(index)), on_duplicate="merge")
             out.append((index, label, outcome.status, outcome.entry.name))
     except Exception as error:  # reported to the test, which fails on it
         out.append((-1, "error", f"{type(error).__name__}: {error}", None))
@@ -157,7 +158,8 @@ def test_update_source_sets_provenance_fields_atomically_and_refuses_the_structu
     from scenario_bank.bank import BankError, UnknownScenarioError
 
     bank = Bank(tmp_path / "bank")
-    entry = bank.add(A, "A stopped car ahead.", name="mined_stop", elements=ELEMENTS, provenance=mined(1))
+    entry = bank.add(A, Sidecar(description="A stopped car ahead.", name="mined_stop", elements=ELEMENTS,
+                                source=mined(1)))
     updated = bank.update_source(entry.name, {"converted": "mined_other", "converted_e2e_sc": 0.5})
     assert updated.source["converted"] == "mined_other" and updated.source["index"] == 1
     reread = Bank(tmp_path / "bank").get(entry.name)
@@ -173,34 +175,37 @@ def test_update_source_sets_provenance_fields_atomically_and_refuses_the_structu
 def test_add_names_an_unknown_on_duplicate_and_a_near_copy_rule_without_merging(tmp_path):
     bank = Bank(tmp_path / "bank")
     with pytest.raises(ValueError, match="on_duplicate must be one of 'error', 'merge', not 'skip'"):
-        bank.add(A, "A stopped car ahead.", elements=ELEMENTS, on_duplicate="skip")
+        bank.add(A, Sidecar(description="A stopped car ahead.", elements=ELEMENTS), on_duplicate="skip")
     with pytest.raises(ValueError, match="near_copy_of only applies to on_duplicate='merge'"):
-        bank.add(A, "A stopped car ahead.", elements=ELEMENTS, near_copy_of=lambda entry: True)
+        bank.add(A, Sidecar(description="A stopped car ahead.", elements=ELEMENTS), near_copy_of=lambda entry: True)
     assert not (tmp_path / "bank").exists()  # refused before anything was written
 
 
 @pytest.mark.slow
-def test_add_takes_the_entry_fields_as_one_sidecar_or_as_keywords_alike(tmp_path):
-    """The new entry's fields may come as one :class:`Sidecar` (``source``: the provenance); the entry written is
-    the one the same fields as keywords write, byte for byte."""
+def test_add_takes_the_entry_as_one_sidecar_or_its_description_alone(tmp_path):
+    """The new entry's fields come as one :class:`Sidecar` (``source``: the provenance, a record or a mapping of its
+    fields, written alike byte for byte); a string is the description alone, written as a sidecar holding only it."""
     fields = Sidecar(description="A stopped car ahead.", name="stop", elements=ELEMENTS, tags=("b", "a"),
                      use_case="braking", source=Provenance(kind="mined", parent=BASE, seed=3, date="2026-01-02"))
     by_record = Bank(tmp_path / "record").add(A, fields)
-    by_keywords = Bank(tmp_path / "keywords").add(A, "A stopped car ahead.", name="stop", elements=ELEMENTS,
-                                                  tags=["b", "a"], use_case="braking",
-                                                  provenance={"kind": "mined", "parent": BASE, "seed": 3,
-                                                              "date": "2026-01-02"})
-    assert by_record.name == by_keywords.name == "stop"
-    assert (by_record.folder / "meta.json").read_bytes() == (by_keywords.folder / "meta.json").read_bytes()
+    by_mapping = Bank(tmp_path / "mapping").add(A, fields.replace(source={"kind": "mined", "parent": BASE, "seed": 3,
+                                                                          "date": "2026-01-02"}))
+    assert by_record.name == by_mapping.name == "stop"
+    assert (by_record.folder / "meta.json").read_bytes() == (by_mapping.folder / "meta.json").read_bytes()
     assert by_record.map == "highway_straight"  # an empty map in the record is read from the script
+    assert by_record.tags == ["a", "b"] and by_record.meta["use_case"] == "braking" and by_record.source["seed"] == 3
+    by_text = Bank(tmp_path / "text").add(A, "A stopped car ahead.")
+    by_description = Bank(tmp_path / "description").add(A, Sidecar(description="A stopped car ahead."))
+    assert by_text.name == by_description.name == "stopped_ahead"  # made from the description
+    assert (by_text.folder / "meta.json").read_bytes() == (by_description.folder / "meta.json").read_bytes()
 
 
-def test_add_refuses_an_unknown_field_and_fields_given_twice(tmp_path):
+def test_add_refuses_fields_as_keywords_and_what_a_new_entry_cannot_take(tmp_path):
     bank = Bank(tmp_path / "bank")
-    with pytest.raises(TypeError, match="unexpected keyword argument 'colour'"):
-        bank.add(A, "A stopped car ahead.", colour="red")
-    with pytest.raises(TypeError, match="not both: name given beside a Sidecar"):
-        bank.add(A, Sidecar(description="A stopped car ahead."), name="stop")
+    with pytest.raises(TypeError, match="unexpected keyword argument 'name'"):
+        bank.add(A, "A stopped car ahead.", name="stop")
+    with pytest.raises(TypeError, match="as a Sidecar or its description as a string, not dict"):
+        bank.add(A, {"description": "A stopped car ahead.", "name": "stop"})
     with pytest.raises(TypeError, match="a story or other keys would be lost"):
         bank.add(A, Sidecar(description="A stopped car ahead.", story=["brake"]))
     assert not (tmp_path / "bank").exists()  # refused before anything was written

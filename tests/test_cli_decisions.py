@@ -3,13 +3,14 @@ which story check failed, a resumed run's settings, which kind of file replay wa
 
 import argparse
 import json
+import re
 from pathlib import Path
 
 import pytest
 
 from dv2s_gym.cli import build_parser
 from dv2s_gym.cli.errors import UsageError
-from dv2s_gym.cli.inputs import env_config_option
+from dv2s_gym.cli.inputs import env_config_option, json_option, json_value
 from dv2s_gym.mining.loop_settings import FINE_TUNE_METHODS
 from dv2s_gym.pipeline.convert import checks_passed, generated, placed_nothing
 from dv2s_gym.pipeline.prompts import CAMERA_VIEWPOINTS
@@ -82,6 +83,42 @@ def test_one_parser_reads_every_config_option(tmp_path):
     for module in ("mine.py", "regress.py", "train.py"):
         text = (CLI / module).read_text()
         assert "env_config_option(args.config)" in text and 'json_option(args.config' not in text, module
+
+
+def test_json_options_have_one_parser_and_one_error_shape(tmp_path):
+    """Every JSON value the command line takes is parsed by inputs.json_value (inline, or a .json file through
+    json_option), size and depth capped, and every error reads ``{what} must be {wanted}, e.g. {example}; {why}``."""
+    import ast
+
+    parsers = [f"{path.name}:{node.lineno}" for path in sorted(CLI.glob("*.py"))
+               for node in ast.walk(ast.parse(path.read_text()))
+               if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+               and node.func.attr in ("loads", "load", "load_json_bounded") and path.name != "inputs.py"]
+    assert not parsers, f"JSON parsed outside dv2s_gym/cli/inputs.py: {parsers}"
+    (tmp_path / "w.json").write_text('{"a": 2}')
+    assert json_option(str(tmp_path / "w.json"), "--w", "an object") == {"a": 2}
+    assert json_value('[1, 2]', "--w", "a value") == [1, 2] and json_option(None, "--w", "an object") is None
+    shape = r"^--w must be a JSON object of weights, e\.g\. '\{\"a\": 1\}'; "
+    for bad, why in (("{a: 1", "it is not valid JSON \\(Expecting property name"), ("[1]", "it is a JSON array"),
+                     ("[" * 200 + "]" * 200, "it nests arrays and objects deeper than"),
+                     (" " * (1 << 21), "it is larger than"), (str(tmp_path / "none.json"), "there is no file")):
+        with pytest.raises(UsageError, match=shape + why):
+            json_option(bad, "--w", "a JSON object of weights", "'{\"a\": 1}'", mapping=True)
+    with pytest.raises(UsageError, match=r"^the elements file x must be JSON; it is not UTF-8 text"):
+        json_value(b"\xff", "the elements file x", "JSON")
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["bank", "sample", "--weights", "{a"], "--weights"),
+    (["bank", "sample", "--weights", '{"a": "x"}'], "--weights"),
+    (["loop", "--fine-tune-reward", "[1]"], "--fine-tune-reward"),
+    (["regress", "--policy", "idm", "--config", "{x"], "--config"),
+])
+def test_every_json_option_reports_in_the_one_shape(tmp_path, capsys, argv, flag):
+    from cli_helpers import run
+
+    code, _, err = run(capsys, *argv[:1], *(["--out", tmp_path / "out"] if argv[0] == "loop" else []), *argv[1:])
+    assert code == 2 and re.search(rf"dv2s: error: {flag} must be .*, e\.g\. '.*'; ", err), err
 
 
 def test_bank_add_upgrades_scenic2_once():

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from scenario_bank.bank import Bank, ScenarioRejectedError
+from scenario_bank.bank import Bank, ScenarioRejectedError, Sidecar
 from scenario_bank.precheck import PrecheckError, precheck_text
 from scenario_bank.safety import UnsafeScenarioError, check_script
 from scenario_bank.sandbox import SandboxError, SandboxLimits, run_in_sandbox, verify_script
@@ -82,7 +82,7 @@ def test_safety_check_refuses_with_line_and_reason(path, tmp_path):
         verify_script(text, name=path.stem, limits=TEST_LIMITS)
     bank = Bank(tmp_path / "bank")
     with pytest.raises(ScenarioRejectedError, match="safety check") as caught:
-        bank.add(text, "a hostile script", name="hostile")
+        bank.add(text, Sidecar(description="a hostile script", name="hostile"))
     assert caught.value.stage == "safety" and caught.value.findings
     assert len(Bank(bank.root)) == 0 and not (bank.root / "hostile").exists()
     assert not marker.exists()
@@ -113,7 +113,7 @@ def test_bank_add_refuses_what_the_sandbox_stops_and_stays_unchanged(path, tmp_p
     monkeypatch.setenv("DV2S_SANDBOX_WALL", "600")
     bank = Bank(tmp_path / "bank")
     with pytest.raises(ScenarioRejectedError, match="sandboxed check") as caught:
-        bank.add(path.read_text(encoding="utf-8"), "a hostile script", name="hostile")
+        bank.add(path.read_text(encoding="utf-8"), Sidecar(description="a hostile script", name="hostile"))
     assert caught.value.limit == _header(path, "limit")
     assert len(Bank(bank.root)) == 0 and not (bank.root / "hostile").exists()
 
@@ -124,7 +124,7 @@ def test_an_infinite_loop_through_bank_add_names_the_cpu_limit(tmp_path, monkeyp
     bank = Bank(tmp_path / "bank")
     text = (HOSTILE / "exhaust_top_level_loop.scenic").read_text(encoding="utf-8")
     with pytest.raises(ScenarioRejectedError, match="exceeded the 4 s CPU-time limit while compiling"):
-        bank.add(text, "loops forever", name="loop")
+        bank.add(text, Sidecar(description="loops forever", name="loop"))
     assert len(Bank(bank.root)) == 0
 
 

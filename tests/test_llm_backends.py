@@ -22,6 +22,7 @@ from llm_server import ChatServer, closed_port_url, last_user_text, load_recorde
 from dv2s_gym.pipeline import errors
 from dv2s_gym.pipeline.dra.openai import describe_with_vlm, select_frames
 from dv2s_gym.pipeline.llm_client import ChatClient
+from dv2s_gym.pipeline.llm_config import LLMConfig
 from dv2s_gym.pipeline.prompts import CAMERA_VIEWPOINTS, SG_RULES, dra_prompt, prompt_hash, sg_context
 from dv2s_gym.pipeline.sg import openai as sg_openai
 from dv2s_gym.pipeline.sg.openai import (
@@ -195,6 +196,35 @@ def test_from_config_reads_config_then_environment(monkeypatch):
     assert ChatClient.from_config({"model": "llama3", "vlm": {"model": "llava"}}, kind="vlm").model == "llava"
     with pytest.raises(ValueError, match="unknown LLM config keys"):
         ChatClient.from_config({"base_ur": "http://x"})
+    mapping = {"model": "llama3", "retries": 0, "vlm": {"model": "llava"}}
+    record = LLMConfig.of(mapping)
+    assert record == LLMConfig(model="llama3", retries=0, vlm=LLMConfig(model="llava"))
+    for kind, model in (("llm", "llama3"), ("vlm", "llava")):  # a record reads as the mapping it was made of
+        client, same = ChatClient.from_config(record, kind=kind), ChatClient.from_config(mapping, kind=kind)
+        assert (client.model, client.retries) == (model, 0) and repr(client) == repr(same)
+
+
+def test_an_llm_config_is_a_record_whose_keys_are_checked_where_it_enters(monkeypatch):
+    """The command line, the conversion settings and the client hand one typed record along; a mapping given
+    instead is read once, where it enters, and its keys checked there (also a section's)."""
+    import argparse
+
+    from dv2s_gym.cli.inputs import llm_config
+    from dv2s_gym.mining.convert import ConversionSettings
+    from dv2s_gym.pipeline.convert import ConvertSettings
+
+    given = argparse.Namespace(base_url="http://localhost:1/v1", model="m", api_key=None)
+    assert llm_config(given) == LLMConfig(base_url="http://localhost:1/v1", model="m")
+    assert llm_config(argparse.Namespace(base_url=None, model=None, api_key=None)) is None
+    for settings in (ConversionSettings, ConvertSettings):
+        made = settings(llm_config={"model": "m", "llm": {"timeout": 5}})
+        assert made.llm_config == LLMConfig(model="m", llm=LLMConfig(timeout=5)) and settings().llm_config is None
+        with pytest.raises(errors.LLMConfigError, match=r"unknown LLM config keys \['vlm.modle'\]"):
+            settings(llm_config={"vlm": {"modle": "m"}})
+    assert LLMConfig(model="a", timeout=3, llm=LLMConfig(model="b")).for_kind("llm") == LLMConfig(model="b", timeout=3)
+    assert LLMConfig.of(LLMConfig(model="a")) == LLMConfig(model="a") and LLMConfig.of(None) is None
+    with pytest.raises(errors.LLMConfigError, match="must be a mapping"):
+        LLMConfig.of(["model"])
 
 
 # ------------------------------------------------------------------------ DRA

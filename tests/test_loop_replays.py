@@ -12,7 +12,7 @@ import pytest
 
 from dv2s_gym.mining.convert import replay_failure_entry
 from dv2s_gym.mining.exact_replay import replay_failure
-from scenario_bank.bank import Bank
+from scenario_bank.bank import Bank, Sidecar
 from test_mining_convert import SCENARIO, make_record, midpoint
 
 
@@ -128,8 +128,8 @@ def test_a_failure_in_a_scenario_without_free_parameters_says_why_it_has_no_repl
     fixed = re.sub(r"Range\((\d+), (\d+)\)", lambda m: str((int(m[1]) + int(m[2])) // 2), script)
     fixed = re.sub(r"Uniform\(('[^']*')[^)]*\)", r"\1", fixed)
     bank = Bank(tmp_path / "bank")
-    bank.add(fixed, "A car stands still in the ego's lane ahead.", name="fixed_stopped_car",
-             elements=Bank().get(SCENARIO).elements)
+    bank.add(fixed, Sidecar(description="A car stands still in the ego's lane ahead.", name="fixed_stopped_car",
+                            elements=Bank().get(SCENARIO).elements))
     record = make_record("fixed_stopped_car", 0, {}, bank_dir=str(bank.root))
     out = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", policy="keep_lane", bank=bank,
                                monitor={})

@@ -18,7 +18,7 @@ from dv2s_gym.mining.failure_video import FailureReplayError, record_failure_vid
 from dv2s_gym.pipeline.video import read_video
 from envs.trace import EpisodeTrace
 from policies.evaluation import trajectory_hash
-from scenario_bank.bank import Bank
+from scenario_bank.bank import Bank, Sidecar
 
 SCENARIO = "urban_lead_vehicle_stopped"
 
@@ -568,22 +568,24 @@ def test_a_near_copy_of_a_mined_entry_of_the_same_family_is_merged(tmp_path):
     assert changed_code_lines(script, "# a comment\n" + script) == 0
     bank = Bank(tmp_path / "bank")
     source = {"kind": "mined", "parent": SCENARIO, "failure": {"type": "collision"}}
-    first = bank.add(script, "a car stands still ahead", elements={"participants": ["ego", "car"]},
-                     provenance=source, name="mined_a", near_copy_of=_family(SCENARIO, "collision"),
-                     on_duplicate="merge")
+    first = bank.add(script, Sidecar(description="a car stands still ahead", elements={"participants": ["ego", "car"]},
+                                     source=source, name="mined_a"),
+                     near_copy_of=_family(SCENARIO, "collision"), on_duplicate="merge")
     assert first.status == "added"
     # other elements, no overlapping range: not a near-duplicate by elements, but one line of code apart
     other = {"participants": ["ego", "car", "car"], "actions": [["car", "stop"]]}
     elsewhere = script.replace("param oncoming_distance = Range(40, 90)", "param oncoming_distance = Range(91, 120)")
-    stall = bank.add(elsewhere, "another description", elements=other, name="mined_b",
-                     provenance={**source, "failure": {"type": "stall"}},
+    stall = bank.add(elsewhere, Sidecar(description="another description", elements=other, name="mined_b",
+                                        source={**source, "failure": {"type": "stall"}}),
                      near_copy_of=_family(SCENARIO, "stall"), on_duplicate="merge")
     assert stall.status == "added"  # another family (failure type): kept apart
-    copy = bank.add(one_line, "another description", elements=other, name="mined_c", provenance=source,
+    copy = bank.add(one_line, Sidecar(description="another description", elements=other, name="mined_c",
+                                      source=source),
                     near_copy_of=_family(SCENARIO, "collision"), on_duplicate="merge")
     assert copy.status == "merged" and copy.entry.name == first.entry.name and "1 changed line" in copy.how
-    apart = bank.add(three_lines, "a third description", elements=other, name="mined_d",
-                     provenance=source, near_copy_of=_family(SCENARIO, "collision"), on_duplicate="merge")
+    apart = bank.add(three_lines, Sidecar(description="a third description", elements=other, name="mined_d",
+                                          source=source),
+                     near_copy_of=_family(SCENARIO, "collision"), on_duplicate="merge")
     assert apart.status == "added"
     assert sorted(Bank(tmp_path / "bank").names()) == ["mined_a", "mined_b", "mined_d"]
 

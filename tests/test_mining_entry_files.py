@@ -20,7 +20,7 @@ from dv2s_gym.mining.convert import convert_failure
 from dv2s_gym.pipeline.video import read_video
 from envs.trace import EpisodeTrace
 from policies.evaluation import trajectory_hash
-from scenario_bank.bank import Bank, BankError, entry_files
+from scenario_bank.bank import Bank, BankError, Sidecar, entry_files
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_mining_convert import SCENARIO, make_record, midpoint  # noqa: E402
@@ -91,10 +91,12 @@ def test_entry_file_names_are_checked(tmp_path):
     bank = Bank(tmp_path / "bank")
     for bad in ("../v.webm", "/abs/v.webm", ".hidden", "meta.json", "a/../b"):
         with pytest.raises(BankError, match="invalid entry file name"):
-            bank.add(script, "a test scenario", provenance={"kind": "mined", "video": bad}, files={bad: video})
+            bank.add(script, Sidecar(description="a test scenario", source={"kind": "mined", "video": bad}),
+                     files={bad: video})
     with pytest.raises(BankError, match="does not exist"):
         bank.add(script, "a test scenario", files={"v.webm": tmp_path / "nope.webm"})
     assert bank.names() == []
     # a video given by a path of the user's (not carried) is not taken for a missing entry file
-    entry = bank.add(script, "a test scenario", provenance={"kind": "generated", "video": "clips/a.mp4"})
+    entry = bank.add(script, Sidecar(description="a test scenario", source={"kind": "generated",
+                                                                            "video": "clips/a.mp4"}))
     assert entry.files == [] and entry.missing_files() == []

@@ -9,7 +9,7 @@ from dv2s_gym.mining.convert import convert_failure
 from dv2s_gym.mining.exact_replay import replay_failure
 from dv2s_gym.pipeline.video import read_video
 from envs.dv2s_env import DV2SEnv
-from scenario_bank.bank import Bank
+from scenario_bank.bank import Bank, Sidecar
 
 STOPPED_VAN = '''"""A van stands still in the ego's lane on a straight highway."""
 param map = 'highway_straight'
@@ -30,7 +30,8 @@ NAME = "user_stopped_van"
 @pytest.fixture(scope="module")
 def user_bank(tmp_path_factory):
     folder = tmp_path_factory.mktemp("user") / "bank"
-    Bank(folder).add(STOPPED_VAN, "A van stands still in the ego's lane.", name=NAME, tags=["user"])
+    Bank(folder).add(STOPPED_VAN, Sidecar(description="A van stands still in the ego's lane.", name=NAME,
+                                          tags=["user"]))
     return folder
 
 
@@ -79,7 +80,7 @@ def test_the_exact_replay_is_kept_when_the_video_stage_fails(record, user_bank, 
 
     monkeypatch.setattr(failure_video, "write_failure_video", broken)
     bank = tmp_path / "bank"
-    Bank(bank).add(STOPPED_VAN, "A van stands still in the ego's lane.", name=NAME)
+    Bank(bank).add(STOPPED_VAN, Sidecar(description="A van stands still in the ego's lane.", name=NAME))
     out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=bank, k=2)
     assert out["status"] == "rejected" and out["stage"] == "video"
     assert out["reason"] == "video: OSError: no space left on device" and out["rejections"] == [out["reason"]]

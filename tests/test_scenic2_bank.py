@@ -4,14 +4,15 @@ import json
 
 import pytest
 
-from scenario_bank.bank import Bank, ScenarioRejectedError
+from scenario_bank.bank import Bank, ScenarioRejectedError, Sidecar
 from test_scenic2_upgrade import HIGHWAY_SCENIC2
 
 
 @pytest.mark.slow
 def test_bank_add_upgrades_scenic2_on_request_and_records_the_rewrites(tmp_path):
     bank = Bank(tmp_path / "bank")
-    entry = bank.add(HIGHWAY_SCENIC2, "A car ahead on a highway.", name="old", upgrade_scenic2=True)
+    entry = bank.add(HIGHWAY_SCENIC2, Sidecar(description="A car ahead on a highway.", name="old"),
+                     upgrade_scenic2=True)
     assert "ego = new Car at" in entry.script and "\nnew Car following" in entry.script
     rewrites = entry.source["scenic2_rewrites"]
     assert len(rewrites) == 2 and rewrites[0].startswith("line 4: ego = Car at") and "new Car" in rewrites[1]
@@ -25,7 +26,7 @@ def test_bank_add_upgrades_scenic2_on_request_and_records_the_rewrites(tmp_path)
 def test_bank_add_without_the_option_names_the_scenic2_construct_and_the_fix(tmp_path):
     bank = Bank(tmp_path / "bank")
     with pytest.raises(ScenarioRejectedError) as caught:
-        bank.add(HIGHWAY_SCENIC2, "A car ahead on a highway.", name="old")
+        bank.add(HIGHWAY_SCENIC2, Sidecar(description="A car ahead on a highway.", name="old"))
     message = str(caught.value)
     assert "is Scenic 2: line 4: `ego = Car at lane.centerline" in message
     assert "'new Car'" in message and "upgrade_scenic2=True" in message
@@ -38,14 +39,14 @@ def test_scenic3_script_with_the_option_is_stored_unchanged_without_scenic2_prov
     from scenario_bank.scenic2 import upgrade_scenic2
 
     scenic3 = upgrade_scenic2(HIGHWAY_SCENIC2).source
-    entry = Bank(tmp_path / "bank").add(scenic3, "A car ahead on a highway.", name="new3", upgrade_scenic2=True,
-                                        provenance={"kind": "hand-written"})
+    entry = Bank(tmp_path / "bank").add(scenic3, Sidecar(description="A car ahead on a highway.", name="new3",
+                                                         source={"kind": "hand-written"}), upgrade_scenic2=True)
     assert entry.script == scenic3 and "scenic2_rewrites" not in entry.source
 
 
 def test_add_with_merge_upgrades_too(tmp_path):
-    outcome = Bank(tmp_path / "bank").add(HIGHWAY_SCENIC2, "A car ahead on a highway.", name="old",
-                                           upgrade_scenic2=True, on_duplicate="merge")
+    outcome = Bank(tmp_path / "bank").add(HIGHWAY_SCENIC2, Sidecar(description="A car ahead on a highway.", name="old"),
+                                          upgrade_scenic2=True, on_duplicate="merge")
     assert outcome.entry.source["scenic2_rewrites"] and "new Car" in outcome.entry.script
 
 

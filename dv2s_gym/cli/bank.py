@@ -10,14 +10,16 @@ from typing import List
 
 from dv2s_gym.cli import bank_validate
 from dv2s_gym.cli.errors import UsageError
-from dv2s_gym.cli.inputs import json_argument, open_bank, read_input_file
+from dv2s_gym.cli.inputs import WEIGHTS, WEIGHTS_EXAMPLE, json_error, json_value, open_bank, read_input_file
 from dv2s_gym.cli.output import emit
 from dv2s_gym.cli.parser import bank_command, bank_option
 from scenario_bank.admission import ON_DUPLICATE_OF
-from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, Provenance
+from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, Provenance, Sidecar
 
 __all__ = ["add_parser", "run_add", "run_export", "run_import", "run_list", "run_rm", "run_sample", "run_show",
            "run_stats"]
+
+ELEMENTS_EXAMPLE = '\'{"participants": ["ego", "car"], "actions": [["car", "stop"]]}\''
 
 
 def add_parser(subparsers) -> None:
@@ -115,13 +117,15 @@ def run_add(args: argparse.Namespace) -> int:
         script = read_input_file(args.script, "script", MAX_SCRIPT_BYTES).decode("utf-8")
     except UnicodeDecodeError as error:
         raise UsageError(f"the script {args.script} is not UTF-8 text ({error.reason}); save it as UTF-8") from None
-    elements = (json_argument(read_input_file(args.elements, "elements file", MAX_SIDECAR_BYTES),
-                              f"the elements file {args.elements}") if args.elements else None)
+    elements = (json_value(read_input_file(args.elements, "elements file", MAX_SIDECAR_BYTES),
+                           f"the elements file {args.elements}", "the scenario's elements as JSON",
+                           ELEMENTS_EXAMPLE) if args.elements else None)
     provenance = Provenance(kind=args.kind, video=args.video, parent=args.parent)
     # Bank.add upgrades Scenic 2 syntax to Scenic 3 (recording the rewrites and notes in the provenance), then its
     # allowlist + sandbox checks
-    entry = open_bank(args).add(script, args.description, name=args.name, elements=elements, tags=args.tag or [],
-                                map=args.map, provenance=provenance, upgrade_scenic2=True)
+    fields = Sidecar(description=args.description, name=args.name, elements=elements, tags=tuple(args.tag or ()),
+                     map=args.map or "", source=provenance)
+    entry = open_bank(args).add(script, fields, upgrade_scenic2=True)
     rewrites = list(entry.source.get("scenic2_rewrites") or [])
     for line in [f"scenic2: {r}" for r in rewrites] + [f"scenic2 note: {n}" for n in entry.source.get("scenic2_notes") or []]:
         print(line, file=sys.stderr)
@@ -143,9 +147,9 @@ def run_sample(args: argparse.Namespace) -> int:
     """``dv2s bank sample``: scenario names drawn by weight."""
     bank = open_bank(args)
     candidates = [e.name for e in bank.list(tag=args.tag)] if args.tag else None
-    weights = json_argument(args.weights, "--weights") if args.weights else None
-    if weights is not None and not (isinstance(weights, dict) and all(isinstance(v, (int, float)) for v in weights.values())):
-        raise UsageError('--weights must be a JSON object of scenario name -> number, e.g. \'{"a": 2, "b": 1}\'')
+    weights = json_value(args.weights, "--weights", WEIGHTS, WEIGHTS_EXAMPLE, mapping=True) if args.weights else None
+    if weights is not None and not all(isinstance(v, (int, float)) for v in weights.values()):
+        raise json_error("--weights", WEIGHTS, WEIGHTS_EXAMPLE, "a weight is not a number")
     picks = [bank.sample(args.seed + k, weights=weights, candidates=candidates).name for k in range(args.count)]
     emit(args, picks, "\n".join(picks))
     return 0

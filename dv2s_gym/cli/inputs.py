@@ -5,13 +5,15 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional, Union
 
 from dv2s_gym.cli.errors import UsageError
+from dv2s_gym.pipeline.llm_config import LLMConfig
 from scenario_bank.bank import Bank, BankError, MAX_JSON_DEPTH, MAX_SIDECAR_BYTES, UnsafeBankInputError
-from scenario_bank.safe_files import load_json_bounded, read_regular_file, UnsafeInputError
+from scenario_bank.safe_files import nests_deeper_than, read_regular_file, UnsafeInputError
 
-__all__ = ["env_config_option", "json_argument", "json_option", "llm_config", "open_bank", "read_input_file"]
+__all__ = ["CONFIG_EXAMPLE", "WEIGHTS", "WEIGHTS_EXAMPLE", "env_config_option", "json_error", "json_option",
+           "json_value", "llm_config", "open_bank", "read_input_file"]
 
 
 def open_bank(args: argparse.Namespace):
@@ -33,51 +35,64 @@ def read_input_file(path: str, what: str, max_bytes: int) -> bytes:
         raise UnsafeBankInputError(f"the {what} {error}") from None
 
 
-def json_argument(text: str, what: str):
-    """A JSON value given on the command line (or in a file), size and nesting capped."""
-    data = text.encode("utf-8", "surrogateescape") if isinstance(text, str) else text
-    if len(data) > MAX_SIDECAR_BYTES:
-        raise UnsafeBankInputError(f"{what} is larger than {MAX_SIDECAR_BYTES} bytes; shorten it")
-    try:
-        return load_json_bounded(data, MAX_JSON_DEPTH, what)
-    except UnsafeInputError as error:
-        raise UnsafeBankInputError(str(error)) from None
-
-
-def llm_config(args: argparse.Namespace):
+def llm_config(args: argparse.Namespace) -> Optional[LLMConfig]:
     """The LLM endpoint settings given (``--base-url``, ``--model``, ``--api-key``), or None."""
     config = {k: getattr(args, k, None) for k in ("base_url", "model", "api_key")}
-    return {k: v for k, v in config.items() if v} or None
+    return LLMConfig.of({k: v for k, v in config.items() if v}) if any(config.values()) else None
 
 
 CONFIG_EXAMPLE = "'{\"duration\": 10}'"
+WEIGHTS = "a JSON object of scenario name -> number"
+WEIGHTS_EXAMPLE = '\'{"a": 2, "b": 1}\''
+
+
+def json_error(what: str, wanted: str, example: str, why: str) -> UsageError:
+    """The one shape of the error of a JSON value given on the command line: ``{what} must be {wanted}, e.g.
+    {example}; {why}`` (without the example when there is none)."""
+    return UsageError(f"{what} must be {wanted}{f', e.g. {example}' if example else ''}; {why}")
+
+
+def json_value(source: Union[str, bytes], what: str, wanted: str, example: str = "", *, mapping: bool = False) -> Any:
+    """The command line's one JSON parser: a value given inline (or the bytes of a file named on the command line),
+    at most :data:`~scenario_bank.bank.MAX_SIDECAR_BYTES` of UTF-8 nested at most
+    :data:`~scenario_bank.bank.MAX_JSON_DEPTH` deep, and with ``mapping`` a JSON object; anything else is a
+    :class:`UsageError` of one shape (:func:`json_error`)."""
+    data = source.encode("utf-8", "surrogateescape") if isinstance(source, str) else source
+    if len(data) > MAX_SIDECAR_BYTES:
+        raise json_error(what, wanted, example, f"it is larger than {MAX_SIDECAR_BYTES} bytes")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as error:
+        raise json_error(what, wanted, example, f"it is not UTF-8 text ({error.reason})") from None
+    if nests_deeper_than(text, MAX_JSON_DEPTH):
+        raise json_error(what, wanted, example, f"it nests arrays and objects deeper than {MAX_JSON_DEPTH} levels")
+    try:
+        value = json.loads(text)
+    except (ValueError, RecursionError) as error:
+        raise json_error(what, wanted, example, f"it is not valid JSON ({error})") from None
+    if mapping and not isinstance(value, dict):
+        raise json_error(what, wanted, example, f"it is a JSON {_JSON_KINDS.get(type(value), 'value')}")
+    return value
+
+
+_JSON_KINDS = {list: "array", str: "string", int: "number", float: "number", bool: "boolean", type(None): "null"}
+
+
+def json_option(text: Optional[str], what: str, wanted: str, example: str = "", *, mapping: bool = False) -> Any:
+    """An option holding a JSON value inline or, when it ends in ``.json``, the path of a file holding one (``None``
+    when not given); parsed by :func:`json_value`."""
+    if text is None:
+        return None
+    if text.endswith(".json"):
+        if not Path(text).is_file():
+            raise json_error(what, wanted, example, f"there is no file {text}")
+        return json_value(read_input_file(text, f"{what} file", MAX_SIDECAR_BYTES), what, wanted, example,
+                          mapping=mapping)
+    return json_value(text, what, wanted, example, mapping=mapping)
 
 
 def env_config_option(text: Optional[str], what: str = "--config") -> Optional[dict]:
     """``--config``: DV2S-v0 config overrides, a JSON object given inline or as a path to a .json file holding
     one (``None`` when not given); every command that takes one reads it here."""
-    if text is None:
-        return None
-    if text.endswith(".json") and not Path(text).is_file():
-        raise UsageError(f"{what}: there is no file {text}; pass a JSON object of DV2S-v0 config overrides, e.g. "
-                         f"{CONFIG_EXAMPLE}, or the path of a .json file holding one")
-    source = Path(text).read_text(encoding="utf-8") if text.endswith(".json") else text
-    try:
-        value = json.loads(source)
-    except ValueError as error:
-        raise UsageError(f"{what} must be a JSON object of DV2S-v0 config overrides (or a .json file), e.g. "
-                         f"{CONFIG_EXAMPLE}; {error}") from None
-    if not isinstance(value, dict):
-        raise UsageError(f"{what} must be a JSON object of DV2S-v0 config overrides, e.g. {CONFIG_EXAMPLE}")
-    return value
-
-
-def json_option(text: Optional[str], what: str):
-    """A JSON value given inline or as a path to a .json file."""
-    if text is None:
-        return None
-    source = Path(text).read_text(encoding="utf-8") if text.endswith(".json") and Path(text).is_file() else text
-    try:
-        return json.loads(source)
-    except ValueError as error:
-        raise UsageError(f"{what} is not valid JSON ({error}); pass a JSON object or a path to a .json file") from None
+    return json_option(text, what, "a JSON object of DV2S-v0 config overrides (or a .json file holding one)",
+                       CONFIG_EXAMPLE, mapping=True)

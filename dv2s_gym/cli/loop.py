@@ -8,6 +8,7 @@ import json
 from typing import Any, List, Mapping, Optional
 
 from dv2s_gym.cli.errors import UsageError
+from dv2s_gym.cli.inputs import json_value
 from dv2s_gym.cli.parser import bank_option
 from dv2s_gym.mining.loop_settings import DEFAULT_PROFILE, DEFAULTS, EVIDENCE, FINE_TUNE_METHODS, PROFILES, LoopSettings
 from dv2s_gym.mining.loop_verdict import EVIDENCE_FLOOR as FLOOR, HELDOUT_ALPHA as ALPHA
@@ -159,14 +160,9 @@ def loop_settings(args: argparse.Namespace):
     if args.no_control:
         options["control"] = False
     if args.fine_tune_reward is not None:
-        try:
-            options["fine_tune_reward"] = json.loads(args.fine_tune_reward)
-        except ValueError as error:
-            raise UsageError(f"--fine-tune-reward must be a JSON object of reward-term weights, e.g. "
-                             f"'{{\"standing\": -1.0}}'; {error}") from None
-        if not isinstance(options["fine_tune_reward"], dict):
-            raise UsageError("--fine-tune-reward must be a JSON object of reward-term weights, e.g. "
-                             "'{\"standing\": -1.0}' ('{}' keeps the policy's own reward)")
+        options["fine_tune_reward"] = json_value(args.fine_tune_reward, "--fine-tune-reward",
+                                                 "a JSON object of reward-term weights ('{}' keeps the policy's own "
+                                                 "reward)", "'{\"standing\": -1.0}'", mapping=True)
     return LoopSettings.from_profile(getattr(args, "profile", None) or "quick", bank_dir=getattr(args, "bank", None),
                                      n_envs=args.envs, **options)
 

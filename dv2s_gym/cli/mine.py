@@ -127,6 +127,8 @@ def _settings(args: argparse.Namespace, env_config) -> MineSettings:
         reference=None if args.reference == "none" else args.reference, batch=args.batch,
         env_config=env_config or {}, ttc_threshold=args.ttc_threshold, stall_seconds=args.stall_seconds,
         convert=not args.no_convert, max_conversions=args.max_conversions, feedback=args.feedback,
-        sampler_options=json_option(args.sampler_options, "--sampler-options"),
+        sampler_options=json_option(args.sampler_options, "--sampler-options",
+                                    "VerifAI settings as a JSON object (or a .json file holding one)",
+                                    "'{\"alpha\": 0.9}'"),
         convert_options={"dra": args.dra, "sg": args.sg, "k": args.k, "threshold": args.threshold,
                          "llm_config": llm_config(args)})

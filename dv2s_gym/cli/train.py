@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 
-from dv2s_gym.cli.inputs import env_config_option, json_option
+from dv2s_gym.cli.errors import UsageError
+from dv2s_gym.cli.inputs import WEIGHTS, WEIGHTS_EXAMPLE, env_config_option, json_option, json_value
 from dv2s_gym.cli.parser import bank_option
 from dv2s_gym.progress_lines import log_line
 
@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
 
     given = {
         "algo": args.algo, "scenarios": args.scenarios, "bank_dir": getattr(args, "bank", None), "seed": args.seed,
-        "sampler": args.sampler, "weights": json_option(args.weights, "--weights"),
+        "sampler": args.sampler, "weights": json_option(args.weights, "--weights", WEIGHTS, WEIGHTS_EXAMPLE),
         "env_config": env_config_option(args.config), "steps": args.steps, "n_envs": args.envs,
         "eval_freq": args.eval_freq, "eval_seeds": args.eval_seeds, "card_seeds": args.card_seeds,
         "baselines": args.baselines, "eval_jobs": args.eval_jobs, "checkpoint_freq": args.checkpoint_freq,
@@ -71,9 +71,9 @@ def run(args: argparse.Namespace) -> int:
             if not sep or not key:
                 raise TrainingError(f"--hp {pair!r} is not KEY=VALUE (e.g. --hp learning_rate=3e-4)")
             try:
-                hyperparameters[key] = json.loads(value)
-            except ValueError:
-                hyperparameters[key] = value
+                hyperparameters[key] = json_value(value, f"--hp {key}", "a JSON value or a word")
+            except UsageError:
+                hyperparameters[key] = value  # a word (e.g. --hp activation=tanh)
         given["hyperparameters"] = hyperparameters
     train(run_settings(args.out, given, resume=args.resume), resume=args.resume, log=log_line)
     return 0

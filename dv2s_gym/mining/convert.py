@@ -86,6 +86,7 @@ from dv2s_gym.pipeline import stages
 from dv2s_gym.pipeline.convert import check_scenario, conversion_provenance
 from dv2s_gym.pipeline.errors import (EndpointHTTPError, EndpointTimeoutError, EndpointUnreachableError,
                                       MissingAPIKeyError)
+from dv2s_gym.pipeline.llm_config import LLMConfig
 from dv2s_gym.pipeline.metrics import e2e_sc
 from dv2s_gym.pipeline.semantics.text import elements_from_text
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace, trace_actor_kind
@@ -93,7 +94,7 @@ from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.atomic import atomic_write_text
 from scenario_bank.bank import Bank, DuplicateScenarioError
 from scenario_bank.dedup import param_ranges
-from scenario_bank.records import Provenance
+from scenario_bank.records import Provenance, Sidecar
 
 SETUP_ERRORS = (EndpointUnreachableError, EndpointTimeoutError, EndpointHTTPError, MissingAPIKeyError)
 """Errors of the model backends' setup (no connection, no answer, an HTTP error, no API key):
@@ -234,7 +235,7 @@ class ConversionSettings:
     policy: Any = None
     dra: str = "bev"
     sg: str = "rules"
-    llm_config: Optional[Dict[str, Any]] = None
+    llm_config: Optional[LLMConfig] = None
     k: int = 10
     threshold: float = 0.3
     seed: int = 0
@@ -245,6 +246,9 @@ class ConversionSettings:
     after: float = 1.0
     reference: Optional[Any] = "rule"
     describe_events: bool = True
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "llm_config", LLMConfig.of(self.llm_config))  # a mapping's keys checked once, here
 
     def replace(self, **changes: Any) -> "ConversionSettings":
         """A copy with ``changes``."""
@@ -933,8 +937,9 @@ def _bank_replay(out: Dict[str, Any], record: Mapping[str, Any], bank, parent: A
     while name in bank:
         name, n = f"{base}_{n}", n + 1
     try:
-        entry = bank.add(script, description, name=name, elements=parent.elements, map=parent.map,
-                         tags=["mined", REPLAY_TAG, source_failure["type"]], provenance=provenance, files=files)
+        fields = Sidecar(description=description, name=name, elements=parent.elements, map=parent.map,
+                         tags=("mined", REPLAY_TAG, source_failure["type"]), source=provenance)
+        entry = bank.add(script, fields, files=files)
         out["entry"] = entry.name
     except DuplicateScenarioError as error:
         existing = bank.get(error.existing).provenance.replay or {}
@@ -1310,13 +1315,12 @@ class _Conversion:
         files = {ENTRY_VIDEO: self.video, ENTRY_TRACE: self.written.trace_path}
         if self.clip_path is not None:
             files[ENTRY_CONVERTED_VIDEO] = self.clip_path
-        outcome = self.bank.add(self.generation.script, self.description.text,
-                                name=_mined_name(record["scenario"], self.source_failure["type"]),
-                                elements=self.description.elements, tags=["mined", self.source_failure["type"]],
-                                provenance=self._provenance(),
-                                files=files,
-                                on_duplicate="merge", near_copy_of=_family(record["scenario"],
-                                                                           self.source_failure["type"]))
+        fields = Sidecar(description=self.description.text,
+                         name=_mined_name(record["scenario"], self.source_failure["type"]),
+                         elements=self.description.elements, tags=("mined", self.source_failure["type"]),
+                         source=self._provenance())
+        outcome = self.bank.add(self.generation.script, fields, files=files, on_duplicate="merge",
+                                near_copy_of=_family(record["scenario"], self.source_failure["type"]))
         if outcome.status == "added":
             out.update(status="kept", bank_entry=outcome.entry.name)
         else:

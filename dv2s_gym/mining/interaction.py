@@ -28,6 +28,7 @@ from typing import Any, Dict, List, Mapping, Optional
 
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace, trace_actor_kind
 from scenario_bank.failure_types import failure_type
+from scenario_bank.elements import ActorKind
 
 __all__ = ["MANOEUVRES", "LOOKBACK_S", "key_actor", "actor_manoeuvres", "failure_interaction", "shows_interaction",
            "interaction_sentence"]
@@ -179,7 +180,7 @@ def interaction_sentence(interaction: Mapping[str, Any], known: Optional[Mapping
     subject = _ARTICLE.get(kind, f"A {kind}")
     gap, side = interaction.get("gap_m"), interaction.get("side")
     where = f" about {abs(gap):.0f} m {'ahead of' if gap >= 0 else 'behind'} the ego vehicle" if gap is not None else ""
-    if kind == "pedestrian" or "cross" in moves:
+    if kind == ActorKind.PEDESTRIAN or "cross" in moves:
         text = f"{subject} crosses the road in front of the ego vehicle."
     elif "cut_in" in moves or "merge" in moves:
         lane = f" from the lane to the {side} of the ego vehicle" if side in ("left", "right") else ""

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional
 import datetime
 
+from dv2s_gym.pipeline.llm_config import LLMConfig, LLMConfigLike
 from dv2s_gym.pipeline.sg.openai import classify_failure
 from scenario_bank.atomic import atomic_write_text
 from dv2s_gym.pipeline.stages import Description, Generation, describe, generate
@@ -29,7 +30,7 @@ from scenario_bank.safety import UnsafeScenarioError
 from scenario_bank.sandbox import SandboxError, verify_script
 from dv2s_gym.pipeline.labels import label_path_for, read_label
 from dv2s_gym.pipeline.metrics import e2e_sc, semantic_preservation
-from scenario_bank.bank import Bank, Provenance
+from scenario_bank.bank import Bank, Provenance, Sidecar
 
 __all__ = ["ConvertSettings", "ScenarioCheck", "add_converted", "check_scenario", "checks_passed", "classify_failure", "generated", "placed_nothing", "conversion_provenance", "convert_video",
            "generate_to_folder", "label_for"]
@@ -130,7 +131,7 @@ def _write(folder: Path, name: str, text: str) -> None:
 
 
 def generate_to_folder(description: Description, out: Path, *, sg: str = "rules", seed: int = 0,
-                       llm_config: Optional[Dict[str, Any]] = None, labels: Optional[Dict[str, Any]] = None,
+                       llm_config: LLMConfigLike = None, labels: Optional[Dict[str, Any]] = None,
                        seconds: float = 10.0) -> Dict[str, Any]:
     """SG + validation for a description; writes the folder's files and returns the report."""
     out.mkdir(parents=True, exist_ok=True)
@@ -199,10 +200,13 @@ class ConvertSettings:
     """The question put to a VLM analyzer (``None``: its default)."""
     seed: int = 0
     """Seed of the generation and of the preview episode."""
-    llm_config: Optional[Dict[str, Any]] = None
-    """Model settings of the LLM/VLM backends."""
+    llm_config: Optional[LLMConfig] = None
+    """Model settings of the LLM/VLM backends (a mapping of their keys is read into the record, its keys checked)."""
     seconds: float = 10.0
     """Length of the preview episode [s]."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "llm_config", LLMConfig.of(self.llm_config))  # a mapping's keys checked once, here
 
 
 def convert_video(video: str | os.PathLike, out: str | os.PathLike,
@@ -244,6 +248,6 @@ def add_converted(bank_dir: Optional[str | os.PathLike], video: str | os.PathLik
     provenance = Provenance(kind="generated", video=str(video), seed=seed,
                             **conversion_provenance(dra, sg, report["generation"], description))
     script = (Path(out) / "scenario.scenic").read_text(encoding="utf-8")
-    entry = Bank(bank_dir).add(script, description["text"], elements=description["elements"],
-                               tags=["generated"], provenance=provenance, name=None)
+    entry = Bank(bank_dir).add(script, Sidecar(description=description["text"], elements=description["elements"],
+                                               tags=("generated",), source=provenance))
     return entry.name

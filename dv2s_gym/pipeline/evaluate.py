@@ -29,6 +29,7 @@ from typing import Any, Dict, List, Optional, Sequence
 from tqdm import tqdm
 
 from dv2s_gym.pipeline.labels import LABEL_SUFFIX, read_label
+from dv2s_gym.pipeline.llm_config import LLMConfigLike
 from dv2s_gym.pipeline.metrics import e2e_sc, hallucination_rate, mean_sd, scs, semantic_preservation
 from dv2s_gym.pipeline.convert import check_scenario
 from dv2s_gym.pipeline.semantics.text import elements_from_text
@@ -96,7 +97,7 @@ def collect_items(folder: str | Path, *, unlabeled_descriptions: bool = False) -
     return items
 
 
-def _evaluate_item(stage: str, item: EvalItem, dra: str, sg: str, llm_config: Optional[Dict[str, Any]],
+def _evaluate_item(stage: str, item: EvalItem, dra: str, sg: str, llm_config: LLMConfigLike,
                    seconds: float) -> ItemResult:
     result = ItemResult(item.stem, item.use_case)
     start = time.perf_counter()
@@ -140,7 +141,7 @@ def _evaluate_item(stage: str, item: EvalItem, dra: str, sg: str, llm_config: Op
 
 
 def evaluate(stage: str, folder: str | Path, *, dra: str = "bev", sg: str = "rules",
-             llm_config: Optional[Dict[str, Any]] = None, jobs: int = 1, seconds: float = 10.0,
+             llm_config: LLMConfigLike = None, jobs: int = 1, seconds: float = 10.0,
              progress: bool = True) -> Dict[str, Any]:
     """Run one evaluation; returns per-item results and the per-use-case / overall summary."""
     if stage not in ("dra", "sg", "e2e"):

@@ -49,6 +49,7 @@ from dv2s_gym.pipeline.errors import (
     MissingAPIKeyError,
 )
 from dv2s_gym.pipeline.errors import LLMConfigError
+from dv2s_gym.pipeline.llm_config import CONFIG_KEYS, LLMConfig, LLMConfigLike
 
 __all__ = ["ChatClient", "ChatReply", "DEFAULT_BASE_URL", "DEFAULT_MODEL", "CONFIG_KEYS"]
 
@@ -58,9 +59,6 @@ DEFAULT_BASE_URL = "https://api.openai.com/v1"
 """Endpoint used when neither the config nor the environment names one."""
 DEFAULT_MODEL = "gpt-4o"
 """Model used when neither the config nor the environment names one (the paper's choice)."""
-CONFIG_KEYS = ("base_url", "model", "api_key", "timeout", "retries")
-"""Keys :meth:`ChatClient.from_config` reads."""
-
 _KEY_HOSTS = ("api.openai.com",)
 _NO_KEY = "no-key"  # sent to servers that need none: the openai package always sends a bearer token
 _EXCERPT = 300
@@ -166,8 +164,9 @@ class ChatClient:
 
     # ------------------------------------------------------------ configuration
     @classmethod
-    def from_config(cls, config: Optional[Mapping[str, Any]] = None, kind: str = "llm") -> "ChatClient":
-        """A client configured from ``config`` (keys :data:`CONFIG_KEYS`), then the environment.
+    def from_config(cls, config: LLMConfigLike = None, kind: str = "llm") -> "ChatClient":
+        """A client configured from ``config`` (an :class:`~dv2s_gym.pipeline.llm_config.LLMConfig`, or a mapping of
+        its keys, :data:`CONFIG_KEYS`, read by :meth:`LLMConfig.of`), then the environment.
 
         ``kind="llm"`` (Scenario Generator) reads ``DV2S_LLM_*`` variables; ``kind="vlm"``
         (Driving Record Analyzer) reads ``DV2S_VLM_*`` first and falls back to ``DV2S_LLM_*``.
@@ -176,12 +175,8 @@ class ChatClient:
         """
         if kind not in ("llm", "vlm"):
             raise ValueError(f"kind must be 'llm' or 'vlm', not {kind!r}")
-        config = dict(config or {})
-        nested = {k: config.pop(k) for k in ("llm", "vlm") if isinstance(config.get(k), Mapping)}
-        config.update(nested.get(kind, {}))
-        unknown = sorted(set(config) - set(CONFIG_KEYS))
-        if unknown:
-            raise LLMConfigError(f"unknown LLM config keys {unknown}; allowed: {', '.join(CONFIG_KEYS)}")
+        settings = (LLMConfig.of(config) or LLMConfig()).for_kind(kind)
+        config = {key: getattr(settings, key) for key in CONFIG_KEYS}
         prefixes = ["DV2S_VLM_", "DV2S_LLM_"] if kind == "vlm" else ["DV2S_LLM_"]
 
         def env(name: str) -> Optional[str]:

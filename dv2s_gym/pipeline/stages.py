@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 from dv2s_gym.pipeline.errors import BackendResultError, PipelineError, UnknownBackendError
+from dv2s_gym.pipeline.llm_config import LLMConfigLike
 from scenario_bank.named_registry import register_named
 from scenario_bank.bank import Bank
 from scenario_bank.safety import assert_safe
@@ -117,14 +118,14 @@ def registered_sgs() -> List[str]:
 
 
 def _describe_bev(clip: Any, *, camera: str, question: Optional[str],
-                  llm_config: Optional[Dict[str, Any]]) -> Tuple[str, Dict[str, Any]]:
+                  llm_config: LLMConfigLike) -> Tuple[str, Dict[str, Any]]:
     from dv2s_gym.pipeline.dra.bev import analyze_bev
 
     return analyze_bev(clip, question=question).description, {}
 
 
 def _describe_openai(clip: Any, *, camera: str, question: Optional[str],
-                     llm_config: Optional[Dict[str, Any]]) -> Tuple[str, Dict[str, Any]]:
+                     llm_config: LLMConfigLike) -> Tuple[str, Dict[str, Any]]:
     from dv2s_gym.pipeline.dra.openai import describe_with_vlm
     from dv2s_gym.pipeline.llm_client import ChatClient
 
@@ -132,7 +133,7 @@ def _describe_openai(clip: Any, *, camera: str, question: Optional[str],
     return describe_with_vlm(clip.frames, client, camera=camera, question=question)
 
 
-def _generate_rules(description: str, *, seed: int, llm_config: Optional[Dict[str, Any]],
+def _generate_rules(description: str, *, seed: int, llm_config: LLMConfigLike,
                     max_attempts: int) -> Generation:
     from dv2s_gym.pipeline.sg.rules import generate_rules
 
@@ -142,7 +143,7 @@ def _generate_rules(description: str, *, seed: int, llm_config: Optional[Dict[st
                       intended_elements=dict(getattr(result, "elements", {}) or {}))
 
 
-def _generate_openai(description: str, *, seed: int, llm_config: Optional[Dict[str, Any]],
+def _generate_openai(description: str, *, seed: int, llm_config: LLMConfigLike,
                      max_attempts: int) -> Generation:
     from dv2s_gym.pipeline.llm_client import ChatClient
     from dv2s_gym.pipeline.sg.openai import generate_with_llm
@@ -174,7 +175,7 @@ def describe(
     fps: float = 2.0,
     max_frames: int = 16,
     max_pixels: int = 448 * 448,
-    llm_config: Optional[Dict[str, Any]] = None,
+    llm_config: LLMConfigLike = None,
 ) -> Description:
     """Describe a driving video (frames sampled at ``fps`` under ``max_frames`` and ``max_pixels``)."""
     from dv2s_gym.pipeline.semantics.text import elements_from_text
@@ -194,7 +195,7 @@ def generate(
     *,
     backend: str = "rules",
     seed: int = 0,
-    llm_config: Optional[Dict[str, Any]] = None,
+    llm_config: LLMConfigLike = None,
     max_attempts: int = 4,
 ) -> Generation:
     """Turn a description into a Scenic script that passed the safety check."""

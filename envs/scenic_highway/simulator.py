@@ -42,6 +42,7 @@ from envs.scenic_highway.actors import Pedestrian, Prop, ScenicVehicle
 from envs.scenic_highway.readback import update_objects
 from envs.errors import UnsupportedConstructError
 from envs.road_network import load_road_network
+from scenario_bank.elements import ActorKind
 
 __all__ = [
     "EgoDriver",
@@ -470,7 +471,7 @@ def _hw_color(obj, is_ego: bool):
     if kind is not None:
         if kind in _FACADE_KIND_CLASSES:
             return _KIND_COLORS[_FACADE_KIND_CLASSES[kind]]
-        return _CAR_COLOR if kind == "car" else _PROP_COLOR
+        return _CAR_COLOR if kind == ActorKind.CAR else _PROP_COLOR
     for cls in type(obj).__mro__:
         if cls.__name__ in _KIND_COLORS:
             return _KIND_COLORS[cls.__name__]

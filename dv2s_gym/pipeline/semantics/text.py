@@ -71,7 +71,7 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
 from dv2s_gym.pipeline.semantics.road import distance_m, road_features, speed_kph, strip_absences, time_s
-from scenario_bank.elements import CAN_DO, normalize_elements
+from scenario_bank.elements import CAN_DO, ActorKind, normalize_elements
 
 __all__ = ["Entity", "ParsedDescription", "parse_description", "elements_from_text", "ROAD_PATTERNS"]
 
@@ -177,7 +177,7 @@ class ParsedDescription:
     @property
     def ego(self) -> Optional[Entity]:
         for e in self.entities:
-            if e.kind == "ego":
+            if e.kind == ActorKind.EGO:
                 return e
         return None
 
@@ -359,7 +359,7 @@ def _noun_phrase(clause: str, m: re.Match) -> _NounPhrase:
 def _state_before_noun(before: str, entity: Entity) -> None:
     """Words right before an actor noun that say what it does: "a crossing pedestrian" crosses, "a crossing
     vehicle" crosses the ego's path, "a stopped / stalled / broken down car" stands still."""
-    if entity.kind in ("pedestrian", "bicycle") and re.search(r"\bcrossing\s+$", before) and \
+    if entity.kind in (ActorKind.PEDESTRIAN, ActorKind.BICYCLE) and re.search(r"\bcrossing\s+$", before) and \
             not NEGATION.search(before):
         entity.add_action("cross", sudden=False, directions=[])
     elif entity.kind in MOTOR and re.search(r"\b(?:crossing|cross traffic)\s+$", before):
@@ -367,7 +367,7 @@ def _state_before_noun(before: str, entity: Entity) -> None:
         if "crossing_path" not in pending:
             pending.append("crossing_path")  # "a crossing vehicle" crosses the ego's path
     # adjectives of state before the noun: stopped car, parked truck, broken down car
-    if entity.kind not in ("ego", "obstacle") and re.search(
+    if entity.kind not in (ActorKind.EGO, ActorKind.OBSTACLE) and re.search(
             r"\b(?:stopped|stationary|broken down|stalled|standing|disabled|idle|halted)\s+"
             r"(?:\w+\s+)?$", before):
         if not NEGATION.search(before):
@@ -447,7 +447,7 @@ class _Parser:
 
     # ---------------------------------------------------------------- helpers
     def _entity_for(self, kind: str, count: int, definite: bool, descriptors: set, new: bool) -> Entity:
-        if kind == "ego":
+        if kind == ActorKind.EGO:
             ego = self.out.ego
             if ego is None:
                 ego = Entity("ego")
@@ -537,7 +537,7 @@ class _Parser:
     def _noun_mention(self, clause: str, m: re.Match, mentions: List[_Mention], taken: List[Tuple[int, int]]) -> None:
         """One actor noun: the entity it names (new or known), what the words around it say of that entity."""
         phrase = _noun_phrase(clause, m)
-        if phrase.kind == "obstacle" and re.search(r"'s\s+(?:\w+\s+)?$", clause[:m.start()]):
+        if phrase.kind == ActorKind.OBSTACLE and re.search(r"'s\s+(?:\w+\s+)?$", clause[:m.start()]):
             return  # "the ego vehicle's tire": a part of a vehicle, not an obstacle
         if self._names_the_ego_vehicle(clause, m, phrase):
             mentions.append(_Mention(m.start(), m.end(), self.out.ego, _prep_before(clause, m.start()), False))
@@ -547,11 +547,11 @@ class _Parser:
         possessive = m.group(0).endswith("'s") or m.group(0).endswith("s'")
         taken.append((m.start(), m.end()))
         entity.attrs.setdefault("noun", phrase.surface)
-        if phrase.kind == "obstacle" and re.fullmatch(r"(?:deer|animals?|dogs?|cats?|cows?|horses?|moose|sheep|"
+        if phrase.kind == ActorKind.OBSTACLE and re.fullmatch(r"(?:deer|animals?|dogs?|cats?|cows?|horses?|moose|sheep|"
                                                       r"birds?|elks?|kangaroos?|fox|boar|wild boar)", phrase.surface):
             entity.attrs["animal"] = True
         self._mention_log.append((self._sentence_index, len(self._mention_log), entity))
-        if phrase.kind == "car" and phrase.surface in ("vehicles", "vehicle") and \
+        if phrase.kind == ActorKind.CAR and phrase.surface in ("vehicles", "vehicle") and \
                 (phrase.count > 1 or re.match(r"\s*(?:crash|collision|pile ?up|accident)", clause[m.end():])):
             entity.attrs["generic"] = True
         mentions.append(_Mention(m.start(), m.end(), entity, _prep_before(clause, m.start()), possessive))
@@ -561,7 +561,7 @@ class _Parser:
         """"The vehicle" after a text that calls the ego "the test vehicle" and names no car: the ego."""
         return phrase.surface == "vehicle" and bool(re.search(r"\bthe\s+$", clause[:m.start()])) and \
             self.out.ego is not None and str(self.out.ego.attrs.get("noun", "")).endswith("vehicle") and \
-            not any(e.kind == "car" for e in self.out.entities)
+            not any(e.kind == ActorKind.CAR for e in self.out.entities)
 
     def _noun_entity(self, clause: str, m: re.Match, phrase: "_NounPhrase") -> Entity:
         """The entity a noun names: a numbered crash-report vehicle ("V2"), the ego by an alias ("our car"),
@@ -574,7 +574,7 @@ class _Parser:
             if entity is None:
                 entity = self._named[key] = self._new("car", 1, {key})
             return entity
-        if phrase.kind == "car" and self._is_ego_alias(clause, m.start()):
+        if phrase.kind == ActorKind.CAR and self._is_ego_alias(clause, m.start()):
             return self._entity_for("ego", 1, True, set(), False)
         if phrase.plural and phrase.definite and self.last_group is not None and self.last_group.kind == phrase.kind:
             return self.last_group
@@ -591,8 +591,8 @@ class _Parser:
             if not _free(taken, m.start(), m.end()):
                 continue
             last = next((mm.entity for mm in reversed(mentions) if mm.start < m.start() and not isinstance(mm.entity, tuple)
-                         and mm.entity.kind != "ego"), None) or \
-                next((e for e in reversed(self.recent) if e.kind != "ego"), None)
+                         and mm.entity.kind != ActorKind.EGO), None) or \
+                next((e for e in reversed(self.recent) if e.kind != ActorKind.EGO), None)
             if last is None:
                 continue
             entity = self._new(last.kind, 1, set())
@@ -716,7 +716,7 @@ class _Parser:
                         all(e is not x for x in later):
                     later.append(e)
             named_later = sum(e.count for e in later)
-            if later and named_later >= group.count and any(e.kind != "ego" for e in later):
+            if later and named_later >= group.count and any(e.kind != ActorKind.EGO for e in later):
                 self.out.entities = [e for e in self.out.entities if e is not group]
 
     def _sentence(self, sentence: str) -> None:
@@ -768,7 +768,8 @@ class _Parser:
         entity = self.out.ego if key in ("v1", "ego", "theego", "theav", "thesubjectvehicle") else self._named.get(key)
         if entity is None:
             return False
-        if entity.kind == "car" and kind in ("truck", "bus", "motorcycle", "bicycle"):
+        if entity.kind == ActorKind.CAR and kind in (ActorKind.TRUCK, ActorKind.BUS, ActorKind.MOTORCYCLE,
+                                                     ActorKind.BICYCLE):
             entity.kind = kind  # "V2, a motorcycle"
         entity.attrs.setdefault("model", nm.group(0))
         return True
@@ -888,7 +889,7 @@ class _Parser:
 
     def _ahead_until_reached(self, clause: str, inherited: Optional[Entity]) -> None:
         """"... before the ego reaches it": the actor of the clause before is ahead of the ego."""
-        if inherited is not None and inherited.kind != "ego" and \
+        if inherited is not None and inherited.kind != ActorKind.EGO and \
                 re.match(r"before (?:the ego(?: car| vehicle)?|it) (?:reaches|catches up with|gets to) (?:it|them)\b",
                          clause):
             ego = self.out.ego
@@ -944,7 +945,7 @@ class _Parser:
                 continue
             ref = next((mm for mm in reversed(mentions) if mm.end <= m.start() and mm.size is not None), None)
             owner = ref.entity if ref is not None else subject
-            if owner is None or owner.kind != "pedestrian":
+            if owner is None or owner.kind != ActorKind.PEDESTRIAN:
                 continue
             dirs = owner.attrs.setdefault("cross_dirs", [])
             if ref is not None:
@@ -970,17 +971,17 @@ class _Parser:
         """The actor a phrase at ``pos`` describes: the mention right before it, else the subject."""
         before = [mm for mm in mentions if mm.end <= pos and not mm.possessive]
         for mm in reversed(before):
-            if mm.entity is exclude or (not allow_ego and mm.entity.kind == "ego"):
+            if mm.entity is exclude or (not allow_ego and mm.entity.kind == ActorKind.EGO):
                 continue
             if pos - mm.end <= 40:
                 if mm.prep_object and subject is not None and subject is not exclude and (
-                        allow_ego or subject.kind != "ego"):
+                        allow_ego or subject.kind != ActorKind.EGO):
                     # "the car in front of the ego ... on the left": prefer the actor, not the object
                     if pos - mm.end > 12:
                         return subject
                 return mm.entity
             break
-        if subject is not None and subject is not exclude and (allow_ego or subject.kind != "ego"):
+        if subject is not None and subject is not exclude and (allow_ego or subject.kind != ActorKind.EGO):
             return subject
         return None
 
@@ -1030,23 +1031,23 @@ class _Parser:
                     continue
                 if rel == "behind" and re.search(r"\bfrom\s+$", clause[:m.start()]):
                     continue  # "appears from behind a parked van": occlusion, not a position
-                if rel == "behind" and owner.kind in ("pedestrian", "bicycle") and \
+                if rel == "behind" and owner.kind in (ActorKind.PEDESTRIAN, ActorKind.BICYCLE) and \
                         re.search(r"\b(?:hidden|concealed|obscured|occluded|hiding|waiting|standing)\s+$", clause[:m.start()]):
                     owner.attrs["from_behind"] = target  # "a pedestrian hidden behind a parked truck"
                     continue
                 if rel == "ahead_of" and m.group(0).strip() == "before":
                     continue
                 if rel == "follow":
-                    if owner.kind == "ego" and target.kind != "ego":
+                    if owner.kind == ActorKind.EGO and target.kind != ActorKind.EGO:
                         self._relate(target, "ahead_of", owner)  # "the test vehicle follows a target car"
-                    elif target.kind == "ego":
+                    elif target.kind == ActorKind.EGO:
                         self._relate(owner, "behind", target)
                     continue
                 if rel == "toward":
-                    if owner.kind == "ego" and target.kind != "ego":
+                    if owner.kind == ActorKind.EGO and target.kind != ActorKind.EGO:
                         self._relate(target, "ahead_of", owner)  # "the ego drives towards a stopped car"
                     continue
-                if owner.kind == "ego" and target.kind != "ego" and rel in ("behind", "ahead_of"):
+                if owner.kind == ActorKind.EGO and target.kind != ActorKind.EGO and rel in ("behind", "ahead_of"):
                     # "the ego drives behind a truck": the truck is ahead of the ego
                     self._relate(target, "ahead_of" if rel == "behind" else "behind", owner)
                     continue
@@ -1061,7 +1062,7 @@ class _Parser:
                     owner = self._attach_forward(m, clause, mentions, subject)
                 else:
                     owner = self._attach(m.start(), mentions, subject, allow_ego=False)
-                if owner is None or owner.kind == "ego":
+                if owner is None or owner.kind == ActorKind.EGO:
                     continue
                 if rel in ("left_of", "right_of") and re.search(
                         r"\b(?:chang\w*|switch\w*|mov\w*|steer\w*|swerv\w*|turn\w*|veer\w*|shift\w*|lanes?|"
@@ -1070,12 +1071,12 @@ class _Parser:
                 if rel in ("left_of", "right_of") and m.group(0).startswith("from the") and not (
                         owner.has("cut_in") or re.search(r"\bcut|pull|merg|swerv|mov|chang|approach|come|overt",
                                                           clause)):
-                    if owner.kind == "pedestrian" and not re.search(
+                    if owner.kind == ActorKind.PEDESTRIAN and not re.search(
                             r"\bfrom the (?:left|right)(?: (?:side|kerb|curb|sidewalk|pavement))?\b", m.group(0) + clause[m.end():m.end() + 12]):
                         continue
                 if rel == "same_lane" and re.search(r"\binto\s+(?:the ego|its|our|my)", clause[max(0, m.start() - 8):m.end()]):
                     continue
-                if rel == "behind" and "from behind" in m.group(0) and owner.kind == "pedestrian":
+                if rel == "behind" and "from behind" in m.group(0) and owner.kind == ActorKind.PEDESTRIAN:
                     continue
                 if ego is not None:
                     self._relate(owner, rel, ego)
@@ -1086,7 +1087,7 @@ class _Parser:
                         subject: Optional[Entity]) -> Optional[Entity]:
         """Adjectives ("oncoming cars", "the lead vehicle") describe the noun right after them."""
         for mm in mentions:
-            if mm.start >= m.end() and mm.start - m.end() <= 25 and mm.entity.kind != "ego":
+            if mm.start >= m.end() and mm.start - m.end() <= 25 and mm.entity.kind != ActorKind.EGO:
                 return mm.entity
         return self._attach(m.start(), mentions, subject, allow_ego=False)
 
@@ -1204,7 +1205,7 @@ class _Parser:
                     isinstance(mm.entity, tuple) or mm.entity is subject:
                 break
             for a, d in new:
-                if mm.entity.kind == "pedestrian" and a not in CAN_DO["pedestrian"]:
+                if mm.entity.kind == ActorKind.PEDESTRIAN and a not in CAN_DO["pedestrian"]:
                     continue
                 mm.entity.add_action(a, **{k: v for k, v in d.items() if k != "with"})
 
@@ -1246,7 +1247,7 @@ class _Parser:
         sudden = bool(SUDDEN.search(_action_window(clause, m)))
         if self._static_object_acts(owner, action, clause):
             return
-        if action in ("lane_change", "cut_in") and m.group(0).startswith("merg") and owner.kind != "pedestrian":
+        if action in ("lane_change", "cut_in") and m.group(0).startswith("merg") and owner.kind != ActorKind.PEDESTRIAN:
             owner.add_action("merge", sudden=sudden)  # "merges left", "merged into its lane": the text says merge
         rule = self._ACTION_RULES.get("collide" if action.startswith("collide") else action)
         if rule is None or not rule(self, owner, action, m, clause, sudden):
@@ -1255,7 +1256,8 @@ class _Parser:
     def _static_object_acts(self, owner: Entity, action: str, clause: str) -> bool:
         """Whether ``action`` was read onto a static object (an obstacle that does not collide, and is no animal
         crossing, emerging or stopping): then the clause is listed as not placed."""
-        if owner.kind == "obstacle" and not (owner.attrs.get("animal") and action in ("cross", "emerge", "stop")) \
+        if owner.kind == ActorKind.OBSTACLE and not (owner.attrs.get("animal")
+                                                    and action in ("cross", "emerge", "stop")) \
                 and not action.startswith("collide"):
             if clause not in self._unplaced_phrases:
                 self._unplaced_phrases.append(clause)
@@ -1271,7 +1273,7 @@ class _Parser:
         groups = m.groupdict()
         d = groups.get("dir") or groups.get("dir2")
         if not d:
-            if owner.kind == "pedestrian":
+            if owner.kind == ActorKind.PEDESTRIAN:
                 return True
             if groups.get("weave"):
                 owner.add_action("lane_change", sudden=sudden, weave=True)
@@ -1289,7 +1291,7 @@ class _Parser:
 
     def _swerve_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
         """A swerve is always sudden, to the side said; a pedestrian does not swerve."""
-        if owner.kind != "pedestrian":
+        if owner.kind != ActorKind.PEDESTRIAN:
             owner.add_action("swerve", sudden=True, side=m.groupdict().get("dir"))
         return True
 
@@ -1303,7 +1305,7 @@ class _Parser:
                     self._sentence_text if groups.get("generic3") is not None else clause)):
             self._unplaced_phrases.append(clause)
             return True
-        if owner.kind == "pedestrian":
+        if owner.kind == ActorKind.PEDESTRIAN:
             return True
         owner.actions = [(a, d) for a, d in owner.actions if a != "stop"]
         owner.add_action("pull_out", sudden=sudden)
@@ -1320,7 +1322,7 @@ class _Parser:
             behind = self._next_mention(clause, m.start() + bm.end(), self._clause_mentions, exclude=owner)
         if behind is not None:
             owner.attrs["from_behind"] = behind
-        if owner.kind in ("pedestrian", "bicycle") or owner.attrs.get("animal"):
+        if owner.kind in (ActorKind.PEDESTRIAN, ActorKind.BICYCLE) or owner.attrs.get("animal"):
             quick = bool(re.match(r"(?:dash|dart|rush|sprint|run|ran|jump|leap|burst|pop)", m.group(0)))
             owner.add_action("cross", sudden=sudden or quick, directions=[])
             if behind is not None:
@@ -1335,7 +1337,7 @@ class _Parser:
 
     def _pull_over_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
         """Pulling over: a lane change to the right and a stop (not for a pedestrian)."""
-        if owner.kind != "pedestrian":
+        if owner.kind != ActorKind.PEDESTRIAN:
             owner.add_action("lane_change_right", sudden=sudden)
             owner.add_action("stop", sudden=sudden)
         return True
@@ -1343,7 +1345,7 @@ class _Parser:
     def _stop_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
         """A stop, with its trigger; the ego parking is not one."""
         self._trigger(owner, action, m, clause)
-        return bool(re.match(r"park", m.group(0))) and owner.kind == "ego"
+        return bool(re.match(r"park", m.group(0))) and owner.kind == ActorKind.EGO
 
     def _brake_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
         """A brake, with its trigger."""
@@ -1353,7 +1355,7 @@ class _Parser:
     def _turn_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
         """A turn to the side said, ``unprotected`` when the words around say so; a pedestrian does not turn."""
         d = m.groupdict().get("dir")
-        if owner.kind in ("pedestrian",):
+        if owner.kind in (ActorKind.PEDESTRIAN,):
             return True
         owner.add_action(f"turn_{d}", sudden=sudden)
         if m.groupdict().get("unprot") == "unprotected" or re.search(r"\bunprotected\b", _action_window(clause, m)):
@@ -1363,7 +1365,7 @@ class _Parser:
     def _cross_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
         """A pedestrian crosses in the directions said (each phrase adds one); a vehicle crosses when the road,
         street or lanes are said (a cyclist always), else the clause is not placed; others as read."""
-        if owner.kind == "pedestrian":
+        if owner.kind == ActorKind.PEDESTRIAN:
             direction = _crossing_direction(clause, m.groupdict())
             d = owner.detail("cross")
             if owner.has("cross") and direction:
@@ -1371,9 +1373,10 @@ class _Parser:
             else:
                 owner.add_action("cross", sudden=sudden, directions=[direction] if direction else [])
             return True
-        if owner.kind in ("car", "truck", "bus", "motorcycle", "bicycle", "ego"):
+        if owner.kind in (ActorKind.CAR, ActorKind.TRUCK, ActorKind.BUS, ActorKind.MOTORCYCLE, ActorKind.BICYCLE,
+                          ActorKind.EGO):
             if re.match(r"cross(?:es|ed|ing)? (?:the |a )?(?:road|street|lanes?|highway)\b", m.group(0) +
-                        clause[m.end():m.end() + 20].lstrip().join([" ", ""])) or owner.kind == "bicycle":
+                        clause[m.end():m.end() + 20].lstrip().join([" ", ""])) or owner.kind == ActorKind.BICYCLE:
                 owner.add_action("cross", sudden=sudden)  # (a cyclist crossing in front: like a pedestrian)
             elif clause not in self._unplaced_phrases:
                 self._unplaced_phrases.append(clause)  # "crosses" of a vehicle that says not what: warned
@@ -1410,7 +1413,7 @@ class _Parser:
 
     def _merge_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
         """A pedestrian does not merge."""
-        return owner.kind == "pedestrian"
+        return owner.kind == ActorKind.PEDESTRIAN
 
     def _collide_rule(self, owner: Entity, action: str, m: re.Match, clause: str, sudden: bool) -> bool:
         """A collision (and its type when said), with the next actor named after it, else the clause subject
@@ -1441,7 +1444,7 @@ class _Parser:
                 continue
             other = e.detail("collide").get("with")
             if other is None:
-                others = [x for x in self.out.entities if x is not e and x.kind != "obstacle" or
+                others = [x for x in self.out.entities if x is not e and x.kind != ActorKind.OBSTACLE or
                           x is not e and x.attrs.get("animal")]
                 if e is not ego and ego is not None and not any(x.has("collide") for x in others if x is not ego):
                     other = ego
@@ -1476,7 +1479,7 @@ class _Parser:
         if ego is not None and ego.lane in ("left", "middle", "right"):
             order = {"left": 0, "middle": 1, "right": 2}
             for e in self.out.entities:
-                if e is ego or e.lane not in order or e.kind == "pedestrian":
+                if e is ego or e.lane not in order or e.kind == ActorKind.PEDESTRIAN:
                     continue
                 if order[e.lane] < order[ego.lane]:
                     self._relate(e, "left_of", ego)
@@ -1492,11 +1495,11 @@ class _Parser:
         ego = self.out.ego
         for e in self.out.entities:
             self._middle_lane_direction(e, ego)
-            if e.kind == "pedestrian" and e.has("cross"):
+            if e.kind == ActorKind.PEDESTRIAN and e.has("cross"):
                 e.actions = [(a, d) for a, d in e.actions if a not in ("stop",) or d.get("keep")]
             _cut_in_side_from_relations(e)
         for e in self.out.entities:
-            if e.kind == "ego" or ego is None:
+            if e.kind == ActorKind.EGO or ego is None:
                 continue
             rels = self._relations_said_to_ego(e, ego)
             _cut_in_lane_changes(e, rels)
@@ -1515,11 +1518,12 @@ class _Parser:
         self._occluders_ahead(ego)
         self._cross_traffic(ego)
         # animals alone in a text with no road and no vehicle are not a driving scene ("the lazy dog")
-        if self.out.road is None and all(e.attrs.get("animal") or e.kind == "pedestrian" for e in self.out.entities):
+        if self.out.road is None and all(e.attrs.get("animal") or e.kind == ActorKind.PEDESTRIAN
+                                         for e in self.out.entities):
             self.out.entities = [e for e in self.out.entities if not e.attrs.get("animal")]
         # a pedestrian crossing in front of the ego; "one ... and the two others" count directions
         for e in self.out.entities:
-            if e.kind == "pedestrian" and e.has("cross"):
+            if e.kind == ActorKind.PEDESTRIAN and e.has("cross"):
                 dirs = e.detail("cross").get("directions") or []
                 e.detail("cross")["directions"] = dirs
 
@@ -1558,9 +1562,9 @@ class _Parser:
         if e.kind in MOTOR and "ahead_of" in rels and not rels & {"left_of", "right_of", "oncoming"} \
                 and not (e.has("cut_in") and not e.detail("cut_in").get("back")) and not e.has("merge"):
             self._relate(e, "same_lane", ego)
-        if e.kind == "obstacle" and "same_lane" in rels:
+        if e.kind == ActorKind.OBSTACLE and "same_lane" in rels:
             self._relate(e, "ahead_of", ego)
-        if (e.kind in ("pedestrian", "bicycle") or e.attrs.get("animal")) and e.has("cross"):
+        if (e.kind in (ActorKind.PEDESTRIAN, ActorKind.BICYCLE) or e.attrs.get("animal")) and e.has("cross"):
             self._relate(e, "ahead_of", ego)
             self._relate(e, "crossing_path", ego)
         if e.kind in MOTOR + ("bicycle",) and "oncoming" in rels and ego.has("turn_left"):
@@ -1604,7 +1608,7 @@ class _Parser:
 def _conflict_partner_of(entities: List[Entity], who: Entity) -> Optional[Entity]:
     """The actor ``who`` is in conflict with: one crossing its path, oncoming, crossing, turning or going
     straight at the junction; else the first other moving actor."""
-    others = [e for e in entities if e is not who and e.kind not in ("ego", "obstacle")]
+    others = [e for e in entities if e is not who and e.kind not in (ActorKind.EGO, ActorKind.OBSTACLE)]
     for e in others:
         if any(j is who and r in ("crossing_path", "oncoming") for r, j in e.relations):
             return e

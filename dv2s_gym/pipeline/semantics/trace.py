@@ -65,7 +65,7 @@ import numpy as np
 import shapely
 from shapely.affinity import scale
 
-from scenario_bank.elements import normalize_elements
+from scenario_bank.elements import ActorKind, normalize_elements
 from scenario_bank.maps import MAPS_DIR
 
 __all__ = ["elements_from_trace", "collision_type", "trace_actor_kind", "map_view", "MAP_ROAD_TYPES", "KEEP_LANE_MIN_M"]
@@ -357,9 +357,9 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
     if len(track) < 2:
         return out
     speed = track[:, 3]
-    if kind == "pedestrian":
+    if kind == ActorKind.PEDESTRIAN:
         return out  # crossing is judged relative to the road/ego in _interactions
-    if kind == "obstacle":
+    if kind == ActorKind.OBSTACLE:
         return out
     window = max(1, int(round(BRAKE_WINDOW / dt)))
     drops = speed[:-window] - speed[window:] if len(speed) > window else np.array([speed[0] - speed[-1]])
@@ -626,15 +626,16 @@ def _interactions(
     out: Set[str] = set()
     n = min(len(ego), len(track))
     rel = np.array([_ego_frame(ego[i], track[i]) for i in range(n)])
-    if kind == "pedestrian":
+    if kind == ActorKind.PEDESTRIAN:
         lateral_travel = abs(rel[-1, 1] - rel[0, 1]) if n else 0.0
         moved = float(np.hypot(*(track[-1, :2] - track[0, :2])))
         if moved > 2.5 and lateral_travel > 2.0:
             out.add("cross")
         return out
-    if kind == "obstacle":
+    if kind == ActorKind.OBSTACLE:
         return out
-    if kind == "bicycle" and n and math.radians(45) <= _heading_gap(track[0, 2], ego[0, 2]) <= math.radians(135):
+    if (kind == ActorKind.BICYCLE and n
+            and math.radians(45) <= _heading_gap(track[0, 2], ego[0, 2]) <= math.radians(135)):
         # a cyclist riding across the reference's road (a crossing, a crosswalk), judged like a pedestrian
         moved = float(np.hypot(*(track[n - 1, :2] - track[0, :2])))
         if moved > 2.5 and abs(rel[-1, 1] - rel[0, 1]) > 2.0:

@@ -10,7 +10,8 @@ from dv2s_gym.pipeline.semantics.text import Entity, ParsedDescription
 from dv2s_gym.pipeline.sg.rules.describe import COLLISION_HINTS
 from dv2s_gym.pipeline.sg.rules.roads import MAP_ROADS
 from dv2s_gym.pipeline.sg.rules.script import Script
-from scenario_bank.elements import ACTIONS, CAN_DO, PARTICIPANTS, RELATIONS, ROADS, element_set, with_undirected
+from scenario_bank.elements import (ACTIONS, CAN_DO, PARTICIPANTS, RELATIONS, ROADS, ActorKind, element_set,
+                                    with_undirected)
 
 __all__ = ["check_main_event", "typed_collisions", "unbuilt_warnings", "absent_warnings", "unshown_warnings"]
 
@@ -27,7 +28,7 @@ def _main_event(parsed: ParsedDescription) -> Optional[Tuple[Entity, str]]:
         return None
 
     for entity in parsed.entities:
-        if entity.kind != "ego" and first(entity):
+        if entity.kind != ActorKind.EGO and first(entity):
             return entity, first(entity)
     ego = parsed.ego
     if ego is not None and first(ego):
@@ -42,9 +43,9 @@ def check_main_event(parsed: ParsedDescription, s: Script) -> None:
     if main is None:
         return
     entity, action = main
-    kind = "ego" if entity.kind == "ego" else entity.kind
+    kind = "ego" if entity.kind == ActorKind.EGO else entity.kind
     shown = {a for k, a in s.actions if k == kind}
-    if action == "lane_change" or action == "merge" and kind == "ego" and s.merged_as_lane_change:
+    if action == "lane_change" or action == "merge" and kind == ActorKind.EGO and s.merged_as_lane_change:
         placed_it = bool(shown & {"lane_change_left", "lane_change_right"})
     elif action in COLLISION_HINTS:
         placed_it = "collide" in shown
@@ -53,7 +54,7 @@ def check_main_event(parsed: ParsedDescription, s: Script) -> None:
     else:
         placed_it = action in shown
     if not placed_it:
-        noun = entity.attrs.get("noun", entity.kind) if entity.kind != "ego" else "ego"
+        noun = entity.attrs.get("noun", entity.kind) if entity.kind != ActorKind.EGO else "ego"
         raise GenerationError(
             f"cannot place the main event '{noun} {action.replace('_', ' ')}' of the description: the rules SG "
             f"has no block for it on the chosen road; describe it with a supported manoeuvre (e.g. brake, stop, "
@@ -85,7 +86,7 @@ def unbuilt_warnings(parsed: ParsedDescription, s: "Script", said: Sequence[str]
     said_text = " ".join(w.lower().replace("_", " ") for w in said)
     phrases: Dict[Tuple, str] = {}
     for entity in parsed.entities:
-        noun = "ego" if entity.kind == "ego" else str(entity.attrs.get("noun", entity.kind))
+        noun = "ego" if entity.kind == ActorKind.EGO else str(entity.attrs.get("noun", entity.kind))
         for action, detail in entity.actions:
             phrases.setdefault(("action", entity.kind, action), str(detail.get("phrase") or noun))
         for rel, other in entity.relations:
@@ -95,7 +96,7 @@ def unbuilt_warnings(parsed: ParsedDescription, s: "Script", said: Sequence[str]
     for entity in parsed.entities:
         if entity.kind not in PARTICIPANTS:
             continue  # an unknown kind is warned about already
-        count = entity.count if entity.kind != "ego" else 1
+        count = entity.count if entity.kind != ActorKind.EGO else 1
         described.update(("participant", entity.kind, i + 1) for i in range(count))
         described.update(("action", entity.kind, a) for a, _ in entity.actions if a in ACTIONS)
         described.update(("relation", entity.kind, r, o.kind) for r, o in entity.relations

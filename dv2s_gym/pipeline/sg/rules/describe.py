@@ -9,6 +9,7 @@ from dv2s_gym.pipeline.semantics.text import Entity, ParsedDescription, parse_de
 from dv2s_gym.pipeline.sg.rules.frame import CLASS, VEHICLES, ActorFrame, ScenarioFrame
 from dv2s_gym.pipeline.sg.rules.map_choice import choose_map
 from dv2s_gym.pipeline.sg.rules.roads import PARKING_STREET
+from scenario_bank.elements import ActorKind
 
 __all__ = ["COLLISION_HINTS", "MAX_COUNT", "build_frame"]
 
@@ -37,7 +38,7 @@ def _directed_actions(actor: ActorFrame, warnings: List[str]) -> None:
             action = f"lane_change_{side}"
             actor.details.setdefault(action, dict(detail))
         elif action in COLLISION_HINTS:
-            if actor.kind != "ego" and not actor.relations:
+            if actor.kind != ActorKind.EGO and not actor.relations:
                 actor.relations.extend(COLLISION_HINTS[action])
             actor.details.setdefault("collide", dict(detail))
             actor.details["collide"]["type"] = action
@@ -88,7 +89,7 @@ def build_frame(description: str, parsed: Optional[ParsedDescription] = None,
     actors: List[ActorFrame] = []
     names: Dict[str, int] = {}
     for entity in parsed.entities:
-        if entity.kind == "ego":
+        if entity.kind == ActorKind.EGO:
             continue
         if entity.kind not in CLASS:
             warnings.append(f"could not place the {entity.attrs.get('noun', entity.kind)}: no participant type "
@@ -98,7 +99,7 @@ def build_frame(description: str, parsed: Optional[ParsedDescription] = None,
         names[base] = names.get(base, 0) + 1
         actor = _actor_from(entity, f"{base}{names[base]}")
         for rel, other in entity.relations:
-            if other.kind == "ego":
+            if other.kind == ActorKind.EGO:
                 actor.relations.append(rel)
             else:
                 warnings.append(f"relation '{entity.kind} {rel} {other.kind}' between two non-ego "

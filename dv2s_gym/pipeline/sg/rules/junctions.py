@@ -17,7 +17,7 @@ from dv2s_gym.pipeline.sg.rules.pedestrians import spawn_junction_pedestrians
 from dv2s_gym.pipeline.sg.rules.roads import RING_MAP, speed_ranges
 from dv2s_gym.pipeline.sg.rules.roles import JunctionRole
 from dv2s_gym.pipeline.sg.rules.script import Script, check_actions
-from scenario_bank.elements import CAN_DO
+from scenario_bank.elements import CAN_DO, ActorKind
 
 __all__ = ["compose_junction"]
 
@@ -55,9 +55,9 @@ def compose_junction(s: Script) -> None:
     if waits:
         s.spawn += ego_lines  # after the vehicle it waits for, which its behaviour names
     for actor in frame.actors:
-        if actor.kind == "pedestrian":
+        if actor.kind == ActorKind.PEDESTRIAN:
             spawn_junction_pedestrians(s, actor, frame.map, reckless)
-        elif actor.kind == "obstacle":
+        elif actor.kind == ActorKind.OBSTACLE:
             spawn_junction_obstacle(s, actor)
 
 
@@ -68,7 +68,7 @@ def _roles(s: Script) -> List[RoleSpec]:
     for a in frame.actors:
         if a.kind in VEHICLES:
             check_actions(a, s, JUNCTION_ACTIONS)
-        elif a.kind == "pedestrian":
+        elif a.kind == ActorKind.PEDESTRIAN:
             check_actions(a, s, set(CAN_DO["pedestrian"]))
         else:
             a.actions = []

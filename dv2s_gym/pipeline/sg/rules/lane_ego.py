@@ -9,6 +9,7 @@ from dv2s_gym.pipeline.sg.rules.frame import KIND_SPEEDS, ActorFrame, ScenarioFr
 from dv2s_gym.pipeline.sg.rules.manoeuvres import drift, swerve, u_turn
 from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script, brake_params
+from scenario_bank.elements import ActorKind
 
 __all__ = ["ego_lane_behavior"]
 
@@ -78,4 +79,4 @@ def ego_lane_behavior(s: Script, ego: ActorFrame, speed: str, reckless: bool, tw
 
 
 def _something_stops_ego(frame: ScenarioFrame) -> bool:
-    return any(a.kind == "obstacle" and a.side == 0 or a.role == Role.LEAD and a.has("stop") for a in frame.actors)
+    return any(a.kind == ActorKind.OBSTACLE and a.side == 0 or a.role == Role.LEAD and a.has("stop") for a in frame.actors)

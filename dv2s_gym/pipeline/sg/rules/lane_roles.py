@@ -11,7 +11,7 @@ from dv2s_gym.pipeline.sg.rules.frame import VEHICLES, ActorFrame, ScenarioFrame
 from dv2s_gym.pipeline.sg.rules.roads import MULTILANE_STREET, PARKING_STREET, SHOULDER_HIGHWAY, STREET_MAPS
 from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script, check_actions
-from scenario_bank.elements import CAN_DO
+from scenario_bank.elements import CAN_DO, ActorKind
 
 __all__ = ["LANE_ACTIONS", "LaneRoad", "assign_lane_roles", "lanes_needed"]
 
@@ -71,11 +71,11 @@ def assign_lane_roles(s: Script, road: LaneRoad) -> None:
 
 
 def _check_lane_actions(s: Script, actor: ActorFrame, road: LaneRoad) -> None:
-    if actor.kind == "bicycle" and actor.has("cross"):
+    if actor.kind == ActorKind.BICYCLE and actor.has("cross"):
         check_actions(actor, s, {"cross", "collide"})  # a cyclist riding across the road, like a pedestrian
     elif actor.kind in VEHICLES:
         check_actions(actor, s, LANE_ACTIONS - {"cross"} | ({"merge"} if road.onramp else set()))
-    elif actor.kind == "pedestrian":
+    elif actor.kind == ActorKind.PEDESTRIAN:
         check_actions(actor, s, set(CAN_DO["pedestrian"]))
     else:
         actor.actions = []
@@ -133,10 +133,10 @@ def _rams_from_behind(q: _Asked) -> bool:
 
 
 _ROLE_RULES: Tuple[Tuple[Callable[[_Asked], bool], Union[Role, Callable[[_Asked], Role]]], ...] = (
-    (lambda q: q.actor.kind == "obstacle", _obstacle_role),
-    (lambda q: q.actor.kind == "pedestrian" and (q.actor.has("cross") or q.actor.has("collide")), Role.CROSSER),
-    (lambda q: q.actor.kind == "pedestrian", Role.ROADSIDE),
-    (lambda q: q.actor.kind == "bicycle" and q.actor.has("cross"), Role.CROSSER),
+    (lambda q: q.actor.kind == ActorKind.OBSTACLE, _obstacle_role),
+    (lambda q: q.actor.kind == ActorKind.PEDESTRIAN and (q.actor.has("cross") or q.actor.has("collide")), Role.CROSSER),
+    (lambda q: q.actor.kind == ActorKind.PEDESTRIAN, Role.ROADSIDE),
+    (lambda q: q.actor.kind == ActorKind.BICYCLE and q.actor.has("cross"), Role.CROSSER),
     # parked at the kerb (or on the shoulder) beside the ego's lane
     (lambda q: q.actor.has("pull_out") or q.actor.has("reverse"), Role.PULLER),
     (lambda q: q.actor.has("merge") and q.road.onramp, Role.RAMP),
@@ -265,7 +265,7 @@ def _set_cutter_side(s: Script, actor: ActorFrame, rels: set) -> None:
         side = actor.lane  # "in the left lane", the ego's lane not said: it comes from that side
     if side is None:
         side = "left" if "left_of" in rels else "right" if "right_of" in rels else \
-            ("right" if actor.kind == "truck" else s.rng.choice(["left", "right"]))
+            ("right" if actor.kind == ActorKind.TRUCK else s.rng.choice(["left", "right"]))
     actor.side = 1 if side == "left" else -1
     if "left_of" not in rels and "right_of" not in rels:
         actor.relations.append(f"{side}_of")

@@ -8,6 +8,7 @@ from dv2s_gym.pipeline.sg.rules.lane_context import LaneContext
 from dv2s_gym.pipeline.sg.rules.manoeuvres import longitudinal_behavior
 from dv2s_gym.pipeline.sg.rules.placement import Placement
 from dv2s_gym.pipeline.sg.rules.script import Script
+from scenario_bank.elements import ActorKind
 
 __all__ = ["place_ramp", "place_oncoming", "place_cutter", "place_overtaker"]
 
@@ -58,7 +59,7 @@ def place_cutter(s: Script, actor: ActorFrame, ctx: LaneContext, p: Placement) -
     """From the lane at its side into the ego's lane ahead of the ego: a slow truck pulls in when the ego comes
     close, anything else overtakes a little and cuts in."""
     lane = ctx.lane_of(actor.side)
-    if actor.kind == "truck" and not actor.has("accelerate") and "behind" not in p.relations:
+    if actor.kind == ActorKind.TRUCK and not actor.has("accelerate") and "behind" not in p.relations:
         _truck_pulls_in(s, actor, lane, p)
     else:
         _cuts_in(s, actor, lane, p)

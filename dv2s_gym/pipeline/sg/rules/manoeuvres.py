@@ -9,6 +9,7 @@ from dv2s_gym.pipeline.sg.rules.frame import ActorFrame
 from dv2s_gym.pipeline.sg.rules.roads import HIGHWAY_MAPS
 from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script, brake_params
+from scenario_bank.elements import ActorKind
 
 __all__ = ["u_turn", "swerve", "drift", "longitudinal_behavior"]
 
@@ -34,7 +35,7 @@ def swerve(s: Script, speed: str, actor: Optional[ActorFrame] = None) -> str:
     fast = s.frame.map in HIGHWAY_MAPS
     depth = f"{sign}Range(1.1, 1.3)" if fast else f"{sign}Range(1.2, 1.5)"
     duration = "Range(1.2, 1.6)" if fast else "Range(0.8, 1.2)"
-    if actor is not None and actor.kind == "ego":
+    if actor is not None and actor.kind == ActorKind.EGO:
         s.use("SwerveWhenBlocked")
         return f"SwerveWhenBlocked({speed}, {depth}, {duration})"
     s.use("SwerveAndBack")

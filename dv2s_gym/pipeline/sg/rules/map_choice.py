@@ -6,6 +6,7 @@ from typing import List, Optional, Sequence
 
 from dv2s_gym.pipeline.sg.rules.frame import VEHICLES, ActorFrame
 from dv2s_gym.pipeline.sg.rules.roads import MULTILANE_STREET, ROAD_MAPS
+from scenario_bank.elements import ActorKind
 
 __all__ = ["choose_map"]
 
@@ -64,7 +65,7 @@ def choose_map(road: Optional[str], ego: ActorFrame, actors: Sequence[ActorFrame
         return "urban_crossroads"  # a vehicle crossing the ego's path comes from a crossing road
     if "merge" in all_actions:
         return "highway_onramp"
-    if any(a.kind == "pedestrian" for a in actors):
+    if any(a.kind == ActorKind.PEDESTRIAN for a in actors):
         if not _needs_same_direction_lanes(ego, actors):
             return "urban_two_way"
         return "highway_straight" if _needs_three_lanes(ego, actors) else MULTILANE_STREET

@@ -10,6 +10,7 @@ from dv2s_gym.pipeline.sg.rules.frame import CLASS, ActorFrame
 from dv2s_gym.pipeline.sg.rules.roads import MULTILANE_STREET, PARKING_STREET, STREET_LANES
 from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script
+from scenario_bank.elements import ActorKind
 
 __all__ = ["crossing_directions", "spawn_lane_pedestrians", "spawn_junction_pedestrians"]
 
@@ -33,7 +34,7 @@ def crossing_directions(actor: ActorFrame, rng: random.Random) -> List[str]:
         sides = list(actor.relations)
         hidden = actor.details.get("cross", {}).get("from_behind")
         if hidden is not None:
-            sides += [r for r, other in getattr(hidden, "relations", []) if getattr(other, "kind", "") == "ego"]
+            sides += [r for r, other in getattr(hidden, "relations", []) if getattr(other, "kind", "") == ActorKind.EGO]
         said = "right_to_left" if "right_of" in sides else "left_to_right" if "left_of" in sides else None
         default = out[-1] if out else said or rng.choice(["right_to_left", "left_to_right"])
         out += [default] * remaining
@@ -49,7 +50,7 @@ def spawn_lane_pedestrians(s: Script, actor: ActorFrame, ego_speed: str, two_way
     if crossing and parked is not None:
         # a parked vehicle on the far kerb: the pedestrian steps out just in front of it, not through it
         dist = s.param(f"{parked.name}_gap", "Range(25, 40)") + " + Range(6.5, 8.0)"
-    riding = actor.kind == "bicycle"
+    riding = actor.kind == ActorKind.BICYCLE
     if crossing and riding:
         walk = s.param(f"{n}_riding_speed", "Range(4, 5.5)")
         hit = actor.has("collide") or reckless and s.frame.ego.has("collide")

@@ -10,6 +10,7 @@ from dv2s_gym.pipeline.sg.rules.frame import CLASS, ActorFrame
 from dv2s_gym.pipeline.sg.rules.lane_context import LaneContext
 from dv2s_gym.pipeline.sg.rules.roles import Role
 from dv2s_gym.pipeline.sg.rules.script import Script
+from scenario_bank.elements import ActorKind
 
 __all__ = ["Placement", "Placer", "driving"]
 
@@ -53,7 +54,7 @@ def _write(s: Script, actor: ActorFrame, p: Placement) -> None:
         pos = position
         if i:
             # further members of a group: the same manoeuvre, one vehicle length and a gap further on
-            step = (18 if actor.kind == "truck" else 12) * i
+            step = (18 if actor.kind == ActorKind.TRUCK else 12) * i
             sign = "+" if actor.role in (Role.LEAD, Role.SLOW_LEAD) else "-"
             pos = re.sub(r"pointAlongBy\((.*)\)$", lambda m: f"pointAlongBy({m.group(1)} {sign} {step})", position)
         start_speed = "0" if behavior and behavior.startswith("HoldStill") else p.speed

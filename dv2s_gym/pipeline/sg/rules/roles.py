@@ -1,7 +1,7 @@
 """The roles an actor plays in a composed script: where it is placed and how it moves relative to the ego.
 
 Both enums are ``str``-valued: a role compares equal to its name as a plain string (``Role.LEAD == "lead"``)
-and formats as that string in warnings.
+and formats as that string in warnings (an actor's kind is a ``scenario_bank.elements.ActorKind``).
 """
 
 from __future__ import annotations
