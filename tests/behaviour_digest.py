@@ -44,7 +44,7 @@ import json
 import re
 import tempfile
 from pathlib import Path
-from typing import Any, Dict, Mapping
+from typing import Any, Callable, Dict, Mapping
 
 import cv2
 
@@ -177,3 +177,11 @@ def differences(recorded: Any, now: Any, where: str = "") -> list:
         return [path for index, (old, new) in enumerate(zip(recorded, now))
                 for path in differences(old, new, f"{where}[{index}]")]
     return [] if recorded == now else [where or "(all)"]
+
+
+def write_record(record_file: Path, behaviour: Callable[[], Any]) -> None:
+    """Write a behaviour record again (``python tests/test_behaviour_<kind>.py --write``): what ``behaviour()``
+    gives now becomes the record the test compares with."""
+    record_file.parent.mkdir(parents=True, exist_ok=True)
+    record_file.write_text(json.dumps(behaviour(), indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    print(f"wrote {record_file}")

@@ -30,7 +30,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from behaviour_digest import differences, digest, file_digests, folder_digests, normalise_text  # noqa: E402
+from behaviour_digest import (differences, digest, file_digests, folder_digests, normalise_text,  # noqa: E402
+                              write_record)
 
 RECORD = ROOT / "tests" / "data" / "behaviour" / "reports.json"
 SHIPPED_BANK = ROOT / "scenario_bank" / "scenarios"
@@ -80,6 +81,4 @@ def test_regress_and_mine_write_the_reports_they_wrote():
 
 
 if __name__ == "__main__" and sys.argv[1:] == ["--write"]:
-    RECORD.parent.mkdir(parents=True, exist_ok=True)
-    RECORD.write_text(json.dumps(behaviour(), indent=1, sort_keys=True) + "\n", encoding="utf-8")
-    print(f"wrote {RECORD}")
+    write_record(RECORD, behaviour)

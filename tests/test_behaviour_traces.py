@@ -29,7 +29,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from behaviour_digest import differences, digest, normalise  # noqa: E402
+from behaviour_digest import differences, digest, normalise, write_record  # noqa: E402
 from policies.evaluation import make_eval_env, run_episode  # noqa: E402
 from policies.registry import load_policy  # noqa: E402
 
@@ -78,6 +78,4 @@ def test_every_shipped_scenario_plays_the_episodes_it_played():
 
 
 if __name__ == "__main__" and sys.argv[1:] == ["--write"]:
-    RECORD.parent.mkdir(parents=True, exist_ok=True)
-    RECORD.write_text(json.dumps(behaviour(), indent=1, sort_keys=True) + "\n", encoding="utf-8")
-    print(f"wrote {RECORD}")
+    write_record(RECORD, behaviour)
