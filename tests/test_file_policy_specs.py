@@ -4,6 +4,7 @@ policy is loaded from it; anything else (module:attribute, a checkpoint) needs t
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -131,3 +132,18 @@ def test_a_bank_replay_entry_names_a_policy_only_if_it_is_built_in(tmp_path):
 
     with pytest.raises(PolicyError, match="bank entry 'x'.*policy=SPEC"):
         replay_failure(FakeBank(), "x")
+
+
+@pytest.mark.parametrize("episode, says", [(None, "name the episode with --episode INDEX"),
+                                           ("7", "episode 7 of .* did not finish")])
+def test_replay_of_a_mining_run_without_a_finished_episode_names_the_fix(capsys, tmp_path, episode, says):
+    """A user's mistake on a mining run folder is one line naming the fix, not an unexpected error."""
+    folder = tmp_path / "run"
+    folder.mkdir()
+    (folder / "settings.json").write_text(json.dumps({"schema": "dv2s-mine-run", "policy": "rule",
+                                                      "bank_dir": None, "env_config": {}}))
+    (folder / "episodes.jsonl").write_text(json.dumps({"index": 0, "scenario": "highway_lead_vehicle_brakes",
+                                                       "seed": 0, "params": {}, "result": None}) + "\n")
+    code, _, err = run(capsys, "replay", folder, *([] if episode is None else ["--episode", episode]))
+    line = one_line_error(err)
+    assert code == 2 and re.search(says, line) and "unexpected" not in err and "--debug" not in err

@@ -6,6 +6,7 @@ import os
 from pathlib import Path
 from typing import Optional, Tuple, Union
 
+from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_video import rerun_failure, write_failure_video
 from dv2s_gym.mining.miner import read_records
 from dv2s_gym.mining.settings import read_run_settings, SETTINGS_FILE
@@ -27,21 +28,21 @@ def replay_mined_episode(folder: PathLike, episode: Optional[str], *, policy: Op
 
     ``policy`` replaces the run's policy spec (needed for one that is not built in: a file's spec is loaded only
     if it is). Returns ``(the episode's record, policy spec)``; a folder that is not a mining run, or an episode that
-    did not finish, raises ``ValueError`` naming the fix.
+    did not finish, raises :class:`~dv2s_gym.mining.errors.MiningError` naming the fix.
     """
     folder = Path(folder)
     settings = read_run_settings(folder)
     if settings is None:
-        raise ValueError(f"{folder} is not a `dv2s mine` run folder (no {SETTINGS_FILE}); pass a trace file, a "
+        raise MiningError(f"{folder} is not a `dv2s mine` run folder (no {SETTINGS_FILE}); pass a trace file, a "
                          "regress report.json or a mining run folder")
     if episode is None or not str(episode).isdigit():
-        raise ValueError(f"{folder} is a mining run: name the episode with --episode INDEX (report.md lists the "
+        raise MiningError(f"{folder} is a mining run: name the episode with --episode INDEX (report.md lists the "
                          "failures and their indices)")
     settings_file = str(settings.path)
     records = {int(r["index"]): r for r in read_records(folder / "episodes.jsonl")}
     record = records.get(int(episode))
     if record is None or record.get("error") or not record.get("result"):
-        raise ValueError(f"episode {episode} of {folder} did not finish (not in episodes.jsonl, or an error); "
+        raise MiningError(f"episode {episode} of {folder} did not finish (not in episodes.jsonl, or an error); "
                          f"it has episodes 0..{max(records) if records else -1}")
     if not policy:
         from policies.registry import spec_from_file
