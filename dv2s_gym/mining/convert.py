@@ -382,7 +382,9 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     that set a quantity of the failure's interaction in the parent (the ego's or the key actor's, the
     ``interaction``'s ``actor``, else an actor's of its ``kind``, every actor's when neither is known:
     :func:`~dv2s_gym.mining.param_meaning.key_parameters`): the judge requires each of them compared
-    (:func:`_judge`)."""
+    (:func:`_judge`); ``"key_fixed_outside"`` those whose key quantity the new script fixes without a parameter away
+    from the failing value (:func:`_key_fixed_outside`), and ``"quantities_not_compared"`` (when any) ``{parameter:
+    why}`` for a compared parameter's other quantity the judge could not read (:func:`_through_quantities`)."""
     ranges, supports = _script_ranges(script), _script_supports(script)
     folded: Dict[str, str] = {}
     for script_name in sorted(ranges):
@@ -891,7 +893,8 @@ parameter of its own must be compared and contain the failing value: one not com
 reason (``"key_not_compared"``, :func:`_key_not_compared`). Within the share may go unchecked: parameters of other
 actors (traffic beside the interaction), and key quantities the new script fixes without a parameter of its own or
 leaves out (a generated script parameterises a scene its own way: the rule-based generator leaves most behaviour
-timings fixed)."""
+timings fixed), as long as a fixed key quantity holds the failing value (``"key_fixed_outside"``,
+:func:`_key_fixed_outside`)."""
 
 
 def _key_not_compared(parameters: Optional[Mapping[str, Any]]) -> Optional[str]:
