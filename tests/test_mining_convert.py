@@ -823,7 +823,12 @@ def test_parameters_named_alike_that_reach_no_object_are_not_compared():
     compared, rejections = _judged(decoy)
     assert compared["compared"] == {}
     assert compared["not_comparable"]["cut_in_gap"] == "the new script's cut_in_gap reaches no object of the scene"
-    assert len(rejections) == 1 and "only 0 of the failure's 3 parameters" in rejections[0]
+    assert len(rejections) == 2 and "only 0 of the failure's 3 parameters" in rejections[1]
+    # and the key quantities it fixes instead (the ego's speed at 30, the gap at 40, the duration at 6) are not the
+    # failure's
+    assert sorted(compared["key_fixed_outside"]) == ["cut_in_gap", "ego_speed", "lane_change_duration"]
+    assert rejections[0].startswith("parameters: a key quantity (of the failure's interaction) that the new script "
+                                    "fixes must hold the failing value")
 
 
 def test_a_constant_term_a_factor_or_another_direction_changes_the_meaning():
@@ -1025,6 +1030,24 @@ def test_a_point_that_places_the_actor_hands_on_its_expression(placement, outsid
         assert "crossing_distance (the script's d: the Pedestrian walker's longitudinal placement" in rejections[0]
 
 
+@pytest.mark.parametrize("distance, holds", [("Range(90, 110)", False), ("Range(38, 42)", True), ("40", True),
+                                             ("80", False)])
+def test_a_crossing_point_fixed_without_a_parameter_must_hold_the_failing_distance(distance, holds):
+    """The point that places the pedestrian hands its fixed distance on: 90..110 m can never be the failing 40 m,
+    whether the parameter is gone or still declared."""
+    failing = {"ego_speed": 10.0, "crossing_distance": 40.0, "kerb": 3.0}
+    generated = _CROSSING_PARENT.replace("from ego for globalParameters.crossing_distance", f"from ego for {distance}")
+    for script in (generated, generated.replace("param crossing_distance = Range(35, 55)\n", "")):
+        compared, rejections = _judged(script, parent=_CROSSING_PARENT, failing=failing)
+        assert "crossing_distance" in compared["not_comparable"]
+        assert (list(compared["key_fixed_outside"]) == []) is holds
+        if not holds:
+            assert rejections[0].startswith("parameters: a key quantity (of the failure's interaction) that the new "
+                                            "script fixes must hold the failing value, and it does not: "
+                                            "crossing_distance (the Pedestrian walker's longitudinal placement, "
+                                            f"which the new script fixes at {distance} without a parameter")
+
+
 def test_an_actor_placed_along_the_points_direction_does_not_take_the_points_distance():
     """``ahead of spot by 30`` adds to the point's distance: that placement is not read as the point's."""
     generated = _CROSSING_PARENT.replace("walker = new Pedestrian left of spot by globalParameters.kerb",
@@ -1203,15 +1226,93 @@ def test_a_parameter_of_an_actor_beside_the_interaction_stays_within_the_half_ru
     assert list(unknown["key_not_compared"]) == ["traffic_speed"]
 
 
-def test_a_key_quantity_the_new_script_fixes_without_a_parameter_counts_within_the_half_rule():
-    """A generated script parameterises the scene its own way: a key quantity it fixes with a number is no
-    comparison the judge failed (the rule-based generator leaves most behaviour timings fixed)."""
+@pytest.mark.parametrize("fixed, holds", [("6", True), ("Range(5, 8)", True), ("Options([6, 9])", True),
+                                          ("7", False), ("Range(40, 60)", False), ("Options([5, 9])", False),
+                                          ("globalParameters.dur * 0 + 6", True),
+                                          ("globalParameters.dur * 0 - 15", False)])
+def test_a_key_quantity_the_new_script_fixes_without_a_parameter_must_hold_the_failing_value(fixed, holds):
+    """A generated script parameterises the scene its own way: a key quantity it fixes (a number, an inline range,
+    discrete values; a parameter times 0 is a number) is no comparison the judge failed and counts within the half
+    rule, but only when it holds the failing value: the merger's gap fixed at 40..60 can never be the failing 6."""
     from dv2s_gym.mining.convert import _judge, compare_parameters
 
-    generated = _key_script("7").replace("param g = Range(5, 11)\n", "")
+    generated = _key_script(fixed).replace("param g = Range(5, 11)\n", "")
     compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction={"actor": "merger"})
     assert "gap" in compared["not_comparable"] and compared["key_not_compared"] == {}
-    assert _judge({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3) == []
+    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, {}, {"type": "collision"}, 0.3)]
+    if holds:
+        assert reasons == [] and compared["key_fixed_outside"] == {}
+        return
+    assert list(compared["key_fixed_outside"]) == ["gap"]
+    (reason,) = reasons
+    shown = "-15" if "dur" in fixed else fixed
+    assert reason == ("parameters: a key quantity (of the failure's interaction) that the new script fixes must hold "
+                      "the failing value, and it does not: gap (the Car merger's behaviour argument gap, which the new "
+                      f"script fixes at {shown} without a parameter, while the failing gap = 6)")
+
+
+def test_a_parameter_times_zero_is_no_use_of_it():
+    from dv2s_gym.mining.param_meaning import parameter_uses
+
+    uses = parameter_uses(_key_script("globalParameters.dur * 0 - 15"))
+    assert {slot for _, _, slot, _, _ in uses["dur"]} == {"behavior:duration"}
+
+
+@pytest.mark.parametrize("generated, reason_start", [
+    # the ego's speed fixed at 40 (failing 20), ego_speed still set on the walker: compared there, never on the ego
+    (_KEY_PARENT.replace("    with speed globalParameters.ego_speed\n", "    with speed 40\n")
+     .replace("with speed globalParameters.traffic_speed", "with speed globalParameters.ego_speed / 5"),
+     "ego_speed (the ego's speed, which the new script fixes at 40 without a parameter, while the failing ego_speed = 20)"),
+    # the gap moved to the walker's placement, the merger's gap fixed at 50
+    (_KEY_PARENT.replace("Merge(globalParameters.gap,", "Merge(50,")
+     .replace("ahead of ego by 60", "ahead of ego by globalParameters.gap + 54"),
+     "gap (the Car merger's behaviour argument gap, which the new script fixes at 50 without a parameter"),
+])
+def test_a_key_quantity_fixed_away_from_the_failing_value_is_rejected_whatever_else_uses_the_parameter(
+        generated, reason_start):
+    from dv2s_gym.mining.convert import _judge, compare_parameters
+
+    interaction = {"actor": "merger", "kind": "car"}
+    compared = compare_parameters(_KEY_FAILING, generated, parent=_KEY_PARENT, interaction=interaction)
+    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
+    assert reasons and reasons[0].startswith("parameters: a key quantity (of the failure's interaction) that the new "
+                                             "script fixes must hold the failing value, and it does not: " + reason_start)
+
+
+_SLOWER_PARENT = '''param ego_speed = Range(18, 25)
+param slower_by = Range(2, 4)
+param gap = Range(5, 11)
+
+behavior Drift(gap, slowerBy):
+    wait
+
+ego = new Car at lane.centerline.pointAlongBy(egoS),
+    with speed globalParameters.ego_speed
+drifter = new Car at lane.centerline.pointAlongBy(egoS + 30),
+    with name "drifter",
+    with speed globalParameters.ego_speed - globalParameters.slower_by,
+    with behavior Drift(globalParameters.gap, globalParameters.slower_by)
+'''
+
+
+@pytest.mark.parametrize("speed", ["globalParameters.ego_speed - 3", "globalParameters.ego_speed"])
+def test_a_parameter_compared_on_its_key_quantity_stays_compared_when_another_quantity_cannot_be_read(speed):
+    """ego_speed sets the ego's speed the same way in both scripts (compared, inside); the drifter's speed the new
+    script computes otherwise cannot be compared: it is listed, and it does not make the ego's speed a key parameter
+    the judge could not compare."""
+    from dv2s_gym.mining.convert import _judge, compare_parameters
+
+    generated = _SLOWER_PARENT.replace("globalParameters.ego_speed - globalParameters.slower_by", speed)
+    failing = {"ego_speed": 20.0, "slower_by": 3.0, "gap": 6.0}
+    interaction = {"actor": "drifter", "kind": "car"}
+    compared = compare_parameters(failing, generated, parent=_SLOWER_PARENT, interaction=interaction)
+    assert "ego_speed" in compared["compared"] and compared["key_not_compared"] == {}
+    assert "the Car drifter's speed" in compared["quantities_not_compared"]["ego_speed"]
+    assert _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3) == []
+    # the ego's own speed moved: outside, whatever the drifter
+    moved = generated.replace("param ego_speed = Range(18, 25)", "param ego_speed = Range(30, 35)")
+    outside = compare_parameters(failing, moved, parent=_SLOWER_PARENT, interaction=interaction)
+    assert outside["outside"] == ["ego_speed"]
 
 
 @pytest.mark.parametrize("assignment, inside", [("x = globalParameters.g + 20", False),

@@ -77,9 +77,10 @@ from dv2s_gym.mining.exact_replay import narrowed_script, replay_name, REPLAY_TA
 from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence, key_actor, shows_interaction
 from dv2s_gym.mining.monitors import detect_failure
 from dv2s_gym.mining.report_text import not_compared_names_text
-from dv2s_gym.mining.param_meaning import (counterpart_objects, key_uses, meaning_map, name_mismatch, quantity_of, quantity_uses, read_interval,
+from dv2s_gym.mining.param_meaning import (actor_objects, counterpart_objects, fixed_quantities, key_uses,
+                                           object_behaviours, meaning_map, name_mismatch, quantity_of, quantity_uses, read_interval,
                                            read_support, script_parameters, support_contains, support_hull,
-                                           support_text, tied_objects)
+                                           script_objects, support_text, tied_objects)
 from dv2s_gym.mining.settings import read_run_settings
 from dv2s_gym.mining.tasks import reference_avoids
 from dv2s_gym.pipeline import stages
@@ -381,7 +382,9 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     that set a quantity of the failure's interaction in the parent (the ego's or the key actor's, the
     ``interaction``'s ``actor``, else an actor's of its ``kind``, every actor's when neither is known:
     :func:`~dv2s_gym.mining.param_meaning.key_parameters`): the judge requires each of them compared
-    (:func:`_judge`)."""
+    (:func:`_judge`); ``"key_fixed_outside"`` those whose key quantity the new script fixes without a parameter away
+    from the failing value (:func:`_key_fixed_outside`), and ``"quantities_not_compared"`` (when any) ``{parameter:
+    why}`` for a compared parameter's other quantity the judge could not read (:func:`_through_quantities`)."""
     ranges, supports = _script_ranges(script), _script_supports(script)
     folded: Dict[str, str] = {}
     for script_name in sorted(ranges):
@@ -402,21 +405,86 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
         if script_name != name:
             compared[name]["script_name"] = script_name
     why = {name: "the new script defines no numeric parameter of that name" for name in absent}
+    keyed: Dict[str, List[Tuple[str, str, str, str]]] = {}
     if parent is not None:
-        why = _by_meaning(parent, script, numeric, compared, absent, ranges)
+        interaction = interaction or {}
+        keyed = {name: where for name, where in key_uses(parent, interaction.get("kind"),
+                                                         interaction.get("actor")).items() if name in numeric}
+        meanings = {name: {(obj == "ego", kind, slot) for obj, kind, slot, _ in where} for name, where in keyed.items()}
+        why = _by_meaning(parent, script, numeric, compared, absent, ranges, meanings)
     for name in sorted(compared):
         if not _contains(name, compared[name]):
             outside.append(name)
     not_comparable = {name: why[name] for name in sorted(why) if name not in compared}
     out = {"compared": dict(sorted(compared.items())), "outside": outside, "not_comparable": not_comparable,
            "not_in_script": list(not_comparable)}
+    partly = {name: comparison.pop("quantities_not_compared") for name, comparison in out["compared"].items()
+              if "quantities_not_compared" in comparison}
+    if partly:
+        out["quantities_not_compared"] = partly
     if parent is not None:
-        interaction = interaction or {}
-        keyed = {name: where for name, where in key_uses(parent, interaction.get("kind"),
-                                                         interaction.get("actor")).items() if name in numeric}
         out["key"] = {name: where[0][3] for name, where in keyed.items()}
         out["key_not_compared"] = _key_set_otherwise(parent, script, keyed, out)
+        out["key_fixed_outside"] = _key_fixed_outside(parent, script, keyed, numeric, interaction.get("actor"))
     return out
+
+
+def _key_fixed_outside(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
+                       numeric: Mapping[str, float], actor: Optional[str] = None) -> Dict[str, str]:
+    """``{key parameter: the key quantity and the value the new script fixes it at}`` for each key parameter whose
+    key quantity (the ego's, or the key actor's: the same quantity of its counterpart in the new script) the new
+    script sets without a parameter, to a value (a number, an inline ``Range``, discrete values:
+    :func:`~dv2s_gym.mining.param_meaning.fixed_quantities`) that does not hold the failing value's quantity (the
+    parameter's value through the parent's expression): the new script cannot produce the failing scene's quantity,
+    whatever else it does with the parameter. A key quantity the parent sets other than as a known function of the
+    parameter alone, or that the new script sets with a parameter (compared as a parameter) or not at all, is not
+    checked here; nor is a behaviour argument of an object that runs another behaviour than in the parent
+    (:func:`~dv2s_gym.mining.param_meaning.object_behaviours`: the argument may mean something else there)."""
+    fixed = fixed_quantities(script)
+    if not fixed:
+        return {}
+    old_uses, new_uses = quantity_uses(parent), quantity_uses(script)
+    objects = counterpart_objects(parent, script)
+    new_objects = script_objects(script)
+    named = actor_objects(script)
+    set_by_parameter = {where for by_slot in new_uses.values() for where in by_slot}
+    old_behaviours, new_behaviours = object_behaviours(parent), object_behaviours(script)
+
+    def counterpart(obj: str, kind: str) -> Optional[Tuple[str, str]]:
+        if obj == "ego":
+            return ("ego", kind) if ("ego", kind) in new_objects else None
+        if (obj, kind) in objects:
+            return objects[(obj, kind)]
+        if actor and actor_objects(parent).get(actor) == obj and named.get(actor):
+            found = [o for o in new_objects if o[0] == named[actor] and o[1] == kind]
+            if found:
+                return found[0]
+        same = [o for o in new_objects if o[1] == kind and o[0] != "ego"]
+        old_same = [o for o in script_objects(parent) if o[1] == kind and o[0] != "ego"]
+        return same[0] if len(same) == 1 and len(old_same) == 1 else None
+
+    found: Dict[str, str] = {}
+    for name in sorted(keyed):
+        for obj, kind, slot, words in keyed[name]:
+            functions = {q.key: q for _, q, _ in old_uses.get(name, {}).get((obj, kind, slot), ()) if q is not None}
+            other = counterpart(obj, kind)
+            if len(functions) != 1 or other is None:
+                continue
+            where = (other[0], other[1], slot)
+            if where not in fixed or where in set_by_parameter:
+                continue
+            if slot.startswith("behavior:") and old_behaviours.get(obj) != new_behaviours.get(other[0]):
+                continue  # another behaviour: its argument of that name may mean something else
+            parts = read_support(fixed[where])
+            quantity = next(iter(functions.values())).at(float(numeric[name]))
+            if parts is not None and not support_contains(parts, quantity):
+                parent_text = next(iter(functions.values())).text
+                made = (f", which the parent's {parent_text} makes {_exact(quantity)}"
+                        if parent_text != f"globalParameters.{name}" else "")
+                found[name] = (f"{words}, which the new script fixes at {fixed[where]} without a parameter, while the "
+                               f"failing {name} = {_exact(float(numeric[name]))}{made}")
+                break
+    return found
 
 
 def _key_set_otherwise(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
@@ -502,7 +570,8 @@ def _contains(name: str, comparison: Mapping[str, Any]) -> bool:
     return support_contains([tuple(part) for part in support], quantity, function)
 
 
-def _through_quantities(parent: str, script: str, compared: Dict[str, Any]) -> Dict[str, str]:
+def _through_quantities(parent: str, script: str, compared: Dict[str, Any],
+                        key_meanings: Optional[Mapping[str, Any]] = None) -> Dict[str, str]:
     """Each compared parameter is checked on every quantity it sets in both scripts (the same kind of object, the
     ego or not, and slot; :func:`~dv2s_gym.mining.param_meaning.quantity_uses`), bare uses included: the failing
     value's quantity in the parent (through the parent's own expression) against the interval the new script's
@@ -511,8 +580,11 @@ def _through_quantities(parent: str, script: str, compared: Dict[str, Any]) -> D
     the two set differently, or that several objects of a kind set with different expressions, cannot be
     compared. The first quantity outside is kept in the comparison (``expression``, ``interval``, ``quantity``,
     ``parent_expression``, ``where``), else, with every quantity inside, the first set through an expression;
-    with none outside and one that cannot be compared, the parameter leaves ``compared``. Returns ``{parameter:
-    why it is not comparable}``."""
+    with none outside and one that cannot be compared, the parameter leaves ``compared``, unless one of its key
+    quantities (``key_meanings``: ``{parameter: {(the ego?, kind, slot)}}``, the ego's or the key actor's) was
+    checked: the parameter is then compared on it (its key quantities first, in the reason too) and each quantity
+    that could not be is listed (``quantities_not_compared`` in its comparison). Returns ``{parameter: why it is not
+    comparable}``."""
     old_all, new_all = quantity_uses(parent), quantity_uses(script)
 
     def by_meaning(found: Mapping[Tuple[str, str, str], Any]) -> Dict[Tuple[bool, str, str], List[Any]]:
@@ -526,8 +598,9 @@ def _through_quantities(parent: str, script: str, compared: Dict[str, Any]) -> D
         target = comparison.get("script_name", name)
         old, new = by_meaning(old_all.get(name, {})), by_meaning(new_all.get(target, {}))
         low, high = comparison["range"]
-        outside, shown, unreadable, ambiguous, checked = None, None, None, None, False
-        shared = sorted(set(old) & set(new))
+        outside, shown, unreadable, ambiguous, checked, key_checked = None, None, None, None, False, False
+        own_keys = set((key_meanings or {}).get(name, ()))
+        shared = sorted(set(old) & set(new), key=lambda key: (key not in own_keys, key))
         for key in shared:
             where = _quantity_words(key, new[key])
             checks, problem = _quantity_checks(old[key], new[key], name, comparison)
@@ -538,6 +611,7 @@ def _through_quantities(parent: str, script: str, compared: Dict[str, Any]) -> D
                 unreadable = unreadable or f"the {where}: {problem}"
                 continue
             checked = True
+            key_checked = key_checked or key in own_keys
             for found, inside in checks:
                 if len(shared) > 1:  # which of its quantities, in the reason
                     found["where"] = where
@@ -547,6 +621,11 @@ def _through_quantities(parent: str, script: str, compared: Dict[str, Any]) -> D
                     shown = found
         if outside is not None:
             comparison.update(outside)
+        elif unreadable is not None and key_checked:
+            # compared on its key quantity; the quantity the judge could not read is listed, it does not cancel it
+            comparison["quantities_not_compared"] = f"the quantity it also sets cannot be compared: {unreadable}"
+            if shown is not None:
+                comparison.update(shown)
         elif unreadable is not None or (ambiguous is not None and not checked):
             why[name] = f"the quantity it sets cannot be compared: {unreadable or ambiguous}"
             del compared[name]
@@ -619,7 +698,8 @@ def _quantity_words(key: Tuple[bool, str, str], uses: Sequence[Tuple[Any, ...]])
 
 
 def _by_meaning(parent: str, script: str, numeric: Mapping[str, float], compared: Dict[str, Any],
-                absent: List[str], ranges: Mapping[str, Any]) -> Dict[str, str]:
+                absent: List[str], ranges: Mapping[str, Any],
+                key_meanings: Optional[Mapping[str, Any]] = None) -> Dict[str, str]:
     """:func:`compare_parameters` given the parent script: a name match that does not mean the same (another actor,
     quantity, direction or constant term, or reaching no object) is not comparable; the rest are paired by meaning
     (their counterpart must be read as an interval); no object of the new script may stand for two parent actors.
@@ -656,7 +736,7 @@ def _by_meaning(parent: str, script: str, numeric: Mapping[str, float], compared
     why.update({name: "the new script defines no numeric parameter of that name" for name in absent
                 if name not in mapped["pairs"] and name not in mapped["unpaired"]})
     why.update(_tied_twice(parent, script, compared))
-    why.update(_through_quantities(parent, script, compared))
+    why.update(_through_quantities(parent, script, compared, key_meanings))
     return why
 
 
@@ -785,6 +865,11 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
         found.append(_Rejected("actors", f"the failure's scene has {_census_text(actors['failure'])}, the new "
                                          f"scenario's {_census_text(actors['script'])}: {', '.join(problems)}"))
     parameters = out.get("parameters")
+    fixed_key = (parameters or {}).get("key_fixed_outside") or {}
+    if fixed_key:
+        found.append(_Rejected("parameters", "a key quantity (of the failure's interaction) that the new script fixes "
+                                             "must hold the failing value, and it does not: " + "; ".join(
+                                                 f"{name} ({why})" for name, why in sorted(fixed_key.items()))))
     unchecked_key = _key_not_compared(parameters)
     if unchecked_key:
         found.append(_Rejected("parameters", unchecked_key))
@@ -808,7 +893,8 @@ parameter of its own must be compared and contain the failing value: one not com
 reason (``"key_not_compared"``, :func:`_key_not_compared`). Within the share may go unchecked: parameters of other
 actors (traffic beside the interaction), and key quantities the new script fixes without a parameter of its own or
 leaves out (a generated script parameterises a scene its own way: the rule-based generator leaves most behaviour
-timings fixed)."""
+timings fixed), as long as a fixed key quantity holds the failing value (``"key_fixed_outside"``,
+:func:`_key_fixed_outside`)."""
 
 
 def _key_not_compared(parameters: Optional[Mapping[str, Any]]) -> Optional[str]:

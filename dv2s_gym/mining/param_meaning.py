@@ -47,7 +47,8 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 __all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
            "script_parameters", "affine_uses", "affine_form", "read_interval", "Affine", "Quantity", "quantity_of",
-           "quantity_uses", "read_support", "support_contains", "support_hull", "support_text", "key_parameters", "key_uses", "actor_objects", "counterpart_objects"]
+           "quantity_uses", "read_support", "support_contains", "support_hull", "support_text", "key_parameters", "key_uses", "actor_objects", "counterpart_objects",
+           "fixed_quantities", "object_behaviours", "script_objects"]
 
 PLACEMENT_KINDS = ("OrientedPoint", "Point")
 """Classes that place actors but are not actors themselves."""
@@ -697,6 +698,8 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
                 value = _value_part(slot, expression, ego_point)
                 here: List[Tuple[str, str, str, Optional[Quantity], str]] = []
                 for p in dict.fromkeys(_PARAM.findall(expression)):
+                    if value and _zero_use(value, p):
+                        continue  # times 0: the parameter does not set the quantity (a constant, or others)
                     quantity = quantity_of(value, p) if value else None
                     if quantity is None:
                         here.append((p, slot, _how(expression, p), None, " ".join(expression.split())))
@@ -723,6 +726,130 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
                        for h, q, t in listed):
                 listed.append((how, quantity, text))
     return uses, quantities
+
+
+def _zero_use(value: str, param: str) -> bool:
+    """Whether ``globalParameters.<param>`` enters ``value`` only with a coefficient 0 (``g * 0 - 15``, ``0 * g +
+    h``): whatever its value, the quantity is the same, so it is no use of the parameter. Read by the affine form with
+    the other parameters held as unknowns (each other parameter is replaced by a number, twice: the parameter's
+    coefficient must be 0 both times)."""
+    node = _parse(value)
+    if node is None or not _mentions(node, param):
+        return False
+    for probe in (1.0, 2.0):
+        class _Others(ast.NodeTransformer):
+            def visit_Attribute(self, n: ast.Attribute) -> ast.AST:
+                if (isinstance(n.value, ast.Name) and n.value.id == "globalParameters" and n.attr != param):
+                    return ast.Constant(value=probe)
+                return n
+        form = _affine_node(_Others().visit(_parse(value)), param)
+        if form is None or form[0] != 0.0:
+            return False
+    return True
+
+
+def fixed_quantities(script: str) -> Dict[Tuple[str, str, str], str]:
+    """``{(object, kind, slot): the value it is fixed at}``: each quantity of an object (the slots
+    :func:`quantity_uses` reads: speed, a placement's distance, a behaviour argument, a ``with`` property) that
+    ``script`` sets with no global parameter, to a value :func:`read_support` reads (a number, an inline ``Range``,
+    ``Uniform``, ``Options``...; a parameter times 0 counts as a number). A point that places an object hands its
+    fixed distance on, as it hands on a parameter's (:func:`quantity_uses`); a top-level variable holding such a value
+    is followed."""
+    behaviors = _behaviors(script)
+    fixed: Dict[Tuple[str, str, str], str] = {}
+    carried: Dict[str, List[Tuple[str, str]]] = {}
+    constants: Dict[str, str] = {}
+    ego_point = next((m.group(1) for m in (re.match(r"ego\s*=\s*new\s+\w+\s+at\s+.*?pointAlongBy\s*\(\s*(\w+)\s*\)",
+                                                     statement, re.S) for statement in _statements(script)) if m), None)
+
+    def constant(value: str) -> Optional[str]:
+        text = " ".join(value.split())
+        if text in constants:
+            text = constants[text]
+        for p in dict.fromkeys(_PARAM.findall(text)):
+            if not _zero_use(text, p):
+                return None
+            form = _affine_node(_parse(text), p)
+            if form is None:
+                return None
+            text = f"{form[1]:g}"
+        return text if text and read_support(text) is not None else None
+
+    for statement in _statements(script):
+        if statement.startswith(_SKIP):
+            continue
+        found = _OBJECT.match(statement)
+        if found is None:
+            assign = _ASSIGN.match(statement)
+            if assign and "new " not in assign.group(2):
+                text = " ".join(assign.group(2).split())
+                if not _PARAM.search(text) and read_support(text) is not None:
+                    constants[assign.group(1)] = text
+                else:
+                    constants.pop(assign.group(1), None)
+            continue
+        name, kind, rest = found.group(1) or f"<{found.group(2)}>", found.group(2), found.group(3)
+        here: List[Tuple[str, str]] = []
+        for specifier in _split_top(rest):
+            for slot, expression in _slots(specifier, behaviors):
+                value = _value_part(slot, expression, ego_point)
+                for point, items in carried.items():
+                    if re.search(rf"\b{re.escape(point)}\b", expression):
+                        if value and any(_slot_base(s) == _slot_base(slot) for s, _ in items):
+                            continue  # placed along the same direction from the point: the distances add up
+                        here += items
+                if value:
+                    read = constant(value)
+                    if read is not None:
+                        here.append((slot, read))
+        if kind in PLACEMENT_KINDS:
+            carried[name] = here
+            continue
+        for slot, text in here:
+            fixed.setdefault((name, kind, slot), text)
+    return fixed
+
+
+def object_behaviours(script: str) -> Dict[str, str]:
+    """``{object: its behaviour's definition}``: the text of the ``behavior`` the object is given (its name replaced,
+    its lines joined without their indentation), or the behaviour's name when the script does not define it (a
+    library behaviour: ``FollowLaneBehavior``). Two scripts' behaviour arguments mean the same only when their
+    objects run the same definition: a behaviour written anew may read its arguments another way (a drift ``depth``
+    toward the ego's lane, or to the left)."""
+    lines = script.splitlines()
+    bodies: Dict[str, str] = {}
+    for index, line in enumerate(lines):
+        head = _BEHAVIOR.match(line)
+        if head is None:
+            continue
+        body = [re.sub(rf"\b{re.escape(head.group(1))}\b", "_", line.strip())]
+        for following in lines[index + 1:]:
+            if following.strip() and not following[0].isspace():
+                break
+            if following.strip() and not following.strip().startswith("#"):
+                body.append(following.strip())
+        bodies[head.group(1)] = "\n".join(body)
+    out: Dict[str, str] = {}
+    for statement in _statements(script):
+        found = _OBJECT.match(statement)
+        if found is None or statement.startswith(_SKIP):
+            continue
+        called = re.search(r"\bwith\s+behavior\s+(\w+)", found.group(3))
+        if called:
+            out[found.group(1) or f"<{found.group(2)}>"] = bodies.get(called.group(1), called.group(1))
+    return out
+
+
+def script_objects(script: str) -> List[Tuple[str, str]]:
+    """``[(object, kind)]`` of the actors ``script`` makes at its top level (placing points left out), in order."""
+    objects = []
+    for statement in _statements(script):
+        if statement.startswith(_SKIP):
+            continue
+        found = _OBJECT.match(statement)
+        if found is not None and found.group(2) not in PLACEMENT_KINDS:
+            objects.append((found.group(1) or f"<{found.group(2)}>", found.group(2)))
+    return objects
 
 
 def _is_computation(expression: str) -> bool:
