@@ -27,7 +27,8 @@ from typing import Any, Dict, Mapping, Optional
 
 from dv2s_gym.mining.behaviour import extract_behaviour
 from dv2s_gym.mining.failure_state import failure_state
-from dv2s_gym.mining.monitors import FAILURE_TYPES, detect_failure, robustness
+from dv2s_gym.mining.monitors import (DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD, FAILURE_TYPES, detect_failure,
+                                     robustness)
 from dv2s_gym.workers.tasks import register
 from policies import worker_cache
 
@@ -75,8 +76,8 @@ def run_mine_task(task: Dict[str, Any]) -> Dict[str, Any]:
         "params": dict(task.get("params") or {}), "result": None, "failure": None, "rho": None,
         "reference": None, "avoidable": None, "trace": None, "error": None,
     }
-    monitor = {"ttc_threshold": float(task.get("ttc_threshold", 1.0)),
-               "stall_seconds": float(task.get("stall_seconds", 5.0))}
+    monitor = {"ttc_threshold": float(task.get("ttc_threshold", DEFAULT_TTC_THRESHOLD)),
+               "stall_seconds": float(task.get("stall_seconds", DEFAULT_STALL_SECONDS))}
     try:
         result, trace = _episode(task, task["policy"])
         failure = detect_failure(result, trace, **monitor)
@@ -127,7 +128,7 @@ def heldout_task(task: Mapping[str, Any]) -> Dict[str, Any]:
         env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
         policy = worker_cache.policy_for(task["policy"], env_key, env)
         result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
-        failure = _heldout_failure(result, trace, float(task.get("ttc_threshold", 1.0)))
+        failure = _heldout_failure(result, trace, float(task.get("ttc_threshold", DEFAULT_TTC_THRESHOLD)))
     except Exception as error:  # reported, never counted as a failure of the policy
         if env_key is not None:
             worker_cache.drop_env(env_key)
