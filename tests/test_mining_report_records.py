@@ -129,3 +129,39 @@ def test_the_loop_html_shows_a_kind_with_its_seed_mark_escaped():
                                              ["the worker hung (no result after 5 s)"], 1) for seed in (3, 8)])
     page = _markdown_to_html(_errored_lines({"steps": {"mine": {"errored": found}}}))
     assert "on s seed &lt;seed&gt; (1 attempts) (2 episodes, e.g. seed 3)" in page
+
+
+def test_every_kept_entry_of_the_loop_report_shows_its_clip_or_why_it_has_none(tmp_path):
+    from dv2s_gym.mining.loop_report import render_html, round_clips
+
+    bank = tmp_path / "bank"
+    rejected = bank / "replay_s_collision"
+    rejected.mkdir(parents=True)
+    (rejected / "failure.webm").write_bytes(b"webm")
+    reason = ("parameters: the new scenario's ranges do not contain the failing values: ego_speed = 9.4 outside "
+              "6..9")
+    (rejected / "meta.json").write_text(json.dumps({"name": rejected.name, "source": {
+        "kind": "mined", "replay": {"seed": 1}, "cluster": "s/collision/0", "video": "failure.webm",
+        "converted_rejections": [reason]}}))
+    extra = bank / "replay_t_stall"
+    extra.mkdir()
+    (extra / "meta.json").write_text(json.dumps({"name": extra.name, "source": {
+        "kind": "mined", "replay": {"seed": 2}, "cluster": "t/stall/0", "video": None}}))
+    kept = [{"scenario": rejected.name, "cluster": "s/collision/0", "replay": True},
+            {"scenario": extra.name, "cluster": "t/stall/0", "replay": True}]
+    report = {"settings": {"bank_dir": str(bank)}, "policy": "p",
+              "rounds": [{"round": 1, "steps": {"mine": {"kept": kept}, "split": {"held_out": [extra.name]}}}]}
+    clips = round_clips(report, tmp_path)[1]
+    assert len(clips) == 2
+    (video,) = clips[f"{rejected.name} (fine-tuned on)"]
+    assert video["path"] == "bank/replay_s_collision/failure.webm"
+    assert "has no converted script" not in video["note"]
+    assert ("a script was converted from this failure and rejected (parameters: the new scenario's ranges do not "
+            "contain the failing values)") in video["note"]
+    assert "ego_speed" not in video["note"]  # the reason in short
+    (none,) = clips[f"{extra.name} (held out)"]
+    assert none["path"] is None and "no clip recorded" in none["note"] and "extra exact replay" in none["note"]
+    page = render_html(report, {1: clips})
+    assert page.count("<video") == 1
+    assert "an extra exact replay of a cluster no conversion tried: no clip recorded" in page
+    assert "rejected (parameters: the new scenario&#x27;s ranges do not contain the failing values)" in page

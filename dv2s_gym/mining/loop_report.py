@@ -80,8 +80,10 @@ in ``after`` the same per policy
 ``Rate`` is ``{"k", "n", "rate", "low", "high"}`` (Wilson 95 %). ``report.html`` also shows, per round, the
 clips of the kept mined scenarios (the bank entry's videos, else the mining run's): each failure's clip beside a
 clip of its converted script driven by the same policy on one reproduction episode, captioned with the scenario,
-the seed and whether (and how) that episode failed; an exact replay has no converted script and shows only its
-failure clip, saying so. A round missing a step has not
+the seed and whether (and how) that episode failed; an exact replay shows only its failure clip, saying why (no
+converted script, or the script converted from it was rejected, with the judge's reason in short); a kept entry
+without any clip says why (an extra exact replay of a cluster no conversion tried is not filmed). A round missing
+a step has not
 finished it yet (the loop was stopped; rerunning resumes it).
 """
 
@@ -715,6 +717,9 @@ def _clips_html(clips: Mapping[str, Any]) -> str:
             continue
         rows: List[List[Mapping[str, Any]]] = []
         for video in videos:
+            if not video.get("path"):  # no clip: only the reason
+                rows.append([video])
+                continue
             if rows and video.get("group") is not None and rows[-1][0].get("group") == video.get("group"):
                 rows[-1].append(video)
             else:
@@ -722,7 +727,8 @@ def _clips_html(clips: Mapping[str, Any]) -> str:
         cells = "".join(
             "<div class=\"row\">" + "".join(
                 f"<figure><video src=\"{escape(v['path'])}\" controls muted loop preload=\"metadata\" "
-                f"width=\"320\"></video><figcaption>{escape(v['label'])}</figcaption></figure>" for v in row)
+                f"width=\"320\"></video><figcaption>{escape(v['label'])}</figcaption></figure>" for v in row
+                if v.get("path"))
             + "".join(f"<p class=\"note\">{escape(note)}</p>"
                       for note in dict.fromkeys(v.get("note") for v in row) if note)
             + "</div>" for row in rows)
@@ -807,7 +813,7 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
         round_clips = (clips or {}).get(number) or {}
         if any(round_clips.values()):
             details.append("<h3>Clips of the kept mined scenarios: each failure beside its converted script driven "
-                           "by the same policy</h3>" + _clips_html(round_clips))
+                           "by the same policy (an entry without a clip says why)</h3>" + _clips_html(round_clips))
     return (f"<!DOCTYPE html><html><head><meta charset=\"utf-8\"><title>dv2s loop</title><style>{_CSS}</style>"
             f"</head><body><h1>dv2s loop</h1><p>Started from <code>{escape(str(settings.get('policy')))}</code>; "
             f"last fine-tuned policy <code>{escape(str(report.get('policy')))}</code>.</p>"
@@ -832,8 +838,10 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
     "note"}]``, each failure's clip followed by the clip of its converted script driven by the policy (one
     reproduction episode, :data:`dv2s_gym.mining.convert.ENTRY_CONVERTED_VIDEO`), the two of one ``group`` shown
     side by side. The bank entry's own (its provenance ``video`` and ``converted_video``, and those of failures
-    merged into it), else the mining run's (``failures/<cluster slug>/``). An exact replay has no converted script:
-    only its failure clip, and its ``note`` says so."""
+    merged into it), else the mining run's (``failures/<cluster slug>/``). An exact replay shows only its failure
+    clip, its ``note`` saying why (no converted script, or the judge's rejection of the script converted from it);
+    a kept entry with no clip at all gets one item with ``path`` ``None`` whose ``note`` says why (an extra exact
+    replay of a cluster no conversion tried is not filmed)."""
     settings = report.get("settings") or {}
     bank = Path(settings.get("bank_dir") or Path(out) / "bank")
     found: Dict[int, Dict[str, List[Dict[str, str]]]] = {}
@@ -851,8 +859,56 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
                 if all(v["path"] != path for v in videos):
                     videos.append({"path": path, "label": label, "group": f"{scenario}/{group}",
                                    **({"note": note} if note else {})})
+            if not videos:
+                videos.append({"path": None, "label": "no clip", "group": f"{scenario}/none",
+                               "note": _no_clip_reason(entry, bank / scenario, mine)})
         found[int(record.get("round") or 0)] = clips
     return found
+
+
+def _short_reason(reason: Any, limit: int = 160) -> str:
+    """A judge's rejection in short: its stage and what failed, without the listed values (``"parameters: the new
+    scenario's ranges do not contain the failing values"``), cut at ``limit`` characters."""
+    parts = str(reason).split(": ")
+    text = ": ".join(parts[:2])
+    return text if len(text) <= limit else text[:limit - 1].rstrip() + "\u2026"
+
+
+def _rejection_note(rejections: Any) -> Optional[str]:
+    """The note of an exact replay kept after the script converted from its failure was rejected; ``None`` when no
+    rejection is recorded."""
+    if not isinstance(rejections, list) or not rejections:
+        return None
+    return (f"a script was converted from this failure and rejected ({_short_reason(rejections[0])}): the bank "
+            "keeps the exact replay of the failing scene, so only the failure clip is shown")
+
+
+def _conversion_record(mine: Mapping[str, Any], cluster: Any) -> Dict[str, Any]:
+    """The mining run's conversion record of ``cluster`` (its ``failures/<slug>/conversion/report.json``);
+    ``{}`` when there is none."""
+    if not mine.get("folder") or cluster is None:
+        return {}
+    try:
+        record = json.loads((Path(mine["folder"]) / "failures" / cluster_slug(cluster, None) / CONVERSION_DIR
+                             / "report.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return record if isinstance(record, dict) else {}
+
+
+def _no_clip_reason(entry: Mapping[str, Any], folder: Path, mine: Mapping[str, Any]) -> str:
+    """Why a kept mined scenario shows no clip in the loop report."""
+    source = _entry_source(folder) if folder.is_dir() else {}
+    rejected = _rejection_note(source.get("converted_rejections")
+                               or _conversion_record(mine, entry.get("cluster")).get("rejections"))
+    if rejected:
+        return ("no clip: " + rejected.split(": the bank keeps", 1)[0] + "; no clip of the failure was found")
+    if entry.get("replay") or source.get("replay"):
+        return ("an extra exact replay of a cluster no conversion tried: no clip recorded (only the failures sent "
+                "to conversion are filmed; the entry keeps the failing episode's trace)")
+    if not folder.is_dir():
+        return "no clip: the bank entry is gone and the mining run has no clip of its failure"
+    return "no clip recorded for this entry (neither the bank entry nor the mining run has one)"
 
 
 def _entry_source(folder: Path) -> Dict[str, Any]:
@@ -894,7 +950,7 @@ def _entry_clips(entry: Mapping[str, Any], folder: Path, mine: Mapping[str, Any]
                      else f"failure merged into it ({prefix.rstrip('/')})")
             if provenance.get("parent") and provenance.get("seed") is not None:
                 label += f" ({provenance['parent']}, seed {provenance['seed']})"
-            note = replay_note if replay else None
+            note = (_rejection_note(provenance.get("converted_rejections")) or replay_note) if replay else None
             if not replay and not converted.is_file():
                 clip = (provenance.get("reproduction") or {}).get("clip") or {}
                 note = (f"no clip of the converted script ({clip['error']})" if clip.get("error")
@@ -913,9 +969,10 @@ def _entry_clips(entry: Mapping[str, Any], folder: Path, mine: Mapping[str, Any]
             return found
     if mine.get("folder"):  # the bank entry is gone: the mining run's copy
         run = Path(mine["folder"]) / "failures" / cluster_slug(cluster, None)
+        run_note = ((_rejection_note(_conversion_record(mine, cluster).get("rejections")) or replay_note)
+                    if entry.get("replay") else None)
         for video in sorted(run.glob("*.webm")) if run.is_dir() else []:
-            found.append((video, f"failure of cluster {cluster} (mining run)", "run",
-                          replay_note if entry.get("replay") else None))
+            found.append((video, f"failure of cluster {cluster} (mining run)", "run", run_note))
         converted = run / CONVERSION_DIR / ENTRY_CONVERTED_VIDEO
         if found and not entry.get("replay") and converted.is_file():
             try:
