@@ -161,7 +161,9 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     assert replay.source["converted"] == out["bank_entry"] and replay.source["converted_e2e_sc"] == out["e2e_sc"]
     assert replay.source["e2e_sc"] == 1.0
     for name, (low, high) in replay.source["replay"]["intervals"].items():
-        assert low <= record["params"][name] <= high and f"Range({low!r}, {high!r})" in replay.script
+        assert low <= record["params"][name] <= high
+        assert f"Range({low!r}, {high!r})" in replay.script or (low == high and "fixed at the failing" in replay.script)
+    assert isinstance(replay.source["replay"]["not_narrowed"], dict)
     rerun = replay_failure(fresh, out["replay_entry"])
     assert rerun["matches"] and rerun["trajectory_hash"] == record["result"]["trajectory_hash"]
     assert same_failure_class(record["failure"], rerun["failure"])
@@ -590,19 +592,44 @@ def test_a_near_copy_of_a_mined_entry_of_the_same_family_is_merged(tmp_path):
     assert sorted(Bank(tmp_path / "bank").names()) == ["mined_a", "mined_b", "mined_d"]
 
 
-def test_the_replay_script_narrows_only_the_continuous_ranges_around_the_failing_values():
+def test_the_replay_script_narrows_the_continuous_ranges_and_fixes_the_discrete_ones_at_the_failing_values():
     from dv2s_gym.mining.exact_replay import narrowed_script
 
     script = ("param map = 'highway_straight'\nparam gap = Range(20, 40)  # metres\nparam lanes = DiscreteRange(1, 3)\n"
               "param colour = Uniform('red', 'blue')\nparam other = Range(0, 10)\nego = new Car\n")
-    narrowed, intervals = narrowed_script(script, {"gap": 25.0, "lanes": 2, "colour": "red", "other": 0.0})
-    assert intervals == {"gap": [24.6, 25.4], "other": [0.0, 0.2]}  # 2 % of the width each side, within range
+    narrowed, intervals, not_narrowed = narrowed_script(script, {"gap": 25.0, "lanes": 2, "colour": "red",
+                                                                 "other": 0.0})
+    assert intervals == {"gap": [24.6, 25.4], "lanes": [2.0, 2.0], "other": [0.0, 0.2]}  # 2 % of the width each side
     assert "param gap = Range(24.6, 25.4)" in narrowed and "param other = Range(0.0, 0.2)" in narrowed
-    for kept in ("param lanes = DiscreteRange(1, 3)", "param colour = Uniform('red', 'blue')",
-                 "param map = 'highway_straight'", "ego = new Car"):
+    assert "param lanes = 2  # fixed at the failing value (the parent draws DiscreteRange(1, 3))" in narrowed
+    assert not_narrowed == {"colour": "its failing value 'red' is not a number"}
+    for kept in ("param colour = Uniform('red', 'blue')", "param map = 'highway_straight'", "ego = new Car"):
         assert kept in narrowed
     with pytest.raises(ValueError, match="outside its range"):
         narrowed_script(script, {"gap": 41.0})
+    with pytest.raises(ValueError, match="outside its range"):
+        narrowed_script(script, {"lanes": 4})
+
+
+def test_the_replay_script_narrows_an_offset_range_fixes_a_two_valued_choice_and_lists_what_it_cannot_narrow():
+    from dv2s_gym.mining.exact_replay import narrowed_script
+
+    script = ("param map = 'highway_straight'\nparam ego_speed = Range(22, 30)\nparam lead_gap = Range(0, 10) + 12\n"
+              "param brake_strength = Uniform(0.3, 1.0)\nparam drawn = Range(1, 2)\nparam noise = Normal(0, 1)\n"
+              "param mix = Uniform(Range(1, 2), 5)\nego = new Car\n")
+    params = {"ego_speed": 24.0, "lead_gap": 17.0, "brake_strength": 1.0, "noise": 0.3, "mix": 5.0}
+    narrowed, intervals, not_narrowed = narrowed_script(script, params)
+    assert intervals["lead_gap"] == [16.8, 17.2]  # 2 % of the width 10 of 12..22 on either side
+    assert "param lead_gap = Range(16.8, 17.2)" in narrowed
+    assert intervals["brake_strength"] == [1.0, 1.0]
+    assert "param brake_strength = 1.0  # fixed at the failing value" in narrowed
+    assert sorted(not_narrowed) == ["drawn", "mix", "noise"]
+    assert "not among the failure's recorded parameters" in not_narrowed["drawn"]
+    assert "Normal(0, 1)" in not_narrowed["noise"] and "mixes intervals and separate values" in not_narrowed["mix"]
+    with pytest.raises(ValueError, match="outside its range"):
+        narrowed_script(script, {"lead_gap": 5.0})
+    with pytest.raises(ValueError, match="outside its range"):
+        narrowed_script(script, {"brake_strength": 0.5})
 
 
 def test_the_judge_compares_parameter_names_without_case_and_never_prints_an_outside_value_as_inside():

@@ -953,7 +953,8 @@ def _add_replay(record: Mapping[str, Any], bank, settings: ConversionSettings, s
     """Add the exact replay of the failing scene to ``bank`` (:mod:`dv2s_gym.mining.exact_replay`): the parent
     script (in the settings' ``bank_dir``) narrowed around the failing parameters, checked to replay the recorded
     episode step for step with the settings' ``policy``, ``env_config`` and ``monitor``.
-    Returns ``{"entry", "params", "intervals", "seed", "trajectory_hash", "e2e_sc", "note"}`` (``entry`` None,
+    Returns ``{"entry", "params", "intervals", "not_narrowed", "seed", "trajectory_hash", "e2e_sc", "note"}``
+    (``not_narrowed``: ``{parameter: why}`` of those left at the parent's distribution; ``entry`` None,
     with a ``note``, when the narrowed script is the parent itself and the parent is in ``bank``).
 
     Without a ``source_trace`` (no failure video was made), the replay's own trace stands for it once its
@@ -961,8 +962,8 @@ def _add_replay(record: Mapping[str, Any], bank, settings: ConversionSettings, s
     without an ``interaction`` it is read from that trace."""
     parent = (Bank(settings.bank_dir) if settings.bank_dir else Bank()).get(record["scenario"])
     params = dict(record.get("params") or {})
-    script, intervals, trace, failure, source = _run_narrowed(record, parent, params, settings, source)
-    replay = {"params": params, "intervals": intervals, "seed": int(record["seed"]),
+    script, intervals, not_narrowed, trace, failure, source = _run_narrowed(record, parent, params, settings, source)
+    replay = {"params": params, "intervals": intervals, "not_narrowed": not_narrowed, "seed": int(record["seed"]),
               "trajectory_hash": record["result"]["trajectory_hash"],
               "policy": _policy_name(settings.policy), **replay_versions(settings.policy)}
     out = {"entry": None, **replay, "failure": failure, "note": None,
@@ -974,9 +975,9 @@ def _add_replay(record: Mapping[str, Any], bank, settings: ConversionSettings, s
 def _run_narrowed(record: Mapping[str, Any], parent: Any, params: Dict[str, Any], settings: ConversionSettings,
                   source: _ReplaySource) -> tuple:
     """Write the parent narrowed around the failing ``params`` and replay the recorded episode on it:
-    ``(script, intervals, trace, failure, source)``, ``source`` completed from the replay when it had no trace.
+    ``(script, intervals, not_narrowed, trace, failure, source)``, ``source`` completed from the replay when it had no trace.
     A replay that diverges is a ``replay`` rejection."""
-    script, intervals = narrowed_script(parent.script, params)
+    script, intervals, not_narrowed = narrowed_script(parent.script, params)
     seed = int(record["seed"])
     expected = record["result"]["trajectory_hash"]
     folder = source.run_dir / "failures" / cluster_slug(source.cluster, record.get("index")) / CONVERSION_DIR
@@ -998,7 +999,7 @@ def _run_narrowed(record: Mapping[str, Any], parent: Any, params: Dict[str, Any]
             interaction = failure_interaction(trace, source_failure)
         source = dataclasses.replace(source, source_trace=trace, files={ENTRY_TRACE: folder / ENTRY_TRACE},
                                      source_failure=source_failure, interaction=interaction)
-    return script, intervals, trace, failure, source
+    return script, intervals, not_narrowed, trace, failure, source
 
 
 def _bank_replay(out: Dict[str, Any], record: Mapping[str, Any], bank, parent: Any, script: str,
@@ -1010,7 +1011,9 @@ def _bank_replay(out: Dict[str, Any], record: Mapping[str, Any], bank, parent: A
     source_failure = source.source_failure
     events = interaction_sentence(source.interaction)
     description = (f"{parent.description.strip()} Exact replay of a failure of {_policy_name(policy)}: seed {seed}, "
-                   f"parameters narrowed around the failing values." + (f" {events}" if events else ""))
+                   f"parameters narrowed around the failing values"
+                   + (f" (not narrowed, drawn as in the parent: {', '.join(sorted(replay.get('not_narrowed') or {}))})"
+                      if replay.get("not_narrowed") else "") + "." + (f" {events}" if events else ""))
     provenance = Provenance(kind="mined", parent=record["scenario"], seed=seed, params=params,
                             video=ENTRY_VIDEO if ENTRY_VIDEO in files else None,
                             trace=ENTRY_TRACE if ENTRY_TRACE in files else None, generator="exact replay",

@@ -1,10 +1,12 @@
 """The failing scene itself as a bank entry: its parent scenario, narrowed around the failure, and its seed.
 
 A mined failure is kept exactly, whatever the D-V2S conversion makes of it: the **replay entry** is the
-parent's Scenic script with every continuous mined parameter (``param x = Range(a, b)``) narrowed to
-:data:`NARROW` of its width on either side of the failing value (:func:`narrowed_script`; integer and
-choice parameters keep their values), and its provenance ``replay`` holds what pins the scene exactly:
-``{"params", "seed", "trajectory_hash", "policy"}`` and what the episode depends on beyond the scene
+parent's Scenic script with every continuous mined parameter (``param x = Range(a, b)``, also offset or scaled by
+numbers) narrowed to :data:`NARROW` of its width on either side of the failing value and every discrete one
+(``Uniform(0.3, 1.0)``, ``DiscreteRange(1, 3)``) fixed at it (:func:`narrowed_script`; any other distribution
+keeps the parent's, and the provenance's ``not_narrowed`` lists it with why), and its provenance ``replay`` holds
+what pins the scene exactly: ``{"params", "seed", "trajectory_hash", "policy", "intervals", "not_narrowed"}`` and
+what the episode depends on beyond the scene
 (:func:`replay_versions`): the policy checkpoint's SHA-256 (``policy_sha256``, ``None`` when the policy is
 no checkpoint), the dv2s-gym version, one SHA-256 of its simulator and policy sources (an edited install
 keeps its version) and the trace format's version. Running the entry with those parameters and that seed
@@ -21,6 +23,7 @@ import os
 import re
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import detect_failure
+from dv2s_gym.mining.param_meaning import read_support, support_contains, support_text
 from dv2s_gym.regress import identity
 from dv2s_gym.regress.identity import checkpoint_path, installed_version
 from envs.trace import TRACE_VERSION
@@ -40,32 +43,99 @@ REPLAY_TAG = "replay"
 _PARAM_LINE = re.compile(r"^(\s*param\s+)(\w+)(\s*=\s*)(.+?)(\s*(#.*)?)$")
 
 
-def narrowed_script(script: str, params: Mapping[str, Any], narrow: float = NARROW) -> Tuple[str, Dict[str, list]]:
-    """``script`` with each parameter of ``params`` that the script draws from a continuous ``Range(a, b)``
-    of numbers rewritten to ``Range(lo, hi)``, ``narrow`` of the width on either side of its value; returns
-    the script and the new intervals ``{name: [lo, hi]}``. Other parameters are left as they are. Raises
-    ``ValueError`` for a value outside its range."""
+def narrowed_script(script: str, params: Mapping[str, Any], narrow: float = NARROW
+                    ) -> Tuple[str, Dict[str, list], Dict[str, str]]:
+    """``script`` with each parameter of ``params`` narrowed around its failing value; returns the script, the new
+    intervals ``{name: [lo, hi]}`` and the parameters left as the parent draws them, with why (``{name: reason}``).
+
+    The parameter's distribution is read by :func:`dv2s_gym.mining.param_meaning.read_support`: one interval of
+    numbers (``Range(a, b)``, or one offset or scaled by numbers, ``Range(0, 10) + 12``) becomes ``Range(lo, hi)``,
+    ``narrow`` of its width on either side of the value; a discrete one (``Uniform(0.3, 1.0)``,
+    ``DiscreteRange(1, 3)``, numbers offset or scaled) is fixed at the failing value. Any other (a ``Normal``, an
+    interval mixed with points, text values, another parameter) is left as it is and listed, and so is a parameter
+    the script draws that ``params`` does not hold (its failing value is unknown). Raises
+    ``ValueError`` for a value the distribution cannot take."""
     intervals: Dict[str, list] = {}
+    skipped: Dict[str, str] = {}
     lines = script.splitlines(keepends=True)
     for i, line in enumerate(lines):
         body = line.rstrip("\r\n")
         match = _PARAM_LINE.match(body)
         name = match.group(2) if match else None
-        if name not in params or not re.match(r"Range\s*\(", match.group(4)):
+        if name is None:
             continue
-        bounds = param_ranges(f"param {name} = {match.group(4)}\n").get(name)
-        if bounds is None or isinstance(params[name], bool) or not isinstance(params[name], (int, float)):
+        if name not in params:
+            if _random(match.group(4)):
+                skipped[name] = ("not among the failure's recorded parameters (the mining run did not sample it: "
+                                 "the scene drew it from the seed), so its failing value is unknown and it keeps "
+                                 f"the parent's {match.group(4).strip()}")
             continue
-        low, high = bounds
-        value = float(params[name])
-        if not low - 1e-9 <= value <= high + 1e-9:
-            raise MiningError(f"parameter {name}={value} lies outside its range {low:g}..{high:g}")
-        width = narrow * (high - low)
-        lo, hi = max(low, value - width), min(high, value + width)
-        intervals[name] = [lo, hi]
-        lines[i] = f"{match.group(1)}{name}{match.group(3)}Range({lo!r}, {hi!r})" \
-                   f"  # narrowed around the failing value {value!r}" + line[len(body):]
-    return "".join(lines), intervals
+        expression, value = match.group(4), params[name]
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            skipped[name] = f"its failing value {value!r} is not a number"
+            continue
+        parts = read_support(expression)
+        if parts is None:
+            skipped[name] = (f"its distribution {expression.strip()} is not read as an interval or a set of numbers, "
+                             "so it keeps the parent's")
+            continue
+        value = float(value)
+        kinds = {part[0] for part in parts}
+        if kinds == {"interval"} and len(parts) == 1:
+            low, high = parts[0][1], parts[0][2]
+            if not low - 1e-9 <= value <= high + 1e-9:
+                raise MiningError(f"parameter {name}={value} lies outside its range {low:g}..{high:g}")
+            if high == low:
+                continue  # a constant: nothing to narrow
+            width = narrow * (high - low)
+            lo, hi = max(low, value - width), min(high, value + width)
+            intervals[name] = [lo, hi]
+            lines[i] = f"{match.group(1)}{name}{match.group(3)}Range({lo!r}, {hi!r})" \
+                       f"  # narrowed around the failing value {value!r}" + line[len(body):]
+        elif "interval" not in kinds:
+            if not support_contains(parts, value):
+                raise MiningError(f"parameter {name}={value} lies outside its range {support_text(parts)}")
+            if len(support_values(parts)) == 1:
+                continue  # a constant: nothing to fix
+            written = int(value) if float(value).is_integer() and _integers(parts) else value
+            intervals[name] = [value, value]
+            lines[i] = f"{match.group(1)}{name}{match.group(3)}{written!r}" \
+                       f"  # fixed at the failing value (the parent draws {expression.strip()})" + line[len(body):]
+        else:
+            skipped[name] = (f"its distribution {expression.strip()} mixes intervals and separate values "
+                             f"({support_text(parts)}), so it keeps the parent's")
+    return "".join(lines), intervals, skipped
+
+
+_RANDOM = re.compile(r"\b(Range|Uniform|Normal|TruncatedNormal|Options|Discrete|DiscreteRange|VerifaiRange|"
+                     r"VerifaiOptions|VerifaiParameter|resample)\s*\(")
+
+
+def _random(expression: str) -> bool:
+    """Whether a ``param`` line's expression draws a value (a distribution that is not a single value)."""
+    parts = read_support(expression)
+    if parts is not None:
+        return any(part[0] == "interval" and part[1] != part[2] for part in parts) or \
+            len(support_values(parts)) > 1
+    return bool(_RANDOM.search(expression.split("#", 1)[0]))
+
+
+def support_values(parts) -> list:
+    """The separate values of a discrete :func:`~dv2s_gym.mining.param_meaning.read_support` (no interval)."""
+    values = set()
+    for part in parts:
+        if part[0] == "points":
+            values.update(part[1])
+        elif part[3] <= 2:
+            values.update(part[1] + k * part[2] for k in range(part[3]))
+        else:
+            return [None, None]  # many
+    return sorted(values)
+
+
+def _integers(parts) -> bool:
+    """Whether every value of the discrete ``parts`` is an integer (a ``DiscreteRange``)."""
+    return all(part[0] == "grid" and float(part[1]).is_integer() and float(part[2]).is_integer() for part in parts)
 
 
 def replay_name(parent: str, failure_type: str) -> str:
