@@ -140,6 +140,34 @@ def test_heldout_comparison_needs_enough_families_as_well_as_episodes():
     assert _round_row({"steps": {"after": few}})["drop"] == "not reported: 2 < 3 families"
 
 
+def test_the_heldout_drop_interval_resamples_families_and_the_report_says_pairs_of_a_family_are_not_independent():
+    from dv2s_gym.mining.loop import heldout_comparison
+    from dv2s_gym.mining.loop_report import _heldout_lines
+
+    families, start, tuned = {}, [], []
+
+    def add(scenario, family, before, after):
+        families[scenario] = family
+        for seed in range(4):
+            start.append({"scenario": scenario, "seed": seed, "failed": before, "error": None})
+            tuned.append({"scenario": scenario, "seed": seed, "failed": after, "error": None})
+
+    for i in range(5):  # one family of five replays of one failure, all fixed; two families unchanged
+        add(f"replay_a_{i}", "fam_a", True, False)
+    add("replay_b", "fam_b", True, True)
+    add("replay_c", "fam_c", True, True)
+    summary = heldout_comparison(start, tuned, None, min_episodes=20, families=families, min_families=3)
+    assert summary["relative_drop"] == pytest.approx(20 / 28)
+    # drawing three families with replacement can leave out family A (drop 0) or take only it (drop 1): resampling
+    # the 7 scenarios as if independent gave [0.43, 1.0]
+    assert summary["relative_drop_interval"] == [0.0, 1.0]
+    assert summary["relative_drop_interval_unit"] == "family" and summary["relative_drop_interval_units"] == 3
+    assert summary["mcnemar_unit"] == "pair" and summary["pairs_per_family"] == {"fam_a": 20, "fam_b": 4, "fam_c": 4}
+    text = "\n".join(_heldout_lines(summary))
+    assert "resamples whole held-out families (the unit the split holds out), 3 of them" in text
+    assert "pairs within one family" in text and "are not independent" in text and "up to 20 pairs" in text
+
+
 def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
     from dv2s_gym.mining.loop import heldout_comparison
 

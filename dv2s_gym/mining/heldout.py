@@ -116,11 +116,17 @@ def _relative_drop(before: float, after: float) -> Optional[float]:
 
 
 def paired_summary(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[str, Any]], *,
-                   bootstrap: int = 2000, seed: int = 0) -> Dict[str, Any]:
-    """Rates before and after (Wilson 95 %), relative drop with a scenario-bootstrap interval,
-    the paired table (candidate = after, baseline = before) and the exact two-sided McNemar p.
+                   bootstrap: int = 2000, seed: int = 0,
+                   families: Optional[Mapping[str, str]] = None) -> Dict[str, Any]:
+    """Rates before and after (Wilson 95 %), relative drop with a bootstrap interval resampling whole families
+    (``families`` maps each scenario to its family; default: each scenario its own), the paired table (candidate =
+    after, baseline = before) and the exact two-sided McNemar p.
 
-    Pairs are matched by (scenario, seed); a pair with an error on either side is left out.
+    Pairs are matched by (scenario, seed); a pair with an error on either side is left out. The scenarios of one
+    family (replays of one failure, a conversion of it) are not independent: the split holds families out, so the
+    bootstrap draws families, and ``relative_drop_interval_unit`` / ``relative_drop_interval_units`` say what it
+    drew and how many. The McNemar test stays per pair (``mcnemar_unit`` ``"pair"``): pairs within one family are
+    not independent, so its p is optimistic when a family holds several pairs.
     """
     after_by = {(r["scenario"], int(r["seed"])): r for r in after}
     pairs: List[Tuple[str, bool, bool]] = []
@@ -138,11 +144,13 @@ def paired_summary(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[
     drop = _relative_drop(k_before / n, k_after / n) if n else None
     interval = [None, None]
     scenarios = sorted({s for s, _, _ in pairs})
-    if drop is not None and len(scenarios) > 1 and bootstrap > 0:
-        counts = np.array([[sum(1 for s, b, _ in pairs if s == name and b), sum(1 for s, _, a in pairs if s == name and a)]
-                           for name in scenarios], dtype=float)
+    family_of = {name: str((families or {}).get(name, name)) for name in scenarios}
+    units = sorted(set(family_of.values()))
+    if drop is not None and len(units) > 1 and bootstrap > 0:
+        counts = np.array([[sum(1 for s, b, _ in pairs if family_of[s] == unit and b),
+                            sum(1 for s, _, a in pairs if family_of[s] == unit and a)] for unit in units], dtype=float)
         rng = np.random.default_rng(seed)
-        draws = rng.integers(0, len(scenarios), size=(bootstrap, len(scenarios)))
+        draws = rng.integers(0, len(units), size=(bootstrap, len(units)))
         sums = counts[draws].sum(axis=1)
         valid = sums[:, 0] > 0
         drops = (sums[valid, 0] - sums[valid, 1]) / sums[valid, 0]
@@ -159,6 +167,11 @@ def paired_summary(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[
         "after": _rate(k_after, n),
         "relative_drop": drop,
         "relative_drop_interval": interval,
+        "relative_drop_interval_unit": "family" if families is not None else "scenario",
+        "relative_drop_interval_units": len(units),
+        "mcnemar_unit": "pair",
+        "pairs_per_family": ({unit: sum(1 for s, _, _ in pairs if family_of[s] == unit) for unit in units}
+                             if families is not None else None),
         "table": {"both_fail": table.both_fail, "after_only": table.candidate_only,
                   "before_only": table.baseline_only, "neither": table.neither},
         "mcnemar_p": mcnemar_exact(table) if n else None,

@@ -848,9 +848,12 @@ def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapp
     (:func:`dv2s_gym.mining.loop_verdict.heldout_worse`, the verdict's held-out tests; ``None`` when not tested:
     below the minimums, or no control), each with its held-out families' harm rule at ``margin`` (default: the
     loop's default margin; :func:`dv2s_gym.mining.loop_verdict.family_harm`)."""
-    summary = paired_summary(before, after, seed=seed)
-    summary["min_episodes"] = min_episodes
     scenarios = sorted({str(r["scenario"]) for r in before})
+    # the drop's interval resamples families, the unit the split holds out (scenarios of one family are not
+    # independent); a scenario without a family stands for itself
+    summary = paired_summary(before, after, seed=seed,
+                             families={name: (families or {}).get(name, name) for name in scenarios})
+    summary["min_episodes"] = min_episodes
     summary["heldout_scenarios"] = len(scenarios)
     # a family counts only with a tested pair (no error on either side) in each held-out test: one whose episodes
     # all errored tests nothing, so it never makes a round large enough to judge

@@ -30,8 +30,10 @@
                                          "env_config": the fine-tuning env's config,
                                          "reference", "agreement", "resumed" (dagger only)},
                            "after": {"pairs", "errors", "before": Rate (start), "after": Rate (fine-tuned),
-                                     "control": Rate, "relative_drop", "relative_drop_interval", "table",
-                                     "mcnemar_p" (fine-tuned vs start), "per_scenario",
+                                     "control": Rate, "relative_drop", "relative_drop_interval" (resampling
+                                     "relative_drop_interval_unit" "family", "relative_drop_interval_units" of
+                                     them), "table", "mcnemar_p" (fine-tuned vs start, per pair: "mcnemar_unit"),
+                                     "pairs_per_family", "per_scenario",
                                      "vs_control": {"pairs", "errors", "relative_drop", "table": {"both_fail",
                                                     "fine_tuned_only", "control_only", "neither"}, "mcnemar_p",
                                                     "per_scenario": {scenario: control failures}},
@@ -427,6 +429,9 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
                  f"{table.get('both_fail')}, only start {table.get('before_only')}, only fine-tuned "
                  f"{table.get('after_only')}, neither {table.get('neither')}"
                  + ("" if after.get("mcnemar_p") is None else f", exact McNemar p = {after['mcnemar_p']:.3g}"))
+    dependence = _dependence_line(after)
+    if dependence:
+        lines.append(dependence)
     kinds = after.get("failure_types") or {}
     if kinds:
         lines.append("- held-out failures by type: " + "; ".join(
@@ -512,6 +517,28 @@ def _settings_lines(settings: Mapping[str, Any]) -> List[str]:
         f"{settings.get('regress_episodes')} seeds per scenario (margin {settings.get('margin')}).", "",
         *_floor_lines(settings),
     ]
+
+
+def _dependence_line(after: Mapping[str, Any]) -> Optional[str]:
+    """What the held-out drop's interval resampled, and that the paired McNemar tests count pairs of one family as
+    independent when they are not; ``None`` without a drop or test."""
+    interval = after.get("relative_drop_interval") or [None, None]
+    if after.get("relative_drop") is None and after.get("mcnemar_p") is None:
+        return None
+    parts = []
+    if interval[0] is not None:
+        unit = after.get("relative_drop_interval_unit") or "scenario"
+        count = after.get("relative_drop_interval_units")
+        what = "held-out families (the unit the split holds out)" if unit == "family" else "held-out scenarios"
+        parts.append(f"the relative drop's 95 % interval [{interval[0]:.0%}, {interval[1]:.0%}] resamples whole "
+                     + (f"{what}, {count} of them" if count is not None else what))
+    if after.get("mcnemar_p") is not None:
+        per_family = after.get("pairs_per_family") or {}
+        largest = max(per_family.values()) if per_family else None
+        parts.append("the McNemar tests pair episodes one by one, and pairs within one family (replays of one "
+                     "failure, its conversion, their seeds) are not independent, so their p-values overstate the "
+                     "evidence" + (f" (up to {largest} pairs from one family)" if largest and largest > 1 else ""))
+    return f"- {'; '.join(parts)}" if parts else None
 
 
 def _rounds_table_lines(report: Mapping[str, Any]) -> List[str]:
@@ -827,7 +854,8 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
             f"{escape(_weights(settings.get('fine_tune_reward')))} overridden in training only), "
             f"{'with' if settings.get('control') else 'without'} a control arm, {settings.get('k_eval')} "
             f"evaluation seeds per held-out scenario (Wilson 95 % intervals; the drop's interval resamples "
-            f"scenarios; no drop or test below {settings.get('min_heldout_episodes', 0)} held-out episodes or "
+            f"held-out families, the unit the split holds out; the McNemar p-values pair episodes, and pairs within "
+            f"a family are not independent; no drop or test below {settings.get('min_heldout_episodes', 0)} held-out episodes or "
             f"{settings.get('min_heldout_families', 0)} held-out families).</p>"
             + "".join(f"<p><strong>{escape(line.strip('*'))}</strong></p>" for line in _floor_lines(settings)[:1]) +
             f"<table>{head}{''.join(rows)}</table>{final_html}{''.join(details)}</body></html>\n")
