@@ -165,3 +165,21 @@ def test_every_kept_entry_of_the_loop_report_shows_its_clip_or_why_it_has_none(t
     assert page.count("<video") == 1
     assert "an extra exact replay of a cluster no conversion tried: no clip recorded" in page
     assert "rejected (parameters: the new scenario&#x27;s ranges do not contain the failing values)" in page
+
+
+def test_the_loop_report_lists_an_exact_replays_parameters_left_at_the_parents_distribution(tmp_path):
+    from dv2s_gym.mining.loop_report import _mining_lines
+    from dv2s_gym.mining.replays import replay_entries
+
+    why = "its distribution Normal(0, 1) is not read as an interval or a set of numbers, so it keeps the parent's"
+    rows = [{"cluster": "p/stall/0", "scenario": "p", "status": "kept", "replay_entry": "replay_p_stall",
+             "replay_not_narrowed": {"noise": why}},
+            {"cluster": "q/stall/0", "scenario": "q", "status": "kept", "replay_entry": "replay_q_stall",
+             "replay_not_narrowed": {}}]
+    (tmp_path / "replays.jsonl").write_text("".join(json.dumps(row) + "\n" for row in rows))
+    kept = replay_entries(tmp_path)
+    assert kept[0]["not_narrowed"] == {"noise": why} and "not_narrowed" not in kept[1]
+    lines = _mining_lines({"folder": str(tmp_path), "kept": kept}, {})
+    assert (f"  - exact replay replay_p_stall: parameter noise not narrowed around the failing value: {why}"
+            in lines)
+    assert not any("replay_q_stall" in line for line in lines)

@@ -1049,7 +1049,8 @@ def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, *, policy
     trace). Never raises for a bad failure.
 
     Returns ``{"cluster", "index", "scenario", "status": "kept"|"rejected", "replay_entry", "reason",
-    "note", "seconds"}``: ``kept`` with the entry's name, or ``rejected`` with the reason (a replay that
+    "note", "seconds"}`` (and ``replay_not_narrowed`` when kept: ``{parameter: why}`` of those the replay leaves at
+    the parent's distribution): ``kept`` with the entry's name, or ``rejected`` with the reason (a replay that
     diverges from the recorded episode, a bad record); ``kept`` with no entry and a ``note`` when the bank
     holds the scene already under another name."""
     start = time.perf_counter()
@@ -1070,7 +1071,8 @@ def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, *, policy
         settings = ConversionSettings(policy=policy, env_config=env_config, bank_dir=bank_dir,
                                       monitor=_monitor_options(run_dir, monitor))
         replay = _add_replay(record, bank, settings, _ReplaySource(failure, cluster, run_dir))
-        out.update(status="kept", replay_entry=replay["entry"], note=replay["note"])
+        out.update(status="kept", replay_entry=replay["entry"], note=replay["note"],
+                   replay_not_narrowed=dict(replay.get("not_narrowed") or {}))
     except _Rejected as rejection:
         out["reason"] = str(rejection)
     except SETUP_ERRORS:
@@ -1106,6 +1108,7 @@ def _replay_without_video(out: Dict[str, Any], video_error: str, record: Mapping
         out["rejections"].append(_in_run(_stage_error("replay", error), source.run_dir))
         return
     out["replay_entry"] = replay["entry"]
+    out["replay_not_narrowed"] = dict(replay.get("not_narrowed") or {})
     details["replay"] = replay
     if replay["entry"]:
         _link(bank, replay["entry"], {"converted_rejections": list(out["rejections"])})
@@ -1150,8 +1153,9 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, settings: Opti
     relative to ``run_dir``; ``actors`` and ``parameters``: the judge's comparisons of the failure with the new
     script, :func:`compare_actors` and :func:`compare_parameters`;
     ``timings``: seconds per stage; ``status`` is the converted script's; ``replay_entry``: the exact replay's
-    bank entry, kept whatever the script's fate; ``rejections``: every judge check that failed, the first
-    one is ``reason``).
+    bank entry, kept whatever the script's fate, and ``replay_not_narrowed`` (once the replay is made) the
+    parameters it leaves at the parent's distribution, with why; ``rejections``: every judge check that failed,
+    the first one is ``reason``).
     """
     settings = (settings or ConversionSettings()).replace(**options)
     if settings.policy is None:
@@ -1268,6 +1272,7 @@ class _Conversion:
                                files={ENTRY_VIDEO: self.video, ENTRY_TRACE: self.written.trace_path})
         self.replay = _add_replay(self.record, self.bank, self.settings, source)
         self.out["replay_entry"] = self.replay["entry"]
+        self.out["replay_not_narrowed"] = dict(self.replay.get("not_narrowed") or {})
         self.details["replay"] = self.replay
         self.lap("replay")
 

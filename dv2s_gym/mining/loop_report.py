@@ -583,6 +583,10 @@ def _mining_lines(mine: Mapping[str, Any], settings: Mapping[str, Any]) -> List[
     if (mine.get("rejected_reason_count") or 0) > len(reasons):
         lines.append(f"  - and {mine['rejected_reason_count'] - len(reasons)} more rejection reasons "
                      f"(conversions.jsonl in {mine.get('folder')})")
+    for entry in mine.get("kept") or []:  # what an exact replay leaves as its parent draws it
+        for name, why in sorted((entry.get("not_narrowed") or {}).items()):
+            lines.append(f"  - exact replay {entry.get('scenario')}: parameter {name} not narrowed around the "
+                         f"failing value: {why}")
     return lines
 
 

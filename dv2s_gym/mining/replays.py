@@ -104,7 +104,8 @@ def replay_order(groups: Mapping[str, Sequence[Mapping[str, Any]]]) -> List[Tupl
 
 def replay_entries(run_dir: os.PathLike | str) -> List[Dict[str, Any]]:
     """The exact replay entries a mining run added: ``[{"cluster", "scenario", "parent", "reproduction": None,
-    "replay": True}]``, from the conversions' ``replay_entry`` and from ``replays.jsonl``, one per entry."""
+    "replay": True}]`` (with ``"not_narrowed": {parameter: why}`` when the replay leaves some at the parent's
+    distribution), from the conversions' ``replay_entry`` and from ``replays.jsonl``, one per entry."""
     run_dir = Path(run_dir)
     found: Dict[str, Dict[str, Any]] = {}
     episodes = None
@@ -119,4 +120,6 @@ def replay_entries(run_dir: os.PathLike | str) -> List[Dict[str, Any]]:
             parent = (episodes.get(row.get("index")) or {}).get("scenario")
         found[name] = {"cluster": str(row.get("cluster")), "scenario": name, "parent": parent, "reproduction": None,
                        "replay": True}
+        if row.get("replay_not_narrowed"):  # parameters the replay leaves at the parent's distribution, with why
+            found[name]["not_narrowed"] = dict(row["replay_not_narrowed"])
     return [found[name] for name in sorted(found)]
