@@ -181,7 +181,7 @@ def test_a_sidecar_with_a_malformed_story_is_reported_with_the_fix(bank):
     assert "'cuter'" in problem and "story.actors" in problem
     meta["story"]["steps"][0]["actor"] = "cutter"
     (bank.root / "told" / "meta.json").write_text(json.dumps(meta))
-    assert Bank(bank.root).get("told").meta["story"]["actors"] == {"cutter": "car"}
+    assert Bank(bank.root).get("told").sidecar.story["actors"] == {"cutter": "car"}
 
 
 def index_path(bank):

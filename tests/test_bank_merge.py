@@ -193,7 +193,7 @@ def test_add_takes_the_entry_as_one_sidecar_or_its_description_alone(tmp_path):
     assert by_record.name == by_mapping.name == "stop"
     assert (by_record.folder / "meta.json").read_bytes() == (by_mapping.folder / "meta.json").read_bytes()
     assert by_record.map == "highway_straight"  # an empty map in the record is read from the script
-    assert by_record.tags == ["a", "b"] and by_record.meta["use_case"] == "braking" and by_record.source["seed"] == 3
+    assert by_record.tags == ["a", "b"] and by_record.sidecar.use_case == "braking" and by_record.source["seed"] == 3
     by_text = Bank(tmp_path / "text").add(A, "A stopped car ahead.")
     by_description = Bank(tmp_path / "description").add(A, Sidecar(description="A stopped car ahead."))
     assert by_text.name == by_description.name == "stopped_ahead"  # made from the description

@@ -540,7 +540,7 @@ def test_a_held_out_familys_grandchild_stays_out_of_the_fine_tuning_mix(tmp_path
         meta["name"] = name
         meta["source"] = {**(meta.get("source") or {}), "parent": parent, "kind": "mined"}
         (bank / name / "meta.json").write_text(json.dumps(meta))
-    assert Bank(bank).get("m_cutin_child").provenance.parent == "m_cutin"
+    assert Bank(bank).get("m_cutin_child").source.parent == "m_cutin"
     captured = {}
 
     def fake_dagger(current, out, weights, arm, label):
