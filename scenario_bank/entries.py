@@ -285,10 +285,9 @@ def scan_entries(root: Path, cached: Mapping[str, Any]) -> Listing:
             sidecar: Optional[Sidecar] = None
             if stat.S_ISREG(st.st_mode) and isinstance(hit, dict) and hit.get("stamp") == stamp \
                     and "semantic_key" in hit:
-                try:
-                    sidecar, key, meta = Sidecar.from_dict(hit["meta"]), hit["semantic_key"], hit["meta"]
-                except (RecordError, BankVersionError):  # an index record that no longer reads: read the sidecar
-                    sidecar = None
+                meta, key = hit.get("meta"), hit["semantic_key"]
+                if isinstance(meta, dict) and isinstance(meta.get("source"), dict):
+                    sidecar = Sidecar.from_checked(meta)  # the index holds sidecars read and checked before
             if sidecar is None:
                 try:
                     sidecar = validate_sidecar(read_json(root, f"{name}/{SIDECAR}"), folder)

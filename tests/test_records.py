@@ -48,6 +48,9 @@ def test_every_shipped_sidecar_reads_and_writes_back_byte_for_byte(folder):
     assert _sidecar_bytes(sidecar.to_dict()) == data
     assert sidecar.provenance.kind in ("hand-written", "generated", "mined")
     assert sidecar.map and sidecar.description
+    kept = Sidecar.from_checked(sidecar.to_dict())
+    assert _sidecar_bytes(kept.to_dict()) == data and isinstance(kept.source, Provenance)
+    assert kept.source.to_dict() == sidecar.source.to_dict() and kept.tags == sidecar.tags
 
 
 def test_a_mined_provenance_round_trips_with_its_unknown_and_null_fields():
