@@ -102,10 +102,12 @@ def run_show(args: argparse.Namespace) -> int:
     entry = open_bank(args).get(args.name)
     missing = set(entry.missing_files())
     files = [str(f) + (" (missing)" if str(f.relative_to(entry.folder)) in missing else "") for f in entry.files]
-    data = {**entry.sidecar.to_dict(), "path": str(entry.script_path), "script": entry.script, "files": files}
+    # the sidecar's fields in the order its file holds them (the bank writes sidecars with sorted keys)
+    sidecar = json.loads(json.dumps(entry.sidecar.to_dict(), sort_keys=True))
+    data = {**sidecar, "path": str(entry.script_path), "script": entry.script, "files": files}
     human = (f"{entry.name}  ({entry.map}, {entry.source.kind})\n{entry.description}\n"
              f"tags: {', '.join(entry.tags)}\nelements: {json.dumps(entry.elements)}\n"
-             f"source: {json.dumps(entry.source.to_dict())}\npath: {entry.script_path}\n"
+             f"source: {json.dumps(sidecar['source'])}\npath: {entry.script_path}\n"
              + "".join(f"file: {f}\n" for f in files) + f"\n{entry.script}")
     emit(args, data, human)
     return 0
