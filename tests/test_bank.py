@@ -64,7 +64,7 @@ def test_add_get_list_filter_remove(bank):
                                                "model": None, "context_hash": "abc", "seed": 3})
     assert entry.name == "lead_slow" and entry.map == "highway_straight"
     assert entry.content_hash == content_hash(entry.script)
-    assert entry.source["kind"] == "generated" and entry.source["video"] == "v.mp4" and entry.source["date"]
+    assert entry.source.kind == "generated" and entry.source.video == "v.mp4" and entry.source.date
     add(bank, "lead_fast", speed=30, tags=["highway", "fast"],
         elements={**ELEMENTS, "actions": [["car", "brake"]]})
     reopened = Bank(bank.root)
