@@ -29,7 +29,7 @@ def build(root: Path, n: int = N) -> None:
     for i in range(n):
         base = shipped[i % len(shipped)]
         script = base.script + f"\nparam bench_{i} = Range({i}, {i + rng.randint(1, 9)})\n"
-        meta = dict(base.meta, name=f"s{i:05d}", content_hash=content_hash(script),
+        meta = dict(base.sidecar.to_dict(), name=f"s{i:05d}", content_hash=content_hash(script),
                     tags=base.tags + [f"batch{i % 50}"])
         folder = root / meta["name"]
         folder.mkdir(parents=True)

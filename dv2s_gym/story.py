@@ -165,7 +165,7 @@ def story_episodes(name: str, ego: str, seeds: Sequence[int], bank_root: Optiona
     ``ego_hit`` the kinds the ego hit.
     """
     entry = Bank(bank_root).get(name)
-    story = entry.meta.get("story")
+    story = entry.sidecar.story
     story = normalize_story(story, f"{name}: story") if story is not None else None
     elements = normalize_elements(entry.elements)
     seconds = STORY_SECONDS.get(name)

@@ -23,6 +23,7 @@ from scenario_bank.atomic import atomic_path
 from scenario_bank.dedup import content_hash
 from scenario_bank.entries import (BANK_VERSION, MAX_JSON_DEPTH, SCRIPT, SIDECAR, PathLike,
                                    entry_bytes, entry_files, read_json, read_text, unsafe_input, validate_sidecar)
+from scenario_bank.records import Sidecar
 from scenario_bank.errors import (BankError, BankVersionError, DuplicateScenarioError, MissingFileError, ScenarioRejectedError,
                                   UnsafeBankInputError, bank_write_error)
 from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, extract_archive, load_json_bounded,
@@ -64,7 +65,7 @@ def _check_header(header: Dict[str, Any], archive: PathLike) -> None:
         raise BankVersionError(f"{archive} was written by a newer dv2s-gym (format {version}); upgrade")
 
 
-def _read_entry(unpack: Path, n: str, limits: ArchiveLimits) -> Tuple[Dict[str, Any], str]:
+def _read_entry(unpack: Path, n: str, limits: ArchiveLimits) -> Tuple[Sidecar, str]:
     """``(sidecar, script)`` of the unpacked archive entry ``n``, checked (readable, valid, the script the
     sidecar's content hash names)."""
     try:
@@ -74,7 +75,7 @@ def _read_entry(unpack: Path, n: str, limits: ArchiveLimits) -> Tuple[Dict[str, 
     except (OSError, ValueError) as error:
         message = error.strerror if isinstance(error, OSError) and error.strerror else error
         raise UnsafeBankInputError(f"archive entry {n!r} is broken: {message}; nothing was imported") from None
-    if meta.get("content_hash") != content_hash(script):
+    if meta.content_hash != content_hash(script):
         raise BankError(f"archive entry {n!r}: script does not match its content_hash; nothing was imported")
     return meta, script
 
@@ -109,7 +110,7 @@ def import_archive(bank: Any, archive: PathLike, on_duplicate: str = "skip",
             _check_header(header, archive)
             for n in entries:
                 meta, script = _read_entry(unpack, n, limits)
-                duplicate = batch.duplicate_of(script, meta["elements"], meta["map"])
+                duplicate = batch.duplicate_of(script, meta.elements, meta.map)
                 if duplicate is not None:
                     if on_duplicate == "error":
                         raise DuplicateScenarioError(
@@ -122,7 +123,7 @@ def import_archive(bank: Any, archive: PathLike, on_duplicate: str = "skip",
                 except ScenarioRejectedError as error:
                     error.args = (f"{error}; nothing was imported",)
                     raise
-                carried = {f: unpack / n / f for f in entry_files(meta.get("source") or {})
+                carried = {f: unpack / n / f for f in entry_files(meta.provenance)
                            if regular_file_in_folder(unpack, f"{n}/{f}")}
                 batch.stage(script, meta, carried)
         finally:

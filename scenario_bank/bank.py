@@ -259,7 +259,7 @@ class Bank:
 
     def tags(self) -> List[str]:
         """Every tag in the bank."""
-        return sorted({t for e in self._entries.values() for t in e.meta.get("tags", ())})
+        return sorted({t for e in self._entries.values() for t in e.sidecar.tags})
 
     def sample(
         self,
@@ -299,7 +299,7 @@ class Bank:
             "scenarios": len(entries),
             "problems": len(self.problems),
             "by_map": count(e.map or "?" for e in entries),
-            "by_source": count(e.source.get("kind", "?") for e in entries),
+            "by_source": count(e.source.kind or "?" for e in entries),
             "by_road": count(e.elements.get("road") or "?" for e in entries),
             "by_tag": count(t for e in entries for t in e.tags),
             "by_participant": count(p for e in entries for p in set(e.elements.get("participants", []))),
@@ -476,7 +476,7 @@ class Bank:
         merged = {key: value for key, value in meta.source.to_dict().items() if value is not None and key != "merged"}
         merged.update(description=meta.description, content_hash=meta.content_hash, how=how)
         if files:
-            prefix = f"merged/{len(self._entries[existing].source.get('merged') or []) + 1}/"
+            prefix = f"merged/{len(self._entries[existing].source.merged or ()) + 1}/"
             folder = self._entries[existing].folder
             for file in files:
                 if not real_folder_in(self.root, f"{existing}/{prefix}{file}".rsplit("/", 1)[0]):
@@ -677,7 +677,7 @@ class Bank:
             elif n not in self._entries:
                 out.only_in_second.append(n)
             else:
-                a, b = self._entries[n].meta, other._entries[n].meta
+                a, b = self._entries[n].sidecar.to_dict(), other._entries[n].sidecar.to_dict()
                 strip = lambda m: {k: v for k, v in m.items() if k != "name"}  # noqa: E731
                 (out.same if strip(a) == strip(b) else out.changed).append(n)
         return out

@@ -39,7 +39,7 @@ def scenario_path(name: str, bank_dir: Optional[PathLike] = None) -> Path:
 
 def scenario_metadata(name: str, bank_dir: Optional[PathLike] = None) -> Dict:
     """The metadata sidecar of a scenario."""
-    return dict(open_bank(bank_dir).get(name).meta)
+    return open_bank(bank_dir).get(name).sidecar.to_dict()
 
 
 def select_scenarios(selector: Union[None, str, Sequence[str]], bank_dir: Optional[PathLike] = None) -> List[str]:

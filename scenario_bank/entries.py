@@ -99,11 +99,12 @@ def read_json(folder: Path, relative: str, max_bytes: int = MAX_SIDECAR_BYTES, s
 
 @dataclass
 class ScenarioEntry:
-    """One scenario of a bank: its script path and its sidecar."""
+    """One scenario of a bank: its script path and its sidecar (:class:`~scenario_bank.records.Sidecar`, read and
+    checked once when the bank is listed)."""
 
     name: str
     folder: Path
-    meta: Dict[str, Any]
+    sidecar: Sidecar
 
     @property
     def script_path(self) -> Path:
@@ -120,46 +121,29 @@ class ScenarioEntry:
 
     @property
     def description(self) -> str:
-        return self.meta.get("description", "")
+        return self.sidecar.description
 
     @property
-    def elements(self) -> Dict[str, Any]:
-        return self.meta.get("elements") or {"road": None, "participants": [], "actions": [], "relations": []}
+    def elements(self) -> Mapping[str, Any]:
+        """The entry's elements in canonical form (:func:`~scenario_bank.elements.normalize_elements`)."""
+        return self.sidecar.elements or {"road": None, "participants": [], "actions": [], "relations": []}
 
     @property
     def tags(self) -> List[str]:
-        return list(self.meta.get("tags", []))
+        return list(self.sidecar.tags)
 
     @property
-    def map(self) -> Optional[str]:
-        return self.meta.get("map")
+    def map(self) -> str:
+        return self.sidecar.map
 
     @property
-    def source(self) -> Dict[str, Any]:
-        return dict(self.meta.get("source") or {})
+    def source(self) -> Provenance:
+        """Where the entry came from: its sidecar's ``source`` (:class:`~scenario_bank.records.Provenance`)."""
+        return self.sidecar.provenance
 
     @property
     def content_hash(self) -> str:
-        return self.meta.get("content_hash", "")
-
-    @property
-    def sidecar(self) -> Sidecar:
-        """The entry's sidecar as a typed record (:class:`~scenario_bank.records.Sidecar`); a
-        :class:`~scenario_bank.errors.BankError` naming the entry and the field when a field has the wrong kind."""
-        return self._record(Sidecar, self.meta)
-
-    @property
-    def provenance(self) -> Provenance:
-        """Where the entry came from (its sidecar's ``source``) as a typed record
-        (:class:`~scenario_bank.records.Provenance`); a :class:`~scenario_bank.errors.BankError` naming the entry
-        and the field when a field has the wrong kind."""
-        return self._record(Provenance, self.meta.get("source") or {})
-
-    def _record(self, kind: Any, data: Mapping[str, Any]) -> Any:
-        try:
-            return kind.from_dict(data)
-        except RecordError as error:
-            raise BankError(f"bank entry {self.name!r}: {error}; correct it in {self.name}/{SIDECAR}") from None
+        return self.sidecar.content_hash or ""
 
     @property
     def files(self) -> List[Path]:
@@ -175,22 +159,22 @@ class ScenarioEntry:
     def summary(self) -> Dict[str, Any]:
         """A JSON-ready record for listings."""
         return {"name": self.name, "description": self.description, "tags": self.tags, "map": self.map,
-                "source": self.source.get("kind"), "elements": self.elements, "content_hash": self.content_hash,
+                "source": self.source.kind, "elements": self.elements, "content_hash": self.content_hash,
                 "path": str(self.script_path)}
 
 
-def validate_sidecar(meta: Any, folder: Path) -> Dict[str, Any]:
+def validate_sidecar(meta: Any, folder: Path) -> Sidecar:
     """Check a sidecar read from ``folder`` (its format: :class:`~scenario_bank.records.Sidecar`, which raises a
     :class:`~scenario_bank.records.RecordError` naming the field, or a :class:`BankVersionError`) and that the
-    folder holds its script; return it with its elements in canonical form."""
-    Sidecar.from_dict(meta)
-    meta["elements"] = normalize_elements(meta.get("elements") or {})
+    folder holds its script; return its record, its elements in canonical form."""
+    record = Sidecar.from_dict(meta)
+    record = record.replace(elements=normalize_elements(record.elements or {}))
     if not regular_file_in_folder(folder.parent, f"{folder.name}/{SCRIPT}"):
         if os.path.lexists(folder / SCRIPT):
             raise UnsafeBankInputError(f"the script {SCRIPT} is not a regular file (a link, a FIFO or a device?); "
                             "replace it by the script itself")
         raise UnsafeBankInputError(f"the script {SCRIPT} is missing")
-    return meta
+    return record
 
 
 def _has_element(elements: Mapping[str, Any], wanted: str) -> bool:
@@ -236,16 +220,16 @@ def entry_matches(entry: ScenarioEntry, tag: Optional[str], needle: Optional[str
                   map_name: Optional[str], source: Optional[str]) -> bool:
     """Whether ``entry`` passes every given filter of a listing (``needle``: a lowercase substring of the name or
     description; ``wanted``: elements it must all have)."""
-    if tag is not None and tag not in entry.meta.get("tags", ()):
+    sidecar = entry.sidecar
+    if tag is not None and tag not in sidecar.tags:
         return False
-    if map_name is not None and entry.meta.get("map") != map_name:
+    if map_name is not None and sidecar.map != map_name:
         return False
-    if source is not None and (entry.meta.get("source") or {}).get("kind") != source:
+    if source is not None and entry.source.kind != source:
         return False
-    if needle is not None and needle not in entry.name.lower() \
-            and needle not in entry.meta.get("description", "").lower():
+    if needle is not None and needle not in entry.name.lower() and needle not in sidecar.description.lower():
         return False
-    return all(_has_element(entry.meta.get("elements") or {}, w) for w in wanted)
+    return all(_has_element(sidecar.elements or {}, w) for w in wanted)
 
 
 @dataclass
@@ -298,19 +282,23 @@ def scan_entries(root: Path, cached: Mapping[str, Any]) -> Listing:
                 continue
             stamp = [st.st_mtime_ns, st.st_size]
             hit = cached.get(name)
+            sidecar: Optional[Sidecar] = None
             if stat.S_ISREG(st.st_mode) and isinstance(hit, dict) and hit.get("stamp") == stamp \
                     and "semantic_key" in hit:
-                meta, key = hit["meta"], hit["semantic_key"]
-            else:
+                meta, key = hit.get("meta"), hit["semantic_key"]
+                if isinstance(meta, dict) and isinstance(meta.get("source"), dict):
+                    sidecar = Sidecar.from_checked(meta)  # the index holds sidecars read and checked before
+            if sidecar is None:
                 try:
-                    meta = validate_sidecar(read_json(root, f"{name}/{SIDECAR}"), folder)
-                    key = semantic_key(meta["elements"], meta["map"],
+                    sidecar = validate_sidecar(read_json(root, f"{name}/{SIDECAR}"), folder)
+                    key = semantic_key(sidecar.elements, sidecar.map,
                                        read_text(root, f"{name}/{SCRIPT}", MAX_SCRIPT_BYTES))
                 except (ValueError, BankVersionError, OSError) as error:
                     problems[name] = f"bad sidecar {name}/{SIDECAR}: {error}"
                     continue
+                meta = sidecar.to_dict()
             fresh[name] = {"stamp": stamp, "meta": meta, "semantic_key": key}
-            entries[name] = ScenarioEntry(name, folder, meta)
+            entries[name] = ScenarioEntry(name, folder, sidecar)
             keys[name] = key
     return Listing(entries, problems, keys, fresh)
 

@@ -178,6 +178,24 @@ class _Record(_MappingABC):
         return cls(**values)
 
     @classmethod
+    def from_checked(cls, data: Mapping[str, Any]):
+        """The record of ``data``, the :meth:`to_dict` of a record this code read with :meth:`from_dict` and kept
+        (a bank's index of its sidecars): its fields are taken as they are, not checked again."""
+        values: Dict[str, Any] = {}
+        for key in cls._KINDS:
+            value = data.get(key)
+            if value is None:
+                continue
+            if key in cls._NESTED:
+                value = cls._NESTED[key].from_checked(value)
+            elif key in cls._LISTS:
+                value = tuple(value)
+            values[cls._ATTRIBUTES.get(key, key)] = value
+        values["extra"] = {k: v for k, v in data.items() if k not in cls._KINDS}
+        values["null_fields"] = frozenset(k for k in cls._KINDS if k in data and data[k] is None)
+        return cls(**values)
+
+    @classmethod
     def _nested(cls, key: str, value: Mapping[str, Any]) -> Any:
         """The nested record of field ``key``; its errors name the field from this record (``source.kind``)."""
         nested = cls._NESTED[key]

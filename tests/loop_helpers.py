@@ -23,7 +23,7 @@ def add_mined_copy(bank_dir: str, source: str, name: str, cluster: str, parent: 
     names ``parent`` (default ``source``) as the scenario it was mined from."""
     entry = Bank().get(source)
     script = entry.script + f"\n# mined copy for cluster {cluster}\n"
-    meta = json.loads(json.dumps(entry.meta))
+    meta = json.loads(json.dumps(entry.sidecar.to_dict()))
     meta.update(name=name, content_hash=content_hash(script))
     meta["source"] = {**meta["source"], "kind": "mined", "parent": parent or source, "seed": 0}
     folder = Path(bank_dir) / name

@@ -64,7 +64,7 @@ def test_add_get_list_filter_remove(bank):
                                                "model": None, "context_hash": "abc", "seed": 3})
     assert entry.name == "lead_slow" and entry.map == "highway_straight"
     assert entry.content_hash == content_hash(entry.script)
-    assert entry.source["kind"] == "generated" and entry.source["video"] == "v.mp4" and entry.source["date"]
+    assert entry.source.kind == "generated" and entry.source.video == "v.mp4" and entry.source.date
     add(bank, "lead_fast", speed=30, tags=["highway", "fast"],
         elements={**ELEMENTS, "actions": [["car", "brake"]]})
     reopened = Bank(bank.root)
@@ -181,7 +181,7 @@ def test_a_sidecar_with_a_malformed_story_is_reported_with_the_fix(bank):
     assert "'cuter'" in problem and "story.actors" in problem
     meta["story"]["steps"][0]["actor"] = "cutter"
     (bank.root / "told" / "meta.json").write_text(json.dumps(meta))
-    assert Bank(bank.root).get("told").meta["story"]["actors"] == {"cutter": "car"}
+    assert Bank(bank.root).get("told").sidecar.story["actors"] == {"cutter": "car"}
 
 
 def index_path(bank):

@@ -55,7 +55,7 @@ def test_add_with_merge_adds_then_merges_into_the_existing_sidecar(tmp_path):
     first = bank.add(A, Sidecar(description="A stopped car ahead.", name="mined_stop", elements=ELEMENTS,
                                 source=mined(1)), on_duplicate="merge")
     assert first.status == "added" and first.entry.name == "mined_stop"
-    assert first.entry.source["kind"] == "mined" and first.entry.source["index"] == 1
+    assert first.entry.source.kind == "mined" and first.entry.source.index == 1
     assert first.entry.source["reproduction"] is None  # every mined field is present, unknown ones None
     near = bank.add(A_NEAR, Sidecar(description="A car stands still ahead.", name="mined_stop", elements=ELEMENTS,
                                     source=mined(2)), on_duplicate="merge")
@@ -69,7 +69,7 @@ def test_add_with_merge_adds_then_merges_into_the_existing_sidecar(tmp_path):
 
     reread = Bank(tmp_path / "bank")
     assert reread.names() == ["mined_stop", "mined_stop_2"] and not reread.problems
-    merged = reread.get("mined_stop").source["merged"]
+    merged = reread.get("mined_stop").source.merged
     assert [m["index"] for m in merged] == [2, 3]
     assert merged[0]["description"] == "A car stands still ahead." and merged[0]["content_hash"]
     assert reread.get("mined_stop").script == A  # the entry itself is unchanged
@@ -89,7 +89,7 @@ def test_old_sidecars_load_and_take_merges(tmp_path):
     outcome = bank.add(A, Sidecar(description="stopped car", elements=ELEMENTS, map="highway_straight",
                                   source=mined(9)), on_duplicate="merge")
     assert outcome.status == "merged" and outcome.entry.name == BASE
-    assert Bank(tmp_path / "bank").get(BASE).source["merged"][0]["index"] == 9
+    assert Bank(tmp_path / "bank").get(BASE).source.merged[0]["index"] == 9
 
 
 def test_a_malformed_merged_list_is_reported_for_its_entry(tmp_path):
@@ -146,8 +146,8 @@ def test_several_miners_writing_to_one_bank_keep_it_consistent(tmp_path, miners)
     assert by_label["A"] == by_label["A_NEAR"] and len(by_label["A"]) == 1 and by_label["B"] != by_label["A"]
     indices = []
     for entry in bank:
-        indices.append(entry.source["index"])
-        indices += [m["index"] for m in entry.source.get("merged", [])]
+        indices.append(entry.source.index)
+        indices += [m["index"] for m in entry.source.merged or ()]
         json.loads((entry.folder / "meta.json").read_text())  # whole, parseable sidecars
     assert sorted(indices) == sorted(index for index, _, _, _ in outcomes)  # every failure recorded exactly once
     leftovers = [p.name for p in (tmp_path / "bank").glob(".*")]
@@ -161,9 +161,9 @@ def test_update_source_sets_provenance_fields_atomically_and_refuses_the_structu
     entry = bank.add(A, Sidecar(description="A stopped car ahead.", name="mined_stop", elements=ELEMENTS,
                                 source=mined(1)))
     updated = bank.update_source(entry.name, {"converted": "mined_other", "converted_e2e_sc": 0.5})
-    assert updated.source["converted"] == "mined_other" and updated.source["index"] == 1
+    assert updated.source.converted == "mined_other" and updated.source.index == 1
     reread = Bank(tmp_path / "bank").get(entry.name)
-    assert reread.source["converted_e2e_sc"] == 0.5 and reread.script == A and reread.content_hash == entry.content_hash
+    assert reread.source.extra["converted_e2e_sc"] == 0.5 and reread.script == A and reread.content_hash == entry.content_hash
     for field in ("kind", "merged", "files"):
         with pytest.raises(BankError, match="cannot set"):
             bank.update_source(entry.name, {field: []})
@@ -193,7 +193,7 @@ def test_add_takes_the_entry_as_one_sidecar_or_its_description_alone(tmp_path):
     assert by_record.name == by_mapping.name == "stop"
     assert (by_record.folder / "meta.json").read_bytes() == (by_mapping.folder / "meta.json").read_bytes()
     assert by_record.map == "highway_straight"  # an empty map in the record is read from the script
-    assert by_record.tags == ["a", "b"] and by_record.meta["use_case"] == "braking" and by_record.source["seed"] == 3
+    assert by_record.tags == ["a", "b"] and by_record.sidecar.use_case == "braking" and by_record.source.seed == 3
     by_text = Bank(tmp_path / "text").add(A, "A stopped car ahead.")
     by_description = Bank(tmp_path / "description").add(A, Sidecar(description="A stopped car ahead."))
     assert by_text.name == by_description.name == "stopped_ahead"  # made from the description

@@ -492,14 +492,14 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
     split = steps["split"]
     assert split["by"] == "family" and split["groups"] == 3 and len(split["held_out_families"]) == 2
     bank = Bank(tmp_path / "loop" / "bank")
-    parents = {name: bank.get(name).source["parent"] for name in split["held_out"] + split["fine_tune"]}
+    parents = {name: bank.get(name).source.parent for name in split["held_out"] + split["fine_tune"]}
     assert {parents[n] for n in split["held_out"]} == set(split["held_out_families"])
     assert not {parents[n] for n in split["held_out"]} & {parents[n] for n in split["fine_tune"]}
     tuned, control = stand.fine_tunes
     assert tuned["out"].endswith("round_1/policy") and control["out"].endswith("round_1/control")
     for key in ("steps", "seed", "learning_rate", "policy"):
         assert tuned[key] == control[key]  # the same fine-tuning but for the mined scenarios
-    mined = {e.name for e in bank if e.source.get("kind") == "mined"}
+    mined = {e.name for e in bank if e.source.kind == "mined"}
     assert set(split["fine_tune"]) <= set(tuned["weights"]) and not mined & set(control["weights"])
     assert set(control["weights"]) == set(tuned["weights"]) - mined
     for arm in (tuned, control):  # neither arm sees a held-out scenario or a held-out family's parent
@@ -542,7 +542,7 @@ def test_no_member_of_a_held_out_family_reaches_either_arm(tmp_path, monkeypatch
                       miner=FakeMiner(WIRING["scenarios"], failures_per_round=6, replays=True), **WIRING)
     split = report.rounds[0]["steps"]["split"]
     bank = Bank(tmp_path / "loop" / "bank")
-    family = {e.name for e in bank if e.source.get("parent") in split["held_out_families"]}
+    family = {e.name for e in bank if e.source.parent in split["held_out_families"]}
     assert any(name.startswith("replay_") for name in family)
     for arm in stand.fine_tunes:
         assert not family & set(arm["weights"])
@@ -568,7 +568,7 @@ def test_a_held_out_familys_grandchild_stays_out_of_the_fine_tuning_mix(tmp_path
         meta["name"] = name
         meta["source"] = {**(meta.get("source") or {}), "parent": parent, "kind": "mined"}
         (bank / name / "meta.json").write_text(json.dumps(meta))
-    assert Bank(bank).get("m_cutin_child").provenance.parent == "m_cutin"
+    assert Bank(bank).get("m_cutin_child").source.parent == "m_cutin"
     captured = {}
 
     def fake_dagger(current, out, weights, arm, label):
@@ -634,7 +634,7 @@ def test_the_untouched_set_is_a_bank_of_the_corpus_scripts_with_their_licences()
     sources = (UNTOUCHED_BANK / "SOURCES.md").read_text()
     for entry in bank:
         assert entry.script == originals[entry.name].read_text()  # as in the corpus, nothing changed here
-        assert "untouched" in entry.tags and entry.source["kind"] != "mined"
+        assert "untouched" in entry.tags and entry.source.kind != "mined"
         assert entry.name in sources and not entry.missing_files()
     for name in ("LICENSE-Scenic.txt", "LICENSE-CARLA-maps.txt"):
         assert (UNTOUCHED_BANK / name).is_file() and name in sources
@@ -717,7 +717,7 @@ def test_a_round_whose_conversions_are_all_rejected_holds_out_replay_families(tm
     assert split["groups"] == 3 and split["held_out"] and split["fine_tune"]
     assert all(name.startswith("replay_") for name in split["held_out"] + split["fine_tune"])
     bank = Bank(tmp_path / "loop" / "bank")
-    held_family = {e.name for e in bank if e.source.get("parent") in split["held_out_families"]}
+    held_family = {e.name for e in bank if e.source.parent in split["held_out_families"]}
     assert set(split["held_out"]) <= held_family
     tuned, control = stand.fine_tunes
     for arm in (tuned, control):

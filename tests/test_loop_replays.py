@@ -27,10 +27,10 @@ def test_a_failure_is_kept_as_its_exact_replay_without_a_video_or_a_script(recor
     assert out["status"] == "kept" and out["reason"] is None and out["scenario"] == SCENARIO, out
     bank = Bank(tmp_path / "bank")
     entry = bank.get(out["replay_entry"])
-    assert {"mined", "replay", "collision"} <= set(entry.tags) and entry.source["parent"] == SCENARIO
+    assert {"mined", "replay", "collision"} <= set(entry.tags) and entry.source.parent == SCENARIO
     assert entry.source["video"] is None and entry.source["trace"] == "trace.json.gz"
     assert not entry.missing_files() and (entry.folder / "trace.json.gz").is_file()
-    assert entry.source["interaction"]["failure_type"] == "collision" and entry.source["e2e_sc"] == 1.0
+    assert entry.source.interaction["failure_type"] == "collision" and entry.source.e2e_sc == 1.0
     assert replay_failure(bank, out["replay_entry"]).get("matches") is True  # the recorded episode, step for step
     again = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", policy="keep_lane", bank=bank,
                                  monitor={})
@@ -50,7 +50,7 @@ def test_a_replay_entry_records_what_it_depends_on_and_a_mismatch_says_why(recor
                                bank=tmp_path / "bank", monitor={})
     bank = Bank(tmp_path / "bank")
     name = out["replay_entry"]
-    replay = bank.get(name).source["replay"]
+    replay = bank.get(name).source.replay
     assert replay["policy"] == "keep_lane" and replay["policy_sha256"] is None  # a driver, no checkpoint
     assert replay["dv2s_gym_version"] == installed_version() and replay["trace_version"] == TRACE_VERSION
     assert replay["dv2s_sources_sha256"] == dv2s_sources_sha256()
@@ -90,7 +90,7 @@ def test_a_replay_that_does_not_match_the_recorded_episode_is_rejected_and_adds_
     out = replay_failure_entry(tampered, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank", monitor={})
     assert out["status"] == "rejected" and out["replay_entry"] is None
     assert out["reason"].startswith("replay: ") and "does not replay the failing episode" in out["reason"]
-    assert not [e for e in Bank(tmp_path / "bank") if e.source.get("kind") == "mined"]
+    assert not [e for e in Bank(tmp_path / "bank") if e.source.kind == "mined"]
     missing = replay_failure_entry({**record, "failure": None}, tmp_path / "run", policy="keep_lane",
                                    bank=tmp_path / "bank", monitor={})
     assert missing["status"] == "rejected" and missing["reason"].startswith("input: ")

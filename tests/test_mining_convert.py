@@ -157,13 +157,13 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
     # the failing scene itself, kept exactly: running the replay entry is the recorded episode, step for step
     replay = fresh.get(out["replay_entry"])
     assert {"mined", "replay", "collision"} <= set(replay.tags)
-    assert replay.source["replay"]["seed"] == 0 and replay.source["replay"]["params"] == record["params"]
-    assert replay.source["converted"] == out["bank_entry"] and replay.source["converted_e2e_sc"] == out["e2e_sc"]
-    assert replay.source["e2e_sc"] == 1.0
-    for name, (low, high) in replay.source["replay"]["intervals"].items():
+    assert replay.source.replay["seed"] == 0 and replay.source.replay["params"] == record["params"]
+    assert replay.source.converted == out["bank_entry"] and replay.source.extra["converted_e2e_sc"] == out["e2e_sc"]
+    assert replay.source.e2e_sc == 1.0
+    for name, (low, high) in replay.source.replay["intervals"].items():
         assert low <= record["params"][name] <= high
         assert f"Range({low!r}, {high!r})" in replay.script or (low == high and "fixed at the failing" in replay.script)
-    assert isinstance(replay.source["replay"]["not_narrowed"], dict)
+    assert isinstance(replay.source.replay["not_narrowed"], dict)
     rerun = replay_failure(fresh, out["replay_entry"])
     assert rerun["matches"] and rerun["trajectory_hash"] == record["result"]["trajectory_hash"]
     assert same_failure_class(record["failure"], rerun["failure"])
@@ -187,7 +187,7 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
 
     again = convert_failure({**record, "index": 5}, tmp_path / "run2", policy="keep_lane", bank=bank)
     assert again["status"] == "merged" and again["merged_into"] == out["bank_entry"], again["reason"]
-    merged = Bank(tmp_path / "bank").get(out["bank_entry"]).source["merged"]
+    merged = Bank(tmp_path / "bank").get(out["bank_entry"]).source.merged
     assert len(merged) == 1 and merged[0]["index"] == 5 and merged[0]["parent"] == SCENARIO
     assert merged[0]["converted_video"] == "merged/1/converted.webm"
     assert (entry.folder / "merged" / "1" / "converted.webm").is_file()
@@ -253,7 +253,7 @@ def test_a_reproduction_rate_below_the_threshold_is_rejected(record, tmp_path):
 
 def _converted(bank_dir) -> list:
     """The bank's mined entries that are converted scripts (not exact replays of a failing scene)."""
-    return [e.name for e in Bank(bank_dir) if e.source.get("kind") == "mined" and not e.source.get("replay")]
+    return [e.name for e in Bank(bank_dir) if e.source.kind == "mined" and not e.source.replay]
 
 
 def _generator_speeds_as_the_scenario(monkeypatch) -> None:
@@ -310,7 +310,7 @@ def test_a_minimal_failure_record_is_completed_from_the_monitors(record, tmp_pat
     minimal = {**record, "failure": {"type": "collision", "time": record["failure"]["time"]}}
     out = convert_failure(minimal, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
     assert out["status"] == "kept", out["reason"]
-    failure = Bank(tmp_path / "bank").get(out["bank_entry"]).source["failure"]
+    failure = Bank(tmp_path / "bank").get(out["bank_entry"]).source.failure
     assert failure["with_kind"] == "car" and failure["collision_type"] == "rear_end"
 
 
@@ -348,8 +348,8 @@ def test_the_miner_converts_a_cluster_into_the_bank(tmp_path):
         assert row["status"] == "kept", row
     for name in filter(None, [row["bank_entry"], row["replay_entry"]]):  # the failing scene is kept either way
         entry = Bank(tmp_path / "bank").get(name)
-        assert entry.source["cluster"] == row["cluster"] and entry.source["index"] == row["index"]
-        assert entry.source["run"] == str((tmp_path / "run").resolve())
+        assert entry.source.cluster == row["cluster"] and entry.source.index == row["index"]
+        assert entry.source.run == str((tmp_path / "run").resolve())
     assert row["replay_entry"]
     settings = json.loads((tmp_path / "run" / "settings.json").read_text())
     report = json.loads((tmp_path / "run" / row["script"]).with_name("report.json").read_text())
@@ -379,16 +379,16 @@ def test_a_run_killed_between_the_bank_write_and_its_record_resumes_without_a_se
     monkeypatch.setattr(JsonlAppender, "append", original)
     mined = _converted(tmp_path / "bank")
     assert len(mined) == 1 and not (tmp_path / "run" / "conversions.jsonl").read_text().strip()
-    replays = [e.name for e in Bank(tmp_path / "bank") if e.source.get("replay")]
-    assert len(replays) == 1 and Bank(tmp_path / "bank").get(replays[0]).source["converted"] == mined[0]
+    replays = [e.name for e in Bank(tmp_path / "bank") if e.source.replay]
+    assert len(replays) == 1 and Bank(tmp_path / "bank").get(replays[0]).source.converted == mined[0]
 
     resumed = mine("keep_lane", **run)
     row = resumed.conversions[0]
     assert len(resumed.conversions) == 1 and row["status"] == "kept" and row["bank_entry"] == mined[0], row
     entry = Bank(tmp_path / "bank").get(mined[0])
     assert _converted(tmp_path / "bank") == mined
-    assert [e.name for e in Bank(tmp_path / "bank") if e.source.get("replay")] == replays
-    assert not entry.source.get("merged") and row["reproduction"] == entry.source["reproduction"]
+    assert [e.name for e in Bank(tmp_path / "bank") if e.source.replay] == replays
+    assert not entry.source.merged and row["reproduction"] == entry.source.reproduction
     assert CONTRACT_KEYS <= set(row) and (tmp_path / "run" / row["video"]).is_file()
     assert (tmp_path / "run" / row["script"]).is_file()
 
@@ -554,7 +554,7 @@ def test_a_script_on_which_the_reference_fails_another_way_is_rejected(record, t
     report = json.loads((tmp_path / "run" / out["script"]).with_name("report.json").read_text())
     assert [e["failure"]["collision_type"] for e in report["reference_episodes"]] == ["struck_from_behind"] * 4
     replay = Bank(tmp_path / "bank").get(out["replay_entry"])  # the failing scene is kept exactly all the same
-    assert replay.source["converted_rejections"] == out["rejections"]
+    assert replay.source.extra["converted_rejections"] == out["rejections"]
 
 
 @pytest.mark.slow

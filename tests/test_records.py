@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from scenario_bank.entries import ScenarioEntry, new_provenance, new_sidecar
+from scenario_bank.entries import new_provenance, new_sidecar, scan_entries
 from scenario_bank.errors import BankError
 from scenario_bank.records import (MINED_PROVENANCE_FIELDS, PROVENANCE_FIELDS, EpisodeRecord, Provenance,
                                    RecordError, Sidecar)
@@ -48,6 +48,9 @@ def test_every_shipped_sidecar_reads_and_writes_back_byte_for_byte(folder):
     assert _sidecar_bytes(sidecar.to_dict()) == data
     assert sidecar.provenance.kind in ("hand-written", "generated", "mined")
     assert sidecar.map and sidecar.description
+    kept = Sidecar.from_checked(sidecar.to_dict())
+    assert _sidecar_bytes(kept.to_dict()) == data and isinstance(kept.source, Provenance)
+    assert kept.source.to_dict() == sidecar.source.to_dict() and kept.tags == sidecar.tags
 
 
 def test_a_mined_provenance_round_trips_with_its_unknown_and_null_fields():
@@ -135,14 +138,22 @@ def test_a_new_provenance_defaults_its_kind_and_date_and_refuses_a_bad_field():
         new_provenance({"seed": "3"})
 
 
-def test_an_entry_hands_out_its_provenance_and_names_itself_when_it_is_malformed(tmp_path):
-    entry = ScenarioEntry("mined_x", tmp_path / "mined_x", {"description": "d", "map": "m", "source": MINED_SOURCE})
-    assert entry.provenance.parent == "highway_lead_vehicle_brakes" and entry.sidecar.source == MINED_SOURCE
-    broken = ScenarioEntry("broken", tmp_path / "broken", {"description": "d", "map": "m",
-                                                           "source": {"kind": "mined", "parent": 5}})
-    with pytest.raises(BankError, match=r"bank entry 'broken': provenance field 'parent' must be a string.*"
-                                        r"broken/meta.json"):
-        broken.provenance
+def test_a_listed_entry_carries_its_typed_sidecar_and_a_malformed_one_is_a_problem_naming_its_file(tmp_path):
+    for name, source in [("mined_x", MINED_SOURCE), ("broken", {"kind": "mined", "parent": 5})]:
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "scenario.scenic").write_text("ego = new Car\n")
+        (tmp_path / name / "meta.json").write_text(json.dumps({"description": "d", "map": "m", "source": source}))
+    listing = scan_entries(tmp_path, {})
+    entry = listing.entries["mined_x"]
+    assert isinstance(entry.sidecar, Sidecar) and isinstance(entry.source, Provenance)
+    assert entry.source.parent == "highway_lead_vehicle_brakes" and entry.source == MINED_SOURCE
+    assert entry.sidecar.source is entry.source and entry.sidecar.description == "d"
+    assert listing.index["mined_x"]["meta"] == entry.sidecar.to_dict()
+    assert list(listing.entries) == ["mined_x"]
+    assert listing.problems["broken"] == ("bad sidecar broken/meta.json: sidecar field 'source.parent' must be a "
+                                          "string, not int 5")
+    cached = scan_entries(tmp_path, listing.index).entries["mined_x"]
+    assert cached.source == entry.source and cached.sidecar.to_dict() == entry.sidecar.to_dict()
 
 
 def test_an_episode_record_round_trips_and_reads_its_outcome():

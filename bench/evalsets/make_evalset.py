@@ -92,7 +92,7 @@ def build_evalset(out: str | os.PathLike, scenarios: Optional[Sequence[str]] = N
             problem = story_problem(label, elements_from_trace(summary["trace"]))
             if problem:
                 differs[name].append(f"seed {seed} ({policy} ego): {problem}")
-            record = {"use_case": entry.meta.get("use_case") or name, "scenario": name, "seed": seed,
+            record = {"use_case": entry.sidecar.use_case or name, "scenario": name, "seed": seed,
                       "seconds": length, "ego_policy": policy, "description": entry.description,
                       "elements": label}
             (out / f"{stem}.label.json").write_text(json.dumps(record, indent=1, sort_keys=True) + "\n",

@@ -82,9 +82,9 @@ def main() -> None:
                              workers=WorkerSettings(workers=args.workers), progress=False)
     t_before = time.perf_counter() - began
     excluded = set(held) | set(steps["split"].get("held_out_families") or [])
-    entries = [e for e in Bank(bank) if e.name not in excluded and e.source.get("parent") not in excluded]
+    entries = [e for e in Bank(bank) if e.name not in excluded and e.source.parent not in excluded]
     names = sorted(e.name for e in entries)
-    mined = [e.name for e in entries if e.source.get("kind") == "mined"]
+    mined = [e.name for e in entries if e.source.mined]
     out = base / args.name
     began = time.perf_counter()
     weights = fine_tune_weights(names, mined, args.share)

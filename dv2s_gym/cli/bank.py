@@ -81,7 +81,7 @@ def run_list(args: argparse.Namespace) -> int:
     bank = open_bank(args)
     entries = bank.list(tag=args.tag, text=args.text, element=args.element, map=args.map, source=args.source)
     lines = _columns(["name", "map", "source", "tags"],
-                     [[e.name, e.map or "", str(e.source.get("kind", "")), ", ".join(e.tags)] for e in entries])
+                     [[e.name, e.map or "", e.source.kind or "", ", ".join(e.tags)] for e in entries])
     lines += [f"! {name}: {message}" for name, message in sorted(bank.problems.items())]
     emit(args, {"scenarios": [e.summary() for e in entries], "problems": bank.problems},
          "\n".join(lines) + f"\n{len(entries)} scenario(s)")
@@ -102,10 +102,12 @@ def run_show(args: argparse.Namespace) -> int:
     entry = open_bank(args).get(args.name)
     missing = set(entry.missing_files())
     files = [str(f) + (" (missing)" if str(f.relative_to(entry.folder)) in missing else "") for f in entry.files]
-    data = {**entry.meta, "path": str(entry.script_path), "script": entry.script, "files": files}
-    human = (f"{entry.name}  ({entry.map}, {entry.source.get('kind')})\n{entry.description}\n"
+    # the sidecar's fields in the order its file holds them (the bank writes sidecars with sorted keys)
+    sidecar = json.loads(json.dumps(entry.sidecar.to_dict(), sort_keys=True))
+    data = {**sidecar, "path": str(entry.script_path), "script": entry.script, "files": files}
+    human = (f"{entry.name}  ({entry.map}, {entry.source.kind})\n{entry.description}\n"
              f"tags: {', '.join(entry.tags)}\nelements: {json.dumps(entry.elements)}\n"
-             f"source: {json.dumps(entry.source)}\npath: {entry.script_path}\n"
+             f"source: {json.dumps(sidecar['source'])}\npath: {entry.script_path}\n"
              + "".join(f"file: {f}\n" for f in files) + f"\n{entry.script}")
     emit(args, data, human)
     return 0
@@ -126,8 +128,8 @@ def run_add(args: argparse.Namespace) -> int:
     fields = Sidecar(description=args.description, name=args.name, elements=elements, tags=tuple(args.tag or ()),
                      map=args.map or "", source=provenance)
     entry = open_bank(args).add(script, fields, upgrade_scenic2=True)
-    rewrites = list(entry.source.get("scenic2_rewrites") or [])
-    for line in [f"scenic2: {r}" for r in rewrites] + [f"scenic2 note: {n}" for n in entry.source.get("scenic2_notes") or []]:
+    rewrites = list(entry.source.extra.get("scenic2_rewrites") or [])
+    for line in [f"scenic2: {r}" for r in rewrites] + [f"scenic2 note: {n}" for n in entry.source.extra.get("scenic2_notes") or []]:
         print(line, file=sys.stderr)
     summary = dict(entry.summary(), scenic2_rewrites=rewrites)
     emit(args, summary, f"added {entry.name} ({entry.script_path})")

@@ -925,7 +925,7 @@ def _too_few_compared(parameters: Optional[Mapping[str, Any]]) -> Optional[str]:
 def _family(parent: str, failure_type: str):
     """Whether a bank entry is a converted (not replay) mined entry from ``parent`` with a ``failure_type`` failure."""
     def same(entry) -> bool:
-        source = entry.provenance
+        source = entry.source
         return (source.mined and not source.is_replay and source.parent == parent
                 and source.failure_type == failure_type)
     return same
@@ -1031,7 +1031,7 @@ def _bank_replay(out: Dict[str, Any], record: Mapping[str, Any], bank, parent: A
         entry = bank.add(script, fields, files=files)
         out["entry"] = entry.name
     except DuplicateScenarioError as error:
-        existing = bank.get(error.existing).provenance.replay or {}
+        existing = bank.get(error.existing).source.replay or {}
         if existing.get("seed") == seed and existing.get("params") == params:
             out["entry"] = error.existing  # this failing scene is in the bank already (a resumed run)
         elif error.existing == record["scenario"]:

@@ -233,7 +233,7 @@ def replay_failure(bank: Any, name: str, *, policy: Optional[Any] = None,
     why it may not be (:func:`mismatch_reason`: the checkpoint or dv2s-gym changed, or a real divergence)."""
     bank = bank if isinstance(bank, Bank) else Bank(bank)
     entry = bank.get(name)
-    replay = entry.provenance.replay
+    replay = entry.source.replay
     if not isinstance(replay, Mapping) or replay.get("seed") is None:
         raise BankError(f"bank entry {name!r} is no replay of a mined failure (its provenance has no 'replay'); "
                         "replay entries are tagged 'replay'")

@@ -45,7 +45,7 @@ def _family(name: str, bank_dir: Optional[str], stamp: Tuple[int, ...]) -> str:
         return name
     current, seen = name, {name}
     while current in bank:
-        parent = bank.get(current).provenance.parent
+        parent = bank.get(current).source.parent
         if not parent or str(parent) in seen:
             break
         current = str(parent)

@@ -798,9 +798,9 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, a
     # at any depth (a member's family is the root of its provenance chain, not its immediate parent)
     bank = list(Bank(arm.bank))
     roots = {e.name: scenario_family(e.name, arm.bank) for e in bank}
-    entries = [e for e in bank if e.name not in excluded and e.provenance.parent not in excluded
+    entries = [e for e in bank if e.name not in excluded and e.source.parent not in excluded
                and roots[e.name] not in excluded]
-    mined = sorted(e.name for e in entries if e.provenance.mined)
+    mined = sorted(e.name for e in entries if e.source.mined)
     names = sorted(e.name for e in entries if with_mined or e.name not in mined)
     weights = fine_tune_weights(names, mined if with_mined else [], mined_share)
     common = {"scenarios": len(names), "mined_upweighted": len(mined) if with_mined else 0, "steps": arm.steps,

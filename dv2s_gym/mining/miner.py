@@ -718,7 +718,7 @@ def _reached_bank(bank, out: Path, cluster: str) -> Optional[Dict[str, Any]]:
     resumed run neither converts the cluster again nor reports it merged into the entry it made itself."""
     run = str(Path(out).resolve())
     for entry in bank:
-        source = entry.provenance
+        source = entry.source
         if source.is_replay:
             continue  # the exact replay of a failure is written before its converted script is judged
         found = [("kept", source)] + [("merged", merged) for merged in source.merged or ()]
