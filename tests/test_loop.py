@@ -651,6 +651,23 @@ def test_a_round_that_keeps_nothing_is_skipped_and_says_why(tmp_path, monkeypatc
     assert any(steps["skipped"] in line for line in lines) and steps["skipped"] in report.paths["md"].read_text()
 
 
+def test_a_finished_loop_whose_record_holds_a_wrongly_shaped_step_is_refused_in_one_line(tmp_path, monkeypatch):
+    _StandIns(monkeypatch)
+    out = tmp_path / "loop"
+    settings = dict(miner=FakeMiner(WIRING["scenarios"], failures_per_round=6), min_heldout_episodes=1,
+                    min_heldout_families=2, log=lambda _: None, **WIRING)
+    run_loop("dv2s-ppo", out=out, **settings)
+    record = json.loads((out / "loop.json").read_text())
+    assert isinstance(record["rounds"][0]["steps"]["after"], dict)
+    record["rounds"][0]["steps"]["after"] = [1, 2]  # a damaged run file, with the loop's own settings
+    (out / "loop.json").write_text(json.dumps(record))
+    with pytest.raises(LoopError) as error:
+        run_loop("dv2s-ppo", out=out, **settings)
+    message = str(error.value)
+    assert message.startswith(f"{out / 'loop.json'} is not a dv2s loop record (round 1's 'after' step is not an "
+                              "object)") and "delete the file to start the loop over" in message
+
+
 def test_each_round_mines_with_a_derived_seed_and_tells_the_miner_the_loop_s_own(tmp_path, monkeypatch):
     """Round R of a loop with seed S mines with seed 1000 S + R; the miner is told S and R, so its report can name
     the loop's seed beside its own (a loop run with seed 0 is not reported as one with seed 1)."""
@@ -791,6 +808,14 @@ def test_a_discarded_rounds_fine_tuning_does_not_keep_its_families_out_of_the_ne
     ('{"rounds": "x", "settings": {}}', 'has no list of round objects under "rounds"'),
     ('{"rounds": [], "settings": {}}', "records no holdout_by in its settings"),
     ('[1, 2]', "holds a list, not an object"),
+    ('{"rounds": [{"steps": {"after": [1, 2]}}], "settings": {"holdout_by": "family"}}',
+     "round 1's 'after' step is not an object"),
+    ('{"rounds": [{"steps": {"skipped": 3}}], "settings": {"holdout_by": "family"}}',
+     'round 1\'s "skipped" reason is not text'),
+    ('{"rounds": [{"steps": {}, "policy": ["x"]}], "settings": {"holdout_by": "family"}}',
+     "round 1's 'policy' is not text"),
+    ('{"rounds": [{"steps": {}, "timings": {"mine": "x"}}], "settings": {"holdout_by": "family"}}',
+     "round 1 has a timing that is not a number"),
 ])
 def test_a_loop_json_of_the_wrong_structure_is_refused_in_one_line(tmp_path, content, problem):
     (tmp_path / "loop").mkdir()

@@ -29,12 +29,18 @@ class JsonlAppender:
     def append(self, record: Mapping[str, Any]) -> None:
         """Write ``record`` (a JSON object, or an :class:`~scenario_bank.records.EpisodeRecord`) as one line."""
         record = record.to_dict() if isinstance(record, EpisodeRecord) else record
-        self._handle.write(json.dumps(record, sort_keys=True, default=str).encode("utf-8") + b"\n")
-        self._handle.flush()
-        os.fsync(self._handle.fileno())
+        try:
+            self._handle.write(json.dumps(record, sort_keys=True, default=str).encode("utf-8") + b"\n")
+            self._handle.flush()
+            os.fsync(self._handle.fileno())
+        except OSError as error:  # a full disk...: name the file (a torn line is dropped when it is opened again)
+            raise OSError(error.errno, error.strerror, str(self._path)) from None
 
     def close(self) -> None:
-        self._handle.close()
+        try:
+            self._handle.close()
+        except OSError:
+            pass  # the unwritten rest of a line whose append already failed (and was reported)
 
 
 def read_rows(path: Path) -> List[Dict[str, Any]]:

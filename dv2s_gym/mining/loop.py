@@ -184,9 +184,33 @@ def _check_structure(data: Any, path: Path) -> None:
         problem = "has a \"start\" that is not an object with a list of scenarios"
     elif any(key not in data["settings"] for key in _RECORDED):
         problem = f"records no {' or '.join(_RECORDED)} in its settings"
+    else:
+        problem = _round_problem(data["rounds"])
     if problem:
         raise LoopError(f"{path} is not a dv2s loop record ({problem}); choose another --out, or delete the file "
                         "to start the loop over")
+
+
+_ROUND_TEXTS = ("policy", "new_policy", "control_policy", "next_policy", "next_policy_reason")
+"""The fields of a round in ``loop.json`` that are text (or absent)."""
+
+
+def _round_problem(rounds: List[Dict[str, Any]]) -> Optional[str]:
+    """What is wrong with the rounds of a ``loop.json`` (``None``: nothing): each finished step is an object (a
+    skipped round's reason is text), each policy field text, each timing a number."""
+    for number, record in enumerate(rounds, start=1):
+        for step, value in record.get("steps", {}).items():
+            if step == "skipped":
+                if not isinstance(value, str):
+                    return f"round {number}'s \"skipped\" reason is not text"
+            elif step in _STAGE_NAMES and not isinstance(value, dict):
+                return f"round {number}'s {step!r} step is not an object"
+        for key in _ROUND_TEXTS:
+            if record.get(key) is not None and not isinstance(record[key], str):
+                return f"round {number}'s {key!r} is not text"
+        if any(isinstance(t, bool) or not isinstance(t, (int, float)) for t in record.get("timings", {}).values()):
+            return f"round {number} has a timing that is not a number"
+    return None
 
 
 # --------------------------------------------------------------------------- helpers

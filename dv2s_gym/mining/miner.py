@@ -60,8 +60,9 @@ from dv2s_gym.mining.report import write_reports
 from dv2s_gym.mining.report_text import error_warning
 from dv2s_gym.mining.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
 from dv2s_gym.mining.settings import FEEDBACKS, MineSettings, read_run_settings, RunSettings, SETTINGS_FILE
-from dv2s_gym.mining.tasks import MINE
+from dv2s_gym.mining.tasks import MINE, trace_name
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
+from dv2s_gym.mining.write_errors import from_os_error, is_write_failure, run_write_error, trace_write_failed
 from dv2s_gym.workers import backends
 from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.pool import default_workers
@@ -223,6 +224,9 @@ class _Recorder:
         self.failed = len(counted)
 
     def add(self, result: Dict[str, Any], task: Dict[str, Any], spec) -> None:
+        problem = result.get("write_error")
+        if problem:  # the episode's trace could not be written: stop before recording it, a resume reruns it
+            raise run_write_error(problem.get("path"), problem.get("errno"), problem.get("strerror"))
         record = _complete(result, task, spec, self.sampler, self.out)
         self.appender.append(record)
         self.done[record.index] = record
@@ -476,7 +480,13 @@ def mine(policy: str, settings: MineSettings, *, out: os.PathLike | str, workers
     except OSError as error:
         raise MiningError(f"cannot create the run folder {out}: {error.strerror}; pass a writable --out") from None
     try:
-        return _mine_in(out, started, policy, settings, workers or WorkerSettings(), progress, reports, origin)
+        try:
+            return _mine_in(out, started, policy, settings, workers or WorkerSettings(), progress, reports, origin)
+        except OSError as error:
+            if not is_write_failure(error):
+                raise
+            # a full disk, a quota, a read-only file system: the file, the problem and the fix in one line
+            raise from_os_error(error) from None
     except BaseException:
         if created:
             _remove_if_empty(out)  # bad input found late (an unknown scenario) leaves no empty run folder behind
@@ -525,7 +535,9 @@ def _mine_in(out: Path, started: float, policy: str, settings: MineSettings, wor
         1 if workers.backend == "local" and default_workers() < 2 else default_workers())
     with _run_lock(out):
         recorded, space = _open_run(out, policy, settings, bank_dir, n_workers, origin)
-        done = {int(r["index"]): r for r in read_records(out / "episodes.jsonl")}
+        # a failure recorded as an error because its trace could not be written (a full disk) runs again
+        done = {int(r["index"]): r for r in read_records(out / "episodes.jsonl")
+                if not trace_write_failed(r, trace_name(int(r["index"])))}
         _run_episodes(out, recorded, space, done, workers, n_workers, progress)
         records = [done[i] for i in sorted(done) if i < settings.budget]
         run = MineRun(out=out, settings=recorded, records=records, clusters=cluster_failures(records))

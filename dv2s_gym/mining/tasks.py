@@ -13,6 +13,9 @@ A mining task is a plain dict (shipped to a pool of :mod:`dv2s_gym.workers`, loc
   (``<index>.json.gz``; the Ray pool swaps in a local folder and ships the file back);
 - ``ttc_threshold``, ``stall_seconds``: monitor settings.
 
+When the failed episode's trace cannot be written (a full disk...), the result is no episode record: it carries
+``write_error`` (:func:`~dv2s_gym.mining.write_errors.write_failure`) and the miner stops before recording it.
+
 The result is the episode record (a failed episode's ``behaviour``: who else was involved and what
 each side was doing, :mod:`dv2s_gym.mining.behaviour`) of the run's ``episodes.jsonl`` without the sampler
 fields (the miner adds those). The policy's episode and, when it failed, the reference
@@ -27,6 +30,7 @@ from typing import Any, Dict, Mapping, Optional
 
 from dv2s_gym.mining.behaviour import extract_behaviour
 from dv2s_gym.mining.failure_state import failure_state
+from dv2s_gym.mining.write_errors import write_failure
 from dv2s_gym.mining.monitors import (DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD, FAILURE_TYPES, detect_failure,
                                      robustness)
 from dv2s_gym.workers.tasks import register
@@ -89,7 +93,11 @@ def run_mine_task(task: Dict[str, Any]) -> Dict[str, Any]:
             record["failure_state"] = failure_state(trace, record["failure"])
             if task.get("trace_dir"):
                 path = os.path.join(task["trace_dir"], trace_name(int(task["index"])))
-                trace.save(path)
+                try:
+                    trace.save(path)
+                except OSError as error:  # the run's own file, not the episode: the miner stops, a resume reruns it
+                    record["write_error"] = write_failure(error, path)
+                    return record
                 record["trace"] = path
             if task.get("reference"):
                 ref_result, ref_trace = _episode(task, task["reference"])
