@@ -120,7 +120,7 @@ def test_a_bank_replay_entry_names_a_policy_only_if_it_is_built_in(tmp_path):
     from scenario_bank.records import Provenance
 
     class Entry:
-        provenance = Provenance.from_dict({"replay": {"seed": 0, "policy": "marker:make"}})
+        source = Provenance.from_dict({"replay": {"seed": 0, "policy": "marker:make"}})
         script_path = tmp_path / "scenario.scenic"
 
     class FakeBank(Bank):

@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import List
+from typing import Any, List
 
 from dv2s_gym.cli import bank_validate
 from dv2s_gym.cli.errors import UsageError
@@ -97,13 +97,22 @@ def _columns(header: List[str], rows: List[List[str]]) -> List[str]:
             for row in [header, *rows]]
 
 
+def _keys_sorted(value: Any) -> Any:
+    """``value`` with the keys of every mapping in it sorted, as the bank writes a sidecar."""
+    if isinstance(value, dict):
+        return {key: _keys_sorted(value[key]) for key in sorted(value)}
+    if isinstance(value, list):
+        return [_keys_sorted(item) for item in value]
+    return value
+
+
 def run_show(args: argparse.Namespace) -> int:
     """``dv2s bank show``: one scenario's metadata, files and script."""
     entry = open_bank(args).get(args.name)
     missing = set(entry.missing_files())
     files = [str(f) + (" (missing)" if str(f.relative_to(entry.folder)) in missing else "") for f in entry.files]
     # the sidecar's fields in the order its file holds them (the bank writes sidecars with sorted keys)
-    sidecar = json.loads(json.dumps(entry.sidecar.to_dict(), sort_keys=True))
+    sidecar = _keys_sorted(entry.sidecar.to_dict())
     data = {**sidecar, "path": str(entry.script_path), "script": entry.script, "files": files}
     human = (f"{entry.name}  ({entry.map}, {entry.source.kind})\n{entry.description}\n"
              f"tags: {', '.join(entry.tags)}\nelements: {json.dumps(entry.elements)}\n"
