@@ -571,13 +571,31 @@ def classes_made_by_calls(tree: ast.AST) -> List[tuple]:
     return made
 
 
-def _aliases(tree: ast.AST) -> Dict[str, str]:
-    """Names a module binds to another name: ``E = ValueError``, ``E: type = errors.DV2SError``, ``E, F = A, B``,
-    ``from builtins import ValueError as E`` -> the name they stand for (``ValueError``, ``DV2SError``, ...)."""
-    found: Dict[str, str] = {}
-    for node in ast.walk(tree):
+THE_BASE = "scenario_bank.errors.DV2SError"
+"""The one base error, named by the module that defines it (a class of the same name elsewhere is another class)."""
+UNREADABLE = "?"
+"""What a base written as a computed expression (``*BASES``, ``ERRORS[0]``, ``A if c else B``, a call) stands for."""
+
+
+def _bindings(nodes: List[ast.AST], made: List[tuple], module: str, path: Path) -> Dict[str, object]:
+    """What each name a module binds stands for: a qualified name (``"json.JSONDecodeError"`` for ``from json
+    import JSONDecodeError as E``; ``"module.Class"`` for a class it defines, by a statement or a call) or, for a
+    name assigned an expression (``E = errors.Base``, ``E, F = A, B``), that expression (read by
+    :func:`_qualified`)."""
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    found: Dict[str, object] = {}
+    for node in nodes:
         pairs = []
-        if isinstance(node, ast.Assign):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                found[alias.asname or alias.name.split(".")[0]] = alias.name if alias.asname else alias.name.split(".")[0]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(anchor + ([base] if base else []))
+            found.update({alias.asname or alias.name: f"{base}.{alias.name}" for alias in node.names})
+        elif isinstance(node, ast.Assign):
             for target in node.targets:
                 if isinstance(target, ast.Tuple) and isinstance(node.value, ast.Tuple):
                     pairs += list(zip(target.elts, node.value.elts))
@@ -585,65 +603,161 @@ def _aliases(tree: ast.AST) -> Dict[str, str]:
                     pairs.append((target, node.value))
         elif isinstance(node, (ast.AnnAssign, ast.NamedExpr)) and node.value is not None:
             pairs.append((node.target, node.value))
-        elif isinstance(node, ast.ImportFrom):
-            found.update({alias.asname: alias.name for alias in node.names if alias.asname})
         for target, value in pairs:
-            if isinstance(target, ast.Name) and _base_name(value) and target.id != _base_name(value):
-                found[target.id] = _base_name(value)
+            if isinstance(target, ast.Name):
+                found[target.id] = value
+    for node in nodes:
+        if isinstance(node, ast.ClassDef):
+            found[node.name] = f"{module}.{node.name}"
+    for name, _, _ in made:
+        found[name] = f"{module}.{name}"
     return found
 
 
-def _class_table(modules: Optional[Dict[str, Path]] = None) -> tuple:
-    """``(classes, by_name)``: ``module.Class`` -> the names of its bases, for every class of the four packages (a
-    ``class`` statement or a class made by a call, :func:`classes_made_by_calls`; computed bases are ``["?"]``);
-    and a class's or an alias's plain name -> what it stands for (its bases; for an alias, :func:`_aliases`, the
-    name it is bound to: ``E = ValueError; class X(E)`` derives X from ValueError)."""
-    classes: Dict[str, List[str]] = {}
-    by_name: Dict[str, List[str]] = {}
-    for module, path in (modules or _modules()).items():
-        defined, aliases = _classes_and_aliases(path)
-        classes.update({f"{module}.{name}": list(bases) for name, bases in defined})
-        for alias, name in aliases:
-            by_name.setdefault(alias, []).append(name)
-    for qualified, bases in classes.items():
-        by_name.setdefault(qualified.rpartition(".")[2], []).extend(bases)
-    return classes, by_name
+def _qualified(node: object, bindings: Dict[str, object], seen: frozenset = frozenset()) -> str:
+    """The qualified name an expression stands for in a module (its :func:`_bindings`): a name it binds, a
+    built-in (``"builtins.ValueError"``) or an attribute of either (``"json.JSONDecodeError"``); a subscript stands
+    for what it subscripts when that is a name (``Generic[T]``: ``typing.Generic``); anything else is
+    :data:`UNREADABLE`."""
+    if isinstance(node, str):
+        return node
+    if isinstance(node, ast.Name):
+        if node.id in bindings and node.id not in seen:
+            return _qualified(bindings[node.id], bindings, seen | {node.id})
+        return f"builtins.{node.id}" if hasattr(builtins, node.id) and node.id not in bindings else UNREADABLE
+    if isinstance(node, ast.Attribute):
+        value = _qualified(node.value, bindings, seen)
+        return UNREADABLE if value == UNREADABLE else f"{value}.{node.attr}"
+    if isinstance(node, ast.Subscript) and isinstance(node.value, (ast.Name, ast.Attribute)):
+        return _qualified(node.value, bindings, seen)
+    return UNREADABLE
 
 
 @functools.lru_cache(maxsize=None)
-def _classes_and_aliases(path: Path) -> tuple:
-    """``(classes, aliases)`` of a module's file, read once a run: ``(name, bases)`` of each class (computed bases
-    of a class made by a call are ``("?",)``) and ``(alias, name)`` of each alias (:func:`_aliases`)."""
+def _module_classes(path: Path, module: str) -> tuple:
+    """``(bindings, classes, exported)`` of one module's file, read once a run (see :func:`_class_table`)."""
     tree = _parsed(path)
-    classes = [(node.name, tuple(_base_name(b) for b in node.bases)) for node in ast.walk(tree)
-               if isinstance(node, ast.ClassDef)]
-    classes += [(name, tuple(bases) if bases is not None else ("?",)) for name, bases, _ in classes_made_by_calls(tree)]
-    return tuple(classes), tuple(_aliases(tree).items())
+    nodes = list(ast.walk(tree))
+    made = classes_made_by_calls(tree)
+    names = _bindings(nodes, made, module, path)
+    classes: Dict[str, List[str]] = {}
+    for node in nodes:
+        if isinstance(node, ast.ClassDef):
+            classes[f"{module}.{node.name}"] = [UNREADABLE if isinstance(b, ast.Starred) else _qualified(b, names)
+                                                for b in node.bases]
+    for name, bases, _ in made:
+        classes[f"{module}.{name}"] = [UNREADABLE] if bases is None else [
+            _qualified(ast.Name(id=b), names) if b else UNREADABLE for b in bases]
+    exported: Dict[str, str] = {}
+    for node in tree.body:
+        for target in node.targets if isinstance(node, ast.Assign) else []:
+            if isinstance(target, ast.Name) and not target.id.startswith("_"):
+                value = _qualified(node.value, names)
+                if value.rpartition(".")[2].startswith("_") and value.rpartition(".")[0] == module:
+                    exported[f"{module}.{target.id}"] = value
+    return names, classes, exported
 
 
-def _reaches(name: str, goal, by_name: Dict[str, List[str]], seen: frozenset = frozenset()) -> bool:
-    """``goal(name)`` holds for ``name`` or for a name it derives from or stands for (through ``by_name``)."""
-    return goal(name) or (name not in seen and any(_reaches(b, goal, by_name, seen | {name})
-                                                   for b in by_name.get(name, ())))
+def _class_table(modules: Optional[Dict[str, Path]] = None) -> tuple:
+    """``(classes, exported)``: ``module.Class`` -> the qualified names of its bases (:func:`_qualified`, each
+    resolved to where it is defined: a name a project module imports stands for the imported class), for every
+    class of the four packages (a ``class`` statement or a class made by a call, :func:`classes_made_by_calls`;
+    computed bases are :data:`UNREADABLE`); and ``module.Name`` -> the class a public module-level name of the
+    module is bound to when that is a private class of it (``Public = _Hidden``: the private class leaves its
+    module)."""
+    bindings: Dict[str, Dict[str, object]] = {}
+    written: Dict[str, List[str]] = {}
+    exported: Dict[str, str] = {}
+    for module, path in (modules or _modules()).items():
+        names, classes, public = _module_classes(path, module)
+        bindings[module] = names
+        written.update(classes)
+        exported.update(public)
+
+    def defined(name: str, seen: frozenset = frozenset()) -> str:
+        """Where a qualified name is defined: a project module's imported name followed to its source."""
+        if name in written or name in seen:
+            return name
+        owner, _, attr = name.rpartition(".")
+        if owner in bindings and attr in bindings[owner]:
+            target = _qualified(bindings[owner][attr], bindings[owner])
+            if target != name and target != UNREADABLE:
+                return defined(target, seen | {name})
+        return name
+
+    classes = {q: [b if b == UNREADABLE else defined(b) for b in bases] for q, bases in written.items()}
+    return classes, {name: defined(target) for name, target in exported.items()}
+
+
+@functools.lru_cache(maxsize=None)
+def _outside_class(name: str) -> Optional[type]:
+    """The class a qualified name outside the project stands for (its module imported), else None."""
+    import importlib
+
+    module, attributes = name, []
+    while module:
+        try:
+            value = importlib.import_module(module)
+        except Exception:  # not a module: one attribute further up
+            module, _, attribute = module.rpartition(".")
+            attributes.insert(0, attribute)
+            continue
+        for attribute in attributes:
+            value = getattr(value, attribute, None)
+        return value if isinstance(value, type) else None
+    return None
+
+
+def _derives(name: str, classes: Dict[str, List[str]], goal, seen: frozenset = frozenset()) -> bool:
+    """``goal`` holds for the class a qualified name stands for or one it derives from: through the project's
+    classes, and for a class outside the project, ``goal(name, the class)``."""
+    if name in classes:
+        return goal(name, None) or (name not in seen and any(_derives(b, classes, goal, seen | {name})
+                                                              for b in classes[name]))
+    if name == UNREADABLE or name.split(".")[0] in {*PACKAGES, *HEAVY_DEPENDENCIES}:
+        return goal(name, None)
+    return goal(name, _outside_class(name))
+
+
+_NAMED_LIKE_AN_ERROR = re.compile(r"(Error|Exception|Warning|Interrupt|Exit|Failure|Fault)$")
+"""A class of a heavy package (:data:`HEAVY_DEPENDENCIES`, not imported by this test: scenic and torch take seconds)
+is taken to be an exception when its name says so."""
+
+
+def _is_exception(name: str, found: Optional[type]) -> bool:
+    """A qualified name outside the project stands for an exception class: its module imported (the standard
+    library, a light third-party package), or for a heavy package, named like one."""
+    if name.split(".")[0] in HEAVY_DEPENDENCIES:
+        return bool(_NAMED_LIKE_AN_ERROR.search(name))
+    return found is not None and issubclass(found, BaseException)
 
 
 def error_classes(modules: Optional[Dict[str, Path]] = None) -> Dict[str, List[str]]:
     """Every exception class defined in the four packages (parsed, :func:`_class_table`): ``module.Class`` -> the
-    names of its bases."""
-    classes, by_name = _class_table(modules)
-    return {q: b for q, b in classes.items() if any(_reaches(base, _EXCEPTION_BASES.__contains__, by_name)
-                                                    for base in b)}
+    qualified names of its bases. An exception is any class deriving from ``BaseException``, built-in, from the
+    standard library or from a third-party package (``json.JSONDecodeError``, ``KeyboardInterrupt``)."""
+    classes, _ = _class_table(modules)
+    return {q: b for q, b in classes.items() if any(_derives(base, classes, _is_exception) for base in b)}
 
 
 def errors_outside_the_base(modules: Optional[Dict[str, Path]] = None) -> List[str]:
-    """Public error classes (:func:`error_classes`) that do not derive from ``DV2SError``, save ``DV2SError``
-    itself (a private class is a module's own control flow and never leaves it)."""
-    classes, by_name = _class_table(modules)
-    errors = {q: b for q, b in classes.items() if any(_reaches(base, _EXCEPTION_BASES.__contains__, by_name)
-                                                      for base in b)}
-    return sorted(q for q, bases in errors.items()
-                  if not q.endswith(".DV2SError") and not q.rpartition(".")[2].startswith("_")
-                  and not any(_reaches(b, "DV2SError".__eq__, by_name) for b in bases))
+    """Public error classes (:func:`error_classes`) that do not derive from :data:`THE_BASE`, save the base itself; a
+    private class is a module's own control flow and never leaves it: a public name bound to it
+    (``Public = _Hidden``) is a public error."""
+    classes, exported = _class_table(modules)
+    errors = {q for q, b in classes.items() if any(_derives(base, classes, _is_exception) for base in b)}
+    public = {q: q for q in errors if not q.rpartition(".")[2].startswith("_")}
+    public.update({name: target for name, target in exported.items() if target in errors})
+    return sorted(name for name, q in public.items()
+                  if q != THE_BASE and not _derives(q, classes, lambda n, _: n == THE_BASE))
+
+
+def unreadable_bases(modules: Optional[Dict[str, Path]] = None) -> List[str]:
+    """Classes of the four packages with a base written as a computed expression (:data:`UNREADABLE`): what they
+    derive from is not visible, so the error rules could not see them."""
+    classes, _ = _class_table(modules)
+    return sorted(q for q, bases in classes.items() if UNREADABLE in bases)
+
 
 
 def test_an_error_class_is_seen_whatever_built_in_it_derives_from():
@@ -653,8 +767,10 @@ def test_an_error_class_is_seen_whatever_built_in_it_derives_from():
 
 def test_every_project_error_derives_from_the_one_base():
     """One base error (``scenario_bank.errors.DV2SError``) under every error the project raises, so the command
-    line catches it once. ``Interrupted`` is Ctrl-C (a KeyboardInterrupt), not an error; a private class is a
-    module's own control flow and never leaves it."""
+    line catches it once. The base is the class ``scenario_bank.errors`` defines (not a name: another class
+    called ``DV2SError`` is another class), and an error is any class deriving from ``BaseException``, a built-in
+    one or one of the standard library or a third-party package (``json.JSONDecodeError``); a private class is a
+    module's own control flow and never leaves it (a public name bound to it does)."""
     classes = error_classes()
     assert "scenario_bank.errors.DV2SError" in classes and len(classes) > 40
     outside = errors_outside_the_base()
@@ -702,6 +818,62 @@ def test_the_error_rule_sees_an_error_planted_through_an_alias_or_a_call(tmp_pat
     assert errors_outside_the_base(modules) == sorted(OUTSIDE_THE_BASE)  # the same error under the base is fine
 
 
+def test_class_bases_are_readable():
+    """A base written as a computed expression (``*BASES``, ``ERRORS[0]``, ``A if c else B``) could be anything:
+    the error rules could not see what the class derives from. Bases are names (``Generic[T]`` is ``Generic``)."""
+    assert not unreadable_bases(), f"classes with computed bases (name the base classes): {unreadable_bases()}"
+
+
+@pytest.mark.parametrize("planted, names", [
+    ("_BASES = (ValueError,)\nclass PlantedStarError(*_BASES):\n    pass\n", ["PlantedStarError"]),
+    ("_ERRORS = [KeyError]\nclass PlantedSubscriptError(_ERRORS[0]):\n    pass\n", ["PlantedSubscriptError"]),
+    ("class PlantedIfError(ValueError if json else TypeError):\n    pass\n", ["PlantedIfError"]),
+    ("class PlantedCallError(type(ValueError())):\n    pass\n", ["PlantedCallError"]),
+])
+def test_the_error_rule_refuses_a_base_written_as_an_expression(tmp_path, planted, names):
+    modules = _modules()
+    target = "envs.trace"
+    source = modules[target].read_text(encoding="utf-8")
+    assert unreadable_bases(modules) == []
+    modules[target] = tmp_path / "planted.py"
+    modules[target].write_text(source + "\n\n" + planted, encoding="utf-8")
+    assert unreadable_bases(modules) == [f"{target}.{name}" for name in names]
+
+
+@pytest.mark.parametrize("planted, names", [
+    # a base from the standard library or a third-party package is resolved to its module and imported
+    ("class PlantedJsonError(json.JSONDecodeError):\n    pass\n", ["PlantedJsonError"]),
+    ("from subprocess import CalledProcessError as _Failed\nclass PlantedProcessError(_Failed):\n    pass\n",
+     ["PlantedProcessError"]),
+    ("import http.client\nclass PlantedHttpError(http.client.HTTPException):\n    pass\n", ["PlantedHttpError"]),
+    # not an Exception, so neither ``except DV2SError`` nor ``except Exception`` catches it
+    ("class PlantedBaseExceptionError(BaseException):\n    pass\n", ["PlantedBaseExceptionError"]),
+    # a private class leaves its module under a public name
+    ("class _HiddenError(ValueError):\n    pass\nPlantedPublicError = _HiddenError\n", ["PlantedPublicError"]),
+    # a second class named DV2SError is not the base
+    ("class DV2SError(RuntimeError):\n    pass\nclass PlantedShadowError(DV2SError):\n    pass\n",
+     ["DV2SError", "PlantedShadowError"]),
+    # an imported name spelled like a real project error stands for what it imports
+    ("from json import JSONDecodeError as RunIdentityError\nclass PlantedCollidingError(RunIdentityError):\n"
+     "    pass\n", ["PlantedCollidingError"]),
+])
+def test_the_error_rule_resolves_bases_to_the_class_they_name(tmp_path, planted, names):
+    modules = _modules()
+    target = "envs.trace"
+    source = modules[target].read_text(encoding="utf-8")
+    assert errors_outside_the_base(modules) == sorted(OUTSIDE_THE_BASE)
+    modules[target] = tmp_path / "planted.py"
+    modules[target].write_text(source + "\n\n" + planted, encoding="utf-8")
+    outside = set(errors_outside_the_base(modules)) - set(OUTSIDE_THE_BASE)
+    # (a shadow DV2SError also takes the module's own errors off the base: the name is the module's class after it)
+    assert {f"{target}.{n}" for n in names} <= outside and all(q.startswith(target + ".") for q in outside)
+    under = re.sub(r"^class (Planted\w+|_HiddenError)\((.*)\):", r"class \1(\2, scenario_bank.errors.DV2SError):",
+                   planted, flags=re.M).replace("DV2SError(RuntimeError)", "Shadow(RuntimeError, DV2SError)")
+    modules[target] = tmp_path / "under.py"
+    modules[target].write_text(source + "\n\nimport scenario_bank.errors\n" + under, encoding="utf-8")
+    assert errors_outside_the_base(modules) == sorted(OUTSIDE_THE_BASE)  # the same errors under the real base
+
+
 def test_a_class_made_by_a_call_with_computed_bases_is_refused():
     tree = ast.parse("import types\nbases = (ValueError,)\nA = type('A', bases, {})\nB = types.new_class('B', bases)\n"
                      "C = type('C', (int,), {})\nkind = type(3)\n")
@@ -711,6 +883,8 @@ def test_a_class_made_by_a_call_with_computed_bases_is_refused():
 OUTSIDE_THE_BASE: Dict[str, str] = {
     "envs.errors.ForeignConstructWarning": "a warning (warnings.warn) a CARLA-model script's ignored construct "
                                            "issues, never raised: nothing catches it",
+    "envs.errors.Interrupted": "Ctrl-C (a KeyboardInterrupt, not an Exception): it stops the run like Ctrl-C and "
+                               "carries the note on how to resume; the command line prints the note",
 }
 """Public exception or warning classes not under ``DV2SError``, each with the reason (the list only shrinks)."""
 
