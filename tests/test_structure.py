@@ -139,7 +139,107 @@ def _loader_uses(tree: ast.AST, processes: bool = True) -> tuple:
         elif (isinstance(node, ast.Call) and getattr(node.func, "id", None) == "getattr" and len(node.args) > 1
               and getattr(node.args[0], "id", None) in _LOADER_MODULES and not isinstance(node.args[1], ast.Constant)):
             computed.append(f"{node.lineno}: {ast.unparse(node)}")  # a computed attribute of importlib
+    other_names, other_computed = _other_loads(nodes)
+    names += other_names
+    computed += other_computed
+    if processes:
+        computed += _commands_with_computed_code(tree)
     return names, computed
+
+
+_MODULE_LOADERS = {("pkgutil", "resolve_name"): "name", ("runpy", "run_path"): "path", ("pickle", "loads"): "pickle",
+                   ("sys", "modules"): "table"}
+"""More ways to load (or reach) a module by name, each a module's attribute: ``pkgutil.resolve_name("pkg.mod:attr")``,
+``runpy.run_path("pkg/mod.py")``, ``pickle.loads(b"...")`` (its GLOBAL opcodes import the modules they name: a
+literal is read, anything else is data) and ``sys.modules["pkg.mod"]`` (or ``.get``), read as the module named."""
+
+
+def _module_of_path(text: str) -> str:
+    """``"dv2s_gym/story_check.py"`` -> ``"dv2s_gym.story_check"``; from the first part that is a project package."""
+    parts = list(Path(text).with_suffix("").parts) if text.endswith(".py") else list(Path(text).parts)
+    if parts and parts[-1] in ("__init__", "__main__"):
+        parts.pop()
+    starts = [i for i, part in enumerate(parts) if part in PACKAGES]
+    return ".".join(parts[starts[0]:]) if starts else text
+
+
+def _modules_a_pickle_imports(data: bytes) -> List[str]:
+    """The modules a pickle's GLOBAL and STACK_GLOBAL opcodes import (unpickling imports them)."""
+    import pickletools
+
+    names: List[str] = []
+    strings: List[str] = []
+    try:
+        for opcode, argument, _ in pickletools.genops(data):
+            if opcode.name in ("GLOBAL", "INST"):
+                names.append(str(argument).partition(" ")[0])
+            elif isinstance(argument, str):
+                strings.append(argument)
+            elif opcode.name == "STACK_GLOBAL" and len(strings) > 1:
+                names.append(strings[-2])
+    except Exception:  # not a whole pickle: what it reads up to the error is still read
+        pass
+    return names
+
+
+def _other_loads(nodes: List[ast.AST]) -> tuple:
+    """``(names, computed)`` for the loaders of :data:`_MODULE_LOADERS`, reached as ``module.attribute`` or a name
+    imported from the module (with an alias): the module names they are given as literals, and the lines where one
+    is given a computed name (a pickle given anything but a literal is data, not counted)."""
+    reached = {}
+    for node in nodes:
+        if isinstance(node, ast.ImportFrom):
+            reached.update({alias.asname or alias.name: _MODULE_LOADERS[(node.module, alias.name)]
+                            for alias in node.names if (node.module, alias.name) in _MODULE_LOADERS})
+
+    def kind(node: ast.AST) -> Optional[str]:
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
+            return _MODULE_LOADERS.get((node.value.id, node.attr))
+        return reached.get(node.id) if isinstance(node, ast.Name) else None
+
+    names: List[str] = []
+    computed: List[str] = []
+    for node in nodes:
+        if isinstance(node, ast.Call) and kind(node.func) in ("name", "path", "pickle"):
+            how, argument = kind(node.func), node.args[0] if node.args else None
+        elif isinstance(node, ast.Subscript) and kind(node.value) == "table":
+            how, argument = "name", node.slice
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get"
+              and kind(node.func.value) == "table"):
+            how, argument = "name", node.args[0] if node.args else None
+        else:
+            continue
+        value = argument.value if isinstance(argument, ast.Constant) else None
+        if how == "pickle":
+            names += _modules_a_pickle_imports(value) if isinstance(value, bytes) else []
+        elif isinstance(value, str):
+            names.append(_module_of_path(value) if how == "path" else value.partition(":")[0])
+        else:
+            computed.append(f"{node.lineno}: {ast.unparse(node)}")
+    return names, computed
+
+
+def _folded_strings(tree: ast.AST) -> List[str]:
+    """Every string a module spells out: its literals, and the strings it builds from literals only (``"a" + "b"``,
+    ``"".join(("a", "b"))``, an f-string without fields)."""
+    def fold(node: ast.AST) -> Optional[str]:
+        if isinstance(node, ast.Constant) and isinstance(node.value, str):
+            return node.value
+        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Add):
+            left, right = fold(node.left), fold(node.right)
+            return None if left is None or right is None else left + right
+        if isinstance(node, ast.FormattedValue) and node.format_spec is None:
+            return fold(node.value)
+        if isinstance(node, ast.JoinedStr):
+            pieces = [fold(value) for value in node.values]
+            return None if None in pieces else "".join(pieces)
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "join"
+                and len(node.args) == 1 and isinstance(node.args[0], (ast.Tuple, ast.List))):
+            separator, pieces = fold(node.func.value), [fold(e) for e in node.args[0].elts]
+            return None if separator is None or None in pieces else separator.join(pieces)
+        return None
+
+    return [text for node in ast.walk(tree) if (text := fold(node)) is not None]
 
 
 _RUNNERS = {"exec", "eval", "compile"}
@@ -221,6 +321,8 @@ COMPUTED_LOADS: Dict[str, str] = {
     "scenario_bank.jail.probe": "the jail's test probe runs the Python source a test sends it (exec), inside the "
                                 "jail; no product code starts it (tests/test_jail.py)",
     "scenario_bank.jail.zygote_server": "the worker module its command line names (the jail's JailedProcess)",
+    "scenario_bank.jail.process": "JailedProcess starts the worker module its caller names (read where it is "
+                                  "called: JailedProcess(\"pkg.mod\"))",
     "scenario_bank.sandbox": "the simulator's worker module, named to it by envs (simulator_worker())",
 }
 """Modules that call a loader with a computed name, or run code that is not a literal string (:func:`_loader_uses`,
@@ -241,9 +343,10 @@ def _dynamic_imports(path: Path, module: str, modules: Dict[str, Path], processe
     """
     tree = _parsed(path)
     names, computed = _loader_uses(tree, processes)
+    names = [name.partition(":")[0] for name in names]
+    names = [_resolve(name, modules) or name if name.split(".")[0] in PACKAGES else name for name in names]
     if computed:
-        names += [node.value.partition(":")[0] for node in ast.walk(tree)
-                  if isinstance(node, ast.Constant) and isinstance(node.value, str)]
+        names += [text.partition(":")[0] for text in _folded_strings(tree)]
     names += _modules_run_by_commands(tree) if processes else []
     return {name for name in names if isinstance(name, str) and name in modules and name != module}
 
@@ -297,6 +400,58 @@ def test_the_graph_sees_an_import_planted_in_code_run_from_a_string(tmp_path, ta
     assert not _loader_uses(_parsed(copy))[1]  # literal code: nothing computed
 
 
+@pytest.mark.parametrize("planted, loaded", [
+    ('import pkgutil\n    pkgutil.resolve_name("dv2s_gym.story:main")', "dv2s_gym.story"),
+    ('from runpy import run_path\n    run_path("dv2s_gym/story_check.py")', "dv2s_gym.story_check"),
+    ('import sys, subprocess\n    subprocess.run([sys.executable, "-c", "import dv2s_gym.mining.loop"])',
+     "dv2s_gym.mining.loop"),
+    ('import sys, subprocess\n    subprocess.run(f"{sys.executable} -m dv2s_gym.cli --help", shell=True)',
+     "dv2s_gym.cli"),
+    ('import os\n    os.system("python3 -c \'import dv2s_gym.demo\'")', "dv2s_gym.demo"),
+    ('import pickle\n    pickle.loads(b"cdv2s_gym.report_page\\n__name__\\n.")', "dv2s_gym.report_page"),
+    ('import sys\n    return sys.modules["dv2s_gym.cli"]', "dv2s_gym.cli"),
+    ('from sys import modules\n    return modules.get("dv2s_gym.story")', "dv2s_gym.story"),
+])
+def test_the_graph_sees_a_module_reached_by_other_loaders(tmp_path, planted, loaded):
+    """envs may not load dv2s_gym: a module resolved by name, a file run by path, a child Python given code, an
+    unpickled global and a module read from ``sys.modules`` tie the layers together all the same."""
+    modules = _modules()
+    target = "envs.trace"
+    source = modules[target].read_text(encoding="utf-8")
+    assert loaded not in module_edges(modules[target], target, modules)
+    copy = tmp_path / "planted.py"
+    copy.write_text(source + f"\n\ndef _planted():\n    {planted}\n", encoding="utf-8")
+    assert module_edges(copy, target, modules) - module_edges(modules[target], target, modules) == {loaded}
+    assert not _loader_uses(_parsed(copy))[1]  # literal names: nothing computed
+
+
+@pytest.mark.parametrize("planted", [
+    'subprocess.run([sys.executable, "-m", "dv2s_gym." + name])',
+    'subprocess.run([sys.executable, "-c", f"import {name}"])',
+    'pkgutil.resolve_name(name)',
+    'runpy.run_path(name)',
+    'sys.modules[name]',
+])
+def test_a_computed_name_given_to_another_loader_is_refused(planted):
+    tree = ast.parse(f"import pkgutil, runpy, subprocess, sys\ndef f(name):\n    {planted}\n")
+    assert [line.partition(":")[0] for line in _loader_uses(tree)[1]] == ["3"]
+
+
+def test_a_module_allowed_to_compute_names_still_loads_the_names_it_joins(tmp_path):
+    """A module of :data:`COMPUTED_LOADS` loads every project module its strings name, spelled whole or joined
+    from literal pieces."""
+    modules = _modules()
+    target = "policies.registry"
+    assert target in COMPUTED_LOADS
+    source = modules[target].read_text(encoding="utf-8")
+    for planted in ('_PLANTED = "".join(("dv2s", "_gym.mining.loop")) + ":run_loop"\n',
+                    '_PLANTED = "dv2s_gym." + "mining" + ".loop"\n', '_PLANTED = f"dv2s_gym.mining.{\'loop\'}"\n'):
+        copy = tmp_path / "planted.py"
+        copy.write_text(source + "\n\n" + planted, encoding="utf-8")
+        assert module_edges(copy, target, modules) - module_edges(modules[target], target, modules) == {
+            "dv2s_gym.mining.loop"}, planted
+
+
 def test_code_run_from_a_computed_string_is_refused():
     tree = ast.parse(textwrap.dedent('''
         import builtins
@@ -315,22 +470,67 @@ def test_code_run_from_a_computed_string_is_refused():
 
 
 _RUN_MODULE = re.compile(r"\bpython[\w.]*(?:\s+-\w+)*\s+-m\s+([\w.]+)")
+_RUN_CODE = re.compile(r"\bpython[\w.]*(?:\s+-\w+)*\s+-c\s+(?:\"([^\"]*)\"|'([^']*)')")
+
+
+def _command_text(node: ast.AST) -> Optional[str]:
+    """A command string as written: a literal, or an f-string whose fields are taken to name the interpreter
+    (``f"{sys.executable} -m pkg.mod"`` reads as ``"python -m pkg.mod"``)."""
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        return node.value
+    if isinstance(node, ast.JoinedStr):
+        return "".join(v.value if isinstance(v, ast.Constant) else "python" for v in node.values)
+    return None
+
+
+def _modules_imported_by_code(code: str) -> List[str]:
+    """The modules Python code given on a command line (``python -c CODE``) imports or loads by name."""
+    try:
+        tree = ast.parse(code)
+    except SyntaxError:
+        return []
+    names: List[str] = []
+    for node in (node for part in (tree, *_code_run(tree)[0]) for node in ast.walk(part)):
+        if isinstance(node, ast.Import):
+            names += [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level:
+            names += [f"{node.module}.{alias.name}" for alias in node.names] + [node.module or ""]
+    return names + _loader_uses(tree)[0] + _modules_run_by_commands(tree)
 
 
 def _modules_run_by_commands(tree: ast.AST) -> List[str]:
-    """Module names after ``"-m"`` in a literal argument list, or in a ``python -m NAME`` command string."""
+    """Module names after ``"-m"`` in a literal argument list, or in a ``python -m NAME`` command string (a literal
+    or an f-string); and what the code after ``"-c"`` (``python -c CODE``) imports."""
     docstrings = {id(node.value) for node in ast.walk(tree)
                   if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)}
     names: List[str] = []
     for node in ast.walk(tree):
         if isinstance(node, (ast.List, ast.Tuple)):
             items = node.elts
-            names += [after.value for flag, after in zip(items, items[1:])
-                      if isinstance(flag, ast.Constant) and flag.value == "-m"
-                      and isinstance(after, ast.Constant) and isinstance(after.value, str)]
-        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
-            names += _RUN_MODULE.findall(node.value)
+            for flag, after in zip(items, items[1:]):
+                if not (isinstance(flag, ast.Constant) and isinstance(after, ast.Constant)
+                        and isinstance(after.value, str)):
+                    continue
+                names += [after.value] if flag.value == "-m" else \
+                    _modules_imported_by_code(after.value) if flag.value == "-c" else []
+        elif (text := _command_text(node)) is not None and id(node) not in docstrings:
+            names += _RUN_MODULE.findall(text)
+            names += [name for code in _RUN_CODE.findall(text) for name in _modules_imported_by_code("".join(code))]
     return names
+
+
+def _commands_with_computed_code(tree: ast.AST) -> List[str]:
+    """``"line: code"`` of each argument list whose ``"-m"`` or ``"-c"`` is followed by anything but a literal
+    string: the module it runs is not visible."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.List, ast.Tuple)):
+            items = node.elts
+            if any(isinstance(flag, ast.Constant) and flag.value in ("-m", "-c")
+                   and not (isinstance(after, ast.Constant) and isinstance(after.value, str))
+                   for flag, after in zip(items, items[1:])):
+                found.append(f"{node.lineno}: {ast.unparse(node)}")
+    return found
 
 
 def find_cycles(graph: Dict[str, Set[str]]) -> List[List[str]]:
@@ -442,7 +642,9 @@ def test_neither_the_product_nor_its_tests_import_the_benchmarks():
     """bench/ is research code: what the product or its tests need lives in the packages; the tests of
     benchmark code are under bench/tests/."""
     files = [path for package in PACKAGES for path in (ROOT / package).rglob("*.py")]
-    files += sorted((ROOT / "tests").rglob("*.py"))
+    # this file names bench in the strings its own checks are tried on, and loads modules (the standard library's
+    # exceptions, the entry points) by computed names: it imports no benchmark
+    files += sorted(path for path in (ROOT / "tests").rglob("*.py") if path != Path(__file__).resolve())
     wrong = []
     for path in files:
         wrong += [f"{path.relative_to(ROOT)} {how}" for how in _loads_of_bench(_parsed(path))]
