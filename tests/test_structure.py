@@ -1253,6 +1253,29 @@ def test_the_limits_see_parameters_planted_through_star_args(tmp_path, planted):
     assert list(over_the_limits({target: copy})) == [f"{target}:{name}"]
 
 
+@pytest.mark.parametrize("planted, name", [
+    ("_planted = lambda a, b, c, d, e, f, g, h, i: a\n", "<lambda at line {line}>"),
+    ("def _planted_listed(*args):\n    a, b, c, d, e, f, g, h, i, j = list(args)\n    return a\n",
+     "_planted_listed"),
+    ("def _planted_dense(x):\n" + "".join(f"    x = x + {n}; x = x - {n}\n" for n in range(45)) + "    return x\n",
+     "_planted_dense"),
+])
+def test_the_limits_see_lambdas_listed_args_and_joined_statements(tmp_path, planted, name):
+    target = "policies/baselines.py"
+    source = (ROOT / target).read_text(encoding="utf-8")
+    copy = tmp_path / "planted.py"
+    copy.write_text(source + "\n\n" + planted, encoding="utf-8")
+    assert not over_the_limits({target: ROOT / target})
+    line = len((source + "\n\n").splitlines()) + 1
+    assert list(over_the_limits({target: copy})) == [f"{target}:{name.format(line=line)}"]
+
+
+def test_the_limits_report_a_module_too_deep_to_parse(tmp_path):
+    deep = tmp_path / "deep.py"
+    deep.write_text("f = lambda a: (" + " + ".join(["a"] * 5000) + ")\n", encoding="utf-8")
+    assert list(over_the_limits({"deep.py": deep})) == ["deep.py"]
+
+
 def test_functions_take_few_parameters_and_fit_on_a_screen():
     found = over_the_limits()
     new = {name: why for name, why in found.items() if name not in NOT_YET_WITHIN_LIMITS}
