@@ -139,7 +139,107 @@ def _loader_uses(tree: ast.AST, processes: bool = True) -> tuple:
         elif (isinstance(node, ast.Call) and getattr(node.func, "id", None) == "getattr" and len(node.args) > 1
               and getattr(node.args[0], "id", None) in _LOADER_MODULES and not isinstance(node.args[1], ast.Constant)):
             computed.append(f"{node.lineno}: {ast.unparse(node)}")  # a computed attribute of importlib
+    other_names, other_computed = _other_loads(nodes)
+    names += other_names
+    computed += other_computed
+    if processes:
+        computed += _commands_with_computed_code(tree)
     return names, computed
+
+
+_MODULE_LOADERS = {("pkgutil", "resolve_name"): "name", ("runpy", "run_path"): "path", ("pickle", "loads"): "pickle",
+                   ("sys", "modules"): "table"}
+"""More ways to load (or reach) a module by name, each a module's attribute: ``pkgutil.resolve_name("pkg.mod:attr")``,
+``runpy.run_path("pkg/mod.py")``, ``pickle.loads(b"...")`` (its GLOBAL opcodes import the modules they name: a
+literal is read, anything else is data) and ``sys.modules["pkg.mod"]`` (or ``.get``), read as the module named."""
+
+
+def _module_of_path(text: str) -> str:
+    """``"dv2s_gym/story_check.py"`` -> ``"dv2s_gym.story_check"``; from the first part that is a project package."""
+    parts = list(Path(text).with_suffix("").parts) if text.endswith(".py") else list(Path(text).parts)
+    if parts and parts[-1] in ("__init__", "__main__"):
+        parts.pop()
+    starts = [i for i, part in enumerate(parts) if part in PACKAGES]
+    return ".".join(parts[starts[0]:]) if starts else text
+
+
+def _modules_a_pickle_imports(data: bytes) -> List[str]:
+    """The modules a pickle's GLOBAL and STACK_GLOBAL opcodes import (unpickling imports them)."""
+    import pickletools
+
+    names: List[str] = []
+    strings: List[str] = []
+    try:
+        for opcode, argument, _ in pickletools.genops(data):
+            if opcode.name in ("GLOBAL", "INST"):
+                names.append(str(argument).partition(" ")[0])
+            elif isinstance(argument, str):
+                strings.append(argument)
+            elif opcode.name == "STACK_GLOBAL" and len(strings) > 1:
+                names.append(strings[-2])
+    except Exception:  # not a whole pickle: what it reads up to the error is still read
+        pass
+    return names
+
+
+def _other_loads(nodes: List[ast.AST]) -> tuple:
+    """``(names, computed)`` for the loaders of :data:`_MODULE_LOADERS`, reached as ``module.attribute`` or a name
+    imported from the module (with an alias): the module names they are given as literals, and the lines where one
+    is given a computed name (a pickle given anything but a literal is data, not counted)."""
+    reached = {}
+    for node in nodes:
+        if isinstance(node, ast.ImportFrom):
+            reached.update({alias.asname or alias.name: _MODULE_LOADERS[(node.module, alias.name)]
+                            for alias in node.names if (node.module, alias.name) in _MODULE_LOADERS})
+
+    def kind(node: ast.AST) -> Optional[str]:
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
+            return _MODULE_LOADERS.get((node.value.id, node.attr))
+        return reached.get(node.id) if isinstance(node, ast.Name) else None
+
+    names: List[str] = []
+    computed: List[str] = []
+    for node in nodes:
+        if isinstance(node, ast.Call) and kind(node.func) in ("name", "path", "pickle"):
+            how, argument = kind(node.func), node.args[0] if node.args else None
+        elif isinstance(node, ast.Subscript) and kind(node.value) == "table":
+            how, argument = "name", node.slice
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get"
+              and kind(node.func.value) == "table"):
+            how, argument = "name", node.args[0] if node.args else None
+        else:
+            continue
+        value = argument.value if isinstance(argument, ast.Constant) else None
+        if how == "pickle":
+            names += _modules_a_pickle_imports(value) if isinstance(value, bytes) else []
+        elif isinstance(value, str):
+            names.append(_module_of_path(value) if how == "path" else value.partition(":")[0])
+        else:
+            computed.append(f"{node.lineno}: {ast.unparse(node)}")
+    return names, computed
+
+
+def _folded_strings(tree: ast.AST) -> List[str]:
+    """Every string a module spells out: its literals, and the strings it builds from literals only (``"a" + "b"``,
+    ``"".join(("a", "b"))``, an f-string without fields)."""
+    def fold(node: ast.AST) -> Optional[str]:
+        if isinstance(node, ast.Constant) and isinstance(node.value, str):
+            return node.value
+        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Add):
+            left, right = fold(node.left), fold(node.right)
+            return None if left is None or right is None else left + right
+        if isinstance(node, ast.FormattedValue) and node.format_spec is None:
+            return fold(node.value)
+        if isinstance(node, ast.JoinedStr):
+            pieces = [fold(value) for value in node.values]
+            return None if None in pieces else "".join(pieces)
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "join"
+                and len(node.args) == 1 and isinstance(node.args[0], (ast.Tuple, ast.List))):
+            separator, pieces = fold(node.func.value), [fold(e) for e in node.args[0].elts]
+            return None if separator is None or None in pieces else separator.join(pieces)
+        return None
+
+    return [text for node in ast.walk(tree) if (text := fold(node)) is not None]
 
 
 _RUNNERS = {"exec", "eval", "compile"}
@@ -221,6 +321,8 @@ COMPUTED_LOADS: Dict[str, str] = {
     "scenario_bank.jail.probe": "the jail's test probe runs the Python source a test sends it (exec), inside the "
                                 "jail; no product code starts it (tests/test_jail.py)",
     "scenario_bank.jail.zygote_server": "the worker module its command line names (the jail's JailedProcess)",
+    "scenario_bank.jail.process": "JailedProcess starts the worker module its caller names (read where it is "
+                                  "called: JailedProcess(\"pkg.mod\"))",
     "scenario_bank.sandbox": "the simulator's worker module, named to it by envs (simulator_worker())",
 }
 """Modules that call a loader with a computed name, or run code that is not a literal string (:func:`_loader_uses`,
@@ -241,9 +343,10 @@ def _dynamic_imports(path: Path, module: str, modules: Dict[str, Path], processe
     """
     tree = _parsed(path)
     names, computed = _loader_uses(tree, processes)
+    names = [name.partition(":")[0] for name in names]
+    names = [_resolve(name, modules) or name if name.split(".")[0] in PACKAGES else name for name in names]
     if computed:
-        names += [node.value.partition(":")[0] for node in ast.walk(tree)
-                  if isinstance(node, ast.Constant) and isinstance(node.value, str)]
+        names += [text.partition(":")[0] for text in _folded_strings(tree)]
     names += _modules_run_by_commands(tree) if processes else []
     return {name for name in names if isinstance(name, str) and name in modules and name != module}
 
@@ -297,6 +400,58 @@ def test_the_graph_sees_an_import_planted_in_code_run_from_a_string(tmp_path, ta
     assert not _loader_uses(_parsed(copy))[1]  # literal code: nothing computed
 
 
+@pytest.mark.parametrize("planted, loaded", [
+    ('import pkgutil\n    pkgutil.resolve_name("dv2s_gym.story:main")', "dv2s_gym.story"),
+    ('from runpy import run_path\n    run_path("dv2s_gym/story_check.py")', "dv2s_gym.story_check"),
+    ('import sys, subprocess\n    subprocess.run([sys.executable, "-c", "import dv2s_gym.mining.loop"])',
+     "dv2s_gym.mining.loop"),
+    ('import sys, subprocess\n    subprocess.run(f"{sys.executable} -m dv2s_gym.cli --help", shell=True)',
+     "dv2s_gym.cli"),
+    ('import os\n    os.system("python3 -c \'import dv2s_gym.demo\'")', "dv2s_gym.demo"),
+    ('import pickle\n    pickle.loads(b"cdv2s_gym.report_page\\n__name__\\n.")', "dv2s_gym.report_page"),
+    ('import sys\n    return sys.modules["dv2s_gym.cli"]', "dv2s_gym.cli"),
+    ('from sys import modules\n    return modules.get("dv2s_gym.story")', "dv2s_gym.story"),
+])
+def test_the_graph_sees_a_module_reached_by_other_loaders(tmp_path, planted, loaded):
+    """envs may not load dv2s_gym: a module resolved by name, a file run by path, a child Python given code, an
+    unpickled global and a module read from ``sys.modules`` tie the layers together all the same."""
+    modules = _modules()
+    target = "envs.trace"
+    source = modules[target].read_text(encoding="utf-8")
+    assert loaded not in module_edges(modules[target], target, modules)
+    copy = tmp_path / "planted.py"
+    copy.write_text(source + f"\n\ndef _planted():\n    {planted}\n", encoding="utf-8")
+    assert module_edges(copy, target, modules) - module_edges(modules[target], target, modules) == {loaded}
+    assert not _loader_uses(_parsed(copy))[1]  # literal names: nothing computed
+
+
+@pytest.mark.parametrize("planted", [
+    'subprocess.run([sys.executable, "-m", "dv2s_gym." + name])',
+    'subprocess.run([sys.executable, "-c", f"import {name}"])',
+    'pkgutil.resolve_name(name)',
+    'runpy.run_path(name)',
+    'sys.modules[name]',
+])
+def test_a_computed_name_given_to_another_loader_is_refused(planted):
+    tree = ast.parse(f"import pkgutil, runpy, subprocess, sys\ndef f(name):\n    {planted}\n")
+    assert [line.partition(":")[0] for line in _loader_uses(tree)[1]] == ["3"]
+
+
+def test_a_module_allowed_to_compute_names_still_loads_the_names_it_joins(tmp_path):
+    """A module of :data:`COMPUTED_LOADS` loads every project module its strings name, spelled whole or joined
+    from literal pieces."""
+    modules = _modules()
+    target = "policies.registry"
+    assert target in COMPUTED_LOADS
+    source = modules[target].read_text(encoding="utf-8")
+    for planted in ('_PLANTED = "".join(("dv2s", "_gym.mining.loop")) + ":run_loop"\n',
+                    '_PLANTED = "dv2s_gym." + "mining" + ".loop"\n', '_PLANTED = f"dv2s_gym.mining.{\'loop\'}"\n'):
+        copy = tmp_path / "planted.py"
+        copy.write_text(source + "\n\n" + planted, encoding="utf-8")
+        assert module_edges(copy, target, modules) - module_edges(modules[target], target, modules) == {
+            "dv2s_gym.mining.loop"}, planted
+
+
 def test_code_run_from_a_computed_string_is_refused():
     tree = ast.parse(textwrap.dedent('''
         import builtins
@@ -315,22 +470,67 @@ def test_code_run_from_a_computed_string_is_refused():
 
 
 _RUN_MODULE = re.compile(r"\bpython[\w.]*(?:\s+-\w+)*\s+-m\s+([\w.]+)")
+_RUN_CODE = re.compile(r"\bpython[\w.]*(?:\s+-\w+)*\s+-c\s+(?:\"([^\"]*)\"|'([^']*)')")
+
+
+def _command_text(node: ast.AST) -> Optional[str]:
+    """A command string as written: a literal, or an f-string whose fields are taken to name the interpreter
+    (``f"{sys.executable} -m pkg.mod"`` reads as ``"python -m pkg.mod"``)."""
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        return node.value
+    if isinstance(node, ast.JoinedStr):
+        return "".join(v.value if isinstance(v, ast.Constant) else "python" for v in node.values)
+    return None
+
+
+def _modules_imported_by_code(code: str) -> List[str]:
+    """The modules Python code given on a command line (``python -c CODE``) imports or loads by name."""
+    try:
+        tree = ast.parse(code)
+    except SyntaxError:
+        return []
+    names: List[str] = []
+    for node in (node for part in (tree, *_code_run(tree)[0]) for node in ast.walk(part)):
+        if isinstance(node, ast.Import):
+            names += [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level:
+            names += [f"{node.module}.{alias.name}" for alias in node.names] + [node.module or ""]
+    return names + _loader_uses(tree)[0] + _modules_run_by_commands(tree)
 
 
 def _modules_run_by_commands(tree: ast.AST) -> List[str]:
-    """Module names after ``"-m"`` in a literal argument list, or in a ``python -m NAME`` command string."""
+    """Module names after ``"-m"`` in a literal argument list, or in a ``python -m NAME`` command string (a literal
+    or an f-string); and what the code after ``"-c"`` (``python -c CODE``) imports."""
     docstrings = {id(node.value) for node in ast.walk(tree)
                   if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)}
     names: List[str] = []
     for node in ast.walk(tree):
         if isinstance(node, (ast.List, ast.Tuple)):
             items = node.elts
-            names += [after.value for flag, after in zip(items, items[1:])
-                      if isinstance(flag, ast.Constant) and flag.value == "-m"
-                      and isinstance(after, ast.Constant) and isinstance(after.value, str)]
-        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docstrings:
-            names += _RUN_MODULE.findall(node.value)
+            for flag, after in zip(items, items[1:]):
+                if not (isinstance(flag, ast.Constant) and isinstance(after, ast.Constant)
+                        and isinstance(after.value, str)):
+                    continue
+                names += [after.value] if flag.value == "-m" else \
+                    _modules_imported_by_code(after.value) if flag.value == "-c" else []
+        elif (text := _command_text(node)) is not None and id(node) not in docstrings:
+            names += _RUN_MODULE.findall(text)
+            names += [name for code in _RUN_CODE.findall(text) for name in _modules_imported_by_code("".join(code))]
     return names
+
+
+def _commands_with_computed_code(tree: ast.AST) -> List[str]:
+    """``"line: code"`` of each argument list whose ``"-m"`` or ``"-c"`` is followed by anything but a literal
+    string: the module it runs is not visible."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.List, ast.Tuple)):
+            items = node.elts
+            if any(isinstance(flag, ast.Constant) and flag.value in ("-m", "-c")
+                   and not (isinstance(after, ast.Constant) and isinstance(after.value, str))
+                   for flag, after in zip(items, items[1:])):
+                found.append(f"{node.lineno}: {ast.unparse(node)}")
+    return found
 
 
 def find_cycles(graph: Dict[str, Set[str]]) -> List[List[str]]:
@@ -442,7 +642,9 @@ def test_neither_the_product_nor_its_tests_import_the_benchmarks():
     """bench/ is research code: what the product or its tests need lives in the packages; the tests of
     benchmark code are under bench/tests/."""
     files = [path for package in PACKAGES for path in (ROOT / package).rglob("*.py")]
-    files += sorted((ROOT / "tests").rglob("*.py"))
+    # this file names bench in the strings its own checks are tried on, and loads modules (the standard library's
+    # exceptions, the entry points) by computed names: it imports no benchmark
+    files += sorted(path for path in (ROOT / "tests").rglob("*.py") if path != Path(__file__).resolve())
     wrong = []
     for path in files:
         wrong += [f"{path.relative_to(ROOT)} {how}" for how in _loads_of_bench(_parsed(path))]
@@ -571,13 +773,31 @@ def classes_made_by_calls(tree: ast.AST) -> List[tuple]:
     return made
 
 
-def _aliases(tree: ast.AST) -> Dict[str, str]:
-    """Names a module binds to another name: ``E = ValueError``, ``E: type = errors.DV2SError``, ``E, F = A, B``,
-    ``from builtins import ValueError as E`` -> the name they stand for (``ValueError``, ``DV2SError``, ...)."""
-    found: Dict[str, str] = {}
-    for node in ast.walk(tree):
+THE_BASE = "scenario_bank.errors.DV2SError"
+"""The one base error, named by the module that defines it (a class of the same name elsewhere is another class)."""
+UNREADABLE = "?"
+"""What a base written as a computed expression (``*BASES``, ``ERRORS[0]``, ``A if c else B``, a call) stands for."""
+
+
+def _bindings(nodes: List[ast.AST], made: List[tuple], module: str, path: Path) -> Dict[str, object]:
+    """What each name a module binds stands for: a qualified name (``"json.JSONDecodeError"`` for ``from json
+    import JSONDecodeError as E``; ``"module.Class"`` for a class it defines, by a statement or a call) or, for a
+    name assigned an expression (``E = errors.Base``, ``E, F = A, B``), that expression (read by
+    :func:`_qualified`)."""
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    found: Dict[str, object] = {}
+    for node in nodes:
         pairs = []
-        if isinstance(node, ast.Assign):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                found[alias.asname or alias.name.split(".")[0]] = alias.name if alias.asname else alias.name.split(".")[0]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(anchor + ([base] if base else []))
+            found.update({alias.asname or alias.name: f"{base}.{alias.name}" for alias in node.names})
+        elif isinstance(node, ast.Assign):
             for target in node.targets:
                 if isinstance(target, ast.Tuple) and isinstance(node.value, ast.Tuple):
                     pairs += list(zip(target.elts, node.value.elts))
@@ -585,65 +805,161 @@ def _aliases(tree: ast.AST) -> Dict[str, str]:
                     pairs.append((target, node.value))
         elif isinstance(node, (ast.AnnAssign, ast.NamedExpr)) and node.value is not None:
             pairs.append((node.target, node.value))
-        elif isinstance(node, ast.ImportFrom):
-            found.update({alias.asname: alias.name for alias in node.names if alias.asname})
         for target, value in pairs:
-            if isinstance(target, ast.Name) and _base_name(value) and target.id != _base_name(value):
-                found[target.id] = _base_name(value)
+            if isinstance(target, ast.Name):
+                found[target.id] = value
+    for node in nodes:
+        if isinstance(node, ast.ClassDef):
+            found[node.name] = f"{module}.{node.name}"
+    for name, _, _ in made:
+        found[name] = f"{module}.{name}"
     return found
 
 
-def _class_table(modules: Optional[Dict[str, Path]] = None) -> tuple:
-    """``(classes, by_name)``: ``module.Class`` -> the names of its bases, for every class of the four packages (a
-    ``class`` statement or a class made by a call, :func:`classes_made_by_calls`; computed bases are ``["?"]``);
-    and a class's or an alias's plain name -> what it stands for (its bases; for an alias, :func:`_aliases`, the
-    name it is bound to: ``E = ValueError; class X(E)`` derives X from ValueError)."""
-    classes: Dict[str, List[str]] = {}
-    by_name: Dict[str, List[str]] = {}
-    for module, path in (modules or _modules()).items():
-        defined, aliases = _classes_and_aliases(path)
-        classes.update({f"{module}.{name}": list(bases) for name, bases in defined})
-        for alias, name in aliases:
-            by_name.setdefault(alias, []).append(name)
-    for qualified, bases in classes.items():
-        by_name.setdefault(qualified.rpartition(".")[2], []).extend(bases)
-    return classes, by_name
+def _qualified(node: object, bindings: Dict[str, object], seen: frozenset = frozenset()) -> str:
+    """The qualified name an expression stands for in a module (its :func:`_bindings`): a name it binds, a
+    built-in (``"builtins.ValueError"``) or an attribute of either (``"json.JSONDecodeError"``); a subscript stands
+    for what it subscripts when that is a name (``Generic[T]``: ``typing.Generic``); anything else is
+    :data:`UNREADABLE`."""
+    if isinstance(node, str):
+        return node
+    if isinstance(node, ast.Name):
+        if node.id in bindings and node.id not in seen:
+            return _qualified(bindings[node.id], bindings, seen | {node.id})
+        return f"builtins.{node.id}" if hasattr(builtins, node.id) and node.id not in bindings else UNREADABLE
+    if isinstance(node, ast.Attribute):
+        value = _qualified(node.value, bindings, seen)
+        return UNREADABLE if value == UNREADABLE else f"{value}.{node.attr}"
+    if isinstance(node, ast.Subscript) and isinstance(node.value, (ast.Name, ast.Attribute)):
+        return _qualified(node.value, bindings, seen)
+    return UNREADABLE
 
 
 @functools.lru_cache(maxsize=None)
-def _classes_and_aliases(path: Path) -> tuple:
-    """``(classes, aliases)`` of a module's file, read once a run: ``(name, bases)`` of each class (computed bases
-    of a class made by a call are ``("?",)``) and ``(alias, name)`` of each alias (:func:`_aliases`)."""
+def _module_classes(path: Path, module: str) -> tuple:
+    """``(bindings, classes, exported)`` of one module's file, read once a run (see :func:`_class_table`)."""
     tree = _parsed(path)
-    classes = [(node.name, tuple(_base_name(b) for b in node.bases)) for node in ast.walk(tree)
-               if isinstance(node, ast.ClassDef)]
-    classes += [(name, tuple(bases) if bases is not None else ("?",)) for name, bases, _ in classes_made_by_calls(tree)]
-    return tuple(classes), tuple(_aliases(tree).items())
+    nodes = list(ast.walk(tree))
+    made = classes_made_by_calls(tree)
+    names = _bindings(nodes, made, module, path)
+    classes: Dict[str, List[str]] = {}
+    for node in nodes:
+        if isinstance(node, ast.ClassDef):
+            classes[f"{module}.{node.name}"] = [UNREADABLE if isinstance(b, ast.Starred) else _qualified(b, names)
+                                                for b in node.bases]
+    for name, bases, _ in made:
+        classes[f"{module}.{name}"] = [UNREADABLE] if bases is None else [
+            _qualified(ast.Name(id=b), names) if b else UNREADABLE for b in bases]
+    exported: Dict[str, str] = {}
+    for node in tree.body:
+        for target in node.targets if isinstance(node, ast.Assign) else []:
+            if isinstance(target, ast.Name) and not target.id.startswith("_"):
+                value = _qualified(node.value, names)
+                if value.rpartition(".")[2].startswith("_") and value.rpartition(".")[0] == module:
+                    exported[f"{module}.{target.id}"] = value
+    return names, classes, exported
 
 
-def _reaches(name: str, goal, by_name: Dict[str, List[str]], seen: frozenset = frozenset()) -> bool:
-    """``goal(name)`` holds for ``name`` or for a name it derives from or stands for (through ``by_name``)."""
-    return goal(name) or (name not in seen and any(_reaches(b, goal, by_name, seen | {name})
-                                                   for b in by_name.get(name, ())))
+def _class_table(modules: Optional[Dict[str, Path]] = None) -> tuple:
+    """``(classes, exported)``: ``module.Class`` -> the qualified names of its bases (:func:`_qualified`, each
+    resolved to where it is defined: a name a project module imports stands for the imported class), for every
+    class of the four packages (a ``class`` statement or a class made by a call, :func:`classes_made_by_calls`;
+    computed bases are :data:`UNREADABLE`); and ``module.Name`` -> the class a public module-level name of the
+    module is bound to when that is a private class of it (``Public = _Hidden``: the private class leaves its
+    module)."""
+    bindings: Dict[str, Dict[str, object]] = {}
+    written: Dict[str, List[str]] = {}
+    exported: Dict[str, str] = {}
+    for module, path in (modules or _modules()).items():
+        names, classes, public = _module_classes(path, module)
+        bindings[module] = names
+        written.update(classes)
+        exported.update(public)
+
+    def defined(name: str, seen: frozenset = frozenset()) -> str:
+        """Where a qualified name is defined: a project module's imported name followed to its source."""
+        if name in written or name in seen:
+            return name
+        owner, _, attr = name.rpartition(".")
+        if owner in bindings and attr in bindings[owner]:
+            target = _qualified(bindings[owner][attr], bindings[owner])
+            if target != name and target != UNREADABLE:
+                return defined(target, seen | {name})
+        return name
+
+    classes = {q: [b if b == UNREADABLE else defined(b) for b in bases] for q, bases in written.items()}
+    return classes, {name: defined(target) for name, target in exported.items()}
+
+
+@functools.lru_cache(maxsize=None)
+def _outside_class(name: str) -> Optional[type]:
+    """The class a qualified name outside the project stands for (its module imported), else None."""
+    import importlib
+
+    module, attributes = name, []
+    while module:
+        try:
+            value = importlib.import_module(module)
+        except Exception:  # not a module: one attribute further up
+            module, _, attribute = module.rpartition(".")
+            attributes.insert(0, attribute)
+            continue
+        for attribute in attributes:
+            value = getattr(value, attribute, None)
+        return value if isinstance(value, type) else None
+    return None
+
+
+def _derives(name: str, classes: Dict[str, List[str]], goal, seen: frozenset = frozenset()) -> bool:
+    """``goal`` holds for the class a qualified name stands for or one it derives from: through the project's
+    classes, and for a class outside the project, ``goal(name, the class)``."""
+    if name in classes:
+        return goal(name, None) or (name not in seen and any(_derives(b, classes, goal, seen | {name})
+                                                              for b in classes[name]))
+    if name == UNREADABLE or name.split(".")[0] in {*PACKAGES, *HEAVY_DEPENDENCIES}:
+        return goal(name, None)
+    return goal(name, _outside_class(name))
+
+
+_NAMED_LIKE_AN_ERROR = re.compile(r"(Error|Exception|Warning|Interrupt|Exit|Failure|Fault)$")
+"""A class of a heavy package (:data:`HEAVY_DEPENDENCIES`, not imported by this test: scenic and torch take seconds)
+is taken to be an exception when its name says so."""
+
+
+def _is_exception(name: str, found: Optional[type]) -> bool:
+    """A qualified name outside the project stands for an exception class: its module imported (the standard
+    library, a light third-party package), or for a heavy package, named like one."""
+    if name.split(".")[0] in HEAVY_DEPENDENCIES:
+        return bool(_NAMED_LIKE_AN_ERROR.search(name))
+    return found is not None and issubclass(found, BaseException)
 
 
 def error_classes(modules: Optional[Dict[str, Path]] = None) -> Dict[str, List[str]]:
     """Every exception class defined in the four packages (parsed, :func:`_class_table`): ``module.Class`` -> the
-    names of its bases."""
-    classes, by_name = _class_table(modules)
-    return {q: b for q, b in classes.items() if any(_reaches(base, _EXCEPTION_BASES.__contains__, by_name)
-                                                    for base in b)}
+    qualified names of its bases. An exception is any class deriving from ``BaseException``, built-in, from the
+    standard library or from a third-party package (``json.JSONDecodeError``, ``KeyboardInterrupt``)."""
+    classes, _ = _class_table(modules)
+    return {q: b for q, b in classes.items() if any(_derives(base, classes, _is_exception) for base in b)}
 
 
 def errors_outside_the_base(modules: Optional[Dict[str, Path]] = None) -> List[str]:
-    """Public error classes (:func:`error_classes`) that do not derive from ``DV2SError``, save ``DV2SError``
-    itself (a private class is a module's own control flow and never leaves it)."""
-    classes, by_name = _class_table(modules)
-    errors = {q: b for q, b in classes.items() if any(_reaches(base, _EXCEPTION_BASES.__contains__, by_name)
-                                                      for base in b)}
-    return sorted(q for q, bases in errors.items()
-                  if not q.endswith(".DV2SError") and not q.rpartition(".")[2].startswith("_")
-                  and not any(_reaches(b, "DV2SError".__eq__, by_name) for b in bases))
+    """Public error classes (:func:`error_classes`) that do not derive from :data:`THE_BASE`, save the base itself; a
+    private class is a module's own control flow and never leaves it: a public name bound to it
+    (``Public = _Hidden``) is a public error."""
+    classes, exported = _class_table(modules)
+    errors = {q for q, b in classes.items() if any(_derives(base, classes, _is_exception) for base in b)}
+    public = {q: q for q in errors if not q.rpartition(".")[2].startswith("_")}
+    public.update({name: target for name, target in exported.items() if target in errors})
+    return sorted(name for name, q in public.items()
+                  if q != THE_BASE and not _derives(q, classes, lambda n, _: n == THE_BASE))
+
+
+def unreadable_bases(modules: Optional[Dict[str, Path]] = None) -> List[str]:
+    """Classes of the four packages with a base written as a computed expression (:data:`UNREADABLE`): what they
+    derive from is not visible, so the error rules could not see them."""
+    classes, _ = _class_table(modules)
+    return sorted(q for q, bases in classes.items() if UNREADABLE in bases)
+
 
 
 def test_an_error_class_is_seen_whatever_built_in_it_derives_from():
@@ -653,8 +969,10 @@ def test_an_error_class_is_seen_whatever_built_in_it_derives_from():
 
 def test_every_project_error_derives_from_the_one_base():
     """One base error (``scenario_bank.errors.DV2SError``) under every error the project raises, so the command
-    line catches it once. ``Interrupted`` is Ctrl-C (a KeyboardInterrupt), not an error; a private class is a
-    module's own control flow and never leaves it."""
+    line catches it once. The base is the class ``scenario_bank.errors`` defines (not a name: another class
+    called ``DV2SError`` is another class), and an error is any class deriving from ``BaseException``, a built-in
+    one or one of the standard library or a third-party package (``json.JSONDecodeError``); a private class is a
+    module's own control flow and never leaves it (a public name bound to it does)."""
     classes = error_classes()
     assert "scenario_bank.errors.DV2SError" in classes and len(classes) > 40
     outside = errors_outside_the_base()
@@ -702,6 +1020,62 @@ def test_the_error_rule_sees_an_error_planted_through_an_alias_or_a_call(tmp_pat
     assert errors_outside_the_base(modules) == sorted(OUTSIDE_THE_BASE)  # the same error under the base is fine
 
 
+def test_class_bases_are_readable():
+    """A base written as a computed expression (``*BASES``, ``ERRORS[0]``, ``A if c else B``) could be anything:
+    the error rules could not see what the class derives from. Bases are names (``Generic[T]`` is ``Generic``)."""
+    assert not unreadable_bases(), f"classes with computed bases (name the base classes): {unreadable_bases()}"
+
+
+@pytest.mark.parametrize("planted, names", [
+    ("_BASES = (ValueError,)\nclass PlantedStarError(*_BASES):\n    pass\n", ["PlantedStarError"]),
+    ("_ERRORS = [KeyError]\nclass PlantedSubscriptError(_ERRORS[0]):\n    pass\n", ["PlantedSubscriptError"]),
+    ("class PlantedIfError(ValueError if json else TypeError):\n    pass\n", ["PlantedIfError"]),
+    ("class PlantedCallError(type(ValueError())):\n    pass\n", ["PlantedCallError"]),
+])
+def test_the_error_rule_refuses_a_base_written_as_an_expression(tmp_path, planted, names):
+    modules = _modules()
+    target = "envs.trace"
+    source = modules[target].read_text(encoding="utf-8")
+    assert unreadable_bases(modules) == []
+    modules[target] = tmp_path / "planted.py"
+    modules[target].write_text(source + "\n\n" + planted, encoding="utf-8")
+    assert unreadable_bases(modules) == [f"{target}.{name}" for name in names]
+
+
+@pytest.mark.parametrize("planted, names", [
+    # a base from the standard library or a third-party package is resolved to its module and imported
+    ("class PlantedJsonError(json.JSONDecodeError):\n    pass\n", ["PlantedJsonError"]),
+    ("from subprocess import CalledProcessError as _Failed\nclass PlantedProcessError(_Failed):\n    pass\n",
+     ["PlantedProcessError"]),
+    ("import http.client\nclass PlantedHttpError(http.client.HTTPException):\n    pass\n", ["PlantedHttpError"]),
+    # not an Exception, so neither ``except DV2SError`` nor ``except Exception`` catches it
+    ("class PlantedBaseExceptionError(BaseException):\n    pass\n", ["PlantedBaseExceptionError"]),
+    # a private class leaves its module under a public name
+    ("class _HiddenError(ValueError):\n    pass\nPlantedPublicError = _HiddenError\n", ["PlantedPublicError"]),
+    # a second class named DV2SError is not the base
+    ("class DV2SError(RuntimeError):\n    pass\nclass PlantedShadowError(DV2SError):\n    pass\n",
+     ["DV2SError", "PlantedShadowError"]),
+    # an imported name spelled like a real project error stands for what it imports
+    ("from json import JSONDecodeError as RunIdentityError\nclass PlantedCollidingError(RunIdentityError):\n"
+     "    pass\n", ["PlantedCollidingError"]),
+])
+def test_the_error_rule_resolves_bases_to_the_class_they_name(tmp_path, planted, names):
+    modules = _modules()
+    target = "envs.trace"
+    source = modules[target].read_text(encoding="utf-8")
+    assert errors_outside_the_base(modules) == sorted(OUTSIDE_THE_BASE)
+    modules[target] = tmp_path / "planted.py"
+    modules[target].write_text(source + "\n\n" + planted, encoding="utf-8")
+    outside = set(errors_outside_the_base(modules)) - set(OUTSIDE_THE_BASE)
+    # (a shadow DV2SError also takes the module's own errors off the base: the name is the module's class after it)
+    assert {f"{target}.{n}" for n in names} <= outside and all(q.startswith(target + ".") for q in outside)
+    under = re.sub(r"^class (Planted\w+|_HiddenError)\((.*)\):", r"class \1(\2, scenario_bank.errors.DV2SError):",
+                   planted, flags=re.M).replace("DV2SError(RuntimeError)", "Shadow(RuntimeError, DV2SError)")
+    modules[target] = tmp_path / "under.py"
+    modules[target].write_text(source + "\n\nimport scenario_bank.errors\n" + under, encoding="utf-8")
+    assert errors_outside_the_base(modules) == sorted(OUTSIDE_THE_BASE)  # the same errors under the real base
+
+
 def test_a_class_made_by_a_call_with_computed_bases_is_refused():
     tree = ast.parse("import types\nbases = (ValueError,)\nA = type('A', bases, {})\nB = types.new_class('B', bases)\n"
                      "C = type('C', (int,), {})\nkind = type(3)\n")
@@ -711,6 +1085,8 @@ def test_a_class_made_by_a_call_with_computed_bases_is_refused():
 OUTSIDE_THE_BASE: Dict[str, str] = {
     "envs.errors.ForeignConstructWarning": "a warning (warnings.warn) a CARLA-model script's ignored construct "
                                            "issues, never raised: nothing catches it",
+    "envs.errors.Interrupted": "Ctrl-C (a KeyboardInterrupt, not an Exception): it stops the run like Ctrl-C and "
+                               "carries the note on how to resume; the command line prints the note",
 }
 """Public exception or warning classes not under ``DV2SError``, each with the reason (the list only shrinks)."""
 
@@ -739,6 +1115,9 @@ def _functions_of(tree: ast.AST):
             if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 yield prefix + child.name, child
                 yield from walk(child, prefix + child.name + ".")
+            elif isinstance(child, ast.Lambda):  # a lambda is a function too
+                yield f"{prefix}<lambda at line {child.lineno}>", child
+                yield from walk(child, f"{prefix}<lambda at line {child.lineno}>.")
             elif isinstance(child, ast.ClassDef):
                 yield from walk(child, prefix + child.name + ".")
             else:
@@ -764,6 +1143,8 @@ def _positional_fields(function: ast.AST, vararg: str) -> int:
     three; ``args[-2]``: two) and the largest literal bound of a slice of it (``args[:3]``: three); 0 when it reads
     none by position (it is passed on whole)."""
     def is_vararg(node: ast.AST) -> bool:
+        if isinstance(node, ast.Call) and getattr(node.func, "id", None) in ("list", "tuple") and len(node.args) == 1:
+            node = node.args[0]  # ``list(args)`` holds the same positions
         return isinstance(node, ast.Name) and node.id == vararg
 
     def literal(node: Optional[ast.AST]) -> Optional[int]:
@@ -807,6 +1188,12 @@ def _keyword_fields(function: ast.AST, kwarg: str) -> Set[str]:
     return keys - {None}
 
 
+def _statement_lines(node: ast.AST) -> int:
+    """Lines a function spans, a line holding several statements (joined by ``;``) counting one per statement."""
+    starts = [n.lineno for n in ast.walk(node) if isinstance(n, ast.stmt)]
+    return node.end_lineno - node.lineno + 1 + len(starts) - len(set(starts))
+
+
 def over_the_limits(files: Optional[Dict[str, Path]] = None) -> Dict[str, str]:
     """``path:Qualified.name`` -> why, for every function of the four packages over the limits (``files``: the
     file read for each path, relative to the repository; by default the packages' own)."""
@@ -815,8 +1202,13 @@ def over_the_limits(files: Optional[Dict[str, Path]] = None) -> Dict[str, str]:
                  for path in sorted((ROOT / package).rglob("*.py"))}
     found = {}
     for shown, path in files.items():
-        for name, node in _functions(path):
-            lines, count = node.end_lineno - node.lineno + 1, _parameters(node)
+        try:
+            functions = list(_functions(path))
+        except RecursionError:
+            found[f"{shown}"] = "nested too deeply for Python's parser to read (RecursionError)"
+            continue
+        for name, node in functions:
+            lines, count = _statement_lines(node), _parameters(node)
             if lines > MAX_LINES or count > MAX_PARAMETERS:
                 found[f"{shown}:{name}"] = f"{lines} lines, {count} parameters"
     return found
@@ -859,6 +1251,29 @@ def test_the_limits_see_parameters_planted_through_star_args(tmp_path, planted):
     assert not over_the_limits({target: ROOT / target})
     name = planted.partition("(")[0].removeprefix("def ")
     assert list(over_the_limits({target: copy})) == [f"{target}:{name}"]
+
+
+@pytest.mark.parametrize("planted, name", [
+    ("_planted = lambda a, b, c, d, e, f, g, h, i: a\n", "<lambda at line {line}>"),
+    ("def _planted_listed(*args):\n    a, b, c, d, e, f, g, h, i, j = list(args)\n    return a\n",
+     "_planted_listed"),
+    ("def _planted_dense(x):\n" + "".join(f"    x = x + {n}; x = x - {n}\n" for n in range(45)) + "    return x\n",
+     "_planted_dense"),
+])
+def test_the_limits_see_lambdas_listed_args_and_joined_statements(tmp_path, planted, name):
+    target = "policies/baselines.py"
+    source = (ROOT / target).read_text(encoding="utf-8")
+    copy = tmp_path / "planted.py"
+    copy.write_text(source + "\n\n" + planted, encoding="utf-8")
+    assert not over_the_limits({target: ROOT / target})
+    line = len((source + "\n\n").splitlines()) + 1
+    assert list(over_the_limits({target: copy})) == [f"{target}:{name.format(line=line)}"]
+
+
+def test_the_limits_report_a_module_too_deep_to_parse(tmp_path):
+    deep = tmp_path / "deep.py"
+    deep.write_text("f = lambda a: (" + " + ".join(["a"] * 5000) + ")\n", encoding="utf-8")
+    assert list(over_the_limits({"deep.py": deep})) == ["deep.py"]
 
 
 def test_functions_take_few_parameters_and_fit_on_a_screen():
