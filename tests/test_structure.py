@@ -381,6 +381,18 @@ def test_the_loader_check_sees_computed_and_indirect_loads():
     assert [line.partition(":")[0] for line in computed] == ["5", "7", "8"]
 
 
+def _assert_planted_load_is_seen(tmp_path, target, planted, loaded):
+    """A copy of module ``target`` with ``planted`` code appended in a function has exactly one more edge, to
+    ``loaded``, and its loads are literal (nothing computed)."""
+    modules = _modules()
+    source = modules[target].read_text(encoding="utf-8")
+    assert loaded not in module_edges(modules[target], target, modules)
+    copy = tmp_path / "planted.py"
+    copy.write_text(source + f"\n\ndef _planted():\n    {planted}\n", encoding="utf-8")
+    assert module_edges(copy, target, modules) - module_edges(modules[target], target, modules) == {loaded}
+    assert not _loader_uses(_parsed(copy))[1]
+
+
 @pytest.mark.parametrize("target, planted, loaded", [
     # regress may not import mining, envs may not import dv2s_gym: code run from a string imports all the same
     ("dv2s_gym.regress.html", 'exec("import dv2s_gym.mining.loop")', "dv2s_gym.mining.loop"),
@@ -391,13 +403,7 @@ def test_the_loader_check_sees_computed_and_indirect_loads():
     ("envs.trace", '__import__("dv2s_gym.story")', "dv2s_gym.story"),
 ])
 def test_the_graph_sees_an_import_planted_in_code_run_from_a_string(tmp_path, target, planted, loaded):
-    modules = _modules()
-    source = modules[target].read_text(encoding="utf-8")
-    assert loaded not in module_edges(modules[target], target, modules)
-    copy = tmp_path / "planted.py"
-    copy.write_text(source + f"\n\ndef _planted():\n    {planted}\n", encoding="utf-8")
-    assert module_edges(copy, target, modules) - module_edges(modules[target], target, modules) == {loaded}
-    assert not _loader_uses(_parsed(copy))[1]  # literal code: nothing computed
+    _assert_planted_load_is_seen(tmp_path, target, planted, loaded)
 
 
 @pytest.mark.parametrize("planted, loaded", [
@@ -415,14 +421,7 @@ def test_the_graph_sees_an_import_planted_in_code_run_from_a_string(tmp_path, ta
 def test_the_graph_sees_a_module_reached_by_other_loaders(tmp_path, planted, loaded):
     """envs may not load dv2s_gym: a module resolved by name, a file run by path, a child Python given code, an
     unpickled global and a module read from ``sys.modules`` tie the layers together all the same."""
-    modules = _modules()
-    target = "envs.trace"
-    source = modules[target].read_text(encoding="utf-8")
-    assert loaded not in module_edges(modules[target], target, modules)
-    copy = tmp_path / "planted.py"
-    copy.write_text(source + f"\n\ndef _planted():\n    {planted}\n", encoding="utf-8")
-    assert module_edges(copy, target, modules) - module_edges(modules[target], target, modules) == {loaded}
-    assert not _loader_uses(_parsed(copy))[1]  # literal names: nothing computed
+    _assert_planted_load_is_seen(tmp_path, "envs.trace", planted, loaded)
 
 
 @pytest.mark.parametrize("planted", [
