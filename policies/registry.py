@@ -63,6 +63,7 @@ __all__ = [
     "BUILTIN_POLICIES",
     "spec_from_file",
     "check_policy_spec",
+    "check_card_observation",
 ]
 
 SHIPPED_CHECKPOINT = Path(__file__).resolve().parent / "checkpoints" / "dv2s_ppo" / "model.zip"
@@ -283,26 +284,32 @@ class SB3Policy(Policy):
         self.action_space = model.action_space
 
     def check_env_config(self, env_config: Optional[Mapping[str, Any]]) -> None:
-        """The env must observe as the env the model was trained in, by its card's ``env_config`` (no
-        ``observation`` there: the default one): same type, features and options. A card without an
-        ``env_config`` (a bare checkpoint) is checked by the observation space's shape only."""
-        if "env_config" not in self.card:
-            return
-        from envs.dv2s_env import DV2SEnv
-
-        defaults = DV2SEnv.default_config()
-        trained = observation_in_force(self.card.get("env_config") or {}, defaults)
-        given = observation_in_force(env_config or {}, defaults)
-        if trained != given:
-            differ = sorted(key for key in set(trained) | set(given) if trained.get(key) != given.get(key))
-            detail = "; ".join(f"{key}: trained {trained.get(key)!r}, env {given.get(key)!r}" for key in differ)
-            raise PolicySpaceError(
-                f"policy {self.name!r} was trained with another observation than this env's ({detail}); run it "
-                f"with the env config of its model card (config['observation'] = {trained_section(self.card)!r})")
+        """The env must observe as the env the model was trained in (:func:`check_card_observation`)."""
+        check_card_observation(self.name, self.card, env_config)
 
     def act(self, observations: np.ndarray, deterministic: bool = True) -> np.ndarray:
         actions, _ = self.model.predict(np.asarray(observations, dtype=np.float32), deterministic=deterministic)
         return np.asarray(actions)
+
+
+def check_card_observation(name: str, card: Mapping[str, Any], env_config: Optional[Mapping[str, Any]]) -> None:
+    """Raise :class:`PolicySpaceError` unless ``env_config`` observes as the env the policy ``name`` of model card
+    ``card`` was trained in, by the card's ``env_config`` (no ``observation`` there: the default one): same type,
+    features and options. A card without an ``env_config`` (a bare checkpoint) is checked by the observation
+    space's shape only, elsewhere."""
+    if "env_config" not in card:
+        return
+    from envs.dv2s_env import DV2SEnv
+
+    defaults = DV2SEnv.default_config()
+    trained = observation_in_force(card.get("env_config") or {}, defaults)
+    given = observation_in_force(env_config or {}, defaults)
+    if trained != given:
+        differ = sorted(key for key in set(trained) | set(given) if trained.get(key) != given.get(key))
+        detail = "; ".join(f"{key}: trained {trained.get(key)!r}, env {given.get(key)!r}" for key in differ)
+        raise PolicySpaceError(
+            f"policy {name!r} was trained with another observation than this env's ({detail}); run it "
+            f"with the env config of its model card (config['observation'] = {trained_section(card)!r})")
 
 
 def trained_section(card: Mapping[str, Any]) -> Dict[str, Any]:

@@ -1062,13 +1062,10 @@ def resolve_checkpoint(spec: str) -> Tuple[str, Path, Dict[str, Any]]:
 def check_source_observation(source_card: Mapping[str, Any], env_config: Mapping[str, Any], spec: str) -> None:
     """Refuse to fine-tune a checkpoint in envs that observe otherwise than the ones it was trained in (its card's
     ``env_config``; a card without one is checked by the observation space's shape only)."""
-    from policies.registry import PolicySpaceError, SB3Policy
-
-    class _Card:  # the check needs the card only, not the model
-        observation_space = action_space = None
+    from policies.registry import PolicySpaceError, check_card_observation
 
     try:
-        SB3Policy(str(spec), _Card(), source_card).check_env_config(env_config)
+        check_card_observation(str(spec), source_card, env_config)
     except PolicySpaceError as error:
         raise TrainingError(f"cannot fine-tune here: {error}") from None
 
