@@ -73,11 +73,12 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
 import numpy as np
 
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.exact_replay import narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
+from dv2s_gym.mining.exact_replay import NARROW, narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
 from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence, key_actor, shows_interaction
 from dv2s_gym.mining.monitors import detect_failure
 from dv2s_gym.mining.report_text import not_compared_names_text
-from dv2s_gym.mining.param_meaning import (actor_objects, counterpart_objects, fixed_quantities, key_uses,
+from dv2s_gym.mining.param_meaning import (actor_objects, behaviour_overrides, counterpart_objects, fixed_quantities,
+                                           key_uses, object_behaviour_heads,
                                            object_behaviours, meaning_map, name_mismatch, quantity_of, quantity_uses, read_interval,
                                            read_support, script_parameters, support_contains, support_hull,
                                            script_objects, support_text, tied_objects)
@@ -426,64 +427,138 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
         out["key"] = {name: where[0][3] for name, where in keyed.items()}
         out["key_not_compared"] = _key_set_otherwise(parent, script, keyed, out)
         out["key_fixed_outside"] = _key_fixed_outside(parent, script, keyed, numeric, interaction.get("actor"))
+        overridden = _key_overridden(parent, script, keyed, numeric, interaction.get("actor"))
+        if overridden:
+            out["key_overridden"] = overridden
     return out
 
 
-def _key_fixed_outside(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
-                       numeric: Mapping[str, float], actor: Optional[str] = None) -> Dict[str, str]:
-    """``{key parameter: the key quantity and the value the new script fixes it at}`` for each key parameter whose
-    key quantity (the ego's, or the key actor's: the same quantity of its counterpart in the new script) the new
-    script sets without a parameter, to a value (a number, an inline ``Range``, discrete values:
-    :func:`~dv2s_gym.mining.param_meaning.fixed_quantities`) that does not hold the failing value's quantity (the
-    parameter's value through the parent's expression): the new script cannot produce the failing scene's quantity,
-    whatever else it does with the parameter. A key quantity the parent sets other than as a known function of the
-    parameter alone, or that the new script sets with a parameter (compared as a parameter) or not at all, is not
-    checked here; nor is a behaviour argument of an object that runs another behaviour than in the parent
-    (:func:`~dv2s_gym.mining.param_meaning.object_behaviours`: the argument may mean something else there)."""
-    fixed = fixed_quantities(script)
-    if not fixed:
-        return {}
-    old_uses, new_uses = quantity_uses(parent), quantity_uses(script)
+FIXED_TOLERANCE = NARROW
+"""How far a key quantity the new script fixes at a value (``with speed 20``, ``CutIn(2.5)``) may lie from the
+failing value's quantity and still hold it, as a share of the width the parent's range of the parameter gives
+that quantity: the exact replay narrows each parameter to this share of its width on either side of the failing
+value (:data:`~dv2s_gym.mining.exact_replay.NARROW`) and takes any value in that band as the failing scene's, so
+a fixed value as close stands for the failing scene as well as the replay's draws do. A parent range of no width
+allows no distance."""
+
+
+def _counterpart_finder(parent: str, script: str, actor: Optional[str] = None):
+    """``counterpart(object, kind)``: the new script's object that stands for the parent's (the ego for the ego; the
+    paired object; the key ``actor``'s object by its name; the only object of the kind on both sides), or ``None``."""
     objects = counterpart_objects(parent, script)
     new_objects = script_objects(script)
     named = actor_objects(script)
-    set_by_parameter = {where for by_slot in new_uses.values() for where in by_slot}
-    old_behaviours, new_behaviours = object_behaviours(parent), object_behaviours(script)
+    old_named = actor_objects(parent)
+    old_objects = script_objects(parent)
 
     def counterpart(obj: str, kind: str) -> Optional[Tuple[str, str]]:
         if obj == "ego":
             return ("ego", kind) if ("ego", kind) in new_objects else None
         if (obj, kind) in objects:
             return objects[(obj, kind)]
-        if actor and actor_objects(parent).get(actor) == obj and named.get(actor):
+        if actor and old_named.get(actor) == obj and named.get(actor):
             found = [o for o in new_objects if o[0] == named[actor] and o[1] == kind]
             if found:
                 return found[0]
         same = [o for o in new_objects if o[1] == kind and o[0] != "ego"]
-        old_same = [o for o in script_objects(parent) if o[1] == kind and o[0] != "ego"]
+        old_same = [o for o in old_objects if o[1] == kind and o[0] != "ego"]
         return same[0] if len(same) == 1 and len(old_same) == 1 else None
+    return counterpart
 
-    found: Dict[str, str] = {}
+
+def _key_checks(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
+                actor: Optional[str] = None):
+    """``[(parameter, parent's (object, kind, slot), the new script's (object, kind, slot), words, the parent's
+    quantity function, tolerance, read as a target speed?)]`` for each key quantity the parent sets as one known function of the parameter
+    alone and whose object has a counterpart in the new script (:func:`_counterpart_finder`); ``tolerance`` is
+    :data:`FIXED_TOLERANCE` of the width that function takes over the parent's range of the parameter. The ego's
+    or an actor's speed is checked as its behaviour's ``target_speed`` too when the parent sets no target speed of
+    its own there (``FollowLaneBehavior(target_speed=30)`` keeps the object at 30 whatever its start speed)."""
+    old_uses = quantity_uses(parent)
+    parent_fixed = fixed_quantities(parent)
+    ranges = _script_ranges(parent)
+    counterpart = _counterpart_finder(parent, script, actor)
+    out = []
     for name in sorted(keyed):
         for obj, kind, slot, words in keyed[name]:
             functions = {q.key: q for _, q, _ in old_uses.get(name, {}).get((obj, kind, slot), ()) if q is not None}
             other = counterpart(obj, kind)
             if len(functions) != 1 or other is None:
                 continue
-            where = (other[0], other[1], slot)
-            if where not in fixed or where in set_by_parameter:
-                continue
-            if slot.startswith("behavior:") and old_behaviours.get(obj) != new_behaviours.get(other[0]):
-                continue  # another behaviour: its argument of that name may mean something else
-            parts = read_support(fixed[where])
-            quantity = next(iter(functions.values())).at(float(numeric[name]))
-            if parts is not None and not support_contains(parts, quantity):
-                parent_text = next(iter(functions.values())).text
-                made = (f", which the parent's {parent_text} makes {_exact(quantity)}"
-                        if parent_text != f"globalParameters.{name}" else "")
-                found[name] = (f"{words}, which the new script fixes at {fixed[where]} without a parameter, while the "
-                               f"failing {name} = {_exact(float(numeric[name]))}{made}")
-                break
+            function = next(iter(functions.values()))
+            tolerance = 0.0
+            if name in ranges:
+                start, end = function.over(*ranges[name])
+                tolerance = FIXED_TOLERANCE * abs(end - start)
+            out.append((name, (obj, kind, slot), (other[0], other[1], slot), words, function, tolerance, False))
+            target = "behavior:targetspeed"
+            parent_sets_target = ((obj, kind, target) in parent_fixed
+                                  or any((obj, kind, target) in by_slot for by_slot in old_uses.values()))
+            if slot == "speed" and not parent_sets_target:
+                out.append((name, (obj, kind, target), (other[0], other[1], target),
+                            f"{words} (as its behaviour's target speed)", function, tolerance, True))
+    return out
+
+
+def _key_fixed_outside(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
+                       numeric: Mapping[str, float], actor: Optional[str] = None) -> Dict[str, str]:
+    """``{key parameter: the key quantity and the value the new script fixes it at}`` for each key parameter whose
+    key quantity (the ego's, or the key actor's: the same quantity of its counterpart in the new script;
+    :func:`_key_checks`, a speed read as a target speed too) the new script sets without a parameter, to a value (a
+    number, an inline ``Range``, discrete values: :func:`~dv2s_gym.mining.param_meaning.fixed_quantities`) that
+    does not hold the failing value's quantity (the parameter's value through the parent's expression) within
+    :data:`FIXED_TOLERANCE`: the new script cannot produce the failing scene's quantity, whatever else it does with
+    the parameter. A key quantity the parent sets other than as a known function of the parameter alone, or that
+    the new script sets with a parameter (compared as a parameter) or not at all, is not checked here; nor is a
+    behaviour argument of an object that runs another behaviour than in the parent, by name or argument names
+    (:func:`~dv2s_gym.mining.param_meaning.object_behaviour_heads`: the argument may mean something else there; a
+    behaviour of the same name and arguments whose body differs is held to the same meaning)."""
+    fixed = fixed_quantities(script)
+    if not fixed:
+        return {}
+    new_uses = quantity_uses(script)
+    set_by_parameter = {where for by_slot in new_uses.values() for where in by_slot}
+    old_heads, new_heads = object_behaviour_heads(parent), object_behaviour_heads(script)
+    found: Dict[str, str] = {}
+    for name, (obj, _, slot), where, words, function, tolerance, target in _key_checks(parent, script, keyed, actor):
+        if name in found or where not in fixed or where in set_by_parameter:
+            continue
+        if slot.startswith("behavior:") and not target and old_heads.get(obj) != new_heads.get(where[0]):
+            continue  # another behaviour: its argument of that name may mean something else
+        parts = read_support(fixed[where])
+        quantity = function.at(float(numeric[name]))
+        if parts is not None and not support_contains(parts, quantity, tolerance=tolerance):
+            made = (f", which the parent's {function.text} makes {_exact(quantity)}"
+                    if function.text != f"globalParameters.{name}" else "")
+            found[name] = (f"{words}, which the new script fixes at {fixed[where]} without a parameter, while the "
+                           f"failing {name} = {_exact(float(numeric[name]))}{made} (held within "
+                           f"{_exact(round(tolerance, 12))})")
+    return found
+
+
+def _key_overridden(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
+                    numeric: Mapping[str, float], actor: Optional[str] = None) -> Dict[str, str]:
+    """``{key parameter: the key quantity and the statement}`` for each key parameter whose key quantity is a
+    behaviour argument that the new script's behaviour assigns anew in its body
+    (:func:`~dv2s_gym.mining.param_meaning.behaviour_overrides`) where the parent's does not do so alike: the
+    parameter passed there does not decide what the behaviour uses. An override to a value
+    (``extraSpeed = 25``) that holds the failing value's quantity within :data:`FIXED_TOLERANCE` is no rejection."""
+    overrides = behaviour_overrides(script)
+    if not overrides:
+        return {}
+    old_overrides = behaviour_overrides(parent)
+    found: Dict[str, str] = {}
+    for name, old_where, where, words, function, tolerance, _ in _key_checks(parent, script, keyed, actor):
+        statement = overrides.get(where)
+        if name in found or statement is None or old_overrides.get(old_where) == statement:
+            continue
+        value = statement.split("=", 1)[1].strip() if re.match(r"^\w+\s*=", statement) else None
+        parts = read_support(value) if value is not None else None
+        quantity = function.at(float(numeric[name]))
+        if parts is not None and support_contains(parts, quantity, tolerance=tolerance):
+            continue
+        found[name] = (f"{words}: the new script's behaviour assigns that argument anew ({statement}), so the "
+                       f"value passed does not decide it (failing {name} = {_exact(float(numeric[name]))})")
     return found
 
 
@@ -870,6 +945,12 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
         found.append(_Rejected("parameters", "a key quantity (of the failure's interaction) that the new script fixes "
                                              "must hold the failing value, and it does not: " + "; ".join(
                                                  f"{name} ({why})" for name, why in sorted(fixed_key.items()))))
+    overridden = (parameters or {}).get("key_overridden") or {}
+    if overridden:
+        found.append(_Rejected("parameters", "a key quantity (of the failure's interaction) that the new script passes "
+                                             "to a behaviour must be what the behaviour uses, and the behaviour "
+                                             "assigns it anew: " + "; ".join(
+                                                 f"{name} ({why})" for name, why in sorted(overridden.items()))))
     unchecked_key = _key_not_compared(parameters)
     if unchecked_key:
         found.append(_Rejected("parameters", unchecked_key))

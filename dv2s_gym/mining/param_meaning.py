@@ -48,7 +48,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 __all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
            "script_parameters", "affine_uses", "affine_form", "read_interval", "Affine", "Quantity", "quantity_of",
            "quantity_uses", "read_support", "support_contains", "support_hull", "support_text", "key_parameters", "key_uses", "actor_objects", "counterpart_objects",
-           "fixed_quantities", "object_behaviours", "script_objects"]
+           "fixed_quantities", "object_behaviours", "script_objects", "behaviour_overrides", "object_behaviour_heads"]
 
 PLACEMENT_KINDS = ("OrientedPoint", "Point")
 """Classes that place actors but are not actors themselves."""
@@ -381,15 +381,17 @@ def support_hull(parts: Sequence[Part]) -> Tuple[float, float]:
     return min(ends), max(ends)
 
 
-def support_contains(parts: Sequence[Part], quantity: float, function: Optional["Quantity"] = None) -> bool:
+def support_contains(parts: Sequence[Part], quantity: float, function: Optional["Quantity"] = None,
+                     tolerance: float = 0.0) -> bool:
     """Whether ``quantity`` is a value the distribution ``parts`` takes, or, given ``function``, one that
-    ``function`` of such a value takes (a grid of more than 100000 values is read as its interval)."""
-    close = lambda v: abs(v - quantity) <= 1e-9 * max(1.0, abs(quantity))  # noqa: E731
+    ``function`` of such a value takes (a grid of more than 100000 values is read as its interval); given
+    ``tolerance``, whether it lies within ``tolerance`` of such a value."""
+    close = lambda v: abs(v - quantity) <= max(tolerance, 1e-9 * max(1.0, abs(quantity)))  # noqa: E731
     at = (lambda v: v) if function is None else function.at
     for part in parts:
         if part[0] == "interval":
             low, high = (part[1], part[2]) if function is None else function.over(part[1], part[2])
-            if low - 1e-9 <= quantity <= high + 1e-9:
+            if low - 1e-9 - tolerance <= quantity <= high + 1e-9 + tolerance:
                 return True
         elif part[0] == "points":
             if any(close(at(v)) for v in part[1]):
@@ -397,7 +399,7 @@ def support_contains(parts: Sequence[Part], quantity: float, function: Optional[
         elif part[3] > _GRID_LIMIT:
             ends = _ends(part)
             low, high = ends if function is None else function.over(*ends)
-            if low - 1e-9 <= quantity <= high + 1e-9:
+            if low - 1e-9 - tolerance <= quantity <= high + 1e-9 + tolerance:
                 return True
         elif any(close(at(part[1] + k * part[2])) for k in range(part[3])):
             return True
@@ -837,6 +839,54 @@ def object_behaviours(script: str) -> Dict[str, str]:
         called = re.search(r"\bwith\s+behavior\s+(\w+)", found.group(3))
         if called:
             out[found.group(1) or f"<{found.group(2)}>"] = bodies.get(called.group(1), called.group(1))
+    return out
+
+
+_REASSIGN = re.compile(r"^(\w+)\s*([-+*/]?=)(?!=)\s*(.+)$")
+
+
+def object_behaviour_heads(script: str) -> Dict[str, Tuple[str, Tuple[str, ...]]]:
+    """``{object: (its behaviour's name, the behaviour's argument names)}`` for each object given a behaviour
+    (the argument names empty for a behaviour the script does not define)."""
+    behaviors = _behaviors(script)
+    out: Dict[str, Tuple[str, Tuple[str, ...]]] = {}
+    for statement in _statements(script):
+        found = _OBJECT.match(statement)
+        if found is None or statement.startswith(_SKIP):
+            continue
+        called = re.search(r"\bwith\s+behavior\s+(\w+)", found.group(3))
+        if called:
+            out[found.group(1) or f"<{found.group(2)}>"] = (called.group(1),
+                                                             tuple(behaviors.get(called.group(1), ())))
+    return out
+
+
+def behaviour_overrides(script: str) -> Dict[Tuple[str, str, str], str]:
+    """``{(object, kind, "behavior:<argument>"): the statement}`` for each argument of an object's behaviour that the
+    behaviour's body assigns anew (``extraSpeed = 25``, ``speed += 1``, anywhere in the body, under a condition
+    too): the value the object is given for that argument is then not (or not only) what the behaviour uses, so a
+    parameter passed there does not set the quantity alone. The first such statement is kept."""
+    lines = script.splitlines()
+    overridden: Dict[str, Dict[str, str]] = {}
+    for index, line in enumerate(lines):
+        head = _BEHAVIOR.match(line)
+        if head is None:
+            continue
+        formals = {f.split("=")[0].strip() for f in _split_top(head.group(2)) if f.strip()}
+        found: Dict[str, str] = {}
+        for following in lines[index + 1:]:
+            if following.strip() and not following[0].isspace():
+                break
+            statement = re.sub(r"#.*$", "", following).strip()
+            match = _REASSIGN.match(statement)
+            if match and match.group(1) in formals:
+                found.setdefault(_norm(match.group(1)), " ".join(statement.split()))
+        overridden[head.group(1)] = found
+    out: Dict[Tuple[str, str, str], str] = {}
+    kinds = dict(script_objects(script))
+    for obj, (name, _) in object_behaviour_heads(script).items():
+        for argument, statement in overridden.get(name, {}).items():
+            out[(obj, kinds.get(obj, ""), f"behavior:{argument}")] = statement
     return out
 
 
