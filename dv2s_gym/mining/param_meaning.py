@@ -386,7 +386,7 @@ def support_contains(parts: Sequence[Part], quantity: float, function: Optional[
     """Whether ``quantity`` is a value the distribution ``parts`` takes, or, given ``function``, one that
     ``function`` of such a value takes (a grid of more than 100000 values is read as its interval); given
     ``tolerance``, whether it lies within ``tolerance`` of such a value."""
-    close = lambda v: abs(v - quantity) <= max(tolerance, 1e-9 * max(1.0, abs(quantity)))  # noqa: E731
+    close = lambda v: abs(v - quantity) <= tolerance + 1e-9 * max(1.0, abs(quantity))  # noqa: E731
     at = (lambda v: v) if function is None else function.at
     for part in parts:
         if part[0] == "interval":
