@@ -1427,6 +1427,73 @@ def test_a_behaviour_of_the_same_name_and_arguments_keeps_its_argument_check():
                               interaction=interaction)["key_fixed_outside"] == {}
 
 
+_JUNCTION_PARENT = '''param ego_speed = Range(6, 10)
+param ego_distance = Range(20, 40)
+param bus_speed = Range(7, 11)
+param bus_extra = Range(1, 3)
+
+ego = new Car at egoManeuver.startLane.centerline.pointAlongBy(-globalParameters.ego_distance),
+    with speed globalParameters.ego_speed
+bus = new Bus at busManeuver.startLane.centerline.pointAlongBy(-20),
+    with name "bus",
+    with speed globalParameters.bus_speed + globalParameters.bus_extra
+'''
+_JUNCTION_FAILING = {"ego_speed": 8.0, "ego_distance": 30.0, "bus_speed": 9.0, "bus_extra": 2.0}
+
+
+@pytest.mark.parametrize("ego_distance, times, holds", [
+    (30.0, "Range(1.0, 2.0)\nparam lag = Range(1.5, 2.5)", True),   # 8 * (1..2 + 1.5..2.5) = 20..36 holds 30
+    (38.0, "Range(1.0, 2.0)\nparam lag = Range(1.5, 2.5)", False),  # 38 is past 36
+    (30.0, "Range(0.5, 1.0)\nparam lag = Range(1.0, 1.5)", False),  # 8 * (1.5..2.5) = 12..20
+])
+def test_a_key_placement_set_by_a_product_of_parameters_is_compared_jointly(ego_distance, times, holds):
+    """The parent places the ego ego_distance before the junction; the new script places it ego_speed * (lead +
+    lag), a product the judge reads jointly: ego_speed held at the failing 8, lead and lag over their ranges."""
+    from dv2s_gym.mining.convert import _judge, compare_parameters
+
+    generated = (_JUNCTION_PARENT.replace("param ego_distance = Range(20, 40)", "param lead = " + times)
+                 .replace("pointAlongBy(-globalParameters.ego_distance)",
+                          "pointAlongBy(-(globalParameters.ego_speed * (globalParameters.lead + globalParameters.lag)))"))
+    failing = {**_JUNCTION_FAILING, "ego_distance": ego_distance}
+    interaction = {"actor": "bus", "kind": "bus"}
+    compared = compare_parameters(failing, generated, parent=_JUNCTION_PARENT, interaction=interaction)
+    assert compared["key_not_compared"] == {}
+    assert compared["compared"]["ego_distance"]["jointly"] == "the ego's longitudinal placement"
+    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
+    assert (reasons == []) is holds
+    if not holds:
+        assert compared["outside"] == ["ego_distance"]
+        assert reasons[0].startswith("parameters: the new scenario's ranges do not contain the failing values: "
+                                     f"ego_distance = {ego_distance:g}, which the parent's -globalParameters.ego_distance "
+                                     f"makes {-ego_distance:g} as the ego's longitudinal placement, outside ")
+
+
+def test_a_product_that_uses_a_sampled_value_twice_is_not_read_jointly():
+    from dv2s_gym.mining.convert import compare_parameters
+
+    generated = (_JUNCTION_PARENT.replace("param ego_distance = Range(20, 40)", "param lead = Range(3, 5)")
+                 .replace("pointAlongBy(-globalParameters.ego_distance)",
+                          "pointAlongBy(-(globalParameters.ego_speed * (globalParameters.lead + globalParameters.lead)))"))
+    compared = compare_parameters(_JUNCTION_FAILING, generated, parent=_JUNCTION_PARENT,
+                                  interaction={"actor": "bus", "kind": "bus"})
+    assert list(compared["key_not_compared"]) == ["ego_distance"]
+
+
+@pytest.mark.parametrize("speed_range, holds", [("Range(10, 12)", True), ("Range(7, 10)", False)])
+def test_a_relative_speed_rewritten_as_absolute_is_compared_jointly(speed_range, holds):
+    """The parent drives the bus at bus_speed + bus_extra (failing 9 + 2 = 11); the new script drives it at one
+    parameter of its own: it must hold 11."""
+    from dv2s_gym.mining.convert import _judge, compare_parameters
+
+    generated = (_JUNCTION_PARENT.replace("param bus_extra = Range(1, 3)", "")
+                 .replace("param bus_speed = Range(7, 11)", f"param bus_v = {speed_range}")
+                 .replace("globalParameters.bus_speed + globalParameters.bus_extra", "globalParameters.bus_v"))
+    interaction = {"actor": "bus", "kind": "bus"}
+    compared = compare_parameters(_JUNCTION_FAILING, generated, parent=_JUNCTION_PARENT, interaction=interaction)
+    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
+    assert (reasons == []) is holds, reasons
+
+
 _SLOWER_PARENT = '''param ego_speed = Range(18, 25)
 param slower_by = Range(2, 4)
 param gap = Range(5, 11)

@@ -78,7 +78,7 @@ from dv2s_gym.mining.interaction import failure_interaction, interaction_sentenc
 from dv2s_gym.mining.monitors import detect_failure
 from dv2s_gym.mining.report_text import not_compared_names_text
 from dv2s_gym.mining.param_meaning import (actor_objects, behaviour_overrides, counterpart_objects, fixed_quantities,
-                                           key_uses, object_behaviour_heads,
+                                           joint_interval, key_uses, object_behaviour_heads, placement_parts,
                                            object_behaviours, meaning_map, name_mismatch, quantity_of, quantity_uses, read_interval,
                                            read_support, script_parameters, support_contains, support_hull,
                                            script_objects, support_text, tied_objects)
@@ -426,6 +426,7 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     if parent is not None:
         out["key"] = {name: where[0][3] for name, where in keyed.items()}
         out["key_not_compared"] = _key_set_otherwise(parent, script, keyed, out)
+        _compare_jointly(parent, script, keyed, numeric, out, interaction.get("actor"))
         out["key_fixed_outside"] = _key_fixed_outside(parent, script, keyed, numeric, interaction.get("actor"))
         overridden = _key_overridden(parent, script, keyed, numeric, interaction.get("actor"))
         if overridden:
@@ -560,6 +561,68 @@ def _key_overridden(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple
         found[name] = (f"{words}: the new script's behaviour assigns that argument anew ({statement}), so the "
                        f"value passed does not decide it (failing {name} = {_exact(float(numeric[name]))})")
     return found
+
+
+def _compare_jointly(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
+                     numeric: Mapping[str, float], out: Dict[str, Any], actor: Optional[str] = None) -> None:
+    """Compare jointly each key parameter the judge could not compare although the new script sets its key quantity
+    by parameters of its own (``out["key_not_compared"]``) when both scripts set that quantity by expressions of
+    parameters, numbers and inline ``Range``s in the same frame (the same slot; a placement along a lane in the same
+    form, :func:`~dv2s_gym.mining.param_meaning.placement_parts`): the parent's expression at the failing values
+    (all of them failing parameters) gives the failing quantity; the new expression's interval
+    (:func:`~dv2s_gym.mining.param_meaning.joint_interval`) holds each of its parameters that stands for a compared
+    failing parameter (compared bare, by name or meaning) at that failing value and lets the others range over
+    their ranges: ``ego_speed * (first_arrival + ego_gap_time)`` with the failing ego_speed and the two times over
+    their ranges against the parent's ``ego_distance``. The parameter then moves to ``compared`` (``"jointly"``: the
+    quantity), inside or outside (a rejection) like any other. Updates ``out``."""
+    missing = out.get("key_not_compared") or {}
+    if not missing:
+        return
+    old_uses, new_uses = quantity_uses(parent), quantity_uses(script)
+    counterpart = _counterpart_finder(parent, script, actor)
+    script_ranges = _script_ranges(script)
+    values: Dict[str, Tuple[float, float]] = {}
+    standing = {comparison.get("script_name", name): comparison for name, comparison in out["compared"].items()}
+    for param in script_parameters(script):
+        if param in standing:
+            comparison = standing[param]
+            if not any(field in comparison for field in ("expression", "support")):
+                values[param] = (comparison["value"], comparison["value"])
+        elif param in script_ranges and param not in _script_supports(script):
+            values[param] = tuple(script_ranges[param])
+    failing = {name: (float(value), float(value)) for name, value in numeric.items()}
+    for name in sorted(missing):
+        for obj, kind, slot, words in keyed[name]:
+            other = counterpart(obj, kind)
+            if other is None:
+                continue
+            old_texts = {(q is None, text) for _, q, text in old_uses.get(name, {}).get((obj, kind, slot), ())}
+            new_texts = {(q is None, text) for by_slot in new_uses.values()
+                         for _, q, text in by_slot.get((other[0], other[1], slot), ())}
+            if len(old_texts) != 1 or len(new_texts) != 1:
+                continue
+            (old_whole, old_text), (new_whole, new_text) = next(iter(old_texts)), next(iter(new_texts))
+            placement = "pointAlongBy" in old_text or "pointAlongBy" in new_text
+            if placement and not (old_whole and new_whole):
+                continue  # a placement read from a reference point on one side: not the same frame
+            (old_frame, old_value), (new_frame, new_value) = placement_parts(old_text), placement_parts(new_text)
+            if old_frame != new_frame:
+                continue
+            quantity = joint_interval(old_value, failing)
+            interval = joint_interval(new_value, values)
+            if quantity is None or quantity[0] != quantity[1] or interval is None:
+                continue
+            comparison = {"value": float(numeric[name]), "range": list(interval), "interval": list(interval),
+                          "quantity": quantity[0], "expression": new_value, "parent_expression": old_value,
+                          "jointly": words}
+            missing.pop(name)
+            out["not_comparable"].pop(name, None)
+            out["not_in_script"] = [n for n in out["not_in_script"] if n != name]
+            out["compared"][name] = comparison
+            out["compared"] = dict(sorted(out["compared"].items()))
+            if not _contains(name, comparison):
+                out["outside"] = sorted(set(out["outside"]) | {name})
+            break
 
 
 def _key_set_otherwise(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
@@ -864,6 +927,12 @@ def _outside_text(name: str, comparison: Mapping[str, Any]) -> str:
     if comparison.get("by") == "meaning":
         spelled = f" (the script's {comparison['script_name']}: {comparison.get('basis')})"
     where = f" (as the {comparison['where']})" if comparison.get("where") else ""
+    if comparison.get("jointly"):
+        return (f"{name} = {_exact(float(comparison['value']))}, which the parent's {comparison['parent_expression']} "
+                f"makes {_exact(float(comparison['quantity']))} as {comparison['jointly']}, outside "
+                f"{_exact(float(comparison['interval'][0]))}..{_exact(float(comparison['interval'][1]))}, the "
+                f"interval the new script's {comparison['expression']} takes with its parameters that stand for "
+                f"compared ones at their failing values and the others over their ranges")
     if comparison.get("interval"):
         own = comparison.get("script_name", name)
         parent = (f", which the parent's {comparison['parent_expression']} makes "

@@ -48,7 +48,8 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 __all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
            "script_parameters", "affine_uses", "affine_form", "read_interval", "Affine", "Quantity", "quantity_of",
            "quantity_uses", "read_support", "support_contains", "support_hull", "support_text", "key_parameters", "key_uses", "actor_objects", "counterpart_objects",
-           "fixed_quantities", "object_behaviours", "script_objects", "behaviour_overrides", "object_behaviour_heads"]
+           "fixed_quantities", "object_behaviours", "script_objects", "behaviour_overrides", "object_behaviour_heads",
+           "joint_interval", "placement_parts"]
 
 PLACEMENT_KINDS = ("OrientedPoint", "Point")
 """Classes that place actors but are not actors themselves."""
@@ -281,6 +282,75 @@ def read_interval(expression: str) -> Optional[Tuple[float, float]]:
     sampled values combined)."""
     node = _parse(expression.split("#", 1)[0])
     return _interval_node(node) if node is not None else None
+
+
+def joint_interval(expression: str, values: Mapping[str, Tuple[float, float]]) -> Optional[Tuple[float, float]]:
+    """``(low, high)``: the values ``expression`` takes when each ``globalParameters.<name>`` in it ranges over
+    ``values[name]`` (a point when both ends are equal) and each inline ``Range(a, b)`` of numbers over its interval,
+    built by sums, differences, products, quotients (by an interval without 0) and unary minus. Each sampled value
+    (a parameter of non-zero width, an inline ``Range``) may appear once only: interval arithmetic is then the exact
+    range of the expression over the box (with a value used twice, ``g - g``, it would be wider than the truth).
+    ``None`` for anything else: another name, a call, a parameter missing from ``values``."""
+    node = _parse(expression.split("#", 1)[0])
+    if node is None:
+        return None
+    seen: Set[str] = set()
+
+    def walk(part: ast.AST) -> Optional[Tuple[float, float]]:
+        if isinstance(part, ast.Constant) and isinstance(part.value, (int, float)) and not isinstance(part.value, bool):
+            return (float(part.value), float(part.value)) if _plain(part.value) else None
+        if isinstance(part, ast.Attribute) and isinstance(part.value, ast.Name) and part.value.id == "globalParameters":
+            if part.attr not in values:
+                return None
+            low, high = values[part.attr]
+            if low != high:
+                if part.attr in seen:
+                    return None
+                seen.add(part.attr)
+            return float(low), float(high)
+        if isinstance(part, ast.Call) and isinstance(part.func, ast.Name) and part.func.id == "Range":
+            return _interval_node(part)
+        if isinstance(part, ast.UnaryOp) and isinstance(part.op, (ast.USub, ast.UAdd)):
+            inner = walk(part.operand)
+            if inner is None:
+                return None
+            return (-inner[1], -inner[0]) if isinstance(part.op, ast.USub) else inner
+        if isinstance(part, ast.BinOp) and isinstance(part.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
+            left, right = walk(part.left), walk(part.right)
+            if left is None or right is None:
+                return None
+            if isinstance(part.op, ast.Add):
+                return left[0] + right[0], left[1] + right[1]
+            if isinstance(part.op, ast.Sub):
+                return left[0] - right[1], left[1] - right[0]
+            if isinstance(part.op, ast.Div):
+                if right[0] <= 0.0 <= right[1]:
+                    return None
+                right = (1.0 / right[1], 1.0 / right[0])
+            ends = [a * b for a in left for b in right]
+            return min(ends), max(ends)
+        return None
+
+    found = walk(node)
+    return found if found is not None and all(_finite(v) for v in found) else None
+
+
+def placement_parts(text: str) -> Tuple[str, str]:
+    """``(frame, value)`` of a use's text: for a placement along a lane (``at X.pointAlongBy(value)``) the frame is
+    the text with the argument taken out and every name replaced by ``N`` (two placements along a lane from its start
+    have the same frame whatever their objects are called), else the frame is ``""`` and the value the text whole."""
+    match = re.search(r"pointAlongBy\s*\(", text)
+    if match is None:
+        return "", text
+    depth, start = 1, match.end()
+    for index in range(start, len(text)):
+        depth += {"(": 1, ")": -1}.get(text[index], 0)
+        if depth == 0:
+            break
+    else:
+        return "", text
+    frame = text[:start] + "#" + text[index:]
+    return re.sub(r"\b[A-Za-z_]\w*\b", "N", re.sub(r"\s+", "", frame)), text[start:index]
 
 
 _DISCRETE_RANGES = ("DiscreteRange", "VerifaiDiscreteRange")
