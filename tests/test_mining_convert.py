@@ -1494,6 +1494,23 @@ def test_a_relative_speed_rewritten_as_absolute_is_compared_jointly(speed_range,
     assert (reasons == []) is holds, reasons
 
 
+@pytest.mark.parametrize("distribution, holds", [("Normal(1.5, 0.1)", True), ("Normal(1.45, 0.02)", True),
+                                                 ("Normal(2.0, 0.1)", False), ("Normal(1.5, 0.03)", False)])
+def test_a_normal_parameter_is_read_as_three_standard_deviations_about_its_mean(distribution, holds):
+    """The walker's pace drawn from a Normal: the failing 1.4 must lie within 3 standard deviations of its mean
+    (1.2..1.8 and 1.39..1.51 hold it; 1.7..2.3 and 1.41..1.59 do not)."""
+    from dv2s_gym.mining.convert import NORMAL_SPREAD, _judge, compare_parameters
+
+    assert NORMAL_SPREAD == 3.0
+    generated = _OVERRIDE_PARENT.replace("param pace = Range(1.0, 2.0)", f"param pace = {distribution}")
+    interaction = {"actor": "walker", "kind": "pedestrian"}
+    compared = compare_parameters(_OVERRIDE_FAILING, generated, parent=_OVERRIDE_PARENT, interaction=interaction)
+    assert "pace" in compared["compared"]
+    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
+    assert (reasons == []) is holds
+    assert (compared["outside"] == ["pace"]) is not holds
+
+
 _SLOWER_PARENT = '''param ego_speed = Range(18, 25)
 param slower_by = Range(2, 4)
 param gap = Range(5, 11)

@@ -660,17 +660,38 @@ def _key_set_otherwise(parent: str, script: str, keyed: Mapping[str, Sequence[Tu
 
 def _script_ranges(script: str) -> Dict[str, Tuple[float, float]]:
     """``{parameter: (low, high)}`` of the script's numeric parameters: :func:`scenario_bank.dedup.param_ranges`'s
-    forms, and the affine expressions of ``Range``/``Uniform``/numbers
-    :func:`~dv2s_gym.mining.param_meaning.read_interval` reads."""
+    forms, the affine expressions of ``Range``/``Uniform``/numbers
+    :func:`~dv2s_gym.mining.param_meaning.read_interval` reads, and ``Normal(mean, sd)`` read as
+    ``mean ± NORMAL_SPREAD * sd`` (:data:`NORMAL_SPREAD`)."""
     ranges: Dict[str, Tuple[float, float]] = {}
     for name, text in script_parameters(script).items():
         interval = read_interval(text)
+        if interval is None:
+            interval = _normal_interval(text)
         if interval is not None:
             ranges[name] = interval
     ranges.update(param_ranges(script))
     for name, parts in _script_supports(script).items():
         ranges.setdefault(name, support_hull(parts))
     return ranges
+
+
+NORMAL_SPREAD = 3.0
+"""A parameter drawn from ``Normal(mean, sd)`` is read as the interval ``mean ± NORMAL_SPREAD * sd``: a normal draw
+falls there 997 times in 1000, so a failing value inside is one the new script draws in practice, and one outside
+is one it almost never draws."""
+
+_NORMAL = re.compile(r"^\s*Normal\s*\(\s*(-?\d+(?:\.\d+)?)\s*,\s*(\d+(?:\.\d+)?)\s*\)\s*(#.*)?$")
+
+
+def _normal_interval(text: str) -> Optional[Tuple[float, float]]:
+    """``(mean - NORMAL_SPREAD * sd, mean + NORMAL_SPREAD * sd)`` for ``Normal(mean, sd)`` of numbers (sd > 0), else
+    ``None``."""
+    match = _NORMAL.match(text)
+    if match is None or float(match.group(2)) <= 0:
+        return None
+    mean, spread = float(match.group(1)), NORMAL_SPREAD * float(match.group(2))
+    return mean - spread, mean + spread
 
 
 def _script_supports(script: str) -> Dict[str, List[Any]]:
