@@ -1511,6 +1511,25 @@ def test_a_normal_parameter_is_read_as_three_standard_deviations_about_its_mean(
     assert (compared["outside"] == ["pace"]) is not holds
 
 
+@pytest.mark.parametrize("loop, runs", [("for k in range(1):", True), ("for k in range(3):", True),
+                                       ("for k in range(0):", False), ("for k in range(n):", False)])
+def test_an_actor_made_in_a_top_level_loop_that_runs_is_read_as_made_at_the_top_level(loop, runs):
+    """The walker made in the body of a loop over range(1) or range(3) is compared as in the parent (its body runs;
+    a specifier line after a trailing comma continues the statement at any indentation); over range(0), or a count
+    the judge does not know, its parameters reach no object."""
+    from dv2s_gym.mining.convert import _judge, compare_parameters
+
+    generated = _OVERRIDE_PARENT.replace("walker = new Pedestrian ahead of ego by 30,\n    with name \"walker\",\n",
+                                         f"{loop}\n    walker = new Pedestrian ahead of ego by 30,\n"
+                                         "        with name \"walker\",\n")
+    assert loop in generated
+    interaction = {"actor": "walker", "kind": "pedestrian"}
+    compared = compare_parameters(_OVERRIDE_FAILING, generated, parent=_OVERRIDE_PARENT, interaction=interaction)
+    reasons = [str(r) for r in _judge({**_PASSING, "parameters": compared}, interaction, {"type": "collision"}, 0.3)]
+    assert (sorted(compared["compared"]) == ["ego_speed", "gap", "pace"]) is runs
+    assert (reasons == []) is runs
+
+
 _SLOWER_PARENT = '''param ego_speed = Range(18, 25)
 param slower_by = Range(2, 4)
 param gap = Range(5, 11)
