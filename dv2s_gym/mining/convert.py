@@ -384,8 +384,11 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     ``interaction``'s ``actor``, else an actor's of its ``kind``, every actor's when neither is known:
     :func:`~dv2s_gym.mining.param_meaning.key_parameters`): the judge requires each of them compared
     (:func:`_judge`); ``"key_fixed_outside"`` those whose key quantity the new script fixes without a parameter away
-    from the failing value (:func:`_key_fixed_outside`), and ``"quantities_not_compared"`` (when any) ``{parameter:
-    why}`` for a compared parameter's other quantity the judge could not read (:func:`_through_quantities`)."""
+    from the failing value (:func:`_key_fixed_outside`), ``"key_overridden"`` (when any) those whose key behaviour
+    argument the new script's behaviour assigns anew (:func:`_key_overridden`), and ``"quantities_not_compared"`` (when any) ``{parameter:
+    why}`` for a compared parameter's other quantity the judge could not read (:func:`_through_quantities`). A key
+    parameter the new script sets by parameters of its own is compared jointly when both scripts' expressions can
+    be read so (:func:`_compare_jointly`)."""
     ranges, supports = _script_ranges(script), _script_supports(script)
     folded: Dict[str, str] = {}
     for script_name in sorted(ranges):
