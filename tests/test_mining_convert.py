@@ -776,7 +776,7 @@ def test_the_reports_name_each_reason_a_parameter_was_not_compared_with_its_coun
     from dv2s_gym.mining.html import render_html
     from dv2s_gym.mining.report import build_report_from_records, markdown
 
-    opaque = (_CUT_PARENT.replace("cut_in_gap = Range(5, 11)", "g = Normal(30, 1)")
+    opaque = (_CUT_PARENT.replace("cut_in_gap = Range(5, 11)", "g = TruncatedNormal(30, 1, 25, 35)")
               .replace("globalParameters.cut_in_gap", "globalParameters.g")
               .replace("lane_change_duration = Range(1.8, 3.0)", "lane_change_duration = Range(8, 9)"))
     failing = {**_CUT_FAILING, "kerb_offset": 2.8}
@@ -881,18 +881,18 @@ def test_a_constant_term_a_factor_or_another_direction_changes_the_meaning():
 
 
 def test_a_counterpart_with_a_distribution_the_judge_cannot_read_is_not_comparable_with_that_reason():
-    opaque = (_CUT_PARENT.replace("cut_in_gap = Range(5, 11)", "g = Normal(30, 1)")
+    opaque = (_CUT_PARENT.replace("cut_in_gap = Range(5, 11)", "g = TruncatedNormal(30, 1, 25, 35)")
               .replace("lane_change_duration = Range(1.8, 3.0)", "dur = Range(8, 9) * 1")
               .replace("globalParameters.cut_in_gap", "globalParameters.g")
               .replace("globalParameters.lane_change_duration", "globalParameters.dur"))
     compared, rejections = _judged(opaque)
-    assert "cannot read as an interval (Normal(30, 1))" in compared["not_comparable"]["cut_in_gap"]
+    assert "cannot read as an interval (TruncatedNormal(30, 1, 25, 35))" in compared["not_comparable"]["cut_in_gap"]
     assert "cannot read as an interval (Range(8, 9) + Range(0, 1))" in _judged(
         opaque.replace("Range(8, 9) * 1", "Range(8, 9) + Range(0, 1)"))[0]["not_comparable"]["lane_change_duration"]
     # Range(8, 9) * 1 is read as the interval 8..9, which does not contain the failing 2
     assert compared["compared"]["lane_change_duration"]["range"] == [8.0, 9.0]
     key, outside = rejections  # the gap, a quantity of the failure's interaction, is set by the new script's own g
-    assert key.startswith("parameters: a key parameter") and "cut_in_gap (" in key and "Normal(30, 1)" in key
+    assert key.startswith("parameters: a key parameter") and "cut_in_gap (" in key and "TruncatedNormal(30, 1, 25, 35)" in key
     assert "lane_change_duration (the script's dur" in outside and "= 2 outside 8..9" in outside
 
 
@@ -1087,8 +1087,9 @@ def test_an_actor_placed_along_the_points_direction_does_not_take_the_points_dis
 
 def test_a_quantity_read_as_a_function_in_one_script_only_is_not_comparable():
     """The parent's speed is ``ego_speed + extra`` (not a function of extra alone), the new one's ``e + 50``
-    (never the parent's 25 for any e in 4..8, so not "the same quantity" either): extra is not comparable, with
-    the two expressions in the reason; and the other way round."""
+    (never the parent's 25 for any e in 4..8, so not "the same quantity" either): extra is not comparable as a
+    parameter, but as a key quantity it is compared jointly and is outside; the other way round (the parent's
+    read, the new one's not) it is not comparable."""
     parent = ("param ego_speed = Range(18, 25)\nparam extra = Range(4, 8)\nego = new Car on lane.centerline, "
               "with speed globalParameters.ego_speed\nrival = new Car ahead of ego by 20, "
               "with speed globalParameters.ego_speed + globalParameters.extra\n")
@@ -1096,9 +1097,11 @@ def test_a_quantity_read_as_a_function_in_one_script_only_is_not_comparable():
         "globalParameters.ego_speed + globalParameters.extra", "globalParameters.e + 50")
     failing = {"ego_speed": 20.0, "extra": 5.0}
     compared, _ = _judged(generated, parent=parent, failing=failing)
-    why = compared["not_comparable"]["extra"]
-    assert "the parent sets it by globalParameters.ego_speed + globalParameters.extra" in why
-    assert "the new script by globalParameters.e + 50" in why
+    # the rival's speed, a key quantity (every actor's, the key actor unknown), is compared jointly: the parent's
+    # 20 + 5 against e + 50 over e in 4..8, 54..58
+    assert "extra" not in compared["not_comparable"]
+    assert compared["compared"]["extra"]["jointly"] == "the Car rival's speed" and compared["outside"] == ["extra"]
+    assert compared["compared"]["extra"]["interval"] == [54.0, 58.0] and compared["compared"]["extra"]["quantity"] == 25
     # the parent's rival at extra + 50 (read), the new one's at ego_speed + e (not read)
     reversed_new = parent.replace("param extra", "param e").replace("globalParameters.extra", "globalParameters.e")
     reversed_parent = generated.replace("param e ", "param extra ").replace("globalParameters.e ",

@@ -572,15 +572,17 @@ def _compare_jointly(parent: str, script: str, keyed: Mapping[str, Sequence[Tupl
     by parameters of its own (``out["key_not_compared"]``) when both scripts set that quantity by expressions of
     parameters, numbers and inline ``Range``s in the same frame (the same slot; a placement along a lane in the same
     form, :func:`~dv2s_gym.mining.param_meaning.placement_parts`): the parent's expression at the failing values
-    (all of them failing parameters) gives the failing quantity; the new expression's interval
+    (all of them failing parameters, and more than the parameter alone: a quantity the parent sets as a function of
+    the parameter alone is compared as a parameter) gives the failing quantity; the new expression's interval
     (:func:`~dv2s_gym.mining.param_meaning.joint_interval`) holds each of its parameters that stands for a compared
     failing parameter (compared bare, by name or meaning) at that failing value and lets the others range over
-    their ranges: ``ego_speed * (first_arrival + ego_gap_time)`` with the failing ego_speed and the two times over
+    their ranges (each quantity on its own: a parameter of the new script that sets two of them may take one value
+    for one and another for the other): ``ego_speed * (first_arrival + ego_gap_time)`` with the failing ego_speed and the two times over
     their ranges against the parent's ``ego_distance``. The parameter then moves to ``compared`` (``"jointly"``: the
     quantity), inside or outside (a rejection) like any other. Updates ``out``."""
     missing = out.get("key_not_compared") or {}
     if not missing:
-        return
+        return  # (a parameter named as a failing one but not compared means something else: it is not let range)
     old_uses, new_uses = quantity_uses(parent), quantity_uses(script)
     counterpart = _counterpart_finder(parent, script, actor)
     script_ranges = _script_ranges(script)
@@ -591,7 +593,7 @@ def _compare_jointly(parent: str, script: str, keyed: Mapping[str, Sequence[Tupl
             comparison = standing[param]
             if not any(field in comparison for field in ("expression", "support")):
                 values[param] = (comparison["value"], comparison["value"])
-        elif param in script_ranges and param not in _script_supports(script):
+        elif param in script_ranges and param not in _script_supports(script) and param not in numeric:
             values[param] = tuple(script_ranges[param])
     failing = {name: (float(value), float(value)) for name, value in numeric.items()}
     for name in sorted(missing):
@@ -605,8 +607,9 @@ def _compare_jointly(parent: str, script: str, keyed: Mapping[str, Sequence[Tupl
             if len(old_texts) != 1 or len(new_texts) != 1:
                 continue
             (old_whole, old_text), (new_whole, new_text) = next(iter(old_texts)), next(iter(new_texts))
-            placement = "pointAlongBy" in old_text or "pointAlongBy" in new_text
-            if placement and not (old_whole and new_whole):
+            if not old_whole:
+                continue  # the parent's quantity is a function of the parameter alone: compared as a parameter
+            if "pointAlongBy" in new_text and not new_whole:
                 continue  # a placement read from a reference point on one side: not the same frame
             (old_frame, old_value), (new_frame, new_value) = placement_parts(old_text), placement_parts(new_text)
             if old_frame != new_frame:
