@@ -51,6 +51,7 @@ from scenario_bank.maps import list_maps
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.scenic2 import upgrade_scenic2
 from scenario_bank.errors import MissingFileError, SettingError
+from envs.rendering import DV2SViewer
 
 __all__ = ["DV2SEnv", "ScenarioRef", "check_env_config"]
 
@@ -721,8 +722,6 @@ class DV2SEnv(AbstractEnv):
         if self.render_mode is None:
             return super().render()
         if self.viewer is None:
-            from envs.rendering import DV2SViewer
-
             self.viewer = DV2SViewer(self)
         return super().render()
 
