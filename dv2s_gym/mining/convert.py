@@ -95,6 +95,7 @@ from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.atomic import atomic_write_text
 from scenario_bank.bank import Bank, DuplicateScenarioError
 from scenario_bank.dedup import param_ranges
+from scenario_bank.errors import WrongTypeError
 from scenario_bank.records import Provenance, Sidecar
 from policies.evaluation import run_episode
 from policies.registry import load_policy
@@ -1158,7 +1159,7 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, settings: Opti
     """
     settings = (settings or ConversionSettings()).replace(**options)
     if settings.policy is None:
-        raise TypeError("convert_failure needs the policy that failed (policy=...)")
+        raise WrongTypeError("convert_failure needs the policy that failed: pass policy=<its spec>")
     return _Conversion(record, Path(run_dir), settings, bank, cluster).run()
 
 
