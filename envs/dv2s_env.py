@@ -27,7 +27,8 @@ from highway_env.envs.common.observation import KinematicObservation
 
 import envs.rendering  # noqa: F401  (sets SDL/XDG variables before any viewer starts pygame)
 from envs.config_check import RENDER_MODES, check_config, check_render_mode
-from envs.errors import InvalidActionError, SceneSamplingError
+from envs.errors import InvalidActionError, ResetNeededError, SceneSamplingError
+from scenario_bank.errors import WrongTypeError
 from envs.hw_road import EventRoad
 from envs.observations import FastKinematicObservation
 from envs.safety_metrics import STANDING_SPEED, path_is_free, time_to_collision
@@ -51,6 +52,7 @@ from scenario_bank.maps import list_maps
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.scenic2 import upgrade_scenic2
 from scenario_bank.errors import MissingFileError, SettingError
+from envs.rendering import DV2SViewer
 
 __all__ = ["DV2SEnv", "ScenarioRef", "check_env_config"]
 
@@ -99,7 +101,7 @@ def resolve_scenarios(spec: ScenarioSpec, bank_dir: Optional[str] = None) -> Lis
     elif spec is not None and (
         not isinstance(spec, Sequence) or not all(isinstance(item, str) for item in spec)
     ):
-        raise TypeError(
+        raise WrongTypeError(
             f"scenario must be None, a bank name, 'tag:<tag>', a .scenic path, Scenic source text "
             f"or a list of bank names/tags, not {spec!r}"
         )
@@ -560,7 +562,7 @@ class DV2SEnv(AbstractEnv):
     def step(self, action):
         """Apply ``action`` for one policy period; Gymnasium's 5-tuple."""
         if self._stepper is None:
-            raise RuntimeError("call reset() before step()")
+            raise ResetNeededError("step() was called before reset(): call reset() to start an episode first")
         if not self.action_space.contains(self._as_space_action(action)):
             raise InvalidActionError(
                 f"action {action!r} is outside the action space {self.action_space} "
@@ -721,8 +723,6 @@ class DV2SEnv(AbstractEnv):
         if self.render_mode is None:
             return super().render()
         if self.viewer is None:
-            from envs.rendering import DV2SViewer
-
             self.viewer = DV2SViewer(self)
         return super().render()
 
@@ -735,7 +735,7 @@ class DV2SEnv(AbstractEnv):
     def save_trace(self, path: Union[str, os.PathLike]) -> Path:
         """Write the current episode's trace to ``path`` (JSON, ``.gz`` compresses)."""
         if self._trace is None:
-            raise RuntimeError("no episode to save; call reset() first")
+            raise ResetNeededError("no episode to save: call reset() (and step()) first")
         return self._trace.save(path)
 
     # ---------------------------------------------------------------- cleanup

@@ -12,6 +12,7 @@ __all__ = [
     "InvalidActionError",
     "UnknownConfigKeyError",
     "UnknownRenderModeError",
+    "ResetNeededError",
     "StepTimeoutError",
     "Interrupted",
     "OBSERVATION_TYPES",
@@ -70,6 +71,12 @@ class ForeignConstructWarning(UserWarning):
 
 __all__.append("ForeignConstructWarning")
 __all__.append("UntrustedScenarioError")
+
+
+class ResetNeededError(DV2SError, RuntimeError):
+    """The env was asked for an episode's step or its trace before ``reset()`` started one (or after it ended);
+    the fix is to call ``reset()``."""
+
 
 
 class StepTimeoutError(DV2SError, RuntimeError):

@@ -37,6 +37,7 @@ from envs.sandbox_checks import check_compiles_and_runs
 from scenario_bank.jail import wire
 from scenario_bank.jail.limits import start_charging_cpu
 from scenario_bank.safety import check_script
+from envs.jailed_env import space_to_data
 
 __all__ = ["SCRATCH", "preload", "serve", "main"]
 
@@ -67,7 +68,6 @@ class _Worker:
 
     def open(self, scenarios: List[Dict[str, Any]], config: Optional[dict], render_mode: Optional[str]) -> dict:
         from envs.dv2s_env import DV2SEnv, ScenarioRef
-        from envs.jailed_env import space_to_data
 
         refs = []
         for index, item in enumerate(scenarios):
@@ -193,7 +193,6 @@ def _error(error: BaseException) -> dict:
 def preload() -> None:
     """Import the simulator: what starting a worker costs, done once by the zygote for all its workers."""
     import envs.dv2s_env  # noqa: F401
-    import envs.jailed_env  # noqa: F401
 
 
 def serve(inbound_fd: int, outbound_fd: int, started: float) -> int:

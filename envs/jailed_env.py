@@ -21,6 +21,7 @@ import gymnasium as gym
 import numpy as np
 
 from envs.errors import DV2SError, InvalidActionError, ScenarioCompileError, SceneSamplingError, StepTimeoutError
+from envs.errors import ResetNeededError
 from envs.config_check import check_config
 from envs.errors import UnsupportedConstructError
 from envs.trace import EpisodeTrace
@@ -266,7 +267,7 @@ class JailedDV2SEnv(gym.Env):
     def step(self, action):
         """Apply ``action`` for one policy period; Gymnasium's 5-tuple."""
         if self.vehicle is None:
-            raise RuntimeError("call reset() before step()")
+            raise ResetNeededError("step() was called before reset(): call reset() to start an episode first")
         if isinstance(action, np.ndarray) and action.dtype.kind not in "biuf":
             raise InvalidActionError(f"action {action!r} is outside the action space {self.action_space}")
         if isinstance(action, (np.integer,)):
@@ -344,7 +345,7 @@ class JailedDV2SEnv(gym.Env):
         """Write the current episode's trace to ``path`` (JSON, ``.gz`` compresses)."""
         trace = self.trace
         if trace is None:
-            raise RuntimeError("no episode to save; call reset() first")
+            raise ResetNeededError("no episode to save: call reset() (and step()) first")
         return trace.save(path)
 
     # ------------------------------------------------------------------ privileged drivers

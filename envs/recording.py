@@ -10,7 +10,7 @@ from typing import Callable, Optional, Union
 import numpy as np
 
 from scenario_bank.atomic import atomic_path
-from scenario_bank.errors import DV2SError
+from scenario_bank.errors import DV2SError, SettingError
 
 __all__ = ["VideoWriter", "VideoFormatError", "VideoEncoderError", "record_episode", "video_codecs", "write_frames"]
 
@@ -132,7 +132,8 @@ def record_episode(
     """
     base = env.unwrapped
     if getattr(base, "render_mode", None) != "rgb_array":
-        raise ValueError("record_episode needs an env made with render_mode='rgb_array'")
+        raise SettingError("record_episode needs an env made with render_mode='rgb_array'; make the env with that "
+                           "render mode")
     fps = base.config.get("policy_frequency", 5)
     obs, info = env.reset(seed=seed)
     if policy is None and seed is not None:

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import gymnasium
+from gymnasium.wrappers import RenderCollection
+
 from envs.config_check import RENDER_MODES, check_render_mode
 
 __all__ = ["register_envs", "make_env", "ENV_ID"]
@@ -11,8 +14,6 @@ ENV_ID = "DV2S-v0"
 
 def register_envs() -> None:
     """Register ``DV2S-v0`` with Gymnasium (idempotent)."""
-    import gymnasium
-
     if ENV_ID not in gymnasium.registry:
         gymnasium.register(id=ENV_ID, entry_point="envs.registration:make_env", disable_env_checker=False)
 
@@ -34,7 +35,5 @@ def make_env(**kwargs):
         check_render_mode(mode)
     env = DV2SEnv(**kwargs)
     if collect:
-        from gymnasium.wrappers import RenderCollection
-
         env = RenderCollection(env)
     return env

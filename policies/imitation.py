@@ -50,6 +50,7 @@ from policies.training import (ScenarioSchedule, TrainConfig, TrainEnvSpec, Trai
 from policies.model_card import write_card
 from policies.registry import load_policy, read_model_card
 from scenario_bank.atomic import atomic_path
+import stable_baselines3 as sb3
 
 __all__ = ["ReferenceLabels", "DAGGER_DEFAULTS", "DaggerConfig", "dagger_fine_tune", "agreement", "imitation_step"]
 
@@ -302,7 +303,6 @@ class _DaggerRun:
 
     def restore(self, saved: Any) -> None:
         """The student, its optimizer and RNGs, and the data so far: fresh, or as ``saved`` (the last commit)."""
-        import stable_baselines3 as sb3
         import torch
 
         torch.manual_seed(int(self.config.seed))
@@ -410,8 +410,6 @@ class _DaggerRun:
 
     def finish(self) -> Path:
         """Write the fine-tuned model and its card, remove the checkpoint; the model's path."""
-        import stable_baselines3 as sb3
-
         wall = self.elapsed()
         all_obs, all_labels = np.concatenate(self.observations), np.concatenate(self.labels)
         source_model = sb3.PPO.load(str(self.source), device="cpu")

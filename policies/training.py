@@ -57,19 +57,23 @@ from typing import Any, Callable, Deque, Dict, List, Mapping, Optional, Sequence
 
 import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from tqdm import tqdm
 
 from envs.dv2s_env import DV2SEnv, check_env_config
 from envs.errors import DV2SError, Interrupted
 from policies.evaluation import make_eval_env, run_episode
-from policies.model_card import bank_version, summarize_results, write_card
-from policies.registry import SB3Policy, load_policy, read_model_card
+from policies.model_card import bank_version, summarize_results, write_card, evaluate_for_card
+from policies.registry import (SB3Policy, load_policy, read_model_card, SHIPPED_CHECKPOINT, parse_spec,
+                               PolicySpaceError, check_card_observation)
 from scenario_bank import select_scenarios
 from scenario_bank.atomic import atomic_path, atomic_write_json
 from scenario_bank.field_checks import (check_bool, check_choice, check_int, check_mapping, check_names,
                                         check_number, check_path)
 from scenario_bank.run_identity import check_identity
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+import stable_baselines3 as sb3
 
 __all__ = [
     "ALGORITHMS",
@@ -339,8 +343,6 @@ _FINE_TUNE_DEFAULTS: Dict[str, Any] = {"env_config": None, "eval_freq": 0, "eval
 
 
 def _known_hyperparameters(algo: str) -> set:
-    import stable_baselines3 as sb3
-
     parameters = set(inspect.signature(getattr(sb3, algo.upper()).__init__).parameters)
     return (parameters - {"self", "env", "tensorboard_log", "verbose", "seed", "device", "_init_setup_model"}) | {"net_arch"}
 
@@ -474,7 +476,6 @@ class TrainEnvSpec:
 
 def _build_train_env(spec: TrainEnvSpec, seed: int, stream: int) -> gym.Env:
     os.environ["OMP_NUM_THREADS"] = "1"
-    from stable_baselines3.common.monitor import Monitor
 
     env = DV2SEnv(scenario=list(spec.names), config=dict(spec.config), bank_dir=spec.bank_dir)
     scheduled = ScenarioSchedule(env, spec.probabilities, seed=seed, stream=stream)
@@ -489,8 +490,6 @@ def make_train_env(spec: TrainEnvSpec, seed: int, stream: int = 0) -> Callable[[
 
 def make_vec_env(spec: TrainEnvSpec, n_envs: int, seed: int, stream: int = 0, vec_env: str = "subproc"):
     """``n_envs`` training envs in a ``SubprocVecEnv`` (or ``DummyVecEnv``); env ``i`` is seeded ``seed + i``."""
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
-
     os.environ["OMP_NUM_THREADS"] = "1"  # inherited by the worker processes
     factories = [make_train_env(spec, seed + rank, stream) for rank in range(n_envs)]
     if vec_env == "dummy":
@@ -760,8 +759,6 @@ def _check_resume(config: TrainConfig, recorded: TrainConfig) -> None:
 
 
 def _new_model(config: TrainConfig, venv, tensorboard_log: str):
-    import stable_baselines3 as sb3
-
     hyperparameters = config.effective_hyperparameters()
     policy = hyperparameters.pop("policy", "MlpPolicy")
     policy_kwargs = dict(hyperparameters.pop("policy_kwargs", None) or {})
@@ -777,8 +774,6 @@ def _new_model(config: TrainConfig, venv, tensorboard_log: str):
 
 
 def _resume_model(config: TrainConfig, checkpoint: Path, venv, tensorboard_log: str):
-    import stable_baselines3 as sb3
-
     # The registry gives the clear errors: a checkpoint that does not load, or mismatched spaces.
     policy = load_policy(f"{config.algo}:{checkpoint}")
     policy.check_spaces(venv.observation_space, venv.action_space)
@@ -840,8 +835,6 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
     names = _resolve_names(config)
     run_path = out / "run.json"
     resume, record, checkpoint = _open_record(config, resume, log)
-
-    from stable_baselines3.common.callbacks import CallbackList
 
     import torch
 
@@ -999,7 +992,6 @@ def _evaluate_for_card(config: TrainConfig, names: Sequence[str], card: Dict[str
     card_seeds = config.card_seed_count()
     if card_seeds <= 0:
         return
-    from policies.model_card import evaluate_for_card, write_card
 
     env_config = card["env_config"]
     specs = {config.algo: f"{config.algo}:{model_path.resolve()}", **{b: b for b in config.baselines}}
@@ -1030,8 +1022,6 @@ def resolve_checkpoint(spec: str) -> Tuple[str, Path, Dict[str, Any]]:
     ``sac:PATH``, a ``model.zip`` or the run folder holding one. The card is ``{}`` when
     none lies beside the checkpoint; the algorithm then comes from loading it.
     """
-    from policies.registry import SHIPPED_CHECKPOINT, SB3Policy, load_policy, parse_spec, read_model_card
-
     base, options = parse_spec(str(spec))
     if options:
         raise TrainingError(f"cannot fine-tune {spec!r}: policy options ({', '.join(options)}) change how it acts, "
@@ -1062,8 +1052,6 @@ def resolve_checkpoint(spec: str) -> Tuple[str, Path, Dict[str, Any]]:
 def check_source_observation(source_card: Mapping[str, Any], env_config: Mapping[str, Any], spec: str) -> None:
     """Refuse to fine-tune a checkpoint in envs that observe otherwise than the ones it was trained in (its card's
     ``env_config``; a card without one is checked by the observation space's shape only)."""
-    from policies.registry import PolicySpaceError, check_card_observation
-
     try:
         check_card_observation(str(spec), source_card, env_config)
     except PolicySpaceError as error:
@@ -1147,7 +1135,6 @@ def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, learning_rate: Op
     model_path = out / "model.zip"
     if model_path.is_file() and "fine_tune" in read_model_card(model_path):
         return model_path
-    import stable_baselines3 as sb3
 
     start_step = int(getattr(sb3, algorithm.upper()).load(str(source), device="cpu").num_timesteps)
     run_config = dataclasses.replace(
@@ -1174,8 +1161,6 @@ def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, learning_rate: Op
 def _first_checkpoint(config: TrainConfig, source: Path, start_step: int, learning_rate: Optional[float]) -> None:
     """Start a fine-tuning run in ``config.out``: the source checkpoint as its first checkpoint (with
     ``learning_rate`` saved in it when given) and a ``run.json`` with no segment yet."""
-    import stable_baselines3 as sb3
-
     out = Path(config.out)
     if (out / "run.json").exists():
         raise TrainingError(f"{out} holds a training run without a checkpoint; remove it or choose another out")

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import json
 from typing import Any, Dict, Optional, Tuple
+from policies.evaluation import make_eval_env
+from policies.registry import load_policy
 
 __all__ = ["env_for", "policy_for", "drop_env", "clear_caches"]
 
@@ -25,8 +27,6 @@ def env_for(bank_dir: Optional[str], config: Optional[Dict[str, Any]]):
     key = (bank_dir, _config_key(config))
     env = _ENVS.get(key)
     if env is None:
-        from policies.evaluation import make_eval_env
-
         # the whole bank: reset(options={"scenario": name}) picks the episode's scenario,
         # and each scenario is compiled once, the first time it runs here
         env = make_eval_env(None, config=dict(config or {}), bank_dir=bank_dir)
@@ -43,8 +43,6 @@ def policy_for(spec: str, env_key: Tuple[Optional[str], str], env, owner: str = 
     key = (spec, owner, *env_key)
     policy = _POLICIES.get(key)
     if policy is None:
-        from policies.registry import load_policy
-
         policy = load_policy(spec)
         policy.bind([env])
         _POLICIES[key] = policy

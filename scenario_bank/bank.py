@@ -67,7 +67,8 @@ from scenario_bank.entries import (BANK_VERSION, CONTROL_FIX, ENTRY_FILE_KEYS, E
                                    unsafe_input)
 from scenario_bank.records import Provenance, Sidecar
 from scenario_bank.errors import (BankError, BankOptionError, BankVersionError, DuplicateScenarioError, NotABankError,
-                                  ScenarioRejectedError, UnknownScenarioError, UnsafeBankInputError, bank_write_error)
+                                  ScenarioRejectedError, UnknownScenarioError, UnsafeBankInputError, WrongTypeError,
+                                  bank_write_error)
 from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, is_entry_name, load_json_bounded,
                                       read_regular_file, real_folder_in, validate_entry_name)
 
@@ -754,10 +755,10 @@ def _new_entry(entry: Union[str, Sidecar]) -> Sidecar:
     if isinstance(entry, str):
         return Sidecar(description=entry)
     if not isinstance(entry, Sidecar):
-        raise TypeError(f"Bank.add() takes the new entry as a Sidecar or its description as a string, not "
+        raise WrongTypeError(f"Bank.add() takes the new entry as a Sidecar or its description as a string, not "
                         f"{type(entry).__name__}")
     if entry.story is not None or entry.extra:
-        raise TypeError("Bank.add() writes a new entry's sidecar from its description, name, elements, tags, map, "
+        raise WrongTypeError("Bank.add() writes a new entry's sidecar from its description, name, elements, tags, map, "
                         "use_case and source; a story or other keys would be lost: leave them out")
     return entry
 

@@ -15,7 +15,7 @@ from typing import Any, Optional, Sequence
 
 __all__ = ["DV2SError", "BankError", "BankVersionError", "UnsafeBankInputError", "NotABankError",
            "DuplicateScenarioError", "ScenarioRejectedError", "UnknownScenarioError", "BankOptionError",
-           "MissingFileError", "WrongFileError", "SettingError", "bank_write_error"]
+           "MissingFileError", "WrongFileError", "SettingError", "WrongTypeError", "bank_write_error"]
 
 
 class DV2SError(Exception):
@@ -40,6 +40,11 @@ class WrongFileError(DV2SError, ValueError):
 class SettingError(DV2SError, ValueError):
     """A setting (an option, a keyword, an environment variable) holds a value that cannot be used; the message
     names the setting and the values it takes."""
+
+
+class WrongTypeError(DV2SError, TypeError):
+    """An argument of the public API holds a value of a type it does not take (or one it needs is missing); the
+    message names the argument and what to pass. A :class:`TypeError`, so code catching that keeps working."""
 
 
 class BankError(DV2SError):

@@ -33,7 +33,7 @@ import unicodedata
 from dataclasses import dataclass
 from typing import List, Union
 
-from scenario_bank.errors import DV2SError
+from scenario_bank.errors import DV2SError, WrongTypeError
 
 __all__ = [
     "MAX_SCRIPT_BYTES",
@@ -329,7 +329,7 @@ def precheck_text(text: Union[str, bytes], name: str = "<script>") -> str:
     if isinstance(text, (bytes, bytearray, memoryview)):
         text = _decode(bytes(text), name)
     elif not isinstance(text, str):
-        raise TypeError(f"a script is text or bytes, not {type(text).__name__}")
+        raise WrongTypeError(f"a script is text or bytes, not {type(text).__name__}")
     else:
         if len(text) > MAX_SCRIPT_BYTES:  # characters <= bytes: a cheap first bound
             raise _refuse(name, 1, f"{len(text)} characters", f"the script is larger than "

@@ -36,7 +36,7 @@ from scenario_bank.precheck import precheck_text
 from scenario_bank.safety import SafetyFinding, UnsafeScenarioError
 from scenario_bank.simulator_worker import simulator_worker
 from scenario_bank.errors import DV2SError
-from scenario_bank.errors import SettingError
+from scenario_bank.errors import SettingError, WrongTypeError
 
 __all__ = ["SandboxLimits", "SandboxResult", "SandboxError", "run_in_sandbox", "verify_script", "check_in_jail",
            "bounded_precheck", "cache_dir"]
@@ -201,7 +201,7 @@ def bounded_precheck(script: Any, name: str = "<script>") -> None:
     Everything that parses the text runs in the jail.
     """
     if not isinstance(script, str):
-        raise TypeError(f"{name}: a Scenic script is text (str), not {type(script).__name__}")
+        raise WrongTypeError(f"{name}: a Scenic script is text (str), not {type(script).__name__}")
     precheck_text(script, name)
 
 

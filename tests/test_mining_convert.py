@@ -11,7 +11,7 @@ import json
 import numpy as np
 import pytest
 
-import dv2s_gym.mining.failure_video as failure_video
+import dv2s_gym.mining.convert as convert_module
 from dv2s_gym.mining.convert import _exact, convert_failure, reproduction_seeds, same_failure_class
 from dv2s_gym.mining.exact_replay import replay_failure
 from dv2s_gym.mining.failure_video import FailureReplayError, record_failure_video, write_failure_video
@@ -1177,7 +1177,7 @@ def test_a_clip_that_cannot_be_written_is_recorded_without_this_machines_paths(r
     def full_disk(script_path, episode, out_path, *args, **kwargs):
         raise OSError(28, "No space left on device", str(out_path))
 
-    monkeypatch.setattr(failure_video, "write_script_episode_video", full_disk)
+    monkeypatch.setattr(convert_module, "write_script_episode_video", full_disk)  # where convert calls it
     out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=Bank(tmp_path / "bank"),
                           cluster=f"{SCENARIO}/collision/0")
     assert out["status"] == "kept", out["reason"]

@@ -73,12 +73,12 @@ def test_a_failure_in_a_jailed_scenario_gets_its_video_and_its_exact_replay(reco
 
 @pytest.mark.slow
 def test_the_exact_replay_is_kept_when_the_video_stage_fails(record, user_bank, tmp_path, monkeypatch):
-    from dv2s_gym.mining import failure_video
+    from dv2s_gym.mining import convert as convert_module
 
     def broken(*args, **kwargs):
         raise OSError("no space left on device")
 
-    monkeypatch.setattr(failure_video, "write_failure_video", broken)
+    monkeypatch.setattr(convert_module, "write_failure_video", broken)  # where convert calls it
     bank = tmp_path / "bank"
     Bank(bank).add(STOPPED_VAN, Sidecar(description="A van stands still in the ego's lane.", name=NAME))
     out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=bank, k=2)

@@ -1,8 +1,11 @@
 """No project module reaches into another module's private names (a leading underscore): what another module needs
 is public there (named without the underscore, with a docstring) or lives where it is used.
 
-Both ways in are checked: ``from module import _name`` and ``module._name`` on a module imported by name. The modules
-that may share private names are listed below with the reason.
+Every way in is checked: ``from module import _name``; ``module._name`` on a module imported by name, rebound to
+another name (``m = module``) or loaded by ``import_module("...")``; ``getattr(module, "_name")`` (and hasattr, setattr,
+delattr), ``vars(module)["_name"]`` and ``module.__dict__["_name"]``. A name computed at run time and a module's whole
+namespace (``vars``, ``dir``, ``__dict__``) are refused too: they cannot be told public. The modules that may share
+private names are listed below with the reason.
 """
 
 from __future__ import annotations
@@ -10,6 +13,8 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 from typing import Dict, Iterator, List, Optional, Tuple
+
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("dv2s_gym", "scenario_bank", "envs", "policies")
@@ -58,45 +63,150 @@ def _shared(importer: str, imported: str) -> Optional[str]:
     return None
 
 
-def private_uses() -> List[Tuple[str, int, str, str]]:
-    """``(module, line, imported module, private name)`` of every private name one project module takes from
-    another."""
-    known = {name for name, _ in _modules()}
+REFLECTION = ("getattr", "hasattr", "setattr", "delattr")
+"""Built-ins that reach an attribute by a name given as a string."""
+
+NAMESPACE = "(its whole namespace)"
+"""What :func:`private_uses` reports for ``vars(m)``, ``dir(m)`` or ``m.__dict__`` of another project module: every
+private name of it is within reach."""
+
+COMPUTED = "(a computed name)"
+"""What :func:`private_uses` reports for a name another module's attribute is reached by, when the name is not a
+literal: it cannot be told public, so it is refused like a private one."""
+
+
+def _dotted(node: ast.AST) -> Optional[List[str]]:
+    """``a.b.c`` -> ``["a", "b", "c"]``; anything else -> None."""
+    parts: List[str] = []
+    while isinstance(node, ast.Attribute):
+        parts.insert(0, node.attr)
+        node = node.value
+    return [node.id] + parts if isinstance(node, ast.Name) else None
+
+
+def _loaded_by_name(node: ast.AST) -> Optional[str]:
+    """The module ``importlib.import_module("a.b")`` (or ``import_module("a.b")``) returns, when named by a
+    literal."""
+    if not (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant)
+            and isinstance(node.args[0].value, str)):
+        return None
+    called = _dotted(node.func)
+    return node.args[0].value if called and called[-1] == "import_module" else None
+
+
+def _module_named(node: ast.AST, aliases: Dict[str, str], known: set) -> Optional[str]:
+    """The project module an expression stands for: a name bound to one (by an import, an assignment or
+    ``import_module``), a dotted path from a package, or a call of ``import_module`` with a literal."""
+    loaded = _loaded_by_name(node)
+    if loaded is not None:
+        return loaded if loaded in known else None
+    dotted = _dotted(node)
+    if dotted is None:
+        return None
+    if dotted[0] in aliases:
+        source = ".".join([aliases[dotted[0]]] + dotted[1:])
+    elif dotted[0] in PACKAGES:
+        source = ".".join(dotted)
+    else:
+        return None
+    return source if source in known else None
+
+
+def _reached_names(node: ast.AST, aliases: Dict[str, str], known: set) -> Iterator[Tuple[str, str]]:
+    """``(module, name)`` of each attribute of a project module a node reaches: ``m._x``, ``getattr(m, "_x")``
+    (and hasattr, setattr, delattr), ``vars(m)["_x"]``, ``m.__dict__["_x"]`` and ``vars(m).get("_x")``; ``vars(m)``,
+    ``dir(m)`` and ``m.__dict__`` as :data:`NAMESPACE`."""
+    if isinstance(node, ast.Attribute):
+        source = _module_named(node.value, aliases, known)
+        if source is not None:
+            yield source, NAMESPACE if node.attr == "__dict__" else node.attr
+        return
+    if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in ("vars", "dir")
+            and node.args):
+        source = _module_named(node.args[0], aliases, known)
+        if source is not None:
+            yield source, NAMESPACE
+        return
+    key, holder = None, None
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in REFLECTION and node.args:
+        holder, key = node.args[0], node.args[1] if len(node.args) > 1 else None
+    elif isinstance(node, ast.Subscript):
+        holder, key = node.value, node.slice
+    elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in ("get", "pop")
+          and node.args):
+        holder, key = node.func.value, node.args[0]
+    if holder is None:
+        return
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name):
+        source = _module_named(holder, aliases, known)
+    elif (isinstance(holder, ast.Call) and isinstance(holder.func, ast.Name) and holder.func.id == "vars"
+          and holder.args):
+        source = _module_named(holder.args[0], aliases, known)
+    elif isinstance(holder, ast.Attribute) and holder.attr == "__dict__":
+        source = _module_named(holder.value, aliases, known)
+    else:
+        return
+    if source is None:
+        return
+    if isinstance(key, ast.Constant) and isinstance(key.value, str):
+        yield source, key.value
+    else:
+        yield source, COMPUTED
+
+
+def _module_aliases(module: str, path: Path, tree: ast.AST, known: set) -> Dict[str, str]:
+    """Local name -> the project module it is bound to: by ``import a.b as n``, ``from a import b`` (a module),
+    ``n = <a module>`` or ``n = import_module("a.b")``. Scopes are not told apart: a name bound to a module anywhere
+    in the file counts everywhere in it."""
+    aliases: Dict[str, str] = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            source = _absolute(module, path, node)
+            if _project(source):
+                for alias in node.names:
+                    if f"{source}.{alias.name}" in known:
+                        aliases[alias.asname or alias.name] = f"{source}.{alias.name}"
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if _project(alias.name) and alias.asname:
+                    aliases[alias.asname] = alias.name
+    bindings = [node for node in ast.walk(tree) if isinstance(node, (ast.Assign, ast.AnnAssign, ast.NamedExpr))]
+    changed = True
+    while changed:  # ``a = module; b = a`` in any order
+        changed = False
+        for node in bindings:
+            targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+            if node.value is None:
+                continue
+            source = _module_named(node.value, aliases, known)
+            for target in targets:
+                if source is not None and isinstance(target, ast.Name) and aliases.get(target.id) != source:
+                    aliases[target.id], changed = source, True
+    return aliases
+
+
+def private_uses(modules: Optional[List[Tuple[str, Path]]] = None,
+                 only: Optional[str] = None) -> List[Tuple[str, int, str, str]]:
+    """``(module, line, imported module, private name)`` of every private name one project module (or the module
+    ``only``) takes from another (:data:`COMPUTED` for a name computed at run time)."""
+    modules = list(_modules()) if modules is None else modules
+    known = {name for name, _ in modules}
     found = []
-    for module, path in _modules():
+    for module, path in modules:
+        if only is not None and module != only:
+            continue
         tree = ast.parse(path.read_text(encoding="utf-8"))
-        aliases: Dict[str, str] = {}  # a local name bound to a project module
         for node in ast.walk(tree):
             if isinstance(node, ast.ImportFrom):
                 source = _absolute(module, path, node)
-                if not _project(source):
-                    continue
-                for alias in node.names:
-                    if _is_private(alias.name):
-                        found.append((module, node.lineno, source, alias.name))
-                    elif f"{source}.{alias.name}" in known:
-                        aliases[alias.asname or alias.name] = f"{source}.{alias.name}"
-            elif isinstance(node, ast.Import):
-                for alias in node.names:
-                    if _project(alias.name) and alias.asname:
-                        aliases[alias.asname] = alias.name
+                if _project(source):
+                    found += [(module, node.lineno, source, alias.name) for alias in node.names
+                              if _is_private(alias.name)]
+        aliases = _module_aliases(module, path, tree, known)
         for node in ast.walk(tree):
-            if isinstance(node, ast.Attribute) and _is_private(node.attr):
-                target = node.value
-                dotted = []
-                while isinstance(target, ast.Attribute):
-                    dotted.insert(0, target.attr)
-                    target = target.value
-                if not isinstance(target, ast.Name):
-                    continue
-                if target.id in aliases:
-                    source = ".".join([aliases[target.id]] + dotted)
-                elif target.id in PACKAGES:
-                    source = ".".join([target.id] + dotted)
-                else:
-                    continue
-                if source in known and source != module:
-                    found.append((module, node.lineno, source, node.attr))
+            for source, name in _reached_names(node, aliases, known):
+                if (name in (COMPUTED, NAMESPACE) or _is_private(name)) and source != module:
+                    found.append((module, node.lineno, source, name))
     return [use for use in found if use[2] != use[0]]
 
 
@@ -125,3 +235,37 @@ def test_the_check_sees_both_ways_in(tmp_path, monkeypatch):
     assert sorted(private_uses()) == [("dv2s_gym.b", 1, "dv2s_gym.a", "_hidden"),
                                       ("dv2s_gym.b", 3, "dv2s_gym.a", "_hidden"),
                                       ("dv2s_gym.b", 5, "dv2s_gym.a", "_hidden")]
+
+
+@pytest.mark.parametrize("planted, name", [
+    ('getattr(heldout, "_rate")', "_rate"),
+    ('getattr(heldout, "_rate", None)', "_rate"),
+    ('hasattr(heldout, "_rate")', "_rate"),
+    ('vars(heldout)["_rate"]', "_rate"),
+    ('vars(heldout).get("_rate")', "_rate"),
+    ('heldout.__dict__["_rate"]', "_rate"),
+    ("dir(heldout)", NAMESPACE),
+    ('getattr(heldout, "_" + "rate")', COMPUTED),
+    ("module = heldout\n    return module._rate", "_rate"),
+    ("module = dv2s_gym.mining.heldout\n    return module._rate", "_rate"),
+    ('module = importlib.import_module("dv2s_gym.mining.heldout")\n    return module._rate', "_rate"),
+    ('return import_module("dv2s_gym.mining.heldout")._rate', "_rate"),
+])
+def test_the_check_sees_private_names_reached_by_reflection_or_a_rebound_name(tmp_path, planted, name):
+    """A copy of a real module (which imports ``heldout``) with a function appended that reaches ``heldout``'s
+    private ``_rate`` another way than ``from ... import _rate`` or ``heldout._rate``."""
+    modules = list(_modules())
+    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.mining.loop")
+    source = modules[index][1].read_text(encoding="utf-8")
+    assert "from dv2s_gym.mining import heldout," in source
+    copy = tmp_path / "loop.py"
+    body = planted if "return" in planted else f"return {planted}"
+    copy.write_text(source + "\n\nimport importlib\nfrom importlib import import_module\nimport dv2s_gym.mining\n\n\n"
+                    f"def _planted():\n    {body}\n", encoding="utf-8")
+    before = private_uses(modules, only="dv2s_gym.mining.loop")
+    modules[index] = ("dv2s_gym.mining.loop", copy)
+    added = sorted(set(private_uses(modules, only="dv2s_gym.mining.loop")) - set(before))
+    last = len(copy.read_text(encoding="utf-8").splitlines())
+    planted_uses = {(module, source, found) for module, line, source, found in added if line == last}
+    assert ("dv2s_gym.mining.loop", "dv2s_gym.mining.heldout", name) in planted_uses
+    assert {module for module, _, _ in planted_uses} == {"dv2s_gym.mining.loop"}

@@ -36,7 +36,7 @@ def test_standing_behind_traffic_is_not_a_stall():
 
 
 def test_the_regression_worker_counts_total_standing_time(monkeypatch):
-    import policies.evaluation as evaluation
+    import dv2s_gym.regress.tasks as regress_tasks
     import policies.worker_cache as worker_cache
     from dv2s_gym.regress.tasks import run_regress_task
 
@@ -45,7 +45,7 @@ def test_the_regression_worker_counts_total_standing_time(monkeypatch):
                                               "error": None})
     monkeypatch.setattr(worker_cache, "env_for", lambda bank, config: (("k", "{}"), None))
     monkeypatch.setattr(worker_cache, "policy_for", lambda spec, key, env, owner="": None)
-    monkeypatch.setattr(evaluation, "run_episode", lambda env, policy, scenario, seed: (result, trace))
+    monkeypatch.setattr(regress_tasks, "run_episode", lambda env, policy, scenario, seed: (result, trace))
     data = run_regress_task({"kind": "regress", "policy": "rule", "role": "candidate", "scenario": "s", "seed": 0,
                              "env_config": {}, "bank_dir": None, "trace_dir": None, "stall_seconds": 5.0})
     assert data["stalled"] and data["failed"] and data["failure_kinds"] == ["stall"]

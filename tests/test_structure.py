@@ -1367,10 +1367,6 @@ the pytest plugin runs inside pytest): deferring them saves nothing. Of the extr
 dill 0.040, the packaged model 0.005."""
 
 LISTED_DESPITE_THE_MEASURE: Dict[str, str] = {
-    "gymnasium": "0.136 s, but ``import envs`` registers DV2S-v0 with it, so start-up loads it anyway; listed "
-                 "because the modules that import policies.registry, policies.evaluation or envs.jailed_env "
-                 "inside functions (33 imports, in mining/, regress/, workers/, policies/) count as heavy "
-                 "through it: to be moved to the top, then taken off",
     "pygame": "0.038 s, but importing it prints pygame's banner on stdout unless envs.rendering has set "
               "PYGAME_HIDE_SUPPORT_PROMPT first: only the code that opens a window loads it",
     "pyseccomp": "0.019 s; scenario_bank.jail.seccomp is loaded at start-up and only a jailed worker builds its "
@@ -1468,6 +1464,32 @@ def heavy_modules(modules: Dict[str, Path]) -> Dict[str, str]:
     return heavy
 
 
+def heavy_dependencies(modules: Dict[str, Path]) -> Dict[str, frozenset]:
+    """Project module -> every heavy dependency (:data:`HEAVY_DEPENDENCIES`) it loads when imported, itself or
+    through the project modules (and parent packages) it imports at import time."""
+    loads: Dict[str, Set[str]] = {}
+    edges: Dict[str, Set[str]] = {}
+    for module, path in modules.items():
+        loads[module] = set()
+        edges[module] = {".".join(module.split(".")[:i]) for i in range(1, module.count(".") + 1)} & set(modules)
+        for node in _imports_run_at_import(_parsed(path)):
+            for name in _imported_names(node, module, path):
+                if name.split(".")[0] in HEAVY_DEPENDENCIES:
+                    loads[module].add(name.split(".")[0])
+                resolved = _resolve(name, modules)
+                if resolved is not None and resolved != module:
+                    edges[module].add(resolved)
+    changed = True
+    while changed:
+        changed = False
+        for module in sorted(edges):
+            through = set().union(*(loads[target] for target in edges[module]))
+            if not through <= loads[module]:
+                loads[module] |= through
+                changed = True
+    return {module: frozenset(found) for module, found in loads.items()}
+
+
 def _entry_points() -> List[str]:
     """What ``pyproject.toml`` starts: its scripts (``module:function``) and plugins (``module``)."""
     text = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
@@ -1508,11 +1530,14 @@ def startup_modules() -> frozenset:
 def misplaced_imports(modules: Dict[str, Path], heavy: Dict[str, str], startup: frozenset) -> List[str]:
     """Imports inside functions that belong at the top of their module.
 
-    One is allowed when what it loads is heavy (:data:`HEAVY_DEPENDENCIES`, or a project module that imports
-    one when imported: :func:`heavy_modules`), or when the importing module is one of :data:`STARTUP_FRONT`,
-    loaded at start-up (:func:`startup_modules`), and what it loads is not (deferring it keeps start-up short),
-    or in the parts :data:`LAZY_BY_DESIGN`; :data:`STILL_TO_CLEAN` is not checked yet.
+    One is allowed when what it loads adds a heavy dependency (:data:`HEAVY_DEPENDENCIES`, itself or through a
+    project module that imports one when imported: :func:`heavy_dependencies`) that the importing module does not
+    load already when imported -- deferring what is loaded anyway saves nothing --, or when the importing module is
+    one of :data:`STARTUP_FRONT`, loaded at start-up (:func:`startup_modules`), and what it loads is not (deferring
+    it keeps start-up short), or in the parts :data:`LAZY_BY_DESIGN`; :data:`STILL_TO_CLEAN` is not checked yet.
+    ``heavy`` (:func:`heavy_modules`) names the modules that load a heavy dependency at all.
     """
+    loads = heavy_dependencies(modules)
     wrong = []
     for module, path in sorted(modules.items()):
         if any(module == part or module.startswith(part + ".") for part in STILL_TO_CLEAN + LAZY_BY_DESIGN):
@@ -1526,10 +1551,14 @@ def misplaced_imports(modules: Dict[str, Path], heavy: Dict[str, str], startup: 
             names = _imported_names(node, module, path)
             if isinstance(node, ast.ImportFrom):
                 names = names[:-1]  # ``from a import b`` loads a.b when that is a module, else a
-            loaded = {_resolve(name, modules) or name.split(".")[0] for name in names}
-            light = sorted(name for name in loaded
-                           if name not in heavy and name.split(".")[0] not in HEAVY_DEPENDENCIES
-                           and not (front and name not in startup))
+            light = []
+            for name in names:
+                resolved = _resolve(name, modules)
+                top = name.split(".")[0]
+                added = ({top} & HEAVY_DEPENDENCIES) | (loads[resolved] if resolved in heavy else frozenset())
+                deferred = front and (resolved or top) not in startup
+                if not (added - loads[module]) and not deferred:
+                    light.append(name)
             if light:
                 wrong.append(f"{module}:{node.lineno}: {ast.unparse(node)}")
     return wrong
@@ -1545,7 +1574,7 @@ def test_imports_are_at_the_top_of_the_module():
     wrong = misplaced_imports(modules, heavy_modules(modules), startup)
     assert not wrong, "imports inside functions that belong at the top of the module:\n" + "\n".join(wrong)
     loaded = sorted(HEAVY_DEPENDENCIES & {name.split(".")[0] for name in startup})
-    assert loaded == ["gymnasium"], f"heavy dependencies loaded at start-up (they are kept off it): {loaded}"
+    assert not loaded, f"heavy dependencies loaded at start-up (they are kept off it): {loaded}"
 
 
 @pytest.mark.slow
@@ -1554,6 +1583,11 @@ def test_imports_are_at_the_top_of_the_module():
     ("dv2s_gym.regress.report", "from dv2s_gym.regress import family"),
     # loaded at start-up, but not one of STARTUP_FRONT: it may not defer a light module start-up does not load
     ("dv2s_gym.mining.loop_settings", "from dv2s_gym.mining import report_text"),
+    # gymnasium is loaded at start-up anyway: a module that needs only it (policies.registry) is not heavy
+    ("dv2s_gym.regress.report", "from policies.registry import load_policy"),
+    # heavy, but policies.training loads it (and highway-env) at its top already: deferring it saves nothing
+    ("policies.training", "import stable_baselines3 as sb3"),
+    ("policies.training", "from envs.dv2s_env import DV2SEnv"),
 ])
 def test_the_import_rule_sees_an_import_planted_in_a_function(tmp_path, target, planted):
     modules = _modules()
@@ -1563,6 +1597,7 @@ def test_the_import_rule_sees_an_import_planted_in_a_function(tmp_path, target, 
     heavy = heavy_modules(modules)
     assert "envs.dv2s_env" in heavy and "scenario_bank.bank" not in heavy  # highway-env; the bank is light
     assert "dv2s_gym.regress.stats" in heavy and "dv2s_gym.regress.family" not in heavy  # scipy; numpy only
+    assert "policies.registry" not in heavy and "policies.training" in heavy  # gymnasium only; sb3
     startup = startup_modules()
     assert "dv2s_gym.mining.loop_settings" in startup and "dv2s_gym.mining.report_text" not in startup
     modules[target] = copy

@@ -7,6 +7,7 @@ import os
 from typing import Iterable, Optional, Sequence, Union
 
 from scenario_bank import select_scenarios
+from policies.registry import check_policy_spec
 
 __all__ = ["check_names"]
 
@@ -20,8 +21,6 @@ def check_names(*, policies: Iterable[Optional[str]] = (), scenarios: Union[None
                 bank: Optional[str] = None) -> None:
     """Raise the error the command would raise later for an unknown policy name or bank scenario/tag (the
     scenarios of a ``bank`` folder that does not exist yet are left to the command)."""
-    from policies.registry import check_policy_spec
-
     for spec in policies:
         if spec:
             check_policy_spec(spec)

@@ -16,11 +16,18 @@ from pathlib import Path
 from platformdirs import user_state_dir
 from typing import Optional
 
-__all__ = ["MAGIC", "key_path", "seal", "unseal"]
+from scenario_bank.errors import DV2SError
+
+__all__ = ["MAGIC", "DamagedKeyError", "key_path", "seal", "unseal"]
 
 MAGIC = b"DV2S-HMAC-SHA256\n"
 """The header of a sealed checkpoint: ``MAGIC``, the 32-byte MAC, then the pickle."""
 _KEY_BYTES = 32
+
+
+class DamagedKeyError(DV2SError, OSError):
+    """The key that seals the sampler checkpoints is not a key (truncated, or written over); the message names the
+    file and says to delete it. An :class:`OSError`, as a file that cannot be read is."""
 
 
 def state_dir() -> Path:
@@ -51,8 +58,8 @@ def _key() -> bytes:
     finally:
         os.close(fd)
     if len(key) != _KEY_BYTES:
-        raise OSError(f"the checkpoint key {path} is damaged ({len(key)} bytes, not {_KEY_BYTES}); delete it "
-                      "(checkpoints written with it are then rebuilt from the runs' episodes.jsonl)")
+        raise DamagedKeyError(f"the checkpoint key {path} is damaged ({len(key)} bytes, not {_KEY_BYTES}); delete it "
+                              "(checkpoints written with it are then rebuilt from the runs' episodes.jsonl)")
     return key
 
 

@@ -96,7 +96,11 @@ from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.atomic import atomic_write_text
 from scenario_bank.bank import Bank, DuplicateScenarioError
 from scenario_bank.dedup import param_ranges
+from scenario_bank.errors import WrongTypeError
 from scenario_bank.records import Provenance, Sidecar
+from policies.evaluation import run_episode
+from policies.registry import load_policy
+from dv2s_gym.mining.failure_video import VideoSettings, write_failure_video, write_script_episode_video
 
 SETUP_ERRORS = (EndpointUnreachableError, EndpointTimeoutError, EndpointHTTPError, MissingAPIKeyError)
 """Errors of the model backends' setup (no connection, no answer, an HTTP error, no API key):
@@ -258,8 +262,6 @@ class ConversionSettings:
 
     def video(self):
         """The settings of the failure's video (:class:`~dv2s_gym.mining.failure_video.VideoSettings`)."""
-        from dv2s_gym.mining.failure_video import VideoSettings
-
         return VideoSettings(policy=self.policy, bank_dir=self.bank_dir, env_config=self.env_config,
                              before=self.before, after=self.after,
                              stall_seconds=(self.monitor or {}).get("stall_seconds"))
@@ -274,8 +276,6 @@ def _reproduce(script_path: Path, policy: Any, settings: ConversionSettings, rec
     shows the source failure's interaction (``interaction``) and ``reproduced``: the same failure class with
     the same kind of actor."""
     from envs.dv2s_env import DV2SEnv
-    from policies.evaluation import run_episode
-    from policies.registry import load_policy
 
     env = DV2SEnv(scenario=str(script_path), config=dict(settings.env_config or {}))
     try:
@@ -1336,7 +1336,7 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, settings: Opti
     """
     settings = (settings or ConversionSettings()).replace(**options)
     if settings.policy is None:
-        raise TypeError("convert_failure needs the policy that failed (policy=...)")
+        raise WrongTypeError("convert_failure needs the policy that failed: pass policy=<its spec>")
     return _Conversion(record, Path(run_dir), settings, bank, cluster).run()
 
 
@@ -1411,7 +1411,6 @@ class _Conversion:
 
     def _video(self) -> None:
         self.stage = "video"
-        from dv2s_gym.mining.failure_video import write_failure_video
 
         self.video = self.folder / "failure.webm"
         self.settings = self.settings.replace(monitor=_monitor_options(self.run_dir, self.settings.monitor))
@@ -1554,7 +1553,6 @@ class _Conversion:
         when there is one) filmed as the failure was, so a reader sees whether the script plays the failure. The
         clip is extra: when it cannot be made, the record says why and the conversion goes on without it."""
         self.stage = "clip"
-        from dv2s_gym.mining.failure_video import write_script_episode_video
 
         episodes = self.details.get("reproduction_episodes") or []
         self.clip_path: Optional[Path] = None

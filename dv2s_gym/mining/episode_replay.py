@@ -13,6 +13,7 @@ from dv2s_gym.mining.settings import read_run_settings, SETTINGS_FILE
 from envs.recording import write_frames
 from envs.trace_bounds import check_file_config
 from scenario_bank.records import EpisodeRecord
+from policies.registry import spec_from_file
 
 __all__ = ["replay_mined_episode"]
 
@@ -45,8 +46,6 @@ def replay_mined_episode(folder: PathLike, episode: Optional[str], *, policy: Op
         raise MiningError(f"episode {episode} of {folder} did not finish (not in episodes.jsonl, or an error); "
                          f"it has episodes 0..{max(records) if records else -1}")
     if not policy:
-        from policies.registry import spec_from_file
-
         policy = spec_from_file(settings.policy, settings_file, "--policy-spec SPEC")
     options = {"policy": policy, "bank_dir": settings.bank_dir,
                "env_config": check_file_config(settings.env_config, settings_file)}

@@ -31,6 +31,8 @@ from pathlib import Path
 from scenario_bank.atomic import file_sha256
 from scenario_bank.bank import Bank, BankError, param_ranges
 from typing import Any, Dict, Mapping, Optional, Tuple
+from policies.registry import parse_spec, load_policy, spec_from_file
+from policies.evaluation import run_episode
 
 __all__ = ["NARROW", "REPLAY_TAG", "narrowed_script", "replay_name", "run_replay", "replay_failure",
            "ReplayOutcome", "replay_versions", "mismatch_reason"]
@@ -154,8 +156,6 @@ def replay_versions(policy: Any) -> Dict[str, Any]:
 
 
 def _checkpoint_sha256(policy: Any) -> Optional[str]:
-    from policies.registry import parse_spec
-
     if not isinstance(policy, (str, os.PathLike)):
         return None
     try:
@@ -207,8 +207,6 @@ def run_replay(scenario: Any, *, policy: Any, seed: int, params: Mapping[str, An
     """Run ``policy`` on ``scenario`` (a bank name or a ``.scenic`` path) with ``seed`` and ``params`` fixed;
     returns ``(EpisodeResult, EpisodeTrace, failure dict or None)`` (the miner's monitors)."""
     from envs.dv2s_env import DV2SEnv
-    from policies.evaluation import run_episode
-    from policies.registry import load_policy
 
     env = DV2SEnv(scenario=str(scenario), config=dict(env_config or {}), bank_dir=bank_dir)
     try:
@@ -238,8 +236,6 @@ def replay_failure(bank: Any, name: str, *, policy: Optional[Any] = None,
         raise BankError(f"bank entry {name!r} is no replay of a mined failure (its provenance has no 'replay'); "
                         "replay entries are tagged 'replay'")
     if policy is None:
-        from policies.registry import spec_from_file
-
         policy = spec_from_file(replay.get("policy"), f"the provenance of bank entry {name!r}", "policy=SPEC")
     result, trace, failure = run_replay(str(entry.script_path), policy=policy,
                                         seed=int(replay["seed"]), params=replay.get("params") or {},

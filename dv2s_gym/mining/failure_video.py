@@ -35,6 +35,8 @@ from envs.errors import DV2SError
 from envs.recording import VideoWriter
 from envs.safety_metrics import path_is_free
 from envs.trace import EpisodeTrace, TraceMismatchError
+from policies.evaluation import run_episode, make_eval_env
+from policies.registry import load_policy
 
 __all__ = ["FailureReplayError", "FailureVideo", "VIDEO_CONFIG", "VideoSettings", "failure_step",
            "record_failure_video", "rerun_failure", "stall_end", "write_failure_video", "write_script_episode_video"]
@@ -104,8 +106,6 @@ def _check_record(record: Mapping[str, Any]) -> None:
 
 
 def _run_episode(env, policy, scenario: str, seed: int, params: Mapping[str, Any], frames):
-    from policies.evaluation import run_episode
-
     return run_episode(env, policy, scenario, seed, frames=frames, params=dict(params) or None)
 
 
@@ -135,8 +135,6 @@ def rerun_failure(record: Mapping[str, Any], *, policy: Any, bank_dir: Optional[
     step, then ``extra_steps`` more steps driven past the episode's end. Raises
     :class:`FailureReplayError` when the trajectory hash differs from the record's.
     """
-    from policies.evaluation import make_eval_env
-
     _check_record(record)
     config = dict(env_config or {})
     if render:
@@ -164,8 +162,6 @@ def _checked_run(env, policy: Any, scene: _Scene, render: bool, extra_steps: int
                  diverged) -> Tuple[Any, Any, List[np.ndarray]]:
     """One episode of ``policy`` on ``env`` (closed afterwards) in ``scene``, its trajectory hash checked against
     ``expected`` (``diverged(hash)`` is the error's message), then ``extra_steps`` rendered steps past its end."""
-    from policies.registry import load_policy
-
     try:
         bound = load_policy(policy)
         bound.bind([env])

@@ -89,6 +89,7 @@ from scenario_bank import select_scenarios
 from scenario_bank.atomic import atomic_write_json
 from scenario_bank.bank import Bank
 from scenario_bank.run_identity import check_identity
+from policies.registry import SB3_ALGORITHMS, read_model_card
 
 __all__ = ["LoopError", "LoopReport", "LoopSettings", "run_loop", "DEFAULT_OUT", "DEFAULTS", "mined_entries",
            "fine_tune_weights", "FINE_TUNE_METHODS", "METHOD_LEARNING_RATES"]
@@ -218,8 +219,6 @@ def _round_spec(spec: Any, folder: Path, out: Path) -> str:
     """A round's policy spec read back from ``loop.json``: an SB3 checkpoint inside that round's own
     ``folder``, as the loop writes it. A spec naming anything else (code, a checkpoint elsewhere) is refused:
     ``loop.json`` is a file, not the user's command line."""
-    from policies.registry import SB3_ALGORITHMS
-
     text = spec if isinstance(spec, str) else repr(spec)
     algorithm, sep, path = text.partition(":")
     inside = False
@@ -844,7 +843,6 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, a
 def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, label: str) -> Dict[str, Any]:
     """A fine-tuning arm by DAgger (:func:`policies.imitation.dagger_fine_tune`); a killed one resumes."""
     from policies.imitation import DaggerConfig, dagger_fine_tune
-    from policies.registry import read_model_card
 
     # a resumed run says so itself ("DAgger: resumed from ...", after the step's own line naming the arm)
     path = dagger_fine_tune(current, arm.config(out, weights), DaggerConfig(learning_rate=arm.learning_rate),

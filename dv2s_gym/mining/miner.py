@@ -72,6 +72,7 @@ from scenario_bank.bank import Bank, BankError
 from scenario_bank.extras import missing_extra_message
 from scenario_bank.records import EpisodeRecord, RecordError
 from scenario_bank.run_identity import check_identity
+from policies.registry import load_policy
 
 __all__ = ["MineRun", "MineSettings", "WorkerSettings", "FEEDBACKS", "mine", "read_records", "episode_seed",
            "SETTINGS_VERSION"]
@@ -500,7 +501,6 @@ def _check_can_mine(policy: str, settings: MineSettings) -> None:
         raise MiningError(missing_extra_message("verifai", "failure mining"))
     sampler_params(settings.sampler, dict(settings.sampler_options) if settings.sampler_options else None)
     from envs.dv2s_env import check_env_config
-    from policies.registry import load_policy
 
     check_env_config(settings.env_config)  # a misspelt key fails here, in one line, not in every episode
     # an unknown spec or broken checkpoint fails here, in one line, before any worker starts; so does a checkpoint

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence
 
 from dv2s_gym.mining.errors import MiningError
+from envs.jailed_env import parameter_ranges_of
 
 __all__ = ["SceneSpec", "SceneSpace", "IGNORED_PARAMS"]
 
@@ -49,7 +50,6 @@ class SceneSpace:
 
     def __init__(self, scenarios: Optional[Sequence[str]] = None, bank_dir: Optional[str] = None) -> None:
         from envs.dv2s_env import resolve_scenarios
-        from envs.jailed_env import parameter_ranges_of
 
         refs = resolve_scenarios(list(scenarios) if scenarios else None, bank_dir)
         if not refs:

@@ -46,10 +46,16 @@ from dataclasses import dataclass
 from typing import Any, List, Optional, Sequence, Tuple
 
 import numpy as np
-from verifai.samplers.feature_sampler import FeatureSampler
+from verifai.samplers.feature_sampler import FeatureSampler, default_sampler_params
 
 from dv2s_gym.mining.chooser import ForgetfulCrossEntropySampler, LeaveSettings
 from dv2s_gym.mining.cluster import REGION_BINS, region_of
+from verifai.features import Box, DiscreteBox
+from verifai.samplers.multi_armed_bandit import ContinuousMultiArmedBanditSampler
+from verifai.samplers.cross_entropy import ContinuousCrossEntropySampler, DiscreteCrossEntropySampler
+from verifai.samplers.eg_sampler import ContinuousEpsilonGreedySampler
+from verifai.samplers.halton import HaltonSampler
+from verifai.samplers.random_sampler import RandomSampler
 
 __all__ = ["AdaptSettings", "ScenarioSplitSampler", "CHOOSERS", "PARAM_SAMPLERS", "scenario_dimensions"]
 
@@ -82,46 +88,30 @@ class AdaptSettings:
 
 def _make_chooser(kind: str, count: int, adapt: AdaptSettings, leave: LeaveSettings,
                   cells: Optional[Sequence[int]] = None):
-    from verifai.features import Box, DiscreteBox
-
     alpha, thres = adapt.alpha, adapt.thres
     if kind == "cross-entropy":
         if leave.active:
             return ForgetfulCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=alpha, thres=thres,
                                                 leave=leave, cells=cells)
-        from verifai.samplers.cross_entropy import DiscreteCrossEntropySampler
 
         return DiscreteCrossEntropySampler(domain=DiscreteBox([0, count - 1]), alpha=alpha, thres=thres)
     if kind == "epsilon-greedy":
-        from verifai.samplers.eg_sampler import ContinuousEpsilonGreedySampler
-
         return ContinuousEpsilonGreedySampler(domain=Box([0.0, 1.0]), alpha=alpha, thres=thres, buckets=count)
-    from verifai.samplers.multi_armed_bandit import ContinuousMultiArmedBanditSampler
 
     return ContinuousMultiArmedBanditSampler(domain=Box([0.0, 1.0]), alpha=alpha, thres=thres, buckets=count)
 
 
 def _make_params(kind: str, dimension: int, alpha: float, thres: float, buckets: int):
-    from verifai.features import Box
-    from verifai.samplers.feature_sampler import default_sampler_params
-
     box = Box(*[[0.0, 1.0]] * max(dimension, 1))
     if kind == "halton":
-        from verifai.samplers.halton import HaltonSampler
-
         start = int(np.random.randint(0, _HALTON_START))  # the caller seeds the generators
         params = default_sampler_params("halton")  # VerifAI's DotMap: sample_index, bases_skipped
         params.sample_index = start
         return HaltonSampler(domain=box, halton_params=params)
     if kind == "random":
-        from verifai.samplers.random_sampler import RandomSampler
-
         return RandomSampler(box)
     if kind == "bandit":
-        from verifai.samplers.multi_armed_bandit import ContinuousMultiArmedBanditSampler
-
         return ContinuousMultiArmedBanditSampler(domain=box, alpha=alpha, thres=thres, buckets=buckets)
-    from verifai.samplers.cross_entropy import ContinuousCrossEntropySampler
 
     return ContinuousCrossEntropySampler(domain=box, alpha=alpha, thres=thres, buckets=buckets)
 

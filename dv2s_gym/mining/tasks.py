@@ -35,6 +35,7 @@ from dv2s_gym.mining.monitors import (DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHO
                                      robustness)
 from dv2s_gym.workers.tasks import register
 from policies import worker_cache
+from policies.evaluation import run_episode
 
 __all__ = ["MINE", "HELDOUT", "run_mine_task", "heldout_task", "reference_avoids", "trace_name"]
 
@@ -59,8 +60,6 @@ def reference_avoids(failure: Optional[Dict[str, Any]], reference_failure: Optio
 
 
 def _episode(task: Dict[str, Any], spec: str):
-    from policies.evaluation import run_episode
-
     env_key = None
     try:
         env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
@@ -131,8 +130,6 @@ def heldout_task(task: Mapping[str, Any]) -> Dict[str, Any]:
                               "error": None}
     env_key = None
     try:
-        from policies.evaluation import run_episode
-
         env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
         policy = worker_cache.policy_for(task["policy"], env_key, env)
         result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))

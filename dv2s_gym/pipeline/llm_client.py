@@ -50,6 +50,7 @@ from dv2s_gym.pipeline.errors import (
 )
 from dv2s_gym.pipeline.errors import LLMConfigError
 from dv2s_gym.pipeline.llm_config import CONFIG_KEYS, LLMConfig, LLMConfigLike
+from scenario_bank.errors import SettingError
 
 __all__ = ["ChatClient", "ChatReply", "DEFAULT_BASE_URL", "DEFAULT_MODEL", "CONFIG_KEYS"]
 
@@ -174,7 +175,8 @@ class ChatClient:
         ``{"llm": {...}, "vlm": {...}}`` section per kind, which wins over its top level.
         """
         if kind not in ("llm", "vlm"):
-            raise ValueError(f"kind must be 'llm' or 'vlm', not {kind!r}")
+            raise SettingError(f"kind must be 'llm' (the scenario generator) or 'vlm' (the record analyzer), "
+                               f"not {kind!r}")
         settings = (LLMConfig.of(config) or LLMConfig()).for_kind(kind)
         config = {key: getattr(settings, key) for key in CONFIG_KEYS}
         prefixes = ["DV2S_VLM_", "DV2S_LLM_"] if kind == "vlm" else ["DV2S_LLM_"]
@@ -343,12 +345,13 @@ class ChatClient:
 
 def _check_messages(messages: Sequence[Mapping[str, Any]]) -> None:
     if isinstance(messages, (str, bytes)) or not messages:
-        raise ValueError("messages must be a non-empty list of {'role': ..., 'content': ...} dicts")
+        raise SettingError("messages must be a non-empty list of {'role': ..., 'content': ...} dicts")
     for i, message in enumerate(messages):
         if not isinstance(message, Mapping) or "role" not in message or "content" not in message:
-            raise ValueError(f"message {i} must be a dict with 'role' and 'content', got {message!r:.120}")
+            raise SettingError(f"message {i} must be a dict with 'role' and 'content', got {message!r:.120}")
         if message["role"] not in ("system", "user", "assistant", "developer", "tool"):
-            raise ValueError(f"message {i} has unknown role {message['role']!r}")
+            raise SettingError(f"message {i} has unknown role {message['role']!r}; the roles are system, user, "
+                               "assistant, developer and tool")
 
 
 def _error_detail(text: str) -> str:

@@ -434,7 +434,7 @@ def frames_to_data_urls(frames: Sequence[np.ndarray], fmt: str = "jpeg", quality
     for frame in frames:
         array = np.asarray(frame)
         if array.ndim != 3 or array.shape[2] not in (3, 4):
-            raise ValueError(f"frames must be H x W x 3 RGB arrays, got shape {array.shape}")
+            raise VideoError(f"frames must be H x W x 3 RGB arrays (height, width, colour), got shape {array.shape}")
         bgr = cv2.cvtColor(np.ascontiguousarray(array[..., :3], dtype=np.uint8), cv2.COLOR_RGB2BGR)
         ok, data = cv2.imencode(ext, bgr, params)
         if not ok:

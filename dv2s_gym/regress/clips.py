@@ -20,6 +20,8 @@ from envs.trace import EpisodeTrace
 from envs.trace_bounds import check_file_config, TraceConfigError
 from envs.recording import VideoWriter
 from dv2s_gym.regress.replay import bank_for_scenario
+from policies.evaluation import make_eval_env, run_episode
+from policies.registry import load_policy, PolicyError, spec_from_file
 
 __all__ = ["ClipError", "render_episode_video", "render_policy_video", "clip_window", "DEFAULT_CLIP_CONFIG"]
 
@@ -88,14 +90,10 @@ def render_policy_video(report: Dict[str, Any], result: Mapping[str, Any], role:
     result in the report (a :class:`~scenario_bank.records.RegressEpisode` or its JSON object). The re-run must
     reproduce the report's trajectory hash, so the clip shows the very episode the report counted.
     """
-    from policies.evaluation import make_eval_env, run_episode
-    from policies.registry import load_policy
-
     spec = (report.get(role) or {}).get("spec")
     if not spec:
         raise ClipError(f"the report names no {role} policy to re-run")
     if (report.get(role) or {}).get("report"):  # the spec came from another report file, not the command line
-        from policies.registry import PolicyError, spec_from_file
 
         try:
             spec_from_file(spec, f"the baseline report {report[role]['report']}", "--baseline SPEC (instead of --baseline-report)")

@@ -40,6 +40,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from dv2s_gym.regress.errors import RegressError
 
 __all__ = ["DEFAULT_POOLED_WEIGHT", "FamilyDecision", "gate_rejections", "tarone_level", "smallest_p_value"]
 
@@ -103,11 +104,11 @@ def gate_rejections(p_values: Sequence[float], discordant: Sequence[int], pooled
         The :class:`FamilyDecision`.
     """
     if not 0.0 < alpha < 1.0:
-        raise ValueError(f"alpha must be strictly between 0 and 1, got {alpha}")
+        raise RegressError(f"alpha must be strictly between 0 and 1, got {alpha}")
     if not 0.0 < pooled_weight < 1.0:
-        raise ValueError(f"pooled_weight must be strictly between 0 and 1, got {pooled_weight}")
+        raise RegressError(f"pooled_weight must be strictly between 0 and 1, got {pooled_weight}")
     if len(p_values) != len(discordant):
-        raise ValueError(f"need one discordant count per p-value: {len(p_values)} p-values, {len(discordant)} counts")
+        raise RegressError(f"need one discordant count per p-value: {len(p_values)} p-values, {len(discordant)} counts")
     p = np.asarray(p_values, dtype=float)
     smallest = np.array([smallest_p_value(m) for m in discordant])
     count = p.size

@@ -31,6 +31,8 @@ from typing import Any, Dict, Iterable, List, Optional
 from importlib import metadata
 
 from scenario_bank.atomic import file_sha256
+from policies.registry import (SB3_ALGORITHMS, SHIPPED_CHECKPOINT, parse_spec, registered_policies,
+                               registered_policy_module)
 
 __all__ = ["policy_fingerprint", "checkpoint_path", "installed_version", "file_sha256", "dv2s_sources_sha256",
            "MAX_HELPER_FILES"]
@@ -116,8 +118,6 @@ def installed_version() -> str:
 def checkpoint_path(base: str) -> Optional[Path]:
     """The checkpoint file a policy spec's base names (``dv2s-ppo``, ``model.zip``, ``ppo:PATH``, a folder holding
     ``model.zip``), ``None`` for a driver or a ``module:attribute`` policy."""
-    from policies.registry import SB3_ALGORITHMS, SHIPPED_CHECKPOINT
-
     if base == "dv2s-ppo":
         return SHIPPED_CHECKPOINT
     prefix, sep, rest = base.partition(":")
@@ -131,8 +131,6 @@ def checkpoint_path(base: str) -> Optional[Path]:
 
 def policy_fingerprint(spec: str) -> Dict[str, Any]:
     """``{description: value}`` facts of a policy spec (see the module docstring); every key names what it is."""
-    from policies.registry import parse_spec, registered_policies, registered_policy_module
-
     base, options = parse_spec(spec)
     facts: Dict[str, Any] = {"options": json.dumps(options, sort_keys=True, default=str),
                              "dv2s version": installed_version(), "dv2s sources (SHA-256)": dv2s_sources_sha256()}

@@ -43,6 +43,7 @@ import pytest
 from dv2s_gym.regress.assertions import RegressionFailed, RegressionReport
 from dv2s_gym.workers.backends import backend_choices
 from dv2s_gym.regress.errors import RegressError
+from scenario_bank.errors import WrongTypeError
 
 __all__ = ["RegressionReport", "RegressionFailed", "MARKER"]
 
@@ -63,7 +64,8 @@ def regression_arguments(policy: str, baseline: Optional[str] = None, *, baselin
     (``scenarios`` may be one name); an unknown argument is a ``TypeError``."""
     unknown = sorted(set(settings) - set(_SETTINGS))
     if unknown:
-        raise TypeError(f"got an unexpected keyword argument {unknown[0]!r} (the settings: {', '.join(_SETTINGS)})")
+        raise WrongTypeError(f"got an unexpected keyword argument {unknown[0]!r}; pass only the settings: "
+                             f"{', '.join(_SETTINGS)}")
     if baseline is None and baseline_report is None:
         raise pytest.UsageError(f"{MARKER}: give baseline= (a policy spec) or baseline_report= (a report.json) "
                                 f"to compare {policy!r} against")

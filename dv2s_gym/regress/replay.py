@@ -20,6 +20,8 @@ from dv2s_gym.regress.report import bank_info, load_report
 from envs.recording import VideoWriter
 from envs.trace import EpisodeTrace
 from envs.trace_bounds import check_file_config
+from policies.evaluation import trajectory_hash, make_eval_env, run_episode
+from policies.registry import load_policy, spec_from_file
 
 __all__ = ["find_episode", "replay_episode", "bank_for_scenario"]
 
@@ -73,8 +75,6 @@ def replay_episode(report_path: Union[str, os.PathLike], episode_id: str, role: 
         source = "trace"
     else:
         if not spec:
-            from policies.registry import spec_from_file
-
             named = (report.get(role) or {}).get("spec")
             if not named:
                 raise RegressError(f"the report names no {role} policy to re-run")
@@ -94,7 +94,6 @@ def replay_episode(report_path: Union[str, os.PathLike], episode_id: str, role: 
 
 def _from_trace(path: str, frames: Optional[List[Any]]):
     from envs.replay import replay_trace
-    from policies.evaluation import trajectory_hash
 
     trace = EpisodeTrace.load(path)
     env, replayed = replay_trace(trace, render_mode="rgb_array" if frames is not None else None, frames=frames)
@@ -105,9 +104,6 @@ def _from_trace(path: str, frames: Optional[List[Any]]):
 
 
 def _from_policy(report: Dict[str, Any], result: Dict[str, Any], spec: str, frames: Optional[List[Any]]):
-    from policies.evaluation import make_eval_env, run_episode
-    from policies.registry import load_policy
-
     config = check_file_config((report.get("settings") or {}).get("env_config"), "the report")
     bank = report.get("bank") or {}
     scenario = result["scenario"]

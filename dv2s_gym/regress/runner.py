@@ -51,6 +51,7 @@ from envs.config_check import check_config
 from envs.errors import UnknownConfigKeyError
 from scenario_bank import select_scenarios
 from scenario_bank.records import RecordError, RegressEpisode
+from policies.registry import PolicySpaceError, load_policy
 
 __all__ = ["run_regression", "run_size", "RegressSettings", "BaselineReport", "WorkerSettings", "bank_info",
            "plan_tasks", "DEFAULT_OUT", "ROLES"]
@@ -78,8 +79,6 @@ def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterab
 def _policy_info(spec: str, env_config: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
     """Load the policy here once: a bad spec, or a checkpoint trained with another observation than ``env_config``'s,
     fails before any worker starts; the model card goes in the report."""
-    from policies.registry import PolicySpaceError, load_policy
-
     policy = load_policy(spec)
     try:
         policy.check_env_config(env_config or {})

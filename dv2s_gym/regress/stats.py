@@ -87,6 +87,8 @@ import numpy as np
 from scipy import stats
 
 from dv2s_gym.regress.family import DEFAULT_POOLED_WEIGHT, gate_rejections
+from dv2s_gym.regress.errors import RegressError
+from scenario_bank.errors import WrongTypeError
 
 __all__ = ["DEFAULT_ALPHA", "DEFAULT_MARGIN", "DEFAULT_CORRELATION", "Verdict", "wilson_interval",
            "clopper_pearson_interval", "cluster_bootstrap_mean", "cluster_bootstrap_rate", "PairedTable",
@@ -126,7 +128,7 @@ _VERDICT_OF_CODE = {_FAIL: Verdict.FAIL, _PASS: Verdict.PASS, _INCONCLUSIVE: Ver
 def _check_level(value: float, name: str) -> float:
     value = float(value)
     if not 0.0 < value < 1.0:
-        raise ValueError(f"{name} must be strictly between 0 and 1, got {value}")
+        raise RegressError(f"{name} must be strictly between 0 and 1, got {value}")
     return value
 
 
@@ -138,7 +140,7 @@ def _two_sided_z(confidence: float) -> float:
 def _check_count(k: int, n: int) -> tuple[int, int]:
     k, n = operator.index(k), operator.index(n)
     if n < 0 or not 0 <= k <= n:
-        raise ValueError(f"need 0 <= k <= n, got k={k}, n={n}")
+        raise RegressError(f"need 0 <= k <= n, got k={k}, n={n}")
     return k, n
 
 
@@ -221,15 +223,15 @@ def cluster_bootstrap_mean(
         ``(estimate, low, high)``.
 
     Raises:
-        ValueError: If there are no values at all.
+        RegressError: If there are no values at all (a ValueError).
     """
     tail = (1.0 - _check_level(confidence, "confidence")) / 2.0
     sums = np.array([float(np.sum(np.asarray(g, dtype=float))) for g in groups if len(g) > 0])
     sizes = np.array([len(g) for g in groups if len(g) > 0], dtype=float)
     if sizes.size == 0:
-        raise ValueError("cluster_bootstrap_mean needs at least one value")
+        raise RegressError("cluster_bootstrap_mean needs at least one value")
     if n_resamples < 1:
-        raise ValueError(f"n_resamples must be positive, got {n_resamples}")
+        raise RegressError(f"n_resamples must be positive, got {n_resamples}")
     estimate = float(sums.sum() / sizes.sum())
     rng = np.random.default_rng(seed)
     picks = rng.integers(0, sizes.size, size=(n_resamples, sizes.size))
@@ -281,9 +283,9 @@ class PairedTable:
             try:
                 count = operator.index(value)
             except TypeError:
-                raise TypeError(f"{field.name} must be an integer count, got {value!r}") from None
+                raise WrongTypeError(f"{field.name} must be an integer count, got {value!r}") from None
             if count < 0:
-                raise ValueError(f"{field.name} must not be negative, got {count}")
+                raise RegressError(f"{field.name} must not be negative, got {count}")
             object.__setattr__(self, field.name, int(count))
 
     @classmethod
@@ -295,10 +297,10 @@ class PairedTable:
             baseline: The baseline's outcome on the same episodes, paired by index.
 
         Raises:
-            ValueError: If the lengths differ or an outcome is not a boolean (or 0/1).
+            RegressError (a ValueError): If the lengths differ or an outcome is not a boolean (or 0/1).
         """
         if len(candidate) != len(baseline):
-            raise ValueError(
+            raise RegressError(
                 f"paired outcomes need the same length: candidate has {len(candidate)} episodes, "
                 f"baseline has {len(baseline)}"
             )
@@ -362,10 +364,10 @@ class PairedTable:
 def _as_bool_array(values: Sequence[bool], name: str) -> np.ndarray:
     array = np.asarray(values)
     if array.ndim != 1:
-        raise ValueError(f"{name} outcomes must be a flat sequence, got shape {array.shape}")
+        raise RegressError(f"{name} outcomes must be a flat sequence, got shape {array.shape}")
     if array.dtype != bool:
         if array.size and not np.isin(array, (0, 1)).all():
-            raise ValueError(f"{name} outcomes must be booleans (True = failed) or 0/1")
+            raise RegressError(f"{name} outcomes must be booleans (True = failed) or 0/1")
         array = array.astype(bool)
     return array
 
@@ -452,7 +454,7 @@ def mcnemar_exact(table: PairedTable, alternative: str = "two-sided") -> float:
         The p-value; 1.0 when there are no discordant pairs.
     """
     if alternative not in ("two-sided", "greater", "less"):
-        raise ValueError(f"alternative must be 'two-sided', 'greater' or 'less', got {alternative!r}")
+        raise RegressError(f"alternative must be 'two-sided', 'greater' or 'less', got {alternative!r}")
     if table.discordant == 0:
         return 1.0
     result = stats.binomtest(table.candidate_only, table.discordant, 0.5, alternative=alternative)
@@ -503,11 +505,11 @@ def weighted_holm(p_values: Sequence[float], weights: Sequence[float]) -> list[f
     p = np.asarray(p_values, dtype=float)
     w = np.asarray(weights, dtype=float)
     if p.ndim != 1 or p.shape != w.shape:
-        raise ValueError(f"need one weight per p-value: {p.size} p-values, {w.size} weights")
+        raise RegressError(f"need one weight per p-value: {p.size} p-values, {w.size} weights")
     if np.isnan(p).any() or (p < 0).any() or (p > 1).any():
-        raise ValueError("p-values must lie in [0, 1]")
+        raise RegressError("p-values must lie in [0, 1]")
     if not (w > 0).all():
-        raise ValueError("weights must be positive")
+        raise RegressError("weights must be positive")
     w = w / w.sum()
     order = np.argsort(p / w, kind="stable")
     remaining = np.cumsum(w[order][::-1])[::-1]  # weight of the hypotheses from k on
@@ -614,13 +616,13 @@ def compare(
     """
     alpha = _check_level(alpha, "alpha")
     if not 0.0 <= margin < 1.0:
-        raise ValueError(f"margin must be in [0, 1), got {margin}")
+        raise RegressError(f"margin must be in [0, 1), got {margin}")
     interval = paired_difference_interval(table, 1.0 - alpha)
     p_value = mcnemar_exact(table, "greater")
     if adjusted_p is None:
         adjusted_p = p_value
     elif not p_value - 1e-12 <= adjusted_p <= 1.0:
-        raise ValueError(f"adjusted_p={adjusted_p} must lie between the raw p-value {p_value:.6g} and 1")
+        raise RegressError(f"adjusted_p={adjusted_p} must lie between the raw p-value {p_value:.6g} and 1")
     decisive_p = adjusted_p if rejected is None else (0.0 if rejected else 1.0)
     verdict = _VERDICT_OF_CODE[int(_decide(interval[1], table.difference, decisive_p, margin, alpha))]
     return Comparison(
@@ -664,7 +666,7 @@ def compare_scenarios(
         ``(per_scenario, overall)``.
     """
     if not tables:
-        raise ValueError("compare_scenarios needs at least one scenario")
+        raise RegressError("compare_scenarios needs at least one scenario")
     names = list(tables)
     pooled_table = PairedTable.pooled([tables[name] for name in names])
     raw = [mcnemar_exact(tables[name], "greater") for name in names]
@@ -797,9 +799,9 @@ class SequentialTest:
         stop_for_pass: bool = True,
     ) -> None:
         if not 0.0 <= margin < 1.0:
-            raise ValueError(f"margin must be in [0, 1), got {margin}")
+            raise RegressError(f"margin must be in [0, 1), got {margin}")
         if operator.index(max_episodes) < 1:
-            raise ValueError(f"max_episodes must be positive, got {max_episodes}")
+            raise RegressError(f"max_episodes must be positive, got {max_episodes}")
         self.margin = float(margin)
         self.alpha = _check_level(alpha, "alpha")
         self.max_episodes = int(max_episodes)
@@ -818,10 +820,10 @@ class SequentialTest:
         counts = ("both_fail", "candidate_only", "baseline_only", "neither")
         shrunk = [name for name in counts if getattr(table, name) < getattr(last, name)]
         if shrunk:
-            raise ValueError(f"update needs the cumulative table: {', '.join(shrunk)} went down "
+            raise RegressError(f"update needs the cumulative table: {', '.join(shrunk)} went down "
                              f"since the last look")
         if table.n <= last.n:
-            raise ValueError(f"update needs new episodes: {table.n} paired episodes, {last.n} at the last look")
+            raise RegressError(f"update needs new episodes: {table.n} paired episodes, {last.n} at the last look")
 
     def _fail_boundary(self, table: PairedTable, final: bool, fraction: float) -> int:
         """Critical candidate-only count at this look; updates the exact FAIL bookkeeping."""
@@ -848,7 +850,7 @@ class SequentialTest:
 
         Raises:
             RuntimeError: If the test already stopped.
-            ValueError: If the table is not cumulative or has no new episodes.
+            RegressError (a ValueError): If the table is not cumulative or has no new episodes.
         """
         if self.verdict is not None:
             raise RuntimeError(f"the test already stopped with {self.verdict.value.upper()}")

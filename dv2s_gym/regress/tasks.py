@@ -40,6 +40,7 @@ from dv2s_gym.workers.tasks import error_result, register, task_id
 from policies import worker_cache
 from dv2s_gym.regress.failures import apply_failure, DEFAULT_STALL_SECONDS, parse_failure
 from envs.safety_metrics import total_stall_step
+from policies.evaluation import run_episode
 
 __all__ = ["KIND", "run_regress_task", "trace_filename"]
 
@@ -54,8 +55,6 @@ def trace_filename(role: str, scenario: str, seed: int) -> str:
 
 def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
     """Run one episode described by ``task`` (see the module docstring) and return its result dict."""
-    from policies.evaluation import run_episode
-
     for folder in task.get("python_path") or []:  # where a module:attribute policy is found
         if folder not in sys.path:
             sys.path.append(folder)

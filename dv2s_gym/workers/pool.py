@@ -27,6 +27,7 @@ from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Set, Tu
 from dv2s_gym.workers.base import DEFAULT_TIMEOUT, Backend, OnResult, default_workers
 from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.tasks import TaskFunction, function_for, gave_up_result, run_task, task_modules
+import policies.evaluation
 
 __all__ = ["Backend", "LocalBackend", "default_workers", "DEFAULT_TIMEOUT"]
 
@@ -39,7 +40,6 @@ def _worker_main(connection) -> None:
     os.environ["OMP_NUM_THREADS"] = "1"
     try:
         import envs.dv2s_env  # noqa: F401  (the slow imports happen before the first episode's clock starts)
-        import policies.evaluation  # noqa: F401
         from scenic.core.dynamics import StuckBehaviorWarning
 
         # Scenic's wall-clock "behavior is taking a long time" fires on a loaded machine and would print

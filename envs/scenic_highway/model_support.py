@@ -11,6 +11,8 @@ import math
 import os
 import sys
 
+import scenic.syntax.veneer as veneer
+from scenic.core.regions import PolylineRegion
 from scenic.core.simulators import Action
 from scenic.core.vectors import Vector
 from scenic.domains.driving import actions as _driving_actions
@@ -43,8 +45,6 @@ def resolve_map_parameter() -> None:
     plain strings: a ``pathlib.Path`` left in ``globalParameters`` would hand the
     script file-system methods (``globalParameters.map.replace(...)`` moves the file).
     """
-    import scenic.syntax.veneer as veneer
-
     install_network_cache()  # the driving model's Network.fromFile caches outside the package
 
     params = veneer._globalParameters
@@ -71,8 +71,6 @@ def remove_backward_seams(network) -> int:
     a segment: a car passing one is told it is on the wrong side of its path and
     swerves. Removing these vertices moves the centerline by a few centimetres.
     """
-    from scenic.core.regions import PolylineRegion
-
     removed = 0
     for lane in network.lanes:
         points = [tuple(p[:2]) for p in lane.centerline.points]

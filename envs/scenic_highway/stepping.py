@@ -25,6 +25,7 @@ import scenic.syntax.veneer as veneer
 from scenic.core.distributions import RejectionException
 from scenic.core.dynamics import RejectSimulationException
 
+from envs.errors import ResetNeededError
 from scenario_bank.errors import DV2SError
 
 
@@ -148,7 +149,7 @@ class ExternalStepper:
     def advance(self, action: Any) -> StepOutcome:
         """Apply ``action`` and simulate one Scenic time step."""
         if self.done:
-            raise RuntimeError("the simulation has ended; reset the environment")
+            raise ResetNeededError("the simulation has ended: call reset() to start a new episode")
         return self._switch(action)
 
     def _switch(self, *args) -> StepOutcome:

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import List, Union
 
 from scenario_bank.errors import DV2SError
-from scenario_bank.errors import MissingFileError, WrongFileError
+from scenario_bank.errors import MissingFileError, WrongFileError, WrongTypeError
 
 __all__ = ["MAPS_DIR", "MAP_SUFFIX", "UnknownMapError", "list_maps", "resolve_map"]
 
@@ -90,7 +90,7 @@ def resolve_map(name_or_path: Union[str, os.PathLike]) -> Path:
         text = name_or_path
         is_path = False
     else:
-        raise TypeError(
+        raise WrongTypeError(
             f"map must be a name or a path, not {type(name_or_path).__name__}: {name_or_path!r}"
         )
 

@@ -72,6 +72,7 @@ from typing import Any, Dict, List, Optional, Tuple
 
 from dv2s_gym.pipeline.semantics.road import distance_m, road_features, speed_kph, strip_absences, time_s
 from scenario_bank.elements import CAN_DO, ActorKind, normalize_elements
+from scenario_bank.errors import WrongTypeError
 
 __all__ = ["Entity", "ParsedDescription", "parse_description", "elements_from_text", "ROAD_PATTERNS"]
 
@@ -1621,7 +1622,7 @@ def _conflict_partner_of(entities: List[Entity], who: Entity) -> Optional[Entity
 def parse_description(text: str) -> ParsedDescription:
     """Parse a description into entities with actions, relations, lanes and counts."""
     if not isinstance(text, str):
-        raise TypeError(f"description must be a string, got {type(text).__name__}")
+        raise WrongTypeError(f"description must be a string (the scenario's text), got {type(text).__name__}")
     return _Parser(text).parse()
 
 

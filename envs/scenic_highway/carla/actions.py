@@ -15,6 +15,7 @@ import sys
 import warnings
 from typing import Any, Optional, Tuple
 
+import scenic.syntax.veneer as veneer
 from scenic.core.simulators import Action
 from scenic.domains.driving.actions import SetSpeedAction  # noqa: F401  (re-exported for scripts)
 
@@ -56,9 +57,8 @@ def warn_no_traffic_lights() -> None:
     """Warn once per running scenario (or once per compile outside a simulation) that lights are absent."""
     key: Optional[int]
     try:
-        from scenic.syntax.veneer import currentSimulation
-
-        key = id(currentSimulation.scene) if currentSimulation is not None else None
+        simulation = veneer.currentSimulation  # the running one: read when called, never bound at import
+        key = id(simulation.scene) if simulation is not None else None
     except Exception:  # pragma: no cover - defensive
         key = None
     if key in _warned_scripts:
