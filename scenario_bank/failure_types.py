@@ -7,8 +7,9 @@ as a failure by default (``regress_default``), whether a regression report writt
 failure kinds counted it (``counted_before_choice``), whether the failure names the actor it met
 (``with_actor``) and the ``label`` reports show for it (``None``: reports show none).
 
-The failure miner detects all four types (:mod:`dv2s_gym.mining.monitors`), and its reports list them in
-severity order; ``dv2s regress`` counts the types that have a result field (:mod:`dv2s_gym.regress.failures`).
+The failure miner detects every type of the table, each through its detector (:mod:`dv2s_gym.mining.monitors`),
+and its reports list them in severity order (:func:`failure_table`: the table and the rows added at run time with
+:func:`register_failure_type`); ``dv2s regress`` counts the types that have a result field (:mod:`dv2s_gym.regress.failures`).
 """
 
 from __future__ import annotations

@@ -14,6 +14,13 @@ its :class:`~envs.trace.EpisodeTrace` and returns the first failure by severity:
 
 :func:`robustness` turns the outcome into one number for VerifAI's adaptive samplers:
 negative for a failure (the more negative, the worse), positive otherwise.
+
+Both walk the failure table (:func:`scenario_bank.failure_types.failure_table`): each type has one
+:class:`Detector` in :data:`DETECTORS` that finds it and scores it. A new failure type is its row (with its
+label) in ``scenario_bank/failure_types.py`` and its detector here; a plug-in adds both at run time with
+:func:`~scenario_bank.failure_types.register_failure_type` and :func:`register_detector` (in each process that
+detects: a worker process started before the registration does not see it). The settings the monitors read
+travel as one :class:`MonitorSettings`.
 """
 
 from __future__ import annotations
