@@ -7,8 +7,9 @@ as a failure by default (``regress_default``), whether a regression report writt
 failure kinds counted it (``counted_before_choice``), whether the failure names the actor it met
 (``with_actor``) and the ``label`` reports show for it (``None``: reports show none).
 
-The failure miner detects all four types (:mod:`dv2s_gym.mining.monitors`), and its reports list them in
-severity order; ``dv2s regress`` counts the types that have a result field (:mod:`dv2s_gym.regress.failures`).
+The failure miner detects every type of the table, each through its detector (:mod:`dv2s_gym.mining.monitors`),
+and its reports list them in severity order (:func:`failure_table`: the table and the rows added at run time with
+:func:`register_failure_type`); ``dv2s regress`` counts the types that have a result field (:mod:`dv2s_gym.regress.failures`).
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Dict, Iterable, List, Optional, Tuple
 
-__all__ = ["FailureType", "FAILURE_TABLE", "FAILURE_TYPES", "failure_type", "severity_order"]
+__all__ = ["FailureType", "FAILURE_TABLE", "FAILURE_TYPES", "failure_table", "failure_type", "severity_order",
+           "register_failure_type", "unregister_failure_type"]
 
 
 @dataclass(frozen=True)
@@ -54,7 +56,15 @@ FAILURE_TABLE: Tuple[FailureType, ...] = (
 FAILURE_TYPES: Tuple[str, ...] = tuple(row.name for row in FAILURE_TABLE)
 """The failure types' names, most severe first."""
 
+_REGISTERED: Dict[str, FailureType] = {}
+"""Rows added at run time (:func:`register_failure_type`), by name."""
+_TABLE: Tuple[FailureType, ...] = FAILURE_TABLE
 _BY_NAME: Dict[str, FailureType] = {row.name: row for row in FAILURE_TABLE}
+
+
+def failure_table() -> Tuple[FailureType, ...]:
+    """Every failure type, most severe first: :data:`FAILURE_TABLE` and the rows registered at run time."""
+    return _TABLE
 
 
 def failure_type(name: str) -> Optional[FailureType]:
@@ -65,4 +75,30 @@ def failure_type(name: str) -> Optional[FailureType]:
 def severity_order(names: Iterable[str]) -> List[str]:
     """The distinct ``names``: failure types most severe first, then any other names sorted."""
     names = set(names)
-    return [n for n in FAILURE_TYPES if n in names] + sorted(n for n in names if n not in _BY_NAME)
+    return [row.name for row in _TABLE if row.name in names] + sorted(n for n in names if n not in _BY_NAME)
+
+
+def register_failure_type(row: FailureType) -> FailureType:
+    """Add ``row`` to the table at run time (a plug-in's failure type; the product's own types are rows of
+    :data:`FAILURE_TABLE`); its name and severity must be new. The miner detects it once its monitor registers a
+    detector for it (:func:`dv2s_gym.mining.monitors.register_detector`). Returns ``row``."""
+    if row.name in _BY_NAME:
+        raise ValueError(f"failure type {row.name!r} exists already")
+    if any(other.severity == row.severity for other in _TABLE):
+        raise ValueError(f"failure type {row.name!r}: severity {row.severity} is taken; choose one no type has")
+    _REGISTERED[row.name] = row
+    _rebuild()
+    return row
+
+
+def unregister_failure_type(name: str) -> None:
+    """Remove the failure type ``name`` added by :func:`register_failure_type` (the table's own rows stay)."""
+    if _REGISTERED.pop(name, None) is None:
+        raise ValueError(f"failure type {name!r} was not registered at run time")
+    _rebuild()
+
+
+def _rebuild() -> None:
+    global _TABLE, _BY_NAME
+    _TABLE = tuple(sorted(FAILURE_TABLE + tuple(_REGISTERED.values()), key=lambda row: row.severity))
+    _BY_NAME = {row.name: row for row in _TABLE}

@@ -4,15 +4,22 @@ module lists them again."""
 from __future__ import annotations
 
 import ast
+import math
 from pathlib import Path
 from typing import List
+
+import pytest
 
 from dv2s_gym.mining import monitors
 from dv2s_gym.mining import report as mining_report
 from dv2s_gym.mining.tasks import reference_avoids
 from dv2s_gym.regress import failures
 from dv2s_gym.regress import report as regress_report
-from scenario_bank.failure_types import FAILURE_TABLE, FAILURE_TYPES, failure_type, severity_order
+from envs.trace import EpisodeTrace
+from policies.evaluation import EpisodeResult
+from scenario_bank.failure_types import (FAILURE_TABLE, FAILURE_TYPES, FailureType, failure_table, failure_type,
+                                         register_failure_type, severity_order, unregister_failure_type)
+from tests.test_mining_report import make_run
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("scenario_bank", "envs", "policies", "dv2s_gym")
@@ -67,3 +74,72 @@ def test_no_module_but_the_table_lists_the_failure_types():
     found = [hit for package in PACKAGES for path in sorted((ROOT / package).rglob("*.py")) if path != TABLE
              for hit in _failure_name_lists(path.read_text(encoding="utf-8"), str(path.relative_to(ROOT)))]
     assert not found, "failure types listed outside scenario_bank/failure_types.py:\n" + "\n".join(found)
+
+
+def test_every_row_has_a_detector_and_every_detector_a_row():
+    """The miner detects each failure type through its row's detector (a row without one would never be found)."""
+    assert sorted(monitors.DETECTORS) == sorted(FAILURE_TYPES)
+    assert all(name == detector.name for name, detector in monitors.DETECTORS.items())
+
+
+TOY = "hard_brake"
+"""A failure type a plug-in adds at run time: the ego slowed by more than 4 m/s in one step."""
+
+
+def _hard_brake(result, trace, settings):
+    speeds = [float(step["ego"][3]) for step in trace.states]
+    for step in range(1, len(speeds)):
+        if speeds[step - 1] - speeds[step] > 4.0:
+            return monitors.Failure(TOY, step / 5.0, step, speed=speeds[step])
+    return None
+
+
+@pytest.fixture
+def toy_type():
+    """The toy type registered in one place (its row, with its label, and its detector); undone after."""
+    row = register_failure_type(FailureType(TOY, severity=len(FAILURE_TABLE), result_field=None,
+                                            regress_default=False, counted_before_choice=False, with_actor=False,
+                                            label="hard brake"))
+    monitors.register_detector(monitors.Detector(TOY, _hard_brake, lambda result, failure, settings: -0.25))
+    yield row
+    monitors.unregister_detector(TOY)
+    unregister_failure_type(TOY)
+
+
+def _episode(speeds, **result):
+    values = dict(scenario="s", seed=0, scene_seed=0, params={}, collided=False, collisions=[], off_road=False,
+                  success=True, min_ttc=math.inf, mean_speed=10.0, distance=100.0, episode_return=0.0, steps=0,
+                  trajectory_hash="h", error=None, extra={})
+    values.update(result)
+    trace = EpisodeTrace(scenario="s", source="test", seed=0, scene_seed=0, params={}, config={"policy_frequency": 5},
+                         states=[{"ego": [2.0 * i, 0.0, 0.0, v]} for i, v in enumerate(speeds)], events=[],
+                         kinds={"ego": "ego"})
+    return EpisodeResult(**values), trace
+
+
+def test_a_failure_type_registered_in_one_place_is_detected_scored_and_counted(toy_type, tmp_path):
+    assert failure_type(TOY) is toy_type and failure_table()[-1] is toy_type
+    result, trace = _episode([10.0, 10.0, 4.0, 4.0, 4.0])
+    failure = monitors.detect_failure(result, trace)
+    assert (failure.type, failure.step, failure.speed) == (TOY, 2, 4.0)
+    assert monitors.robustness(result, failure) == -0.25
+    # the table's order of precedence: a more severe failure of the same episode wins
+    collided, _ = _episode([10.0, 4.0], collided=True, collisions=["car1"])
+    assert monitors.detect_failure(collided, trace).type == "collision"
+    assert monitors.detect_failure(*_episode([10.0, 9.0, 8.0])) is None  # gentle braking is no failure
+    # counted: the mining report's failures by type, in the table's order
+    run = make_run(tmp_path / "run", clips=False)
+    episodes = run / "episodes.jsonl"
+    episodes.write_text(episodes.read_text(encoding="utf-8").replace('"type": "stall"', f'"type": "{TOY}"'),
+                        encoding="utf-8")
+    counts = mining_report.build_report(run)["counts"]["failures_by_type"]
+    assert counts == {"collision": 5, "off_road": 3, "low_ttc": 1, TOY: 1}
+    assert list(counts) == [row.name for row in failure_table() if row.name in counts]
+
+
+def test_a_registered_type_is_in_the_table_while_registered(toy_type):
+    assert TOY in [row.name for row in failure_table()]
+
+
+def test_registration_is_undone():
+    assert failure_type(TOY) is None and TOY not in monitors.DETECTORS and failure_table() == FAILURE_TABLE

@@ -29,6 +29,7 @@ from dv2s_gym.mining.monitors import (
     DEFAULT_STALL_SECONDS,
     FREE_PATH,
     Failure,
+    MonitorSettings,
     collision_type,
     detect_failure,
     robustness,
@@ -245,8 +246,8 @@ def test_stall_needs_a_free_path_ahead():
         assert detect_failure(_result(), _trace(_standing(long, {"car": where}))).type == "stall"
     # standing for less than stall_seconds, or moving slowly but above the stall speed: no stall
     assert detect_failure(_result(), _trace(_standing(STALL_STEPS - 1))) is None
-    assert detect_failure(_result(), _trace(_standing(long)), stall_seconds=DEFAULT_STALL_SECONDS + 2) is None
-    assert detect_failure(_result(), _trace(_standing(long)), stall_seconds=1.0).type == "stall"
+    assert detect_failure(_result(), _trace(_standing(long)), MonitorSettings(stall_seconds=DEFAULT_STALL_SECONDS + 2)) is None
+    assert detect_failure(_result(), _trace(_standing(long)), MonitorSettings(stall_seconds=1.0)).type == "stall"
     assert detect_failure(_result(), _trace([{"ego": [0.0, 0.0, 0.0, 1.0]}] * (2 * long))) is None
     # standing split in two short stops does not add up to a stall
     half = STALL_STEPS // 2 + 1
@@ -260,7 +261,7 @@ def test_low_ttc_off_road_and_severity_order():
     failure = detect_failure(close, _trace(moving, kinds={"car1": "car"}))
     assert (failure.type, failure.with_, failure.with_kind, failure.step) == ("low_ttc", "car1", "car", 6)
     assert failure.min_ttc == pytest.approx(0.6)
-    assert detect_failure(close, _trace(moving), ttc_threshold=0.5) is None
+    assert detect_failure(close, _trace(moving), MonitorSettings(ttc_threshold=0.5)) is None
     assert detect_failure(_result(min_ttc=1.5), _trace(moving)) is None
 
     off = detect_failure(_result(off_road=True, min_ttc=0.3),

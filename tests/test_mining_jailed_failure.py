@@ -7,6 +7,7 @@ import pytest
 
 from dv2s_gym.mining.convert import convert_failure
 from dv2s_gym.mining.exact_replay import replay_failure
+from dv2s_gym.mining.monitors import MonitorSettings
 from dv2s_gym.pipeline.video import read_video
 from envs.dv2s_env import DV2SEnv
 from scenario_bank.bank import Bank, Sidecar
@@ -46,8 +47,8 @@ def record(user_bank) -> dict:
         env.close()
     record = run_mine_task({"kind": "mine", "role": "mine", "index": 0, "policy": "keep_lane", "reference": None,
                             "scenario": NAME, "seed": 3, "params": {"ego_speed": 23.0, "van_gap": 60.0},
-                            "env_config": {}, "bank_dir": str(user_bank), "trace_dir": None, "ttc_threshold": 1.0,
-                            "stall_seconds": 5.0})
+                            "env_config": {}, "bank_dir": str(user_bank), "trace_dir": None,
+                            "monitor": MonitorSettings(ttc_threshold=1.0, stall_seconds=5.0)})
     assert record["error"] is None and record["failure"]["type"] == "collision", record
     return record
 

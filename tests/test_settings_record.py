@@ -10,6 +10,7 @@ from dv2s_gym.cli import build_parser
 from dv2s_gym.cli.loop import _VALUED, loop_settings
 from dv2s_gym.mining import loop, miner
 from dv2s_gym.mining.loop_settings import LoopSettings
+from dv2s_gym.mining.monitors import MonitorSettings
 from dv2s_gym.mining.settings import MineSettings
 
 NOT_RECORDED_BY_MINE = {"convert", "convert_options", "max_conversions"}
@@ -76,7 +77,7 @@ def test_a_run_folder_s_settings_are_read_in_one_place(tmp_path):
     settings = read_run_settings(tmp_path)
     assert settings == values and dict(settings) == values  # a mapping: code reading a dict keeps working
     assert (settings.policy, settings.bank_dir, settings.env_config) == ("rule", "/b", {"duration": 5})
-    assert settings.monitor == {"ttc_threshold": 1.5}  # an absent or null monitor setting: the default applies
+    assert settings.monitor == MonitorSettings(ttc_threshold=1.5)  # an absent or null monitor setting: the default
     assert settings.path == tmp_path / "settings.json"
     for content, needle in (("{garbage", "is not readable JSON"), ("[1]", "is not a mining run's settings")):
         (tmp_path / "settings.json").write_text(content)

@@ -75,7 +75,7 @@ import numpy as np
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.exact_replay import NARROW, narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
 from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence, key_actor, shows_interaction
-from dv2s_gym.mining.monitors import detect_failure
+from dv2s_gym.mining.monitors import MonitorSettings, detect_failure
 from dv2s_gym.mining.report_text import not_compared_names_text
 from dv2s_gym.mining.param_meaning import (actor_objects, behaviour_overrides, counterpart_objects, fixed_quantities,
                                            joint_interval, key_uses, object_behaviour_heads, placement_parts,
@@ -183,21 +183,21 @@ def cluster_slug(cluster: Optional[str], index: Any) -> str:
     return re.sub(r"[^A-Za-z0-9_.\-]+", "_", str(cluster).replace("/", "__")).strip("._")[:120] or "failure"
 
 
-def _detect(result, trace, options: Mapping[str, Any]) -> Optional[Dict[str, Any]]:
+def _detect(result, trace, options: Union[MonitorSettings, Mapping[str, Any], None]) -> Optional[Dict[str, Any]]:
     """The episode's failure as a dict (the miner's monitors, :func:`dv2s_gym.mining.monitors.detect_failure`)."""
-    found = detect_failure(result, trace, **dict(options))
+    found = detect_failure(result, trace, MonitorSettings.of(options))
     return None if found is None else found.to_json()
 
 
-def _monitor_options(run_dir: Path, monitor: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
+def _monitor_options(run_dir: Path, monitor: Union[MonitorSettings, Mapping[str, Any], None]) -> MonitorSettings:
     """The monitor settings: ``monitor`` when given, else the mining run's (``settings.json``), else the defaults."""
     if monitor is not None:
-        return dict(monitor)
+        return MonitorSettings.of(monitor)
     try:
         settings = read_run_settings(run_dir)
     except MiningError:
-        return {}
-    return {} if settings is None else settings.monitor
+        return MonitorSettings()
+    return MonitorSettings() if settings is None else settings.monitor
 
 
 def _policy_name(policy: Any) -> str:
@@ -247,7 +247,7 @@ class ConversionSettings:
     seed: int = 0
     env_config: Optional[Mapping[str, Any]] = None
     bank_dir: Optional[PathLike] = None
-    monitor: Optional[Mapping[str, Any]] = None
+    monitor: Union[MonitorSettings, Mapping[str, Any], None] = None
     before: float = 4.0
     after: float = 1.0
     reference: Optional[Any] = "rule"
@@ -264,7 +264,7 @@ class ConversionSettings:
         """The settings of the failure's video (:class:`~dv2s_gym.mining.failure_video.VideoSettings`)."""
         return VideoSettings(policy=self.policy, bank_dir=self.bank_dir, env_config=self.env_config,
                              before=self.before, after=self.after,
-                             stall_seconds=(self.monitor or {}).get("stall_seconds"))
+                             stall_seconds=None if self.monitor is None else MonitorSettings.of(self.monitor).stall_seconds)
 
 
 def _reproduce(script_path: Path, policy: Any, settings: ConversionSettings, record_seed: int,
@@ -285,7 +285,7 @@ def _reproduce(script_path: Path, policy: Any, settings: ConversionSettings, rec
         episodes, traces = [], []
         for scene_seed in reproduction_seeds(record_seed, settings.k, settings.seed):
             result, trace = run_episode(env, bound, name, scene_seed)
-            episodes.append(_reproduction_episode(scene_seed, result, trace, settings.monitor or {}, source_failure,
+            episodes.append(_reproduction_episode(scene_seed, result, trace, settings.monitor, source_failure,
                                                   interaction))
             traces.append(trace)
         return episodes, traces
@@ -293,7 +293,8 @@ def _reproduce(script_path: Path, policy: Any, settings: ConversionSettings, rec
         env.close()
 
 
-def _reproduction_episode(scene_seed: int, result: Any, trace: Any, monitor: Mapping[str, Any],
+def _reproduction_episode(scene_seed: int, result: Any, trace: Any,
+                          monitor: Union[MonitorSettings, Mapping[str, Any], None],
                           source_failure: Mapping[str, Any], interaction: Optional[Mapping[str, Any]]
                           ) -> Dict[str, Any]:
     """One episode of :func:`_reproduce`, judged."""

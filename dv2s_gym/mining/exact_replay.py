@@ -22,7 +22,7 @@ from __future__ import annotations
 import os
 import re
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.monitors import detect_failure
+from dv2s_gym.mining.monitors import MonitorSettings, detect_failure
 from dv2s_gym.mining.param_meaning import read_support, support_contains, support_text
 from dv2s_gym.regress import identity
 from dv2s_gym.regress.identity import checkpoint_path, installed_version
@@ -30,7 +30,7 @@ from envs.trace import TRACE_VERSION
 from pathlib import Path
 from scenario_bank.atomic import file_sha256
 from scenario_bank.bank import Bank, BankError, param_ranges
-from typing import Any, Dict, Mapping, Optional, Tuple
+from typing import Any, Dict, Mapping, Optional, Tuple, Union
 from policies.registry import parse_spec, load_policy, spec_from_file
 from policies.evaluation import run_episode
 
@@ -203,7 +203,7 @@ class ReplayOutcome(dict):
 
 def run_replay(scenario: Any, *, policy: Any, seed: int, params: Mapping[str, Any],
                env_config: Optional[Mapping[str, Any]] = None, bank_dir: Optional[str] = None,
-               monitor: Optional[Mapping[str, Any]] = None) -> Tuple[Any, Any, Optional[Dict[str, Any]]]:
+               monitor: Union[MonitorSettings, Mapping[str, Any], None] = None) -> Tuple[Any, Any, Optional[Dict[str, Any]]]:
     """Run ``policy`` on ``scenario`` (a bank name or a ``.scenic`` path) with ``seed`` and ``params`` fixed;
     returns ``(EpisodeResult, EpisodeTrace, failure dict or None)`` (the miner's monitors)."""
     from envs.dv2s_env import DV2SEnv
@@ -218,13 +218,14 @@ def run_replay(scenario: Any, *, policy: Any, seed: int, params: Mapping[str, An
         result, trace = run_episode(env, bound, name, int(seed), params=dict(params) or None)
     finally:
         env.close()
-    found = detect_failure(result, trace, **dict(monitor or {}))
+    found = detect_failure(result, trace, MonitorSettings.of(monitor))
     return result, trace, None if found is None else found.to_json()
 
 
 def replay_failure(bank: Any, name: str, *, policy: Optional[Any] = None,
                    env_config: Optional[Mapping[str, Any]] = None,
-                   monitor: Optional[Mapping[str, Any]] = None) -> ReplayOutcome:
+                   monitor: Union[MonitorSettings, Mapping[str, Any], None] = None
+                   ) -> ReplayOutcome:
     """Run replay entry ``name`` of ``bank`` (a :class:`~scenario_bank.bank.Bank` or folder) with the seed and
     parameters of its provenance ``replay`` and the policy that failed (or ``policy``); ``matches`` says
     whether the episode is the recorded failing one (same trajectory hash), and ``reason``, when it is not,

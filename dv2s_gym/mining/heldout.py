@@ -28,7 +28,7 @@ __all__ = ["HeldOutStore", "heldout_task", "evaluate_heldout", "paired_summary",
 
 import numpy as np
 from dv2s_gym.mining.jsonl import read_rows
-from dv2s_gym.mining.monitors import DEFAULT_TTC_THRESHOLD
+from dv2s_gym.mining.monitors import DEFAULT_MONITOR
 from dv2s_gym.mining.tasks import HELDOUT, heldout_task
 from dv2s_gym.regress.stats import mcnemar_exact, PairedTable, wilson_interval
 from dv2s_gym.workers.pool import LocalBackend
@@ -78,7 +78,7 @@ def evaluate_heldout(role: str, policy: str, episodes: Sequence[Episode], *, sto
     """
     count = workers.workers if workers.workers is not None else (os.cpu_count() or 1)
     tasks = [{"kind": HELDOUT, "role": role, "policy": policy, "scenario": scenario, "seed": int(seed),
-              "bank_dir": bank_dir, "env_config": dict(env_config or {}), "ttc_threshold": DEFAULT_TTC_THRESHOLD}
+              "bank_dir": bank_dir, "env_config": dict(env_config or {}), "monitor": DEFAULT_MONITOR}
              for scenario, seed in episodes if store.get(role, scenario, seed) is None]
     bar = None
     if progress:

@@ -56,6 +56,7 @@ from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import is_novel
 from dv2s_gym.mining.family import record_family, scenario_family
 from dv2s_gym.mining.jsonl import JsonlAppender, read_rows
+from dv2s_gym.mining.monitors import MonitorSettings
 from dv2s_gym.mining.report import write_reports
 from dv2s_gym.mining.report_text import error_warning
 from dv2s_gym.mining.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
@@ -613,7 +614,7 @@ def _task(index: int, spec, policy: str, reference: Optional[str], settings: Dic
         "reference": reference, "scenario": spec.scenario, "seed": seed, "params": spec.params,
         "family": scenario_family(str(spec.scenario), settings["bank_dir"]), "env_config": settings["env_config"], "bank_dir": settings["bank_dir"],
         "trace_dir": str(out / "traces"),
-        "ttc_threshold": settings["ttc_threshold"], "stall_seconds": settings["stall_seconds"],
+        "monitor": MonitorSettings.from_recorded(settings),
     }
 
 

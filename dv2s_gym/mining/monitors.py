@@ -14,24 +14,35 @@ its :class:`~envs.trace.EpisodeTrace` and returns the first failure by severity:
 
 :func:`robustness` turns the outcome into one number for VerifAI's adaptive samplers:
 negative for a failure (the more negative, the worse), positive otherwise.
+
+Both walk the failure table (:func:`scenario_bank.failure_types.failure_table`): each type has one
+:class:`Detector` in :data:`DETECTORS` that finds it and scores it. A new failure type is its row (with its
+label) in ``scenario_bank/failure_types.py`` and its detector here; a plug-in adds both at run time with
+:func:`~scenario_bank.failure_types.register_failure_type` and :func:`register_detector` (in each process that
+detects: a worker process started before the registration does not see it). The settings the monitors read
+travel as one :class:`MonitorSettings`.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
-from typing import Any, Dict, List, Optional
+from dataclasses import asdict, dataclass, fields
+from typing import Any, Callable, Dict, List, Mapping, Optional, Union
 
 from envs.safety_metrics import DEFAULT_STALL_SECONDS, FREE_PATH, STANDING_SPEED, first_stall_step
-from scenario_bank.failure_types import FAILURE_TYPES
+from scenario_bank.elements import ActorKind
+from scenario_bank.failure_types import FAILURE_TYPES, failure_table, failure_type
 
-__all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "detect_failure", "detect_stall", "robustness",
-           "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
+__all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "MonitorSettings", "Detector", "DETECTORS",
+           "DEFAULT_MONITOR", "register_detector", "unregister_detector", "detect_failure", "detect_stall",
+           "robustness", "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
 
 COLLISION_TYPES = ("rear_end", "struck_from_behind", "side", "head_on", "pedestrian", "obstacle")
 STALL_SPEED = STANDING_SPEED
 """m/s under which the ego counts as standing."""
 DEFAULT_TTC_THRESHOLD = 1.0
+_VEHICLES = (ActorKind.CAR, ActorKind.TRUCK, ActorKind.BICYCLE, ActorKind.MOTORCYCLE, None)
+"""The kinds (and no kind) a collision is typed by the actors' headings for; the others count as obstacles."""
 
 
 @dataclass
@@ -75,9 +86,9 @@ def _wrap(angle: float) -> float:
 
 def collision_type(ego: List[float], other: List[float], other_kind: Optional[str]) -> str:
     """How two actors met, from their ``[x, y, heading, speed]`` states at impact."""
-    if other_kind == "pedestrian":
+    if other_kind == ActorKind.PEDESTRIAN:
         return "pedestrian"
-    if other_kind == "obstacle" or (other_kind not in ("car", "truck", "bicycle", "motorcycle", None)):
+    if other_kind == ActorKind.OBSTACLE or other_kind not in _VEHICLES:
         return "obstacle"
     relative = abs(_wrap(other[2] - ego[2]))
     if relative > 3 * math.pi / 4:
@@ -96,39 +107,153 @@ def _step_at(trace, time: float) -> int:
     return max(0, min(len(trace.states) - 1, int(round(time / period))))
 
 
-def detect_failure(result, trace, *, ttc_threshold: float = DEFAULT_TTC_THRESHOLD,
-                   stall_seconds: float = DEFAULT_STALL_SECONDS) -> Optional[Failure]:
-    """The episode's failure (see the module docstring), or ``None``."""
+@dataclass(frozen=True)
+class MonitorSettings:
+    """The failure monitors' settings: ``ttc_threshold`` [s] (a smaller time-to-collision is a ``low_ttc``
+    failure) and ``stall_seconds`` (standing that long with a free path ahead is a ``stall``)."""
+
+    ttc_threshold: float = DEFAULT_TTC_THRESHOLD
+    stall_seconds: float = DEFAULT_STALL_SECONDS
+
+    @classmethod
+    def from_recorded(cls, values: Mapping[str, Any]) -> "MonitorSettings":
+        """The settings a mapping records under their names (a run's ``settings.json``, a mining task, a
+        conversion's ``monitor`` option); a setting absent or ``None`` there takes its default."""
+        given = {field.name: float(values[field.name]) for field in fields(cls) if values.get(field.name) is not None}
+        return cls(**given)
+
+    @classmethod
+    def of(cls, value: Union["MonitorSettings", Mapping[str, Any], None]) -> "MonitorSettings":
+        """``value`` as settings: settings as they are, a mapping read by :meth:`from_recorded`, ``None`` the
+        defaults."""
+        if isinstance(value, cls):
+            return value
+        return cls.from_recorded(value or {})
+
+
+@dataclass(frozen=True)
+class Detector:
+    """How the miner finds the failure type ``name`` (a row of the failure table) and scores it:
+    ``detect(result, trace, settings)`` returns the episode's failure of that type (a :class:`Failure`) or
+    ``None``; ``score(result, failure, settings)`` is the failure's robustness for the adaptive samplers, below 0
+    (the more negative, the worse)."""
+
+    name: str
+    detect: Callable[[Any, Any, MonitorSettings], Optional[Failure]]
+    score: Callable[[Any, Failure, MonitorSettings], float]
+
+
+def _time_of(trace, step: int) -> float:
+    return step / float(trace.config.get("policy_frequency", 5))
+
+
+def _collision(result, trace, settings: MonitorSettings) -> Optional[Failure]:
+    if not result.collided:
+        return None
+    for event in trace.events:
+        if event.get("kind") == "collision" and "ego" in event.get("actors", []):
+            others = [a for a in event["actors"] if a != "ego"]
+            other = others[0] if others else None
+            step = _step_at(trace, float(event["time"]))
+            kind = trace.kinds.get(other) if other else None
+            states = trace.states[step]
+            ctype = (collision_type(states["ego"], states[other], kind)
+                     if other in states and "ego" in states else None)
+            return Failure("collision", float(event["time"]), step, other, kind, ctype,
+                           _finite(result.min_ttc), _ego_speed(states))
+    step = len(trace.states) - 1
+    return Failure("collision", _time_of(trace, step), step, result.collisions[0] if result.collisions else None)
+
+
+def _collision_score(result, failure: Failure, settings: MonitorSettings) -> float:
+    speed = failure.speed if failure.speed is not None else result.mean_speed
+    return -1.0 - float(speed) / 10.0
+
+
+def _off_road(result, trace, settings: MonitorSettings) -> Optional[Failure]:
+    if not result.off_road:
+        return None
+    for event in trace.events:
+        if event.get("kind") == "off_road":
+            return Failure("off_road", float(event["time"]), _step_at(trace, float(event["time"])))
+    step = len(trace.states) - 1
+    return Failure("off_road", _time_of(trace, step), step)
+
+
+def _low_ttc(result, trace, settings: MonitorSettings) -> Optional[Failure]:
+    if not result.min_ttc < settings.ttc_threshold:
+        return None
+    time = result.extra.get("min_ttc_time")
+    time = float(time) if time is not None else 0.0
+    other = result.extra.get("min_ttc_with") or None
+    return Failure("low_ttc", time, _step_at(trace, time), other, trace.kinds.get(other) if other else None,
+                   None, float(result.min_ttc))
+
+
+def _low_ttc_score(result, failure: Failure, settings: MonitorSettings) -> float:
+    return min(-1e-3, float(result.min_ttc) - settings.ttc_threshold)
+
+
+def _off_road_score(result, failure: Failure, settings: MonitorSettings) -> float:
+    return -1.0
+
+
+def _stall_detect(result, trace, settings: MonitorSettings) -> Optional[Failure]:
+    return _stall(trace, settings.stall_seconds)
+
+
+def _stall_score(result, failure: Failure, settings: MonitorSettings) -> float:
+    return -0.5
+
+
+DETECTORS: Dict[str, Detector] = {detector.name: detector for detector in (
+    Detector("collision", _collision, _collision_score),
+    Detector("off_road", _off_road, _off_road_score),
+    Detector("low_ttc", _low_ttc, _low_ttc_score),
+    Detector("stall", _stall_detect, _stall_score),
+)}
+"""Each failure type's detector, by the type's name (every row of the failure table has one, and each detector
+a row); :func:`detect_failure` asks them in the order of :func:`~scenario_bank.failure_types.failure_table`
+(most severe first)."""
+
+
+def register_detector(detector: Detector) -> Detector:
+    """Detect the failure type ``detector.name`` (a row of the failure table, e.g. one added with
+    :func:`~scenario_bank.failure_types.register_failure_type`) with ``detector``; :func:`unregister_detector`
+    undoes it. Returns ``detector``."""
+    if failure_type(detector.name) is None:
+        raise ValueError(f"no failure type {detector.name!r}: add its row to scenario_bank/failure_types.py first")
+    if detector.name in DETECTORS:
+        raise ValueError(f"failure type {detector.name!r} has a detector already")
+    DETECTORS[detector.name] = detector
+    return detector
+
+
+def unregister_detector(name: str) -> None:
+    """Remove the detector :func:`register_detector` added for ``name``."""
+    DETECTORS.pop(name)
+
+
+def _detector(name: str) -> Detector:
+    detector = DETECTORS.get(name)
+    if detector is None:
+        raise KeyError(f"failure type {name!r} has no detector: register one in dv2s_gym/mining/monitors.py")
+    return detector
+
+
+DEFAULT_MONITOR = MonitorSettings()
+
+
+def detect_failure(result, trace, settings: MonitorSettings = DEFAULT_MONITOR) -> Optional[Failure]:
+    """The episode's failure (see the module docstring): that of the most severe type whose detector finds one,
+    or ``None``."""
     if result.error is not None:
         return None
-    if result.collided:
-        for event in trace.events:
-            if event.get("kind") == "collision" and "ego" in event.get("actors", []):
-                others = [a for a in event["actors"] if a != "ego"]
-                other = others[0] if others else None
-                step = _step_at(trace, float(event["time"]))
-                kind = trace.kinds.get(other) if other else None
-                states = trace.states[step]
-                ctype = (collision_type(states["ego"], states[other], kind)
-                         if other in states and "ego" in states else None)
-                return Failure("collision", float(event["time"]), step, other, kind, ctype,
-                               _finite(result.min_ttc), _ego_speed(states))
-        step = len(trace.states) - 1
-        return Failure("collision", step / float(trace.config.get("policy_frequency", 5)), step,
-                       result.collisions[0] if result.collisions else None)
-    if result.off_road:
-        for event in trace.events:
-            if event.get("kind") == "off_road":
-                return Failure("off_road", float(event["time"]), _step_at(trace, float(event["time"])))
-        step = len(trace.states) - 1
-        return Failure("off_road", step / float(trace.config.get("policy_frequency", 5)), step)
-    if result.min_ttc < ttc_threshold:
-        time = result.extra.get("min_ttc_time")
-        time = float(time) if time is not None else 0.0
-        other = result.extra.get("min_ttc_with") or None
-        return Failure("low_ttc", time, _step_at(trace, time), other, trace.kinds.get(other) if other else None,
-                       None, float(result.min_ttc))
-    return _stall(trace, stall_seconds)
+    for row in failure_table():
+        failure = _detector(row.name).detect(result, trace, settings)
+        if failure is not None:
+            return failure
+    return None
 
 
 def detect_stall(trace, stall_seconds: float = DEFAULT_STALL_SECONDS) -> Optional[Failure]:
@@ -141,7 +266,7 @@ def _stall(trace, stall_seconds: float) -> Optional[Failure]:
     start = first_stall_step(trace, stall_seconds)
     if start is None:
         return None
-    return Failure("stall", start / float(trace.config.get("policy_frequency", 5)), start)
+    return Failure("stall", _time_of(trace, start), start)
 
 
 def _ego_speed(states: Dict[str, List[float]]) -> Optional[float]:
@@ -152,23 +277,16 @@ def _finite(value: float) -> Optional[float]:
     return float(value) if math.isfinite(value) else None
 
 
-def robustness(result, failure: Optional[Failure], ttc_threshold: float = DEFAULT_TTC_THRESHOLD) -> float:
+def robustness(result, failure: Optional[Failure], settings: MonitorSettings = DEFAULT_MONITOR) -> float:
     """One number per episode for the adaptive samplers: below 0 exactly when ``failure`` is set.
 
-    A collision scores ``-1 - (ego speed at impact) / 10``, leaving the road ``-1``, a stall ``-0.5``,
-    a low TTC ``ttc - threshold``; an episode without failure scores its smallest TTC above
-    the threshold (capped at 10 s), so near misses rank before easy scenes.
+    A failure scores what its type's detector says (:data:`DETECTORS`): a collision ``-1 - (ego speed at
+    impact) / 10``, leaving the road ``-1``, a stall ``-0.5``, a low TTC ``ttc - threshold``; an episode without
+    failure scores its smallest TTC above the threshold (capped at 10 s), so near misses rank before easy scenes.
     """
     if result.error is not None:
         return 0.0
     if failure is not None:
-        if failure.type == "collision":
-            speed = failure.speed if failure.speed is not None else result.mean_speed
-            return -1.0 - float(speed) / 10.0
-        if failure.type == "off_road":
-            return -1.0
-        if failure.type == "stall":
-            return -0.5
-        return min(-1e-3, float(result.min_ttc) - ttc_threshold)
+        return _detector(failure.type).score(result, failure, settings)
     ttc = result.min_ttc if math.isfinite(result.min_ttc) else 10.0
-    return max(1e-3, min(ttc, 10.0) - ttc_threshold)
+    return max(1e-3, min(ttc, 10.0) - settings.ttc_threshold)

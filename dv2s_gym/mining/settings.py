@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any, Dict, Iterator, Mapping, Optional, Tuple, Type, Union
 
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD
+from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD, MonitorSettings
 from dv2s_gym.mining.samplers import default_feedback, registered_samplers
 from scenario_bank.field_checks import (check_bool, check_int, check_mapping, check_names,
                                         check_number, check_path, check_text)
@@ -170,11 +170,10 @@ class RunSettings(Mapping[str, Any]):
         return self._values.get("env_config")
 
     @property
-    def monitor(self) -> Dict[str, Any]:
-        """The failure monitors' settings the run recorded (``ttc_threshold``, ``stall_seconds``; those absent
-        are left out, so the monitors' defaults apply)."""
-        return {key: self._values[key] for key in ("ttc_threshold", "stall_seconds")
-                if self._values.get(key) is not None}
+    def monitor(self) -> MonitorSettings:
+        """The failure monitors' settings the run recorded (``ttc_threshold``, ``stall_seconds``; the monitors'
+        defaults for those absent)."""
+        return MonitorSettings.from_recorded(self._values)
 
 
 def read_run_settings(run_dir: Union[str, os.PathLike], *,

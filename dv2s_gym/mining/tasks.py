@@ -11,7 +11,7 @@ A mining task is a plain dict (shipped to a pool of :mod:`dv2s_gym.workers`, loc
 - ``scenario``, ``seed``, ``params``: the scene (see :mod:`dv2s_gym.mining.space`);
 - ``env_config``, ``bank_dir``; ``trace_dir``: the folder for a failed episode's trace
   (``<index>.json.gz``; the Ray pool swaps in a local folder and ships the file back);
-- ``ttc_threshold``, ``stall_seconds``: monitor settings.
+- ``monitor``: the monitors' settings (a :class:`~dv2s_gym.mining.monitors.MonitorSettings`).
 
 When the failed episode's trace cannot be written (a full disk...), the result is no episode record: it carries
 ``write_error`` (:func:`~dv2s_gym.mining.write_errors.write_failure`) and the miner stops before recording it.
@@ -31,8 +31,7 @@ from typing import Any, Dict, Mapping, Optional
 from dv2s_gym.mining.behaviour import extract_behaviour
 from dv2s_gym.mining.failure_state import failure_state
 from dv2s_gym.mining.write_errors import write_failure
-from dv2s_gym.mining.monitors import (DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD, FAILURE_TYPES, detect_failure,
-                                     robustness)
+from dv2s_gym.mining.monitors import DEFAULT_MONITOR, FAILURE_TYPES, MonitorSettings, detect_failure, robustness
 from dv2s_gym.workers.tasks import register
 from policies import worker_cache
 from policies.evaluation import run_episode
@@ -79,14 +78,13 @@ def run_mine_task(task: Dict[str, Any]) -> Dict[str, Any]:
         "params": dict(task.get("params") or {}), "result": None, "failure": None, "rho": None,
         "reference": None, "avoidable": None, "trace": None, "error": None,
     }
-    monitor = {"ttc_threshold": float(task.get("ttc_threshold", DEFAULT_TTC_THRESHOLD)),
-               "stall_seconds": float(task.get("stall_seconds", DEFAULT_STALL_SECONDS))}
+    monitor: MonitorSettings = task.get("monitor") or DEFAULT_MONITOR
     try:
         result, trace = _episode(task, task["policy"])
-        failure = detect_failure(result, trace, **monitor)
+        failure = detect_failure(result, trace, monitor)
         record["result"] = result.to_json()
         record["failure"] = failure.to_json() if failure else None
-        record["rho"] = robustness(result, failure, monitor["ttc_threshold"])
+        record["rho"] = robustness(result, failure, monitor)
         if failure is not None:
             record["behaviour"] = extract_behaviour(trace, record["failure"])
             record["failure_state"] = failure_state(trace, record["failure"])
@@ -100,7 +98,7 @@ def run_mine_task(task: Dict[str, Any]) -> Dict[str, Any]:
                 record["trace"] = path
             if task.get("reference"):
                 ref_result, ref_trace = _episode(task, task["reference"])
-                ref_failure = detect_failure(ref_result, ref_trace, **monitor)
+                ref_failure = detect_failure(ref_result, ref_trace, monitor)
                 record["reference"] = {
                     "policy": task["reference"], "failure": ref_failure.to_json() if ref_failure else None,
                     "trajectory_hash": ref_result.trajectory_hash, "collided": ref_result.collided,
@@ -115,15 +113,15 @@ def run_mine_task(task: Dict[str, Any]) -> Dict[str, Any]:
     return record
 
 
-def _heldout_failure(result, trace, ttc_threshold: float) -> Optional[Dict[str, Any]]:
-    failure = detect_failure(result, trace, ttc_threshold=ttc_threshold)
+def _heldout_failure(result, trace, monitor: MonitorSettings) -> Optional[Dict[str, Any]]:
+    failure = detect_failure(result, trace, monitor)
     return None if failure is None else failure.to_json()
 
 
 def heldout_task(task: Mapping[str, Any]) -> Dict[str, Any]:
     """Run one episode in this process: ``task`` has role, policy, scenario, seed, bank_dir,
-    env_config, ttc_threshold. Returns ``{"role", "scenario", "seed", "policy", "failed",
-    "failure", "result", "error"}`` (an exception becomes ``error``, never a failure)."""
+    env_config, monitor (a :class:`~dv2s_gym.mining.monitors.MonitorSettings`). Returns ``{"role", "scenario",
+    "seed", "policy", "failed", "failure", "result", "error"}`` (an exception becomes ``error``, never a failure)."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     record: Dict[str, Any] = {"role": task["role"], "scenario": task["scenario"], "seed": int(task["seed"]),
                               "policy": task["policy"], "failed": None, "failure": None, "result": None,
@@ -133,7 +131,7 @@ def heldout_task(task: Mapping[str, Any]) -> Dict[str, Any]:
         env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
         policy = worker_cache.policy_for(task["policy"], env_key, env)
         result, trace = run_episode(env, policy, task["scenario"], int(task["seed"]))
-        failure = _heldout_failure(result, trace, float(task.get("ttc_threshold", DEFAULT_TTC_THRESHOLD)))
+        failure = _heldout_failure(result, trace, task.get("monitor") or DEFAULT_MONITOR)
     except Exception as error:  # reported, never counted as a failure of the policy
         if env_key is not None:
             worker_cache.drop_env(env_key)

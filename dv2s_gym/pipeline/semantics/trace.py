@@ -110,6 +110,8 @@ DRIFT_OUT_S = 1.5         # s driven with the centre outside the lane it was cen
 DRIFT_SETTLE_M = 0.6      # ... without coming this close to another lane's centre (that is a lane change)
 _LEAVES_LANE = {"u_turn", "reverse", "swerve", "pull_out", "drift", "cut_in", "merge", "overtake", "lane_change_left", "lane_change_right",
                 "turn_left", "turn_right"}
+_MET_BY_EGO = (ActorKind.CAR, ActorKind.TRUCK, ActorKind.BUS, ActorKind.MOTORCYCLE, ActorKind.BICYCLE, ActorKind.OBSTACLE)
+"""The kinds whose moves relative to the ego are the ego's interactions (an obstacle's: only an overtake)."""
 
 
 def _kind(name: str, kinds: Dict[str, str]) -> str:
@@ -307,7 +309,7 @@ def elements_from_trace(trace) -> Dict[str, Any]:
     for name, changes in list(lane_changes.items()):
         # a drift across a lane line is no lane change (the env logs one whenever the nearest lane changes)
         track = tracks.get(name)
-        if track is not None and _kind(name, kinds) not in ("pedestrian", "obstacle") and \
+        if track is not None and _kind(name, kinds) not in (ActorKind.PEDESTRIAN, ActorKind.OBSTACLE) and \
                 abs(float(_wrap(np.array([track[-1, 2] - track[0, 2]]))[0])) < TURN_ANGLE:
             windows = _drift_windows(_until_crash(track, crashed.get(name), dt), dt, view)
             lane_changes[name] = [c for c in changes if not _during(windows, float(c.get("time", 0.0)))]
@@ -327,9 +329,9 @@ def elements_from_trace(trace) -> Dict[str, Any]:
         own = _motion_actions(track, dt, kind, lane_changes.get(name, []), road, view, crashed.get(name))
         if name == "ego":
             for other, other_kind in near.items():
-                if other != "ego" and other_kind in ("car", "truck", "bus", "motorcycle", "bicycle", "obstacle"):
+                if other != "ego" and other_kind in _MET_BY_EGO:
                     found = _interactions(tracks[other], ego, "ego", ego_changes, road, dt, view)
-                    own |= found if other_kind != "obstacle" else found & {"overtake"}
+                    own |= found if other_kind != ActorKind.OBSTACLE else found & {"overtake"}
         else:
             relations.update((kind, r, "ego") for r in _relations(ego, track))
             if _paths_cross(ego, track):
