@@ -49,11 +49,12 @@ RUNS = {
 ``{bank}`` is a copy of the shipped bank the run may add to."""
 
 
-def _run(name: str, argv: list, work: Path) -> Dict[str, Any]:
+def _run(name: str, argv: list, work: Path, workers: int = 1) -> Dict[str, Any]:
     out, bank = work / name / "out", work / name / "bank"
     shutil.copytree(SHIPPED_BANK, bank)
     shipped = {entry.name for entry in bank.iterdir()}
-    argv = [part.format(bank=bank) for part in argv] + ["--workers", "1", "--no-progress", "--out", str(out)]
+    argv = [part.format(bank=bank) for part in argv] + ["--workers", str(workers), "--no-progress",
+                                                           "--out", str(out)]
     environment = dict(os.environ, PYTHONPATH=str(ROOT), OMP_NUM_THREADS="1", PYTHONHASHSEED="0")
     done = subprocess.run([sys.executable, "-m", "dv2s_gym.cli", *argv], cwd=work, env=environment,
                           capture_output=True, text=True, timeout=900)
