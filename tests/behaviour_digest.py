@@ -27,7 +27,8 @@ Text (every string above, Markdown, JUnit XML, HTML, the command's standard outp
   - the mining report's sentence of conversion times (``Conversion time: ...``) becomes ``Conversion time: <masked>``;
   - the installed version after ``dv2s version`` becomes ``<version>``;
   - the episodes line's wall time (``N errors, T s``) becomes ``N errors, <seconds>``;
-  - a model card's training time (``wall time: T s (R env steps/s)``) becomes ``wall time: <seconds>``.
+  - a model card's training time (``wall time: T s (R env steps/s)``) becomes ``wall time: <seconds>``;
+  - a loop report's stage times (``timings: mine T s, split T s, ...``) become ``timings: <masked>``.
 
 A record may name further JSON keys to drop (``drop`` of :func:`normalise` and :func:`file_digests`); its module
 docstring then says which and why.
@@ -79,6 +80,7 @@ _TEXT_RULES = (
     (re.compile(r"(dv2s version(?:</th><td>|\W)*)\d[\w.+-]*"), r"\1<version>"),
     (re.compile(r"(\d+ errors?), \d+(?:\.\d+)? ?s\b"), r"\1, <seconds>"),
     (re.compile(r"wall time: \d+(?:\.\d+)? ?s \(\d+(?:\.\d+)? env steps/s\)"), "wall time: <seconds>"),
+    (re.compile(r"timings: mine \d+(?:\.\d+)? ?s(?:, \w+ \d+(?:\.\d+)? ?s)*"), "timings: <masked>"),
 )
 
 
