@@ -14,6 +14,9 @@ JSON (``.json``, every line of ``.jsonl``, the JSON inside ``.json.gz``):
     ``dv2s sources (SHA-256)``, ``dv2s_sources_sha256``, ``module ... source (SHA-256)``, ``module file ...
     (SHA-256)``): a regression run and an exact replay record them so that they resume or replay only on the same
     code, and a refactor changes them by definition;
+  - keys naming a digest of a trained model's files (:data:`MODEL_FILE_IDENTITY`: ``... checkpoint <path>
+    (SHA-256)``, ``... model card <path> (SHA-256)``): the model zip's members carry their writing date and the
+    card a wall time, so these change from run to run with the same weights;
   - every string goes through the text rules below.
 
 Text (every string above, Markdown, JUnit XML, HTML, the command's standard output):
@@ -23,7 +26,12 @@ Text (every string above, Markdown, JUnit XML, HTML, the command's standard outp
   - JUnit's ``time``, ``timestamp`` and ``hostname`` attributes become ``<masked>``;
   - the mining report's sentence of conversion times (``Conversion time: ...``) becomes ``Conversion time: <masked>``;
   - the installed version after ``dv2s version`` becomes ``<version>``;
-  - the episodes line's wall time (``N errors, T s``) becomes ``N errors, <seconds>``.
+  - the episodes line's wall time (``N errors, T s``) becomes ``N errors, <seconds>``;
+  - a model card's training time (``wall time: T s (R env steps/s)``) becomes ``wall time: <seconds>``;
+  - a loop report's stage times (``timings: mine T s, split T s, ...``) become ``timings: <masked>``.
+
+A record may name further JSON keys to drop (``drop`` of :func:`normalise` and :func:`file_digests`); its module
+docstring then says which and why.
 
 Videos (``.webm`` files, and the ``data:video/webm;base64,...`` clips a report page embeds): the container holds a
 random segment id and its writing date, so a video's digest is that of its decoded frames (count, shape, pixels).
@@ -44,7 +52,7 @@ import json
 import re
 import tempfile
 from pathlib import Path
-from typing import Any, Callable, Dict, Mapping
+from typing import AbstractSet, Any, Callable, Dict, Mapping
 
 import cv2
 
@@ -59,6 +67,11 @@ CODE_IDENTITY = re.compile(r"dv2s version$|dv2s sources \(SHA-256\)$|^dv2s_sourc
                            r"^(?:\w+ )?module .*\(SHA-256\)$")
 """Keys naming a digest of the code (or its version): a regression run's resume identity, changed by any edit."""
 
+MODEL_FILE_IDENTITY = re.compile(r"^(?:\w+ )?(?:checkpoint|model card) .*\(SHA-256\)$")
+"""Keys naming a digest of a trained model's files (a regression run's identity of a checkpoint policy): the model
+file is a zip whose members carry their writing date, its card a wall time; the weights themselves are recorded
+by ``tests/test_behaviour_runs.py``."""
+
 _TEXT_RULES = (
     (re.compile(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\d(?:\.\d+)?(?:[+-]\d\d:\d\d|Z)?"), "<time>"),
     (re.compile(r"\b\d{4}-\d\d-\d\d\b"), "<date>"),
@@ -66,6 +79,8 @@ _TEXT_RULES = (
     (re.compile(r"Conversion time: [^<\n]*"), "Conversion time: <masked>"),
     (re.compile(r"(dv2s version(?:</th><td>|\W)*)\d[\w.+-]*"), r"\1<version>"),
     (re.compile(r"(\d+ errors?), \d+(?:\.\d+)? ?s\b"), r"\1, <seconds>"),
+    (re.compile(r"wall time: \d+(?:\.\d+)? ?s \(\d+(?:\.\d+)? env steps/s\)"), "wall time: <seconds>"),
+    (re.compile(r"timings: mine \d+(?:\.\d+)? ?s(?:, \w+ \d+(?:\.\d+)? ?s)*"), "timings: <masked>"),
 )
 
 
@@ -104,20 +119,22 @@ def normalise_text(text: str, places: Mapping[str, str]) -> str:
     return text
 
 
-def normalise_document(value: Any, places: Mapping[str, str]) -> Any:
+def normalise_document(value: Any, places: Mapping[str, str], drop: AbstractSet[str] = frozenset()) -> Any:
     """A whole file's JSON value normalised: :func:`normalise`, and its top-level volatile keys dropped."""
     if isinstance(value, dict):
         value = {key: item for key, item in value.items() if key not in VOLATILE_TOP_KEYS}
-    return normalise(value, places)
+    return normalise(value, places, drop)
 
 
-def normalise(value: Any, places: Mapping[str, str]) -> Any:
-    """A JSON value with the volatile keys dropped and every string (keys included) normalised as text."""
+def normalise(value: Any, places: Mapping[str, str], drop: AbstractSet[str] = frozenset()) -> Any:
+    """A JSON value with the volatile keys (and the keys in ``drop``, which a record that needs more names
+    itself) dropped and every string (keys included) normalised as text."""
     if isinstance(value, dict):
-        return {normalise_text(str(key), places): normalise(item, places) for key, item in value.items()
-                if key not in VOLATILE_KEYS and not CODE_IDENTITY.search(str(key))}
+        return {normalise_text(str(key), places): normalise(item, places, drop) for key, item in value.items()
+                if key not in VOLATILE_KEYS and key not in drop and not CODE_IDENTITY.search(str(key))
+                and not MODEL_FILE_IDENTITY.search(str(key))}
     if isinstance(value, list):
-        return [normalise(item, places) for item in value]
+        return [normalise(item, places, drop) for item in value]
     if isinstance(value, str):
         return normalise_text(value, places)
     return value
@@ -130,10 +147,10 @@ def digest(value: Any) -> str:
     return hashlib.sha256(json.dumps(value, sort_keys=True, default=str).encode("utf-8")).hexdigest()
 
 
-def file_digests(path: Path, places: Mapping[str, str]) -> Any:
+def file_digests(path: Path, places: Mapping[str, str], drop: AbstractSet[str] = frozenset()) -> Any:
     """The digest of one written file, normalised by its kind: a JSON object's top-level keys one digest each
     (so a difference names the field), a JSON-lines file one digest per line, any other text one digest, bytes
-    as they are."""
+    as they are; ``drop`` names further JSON keys to drop (see :func:`normalise`)."""
     raw = path.read_bytes()
     name = path.name
     if name.endswith(".webm"):
@@ -143,9 +160,10 @@ def file_digests(path: Path, places: Mapping[str, str]) -> Any:
     if name.endswith(".gz"):
         raw, name = gzip.decompress(raw), name[:-3]
     if name.endswith(".jsonl"):
-        return [digest(normalise_document(json.loads(line), places)) for line in raw.decode("utf-8").splitlines() if line]
+        return [digest(normalise_document(json.loads(line), places, drop))
+                for line in raw.decode("utf-8").splitlines() if line]
     if name.endswith(".json"):
-        data = normalise_document(json.loads(raw.decode("utf-8")), places)
+        data = normalise_document(json.loads(raw.decode("utf-8")), places, drop)
         if isinstance(data, dict):
             return {key: digest(item) for key, item in sorted(data.items())}
         return digest(data)

@@ -23,7 +23,7 @@ import subprocess
 import sys
 import tempfile
 from pathlib import Path
-from typing import Any, Dict
+from typing import Any, Callable, Dict, Optional
 
 import pytest
 
@@ -49,14 +49,18 @@ RUNS = {
 ``{bank}`` is a copy of the shipped bank the run may add to."""
 
 
-def _run(name: str, argv: list, work: Path) -> Dict[str, Any]:
+def _run(name: str, argv: list, work: Path, workers: int = 1,
+         adjust: Optional[Callable[[Path], None]] = None) -> Dict[str, Any]:
     out, bank = work / name / "out", work / name / "bank"
     shutil.copytree(SHIPPED_BANK, bank)
     shipped = {entry.name for entry in bank.iterdir()}
-    argv = [part.format(bank=bank) for part in argv] + ["--workers", "1", "--no-progress", "--out", str(out)]
+    argv = [part.format(bank=bank) for part in argv] + ["--workers", str(workers), "--no-progress",
+                                                           "--out", str(out)]
     environment = dict(os.environ, PYTHONPATH=str(ROOT), OMP_NUM_THREADS="1", PYTHONHASHSEED="0")
     done = subprocess.run([sys.executable, "-m", "dv2s_gym.cli", *argv], cwd=work, env=environment,
                           capture_output=True, text=True, timeout=900)
+    if adjust is not None:
+        adjust(out)
     places = {str(out): "<out>", str(bank): "<bank>", str(ROOT): "<repo>"}
     added = {entry.name: folder_digests(entry, places) if entry.is_dir() else file_digests(entry, places)
              for entry in sorted(bank.iterdir()) if entry.name not in shipped}
