@@ -258,7 +258,7 @@ def _read_settings(out: Path) -> Optional[RunSettings]:
 
 def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path,
                   keys: Sequence[str] = _RESUME_KEYS) -> None:
-    check_identity(saved, settings, keys, run=f"{out} holds a mining run",
+    check_identity(saved, settings, keys, run=f"{out} holds a mining run", defaults=MineSettings,
                    fix="resume it with the same settings or pass another --out")
 
 
