@@ -23,7 +23,7 @@ import socket
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from tqdm import tqdm
 
@@ -379,14 +379,15 @@ class _Episodes:
         self.timing: Dict[str, float] = {}
         self.bar = None
 
-    def handle(self, result: Dict[str, Any]) -> None:
-        """Take a worker's result (:func:`~dv2s_gym.regress.tasks.run_regress_task`): time it, save it, count it."""
-        result = dict(result)
-        seconds = result.pop("seconds", None)  # wall time varies: kept apart, so episodes compare equal
-        if seconds is not None:
-            self.timing[result["scenario"]] = self.timing.get(result["scenario"], 0.0) + float(seconds)
-        result["trace"] = self.store.relative(result.get("trace"))
+    def handle(self, result: Mapping[str, Any]) -> None:
+        """Take a worker's result (:func:`~dv2s_gym.regress.tasks.run_regress_task`'s record, or a backend's error
+        result for a crashed or hung worker): time it, save it, count it."""
         record = RegressEpisode.from_dict(result)
+        seconds = record.extra.get("seconds")  # wall time varies: kept apart, so episodes compare equal
+        if seconds is not None:
+            self.timing[record.scenario] = self.timing.get(record.scenario, 0.0) + float(seconds)
+        record = record.replace(trace=self.store.relative(record.trace), null_fields=record.null_fields | {"trace"},
+                                extra={key: value for key, value in record.extra.items() if key != "seconds"})
         self.store.append(record)
         self.results[record.key] = record
         if self.bar is not None:
