@@ -34,13 +34,13 @@ from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
-from scenario_bank.run_identity import check_identity
+from policies.dagger_config import DaggerConfig
 from policies.training import TrainingError
+from scenario_bank.run_identity import check_identity, setting_defaults
 from scenario_bank.atomic import atomic_write_bytes, atomic_write_json, file_sha256
 from scenario_bank.bank import Bank
 
 if TYPE_CHECKING:
-    from policies.dagger_config import DaggerConfig
     from policies.training import TrainConfig
 
 __all__ = ["CHECKPOINT_DIR", "DAggerResumeError", "DAggerCheckpoint", "LabelledBatch", "SavedIteration", "PartialIteration",
@@ -54,6 +54,11 @@ SCHEMA = "dv2s-dagger-checkpoint"
 IDENTITY_ORDER = ("steps", "iterations", "epochs", "batch_size", "learning_rate", "beta", "beta_decay", "reference",
                   "seed", "n_envs", "weights", "env_config", "bank_dir", "source", "source_sha256", "scenario_hashes")
 """The order in which a refused checkpoint's settings are compared (the first difference is named)."""
+
+IDENTITY_DEFAULTS = setting_defaults(DaggerConfig, ("iterations", "beta", "beta_decay", "epochs", "batch_size",
+                                                   "learning_rate", "reference", "slower_weight"))
+"""The identity's :class:`~policies.dagger_config.DaggerConfig` settings, as their defaults: what a checkpoint that
+does not record one compares as (the other identity values are the run's own: bytes, hashes, scenarios)."""
 
 _DERIVED = {"source_sha256": " (the source checkpoint's file changed)",
             "scenario_hashes": " (the bank's scenario scripts changed)"}
@@ -185,7 +190,7 @@ class DAggerCheckpoint:
         recorded = data.get("identity") or {}
         keys = [key for key in IDENTITY_ORDER if key in recorded or key in self.identity]
         check_identity(recorded, self.identity, keys + sorted((set(recorded) | set(self.identity)) - set(keys)),
-                       run=f"{self.folder} holds an unfinished DAgger run", notes=_DERIVED,
+                       run=f"{self.folder} holds an unfinished DAgger run", notes=_DERIVED, defaults=IDENTITY_DEFAULTS,
                        fix=f"pass the same settings to resume it, or delete {self.folder} to start over")
         iteration = int(data["iteration"])
         try:

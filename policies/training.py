@@ -753,8 +753,11 @@ def _resolve_names(config: TrainConfig) -> List[str]:
     return sorted(names)
 
 
-def _check_resume(config: TrainConfig, recorded: TrainConfig) -> None:
-    check_identity(recorded.to_json(), config.to_json(), TrainConfig.IDENTITY, run=f"{config.out} holds a training run",
+def _check_resume(config: TrainConfig, recorded: Mapping[str, Any]) -> None:
+    """Refuse ``config`` unless it has the identity of the run's ``recorded`` settings (``run.json``'s ``config``;
+    a setting it lacks is the field's default)."""
+    check_identity(recorded, config.to_json(), TrainConfig.IDENTITY, run=f"{config.out} holds a training run",
+                   defaults=TrainConfig,
                    fix="resume with the run's own settings (omit the option) or start a new run in another --out")
 
 
@@ -927,8 +930,8 @@ def _open_record(config: TrainConfig, resume: bool, log: Callable[[str], None]
     checkpoint = latest_checkpoint(out)
     record: Dict[str, Any] = {"config": config.to_json(), "segments": []}
     if resume:
-        recorded, record = load_run_config(out)
-        _check_resume(config, recorded)
+        _, record = load_run_config(out)
+        _check_resume(config, record["config"])
         if checkpoint is None:
             # stopped before its first checkpoint: nothing was kept, so the run starts over in place
             log(f"{out} holds no checkpoint yet (the run stopped before its first one): starting from step 0")

@@ -1,6 +1,6 @@
 """Typed records of what travels between the bank, the miner, the regression runner and the policies.
 
-Four records stand for the JSON objects the subsystems hand each other and write to disk:
+Five records stand for the JSON objects the subsystems hand each other and write to disk:
 
 - :class:`Provenance`: where a bank entry came from (a sidecar's ``source``: its kind, video, parent scenario,
   seed, generator; for a mined entry also the failure, cluster, reproduction rate, E2E-SC and replay parameters).
@@ -9,6 +9,8 @@ Four records stand for the JSON objects the subsystems hand each other and write
   policy's result and failure, the reference driver's outcome, the sampler's point).
 - :class:`RegressEpisode`: one policy's episode of a regression run, a line of its ``results.jsonl`` and a result
   in its report (the episode's outcome measures, the failure kinds it counts, its trace, or the error it ended in).
+- :class:`HeldOutEpisode`: one episode of a loop's held-out evaluation, a line of a round's ``heldout.jsonl`` (the
+  role and policy, the scene, whether the policy failed and how, its result, or the error it ended in).
 
 Each is a frozen dataclass with :meth:`from_dict` (checks every field it knows; a :class:`RecordError` names the
 bad one and what it should hold) and :meth:`to_dict`, which gives back exactly the JSON object the files hold:
@@ -33,7 +35,7 @@ from scenario_bank.errors import BankVersionError, DV2SError
 from scenario_bank.safe_files import UnsafeInputError, is_entry_name, validate_relative_path
 from scenario_bank.story import StoryError, normalize_story
 
-__all__ = ["RecordError", "Provenance", "Sidecar", "EpisodeRecord", "RegressEpisode", "SOURCE_KINDS",
+__all__ = ["RecordError", "Provenance", "Sidecar", "EpisodeRecord", "RegressEpisode", "HeldOutEpisode", "SOURCE_KINDS",
            "PROVENANCE_FIELDS", "MINED_PROVENANCE_FIELDS", "ENTRY_FILES", "SIDECAR_VERSION", "SCRIPT", "SIDECAR",
            "CONTROL_FIX", "control_character_field", "is_entry_file"]
 
@@ -587,3 +589,37 @@ class RegressEpisode(_Record):
     def key(self) -> Tuple[str, str]:
         """``(id, role)``: the episode's place in the run (one result each)."""
         return self.id, self.role
+
+
+@dataclass(frozen=True, eq=False)
+class HeldOutEpisode(_Record):
+    """One episode of a loop's held-out evaluation (:mod:`dv2s_gym.mining.heldout`): a line of a round's
+    ``heldout.jsonl``.
+
+    The ``role`` the policy was evaluated as (``before``, ``after``, ``control``...), the ``policy``, the bank
+    ``scenario`` and env ``seed``; whether the policy ``failed`` and its ``failure`` (``type``, ``kind``, ``time``...;
+    ``None`` when it drove safely), its ``result`` (:meth:`policies.evaluation.EpisodeResult.to_json`), or the
+    ``error`` the episode ended in (``failed`` is then ``None``: no failure of the policy). Other keys are kept in
+    ``extra``. Every field is written, ``null`` when ``None``.
+    """
+
+    role: str
+    scenario: str
+    seed: int
+    policy: Optional[str] = None
+    failed: Optional[bool] = None
+    failure: Optional[Mapping[str, Any]] = None
+    result: Optional[Mapping[str, Any]] = None
+    error: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "role": "str", "scenario": "str", "seed": "int", "policy": "str", "failed": "bool", "failure": "object",
+        "result": "object", "error": "str",
+    }
+    _REQUIRED: ClassVar[Tuple[str, ...]] = ("role", "scenario", "seed")
+    _WHAT: ClassVar[str] = "held-out episode"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS)

@@ -5,6 +5,11 @@ records the settings that make its result what it is when it starts, and compare
 of the call that resumes it: a difference is refused with :class:`RunIdentityError`, which names every
 setting that differs (the recorded and the asked value) and the fix. Settings that only change how the
 run goes (workers, progress bars) are not part of a run's identity.
+
+A setting added to a command after a run folder was written is absent from that folder's record: it compares as
+the setting's default (the value the command used before the setting existed, :func:`setting_defaults`), so the
+run resumes when the default is asked and is refused, naming the setting, when another value is. A setting
+recorded as ``null`` stays ``null``.
 """
 
 from __future__ import annotations
@@ -16,10 +21,12 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 from scenario_bank.errors import DV2SError
 
 __all__ = ["RunIdentityError", "identity_of", "differing", "check_identity", "setting", "resume_keys",
-           "recorded_settings"]
+           "recorded_settings", "setting_defaults"]
 
 _SHOWN = 3
 """Differences spelled out in a refusal (the rest are counted)."""
+_UNRECORDED = " (not recorded: the default)"
+"""Said of a recorded value that is the setting's default because the run did not record the setting."""
 
 
 class RunIdentityError(DV2SError, ValueError):
@@ -45,10 +52,31 @@ def _same(recorded: Any, asked: Any) -> bool:
     return json.dumps(recorded, sort_keys=True, default=str) == json.dumps(asked, sort_keys=True, default=str)
 
 
-def differing(recorded: Mapping[str, Any], asked: Mapping[str, Any], keys: Sequence[str]) -> List[str]:
+Defaults = Union[type, Mapping[str, Any], None]
+"""What a setting absent from a record compares as: a settings dataclass (its fields' defaults,
+:func:`setting_defaults`), a mapping of setting to default (recorded JSON values), or ``None`` (no defaults)."""
+
+def _defaults_mapping(defaults: Defaults) -> Mapping[str, Any]:
+    if defaults is None:
+        return {}
+    if isinstance(defaults, type):
+        return setting_defaults(defaults)
+    return defaults
+
+
+def _value(settings: Mapping[str, Any], key: str, defaults: Mapping[str, Any]) -> Any:
+    """``settings[key]``; when it lacks the key, the key's default (``None`` when it has none)."""
+    if key in settings:
+        return settings[key]
+    return defaults.get(key)
+
+
+def differing(recorded: Mapping[str, Any], asked: Mapping[str, Any], keys: Sequence[str], *,
+              defaults: Defaults = None) -> List[str]:
     """The ``keys`` whose values differ between ``recorded`` and ``asked``, in ``keys``' order (a setting one
-    of them lacks is ``None`` there)."""
-    return [key for key in keys if not _same(recorded.get(key), asked.get(key))]
+    of them lacks is its default in ``defaults``, else ``None``)."""
+    known = _defaults_mapping(defaults)
+    return [key for key in keys if not _same(_value(recorded, key, known), _value(asked, key, known))]
 
 
 def _show(value: Any, limit: int = 80) -> str:
@@ -57,21 +85,26 @@ def _show(value: Any, limit: int = 80) -> str:
 
 
 def check_identity(recorded: Mapping[str, Any], asked: Mapping[str, Any], keys: Sequence[str], *, run: str,
-                   fix: str, notes: Optional[Mapping[str, str]] = None,
+                   fix: str, defaults: Defaults, notes: Optional[Mapping[str, str]] = None,
                    error: Type[RunIdentityError] = RunIdentityError) -> None:
     """Refuse to resume ``run`` (e.g. ``"out/mine holds a mining run"``) when any of ``keys`` differs.
+
+    ``defaults`` (:data:`Defaults`, the run's settings dataclass or a mapping): what a setting absent from
+    ``recorded`` (a run written before the setting existed) or from ``asked`` compares as; a recorded ``None`` is
+    ``None``. A setting without a default compares as ``None`` when absent.
 
     Raises:
         RunIdentityError: ``"<run> with other settings (<key>: run has <old>, asked <new>; ...); <fix>"``;
             ``notes`` adds a parenthesised why to a setting (a derived one, such as a file's hash). ``error``:
             the subclass raised (a command's own, such as ``dv2s regress``'s ``ResumeMismatchError``).
     """
-    keys_differing = differing(recorded, asked, keys)
+    known = _defaults_mapping(defaults)
+    keys_differing = differing(recorded, asked, keys, defaults=known)
     if not keys_differing:
         return
-    differences = [(key, recorded.get(key), asked.get(key)) for key in keys_differing]
-    shown = [f"{key}: run has {_show(old)}, asked {_show(new)}{(notes or {}).get(key, '')}"
-             for key, old, new in differences[:_SHOWN]]
+    differences = [(key, _value(recorded, key, known), _value(asked, key, known)) for key in keys_differing]
+    shown = [f"{key}: run has {_show(old)}{_UNRECORDED if key not in recorded and key in known else ''}, "
+             f"asked {_show(new)}{(notes or {}).get(key, '')}" for key, old, new in differences[:_SHOWN]]
     if len(differences) > _SHOWN:
         shown.append(f"and {len(differences) - _SHOWN} more")
     raise error(f"{run} with other settings ({'; '.join(shown)}); {fix}", differences)
@@ -126,3 +159,21 @@ def _json_value(field: dataclasses.Field, value: Any) -> Any:
     if isinstance(value, Mapping):
         return dict(value)
     return value
+
+
+def setting_defaults(settings_class: type, keys: Optional[Sequence[str]] = None) -> Dict[str, Any]:
+    """The default of each field of a settings dataclass that has one, as its run folder records it
+    (:func:`recorded_settings`' JSON form; fields declared ``record=False`` have none); only ``keys`` when given."""
+    values: Dict[str, Any] = {}
+    for field in dataclasses.fields(settings_class):
+        record = field.metadata.get(_RECORD, True)
+        if record is False or (keys is not None and field.name not in keys):
+            continue
+        if field.default is not dataclasses.MISSING:
+            value = field.default
+        elif field.default_factory is not dataclasses.MISSING:
+            value = field.default_factory()
+        else:
+            continue
+        values[field.name] = record(value) if callable(record) else _json_value(field, value)
+    return values

@@ -1185,3 +1185,22 @@ def test_merging_the_steps_error_messages_counts_each_distinct_message_once():
     merged = merged_messages([second, legacy])
     assert messages_text(merged["messages"], merged["unlisted"], "s1") == (
         "x (4 episodes); scene rejected by requirement 6 (1 episode); and 3 more distinct message(s) in 5 episode(s)")
+
+
+def test_a_setting_the_loop_did_not_record_is_its_default(tmp_path, monkeypatch):
+    """A loop folder written before a setting existed resumes with the setting's default (its report then states
+    it) and refuses another value naming the setting."""
+    _StandIns(monkeypatch)
+    miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
+    settings = {**WIRING, "min_heldout_episodes": 1, "min_heldout_families": 2}
+    run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, log=lambda _: None, **settings)
+    path = tmp_path / "loop" / "loop.json"
+    state = json.loads(path.read_text())
+    del state["settings"]["mined_share"]
+    path.write_text(json.dumps(state))
+    with pytest.raises(RunIdentityError, match=r"\(mined_share: run has 0.5 \(not recorded: the default\), "
+                                               r"asked 0.25\)"):
+        run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, log=lambda _: None, **{**settings, "mined_share": 0.25})
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, log=lambda _: None, **settings)
+    assert report.settings["mined_share"] == 0.5  # the report states the value the loop ran with
+    assert len(miner.calls) == 1  # the finished round was not run again

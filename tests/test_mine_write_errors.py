@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import errno
 import json
-import shutil
 from types import SimpleNamespace
 
 import pytest
@@ -89,26 +88,6 @@ def test_a_trace_that_cannot_be_written_stops_the_run_and_the_resumed_run_counts
     resumed = mine(POLICY, out=out, **RUN)  # space freed: the same command
     assert not resumed.errors and len(resumed.failures) == len(whole.failures)
     assert _stable(resumed.records) == _stable(whole.records)
-
-
-@pytest.mark.slow
-def test_an_older_run_that_recorded_the_unwritten_trace_as_an_error_runs_that_episode_again(whole, inline, tmp_path):
-    out = tmp_path / "old"
-    shutil.copytree(whole.out, out)
-    lines = (out / "episodes.jsonl").read_text().splitlines()
-    first = whole.failures[0]["index"]
-    row = json.loads(lines[first])
-    trace = out / "traces" / f"{first:06d}.json.gz"
-    trace.unlink()
-    row.update(failure=None, rho=None, result=None, behaviour=None, failure_state=None, avoidable=None, trace=None,
-               error=f"AtomicWriteError: [Errno 28] the disk is full while writing {trace}; free some space and retry "
-                     f"({trace.name} is unchanged): '{trace}'")
-    lines[first] = json.dumps(row, sort_keys=True)
-    (out / "episodes.jsonl").write_text("\n".join(lines) + "\n")
-    (out / "sampler.pkl").unlink()
-    resumed = mine(POLICY, out=out, **RUN)
-    assert not resumed.errors and len(resumed.failures) == len(whole.failures)
-    assert _stable(resumed.records) == _stable(whole.records) and trace.is_file()
 
 
 def test_an_episode_log_that_cannot_be_written_is_named_with_the_fix(tmp_path, monkeypatch, inline):

@@ -757,6 +757,10 @@ def test_a_parameter_scaled_in_one_script_and_added_in_the_other_is_not_paired()
     assert mapped["pairs"] == {} and "no parameter" in mapped["unpaired"]["share"]
 
 
+_NO_COUNTERPART = "the new script defines no numeric parameter of that name"
+"""The judge's reason for a failing parameter the new script has no counterpart of."""
+
+
 def test_the_mining_report_counts_the_failing_parameters_the_judge_could_not_compare():
     from dv2s_gym.mining.report import build_report_from_records, markdown
 
@@ -764,7 +768,8 @@ def test_the_mining_report_counts_the_failing_parameters_the_judge_could_not_com
                     "parameters": {"compared": {"a": {}, "b": {}}, "outside": ["a"],
                                    "not_comparable": {"c": "why", "d": "why"}}},
                    {"cluster": "c2", "index": 1, "status": "kept",
-                    "parameters": {"compared": {"a": {}}, "outside": [], "not_in_script": ["e"]}}]
+                    "parameters": {"compared": {"a": {}}, "outside": [], "not_in_script": ["e"],
+                                   "not_comparable": {"e": _NO_COUNTERPART}}}]
     report = build_report_from_records({"policy": "p", "sampler": "uniform"}, [], conversions, {})
     assert report["counts"]["parameters_compared"] == 3 and report["counts"]["parameters_not_compared"] == 3
     assert "3 failing parameter value(s) compared with the new scripts' ranges, 3 not compared" in markdown(report)
@@ -795,8 +800,9 @@ def test_the_reports_name_each_reason_a_parameter_was_not_compared_with_its_coun
                     "parameters": judged},
                    {"cluster": "c2", "index": 1, "status": "rejected", "stage": "parameters", "reason": "x",
                     "parameters": compare_parameters(_CUT_FAILING, decoy, parent=_CUT_PARENT)},
-                   {"cluster": "c3", "index": 2, "status": "kept",  # a record listing names only
-                    "parameters": {"compared": {"a": {}}, "outside": [], "not_in_script": ["e", "f"]}}]
+                   {"cluster": "c3", "index": 2, "status": "kept",
+                    "parameters": {"compared": {"a": {}}, "outside": [], "not_in_script": ["e", "f"],
+                                   "not_comparable": {"e": _NO_COUNTERPART, "f": _NO_COUNTERPART}}}]
     report = build_report_from_records({"policy": "p", "sampler": "uniform"}, [], conversions, {})
     counts = report["counts"]
     assert counts["parameters_not_compared"] == 6

@@ -152,9 +152,11 @@ class _State:
                 raise LoopError(f"{path} is not readable JSON ({error}); choose another --out") from error
             _check_structure(data, path)
             recorded = data.get("settings", {})
-            check_identity(recorded, settings, IDENTITY, run=f"{path.parent} holds a loop",
+            check_identity(recorded, settings, IDENTITY, run=f"{path.parent} holds a loop", defaults=LoopSettings,
                            fix="rerun with its settings to resume it, or choose another --out")
-            data["settings"].update({k: settings[k] for k in settings if k not in IDENTITY and k not in _RECORDED})
+            # what may change on a resume, and a setting the loop did not record yet (its default, checked above)
+            data["settings"].update({k: settings[k] for k in settings
+                                     if k not in recorded or (k not in IDENTITY and k not in _RECORDED)})
             self.data = data
         else:
             self.data = {"settings": settings, "start": None, "rounds": []}

@@ -61,9 +61,9 @@ from dv2s_gym.mining.report import write_reports
 from dv2s_gym.mining.report_text import error_warning
 from dv2s_gym.mining.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
 from dv2s_gym.mining.settings import FEEDBACKS, MineSettings, read_run_settings, RunSettings, SETTINGS_FILE
-from dv2s_gym.mining.tasks import MINE, trace_name
+from dv2s_gym.mining.tasks import MINE
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
-from dv2s_gym.mining.write_errors import from_os_error, is_write_failure, run_write_error, trace_write_failed
+from dv2s_gym.mining.write_errors import from_os_error, is_write_failure, run_write_error
 from dv2s_gym.workers import backends
 from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.pool import default_workers
@@ -260,7 +260,7 @@ def _read_settings(out: Path) -> Optional[RunSettings]:
 
 def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path,
                   keys: Sequence[str] = _RESUME_KEYS) -> None:
-    check_identity(saved, settings, keys, run=f"{out} holds a mining run",
+    check_identity(saved, settings, keys, run=f"{out} holds a mining run", defaults=MineSettings,
                    fix="resume it with the same settings or pass another --out")
 
 
@@ -536,9 +536,7 @@ def _mine_in(out: Path, started: float, policy: str, settings: MineSettings, wor
         1 if workers.backend == "local" and default_workers() < 2 else default_workers())
     with _run_lock(out):
         recorded, space = _open_run(out, policy, settings, bank_dir, n_workers, origin)
-        # a failure recorded as an error because its trace could not be written (a full disk) runs again
-        done = {int(r["index"]): r for r in read_records(out / "episodes.jsonl")
-                if not trace_write_failed(r, trace_name(int(r["index"])))}
+        done = {int(r["index"]): r for r in read_records(out / "episodes.jsonl")}
         _run_episodes(out, recorded, space, done, workers, n_workers, progress)
         records = [done[i] for i in sorted(done) if i < settings.budget]
         run = MineRun(out=out, settings=recorded, records=records, clusters=cluster_failures(records))

@@ -466,7 +466,7 @@ def _conversion_counts(conversions: Sequence[Mapping[str, Any]],
     not_compared: Dict[str, int] = {}
     for c in conversions:
         parameters = c.get("parameters") or {}
-        for key, n in not_compared_counts(parameters.get("not_comparable") or parameters.get("not_in_script")).items():
+        for key, n in not_compared_counts(parameters.get("not_comparable")).items():
             not_compared[key] = not_compared.get(key, 0) + n
     not_compared = {key: not_compared[key] for key, _, _ in NOT_COMPARED_REASONS if key in not_compared}
     return {

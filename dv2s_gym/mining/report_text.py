@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 __all__ = ["breadth", "rate_text", "number_text", "percent_text", "seed_text", "error_warning",
            "NOT_COMPARED_REASONS", "not_compared_reason", "not_compared_counts", "not_compared_text",
@@ -33,10 +33,7 @@ reports list them."""
 
 
 def not_compared_reason(why: Any) -> str:
-    """The key of :data:`NOT_COMPARED_REASONS` a judge's reason for not comparing a parameter falls under (``None``,
-    as in a record listing only names, is ``no_counterpart``: the name was not in the new script)."""
-    if why is None:
-        return "no_counterpart"
+    """The key of :data:`NOT_COMPARED_REASONS` a judge's reason for not comparing a parameter falls under."""
     text = str(why)
     for key, phrases, _ in NOT_COMPARED_REASONS:
         if any(phrase in text for phrase in phrases):
@@ -44,12 +41,11 @@ def not_compared_reason(why: Any) -> str:
     return "other"
 
 
-def not_compared_counts(not_compared: Union[Mapping[str, Any], Sequence[str], None]) -> Dict[str, int]:
-    """``{reason key: n}`` of a conversion's ``not_comparable`` (``{name: why}``; an older record's list of names
-    counts as ``no_counterpart``), in :data:`NOT_COMPARED_REASONS`' order."""
-    reasons = (not_compared or {}) if isinstance(not_compared, Mapping) else {name: None for name in not_compared or []}
+def not_compared_counts(not_compared: Optional[Mapping[str, Any]]) -> Dict[str, int]:
+    """``{reason key: n}`` of a conversion's ``not_comparable`` (``{name: why}``), in :data:`NOT_COMPARED_REASONS`'
+    order."""
     found: Dict[str, int] = {}
-    for why in reasons.values():
+    for why in (not_compared or {}).values():
         key = not_compared_reason(why)
         found[key] = found.get(key, 0) + 1
     return {key: found[key] for key, _, _ in NOT_COMPARED_REASONS if key in found}

@@ -13,12 +13,12 @@ A mining task is a plain dict (shipped to a pool of :mod:`dv2s_gym.workers`, loc
   (``<index>.json.gz``; the Ray pool swaps in a local folder and ships the file back);
 - ``monitor``: the monitors' settings (a :class:`~dv2s_gym.mining.monitors.MonitorSettings`).
 
-When the failed episode's trace cannot be written (a full disk...), the result is no episode record: it carries
+When the failed episode's trace cannot be written (a full disk...), the result is no finished episode: it carries
 ``write_error`` (:func:`~dv2s_gym.mining.write_errors.write_failure`) and the miner stops before recording it.
 
-The result is the episode record (a failed episode's ``behaviour``: who else was involved and what
-each side was doing, :mod:`dv2s_gym.mining.behaviour`) of the run's ``episodes.jsonl`` without the sampler
-fields (the miner adds those). The policy's episode and, when it failed, the reference
+The result is the episode record (:class:`~scenario_bank.records.EpisodeRecord`; a failed episode's
+``behaviour``: who else was involved and what each side was doing, :mod:`dv2s_gym.mining.behaviour`) of the run's
+``episodes.jsonl`` without the sampler fields (the miner adds those). The policy's episode and, when it failed, the reference
 driver's episode on the same scene run here, so a record is complete when it arrives.
 """
 
@@ -35,6 +35,7 @@ from dv2s_gym.mining.monitors import DEFAULT_MONITOR, FAILURE_TYPES, MonitorSett
 from dv2s_gym.workers.tasks import register
 from policies import worker_cache
 from policies.evaluation import run_episode
+from scenario_bank.records import EpisodeRecord, HeldOutEpisode
 
 __all__ = ["MINE", "HELDOUT", "run_mine_task", "heldout_task", "reference_avoids", "trace_name"]
 
@@ -70,47 +71,62 @@ def _episode(task: Dict[str, Any], spec: str):
         raise
 
 
-def run_mine_task(task: Dict[str, Any]) -> Dict[str, Any]:
-    """Run the policy (and, if it failed, the reference driver) on the task's scene; the episode record."""
-    record: Dict[str, Any] = {
-        "index": int(task["index"]), "role": "mine", "id": f"{task['scenario']}/{int(task['seed'])}",
-        "policy": task["policy"], "scenario": task["scenario"], "seed": int(task["seed"]),
-        "params": dict(task.get("params") or {}), "result": None, "failure": None, "rho": None,
-        "reference": None, "avoidable": None, "trace": None, "error": None,
-    }
+_MINE_NULLS = frozenset({"policy", "params", "result", "failure", "rho", "reference", "avoidable", "trace", "error"})
+"""The fields a mining task's record always holds (``null`` when ``None``); a failure's ``behaviour`` and
+``failure_state`` are there only for a failure."""
+
+
+def run_mine_task(task: Dict[str, Any]) -> EpisodeRecord:
+    """Run the policy (and, if it failed, the reference driver) on the task's scene; the episode record (without
+    the sampler fields, the miner's; ``role`` and ``id`` and, when the trace could not be written, ``write_error``
+    in its ``extra``)."""
+    scene: Dict[str, Any] = {"index": int(task["index"]), "policy": task["policy"], "scenario": task["scenario"],
+                             "seed": int(task["seed"]), "params": dict(task.get("params") or {})}
+    extra: Dict[str, Any] = {"role": "mine", "id": f"{task['scenario']}/{int(task['seed'])}"}
+    outcome: Dict[str, Any] = {}
+    nulls = _MINE_NULLS
     monitor: MonitorSettings = task.get("monitor") or DEFAULT_MONITOR
     try:
         result, trace = _episode(task, task["policy"])
         failure = detect_failure(result, trace, monitor)
-        record["result"] = result.to_json()
-        record["failure"] = failure.to_json() if failure else None
-        record["rho"] = robustness(result, failure, monitor)
+        outcome["result"] = result.to_json()
+        outcome["failure"] = failure.to_json() if failure else None
+        outcome["rho"] = robustness(result, failure, monitor)
         if failure is not None:
-            record["behaviour"] = extract_behaviour(trace, record["failure"])
-            record["failure_state"] = failure_state(trace, record["failure"])
+            nulls = nulls | {"behaviour", "failure_state"}
+            outcome["behaviour"] = extract_behaviour(trace, outcome["failure"])
+            outcome["failure_state"] = failure_state(trace, outcome["failure"])
             if task.get("trace_dir"):
                 path = os.path.join(task["trace_dir"], trace_name(int(task["index"])))
                 try:
                     trace.save(path)
                 except OSError as error:  # the run's own file, not the episode: the miner stops, a resume reruns it
-                    record["write_error"] = write_failure(error, path)
-                    return record
-                record["trace"] = path
+                    extra["write_error"] = write_failure(error, path)
+                    return _mine_record(scene, outcome, extra, nulls)
+                outcome["trace"] = path
             if task.get("reference"):
                 ref_result, ref_trace = _episode(task, task["reference"])
                 ref_failure = detect_failure(ref_result, ref_trace, monitor)
-                record["reference"] = {
+                outcome["reference"] = {
                     "policy": task["reference"], "failure": ref_failure.to_json() if ref_failure else None,
                     "trajectory_hash": ref_result.trajectory_hash, "collided": ref_result.collided,
                     "min_ttc": ref_result.to_json()["min_ttc"],
                 }
-                record["avoidable"] = reference_avoids(record["failure"], record["reference"]["failure"])
+                outcome["avoidable"] = reference_avoids(outcome["failure"], outcome["reference"]["failure"])
     except Exception as error:  # reported in the record, never dropped
         message = " ".join(f"{type(error).__name__}: {error}".split())
         if os.environ.get("DV2S_DEBUG"):
             message += "\n" + traceback.format_exc()
-        record["error"] = message
-    return record
+        outcome["error"] = message
+    return _mine_record(scene, outcome, extra, nulls)
+
+
+def _mine_record(scene: Dict[str, Any], outcome: Dict[str, Any], extra: Dict[str, Any],
+                 nulls: frozenset) -> EpisodeRecord:
+    values = {**scene, **outcome}
+    if values.get("failure_state") is not None:
+        values["failure_state"] = tuple(values["failure_state"])
+    return EpisodeRecord(**values, extra=extra, null_fields=nulls)
 
 
 def _heldout_failure(result, trace, monitor: MonitorSettings) -> Optional[Dict[str, Any]]:
@@ -118,14 +134,13 @@ def _heldout_failure(result, trace, monitor: MonitorSettings) -> Optional[Dict[s
     return None if failure is None else failure.to_json()
 
 
-def heldout_task(task: Mapping[str, Any]) -> Dict[str, Any]:
+def heldout_task(task: Mapping[str, Any]) -> HeldOutEpisode:
     """Run one episode in this process: ``task`` has role, policy, scenario, seed, bank_dir,
-    env_config, monitor (a :class:`~dv2s_gym.mining.monitors.MonitorSettings`). Returns ``{"role", "scenario",
-    "seed", "policy", "failed", "failure", "result", "error"}`` (an exception becomes ``error``, never a failure)."""
+    env_config, monitor (a :class:`~dv2s_gym.mining.monitors.MonitorSettings`). Returns its
+    :class:`~scenario_bank.records.HeldOutEpisode` (an exception becomes ``error``, never a failure)."""
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    record: Dict[str, Any] = {"role": task["role"], "scenario": task["scenario"], "seed": int(task["seed"]),
-                              "policy": task["policy"], "failed": None, "failure": None, "result": None,
-                              "error": None}
+    episode = HeldOutEpisode(role=task["role"], scenario=task["scenario"], seed=int(task["seed"]),
+                             policy=task["policy"])
     env_key = None
     try:
         env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
@@ -135,10 +150,8 @@ def heldout_task(task: Mapping[str, Any]) -> Dict[str, Any]:
     except Exception as error:  # reported, never counted as a failure of the policy
         if env_key is not None:
             worker_cache.drop_env(env_key)
-        record["error"] = " ".join(f"{type(error).__name__}: {error}".split())
-        return record
-    record.update(failed=failure is not None, failure=failure, result=result.to_json())
-    return record
+        return episode.replace(error=" ".join(f"{type(error).__name__}: {error}".split()))
+    return episode.replace(failed=failure is not None, failure=failure, result=result.to_json())
 
 
 register(MINE, run_mine_task)

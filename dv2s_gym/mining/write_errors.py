@@ -2,22 +2,19 @@
 
 Such a failure is not an episode's outcome: the run stops before recording the episode whose file could not be
 written, and says which file, what is wrong and the fix; rerunning the same command resumes it and runs that
-episode again. A run folder written before this rule may hold a failed episode recorded as an error because its
-trace could not be written (:func:`trace_write_failed`); a resumed run runs it again.
+episode again.
 """
 
 from __future__ import annotations
 
 import errno
 import os
-import re
 from pathlib import Path
-from typing import Any, Mapping, Optional
+from typing import Optional
 
 from dv2s_gym.mining.errors import MiningError
 
-__all__ = ["WRITE_ERRNOS", "is_write_failure", "write_failure", "run_write_error", "from_os_error",
-           "trace_write_failed"]
+__all__ = ["WRITE_ERRNOS", "is_write_failure", "write_failure", "run_write_error", "from_os_error"]
 
 WRITE_ERRNOS = (errno.ENOSPC, errno.EDQUOT, errno.EROFS)
 """The errors of writing a file that say nothing about the episode: the fix is on the machine's side."""
@@ -66,16 +63,3 @@ def run_write_error(path: Optional[os.PathLike | str], code: Optional[int], stre
 def from_os_error(error: OSError) -> MiningError:
     """:func:`run_write_error` for an ``OSError`` raised while writing a run's file."""
     return run_write_error(error.filename, error.errno, error.strerror)
-
-
-_RECORDED = re.compile(r"^(?:AtomicWriteError|OSError): \[Errno (\d+)\]")
-
-
-def trace_write_failed(record: Mapping[str, Any], trace_file: str) -> bool:
-    """Whether ``record`` is a failed episode recorded as an error only because its trace (``trace_file``, its
-    name in ``traces/``) could not be written (the full disk, quota or read-only file system of an older run)."""
-    error = record.get("error")
-    if not error:
-        return False
-    match = _RECORDED.match(str(error))
-    return bool(match) and int(match.group(1)) in WRITE_ERRNOS and trace_file in str(error)

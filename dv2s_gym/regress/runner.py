@@ -23,7 +23,7 @@ import socket
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 from tqdm import tqdm
 
@@ -52,6 +52,7 @@ from envs.errors import UnknownConfigKeyError
 from scenario_bank import select_scenarios
 from scenario_bank.records import RecordError, RegressEpisode
 from policies.registry import PolicySpaceError, load_policy
+from scenario_bank.run_identity import setting_defaults
 
 __all__ = ["run_regression", "run_size", "RegressSettings", "BaselineReport", "WorkerSettings", "bank_info",
            "plan_tasks", "DEFAULT_OUT", "ROLES"]
@@ -224,7 +225,8 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
     settings = settings or RegressSettings()
     workers = workers or WorkerSettings()
     plan = _prepare(candidate, baseline, settings)
-    store = RunStore(Path(out_dir if out_dir is not None else DEFAULT_OUT), _identity(plan, settings))
+    store = RunStore(Path(out_dir if out_dir is not None else DEFAULT_OUT), _identity(plan, settings),
+                     defaults=IDENTITY_DEFAULTS)
     done = {key: result for key, result in store.open().items() if not result.get("error")}  # errors run again
     policies = {"candidate": candidate, **({"baseline": plan.baseline_spec} if plan.baseline_spec else {})}
     all_tasks = plan_tasks(policies, plan.names, plan.seeds, env_config=plan.env_config, bank_dir=plan.bank_dir,
@@ -329,6 +331,11 @@ def run_size(settings: RegressSettings) -> Tuple[int, int]:
     return len(names), episodes
 
 
+IDENTITY_DEFAULTS = setting_defaults(RegressSettings, ("seed", "sequential", "stall_seconds", "margin", "alpha"))
+"""The settings of a run's identity (:func:`_identity`) that are :class:`RegressSettings`' own values, as their
+defaults: what a run folder that does not record one compares as (the others are resolved values, no defaults)."""
+
+
 def _identity(plan: _Plan, settings: RegressSettings) -> Dict[str, Any]:
     """What a resumed run must share with the run in its folder (:class:`~dv2s_gym.regress.store.RunStore`)."""
     identity: Dict[str, Any] = {
@@ -371,14 +378,15 @@ class _Episodes:
         self.timing: Dict[str, float] = {}
         self.bar = None
 
-    def handle(self, result: Dict[str, Any]) -> None:
-        """Take a worker's result (:func:`~dv2s_gym.regress.tasks.run_regress_task`): time it, save it, count it."""
-        result = dict(result)
-        seconds = result.pop("seconds", None)  # wall time varies: kept apart, so episodes compare equal
-        if seconds is not None:
-            self.timing[result["scenario"]] = self.timing.get(result["scenario"], 0.0) + float(seconds)
-        result["trace"] = self.store.relative(result.get("trace"))
+    def handle(self, result: Mapping[str, Any]) -> None:
+        """Take a worker's result (:func:`~dv2s_gym.regress.tasks.run_regress_task`'s record, or a backend's error
+        result for a crashed or hung worker): time it, save it, count it."""
         record = RegressEpisode.from_dict(result)
+        seconds = record.extra.get("seconds")  # wall time varies: kept apart, so episodes compare equal
+        if seconds is not None:
+            self.timing[record.scenario] = self.timing.get(record.scenario, 0.0) + float(seconds)
+        record = record.replace(trace=self.store.relative(record.trace), null_fields=record.null_fields | {"trace"},
+                                extra={key: value for key, value in record.extra.items() if key != "seconds"})
         self.store.append(record)
         self.results[record.key] = record
         if self.bar is not None:

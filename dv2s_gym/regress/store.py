@@ -58,13 +58,17 @@ class RunStore:
         out_dir: the folder (created when missing).
         settings: the run's identity (JSON-safe dict); compared with ``run.json`` when the
             folder already holds a run.
+        defaults: what a setting ``run.json`` does not record compares as (a run written before the
+            setting existed; :func:`~scenario_bank.run_identity.check_identity`).
         fsync: sync every appended line to disk (default), so not even a power loss loses
             a finished episode.
     """
 
-    def __init__(self, out_dir: Union[str, os.PathLike], settings: Dict[str, Any], fsync: bool = True) -> None:
+    def __init__(self, out_dir: Union[str, os.PathLike], settings: Dict[str, Any], fsync: bool = True, *,
+                 defaults: Optional[Mapping[str, Any]] = None) -> None:
         self.root = Path(out_dir)
         self.settings = json.loads(json.dumps(settings, sort_keys=True, default=str))
+        self.defaults = dict(defaults or {})
         self.fsync = fsync
         self.results_path = self.root / RESULTS_FILE
         self.traces_dir = self.root / TRACES_DIR
@@ -100,7 +104,7 @@ class RunStore:
         stale = [n for n in ("junit.xml", "report.html", "report.md", "report.json") if (self.root / n).is_file()]
         warning = (f"its reports ({', '.join(stale)}) are that run's, not this one's: nothing was written, so do "
                    "not read them as this run's verdict; " if stale else "")
-        check_identity(there, self.settings, sorted(set(there) | set(self.settings)),
+        check_identity(there, self.settings, sorted(set(there) | set(self.settings)), defaults=self.defaults,
                        run=f"{self.root} holds a regression run", error=ResumeMismatchError,
                        fix=f"{warning}rerun with the same settings to resume it, or choose another --out (or delete "
                            f"{self.root}) for a new run")

@@ -12,15 +12,13 @@ A task is a plain dict, so any pool of :mod:`dv2s_gym.workers` (local processes,
 - ``failure``: the failure kinds (:mod:`dv2s_gym.regress.failures`; default collision, off-road, stall)
   and ``stall_seconds``.
 
-:func:`run_regress_task` returns ``EpisodeResult.to_json()`` plus ``role``, ``id``
-(``"<scenario>/<seed>"``), ``trace`` (the saved trace's path or ``None``) and ``seconds`` (the
-episode's wall time; the runner keeps it apart from the result), ``stalled`` and ``stall_time`` (when the ego's total standing time on a free road reached
-``stall_seconds``: :func:`envs.safety_metrics.total_stall_step`), with ``failed``
-and ``failure_kinds`` set from the task's failure kinds; the runner reads the dict (``seconds`` set
-apart) as a :class:`~scenario_bank.records.RegressEpisode`. An
-exception inside the episode comes back as an error result (``{"id", "role",
-"scenario", "seed", "error", "trace": None}``) instead of propagating: it is kept in
-the report, never dropped.
+:func:`run_regress_task` returns the episode's :class:`~scenario_bank.records.RegressEpisode`:
+``EpisodeResult.to_json()`` plus ``role``, ``id`` (``"<scenario>/<seed>"``), ``trace`` (the saved trace's path or
+``None``), ``stalled`` and ``stall_time`` (when the ego's total standing time on a free road reached
+``stall_seconds``: :func:`envs.safety_metrics.total_stall_step`), with ``failed`` and ``failure_kinds`` set from
+the task's failure kinds, and in its ``extra`` ``seconds`` (the episode's wall time; the runner keeps it apart
+from the result). An exception inside the episode comes back as an error result (``id``, ``role``, ``scenario``,
+``seed``, ``error`` and a ``null`` trace) instead of propagating: it is kept in the report, never dropped.
 
 Envs and loaded policies are cached per process between tasks (making an env and
 compiling a scenario is the slow part); the caches are keyed by bank, env config and
@@ -38,6 +36,7 @@ from typing import Any, Dict
 
 from dv2s_gym.workers.tasks import error_result, register, task_id
 from policies import worker_cache
+from scenario_bank.records import RegressEpisode
 from dv2s_gym.regress.failures import apply_failure, DEFAULT_STALL_SECONDS, parse_failure
 from envs.safety_metrics import total_stall_step
 from policies.evaluation import run_episode
@@ -53,8 +52,8 @@ def trace_filename(role: str, scenario: str, seed: int) -> str:
     return f"{scenario}__{int(seed)}__{role}.json.gz"
 
 
-def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
-    """Run one episode described by ``task`` (see the module docstring) and return its result dict."""
+def run_regress_task(task: Dict[str, Any]) -> RegressEpisode:
+    """Run one episode described by ``task`` (see the module docstring) and return its record."""
     for folder in task.get("python_path") or []:  # where a module:attribute policy is found
         if folder not in sys.path:
             sys.path.append(folder)
@@ -71,7 +70,7 @@ def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
         message = " ".join(f"{type(error).__name__}: {error}".split())
         if os.environ.get("DV2S_DEBUG"):
             message += "\n" + traceback.format_exc()
-        return error_result(task, message)
+        return RegressEpisode.from_dict(error_result(task, message))
     data = result.to_json()
     stall = total_stall_step(trace, float(task.get("stall_seconds") or DEFAULT_STALL_SECONDS))
     period = 1.0 / float(trace.config.get("policy_frequency", 5))
@@ -83,7 +82,7 @@ def run_regress_task(task: Dict[str, Any]) -> Dict[str, Any]:
         path = Path(trace_dir) / trace_filename(task["role"], task["scenario"], task["seed"])
         trace.save(path)
         data["trace"] = str(path)
-    return data
+    return RegressEpisode.from_dict(data)
 
 
 register(KIND, run_regress_task)
