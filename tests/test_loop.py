@@ -1117,9 +1117,11 @@ def test_a_starting_policy_episode_that_errored_before_stays_out_of_the_after_st
 
     def task(t):
         runs.append((t["role"], t["scenario"], t["seed"]))
+        episode = {key: t[key] for key in ("role", "scenario", "seed", "policy")}  # a held-out episode's fields
         if (t["role"], t["scenario"], t["seed"]) == ("before", "s1", 0):
-            return {**t, "failed": None, "failure": None, "error": "TimeoutError: worker hung"}
-        return {**t, "failed": t["role"] == "after" and t["seed"] == 0, "failure": None, "error": None}
+            return {**episode, "failed": None, "failure": None, "result": None, "error": "TimeoutError: worker hung"}
+        return {**episode, "failed": t["role"] == "after" and t["seed"] == 0, "failure": None, "result": None,
+                "error": None}
 
     monkeypatch.setattr(heldout, "heldout_task", task)
     path = tmp_path / "heldout.jsonl"

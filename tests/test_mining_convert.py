@@ -43,7 +43,7 @@ def make_record(scenario: str, seed: int, params: dict, policy: str = "keep_lane
                             "bank_dir": bank_dir, "trace_dir": None,
                             "monitor": MonitorSettings(ttc_threshold=1.0, stall_seconds=5.0)})
     assert record["error"] is None and record["failure"]["type"] == "collision", record
-    return record
+    return record.to_dict()  # as episodes.jsonl holds it
 
 
 @pytest.fixture(scope="module")
