@@ -15,7 +15,11 @@ a. **mine**: :func:`dv2s_gym.mining.miner.mine` runs ``P`` on sampled scenes of 
 b. **split**: the newly kept scenarios (converted scripts and exact replays) are split by *family* (their parent bank scenario,
    :func:`dv2s_gym.mining.split.split_by_family`) into a fine-tuning part and a held-out part,
    deterministically from the seed; a family held out once stays held out;
-c. **before**: ``P`` runs on the held-out scenarios, ``k_eval`` evaluation seeds each
+c. **reference**, then **before**: the reference driver (:data:`REFERENCE_DRIVER`, the DAgger teacher and the
+   miner's reference) drives every held-out episode first; an episode it does not pass (any failure of the
+   monitors, or an error) is left out of every held-out rate and test, counted and named
+   (:func:`reference_gate`: no imitation of the reference can fix a scene the reference fails, so its pair
+   measures nothing); ``P`` runs on the held-out scenarios, ``k_eval`` evaluation seeds each
    (``EVAL_SEED_BASE + i``, never a training seed): failure rate (the miner's monitors) with
    a Wilson interval; fewer than ``min_heldout_episodes`` held-out episodes is said loudly and
    the round reports rates but no drop and no test;
