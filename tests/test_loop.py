@@ -12,6 +12,7 @@ import pytest
 
 from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, paired_summary
+from dv2s_gym.mining import loop as loop_module
 from dv2s_gym.mining.loop import LoopError, fine_tune_weights
 from dv2s_gym.mining.split import cluster_groups, family_of, split_by_cluster, split_by_family
 from dv2s_gym.workers.settings import WorkerSettings
@@ -342,11 +343,12 @@ def test_loop_resumes_without_redoing_steps_and_reports_every_field(tmp_path, mo
     with pytest.raises(_Kill):
         run_loop("dv2s-ppo", out=out, miner=miner, **TINY)
     state = json.loads((out / "loop.json").read_text())
-    assert set(state["rounds"][0]["steps"]) == {"mine", "split", "before"}
+    assert set(state["rounds"][0]["steps"]) == {"mine", "split", "reference", "before"}
     held = state["rounds"][0]["steps"]["split"]["held_out"]
     assert len(held) == 2 and len(state["rounds"][0]["steps"]["split"]["fine_tune"]) == 2
     lines_before = (out / "round_1" / "heldout.jsonl").read_text().splitlines()
-    assert len(lines_before) == 2 * TINY["k_eval"]
+    kept = state["rounds"][0]["steps"]["reference"]["kept"]  # the episodes the reference driver passed
+    assert len(lines_before) == 2 * TINY["k_eval"] + kept
 
     monkeypatch.setattr(training, "fine_tune", real_fine_tune)
     with pytest.raises(RunIdentityError, match="budget: run has 6, asked 7"):
@@ -355,14 +357,14 @@ def test_loop_resumes_without_redoing_steps_and_reports_every_field(tmp_path, mo
     assert len(miner.calls) == 1  # mining was not run again
     lines = (out / "round_1" / "heldout.jsonl").read_text().splitlines()
     # only "after" and "control" ran
-    assert lines[:len(lines_before)] == lines_before and len(lines) == 3 * len(lines_before)
+    assert lines[:len(lines_before)] == lines_before and len(lines) == len(lines_before) + 2 * kept
     record = report.rounds[0]
     steps = record["steps"]
-    assert set(steps) == {"mine", "split", "before", "fine_tune", "control", "after", "regress"}
+    assert set(steps) == {"mine", "split", "reference", "before", "fine_tune", "control", "after", "regress"}
     assert steps["control"]["mined_upweighted"] == 0 and steps["control"]["mined_left_out"] == 2
     assert {"k", "n", "rate", "low", "high"} <= set(steps["after"]["control"])
     assert steps["mine"]["failures"] == 4 and len(steps["mine"]["kept"]) == 4
-    assert steps["after"]["pairs"] == 2 * TINY["k_eval"]
+    assert steps["after"]["pairs"] == kept
     for key in ("before", "after"):
         assert {"k", "n", "rate", "low", "high"} <= set(steps["after"][key])
     assert "relative_drop" in steps["after"] and "mcnemar_p" in steps["after"]
@@ -453,8 +455,8 @@ class _StandIns:
 
         def evaluate(role, policy, episodes, **options):
             self.evaluations.append((role, policy, list(episodes)))
-            outcome = {"before": lambda i: True, "control": lambda i: i % 2 == 0, "after": lambda i: i % 4 == 0,
-                       **(fails or {})}[role]
+            outcome = {"reference": lambda i: False, "before": lambda i: True, "control": lambda i: i % 2 == 0,
+                       "after": lambda i: i % 4 == 0, **(fails or {})}[role]
             return [{"role": role, "scenario": s, "seed": seed, "failed": outcome(i), "error": None}
                     for i, (s, seed) in enumerate(episodes)]
 
@@ -517,7 +519,7 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
     assert first["bank_dir"] == second["bank_dir"] == str(__import__("dv2s_gym.mining.loop", fromlist=["x"])
                                                            .UNTOUCHED_BANK)
     assert second["candidate"] == report.rounds[0]["control_policy"] and second["baseline_role"] == "candidate"
-    assert any("[5/8] control" in line for line in lines)
+    assert any("[6/9] control" in line for line in lines)
     assert set(steps["regress"]["held_out_parents"]) == set(split["held_out_families"])
     markdown = report.paths["md"].read_text()
     assert "control arm" in markdown and "untouched scenario set" in markdown and "split by family" in markdown
@@ -531,6 +533,53 @@ def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scen
     page = write_loop_reports(report.to_json(), tmp_path / "loop")["html"].read_text()
     assert f'<video src="bank/{held}/failure.webm"' in page and f"{held} (held out)" in page
     assert page.count("<svg") == 2 and "held-out failure rate (95 % Wilson)" in page and "http" not in page
+
+
+def test_held_out_episodes_the_reference_driver_does_not_pass_are_left_out_counted_and_reported(tmp_path,
+                                                                                                 monkeypatch):
+    stand = _StandIns(monkeypatch, fails={"reference": lambda i: i < WIRING["k_eval"] + 1})
+    lines = []
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=FakeMiner(WIRING["scenarios"], failures_per_round=6),
+                      min_heldout_episodes=1, min_heldout_families=1, log=lines.append, **WIRING)
+    steps = report.rounds[0]["steps"]
+    evaluated = {role: episodes for role, _, episodes in stand.evaluations}
+    everything = evaluated["reference"]  # the reference driver runs every held-out episode, first
+    assert [role for role, _, _ in stand.evaluations][0] == "reference"
+    assert [policy for role, policy, _ in stand.evaluations if role == "reference"] == [loop_module.REFERENCE_DRIVER]
+    assert len(everything) == len(steps["split"]["held_out"]) * WIRING["k_eval"]
+    failing = everything[:WIRING["k_eval"] + 1]
+    gate = steps["reference"]
+    assert [tuple(e) for e in gate["excluded"]] == failing and gate["failed"] == len(failing)
+    assert gate["kept"] == len(everything) - len(failing) and gate["episodes"] == len(everything)
+    for role in ("before", "after", "control"):  # never measured on a scene the teacher fails
+        assert evaluated[role] == everything[len(failing):]
+    assert steps["after"]["pairs"] == len(everything) - len(failing)
+    first = failing[0][0]
+    assert gate["by_scenario"][first] == {"episodes": WIRING["k_eval"], "excluded": WIRING["k_eval"],
+                                          "failures": {"failure": WIRING["k_eval"]}}  # the stand-in names no type
+    said = [line for line in lines if "left out because the reference driver" in line]
+    assert said and said[0].startswith("round 1: WARNING: ") and f"{first} {WIRING['k_eval']}/{WIRING['k_eval']}" \
+        in said[0]
+    markdown = report.paths["md"].read_text()
+    assert f"{len(failing)} of {len(everything)} held-out episodes left out because the reference driver" in markdown
+    assert any("[3/9] held-out: reference driver" in line for line in lines)
+
+
+def test_reference_gate_counts_failures_and_errors_and_names_families_left_out_entirely():
+    records = [{"scenario": "a1", "seed": 1, "failed": True, "failure": {"type": "stall"}, "error": None},
+               {"scenario": "a1", "seed": 2, "failed": None, "failure": None, "error": "boom"},
+               {"scenario": "b1", "seed": 1, "failed": True, "failure": {"type": "collision"}, "error": None},
+               {"scenario": "b2", "seed": 1, "failed": False, "failure": None, "error": None}]
+    gate = loop_module.reference_gate(records, {"a1": "A", "b1": "B", "b2": "B"})
+    assert gate["excluded"] == [["a1", 1], ["a1", 2], ["b1", 1]] and gate["kept"] == 1
+    assert (gate["failed"], gate["errored"]) == (2, 1)
+    assert gate["excluded_families"] == ["A"]  # B keeps a passed episode
+    assert gate["by_scenario"]["a1"]["failures"] == {"stall": 1, "error": 1}
+    from dv2s_gym.mining.loop_report import reference_gate_text
+
+    text = reference_gate_text(gate)
+    assert "3 of 4 held-out episodes left out" in text and "2 failed, 1 errored" in text and "entirely: A" in text
+    assert "none left out" in reference_gate_text(loop_module.reference_gate(records[3:], {}))
 
 
 def test_no_member_of_a_held_out_family_reaches_either_arm(tmp_path, monkeypatch):
@@ -609,7 +658,7 @@ def test_loop_resumes_the_control_arm_without_redoing_the_fine_tune(tmp_path, mo
     with pytest.raises(_Kill):
         run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, **WIRING)
     state = json.loads((out / "loop.json").read_text())
-    assert set(state["rounds"][0]["steps"]) == {"mine", "split", "before", "fine_tune"}
+    assert set(state["rounds"][0]["steps"]) == {"mine", "split", "reference", "before", "fine_tune"}
     stand = _StandIns(monkeypatch)
     with pytest.raises(RunIdentityError, match="control: run has True, asked False"):
         run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, control=False, **WIRING)
@@ -618,7 +667,7 @@ def test_loop_resumes_the_control_arm_without_redoing_the_fine_tune(tmp_path, mo
     assert [call["out"][-len("control"):] for call in stand.fine_tunes] == ["control"]  # only the control ran
     assert len(miner.calls) == 1 and "control" in report.rounds[0]["steps"]
     resumed = [line for line in lines if "resuming" in line]
-    assert len(resumed) == 1 and "4 of" in resumed[0] and "mining failures" in resumed[0], lines
+    assert len(resumed) == 1 and "5 of" in resumed[0] and "mining failures" in resumed[0], lines
 
 
 def test_the_untouched_set_is_a_bank_of_the_corpus_scripts_with_their_licences():

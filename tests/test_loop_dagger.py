@@ -129,7 +129,7 @@ def test_the_loop_runs_end_to_end_with_dagger(tmp_path):
                 scenarios=SOURCES, min_heldout_episodes=1, untouched_seeds=0, log=lambda _: None)
     report = run_loop("dv2s-ppo", out=out, miner=miner, fine_tune_method="dagger", **tiny)
     steps = report.rounds[0]["steps"]
-    assert set(steps) == {"mine", "split", "before", "fine_tune", "control", "after", "regress"}
+    assert set(steps) == {"mine", "split", "reference", "before", "fine_tune", "control", "after", "regress"}
     assert steps["control"]["method"] == "dagger" and steps["control"]["steps"] == tiny["fine_tune_steps"]
     tuned = steps["fine_tune"]
     assert tuned["method"] == "dagger" and tuned["reward_weights"] is None and tuned["env_config"] == SHIPPED_CONFIG

@@ -184,3 +184,33 @@ def test_exact_replays_take_the_families_in_turn_largest_cluster_first(tmp_path,
     order = replay_order(group(records))
     assert order == replay_order(dict(reversed(list(group(records).items()))))
     assert [r["index"] for _, r in order] == [4, 13, 14, 8, 11]
+
+
+def test_an_exact_replay_is_kept_only_of_a_scene_the_reference_driver_passed(tmp_path):
+    """The miner calls a near miss 'avoidable' when the reference driver merely stalled in its scene (a stall is
+    less severe); the loop counts the stall as a failure too, so that cluster gets no exact replay, and the mining
+    summary counts it apart. A reference near miss where the policy collided still counts as passed."""
+    from dv2s_gym.mining.cluster import group
+    from dv2s_gym.mining.replays import replay_order
+
+    def failing(index, family, kind, reference):
+        record = _failed(index, family, "pedestrian")
+        record["failure"] = {"type": kind, "kind": kind}
+        record["reference"] = {"policy": "rule", "failure": None if reference is None else {"type": reference}}
+        return record
+
+    stalled = failing(0, "a", "low_ttc", "stall")
+    assert stalled["avoidable"] is True  # the miner's flag says avoidable: the reference's stall is less severe
+    passed = failing(1, "b", "low_ttc", None)
+    near = failing(2, "c", "collision", "low_ttc")
+    unchecked = dict(_failed(3, "d", "car"), reference=None)
+    records = [stalled, passed, near, unchecked]
+    order = replay_order(group(records))
+    assert sorted(r["index"] for _, r in order) == [1, 2, 3]  # no replay of the scene the reference stalled in
+    from dv2s_gym.mining.loop import _mining_summary
+    from dv2s_gym.mining.replays import reference_passed
+
+    assert not reference_passed(stalled)
+    assert reference_passed(passed) and reference_passed(near) and reference_passed(unchecked)
+    (tmp_path / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    assert _mining_summary(tmp_path)["clusters_reference_failed"] == 1

@@ -15,7 +15,11 @@ a. **mine**: :func:`dv2s_gym.mining.miner.mine` runs ``P`` on sampled scenes of 
 b. **split**: the newly kept scenarios (converted scripts and exact replays) are split by *family* (their parent bank scenario,
    :func:`dv2s_gym.mining.split.split_by_family`) into a fine-tuning part and a held-out part,
    deterministically from the seed; a family held out once stays held out;
-c. **before**: ``P`` runs on the held-out scenarios, ``k_eval`` evaluation seeds each
+c. **reference**, then **before**: the reference driver (:data:`REFERENCE_DRIVER`, the DAgger teacher and the
+   miner's reference) drives every held-out episode first; an episode it does not pass (any failure of the
+   monitors, or an error) is left out of every held-out rate and test, counted and named
+   (:func:`reference_gate`: no imitation of the reference can fix a scene the reference fails, so its pair
+   measures nothing); ``P`` runs on the held-out scenarios, ``k_eval`` evaluation seeds each
    (``EVAL_SEED_BASE + i``, never a training seed): failure rate (the miner's monitors) with
    a Wilson interval; fewer than ``min_heldout_episodes`` held-out episodes is said loudly and
    the round reports rates but no drop and no test;
@@ -67,17 +71,17 @@ from pathlib import Path
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence
 
 from dv2s_gym.mining import heldout, loop_report, miner
-from dv2s_gym.mining.cluster import cluster_failures
+from dv2s_gym.mining.cluster import cluster_failures, group
 from dv2s_gym.mining.errored import errored_episodes, merged_messages, messages_text
 from dv2s_gym.mining.family import scenario_family
 from dv2s_gym.mining.heldout import episode_failed, failure_types, HeldOutStore, paired_summary
 from dv2s_gym.mining.jsonl import read_rows
-from dv2s_gym.mining.loop_report import errored_note, errored_text, write_loop_reports
+from dv2s_gym.mining.loop_report import errored_note, errored_text, reference_gate_text, write_loop_reports
 from dv2s_gym.mining.loop_settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
 from dv2s_gym.mining.loop_verdict import (
     EVIDENCE_FLOOR, evidence_floor_note, HELDOUT_ALPHA, heldout_worse, recommendation)
 from dv2s_gym.mining.miner import MineSettings
-from dv2s_gym.mining.replays import replay_clusters, replay_entries, REPLAYS_FILE
+from dv2s_gym.mining.replays import reference_passed, replay_clusters, replay_entries, REPLAYS_FILE
 from dv2s_gym.mining.split import family_of, split_by_cluster, split_by_family
 from dv2s_gym.progress_lines import log_line
 from dv2s_gym.regress import runner
@@ -292,6 +296,13 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
         if record.get("status") == "rejected" and (record.get("rejections") or record.get("reason")):
             reasons += [str(r) for r in record.get("rejections") or [record["reason"]]]  # every failed check
     converted = sum(statuses.values())
+    tried = {str(r.get("cluster")) for r in read_rows(mine_out / "conversions.jsonl")}
+    reference_failed = None
+    try:  # clusters no conversion tried whose every failing scene the reference driver failed too: never replayed
+        reference_failed = sum(1 for cluster, members in group(records).items()
+                               if cluster not in tried and not any(reference_passed(r) for r in members))
+    except Exception:  # informative, as the cluster count
+        pass
 
     replayed: Dict[str, int] = {}
     for row in read_rows(mine_out / REPLAYS_FILE):
@@ -302,7 +313,8 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
             "rejected_reason_count": len(reasons),
             "clusters_not_converted": None if clusters is None else max(0, clusters - converted),
             "clusters_not_kept": None if clusters is None else max(0, clusters - converted
-                                                                   - sum(replayed.values()))}
+                                                                   - sum(replayed.values())),
+            "clusters_reference_failed": reference_failed}
 
 
 def _regress_errored(report: Mapping[str, Any], roles: Mapping[str, str]) -> Dict[str, Dict[str, Any]]:
@@ -456,7 +468,7 @@ class _Timed:
     def __init__(self, loop: _Loop, number: int, record: Dict[str, Any]) -> None:
         self.loop, self.number, self.record = loop, number, record
         control, untouched = loop.settings.control, loop.settings.untouched_seeds
-        self.stages = ["mine", "split", "before", "fine_tune"] + (["control"] if control else []) + ["after"] + (
+        self.stages = ["mine", "split", "reference", "before", "fine_tune"] + (["control"] if control else []) + ["after"] + (
             ["untouched"] if untouched else []) + ["regress"]
 
     def __call__(self, step: str, function: Callable[[], Any], plan: str = "") -> Any:
@@ -618,7 +630,10 @@ def _log_mined(loop: _Loop, number: int, mined: Mapping[str, Any]) -> None:
                 f"{'all' if s.max_conversions is None else s.max_conversions})"
                 if mined.get("clusters_not_converted") else "")
              + (f", {mined['clusters_not_kept']} neither converted nor replayed (--max-replays "
-                f"{'all' if s.max_replays is None else s.max_replays})" if mined.get("clusters_not_kept") else ""))
+                f"{'all' if s.max_replays is None else s.max_replays}"
+                + (f"; {mined['clusters_reference_failed']} of them because the reference driver {REFERENCE_DRIVER} "
+                   "did not pass any of their failing scenes" if mined.get("clusters_reference_failed") else "")
+                + ")" if mined.get("clusters_not_kept") else ""))
 
 
 def _skip_round(loop: _Loop, number: int, steps: Dict[str, Any]) -> None:
@@ -645,11 +660,18 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
     steps, split = record["steps"], record["steps"]["split"]
     episodes = [(name, EVAL_SEED_BASE + i) for name in split["held_out"] for i in range(s.k_eval)]
     families = _families_of(steps["mine"]["kept"], split["held_out"], loop.bank)
-    shortfall = underpowered(len(episodes), s.min_heldout_episodes, len(set(families.values())),
-                             s.min_heldout_families)
+    store_path = round_dir / "heldout.jsonl"
+    if "reference" not in steps:
+        timed("reference", lambda: _reference_step(loop, episodes, HeldOutStore(store_path), families),
+              f"{len(episodes)} episodes ({len(split['held_out'])} held-out scenario(s) x {s.k_eval} seeds) for the "
+              f"reference driver {REFERENCE_DRIVER}: a held-out episode it does not pass is left out")
+        _log_reference(loop, number, steps["reference"])
+    excluded = {(str(name), int(seed)) for name, seed in steps["reference"]["excluded"]}
+    episodes = [episode for episode in episodes if episode not in excluded]
+    shortfall = underpowered(len(episodes), s.min_heldout_episodes,
+                             len({families[name] for name, _ in episodes}), s.min_heldout_families)
     if shortfall:
         loop.log(f"round {number}: WARNING: {shortfall}")
-    store_path = round_dir / "heldout.jsonl"
     if "before" not in steps:
         def before_step() -> Dict[str, Any]:
             records = heldout.evaluate_heldout("before", current, episodes, store=HeldOutStore(store_path),
@@ -680,6 +702,64 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
               f"{len(loop.start_names)} scenarios x {s.regress_episodes} seed(s), fine-tuned against starting policy")
         _log_errored(loop, number, "regression test", steps["regress"].get("errored") or {})
     return new_policy
+
+
+REFERENCE_DRIVER = "rule"
+"""The reference driver of the loop: the DAgger teacher (:mod:`policies.imitation`) and the miner's avoidability
+reference (:class:`~dv2s_gym.mining.settings.MineSettings`' default). The held-out evaluation keeps only the
+episodes it passes (:func:`reference_gate`)."""
+
+
+def reference_gate(records: Sequence[Mapping[str, Any]], families: Mapping[str, str]) -> Dict[str, Any]:
+    """The ``reference`` step's record from the reference driver's held-out ``records``: which held-out episodes
+    the loop leaves out because the reference driver did not pass them (it failed, by the miner's monitors, or the
+    episode errored, so that nobody knows), counted and named, never dropped silently.
+
+    A policy that imitates the reference cannot be expected to pass a scene the reference itself fails, so such a
+    pair measures nothing the fine-tuning can change and only adds noise to the held-out comparison. Returns
+    ``{"reference", "episodes", "kept", "excluded": [[scenario, seed], ...], "failed", "errored",
+    "by_scenario": {scenario: {"episodes", "excluded", "failures": {type: n}}}, "excluded_families": [family whose
+    every episode is left out]}``."""
+    by_scenario: Dict[str, Dict[str, Any]] = {}
+    excluded, failed, errored = [], 0, 0
+    kept_families, all_families = set(), set()
+    for record in records:
+        name, seed = str(record["scenario"]), int(record["seed"])
+        row = by_scenario.setdefault(name, {"episodes": 0, "excluded": 0, "failures": {}})
+        row["episodes"] += 1
+        family = families.get(name, name)
+        all_families.add(family)
+        outcome = episode_failed(record)
+        if outcome is False:
+            kept_families.add(family)
+            continue
+        excluded.append([name, seed])
+        row["excluded"] += 1
+        if outcome is None:
+            errored += 1
+            kind = "error"
+        else:
+            failed += 1
+            kind = str((record.get("failure") or {}).get("type") or "failure")
+        row["failures"][kind] = row["failures"].get(kind, 0) + 1
+    return {"reference": REFERENCE_DRIVER, "episodes": len(records), "kept": len(records) - len(excluded),
+            "excluded": excluded, "failed": failed, "errored": errored,
+            "by_scenario": {name: by_scenario[name] for name in sorted(by_scenario)},
+            "excluded_families": sorted(all_families - kept_families)}
+
+
+def _reference_step(loop: _Loop, episodes: List[tuple], store, families: Mapping[str, str]) -> Dict[str, Any]:
+    """The ``reference`` step: the reference driver on every held-out episode (role ``reference`` in the
+    held-out store); :func:`reference_gate`'s record."""
+    records = heldout.evaluate_heldout("reference", REFERENCE_DRIVER, episodes, store=store, bank_dir=loop.bank,
+                                       env_config=loop.env_config, workers=WorkerSettings(workers=loop.workers),
+                                       progress=loop.progress)
+    return reference_gate(records, families)
+
+
+def _log_reference(loop: _Loop, number: int, gate: Mapping[str, Any]) -> None:
+    text = reference_gate_text(gate)
+    loop.log(f"round {number}: {'WARNING: ' if gate.get('excluded') else ''}{text}")
 
 
 def _fine_tune_arms(loop: _Loop, number: int, current: str, round_dir: Path, timed: _Timed) -> tuple:
@@ -752,7 +832,8 @@ def _regress_step(loop: _Loop, new_policy: str, current: str, round_dir: Path,
     return summary
 
 
-_STAGE_NAMES = {"mine": "mining failures", "split": "splitting by family", "before": "held-out: starting policy",
+_STAGE_NAMES = {"mine": "mining failures", "split": "splitting by family",
+                "reference": "held-out: reference driver", "before": "held-out: starting policy",
                 "fine_tune": "fine-tuning with the mined scenarios", "control": "control: fine-tuning without them",
                 "after": "held-out: fine-tuned and control", "untouched": "untouched scenario set",
                 "regress": "regression test on the starting bank"}

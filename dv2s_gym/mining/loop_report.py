@@ -13,7 +13,9 @@
                  "timings": {step: seconds},
                  "control_policy": the control arm's spec (with a control),
                  "steps": {"mine": {"episodes", "errors", "errored", "failures", "failures_against_policy", "clusters",
-                                    "clusters_not_converted", "clusters_not_kept", "conversions": {status: n},
+                                    "clusters_not_converted", "clusters_not_kept", "clusters_reference_failed"
+                                    (clusters no conversion tried whose every failing scene the reference driver
+                                    failed too: no exact replay), "conversions": {status: n},
                                     "replays": {status: n}, "rejected_reasons" (every failed check of each
                                     rejected conversion, at most 40), "rejected_reason_count",
                                     "kept": [{"cluster", "scenario", "reproduction", "replay" (exact replays:
@@ -22,7 +24,11 @@
                                      "held_out_clusters", "fine_tune_families", "held_out_families", "groups",
                                      "moved_to_fine_tune"}
                                     (loops recorded before the family split: no "by" and no families),
-                           "before": {"episodes", "errored"},
+                           "reference": {"reference", "episodes", "kept", "excluded": [[scenario, seed]]
+                                         (held-out episodes the reference driver failed or errored on, left out of
+                                         every rate and test), "failed", "errored", "by_scenario",
+                                         "excluded_families"} (loop.reference_gate),
+                           "before": {"episodes" (those the reference driver passed), "errored"},
                            "fine_tune" and "control": {"model", "method": "ppo" | "dagger", "scenarios",
                                          "mined_upweighted", "mined_left_out", "steps", "families" (every
                                          family in the arm's mix: later rounds keep them on the fine-tuning side),
@@ -232,7 +238,7 @@ def _final_line(final: Optional[Mapping[str, Any]]) -> Optional[str]:
             + (f"; report `{final['report']}`" if final.get("report") else "") + ".")
 
 
-_ORDER = ("mine", "split", "before", "fine_tune", "control", "after", "untouched", "regress")
+_ORDER = ("mine", "split", "reference", "before", "fine_tune", "control", "after", "untouched", "regress")
 
 
 def _seconds(timings: Mapping[str, Any]) -> str:
@@ -412,6 +418,32 @@ def _sources_text(after: Mapping[str, Any]) -> str:
             f"{'' if scenarios == 1 else 's'}{untested})")
 
 
+def reference_gate_text(gate: Mapping[str, Any]) -> str:
+    """The reference step's outcome in one sentence (log and reports)."""
+    if not gate.get("excluded"):
+        return (f"the reference driver {gate.get('reference')} passed all {gate.get('episodes')} held-out episodes; "
+                "none left out")
+    scenarios = "; ".join(
+        f"{name} {row['excluded']}/{row['episodes']} ("
+        + ", ".join(f"{kind} {n}" for kind, n in sorted(row["failures"].items())) + ")"
+        for name, row in gate.get("by_scenario", {}).items() if row.get("excluded"))
+    families = gate.get("excluded_families") or []
+    return (f"{len(gate['excluded'])} of {gate.get('episodes')} held-out episodes left out because the reference "
+            f"driver {gate.get('reference')} did not pass them ({gate.get('failed')} failed, {gate.get('errored')} "
+            f"errored): {scenarios}"
+            + (f"; famil(ies) left out entirely: {', '.join(families)}" if families else ""))
+
+
+def _reference_lines(gate: Mapping[str, Any]) -> List[str]:
+    """The reference driver's pass over the held-out episodes: how many it did not pass, left out of every rate
+    and test (loop.reference_gate)."""
+    if not gate:
+        return []
+    text = reference_gate_text(gate)
+    return [f"- held-out episodes the reference driver does not pass: " + (f"**{text}**" if gate.get("excluded")
+                                                                           else text)]
+
+
 def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
     """The held-out comparison: start, control, fine-tuned, and what is (not) reported."""
     if not after:
@@ -575,7 +607,10 @@ def _mining_lines(mine: Mapping[str, Any], settings: Mapping[str, Any]) -> List[
                 f"{settings.get('max_conversions')} per round)" if mine.get("clusters_not_converted")
                 else "")
              + (f"; **{mine['clusters_not_kept']} clusters skipped**, neither converted nor replayed "
-                f"(at most {settings.get('max_replays')} exact replays per round)"
+                f"(at most {settings.get('max_replays')} exact replays per round"
+                + (f"; {mine['clusters_reference_failed']} of them because the reference driver did not pass any of "
+                   "their failing scenes, so they are neither replayed nor held out"
+                   if mine.get("clusters_reference_failed") else "") + ")"
                 if mine.get("clusters_not_kept") else "")]
     reasons = mine.get("rejected_reasons") or []
     for reason in reasons:  # every failed check of the conversion judge, each its own reason
@@ -666,6 +701,7 @@ def _round_lines(record: Mapping[str, Any], settings: Mapping[str, Any]) -> List
     lines += _mining_lines(steps.get("mine") or {}, settings)
     lines += _split_lines(steps.get("split") or {})
     lines += _fine_tuning_lines(steps)
+    lines += _reference_lines(steps.get("reference") or {})
     lines += _heldout_lines(steps.get("after") or {})
     lines += _untouched_lines(steps.get("untouched") or {})
     lines += _regression_lines(steps.get("regress") or {})

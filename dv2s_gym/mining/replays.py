@@ -25,7 +25,7 @@ from dv2s_gym.mining.miner import progress_bar, read_records
 from dv2s_gym.mining.settings import read_run_settings, SETTINGS_FILE
 from scenario_bank.bank import Bank
 
-__all__ = ["REPLAYS_FILE", "replay_clusters", "replay_order", "replay_entries"]
+__all__ = ["REPLAYS_FILE", "replay_clusters", "replay_order", "replay_entries", "reference_passed"]
 
 REPLAYS_FILE = "replays.jsonl"
 """The rows of :func:`replay_clusters` in a mining run folder (one JSON object a line)."""
@@ -80,12 +80,13 @@ def replay_order(groups: Mapping[str, Sequence[Mapping[str, Any]]]) -> List[Tupl
     families, so that a round's few replays spread over its families instead of all coming from the family with
     the most failures. The families take turns in the order of their largest cluster (most avoidable failures,
     then the family's name); each turn gives a family its largest cluster not yet taken (most avoidable
-    failures, then the cluster id). Clusters without an avoidable failure get none. The representative is the
+    failures, then the cluster id). Only failures the reference driver passed count (:func:`reference_passed`):
+    clusters without one get none. The representative is the
     failure a conversion would take (lowest robustness, then lowest index). Deterministic: a function of
     ``groups`` only."""
     by_family: Dict[str, List[Tuple[int, str, Dict[str, Any]]]] = {}
     for cluster, members in groups.items():
-        avoidable = [r for r in members if r.get("avoidable") is not False]
+        avoidable = [r for r in members if reference_passed(r)]
         if not avoidable:
             continue
         representative = min(avoidable, key=lambda r: (float(r.get("rho") or 0.0), int(r["index"])))
@@ -100,6 +101,22 @@ def replay_order(groups: Mapping[str, Sequence[Mapping[str, Any]]]) -> List[Tupl
     for turn in range(max((len(q[2]) for q in queues), default=0)):
         order += [(q[2][turn][1], q[2][turn][2]) for q in queues if turn < len(q[2])]
     return order
+
+
+def reference_passed(record: Mapping[str, Any]) -> bool:
+    """Whether the reference driver passed the failing scene of mined episode ``record`` by the rule a conversion's
+    avoidability uses on its new scenario (:func:`dv2s_gym.mining.convert.reference_failed`: any collision, off-road
+    or stall of the reference counts, and a near miss unless the policy's failure was worse). The miner's
+    ``avoidable`` flag is looser (a reference outcome less severe than the policy's failure, such as a stall where
+    the policy came too close, counts as avoided), but the loop counts every failure of the held-out monitors, so an
+    exact replay is kept only of a scene the reference driver passed. A record whose reference episode did not run
+    (no reference driver) keeps the miner's flag."""
+    if record.get("avoidable") is False:
+        return False
+    reference = record.get("reference")
+    if not reference:
+        return True
+    return not convert.reference_failed(dict(record.get("failure") or {}), reference.get("failure"))
 
 
 def replay_entries(run_dir: os.PathLike | str) -> List[Dict[str, Any]]:
