@@ -486,6 +486,7 @@ def _fed(record, records, feedback):
 
 
 def test_novelty_feedback_feeds_a_repeated_parameter_cell_as_an_easy_scene():
+    from dv2s_gym.mining.cluster import cluster_id
     from dv2s_gym.mining.miner import _feedback
 
     failure = {"type": "collision", "kind": "collision:rear_end"}
@@ -503,6 +504,14 @@ def test_novelty_feedback_feeds_a_repeated_parameter_cell_as_an_easy_scene():
     elsewhere = {**other_cell, "index": 5, "scenario": LEFT_TURN, "rho": -1.1}
     assert [_feedback(r, seen, "scenario-novelty") for r in (first, other_cell, passed, elsewhere)] == [
         -2.0, 9.0, 3.0, -1.1]
+    seen = set()  # cluster-novelty: a failure in a behaviour cluster already found is fed as an easy scene
+    behaviour = {"actor": "car", "actor_manoeuvre": "braking", "ego_manoeuvre": "following"}
+    a = {**first, "behaviour": behaviour}
+    same_cluster = {**a, "index": 6, "point": [0.9, 0.1], "rho": -1.4}  # other cell, same behaviour
+    other_actor = {**a, "index": 7, "behaviour": {**behaviour, "actor_manoeuvre": "cut_in"}, "rho": -1.3}
+    assert cluster_id(a) == cluster_id(same_cluster) != cluster_id(other_actor)
+    assert [_feedback(r, seen, "cluster-novelty") for r in (a, same_cluster, other_actor, passed, crashed)] == [
+        -2.0, 9.0, -1.3, 3.0, 1.0]
     with pytest.raises(MiningError, match="unknown feedback 'curious'.*novelty"):
         mine("rule", out="unused", budget=1, feedback="curious")
 

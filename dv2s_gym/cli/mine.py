@@ -63,7 +63,8 @@ def add_parser(subparsers) -> None:
                    help="what adaptive samplers learn from: robustness (every failure), novelty (a failure in a "
                    "parameter cell that already failed counts as an easy scene, to spread the search) or "
                    "scenario-novelty (only each scenario's first failure counts) or state-novelty (a failure whose "
-                   "speeds and geometry at the failure are close to an earlier one's in the scenario counts as easy); "
+                   "speeds and geometry at the failure are close to an earlier one's in the scenario counts as easy) or "
+                   "cluster-novelty (a failure in a behaviour cluster already found counts as easy); "
                    "default novelty for split, state-novelty for novelty-bandit, robustness for the others")
     p.add_argument("--seed", type=int, default=MINE.seed,
                    help=f"seed of the sampler and the episodes (default {MINE.seed})")

@@ -434,6 +434,11 @@ def _feedback(record: Dict[str, Any], seen: set, mode: str) -> float:
     rho = record.get("rho")
     if rho is None or record.get("error"):
         return 1.0
+    if record.get("failure") and mode == "cluster-novelty":
+        cluster = ("cluster", cluster_id(record))
+        repeat = cluster in seen
+        seen.add(cluster)
+        return _REPEAT if repeat else float(rho)
     if record.get("failure") and mode == "state-novelty":
         state = record.get("failure_state")
         scenario = str(record["scenario"])

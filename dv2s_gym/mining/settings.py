@@ -21,7 +21,7 @@ SETTINGS_FILE = "settings.json"
 """The file of a mining run folder that records what the run mines (:meth:`MineSettings.recorded` and the run's
 resolved values)."""
 
-FEEDBACKS = ("robustness", "novelty", "scenario-novelty", "state-novelty")
+FEEDBACKS = ("robustness", "novelty", "scenario-novelty", "state-novelty", "cluster-novelty")
 """What the adaptive samplers are fed: ``robustness`` (each episode's robustness) or ``novelty`` (the same,
 except that a failure in a parameter cell an earlier episode already failed in with the same failure class,
 :func:`~dv2s_gym.mining.cluster.cell_id`, is fed as an easy scene). Novelty is over where in parameter space
@@ -30,7 +30,9 @@ the first failure of each scenario is fed as a failure, later ones as easy scene
 scenarios that have not failed yet). ``state-novelty`` (``novelty-bandit``'s default): a failure is fed as one
 only when its failure-state descriptor (:mod:`dv2s_gym.mining.failure_state`, continuous: speeds, geometry and
 timing at the failure) is farther than :data:`~dv2s_gym.mining.failure_state.NOVELTY_RADIUS` from every earlier
-failure's in the same scenario."""
+failure's in the same scenario. ``cluster-novelty``: a failure is fed as one only when its behaviour cluster
+(:func:`~dv2s_gym.mining.cluster.cluster_id`, the key the reports group failures by) is new to the run; a
+failure in a cluster already found is fed as an easy scene."""
 
 
 @dataclasses.dataclass(frozen=True)
