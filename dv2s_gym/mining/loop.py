@@ -680,7 +680,8 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
             return {"episodes": len(episodes), "done": bool(records), "errored": errored_episodes(records)}
 
         timed("before", before_step,
-              f"{len(episodes)} episodes ({len(split['held_out'])} held-out scenario(s) x {s.k_eval} seeds)")
+              f"{len(episodes)} episodes ({len(split['held_out'])} held-out scenario(s) x {s.k_eval} seeds"
+              + (f", {len(excluded)} left out: the reference driver does not pass them" if excluded else "") + ")")
         _log_errored(loop, number, "held-out: starting policy", {"start": steps["before"]["errored"]})
     new_policy, control_policy = _fine_tune_arms(loop, number, current, round_dir, timed)
     policies = {"before": current, "after": new_policy, "control": control_policy}
