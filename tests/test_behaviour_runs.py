@@ -352,9 +352,13 @@ def test_several_workers_write_what_one_worker_wrote(run):
 
 
 @pytest.mark.slow
-def test_regress_on_ray_writes_what_one_local_worker_wrote():
+def test_regress_on_ray_writes_what_one_local_worker_wrote(tmp_path, monkeypatch):
     pytest.importorskip("ray")
     import test_behaviour_reports as reports
+
+    # a local Ray instance writes a token to ~/.ray/auth_token, after which connecting to a cluster started by
+    # `ray start --head` without one fails (tests/test_regress_ray.py runs such a cluster): keep it out of HOME
+    monkeypatch.setenv("HOME", str(tmp_path))
 
     _compare_with_one_worker("regress", [*reports.RUNS["regress"], "--backend", "ray"], "on Ray")
 

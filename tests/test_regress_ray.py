@@ -45,6 +45,9 @@ def ray_address():
     """A Ray head on 127.0.0.1 for this module; stopped (its process group killed) at the end."""
     port = _free_port()
     temp = tempfile.mkdtemp(prefix="ray", dir="/tmp")  # short: Ray's socket paths must fit 107 bytes
+    # a token a local Ray instance left in ~/.ray/auth_token makes clients fail to connect to this head: a clean HOME
+    home = pytest.MonkeyPatch()
+    home.setenv("HOME", temp)
     env = dict(os.environ, RAY_DISABLE_USAGE_STATS="1", OMP_NUM_THREADS="1",
                PYTHONPATH=os.pathsep.join([str(ROOT), str(ROOT / "tests"), os.environ.get("PYTHONPATH", "")]))
     command = [_ray_executable(), "start", "--head", "--block", "--node-ip-address=127.0.0.1", f"--port={port}",
@@ -80,6 +83,7 @@ def ray_address():
         except ProcessLookupError:
             pass
         head.wait(10)
+        home.undo()
         shutil.rmtree(temp, ignore_errors=True)
 
 
