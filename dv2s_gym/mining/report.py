@@ -70,7 +70,9 @@ so its interval is a guide, not an exact guarantee.
 {"values"}}`` (the parameter region its failures cover), ``"collision_types", "with_kinds",
 "representative": Failure, "video": path relative to the run folder | null, "converted_video": the clip of the
 converted script driven by the policy (one reproduction episode; ``reproduction["clip"]`` says which) | null, "status":
-"kept" | "merged" | "rejected" | "not converted", "reason", "bank_entry", "merged_into",
+"kept" | "merged" | "rejected" | "not converted", "reason", "bank_entry", "merged_into", "replay_entry": the
+exact replay entry the conversion kept | null, "replay_not_narrowed": ``{parameter: why}`` of those its replay
+draws as the parent does ({} when every one was narrowed, or without a replay entry),
 "reproduction": the conversion's record | null, "reproduction_rate", "e2e_sc", "description",
 "script", "conversion": the conversion record | null}``. A conversion belongs to the cluster
 of its representative episode (``index``); its own ``cluster`` id is kept in the record.
