@@ -9,9 +9,9 @@ seconds before the failure through ``after`` seconds after it are written as a V
 (:class:`envs.recording.VideoWriter`) at the policy frequency, in the style the ``bev`` Driving
 Record Analyzer reads (the camera follows the ego, north up, 5.5 px/m).
 
-The frame covers the actor the failure involves (:func:`dv2s_gym.mining.behaviour.involved_actor`: the one it
-names, or the one a stalled ego stood behind): a 480 x 480 px view holds about 44 m around the ego, so when that
-actor is farther off in the clip's frames the view looks ahead (:func:`clip_camera`): at the same scale, the ego
+The frame covers the actor the failure involves (:func:`dv2s_gym.mining.interaction.key_actor`, the actor the
+conversion's description and judge name: the failure's partner, or for a stall the one ahead in the ego's
+lane): a 480 x 480 px view holds about 44 m around the ego, so when that actor is farther off in the clip's frames the view looks ahead (:func:`clip_camera`): at the same scale, the ego
 sits off-centre at one fixed spot of the frame for the whole clip, so that the actor is inside with
 :data:`ACTOR_MARGIN` m to spare; when the 480 px are not enough the frame grows that way (up to
 :data:`MAX_SCREEN` px) and narrows across (to :data:`MIN_SIDE` of it at least), keeping about the plain view's
@@ -39,7 +39,7 @@ from typing import Any, Dict, List, Mapping, NamedTuple, Optional, Tuple, Union
 import gymnasium as gym
 import numpy as np
 
-from dv2s_gym.mining.behaviour import involved_actor
+from dv2s_gym.mining.interaction import key_actor
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, STALL_SPEED
 from envs.errors import DV2SError
 from envs.recording import VideoWriter
@@ -345,7 +345,7 @@ def _camera(trace, failure: Optional[Mapping[str, Any]], k: int, frequency: floa
     """The look-ahead view (:func:`clip_camera`) that holds the actor ``failure`` involves in the clip's frames
     (those up to the failure's frame, or through a stall)."""
     start, end = _window(trace, k, frequency, stall_seconds, settings, frames)
-    return clip_camera(trace, involved_actor(trace, failure), start, end)
+    return clip_camera(trace, key_actor(trace, failure) if failure else None, start, end)
 
 
 def _write_window(out_path: Path, frames: List[np.ndarray], trace, k: int, frequency: float,
