@@ -42,8 +42,50 @@ def scenario_metadata(name: str, bank_dir: Optional[PathLike] = None) -> Dict:
     return open_bank(bank_dir).get(name).sidecar.to_dict()
 
 
-def select_scenarios(selector: Union[None, str, Sequence[str]], bank_dir: Optional[PathLike] = None) -> List[str]:
-    """Bank names selected by ``None`` (all), a name, ``'tag:<tag>'`` or a list of those."""
+def _suggestions(bank: Bank, item: str) -> List[str]:
+    """Bank names ``item`` may have meant, at most three: a ``.scenic`` path's entry name if the bank holds it,
+    else names holding ``item`` as a part, then close spellings."""
+    stem = item.strip()
+    if stem.endswith(".scenic") or os.sep in stem or "/" in stem:
+        path = Path(stem)
+        stem = path.parent.name if path.name == "scenario.scenic" else path.stem
+    names = bank.names()
+    if stem in names:
+        return [stem]
+    lowered = stem.lower()
+    near = [n for n in names if lowered in n.lower()] if len(lowered) >= 3 else []
+    near += [n for n in difflib.get_close_matches(stem, names, n=3, cutoff=0.5) if n not in near]
+    return near[:3]
+
+
+def unknown_bank_name(bank: Bank, item: str, command: str) -> UnknownScenarioError:
+    """The error for ``item``, which ``command`` (a command taking bank names and ``tag:<tag>`` only) cannot
+    select: what the command accepts, and the bank's names it may have meant."""
+    near = _suggestions(bank, item)
+    accepts = (f"{command} --scenarios takes bank names and 'tag:<tag>' selections (`dv2s bank list` shows them "
+               "with their tags)")
+    if item in bank.problems:
+        what = f"scenario {item!r} in the bank at {bank.root} is unusable: {bank.problems[item]}. {accepts}."
+    elif item.strip().endswith(".scenic") or os.sep in item or "/" in item or "\n" in item:
+        what = (f"{accepts}, not Scenic files or text: {item[:200]!r} is not a name in the bank at {bank.root}. "
+                "Add a script to a bank first (`dv2s bank add PATH --description TEXT --bank FOLDER`), then pass "
+                "its name and that --bank.")
+    else:
+        what = f"the bank at {bank.root} holds no scenario {item!r}; {accepts}."
+    if near:
+        return UnknownScenarioError(f"{what} Did you mean {', '.join(repr(n) for n in near)}?")
+    shown = bank.names()[:3]
+    more = f" and {len(bank) - len(shown)} more" if len(bank) > len(shown) else ""
+    listing = f" The bank's scenarios: {', '.join(repr(n) for n in shown)}{more}." if shown else ""
+    return UnknownScenarioError(f"{what}{listing}")
+
+
+def select_scenarios(selector: Union[None, str, Sequence[str]], bank_dir: Optional[PathLike] = None,
+                     command: Optional[str] = None) -> List[str]:
+    """Bank names selected by ``None`` (all), a name, ``'tag:<tag>'`` or a list of those.
+
+    ``command`` names a command that takes bank names and tags only (``"dv2s mine"``): an unknown item's error
+    then says so (no ``.scenic`` paths or Scenic text) and suggests the bank's nearest names."""
     bank = open_bank(bank_dir)
     if selector is None:
         if not len(bank):
@@ -67,6 +109,8 @@ def select_scenarios(selector: Union[None, str, Sequence[str]], bank_dir: Option
                 )
             selected.extend(tagged)
         else:
+            if command is not None and item not in bank:
+                raise unknown_bank_name(bank, item, command)
             bank.get(item)
             selected.append(item)
     return list(dict.fromkeys(selected))

@@ -64,6 +64,36 @@ def test_bad_input_is_one_line(tmp_path, capsys, argv, message):
     assert not (tmp_path / "run").exists()  # refused input leaves no empty run folder behind
 
 
+@pytest.mark.parametrize("given, meant", [
+    ("nosuch", None),
+    ("lead_brak", "highway_lead_vehicle_brakes"),
+    (str(ROOT / "scenario_bank" / "scenarios" / "highway_cut_in_from_left" / "scenario.scenic"),
+     "highway_cut_in_from_left"),
+])
+def test_an_unknown_scenario_says_what_mine_takes_and_what_the_bank_holds(tmp_path, capsys, given, meant):
+    code, _, err = run(capsys, "mine", "--policy", "rule", "--budget", "4", "--no-convert", "--scenarios", given,
+                       "--out", tmp_path / "run", "--no-progress")
+    line = one_line_error(err)  # it offered "a path to a .scenic file, Scenic source text", which mine refuses
+    assert code == 2 and "dv2s mine --scenarios takes bank names and 'tag:<tag>'" in line
+    assert ".scenic file" not in line and "Scenic source text" not in line
+    if given.endswith(".scenic"):
+        assert "not Scenic files or text" in line and "dv2s bank add" in line
+    if meant:
+        assert f"Did you mean '{meant}'" in line
+    else:  # nothing close: a few of the bank's names instead
+        assert "Did you mean" not in line and "The bank's scenarios: 'highway_adjacent_car_drifts'" in line
+    assert not (tmp_path / "run").exists()
+
+
+def test_the_mining_api_refuses_an_unknown_scenario_the_same_way():
+    from scenario_bank import UnknownScenarioError
+    from dv2s_gym.mining.space import SceneSpace
+
+    with pytest.raises(UnknownScenarioError, match=r"dv2s mine --scenarios takes bank names.*Did you mean "
+                                                   r"'highway_lead_vehicle_brakes'"):
+        SceneSpace(["lead_brak"])
+
+
 def test_mining_a_bank_that_does_not_exist_names_it(tmp_path, capsys):
     code, _, err = run(capsys, "mine", "--policy", "rule", "--budget", "4", "--no-convert", "--bank",
                        tmp_path / "typo", "--out", tmp_path / "run", "--no-progress")

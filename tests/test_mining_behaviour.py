@@ -77,6 +77,24 @@ def test_failures_without_another_actor():
     assert extract_behaviour(empty, stall) == UNKNOWN
 
 
+def test_a_stall_names_the_car_the_ego_stood_behind_in_its_lane():
+    # the ego stands at x = 10; a car stopped 55 m ahead in its lane (beyond the stall's 40 m free path), another
+    # car cruising in the next lane: the stall is clustered with the stopped car, not with "none"
+    stall = {"type": "stall", "time": 1.0, "step": 5, "with": None, "kind": "stall"}
+    behind = _trace({"ego": lambda s: [10.0, 0.0, 0.0, 0.0], "car1": lambda s: [65.0, 0.5, 0.0, 0.0],
+                     "car2": _cruise(4.0, 20.0, x0=20.0)}, {"car1": "truck"})
+    assert extract_behaviour(behind, stall) == {"actor": "truck", "actor_manoeuvre": "stopped",
+                                                "ego_manoeuvre": "stopped"}
+    slowing = _trace({"ego": lambda s: [10.0, 0.0, 0.0, 0.0],
+                      "car1": lambda s: [60.0 + 0.2 * s, 0.0, 0.0, max(1.0, 8.0 - 2.0 * s)]})
+    assert extract_behaviour(slowing, stall) == {"actor": "car", "actor_manoeuvre": "braking",
+                                                 "ego_manoeuvre": "stopped"}
+    too_far = _trace({"ego": lambda s: [10.0, 0.0, 0.0, 0.0], "car1": lambda s: [10.0 + 85.0, 0.0, 0.0, 0.0]})
+    assert extract_behaviour(too_far, stall)["actor"] == "none"  # beyond WAITING_DISTANCE (80 m): a free road
+    records = [_record(0, "s", "stall", tuple(extract_behaviour(behind, stall).values()), [0.5])]
+    assert cluster_failures(records)[0] == "s/stall/truck-stopped/ego-stopped"
+
+
 def _record(index: int, scenario: str, kind: str, behaviour, point) -> dict:
     record = {"index": index, "scenario": scenario, "failure": {"type": kind.split(":")[0], "kind": kind},
               "point": point, "error": None}

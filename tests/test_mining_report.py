@@ -628,3 +628,29 @@ def test_every_reason_the_judge_rejected_a_conversion_for_is_in_the_reports(tmp_
     markdown, page = paths["markdown"].read_text(), paths["html"].read_text()
     for reason in reasons:
         assert reason in markdown and html.escape(reason, quote=True) in page, reason
+
+
+def test_each_kept_replay_entry_lists_the_parameters_its_replay_could_not_narrow(tmp_path):
+    run_dir = make_run(tmp_path / "run", clips=False)
+    lines = (run_dir / "conversions.jsonl").read_text().splitlines()
+    conversions = [json.loads(line) for line in lines]
+    why = "its distribution is not an interval the replay can narrow"
+    conversions[0].update(replay_entry="A_replay_1000", replay_not_narrowed={"weather": why, "lane": "a <choice>"})
+    conversions[1].update(replay_entry="B_replay_1004", replay_not_narrowed={})  # kept although its script was not
+    (run_dir / "conversions.jsonl").write_text("".join(json.dumps(c) + "\n" for c in conversions))
+    report = build_report(run_dir)
+    clusters = {c["id"]: c for c in report["clusters"]}
+    assert clusters[A_COLLISION]["replay_entry"] == "A_replay_1000"
+    assert clusters[A_COLLISION]["replay_not_narrowed"] == {"weather": why, "lane": "a <choice>"}
+    assert clusters[B_COLLISION]["replay_not_narrowed"] == {} and clusters[B_STALL]["replay_entry"] is None
+    saved = json.loads(json.dumps(report))  # what report.json holds
+    assert saved["clusters"][0]["replay_not_narrowed"]["weather"] == why
+    text = markdown(report)
+    section = text[text.index("### Exact replay entries"):]
+    assert (f"- `A_replay_1000` (cluster `{A_COLLISION}`): not narrowed: lane (a <choice>); weather ({why})"
+            in section)
+    assert f"- `B_replay_1004` (cluster `{B_COLLISION}`): every parameter narrowed" in section
+    page = write_html(report, tmp_path / "report.html", base=run_dir).read_text()
+    assert ("exact replay entry <code>A_replay_1000</code>: not narrowed (drawn as in the parent): "
+            "<code>lane</code> (a &lt;choice&gt;); <code>weather</code> (" + why + ")") in page
+    assert "exact replay entry <code>B_replay_1004</code>: every parameter narrowed" in page

@@ -104,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     from dv2s_gym.cli.name_checks import check_names
 
     check_names(policies=(args.policy, args.reference if args.reference != "none" else None),
-                scenarios=args.scenarios, bank=args.bank)  # a typo is reported before the slow imports
+                scenarios=args.scenarios, bank=args.bank, bank_names_only="dv2s mine")  # a typo is reported before the slow imports
     from dv2s_gym.mining.miner import mine
 
     env_config = env_config_option(args.config)

@@ -18,13 +18,16 @@ def _is_bank_selector(item: str) -> bool:
 
 
 def check_names(*, policies: Iterable[Optional[str]] = (), scenarios: Union[None, str, Sequence[str]] = None,
-                bank: Optional[str] = None) -> None:
+                bank: Optional[str] = None, bank_names_only: Optional[str] = None) -> None:
     """Raise the error the command would raise later for an unknown policy name or bank scenario/tag (the
-    scenarios of a ``bank`` folder that does not exist yet are left to the command)."""
+    scenarios of a ``bank`` folder that does not exist yet are left to the command). ``bank_names_only`` names
+    a command whose --scenarios are bank names and tags only (``"dv2s mine"``): every item is checked, and an
+    unknown one's error says what the command accepts."""
     for spec in policies:
         if spec:
             check_policy_spec(spec)
     items = [scenarios] if isinstance(scenarios, str) else list(scenarios or [])
-    names = [item.strip() for item in items if isinstance(item, str) and _is_bank_selector(item.strip())]
+    names = [item.strip() for item in items
+             if isinstance(item, str) and (bank_names_only or _is_bank_selector(item.strip()))]
     if names and (bank is None or os.path.isdir(bank)):  # a new --bank folder is made by the command (mine)
-        select_scenarios(names, bank)
+        select_scenarios(names, bank, command=bank_names_only)

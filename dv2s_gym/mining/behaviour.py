@@ -21,7 +21,9 @@ The manoeuvres are read from the :data:`WINDOW_SECONDS` before the failure step:
 
 Sideways motion is measured across the heading at the start of the window, so on a tight curve a
 long window can read as a lane change; the bank's roads are mostly straight or gently curved over
-two seconds. A failure without another actor (``off_road``, ``stall``) has actor ``"none"``.
+two seconds. A ``stall`` names the actor the ego stood behind (:func:`actor_ahead`: the nearest one ahead in
+the ego's lane, within :data:`WAITING_DISTANCE`, at the stall's start); a stall on a free road, and a failure
+without another actor (``off_road``), have actor ``"none"``.
 
 """
 
@@ -30,7 +32,7 @@ from __future__ import annotations
 import math
 from typing import Any, Dict, List, Mapping, Optional
 
-__all__ = ["extract_behaviour", "behaviour_of", "UNKNOWN", "WINDOW_SECONDS", "LATERAL_METRES",
+__all__ = ["extract_behaviour", "behaviour_of", "actor_ahead", "involved_actor", "WAITING_DISTANCE", "UNKNOWN", "WINDOW_SECONDS", "LATERAL_METRES",
            "BRAKING_DROP", "ACTOR_MANOEUVRES", "EGO_MANOEUVRES"]
 
 WINDOW_SECONDS = 2.0
@@ -43,6 +45,11 @@ STANDING = 0.5
 """m/s under which an actor stands (``envs.safety_metrics.STANDING_SPEED``)."""
 ACTOR_MANOEUVRES = ("crossing", "oncoming", "stopped", "cut_in", "lane_change", "braking", "steady", "none")
 EGO_MANOEUVRES = ("stopped", "lane_change", "braking", "keeping_lane")
+WAITING_DISTANCE = 80.0
+"""Metres ahead of a stalled ego within which an actor in its lane counts as the one it stood behind (twice the
+stall monitor's free path, :data:`envs.safety_metrics.FREE_PATH`: a stall's path is free that far)."""
+LANE_HALF_WIDTH = 2.0
+"""Metres to either side of the ego's heading line that count as its lane (half a 4 m lane)."""
 UNKNOWN = {"actor": "unknown", "actor_manoeuvre": "unknown", "ego_manoeuvre": "unknown"}
 """The behaviour of a failure whose record and trace cannot tell it."""
 
@@ -102,6 +109,41 @@ def _actor_manoeuvre(path: List[List[float]], ego_path: List[List[float]]) -> st
     return "steady"
 
 
+def actor_ahead(states: Mapping[str, List[float]], distance: float = WAITING_DISTANCE,
+                half_width: float = LANE_HALF_WIDTH) -> Optional[str]:
+    """The nearest actor of one step's ``states`` ahead of the ego in its lane: centre within ``distance`` m
+    ahead along the ego's heading and within ``half_width`` m of its heading line; ``None`` when none is."""
+    ego = states.get("ego")
+    if ego is None:
+        return None
+    c, s = math.cos(ego[2]), math.sin(ego[2])
+    best: Optional[tuple] = None
+    for name, state in states.items():
+        if name == "ego":
+            continue
+        dx, dy = state[0] - ego[0], state[1] - ego[1]
+        ahead, lateral = dx * c + dy * s, -dx * s + dy * c
+        if 0 < ahead <= distance and abs(lateral) < half_width and (best is None or (ahead, name) < best):
+            best = (ahead, name)
+    return best[1] if best else None
+
+
+def involved_actor(trace: Any, failure: Optional[Mapping[str, Any]]) -> Optional[str]:
+    """The other actor ``failure`` involves in ``trace``: the one it names (``with``), else for a stall the actor
+    the ego stood behind at the stall's start (:func:`actor_ahead`); ``None`` when there is none."""
+    if not failure:
+        return None
+    states = list(getattr(trace, "states", None) or [])
+    other = failure.get("with")
+    if other and other != "ego":
+        return str(other)
+    if failure.get("type") != "stall" or not states:
+        return None
+    step = failure.get("step")
+    step = len(states) - 1 if not isinstance(step, int) else max(0, min(len(states) - 1, step))
+    return actor_ahead(states[step])
+
+
 def extract_behaviour(trace: Any, failure: Optional[Mapping[str, Any]]) -> Optional[Dict[str, str]]:
     """The behaviour dict (module docstring) of ``failure`` (a ``Failure.to_json()`` dict) in ``trace``;
     ``None`` without a failure."""
@@ -115,10 +157,11 @@ def extract_behaviour(trace: Any, failure: Optional[Mapping[str, Any]]) -> Optio
     step = failure.get("step")
     step = len(states) - 1 if not isinstance(step, int) else max(0, min(len(states) - 1, step))
     ego_path = _window(states, "ego", step, steps)
-    other = failure.get("with")
-    if other and other != "ego":
+    other = involved_actor(trace, failure)
+    if other:
         kinds = getattr(trace, "kinds", None) or {}
-        actor = str(failure.get("with_kind") or kinds.get(other) or "car")
+        named = other == failure.get("with")
+        actor = str((failure.get("with_kind") if named else None) or kinds.get(other) or "car")
         manoeuvre = _actor_manoeuvre(_window(states, other, step, steps), ego_path)
     else:
         actor, manoeuvre = "none", "none"

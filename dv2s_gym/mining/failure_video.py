@@ -7,7 +7,16 @@ trace (:class:`~envs.trace.EpisodeTrace` or its file) is replayed with its own a
 (:func:`envs.replay.replay_trace`, every actor state checked). The frames from ``before``
 seconds before the failure through ``after`` seconds after it are written as a VP8 ``.webm``
 (:class:`envs.recording.VideoWriter`) at the policy frequency, in the style the ``bev`` Driving
-Record Analyzer reads (ego-centred, north up, 5.5 px/m).
+Record Analyzer reads (the camera follows the ego, north up, 5.5 px/m).
+
+The frame covers the actor the failure involves (:func:`dv2s_gym.mining.interaction.key_actor`, the actor the
+conversion's description and judge name: the failure's partner, or for a stall the one ahead in the ego's
+lane): a 480 x 480 px view holds about 44 m around the ego, so when that actor is farther off in the clip's frames the view looks ahead (:func:`clip_camera`): at the same scale, the ego
+sits off-centre at one fixed spot of the frame for the whole clip, so that the actor is inside with
+:data:`ACTOR_MARGIN` m to spare; when the 480 px are not enough the frame grows that way (up to
+:data:`MAX_SCREEN` px) and narrows across (to :data:`MIN_SIDE` of it at least), keeping about the plain view's
+pixel count: the analyzer reads frames under a pixel budget, measures the scale from the vehicles' size and finds
+the ego at its fixed spot.
 
 A ``stall`` failure's time is when the ego starts standing, so its clip covers the stall: from
 ``before`` seconds before it starts through its last standing frame (at most ``stall_seconds``, the
@@ -30,6 +39,7 @@ from typing import Any, Dict, List, Mapping, NamedTuple, Optional, Tuple, Union
 import gymnasium as gym
 import numpy as np
 
+from dv2s_gym.mining.interaction import key_actor
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, STALL_SPEED
 from envs.errors import DV2SError
 from envs.recording import VideoWriter
@@ -38,7 +48,7 @@ from envs.trace import EpisodeTrace, TraceMismatchError
 from policies.evaluation import run_episode, make_eval_env
 from policies.registry import load_policy
 
-__all__ = ["FailureReplayError", "FailureVideo", "VIDEO_CONFIG", "VideoSettings", "failure_step",
+__all__ = ["FailureReplayError", "FailureVideo", "VIDEO_CONFIG", "VideoSettings", "clip_camera", "failure_step",
            "record_failure_video", "rerun_failure", "stall_end", "write_failure_video", "write_script_episode_video"]
 
 VIDEO_CONFIG: Dict[str, Any] = {"screen_width": 480, "screen_height": 480, "scaling": 5.5,
@@ -46,7 +56,72 @@ VIDEO_CONFIG: Dict[str, Any] = {"screen_width": 480, "screen_height": 480, "scal
 """Rendering settings of failure videos (those of the shipped evaluation clips the ``bev`` DRA was built on).
 They change only the pixels, never the trajectory."""
 
+ACTOR_MARGIN = 8.0
+"""Metres kept between the filmed actor's centre and the frame's edge (a car's length and more)."""
+BEHIND = 12.0
+"""Metres on the ego's other side (and around it) a look-ahead view keeps at least."""
+MIN_SIDE = 0.6
+"""The share of the plain view's extent a grown view keeps across the way it grew (at least)."""
+MAX_SCREEN = 1280
+"""The largest side (px) a look-ahead view grows to (about 230 m at 5.5 px/m)."""
+
 PathLike = Union[str, os.PathLike]
+
+
+def _span(offsets: List[float], default: float, limit: float) -> Tuple[float, float]:
+    """``(low, size)`` in metres of one axis of the view holding 0 (the ego, with :data:`BEHIND` m around it) and
+    every offset (with :data:`ACTOR_MARGIN` m to spare): the plain view's ``default`` metres, centred on the ego
+    when that holds them, else shifted only as far as needed (as much of the plain view kept as fits); wider
+    than ``default`` only when it must be, up to ``limit`` (the farther side first)."""
+    low = min([-BEHIND] + [o - ACTOR_MARGIN for o in offsets])
+    high = max([BEHIND] + [o + ACTOR_MARGIN for o in offsets])
+    if high - low <= default:
+        if high > default / 2:
+            return high - default, default
+        return min(low, -default / 2), default
+    if high - low <= limit:
+        return low, high - low
+    return (-BEHIND, limit) if high >= -low else (BEHIND - limit, limit)
+
+
+def _narrowed(offsets: List[float], default: float, size: float) -> Tuple[float, float]:
+    """``(size, low)`` of an axis narrowed from ``default`` to ``size`` metres (no less than what it must hold:
+    the ego and the offsets with their margins), centred on what it must hold."""
+    low = min([-BEHIND] + [o - ACTOR_MARGIN for o in offsets])
+    high = max([BEHIND] + [o + ACTOR_MARGIN for o in offsets])
+    size = min(default, max(size, high - low))
+    middle = 0.0 if -size / 2 <= low and high <= size / 2 else (low + high) / 2
+    return size, middle - size / 2
+
+
+def clip_camera(trace, actor: Optional[str], first: int, last: int,
+                base: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
+    """The rendering settings (``screen_width``, ``screen_height``, ``centering_position``) of a view that holds
+    ``actor`` in frames ``first`` to ``last`` of ``trace`` (those it has; 0 = the reset) at ``base``'s scale
+    (default :data:`VIDEO_CONFIG`); ``{}`` (the plain ego-centred view) when there is no such actor or the plain
+    view already holds it. The ego keeps one spot of the frame in the whole clip."""
+    base = {**VIDEO_CONFIG, **dict(base or {})}
+    states = list(getattr(trace, "states", None) or [])[max(0, first): max(0, last) + 1]
+    offsets = [(s[actor][0] - s["ego"][0], s[actor][1] - s["ego"][1])
+               for s in states if actor and actor in s and "ego" in s]
+    if not offsets:
+        return {}
+    scaling = float(base["scaling"])
+    width_m, height_m = base["screen_width"] / scaling, base["screen_height"] / scaling
+    x0, w = _span([o[0] for o in offsets], width_m, MAX_SCREEN / scaling)
+    y0, h = _span([o[1] for o in offsets], height_m, MAX_SCREEN / scaling)
+    if (x0, w, y0, h) == (-width_m / 2, width_m, -height_m / 2, height_m):
+        return {}
+    # a view grown along one axis gives up some of the other one's plain extent (down to MIN_SIDE of it, never
+    # what it must hold): the describing reads frames under a pixel budget, so a larger frame draws smaller cars
+    area = width_m * height_m
+    if w > width_m and h <= height_m:
+        h, y0 = _narrowed([o[1] for o in offsets], height_m, max(MIN_SIDE * height_m, area / w))
+    elif h > height_m and w <= width_m:
+        w, x0 = _narrowed([o[0] for o in offsets], width_m, max(MIN_SIDE * width_m, area / h))
+    width, height = 2 * int(math.ceil(w * scaling / 2)), 2 * int(math.ceil(h * scaling / 2))  # even: VP8's frames
+    return {"screen_width": width, "screen_height": height,
+            "centering_position": [round(-x0 * scaling / width, 6), round(-y0 * scaling / height, 6)]}
 
 
 class FailureReplayError(DV2SError, ValueError):
@@ -128,17 +203,19 @@ class _LastObservation(gym.Wrapper):
 
 def rerun_failure(record: Mapping[str, Any], *, policy: Any, bank_dir: Optional[PathLike] = None,
                   env_config: Optional[Mapping[str, Any]] = None, render: bool = False,
-                  extra_steps: int = 0) -> Tuple[Any, Any, List[np.ndarray]]:
+                  extra_steps: int = 0, camera: Optional[Mapping[str, Any]] = None) -> Tuple[Any, Any, List[np.ndarray]]:
     """Re-run an episode record with ``policy`` (a spec or a :class:`~policies.registry.Policy`).
 
     Returns ``(EpisodeResult, EpisodeTrace, frames)``; frames (when ``render``) hold the reset and every
-    step, then ``extra_steps`` more steps driven past the episode's end. Raises
-    :class:`FailureReplayError` when the trajectory hash differs from the record's.
+    step, then ``extra_steps`` more steps driven past the episode's end, drawn with :data:`VIDEO_CONFIG` and
+    ``camera`` (:func:`clip_camera`) on top. Raises :class:`FailureReplayError` when the trajectory hash differs
+    from the record's.
     """
     _check_record(record)
     config = dict(env_config or {})
     if render:
         config.update(VIDEO_CONFIG)
+        config.update(camera or {})
     env = make_eval_env([record["scenario"]], config=config, bank_dir=str(bank_dir) if bank_dir else None,
                         render_mode="rgb_array" if render else None)
     expected = record["result"]["trajectory_hash"]
@@ -181,10 +258,10 @@ def _checked_run(env, policy: Any, scene: _Scene, render: bool, extra_steps: int
         env.close()
 
 
-def _replay_trace_frames(trace) -> List[np.ndarray]:
+def _replay_trace_frames(trace, camera: Optional[Mapping[str, Any]] = None) -> List[np.ndarray]:
     from envs.replay import replay_trace
 
-    config = {**trace.config, **VIDEO_CONFIG}
+    config = {**trace.config, **VIDEO_CONFIG, **dict(camera or {})}
     frames: List[np.ndarray] = []
     try:
         env, _ = replay_trace(dataclasses.replace(trace, config=config), render_mode="rgb_array", frames=frames)
@@ -255,14 +332,28 @@ def record_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike
     return write_failure_video(record_or_trace, out_path, settings, trace_path=trace_path, **options).path
 
 
+def _window(trace, k: int, frequency: float, stall_seconds: Optional[float], settings: VideoSettings,
+            frames: int) -> Tuple[int, int]:
+    """The first and last frame of the clip around frame ``k`` (:func:`_write_window`) of ``frames`` frames."""
+    start = max(0, k - int(round(settings.before * frequency)))
+    last = stall_end(trace, k, int(math.ceil(stall_seconds * frequency))) if stall_seconds is not None else k
+    return start, min(frames - 1, last + int(round(settings.after * frequency)))
+
+
+def _camera(trace, failure: Optional[Mapping[str, Any]], k: int, frequency: float, stall_seconds: Optional[float],
+            settings: VideoSettings, frames: int) -> Dict[str, Any]:
+    """The look-ahead view (:func:`clip_camera`) that holds the actor ``failure`` involves in the clip's frames
+    (those up to the failure's frame, or through a stall)."""
+    start, end = _window(trace, k, frequency, stall_seconds, settings, frames)
+    return clip_camera(trace, key_actor(trace, failure) if failure else None, start, end)
+
+
 def _write_window(out_path: Path, frames: List[np.ndarray], trace, k: int, frequency: float,
                   stall_seconds: Optional[float], settings: VideoSettings) -> Tuple[int, int]:
     """Write the frames (``frequency`` per second) from ``before`` seconds before frame ``k`` to ``after`` seconds
     after it (after the stall's end when ``stall_seconds`` is given) to ``out_path``. Returns the first and last
     frame written."""
-    start = max(0, k - int(round(settings.before * frequency)))
-    last = stall_end(trace, k, int(math.ceil(stall_seconds * frequency))) if stall_seconds is not None else k
-    end = min(len(frames) - 1, last + int(round(settings.after * frequency)))
+    start, end = _window(trace, k, frequency, stall_seconds, settings, len(frames))
     out_path.parent.mkdir(parents=True, exist_ok=True)
     with VideoWriter(out_path, fps=frequency) as video:
         for frame in frames[start:end + 1]:
@@ -281,7 +372,7 @@ def write_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike]
     if isinstance(record_or_trace, Mapping):
         clip = _record_clip(record_or_trace, settings, stall_seconds)
     else:
-        clip = _trace_clip(record_or_trace)
+        clip = _trace_clip(record_or_trace, settings)
     frames, result, trace, frequency, k, stall = clip
     start, end = _write_window(out_path, frames, trace, k, frequency, stall_seconds if stall else None,
                                settings)
@@ -310,15 +401,22 @@ def _record_clip(record: Mapping[str, Any], settings: VideoSettings, stall_secon
     stall = (record.get("failure") or {}).get("type") == "stall"
     span = int(math.ceil(stall_seconds * frequency)) if stall else 0  # an upper bound of the stall's frames
     end = k + span + int(round(settings.after * frequency))
-    result, trace, frames = rerun_failure(record, policy=settings.policy, bank_dir=settings.bank_dir,
-                                          env_config=settings.env_config, render=True,
-                                          extra_steps=max(0, end - steps))
-    frequency = _frequency(trace.config)
-    k = failure_step(record.get("failure"), len(trace.actions), frequency)
+    camera: Dict[str, Any] = {}
+    for attempt in range(2):  # the plain view, then (when the actor is out of it) the look-ahead view
+        result, trace, frames = rerun_failure(record, policy=settings.policy, bank_dir=settings.bank_dir,
+                                              env_config=settings.env_config, render=True,
+                                              extra_steps=max(0, end - steps), camera=camera)
+        frequency = _frequency(trace.config)
+        k = failure_step(record.get("failure"), len(trace.actions), frequency)
+        wanted = _camera(trace, record.get("failure"), k, frequency, stall_seconds if stall else None, settings,
+                         len(frames))
+        if wanted == camera or attempt:  # the actor is in view (the second run's trace is the first's: same hash)
+            break
+        camera = wanted
     return frames, result, trace, frequency, k, stall
 
 
-def _trace_clip(source: Any) -> tuple:
+def _trace_clip(source: Any, settings: VideoSettings) -> tuple:
     """``(frames, None, trace, frequency, failure frame, False)`` of a saved trace (or its file), replayed with its
     recorded actions."""
     trace = source if isinstance(source, EpisodeTrace) else None
@@ -327,9 +425,24 @@ def _trace_clip(source: Any) -> tuple:
             trace = EpisodeTrace.load(source)
         except (OSError, ValueError) as error:
             raise FailureReplayError(f"cannot read the failure trace {source}: {error}") from None
-    frames = _replay_trace_frames(trace)
     frequency = _frequency(trace.config)
-    return frames, None, trace, frequency, failure_step(_trace_failure(trace), len(trace.actions), frequency), False
+    failure = _trace_failure(trace)
+    k = failure_step(failure, len(trace.actions), frequency)
+    failure = {**(failure or {}), **_trace_failure_actor(trace)}
+    camera = _camera(trace, failure, k, frequency, None, settings, len(trace.states))
+    frames = _replay_trace_frames(trace, camera)
+    return frames, None, trace, frequency, k, False
+
+
+def _trace_failure_actor(trace) -> Dict[str, Any]:
+    """``{"with": actor}`` of the trace's first ego collision (the other actor), ``{}`` without one."""
+    for event in trace.events:
+        if event.get("kind") == "collision" and "ego" in event.get("actors", []):
+            others = [a for a in event.get("actors", []) if a != "ego"]
+            return {"with": others[0]} if others else {}
+        if event.get("kind") == "off_road":
+            return {}
+    return {}
 
 
 def write_script_episode_video(script_path: PathLike, episode: Mapping[str, Any], out_path: PathLike,
@@ -363,11 +476,17 @@ def write_script_episode_video(script_path: PathLike, episode: Mapping[str, Any]
          else max(0, min(episode_steps, episode_steps if centre is None else int(centre))))
     span = int(math.ceil(stall_seconds * frequency)) if stall else 0  # an upper bound of the stall's frames
     end = k + span + int(round(settings.after * frequency))
-    env = DV2SEnv(scenario=str(script_path), config=config, render_mode="rgb_array")
-    result, trace, frames = _checked_run(
-        env, settings.policy, _Scene(name, seed, {}), True, max(0, end - episode_steps), trajectory_hash,
-        lambda got: (f"the rendered run of {script_path} (seed {seed}) diverged from its episode: trajectory hash "
-                     f"{got[:12]} != {str(trajectory_hash)[:12]}"))
+    camera: Dict[str, Any] = {}
+    for attempt in range(2):  # the plain view, then (when the actor is out of it) the look-ahead view
+        env = DV2SEnv(scenario=str(script_path), config={**config, **camera}, render_mode="rgb_array")
+        result, trace, frames = _checked_run(
+            env, settings.policy, _Scene(name, seed, {}), True, max(0, end - episode_steps), trajectory_hash,
+            lambda got: (f"the rendered run of {script_path} (seed {seed}) diverged from its episode: trajectory "
+                         f"hash {got[:12]} != {str(trajectory_hash)[:12]}"))
+        wanted = _camera(trace, failure, k, frequency, stall_seconds if stall else None, settings, len(frames))
+        if wanted == camera or attempt:
+            break
+        camera = wanted
     start, stop = _write_window(out_path, frames, trace, k, frequency, stall_seconds if stall else None,
                                settings)
     return FailureVideo(out_path, None, start, stop, k, frequency, result, trace)

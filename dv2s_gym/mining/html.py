@@ -363,6 +363,12 @@ def _cards(clusters: Sequence[Mapping[str, Any]], videos: _Videos, base: Path,
                  f"conversion: {_status(c)}" + (f", bank entry <code>{escape(c['bank_entry'])}</code>"
                                                 if c.get("bank_entry") else ""),
                  f"reproduction: {escape(_reproduction(c))}; E2E-SC {escape(fmt(c.get('e2e_sc'), 3))}"]
+        if c.get("replay_entry"):
+            missed = c.get("replay_not_narrowed") or {}
+            facts.append(f"exact replay entry <code>{escape(c['replay_entry'])}</code>: " + (
+                "every parameter narrowed around the failing values" if not missed else
+                "not narrowed (drawn as in the parent): " + "; ".join(
+                    f"<code>{escape(name)}</code> ({escape(why)})" for name, why in sorted(missed.items()))))
         if c.get("reason"):
             facts.append(f"reason: {escape(c['reason'])}")
         if c.get("status") in ("kept", "merged") and not c.get("converted_video"):

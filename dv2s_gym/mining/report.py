@@ -70,7 +70,9 @@ so its interval is a guide, not an exact guarantee.
 {"values"}}`` (the parameter region its failures cover), ``"collision_types", "with_kinds",
 "representative": Failure, "video": path relative to the run folder | null, "converted_video": the clip of the
 converted script driven by the policy (one reproduction episode; ``reproduction["clip"]`` says which) | null, "status":
-"kept" | "merged" | "rejected" | "not converted", "reason", "bank_entry", "merged_into",
+"kept" | "merged" | "rejected" | "not converted", "reason", "bank_entry", "merged_into", "replay_entry": the
+exact replay entry the conversion kept | null, "replay_not_narrowed": ``{parameter: why}`` of those its replay
+draws as the parent does ({} when every one was narrowed, or without a replay entry),
 "reproduction": the conversion's record | null, "reproduction_rate", "e2e_sc", "description",
 "script", "conversion": the conversion record | null}``. A conversion belongs to the cluster
 of its representative episode (``index``); its own ``cluster`` id is kept in the record.
@@ -397,6 +399,8 @@ def _cluster_entry(cluster_id: str, members: Sequence[Dict[str, Any]],
         "reason": (conversion or {}).get("reason"),
         "bank_entry": (conversion or {}).get("bank_entry"),
         "merged_into": (conversion or {}).get("merged_into"),
+        "replay_entry": (conversion or {}).get("replay_entry"),
+        "replay_not_narrowed": dict((conversion or {}).get("replay_not_narrowed") or {}),
         "reproduction": reproduction,
         "reproduction_rate": (reproduction or {}).get("rate") if isinstance(reproduction, Mapping) else None,
         "e2e_sc": (conversion or {}).get("e2e_sc"),
@@ -785,9 +789,27 @@ def _converted_lines(report: Mapping[str, Any]) -> List[str]:
                          f"{c.get('script') or '-'}")
             if c.get("description"):
                 lines.append(f"  > {_cell(c['description'])}")
+    lines += _replay_entry_lines(converted)
     if counts.get("parameters_compared") or counts.get("parameters_not_compared"):
         lines += ["", parameter_check_text(counts) + " (each conversion record lists the parameters not compared, "
                       "with why, under `parameters.not_comparable`)."]
+    return lines
+
+
+def _replay_entry_lines(converted: Sequence[Mapping[str, Any]]) -> List[str]:
+    """The exact replay entries the conversions kept in the bank, each with the parameters its replay could not
+    narrow around the failing values (drawn as the parent draws them) and why."""
+    kept = [c for c in converted if c.get("replay_entry")]
+    if not kept:
+        return []
+    lines = ["", "### Exact replay entries", "",
+             "Each replays its failing scene with the parent's parameters narrowed around the failing values; the "
+             "parameters listed could not be narrowed and are drawn as in the parent.", ""]
+    for c in kept:
+        missed = c.get("replay_not_narrowed") or {}
+        lines.append(f"- `{_cell(c['replay_entry'])}` (cluster `{_cell(c['id'])}`): "
+                     + ("every parameter narrowed" if not missed else "not narrowed: " + "; ".join(
+                         f"{_cell(name)} ({_cell(why)})" for name, why in sorted(missed.items()))))
     return lines
 
 

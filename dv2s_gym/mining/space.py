@@ -50,7 +50,10 @@ class SceneSpace:
 
     def __init__(self, scenarios: Optional[Sequence[str]] = None, bank_dir: Optional[str] = None) -> None:
         from envs.dv2s_env import resolve_scenarios
+        from scenario_bank import select_scenarios
 
+        if scenarios:  # bank names and tags only: an unknown one's error says so, with the bank's near names
+            select_scenarios(list(scenarios), bank_dir, command="dv2s mine")
         refs = resolve_scenarios(list(scenarios) if scenarios else None, bank_dir)
         if not refs:
             raise MiningError("no scenarios to mine: the selection is empty; check --scenarios and --bank")
