@@ -96,6 +96,7 @@ class CompiledScenario:
 
         random.seed(seed)
         np.random.seed(seed % (2**32))
+        self._restart_external_sampler(seed)
         restore = self._condition(params or {})
         try:
             scene, self.last_iterations = self.scenario.generate(maxIterations=max_iterations, verbosity=0)
@@ -110,6 +111,21 @@ class CompiledScenario:
         finally:
             restore()
         return scene
+
+    def _restart_external_sampler(self, seed: int) -> None:
+        """Give the script's external parameters (``VerifaiRange`` ...) a sampler decided by ``seed`` alone.
+
+        Scenic keeps one external sampler per compiled scenario, and its default (VerifAI's Halton sequence)
+        hands out the next point of the sequence at each draw: the values would depend on how many scenes the
+        compiled (and cached) scenario gave before in this process. A fresh sampler per scene, built after the
+        seeding, with a Halton sequence started at ``seed``, makes the same (script, seed) the same scene in any
+        process and order; consecutive seeds still walk the Halton sequence."""
+        scenario = self.scenario
+        if not getattr(scenario, "externalParams", None):
+            return
+        scenario.resetExternalSampler()
+        for halton in _halton_samplers(scenario.externalSampler):
+            halton.sample_index += int(seed) % _HALTON_START_PERIOD
 
     def _condition(self, params: Dict[str, Any]):
         """Condition global parameters to constants; returns the function that undoes it."""
@@ -143,6 +159,7 @@ class CompiledScenario:
 
         random.seed(seed)
         np.random.seed(seed % (2**32))
+        self._restart_external_sampler(seed)
         reasons: Counter = Counter()
         scenario = self.scenario
         for _ in range(trials):
@@ -157,6 +174,36 @@ class CompiledScenario:
             if rejection is not None:
                 reasons[_short(str(rejection))] += 1
         return reasons
+
+
+_HALTON_START_PERIOD = 2**31
+"""Seeds start the Halton sequence of external parameters at ``seed`` modulo this."""
+
+
+def _halton_samplers(sampler: Any) -> List[Any]:
+    """The VerifAI Halton samplers inside Scenic's external ``sampler`` (a VerifAI feature sampler wraps
+    per-domain samplers, which may split into further ones)."""
+    from verifai.samplers.halton import HaltonSampler
+
+    found: List[Any] = []
+    pending, seen = [sampler], set()
+    while pending:
+        current = pending.pop()
+        if current is None or id(current) in seen:
+            continue
+        seen.add(id(current))
+        if isinstance(current, HaltonSampler):
+            found.append(current)
+            continue
+        for attribute in ("sampler", "domainSampler", "lengthSampler", "samplers"):
+            inner = getattr(current, attribute, None)
+            if isinstance(inner, dict):
+                pending.extend(inner.values())
+            elif isinstance(inner, (list, tuple)):
+                pending.extend(inner)
+            elif inner is not None and not isinstance(inner, (str, int, float)):
+                pending.append(inner)
+    return found
 
 
 @dataclass(frozen=True)

@@ -181,3 +181,19 @@ def test_a_backend_that_does_not_stream_runs_the_window_call_by_call_to_the_same
     run = mine(POLICY, out=tmp_path / "chunked", workers=2, **RUN)
     assert _stable(run.records) == _stable(whole.records)
     assert _ChunkOnly.calls >= 12 // 4
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sampler", ["novelty-bandit", "random"])
+def test_without_a_batch_one_and_two_workers_write_the_same_episodes(sampler, tmp_path):
+    """The seed decides the run whatever the number of workers: the default window (adaptive samplers) or chunk
+    (random) is not sized by the workers."""
+    run = dict(RUN, batch=None, sampler=sampler, budget=10)
+    one = mine(POLICY, out=tmp_path / "one", workers=1, **run)
+    two = mine(POLICY, out=tmp_path / "two", workers=2, **run)
+    settings = [json.loads((out / "settings.json").read_text()) for out in (tmp_path / "one", tmp_path / "two")]
+    assert settings[0] == settings[1]
+    assert settings[0]["schedule"] == ("window" if sampler == "novelty-bandit" else "chunks")
+    assert [r["index"] for r in two.records] == list(range(10))
+    lines = [sorted((out / "episodes.jsonl").read_text().splitlines()) for out in (tmp_path / "one", tmp_path / "two")]
+    assert lines[0] == lines[1]

@@ -82,7 +82,8 @@ def add_parser(subparsers) -> None:
                    help="seconds one episode may take before its worker counts as hung (default 600)")
     p.add_argument("--batch", type=int, default=None,
                    help="scenes drawn ahead of the outcomes fed back to the sampler: the sliding window of an "
-                        "adaptive sampler, the chunk of random/halton (default 4 per worker)")
+                        "adaptive sampler, the chunk of random/halton; with the seed it decides the run, whatever "
+                        "the workers (default 8: raise it to keep more than 8 workers busy)")
     p.add_argument("--config", help="DV2S-v0 config overrides as JSON (or a .json file)")
     p.add_argument("--no-convert", action="store_true", help="only find and cluster failures; add nothing to a bank")
     p.add_argument("--max-conversions", type=int, default=None,

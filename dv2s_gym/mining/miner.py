@@ -60,7 +60,7 @@ from dv2s_gym.mining.monitors import MonitorSettings
 from dv2s_gym.mining.report import write_reports
 from dv2s_gym.mining.report_text import error_warning
 from dv2s_gym.mining.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
-from dv2s_gym.mining.settings import FEEDBACKS, MineSettings, read_run_settings, RunSettings, SETTINGS_FILE
+from dv2s_gym.mining.settings import DEFAULT_BATCH, FEEDBACKS, MineSettings, read_run_settings, RunSettings, SETTINGS_FILE
 from dv2s_gym.mining.tasks import MINE
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
 from dv2s_gym.mining.write_errors import from_os_error, is_write_failure, run_write_error
@@ -540,7 +540,7 @@ def _mine_in(out: Path, started: float, policy: str, settings: MineSettings, wor
     n_workers = int(workers.workers) if workers.workers else (
         1 if workers.backend == "local" and default_workers() < 2 else default_workers())
     with _run_lock(out):
-        recorded, space = _open_run(out, policy, settings, bank_dir, n_workers, origin)
+        recorded, space = _open_run(out, policy, settings, bank_dir, origin)
         done = {int(r["index"]): r for r in read_records(out / "episodes.jsonl")}
         _run_episodes(out, recorded, space, done, workers, n_workers, progress)
         records = [done[i] for i in sorted(done) if i < settings.budget]
@@ -556,13 +556,13 @@ def _mine_in(out: Path, started: float, policy: str, settings: MineSettings, wor
     return run
 
 
-def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional[str], n_workers: int,
+def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional[str],
               origin: Optional[Mapping[str, Any]]) -> tuple:
     """``(settings.json's content, the scene space)`` of the run in ``out``: a new run's settings, or a resumed
     run's checked against the ones asked (its own scenarios and batch when none are asked); written back."""
     settings_path = out / SETTINGS_FILE
     saved = _read_settings(out)
-    batch = settings.batch or (saved["batch"] if saved else 4 * n_workers)
+    batch = settings.batch or (saved["batch"] if saved else DEFAULT_BATCH)  # never the workers: the seed decides the run
     if saved is not None:  # a changed seed, policy, ... is refused before the space is built, not minutes later
         before_space = _settings(policy, settings, batch, saved["scenarios"], bank_dir, {})
         _check_resume(saved, before_space, out, [key for key in _RESUME_KEYS if key not in _SPACE_KEYS])

@@ -15,7 +15,7 @@ from scenario_bank.field_checks import (check_bool, check_int, check_mapping, ch
                                         check_number, check_path, check_text)
 from scenario_bank.run_identity import recorded_settings, resume_keys, setting
 
-__all__ = ["FEEDBACKS", "MineSettings", "SETTINGS_FILE", "RunSettings", "read_run_settings"]
+__all__ = ["DEFAULT_BATCH", "FEEDBACKS", "MineSettings", "SETTINGS_FILE", "RunSettings", "read_run_settings"]
 
 SETTINGS_FILE = "settings.json"
 """The file of a mining run folder that records what the run mines (:meth:`MineSettings.recorded` and the run's
@@ -33,6 +33,12 @@ timing at the failure) is farther than :data:`~dv2s_gym.mining.failure_state.NOV
 failure's in the same scenario. ``cluster-novelty``: a failure is fed as one only when its behaviour cluster
 (:func:`~dv2s_gym.mining.cluster.cluster_id`, the key the reports group failures by) is new to the run; a
 failure in a cluster already found is fed as an easy scene."""
+
+
+DEFAULT_BATCH = 8
+"""Scenes drawn ahead of the outcomes fed back when ``--batch`` is not given. It is part of what the seed decides (an
+adaptive sampler draws each scene after the outcomes of all but the last ``batch`` ones), so it is the same for any
+number of workers: a run with more workers than this keeps the extra ones idle unless ``--batch`` is raised."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -64,7 +70,7 @@ class MineSettings:
     reference: Optional[str] = "rule"
     """The driver that decides avoidability (``None``: skip the check)."""
     batch: Optional[int] = None
-    """Scenes drawn ahead of the outcomes fed back (default 4 per worker, or a resumed run's own)."""
+    """Scenes drawn ahead of the outcomes fed back (default :data:`DEFAULT_BATCH`, or a resumed run's own)."""
     env_config: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     """DV2S-v0 config overrides."""
     ttc_threshold: float = DEFAULT_TTC_THRESHOLD
@@ -100,7 +106,7 @@ class MineSettings:
         object.__setattr__(self, "env_config", dict(self.env_config or {}))
         if self.batch == 0 and not isinstance(self.batch, bool):  # as the command line has always read it: the default
             object.__setattr__(self, "batch", None)
-        check_int(MiningError, "--batch", self.batch, low=1, optional=True, none_means="4 per worker")
+        check_int(MiningError, "--batch", self.batch, low=1, optional=True, none_means=f"{DEFAULT_BATCH}")
         check_bool(MiningError, "convert (--no-convert)", self.convert)
         check_mapping(MiningError, "convert_options", self.convert_options, optional=True,
                       what="keyword arguments of convert_failure")
