@@ -20,6 +20,7 @@ from typing import Any, Dict, List, Optional, Sequence
 
 from dv2s_gym.mining.errors import MiningError
 from envs.jailed_env import parameter_ranges_of
+from scenario_bank import select_scenarios
 
 __all__ = ["SceneSpec", "SceneSpace", "IGNORED_PARAMS"]
 
@@ -50,7 +51,6 @@ class SceneSpace:
 
     def __init__(self, scenarios: Optional[Sequence[str]] = None, bank_dir: Optional[str] = None) -> None:
         from envs.dv2s_env import resolve_scenarios
-        from scenario_bank import select_scenarios
 
         if scenarios:  # bank names and tags only: an unknown one's error says so, with the bank's near names
             select_scenarios(list(scenarios), bank_dir, command="dv2s mine")
