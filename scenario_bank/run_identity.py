@@ -56,6 +56,7 @@ Defaults = Union[type, Mapping[str, Any], None]
 """What a setting absent from a record compares as: a settings dataclass (its fields' defaults,
 :func:`setting_defaults`), a mapping of setting to default (recorded JSON values), or ``None`` (no defaults)."""
 
+
 def _defaults_mapping(defaults: Defaults) -> Mapping[str, Any]:
     if defaults is None:
         return {}

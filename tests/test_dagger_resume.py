@@ -137,25 +137,30 @@ def test_a_killed_dagger_run_resumes_to_the_same_model_and_refuses_other_setting
     assert not (out / CHECKPOINT_DIR).exists()
 
 
+def _kill_at_partial_commit(monkeypatch, out, run: dict, call: int) -> None:
+    """Run a DAgger fine-tuning into ``out`` and kill it (KeyboardInterrupt) at its ``call``-th partial commit."""
+    original, calls = DAggerCheckpoint.save_partial, [0]
+
+    def save_partial(self, *args, **kwargs):
+        calls[0] += 1
+        if calls[0] == call:
+            raise KeyboardInterrupt
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(DAggerCheckpoint, "save_partial", save_partial)
+    with pytest.raises(KeyboardInterrupt):
+        dagger_fine_tune("dv2s-ppo", out=out, log=lambda _: None, **run)
+    monkeypatch.undo()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("killed_at_call, position", [(3, (0, 120)), (6, (1, 120))])
 def test_a_run_killed_while_collecting_resumes_from_its_last_partial_commit(tmp_path, monkeypatch, killed_at_call,
                                                                              position):
     whole = dagger_fine_tune("dv2s-ppo", out=tmp_path / "whole", log=lambda _: None, **RUN)
     run = {**RUN, "checkpoint_every": 60}  # partial commits at 60, 120, 180 steps of each 220-step iteration
-    original, calls = DAggerCheckpoint.save_partial, [0]
-
-    def save_partial(self, *args, **kwargs):
-        calls[0] += 1
-        if calls[0] == killed_at_call:  # killed mid-collection, 60 steps after the last partial commit
-            raise KeyboardInterrupt
-        original(self, *args, **kwargs)
-
-    monkeypatch.setattr(DAggerCheckpoint, "save_partial", save_partial)
     out = tmp_path / "killed"
-    with pytest.raises(KeyboardInterrupt):
-        dagger_fine_tune("dv2s-ppo", out=out, log=lambda _: None, **run)
-    monkeypatch.undo()
+    _kill_at_partial_commit(monkeypatch, out, run, killed_at_call)  # mid-collection, 60 steps after the last commit
     assert checkpoint_position(out) == position
     assert [p.name for p in (out / CHECKPOINT_DIR).glob("partial_*")] == [f"partial_{position[0] + 1}_120.npz"]
     lines = []
@@ -238,19 +243,8 @@ class _PastTheCheck(Exception):
 def test_a_setting_the_checkpoint_did_not_record_is_its_default(tmp_path, monkeypatch):
     """A checkpoint written before a setting existed resumes with the setting's default and refuses another value."""
     run = {**RUN, "checkpoint_every": 60}
-    original, calls = DAggerCheckpoint.save_partial, [0]
-
-    def save_partial(self, *args, **kwargs):
-        calls[0] += 1
-        if calls[0] == 2:
-            raise KeyboardInterrupt
-        original(self, *args, **kwargs)
-
-    monkeypatch.setattr(DAggerCheckpoint, "save_partial", save_partial)
     out = tmp_path / "killed"
-    with pytest.raises(KeyboardInterrupt):
-        dagger_fine_tune("dv2s-ppo", out=out, log=lambda _: None, **run)
-    monkeypatch.undo()
+    _kill_at_partial_commit(monkeypatch, out, run, 2)
     path = out / CHECKPOINT_DIR / "progress.json"
     progress = json.loads(path.read_text())
     del progress["identity"]["slower_weight"]

@@ -582,6 +582,12 @@ def test_reference_gate_counts_failures_and_errors_and_names_families_left_out_e
     assert "none left out" in reference_gate_text(loop_module.reference_gate(records[3:], {}))
 
 
+def test_the_loops_reference_driver_is_the_dagger_teacher_and_the_miners_reference():
+    from policies.dagger_config import DaggerConfig
+
+    assert loop_module.REFERENCE_DRIVER == DaggerConfig().reference == loop_module.MineSettings().reference
+
+
 def test_no_member_of_a_held_out_family_reaches_either_arm(tmp_path, monkeypatch):
     """Exact replays of held-out failures are bank entries of the held-out family too: neither arm trains on them."""
     from scenario_bank.bank import Bank

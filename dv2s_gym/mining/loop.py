@@ -705,10 +705,11 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
     return new_policy
 
 
-REFERENCE_DRIVER = "rule"
-"""The reference driver of the loop: the DAgger teacher (:mod:`policies.imitation`) and the miner's avoidability
-reference (:class:`~dv2s_gym.mining.settings.MineSettings`' default). The held-out evaluation keeps only the
-episodes it passes (:func:`reference_gate`)."""
+REFERENCE_DRIVER: str = MineSettings.reference
+"""The reference driver of the loop: the miner's avoidability reference (:class:`~dv2s_gym.mining.settings.MineSettings`'
+default) and the DAgger teacher (:class:`~policies.dagger_config.DaggerConfig`'s default, the same; read from the
+miner's settings so that importing the loop does not load torch). The held-out evaluation keeps only the episodes it
+passes (:func:`reference_gate`)."""
 
 
 def reference_gate(records: Sequence[Mapping[str, Any]], families: Mapping[str, str]) -> Dict[str, Any]:

@@ -70,11 +70,15 @@ Affine = Tuple[float, float, str]
 _INTERVAL_CALLS = ("Range", "Uniform")
 
 
+def _is_number(node: ast.AST) -> bool:
+    return isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool)
+
+
 def _affine_node(node: ast.AST, param: Optional[str]) -> Optional[Tuple[float, float]]:
     """``(scale, offset)`` of ``node`` as ``scale * globalParameters.<param> + offset``; ``None`` when it is built
     from anything but that parameter, numbers, ``+ - * /`` (a product or quotient by a number only) and unary
     minus or plus."""
-    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool) and _plain(node.value):
+    if _is_number(node) and _plain(node.value):
         return 0.0, float(node.value)
     if (param is not None and isinstance(node, ast.Attribute) and node.attr == param
             and isinstance(node.value, ast.Name) and node.value.id == "globalParameters"):
@@ -167,7 +171,7 @@ def _image(node: ast.AST, param: str, low: float, high: float) -> Optional[Tuple
     """The interval ``node`` takes with the parameter in ``low..high``, by interval arithmetic (exact when the
     parameter occurs once): numbers, the parameter, ``+ -``, ``* /`` by a non-zero number, unary minus or plus and
     ``abs``; ``None`` for anything else."""
-    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool) and _plain(node.value):
+    if _is_number(node) and _plain(node.value):
         return float(node.value), float(node.value)
     if _is_param(node, param):
         return low, high
@@ -241,8 +245,25 @@ def quantity_of(expression: str, param: str) -> Optional[Quantity]:
     return Quantity(text, ("exact", ast.dump(_Renamed(param).visit(_parse(expression)))), node, param)
 
 
+def _signed(op: ast.unaryop, inner: Tuple[float, float]) -> Tuple[float, float]:
+    """The interval of ``-x`` or ``+x`` for ``x`` in ``inner``."""
+    return (-inner[1], -inner[0]) if isinstance(op, ast.USub) else inner
+
+
+def _sum_difference_product(op: ast.operator, left: Tuple[float, float],
+                            right: Tuple[float, float]) -> Tuple[float, float]:
+    """The interval of ``a + b``, ``a - b`` or ``a * b`` (``op`` one of those) for ``a`` in ``left``, ``b`` in
+    ``right``."""
+    if isinstance(op, ast.Add):
+        return left[0] + right[0], left[1] + right[1]
+    if isinstance(op, ast.Sub):
+        return left[0] - right[1], left[1] - right[0]
+    ends = [a * b for a in left for b in right]
+    return min(ends), max(ends)
+
+
 def _interval_node(node: ast.AST) -> Optional[Tuple[float, float]]:
-    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool) and _plain(node.value):
+    if _is_number(node) and _plain(node.value):
         return float(node.value), float(node.value)
     if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _INTERVAL_CALLS \
             and node.args and not node.keywords:
@@ -252,22 +273,15 @@ def _interval_node(node: ast.AST) -> Optional[Tuple[float, float]]:
         return min(b[0] for b in bounds), max(b[1] for b in bounds)
     if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
         inner = _interval_node(node.operand)
-        if inner is None:
-            return None
-        return (-inner[1], -inner[0]) if isinstance(node.op, ast.USub) else inner
+        return None if inner is None else _signed(node.op, inner)
     if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
         left, right = _interval_node(node.left), _interval_node(node.right)
         if left is None or right is None:
             return None
         if left[0] != left[1] and right[0] != right[1]:
             return None  # two sampled values: only constants may offset or scale a sampled one
-        if isinstance(node.op, ast.Add):
-            return left[0] + right[0], left[1] + right[1]
-        if isinstance(node.op, ast.Sub):
-            return left[0] - right[1], left[1] - right[0]
-        if isinstance(node.op, ast.Mult):
-            ends = [a * b for a in left for b in right]
-            return min(ends), max(ends)
+        if not isinstance(node.op, ast.Div):
+            return _sum_difference_product(node.op, left, right)
         if right[0] != right[1] or right[0] == 0.0:
             return None  # a quotient by a sampled value, or by zero
         ends = [a / right[0] for a in left]
@@ -297,7 +311,7 @@ def joint_interval(expression: str, values: Mapping[str, Tuple[float, float]]) -
     seen: Set[str] = set()
 
     def walk(part: ast.AST) -> Optional[Tuple[float, float]]:
-        if isinstance(part, ast.Constant) and isinstance(part.value, (int, float)) and not isinstance(part.value, bool):
+        if _is_number(part):
             return (float(part.value), float(part.value)) if _plain(part.value) else None
         if isinstance(part, ast.Attribute) and isinstance(part.value, ast.Name) and part.value.id == "globalParameters":
             if part.attr not in values:
@@ -312,23 +326,16 @@ def joint_interval(expression: str, values: Mapping[str, Tuple[float, float]]) -
             return _interval_node(part)
         if isinstance(part, ast.UnaryOp) and isinstance(part.op, (ast.USub, ast.UAdd)):
             inner = walk(part.operand)
-            if inner is None:
-                return None
-            return (-inner[1], -inner[0]) if isinstance(part.op, ast.USub) else inner
+            return None if inner is None else _signed(part.op, inner)
         if isinstance(part, ast.BinOp) and isinstance(part.op, (ast.Add, ast.Sub, ast.Mult, ast.Div)):
             left, right = walk(part.left), walk(part.right)
             if left is None or right is None:
                 return None
-            if isinstance(part.op, ast.Add):
-                return left[0] + right[0], left[1] + right[1]
-            if isinstance(part.op, ast.Sub):
-                return left[0] - right[1], left[1] - right[0]
-            if isinstance(part.op, ast.Div):
-                if right[0] <= 0.0 <= right[1]:
-                    return None
-                right = (1.0 / right[1], 1.0 / right[0])
-            ends = [a * b for a in left for b in right]
-            return min(ends), max(ends)
+            if not isinstance(part.op, ast.Div):
+                return _sum_difference_product(part.op, left, right)
+            if right[0] <= 0.0 <= right[1]:
+                return None
+            return _sum_difference_product(ast.Mult(), left, (1.0 / right[1], 1.0 / right[0]))
         return None
 
     found = walk(node)
@@ -363,7 +370,7 @@ Part = Tuple[Any, ...]
 
 
 def _support_node(node: ast.AST) -> Optional[List[Part]]:
-    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool) and _plain(node.value):
+    if _is_number(node) and _plain(node.value):
         return [("points", [float(node.value)])]
     if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.args and not node.keywords:
         call = node.func.id
