@@ -1261,3 +1261,16 @@ def test_a_setting_the_loop_did_not_record_is_its_default(tmp_path, monkeypatch)
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, log=lambda _: None, **settings)
     assert report.settings["mined_share"] == 0.5  # the report states the value the loop ran with
     assert len(miner.calls) == 1  # the finished round was not run again
+
+
+@pytest.mark.parametrize("given, meant", [("lead_brak", "highway_lead_vehicle_brakes"), ("my_failure.scenic", None)])
+def test_an_unknown_loop_scenario_says_what_the_loop_takes(tmp_path, capsys, given, meant):
+    code, _, err = run(capsys, "loop", "--scenarios", given, "--out", tmp_path / "loop", "--no-progress")
+    line = one_line_error(err)  # it offered "a path to a .scenic file, Scenic source text", which the loop refuses
+    assert code == 2 and "dv2s loop --scenarios takes bank names and 'tag:<tag>'" in line
+    assert "Scenic source text" not in line
+    if meant:
+        assert f"Did you mean '{meant}'" in line
+    else:
+        assert "not Scenic files or text" in line and "dv2s bank add" in line
+    assert not (tmp_path / "loop" / "loop.json").exists()

@@ -444,7 +444,8 @@ def _open_loop(policy: str, settings: LoopSettings, out: Path, progress: bool, l
     state = _State(out / "loop.json", _recorded_settings(policy, settings, workers, env_config, fine_tune_config))
     bank = _working_bank(out, state.data["settings"]["bank_dir"])
     if state.data.get("start") is None:
-        names = sorted(select_scenarios(list(settings.scenarios) if settings.scenarios is not None else None, bank))
+        names = sorted(select_scenarios(list(settings.scenarios) if settings.scenarios is not None else None, bank,
+                                           command="dv2s loop"))
         if not names:
             raise LoopError("the scenario selection is empty; name bank scenarios or tag:<tag>")
         state.data["start"] = {"bank": bank, "scenarios": names}
