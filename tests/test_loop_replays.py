@@ -37,6 +37,19 @@ def test_a_failure_is_kept_as_its_exact_replay_without_a_video_or_a_script(recor
     assert again["replay_entry"] == out["replay_entry"] and len(bank) == len(Bank(tmp_path / "bank"))
 
 
+def test_a_scene_the_reference_driver_failed_too_gets_no_replay_entry(record, tmp_path):
+    """The conversion and the loop's replays share the rule: an exact replay is kept only of a scene the reference
+    driver passed (it stalled here), and the note says why there is none."""
+    failed = dict(record, cluster="c1", reference={"policy": "rule", "failure": {"type": "stall", "kind": "stall"}})
+    out = replay_failure_entry(failed, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank", monitor={})
+    assert out["status"] == "kept" and out["replay_entry"] is None, out
+    assert "the reference driver failed this scene too (stall)" in out["note"]
+    assert len(Bank(tmp_path / "bank")) == 0
+    passed = dict(failed, reference={"policy": "rule", "failure": None})
+    kept = replay_failure_entry(passed, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank", monitor={})
+    assert kept["replay_entry"] is not None and kept["note"] is None
+
+
 @pytest.mark.slow
 def test_a_replay_entry_records_what_it_depends_on_and_a_mismatch_says_why(record, tmp_path):
     from dv2s_gym.mining.exact_replay import replay_versions
@@ -214,3 +227,28 @@ def test_an_exact_replay_is_kept_only_of_a_scene_the_reference_driver_passed(tmp
     assert reference_passed(passed) and reference_passed(near) and reference_passed(unchecked)
     (tmp_path / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     assert _mining_summary(tmp_path)["clusters_reference_failed"] == 1
+
+
+def test_a_conversion_takes_a_failure_whose_scene_the_reference_driver_passed(tmp_path, monkeypatch):
+    """A cluster's most severe failure is a scene the reference driver stalled in: the conversion takes the next
+    one, whose exact replay can be kept; a cluster with no such failure is still converted, from its worst."""
+    from types import SimpleNamespace
+
+    from dv2s_gym.mining import miner
+
+    def failing(index, actor, rho, reference):
+        return dict(_failed(index, "a", actor, rho=rho), reference={"policy": "rule", "failure": reference})
+
+    records = [failing(0, "car", -3.0, {"type": "stall"}), failing(1, "car", -1.0, None),
+               failing(2, "truck", -2.0, {"type": "stall"}), failing(3, "truck", -1.0, {"type": "collision"})]
+    taken = []
+
+    def convert(record, out, **_):
+        taken.append(record["index"])
+        return {"cluster": record["cluster"], "index": record["index"], "status": "rejected"}
+
+    monkeypatch.setattr(miner, "convert_failure", convert)
+    monkeypatch.setattr(miner, "_reached_bank", lambda *_: None)
+    run = SimpleNamespace(out=tmp_path, records=records, settings={"policy": "keep_lane", "env_config": None})
+    miner.convert_clusters(run, bank_dir=str(tmp_path / "bank"), options={}, progress=False)
+    assert sorted(taken) == [1, 2]

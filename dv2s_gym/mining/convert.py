@@ -107,7 +107,7 @@ SETUP_ERRORS = (EndpointUnreachableError, EndpointTimeoutError, EndpointHTTPErro
 :func:`convert_failure` raises them instead of rejecting the failure, so a run stops and can be resumed
 when the endpoint works, rather than rejecting every cluster."""
 
-__all__ = ["ConversionSettings", "convert_failure", "replay_failure_entry", "same_failure_class", "reference_failed", "reference_outcome",
+__all__ = ["ConversionSettings", "convert_failure", "replay_failure_entry", "same_failure_class", "reference_failed", "reference_passed", "reference_outcome",
            "reproduction_seeds", "cluster_slug", "CONVERSION_DIR", "ENTRY_VIDEO",
            "ENTRY_TRACE", "ENTRY_CONVERTED_VIDEO", "clip_episode"]
 
@@ -151,6 +151,22 @@ def reference_failed(source: Mapping[str, Any], reference_failure: Optional[Mapp
     if reference_failure["type"] != "low_ttc":
         return True
     return not reference_avoids(dict(source), dict(reference_failure))
+
+
+def reference_passed(record: Mapping[str, Any]) -> bool:
+    """Whether the reference driver passed the failing scene of mined episode ``record`` by the rule a conversion's
+    avoidability uses on its new scenario (:func:`reference_failed`: any collision, off-road
+    or stall of the reference counts, and a near miss unless the policy's failure was worse). The miner's
+    ``avoidable`` flag is looser (a reference outcome less severe than the policy's failure, such as a stall where
+    the policy came too close, counts as avoided), but the loop counts every failure of the held-out monitors, so an
+    exact replay is kept only of a scene the reference driver passed. A record whose reference episode did not run
+    (no reference driver) keeps the miner's flag."""
+    if record.get("avoidable") is False:
+        return False
+    reference = record.get("reference")
+    if not reference:
+        return True
+    return not reference_failed(dict(record.get("failure") or {}), reference.get("failure"))
 
 
 def reference_outcome(source: Mapping[str, Any], episodes: List[Mapping[str, Any]], reference: str) -> Dict[str, Any]:
@@ -1184,6 +1200,11 @@ def _bank_replay(out: Dict[str, Any], record: Mapping[str, Any], bank, parent: A
                  replay: Mapping[str, Any], settings: ConversionSettings, source: _ReplaySource) -> None:
     """Add the narrowed script to ``bank`` as the failure's exact replay entry (``out["entry"]``), or say in
     ``out["note"]`` why there is none."""
+    if not reference_passed(record):
+        out["note"] = ("no replay entry: the reference driver failed this scene too "
+                       f"({((record.get('reference') or {}).get('failure') or {}).get('type') or 'not avoided'}), so it is "
+                       "no failure the policy could have avoided")
+        return
     files = dict(source.files or {})
     seed, params, policy = replay["seed"], replay["params"], settings.policy
     source_failure = source.source_failure

@@ -51,7 +51,7 @@ from tqdm.auto import tqdm
 
 from dv2s_gym.mining import space as space_module
 from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, group
-from dv2s_gym.mining.convert import cluster_slug, CONVERSION_DIR, convert_failure, SETUP_ERRORS
+from dv2s_gym.mining.convert import cluster_slug, CONVERSION_DIR, convert_failure, reference_passed, SETUP_ERRORS
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import is_novel
 from dv2s_gym.mining.family import record_family, scenario_family
@@ -671,7 +671,8 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
     """Convert one representative failure per avoidable cluster not converted yet; the conversion records.
 
     The representative is the cluster's most severe failure (lowest robustness, then
-    lowest index). Clusters with more avoidable failures go first; at most
+    lowest index) among those whose scene the reference driver passed (:func:`~dv2s_gym.mining.convert.reference_passed`;
+    among all when there is none: the converted script is judged all the same, but no exact replay is kept). Clusters with more avoidable failures go first; at most
     ``max_conversions`` conversions are made in the run (``None``: every cluster). Each conversion is appended to ``conversions.jsonl`` when it ends, so a
     resumed run converts the remaining clusters only.
     """
@@ -687,7 +688,9 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
         avoidable = [r for r in members if r.get("avoidable") is not False]
         if cluster in converted or not avoidable or any(r["index"] in converted_episodes for r in members):
             continue
-        representative = min(avoidable, key=lambda r: (float(r.get("rho") or 0.0), int(r["index"])))
+        # a failure whose scene the reference driver passed first: only such a scene gets an exact replay entry
+        representative = min(avoidable, key=lambda r: (not reference_passed(r), float(r.get("rho") or 0.0),
+                                                       int(r["index"])))
         candidates.append((-len(avoidable), cluster, representative))
     candidates.sort(key=lambda c: (c[0], c[1]))  # the clusters with most avoidable failures first
     room = None if max_conversions is None else max(0, int(max_conversions) - len(existing))

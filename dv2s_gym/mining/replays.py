@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from dv2s_gym.mining import convert
+from dv2s_gym.mining.convert import reference_passed
 from dv2s_gym.mining.cluster import group
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.family import record_family
@@ -101,22 +102,6 @@ def replay_order(groups: Mapping[str, Sequence[Mapping[str, Any]]]) -> List[Tupl
     for turn in range(max((len(q[2]) for q in queues), default=0)):
         order += [(q[2][turn][1], q[2][turn][2]) for q in queues if turn < len(q[2])]
     return order
-
-
-def reference_passed(record: Mapping[str, Any]) -> bool:
-    """Whether the reference driver passed the failing scene of mined episode ``record`` by the rule a conversion's
-    avoidability uses on its new scenario (:func:`dv2s_gym.mining.convert.reference_failed`: any collision, off-road
-    or stall of the reference counts, and a near miss unless the policy's failure was worse). The miner's
-    ``avoidable`` flag is looser (a reference outcome less severe than the policy's failure, such as a stall where
-    the policy came too close, counts as avoided), but the loop counts every failure of the held-out monitors, so an
-    exact replay is kept only of a scene the reference driver passed. A record whose reference episode did not run
-    (no reference driver) keeps the miner's flag."""
-    if record.get("avoidable") is False:
-        return False
-    reference = record.get("reference")
-    if not reference:
-        return True
-    return not convert.reference_failed(dict(record.get("failure") or {}), reference.get("failure"))
 
 
 def replay_entries(run_dir: os.PathLike | str) -> List[Dict[str, Any]]:
