@@ -7,6 +7,7 @@ started (not `ray stop`, which would stop every Ray instance on the machine)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
@@ -40,16 +41,18 @@ def _ray_executable() -> str:
     return str(found) if found.exists() else shutil.which("ray") or "ray"
 
 
-@pytest.fixture(scope="module")
-def ray_address():
-    """A Ray head on 127.0.0.1 for this module; stopped (its process group killed) at the end."""
+@contextlib.contextmanager
+def _ray_head(**head_env: str):
+    """A Ray head on 127.0.0.1 (``head_env`` added to its environment); stopped (its process group killed) at the
+    end. Its HOME, and this process's, is a clean folder: a token a local Ray instance left in ~/.ray/auth_token
+    would turn token authentication on."""
     port = _free_port()
     temp = tempfile.mkdtemp(prefix="ray", dir="/tmp")  # short: Ray's socket paths must fit 107 bytes
-    # a token a local Ray instance left in ~/.ray/auth_token makes clients fail to connect to this head: a clean HOME
     home = pytest.MonkeyPatch()
     home.setenv("HOME", temp)
     env = dict(os.environ, RAY_DISABLE_USAGE_STATS="1", OMP_NUM_THREADS="1",
-               PYTHONPATH=os.pathsep.join([str(ROOT), str(ROOT / "tests"), os.environ.get("PYTHONPATH", "")]))
+               PYTHONPATH=os.pathsep.join([str(ROOT), str(ROOT / "tests"), os.environ.get("PYTHONPATH", "")]),
+               **head_env)
     command = [_ray_executable(), "start", "--head", "--block", "--node-ip-address=127.0.0.1", f"--port={port}",
                "--num-cpus=2", "--include-dashboard=false", "--disable-usage-stats",
                "--object-store-memory=100000000", f"--temp-dir={temp}",
@@ -85,6 +88,13 @@ def ray_address():
         head.wait(10)
         home.undo()
         shutil.rmtree(temp, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def ray_address():
+    """A Ray head on 127.0.0.1 for this module."""
+    with _ray_head() as address:
+        yield address
 
 
 def _task(policy: str, scenario: str, seed: int, trace_dir=None, role: str = "candidate") -> dict:
@@ -180,3 +190,25 @@ def test_mining_on_ray_equals_mining_locally(ray_address, tmp_path):
     assert failed, "keep_lane runs into the braking lead car in some of these scenes"
     for record in failed:
         assert (tmp_path / "ray" / record["trace"]).is_file()
+
+
+@pytest.mark.slow
+def test_a_head_with_token_authentication_names_the_token_in_the_error(tmp_path):
+    """A head started by a user with a ~/.ray/auth_token requires it; a process without it gets the one-line error
+    naming the token and how to pass it, and passing it that way connects."""
+    token = "0123456789abcdef" * 4
+    connect = ("from dv2s_gym.workers.ray_pool import RayBackend\n"
+               "import sys\n"
+               "try:\n    RayBackend(address=sys.argv[1], workers=1)\n"
+               "except Exception as error:\n    print(type(error).__name__, error)\nelse:\n    print('connected')\n")
+    with _ray_head(RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=token) as address:
+        client = {k: v for k, v in os.environ.items() if not k.startswith("RAY_AUTH")}
+        client.update(HOME=str(tmp_path), OMP_NUM_THREADS="1", RAY_DISABLE_USAGE_STATS="1")
+        refused = subprocess.run([sys.executable, "-c", connect, address], env=client, capture_output=True,
+                                 text=True, timeout=300)
+        line = refused.stdout.strip().splitlines()[-1]
+        assert line.startswith("RayUnavailableError cannot connect to Ray at " + address), refused.stdout
+        assert "RAY_AUTH_MODE=token RAY_AUTH_TOKEN=" in line and "~/.ray/auth_token" in line
+        allowed = subprocess.run([sys.executable, "-c", connect, address], timeout=300, capture_output=True, text=True,
+                                 env=dict(client, RAY_AUTH_MODE="token", RAY_AUTH_TOKEN=token))
+        assert allowed.stdout.strip().splitlines()[-1] == "connected", allowed.stdout + allowed.stderr[-2000:]

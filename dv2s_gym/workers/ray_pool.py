@@ -41,6 +41,11 @@ CONNECT_TIMEOUT = 10.0
 START_HINT = ("start a cluster with `ray start --head` (it prints the address to pass, host:6379) "
               "or use --backend local")
 
+TOKEN_HINT = ("if the cluster uses token authentication (Ray turns it on for a head started by a user with a "
+              "~/.ray/auth_token, which any local Ray run writes), give this process the head's token: "
+              "RAY_AUTH_MODE=token RAY_AUTH_TOKEN=<the head's ~/.ray/auth_token>")
+"""Ray's own error then says only that it failed to connect (its log says ``InvalidAuthToken``)."""
+
 
 class RayUnavailableError(WorkerError):
     """No Ray cluster answers at the address given."""
@@ -146,8 +151,9 @@ class RayBackend(Backend):
         except Exception as error:  # ray raises ConnectionError, RuntimeError, ValueError, ... here
             where = f"at {address}" if address else "locally"
             message = " ".join(str(error).split())[:300]
+            hint = f"{TOKEN_HINT}; or {START_HINT}" if address else START_HINT
             raise RayUnavailableError(f"cannot connect to Ray {where} ({type(error).__name__}: {message}); "
-                                      f"{START_HINT}") from None
+                                      f"{hint}") from None
         self._owns_ray = True
 
     def _new_actor(self) -> None:
