@@ -127,6 +127,10 @@ def test_a_failure_type_registered_in_one_place_is_detected_scored_and_counted(t
     collided, _ = _episode([10.0, 4.0], collided=True, collisions=["car1"])
     assert monitors.detect_failure(collided, trace).type == "collision"
     assert monitors.detect_failure(*_episode([10.0, 9.0, 8.0])) is None  # gentle braking is no failure
+    # avoidability reads the table: the reference driver's hard brake is less severe than a stall, and its stall
+    # where the policy braked hard is not
+    assert reference_avoids({"type": "stall"}, {"type": TOY}) and not reference_avoids({"type": TOY},
+                                                                                        {"type": "stall"})
     # counted: the mining report's failures by type, in the table's order
     run = make_run(tmp_path / "run", clips=False)
     episodes = run / "episodes.jsonl"

@@ -31,10 +31,12 @@ from typing import Any, Dict, Mapping, Optional
 from dv2s_gym.mining.behaviour import extract_behaviour
 from dv2s_gym.mining.failure_state import failure_state
 from dv2s_gym.mining.write_errors import write_failure
-from dv2s_gym.mining.monitors import DEFAULT_MONITOR, FAILURE_TYPES, MonitorSettings, detect_failure, robustness
+from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.monitors import DEFAULT_MONITOR, MonitorSettings, detect_failure, robustness
 from dv2s_gym.workers.tasks import register
 from policies import worker_cache
 from policies.evaluation import run_episode
+from scenario_bank.failure_types import failure_type
 from scenario_bank.records import EpisodeRecord, HeldOutEpisode
 
 __all__ = ["MINE", "HELDOUT", "run_mine_task", "heldout_task", "reference_avoids", "trace_name"]
@@ -56,7 +58,15 @@ def reference_avoids(failure: Optional[Dict[str, Any]], reference_failure: Optio
         return True
     if reference_failure is None:
         return True
-    return FAILURE_TYPES.index(reference_failure["type"]) > FAILURE_TYPES.index(failure["type"])
+    return _severity(reference_failure["type"]) > _severity(failure["type"])
+
+
+def _severity(name: str) -> int:
+    row = failure_type(name)
+    if row is None:
+        raise MiningError(f"unknown failure type {name!r}: a monitor's new type needs its row in the failure table "
+                          "(scenario_bank.failure_types.register_failure_type)")
+    return row.severity
 
 
 def _episode(task: Dict[str, Any], spec: str):
