@@ -35,8 +35,9 @@ one CPU (checked before the record was written: torch on CPU with one thread is 
 
 ``test_several_workers_write_what_one_worker_wrote`` records nothing new: the runs of
 ``tests/test_behaviour_reports.py`` with ``--workers 2`` must write the digests that file records for one worker,
-and so must ``dv2s regress`` on the Ray backend when Ray is installed; only ``dv2s regress`` is compared: ``dv2s
-mine`` with 2 workers feeds its adaptive sampler the outcomes in another order, so it draws other scenes.
+and so must ``dv2s regress`` on the Ray backend when Ray is installed. The miner's sampler is fed one batch of
+outcomes at a time, in the batch's order whatever the workers, so ``dv2s mine`` over several batches draws the
+same scenes with 2 workers as with one.
 
 A refactor must leave every digest as it is; a change of behaviour meant to be one changes them, and is recorded
 by writing them again (all parts, or the parts named):
@@ -342,13 +343,37 @@ def _compare_with_one_worker(run: str, argv: list, label: str, workers: int = 2)
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("run", ["regress"])
-# `dv2s mine` is not compared: with 2 workers its adaptive sampler is fed the outcomes in another order and draws
-# other scenes (episodes.jsonl, failures, clusters and the report differ from the 1-worker record)
+@pytest.mark.parametrize("run", ["regress", "mine", "mine-convert"])
 def test_several_workers_write_what_one_worker_wrote(run):
     import test_behaviour_reports as reports
 
     _compare_with_one_worker(run, reports.RUNS[run], "with 2 workers")
+
+
+@pytest.mark.slow
+def test_mining_over_several_batches_draws_with_two_workers_what_one_worker_draws():
+    """The recorded mining runs fit one batch of the sampler; over three batches (24 episodes, the adaptive sampler
+    fed each batch's outcomes before it draws the next) two workers must still draw the same scenes and write the
+    same run as one (``episodes.jsonl`` holds its lines in the order episodes ended: compared in index order)."""
+    import test_behaviour_reports as reports
+
+    argv = ["mine", "--policy", "keep_lane", "--scenarios", "highway_cut_in_from_left", "urban_pedestrian_crossing",
+            "highway_lead_vehicle_brakes", "--budget", "24", "--no-convert"]
+    def in_index_order(out: Path) -> None:  # workers finish in their own order; each line is written as one ends
+        episodes = out / "episodes.jsonl"
+        lines = episodes.read_text(encoding="utf-8").splitlines()
+        episodes.write_text("".join(line + "\n" for line in sorted(lines, key=lambda l: json.loads(l)["index"])),
+                            encoding="utf-8")
+
+    def as_one_worker(out: Path) -> None:
+        _as_one_worker(out)
+        in_index_order(out)
+
+    with tempfile.TemporaryDirectory(prefix="dv2s-behaviour-batches-") as work:
+        one = reports._run("mine", argv, Path(work) / "one", adjust=in_index_order)
+        two = reports._run("mine", argv, Path(work) / "two", workers=2, adjust=as_one_worker)
+    changed = differences(one, two)
+    assert not changed, f"`dv2s mine` over 3 batches writes other digests with 2 workers: {changed[:12]}"
 
 
 @pytest.mark.slow
