@@ -15,10 +15,10 @@ and its reports list them in severity order (:func:`failure_table`: the table an
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Dict, Iterable, List, Optional, Tuple
+from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Tuple
 
 __all__ = ["FailureType", "FAILURE_TABLE", "FAILURE_TYPES", "failure_table", "failure_type", "severity_order",
-           "register_failure_type", "unregister_failure_type"]
+           "register_failure_type", "unregister_failure_type", "attach_detection", "detach_detection", "happened"]
 
 
 @dataclass(frozen=True)
@@ -96,6 +96,41 @@ def unregister_failure_type(name: str) -> None:
     if _REGISTERED.pop(name, None) is None:
         raise ValueError(f"failure type {name!r} was not registered at run time")
     _rebuild()
+
+
+Detection = Callable[[Any, Any, Mapping[str, Any]], bool]
+"""``(episode result, trace, recorded monitor settings) -> whether the type happened``."""
+
+_DETECTION: Dict[str, Detection] = {}
+"""How a registered type is found, by name: set by :func:`dv2s_gym.mining.monitors.register_detector`, so that
+a part that may not import the miner (``dv2s regress``'s worker task) can run the detector."""
+
+
+def attach_detection(name: str, detection: Detection) -> None:
+    """Let :func:`happened` find the failure type ``name`` with ``detection`` (the miner's detector registry does
+    this when a detector registers; :func:`detach_detection` undoes it)."""
+    _DETECTION[name] = detection
+
+
+def detach_detection(name: str) -> None:
+    """Undo :func:`attach_detection` for ``name``."""
+    _DETECTION.pop(name, None)
+
+
+def happened(name: str, result: Any, trace: Any, settings: Mapping[str, Any]) -> bool:
+    """Whether the registered failure type ``name`` happened in the episode (``result``, ``trace``), by its
+    detector with the monitor ``settings`` (e.g. ``{"stall_seconds": 5.0}``; an absent one takes its default).
+
+    Raises:
+        KeyError: when no detector is registered for ``name`` in this process (a plug-in registers its type and
+            detector in each process that detects).
+    """
+    detection = _DETECTION.get(name)
+    if detection is None:
+        raise KeyError(f"failure type {name!r} has no detector registered in this process; its plug-in must "
+                       "register the type and its detector (dv2s_gym.mining.monitors.register_detector) in each "
+                       "process that detects")
+    return bool(detection(result, trace, settings))
 
 
 def _rebuild() -> None:
