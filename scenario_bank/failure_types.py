@@ -3,8 +3,7 @@
 Each row (:class:`FailureType`) says what the rest of the project reads about a type: its ``name`` (as mining
 records and regression results write it), its ``severity`` (0 is the most severe; the table is in that order),
 the field of a regression result that says it happened (``result_field``), whether ``dv2s regress`` counts it
-as a failure by default (``regress_default``), whether a regression report written before runs chose their
-failure kinds counted it (``counted_before_choice``), whether the failure names the actor it met
+as a failure by default (``regress_default``), whether the failure names the actor it met
 (``with_actor``) and the ``label`` reports show for it (``None``: reports show none).
 
 The failure miner detects every type of the table, each through its detector (:mod:`dv2s_gym.mining.monitors`),
@@ -32,9 +31,6 @@ class FailureType:
     """The regression result's field that is true when the type happened; ``None``: results do not record it."""
     regress_default: bool
     """Whether ``dv2s regress`` counts the type as a failure unless ``--failure`` says otherwise."""
-    counted_before_choice: bool
-    """Whether a regression report without a ``failure`` setting (made before runs chose their failure kinds)
-    counted the type as a failure."""
     with_actor: bool
     """Whether the failure names the actor it met (a mined failure's ``with``)."""
     label: Optional[str]
@@ -42,14 +38,10 @@ class FailureType:
 
 
 FAILURE_TABLE: Tuple[FailureType, ...] = (
-    FailureType("collision", severity=0, result_field="collided", regress_default=True, counted_before_choice=True,
-                with_actor=True, label="collision"),
-    FailureType("off_road", severity=1, result_field="off_road", regress_default=True, counted_before_choice=True,
-                with_actor=False, label="off road"),
-    FailureType("low_ttc", severity=2, result_field=None, regress_default=False, counted_before_choice=False,
-                with_actor=True, label=None),
-    FailureType("stall", severity=3, result_field="stalled", regress_default=True, counted_before_choice=False,
-                with_actor=False, label="stall"),
+    FailureType("collision", severity=0, result_field="collided", regress_default=True, with_actor=True, label="collision"),
+    FailureType("off_road", severity=1, result_field="off_road", regress_default=True, with_actor=False, label="off road"),
+    FailureType("low_ttc", severity=2, result_field=None, regress_default=False, with_actor=True, label=None),
+    FailureType("stall", severity=3, result_field="stalled", regress_default=True, with_actor=False, label="stall"),
 )
 """Every failure type, most severe first."""
 

@@ -40,7 +40,6 @@ def test_the_public_names_are_the_table_read_by_each_part():
     assert failures.failure_kinds() == {"collision": "collided", "off_road": "off_road", "stall": "stalled"}
     assert list(failures.failure_kinds()) == [n for n in FAILURE_TYPES if n != "low_ttc"]  # severity order
     assert failures.default_failure() == ("collision", "off_road", "stall")
-    assert failures.FAILURE_BEFORE_CHOICE == ("collision", "off_road")
     assert [key for key, _ in regress_report.rates()] == [
         "collision_rate", "off_road_rate", "stall_rate", "failure_rate", "success_rate"]
 
@@ -98,8 +97,7 @@ def _hard_brake(result, trace, settings):
 def toy_type():
     """The toy type registered in one place (its row, with its label, and its detector); undone after."""
     row = register_failure_type(FailureType(TOY, severity=len(FAILURE_TABLE), result_field="hard_braked",
-                                            regress_default=False, counted_before_choice=False, with_actor=False,
-                                            label="hard brake"))
+                                            regress_default=False, with_actor=False, label="hard brake"))
     monitors.register_detector(monitors.Detector(TOY, _hard_brake, lambda result, failure, settings: -0.25))
     yield row
     monitors.unregister_detector(TOY)

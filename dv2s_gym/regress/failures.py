@@ -22,9 +22,9 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.regress.errors import RegressError
 from envs.safety_metrics import DEFAULT_STALL_SECONDS
-from scenario_bank.failure_types import FAILURE_TABLE, failure_table
+from scenario_bank.failure_types import failure_table
 
-__all__ = ["failure_kinds", "default_failure", "FAILURE_BEFORE_CHOICE", "DEFAULT_STALL_SECONDS", "parse_failure",
+__all__ = ["failure_kinds", "default_failure", "DEFAULT_STALL_SECONDS", "parse_failure",
            "apply_failure", "missing_facts"]
 
 
@@ -41,8 +41,6 @@ def default_failure() -> Tuple[str, ...]:
     return tuple(row.name for row in failure_table() if row.regress_default)
 
 
-FAILURE_BEFORE_CHOICE: Tuple[str, ...] = tuple(row.name for row in FAILURE_TABLE if row.counted_before_choice)
-"""The failure kinds of a report that has no ``failure`` setting (made before runs chose their kinds)."""
 
 def parse_failure(value: Union[None, str, Iterable[str]]) -> List[str]:
     """``"collision,stall"`` or a list of kinds -> the kinds in canonical order; None: the default.

@@ -90,7 +90,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.aggregates import return_aggregates
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
-from dv2s_gym.regress.failures import FAILURE_BEFORE_CHOICE, failure_kinds
+from dv2s_gym.regress.failures import failure_kinds
 from dv2s_gym.regress.identity import installed_version
 from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
 from dv2s_gym.regress.store import describe_differences
@@ -425,6 +425,10 @@ def load_report(path: Union[str, os.PathLike]) -> Dict[str, Any]:
             f"baseline report {path} has schema version {version}, this dv2s-gym reads version "
             f"{SCHEMA_VERSION}; rerun the baseline with this version (dv2s regress --policy BASELINE) "
             "and compare against that report")
+    if "failure" not in (report.get("settings") or {}):
+        raise ReportMismatchError(
+            f"report {path} records no failure kinds (settings.failure): it was written by an older dv2s-gym; "
+            "rerun that `dv2s regress` command with a new --out and use its report")
     return report
 
 
@@ -496,7 +500,7 @@ def headline(report: Mapping[str, Any], base: Optional[Path] = None) -> str:
     against = ("" if baseline is None else f" vs baseline `{baseline.get('spec')}`" + (
         f" (the {baseline.get('role') or 'candidate'} policy of {_relative(baseline['report'], base)})"
         if baseline.get("report") else ""))
-    failure = ", ".join(settings.get("failure") or FAILURE_BEFORE_CHOICE)
+    failure = ", ".join(settings["failure"])
     return (f"candidate `{report['candidate']['spec']}`{against}; failure: {failure}; "
             f"{len(report['scenarios'])} scenario(s) x "
             f"{settings['episodes']} episode(s) from seed {settings['seed']}; margin {100 * settings['margin']:g} pp, "
@@ -645,7 +649,7 @@ def _markdown(report: Mapping[str, Any], report_path: str = "report.json", base:
     lines = [f"## dv2s regress: {verdict or 'measures (no baseline)'} - candidate `{report['candidate']['spec']}`{against}",
              "", _verdict_line(report), ""]
     facts = [f"{len(report['scenarios'])} scenario(s) x {settings['episodes']} episode(s) from seed {settings['seed']}; "
-             f"failure: {', '.join(settings.get('failure') or FAILURE_BEFORE_CHOICE)}; margin "
+             f"failure: {', '.join(settings['failure'])}; margin "
              f"{100 * settings['margin']:g} pp, alpha {settings['alpha']:g}"]
     if report["newly_failing"]:
         facts.append(f"{len(report['newly_failing'])} newly failing episode(s) (candidate fails, baseline does not)")
