@@ -30,9 +30,13 @@ def _loop_json(tmp_path, settings, steps=None):
     ({"holdout_by": "family"}, {"mine": {"episodes": 3, "errors": 1}}, "round 1's mining step records no errored"),
     ({"holdout_by": "family"}, {"mine": {"errored": {"episodes": 1, "scenarios": {"s": 1}, "examples": {"s": "x"}}}},
      "round 1's 'mine' step records its errored episodes without every message"),
-    ({"holdout_by": "family"}, {"mine": {"errored": _ERRORED}, "after": {"errored": {"fine_tuned": {
+    ({"holdout_by": "family"}, {"mine": {"errored": _ERRORED}, "untouched": {"errored": {"fine_tuned": {
         **_ERRORED, "unlisted": {"s": {"messages": 3, "episodes": 5}}}}}},
-     "round 1's 'after' step records its errored episodes without every message"),
+     "round 1's 'untouched' step records its errored episodes without every message"),
+    ({"holdout_by": "family"}, {"after": {"pairs": 1, "heldout_families": 1, "table": {"after_only": 1}}},
+     "round 1's held-out step records no held-out tests with their families' harm check"),
+    ({"holdout_by": "family"}, {"after": {"pairs": 9, "significantly_worse": {"start": {"worse": False}}}},
+     "round 1's held-out step records no held-out tests with their families' harm check"),
 ])
 def test_a_loop_folder_of_an_older_layout_is_refused_in_one_line(tmp_path, settings, steps, what):
     folder = _loop_json(tmp_path, settings, steps)

@@ -202,14 +202,19 @@ _ERRORED_BY_POLICY = ("after", "untouched", "regress")
 
 
 def _older_problem(data: Mapping[str, Any]) -> Optional[str]:
-    """What in a ``loop.json`` this version does not write (``None``: nothing): a split other than by family, or
-    errored episodes recorded without every message counted."""
+    """What in a ``loop.json`` this version does not write (``None``: nothing): a split other than by family,
+    errored episodes recorded without every message counted, or held-out comparisons without their recorded tests
+    (``significantly_worse``, each test with its families' harm check)."""
     if data["settings"].get("holdout_by") != HOLDOUT_BY:
         return f"its loop.json records holdout_by {data['settings'].get('holdout_by')!r}, not {HOLDOUT_BY!r}"
     for number, record in enumerate(data["rounds"], start=1):
         steps = record.get("steps", {})
         if isinstance(steps.get("mine"), dict) and "errored" not in steps["mine"]:
             return f"round {number}'s mining step records no errored episodes"
+        after = steps.get("after")
+        if isinstance(after, dict) and (not isinstance(after.get("significantly_worse"), dict) or any(
+                isinstance(test, dict) and "family_harm" not in test for test in after["significantly_worse"].values())):
+            return f"round {number}'s held-out step records no held-out tests with their families' harm check"
         for step, value in steps.items():
             if not isinstance(value, dict) or not isinstance(value.get("errored"), dict):
                 continue
