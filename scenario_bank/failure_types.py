@@ -3,8 +3,7 @@
 Each row (:class:`FailureType`) says what the rest of the project reads about a type: its ``name`` (as mining
 records and regression results write it), its ``severity`` (0 is the most severe; the table is in that order),
 the field of a regression result that says it happened (``result_field``), whether ``dv2s regress`` counts it
-as a failure by default (``regress_default``), whether a regression report written before runs chose their
-failure kinds counted it (``counted_before_choice``), whether the failure names the actor it met
+as a failure by default (``regress_default``), whether the failure names the actor it met
 (``with_actor``) and the ``label`` reports show for it (``None``: reports show none).
 
 The failure miner detects every type of the table, each through its detector (:mod:`dv2s_gym.mining.monitors`),
@@ -15,10 +14,10 @@ and its reports list them in severity order (:func:`failure_table`: the table an
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Dict, Iterable, List, Optional, Tuple
+from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Tuple
 
 __all__ = ["FailureType", "FAILURE_TABLE", "FAILURE_TYPES", "failure_table", "failure_type", "severity_order",
-           "register_failure_type", "unregister_failure_type"]
+           "register_failure_type", "unregister_failure_type", "attach_detection", "detach_detection", "happened"]
 
 
 @dataclass(frozen=True)
@@ -32,9 +31,6 @@ class FailureType:
     """The regression result's field that is true when the type happened; ``None``: results do not record it."""
     regress_default: bool
     """Whether ``dv2s regress`` counts the type as a failure unless ``--failure`` says otherwise."""
-    counted_before_choice: bool
-    """Whether a regression report without a ``failure`` setting (made before runs chose their failure kinds)
-    counted the type as a failure."""
     with_actor: bool
     """Whether the failure names the actor it met (a mined failure's ``with``)."""
     label: Optional[str]
@@ -42,14 +38,10 @@ class FailureType:
 
 
 FAILURE_TABLE: Tuple[FailureType, ...] = (
-    FailureType("collision", severity=0, result_field="collided", regress_default=True, counted_before_choice=True,
-                with_actor=True, label="collision"),
-    FailureType("off_road", severity=1, result_field="off_road", regress_default=True, counted_before_choice=True,
-                with_actor=False, label="off road"),
-    FailureType("low_ttc", severity=2, result_field=None, regress_default=False, counted_before_choice=False,
-                with_actor=True, label=None),
-    FailureType("stall", severity=3, result_field="stalled", regress_default=True, counted_before_choice=False,
-                with_actor=False, label="stall"),
+    FailureType("collision", severity=0, result_field="collided", regress_default=True, with_actor=True, label="collision"),
+    FailureType("off_road", severity=1, result_field="off_road", regress_default=True, with_actor=False, label="off road"),
+    FailureType("low_ttc", severity=2, result_field=None, regress_default=False, with_actor=True, label=None),
+    FailureType("stall", severity=3, result_field="stalled", regress_default=True, with_actor=False, label="stall"),
 )
 """Every failure type, most severe first."""
 
@@ -96,6 +88,41 @@ def unregister_failure_type(name: str) -> None:
     if _REGISTERED.pop(name, None) is None:
         raise ValueError(f"failure type {name!r} was not registered at run time")
     _rebuild()
+
+
+Detection = Callable[[Any, Any, Mapping[str, Any]], bool]
+"""``(episode result, trace, recorded monitor settings) -> whether the type happened``."""
+
+_DETECTION: Dict[str, Detection] = {}
+"""How a registered type is found, by name: set by :func:`dv2s_gym.mining.monitors.register_detector`, so that
+a part that may not import the miner (``dv2s regress``'s worker task) can run the detector."""
+
+
+def attach_detection(name: str, detection: Detection) -> None:
+    """Let :func:`happened` find the failure type ``name`` with ``detection`` (the miner's detector registry does
+    this when a detector registers; :func:`detach_detection` undoes it)."""
+    _DETECTION[name] = detection
+
+
+def detach_detection(name: str) -> None:
+    """Undo :func:`attach_detection` for ``name``."""
+    _DETECTION.pop(name, None)
+
+
+def happened(name: str, result: Any, trace: Any, settings: Mapping[str, Any]) -> bool:
+    """Whether the registered failure type ``name`` happened in the episode (``result``, ``trace``), by its
+    detector with the monitor ``settings`` (e.g. ``{"stall_seconds": 5.0}``; an absent one takes its default).
+
+    Raises:
+        KeyError: when no detector is registered for ``name`` in this process (a plug-in registers its type and
+            detector in each process that detects).
+    """
+    detection = _DETECTION.get(name)
+    if detection is None:
+        raise KeyError(f"failure type {name!r} has no detector registered in this process; its plug-in must "
+                       "register the type and its detector (dv2s_gym.mining.monitors.register_detector) in each "
+                       "process that detects")
+    return bool(detection(result, trace, settings))
 
 
 def _rebuild() -> None:

@@ -37,11 +37,10 @@ def test_the_table_is_in_severity_order_and_its_names_are_unique():
 def test_the_public_names_are_the_table_read_by_each_part():
     assert monitors.FAILURE_TYPES is FAILURE_TYPES
     assert mining_report.FAILURE_ORDER is FAILURE_TYPES
-    assert failures.FAILURE_KINDS == {"collision": "collided", "off_road": "off_road", "stall": "stalled"}
-    assert list(failures.FAILURE_KINDS) == [n for n in FAILURE_TYPES if n != "low_ttc"]  # severity order
-    assert failures.DEFAULT_FAILURE == ("collision", "off_road", "stall")
-    assert failures.FAILURE_BEFORE_CHOICE == ("collision", "off_road")
-    assert [key for key, _ in regress_report.RATES] == [
+    assert failures.failure_kinds() == {"collision": "collided", "off_road": "off_road", "stall": "stalled"}
+    assert list(failures.failure_kinds()) == [n for n in FAILURE_TYPES if n != "low_ttc"]  # severity order
+    assert failures.default_failure() == ("collision", "off_road", "stall")
+    assert [key for key, _ in regress_report.rates()] == [
         "collision_rate", "off_road_rate", "stall_rate", "failure_rate", "success_rate"]
 
 
@@ -67,7 +66,7 @@ def _failure_name_lists(source: str, where: str) -> List[str]:
 
 def test_no_module_but_the_table_lists_the_failure_types():
     """A second list of the failure types drifts from the table: read the table (its rows, FAILURE_TYPES,
-    or regress's FAILURE_KINDS / DEFAULT_FAILURE / FAILURE_BEFORE_CHOICE) instead."""
+    or regress's failure_kinds() / default_failure()) instead."""
     planted = 'ORDER = ("collision", "off_road")\nFIELDS = {"stall": "stalled", "low_ttc": None}\n'
     assert len(_failure_name_lists(planted, "planted.py")) == 2  # the check sees such lists
     assert not _failure_name_lists('MEASURES = ("collision", "success")\n', "measures.py")  # other names mixed in
@@ -97,9 +96,8 @@ def _hard_brake(result, trace, settings):
 @pytest.fixture
 def toy_type():
     """The toy type registered in one place (its row, with its label, and its detector); undone after."""
-    row = register_failure_type(FailureType(TOY, severity=len(FAILURE_TABLE), result_field=None,
-                                            regress_default=False, counted_before_choice=False, with_actor=False,
-                                            label="hard brake"))
+    row = register_failure_type(FailureType(TOY, severity=len(FAILURE_TABLE), result_field="hard_braked",
+                                            regress_default=False, with_actor=False, label="hard brake"))
     monitors.register_detector(monitors.Detector(TOY, _hard_brake, lambda result, failure, settings: -0.25))
     yield row
     monitors.unregister_detector(TOY)
@@ -147,3 +145,39 @@ def test_a_registered_type_is_in_the_table_while_registered(toy_type):
 
 def test_registration_is_undone():
     assert failure_type(TOY) is None and TOY not in monitors.DETECTORS and failure_table() == FAILURE_TABLE
+
+
+def _regress_task(monkeypatch, speeds, failure):
+    """The regress worker task on a stand-in episode of ``speeds`` (no simulator), run in this process."""
+    from dv2s_gym.regress import tasks
+    monkeypatch.setattr(tasks.worker_cache, "env_for", lambda bank_dir, config: (("bank", "config"), None))
+    monkeypatch.setattr(tasks.worker_cache, "policy_for", lambda *args, **kwargs: None)
+    monkeypatch.setattr(tasks, "run_episode", lambda env, policy, scenario, seed: _episode(speeds))
+    return tasks.run_regress_task({"kind": "regress", "policy": "rule", "role": "candidate", "scenario": "s",
+                                   "seed": 0, "env_config": {}, "bank_dir": None, "trace_dir": None,
+                                   "failure": failure, "stall_seconds": 5.0}).to_dict()
+
+
+def test_regress_counts_a_registered_failure_type(toy_type, monkeypatch):
+    """``dv2s regress`` reads the live table: a registered type with a result field is a --failure kind, its
+    worker task records the field by the type's detector, and the report counts it."""
+    assert failures.parse_failure("hard-brake,collision") == ["collision", TOY]
+    assert failures.default_failure() == ("collision", "off_road", "stall")  # the toy type is not a default
+    assert failures.failure_kinds()[TOY] == "hard_braked"
+    braked = _regress_task(monkeypatch, [10.0, 10.0, 4.0, 4.0], ["collision", TOY])
+    gentle = _regress_task(monkeypatch, [10.0, 9.0, 8.0, 7.0], ["collision", TOY])
+    assert braked["error"] is None and braked["hard_braked"] is True and gentle["hard_braked"] is False
+    assert braked["failed"] and braked["failure_kinds"] == [TOY] and not gentle["failed"]
+    not_chosen = _regress_task(monkeypatch, [10.0, 10.0, 4.0, 4.0], ["collision"])
+    assert not_chosen["hard_braked"] is True and not not_chosen["failed"]  # recorded, counted only when chosen
+    summary = regress_report.summarize([braked, gentle, gentle, gentle])
+    assert summary["hard_brake_rate"]["count"] == 1 and summary["failure_rate"]["count"] == 1
+    assert [key for key, _ in regress_report.rates()][:4] == [
+        "collision_rate", "off_road_rate", "stall_rate", "hard_brake_rate"]
+
+
+def test_a_worker_without_the_registered_type_says_so(toy_type, monkeypatch):
+    """A worker process where the plug-in did not register gives an error result naming the type."""
+    monkeypatch.setattr(failures, "failure_table", lambda: FAILURE_TABLE)  # as a process that never registered
+    result = _regress_task(monkeypatch, [10.0, 10.0, 4.0], ["collision", TOY])
+    assert result.get("failed") is None and "hard_brake is not registered in this worker process" in result["error"]

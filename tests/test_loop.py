@@ -14,7 +14,7 @@ from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, paired_summary
 from dv2s_gym.mining import loop as loop_module
 from dv2s_gym.mining.loop import LoopError, fine_tune_weights
-from dv2s_gym.mining.split import cluster_groups, family_of, split_by_cluster, split_by_family
+from dv2s_gym.mining.split import family_of, split_by_family
 from dv2s_gym.workers.settings import WorkerSettings
 from cli_helpers import one_line_error, run
 from loop_helpers import FakeMiner, run_loop
@@ -34,38 +34,6 @@ def _random_entries(rng: np.random.Generator, n: int):
         scenario = f"mined_{rng.integers(n)}"  # collisions: merged entries tie clusters together
         entries.append({"cluster": cluster, "scenario": scenario})
     return entries
-
-
-@pytest.mark.parametrize("trial", range(30))
-def test_split_never_puts_one_cluster_or_scenario_on_both_sides(trial):
-    rng = np.random.default_rng(trial)
-    entries = _random_entries(rng, int(rng.integers(2, 25)))
-    split = split_by_cluster(entries, fraction=0.5, seed=trial)
-    assert not set(split["held_out_clusters"]) & set(split["fine_tune_clusters"])
-    assert not set(split["held_out"]) & set(split["fine_tune"])
-    assert set(split["held_out_clusters"]) | set(split["fine_tune_clusters"]) == {e["cluster"] for e in entries}
-    assert set(split["held_out"]) | set(split["fine_tune"]) == {e["scenario"] for e in entries}
-    for entry in entries:  # a scenario sits on the side of its cluster
-        side = "held_out" if entry["cluster"] in split["held_out_clusters"] else "fine_tune"
-        assert entry["scenario"] in split[side]
-    if split["groups"] >= 2:  # both sides get something
-        assert split["held_out"] and split["fine_tune"]
-    assert split_by_cluster(list(reversed(entries)), 0.5, trial) == split  # deterministic, order-free
-
-
-def test_split_share_and_seed():
-    entries = [{"cluster": f"s{i % 3}/collision/r{i}", "scenario": f"m{i}"} for i in range(20)]
-    assert len(cluster_groups(entries)) == 20
-    split = split_by_cluster(entries, 0.3, seed=1)
-    assert len(split["held_out"]) == 6 and len(split["fine_tune"]) == 14
-    # every parent scenario appears on both sides (dealt in turn within each kind)
-    assert {c.split("/")[0] for c in split["held_out_clusters"]} == {"s0", "s1", "s2"}
-    others = {tuple(split_by_cluster(entries, 0.3, seed=s)["held_out"]) for s in range(2, 8)}
-    assert len(others) > 1  # the seed decides which clusters, not a fixed rule
-    tied = [{"cluster": "a/collision/r0", "scenario": "m"}, {"cluster": "b/collision/r0", "scenario": "m"}]
-    assert split_by_cluster(tied, 0.5, 0)["groups"] == 1
-    with pytest.raises(ValueError, match="fraction"):
-        split_by_cluster(entries, 1.5)
 
 
 @pytest.mark.parametrize("trial", range(30))
@@ -861,7 +829,6 @@ def test_a_discarded_rounds_fine_tuning_does_not_keep_its_families_out_of_the_ne
 @pytest.mark.parametrize("content, problem", [
     ('{"rounds": "x", "settings": 5}', 'has no "settings" object'),
     ('{"rounds": "x", "settings": {}}', 'has no list of round objects under "rounds"'),
-    ('{"rounds": [], "settings": {}}', "records no holdout_by in its settings"),
     ('[1, 2]', "holds a list, not an object"),
     ('{"rounds": [{"steps": {"after": [1, 2]}}], "settings": {"holdout_by": "family"}}',
      "round 1's 'after' step is not an object"),
@@ -1210,12 +1177,12 @@ def test_every_distinct_error_of_a_scenario_is_kept_with_its_count_the_most_freq
                                        {"message": "b", "count": 1}, {"message": "d", "count": 1}]
     assert "unlisted" not in found
     assert found["examples"] == {"s1": "scene not sampled"}
-    text = messages_text(found["messages"], None, "s1")
+    text = messages_text(found["messages"], "s1")
     assert text.startswith("worker hung (3 episodes); worker crashed (2 episodes); c (2 episodes)")
     assert text.endswith("and 2 more distinct message(s) in 2 episode(s)")
-    # a later step's errors add up; a step recorded with its first error only counts it once
-    merged = merged_messages([found, {"episodes": 1, "examples": {"s1": "worker hung"}}])
-    assert merged["messages"]["s1"][0] == {"message": "worker hung", "count": 4}
+    # a later step's errors add up
+    merged = merged_messages([found, errored_episodes([{"scenario": "s1", "error": "worker hung"}])])
+    assert merged["s1"][0] == {"message": "worker hung", "count": 4}
     record = {"round": 1, "steps": {"mine": {"episodes": 20, "errors": 11, "errored": found}}}
     markdown = render_markdown({"settings": {"policy": "dv2s-ppo"}, "policy": "dv2s-ppo", "rounds": [record]})
     assert "- `s1`: worker hung (3 episodes); worker crashed (2 episodes); c (2 episodes)" in markdown
@@ -1232,16 +1199,11 @@ def test_merging_the_steps_error_messages_counts_each_distinct_message_once():
                              + [{"scenario": "s1", "error": "scene rejected by requirement 0"}])
     second = errored_episodes([{"scenario": "s1", "error": "scene rejected by requirement 6"}])
     merged = merged_messages([first, second])
-    assert len(merged["messages"]["s1"]) == 7 and sum(r["count"] for r in merged["messages"]["s1"]) == 9
-    assert merged["messages"]["s1"][:2] == [{"message": "scene rejected by requirement 0", "count": 2},
+    assert len(merged["s1"]) == 7 and sum(r["count"] for r in merged["s1"]) == 9
+    assert merged["s1"][:2] == [{"message": "scene rejected by requirement 0", "count": 2},
                                             {"message": "scene rejected by requirement 6", "count": 2}]
-    text = messages_text(merged["messages"], merged["unlisted"], "s1")
+    text = messages_text(merged, "s1")
     assert text.endswith("scene rejected by requirement 3 (1 episode); and 2 more distinct message(s) in 2 episode(s)")
-    # a step recorded when only five were kept brings its anonymous rest as it was counted
-    legacy = {"messages": {"s1": [{"message": "x", "count": 4}]}, "unlisted": {"s1": {"messages": 3, "episodes": 5}}}
-    merged = merged_messages([second, legacy])
-    assert messages_text(merged["messages"], merged["unlisted"], "s1") == (
-        "x (4 episodes); scene rejected by requirement 6 (1 episode); and 3 more distinct message(s) in 5 episode(s)")
 
 
 def test_a_setting_the_loop_did_not_record_is_its_default(tmp_path, monkeypatch):

@@ -26,7 +26,8 @@ def _regress(path: Path, candidate: str, baseline: str, cand_fail: set, base_fai
     episodes = [{"id": f"{n}:{s}", "scenario": n, "seed": s, "candidate": _result((n, s) in cand_fail),
                  "baseline": _result((n, s) in base_fail)} for n in NAMES for s in SEEDS]
     bank = {"path": "bank", "version": 1, "scenarios": NAMES, "hashes": hashes or {n: "h-" + n for n in NAMES}}
-    report = build_report(bank=bank, settings={"margin": 0.05, "alpha": 0.05, "episodes": 4, "seed": 0},
+    report = build_report(bank=bank, settings={"margin": 0.05, "alpha": 0.05, "episodes": 4, "seed": 0,
+                                                      "failure": ["collision", "off_road"]},
                           candidate={"spec": candidate}, baseline={"spec": baseline}, episodes=episodes)
     return str(write_json(report, path))
 

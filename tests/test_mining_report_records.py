@@ -58,27 +58,6 @@ def test_a_merged_clusters_clip_is_captioned_as_its_own_script_in_the_mining_rep
     assert "generated scenario s_mined_collision (the converted script) driven by keep_lane" in page
 
 
-def test_a_record_keeping_only_its_first_error_counts_every_errored_episode():
-    from dv2s_gym.mining.errored import merged_messages, messages_text
-
-    # a step recorded before messages were counted: 5 episodes errored, only the first one's message kept
-    oldest = {"episodes": 5, "scenarios": {"s": 5}, "examples": {"s": "scene not sampled"}}
-    merged = merged_messages([oldest])
-    text = messages_text(merged["messages"], merged["unlisted"], "s")
-    assert text == ("scene not sampled (1 episode); and 4 episodes whose message was not recorded (only the first "
-                    "error was)")
-    # an older record listing fewer episodes than it counted (the rest without text) shows them too
-    older = {"episodes": 3, "scenarios": {"s": 3}, "messages": {"s": [{"message": "a", "count": 1}]},
-             "unlisted": {"s": {"messages": 0, "episodes": 2}}}
-    merged = merged_messages([older])
-    assert messages_text(merged["messages"], merged["unlisted"], "s") == (
-        "a (1 episode); and 2 more episode(s) whose messages are not listed")
-    # a scenario whose messages are all unlisted is still named
-    only = {"episodes": 4, "scenarios": {"s": 4}, "messages": {}, "unlisted": {"s": {"messages": 3, "episodes": 4}}}
-    merged = merged_messages([only])
-    assert messages_text(merged["messages"], merged["unlisted"], "s") == "3 distinct message(s) not listed in 4 episode(s)"
-
-
 def test_a_workers_give_up_messages_count_by_kind_with_a_seed_as_example():
     from dv2s_gym.mining.errored import errored_episodes, merged_messages, messages_text
     from dv2s_gym.mining.loop_report import _errored_lines
@@ -93,12 +72,12 @@ def test_a_workers_give_up_messages_count_by_kind_with_a_seed_as_example():
             "'keep_lane' on s seed <seed> (2 attempts)")
     assert found["messages"]["s"] == [{"message": kind, "count": 3, "example": records[0]["error"]},
                                       {"message": "scene not sampled", "count": 1}]
-    assert messages_text(found["messages"], None, "s") == f"{kind} (3 episodes, e.g. seed 17); scene not sampled (1 episode)"
+    assert messages_text(found["messages"], "s") == f"{kind} (3 episodes, e.g. seed 17); scene not sampled (1 episode)"
     # a step recorded with one message per seed adds up with a new one by kind
     old = {"episodes": 2, "scenarios": {"s": 2},
            "messages": {"s": [{"message": records[1]["error"], "count": 1}, {"message": records[2]["error"], "count": 1}]}}
     merged = merged_messages([old, found])
-    assert merged["messages"]["s"][0]["message"] == kind and merged["messages"]["s"][0]["count"] == 5
+    assert merged["s"][0]["message"] == kind and merged["s"][0]["count"] == 5
     lines = _errored_lines({"steps": {"mine": {"errored": old}, "regress": {"errored": {"fine_tuned": found}}}})
     assert lines[-1] == f"  - `s`: {kind} (5 episodes, e.g. seed 4); scene not sampled (1 episode)"
 

@@ -2,7 +2,9 @@
 is public there (named without the underscore, with a docstring) or lives where it is used.
 
 Every way in is checked: ``from module import _name``; ``module._name`` on a module imported by name, rebound to
-another name (``m = module``) or loaded by ``import_module("...")``; ``getattr(module, "_name")`` (and hasattr, setattr,
+another name (``m = module``), loaded by ``import_module("...")`` or from its file
+(``importlib.util.module_from_spec(importlib.util.spec_from_file_location(...))``: the module its name or its path
+names, else a module of unknown origin, :data:`FROM_A_FILE`, whose private names are all refused); ``getattr(module, "_name")`` (and hasattr, setattr,
 delattr), ``vars(module)["_name"]`` and ``module.__dict__["_name"]``. A name computed at run time and a module's whole
 namespace (``vars``, ``dir``, ``__dict__``) are refused too: they cannot be told public. The modules that may share
 private names are listed below with the reason.
@@ -84,26 +86,64 @@ def _dotted(node: ast.AST) -> Optional[List[str]]:
     return [node.id] + parts if isinstance(node, ast.Name) else None
 
 
-def _loaded_by_name(node: ast.AST) -> Optional[str]:
+FROM_A_FILE = "<a module loaded from a file>"
+"""What a module made by ``module_from_spec`` stands for when neither the name nor the path given to
+``spec_from_file_location`` names a project module (it could be any of them)."""
+
+
+def _called(node: ast.AST) -> Optional[str]:
+    """The last part of the name a call calls (``importlib.util.module_from_spec(...)`` -> ``module_from_spec``)."""
+    called = _dotted(node.func) if isinstance(node, ast.Call) else None
+    return called[-1] if called else None
+
+
+def _file_spec(node: ast.AST, known: set) -> Optional[str]:
+    """The project module a ``spec_from_file_location(name, location)`` call loads: the module ``name`` names, else
+    the one a string in ``location`` is the file of (``ROOT / "dv2s_gym/mining/heldout.py"``), else
+    :data:`FROM_A_FILE`; ``None`` for another expression."""
+    if _called(node) != "spec_from_file_location":
+        return None
+    if node.args and isinstance(node.args[0], ast.Constant) and node.args[0].value in known:
+        return node.args[0].value
+    for argument in node.args[1:] + [k.value for k in node.keywords]:
+        for part in ast.walk(argument):
+            if isinstance(part, ast.Constant) and isinstance(part.value, str) and part.value.endswith(".py"):
+                parts = Path(part.value).with_suffix("").parts
+                name = ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+                if name in known:
+                    return name
+    return FROM_A_FILE
+
+
+def _loaded_by_name(node: ast.AST, specs: Optional[Dict[str, str]] = None, known: frozenset = frozenset()
+                    ) -> Optional[str]:
     """The module ``importlib.import_module("a.b")`` (or ``import_module("a.b")``) returns, when named by a
-    literal."""
+    literal; or the module ``module_from_spec(spec)`` makes, its spec a ``spec_from_file_location`` call or a name
+    bound to one (``specs``: name -> :func:`_file_spec`)."""
+    if _called(node) == "module_from_spec" and node.args:
+        spec = node.args[0]
+        if isinstance(spec, ast.Name) and spec.id in (specs or {}):
+            return (specs or {})[spec.id]
+        return _file_spec(spec, set(known)) or FROM_A_FILE
     if not (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant)
             and isinstance(node.args[0].value, str)):
         return None
-    called = _dotted(node.func)
-    return node.args[0].value if called and called[-1] == "import_module" else None
+    return node.args[0].value if _called(node) == "import_module" else None
 
 
 def _module_named(node: ast.AST, aliases: Dict[str, str], known: set) -> Optional[str]:
-    """The project module an expression stands for: a name bound to one (by an import, an assignment or
-    ``import_module``), a dotted path from a package, or a call of ``import_module`` with a literal."""
-    loaded = _loaded_by_name(node)
+    """The project module an expression stands for: a name bound to one (by an import, an assignment,
+    ``import_module`` or ``module_from_spec``), a dotted path from a package, or a call of ``import_module`` with a
+    literal or of ``module_from_spec`` (:data:`FROM_A_FILE` when the file is not known to be a project module)."""
+    loaded = _loaded_by_name(node, aliases.get(_SPECS), frozenset(known))
     if loaded is not None:
-        return loaded if loaded in known else None
+        return loaded if loaded in known or loaded == FROM_A_FILE else None
     dotted = _dotted(node)
     if dotted is None:
         return None
-    if dotted[0] in aliases:
+    if dotted[0] in aliases and dotted[0] != _SPECS:
+        if aliases[dotted[0]] == FROM_A_FILE:
+            return FROM_A_FILE if len(dotted) == 1 else None
         source = ".".join([aliases[dotted[0]]] + dotted[1:])
     elif dotted[0] in PACKAGES:
         source = ".".join(dotted)
@@ -154,6 +194,10 @@ def _reached_names(node: ast.AST, aliases: Dict[str, str], known: set) -> Iterat
         yield source, COMPUTED
 
 
+_SPECS = "<specs>"
+"""The key of :func:`_module_aliases`' answer holding the names bound to a ``spec_from_file_location`` call."""
+
+
 def _module_aliases(module: str, path: Path, tree: ast.AST, known: set) -> Dict[str, str]:
     """Local name -> the project module it is bound to: by ``import a.b as n``, ``from a import b`` (a module),
     ``n = <a module>`` or ``n = import_module("a.b")``. Scopes are not told apart: a name bound to a module anywhere
@@ -171,6 +215,12 @@ def _module_aliases(module: str, path: Path, tree: ast.AST, known: set) -> Dict[
                 if _project(alias.name) and alias.asname:
                     aliases[alias.asname] = alias.name
     bindings = [node for node in ast.walk(tree) if isinstance(node, (ast.Assign, ast.AnnAssign, ast.NamedExpr))]
+    specs: Dict[str, str] = {}
+    for node in bindings:
+        spec = _file_spec(node.value, known) if node.value is not None else None
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+        specs.update({target.id: spec for target in targets if spec is not None and isinstance(target, ast.Name)})
+    aliases[_SPECS] = specs  # type: ignore[assignment]  # read by _module_named, never a module name
     changed = True
     while changed:  # ``a = module; b = a`` in any order
         changed = False
@@ -250,6 +300,10 @@ def test_the_check_sees_both_ways_in(tmp_path, monkeypatch):
     ("module = dv2s_gym.mining.heldout\n    return module._rate", "_rate"),
     ('module = importlib.import_module("dv2s_gym.mining.heldout")\n    return module._rate', "_rate"),
     ('return import_module("dv2s_gym.mining.heldout")._rate', "_rate"),
+    ('spec = importlib.util.spec_from_file_location("dv2s_gym.mining.heldout", where)\n'
+     '    return importlib.util.module_from_spec(spec)._rate', "_rate"),
+    ('module = importlib.util.module_from_spec(importlib.util.spec_from_file_location(\n'
+     '        "copy", ROOT / "dv2s_gym/mining/heldout.py"))\n    return module._rate', "_rate"),
 ])
 def test_the_check_sees_private_names_reached_by_reflection_or_a_rebound_name(tmp_path, planted, name):
     """A copy of a real module (which imports ``heldout``) with a function appended that reaches ``heldout``'s
@@ -269,3 +323,20 @@ def test_the_check_sees_private_names_reached_by_reflection_or_a_rebound_name(tm
     planted_uses = {(module, source, found) for module, line, source, found in added if line == last}
     assert ("dv2s_gym.mining.loop", "dv2s_gym.mining.heldout", name) in planted_uses
     assert {module for module, _, _ in planted_uses} == {"dv2s_gym.mining.loop"}
+
+
+def test_the_check_refuses_private_names_of_a_module_loaded_from_an_unknown_file(tmp_path):
+    """A module made by ``module_from_spec`` from a file neither its name nor its path tells could be any project
+    module: a private name taken from it is refused."""
+    modules = list(_modules())
+    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.mining.loop")
+    copy = tmp_path / "loop.py"
+    copy.write_text(modules[index][1].read_text(encoding="utf-8") + "\n\nimport importlib.util\n\n\n"
+                    "def _planted(where):\n    spec = importlib.util.spec_from_file_location('anything', where)\n"
+                    "    loaded = importlib.util.module_from_spec(spec)\n    return loaded._hidden, loaded.public\n",
+                    encoding="utf-8")
+    before = private_uses(modules, only="dv2s_gym.mining.loop")
+    modules[index] = ("dv2s_gym.mining.loop", copy)
+    added = set(private_uses(modules, only="dv2s_gym.mining.loop")) - set(before)
+    last = len(copy.read_text(encoding="utf-8").splitlines())
+    assert added == {("dv2s_gym.mining.loop", last, FROM_A_FILE, "_hidden")}

@@ -146,7 +146,7 @@ def _junit_of(tables, errors=0, baseline=True):
     for k in range(errors):
         episodes[k] = dict(episodes[k], candidate={"error": "RuntimeError: boom"})
     bank = {"path": "x", "version": "v", "scenarios": list(tables), "hashes": {n: "h" for n in tables}}
-    report = build_report(bank=bank, settings={"episodes": 1, "seed": 0, "margin": 0.02, "alpha": 0.05},
+    report = build_report(bank=bank, settings={"episodes": 1, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
                           candidate={"spec": "new"}, baseline={"spec": "old"} if baseline else None, episodes=episodes)
     with tempfile.TemporaryDirectory() as folder:
         write_junit(report, f"{folder}/junit.xml")
@@ -212,7 +212,7 @@ def test_markdown_puts_the_regressed_scenarios_first_and_fits_a_comment(tmp_path
     episodes = [{"id": f"{n}/{k}", "scenario": n, "seed": k, "candidate": {"failed": c, "collided": c},
                  "baseline": {"failed": b, "collided": b}} for n, rows in tables.items() for k, (c, b) in enumerate(rows)]
     bank = {"path": "x", "version": "v", "scenarios": list(tables), "hashes": {n: "h" for n in tables}}
-    report = build_report(bank=bank, settings={"episodes": 40, "seed": 0, "margin": 0.02, "alpha": 0.05},
+    report = build_report(bank=bank, settings={"episodes": 40, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
                           candidate={"spec": "new"}, baseline={"spec": "old", "report": str(tmp_path / "old" / "report.json")},
                           episodes=episodes)
     text = write_markdown(report, tmp_path / "out" / "report.md").read_text()
@@ -357,7 +357,7 @@ def test_an_exception_in_an_episode_is_an_error_result_and_errors_never_pass(tmp
     ok = dict(by_seed[5], failed=False)
     episodes = [{"id": f"s/{k}", "scenario": "s", "seed": k, "candidate": ok, "baseline": ok} for k in range(200)]
     bank = {"path": "x", "version": "v", "scenarios": ["s"], "hashes": {"s": "h"}}
-    settings = {"episodes": 200, "seed": 0, "margin": 0.05, "alpha": 0.05}
+    settings = {"episodes": 200, "seed": 0, "margin": 0.05, "alpha": 0.05, "failure": ["collision", "off_road"]}
     clean = build_report(bank=bank, settings=settings, candidate={"spec": "a"}, baseline={"spec": "b"},
                          episodes=episodes)
     assert clean["verdict"] == "PASS"

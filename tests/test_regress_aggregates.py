@@ -54,11 +54,11 @@ def test_report_carries_the_aggregates_as_context():
                  "candidate": {"failed": False, "episode_return": float(rng.normal(2))},
                  "baseline": {"failed": False, "episode_return": float(rng.normal(0))}} for k in range(30)]
     bank = {"path": "x", "version": "v", "scenarios": ["s"], "hashes": {"s": "h"}}
-    report = build_report(bank=bank, settings={"episodes": 30, "seed": 0, "margin": 0.02, "alpha": 0.05},
+    report = build_report(bank=bank, settings={"episodes": 30, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
                           candidate={"spec": "new"}, baseline={"spec": "old"}, episodes=episodes)
     poi = report["aggregates"]["probability_of_improvement"]
     assert poi["value"] > 0.8 and poi["low"] <= poi["value"] <= poi["high"]
     assert "probability of improvement" in _markdown(report) and "the verdict is the paired failure test" in _markdown(report)
-    alone = build_report(bank=bank, settings={"episodes": 30, "seed": 0, "margin": 0.02, "alpha": 0.05},
+    alone = build_report(bank=bank, settings={"episodes": 30, "seed": 0, "margin": 0.02, "alpha": 0.05, "failure": ["collision", "off_road"]},
                          candidate={"spec": "new"}, baseline=None, episodes=[dict(e, baseline=None) for e in episodes])
     assert alone["aggregates"] is None and return_aggregates([dict(e, baseline=None) for e in episodes]) is None

@@ -73,7 +73,7 @@ def test_a_report_built_from_records_holds_the_same_json_as_one_built_from_their
     candidate, baseline = lines[0], lines[1]  # one episode of a real run, both roles
     assert candidate["id"] == baseline["id"]
     bank = {"path": "bank", "version": "v", "scenarios": [candidate["scenario"]], "hashes": {candidate["scenario"]: "h"}}
-    settings = {"episodes": 1, "seed": 0, "margin": 0.05, "alpha": 0.05}
+    settings = {"episodes": 1, "seed": 0, "margin": 0.05, "alpha": 0.05, "failure": ["collision", "off_road"]}
 
     def report(make):
         episode = {"id": candidate["id"], "scenario": candidate["scenario"], "seed": candidate["seed"],

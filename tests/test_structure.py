@@ -739,19 +739,21 @@ def _base_name(node: ast.AST) -> str:
 
 
 def _class_makers(tree: ast.AST) -> Dict[str, str]:
-    """The names a module makes classes with by a call, ``type(name, bases, namespace)`` and ``types.new_class``,
-    with what each is called under there (``{"type": "type", "new_class": "new_class"}``, with aliases)."""
-    makers = {"type": "type", "new_class": "new_class"}
+    """The names a module makes classes with by a call, ``type(name, bases, namespace)``, ``abc.ABCMeta(name,
+    bases, namespace)``, ``types.new_class`` and ``dataclasses.make_dataclass`` (bases in ``bases=``), with what
+    each is called under there (``{"type": "type", "ABCMeta": "ABCMeta", ...}``, with aliases)."""
+    makers = {"type": "type", "new_class": "new_class", "ABCMeta": "ABCMeta", "make_dataclass": "make_dataclass"}
     for node in ast.walk(tree):
-        if isinstance(node, ast.ImportFrom) and node.module in ("types", "builtins"):
+        if isinstance(node, ast.ImportFrom) and node.module in ("types", "builtins", "abc", "dataclasses"):
             makers.update({alias.asname: alias.name for alias in node.names if alias.name in makers and alias.asname})
     return makers
 
 
 def classes_made_by_calls(tree: ast.AST) -> List[tuple]:
-    """``(name, bases, line)`` of every class a module makes by calling :func:`_class_makers` (``type`` with three
-    arguments, ``types.new_class``): named by the name it is assigned to (else its literal name), its bases the
-    names in a literal tuple; ``bases`` is None when they are computed (what it derives from is not visible)."""
+    """``(name, bases, line)`` of every class a module makes by calling :func:`_class_makers` (``type`` or
+    ``ABCMeta`` with three arguments, ``types.new_class``, ``make_dataclass``: its bases are its ``bases=``, none
+    given is ``()``): named by the name it is assigned to (else its literal name), its bases the names in a literal
+    tuple; ``bases`` is None when they are computed (what it derives from is not visible)."""
     makers = _class_makers(tree)
     assigned = {id(node.value): node.targets[0].id for node in ast.walk(tree)
                 if isinstance(node, ast.Assign) and len(node.targets) == 1 and isinstance(node.targets[0], ast.Name)}
@@ -760,12 +762,18 @@ def classes_made_by_calls(tree: ast.AST) -> List[tuple]:
         if not isinstance(node, ast.Call):
             continue
         maker = makers.get(_base_name(node.func))
-        arguments = node.args + [k.value for k in node.keywords if k.arg in ("bases",)]
-        if maker is None or (maker == "type" and len(node.args) != 3) or len(arguments) < 2:
+        keyword = [k.value for k in node.keywords if k.arg == "bases"]
+        arguments = node.args + keyword
+        if maker == "make_dataclass":
+            if not node.args:
+                continue
+            given = keyword[0] if keyword else ast.Tuple(elts=[])  # no bases: it derives from object
+        elif maker is None or (maker in ("type", "ABCMeta") and len(node.args) != 3) or len(arguments) < 2:
             continue
+        else:
+            given = node.args[1] if len(node.args) > 1 else arguments[-1]
         literal = node.args[0].value if isinstance(node.args[0], ast.Constant) else None
         name = assigned.get(id(node)) or (literal if isinstance(literal, str) else f"<{maker}() at line {node.lineno}>")
-        given = node.args[1] if len(node.args) > 1 else arguments[-1]
         bases = ([_base_name(b) for b in given.elts] if isinstance(given, (ast.Tuple, ast.List))
                  and not any(isinstance(b, ast.Starred) for b in given.elts) else None)
         made.append((name, bases, node.lineno))
@@ -1000,6 +1008,11 @@ def test_classes_made_by_a_call_name_their_bases():
     ("import types\nPlantedNewClassError = types.new_class('PlantedNewClassError', (OSError,))\n",
      "PlantedNewClassError"),
     ("_E = RuntimeError\nPlantedBoth = type('PlantedBoth', (_E,), {})\n", "PlantedBoth"),
+    ("import abc\nPlantedMetaError = abc.ABCMeta('PlantedMetaError', (LookupError,), {})\n", "PlantedMetaError"),
+    ("from abc import ABCMeta as _Meta\nPlantedAliasMetaError = _Meta('PlantedAliasMetaError', (OSError,), {})\n",
+     "PlantedAliasMetaError"),
+    ("import dataclasses\nPlantedDataError = dataclasses.make_dataclass('PlantedDataError', [('code', int)], "
+     "bases=(LookupError,))\n", "PlantedDataError"),
 ])
 def test_the_error_rule_sees_an_error_planted_through_an_alias_or_a_call(tmp_path, planted, name):
     modules = _modules()
@@ -1077,8 +1090,11 @@ def test_the_error_rule_resolves_bases_to_the_class_they_name(tmp_path, planted,
 
 def test_a_class_made_by_a_call_with_computed_bases_is_refused():
     tree = ast.parse("import types\nbases = (ValueError,)\nA = type('A', bases, {})\nB = types.new_class('B', bases)\n"
-                     "C = type('C', (int,), {})\nkind = type(3)\n")
-    assert classes_made_by_calls(tree) == [("A", None, 3), ("B", None, 4), ("C", ["int"], 5)]
+                     "C = type('C', (int,), {})\nkind = type(3)\nimport abc, dataclasses\n"
+                     "D = abc.ABCMeta('D', bases, {})\nE = dataclasses.make_dataclass('E', [], bases=bases)\n"
+                     "F = dataclasses.make_dataclass('F', ['x'])\nG = abc.ABCMeta('G', (KeyError,), {})\n")
+    assert classes_made_by_calls(tree) == [("A", None, 3), ("B", None, 4), ("C", ["int"], 5), ("D", None, 8),
+                                           ("E", None, 9), ("F", [], 10), ("G", ["KeyError"], 11)]
 
 
 OUTSIDE_THE_BASE: Dict[str, str] = {

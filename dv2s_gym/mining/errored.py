@@ -76,46 +76,25 @@ def _ranked(counts: Mapping[str, Mapping[str, int]],
             for name in sorted(counts)}
 
 
-def merged_messages(found: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
-    """The ``messages`` of several :func:`errored_episodes` (steps, policies) added up per scenario, every distinct
-    kind of message (:func:`message_kind`: a message recorded with its seed counts with the others of its kind) with
-    its total count. One recorded when only the five most frequent were kept brings its ``unlisted`` count of the
-    rest, which is added to ``unlisted`` as it is (its messages unknown, they cannot be matched with those listed
-    elsewhere). The episodes a record counts for a scenario beyond those its messages account for (one recorded
-    before messages were counted keeps only its first error) are added to ``unlisted[scenario]["unrecorded"]``:
-    their messages are not known. Every scenario with an errored episode is in ``messages``, if only with ``[]``."""
+def merged_messages(found: Sequence[Mapping[str, Any]]) -> Dict[str, List[Dict[str, Any]]]:
+    """The ``messages`` of several :func:`errored_episodes` (steps, policies) added up per scenario: ``{scenario:
+    [{"message", "count"[, "example"]}]}``, every distinct kind of message (:func:`message_kind`: a message recorded
+    with its seed counts with the others of its kind) with its total count, the most frequent first. Every scenario
+    with an errored episode is in it, if only with ``[]``."""
     counts: Dict[str, Dict[str, int]] = {}
     examples: Dict[str, Dict[str, str]] = {}
-    beyond: Dict[str, Dict[str, int]] = {}
     for errored in found:
-        errored = errored or {}
-        listed = errored.get("messages")
-        if listed is None:  # recorded with its first error only
-            listed = {name: [{"message": why, "count": 1}] for name, why in (errored.get("examples") or {}).items()}
-        accounted: Dict[str, int] = {}
-        for name, rows in listed.items():
+        for name in (errored or {}).get("scenarios") or {}:
+            counts.setdefault(name, {})
+        for name, rows in ((errored or {}).get("messages") or {}).items():
             into = counts.setdefault(name, {})
             for row in rows:
                 kind = message_kind(row["message"])
-                into[kind] = into.get(kind, 0) + int(row.get("count") or 0)
-                accounted[name] = accounted.get(name, 0) + int(row.get("count") or 0)
+                into[kind] = into.get(kind, 0) + int(row["count"])
                 example = row.get("example") or (row["message"] if kind != row["message"] else None)
                 if example:
                     examples.setdefault(name, {}).setdefault(kind, example)
-        for name, more in (errored.get("unlisted") or {}).items():
-            counts.setdefault(name, {})
-            into = beyond.setdefault(name, {"messages": 0, "episodes": 0})
-            into["messages"] += int(more.get("messages") or 0)
-            into["episodes"] += int(more.get("episodes") or 0)
-            into["unrecorded"] = into.get("unrecorded", 0) + int(more.get("unrecorded") or 0)
-            accounted[name] = accounted.get(name, 0) + int(more.get("episodes") or 0)
-        for name, n in (errored.get("scenarios") or {}).items():
-            missing = int(n or 0) - accounted.get(name, 0)
-            if missing > 0:
-                counts.setdefault(name, {})
-                into = beyond.setdefault(name, {"messages": 0, "episodes": 0})
-                into["unrecorded"] = into.get("unrecorded", 0) + missing
-    return {"messages": _ranked(counts, examples), "unlisted": beyond}
+    return _ranked(counts, examples)
 
 
 def _episodes(n: int) -> str:
@@ -129,25 +108,15 @@ def _row_text(row: Mapping[str, Any]) -> str:
     return f"{row['message']} ({_episodes(int(row['count']))}" + (f", e.g. seed {seed.group(1)})" if seed else ")")
 
 
-def messages_text(messages: Mapping[str, Sequence[Mapping[str, Any]]],
-                  unlisted: Optional[Mapping[str, Mapping[str, int]]], name: str, kept: int = ERROR_MESSAGES_KEPT) -> str:
+def messages_text(messages: Mapping[str, Sequence[Mapping[str, Any]]], name: str,
+                  kept: int = ERROR_MESSAGES_KEPT) -> str:
     """Scenario ``name``'s error messages in words, the ``kept`` most frequent: ``"scene not sampled (3 episodes);
-    worker hung ... seed <seed> (2 episodes, e.g. seed 17)"``, how many more distinct messages there were in how
-    many episodes (with those an older record counted without their text, ``unlisted``), and how many episodes
-    errored with a message that was not recorded (``unlisted[name]["unrecorded"]``)."""
+    worker hung ... seed <seed> (2 episodes, e.g. seed 17)"``, then how many more distinct messages there were in
+    how many episodes."""
     rows = sorted(messages.get(name) or [], key=lambda row: -int(row["count"]))  # stable: ties keep their order
     parts = [_row_text(row) for row in rows[:kept]]
     rest = rows[kept:]
-    more = {"messages": len(rest), "episodes": sum(int(row["count"]) for row in rest)}
-    for key, value in ((unlisted or {}).get(name) or {}).items():
-        more[key] = more.get(key, 0) + int(value or 0)
-    lead = "and " if parts else ""
-    if more["messages"]:
-        parts.append(f"{lead}{more['messages']} {'more ' if parts else ''}distinct message(s) "
-                     f"{'' if parts else 'not listed '}in {more['episodes']} episode(s)")
-    elif more["episodes"]:
-        parts.append(f"{lead}{more['episodes']} {'more ' if parts else ''}episode(s) whose messages are not listed")
-    if more.get("unrecorded"):
-        parts.append(f"{'and ' if parts else ''}{_episodes(more['unrecorded'])} whose message was not recorded "
-                     "(only the first error was)")
+    if rest:
+        parts.append(f"and {len(rest)} more distinct message(s) in {sum(int(row['count']) for row in rest)} "
+                     "episode(s)")
     return "; ".join(parts)

@@ -82,7 +82,7 @@ from dv2s_gym.mining.loop_verdict import (
     EVIDENCE_FLOOR, evidence_floor_note, HELDOUT_ALPHA, heldout_worse, recommendation)
 from dv2s_gym.mining.miner import MineSettings
 from dv2s_gym.mining.replays import reference_passed, replay_clusters, replay_entries, REPLAYS_FILE
-from dv2s_gym.mining.split import family_of, split_by_cluster, split_by_family
+from dv2s_gym.mining.split import family_of, split_by_family
 from dv2s_gym.progress_lines import log_line
 from dv2s_gym.regress import runner
 from dv2s_gym.regress.runner import BaselineReport, RegressSettings
@@ -103,11 +103,9 @@ DEFAULT_OUT = "out/loop"
 
 IDENTITY = ("policy",) + LoopSettings.resume_keys()
 """The settings of ``loop.json`` a resumed loop must share with the recorded ones."""
-_RECORDED = ("holdout_by",)
-"""Settings a loop keeps as first recorded (not chosen by the user, so never a reason to refuse a resume)."""
-
 HOLDOUT_BY = "family"
-"""How a loop splits its mined scenarios (recorded in ``loop.json``)."""
+"""How a loop splits its mined scenarios (recorded in ``loop.json``; a loop folder recording another way was
+written by an older dv2s-gym and is refused)."""
 
 UNTOUCHED_BANK = Path(__file__).resolve().parent / "untouched"
 """The scenario set no loop mines or fine-tunes on: a bank folder of scripts written by others for Scenic's
@@ -160,7 +158,7 @@ class _State:
                            fix="rerun with its settings to resume it, or choose another --out")
             # what may change on a resume, and a setting the loop did not record yet (its default, checked above)
             data["settings"].update({k: settings[k] for k in settings
-                                     if k not in recorded or (k not in IDENTITY and k not in _RECORDED)})
+                                     if k not in recorded or k not in IDENTITY})
             self.data = data
         else:
             self.data = {"settings": settings, "start": None, "rounds": []}
@@ -189,13 +187,41 @@ def _check_structure(data: Any, path: Path) -> None:
     elif data.get("start") is not None and not (isinstance(data["start"], dict)
                                                 and isinstance(data["start"].get("scenarios"), list)):
         problem = "has a \"start\" that is not an object with a list of scenarios"
-    elif any(key not in data["settings"] for key in _RECORDED):
-        problem = f"records no {' or '.join(_RECORDED)} in its settings"
     else:
         problem = _round_problem(data["rounds"])
     if problem:
         raise LoopError(f"{path} is not a dv2s loop record ({problem}); choose another --out, or delete the file "
                         "to start the loop over")
+    older = _older_problem(data)
+    if older:
+        raise LoopError(f"{path.parent} was written by an older dv2s-gym ({older}); rerun with a new --out")
+
+
+_ERRORED_BY_POLICY = ("after", "untouched", "regress")
+"""The steps of a round that record their errored episodes per policy (``mine`` and ``before`` record one)."""
+
+
+def _older_problem(data: Mapping[str, Any]) -> Optional[str]:
+    """What in a ``loop.json`` this version does not write (``None``: nothing): a split other than by family,
+    errored episodes recorded without every message counted, or held-out comparisons without their recorded tests
+    (``significantly_worse``, each test with its families' harm check)."""
+    if data["settings"].get("holdout_by") != HOLDOUT_BY:
+        return f"its loop.json records holdout_by {data['settings'].get('holdout_by')!r}, not {HOLDOUT_BY!r}"
+    for number, record in enumerate(data["rounds"], start=1):
+        steps = record.get("steps", {})
+        if isinstance(steps.get("mine"), dict) and "errored" not in steps["mine"]:
+            return f"round {number}'s mining step records no errored episodes"
+        after = steps.get("after")
+        if isinstance(after, dict) and (not isinstance(after.get("significantly_worse"), dict) or any(
+                isinstance(test, dict) and "family_harm" not in test for test in after["significantly_worse"].values())):
+            return f"round {number}'s held-out step records no held-out tests with their families' harm check"
+        for step, value in steps.items():
+            if not isinstance(value, dict) or not isinstance(value.get("errored"), dict):
+                continue
+            found = value["errored"].values() if step in _ERRORED_BY_POLICY else [value["errored"]]
+            if any(isinstance(f, dict) and ("messages" not in f or "unlisted" in f) for f in found):
+                return f"round {number}'s {step!r} step records its errored episodes without every message"
+    return None
 
 
 _ROUND_TEXTS = ("policy", "new_policy", "control_policy", "next_policy", "next_policy_reason")
@@ -425,10 +451,6 @@ class _Loop:
     progress: bool
     log: Callable[[str], None]
 
-    @property
-    def holdout_by(self) -> str:
-        return self.state.data["settings"]["holdout_by"]
-
 
 def _open_loop(policy: str, settings: LoopSettings, out: Path, progress: bool, log: Callable[[str], None]) -> _Loop:
     """The loop in ``out``: a new one recorded in ``loop.json``, or the recorded one checked against ``settings``;
@@ -530,8 +552,8 @@ def _split_step(loop: _Loop, number: int, current: str, timed: "_Timed") -> None
     held_families, _ = _earlier_sides(earlier)
     _, tuned_families = _earlier_sides(_lineage(loop, earlier, current))
     kept = steps["mine"]["kept"]
-    timed("split", lambda: _split(kept, loop.settings.holdout_fraction, loop.settings.seed * 1000 + number,
-                                  loop.holdout_by, loop.bank, held_families, tuned_families),
+    timed("split", lambda: split_by_family(_with_parents(kept, loop.bank), loop.settings.holdout_fraction,
+                                           loop.settings.seed * 1000 + number, held_families, tuned_families),
           f"{len(kept)} kept mined scenario(s) into fine-tuning and held-out families")
     families = set(steps["split"].get("fine_tune_families", []))  # every kept family, when none is held out
     if kept and not steps["split"]["held_out"] and families and families <= set(tuned_families) - set(held_families):
@@ -616,8 +638,7 @@ def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Map
         return
     merged = merged_messages([found for found in errored.values() if found])
     loop.log(f"round {number}: WARNING: episodes that errored in the {stage} step (left out of its rates and "
-             f"tests): {text}" + "".join(f"; {name}: {messages_text(merged['messages'], merged['unlisted'], name)}"
-                                         for name in merged["messages"]))
+             f"tests): {text}" + "".join(f"; {name}: {messages_text(merged, name)}" for name in merged))
 
 
 def _log_mined(loop: _Loop, number: int, mined: Mapping[str, Any]) -> None:
@@ -1084,14 +1105,6 @@ def _comparison(report: Mapping[str, Any], path: Path) -> Dict[str, Any]:
     return {"verdict": report.get("verdict"), "reason": comparison.get("reason"), "episodes": comparison.get("n"),
             "difference": comparison.get("difference"), "p_value": comparison.get("p_value"),
             "report": str(Path(path).resolve())}
-
-
-def _split(kept: Sequence[Mapping[str, Any]], fraction: float, seed: int, by: str = HOLDOUT_BY,
-           bank: Optional[str] = None, held_families: Sequence[str] = (),
-           tuned_families: Sequence[str] = ()) -> Dict[str, Any]:
-    if by == "cluster":
-        return split_by_cluster(kept, fraction, seed)
-    return split_by_family(_with_parents(kept, bank), fraction, seed, held_families, tuned_families)
 
 
 def _lineage(loop: _Loop, rounds: Sequence[Mapping[str, Any]], current: str) -> List[Mapping[str, Any]]:

@@ -22,8 +22,7 @@
                                               True), "parent" (exact replays)}], "folder"},
                            "split": {"by": "family", "fine_tune", "held_out", "fine_tune_clusters",
                                      "held_out_clusters", "fine_tune_families", "held_out_families", "groups",
-                                     "moved_to_fine_tune"}
-                                    (loops recorded before the family split: no "by" and no families),
+                                     "moved_to_fine_tune"},
                            "reference": {"reference", "episodes", "kept", "excluded": [[scenario, seed]]
                                          (held-out episodes the reference driver failed or errored on, left out of
                                          every rate and test), "failed", "errored", "by_scenario",
@@ -79,8 +78,7 @@ round's baseline episodes (the starting policy) are paired with the last tested 
 ``errored`` counts the episodes that errored (no rate or test counts them; e.g. a scene the scenario's
 sampler could not produce): in ``mine`` and ``before`` ``{"episodes", "scenarios": {scenario: n}, "messages":
 {scenario: [{"message", "count"}]: every distinct error, the most frequent first; the reports list 5 and count
-the rest}, "examples": {scenario: its first error}}`` (a record written when only 5 were kept has ``"unlisted":
-{scenario: {"messages", "episodes"}}`` for the rest) (:func:`dv2s_gym.mining.errored.errored_episodes`);
+the rest}, "examples": {scenario: its first error}}`` (:func:`dv2s_gym.mining.errored.errored_episodes`);
 in ``after`` the same per policy
 (``fine_tuned``, ``control``), in ``untouched`` and ``regress`` per policy (``start``, ``fine_tuned``, and
 ``control`` in ``untouched``). The log warns of them after each step and ``report.md`` lists them per round.
@@ -302,12 +300,12 @@ def errored_note(errored: Mapping[str, Any]) -> str:
 
 def errored_by_stage(record: Mapping[str, Any]) -> List[tuple]:
     """``[(stage label, {policy: errored})]``: the round's errored episodes per step that ran
-    (:func:`dv2s_gym.mining.errored.errored_episodes`' form; a mining step recorded without them gives its count)."""
+    (:func:`dv2s_gym.mining.errored.errored_episodes`' form)."""
     steps = record.get("steps") or {}
     found = []
     mine = steps.get("mine") or {}
-    if mine:
-        found.append(("mining", {"mine": mine.get("errored") or {"episodes": mine.get("errors") or 0}}))
+    if mine.get("errored") is not None:
+        found.append(("mining", {"mine": mine["errored"]}))
     held: Dict[str, Any] = {}
     if (steps.get("before") or {}).get("errored") is not None:
         held["start"] = steps["before"]["errored"]
@@ -338,8 +336,7 @@ def _errored_lines(record: Mapping[str, Any]) -> List[str]:
              + ("**" if total else "")]
 
     merged = merged_messages([found for _, by in stages for found in by.values() if found])
-    lines += [f"  - `{name}`: {messages_text(merged['messages'], merged['unlisted'], name)}"
-              for name in merged["messages"]]
+    lines += [f"  - `{name}`: {messages_text(merged, name)}" for name in merged]
     return lines
 
 
@@ -537,7 +534,7 @@ def _settings_lines(settings: Mapping[str, Any]) -> List[str]:
         f"Per round: mining budget {settings.get('budget')} episodes ({settings.get('sampler')} sampler), at most "
         f"{'every' if settings.get('max_conversions') is None else settings.get('max_conversions')} cluster(s) converted, "
         f"{_replays_text(settings)}, "
-        f"{settings.get('holdout_fraction')} of the mined {'families (parent scenarios)' if settings.get('holdout_by', 'cluster') == 'family' else 'clusters'} "
+        f"{settings.get('holdout_fraction')} of the mined families (parent scenarios) "
         f"held out, {settings.get('k_eval')} evaluation seeds per held-out scenario (at least "
         f"{settings.get('min_heldout_episodes', 0)} held-out episodes from at least "
         f"{settings.get('min_heldout_families', 0)} families for a drop or test), "
@@ -626,19 +623,14 @@ def _mining_lines(mine: Mapping[str, Any], settings: Mapping[str, Any]) -> List[
 
 
 def _split_lines(split: Mapping[str, Any]) -> List[str]:
-    """A round's split of the mined scenarios into fine-tuning and held-out ones (by family or by cluster)."""
+    """A round's split of the mined scenarios into fine-tuning and held-out families."""
     if not split:
         return []
-    if split.get("by") == "family":
-        return [f"- split by family ({split.get('groups')} family groups): fine-tune families "
-                f"{', '.join(split.get('fine_tune_families', [])) or 'none'} "
-                f"({', '.join(split.get('fine_tune', [])) or 'no scenario'}); held-out families "
-                f"{', '.join(split.get('held_out_families', [])) or 'none'} "
-                f"({', '.join(split.get('held_out', [])) or 'no scenario'}; their parents are not "
-                "fine-tuned on either)"]
-    return [f"- split by cluster ({split.get('groups')} groups): fine-tune "
-            f"{', '.join(split.get('fine_tune', [])) or 'none'}; held out "
-            f"{', '.join(split.get('held_out', [])) or 'none'}"]
+    return [f"- split by family ({split.get('groups')} family groups): fine-tune families "
+            f"{', '.join(split.get('fine_tune_families', [])) or 'none'} "
+            f"({', '.join(split.get('fine_tune', [])) or 'no scenario'}); held-out families "
+            f"{', '.join(split.get('held_out_families', [])) or 'none'} "
+            f"({', '.join(split.get('held_out', [])) or 'no scenario'}; their parents are not fine-tuned on either)"]
 
 
 def _fine_tuning_lines(steps: Mapping[str, Any]) -> List[str]:

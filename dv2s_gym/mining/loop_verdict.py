@@ -96,8 +96,6 @@ def too_small(record: Mapping[str, Any]) -> Optional[str]:
     after = steps.get("after") or {}
     if after.get("underpowered"):
         reasons.append("too few held-out episodes or families for a drop or a test")
-    elif _below_floor(after):
-        reasons.append(_below_floor(after))
     elif _control_below_floor(after):
         reasons.append("too few held-out episodes or families for the test against the control")
     if (steps.get("regress") or {}).get("verdict") == "INCONCLUSIVE":
@@ -177,20 +175,6 @@ def _harm_text(harm: Mapping[str, Any], label: str) -> str:
     return "; ".join(parts)
 
 
-def _below_floor(after: Mapping[str, Any]) -> Optional[str]:
-    """Why a round's held-out tests count for nothing (fewer than :data:`EVIDENCE_FLOOR` tested pairs, or no family
-    with a tested pair), as a round recorded before that floor may have them; ``None`` when they count."""
-    pairs, families = after.get("pairs"), after.get("heldout_families")
-    if not after or pairs is None:
-        return None
-    if pairs < EVIDENCE_FLOOR:
-        return (f"only {pairs} tested held-out pair(s), fewer than {EVIDENCE_FLOOR}: no held-out test can reach "
-                f"p < {HELDOUT_ALPHA:g} below {EVIDENCE_FLOOR} discordant pairs")
-    if families is not None and families < 1:
-        return "no held-out family with a tested pair"
-    return None
-
-
 def heldout_worse(tables: Mapping[str, Any], against: str, margin: Optional[float] = None) -> Optional[Dict[str, Any]]:
     """Whether the fine-tuned policy is significantly worse than ``against`` (``"start"`` or ``"control"``) on
     the held-out families: ``tables`` maps each held-out family to its paired table of fine-tuned (candidate)
@@ -229,48 +213,17 @@ def _default_margin() -> float:
 
 
 def _heldout_tests(after: Mapping[str, Any]) -> Dict[str, Optional[Dict[str, Any]]]:
-    """The held-out tests of a round's ``after`` step: as recorded (``significantly_worse``), else, for a round
-    recorded before they were, the same test on its pooled tables (one family); ``None`` where none ran."""
-    if "significantly_worse" in after:
-        recorded = after.get("significantly_worse") or {}
-        tests = {"start": recorded.get("start"), "control": recorded.get("control")}
-    else:
-        margin = after.get("margin")
-        tests = {"start": _pooled_test(after, "after_only", "before_only", "start", margin),
-                 "control": _pooled_test(after.get("vs_control") or {}, "fine_tuned_only", "control_only", "control",
-                                         margin)}
-    if _control_below_floor(after):  # a test on fewer pairs than the floor (a round recorded before it) counts not
-        tests["control"] = None
-    return tests
+    """The held-out tests of a round's ``after`` step as recorded (``significantly_worse``); ``None`` where none
+    ran (none does below the minimums or :data:`EVIDENCE_FLOOR`)."""
+    recorded = after.get("significantly_worse") or {}
+    return {"start": recorded.get("start"), "control": recorded.get("control")}
 
 
 def _control_below_floor(after: Mapping[str, Any]) -> Optional[str]:
-    """Why the held-out test against the control does not count: recorded as not run (``vs_control``'s
-    ``underpowered``), or on fewer than :data:`EVIDENCE_FLOOR` tested pairs against the control; ``None`` when it
-    counts or there is no control."""
+    """Why the held-out test against the control did not run (``vs_control``'s ``underpowered``: too few tested
+    pairs or families against the control); ``None`` when it ran or there is no control."""
     versus = after.get("vs_control") or {}
-    if not versus:
-        return None
-    if versus.get("underpowered"):
-        return str(versus["underpowered"])
-    pairs = versus.get("pairs")
-    if pairs is None and versus.get("table"):
-        pairs = sum(int(v or 0) for v in versus["table"].values())
-    if pairs is not None and pairs < EVIDENCE_FLOOR:
-        return (f"against the control: only {pairs} tested held-out pair(s), fewer than {EVIDENCE_FLOOR}: no "
-                f"held-out test can reach p < {HELDOUT_ALPHA:g} below {EVIDENCE_FLOOR} discordant pairs")
-    return None
-
-
-def _pooled_test(comparison: Mapping[str, Any], fine_tuned_key: str, other_key: str,
-                 against: str, margin: Optional[float] = None) -> Optional[Dict[str, Any]]:
-    """:func:`heldout_worse` on a comparison's pooled paired table, read with its own key names."""
-    t = comparison.get("table")
-    if comparison.get("mcnemar_p") is None or not t:
-        return None
-    return heldout_worse({"held-out": {"both_fail": t.get("both_fail", 0), "candidate_only": t.get(fine_tuned_key, 0),
-                                       "baseline_only": t.get(other_key, 0), "neither": t.get("neither", 0)}}, against,
-                         margin)
+    return str(versus["underpowered"]) if versus.get("underpowered") else None
 
 
 def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
@@ -302,11 +255,6 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
     if verdict != "PASS":
         return {"verdict": NOT_ACCEPTED, "decided_by": "regression",
                 "reason": f"{regression} is {verdict}, so no regression is ruled out ({regress.get('reason')})"}
-    floor = _below_floor(after)
-    if floor and not after.get("underpowered"):
-        return {"verdict": NOT_ACCEPTED, "decided_by": "heldout_vs_start",
-                "reason": f"{regression} PASSed, but the held-out tests count for nothing ({floor}), so a harm on "
-                          "the held-out families is not ruled out"}
     missing = [key for key in ("start", "control") if tests.get(key) is None
                and (key == "start" or after.get("control") or "vs_control" in after)]
     if missing:
@@ -320,12 +268,7 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
         test = tests.get(key)
         if not test:
             continue
-        harm = test.get("family_harm")
-        if harm is None:
-            return {"verdict": NOT_ACCEPTED, "decided_by": f"heldout_families_vs_{key}",
-                    "reason": f"{regression} PASSed, but the round was recorded without the held-out families' harm "
-                              f"check against {label} ({FAMILY_RULE}), so a harm confined to one family is not "
-                              "ruled out"}
+        harm = test["family_harm"]
         if harm.get("harmed"):
             return {"verdict": NOT_ACCEPTED, "decided_by": f"heldout_families_vs_{key}",
                     "reason": f"{regression} PASSed and the fine-tuned policy is not significantly worse than "

@@ -31,7 +31,8 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Union
 
 from envs.safety_metrics import DEFAULT_STALL_SECONDS, FREE_PATH, STANDING_SPEED, first_stall_step
 from scenario_bank.elements import ActorKind
-from scenario_bank.failure_types import FAILURE_TYPES, failure_table, failure_type
+from scenario_bank.failure_types import (FAILURE_TYPES, attach_detection, detach_detection, failure_table,
+                                         failure_type)
 
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "MonitorSettings", "Detector", "DETECTORS",
            "DEFAULT_MONITOR", "register_detector", "unregister_detector", "detect_failure", "detect_stall",
@@ -220,18 +221,23 @@ a row); :func:`detect_failure` asks them in the order of :func:`~scenario_bank.f
 def register_detector(detector: Detector) -> Detector:
     """Detect the failure type ``detector.name`` (a row of the failure table, e.g. one added with
     :func:`~scenario_bank.failure_types.register_failure_type`) with ``detector``; :func:`unregister_detector`
-    undoes it. Returns ``detector``."""
+    undoes it. ``dv2s regress`` runs it too when its type has a ``result_field``
+    (:func:`scenario_bank.failure_types.happened`). Register in each process that detects: a worker process of
+    a pool (forkserver or spawn) does not see a registration made in the calling process. Returns ``detector``."""
     if failure_type(detector.name) is None:
         raise ValueError(f"no failure type {detector.name!r}: add its row to scenario_bank/failure_types.py first")
     if detector.name in DETECTORS:
         raise ValueError(f"failure type {detector.name!r} has a detector already")
     DETECTORS[detector.name] = detector
+    attach_detection(detector.name, lambda result, trace, settings: detector.detect(
+        result, trace, MonitorSettings.from_recorded(settings)) is not None)
     return detector
 
 
 def unregister_detector(name: str) -> None:
     """Remove the detector :func:`register_detector` added for ``name``."""
     DETECTORS.pop(name)
+    detach_detection(name)
 
 
 def _detector(name: str) -> Detector:

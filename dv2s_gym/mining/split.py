@@ -8,16 +8,8 @@ failures come from scenarios the fine-tuning never drew in any form. Across roun
 one held out earlier stays held out, and one an earlier round fine-tuned on (a mined scenario of it, or its
 parent scenario in the fine-tuning mix) stays on the fine-tuning side.
 
-:func:`split_by_cluster` (loops recorded before the family split) moves groups of tied clusters:
-
-A mined scenario comes from one failure cluster (``"<scenario>/<failure type>/<region>"``);
-clusters merged into one bank entry, or one cluster converted into several entries, are tied
-together. The split moves whole groups of tied clusters and scenarios, so no cluster (and no
-scenario) is on both sides: the held-out failures are ones the fine-tuning never saw.
-
-The split is deterministic from ``seed``: groups are shuffled with that seed, ordered by
-their parent scenario and failure type (so each kind is spread over both sides), then dealt
-so the held-out share tracks ``fraction`` along the list.
+The split is deterministic from ``seed``: the family groups are shuffled with that seed and dealt so the
+held-out share is ``fraction`` of them.
 """
 
 from __future__ import annotations
@@ -28,7 +20,7 @@ import numpy as np
 
 from dv2s_gym.mining.errors import MiningError
 
-__all__ = ["split_by_family", "split_by_cluster", "cluster_groups", "family_of"]
+__all__ = ["split_by_family", "family_of"]
 
 
 class _UnionFind:
@@ -48,59 +40,6 @@ class _UnionFind:
         a, b = self.find(a), self.find(b)
         if a != b:
             self.parent[max(a, b)] = min(a, b)
-
-
-def cluster_groups(entries: Sequence[Mapping[str, Any]]) -> List[Dict[str, List[str]]]:
-    """Connected groups of ``{"cluster", "scenario"}`` entries: two entries are in one group
-    when they share a cluster or a scenario. Returns ``[{"clusters": [...], "scenarios": [...]}]``
-    sorted by their first cluster."""
-    sets = _UnionFind()
-    find = sets.find
-    for entry in entries:
-        sets.union("c:" + str(entry["cluster"]), "s:" + str(entry["scenario"]))
-    groups: Dict[str, Dict[str, set]] = {}
-    for entry in entries:
-        group = groups.setdefault(find("c:" + str(entry["cluster"])), {"clusters": set(), "scenarios": set()})
-        group["clusters"].add(str(entry["cluster"]))
-        group["scenarios"].add(str(entry["scenario"]))
-    result = [{"clusters": sorted(g["clusters"]), "scenarios": sorted(g["scenarios"])} for g in groups.values()]
-    return sorted(result, key=lambda g: g["clusters"][0])
-
-
-def _kind(group: Mapping[str, List[str]]) -> str:
-    parts = group["clusters"][0].split("/")
-    return "/".join(parts[:2])  # parent scenario / failure type
-
-
-def split_by_cluster(entries: Sequence[Mapping[str, Any]], fraction: float = 0.5, seed: int = 0) -> Dict[str, Any]:
-    """Split mined entries (``{"cluster", "scenario"}`` each) into fine-tune and held-out parts.
-
-    ``fraction`` of the groups (rounded, at least one and at most all but one when there are
-    two or more) go to the held-out part. Returns ``{"fine_tune": [scenarios], "held_out":
-    [scenarios], "fine_tune_clusters": [...], "held_out_clusters": [...], "groups": n}``.
-    """
-    if not 0.0 <= float(fraction) <= 1.0:
-        raise MiningError(f"the held-out fraction must be in [0, 1], not {fraction}")
-    groups = cluster_groups(entries)
-    order = np.random.default_rng([int(seed), 9]).permutation(len(groups))
-    shuffled = sorted((groups[i] for i in order), key=_kind)  # stable: shuffled within each kind
-    count = len(groups)
-    target = int(round(fraction * count))
-    if count >= 2 and 0.0 < fraction < 1.0:
-        target = min(max(target, 1), count - 1)
-    held: List[Dict[str, List[str]]] = []
-    tuned: List[Dict[str, List[str]]] = []
-    for index, group in enumerate(shuffled):
-        # deal so that after i groups about fraction * i are held out, ending at exactly `target`
-        want = round(target * (index + 1) / count) if count else 0
-        (held if len(held) < want else tuned).append(group)
-    return {
-        "fine_tune": sorted(s for g in tuned for s in g["scenarios"]),
-        "held_out": sorted(s for g in held for s in g["scenarios"]),
-        "fine_tune_clusters": sorted(c for g in tuned for c in g["clusters"]),
-        "held_out_clusters": sorted(c for g in held for c in g["clusters"]),
-        "groups": count,
-    }
 
 
 def family_of(entry: Mapping[str, Any]) -> str:

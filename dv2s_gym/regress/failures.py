@@ -6,6 +6,14 @@ total over the episode, :func:`envs.safety_metrics.total_stall_step`; the failur
 unbroken stretch instead, to find where a stall begins), and :func:`apply_failure` marks the episode ``failed``
 when any of the chosen kinds happened, listing them in ``failure_kinds``. The paired test compares
 ``failed``; the reports show each kind apart.
+
+The kinds are read from the live failure table (:func:`scenario_bank.failure_types.failure_table`) at each call,
+so a type a plug-in adds with :func:`~scenario_bank.failure_types.register_failure_type` and a ``result_field``
+(its detector registered with :func:`dv2s_gym.mining.monitors.register_detector`) is a kind of ``--failure``
+too: the worker records its field by running the detector on the episode's trace
+(:mod:`dv2s_gym.regress.tasks`). A plug-in must register in each process that detects: the worker processes of
+the local pool (forkserver or spawn) and of Ray import only the product's modules, so a type registered in the
+calling process alone is refused by the workers with a message saying so (see ``docs/mining.md``).
 """
 
 from __future__ import annotations
@@ -14,20 +22,25 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
 from dv2s_gym.regress.errors import RegressError
 from envs.safety_metrics import DEFAULT_STALL_SECONDS
-from scenario_bank.failure_types import FAILURE_TABLE
+from scenario_bank.failure_types import failure_table
 
-__all__ = ["FAILURE_KINDS", "DEFAULT_FAILURE", "FAILURE_BEFORE_CHOICE", "DEFAULT_STALL_SECONDS", "parse_failure",
+__all__ = ["failure_kinds", "default_failure", "DEFAULT_STALL_SECONDS", "parse_failure",
            "apply_failure", "missing_facts"]
 
-FAILURE_KINDS: Dict[str, str] = {row.name: row.result_field for row in FAILURE_TABLE if row.result_field}
-"""Failure kind -> the episode result's field that says it happened: the failure types
-(:data:`scenario_bank.failure_types.FAILURE_TABLE`) that results record, most severe first."""
 
-DEFAULT_FAILURE: Tuple[str, ...] = tuple(row.name for row in FAILURE_TABLE if row.regress_default)
-"""A failure is any of these unless the run says otherwise (``--failure``)."""
+def failure_kinds() -> Dict[str, str]:
+    """Failure kind -> the episode result's field that says it happened: the failure types of the live table
+    (:func:`scenario_bank.failure_types.failure_table`, registered ones included) that results record, most
+    severe first."""
+    return {row.name: row.result_field for row in failure_table() if row.result_field}
 
-FAILURE_BEFORE_CHOICE: Tuple[str, ...] = tuple(row.name for row in FAILURE_TABLE if row.counted_before_choice)
-"""The failure kinds of a report that has no ``failure`` setting (made before runs chose their kinds)."""
+
+def default_failure() -> Tuple[str, ...]:
+    """A failure is any of these unless the run says otherwise (``--failure``): the live table's
+    ``regress_default`` types."""
+    return tuple(row.name for row in failure_table() if row.regress_default)
+
+
 
 def parse_failure(value: Union[None, str, Iterable[str]]) -> List[str]:
     """``"collision,stall"`` or a list of kinds -> the kinds in canonical order; None: the default.
@@ -35,32 +48,36 @@ def parse_failure(value: Union[None, str, Iterable[str]]) -> List[str]:
     Raises:
         RegressError: for an empty selection or an unknown kind, naming the kinds there are.
     """
+    kinds_known = failure_kinds()
     if value is None:
-        return list(DEFAULT_FAILURE)
+        return list(default_failure())
     items = value.split(",") if isinstance(value, str) else list(value)
     kinds = [str(item).strip().replace("-", "_") for item in items if str(item).strip()]
-    unknown = [kind for kind in kinds if kind not in FAILURE_KINDS]
+    unknown = [kind for kind in kinds if kind not in kinds_known]
     if unknown or not kinds:
         what = f"unknown failure kind {', '.join(map(repr, unknown))}" if unknown else "no failure kind given"
-        raise RegressError(f"--failure: {what}; give a comma-separated list of {', '.join(FAILURE_KINDS)} "
-                           f"(default {','.join(DEFAULT_FAILURE)})")
-    return [kind for kind in FAILURE_KINDS if kind in kinds]
+        raise RegressError(f"--failure: {what}; give a comma-separated list of {', '.join(kinds_known)} "
+                           f"(default {','.join(default_failure())})")
+    return [kind for kind in kinds_known if kind in kinds]
 
 
 def apply_failure(result: Dict[str, Any], kinds: Sequence[str]) -> Dict[str, Any]:
     """``result`` with ``failed`` and ``failure_kinds`` set from the chosen kinds (errors stay unfailed)."""
     if result.get("error"):
         return result
-    happened = [kind for kind in FAILURE_KINDS if bool(result.get(FAILURE_KINDS[kind]))]
+    fields = failure_kinds()
+    happened = [kind for kind, field in fields.items() if bool(result.get(field))]
     result["failure_kinds"] = [kind for kind in happened if kind in kinds]
     result["failed"] = bool(result["failure_kinds"])
     return result
 
 
 def missing_facts(results: Iterable[Optional[Dict[str, Any]]], kinds: Sequence[str]) -> List[str]:
-    """The chosen kinds some (non-error) result has no record of (a report made before they were recorded)."""
+    """The chosen kinds some (non-error) result has no record of (a run made without that failure type
+    registered)."""
+    fields = failure_kinds()
     lacking = set()
     for result in results:
         if result and not result.get("error"):
-            lacking.update(kind for kind in kinds if FAILURE_KINDS[kind] not in result)
-    return [kind for kind in FAILURE_KINDS if kind in lacking]
+            lacking.update(kind for kind in kinds if fields[kind] not in result)
+    return [kind for kind in fields if kind in lacking]

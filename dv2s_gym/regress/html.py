@@ -32,7 +32,6 @@ from tqdm import tqdm
 
 from dv2s_gym.regress.clips import (DEFAULT_CLIP_CONFIG, ClipError, clip_window, render_episode_video,
                                     render_policy_video)
-from dv2s_gym.regress.failures import FAILURE_BEFORE_CHOICE
 from dv2s_gym.regress.report import scenarios_by_severity, warnings as report_warnings
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, VideoSource,
                                   axis as _axis, escape as _e, finite as _num, fmt as _fmt,
@@ -428,7 +427,7 @@ def render_html(report: Mapping[str, Any], *, base: Union[str, os.PathLike] = ".
     """The report page as a string (see :func:`write_html`); relative trace paths resolve against ``base``."""
     title = f"dv2s regress: {(report.get('candidate') or {}).get('spec', '?')}"
     has_baseline = report.get("baseline") is not None
-    failure = ", ".join((report.get("settings") or {}).get("failure") or FAILURE_BEFORE_CHOICE)
+    failure = ", ".join(report["settings"]["failure"])
     plots = [(f"Failure ({failure}) rate per scenario, 95% intervals",
               rate_plot(report, "failure_rate", "Failure rate")),
              ("Collision rate per scenario, 95% intervals", rate_plot(report, "collision_rate", "Collision rate"))]

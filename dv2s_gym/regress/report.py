@@ -90,7 +90,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.aggregates import return_aggregates
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
-from dv2s_gym.regress.failures import FAILURE_BEFORE_CHOICE, FAILURE_KINDS
+from dv2s_gym.regress.failures import failure_kinds
 from dv2s_gym.regress.identity import installed_version
 from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
 from dv2s_gym.regress.store import describe_differences
@@ -119,9 +119,15 @@ __all__ = [
 SCHEMA = "dv2s-regress"
 SCHEMA_VERSION = 1
 CONFIDENCE = 0.95
-RATES = tuple((f"{kind}_rate", field) for kind, field in FAILURE_KINDS.items()) + (
-    ("failure_rate", "failed"), ("success_rate", "success"))
-"""A summary's rates and the result field each counts: one per failure kind, then any failure and success."""
+
+
+def rates() -> Tuple[Tuple[str, str], ...]:
+    """A summary's rates and the result field each counts: one per failure kind of the live failure table
+    (:func:`dv2s_gym.regress.failures.failure_kinds`), then any failure and success."""
+    return tuple((f"{kind}_rate", field) for kind, field in failure_kinds().items()) + (
+        ("failure_rate", "failed"), ("success_rate", "success"))
+
+
 MEANS = (("min_ttc", "min_ttc"), ("mean_speed", "mean_speed"), ("return", "episode_return"))
 
 EXIT_CODES = {"PASS": 0, "FAIL": 1, "INCONCLUSIVE": 3, "ERROR": 4, None: 0}
@@ -187,7 +193,7 @@ def summarize_groups(groups: Mapping[str, Sequence[Mapping[str, Any]]], *, episo
     every = [r for results in groups.values() for r in results if r is not None]
     ok = _ok(every)
     summary: Dict[str, Any] = {"episodes": len(ok), "errors": len(every) - len(ok)}
-    for key, field in RATES:
+    for key, field in rates():
         summary[key] = _rate([bool(r.get(field)) for r in ok])
     for key, field in MEANS:
         per_group = [[v for v in (_finite(r.get(field)) for r in _ok(results)) if v is not None]
@@ -419,6 +425,10 @@ def load_report(path: Union[str, os.PathLike]) -> Dict[str, Any]:
             f"baseline report {path} has schema version {version}, this dv2s-gym reads version "
             f"{SCHEMA_VERSION}; rerun the baseline with this version (dv2s regress --policy BASELINE) "
             "and compare against that report")
+    if "failure" not in (report.get("settings") or {}):
+        raise ReportMismatchError(
+            f"report {path} records no failure kinds (settings.failure): it was written by an older dv2s-gym; "
+            "rerun that `dv2s regress` command with a new --out and use its report")
     return report
 
 
@@ -490,7 +500,7 @@ def headline(report: Mapping[str, Any], base: Optional[Path] = None) -> str:
     against = ("" if baseline is None else f" vs baseline `{baseline.get('spec')}`" + (
         f" (the {baseline.get('role') or 'candidate'} policy of {_relative(baseline['report'], base)})"
         if baseline.get("report") else ""))
-    failure = ", ".join(settings.get("failure") or FAILURE_BEFORE_CHOICE)
+    failure = ", ".join(settings["failure"])
     return (f"candidate `{report['candidate']['spec']}`{against}; failure: {failure}; "
             f"{len(report['scenarios'])} scenario(s) x "
             f"{settings['episodes']} episode(s) from seed {settings['seed']}; margin {100 * settings['margin']:g} pp, "
@@ -639,7 +649,7 @@ def _markdown(report: Mapping[str, Any], report_path: str = "report.json", base:
     lines = [f"## dv2s regress: {verdict or 'measures (no baseline)'} - candidate `{report['candidate']['spec']}`{against}",
              "", _verdict_line(report), ""]
     facts = [f"{len(report['scenarios'])} scenario(s) x {settings['episodes']} episode(s) from seed {settings['seed']}; "
-             f"failure: {', '.join(settings.get('failure') or FAILURE_BEFORE_CHOICE)}; margin "
+             f"failure: {', '.join(settings['failure'])}; margin "
              f"{100 * settings['margin']:g} pp, alpha {settings['alpha']:g}"]
     if report["newly_failing"]:
         facts.append(f"{len(report['newly_failing'])} newly failing episode(s) (candidate fails, baseline does not)")

@@ -30,7 +30,7 @@ from tqdm import tqdm
 from dv2s_gym.regress import power as power_plan
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.errors import RegressError, ReportMismatchError
-from dv2s_gym.regress.failures import DEFAULT_FAILURE, DEFAULT_STALL_SECONDS, apply_failure, missing_facts
+from dv2s_gym.regress.failures import DEFAULT_STALL_SECONDS, apply_failure, missing_facts, parse_failure
 from dv2s_gym.regress.report import (
     bank_info,
     build_report,
@@ -63,10 +63,12 @@ Scenarios = Union[None, str, Sequence[str]]
 
 def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterable[int], *,
                env_config: Dict[str, Any], bank_dir: Optional[str], trace_dir: Optional[str],
-               failure: Sequence[str] = DEFAULT_FAILURE, stall_seconds: float = DEFAULT_STALL_SECONDS
+               failure: Optional[Sequence[str]] = None, stall_seconds: float = DEFAULT_STALL_SECONDS
                ) -> List[Dict[str, Any]]:
     """Task dicts, seed by seed (every scenario, then the next seed), each role in turn; which role goes first
-    alternates from pair to pair, so neither role is always the first to meet a scene."""
+    alternates from pair to pair, so neither role is always the first to meet a scene; ``failure`` ``None``: the
+    default failure kinds."""
+    failure = parse_failure(failure)
     roles = list(policies.items())
     tasks = []
     for pair, (seed, scenario) in enumerate((seed, scenario) for seed in seeds for scenario in scenarios):
@@ -165,8 +167,8 @@ def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: S
     lacking = missing_facts(wanted, failure)
     if lacking:
         raise ReportMismatchError(
-            f"baseline report {path} does not record {', '.join(lacking)} for its episodes (an older dv2s made it); "
-            f"rerun the baseline with this version, or leave {', '.join(lacking)} out of --failure")
+            f"baseline report {path} does not record {', '.join(lacking)} for its episodes (that run had no such failure "
+            f"type registered); rerun the baseline with {', '.join(lacking)} registered, or leave {', '.join(lacking)} out of --failure")
     their_stall = (old.get("settings") or {}).get("stall_seconds", DEFAULT_STALL_SECONDS)
     if "stall" in failure and float(their_stall) != float(stall_seconds):
         raise ReportMismatchError(f"baseline report {path} detected stalls after {their_stall:g} s, this run after "

@@ -12,6 +12,13 @@ A task is a plain dict, so any pool of :mod:`dv2s_gym.workers` (local processes,
 - ``failure``: the failure kinds (:mod:`dv2s_gym.regress.failures`; default collision, off-road, stall)
   and ``stall_seconds``.
 
+A failure type registered at run time (:func:`scenario_bank.failure_types.register_failure_type`) with a
+``result_field`` is recorded in that field by running its detector
+(:func:`dv2s_gym.mining.monitors.register_detector`) on the episode's trace. The worker process must have the
+type and its detector registered: a plug-in registers in each process that detects, and the pool's workers
+(forkserver or spawn) import only the product's modules, so a task naming a type this process does not know
+comes back as an error result that says so.
+
 :func:`run_regress_task` returns the episode's :class:`~scenario_bank.records.RegressEpisode`:
 ``EpisodeResult.to_json()`` plus ``role``, ``id`` (``"<scenario>/<seed>"``), ``trace`` (the saved trace's path or
 ``None``), ``stalled`` and ``stall_time`` (when the ego's total standing time on a free road reached
@@ -37,7 +44,8 @@ from typing import Any, Dict
 from dv2s_gym.workers.tasks import error_result, register, task_id
 from policies import worker_cache
 from scenario_bank.records import RegressEpisode
-from dv2s_gym.regress.failures import apply_failure, DEFAULT_STALL_SECONDS, parse_failure
+from dv2s_gym.regress.failures import apply_failure, DEFAULT_STALL_SECONDS, failure_kinds, parse_failure
+from scenario_bank.failure_types import failure_table, happened
 from envs.safety_metrics import total_stall_step
 from policies.evaluation import run_episode
 
@@ -57,6 +65,11 @@ def run_regress_task(task: Dict[str, Any]) -> RegressEpisode:
     for folder in task.get("python_path") or []:  # where a module:attribute policy is found
         if folder not in sys.path:
             sys.path.append(folder)
+    unknown = [kind for kind in task.get("failure") or () if kind not in failure_kinds()]
+    if unknown:
+        return RegressEpisode.from_dict(error_result(task, (
+            f"failure type {', '.join(unknown)} is not registered in this worker process: a plug-in's failure type "
+            "must be registered, with its detector, in each process that runs episodes")))
     env_key = None
     try:
         env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
@@ -76,6 +89,9 @@ def run_regress_task(task: Dict[str, Any]) -> RegressEpisode:
     period = 1.0 / float(trace.config.get("policy_frequency", 5))
     data.update(role=task["role"], id=task_id(task["scenario"], task["seed"]), trace=None, seconds=round(seconds, 4),
                 stalled=stall is not None, stall_time=None if stall is None else stall * period)
+    for row in failure_table():  # a registered type's field: its detector on the trace
+        if row.result_field and row.result_field not in data:
+            data[row.result_field] = happened(row.name, result, trace, {"stall_seconds": task.get("stall_seconds")})
     apply_failure(data, parse_failure(task.get("failure")))
     trace_dir = task.get("trace_dir")
     if data["failed"] and trace_dir:
