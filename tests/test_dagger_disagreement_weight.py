@@ -92,3 +92,25 @@ def test_the_checkpoint_keeps_which_states_the_student_disagreed_on(tmp_path):
     saved = DAggerCheckpoint(tmp_path / "ckpt", {"steps": 4}).load()
     assert saved.iteration == 2
     assert [d.tolist() for d in saved.disagreed] == [disagreed.tolist(), [False] * 4]
+
+
+@pytest.mark.slow
+def test_a_killed_run_with_the_disagreement_weight_resumes_to_the_same_model(tmp_path, monkeypatch):
+    from fine_tune_helpers import dagger_fine_tune
+    from policies.model_card import read_card
+    from test_dagger_resume import RUN, _kill_on_train_call, _same_model, _stats
+
+    run = {**RUN, "disagreement_weight": 4.0}
+    whole = dagger_fine_tune("dv2s-ppo", out=tmp_path / "whole", log=lambda _: None, **run)
+    assert read_card(whole)["fine_tune"]["disagreement_weight"] == 4.0
+    plain = dagger_fine_tune("dv2s-ppo", out=tmp_path / "plain", log=lambda _: None, **RUN)
+    with pytest.raises(AssertionError):  # the weight changes the training
+        _same_model(whole, plain)
+    out = tmp_path / "killed"
+    _kill_on_train_call(monkeypatch, 2)  # iteration 2 collected, killed while training on it
+    with pytest.raises(KeyboardInterrupt):
+        dagger_fine_tune("dv2s-ppo", out=out, log=lambda _: None, **run)
+    monkeypatch.undo()
+    resumed = dagger_fine_tune("dv2s-ppo", out=out, log=lambda _: None, **run)  # iteration 1's flags read back
+    _same_model(whole, resumed)
+    assert _stats(resumed) == _stats(whole)
