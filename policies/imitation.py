@@ -55,7 +55,7 @@ from scenario_bank.atomic import atomic_path
 import stable_baselines3 as sb3
 
 __all__ = ["ReferenceLabels", "DAGGER_DEFAULTS", "DaggerConfig", "dagger_fine_tune", "agreement", "imitation_step",
-           "disagreement_weights"]
+           "loss_weights"]
 
 class ReferenceLabels(gym.Wrapper):
     """Labels every step with the reference driver's action for the state the action is taken in.
@@ -189,15 +189,15 @@ def imitation_step(model: Any, optimizer: Any, observations: np.ndarray, labels:
 
 
 def _train(model: Any, optimizer: Any, observations: np.ndarray, labels: np.ndarray, epochs: int, batch_size: int,
-           rng: np.random.Generator, slower_weight: float = 1.0, weights: Optional[np.ndarray] = None) -> float:
+           rng: np.random.Generator, weights: Optional[np.ndarray] = None) -> float:
     model.policy.set_training_mode(True)
     losses: List[float] = []
     for _ in range(epochs):
         order = rng.permutation(len(labels))
         for start in range(0, len(order), batch_size):
             rows = order[start:start + batch_size]
-            losses.append(imitation_step(model, optimizer, observations[rows], labels[rows], slower_weight,
-                                         None if weights is None else weights[rows]))
+            losses.append(imitation_step(model, optimizer, observations[rows], labels[rows],
+                                         weights=None if weights is None else weights[rows]))
     model.policy.set_training_mode(False)
     return float(np.mean(losses)) if losses else float("nan")
 
@@ -240,12 +240,15 @@ def _collect(venv: Any, model: Any, obs: np.ndarray, budget: int, collected: _Co
     return obs
 
 
-def disagreement_weights(disagreed: np.ndarray, weight: float) -> Optional[np.ndarray]:
-    """Per labelled state, ``weight`` where the student that collected it disagreed with the label, else 1
-    (``None`` when ``weight`` is 1: no weighting)."""
-    if float(weight) == 1.0:
+def loss_weights(labels: np.ndarray, disagreed: np.ndarray, slower_weight: float = 1.0,
+                 disagreement_weight: float = 1.0) -> Optional[np.ndarray]:
+    """Each labelled state's weight in the imitation loss: ``slower_weight`` if its label is SLOWER, times
+    ``disagreement_weight`` if the student that collected it chose greedily another action (``disagreed``), each
+    1 otherwise (``None`` when both are 1: the plain mean)."""
+    if float(slower_weight) == 1.0 and float(disagreement_weight) == 1.0:
         return None
-    return np.where(np.asarray(disagreed, dtype=bool), float(weight), 1.0)
+    return (np.where(np.asarray(labels) == SLOWER, float(slower_weight), 1.0)
+            * np.where(np.asarray(disagreed, dtype=bool), float(disagreement_weight), 1.0))
 
 
 def _restore_envs(venv: Any, snapshots: Sequence[Mapping[str, Any]], expected: np.ndarray):
@@ -416,8 +419,7 @@ class _DaggerRun:
         self.disagreed.append(disagreed)
         all_obs, all_labels = np.concatenate(self.observations), np.concatenate(self.labels)
         loss = _train(self.model, self.optimizer, all_obs, all_labels, d.epochs, d.batch_size, self.rng,
-                      float(d.slower_weight), disagreement_weights(np.concatenate(self.disagreed),
-                                                                   d.disagreement_weight))
+                      loss_weights(all_labels, np.concatenate(self.disagreed), d.slower_weight, d.disagreement_weight))
         record = {"iteration": iteration + 1, "beta": mixture, "steps": int(len(batch_labels)),
                   "episodes_finished": collected.episodes, "episodes_failed": collected.crashes,
                   "agreement_before": round(on_policy, 4),

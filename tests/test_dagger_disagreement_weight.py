@@ -42,8 +42,8 @@ def _fit(disagreement_weight: float):
     observations, labels = _states(0, 1000)
     disagreed = imitation._greedy(model, observations) != labels
     optimizer = torch.optim.Adam(model.policy.parameters(), lr=1e-3)
-    imitation._train(model, optimizer, observations, labels, 4, 64, np.random.default_rng(0), 1.0,
-                     imitation.disagreement_weights(disagreed, disagreement_weight))
+    imitation._train(model, optimizer, observations, labels, 4, 64, np.random.default_rng(0),
+                     imitation.loss_weights(labels, disagreed, 1.0, disagreement_weight))
     test_obs, test_labels = _states(100, 1000)
     actions = model.predict(test_obs)[0]
     rare = test_labels == FASTER
@@ -69,10 +69,11 @@ def test_the_weights_multiply_the_slower_weight_in_the_loss():
         nll = -model.policy.get_distribution(torch.as_tensor(observations)).log_prob(torch.as_tensor(labels)).numpy()
     weights = np.where(labels == SLOWER, 3.0, 1.0) * np.where(disagreed, 4.0, 1.0)
     optimizer = torch.optim.SGD(model.policy.parameters(), lr=0.0)  # a step that changes nothing
-    loss = imitation.imitation_step(model, optimizer, observations, labels, 3.0,
-                                    imitation.disagreement_weights(disagreed, 4.0))
+    loss = imitation.imitation_step(model, optimizer, observations, labels,
+                                    weights=imitation.loss_weights(labels, disagreed, 3.0, 4.0))
     assert loss == pytest.approx(float((weights * nll).sum() / weights.sum()), rel=1e-5)
-    assert imitation.disagreement_weights(disagreed, 1.0) is None  # weight 1: the plain mean, as before
+    assert imitation.loss_weights(labels, disagreed, 1.0, 1.0) is None  # both 1: the plain mean, as before
+    assert imitation.loss_weights(labels, disagreed, 3.0, 1.0).tolist() == [1, 3, 1, 3, 1, 1]  # SLOWER alone
     assert imitation.DAGGER_DEFAULTS["disagreement_weight"] == 1.0
     with pytest.raises(imitation.TrainingError, match="disagreement_weight"):
         imitation.DaggerConfig(disagreement_weight=0)
