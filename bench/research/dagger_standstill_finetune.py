@@ -1,8 +1,8 @@
 """As run for the DAgger standstill measurement in bench/RESULTS.md (paths are those of that machine; FT_SEED the
-training seed, default 0).
+training seed, default 0; FT_BETA_DECAY the DAgger beta_decay, default 0.5).
 
 Fine-tune the route-aware start policy by DAgger, with or without the disagreement weight (equal steps).
-Usage: ft.py OUT DISAGREEMENT_WEIGHT"""
+Usage: dagger_standstill_finetune.py OUT DISAGREEMENT_WEIGHT [SLOWER_WEIGHT]"""
 import sys, json
 from pathlib import Path
 from policies.dagger_config import DaggerConfig
@@ -18,6 +18,6 @@ names = sorted(e.name for e in Bank(BANK))
 weights = {n: (5.0 if n in JUNCTION else 1.0) for n in names}
 config = TrainConfig.fine_tuning(out, steps=20000, weights=weights, bank_dir=BANK, seed=int(__import__('os').environ.get('FT_SEED', 0)), n_envs=1,
                                  vec_env='dummy', progress_bar=False)
-path = dagger_fine_tune('ppo:/work/exp/intent_start/model.zip', config, DaggerConfig(disagreement_weight=weight, **({"slower_weight": float(sys.argv[3])} if len(sys.argv) > 3 else {})),
+path = dagger_fine_tune('ppo:/work/exp/intent_start/model.zip', config, DaggerConfig(disagreement_weight=weight, beta_decay=float(__import__("os").environ.get("FT_BETA_DECAY", 0.5)), **({"slower_weight": float(sys.argv[3])} if len(sys.argv) > 3 else {})),
                         log=lambda line: print(line, flush=True))
 print('done', path)

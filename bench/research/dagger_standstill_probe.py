@@ -3,7 +3,7 @@
 Standstill-before-left-turn probe: drive each policy on the two left-turn junction scenarios, seeds 10000..,
 count the steps where the ego stands (speed < 0.5 m/s) with its left turn still ahead (route_turn obs > 0.25),
 the rule's label there and the policy's greedy action; the episode's judged failure (detect_failure).
-Usage: probe.py OUT.json NSEEDS SPEC [SPEC...]"""
+Usage: dagger_standstill_probe.py OUT.json NSEEDS SPEC [SPEC...]"""
 import json, sys
 from collections import Counter
 import numpy as np
