@@ -2,8 +2,9 @@
 
 After every iteration the run writes, into ``out/dagger_checkpoint/`` (all atomic):
 
-- ``iteration_<i>.npz``: the states labelled in iteration ``i`` (``observations``, ``labels``)
-  and the training envs' observations when it ended (``next_observations``); the aggregated
+- ``iteration_<i>.npz``: the states labelled in iteration ``i`` (``observations``, ``labels``,
+  ``disagreed``: whether the student's greedy action there was not the label) and the training
+  envs' observations when it ended (``next_observations``); the aggregated
   data set after iteration ``k`` is ``iteration_1 .. iteration_k`` in order;
 - ``weights_<k>.pt``: the policy's parameters, Adam's state and torch's RNG state after
   iteration ``k``'s training (the previous iteration's file is removed once ``k`` is committed);
@@ -56,7 +57,8 @@ IDENTITY_ORDER = ("steps", "iterations", "epochs", "batch_size", "learning_rate"
 """The order in which a refused checkpoint's settings are compared (the first difference is named)."""
 
 IDENTITY_DEFAULTS = setting_defaults(DaggerConfig, ("iterations", "beta", "beta_decay", "epochs", "batch_size",
-                                                   "learning_rate", "reference", "slower_weight"))
+                                                   "learning_rate", "reference", "slower_weight",
+                                                   "disagreement_weight"))
 """The identity's :class:`~policies.dagger_config.DaggerConfig` settings, as their defaults: what a checkpoint that
 does not record one compares as (the other identity values are the run's own: bytes, hashes, scenarios)."""
 
@@ -79,11 +81,18 @@ class LabelledBatch:
     labels: np.ndarray
     next_observations: np.ndarray
     """The training envs' observations when the iteration ended."""
+    disagreed: Optional[np.ndarray] = None
+    """Per state, whether the student that collected it (the policy at the iteration's start) greedily chose
+    another action than the label (``None``: not recorded, read back as all ``False``)."""
 
 
 def _npz_bytes(batch: "LabelledBatch | PartialIteration") -> bytes:
     buffer = io.BytesIO()
-    np.savez(buffer, observations=batch.observations, labels=batch.labels, next_observations=batch.next_observations)
+    arrays = {"observations": batch.observations, "labels": batch.labels,
+              "next_observations": batch.next_observations}
+    if getattr(batch, "disagreed", None) is not None:
+        arrays["disagreed"] = np.asarray(batch.disagreed, dtype=bool)
+    np.savez(buffer, **arrays)
     return buffer.getvalue()
 
 
@@ -126,6 +135,8 @@ class SavedIteration:
     wall_time_s: float
     resumes: List[Dict[str, Any]]
     partial: Optional[PartialIteration] = None
+    disagreed: List[np.ndarray] = dataclasses.field(default_factory=list)
+    """Per finished iteration, :attr:`LabelledBatch.disagreed` (all ``False`` where not recorded)."""
 
 
 def _scenario_hashes(bank_dir: Optional[str], names: List[str]) -> Dict[str, Optional[str]]:
@@ -149,6 +160,7 @@ def run_identity(*, source: str, source_checkpoint: Path, config: "TrainConfig",
         "steps": int(config.steps), "iterations": int(d.iterations), "beta": float(d.beta),
         "beta_decay": float(d.beta_decay), "epochs": int(d.epochs), "batch_size": int(d.batch_size),
         "learning_rate": float(d.learning_rate), "reference": str(d.reference), "slower_weight": float(d.slower_weight),
+        "disagreement_weight": float(d.disagreement_weight),
         "seed": int(config.seed), "n_envs": int(config.n_envs)}, sort_keys=True))
 
 
@@ -194,11 +206,13 @@ class DAggerCheckpoint:
                        fix=f"pass the same settings to resume it, or delete {self.folder} to start over")
         iteration = int(data["iteration"])
         try:
-            observations, labels, next_observations = [], [], None
+            observations, labels, disagreed, next_observations = [], [], [], None
             for number in range(1, iteration + 1):
                 with np.load(self.folder / f"iteration_{number}.npz") as batch:
                     observations.append(batch["observations"])
                     labels.append(batch["labels"])
+                    disagreed.append(batch["disagreed"] if "disagreed" in batch.files
+                                     else np.zeros(len(batch["labels"]), dtype=bool))
                     next_observations = batch["next_observations"]
             weights = None
             if iteration:
@@ -221,7 +235,7 @@ class DAggerCheckpoint:
                               next_observations=next_observations, weights=weights, rng_state=data["rng"],
                               history=list(data["history"]), envs=list(data["envs"]),
                               wall_time_s=float(data.get("wall_time_s", 0.0)), resumes=list(data.get("resumes", [])),
-                              partial=partial)
+                              partial=partial, disagreed=disagreed)
 
     def save(self, batch: LabelledBatch, *, model: Any, optimizer: Any, rng: np.random.Generator,
              history: List[Dict[str, Any]], envs: List[Dict[str, Any]], wall_time_s: float,

@@ -41,6 +41,13 @@ class DaggerConfig:
     """The driver imitated (a policy spec whose action for the current state labels it)."""
     slower_weight: float = 3.0
     """Weight of the reference's SLOWER labels in the cross-entropy (1: unweighted)."""
+    disagreement_weight: float = 1.0
+    """Weight in the cross-entropy of the labelled states where the student that collected them (the policy at
+    the start of their iteration) chose greedily another action than the reference's label (times the SLOWER
+    weight; 1: unweighted). Above 1 it tilts the aggregated data toward the student's own mistakes, for labels
+    that are rare among alike states (the reference pulls away from a standstill with one FASTER among many
+    standing states labelled IDLE or SLOWER). On the junction standstill it was measured on (bench/RESULTS.md,
+    weight 4) it did not make the student press FASTER there, so it is off by default."""
     checkpoint_every: int = 2000
     """Env steps between commits of the states collected so far in an iteration (0: finished iterations only)."""
 
@@ -50,6 +57,7 @@ class DaggerConfig:
         check_number(TrainingError, "DAgger beta", self.beta, low=0, high=1)
         check_number(TrainingError, "DAgger beta_decay", self.beta_decay, low=0, high=1)
         check_number(TrainingError, "DAgger slower_weight", self.slower_weight, low=0, interval="(]")
+        check_number(TrainingError, "DAgger disagreement_weight", self.disagreement_weight, low=0, interval="(]")
         check_number(TrainingError, "DAgger learning_rate", self.learning_rate, low=0, interval="(]")
         check_text(TrainingError, "DAgger reference", self.reference, what="a driver's policy spec (e.g. rule)")
 

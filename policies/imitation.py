@@ -16,7 +16,9 @@ the policy visits with the action it would take there. :func:`dagger_fine_tune` 
 2. the labelled states are added to the aggregated data set, and the policy's action
    distribution is trained on all of it by cross-entropy (``policy.get_distribution``, Adam,
    ``epochs`` passes per iteration, minibatches of ``batch_size``). The value network is not
-   trained.
+   trained. The cross-entropy is a weighted mean: the reference's SLOWER labels weigh
+   ``slower_weight``, and the states where the student that collected them chose greedily
+   another action than the label weigh ``disagreement_weight`` (the two multiply).
 
 The result is a normal SB3 checkpoint (``out/model.zip``, the source's class and spaces) with
 a model card (``model_card.json``, ``README.md``) whose ``fine_tune`` section has
@@ -52,7 +54,8 @@ from policies.registry import load_policy, read_model_card
 from scenario_bank.atomic import atomic_path
 import stable_baselines3 as sb3
 
-__all__ = ["ReferenceLabels", "DAGGER_DEFAULTS", "DaggerConfig", "dagger_fine_tune", "agreement", "imitation_step"]
+__all__ = ["ReferenceLabels", "DAGGER_DEFAULTS", "DaggerConfig", "dagger_fine_tune", "agreement", "imitation_step",
+           "loss_weights"]
 
 class ReferenceLabels(gym.Wrapper):
     """Labels every step with the reference driver's action for the state the action is taken in.
@@ -144,22 +147,26 @@ def _with_labels(env: gym.Env, seed: int, stream: int, reference: str) -> gym.En
     return ReferenceLabels(env, reference=reference, seed=seed, stream=stream)
 
 
+def _greedy(model: Any, observations: np.ndarray, batch: int = 4096) -> np.ndarray:
+    """``model``'s greedy action for each of ``observations``."""
+    actions = [np.asarray(model.predict(observations[start:start + batch], deterministic=True)[0]).reshape(-1)
+               for start in range(0, len(observations), batch)]
+    return np.concatenate(actions) if actions else np.zeros(0, dtype=np.int64)
+
+
 def agreement(model: Any, observations: np.ndarray, labels: np.ndarray, batch: int = 4096) -> float:
     """Share of ``observations`` where ``model``'s greedy action equals ``labels`` (NaN when empty)."""
     if len(labels) == 0:
         return float("nan")
-    hits = 0
-    for start in range(0, len(labels), batch):
-        actions, _ = model.predict(observations[start:start + batch], deterministic=True)
-        hits += int(np.sum(np.asarray(actions).reshape(-1) == labels[start:start + batch]))
-    return hits / len(labels)
+    return int(np.sum(_greedy(model, observations, batch) == labels)) / len(labels)
 
 
 def imitation_step(model: Any, optimizer: Any, observations: np.ndarray, labels: np.ndarray,
-                   slower_weight: float = 1.0) -> float:
+                   slower_weight: float = 1.0, weights: Optional[np.ndarray] = None) -> float:
     """One cross-entropy step of ``model``'s action distribution toward ``labels``; returns the loss.
 
-    ``slower_weight``: weight of the SLOWER labels in the (weighted mean) cross-entropy, the others 1.
+    The loss is the weighted mean of the states' cross-entropies; a state's weight is ``slower_weight`` if its
+    label is SLOWER (else 1) times its entry of ``weights`` (``None``: all 1).
     """
     import torch
 
@@ -167,11 +174,13 @@ def imitation_step(model: Any, optimizer: Any, observations: np.ndarray, labels:
     obs = torch.as_tensor(observations, dtype=torch.float32, device=policy.device)
     actions = torch.as_tensor(labels, dtype=torch.long, device=policy.device)
     log_prob = policy.get_distribution(obs).log_prob(actions)
-    if slower_weight == 1.0:
+    if slower_weight == 1.0 and weights is None:
         loss = -log_prob.mean()
     else:
-        weights = torch.where(actions == SLOWER, float(slower_weight), 1.0).to(log_prob.dtype)
-        loss = -(log_prob * weights).sum() / weights.sum()
+        weight = torch.where(actions == SLOWER, float(slower_weight), 1.0).to(log_prob.dtype)
+        if weights is not None:
+            weight = weight * torch.as_tensor(np.asarray(weights), dtype=log_prob.dtype, device=policy.device)
+        loss = -(log_prob * weight).sum() / weight.sum()
     optimizer.zero_grad()
     loss.backward()
     torch.nn.utils.clip_grad_norm_(policy.parameters(), 0.5)
@@ -180,14 +189,15 @@ def imitation_step(model: Any, optimizer: Any, observations: np.ndarray, labels:
 
 
 def _train(model: Any, optimizer: Any, observations: np.ndarray, labels: np.ndarray, epochs: int, batch_size: int,
-           rng: np.random.Generator, slower_weight: float = 1.0) -> float:
+           rng: np.random.Generator, weights: Optional[np.ndarray] = None) -> float:
     model.policy.set_training_mode(True)
     losses: List[float] = []
     for _ in range(epochs):
         order = rng.permutation(len(labels))
         for start in range(0, len(order), batch_size):
             rows = order[start:start + batch_size]
-            losses.append(imitation_step(model, optimizer, observations[rows], labels[rows], slower_weight))
+            losses.append(imitation_step(model, optimizer, observations[rows], labels[rows],
+                                         weights=None if weights is None else weights[rows]))
     model.policy.set_training_mode(False)
     return float(np.mean(losses)) if losses else float("nan")
 
@@ -230,6 +240,17 @@ def _collect(venv: Any, model: Any, obs: np.ndarray, budget: int, collected: _Co
     return obs
 
 
+def loss_weights(labels: np.ndarray, disagreed: np.ndarray, slower_weight: float = 1.0,
+                 disagreement_weight: float = 1.0) -> Optional[np.ndarray]:
+    """Each labelled state's weight in the imitation loss: ``slower_weight`` if its label is SLOWER, times
+    ``disagreement_weight`` if the student that collected it chose greedily another action (``disagreed``), each
+    1 otherwise (``None`` when both are 1: the plain mean)."""
+    if float(slower_weight) == 1.0 and float(disagreement_weight) == 1.0:
+        return None
+    return (np.where(np.asarray(labels) == SLOWER, float(slower_weight), 1.0)
+            * np.where(np.asarray(disagreed, dtype=bool), float(disagreement_weight), 1.0))
+
+
 def _restore_envs(venv: Any, snapshots: Sequence[Mapping[str, Any]], expected: np.ndarray):
     """Put each env of ``venv`` back where its snapshot was taken (:meth:`ReferenceLabels.restore`):
     ``(observations, whether they equal the checkpoint's)``."""
@@ -249,7 +270,8 @@ def dagger_fine_tune(checkpoint_or_spec: str, config: TrainConfig, dagger: Optio
     the env's config (``None``: the checkpoint card's; the reward plays no part), ``seed``, ``n_envs``,
     ``vec_env``, ``progress_bar``. ``dagger`` (:class:`~policies.dagger_config.DaggerConfig`, default its
     defaults) says how to imitate: iterations, the reference's share, epochs, Adam's learning rate, the weight
-    of the reference's SLOWER labels, how often collected states are committed.
+    of the reference's SLOWER labels and of the states the student disagreed on, how often collected states are
+    committed.
 
     Resumable: every finished iteration is committed to ``out/dagger_checkpoint/``
     (:mod:`policies.dagger_checkpoint`: the labelled states, the weights and Adam's state, the
@@ -311,6 +333,7 @@ class _DaggerRun:
         self.rng = np.random.default_rng([int(self.config.seed), 11])
         self.observations: List[np.ndarray] = []
         self.labels: List[np.ndarray] = []
+        self.disagreed: List[np.ndarray] = []
         self.history: List[Dict[str, Any]] = []
         self.resumes: List[Dict[str, Any]] = []
         self.start, self.spent, self.partial, self.saved = 0, 0.0, None, saved
@@ -324,6 +347,7 @@ class _DaggerRun:
             torch.set_rng_state(saved.weights["torch_rng"])
         self.rng.bit_generator.state = saved.rng_state
         self.observations, self.labels, self.history = list(saved.observations), list(saved.labels), list(saved.history)
+        self.disagreed = list(saved.disagreed)
         self.resumes, self.start, self.spent = list(saved.resumes), saved.iteration, saved.wall_time_s
         self.partial = saved.partial
         rows = self.partial.rows if self.partial else 0
@@ -388,19 +412,21 @@ class _DaggerRun:
         obs = _collect(venv, self.model, obs, self.per_iteration[iteration], collected, d.checkpoint_every,
                        commit_partial, bar)
         batch_obs, batch_labels = np.concatenate(collected.observations), np.concatenate(collected.labels)
-        on_policy = agreement(self.model, batch_obs, batch_labels)
+        disagreed = _greedy(self.model, batch_obs) != batch_labels  # the student that collected them
+        on_policy = float(np.mean(~disagreed)) if len(disagreed) else float("nan")
         self.observations.append(batch_obs)
         self.labels.append(batch_labels)
+        self.disagreed.append(disagreed)
         all_obs, all_labels = np.concatenate(self.observations), np.concatenate(self.labels)
         loss = _train(self.model, self.optimizer, all_obs, all_labels, d.epochs, d.batch_size, self.rng,
-                      float(d.slower_weight))
+                      loss_weights(all_labels, np.concatenate(self.disagreed), d.slower_weight, d.disagreement_weight))
         record = {"iteration": iteration + 1, "beta": mixture, "steps": int(len(batch_labels)),
                   "episodes_finished": collected.episodes, "episodes_failed": collected.crashes,
                   "agreement_before": round(on_policy, 4),
                   "agreement_after": round(agreement(self.model, batch_obs, batch_labels), 4),
                   "dataset": int(len(all_labels)), "loss": round(loss, 4)}
         self.history.append(record)
-        self.checkpoint.save(LabelledBatch(iteration + 1, batch_obs, batch_labels, np.asarray(obs)),
+        self.checkpoint.save(LabelledBatch(iteration + 1, batch_obs, batch_labels, np.asarray(obs), disagreed),
                              model=self.model, optimizer=self.optimizer, rng=self.rng, history=self.history,
                              envs=venv.env_method("snapshot"), wall_time_s=self.elapsed(), resumes=self.resumes)
         self.log(f"DAgger iteration {iteration + 1}/{d.iterations}: beta {mixture:.3g}, {record['steps']} labelled "
@@ -440,6 +466,7 @@ class _DaggerRun:
                              "learning_rate": float(d.learning_rate), "reference": d.reference,
                              "iterations": d.iterations, "beta": float(d.beta), "beta_decay": float(d.beta_decay),
                              "epochs": d.epochs, "batch_size": d.batch_size, "slower_weight": float(d.slower_weight),
+                             "disagreement_weight": float(d.disagreement_weight),
                              "history": self.history, "agreement": agreements, "resumed": self.resumes}
         card["description"] = (f"Fine-tuned from {self.spec} by DAgger toward the {d.reference} driver: {steps} "
                                f"labelled env steps in {d.iterations} iterations on {len(self.scenarios)} scenarios "

@@ -113,6 +113,7 @@ BAD = {
         "learning_rate": ("DAgger learning_rate", [0, -1e-3, NAN, INF, True, "1e-3", None]),
         "reference": ("DAgger reference", [-1, 0, "", None]),
         "slower_weight": ("DAgger slower_weight", POSITIVE),
+        "disagreement_weight": ("DAgger disagreement_weight", POSITIVE),
         "checkpoint_every": ("DAgger checkpoint_every", COUNT_FROM_0),
     },
     TrainConfig: {
@@ -175,7 +176,8 @@ def test_the_defaults_and_the_edges_of_each_range_stay_valid(cls):
              RegressSettings: dict(margin=0.0, episodes=1, batch=1, failure=["stall"], mde=0.5, power=0.9,
                                    env_config={}, scenarios=("a", "tag:b")),
              WorkerSettings: dict(backend="ray", workers=1, address="auto", timeout=0.5),
-             DaggerConfig: dict(beta=0, beta_decay=1, epochs=0, checkpoint_every=0, slower_weight=1),
+             DaggerConfig: dict(beta=0, beta_decay=1, epochs=0, checkpoint_every=0, slower_weight=1,
+                                disagreement_weight=1),
              TrainConfig: dict(card_seeds=0, eval_freq=0, eval_seeds=0, curriculum_floor=1, baselines=[],
                                env_config=None, weights={"a": 0}, sampler="weighted", seed=0)}
     settings = cls(**{**base, **edges[cls]})

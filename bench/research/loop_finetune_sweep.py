@@ -51,6 +51,9 @@ def main() -> None:
     parser.add_argument("--slower-weight", type=float, default=None,
                         help="DAgger: weight of the reference's SLOWER labels in the cross-entropy (default: its own, 3; "
                              "1 is unweighted)")
+    parser.add_argument("--disagreement-weight", type=float, default=None,
+                        help="DAgger: weight of the states where the collecting student's greedy action was not the "
+                             "reference's label (default: its own, 1: unweighted)")
     parser.add_argument("--regress", action="store_true")
     parser.add_argument("--regress-episodes", type=int, default=4)
     parser.add_argument("--workers", type=int, default=2)
@@ -96,7 +99,8 @@ def main() -> None:
     if args.method == "dagger":
         from policies.imitation import DaggerConfig, dagger_fine_tune
 
-        extra = {key: getattr(args, key) for key in ("iterations", "epochs", "beta_decay", "slower_weight")
+        extra = {key: getattr(args, key) for key in ("iterations", "epochs", "beta_decay", "slower_weight",
+                                                             "disagreement_weight")
                  if getattr(args, key) is not None}
         if args.lr is not None:
             extra["learning_rate"] = args.lr
