@@ -1,4 +1,4 @@
-"""As run for the DAgger standstill measurement in bench/RESULTS.md (paths are those of that machine).
+"""The DAgger standstill measurement of bench/RESULTS.md (the bank: DV2S_STANDSTILL_BANK, a loop round's working bank).
 
 Standstill-before-left-turn probe: drive each policy on the two left-turn junction scenarios, seeds 10000..,
 count the steps where the ego stands (speed < 0.5 m/s) with its left turn still ahead (route_turn obs > 0.25),
@@ -15,7 +15,7 @@ from dv2s_gym.mining.monitors import detect_failure
 
 NAMES = ['L', 'I', 'R', 'F', 'S']
 SCENARIOS = ['urban_t_junction_left_turn_oncoming', 'urban_left_turn_oncoming']
-BANK = '/work/exp/loop_ev4/bank'
+BANK = __import__('os').environ['DV2S_STANDSTILL_BANK']
 
 
 class Recorder:
@@ -43,7 +43,7 @@ class Recorder:
 
 def main():
     out, nseeds, specs = sys.argv[1], int(sys.argv[2]), sys.argv[3:]
-    cfg = json.load(open('/work/exp/loop_ev4/loop.json'))['settings']['env_config']
+    cfg = json.load(open(__import__('os').path.join(BANK, '..', 'loop.json')))['settings']['env_config']
     key, env = worker_cache.env_for(BANK, cfg)
     rule = load_policy('rule'); rule.bind([env])
     report = {}
