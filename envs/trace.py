@@ -62,6 +62,23 @@ class EpisodeTrace:
     """Global parameters the reset fixed (``options={"params": ...}``, failure mining); a replay fixes them again."""
     version: int = TRACE_VERSION
 
+    def ego_collision(self) -> Optional[Dict[str, Any]]:
+        """The first ``collision`` event the ego is part of (``{"kind", "time", "actors", ...}``), or ``None``."""
+        return next((event for event in self.events
+                     if event.get("kind") == "collision" and "ego" in event.get("actors", [])), None)
+
+    def first_failure_event(self) -> Optional[Dict[str, Any]]:
+        """The first event that ends the ego's episode as a failure: a collision the ego is part of, or the ego
+        leaving the road (``off_road``); ``None`` when there is neither."""
+        return next((event for event in self.events
+                     if event.get("kind") == "off_road"
+                     or (event.get("kind") == "collision" and "ego" in event.get("actors", []))), None)
+
+    @staticmethod
+    def other_actor(event: Dict[str, Any]) -> Optional[str]:
+        """The first actor of ``event`` that is not the ego, or ``None``."""
+        return next((actor for actor in event.get("actors", []) if actor != "ego"), None)
+
     def save(self, path: Union[str, os.PathLike]) -> Path:
         """Write the trace as JSON (gzip-compressed when ``path`` ends in ``.gz``); atomic."""
         path = Path(path)

@@ -163,12 +163,8 @@ def stall_end(trace, start: int, max_frames: int) -> int:
 
 def _trace_failure(trace) -> Optional[Dict[str, Any]]:
     """The first failure event of a trace (a collision involving the ego, or leaving the road)."""
-    for event in trace.events:
-        if event.get("kind") == "collision" and "ego" in event.get("actors", []):
-            return {"type": "collision", "time": float(event["time"])}
-        if event.get("kind") == "off_road":
-            return {"type": "off_road", "time": float(event["time"])}
-    return None
+    event = trace.first_failure_event()
+    return None if event is None else {"type": event["kind"], "time": float(event["time"])}
 
 
 def _check_record(record: Mapping[str, Any]) -> None:
@@ -436,13 +432,9 @@ def _trace_clip(source: Any, settings: VideoSettings) -> tuple:
 
 def _trace_failure_actor(trace) -> Dict[str, Any]:
     """``{"with": actor}`` of the trace's first ego collision (the other actor), ``{}`` without one."""
-    for event in trace.events:
-        if event.get("kind") == "collision" and "ego" in event.get("actors", []):
-            others = [a for a in event.get("actors", []) if a != "ego"]
-            return {"with": others[0]} if others else {}
-        if event.get("kind") == "off_road":
-            return {}
-    return {}
+    event = trace.first_failure_event()
+    other = trace.other_actor(event) if event is not None and event["kind"] == "collision" else None
+    return {"with": other} if other is not None else {}
 
 
 def write_script_episode_video(script_path: PathLike, episode: Mapping[str, Any], out_path: PathLike,

@@ -69,10 +69,8 @@ def key_actor(trace, failure: Optional[Mapping[str, Any]]) -> Optional[str]:
     names = [n for n in trace.states[0] if n != "ego"]
     partner = failure.get("with")
     if failure.get("type") == "collision" and partner is None:
-        for event in trace.events:
-            if event.get("kind") == "collision" and "ego" in event.get("actors", []):
-                partner = next((a for a in event["actors"] if a != "ego"), None)
-                break
+        event = trace.ego_collision()
+        partner = trace.other_actor(event) if event is not None else None
     row = failure_type(str(failure.get("type")))
     if partner is not None and partner in names and row is not None and row.with_actor:
         return partner

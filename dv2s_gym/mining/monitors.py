@@ -151,17 +151,16 @@ def _time_of(trace, step: int) -> float:
 def _collision(result, trace, settings: MonitorSettings) -> Optional[Failure]:
     if not result.collided:
         return None
-    for event in trace.events:
-        if event.get("kind") == "collision" and "ego" in event.get("actors", []):
-            others = [a for a in event["actors"] if a != "ego"]
-            other = others[0] if others else None
-            step = _step_at(trace, float(event["time"]))
-            kind = trace.kinds.get(other) if other else None
-            states = trace.states[step]
-            ctype = (collision_type(states["ego"], states[other], kind)
-                     if other in states and "ego" in states else None)
-            return Failure("collision", float(event["time"]), step, other, kind, ctype,
-                           _finite(result.min_ttc), _ego_speed(states))
+    event = trace.ego_collision()
+    if event is not None:
+        other = trace.other_actor(event)
+        step = _step_at(trace, float(event["time"]))
+        kind = trace.kinds.get(other) if other else None
+        states = trace.states[step]
+        ctype = (collision_type(states["ego"], states[other], kind)
+                 if other in states and "ego" in states else None)
+        return Failure("collision", float(event["time"]), step, other, kind, ctype,
+                       _finite(result.min_ttc), _ego_speed(states))
     step = len(trace.states) - 1
     return Failure("collision", _time_of(trace, step), step, result.collisions[0] if result.collisions else None)
 
