@@ -150,11 +150,11 @@ def error_warning(errors: int, episodes: int, first: str) -> str:
 
 def parameter_check_text(counts: Mapping[str, Any]) -> str:
     """``"Parameter check of the conversions: 3 failing parameter value(s) compared with the new scripts' ranges, 3
-    not compared: 2 with no counterpart in the new script, 1 ..."``, from a mining report's ``counts`` (a report
-    written before the reasons were counted says only how many)."""
-    text = (f"Parameter check of the conversions: {counts.get('parameters_compared', 0)} failing parameter value(s) "
-            f"compared with the new scripts' ranges, {counts.get('parameters_not_compared', 0)} not compared")
-    reasons = not_compared_text(counts.get("parameters_not_compared_by_reason") or {})
+    not compared: 2 with no counterpart in the new script, 1 ..."``, from a mining report's ``counts`` (as
+    :func:`dv2s_gym.mining.report.build_report` makes them)."""
+    text = (f"Parameter check of the conversions: {counts['parameters_compared']} failing parameter value(s) "
+            f"compared with the new scripts' ranges, {counts['parameters_not_compared']} not compared")
+    reasons = not_compared_text(counts["parameters_not_compared_by_reason"])
     return text + (f": {reasons}" if reasons else "")
 
 
