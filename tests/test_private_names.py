@@ -8,6 +8,13 @@ names, else a module of unknown origin, :data:`FROM_A_FILE`, whose private names
 delattr), ``vars(module)["_name"]`` and ``module.__dict__["_name"]``. A name computed at run time and a module's whole
 namespace (``vars``, ``dir``, ``__dict__``) are refused too: they cannot be told public. The modules that may share
 private names are listed below with the reason.
+
+Beside these binding-based checks, a rule by name holds whatever the spelling (:func:`private_names_by_name`): a
+module writes a private name as an attribute (``x._name``, whatever ``x`` is: a parameter, a loop variable, a
+``sys.modules`` entry, a class's private method) only when it defines that name itself, or when the name is a
+library's listed in :data:`LIBRARY_PRIVATE_NAMES` with the reason; and a string naming a private name (the whole
+string, or its part after the last ``.`` or ``:``, as given to ``getattr``, ``attrgetter``, ``__getattribute__``,
+``pydoc.locate`` or ``pkgutil.resolve_name``) only when it defines that name or no other project module does.
 """
 
 from __future__ import annotations
