@@ -8,7 +8,11 @@ else to ``a.b``), and so is a module loaded by name: through ``importlib.import_
 command. Function-level imports count: a deferred import still ties the
 two modules together, it only hides the cycle from Python's import machinery. A loader given a name that is not a
 literal string (or reached another way than by a call: ``getattr(importlib, "import_module")``) is refused unless
-:data:`COMPUTED_LOADS` lists its module with the reason.
+:data:`COMPUTED_LOADS` lists its module with the reason. Whatever the call, a string naming a project module
+(``"pkg.mod"``, ``"pkg.mod:attr"``, ``"pkg.mod.attr"``, ``"-mpkg.mod"``, a ``"pkg."`` prefix) is an edge
+(:func:`modules_named_in_strings`: ``pydoc.locate``, ``mock.patch``, ``importlib.resources.files``, a forkserver
+preload list...), as is the ``dv2s`` console script started in a child process (``dv2s_gym.cli``); a string that
+names a package without loading it is listed in :data:`NAMED_NOT_LOADED` with the reason.
 """
 
 from __future__ import annotations
