@@ -4,7 +4,7 @@ Each row (:class:`FailureType`) says what the rest of the project reads about a 
 records and regression results write it), its ``severity`` (0 is the most severe; the table is in that order),
 the field of a regression result that says it happened (``result_field``), whether ``dv2s regress`` counts it
 as a failure by default (``regress_default``), whether the failure names the actor it met
-(``with_actor``) and the ``label`` reports show for it (``None``: reports show none).
+(``with_actor``) and the ``label`` reports show for it (``None``: reports show its ``name``; :func:`type_label`).
 
 The failure miner detects every type of the table, each through its detector (:mod:`dv2s_gym.mining.monitors`),
 and its reports list them in severity order (:func:`failure_table`: the table and the rows added at run time with
@@ -17,7 +17,8 @@ from dataclasses import dataclass
 from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Tuple
 
 __all__ = ["FailureType", "FAILURE_TABLE", "FAILURE_TYPES", "failure_table", "failure_type", "severity_order",
-           "register_failure_type", "unregister_failure_type", "attach_detection", "detach_detection", "happened"]
+           "register_failure_type", "unregister_failure_type", "type_label", "attach_detection", "detach_detection",
+           "happened"]
 
 
 @dataclass(frozen=True)
@@ -34,7 +35,7 @@ class FailureType:
     with_actor: bool
     """Whether the failure names the actor it met (a mined failure's ``with``)."""
     label: Optional[str]
-    """What reports call the type; ``None`` when they show no label of their own."""
+    """What reports call the type (:func:`type_label`); ``None``: they call it by its ``name``."""
 
 
 FAILURE_TABLE: Tuple[FailureType, ...] = (
@@ -64,6 +65,13 @@ def failure_type(name: str) -> Optional[FailureType]:
     return _BY_NAME.get(name)
 
 
+def type_label(name: str) -> str:
+    """What reports call the failure type ``name``: its row's ``label``, else its name (also for a name that is no
+    failure type, e.g. one a run recorded with a plug-in not loaded now)."""
+    row = _BY_NAME.get(name)
+    return row.label if row is not None and row.label else name
+
+
 def severity_order(names: Iterable[str]) -> List[str]:
     """The distinct ``names``: failure types most severe first, then any other names sorted."""
     names = set(names)
@@ -76,6 +84,9 @@ def register_failure_type(row: FailureType) -> FailureType:
     detector for it (:func:`dv2s_gym.mining.monitors.register_detector`). Returns ``row``."""
     if row.name in _BY_NAME:
         raise ValueError(f"failure type {row.name!r} exists already")
+    if not isinstance(row.severity, int) or isinstance(row.severity, bool) or row.severity < 0:
+        raise ValueError(f"failure type {row.name!r}: severity {row.severity!r} is not a whole number >= 0 (0 is the "
+                         "most severe, the table's collision; a plug-in's type takes a number after the table's)")
     if any(other.severity == row.severity for other in _TABLE):
         raise ValueError(f"failure type {row.name!r}: severity {row.severity} is taken; choose one no type has")
     _REGISTERED[row.name] = row

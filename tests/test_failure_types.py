@@ -10,6 +10,7 @@ from typing import List
 
 import pytest
 
+from dv2s_gym.mining import html as mining_html
 from dv2s_gym.mining import monitors
 from dv2s_gym.mining import report as mining_report
 from dv2s_gym.mining.tasks import reference_avoids
@@ -134,9 +135,40 @@ def test_a_failure_type_registered_in_one_place_is_detected_scored_and_counted(t
     episodes = run / "episodes.jsonl"
     episodes.write_text(episodes.read_text(encoding="utf-8").replace('"type": "stall"', f'"type": "{TOY}"'),
                         encoding="utf-8")
-    counts = mining_report.build_report(run)["counts"]["failures_by_type"]
+    report = mining_report.build_report(run)
+    counts = report["counts"]["failures_by_type"]
     assert counts == {"collision": 5, "off_road": 3, "low_ttc": 1, TOY: 1}
     assert list(counts) == [row.name for row in failure_table() if row.name in counts]
+    # shown by its row's label, counted from the table like every type (no type is named by the report itself)
+    shown = "collision 5, off road 3, low_ttc 1, hard brake 1"
+    assert f"Failures by type: {shown}" in mining_report.markdown(report)
+    assert f"with a failure; by type: {shown}" in mining_report.format_summary(report)
+    assert "Failures by type: " + shown in mining_html._counts_table(report)
+
+
+@pytest.mark.parametrize("severity", [-1, 1.5, True])
+def test_a_failure_type_with_a_negative_or_fractional_severity_is_refused(severity):
+    with pytest.raises(ValueError, match="not a whole number >= 0"):
+        register_failure_type(FailureType(TOY, severity=severity, result_field=None, regress_default=False,
+                                          with_actor=False, label=None))
+    assert failure_type(TOY) is None
+
+
+def test_mining_refuses_to_start_with_a_type_registered_without_a_detector(tmp_path):
+    """Not an error in every episode: one line before any work, naming what to call."""
+    from dv2s_gym.mining.errors import MiningError
+    from tests.mining_helpers import mine
+
+    register_failure_type(FailureType(TOY, severity=len(FAILURE_TABLE), result_field=None, regress_default=False,
+                                      with_actor=False, label="hard brake"))
+    try:
+        with pytest.raises(MiningError) as refused:
+            mine("rule", out=tmp_path / "run", budget=1)
+    finally:
+        unregister_failure_type(TOY)
+    message = str(refused.value)
+    assert TOY in message and "register_detector" in message and "\n" not in message
+    assert not (tmp_path / "run" / "episodes.jsonl").exists()
 
 
 def test_a_registered_type_is_in_the_table_while_registered(toy_type):

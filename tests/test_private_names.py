@@ -8,11 +8,19 @@ names, else a module of unknown origin, :data:`FROM_A_FILE`, whose private names
 delattr), ``vars(module)["_name"]`` and ``module.__dict__["_name"]``. A name computed at run time and a module's whole
 namespace (``vars``, ``dir``, ``__dict__``) are refused too: they cannot be told public. The modules that may share
 private names are listed below with the reason.
+
+Beside these binding-based checks, a rule by name holds whatever the spelling (:func:`private_names_by_name`): a
+module writes a private name as an attribute (``x._name``, whatever ``x`` is: a parameter, a loop variable, a
+``sys.modules`` entry, a class's private method) only when it defines that name itself, or when the name is a
+library's listed in :data:`LIBRARY_PRIVATE_NAMES` with the reason; and a string naming a private name (the whole
+string, or its part after the last ``.`` or ``:``, as given to ``getattr``, ``attrgetter``, ``__getattribute__``,
+``pydoc.locate`` or ``pkgutil.resolve_name``) only when it defines that name or no other project module does.
 """
 
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 from typing import Dict, Iterator, List, Optional, Tuple
 
@@ -258,6 +266,217 @@ def private_uses(modules: Optional[List[Tuple[str, Path]]] = None,
                 if (name in (COMPUTED, NAMESPACE) or _is_private(name)) and source != module:
                     found.append((module, node.lineno, source, name))
     return [use for use in found if use[2] != use[0]]
+
+
+
+# --- Private names by name, whatever the spelling --------------------------------------------------------------
+#
+# The rules above follow how a module is bound to a name; these hold whatever the spelling: a module may write a
+# private name as an attribute (``x._name``, whatever ``x`` is) only when it defines that name itself, and a string
+# naming one (the whole string, or its part after the last ``.`` or ``:``) only when no other project module defines
+# it without this one doing so too. A name defined by a module that may share private names with this one
+# (:data:`SHARED_PRIVATE_NAMES`) counts as its own.
+
+LIBRARY_PRIVATE_NAMES: Dict[str, Tuple[Tuple[str, ...], str]] = {
+    "_actions": (("dv2s_gym.cli.parser",),
+                 "argparse keeps a parser's arguments there; the CLI lists them to describe every command's options"),
+    "_option_string_actions": (("dv2s_gym.cli.parser",),
+                               "argparse's map from an option string to its action; the CLI finds the options a "
+                               "command already has"),
+    "_SubParsersAction": (("dv2s_gym.cli.parser",), "argparse's class of a parser's subcommands, found by isinstance"),
+    "_run_exitfuncs": (("dv2s_gym.cli",), "atexit's call of the exit handlers before the CLI leaves with os._exit"),
+    "_exit": (("dv2s_gym.cli", "scenario_bank.jail.zygote_server"),
+              "os._exit: a forked child leaves without running its parent's cleanup"),
+    "_getframe": (("envs.scenic_highway.carla.actions",), "sys._getframe: Scenic's actions read their caller's frame"),
+    "_globalParameters": (("envs.scenic_highway.model_support",), "Scenic's global parameters of a compiled scenario"),
+    "_simulatorProvidedProperties": (("envs.scenic_highway.readback",),
+                                     "Scenic's properties a simulator writes back to an object"),
+    "_specify": (("envs.scenic_highway.readback",), "Scenic's setter of an object's property during read-back"),
+    "_recomputeDynamicFinals": (("envs.scenic_highway.readback",),
+                                "Scenic's recomputation of an object's derived properties after read-back"),
+    "_replayOut": (("envs.scenic_highway.simulator",), "Scenic's record of a simulation for replay"),
+    "_isRunning": (("envs.scenic_highway.simulator",), "Scenic's flag of a simulation still running"),
+    "_stop": (("envs.scenic_highway.simulator",), "Scenic's end of a simulation"),
+    "_setup_lr_schedule": (("policies.training",),
+                           "Stable-Baselines3's rebuild of a model's learning-rate schedule after its rate is set"),
+}
+"""Private names of the standard library or a third-party library a project module uses as an attribute:
+name -> (the modules that may, why)."""
+
+_STRING_METHODS = ("startswith", "endswith", "removeprefix", "removesuffix")
+"""String methods whose argument is a part of a string, not a name (``action.endswith("_pending")``)."""
+
+
+def defined_names(tree: ast.AST) -> set:
+    """Every name a module defines itself: by def, class, assignment (any target, also ``for``, ``with``, ``match``,
+    comprehensions), attribute store, argument or import (its alias)."""
+    names = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            names.add(node.name)
+        elif isinstance(node, ast.Name) and isinstance(node.ctx, (ast.Store, ast.Del)):
+            names.add(node.id)
+        elif isinstance(node, ast.Attribute) and isinstance(node.ctx, (ast.Store, ast.Del)):
+            names.add(node.attr)
+        elif isinstance(node, ast.arg):
+            names.add(node.arg)
+        elif isinstance(node, ast.alias):
+            names.add((node.asname or node.name).split(".")[0])
+        elif isinstance(node, (ast.MatchAs, ast.MatchStar)) and node.name:
+            names.add(node.name)
+        elif isinstance(node, ast.MatchMapping) and node.rest:
+            names.add(node.rest)
+    return names
+
+
+def _plain_strings(tree: ast.AST) -> Iterator[ast.Constant]:
+    """The string constants of a module that may name something: not docstrings, not the literal parts of an
+    f-string, not the argument of :data:`_STRING_METHODS`."""
+    skipped = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body:
+            first = node.body[0]
+            if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant):
+                skipped.add(id(first.value))
+        elif isinstance(node, ast.JoinedStr):
+            skipped.update(id(value) for value in node.values)
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+              and node.func.attr in _STRING_METHODS):
+            skipped.update(id(argument) for argument in node.args)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skipped:
+            yield node
+
+
+def _private_in_string(text: str) -> Optional[str]:
+    """The private name a string names: the whole string, or its part after the last ``.`` or ``:``
+    (``"pkg.mod:_name"``); not a name made of underscores only."""
+    for part in (text, text.replace(":", ".").rsplit(".", 1)[-1]):
+        if part.isidentifier() and _is_private(part) and part.strip("_"):
+            return part
+    return None
+
+
+@functools.lru_cache(maxsize=None)
+def _parsed(path: Path) -> ast.AST:
+    return ast.parse(path.read_text(encoding="utf-8"))
+
+
+@functools.lru_cache(maxsize=None)
+def _defined_in(path: Path) -> frozenset:
+    return frozenset(defined_names(_parsed(path)))
+
+
+def private_names_by_name(modules: Optional[List[Tuple[str, Path]]] = None, only: Optional[str] = None
+                          ) -> List[Tuple[str, int, str]]:
+    """``(module, line, name)`` of each private name a module writes as an attribute without defining it (nor
+    listed in :data:`LIBRARY_PRIVATE_NAMES` for it), or in a string while another project module defines it and
+    this one does not."""
+    modules = list(_modules()) if modules is None else modules
+    trees = {module: _parsed(path) for module, path in modules}
+    defined = {module: _defined_in(path) for module, path in modules}
+    owners: Dict[str, set] = {}
+    for module, names in defined.items():
+        for name in names:
+            if _is_private(name):
+                owners.setdefault(name, set()).add(module)
+    found = []
+    for module, tree in trees.items():
+        if only is not None and module != only:
+            continue
+        own = set(defined[module])
+        for other, names in defined.items():
+            if other != module and _shared(module, other) is not None:
+                own |= names
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and _is_private(node.attr) and node.attr not in own
+                    and module not in LIBRARY_PRIVATE_NAMES.get(node.attr, ((), ""))[0]):
+                found.append((module, node.lineno, node.attr))
+        for node in _plain_strings(tree):
+            name = _private_in_string(node.value)
+            if name is not None and name not in own and owners.get(name, set()) - {module}:
+                found.append((module, node.lineno, name))
+    return found
+
+
+def test_no_module_writes_a_private_name_it_does_not_define():
+    offending = [f"{module}:{line} uses {name}, which it does not define" for module, line, name
+                 in private_names_by_name()]
+    assert not offending, ("private names used by a module that does not define them (make them public where they "
+                           "are defined, or list a library's private name in LIBRARY_PRIVATE_NAMES with the reason):"
+                           "\n" + "\n".join(offending))
+
+
+def test_every_listed_library_private_name_is_still_used_where_listed():
+    modules = list(_modules())
+    used = {(module, node.attr) for module, path in modules for node in ast.walk(_parsed(path))
+            if isinstance(node, ast.Attribute) and node.attr in LIBRARY_PRIVATE_NAMES
+            and node.attr not in _defined_in(path)}
+    listed = {(module, name) for name, (where, _) in LIBRARY_PRIVATE_NAMES.items() for module in where}
+    assert listed == used
+
+
+PLANTS_BY_NAME = {
+    "parameter default": "def _planted(module=heldout):\n    return module._rate\n",
+    "for target": "def _planted():\n    for module in (heldout,):\n        return module._rate\n",
+    "with target": "def _planted():\n    with contextlib.nullcontext(heldout) as module:\n        return module._rate\n",
+    "tuple unpacking": "def _planted():\n    module, other = heldout, None\n    return module._rate\n",
+    "starred unpacking": "def _planted():\n    [module] = [heldout]\n    return module._rate\n",
+    "dict holder": "def _planted():\n    return {'m': heldout}['m']._rate\n",
+    "list index": "def _planted():\n    return [heldout][0]._rate\n",
+    "lambda parameter": "def _planted():\n    return (lambda module: module._rate)(heldout)\n",
+    "__getattribute__": "def _planted():\n    return heldout.__getattribute__('_rate')\n",
+    "object.__getattribute__": "def _planted():\n    return object.__getattribute__(heldout, '_rate')\n",
+    "operator.attrgetter": "def _planted():\n    return operator.attrgetter('_rate')(heldout)\n",
+    "inspect.getmembers": "def _planted():\n    return dict(inspect.getmembers(heldout))['_rate']\n",
+    "class attribute holder": "class _Holder:\n    module = heldout\n\n\ndef _planted():\n"
+                              "    return _Holder.module._rate\n",
+    "sys.modules": "def _planted():\n    return sys.modules['dv2s_gym.mining.heldout']._rate\n",
+    "pydoc.locate": "def _planted():\n    return pydoc.locate('dv2s_gym.mining.heldout._rate')\n",
+    "match capture": "def _planted():\n    match heldout:\n        case module:\n            return module._rate\n",
+    "comprehension variable": "def _planted():\n    return [module._rate for module in [heldout]]\n",
+    "functools.partial(getattr)": "def _planted():\n    return functools.partial(getattr, heldout)('_rate')\n",
+    "builtins.getattr": "def _planted():\n    return builtins.getattr(heldout, '_rate')\n",
+    "__import__ with fromlist": "def _planted():\n"
+                                "    return __import__('dv2s_gym.mining.heldout', fromlist=['x'])._rate\n",
+    "pkgutil.resolve_name": "def _planted():\n    return pkgutil.resolve_name('dv2s_gym.mining.heldout:_rate')\n",
+    "a class's private method": "def _planted(record):\n    return heldout.HeldOutStore._rate(record)\n",
+}
+"""Ways to reach ``heldout``'s private ``_rate`` from another module that no binding-based rule follows."""
+
+
+@pytest.mark.parametrize("family", sorted(PLANTS_BY_NAME))
+def test_a_private_name_is_refused_whatever_the_spelling(tmp_path, family):
+    """A copy of a real module (which imports ``heldout`` and does not define ``_rate``) with a function appended
+    that reaches ``_rate``: the by-name rule reports it on the planted lines, and only there."""
+    modules = list(_modules())
+    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.mining.loop")
+    source = modules[index][1].read_text(encoding="utf-8")
+    assert "from dv2s_gym.mining import heldout," in source and "_rate" not in defined_names(ast.parse(source))
+    assert "_rate" in defined_names(ast.parse((ROOT / "dv2s_gym/mining/heldout.py").read_text(encoding="utf-8")))
+    header = "\n\nimport builtins\nimport contextlib\nimport functools\nimport inspect\nimport operator\n" \
+             "import pkgutil\nimport pydoc\nimport sys\n\n\n"
+    copy = tmp_path / "loop.py"
+    copy.write_text(source + header + PLANTS_BY_NAME[family], encoding="utf-8")
+    before = set(private_names_by_name(modules, only="dv2s_gym.mining.loop"))
+    assert not before
+    modules[index] = ("dv2s_gym.mining.loop", copy)
+    added = set(private_names_by_name(modules, only="dv2s_gym.mining.loop"))
+    first = len((source + header).splitlines())
+    assert added and all(name == "_rate" and line > first for _, line, name in added)
+
+
+def test_a_string_rule_leaves_suffixes_and_a_modules_own_names_alone(tmp_path):
+    """Strings that are parts of names (an f-string's literal, a suffix tested by endswith) and strings naming a
+    private name the module defines itself are not uses of another module's private name."""
+    modules = list(_modules())
+    index = next(i for i, (module, _) in enumerate(modules) if module == "dv2s_gym.mining.loop")
+    copy = tmp_path / "loop.py"
+    copy.write_text(modules[index][1].read_text(encoding="utf-8") + "\n\n\n_own = 1\n\n\n"
+                    "def _planted(name):\n    return f'{name}_rate', name.endswith('_rate'), getattr(_planted, '_own')\n",
+                    encoding="utf-8")
+    modules[index] = ("dv2s_gym.mining.loop", copy)
+    assert private_names_by_name(modules, only="dv2s_gym.mining.loop") == []
 
 
 def test_no_module_imports_another_modules_private_names():

@@ -8,7 +8,11 @@ else to ``a.b``), and so is a module loaded by name: through ``importlib.import_
 command. Function-level imports count: a deferred import still ties the
 two modules together, it only hides the cycle from Python's import machinery. A loader given a name that is not a
 literal string (or reached another way than by a call: ``getattr(importlib, "import_module")``) is refused unless
-:data:`COMPUTED_LOADS` lists its module with the reason.
+:data:`COMPUTED_LOADS` lists its module with the reason. Whatever the call, a string naming a project module
+(``"pkg.mod"``, ``"pkg.mod:attr"``, ``"pkg.mod.attr"``, ``"-mpkg.mod"``, a ``"pkg."`` prefix) is an edge
+(:func:`modules_named_in_strings`: ``pydoc.locate``, ``mock.patch``, ``importlib.resources.files``, a forkserver
+preload list...), as is the ``dv2s`` console script started in a child process (``dv2s_gym.cli``); a string that
+names a package without loading it is listed in :data:`NAMED_NOT_LOADED` with the reason.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ import functools
 import re
 import textwrap
 from pathlib import Path
-from typing import Dict, List, Optional, Set
+from typing import Dict, List, Optional, Set, Tuple
 
 import pytest
 
@@ -348,7 +352,183 @@ def _dynamic_imports(path: Path, module: str, modules: Dict[str, Path], processe
     if computed:
         names += [text.partition(":")[0] for text in _folded_strings(tree)]
     names += _modules_run_by_commands(tree) if processes else []
+    names += [name for name, line in modules_named_in_strings(tree, modules, processes)
+              if (module, name) not in NAMED_NOT_LOADED]
     return {name for name in names if isinstance(name, str) and name in modules and name != module}
+
+
+NAMED_NOT_LOADED: Dict[Tuple[str, str], str] = {
+    ("scenario_bank.safety", "envs"): "the top-level names a checked script may import (its allowlist)",
+    ("scenario_bank.safety", "dv2s_gym"): "the project's packages a checked script may not reach (its denylist)",
+    ("scenario_bank.safety", "policies"): "the project's packages a checked script may not reach (its denylist)",
+    ("scenario_bank.safety", "scenario_bank"): "the project's packages a checked script may not reach (its denylist)",
+    ("scenario_bank.jail.bwrap", "envs"): "the packages the jail binds read-only into the sandbox (paths)",
+    ("scenario_bank.jail.bwrap", "policies"): "the packages the jail binds read-only into the sandbox (paths)",
+    ("scenario_bank.jail.bwrap", "scenario_bank"): "the packages the jail binds read-only into the sandbox (paths)",
+    ("scenario_bank.scenic_parse", "envs"): "a folder name in the path of the Scenic models it parses",
+    ("envs.scenarios", "scenario_bank"): "a folder name in a code object's file path it compares",
+    ("envs.scenarios", "envs.scenic_highway.carla"): "the Scenic model of a simulator (envs.scenic_highway.carla."
+                                                     "model), compiled by Scenic, not imported here",
+    ("envs.scenarios", "envs.scenic_highway.metadrive"): "the Scenic model of a simulator (envs.scenic_highway."
+                                                         "metadrive.model), compiled by Scenic, not imported here",
+    ("envs.jail_worker", "policies"): "the prefix a driver class path it is sent must start with (a check; the "
+                                      "driver is loaded by the name its caller sends, COMPUTED_LOADS)",
+    ("dv2s_gym.regress.identity", "envs"): "the project's packages whose sources it hashes (paths)",
+    ("dv2s_gym.regress.identity", "policies"): "the project's packages whose sources it hashes (paths)",
+    ("dv2s_gym.regress.identity", "scenario_bank"): "the project's packages whose sources it hashes (paths)",
+    ("dv2s_gym.regress.identity", "dv2s_gym"): "the project's packages whose sources it hashes (paths)",
+    ("policies.training", "envs"): "the name of the --envs option in a check of the settings",
+}
+"""``(module, project module)`` -> why a string in the module naming that project module does not load it (a
+name in a list of packages, a folder in a path, an option's name)."""
+
+_SUBPROCESS_CALLS = {"run", "Popen", "call", "check_call", "check_output", "system", "popen", "execv", "execvp",
+                     "execlp", "spawnlp", "spawnv", "create_subprocess_exec", "create_subprocess_shell", "which"}
+"""Calls that start (or find) a program: one given the ``dv2s`` console script runs :data:`CONSOLE_MODULE`."""
+CONSOLE_MODULE = "dv2s_gym.cli"
+"""The module the ``dv2s`` console script runs."""
+_ENTRY_POINT_CALLS = {"entry_points", "load_entry_point", "get_entry_map", "iter_entry_points"}
+"""Calls that find installed entry points; a module making one may load the ``dv2s`` console script's module."""
+
+
+def _module_in_string(text: str, modules: Dict[str, Path]) -> Optional[str]:
+    """The project module a string names: exactly a module name, optionally after ``-m`` (``"-mpkg.mod"``), with an
+    ``:attr`` or ``.attr`` suffix, or a ``"pkg."`` prefix (what ``walk_packages`` is given)."""
+    name = text[2:].strip() if text.startswith("-m") else text
+    name = name.partition(":")[0]
+    if name.endswith("."):
+        name = name[:-1]
+    if name in modules:
+        return name
+    head, _, attribute = name.rpartition(".")
+    return head if head in modules and attribute.isidentifier() else None
+
+
+def modules_named_in_strings(tree: ast.AST, modules: Dict[str, Path], processes: bool = True
+                             ) -> List[Tuple[str, int]]:
+    """``(module, line)`` of each string constant naming a project module (:func:`_module_in_string`), whatever the
+    call it is given to (``pydoc.locate``, ``pkgutil.get_data``, ``importlib.resources.files``, ``mock.patch``, a
+    ``dictConfig`` ``"()"``, a forkserver preload list, ``pkgutil.walk_packages``' prefix): it loads that module, or
+    may. Not a docstring, an f-string's literal part, a key (of a dict display, a subscript, ``.get``/``.pop``).
+    Without ``processes``, a module only started in a child process (``"-m", "pkg.mod"``, ``"-mpkg.mod"``, the
+    module given to a jailed worker, a subclass of it or a ``functools.partial`` of it) is left out; with it, the ``dv2s`` console script
+    given to a call that starts a program counts as :data:`CONSOLE_MODULE`, and so does a call finding entry
+    points (:data:`_ENTRY_POINT_CALLS`) in any case."""
+    skipped, started = set(), set()
+    starters = set(_STARTERS)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ClassDef) and any(_base_name(base).rpartition(".")[2] in _STARTERS
+                                                  for base in node.bases):
+            starters.add(node.name)
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body:
+            first = node.body[0]
+            if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant):
+                skipped.add(id(first.value))
+        elif isinstance(node, ast.JoinedStr):
+            skipped.update(id(value) for value in node.values)
+        elif isinstance(node, ast.Dict):
+            skipped.update(id(key) for key in node.keys if key is not None)
+        elif isinstance(node, ast.Subscript):
+            skipped.add(id(node.slice))
+        elif isinstance(node, ast.Call):
+            called = _base_name(node.func).rpartition(".")[2]
+            if isinstance(node.func, ast.Attribute) and called in ("get", "pop", "setdefault") and node.args:
+                skipped.add(id(node.args[0]))
+            arguments = node.args[1:] if called == "partial" and node.args and \
+                _base_name(node.args[0]).rpartition(".")[2] in starters else node.args if called in starters else []
+            started.update(id(argument) for argument in arguments)
+        if isinstance(node, (ast.List, ast.Tuple)):
+            started.update(id(after) for flag, after in zip(node.elts, node.elts[1:])
+                           if isinstance(flag, ast.Constant) and flag.value == "-m")
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skipped:
+            name = _module_in_string(node.value, modules)
+            if name is not None and (processes or not (id(node) in started or node.value.startswith("-m"))):
+                found.append((name, node.lineno))
+        elif isinstance(node, ast.Call) and _base_name(node.func) in _ENTRY_POINT_CALLS and CONSOLE_MODULE in modules:
+            found.append((CONSOLE_MODULE, node.lineno))  # it may load the project's own entry points
+        elif processes and isinstance(node, ast.Call) and \
+                _base_name(node.func).rpartition(".")[2] in _SUBPROCESS_CALLS and CONSOLE_MODULE in modules:
+            for part in (part for argument in node.args for part in ast.walk(argument)):
+                if isinstance(part, ast.Constant) and isinstance(part.value, str) and \
+                        part.value.split(" ")[0] == "dv2s":
+                    found.append((CONSOLE_MODULE, node.lineno))
+    return found
+
+
+STRING_NAMED_PLANTS = {
+    "pydoc.locate": ("import pydoc\n    return pydoc.locate('dv2s_gym.mining.loop')", "dv2s_gym.mining.loop"),
+    "pkgutil.get_data": ("import pkgutil\n    return pkgutil.get_data('dv2s_gym.mining', 'loop.py')",
+                         "dv2s_gym.mining"),
+    "importlib.resources.files": ("import importlib.resources\n"
+                                  "    return importlib.resources.files('dv2s_gym.mining')", "dv2s_gym.mining"),
+    "mock.patch": ("from unittest import mock\n    return mock.patch('dv2s_gym.mining.loop.run_loop').start()",
+                   "dv2s_gym.mining.loop"),
+    "entry point": ("from importlib.metadata import entry_points\n"
+                    "    return entry_points(group='console_scripts')['dv2s'].load()", "dv2s_gym.cli"),
+    "walk_packages prefix": ("import pkgutil\n    return list(pkgutil.walk_packages(['x'], 'dv2s_gym.'))",
+                             "dv2s_gym"),
+    "dictConfig factory": ("import logging.config\n    logging.config.dictConfig({'version': 1, 'handlers': "
+                           "{'h': {'()': 'dv2s_gym.mining.loop.run_loop'}}})", "dv2s_gym.mining.loop"),
+    "forkserver preload": ("import multiprocessing\n    multiprocessing.get_context('forkserver')"
+                           ".set_forkserver_preload(['dv2s_gym.mining.loop'])", "dv2s_gym.mining.loop"),
+    "methodcaller": ("import operator, importlib\n"
+                     "    return operator.methodcaller('import_module', 'dv2s_gym.mining.loop')(importlib)",
+                     "dv2s_gym.mining.loop"),
+    "a module's __dict__": ("import importlib\n"
+                            "    return importlib.__dict__.get('import_module')('dv2s_gym.mining.loop')",
+                            "dv2s_gym.mining.loop"),
+    "-m joined": ("import subprocess, sys\n    return subprocess.run([sys.executable, '-mdv2s_gym.cli'])",
+                  "dv2s_gym.cli"),
+    "console script": ("import subprocess\n    return subprocess.run(['dv2s', 'loop', '--help'])", "dv2s_gym.cli"),
+    "console script command": ("import os\n    return os.system('dv2s loop --help')", "dv2s_gym.cli"),
+    "JailedProcess subclass": ("from scenario_bank.jail.process import JailedProcess\n\n"
+                               "    class _Worker(JailedProcess):\n        pass\n"
+                               "    return _Worker('dv2s_gym.cli')", "dv2s_gym.cli"),
+    "partial of JailedProcess": ("import functools\n    from scenario_bank.jail.process import JailedProcess\n"
+                                 "    return functools.partial(JailedProcess, 'dv2s_gym.cli')", "dv2s_gym.cli"),
+}
+"""Ways a module names another to load or start it without an import statement or a known loader."""
+STARTED_ONLY = ("-m joined", "console script", "console script command", "JailedProcess subclass",
+                "partial of JailedProcess")
+"""The plants of :data:`STRING_NAMED_PLANTS` that start the module in a child process (no import cycle)."""
+
+
+@pytest.mark.parametrize("family", sorted(STRING_NAMED_PLANTS))
+def test_the_graph_sees_a_module_named_in_a_string(tmp_path, family):
+    """envs may not load dv2s_gym: a string naming a module is an edge whatever call it is given to."""
+    planted, loaded = STRING_NAMED_PLANTS[family]
+    modules = _modules()
+    target = "envs.trace"
+    source = modules[target].read_text(encoding="utf-8")
+    assert loaded not in module_edges(modules[target], target, modules)
+    copy = tmp_path / "planted.py"
+    copy.write_text(source + f"\n\ndef _planted():\n    {planted}\n", encoding="utf-8")
+    imported = {"scenario_bank.jail.process"}  # the worker's class, imported by the plant
+    added = module_edges(copy, target, modules) - module_edges(modules[target], target, modules) - imported
+    assert added == {loaded}
+    in_process = (module_edges(copy, target, modules, processes=False)
+                  - module_edges(modules[target], target, modules, processes=False) - imported)
+    assert in_process == (set() if family in STARTED_ONLY else {loaded})
+
+
+def test_a_string_naming_a_module_as_a_key_a_part_or_a_docstring_is_no_edge(tmp_path):
+    modules = _modules()
+    copy = tmp_path / "planted.py"
+    copy.write_text(modules["envs.trace"].read_text(encoding="utf-8") + '\n\ndef _planted(record):\n'
+                    '    """Read like dv2s_gym.mining.loop."""\n'
+                    '    return {"dv2s_gym": 1}, record["dv2s_gym"], record.get("policies"), f"dv2s_gym.{record}"\n',
+                    encoding="utf-8")
+    assert module_edges(copy, "envs.trace", modules) == module_edges(modules["envs.trace"], "envs.trace", modules)
+
+
+def test_every_string_listed_as_no_import_is_still_there():
+    modules = _modules()
+    named = {(module, name) for module, path in modules.items()
+             for name, _ in modules_named_in_strings(_parsed(path), modules)}
+    assert set(NAMED_NOT_LOADED) <= named, set(NAMED_NOT_LOADED) - named
 
 
 def test_loaders_are_given_literal_module_names():

@@ -22,7 +22,8 @@ import os
 from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 
-from dv2s_gym.mining.report_text import breadth, clip_caption, parameter_check_text, rate_text, seed_text
+from dv2s_gym.mining.report_text import (breadth, by_type_text, clip_caption, parameter_check_text, rate_text,
+                                         seed_text)
 from dv2s_gym.report_page import (BOTTOM, CSS, RIGHT, ROW, SELFTEST, TOP, WIDTH, axis, escape, finite,
                                   fmt, fmt_interval, interval_mark, legend, row_label, svg, video_tag, x_scale)
 from scenario_bank.atomic import atomic_write_text
@@ -190,19 +191,19 @@ def _settings_table(report: Mapping[str, Any]) -> str:
 def _counts_table(report: Mapping[str, Any]) -> str:
     c = report.get("counts") or {}
     head = ["episodes", "errors", "failures", "distinct behaviours", "(scenario family, failure type) pairs",
-            "scenario families with a failure", "collisions", "stalls", "avoidable", "unavoidable", "unknown",
+            "scenario families with a failure", "avoidable", "unavoidable", "unknown",
             "avoidable behaviours", "converted", "kept", "merged", "rejected"]
-    keys = ["episodes", "errors", "failures", "behaviours", "scenario_failure_types", "scenarios_failing", "collisions",
-            "stalls", "avoidable", "unavoidable", "avoidability_unknown", "avoidable_clusters", "converted", "kept",
+    keys = ["episodes", "errors", "failures", "behaviours", "scenario_failure_types", "scenarios_failing",
+            "avoidable", "unavoidable", "avoidability_unknown", "avoidable_clusters", "converted", "kept",
             "merged", "rejected"]
-    half = len(head) // 2  # two tables of eight columns: one of sixteen is wider than the page
+    half = len(head) // 2  # two tables of seven columns: one of fourteen is wider than the page
     table = "".join(_table(head[part], [[(escape(c.get(k, 0)), True) for k in keys[part]]])
                     for part in (slice(0, half), slice(half, None)))
     by_type = c.get("failures_by_type") or {}
     seconds = c.get("conversion_seconds") or {}
     notes = []
     if by_type:
-        notes.append("Failures by type: " + ", ".join(f"{escape(t)} {escape(n)}" for t, n in by_type.items()))
+        notes.append("Failures by type: " + escape(by_type_text(by_type)))
     if seconds.get("n"):
         stages = c.get("conversion_stage_seconds") or {}
         notes.append(f"Conversion time: median {fmt(seconds.get('median'))} s, max {fmt(seconds.get('max'))} s over "
@@ -229,7 +230,7 @@ def _sampler_table(report: Mapping[str, Any]) -> str:
 def _scenario_table(report: Mapping[str, Any]) -> str:
     rows = []
     for name, s in (report.get("scenarios") or {}).items():
-        types = ", ".join(f"{t} {n}" for t, n in (s.get("failures_by_type") or {}).items())
+        types = by_type_text(s.get("failures_by_type") or {}) if s.get("failures_by_type") else ""
         rows.append([(_breakable(name), False), (escape(s.get("episodes")), True), (escape(s.get("failures")), True),
                      (escape(fmt_interval(s.get("failure_rate"))), True),
                      (escape(_estimate(s.get("estimated_rate"))), True), (escape(s.get("avoidable")), True),

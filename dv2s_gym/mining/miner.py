@@ -56,7 +56,7 @@ from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import is_novel
 from dv2s_gym.mining.family import record_family, scenario_family
 from dv2s_gym.mining.jsonl import JsonlAppender, read_rows
-from dv2s_gym.mining.monitors import MonitorSettings
+from dv2s_gym.mining.monitors import MonitorSettings, types_without_detector
 from dv2s_gym.mining.report import write_reports
 from dv2s_gym.mining.report_text import error_warning
 from dv2s_gym.mining.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
@@ -501,10 +501,14 @@ def mine(policy: str, settings: MineSettings, *, out: os.PathLike | str, workers
 
 
 def _check_can_mine(policy: str, settings: MineSettings) -> None:
-    """Refuse, before any work, a run that cannot start: no VerifAI, bad sampler options, a misspelt env config key,
-    an unknown policy."""
+    """Refuse, before any work, a run that cannot start: no VerifAI, a failure type without a detector, bad sampler
+    options, a misspelt env config key, an unknown policy."""
     if importlib.util.find_spec("verifai") is None:  # the core install has no mining extra
         raise MiningError(missing_extra_message("verifai", "failure mining"))
+    undetected = types_without_detector()
+    if undetected:  # else every episode would end in an error
+        raise MiningError(f"failure type(s) {', '.join(undetected)} have no detector: register one for each with "
+                          "dv2s_gym.mining.monitors.register_detector (in each process that detects) before mining")
     sampler_params(settings.sampler, dict(settings.sampler_options) if settings.sampler_options else None)
     from envs.dv2s_env import check_env_config
 

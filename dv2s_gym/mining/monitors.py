@@ -35,8 +35,8 @@ from scenario_bank.failure_types import (FAILURE_TYPES, attach_detection, detach
                                          failure_type)
 
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "MonitorSettings", "Detector", "DETECTORS",
-           "DEFAULT_MONITOR", "register_detector", "unregister_detector", "detect_failure", "detect_stall",
-           "robustness", "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
+           "DEFAULT_MONITOR", "register_detector", "unregister_detector", "types_without_detector", "detect_failure",
+           "detect_stall", "robustness", "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
 
 COLLISION_TYPES = ("rear_end", "struck_from_behind", "side", "head_on", "pedestrian", "obstacle")
 STALL_SPEED = STANDING_SPEED
@@ -239,10 +239,17 @@ def unregister_detector(name: str) -> None:
     detach_detection(name)
 
 
+def types_without_detector() -> List[str]:
+    """The failure types of the table (with the rows registered at run time) that no detector finds in this
+    process: the miner refuses to start while there is one."""
+    return [row.name for row in failure_table() if row.name not in DETECTORS]
+
+
 def _detector(name: str) -> Detector:
     detector = DETECTORS.get(name)
     if detector is None:
-        raise KeyError(f"failure type {name!r} has no detector: register one in dv2s_gym/mining/monitors.py")
+        raise KeyError(f"failure type {name!r} has no detector in this process: register one with "
+                       "dv2s_gym.mining.monitors.register_detector in each process that detects")
     return detector
 
 

@@ -22,8 +22,9 @@ An adaptive sampler that collapses (VerifAI's cross-entropy sampler moves almost
 buckets where failures were found, also along parameters that do not matter) stops drawing some regions;
 the estimate then misses their failures and can be far too low. ``collapsed`` says when some draw gave a
 region under :data:`COLLAPSE_FLOOR` of its uniform share. A ``random`` or ``halton`` run is uniform.
-Records without a proposal density (a sampler that has none, or a run written before densities were kept;
-``random`` and ``halton`` runs need none) make the estimate unavailable.
+Records without a proposal density from a sampler that has none (``bandit``, ``split`` with cell avoidance) make
+the estimate unavailable; a uniform sampler's records need none (a plug-in's sampler registered as uniform
+records none: its weight is 1, as for ``random`` and ``halton``).
 """
 
 from __future__ import annotations
@@ -94,7 +95,7 @@ def _proposal(record: Mapping[str, Any], sampler: str) -> Optional[Mapping[str, 
     proposal = record.get("proposal")
     if isinstance(proposal, Mapping) and proposal.get("scenario") and proposal.get("params"):
         return proposal
-    if is_uniform(str(record.get("sampler") or sampler)):  # weight 1 without a record of it
+    if is_uniform(str(record.get("sampler") or sampler)):  # a uniform plug-in sampler records none: weight 1
         return {"scenario": None, "params": 1.0, "floor": 1.0}
     return None
 

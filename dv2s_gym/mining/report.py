@@ -21,7 +21,7 @@ JSON schema ``dv2s-mine-report``, version 3 (:data:`SCHEMA_VERSION`; a change to
         "unavoidable": failures the reference driver had too, "avoidability_unknown": no reference outcome,
         "clusters": distinct clusters (behaviours, :mod:`dv2s_gym.mining.cluster`), "behaviours": the same count,
         "scenario_failure_types": distinct (scenario family, failure class) pairs, "scenarios_failing": scenario
-        families with a failure (a family: :mod:`dv2s_gym.mining.family`), "collisions", "stalls": failures of those types,
+        families with a failure (a family: :mod:`dv2s_gym.mining.family`),
         "avoidable_clusters": clusters with an avoidable failure,
         "unavoidable_clusters": clusters whose failures are all unavoidable,
         "converted": conversion records (one per converted cluster representative),
@@ -99,8 +99,8 @@ from dv2s_gym.mining.cluster import cluster_failures
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.html import write_html
 from dv2s_gym.mining.rate import rate_estimates
-from dv2s_gym.mining.report_text import (NOT_COMPARED_REASONS, breadth, error_warning, not_compared_counts,
-                                         parameter_check_text, rate_text, seed_text)
+from dv2s_gym.mining.report_text import (NOT_COMPARED_REASONS, breadth, by_type_text, error_warning,
+                                         not_compared_counts, parameter_check_text, rate_text, seed_text)
 from dv2s_gym.mining.report_text import number_text as _num
 from dv2s_gym.mining.settings import read_run_settings, RunSettings, SETTINGS_FILE
 from dv2s_gym.mining.report_text import percent_text as _pct
@@ -449,8 +449,6 @@ def _failure_counts(ok: Sequence[Mapping[str, Any]], errors: Sequence[Mapping[st
         "behaviours": len(cluster_entries),
         "scenario_failure_types": len({(f["family"], str(f["kind"])) for f in failures}),
         "scenarios_failing": len({f["family"] for f in failures}),
-        "collisions": sum(f["type"] == "collision" for f in failures),
-        "stalls": sum(f["type"] == "stall" for f in failures),
         "avoidable_clusters": sum(c["avoidable"] > 0 for c in cluster_entries),
         "unavoidable_clusters": len({c["id"] for c in cluster_entries if c["unavoidable"] == c["size"]}),
     }
@@ -722,7 +720,7 @@ def _summary_lines(report: Mapping[str, Any]) -> List[str]:
               f"{counts['converted']} | {counts['kept']} | {counts['merged']} | {counts['rejected']} | "
               f"{counts['errors']} |", ""]
     if counts["failures_by_type"]:
-        lines += ["Failures by type: " + ", ".join(f"{t} {n}" for t, n in counts["failures_by_type"].items()), ""]
+        lines += ["Failures by type: " + by_type_text(counts["failures_by_type"]), ""]
     seconds = counts["conversion_seconds"]
     if seconds["n"]:
         stages = counts.get("conversion_stage_seconds") or {}

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from typing import Any, Dict, List, Mapping, Optional, Tuple
 
+from scenario_bank.failure_types import severity_order, type_label
+
 __all__ = ["breadth", "rate_text", "number_text", "percent_text", "seed_text", "error_warning",
            "NOT_COMPARED_REASONS", "not_compared_reason", "not_compared_counts", "not_compared_text",
            "not_compared_names_text", "parameter_check_text", "clip_caption"]
@@ -99,13 +101,19 @@ def seed_text(settings: Mapping[str, Any]) -> str:
     return text
 
 
+def by_type_text(by_type: Mapping[str, int]) -> str:
+    """``"collision 5, off road 1, stall 1"``: failures per type, most severe first, each type called by its row's
+    label in the failure table (:func:`~scenario_bank.failure_types.type_label`); ``"none"`` for no failure."""
+    return ", ".join(f"{type_label(name)} {by_type[name]}" for name in severity_order(by_type)) or "none"
+
+
 def breadth(counts: Mapping[str, Any]) -> str:
     """How broad the failures found are: failures, distinct behaviours, (scenario, failure type) pairs, scenarios
-    with a failure, and stalls apart from collisions."""
+    with a failure, and the failures per type (:func:`by_type_text`)."""
     return (f"{counts['failures']} failure(s): {counts.get('behaviours', counts['clusters'])} distinct behaviour(s), "
             f"{counts.get('scenario_failure_types', 0)} (scenario family, failure type) pair(s), "
-            f"{counts.get('scenarios_failing', 0)} scenario famil(ies) with a failure; "
-            f"{counts.get('collisions', 0)} collision(s), {counts.get('stalls', 0)} stall(s)")
+            f"{counts.get('scenarios_failing', 0)} scenario famil(ies) with a failure; by type: "
+            f"{by_type_text(counts.get('failures_by_type') or {})}")
 
 
 def rate_text(rate: Optional[Mapping[str, Any]]) -> str:
@@ -142,11 +150,11 @@ def error_warning(errors: int, episodes: int, first: str) -> str:
 
 def parameter_check_text(counts: Mapping[str, Any]) -> str:
     """``"Parameter check of the conversions: 3 failing parameter value(s) compared with the new scripts' ranges, 3
-    not compared: 2 with no counterpart in the new script, 1 ..."``, from a mining report's ``counts`` (a report
-    written before the reasons were counted says only how many)."""
-    text = (f"Parameter check of the conversions: {counts.get('parameters_compared', 0)} failing parameter value(s) "
-            f"compared with the new scripts' ranges, {counts.get('parameters_not_compared', 0)} not compared")
-    reasons = not_compared_text(counts.get("parameters_not_compared_by_reason") or {})
+    not compared: 2 with no counterpart in the new script, 1 ..."``, from a mining report's ``counts`` (as
+    :func:`dv2s_gym.mining.report.build_report` makes them)."""
+    text = (f"Parameter check of the conversions: {counts['parameters_compared']} failing parameter value(s) "
+            f"compared with the new scripts' ranges, {counts['parameters_not_compared']} not compared")
+    reasons = not_compared_text(counts["parameters_not_compared_by_reason"])
     return text + (f": {reasons}" if reasons else "")
 
 
