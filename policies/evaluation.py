@@ -20,7 +20,13 @@ import numpy as np
 
 from policies.registry import Policy, load_policy
 
-__all__ = ["EpisodeResult", "run_episode", "evaluate", "trajectory_hash", "make_eval_env", "SUCCESS_MIN_DISTANCE"]
+__all__ = ["EpisodeResult", "run_episode", "evaluate", "trajectory_hash", "make_eval_env", "SUCCESS_MIN_DISTANCE",
+           "EVAL_SEED_BASE", "TRAIN_SEED_LOW"]
+
+EVAL_SEED_BASE = 10_000
+"""Evaluation episodes use reset seeds ``EVAL_SEED_BASE + i`` (i < 1000) for every scenario."""
+TRAIN_SEED_LOW = 1_000_000
+"""Training episodes draw reset seeds from ``[TRAIN_SEED_LOW, 2**31 - 1)``: never an evaluation seed."""
 
 SUCCESS_MIN_DISTANCE = 20.0
 """Metres the ego must travel for a collision-free, on-road episode to count as a success (not a stall)."""

@@ -8,7 +8,7 @@ the policy visits with the action it would take there. :func:`dagger_fine_tune` 
 
 1. iteration ``i`` (of ``iterations``) collects ``steps / iterations`` env steps in ``n_envs``
    training envs (:func:`policies.training.make_vec_env`'s scenario schedule: each episode's
-   scenario drawn by ``weights``, reset seeds >= :data:`~policies.training.TRAIN_SEED_LOW`, so no
+   scenario drawn by ``weights``, reset seeds >= :data:`~policies.evaluation.TRAIN_SEED_LOW`, so no
    evaluation scene is ever visited). At every step the executed action is the reference's
    with probability ``beta_i = beta * beta_decay ** i`` and the current policy's greedy action
    otherwise (:class:`ReferenceLabels`, in the env workers); every visited observation is

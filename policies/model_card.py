@@ -8,7 +8,7 @@ command that reproduces it, and an evaluation on held-out episodes:
 
 - ``evaluation.episodes``: the ``(scenario, seed)`` pairs, every scenario with the
   seeds ``seed_base .. seed_base + seeds - 1`` (never used in training, see
-  :data:`policies.training.EVAL_SEED_BASE`);
+  :data:`policies.evaluation.EVAL_SEED_BASE`);
 - ``evaluation.policies[label]``: for the trained policy (label ``"policy"``) and each
   baseline, overall and per-scenario collision, success, off-road and failure rates,
   each ``{"k", "n", "rate", "lo", "hi"}`` with a Wilson interval, and the outcome of

@@ -62,7 +62,7 @@ from tqdm import tqdm
 
 from envs.dv2s_env import DV2SEnv, check_env_config
 from envs.errors import DV2SError, Interrupted
-from policies.evaluation import make_eval_env, run_episode
+from policies.evaluation import EVAL_SEED_BASE, make_eval_env, run_episode, TRAIN_SEED_LOW
 from policies.model_card import bank_version, summarize_results, write_card, evaluate_for_card
 from policies.registry import (SB3Policy, load_policy, read_model_card, SHIPPED_CHECKPOINT, parse_spec,
                                PolicySpaceError, check_card_observation)
@@ -106,10 +106,6 @@ __all__ = [
 
 ALGORITHMS = ("ppo", "dqn", "sac")
 SAMPLERS = ("uniform", "weighted", "curriculum")
-EVAL_SEED_BASE = 10_000
-"""Evaluation episodes use reset seeds ``EVAL_SEED_BASE + i`` (i < 1000) for every scenario."""
-TRAIN_SEED_LOW = 1_000_000
-"""Training episodes draw reset seeds from ``[TRAIN_SEED_LOW, 2**31 - 1)``: never an evaluation seed."""
 TRAIN_SEED_HIGH = 2**31 - 1
 #: Seeds per scenario of the model card's evaluation, and for runs shorter than SHORT_RUN_STEPS.
 CARD_SEEDS = 20

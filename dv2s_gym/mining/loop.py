@@ -93,6 +93,7 @@ from scenario_bank import select_scenarios
 from scenario_bank.atomic import atomic_write_json
 from scenario_bank.bank import Bank
 from scenario_bank.run_identity import check_identity
+from policies.evaluation import EVAL_SEED_BASE
 from policies.registry import SB3_ALGORITHMS, read_model_card
 
 __all__ = ["LoopError", "LoopReport", "LoopSettings", "run_loop", "DEFAULT_OUT", "DEFAULTS", "mined_entries",
@@ -676,8 +677,6 @@ def _skip_round(loop: _Loop, number: int, steps: Dict[str, Any]) -> None:
 def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, timed: _Timed) -> str:
     """The steps after the split: held-out before, fine-tune (+ control), held-out after, untouched set,
     regression; the fine-tuned policy's spec."""
-    from policies.training import EVAL_SEED_BASE
-
     s, record = loop.settings, timed.record
     steps, split = record["steps"], record["steps"]["split"]
     episodes = [(name, EVAL_SEED_BASE + i) for name in split["held_out"] for i in range(s.k_eval)]
@@ -844,8 +843,6 @@ def _after_step(loop: _Loop, policies: Mapping[str, Optional[str]], episodes: Li
 def _regress_step(loop: _Loop, new_policy: str, current: str, round_dir: Path,
                   split: Mapping[str, Any]) -> Dict[str, Any]:
     """The ``regress`` step: the fine-tuned policy against the round's start on the starting bank's scenarios."""
-    from policies.training import EVAL_SEED_BASE
-
     s = loop.settings
     settings = RegressSettings(bank_dir=loop.bank, scenarios=loop.start_names, episodes=s.regress_episodes,
                                seed=EVAL_SEED_BASE, margin=s.margin, env_config=loop.env_config)
@@ -1061,8 +1058,6 @@ def untouched_settings(seeds: int, env_config: Mapping[str, Any], margin: float,
                        bank_dir: Optional[os.PathLike | str] = None):
     """The regression settings of the untouched set: ``bank_dir`` (default :data:`UNTOUCHED_BANK`), ``seeds``
     seeds per scenario from ``EVAL_SEED_BASE``, the policy's ``env_config`` and the loop's ``margin``."""
-    from policies.training import EVAL_SEED_BASE
-
     return RegressSettings(bank_dir=str(Path(bank_dir or UNTOUCHED_BANK).resolve()), episodes=seeds,
                            seed=EVAL_SEED_BASE, margin=margin, env_config=dict(env_config))
 
