@@ -343,3 +343,103 @@ def test_loop_help_names_the_family_harm_rule_and_the_untouched_set(capsys):
         main(["loop", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "(per-family harm rule)" in text and "untouched scenario set" in text
+
+
+# --------------------------------------------------------------------------- the harm rule at its boundaries
+def _one_family_round(fine_tuned_only, *, pairs=50, other_only=0, margin=None):
+    """A round with one held-out family ``F`` of ``pairs`` paired episodes and no control: the fine-tuned policy fails
+    the first ``fine_tuned_only`` episodes alone, the starting policy the next ``other_only`` alone."""
+    from dv2s_gym.mining.loop import heldout_comparison
+
+    before = [{"scenario": "F_replay", "seed": s, "failed": fine_tuned_only <= s < fine_tuned_only + other_only,
+               "error": None} for s in range(pairs)]
+    after = [{"scenario": "F_replay", "seed": s, "failed": s < fine_tuned_only, "error": None} for s in range(pairs)]
+    summary = heldout_comparison(before, after, None, min_episodes=pairs, families={"F_replay": "F"}, min_families=1,
+                                 margin=margin)
+    return {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
+            "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
+
+
+@pytest.mark.parametrize("pairs, margin", [(50, None), (10, 0.1), (20, 0.15)])
+def test_a_family_exactly_at_the_margin_is_not_harmed_and_one_pair_more_is(pairs, margin):
+    """The default margin is 2 pp: one fine-tuned-only failure in 50 pairs is +2 pp, exactly the margin, and is no
+    harm (the rule is "worse by more than the margin"); a second one (+4 pp) is. The same at margins 10 pp (1 of 10
+    pairs) and 15 pp (3 of 20)."""
+    from dv2s_gym.mining.loop_settings import DEFAULTS
+
+    limit = DEFAULTS["margin"] if margin is None else margin
+    at = round(limit * pairs)
+    assert at / pairs == limit  # the boundary is hit exactly, not by a rounding error
+    equal = _one_family_round(at, pairs=pairs, margin=margin)
+    test = equal["steps"]["after"]["significantly_worse"]["start"]
+    row = test["family_harm"]["families"]["F"]
+    assert row["difference"] == limit and not row["harm"] and test["family_harm"]["harmed"] == []
+    assert not test["worse"]  # the significance gate never fires here: only the harm rule decides
+    verdict = recommendation(_report(equal))
+    assert verdict["verdict"] == "ACCEPTED" and verdict["decided_by"] == "all"
+    more = _one_family_round(at + 1, pairs=pairs, margin=margin)
+    test = more["steps"]["after"]["significantly_worse"]["start"]
+    assert not test["worse"] and test["family_harm"]["harmed"] == ["F"]
+    verdict = recommendation(_report(more))
+    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "heldout_families_vs_start"
+    assert f"in family F the fine-tuned policy failed {at + 1} of {pairs} pairs" in verdict["reason"]
+    assert verdict["policy"] == "dv2s-ppo" and verdict["exit_code"] == 3
+
+
+def test_family_non_inferiority_is_shown_at_one_sided_2_5_percent_after_holm_and_the_report_says_so():
+    """10 pairs, the starting policy failing alone 3 times (-30 pp): Holm-adjusted one-sided p is 0.031, between
+    0.025 and 0.05, so non-inferiority at the margin is not shown (it would be at one-sided 0.05); 40 such pairs
+    show it. The report's line on the family says which."""
+    from dv2s_gym.mining.loop_report import render_markdown
+    from dv2s_gym.mining.loop_verdict import family_harm, non_inferiority_p
+    from dv2s_gym.regress.stats import PairedTable, paired_difference_interval
+
+    record = _one_family_round(0, pairs=10, other_only=3)
+    harm = record["steps"]["after"]["significantly_worse"]["start"]["family_harm"]
+    row = harm["families"]["F"]
+    assert row["holm_p"] == row["non_inferiority_p"] == pytest.approx(0.0306, abs=5e-4)  # one family: Holm is p
+    assert 0.025 < row["holm_p"] < 0.05
+    assert not row["non_inferior"] and harm["non_inferior"] == [] and harm["harmed"] == []
+    table = PairedTable(baseline_only=3, neither=7)
+    assert row["interval"] == list(paired_difference_interval(table, 0.95))
+    # the one-sided p is where the upper end of the two-sided interval crosses the margin
+    assert paired_difference_interval(table, 1 - 2 * 0.0305)[1] > 0.02 > paired_difference_interval(
+        table, 1 - 2 * 0.0307)[1]
+    markdown = render_markdown(_report(record))
+    line = next(text for text in markdown.splitlines() if text.startswith("- held-out families against the starting"))
+    assert "no family worse by more than the margin" in line and "F -30.0 pp (95% CI " in line
+    assert line.endswith("; not shown)") and "one-sided 0.025" in line
+    shown = _one_family_round(0, pairs=40, other_only=12)
+    row = shown["steps"]["after"]["significantly_worse"]["start"]["family_harm"]["families"]["F"]
+    assert row["holm_p"] < 0.025 and row["non_inferior"]
+    line = next(text for text in render_markdown(_report(shown)).splitlines()
+                if text.startswith("- held-out families against the starting"))
+    assert line.endswith("; non-inferior)")
+    # Holm over two families doubles the smaller p: each alone is shown (p = 0.018), together neither is (0.035)
+    alone = PairedTable(baseline_only=4, neither=16)
+    p = non_inferiority_p(alone, 0.02)
+    assert 0.0125 < p < 0.025 < 2 * p < 0.05
+    both = family_harm({"a": alone, "b": alone}, 0.02)
+    assert both["families"]["a"]["holm_p"] == pytest.approx(2 * p) and both["non_inferior"] == []
+    assert family_harm({"a": alone}, 0.02)["non_inferior"] == ["a"]
+
+
+def test_the_point_estimate_alone_decides_harm_and_the_non_inferiority_test_never_overrides_it():
+    """Over every paired table of up to 8 pairs and several margins: a family is harmed exactly when its difference
+    exceeds the margin, and a harmed family never shows non-inferiority (its p-value is 1), so reporting the test
+    beside the estimate changes no verdict."""
+    from dv2s_gym.mining.loop_verdict import FAMILY_RULE, family_harm, non_inferiority_p
+    from dv2s_gym.regress.stats import PairedTable
+
+    other = PairedTable(candidate_only=1, neither=1)  # a second family for Holm to adjust over
+    for margin in (0.0, 0.02, 0.25):
+        for n in range(1, 9):
+            for c in range(n + 1):
+                for b in range(n - c + 1):
+                    table = PairedTable(candidate_only=c, baseline_only=b, neither=n - c - b)
+                    row = family_harm({"f": table, "g": other}, margin)["families"]["f"]
+                    assert row["harm"] == (table.difference > margin), (table, margin)
+                    if table.difference >= margin:
+                        assert non_inferiority_p(table, margin) == 1.0 and not row["non_inferior"]
+    assert "point estimate" in FAMILY_RULE and "deciding nothing" in FAMILY_RULE
+    assert FAMILY_RULE.index("blocks ACCEPTED") < FAMILY_RULE.index("non-inferiority")
