@@ -153,7 +153,7 @@ def family_harm(tables: Mapping[str, Any], margin: float) -> Dict[str, Any]:
 
     names = [name for name in sorted(tables) if tables[name].n]
     raw = [non_inferiority_p(tables[name], margin) for name in names]
-    adjusted = holm(raw) if raw else []
+    adjusted = holm(raw)
     families: Dict[str, Any] = {}
     for name, p, q in zip(names, raw, adjusted):
         t = tables[name]
@@ -288,10 +288,9 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
              f"{tests[key].get('families')} famil{'y' if tests[key].get('families') == 1 else 'ies'})"
              for key in ("start", "control") if tests.get(key)]
     control_note = "" if tests.get("control") else "; no control arm to compare with"
-    harms = [tests[key]["family_harm"] for key in ("start", "control") if tests.get(key)]
-    margin = harms[0]["margin"] if harms else None
+    margin = tests["start"]["family_harm"]["margin"]  # the test against the start always ran here (else missing)
     control_note += (f"; no held-out family worse for the fine-tuned policy by more than the margin "
-                     f"{100 * margin:+.1f} pp ({FAMILY_RULE})" if margin is not None else "")
+                     f"{100 * margin:+.1f} pp ({FAMILY_RULE})")
     return {"verdict": ACCEPTED, "decided_by": "all",
             "reason": f"no regression on the rest of the bank ({regression} PASSed: {regress.get('reason')}); on "
                       f"the held-out families {' and '.join(parts)} ({HELDOUT_TEST}){control_note}"}
