@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from dv2s_gym.mining.loop_verdict import heldout_worse, recommendation
+from dv2s_gym.mining.loop_verdict import FAMILY_RULE, heldout_worse, recommendation
 
 
 def _round(number, verdict, *, control_only=0, fine_tuned_only=0, p=1.0):
@@ -343,3 +343,226 @@ def test_loop_help_names_the_family_harm_rule_and_the_untouched_set(capsys):
         main(["loop", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert "(per-family harm rule)" in text and "untouched scenario set" in text
+
+
+# --------------------------------------------------------------------------- the harm rule at its boundaries
+def _one_family_round(fine_tuned_only, *, pairs=50, other_only=0, margin=None):
+    """A round with one held-out family ``F`` of ``pairs`` paired episodes and no control: the fine-tuned policy fails
+    the first ``fine_tuned_only`` episodes alone, the starting policy the next ``other_only`` alone."""
+    from dv2s_gym.mining.loop import heldout_comparison
+
+    before = [{"scenario": "F_replay", "seed": s, "failed": fine_tuned_only <= s < fine_tuned_only + other_only,
+               "error": None} for s in range(pairs)]
+    after = [{"scenario": "F_replay", "seed": s, "failed": s < fine_tuned_only, "error": None} for s in range(pairs)]
+    summary = heldout_comparison(before, after, None, min_episodes=pairs, families={"F_replay": "F"}, min_families=1,
+                                 margin=margin)
+    return {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
+            "steps": {"fine_tune": {}, "after": summary, "regress": {"verdict": "PASS", "reason": "stand-in"}}}
+
+
+@pytest.mark.parametrize("pairs, margin", [(50, None), (10, 0.1), (20, 0.15)])
+def test_a_family_exactly_at_the_margin_is_not_harmed_and_one_pair_more_is(pairs, margin):
+    """The default margin is 2 pp: one fine-tuned-only failure in 50 pairs is +2 pp, exactly the margin, and is no
+    harm (the rule is "worse by more than the margin"); a second one (+4 pp) is. The same at margins 10 pp (1 of 10
+    pairs) and 15 pp (3 of 20)."""
+    from dv2s_gym.mining.loop_settings import DEFAULTS
+
+    limit = DEFAULTS["margin"] if margin is None else margin
+    at = round(limit * pairs)
+    assert at / pairs == limit  # the boundary is hit exactly, not by a rounding error
+    equal = _one_family_round(at, pairs=pairs, margin=margin)
+    test = equal["steps"]["after"]["significantly_worse"]["start"]
+    row = test["family_harm"]["families"]["F"]
+    assert row["difference"] == limit and not row["harm"] and test["family_harm"]["harmed"] == []
+    assert not test["worse"]  # the significance gate never fires here: only the harm rule decides
+    verdict = recommendation(_report(equal))
+    assert verdict["verdict"] == "ACCEPTED" and verdict["decided_by"] == "all"
+    more = _one_family_round(at + 1, pairs=pairs, margin=margin)
+    test = more["steps"]["after"]["significantly_worse"]["start"]
+    assert not test["worse"] and test["family_harm"]["harmed"] == ["F"]
+    verdict = recommendation(_report(more))
+    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["decided_by"] == "heldout_families_vs_start"
+    assert f"in family F the fine-tuned policy failed {at + 1} of {pairs} pairs" in verdict["reason"]
+    assert verdict["policy"] == "dv2s-ppo" and verdict["exit_code"] == 3
+
+
+def test_family_non_inferiority_is_shown_at_one_sided_2_5_percent_after_holm_and_the_report_says_so():
+    """10 pairs, the starting policy failing alone 3 times (-30 pp): Holm-adjusted one-sided p is 0.031, between
+    0.025 and 0.05, so non-inferiority at the margin is not shown (it would be at one-sided 0.05); 40 such pairs
+    show it. The report's line on the family says which."""
+    from dv2s_gym.mining.loop_report import render_markdown
+    from dv2s_gym.mining.loop_verdict import family_harm, non_inferiority_p
+    from dv2s_gym.regress.stats import PairedTable, paired_difference_interval
+
+    record = _one_family_round(0, pairs=10, other_only=3)
+    harm = record["steps"]["after"]["significantly_worse"]["start"]["family_harm"]
+    row = harm["families"]["F"]
+    assert row["holm_p"] == row["non_inferiority_p"] == pytest.approx(0.0306, abs=5e-4)  # one family: Holm is p
+    assert 0.025 < row["holm_p"] < 0.05
+    assert not row["non_inferior"] and harm["non_inferior"] == [] and harm["harmed"] == []
+    table = PairedTable(baseline_only=3, neither=7)
+    assert row["interval"] == list(paired_difference_interval(table, 0.95))
+    # the one-sided p is where the upper end of the two-sided interval crosses the margin
+    assert paired_difference_interval(table, 1 - 2 * 0.0305)[1] > 0.02 > paired_difference_interval(
+        table, 1 - 2 * 0.0307)[1]
+    markdown = render_markdown(_report(record))
+    line = next(text for text in markdown.splitlines() if text.startswith("- held-out families against the starting"))
+    assert "no family worse by more than the margin" in line and "F -30.0 pp (95% CI " in line
+    assert line.endswith("; not shown)") and "one-sided 0.025" in line
+    shown = _one_family_round(0, pairs=40, other_only=12)
+    row = shown["steps"]["after"]["significantly_worse"]["start"]["family_harm"]["families"]["F"]
+    assert row["holm_p"] < 0.025 and row["non_inferior"]
+    line = next(text for text in render_markdown(_report(shown)).splitlines()
+                if text.startswith("- held-out families against the starting"))
+    assert line.endswith("; non-inferior)")
+    # Holm over two families doubles the smaller p: each alone is shown (p = 0.018), together neither is (0.035)
+    alone = PairedTable(baseline_only=4, neither=16)
+    p = non_inferiority_p(alone, 0.02)
+    assert 0.0125 < p < 0.025 < 2 * p < 0.05
+    both = family_harm({"a": alone, "b": alone}, 0.02)
+    assert both["families"]["a"]["holm_p"] == pytest.approx(2 * p) and both["non_inferior"] == []
+    assert family_harm({"a": alone}, 0.02)["non_inferior"] == ["a"]
+
+
+def test_the_point_estimate_alone_decides_harm_and_the_non_inferiority_test_never_overrides_it():
+    """Over every paired table of up to 8 pairs and several margins: a family is harmed exactly when its difference
+    exceeds the margin, and a harmed family never shows non-inferiority (its p-value is 1), so reporting the test
+    beside the estimate changes no verdict."""
+    from dv2s_gym.mining.loop_verdict import FAMILY_RULE, family_harm, non_inferiority_p
+    from dv2s_gym.regress.stats import PairedTable
+
+    other = PairedTable(candidate_only=1, neither=1)  # a second family for Holm to adjust over
+    for margin in (0.0, 0.02, 0.25):
+        for n in range(1, 9):
+            for c in range(n + 1):
+                for b in range(n - c + 1):
+                    table = PairedTable(candidate_only=c, baseline_only=b, neither=n - c - b)
+                    row = family_harm({"f": table, "g": other}, margin)["families"]["f"]
+                    assert row["harm"] == (table.difference > margin), (table, margin)
+                    if table.difference >= margin:
+                        assert non_inferiority_p(table, margin) == 1.0 and not row["non_inferior"]
+    assert "point estimate" in FAMILY_RULE and "deciding nothing" in FAMILY_RULE
+    assert FAMILY_RULE.index("blocks ACCEPTED") < FAMILY_RULE.index("non-inferiority")
+
+
+# --------------------------------------------------------------------------- every branch of the verdict, one at a time
+def _held_out_test(against="start", **table):
+    """A held-out test the fine-tuned policy passes (not worse, no family harmed) against ``against``."""
+    counts = {"both_fail": 0, "candidate_only": 0, "baseline_only": 4, "neither": 16, **table}
+    return heldout_worse({"F": counts}, against)
+
+
+def _passed_round(after, **steps):
+    return {"round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:round_1/policy/model.zip",
+            "steps": {"fine_tune": {}, "after": after, "regress": {"verdict": "PASS", "reason": "stand-in"}, **steps}}
+
+
+def test_the_held_out_gate_has_no_margin_and_says_against_whom_and_where():
+    from dv2s_gym.regress.stats import PairedTable
+
+    assert heldout_worse({}, "start") is None  # no pairs, no test
+    assert heldout_worse({"F": PairedTable()}, "start") is None
+    start, control = _held_out_test("start", candidate_only=2, baseline_only=3), _held_out_test("control")
+    assert "only the fine-tuned policy failed 2, only the starting policy 3; pooled one-sided p = " in start["reason"]
+    assert "only the fine-tuned policy failed 0, only the control 4;" in control["reason"]
+    assert start["reason"].endswith("; not significantly worse") and not start["worse"]
+    # worse pooled only (no family on its own): no family is named
+    spread = heldout_worse({name: PairedTable(candidate_only=2, neither=6) for name in "abcd"}, "start")
+    assert spread["worse"] and spread["worse_families"] == [] and spread["reason"].endswith("; significantly worse")
+    one = heldout_worse({"a": PairedTable(candidate_only=8), "b": PairedTable(neither=8)}, "control")
+    assert one["worse"] and one["reason"].endswith("significantly worse (in family a)")
+    two = heldout_worse({"a": PairedTable(candidate_only=9), "b": PairedTable(candidate_only=9)}, "start")
+    assert two["reason"].endswith("significantly worse (in families a, b)")
+    # dv2s regress's gate with no margin: a small harm on many pairs is significantly worse
+    # (+0.5 pp on 100,000 pairs, upper 95 % bound +0.56 pp), which the harm rule at the 2 pp margin lets through
+    table = PairedTable(candidate_only=600, baseline_only=100, neither=99_300)
+    many = heldout_worse({"F": table}, "start")
+    assert many["worse"] and many["worse_families"] == ["F"] and many["family_harm"]["harmed"] == []
+    assert heldout_worse({"F": table}, "start", margin=0.002)["family_harm"]["harmed"] == ["F"]
+
+
+def test_a_round_is_judged_once_it_fine_tuned_or_named_a_policy():
+    from dv2s_gym.mining.loop_verdict import judge_round
+
+    assert judge_round({"round": 1, "steps": {"mine": {}}}) is None and judge_round({"round": 1}) is None
+    for record in ({"round": 1, "steps": {"fine_tune": {}}}, {"round": 1, "new_policy": "ppo:x", "steps": {}}):
+        assert judge_round(record) == {"verdict": "NOT ACCEPTED", "decided_by": "regression",
+                                       "reason": "the round has no regression test yet"}
+
+
+def test_a_held_out_test_that_did_not_run_says_which_and_why():
+    from dv2s_gym.mining.loop_verdict import judge_round
+
+    tested = _held_out_test()
+    cases = [  # (after, decided_by, the reason's words)
+        ({"pairs": 0, "significantly_worse": {"start": None, "control": None}}, "heldout_vs_start",
+         "against the starting policy did not run (no held-out pair ran)"),
+        ({"pairs": 20, "significantly_worse": {"start": None, "control": None}}, "heldout_vs_start",
+         "against the starting policy did not run (not recorded)"),
+        ({"pairs": 3, "underpowered": "only 3 held-out episode(s)", "control": {"k": 1},
+          "significantly_worse": {"start": None, "control": None}}, "heldout_vs_start",
+         "against the starting policy and the control did not run (only 3 held-out episode(s))"),
+        ({"pairs": 20, "control": {"k": 1}, "vs_control": {"underpowered": "against the control: only 4"},
+          "significantly_worse": {"start": None, "control": None}}, "heldout_vs_start",
+         "against the starting policy and the control did not run (not recorded)"),
+        ({"pairs": 20, "control": {"k": 1}, "significantly_worse": {"start": tested, "control": None}},
+         "heldout_vs_control", "against the control did not run (not recorded)"),
+        ({"pairs": 20, "vs_control": {"underpowered": "against the control: only 4"},
+          "significantly_worse": {"start": tested, "control": None}}, "heldout_vs_control",
+         "against the control did not run (against the control: only 4)"),
+        ({"pairs": 20, "vs_control": {}, "significantly_worse": {"start": tested, "control": None}},
+         "heldout_vs_control", "against the control did not run (not recorded)"),
+    ]
+    for after, decided_by, words in cases:
+        judged = judge_round(_passed_round(after))
+        assert judged["verdict"] == "NOT ACCEPTED" and judged["decided_by"] == decided_by, after
+        assert words + ", so a harm on the held-out families is not ruled out" in judged["reason"], judged["reason"]
+    # no control arm recorded at all: the test against the start is enough
+    alone = judge_round(_passed_round({"pairs": 20, "significantly_worse": {"start": tested, "control": None}}))
+    assert alone["verdict"] == "ACCEPTED" and alone["reason"].endswith("; no control arm to compare with; no held-out "
+                                                                     f"family worse for the fine-tuned policy by more "
+                                                                     f"than the margin +2.0 pp ({FAMILY_RULE})")
+    both = judge_round(_passed_round({"pairs": 20, "control": {"k": 1}, "vs_control": {},
+                                      "significantly_worse": {"start": tested, "control": _held_out_test("control")}}))
+    assert both["verdict"] == "ACCEPTED" and "no control arm" not in both["reason"]
+    assert "not significantly worse than the starting policy (p = " in both["reason"]
+    assert "and not significantly worse than the control (p = 1 on 20 held-out pairs from 1 family)" in both["reason"]
+
+
+def test_the_cross_round_check_changes_only_an_accepted_verdict():
+    final = {"verdict": "FAIL", "rounds": [1, 2], "reason": "worse"}
+    kept = recommendation(_report(_round(1, "PASS"), _round(2, "INCONCLUSIVE"), final_vs_start=final))
+    assert kept["verdict"] == "NOT ACCEPTED" and kept["decided_by"] == "regression"
+    assert kept["policy"] == "ppo:round_1/policy/model.zip"
+    passed = recommendation(_report(_round(1, "PASS"), _round(2, "PASS"),
+                                    final_vs_start={"verdict": "PASS", "rounds": [1, 2], "reason": "no worse"}))
+    alone = recommendation(_report(_round(2, "PASS")))
+    assert passed["verdict"] == "ACCEPTED" and passed["reason"] == alone["reason"] and "INCONCLUSIVE" not in passed["reason"]
+    # without the report's own check, the last round's recorded one applies
+    last = {**_round(2, "PASS"), "final_vs_start": final}
+    judged = recommendation(_report(_round(1, "PASS"), last))
+    assert judged["verdict"] == "REJECTED" and judged["decided_by"] == "final_vs_start" and judged["policy"] == "dv2s-ppo"
+
+
+def test_the_candidate_is_the_rounds_own_policy_and_only_a_not_accepted_round_is_too_small():
+    unnamed = _round(1, "PASS")
+    del unnamed["new_policy"]
+    verdict = recommendation({**_report(unnamed), "policy": "ppo:loop/policy.zip"})
+    assert verdict["verdict"] == "ACCEPTED" and verdict["policy"] == verdict["candidate"] == "ppo:loop/policy.zip"
+    named = recommendation({**_report(_round(1, "FAIL")), "policy": "ppo:elsewhere.zip"})
+    assert named["candidate"] == "ppo:round_1/policy/model.zip"
+    rejected = _round(1, "FAIL")
+    rejected["steps"]["after"]["underpowered"] = "only 5 held-out episode(s)"
+    verdict = recommendation(_report(rejected))
+    assert verdict["verdict"] == "REJECTED" and verdict["too_small"] is None and "TOO SMALL" not in verdict["sentence"]
+
+
+def test_family_non_inferiority_at_the_edge_of_one_sided_2_5_percent():
+    """55 pairs, the other policy failing alone 3 times: p = 0.02492, shown; 58 pairs with 7 and 2: p = 0.02501, not."""
+    from dv2s_gym.mining.loop_verdict import family_harm
+    from dv2s_gym.regress.stats import PairedTable
+
+    below = family_harm({"f": PairedTable(baseline_only=3, neither=52)}, 0.02)["families"]["f"]
+    above = family_harm({"f": PairedTable(candidate_only=2, baseline_only=7, neither=49)}, 0.02)["families"]["f"]
+    assert 0.0249 < below["holm_p"] < 0.025 < above["holm_p"] < 0.0251
+    assert below["non_inferior"] and not above["non_inferior"] and not below["harm"] and not above["harm"]

@@ -536,3 +536,45 @@ def test_unknown_extension_raises_map_load_error(tmp_path):
     bad.write_text("hello")
     with pytest.raises(MapLoadError, match="map.txt"):
         load_road_network(bad)
+
+
+def _two_road_map(speed_on_second: str) -> str:
+    """An OpenDRIVE map of two 200 m straight roads, one lane each way, side by side 50 m apart; the first gives no
+    speed limit, the second ``speed_on_second`` (a road type's ``<speed>`` element)."""
+    def road(number: int, y: float, speed: str) -> str:
+        lane = '<lane id="{}" type="driving" level="false"><width sOffset="0" a="3.5" b="0" c="0" d="0"/></lane>'
+        return (f'<road name="r{number}" length="200" id="{number}" junction="-1"><link/>'
+                + (f'<type s="0" type="town">{speed}</type>' if speed else "")
+                + f'<planView><geometry s="0" x="0" y="{y}" hdg="0" length="200"><line/></geometry></planView>'
+                '<lanes><laneSection s="0"><left>' + lane.format(1)
+                + '</left><center><lane id="0" type="driving" level="false"/></center><right>' + lane.format(-1)
+                + "</right></laneSection></lanes></road>")
+
+    return ('<?xml version="1.0" standalone="yes"?>\n<OpenDRIVE><header revMajor="1" revMinor="4" name="plain" '
+            'version="1.00" north="0" south="0" east="0" west="0"/>' + road(1, 0.0, "") + road(2, 50.0, speed_on_second)
+            + "</OpenDRIVE>\n")
+
+
+def test_a_map_road_without_a_speed_limit_gets_20_m_s_in_the_env(tmp_path):
+    """Most roads of real OpenDRIVE maps (CARLA's towns) give no speed limit: the env drives them at 20 m/s
+    (highway-env's default), while a road that gives one keeps it (36 km/h here)."""
+    (tmp_path / "plain.xodr").write_text(_two_road_map('<speed max="36" unit="km/h"/>'))
+    script = tmp_path / "plain.scenic"
+    script.write_text("param map = localPath('plain.xodr')\nmodel scenic.domains.driving.model\n"
+                      "ego = new Car at (60, -1.75), with speed 5\n")
+    import gymnasium as gym
+
+    import dv2s_gym  # noqa: F401  (registers DV2S-v0)
+
+    env = gym.make("DV2S-v0", scenario=str(script), config={"duration": 1.0})
+    try:
+        env.reset(seed=0)
+        road = env.unwrapped.road
+        graph = road.network.graph
+        lanes = [lane for start in graph for end in graph[start] for lane in graph[start][end]]
+        limits = sorted({round(float(lane.speed_limit), 6) for lane in lanes})
+        assert len(lanes) == 4 and limits == [10.0, 20.0]
+        ego = env.unwrapped.vehicle
+        assert ego.lane.speed_limit == 20.0  # the ego is on the first road, which gives none
+    finally:
+        env.close()

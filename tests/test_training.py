@@ -266,6 +266,30 @@ def test_dqn_and_sac_train_tiny_and_load_through_the_registry(tmp_path, algo):
     assert result.steps > 0 and result.error is None
 
 
+@pytest.mark.slow
+def test_dqn_trains_with_its_default_learning_rate_and_exploration(tmp_path, capsys):
+    """`dv2s train --algo dqn` without --hp: the saved model's optimiser steps at 5e-4 and its exploration rate
+    falls linearly from 1 to 0.05 over the first 70 % of the run (highway-env's documented DQN settings for highway),
+    and its card says so."""
+    from stable_baselines3 import DQN
+
+    out = tmp_path / "dqn"
+    code, _, err = run(capsys, "train", "--algo", "dqn", "--scenarios", SCENARIOS[0], "--steps", 64, "--envs", 1,
+                       "--seed", 0, "--vec-env", "dummy", "--eval-freq", 0, "--card-seeds", 0, "--checkpoint-freq", 0,
+                       "--no-progress", "--out", out)
+    assert code == 0, err
+    model = DQN.load(out / "model.zip", device="cpu")
+    assert model.learning_rate == 5e-4 and model.exploration_fraction == 0.7
+    assert [group["lr"] for group in model.policy.optimizer.param_groups] == [5e-4]
+    # the schedule the model explores with: 35 % into the run it is half-way down from 1 to 0.05; at 70 % down
+    assert model.exploration_schedule(1 - 0.35) == pytest.approx(1 - 0.95 * 0.5)
+    assert model.exploration_schedule(1 - 0.7) == pytest.approx(0.05)
+    assert model.exploration_schedule(1 - 0.3) > 0.05
+    assert (model.exploration_initial_eps, model.exploration_final_eps) == (1.0, 0.05)
+    hyperparameters = read_card(out)["hyperparameters"]
+    assert hyperparameters["learning_rate"] == 5e-4 and hyperparameters["exploration_fraction"] == 0.7
+
+
 def test_a_short_run_gets_a_short_card_evaluation_unless_told_otherwise():
     from policies.training import CARD_SEEDS, SHORT_RUN_CARD_SEEDS, SHORT_RUN_STEPS, TrainConfig
 

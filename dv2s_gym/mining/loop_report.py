@@ -101,7 +101,8 @@ import re
 from dv2s_gym.mining.convert import CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_VIDEO, cluster_slug
 from dv2s_gym.mining.errored import merged_messages, messages_text
 from dv2s_gym.mining.report_text import clip_caption
-from dv2s_gym.mining.loop_verdict import ACCEPTED, evidence_floor_note, judge_round, recommendation
+from dv2s_gym.mining.loop_verdict import (ACCEPTED, HELDOUT_ALPHA, evidence_floor_note, judge_round,
+                                         recommendation)
 from dv2s_gym.regress.report import build_report, load_report, write_json
 from html import escape
 from pathlib import Path
@@ -487,12 +488,14 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
             harm = test.get("family_harm")
             if harm:
                 rows = harm.get("families") or {}
-                lines.append(f"- held-out families against {label}, non-inferiority at the margin "
-                             f"{100 * harm['margin']:+.1f} pp (Holm over the families): "
+                lines.append(f"- held-out families against {label}, harm rule at the margin "
+                             f"{100 * harm['margin']:+.1f} pp (a family whose difference is worse blocks ACCEPTED): "
                              + ("**harm not ruled out in " + ", ".join(harm["harmed"]) + "**; " if harm["harmed"]
                                 else "no family worse by more than the margin; ")
+                             + "per family the difference (95% CI; non-inferiority at the margin, Holm over the "
+                             f"families at one-sided {HELDOUT_ALPHA / 2:g}, evidence only): "
                              + "; ".join(f"{name} {100 * row['difference']:+.1f} pp (95% CI "
-                                         f"{100 * row['interval'][0]:+.1f} to {100 * row['interval'][1]:+.1f}, "
+                                         f"{100 * row['interval'][0]:+.1f} to {100 * row['interval'][1]:+.1f}; "
                                          f"{'non-inferior' if row['non_inferior'] else 'not shown'})"
                                          for name, row in rows.items()))
     per = after.get("per_scenario") or {}

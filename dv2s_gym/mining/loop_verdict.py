@@ -11,11 +11,13 @@ FAILed or either held-out test found it worse; it is *not accepted* when the reg
 in ERROR, when the round skipped, or when the held-out tests did not run (too few held-out episodes or families:
 no test, no acceptance; never fewer than :data:`EVIDENCE_FLOOR` tested pairs and one family, below which no exact
 McNemar test can be significant). It is not accepted either when a harm confined to one held-out family is not ruled
-out (:func:`family_harm`, the rule a regulator applies to subgroups): per held-out family, non-inferiority at the
-loop's margin is tested one-sided by Newcombe's paired interval, Holm-adjusted over the families; a family whose point
-estimate is worse for the fine-tuned policy (than the start, or than the control) by more than the margin cannot show
-non-inferiority, so it blocks ACCEPTED even when the significance gate calls it inconclusive. A family that merely
-fails to show non-inferiority with an estimate within the margin (too few pairs to tell) does not block. Without a control arm only the test against the start is required. Each round is
+out (:func:`family_harm`, the rule a regulator applies to subgroups): a held-out family whose point estimate (the
+fine-tuned policy's failure rate minus the start's, or the control's, on its paired episodes) is worse for the
+fine-tuned policy by more than the loop's margin blocks ACCEPTED, even when the significance gate calls it
+inconclusive. The point estimate alone decides. Beside it each family's one-sided non-inferiority test at the margin
+(Newcombe's paired interval, Holm-adjusted over the families) is reported as evidence and decides nothing: a family
+worse than the margin can never show non-inferiority, and a family within the margin that does not show it (too few
+pairs to tell) does not block. Without a control arm only the test against the start is required. Each round is
 tested against the policy it started from, so with two or more tested rounds a fine-tuned policy that FAILs
 against the starting one (``final_vs_start``) is rejected too, and is not accepted when that comparison
 cannot run; when that comparison is INCONCLUSIVE the reason says so. A fine-tuned policy that FAILs against the
@@ -104,11 +106,13 @@ def too_small(record: Mapping[str, Any]) -> Optional[str]:
     return "; ".join(reasons) or None
 
 
-FAMILY_RULE = ("per held-out family, non-inferiority at the margin: the one-sided test of \"the fine-tuned policy "
-               "fails at least the margin more often\" (Newcombe's paired interval), Holm-adjusted over the families "
-               f"at one-sided {HELDOUT_ALPHA / 2:g}; a family whose point estimate is worse for the fine-tuned policy "
-               "by more than the margin cannot show non-inferiority, and blocks ACCEPTED")
-"""The held-out families' harm rule in words (:func:`family_harm`), as the verdict's reason and the reports name it."""
+FAMILY_RULE = ("per held-out family, a point estimate (the fine-tuned policy's failure rate minus the other's on the "
+               "family's paired episodes) worse for the fine-tuned policy by more than the margin blocks ACCEPTED; "
+               "reported beside it as evidence, deciding nothing: the family's one-sided non-inferiority test at the "
+               "margin (Newcombe's paired interval), Holm-adjusted over the families at one-sided "
+               f"{HELDOUT_ALPHA / 2:g}, which a family worse than the margin can never pass")
+"""The held-out families' harm rule in words (:func:`family_harm`), as the verdict's reason and the reports name it:
+the point estimate against the margin decides; the Holm-adjusted non-inferiority test is evidence only."""
 
 
 def non_inferiority_p(table: Any, margin: float) -> float:
@@ -138,17 +142,18 @@ def non_inferiority_p(table: Any, margin: float) -> float:
 
 def family_harm(tables: Mapping[str, Any], margin: float) -> Dict[str, Any]:
     """The held-out families' harm rule (:data:`FAMILY_RULE`) on ``{family: PairedTable}`` of the fine-tuned policy
-    (candidate) against another (baseline): per family the difference in failure rate with its two-sided 95 %
-    Newcombe interval, the one-sided non-inferiority p-value at ``margin`` (:func:`non_inferiority_p`) and its Holm
-    adjustment over the families, ``non_inferior`` (shown: adjusted p below :data:`HELDOUT_ALPHA` / 2) and
-    ``harm``: the point estimate worse for the fine-tuned policy by more than ``margin`` and non-inferiority not
-    shown. Returns ``{"margin", "rule", "families": {name: ...}, "harmed": [families with harm], "non_inferior":
+    (candidate) against another (baseline): per family the difference in failure rate (the point estimate) with its
+    two-sided 95 % Newcombe interval, ``harm``: that difference worse for the fine-tuned policy by more than
+    ``margin`` (this alone decides), and as evidence beside it the one-sided non-inferiority p-value at ``margin``
+    (:func:`non_inferiority_p`), its Holm adjustment over the families and ``non_inferior`` (shown: adjusted p below
+    :data:`HELDOUT_ALPHA` / 2). A harmed family is never non-inferior (its p-value is 1), so the test cannot clear
+    it; a family within the margin that is not shown non-inferior is not harmed. Returns ``{"margin", "rule", "families": {name: ...}, "harmed": [families with harm], "non_inferior":
     [families shown non-inferior]}``."""
     from dv2s_gym.regress.stats import holm, paired_difference_interval
 
     names = [name for name in sorted(tables) if tables[name].n]
     raw = [non_inferiority_p(tables[name], margin) for name in names]
-    adjusted = holm(raw) if raw else []
+    adjusted = holm(raw)
     families: Dict[str, Any] = {}
     for name, p, q in zip(names, raw, adjusted):
         t = tables[name]
@@ -156,7 +161,7 @@ def family_harm(tables: Mapping[str, Any], margin: float) -> Dict[str, Any]:
         shown = q < HELDOUT_ALPHA / 2.0
         families[name] = {"pairs": t.n, "fine_tuned_only": t.candidate_only, "other_only": t.baseline_only,
                           "difference": t.difference, "interval": [low, high], "non_inferiority_p": p,
-                          "holm_p": q, "non_inferior": shown, "harm": t.difference > margin and not shown}
+                          "holm_p": q, "non_inferior": shown, "harm": t.difference > margin}
     return {"margin": margin, "rule": FAMILY_RULE, "families": families,
             "harmed": [name for name in names if families[name]["harm"]],
             "non_inferior": [name for name in names if families[name]["non_inferior"]]}
@@ -170,8 +175,8 @@ def _harm_text(harm: Mapping[str, Any], label: str) -> str:
         parts.append(f"in family {name} the fine-tuned policy failed {f['fine_tuned_only']} of {f['pairs']} pairs "
                      f"that {label} passed and passed {f['other_only']} it failed ({100 * f['difference']:+.1f} pp, "
                      f"95% CI {100 * f['interval'][0]:+.1f} to {100 * f['interval'][1]:+.1f} pp, worse than the "
-                     f"margin {100 * harm['margin']:+.1f} pp; non-inferiority not shown, Holm-adjusted one-sided "
-                     f"p = {f['holm_p']:.3g})")
+                     f"margin {100 * harm['margin']:+.1f} pp, so non-inferiority cannot be shown: Holm-adjusted "
+                     f"one-sided p = {f['holm_p']:.3g})")
     return "; ".join(parts)
 
 
@@ -283,10 +288,9 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
              f"{tests[key].get('families')} famil{'y' if tests[key].get('families') == 1 else 'ies'})"
              for key in ("start", "control") if tests.get(key)]
     control_note = "" if tests.get("control") else "; no control arm to compare with"
-    harms = [tests[key]["family_harm"] for key in ("start", "control") if tests.get(key)]
-    margin = harms[0]["margin"] if harms else None
+    margin = tests["start"]["family_harm"]["margin"]  # the test against the start always ran here (else missing)
     control_note += (f"; no held-out family worse for the fine-tuned policy by more than the margin "
-                     f"{100 * margin:+.1f} pp ({FAMILY_RULE})" if margin is not None else "")
+                     f"{100 * margin:+.1f} pp ({FAMILY_RULE})")
     return {"verdict": ACCEPTED, "decided_by": "all",
             "reason": f"no regression on the rest of the bank ({regression} PASSed: {regress.get('reason')}); on "
                       f"the held-out families {' and '.join(parts)} ({HELDOUT_TEST}){control_note}"}
