@@ -26,6 +26,8 @@ from typing import Dict, Iterator, List, Optional, Tuple
 
 import pytest
 
+from ast_helpers import text_only_strings
+
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("dv2s_gym", "scenario_bank", "envs", "policies")
 
@@ -332,16 +334,9 @@ def defined_names(tree: ast.AST) -> set:
 def _plain_strings(tree: ast.AST) -> Iterator[ast.Constant]:
     """The string constants of a module that may name something: not docstrings, not the literal parts of an
     f-string, not the argument of :data:`_STRING_METHODS`."""
-    skipped = set()
+    skipped = text_only_strings(tree)
     for node in ast.walk(tree):
-        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body:
-            first = node.body[0]
-            if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant):
-                skipped.add(id(first.value))
-        elif isinstance(node, ast.JoinedStr):
-            skipped.update(id(value) for value in node.values)
-        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
-              and node.func.attr in _STRING_METHODS):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr in _STRING_METHODS:
             skipped.update(id(argument) for argument in node.args)
     for node in ast.walk(tree):
         if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skipped:

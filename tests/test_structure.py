@@ -27,6 +27,8 @@ from typing import Dict, List, Optional, Set, Tuple
 
 import pytest
 
+from ast_helpers import text_only_strings
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("scenario_bank", "envs", "policies", "dv2s_gym")
 LAYER = {name: rank for rank, name in enumerate(PACKAGES)}  # may import only its own rank or lower
@@ -414,20 +416,14 @@ def modules_named_in_strings(tree: ast.AST, modules: Dict[str, Path], processes:
     module given to a jailed worker, a subclass of it or a ``functools.partial`` of it) is left out; with it, the ``dv2s`` console script
     given to a call that starts a program counts as :data:`CONSOLE_MODULE`, and so does a call finding entry
     points (:data:`_ENTRY_POINT_CALLS`) in any case."""
-    skipped, started = set(), set()
+    skipped, started = text_only_strings(tree), set()
     starters = set(_STARTERS)
     for node in ast.walk(tree):
         if isinstance(node, ast.ClassDef) and any(_base_name(base).rpartition(".")[2] in _STARTERS
                                                   for base in node.bases):
             starters.add(node.name)
     for node in ast.walk(tree):
-        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body:
-            first = node.body[0]
-            if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant):
-                skipped.add(id(first.value))
-        elif isinstance(node, ast.JoinedStr):
-            skipped.update(id(value) for value in node.values)
-        elif isinstance(node, ast.Dict):
+        if isinstance(node, ast.Dict):
             skipped.update(id(key) for key in node.keys if key is not None)
         elif isinstance(node, ast.Subscript):
             skipped.add(id(node.slice))
