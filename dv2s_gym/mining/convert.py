@@ -1153,7 +1153,13 @@ def _add_replay(record: Mapping[str, Any], bank, settings: ConversionSettings, s
 
     Without a ``source_trace`` (no failure video was made), the replay's own trace stands for it once its
     trajectory hash matches the record's, and is what the entry keeps (``files``: the trace only, no video);
-    without an ``interaction`` it is read from that trace."""
+    without an ``interaction`` it is read from that trace. A scene the reference driver failed too
+    (:func:`reference_passed`) is not replayed: ``{"entry": None, "note", "not_narrowed": {}}``."""
+    if not reference_passed(record):
+        failed = ((record.get("reference") or {}).get("failure") or {}).get("type") or "not avoided"
+        return {"entry": None, "not_narrowed": {}, "note": f"no replay entry: the reference driver failed this scene "
+                                                          f"too ({failed}), so it is no failure the policy could have "
+                                                          "avoided"}
     parent = (Bank(settings.bank_dir) if settings.bank_dir else Bank()).get(record["scenario"])
     params = dict(record.get("params") or {})
     script, intervals, not_narrowed, trace, failure, source = _run_narrowed(record, parent, params, settings, source)
@@ -1200,11 +1206,6 @@ def _bank_replay(out: Dict[str, Any], record: Mapping[str, Any], bank, parent: A
                  replay: Mapping[str, Any], settings: ConversionSettings, source: _ReplaySource) -> None:
     """Add the narrowed script to ``bank`` as the failure's exact replay entry (``out["entry"]``), or say in
     ``out["note"]`` why there is none."""
-    if not reference_passed(record):
-        out["note"] = ("no replay entry: the reference driver failed this scene too "
-                       f"({((record.get('reference') or {}).get('failure') or {}).get('type') or 'not avoided'}), so it is "
-                       "no failure the policy could have avoided")
-        return
     files = dict(source.files or {})
     seed, params, policy = replay["seed"], replay["params"], settings.policy
     source_failure = source.source_failure
