@@ -162,11 +162,11 @@ def agreement(model: Any, observations: np.ndarray, labels: np.ndarray, batch: i
 
 
 def imitation_step(model: Any, optimizer: Any, observations: np.ndarray, labels: np.ndarray,
-                   slower_weight: float = 1.0, weights: Optional[np.ndarray] = None) -> float:
+                   weights: Optional[np.ndarray] = None) -> float:
     """One cross-entropy step of ``model``'s action distribution toward ``labels``; returns the loss.
 
-    The loss is the weighted mean of the states' cross-entropies; a state's weight is ``slower_weight`` if its
-    label is SLOWER (else 1) times its entry of ``weights`` (``None``: all 1).
+    The loss is the mean of the states' cross-entropies weighted by ``weights`` (``None``: all 1;
+    :func:`loss_weights` gives DAgger's).
     """
     import torch
 
@@ -174,12 +174,10 @@ def imitation_step(model: Any, optimizer: Any, observations: np.ndarray, labels:
     obs = torch.as_tensor(observations, dtype=torch.float32, device=policy.device)
     actions = torch.as_tensor(labels, dtype=torch.long, device=policy.device)
     log_prob = policy.get_distribution(obs).log_prob(actions)
-    if slower_weight == 1.0 and weights is None:
+    if weights is None:
         loss = -log_prob.mean()
     else:
-        weight = torch.where(actions == SLOWER, float(slower_weight), 1.0).to(log_prob.dtype)
-        if weights is not None:
-            weight = weight * torch.as_tensor(np.asarray(weights), dtype=log_prob.dtype, device=policy.device)
+        weight = torch.as_tensor(np.asarray(weights), dtype=log_prob.dtype, device=policy.device)
         loss = -(log_prob * weight).sum() / weight.sum()
     optimizer.zero_grad()
     loss.backward()

@@ -28,7 +28,8 @@ def test_slower_labels_weigh_more_in_the_loss():
         nll = -model.policy.get_distribution(torch.as_tensor(obs)).log_prob(torch.as_tensor(labels)).numpy()
     weights = np.where(labels == SLOWER, 3.0, 1.0)
     optimizer = torch.optim.SGD(model.policy.parameters(), lr=0.0)  # a step that changes nothing
-    loss = imitation.imitation_step(model, optimizer, obs, labels, slower_weight=3.0)
+    loss = imitation.imitation_step(model, optimizer, obs, labels,
+                                   weights=imitation.loss_weights(labels, np.zeros(len(labels), bool), 3.0))
     assert loss == pytest.approx(float((weights * nll).sum() / weights.sum()), rel=1e-5)
     assert loss != pytest.approx(float(nll.mean()), rel=1e-3)  # not the unweighted mean
     unweighted = imitation.imitation_step(model, optimizer, obs, labels)
