@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from dv2s_gym.mining.rate import failure_rate, weighted_rate
+from scenario_bank.records import EpisodeRecord
 
 
 def test_an_unfair_proposal_is_reweighted_to_the_true_rate():
@@ -75,9 +76,9 @@ def _cross_entropy_run(dimensions: int, draws: int, seed: int):
         scenario, u = int(point.scenario[0]), [float(x) for x in point.u]
         failed = scenario == 0 and u[0] < 0.2
         sampler.feed(point, info, -1.0 if failed else 1.0)
-        records.append({"index": index, "scenario": f"s{scenario}", "sampler": "cross-entropy",
-                        "failure": {"type": "collision"} if failed else None,
-                        "proposal": scene_proposal(sampler.proposal(index), dimensions)})
+        records.append(EpisodeRecord(index=index, scenario=f"s{scenario}", seed=index, sampler="cross-entropy",
+                                     failure={"type": "collision"} if failed else None,
+                                     proposal=scene_proposal(sampler.proposal(index), dimensions)))
     return records
 
 
@@ -111,12 +112,12 @@ def test_a_collapsed_proposal_is_flagged():
     rate = failure_rate(records, scenarios=["s0", "s1"], sampler="cross-entropy")
     assert rate["scenarios"]["s0"]["high"] < 0.2  # the estimate is far too low...
     assert rate["collapsed"] is True  # ...and flagged
-    uniform = [dict(r, sampler="random", proposal=None) for r in records[:20]]
+    uniform = [r.replace(sampler="random", proposal=None) for r in records[:20]]
     assert failure_rate(uniform, sampler="random")["collapsed"] is False
 
 
 def test_a_sampler_without_densities_gives_no_estimate():
-    records = [{"index": 0, "scenario": "a", "failure": None, "sampler": "bandit", "proposal": None}]
+    records = [EpisodeRecord(index=0, scenario="a", seed=0, failure=None, sampler="bandit", proposal=None)]
     rate = failure_rate(records, sampler="bandit")
     assert rate["available"] is False and rate["overall"] is None
 
@@ -140,9 +141,9 @@ def _novelty_bandit_run(draws: int, seed: int, window: int = 4):
         pending.append((point, info, -1.0 if failed else 1.0))
         if len(pending) > window:
             sampler.feed(*pending.pop(0))
-        records.append({"index": index, "scenario": f"s{scenario}", "sampler": NOVELTY,
-                        "failure": {"type": "collision"} if failed else None,
-                        "proposal": scene_proposal(sampler.proposal(index), 2)})
+        records.append(EpisodeRecord(index=index, scenario=f"s{scenario}", seed=index, sampler=NOVELTY,
+                                     failure={"type": "collision"} if failed else None,
+                                     proposal=scene_proposal(sampler.proposal(index), 2)))
     return records
 
 

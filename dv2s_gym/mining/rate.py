@@ -35,6 +35,7 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence
 
 from dv2s_gym.mining.samplers import is_uniform
 from dv2s_gym.regress.stats import wilson_interval
+from scenario_bank.records import EpisodeRecord
 
 __all__ = ["failure_rate", "weighted_rate", "rate_estimates", "COLLAPSE_FLOOR"]
 
@@ -91,16 +92,16 @@ def _wilson(p: float, n: float, confidence: float) -> tuple:
     return max(0.0, centre - half), min(1.0, centre + half)
 
 
-def _proposal(record: Mapping[str, Any], sampler: str) -> Optional[Mapping[str, float]]:
-    proposal = record.get("proposal")
+def _proposal(record: EpisodeRecord, sampler: str) -> Optional[Mapping[str, float]]:
+    proposal = record.proposal
     if isinstance(proposal, Mapping) and proposal.get("scenario") and proposal.get("params"):
         return proposal
-    if is_uniform(str(record.get("sampler") or sampler)):  # a uniform plug-in sampler records none: weight 1
+    if is_uniform(str(record.sampler or sampler)):  # a uniform plug-in sampler records none: weight 1
         return {"scenario": None, "params": 1.0, "floor": 1.0}
     return None
 
 
-def failure_rate(records: Iterable[Mapping[str, Any]], *, scenarios: Optional[Sequence[str]] = None,
+def failure_rate(records: Iterable[EpisodeRecord], *, scenarios: Optional[Sequence[str]] = None,
                  sampler: str = "", confidence: float = 0.95) -> Dict[str, Any]:
     """The failure rate of the run's policy under its scenarios' own distributions (module docstring).
 
@@ -116,35 +117,35 @@ def failure_rate(records: Iterable[Mapping[str, Any]], *, scenarios: Optional[Se
     records = list(records)
     errored: Dict[str, int] = {}
     for record in records:
-        if record.get("error"):
-            errored[str(record["scenario"])] = errored.get(str(record["scenario"]), 0) + 1
-    records = [r for r in records if not r.get("error")]
-    names = list(scenarios) if scenarios else sorted({str(r["scenario"]) for r in records})
+        if record.error:
+            errored[str(record.scenario)] = errored.get(str(record.scenario), 0) + 1
+    records = [r for r in records if not r.error]
+    names = list(scenarios) if scenarios else sorted({str(r.scenario) for r in records})
     missing = [r for r in records if _proposal(r, sampler) is None]
     if missing:
         return {"available": False, "reason": f"{len(missing)} of {len(records)} episodes have no proposal density "
                 "(the sampler draws without one, e.g. bandit or split with cell avoidance)",
                 "collapsed": False, "overall": None, "scenarios": {}, "errored": errored}
-    by_scenario: Dict[str, List[Mapping[str, Any]]] = {name: [] for name in names}
+    by_scenario: Dict[str, List[EpisodeRecord]] = {name: [] for name in names}
     for record in records:
-        by_scenario.setdefault(str(record["scenario"]), []).append(record)
+        by_scenario.setdefault(str(record.scenario), []).append(record)
     estimates = {}
     for name, members in by_scenario.items():
         weights = [1.0 / float(_proposal(r, sampler)["params"]) for r in members]
-        estimates[name] = weighted_rate([1.0 if r.get("failure") else 0.0 for r in members], weights, confidence)
+        estimates[name] = weighted_rate([1.0 if r.failure else 0.0 for r in members], weights, confidence)
     count = len(by_scenario)
     overall_weights, outcomes = [], []
     for record in records:
         proposal = _proposal(record, sampler)
         chance = proposal["scenario"] if proposal["scenario"] else 1.0 / count
         overall_weights.append((1.0 / count) / (float(chance) * float(proposal["params"])))
-        outcomes.append(1.0 if record.get("failure") else 0.0)
+        outcomes.append(1.0 if record.failure else 0.0)
     collapsed = any(float(_proposal(r, sampler).get("floor", 1.0)) < COLLAPSE_FLOOR for r in records)
     return {"available": True, "reason": None, "collapsed": collapsed,
             "overall": weighted_rate(outcomes, overall_weights, confidence),
             "scenarios": estimates, "errored": errored}
 
 
-def rate_estimates(settings: Mapping[str, Any], records: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
+def rate_estimates(settings: Mapping[str, Any], records: Sequence[EpisodeRecord]) -> Dict[str, Any]:
     """:func:`failure_rate` of a run from its ``settings.json`` and records."""
     return failure_rate(records, scenarios=settings.get("scenarios") or None, sampler=str(settings.get("sampler") or ""))
