@@ -555,7 +555,7 @@ def _split_step(loop: _Loop, number: int, current: str, timed: "_Timed") -> None
     _, tuned_families = _earlier_sides(_lineage(loop, earlier, current))
     kept = steps["mine"]["kept"]
     timed("split", lambda: split_by_family(_with_parents(kept, loop.bank), loop.settings.holdout_fraction,
-                                           loop.settings.seed * 1000 + number, held_families, tuned_families),
+                                           loop.settings.seed * 1000 + number, held_families, tuned_families).to_dict(),
           f"{len(kept)} kept mined scenario(s) into fine-tuning and held-out families")
     families = set(steps["split"].get("fine_tune_families", []))  # every kept family, when none is held out
     if kept and not steps["split"]["held_out"] and families and families <= set(tuned_families) - set(held_families):
