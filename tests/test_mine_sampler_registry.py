@@ -53,7 +53,7 @@ def test_a_registered_sampler_is_built_checked_and_accepted_everywhere(registry)
     records = [EpisodeRecord(index=i, scenario="s", seed=i, failure={"type": "collision"} if i < 2 else None)
                for i in range(4)]
     assert failure_rate(records, sampler="sweep") == failure_rate(records, sampler="random")
-    assert failure_rate(records, sampler="sweep")["available"] and not failure_rate(records, sampler="bandit")["available"]
+    assert failure_rate(records, sampler="sweep").available and not failure_rate(records, sampler="bandit").available
     assert build_parser().parse_args(["mine", "--policy", "rule", "--sampler", "sweep"]).sampler == "sweep"
 
 

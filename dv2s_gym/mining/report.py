@@ -100,7 +100,7 @@ from dv2s_gym.mining.cluster import cluster_failures
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.family import record_family
 from dv2s_gym.mining.html import write_html
-from dv2s_gym.mining.rate import rate_estimates
+from dv2s_gym.mining.rate import FailureRate, rate_estimates
 from dv2s_gym.mining.report_text import (NOT_COMPARED_REASONS, breadth, by_type_text, error_warning,
                                          not_compared_counts, parameter_check_text, rate_text, seed_text)
 from dv2s_gym.mining.report_text import number_text as _num
@@ -623,7 +623,7 @@ def _per_sampler(episodes: Sequence[EpisodeRecord], failures: Sequence[FailureEn
 
 def _per_scenario(settings: Mapping[str, Any], episodes: Sequence[EpisodeRecord],
                   errors: Sequence[Mapping[str, Any]], failures: Sequence[FailureEntry],
-                  cluster_entries: Sequence[ClusterEntry], rate: Mapping[str, Any]) -> Dict[str, Any]:
+                  cluster_entries: Sequence[ClusterEntry], rate: FailureRate) -> Dict[str, Any]:
     """Per scenario (the run's own, then any other an episode ran): its episodes, failures, failure rates (sampled
     and estimated), clusters and conversions."""
     ok = [r for r in episodes if not r.error]
@@ -642,7 +642,7 @@ def _per_scenario(settings: Mapping[str, Any], episodes: Sequence[EpisodeRecord]
             "unavoidable": sum(f.avoidable is False for f in found),
             "unknown": sum(f.avoidable is None for f in found),
             "failure_rate": _rate(len(found), len(ran)),
-            "estimated_rate": (rate.get("scenarios") or {}).get(name),
+            "estimated_rate": rate.scenarios[name].to_dict() if name in rate.scenarios else None,
             "failures_by_type": _by_type(found),
             "failure_types": len({str(f.kind) for f in found}),
             "clusters": len(in_clusters),
@@ -685,7 +685,7 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ep
         "counts": counts,
         "samplers": samplers,
         "scenarios": scenarios,
-        "failure_rate": rate,
+        "failure_rate": rate.to_dict(),
         "clusters": [c.to_dict() for c in cluster_entries if c.id not in unavoidable_ids],
         "unavoidable_clusters": [c.to_dict() for c in cluster_entries if c.id in unavoidable_ids],
         "failures": [f.to_dict() for f in failures if f.avoidable is not False],
