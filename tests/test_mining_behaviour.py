@@ -8,6 +8,7 @@ from types import SimpleNamespace
 
 from dv2s_gym.mining.behaviour import UNKNOWN, Behaviour, extract_behaviour
 from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, pair_of
+from dv2s_gym.mining.monitors import Failure
 from scenario_bank.records import EpisodeRecord
 
 FREQUENCY = 5  # steps per second
@@ -24,9 +25,9 @@ def _cruise(y: float, speed: float, x0: float = 0.0):
     return lambda step: [x0 + speed * step / FREQUENCY, y, 0.0, speed]
 
 
-def _collision(with_: str = "car1", kind: str = "car", step: int = 20) -> dict:
-    return {"type": "collision", "time": step / FREQUENCY, "step": step, "with": with_, "with_kind": kind,
-            "collision_type": "rear_end", "kind": "collision:rear_end"}
+def _collision(with_: str = "car1", kind: str = "car", step: int = 20) -> Failure:
+    return Failure(type="collision", time=step / FREQUENCY, step=step, with_=with_, with_kind=kind,
+                   collision_type="rear_end")
 
 
 def test_a_braking_lead_car_hit_by_a_lane_keeping_ego():
@@ -71,7 +72,7 @@ def test_a_stopped_obstacle_and_an_ego_changing_lanes_or_braking():
 
 def test_failures_without_another_actor():
     stalled = _trace({"ego": lambda s: [10.0, 0.0, 0.0, 0.0], "car1": _cruise(4.0, 20.0)})
-    stall = {"type": "stall", "time": 1.0, "step": 5, "with": None, "kind": "stall"}
+    stall = Failure(type="stall", time=1.0, step=5)
     assert extract_behaviour(stalled, stall) == Behaviour(actor="none", actor_manoeuvre="none", ego_manoeuvre="stopped")
     assert extract_behaviour(stalled, None) is None
     empty = SimpleNamespace(states=[], kinds={}, config={})
@@ -81,7 +82,7 @@ def test_failures_without_another_actor():
 def test_a_stall_names_the_car_the_ego_stood_behind_in_its_lane():
     # the ego stands at x = 10; a car stopped 55 m ahead in its lane (beyond the stall's 40 m free path), another
     # car cruising in the next lane: the stall is clustered with the stopped car, not with "none"
-    stall = {"type": "stall", "time": 1.0, "step": 5, "with": None, "kind": "stall"}
+    stall = Failure(type="stall", time=1.0, step=5)
     behind = _trace({"ego": lambda s: [10.0, 0.0, 0.0, 0.0], "car1": lambda s: [65.0, 0.5, 0.0, 0.0],
                      "car2": _cruise(4.0, 20.0, x0=20.0)}, {"car1": "truck"})
     assert extract_behaviour(behind, stall) == Behaviour(actor="truck", actor_manoeuvre="stopped",

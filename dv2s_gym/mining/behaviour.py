@@ -33,6 +33,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Dict, List, Mapping, Optional
 
+from dv2s_gym.mining.monitors import Failure
 from scenario_bank.records import EpisodeRecord
 
 __all__ = ["Behaviour", "extract_behaviour", "behaviour_of", "actor_ahead", "involved_actor", "WAITING_DISTANCE", "UNKNOWN", "WINDOW_SECONDS", "LATERAL_METRES",
@@ -149,40 +150,39 @@ def actor_ahead(states: Mapping[str, List[float]], distance: float = WAITING_DIS
     return best[1] if best else None
 
 
-def involved_actor(trace: Any, failure: Optional[Mapping[str, Any]]) -> Optional[str]:
-    """The other actor ``failure`` involves in ``trace``: the one it names (``with``), else for a stall the actor
+def involved_actor(trace: Any, failure: Optional[Failure]) -> Optional[str]:
+    """The other actor ``failure`` involves in ``trace``: the one it names (``with_``), else for a stall the actor
     the ego stood behind at the stall's start (:func:`actor_ahead`); ``None`` when there is none."""
-    if not failure:
+    if failure is None:
         return None
     states = list(getattr(trace, "states", None) or [])
-    other = failure.get("with")
+    other = failure.with_
     if other and other != "ego":
         return str(other)
-    if failure.get("type") != "stall" or not states:
+    if failure.type != "stall" or not states:
         return None
-    step = failure.get("step")
+    step = failure.step
     step = len(states) - 1 if not isinstance(step, int) else max(0, min(len(states) - 1, step))
     return actor_ahead(states[step])
 
 
-def extract_behaviour(trace: Any, failure: Optional[Mapping[str, Any]]) -> Optional[Behaviour]:
-    """The behaviour (module docstring) of ``failure`` (a ``Failure.to_json()`` object, as the episode record holds
-    it) in ``trace``; ``None`` without a failure."""
-    if not failure:
+def extract_behaviour(trace: Any, failure: Optional[Failure]) -> Optional[Behaviour]:
+    """The behaviour (module docstring) of ``failure`` in ``trace``; ``None`` without a failure."""
+    if failure is None:
         return None
     states = list(getattr(trace, "states", None) or [])
     if not states:
         return UNKNOWN
     frequency = float((getattr(trace, "config", None) or {}).get("policy_frequency", 5))
     steps = max(1, int(round(WINDOW_SECONDS * frequency)))
-    step = failure.get("step")
+    step = failure.step
     step = len(states) - 1 if not isinstance(step, int) else max(0, min(len(states) - 1, step))
     ego_path = _window(states, "ego", step, steps)
     other = involved_actor(trace, failure)
     if other:
         kinds = getattr(trace, "kinds", None) or {}
-        named = other == failure.get("with")
-        actor = str((failure.get("with_kind") if named else None) or kinds.get(other) or "car")
+        named = other == failure.with_
+        actor = str((failure.with_kind if named else None) or kinds.get(other) or "car")
         manoeuvre = _actor_manoeuvre(_window(states, other, step, steps), ego_path)
     else:
         actor, manoeuvre = "none", "none"
