@@ -1,9 +1,10 @@
 """The mining report: what a ``dv2s mine`` run found, read back from its run folder.
 
-:func:`build_report` reads a run folder (``settings.json``, ``episodes.jsonl``,
-``conversions.jsonl``; record formats in the mining contract), groups the failures into
-clusters with :func:`dv2s_gym.mining.cluster.cluster_failures` and returns a JSON-safe
-dict; :func:`write_reports` writes it as ``report.json`` (atomic), ``report.md`` and the
+:func:`build_report` reads a run folder (``settings.json``, ``episodes.jsonl`` as
+:class:`~scenario_bank.records.EpisodeRecord`, ``conversions.jsonl``; record formats in the mining contract), groups
+the failures into clusters with :func:`dv2s_gym.mining.cluster.cluster_failures` and returns a JSON-safe
+dict (in process each failure is a :class:`FailureEntry` and each cluster a :class:`ClusterEntry`, whose
+``to_dict`` is the JSON below); :func:`write_reports` writes it as ``report.json`` (atomic), ``report.md`` and the
 self-contained ``report.html`` (:mod:`dv2s_gym.mining.html`). Nothing here imports Scenic
 or highway-env, so a report is rebuilt in well under a second from any run folder, also
 from one whose run was killed (a truncated last line of a ``.jsonl`` file is left out).
@@ -113,7 +114,8 @@ from scenario_bank.failure_types import FAILURE_TYPES, severity_order
 from scenario_bank.records import EpisodeRecord, RecordError
 
 __all__ = [
-    "SCHEMA", "SCHEMA_VERSION", "FAILURE_ORDER", "MiningReportError", "FailureEntry", "ClusterEntry", "read_jsonl", "read_run",
+    "SCHEMA", "SCHEMA_VERSION", "FAILURE_ORDER", "MiningReportError", "FailureEntry", "ClusterEntry", "read_jsonl",
+    "read_run",
     "build_report", "build_report_from_records", "format_summary", "markdown", "write_reports", "breadth", "rate_text",
 ]
 
