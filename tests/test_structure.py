@@ -1844,13 +1844,86 @@ _KIND_NAMES = frozenset({"kind", "role", "noun"})
 """Names (a variable, an attribute, the key of ``getattr(x, "kind", ...)``) that hold an actor's kind or role."""
 
 
-def kind_strings_compared(tree: ast.AST, kinds: frozenset, any_name: bool = False) -> List[str]:
-    """``"line: code"`` of each comparison of an actor's kind or role (:data:`_KIND_NAMES`; with ``any_name``, also
-    any name ending in ``kind`` and any call of a function so named) with a string literal that is one of ``kinds``
-    (the enum's values are the names to compare with)."""
+_KIND_READERS = ("str", "lower", "strip", "casefold", "value", "name")
+"""What a kind is read through and stays a kind: ``str(kind)``, ``kind.lower()``, ``kind.value``."""
+_KIND_TABLE_MAKERS = ("frozenset", "set", "tuple", "list", "sorted", "dict", "MappingProxyType")
+
+
+def _is_kind_literal(node: ast.AST, kinds: frozenset) -> bool:
+    return isinstance(node, ast.Constant) and node.value in kinds
+
+
+def _kind_table(node: Optional[ast.AST], kinds: frozenset) -> bool:
+    """``node`` is a table of kinds spelled out: a tuple, list, set or dict display (its keys) whose string entries
+    are mostly kind strings (more than half: a table of other words that holds one by chance is not one), such a
+    display given to ``frozenset``/``dict``/..., joined to another (``MOTOR + ("bicycle",)``), a dict comprehension
+    whose keys run over kind strings, or a dict display that unpacks one (``{**{k: v for k in ("car", "bus")}}``)."""
+    def mostly(entries: List[Optional[ast.AST]]) -> bool:
+        strings = [e for e in entries if isinstance(e, ast.Constant) and isinstance(e.value, str)]
+        return 2 * sum(_is_kind_literal(e, kinds) for e in strings) > len(strings)
+
+    if isinstance(node, ast.Call) and _base_name(node.func) in _KIND_TABLE_MAKERS and len(node.args) == 1:
+        node = node.args[0]
+    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.BitOr)):
+        return _kind_table(node.left, kinds) or _kind_table(node.right, kinds)
+    if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+        return mostly(node.elts)
+    if isinstance(node, ast.Dict):
+        return mostly(node.keys) or any(k is None and _kind_table(v, kinds) for k, v in zip(node.keys, node.values))
+    if isinstance(node, ast.DictComp):
+        return any(_kind_table(g.iter, kinds) and isinstance(node.key, ast.Name) and isinstance(g.target, ast.Name)
+                   and g.target.id == node.key.id for g in node.generators)
+    return False
+
+
+def kind_tables(tree: ast.AST, kinds: frozenset) -> Set[str]:
+    """Names a module binds at its top to a table of kind strings (:func:`_kind_table`): ``VEHICLES = ("car",
+    "bus")``, ``CLASS = {"car": "Car"}``."""
+    found = set()
+    for node in getattr(tree, "body", []):
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) \
+            else []
+        if _kind_table(getattr(node, "value", None), kinds):
+            found.update(t.id for t in targets if isinstance(t, ast.Name))
+    return found
+
+
+def kind_strings_compared(tree: ast.AST, kinds: frozenset, any_name: bool = False,
+                          tables: frozenset = frozenset()) -> List[str]:
+    """``"line: code"`` of each place an actor's kind or role (:data:`_KIND_NAMES`; with ``any_name``, also any
+    name ending in ``kind`` and any call of a function so named) meets a string literal that is one of ``kinds``
+    (the enum's values are the names to compare with):
+
+    - a comparison (``==``, ``!=``, ``in``) with a kind string or a collection holding one, spelled out or a name
+      bound to one (:func:`kind_tables`; ``tables``: such names the module imports);
+    - ``match kind:`` with a ``case "car":``;
+    - a lookup of the kind in a table keyed by kind strings (``{"car": f}[actor.kind]``, ``CLASS.get(kind)``), and a
+      lookup of a kind string in such a table (``CAN_DO["pedestrian"]``).
+
+    A kind is read as ``actor.kind``, ``getattr(actor, "kind")``, ``actor["kind"]``, ``actor.get("kind")``, through
+    ``str()``/``.value``/``.lower()``, or from a name it was bound to (``k = actor.kind``)."""
+    rebound: Set[str] = set()
+    tables = set(tables) | kind_tables(tree, kinds)
+
     def names_kind(node: ast.AST) -> bool:
+        if isinstance(node, ast.NamedExpr):
+            return names_kind(node.value)
+        if isinstance(node, ast.Call) and _base_name(node.func) in _KIND_READERS:
+            inner = node.args[0] if isinstance(node.func, ast.Name) and node.args else \
+                node.func.value if isinstance(node.func, ast.Attribute) else None
+            if inner is not None and names_kind(inner):
+                return True
+        if isinstance(node, ast.Attribute) and node.attr in _KIND_READERS and names_kind(node.value):
+            return True
         if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "getattr" and len(node.args) > 1:
             return isinstance(node.args[1], ast.Constant) and node.args[1].value in _KIND_NAMES
+        if isinstance(node, ast.Subscript) and isinstance(node.slice, ast.Constant):
+            return node.slice.value in _KIND_NAMES
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get"
+                and node.args and isinstance(node.args[0], ast.Constant)):
+            return node.args[0].value in _KIND_NAMES
+        if isinstance(node, ast.Name) and node.id in rebound:
+            return True
         name = getattr(node, "id", None) or getattr(node, "attr", None)
         if any_name and isinstance(node, ast.Call):
             name = getattr(node.func, "id", None) or getattr(node.func, "attr", None)
@@ -1859,14 +1932,67 @@ def kind_strings_compared(tree: ast.AST, kinds: frozenset, any_name: bool = Fals
     def literal(node: ast.AST) -> bool:
         if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
             return any(literal(e) for e in node.elts)
-        return isinstance(node, ast.Constant) and node.value in kinds
+        if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.BitOr)):
+            return literal(node.left) or literal(node.right)
+        return _is_kind_literal(node, kinds) or table(node)
 
+    def table(node: ast.AST) -> bool:
+        if isinstance(node, ast.Call) and _base_name(node.func) in _KIND_TABLE_MAKERS and len(node.args) == 1:
+            return table(node.args[0])
+        if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.BitOr)):
+            return table(node.left) or table(node.right)
+        return (isinstance(node, ast.Name) and node.id in tables) or _kind_table(node, kinds)
+
+    changed = True
+    while changed:  # names bound to a kind, and names bound to those
+        changed = False
+        for node in ast.walk(tree):
+            pairs = [(t, node.value) for t in node.targets] if isinstance(node, ast.Assign) else \
+                [(node.target, node.value)] if isinstance(node, (ast.AnnAssign, ast.NamedExpr)) and node.value else []
+            for target, value in pairs:
+                if isinstance(target, ast.Name) and target.id not in rebound and names_kind(value):
+                    rebound.add(target.id)
+                    changed = True
     found = []
     for node in ast.walk(tree):
+        hit = False
         if isinstance(node, ast.Compare):
             sides = [node.left, *node.comparators]
-            if any(names_kind(a) and literal(b) or literal(a) and names_kind(b) for a, b in zip(sides, sides[1:])):
-                found.append(f"{node.lineno}: {ast.unparse(node)}")
+            hit = any(names_kind(a) and literal(b) or literal(a) and names_kind(b) for a, b in zip(sides, sides[1:]))
+        elif isinstance(node, ast.Match) and names_kind(node.subject):
+            hit = any(_is_kind_literal(p.value, kinds) for case in node.cases for p in ast.walk(case.pattern)
+                      if isinstance(p, ast.MatchValue))
+        elif isinstance(node, ast.Subscript) and table(node.value):
+            hit = names_kind(node.slice) or _is_kind_literal(node.slice, kinds)
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.args
+              and node.func.attr in ("get", "pop", "setdefault", "__getitem__") and table(node.func.value)):
+            hit = names_kind(node.args[0]) or _is_kind_literal(node.args[0], kinds)
+        if hit:
+            found.append(f"{node.lineno}: {ast.unparse(node).splitlines()[0]}")
+    return found
+
+
+def _module_of(shown: str) -> str:
+    parts = list(Path(shown).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def kinds_spelled_out(files: Dict[str, Path], kinds: frozenset) -> Dict[str, List[str]]:
+    """``path`` -> :func:`kind_strings_compared` for each of ``files`` (the file read for each path relative to the
+    repository), with the kind tables each imports from another of them (``from pkg.frame import VEHICLES``)."""
+    trees = {shown: _parsed(path) for shown, path in files.items()}
+    tables = {_module_of(shown): kind_tables(tree, kinds) for shown, tree in trees.items()}
+    found = {}
+    for shown, tree in trees.items():
+        module = _module_of(shown)
+        imported = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                base = _imported_names(node, module, Path(shown))[-1]
+                imported.update(a.asname or a.name for a in node.names if a.name in tables.get(base, ()))
+        lines = kind_strings_compared(tree, kinds, shown in KINDS_UNDER_ANY_NAME, frozenset(imported))
+        if lines:
+            found[shown] = lines
     return found
 
 
@@ -1879,6 +2005,18 @@ KINDS_UNDER_ANY_NAME = ("dv2s_gym/mining/monitors.py", "dv2s_gym/pipeline/semant
 ``kind``, or a call of a function whose name does, holds a kind."""
 
 
+def _kind_checked_files() -> Dict[str, Path]:
+    """The modules of :data:`KINDS_BY_ENUM`, by their path relative to the repository."""
+    return {str(path.relative_to(ROOT)): path for part in KINDS_BY_ENUM for path in sorted((ROOT / part).rglob("*.py"))}
+
+
+def _all_kinds() -> frozenset:
+    from dv2s_gym.pipeline.sg.rules.roles import JunctionRole, Role
+    from scenario_bank.elements import ActorKind
+
+    return frozenset(str(k) for k in (*ActorKind, *Role, *JunctionRole))
+
+
 def test_kinds_and_roles_are_compared_with_their_enums():
     """An actor's kind is compared with ``ActorKind`` (the table of the elements' participants) and, in the rule-based
     Scenario Generator, its role with ``Role``/``JunctionRole``; never with a string spelled out."""
@@ -1887,10 +2025,7 @@ def test_kinds_and_roles_are_compared_with_their_enums():
 
     assert tuple(ActorKind) == PARTICIPANTS
     kinds = frozenset(ActorKind) | frozenset(Role) | frozenset(JunctionRole)
-    paths = [path for part in KINDS_BY_ENUM for path in sorted((ROOT / part).rglob("*.py"))]
-    found = {str(path.relative_to(ROOT)): lines for path in paths
-             if (lines := kind_strings_compared(_parsed(path), frozenset(str(k) for k in kinds),
-                                                str(path.relative_to(ROOT)) in KINDS_UNDER_ANY_NAME))}
+    found = kinds_spelled_out(_kind_checked_files(), frozenset(str(k) for k in kinds))
     assert not found, f"kinds or roles compared with a string (use ActorKind, Role, JunctionRole): {found}"
     planted = ast.parse('if actor.kind == "truck" or role != "lead" or getattr(a, "kind", "") in ("ego", "x"):\n'
                         '    pass\nif actor.kind == ActorKind.TRUCK and name == "ego":\n    pass\n')
@@ -1899,3 +2034,62 @@ def test_kinds_and_roles_are_compared_with_their_enums():
     planted = ast.parse('if other_kind in ("car", "bus") or _kind(name, kinds) != "obstacle":\n    pass\n')
     assert not kind_strings_compared(planted, frozenset({"car", "bus", "obstacle"}))  # other names: not everywhere
     assert len(kind_strings_compared(planted, frozenset({"car", "bus", "obstacle"}), any_name=True)) == 2
+
+
+@pytest.mark.parametrize("planted", [
+    # match on the kind
+    "def _planted(actor):\n    match actor.kind:\n        case 'pedestrian':\n            return 1\n    return 0\n",
+    "def _planted(actor):\n    match actor.kind:\n        case 'car' | 'truck':\n            return 1\n    return 0\n",
+    # dispatch through a table keyed by kind strings
+    "def _planted(actor, f, g):\n    return {'pedestrian': f, 'car': g}[actor.kind]()\n",
+    "def _planted(actor, f, g):\n    return {'pedestrian': f, 'car': g}.get(actor.kind)\n",
+    "_PLANTED_TABLE = {'pedestrian': 1, 'bicycle': 2}\n\n\ndef _planted(actor):\n"
+    "    return _PLANTED_TABLE.get(actor.kind, 0)\n",
+    "_PLANTED_TABLE = {**{k: 1 for k in ('car', 'bus')}}\n\n\ndef _planted(actor):\n    return _PLANTED_TABLE[actor.kind]\n",
+    "_PLANTED_TABLE = {'pedestrian': 1, 'bicycle': 2}\n\n\ndef _planted():\n    return _PLANTED_TABLE['pedestrian']\n",
+    # the kind read by a subscript or .get
+    "def _planted(actor):\n    return actor['kind'] == 'car'\n",
+    "def _planted(actor):\n    return actor.get('kind') in ('car', 'truck')\n",
+    # the kind rebound to a name, or read through str()/.value
+    "def _planted(actor):\n    k = actor.kind\n    if k == 'car':\n        return 1\n    return 0\n",
+    "def _planted(actor):\n    k = actor.kind\n    other = k\n    return other in ('car', 'truck')\n",
+    "def _planted(actor):\n    if (k := str(actor.kind)) == 'car':\n        return k\n    return None\n",
+    "def _planted(actor):\n    return actor.kind.value == 'car'\n",
+    # membership in a named collection of kind strings
+    "_PLANTED_KINDS = frozenset({'car', 'truck'})\n\n\ndef _planted(actor):\n    return actor.kind in _PLANTED_KINDS\n",
+    "_PLANTED_KINDS = ('car', 'truck')\n\n\ndef _planted(actor):\n    return actor.kind in _PLANTED_KINDS + ('bus',)\n",
+])
+def test_the_kind_rule_sees_a_kind_planted_through_another_spelling(tmp_path, planted):
+    target = "envs/trace.py"
+    kinds = _all_kinds()
+    assert not kinds_spelled_out({target: ROOT / target}, kinds)
+    copy = tmp_path / "planted.py"
+    source = (ROOT / target).read_text(encoding="utf-8")
+    copy.write_text(source + "\n\n" + planted, encoding="utf-8")
+    found = kinds_spelled_out({target: copy}, kinds)
+    first = len((source + "\n\n").splitlines()) + 1
+    assert list(found) == [target] and found[target] and all(int(line.partition(":")[0]) >= first
+                                                              for line in found[target]), found
+
+
+def test_the_kind_rule_sees_a_kind_table_imported_from_another_module(tmp_path):
+    """A table of kind strings defined in one module and read with a kind in another."""
+    kinds = _all_kinds()
+    home, user = "envs/trace.py", "envs/trace_bounds.py"
+    table = tmp_path / "table.py"
+    table.write_text((ROOT / home).read_text(encoding="utf-8") + "\n\nPLANTED_KINDS = ('car', 'truck', 'bus')\n",
+                     encoding="utf-8")
+    reader = tmp_path / "reader.py"
+    reader.write_text((ROOT / user).read_text(encoding="utf-8") + "\n\nfrom envs.trace import PLANTED_KINDS as _K\n\n\n"
+                      "def _planted(actor):\n    return actor.kind in _K\n", encoding="utf-8")
+    assert not kinds_spelled_out({home: ROOT / home, user: ROOT / user}, kinds)
+    assert list(kinds_spelled_out({home: table, user: reader}, kinds)) == [user]
+
+
+def test_the_kind_rule_leaves_tables_of_other_words_alone():
+    """A table of other words that holds one kind by chance is not a table of kinds (``{"str": ..., "any": ...}``);
+    a table keyed by the enum is the way to key by kind."""
+    kinds = _all_kinds()
+    tree = ast.parse("_CHECKS = {'str': 1, 'int': 2, 'any': 3}\n_BY_KIND = {ActorKind.CAR: 1}\n"
+                     "def f(kind, actor):\n    return _CHECKS[kind], _BY_KIND[actor.kind], actor.kind in _BY_KIND\n")
+    assert not kind_strings_compared(tree, kinds)
