@@ -1318,9 +1318,9 @@ def _functions_of(tree: ast.AST):
 
 
 def _parameters(node: ast.AST) -> int:
-    """Named parameters (not ``self``, ``cls``), ``*args``, and ``**kwargs`` as the named fields the body reads
-    from it (``kwargs["x"]``, ``kwargs.get("x")``, ``.pop``, ``.setdefault``, ``"x" in kwargs``; one when it
-    reads none by name)."""
+    """Named parameters (not ``self``, ``cls``), ``*args`` as the positions the body takes from it
+    (:func:`_positional_fields`), and ``**kwargs`` as the named fields the body reads from it
+    (:func:`_keyword_fields`); each counts one when the body reads none by name or position."""
     args = node.args
     names = [a.arg for a in args.posonlyargs + args.args + args.kwonlyargs]
     count = len([n for n in names if n not in ("self", "cls")])
@@ -1328,55 +1328,161 @@ def _parameters(node: ast.AST) -> int:
     return count + (max(1, len(_keyword_fields(node, args.kwarg.arg))) if args.kwarg else 0)
 
 
+def _literal_int(node: Optional[ast.AST]) -> Optional[int]:
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+        value = _literal_int(node.operand)
+        return None if value is None else -value
+    return node.value if isinstance(node, ast.Constant) and isinstance(node.value, int) else None
+
+
+def _aliases(function: ast.AST, name: str, same) -> Set[str]:
+    """``name`` and the names the function binds to it, or to what ``same(node, aliases)`` says holds the same
+    (``rest = args``, ``options = dict(kwargs)``), followed through further bindings."""
+    aliases = {name}
+    changed = True
+    while changed:
+        changed = False
+        for node in ast.walk(function):
+            pairs = [(t, node.value) for t in node.targets] if isinstance(node, ast.Assign) else \
+                [(node.target, node.value)] if isinstance(node, (ast.AnnAssign, ast.NamedExpr)) and node.value else []
+            for target, value in pairs:
+                if isinstance(target, ast.Name) and target.id not in aliases and same(value, aliases):
+                    aliases.add(target.id)
+                    changed = True
+    return aliases
+
+
+def _literal_length(node: ast.AST, function: ast.AST) -> int:
+    """The length of a literal tuple or list, or of one a name of the function is bound to; else 0."""
+    if isinstance(node, ast.Name):
+        bound = [n.value for n in ast.walk(function) if isinstance(n, ast.Assign)
+                 and any(isinstance(t, ast.Name) and t.id == node.id for t in n.targets)]
+        node = bound[0] if len(bound) == 1 else node
+    return len(node.elts) if isinstance(node, (ast.Tuple, ast.List)) else 0
+
+
 def _positional_fields(function: ast.AST, vararg: str) -> int:
-    """How many positions a function's body reads from its ``*vararg`` tuple: the most of the names it is
-    unpacked into (``a, b, *rest = args``: three), one past the highest literal index it reads (``args[2]``:
-    three; ``args[-2]``: two) and the largest literal bound of a slice of it (``args[:3]``: three); 0 when it reads
-    none by position (it is passed on whole)."""
-    def is_vararg(node: ast.AST) -> bool:
+    """How many positions a function's body reads from its ``*vararg`` tuple (or a name bound to it, ``list(args)``
+    or ``tuple(args)``): the most of the names it is unpacked into (``a, b, *rest = args``: three), one past the
+    highest literal index it reads (``args[2]``: three; ``args[-2]``: two), the largest literal bound of a slice of
+    it (``args[:3]``: three), an index run over ``range(N)`` (N), the names it is zipped with (``zip(("a", "b"),
+    args)``: two) and the ``next()`` calls on an iterator over it (``it = iter(args)``); 0 when it reads none by
+    position (it is passed on whole)."""
+    def holds(node: ast.AST, aliases: Set[str]) -> bool:
         if isinstance(node, ast.Call) and getattr(node.func, "id", None) in ("list", "tuple") and len(node.args) == 1:
             node = node.args[0]  # ``list(args)`` holds the same positions
-        return isinstance(node, ast.Name) and node.id == vararg
+        return isinstance(node, ast.Name) and node.id in aliases
 
-    def literal(node: Optional[ast.AST]) -> Optional[int]:
-        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
-            value = literal(node.operand)
-            return None if value is None else -value
-        return node.value if isinstance(node, ast.Constant) and isinstance(node.value, int) else None
-
-    count = 0
+    aliases = _aliases(function, vararg, holds)
+    iterators = _aliases(function, "\0", lambda node, found: isinstance(node, ast.Call) and getattr(
+        node.func, "id", None) == "iter" and len(node.args) == 1 and holds(node.args[0], aliases) or (
+        isinstance(node, ast.Name) and node.id in found))
+    ranges = {}
     for node in ast.walk(function):
-        if isinstance(node, ast.Assign) and is_vararg(node.value):
+        if (isinstance(node, (ast.For, ast.comprehension)) and isinstance(node.target, ast.Name)
+                and isinstance(node.iter, ast.Call) and getattr(node.iter.func, "id", None) == "range"):
+            bounds = [_literal_int(a) for a in node.iter.args[:2]]
+            if bounds and all(b is not None for b in bounds):
+                ranges[node.target.id] = max(bounds)
+    count = nexts = 0
+    for node in ast.walk(function):
+        if isinstance(node, ast.Assign) and (holds(node.value, aliases) or holds(node.value, iterators)):
             count = max([count] + [len(t.elts) for t in node.targets if isinstance(t, (ast.Tuple, ast.List))])
-        elif isinstance(node, ast.Subscript) and is_vararg(node.value):
+        elif isinstance(node, ast.Subscript) and holds(node.value, aliases):
             index = node.slice
             if isinstance(index, ast.Slice):
-                bounds = [literal(index.lower), literal(index.upper)]
+                bounds = [_literal_int(index.lower), _literal_int(index.upper)]
                 count = max([count] + [abs(b) for b in bounds if b is not None])
-            elif literal(index) is not None:
-                position = literal(index)
+            elif _literal_int(index) is not None:
+                position = _literal_int(index)
                 count = max(count, position + 1 if position >= 0 else -position)
-    return count
+            elif isinstance(index, ast.Name) and index.id in ranges:
+                count = max(count, ranges[index.id])
+        elif isinstance(node, ast.Call) and getattr(node.func, "id", None) == "zip" and \
+                any(holds(a, aliases) for a in node.args):
+            count = max([count] + [_literal_length(a, function) for a in node.args])
+        elif isinstance(node, ast.Call) and getattr(node.func, "id", None) == "next" and node.args and \
+                holds(node.args[0], iterators):
+            nexts += 1
+    return max(count, nexts)
 
 
 def _keyword_fields(function: ast.AST, kwarg: str) -> Set[str]:
-    """The literal keys a function's body reads from its ``**kwarg`` mapping."""
-    def is_kwarg(node: ast.AST) -> bool:
-        return isinstance(node, ast.Name) and node.id == kwarg
+    """The literal keys a function's body reads from its ``**kwarg`` mapping, or from a name bound to it (``options
+    = kwargs``, ``dict(kwargs)``, ``kwargs.copy()``, ``{**kwargs}``, ``dict(kwargs.items())``) or to one of its
+    readers (``get = kwargs.get``): ``kwargs["x"]``, ``.get("x")``, ``.pop``, ``.setdefault``, ``"x" in kwargs``,
+    ``operator.itemgetter("x", "y")(kwargs)``; and the literal keys a key taken from it is compared with (``for key,
+    value in kwargs.items(): if key == "x"``, ``key in ("x", "y")``, ``match key: case "x"``)."""
+    def holds(node: ast.AST, aliases: Set[str]) -> bool:
+        if isinstance(node, ast.Call) and not node.keywords and len(node.args) == 1 and \
+                getattr(node.func, "id", None) == "dict":
+            node = node.args[0]
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "copy":
+            node = node.func.value
+        elif isinstance(node, ast.Call) and getattr(node.func, "id", None) == "dict" and not node.args and \
+                len(node.keywords) == 1 and node.keywords[0].arg is None:
+            node = node.keywords[0].value
+        elif isinstance(node, ast.Dict) and len(node.keys) == 1 and node.keys[0] is None:
+            node = node.values[0]
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "items":
+            node = node.func.value
+        return isinstance(node, ast.Name) and node.id in aliases
 
-    def literal(node: ast.AST) -> Optional[str]:
-        return node.value if isinstance(node, ast.Constant) and isinstance(node.value, str) else None
+    def literals(node: ast.AST) -> List[Optional[str]]:
+        if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+            return [k for e in node.elts for k in literals(e)]
+        return [node.value] if isinstance(node, ast.Constant) and isinstance(node.value, str) else []
+
+    aliases = _aliases(function, kwarg, holds)
+    readers = _aliases(function, "\0", lambda node, found: isinstance(node, ast.Attribute) and node.attr in (
+        "get", "pop", "setdefault", "__getitem__") and holds(node.value, aliases) or (
+        isinstance(node, ast.Name) and node.id in found))
+    keys_taken: Set[str] = set()
+    for node in ast.walk(function):
+        if isinstance(node, (ast.For, ast.comprehension)):
+            iterated = node.iter
+            if isinstance(iterated, ast.Call) and isinstance(iterated.func, ast.Attribute) and \
+                    iterated.func.attr in ("items", "keys"):
+                iterated = iterated.func.value
+            if holds(iterated, aliases):
+                target = node.target.elts[0] if isinstance(node.target, ast.Tuple) and node.target.elts \
+                    else node.target
+                if isinstance(target, ast.Name):
+                    keys_taken.add(target.id)
+
+    def is_key(node: ast.AST) -> bool:
+        return isinstance(node, ast.Name) and node.id in keys_taken
 
     keys: Set[str] = set()
     for node in ast.walk(function):
-        if isinstance(node, ast.Subscript) and is_kwarg(node.value):
-            keys.add(literal(node.slice))
-        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and is_kwarg(node.func.value)
-              and node.func.attr in ("get", "pop", "setdefault") and node.args):
-            keys.add(literal(node.args[0]))
-        elif isinstance(node, ast.Compare) and any(is_kwarg(c) for c in node.comparators):
-            keys.add(literal(node.left))
-    return keys - {None}
+        if isinstance(node, ast.Subscript) and holds(node.value, aliases):
+            keys.update(literals(node.slice))
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and holds(node.func.value, aliases)
+              and node.func.attr in ("get", "pop", "setdefault", "__getitem__") and node.args):
+            keys.update(literals(node.args[0]))
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in readers - {"\0"} \
+                and node.args:
+            keys.update(literals(node.args[0]))
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Call) and
+              _base_name(node.func.func) == "itemgetter" and node.args and holds(node.args[0], aliases)):
+            keys.update(k for a in node.func.args for k in literals(a))
+        elif isinstance(node, ast.Compare):
+            sides = [node.left, *node.comparators]
+            for a, b in zip(sides, sides[1:]):
+                if holds(b, aliases) or is_key(a):
+                    keys.update(literals(b) if is_key(a) else literals(a))
+                elif is_key(b):
+                    keys.update(literals(a))
+        elif isinstance(node, ast.Match) and is_key(node.subject):
+            keys.update(p.value.value for p in ast.walk(node) if isinstance(p, ast.MatchValue)
+                        and isinstance(p.value, ast.Constant) and isinstance(p.value.value, str))
+        elif isinstance(node, (ast.Subscript, ast.Call)) and is_key(
+                node.slice if isinstance(node, ast.Subscript) else node.args[0] if node.args else None):
+            table = node.value if isinstance(node, ast.Subscript) else \
+                node.func.value if isinstance(node.func, ast.Attribute) and node.func.attr == "get" else None
+            if isinstance(table, ast.Dict):
+                keys.update(k for key in table.keys if key is not None for k in literals(key))
+    return keys
 
 
 def _statement_lines(node: ast.AST) -> int:
@@ -1442,6 +1548,54 @@ def test_the_limits_see_parameters_planted_through_star_args(tmp_path, planted):
     assert not over_the_limits({target: ROOT / target})
     name = planted.partition("(")[0].removeprefix("def ")
     assert list(over_the_limits({target: copy})) == [f"{target}:{name}"]
+
+
+_NINE = ("a", "b", "c", "d", "e", "f", "g", "h", "i")
+"""Nine names: one more than :data:`MAX_PARAMETERS`."""
+
+
+@pytest.mark.parametrize("planted", [
+    # named keys read from **kwargs through .items(), an alias, a bound reader or itemgetter
+    "def _planted_items(**kwargs):\n    total = 0\n    for key, value in kwargs.items():\n"
+    "        if key in (%(keys)s):\n            total += value\n    return total\n",
+    "def _planted_match(**kwargs):\n    total = 0\n    for key in kwargs:\n        match key:\n"
+    + "".join(f"            case '{k}':\n                total += {n}\n" for n, k in enumerate(_NINE)) + "    return total\n",
+    "def _planted_dispatch(**kwargs):\n    return [{%(table)s}.get(key) for key, value in kwargs.items()]\n",
+    "def _planted_alias(**kwargs):\n    options = dict(kwargs)\n    return " + ", ".join(
+        f"options.get('{k}')" for k in _NINE) + "\n",
+    "def _planted_copy(**kwargs):\n    options = {**kwargs}\n    return " + ", ".join(
+        f"options['{k}']" for k in _NINE) + "\n",
+    "def _planted_reader(**kwargs):\n    get = kwargs.get\n    return " + ", ".join(f"get('{k}')" for k in _NINE) + "\n",
+    "def _planted_itemgetter(**kwargs):\n    import operator\n    return operator.itemgetter(%(keys)s)(kwargs)\n",
+    "def _planted_subscript(**kwargs):\n    return " + ", ".join(f"kwargs['{k}']" for k in _NINE) + "\n",
+    # positions taken from *args through zip, iter, an index over range() or an alias
+    "def _planted_zip(*args):\n    return dict(zip((%(keys)s), args))\n",
+    "def _planted_zip_named(*args):\n    names = (%(keys)s)\n    return {n: v for n, v in zip(names, args)}\n",
+    "def _planted_iter(*args):\n    it = iter(args)\n    return " + ", ".join("next(it)" for _ in _NINE) + "\n",
+    "def _planted_iter_unpacked(*args):\n    it = iter(args)\n    a, b, c, d, e, f, g, h, i = it\n    return a\n",
+    "def _planted_range(*args):\n    total = 0\n    for i in range(9):\n        total += args[i]\n    return total\n",
+    "def _planted_alias_index(*args):\n    rest = args\n    return rest[8]\n",
+])
+def test_the_limits_see_parameters_planted_through_kwargs_and_args(tmp_path, planted):
+    planted = planted % {"keys": ", ".join(repr(k) for k in _NINE),
+                         "table": ", ".join(f"{k!r}: {n}" for n, k in enumerate(_NINE))}
+    target = "policies/baselines.py"
+    copy = tmp_path / "planted.py"
+    copy.write_text((ROOT / target).read_text(encoding="utf-8") + "\n\n" + planted, encoding="utf-8")
+    assert not over_the_limits({target: ROOT / target})
+    name = planted.partition("(")[0].removeprefix("def ")
+    assert list(over_the_limits({target: copy})) == [f"{target}:{name}"]
+    assert over_the_limits({target: copy})[f"{target}:{name}"].endswith(" 9 parameters")
+
+
+def test_keyword_arguments_passed_on_whole_count_once():
+    def count(source: str) -> int:
+        return _parameters(ast.parse(textwrap.dedent(source)).body[0])
+
+    assert count("def f(**kw):\n    return g(**kw)\n") == 1
+    assert count("def f(**kw):\n    for key, value in kw.items():\n        print(key, value)\n") == 1
+    assert count("def f(**kw):\n    options = dict(kw)\n    return options['a'], kw.get('b')\n") == 2
+    assert count("def f(*args):\n    return [a for a in args]\n") == 1
 
 
 @pytest.mark.parametrize("planted, name", [
