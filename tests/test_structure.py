@@ -1890,10 +1890,7 @@ def misplaced_imports(modules: Dict[str, Path], heavy: Dict[str, str], startup: 
             continue
         front = module in startup and any(module == part or module.startswith(part + ".") for part in STARTUP_FRONT)
         tree = _parsed(path)
-        in_functions = {id(node): node for function in ast.walk(tree)
-                        if isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef))
-                        for node in ast.walk(function) if isinstance(node, (ast.Import, ast.ImportFrom))}
-        for node in sorted(in_functions.values(), key=lambda n: n.lineno):
+        for node, line, shown in function_level_imports(tree):
             names = _imported_names(node, module, path)
             if isinstance(node, ast.ImportFrom):
                 names = names[:-1]  # ``from a import b`` loads a.b when that is a module, else a
@@ -1906,8 +1903,64 @@ def misplaced_imports(modules: Dict[str, Path], heavy: Dict[str, str], startup: 
                 if not (added - loads[module]) and not deferred:
                     light.append(name)
             if light:
-                wrong.append(f"{module}:{node.lineno}: {ast.unparse(node)}")
+                wrong.append(f"{module}:{line}: {shown}")
     return wrong
+
+
+_IMPORTERS = {"import_module", "__import__"}
+"""Calls that import the module their first argument names: ``importlib.import_module``, ``__import__``."""
+
+
+def function_level_imports(tree: ast.Module) -> List[tuple]:
+    """``(import statement, line, as written)`` of every import made inside a function (or a lambda), by line: an
+    ``import`` statement; a call of an importer (:data:`_IMPORTERS`, under its name, an alias, an attribute or a
+    ``getattr(importlib, "import_module")``) given a literal name, read as ``import name`` (``import_module(".mod",
+    "pkg")`` as ``import pkg.mod``); and the imports of code run from a literal string (``exec("import x")``,
+    :func:`_code_run`). A name computed at run time is not read here: the import graph refuses it unless
+    :data:`COMPUTED_LOADS` lists the module."""
+    importers = set(_IMPORTERS)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module in ("importlib", "builtins"):
+            importers |= {alias.asname for alias in node.names if alias.name in _IMPORTERS and alias.asname}
+
+    def imported_by(call: ast.Call) -> Optional[str]:
+        func = call.func
+        named = _base_name(func) in importers or (
+            isinstance(func, ast.Call) and getattr(func.func, "id", None) == "getattr" and len(func.args) > 1
+            and isinstance(func.args[1], ast.Constant) and func.args[1].value in _IMPORTERS)
+        first = call.args[0] if call.args else None
+        if not named or not (isinstance(first, ast.Constant) and isinstance(first.value, str)):
+            return None
+        name = first.value
+        if name.startswith("."):
+            package = call.args[1] if len(call.args) > 1 else next(
+                (k.value for k in call.keywords if k.arg == "package"), None)
+            if not (isinstance(package, ast.Constant) and isinstance(package.value, str)):
+                return None
+            anchor = package.value.split(".")
+            level = len(name) - len(name.lstrip("."))
+            name = ".".join(anchor[: len(anchor) - level + 1] + [name.lstrip(".")])
+        return name
+
+    found = {}
+    for function in ast.walk(tree):
+        if not isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            continue
+        for node in ast.walk(function):
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                found[(node.lineno, ast.unparse(node))] = (node, node.lineno, ast.unparse(node))
+            elif isinstance(node, ast.Call) and (name := imported_by(node)) is not None:
+                statement = ast.Import(names=[ast.alias(name=name)])
+                found[(node.lineno, ast.unparse(node))] = (statement, node.lineno, ast.unparse(node))
+            elif isinstance(node, ast.Call) and (_base_name(node.func) in _RUNNERS or isinstance(node.func, ast.Call)):
+                code_trees = _code_run(ast.Module(body=[ast.Expr(value=node)], type_ignores=[]))[0]
+                for code in code_trees:
+                    for inner in ast.walk(code):
+                        if isinstance(inner, ast.Call) and (name := imported_by(inner)) is not None:
+                            inner = ast.Import(names=[ast.alias(name=name)])
+                        if isinstance(inner, (ast.Import, ast.ImportFrom)):
+                            found.setdefault((node.lineno, ast.unparse(inner)), (inner, node.lineno, ast.unparse(node)))
+    return sorted(found.values(), key=lambda item: item[1])
 
 
 @pytest.mark.slow
@@ -1949,6 +2002,46 @@ def test_the_import_rule_sees_an_import_planted_in_a_function(tmp_path, target, 
     modules[target] = copy
     wrong = misplaced_imports(modules, heavy, startup)
     assert [line.rpartition(": ")[2] for line in wrong] == [planted]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("planted, shown", [
+    ('def _planted():\n    exec("import json")\n', "exec('import json')"),
+    ('def _planted():\n    exec(compile("from dv2s_gym.regress import family", "<x>", "exec"))\n',
+     "exec(compile('from dv2s_gym.regress import family', '<x>', 'exec'))"),
+    ('import builtins\n\n\ndef _planted():\n    builtins.exec("import json")\n', "builtins.exec('import json')"),
+    ('def _planted():\n    return eval("__import__(\'json\')")\n', "eval(\"__import__('json')\")"),
+    ('def _planted():\n    return __import__("json")\n', "__import__('json')"),
+    ('_planted = lambda: __import__("json")\n', "__import__('json')"),
+    ('import importlib\n\n\ndef _planted():\n    return importlib.import_module("json")\n',
+     "importlib.import_module('json')"),
+    ('from importlib import import_module as _load\n\n\ndef _planted():\n    return _load("dv2s_gym.regress.family")\n',
+     "_load('dv2s_gym.regress.family')"),
+    ('import importlib\n\n\ndef _planted():\n    return getattr(importlib, "import_module")("json")\n',
+     "getattr(importlib, 'import_module')('json')"),
+    ('import importlib\n\n\ndef _planted():\n    return importlib.import_module(".family", "dv2s_gym.regress")\n',
+     "importlib.import_module('.family', 'dv2s_gym.regress')"),
+])
+def test_the_import_rule_sees_an_import_made_by_a_call_in_a_function(tmp_path, planted, shown):
+    """``exec("import x")``, ``__import__("x")`` and ``importlib.import_module("x")`` inside a function import ``x``
+    there as much as an ``import`` statement does: the rule reads them as one."""
+    target = "dv2s_gym.regress.report"
+    modules = _modules()
+    source = modules[target].read_text(encoding="utf-8")
+    heavy, startup = heavy_modules(modules), startup_modules()
+    assert not misplaced_imports({target: modules[target]}, heavy, startup)
+    copy = tmp_path / "planted.py"
+    copy.write_text(source + "\n\n" + planted, encoding="utf-8")
+    modules[target] = copy
+    wrong = misplaced_imports(modules, heavy, startup)
+    assert [line.partition(": ")[2] for line in wrong] == [shown]
+    # a heavy dependency loaded the same way stays allowed inside a function
+    copy = modules[target] = tmp_path / "heavy.py"
+    copy.write_text(source + "\n\n" + planted.replace("json", "torch").replace(
+        "from dv2s_gym.regress import family", "import torch").replace("dv2s_gym.regress.family", "torch").replace(
+        "'.family', 'dv2s_gym.regress'", "'torch'").replace('".family", "dv2s_gym.regress"', '"torch"'),
+        encoding="utf-8")
+    assert not misplaced_imports(modules, heavy, startup)
 
 
 def _pictured_tree() -> List[tuple]:
