@@ -2340,3 +2340,119 @@ def test_the_kind_rule_leaves_tables_of_other_words_alone():
     tree = ast.parse("_CHECKS = {'str': 1, 'int': 2, 'any': 3}\n_BY_KIND = {ActorKind.CAR: 1}\n"
                      "def f(kind, actor):\n    return _CHECKS[kind], _BY_KIND[actor.kind], actor.kind in _BY_KIND\n")
     assert not kind_strings_compared(tree, kinds)
+
+
+BUILT_IN_RAISES: Dict[str, str] = {
+    "dv2s_gym:__getattr__:AttributeError": "a module's __getattr__: Python's protocol (hasattr, from-imports) needs "
+                                           "AttributeError for a name the module does not have",
+    "dv2s_gym.regress:__getattr__:AttributeError": "a module's __getattr__: Python's protocol needs AttributeError",
+    "policies:__getattr__:AttributeError": "a module's __getattr__: Python's protocol needs AttributeError",
+    "dv2s_gym.workers.base:Backend.run:NotImplementedError": "an abstract method: a subclass that does not override "
+                                                              "it is a programming fault, Python's convention",
+    "policies.registry:Policy.act:NotImplementedError": "an abstract method (Python's convention)",
+    "policies.state_driver:StateDriver.act:NotImplementedError": "an abstract method (Python's convention)",
+    "dv2s_gym.pipeline.semantics.text:ParsedDescription.index:ValueError": "list.index's contract: ValueError when "
+                                                                           "the item is not there",
+    "dv2s_gym.mining.jsonl:JsonlAppender.append:OSError": "the operating system's error raised again with the "
+                                                          "file's path (errno kept); the command line reports an "
+                                                          "OSError as one line",
+    "scenario_bank.atomic:atomic_path:FileNotFoundError": "caught by the same function's `except OSError` and "
+                                                          "raised as AtomicWriteError: it never leaves it",
+    "scenario_bank.jail.zygote_server:unpack_reply:ValueError": "the jail's wire format: its one caller (the zygote "
+                                                                "client) catches ValueError with struct's own "
+                                                                "errors and raises ZygoteError",
+    "envs.jail_worker:serve:ValueError": "inside the jailed worker: the error is the answer sent to the parent "
+                                         "(JailRemoteError there), never raised in the user's process",
+    "scenario_bank.maps.build_maps:format_float:ValueError": "the map builder's self-check on the geometry it "
+                                                             "computes from its own tables (no user input)",
+    "scenario_bank.maps.build_maps:assert_poses_meet:AssertionError": "the map builder's self-check on its own "
+                                                                      "geometry (no user input)",
+    "scenario_bank.maps.build_maps:junction_arms:ValueError": "the map builder's self-check on its own junction "
+                                                              "tables (no user input)",
+}
+"""``module:Qualified.function:Exception`` -> why a public product function raises a bare built-in exception
+rather than a project error (one that derives from ``DV2SError`` and, where callers catch it, from the same
+built-in). The list only shrinks."""
+
+
+def _is_public(name: str) -> bool:
+    """No part of a dotted name is private (``_x``); a dunder (``__init__``, ``__getattr__``) is public."""
+    return not any(part.startswith("_") and not (part.startswith("__") and part.endswith("__"))
+                   for part in name.split("."))
+
+
+def built_in_raises(modules: Optional[Dict[str, Path]] = None) -> List[str]:
+    """``module:Qualified.function:Exception`` of every ``raise`` of a built-in exception in a public function (or
+    method) of a public module: ``raise ValueError(...)``, ``raise KeyError``, through an alias (``_E = ValueError``,
+    ``from builtins import KeyError as _K``, ``builtins.ValueError``) or a name bound to an instance (``error =
+    ValueError(...)``; ``raise error``). A raise in a nested function counts for the public function around it."""
+    found = []
+    for module, path in sorted((modules or _modules()).items()):
+        if not _is_public(module):
+            continue
+        tree = _parsed(path)
+        bindings = _bindings(list(ast.walk(tree)), classes_made_by_calls(tree), module, path)
+
+        def raised(node: ast.AST, seen: frozenset = frozenset()) -> str:
+            if isinstance(node, ast.Call):
+                return raised(node.func, seen)
+            if isinstance(node, ast.Name) and isinstance(bindings.get(node.id), ast.Call) and node.id not in seen:
+                return raised(bindings[node.id], seen | {node.id})
+            return _qualified(node, bindings)
+
+        def walk(node: ast.AST, function: Optional[str], prefix: str):
+            for child in ast.iter_child_nodes(node):
+                if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    yield from walk(child, function if function else prefix + child.name, prefix + child.name + ".")
+                elif isinstance(child, ast.ClassDef):
+                    yield from walk(child, function, prefix + child.name + ".")
+                else:
+                    if isinstance(child, ast.Raise) and child.exc is not None and function is not None:
+                        yield function, child
+                    yield from walk(child, function, prefix)
+
+        for function, node in walk(tree, None, ""):
+            qualified = raised(node.exc)
+            value = getattr(builtins, qualified.partition(".")[2], None) if qualified.startswith("builtins.") else None
+            if isinstance(value, type) and issubclass(value, BaseException) and _is_public(function):
+                found.append(f"{module}:{function}:{value.__name__}")
+    return sorted(set(found))
+
+
+def test_public_functions_raise_project_errors():
+    """A public function of the product raises the project's error for its subsystem (under ``DV2SError``, and
+    also the built-in where callers catch that), not a bare built-in: the command line catches ``DV2SError`` once
+    and prints its message; a bare ``ValueError`` is taken for a fault. :data:`BUILT_IN_RAISES` lists the
+    exceptions to this, each with the reason."""
+    found = built_in_raises()
+    new = [name for name in found if name not in BUILT_IN_RAISES]
+    assert not new, f"public functions raising a bare built-in exception (raise the subsystem's project error, or " \
+                    f"list it in BUILT_IN_RAISES with the reason): {new}"
+    stale = sorted(set(BUILT_IN_RAISES) - set(found))
+    assert not stale, f"BUILT_IN_RAISES lists raises that are gone: take them off: {stale}"
+
+
+@pytest.mark.parametrize("planted, raised", [
+    ("def planted(x):\n    raise ValueError(f'bad {x}')\n", "planted:ValueError"),
+    ("def planted(x):\n    if x:\n        raise KeyError\n", "planted:KeyError"),
+    ("def planted(x):\n    try:\n        return x[0]\n    except IndexError:\n        raise RuntimeError('no') from None\n",
+     "planted:RuntimeError"),
+    ("_E = TypeError\n\n\ndef planted(x):\n    raise _E(x)\n", "planted:TypeError"),
+    ("from builtins import LookupError as _L\n\n\ndef planted(x):\n    raise _L(x)\n", "planted:LookupError"),
+    ("import builtins\n\n\ndef planted(x):\n    raise builtins.ValueError(x)\n", "planted:ValueError"),
+    ("def planted(x):\n    error = ValueError(x)\n    raise error\n", "planted:ValueError"),
+    ("class Planted:\n    def check(self, x):\n        raise ValueError(x)\n", "Planted.check:ValueError"),
+    ("class Planted:\n    def __init__(self, x):\n        raise TypeError(x)\n", "Planted.__init__:TypeError"),
+    ("def planted(x):\n    def inner():\n        raise ValueError(x)\n    return inner()\n", "planted:ValueError"),
+])
+def test_the_raise_rule_sees_a_built_in_planted_in_a_public_function(tmp_path, planted, raised):
+    modules = _modules()
+    target = "envs.trace"
+    assert not built_in_raises({target: modules[target]})
+    copy = tmp_path / "planted.py"
+    copy.write_text(modules[target].read_text(encoding="utf-8") + "\n\n" + planted, encoding="utf-8")
+    assert built_in_raises({target: copy}) == [f"{target}:{raised}"]
+    private = tmp_path / "private.py"  # the same raise in a private function is the module's own business
+    private.write_text(modules[target].read_text(encoding="utf-8") + "\n\n" + planted.replace("planted", "_planted")
+                       .replace("class Planted", "class _Planted"), encoding="utf-8")
+    assert not built_in_raises({target: private})
