@@ -2384,8 +2384,9 @@ def _is_public(name: str) -> bool:
 def built_in_raises(modules: Optional[Dict[str, Path]] = None) -> List[str]:
     """``module:Qualified.function:Exception`` of every ``raise`` of a built-in exception in a public function (or
     method) of a public module: ``raise ValueError(...)``, ``raise KeyError``, through an alias (``_E = ValueError``,
-    ``from builtins import KeyError as _K``, ``builtins.ValueError``) or a name bound to an instance (``error =
-    ValueError(...)``; ``raise error``). A raise in a nested function counts for the public function around it."""
+    ``from builtins import KeyError as _K``, ``builtins.ValueError``), a name bound to an instance (``error =
+    ValueError(...)``; ``raise error``) or a table of classes it is looked up in (``_ERRORS[kind](message)``). A
+    raise in a nested function counts for the public function around it."""
     found = []
     for module, path in sorted((modules or _modules()).items()):
         if not _is_public(module):
@@ -2393,12 +2394,21 @@ def built_in_raises(modules: Optional[Dict[str, Path]] = None) -> List[str]:
         tree = _parsed(path)
         bindings = _bindings(list(ast.walk(tree)), classes_made_by_calls(tree), module, path)
 
-        def raised(node: ast.AST, seen: frozenset = frozenset()) -> str:
+        def raised(node: ast.AST, seen: frozenset = frozenset()) -> List[str]:
+            """What a raised expression may stand for: a class (called or not), an instance bound to a name, or
+            any of the classes of a table it is looked up in (``_ERRORS[kind](message)``, ``_ERRORS.get(kind)``)."""
+            looked_up = node.value if isinstance(node, ast.Subscript) else node.func.value if (
+                isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get") \
+                else None
+            table = bindings.get(looked_up.id) if isinstance(looked_up, ast.Name) else looked_up
+            if isinstance(table, ast.Dict):
+                return [q for value in table.values for q in raised(value, seen)]
             if isinstance(node, ast.Call):
                 return raised(node.func, seen)
-            if isinstance(node, ast.Name) and isinstance(bindings.get(node.id), ast.Call) and node.id not in seen:
+            if isinstance(node, ast.Name) and isinstance(bindings.get(node.id), (ast.Call, ast.Subscript)) \
+                    and node.id not in seen:
                 return raised(bindings[node.id], seen | {node.id})
-            return _qualified(node, bindings)
+            return [_qualified(node, bindings)]
 
         def walk(node: ast.AST, function: Optional[str], prefix: str):
             for child in ast.iter_child_nodes(node):
@@ -2412,10 +2422,11 @@ def built_in_raises(modules: Optional[Dict[str, Path]] = None) -> List[str]:
                     yield from walk(child, function, prefix)
 
         for function, node in walk(tree, None, ""):
-            qualified = raised(node.exc)
-            value = getattr(builtins, qualified.partition(".")[2], None) if qualified.startswith("builtins.") else None
-            if isinstance(value, type) and issubclass(value, BaseException) and _is_public(function):
-                found.append(f"{module}:{function}:{value.__name__}")
+            for qualified in raised(node.exc):
+                value = getattr(builtins, qualified.partition(".")[2], None) if qualified.startswith("builtins.") \
+                    else None
+                if isinstance(value, type) and issubclass(value, BaseException) and _is_public(function):
+                    found.append(f"{module}:{function}:{value.__name__}")
     return sorted(set(found))
 
 
@@ -2444,6 +2455,9 @@ def test_public_functions_raise_project_errors():
     ("class Planted:\n    def check(self, x):\n        raise ValueError(x)\n", "Planted.check:ValueError"),
     ("class Planted:\n    def __init__(self, x):\n        raise TypeError(x)\n", "Planted.__init__:TypeError"),
     ("def planted(x):\n    def inner():\n        raise ValueError(x)\n    return inner()\n", "planted:ValueError"),
+    ("_ERRORS = {'a': KeyError, 'b': DV2SError}\n\n\ndef planted(x):\n    raise _ERRORS[x]('no')\n", "planted:KeyError"),
+    ("_ERRORS = {'a': KeyError}\n\n\ndef planted(x):\n    cls = _ERRORS.get(x, DV2SError)\n    raise cls('no')\n",
+     "planted:KeyError"),
 ])
 def test_the_raise_rule_sees_a_built_in_planted_in_a_public_function(tmp_path, planted, raised):
     modules = _modules()
