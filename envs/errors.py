@@ -86,3 +86,13 @@ class StepTimeoutError(DV2SError, RuntimeError):
 
 class UntrustedScenarioError(DV2SError, PermissionError):
     """Untrusted Scenic was about to be compiled outside the jail; run it through DV2SEnv or the sandbox."""
+
+
+class SimulatorPropertiesError(DV2SError, RuntimeError):
+    """The simulator reported an object's properties other than the ones Scenic declares for it (a fault of the
+    simulator interface, not of the scenario). A :class:`RuntimeError`, so code catching that keeps working."""
+
+    expected = False
+
+
+__all__.append("SimulatorPropertiesError")

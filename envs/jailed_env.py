@@ -33,10 +33,10 @@ from envs.scenarios import ParamRange, read_scenario_file
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.maps import list_maps, resolve_map, UnknownMapError
 from scenario_bank.safety import UnsafeScenarioError
-from scenario_bank.errors import MissingFileError
+from scenario_bank.errors import MissingFileError, WrongTypeError
 from scenario_bank.safe_files import UnsafeInputError
 
-__all__ = ["JailedDV2SEnv", "space_to_data", "data_to_space", "parameter_ranges_of", "MAX_MAP_BYTES"]
+__all__ = ["JailedDV2SEnv", "SpaceDataError", "space_to_data", "data_to_space", "parameter_ranges_of", "MAX_MAP_BYTES"]
 
 MAX_MAP_BYTES = 64 * 2**20  # all map files of one scenario together
 MAX_MAP_FILES = 4
@@ -46,6 +46,11 @@ _MAP_LINE = re.compile(r"""^[ \t]*param[ \t]+(map|sumo_map)[ \t]*=[ \t]*(localPa
 
 
 # ---------------------------------------------------------------- spaces as data
+class SpaceDataError(DV2SError, ValueError):
+    """A space description from the jailed worker is not one :func:`space_to_data` writes. A :class:`ValueError`,
+    so code catching that keeps working."""
+
+
 def space_to_data(space: gym.Space) -> Dict[str, Any]:
     """A Gymnasium space as plain data (Box, Discrete, MultiDiscrete, MultiBinary, Tuple, Dict)."""
     if isinstance(space, gym.spaces.Box):
@@ -60,18 +65,19 @@ def space_to_data(space: gym.Space) -> Dict[str, Any]:
         return {"type": "Tuple", "spaces": [space_to_data(s) for s in space.spaces]}
     if isinstance(space, gym.spaces.Dict):
         return {"type": "Dict", "spaces": {k: space_to_data(s) for k, s in space.spaces.items()}}
-    raise TypeError(f"space {space} cannot cross the jail")
+    raise WrongTypeError(f"space {space} cannot cross the jail")
 
 
 def data_to_space(data: Any, depth: int = 0) -> gym.Space:
-    """The space :func:`space_to_data` described; raises ``ValueError`` on anything else."""
+    """The space :func:`space_to_data` described; raises :class:`SpaceDataError` (a ``ValueError``) on anything
+    else."""
     if not isinstance(data, dict) or depth > 8:
-        raise ValueError("not a space description")
+        raise SpaceDataError("not a space description")
     kind = data.get("type")
     if kind == "Box":
         low, high = np.asarray(data["low"]), np.asarray(data["high"])
         if low.shape != high.shape or low.size > 10**7:
-            raise ValueError("Box bounds disagree")
+            raise SpaceDataError("Box bounds disagree")
         return gym.spaces.Box(low=low, high=high, dtype=np.dtype(str(data["dtype"])))
     if kind == "Discrete":
         return gym.spaces.Discrete(int(data["n"]), start=int(data.get("start", 0)))
@@ -83,7 +89,7 @@ def data_to_space(data: Any, depth: int = 0) -> gym.Space:
         return gym.spaces.Tuple([data_to_space(s, depth + 1) for s in data["spaces"]])
     if kind == "Dict":
         return gym.spaces.Dict({str(k): data_to_space(s, depth + 1) for k, s in data["spaces"].items()})
-    raise ValueError(f"unknown space type {kind!r}")
+    raise SpaceDataError(f"unknown space type {kind!r}")
 
 
 def _as_space_value(value: Any, space: gym.Space) -> Any:

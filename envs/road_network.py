@@ -199,7 +199,7 @@ class _Polyline:
     def __init__(self, points: np.ndarray) -> None:
         pts = _dedupe(np.asarray(points, dtype=float)[:, :2])
         if len(pts) < 2:
-            raise ValueError("polyline needs at least two distinct points")
+            raise MapLoadError("polyline needs at least two distinct points")
         seg = np.diff(pts, axis=0)
         seg_len = np.hypot(seg[:, 0], seg[:, 1])
         self.points = pts

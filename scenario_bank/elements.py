@@ -50,8 +50,6 @@ __all__ = [
 ]
 
 ROADS = ("highway", "straight_road", "intersection", "t_junction", "three_way", "roundabout", "merge")
-PARTICIPANTS = ("ego", "car", "truck", "bus", "motorcycle", "bicycle", "pedestrian", "obstacle")
-"""Vans, SUVs and pickups are ``car``; scooters and cyclists ride a ``bicycle``; a motorcyclist a ``motorcycle``."""
 
 
 class ActorKind(StrEnum):
@@ -67,6 +65,11 @@ class ActorKind(StrEnum):
     BICYCLE = "bicycle"
     PEDESTRIAN = "pedestrian"
     OBSTACLE = "obstacle"
+
+
+PARTICIPANTS = tuple(str(kind) for kind in ActorKind)
+"""The kinds of :class:`ActorKind`, as plain strings. Vans, SUVs and pickups are ``car``; scooters and cyclists
+ride a ``bicycle``; a motorcyclist a ``motorcycle``."""
 ACTIONS = (
     "brake", "stop", "accelerate", "lane_change_left", "lane_change_right", "cut_in", "merge",
     "turn_left", "turn_right", "cross", "collide", "keep_lane", "go_straight", "overtake", "drift",
@@ -84,9 +87,10 @@ RELATIONS = ("ahead_of", "behind", "left_of", "right_of", "oncoming", "same_lane
 
 _VEHICLE_ACTIONS = frozenset(ACTIONS)
 CAN_DO: Dict[str, FrozenSet[str]] = {
-    **{kind: _VEHICLE_ACTIONS for kind in ("ego", "car", "truck", "bus", "motorcycle", "bicycle")},
-    "pedestrian": frozenset({"cross", "stop", "collide"} | set(COLLISION_TYPES)),
-    "obstacle": frozenset(),
+    **{kind: _VEHICLE_ACTIONS for kind in (ActorKind.EGO, ActorKind.CAR, ActorKind.TRUCK, ActorKind.BUS,
+                                           ActorKind.MOTORCYCLE, ActorKind.BICYCLE)},
+    ActorKind.PEDESTRIAN: frozenset({"cross", "stop", "collide"} | set(COLLISION_TYPES)),
+    ActorKind.OBSTACLE: frozenset(),
 }
 """Participant type -> the actions a participant of that type can do at all, whether a generator builds them or
 not: the ego and every vehicle any action; a pedestrian only crosses, stops or collides; an obstacle nothing."""

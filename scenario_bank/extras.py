@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from typing import Dict
 
+from scenario_bank.errors import SettingError
+
 __all__ = ["EXTRA_OF_MODULE", "extra_of", "missing_extra_message"]
 
 EXTRA_OF_MODULE: Dict[str, str] = {
@@ -31,10 +33,10 @@ def missing_extra_message(module: str, needed_by: str = "this") -> str:
     installed: pip install 'dv2s-gym[<extra>]' (scripts/setup.sh installs every extra)"``.
 
     Raises:
-        ValueError: ``module`` is no optional dependency (:data:`EXTRA_OF_MODULE`).
+        SettingError: (a ``ValueError``) ``module`` is no optional dependency (:data:`EXTRA_OF_MODULE`).
     """
     extra = extra_of(module)
     if not extra:
-        raise ValueError(f"{module!r} is no optional dependency of dv2s-gym; those are {', '.join(EXTRA_OF_MODULE)}")
+        raise SettingError(f"{module!r} is no optional dependency of dv2s-gym; those are {', '.join(EXTRA_OF_MODULE)}")
     return (f"{needed_by} needs {module.partition('.')[0]}, which is not installed: pip install 'dv2s-gym[{extra}]' "
             "(scripts/setup.sh installs every extra)")

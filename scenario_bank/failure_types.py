@@ -16,9 +16,23 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Tuple
 
-__all__ = ["FailureType", "FAILURE_TABLE", "FAILURE_TYPES", "failure_table", "failure_type", "severity_order",
+from scenario_bank.errors import DV2SError
+
+__all__ = ["FailureTypeError", "UnknownDetectorError", "FailureType", "FAILURE_TABLE", "FAILURE_TYPES", "failure_table",
+           "failure_type", "severity_order",
            "register_failure_type", "unregister_failure_type", "type_label", "attach_detection", "detach_detection",
            "happened"]
+
+
+class FailureTypeError(DV2SError, ValueError):
+    """A failure type (or its detector) cannot be registered or removed as asked: the name or severity is taken,
+    the severity is not a whole number, the type is not there. A :class:`ValueError`, so code catching that keeps
+    working."""
+
+
+class UnknownDetectorError(DV2SError, KeyError):
+    """No detector is registered for a failure type in this process. A :class:`KeyError`, so code catching that
+    keeps working."""
 
 
 @dataclass(frozen=True)
@@ -83,12 +97,12 @@ def register_failure_type(row: FailureType) -> FailureType:
     :data:`FAILURE_TABLE`); its name and severity must be new. The miner detects it once its monitor registers a
     detector for it (:func:`dv2s_gym.mining.monitors.register_detector`). Returns ``row``."""
     if row.name in _BY_NAME:
-        raise ValueError(f"failure type {row.name!r} exists already")
+        raise FailureTypeError(f"failure type {row.name!r} exists already")
     if not isinstance(row.severity, int) or isinstance(row.severity, bool) or row.severity < 0:
-        raise ValueError(f"failure type {row.name!r}: severity {row.severity!r} is not a whole number >= 0 (0 is the "
+        raise FailureTypeError(f"failure type {row.name!r}: severity {row.severity!r} is not a whole number >= 0 (0 is the "
                          "most severe, the table's collision; a plug-in's type takes a number after the table's)")
     if any(other.severity == row.severity for other in _TABLE):
-        raise ValueError(f"failure type {row.name!r}: severity {row.severity} is taken; choose one no type has")
+        raise FailureTypeError(f"failure type {row.name!r}: severity {row.severity} is taken; choose one no type has")
     _REGISTERED[row.name] = row
     _rebuild()
     return row
@@ -97,7 +111,7 @@ def register_failure_type(row: FailureType) -> FailureType:
 def unregister_failure_type(name: str) -> None:
     """Remove the failure type ``name`` added by :func:`register_failure_type` (the table's own rows stay)."""
     if _REGISTERED.pop(name, None) is None:
-        raise ValueError(f"failure type {name!r} was not registered at run time")
+        raise FailureTypeError(f"failure type {name!r} was not registered at run time")
     _rebuild()
 
 
@@ -125,12 +139,12 @@ def happened(name: str, result: Any, trace: Any, settings: Mapping[str, Any]) ->
     detector with the monitor ``settings`` (e.g. ``{"stall_seconds": 5.0}``; an absent one takes its default).
 
     Raises:
-        KeyError: when no detector is registered for ``name`` in this process (a plug-in registers its type and
+        UnknownDetectorError: (a ``KeyError``) when no detector is registered for ``name`` in this process (a plug-in registers its type and
             detector in each process that detects).
     """
     detection = _DETECTION.get(name)
     if detection is None:
-        raise KeyError(f"failure type {name!r} has no detector registered in this process; its plug-in must "
+        raise UnknownDetectorError(f"failure type {name!r} has no detector registered in this process; its plug-in must "
                        "register the type and its detector (dv2s_gym.mining.monitors.register_detector) in each "
                        "process that detects")
     return bool(detection(result, trace, settings))

@@ -12,7 +12,7 @@ import math
 import os
 from typing import Any, Collection, Mapping, Optional, Tuple, Type
 
-from scenario_bank.errors import DV2SError
+from scenario_bank.errors import DV2SError, SettingError
 
 __all__ = ["check_int", "check_number", "check_bool", "check_choice", "check_names", "check_text", "check_path",
            "check_mapping"]
@@ -55,7 +55,7 @@ def check_number(error: Type[DV2SError], name: str, value: Any, *, low: Optional
     brackets of an interval (``"[)"``: ``low <= value < high``, ``"(]"``: ``low < value``); ``None`` when
     ``optional``. ``example`` is appended to the message (``"e.g. 0.05"``)."""
     if interval not in ("[]", "(]", "[)", "()"):
-        raise ValueError(f"interval must be one of [], (], [), (), not {interval!r}")
+        raise SettingError(f"interval must be one of [], (], [), (), not {interval!r}")
     if value is None and optional:
         return None
     low_open, high_open = interval[0] == "(", interval[1] == ")"

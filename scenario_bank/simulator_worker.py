@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import Optional
 
-from scenario_bank.errors import DV2SError
+from scenario_bank.errors import DV2SError, SettingError
 
 __all__ = ["NoSimulatorError", "use_simulator_worker", "simulator_worker"]
 
@@ -31,7 +31,7 @@ def use_simulator_worker(module: str) -> None:
     """Name the jailed worker module (a dotted module name) that compiles, samples and runs scripts."""
     global _WORKER
     if not isinstance(module, str) or not module or not all(part.isidentifier() for part in module.split(".")):
-        raise ValueError(f"the simulator worker is a dotted module name such as 'envs.jail_worker', not {module!r}")
+        raise SettingError(f"the simulator worker is a dotted module name such as 'envs.jail_worker', not {module!r}")
     _WORKER = module
 
 

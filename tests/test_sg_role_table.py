@@ -52,5 +52,5 @@ def test_pedestrian_abilities_are_read_from_can_do():
     for path in [RULES / "lane_roles.py", RULES / "junctions.py", Path(lane_roles.__file__).parents[2] / "semantics" / "text.py"]:
         text = path.read_text()
         assert '"cross", "stop", "collide"' not in text, path
-        assert 'CAN_DO["pedestrian"]' in text, path
+        assert 'CAN_DO[ActorKind.PEDESTRIAN]' in text, path
     assert {"cross", "stop", "collide"} <= CAN_DO["pedestrian"]

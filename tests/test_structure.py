@@ -1318,9 +1318,9 @@ def _functions_of(tree: ast.AST):
 
 
 def _parameters(node: ast.AST) -> int:
-    """Named parameters (not ``self``, ``cls``), ``*args``, and ``**kwargs`` as the named fields the body reads
-    from it (``kwargs["x"]``, ``kwargs.get("x")``, ``.pop``, ``.setdefault``, ``"x" in kwargs``; one when it
-    reads none by name)."""
+    """Named parameters (not ``self``, ``cls``), ``*args`` as the positions the body takes from it
+    (:func:`_positional_fields`), and ``**kwargs`` as the named fields the body reads from it
+    (:func:`_keyword_fields`); each counts one when the body reads none by name or position."""
     args = node.args
     names = [a.arg for a in args.posonlyargs + args.args + args.kwonlyargs]
     count = len([n for n in names if n not in ("self", "cls")])
@@ -1328,55 +1328,161 @@ def _parameters(node: ast.AST) -> int:
     return count + (max(1, len(_keyword_fields(node, args.kwarg.arg))) if args.kwarg else 0)
 
 
+def _literal_int(node: Optional[ast.AST]) -> Optional[int]:
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
+        value = _literal_int(node.operand)
+        return None if value is None else -value
+    return node.value if isinstance(node, ast.Constant) and isinstance(node.value, int) else None
+
+
+def _aliases(function: ast.AST, name: str, same) -> Set[str]:
+    """``name`` and the names the function binds to it, or to what ``same(node, aliases)`` says holds the same
+    (``rest = args``, ``options = dict(kwargs)``), followed through further bindings."""
+    aliases = {name}
+    changed = True
+    while changed:
+        changed = False
+        for node in ast.walk(function):
+            pairs = [(t, node.value) for t in node.targets] if isinstance(node, ast.Assign) else \
+                [(node.target, node.value)] if isinstance(node, (ast.AnnAssign, ast.NamedExpr)) and node.value else []
+            for target, value in pairs:
+                if isinstance(target, ast.Name) and target.id not in aliases and same(value, aliases):
+                    aliases.add(target.id)
+                    changed = True
+    return aliases
+
+
+def _literal_length(node: ast.AST, function: ast.AST) -> int:
+    """The length of a literal tuple or list, or of one a name of the function is bound to; else 0."""
+    if isinstance(node, ast.Name):
+        bound = [n.value for n in ast.walk(function) if isinstance(n, ast.Assign)
+                 and any(isinstance(t, ast.Name) and t.id == node.id for t in n.targets)]
+        node = bound[0] if len(bound) == 1 else node
+    return len(node.elts) if isinstance(node, (ast.Tuple, ast.List)) else 0
+
+
 def _positional_fields(function: ast.AST, vararg: str) -> int:
-    """How many positions a function's body reads from its ``*vararg`` tuple: the most of the names it is
-    unpacked into (``a, b, *rest = args``: three), one past the highest literal index it reads (``args[2]``:
-    three; ``args[-2]``: two) and the largest literal bound of a slice of it (``args[:3]``: three); 0 when it reads
-    none by position (it is passed on whole)."""
-    def is_vararg(node: ast.AST) -> bool:
+    """How many positions a function's body reads from its ``*vararg`` tuple (or a name bound to it, ``list(args)``
+    or ``tuple(args)``): the most of the names it is unpacked into (``a, b, *rest = args``: three), one past the
+    highest literal index it reads (``args[2]``: three; ``args[-2]``: two), the largest literal bound of a slice of
+    it (``args[:3]``: three), an index run over ``range(N)`` (N), the names it is zipped with (``zip(("a", "b"),
+    args)``: two) and the ``next()`` calls on an iterator over it (``it = iter(args)``); 0 when it reads none by
+    position (it is passed on whole)."""
+    def holds(node: ast.AST, aliases: Set[str]) -> bool:
         if isinstance(node, ast.Call) and getattr(node.func, "id", None) in ("list", "tuple") and len(node.args) == 1:
             node = node.args[0]  # ``list(args)`` holds the same positions
-        return isinstance(node, ast.Name) and node.id == vararg
+        return isinstance(node, ast.Name) and node.id in aliases
 
-    def literal(node: Optional[ast.AST]) -> Optional[int]:
-        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub):
-            value = literal(node.operand)
-            return None if value is None else -value
-        return node.value if isinstance(node, ast.Constant) and isinstance(node.value, int) else None
-
-    count = 0
+    aliases = _aliases(function, vararg, holds)
+    iterators = _aliases(function, "\0", lambda node, found: isinstance(node, ast.Call) and getattr(
+        node.func, "id", None) == "iter" and len(node.args) == 1 and holds(node.args[0], aliases) or (
+        isinstance(node, ast.Name) and node.id in found))
+    ranges = {}
     for node in ast.walk(function):
-        if isinstance(node, ast.Assign) and is_vararg(node.value):
+        if (isinstance(node, (ast.For, ast.comprehension)) and isinstance(node.target, ast.Name)
+                and isinstance(node.iter, ast.Call) and getattr(node.iter.func, "id", None) == "range"):
+            bounds = [_literal_int(a) for a in node.iter.args[:2]]
+            if bounds and all(b is not None for b in bounds):
+                ranges[node.target.id] = max(bounds)
+    count = nexts = 0
+    for node in ast.walk(function):
+        if isinstance(node, ast.Assign) and (holds(node.value, aliases) or holds(node.value, iterators)):
             count = max([count] + [len(t.elts) for t in node.targets if isinstance(t, (ast.Tuple, ast.List))])
-        elif isinstance(node, ast.Subscript) and is_vararg(node.value):
+        elif isinstance(node, ast.Subscript) and holds(node.value, aliases):
             index = node.slice
             if isinstance(index, ast.Slice):
-                bounds = [literal(index.lower), literal(index.upper)]
+                bounds = [_literal_int(index.lower), _literal_int(index.upper)]
                 count = max([count] + [abs(b) for b in bounds if b is not None])
-            elif literal(index) is not None:
-                position = literal(index)
+            elif _literal_int(index) is not None:
+                position = _literal_int(index)
                 count = max(count, position + 1 if position >= 0 else -position)
-    return count
+            elif isinstance(index, ast.Name) and index.id in ranges:
+                count = max(count, ranges[index.id])
+        elif isinstance(node, ast.Call) and getattr(node.func, "id", None) == "zip" and \
+                any(holds(a, aliases) for a in node.args):
+            count = max([count] + [_literal_length(a, function) for a in node.args])
+        elif isinstance(node, ast.Call) and getattr(node.func, "id", None) == "next" and node.args and \
+                holds(node.args[0], iterators):
+            nexts += 1
+    return max(count, nexts)
 
 
 def _keyword_fields(function: ast.AST, kwarg: str) -> Set[str]:
-    """The literal keys a function's body reads from its ``**kwarg`` mapping."""
-    def is_kwarg(node: ast.AST) -> bool:
-        return isinstance(node, ast.Name) and node.id == kwarg
+    """The literal keys a function's body reads from its ``**kwarg`` mapping, or from a name bound to it (``options
+    = kwargs``, ``dict(kwargs)``, ``kwargs.copy()``, ``{**kwargs}``, ``dict(kwargs.items())``) or to one of its
+    readers (``get = kwargs.get``): ``kwargs["x"]``, ``.get("x")``, ``.pop``, ``.setdefault``, ``"x" in kwargs``,
+    ``operator.itemgetter("x", "y")(kwargs)``; and the literal keys a key taken from it is compared with (``for key,
+    value in kwargs.items(): if key == "x"``, ``key in ("x", "y")``, ``match key: case "x"``)."""
+    def holds(node: ast.AST, aliases: Set[str]) -> bool:
+        if isinstance(node, ast.Call) and not node.keywords and len(node.args) == 1 and \
+                getattr(node.func, "id", None) == "dict":
+            node = node.args[0]
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "copy":
+            node = node.func.value
+        elif isinstance(node, ast.Call) and getattr(node.func, "id", None) == "dict" and not node.args and \
+                len(node.keywords) == 1 and node.keywords[0].arg is None:
+            node = node.keywords[0].value
+        elif isinstance(node, ast.Dict) and len(node.keys) == 1 and node.keys[0] is None:
+            node = node.values[0]
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "items":
+            node = node.func.value
+        return isinstance(node, ast.Name) and node.id in aliases
 
-    def literal(node: ast.AST) -> Optional[str]:
-        return node.value if isinstance(node, ast.Constant) and isinstance(node.value, str) else None
+    def literals(node: ast.AST) -> List[Optional[str]]:
+        if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+            return [k for e in node.elts for k in literals(e)]
+        return [node.value] if isinstance(node, ast.Constant) and isinstance(node.value, str) else []
+
+    aliases = _aliases(function, kwarg, holds)
+    readers = _aliases(function, "\0", lambda node, found: isinstance(node, ast.Attribute) and node.attr in (
+        "get", "pop", "setdefault", "__getitem__") and holds(node.value, aliases) or (
+        isinstance(node, ast.Name) and node.id in found))
+    keys_taken: Set[str] = set()
+    for node in ast.walk(function):
+        if isinstance(node, (ast.For, ast.comprehension)):
+            iterated = node.iter
+            if isinstance(iterated, ast.Call) and isinstance(iterated.func, ast.Attribute) and \
+                    iterated.func.attr in ("items", "keys"):
+                iterated = iterated.func.value
+            if holds(iterated, aliases):
+                target = node.target.elts[0] if isinstance(node.target, ast.Tuple) and node.target.elts \
+                    else node.target
+                if isinstance(target, ast.Name):
+                    keys_taken.add(target.id)
+
+    def is_key(node: ast.AST) -> bool:
+        return isinstance(node, ast.Name) and node.id in keys_taken
 
     keys: Set[str] = set()
     for node in ast.walk(function):
-        if isinstance(node, ast.Subscript) and is_kwarg(node.value):
-            keys.add(literal(node.slice))
-        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and is_kwarg(node.func.value)
-              and node.func.attr in ("get", "pop", "setdefault") and node.args):
-            keys.add(literal(node.args[0]))
-        elif isinstance(node, ast.Compare) and any(is_kwarg(c) for c in node.comparators):
-            keys.add(literal(node.left))
-    return keys - {None}
+        if isinstance(node, ast.Subscript) and holds(node.value, aliases):
+            keys.update(literals(node.slice))
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and holds(node.func.value, aliases)
+              and node.func.attr in ("get", "pop", "setdefault", "__getitem__") and node.args):
+            keys.update(literals(node.args[0]))
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in readers - {"\0"} \
+                and node.args:
+            keys.update(literals(node.args[0]))
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Call) and
+              _base_name(node.func.func) == "itemgetter" and node.args and holds(node.args[0], aliases)):
+            keys.update(k for a in node.func.args for k in literals(a))
+        elif isinstance(node, ast.Compare):
+            sides = [node.left, *node.comparators]
+            for a, b in zip(sides, sides[1:]):
+                if holds(b, aliases) or is_key(a):
+                    keys.update(literals(b) if is_key(a) else literals(a))
+                elif is_key(b):
+                    keys.update(literals(a))
+        elif isinstance(node, ast.Match) and is_key(node.subject):
+            keys.update(p.value.value for p in ast.walk(node) if isinstance(p, ast.MatchValue)
+                        and isinstance(p.value, ast.Constant) and isinstance(p.value.value, str))
+        elif isinstance(node, (ast.Subscript, ast.Call)) and is_key(
+                node.slice if isinstance(node, ast.Subscript) else node.args[0] if node.args else None):
+            table = node.value if isinstance(node, ast.Subscript) else \
+                node.func.value if isinstance(node.func, ast.Attribute) and node.func.attr == "get" else None
+            if isinstance(table, ast.Dict):
+                keys.update(k for key in table.keys if key is not None for k in literals(key))
+    return keys
 
 
 def _statement_lines(node: ast.AST) -> int:
@@ -1442,6 +1548,54 @@ def test_the_limits_see_parameters_planted_through_star_args(tmp_path, planted):
     assert not over_the_limits({target: ROOT / target})
     name = planted.partition("(")[0].removeprefix("def ")
     assert list(over_the_limits({target: copy})) == [f"{target}:{name}"]
+
+
+_NINE = ("a", "b", "c", "d", "e", "f", "g", "h", "i")
+"""Nine names: one more than :data:`MAX_PARAMETERS`."""
+
+
+@pytest.mark.parametrize("planted", [
+    # named keys read from **kwargs through .items(), an alias, a bound reader or itemgetter
+    "def _planted_items(**kwargs):\n    total = 0\n    for key, value in kwargs.items():\n"
+    "        if key in (%(keys)s):\n            total += value\n    return total\n",
+    "def _planted_match(**kwargs):\n    total = 0\n    for key in kwargs:\n        match key:\n"
+    + "".join(f"            case '{k}':\n                total += {n}\n" for n, k in enumerate(_NINE)) + "    return total\n",
+    "def _planted_dispatch(**kwargs):\n    return [{%(table)s}.get(key) for key, value in kwargs.items()]\n",
+    "def _planted_alias(**kwargs):\n    options = dict(kwargs)\n    return " + ", ".join(
+        f"options.get('{k}')" for k in _NINE) + "\n",
+    "def _planted_copy(**kwargs):\n    options = {**kwargs}\n    return " + ", ".join(
+        f"options['{k}']" for k in _NINE) + "\n",
+    "def _planted_reader(**kwargs):\n    get = kwargs.get\n    return " + ", ".join(f"get('{k}')" for k in _NINE) + "\n",
+    "def _planted_itemgetter(**kwargs):\n    import operator\n    return operator.itemgetter(%(keys)s)(kwargs)\n",
+    "def _planted_subscript(**kwargs):\n    return " + ", ".join(f"kwargs['{k}']" for k in _NINE) + "\n",
+    # positions taken from *args through zip, iter, an index over range() or an alias
+    "def _planted_zip(*args):\n    return dict(zip((%(keys)s), args))\n",
+    "def _planted_zip_named(*args):\n    names = (%(keys)s)\n    return {n: v for n, v in zip(names, args)}\n",
+    "def _planted_iter(*args):\n    it = iter(args)\n    return " + ", ".join("next(it)" for _ in _NINE) + "\n",
+    "def _planted_iter_unpacked(*args):\n    it = iter(args)\n    a, b, c, d, e, f, g, h, i = it\n    return a\n",
+    "def _planted_range(*args):\n    total = 0\n    for i in range(9):\n        total += args[i]\n    return total\n",
+    "def _planted_alias_index(*args):\n    rest = args\n    return rest[8]\n",
+])
+def test_the_limits_see_parameters_planted_through_kwargs_and_args(tmp_path, planted):
+    planted = planted % {"keys": ", ".join(repr(k) for k in _NINE),
+                         "table": ", ".join(f"{k!r}: {n}" for n, k in enumerate(_NINE))}
+    target = "policies/baselines.py"
+    copy = tmp_path / "planted.py"
+    copy.write_text((ROOT / target).read_text(encoding="utf-8") + "\n\n" + planted, encoding="utf-8")
+    assert not over_the_limits({target: ROOT / target})
+    name = planted.partition("(")[0].removeprefix("def ")
+    assert list(over_the_limits({target: copy})) == [f"{target}:{name}"]
+    assert over_the_limits({target: copy})[f"{target}:{name}"].endswith(" 9 parameters")
+
+
+def test_keyword_arguments_passed_on_whole_count_once():
+    def count(source: str) -> int:
+        return _parameters(ast.parse(textwrap.dedent(source)).body[0])
+
+    assert count("def f(**kw):\n    return g(**kw)\n") == 1
+    assert count("def f(**kw):\n    for key, value in kw.items():\n        print(key, value)\n") == 1
+    assert count("def f(**kw):\n    options = dict(kw)\n    return options['a'], kw.get('b')\n") == 2
+    assert count("def f(*args):\n    return [a for a in args]\n") == 1
 
 
 @pytest.mark.parametrize("planted, name", [
@@ -1736,10 +1890,7 @@ def misplaced_imports(modules: Dict[str, Path], heavy: Dict[str, str], startup: 
             continue
         front = module in startup and any(module == part or module.startswith(part + ".") for part in STARTUP_FRONT)
         tree = _parsed(path)
-        in_functions = {id(node): node for function in ast.walk(tree)
-                        if isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef))
-                        for node in ast.walk(function) if isinstance(node, (ast.Import, ast.ImportFrom))}
-        for node in sorted(in_functions.values(), key=lambda n: n.lineno):
+        for node, line, shown in function_level_imports(tree):
             names = _imported_names(node, module, path)
             if isinstance(node, ast.ImportFrom):
                 names = names[:-1]  # ``from a import b`` loads a.b when that is a module, else a
@@ -1752,8 +1903,64 @@ def misplaced_imports(modules: Dict[str, Path], heavy: Dict[str, str], startup: 
                 if not (added - loads[module]) and not deferred:
                     light.append(name)
             if light:
-                wrong.append(f"{module}:{node.lineno}: {ast.unparse(node)}")
+                wrong.append(f"{module}:{line}: {shown}")
     return wrong
+
+
+_IMPORTERS = {"import_module", "__import__"}
+"""Calls that import the module their first argument names: ``importlib.import_module``, ``__import__``."""
+
+
+def function_level_imports(tree: ast.Module) -> List[tuple]:
+    """``(import statement, line, as written)`` of every import made inside a function (or a lambda), by line: an
+    ``import`` statement; a call of an importer (:data:`_IMPORTERS`, under its name, an alias, an attribute or a
+    ``getattr(importlib, "import_module")``) given a literal name, read as ``import name`` (``import_module(".mod",
+    "pkg")`` as ``import pkg.mod``); and the imports of code run from a literal string (``exec("import x")``,
+    :func:`_code_run`). A name computed at run time is not read here: the import graph refuses it unless
+    :data:`COMPUTED_LOADS` lists the module."""
+    importers = set(_IMPORTERS)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module in ("importlib", "builtins"):
+            importers |= {alias.asname for alias in node.names if alias.name in _IMPORTERS and alias.asname}
+
+    def imported_by(call: ast.Call) -> Optional[str]:
+        func = call.func
+        named = _base_name(func) in importers or (
+            isinstance(func, ast.Call) and getattr(func.func, "id", None) == "getattr" and len(func.args) > 1
+            and isinstance(func.args[1], ast.Constant) and func.args[1].value in _IMPORTERS)
+        first = call.args[0] if call.args else None
+        if not named or not (isinstance(first, ast.Constant) and isinstance(first.value, str)):
+            return None
+        name = first.value
+        if name.startswith("."):
+            package = call.args[1] if len(call.args) > 1 else next(
+                (k.value for k in call.keywords if k.arg == "package"), None)
+            if not (isinstance(package, ast.Constant) and isinstance(package.value, str)):
+                return None
+            anchor = package.value.split(".")
+            level = len(name) - len(name.lstrip("."))
+            name = ".".join(anchor[: len(anchor) - level + 1] + [name.lstrip(".")])
+        return name
+
+    found = {}
+    for function in ast.walk(tree):
+        if not isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            continue
+        for node in ast.walk(function):
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                found[(node.lineno, ast.unparse(node))] = (node, node.lineno, ast.unparse(node))
+            elif isinstance(node, ast.Call) and (name := imported_by(node)) is not None:
+                statement = ast.Import(names=[ast.alias(name=name)])
+                found[(node.lineno, ast.unparse(node))] = (statement, node.lineno, ast.unparse(node))
+            elif isinstance(node, ast.Call) and (_base_name(node.func) in _RUNNERS or isinstance(node.func, ast.Call)):
+                code_trees = _code_run(ast.Module(body=[ast.Expr(value=node)], type_ignores=[]))[0]
+                for code in code_trees:
+                    for inner in ast.walk(code):
+                        if isinstance(inner, ast.Call) and (name := imported_by(inner)) is not None:
+                            inner = ast.Import(names=[ast.alias(name=name)])
+                        if isinstance(inner, (ast.Import, ast.ImportFrom)):
+                            found.setdefault((node.lineno, ast.unparse(inner)), (inner, node.lineno, ast.unparse(node)))
+    return sorted(found.values(), key=lambda item: item[1])
 
 
 @pytest.mark.slow
@@ -1795,6 +2002,46 @@ def test_the_import_rule_sees_an_import_planted_in_a_function(tmp_path, target, 
     modules[target] = copy
     wrong = misplaced_imports(modules, heavy, startup)
     assert [line.rpartition(": ")[2] for line in wrong] == [planted]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("planted, shown", [
+    ('def _planted():\n    exec("import json")\n', "exec('import json')"),
+    ('def _planted():\n    exec(compile("from dv2s_gym.regress import family", "<x>", "exec"))\n',
+     "exec(compile('from dv2s_gym.regress import family', '<x>', 'exec'))"),
+    ('import builtins\n\n\ndef _planted():\n    builtins.exec("import json")\n', "builtins.exec('import json')"),
+    ('def _planted():\n    return eval("__import__(\'json\')")\n', "eval(\"__import__('json')\")"),
+    ('def _planted():\n    return __import__("json")\n', "__import__('json')"),
+    ('_planted = lambda: __import__("json")\n', "__import__('json')"),
+    ('import importlib\n\n\ndef _planted():\n    return importlib.import_module("json")\n',
+     "importlib.import_module('json')"),
+    ('from importlib import import_module as _load\n\n\ndef _planted():\n    return _load("dv2s_gym.regress.family")\n',
+     "_load('dv2s_gym.regress.family')"),
+    ('import importlib\n\n\ndef _planted():\n    return getattr(importlib, "import_module")("json")\n',
+     "getattr(importlib, 'import_module')('json')"),
+    ('import importlib\n\n\ndef _planted():\n    return importlib.import_module(".family", "dv2s_gym.regress")\n',
+     "importlib.import_module('.family', 'dv2s_gym.regress')"),
+])
+def test_the_import_rule_sees_an_import_made_by_a_call_in_a_function(tmp_path, planted, shown):
+    """``exec("import x")``, ``__import__("x")`` and ``importlib.import_module("x")`` inside a function import ``x``
+    there as much as an ``import`` statement does: the rule reads them as one."""
+    target = "dv2s_gym.regress.report"
+    modules = _modules()
+    source = modules[target].read_text(encoding="utf-8")
+    heavy, startup = heavy_modules(modules), startup_modules()
+    assert not misplaced_imports({target: modules[target]}, heavy, startup)
+    copy = tmp_path / "planted.py"
+    copy.write_text(source + "\n\n" + planted, encoding="utf-8")
+    modules[target] = copy
+    wrong = misplaced_imports(modules, heavy, startup)
+    assert [line.partition(": ")[2] for line in wrong] == [shown]
+    # a heavy dependency loaded the same way stays allowed inside a function
+    copy = modules[target] = tmp_path / "heavy.py"
+    copy.write_text(source + "\n\n" + planted.replace("json", "torch").replace(
+        "from dv2s_gym.regress import family", "import torch").replace("dv2s_gym.regress.family", "torch").replace(
+        "'.family', 'dv2s_gym.regress'", "'torch'").replace('".family", "dv2s_gym.regress"', '"torch"'),
+        encoding="utf-8")
+    assert not misplaced_imports(modules, heavy, startup)
 
 
 def _pictured_tree() -> List[tuple]:
@@ -1844,13 +2091,86 @@ _KIND_NAMES = frozenset({"kind", "role", "noun"})
 """Names (a variable, an attribute, the key of ``getattr(x, "kind", ...)``) that hold an actor's kind or role."""
 
 
-def kind_strings_compared(tree: ast.AST, kinds: frozenset, any_name: bool = False) -> List[str]:
-    """``"line: code"`` of each comparison of an actor's kind or role (:data:`_KIND_NAMES`; with ``any_name``, also
-    any name ending in ``kind`` and any call of a function so named) with a string literal that is one of ``kinds``
-    (the enum's values are the names to compare with)."""
+_KIND_READERS = ("str", "lower", "strip", "casefold", "value", "name")
+"""What a kind is read through and stays a kind: ``str(kind)``, ``kind.lower()``, ``kind.value``."""
+_KIND_TABLE_MAKERS = ("frozenset", "set", "tuple", "list", "sorted", "dict", "MappingProxyType")
+
+
+def _is_kind_literal(node: ast.AST, kinds: frozenset) -> bool:
+    return isinstance(node, ast.Constant) and node.value in kinds
+
+
+def _kind_table(node: Optional[ast.AST], kinds: frozenset) -> bool:
+    """``node`` is a table of kinds spelled out: a tuple, list, set or dict display (its keys) whose string entries
+    are mostly kind strings (more than half: a table of other words that holds one by chance is not one), such a
+    display given to ``frozenset``/``dict``/..., joined to another (``MOTOR + ("bicycle",)``), a dict comprehension
+    whose keys run over kind strings, or a dict display that unpacks one (``{**{k: v for k in ("car", "bus")}}``)."""
+    def mostly(entries: List[Optional[ast.AST]]) -> bool:
+        strings = [e for e in entries if isinstance(e, ast.Constant) and isinstance(e.value, str)]
+        return 2 * sum(_is_kind_literal(e, kinds) for e in strings) > len(strings)
+
+    if isinstance(node, ast.Call) and _base_name(node.func) in _KIND_TABLE_MAKERS and len(node.args) == 1:
+        node = node.args[0]
+    if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.BitOr)):
+        return _kind_table(node.left, kinds) or _kind_table(node.right, kinds)
+    if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+        return mostly(node.elts)
+    if isinstance(node, ast.Dict):
+        return mostly(node.keys) or any(k is None and _kind_table(v, kinds) for k, v in zip(node.keys, node.values))
+    if isinstance(node, ast.DictComp):
+        return any(_kind_table(g.iter, kinds) and isinstance(node.key, ast.Name) and isinstance(g.target, ast.Name)
+                   and g.target.id == node.key.id for g in node.generators)
+    return False
+
+
+def kind_tables(tree: ast.AST, kinds: frozenset) -> Set[str]:
+    """Names a module binds at its top to a table of kind strings (:func:`_kind_table`): ``VEHICLES = ("car",
+    "bus")``, ``CLASS = {"car": "Car"}``."""
+    found = set()
+    for node in getattr(tree, "body", []):
+        targets = node.targets if isinstance(node, ast.Assign) else [node.target] if isinstance(node, ast.AnnAssign) \
+            else []
+        if _kind_table(getattr(node, "value", None), kinds):
+            found.update(t.id for t in targets if isinstance(t, ast.Name))
+    return found
+
+
+def kind_strings_compared(tree: ast.AST, kinds: frozenset, any_name: bool = False,
+                          tables: frozenset = frozenset()) -> List[str]:
+    """``"line: code"`` of each place an actor's kind or role (:data:`_KIND_NAMES`; with ``any_name``, also any
+    name ending in ``kind`` and any call of a function so named) meets a string literal that is one of ``kinds``
+    (the enum's values are the names to compare with):
+
+    - a comparison (``==``, ``!=``, ``in``) with a kind string or a collection holding one, spelled out or a name
+      bound to one (:func:`kind_tables`; ``tables``: such names the module imports);
+    - ``match kind:`` with a ``case "car":``;
+    - a lookup of the kind in a table keyed by kind strings (``{"car": f}[actor.kind]``, ``CLASS.get(kind)``), and a
+      lookup of a kind string in such a table (``CAN_DO["pedestrian"]``).
+
+    A kind is read as ``actor.kind``, ``getattr(actor, "kind")``, ``actor["kind"]``, ``actor.get("kind")``, through
+    ``str()``/``.value``/``.lower()``, or from a name it was bound to (``k = actor.kind``)."""
+    rebound: Set[str] = set()
+    tables = set(tables) | kind_tables(tree, kinds)
+
     def names_kind(node: ast.AST) -> bool:
+        if isinstance(node, ast.NamedExpr):
+            return names_kind(node.value)
+        if isinstance(node, ast.Call) and _base_name(node.func) in _KIND_READERS:
+            inner = node.args[0] if isinstance(node.func, ast.Name) and node.args else \
+                node.func.value if isinstance(node.func, ast.Attribute) else None
+            if inner is not None and names_kind(inner):
+                return True
+        if isinstance(node, ast.Attribute) and node.attr in _KIND_READERS and names_kind(node.value):
+            return True
         if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "getattr" and len(node.args) > 1:
             return isinstance(node.args[1], ast.Constant) and node.args[1].value in _KIND_NAMES
+        if isinstance(node, ast.Subscript) and isinstance(node.slice, ast.Constant):
+            return node.slice.value in _KIND_NAMES
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get"
+                and node.args and isinstance(node.args[0], ast.Constant)):
+            return node.args[0].value in _KIND_NAMES
+        if isinstance(node, ast.Name) and node.id in rebound:
+            return True
         name = getattr(node, "id", None) or getattr(node, "attr", None)
         if any_name and isinstance(node, ast.Call):
             name = getattr(node.func, "id", None) or getattr(node.func, "attr", None)
@@ -1859,14 +2179,67 @@ def kind_strings_compared(tree: ast.AST, kinds: frozenset, any_name: bool = Fals
     def literal(node: ast.AST) -> bool:
         if isinstance(node, (ast.Tuple, ast.List, ast.Set)):
             return any(literal(e) for e in node.elts)
-        return isinstance(node, ast.Constant) and node.value in kinds
+        if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.BitOr)):
+            return literal(node.left) or literal(node.right)
+        return _is_kind_literal(node, kinds) or table(node)
 
+    def table(node: ast.AST) -> bool:
+        if isinstance(node, ast.Call) and _base_name(node.func) in _KIND_TABLE_MAKERS and len(node.args) == 1:
+            return table(node.args[0])
+        if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.BitOr)):
+            return table(node.left) or table(node.right)
+        return (isinstance(node, ast.Name) and node.id in tables) or _kind_table(node, kinds)
+
+    changed = True
+    while changed:  # names bound to a kind, and names bound to those
+        changed = False
+        for node in ast.walk(tree):
+            pairs = [(t, node.value) for t in node.targets] if isinstance(node, ast.Assign) else \
+                [(node.target, node.value)] if isinstance(node, (ast.AnnAssign, ast.NamedExpr)) and node.value else []
+            for target, value in pairs:
+                if isinstance(target, ast.Name) and target.id not in rebound and names_kind(value):
+                    rebound.add(target.id)
+                    changed = True
     found = []
     for node in ast.walk(tree):
+        hit = False
         if isinstance(node, ast.Compare):
             sides = [node.left, *node.comparators]
-            if any(names_kind(a) and literal(b) or literal(a) and names_kind(b) for a, b in zip(sides, sides[1:])):
-                found.append(f"{node.lineno}: {ast.unparse(node)}")
+            hit = any(names_kind(a) and literal(b) or literal(a) and names_kind(b) for a, b in zip(sides, sides[1:]))
+        elif isinstance(node, ast.Match) and names_kind(node.subject):
+            hit = any(_is_kind_literal(p.value, kinds) for case in node.cases for p in ast.walk(case.pattern)
+                      if isinstance(p, ast.MatchValue))
+        elif isinstance(node, ast.Subscript) and table(node.value):
+            hit = names_kind(node.slice) or _is_kind_literal(node.slice, kinds)
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.args
+              and node.func.attr in ("get", "pop", "setdefault", "__getitem__") and table(node.func.value)):
+            hit = names_kind(node.args[0]) or _is_kind_literal(node.args[0], kinds)
+        if hit:
+            found.append(f"{node.lineno}: {ast.unparse(node).splitlines()[0]}")
+    return found
+
+
+def _module_of(shown: str) -> str:
+    parts = list(Path(shown).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def kinds_spelled_out(files: Dict[str, Path], kinds: frozenset) -> Dict[str, List[str]]:
+    """``path`` -> :func:`kind_strings_compared` for each of ``files`` (the file read for each path relative to the
+    repository), with the kind tables each imports from another of them (``from pkg.frame import VEHICLES``)."""
+    trees = {shown: _parsed(path) for shown, path in files.items()}
+    tables = {_module_of(shown): kind_tables(tree, kinds) for shown, tree in trees.items()}
+    found = {}
+    for shown, tree in trees.items():
+        module = _module_of(shown)
+        imported = set()
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                base = _imported_names(node, module, Path(shown))[-1]
+                imported.update(a.asname or a.name for a in node.names if a.name in tables.get(base, ()))
+        lines = kind_strings_compared(tree, kinds, shown in KINDS_UNDER_ANY_NAME, frozenset(imported))
+        if lines:
+            found[shown] = lines
     return found
 
 
@@ -1879,6 +2252,18 @@ KINDS_UNDER_ANY_NAME = ("dv2s_gym/mining/monitors.py", "dv2s_gym/pipeline/semant
 ``kind``, or a call of a function whose name does, holds a kind."""
 
 
+def _kind_checked_files() -> Dict[str, Path]:
+    """The modules of :data:`KINDS_BY_ENUM`, by their path relative to the repository."""
+    return {str(path.relative_to(ROOT)): path for part in KINDS_BY_ENUM for path in sorted((ROOT / part).rglob("*.py"))}
+
+
+def _all_kinds() -> frozenset:
+    from dv2s_gym.pipeline.sg.rules.roles import JunctionRole, Role
+    from scenario_bank.elements import ActorKind
+
+    return frozenset(str(k) for k in (*ActorKind, *Role, *JunctionRole))
+
+
 def test_kinds_and_roles_are_compared_with_their_enums():
     """An actor's kind is compared with ``ActorKind`` (the table of the elements' participants) and, in the rule-based
     Scenario Generator, its role with ``Role``/``JunctionRole``; never with a string spelled out."""
@@ -1887,10 +2272,7 @@ def test_kinds_and_roles_are_compared_with_their_enums():
 
     assert tuple(ActorKind) == PARTICIPANTS
     kinds = frozenset(ActorKind) | frozenset(Role) | frozenset(JunctionRole)
-    paths = [path for part in KINDS_BY_ENUM for path in sorted((ROOT / part).rglob("*.py"))]
-    found = {str(path.relative_to(ROOT)): lines for path in paths
-             if (lines := kind_strings_compared(_parsed(path), frozenset(str(k) for k in kinds),
-                                                str(path.relative_to(ROOT)) in KINDS_UNDER_ANY_NAME))}
+    found = kinds_spelled_out(_kind_checked_files(), frozenset(str(k) for k in kinds))
     assert not found, f"kinds or roles compared with a string (use ActorKind, Role, JunctionRole): {found}"
     planted = ast.parse('if actor.kind == "truck" or role != "lead" or getattr(a, "kind", "") in ("ego", "x"):\n'
                         '    pass\nif actor.kind == ActorKind.TRUCK and name == "ego":\n    pass\n')
@@ -1899,3 +2281,192 @@ def test_kinds_and_roles_are_compared_with_their_enums():
     planted = ast.parse('if other_kind in ("car", "bus") or _kind(name, kinds) != "obstacle":\n    pass\n')
     assert not kind_strings_compared(planted, frozenset({"car", "bus", "obstacle"}))  # other names: not everywhere
     assert len(kind_strings_compared(planted, frozenset({"car", "bus", "obstacle"}), any_name=True)) == 2
+
+
+@pytest.mark.parametrize("planted", [
+    # match on the kind
+    "def _planted(actor):\n    match actor.kind:\n        case 'pedestrian':\n            return 1\n    return 0\n",
+    "def _planted(actor):\n    match actor.kind:\n        case 'car' | 'truck':\n            return 1\n    return 0\n",
+    # dispatch through a table keyed by kind strings
+    "def _planted(actor, f, g):\n    return {'pedestrian': f, 'car': g}[actor.kind]()\n",
+    "def _planted(actor, f, g):\n    return {'pedestrian': f, 'car': g}.get(actor.kind)\n",
+    "_PLANTED_TABLE = {'pedestrian': 1, 'bicycle': 2}\n\n\ndef _planted(actor):\n"
+    "    return _PLANTED_TABLE.get(actor.kind, 0)\n",
+    "_PLANTED_TABLE = {**{k: 1 for k in ('car', 'bus')}}\n\n\ndef _planted(actor):\n    return _PLANTED_TABLE[actor.kind]\n",
+    "_PLANTED_TABLE = {'pedestrian': 1, 'bicycle': 2}\n\n\ndef _planted():\n    return _PLANTED_TABLE['pedestrian']\n",
+    # the kind read by a subscript or .get
+    "def _planted(actor):\n    return actor['kind'] == 'car'\n",
+    "def _planted(actor):\n    return actor.get('kind') in ('car', 'truck')\n",
+    # the kind rebound to a name, or read through str()/.value
+    "def _planted(actor):\n    k = actor.kind\n    if k == 'car':\n        return 1\n    return 0\n",
+    "def _planted(actor):\n    k = actor.kind\n    other = k\n    return other in ('car', 'truck')\n",
+    "def _planted(actor):\n    if (k := str(actor.kind)) == 'car':\n        return k\n    return None\n",
+    "def _planted(actor):\n    return actor.kind.value == 'car'\n",
+    # membership in a named collection of kind strings
+    "_PLANTED_KINDS = frozenset({'car', 'truck'})\n\n\ndef _planted(actor):\n    return actor.kind in _PLANTED_KINDS\n",
+    "_PLANTED_KINDS = ('car', 'truck')\n\n\ndef _planted(actor):\n    return actor.kind in _PLANTED_KINDS + ('bus',)\n",
+])
+def test_the_kind_rule_sees_a_kind_planted_through_another_spelling(tmp_path, planted):
+    target = "envs/trace.py"
+    kinds = _all_kinds()
+    assert not kinds_spelled_out({target: ROOT / target}, kinds)
+    copy = tmp_path / "planted.py"
+    source = (ROOT / target).read_text(encoding="utf-8")
+    copy.write_text(source + "\n\n" + planted, encoding="utf-8")
+    found = kinds_spelled_out({target: copy}, kinds)
+    first = len((source + "\n\n").splitlines()) + 1
+    assert list(found) == [target] and found[target] and all(int(line.partition(":")[0]) >= first
+                                                              for line in found[target]), found
+
+
+def test_the_kind_rule_sees_a_kind_table_imported_from_another_module(tmp_path):
+    """A table of kind strings defined in one module and read with a kind in another."""
+    kinds = _all_kinds()
+    home, user = "envs/trace.py", "envs/trace_bounds.py"
+    table = tmp_path / "table.py"
+    table.write_text((ROOT / home).read_text(encoding="utf-8") + "\n\nPLANTED_KINDS = ('car', 'truck', 'bus')\n",
+                     encoding="utf-8")
+    reader = tmp_path / "reader.py"
+    reader.write_text((ROOT / user).read_text(encoding="utf-8") + "\n\nfrom envs.trace import PLANTED_KINDS as _K\n\n\n"
+                      "def _planted(actor):\n    return actor.kind in _K\n", encoding="utf-8")
+    assert not kinds_spelled_out({home: ROOT / home, user: ROOT / user}, kinds)
+    assert list(kinds_spelled_out({home: table, user: reader}, kinds)) == [user]
+
+
+def test_the_kind_rule_leaves_tables_of_other_words_alone():
+    """A table of other words that holds one kind by chance is not a table of kinds (``{"str": ..., "any": ...}``);
+    a table keyed by the enum is the way to key by kind."""
+    kinds = _all_kinds()
+    tree = ast.parse("_CHECKS = {'str': 1, 'int': 2, 'any': 3}\n_BY_KIND = {ActorKind.CAR: 1}\n"
+                     "def f(kind, actor):\n    return _CHECKS[kind], _BY_KIND[actor.kind], actor.kind in _BY_KIND\n")
+    assert not kind_strings_compared(tree, kinds)
+
+
+BUILT_IN_RAISES: Dict[str, str] = {
+    "dv2s_gym:__getattr__:AttributeError": "a module's __getattr__: Python's protocol (hasattr, from-imports) needs "
+                                           "AttributeError for a name the module does not have",
+    "dv2s_gym.regress:__getattr__:AttributeError": "a module's __getattr__: Python's protocol needs AttributeError",
+    "policies:__getattr__:AttributeError": "a module's __getattr__: Python's protocol needs AttributeError",
+    "dv2s_gym.workers.base:Backend.run:NotImplementedError": "an abstract method: a subclass that does not override "
+                                                              "it is a programming fault, Python's convention",
+    "policies.registry:Policy.act:NotImplementedError": "an abstract method (Python's convention)",
+    "policies.state_driver:StateDriver.act:NotImplementedError": "an abstract method (Python's convention)",
+    "dv2s_gym.pipeline.semantics.text:ParsedDescription.index:ValueError": "list.index's contract: ValueError when "
+                                                                           "the item is not there",
+    "dv2s_gym.mining.jsonl:JsonlAppender.append:OSError": "the operating system's error raised again with the "
+                                                          "file's path (errno kept); the command line reports an "
+                                                          "OSError as one line",
+    "scenario_bank.atomic:atomic_path:FileNotFoundError": "caught by the same function's `except OSError` and "
+                                                          "raised as AtomicWriteError: it never leaves it",
+    "scenario_bank.jail.zygote_server:unpack_reply:ValueError": "the jail's wire format: its one caller (the zygote "
+                                                                "client) catches ValueError with struct's own "
+                                                                "errors and raises ZygoteError",
+    "envs.jail_worker:serve:ValueError": "inside the jailed worker: the error is the answer sent to the parent "
+                                         "(JailRemoteError there), never raised in the user's process",
+    "scenario_bank.maps.build_maps:format_float:ValueError": "the map builder's self-check on the geometry it "
+                                                             "computes from its own tables (no user input)",
+    "scenario_bank.maps.build_maps:assert_poses_meet:AssertionError": "the map builder's self-check on its own "
+                                                                      "geometry (no user input)",
+    "scenario_bank.maps.build_maps:junction_arms:ValueError": "the map builder's self-check on its own junction "
+                                                              "tables (no user input)",
+}
+"""``module:Qualified.function:Exception`` -> why a public product function raises a bare built-in exception
+rather than a project error (one that derives from ``DV2SError`` and, where callers catch it, from the same
+built-in). The list only shrinks."""
+
+
+def _is_public(name: str) -> bool:
+    """No part of a dotted name is private (``_x``); a dunder (``__init__``, ``__getattr__``) is public."""
+    return not any(part.startswith("_") and not (part.startswith("__") and part.endswith("__"))
+                   for part in name.split("."))
+
+
+def built_in_raises(modules: Optional[Dict[str, Path]] = None) -> List[str]:
+    """``module:Qualified.function:Exception`` of every ``raise`` of a built-in exception in a public function (or
+    method) of a public module: ``raise ValueError(...)``, ``raise KeyError``, through an alias (``_E = ValueError``,
+    ``from builtins import KeyError as _K``, ``builtins.ValueError``), a name bound to an instance (``error =
+    ValueError(...)``; ``raise error``) or a table of classes it is looked up in (``_ERRORS[kind](message)``). A
+    raise in a nested function counts for the public function around it."""
+    found = []
+    for module, path in sorted((modules or _modules()).items()):
+        if not _is_public(module):
+            continue
+        tree = _parsed(path)
+        bindings = _bindings(list(ast.walk(tree)), classes_made_by_calls(tree), module, path)
+
+        def raised(node: ast.AST, seen: frozenset = frozenset()) -> List[str]:
+            """What a raised expression may stand for: a class (called or not), an instance bound to a name, or
+            any of the classes of a table it is looked up in (``_ERRORS[kind](message)``, ``_ERRORS.get(kind)``)."""
+            looked_up = node.value if isinstance(node, ast.Subscript) else node.func.value if (
+                isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get") \
+                else None
+            table = bindings.get(looked_up.id) if isinstance(looked_up, ast.Name) else looked_up
+            if isinstance(table, ast.Dict):
+                return [q for value in table.values for q in raised(value, seen)]
+            if isinstance(node, ast.Call):
+                return raised(node.func, seen)
+            if isinstance(node, ast.Name) and isinstance(bindings.get(node.id), (ast.Call, ast.Subscript)) \
+                    and node.id not in seen:
+                return raised(bindings[node.id], seen | {node.id})
+            return [_qualified(node, bindings)]
+
+        def walk(node: ast.AST, function: Optional[str], prefix: str):
+            for child in ast.iter_child_nodes(node):
+                if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                    yield from walk(child, function if function else prefix + child.name, prefix + child.name + ".")
+                elif isinstance(child, ast.ClassDef):
+                    yield from walk(child, function, prefix + child.name + ".")
+                else:
+                    if isinstance(child, ast.Raise) and child.exc is not None and function is not None:
+                        yield function, child
+                    yield from walk(child, function, prefix)
+
+        for function, node in walk(tree, None, ""):
+            for qualified in raised(node.exc):
+                value = getattr(builtins, qualified.partition(".")[2], None) if qualified.startswith("builtins.") \
+                    else None
+                if isinstance(value, type) and issubclass(value, BaseException) and _is_public(function):
+                    found.append(f"{module}:{function}:{value.__name__}")
+    return sorted(set(found))
+
+
+def test_public_functions_raise_project_errors():
+    """A public function of the product raises the project's error for its subsystem (under ``DV2SError``, and
+    also the built-in where callers catch that), not a bare built-in: the command line catches ``DV2SError`` once
+    and prints its message; a bare ``ValueError`` is taken for a fault. :data:`BUILT_IN_RAISES` lists the
+    exceptions to this, each with the reason."""
+    found = built_in_raises()
+    new = [name for name in found if name not in BUILT_IN_RAISES]
+    assert not new, f"public functions raising a bare built-in exception (raise the subsystem's project error, or " \
+                    f"list it in BUILT_IN_RAISES with the reason): {new}"
+    stale = sorted(set(BUILT_IN_RAISES) - set(found))
+    assert not stale, f"BUILT_IN_RAISES lists raises that are gone: take them off: {stale}"
+
+
+@pytest.mark.parametrize("planted, raised", [
+    ("def planted(x):\n    raise ValueError(f'bad {x}')\n", "planted:ValueError"),
+    ("def planted(x):\n    if x:\n        raise KeyError\n", "planted:KeyError"),
+    ("def planted(x):\n    try:\n        return x[0]\n    except IndexError:\n        raise RuntimeError('no') from None\n",
+     "planted:RuntimeError"),
+    ("_E = TypeError\n\n\ndef planted(x):\n    raise _E(x)\n", "planted:TypeError"),
+    ("from builtins import LookupError as _L\n\n\ndef planted(x):\n    raise _L(x)\n", "planted:LookupError"),
+    ("import builtins\n\n\ndef planted(x):\n    raise builtins.ValueError(x)\n", "planted:ValueError"),
+    ("def planted(x):\n    error = ValueError(x)\n    raise error\n", "planted:ValueError"),
+    ("class Planted:\n    def check(self, x):\n        raise ValueError(x)\n", "Planted.check:ValueError"),
+    ("class Planted:\n    def __init__(self, x):\n        raise TypeError(x)\n", "Planted.__init__:TypeError"),
+    ("def planted(x):\n    def inner():\n        raise ValueError(x)\n    return inner()\n", "planted:ValueError"),
+    ("_ERRORS = {'a': KeyError, 'b': DV2SError}\n\n\ndef planted(x):\n    raise _ERRORS[x]('no')\n", "planted:KeyError"),
+    ("_ERRORS = {'a': KeyError}\n\n\ndef planted(x):\n    cls = _ERRORS.get(x, DV2SError)\n    raise cls('no')\n",
+     "planted:KeyError"),
+])
+def test_the_raise_rule_sees_a_built_in_planted_in_a_public_function(tmp_path, planted, raised):
+    modules = _modules()
+    target = "envs.trace"
+    assert not built_in_raises({target: modules[target]})
+    copy = tmp_path / "planted.py"
+    copy.write_text(modules[target].read_text(encoding="utf-8") + "\n\n" + planted, encoding="utf-8")
+    assert built_in_raises({target: copy}) == [f"{target}:{raised}"]
+    private = tmp_path / "private.py"  # the same raise in a private function is the module's own business
+    private.write_text(modules[target].read_text(encoding="utf-8") + "\n\n" + planted.replace("planted", "_planted")
+                       .replace("class Planted", "class _Planted"), encoding="utf-8")
+    assert not built_in_raises({target: private})

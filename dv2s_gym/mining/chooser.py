@@ -33,6 +33,8 @@ from typing import Any, Optional, Sequence
 import numpy as np
 from verifai.samplers.cross_entropy import DiscreteCrossEntropySampler
 
+from dv2s_gym.mining.errors import MiningError
+
 __all__ = ["ForgetfulCrossEntropySampler", "LeaveSettings"]
 
 
@@ -70,7 +72,7 @@ class ForgetfulCrossEntropySampler(DiscreteCrossEntropySampler):
                  cells: Optional[Sequence[int]] = None, dist: Optional[Any] = None) -> None:
         super().__init__(domain, alpha=alpha, thres=thres, dist=dist)
         if len(self.dist) != 1:
-            raise ValueError("ForgetfulCrossEntropySampler chooses one index; give it a one-dimensional DiscreteBox")
+            raise MiningError("ForgetfulCrossEntropySampler chooses one index; give it a one-dimensional DiscreteBox")
         self.forget = float(leave.forget)
         self.patience = int(leave.patience)
         self.floor = float(leave.floor)
@@ -82,7 +84,7 @@ class ForgetfulCrossEntropySampler(DiscreteCrossEntropySampler):
         count = len(self.dist[0])
         self.cells = np.array(list(cells) if cells is not None else [0] * count, dtype=float)
         if len(self.cells) != count:
-            raise ValueError(f"cells has {len(self.cells)} entries for {count} indices")
+            raise MiningError(f"cells has {len(self.cells)} entries for {count} indices")
         self.drawn = np.zeros(count, dtype=int)
         """Per index: outcomes fed."""
 

@@ -157,7 +157,7 @@ def shows_interaction(interaction: Mapping[str, Any], elements: Mapping[str, Any
     return bool(wanted & actions)
 
 
-_ARTICLE = {"obstacle": "An obstacle", "ego": "The ego vehicle"}
+_ARTICLE = {ActorKind.OBSTACLE: "An obstacle", ActorKind.EGO: "The ego vehicle"}
 
 
 def interaction_sentence(interaction: Mapping[str, Any], known: Optional[Mapping[str, Any]] = None) -> str:

@@ -31,7 +31,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Union
 
 from envs.safety_metrics import DEFAULT_STALL_SECONDS, FREE_PATH, STANDING_SPEED, first_stall_step
 from scenario_bank.elements import ActorKind
-from scenario_bank.failure_types import (FAILURE_TYPES, attach_detection, detach_detection, failure_table,
+from scenario_bank.failure_types import (FAILURE_TYPES, FailureTypeError, UnknownDetectorError, attach_detection, detach_detection, failure_table,
                                          failure_type)
 
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "MonitorSettings", "Detector", "DETECTORS",
@@ -224,9 +224,9 @@ def register_detector(detector: Detector) -> Detector:
     (:func:`scenario_bank.failure_types.happened`). Register in each process that detects: a worker process of
     a pool (forkserver or spawn) does not see a registration made in the calling process. Returns ``detector``."""
     if failure_type(detector.name) is None:
-        raise ValueError(f"no failure type {detector.name!r}: add its row to scenario_bank/failure_types.py first")
+        raise FailureTypeError(f"no failure type {detector.name!r}: add its row to scenario_bank/failure_types.py first")
     if detector.name in DETECTORS:
-        raise ValueError(f"failure type {detector.name!r} has a detector already")
+        raise FailureTypeError(f"failure type {detector.name!r} has a detector already")
     DETECTORS[detector.name] = detector
     attach_detection(detector.name, lambda result, trace, settings: detector.detect(
         result, trace, MonitorSettings.from_recorded(settings)) is not None)
@@ -248,7 +248,7 @@ def types_without_detector() -> List[str]:
 def _detector(name: str) -> Detector:
     detector = DETECTORS.get(name)
     if detector is None:
-        raise KeyError(f"failure type {name!r} has no detector in this process: register one with "
+        raise UnknownDetectorError(f"failure type {name!r} has no detector in this process: register one with "
                        "dv2s_gym.mining.monitors.register_detector in each process that detects")
     return detector
 

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 from statistics import NormalDist
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence
 
+from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.samplers import is_uniform
 from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.records import EpisodeRecord
@@ -94,7 +95,7 @@ def weighted_rate(outcomes: Sequence[float], weights: Sequence[float], confidenc
     weights can push past 1, ``value`` it capped at 1).
     """
     if len(outcomes) != len(weights):
-        raise ValueError(f"{len(outcomes)} outcomes but {len(weights)} weights; give one weight per outcome")
+        raise MiningError(f"{len(outcomes)} outcomes but {len(weights)} weights; give one weight per outcome")
     n = len(outcomes)
     failures = int(sum(1 for y in outcomes if y))
     if n == 0:

@@ -38,6 +38,7 @@ __all__ = [
     "BackendResultError",
     "GenerationFailedError",
     "GenerationError",
+    "FrameEncodeError",
 ]
 
 
@@ -102,6 +103,13 @@ class GenerationFailedError(PipelineError):
     def __init__(self, message: str, result: Optional[Any] = None) -> None:
         super().__init__(message)
         self.result = result
+
+
+class FrameEncodeError(PipelineError, RuntimeError):
+    """A video frame could not be encoded as an image for the vision-language model (a broken OpenCV build). A
+    :class:`RuntimeError`, so code catching that keeps working."""
+
+    expected = False
 
 
 class GenerationError(PipelineError, ValueError):

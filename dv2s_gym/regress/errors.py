@@ -5,7 +5,7 @@ from __future__ import annotations
 from envs.errors import DV2SError
 from scenario_bank.run_identity import RunIdentityError
 
-__all__ = ["RegressError", "ReportMismatchError", "ResumeMismatchError"]
+__all__ = ["RegressError", "ReportMismatchError", "ResumeMismatchError", "SequenceStoppedError"]
 
 
 class RegressError(DV2SError, ValueError):
@@ -20,3 +20,10 @@ class ResumeMismatchError(RegressError, RunIdentityError):
     """An output folder holding a run with other settings than the one asked for (the resume check every
     resumable command shares, :mod:`scenario_bank.run_identity`; ``differences`` lists every setting that
     differs)."""
+
+
+class SequenceStoppedError(DV2SError, RuntimeError):
+    """A sequential test that has reached its verdict is fed more episodes. A :class:`RuntimeError`, so code
+    catching that keeps working."""
+
+    expected = False  # the caller's fault, not the user's input

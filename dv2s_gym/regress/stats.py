@@ -87,7 +87,7 @@ import numpy as np
 from scipy import stats
 
 from dv2s_gym.regress.family import DEFAULT_POOLED_WEIGHT, gate_rejections
-from dv2s_gym.regress.errors import RegressError
+from dv2s_gym.regress.errors import RegressError, SequenceStoppedError
 from scenario_bank.errors import WrongTypeError
 
 __all__ = ["DEFAULT_ALPHA", "DEFAULT_MARGIN", "DEFAULT_CORRELATION", "Verdict", "wilson_interval",
@@ -849,11 +849,11 @@ class SequentialTest:
             None to keep going.
 
         Raises:
-            RuntimeError: If the test already stopped.
+            SequenceStoppedError (a RuntimeError): If the test already stopped.
             RegressError (a ValueError): If the table is not cumulative or has no new episodes.
         """
         if self.verdict is not None:
-            raise RuntimeError(f"the test already stopped with {self.verdict.value.upper()}")
+            raise SequenceStoppedError(f"the test already stopped with {self.verdict.value.upper()}")
         self._check_cumulative(table)
         final = table.n >= self.max_episodes
         fraction = min(1.0, table.n / self.max_episodes)

@@ -31,6 +31,8 @@ from typing import FrozenSet, Tuple
 
 from scenic.core.lazy_eval import valueInContext
 
+from envs.errors import SimulatorPropertiesError
+
 __all__ = ["update_objects", "prepare_class"]
 
 
@@ -117,7 +119,7 @@ def update_objects(simulation, get_properties) -> None:
         dyn_types = cls._simulatorProvidedProperties
         values = get_properties(obj, dyn_types.keys())
         if values.keys() != dyn_types.keys():
-            raise RuntimeError(f"simulator provided properties {sorted(values)} instead of {sorted(dyn_types)}")
+            raise SimulatorPropertiesError(f"simulator provided properties {sorted(values)} instead of {sorted(dyn_types)}")
         state = object.__getattribute__(proxy, "__dict__")
         for prop, value in values.items():
             ty = dyn_types[prop]
@@ -126,7 +128,7 @@ def update_objects(simulation, get_properties) -> None:
             elif ty is type(None):
                 dyn_types[prop] = type(value)
             elif not isinstance(value, ty):
-                raise RuntimeError(
+                raise SimulatorPropertiesError(
                     f'simulator provided value for property "{prop}" '
                     f"with type {type(value).__name__} instead of expected {ty.__name__}"
                 )

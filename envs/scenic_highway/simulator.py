@@ -452,7 +452,8 @@ _CAR_COLOR = (100, 200, 255)
 _PROP_COLOR = (120, 120, 120)
 
 
-_FACADE_KIND_CLASSES = {"pedestrian": "Pedestrian", "bus": "Bus", "truck": "Truck", "motorcycle": "Motorcycle", "bicycle": "Bicycle"}
+_FACADE_KIND_CLASSES = {ActorKind.PEDESTRIAN: "Pedestrian", ActorKind.BUS: "Bus", ActorKind.TRUCK: "Truck",
+                        ActorKind.MOTORCYCLE: "Motorcycle", ActorKind.BICYCLE: "Bicycle"}
 
 
 def _facade_kind(obj):

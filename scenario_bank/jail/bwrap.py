@@ -22,6 +22,8 @@ import sys
 from pathlib import Path
 from typing import Dict, List, Optional, Sequence
 
+from scenario_bank.jail.errors import BwrapMissingError
+
 __all__ = ["CODE_ROOT", "PACKAGES", "bwrap_path", "command", "worker_environment", "SCRATCH", "SCRATCH_DIRS",
            "SHM_BYTES", "WORKER_UID"]
 
@@ -134,7 +136,7 @@ def command(argv: Sequence[str], *, scratch_bytes: int, seccomp_fd: Optional[int
     """
     bwrap = bwrap_path()
     if bwrap is None:
-        raise FileNotFoundError("bwrap")
+        raise BwrapMissingError("bwrap")
     capability_args = [arg for cap in capabilities for arg in ("--cap-add", cap)]
     args = [
         bwrap,

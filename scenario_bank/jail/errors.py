@@ -6,7 +6,7 @@ from typing import Optional
 
 from scenario_bank.errors import DV2SError
 
-__all__ = ["JailError", "JailUnavailableError", "JailLimitError", "JailCrashError", "JailProtocolError"]
+__all__ = ["JailError", "JailUnavailableError", "BwrapMissingError", "JailLimitError", "JailCrashError", "JailProtocolError"]
 
 
 class JailError(DV2SError, RuntimeError):
@@ -25,6 +25,10 @@ class JailUnavailableError(JailError):
     """The jail cannot be created on this machine (no bubblewrap, no user namespaces, no seccomp)."""
 
     expected = True
+
+
+class BwrapMissingError(JailUnavailableError, FileNotFoundError):
+    """bubblewrap (``bwrap``) is not installed. A :class:`FileNotFoundError`, so code catching that keeps working."""
 
 
 class JailLimitError(JailError):

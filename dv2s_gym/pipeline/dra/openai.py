@@ -20,7 +20,7 @@ from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from dv2s_gym.pipeline.errors import MalformedResponseError
+from dv2s_gym.pipeline.errors import FrameEncodeError, MalformedResponseError
 from dv2s_gym.pipeline.prompts import dra_prompt, normalize_camera, prompt_hash
 from dv2s_gym.pipeline.video import VideoError
 from scenario_bank.errors import SettingError
@@ -33,7 +33,7 @@ def _as_rgb_uint8(frame: Any, index: int) -> np.ndarray:
     if array.ndim == 2:
         array = np.repeat(array[:, :, None], 3, axis=2)
     if array.ndim != 3 or array.shape[2] not in (3, 4) or array.shape[0] == 0 or array.shape[1] == 0:
-        raise ValueError(f"frame {index} must be an RGB image of shape (H, W, 3), got shape {array.shape}")
+        raise VideoError(f"frame {index} must be an RGB image of shape (H, W, 3), got shape {array.shape}")
     array = array[:, :, :3]
     if array.dtype != np.uint8:
         if np.issubdtype(array.dtype, np.floating) and array.size and float(np.nanmax(array)) <= 1.0:
@@ -54,7 +54,7 @@ def frame_to_data_url(frame: Any, quality: int = 85, max_side: Optional[int] = 7
         rgb = cv2.resize(rgb, size, interpolation=cv2.INTER_AREA)
     ok, buffer = cv2.imencode(".jpg", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
     if not ok:  # pragma: no cover - OpenCV fails only on broken builds
-        raise RuntimeError("OpenCV could not encode a frame as JPEG")
+        raise FrameEncodeError("OpenCV could not encode a frame as JPEG")
     return "data:image/jpeg;base64," + base64.b64encode(buffer.tobytes()).decode("ascii")
 
 

@@ -10,6 +10,8 @@ from __future__ import annotations
 import re
 from typing import Dict, List, Sequence, Tuple
 
+from scenario_bank.elements import ActorKind
+
 __all__ = ["UNKNOWN_ACTORS", "ROAD_PATTERNS", "COLLISION_KINDS",
            # the tables the description reader (text.py) reads
            "NUMBERS", "NOUNS", "EGO", "NOT_ACTOR_AFTER", "COLORS", "ORDINALS",
@@ -326,7 +328,7 @@ stand stands standing ride rides riding first green red amber yellow signal sign
 unsignalized unsignalised controlled uncontrolled already inside outside next no
 involved involving hidden concealed obscured static
 """.split())
-MOTOR = ("car", "truck", "bus", "motorcycle")
+MOTOR = (ActorKind.CAR, ActorKind.TRUCK, ActorKind.BUS, ActorKind.MOTORCYCLE)
 PLACE_NOUNS = frozenset(("highway", "motorway", "freeway", "expressway", "roadway", "way", "alley", "driveway",
                           "parkway", "causeway", "gateway", "entryway", "byway", "interstate", "city", "valley"))
 COLLISION_KINDS = ("collide_rear_end", "collide_head_on", "collide_side")

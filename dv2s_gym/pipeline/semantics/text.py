@@ -1206,7 +1206,7 @@ class _Parser:
                     isinstance(mm.entity, tuple) or mm.entity is subject:
                 break
             for a, d in new:
-                if mm.entity.kind == ActorKind.PEDESTRIAN and a not in CAN_DO["pedestrian"]:
+                if mm.entity.kind == ActorKind.PEDESTRIAN and a not in CAN_DO[ActorKind.PEDESTRIAN]:
                     continue
                 mm.entity.add_action(a, **{k: v for k, v in d.items() if k != "with"})
 
@@ -1568,7 +1568,7 @@ class _Parser:
         if (e.kind in (ActorKind.PEDESTRIAN, ActorKind.BICYCLE) or e.attrs.get("animal")) and e.has("cross"):
             self._relate(e, "ahead_of", ego)
             self._relate(e, "crossing_path", ego)
-        if e.kind in MOTOR + ("bicycle",) and "oncoming" in rels and ego.has("turn_left"):
+        if e.kind in MOTOR + (ActorKind.BICYCLE,) and "oncoming" in rels and ego.has("turn_left"):
             self._relate(e, "crossing_path", ego)
 
     def _occluders_ahead(self, ego: Optional[Entity]) -> None:
@@ -1591,7 +1591,7 @@ class _Parser:
         if ego is None or self.out.road not in ("intersection", "t_junction", "three_way", "roundabout"):
             return
         for e in self.out.entities:
-            if e is ego or e.kind not in MOTOR + ("bicycle",):
+            if e is ego or e.kind not in MOTOR + (ActorKind.BICYCLE,):
                 continue
             rels = {r for r, j in e.relations if j is ego}
             lane_moves = ("cut_in", "lane_change", "lane_change_left", "lane_change_right", "overtake", "merge")

@@ -14,6 +14,8 @@ from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from dv2s_gym.pipeline.dra.bev.frames import NotBirdsEyeError
+
 COMMON_LENGTH_M = 4.5        # the coloured body of the common cars, calibrated on the bank's renders (see above)
 COMMON_WIDTH_M = 2.0
 OUTLINE_PX = 2.0             # the 1-px outline on both sides, not part of the coloured body
@@ -65,11 +67,11 @@ def estimate_scale(ego_sizes: Sequence[Tuple[float, float]], other_sizes: Iterab
     vehicles; ``line_positions``: per frame, the sorted positions (px) of the lane lines of one family.
 
     The ego's views come first; the other vehicles count only when car-shaped and within 25 % of the
-    ego's length (long vehicles, pedestrians and partly seen vehicles stay out). Raises ValueError
-    when no ego size is given."""
+    ego's length (long vehicles, pedestrians and partly seen vehicles stay out). Raises NotBirdsEyeError (a
+    ValueError) when no ego size is given."""
     ego = [(l, w) for l, w in ego_sizes if l > 0 and w > 0]
     if not ego:
-        raise ValueError("no ego vehicle size to estimate the scale from")
+        raise NotBirdsEyeError("no ego vehicle size to estimate the scale from")
     ego_len = float(np.median([l for l, _ in ego]))
     views: List[Tuple[float, float]] = list(ego)
     for l, w in other_sizes:

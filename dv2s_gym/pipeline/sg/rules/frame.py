@@ -6,13 +6,14 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Tuple
 
 from dv2s_gym.pipeline.sg.rules.roles import Role
+from scenario_bank.elements import ActorKind
 
 __all__ = ["VEHICLES", "CLASS", "KIND_SPEEDS", "ActorFrame", "ScenarioFrame", "SGResult"]
 
-VEHICLES = ("car", "truck", "bus", "motorcycle", "bicycle")
-CLASS = {"car": "Car", "truck": "Truck", "bus": "Bus", "motorcycle": "Motorcycle", "bicycle": "Bicycle",
-         "pedestrian": "Pedestrian", "obstacle": "Obstacle"}
-KIND_SPEEDS = {"bicycle": "Range(4, 6)"}
+VEHICLES = (ActorKind.CAR, ActorKind.TRUCK, ActorKind.BUS, ActorKind.MOTORCYCLE, ActorKind.BICYCLE)
+CLASS = {ActorKind.CAR: "Car", ActorKind.TRUCK: "Truck", ActorKind.BUS: "Bus", ActorKind.MOTORCYCLE: "Motorcycle",
+         ActorKind.BICYCLE: "Bicycle", ActorKind.PEDESTRIAN: "Pedestrian", ActorKind.OBSTACLE: "Obstacle"}
+KIND_SPEEDS = {ActorKind.BICYCLE: "Range(4, 6)"}
 """Cruise speed (m/s) of a kind slower than the road's traffic; it replaces the road's speed range."""
 
 

@@ -69,7 +69,7 @@ def _roles(s: Script) -> List[RoleSpec]:
         if a.kind in VEHICLES:
             check_actions(a, s, JUNCTION_ACTIONS)
         elif a.kind == ActorKind.PEDESTRIAN:
-            check_actions(a, s, set(CAN_DO["pedestrian"]))
+            check_actions(a, s, set(CAN_DO[ActorKind.PEDESTRIAN]))
         else:
             a.actions = []
     roles: List[RoleSpec] = [(a,) + junction_role(a, frame.ego, s.rng) for a in vehicles]

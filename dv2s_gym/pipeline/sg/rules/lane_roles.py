@@ -76,7 +76,7 @@ def _check_lane_actions(s: Script, actor: ActorFrame, road: LaneRoad) -> None:
     elif actor.kind in VEHICLES:
         check_actions(actor, s, LANE_ACTIONS - {"cross"} | ({"merge"} if road.onramp else set()))
     elif actor.kind == ActorKind.PEDESTRIAN:
-        check_actions(actor, s, set(CAN_DO["pedestrian"]))
+        check_actions(actor, s, set(CAN_DO[ActorKind.PEDESTRIAN]))
     else:
         actor.actions = []
 
