@@ -72,6 +72,7 @@ from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 from scenario_bank.bank import Bank, BankError
 from scenario_bank.extras import missing_extra_message
 from scenario_bank.records import EpisodeRecord, RecordError
+from scenario_bank.failure_types import failure_table
 from scenario_bank.run_identity import check_identity
 from policies.registry import load_policy
 
@@ -622,6 +623,7 @@ def _task(index: int, spec, policy: str, reference: Optional[str], settings: Dic
         "family": scenario_family(str(spec.scenario), settings["bank_dir"]), "env_config": settings["env_config"], "bank_dir": settings["bank_dir"],
         "trace_dir": str(out / "traces"),
         "monitor": MonitorSettings.from_recorded(settings),
+        "failure_types": [row.name for row in failure_table()],
     }
 
 

@@ -18,9 +18,10 @@ negative for a failure (the more negative, the worse), positive otherwise.
 Both walk the failure table (:func:`scenario_bank.failure_types.failure_table`): each type has one
 :class:`Detector` in :data:`DETECTORS` that finds it and scores it. A new failure type is its row (with its
 label) in ``scenario_bank/failure_types.py`` and its detector here; a plug-in adds both at run time with
-:func:`~scenario_bank.failure_types.register_failure_type` and :func:`register_detector` (in each process that
-detects: a worker process started before the registration does not see it). The settings the monitors read
-travel as one :class:`MonitorSettings`.
+:func:`~scenario_bank.failure_types.register_failure_type` and :func:`register_detector`, from an importable
+module that registers when it is imported: the registries remember that module and every worker process imports
+it before its first episode (:mod:`scenario_bank.plugins`). The settings the monitors read travel as one
+:class:`MonitorSettings`.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from envs.safety_metrics import DEFAULT_STALL_SECONDS, FREE_PATH, STANDING_SPEED
 from scenario_bank.elements import ActorKind
 from scenario_bank.failure_types import (FAILURE_TYPES, attach_detection, detach_detection, failure_table,
                                          failure_type)
+from scenario_bank.plugins import forget_plugin, remember_plugin
 
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "MonitorSettings", "Detector", "DETECTORS",
            "DEFAULT_MONITOR", "register_detector", "unregister_detector", "types_without_detector", "detect_failure",
@@ -221,13 +223,16 @@ def register_detector(detector: Detector) -> Detector:
     """Detect the failure type ``detector.name`` (a row of the failure table, e.g. one added with
     :func:`~scenario_bank.failure_types.register_failure_type`) with ``detector``; :func:`unregister_detector`
     undoes it. ``dv2s regress`` runs it too when its type has a ``result_field``
-    (:func:`scenario_bank.failure_types.happened`). Register in each process that detects: a worker process of
-    a pool (forkserver or spawn) does not see a registration made in the calling process. Returns ``detector``."""
+    (:func:`scenario_bank.failure_types.happened`). The module defining ``detector.detect`` is remembered as a
+    plug-in module: every worker process imports it before its first episode, so it must register the detector
+    when it is imported and be importable (not ``__main__``; :mod:`scenario_bank.plugins`). Returns
+    ``detector``."""
     if failure_type(detector.name) is None:
         raise ValueError(f"no failure type {detector.name!r}: add its row to scenario_bank/failure_types.py first")
     if detector.name in DETECTORS:
         raise ValueError(f"failure type {detector.name!r} has a detector already")
     DETECTORS[detector.name] = detector
+    remember_plugin(_plugin_name(detector.name), getattr(detector.detect, "__module__", None))
     attach_detection(detector.name, lambda result, trace, settings: detector.detect(
         result, trace, MonitorSettings.from_recorded(settings)) is not None)
     return detector
@@ -237,6 +242,11 @@ def unregister_detector(name: str) -> None:
     """Remove the detector :func:`register_detector` added for ``name``."""
     DETECTORS.pop(name)
     detach_detection(name)
+    forget_plugin(_plugin_name(name))
+
+
+def _plugin_name(name: str) -> str:
+    return f"the detector of failure type {name!r}"
 
 
 def types_without_detector() -> List[str]:
@@ -249,7 +259,7 @@ def _detector(name: str) -> Detector:
     detector = DETECTORS.get(name)
     if detector is None:
         raise KeyError(f"failure type {name!r} has no detector in this process: register one with "
-                       "dv2s_gym.mining.monitors.register_detector in each process that detects")
+                       "dv2s_gym.mining.monitors.register_detector in the plug-in module that registers the type")
     return detector
 
 

@@ -14,10 +14,10 @@ A task is a plain dict, so any pool of :mod:`dv2s_gym.workers` (local processes,
 
 A failure type registered at run time (:func:`scenario_bank.failure_types.register_failure_type`) with a
 ``result_field`` is recorded in that field by running its detector
-(:func:`dv2s_gym.mining.monitors.register_detector`) on the episode's trace. The worker process must have the
-type and its detector registered: a plug-in registers in each process that detects, and the pool's workers
-(forkserver or spawn) import only the product's modules, so a task naming a type this process does not know
-comes back as an error result that says so.
+(:func:`dv2s_gym.mining.monitors.register_detector`) on the episode's trace. Every worker process imports the
+plug-in modules of the process that started it before its first task (:mod:`scenario_bank.plugins`), so a
+plug-in module that registers the type and its detector when it is imported registers them there too; a task
+naming a type this process still does not know comes back as an error result that says so.
 
 :func:`run_regress_task` returns the episode's :class:`~scenario_bank.records.RegressEpisode`:
 ``EpisodeResult.to_json()`` plus ``role``, ``id`` (``"<scenario>/<seed>"``), ``trace`` (the saved trace's path or
@@ -68,8 +68,9 @@ def run_regress_task(task: Dict[str, Any]) -> RegressEpisode:
     unknown = [kind for kind in task.get("failure") or () if kind not in failure_kinds()]
     if unknown:
         return RegressEpisode.from_dict(error_result(task, (
-            f"failure type {', '.join(unknown)} is not registered in this worker process: a plug-in's failure type "
-            "must be registered, with its detector, in each process that runs episodes")))
+            f"failure type {', '.join(unknown)} is not registered in this worker process: the plug-in module that "
+            "registers it (imported by every worker) must register the type and its detector when it is imported, "
+            "not later")))
     env_key = None
     try:
         env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
