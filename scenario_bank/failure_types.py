@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import inspect
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Tuple
+from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple
 
 from scenario_bank.plugins import forget_plugin, remember_plugin
 
@@ -121,8 +121,9 @@ def unregister_failure_type(name: str) -> None:
     _rebuild()
 
 
-Detection = Callable[[Any, Any, Mapping[str, Any]], bool]
-"""``(episode result, trace, recorded monitor settings) -> whether the type happened``."""
+Detection = Callable[[Any, Any, Any], bool]
+"""``(episode result, trace, monitor settings) -> whether the type happened``; the settings are an
+:class:`envs.safety_metrics.MonitorSettings` (a mapping of them, as a run records them, is read too)."""
 
 _DETECTION: Dict[str, Detection] = {}
 """How a registered type is found, by name: set by :func:`dv2s_gym.mining.monitors.register_detector`, so that
@@ -140,9 +141,9 @@ def detach_detection(name: str) -> None:
     _DETECTION.pop(name, None)
 
 
-def happened(name: str, result: Any, trace: Any, settings: Mapping[str, Any]) -> bool:
+def happened(name: str, result: Any, trace: Any, settings: Any) -> bool:
     """Whether the registered failure type ``name`` happened in the episode (``result``, ``trace``), by its
-    detector with the monitor ``settings`` (e.g. ``{"stall_seconds": 5.0}``; an absent one takes its default).
+    detector with the monitor ``settings`` (an :class:`envs.safety_metrics.MonitorSettings`).
 
     Raises:
         KeyError: when no detector is registered for ``name`` in this process (a plug-in module registers its

@@ -27,10 +27,11 @@ it before its first episode (:mod:`scenario_bank.plugins`). The settings the mon
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
-from typing import Any, Callable, Dict, List, Mapping, Optional, Union
+from dataclasses import asdict, dataclass
+from typing import Any, Callable, Dict, List, Optional
 
-from envs.safety_metrics import DEFAULT_STALL_SECONDS, FREE_PATH, STANDING_SPEED, first_stall_step
+from envs.safety_metrics import (DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD, FREE_PATH, STANDING_SPEED,
+                                 MonitorSettings, first_stall_step)
 from scenario_bank.elements import ActorKind
 from scenario_bank.failure_types import (FAILURE_TYPES, attach_detection, detach_detection, failure_table,
                                          failure_type)
@@ -43,7 +44,6 @@ __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "MonitorSettings", "De
 COLLISION_TYPES = ("rear_end", "struck_from_behind", "side", "head_on", "pedestrian", "obstacle")
 STALL_SPEED = STANDING_SPEED
 """m/s under which the ego counts as standing."""
-DEFAULT_TTC_THRESHOLD = 1.0
 _VEHICLES = (ActorKind.CAR, ActorKind.TRUCK, ActorKind.BICYCLE, ActorKind.MOTORCYCLE, None)
 """The kinds (and no kind) a collision is typed by the actors' headings for; the others count as obstacles."""
 
@@ -108,30 +108,6 @@ def collision_type(ego: List[float], other: List[float], other_kind: Optional[st
 def _step_at(trace, time: float) -> int:
     period = 1.0 / float(trace.config.get("policy_frequency", 5))
     return max(0, min(len(trace.states) - 1, int(round(time / period))))
-
-
-@dataclass(frozen=True)
-class MonitorSettings:
-    """The failure monitors' settings: ``ttc_threshold`` [s] (a smaller time-to-collision is a ``low_ttc``
-    failure) and ``stall_seconds`` (standing that long with a free path ahead is a ``stall``)."""
-
-    ttc_threshold: float = DEFAULT_TTC_THRESHOLD
-    stall_seconds: float = DEFAULT_STALL_SECONDS
-
-    @classmethod
-    def from_recorded(cls, values: Mapping[str, Any]) -> "MonitorSettings":
-        """The settings a mapping records under their names (a run's ``settings.json``, a mining task, a
-        conversion's ``monitor`` option); a setting absent or ``None`` there takes its default."""
-        given = {field.name: float(values[field.name]) for field in fields(cls) if values.get(field.name) is not None}
-        return cls(**given)
-
-    @classmethod
-    def of(cls, value: Union["MonitorSettings", Mapping[str, Any], None]) -> "MonitorSettings":
-        """``value`` as settings: settings as they are, a mapping read by :meth:`from_recorded`, ``None`` the
-        defaults."""
-        if isinstance(value, cls):
-            return value
-        return cls.from_recorded(value or {})
 
 
 @dataclass(frozen=True)
@@ -201,7 +177,7 @@ def _off_road_score(result, failure: Failure, settings: MonitorSettings) -> floa
 
 
 def _stall_detect(result, trace, settings: MonitorSettings) -> Optional[Failure]:
-    return _stall(trace, settings.stall_seconds)
+    return _stall(trace, settings)
 
 
 def _stall_score(result, failure: Failure, settings: MonitorSettings) -> float:
@@ -234,7 +210,7 @@ def register_detector(detector: Detector) -> Detector:
     DETECTORS[detector.name] = detector
     remember_plugin(_plugin_name(detector.name), getattr(detector.detect, "__module__", None))
     attach_detection(detector.name, lambda result, trace, settings: detector.detect(
-        result, trace, MonitorSettings.from_recorded(settings)) is not None)
+        result, trace, MonitorSettings.of(settings)) is not None)
     return detector
 
 
@@ -278,14 +254,14 @@ def detect_failure(result, trace, settings: MonitorSettings = DEFAULT_MONITOR) -
     return None
 
 
-def detect_stall(trace, stall_seconds: float = DEFAULT_STALL_SECONDS) -> Optional[Failure]:
-    """The episode's first stall (the ego stood for ``stall_seconds`` with a free path ahead), or ``None``,
-    whatever else happened in it."""
-    return _stall(trace, stall_seconds)
+def detect_stall(trace, settings: MonitorSettings = DEFAULT_MONITOR) -> Optional[Failure]:
+    """The episode's first stall (the ego stood for the settings' ``stall_seconds`` with a free path ahead), or
+    ``None``, whatever else happened in it."""
+    return _stall(trace, settings)
 
 
-def _stall(trace, stall_seconds: float) -> Optional[Failure]:
-    start = first_stall_step(trace, stall_seconds)
+def _stall(trace, settings: MonitorSettings) -> Optional[Failure]:
+    start = first_stall_step(trace, settings.stall_seconds)
     if start is None:
         return None
     return Failure("stall", _time_of(trace, start), start)

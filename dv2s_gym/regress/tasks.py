@@ -9,8 +9,8 @@ A task is a plain dict, so any pool of :mod:`dv2s_gym.workers` (local processes,
 - ``env_config``: ``DV2S-v0`` config overrides (dict, may be empty);
 - ``bank_dir``: bank folder (``None``: the shipped bank);
 - ``trace_dir``: folder for the trace of a failed episode (``None``: keep no trace);
-- ``failure``: the failure kinds (:mod:`dv2s_gym.regress.failures`; default collision, off-road, stall)
-  and ``stall_seconds``.
+- ``failure``: the failure kinds (:mod:`dv2s_gym.regress.failures`; default collision, off-road, stall);
+- ``monitor``: the monitors' settings (an :class:`envs.safety_metrics.MonitorSettings`: its ``stall_seconds``).
 
 A failure type registered at run time (:func:`scenario_bank.failure_types.register_failure_type`) with a
 ``result_field`` is recorded in that field by running its detector
@@ -21,7 +21,7 @@ naming a type this process still does not know comes back as an error result tha
 
 :func:`run_regress_task` returns the episode's :class:`~scenario_bank.records.RegressEpisode`:
 ``EpisodeResult.to_json()`` plus ``role``, ``id`` (``"<scenario>/<seed>"``), ``trace`` (the saved trace's path or
-``None``), ``stalled`` and ``stall_time`` (when the ego's total standing time on a free road reached
+``None``), ``stalled`` and ``stall_time`` (when the ego's total standing time on a free road reached the monitor's
 ``stall_seconds``: :func:`envs.safety_metrics.total_stall_step`), with ``failed`` and ``failure_kinds`` set from
 the task's failure kinds, and in its ``extra`` ``seconds`` (the episode's wall time; the runner keeps it apart
 from the result). An exception inside the episode comes back as an error result (``id``, ``role``, ``scenario``,
@@ -44,9 +44,9 @@ from typing import Any, Dict
 from dv2s_gym.workers.tasks import error_result, register, task_id
 from policies import worker_cache
 from scenario_bank.records import RegressEpisode
-from dv2s_gym.regress.failures import apply_failure, DEFAULT_STALL_SECONDS, failure_kinds, parse_failure
+from dv2s_gym.regress.failures import apply_failure, failure_kinds, parse_failure
 from scenario_bank.failure_types import failure_table, happened
-from envs.safety_metrics import total_stall_step
+from envs.safety_metrics import MonitorSettings, total_stall_step
 from policies.evaluation import run_episode
 
 __all__ = ["KIND", "run_regress_task", "trace_filename"]
@@ -86,13 +86,14 @@ def run_regress_task(task: Dict[str, Any]) -> RegressEpisode:
             message += "\n" + traceback.format_exc()
         return RegressEpisode.from_dict(error_result(task, message))
     data = result.to_json()
-    stall = total_stall_step(trace, float(task.get("stall_seconds") or DEFAULT_STALL_SECONDS))
+    monitor = MonitorSettings.of(task.get("monitor"))
+    stall = total_stall_step(trace, monitor.stall_seconds)
     period = 1.0 / float(trace.config.get("policy_frequency", 5))
     data.update(role=task["role"], id=task_id(task["scenario"], task["seed"]), trace=None, seconds=round(seconds, 4),
                 stalled=stall is not None, stall_time=None if stall is None else stall * period)
     for row in failure_table():  # a registered type's field: its detector on the trace
         if row.result_field and row.result_field not in data:
-            data[row.result_field] = happened(row.name, result, trace, {"stall_seconds": task.get("stall_seconds")})
+            data[row.result_field] = happened(row.name, result, trace, monitor)
     apply_failure(data, parse_failure(task.get("failure")))
     trace_dir = task.get("trace_dir")
     if data["failed"] and trace_dir:
