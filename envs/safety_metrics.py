@@ -1,14 +1,16 @@
-"""Safety measures computed on highway-env state: time-to-collision."""
+"""Safety measures computed on highway-env state: time-to-collision, stalls; and :class:`MonitorSettings`, the
+settings the failure monitors read (the miner's, :mod:`dv2s_gym.mining.monitors`, and ``dv2s regress``'s)."""
 
 from __future__ import annotations
 
 import math
-from typing import Iterable, Optional, Sequence, Tuple
+from dataclasses import dataclass, fields
+from typing import Any, Iterable, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 __all__ = ["time_to_collision", "path_is_free", "first_stall_step", "total_stall_step", "FREE_PATH", "STANDING_SPEED",
-           "DEFAULT_STALL_SECONDS"]
+           "DEFAULT_STALL_SECONDS", "DEFAULT_TTC_THRESHOLD", "MonitorSettings"]
 
 FREE_PATH = 40.0
 """Metres ahead of the ego that must be empty for its path to count as free."""
@@ -16,6 +18,33 @@ STANDING_SPEED = 0.5
 """m/s under which a vehicle counts as standing."""
 DEFAULT_STALL_SECONDS = 5.0
 """Seconds the ego must stand with a free path ahead for a stall (the miner's monitors and ``dv2s regress``)."""
+DEFAULT_TTC_THRESHOLD = 1.0
+"""Seconds of time-to-collision under which the miner's monitors see a ``low_ttc`` failure."""
+
+
+@dataclass(frozen=True)
+class MonitorSettings:
+    """The failure monitors' settings: ``ttc_threshold`` [s] (a smaller time-to-collision is a ``low_ttc``
+    failure) and ``stall_seconds`` (standing that long with a free path ahead is a ``stall``). The one carrier of
+    these settings from a command's options (``--ttc-threshold``, ``--stall-seconds``) to the code that reads them."""
+
+    ttc_threshold: float = DEFAULT_TTC_THRESHOLD
+    stall_seconds: float = DEFAULT_STALL_SECONDS
+
+    @classmethod
+    def from_recorded(cls, values: Mapping[str, Any]) -> "MonitorSettings":
+        """The settings a mapping records under their names (a run's ``settings.json``, a conversion's ``monitor``
+        option); a setting absent or ``None`` there takes its default."""
+        given = {field.name: float(values[field.name]) for field in fields(cls) if values.get(field.name) is not None}
+        return cls(**given)
+
+    @classmethod
+    def of(cls, value: Union["MonitorSettings", Mapping[str, Any], None]) -> "MonitorSettings":
+        """``value`` as settings: settings as they are, a mapping read by :meth:`from_recorded`, ``None`` the
+        defaults."""
+        if isinstance(value, cls):
+            return value
+        return cls.from_recorded(value or {})
 
 
 def time_to_collision(

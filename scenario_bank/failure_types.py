@@ -13,10 +13,12 @@ and its reports list them in severity order (:func:`failure_table`: the table an
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, Iterable, List, Mapping, Optional, Tuple
+from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple
 
 from scenario_bank.errors import DV2SError
+from scenario_bank.plugins import forget_plugin, remember_plugin
 
 __all__ = ["FailureTypeError", "UnknownDetectorError", "FailureType", "FAILURE_TABLE", "FAILURE_TYPES", "failure_table",
            "failure_type", "severity_order",
@@ -92,10 +94,14 @@ def severity_order(names: Iterable[str]) -> List[str]:
     return [row.name for row in _TABLE if row.name in names] + sorted(n for n in names if n not in _BY_NAME)
 
 
-def register_failure_type(row: FailureType) -> FailureType:
+def register_failure_type(row: FailureType, module: Optional[str] = None) -> FailureType:
     """Add ``row`` to the table at run time (a plug-in's failure type; the product's own types are rows of
     :data:`FAILURE_TABLE`); its name and severity must be new. The miner detects it once its monitor registers a
-    detector for it (:func:`dv2s_gym.mining.monitors.register_detector`). Returns ``row``."""
+    detector for it (:func:`dv2s_gym.mining.monitors.register_detector`). Returns ``row``.
+
+    ``module``: the plug-in module that registers it (default: the caller's), which every worker process imports
+    before its first episode so that the registration holds there too (:mod:`scenario_bank.plugins`): register
+    at the module's import time, in a module other processes can import (not ``__main__``)."""
     if row.name in _BY_NAME:
         raise FailureTypeError(f"failure type {row.name!r} exists already")
     if not isinstance(row.severity, int) or isinstance(row.severity, bool) or row.severity < 0:
@@ -104,19 +110,33 @@ def register_failure_type(row: FailureType) -> FailureType:
     if any(other.severity == row.severity for other in _TABLE):
         raise FailureTypeError(f"failure type {row.name!r}: severity {row.severity} is taken; choose one no type has")
     _REGISTERED[row.name] = row
+    remember_plugin(_plugin_name(row.name), module or _caller_module())
     _rebuild()
     return row
+
+
+def _plugin_name(name: str) -> str:
+    return f"failure type {name!r}"
+
+
+def _caller_module() -> Optional[str]:
+    """The module of the code that called :func:`register_failure_type`."""
+    frame = inspect.currentframe()
+    caller = frame.f_back.f_back if frame is not None and frame.f_back is not None else None
+    return caller.f_globals.get("__name__") if caller is not None else None
 
 
 def unregister_failure_type(name: str) -> None:
     """Remove the failure type ``name`` added by :func:`register_failure_type` (the table's own rows stay)."""
     if _REGISTERED.pop(name, None) is None:
         raise FailureTypeError(f"failure type {name!r} was not registered at run time")
+    forget_plugin(_plugin_name(name))
     _rebuild()
 
 
-Detection = Callable[[Any, Any, Mapping[str, Any]], bool]
-"""``(episode result, trace, recorded monitor settings) -> whether the type happened``."""
+Detection = Callable[[Any, Any, Any], bool]
+"""``(episode result, trace, monitor settings) -> whether the type happened``; the settings are an
+:class:`envs.safety_metrics.MonitorSettings` (a mapping of them, as a run records them, is read too)."""
 
 _DETECTION: Dict[str, Detection] = {}
 """How a registered type is found, by name: set by :func:`dv2s_gym.mining.monitors.register_detector`, so that
@@ -134,19 +154,19 @@ def detach_detection(name: str) -> None:
     _DETECTION.pop(name, None)
 
 
-def happened(name: str, result: Any, trace: Any, settings: Mapping[str, Any]) -> bool:
+def happened(name: str, result: Any, trace: Any, settings: Any) -> bool:
     """Whether the registered failure type ``name`` happened in the episode (``result``, ``trace``), by its
-    detector with the monitor ``settings`` (e.g. ``{"stall_seconds": 5.0}``; an absent one takes its default).
+    detector with the monitor ``settings`` (an :class:`envs.safety_metrics.MonitorSettings`).
 
     Raises:
-        UnknownDetectorError: (a ``KeyError``) when no detector is registered for ``name`` in this process (a plug-in registers its type and
-            detector in each process that detects).
+        UnknownDetectorError: (a ``KeyError``) when no detector is registered for ``name`` in this process (a plug-in module registers its
+            type and detector when it is imported, and every worker process imports it).
     """
     detection = _DETECTION.get(name)
     if detection is None:
-        raise UnknownDetectorError(f"failure type {name!r} has no detector registered in this process; its plug-in must "
-                       "register the type and its detector (dv2s_gym.mining.monitors.register_detector) in each "
-                       "process that detects")
+        raise UnknownDetectorError(f"failure type {name!r} has no detector registered in this process; its plug-in module "
+                       "must register the type and its detector (dv2s_gym.mining.monitors.register_detector) "
+                       "when it is imported")
     return bool(detection(result, trace, settings))
 
 

@@ -55,6 +55,9 @@ from pathlib import Path
 from typing import AbstractSet, Any, Callable, Dict, Mapping
 
 import cv2
+import pytest
+
+from scenario_bank.jail import jail_status
 
 VOLATILE_KEYS = frozenset({"created", "date", "timing", "timings", "seconds", "conversion_seconds",
                            "conversion_stage_seconds", "hostname", "dv2s_version", "dv2s_gym_version"})
@@ -203,3 +206,13 @@ def write_record(record_file: Path, behaviour: Callable[[], Any]) -> None:
     record_file.parent.mkdir(parents=True, exist_ok=True)
     record_file.write_text(json.dumps(behaviour(), indent=1, sort_keys=True) + "\n", encoding="utf-8")
     print(f"wrote {record_file}")
+
+
+def require_the_jail(runs: str) -> None:
+    """Fail at once, naming the cause and its fix, when the jail cannot start here: ``runs`` convert failures in
+    it (their exact replays and generated scripts), and without it every conversion would be rejected, showing
+    only as digests that differ (e.g. a checkout copied under /tmp, which the jail hides)."""
+    ok, why = jail_status()
+    if not ok:
+        pytest.fail(f"{runs} convert failures, whose scripts run only in the jail, and the jail cannot start here: "
+                    f"{why}", pytrace=False)

@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 from behaviour_digest import (differences, digest, file_digests, folder_digests, normalise_text,  # noqa: E402
-                              write_record)
+                              require_the_jail, write_record)
 
 RECORD = ROOT / "tests" / "data" / "behaviour" / "reports.json"
 SHIPPED_BANK = ROOT / "scenario_bank" / "scenarios"
@@ -70,6 +70,7 @@ def _run(name: str, argv: list, work: Path, workers: int = 1,
 
 def behaviour() -> Dict[str, Dict[str, Any]]:
     """``{run: {exit, stdout, files, bank added}}`` for every run of :data:`RUNS`, each in a fresh folder."""
+    require_the_jail("the recorded mining runs")
     with tempfile.TemporaryDirectory(prefix="dv2s-behaviour-") as work:
         return {name: _run(name, argv, Path(work)) for name, argv in RUNS.items()}
 

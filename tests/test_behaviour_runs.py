@@ -64,7 +64,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from behaviour_digest import differences, digest, file_digests, normalise, normalise_text  # noqa: E402
+from behaviour_digest import (differences, digest, file_digests, normalise, normalise_text,  # noqa: E402
+                              require_the_jail)
 
 RECORD = ROOT / "tests" / "data" / "behaviour" / "runs.json"
 SHIPPED_BANK = ROOT / "scenario_bank" / "scenarios"
@@ -269,6 +270,7 @@ PARTS: Dict[str, Callable[[Path], Dict[str, Any]]] = {"train": _train, "dagger":
 
 def behaviour(part: str) -> Dict[str, Any]:
     """What the run of ``part`` writes, in a fresh folder."""
+    require_the_jail("the recorded runs (the loop's and the conversion's)")
     with tempfile.TemporaryDirectory(prefix=f"dv2s-behaviour-{part}-") as work:
         return PARTS[part](Path(work))
 
@@ -334,6 +336,7 @@ def _same_lines(recorded: Dict[str, Any], now: Dict[str, Any]) -> None:
 def _compare_with_one_worker(run: str, argv: list, label: str, workers: int = 2) -> None:
     import test_behaviour_reports as reports
 
+    require_the_jail("the recorded mining runs")
     with tempfile.TemporaryDirectory(prefix="dv2s-behaviour-workers-") as work:
         now = reports._run(run, argv, Path(work), workers=workers, adjust=_as_one_worker)
     recorded = _reports_record()[run]

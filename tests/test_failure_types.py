@@ -16,6 +16,7 @@ from dv2s_gym.mining import report as mining_report
 from dv2s_gym.mining.tasks import reference_avoids
 from dv2s_gym.regress import failures
 from dv2s_gym.regress import report as regress_report
+from envs.safety_metrics import MonitorSettings
 from envs.trace import EpisodeTrace
 from policies.evaluation import EpisodeResult
 from scenario_bank.failure_types import (FAILURE_TABLE, FAILURE_TYPES, FailureType, failure_table, failure_type,
@@ -187,7 +188,7 @@ def _regress_task(monkeypatch, speeds, failure):
     monkeypatch.setattr(tasks, "run_episode", lambda env, policy, scenario, seed: _episode(speeds))
     return tasks.run_regress_task({"kind": "regress", "policy": "rule", "role": "candidate", "scenario": "s",
                                    "seed": 0, "env_config": {}, "bank_dir": None, "trace_dir": None,
-                                   "failure": failure, "stall_seconds": 5.0}).to_dict()
+                                   "failure": failure, "monitor": MonitorSettings(stall_seconds=5.0)}).to_dict()
 
 
 def test_regress_counts_a_registered_failure_type(toy_type, monkeypatch):

@@ -27,3 +27,22 @@ def test_code_elsewhere_is_not_hidden(monkeypatch):
     monkeypatch.setattr(bwrap, "CODE_ROOT", Path("/var/tmp/tmpclone"))
     monkeypatch.setattr(bwrap, "_python_roots", lambda: ["/opt/venv", "/tmpfoo/venv"])
     assert bwrap.hidden_by_scratch() is None
+
+
+def test_mining_that_converts_refuses_to_start_where_the_jail_hides_the_code(monkeypatch, tmp_path):
+    """Every conversion runs scripts in the jail: without it the run would reject each failure for the same reason,
+    so it stops before any episode with that reason and its fix."""
+    pytest.importorskip("verifai")
+    from dv2s_gym.mining.errors import MiningError
+    from dv2s_gym.mining.miner import mine
+    from dv2s_gym.mining.settings import MineSettings
+
+    monkeypatch.setattr(bwrap, "CODE_ROOT", Path("/tmp/clone"))
+    monkeypatch.setattr(process, "_STATUS", {})
+    settings = MineSettings(budget=1, scenarios=("highway_lead_vehicle_brakes",), convert=True,
+                            bank_dir=str(tmp_path / "bank"))
+    with pytest.raises(MiningError) as refused:
+        mine("rule", settings, out=tmp_path / "run", progress=False)
+    message = str(refused.value)
+    assert "/tmp/clone is under /tmp" in message and "outside /tmp" in message and "--no-convert" in message
+    assert not (tmp_path / "run").exists() and not (tmp_path / "bank").exists()

@@ -63,7 +63,7 @@ def test_a_stall_clip_holds_the_car_the_ego_stood_behind():
               for k in range(40)]
     trace = SimpleNamespace(states=states, events=[], config={"policy_frequency": 5})
     stall = {"type": "stall", "step": 10, "time": 2.0, "with": None}
-    camera = _camera(trace, stall, 10, 5.0, 5.0, VideoSettings(), 40)
+    camera = _camera(trace, stall, 10, 5.0, True, VideoSettings(), 40)
     assert not _inside({}, (60.0, 0.3), 0) and _inside(camera, (60.0, 0.3), ACTOR_MARGIN)
 
 

@@ -12,7 +12,7 @@ import math
 import pytest
 
 from dv2s_gym.mining.failure_video import stall_end, write_failure_video
-from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, STALL_SPEED
+from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, STALL_SPEED, MonitorSettings
 from dv2s_gym.pipeline.video import read_video
 
 FPS = 5  # the env's default policy frequency
@@ -51,6 +51,6 @@ def test_a_stall_video_runs_from_before_the_stall_through_it(stall, tmp_path):
 @pytest.mark.slow
 def test_a_shorter_monitor_stall_duration_shortens_the_clip(stall, tmp_path):
     written = write_failure_video(stall, tmp_path / "stall.webm", policy="dv2s-ppo", before=1.0, after=0.0,
-                                  stall_seconds=2.0)
+                                  monitor=MonitorSettings(stall_seconds=2.0))
     k = stall["failure"]["step"]
     assert (written.first, written.last) == (k - FPS, k + 2 * FPS - 1)

@@ -170,7 +170,9 @@ def test_degenerate_episode_settings_are_refused_before_any_episode(tmp_path, ca
     # without stall among the failure kinds a short episode is fine
     from dv2s_gym.regress.runner import _check_env_config
 
-    _check_env_config({"duration": 2}, ["collision", "off_road"], 5.0)
+    from envs.safety_metrics import MonitorSettings
+
+    _check_env_config({"duration": 2}, ["collision", "off_road"], MonitorSettings(stall_seconds=5.0))
 
 
 def test_a_policy_option_of_the_wrong_type_is_named():

@@ -2,7 +2,7 @@
 
 from types import SimpleNamespace
 
-from envs.safety_metrics import first_stall_step, total_stall_step
+from envs.safety_metrics import MonitorSettings, first_stall_step, total_stall_step
 
 FREQUENCY = 5  # steps per second
 
@@ -47,5 +47,6 @@ def test_the_regression_worker_counts_total_standing_time(monkeypatch):
     monkeypatch.setattr(worker_cache, "policy_for", lambda spec, key, env, owner="": None)
     monkeypatch.setattr(regress_tasks, "run_episode", lambda env, policy, scenario, seed: (result, trace))
     data = run_regress_task({"kind": "regress", "policy": "rule", "role": "candidate", "scenario": "s", "seed": 0,
-                             "env_config": {}, "bank_dir": None, "trace_dir": None, "stall_seconds": 5.0})
+                             "env_config": {}, "bank_dir": None, "trace_dir": None,
+                             "monitor": MonitorSettings(stall_seconds=5.0)})
     assert data["stalled"] and data["failed"] and data["failure_kinds"] == ["stall"]

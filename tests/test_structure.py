@@ -330,6 +330,8 @@ COMPUTED_LOADS: Dict[str, str] = {
     "scenario_bank.jail.process": "JailedProcess starts the worker module its caller names (read where it is "
                                   "called: JailedProcess(\"pkg.mod\"))",
     "scenario_bank.sandbox": "the simulator's worker module, named to it by envs (simulator_worker())",
+    "scenario_bank.plugins": "the user's plug-in modules (the modules that registered a failure type or detector, "
+                             "or DV2S_PLUGINS), which every worker process imports",
 }
 """Modules that call a loader with a computed name, or run code that is not a literal string (:func:`_loader_uses`,
 :func:`_code_run`), with the reason. What they load is

@@ -290,6 +290,31 @@ def test_dqn_trains_with_its_default_learning_rate_and_exploration(tmp_path, cap
     assert hyperparameters["learning_rate"] == 5e-4 and hyperparameters["exploration_fraction"] == 0.7
 
 
+@pytest.mark.slow
+def test_sac_trains_with_its_default_hyperparameters(tmp_path, capsys):
+    """`dv2s train --algo sac` without --hp: the saved model learns at 3e-4 (actor, critics and entropy coefficient)
+    from a 50 000-transition replay buffer, starting after 1000 steps, in batches of 256, with gamma 0.9 and
+    [256, 256] layers, on ContinuousAction; its card says so."""
+    from stable_baselines3 import SAC
+
+    out = tmp_path / "sac"
+    code, _, err = run(capsys, "train", "--algo", "sac", "--scenarios", SCENARIOS[0], "--steps", 64, "--envs", 1,
+                       "--seed", 0, "--vec-env", "dummy", "--eval-freq", 0, "--card-seeds", 0, "--checkpoint-freq", 0,
+                       "--no-progress", "--out", out)
+    assert code == 0, err
+    model = SAC.load(out / "model.zip", device="cpu")
+    assert model.learning_rate == 3e-4 and model.lr_schedule(0.5) == 3e-4
+    optimizers = (model.actor.optimizer, model.critic.optimizer, model.ent_coef_optimizer)
+    assert [group["lr"] for optimizer in optimizers for group in optimizer.param_groups] == [3e-4] * 3
+    assert (model.buffer_size, model.learning_starts, model.batch_size, model.gamma) == (50_000, 1000, 256, 0.9)
+    assert model.policy.net_arch == [256, 256]
+    card = read_card(out)
+    assert card["hyperparameters"] == {"policy": "MlpPolicy", "net_arch": [256, 256], "learning_rate": 3e-4,
+                                       "buffer_size": 50_000, "learning_starts": 1000, "batch_size": 256,
+                                       "gamma": 0.9}
+    assert card["env_config"]["action"] == {"type": "ContinuousAction"}
+
+
 def test_a_short_run_gets_a_short_card_evaluation_unless_told_otherwise():
     from policies.training import CARD_SEEDS, SHORT_RUN_CARD_SEEDS, SHORT_RUN_STEPS, TrainConfig
 

@@ -2,6 +2,11 @@
 
 Each command group is a module holding its subcommands' arguments (``add_parser``) next to the functions
 that run them; :func:`build_parser` asks each to add its own, in the order ``dv2s --help`` lists them.
+
+Before the command line is read, the plug-in modules named by the ``DV2S_PLUGINS`` environment variable
+(comma-separated module names) are imported (:func:`scenario_bank.plugins.load_plugins_from_environment`): their
+registrations (a failure type and its detector, a sampler, a backend) hold for the command and, through the
+plug-in registries, in every worker process it starts.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from dv2s_gym.cli.errors import missing_extra, report_error
 from dv2s_gym.cli.interrupts import SigintFlag, report_interrupted
 from dv2s_gym.cli.parser import Parser
 from scenario_bank.errors import DV2SError
+from scenario_bank.plugins import PluginError, load_plugins_from_environment
 
 __all__ = ["main", "build_parser"]
 
@@ -71,6 +77,11 @@ def _exit_at_once(code: int) -> None:
 
 
 def _main(argv: Optional[List[str]]) -> int:
+    try:
+        load_plugins_from_environment()  # before parsing: a plug-in's sampler or backend is a choice of its flag
+    except PluginError as error:
+        given = sys.argv[1:] if argv is None else argv
+        return report_error(argparse.Namespace(debug="--debug" in given), error, explained=True)
     parser = build_parser()
     args = parser.parse_args(argv)
     sigint = SigintFlag()

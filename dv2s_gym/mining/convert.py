@@ -280,7 +280,7 @@ class ConversionSettings:
         """The settings of the failure's video (:class:`~dv2s_gym.mining.failure_video.VideoSettings`)."""
         return VideoSettings(policy=self.policy, bank_dir=self.bank_dir, env_config=self.env_config,
                              before=self.before, after=self.after,
-                             stall_seconds=None if self.monitor is None else MonitorSettings.of(self.monitor).stall_seconds)
+                             monitor=None if self.monitor is None else MonitorSettings.of(self.monitor))
 
 
 def _reproduce(script_path: Path, policy: Any, settings: ConversionSettings, record_seed: int,

@@ -40,7 +40,7 @@ import gymnasium as gym
 import numpy as np
 
 from dv2s_gym.mining.interaction import key_actor
-from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, STALL_SPEED
+from dv2s_gym.mining.monitors import STALL_SPEED, MonitorSettings
 from envs.errors import DV2SError
 from envs.recording import VideoWriter
 from envs.safety_metrics import path_is_free
@@ -291,15 +291,15 @@ class FailureVideo:
 class VideoSettings:
     """How :func:`write_failure_video` re-runs and films a failure: the deterministic ``policy`` that failed (not
     needed to replay a trace), the bank holding the scenario (``bank_dir``; default the shipped bank), the episode's
-    ``env_config``, the seconds of video ``before`` and ``after`` the failure, and ``stall_seconds``, the longest
-    stall a clip covers (default the monitors' ``DEFAULT_STALL_SECONDS``)."""
+    ``env_config``, the seconds of video ``before`` and ``after`` the failure, and the failure ``monitor``'s settings,
+    whose ``stall_seconds`` is the longest stall a clip covers (``None``: the monitors' defaults)."""
 
     policy: Any = None
     bank_dir: Optional[PathLike] = None
     env_config: Optional[Mapping[str, Any]] = None
     before: float = 4.0
     after: float = 1.0
-    stall_seconds: Optional[float] = None
+    monitor: Optional[MonitorSettings] = None
 
     @classmethod
     def of(cls, settings: Optional["VideoSettings"], options: Mapping[str, Any]) -> "VideoSettings":
@@ -322,34 +322,38 @@ def record_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike
     ``round(before * f) + round(after * f) + 1`` frames unless the episode started less than
     ``before`` seconds before the failure. A record's ``stall`` covers the stall: the window runs from
     ``before`` seconds before its start through its last standing frame (:func:`stall_end`, at most
-    ``stall_seconds`` after the start; default the monitors' ``DEFAULT_STALL_SECONDS``) plus ``after``
+    the monitor's ``stall_seconds`` after the start) plus ``after``
     seconds. The trace is saved to ``trace_path`` (default ``trace.json.gz`` beside the video).
     """
     return write_failure_video(record_or_trace, out_path, settings, trace_path=trace_path, **options).path
 
 
-def _window(trace, k: int, frequency: float, stall_seconds: Optional[float], settings: VideoSettings,
+def _window(trace, k: int, frequency: float, stall: bool, settings: VideoSettings,
             frames: int) -> Tuple[int, int]:
     """The first and last frame of the clip around frame ``k`` (:func:`_write_window`) of ``frames`` frames."""
     start = max(0, k - int(round(settings.before * frequency)))
-    last = stall_end(trace, k, int(math.ceil(stall_seconds * frequency))) if stall_seconds is not None else k
+    last = stall_end(trace, k, _stall_span(settings, frequency)) if stall else k
     return start, min(frames - 1, last + int(round(settings.after * frequency)))
 
 
-def _camera(trace, failure: Optional[Mapping[str, Any]], k: int, frequency: float, stall_seconds: Optional[float],
+def _stall_span(settings: VideoSettings, frequency: float) -> int:
+    """The frames of the longest stall a clip covers: the monitor's ``stall_seconds``."""
+    return int(math.ceil(MonitorSettings.of(settings.monitor).stall_seconds * frequency))
+
+
+def _camera(trace, failure: Optional[Mapping[str, Any]], k: int, frequency: float, stall: bool,
             settings: VideoSettings, frames: int) -> Dict[str, Any]:
     """The look-ahead view (:func:`clip_camera`) that holds the actor ``failure`` involves in the clip's frames
-    (those up to the failure's frame, or through a stall)."""
-    start, end = _window(trace, k, frequency, stall_seconds, settings, frames)
+    (those up to the failure's frame, or through a ``stall``)."""
+    start, end = _window(trace, k, frequency, stall, settings, frames)
     return clip_camera(trace, key_actor(trace, failure) if failure else None, start, end)
 
 
 def _write_window(out_path: Path, frames: List[np.ndarray], trace, k: int, frequency: float,
-                  stall_seconds: Optional[float], settings: VideoSettings) -> Tuple[int, int]:
+                  stall: bool, settings: VideoSettings) -> Tuple[int, int]:
     """Write the frames (``frequency`` per second) from ``before`` seconds before frame ``k`` to ``after`` seconds
-    after it (after the stall's end when ``stall_seconds`` is given) to ``out_path``. Returns the first and last
-    frame written."""
-    start, end = _window(trace, k, frequency, stall_seconds, settings, len(frames))
+    after it (after the stall's end for a ``stall``) to ``out_path``. Returns the first and last frame written."""
+    start, end = _window(trace, k, frequency, stall, settings, len(frames))
     out_path.parent.mkdir(parents=True, exist_ok=True)
     with VideoWriter(out_path, fps=frequency) as video:
         for frame in frames[start:end + 1]:
@@ -362,31 +366,29 @@ def write_failure_video(record_or_trace: Union[Mapping[str, Any], Any, PathLike]
                         **options: Any) -> FailureVideo:
     """:func:`record_failure_video`, returning a :class:`FailureVideo` (window, result, trace)."""
     settings = VideoSettings.of(settings, options)
-    stall_seconds = _check_window(settings)
+    _check_window(settings)
     out_path = Path(out_path)
     trace_path = Path(trace_path) if trace_path is not None else out_path.parent / "trace.json.gz"
     if isinstance(record_or_trace, Mapping):
-        clip = _record_clip(record_or_trace, settings, stall_seconds)
+        clip = _record_clip(record_or_trace, settings)
     else:
         clip = _trace_clip(record_or_trace, settings)
     frames, result, trace, frequency, k, stall = clip
-    start, end = _write_window(out_path, frames, trace, k, frequency, stall_seconds if stall else None,
-                               settings)
+    start, end = _write_window(out_path, frames, trace, k, frequency, stall, settings)
     trace.save(trace_path)
     return FailureVideo(out_path, trace_path, start, end, k, frequency, result, trace)
 
 
-def _check_window(settings: VideoSettings) -> float:
-    """The settings' ``stall_seconds`` (its default filled in), once ``before``, ``after`` and it are checked."""
+def _check_window(settings: VideoSettings) -> None:
+    """Check the settings' ``before``, ``after`` and the monitor's ``stall_seconds``."""
     if settings.before < 0 or settings.after < 0:
         raise FailureReplayError(f"before and after must be >= 0 seconds, not {settings.before} and {settings.after}")
-    stall_seconds = DEFAULT_STALL_SECONDS if settings.stall_seconds is None else float(settings.stall_seconds)
+    stall_seconds = MonitorSettings.of(settings.monitor).stall_seconds
     if not stall_seconds > 0:
         raise FailureReplayError(f"stall_seconds must be > 0, not {stall_seconds}")
-    return stall_seconds
 
 
-def _record_clip(record: Mapping[str, Any], settings: VideoSettings, stall_seconds: float) -> tuple:
+def _record_clip(record: Mapping[str, Any], settings: VideoSettings) -> tuple:
     """``(frames, result, trace, frequency, failure frame, stall)`` of an episode record, re-run far enough past
     its end to show ``after`` seconds (and a stall's standing frames) past the failure."""
     if settings.policy is None:
@@ -395,7 +397,7 @@ def _record_clip(record: Mapping[str, Any], settings: VideoSettings, stall_secon
     steps = int((record.get("result") or {}).get("steps") or 0)
     k = failure_step(record.get("failure"), steps, frequency)
     stall = (record.get("failure") or {}).get("type") == "stall"
-    span = int(math.ceil(stall_seconds * frequency)) if stall else 0  # an upper bound of the stall's frames
+    span = _stall_span(settings, frequency) if stall else 0  # an upper bound of the stall's frames
     end = k + span + int(round(settings.after * frequency))
     camera: Dict[str, Any] = {}
     for attempt in range(2):  # the plain view, then (when the actor is out of it) the look-ahead view
@@ -404,8 +406,7 @@ def _record_clip(record: Mapping[str, Any], settings: VideoSettings, stall_secon
                                               extra_steps=max(0, end - steps), camera=camera)
         frequency = _frequency(trace.config)
         k = failure_step(record.get("failure"), len(trace.actions), frequency)
-        wanted = _camera(trace, record.get("failure"), k, frequency, stall_seconds if stall else None, settings,
-                         len(frames))
+        wanted = _camera(trace, record.get("failure"), k, frequency, stall, settings, len(frames))
         if wanted == camera or attempt:  # the actor is in view (the second run's trace is the first's: same hash)
             break
         camera = wanted
@@ -425,7 +426,7 @@ def _trace_clip(source: Any, settings: VideoSettings) -> tuple:
     failure = _trace_failure(trace)
     k = failure_step(failure, len(trace.actions), frequency)
     failure = {**(failure or {}), **_trace_failure_actor(trace)}
-    camera = _camera(trace, failure, k, frequency, None, settings, len(trace.states))
+    camera = _camera(trace, failure, k, frequency, False, settings, len(trace.states))
     frames = _replay_trace_frames(trace, camera)
     return frames, None, trace, frequency, k, False
 
@@ -456,7 +457,7 @@ def write_script_episode_video(script_path: PathLike, episode: Mapping[str, Any]
     settings = VideoSettings.of(settings, options)
     if settings.policy is None:
         raise FailureReplayError("running a script's episode needs the policy (policy=...)")
-    stall_seconds = _check_window(settings)
+    _check_window(settings)
     script_path, out_path = Path(script_path), Path(out_path)
     name = scenario or (script_path.parent.name if script_path.name == "scenario.scenic" else script_path.stem)
     config = {**dict(settings.env_config or {}), **VIDEO_CONFIG}
@@ -466,7 +467,7 @@ def write_script_episode_video(script_path: PathLike, episode: Mapping[str, Any]
     stall = (failure or {}).get("type") == "stall"
     k = (failure_step(failure, episode_steps, frequency) if failure
          else max(0, min(episode_steps, episode_steps if centre is None else int(centre))))
-    span = int(math.ceil(stall_seconds * frequency)) if stall else 0  # an upper bound of the stall's frames
+    span = _stall_span(settings, frequency) if stall else 0  # an upper bound of the stall's frames
     end = k + span + int(round(settings.after * frequency))
     camera: Dict[str, Any] = {}
     for attempt in range(2):  # the plain view, then (when the actor is out of it) the look-ahead view
@@ -475,10 +476,9 @@ def write_script_episode_video(script_path: PathLike, episode: Mapping[str, Any]
             env, settings.policy, _Scene(name, seed, {}), True, max(0, end - episode_steps), trajectory_hash,
             lambda got: (f"the rendered run of {script_path} (seed {seed}) diverged from its episode: trajectory "
                          f"hash {got[:12]} != {str(trajectory_hash)[:12]}"))
-        wanted = _camera(trace, failure, k, frequency, stall_seconds if stall else None, settings, len(frames))
+        wanted = _camera(trace, failure, k, frequency, stall, settings, len(frames))
         if wanted == camera or attempt:
             break
         camera = wanted
-    start, stop = _write_window(out_path, frames, trace, k, frequency, stall_seconds if stall else None,
-                               settings)
+    start, stop = _write_window(out_path, frames, trace, k, frequency, stall, settings)
     return FailureVideo(out_path, None, start, stop, k, frequency, result, trace)

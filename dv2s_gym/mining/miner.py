@@ -72,6 +72,8 @@ from scenario_bank.atomic import atomic_write_bytes, atomic_write_json
 from scenario_bank.bank import Bank, BankError
 from scenario_bank.extras import missing_extra_message
 from scenario_bank.records import EpisodeRecord, RecordError
+from scenario_bank.failure_types import failure_table
+from scenario_bank.jail import JailUnavailableError, require_jail
 from scenario_bank.run_identity import check_identity
 from policies.registry import load_policy
 
@@ -502,7 +504,7 @@ def mine(policy: str, settings: MineSettings, *, out: os.PathLike | str, workers
 
 def _check_can_mine(policy: str, settings: MineSettings) -> None:
     """Refuse, before any work, a run that cannot start: no VerifAI, a failure type without a detector, bad sampler
-    options, a misspelt env config key, an unknown policy."""
+    options, a misspelt env config key, an unknown policy, conversions without a jail to run them in."""
     if importlib.util.find_spec("verifai") is None:  # the core install has no mining extra
         raise MiningError(missing_extra_message("verifai", "failure mining"))
     undetected = types_without_detector()
@@ -518,6 +520,17 @@ def _check_can_mine(policy: str, settings: MineSettings) -> None:
     load_policy(policy).check_env_config(settings.env_config)
     if settings.reference:
         load_policy(settings.reference)
+    if settings.convert:
+        _check_jail()
+
+
+def _check_jail() -> None:
+    """Refuse to convert where the jail cannot start: the exact replays and generated scripts run only there, so
+    every conversion would be rejected with the same reason (e.g. a checkout under /tmp, which the jail hides)."""
+    try:
+        require_jail("a converted failure (its exact replay and its generated script)")
+    except JailUnavailableError as error:
+        raise MiningError(f"{' '.join(str(error).split())} Or mine without converting: --no-convert.") from None
 
 
 def _remove_if_empty(out: Path) -> None:
@@ -622,6 +635,7 @@ def _task(index: int, spec, policy: str, reference: Optional[str], settings: Dic
         "family": scenario_family(str(spec.scenario), settings["bank_dir"]), "env_config": settings["env_config"], "bank_dir": settings["bank_dir"],
         "trace_dir": str(out / "traces"),
         "monitor": MonitorSettings.from_recorded(settings),
+        "failure_types": [row.name for row in failure_table()],
     }
 
 

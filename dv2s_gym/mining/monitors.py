@@ -18,21 +18,24 @@ negative for a failure (the more negative, the worse), positive otherwise.
 Both walk the failure table (:func:`scenario_bank.failure_types.failure_table`): each type has one
 :class:`Detector` in :data:`DETECTORS` that finds it and scores it. A new failure type is its row (with its
 label) in ``scenario_bank/failure_types.py`` and its detector here; a plug-in adds both at run time with
-:func:`~scenario_bank.failure_types.register_failure_type` and :func:`register_detector` (in each process that
-detects: a worker process started before the registration does not see it). The settings the monitors read
-travel as one :class:`MonitorSettings`.
+:func:`~scenario_bank.failure_types.register_failure_type` and :func:`register_detector`, from an importable
+module that registers when it is imported: the registries remember that module and every worker process imports
+it before its first episode (:mod:`scenario_bank.plugins`). The settings the monitors read travel as one
+:class:`MonitorSettings`.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
-from typing import Any, Callable, Dict, List, Mapping, Optional, Union
+from dataclasses import asdict, dataclass
+from typing import Any, Callable, Dict, List, Optional
 
-from envs.safety_metrics import DEFAULT_STALL_SECONDS, FREE_PATH, STANDING_SPEED, first_stall_step
+from envs.safety_metrics import (DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD, FREE_PATH, STANDING_SPEED,
+                                 MonitorSettings, first_stall_step)
 from scenario_bank.elements import ActorKind
 from scenario_bank.failure_types import (FAILURE_TYPES, FailureTypeError, UnknownDetectorError, attach_detection, detach_detection, failure_table,
                                          failure_type)
+from scenario_bank.plugins import forget_plugin, remember_plugin
 
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "MonitorSettings", "Detector", "DETECTORS",
            "DEFAULT_MONITOR", "register_detector", "unregister_detector", "types_without_detector", "detect_failure",
@@ -41,7 +44,6 @@ __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "MonitorSettings", "De
 COLLISION_TYPES = ("rear_end", "struck_from_behind", "side", "head_on", "pedestrian", "obstacle")
 STALL_SPEED = STANDING_SPEED
 """m/s under which the ego counts as standing."""
-DEFAULT_TTC_THRESHOLD = 1.0
 _VEHICLES = (ActorKind.CAR, ActorKind.TRUCK, ActorKind.BICYCLE, ActorKind.MOTORCYCLE, None)
 """The kinds (and no kind) a collision is typed by the actors' headings for; the others count as obstacles."""
 
@@ -106,30 +108,6 @@ def collision_type(ego: List[float], other: List[float], other_kind: Optional[st
 def _step_at(trace, time: float) -> int:
     period = 1.0 / float(trace.config.get("policy_frequency", 5))
     return max(0, min(len(trace.states) - 1, int(round(time / period))))
-
-
-@dataclass(frozen=True)
-class MonitorSettings:
-    """The failure monitors' settings: ``ttc_threshold`` [s] (a smaller time-to-collision is a ``low_ttc``
-    failure) and ``stall_seconds`` (standing that long with a free path ahead is a ``stall``)."""
-
-    ttc_threshold: float = DEFAULT_TTC_THRESHOLD
-    stall_seconds: float = DEFAULT_STALL_SECONDS
-
-    @classmethod
-    def from_recorded(cls, values: Mapping[str, Any]) -> "MonitorSettings":
-        """The settings a mapping records under their names (a run's ``settings.json``, a mining task, a
-        conversion's ``monitor`` option); a setting absent or ``None`` there takes its default."""
-        given = {field.name: float(values[field.name]) for field in fields(cls) if values.get(field.name) is not None}
-        return cls(**given)
-
-    @classmethod
-    def of(cls, value: Union["MonitorSettings", Mapping[str, Any], None]) -> "MonitorSettings":
-        """``value`` as settings: settings as they are, a mapping read by :meth:`from_recorded`, ``None`` the
-        defaults."""
-        if isinstance(value, cls):
-            return value
-        return cls.from_recorded(value or {})
 
 
 @dataclass(frozen=True)
@@ -199,7 +177,7 @@ def _off_road_score(result, failure: Failure, settings: MonitorSettings) -> floa
 
 
 def _stall_detect(result, trace, settings: MonitorSettings) -> Optional[Failure]:
-    return _stall(trace, settings.stall_seconds)
+    return _stall(trace, settings)
 
 
 def _stall_score(result, failure: Failure, settings: MonitorSettings) -> float:
@@ -221,15 +199,18 @@ def register_detector(detector: Detector) -> Detector:
     """Detect the failure type ``detector.name`` (a row of the failure table, e.g. one added with
     :func:`~scenario_bank.failure_types.register_failure_type`) with ``detector``; :func:`unregister_detector`
     undoes it. ``dv2s regress`` runs it too when its type has a ``result_field``
-    (:func:`scenario_bank.failure_types.happened`). Register in each process that detects: a worker process of
-    a pool (forkserver or spawn) does not see a registration made in the calling process. Returns ``detector``."""
+    (:func:`scenario_bank.failure_types.happened`). The module defining ``detector.detect`` is remembered as a
+    plug-in module: every worker process imports it before its first episode, so it must register the detector
+    when it is imported and be importable (not ``__main__``; :mod:`scenario_bank.plugins`). Returns
+    ``detector``."""
     if failure_type(detector.name) is None:
         raise FailureTypeError(f"no failure type {detector.name!r}: add its row to scenario_bank/failure_types.py first")
     if detector.name in DETECTORS:
         raise FailureTypeError(f"failure type {detector.name!r} has a detector already")
     DETECTORS[detector.name] = detector
+    remember_plugin(_plugin_name(detector.name), getattr(detector.detect, "__module__", None))
     attach_detection(detector.name, lambda result, trace, settings: detector.detect(
-        result, trace, MonitorSettings.from_recorded(settings)) is not None)
+        result, trace, MonitorSettings.of(settings)) is not None)
     return detector
 
 
@@ -237,6 +218,11 @@ def unregister_detector(name: str) -> None:
     """Remove the detector :func:`register_detector` added for ``name``."""
     DETECTORS.pop(name)
     detach_detection(name)
+    forget_plugin(_plugin_name(name))
+
+
+def _plugin_name(name: str) -> str:
+    return f"the detector of failure type {name!r}"
 
 
 def types_without_detector() -> List[str]:
@@ -249,7 +235,7 @@ def _detector(name: str) -> Detector:
     detector = DETECTORS.get(name)
     if detector is None:
         raise UnknownDetectorError(f"failure type {name!r} has no detector in this process: register one with "
-                       "dv2s_gym.mining.monitors.register_detector in each process that detects")
+                       "dv2s_gym.mining.monitors.register_detector in the plug-in module that registers the type")
     return detector
 
 
@@ -268,14 +254,14 @@ def detect_failure(result, trace, settings: MonitorSettings = DEFAULT_MONITOR) -
     return None
 
 
-def detect_stall(trace, stall_seconds: float = DEFAULT_STALL_SECONDS) -> Optional[Failure]:
-    """The episode's first stall (the ego stood for ``stall_seconds`` with a free path ahead), or ``None``,
-    whatever else happened in it."""
-    return _stall(trace, stall_seconds)
+def detect_stall(trace, settings: MonitorSettings = DEFAULT_MONITOR) -> Optional[Failure]:
+    """The episode's first stall (the ego stood for the settings' ``stall_seconds`` with a free path ahead), or
+    ``None``, whatever else happened in it."""
+    return _stall(trace, settings)
 
 
-def _stall(trace, stall_seconds: float) -> Optional[Failure]:
-    start = first_stall_step(trace, stall_seconds)
+def _stall(trace, settings: MonitorSettings) -> Optional[Failure]:
+    start = first_stall_step(trace, settings.stall_seconds)
     if start is None:
         return None
     return Failure("stall", _time_of(trace, start), start)

@@ -11,7 +11,10 @@ A mining task is a plain dict (shipped to a pool of :mod:`dv2s_gym.workers`, loc
 - ``scenario``, ``seed``, ``params``: the scene (see :mod:`dv2s_gym.mining.space`);
 - ``env_config``, ``bank_dir``; ``trace_dir``: the folder for a failed episode's trace
   (``<index>.json.gz``; the Ray pool swaps in a local folder and ships the file back);
-- ``monitor``: the monitors' settings (a :class:`~dv2s_gym.mining.monitors.MonitorSettings`).
+- ``monitor``: the monitors' settings (a :class:`~dv2s_gym.mining.monitors.MonitorSettings`);
+- ``failure_types``: the failure types the miner detects (its table with the plug-ins' rows): a worker process
+  that does not detect one of them (a plug-in module that registers later than when it is imported) records an
+  error for the episode rather than missing the type.
 
 When the failed episode's trace cannot be written (a full disk...), the result is no finished episode: it carries
 ``write_error`` (:func:`~dv2s_gym.mining.write_errors.write_failure`) and the miner stops before recording it.
@@ -32,11 +35,12 @@ from dv2s_gym.mining.behaviour import extract_behaviour
 from dv2s_gym.mining.failure_state import failure_state
 from dv2s_gym.mining.write_errors import write_failure
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.monitors import DEFAULT_MONITOR, MonitorSettings, detect_failure, robustness
+from dv2s_gym.mining.monitors import (DEFAULT_MONITOR, MonitorSettings, detect_failure, robustness,
+                                      types_without_detector)
 from dv2s_gym.workers.tasks import register
 from policies import worker_cache
 from policies.evaluation import run_episode
-from scenario_bank.failure_types import failure_type
+from scenario_bank.failure_types import failure_table, failure_type
 from scenario_bank.records import EpisodeRecord, HeldOutEpisode
 
 __all__ = ["MINE", "HELDOUT", "run_mine_task", "heldout_task", "reference_avoids", "trace_name"]
@@ -97,6 +101,7 @@ def run_mine_task(task: Dict[str, Any]) -> EpisodeRecord:
     nulls = _MINE_NULLS
     monitor: MonitorSettings = task.get("monitor") or DEFAULT_MONITOR
     try:
+        _check_detects(task.get("failure_types") or ())
         result, trace = _episode(task, task["policy"])
         failure = detect_failure(result, trace, monitor)
         outcome["result"] = result.to_json()
@@ -130,6 +135,16 @@ def run_mine_task(task: Dict[str, Any]) -> EpisodeRecord:
             message += "\n" + traceback.format_exc()
         outcome["error"] = message
     return _mine_record(scene, outcome, extra, nulls)
+
+
+def _check_detects(names) -> None:
+    """Refuse an episode where this process would miss a failure type the miner detects."""
+    known = {row.name for row in failure_table()}
+    missing = [name for name in names if name not in known] + types_without_detector()
+    if missing:
+        raise MiningError(f"failure type {', '.join(missing)} is not detected in this worker process: the plug-in "
+                          "module that registers it (imported by every worker) must register the type and its "
+                          "detector when it is imported, not later")
 
 
 def _mine_record(scene: Dict[str, Any], outcome: Dict[str, Any], extra: Dict[str, Any],

@@ -49,6 +49,7 @@ from dv2s_gym.workers.settings import WorkerSettings
 from dv2s_gym.workers.tasks import task_id
 from envs.config_check import check_config
 from envs.errors import UnknownConfigKeyError
+from envs.safety_metrics import MonitorSettings
 from scenario_bank import select_scenarios
 from scenario_bank.records import RecordError, RegressEpisode
 from policies.registry import PolicySpaceError, load_policy
@@ -63,11 +64,12 @@ Scenarios = Union[None, str, Sequence[str]]
 
 def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterable[int], *,
                env_config: Dict[str, Any], bank_dir: Optional[str], trace_dir: Optional[str],
-               failure: Optional[Sequence[str]] = None, stall_seconds: float = DEFAULT_STALL_SECONDS
+               failure: Optional[Sequence[str]] = None, monitor: Optional[MonitorSettings] = None
                ) -> List[Dict[str, Any]]:
     """Task dicts, seed by seed (every scenario, then the next seed), each role in turn; which role goes first
     alternates from pair to pair, so neither role is always the first to meet a scene; ``failure`` ``None``: the
-    default failure kinds."""
+    default failure kinds; ``monitor``: the monitors' settings (``None``: the defaults)."""
+    monitor = monitor or MonitorSettings()
     failure = parse_failure(failure)
     roles = list(policies.items())
     tasks = []
@@ -75,7 +77,7 @@ def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterab
         for role, spec in (roles if pair % 2 == 0 else roles[::-1]):
             tasks.append({"kind": KIND, "policy": spec, "role": role, "scenario": scenario, "seed": int(seed),
                           "env_config": dict(env_config), "bank_dir": bank_dir, "trace_dir": trace_dir,
-                          "failure": list(failure), "stall_seconds": float(stall_seconds)})
+                          "failure": list(failure), "monitor": monitor})
     return tasks
 
 
@@ -94,7 +96,7 @@ def _policy_info(spec: str, env_config: Optional[Dict[str, Any]] = None) -> Dict
     return {"spec": spec, "card": card}
 
 
-def _check_env_config(env_config: Dict[str, Any], failure: Sequence[str], stall_seconds: float) -> None:
+def _check_env_config(env_config: Dict[str, Any], failure: Sequence[str], monitor: MonitorSettings) -> None:
     """Refuse env settings under which the gate cannot see failures: unknown keys, a non-positive episode
     duration, or a stall time the episodes are too short to reach."""
     from envs.dv2s_env import DV2SEnv
@@ -107,8 +109,8 @@ def _check_env_config(env_config: Dict[str, Any], failure: Sequence[str], stall_
     if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not math.isfinite(duration) \
             or duration <= 0:
         raise RegressError(f"--config duration must be a positive number of seconds per episode, not {duration!r}")
-    if "stall" in failure and float(stall_seconds) >= float(duration):
-        raise RegressError(f"--stall-seconds {stall_seconds:g} is not shorter than the episodes ({duration:g} s): no "
+    if "stall" in failure and monitor.stall_seconds >= float(duration):
+        raise RegressError(f"--stall-seconds {monitor.stall_seconds:g} is not shorter than the episodes ({duration:g} s): no "
                            "stall could ever be detected; lower --stall-seconds, lengthen the episodes with "
                            "--config '{\"duration\": ...}', or leave stall out of --failure")
 
@@ -132,7 +134,7 @@ def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: S
                           ) -> Tuple[Dict[str, Any], Dict[str, RegressEpisode], str]:
     """The baseline info, the baseline result per episode id, and the report file's SHA-256."""
     path, role, failure = Path(report.path), report.role, list(settings.failure)
-    stall_seconds, accept_failed = float(settings.stall_seconds), report.accept_failed
+    monitor, accept_failed = settings.monitor, report.accept_failed
     old = load_report(path)
     check_baseline_report(old, path=path, bank=bank, env_config=env_config)  # a report with errors: never
     if old.get("verdict") in ("FAIL", "ERROR") and not accept_failed:
@@ -170,9 +172,9 @@ def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: S
             f"baseline report {path} does not record {', '.join(lacking)} for its episodes (that run had no such failure "
             f"type registered); rerun the baseline with {', '.join(lacking)} registered, or leave {', '.join(lacking)} out of --failure")
     their_stall = (old.get("settings") or {}).get("stall_seconds", DEFAULT_STALL_SECONDS)
-    if "stall" in failure and float(their_stall) != float(stall_seconds):
+    if "stall" in failure and float(their_stall) != monitor.stall_seconds:
         raise ReportMismatchError(f"baseline report {path} detected stalls after {their_stall:g} s, this run after "
-                                  f"{stall_seconds:g} s; use the same stall time, or rerun the baseline")
+                                  f"{monitor.stall_seconds:g} s; use the same stall time, or rerun the baseline")
     for result in results.values():
         apply_failure(result, failure)
     records = {episode_id: _baseline_record(path, result) for episode_id, result in results.items()}
@@ -233,7 +235,7 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
     policies = {"candidate": candidate, **({"baseline": plan.baseline_spec} if plan.baseline_spec else {})}
     all_tasks = plan_tasks(policies, plan.names, plan.seeds, env_config=plan.env_config, bank_dir=plan.bank_dir,
                            trace_dir=str(store.traces_dir.resolve()), failure=plan.failure,
-                           stall_seconds=float(settings.stall_seconds))
+                           monitor=settings.monitor)
     if any(":" in spec.partition("?")[0] for spec in policies.values()):
         for task in all_tasks:  # module:attribute specs are found in this folder in the workers too
             task["python_path"] = [os.getcwd()]
@@ -294,7 +296,7 @@ def _prepare(candidate: str, baseline: Union[None, str, BaselineReport], setting
             env_config = (old.get("settings") or {}).get("env_config")
     env_config = dict(env_config or {})
     failure = list(settings.failure)
-    _check_env_config(env_config, failure, float(settings.stall_seconds))
+    _check_env_config(env_config, failure, settings.monitor)
     names, episodes, planned = _size(settings, bank_dir, fallback, report)
     bank = bank_info(names, bank_dir)
     seeds = [settings.seed + k for k in range(episodes)]

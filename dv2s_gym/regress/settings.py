@@ -10,6 +10,7 @@ from typing import Any, Mapping, Optional, Sequence, Tuple, Union
 from dv2s_gym.regress import stats
 from dv2s_gym.regress.errors import RegressError
 from dv2s_gym.regress.failures import DEFAULT_STALL_SECONDS, parse_failure
+from envs.safety_metrics import MonitorSettings
 from scenario_bank.field_checks import check_bool, check_int, check_mapping, check_names, check_number, check_path
 
 __all__ = ["RegressSettings", "BaselineReport", "ROLES"]
@@ -53,6 +54,11 @@ class RegressSettings:
     ``"collision,stall"``; ``None``: all three); each kind is also reported apart. Read as the kinds' tuple."""
     stall_seconds: float = DEFAULT_STALL_SECONDS
     """How long the ego must stand with a free road ahead for a stall."""
+
+    @property
+    def monitor(self) -> MonitorSettings:
+        """The failure monitors' settings of the run (its ``stall_seconds``), as the run's code carries them."""
+        return MonitorSettings(stall_seconds=float(self.stall_seconds))
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "scenarios", check_names(RegressError, "--scenarios", self.scenarios))

@@ -9,19 +9,19 @@ A task is a plain dict, so any pool of :mod:`dv2s_gym.workers` (local processes,
 - ``env_config``: ``DV2S-v0`` config overrides (dict, may be empty);
 - ``bank_dir``: bank folder (``None``: the shipped bank);
 - ``trace_dir``: folder for the trace of a failed episode (``None``: keep no trace);
-- ``failure``: the failure kinds (:mod:`dv2s_gym.regress.failures`; default collision, off-road, stall)
-  and ``stall_seconds``.
+- ``failure``: the failure kinds (:mod:`dv2s_gym.regress.failures`; default collision, off-road, stall);
+- ``monitor``: the monitors' settings (an :class:`envs.safety_metrics.MonitorSettings`: its ``stall_seconds``).
 
 A failure type registered at run time (:func:`scenario_bank.failure_types.register_failure_type`) with a
 ``result_field`` is recorded in that field by running its detector
-(:func:`dv2s_gym.mining.monitors.register_detector`) on the episode's trace. The worker process must have the
-type and its detector registered: a plug-in registers in each process that detects, and the pool's workers
-(forkserver or spawn) import only the product's modules, so a task naming a type this process does not know
-comes back as an error result that says so.
+(:func:`dv2s_gym.mining.monitors.register_detector`) on the episode's trace. Every worker process imports the
+plug-in modules of the process that started it before its first task (:mod:`scenario_bank.plugins`), so a
+plug-in module that registers the type and its detector when it is imported registers them there too; a task
+naming a type this process still does not know comes back as an error result that says so.
 
 :func:`run_regress_task` returns the episode's :class:`~scenario_bank.records.RegressEpisode`:
 ``EpisodeResult.to_json()`` plus ``role``, ``id`` (``"<scenario>/<seed>"``), ``trace`` (the saved trace's path or
-``None``), ``stalled`` and ``stall_time`` (when the ego's total standing time on a free road reached
+``None``), ``stalled`` and ``stall_time`` (when the ego's total standing time on a free road reached the monitor's
 ``stall_seconds``: :func:`envs.safety_metrics.total_stall_step`), with ``failed`` and ``failure_kinds`` set from
 the task's failure kinds, and in its ``extra`` ``seconds`` (the episode's wall time; the runner keeps it apart
 from the result). An exception inside the episode comes back as an error result (``id``, ``role``, ``scenario``,
@@ -44,9 +44,9 @@ from typing import Any, Dict
 from dv2s_gym.workers.tasks import error_result, register, task_id
 from policies import worker_cache
 from scenario_bank.records import RegressEpisode
-from dv2s_gym.regress.failures import apply_failure, DEFAULT_STALL_SECONDS, failure_kinds, parse_failure
+from dv2s_gym.regress.failures import apply_failure, failure_kinds, parse_failure
 from scenario_bank.failure_types import failure_table, happened
-from envs.safety_metrics import total_stall_step
+from envs.safety_metrics import MonitorSettings, total_stall_step
 from policies.evaluation import run_episode
 
 __all__ = ["KIND", "run_regress_task", "trace_filename"]
@@ -68,8 +68,9 @@ def run_regress_task(task: Dict[str, Any]) -> RegressEpisode:
     unknown = [kind for kind in task.get("failure") or () if kind not in failure_kinds()]
     if unknown:
         return RegressEpisode.from_dict(error_result(task, (
-            f"failure type {', '.join(unknown)} is not registered in this worker process: a plug-in's failure type "
-            "must be registered, with its detector, in each process that runs episodes")))
+            f"failure type {', '.join(unknown)} is not registered in this worker process: the plug-in module that "
+            "registers it (imported by every worker) must register the type and its detector when it is imported, "
+            "not later")))
     env_key = None
     try:
         env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
@@ -85,13 +86,14 @@ def run_regress_task(task: Dict[str, Any]) -> RegressEpisode:
             message += "\n" + traceback.format_exc()
         return RegressEpisode.from_dict(error_result(task, message))
     data = result.to_json()
-    stall = total_stall_step(trace, float(task.get("stall_seconds") or DEFAULT_STALL_SECONDS))
+    monitor = MonitorSettings.of(task.get("monitor"))
+    stall = total_stall_step(trace, monitor.stall_seconds)
     period = 1.0 / float(trace.config.get("policy_frequency", 5))
     data.update(role=task["role"], id=task_id(task["scenario"], task["seed"]), trace=None, seconds=round(seconds, 4),
                 stalled=stall is not None, stall_time=None if stall is None else stall * period)
     for row in failure_table():  # a registered type's field: its detector on the trace
         if row.result_field and row.result_field not in data:
-            data[row.result_field] = happened(row.name, result, trace, {"stall_seconds": task.get("stall_seconds")})
+            data[row.result_field] = happened(row.name, result, trace, monitor)
     apply_failure(data, parse_failure(task.get("failure")))
     trace_dir = task.get("trace_dir")
     if data["failed"] and trace_dir:

@@ -4,7 +4,9 @@ A :class:`Backend` takes task dicts (see :mod:`dv2s_gym.workers.tasks`) and hand
 result to a callback as soon as it finishes. :class:`LocalBackend` runs one process per
 worker (``forkserver`` context where available, else ``spawn``; ``OMP_NUM_THREADS=1``), each running
 the registered function of every task it gets and keeping its envs and policies between
-tasks. A worker that dies mid-episode (segfault, ``os._exit``, out of memory) or gives no
+tasks. Before its first task, each worker imports the plug-in modules of the process that started it
+(:func:`~dv2s_gym.workers.tasks.worker_plugins`: a plug-in's failure type and detector register there too); a
+worker that cannot import one stops the run with a :class:`WorkerError` naming the module. A worker that dies mid-episode (segfault, ``os._exit``, out of memory) or gives no
 result within the per-episode timeout is killed and replaced; its task is retried once
 (``retries``), then reported as an error result ``{"error": ..., "id", "role", ...}`` -
 never silently dropped; a task that finishes on a retry carries ``"worker_restarts"``, the
@@ -26,17 +28,20 @@ from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Set, Tu
 
 from dv2s_gym.workers.base import DEFAULT_TIMEOUT, Backend, OnResult, default_workers
 from dv2s_gym.workers.errors import WorkerError
-from dv2s_gym.workers.tasks import TaskFunction, function_for, gave_up_result, run_task, task_modules
+from dv2s_gym.workers.tasks import (TaskFunction, function_for, gave_up_result, run_task, start_plugins,
+                                    task_modules, worker_plugins)
 import policies.evaluation
 
 __all__ = ["Backend", "LocalBackend", "default_workers", "DEFAULT_TIMEOUT"]
 
 _READY = "ready"
+_CANNOT_START = "cannot start"
 _PRELOAD = ("dv2s_gym.workers.pool", "envs.dv2s_env", "policies.evaluation")
 
 
-def _worker_main(connection) -> None:
-    """A pool process: receive ``(index, function, task)``, send ``(index, result)``; ``None`` stops it."""
+def _worker_main(connection, plugins: List[str]) -> None:
+    """A pool process: import the ``plugins`` modules, then receive ``(index, function, task)``, send ``(index,
+    result)``; ``None`` stops it. A plug-in that cannot be imported is sent as ``(_CANNOT_START, message)``."""
     os.environ["OMP_NUM_THREADS"] = "1"
     try:
         import envs.dv2s_env  # noqa: F401  (the slow imports happen before the first episode's clock starts)
@@ -47,6 +52,11 @@ def _worker_main(connection) -> None:
         warnings.filterwarnings("ignore", category=StuckBehaviorWarning)
     except Exception:  # reported by the first task instead
         pass
+    try:
+        start_plugins(plugins)
+    except WorkerError as error:
+        _send_quietly(connection, (_CANNOT_START, str(error)))
+        return
     try:
         connection.send(_READY)  # imports done: episode timeouts count from here
     except (OSError, KeyboardInterrupt):
@@ -66,11 +76,18 @@ def _worker_main(connection) -> None:
             return
 
 
+def _send_quietly(connection, message: Any) -> None:
+    try:
+        connection.send(message)
+    except (OSError, KeyboardInterrupt):
+        pass
+
+
 class _Worker:
-    def __init__(self, context) -> None:
+    def __init__(self, context, plugins: List[str]) -> None:
         parent, child = context.Pipe()
         self.connection = parent
-        self.process = context.Process(target=_worker_main, args=(child,), daemon=True,
+        self.process = context.Process(target=_worker_main, args=(child, list(plugins)), daemon=True,
                                        name="dv2s-worker")
         saved = os.environ.get("OMP_NUM_THREADS")
         os.environ["OMP_NUM_THREADS"] = "1"  # set before the child imports numpy
@@ -183,11 +200,16 @@ class LocalBackend(Backend):
             # imported once by the server (it starts with the first worker), inherited by every fork
             self._context.set_forkserver_preload(list(_PRELOAD) + task_modules())
         self._pool: List[_Worker] = []
+        self._plugins: List[str] = []  # the plug-in modules the workers in the pool imported
 
     def _ensure(self, count: int) -> None:
+        plugins = worker_plugins()
+        if plugins != self._plugins:  # a plug-in registered since the workers started: new workers import it
+            self.close()
+            self._plugins = plugins
         self._pool = [w for w in self._pool if w.process.is_alive()]
         while len(self._pool) < count:
-            self._pool.append(_Worker(self._context))
+            self._pool.append(_Worker(self._context, self._plugins))
 
     streams = True
 
@@ -272,6 +294,8 @@ class LocalBackend(Backend):
             if message == _READY:
                 worker.ready = True
                 return None, None
+            if isinstance(message, tuple) and message[0] == _CANNOT_START:
+                raise WorkerError(message[1])  # every worker would fail alike: the run stops, naming the module
             _, result = message
             if worker.busy[0] in failures:  # finished on a retry: say what happened before
                 result = dict(result, worker_restarts=list(failures[worker.busy[0]]))
@@ -289,7 +313,7 @@ class LocalBackend(Backend):
         code = worker.process.exitcode
         worker.kill()
         self._pool.remove(worker)
-        self._pool.append(_Worker(self._context))
+        self._pool.append(_Worker(self._context, self._plugins))
         return code
 
     def _dispatch(self, queue: "_ScenarioQueue", tasks: List[Dict[str, Any]], functions: List[TaskFunction],

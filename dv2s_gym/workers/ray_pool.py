@@ -4,7 +4,9 @@
 address) or, without an address, starts a local Ray instance. Episodes run in Ray
 actors, one per CPU (or ``workers``), each running the registered function of every task
 it gets (:mod:`dv2s_gym.workers.tasks`) and keeping its envs and policies between
-tasks. Results come back as they finish (``ray.wait``). An actor that dies (crash,
+tasks. Each actor imports the plug-in modules of the driver
+(:func:`~dv2s_gym.workers.tasks.worker_plugins`) before its first task; one that cannot stops the run with a
+:class:`~dv2s_gym.workers.errors.WorkerError` naming the module. Results come back as they finish (``ray.wait``). An actor that dies (crash,
 out of memory, a lost node) or gives no result within the per-episode timeout is
 killed and replaced; its task is retried once, then reported as an error result,
 never dropped.
@@ -30,7 +32,7 @@ import ray.exceptions
 
 from dv2s_gym.workers.errors import WorkerError
 from dv2s_gym.workers.base import DEFAULT_TIMEOUT, Backend
-from dv2s_gym.workers.tasks import TaskFunction, function_for, gave_up_result, run_task
+from dv2s_gym.workers.tasks import TaskFunction, function_for, gave_up_result, run_task, start_plugins, worker_plugins
 from scenario_bank.atomic import atomic_write_bytes
 
 __all__ = ["RayBackend", "RayUnavailableError", "CONNECT_TIMEOUT"]
@@ -52,11 +54,21 @@ class RayUnavailableError(WorkerError):
 
 
 class EpisodeActor:
-    """A Ray actor running tasks in one long-lived worker process."""
+    """A Ray actor running tasks in one long-lived worker process; it imports the driver's plug-in modules
+    (``plugins``) first."""
 
-    def __init__(self) -> None:
+    def __init__(self, plugins: Optional[List[str]] = None) -> None:
         os.environ["OMP_NUM_THREADS"] = "1"
         self.scratch = Path(tempfile.mkdtemp(prefix="dv2s-ray-traces-"))
+        self.problem: Optional[str] = None
+        try:
+            start_plugins(plugins or [])
+        except WorkerError as error:  # told to the driver by start_problem(), which stops the run with it
+            self.problem = str(error)
+
+    def start_problem(self) -> Optional[str]:
+        """Why this actor cannot run tasks (a plug-in module it could not import), or ``None`` once it is up."""
+        return self.problem
 
     def run(self, function: TaskFunction, task: Dict[str, Any]) -> Tuple[Dict[str, Any], Optional[bytes]]:
         """``(function(task), trace bytes or None)``: the trace goes back to the driver, not a shared disk."""
@@ -131,6 +143,7 @@ class RayBackend(Backend):
         self._idle: List[Any] = []  # actors up and waiting for a task
         self._starting: Dict[Any, Any] = {}  # readiness ref -> actor being started
         self._start_failures = 0
+        self._plugins: List[str] = []  # the plug-in modules each actor imports first
         os.environ.setdefault("RAY_DISABLE_USAGE_STATS", "1")
         if not ray.is_initialized():
             self._connect(address, workers, connect_timeout)
@@ -157,9 +170,9 @@ class RayBackend(Backend):
         self._owns_ray = True
 
     def _new_actor(self) -> None:
-        actor = self._actor_class.remote()
+        actor = self._actor_class.remote(self._plugins)
         self._actors.append(actor)
-        self._starting[actor.pid.remote()] = actor
+        self._starting[actor.start_problem.remote()] = actor
 
     def run(self, tasks: Iterable[Dict[str, Any]], on_result: Callable[[Dict[str, Any]], None]) -> None:
         """Run every task on the cluster; ``on_result`` gets each result here, as it finishes.
@@ -172,6 +185,10 @@ class RayBackend(Backend):
         if not tasks:
             return
         functions = [function_for(task) for task in tasks]  # a task of no registered kind fails here, at once
+        plugins = worker_plugins()
+        if plugins != self._plugins:  # a plug-in registered since the actors started: new actors import it
+            self._kill_actors()
+            self._plugins = plugins
         queue: Deque[int] = deque(range(len(tasks)))
         attempts: Dict[int, int] = {}
         failures: Dict[int, List[str]] = {}
@@ -223,7 +240,7 @@ class RayBackend(Backend):
     def _started(self, ref) -> None:
         actor = self._starting.pop(ref)
         try:
-            ray.get(ref)
+            problem = ray.get(ref)
         except ray.exceptions.RayError as error:
             self._start_failures += 1
             self._actors.remove(actor)
@@ -234,6 +251,8 @@ class RayBackend(Backend):
                     "install dv2s-gym (same version) on every node") from None
             self._new_actor()
             return
+        if problem is not None:  # every actor would fail alike: the run stops, naming the module
+            raise WorkerError(problem)
         self._start_failures = 0
         self._idle.append(actor)
 
@@ -260,6 +279,12 @@ class RayBackend(Backend):
 
     def close(self) -> None:
         """Kill the actors; disconnect from (or stop) the Ray instance this backend started."""
+        self._kill_actors()
+        if self._owns_ray and ray.is_initialized():
+            ray.shutdown()
+        self._owns_ray = False
+
+    def _kill_actors(self) -> None:
         actors, self._actors = self._actors, []
         self._idle, self._starting = [], {}
         for actor in actors:
@@ -267,9 +292,6 @@ class RayBackend(Backend):
                 ray.kill(actor, no_restart=True)
             except Exception:  # an actor already gone, or the cluster lost
                 pass
-        if self._owns_ray and ray.is_initialized():
-            ray.shutdown()
-        self._owns_ray = False
 
     def __del__(self) -> None:  # pragma: no cover - best effort
         try:

@@ -16,12 +16,13 @@ import sys
 from typing import Any, Callable, Dict, List, Mapping, Sequence
 
 from dv2s_gym.workers.errors import WorkerError
+from scenario_bank.plugins import PluginError, check_plugins, import_plugins
 
 if "numpy" not in sys.modules:  # a fresh worker process (e.g. Ray's): one BLAS/OpenMP thread per worker
     os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-__all__ = ["TaskFunction", "register", "function_for", "task_modules", "run_task", "task_id", "error_result",
-           "gave_up_result"]
+__all__ = ["TaskFunction", "register", "function_for", "task_modules", "worker_plugins", "start_plugins", "run_task",
+           "task_id", "error_result", "gave_up_result"]
 
 TaskFunction = Callable[[Dict[str, Any]], Dict[str, Any]]
 """Runs one task in a worker process and returns its result (a JSON-able dict)."""
@@ -60,6 +61,33 @@ def function_for(task: Mapping[str, Any]) -> TaskFunction:
 def task_modules() -> List[str]:
     """The modules defining the registered task functions (a pool may import them before the first task)."""
     return sorted({function.__module__ for function in _KINDS.values()})
+
+
+def worker_plugins() -> List[str]:
+    """The plug-in modules every worker process must import before its first task (a plug-in's failure type and
+    detector, :mod:`scenario_bank.plugins`), read when a pool starts its workers.
+
+    Raises:
+        WorkerError: when a plug-in was registered in ``__main__``, which no worker can import (the message
+            says to move it into an importable module).
+    """
+    try:
+        return check_plugins()
+    except PluginError as error:
+        raise WorkerError(str(error)) from None
+
+
+def start_plugins(modules: Sequence[str]) -> None:
+    """In a worker process, before its first task: import the plug-in ``modules`` (:func:`worker_plugins` of the
+    process that started it), so their registrations hold here too.
+
+    Raises:
+        WorkerError: naming the module that cannot be imported here, and why.
+    """
+    try:
+        import_plugins(modules, where="a worker process")
+    except PluginError as error:
+        raise WorkerError(str(error)) from None
 
 
 def run_task(function: TaskFunction, task: Dict[str, Any]) -> Dict[str, Any]:

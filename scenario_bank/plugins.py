@@ -1,0 +1,105 @@
+"""Plug-in modules: the user's modules that add to dv2s-gym's registries, and how every worker process gets them.
+
+A registration (a failure type, its detector) holds only in the process that made it, and the worker processes
+that run episodes (the local pool's, started by forkserver or spawn; Ray's actors) import the product's modules,
+not the user's. So the registries remember the module each plug-in comes from (:func:`remember_plugin`), and
+every worker imports those modules (:func:`import_plugins`) before its first episode: a plug-in module registers
+at import time, and then registers again in each worker.
+
+A plug-in defined in ``__main__`` (a script, ``python -c``, an interactive session) cannot be imported by another
+process; a run in worker processes refuses it (:func:`check_plugins`) and says to move it into an importable
+module, named on the command line by the :data:`PLUGINS_VARIABLE` environment variable
+(:func:`load_plugins_from_environment`, which ``dv2s`` reads before anything else).
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from typing import Dict, Iterable, List, Optional
+
+from scenario_bank.errors import DV2SError
+
+__all__ = ["PluginError", "PLUGINS_VARIABLE", "MAIN", "remember_plugin", "forget_plugin", "plugin_modules",
+           "check_plugins", "import_plugins", "load_plugins_from_environment"]
+
+PLUGINS_VARIABLE = "DV2S_PLUGINS"
+"""The environment variable naming plug-in modules for ``dv2s`` (comma-separated module names)."""
+
+MAIN = "__main__"
+"""The name of the module of a script or an interactive session, which no other process can import."""
+
+_ORIGINS: Dict[str, str] = {}
+"""What was registered (``"failure type 'hard_brake'"``) -> the module it comes from."""
+
+
+class PluginError(DV2SError, ValueError):
+    """A plug-in module that worker processes cannot import: defined in ``__main__``, or failing to import."""
+
+
+def remember_plugin(what: str, module: Optional[str]) -> None:
+    """Remember that ``what`` (e.g. ``"failure type 'hard_brake'"``) was registered by ``module``, which every
+    worker process then imports (:func:`plugin_modules`). The product's own modules need not be remembered (the
+    workers import them anyway), nor is a ``None`` module."""
+    if module:
+        _ORIGINS[what] = module
+
+
+def forget_plugin(what: str) -> None:
+    """Undo :func:`remember_plugin` for ``what`` (its registration was undone)."""
+    _ORIGINS.pop(what, None)
+
+
+def plugin_modules() -> List[str]:
+    """The modules of every plug-in registered in this process, sorted, each once."""
+    return sorted(set(_ORIGINS.values()))
+
+
+def check_plugins() -> List[str]:
+    """The plug-in modules (:func:`plugin_modules`), checked to be importable by worker processes.
+
+    Raises:
+        PluginError: when a plug-in comes from ``__main__``, naming what it registered and the fix.
+    """
+    in_main = sorted(what for what, module in _ORIGINS.items() if module == MAIN)
+    if in_main:
+        raise PluginError(
+            f"{', '.join(in_main)} {'is' if len(in_main) == 1 else 'are'} registered in __main__ (a script, "
+            "python -c or an interactive session), which the worker processes that run episodes cannot import: "
+            "put the registration in an importable module (e.g. my_plugins.py on the Python path) and import that "
+            f"module, or name it to dv2s with {PLUGINS_VARIABLE}=my_plugins")
+    return plugin_modules()
+
+
+def import_plugins(modules: Iterable[str], where: str = "this process") -> None:
+    """Import each of ``modules`` (a worker does, before its first episode, so that their registrations hold
+    there too).
+
+    Raises:
+        PluginError: naming the first module that cannot be imported, where, and why.
+    """
+    for module in modules:
+        try:
+            importlib.import_module(module)
+        except BaseException as error:  # a plug-in's own failure at import time, whatever it is, is reported
+            if isinstance(error, KeyboardInterrupt):
+                raise
+            reason = " ".join(f"{type(error).__name__}: {error}".split())
+            raise PluginError(f"plug-in module {module!r} cannot be imported in {where} ({reason}); it must be "
+                              "importable there: on the Python path of every worker (the same path on every "
+                              "node of a cluster)") from None
+
+
+def load_plugins_from_environment(environ: Optional[Dict[str, str]] = None) -> List[str]:
+    """Import the modules :data:`PLUGINS_VARIABLE` names (comma-separated; none when unset) and remember them as
+    plug-ins, so the worker processes import them too. Returns their names.
+
+    Raises:
+        PluginError: naming a module that cannot be imported.
+    """
+    value = (os.environ if environ is None else environ).get(PLUGINS_VARIABLE, "")
+    modules = [name.strip() for name in value.split(",") if name.strip()]
+    import_plugins(modules, where=f"this process (named by {PLUGINS_VARIABLE})")
+    for module in modules:
+        remember_plugin(f"{PLUGINS_VARIABLE}={module}", module)
+    return modules
