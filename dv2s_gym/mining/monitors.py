@@ -33,8 +33,8 @@ from typing import Any, Callable, Dict, List, Optional
 from envs.safety_metrics import (DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD, FREE_PATH, STANDING_SPEED,
                                  MonitorSettings, first_stall_step)
 from scenario_bank.elements import ActorKind
-from scenario_bank.failure_types import (FAILURE_TYPES, FailureTypeError, UnknownDetectorError, attach_detection, detach_detection, failure_table,
-                                         failure_type)
+from scenario_bank.failure_types import (FAILURE_TYPES, FailureTypeError, UnknownDetectorError, attach_detection,
+                                          detach_detection, failure_table, failure_type)
 from scenario_bank.plugins import forget_plugin, remember_plugin
 
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "MonitorSettings", "Detector", "DETECTORS",
