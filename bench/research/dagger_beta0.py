@@ -12,7 +12,9 @@ Design (fixed before running; see bench/RESULTS.md, "DAgger with beta_decay 0"):
   earlier standstill measurement's fine-tuning, unchanged).
 * Arms, all DAgger 4 iterations, SLOWER weight 3, 8 epochs, Adam 1e-3, ``STEPS`` env steps, 1 env:
   A = the defaults (beta_decay 0.5, disagreement_weight 1); C = beta_decay 0; D = beta_decay 0 and
-  disagreement_weight 4.  (The earlier, exploratory "D" of bench/RESULTS.md is this C.)
+  disagreement_weight 4.  Run with ``--steps 12000`` (scaled from the earlier measurement's 20,000: at the shared
+  machine's load of 8-10 a 20k fine-tuning took about 11 minutes, six of them would not fit the time; decided
+  after the start policy's evaluation and 2 iterations of A seed 2, before any trained arm was evaluated).  (The earlier, exploratory "D" of bench/RESULTS.md is this C.)
 * Training seeds 2 and 3: new seeds, not the 0 and 1 whose runs suggested the hypothesis.
 * Evaluation seeds fixed in advance: ``EVAL_SEED_BASE + 0 .. 19`` on each junction scenario
   (``urban_t_junction_left_turn_oncoming``, ``urban_left_turn_oncoming``): 40 episodes per trained policy, 80 per arm;
