@@ -15,7 +15,7 @@ from dv2s_gym.mining.monitors import detect_failure
 
 NAMES = ['L', 'I', 'R', 'F', 'S']
 SCENARIOS = ['urban_t_junction_left_turn_oncoming', 'urban_left_turn_oncoming']
-BANK = __import__('os').environ['DV2S_STANDSTILL_BANK']
+BANK = __import__('os').environ.get('DV2S_STANDSTILL_BANK')  # read by main(); Recorder needs no bank
 
 
 class Recorder:
