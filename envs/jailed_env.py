@@ -33,7 +33,7 @@ from envs.scenarios import ParamRange, read_scenario_file
 from scenario_bank.shipped import is_shipped_text
 from scenario_bank.maps import list_maps, resolve_map, UnknownMapError
 from scenario_bank.safety import UnsafeScenarioError
-from scenario_bank.errors import MissingFileError, WrongTypeError
+from scenario_bank.errors import MissingFileError, UnknownScenarioError, WrongTypeError
 from scenario_bank.safe_files import UnsafeInputError
 
 __all__ = ["JailedDV2SEnv", "SpaceDataError", "space_to_data", "data_to_space", "parameter_ranges_of", "MAX_MAP_BYTES"]
@@ -129,7 +129,7 @@ _REMOTE_ERRORS = {
     "SceneSamplingError": SceneSamplingError,
     "StepTimeoutError": StepTimeoutError,
     "InvalidActionError": InvalidActionError,
-    "UnknownScenarioError": KeyError,
+    "UnknownScenarioError": UnknownScenarioError,
     "RecursionError": ScenarioCompileError,
 }
 
