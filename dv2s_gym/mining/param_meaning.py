@@ -9,7 +9,10 @@ quantity of it it sets (its *slot*):
 - ``behavior:<argument>``: an argument of the object's behaviour, by the behaviour's own name for it (positional
   arguments read against the ``behavior NAME(...)`` definition in the script, case and underscores ignored);
 - ``longitudinal`` (``at ...pointAlongBy(...)``, ``following ... for``, ``ahead of``, ``behind``), ``lateral``
-  (``left of``, ``right of``), ``offset``, ``heading`` (``facing``) and ``position`` (any other placement);
+  (``left of``, ``right of``); an offset in an oriented point's frame (``offset by X @ Y``, ``offset along
+  roadDirection by X @ Y``, ``at ego offset by X @ Y``: :func:`_offset_form`) sets both, ``Y`` ahead
+  (``longitudinal``) and ``X`` to the right (``lateral:right``); ``offset`` (any other ``offset by``/``offset
+  along``), ``heading`` (``facing``) and ``position`` (any other placement);
 
 and how it enters the expression there (``scaled`` next to ``*`` or ``/``, ``subtracted`` after a minus, else
 ``additive``: alone or added, as a distance from a reference point is either way; ``derived ...`` when the
