@@ -758,6 +758,16 @@ def _offset_pair(slots: Sequence[Tuple[str, str]]) -> bool:
     return tuple(slot for slot, _ in slots) == _OFFSET_SLOTS and _offset_form(slots[0][1]) is not None
 
 
+def _step(slots: Sequence[Tuple[str, str]], carried: str, slot: str, value: str, offset: bool) -> str:
+    """``"<slot> by <distance>"``: how far an object is placed from a point along the direction the point was placed
+    in (``carried``, the point's slot): for an offset, its component along that direction."""
+    if offset:
+        for other, expression in slots:
+            if _slot_base(other) == _slot_base(carried):
+                return f"{other} by {' '.join(_value_part(other, expression).split())}"
+    return f"{slot} by {' '.join(value.split())}"
+
+
 def _oriented_names(script: str) -> Set[str]:
     """The names of the objects ``script`` makes that are oriented points (any but a ``Point``), and the ego."""
     names = {"ego"}
@@ -911,7 +921,7 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
                         here.append((p, slot, how, quantity, text))
                     elif value and _slot_base(s) in bases:
                         # placed along the same direction from the point: the distances add up
-                        here.append((p, s, f"{how} then {slot} by {' '.join(value.split())}", None,
+                        here.append((p, s, f"{how} then {_step(slots, s, slot, value, offset)}", None,
                                      f"{text}, then {' '.join(expression.split())}"))
                     else:
                         here.append((p, s, how, quantity, text))
