@@ -479,6 +479,23 @@ def test_the_miner_s_summary_states_the_breadth(run_dir):
             "families with a failure; 5 collisions, 1 stalls") in run.summary()
 
 
+def test_without_a_reference_driver_the_summary_counts_no_behaviour_with_avoidable_failures(run_dir):
+    from pathlib import Path as _Path
+
+    from dv2s_gym.mining.cluster import cluster_failures
+    from dv2s_gym.mining.miner import MineRun, read_records
+
+    records = [{**r.to_dict(), "avoidable": None, "reference": None}
+               for r in read_records(_Path(run_dir) / "episodes.jsonl")]
+    settings = {**json.loads((_Path(run_dir) / "settings.json").read_text()), "reference": None}
+    run = MineRun(out=_Path(run_dir), settings=settings, records=records,
+                  clusters=cluster_failures([EpisodeRecord.from_dict(r) for r in records]))
+    summary = run.summary()
+    assert "avoidability not checked (no reference driver)" in summary
+    assert "5 distinct behaviours; 5 (scenario family, failure type) pairs" in summary
+    assert "avoidable failures" not in summary
+
+
 def test_a_plain_run_states_its_seed(report):
     assert "sampler cross-entropy, seed 7: " in format_summary(report)
     assert "derived" not in markdown(report)

@@ -155,7 +155,9 @@ class MineRun:
             f"{len(failures)} failures ({', '.join(f'{k} {n}' for k, n in kinds.most_common()) or 'none'}); "
             + (f"{len(self.avoidable)} avoidable by {self.settings['reference']}" if self.settings["reference"]
              else "avoidability not checked (no reference driver)"),
-            f"{self.distinct_clusters} distinct behaviours, {len(avoidable_clusters)} with avoidable failures; "
+            f"{self.distinct_clusters} distinct behaviours"
+            # without a reference driver no failure is known to be avoidable: no count of them
+            + (f", {len(avoidable_clusters)} with avoidable failures" if self.settings["reference"] else "") + "; "
             f"{len({(record_family(r), r['failure']['kind']) for r in failures})} (scenario family, failure type) "
             f"pairs, {len({record_family(r) for r in failures})} scenario families with a failure; "
             f"{kinds_by_type.get('collision', 0)} collisions, {kinds_by_type.get('stall', 0)} stalls",

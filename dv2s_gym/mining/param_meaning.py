@@ -9,7 +9,10 @@ quantity of it it sets (its *slot*):
 - ``behavior:<argument>``: an argument of the object's behaviour, by the behaviour's own name for it (positional
   arguments read against the ``behavior NAME(...)`` definition in the script, case and underscores ignored);
 - ``longitudinal`` (``at ...pointAlongBy(...)``, ``following ... for``, ``ahead of``, ``behind``), ``lateral``
-  (``left of``, ``right of``), ``offset``, ``heading`` (``facing``) and ``position`` (any other placement);
+  (``left of``, ``right of``); an offset in an oriented point's frame (``offset by X @ Y``, ``offset along
+  roadDirection by X @ Y``, ``at ego offset by X @ Y``: :func:`_offset_form`) sets both, ``Y`` ahead
+  (``longitudinal``) and ``X`` to the right (``lateral:right``); ``offset`` (any other ``offset by``/``offset
+  along``), ``heading`` (``facing``) and ``position`` (any other placement);
 
 and how it enters the expression there (``scaled`` next to ``*`` or ``/``, ``subtracted`` after a minus, else
 ``additive``: alone or added, as a distance from a reference point is either way; ``derived ...`` when the
@@ -629,8 +632,11 @@ def _behaviors(script: str) -> Dict[str, List[str]]:
     return found
 
 
-def _slots(specifier: str, behaviors: Mapping[str, List[str]]) -> List[Tuple[str, str]]:
-    """``[(slot, expression)]`` of one specifier of a ``new`` statement."""
+def _slots(specifier: str, behaviors: Mapping[str, List[str]],
+           oriented: Optional[Set[str]] = None) -> List[Tuple[str, str]]:
+    """``[(slot, expression)]`` of one specifier of a ``new`` statement. A placement offset in an oriented point's
+    frame (:func:`_offset_form`; ``oriented``: the names of the script's objects that are oriented points, the ego
+    always) sets two slots, ``longitudinal`` and ``lateral:right``, with the same expression."""
     text = specifier.strip()
     match = re.match(r"with\s+behavior\s+(\w+)\s*\((.*)\)\s*$", text, re.S)
     if match:
@@ -647,6 +653,9 @@ def _slots(specifier: str, behaviors: Mapping[str, List[str]]) -> List[Tuple[str
     if match:
         prop = match.group(1)
         return [("speed" if prop == "speed" else f"with:{_norm(prop)}", match.group(2))]
+    form = _offset_form(text)
+    if form is not None and form[0] in (oriented or set()) | {"ego"}:
+        return [("longitudinal", text), ("lateral:right", text)]
     for pattern, slot in ((r"at\b.*pointAlongBy", "longitudinal"), (r"following\b", "longitudinal"),
                           (r"ahead of\b", "longitudinal"), (r"behind\b", "longitudinal:behind"),
                           (r"left of\b", "lateral:left"), (r"right of\b", "lateral:right"),
@@ -658,16 +667,115 @@ def _slots(specifier: str, behaviors: Mapping[str, List[str]]) -> List[Tuple[str
 
 def _value_part(slot: str, expression: str, reference: Optional[str] = None) -> str:
     """The part of a slot's expression that is the quantity: a behaviour argument or a ``with`` value whole, the
-    distance after ``by`` of ``ahead of``/``behind``/``left of``/``right of`` and after ``for`` of ``following``;
-    ``""`` for other placements."""
+    distance after ``by`` of ``ahead of``/``behind``/``left of``/``right of`` and after ``for`` of ``following``,
+    the vector's second component (ahead) or first (to the right) of an offset (:func:`_offset_form`); ``""`` for
+    other placements."""
     if slot.startswith(("behavior:", "with:")) or slot == "speed":
         return expression
+    form = _offset_form(expression) if slot in _OFFSET_SLOTS else None
+    if form is not None:
+        return form[2] if slot == "longitudinal" else form[1]
     if slot == "longitudinal" and "pointAlongBy" in expression:
         return _along(expression, reference)
     match = re.match(r"^(?:ahead of|behind|left of|right of)\s+[\w.]+\s+by\s+(.+)$", expression.strip(), re.S)
     if match is None:
         match = re.match(r"^following\b.*?\bfor\s+(.+)$", expression.strip(), re.S)
     return match.group(1) if match else ""
+
+
+_OFFSET_SLOTS = ("longitudinal", "lateral:right")
+"""The slots an offset in an oriented point's frame sets (:func:`_offset_form`): ahead, and to the right."""
+
+
+def _unbracketed(text: str) -> str:
+    """``text`` without the brackets that enclose all of it."""
+    text = text.strip()
+    while text.startswith("(") and text.endswith(")"):
+        depth = 0
+        for index, char in enumerate(text):
+            depth += {"(": 1, ")": -1}.get(char, 0)
+            if depth == 0:
+                break
+        if index != len(text) - 1:
+            break
+        text = text[1:-1].strip()
+    return text
+
+
+def _offset_form(text: str) -> Optional[Tuple[str, str, str]]:
+    """``(reference, lateral, longitudinal)`` of a placement offset in an oriented point's frame, or ``None``: the
+    specifiers ``offset by X @ Y`` and ``offset along D by X @ Y`` (from the ego) and ``at P offset by X @ Y`` and
+    ``at P offset along D by X @ Y`` (from ``P``, a name; in brackets or not). In Scenic 3 ``P offset by X @ Y`` of
+    an oriented point ``P`` is ``P``'s local frame: ``Y`` ahead along its heading, ``X`` to its right; ``offset
+    along D`` turns the frame to ``D``, read here only when ``D`` is ``roadDirection`` (the road's direction at the
+    reference point) or the reference's own ``heading``/``orientation``. The vector must be ``X @ Y`` as a whole
+    (``0 @ g - 90`` is ``(0 @ g) - 90`` in Scenic: not read). Whether ``P`` is an oriented point (a vector offset by
+    a vector is a sum in the world's frame) is the caller's to check."""
+    text = " ".join(text.split())
+    at = re.match(r"^at\s+(.*)$", text, re.S)
+    if at is not None:
+        found = re.match(r"^(\w+)\s+offset\s+(.*)$", _unbracketed(at.group(1)), re.S)
+        if found is None:
+            return None
+        reference, rest = found.group(1), found.group(2)
+    else:
+        found = re.match(r"^offset\s+(.*)$", text, re.S)
+        if found is None:
+            return None
+        reference, rest = "ego", found.group(1)
+    along = re.match(r"^along\s+(.+?)\s+by\s+(.+)$", rest, re.S)
+    if along is not None:
+        if along.group(1) not in ("roadDirection", f"{reference}.heading", f"{reference}.orientation"):
+            return None
+        vector = along.group(2)
+    elif re.match(r"^by\b", rest):
+        vector = rest[2:]
+    else:
+        return None
+    node = _parse(vector.strip())
+    if not (isinstance(node, ast.BinOp) and isinstance(node.op, ast.MatMult)):
+        return None
+    source = vector.strip()
+    lateral, longitudinal = ast.get_source_segment(source, node.left), ast.get_source_segment(source, node.right)
+    if lateral is None or longitudinal is None:
+        return None
+    return reference, _unbracketed(lateral), _unbracketed(longitudinal)
+
+
+def _ego_point(script: str) -> Optional[str]:
+    """The name the ego is placed at along a lane (``ego = new Car at lane.centerline.pointAlongBy(egoS)``: ``egoS``),
+    or ``None``."""
+    for statement in _statements(script):
+        found = re.match(r"ego\s*=\s*new\s+\w+\s+at\s+.*?pointAlongBy\s*\(\s*(\w+)\s*\)", statement, re.S)
+        if found:
+            return found.group(1)
+    return None
+
+
+def _offset_pair(slots: Sequence[Tuple[str, str]]) -> bool:
+    """Whether ``slots`` are the two an offset in an oriented point's frame sets (:func:`_slots`): each takes its
+    parameters from its own component, and a point it is offset from is handed on once, for both."""
+    return tuple(slot for slot, _ in slots) == _OFFSET_SLOTS and _offset_form(slots[0][1]) is not None
+
+
+def _step(slots: Sequence[Tuple[str, str]], carried: str, slot: str, value: str, offset: bool) -> str:
+    """``"<slot> by <distance>"``: how far an object is placed from a point along the direction the point was placed
+    in (``carried``, the point's slot): for an offset, its component along that direction."""
+    if offset:
+        for other, expression in slots:
+            if _slot_base(other) == _slot_base(carried):
+                return f"{other} by {' '.join(_value_part(other, expression).split())}"
+    return f"{slot} by {' '.join(value.split())}"
+
+
+def _oriented_names(script: str) -> Set[str]:
+    """The names of the objects ``script`` makes that are oriented points (any but a ``Point``), and the ego."""
+    names = {"ego"}
+    for statement in _statements(script):
+        found = _OBJECT.match(statement)
+        if found is not None and found.group(1) and found.group(2) != "Point" and not statement.startswith(_SKIP):
+            names.add(found.group(1))
+    return names
 
 
 def _along(expression: str, reference: Optional[str] = None) -> str:
@@ -766,8 +874,8 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
                 for item in items]
 
     numbers: Dict[str, str] = {}  # variable -> its expression, when it is a computation on parameters
-    ego_point = next((m.group(1) for m in (re.match(r"ego\s*=\s*new\s+\w+\s+at\s+.*?pointAlongBy\s*\(\s*(\w+)\s*\)",
-                                                     statement, re.S) for statement in _statements(script)) if m), None)
+    ego_point = _ego_point(script)
+    oriented = _oriented_names(script)
     for statement in _statements(script):
         if statement.startswith(_SKIP):
             continue
@@ -793,23 +901,27 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
         name, kind, rest = found.group(1) or f"<{found.group(2)}>", found.group(2), found.group(3)
         items: List[Tuple[str, str, str, frozenset, Optional[Quantity], str]] = []
         for specifier in _split_top(rest):
-            for slot, expression in _slots(specifier, behaviors):
+            slots = _slots(specifier, behaviors, oriented)
+            offset = _offset_pair(slots)
+            for index, (slot, expression) in enumerate(slots):
                 value = _value_part(slot, expression, ego_point)
                 here: List[Tuple[str, str, str, Optional[Quantity], str]] = []
-                for p in dict.fromkeys(_PARAM.findall(expression)):
+                for p in dict.fromkeys(_PARAM.findall(value if offset else expression)):
                     if value and _zero_use(value, p):
                         continue  # times 0: the parameter does not set the quantity (a constant, or others)
                     quantity = quantity_of(value, p) if value else None
                     if quantity is None:
-                        here.append((p, slot, _how(expression, p), None, " ".join(expression.split())))
+                        here.append((p, slot, _how(value if offset else expression, p), None,
+                                     " ".join(expression.split())))
                     else:  # a known function of p alone: compared through the interval it produces
                         here.append((p, slot, "additive", quantity, quantity.text))
-                for p, s, how, quantity, text in carried_by(expression):
+                bases = {_slot_base(s) for s, _ in slots} if offset else {_slot_base(slot)}
+                for p, s, how, quantity, text in (carried_by(expression) if not (offset and index) else []):
                     if s == "position":
                         here.append((p, slot, how, quantity, text))
-                    elif value and _slot_base(s) == _slot_base(slot):
+                    elif value and _slot_base(s) in bases:
                         # placed along the same direction from the point: the distances add up
-                        here.append((p, s, f"{how} then {slot} by {' '.join(value.split())}", None,
+                        here.append((p, s, f"{how} then {_step(slots, s, slot, value, offset)}", None,
                                      f"{text}, then {' '.join(expression.split())}"))
                     else:
                         here.append((p, s, how, quantity, text))
@@ -858,8 +970,8 @@ def fixed_quantities(script: str) -> Dict[Tuple[str, str, str], str]:
     fixed: Dict[Tuple[str, str, str], str] = {}
     carried: Dict[str, List[Tuple[str, str]]] = {}
     constants: Dict[str, str] = {}
-    ego_point = next((m.group(1) for m in (re.match(r"ego\s*=\s*new\s+\w+\s+at\s+.*?pointAlongBy\s*\(\s*(\w+)\s*\)",
-                                                     statement, re.S) for statement in _statements(script)) if m), None)
+    ego_point = _ego_point(script)
+    oriented = _oriented_names(script)
 
     def constant(value: str) -> Optional[str]:
         text = " ".join(value.split())
@@ -890,11 +1002,14 @@ def fixed_quantities(script: str) -> Dict[Tuple[str, str, str], str]:
         name, kind, rest = found.group(1) or f"<{found.group(2)}>", found.group(2), found.group(3)
         here: List[Tuple[str, str]] = []
         for specifier in _split_top(rest):
-            for slot, expression in _slots(specifier, behaviors):
+            slots = _slots(specifier, behaviors, oriented)
+            offset = _offset_pair(slots)
+            for index, (slot, expression) in enumerate(slots):
                 value = _value_part(slot, expression, ego_point)
-                for point, items in carried.items():
+                bases = {_slot_base(s) for s, _ in slots} if offset else {_slot_base(slot)}
+                for point, items in (carried.items() if not (offset and index) else ()):
                     if re.search(rf"\b{re.escape(point)}\b", expression):
-                        if value and any(_slot_base(s) == _slot_base(slot) for s, _ in items):
+                        if value and any(_slot_base(s) in bases for s, _ in items):
                             continue  # placed along the same direction from the point: the distances add up
                         here += items
                 if value:

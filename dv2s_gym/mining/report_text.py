@@ -110,7 +110,7 @@ def by_type_text(by_type: Mapping[str, int]) -> str:
 def breadth(counts: Mapping[str, Any]) -> str:
     """How broad the failures found are: failures, distinct behaviours, (scenario, failure type) pairs, scenarios
     with a failure, and the failures per type (:func:`by_type_text`)."""
-    return (f"{counts['failures']} failure(s): {counts.get('behaviours', counts['clusters'])} distinct behaviour(s), "
+    return (f"{counts['failures']} failure(s): {counts['behaviours']} distinct behaviour(s), "
             f"{counts.get('scenario_failure_types', 0)} (scenario family, failure type) pair(s), "
             f"{counts.get('scenarios_failing', 0)} scenario famil(ies) with a failure; by type: "
             f"{by_type_text(counts.get('failures_by_type') or {})}")
