@@ -7,8 +7,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.html import _cards, _Videos
 from dv2s_gym.mining.loop_report import _entry_clips
+
+KEEP_LANE = ConversionSettings(policy="keep_lane")
+"""The conversion settings of the tests: the deterministic policy that fails."""
 
 CLIP = {"seed": 7, "failed": True, "reproduced": True, "failure": {"type": "collision"}, "chosen": "reproduced",
         "file": "converted.webm"}
@@ -90,11 +94,11 @@ def test_rejection_reasons_name_files_in_the_run_folder_by_their_relative_path(t
     (run / "failures").write_text("not a folder")  # the conversion cannot make its folder there
     record = {"scenario": "urban_lead_vehicle_stopped", "seed": 0, "index": 3, "params": {},
               "failure": {"type": "collision"}, "result": {"trajectory_hash": "0" * 16}}
-    out = convert_failure(record, run, policy="keep_lane", bank=tmp_path / "bank", k=1)
+    out = convert_failure(record, run, KEEP_LANE.replace(k=1), bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "input"
     assert "failures/episode-000003/conversion" in out["reason"] and str(tmp_path) not in out["reason"]
     (run / "settings.json").mkdir()  # nor read the run's settings
-    out = replay_failure_entry(record, run, policy="keep_lane", bank=tmp_path / "bank")
+    out = replay_failure_entry(record, run, KEEP_LANE, bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["reason"].startswith("replay: ")
     assert str(tmp_path) not in out["reason"] and "failures/" in out["reason"]
 
