@@ -107,7 +107,8 @@ def test_heldout_comparison_needs_enough_families_as_well_as_episodes():
     from dv2s_gym.mining.loop_report import _heldout_lines, _round_row
 
     assert "40 pairs from 2 families (4 scenarios)" in _heldout_lines(few)[1]
-    assert _round_row({"steps": {"after": few}})["drop"] == "not reported: 2 < 3 families"
+    assert _round_row(RoundRecord.from_dict({"round": 1, "steps": {"after": few}}))["drop"] == \
+        "not reported: 2 < 3 families"
 
 
 def test_the_heldout_drop_interval_resamples_families_and_the_report_says_pairs_of_a_family_are_not_independent():
