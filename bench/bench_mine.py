@@ -89,7 +89,7 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
     from dv2s_gym.mining.rate import rate_estimates
 
     rate = rate_estimates(run.settings, run.records)
-    overall = rate["overall"] if rate["available"] else None
+    overall = rate.overall if rate.available else None
     avoidable_clusters = {run.clusters[int(r["index"])] for r in avoidable}
     return {
         "sampler": sampler, "seed": seed, "episodes": len(run.records),
@@ -97,7 +97,7 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
         "avoidable": len(avoidable), "clusters": len(clusters), "avoidable_clusters": len(avoidable_clusters),
         "scenarios_failing": len({r["scenario"] for r in failures}),
         "kinds": len({(r["scenario"], r["failure"]["kind"]) for r in failures}), "seconds": seconds,
-        "rate": (overall["value"], overall["low"], overall["high"], overall["ess"]) if overall else None,
+        "rate": (overall.value, overall.low, overall.high, overall.ess) if overall else None,
         "collapsed": bool(rate.get("collapsed")),
     }
 

@@ -44,29 +44,29 @@ def test_family_split_never_puts_one_parent_on_both_sides(trial):
     for entry in entries[::3]:  # some sidecars name the parent: it wins over the cluster id
         entry["parent"] = f"p{rng.integers(3)}"
     split = split_by_family(entries, fraction=0.5, seed=trial)
-    families = {side: {family_of(e) for e in entries if e["scenario"] in split[side]}
+    families = {side: {family_of(e) for e in entries if e["scenario"] in getattr(split, side)}
                 for side in ("held_out", "fine_tune")}
     assert not families["held_out"] & families["fine_tune"]  # no parent on both sides
-    assert set(split["held_out_families"]) == families["held_out"]
-    assert set(split["fine_tune_families"]) == families["fine_tune"]
-    assert not set(split["held_out"]) & set(split["fine_tune"])
-    assert not set(split["held_out_clusters"]) & set(split["fine_tune_clusters"])
-    assert set(split["held_out"]) | set(split["fine_tune"]) == {e["scenario"] for e in entries}
-    if split["groups"] >= 2:
-        assert split["held_out"] and split["fine_tune"]
+    assert set(split.held_out_families) == families["held_out"]
+    assert set(split.fine_tune_families) == families["fine_tune"]
+    assert not set(split.held_out) & set(split.fine_tune)
+    assert not set(split.held_out_clusters) & set(split.fine_tune_clusters)
+    assert set(split.held_out) | set(split.fine_tune) == {e["scenario"] for e in entries}
+    if split.groups >= 2:
+        assert split.held_out and split.fine_tune
     assert split_by_family(list(reversed(entries)), 0.5, trial) == split
 
 
 def test_family_split_keeps_a_family_held_out_once_held_out():
     entries = [{"cluster": f"s{i % 4}/collision/r{i}", "scenario": f"m{i}"} for i in range(12)]
     split = split_by_family(entries, 0.5, seed=3)
-    assert split["by"] == "family" and split["groups"] == 4 and len(split["held_out_families"]) == 2
-    assert len({tuple(split_by_family(entries, 0.5, seed=s)["held_out_families"]) for s in range(8)}) > 1
-    tuned = split["fine_tune_families"]
+    assert split.to_dict()["by"] == "family" and split.groups == 4 and len(split.held_out_families) == 2
+    assert len({tuple(split_by_family(entries, 0.5, seed=s).held_out_families) for s in range(8)}) > 1
+    tuned = split.fine_tune_families
     forced = split_by_family(entries, 0.5, seed=3, held_families=tuned)
-    assert set(tuned) <= set(forced["held_out_families"])  # an earlier round's held-out family never moves
+    assert set(tuned) <= set(forced.held_out_families)  # an earlier round's held-out family never moves
     one = [{"cluster": "s0/collision/r1", "scenario": "a"}, {"cluster": "s0/off_road/r2", "scenario": "b"}]
-    assert split_by_family(one, 0.5, 0)["held_out"] == []  # one family: nothing to hold out apart
+    assert split_by_family(one, 0.5, 0).held_out == ()  # one family: nothing to hold out apart
     assert family_of({"cluster": "s0/collision/r1", "parent": "p"}) == "p"
 
 
@@ -78,16 +78,16 @@ def test_family_split_keeps_every_family_on_its_side_across_two_rounds(seed):
                 for f in families]
 
     first = split_by_family(mined(["fam_a", "fam_b"]), 0.5, seed * 1000 + 1)
-    assert len(first["held_out_families"]) == 1 and len(first["fine_tune_families"]) == 1
+    assert len(first.held_out_families) == 1 and len(first.fine_tune_families) == 1
     second = split_by_family(mined(["fam_a", "fam_b", "fam_c", "fam_d", "fam_e", "fam_f"]), 0.5, seed * 1000 + 2,
-                             first["held_out_families"], first["fine_tune_families"])
-    assert set(first["fine_tune_families"]) <= set(second["fine_tune_families"])
-    assert set(first["held_out_families"]) <= set(second["held_out_families"])
-    assert len(second["held_out_families"]) == 3 and second["moved_to_fine_tune"] == []
+                             first.held_out_families, first.fine_tune_families)
+    assert set(first.fine_tune_families) <= set(second.fine_tune_families)
+    assert set(first.held_out_families) <= set(second.held_out_families)
+    assert len(second.held_out_families) == 3 and second.moved_to_fine_tune == ()
     # a failure tying an earlier held-out family to an earlier fine-tuned one: it cannot stay held out
     tied = mined(["fam_a", "fam_b", "fam_c"]) + [{"cluster": "fam_a/collision/x", "scenario": "replay_fam_b"}]
     both = split_by_family(tied, 0.5, 7, held_families=["fam_a"], tuned_families=["fam_b"])
-    assert {"fam_a", "fam_b"} <= set(both["fine_tune_families"]) and both["moved_to_fine_tune"] == ["fam_a"]
+    assert {"fam_a", "fam_b"} <= set(both.fine_tune_families) and both.moved_to_fine_tune == ("fam_a",)
 
 
 def test_heldout_comparison_needs_enough_families_as_well_as_episodes():
@@ -767,8 +767,8 @@ def test_mined_entries_include_the_exact_replays_with_their_parent(tmp_path):
     assert [e["scenario"] for e in mined_entries(run_dir, replays=False)] == ["mined_a"]
     # the family split keeps a converted entry and the replay of the same failure on one side
     split = split_by_family(entries, 0.5, seed=3)
-    assert {"mined_a", "replay_a"} <= set(split["held_out"]) or {"mined_a", "replay_a"} <= set(split["fine_tune"])
-    assert split["groups"] == 3 and not set(split["held_out_families"]) & set(split["fine_tune_families"])
+    assert {"mined_a", "replay_a"} <= set(split.held_out) or {"mined_a", "replay_a"} <= set(split.fine_tune)
+    assert split.groups == 3 and not set(split.held_out_families) & set(split.fine_tune_families)
     # a run that converted nothing (no conversions.jsonl) still yields its exact replays
     (run_dir / "conversions.jsonl").unlink()
     assert [e["scenario"] for e in mined_entries(run_dir)] == ["replay_c"]
@@ -895,7 +895,7 @@ def test_the_held_out_split_groups_entries_by_the_family_they_were_clustered_by(
     parents = {e["scenario"]: e["parent"] for e in _with_parents(kept, str(bank))}
     assert parents == {name: scenario_family(name, str(bank)) for name in parents} == {
         "mined_x": "highway_cut_in_from_right", "mined_of_mined_x": "highway_cut_in_from_right"}
-    assert split_by_family(_with_parents(kept, str(bank)), 0.5, seed=0)["groups"] == 1
+    assert split_by_family(_with_parents(kept, str(bank)), 0.5, seed=0).groups == 1
 
 
 # --------------------------------------------------------------------------- the verdict: which policy to use

@@ -14,6 +14,7 @@ from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.convert import replay_failure_entry
 from dv2s_gym.mining.exact_replay import replay_failure
 from scenario_bank.bank import Bank, Sidecar
+from scenario_bank.records import EpisodeRecord
 from test_mining_convert import SCENARIO, make_record, midpoint
 
 KEEP_LANE = ConversionSettings(policy="keep_lane", monitor={})
@@ -194,8 +195,9 @@ def test_exact_replays_take_the_families_in_turn_largest_cluster_first(tmp_path,
     from dv2s_gym.mining.replays import replay_order
 
     # deterministic, and the representative is the failure a conversion would take (lowest robustness)
-    order = replay_order(group(records))
-    assert order == replay_order(dict(reversed(list(group(records).items()))))
+    typed = [EpisodeRecord.from_dict(r) for r in records]
+    order = replay_order(group(typed))
+    assert order == replay_order(dict(reversed(list(group(typed).items()))))
     assert [r["index"] for _, r in order] == [4, 13, 14, 8, 11]
 
 
@@ -218,7 +220,7 @@ def test_an_exact_replay_is_kept_only_of_a_scene_the_reference_driver_passed(tmp
     near = failing(2, "c", "collision", "low_ttc")
     unchecked = dict(_failed(3, "d", "car"), reference=None)
     records = [stalled, passed, near, unchecked]
-    order = replay_order(group(records))
+    order = replay_order(group([EpisodeRecord.from_dict(r) for r in records]))
     assert sorted(r["index"] for _, r in order) == [1, 2, 3]  # no replay of the scene the reference stalled in
     from dv2s_gym.mining.loop import _mining_summary
     from dv2s_gym.mining.replays import reference_passed
@@ -249,6 +251,7 @@ def test_a_conversion_takes_a_failure_whose_scene_the_reference_driver_passed(tm
 
     monkeypatch.setattr(miner, "convert_failure", convert)
     monkeypatch.setattr(miner, "_reached_bank", lambda *_: None)
-    run = SimpleNamespace(out=tmp_path, records=records, settings={"policy": "keep_lane", "env_config": None})
+    run = SimpleNamespace(out=tmp_path, records=[EpisodeRecord.from_dict(r) for r in records],
+                          settings={"policy": "keep_lane", "env_config": None})
     miner.convert_clusters(run, ConversionSettings(), bank_dir=str(tmp_path / "bank"), progress=False)
     assert sorted(taken) == [1, 2]

@@ -13,6 +13,7 @@ from dv2s_gym.mining.samplers import (SAMPLER_OPTIONS, SAMPLERS, SamplerRecord, 
                                       is_uniform, make_sampler, register_sampler, registered_samplers, sampler_params)
 from dv2s_gym.mining.settings import MineSettings
 from dv2s_gym.mining.space import SceneSpace
+from scenario_bank.records import EpisodeRecord
 
 
 @pytest.fixture
@@ -49,9 +50,10 @@ def test_a_registered_sampler_is_built_checked_and_accepted_everywhere(registry)
     assert is_uniform("sweep") and not is_adaptive("sweep") and default_feedback("sweep") == "novelty"
     assert MineSettings(sampler="sweep").feedback == "novelty"
     # its scenes weigh 1 in the failure-rate estimate without a proposal recorded, as a uniform sampler's do
-    records = [{"scenario": "s", "failure": "collision" if i < 2 else None} for i in range(4)]
+    records = [EpisodeRecord(index=i, scenario="s", seed=i, failure={"type": "collision"} if i < 2 else None)
+               for i in range(4)]
     assert failure_rate(records, sampler="sweep") == failure_rate(records, sampler="random")
-    assert failure_rate(records, sampler="sweep")["available"] and not failure_rate(records, sampler="bandit")["available"]
+    assert failure_rate(records, sampler="sweep").available and not failure_rate(records, sampler="bandit").available
     assert build_parser().parse_args(["mine", "--policy", "rule", "--sampler", "sweep"]).sampler == "sweep"
 
 

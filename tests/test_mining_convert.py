@@ -24,6 +24,7 @@ from envs.trace import EpisodeTrace
 from policies.evaluation import trajectory_hash
 from scenario_bank.bank import Bank, Sidecar
 from scenario_bank.errors import WrongTypeError
+from scenario_bank.records import EpisodeRecord
 
 KEEP_LANE = ConversionSettings(policy="keep_lane")
 """The conversion settings of the tests: the deterministic policy that fails."""
@@ -239,8 +240,8 @@ def _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_pat
                                              f"run/failures/{SCENARIO}__collision__0/conversion/converted.webm"]
     assert f"driven by keep_lane, seed {seed}: it failed" in from_run[1]["label"]  # the round's policy, named
 
-    mining = build_report_from_records({"policy": "keep_lane", "sampler": "uniform"}, [record], [out],
-                                       {record["index"]: out["cluster"]})
+    mining = build_report_from_records({"policy": "keep_lane", "sampler": "uniform"},
+                                       [EpisodeRecord.from_dict(record)], [out], {record["index"]: out["cluster"]})
     card = render_html(mining, base=tmp_path / "run", page_dir=tmp_path / "run", embed_videos=False)
     card = card.split(f'id="card-{out["cluster"]}"')[1].split('class="text"')[0]
     assert f'src="failures/{SCENARIO}__collision__0/failure.webm"' in card

@@ -19,6 +19,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from scenario_bank.records import EpisodeRecord
 from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import NOVELTY_RADIUS, STATE_SIZE
@@ -490,25 +491,25 @@ def test_novelty_feedback_feeds_a_repeated_parameter_cell_as_an_easy_scene():
     from dv2s_gym.mining.miner import _feedback
 
     failure = {"type": "collision", "kind": "collision:rear_end"}
-    first = {"index": 0, "scenario": BRAKES, "point": [0.1, 0.9], "failure": failure, "rho": -2.0, "error": None}
-    same_cell = {**first, "index": 1, "point": [0.2, 0.8], "rho": -1.5}
-    other_cell = {**first, "index": 2, "point": [0.5, 0.8], "rho": -1.2}
-    passed = {**first, "index": 3, "failure": None, "rho": 3.0}
-    crashed = {**first, "index": 4, "failure": None, "rho": None, "error": "crashed"}
+    first = EpisodeRecord(index=0, scenario=BRAKES, seed=0, point=[0.1, 0.9], failure=failure, rho=-2.0)
+    same_cell = first.replace(index=1, point=[0.2, 0.8], rho=-1.5)
+    other_cell = first.replace(index=2, point=[0.5, 0.8], rho=-1.2)
+    passed = first.replace(index=3, failure=None, rho=3.0)
+    crashed = first.replace(index=4, failure=None, rho=None, error="crashed")
     seen: set = set()
     assert [_feedback(r, seen, "novelty") for r in (first, same_cell, other_cell, passed, crashed)] == [
         -2.0, 9.0, -1.2, 3.0, 1.0]
     seen = set()
     assert [_feedback(r, seen, "robustness") for r in (first, same_cell, other_cell)] == [-2.0, -1.5, -1.2]
     seen = set()  # scenario-novelty: only each scenario's first failure is fed as one
-    elsewhere = {**other_cell, "index": 5, "scenario": LEFT_TURN, "rho": -1.1}
+    elsewhere = other_cell.replace(index=5, scenario=LEFT_TURN, rho=-1.1)
     assert [_feedback(r, seen, "scenario-novelty") for r in (first, other_cell, passed, elsewhere)] == [
         -2.0, 9.0, 3.0, -1.1]
     seen = set()  # cluster-novelty: a failure in a behaviour cluster already found is fed as an easy scene
     behaviour = {"actor": "car", "actor_manoeuvre": "braking", "ego_manoeuvre": "following"}
-    a = {**first, "behaviour": behaviour}
-    same_cluster = {**a, "index": 6, "point": [0.9, 0.1], "rho": -1.4}  # other cell, same behaviour
-    other_actor = {**a, "index": 7, "behaviour": {**behaviour, "actor_manoeuvre": "cut_in"}, "rho": -1.3}
+    a = first.replace(behaviour=behaviour)
+    same_cluster = a.replace(index=6, point=[0.9, 0.1], rho=-1.4)  # other cell, same behaviour
+    other_actor = a.replace(index=7, behaviour={**behaviour, "actor_manoeuvre": "cut_in"}, rho=-1.3)
     assert cluster_id(a) == cluster_id(same_cluster) != cluster_id(other_actor)
     assert [_feedback(r, seen, "cluster-novelty") for r in (a, same_cluster, other_actor, passed, crashed)] == [
         -2.0, 9.0, -1.3, 3.0, 1.0]

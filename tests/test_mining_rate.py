@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from dv2s_gym.mining.rate import failure_rate, weighted_rate
+from scenario_bank.records import EpisodeRecord
 
 
 def test_an_unfair_proposal_is_reweighted_to_the_true_rate():
@@ -20,13 +21,13 @@ def test_an_unfair_proposal_is_reweighted_to_the_true_rate():
     outcomes = (u < 0.1).astype(float)
     estimate = weighted_rate(list(outcomes), list(1.0 / density))
     assert outcomes.mean() == pytest.approx(0.5, abs=0.03)  # what the sampler saw
-    assert estimate["low"] <= 0.1 <= estimate["high"]
-    assert estimate["value"] == pytest.approx(0.1, abs=0.01)
-    assert estimate["high"] - estimate["low"] < 0.03
+    assert estimate.low <= 0.1 <= estimate.high
+    assert estimate.value == pytest.approx(0.1, abs=0.01)
+    assert estimate.high - estimate.low < 0.03
     # drawing the failure region more often could be worth more than n uniform draws, but the interval never
     # claims more than Kish's effective sample size of the weights (a rare small-weight failure would fake it)
-    assert estimate["ess"] <= n
-    assert estimate["failures"] == int(outcomes.sum()) and estimate["n"] == n
+    assert estimate.ess <= n
+    assert estimate.failures == int(outcomes.sum()) and estimate.n == n
 
 
 def test_a_proposal_that_avoids_the_failure_region_is_worth_fewer_draws():
@@ -37,21 +38,21 @@ def test_a_proposal_that_avoids_the_failure_region_is_worth_fewer_draws():
     u = np.where(inside, rng.uniform(0.0, 0.1, n), rng.uniform(0.1, 1.0, n))
     density = np.where(u < 0.1, 0.1, 0.99 / 0.9)
     estimate = weighted_rate(list((u < 0.1).astype(float)), list(1.0 / density))
-    assert estimate["low"] <= 0.1 <= estimate["high"]
-    assert estimate["ess"] < n / 5
+    assert estimate.low <= 0.1 <= estimate.high
+    assert estimate.ess < n / 5
 
 
 def test_equal_weights_give_the_plain_rate_and_its_wilson_interval():
     from dv2s_gym.regress.stats import wilson_interval
 
     estimate = weighted_rate([1, 0, 0, 1, 0, 0, 0, 0], [1.0] * 8)
-    assert estimate["value"] == 0.25 and estimate["ess"] == pytest.approx(8)
-    assert (estimate["low"], estimate["high"]) == pytest.approx(wilson_interval(2, 8))
+    assert estimate.value == 0.25 and estimate.ess == pytest.approx(8)
+    assert (estimate.low, estimate.high) == pytest.approx(wilson_interval(2, 8))
 
 
 def test_no_failure_still_has_an_upper_bound():
     estimate = weighted_rate([0] * 50, [1.0] * 50)
-    assert estimate["value"] == 0.0 and estimate["low"] == 0.0 and 0.0 < estimate["high"] < 0.1
+    assert estimate.value == 0.0 and estimate.low == 0.0 and 0.0 < estimate.high < 0.1
 
 
 def test_outcomes_and_weights_must_pair_up():
@@ -75,9 +76,9 @@ def _cross_entropy_run(dimensions: int, draws: int, seed: int):
         scenario, u = int(point.scenario[0]), [float(x) for x in point.u]
         failed = scenario == 0 and u[0] < 0.2
         sampler.feed(point, info, -1.0 if failed else 1.0)
-        records.append({"index": index, "scenario": f"s{scenario}", "sampler": "cross-entropy",
-                        "failure": {"type": "collision"} if failed else None,
-                        "proposal": scene_proposal(sampler.proposal(index), dimensions)})
+        records.append(EpisodeRecord(index=index, scenario=f"s{scenario}", seed=index, sampler="cross-entropy",
+                                     failure={"type": "collision"} if failed else None,
+                                     proposal=scene_proposal(sampler.proposal(index), dimensions)))
     return records
 
 
@@ -94,11 +95,11 @@ def test_the_cross_entropy_sampler_s_densities_recover_the_true_rates():
         drawn = [r for r in records if r["scenario"] == "s0"]
         assert sum(1 for r in drawn if r["failure"]) / len(drawn) > 0.5  # what the sampler saw
         rate = failure_rate(records, scenarios=["s0", "s1"], sampler="cross-entropy")
-        assert rate["available"] and rate["scenarios"]["s1"]["value"] == 0.0
-        s0, overall = rate["scenarios"]["s0"], rate["overall"]
-        covered_s0 += s0["low"] <= 0.2 <= s0["high"]
-        covered_overall += overall["low"] <= 0.1 <= overall["high"]
-        values.append(s0["value"])
+        assert rate.available and rate.scenarios["s1"].value == 0.0
+        s0, overall = rate.scenarios["s0"], rate.overall
+        covered_s0 += s0.low <= 0.2 <= s0.high
+        covered_overall += overall.low <= 0.1 <= overall.high
+        values.append(s0.value)
     assert covered_s0 >= 5 and covered_overall >= 5
     assert sum(values) / len(values) == pytest.approx(0.2, abs=0.005)
 
@@ -109,16 +110,16 @@ def test_a_collapsed_proposal_is_flagged():
     rest, so the estimate misses most of the failures: the report must say so."""
     records = _cross_entropy_run(dimensions=2, draws=1000, seed=11)
     rate = failure_rate(records, scenarios=["s0", "s1"], sampler="cross-entropy")
-    assert rate["scenarios"]["s0"]["high"] < 0.2  # the estimate is far too low...
-    assert rate["collapsed"] is True  # ...and flagged
-    uniform = [dict(r, sampler="random", proposal=None) for r in records[:20]]
-    assert failure_rate(uniform, sampler="random")["collapsed"] is False
+    assert rate.scenarios["s0"].high < 0.2  # the estimate is far too low...
+    assert rate.collapsed is True  # ...and flagged
+    uniform = [r.replace(sampler="random", proposal=None) for r in records[:20]]
+    assert failure_rate(uniform, sampler="random").collapsed is False
 
 
 def test_a_sampler_without_densities_gives_no_estimate():
-    records = [{"index": 0, "scenario": "a", "failure": None, "sampler": "bandit", "proposal": None}]
+    records = [EpisodeRecord(index=0, scenario="a", seed=0, failure=None, sampler="bandit", proposal=None)]
     rate = failure_rate(records, sampler="bandit")
-    assert rate["available"] is False and rate["overall"] is None
+    assert rate.available is False and rate.overall is None
 
 
 def _novelty_bandit_run(draws: int, seed: int, window: int = 4):
@@ -140,9 +141,9 @@ def _novelty_bandit_run(draws: int, seed: int, window: int = 4):
         pending.append((point, info, -1.0 if failed else 1.0))
         if len(pending) > window:
             sampler.feed(*pending.pop(0))
-        records.append({"index": index, "scenario": f"s{scenario}", "sampler": NOVELTY,
-                        "failure": {"type": "collision"} if failed else None,
-                        "proposal": scene_proposal(sampler.proposal(index), 2)})
+        records.append(EpisodeRecord(index=index, scenario=f"s{scenario}", seed=index, sampler=NOVELTY,
+                                     failure={"type": "collision"} if failed else None,
+                                     proposal=scene_proposal(sampler.proposal(index), 2)))
     return records
 
 
@@ -162,11 +163,11 @@ def test_the_novelty_bandit_s_densities_recover_the_true_rates():
         assert min(r["proposal"]["scenario"] for r in records) == pytest.approx(0.2 / 3)  # never below explore / S
         assert all(r["proposal"]["params"] == 1.0 and r["proposal"]["floor"] >= 0.2 - 1e-9 for r in records)
         rate = failure_rate(records, scenarios=["s0", "s1", "s2"], sampler="novelty-bandit")
-        assert rate["available"] and not rate["collapsed"]
-        assert rate["scenarios"]["s2"]["value"] == 0.0
-        overall = rate["overall"]
-        covered += overall["low"] <= truth <= overall["high"]
-        values.append(overall["value"])
+        assert rate.available and not rate.collapsed
+        assert rate.scenarios["s2"].value == 0.0
+        overall = rate.overall
+        covered += overall.low <= truth <= overall.high
+        values.append(overall.value)
     assert covered >= 7
     assert sum(values) / len(values) == pytest.approx(truth, abs=0.01)
 
@@ -178,9 +179,9 @@ def test_an_estimate_pushed_past_one_by_heavy_weights_keeps_a_wide_interval():
     weights = [5.0] * 12 + [0.1] * 48
     outcomes = [1] * 12 + [1] * 40 + [0] * 8
     estimate = weighted_rate(outcomes, weights)
-    assert estimate["raw"] > 1.0 and estimate["value"] == 1.0 and estimate["high"] == 1.0
-    assert estimate["low"] < 0.75
-    assert estimate["ess"] < 20  # Kish's: a few heavy weights are worth a few draws
+    assert estimate.raw > 1.0 and estimate.value == 1.0 and estimate.high == 1.0
+    assert estimate.low < 0.75
+    assert estimate.ess < 20  # Kish's: a few heavy weights are worth a few draws
 
 
 def test_the_effective_sample_size_never_exceeds_kish_s_or_the_episode_count():
@@ -189,8 +190,8 @@ def test_the_effective_sample_size_never_exceeds_kish_s_or_the_episode_count():
     draws'."""
     one = weighted_rate([1.0] + [0.0] * 99, [0.01] + [1.0] * 99)
     kish = (0.01 + 99) ** 2 / (0.01 ** 2 + 99)
-    assert one["ess"] == pytest.approx(kish) and one["ess"] <= one["n"]
-    assert one["high"] > 0.03
+    assert one.ess == pytest.approx(kish) and one.ess <= one.n
+    assert one.high > 0.03
 
 
 def test_the_interval_covers_the_truth_when_the_proposal_piles_onto_one_small_failing_region():
@@ -205,6 +206,6 @@ def test_the_interval_covers_the_truth_when_the_proposal_piles_onto_one_small_fa
         density = (1 - mix) + mix * (x < a) / a
         y = ((x < a) | ((x >= 0.5) & (x < 0.5 + b))).astype(float)
         est = weighted_rate(list(y), list(1.0 / density))
-        covered += est["low"] <= a + b <= est["high"]
-        assert est["ess"] <= n + 1e-9
+        covered += est.low <= a + b <= est.high
+        assert est.ess <= n + 1e-9
     assert covered / runs >= 0.93

@@ -20,6 +20,7 @@ from dv2s_gym.mining.html import write_html
 from dv2s_gym.mining.report import (SCHEMA, SCHEMA_VERSION, MiningReportError, build_report, format_summary,
                                     markdown, write_reports)
 from envs.errors import DV2SError
+from scenario_bank.records import EpisodeRecord
 from browser_helpers import body_attributes, table_widths
 
 POLICY = "rule?action_noise=0.3"
@@ -472,7 +473,7 @@ def test_the_miner_s_summary_states_the_breadth(run_dir):
 
     records = read_records(_Path(run_dir) / "episodes.jsonl")
     settings = json.loads((_Path(run_dir) / "settings.json").read_text())
-    run = MineRun(out=_Path(run_dir), settings=settings, records=records, clusters=cluster_failures(records))
+    run = MineRun(out=_Path(run_dir), settings=settings, records=records, clusters=cluster_failures([EpisodeRecord.from_dict(r) for r in records]))
     # the miner counts a failure of unknown avoidability (the low TTC) as avoidable
     assert ("5 distinct behaviours, 4 with avoidable failures; 5 (scenario family, failure type) pairs, 2 scenario "
             "families with a failure; 5 collisions, 1 stalls") in run.summary()
@@ -549,7 +550,7 @@ def test_a_run_whose_every_episode_errored_says_so_and_counts_them_as_drawn(tmp_
     assert "WARNING: all 2 episodes ended in an error: the run measured nothing (e.g. RuntimeError: boom)" in text
     assert "1 of 2 scenarios were drawn (2 episode(s)) but every episode of them ended in an error" in text
     assert "1 of 2 scenarios were never drawn" in text  # B
-    run = MineRun(out=out, settings=settings, records=records, clusters=cluster_failures(records))
+    run = MineRun(out=out, settings=settings, records=records, clusters=cluster_failures([EpisodeRecord.from_dict(r) for r in records]))
     assert run.all_errored and "WARNING: all 2 episodes ended in an error" in run.summary()
     partial = MineRun(out=out, settings=settings, clusters={},
                       records=records[:1] + [_record(1, "random", "A", 0.5, None, None, None)])
@@ -579,7 +580,7 @@ def test_one_behaviour_in_two_entries_of_one_family_is_one_behaviour(tmp_path):
     assert report["scenarios"]["replay_a"]["clusters"] == report["scenarios"]["mined_a"]["clusters"] == 1
     assert "`mined_a`, `replay_a`" in markdown(report)
     legacy = [{k: v for k, v in r.items() if k != "family"} for r in records]  # runs recorded before families
-    assert len(set(cluster_failures(legacy).values())) == 2
+    assert len(set(cluster_failures([EpisodeRecord.from_dict(r) for r in legacy]).values())) == 2
 
 
 def test_a_scenario_s_family_follows_the_provenance_to_its_first_scenario(tmp_path):

@@ -28,8 +28,10 @@ import time
 from collections import Counter
 from typing import Any, Dict, List
 
+from scenario_bank.records import EpisodeRecord
 
-def _episodes(records: List[Dict[str, Any]]) -> List[Dict[str, Any]]:
+
+def _episodes(records: List[EpisodeRecord]) -> List[Dict[str, Any]]:
     from dv2s_gym.mining.cluster import cluster_id, pair_of
 
     out = []
@@ -82,7 +84,7 @@ def main() -> None:
     args = p.parse_args()
     if args.jsonl:
         with open(args.jsonl) as f:
-            records = [json.loads(line) for line in f if line.strip()]
+            records = [EpisodeRecord.from_dict(json.loads(line)) for line in f if line.strip()]
         records = [r for r in records if not r.get("error")]
         saved = {"policy": records[0]["policy"] if records else args.policy, "seed": args.seed,
                  "large": len(records), "episodes": _episodes(records)}

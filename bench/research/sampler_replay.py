@@ -26,11 +26,12 @@ import numpy as np
 
 from dv2s_gym.mining.cluster import cluster_id, pair_of
 from dv2s_gym.mining.failure_state import is_novel
+from scenario_bank.records import EpisodeRecord
 
 
-def load(path: str) -> List[Dict[str, Any]]:
+def load(path: str) -> List[EpisodeRecord]:
     with open(path) as f:
-        rows = [json.loads(line) for line in f if line.strip()]
+        rows = [EpisodeRecord.from_dict(json.loads(line)) for line in f if line.strip()]
     return [r for r in rows if not r.get("error")]
 
 

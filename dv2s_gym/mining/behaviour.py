@@ -2,8 +2,8 @@
 
 :func:`extract_behaviour` reads an episode's trace (:class:`~envs.trace.EpisodeTrace`: every actor's
 ``[x, y, heading, speed]`` after every step, and each actor's kind) and its
-:class:`~dv2s_gym.mining.monitors.Failure`, and returns a small dict the miner keeps in the episode
-record (``record["behaviour"]``)::
+:class:`~dv2s_gym.mining.monitors.Failure`, and returns a :class:`Behaviour`, whose JSON object
+(:meth:`Behaviour.to_dict`) the miner keeps in the episode record (``behaviour``)::
 
     {"actor": kind of the other actor involved ("car", "truck", "pedestrian", ...) or "none",
      "actor_manoeuvre": "crossing" | "oncoming" | "stopped" | "cut_in" | "lane_change" | "braking"
@@ -30,9 +30,13 @@ without another actor (``off_road``), have actor ``"none"``.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any, Dict, List, Mapping, Optional
 
-__all__ = ["extract_behaviour", "behaviour_of", "actor_ahead", "involved_actor", "WAITING_DISTANCE", "UNKNOWN", "WINDOW_SECONDS", "LATERAL_METRES",
+from dv2s_gym.mining.monitors import Failure
+from scenario_bank.records import EpisodeRecord
+
+__all__ = ["Behaviour", "extract_behaviour", "behaviour_of", "actor_ahead", "involved_actor", "WAITING_DISTANCE", "UNKNOWN", "WINDOW_SECONDS", "LATERAL_METRES",
            "BRAKING_DROP", "ACTOR_MANOEUVRES", "EGO_MANOEUVRES"]
 
 WINDOW_SECONDS = 2.0
@@ -50,7 +54,25 @@ WAITING_DISTANCE = 80.0
 stall monitor's free path, :data:`envs.safety_metrics.FREE_PATH`: a stall's path is free that far)."""
 LANE_HALF_WIDTH = 2.0
 """Metres to either side of the ego's heading line that count as its lane (half a 4 m lane)."""
-UNKNOWN = {"actor": "unknown", "actor_manoeuvre": "unknown", "ego_manoeuvre": "unknown"}
+
+
+@dataclass(frozen=True)
+class Behaviour:
+    """What happened in a failure: the kind of the other ``actor`` involved (``"car"``, ``"truck"``,
+    ``"pedestrian"``, ...; ``"none"`` without one), what it was doing (``actor_manoeuvre``, one of
+    :data:`ACTOR_MANOEUVRES`) and what the ego was doing (``ego_manoeuvre``, one of :data:`EGO_MANOEUVRES`); each is
+    ``"unknown"`` where the record or trace cannot tell it."""
+
+    actor: str
+    actor_manoeuvre: str
+    ego_manoeuvre: str
+
+    def to_dict(self) -> Dict[str, str]:
+        """The JSON object of the behaviour, as episode records and reports hold it."""
+        return {"actor": self.actor, "actor_manoeuvre": self.actor_manoeuvre, "ego_manoeuvre": self.ego_manoeuvre}
+
+
+UNKNOWN = Behaviour(actor="unknown", actor_manoeuvre="unknown", ego_manoeuvre="unknown")
 """The behaviour of a failure whose record and trace cannot tell it."""
 
 
@@ -128,51 +150,52 @@ def actor_ahead(states: Mapping[str, List[float]], distance: float = WAITING_DIS
     return best[1] if best else None
 
 
-def involved_actor(trace: Any, failure: Optional[Mapping[str, Any]]) -> Optional[str]:
-    """The other actor ``failure`` involves in ``trace``: the one it names (``with``), else for a stall the actor
+def involved_actor(trace: Any, failure: Optional[Failure]) -> Optional[str]:
+    """The other actor ``failure`` involves in ``trace``: the one it names (``with_``), else for a stall the actor
     the ego stood behind at the stall's start (:func:`actor_ahead`); ``None`` when there is none."""
-    if not failure:
+    if failure is None:
         return None
     states = list(getattr(trace, "states", None) or [])
-    other = failure.get("with")
+    other = failure.with_
     if other and other != "ego":
         return str(other)
-    if failure.get("type") != "stall" or not states:
+    if failure.type != "stall" or not states:
         return None
-    step = failure.get("step")
+    step = failure.step
     step = len(states) - 1 if not isinstance(step, int) else max(0, min(len(states) - 1, step))
     return actor_ahead(states[step])
 
 
-def extract_behaviour(trace: Any, failure: Optional[Mapping[str, Any]]) -> Optional[Dict[str, str]]:
-    """The behaviour dict (module docstring) of ``failure`` (a ``Failure.to_json()`` dict) in ``trace``;
-    ``None`` without a failure."""
-    if not failure:
+def extract_behaviour(trace: Any, failure: Optional[Failure]) -> Optional[Behaviour]:
+    """The behaviour (module docstring) of ``failure`` in ``trace``; ``None`` without a failure."""
+    if failure is None:
         return None
     states = list(getattr(trace, "states", None) or [])
     if not states:
-        return dict(UNKNOWN)
+        return UNKNOWN
     frequency = float((getattr(trace, "config", None) or {}).get("policy_frequency", 5))
     steps = max(1, int(round(WINDOW_SECONDS * frequency)))
-    step = failure.get("step")
+    step = failure.step
     step = len(states) - 1 if not isinstance(step, int) else max(0, min(len(states) - 1, step))
     ego_path = _window(states, "ego", step, steps)
     other = involved_actor(trace, failure)
     if other:
         kinds = getattr(trace, "kinds", None) or {}
-        named = other == failure.get("with")
-        actor = str((failure.get("with_kind") if named else None) or kinds.get(other) or "car")
+        named = other == failure.with_
+        actor = str((failure.with_kind if named else None) or kinds.get(other) or "car")
         manoeuvre = _actor_manoeuvre(_window(states, other, step, steps), ego_path)
     else:
         actor, manoeuvre = "none", "none"
-    return {"actor": actor, "actor_manoeuvre": manoeuvre, "ego_manoeuvre": _ego_manoeuvre(ego_path)}
+    return Behaviour(actor=actor, actor_manoeuvre=manoeuvre, ego_manoeuvre=_ego_manoeuvre(ego_path))
 
 
-def behaviour_of(record: Mapping[str, Any]) -> Dict[str, str]:
+def behaviour_of(record: EpisodeRecord) -> Behaviour:
     """The behaviour of a failed episode record (:data:`UNKNOWN` parts where it has none)."""
-    found = record.get("behaviour")
+    found = record.behaviour
     if not isinstance(found, Mapping):
-        return dict(UNKNOWN)
-    return {key: str(found.get(key) or UNKNOWN[key]) for key in UNKNOWN}
+        return UNKNOWN
+    return Behaviour(actor=str(found.get("actor") or UNKNOWN.actor),
+                     actor_manoeuvre=str(found.get("actor_manoeuvre") or UNKNOWN.actor_manoeuvre),
+                     ego_manoeuvre=str(found.get("ego_manoeuvre") or UNKNOWN.ego_manoeuvre))
 
 

@@ -21,10 +21,11 @@ been, which is not what the reports count.
 from __future__ import annotations
 
 from collections import defaultdict
-from typing import Any, Dict, Iterable, List, Sequence
+from typing import Dict, Iterable, List, Sequence
 
 from dv2s_gym.mining.behaviour import behaviour_of
 from dv2s_gym.mining.family import record_family
+from scenario_bank.records import EpisodeRecord
 
 __all__ = ["REGION_BINS", "region_of", "cluster_id", "cell_id", "cluster_failures", "group", "slug", "pair_of"]
 
@@ -37,33 +38,33 @@ def region_of(point: Sequence[float], bins: int = REGION_BINS) -> str:
     return "r" + ".".join(cells)
 
 
-def cluster_id(record: Dict[str, Any]) -> str:
+def cluster_id(record: EpisodeRecord) -> str:
     """The behaviour cluster of a failed episode record (module docstring)."""
     behaviour = behaviour_of(record)
-    return (f"{record_family(record)}/{record['failure']['kind']}/{behaviour['actor']}-{behaviour['actor_manoeuvre']}"
-            f"/ego-{behaviour['ego_manoeuvre']}")
+    return (f"{record_family(record)}/{record.failure['kind']}/{behaviour.actor}-{behaviour.actor_manoeuvre}"
+            f"/ego-{behaviour.ego_manoeuvre}")
 
 
-def cell_id(record: Dict[str, Any], bins: int = REGION_BINS) -> str:
+def cell_id(record: EpisodeRecord, bins: int = REGION_BINS) -> str:
     """``"<scenario>/<failure class>/<grid cell>"`` of a failed record: where in parameter space it failed."""
-    return f"{record['scenario']}/{record['failure']['kind']}/{region_of(record.get('point') or [], bins)}"
+    return f"{record.scenario}/{record.failure['kind']}/{region_of(record.point or [], bins)}"
 
 
-def pair_of(record: Dict[str, Any]) -> str:
+def pair_of(record: EpisodeRecord) -> str:
     """``"<family>/<failure class>"`` of a failed record."""
-    return f"{record_family(record)}/{record['failure']['kind']}"
+    return f"{record_family(record)}/{record.failure['kind']}"
 
 
-def cluster_failures(records: Iterable[Dict[str, Any]]) -> Dict[int, str]:
+def cluster_failures(records: Iterable[EpisodeRecord]) -> Dict[int, str]:
     """``{episode index: cluster id}`` for every failed episode record."""
-    return {int(r["index"]): cluster_id(r) for r in records if r.get("failure") and not r.get("error")}
+    return {int(r.index): cluster_id(r) for r in records if r.failed}
 
 
-def group(records: Iterable[Dict[str, Any]]) -> Dict[str, List[Dict[str, Any]]]:
+def group(records: Iterable[EpisodeRecord]) -> Dict[str, List[EpisodeRecord]]:
     """Failed records by cluster id (each list in index order)."""
-    groups: Dict[str, List[Dict[str, Any]]] = defaultdict(list)
-    for record in sorted(records, key=lambda r: int(r["index"])):
-        if record.get("failure") and not record.get("error"):
+    groups: Dict[str, List[EpisodeRecord]] = defaultdict(list)
+    for record in sorted(records, key=lambda r: int(r.index)):
+        if record.failed:
             groups[cluster_id(record)].append(record)
     return dict(groups)
 

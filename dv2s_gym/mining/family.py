@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import os
 from functools import lru_cache
+from typing import Optional, Tuple
+
 from scenario_bank.bank import Bank
-from typing import Any, Mapping, Optional, Tuple
+from scenario_bank.records import EpisodeRecord
 
 __all__ = ["scenario_family", "record_family"]
 
@@ -53,6 +55,6 @@ def _family(name: str, bank_dir: Optional[str], stamp: Tuple[int, ...]) -> str:
     return current
 
 
-def record_family(record: Mapping[str, Any]) -> str:
+def record_family(record: EpisodeRecord) -> str:
     """An episode record's family: its ``family`` field, or its scenario for records written without one."""
-    return str(record.get("family") or record["scenario"])
+    return str(record.family or record.scenario)

@@ -93,7 +93,7 @@ from dv2s_gym.workers.settings import WorkerSettings
 from scenario_bank import select_scenarios
 from scenario_bank.atomic import atomic_write_json
 from scenario_bank.bank import Bank
-from scenario_bank.records import RecordError
+from scenario_bank.records import EpisodeRecord, RecordError
 from scenario_bank.run_identity import check_identity
 from policies.evaluation import EVAL_SEED_BASE
 from policies.registry import SB3_ALGORITHMS, read_model_card
@@ -339,7 +339,7 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
             counted += record.get("avoidable") is not False  # as MineRun.avoidable
     clusters = None
     try:
-        clusters = len(set(cluster_failures(records).values()))
+        clusters = len(set(cluster_failures([EpisodeRecord.from_dict(r) for r in records]).values()))
     except Exception:  # the count is informative; the loop goes on without it
         pass
     statuses: Dict[str, int] = {}
@@ -352,7 +352,7 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
     tried = {str(r.get("cluster")) for r in read_rows(mine_out / "conversions.jsonl")}
     reference_failed = None
     try:  # clusters no conversion tried whose every failing scene the reference driver failed too: never replayed
-        reference_failed = sum(1 for cluster, members in group(records).items()
+        reference_failed = sum(1 for cluster, members in group([EpisodeRecord.from_dict(r) for r in records]).items()
                                if cluster not in tried and not any(reference_passed(r) for r in members))
     except Exception:  # informative, as the cluster count
         pass
@@ -585,7 +585,8 @@ def _split_step(loop: _Loop, number: int, current: str, timed: "_Timed") -> None
     _, tuned_families = _earlier_sides(_lineage(loop, earlier, current))
     kept = timed.steps.mine["kept"]
     split = timed("split", lambda: split_by_family(_with_parents(kept, loop.bank), loop.settings.holdout_fraction,
-                                                   loop.settings.seed * 1000 + number, held_families, tuned_families),
+                                                   loop.settings.seed * 1000 + number, held_families,
+                                                   tuned_families).to_dict(),
                   f"{len(kept)} kept mined scenario(s) into fine-tuning and held-out families")
     families = set(split.get("fine_tune_families", []))  # every kept family, when none is held out
     if kept and not split["held_out"] and families and families <= set(tuned_families) - set(held_families):

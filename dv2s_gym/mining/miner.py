@@ -429,7 +429,7 @@ def _run_window(window: WindowSchedule, pool, space, settings: Dict[str, Any], o
 _REPEAT = 9.0  # what a repeated failure is fed under "novelty": the robustness of a scene without a near miss
 
 
-def _feedback(record: Dict[str, Any], seen: set, mode: str) -> float:
+def _feedback(record: EpisodeRecord, seen: set, mode: str) -> float:
     """The value fed to the sampler for ``record``; ``seen`` holds the parameter cells (:func:`cell_id`) of the
     failures fed before it (in index order) and is updated."""
     rho = record.get("rho")

@@ -30,32 +30,75 @@ records none: its weight is 1, as for ``random`` and ``halton``).
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from statistics import NormalDist
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence
 
 from dv2s_gym.mining.samplers import is_uniform
 from dv2s_gym.regress.stats import wilson_interval
+from scenario_bank.records import EpisodeRecord
 
-__all__ = ["failure_rate", "weighted_rate", "rate_estimates", "COLLAPSE_FLOOR"]
+__all__ = ["RateEstimate", "FailureRate", "failure_rate", "weighted_rate", "rate_estimates", "COLLAPSE_FLOOR"]
 
 COLLAPSE_FLOOR = 0.01
 """A draw whose proposal gave some scenario or parameter bucket under this share of its uniform share marks the
 estimate ``collapsed``."""
 
 
+@dataclass(frozen=True)
+class RateEstimate:
+    """An importance-sampling estimate of a failure rate (:func:`weighted_rate`; ``Estimate`` in the mining report):
+    ``value`` (capped at 1; ``None`` without outcomes), ``raw`` (the estimate itself, which a few heavy weights can
+    push past 1), its 95 % interval ``low``..``high``, the effective sample size ``ess``, the ``n`` outcomes and
+    the ``failures`` among them."""
 
-def weighted_rate(outcomes: Sequence[float], weights: Sequence[float], confidence: float = 0.95) -> Dict[str, Any]:
-    """Plain importance-sampling estimate ``mean(w * y)`` of a rate from 0/1 ``outcomes`` and their ``weights``.
+    value: Optional[float]
+    raw: Optional[float]
+    low: Optional[float]
+    high: Optional[float]
+    ess: float
+    n: int
+    failures: int
 
-    Returns ``{"value", "raw", "low", "high", "ess", "n", "failures"}`` (``value`` ``None`` without outcomes;
-    ``raw`` is the estimate itself, which a few heavy weights can push past 1, ``value`` it capped at 1).
+    def to_dict(self) -> Dict[str, Any]:
+        """The estimate's JSON object, as the mining report holds it."""
+        return {"value": self.value, "raw": self.raw, "low": self.low, "high": self.high, "ess": self.ess,
+                "n": self.n, "failures": self.failures}
+
+
+@dataclass(frozen=True)
+class FailureRate:
+    """The failure rate of a run under its scenarios' own distributions (:func:`failure_rate`): whether it is
+    ``available`` and, when not, the ``reason``; whether the sampler ``collapsed``; the ``overall`` estimate (each
+    scenario equally likely), each scenario's (``scenarios``), and per scenario the episodes drawn that ended in an
+    error (``errored``)."""
+
+    available: bool
+    reason: Optional[str] = None
+    collapsed: bool = False
+    overall: Optional[RateEstimate] = None
+    scenarios: Mapping[str, RateEstimate] = field(default_factory=dict)
+    errored: Mapping[str, int] = field(default_factory=dict)
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The rate's JSON object, as the mining report holds it (``failure_rate``)."""
+        return {"available": self.available, "reason": self.reason, "collapsed": self.collapsed,
+                "overall": self.overall.to_dict() if self.overall is not None else None,
+                "scenarios": {name: estimate.to_dict() for name, estimate in self.scenarios.items()},
+                "errored": dict(self.errored)}
+
+
+def weighted_rate(outcomes: Sequence[float], weights: Sequence[float], confidence: float = 0.95) -> RateEstimate:
+    """Plain importance-sampling estimate ``mean(w * y)`` of a rate from 0/1 ``outcomes`` and their ``weights``
+    (:class:`RateEstimate`: ``value`` ``None`` without outcomes; ``raw`` is the estimate itself, which a few heavy
+    weights can push past 1, ``value`` it capped at 1).
     """
     if len(outcomes) != len(weights):
         raise ValueError(f"{len(outcomes)} outcomes but {len(weights)} weights; give one weight per outcome")
     n = len(outcomes)
     failures = int(sum(1 for y in outcomes if y))
     if n == 0:
-        return {"value": None, "raw": None, "low": None, "high": None, "ess": 0.0, "n": 0, "failures": 0}
+        return RateEstimate(value=None, raw=None, low=None, high=None, ess=0.0, n=0, failures=0)
     terms = [float(w) * (1.0 if y else 0.0) for w, y in zip(weights, outcomes)]
     value = sum(terms) / n
     variance = sum((t - value) ** 2 for t in terms) / n / n  # of the estimate
@@ -66,14 +109,14 @@ def weighted_rate(outcomes: Sequence[float], weights: Sequence[float], confidenc
         # heavy weights pushed the estimate to 1 or past it: p (1 - p) says nothing there, so the interval is the
         # normal one of the estimate itself (cut at 1) and the effective sample size Kish's
         z = NormalDist().inv_cdf(0.5 + confidence / 2)
-        return {"value": shown, "raw": value, "low": max(0.0, value - z * math.sqrt(variance)), "high": 1.0,
-                "ess": kish, "n": n, "failures": failures}
+        return RateEstimate(value=shown, raw=value, low=max(0.0, value - z * math.sqrt(variance)), high=1.0,
+                            ess=kish, n=n, failures=failures)
     ess = shown * (1.0 - shown) / variance if failures and variance > 0.0 else kish
     # never more than Kish's effective sample size of the weights (itself at most the n episodes): a rare
     # failure with a small weight makes the variance tiny and p (1 - p) / variance far larger than n
     ess = min(ess, kish, float(n))
     low, high = _wilson(shown, ess, confidence)
-    return {"value": shown, "raw": value, "low": low, "high": high, "ess": ess, "n": n, "failures": failures}
+    return RateEstimate(value=shown, raw=value, low=low, high=high, ess=ess, n=n, failures=failures)
 
 
 def _wilson(p: float, n: float, confidence: float) -> tuple:
@@ -91,17 +134,17 @@ def _wilson(p: float, n: float, confidence: float) -> tuple:
     return max(0.0, centre - half), min(1.0, centre + half)
 
 
-def _proposal(record: Mapping[str, Any], sampler: str) -> Optional[Mapping[str, float]]:
-    proposal = record.get("proposal")
+def _proposal(record: EpisodeRecord, sampler: str) -> Optional[Mapping[str, float]]:
+    proposal = record.proposal
     if isinstance(proposal, Mapping) and proposal.get("scenario") and proposal.get("params"):
         return proposal
-    if is_uniform(str(record.get("sampler") or sampler)):  # a uniform plug-in sampler records none: weight 1
+    if is_uniform(str(record.sampler or sampler)):  # a uniform plug-in sampler records none: weight 1
         return {"scenario": None, "params": 1.0, "floor": 1.0}
     return None
 
 
-def failure_rate(records: Iterable[Mapping[str, Any]], *, scenarios: Optional[Sequence[str]] = None,
-                 sampler: str = "", confidence: float = 0.95) -> Dict[str, Any]:
+def failure_rate(records: Iterable[EpisodeRecord], *, scenarios: Optional[Sequence[str]] = None,
+                 sampler: str = "", confidence: float = 0.95) -> FailureRate:
     """The failure rate of the run's policy under its scenarios' own distributions (module docstring).
 
     Args:
@@ -109,42 +152,41 @@ def failure_rate(records: Iterable[Mapping[str, Any]], *, scenarios: Optional[Se
         scenarios: the mined scenarios (the overall rate weighs each equally; default: those in ``records``).
         sampler: the run's sampler (for records that do not name theirs).
 
-    Returns ``{"available": bool, "reason": why not | None, "collapsed": bool, "overall": estimate, "scenarios":
-    {name: estimate}, "errored": {name: episodes drawn that ended in an error}}`` with each estimate as
-    :func:`weighted_rate` returns it.
+    Returns the :class:`FailureRate` (its :meth:`~FailureRate.to_dict`: ``{"available", "reason", "collapsed",
+    "overall", "scenarios", "errored"}``) with each estimate as :func:`weighted_rate` returns it.
     """
     records = list(records)
     errored: Dict[str, int] = {}
     for record in records:
-        if record.get("error"):
-            errored[str(record["scenario"])] = errored.get(str(record["scenario"]), 0) + 1
-    records = [r for r in records if not r.get("error")]
-    names = list(scenarios) if scenarios else sorted({str(r["scenario"]) for r in records})
+        if record.error:
+            errored[str(record.scenario)] = errored.get(str(record.scenario), 0) + 1
+    records = [r for r in records if not r.error]
+    names = list(scenarios) if scenarios else sorted({str(r.scenario) for r in records})
     missing = [r for r in records if _proposal(r, sampler) is None]
     if missing:
-        return {"available": False, "reason": f"{len(missing)} of {len(records)} episodes have no proposal density "
-                "(the sampler draws without one, e.g. bandit or split with cell avoidance)",
-                "collapsed": False, "overall": None, "scenarios": {}, "errored": errored}
-    by_scenario: Dict[str, List[Mapping[str, Any]]] = {name: [] for name in names}
+        return FailureRate(available=False, reason=f"{len(missing)} of {len(records)} episodes have no proposal "
+                           "density (the sampler draws without one, e.g. bandit or split with cell avoidance)",
+                           collapsed=False, overall=None, scenarios={}, errored=errored)
+    by_scenario: Dict[str, List[EpisodeRecord]] = {name: [] for name in names}
     for record in records:
-        by_scenario.setdefault(str(record["scenario"]), []).append(record)
+        by_scenario.setdefault(str(record.scenario), []).append(record)
     estimates = {}
     for name, members in by_scenario.items():
         weights = [1.0 / float(_proposal(r, sampler)["params"]) for r in members]
-        estimates[name] = weighted_rate([1.0 if r.get("failure") else 0.0 for r in members], weights, confidence)
+        estimates[name] = weighted_rate([1.0 if r.failure else 0.0 for r in members], weights, confidence)
     count = len(by_scenario)
     overall_weights, outcomes = [], []
     for record in records:
         proposal = _proposal(record, sampler)
         chance = proposal["scenario"] if proposal["scenario"] else 1.0 / count
         overall_weights.append((1.0 / count) / (float(chance) * float(proposal["params"])))
-        outcomes.append(1.0 if record.get("failure") else 0.0)
+        outcomes.append(1.0 if record.failure else 0.0)
     collapsed = any(float(_proposal(r, sampler).get("floor", 1.0)) < COLLAPSE_FLOOR for r in records)
-    return {"available": True, "reason": None, "collapsed": collapsed,
-            "overall": weighted_rate(outcomes, overall_weights, confidence),
-            "scenarios": estimates, "errored": errored}
+    return FailureRate(available=True, reason=None, collapsed=collapsed,
+                       overall=weighted_rate(outcomes, overall_weights, confidence),
+                       scenarios=estimates, errored=errored)
 
 
-def rate_estimates(settings: Mapping[str, Any], records: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
+def rate_estimates(settings: Mapping[str, Any], records: Sequence[EpisodeRecord]) -> FailureRate:
     """:func:`failure_rate` of a run from its ``settings.json`` and records."""
     return failure_rate(records, scenarios=settings.get("scenarios") or None, sampler=str(settings.get("sampler") or ""))

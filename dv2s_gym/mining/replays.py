@@ -26,6 +26,7 @@ from dv2s_gym.mining.jsonl import JsonlAppender, read_rows
 from dv2s_gym.mining.miner import progress_bar, read_records
 from dv2s_gym.mining.settings import read_run_settings, SETTINGS_FILE
 from scenario_bank.bank import Bank
+from scenario_bank.records import EpisodeRecord
 
 __all__ = ["REPLAYS_FILE", "replay_clusters", "replay_order", "replay_entries", "reference_passed"]
 
@@ -77,7 +78,7 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
     return existing
 
 
-def replay_order(groups: Mapping[str, Sequence[Mapping[str, Any]]]) -> List[Tuple[str, Dict[str, Any]]]:
+def replay_order(groups: Mapping[str, Sequence[EpisodeRecord]]) -> List[Tuple[str, EpisodeRecord]]:
     """``[(cluster, representative failure)]``: the order in which the clusters of ``groups`` (failed records by
     cluster, :func:`dv2s_gym.mining.cluster.group`) get their exact replay, round-robin over the scenario
     families, so that a round's few replays spread over its families instead of all coming from the family with
@@ -87,20 +88,20 @@ def replay_order(groups: Mapping[str, Sequence[Mapping[str, Any]]]) -> List[Tupl
     clusters without one get none. The representative is the
     failure a conversion would take (lowest robustness, then lowest index). Deterministic: a function of
     ``groups`` only."""
-    by_family: Dict[str, List[Tuple[int, str, Dict[str, Any]]]] = {}
+    by_family: Dict[str, List[Tuple[int, str, EpisodeRecord]]] = {}
     for cluster, members in groups.items():
         avoidable = [r for r in members if reference_passed(r)]
         if not avoidable:
             continue
-        representative = min(avoidable, key=lambda r: (float(r.get("rho") or 0.0), int(r["index"])))
+        representative = min(avoidable, key=lambda r: (float(r.rho or 0.0), int(r.index)))
         family = record_family(representative)
-        by_family.setdefault(family, []).append((len(avoidable), str(cluster), dict(representative)))
+        by_family.setdefault(family, []).append((len(avoidable), str(cluster), representative))
     queues = []
     for family, clusters in by_family.items():
         clusters.sort(key=lambda c: (-c[0], c[1]))
         queues.append((-clusters[0][0], family, clusters))
     queues.sort(key=lambda q: (q[0], q[1]))
-    order: List[Tuple[str, Dict[str, Any]]] = []
+    order: List[Tuple[str, EpisodeRecord]] = []
     for turn in range(max((len(q[2]) for q in queues), default=0)):
         order += [(q[2][turn][1], q[2][turn][2]) for q in queues if turn < len(q[2])]
     return order

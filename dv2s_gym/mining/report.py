@@ -1,9 +1,10 @@
 """The mining report: what a ``dv2s mine`` run found, read back from its run folder.
 
-:func:`build_report` reads a run folder (``settings.json``, ``episodes.jsonl``,
-``conversions.jsonl``; record formats in the mining contract), groups the failures into
-clusters with :func:`dv2s_gym.mining.cluster.cluster_failures` and returns a JSON-safe
-dict; :func:`write_reports` writes it as ``report.json`` (atomic), ``report.md`` and the
+:func:`build_report` reads a run folder (``settings.json``, ``episodes.jsonl`` as
+:class:`~scenario_bank.records.EpisodeRecord`, ``conversions.jsonl``; record formats in the mining contract), groups
+the failures into clusters with :func:`dv2s_gym.mining.cluster.cluster_failures` and returns a JSON-safe
+dict (in process each failure is a :class:`FailureEntry` and each cluster a :class:`ClusterEntry`, whose
+``to_dict`` is the JSON below); :func:`write_reports` writes it as ``report.json`` (atomic), ``report.md`` and the
 self-contained ``report.html`` (:mod:`dv2s_gym.mining.html`). Nothing here imports Scenic
 or highway-env, so a report is rebuilt in well under a second from any run folder, also
 from one whose run was killed (a truncated last line of a ``.jsonl`` file is left out).
@@ -91,14 +92,16 @@ import math
 import os
 import statistics
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
-from dv2s_gym.mining.behaviour import behaviour_of
+from dv2s_gym.mining.behaviour import Behaviour, behaviour_of
 from dv2s_gym.mining.cluster import cluster_failures
 from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.family import record_family
 from dv2s_gym.mining.html import write_html
-from dv2s_gym.mining.rate import rate_estimates
+from dv2s_gym.mining.rate import FailureRate, rate_estimates
 from dv2s_gym.mining.report_text import (NOT_COMPARED_REASONS, breadth, by_type_text, error_warning,
                                          not_compared_counts, parameter_check_text, rate_text, seed_text)
 from dv2s_gym.mining.report_text import number_text as _num
@@ -108,9 +111,11 @@ from dv2s_gym.regress.identity import installed_version
 from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.failure_types import FAILURE_TYPES, severity_order
+from scenario_bank.records import EpisodeRecord, RecordError
 
 __all__ = [
-    "SCHEMA", "SCHEMA_VERSION", "FAILURE_ORDER", "MiningReportError", "read_jsonl", "read_run",
+    "SCHEMA", "SCHEMA_VERSION", "FAILURE_ORDER", "MiningReportError", "FailureEntry", "ClusterEntry", "read_jsonl",
+    "read_run",
     "build_report", "build_report_from_records", "format_summary", "markdown", "write_reports", "breadth", "rate_text",
 ]
 
@@ -165,9 +170,9 @@ def read_jsonl(path: PathLike) -> Tuple[List[Dict[str, Any]], int]:
     return records, skipped
 
 
-def read_run(run_dir: PathLike) -> Tuple[RunSettings, List[Dict[str, Any]], List[Dict[str, Any]], Dict[str, int]]:
+def read_run(run_dir: PathLike) -> Tuple[RunSettings, List[EpisodeRecord], List[Dict[str, Any]], Dict[str, int]]:
     """``(settings, episodes, conversions, skipped_lines)`` of a run folder (``settings``: its ``settings.json``,
-    :func:`~dv2s_gym.mining.settings.read_run_settings`).
+    :func:`~dv2s_gym.mining.settings.read_run_settings`; ``episodes``: its episode records).
 
     Episodes are sorted by index, one per index (the first record of an index wins);
     conversions keep the last record of each cluster id.
@@ -181,14 +186,19 @@ def read_run(run_dir: PathLike) -> Tuple[RunSettings, List[Dict[str, Any]], List
                                 "--out folder of a mining run")
     episodes, skipped_episodes = read_jsonl(run_dir / "episodes.jsonl")
     conversions, skipped_conversions = read_jsonl(run_dir / "conversions.jsonl")
-    by_index: Dict[int, Dict[str, Any]] = {}
-    for number, record in enumerate(episodes, 1):
+    by_index: Dict[int, EpisodeRecord] = {}
+    for number, row in enumerate(episodes, 1):
         try:
-            index = int(record["index"])
+            index = int(row["index"])
         except (KeyError, TypeError, ValueError):
             raise MiningReportError(f"{run_dir / 'episodes.jsonl'}: record {number} has no integer 'index'; "
                                     "remove it and rebuild the report") from None
-        by_index.setdefault(index, record)
+        if index not in by_index:
+            try:
+                by_index[index] = EpisodeRecord.from_dict(row)
+            except RecordError as error:
+                raise MiningReportError(f"{run_dir / 'episodes.jsonl'}: record {number}: {error}; remove it and "
+                                        "rebuild the report") from None
     latest: Dict[str, Dict[str, Any]] = {}
     for record in conversions:
         latest[str(record.get("cluster"))] = record
@@ -225,8 +235,8 @@ def _rate(count: int, n: int) -> Dict[str, Any]:
     return {"value": count / n, "low": low, "high": high, "count": count}
 
 
-def _by_type(failures: Sequence[Mapping[str, Any]]) -> Dict[str, int]:
-    counts = Counter(str(f["type"]) for f in failures)
+def _by_type(failures: Sequence["FailureEntry"]) -> Dict[str, int]:
+    counts = Counter(str(f.type) for f in failures)
     return {t: counts[t] for t in severity_order(counts)}
 
 
@@ -240,11 +250,11 @@ def _stage(reason: Any) -> str:
     return "unknown"
 
 
-def _param_region(members: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
+def _param_region(members: Sequence["FailureEntry"]) -> Dict[str, Any]:
     """Per parameter: ``{"min", "max"}`` over the members' numeric values, else ``{"values"}``."""
     values: Dict[str, List[Any]] = {}
     for member in members:
-        for name, value in (member.get("params") or {}).items():
+        for name, value in member.params.items():
             values.setdefault(str(name), []).append(value)
     region: Dict[str, Any] = {}
     for name in sorted(values):
@@ -257,49 +267,147 @@ def _param_region(members: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
     return region
 
 
-def _failure_entry(record: Mapping[str, Any], cluster: Optional[str], settings: Mapping[str, Any]) -> Dict[str, Any]:
-    failure = record.get("failure") or {}
-    return {
-        "index": int(record["index"]),
-        "sampler": str(record.get("sampler") or settings.get("sampler") or "unknown"),
-        "scenario": record.get("scenario"),
-        "family": str(record.get("family") or record.get("scenario")),
-        "seed": record.get("seed"),
-        "params": dict(record.get("params") or {}),
-        "type": str(failure.get("type")),
-        "kind": str(failure.get("kind") or failure.get("type")),
-        "time": failure.get("time"),
-        "with": failure.get("with"),
-        "with_kind": failure.get("with_kind"),
-        "collision_type": failure.get("collision_type"),
-        "min_ttc": failure.get("min_ttc"),
-        "rho": record.get("rho"),
-        "avoidable": record.get("avoidable"),
-        "reference": record.get("reference"),
-        "cluster": cluster,
-        "behaviour": behaviour_of(record),
-        "trace": record.get("trace"),
-    }
+@dataclass(frozen=True)
+class FailureEntry:
+    """One failed episode as the report lists it (``Failure`` in the module docstring); :meth:`to_dict` is its JSON.
+
+    The episode's ``index``, the ``sampler`` that drew it, its ``scenario``, scenario ``family``
+    (:func:`~dv2s_gym.mining.family.record_family`), env ``seed`` and sampled ``params``; the failure's ``type``, its
+    ``kind`` (the type refined by the collision type), ``time``, the actor it was with (``with_actor``, JSON
+    ``with``) and that actor's kind (``with_kind``), the ``collision_type`` and the failure's ``min_ttc``; the
+    episode's robustness ``rho``, whether the reference driver avoided it (``avoidable``; ``None``: unknown) and the
+    reference driver's outcome (``reference``), the ``cluster`` id, the failure's ``behaviour`` and the saved
+    ``trace`` (relative to the run folder).
+    """
+
+    index: int
+    sampler: str
+    scenario: str
+    family: str
+    seed: int
+    params: Mapping[str, Any]
+    type: str
+    kind: str
+    time: Optional[float]
+    with_actor: Optional[str]
+    with_kind: Optional[str]
+    collision_type: Optional[str]
+    min_ttc: Optional[float]
+    rho: Optional[float]
+    avoidable: Optional[bool]
+    reference: Optional[Mapping[str, Any]]
+    cluster: Optional[str]
+    behaviour: Behaviour
+    trace: Optional[str]
+
+    @classmethod
+    def of(cls, record: EpisodeRecord, cluster: Optional[str], default_sampler: str) -> "FailureEntry":
+        """The entry of the failed episode ``record`` in ``cluster`` (``default_sampler``: the run's sampler, for a
+        record that does not name its own)."""
+        failure = record.failure or {}
+        return cls(index=int(record.index), sampler=str(record.sampler or default_sampler), scenario=record.scenario,
+                   family=record_family(record), seed=record.seed, params=dict(record.params or {}),
+                   type=str(failure.get("type")), kind=str(failure.get("kind") or failure.get("type")),
+                   time=failure.get("time"), with_actor=failure.get("with"), with_kind=failure.get("with_kind"),
+                   collision_type=failure.get("collision_type"), min_ttc=failure.get("min_ttc"), rho=record.rho,
+                   avoidable=record.avoidable, reference=record.reference, cluster=cluster,
+                   behaviour=behaviour_of(record), trace=record.trace)
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The entry's JSON object, as ``report.json`` holds it."""
+        return {"index": self.index, "sampler": self.sampler, "scenario": self.scenario, "family": self.family,
+                "seed": self.seed, "params": dict(self.params), "type": self.type, "kind": self.kind,
+                "time": self.time, "with": self.with_actor, "with_kind": self.with_kind,
+                "collision_type": self.collision_type, "min_ttc": self.min_ttc, "rho": self.rho,
+                "avoidable": self.avoidable, "reference": self.reference, "cluster": self.cluster,
+                "behaviour": self.behaviour.to_dict(), "trace": self.trace}
 
 
-def _representative(members: Sequence[Dict[str, Any]], conversion: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
+@dataclass(frozen=True)
+class ClusterEntry:
+    """One behaviour cluster as the report lists it (``Cluster`` in the module docstring); :meth:`to_dict` is its
+    JSON.
+
+    Its ``id`` and, from it, ``kind`` (the failure class) and ``region`` (the id after family and class); its
+    ``representative`` failure (:class:`FailureEntry`) and that one's ``scenario``, ``family``, ``type`` and
+    ``behaviour``; every scenario its failures ran in (``scenarios``); the members' counts (``size``, ``avoidable``,
+    ``unavoidable``, ``unknown``, per sampler in ``samplers``), the first member's index (``first_index``), the
+    parameter region they cover (``params``), their ``collision_types`` and the kinds of actor they were with
+    (``with_kinds``); and from the cluster's conversion record (``conversion``, ``None`` when it was not converted):
+    the failure ``video`` and the ``converted_video``, the ``status`` and its ``reason``, the ``bank_entry``, the
+    entry it was ``merged_into``, the exact ``replay_entry`` and the parameters it could not narrow
+    (``replay_not_narrowed``), the ``reproduction`` record and its ``reproduction_rate``, the ``e2e_sc``, the
+    ``description`` and the ``script``.
+    """
+
+    id: str
+    scenario: str
+    family: str
+    scenarios: Tuple[str, ...]
+    type: str
+    kind: str
+    region: str
+    behaviour: Behaviour
+    size: int
+    avoidable: int
+    unavoidable: int
+    unknown: int
+    samplers: Mapping[str, int]
+    first_index: int
+    params: Mapping[str, Any]
+    collision_types: Mapping[str, int]
+    with_kinds: Mapping[str, int]
+    representative: FailureEntry
+    video: Optional[str]
+    converted_video: Optional[str]
+    status: str
+    reason: Optional[str]
+    bank_entry: Optional[str]
+    merged_into: Optional[str]
+    replay_entry: Optional[str]
+    replay_not_narrowed: Mapping[str, Any]
+    reproduction: Optional[Any]
+    reproduction_rate: Optional[float]
+    e2e_sc: Optional[float]
+    description: Optional[str]
+    script: Optional[str]
+    conversion: Optional[Mapping[str, Any]]
+
+    def to_dict(self) -> Dict[str, Any]:
+        """The cluster's JSON object, as ``report.json`` holds it."""
+        return {
+            "id": self.id, "scenario": self.scenario, "family": self.family, "scenarios": list(self.scenarios),
+            "type": self.type, "kind": self.kind, "region": self.region, "behaviour": self.behaviour.to_dict(),
+            "size": self.size, "avoidable": self.avoidable, "unavoidable": self.unavoidable, "unknown": self.unknown,
+            "samplers": dict(self.samplers), "first_index": self.first_index, "params": dict(self.params),
+            "collision_types": dict(self.collision_types), "with_kinds": dict(self.with_kinds),
+            "representative": self.representative.to_dict(), "video": self.video,
+            "converted_video": self.converted_video, "status": self.status, "reason": self.reason,
+            "bank_entry": self.bank_entry, "merged_into": self.merged_into, "replay_entry": self.replay_entry,
+            "replay_not_narrowed": dict(self.replay_not_narrowed), "reproduction": self.reproduction,
+            "reproduction_rate": self.reproduction_rate, "e2e_sc": self.e2e_sc, "description": self.description,
+            "script": self.script, "conversion": dict(self.conversion) if self.conversion is not None else None,
+        }
+
+
+def _representative(members: Sequence[FailureEntry], conversion: Optional[Mapping[str, Any]]) -> FailureEntry:
     """The converted episode, else the one the miner would convert: among failures not known to be
     unavoidable (all, when every one is), the most violated (lowest rho), then the first."""
     if conversion is not None:
         for member in members:
-            if member["index"] == conversion.get("index"):
+            if member.index == conversion.get("index"):
                 return member
-    pool = [m for m in members if m.get("avoidable") is not False] or list(members)
+    pool = [m for m in members if m.avoidable is not False] or list(members)
 
-    def key(member: Mapping[str, Any]) -> Tuple[float, int]:
-        rho = member.get("rho")
+    def key(member: FailureEntry) -> Tuple[float, int]:
+        rho = member.rho
         rho = float(rho) if isinstance(rho, (int, float)) and math.isfinite(float(rho)) else 0.0
-        return rho, member["index"]
+        return rho, member.index
 
     return min(pool, key=key)
 
 
-def _cluster_of(records: Sequence[Dict[str, Any]]) -> Dict[int, str]:
+def _cluster_of(records: Sequence[EpisodeRecord]) -> Dict[int, str]:
     """Cluster id of every failed episode, from the mining core's clustering."""
     mapping = cluster_failures(list(records))
     return {int(index): str(cluster) for index, cluster in dict(mapping).items()}
@@ -313,7 +421,7 @@ def build_report(run_dir: PathLike, *, created: Optional[str] = None) -> Dict[st
     damaged records.
     """
     settings, episodes, conversions, skipped = read_run(run_dir)
-    failed = [r for r in episodes if r.get("failure") and not r.get("error")]
+    failed = [r for r in episodes if r.failed]
     clusters = _cluster_of(episodes) if failed else {}
     report = build_report_from_records(settings, episodes, conversions, clusters, created=created)
     report["run_dir"] = str(run_dir)
@@ -321,31 +429,30 @@ def build_report(run_dir: PathLike, *, created: Optional[str] = None) -> Dict[st
     return report
 
 
-def _episode_errors(episodes: Sequence[Mapping[str, Any]], default_sampler: str) -> List[Dict[str, Any]]:
+def _episode_errors(episodes: Sequence[EpisodeRecord], default_sampler: str) -> List[Dict[str, Any]]:
     """The episodes that errored: index, sampler, scenario, seed and the error."""
-    return [{"index": int(r["index"]), "sampler": str(r.get("sampler") or default_sampler),
-             "scenario": r.get("scenario"), "seed": r.get("seed"), "error": str(r["error"])}
-            for r in episodes if r.get("error")]
+    return [{"index": int(r.index), "sampler": str(r.sampler or default_sampler),
+             "scenario": r.scenario, "seed": r.seed, "error": str(r.error)}
+            for r in episodes if r.error]
 
 
-def _worker_restarts(episodes: Sequence[Mapping[str, Any]]) -> List[Dict[str, Any]]:
+def _worker_restarts(episodes: Sequence[EpisodeRecord]) -> List[Dict[str, Any]]:
     """The episodes a new worker finished (their worker crashed or hung), with what happened to it."""
-    return [{"index": int(r["index"]), "scenario": r.get("scenario"), "seed": r.get("seed"),
-             "problems": [str(p) for p in r["worker_restarts"]]} for r in episodes if r.get("worker_restarts")]
+    return [{"index": int(r.index), "scenario": r.scenario, "seed": r.seed,
+             "problems": [str(p) for p in r.worker_restarts]} for r in episodes if r.worker_restarts]
 
 
-def _failures(ok: Sequence[Mapping[str, Any]], clusters: Mapping[int, str],
-              settings: Mapping[str, Any]) -> List[Dict[str, Any]]:
+def _failures(ok: Sequence[EpisodeRecord], clusters: Mapping[int, str], default_sampler: str) -> List[FailureEntry]:
     """An entry for each failed episode of those that ran, with its cluster id.
 
     Raises :class:`MiningReportError` when a failed episode has no cluster id.
     """
-    failed = [r for r in ok if r.get("failure")]
-    missing = [int(r["index"]) for r in failed if int(r["index"]) not in clusters]
+    failed = [r for r in ok if r.failure]
+    missing = [int(r.index) for r in failed if int(r.index) not in clusters]
     if missing:
         raise MiningReportError(f"the clustering gave no cluster to failed episode(s) {missing[:10]}; "
                                 "this is a bug in dv2s_gym.mining.cluster.cluster_failures, please report it")
-    return [_failure_entry(r, clusters[int(r["index"])], settings) for r in failed]
+    return [FailureEntry.of(r, clusters[int(r.index)], default_sampler) for r in failed]
 
 
 def _conversions_by_cluster(conversions: Sequence[Mapping[str, Any]],
@@ -366,60 +473,43 @@ def _primary_conversion(found: Sequence[Mapping[str, Any]]) -> Optional[Mapping[
     return min(found, key=lambda c: status_rank.get(c.get("status"), len(STATUS_ORDER))) if found else None
 
 
-def _cluster_entry(cluster_id: str, members: Sequence[Dict[str, Any]],
-                   conversion: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
+def _cluster_entry(cluster_id: str, members: Sequence[FailureEntry],
+                   conversion: Optional[Mapping[str, Any]]) -> ClusterEntry:
     """A cluster's entry: its representative, its members' counts and parameter region, and its conversion."""
     representative = _representative(members, conversion)
     parts = cluster_id.split("/", 2)
-    behaviour = behaviour_of(representative)
-    reproduction = (conversion or {}).get("reproduction")
-    return {
-        "id": cluster_id,
-        "scenario": representative["scenario"],
-        "family": representative["family"],
-        "scenarios": sorted({str(m["scenario"]) for m in members}),
-        "type": representative["type"],
-        "kind": parts[1] if len(parts) == 3 else representative["kind"],
-        "region": parts[2] if len(parts) == 3 else cluster_id,
-        "behaviour": behaviour,
-        "size": len(members),
-        "avoidable": sum(m["avoidable"] is True for m in members),
-        "unavoidable": sum(m["avoidable"] is False for m in members),
-        "unknown": sum(m["avoidable"] is None for m in members),
-        "samplers": dict(sorted(Counter(m["sampler"] for m in members).items())),
-        "first_index": min(m["index"] for m in members),
-        "params": _param_region(members),
-        "collision_types": dict(sorted(Counter(str(m["collision_type"]) for m in members
-                                               if m["collision_type"]).items())),
-        "with_kinds": dict(sorted(Counter(str(m["with_kind"]) for m in members if m["with_kind"]).items())),
-        "representative": representative,
-        "video": (conversion or {}).get("video"),
-        "converted_video": (conversion or {}).get("converted_video"),
-        "status": (conversion or {}).get("status") or NOT_CONVERTED,
-        "reason": (conversion or {}).get("reason"),
-        "bank_entry": (conversion or {}).get("bank_entry"),
-        "merged_into": (conversion or {}).get("merged_into"),
-        "replay_entry": (conversion or {}).get("replay_entry"),
-        "replay_not_narrowed": dict((conversion or {}).get("replay_not_narrowed") or {}),
-        "reproduction": reproduction,
-        "reproduction_rate": (reproduction or {}).get("rate") if isinstance(reproduction, Mapping) else None,
-        "e2e_sc": (conversion or {}).get("e2e_sc"),
-        "description": (conversion or {}).get("description"),
-        "script": (conversion or {}).get("script"),
-        "conversion": dict(conversion) if conversion is not None else None,
-    }
+    found = conversion or {}
+    reproduction = found.get("reproduction")
+    return ClusterEntry(
+        id=cluster_id, scenario=representative.scenario, family=representative.family,
+        scenarios=tuple(sorted({str(m.scenario) for m in members})), type=representative.type,
+        kind=parts[1] if len(parts) == 3 else representative.kind, region=parts[2] if len(parts) == 3 else cluster_id,
+        behaviour=representative.behaviour, size=len(members),
+        avoidable=sum(m.avoidable is True for m in members), unavoidable=sum(m.avoidable is False for m in members),
+        unknown=sum(m.avoidable is None for m in members),
+        samplers=dict(sorted(Counter(m.sampler for m in members).items())),
+        first_index=min(m.index for m in members), params=_param_region(members),
+        collision_types=dict(sorted(Counter(str(m.collision_type) for m in members if m.collision_type).items())),
+        with_kinds=dict(sorted(Counter(str(m.with_kind) for m in members if m.with_kind).items())),
+        representative=representative, video=found.get("video"), converted_video=found.get("converted_video"),
+        status=found.get("status") or NOT_CONVERTED, reason=found.get("reason"), bank_entry=found.get("bank_entry"),
+        merged_into=found.get("merged_into"), replay_entry=found.get("replay_entry"),
+        replay_not_narrowed=dict(found.get("replay_not_narrowed") or {}), reproduction=reproduction,
+        reproduction_rate=(reproduction or {}).get("rate") if isinstance(reproduction, Mapping) else None,
+        e2e_sc=found.get("e2e_sc"), description=found.get("description"), script=found.get("script"),
+        conversion=dict(conversion) if conversion is not None else None)
 
 
-def _cluster_entries(failures: Sequence[Dict[str, Any]], conversions: Sequence[Mapping[str, Any]],
-                     clusters: Mapping[int, str]) -> List[Dict[str, Any]]:
+def _cluster_entries(failures: Sequence[FailureEntry], conversions: Sequence[Mapping[str, Any]],
+                     clusters: Mapping[int, str]) -> List[ClusterEntry]:
     """Every cluster's entry, the most avoidable failures first, then the largest, then the first found."""
     by_cluster_conversions = _conversions_by_cluster(conversions, clusters)
-    members_of: Dict[str, List[Dict[str, Any]]] = {}
+    members_of: Dict[str, List[FailureEntry]] = {}
     for failure in failures:
-        members_of.setdefault(failure["cluster"], []).append(failure)
+        members_of.setdefault(failure.cluster, []).append(failure)
     entries = [_cluster_entry(cluster_id, members, _primary_conversion(by_cluster_conversions.get(cluster_id) or []))
                for cluster_id, members in members_of.items()]
-    entries.sort(key=lambda c: (-c["avoidable"], -c["size"], c["first_index"]))
+    entries.sort(key=lambda c: (-c.avoidable, -c.size, c.first_index))
     return entries
 
 
@@ -432,9 +522,9 @@ def _rejected_conversions(conversions: Sequence[Mapping[str, Any]]) -> List[Dict
             for c in conversions if c.get("status") == "rejected"]
 
 
-def _failure_counts(ok: Sequence[Mapping[str, Any]], errors: Sequence[Mapping[str, Any]],
-                    restarts: Sequence[Mapping[str, Any]], failures: Sequence[Mapping[str, Any]],
-                    cluster_entries: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
+def _failure_counts(ok: Sequence[EpisodeRecord], errors: Sequence[Mapping[str, Any]],
+                    restarts: Sequence[Mapping[str, Any]], failures: Sequence[FailureEntry],
+                    cluster_entries: Sequence[ClusterEntry]) -> Dict[str, Any]:
     """The counts of episodes, failures and clusters."""
     return {
         "episodes": len(ok),
@@ -442,15 +532,15 @@ def _failure_counts(ok: Sequence[Mapping[str, Any]], errors: Sequence[Mapping[st
         "worker_restarts": len(restarts),
         "failures": len(failures),
         "failures_by_type": _by_type(failures),
-        "avoidable": sum(f["avoidable"] is True for f in failures),
-        "unavoidable": sum(f["avoidable"] is False for f in failures),
-        "avoidability_unknown": sum(f["avoidable"] is None for f in failures),
+        "avoidable": sum(f.avoidable is True for f in failures),
+        "unavoidable": sum(f.avoidable is False for f in failures),
+        "avoidability_unknown": sum(f.avoidable is None for f in failures),
         "clusters": len(cluster_entries),
         "behaviours": len(cluster_entries),
-        "scenario_failure_types": len({(f["family"], str(f["kind"])) for f in failures}),
-        "scenarios_failing": len({f["family"] for f in failures}),
-        "avoidable_clusters": sum(c["avoidable"] > 0 for c in cluster_entries),
-        "unavoidable_clusters": len({c["id"] for c in cluster_entries if c["unavoidable"] == c["size"]}),
+        "scenario_failure_types": len({(f.family, str(f.kind)) for f in failures}),
+        "scenarios_failing": len({f.family for f in failures}),
+        "avoidable_clusters": sum(c.avoidable > 0 for c in cluster_entries),
+        "unavoidable_clusters": len({c.id for c in cluster_entries if c.unavoidable == c.size}),
     }
 
 
@@ -487,27 +577,27 @@ def _conversion_counts(conversions: Sequence[Mapping[str, Any]],
     }
 
 
-def _sampler_entry(mine: Sequence[Mapping[str, Any]], found: Sequence[Mapping[str, Any]],
+def _sampler_entry(mine: Sequence[EpisodeRecord], found: Sequence[FailureEntry],
                    clusters: Mapping[int, str]) -> Dict[str, Any]:
     """One sampler's episodes (``mine``) and failures (``found``): rates per 100 episodes and its discovery curve
     (``[episode, distinct clusters so far]`` at each new cluster and at the last episode)."""
-    ran = [r for r in mine if not r.get("error")]
-    avoidable = [f for f in found if f["avoidable"] is True]
+    ran = [r for r in mine if not r.error]
+    avoidable = [f for f in found if f.avoidable is True]
     seen: set = set()
     discovery: List[List[int]] = []
     first_failure = None
     for position, record in enumerate(ran, 1):
-        if record.get("failure"):
+        if record.failure:
             first_failure = first_failure or position
-            cluster = clusters[int(record["index"])]
+            cluster = clusters[int(record.index)]
             if cluster not in seen:
                 seen.add(cluster)
                 discovery.append([position, len(seen)])
     if ran and (not discovery or discovery[-1][0] != len(ran)):
         discovery.append([len(ran), len(seen)])
     n = len(ran)
-    distinct = len({f["cluster"] for f in found})
-    distinct_avoidable = len({f["cluster"] for f in avoidable})
+    distinct = len({f.cluster for f in found})
+    distinct_avoidable = len({f.cluster for f in avoidable})
     return {
         "episodes": n,
         "errors": len(mine) - n,
@@ -524,62 +614,63 @@ def _sampler_entry(mine: Sequence[Mapping[str, Any]], found: Sequence[Mapping[st
     }
 
 
-def _per_sampler(episodes: Sequence[Mapping[str, Any]], failures: Sequence[Mapping[str, Any]],
+def _per_sampler(episodes: Sequence[EpisodeRecord], failures: Sequence[FailureEntry],
                  clusters: Mapping[int, str], default_sampler: str) -> Dict[str, Any]:
     """:func:`_sampler_entry` of every sampler that drew episodes (and of the run's own sampler), by name."""
-    names = sorted({str(r.get("sampler") or default_sampler) for r in episodes} | {default_sampler})
-    return {name: _sampler_entry([r for r in episodes if str(r.get("sampler") or default_sampler) == name],
-                                 [f for f in failures if f["sampler"] == name], clusters)
+    names = sorted({str(r.sampler or default_sampler) for r in episodes} | {default_sampler})
+    return {name: _sampler_entry([r for r in episodes if str(r.sampler or default_sampler) == name],
+                                 [f for f in failures if f.sampler == name], clusters)
             for name in names}
 
 
-def _per_scenario(settings: Mapping[str, Any], episodes: Sequence[Mapping[str, Any]],
-                  errors: Sequence[Mapping[str, Any]], failures: Sequence[Mapping[str, Any]],
-                  cluster_entries: Sequence[Mapping[str, Any]], rate: Mapping[str, Any]) -> Dict[str, Any]:
+def _per_scenario(settings: Mapping[str, Any], episodes: Sequence[EpisodeRecord],
+                  errors: Sequence[Mapping[str, Any]], failures: Sequence[FailureEntry],
+                  cluster_entries: Sequence[ClusterEntry], rate: FailureRate) -> Dict[str, Any]:
     """Per scenario (the run's own, then any other an episode ran): its episodes, failures, failure rates (sampled
     and estimated), clusters and conversions."""
-    ok = [r for r in episodes if not r.get("error")]
+    ok = [r for r in episodes if not r.error]
     scenario_names = list(dict.fromkeys([*(settings.get("scenarios") or []),
-                                         *sorted({str(r.get("scenario")) for r in episodes})]))
+                                         *sorted({str(r.scenario) for r in episodes})]))
     scenarios: Dict[str, Any] = {}
     for name in scenario_names:
-        ran = [r for r in ok if str(r.get("scenario")) == name]
-        found = [f for f in failures if str(f["scenario"]) == name]
-        in_clusters = [c for c in cluster_entries if name in c["scenarios"]]
+        ran = [r for r in ok if str(r.scenario) == name]
+        found = [f for f in failures if str(f.scenario) == name]
+        in_clusters = [c for c in cluster_entries if name in c.scenarios]
         scenarios[name] = {
             "episodes": len(ran),
             "errors": sum(1 for e in errors if str(e["scenario"]) == name),
             "failures": len(found),
-            "avoidable": sum(f["avoidable"] is True for f in found),
-            "unavoidable": sum(f["avoidable"] is False for f in found),
-            "unknown": sum(f["avoidable"] is None for f in found),
+            "avoidable": sum(f.avoidable is True for f in found),
+            "unavoidable": sum(f.avoidable is False for f in found),
+            "unknown": sum(f.avoidable is None for f in found),
             "failure_rate": _rate(len(found), len(ran)),
-            "estimated_rate": (rate.get("scenarios") or {}).get(name),
+            "estimated_rate": rate.scenarios[name].to_dict() if name in rate.scenarios else None,
             "failures_by_type": _by_type(found),
-            "failure_types": len({str(f["kind"]) for f in found}),
+            "failure_types": len({str(f.kind) for f in found}),
             "clusters": len(in_clusters),
-            "avoidable_clusters": sum(c["avoidable"] > 0 for c in in_clusters),
-            "converted": sum(c["conversion"] is not None for c in in_clusters),
-            "kept": sum(c["status"] == "kept" for c in in_clusters),
+            "avoidable_clusters": sum(c.avoidable > 0 for c in in_clusters),
+            "converted": sum(c.conversion is not None for c in in_clusters),
+            "kept": sum(c.status == "kept" for c in in_clusters),
         }
     return scenarios
 
 
-def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Mapping[str, Any]],
+def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[EpisodeRecord],
                               conversions: Sequence[Mapping[str, Any]], clusters: Mapping[int, str], *,
                               created: Optional[str] = None) -> Dict[str, Any]:
-    """The report dict from records already read: ``clusters`` maps each failed episode's index to its cluster id.
+    """The report dict from records already read: ``settings`` (the run's ``settings.json``), its episode records,
+    its conversion records, and ``clusters``, which maps each failed episode's index to its cluster id.
 
     Raises :class:`MiningReportError` when a failed episode has no cluster id.
     """
     default_sampler = str(settings.get("sampler") or "unknown")
-    episodes = sorted(episodes, key=lambda r: int(r["index"]))
-    ok = [r for r in episodes if not r.get("error")]
+    episodes = sorted(episodes, key=lambda r: int(r.index))
+    ok = [r for r in episodes if not r.error]
     errors = _episode_errors(episodes, default_sampler)
     restarts = _worker_restarts(episodes)
-    failures = _failures(ok, clusters, settings)
+    failures = _failures(ok, clusters, default_sampler)
     cluster_entries = _cluster_entries(failures, conversions, clusters)
-    unavoidable_ids = {c["id"] for c in cluster_entries if c["unavoidable"] == c["size"]}
+    unavoidable_ids = {c.id for c in cluster_entries if c.unavoidable == c.size}
     rejected = _rejected_conversions(conversions)
     counts = {**_failure_counts(ok, errors, restarts, failures, cluster_entries),
               **_conversion_counts(conversions, rejected)}
@@ -596,11 +687,11 @@ def build_report_from_records(settings: Mapping[str, Any], episodes: Sequence[Ma
         "counts": counts,
         "samplers": samplers,
         "scenarios": scenarios,
-        "failure_rate": rate,
-        "clusters": [c for c in cluster_entries if c["id"] not in unavoidable_ids],
-        "unavoidable_clusters": [c for c in cluster_entries if c["id"] in unavoidable_ids],
-        "failures": [f for f in failures if f["avoidable"] is not False],
-        "unavoidable": [f for f in failures if f["avoidable"] is False],
+        "failure_rate": rate.to_dict(),
+        "clusters": [c.to_dict() for c in cluster_entries if c.id not in unavoidable_ids],
+        "unavoidable_clusters": [c.to_dict() for c in cluster_entries if c.id in unavoidable_ids],
+        "failures": [f.to_dict() for f in failures if f.avoidable is not False],
+        "unavoidable": [f.to_dict() for f in failures if f.avoidable is False],
         "rejected": rejected,
         "errors": errors,
         "worker_restarts": restarts,

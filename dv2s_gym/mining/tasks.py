@@ -104,7 +104,8 @@ def run_mine_task(task: Dict[str, Any]) -> EpisodeRecord:
         outcome["rho"] = robustness(result, failure, monitor)
         if failure is not None:
             nulls = nulls | {"behaviour", "failure_state"}
-            outcome["behaviour"] = extract_behaviour(trace, outcome["failure"])
+            behaviour = extract_behaviour(trace, failure)
+            outcome["behaviour"] = behaviour.to_dict() if behaviour is not None else None
             outcome["failure_state"] = failure_state(trace, outcome["failure"])
             if task.get("trace_dir"):
                 path = os.path.join(task["trace_dir"], trace_name(int(task["index"])))
