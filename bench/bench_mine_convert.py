@@ -55,6 +55,7 @@ def main(argv=None) -> int:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
 
     t0 = time.perf_counter()
+    from dv2s_gym.mining.conversion_settings import ConversionSettings
     from dv2s_gym.mining.convert import convert_failure
     from dv2s_gym.mining.miner import MineSettings, WorkerSettings, mine
     from dv2s_gym.pipeline.convert import convert_video
@@ -77,7 +78,7 @@ def main(argv=None) -> int:
     rows = []
     for record in chosen:
         start = time.perf_counter()
-        out = convert_failure(record, work / "run", policy=args.policy, bank=work / "bank", k=args.k,
+        out = convert_failure(record, work / "run", ConversionSettings(policy=args.policy, k=args.k), bank=work / "bank",
                               cluster=f"{record['scenario']}/{record['failure']['type']}/bench")
         wall = time.perf_counter() - start
         baseline = None

@@ -12,12 +12,13 @@ Five records stand for the JSON objects the subsystems hand each other and write
 - :class:`HeldOutEpisode`: one episode of a loop's held-out evaluation, a line of a round's ``heldout.jsonl`` (the
   role and policy, the scene, whether the policy failed and how, its result, or the error it ended in).
 
-Each is a frozen dataclass with :meth:`from_dict` (checks every field it knows; a :class:`RecordError` names the
-bad one and what it should hold) and :meth:`to_dict`, which gives back exactly the JSON object the files hold:
-the fields a record does not know travel in ``extra``, and a field that is ``None`` is written as ``null`` only
-when the file format always writes it (or the object read had it as ``null``: ``null_fields``), so reading a
-file and writing it back changes no byte. A record is also a read-only mapping over that JSON object
-(``record["seed"]``, ``record.get("failure")``), so code that reads the dict form reads the record alike.
+Each is a frozen dataclass (a :class:`JsonRecord`) with :meth:`from_dict` (checks every field it knows; a
+:class:`RecordError` names the bad one and what it should hold) and :meth:`to_dict`, which gives back exactly the
+JSON object the files hold: the fields a record does not know travel in ``extra``, and a field that is ``None`` is
+written as ``null`` only when the file format always writes it (or the object read had it as ``null``:
+``null_fields``), so reading a file and writing it back changes no byte. A record is also a read-only mapping over
+that JSON object (``record["seed"]``, ``record.get("failure")``), so code that reads the dict form reads the record
+alike.
 """
 
 from __future__ import annotations
@@ -35,9 +36,9 @@ from scenario_bank.errors import BankVersionError, DV2SError
 from scenario_bank.safe_files import UnsafeInputError, is_entry_name, validate_relative_path
 from scenario_bank.story import StoryError, normalize_story
 
-__all__ = ["RecordError", "Provenance", "Sidecar", "EpisodeRecord", "RegressEpisode", "HeldOutEpisode", "SOURCE_KINDS",
-           "PROVENANCE_FIELDS", "MINED_PROVENANCE_FIELDS", "ENTRY_FILES", "SIDECAR_VERSION", "SCRIPT", "SIDECAR",
-           "CONTROL_FIX", "control_character_field", "is_entry_file"]
+__all__ = ["RecordError", "JsonRecord", "Provenance", "Sidecar", "EpisodeRecord", "RegressEpisode", "HeldOutEpisode",
+           "SOURCE_KINDS", "PROVENANCE_FIELDS", "MINED_PROVENANCE_FIELDS", "ENTRY_FILES", "SIDECAR_VERSION", "SCRIPT",
+           "SIDECAR", "CONTROL_FIX", "control_character_field", "is_entry_file"]
 
 SCRIPT = "scenario.scenic"
 """A bank entry's script, in its folder."""
@@ -130,8 +131,9 @@ _CHECKS = {
 }
 
 
-class _Record(_MappingABC):
-    """What the records share: the JSON form (:meth:`to_dict`), reading from it (:meth:`from_dict`) and
+class JsonRecord(_MappingABC):
+    """What the records share (those of this module, and the other typed records of files the product writes,
+    such as a loop's rounds): the JSON form (:meth:`to_dict`), reading from it (:meth:`from_dict`) and
     read-only mapping access to it. Subclasses list their fields' JSON kinds in ``_KINDS`` (a field missing
     from it is the record's ``extra`` or ``null_fields``), the fields :meth:`from_dict` needs in ``_REQUIRED``,
     the fields nested records fill in ``_NESTED`` and, in ``_ATTRIBUTES``, a JSON key held by an attribute of
@@ -224,7 +226,7 @@ class _Record(_MappingABC):
                 if key in nulls:
                     out[key] = None
                 continue
-            if isinstance(value, _Record):
+            if isinstance(value, JsonRecord):
                 value = value.to_dict()
             elif key in self._LISTS:
                 value = list(value)
@@ -259,7 +261,7 @@ def _shown(value: Any) -> str:
 
 
 @dataclass(frozen=True, eq=False)
-class Provenance(_Record):
+class Provenance(JsonRecord):
     """Where a bank entry came from: a sidecar's ``source``.
 
     ``kind`` is one of :data:`SOURCE_KINDS`; ``video``, ``parent`` (the bank scenario a mined or converted entry
@@ -346,7 +348,7 @@ class Provenance(_Record):
 
 
 @dataclass(frozen=True, eq=False)
-class Sidecar(_Record):
+class Sidecar(JsonRecord):
     """A bank entry's ``meta.json``: ``description`` (natural language), ``elements`` (road, participants,
     actions, relations), optional ``story`` (the phases of the scenario), ``tags``, ``map``, ``use_case``,
     its provenance ``source`` (:class:`Provenance`), the script's ``content_hash``, the entry ``name`` and the
@@ -437,7 +439,7 @@ class Sidecar(_Record):
 
 
 @dataclass(frozen=True, eq=False)
-class EpisodeRecord(_Record):
+class EpisodeRecord(JsonRecord):
     """One episode of a failure-mining run: a line of the run's ``episodes.jsonl``.
 
     The scene: episode ``index``, ``scenario`` (and its ``family``: the bank scenario it derives from), env
@@ -524,7 +526,7 @@ class EpisodeRecord(_Record):
 
 
 @dataclass(frozen=True, eq=False)
-class RegressEpisode(_Record):
+class RegressEpisode(JsonRecord):
     """One policy's episode of a regression run (``dv2s regress``): a line of the run's ``results.jsonl``, and a
     ``candidate`` or ``baseline`` result of its report's ``episodes``.
 
@@ -592,7 +594,7 @@ class RegressEpisode(_Record):
 
 
 @dataclass(frozen=True, eq=False)
-class HeldOutEpisode(_Record):
+class HeldOutEpisode(JsonRecord):
     """One episode of a loop's held-out evaluation (:mod:`dv2s_gym.mining.heldout`): a line of a round's
     ``heldout.jsonl``.
 

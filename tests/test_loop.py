@@ -14,6 +14,7 @@ from scenario_bank.run_identity import RunIdentityError
 from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, paired_summary
 from dv2s_gym.mining import loop as loop_module
 from dv2s_gym.mining.loop import LoopError, fine_tune_weights
+from dv2s_gym.mining.loop_record import HeldOutComparison, RoundRecord
 from dv2s_gym.mining.split import family_of, split_by_family
 from dv2s_gym.workers.settings import WorkerSettings
 from cli_helpers import one_line_error, run
@@ -106,7 +107,8 @@ def test_heldout_comparison_needs_enough_families_as_well_as_episodes():
     from dv2s_gym.mining.loop_report import _heldout_lines, _round_row
 
     assert "40 pairs from 2 families (4 scenarios)" in _heldout_lines(few)[1]
-    assert _round_row({"steps": {"after": few}})["drop"] == "not reported: 2 < 3 families"
+    assert _round_row(RoundRecord.from_dict({"round": 1, "steps": {"after": few}}))["drop"] == \
+        "not reported: 2 < 3 families"
 
 
 def test_the_heldout_drop_interval_resamples_families_and_the_report_says_pairs_of_a_family_are_not_independent():
@@ -449,6 +451,36 @@ class _StandIns:
 
 WIRING = dict(budget=8, fine_tune_steps=100, k_eval=3, regress_episodes=1, workers=1, n_envs=1, progress=False,
               scenarios=SOURCES + ["highway_cut_in_from_left"], fine_tune_method="ppo", untouched_seeds=1)
+
+
+def test_a_round_is_a_typed_record_that_reads_and_writes_loop_json_and_report_json_exactly(tmp_path, monkeypatch):
+    """Each round of a loop run's ``loop.json`` and ``report.json`` reads as a RoundRecord whose parts the verdict
+    and the reports read by attribute, and writes back the very JSON it was read from (keys, values, nulls); a field
+    of the wrong kind is refused naming it."""
+    from scenario_bank.records import RecordError
+
+    _StandIns(monkeypatch)
+    report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=FakeMiner(WIRING["scenarios"], failures_per_round=6),
+                      min_heldout_episodes=1, min_heldout_families=2, log=lambda _: None, **WIRING)
+    assert all(isinstance(record, RoundRecord) for record in report.rounds)
+    for name in ("loop.json", "report.json"):
+        written = json.loads((tmp_path / "loop" / name).read_text())["rounds"]
+        for data in written:
+            record = RoundRecord.from_dict(data)
+            assert json.dumps(record.to_dict(), sort_keys=True) == json.dumps(data, sort_keys=True)  # 1.0 stays 1.0
+            assert RoundRecord.from_dict(record.to_dict()).to_dict() == data
+    record = report.rounds[0]
+    after = record.steps.after
+    assert isinstance(after, HeldOutComparison) and after.pairs == after.to_dict()["pairs"] > 0
+    assert after.heldout_families == 2 and after.failure_types.start == after.to_dict()["failure_types"]["start"]
+    assert after.vs_control.table.to_dict() == after.to_dict()["vs_control"]["table"]
+    assert record.fine_tuned and record.new_policy == record.to_dict()["new_policy"]
+    data = record.to_dict()
+    data["steps"]["after"]["pairs"] = "many"
+    with pytest.raises(RecordError, match=r"round field 'steps\.after\.pairs' must be an integer, not str 'many'"):
+        RoundRecord.from_dict(data)
+    with pytest.raises(RecordError, match="round field 'round' is missing"):
+        RoundRecord.from_dict({"steps": {}})
 
 
 def test_loop_holds_out_families_and_fine_tunes_a_control_without_the_mined_scenarios(tmp_path, monkeypatch):

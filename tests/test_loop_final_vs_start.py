@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from dv2s_gym.mining.loop_record import RoundRecord
 from dv2s_gym.mining.loop_report import final_vs_start, write_loop_reports
 from dv2s_gym.regress.report import build_report, write_json
 
@@ -95,6 +96,20 @@ def _accepted(record: dict) -> dict:
     return {**record, "steps": steps}
 
 
+def _state(rounds: list):
+    """A loop's state holding ``rounds`` (their JSON objects) as the loop holds them, written nowhere."""
+    from types import SimpleNamespace
+
+    records = [RoundRecord.from_dict(record) for record in rounds]
+
+    def update(record: RoundRecord, save: bool = True) -> RoundRecord:
+        records[record.round - 1] = record
+        return record
+
+    return SimpleNamespace(data={"settings": {"policy": "p0"}}, rounds=records, update=update,
+                           round=lambda number: records[number - 1])
+
+
 def test_the_next_round_and_the_report_never_use_a_policy_the_cross_round_check_rejected(tmp_path):
     from types import SimpleNamespace
 
@@ -102,13 +117,15 @@ def test_the_next_round_and_the_report_never_use_a_policy_the_cross_round_check_
 
     body = _loop(tmp_path, 2)
     rounds = [_accepted(record) for record in body["rounds"]]  # round 2 passes against P1 but P2 FAILs against P0
-    state = SimpleNamespace(data={"settings": {"policy": "p0"}, "rounds": rounds}, save=lambda: None)
-    loop = SimpleNamespace(state=state, out=tmp_path)
+    loop = SimpleNamespace(state=_state(rounds), out=tmp_path)
     assert loop_module._next_start(loop, 2, "p1") == "p0"
     # round 3 starts from p0 and its own regression test FAILs
+    rounds = [record.to_dict() for record in loop.state.rounds]
     rounds.append({"round": 3, "policy": "p0", "new_policy": "p3", "steps": {"fine_tune": {}, "regress": {
         "verdict": "FAIL", "report": _regress(tmp_path / "r3.json", "p3", "p0", P2_FAILS, P0_FAILS)}}})
+    loop = SimpleNamespace(state=_state(rounds), out=tmp_path)
     assert loop_module._next_start(loop, 3, "p0") == "p0"
+    rounds = [record.to_dict() for record in loop.state.rounds]
     paths = write_loop_reports({**body, "policy": "p3", "rounds": rounds}, tmp_path / "loop")
     data = json.loads(paths["json"].read_text())
     assert data["rounds"][1]["final_vs_start"]["verdict"] == "FAIL"
@@ -138,8 +155,7 @@ def test_the_cross_round_check_reads_a_moved_loop_folder_from_any_working_direct
     assert final_vs_start(body, folder=given)["verdict"] == "FAIL"
     paths = write_loop_reports(body, given)
     assert json.loads(paths["json"].read_text())["recommendation"]["policy"] == "p0"
-    state = SimpleNamespace(data={"settings": {"policy": "p0"}, "rounds": [dict(r) for r in rounds]}, save=lambda: None)
-    assert loop_module._next_start(SimpleNamespace(state=state, out=given), 2, "p1") == "p0"
+    assert loop_module._next_start(SimpleNamespace(state=_state(rounds), out=given), 2, "p1") == "p0"
     # a cross-round check that cannot run (here: no loop folder to read the reports from) never accepts
     unread = final_vs_start(body)
     assert "cannot read" in unread["error"]
@@ -163,7 +179,7 @@ def test_a_round_begun_from_another_policy_than_the_rounds_before_it_recommend_i
     from dv2s_gym.mining import loop as loop_module
 
     record = {"round": 2, "policy": "p0", "steps": {"mine": {"kept": []}}}  # begun from p0 ...
-    loop = SimpleNamespace(state=SimpleNamespace(round=lambda number: record), out=tmp_path)
+    loop = SimpleNamespace(state=SimpleNamespace(round=lambda number: RoundRecord.from_dict(record)), out=tmp_path)
     with pytest.raises(loop_module.LoopError, match="round 2 .* was begun from p0, not from p1.*--out"):
         loop_module._run_round(loop, 2, "p1")  # ... where round 1 recommends p1
     assert record["policy"] == "p0" and list(record["steps"]) == ["mine"]

@@ -10,11 +10,15 @@ import json
 
 import pytest
 
+from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.convert import replay_failure_entry
 from dv2s_gym.mining.exact_replay import replay_failure
 from scenario_bank.bank import Bank, Sidecar
 from scenario_bank.records import EpisodeRecord
 from test_mining_convert import SCENARIO, make_record, midpoint
+
+KEEP_LANE = ConversionSettings(policy="keep_lane", monitor={})
+"""The conversion settings of the tests: the deterministic policy that fails, the monitors' defaults."""
 
 
 @pytest.fixture(scope="module")
@@ -23,8 +27,7 @@ def record() -> dict:
 
 
 def test_a_failure_is_kept_as_its_exact_replay_without_a_video_or_a_script(record, tmp_path):
-    out = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", policy="keep_lane",
-                               bank=tmp_path / "bank", monitor={})
+    out = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
     assert out["status"] == "kept" and out["reason"] is None and out["scenario"] == SCENARIO, out
     bank = Bank(tmp_path / "bank")
     entry = bank.get(out["replay_entry"])
@@ -33,8 +36,7 @@ def test_a_failure_is_kept_as_its_exact_replay_without_a_video_or_a_script(recor
     assert not entry.missing_files() and (entry.folder / "trace.json.gz").is_file()
     assert entry.source.interaction["failure_type"] == "collision" and entry.source.e2e_sc == 1.0
     assert replay_failure(bank, out["replay_entry"]).get("matches") is True  # the recorded episode, step for step
-    again = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", policy="keep_lane", bank=bank,
-                                 monitor={})
+    again = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", KEEP_LANE, bank=bank)
     assert again["replay_entry"] == out["replay_entry"] and len(bank) == len(Bank(tmp_path / "bank"))
 
 
@@ -42,12 +44,12 @@ def test_a_scene_the_reference_driver_failed_too_gets_no_replay_entry(record, tm
     """The conversion and the loop's replays share the rule: an exact replay is kept only of a scene the reference
     driver passed (it stalled here), and the note says why there is none."""
     failed = dict(record, cluster="c1", reference={"policy": "rule", "failure": {"type": "stall", "kind": "stall"}})
-    out = replay_failure_entry(failed, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank", monitor={})
+    out = replay_failure_entry(failed, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
     assert out["status"] == "kept" and out["replay_entry"] is None, out
     assert "the reference driver failed this scene too (stall)" in out["note"]
     assert len(Bank(tmp_path / "bank")) == 0
     passed = dict(failed, reference={"policy": "rule", "failure": None})
-    kept = replay_failure_entry(passed, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank", monitor={})
+    kept = replay_failure_entry(passed, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
     assert kept["replay_entry"] is not None and kept["note"] is None
 
 
@@ -60,8 +62,7 @@ def test_a_replay_entry_records_what_it_depends_on_and_a_mismatch_says_why(recor
     from policies.registry import SHIPPED_CHECKPOINT
     from scenario_bank.atomic import file_sha256
 
-    out = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", policy="keep_lane",
-                               bank=tmp_path / "bank", monitor={})
+    out = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
     bank = Bank(tmp_path / "bank")
     name = out["replay_entry"]
     replay = bank.get(name).source.replay
@@ -101,12 +102,12 @@ def test_a_replay_entry_records_what_it_depends_on_and_a_mismatch_says_why(recor
 def test_a_replay_that_does_not_match_the_recorded_episode_is_rejected_and_adds_nothing(record, tmp_path):
     tampered = json.loads(json.dumps(record))
     tampered["result"]["trajectory_hash"] = "0" * 64
-    out = replay_failure_entry(tampered, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank", monitor={})
+    out = replay_failure_entry(tampered, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["replay_entry"] is None
     assert out["reason"].startswith("replay: ") and "does not replay the failing episode" in out["reason"]
     assert not [e for e in Bank(tmp_path / "bank") if e.source.kind == "mined"]
-    missing = replay_failure_entry({**record, "failure": None}, tmp_path / "run", policy="keep_lane",
-                                   bank=tmp_path / "bank", monitor={})
+    missing = replay_failure_entry({**record, "failure": None}, tmp_path / "run", KEEP_LANE,
+                                   bank=tmp_path / "bank")
     assert missing["status"] == "rejected" and missing["reason"].startswith("input: ")
 
 
@@ -145,8 +146,7 @@ def test_a_failure_in_a_scenario_without_free_parameters_says_why_it_has_no_repl
     bank.add(fixed, Sidecar(description="A car stands still in the ego's lane ahead.", name="fixed_stopped_car",
                             elements=Bank().get(SCENARIO).elements))
     record = make_record("fixed_stopped_car", 0, {}, bank_dir=str(bank.root))
-    out = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", policy="keep_lane", bank=bank,
-                               monitor={})
+    out = replay_failure_entry(dict(record, cluster="c1"), tmp_path / "run", KEEP_LANE, bank=bank)
     assert out["replay_entry"] is None and len(Bank(bank.root)) == 1
     assert "'fixed_stopped_car' has no free parameters" in out["note"], out
 
@@ -177,7 +177,7 @@ def test_exact_replays_take_the_families_in_turn_largest_cluster_first(tmp_path,
     (run_dir / "episodes.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     replayed = []
 
-    def stand_in(record, run_dir, *, cluster, **options):
+    def stand_in(record, run_dir, settings, *, bank, cluster):
         replayed.append(cluster)
         return {"cluster": cluster, "index": record["index"], "scenario": record["scenario"], "status": "kept",
                 "replay_entry": f"replay_{len(replayed)}", "reason": None}
@@ -245,7 +245,7 @@ def test_a_conversion_takes_a_failure_whose_scene_the_reference_driver_passed(tm
                failing(2, "truck", -2.0, {"type": "stall"}), failing(3, "truck", -1.0, {"type": "collision"})]
     taken = []
 
-    def convert(record, out, **_):
+    def convert(record, out, settings, *, bank):
         taken.append(record["index"])
         return {"cluster": record["cluster"], "index": record["index"], "status": "rejected"}
 
@@ -253,5 +253,5 @@ def test_a_conversion_takes_a_failure_whose_scene_the_reference_driver_passed(tm
     monkeypatch.setattr(miner, "_reached_bank", lambda *_: None)
     run = SimpleNamespace(out=tmp_path, records=[EpisodeRecord.from_dict(r) for r in records],
                           settings={"policy": "keep_lane", "env_config": None})
-    miner.convert_clusters(run, bank_dir=str(tmp_path / "bank"), options={}, progress=False)
+    miner.convert_clusters(run, ConversionSettings(), bank_dir=str(tmp_path / "bank"), progress=False)
     assert sorted(taken) == [1, 2]

@@ -6,20 +6,28 @@ constant speed and runs into what stands in its lane, on a scene with fixed Scen
 
 from __future__ import annotations
 
+import inspect
 import json
 
 import numpy as np
 import pytest
 
 import dv2s_gym.mining.convert as convert_module
-from dv2s_gym.mining.convert import _exact, convert_failure, reproduction_seeds, same_failure_class
+from dv2s_gym.mining.conversion_settings import ConversionSettings
+from dv2s_gym.mining.convert import _exact, convert_failure, replay_failure_entry, reproduction_seeds, same_failure_class
+from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.settings import MineSettings
 from dv2s_gym.mining.exact_replay import replay_failure
 from dv2s_gym.mining.failure_video import FailureReplayError, record_failure_video, write_failure_video
 from dv2s_gym.pipeline.video import read_video
 from envs.trace import EpisodeTrace
 from policies.evaluation import trajectory_hash
 from scenario_bank.bank import Bank, Sidecar
+from scenario_bank.errors import WrongTypeError
 from scenario_bank.records import EpisodeRecord
+
+KEEP_LANE = ConversionSettings(policy="keep_lane")
+"""The conversion settings of the tests: the deterministic policy that fails."""
 
 SCENARIO = "urban_lead_vehicle_stopped"
 
@@ -122,7 +130,7 @@ def test_failure_class_rule():
 @pytest.mark.slow
 def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(record, tmp_path):
     bank = Bank(tmp_path / "bank")
-    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=bank, cluster=f"{SCENARIO}/collision/0")
+    out = convert_failure(record, tmp_path / "run", KEEP_LANE, bank=bank, cluster=f"{SCENARIO}/collision/0")
     assert out["status"] == "kept", out["reason"]
     assert out["reason"] is None and out["merged_into"] is None
     repro = out["reproduction"]
@@ -188,7 +196,7 @@ def test_a_reproducing_failure_is_kept_with_provenance_and_a_repeat_merges(recor
 
     _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_path)
 
-    again = convert_failure({**record, "index": 5}, tmp_path / "run2", policy="keep_lane", bank=bank)
+    again = convert_failure({**record, "index": 5}, tmp_path / "run2", KEEP_LANE, bank=bank)
     assert again["status"] == "merged" and again["merged_into"] == out["bank_entry"], again["reason"]
     merged = Bank(tmp_path / "bank").get(out["bank_entry"]).source.merged
     assert len(merged) == 1 and merged[0]["index"] == 5 and merged[0]["parent"] == SCENARIO
@@ -244,7 +252,7 @@ def _the_reports_show_the_converted_clip_beside_the_failure(record, out, tmp_pat
 def test_a_reproduction_rate_below_the_threshold_is_rejected(record, tmp_path):
     # the collision was with a car; as a collision with a truck, the new scenario never reproduces it
     truck = {**record, "failure": {**record["failure"], "with_kind": "truck"}}
-    out = convert_failure(truck, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    out = convert_failure(truck, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "reproduction"
     assert out["reproduction"]["reproduced"] == 0 and out["reproduction"]["rate"] == 0.0
     assert out["reason"].startswith("reproduction: ") and "0 of 10" in out["reason"]
@@ -279,7 +287,7 @@ def _patch_generator(monkeypatch, script: str) -> None:
 def test_an_unsafe_script_is_rejected_at_the_check(record, tmp_path, monkeypatch):
     _patch_generator(monkeypatch, "param map = 'highway_straight'\nmodel scenic.domains.driving.model\n"
                                   "import os\nego = new Car\n")
-    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    out = convert_failure(record, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "check"
     assert out["reason"].startswith("check: safety failed") and "import" in out["reason"]
     assert out["reproduction"] is None and out["bank_entry"] is None
@@ -290,20 +298,39 @@ def test_an_unsafe_script_is_rejected_at_the_check(record, tmp_path, monkeypatch
 def test_a_script_failing_in_the_sandbox_is_rejected_with_its_stage(record, tmp_path, monkeypatch):
     _patch_generator(monkeypatch, "param map = 'highway_straight'\nmodel scenic.domains.driving.model\n"
                                   "ego = new Car with behavior NoSuchBehavior()\n")
-    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    out = convert_failure(record, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "check", out
     assert "sandboxed check" in out["reason"] and "NoSuchBehavior" in out["reason"]
     assert _converted(tmp_path / "bank") == []
 
 
+def test_the_conversion_entry_points_take_one_settings_record_and_no_loose_options(tmp_path):
+    """The settings of a conversion travel as one checked record: no keyword options, no mapping in its place."""
+    for function in (convert_failure, replay_failure_entry):
+        parameters = inspect.signature(function).parameters
+        assert not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters.values()), function.__name__
+        assert list(parameters)[:3] == ["record", "run_dir", "settings"]
+        assert parameters["settings"].annotation == "ConversionSettings"
+        with pytest.raises(WrongTypeError, match="one ConversionSettings, not dict"):
+            function({}, tmp_path / "run", {"policy": "keep_lane"}, bank=tmp_path / "bank")
+        with pytest.raises(WrongTypeError, match="needs the policy that failed"):
+            function({}, tmp_path / "run", ConversionSettings(), bank=tmp_path / "bank")
+    with pytest.raises(MiningError, match="conversion must be the conversion's settings"):
+        MineSettings(conversion={"dra": "bev"})
+    with pytest.raises(MiningError, match=r"conversion k must be an integer >= 0, not '3'"):
+        MineSettings(conversion=ConversionSettings(k="3"))
+    assert MineSettings().conversion == ConversionSettings()  # and none of it is recorded with the run
+    assert "conversion" not in MineSettings().recorded()
+
+
 def test_a_record_without_a_failure_is_rejected_not_raised(record, tmp_path):
-    out = convert_failure({**record, "failure": None}, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    out = convert_failure({**record, "failure": None}, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "input"
-    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank", k=0)
+    out = convert_failure(record, tmp_path / "run", KEEP_LANE.replace(k=0), bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "input" and "k >= 1" in out["reason"]
-    out = convert_failure({**record, "seed": 1}, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    out = convert_failure({**record, "seed": 1}, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "video" and "diverged" in out["reason"]
-    out = convert_failure({**record, "params": {"no_such_param": 1}}, tmp_path / "run", policy="keep_lane",
+    out = convert_failure({**record, "params": {"no_such_param": 1}}, tmp_path / "run", KEEP_LANE,
                           bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "video"
 
@@ -311,7 +338,7 @@ def test_a_record_without_a_failure_is_rejected_not_raised(record, tmp_path):
 @pytest.mark.slow
 def test_a_minimal_failure_record_is_completed_from_the_monitors(record, tmp_path):
     minimal = {**record, "failure": {"type": "collision", "time": record["failure"]["time"]}}
-    out = convert_failure(minimal, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    out = convert_failure(minimal, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
     assert out["status"] == "kept", out["reason"]
     failure = Bank(tmp_path / "bank").get(out["bank_entry"]).source.failure
     assert failure["with_kind"] == "car" and failure["collision_type"] == "rear_end"
@@ -409,12 +436,12 @@ def test_an_unreachable_model_endpoint_stops_converting_and_the_rerun_converts(t
     _generator_speeds_as_the_scenario(monkeypatch)
     run = dict(out=tmp_path / "run", budget=4, sampler="random", scenarios=[SCENARIO], bank_dir=str(tmp_path / "bank"),
                workers=1, reference=None, progress=False, convert=True, max_conversions=1, reports=False)
-    down = {"dra": "openai", "llm_config": {"base_url": closed_port_url(), "model": "m"}}
+    down = ConversionSettings(dra="openai", llm_config={"base_url": closed_port_url(), "model": "m"})
     with pytest.raises(MiningError, match="converting stopped at cluster .*could not connect.*Rerun the same command"):
-        mine("keep_lane", convert_options=down, **run)
+        mine("keep_lane", conversion=down, **run)
     assert not (tmp_path / "run" / "conversions.jsonl").read_text().strip()
     assert len((tmp_path / "run" / "episodes.jsonl").read_text().splitlines()) == 4
-    rows = mine("keep_lane", convert_options={"dra": "bev"}, **run).conversions
+    rows = mine("keep_lane", conversion=ConversionSettings(dra="bev"), **run).conversions
     assert len(rows) == 1 and rows[0]["stage"] != "describe" and rows[0]["status"] == "kept", rows
 
 
@@ -429,7 +456,7 @@ def test_a_script_without_the_failures_interaction_is_rejected_though_the_policy
         "    with speed 3,\n    with behavior FollowLaneBehavior(target_speed=3)")
     assert moving != Bank().get(SCENARIO).script
     _patch_generator(monkeypatch, moving)
-    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank")
+    out = convert_failure(record, tmp_path / "run", KEEP_LANE, bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "interaction", out
     assert out["reproduction"]["rate"] >= 0.3  # the policy does fail on it, the same way ...
     assert out["reproduction"]["interaction_shown"] == 0  # ... but never with a car that stops
@@ -543,7 +570,7 @@ def test_a_script_on_which_the_reference_fails_another_way_is_rejected(record, t
         "    with speed globalParameters.ego_speed + 5,\n"
         "    with behavior FollowLaneBehavior(target_speed=globalParameters.ego_speed + 5)\n")
     _patch_generator(monkeypatch, chaser)
-    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=tmp_path / "bank", k=4)
+    out = convert_failure(record, tmp_path / "run", KEEP_LANE.replace(k=4), bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "avoidability", out
     # the chaser is also a car the failure's scene did not have: the judge names that too
     assert out["reproduction"]["reproduced"] == 4 and out["rejections"] == [
@@ -1187,7 +1214,7 @@ def test_a_clip_that_cannot_be_written_is_recorded_without_this_machines_paths(r
         raise OSError(28, "No space left on device", str(out_path))
 
     monkeypatch.setattr(convert_module, "write_script_episode_video", full_disk)  # where convert calls it
-    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=Bank(tmp_path / "bank"),
+    out = convert_failure(record, tmp_path / "run", KEEP_LANE, bank=Bank(tmp_path / "bank"),
                           cluster=f"{SCENARIO}/collision/0")
     assert out["status"] == "kept", out["reason"]
     clip = out["reproduction"]["clip"]

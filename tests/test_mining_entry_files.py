@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from dv2s_gym.bank_validate import validate_entry
+from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.convert import convert_failure
 from dv2s_gym.pipeline.video import read_video
 from envs.trace import EpisodeTrace
@@ -24,6 +25,9 @@ from scenario_bank.bank import Bank, BankError, Sidecar, entry_files
 
 sys.path.insert(0, str(Path(__file__).parent))
 from test_mining_convert import SCENARIO, make_record, midpoint  # noqa: E402
+
+KEEP_LANE = ConversionSettings(policy="keep_lane")
+"""The conversion settings of the tests: the deterministic policy that fails."""
 
 
 @pytest.fixture(scope="module")
@@ -34,10 +38,9 @@ def record() -> dict:
 @pytest.mark.slow
 def test_a_kept_and_a_merged_entry_keep_their_videos_once_the_runs_are_deleted(record, tmp_path):
     bank = Bank(tmp_path / "bank")
-    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=bank, k=3,
-                          cluster=f"{SCENARIO}/collision/0")
+    out = convert_failure(record, tmp_path / "run", KEEP_LANE.replace(k=3), bank=bank, cluster=f"{SCENARIO}/collision/0")
     assert out["status"] == "kept", out["reason"]
-    again = convert_failure({**record, "index": 5}, tmp_path / "run2", policy="keep_lane", bank=bank, k=3)
+    again = convert_failure({**record, "index": 5}, tmp_path / "run2", KEEP_LANE.replace(k=3), bank=bank)
     assert again["status"] == "merged" and again["merged_into"] == out["bank_entry"], again["reason"]
     frames = len(read_video(tmp_path / "run" / out["video"], fps=None, max_frames=1000, max_pixels=10**7).frames)
     shutil.rmtree(tmp_path / "run")

@@ -5,12 +5,16 @@ from __future__ import annotations
 
 import pytest
 
+from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.convert import convert_failure
 from dv2s_gym.mining.exact_replay import replay_failure
 from dv2s_gym.mining.monitors import MonitorSettings
 from dv2s_gym.pipeline.video import read_video
 from envs.dv2s_env import DV2SEnv
 from scenario_bank.bank import Bank, Sidecar
+
+KEEP_LANE = ConversionSettings(policy="keep_lane")
+"""The conversion settings of the tests: the deterministic policy that fails."""
 
 STOPPED_VAN = '''"""A van stands still in the ego's lane on a straight highway."""
 param map = 'highway_straight'
@@ -61,7 +65,7 @@ def test_a_failure_in_a_jailed_scenario_gets_its_video_and_its_exact_replay(reco
         raise RuntimeError("describing is not part of this test")
 
     monkeypatch.setattr(stages, "describe", no_description)
-    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=user_bank, k=2, before=1.0, after=1.0)
+    out = convert_failure(record, tmp_path / "run", KEEP_LANE.replace(k=2, before=1.0, after=1.0), bank=user_bank)
     assert out["stage"] == "describe", out  # past the video and the replay
     assert out["timings"].keys() >= {"video", "interaction", "replay"}
     clip = read_video(tmp_path / "run" / out["video"], fps=None, max_frames=1000, max_pixels=10**7)
@@ -82,7 +86,7 @@ def test_the_exact_replay_is_kept_when_the_video_stage_fails(record, user_bank, 
     monkeypatch.setattr(convert_module, "write_failure_video", broken)  # where convert calls it
     bank = tmp_path / "bank"
     Bank(bank).add(STOPPED_VAN, Sidecar(description="A van stands still in the ego's lane.", name=NAME))
-    out = convert_failure(record, tmp_path / "run", policy="keep_lane", bank=bank, k=2)
+    out = convert_failure(record, tmp_path / "run", KEEP_LANE.replace(k=2), bank=bank)
     assert out["status"] == "rejected" and out["stage"] == "video"
     assert out["reason"] == "video: OSError: no space left on device" and out["rejections"] == [out["reason"]]
     assert out["video"] is None and out["replay_entry"] is not None
@@ -92,7 +96,7 @@ def test_the_exact_replay_is_kept_when_the_video_stage_fails(record, user_bank, 
     assert replay_failure(bank, out["replay_entry"])["matches"]
     # a replay that fails as well is recorded beside the video's reason
     diverged = convert_failure({**record, "result": {**record["result"], "trajectory_hash": "0" * 64}},
-                               tmp_path / "run2", policy="keep_lane", bank=bank, k=2)
+                               tmp_path / "run2", KEEP_LANE.replace(k=2), bank=bank)
     assert diverged["stage"] == "video" and diverged["replay_entry"] is None
     assert [r.split(":")[0] for r in diverged["rejections"]] == ["video", "replay"]
     assert "does not replay the failing episode" in diverged["rejections"][1]

@@ -7,8 +7,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.html import _cards, _Videos
+from dv2s_gym.mining.loop_record import RoundRecord
 from dv2s_gym.mining.loop_report import _entry_clips
+
+KEEP_LANE = ConversionSettings(policy="keep_lane")
+"""The conversion settings of the tests: the deterministic policy that fails."""
 
 CLIP = {"seed": 7, "failed": True, "reproduced": True, "failure": {"type": "collision"}, "chosen": "reproduced",
         "file": "converted.webm"}
@@ -78,7 +83,8 @@ def test_a_workers_give_up_messages_count_by_kind_with_a_seed_as_example():
            "messages": {"s": [{"message": records[1]["error"], "count": 1}, {"message": records[2]["error"], "count": 1}]}}
     merged = merged_messages([old, found])
     assert merged["s"][0]["message"] == kind and merged["s"][0]["count"] == 5
-    lines = _errored_lines({"steps": {"mine": {"errored": old}, "regress": {"errored": {"fine_tuned": found}}}})
+    lines = _errored_lines(RoundRecord.from_dict({"round": 1, "steps": {"mine": {"errored": old},
+                                                                       "regress": {"errored": {"fine_tuned": found}}}}))
     assert lines[-1] == f"  - `s`: {kind} (5 episodes, e.g. seed 4); scene not sampled (1 episode)"
 
 
@@ -90,11 +96,11 @@ def test_rejection_reasons_name_files_in_the_run_folder_by_their_relative_path(t
     (run / "failures").write_text("not a folder")  # the conversion cannot make its folder there
     record = {"scenario": "urban_lead_vehicle_stopped", "seed": 0, "index": 3, "params": {},
               "failure": {"type": "collision"}, "result": {"trajectory_hash": "0" * 16}}
-    out = convert_failure(record, run, policy="keep_lane", bank=tmp_path / "bank", k=1)
+    out = convert_failure(record, run, KEEP_LANE.replace(k=1), bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["stage"] == "input"
     assert "failures/episode-000003/conversion" in out["reason"] and str(tmp_path) not in out["reason"]
     (run / "settings.json").mkdir()  # nor read the run's settings
-    out = replay_failure_entry(record, run, policy="keep_lane", bank=tmp_path / "bank")
+    out = replay_failure_entry(record, run, KEEP_LANE, bank=tmp_path / "bank")
     assert out["status"] == "rejected" and out["reason"].startswith("replay: ")
     assert str(tmp_path) not in out["reason"] and "failures/" in out["reason"]
 
@@ -106,7 +112,7 @@ def test_the_loop_html_shows_a_kind_with_its_seed_mark_escaped():
 
     found = errored_episodes([gave_up_result({"scenario": "s", "seed": seed, "role": "eval", "policy": "p"},
                                              ["the worker hung (no result after 5 s)"], 1) for seed in (3, 8)])
-    page = _markdown_to_html(_errored_lines({"steps": {"mine": {"errored": found}}}))
+    page = _markdown_to_html(_errored_lines(RoundRecord.from_dict({"round": 1, "steps": {"mine": {"errored": found}}})))
     assert "on s seed &lt;seed&gt; (1 attempts) (2 episodes, e.g. seed 3)" in page
 
 

@@ -8,6 +8,7 @@ import math
 
 import pytest
 
+from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.loop_settings import LoopError, LoopSettings
 from dv2s_gym.mining.settings import MineSettings
@@ -36,7 +37,7 @@ PATH = [0, "", ["a"]]
 BOOL = ["yes", 1, 0, None]
 
 BASE = {TrainConfig: {"out": "run"}}
-ERRORS = {MineSettings: MiningError, LoopSettings: LoopError, RegressSettings: RegressError,
+ERRORS = {MineSettings: MiningError, ConversionSettings: MiningError, LoopSettings: LoopError, RegressSettings: RegressError,
           WorkerSettings: WorkerError, DaggerConfig: TrainingError, TrainConfig: TrainingError}
 
 # class -> field -> (what the message names, bad values)
@@ -55,8 +56,24 @@ BAD = {
         "ttc_threshold": ("--ttc-threshold", POSITIVE),
         "stall_seconds": ("--stall-seconds", POSITIVE),
         "convert": ("convert", BOOL),
-        "convert_options": ("convert_options", MAPPING),
+        "conversion": ("conversion", MAPPING + [None]),
         "max_conversions": ("--max-conversions", OPTIONAL_COUNT_FROM_0),
+    },
+    ConversionSettings: {
+        "policy": ("conversion policy", ["", " "]),
+        "dra": ("conversion dra", ["", 0, None]),
+        "sg": ("conversion sg", ["", 0, None]),
+        "llm_config": ("llm_config", []),  # its keys are the LLM client's to check (LLMConfigError)
+        "k": ("conversion k", [-1, 1.5, True, "3", None]),
+        "threshold": ("conversion threshold", [NAN, INF, True, "0.3", None]),
+        "seed": ("conversion seed", SEED),
+        "env_config": ("conversion env_config", MAPPING),
+        "bank_dir": ("conversion bank_dir", PATH),
+        "monitor": ("conversion monitor", MAPPING + [{"ttc_threshold": "x"}]),
+        "before": ("conversion before", [-1.0, NAN, True, "4", None]),
+        "after": ("conversion after", [-1.0, NAN, True, "1", None]),
+        "reference": ("conversion reference", ["", " "]),
+        "describe_events": ("conversion describe_events", BOOL),
     },
     LoopSettings: {
         "rounds": ("--rounds", COUNT_FROM_1),
@@ -175,6 +192,9 @@ def test_the_defaults_and_the_edges_of_each_range_stay_valid(cls):
                                 fine_tune_reward={}, min_heldout_episodes=0),
              RegressSettings: dict(margin=0.0, episodes=1, batch=1, failure=["stall"], mde=0.5, power=0.9,
                                    env_config={}, scenarios=("a", "tag:b")),
+             ConversionSettings: dict(policy="keep_lane", k=0, threshold=2.0, seed=0, env_config={}, bank_dir="b",
+                                      monitor={"ttc_threshold": 1.0}, before=0, after=0, reference=None,
+                                      describe_events=False),
              WorkerSettings: dict(backend="ray", workers=1, address="auto", timeout=0.5),
              DaggerConfig: dict(beta=0, beta_decay=1, epochs=0, checkpoint_every=0, slower_weight=1,
                                 disagreement_weight=1),
@@ -182,7 +202,7 @@ def test_the_defaults_and_the_edges_of_each_range_stay_valid(cls):
                                env_config=None, weights={"a": 0}, sampler="weighted", seed=0)}
     settings = cls(**{**base, **edges[cls]})
     for name, value in edges[cls].items():
-        if name not in ("scenarios", "env_config", "batch", "failure", "workers", "fine_tune_reward"):
+        if name not in ("scenarios", "env_config", "batch", "failure", "workers", "fine_tune_reward", "monitor"):
             assert getattr(settings, name) == value, name
 
 

@@ -13,7 +13,7 @@ from dv2s_gym.mining.loop_settings import LoopSettings
 from dv2s_gym.mining.monitors import MonitorSettings
 from dv2s_gym.mining.settings import MineSettings
 
-NOT_RECORDED_BY_MINE = {"convert", "convert_options", "max_conversions"}
+NOT_RECORDED_BY_MINE = {"convert", "conversion", "max_conversions"}
 
 
 def _names(cls) -> set:

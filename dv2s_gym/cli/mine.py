@@ -9,6 +9,7 @@ from dv2s_gym.cli.backend_options import dra_option, sg_option, worker_backend_o
 from dv2s_gym.cli.inputs import env_config_option, json_option, llm_config
 from dv2s_gym.cli.interrupts import episodes_kept_note
 from dv2s_gym.cli.parser import bank_option, llm_options
+from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.samplers import SAMPLERS, registered_samplers
 from dv2s_gym.mining.settings import FEEDBACKS, MineSettings
 from dv2s_gym.registered_names import RegisteredNames
@@ -132,5 +133,5 @@ def _settings(args: argparse.Namespace, env_config) -> MineSettings:
         sampler_options=json_option(args.sampler_options, "--sampler-options",
                                     "VerifAI settings as a JSON object (or a .json file holding one)",
                                     "'{\"alpha\": 0.9}'"),
-        convert_options={"dra": args.dra, "sg": args.sg, "k": args.k, "threshold": args.threshold,
-                         "llm_config": llm_config(args)})
+        conversion=ConversionSettings(dra=args.dra, sg=args.sg, k=args.k, threshold=args.threshold,
+                                      llm_config=llm_config(args)))

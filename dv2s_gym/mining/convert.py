@@ -72,6 +72,7 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
 
 import numpy as np
 
+from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.exact_replay import NARROW, narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
 from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence, key_actor, shows_interaction
@@ -88,7 +89,6 @@ from dv2s_gym.pipeline import stages
 from dv2s_gym.pipeline.convert import check_scenario, conversion_provenance
 from dv2s_gym.pipeline.errors import (EndpointHTTPError, EndpointTimeoutError, EndpointUnreachableError,
                                       MissingAPIKeyError)
-from dv2s_gym.pipeline.llm_config import LLMConfig
 from dv2s_gym.pipeline.metrics import e2e_sc
 from dv2s_gym.pipeline.semantics.text import elements_from_text
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace, trace_actor_kind
@@ -107,7 +107,7 @@ SETUP_ERRORS = (EndpointUnreachableError, EndpointTimeoutError, EndpointHTTPErro
 :func:`convert_failure` raises them instead of rejecting the failure, so a run stops and can be resumed
 when the endpoint works, rather than rejecting every cluster."""
 
-__all__ = ["ConversionSettings", "convert_failure", "replay_failure_entry", "same_failure_class", "reference_failed", "reference_passed", "reference_outcome",
+__all__ = ["convert_failure", "replay_failure_entry", "same_failure_class", "reference_failed", "reference_passed", "reference_outcome",
            "reproduction_seeds", "cluster_slug", "CONVERSION_DIR", "ENTRY_VIDEO",
            "ENTRY_TRACE", "ENTRY_CONVERTED_VIDEO", "clip_episode"]
 
@@ -241,46 +241,11 @@ def _in_run(text: str, run_dir: Path) -> str:
     return text
 
 
-@dataclasses.dataclass(frozen=True)
-class ConversionSettings:
-    """How :func:`convert_failure` converts and judges a failure: the deterministic ``policy`` that failed (a spec or
-    a :class:`~policies.registry.Policy`), the D-V2S backends (``dra``: ``bev``/``openai``, ``sg``:
-    ``rules``/``openai``) and their ``llm_config``, the reproduction check's ``k`` episodes and ``threshold`` (the
-    smallest reproduction rate that keeps the scenario), ``seed`` (the SG's seed and the reproduction seeds' salt),
-    the mining run's ``env_config``, the bank holding the record's scenario (``bank_dir``; default the bank converted
-    into when it holds it, else the shipped bank), the failure ``monitor``'s options (``ttc_threshold``,
-    ``stall_seconds``; default those of the run's ``settings.json``, else the monitors' defaults), the seconds of
-    video ``before`` and ``after`` the failure, the ``reference`` driver that must avoid the failure on the new
-    script (``None``: not checked) and ``describe_events`` (add the trace's account of the failure to the
-    description)."""
-
-    policy: Any = None
-    dra: str = "bev"
-    sg: str = "rules"
-    llm_config: Optional[LLMConfig] = None
-    k: int = 10
-    threshold: float = 0.3
-    seed: int = 0
-    env_config: Optional[Mapping[str, Any]] = None
-    bank_dir: Optional[PathLike] = None
-    monitor: Union[MonitorSettings, Mapping[str, Any], None] = None
-    before: float = 4.0
-    after: float = 1.0
-    reference: Optional[Any] = "rule"
-    describe_events: bool = True
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "llm_config", LLMConfig.of(self.llm_config))  # a mapping's keys checked once, here
-
-    def replace(self, **changes: Any) -> "ConversionSettings":
-        """A copy with ``changes``."""
-        return dataclasses.replace(self, **changes)
-
-    def video(self):
-        """The settings of the failure's video (:class:`~dv2s_gym.mining.failure_video.VideoSettings`)."""
-        return VideoSettings(policy=self.policy, bank_dir=self.bank_dir, env_config=self.env_config,
-                             before=self.before, after=self.after,
-                             monitor=None if self.monitor is None else MonitorSettings.of(self.monitor))
+def _video_settings(settings: ConversionSettings) -> VideoSettings:
+    """The settings of the failure's video (:class:`~dv2s_gym.mining.failure_video.VideoSettings`)."""
+    return VideoSettings(policy=settings.policy, bank_dir=settings.bank_dir, env_config=settings.env_config,
+                         before=settings.before, after=settings.after,
+                         monitor=settings.monitor)
 
 
 def _reproduce(script_path: Path, policy: Any, settings: ConversionSettings, record_seed: int,
@@ -1241,18 +1206,23 @@ def _bank_replay(out: Dict[str, Any], record: Mapping[str, Any], bank, parent: A
             out["note"] = f"no replay entry: {error}"
 
 
-def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, *, policy: Any, bank: Any,
-                         env_config: Optional[Mapping[str, Any]] = None, bank_dir: Optional[PathLike] = None,
-                         cluster: Optional[str] = None, monitor: Optional[Mapping[str, Any]] = None) -> Dict[str, Any]:
+def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, settings: ConversionSettings, *, bank: Any,
+                         cluster: Optional[str] = None) -> Dict[str, Any]:
     """Keep one failure exactly, without converting it: only the exact replay entry of the failing scene
     (stage 3 of :func:`convert_failure`, with no video, description or script; the entry keeps the replay's
-    trace). Never raises for a bad failure.
+    trace). Never raises for a bad failure; raises ``WrongTypeError`` when ``settings`` is not a
+    :class:`ConversionSettings` with a policy.
+
+    Of ``settings`` the replay reads the ``policy`` that failed, the run's ``env_config``, the ``bank_dir`` holding
+    the record's scenario (default the ``bank`` when it holds it, else the shipped bank) and the ``monitor``
+    (default the run's ``settings.json``'s).
 
     Returns ``{"cluster", "index", "scenario", "status": "kept"|"rejected", "replay_entry", "reason",
     "note", "seconds"}`` (and ``replay_not_narrowed`` when kept: ``{parameter: why}`` of those the replay leaves at
     the parent's distribution): ``kept`` with the entry's name, or ``rejected`` with the reason (a replay that
     diverges from the recorded episode, a bad record); ``kept`` with no entry and a ``note`` when the bank
     holds the scene already under another name."""
+    _check_settings(settings, "replay_failure_entry")
     start = time.perf_counter()
     run_dir = Path(run_dir)
     cluster = cluster if cluster is not None else record.get("cluster")
@@ -1266,10 +1236,9 @@ def replay_failure_entry(record: Mapping[str, Any], run_dir: PathLike, *, policy
             raise _Rejected("input", "the record holds no trajectory hash to check the replay against")
         if isinstance(bank, (str, os.PathLike)):
             bank = Bank(bank)
-        if bank_dir is None and getattr(bank, "root", None) is not None and record.get("scenario") in bank:
-            bank_dir = bank.root
-        settings = ConversionSettings(policy=policy, env_config=env_config, bank_dir=bank_dir,
-                                      monitor=_monitor_options(run_dir, monitor))
+        if settings.bank_dir is None and getattr(bank, "root", None) is not None and record.get("scenario") in bank:
+            settings = settings.replace(bank_dir=bank.root)
+        settings = settings.replace(monitor=_monitor_options(run_dir, settings.monitor))
         replay = _add_replay(record, bank, settings, _ReplaySource(failure, cluster, run_dir))
         out.update(status="kept", replay_entry=replay["entry"], note=replay["note"],
                    replay_not_narrowed=dict(replay.get("not_narrowed") or {}))
@@ -1328,8 +1297,16 @@ def _mined_name(parent: str, failure_type: str) -> str:
     return base[:90] or "mined"
 
 
-def convert_failure(record: Mapping[str, Any], run_dir: PathLike, settings: Optional[ConversionSettings] = None, *,
-                    bank: Any, cluster: Optional[str] = None, **options: Any) -> Dict[str, Any]:
+def _check_settings(settings: Any, function: str) -> None:
+    """Refuse ``settings`` that are not a :class:`ConversionSettings` naming the policy that failed."""
+    if not isinstance(settings, ConversionSettings):
+        raise WrongTypeError(f"{function} takes its settings as one ConversionSettings, not {type(settings).__name__}")
+    if settings.policy is None:
+        raise WrongTypeError(f"{function} needs the policy that failed: pass ConversionSettings(policy=<its spec>)")
+
+
+def convert_failure(record: Mapping[str, Any], run_dir: PathLike, settings: ConversionSettings, *,
+                    bank: Any, cluster: Optional[str] = None) -> Dict[str, Any]:
     """Turn one failure record into a bank entry; returns the conversion record (never raises for a bad failure).
 
     Args:
@@ -1337,15 +1314,14 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, settings: Opti
         run_dir: the mining run folder; files go to ``failures/<cluster slug>/`` (``failure.webm``,
             ``trace.json.gz``, ``conversion/{description.txt, elements.json, scenario.scenic, report.json}``).
         settings: the :class:`ConversionSettings` (the policy that failed, the backends, the reproduction check,
-            the video window, the reference driver...); ``options``: its fields given one by one as keywords
-            (``policy=``, ``k=``...), on top of ``settings``. The video covers ``before`` seconds before the failure
+            the video window, the reference driver...). The video covers ``before`` seconds before the failure
             and ``after`` after it (a stall's clip covers the stall, up to the monitor's ``stall_seconds``, between
             them: :func:`~dv2s_gym.mining.failure_video.write_failure_video`).
         bank: the bank to add to (a :class:`~scenario_bank.bank.Bank` or its folder).
         cluster: the failure's cluster id (default ``record["cluster"]``).
 
-    Raises the model backends' setup errors (:data:`SETUP_ERRORS`), and ``TypeError`` without a policy; every
-    other problem is a rejection.
+    Raises the model backends' setup errors (:data:`SETUP_ERRORS`), and ``WrongTypeError`` (a ``TypeError``)
+    for settings that are not a :class:`ConversionSettings` or name no policy; every other problem is a rejection.
 
     Returns ``{"cluster", "index", "status": "kept"|"merged"|"rejected", "reason", "stage", "video",
     "description", "script", "reproduction", "e2e_sc", "bank_entry", "merged_into", "seconds",
@@ -1357,9 +1333,7 @@ def convert_failure(record: Mapping[str, Any], run_dir: PathLike, settings: Opti
     parameters it leaves at the parent's distribution, with why; ``rejections``: every judge check that failed,
     the first one is ``reason``).
     """
-    settings = (settings or ConversionSettings()).replace(**options)
-    if settings.policy is None:
-        raise WrongTypeError("convert_failure needs the policy that failed: pass policy=<its spec>")
+    _check_settings(settings, "convert_failure")
     return _Conversion(record, Path(run_dir), settings, bank, cluster).run()
 
 
@@ -1438,7 +1412,7 @@ class _Conversion:
         self.video = self.folder / "failure.webm"
         self.settings = self.settings.replace(monitor=_monitor_options(self.run_dir, self.settings.monitor))
         try:
-            self.written = write_failure_video(self.record, self.video, self.settings.video())
+            self.written = write_failure_video(self.record, self.video, _video_settings(self.settings))
         except SETUP_ERRORS:
             raise
         except Exception as error:  # no video, no conversion; the exact replay does not need one
@@ -1589,7 +1563,7 @@ class _Conversion:
                 "chosen": chosen, "file": ENTRY_CONVERTED_VIDEO}
         path = self.conversion / ENTRY_CONVERTED_VIDEO
         try:
-            write_script_episode_video(self.script_path, episode, path, self.settings.video(),
+            write_script_episode_video(self.script_path, episode, path, _video_settings(self.settings),
                                        centre=self.written.failure_frame)
         except SETUP_ERRORS:
             raise

@@ -76,6 +76,7 @@ from dv2s_gym.mining.errored import errored_episodes, merged_messages, messages_
 from dv2s_gym.mining.family import scenario_family
 from dv2s_gym.mining.heldout import episode_failed, failure_types, HeldOutStore, paired_summary
 from dv2s_gym.mining.jsonl import read_rows
+from dv2s_gym.mining.loop_record import RoundRecord, RoundSteps
 from dv2s_gym.mining.loop_report import errored_note, errored_text, reference_gate_text, write_loop_reports
 from dv2s_gym.mining.loop_settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
 from dv2s_gym.mining.loop_verdict import (
@@ -92,7 +93,7 @@ from dv2s_gym.workers.settings import WorkerSettings
 from scenario_bank import select_scenarios
 from scenario_bank.atomic import atomic_write_json
 from scenario_bank.bank import Bank
-from scenario_bank.records import EpisodeRecord
+from scenario_bank.records import EpisodeRecord, RecordError
 from scenario_bank.run_identity import check_identity
 from policies.evaluation import EVAL_SEED_BASE
 from policies.registry import SB3_ALGORITHMS, read_model_card
@@ -118,7 +119,7 @@ class LoopReport:
     """What :func:`run_loop` returns: the rounds' records and where the reports are."""
 
     out: Path
-    rounds: List[Dict[str, Any]]
+    rounds: List[RoundRecord]
     policy: str
     """The spec of the last round's fine-tuned policy (the starting policy if no round fine-tuned); the policy to
     use is :attr:`recommendation`'s."""
@@ -128,7 +129,7 @@ class LoopReport:
     def to_json(self) -> Dict[str, Any]:
         """A JSON-safe dict (the body of ``report.json``)."""
         body = {"schema": "dv2s-loop", "schema_version": 1, "out": str(self.out), "settings": self.settings,
-                "policy": self.policy, "rounds": self.rounds}
+                "policy": self.policy, "rounds": [record.to_dict() for record in self.rounds]}
         return {**body, "recommendation": recommendation(body)}
 
     @property
@@ -145,7 +146,8 @@ class LoopReport:
 
 # --------------------------------------------------------------------------- state
 class _State:
-    """``loop.json``: settings, the starting bank's scenarios and every finished step (atomic writes)."""
+    """``loop.json``: settings, the starting bank's scenarios and every round (:attr:`rounds`, each a
+    :class:`~dv2s_gym.mining.loop_record.RoundRecord` replaced as its steps finish; atomic writes)."""
 
     def __init__(self, path: Path, settings: Dict[str, Any]) -> None:
         self.path = path
@@ -164,15 +166,38 @@ class _State:
             self.data = data
         else:
             self.data = {"settings": settings, "start": None, "rounds": []}
+        self.rounds: List[RoundRecord] = _read_rounds(self.data.pop("rounds"), path)
 
     def save(self) -> None:
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_json(self.path, self.data, indent=1)
+        atomic_write_json(self.path, {**self.data, "rounds": [record.to_dict() for record in self.rounds]}, indent=1)
 
-    def round(self, number: int) -> Dict[str, Any]:
-        while len(self.data["rounds"]) < number:
-            self.data["rounds"].append({"round": len(self.data["rounds"]) + 1, "steps": {}, "timings": {}})
-        return self.data["rounds"][number - 1]
+    def round(self, number: int) -> RoundRecord:
+        """Round ``number``'s record (the rounds before it started when not yet)."""
+        while len(self.rounds) < number:
+            self.rounds.append(RoundRecord.started(len(self.rounds) + 1))
+        return self.rounds[number - 1]
+
+    def update(self, record: RoundRecord, save: bool = True) -> RoundRecord:
+        """``record`` becomes its round's record (written to ``loop.json`` when ``save``); returns it."""
+        self.round(record.round)
+        self.rounds[record.round - 1] = record
+        if save:
+            self.save()
+        return record
+
+
+def _read_rounds(rounds: List[Any], path: Path) -> List[RoundRecord]:
+    """The rounds of a ``loop.json`` whose structure is checked (:func:`_check_structure`) as records; a field of
+    the wrong kind is refused in one line naming the round, the field and the fix."""
+    records = []
+    for number, data in enumerate(rounds, start=1):
+        try:
+            records.append(RoundRecord.from_dict(data))
+        except RecordError as error:
+            raise LoopError(f"{path} is not a dv2s loop record (round {number}: {error}); choose another --out, or "
+                            "delete the file to start the loop over") from None
+    return records
 
 
 def _check_structure(data: Any, path: Path) -> None:
@@ -490,57 +515,63 @@ def _recorded_settings(policy: str, settings: LoopSettings, workers: int, env_co
 class _Timed:
     """Runs one step of a round: logs it, times it, records its value in ``loop.json``."""
 
-    def __init__(self, loop: _Loop, number: int, record: Dict[str, Any]) -> None:
-        self.loop, self.number, self.record = loop, number, record
+    def __init__(self, loop: _Loop, number: int) -> None:
+        self.loop, self.number = loop, number
         control, untouched = loop.settings.control, loop.settings.untouched_seeds
         self.stages = ["mine", "split", "reference", "before", "fine_tune"] + (["control"] if control else []) + ["after"] + (
             ["untouched"] if untouched else []) + ["regress"]
 
     def __call__(self, step: str, function: Callable[[], Any], plan: str = "") -> Any:
         """Run ``function`` as ``step``; ``plan`` says what it will do (its size), in the step's opening line."""
-        log, timings = self.loop.log, self.record["timings"]
+        log, state = self.loop.log, self.loop.state
         where = f"round {self.number} [{self.stages.index(step) + 1}/{len(self.stages)}] {_STAGE_NAMES[step]}"
         log(f"{where}: {plan} ..." if plan else f"{where} ...")
         began = time.perf_counter()
         value = function()
-        timings[step] = round(time.perf_counter() - began, 1)  # of the run that finished the step
-        self.record["steps"][step] = value
-        self.loop.state.save()
-        log(f"{where}: done in {timings[step]:.0f} s")
+        seconds = round(time.perf_counter() - began, 1)  # of the run that finished the step
+        state.update(state.round(self.number).with_step(step, value, seconds))
+        log(f"{where}: done in {seconds:.0f} s")
         return value
+
+    @property
+    def steps(self) -> RoundSteps:
+        """The round's steps as recorded so far."""
+        return self.loop.state.round(self.number).steps
 
 
 def _run_round(loop: _Loop, number: int, current: str) -> str:
     """Run (or finish) round ``number`` from policy ``current``; the policy the next round starts from."""
     record = loop.state.round(number)
-    steps = record["steps"]
-    if steps and record.get("policy") not in (None, current):
-        raise LoopError(f"round {number} in {loop.out / 'loop.json'} was begun from {record['policy']}, not from "
+    steps = record.steps
+    if steps and record.policy not in (None, current):
+        raise LoopError(f"round {number} in {loop.out / 'loop.json'} was begun from {record.policy}, not from "
                         f"{current}, the policy the rounds before it recommend; choose another --out")
-    record.setdefault("policy", current)
+    if "policy" not in record:
+        loop.state.update(record.replace(policy=current), save=False)
     round_dir = loop.out / f"round_{number}"
-    if "regress" in steps or steps.get("skipped"):
+    if steps.done("regress") or steps.skipped:
         return _next_start(loop, number, current)
     loop.log(f"round {number}: policy {current}")
-    timed = _Timed(loop, number, record)
-    done = [_STAGE_NAMES[step] for step in timed.stages if step in steps]
+    timed = _Timed(loop, number)
+    done = [_STAGE_NAMES[step] for step in timed.stages if steps.done(step)]
     if done:
         loop.log(f"round {number}: resuming: {len(done)} of {len(timed.stages)} steps already done and kept "
                  f"({', '.join(done)}); an interrupted step carries on from what it had kept")
-    if "mine" not in steps:
-        timed("mine", lambda: _mine_step(loop, number, current, round_dir), _mine_plan(loop))
-        _log_mined(loop, number, steps["mine"])
-        _log_errored(loop, number, "mining", {"mine": steps["mine"].get("errored") or {}})
-    if "split" not in steps:
+    if not steps.done("mine"):
+        mined = timed("mine", lambda: _mine_step(loop, number, current, round_dir), _mine_plan(loop))
+        _log_mined(loop, number, mined)
+        _log_errored(loop, number, "mining", {"mine": mined.get("errored") or {}})
+    if not timed.steps.done("split"):
         _split_step(loop, number, current, timed)
-    if not steps["split"]["fine_tune"] and not steps["split"]["held_out"]:
-        _skip_round(loop, number, steps)
+    if not timed.steps.split["fine_tune"] and not timed.steps.split["held_out"]:
+        _skip_round(loop, number, timed.steps)
     else:
         _tune_and_measure(loop, number, current, round_dir, timed)
-        _log_round(loop.log, number, steps)
+        _log_round(loop.log, number, timed.steps)
     following = _next_start(loop, number, current)
     if number < loop.settings.rounds:
-        loop.log(f"round {number}: round {number + 1} starts from {following}: {record['next_policy_reason']}")
+        loop.log(f"round {number}: round {number + 1} starts from {following}: "
+                 f"{loop.state.round(number).next_policy_reason}")
     _write(loop.out, loop.state)
     return following
 
@@ -549,21 +580,21 @@ def _split_step(loop: _Loop, number: int, current: str, timed: "_Timed") -> None
     """Split the round's kept scenarios into fine-tuning and held-out families. Families an earlier round held
     out stay held out where they can; families fine-tuned on by a round ``current`` descends from
     (:func:`_lineage`) cannot be held out; a discarded round's fine-tuning does not count."""
-    steps = timed.record["steps"]
-    earlier = loop.state.data["rounds"][:number - 1]
+    earlier = loop.state.rounds[:number - 1]
     held_families, _ = _earlier_sides(earlier)
     _, tuned_families = _earlier_sides(_lineage(loop, earlier, current))
-    kept = steps["mine"]["kept"]
-    timed("split", lambda: split_by_family(_with_parents(kept, loop.bank), loop.settings.holdout_fraction,
-                                           loop.settings.seed * 1000 + number, held_families, tuned_families).to_dict(),
-          f"{len(kept)} kept mined scenario(s) into fine-tuning and held-out families")
-    families = set(steps["split"].get("fine_tune_families", []))  # every kept family, when none is held out
-    if kept and not steps["split"]["held_out"] and families and families <= set(tuned_families) - set(held_families):
+    kept = timed.steps.mine["kept"]
+    split = timed("split", lambda: split_by_family(_with_parents(kept, loop.bank), loop.settings.holdout_fraction,
+                                                   loop.settings.seed * 1000 + number, held_families,
+                                                   tuned_families).to_dict(),
+                  f"{len(kept)} kept mined scenario(s) into fine-tuning and held-out families")
+    families = set(split.get("fine_tune_families", []))  # every kept family, when none is held out
+    if kept and not split["held_out"] and families and families <= set(tuned_families) - set(held_families):
         loop.log(f"round {number}: WARNING: nothing can be held out: every kept scenario's family "
                  f"({', '.join(sorted(families))}) was fine-tuned on by an earlier round that {current} descends from")
-    if steps["split"].get("moved_to_fine_tune"):
+    if split.get("moved_to_fine_tune"):
         loop.log(f"round {number}: WARNING: earlier held-out famil(ies) "
-                 f"{', '.join(steps['split']['moved_to_fine_tune'])} now share a mined scenario with a family "
+                 f"{', '.join(split['moved_to_fine_tune'])} now share a mined scenario with a family "
                  "fine-tuned on earlier, so they are fine-tuned on from this round")
 
 
@@ -571,23 +602,23 @@ def _next_start(loop: _Loop, number: int, current: str) -> str:
     """The policy round ``number + 1`` starts from: the one the verdict on rounds 1..``number`` recommends
     (:func:`~dv2s_gym.mining.loop_verdict.recommendation`: never a REJECTED or NOT ACCEPTED fine-tuned policy),
     recorded in round ``number``'s ``next_policy`` and ``next_policy_reason``."""
-    rounds = loop.state.data["rounds"][:number]
+    rounds = loop.state.rounds[:number]
     record = rounds[-1]
     start = loop.state.data["settings"]["policy"]
     # as the report judges it: the cross-round check on each accepted round's policy
-    body = loop_report.with_cross_round_checks({"settings": {"policy": start}, "rounds": rounds}, folder=loop.out)
+    body = loop_report.with_cross_round_checks({"settings": {"policy": start},
+                                                "rounds": [r.to_dict() for r in rounds]}, folder=loop.out)
     advice = recommendation(body)
     # the policy to use, exactly as the report recommends it: the fine-tuned one only when it is the recommendation
     following = advice["policy"]
-    if record.get("new_policy") is None and "fine_tune" not in record["steps"]:
+    if not record.fine_tuned:
         reason = f"this round fine-tuned no policy; {advice['sentence']}"
     else:
         reason = advice["sentence"]
     if following != start:
         following = _earlier_round_spec(following, loop, number + 1)
-    if (record.get("next_policy"), record.get("next_policy_reason")) != (following, reason):
-        record["next_policy"], record["next_policy_reason"] = following, reason
-        loop.state.save()
+    if (record.next_policy, record.next_policy_reason) != (following, reason):
+        loop.state.update(record.replace(next_policy=following, next_policy_reason=reason))
     return following
 
 
@@ -660,70 +691,71 @@ def _log_mined(loop: _Loop, number: int, mined: Mapping[str, Any]) -> None:
                 + ")" if mined.get("clusters_not_kept") else ""))
 
 
-def _skip_round(loop: _Loop, number: int, steps: Dict[str, Any]) -> None:
+def _skip_round(loop: _Loop, number: int, steps: RoundSteps) -> None:
     """Record and log a round that kept no mined scenario (nothing to fine-tune on or to measure)."""
-    mined = steps["mine"]
+    mined = steps.mine
     tried = sum((mined.get("conversions") or {}).values())
     replayed = sum((mined.get("replays") or {}).values())
-    steps["skipped"] = (f"no mined scenario was kept this round ({tried} conversion(s) tried"
-                        + (f", {replayed} exact replay(s) tried" if replayed else "")
-                        + (f", {mined['clusters_not_converted']} cluster(s) not converted: raise "
-                           "--max-conversions, --max-replays or --budget"
-                           if mined.get("clusters_not_converted") else "")
-                        + "): nothing to fine-tune on or to measure")
-    loop.state.save()
-    loop.log(f"round {number}: {steps['skipped']}")
+    skipped = (f"no mined scenario was kept this round ({tried} conversion(s) tried"
+               + (f", {replayed} exact replay(s) tried" if replayed else "")
+               + (f", {mined['clusters_not_converted']} cluster(s) not converted: raise "
+                  "--max-conversions, --max-replays or --budget"
+                  if mined.get("clusters_not_converted") else "")
+               + "): nothing to fine-tune on or to measure")
+    loop.state.update(loop.state.round(number).with_step("skipped", skipped))
+    loop.log(f"round {number}: {skipped}")
 
 
 def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, timed: _Timed) -> str:
     """The steps after the split: held-out before, fine-tune (+ control), held-out after, untouched set,
     regression; the fine-tuned policy's spec."""
-    s, record = loop.settings, timed.record
-    steps, split = record["steps"], record["steps"]["split"]
+    s, split = loop.settings, timed.steps.split
     episodes = [(name, EVAL_SEED_BASE + i) for name in split["held_out"] for i in range(s.k_eval)]
-    families = _families_of(steps["mine"]["kept"], split["held_out"], loop.bank)
+    families = _families_of(timed.steps.mine["kept"], split["held_out"], loop.bank)
     store_path = round_dir / "heldout.jsonl"
-    if "reference" not in steps:
-        timed("reference", lambda: _reference_step(loop, episodes, HeldOutStore(store_path), families),
-              f"{len(episodes)} episodes ({len(split['held_out'])} held-out scenario(s) x {s.k_eval} seeds) for the "
-              f"reference driver {REFERENCE_DRIVER}: a held-out episode it does not pass is left out")
-        _log_reference(loop, number, steps["reference"])
-    excluded = {(str(name), int(seed)) for name, seed in steps["reference"]["excluded"]}
+    if not timed.steps.done("reference"):
+        gate = timed("reference", lambda: _reference_step(loop, episodes, HeldOutStore(store_path), families),
+                     f"{len(episodes)} episodes ({len(split['held_out'])} held-out scenario(s) x {s.k_eval} seeds) "
+                     f"for the reference driver {REFERENCE_DRIVER}: a held-out episode it does not pass is left out")
+        _log_reference(loop, number, gate)
+    excluded = {(str(name), int(seed)) for name, seed in timed.steps.reference["excluded"]}
     episodes = [episode for episode in episodes if episode not in excluded]
     shortfall = underpowered(len(episodes), s.min_heldout_episodes,
                              len({families[name] for name, _ in episodes}), s.min_heldout_families)
     if shortfall:
         loop.log(f"round {number}: WARNING: {shortfall}")
-    if "before" not in steps:
+    if not timed.steps.done("before"):
         def before_step() -> Dict[str, Any]:
             records = heldout.evaluate_heldout("before", current, episodes, store=HeldOutStore(store_path),
                                                bank_dir=loop.bank, env_config=loop.env_config,
                                                workers=WorkerSettings(workers=loop.workers), progress=loop.progress)
             return {"episodes": len(episodes), "done": bool(records), "errored": errored_episodes(records)}
 
-        timed("before", before_step,
-              f"{len(episodes)} episodes ({len(split['held_out'])} held-out scenario(s) x {s.k_eval} seeds"
-              + (f", {len(excluded)} left out: the reference driver does not pass them" if excluded else "") + ")")
-        _log_errored(loop, number, "held-out: starting policy", {"start": steps["before"]["errored"]})
+        before = timed("before", before_step,
+                       f"{len(episodes)} episodes ({len(split['held_out'])} held-out scenario(s) x {s.k_eval} seeds"
+                       + (f", {len(excluded)} left out: the reference driver does not pass them" if excluded else "")
+                       + ")")
+        _log_errored(loop, number, "held-out: starting policy", {"start": before["errored"]})
     new_policy, control_policy = _fine_tune_arms(loop, number, current, round_dir, timed)
     policies = {"before": current, "after": new_policy, "control": control_policy}
-    if "after" not in steps:
-        timed("after", lambda: _after_step(loop, policies, episodes, HeldOutStore(store_path), families),
-              f"{len(episodes)} episodes for the fine-tuned policy" + (" and as many for the control"
-                                                                       if control_policy else ""))
-        _log_errored(loop, number, "held-out: fine-tuned and control", steps["after"].get("errored") or {})
-    if s.untouched_seeds and "untouched" not in steps:
-        timed("untouched", lambda: evaluate_untouched(
+    if not timed.steps.done("after"):
+        after = timed("after", lambda: _after_step(loop, policies, episodes, HeldOutStore(store_path), families),
+                      f"{len(episodes)} episodes for the fine-tuned policy" + (" and as many for the control"
+                                                                               if control_policy else ""))
+        _log_errored(loop, number, "held-out: fine-tuned and control", after.get("errored") or {})
+    if s.untouched_seeds and not timed.steps.done("untouched"):
+        untouched = timed("untouched", lambda: evaluate_untouched(
             current, new_policy, control_policy, settings=untouched_settings(s.untouched_seeds, loop.env_config,
                                                                              s.margin),
             out=round_dir / "untouched", workers=loop.workers, progress=loop.progress),
               f"{_count_scripts(UNTOUCHED_BANK)} scripts x {s.untouched_seeds} seed(s) for the starting, fine-tuned"
               + (" and control policies" if control_policy else " policies"))
-        _log_errored(loop, number, "untouched scenario set", steps["untouched"].get("errored") or {})
-    if "regress" not in steps:
-        timed("regress", lambda: _regress_step(loop, new_policy, current, round_dir, split),
-              f"{len(loop.start_names)} scenarios x {s.regress_episodes} seed(s), fine-tuned against starting policy")
-        _log_errored(loop, number, "regression test", steps["regress"].get("errored") or {})
+        _log_errored(loop, number, "untouched scenario set", untouched.get("errored") or {})
+    if not timed.steps.done("regress"):
+        regress = timed("regress", lambda: _regress_step(loop, new_policy, current, round_dir, split),
+                        f"{len(loop.start_names)} scenarios x {s.regress_episodes} seed(s), fine-tuned against "
+                        "starting policy")
+        _log_errored(loop, number, "regression test", regress.get("errored") or {})
     return new_policy
 
 
@@ -790,17 +822,16 @@ def _fine_tune_arms(loop: _Loop, number: int, current: str, round_dir: Path, tim
     """The ``fine_tune`` and ``control`` steps: ``(fine-tuned policy spec, control policy spec or None)``."""
     from policies.training import resolve_checkpoint
 
-    s, record = loop.settings, timed.record
-    steps, split = record["steps"], record["steps"]["split"]
+    s, split = loop.settings, timed.steps.split
     excluded = set(split["held_out"]) | set(split.get("held_out_families", []))
-    for earlier in loop.state.data["rounds"][:number - 1]:
-        earlier_split = earlier.get("steps", {}).get("split") or {}
+    for earlier in loop.state.rounds[:number - 1]:
+        earlier_split = earlier.steps.split or {}
         excluded.update(earlier_split.get("held_out", []))
         excluded.update(earlier_split.get("held_out_families", []))
     arm = _Arm(bank=loop.bank, method=s.fine_tune_method, steps=s.fine_tune_steps, seed=s.seed * 1000 + number,
                n_envs=s.n_envs, env_config=loop.env_config, fine_tune_config=loop.fine_tune_config,
                reward=s.fine_tune_reward, learning_rate=s.fine_tune_lr, progress=loop.progress, log=loop.log)
-    if "fine_tune" not in steps:
+    if not timed.steps.done("fine_tune"):
         timed("fine_tune", lambda: _fine_tune_arm(current, round_dir / "policy", excluded, s.mined_share, arm,
                                                   with_mined=True, label=f"round {number}"),
               f"{s.fine_tune_method} {s.fine_tune_steps} steps, the mined scenarios drawn with probability "
@@ -810,16 +841,17 @@ def _fine_tune_arms(loop: _Loop, number: int, current: str, round_dir: Path, tim
         _round_spec(f"ppo:{model}", folder, loop.out)  # loop.json is a file: only this round's own checkpoint
         return f"{resolve_checkpoint(model)[0]}:{model}"
 
-    record["new_policy"] = spec_of(steps["fine_tune"]["model"], round_dir / "policy")
+    new_policy = spec_of(timed.steps.fine_tune["model"], round_dir / "policy")
+    loop.state.update(loop.state.round(number).replace(new_policy=new_policy), save=False)
     control_policy = None
     if s.control:
-        if "control" not in steps:
+        if not timed.steps.done("control"):
             timed("control", lambda: _fine_tune_arm(current, round_dir / "control", excluded, s.mined_share, arm,
                                                     with_mined=False, label=f"round {number} control"),
                   f"{s.fine_tune_method} {s.fine_tune_steps} steps without the mined scenarios")
-        control_policy = spec_of(steps["control"]["model"], round_dir / "control")
-        record["control_policy"] = control_policy
-    return record["new_policy"], control_policy
+        control_policy = spec_of(timed.steps.control["model"], round_dir / "control")
+        loop.state.update(loop.state.round(number).replace(control_policy=control_policy), save=False)
+    return new_policy, control_policy
 
 
 def _after_step(loop: _Loop, policies: Mapping[str, Optional[str]], episodes: List[tuple], store,
@@ -1103,36 +1135,35 @@ def _comparison(report: Mapping[str, Any], path: Path) -> Dict[str, Any]:
             "report": str(Path(path).resolve())}
 
 
-def _lineage(loop: _Loop, rounds: Sequence[Mapping[str, Any]], current: str) -> List[Mapping[str, Any]]:
+def _lineage(loop: _Loop, rounds: Sequence[RoundRecord], current: str) -> List[RoundRecord]:
     """The earlier ``rounds`` whose fine-tuned policy ``current`` descends from, latest first: a round whose
     policy was not adopted (REJECTED, NOT ACCEPTED) trained nothing the next rounds start from."""
-    chain: List[Mapping[str, Any]] = []
+    chain: List[RoundRecord] = []
     for number in range(len(rounds), 0, -1):
         record = rounds[number - 1]
-        if record.get("new_policy") is None:
+        if record.new_policy is None:
             continue
         try:
-            spec = _earlier_round_spec(record["new_policy"], loop, number + 1)
+            spec = _earlier_round_spec(record.new_policy, loop, number + 1)
         except LoopError:
             continue
         if spec == current:
             chain.append(record)
-            current = record.get("policy")
+            current = record.policy
     return chain
 
 
-def _earlier_sides(rounds: Sequence[Mapping[str, Any]]) -> tuple:
+def _earlier_sides(rounds: Sequence[RoundRecord]) -> tuple:
     """``(held, tuned)``: the families earlier ``rounds`` held out, and those they fine-tuned on in any form
     (their split's fine-tuning families and every family in a fine-tuning arm's mix, parents included)."""
     held: set = set()
     tuned: set = set()
     for earlier in rounds:
-        steps = earlier.get("steps") or {}
-        split = steps.get("split") or {}
+        split = earlier.steps.split or {}
         held.update(split.get("held_out_families", []))
         tuned.update(split.get("fine_tune_families", []))
-        for arm in ("fine_tune", "control"):
-            tuned.update((steps.get(arm) or {}).get("families", []))
+        for arm in (earlier.steps.fine_tune, earlier.steps.control):
+            tuned.update((arm or {}).get("families", []))
     return sorted(held), sorted(tuned)
 
 
@@ -1151,8 +1182,8 @@ def _with_parents(kept: Sequence[Mapping[str, Any]], bank: Optional[str]) -> Lis
     return entries
 
 
-def _log_round(log: Callable[[str], None], number: int, steps: Mapping[str, Any]) -> None:
-    after = steps.get("after") or {}
+def _log_round(log: Callable[[str], None], number: int, steps: RoundSteps) -> None:
+    after = steps.after
 
     def rate(r: Optional[Mapping[str, Any]]) -> str:
         if not r or r.get("rate") is None:
@@ -1160,18 +1191,17 @@ def _log_round(log: Callable[[str], None], number: int, steps: Mapping[str, Any]
         return f"{r['k']}/{r['n']} = {r['rate']:.2f} [{r['low']:.2f}, {r['high']:.2f}]"
 
     if after:
-        line = (f"round {number}: held-out failure rate start {rate(after.get('before'))}, "
-                + (f"control {rate(after.get('control'))}, " if after.get("control") else "")
-                + f"fine-tuned {rate(after.get('after'))}")
-        if after.get("underpowered"):
-            log(line + f"; NO DROP OR TEST REPORTED: {after['underpowered']}")
+        line = (f"round {number}: held-out failure rate start {rate(after.before)}, "
+                + (f"control {rate(after.control)}, " if after.control else "")
+                + f"fine-tuned {rate(after.after)}")
+        if after.underpowered:
+            log(line + f"; NO DROP OR TEST REPORTED: {after.underpowered}")
         else:
-            drop = after.get("relative_drop")
-            versus = after.get("vs_control") or {}
+            drop, versus = after.relative_drop, after.vs_control
             log(line + (f", relative drop {drop:.0%}" if drop is not None else "")
-                + (f", McNemar p vs start = {after['mcnemar_p']:.3g}" if after.get("mcnemar_p") is not None else "")
-                + (f", vs control = {versus['mcnemar_p']:.3g}" if versus.get("mcnemar_p") is not None else ""))
-    untouched = steps.get("untouched") or {}
+                + (f", McNemar p vs start = {after.mcnemar_p:.3g}" if after.mcnemar_p is not None else "")
+                + (f", vs control = {versus.mcnemar_p:.3g}" if versus and versus.mcnemar_p is not None else ""))
+    untouched = steps.untouched or {}
     if untouched:
         policies = untouched.get("policies") or {}
 
@@ -1182,13 +1212,13 @@ def _log_round(log: Callable[[str], None], number: int, steps: Mapping[str, Any]
         log(f"round {number}: untouched set failure rate start {share('start')}, control {share('control')}, "
             f"fine-tuned {share('fine_tuned')}; fine-tuned vs start "
             f"{(untouched.get('fine_tuned_vs_start') or {}).get('verdict')}")
-    regress = steps.get("regress") or {}
+    regress = steps.regress or {}
     log(f"round {number}: rest of the bank: {regress.get('verdict')} ({regress.get('reason')})")
 
 
 def _write(out: Path, state: _State) -> LoopReport:
-    tuned = [r["new_policy"] for r in state.data["rounds"] if r.get("new_policy")]
+    tuned = [r.new_policy for r in state.rounds if r.new_policy]
     last = tuned[-1] if tuned else state.data["settings"]["policy"]
-    report = LoopReport(out=out, rounds=state.data["rounds"], policy=last, paths={}, settings=state.data["settings"])
+    report = LoopReport(out=out, rounds=list(state.rounds), policy=last, paths={}, settings=state.data["settings"])
     report.paths = write_loop_reports(report.to_json(), out)
     return report

@@ -100,6 +100,7 @@ import os
 import re
 from dv2s_gym.mining.convert import CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_VIDEO, cluster_slug
 from dv2s_gym.mining.errored import merged_messages, messages_text
+from dv2s_gym.mining.loop_record import HeldOutComparison, RoundRecord, RoundSteps
 from dv2s_gym.mining.report_text import clip_caption
 from dv2s_gym.mining.loop_verdict import (ACCEPTED, HELDOUT_ALPHA, evidence_floor_note, judge_round,
                                          recommendation)
@@ -162,28 +163,28 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
     that changed between the rounds, gives ``{"error": reason}`` instead (and the verdict is then NOT ACCEPTED).
     ``folder``: the loop folder the reports are read from (default ``out``; see :func:`_regress_report_path`).
     """
-    tested = [r for r in report.get("rounds", []) if ((r.get("steps") or {}).get("regress") or {}).get("report")]
+    tested = [r for r in _rounds(report) if (r.steps.regress or {}).get("report")]
     if len(tested) < 2:
         return None
     first, last = tested[0], tested[-1]
     try:
         folder = folder if folder is not None else out
-        start = load_report(_regress_report_path(first["steps"]["regress"]["report"], folder))
-        final = load_report(_regress_report_path(last["steps"]["regress"]["report"], folder))
+        start = load_report(_regress_report_path(first.steps.regress["report"], folder))
+        final = load_report(_regress_report_path(last.steps.regress["report"], folder))
     except Exception as error:  # noqa: BLE001 - a missing or foreign report is a line of the loop report
         return {"error": f"cannot read the rounds' regression reports: {(str(error).splitlines() or [''])[0]}"}
     names = list((start.get("bank") or {}).get("scenarios") or [])
     hashes = [(start.get("bank") or {}).get("hashes") or {}, (final.get("bank") or {}).get("hashes") or {}]
     changed = [n for n in names if hashes[0].get(n) != hashes[1].get(n)]
     if changed or names != list((final.get("bank") or {}).get("scenarios") or []):
-        return {"error": f"the starting bank differs between round {first.get('round')} and round "
-                         f"{last.get('round')} ({', '.join(changed[:3]) or 'scenario list'}); no paired comparison"}
+        return {"error": f"the starting bank differs between round {first.round} and round "
+                         f"{last.round} ({', '.join(changed[:3]) or 'scenario list'}); no paired comparison"}
     baseline = {e["id"]: e.get("baseline") for e in start.get("episodes") or []}
     episodes = [{"id": e["id"], "scenario": e["scenario"], "seed": e["seed"], "candidate": e["candidate"],
                  "baseline": baseline[e["id"]]}
                 for e in final.get("episodes") or [] if baseline.get(e["id"]) is not None]
     if not episodes:
-        return {"error": f"round {first.get('round')} and round {last.get('round')} share no regression episode"}
+        return {"error": f"round {first.round} and round {last.round} share no regression episode"}
     paired = build_report(bank=final["bank"], settings=final["settings"], candidate=final["candidate"],
                           baseline=start["baseline"], episodes=episodes)
     path = None
@@ -192,7 +193,7 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
     overall = paired.get("overall") or {}
     comparison = overall.get("comparison") or {}
     return {"start": (start.get("baseline") or {}).get("spec"), "final": (final.get("candidate") or {}).get("spec"),
-            "rounds": [first.get("round"), last.get("round")], "verdict": paired.get("verdict"),
+            "rounds": [first.round, last.round], "verdict": paired.get("verdict"),
             "reason": comparison.get("reason"), "episodes": comparison.get("n"),
             "new_failure_rate": (overall.get("candidate") or {}).get("failure_rate"),
             "old_failure_rate": (overall.get("baseline") or {}).get("failure_rate"),
@@ -206,12 +207,13 @@ def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = Non
     round that its own tests accepted (``None`` before two rounds were regression-tested), and, with two or more
     tested rounds, the report's own ``final_vs_start`` (its paired report written under ``out``). A policy the
     check rejected is never the policy to use (:func:`dv2s_gym.mining.loop_verdict.recommendation`)."""
-    rounds = [dict(record) for record in report.get("rounds") or []]
+    rounds = _rounds(report)
     for index, record in enumerate(rounds):
         judged = judge_round(record)
-        if judged is not None and judged["verdict"] == ACCEPTED and "final_vs_start" not in record:
-            record["final_vs_start"] = final_vs_start({"rounds": rounds[:index + 1]}, folder=folder or out)
-    body = {**report, "rounds": rounds}
+        if judged is not None and judged["verdict"] == ACCEPTED and "final_vs_start" not in record.extra:
+            checked = final_vs_start({"rounds": rounds[:index + 1]}, folder=folder or out)
+            rounds[index] = record.replace(extra={**record.extra, "final_vs_start": checked})
+    body = {**report, "rounds": [record.to_dict() for record in rounds]}
     if "final_vs_start" not in body:
         final = final_vs_start(body, out, folder)
         if final is not None:
@@ -245,35 +247,41 @@ def _seconds(timings: Mapping[str, Any]) -> str:
     return ", ".join(f"{step} {float(timings[step]):.0f} s" for step in steps) or "-"
 
 
-def _round_row(record: Mapping[str, Any]) -> Dict[str, Any]:
+def _rounds(report: Mapping[str, Any]) -> List[RoundRecord]:
+    """The rounds of a loop report's body (``report.json``'s ``rounds``), as records."""
+    return [RoundRecord.from_dict(record) for record in report.get("rounds") or []]
+
+
+def _round_row(record: RoundRecord) -> Dict[str, Any]:
     """The cells of a round's line in the summary tables (Markdown and HTML)."""
-    steps = record.get("steps", {})
-    mine, split, after, regress = (steps.get(k) or {} for k in ("mine", "split", "after", "regress"))
-    drop = after.get("relative_drop")
-    interval = after.get("relative_drop_interval") or [None, None]
+    steps = record.steps
+    mine, split, regress = (value or {} for value in (steps.mine, steps.split, steps.regress))
+    after = steps.after or HeldOutComparison()
+    drop = after.relative_drop
+    interval = after.relative_drop_interval or [None, None]
     drop_text = "-" if drop is None else f"{drop:.0%}" + (
         f" [{interval[0]:.0%}, {interval[1]:.0%}]" if interval[0] is not None else "")
-    if after.get("underpowered"):
+    if after.underpowered:
         short = []
-        if (after.get("pairs") or 0) < (after.get("min_episodes") or 0):
-            short.append(f"{after.get('pairs')} < {after.get('min_episodes')} episodes")
-        if after.get("heldout_families") is not None and after["heldout_families"] < (after.get("min_families") or 0):
-            short.append(f"{after['heldout_families']} < {after['min_families']} families")
+        if (after.pairs or 0) < (after.min_episodes or 0):
+            short.append(f"{after.pairs} < {after.min_episodes} episodes")
+        if after.heldout_families is not None and after.heldout_families < (after.min_families or 0):
+            short.append(f"{after.heldout_families} < {after.min_families} families")
         drop_text = "not reported: " + ", ".join(short or ["too few held-out episodes"])
-    p_value = after.get("mcnemar_p")
-    p_control = (after.get("vs_control") or {}).get("mcnemar_p")
-    untouched = steps.get("untouched") or {}
+    p_value = after.mcnemar_p
+    p_control = None if after.vs_control is None else after.vs_control.mcnemar_p
+    untouched = steps.untouched or {}
     return {
-        "control": _rate(after.get("control")) if after.get("control") else "-",
+        "control": _rate(after.control) if after.control else "-",
         "p_control": "-" if p_control is None else f"{p_control:.3g}",
         "untouched": _untouched_cell(untouched),
-        "round": record.get("round"), "failures": mine.get("failures", "-"),
+        "round": record.round, "failures": mine.get("failures", "-"),
         "against": mine.get("failures_against_policy", "-"), "episodes": mine.get("episodes", "-"),
         "clusters": mine.get("clusters", "-"), "kept": len({e["scenario"] for e in mine.get("kept", [])}),
         "split": f"{len(split.get('fine_tune', []))} / {len(split.get('held_out', []))}",
-        "before": _rate(after.get("before")), "after": _rate(after.get("after")), "drop": drop_text,
+        "before": _rate(after.before), "after": _rate(after.after), "drop": drop_text,
         "p": "-" if p_value is None else f"{p_value:.3g}",
-        "verdict": regress.get("verdict") or steps.get("skipped") or "-",
+        "verdict": regress.get("verdict") or steps.skipped or "-",
     }
 
 
@@ -299,32 +307,32 @@ def errored_note(errored: Mapping[str, Any]) -> str:
     return f" ({count} episode{'s' if count != 1 else ''} errored" + (f": {names})" if names else ")")
 
 
-def errored_by_stage(record: Mapping[str, Any]) -> List[tuple]:
-    """``[(stage label, {policy: errored})]``: the round's errored episodes per step that ran
-    (:func:`dv2s_gym.mining.errored.errored_episodes`' form)."""
-    steps = record.get("steps") or {}
+def errored_by_stage(record: RoundRecord) -> List[tuple]:
+    """``[(stage label, {policy: errored})]``: round ``record``'s errored episodes per step that ran
+    (:func:`dv2s_gym.mining.errored.errored_episodes`' form; a JSON object is read with ``RoundRecord.from_dict``)."""
+    steps = RoundRecord.from_dict(record).steps
     found = []
-    mine = steps.get("mine") or {}
+    mine = steps.mine or {}
     if mine.get("errored") is not None:
         found.append(("mining", {"mine": mine["errored"]}))
     held: Dict[str, Any] = {}
-    if (steps.get("before") or {}).get("errored") is not None:
-        held["start"] = steps["before"]["errored"]
-    held.update((steps.get("after") or {}).get("errored") or {})
+    if (steps.before or {}).get("errored") is not None:
+        held["start"] = steps.before["errored"]
+    held.update((steps.after.errored if steps.after is not None else None) or {})
     if held:
         found.append(("held-out", held))
-    for key, label in (("untouched", "untouched set"), ("regress", "regression test")):
-        errored = (steps.get(key) or {}).get("errored")
+    for step, label in ((steps.untouched, "untouched set"), (steps.regress, "regression test")):
+        errored = (step or {}).get("errored")
         if errored:
             found.append((label, errored))
     return found
 
 
-def _errored_total(record: Mapping[str, Any]) -> int:
+def _errored_total(record: RoundRecord) -> int:
     return sum(int((found or {}).get("episodes") or 0) for _, by in errored_by_stage(record) for found in by.values())
 
 
-def _errored_lines(record: Mapping[str, Any]) -> List[str]:
+def _errored_lines(record: RoundRecord) -> List[str]:
     """The round's errored episodes per step and policy, naming the scenarios and, for each, its distinct error
     messages with their counts over the round's steps (the most frequent first, at most
     :data:`dv2s_gym.mining.errored.ERROR_MESSAGES_KEPT` listed, the rest counted)."""
@@ -341,14 +349,16 @@ def _errored_lines(record: Mapping[str, Any]) -> List[str]:
     return lines
 
 
-def round_summary(record: Mapping[str, Any]) -> str:
-    """One plain-text line on a round for the terminal: held-out failure rates and the regression verdict."""
+def round_summary(record: RoundRecord) -> str:
+    """One plain-text line on round ``record`` (its JSON object is read with ``RoundRecord.from_dict``) for the
+    terminal: held-out failure rates and the regression verdict."""
+    record = RoundRecord.from_dict(record)
     row = _round_row(record)
-    steps = record.get("steps") or {}
-    if steps.get("skipped"):
-        return f"round {row['round']}: skipped: {steps['skipped']}"
+    steps = record.steps
+    if steps.skipped:
+        return f"round {row['round']}: skipped: {steps.skipped}"
     errored = _errored_total(record)
-    mined = errored_note((steps.get("mine") or {}).get("errored") or {})
+    mined = errored_note((steps.mine or {}).get("errored") or {})
     return (f"round {row['round']}: {row['failures']} failures mined in {row['episodes']} episodes{mined}, "
             f"{row['kept']} scenarios kept; held-out failure rate start {row['before']}, control {row['control']}, fine-tuned "
             f"{row['after']}; rest of the bank: {row['verdict']}"
@@ -581,7 +591,7 @@ def _rounds_table_lines(report: Mapping[str, Any]) -> List[str]:
         "| untouched failure rate start / control / fine-tuned | rest of the bank |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for record in report.get("rounds", []):
+    for record in _rounds(report):
         row = _round_row(record)
         lines.append(
             f"| {row['round']} | {row['failures']} ({row['against']}) / {row['episodes']} | {row['clusters']} | "
@@ -636,11 +646,10 @@ def _split_lines(split: Mapping[str, Any]) -> List[str]:
             f"({', '.join(split.get('held_out', [])) or 'no scenario'}; their parents are not fine-tuned on either)"]
 
 
-def _fine_tuning_lines(steps: Mapping[str, Any]) -> List[str]:
+def _fine_tuning_lines(steps: RoundSteps) -> List[str]:
     """A round's fine-tuning (by PPO or DAgger) and its control arm, one line each."""
     lines = []
-    for key in ("fine_tune", "control"):
-        tuned = steps.get(key) or {}
+    for key, tuned in (("fine_tune", steps.fine_tune or {}), ("control", steps.control or {})):
         if not tuned:
             continue
         if key == "control":
@@ -684,25 +693,24 @@ def _regression_lines(regress: Mapping[str, Any]) -> List[str]:
     return lines
 
 
-def _round_lines(record: Mapping[str, Any], settings: Mapping[str, Any]) -> List[str]:
+def _round_lines(record: RoundRecord, settings: Mapping[str, Any]) -> List[str]:
     """A round's section: its policies and timings, then each step it ran, then where the next round starts."""
-    steps = record.get("steps", {})
-    lines = ["", f"## Round {record.get('round')}", "",
-             f"- policy: `{record.get('policy')}` -> fine-tuned policy `{record.get('new_policy', '-')}`",
-             f"- timings: {_seconds(record.get('timings', {}))}"]
+    steps = record.steps
+    lines = ["", f"## Round {record.round}", "",
+             f"- policy: `{record.policy}` -> fine-tuned policy `{record.get('new_policy', '-')}`",
+             f"- timings: {_seconds(record.timings)}"]
     lines += _errored_lines(record)
-    if steps.get("skipped"):
-        lines.append(f"- skipped: {steps['skipped']}")
-    lines += _mining_lines(steps.get("mine") or {}, settings)
-    lines += _split_lines(steps.get("split") or {})
+    if steps.skipped:
+        lines.append(f"- skipped: {steps.skipped}")
+    lines += _mining_lines(steps.mine or {}, settings)
+    lines += _split_lines(steps.split or {})
     lines += _fine_tuning_lines(steps)
-    lines += _reference_lines(steps.get("reference") or {})
-    lines += _heldout_lines(steps.get("after") or {})
-    lines += _untouched_lines(steps.get("untouched") or {})
-    lines += _regression_lines(steps.get("regress") or {})
-    if record.get("next_policy"):
-        lines.append(f"- the next round starts from `{record['next_policy']}` "
-                     f"({record.get('next_policy_reason')})")
+    lines += _reference_lines(steps.reference or {})
+    lines += _heldout_lines(steps.after or {})
+    lines += _untouched_lines(steps.untouched or {})
+    lines += _regression_lines(steps.regress or {})
+    if record.next_policy:
+        lines.append(f"- the next round starts from `{record.next_policy}` ({record.next_policy_reason})")
     return lines
 
 
@@ -711,7 +719,7 @@ def render_markdown(report: Mapping[str, Any]) -> str:
     section per round."""
     settings = report.get("settings", {})
     lines: List[str] = _heading_lines(report) + _settings_lines(settings) + _rounds_table_lines(report)
-    for record in report.get("rounds", []):
+    for record in _rounds(report):
         lines += _round_lines(record, settings)
     return "\n".join(lines) + "\n"
 
@@ -826,14 +834,13 @@ def _rates_svg(title: str, bars: List[tuple]) -> str:
     return "".join(parts) + "</svg>"
 
 
-def _round_figures(record: Mapping[str, Any]) -> str:
+def _round_figures(record: RoundRecord) -> str:
     """The round's failure rates as charts: held-out (start, control, fine-tuned) and untouched."""
-    steps = record.get("steps") or {}
-    after = steps.get("after") or {}
-    held = [(label, (after.get(key) or {}).get("rate"), (after.get(key) or {}).get("low"),
-             (after.get(key) or {}).get("high"))
-            for label, key in (("start", "before"), ("control", "control"), ("fine-tuned", "after"))]
-    policies = (steps.get("untouched") or {}).get("policies") or {}
+    steps = record.steps
+    after = steps.after or HeldOutComparison()
+    held = [(label, (rate or {}).get("rate"), (rate or {}).get("low"), (rate or {}).get("high"))
+            for label, rate in (("start", after.before), ("control", after.control), ("fine-tuned", after.after))]
+    policies = (steps.untouched or {}).get("policies") or {}
     untouched = [(label, ((policies.get(key) or {}).get("failure_rate") or {}).get("value"),
                   ((policies.get(key) or {}).get("failure_rate") or {}).get("low"),
                   ((policies.get(key) or {}).get("failure_rate") or {}).get("high"))
@@ -848,8 +855,9 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
     """A self-contained HTML page (inline CSS, nothing fetched) of the loop report; ``clips``: round -> scenario ->
     ``[{"path", "label"}]`` videos shown per round (:func:`round_clips`)."""
     settings = report.get("settings", {})
+    rounds = _rounds(report)
     rows = []
-    for record in report.get("rounds", []):
+    for record in rounds:
         row = _round_row(record)
         verdict = row["verdict"]
         cells = [row["round"], f"{row['failures']} / {row['episodes']}", row["clusters"], row["kept"], row["split"],
@@ -868,10 +876,10 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
     starts = [i for i, line in enumerate(markdown) if line.startswith("## Round ")]
     for position, begin in enumerate(starts):
         end = starts[position + 1] if position + 1 < len(starts) else len(markdown)
-        number = report["rounds"][position].get("round") if position < len(report.get("rounds", [])) else None
+        number = rounds[position].round if position < len(rounds) else None
         details.append(_markdown_to_html(markdown[begin:end]))
-        if position < len(report.get("rounds", [])):
-            details.append(_round_figures(report["rounds"][position]))
+        if position < len(rounds):
+            details.append(_round_figures(rounds[position]))
         round_clips = (clips or {}).get(number) or {}
         if any(round_clips.values()):
             details.append("<h3>Clips of the kept mined scenarios: each failure beside its converted script driven "
@@ -908,10 +916,10 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
     settings = report.get("settings") or {}
     bank = Path(settings.get("bank_dir") or Path(out) / "bank")
     found: Dict[int, Dict[str, List[Dict[str, str]]]] = {}
-    for record in report.get("rounds", []):
-        mine = (record.get("steps") or {}).get("mine") or {}
-        policy = record.get("policy") or report.get("policy")
-        split = (record.get("steps") or {}).get("split") or {}
+    for record in _rounds(report):
+        mine = record.steps.mine or {}
+        policy = record.policy or report.get("policy")
+        split = record.steps.split or {}
         held = set(split.get("held_out") or [])
         clips: Dict[str, List[Dict[str, str]]] = {}
         for entry in mine.get("kept") or []:
@@ -925,7 +933,7 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
             if not videos:
                 videos.append({"path": None, "label": "no clip", "group": f"{scenario}/none",
                                "note": _no_clip_reason(entry, bank / scenario, mine)})
-        found[int(record.get("round") or 0)] = clips
+        found[int(record.round or 0)] = clips
     return found
 
 

@@ -30,8 +30,10 @@ recommendation back to the starting policy, so it is never the policy to use.
 
 from __future__ import annotations
 
-from dv2s_gym.mining.loop_settings import DEFAULTS
 from typing import Any, Dict, Mapping, Optional
+
+from dv2s_gym.mining.loop_record import HeldOutComparison, RoundRecord, RoundSteps
+from dv2s_gym.mining.loop_settings import DEFAULTS
 
 __all__ = ["ACCEPTED", "REJECTED", "NOT_ACCEPTED", "EXIT_CODES", "CONTROL_ALPHA", "HELDOUT_ALPHA", "HELDOUT_TEST",
            "FAMILY_RULE", "family_harm", "non_inferiority_p",
@@ -90,19 +92,20 @@ EVIDENCE_HINT = "run `dv2s loop --profile evidence` for a round large enough to 
 :data:`dv2s_gym.mining.loop_settings.EVIDENCE`)."""
 
 
-def too_small(record: Mapping[str, Any]) -> Optional[str]:
-    """Why round ``record`` was too small to judge its fine-tuned policy, or ``None``: too few held-out episodes
+def too_small(record: RoundRecord) -> Optional[str]:
+    """Why round ``record`` (a :class:`~dv2s_gym.mining.loop_record.RoundRecord`; its JSON object is read with
+    ``RoundRecord.from_dict``) was too small to judge its fine-tuned policy, or ``None``: too few held-out episodes
     or families for a drop or a test, or a regression test that could not tell."""
-    steps = record.get("steps") or {}
+    steps = RoundRecord.from_dict(record).steps
     reasons = []
-    after = steps.get("after") or {}
-    if after.get("underpowered"):
+    after = steps.after or HeldOutComparison()
+    if after.underpowered:
         reasons.append("too few held-out episodes or families for a drop or a test")
     elif _control_below_floor(after):
         reasons.append("too few held-out episodes or families for the test against the control")
-    if (steps.get("regress") or {}).get("verdict") == "INCONCLUSIVE":
-        reasons.append(f"the regression test on {(steps.get('regress') or {}).get('episodes')} paired episodes "
-                       "could not tell")
+    regress = steps.regress or {}
+    if regress.get("verdict") == "INCONCLUSIVE":
+        reasons.append(f"the regression test on {regress.get('episodes')} paired episodes could not tell")
     return "; ".join(reasons) or None
 
 
@@ -217,31 +220,32 @@ def _default_margin() -> float:
     return float(DEFAULTS["margin"])
 
 
-def _heldout_tests(after: Mapping[str, Any]) -> Dict[str, Optional[Dict[str, Any]]]:
+def _heldout_tests(after: HeldOutComparison) -> Dict[str, Optional[Dict[str, Any]]]:
     """The held-out tests of a round's ``after`` step as recorded (``significantly_worse``); ``None`` where none
     ran (none does below the minimums or :data:`EVIDENCE_FLOOR`)."""
-    recorded = after.get("significantly_worse") or {}
-    return {"start": recorded.get("start"), "control": recorded.get("control")}
+    return {"start": after.held_out_test("start"), "control": after.held_out_test("control")}
 
 
-def _control_below_floor(after: Mapping[str, Any]) -> Optional[str]:
+def _control_below_floor(after: HeldOutComparison) -> Optional[str]:
     """Why the held-out test against the control did not run (``vs_control``'s ``underpowered``: too few tested
     pairs or families against the control); ``None`` when it ran or there is no control."""
-    versus = after.get("vs_control") or {}
-    return str(versus["underpowered"]) if versus.get("underpowered") else None
+    versus = after.vs_control
+    return str(versus.underpowered) if versus is not None and versus.underpowered else None
 
 
-def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
-    """``{"verdict", "reason", "decided_by"}`` on round ``record``'s fine-tuned policy (module docstring);
+def judge_round(record: RoundRecord) -> Optional[Dict[str, str]]:
+    """``{"verdict", "reason", "decided_by"}`` on round ``record``'s fine-tuned policy (module docstring; a
+    :class:`~dv2s_gym.mining.loop_record.RoundRecord`, its JSON object read with ``RoundRecord.from_dict``);
     ``None`` when the round fine-tuned none. ``decided_by`` names the test that decided (``regression``,
     ``heldout_vs_control``, ``heldout_vs_start``, ``all`` when every test agreed on ACCEPTED), or the missing
     one."""
-    steps = record.get("steps") or {}
-    if not record.get("new_policy") and "fine_tune" not in steps:
+    record = RoundRecord.from_dict(record)
+    steps = record.steps
+    if not record.fine_tuned:
         return None
-    regress = steps.get("regress") or {}
+    regress = steps.regress or {}
     verdict = regress.get("verdict")
-    after = steps.get("after") or {}
+    after = steps.after or HeldOutComparison()
     tests = _heldout_tests(after)
     regression = "the regression test on the rest of the bank (paired non-inferiority against the round's start)"
     if verdict == "FAIL":
@@ -261,10 +265,10 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
         return {"verdict": NOT_ACCEPTED, "decided_by": "regression",
                 "reason": f"{regression} is {verdict}, so no regression is ruled out ({regress.get('reason')})"}
     missing = [key for key in ("start", "control") if tests.get(key) is None
-               and (key == "start" or after.get("control") or "vs_control" in after)]
+               and (key == "start" or after.control or after.vs_control is not None)]
     if missing:
-        why = (after.get("underpowered") or (_control_below_floor(after) if missing == ["control"] else None)
-               or ("no held-out pair ran" if not after.get("pairs") else "not recorded"))
+        why = (after.underpowered or (_control_below_floor(after) if missing == ["control"] else None)
+               or ("no held-out pair ran" if not after.pairs else "not recorded"))
         return {"verdict": NOT_ACCEPTED, "decided_by": f"heldout_vs_{missing[0]}",
                 "reason": f"{regression} PASSed, but the held-out test against "
                           f"{' and '.join('the starting policy' if k == 'start' else 'the control' for k in missing)}"
@@ -296,10 +300,10 @@ def judge_round(record: Mapping[str, Any]) -> Optional[Dict[str, str]]:
                       f"the held-out families {' and '.join(parts)} ({HELDOUT_TEST}){control_note}"}
 
 
-def _untouched_fail(steps: Mapping[str, Any]) -> Optional[str]:
+def _untouched_fail(steps: RoundSteps) -> Optional[str]:
     """Why the untouched scenario set blocks ACCEPTED (the fine-tuned policy FAILed against the start there:
     significantly worse), or ``None``."""
-    versus = (steps.get("untouched") or {}).get("fine_tuned_vs_start") or {}
+    versus = (steps.untouched or {}).get("fine_tuned_vs_start") or {}
     if versus.get("verdict") != "FAIL":
         return None
     return (f"on the untouched scenario set (never mined or fine-tuned on) the fine-tuned policy FAILed against the "
@@ -340,8 +344,8 @@ def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
     rounds), "exit_code", "too_small": why a NOT ACCEPTED round was too small to judge (:func:`too_small`; the sentence
     then points to the evidence profile) or ``None``}``."""
     start = (report.get("settings") or {}).get("policy")
-    judged_rounds = [(record, judged) for record in report.get("rounds") or []
-                     for judged in [judge_round(record)] if judged is not None]
+    rounds = [RoundRecord.from_dict(record) for record in report.get("rounds") or []]
+    judged_rounds = [(record, judged) for record in rounds for judged in [judge_round(record)] if judged is not None]
     if not judged_rounds:
         return {"policy": start, "verdict": NOT_ACCEPTED, "round": None, "candidate": None,
                 "reason": "no round fine-tuned a policy", "decided_by": None, "exit_code": EXIT_CODES[NOT_ACCEPTED],
@@ -352,16 +356,16 @@ def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
         # the cross-round check on this round's policy: the report's own for the last round, else the one
         # recorded with the round (the check over the rounds up to it)
         final = (report.get("final_vs_start") if index == len(judged_rounds) - 1 and "final_vs_start" in report
-                 else record.get("final_vs_start"))
+                 else record.extra.get("final_vs_start"))
         judged = _with_cross_round_check(judged, final)
         judged_rounds[index] = (record, judged)
         if judged["verdict"] == ACCEPTED:
-            recommended = record.get("new_policy") or report.get("policy")
+            recommended = record.new_policy or report.get("policy")
         elif judged.get("decided_by") == "final_vs_start" and judged["verdict"] == REJECTED:
             recommended = start  # the lineage regressed against the starting policy: back to it
     record, judged = judged_rounds[-1]
-    candidate = record.get("new_policy") or report.get("policy")
-    number = record.get("round")
+    candidate = record.new_policy or report.get("policy")
+    number = record.round
     if judged["verdict"] == ACCEPTED:
         sentence = f"ACCEPTED: use the round {number} fine-tuned policy {candidate}: {judged['reason']}"
     else:

@@ -51,6 +51,7 @@ from tqdm.auto import tqdm
 
 from dv2s_gym.mining import space as space_module
 from dv2s_gym.mining.cluster import cell_id, cluster_failures, cluster_id, group
+from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.convert import cluster_slug, CONVERSION_DIR, convert_failure, reference_passed, SETUP_ERRORS
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import is_novel
@@ -565,8 +566,8 @@ def _mine_in(out: Path, started: float, policy: str, settings: MineSettings, wor
         records = [done[i] for i in sorted(done) if i < settings.budget]
         run = MineRun(out=out, settings=recorded, records=records, clusters=cluster_failures(records))
         if settings.convert:
-            run.conversions = convert_clusters(run, bank_dir=bank_dir, options=dict(settings.convert_options or {}),
-                                               progress=progress, max_conversions=settings.max_conversions)
+            run.conversions = convert_clusters(run, settings.conversion, bank_dir=bank_dir, progress=progress,
+                                               max_conversions=settings.max_conversions)
         else:
             run.conversions = read_rows(out / "conversions.jsonl")
         run.seconds = time.perf_counter() - started
@@ -686,9 +687,10 @@ def _has_entries(folder: Path) -> bool:
     return folder.is_dir() and any(not p.name.startswith(".") for p in folder.iterdir())
 
 
-def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str, Any],
+def convert_clusters(run: MineRun, conversion: ConversionSettings, *, bank_dir: Optional[str],
                      progress: bool = True, max_conversions: Optional[int] = None) -> List[Dict[str, Any]]:
-    """Convert one representative failure per avoidable cluster not converted yet; the conversion records.
+    """Convert one representative failure per avoidable cluster not converted yet, with ``conversion`` (its policy
+    and ``env_config`` replaced by the run's); the conversion records.
 
     The representative is the cluster's most severe failure (lowest robustness, then
     lowest index) among those whose scene the reference driver passed (:func:`~dv2s_gym.mining.convert.reference_passed`;
@@ -716,6 +718,7 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
     room = None if max_conversions is None else max(0, int(max_conversions) - len(existing))
     todo = [(cluster, record) for _, cluster, record in candidates][:room]
     bank = Bank(bank_dir)
+    conversion = conversion.replace(policy=run.settings["policy"], env_config=run.settings["env_config"])
     appender = JsonlAppender(path)
     bar = progress_bar(progress, len(todo), 0, desc="converting")
     try:
@@ -723,8 +726,7 @@ def convert_clusters(run: MineRun, *, bank_dir: Optional[str], options: Dict[str
             row = _reached_bank(bank, run.out, cluster)  # killed after the bank write, before its line
             if row is None:
                 try:
-                    row = convert_failure(dict(record, cluster=cluster), run.out, policy=run.settings["policy"],
-                                          bank=bank, env_config=run.settings["env_config"], **options)
+                    row = convert_failure(dict(record, cluster=cluster), run.out, conversion, bank=bank)
                 except SETUP_ERRORS as error:
                     first = (str(error).strip().splitlines() or [type(error).__name__])[0]
                     raise MiningError(f"converting stopped at cluster {cluster} ({len(existing)} converted, the rest "

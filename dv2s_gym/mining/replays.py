@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 from dv2s_gym.mining import convert
+from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.convert import reference_passed
 from dv2s_gym.mining.cluster import group
 from dv2s_gym.mining.errors import MiningError
@@ -57,14 +58,15 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
     if not todo:
         return existing
     bank = Bank(bank_dir)
+    replay = ConversionSettings(policy=settings["policy"], env_config=settings.env_config,
+                                bank_dir=settings.bank_dir,  # the bank the run mined (the parents')
+                                monitor=settings.monitor)
     appender = JsonlAppender(path)
     bar = progress_bar(progress, len(todo), 0, desc="exact replays")
     try:
         for cluster, record in todo:
-            row = convert.replay_failure_entry(dict(record, cluster=cluster), run_dir, policy=settings["policy"],
-                                               bank=bank, env_config=settings.env_config, cluster=cluster,
-                                               bank_dir=settings.bank_dir,  # the bank the run mined (the parents')
-                                               monitor=settings.monitor)
+            row = convert.replay_failure_entry(dict(record, cluster=cluster), run_dir, replay, bank=bank,
+                                               cluster=cluster)
             appender.append(row)
             existing.append(row)
             if bar is not None:

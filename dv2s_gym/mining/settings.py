@@ -8,6 +8,7 @@ import os
 from pathlib import Path
 from typing import Any, Dict, Iterator, Mapping, Optional, Tuple, Type, Union
 
+from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD, MonitorSettings
 from dv2s_gym.mining.samplers import default_feedback, registered_samplers
@@ -46,7 +47,7 @@ class MineSettings:
     """The settings of a mining run (:func:`dv2s_gym.mining.miner.mine`); the command line's defaults are these.
 
     A run folder records them (``settings.json``, :meth:`recorded`); resuming it needs the same ones
-    (:meth:`resume_keys`) except ``budget`` (a larger one continues the run), ``convert``, ``convert_options`` and
+    (:meth:`resume_keys`) except ``budget`` (a larger one continues the run), ``convert``, ``conversion`` and
     ``max_conversions`` (not recorded).
     """
 
@@ -80,8 +81,9 @@ class MineSettings:
     convert: bool = setting(False, resume=False, record=False)
     """Turn one failure per avoidable cluster into a bank scenario (:mod:`dv2s_gym.mining.convert`); ``bank_dir``
     must then be given and writable (a new or empty folder starts as a copy of the shipped bank)."""
-    convert_options: Optional[Mapping[str, Any]] = setting(None, resume=False, record=False)
-    """Keyword arguments of :func:`~dv2s_gym.mining.convert.convert_failure` (DRA and SG backends, ``k``...)."""
+    conversion: ConversionSettings = setting(default_factory=ConversionSettings, resume=False, record=False)
+    """How failures are converted (:class:`~dv2s_gym.mining.conversion_settings.ConversionSettings`: the DRA and
+    SG backends, ``k``...); the run's policy and ``env_config`` replace its own."""
     max_conversions: Optional[int] = setting(None, resume=False, record=False)
     """At most this many clusters are converted, largest first (``None``: all)."""
 
@@ -108,8 +110,9 @@ class MineSettings:
             object.__setattr__(self, "batch", None)
         check_int(MiningError, "--batch", self.batch, low=1, optional=True, none_means=f"{DEFAULT_BATCH}")
         check_bool(MiningError, "convert (--no-convert)", self.convert)
-        check_mapping(MiningError, "convert_options", self.convert_options, optional=True,
-                      what="keyword arguments of convert_failure")
+        if not isinstance(self.conversion, ConversionSettings):
+            raise MiningError(f"conversion must be the conversion's settings (a ConversionSettings), not "
+                              f"{self.conversion!r}")
         check_int(MiningError, "--max-conversions", self.max_conversions, low=0, optional=True,
                   none_means="all")
         # a NaN threshold would silently detect no failure, a negative one a stall at every standstill
