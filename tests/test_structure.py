@@ -1526,16 +1526,18 @@ def test_the_limits_count_what_they_say():
         "RunIdentityError.__init__", "identity_of"]
 
 
-def test_parameters_taken_through_star_args_count_by_position():
-    def count(source: str) -> int:
-        return _parameters(ast.parse(textwrap.dedent(source)).body[0])
+def _count(source: str) -> int:
+    """The parameters :func:`over_the_limits` counts for the one function of ``source``."""
+    return _parameters(ast.parse(textwrap.dedent(source)).body[0])
 
-    assert count("def f(*args):\n    a, b, c, d, e, f, g, h, i, j = args\n    return a\n") == 10
-    assert count("def f(x, *args):\n    return args[0] + args[4]\n") == 6
-    assert count("def f(*args):\n    first, *rest = args\n    return args[-3], args[:2]\n") == 3
-    assert count("def f(*args):\n    first, *rest = args\n    return first\n") == 2
-    assert count("def f(*args):\n    return g(*args)\n") == 1  # passed on whole
-    assert count("def f(*parts, **e):\n    return ''.join(parts), e['x']\n") == 2
+
+def test_parameters_taken_through_star_args_count_by_position():
+    assert _count("def f(*args):\n    a, b, c, d, e, f, g, h, i, j = args\n    return a\n") == 10
+    assert _count("def f(x, *args):\n    return args[0] + args[4]\n") == 6
+    assert _count("def f(*args):\n    first, *rest = args\n    return args[-3], args[:2]\n") == 3
+    assert _count("def f(*args):\n    first, *rest = args\n    return first\n") == 2
+    assert _count("def f(*args):\n    return g(*args)\n") == 1  # passed on whole
+    assert _count("def f(*parts, **e):\n    return ''.join(parts), e['x']\n") == 2
 
 
 @pytest.mark.parametrize("planted", [
@@ -1591,13 +1593,10 @@ def test_the_limits_see_parameters_planted_through_kwargs_and_args(tmp_path, pla
 
 
 def test_keyword_arguments_passed_on_whole_count_once():
-    def count(source: str) -> int:
-        return _parameters(ast.parse(textwrap.dedent(source)).body[0])
-
-    assert count("def f(**kw):\n    return g(**kw)\n") == 1
-    assert count("def f(**kw):\n    for key, value in kw.items():\n        print(key, value)\n") == 1
-    assert count("def f(**kw):\n    options = dict(kw)\n    return options['a'], kw.get('b')\n") == 2
-    assert count("def f(*args):\n    return [a for a in args]\n") == 1
+    assert _count("def f(**kw):\n    return g(**kw)\n") == 1
+    assert _count("def f(**kw):\n    for key, value in kw.items():\n        print(key, value)\n") == 1
+    assert _count("def f(**kw):\n    options = dict(kw)\n    return options['a'], kw.get('b')\n") == 2
+    assert _count("def f(*args):\n    return [a for a in args]\n") == 1
 
 
 @pytest.mark.parametrize("planted, name", [

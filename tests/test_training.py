@@ -266,6 +266,16 @@ def test_dqn_and_sac_train_tiny_and_load_through_the_registry(tmp_path, algo):
     assert result.steps > 0 and result.error is None
 
 
+def _train_on_defaults(capsys, tmp_path: Path, algo: str) -> Path:
+    """`dv2s train --algo ALGO` for 64 steps without --hp; the run folder."""
+    out = tmp_path / algo
+    code, _, err = run(capsys, "train", "--algo", algo, "--scenarios", SCENARIOS[0], "--steps", 64, "--envs", 1,
+                       "--seed", 0, "--vec-env", "dummy", "--eval-freq", 0, "--card-seeds", 0, "--checkpoint-freq", 0,
+                       "--no-progress", "--out", out)
+    assert code == 0, err
+    return out
+
+
 @pytest.mark.slow
 def test_dqn_trains_with_its_default_learning_rate_and_exploration(tmp_path, capsys):
     """`dv2s train --algo dqn` without --hp: the saved model's optimiser steps at 5e-4 and its exploration rate
@@ -273,11 +283,7 @@ def test_dqn_trains_with_its_default_learning_rate_and_exploration(tmp_path, cap
     and its card says so."""
     from stable_baselines3 import DQN
 
-    out = tmp_path / "dqn"
-    code, _, err = run(capsys, "train", "--algo", "dqn", "--scenarios", SCENARIOS[0], "--steps", 64, "--envs", 1,
-                       "--seed", 0, "--vec-env", "dummy", "--eval-freq", 0, "--card-seeds", 0, "--checkpoint-freq", 0,
-                       "--no-progress", "--out", out)
-    assert code == 0, err
+    out = _train_on_defaults(capsys, tmp_path, "dqn")
     model = DQN.load(out / "model.zip", device="cpu")
     assert model.learning_rate == 5e-4 and model.exploration_fraction == 0.7
     assert [group["lr"] for group in model.policy.optimizer.param_groups] == [5e-4]
@@ -297,11 +303,7 @@ def test_sac_trains_with_its_default_hyperparameters(tmp_path, capsys):
     [256, 256] layers, on ContinuousAction; its card says so."""
     from stable_baselines3 import SAC
 
-    out = tmp_path / "sac"
-    code, _, err = run(capsys, "train", "--algo", "sac", "--scenarios", SCENARIOS[0], "--steps", 64, "--envs", 1,
-                       "--seed", 0, "--vec-env", "dummy", "--eval-freq", 0, "--card-seeds", 0, "--checkpoint-freq", 0,
-                       "--no-progress", "--out", out)
-    assert code == 0, err
+    out = _train_on_defaults(capsys, tmp_path, "sac")
     model = SAC.load(out / "model.zip", device="cpu")
     assert model.learning_rate == 3e-4 and model.lr_schedule(0.5) == 3e-4
     optimizers = (model.actor.optimizer, model.critic.optimizer, model.ent_coef_optimizer)
