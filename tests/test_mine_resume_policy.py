@@ -77,4 +77,5 @@ def test_a_run_folder_without_a_policy_fingerprint_is_refused_in_one_line(tmp_pa
     with pytest.raises(MiningError) as error:
         _mine("rule", out)
     message = str(error.value)
-    assert "\n" not in message and message.startswith(f"{out} holds a mining run was written by an older")
+    assert "\n" not in message and message.startswith(f"{out} was written by an older dv2s-gym (")
+    assert message.endswith("rerun with a new --out")

@@ -589,7 +589,7 @@ def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional
         before_space = _settings(policy, settings, batch, saved["scenarios"], bank_dir, {})
         _check_resume(saved, before_space, out, [key for key in _RESUME_KEYS if key not in _SPACE_KEYS])
         # the same spec naming a changed checkpoint or module is refused, naming what changed
-        check_policy_unchanged(saved, policy, run=f"{out} holds a mining run", error=MiningError)
+        check_policy_unchanged(saved, policy, folder=out, run="mining run", error=MiningError)
     names = saved["scenarios"] if saved and settings.scenarios is None else None
     asked = list(settings.scenarios) if settings.scenarios is not None else None
     space = space_module.SceneSpace(names or asked, bank_dir)

@@ -184,21 +184,23 @@ def fingerprint_changes(recorded: Dict[str, Any], now: Dict[str, Any]) -> List[s
             if recorded.get(key) != now.get(key)]
 
 
-def check_policy_unchanged(recorded: Mapping[str, Any], spec: str, *, run: str, error: type) -> Dict[str, Any]:
-    """The policy's :func:`resume_fingerprint`, after checking it against the one ``recorded`` (a run's settings).
+def check_policy_unchanged(recorded: Mapping[str, Any], spec: str, *, folder: Any, run: str,
+                           error: type) -> Dict[str, Any]:
+    """The policy's :func:`resume_fingerprint`, after checking it against the one ``recorded`` (the settings of the
+    ``run``, e.g. ``"mining run"``, in ``folder``).
 
     Raises:
-        error: ``"<run> was written by an older dv2s-gym (...); rerun with a new --out"`` when ``recorded`` has
-            no fingerprint; ``"<run> of <spec> whose policy has changed since (<fact>: run has ..., now ...);
-            restore the policy, or pass a new --out"`` when a fact differs.
+        error: ``"<folder> was written by an older dv2s-gym (...); rerun with a new --out"`` when ``recorded`` has
+            no fingerprint; ``"<folder> holds a <run> of <spec> whose policy has changed since (<fact>: run has
+            ..., now ...); restore the policy ..., or pass a new --out"`` when a fact differs.
     """
     now = resume_fingerprint(spec)
     if RESUME_FINGERPRINT not in recorded:
-        raise error(f"{run} was written by an older dv2s-gym (its settings record no fingerprint of the policy); "
+        raise error(f"{folder} was written by an older dv2s-gym (its settings record no fingerprint of the policy); "
                     "rerun with a new --out")
     changes = fingerprint_changes(dict(recorded[RESUME_FINGERPRINT] or {}), now)
     if changes:
-        raise error(f"{run} of {spec} whose policy has changed since ({'; '.join(changes[:3])}"
+        raise error(f"{folder} holds a {run} of {spec} whose policy has changed since ({'; '.join(changes[:3])}"
                     f"{f'; and {len(changes) - 3} more' if len(changes) > 3 else ''}); restore the policy "
                     "(its checkpoint or module as the run used it), or pass a new --out")
     return now
