@@ -1147,11 +1147,10 @@ def _with_parents(kept: Sequence[Mapping[str, Any]], bank: Optional[str]) -> Lis
     if bank is None:
         return entries
 
-    for entry in entries:
-        if not entry.get("parent"):
-            family = scenario_family(str(entry["scenario"]), str(bank))
-            if family != entry["scenario"]:
-                entry["parent"] = family
+    for entry in entries:  # a parent's near-duplicate twins are its family too (scenario_bank.families)
+        family = scenario_family(str(entry.get("parent") or entry["scenario"]), str(bank))
+        if family != entry["scenario"] or entry.get("parent"):
+            entry["parent"] = family
     return entries
 
 
