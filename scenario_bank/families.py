@@ -13,7 +13,7 @@ from typing import Any, Dict, Iterable, List
 
 from scenario_bank.dedup import near_duplicate
 
-__all__ = ["lineage_root", "content_families"]
+__all__ = ["lineage_root", "content_families", "near_duplicates_of"]
 
 
 def lineage_root(bank: Any, name: str) -> str:
@@ -62,3 +62,9 @@ def content_families(bank: Any) -> Dict[str, str]:
         if a != b:
             leader[max(a, b)] = min(a, b)
     return {name: find(root) for name, root in roots.items()}
+
+
+def near_duplicates_of(bank: Any, name: str) -> List[str]:
+    """The other entries of ``bank`` whose scripts are near-duplicates of entry ``name``'s (sorted)."""
+    entries = sorted(bank, key=lambda e: e.name)
+    return sorted({b if a == name else a for a, b in _twins(entries) if name in (a, b)})

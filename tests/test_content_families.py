@@ -8,6 +8,7 @@ from dv2s_gym.mining.loop import _with_parents
 from dv2s_gym.mining.split import family_of, split_by_family
 from scenario_bank.bank import Bank
 from scenario_bank.families import content_families
+from cli_helpers import run
 
 _SCRIPT = '''"""A car stands still ahead of the ego."""
 param map = 'highway_straight'
@@ -53,3 +54,14 @@ def test_the_loop_split_keeps_a_twin_with_its_held_out_family(tmp_path):
         sides = {e["parent"]: e["scenario"] in split.held_out for e in entries}
         twin_sides = {e["scenario"] in split.held_out for e in entries if family_of(e) == families[twins[0]]}
         assert len(twin_sides) == 1, (seed, sides)
+
+
+def test_bank_add_warns_of_a_near_duplicate_naming_it(tmp_path, capsys):
+    bank = _bank(tmp_path)
+    path = tmp_path / "twin.scenic"
+    path.write_text(_SCRIPT.format(low=10, high=140))
+    code, _, err = run(capsys, "bank", "add", path, "--description", "a stopped car, gap 10 to 140",
+                       "--bank", bank.root)
+    assert code == 0
+    warnings = [line for line in err.splitlines() if "near-duplicate of bank entry" in line]
+    assert len(warnings) == 2 and "one scenario family" in warnings[0]
