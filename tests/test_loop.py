@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -1255,6 +1257,32 @@ def test_a_setting_the_loop_did_not_record_is_its_default(tmp_path, monkeypatch)
     report = run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, log=lambda _: None, **settings)
     assert report.settings["mined_share"] == 0.5  # the report states the value the loop ran with
     assert len(miner.calls) == 1  # the finished round was not run again
+
+
+def test_a_loop_whose_starting_checkpoint_was_replaced_in_place_is_refused(tmp_path, monkeypatch):
+    """The same spec naming other bytes is another policy: resuming is refused naming the checkpoint and the fix;
+    a loop folder without the policy's fingerprint was written by an older dv2s-gym."""
+    _StandIns(monkeypatch)
+    miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
+    settings = {**WIRING, "min_heldout_episodes": 1, "min_heldout_families": 2}
+    checkpoint = tmp_path / "start" / "model.zip"
+    checkpoint.parent.mkdir()
+    shutil.copyfile(SHIPPED_CHECKPOINT, checkpoint)
+    spec = f"ppo:{checkpoint}"
+    run_loop(spec, out=tmp_path / "loop", miner=miner, log=lambda _: None, **settings)
+    with zipfile.ZipFile(checkpoint, "a") as archive:  # other bytes under the same path, still a checkpoint
+        archive.writestr("note.txt", "replaced in place")
+    with pytest.raises(LoopError) as error:
+        run_loop(spec, out=tmp_path / "loop", miner=miner, log=lambda _: None, **settings)
+    message = str(error.value)
+    assert "\n" not in message and "holds a loop of" in message and "whose policy has changed since (checkpoint" in message
+    assert "restore the policy" in message and message.endswith("or pass a new --out")
+    path = tmp_path / "loop" / "loop.json"
+    state = json.loads(path.read_text())
+    del state["settings"]["policy_fingerprint"]
+    path.write_text(json.dumps(state))
+    with pytest.raises(LoopError, match=r"was written by an older dv2s-gym \(its settings record no fingerprint"):
+        run_loop(spec, out=tmp_path / "loop", miner=miner, log=lambda _: None, **settings)
 
 
 @pytest.mark.parametrize("given, meant", [("lead_brak", "highway_lead_vehicle_brakes"), ("my_failure.scenic", None)])

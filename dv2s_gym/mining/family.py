@@ -2,7 +2,8 @@
 
 A mined or exact-replay bank entry names the scenario it came from in its provenance (``source.parent``);
 that one may itself be mined. The family is the end of that chain: the first scenario with no parent in the
-bank (a shipped or user scenario). Failures are clustered and counted per family
+bank (a shipped or user scenario), joined with every lineage a near-duplicate script of the bank belongs to
+(:func:`scenario_bank.families.content_families`: twins that differ in one range are one family). Failures are clustered and counted per family
 (:mod:`dv2s_gym.mining.cluster`), so one behaviour found in two entries of one family is one behaviour.
 """
 
@@ -10,17 +11,19 @@ from __future__ import annotations
 
 import os
 from functools import lru_cache
-from typing import Optional, Tuple
+from typing import Dict, Optional, Tuple
 
 from scenario_bank.bank import Bank
+from scenario_bank.families import content_families
 from scenario_bank.records import EpisodeRecord
 
 __all__ = ["scenario_family", "record_family"]
 
 
 def scenario_family(name: str, bank_dir: Optional[str] = None) -> str:
-    """The family of bank scenario ``name`` in ``bank_dir`` (``None``: the shipped bank); ``name`` itself
-    when it has no parent, or when it is not a bank entry (a script path or source text)."""
+    """The family of bank scenario ``name`` in ``bank_dir`` (``None``: the shipped bank, :func:`content_families`);
+    ``name`` itself when it has no parent nor near-duplicate, or when it is not a bank entry (a script path or
+    source text)."""
     return _family(name, bank_dir, _bank_stamp(bank_dir))
 
 
@@ -41,18 +44,18 @@ def _bank_stamp(bank_dir: Optional[str]) -> Tuple[int, ...]:
 
 @lru_cache(maxsize=4096)
 def _family(name: str, bank_dir: Optional[str], stamp: Tuple[int, ...]) -> str:
+    families = _families(bank_dir, stamp)
+    return families.get(name, name) if families is not None else name
+
+
+@lru_cache(maxsize=16)
+def _families(bank_dir: Optional[str], stamp: Tuple[int, ...]) -> Optional[Dict[str, str]]:
+    """:func:`scenario_bank.families.content_families` of a bank, computed once per state of the bank."""
     try:
         bank = Bank(bank_dir) if bank_dir else Bank()
     except Exception:  # noqa: BLE001 - no readable bank: every scenario is its own family
-        return name
-    current, seen = name, {name}
-    while current in bank:
-        parent = bank.get(current).source.parent
-        if not parent or str(parent) in seen:
-            break
-        current = str(parent)
-        seen.add(current)
-    return current
+        return None
+    return content_families(bank)
 
 
 def record_family(record: EpisodeRecord) -> str:

@@ -95,6 +95,7 @@ from scenario_bank.atomic import atomic_write_json
 from scenario_bank.bank import Bank
 from scenario_bank.records import EpisodeRecord, RecordError
 from scenario_bank.run_identity import check_identity
+from dv2s_gym.regress.identity import RESUME_FINGERPRINT, check_policy_unchanged, resume_fingerprint
 from policies.evaluation import EVAL_SEED_BASE
 from policies.registry import SB3_ALGORITHMS, read_model_card
 
@@ -160,6 +161,8 @@ class _State:
             recorded = data.get("settings", {})
             check_identity(recorded, settings, IDENTITY, run=f"{path.parent} holds a loop", defaults=LoopSettings,
                            fix="rerun with its settings to resume it, or choose another --out")
+            # the same spec naming a checkpoint replaced in place is refused, naming what changed
+            check_policy_unchanged(recorded, settings["policy"], folder=path.parent, run="loop", error=LoopError)
             # what may change on a resume, and a setting the loop did not record yet (its default, checked above)
             data["settings"].update({k: settings[k] for k in settings
                                      if k not in recorded or k not in IDENTITY})
@@ -507,9 +510,10 @@ def _recorded_settings(policy: str, settings: LoopSettings, workers: int, env_co
                        fine_tune_config: Dict[str, Any]) -> Dict[str, Any]:
     """The ``settings`` of ``loop.json``: :meth:`LoopSettings.recorded` with the policy, the resolved number of
     workers, how mined scenarios are held out and the env configs (the keys :data:`IDENTITY` names are the loop's
-    identity)."""
+    identity) and the starting policy's fingerprint (:func:`~dv2s_gym.regress.identity.resume_fingerprint`)."""
     return {"policy": policy, **settings.recorded(), "workers": workers, "holdout_by": HOLDOUT_BY,
-            "env_config": env_config, "fine_tune_env_config": fine_tune_config}
+            "env_config": env_config, "fine_tune_env_config": fine_tune_config,
+            RESUME_FINGERPRINT: resume_fingerprint(policy)}
 
 
 class _Timed:
@@ -1174,11 +1178,10 @@ def _with_parents(kept: Sequence[Mapping[str, Any]], bank: Optional[str]) -> Lis
     if bank is None:
         return entries
 
-    for entry in entries:
-        if not entry.get("parent"):
-            family = scenario_family(str(entry["scenario"]), str(bank))
-            if family != entry["scenario"]:
-                entry["parent"] = family
+    for entry in entries:  # a parent's near-duplicate twins are its family too (scenario_bank.families)
+        family = scenario_family(str(entry.get("parent") or entry["scenario"]), str(bank))
+        if family != entry["scenario"] or entry.get("parent"):
+            entry["parent"] = family
     return entries
 
 

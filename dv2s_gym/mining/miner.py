@@ -76,6 +76,7 @@ from scenario_bank.records import EpisodeRecord, RecordError
 from scenario_bank.failure_types import failure_table
 from scenario_bank.jail import JailUnavailableError, require_jail
 from scenario_bank.run_identity import check_identity
+from dv2s_gym.regress.identity import RESUME_FINGERPRINT, check_policy_unchanged, resume_fingerprint
 from policies.registry import load_policy
 
 __all__ = ["MineRun", "MineSettings", "WorkerSettings", "FEEDBACKS", "mine", "read_records", "episode_seed",
@@ -248,9 +249,11 @@ class _Recorder:
 def _settings(policy: str, settings: MineSettings, batch: int, scenarios: List[str], bank_dir: Optional[str],
               space_description: Dict[str, Any]) -> Dict[str, Any]:
     """The run's ``settings.json``: :meth:`MineSettings.recorded` with the policy and the resolved batch, scenarios
-    and bank (the keys :data:`_RESUME_KEYS` name are its identity)."""
+    and bank (the keys :data:`_RESUME_KEYS` name are its identity) and the policy's fingerprint
+    (:func:`~dv2s_gym.regress.identity.resume_fingerprint`: a resume with a changed checkpoint or module is refused)."""
     return {"schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, **settings.recorded(),
-            "batch": int(batch), "scenarios": scenarios, "bank_dir": bank_dir, "space": space_description}
+            "batch": int(batch), "scenarios": scenarios, "bank_dir": bank_dir, "space": space_description,
+            RESUME_FINGERPRINT: resume_fingerprint(policy)}
 
 
 def _read_settings(out: Path) -> Optional[RunSettings]:
@@ -586,6 +589,8 @@ def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional
     if saved is not None:  # a changed seed, policy, ... is refused before the space is built, not minutes later
         before_space = _settings(policy, settings, batch, saved["scenarios"], bank_dir, {})
         _check_resume(saved, before_space, out, [key for key in _RESUME_KEYS if key not in _SPACE_KEYS])
+        # the same spec naming a changed checkpoint or module is refused, naming what changed
+        check_policy_unchanged(saved, policy, folder=out, run="mining run", error=MiningError)
     names = saved["scenarios"] if saved and settings.scenarios is None else None
     asked = list(settings.scenarios) if settings.scenarios is not None else None
     space = space_module.SceneSpace(names or asked, bank_dir)

@@ -27,7 +27,7 @@ import json
 import sys
 import sysconfig
 from pathlib import Path
-from typing import Any, Dict, Iterable, List, Optional
+from typing import Any, Dict, Iterable, List, Mapping, Optional
 from importlib import metadata
 
 from scenario_bank.atomic import file_sha256
@@ -35,7 +35,8 @@ from policies.registry import (SB3_ALGORITHMS, SHIPPED_CHECKPOINT, parse_spec, r
                                registered_policy_module)
 
 __all__ = ["policy_fingerprint", "checkpoint_path", "installed_version", "file_sha256", "dv2s_sources_sha256",
-           "MAX_HELPER_FILES"]
+           "MAX_HELPER_FILES", "RESUME_FINGERPRINT", "resume_fingerprint", "fingerprint_changes",
+           "check_policy_unchanged"]
 
 MAX_HELPER_FILES = 500
 """At most this many ``.py`` files beside a policy module are hashed (a policy in a huge folder)."""
@@ -158,3 +159,48 @@ def policy_fingerprint(spec: str) -> Dict[str, Any]:
                 if helper != found.resolve():
                     facts[f"module file {helper} (SHA-256)"] = file_sha256(helper)
     return facts
+
+
+RESUME_FINGERPRINT = "policy_fingerprint"
+"""The key under which a resumable run's settings record :func:`resume_fingerprint` of its policy."""
+
+
+def resume_fingerprint(spec: str) -> Dict[str, Any]:
+    """What a resumed run must find unchanged in its policy: :func:`policy_fingerprint` without the one SHA-256 of
+    dv2s's own sources (the checkpoint's bytes, a ``module:attribute`` policy's source and its helper files, a
+    registered driver's module, the options and the dv2s version)."""
+    facts = policy_fingerprint(spec)
+    facts.pop("dv2s sources (SHA-256)", None)
+    return facts
+
+
+def fingerprint_changes(recorded: Dict[str, Any], now: Dict[str, Any]) -> List[str]:
+    """``"<fact>: run has <old>, now <new>"`` for every fact of two fingerprints that differs (sorted)."""
+    def show(value: Any) -> str:
+        text = "absent" if value is None else str(value)
+        return text[:12] if len(text) == 64 else text
+    keys = sorted(set(recorded) | set(now))
+    return [f"{key}: run has {show(recorded.get(key))}, now {show(now.get(key))}" for key in keys
+            if recorded.get(key) != now.get(key)]
+
+
+def check_policy_unchanged(recorded: Mapping[str, Any], spec: str, *, folder: Any, run: str,
+                           error: type) -> Dict[str, Any]:
+    """The policy's :func:`resume_fingerprint`, after checking it against the one ``recorded`` (the settings of the
+    ``run``, e.g. ``"mining run"``, in ``folder``).
+
+    Raises:
+        error: ``"<folder> was written by an older dv2s-gym (...); rerun with a new --out"`` when ``recorded`` has
+            no fingerprint; ``"<folder> holds a <run> of <spec> whose policy has changed since (<fact>: run has
+            ..., now ...); restore the policy ..., or pass a new --out"`` when a fact differs.
+    """
+    now = resume_fingerprint(spec)
+    if RESUME_FINGERPRINT not in recorded:
+        raise error(f"{folder} was written by an older dv2s-gym (its settings record no fingerprint of the policy); "
+                    "rerun with a new --out")
+    changes = fingerprint_changes(dict(recorded[RESUME_FINGERPRINT] or {}), now)
+    if changes:
+        raise error(f"{folder} holds a {run} of {spec} whose policy has changed since ({'; '.join(changes[:3])}"
+                    f"{f'; and {len(changes) - 3} more' if len(changes) > 3 else ''}); restore the policy "
+                    "(its checkpoint or module as the run used it), or pass a new --out")
+    return now
