@@ -1540,18 +1540,26 @@ def test_parameters_taken_through_star_args_count_by_position():
     assert _count("def f(*parts, **e):\n    return ''.join(parts), e['x']\n") == 2
 
 
+def _limits_of_a_plant(tmp_path, planted: str) -> str:
+    """What :func:`over_the_limits` says of the one function ``planted`` at the end of a copy of a module that keeps
+    the limits; the planted function must be the only one it finds."""
+    target = "policies/baselines.py"
+    copy = tmp_path / "planted.py"
+    copy.write_text((ROOT / target).read_text(encoding="utf-8") + "\n\n" + planted, encoding="utf-8")
+    assert not over_the_limits({target: ROOT / target})
+    name = planted.partition("(")[0].removeprefix("def ")
+    found = over_the_limits({target: copy})
+    assert list(found) == [f"{target}:{name}"]
+    return found[f"{target}:{name}"]
+
+
 @pytest.mark.parametrize("planted", [
     "def _planted_positions(*args):\n    a, b, c, d, e, f, g, h, i, j = args\n    return a\n",
     "def _planted_indexed(first, *rest):\n    return first, rest[0], rest[1], rest[2], rest[3], rest[4], rest[5], "
     "rest[6], rest[7]\n",
 ])
 def test_the_limits_see_parameters_planted_through_star_args(tmp_path, planted):
-    target = "policies/baselines.py"
-    copy = tmp_path / "planted.py"
-    copy.write_text((ROOT / target).read_text(encoding="utf-8") + "\n\n" + planted, encoding="utf-8")
-    assert not over_the_limits({target: ROOT / target})
-    name = planted.partition("(")[0].removeprefix("def ")
-    assert list(over_the_limits({target: copy})) == [f"{target}:{name}"]
+    _limits_of_a_plant(tmp_path, planted)
 
 
 _NINE = ("a", "b", "c", "d", "e", "f", "g", "h", "i")
@@ -1583,13 +1591,7 @@ _NINE = ("a", "b", "c", "d", "e", "f", "g", "h", "i")
 def test_the_limits_see_parameters_planted_through_kwargs_and_args(tmp_path, planted):
     planted = planted % {"keys": ", ".join(repr(k) for k in _NINE),
                          "table": ", ".join(f"{k!r}: {n}" for n, k in enumerate(_NINE))}
-    target = "policies/baselines.py"
-    copy = tmp_path / "planted.py"
-    copy.write_text((ROOT / target).read_text(encoding="utf-8") + "\n\n" + planted, encoding="utf-8")
-    assert not over_the_limits({target: ROOT / target})
-    name = planted.partition("(")[0].removeprefix("def ")
-    assert list(over_the_limits({target: copy})) == [f"{target}:{name}"]
-    assert over_the_limits({target: copy})[f"{target}:{name}"].endswith(" 9 parameters")
+    assert _limits_of_a_plant(tmp_path, planted).endswith(" 9 parameters")
 
 
 def test_keyword_arguments_passed_on_whole_count_once():
