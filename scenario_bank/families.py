@@ -13,7 +13,26 @@ from typing import Any, Dict, Iterable, List
 
 from scenario_bank.dedup import near_duplicate
 
-__all__ = ["lineage_root", "content_families", "near_duplicates_of"]
+__all__ = ["UnionFind", "lineage_root", "content_families", "near_duplicates_of"]
+
+
+class UnionFind:
+    """Disjoint sets of string keys; each set is named by its smallest key, so groups do not depend on order."""
+
+    def __init__(self) -> None:
+        self.parent: Dict[str, str] = {}
+
+    def find(self, key: str) -> str:
+        parent = self.parent
+        while parent.setdefault(key, key) != key:
+            parent[key] = parent[parent[key]]
+            key = parent[key]
+        return key
+
+    def union(self, a: str, b: str) -> None:
+        a, b = self.find(a), self.find(b)
+        if a != b:
+            self.parent[max(a, b)] = min(a, b)
 
 
 def lineage_root(bank: Any, name: str) -> str:
@@ -28,20 +47,26 @@ def lineage_root(bank: Any, name: str) -> str:
     return current
 
 
-def _twins(entries: List[Any]) -> Iterable[tuple]:
-    """Pairs of entry names whose scripts are near-duplicates (unreadable scripts are no one's twin)."""
-    scripts: Dict[str, str] = {}
+def _scripts(entries: Iterable[Any]) -> Dict[str, Any]:
+    """``{name: (entry, script)}`` of the entries whose script is readable (an unreadable one is no one's twin)."""
+    found: Dict[str, Any] = {}
     for entry in entries:
         try:
-            scripts[entry.name] = entry.script
+            found[entry.name] = (entry, entry.script)
         except OSError:
             continue
-    readable = [e for e in entries if e.name in scripts]
-    for i, first in enumerate(readable):
-        for second in readable[i + 1:]:
-            if first.map == second.map and near_duplicate(first.elements, first.map, scripts[first.name],
-                                                          second.elements, second.map, scripts[second.name]):
-                yield first.name, second.name
+    return found
+
+
+def _twins(scripts: Dict[str, Any]) -> Iterable[tuple]:
+    """Pairs ``(a, b)`` of names in ``scripts`` (:func:`_scripts`), ``a < b``, whose scripts are near-duplicates."""
+    names = sorted(scripts)
+    for i, name in enumerate(names):
+        first, script = scripts[name]
+        for other in names[i + 1:]:
+            second, other_script = scripts[other]
+            if near_duplicate(first.elements, first.map, script, second.elements, second.map, other_script):
+                yield name, other
 
 
 def content_families(bank: Any) -> Dict[str, str]:
@@ -49,22 +74,18 @@ def content_families(bank: Any) -> Dict[str, str]:
     each family named by its first (sorted) root."""
     entries = sorted(bank, key=lambda e: e.name)
     roots = {e.name: lineage_root(bank, e.name) for e in entries}
-    leader: Dict[str, str] = {root: root for root in roots.values()}
-
-    def find(root: str) -> str:
-        while leader[root] != root:
-            leader[root] = leader[leader[root]]
-            root = leader[root]
-        return root
-
-    for first, second in _twins(entries):
-        a, b = find(roots[first]), find(roots[second])
-        if a != b:
-            leader[max(a, b)] = min(a, b)
-    return {name: find(root) for name, root in roots.items()}
+    families = UnionFind()
+    for first, second in _twins(_scripts(entries)):
+        families.union(roots[first], roots[second])
+    return {name: families.find(root) for name, root in roots.items()}
 
 
 def near_duplicates_of(bank: Any, name: str) -> List[str]:
-    """The other entries of ``bank`` whose scripts are near-duplicates of entry ``name``'s (sorted)."""
-    entries = sorted(bank, key=lambda e: e.name)
-    return sorted({b if a == name else a for a, b in _twins(entries) if name in (a, b)})
+    """The other entries of ``bank`` whose scripts are near-duplicates of entry ``name``'s (sorted): one comparison
+    per other entry, not the bank's every pair."""
+    scripts = _scripts(bank)
+    if name not in scripts:
+        return []
+    entry, script = scripts.pop(name)
+    return sorted(other for other, (second, other_script) in scripts.items()
+                  if near_duplicate(entry.elements, entry.map, script, second.elements, second.map, other_script))

@@ -20,27 +20,9 @@ from typing import Any, Dict, List, Mapping, Sequence, Tuple
 import numpy as np
 
 from dv2s_gym.mining.errors import MiningError
+from scenario_bank.families import UnionFind
 
 __all__ = ["split_by_family", "family_of", "family_groups", "FamilyGroup", "FamilySplit"]
-
-
-class _UnionFind:
-    """Disjoint sets of string keys; each set is named by its smallest key, so groups do not depend on order."""
-
-    def __init__(self) -> None:
-        self.parent: Dict[str, str] = {}
-
-    def find(self, key: str) -> str:
-        parent = self.parent
-        while parent.setdefault(key, key) != key:
-            parent[key] = parent[parent[key]]
-            key = parent[key]
-        return key
-
-    def union(self, a: str, b: str) -> None:
-        a, b = self.find(a), self.find(b)
-        if a != b:
-            self.parent[max(a, b)] = min(a, b)
 
 
 def family_of(entry: Mapping[str, Any]) -> str:
@@ -88,7 +70,7 @@ def family_groups(entries: Sequence[Mapping[str, Any]]) -> List[FamilyGroup]:
     """Connected groups of mined entries: two entries are in one group when they share a family, a cluster
     or a scenario (a failure merged into another family's scenario ties the two families), sorted by their first
     family."""
-    sets = _UnionFind()
+    sets = UnionFind()
     find, union = sets.find, sets.union
     for entry in entries:
         family = "f:" + family_of(entry)
