@@ -1167,6 +1167,63 @@ def test_every_project_error_derives_from_the_one_base():
     assert not still, f"under the base now (or gone): take them off OUTSIDE_THE_BASE: {still}"
 
 
+ERRORS_PAGE = ROOT / "docs" / "errors.md"
+"""The user's page of the error classes: a table row per public error class, its bases and what it means."""
+_ERROR_ROW = re.compile(r"^\| `([\w.]+)` \| ([^|]*) \|", re.MULTILINE)
+
+
+def public_error_classes(modules: Optional[Dict[str, Path]] = None) -> Dict[str, List[str]]:
+    """Every public error class of the four packages (:func:`error_classes`, private classes left out, a public
+    name bound to a private one in) -> the short names of its bases (``["DV2SError", "ValueError"]``)."""
+    classes, exported = _class_table(modules)
+    errors = error_classes(modules)
+    public = {q: q for q in errors if not q.rpartition(".")[2].startswith("_")}
+    public.update({name: target for name, target in exported.items() if target in errors})
+    return {name: [base.rpartition(".")[2] for base in classes[q]] for name, q in public.items()}
+
+
+def errors_page_problems(text: str, modules: Optional[Dict[str, Path]] = None) -> List[str]:
+    """What the errors page (its table rows: ``| `module.Class` | `Base`, `Other` | meaning |``) gets wrong about
+    the code: a public error class it does not list, a class it lists that the code does not define, a class
+    listed twice, bases other than the class's own."""
+    rows = [(name, re.findall(r"`(\w+)`", bases)) for name, bases in _ERROR_ROW.findall(text)]
+    listed = [name for name, _ in rows]
+    code = public_error_classes(modules)
+    problems = [f"not on the page: {name}" for name in sorted(set(code) - set(listed))]
+    problems += [f"on the page, not in the code: {name}" for name in sorted(set(listed) - set(code))]
+    problems += [f"listed twice: {name}" for name in sorted({n for n in listed if listed.count(n) > 1})]
+    problems += [f"{name} derives from {', '.join(code[name])}, the page says {', '.join(bases)}"
+                 for name, bases in rows if name in code and bases != code[name]]
+    return problems
+
+
+def test_the_errors_page_lists_every_error_class():
+    """``docs/errors.md`` lists every public error class with its bases, and no class the code no longer has: a
+    user reading it catches the right class."""
+    problems = errors_page_problems(ERRORS_PAGE.read_text(encoding="utf-8"))
+    assert not problems, "docs/errors.md is out of date with the code:\n" + "\n".join(problems)
+    assert len(public_error_classes()) > 80
+
+
+def test_the_errors_page_check_sees_a_new_a_removed_and_a_changed_class(tmp_path):
+    text = ERRORS_PAGE.read_text(encoding="utf-8")
+    modules = _modules()
+    target = "envs.trace"
+    copy = tmp_path / "trace.py"
+    copy.write_text(modules[target].read_text(encoding="utf-8") + "\n\nclass PlantedError(DV2SError, ValueError):\n"
+                    "    pass\n\n\nclass _PlantedPrivateError(DV2SError):\n    pass\n", encoding="utf-8")
+    planted = {**modules, target: copy}
+    assert errors_page_problems(text, planted) == [f"not on the page: {target}.PlantedError"]
+    row = f"| `{target}.PlantedError` | `DV2SError`, `ValueError` | planted |\n"
+    assert errors_page_problems(text + row, planted) == []
+    assert errors_page_problems(text + row, modules) == [f"on the page, not in the code: {target}.PlantedError"]
+    assert errors_page_problems(text + row.replace("`ValueError`", "`KeyError`"), planted) == [
+        f"{target}.PlantedError derives from DV2SError, ValueError, the page says DV2SError, KeyError"]
+    first = _ERROR_ROW.search(text).group(0)
+    assert errors_page_problems(text + "\n" + first + " again |\n", modules) == [
+        f"listed twice: {_ERROR_ROW.search(text).group(1)}"]
+
+
 def test_classes_made_by_a_call_name_their_bases():
     """A class made by ``type(name, bases, namespace)`` or ``types.new_class`` is read like a ``class`` statement;
     one whose bases are computed could derive from anything, so the error rules could not see it."""
