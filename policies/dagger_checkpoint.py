@@ -181,12 +181,14 @@ class DAggerCheckpoint:
             return None
         try:
             data = json.loads(self.progress_path.read_text(encoding="utf-8"))
-            if data.get("schema") != SCHEMA:
-                raise ValueError(f"schema {data.get('schema')!r}, not {SCHEMA!r}")
-            return data
-        except ValueError as error:
-            raise DAggerResumeError(f"the DAgger checkpoint {self.progress_path} is unreadable ({error}); delete "
-                                    f"{self.folder} to start the fine-tuning over") from None
+        except (OSError, ValueError) as error:
+            data, problem = None, str(error)
+        else:
+            problem = _progress_problem(data)
+        if problem:
+            raise DAggerResumeError(f"the DAgger checkpoint {self.progress_path} is unreadable ({problem}); delete "
+                                    f"{self.folder} to start the fine-tuning over")
+        return data
 
     def load(self) -> Optional[SavedIteration]:
         """The last committed iteration, or ``None`` when there is none (a fresh run).
@@ -227,7 +229,7 @@ class DAggerCheckpoint:
                         iteration=int(record["iteration"]), observations=batch["observations"],
                         labels=batch["labels"], next_observations=batch["next_observations"],
                         episodes=int(record["episodes"]), crashes=int(record["crashes"]), envs=list(record["envs"]))
-        except (OSError, KeyError, ValueError, RuntimeError) as error:
+        except (OSError, KeyError, ValueError, RuntimeError, TypeError) as error:
             raise DAggerResumeError(f"the DAgger checkpoint in {self.folder} is incomplete ({error}); delete "
                                     f"{self.folder} to start the fine-tuning over") from None
         self._committed = {key: value for key, value in data.items() if key != "partial"}
@@ -282,6 +284,20 @@ class DAggerCheckpoint:
     def remove(self) -> None:
         """Delete the folder (the run is finished: its model and card are written)."""
         shutil.rmtree(self.folder, ignore_errors=True)
+
+
+_PROGRESS_FIELDS = {"identity": dict, "iteration": int, "history": list, "rng": dict, "envs": list}
+"""What every ``progress.json`` holds (:meth:`DAggerCheckpoint.save` and ``save_partial`` write them all)."""
+
+
+def _progress_problem(data: Any) -> Optional[str]:
+    """What is wrong with a read ``progress.json``, or ``None``."""
+    schema = data.get("schema") if isinstance(data, dict) else None
+    if schema != SCHEMA:
+        return f"schema {schema!r}, not {SCHEMA!r}"
+    wrong = [name for name, kind in _PROGRESS_FIELDS.items()
+             if not isinstance(data.get(name), kind) or isinstance(data.get(name), bool)]
+    return f"no valid {', '.join(wrong)}" if wrong else None
 
 
 def checkpoint_position(out: Path | str) -> Optional[Tuple[int, int]]:

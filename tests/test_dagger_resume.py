@@ -5,6 +5,7 @@ checkpoint of other settings refused."""
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -204,6 +205,45 @@ def test_an_unreadable_checkpoint_is_refused_with_the_fix(tmp_path):
     (folder / "progress.json").write_text("{not json")
     with pytest.raises(DAggerResumeError, match=f"unreadable .*delete {folder}"):
         dagger_fine_tune("dv2s-ppo", out=tmp_path / "run", log=lambda _: None, **RUN)
+
+
+_GOOD_PROGRESS = {"schema": "dv2s-dagger-checkpoint", "schema_version": 1, "identity": {}, "iteration": 0,
+                  "history": [], "rng": {}, "envs": [], "partial": None}
+
+
+@pytest.mark.parametrize("text, problem", [
+    ("[]", "schema None"),
+    ('"dv2s-dagger-checkpoint"', "schema None"),
+    (json.dumps({**_GOOD_PROGRESS, "schema": "other"}), "schema 'other'"),
+    (json.dumps({key: value for key, value in _GOOD_PROGRESS.items() if key != "iteration"}), "no valid iteration"),
+    (json.dumps({**_GOOD_PROGRESS, "iteration": "2", "identity": []}), "no valid identity, iteration"),
+    (json.dumps({**_GOOD_PROGRESS, "iteration": True}), "no valid iteration"),
+    ("\udcff", "codec can't decode"),
+])
+def test_a_damaged_progress_file_is_refused_with_the_fix(tmp_path, text, problem):
+    """A ``progress.json`` that is JSON but not a checkpoint's (another value, fields missing or of another type)
+    is refused as unreadable, naming the fix, instead of failing later with a bare KeyError or AttributeError."""
+    folder = tmp_path / CHECKPOINT_DIR
+    folder.mkdir()
+    (folder / "progress.json").write_bytes(text.encode("utf-8", "surrogateescape"))
+    with pytest.raises(DAggerResumeError, match=f"unreadable .*{re.escape(problem)}.*delete {re.escape(str(folder))}"):
+        DAggerCheckpoint(folder, {}).load()
+
+
+def test_a_damaged_partial_record_is_refused_with_the_fix(tmp_path):
+    folder = tmp_path / CHECKPOINT_DIR
+    folder.mkdir()
+    (folder / "progress.json").write_text(json.dumps({**_GOOD_PROGRESS, "partial": "partial_1_10.npz"}))
+    with pytest.raises(DAggerResumeError, match=f"incomplete .*delete {re.escape(str(folder))}"):
+        DAggerCheckpoint(folder, {}).load()
+
+
+def test_a_whole_progress_file_with_no_iteration_done_loads(tmp_path):
+    folder = tmp_path / CHECKPOINT_DIR
+    folder.mkdir()
+    (folder / "progress.json").write_text(json.dumps(_GOOD_PROGRESS))
+    saved = DAggerCheckpoint(folder, {}).load()
+    assert saved.iteration == 0 and saved.observations == [] and saved.partial is None
 
 
 @pytest.mark.slow

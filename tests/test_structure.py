@@ -1167,6 +1167,63 @@ def test_every_project_error_derives_from_the_one_base():
     assert not still, f"under the base now (or gone): take them off OUTSIDE_THE_BASE: {still}"
 
 
+ERRORS_PAGE = ROOT / "docs" / "errors.md"
+"""The user's page of the error classes: a table row per public error class, its bases and what it means."""
+_ERROR_ROW = re.compile(r"^\| `([\w.]+)` \| ([^|]*) \|", re.MULTILINE)
+
+
+def public_error_classes(modules: Optional[Dict[str, Path]] = None) -> Dict[str, List[str]]:
+    """Every public error class of the four packages (:func:`error_classes`, private classes left out, a public
+    name bound to a private one in) -> the short names of its bases (``["DV2SError", "ValueError"]``)."""
+    classes, exported = _class_table(modules)
+    errors = error_classes(modules)
+    public = {q: q for q in errors if not q.rpartition(".")[2].startswith("_")}
+    public.update({name: target for name, target in exported.items() if target in errors})
+    return {name: [base.rpartition(".")[2] for base in classes[q]] for name, q in public.items()}
+
+
+def errors_page_problems(text: str, modules: Optional[Dict[str, Path]] = None) -> List[str]:
+    """What the errors page (its table rows: ``| `module.Class` | `Base`, `Other` | meaning |``) gets wrong about
+    the code: a public error class it does not list, a class it lists that the code does not define, a class
+    listed twice, bases other than the class's own."""
+    rows = [(name, re.findall(r"`(\w+)`", bases)) for name, bases in _ERROR_ROW.findall(text)]
+    listed = [name for name, _ in rows]
+    code = public_error_classes(modules)
+    problems = [f"not on the page: {name}" for name in sorted(set(code) - set(listed))]
+    problems += [f"on the page, not in the code: {name}" for name in sorted(set(listed) - set(code))]
+    problems += [f"listed twice: {name}" for name in sorted({n for n in listed if listed.count(n) > 1})]
+    problems += [f"{name} derives from {', '.join(code[name])}, the page says {', '.join(bases)}"
+                 for name, bases in rows if name in code and bases != code[name]]
+    return problems
+
+
+def test_the_errors_page_lists_every_error_class():
+    """``docs/errors.md`` lists every public error class with its bases, and no class the code no longer has: a
+    user reading it catches the right class."""
+    problems = errors_page_problems(ERRORS_PAGE.read_text(encoding="utf-8"))
+    assert not problems, "docs/errors.md is out of date with the code:\n" + "\n".join(problems)
+    assert len(public_error_classes()) > 80
+
+
+def test_the_errors_page_check_sees_a_new_a_removed_and_a_changed_class(tmp_path):
+    text = ERRORS_PAGE.read_text(encoding="utf-8")
+    modules = _modules()
+    target = "envs.trace"
+    copy = tmp_path / "trace.py"
+    copy.write_text(modules[target].read_text(encoding="utf-8") + "\n\nclass PlantedError(DV2SError, ValueError):\n"
+                    "    pass\n\n\nclass _PlantedPrivateError(DV2SError):\n    pass\n", encoding="utf-8")
+    planted = {**modules, target: copy}
+    assert errors_page_problems(text, planted) == [f"not on the page: {target}.PlantedError"]
+    row = f"| `{target}.PlantedError` | `DV2SError`, `ValueError` | planted |\n"
+    assert errors_page_problems(text + row, planted) == []
+    assert errors_page_problems(text + row, modules) == [f"on the page, not in the code: {target}.PlantedError"]
+    assert errors_page_problems(text + row.replace("`ValueError`", "`KeyError`"), planted) == [
+        f"{target}.PlantedError derives from DV2SError, ValueError, the page says DV2SError, KeyError"]
+    first = _ERROR_ROW.search(text).group(0)
+    assert errors_page_problems(text + "\n" + first + " again |\n", modules) == [
+        f"listed twice: {_ERROR_ROW.search(text).group(1)}"]
+
+
 def test_classes_made_by_a_call_name_their_bases():
     """A class made by ``type(name, bases, namespace)`` or ``types.new_class`` is read like a ``class`` statement;
     one whose bases are computed could derive from anything, so the error rules could not see it."""
@@ -2372,28 +2429,56 @@ BUILT_IN_RAISES: Dict[str, str] = {
                                                                       "geometry (no user input)",
     "scenario_bank.maps.build_maps:junction_arms:ValueError": "the map builder's self-check on its own junction "
                                                               "tables (no user input)",
+    # private functions and methods
+    "envs.jail_worker:_Worker._write_files:ValueError": "inside the jailed worker: the error is the answer sent to "
+                                                        "the parent (ScenarioCompileError there), never raised in the "
+                                                        "user's process",
+    "envs.jail_worker:_Worker.driver_new:ValueError": "inside the jailed worker: the error is the answer sent to the "
+                                                      "parent (ScenarioCompileError there), never raised in the "
+                                                      "user's process",
+    "envs.scenic_highway.carla.actions:_RefusedAction.applyTo:NotImplementedError": "never reached: every subclass's "
+                                                                                    "constructor refuses the action "
+                                                                                    "with a project error first",
+    "envs.scenic_highway.readback:_LazyFinal.__get__:AttributeError": "a descriptor's __get__: Python's protocol "
+                                                                      "(getattr, hasattr) needs AttributeError for a "
+                                                                      "name the object does not have",
+    "policies.imitation:_plain:TypeError": "json.dumps's default= hook: json's protocol needs TypeError for a value "
+                                           "it cannot write (the env snapshot holds only numbers the hook converts)",
+    "scenario_bank.jail.linux:_check:OSError": "a system call's errno, raised only in the jail's zygote, whose reply "
+                                               "carries the errno to the user's side (ZygoteError there)",
+    "scenario_bank.jail.process:JailedProcess._read_exactly:EOFError": "the end of the worker's output, caught by "
+                                                                       "JailedProcess._receive and raised as a "
+                                                                       "JailError naming how the worker ended",
+    "scenario_bank.jail.process:JailedProcess._read_exactly:TimeoutError": "the deadline passed, caught by "
+                                                                           "JailedProcess._receive and raised as "
+                                                                           "JailLimitError (the wall-clock limit)",
+    "scenario_bank.jail.wire:_read_exactly:EOFError": "the end of the channel, read_message's documented signal: its "
+                                                      "callers (the jailed worker, the jail probe) stop on it",
+    "scenario_bank.jail.zygote:Zygote._receive:ValueError": "caught by the same function's `except ValueError` "
+                                                            "(with unpack_reply's) and raised as ZygoteError",
+    "scenario_bank.jail.zygote_server:_Zygote.self_test:OSError": "inside the jail's zygote: the errno goes to the "
+                                                                  "user's side in its reply (ZygoteError there)",
+    "scenario_bank.jail.zygote_server:_handshake:OSError": "inside the jail's zygote: the errno goes to the user's "
+                                                           "side in its reply (ZygoteError there)",
+    "scenario_bank.maps.build_maps:_check_map:AssertionError": "the map builder's self-check on the maps it builds "
+                                                               "from its own tables (no user input)",
+    "scenario_bank.maps.build_maps:_check_section:AssertionError": "the map builder's self-check on the lanes it "
+                                                                   "builds from its own tables (no user input)",
 }
-"""``module:Qualified.function:Exception`` -> why a public product function raises a bare built-in exception
-rather than a project error (one that derives from ``DV2SError`` and, where callers catch it, from the same
-built-in). The list only shrinks."""
-
-
-def _is_public(name: str) -> bool:
-    """No part of a dotted name is private (``_x``); a dunder (``__init__``, ``__getattr__``) is public."""
-    return not any(part.startswith("_") and not (part.startswith("__") and part.endswith("__"))
-                   for part in name.split("."))
+"""``module:Qualified.function:Exception`` -> why a product function (public or private) raises a bare built-in
+exception rather than a project error (one that derives from ``DV2SError`` and, where callers catch it, from the
+same built-in). The list only shrinks."""
 
 
 def built_in_raises(modules: Optional[Dict[str, Path]] = None) -> List[str]:
-    """``module:Qualified.function:Exception`` of every ``raise`` of a built-in exception in a public function (or
-    method) of a public module: ``raise ValueError(...)``, ``raise KeyError``, through an alias (``_E = ValueError``,
-    ``from builtins import KeyError as _K``, ``builtins.ValueError``), a name bound to an instance (``error =
-    ValueError(...)``; ``raise error``) or a table of classes it is looked up in (``_ERRORS[kind](message)``). A
-    raise in a nested function counts for the public function around it."""
+    """``module:Qualified.function:Exception`` of every ``raise`` of a built-in exception in a function (or
+    method), public or private, of a product module: ``raise ValueError(...)``, ``raise KeyError``, through an alias
+    (``_E = ValueError``, ``from builtins import KeyError as _K``, ``builtins.ValueError``), a name bound to an
+    instance (``error = ValueError(...)``; ``raise error``) or a table of classes it is looked up in
+    (``_ERRORS[kind](message)``). A raise in a nested function counts for the outermost function around it. A
+    private function's raise counts too: the public function that calls it lets it through to the user."""
     found = []
     for module, path in sorted((modules or _modules()).items()):
-        if not _is_public(module):
-            continue
         tree = _parsed(path)
         bindings = _bindings(list(ast.walk(tree)), classes_made_by_calls(tree), module, path)
 
@@ -2428,19 +2513,19 @@ def built_in_raises(modules: Optional[Dict[str, Path]] = None) -> List[str]:
             for qualified in raised(node.exc):
                 value = getattr(builtins, qualified.partition(".")[2], None) if qualified.startswith("builtins.") \
                     else None
-                if isinstance(value, type) and issubclass(value, BaseException) and _is_public(function):
+                if isinstance(value, type) and issubclass(value, BaseException):
                     found.append(f"{module}:{function}:{value.__name__}")
     return sorted(set(found))
 
 
-def test_public_functions_raise_project_errors():
-    """A public function of the product raises the project's error for its subsystem (under ``DV2SError``, and
-    also the built-in where callers catch that), not a bare built-in: the command line catches ``DV2SError`` once
-    and prints its message; a bare ``ValueError`` is taken for a fault. :data:`BUILT_IN_RAISES` lists the
-    exceptions to this, each with the reason."""
+def test_product_functions_raise_project_errors():
+    """A function of the product, public or private, raises the project's error for its subsystem (under
+    ``DV2SError``, and also the built-in where callers catch that), not a bare built-in: the command line catches
+    ``DV2SError`` once and prints its message; a bare ``ValueError`` is taken for a fault. :data:`BUILT_IN_RAISES`
+    lists the exceptions to this, each with the reason."""
     found = built_in_raises()
     new = [name for name in found if name not in BUILT_IN_RAISES]
-    assert not new, f"public functions raising a bare built-in exception (raise the subsystem's project error, or " \
+    assert not new, f"functions raising a bare built-in exception (raise the subsystem's project error, or " \
                     f"list it in BUILT_IN_RAISES with the reason): {new}"
     stale = sorted(set(BUILT_IN_RAISES) - set(found))
     assert not stale, f"BUILT_IN_RAISES lists raises that are gone: take them off: {stale}"
@@ -2469,7 +2554,38 @@ def test_the_raise_rule_sees_a_built_in_planted_in_a_public_function(tmp_path, p
     copy = tmp_path / "planted.py"
     copy.write_text(modules[target].read_text(encoding="utf-8") + "\n\n" + planted, encoding="utf-8")
     assert built_in_raises({target: copy}) == [f"{target}:{raised}"]
-    private = tmp_path / "private.py"  # the same raise in a private function is the module's own business
-    private.write_text(modules[target].read_text(encoding="utf-8") + "\n\n" + planted.replace("planted", "_planted")
-                       .replace("class Planted", "class _Planted"), encoding="utf-8")
-    assert not built_in_raises({target: private})
+
+
+_PRIVATE_PLANTS = [
+    ("def _planted(x):\n    raise ValueError(f'bad {x}')\n", "_planted:ValueError"),
+    ("def _planted(x):\n    if x:\n        raise KeyError\n", "_planted:KeyError"),
+    ("_E = TypeError\n\n\ndef _planted(x):\n    raise _E(x)\n", "_planted:TypeError"),
+    ("def _planted(x):\n    error = RuntimeError(x)\n    raise error\n", "_planted:RuntimeError"),
+    ("class Planted:\n    def _check(self, x):\n        raise ValueError(x)\n", "Planted._check:ValueError"),
+    ("class _Planted:\n    def check(self, x):\n        raise ValueError(x)\n", "_Planted.check:ValueError"),
+    ("class _Planted:\n    def _check(self, x):\n        raise LookupError(x)\n", "_Planted._check:LookupError"),
+    ("def planted(x):\n    def _inner():\n        raise ValueError(x)\n    return _inner()\n", "planted:ValueError"),
+    ("def _planted(x):\n    def inner():\n        raise ValueError(x)\n    return inner()\n", "_planted:ValueError"),
+    ("_ERRORS = {'a': KeyError}\n\n\ndef _planted(x):\n    raise _ERRORS[x]('no')\n", "_planted:KeyError"),
+]
+
+
+@pytest.mark.parametrize("planted, raised", _PRIVATE_PLANTS)
+def test_the_raise_rule_sees_a_built_in_planted_in_a_private_function(tmp_path, planted, raised):
+    """A private helper's bare built-in reaches the user through the public function that calls it: the rule
+    reads private functions, methods and classes too."""
+    modules = _modules()
+    target = "envs.trace"
+    assert not built_in_raises({target: modules[target]})
+    copy = tmp_path / "planted.py"
+    copy.write_text(modules[target].read_text(encoding="utf-8") + "\n\n" + planted, encoding="utf-8")
+    assert built_in_raises({target: copy}) == [f"{target}:{raised}"]
+
+
+def test_a_private_raise_of_a_project_error_is_no_finding(tmp_path):
+    modules = _modules()
+    target = "envs.trace"
+    copy = tmp_path / "planted.py"
+    copy.write_text(modules[target].read_text(encoding="utf-8") + "\n\ndef _planted(x):\n"
+                    "    raise TraceFileError(f'bad {x}')\n", encoding="utf-8")
+    assert not built_in_raises({target: copy})
