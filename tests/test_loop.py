@@ -640,6 +640,12 @@ def test_a_held_out_familys_grandchild_stays_out_of_the_fine_tuning_mix(tmp_path
     record = loop_module._fine_tune_arm("dv2s-ppo", tmp_path / "arm", excluded, 0.5, arm, with_mined=True, label="x")
     assert set(captured) == {"urban_lead_vehicle_stopped", "m_lead"}
     assert record["families"] == ["urban_lead_vehicle_stopped"]
+    # the same draw outside the loop (the fine-tuning sweep's): the fine-tuned arm's, and the control's without m_lead
+    weights, facts = loop_module.arm_weights(str(bank), excluded, 0.5, with_mined=True)
+    assert weights == captured and facts["mined_upweighted"] == 1
+    weights, facts = loop_module.arm_weights(str(bank), excluded, 0.5, with_mined=False)
+    assert weights == {"urban_lead_vehicle_stopped": 1.0}
+    assert facts["mined_left_out"] == 1 and facts["families"] == ["urban_lead_vehicle_stopped"]
 
 
 def test_loop_says_loudly_when_too_few_episodes_are_held_out(tmp_path, monkeypatch):

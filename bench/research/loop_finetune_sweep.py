@@ -9,7 +9,8 @@
 
 Reuses the round-1 mining run, working bank and split of ``--loop`` (so settings are
 compared on the same held-out episodes; a by-family split also keeps every member of a held-out family, its
-parent scenario included, out of the fine-tuning, as the loop does), evaluates the starting policy on the held-out scenarios
+parent scenario included, out of the fine-tuning, as the loop does: the scenario draw is the loop's own
+:func:`dv2s_gym.mining.loop.arm_weights`), evaluates the starting policy on the held-out scenarios
 once (cached in ``OUT/before.jsonl``), fine-tunes exactly as the loop does
 (``--method ppo``: :func:`policies.training.fine_tune`; ``--method dagger``:
 :func:`policies.imitation.dagger_fine_tune`; the loop's weights from
@@ -21,6 +22,10 @@ with ``--regress``, regression-tests it against the starting policy on the start
 (bench/RESULTS.md); a choice is confirmed only by a fresh ``dv2s loop`` on another seed. When the loop's
 round ran a control arm, the result also pairs the new fine-tune with the control's held-out episodes
 (``vs_control``: the table and exact McNemar p), the loop's own fine-tuned arm beside it.
+
+``--control`` fine-tunes the CONTROL arm with the given settings instead: the same fine-tuning without the mined
+scenarios, exactly as the loop's control arm is drawn (``arm_weights(..., with_mined=False)``). Two finished
+sweep arms are paired on the held-out episodes by ``python -m bench.research.loop_sweep_pair``.
 """
 
 from __future__ import annotations
@@ -54,6 +59,9 @@ def main() -> None:
     parser.add_argument("--disagreement-weight", type=float, default=None,
                         help="DAgger: weight of the states where the collecting student's greedy action was not the "
                              "reference's label (default: its own, 1: unweighted)")
+    parser.add_argument("--control", action="store_true",
+                        help="fine-tune the loop's CONTROL arm instead: the same fine-tuning without the mined "
+                             "scenarios, built as the loop builds its control (--share then has no effect)")
     parser.add_argument("--regress", action="store_true")
     parser.add_argument("--regress-episodes", type=int, default=4)
     parser.add_argument("--workers", type=int, default=2)
@@ -61,9 +69,8 @@ def main() -> None:
 
     from dv2s_gym.mining.heldout import HeldOutStore, evaluate_heldout, failure_types, paired_summary
     from dv2s_gym.workers.settings import WorkerSettings
-    from dv2s_gym.mining.loop import fine_tune_weights
+    from dv2s_gym.mining.loop import arm_weights
     from policies.training import EVAL_SEED_BASE, TrainConfig, fine_tune
-    from scenario_bank.bank import Bank
 
     loop = Path(args.loop)
     state = json.loads((loop / "loop.json").read_text(encoding="utf-8"))
@@ -85,12 +92,11 @@ def main() -> None:
                              workers=WorkerSettings(workers=args.workers), progress=False)
     t_before = time.perf_counter() - began
     excluded = set(held) | set(steps["split"].get("held_out_families") or [])
-    entries = [e for e in Bank(bank) if e.name not in excluded and e.source.parent not in excluded]
-    names = sorted(e.name for e in entries)
-    mined = [e.name for e in entries if e.source.mined]
     out = base / args.name
     began = time.perf_counter()
-    weights = fine_tune_weights(names, mined, args.share)
+    # the loop's own scenario draw for its fine-tuned arm, or with --control for its control arm (the mined
+    # scenarios left out, every other scenario drawn uniformly)
+    weights, _ = arm_weights(bank, excluded, args.share, with_mined=not args.control)
     def fine_tune_log(line: str) -> None:
         print(line, file=sys.stderr, flush=True)
     config = TrainConfig.fine_tuning(out / "policy", steps=args.steps, weights=weights, bank_dir=bank,

@@ -100,7 +100,7 @@ from policies.evaluation import EVAL_SEED_BASE
 from policies.registry import SB3_ALGORITHMS, read_model_card
 
 __all__ = ["LoopError", "LoopReport", "LoopSettings", "run_loop", "DEFAULT_OUT", "DEFAULTS", "mined_entries",
-           "fine_tune_weights", "FINE_TUNE_METHODS", "METHOD_LEARNING_RATES"]
+           "fine_tune_weights", "arm_weights", "FINE_TUNE_METHODS", "METHOD_LEARNING_RATES"]
 
 DEFAULT_OUT = "out/loop"
 """Where ``dv2s loop`` writes when ``--out`` is not given (rerunning resumes it)."""
@@ -953,23 +953,31 @@ class _Arm:
                                        n_envs=self.n_envs, env_config=self.env_config, progress_bar=self.progress)
 
 
-def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, arm: _Arm, *, with_mined: bool,
-                   label: str) -> Dict[str, Any]:
-    """Fine-tune ``current`` into ``out`` on the working bank less ``excluded``: the mined scenarios upweighted
-    (``with_mined``) or left out (the control arm); everything else identical between the two arms."""
-
+def arm_weights(bank_dir: str, excluded: set, mined_share: float, *,
+                with_mined: bool) -> tuple:
+    """The scenario sampling weights of one fine-tuning arm on the working bank ``bank_dir`` less ``excluded``
+    (held-out scenarios and families): ``(weights, facts)``. ``with_mined``: the mined scenarios drawn with
+    probability ``mined_share`` (the fine-tuned arm); otherwise left out (the control arm)."""
     # a held-out family's every member stays out too: exact replays of its failures and entries of earlier rounds,
     # at any depth (a member's family is the root of its provenance chain, not its immediate parent)
-    bank = list(Bank(arm.bank))
-    roots = {e.name: scenario_family(e.name, arm.bank) for e in bank}
+    bank = list(Bank(bank_dir))
+    roots = {e.name: scenario_family(e.name, bank_dir) for e in bank}
     entries = [e for e in bank if e.name not in excluded and e.source.parent not in excluded
                and roots[e.name] not in excluded]
     mined = sorted(e.name for e in entries if e.source.mined)
     names = sorted(e.name for e in entries if with_mined or e.name not in mined)
     weights = fine_tune_weights(names, mined if with_mined else [], mined_share)
-    common = {"scenarios": len(names), "mined_upweighted": len(mined) if with_mined else 0, "steps": arm.steps,
-              "mined_left_out": 0 if with_mined else len(mined),
-              "families": sorted({roots[e.name] for e in entries if e.name in names})}
+    return weights, {"scenarios": len(names), "mined_upweighted": len(mined) if with_mined else 0,
+                     "mined_left_out": 0 if with_mined else len(mined),
+                     "families": sorted({roots[e.name] for e in entries if e.name in names})}
+
+
+def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, arm: _Arm, *, with_mined: bool,
+                   label: str) -> Dict[str, Any]:
+    """Fine-tune ``current`` into ``out`` on the working bank less ``excluded``: the mined scenarios upweighted
+    (``with_mined``) or left out (the control arm); everything else identical between the two arms."""
+    weights, common = arm_weights(arm.bank, excluded, mined_share, with_mined=with_mined)
+    common["steps"] = arm.steps
     if arm.method == "dagger":
         result = _dagger_arm(current, out, weights, arm, label)
         return {"model": result.pop("model"), "method": "dagger", **common, **result}
