@@ -51,6 +51,10 @@ from envs.config_check import check_config
 from envs.errors import UnknownConfigKeyError
 from envs.safety_metrics import MonitorSettings
 from scenario_bank import select_scenarios
+from scenario_bank.bank import Bank
+from scenario_bank.jail import JailUnavailableError, require_jail
+from scenario_bank.maps import list_maps
+from scenario_bank.shipped import is_shipped_text
 from scenario_bank.records import RecordError, RegressEpisode
 from policies.registry import PolicySpaceError, load_policy
 from scenario_bank.run_identity import setting_defaults
@@ -299,6 +303,7 @@ def _prepare(candidate: str, baseline: Union[None, str, BaselineReport], setting
     _check_env_config(env_config, failure, settings.monitor)
     names, episodes, planned = _size(settings, bank_dir, fallback, report)
     bank = bank_info(names, bank_dir)
+    _check_jail(bank_dir, env_config)
     seeds = [settings.seed + k for k in range(episodes)]
     candidate_info = _policy_info(candidate, env_config)
     baseline_info = _policy_info(spec, env_config) if spec is not None else None  # a bad baseline spec is bad input too
@@ -311,6 +316,28 @@ def _prepare(candidate: str, baseline: Union[None, str, BaselineReport], setting
                  failure=failure, names=names, bank=bank, episodes=episodes, plan=planned, seeds=seeds,
                  batch=settings.batch or max(1, math.ceil(episodes / 5)), candidate_info=candidate_info,
                  baseline_info=baseline_info, old_results=old_results, report_hash=report_hash)
+
+
+def _untrusted(bank_dir: Optional[str], env_config: Mapping[str, Any]) -> List[str]:
+    """What the episodes' envs run in the jail: the bank's scripts that are not shipped ones (each worker's env holds
+    the whole bank, :func:`policies.worker_cache.env_for`) and a map file of the user's (``env_config["map"]``)."""
+    found = [f"map {env_config['map']!r}"] if env_config.get("map") not in (None, *list_maps()) else []
+    bank = Bank(bank_dir)
+    return found + [f"scenario {name!r}" for name in bank.names() if not is_shipped_text(bank.get(name).script)]
+
+
+def _check_jail(bank_dir: Optional[str], env_config: Mapping[str, Any]) -> None:
+    """Refuse, before any episode, a run whose envs need the jail where it cannot start (no bubblewrap, or the code
+    under /tmp, which the jail hides): each episode would end in the same error. A run on shipped scripts alone
+    needs no jail and is not checked."""
+    untrusted = _untrusted(bank_dir, env_config)
+    if not untrusted:
+        return
+    more = f" (and {len(untrusted) - 1} more)" if len(untrusted) > 1 else ""
+    try:
+        require_jail(f"the bank's {untrusted[0]}{more}")
+    except JailUnavailableError as error:
+        raise RegressError(" ".join(str(error).split())) from None
 
 
 def _size(settings: RegressSettings, bank_dir: Optional[str], fallback: Optional[Sequence[str]],
