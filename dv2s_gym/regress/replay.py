@@ -127,7 +127,7 @@ def bank_for_scenario(bank: Dict[str, Any], scenario: str) -> Optional[str]:
     here = None
     for folder in ([path] if path and Path(path).is_dir() else []) + [None]:
         try:
-            here = bank_info([scenario], folder)["hashes"][scenario]
+            here = bank_info([scenario], folder).hashes[scenario]
         except Exception:  # not in that bank
             continue
         if here == expected:
