@@ -1,5 +1,9 @@
 """The regression report: built from paired episode results, written as JSON, JUnit XML and Markdown.
 
+:func:`build_report` gives a :class:`~dv2s_gym.regress.records.RegressReport` (its parts typed records of
+:mod:`dv2s_gym.regress.records`, read by attribute); its ``to_json()`` is the JSON object below, key for key and in
+this order, and :func:`load_report` reads a ``report.json`` back into one.
+
 JSON schema ``dv2s-regress``, version 1 (:data:`SCHEMA_VERSION`; a change to any key below
 bumps it, and ``--baseline-report`` refuses a report of another version)::
 
