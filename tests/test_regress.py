@@ -397,7 +397,7 @@ def test_baseline_report_of_another_schema_bank_or_config_is_refused(noisy_run, 
     out, old = noisy_run
 
     def variant(name, change):
-        data = json.loads(json.dumps(old))
+        data = json.loads(json.dumps(old.to_json()))
         change(data)
         path = tmp_path / f"{name}.json"
         path.write_text(json.dumps(data))

@@ -114,12 +114,12 @@ def run(args: argparse.Namespace) -> int:
     except KeyboardInterrupt as stop:
         raise Interrupted(getattr(stop, "note", None) or episodes_kept_note(Path(out) / "results.jsonl")) from None
     if args.json:
-        print(json_text(report, indent=1))
+        print(json_text(report.to_json(), indent=1))
     else:
         print(format_summary(report))
         names = ("report.json", "junit.xml", "report.md", "report.html")
         print(f"reports: {', '.join(str(Path(out) / f) for f in names if (Path(out) / f).is_file())}")
-    return exit_code(report["verdict"])
+    return exit_code(report.verdict)
 
 
 def opening_line(policy: str, scenarios: int, seeds: int) -> str:

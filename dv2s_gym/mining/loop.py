@@ -86,6 +86,7 @@ from dv2s_gym.mining.replays import reference_passed, replay_clusters, replay_en
 from dv2s_gym.mining.split import family_of, split_by_family
 from dv2s_gym.progress_lines import log_line
 from dv2s_gym.regress import runner
+from dv2s_gym.regress.records import PairedComparison, RegressReport, ScenarioResult, Summary
 from dv2s_gym.regress.runner import BaselineReport, RegressSettings
 from dv2s_gym.regress.stats import PairedTable
 from dv2s_gym.workers.pool import default_workers
@@ -374,12 +375,14 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
 
 
 def _regress_errored(report: Mapping[str, Any], roles: Mapping[str, str]) -> Dict[str, Dict[str, Any]]:
-    """The errored episodes of a ``dv2s regress`` report per policy: ``roles`` maps its roles (``candidate``,
-    ``baseline``) to the loop's names for them (:func:`errored_episodes`' form)."""
+    """The errored episodes of a ``dv2s regress`` report (a :class:`~dv2s_gym.regress.records.RegressReport`) per
+    policy: ``roles`` maps its roles (``candidate``, ``baseline``) to the loop's names for them
+    (:func:`errored_episodes`' form)."""
+    report = RegressReport.from_json(report)
     found: Dict[str, Dict[str, Any]] = {}
     for role, name in roles.items():
-        found[name] = errored_episodes([{"scenario": e.get("scenario"), "error": (e.get(role) or {}).get("error")}
-                                        for e in report.get("episodes") or [] if e.get(role) is not None])
+        found[name] = errored_episodes([{"scenario": e.scenario, "error": e.result(role).get("error")}
+                                        for e in report.episodes or () if e.result(role) is not None])
     return found
 
 
@@ -412,20 +415,25 @@ def _policy_env_config(spec: str) -> Dict[str, Any]:
 def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[str] = ()) -> Dict[str, Any]:
     """The regression step's record; ``parents``: scenarios whose own results are kept apart (the held-out
     families' parents, never fine-tuned on: the regression test's view beyond the fine-tuning mix)."""
-    overall = report.get("overall") or {}
-    per_scenario = report.get("scenarios") or {}
-    comparison = overall.get("comparison") or {}
+    report = RegressReport.from_json(report)
+    overall = report.overall or ScenarioResult()
+    per_scenario = report.scenarios or {}
+    comparison = overall.comparison or PairedComparison()
 
-    def rate(role: str) -> Optional[Dict[str, Any]]:
-        summary = overall.get(role) or {}
-        return summary.get("failure_rate")
+    def rate(role: str) -> Optional[Mapping[str, Any]]:
+        summary = overall.summary(role)
+        return summary.failure_rate if summary is not None else None
 
-    return {"verdict": report.get("verdict"), "reason": comparison.get("reason"),
-            "episodes": comparison.get("n"), "new_failure_rate": rate("candidate"), "old_failure_rate": rate("baseline"),
-            "difference": comparison.get("difference"), "p_value": comparison.get("p_value"),
-            "regressed": report.get("regressed") or [], "report": str(Path(path).resolve()),
-            "held_out_parents": {name: {role: {key: ((per_scenario[name].get(side) or {}).get(key))
-                                               for key in ("failure_rate", "stall_rate", "mean_speed")}
+    def measures(summary: Optional[Summary]) -> Dict[str, Any]:
+        summary = summary or Summary()
+        return {"failure_rate": summary.failure_rate, "stall_rate": summary.rate("stall"),
+                "mean_speed": summary.mean_speed}
+
+    return {"verdict": report.verdict, "reason": comparison.reason,
+            "episodes": comparison.n, "new_failure_rate": rate("candidate"), "old_failure_rate": rate("baseline"),
+            "difference": comparison.difference, "p_value": comparison.p_value,
+            "regressed": list(report.regressed or ()), "report": str(Path(path).resolve()),
+            "held_out_parents": {name: {role: measures(per_scenario[name].summary(side))
                                         for role, side in (("new", "candidate"), ("old", "baseline"))}
                                  for name in parents if name in per_scenario}}
 
@@ -1114,36 +1122,38 @@ def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, s
     against start (``out/vs_start``), then the control against the fine-tuned policy's episodes of that run
     (``out/vs_control``: only the control runs). Failure rates, stall rates and mean speeds per policy, and
     the two comparisons' verdicts, differences and p-values."""
-    first = runner.run_regression(fine_tuned, start, settings, workers=WorkerSettings(workers=workers),
-                                  out_dir=out / "vs_start", progress=progress)
-    overall = first.get("overall") or {}
-    result: Dict[str, Any] = {"scenarios": list((first.get("bank") or {}).get("scenarios") or []),
-                              "seeds": settings.episodes, "policies": {"start": _measures(overall.get("baseline")),
-                                                           "fine_tuned": _measures(overall.get("candidate"))},
+    first = RegressReport.from_json(runner.run_regression(fine_tuned, start, settings,
+                                                          workers=WorkerSettings(workers=workers),
+                                                          out_dir=out / "vs_start", progress=progress))
+    overall = first.overall or ScenarioResult()
+    result: Dict[str, Any] = {"scenarios": list((first.bank.scenarios if first.bank else None) or []),
+                              "seeds": settings.episodes, "policies": {"start": _measures(overall.baseline),
+                                                           "fine_tuned": _measures(overall.candidate)},
                               "fine_tuned_vs_start": _comparison(first, out / "vs_start" / "report.json"),
                               "errored": _regress_errored(first, {"baseline": "start", "candidate": "fine_tuned"})}
     if control is not None:
         # a measurement, not a gate: the fine-tuned policy is the reference whatever its own verdict was
         baseline = BaselineReport(out / "vs_start" / "report.json", role="candidate", accept_failed=True)
-        second = runner.run_regression(control, baseline, settings, workers=WorkerSettings(workers=workers),
-                                       out_dir=out / "vs_control", progress=progress)
-        result["policies"]["control"] = _measures((second.get("overall") or {}).get("candidate"))
+        second = RegressReport.from_json(runner.run_regression(control, baseline, settings,
+                                                               workers=WorkerSettings(workers=workers),
+                                                               out_dir=out / "vs_control", progress=progress))
+        result["policies"]["control"] = _measures(second.overall.candidate if second.overall else None)
         result["control_vs_fine_tuned"] = _comparison(second, out / "vs_control" / "report.json")
         result["errored"].update(_regress_errored(second, {"candidate": "control"}))
     return result
 
 
-def _measures(summary: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
-    summary = summary or {}
-    return {"episodes": summary.get("episodes"), "errors": summary.get("errors"),
-            "failure_rate": summary.get("failure_rate"), "stall_rate": summary.get("stall_rate"),
-            "collision_rate": summary.get("collision_rate"), "mean_speed": summary.get("mean_speed")}
+def _measures(summary: Optional[Summary]) -> Dict[str, Any]:
+    summary = summary or Summary()
+    return {"episodes": summary.episodes, "errors": summary.errors,
+            "failure_rate": summary.failure_rate, "stall_rate": summary.rate("stall"),
+            "collision_rate": summary.rate("collision"), "mean_speed": summary.mean_speed}
 
 
-def _comparison(report: Mapping[str, Any], path: Path) -> Dict[str, Any]:
-    comparison = (report.get("overall") or {}).get("comparison") or {}
-    return {"verdict": report.get("verdict"), "reason": comparison.get("reason"), "episodes": comparison.get("n"),
-            "difference": comparison.get("difference"), "p_value": comparison.get("p_value"),
+def _comparison(report: RegressReport, path: Path) -> Dict[str, Any]:
+    comparison = (report.overall.comparison if report.overall else None) or PairedComparison()
+    return {"verdict": report.verdict, "reason": comparison.reason, "episodes": comparison.n,
+            "difference": comparison.difference, "p_value": comparison.p_value,
             "report": str(Path(path).resolve())}
 
 

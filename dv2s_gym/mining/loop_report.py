@@ -104,6 +104,7 @@ from dv2s_gym.mining.loop_record import HeldOutComparison, RoundRecord, RoundSte
 from dv2s_gym.mining.report_text import clip_caption
 from dv2s_gym.mining.loop_verdict import (ACCEPTED, HELDOUT_ALPHA, evidence_floor_note, judge_round,
                                          recommendation)
+from dv2s_gym.regress.records import BankInfo, PairedComparison, PairedEpisode, Summary
 from dv2s_gym.regress.report import build_report, load_report, write_json
 from html import escape
 from pathlib import Path
@@ -173,32 +174,37 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
         final = load_report(_regress_report_path(last.steps.regress["report"], folder))
     except Exception as error:  # noqa: BLE001 - a missing or foreign report is a line of the loop report
         return {"error": f"cannot read the rounds' regression reports: {(str(error).splitlines() or [''])[0]}"}
-    names = list((start.get("bank") or {}).get("scenarios") or [])
-    hashes = [(start.get("bank") or {}).get("hashes") or {}, (final.get("bank") or {}).get("hashes") or {}]
+    start_bank, final_bank = start.bank or BankInfo(), final.bank or BankInfo()
+    names = list(start_bank.scenarios or ())
+    hashes = [start_bank.hashes or {}, final_bank.hashes or {}]
     changed = [n for n in names if hashes[0].get(n) != hashes[1].get(n)]
-    if changed or names != list((final.get("bank") or {}).get("scenarios") or []):
+    if changed or names != list(final_bank.scenarios or ()):
         return {"error": f"the starting bank differs between round {first.round} and round "
                          f"{last.round} ({', '.join(changed[:3]) or 'scenario list'}); no paired comparison"}
-    baseline = {e["id"]: e.get("baseline") for e in start.get("episodes") or []}
-    episodes = [{"id": e["id"], "scenario": e["scenario"], "seed": e["seed"], "candidate": e["candidate"],
-                 "baseline": baseline[e["id"]]}
-                for e in final.get("episodes") or [] if baseline.get(e["id"]) is not None]
+    baseline = {e.id: e.baseline for e in start.episodes or ()}
+    episodes = [PairedEpisode(id=e.id, scenario=e.scenario, seed=e.seed, candidate=e.candidate,
+                              baseline=baseline[e.id])
+                for e in final.episodes or () if baseline.get(e.id) is not None]
     if not episodes:
         return {"error": f"round {first.round} and round {last.round} share no regression episode"}
-    paired = build_report(bank=final["bank"], settings=final["settings"], candidate=final["candidate"],
-                          baseline=start["baseline"], episodes=episodes)
+    paired = build_report(bank=final.bank, settings=final.settings, candidate=final.candidate,
+                          baseline=start.baseline, episodes=episodes)
     path = None
     if out is not None:
         path = write_json(paired, Path(out) / FINAL_VS_START_DIR / "report.json")
-    overall = paired.get("overall") or {}
-    comparison = overall.get("comparison") or {}
-    return {"start": (start.get("baseline") or {}).get("spec"), "final": (final.get("candidate") or {}).get("spec"),
-            "rounds": [first.round, last.round], "verdict": paired.get("verdict"),
-            "reason": comparison.get("reason"), "episodes": comparison.get("n"),
-            "new_failure_rate": (overall.get("candidate") or {}).get("failure_rate"),
-            "old_failure_rate": (overall.get("baseline") or {}).get("failure_rate"),
-            "difference": comparison.get("difference"), "p_value": comparison.get("p_value"),
-            "regressed": paired.get("regressed") or [], "report": str(path) if path is not None else None}
+    overall = paired.overall
+    comparison = overall.comparison or PairedComparison()
+
+    def failure_rate(summary: Optional[Summary]) -> Optional[Mapping[str, Any]]:
+        return summary.failure_rate if summary is not None else None
+
+    return {"start": start.baseline.spec if start.baseline else None,
+            "final": final.candidate.spec if final.candidate else None,
+            "rounds": [first.round, last.round], "verdict": paired.verdict,
+            "reason": comparison.reason, "episodes": comparison.n,
+            "new_failure_rate": failure_rate(overall.candidate), "old_failure_rate": failure_rate(overall.baseline),
+            "difference": comparison.difference, "p_value": comparison.p_value,
+            "regressed": list(paired.regressed or ()), "report": str(path) if path is not None else None}
 
 
 def with_cross_round_checks(report: Mapping[str, Any], out: Optional[Path] = None,

@@ -18,7 +18,7 @@ _EXPORTS = {
     "RegressError": "errors", "ReportMismatchError": "errors", "ResumeMismatchError": "errors",
     "EXIT_CODES": "report", "SCHEMA": "report", "SCHEMA_VERSION": "report", "exit_code": "report",
     "load_report": "report", "write_reports": "outputs",
-    "run_regression": "runner",
+    "run_regression": "runner", "RegressReport": "records",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -1,7 +1,7 @@
 """A regression report to assert on: ``report.assert_no_regression()`` in a user's own tests.
 
-:class:`RegressionReport` wraps the report dict :func:`~dv2s_gym.regress.runner.run_regression`
-returns with the folder it was written to; :meth:`RegressionReport.failure_message` says, in a
+:class:`RegressionReport` wraps the report :func:`~dv2s_gym.regress.runner.run_regression`
+returns (a :class:`~dv2s_gym.regress.records.RegressReport`, or its JSON object) with the folder it was written to; :meth:`RegressionReport.failure_message` says, in a
 few lines, why a verdict is not acceptable (which scenarios regressed, by how much, with which
 p-values, which episodes newly fail, where the report is). The pytest plugin
 (:mod:`dv2s_gym.regress.pytest_plugin`) fails tests with that message.
@@ -13,6 +13,7 @@ import os
 from pathlib import Path
 from typing import Any, Dict, Iterator, List, Mapping, Optional, Union
 
+from dv2s_gym.regress.records import RegressReport, ScenarioResult
 from scenario_bank.errors import DV2SError
 
 __all__ = ["RegressionReport", "RegressionFailed"]
@@ -33,9 +34,9 @@ def _pct(value: Any) -> str:
     return "?" if value is None else f"{100 * float(value):.0f}%"
 
 
-def _fails_more(entry: Any) -> bool:
+def _fails_more(entry: ScenarioResult) -> bool:
     """The candidate fails more often than the baseline in this scenario entry."""
-    table = (((entry or {}).get("comparison") or {}).get("table")) or {}
+    table = (entry.comparison.table if entry.comparison is not None else None) or {}
     return table.get("candidate_only", 0) > table.get("baseline_only", 0)
 
 
@@ -43,12 +44,14 @@ class RegressionReport(Mapping[str, Any]):
     """A ``dv2s-regress`` report (read it like the dict) plus where it was written.
 
     Attributes:
-        data: the report dict.
+        data: the report's JSON object.
+        report: the report's record (:class:`~dv2s_gym.regress.records.RegressReport`).
         out_dir: the run's folder (``report.json``, ``report.md``, ``report.html``, traces).
     """
 
     def __init__(self, data: Mapping[str, Any], out_dir: Union[str, os.PathLike, None] = None) -> None:
         self.data: Dict[str, Any] = dict(data)
+        self.report = RegressReport.from_json(data)
         self.out_dir = None if out_dir is None else Path(out_dir)
 
     # Mapping interface: report["scenarios"], report.get("errors"), ...
@@ -64,17 +67,17 @@ class RegressionReport(Mapping[str, Any]):
     @property
     def verdict(self) -> Optional[str]:
         """``"PASS"``, ``"FAIL"``, ``"INCONCLUSIVE"``, ``"ERROR"``, or ``None`` without a baseline."""
-        return self.data.get("verdict")
+        return self.report.verdict
 
     @property
     def regressed(self) -> List[str]:
         """Scenarios whose verdict is FAIL."""
-        return list(self.data.get("regressed") or [])
+        return list(self.report.regressed or ())
 
     @property
     def newly_failing(self) -> List[str]:
         """Episode ids (``"<scenario>/<seed>"``) the candidate fails and the baseline does not."""
-        return list(self.data.get("newly_failing") or [])
+        return list(self.report.newly_failing or ())
 
     @property
     def path(self) -> Optional[Path]:
@@ -96,33 +99,33 @@ class RegressionReport(Mapping[str, Any]):
         verdict = self.verdict
         if verdict == "PASS" or (verdict == "INCONCLUSIVE" and allow_inconclusive):
             return None
-        candidate = (self.data.get("candidate") or {}).get("spec", "?")
-        baseline = (self.data.get("baseline") or {}).get("spec") if self.data.get("baseline") else None
+        report = self.report
+        candidate = report.candidate.spec if report.candidate is not None and "spec" in report.candidate else "?"
+        baseline = report.baseline.spec if report.baseline else None
         where = f"report: {self.path}" if self.path is not None else ""
         if verdict is None:
             return f"dv2s regression: {candidate!r} was run without a baseline, so there is no verdict; {where}"
-        errors = self.data.get("errors") or []
+        errors = report.errors or ()
         if verdict == "ERROR":
             lines = [f"dv2s regression ERROR: {candidate!r} against {baseline!r}: {len(errors)} episode(s) ended in "
                      "an error, so the run cannot be judged"]
-            lines += [f"  {e.get('id')} ({e.get('role')}): {str(e.get('error') or '').splitlines()[0][:200]}"
-                      for e in errors[:SHOWN_EPISODES]]
+            lines += [f"  {e.id} ({e.role}): {e.first_line[:200]}" for e in errors[:SHOWN_EPISODES]]
             if len(errors) > SHOWN_EPISODES:
                 lines.append(f"  and {len(errors) - SHOWN_EPISODES} more")
             if where:
                 lines.append(f"  {where}")
             return "\n".join(lines)
         lines = [f"dv2s regression {verdict}: {candidate!r} against {baseline!r}"]
-        scenarios = self.data.get("scenarios") or {}
+        scenarios = report.scenarios or {}
         if verdict == "FAIL":
             named = self.regressed or [name for name, entry in scenarios.items() if _fails_more(entry)]
             label = "regressed on" if self.regressed else "failing more often (pooled FAIL) on"
             lines[0] += f" {label} {', '.join(named) if named else 'the pooled scenarios'}"
             for name in named:
-                lines.append("  " + self._scenario_line(name, scenarios.get(name) or {}))
-        overall = (self.data.get("overall") or {}).get("comparison") or {}
-        if overall.get("reason"):
-            lines.append(f"  overall: {overall['reason']}")
+                lines.append("  " + self._scenario_line(name, scenarios.get(name) or ScenarioResult()))
+        overall = report.overall.comparison if report.overall is not None else None
+        if overall is not None and overall.reason:
+            lines.append(f"  overall: {overall.reason}")
         if verdict == "INCONCLUSIVE":
             lines.append("  the runs cannot tell within the margin: run more episodes, widen the margin, or allow "
                          "INCONCLUSIVE (allow_inconclusive=True)")
@@ -138,12 +141,16 @@ class RegressionReport(Mapping[str, Any]):
         return "\n".join(lines)
 
     @staticmethod
-    def _scenario_line(name: str, entry: Mapping[str, Any]) -> str:
-        comparison = entry.get("comparison") or {}
-        difference = comparison.get("difference") or {}
-        candidate = ((entry.get("candidate") or {}).get("failure_rate") or {}).get("value")
-        baseline = ((entry.get("baseline") or {}).get("failure_rate") or {}).get("value")
-        p_value, p_adjusted = comparison.get("p_value"), comparison.get("p_adjusted")
+    def _scenario_line(name: str, entry: ScenarioResult) -> str:
+        comparison = entry.comparison
+        difference = (comparison.difference if comparison is not None else None) or {}
+
+        def rate(role: str) -> Optional[float]:
+            summary = entry.summary(role)
+            return ((summary.failure_rate if summary is not None else None) or {}).get("value")
+
+        candidate, baseline = rate("candidate"), rate("baseline")
+        p_value, p_adjusted = (comparison.p_value, comparison.p_adjusted) if comparison is not None else (None, None)
         p_text = "" if p_value is None else f", p = {p_value:.3g}" + (
             "" if p_adjusted is None else f" (adjusted {p_adjusted:.3g})")
         return (f"{name}: failure rate {_pct(candidate)} vs {_pct(baseline)}, difference {_pp(difference.get('value'))} "

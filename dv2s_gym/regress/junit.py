@@ -15,15 +15,16 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any, Mapping, Optional, Union
 
+from dv2s_gym.regress.records import RegressReport, ScenarioResult
 from dv2s_gym.regress.report import failures_text, headline, power_lines, warnings
 from scenario_bank.atomic import atomic_write_text
 
 __all__ = ["write_junit", "junit_tree"]
 
 
-def _seconds(report: Mapping[str, Any], scenario: Optional[str] = None) -> float:
-    """Wall time the episodes of a scenario (None: of every scenario) took in this run (``report["timing"]``)."""
-    timing = report.get("timing") or {}
+def _seconds(report: RegressReport, scenario: Optional[str] = None) -> float:
+    """Wall time the episodes of a scenario (None: of every scenario) took in this run (``report.timing``)."""
+    timing = report.timing or {}
     if scenario is not None:
         return float(timing.get(scenario) or 0.0)
     return float(sum(float(v or 0.0) for v in timing.values()))
@@ -56,46 +57,55 @@ def _case(name: str, classname: str, seconds: float, verdict: Optional[str], rea
     return case
 
 
-def junit_tree(report: Mapping[str, Any]) -> ET.ElementTree:
-    """The JUnit document of a report (see the module docstring)."""
-    cases = []
-    for name, entry in report["scenarios"].items():
-        comparison = entry.get("comparison")
-        errors = [e for e in report["errors"] if e["id"].rsplit("/", 1)[0] == name]
-        verdict = comparison["verdict"] if comparison else ("ERROR" if errors else None)
-        reason = comparison["reason"] if comparison else (f"{len(errors)} episode(s) ended in an error" if errors
-                                                           else "measures only")
-        failing = [i for i in report["newly_failing"] if i.rsplit("/", 1)[0] == name]
-        detail = reason
-        if verdict == "FAIL" and failing:
-            detail += "\nnewly failing: " + ", ".join(failing)
-        if errors:
-            detail += "\n" + "\n".join(f"{e['id']} ({e['role']}): {e['error']}" for e in errors)
-        out = (f"candidate failures {failures_text(entry['candidate'])}, baseline failures "
-               f"{failures_text(entry.get('baseline'))}; {reason}")
-        seconds = _seconds(report, name)
-        cases.append(_case(name, "dv2s.regress.scenario", seconds, verdict, reason, detail, out))
-    verdict = report.get("verdict")
-    comparison = (report.get("overall") or {}).get("comparison")
-    reason = report.get("error_reason") or (comparison or {}).get("reason") or "measures only: no baseline, no verdict"
+def _scenario_case(report: RegressReport, name: str, entry: ScenarioResult) -> ET.Element:
+    """The test case of one scenario: its verdict, its newly failing episodes and errors."""
+    comparison = entry.comparison
+    errors = [e for e in report.errors or () if e.scenario == name]
+    verdict = comparison.verdict if comparison else ("ERROR" if errors else None)
+    reason = comparison.reason if comparison else (f"{len(errors)} episode(s) ended in an error" if errors
+                                                   else "measures only")
+    failing = [i for i in report.newly_failing or () if i.rsplit("/", 1)[0] == name]
     detail = reason
-    if report.get("regressed"):
-        detail += "\nregressed: " + ", ".join(report["regressed"])
-    if report["errors"]:
-        detail += "\n" + "\n".join(f"{e['id']} ({e['role']}): {e['error']}" for e in report["errors"][:50])
+    if verdict == "FAIL" and failing:
+        detail += "\nnewly failing: " + ", ".join(failing)
+    if errors:
+        detail += "\n" + "\n".join(f"{e.id} ({e.role}): {e.error}" for e in errors)
+    out = (f"candidate failures {failures_text(entry.candidate)}, baseline failures "
+           f"{failures_text(entry.baseline)}; {reason}")
+    return _case(name, "dv2s.regress.scenario", _seconds(report, name), verdict, reason, detail, out)
+
+
+def _overall_case(report: RegressReport) -> ET.Element:
+    """The test case of the overall verdict."""
+    verdict = report.verdict
+    comparison = report.overall.comparison if report.overall is not None else None
+    reason = report.error_reason or (comparison.reason if comparison else None) or \
+        "measures only: no baseline, no verdict"
+    detail = reason
+    if report.regressed:
+        detail += "\nregressed: " + ", ".join(report.regressed)
+    if report.errors:
+        detail += "\n" + "\n".join(f"{e.id} ({e.role}): {e.error}" for e in report.errors[:50])
     out = "\n".join([headline(report), f"verdict: {verdict or 'none (measures only)'}"] + power_lines(report))
-    cases.append(_case("overall verdict", "dv2s.regress", _seconds(report), verdict, reason, detail, out))
+    return _case("overall verdict", "dv2s.regress", _seconds(report), verdict, reason, detail, out)
+
+
+def junit_tree(report: Union[RegressReport, Mapping[str, Any]]) -> ET.ElementTree:
+    """The JUnit document of a report (see the module docstring)."""
+    report = RegressReport.from_dict(report)
+    cases = [_scenario_case(report, name, entry) for name, entry in report.scenarios.items()]
+    cases.append(_overall_case(report))
     counts = {key: str(sum(1 for c in cases if c.find(key) is not None)) for key in ("failure", "error", "skipped")}
-    total = f"{float(report.get('duration') or _seconds(report)):.3f}"
+    total = f"{float(report.duration or _seconds(report)):.3f}"
     suite = ET.Element("testsuite", {
         "name": "dv2s regress", "tests": str(len(cases)), "failures": counts["failure"], "errors": counts["error"],
-        "skipped": counts["skipped"], "time": total, "timestamp": _junit_timestamp(report.get("created")),
-        "hostname": str(report.get("hostname") or socket.gethostname()),
+        "skipped": counts["skipped"], "time": total, "timestamp": _junit_timestamp(report.created),
+        "hostname": str(report.hostname or socket.gethostname()),
     })
     properties = ET.SubElement(suite, "properties")
-    for key, value in (("candidate", report["candidate"]["spec"]),
-                       ("baseline", (report.get("baseline") or {}).get("spec")),
-                       ("verdict", verdict), ("bank_version", report["bank"]["version"])):
+    for key, value in (("candidate", report.candidate.spec),
+                       ("baseline", report.baseline.spec if report.baseline is not None else None),
+                       ("verdict", report.verdict), ("bank_version", report.bank.version)):
         ET.SubElement(properties, "property", {"name": key, "value": str(value)})
     found = warnings(report)
     for warning in found:
@@ -110,7 +120,7 @@ def junit_tree(report: Mapping[str, Any]) -> ET.ElementTree:
     return ET.ElementTree(root)
 
 
-def write_junit(report: Mapping[str, Any], path: Union[str, os.PathLike]) -> Path:
+def write_junit(report: Union[RegressReport, Mapping[str, Any]], path: Union[str, os.PathLike]) -> Path:
     """Write JUnit XML: one test case per scenario and one for the overall verdict; FAIL is a failure,
     ERROR an error, INCONCLUSIVE skipped with its reason; the suite has hostname, time and timestamp."""
     tree = junit_tree(report)

@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Any, Dict, List, Optional, Union
+from typing import Any, Dict, List, Mapping, Optional, Union
 import difflib
 
 from dv2s_gym.regress.errors import RegressError
+from dv2s_gym.regress.records import BankInfo, RegressReport
 from dv2s_gym.regress.report import bank_info, load_report
 from envs.recording import VideoWriter
 from envs.trace import EpisodeTrace
@@ -26,18 +27,22 @@ from policies.registry import load_policy, spec_from_file
 __all__ = ["find_episode", "replay_episode", "bank_for_scenario"]
 
 
-def find_episode(report: Dict[str, Any], episode_id: str, role: str = "candidate") -> Dict[str, Any]:
-    """The result of ``role`` in episode ``episode_id`` of a report (clear errors otherwise)."""
+def find_episode(report: Union[RegressReport, Mapping[str, Any]], episode_id: str, role: str = "candidate"
+                 ) -> Mapping[str, Any]:
+    """The result of ``role`` in episode ``episode_id`` of a report (clear errors otherwise): a
+    :class:`~scenario_bank.records.RegressEpisode`."""
     if role not in ("candidate", "baseline"):
         raise RegressError(f"--policy must be 'candidate' or 'baseline', not {role!r}")
-    episodes = {e["id"]: e for e in report.get("episodes") or []}
+    report = RegressReport.from_json(report)
+    episodes = {e.id: e for e in report.episodes or ()}
     if episode_id not in episodes:
         near = difflib.get_close_matches(episode_id, list(episodes), n=3, cutoff=0.6)
         hint = f" Did you mean {', '.join(near)}?" if near else ""
-        failing = report.get("newly_failing") or [e for e in episodes if (episodes[e]["candidate"] or {}).get("failed")]
+        failing = list(report.newly_failing or ()) or [i for i, e in episodes.items()
+                                                        if (e.candidate or {}).get("failed")]
         examples = f" Failed episodes: {', '.join(failing[:5])}." if failing else ""
         raise RegressError(f"the report has no episode {episode_id!r} (ids are scenario/seed).{hint}{examples}")
-    result = episodes[episode_id].get(role)
+    result = episodes[episode_id].result(role)
     if result is None:
         raise RegressError(f"episode {episode_id} has no {role} result (the run had no baseline); "
                            "use --policy candidate")
@@ -75,7 +80,8 @@ def replay_episode(report_path: Union[str, os.PathLike], episode_id: str, role: 
         source = "trace"
     else:
         if not spec:
-            named = (report.get(role) or {}).get("spec")
+            policy = report.candidate if role == "candidate" else report.baseline
+            named = policy.spec if policy is not None else None
             if not named:
                 raise RegressError(f"the report names no {role} policy to re-run")
             spec = spec_from_file(named, f"the report {report_path} ({role})", "--policy-spec SPEC")
@@ -103,9 +109,9 @@ def _from_trace(path: str, frames: Optional[List[Any]]):
         env.close()
 
 
-def _from_policy(report: Dict[str, Any], result: Dict[str, Any], spec: str, frames: Optional[List[Any]]):
-    config = check_file_config((report.get("settings") or {}).get("env_config"), "the report")
-    bank = report.get("bank") or {}
+def _from_policy(report: RegressReport, result: Mapping[str, Any], spec: str, frames: Optional[List[Any]]):
+    config = check_file_config(report.settings.env_config if report.settings else None, "the report")
+    bank = report.bank or BankInfo()
     scenario = result["scenario"]
     bank_dir = bank_for_scenario(bank, scenario)
     env = make_eval_env(None, config=config, bank_dir=bank_dir,
@@ -119,15 +125,16 @@ def _from_policy(report: Dict[str, Any], result: Dict[str, Any], spec: str, fram
         env.close()
 
 
-def bank_for_scenario(bank: Dict[str, Any], scenario: str) -> Optional[str]:
+def bank_for_scenario(bank: Union[BankInfo, Mapping[str, Any]], scenario: str) -> Optional[str]:
     """The report's bank folder, or the shipped bank when that folder is not on this machine, as long as
     the scenario's script is the one the report ran."""
-    expected = (bank.get("hashes") or {}).get(scenario)
-    path = bank.get("path")
+    bank = BankInfo.from_json(bank)
+    expected = (bank.hashes or {}).get(scenario)
+    path = bank.path
     here = None
     for folder in ([path] if path and Path(path).is_dir() else []) + [None]:
         try:
-            here = bank_info([scenario], folder)["hashes"][scenario]
+            here = bank_info([scenario], folder).hashes[scenario]
         except Exception:  # not in that bank
             continue
         if here == expected:

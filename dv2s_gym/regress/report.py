@@ -1,5 +1,9 @@
 """The regression report: built from paired episode results, written as JSON, JUnit XML and Markdown.
 
+:func:`build_report` gives a :class:`~dv2s_gym.regress.records.RegressReport` (its parts typed records of
+:mod:`dv2s_gym.regress.records`, read by attribute); its ``to_json()`` is the JSON object below, key for key and in
+this order, and :func:`load_report` reads a ``report.json`` back into one.
+
 JSON schema ``dv2s-regress``, version 1 (:data:`SCHEMA_VERSION`; a change to any key below
 bumps it, and ``--baseline-report`` refuses a report of another version)::
 
@@ -93,10 +97,12 @@ from dv2s_gym.regress.errors import RegressError, ReportMismatchError
 from dv2s_gym.regress.failures import failure_kinds
 from dv2s_gym.regress.identity import installed_version
 from dv2s_gym.regress.power import DEFAULT_MDE, DEFAULT_POWER, run_power
+from dv2s_gym.regress.records import (BankInfo, EpisodeError, PairedComparison, PairedEpisode, PolicyInfo,
+                                      RegressReport, ReportSettings, ScenarioResult, SequentialOutcome, Summary)
 from dv2s_gym.regress.store import describe_differences
 from scenario_bank.atomic import atomic_write_json, atomic_write_text
 from scenario_bank.bank import Bank, content_hash
-from scenario_bank.records import RegressEpisode
+from scenario_bank.records import RecordError
 
 __all__ = [
     "SCHEMA",
@@ -142,11 +148,11 @@ def exit_code(verdict: Optional[str]) -> int:
     return EXIT_CODES[verdict]
 
 
-def _error_reason(errors: Sequence[Mapping[str, Any]]) -> str:
+def _error_reason(errors: Sequence[EpisodeError]) -> str:
     first = errors[0]
-    message = str(first.get("error") or "").splitlines()[0] if first.get("error") else "no result"
+    message = first.first_line or "no result"
     return (f"{len(errors)} episode{'s' if len(errors) != 1 else ''} ended in an error, so the run cannot be judged "
-            f"(first: {first['id']} ({first['role']}): {message}); fix the error and rerun the same command to "
+            f"(first: {first.id} ({first.role}): {message}); fix the error and rerun the same command to "
             "run them again")
 
 
@@ -185,62 +191,67 @@ def _finite(value: Any) -> Optional[float]:
 
 
 def summarize_groups(groups: Mapping[str, Sequence[Mapping[str, Any]]], *, episode_groups: bool = False
-                     ) -> Dict[str, Any]:
+                     ) -> Summary:
     """Summary over several scenarios: rates over all episodes, means resampling whole scenarios.
 
     With ``episode_groups`` every episode is its own group (the within-scenario interval).
     """
     every = [r for results in groups.values() for r in results if r is not None]
     ok = _ok(every)
-    summary: Dict[str, Any] = {"episodes": len(ok), "errors": len(every) - len(ok)}
-    for key, field in rates():
-        summary[key] = _rate([bool(r.get(field)) for r in ok])
+    means: Dict[str, Any] = {}
     for key, field in MEANS:
         per_group = [[v for v in (_finite(r.get(field)) for r in _ok(results)) if v is not None]
                      for results in groups.values()]
         if episode_groups:
             per_group = [[v] for values in per_group for v in values]
-        summary[key] = _mean(per_group)
-    return summary
+        means[key] = _mean(per_group)
+    return Summary(episodes=len(ok), errors=len(every) - len(ok),
+                   rates={key: _rate([bool(r.get(field)) for r in ok]) for key, field in rates()},
+                   min_ttc=means["min_ttc"], mean_speed=means["mean_speed"], episode_return=means["return"])
 
 
-def summarize(results: Sequence[Mapping[str, Any]]) -> Dict[str, Any]:
+def summarize(results: Sequence[Mapping[str, Any]]) -> Summary:
     """Summary of one policy on one scenario (episodes resampled for the means' intervals)."""
     return summarize_groups({"": results}, episode_groups=True)
 
 
 # ----------------------------------------------------------------------------- comparisons
 def comparison_json(comparison: "stats.Comparison", *, verdict: Optional[str] = None,
-                    reason: Optional[str] = None) -> Dict[str, Any]:
-    """A :class:`~dv2s_gym.regress.stats.Comparison` as the report's ``Comparison`` dict."""
+                    reason: Optional[str] = None) -> PairedComparison:
+    """A :class:`~dv2s_gym.regress.stats.Comparison` as the report's ``Comparison`` record."""
     table = comparison.table
     low, high = comparison.interval
-    return {
-        "n": table.n,
-        "table": {"both_fail": table.both_fail, "candidate_only": table.candidate_only,
-                  "baseline_only": table.baseline_only, "neither": table.neither},
-        "candidate_rate": table.candidate_rate,
-        "baseline_rate": table.baseline_rate,
-        "difference": {"value": comparison.difference, "low": low, "high": high},
-        "p_value": comparison.p_value,
-        "p_adjusted": getattr(comparison, "p_adjusted", getattr(comparison, "adjusted_p", comparison.p_value)),
-        "verdict": verdict or _verdict(comparison.verdict),
-        "reason": reason or comparison.reason,
-    }
+    return PairedComparison(
+        n=table.n,
+        table={"both_fail": table.both_fail, "candidate_only": table.candidate_only,
+               "baseline_only": table.baseline_only, "neither": table.neither},
+        candidate_rate=table.candidate_rate,
+        baseline_rate=table.baseline_rate,
+        difference={"value": comparison.difference, "low": low, "high": high},
+        p_value=comparison.p_value,
+        p_adjusted=getattr(comparison, "p_adjusted", getattr(comparison, "adjusted_p", comparison.p_value)),
+        verdict=verdict or _verdict(comparison.verdict),
+        reason=reason or comparison.reason,
+    )
 
 
-def _paired_table(pairs: Sequence[Dict[str, Any]]) -> "stats.PairedTable":
-    complete = [p for p in pairs if p["baseline"] is not None and not p["candidate"].get("error")
-                and not p["baseline"].get("error")]
-    return stats.PairedTable.from_outcomes([bool(p["candidate"]["failed"]) for p in complete],
-                                           [bool(p["baseline"]["failed"]) for p in complete])
+def _complete(pair: PairedEpisode) -> bool:
+    """Both policies ran the pair and neither ended in an error."""
+    return pair.baseline is not None and not pair.errored("candidate") and not pair.errored("baseline")
 
 
-def paired_tables(episodes: Sequence[Dict[str, Any]], scenarios: Sequence[str]) -> Dict[str, "stats.PairedTable"]:
+def _paired_table(pairs: Sequence[PairedEpisode]) -> "stats.PairedTable":
+    complete = [p for p in pairs if _complete(p)]
+    return stats.PairedTable.from_outcomes([bool(p.candidate["failed"]) for p in complete],
+                                           [bool(p.baseline["failed"]) for p in complete])
+
+
+def paired_tables(episodes: Sequence[Union[PairedEpisode, Mapping[str, Any]]], scenarios: Sequence[str]
+                  ) -> Dict[str, "stats.PairedTable"]:
     """The paired table of each scenario (pairs with an error on either side left out)."""
-    by_scenario: Dict[str, List[Dict[str, Any]]] = {name: [] for name in scenarios}
-    for episode in episodes:
-        by_scenario.setdefault(episode["scenario"], []).append(episode)
+    by_scenario: Dict[str, List[PairedEpisode]] = {name: [] for name in scenarios}
+    for episode in map(PairedEpisode.from_dict, episodes):
+        by_scenario.setdefault(episode.scenario, []).append(episode)
     return {name: _paired_table(pairs) for name, pairs in by_scenario.items()}
 
 
@@ -249,90 +260,69 @@ def _errors_note(count: int) -> str:
 
 
 # ---------------------------------------------------------------------------------- report
-def bank_info(scenarios: Sequence[str], bank_dir: Optional[Union[str, os.PathLike]] = None) -> Dict[str, Any]:
-    """``{"path", "version", "scenarios", "hashes"}``: the version is a SHA-256 over the scenarios' names and scripts."""
+def bank_info(scenarios: Sequence[str], bank_dir: Optional[Union[str, os.PathLike]] = None) -> BankInfo:
+    """The bank's path, the scenarios and their script hashes; the version is a SHA-256 over the scenarios' names and
+    scripts."""
     bank = Bank(bank_dir)
     hashes = {name: content_hash(bank.get(name).script) for name in scenarios}
     payload = "\n".join(f"{name}:{hashes[name]}" for name in sorted(hashes))
-    return {"path": str(Path(bank.root).resolve()), "version": hashlib.sha256(payload.encode()).hexdigest(),
-            "scenarios": list(scenarios), "hashes": hashes}
+    return BankInfo(path=str(Path(bank.root).resolve()), version=hashlib.sha256(payload.encode()).hexdigest(),
+                    scenarios=tuple(scenarios), hashes=hashes)
 
 
-def build_report(*, bank: Dict[str, Any], settings: Dict[str, Any], candidate: Dict[str, Any],
-                 baseline: Optional[Dict[str, Any]], episodes: Sequence[Dict[str, Any]],
-                 stopped_early: bool = False, sequential: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
-    """The report dict (schema in the module docstring) from the paired episodes.
+def build_report(*, bank: Mapping[str, Any], settings: Mapping[str, Any], candidate: Mapping[str, Any],
+                 baseline: Optional[Mapping[str, Any]], episodes: Sequence[Mapping[str, Any]],
+                 stopped_early: bool = False, sequential: Optional[Mapping[str, Any]] = None) -> RegressReport:
+    """The report (schema in the module docstring) from the paired episodes.
 
     Args:
-        bank: ``{"path", "version", "scenarios", "hashes"}``.
-        settings: the run's settings (``margin`` and ``alpha`` decide the verdicts).
-        candidate / baseline: ``{"spec", "card", ...}``; ``baseline`` None for a run without one.
-        episodes: ``{"id", "scenario", "seed", "candidate": result, "baseline": result | None}``, each result a
-            :class:`~scenario_bank.records.RegressEpisode` or its JSON object (the report holds the JSON objects).
-        stopped_early / sequential: the sequential test's outcome (``sequential["verdict"]``,
-            when set, is the overall verdict of a sequential run; a scenario FAIL still FAILs).
+        bank: a :class:`~dv2s_gym.regress.records.BankInfo` (or its JSON object).
+        settings: the run's :class:`~dv2s_gym.regress.records.ReportSettings` (``margin`` and ``alpha`` decide the
+            verdicts), or its JSON object.
+        candidate / baseline: :class:`~dv2s_gym.regress.records.PolicyInfo` (or ``{"spec", "card", ...}``);
+            ``baseline`` None for a run without one.
+        episodes: :class:`~dv2s_gym.regress.records.PairedEpisode` (or ``{"id", "scenario", "seed", "candidate":
+            result, "baseline": result | None}``), each result a :class:`~scenario_bank.records.RegressEpisode` or its
+            JSON object.
+        stopped_early / sequential: the sequential test's outcome (a
+            :class:`~dv2s_gym.regress.records.SequentialOutcome` or its JSON object; its ``verdict``, when set, is the
+            overall verdict of a sequential run; a scenario FAIL still FAILs).
     """
-    scenarios = list(bank["scenarios"])
-    episodes = sorted(episodes, key=lambda e: (scenarios.index(e["scenario"]) if e["scenario"] in scenarios
-                                               else len(scenarios), e["scenario"], int(e["seed"])))
+    bank, settings = BankInfo.from_dict(bank), ReportSettings.from_dict(settings)
+    sequential = SequentialOutcome.from_dict(sequential) if sequential else None
+    scenarios = list(bank.scenarios or ())
+    paired = sorted(map(PairedEpisode.from_dict, episodes), key=lambda e: (
+        scenarios.index(e.scenario) if e.scenario in scenarios else len(scenarios), e.scenario, int(e.seed)))
     has_baseline = baseline is not None
-    by_scenario: Dict[str, List[Dict[str, Any]]] = {name: [] for name in scenarios}
-    for episode in episodes:
-        by_scenario.setdefault(episode["scenario"], []).append(episode)
+    by_scenario: Dict[str, List[PairedEpisode]] = {name: [] for name in scenarios}
+    for episode in paired:
+        by_scenario.setdefault(episode.scenario, []).append(episode)
 
-    def results(name: str, role: str) -> List[Dict[str, Any]]:
-        return [e[role] for e in by_scenario[name] if e.get(role) is not None]
+    def results(name: str, role: str) -> List[Mapping[str, Any]]:
+        return [e.result(role) for e in by_scenario[name] if e.result(role) is not None]
 
-    errors = [{"id": e["id"], "role": role, "error": e[role]["error"]} for e in episodes
-              for role in ("candidate", "baseline") if e.get(role) is not None and e[role].get("error")]
-    report_scenarios: Dict[str, Any] = {}
-    compared = _Compared()
-    if has_baseline:
-        compared = _compare(episodes, by_scenario, errors, settings, sequential)
-    comparisons, verdict = compared.per_scenario, compared.verdict
-    overall_comparison, regressed, newly_failing = compared.overall, compared.regressed, compared.newly_failing
-    power, aggregates = compared.power, compared.aggregates
-    for name in by_scenario:
-        report_scenarios[name] = {
-            "candidate": summarize(results(name, "candidate")),
-            "baseline": summarize(results(name, "baseline")) if has_baseline else None,
-            "comparison": comparisons.get(name),
-        }
-    overall_summary = {
-        "candidate": summarize_groups({n: results(n, "candidate") for n in by_scenario}),
-        "baseline": summarize_groups({n: results(n, "baseline") for n in by_scenario}) if has_baseline else None,
-        "comparison": overall_comparison,
-    }
-    report = {
-        "schema": SCHEMA,
-        "schema_version": SCHEMA_VERSION,
-        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        "dv2s_version": installed_version(),
-        "bank": dict(bank),
-        "settings": dict(settings),
-        "candidate": dict(candidate),
-        "baseline": dict(baseline) if baseline is not None else None,
-        "episodes": [_episode_json(episode) for episode in episodes],
-        "scenarios": report_scenarios,
-        "overall": overall_summary,
-        "verdict": verdict,
-        "regressed": regressed,
-        "newly_failing": newly_failing,
-        "errors": errors,
-        "stopped_early": bool(stopped_early),
-        "sequential": dict(sequential) if sequential else None,
-        "power": power,
-        "aggregates": aggregates,
-    }
+    errors = [EpisodeError(id=e.id, role=role, error=e.result(role)["error"]) for e in paired
+              for role in ("candidate", "baseline") if e.errored(role)]
+    compared = _compare(paired, by_scenario, errors, settings, sequential) if has_baseline else _Compared()
+    report_scenarios = {name: ScenarioResult(
+        candidate=summarize(results(name, "candidate")),
+        baseline=summarize(results(name, "baseline")) if has_baseline else None,
+        comparison=compared.per_scenario.get(name)) for name in by_scenario}
+    overall = ScenarioResult(
+        candidate=summarize_groups({n: results(n, "candidate") for n in by_scenario}),
+        baseline=summarize_groups({n: results(n, "baseline") for n in by_scenario}) if has_baseline else None,
+        comparison=compared.overall)
+    verdict, error_reason = compared.verdict, None
     if errors and verdict is None:  # measures only: an error is still never green
-        report["verdict"] = "ERROR"
-        report["error_reason"] = _error_reason(errors)
-    return report
-
-
-def _episode_json(episode: Mapping[str, Any]) -> Dict[str, Any]:
-    """A paired episode as the report holds it: its results as their JSON objects."""
-    return {key: value.to_dict() if isinstance(value, RegressEpisode) else value for key, value in episode.items()}
+        verdict, error_reason = "ERROR", _error_reason(errors)
+    return RegressReport(
+        schema=SCHEMA, schema_version=SCHEMA_VERSION,
+        created=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        dv2s_version=installed_version(), bank=bank, settings=settings, candidate=PolicyInfo.from_dict(candidate),
+        baseline=PolicyInfo.from_dict(baseline) if has_baseline else None, episodes=tuple(paired),
+        scenarios=report_scenarios, overall=overall, verdict=verdict, regressed=tuple(compared.regressed),
+        newly_failing=tuple(compared.newly_failing), errors=tuple(errors), stopped_early=bool(stopped_early),
+        sequential=sequential, power=compared.power, aggregates=compared.aggregates, error_reason=error_reason)
 
 
 @dataclasses.dataclass
@@ -340,8 +330,8 @@ class _Compared:
     """The candidate against the baseline: each scenario's comparison and the pooled verdict (empty without a
     baseline)."""
 
-    per_scenario: Dict[str, Any] = dataclasses.field(default_factory=dict)
-    overall: Optional[Dict[str, Any]] = None
+    per_scenario: Dict[str, PairedComparison] = dataclasses.field(default_factory=dict)
+    overall: Optional[PairedComparison] = None
     verdict: Optional[str] = None
     regressed: List[str] = dataclasses.field(default_factory=list)
     newly_failing: List[str] = dataclasses.field(default_factory=list)
@@ -349,18 +339,17 @@ class _Compared:
     aggregates: Optional[Dict[str, Any]] = None
 
 
-def _compare(episodes: List[Dict[str, Any]], by_scenario: Dict[str, List[Dict[str, Any]]],
-             errors: List[Dict[str, Any]], settings: Mapping[str, Any],
-             sequential: Optional[Mapping[str, Any]]) -> _Compared:
+def _compare(episodes: List[PairedEpisode], by_scenario: Dict[str, List[PairedEpisode]],
+             errors: List[EpisodeError], settings: ReportSettings,
+             sequential: Optional[SequentialOutcome]) -> _Compared:
     """The paired comparisons of :func:`build_report` (a scenario with an errored episode is an ERROR)."""
-    margin, alpha = float(settings["margin"]), float(settings["alpha"])
-    errors_in = {name: sum(1 for e in by_scenario[name] for role in ("candidate", "baseline")
-                           if e.get(role) is not None and e[role].get("error")) for name in by_scenario}
-    comparisons: Dict[str, Any] = {}
+    margin, alpha = float(settings.margin), float(settings.alpha)
+    errors_in = {name: sum(1 for e in by_scenario[name] for role in ("candidate", "baseline") if e.errored(role))
+                 for name in by_scenario}
+    comparisons: Dict[str, PairedComparison] = {}
     tables = paired_tables(episodes, list(by_scenario))
-    pooled_rejected = None
-    if sequential and sequential.get("verdict") is not None:  # the pooled member was tested sequentially
-        pooled_rejected = sequential["verdict"] == "FAIL"
+    tested = sequential is not None and sequential.verdict is not None  # the pooled member was tested sequentially
+    pooled_rejected = sequential.verdict == "FAIL" if tested else None
     per_scenario, overall = stats.compare_scenarios(tables, margin, alpha, pooled_rejected=pooled_rejected)
     for name, comparison in per_scenario.items():
         scenario_verdict, reason = _verdict(comparison.verdict), comparison.reason
@@ -368,27 +357,26 @@ def _compare(episodes: List[Dict[str, Any]], by_scenario: Dict[str, List[Dict[st
             scenario_verdict, reason = "ERROR", f"{_errors_note(errors_in[name])}; {reason}"
         comparisons[name] = comparison_json(comparison, verdict=scenario_verdict, reason=reason)
     verdict, reason = _verdict(overall.verdict), overall.reason
-    if sequential and sequential.get("verdict") is not None:
-        reason = (f"sequential test of the pooled table ({sequential.get('looks')} looks, "
-                  f"{sequential.get('episodes')} of {sequential.get('max_episodes')} paired episodes): "
-                  f"{sequential['verdict']}; {reason}")
+    if tested:
+        reason = (f"sequential test of the pooled table ({sequential.looks} looks, "
+                  f"{sequential.episodes} of {sequential.max_episodes} paired episodes): "
+                  f"{sequential.verdict}; {reason}")
     if errors:
         verdict, reason = "ERROR", f"{_error_reason(errors)}; without them: {verdict}, {reason}"
-    newly_failing = [e["id"] for e in episodes if e.get("baseline") is not None
-                     and not e["candidate"].get("error") and not e["baseline"].get("error")
-                     and e["candidate"].get("failed") and not e["baseline"].get("failed")]
+    newly_failing = [e.id for e in episodes if _complete(e) and e.candidate.get("failed")
+                     and not e.baseline.get("failed")]
     return _Compared(per_scenario=comparisons, overall=comparison_json(overall, verdict=verdict, reason=reason),
-                     verdict=verdict, regressed=[name for name, c in comparisons.items() if c["verdict"] == "FAIL"],
+                     verdict=verdict, regressed=[name for name, c in comparisons.items() if c.verdict == "FAIL"],
                      newly_failing=newly_failing, power=_power(tables, margin, alpha, settings),
                      aggregates=return_aggregates(episodes))
 
 
 def _power(tables: Mapping[str, "stats.PairedTable"], margin: float, alpha: float,
-           settings: Mapping[str, Any]) -> Dict[str, Any]:
+           settings: ReportSettings) -> Dict[str, Any]:
     """The power the run had (:func:`dv2s_gym.regress.power.run_power`), from its baseline's observed failure rates."""
     rates = {name: (table.baseline_rate if table.n else None) for name, table in tables.items()}
     return run_power({name: table.n for name, table in tables.items()}, rates, margin=margin, alpha=alpha,
-                     mde=float(settings.get("mde") or DEFAULT_MDE), power=float(settings.get("power") or DEFAULT_POWER))
+                     mde=float(settings.mde or DEFAULT_MDE), power=float(settings.power or DEFAULT_POWER))
 
 
 
@@ -399,13 +387,13 @@ def baseline_defaults(path: Union[str, os.PathLike], seed: Optional[int],
     (by default a run repeats the episodes the baseline ran)."""
     if seed is not None and env_config is not None:
         return seed, env_config
-    old = load_report(path).get("settings") or {}
-    return (old.get("seed") if seed is None else seed,
-            old.get("env_config") if env_config is None else env_config)
+    old = load_report(path).settings
+    return (old.seed if seed is None else seed,
+            old.env_config if env_config is None else env_config)
 
 
-def load_report(path: Union[str, os.PathLike]) -> Dict[str, Any]:
-    """Read a report written by ``dv2s regress`` and check its schema and version."""
+def load_report(path: Union[str, os.PathLike]) -> RegressReport:
+    """Read a report written by ``dv2s regress``, check its schema and version, and give its record."""
     path = Path(path)
     if not path.is_file():
         raise RegressError(f"baseline report {path} does not exist; give the report.json of an earlier "
@@ -429,38 +417,42 @@ def load_report(path: Union[str, os.PathLike]) -> Dict[str, Any]:
         raise ReportMismatchError(
             f"report {path} records no failure kinds (settings.failure): it was written by an older dv2s-gym; "
             "rerun that `dv2s regress` command with a new --out and use its report")
-    return report
+    try:
+        return RegressReport.from_json(report)
+    except RecordError as error:
+        raise ReportMismatchError(f"report {path} is damaged: {error}; give the report.json of an earlier "
+                                  "`dv2s regress` run") from None
 
 
-def check_baseline_report(report: Mapping[str, Any], *, path: Union[str, os.PathLike], bank: Mapping[str, Any],
+def check_baseline_report(report: RegressReport, *, path: Union[str, os.PathLike], bank: BankInfo,
                           env_config: Mapping[str, Any]) -> None:
     """Refuse a baseline report with errors, or whose bank scenarios or env config differ from this run's,
     saying what differs."""
-    errors = report.get("errors") or []
+    errors = report.errors or ()
     if errors:
         first = errors[0]
         raise ReportMismatchError(
             f"baseline report {path} cannot be a baseline: {len(errors)} of its episodes ended in an error "
-            f"(first: {first.get('id')} ({first.get('role')}): {str(first.get('error') or '').splitlines()[0][:160]}); "
+            f"(first: {first.id} ({first.role}): {first.first_line[:160]}); "
             "rerun that run's command until it has no errors, and compare against that report")
-    theirs = report.get("bank") or {}
-    their_hashes = theirs.get("hashes") or {}
-    missing = [n for n in bank["scenarios"] if n not in their_hashes]
+    theirs = report.bank or BankInfo()
+    their_hashes = theirs.hashes or {}
+    missing = [n for n in bank.scenarios if n not in their_hashes]
     if missing:
         raise ReportMismatchError(
             f"baseline report {path} has no episodes of {', '.join(missing[:5])}"
-            f"{' and more' if len(missing) > 5 else ''} (it covers {', '.join(theirs.get('scenarios') or []) or 'nothing'}); "
+            f"{' and more' if len(missing) > 5 else ''} (it covers {', '.join(theirs.scenarios or []) or 'nothing'}); "
             "select scenarios it covers with --scenarios, or rerun the baseline on these")
-    changed = [n for n in bank["scenarios"] if their_hashes[n] != bank["hashes"][n]]
+    changed = [n for n in bank.scenarios if their_hashes[n] != bank.hashes[n]]
     if changed:
-        details = ", ".join(f"{n} (script {their_hashes[n][:12]} there, {bank['hashes'][n][:12]} here)"
+        details = ", ".join(f"{n} (script {their_hashes[n][:12]} there, {bank.hashes[n][:12]} here)"
                             for n in changed[:3])
         raise ReportMismatchError(
-            f"baseline report {path} was made with another bank version (bank version {str(theirs.get('version'))[:12]}"
-            f" there, {str(bank['version'])[:12]} here): changed scenario{'s' if len(changed) > 1 else ''} "
+            f"baseline report {path} was made with another bank version (bank version {str(theirs.version)[:12]}"
+            f" there, {str(bank.version)[:12]} here): changed scenario{'s' if len(changed) > 1 else ''} "
             f"{details}{' and more' if len(changed) > 3 else ''}; rerun the baseline on this bank "
             "(--baseline POLICY instead of --baseline-report)")
-    their_config = (report.get("settings") or {}).get("env_config") or {}
+    their_config = (report.settings.env_config if report.settings else None) or {}
     if dict(their_config) != dict(env_config):
         raise ReportMismatchError(
             f"baseline report {path} used another env config ({describe_differences(dict(env_config), dict(their_config))});"
@@ -468,6 +460,10 @@ def check_baseline_report(report: Mapping[str, Any], *, path: Union[str, os.Path
 
 
 # ----------------------------------------------------------------------------------- text
+Report = Union[RegressReport, Mapping[str, Any]]
+"""What the renderings take: a :class:`~dv2s_gym.regress.records.RegressReport` or its JSON object."""
+
+
 def _pct(value: Optional[float]) -> str:
     return "-" if value is None else f"{100 * value:.1f}%"
 
@@ -488,61 +484,69 @@ def failures_text(summary: Optional[Mapping[str, Any]]) -> str:
     """A policy's failures in a report's summary as ``count/episodes (percent)`` (``-`` without a summary)."""
     if not summary:
         return "-"
-    rate = summary["failure_rate"]
-    return f"{rate['count']}/{summary['episodes']} ({_pct(rate['value'])})"
+    summary = Summary.from_dict(summary)
+    rate = summary.failure_rate
+    return f"{rate['count']}/{summary.episodes} ({_pct(rate['value'])})"
 
 
-def headline(report: Mapping[str, Any], base: Optional[Path] = None) -> str:
+def _against(baseline: Optional[PolicyInfo], base: Optional[Path], quote: str = "") -> str:
+    """`` vs baseline `spec` (the candidate policy of REPORT)`` (empty without a baseline)."""
+    if baseline is None:
+        return ""
+    of = (f" (the {baseline.role or 'candidate'} policy of {quote}{_relative(baseline.report, base)}{quote})"
+          if baseline.report else "")
+    return f" vs baseline `{baseline.spec}`{of}"
+
+
+def headline(report: Report, base: Optional[Path] = None) -> str:
     """The one line that says what a report compared: the policies, the failure classes, the scenarios and
     episodes, the margin and alpha, the bank version (a baseline report's path relative to ``base``)."""
-    settings = report["settings"]
-    baseline = report.get("baseline")
-    against = ("" if baseline is None else f" vs baseline `{baseline.get('spec')}`" + (
-        f" (the {baseline.get('role') or 'candidate'} policy of {_relative(baseline['report'], base)})"
-        if baseline.get("report") else ""))
-    failure = ", ".join(settings["failure"])
-    return (f"candidate `{report['candidate']['spec']}`{against}; failure: {failure}; "
-            f"{len(report['scenarios'])} scenario(s) x "
-            f"{settings['episodes']} episode(s) from seed {settings['seed']}; margin {100 * settings['margin']:g} pp, "
-            f"alpha {settings['alpha']:g}; bank version {str(report['bank']['version'])[:12]}")
+    report = RegressReport.from_dict(report)
+    settings = report.settings
+    failure = ", ".join(settings.failure)
+    return (f"candidate `{report.candidate.spec}`{_against(report.baseline, base)}; failure: {failure}; "
+            f"{len(report.scenarios)} scenario(s) x "
+            f"{settings.episodes} episode(s) from seed {settings.seed}; margin {100 * settings.margin:g} pp, "
+            f"alpha {settings.alpha:g}; bank version {str(report.bank.version)[:12]}")
 
 
 SEVERITY = {"ERROR": 0, "FAIL": 1, "INCONCLUSIVE": 2, "PASS": 3}
 
 
-def scenarios_by_severity(report: Mapping[str, Any]) -> List[str]:
+def scenarios_by_severity(report: Report) -> List[str]:
     """Scenario names, worst first: ERROR, FAIL, INCONCLUSIVE, PASS, each by the largest rise in failure
     rate (measures only: by the candidate's failure rate), then by name."""
+    report = RegressReport.from_dict(report)
+
     def key(name: str) -> tuple:
-        entry = report["scenarios"][name]
-        comparison = entry.get("comparison") or {}
-        errors = (entry.get("candidate") or {}).get("errors", 0) + ((entry.get("baseline") or {}).get("errors") or 0)
-        verdict = comparison.get("verdict") or ("ERROR" if errors else None)
-        rise = (comparison.get("difference") or {}).get("value")
+        entry = report.scenario(name)
+        comparison = entry.comparison
+        errors = ((entry.candidate.errors or 0) if entry.candidate else 0) + (
+            (entry.baseline.errors or 0) if entry.baseline else 0)
+        verdict = (comparison.verdict if comparison else None) or ("ERROR" if errors else None)
+        rise = ((comparison.difference if comparison else None) or {}).get("value")
         if rise is None:
-            rise = ((entry.get("candidate") or {}).get("failure_rate") or {}).get("value") or 0.0
+            rise = ((entry.candidate.failure_rate if entry.candidate else None) or {}).get("value") or 0.0
         return SEVERITY.get(verdict, 4), -float(rise), name
 
-    return sorted(report["scenarios"], key=key)
+    return sorted(report.scenarios, key=key)
 
 
-def warnings(report: Mapping[str, Any]) -> List[str]:
+def warnings(report: Report) -> List[str]:
     """What a reader must know before trusting the verdict (a baseline from another dv2s version, ...)."""
-    found = []
-    warning = (report.get("baseline") or {}).get("warning")
-    if warning:
-        found.append(str(warning))
-    return found
+    baseline = RegressReport.from_dict(report).baseline
+    return [str(baseline.warning)] if baseline is not None and baseline.warning else []
 
 
-def power_lines(report: Mapping[str, Any]) -> List[str]:
+def power_lines(report: Report) -> List[str]:
     """What the run could detect: the power per scenario and pooled at the margin and at the planned effect."""
-    power = report.get("power")
+    report = RegressReport.from_dict(report)
+    power = report.power
     if not power:
         return []
     per = list((power.get("per_scenario") or {}).values())
     pooled = power.get("pooled") or {}
-    margin = 100 * float(report["settings"]["margin"])
+    margin = 100 * float(report.settings.margin)
     target = float(power.get("power") or 0.8)
 
     def low(key: str) -> Optional[float]:
@@ -562,40 +566,45 @@ def power_lines(report: Mapping[str, Any]) -> List[str]:
              f"{target:.0%} power at " + (f"+{100 * pooled['detectable']:.1f} pp" if pooled.get("detectable") is not None
                                           else "none below 100 pp"),
              f"power model: {power.get('assumption')}"]
-    note = ((report.get("settings") or {}).get("plan") or {}).get("note")
+    note = (report.settings.plan or {}).get("note")
     if note:
         lines.append(f"note: {note}")
     return lines
 
 
-def format_summary(report: Mapping[str, Any]) -> str:
+def _rows(report: RegressReport, order: Sequence[str], overall: str) -> List[Tuple[str, ScenarioResult]]:
+    """The scenarios' entries in ``order``, then the overall one named ``overall``."""
+    return [(name, report.scenario(name)) for name in order] + [(overall, report.overall)]
+
+
+def format_summary(report: Report) -> str:
     """The plain-text table ``dv2s regress`` prints."""
+    report = RegressReport.from_dict(report)
     rows = [("scenario", "n", "candidate fails", "baseline fails", "difference [95% CI]", "p (adjusted)", "verdict")]
-    ordered = [(name, report["scenarios"][name]) for name in scenarios_by_severity(report)]
-    for name, entry in ordered + [("OVERALL", report["overall"])]:
-        comparison = entry.get("comparison")
-        rows.append((name, str(entry["candidate"]["episodes"]), failures_text(entry["candidate"]),
-                     failures_text(entry.get("baseline")),
-                     _pp(comparison["difference"]) if comparison else "-",
-                     f"{comparison['p_adjusted']:.3g}" if comparison else "-",
-                     comparison["verdict"] if comparison else "-"))
+    for name, entry in _rows(report, scenarios_by_severity(report), "OVERALL"):
+        comparison = entry.comparison
+        rows.append((name, str(entry.candidate.episodes), failures_text(entry.candidate),
+                     failures_text(entry.baseline),
+                     _pp(comparison.difference) if comparison else "-",
+                     f"{comparison.p_adjusted:.3g}" if comparison else "-",
+                     comparison.verdict if comparison else "-"))
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     lines = [headline(report)]
     lines += ["  ".join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
-    if report.get("error_reason"):
-        lines.append(f"verdict: ERROR ({report['error_reason']})")
-    elif report["verdict"] is not None:
-        lines.append(f"verdict: {report['verdict']} ({report['overall']['comparison']['reason']})")
-        if report["regressed"]:
-            lines.append(f"regressed: {', '.join(report['regressed'])}")
+    if report.error_reason:
+        lines.append(f"verdict: ERROR ({report.error_reason})")
+    elif report.verdict is not None:
+        lines.append(f"verdict: {report.verdict} ({report.overall.comparison.reason})")
+        if report.regressed:
+            lines.append(f"regressed: {', '.join(report.regressed)}")
     else:
         lines.append("no baseline: measures only, no verdict")
     lines += power_lines(report)
     lines += [f"warning: {w}" for w in warnings(report)]
-    if report["errors"]:
-        lines.append(f"{len(report['errors'])} error(s): " + "; ".join(
-            f"{e['id']} ({e['role']}): {e['error']}" for e in report["errors"][:3]))
-    if report.get("stopped_early"):
+    if report.errors:
+        lines.append(f"{len(report.errors)} error(s): " + "; ".join(
+            f"{e.id} ({e.role}): {e.error}" for e in report.errors[:3]))
+    if report.stopped_early:
         lines.append("stopped early: the sequential test settled the verdict")
     return "\n".join(lines)
 
@@ -618,90 +627,106 @@ def _details(summary: str, lines: Sequence[str]) -> List[str]:
     return ["<details>", f"<summary>{summary}</summary>", "", *lines, "", "</details>", ""]
 
 
-def _verdict_line(report: Mapping[str, Any]) -> str:
-    verdict = report["verdict"]
-    if report.get("error_reason"):
-        return f"**ERROR**: {report['error_reason']}"
-    comparison = report["overall"].get("comparison")
+def _verdict_line(report: RegressReport) -> str:
+    verdict = report.verdict
+    if report.error_reason:
+        return f"**ERROR**: {report.error_reason}"
+    comparison = report.overall.comparison
     if comparison is None:
         return "No baseline: measures only, no verdict."
-    if verdict == "FAIL" and report["regressed"]:
+    if verdict == "FAIL" and report.regressed:
         parts = []
-        for name in [n for n in scenarios_by_severity(report) if n in report["regressed"]]:
-            entry = report["scenarios"][name]
-            parts.append(f"`{name}` {_pp(entry['comparison']['difference'])} "
-                         f"({failures_text(entry['baseline'])} -> {failures_text(entry['candidate'])})")
-        pooled = " and in all scenarios pooled" if "all scenarios pooled" in comparison["reason"] else ""
+        for name in [n for n in scenarios_by_severity(report) if n in report.regressed]:
+            entry = report.scenario(name)
+            parts.append(f"`{name}` {_pp(entry.comparison.difference)} "
+                         f"({failures_text(entry.baseline)} -> {failures_text(entry.candidate)})")
+        pooled = " and in all scenarios pooled" if "all scenarios pooled" in comparison.reason else ""
         return f"**FAIL**: the candidate fails more often in {'; '.join(parts)}{pooled}."
     if verdict == "ERROR":
-        return f"**ERROR**: {comparison['reason']}"
-    return f"**{verdict}**: {comparison['reason']}"
+        return f"**ERROR**: {comparison.reason}"
+    return f"**{verdict}**: {comparison.reason}"
 
 
-def _markdown(report: Mapping[str, Any], report_path: str = "report.json", base: Optional[Path] = None) -> str:
-    """The Markdown report for a pull-request comment: the verdict and what to look at first, the rest folded."""
-    verdict = report["verdict"]
-    settings = report["settings"]
-    baseline = report.get("baseline")
-    against = "" if baseline is None else (f" vs baseline `{baseline.get('spec')}`" + (
-        f" (the {baseline.get('role') or 'candidate'} policy of `{_relative(baseline['report'], base)}`)"
-        if baseline.get("report") else ""))
-    lines = [f"## dv2s regress: {verdict or 'measures (no baseline)'} - candidate `{report['candidate']['spec']}`{against}",
-             "", _verdict_line(report), ""]
-    facts = [f"{len(report['scenarios'])} scenario(s) x {settings['episodes']} episode(s) from seed {settings['seed']}; "
-             f"failure: {', '.join(settings['failure'])}; margin "
-             f"{100 * settings['margin']:g} pp, alpha {settings['alpha']:g}"]
-    if report["newly_failing"]:
-        facts.append(f"{len(report['newly_failing'])} newly failing episode(s) (candidate fails, baseline does not)")
-    if report["errors"]:
-        facts.append(f"{len(report['errors'])} episode(s) ended in an error")
-    if report.get("stopped_early"):
+def _markdown_facts(report: RegressReport) -> List[str]:
+    """The Markdown report's list under the verdict: the run's size and settings, what newly fails, errors."""
+    settings = report.settings
+    facts = [f"{len(report.scenarios)} scenario(s) x {settings.episodes} episode(s) from seed {settings.seed}; "
+             f"failure: {', '.join(settings.failure)}; margin "
+             f"{100 * settings.margin:g} pp, alpha {settings.alpha:g}"]
+    if report.newly_failing:
+        facts.append(f"{len(report.newly_failing)} newly failing episode(s) (candidate fails, baseline does not)")
+    if report.errors:
+        facts.append(f"{len(report.errors)} episode(s) ended in an error")
+    if report.stopped_early:
         facts.append("stopped early: the sequential test settled the verdict")
     facts += power_lines(report)[:2]
     facts += [f"warning: {w}" for w in warnings(report)]
-    lines += [f"- {fact}" for fact in facts] + [""]
-    order = scenarios_by_severity(report)
-    if report["overall"].get("comparison") is not None:
-        table = ["| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (adjusted) | verdict |",
-                 "|---|---:|---:|---:|---|---:|---|"]
-        for name, entry in [(n, report["scenarios"][n]) for n in order] + [("**overall**", report["overall"])]:
-            c = entry["comparison"]
-            table.append(f"| {name if name.startswith('**') else f'`{name}`'} | {c['n']} | "
-                         f"{failures_text(entry['candidate'])} | {failures_text(entry['baseline'])} | {_pp(c['difference'])} | "
-                         f"{c['p_adjusted']:.3g} | {c['verdict']} |")
-        lines += _details("Scenarios, worst first", table)
-    if report["newly_failing"]:
-        shown = report["newly_failing"][:20]
-        items = [f"Reproduce one from this folder: `dv2s replay {report_path} --episode ID --video out.webm` "
-                 "(`report.html` shows each beside the baseline's run of the same scene).", ""]
-        items += [f"- `{episode_id}`" for episode_id in shown]
-        if len(report["newly_failing"]) > len(shown):
-            items.append(f"- ... and {len(report['newly_failing']) - len(shown)} more (see `{report_path}`)")
-        lines += _details(f"Newly failing episodes ({len(report['newly_failing'])})", items)
+    return [f"- {fact}" for fact in facts] + [""]
+
+
+def _markdown_newly_failing(report: RegressReport, report_path: str) -> List[str]:
+    if not report.newly_failing:
+        return []
+    shown = report.newly_failing[:20]
+    items = [f"Reproduce one from this folder: `dv2s replay {report_path} --episode ID --video out.webm` "
+             "(`report.html` shows each beside the baseline's run of the same scene).", ""]
+    items += [f"- `{episode_id}`" for episode_id in shown]
+    if len(report.newly_failing) > len(shown):
+        items.append(f"- ... and {len(report.newly_failing) - len(shown)} more (see `{report_path}`)")
+    return _details(f"Newly failing episodes ({len(report.newly_failing)})", items)
+
+
+def _markdown_comparison(report: RegressReport, order: Sequence[str]) -> List[str]:
+    """The folded table of the paired comparisons, worst first (none without a baseline)."""
+    if report.overall.comparison is None:
+        return []
+    table = ["| scenario | pairs | candidate failures | baseline failures | difference [95% CI] | p (adjusted) | verdict |",
+             "|---|---:|---:|---:|---|---:|---|"]
+    for name, entry in _rows(report, order, "**overall**"):
+        c = entry.comparison
+        table.append(f"| {name if name.startswith('**') else f'`{name}`'} | {c.n} | "
+                     f"{failures_text(entry.candidate)} | {failures_text(entry.baseline)} | {_pp(c.difference)} | "
+                     f"{c.p_adjusted:.3g} | {c.verdict} |")
+    return _details("Scenarios, worst first", table)
+
+
+def _markdown_measures(report: RegressReport, order: Sequence[str]) -> List[str]:
+    """The folded table of each policy's measures per scenario and overall."""
     measures = ["| scenario | policy | episodes | collision | off-road | stall | success | min TTC [s] | mean speed [m/s] | return |",
                 "|---|---|---:|---|---|---|---|---|---|---|"]
-    for name, entry in [(n, report["scenarios"][n]) for n in order] + [("**overall**", report["overall"])]:
+    for name, entry in _rows(report, order, "**overall**"):
         for role in ("candidate", "baseline"):
-            s = entry.get(role)
+            s = entry.summary(role)
             if not s:
                 continue
             label = name if name.startswith("**") else f"`{name}`"
-            measures.append(f"| {label} | {role} | {s['episodes']} | {_interval(s['collision_rate'])} | "
-                            f"{_interval(s['off_road_rate'])} | {_interval(s.get('stall_rate'))} | "
-                            f"{_interval(s['success_rate'])} | {_interval(s['min_ttc'], False)} | "
-                            f"{_interval(s['mean_speed'], False, 1)} | {_interval(s['return'], False)} |")
-    lines += _details("Measures per scenario (95% intervals)", measures)
+            measures.append(f"| {label} | {role} | {s.episodes} | {_interval(s.rate('collision'))} | "
+                            f"{_interval(s.rate('off_road'))} | {_interval(s.rate('stall'))} | "
+                            f"{_interval(s.success_rate)} | {_interval(s.min_ttc, False)} | "
+                            f"{_interval(s.mean_speed, False, 1)} | {_interval(s.episode_return, False)} |")
+    return _details("Measures per scenario (95% intervals)", measures)
+
+
+def _markdown(report: Report, report_path: str = "report.json", base: Optional[Path] = None) -> str:
+    """The Markdown report for a pull-request comment: the verdict and what to look at first, the rest folded."""
+    report = RegressReport.from_dict(report)
+    title = (f"## dv2s regress: {report.verdict or 'measures (no baseline)'} - candidate `{report.candidate.spec}`"
+             f"{_against(report.baseline, base, quote='`')}")
+    lines = [title, "", _verdict_line(report), ""] + _markdown_facts(report)
+    order = scenarios_by_severity(report)
+    lines += _markdown_comparison(report, order) + _markdown_newly_failing(report, report_path)
+    lines += _markdown_measures(report, order)
     context = aggregates_lines(report)
     if context:
         lines += _details("Context: interquartile mean of return and probability of improvement (not the verdict)",
                           context)
     more = power_lines(report)[2:] + [headline(report, base)]
     lines += _details("Power and settings", [f"- {line}" for line in more])
-    if report["errors"]:
-        errors = [f"- `{e['id']}` ({e['role']}): {str(e['error']).splitlines()[0][:300]}" for e in report["errors"][:20]]
-        if len(report["errors"]) > 20:
-            errors.append(f"- ... and {len(report['errors']) - 20} more (see `{report_path}`)")
-        lines += _details(f"Errors ({len(report['errors'])})", errors)
+    if report.errors:
+        errors = [f"- `{e.id}` ({e.role}): {str(e.error).splitlines()[0][:300]}" for e in report.errors[:20]]
+        if len(report.errors) > 20:
+            errors.append(f"- ... and {len(report.errors) - 20} more (see `{report_path}`)")
+        lines += _details(f"Errors ({len(report.errors)})", errors)
     text = "\n".join(lines)
     if len(text) > MARKDOWN_LIMIT:
         cut = text[:MARKDOWN_LIMIT].rsplit("\n", 1)[0]
@@ -711,9 +736,9 @@ def _markdown(report: Mapping[str, Any], report_path: str = "report.json", base:
     return text
 
 
-def aggregates_lines(report: Mapping[str, Any]) -> List[str]:
+def aggregates_lines(report: Report) -> List[str]:
     """The context aggregates (:mod:`dv2s_gym.regress.aggregates`) as Markdown lines; none without them."""
-    aggregates = report.get("aggregates")
+    aggregates = RegressReport.from_dict(report).aggregates
     if not aggregates:
         return []
     iqm = aggregates.get("return_iqm") or {}
@@ -727,11 +752,12 @@ def aggregates_lines(report: Mapping[str, Any]) -> List[str]:
             f"averaged): {_interval(poi, False)}"]
 
 
-def write_json(report: Mapping[str, Any], path: Union[str, os.PathLike]) -> Path:
-    """Write the report as JSON (atomic)."""
-    return atomic_write_json(path, report)
+def write_json(report: Report, path: Union[str, os.PathLike]) -> Path:
+    """Write the report as JSON (atomic, sorted keys): the record's :meth:`~RegressReport.to_json`, the serialisation
+    boundary."""
+    return atomic_write_json(path, report.to_json() if isinstance(report, RegressReport) else report)
 
 
-def write_markdown(report: Mapping[str, Any], path: Union[str, os.PathLike], report_path: str = "report.json") -> Path:
+def write_markdown(report: Report, path: Union[str, os.PathLike], report_path: str = "report.json") -> Path:
     """Write the Markdown summary for a pull-request comment (paths relative to its folder)."""
     return atomic_write_text(path, _markdown(report, report_path, Path(path).parent))

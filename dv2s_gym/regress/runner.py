@@ -51,7 +51,12 @@ from envs.config_check import check_config
 from envs.errors import UnknownConfigKeyError
 from envs.safety_metrics import MonitorSettings
 from scenario_bank import select_scenarios
+from scenario_bank.bank import Bank
+from scenario_bank.jail import JailUnavailableError, require_jail
+from scenario_bank.maps import list_maps
+from scenario_bank.shipped import is_shipped_text
 from scenario_bank.records import RecordError, RegressEpisode
+from dv2s_gym.regress.records import BankInfo, PairedEpisode, PolicyInfo, RegressReport, SequentialOutcome
 from policies.registry import PolicySpaceError, load_policy
 from scenario_bank.run_identity import setting_defaults
 
@@ -81,7 +86,7 @@ def plan_tasks(policies: Dict[str, str], scenarios: Sequence[str], seeds: Iterab
     return tasks
 
 
-def _policy_info(spec: str, env_config: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
+def _policy_info(spec: str, env_config: Optional[Dict[str, Any]] = None) -> PolicyInfo:
     """Load the policy here once: a bad spec, or a checkpoint trained with another observation than ``env_config``'s,
     fails before any worker starts; the model card goes in the report."""
     policy = load_policy(spec)
@@ -93,7 +98,7 @@ def _policy_info(spec: str, env_config: Optional[Dict[str, Any]] = None) -> Dict
     while policy is not None and card is None:
         card = getattr(policy, "card", None) or None
         policy = getattr(policy, "inner", None)
-    return {"spec": spec, "card": card}
+    return PolicyInfo(spec=spec, card=card)
 
 
 def _check_env_config(env_config: Dict[str, Any], failure: Sequence[str], monitor: MonitorSettings) -> None:
@@ -129,41 +134,41 @@ def _select(scenarios: Scenarios, bank_dir: Optional[str], fallback: Optional[Se
     return names
 
 
-def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: Sequence[int], bank: Dict[str, Any],
+def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: Sequence[int], bank: BankInfo,
                           env_config: Dict[str, Any], settings: RegressSettings
-                          ) -> Tuple[Dict[str, Any], Dict[str, RegressEpisode], str]:
+                          ) -> Tuple[PolicyInfo, Dict[str, RegressEpisode], str]:
     """The baseline info, the baseline result per episode id, and the report file's SHA-256."""
     path, role, failure = Path(report.path), report.role, list(settings.failure)
     monitor, accept_failed = settings.monitor, report.accept_failed
     old = load_report(path)
     check_baseline_report(old, path=path, bank=bank, env_config=env_config)  # a report with errors: never
-    if old.get("verdict") in ("FAIL", "ERROR") and not accept_failed:
+    if old.verdict in ("FAIL", "ERROR") and not accept_failed:
         raise ReportMismatchError(
-            f"baseline report {path} has the verdict {old['verdict']}: its candidate did not pass its own gate, so "
+            f"baseline report {path} has the verdict {old.verdict}: its candidate did not pass its own gate, so "
             "it is no baseline to compare against; compare against a report that passed, or give "
             "--accept-failed-baseline to use it anyway")
     if role not in ROLES:
         raise RegressError(f"--baseline-role must be 'candidate' or 'baseline', not {role!r}")
-    if old.get(role) is None:
+    their = old.candidate if role == "candidate" else old.baseline
+    if their is None:
         raise RegressError(f"baseline report {path} has no {role} policy (it ran without a baseline); "
                            "use --baseline-role candidate")
     results: Dict[str, Dict[str, Any]] = {}
-    for episode in old.get("episodes") or []:
-        result = episode.get(role)
+    for episode in old.episodes or ():
+        result = episode.result(role)
         if result is None:
             continue
         result = dict(result)
         trace = result.get("trace")
         if trace and not Path(trace).is_absolute():
             result["trace"] = str((path.parent / trace).resolve())  # the old folder's traces, wherever this run is
-        results[episode["id"]] = result
+        results[episode.id] = result
     missing = [task_id(n, s) for s in seeds for n in names if task_id(n, s) not in results]
     if missing:
-        settings = old.get("settings") or {}
         more = f" (and {len(missing) - 1} more)" if len(missing) > 1 else ""
         raise ReportMismatchError(
-            f"baseline report {path} has no episode {missing[0]}{more}; it ran {settings.get('episodes')} "
-            f"episode(s) per scenario from seed {settings.get('seed')}: use --episodes and --seed within those, "
+            f"baseline report {path} has no episode {missing[0]}{more}; it ran {old.settings.episodes} "
+            f"episode(s) per scenario from seed {old.settings.seed}: use --episodes and --seed within those, "
             "or rerun the baseline with more episodes")
     wanted = [results[task_id(n, s)] for s in seeds for n in names]
     lacking = missing_facts(wanted, failure)
@@ -171,19 +176,20 @@ def _baseline_from_report(report: BaselineReport, names: Sequence[str], seeds: S
         raise ReportMismatchError(
             f"baseline report {path} does not record {', '.join(lacking)} for its episodes (that run had no such failure "
             f"type registered); rerun the baseline with {', '.join(lacking)} registered, or leave {', '.join(lacking)} out of --failure")
-    their_stall = (old.get("settings") or {}).get("stall_seconds", DEFAULT_STALL_SECONDS)
+    their_stall = old.settings.stall_seconds if old.settings.stall_seconds is not None else DEFAULT_STALL_SECONDS
     if "stall" in failure and float(their_stall) != monitor.stall_seconds:
         raise ReportMismatchError(f"baseline report {path} detected stalls after {their_stall:g} s, this run after "
                                   f"{monitor.stall_seconds:g} s; use the same stall time, or rerun the baseline")
     for result in results.values():
         apply_failure(result, failure)
     records = {episode_id: _baseline_record(path, result) for episode_id, result in results.items()}
-    info = {"report": str(path.resolve()), "role": role, "spec": old[role].get("spec"), "card": old[role].get("card")}
-    theirs, ours = old.get("dv2s_version"), installed_version()
-    if theirs != ours:
-        info["warning"] = (f"baseline report {path} was made by dv2s-gym {theirs}, this is {ours}: the simulator or the "
-                           "policies may have changed between them, so differences may not be the candidate's; "
-                           "rerun the baseline with this version to be sure")
+    theirs, ours = old.dv2s_version, installed_version()
+    warning = None if theirs == ours else (
+        f"baseline report {path} was made by dv2s-gym {theirs}, this is {ours}: the simulator or the "
+        "policies may have changed between them, so differences may not be the candidate's; "
+        "rerun the baseline with this version to be sure")
+    info = PolicyInfo(report=str(path.resolve()), role=role, spec=their.spec, card=their.card, warning=warning,
+                      null_fields=frozenset({"spec", "card"}))
     return info, records, hashlib.sha256(path.read_bytes()).hexdigest()
 
 
@@ -200,7 +206,7 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
                    settings: Optional[RegressSettings] = None, *, workers: Optional[WorkerSettings] = None,
                    out_dir: Optional[Union[str, os.PathLike]] = None, progress: bool = True,
                    on_result: Optional[Callable[[RegressEpisode], None]] = None,
-                   clips: bool = True) -> Dict[str, Any]:
+                   clips: bool = True) -> RegressReport:
     """Run ``candidate`` (and ``baseline``) on scenario x seed pairs and write the reports.
 
     Args:
@@ -223,7 +229,7 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
             those episodes without clips.
 
     Returns:
-        The report dict (schema: :mod:`dv2s_gym.regress.report`).
+        The report (:class:`~dv2s_gym.regress.records.RegressReport`; schema: :mod:`dv2s_gym.regress.report`).
     """
     started = time.time()
     settings = settings or RegressSettings()
@@ -249,11 +255,11 @@ def run_regression(candidate: str, baseline: Union[None, str, BaselineReport] = 
     report_settings["mde"] = float(settings.mde if settings.mde is not None else power_plan.DEFAULT_MDE)
     report_settings["power"] = float(settings.power if settings.power is not None else power_plan.DEFAULT_POWER)
     report = build_report(bank=plan.bank, settings=report_settings, candidate=plan.candidate_info,
-                          baseline=plan.baseline_info, episodes=episodes.paired(ran["seeds"]),
-                          stopped_early=ran["stopped_early"], sequential=ran["sequential"])
-    report["hostname"] = socket.gethostname()
-    report["timing"] = {name: round(value, 3) for name, value in episodes.timing.items()}
-    report["duration"] = round(time.time() - started, 3)
+                          baseline=plan.baseline_info, episodes=episodes.paired(ran.seeds),
+                          stopped_early=ran.stopped_early, sequential=ran.sequential)
+    report = report.replace(hostname=socket.gethostname(),
+                            timing={name: round(value, 3) for name, value in episodes.timing.items()},
+                            duration=round(time.time() - started, 3))
     write_reports(report, store.root, progress=progress, clips=clips)
     return report
 
@@ -269,13 +275,13 @@ class _Plan:
     env_config: Dict[str, Any]
     failure: List[str]
     names: List[str]
-    bank: Dict[str, Any]
+    bank: BankInfo
     episodes: int
     plan: Optional[Dict[str, Any]]
     seeds: List[int]
     batch: int
-    candidate_info: Dict[str, Any]
-    baseline_info: Optional[Dict[str, Any]]
+    candidate_info: PolicyInfo
+    baseline_info: Optional[PolicyInfo]
     old_results: Dict[str, RegressEpisode]
     report_hash: Optional[str]
 
@@ -291,14 +297,15 @@ def _prepare(candidate: str, baseline: Union[None, str, BaselineReport], setting
     fallback, env_config = None, settings.env_config
     if report is not None:
         old = load_report(report.path)
-        fallback = (old.get("bank") or {}).get("scenarios") or None
+        fallback = list(old.bank.scenarios or ()) or None if old.bank is not None else None
         if env_config is None:
-            env_config = (old.get("settings") or {}).get("env_config")
+            env_config = old.settings.env_config
     env_config = dict(env_config or {})
     failure = list(settings.failure)
     _check_env_config(env_config, failure, settings.monitor)
     names, episodes, planned = _size(settings, bank_dir, fallback, report)
     bank = bank_info(names, bank_dir)
+    _check_jail(bank_dir, env_config)
     seeds = [settings.seed + k for k in range(episodes)]
     candidate_info = _policy_info(candidate, env_config)
     baseline_info = _policy_info(spec, env_config) if spec is not None else None  # a bad baseline spec is bad input too
@@ -311,6 +318,28 @@ def _prepare(candidate: str, baseline: Union[None, str, BaselineReport], setting
                  failure=failure, names=names, bank=bank, episodes=episodes, plan=planned, seeds=seeds,
                  batch=settings.batch or max(1, math.ceil(episodes / 5)), candidate_info=candidate_info,
                  baseline_info=baseline_info, old_results=old_results, report_hash=report_hash)
+
+
+def _untrusted(bank_dir: Optional[str], env_config: Mapping[str, Any]) -> List[str]:
+    """What the episodes' envs run in the jail: the bank's scripts that are not shipped ones (each worker's env holds
+    the whole bank, :func:`policies.worker_cache.env_for`) and a map file of the user's (``env_config["map"]``)."""
+    found = [f"map {env_config['map']!r}"] if env_config.get("map") not in (None, *list_maps()) else []
+    bank = Bank(bank_dir)
+    return found + [f"scenario {name!r}" for name in bank.names() if not is_shipped_text(bank.get(name).script)]
+
+
+def _check_jail(bank_dir: Optional[str], env_config: Mapping[str, Any]) -> None:
+    """Refuse, before any episode, a run whose envs need the jail where it cannot start (no bubblewrap, or the code
+    under /tmp, which the jail hides): each episode would end in the same error. A run on shipped scripts alone
+    needs no jail and is not checked."""
+    untrusted = _untrusted(bank_dir, env_config)
+    if not untrusted:
+        return
+    more = f" (and {len(untrusted) - 1} more)" if len(untrusted) > 1 else ""
+    try:
+        require_jail(f"the bank's {untrusted[0]}{more}")
+    except JailUnavailableError as error:
+        raise RegressError(" ".join(str(error).split())) from None
 
 
 def _size(settings: RegressSettings, bank_dir: Optional[str], fallback: Optional[Sequence[str]],
@@ -345,7 +374,7 @@ def _identity(plan: _Plan, settings: RegressSettings) -> Dict[str, Any]:
     identity: Dict[str, Any] = {
         "candidate": plan.candidate, "baseline": plan.baseline_spec, "baseline_report": plan.report_hash,
         "baseline_role": plan.report.role if plan.report is not None else None,
-        "bank_version": plan.bank["version"], "scenarios": plan.names, "episodes": plan.episodes,
+        "bank_version": plan.bank.version, "scenarios": plan.names, "episodes": plan.episodes,
         "seed": settings.seed, "env_config": plan.env_config, "sequential": bool(settings.sequential),
         "failure": plan.failure, "stall_seconds": float(settings.stall_seconds),
     }
@@ -398,7 +427,8 @@ class _Episodes:
         if self.on_result is not None:
             self.on_result(record)
 
-    def paired(self, seed_list: Sequence[int]) -> List[Dict[str, Any]]:
+    def paired(self, seed_list: Sequence[int]) -> List[PairedEpisode]:
+        """The candidate/baseline pairs of ``seed_list`` that have a candidate result, seed by seed."""
         plan, has_baseline = self.plan, self.plan.baseline_info is not None
         episodes_out = []
         for k in seed_list:
@@ -409,17 +439,16 @@ class _Episodes:
                     continue
                 baseline_result = (plan.old_results.get(episode_id) if plan.report is not None
                                    else self.results.get((episode_id, "baseline")))
-                episodes_out.append({"id": episode_id, "scenario": name, "seed": k, "candidate": candidate_result,
-                                     "baseline": baseline_result if has_baseline else None})
+                episodes_out.append(PairedEpisode(id=episode_id, scenario=name, seed=k, candidate=candidate_result,
+                                                  baseline=baseline_result if has_baseline else None))
         return episodes_out
 
 
 def _execute(plan: _Plan, settings: RegressSettings, workers: WorkerSettings, episodes: _Episodes,
-             all_tasks: List[Dict[str, Any]], report_settings: Dict[str, Any]) -> Dict[str, Any]:
-    """Run the episodes not done yet (all at once, or batch by batch until the sequential test settles);
-    ``{"seeds": the seeds the report covers, "stopped_early", "sequential": the sequential test's record}``."""
+             all_tasks: List[Dict[str, Any]], report_settings: Dict[str, Any]) -> "_Ran":
+    """Run the episodes not done yet (all at once, or batch by batch until the sequential test settles)."""
     runner = None
-    ran: Dict[str, Any] = {"seeds": list(plan.seeds), "stopped_early": False, "sequential": None}
+    ran = _Ran(seeds=list(plan.seeds))
     try:
         runner = get_backend(workers.backend, workers=workers.workers, address=workers.address,
                              timeout=workers.timeout)
@@ -441,8 +470,18 @@ def _execute(plan: _Plan, settings: RegressSettings, workers: WorkerSettings, ep
     return ran
 
 
+@dataclasses.dataclass
+class _Ran:
+    """What :func:`_execute` ran: the seeds the report covers, whether the sequential test stopped the run early, and
+    its record (``None`` for a run that is not sequential)."""
+
+    seeds: List[int]
+    stopped_early: bool = False
+    sequential: Optional[SequentialOutcome] = None
+
+
 def _run_sequential(plan: _Plan, settings: RegressSettings, runner: Any, episodes: _Episodes,
-                    all_tasks: List[Dict[str, Any]]) -> Dict[str, Any]:
+                    all_tasks: List[Dict[str, Any]]) -> _Ran:
     """Run ``plan.batch`` seeds at a time, testing the pooled table after each, until it settles FAIL."""
     seeds, batch, names = plan.seeds, plan.batch, plan.names
     test = stats.SequentialTest(float(settings.margin), float(settings.alpha) * stats.DEFAULT_POOLED_WEIGHT,
@@ -462,10 +501,10 @@ def _run_sequential(plan: _Plan, settings: RegressSettings, runner: Any, episode
             ran_seeds = seeds[:start + batch]
             stopped_early = len(ran_seeds) < len(seeds)
             break
-    return {"seeds": ran_seeds, "stopped_early": stopped_early,
-            "sequential": {"looks": looks, "episodes": last_n, "max_episodes": plan.episodes * len(names),
-                           "batch": batch, "spending": test.spending,
-                           "verdict": None if verdict is None else verdict.name}}
+    return _Ran(seeds=ran_seeds, stopped_early=stopped_early,
+                sequential=SequentialOutcome(looks=looks, episodes=last_n, max_episodes=plan.episodes * len(names),
+                                             batch=batch, spending=test.spending,
+                                             verdict=None if verdict is None else verdict.name))
 
 
 def _planned_episodes(names: Sequence[str], baseline_report: Optional[Union[str, os.PathLike]], role: str,
@@ -477,11 +516,11 @@ def _planned_episodes(names: Sequence[str], baseline_report: Optional[Union[str,
     if baseline_report is not None:
         old = load_report(baseline_report)
         for name in names:
-            summary = ((old.get("scenarios") or {}).get(name) or {}).get(role) or {}
-            rates[name] = (summary.get("failure_rate") or {}).get("value")
-        settings = old.get("settings") or {}
-        if isinstance(settings.get("episodes"), int) and isinstance(settings.get("seed"), int):
-            available = settings["seed"] + settings["episodes"] - seed
+            entry = (old.scenarios or {}).get(name)
+            summary = entry.summary(role) if entry is not None else None
+            rates[name] = ((summary.failure_rate if summary is not None else None) or {}).get("value")
+        if old.settings.episodes is not None and old.settings.seed is not None:
+            available = old.settings.seed + old.settings.episodes - seed
     try:
         plan = power_plan.plan_episodes(names, mde=power_plan.DEFAULT_MDE if mde is None else mde,
                                         power=power_plan.DEFAULT_POWER if power is None else power, alpha=alpha,

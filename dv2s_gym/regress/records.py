@@ -1,0 +1,432 @@
+"""Typed records of the regression report (schema ``dv2s-regress``, :mod:`dv2s_gym.regress.report`).
+
+:func:`~dv2s_gym.regress.report.build_report` makes a :class:`RegressReport`; the runner, the text, JUnit and HTML
+renderings, the pytest plugin and the loop's regression step read its parts by attribute:
+
+- :class:`RegressReport`: the whole report (``report.json``);
+- :class:`BankInfo`: the bank the run used (``bank``); :class:`ReportSettings`: the run's settings (``settings``);
+- :class:`PolicyInfo`: the candidate or the baseline (``candidate``, ``baseline``);
+- :class:`PairedEpisode`: one scenario x seed pair (``episodes``), each side a
+  :class:`~scenario_bank.records.RegressEpisode`;
+- :class:`ScenarioResult`: one scenario's (or all scenarios', ``overall``) :class:`Summary` per policy and their
+  :class:`PairedComparison`;
+- :class:`EpisodeError`: an episode that ended in an error (``errors``);
+- :class:`SequentialOutcome`: the sequential test's looks and verdict (``sequential``).
+
+Each is a :class:`~scenario_bank.records.JsonRecord`: :meth:`from_json` (``from_dict``) reads the JSON object,
+checking the kind of every field it knows (a :class:`~scenario_bank.records.RecordError` names a bad one),
+:meth:`to_json` (``to_dict``) gives back exactly the JSON object: the same keys in the same order, ``null`` where
+the report writes one, unknown keys kept. A record is also a read-only mapping over that object. The statistics'
+leaves (the ``{"value", "low", "high"}`` intervals, the paired ``table``, ``power`` and ``aggregates``, made by
+:mod:`~dv2s_gym.regress.power` and :mod:`~dv2s_gym.regress.aggregates` with their own documented shapes) stay JSON
+objects.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
+
+from scenario_bank.records import JsonRecord, RecordError, RegressEpisode
+
+__all__ = ["RegressReport", "BankInfo", "ReportSettings", "PolicyInfo", "PairedEpisode", "Summary",
+           "PairedComparison", "ScenarioResult", "EpisodeError", "SequentialOutcome", "ReportRecord"]
+
+Interval = Mapping[str, Any]
+"""``{"value", "low", "high"}`` (a rate adds ``count``, a mean ``n``); values ``None`` without episodes."""
+
+
+class ReportRecord(JsonRecord):
+    """What the report's records share: :meth:`to_json` and :meth:`from_json`, the JSON object of ``report.json``."""
+
+    def to_json(self) -> Dict[str, Any]:
+        """The JSON object, as ``report.json`` holds it (a new dict each call; nested records as dicts)."""
+        return self.to_dict()
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]):
+        """The record of a JSON object of ``report.json`` (or the record itself)."""
+        return cls.from_dict(data)
+
+    @classmethod
+    def _records(cls, key: str, data: Mapping[str, Any], read: Any) -> Any:
+        """``read`` applied to the items of the list (or values of the object) ``data[key]``; its errors name the
+        item (``episodes[3].seed``)."""
+        value = data.get(key)
+        if value is None:
+            return None
+        items = value.items() if isinstance(value, Mapping) else enumerate(value)
+        out = {}
+        for index, item in items:
+            try:
+                out[index] = read(item)
+            except RecordError as error:
+                where = f"{key}.{index}" if isinstance(value, Mapping) else f"{key}[{index}]"
+                raise RecordError(f"{cls._WHAT} field {where!r}: {error}") from None
+        return out if isinstance(value, Mapping) else tuple(out.values())
+
+
+@dataclass(frozen=True, eq=False)
+class BankInfo(ReportRecord):
+    """The bank a run used: its folder (``path``), its ``version`` (a SHA-256 over the scenarios used, name and
+    script), the ``scenarios`` and each one's script ``hashes``."""
+
+    path: Optional[str] = None
+    version: Optional[Any] = None
+    scenarios: Optional[Tuple[str, ...]] = None
+    hashes: Optional[Mapping[str, str]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"path": "str", "version": "any", "scenarios": "strings", "hashes": "object"}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("scenarios",)
+    _WHAT: ClassVar[str] = "report bank"
+
+
+@dataclass(frozen=True, eq=False)
+class ReportSettings(ReportRecord):
+    """The settings a run used: ``episodes`` per scenario from ``seed``, the ``margin`` and ``alpha`` the verdicts
+    use, ``sequential`` (with its ``batch``), the ``env_config``, where episodes ran (``backend``, ``workers``,
+    ``timeout``), the ``failure`` kinds and ``stall_seconds``, the power ``plan`` that sized the run (when one
+    did), and the planned ``mde`` and ``power``."""
+
+    episodes: Optional[int] = None
+    seed: Optional[int] = None
+    margin: Optional[float] = None
+    alpha: Optional[float] = None
+    sequential: Optional[bool] = None
+    env_config: Optional[Mapping[str, Any]] = None
+    backend: Optional[str] = None
+    workers: Optional[int] = None
+    timeout: Optional[float] = None
+    failure: Optional[Tuple[str, ...]] = None
+    stall_seconds: Optional[float] = None
+    batch: Optional[int] = None
+    plan: Optional[Mapping[str, Any]] = None
+    mde: Optional[float] = None
+    power: Optional[float] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "episodes": "int", "seed": "int", "margin": "number", "alpha": "number", "sequential": "bool",
+        "env_config": "object", "backend": "str", "workers": "int", "timeout": "number", "failure": "strings",
+        "stall_seconds": "number", "batch": "int", "plan": "object", "mde": "number", "power": "number",
+    }
+    _LISTS: ClassVar[Tuple[str, ...]] = ("failure",)
+    _WHAT: ClassVar[str] = "report settings"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"workers", "timeout"})
+
+
+@dataclass(frozen=True, eq=False)
+class PolicyInfo(ReportRecord):
+    """A policy of the run: its ``spec`` and model ``card`` (``None`` without one); a baseline taken from an earlier
+    report also names that ``report``, the ``role`` it had there and, when another dv2s-gym version made it, a
+    ``warning``."""
+
+    report: Optional[str] = None
+    role: Optional[str] = None
+    spec: Optional[str] = None
+    card: Optional[Mapping[str, Any]] = None
+    warning: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"report": "str", "role": "str", "spec": "str", "card": "object",
+                                        "warning": "str"}
+    _WHAT: ClassVar[str] = "report policy"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"card"})
+
+
+def _result(value: Any) -> Any:
+    """A paired episode's side: a :class:`RegressEpisode` (a result of a run: it has the record's required fields),
+    else the JSON object as given (a report other code made from partial results)."""
+    if isinstance(value, Mapping) and not isinstance(value, RegressEpisode) \
+            and all(value.get(key) is not None for key in RegressEpisode._REQUIRED):
+        return RegressEpisode.from_dict(value)
+    if value is not None and not isinstance(value, Mapping):
+        raise RecordError(f"a regression result must be a JSON object, not {type(value).__name__}")
+    return value
+
+
+@dataclass(frozen=True, eq=False)
+class PairedEpisode(ReportRecord):
+    """One scenario x seed pair: its ``id`` (``"scenario/seed"``), ``scenario`` and ``seed``, and each policy's
+    result (a :class:`~scenario_bank.records.RegressEpisode`; ``baseline`` ``None`` without a baseline)."""
+
+    id: Optional[str] = None
+    scenario: Optional[str] = None
+    seed: Optional[int] = None
+    candidate: Optional[Mapping[str, Any]] = None
+    baseline: Optional[Mapping[str, Any]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"id": "str", "scenario": "str", "seed": "int", "candidate": "object",
+                                        "baseline": "object"}
+    _WHAT: ClassVar[str] = "paired episode"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"baseline"})
+
+    @classmethod
+    def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
+        return {role: _result(data[role]) for role in ("candidate", "baseline") if data.get(role) is not None}
+
+    def result(self, role: str) -> Optional[Mapping[str, Any]]:
+        """The ``"candidate"``'s or the ``"baseline"``'s result."""
+        return self.candidate if role == "candidate" else self.baseline
+
+    def errored(self, role: str) -> bool:
+        """Whether ``role`` ran this pair and its episode ended in an error."""
+        result = self.result(role)
+        return result is not None and bool(result.get("error"))
+
+    def to_dict(self) -> Dict[str, Any]:
+        out = super().to_dict()
+        for role in ("candidate", "baseline"):
+            if isinstance(out.get(role), JsonRecord):
+                out[role] = out[role].to_dict()
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class Summary(ReportRecord):
+    """One policy on one scenario (or on all): the ``episodes`` without errors and the ``errors``; the ``rates``
+    (``{kind}_rate`` per failure kind, ``failure_rate``, ``success_rate``: Wilson intervals with ``count``), in the
+    report's order; and the means ``min_ttc``, ``mean_speed`` and ``episode_return`` (JSON ``return``: bootstrap
+    intervals with ``n``)."""
+
+    episodes: Optional[int] = None
+    errors: Optional[int] = None
+    rates: Mapping[str, Interval] = field(default_factory=dict)
+    min_ttc: Optional[Interval] = None
+    mean_speed: Optional[Interval] = None
+    episode_return: Optional[Interval] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"episodes": "int", "errors": "int", "min_ttc": "object",
+                                        "mean_speed": "object", "return": "object"}
+    _ATTRIBUTES: ClassVar[Dict[str, str]] = {"return": "episode_return"}
+    _WHAT: ClassVar[str] = "summary"
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "Summary":
+        record = super().from_dict(data)
+        if record is data:
+            return record
+        rates = {key: value for key, value in data.items() if key.endswith("_rate") and key not in cls._KINDS}
+        for key, value in rates.items():
+            if not isinstance(value, Mapping):
+                raise RecordError(f"summary field {key!r} must be a JSON object, not {type(value).__name__}")
+        return record.replace(rates=rates, extra={k: v for k, v in record.extra.items() if k not in rates})
+
+    def to_dict(self) -> Dict[str, Any]:
+        out = super().to_dict()
+        head = {key: out.pop(key) for key in ("episodes", "errors") if key in out}
+        return {**head, **self.rates, **out}
+
+    def rate(self, name: str) -> Optional[Interval]:
+        """The rate ``name`` (``"failure"``, ``"success"``, ``"collision"``, ...), or ``None`` when not counted."""
+        return self.rates.get(f"{name}_rate")
+
+    @property
+    def failure_rate(self) -> Optional[Interval]:
+        """The rate of episodes with any failure the run counts."""
+        return self.rate("failure")
+
+    @property
+    def success_rate(self) -> Optional[Interval]:
+        """The rate of episodes that reached their goal."""
+        return self.rate("success")
+
+
+@dataclass(frozen=True, eq=False)
+class PairedComparison(ReportRecord):
+    """The candidate against the baseline on ``n`` pairs: the paired ``table`` (``both_fail``, ``candidate_only``,
+    ``baseline_only``, ``neither``), both failure rates, the ``difference`` (Newcombe interval), the exact McNemar
+    ``p_value`` and ``p_adjusted`` for the family of tests, the ``verdict`` and its ``reason``."""
+
+    n: Optional[int] = None
+    table: Optional[Mapping[str, int]] = None
+    candidate_rate: Optional[float] = None
+    baseline_rate: Optional[float] = None
+    difference: Optional[Interval] = None
+    p_value: Optional[float] = None
+    p_adjusted: Optional[float] = None
+    verdict: Optional[str] = None
+    reason: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "n": "int", "table": "object", "candidate_rate": "number", "baseline_rate": "number", "difference": "object",
+        "p_value": "number", "p_adjusted": "number", "verdict": "str", "reason": "str",
+    }
+    _WHAT: ClassVar[str] = "comparison"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS)
+
+
+@dataclass(frozen=True, eq=False)
+class ScenarioResult(ReportRecord):
+    """A scenario's entry of ``scenarios`` (or the ``overall`` one): each policy's :class:`Summary` (``baseline``
+    ``None`` without a baseline) and their :class:`PairedComparison` (``None`` without a baseline)."""
+
+    candidate: Optional[Summary] = None
+    baseline: Optional[Summary] = None
+    comparison: Optional[PairedComparison] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"candidate": "object", "baseline": "object", "comparison": "object"}
+    _NESTED: ClassVar[Dict[str, type]] = {"candidate": Summary, "baseline": Summary, "comparison": PairedComparison}
+    _WHAT: ClassVar[str] = "scenario result"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"baseline", "comparison"})
+
+    def summary(self, role: str) -> Optional[Summary]:
+        """The ``"candidate"``'s or the ``"baseline"``'s summary."""
+        return self.candidate if role == "candidate" else self.baseline
+
+    @property
+    def verdict(self) -> Optional[str]:
+        """The comparison's verdict (``None`` without one)."""
+        return self.comparison.verdict if self.comparison is not None else None
+
+
+@dataclass(frozen=True, eq=False)
+class EpisodeError(ReportRecord):
+    """An episode that ended in an error: its ``id``, the ``role`` that ran it and the ``error``."""
+
+    id: Optional[str] = None
+    role: Optional[str] = None
+    error: Optional[Any] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"id": "str", "role": "str", "error": "any"}
+    _WHAT: ClassVar[str] = "episode error"
+
+    @property
+    def scenario(self) -> str:
+        """The scenario of the episode (its id without the seed)."""
+        return str(self.id).rsplit("/", 1)[0]
+
+    @property
+    def first_line(self) -> str:
+        """The error's first line (empty without one)."""
+        return str(self.error or "").splitlines()[0] if self.error else ""
+
+
+@dataclass(frozen=True, eq=False)
+class SequentialOutcome(ReportRecord):
+    """The sequential test of a ``--sequential`` run: its ``looks`` at the pooled table, the paired ``episodes``
+    it saw of ``max_episodes``, the seeds per look (``batch``), the alpha ``spending`` and the ``verdict`` it
+    reached (``None``: none before the end)."""
+
+    looks: Optional[int] = None
+    episodes: Optional[int] = None
+    max_episodes: Optional[int] = None
+    batch: Optional[int] = None
+    spending: Optional[Any] = None
+    verdict: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"looks": "int", "episodes": "int", "max_episodes": "int", "batch": "int",
+                                        "spending": "any", "verdict": "str"}
+    _WHAT: ClassVar[str] = "sequential test"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"verdict"})
+
+
+@dataclass(frozen=True, eq=False)
+class RegressReport(ReportRecord):
+    """A regression report (``report.json``, schema in :mod:`dv2s_gym.regress.report`): what ran (``bank``,
+    ``settings``, ``candidate``, ``baseline``, the paired ``episodes``), each scenario's and the ``overall``
+    :class:`ScenarioResult`, the ``verdict`` (``None``: measures only) with ``error_reason`` when errors make it
+    ERROR, the ``regressed`` scenarios, the ``newly_failing`` episode ids, the ``errors``, the sequential test
+    (``stopped_early``, ``sequential``), the run's ``power`` and the return ``aggregates`` (context), and where and
+    how long it ran (``hostname``, ``duration``, ``timing`` per scenario)."""
+
+    schema: Optional[str] = None
+    schema_version: Optional[int] = None
+    created: Optional[str] = None
+    dv2s_version: Optional[str] = None
+    bank: Optional[BankInfo] = None
+    settings: Optional[ReportSettings] = None
+    candidate: Optional[PolicyInfo] = None
+    baseline: Optional[PolicyInfo] = None
+    episodes: Optional[Tuple[PairedEpisode, ...]] = None
+    scenarios: Optional[Mapping[str, ScenarioResult]] = None
+    overall: Optional[ScenarioResult] = None
+    verdict: Optional[str] = None
+    regressed: Optional[Tuple[str, ...]] = None
+    newly_failing: Optional[Tuple[str, ...]] = None
+    errors: Optional[Tuple[EpisodeError, ...]] = None
+    stopped_early: Optional[bool] = None
+    sequential: Optional[SequentialOutcome] = None
+    power: Optional[Mapping[str, Any]] = None
+    aggregates: Optional[Mapping[str, Any]] = None
+    error_reason: Optional[str] = None
+    hostname: Optional[str] = None
+    timing: Optional[Mapping[str, float]] = None
+    duration: Optional[float] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "schema": "str", "schema_version": "int", "created": "str", "dv2s_version": "str", "bank": "object",
+        "settings": "object", "candidate": "object", "baseline": "object", "episodes": "objects",
+        "scenarios": "object", "overall": "object", "verdict": "str", "regressed": "strings",
+        "newly_failing": "strings", "errors": "objects", "stopped_early": "bool", "sequential": "object",
+        "power": "object", "aggregates": "object", "error_reason": "str", "hostname": "str", "timing": "object",
+        "duration": "number",
+    }
+    _NESTED: ClassVar[Dict[str, type]] = {"bank": BankInfo, "settings": ReportSettings, "candidate": PolicyInfo,
+                                          "baseline": PolicyInfo, "overall": ScenarioResult,
+                                          "sequential": SequentialOutcome}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("episodes", "regressed", "newly_failing", "errors")
+    _WHAT: ClassVar[str] = "regression report"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"baseline", "verdict", "sequential", "power", "aggregates"})
+
+    @classmethod
+    def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
+        found = {"episodes": cls._records("episodes", data, PairedEpisode.from_dict),
+                 "errors": cls._records("errors", data, EpisodeError.from_dict),
+                 "scenarios": cls._records("scenarios", data, ScenarioResult.from_dict)}
+        return {key: value for key, value in found.items() if value is not None}
+
+    def to_dict(self) -> Dict[str, Any]:
+        out = super().to_dict()
+        for key in ("episodes", "errors"):
+            if key in out:
+                out[key] = [item.to_dict() if isinstance(item, JsonRecord) else item for item in out[key]]
+        if "scenarios" in out:
+            out["scenarios"] = {name: entry.to_dict() if isinstance(entry, JsonRecord) else entry
+                                for name, entry in out["scenarios"].items()}
+        return out
+
+    @property
+    def has_baseline(self) -> bool:
+        """Whether the run compared against a baseline (else it only measured the candidate)."""
+        return self.baseline is not None
+
+    def scenario(self, name: str) -> ScenarioResult:
+        """The entry of scenario ``name``."""
+        return (self.scenarios or {})[name]
+
+    def episode(self, episode_id: str) -> Optional[PairedEpisode]:
+        """The paired episode ``episode_id`` (``"scenario/seed"``), or ``None``."""
+        return next((e for e in self.episodes or () if e.id == episode_id), None)
