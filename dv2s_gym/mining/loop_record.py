@@ -94,7 +94,7 @@ class MiningSummary(JsonRecord):
     clusters_not_converted: Optional[int] = None
     clusters_not_kept: Optional[int] = None
     clusters_reference_failed: Optional[int] = None
-    kept: Tuple[MinedEntry, ...] = ()
+    kept: Optional[Tuple[MinedEntry, ...]] = None
     folder: Optional[str] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
@@ -122,14 +122,19 @@ class MiningSummary(JsonRecord):
         return out
 
     @property
+    def kept_entries(self) -> Tuple[MinedEntry, ...]:
+        """The kept scenarios (none when not recorded)."""
+        return self.kept or ()
+
+    @property
     def converted(self) -> Tuple[MinedEntry, ...]:
         """The kept scenarios converted from a failure (not exact replays)."""
-        return tuple(entry for entry in self.kept if not entry.replay)
+        return tuple(entry for entry in self.kept_entries if not entry.replay)
 
     @property
     def replayed(self) -> Tuple[MinedEntry, ...]:
         """The kept exact replays."""
-        return tuple(entry for entry in self.kept if entry.replay)
+        return tuple(entry for entry in self.kept_entries if entry.replay)
 
 
 @dataclass(frozen=True, eq=False)
@@ -180,7 +185,7 @@ class ReferenceGate(JsonRecord):
     reference: Optional[str] = None
     episodes: Optional[int] = None
     kept: Optional[int] = None
-    excluded: Tuple[Any, ...] = ()
+    excluded: Optional[Tuple[Any, ...]] = None
     failed: Optional[int] = None
     errored: Optional[int] = None
     by_scenario: Optional[Mapping[str, Any]] = None
@@ -197,7 +202,7 @@ class ReferenceGate(JsonRecord):
     @property
     def excluded_episodes(self) -> FrozenSet[Tuple[str, int]]:
         """The left-out episodes as ``(scenario, seed)``."""
-        return frozenset((str(name), int(seed)) for name, seed in self.excluded)
+        return frozenset((str(name), int(seed)) for name, seed in self.excluded or ())
 
 
 @dataclass(frozen=True, eq=False)
@@ -240,7 +245,7 @@ class FineTuneArm(JsonRecord):
     _KINDS: ClassVar[Dict[str, str]] = {
         "model": "str", "method": "str", "scenarios": "int", "mined_upweighted": "int", "steps": "int",
         "mined_left_out": "int", "families": "strings", "reward_weights": "object", "env_config": "object",
-        "reference": "str", "agreement": "any", "resumed": "list"}
+        "reference": "any", "agreement": "any", "resumed": "list"}
     _LISTS: ClassVar[Tuple[str, ...]] = ("families", "resumed")
     _WHAT: ClassVar[str] = "fine-tuning arm"
 
@@ -251,19 +256,19 @@ class FineTuneArm(JsonRecord):
 @dataclass(frozen=True, eq=False)
 class RegressComparison(JsonRecord):
     """One ``dv2s regress`` comparison of the untouched set: its ``verdict`` and ``reason``, the ``episodes``
-    compared, the ``difference`` and ``p_value``, and the ``report`` it wrote."""
+    compared, the ``difference`` (``{"value", "low", "high"}``) and ``p_value``, and the ``report`` it wrote."""
 
     verdict: Optional[str] = None
     reason: Optional[str] = None
     episodes: Optional[int] = None
-    difference: Optional[float] = None
+    difference: Optional[Mapping[str, Any]] = None
     p_value: Optional[float] = None
     report: Optional[str] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
     _KINDS: ClassVar[Dict[str, str]] = {"verdict": "str", "reason": "str", "episodes": "int",
-                                        "difference": "number", "p_value": "number", "report": "str"}
+                                        "difference": "object", "p_value": "number", "report": "str"}
     _WHAT: ClassVar[str] = "untouched comparison"
 
     def default_null_fields(self) -> FrozenSet[str]:
@@ -278,7 +283,7 @@ class UntouchedComparison(JsonRecord):
     against the start and the control against the fine-tuned one (:class:`RegressComparison`) and the episodes
     that ``errored`` per policy."""
 
-    scenarios: Tuple[str, ...] = ()
+    scenarios: Optional[Tuple[str, ...]] = None
     seeds: Optional[int] = None
     policies: Optional[Mapping[str, Any]] = None
     fine_tuned_vs_start: Optional[RegressComparison] = None
@@ -312,7 +317,7 @@ class RegressSummary(JsonRecord):
     episodes: Optional[int] = None
     new_failure_rate: Optional[Mapping[str, Any]] = None
     old_failure_rate: Optional[Mapping[str, Any]] = None
-    difference: Optional[float] = None
+    difference: Optional[Mapping[str, Any]] = None
     p_value: Optional[float] = None
     regressed: Optional[Tuple[Any, ...]] = None
     report: Optional[str] = None
@@ -323,7 +328,7 @@ class RegressSummary(JsonRecord):
 
     _KINDS: ClassVar[Dict[str, str]] = {
         "verdict": "str", "reason": "str", "episodes": "int", "new_failure_rate": "object",
-        "old_failure_rate": "object", "difference": "number", "p_value": "number", "regressed": "list",
+        "old_failure_rate": "object", "difference": "object", "p_value": "number", "regressed": "list",
         "report": "str", "held_out_parents": "object", "errored": "object"}
     _LISTS: ClassVar[Tuple[str, ...]] = ("regressed",)
     _WHAT: ClassVar[str] = "regress step"
@@ -516,6 +521,8 @@ class RoundRecord(JsonRecord):
     def with_step(self, step: str, value: Any, seconds: Optional[float] = None) -> "RoundRecord":
         """A copy with ``step``'s record (its typed record or JSON object, or ``skipped``'s reason) and, when given,
         its ``seconds``."""
+        # the step is kept as its JSON object reads back (as loop.json holds it, and as a resumed loop reads it)
+        value = value.to_dict() if isinstance(value, JsonRecord) else value
         steps = RoundSteps.from_dict({**self.steps.to_dict(), step: value})
         timings = self.timings if seconds is None else {**self.timings, step: seconds}
         return self.replace(steps=steps, timings=timings)
