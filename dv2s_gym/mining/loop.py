@@ -571,7 +571,7 @@ def _run_round(loop: _Loop, number: int, current: str) -> str:
         _log_errored(loop, number, "mining", {"mine": mined.errored or {}})
     if not timed.steps.done("split"):
         _split_step(loop, number, current, timed)
-    if not timed.steps.split.fine_tune and not timed.steps.split.held_out:
+    if not timed.steps.split.fine_tune_scenarios and not timed.steps.split.held_out_scenarios:
         _skip_round(loop, number, timed.steps)
     else:
         _tune_and_measure(loop, number, current, round_dir, timed)
@@ -597,7 +597,7 @@ def _split_step(loop: _Loop, number: int, current: str, timed: "_Timed") -> None
                                                    tuned_families).record(),
                   f"{len(kept)} kept mined scenario(s) into fine-tuning and held-out families")
     families = set(split.fine_tune_family_names)  # every kept family, when none is held out
-    if kept and not split.held_out and families and families <= set(tuned_families) - set(held_families):
+    if kept and not split.held_out_scenarios and families and families <= set(tuned_families) - set(held_families):
         loop.log(f"round {number}: WARNING: nothing can be held out: every kept scenario's family "
                  f"({', '.join(sorted(families))}) was fine-tuned on by an earlier round that {current} descends from")
     if split.moved_to_fine_tune:
@@ -718,12 +718,12 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
     """The steps after the split: held-out before, fine-tune (+ control), held-out after, untouched set,
     regression; the fine-tuned policy's spec."""
     s, split = loop.settings, timed.steps.split
-    episodes = [(name, EVAL_SEED_BASE + i) for name in split.held_out for i in range(s.k_eval)]
-    families = _families_of(timed.steps.mine.kept_entries, split.held_out, loop.bank)
+    episodes = [(name, EVAL_SEED_BASE + i) for name in split.held_out_scenarios for i in range(s.k_eval)]
+    families = _families_of(timed.steps.mine.kept_entries, split.held_out_scenarios, loop.bank)
     store_path = round_dir / "heldout.jsonl"
     if not timed.steps.done("reference"):
         gate = timed("reference", lambda: _reference_step(loop, episodes, HeldOutStore(store_path), families),
-                     f"{len(episodes)} episodes ({len(split.held_out)} held-out scenario(s) x {s.k_eval} seeds) "
+                     f"{len(episodes)} episodes ({len(split.held_out_scenarios)} held-out scenario(s) x {s.k_eval} seeds) "
                      f"for the reference driver {REFERENCE_DRIVER}: a held-out episode it does not pass is left out")
         _log_reference(loop, number, gate)
     excluded = timed.steps.reference.excluded_episodes
@@ -740,7 +740,7 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
             return HeldOutBefore(episodes=len(episodes), done=bool(records), errored=errored_episodes(records))
 
         before = timed("before", before_step,
-                       f"{len(episodes)} episodes ({len(split.held_out)} held-out scenario(s) x {s.k_eval} seeds"
+                       f"{len(episodes)} episodes ({len(split.held_out_scenarios)} held-out scenario(s) x {s.k_eval} seeds"
                        + (f", {len(excluded)} left out: the reference driver does not pass them" if excluded else "")
                        + ")")
         _log_errored(loop, number, "held-out: starting policy", {"start": before.errored})
@@ -831,10 +831,10 @@ def _fine_tune_arms(loop: _Loop, number: int, current: str, round_dir: Path, tim
     from policies.training import resolve_checkpoint
 
     s, split = loop.settings, timed.steps.split
-    excluded = set(split.held_out) | set(split.held_out_family_names)
+    excluded = set(split.held_out_scenarios) | set(split.held_out_family_names)
     for earlier in loop.state.rounds[:number - 1]:
         earlier_split = earlier.steps.split or SplitRecord()
-        excluded.update(earlier_split.held_out)
+        excluded.update(earlier_split.held_out_scenarios)
         excluded.update(earlier_split.held_out_family_names)
     arm = _Arm(bank=loop.bank, method=s.fine_tune_method, steps=s.fine_tune_steps, seed=s.seed * 1000 + number,
                n_envs=s.n_envs, env_config=loop.env_config, fine_tune_config=loop.fine_tune_config,

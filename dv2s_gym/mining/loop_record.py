@@ -144,8 +144,8 @@ class SplitRecord(JsonRecord):
     moved to the fine-tuning side (``moved_to_fine_tune``). A list a loop did not record reads as empty."""
 
     by: Optional[str] = None
-    fine_tune: Tuple[str, ...] = ()
-    held_out: Tuple[str, ...] = ()
+    fine_tune: Optional[Tuple[str, ...]] = None
+    held_out: Optional[Tuple[str, ...]] = None
     fine_tune_clusters: Optional[Tuple[str, ...]] = None
     held_out_clusters: Optional[Tuple[str, ...]] = None
     fine_tune_families: Optional[Tuple[str, ...]] = None
@@ -159,10 +159,19 @@ class SplitRecord(JsonRecord):
         "by": "str", "fine_tune": "strings", "held_out": "strings", "fine_tune_clusters": "strings",
         "held_out_clusters": "strings", "fine_tune_families": "strings", "held_out_families": "strings",
         "groups": "int", "moved_to_fine_tune": "strings"}
-    _REQUIRED: ClassVar[Tuple[str, ...]] = ("fine_tune", "held_out")
     _LISTS: ClassVar[Tuple[str, ...]] = ("fine_tune", "held_out", "fine_tune_clusters", "held_out_clusters",
                                          "fine_tune_families", "held_out_families", "moved_to_fine_tune")
     _WHAT: ClassVar[str] = "split"
+
+    @property
+    def held_out_scenarios(self) -> Tuple[str, ...]:
+        """The held-out scenarios (none when not recorded)."""
+        return self.held_out or ()
+
+    @property
+    def fine_tune_scenarios(self) -> Tuple[str, ...]:
+        """The fine-tuning scenarios (none when not recorded)."""
+        return self.fine_tune or ()
 
     @property
     def held_out_family_names(self) -> Tuple[str, ...]:

@@ -280,7 +280,7 @@ def _round_row(record: RoundRecord) -> Dict[str, Any]:
         "round": record.round, "failures": _recorded(mine, "failures"),
         "against": _recorded(mine, "failures_against_policy"), "episodes": _recorded(mine, "episodes"),
         "clusters": _recorded(mine, "clusters"), "kept": len({e.scenario for e in (mine.kept_entries if mine is not None else ())}),
-        "split": f"{len(split.fine_tune)} / {len(split.held_out)}",
+        "split": f"{len(split.fine_tune_scenarios)} / {len(split.held_out_scenarios)}",
         "before": _rate(after.before), "after": _rate(after.after), "drop": drop_text,
         "p": "-" if p_value is None else f"{p_value:.3g}",
         "verdict": regress.verdict or steps.skipped or "-",
@@ -655,9 +655,9 @@ def _split_lines(split: Optional[SplitRecord]) -> List[str]:
         return []
     return [f"- split by family ({split.groups} family groups): fine-tune families "
             f"{', '.join(split.fine_tune_family_names) or 'none'} "
-            f"({', '.join(split.fine_tune) or 'no scenario'}); held-out families "
+            f"({', '.join(split.fine_tune_scenarios) or 'no scenario'}); held-out families "
             f"{', '.join(split.held_out_family_names) or 'none'} "
-            f"({', '.join(split.held_out) or 'no scenario'}; their parents are not fine-tuned on either)"]
+            f"({', '.join(split.held_out_scenarios) or 'no scenario'}; their parents are not fine-tuned on either)"]
 
 
 def _fine_tuning_lines(steps: RoundSteps) -> List[str]:
@@ -934,7 +934,7 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
         mine = record.steps.mine or MiningSummary()
         policy = record.policy or report.get("policy")
         split = record.steps.split or SplitRecord()
-        held = set(split.held_out)
+        held = set(split.held_out_scenarios)
         clips: Dict[str, List[Dict[str, str]]] = {}
         for entry in mine.kept_entries:
             scenario = str(entry.scenario)
