@@ -69,7 +69,7 @@ def test_family_split_keeps_a_family_held_out_once_held_out():
     assert set(tuned) <= set(forced.held_out_families)  # an earlier round's held-out family never moves
     one = [{"cluster": "s0/collision/r1", "scenario": "a"}, {"cluster": "s0/off_road/r2", "scenario": "b"}]
     assert split_by_family(one, 0.5, 0).held_out == ()  # one family: nothing to hold out apart
-    assert family_of({"cluster": "s0/collision/r1", "parent": "p"}) == "p"
+    assert family_of({"cluster": "s0/collision/r1", "scenario": "s0_mined", "parent": "p"}) == "p"
 
 
 @pytest.mark.parametrize("seed", range(6))

@@ -1,5 +1,10 @@
 """The mining modules that read episode records pass typed records to each other, not string-keyed dicts.
 
+The loop's rounds are typed to the step: each step of ``loop.json`` (``RoundSteps``) is a frozen record of
+``dv2s_gym.mining.loop_record`` (``MiningSummary`` with its ``MinedEntry`` list, ``SplitRecord``, ``ReferenceGate``,
+``HeldOutBefore``, ``FineTuneArm``, ``HeldOutComparison``, ``UntouchedComparison``, ``RegressSummary``), the loop's
+functions return them, and each one's ``to_dict`` writes back exactly the JSON object it was read from.
+
 The modules of :data:`TYPED_MODULES` read a run's episodes as :class:`scenario_bank.records.EpisodeRecord` (by
 their fields) and hand each other frozen records (``Behaviour``, ``FailureEntry``, ``ClusterEntry``,
 ``RateEstimate``, ``FailureRate``, ``FamilyGroup``, ``FamilySplit``); their JSON form, the one the files hold, is
@@ -14,12 +19,17 @@ from __future__ import annotations
 import ast
 import textwrap
 from pathlib import Path
+import json
+import typing
 from typing import Dict, List
+
+from scenario_bank.records import JsonRecord
 
 ROOT = Path(__file__).resolve().parents[1]
 MINING = ROOT / "dv2s_gym" / "mining"
 
-TYPED_MODULES = ("behaviour", "cluster", "family", "rate", "report", "split")
+TYPED_MODULES = ("behaviour", "cluster", "family", "rate", "report", "split", "loop", "loop_record", "loop_report",
+                 "loop_verdict")
 """The mining modules whose functions pass typed records."""
 
 JSON_BOUNDARIES: Dict[str, str] = {
@@ -34,9 +44,26 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "report.markdown": "renders the report's JSON object (report.json)",
     "report.write_reports": "writes the report's JSON object (report.json) and its renderings",
     "rate.rate_estimates": "takes the run's settings.json (a RunSettings is a read-only mapping over it)",
-    "split.family_of": "takes one of the loop's mined entries (dv2s_gym.mining.loop.mined_entries), which the loop owns",
-    "split.family_groups": "takes the loop's mined entries (dv2s_gym.mining.loop.mined_entries), which the loop owns",
-    "split.split_by_family": "takes the loop's mined entries (dv2s_gym.mining.loop.mined_entries), which the loop owns",
+    "loop.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
+    "loop.LoopReport.recommendation": "returns report.json's recommendation (loop_verdict.recommendation's JSON object)",
+    "loop.reference_gate": "takes the held-out store's rows as read from heldout.jsonl: the file format",
+    "loop.heldout_comparison": "takes the held-out store's rows (heldout.jsonl) and returns the after step's JSON "
+                               "object, which the loop reads as a HeldOutComparison",
+    "loop.untouched_settings": "takes the policy's env config, a JSON object of its model card",
+    "loop_record.HeldOutComparison.held_out_test": "returns one recorded held-out test (loop_verdict.heldout_worse's "
+                                                   "JSON object in the after step's significantly_worse)",
+    "loop_verdict.family_harm": "returns the held-out families' harm check as loop.json records it in a held-out test",
+    "loop_verdict.heldout_worse": "returns a held-out test as loop.json records it (significantly_worse)",
+    "loop_verdict.recommendation": "takes the body of report.json and returns its recommendation object",
+    "loop_report.final_vs_start": "takes the body of report.json and returns its final_vs_start object",
+    "loop_report.with_cross_round_checks": "takes and returns the body of report.json",
+    "loop_report.errored_text": "takes errored episodes per policy (dv2s_gym.mining.errored.errored_episodes' JSON "
+                                "form, kept as loop.json holds it)",
+    "loop_report.errored_note": "takes errored episodes (dv2s_gym.mining.errored.errored_episodes' JSON form)",
+    "loop_report.render_markdown": "renders the body of report.json",
+    "loop_report.render_html": "renders the body of report.json",
+    "loop_report.round_clips": "takes the body of report.json",
+    "loop_report.write_loop_reports": "writes the body of report.json and its renderings",
 }
 """``"module.function"`` of the typed modules that take or return a JSON object, each with the reason. A record's
 ``to_dict`` (its JSON form) needs no entry."""
@@ -129,3 +156,122 @@ def test_the_functions_that_read_episodes_take_episode_records():
         if "EpisodeRecord" not in ast.unparse(annotation):
             untyped.append(f"{qualified}({parameter}: {ast.unparse(annotation)})")
     assert not untyped, f"{untyped} read episode records: annotate them EpisodeRecord and read their fields"
+
+
+def _step_records() -> Dict[str, type]:
+    from dv2s_gym.mining import loop_record
+
+    hints = typing.get_type_hints(loop_record.RoundSteps, vars(loop_record))
+    return {step: hints[step] for step in loop_record.STEPS}
+
+
+def test_every_step_of_a_round_is_a_typed_record():
+    untyped = []
+    for step, hint in _step_records().items():
+        kinds = [a for a in typing.get_args(hint) if a is not type(None)]
+        if len(kinds) != 1 or not (isinstance(kinds[0], type) and issubclass(kinds[0], JsonRecord)):
+            untyped.append(f"{step}: {hint}")
+    assert not untyped, f"steps {untyped} of a round are not typed records (loop_record.RoundSteps)"
+
+
+def test_the_mined_entries_are_typed_records():
+    from dv2s_gym.mining import loop_record
+    from dv2s_gym.mining.loop import mined_entries
+    from dv2s_gym.mining.replays import replay_entries
+    from dv2s_gym.mining.split import family_of, family_groups, split_by_family
+
+    hints = typing.get_type_hints(loop_record.MiningSummary, vars(loop_record))
+    assert typing.get_args(typing.get_args(hints["kept"])[0]) == (loop_record.MinedEntry, Ellipsis)
+    for function in (mined_entries, replay_entries):
+        assert "MinedEntry" in str(typing.get_type_hints(function)["return"]), function.__name__
+    for function, parameter in ((family_of, "entry"), (family_groups, "entries"), (split_by_family, "entries")):
+        assert "MinedEntry" in str(typing.get_type_hints(function)[parameter]), function.__name__
+
+
+_ROUND = {
+    "round": 1, "policy": "dv2s-ppo", "new_policy": "ppo:/x/round_1/policy/model.zip", "timings": {"mine": 1.5},
+    "steps": {
+        "mine": {"episodes": 4, "errors": 0, "errored": {"episodes": 0, "scenarios": {}, "messages": {}},
+                 "failures": 2, "failures_against_policy": 1, "clusters": None, "conversions": {"kept": 1},
+                 "replays": {}, "rejected_reasons": ["judge: no"], "rejected_reason_count": 1,
+                 "clusters_not_converted": None, "clusters_not_kept": None, "clusters_reference_failed": None,
+                 "kept": [{"cluster": "a/collision/r0", "scenario": "a_m1", "reproduction": None},
+                          {"cluster": "b/stall/r0", "scenario": "b_r1", "parent": None, "reproduction": None,
+                           "replay": True, "not_narrowed": {"speed": "categorical"}, "later": 1}],
+                 "folder": "/x/round_1/mine"},
+        "split": {"by": "family", "fine_tune": ["a_m1"], "held_out": ["b_r1"], "fine_tune_clusters": ["a/collision/r0"],
+                  "held_out_clusters": ["b/stall/r0"], "fine_tune_families": ["a"], "held_out_families": ["b"],
+                  "groups": 2, "moved_to_fine_tune": []},
+        "reference": {"reference": "rule", "episodes": 2, "kept": 1, "excluded": [["b_r1", 1000]], "failed": 1,
+                      "errored": 0, "by_scenario": {"b_r1": {"episodes": 2, "excluded": 1, "failures": {"stall": 1}}},
+                      "excluded_families": []},
+        "before": {"episodes": 1, "done": True, "errored": {"episodes": 0}},
+        "fine_tune": {"model": "/x/m.zip", "method": "dagger", "scenarios": 3, "mined_upweighted": 1, "steps": 8,
+                      "mined_left_out": 0, "families": ["a"], "reward_weights": None, "env_config": {},
+                      "reference": None, "agreement": None, "resumed": []},
+        "control": {"model": "/x/c.zip", "method": "ppo", "scenarios": 2, "mined_upweighted": 0, "steps": 8,
+                    "mined_left_out": 1, "families": ["a"], "reward_weights": {"standing": -0.3}, "env_config": {}},
+        "untouched": {"scenarios": ["u1"], "seeds": 2, "policies": {"start": {"episodes": 2, "failure_rate": None}},
+                      "fine_tuned_vs_start": {"verdict": None, "reason": None, "episodes": None, "difference": None,
+                                              "p_value": None, "report": "/x/u/report.json"},
+                      "errored": {"start": {"episodes": 0}}},
+        "regress": {"verdict": "PASS", "reason": "ok", "episodes": 8, "new_failure_rate": None,
+                    "old_failure_rate": {"value": 0.1}, "difference": {"value": 0.0, "low": -0.1, "high": 0.1},
+                    "p_value": None, "regressed": [], "report": "/x/r/report.json", "held_out_parents": {},
+                    "errored": {}},
+    },
+}
+
+
+def test_a_round_reads_into_typed_steps_and_writes_back_the_same_json():
+    from dv2s_gym.mining import loop_record
+
+    record = loop_record.RoundRecord.from_dict(_ROUND)
+    steps = record.steps
+    assert isinstance(steps.mine, loop_record.MiningSummary)
+    assert [type(e) for e in steps.mine.kept] == [loop_record.MinedEntry] * 2
+    assert [e.scenario for e in steps.mine.replayed] == ["b_r1"] and steps.mine.kept[1].parent is None
+    assert steps.split.held_out_scenarios == ("b_r1",) and steps.reference.excluded_episodes == {("b_r1", 1000)}
+    assert isinstance(steps.fine_tune, loop_record.FineTuneArm) and steps.control.reward_weights == {"standing": -0.3}
+    assert steps.untouched.fine_tuned_vs_start.report == "/x/u/report.json"
+    assert steps.regress.difference["high"] == 0.1 and steps.before.done is True
+    written = json.dumps(record.to_dict(), sort_keys=True)
+    assert written == json.dumps(_ROUND, sort_keys=True)
+    # a step recorded through the loop's own path is stored as it reads back
+    again = loop_record.RoundRecord.started(1).with_step("mine", steps.mine)
+    assert json.dumps(again.steps.mine.to_dict(), sort_keys=True) == json.dumps(_ROUND["steps"]["mine"], sort_keys=True)
+
+
+def test_the_records_the_loop_builds_write_the_json_it_wrote_as_dicts():
+    from dv2s_gym.mining.loop_record import FineTuneArm, MinedEntry, RegressComparison
+
+    # a DAgger arm writes its reward weights, reference and agreement even when there are none; a PPO arm does not
+    # write the DAgger fields at all
+    dagger = FineTuneArm(model="m", method="dagger", reward_weights=None, env_config={}, reference=None,
+                         agreement=None, resumed=())
+    assert dagger.to_dict() == {"model": "m", "method": "dagger", "reward_weights": None, "env_config": {},
+                                "reference": None, "agreement": None, "resumed": []}
+    assert FineTuneArm(model="m", method="ppo", reward_weights={}).to_dict() == {"model": "m", "method": "ppo",
+                                                                                 "reward_weights": {}}
+    # an exact replay always records its parent and reproduction; a converted entry its reproduction
+    assert MinedEntry(cluster="c", scenario="s", replay=True).to_dict() == {
+        "cluster": "c", "scenario": "s", "reproduction": None, "parent": None, "replay": True}
+    assert MinedEntry(cluster="c", scenario="s").to_dict() == {"cluster": "c", "scenario": "s", "reproduction": None}
+    assert set(RegressComparison(report="r").to_dict()) == {"verdict", "reason", "episodes", "difference", "p_value",
+                                                           "report"}
+
+
+def test_the_failure_interaction_is_a_typed_record_written_as_before():
+    from dv2s_gym.mining.interaction import FailureInteraction, failure_interaction, interaction_sentence
+
+    assert "FailureInteraction" in str(typing.get_type_hints(failure_interaction)["return"])
+    alone = FailureInteraction(failure_type="stall")
+    # a conversion's record and a bank entry's provenance hold every field, null when unknown
+    assert alone.to_dict() == {"failure_type": "stall", "actor": None, "kind": None, "manoeuvres": [], "gap_m": None,
+                               "side": None}
+    assert list(alone.to_dict()) == ["failure_type", "actor", "kind", "manoeuvres", "gap_m", "side"]
+    recorded = {"failure_type": "collision", "actor": "car1", "kind": "car", "manoeuvres": ["brake"], "gap_m": 12.5,
+                "side": "same_lane"}
+    read = FailureInteraction.from_dict(recorded)
+    assert read.manoeuvres == ("brake",) and read.to_dict() == recorded
+    assert interaction_sentence(read) == interaction_sentence(recorded) != ""

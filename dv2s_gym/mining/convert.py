@@ -75,7 +75,8 @@ import numpy as np
 from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.exact_replay import NARROW, narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
-from dv2s_gym.mining.interaction import failure_interaction, interaction_sentence, key_actor, shows_interaction
+from dv2s_gym.mining.interaction import (FailureInteraction, failure_interaction, interaction_sentence, key_actor,
+                                         shows_interaction)
 from dv2s_gym.mining.monitors import MonitorSettings, detect_failure
 from dv2s_gym.mining.report_text import not_compared_names_text
 from dv2s_gym.mining.param_meaning import (actor_objects, behaviour_overrides, counterpart_objects, fixed_quantities,
@@ -1103,7 +1104,7 @@ class _ReplaySource:
     cluster: Optional[str]
     run_dir: Path
     source_trace: Any = None
-    interaction: Optional[Mapping[str, Any]] = None
+    interaction: Optional[FailureInteraction] = None
     files: Optional[Mapping[str, Path]] = None
 
 
@@ -1184,7 +1185,8 @@ def _bank_replay(out: Dict[str, Any], record: Mapping[str, Any], bank, parent: A
                             trace=ENTRY_TRACE if ENTRY_TRACE in files else None, generator="exact replay",
                             policy=_policy_name(policy), failure=dict(source_failure), cluster=source.cluster,
                             run=str(source.run_dir.resolve()), index=record.get("index"),
-                            interaction=dict(source.interaction), replay=dict(replay), e2e_sc=out["e2e_sc"],
+                            interaction=FailureInteraction.from_dict(source.interaction).to_dict(),
+                            replay=dict(replay), e2e_sc=out["e2e_sc"],
                             date=datetime.date.today().isoformat())
     base = replay_name(record["scenario"], source_failure["type"])
     name, n = base, 2
@@ -1435,7 +1437,7 @@ class _Conversion:
         self.stage = "interaction"
 
         self.interaction = failure_interaction(self.source_trace, self.source_failure)
-        self.out["interaction"] = self.interaction
+        self.out["interaction"] = self.interaction.to_dict()  # the conversion's record (report.json, conversions.jsonl)
         self.lap("interaction")
 
     def _replay(self) -> None:
@@ -1502,7 +1504,7 @@ class _Conversion:
         self.out["reproduction"] = {"k": len(episodes), "reproduced": self.reproduced,
                                     "rate": self.reproduced / len(episodes), "interval": [low, high],
                                     "threshold": float(self.settings.threshold), "interaction_shown": self.shown,
-                                    "actor_kind": self.interaction.get("kind")}
+                                    "actor_kind": self.interaction.kind}
         self.details["reproduction_episodes"] = episodes
         self.lap("reproduction")
 
@@ -1531,7 +1533,7 @@ class _Conversion:
         # runs, and the failing parameter values against the new script's ranges
         out, record = self.out, self.record
         out["actors"] = compare_actors(actor_census(self.source_trace), [actor_census(t) for t in self.traces],
-                                       self.interaction.get("kind"))
+                                       self.interaction.kind)
         out["parameters"] = compare_parameters((record.get("result") or {}).get("params") or record.get("params")
                                                or {}, self.generation.script,
                                                parent=_parent_script(record, self.settings.bank_dir),
@@ -1608,7 +1610,7 @@ class _Conversion:
             policy=_policy_name(s.policy), failure=self.source_failure, cluster=self.cluster,
             reproduction=out["reproduction"], e2e_sc=out["e2e_sc"], run=str(self.run_dir.resolve()),
             index=record.get("index"),
-            interaction=self.interaction, judge={"avoidability": out.get("avoidability"),
+            interaction=self.interaction.to_dict(), judge={"avoidability": out.get("avoidability"),
                                                  "interaction_shown": self.shown, "reproduced": self.reproduced,
                                                  "parameters_not_compared": dict(
                                                      (out.get("parameters") or {}).get("not_comparable") or {})},

@@ -24,14 +24,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Dict, List, Mapping, Optional
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Dict, FrozenSet, List, Mapping, Optional, Tuple
 
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace, trace_actor_kind
 from scenario_bank.failure_types import failure_type
 from scenario_bank.elements import ActorKind
+from scenario_bank.records import JsonRecord
 
-__all__ = ["MANOEUVRES", "LOOKBACK_S", "key_actor", "actor_manoeuvres", "failure_interaction", "shows_interaction",
-           "interaction_sentence"]
+__all__ = ["MANOEUVRES", "LOOKBACK_S", "FailureInteraction", "key_actor", "actor_manoeuvres", "failure_interaction",
+           "shows_interaction", "interaction_sentence"]
 
 MANOEUVRES = ("cut_in", "cross", "merge", "lane_change_left", "lane_change_right", "brake", "stop", "pull_out",
               "drift", "swerve", "turn_left", "turn_right", "u_turn", "reverse", "overtake")
@@ -105,8 +107,34 @@ def actor_manoeuvres(trace, name: str) -> List[str]:
     return [m for m in MANOEUVRES if m in found]
 
 
-def failure_interaction(trace, failure: Optional[Mapping[str, Any]]) -> Dict[str, Any]:
-    """The failure's interaction: ``{"failure_type", "actor", "kind", "manoeuvres", "gap_m", "side"}``.
+@dataclass(frozen=True, eq=False)
+class FailureInteraction(JsonRecord):
+    """A failure's interaction (:func:`failure_interaction`), as a conversion's record and a mined bank entry's
+    provenance (``interaction``) hold it: the ``failure_type``, the key ``actor`` (``None``: the ego was alone), its
+    ``kind``, its ``manoeuvres``, its ``gap_m`` ahead of the ego and its ``side``. Every field is written, ``null``
+    when unknown."""
+
+    failure_type: Optional[str] = None
+    actor: Optional[str] = None
+    kind: Optional[str] = None
+    manoeuvres: Tuple[str, ...] = ()
+    gap_m: Optional[float] = None
+    side: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"failure_type": "any", "actor": "any", "kind": "any", "manoeuvres": "list",
+                                        "gap_m": "number", "side": "str"}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("manoeuvres",)
+    _WHAT: ClassVar[str] = "interaction"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"failure_type", "actor", "kind", "gap_m", "side"})
+
+
+def failure_interaction(trace, failure: Optional[Mapping[str, Any]]) -> FailureInteraction:
+    """The failure's interaction (:class:`FailureInteraction`: failure type, key actor, kind, manoeuvres, gap,
+    side).
 
     ``actor`` is the key actor's name (None: the ego was alone), ``kind`` its participant type (the trace's
     ``kinds``; else the failure's ``with_kind``; else guessed from the name),
@@ -116,40 +144,39 @@ def failure_interaction(trace, failure: Optional[Mapping[str, Any]]) -> Dict[str
     """
     failure = dict(failure or {})
     name = key_actor(trace, failure)
-    out: Dict[str, Any] = {"failure_type": failure.get("type"), "actor": name, "kind": None, "manoeuvres": [],
-                           "gap_m": None, "side": None}
+    out = FailureInteraction(failure_type=failure.get("type"), actor=name)
     if name is None:
         return out
     known = dict(getattr(trace, "kinds", {}) or {})
-    out["kind"] = known[name] if name in known else (
+    kind = known[name] if name in known else (
         failure.get("with_kind") if failure.get("with") == name and failure.get("with_kind")
         else trace_actor_kind(trace, name))
-    out["manoeuvres"] = actor_manoeuvres(trace, name)
+    out = out.replace(kind=kind, manoeuvres=tuple(actor_manoeuvres(trace, name)))
     k = _failure_step(trace, failure)
     first = max(0, k - int(round(LOOKBACK_S * _frequency(trace))))
     for step in trace.states[first:k + 1]:
         if "ego" in step and name in step:
             lon, left = _ego_frame(step["ego"], step[name])
-            out["gap_m"] = round(lon, 1)
-            out["side"] = "same_lane" if abs(left) <= _SAME_LANE_M else ("left" if left > 0 else "right")
-            break
+            side = "same_lane" if abs(left) <= _SAME_LANE_M else ("left" if left > 0 else "right")
+            return out.replace(gap_m=round(lon, 1), side=side)
     return out
 
 
-def shows_interaction(interaction: Mapping[str, Any], elements: Mapping[str, Any]) -> bool:
+def shows_interaction(interaction: FailureInteraction, elements: Mapping[str, Any]) -> bool:
     """Whether simulated ``elements`` (a trace's, :func:`~dv2s_gym.pipeline.semantics.trace.elements_from_trace`)
     hold the interaction: a participant of the key actor's kind doing one of its manoeuvres (a lane change
     in either direction matches a lane change), and, for a collision, that kind colliding. An interaction
-    without a key actor is shown by any elements."""
-    kind = interaction.get("kind")
+    without a key actor is shown by any elements (a JSON object of one is read as a :class:`FailureInteraction`)."""
+    interaction = FailureInteraction.from_dict(interaction)
+    kind = interaction.kind
     if kind is None:
         return True
     if kind not in (elements.get("participants") or []):
         return False
     actions = {action for who, action in elements.get("actions") or [] if who == kind}
-    if interaction.get("failure_type") == "collision" and "collide" not in actions:
+    if interaction.failure_type == "collision" and "collide" not in actions:
         return False
-    wanted = set(interaction.get("manoeuvres") or [])
+    wanted = set(interaction.manoeuvres or ())
     if not wanted:
         return True
     if wanted & _LANE_CHANGES and actions & _LANE_CHANGES:
@@ -160,23 +187,24 @@ def shows_interaction(interaction: Mapping[str, Any], elements: Mapping[str, Any
 _ARTICLE = {ActorKind.OBSTACLE: "An obstacle", ActorKind.EGO: "The ego vehicle"}
 
 
-def interaction_sentence(interaction: Mapping[str, Any], known: Optional[Mapping[str, Any]] = None) -> str:
+def interaction_sentence(interaction: FailureInteraction, known: Optional[Mapping[str, Any]] = None) -> str:
     """One or two sentences naming the key actor and what it did (from the trace), for the description of a
     failure video; empty when the ego was alone. ``known``: the elements a description already states; what
     they hold (the actor's kind doing one of its manoeuvres, or, for an actor that did none, its kind where it
-    was; its collision) is not said again."""
-    kind = interaction.get("kind")
+    was; its collision) is not said again. A JSON object of one is read as a :class:`FailureInteraction`."""
+    interaction = FailureInteraction.from_dict(interaction)
+    kind = interaction.kind
     if kind is None:
         return ""
     said = {action for who, action in (known or {}).get("actions") or [] if who == kind}
     placed = {relation for who, relation, _ in (known or {}).get("relations") or [] if who == kind}
-    moves = list(interaction.get("manoeuvres") or [])
-    collided = interaction.get("failure_type") == "collision"
-    relation = {"same_lane": "same_lane", "left": "left_of", "right": "right_of"}.get(interaction.get("side"))
+    moves = list(interaction.manoeuvres or ())
+    collided = interaction.failure_type == "collision"
+    relation = {"same_lane": "same_lane", "left": "left_of", "right": "right_of"}.get(interaction.side)
     if moves and set(moves) & said or not moves and relation in placed:
         return f"The ego vehicle collides with the {kind}." if collided and "collide" not in said else ""
     subject = _ARTICLE.get(kind, f"A {kind}")
-    gap, side = interaction.get("gap_m"), interaction.get("side")
+    gap, side = interaction.gap_m, interaction.side
     where = f" about {abs(gap):.0f} m {'ahead of' if gap >= 0 else 'behind'} the ego vehicle" if gap is not None else ""
     if kind == ActorKind.PEDESTRIAN or "cross" in moves:
         text = f"{subject} crosses the road in front of the ego vehicle."

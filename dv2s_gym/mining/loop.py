@@ -76,7 +76,9 @@ from dv2s_gym.mining.errored import errored_episodes, merged_messages, messages_
 from dv2s_gym.mining.family import scenario_family
 from dv2s_gym.mining.heldout import episode_failed, failure_types, HeldOutStore, paired_summary
 from dv2s_gym.mining.jsonl import read_rows
-from dv2s_gym.mining.loop_record import RoundRecord, RoundSteps
+from dv2s_gym.mining.loop_record import (
+    FineTuneArm, HeldOutBefore, HeldOutComparison, MinedEntry, MiningSummary, ReferenceGate, RegressComparison,
+    RegressSummary, RoundRecord, RoundSteps, SplitRecord, UntouchedComparison)
 from dv2s_gym.mining.loop_report import errored_note, errored_text, reference_gate_text, write_loop_reports
 from dv2s_gym.mining.loop_settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
 from dv2s_gym.mining.loop_verdict import (
@@ -307,23 +309,24 @@ def _working_bank(out: Path, bank_dir: Optional[str]) -> str:
     return str(target.resolve())
 
 
-def mined_entries(mine_out: os.PathLike | str, replays: bool = True) -> List[Dict[str, Any]]:
-    """The kept scenarios of a mining run: ``[{"cluster", "scenario", "reproduction"}]`` from
-    its ``conversions.jsonl`` (status ``kept`` with a bank entry), then (``replays``) the exact replays of its
-    failing scenes (:func:`dv2s_gym.mining.replays.replay_entries`: ``"replay": True`` and ``"parent"``, from
-    the conversions' ``replay_entry`` and from ``replays.jsonl``)."""
+def mined_entries(mine_out: os.PathLike | str, replays: bool = True) -> List[MinedEntry]:
+    """The kept scenarios of a mining run (:class:`~dv2s_gym.mining.loop_record.MinedEntry`: cluster, scenario,
+    reproduction) from its ``conversions.jsonl`` (status ``kept`` with a bank entry), then (``replays``) the exact
+    replays of its failing scenes (:func:`dv2s_gym.mining.replays.replay_entries`: ``replay`` true and ``parent``,
+    from the conversions' ``replay_entry`` and from ``replays.jsonl``)."""
     records = read_rows(Path(mine_out) / "conversions.jsonl")  # none when no cluster was converted
-    entries: Dict[str, Dict[str, Any]] = {}
+    entries: Dict[str, MinedEntry] = {}
     for record in records:
         if record.get("status") == "kept" and record.get("bank_entry"):
-            entries[str(record["cluster"])] = {"cluster": str(record["cluster"]), "scenario": record["bank_entry"],
-                                               "reproduction": (record.get("reproduction") or {}).get("rate")}
-    kept = {entry["scenario"] for entry in entries.values()}
+            entries[str(record["cluster"])] = MinedEntry(
+                cluster=str(record["cluster"]), scenario=record["bank_entry"],
+                reproduction=(record.get("reproduction") or {}).get("rate"))
+    kept = {entry.scenario for entry in entries.values()}
     for record in records:  # a cluster merged into a scenario kept in this run is tied to it
         if record.get("status") == "merged" and record.get("merged_into") in kept:
-            entries.setdefault(str(record["cluster"]), {"cluster": str(record["cluster"]),
-                                                        "scenario": record["merged_into"],
-                                                        "reproduction": (record.get("reproduction") or {}).get("rate")})
+            entries.setdefault(str(record["cluster"]), MinedEntry(
+                cluster=str(record["cluster"]), scenario=record["merged_into"],
+                reproduction=(record.get("reproduction") or {}).get("rate")))
     converted = [entries[key] for key in sorted(entries)]
     if not replays:
         return converted
@@ -331,7 +334,7 @@ def mined_entries(mine_out: os.PathLike | str, replays: bool = True) -> List[Dic
     return converted + replay_entries(mine_out)
 
 
-def _mining_summary(mine_out: Path) -> Dict[str, Any]:
+def _mining_summary(mine_out: Path) -> MiningSummary:
     """Counts read from a mining run folder (episodes, failures, avoidable ones, clusters, conversions)."""
     episodes, failures, counted, errors = 0, 0, 0, 0
     records = read_rows(mine_out / "episodes.jsonl")
@@ -364,14 +367,14 @@ def _mining_summary(mine_out: Path) -> Dict[str, Any]:
     replayed: Dict[str, int] = {}
     for row in read_rows(mine_out / REPLAYS_FILE):
         replayed[row.get("status", "?")] = replayed.get(row.get("status", "?"), 0) + 1
-    return {"replays": replayed, "episodes": episodes, "errors": errors, "errored": errored_episodes(records),
-            "failures": failures, "failures_against_policy": counted,
-            "clusters": clusters, "conversions": statuses, "rejected_reasons": reasons[:40],
-            "rejected_reason_count": len(reasons),
-            "clusters_not_converted": None if clusters is None else max(0, clusters - converted),
-            "clusters_not_kept": None if clusters is None else max(0, clusters - converted
-                                                                   - sum(replayed.values())),
-            "clusters_reference_failed": reference_failed}
+    return MiningSummary(replays=replayed, episodes=episodes, errors=errors, errored=errored_episodes(records),
+                         failures=failures, failures_against_policy=counted,
+                         clusters=clusters, conversions=statuses, rejected_reasons=tuple(reasons[:40]),
+                         rejected_reason_count=len(reasons),
+                         clusters_not_converted=None if clusters is None else max(0, clusters - converted),
+                         clusters_not_kept=None if clusters is None else max(0, clusters - converted
+                                                                             - sum(replayed.values())),
+                         clusters_reference_failed=reference_failed)
 
 
 def _regress_errored(report: Mapping[str, Any], roles: Mapping[str, str]) -> Dict[str, Dict[str, Any]]:
@@ -412,7 +415,7 @@ def _policy_env_config(spec: str) -> Dict[str, Any]:
     return dict(card.get("env_config") or {})
 
 
-def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[str] = ()) -> Dict[str, Any]:
+def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[str] = ()) -> RegressSummary:
     """The regression step's record; ``parents``: scenarios whose own results are kept apart (the held-out
     families' parents, never fine-tuned on: the regression test's view beyond the fine-tuning mix)."""
     report = RegressReport.from_json(report)
@@ -429,13 +432,14 @@ def _regress_summary(report: Mapping[str, Any], path: Path, parents: Sequence[st
         return {"failure_rate": summary.failure_rate, "stall_rate": summary.rate("stall"),
                 "mean_speed": summary.mean_speed}
 
-    return {"verdict": report.verdict, "reason": comparison.reason,
-            "episodes": comparison.n, "new_failure_rate": rate("candidate"), "old_failure_rate": rate("baseline"),
-            "difference": comparison.difference, "p_value": comparison.p_value,
-            "regressed": list(report.regressed or ()), "report": str(Path(path).resolve()),
-            "held_out_parents": {name: {role: measures(per_scenario[name].summary(side))
-                                        for role, side in (("new", "candidate"), ("old", "baseline"))}
-                                 for name in parents if name in per_scenario}}
+    return RegressSummary(
+        verdict=report.verdict, reason=comparison.reason, episodes=comparison.n,
+        new_failure_rate=rate("candidate"), old_failure_rate=rate("baseline"),
+        difference=comparison.difference, p_value=comparison.p_value,
+        regressed=tuple(report.regressed or ()), report=str(Path(path).resolve()),
+        held_out_parents={name: {role: measures(per_scenario[name].summary(side))
+                                 for role, side in (("new", "candidate"), ("old", "baseline"))}
+                          for name in parents if name in per_scenario})
 
 
 def _log_default(line: str) -> None:
@@ -572,10 +576,10 @@ def _run_round(loop: _Loop, number: int, current: str) -> str:
     if not steps.done("mine"):
         mined = timed("mine", lambda: _mine_step(loop, number, current, round_dir), _mine_plan(loop))
         _log_mined(loop, number, mined)
-        _log_errored(loop, number, "mining", {"mine": mined.get("errored") or {}})
+        _log_errored(loop, number, "mining", {"mine": mined.errored or {}})
     if not timed.steps.done("split"):
         _split_step(loop, number, current, timed)
-    if not timed.steps.split["fine_tune"] and not timed.steps.split["held_out"]:
+    if not timed.steps.split.fine_tune_scenarios and not timed.steps.split.held_out_scenarios:
         _skip_round(loop, number, timed.steps)
     else:
         _tune_and_measure(loop, number, current, round_dir, timed)
@@ -595,18 +599,18 @@ def _split_step(loop: _Loop, number: int, current: str, timed: "_Timed") -> None
     earlier = loop.state.rounds[:number - 1]
     held_families, _ = _earlier_sides(earlier)
     _, tuned_families = _earlier_sides(_lineage(loop, earlier, current))
-    kept = timed.steps.mine["kept"]
+    kept = timed.steps.mine.kept_entries
     split = timed("split", lambda: split_by_family(_with_parents(kept, loop.bank), loop.settings.holdout_fraction,
                                                    loop.settings.seed * 1000 + number, held_families,
-                                                   tuned_families).to_dict(),
+                                                   tuned_families).record(),
                   f"{len(kept)} kept mined scenario(s) into fine-tuning and held-out families")
-    families = set(split.get("fine_tune_families", []))  # every kept family, when none is held out
-    if kept and not split["held_out"] and families and families <= set(tuned_families) - set(held_families):
+    families = set(split.fine_tune_family_names)  # every kept family, when none is held out
+    if kept and not split.held_out_scenarios and families and families <= set(tuned_families) - set(held_families):
         loop.log(f"round {number}: WARNING: nothing can be held out: every kept scenario's family "
                  f"({', '.join(sorted(families))}) was fine-tuned on by an earlier round that {current} descends from")
-    if split.get("moved_to_fine_tune"):
+    if split.moved_to_fine_tune:
         loop.log(f"round {number}: WARNING: earlier held-out famil(ies) "
-                 f"{', '.join(split['moved_to_fine_tune'])} now share a mined scenario with a family "
+                 f"{', '.join(split.moved_to_fine_tune)} now share a mined scenario with a family "
                  "fine-tuned on earlier, so they are fine-tuned on from this round")
 
 
@@ -647,7 +651,7 @@ def _earlier_round_spec(spec: Any, loop: _Loop, number: int) -> str:
     return _round_spec(spec, loop.out / f"round_{max(number - 1, 1)}" / "policy", loop.out)  # raises, naming it
 
 
-def _mine_step(loop: _Loop, number: int, current: str, round_dir: Path) -> Dict[str, Any]:
+def _mine_step(loop: _Loop, number: int, current: str, round_dir: Path) -> MiningSummary:
     """The ``mine`` step: mine ``current``'s failures into the working bank, keep exact replays of more."""
     s = loop.settings
     miner.mine(current, MineSettings(budget=s.budget, sampler=s.sampler, scenarios=loop.start_names,
@@ -657,8 +661,8 @@ def _mine_step(loop: _Loop, number: int, current: str, round_dir: Path) -> Dict[
                origin={"command": "dv2s loop", "seed": s.seed, "round": number})
     if s.max_replays != 0 and (round_dir / "mine" / "settings.json").is_file():  # a miner's run folder
         replay_clusters(round_dir / "mine", bank_dir=loop.bank, max_replays=s.max_replays, progress=loop.progress)
-    return {**_mining_summary(round_dir / "mine"), "kept": mined_entries(round_dir / "mine"),
-            "folder": str(round_dir / "mine")}
+    return _mining_summary(round_dir / "mine").replace(kept=tuple(mined_entries(round_dir / "mine")),
+                                                       folder=str(round_dir / "mine"))
 
 
 def _mine_plan(loop: _Loop) -> str:
@@ -686,33 +690,33 @@ def _log_errored(loop: _Loop, number: int, stage: str, errored: Mapping[str, Map
              f"tests): {text}" + "".join(f"; {name}: {messages_text(merged, name)}" for name in merged))
 
 
-def _log_mined(loop: _Loop, number: int, mined: Mapping[str, Any]) -> None:
+def _log_mined(loop: _Loop, number: int, mined: MiningSummary) -> None:
     s = loop.settings
-    loop.log(f"round {number}: mined {mined['failures']} failures in {mined['episodes']} episodes"
-             f"{errored_note(mined.get('errored') or {})}, "
-             f"{mined.get('clusters')} clusters, "
-             f"{len({e['scenario'] for e in mined['kept'] if not e.get('replay')})} converted scenarios and "
-             f"{len({e['scenario'] for e in mined['kept'] if e.get('replay')})} exact replays kept"
-             + (f"; {mined['clusters_not_converted']} clusters not converted (--max-conversions "
+    loop.log(f"round {number}: mined {mined.failures} failures in {mined.episodes} episodes"
+             f"{errored_note(mined.errored or {})}, "
+             f"{mined.clusters} clusters, "
+             f"{len({e.scenario for e in mined.converted})} converted scenarios and "
+             f"{len({e.scenario for e in mined.replayed})} exact replays kept"
+             + (f"; {mined.clusters_not_converted} clusters not converted (--max-conversions "
                 f"{'all' if s.max_conversions is None else s.max_conversions})"
-                if mined.get("clusters_not_converted") else "")
-             + (f", {mined['clusters_not_kept']} neither converted nor replayed (--max-replays "
+                if mined.clusters_not_converted else "")
+             + (f", {mined.clusters_not_kept} neither converted nor replayed (--max-replays "
                 f"{'all' if s.max_replays is None else s.max_replays}"
-                + (f"; {mined['clusters_reference_failed']} of them because the reference driver {REFERENCE_DRIVER} "
-                   "did not pass any of their failing scenes" if mined.get("clusters_reference_failed") else "")
-                + ")" if mined.get("clusters_not_kept") else ""))
+                + (f"; {mined.clusters_reference_failed} of them because the reference driver {REFERENCE_DRIVER} "
+                   "did not pass any of their failing scenes" if mined.clusters_reference_failed else "")
+                + ")" if mined.clusters_not_kept else ""))
 
 
 def _skip_round(loop: _Loop, number: int, steps: RoundSteps) -> None:
     """Record and log a round that kept no mined scenario (nothing to fine-tune on or to measure)."""
     mined = steps.mine
-    tried = sum((mined.get("conversions") or {}).values())
-    replayed = sum((mined.get("replays") or {}).values())
+    tried = sum((mined.conversions or {}).values())
+    replayed = sum((mined.replays or {}).values())
     skipped = (f"no mined scenario was kept this round ({tried} conversion(s) tried"
                + (f", {replayed} exact replay(s) tried" if replayed else "")
-               + (f", {mined['clusters_not_converted']} cluster(s) not converted: raise "
+               + (f", {mined.clusters_not_converted} cluster(s) not converted: raise "
                   "--max-conversions, --max-replays or --budget"
-                  if mined.get("clusters_not_converted") else "")
+                  if mined.clusters_not_converted else "")
                + "): nothing to fine-tune on or to measure")
     loop.state.update(loop.state.round(number).with_step("skipped", skipped))
     loop.log(f"round {number}: {skipped}")
@@ -722,39 +726,39 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
     """The steps after the split: held-out before, fine-tune (+ control), held-out after, untouched set,
     regression; the fine-tuned policy's spec."""
     s, split = loop.settings, timed.steps.split
-    episodes = [(name, EVAL_SEED_BASE + i) for name in split["held_out"] for i in range(s.k_eval)]
-    families = _families_of(timed.steps.mine["kept"], split["held_out"], loop.bank)
+    episodes = [(name, EVAL_SEED_BASE + i) for name in split.held_out_scenarios for i in range(s.k_eval)]
+    families = _families_of(timed.steps.mine.kept_entries, split.held_out_scenarios, loop.bank)
     store_path = round_dir / "heldout.jsonl"
     if not timed.steps.done("reference"):
         gate = timed("reference", lambda: _reference_step(loop, episodes, HeldOutStore(store_path), families),
-                     f"{len(episodes)} episodes ({len(split['held_out'])} held-out scenario(s) x {s.k_eval} seeds) "
+                     f"{len(episodes)} episodes ({len(split.held_out_scenarios)} held-out scenario(s) x {s.k_eval} seeds) "
                      f"for the reference driver {REFERENCE_DRIVER}: a held-out episode it does not pass is left out")
         _log_reference(loop, number, gate)
-    excluded = {(str(name), int(seed)) for name, seed in timed.steps.reference["excluded"]}
+    excluded = timed.steps.reference.excluded_episodes
     episodes = [episode for episode in episodes if episode not in excluded]
     shortfall = underpowered(len(episodes), s.min_heldout_episodes,
                              len({families[name] for name, _ in episodes}), s.min_heldout_families)
     if shortfall:
         loop.log(f"round {number}: WARNING: {shortfall}")
     if not timed.steps.done("before"):
-        def before_step() -> Dict[str, Any]:
+        def before_step() -> HeldOutBefore:
             records = heldout.evaluate_heldout("before", current, episodes, store=HeldOutStore(store_path),
                                                bank_dir=loop.bank, env_config=loop.env_config,
                                                workers=WorkerSettings(workers=loop.workers), progress=loop.progress)
-            return {"episodes": len(episodes), "done": bool(records), "errored": errored_episodes(records)}
+            return HeldOutBefore(episodes=len(episodes), done=bool(records), errored=errored_episodes(records))
 
         before = timed("before", before_step,
-                       f"{len(episodes)} episodes ({len(split['held_out'])} held-out scenario(s) x {s.k_eval} seeds"
+                       f"{len(episodes)} episodes ({len(split.held_out_scenarios)} held-out scenario(s) x {s.k_eval} seeds"
                        + (f", {len(excluded)} left out: the reference driver does not pass them" if excluded else "")
                        + ")")
-        _log_errored(loop, number, "held-out: starting policy", {"start": before["errored"]})
+        _log_errored(loop, number, "held-out: starting policy", {"start": before.errored})
     new_policy, control_policy = _fine_tune_arms(loop, number, current, round_dir, timed)
     policies = {"before": current, "after": new_policy, "control": control_policy}
     if not timed.steps.done("after"):
         after = timed("after", lambda: _after_step(loop, policies, episodes, HeldOutStore(store_path), families),
                       f"{len(episodes)} episodes for the fine-tuned policy" + (" and as many for the control"
                                                                                if control_policy else ""))
-        _log_errored(loop, number, "held-out: fine-tuned and control", after.get("errored") or {})
+        _log_errored(loop, number, "held-out: fine-tuned and control", after.errored or {})
     if s.untouched_seeds and not timed.steps.done("untouched"):
         untouched = timed("untouched", lambda: evaluate_untouched(
             current, new_policy, control_policy, settings=untouched_settings(s.untouched_seeds, loop.env_config,
@@ -762,12 +766,12 @@ def _tune_and_measure(loop: _Loop, number: int, current: str, round_dir: Path, t
             out=round_dir / "untouched", workers=loop.workers, progress=loop.progress),
               f"{_count_scripts(UNTOUCHED_BANK)} scripts x {s.untouched_seeds} seed(s) for the starting, fine-tuned"
               + (" and control policies" if control_policy else " policies"))
-        _log_errored(loop, number, "untouched scenario set", untouched.get("errored") or {})
+        _log_errored(loop, number, "untouched scenario set", untouched.errored or {})
     if not timed.steps.done("regress"):
         regress = timed("regress", lambda: _regress_step(loop, new_policy, current, round_dir, split),
                         f"{len(loop.start_names)} scenarios x {s.regress_episodes} seed(s), fine-tuned against "
                         "starting policy")
-        _log_errored(loop, number, "regression test", regress.get("errored") or {})
+        _log_errored(loop, number, "regression test", regress.errored or {})
     return new_policy
 
 
@@ -778,16 +782,16 @@ miner's settings so that importing the loop does not load torch). The held-out e
 passes (:func:`reference_gate`)."""
 
 
-def reference_gate(records: Sequence[Mapping[str, Any]], families: Mapping[str, str]) -> Dict[str, Any]:
+def reference_gate(records: Sequence[Mapping[str, Any]], families: Mapping[str, str]) -> ReferenceGate:
     """The ``reference`` step's record from the reference driver's held-out ``records``: which held-out episodes
     the loop leaves out because the reference driver did not pass them (it failed, by the miner's monitors, or the
     episode errored, so that nobody knows), counted and named, never dropped silently.
 
     A policy that imitates the reference cannot be expected to pass a scene the reference itself fails, so such a
-    pair measures nothing the fine-tuning can change and only adds noise to the held-out comparison. Returns
-    ``{"reference", "episodes", "kept", "excluded": [[scenario, seed], ...], "failed", "errored",
-    "by_scenario": {scenario: {"episodes", "excluded", "failures": {type: n}}}, "excluded_families": [family whose
-    every episode is left out]}``."""
+    pair measures nothing the fine-tuning can change and only adds noise to the held-out comparison. Returns the
+    :class:`~dv2s_gym.mining.loop_record.ReferenceGate` (``excluded``: ``[scenario, seed]`` pairs; ``by_scenario``:
+    ``{scenario: {"episodes", "excluded", "failures": {type: n}}}``; ``excluded_families``: the families whose
+    every episode is left out)."""
     by_scenario: Dict[str, Dict[str, Any]] = {}
     excluded, failed, errored = [], 0, 0
     kept_families, all_families = set(), set()
@@ -810,13 +814,13 @@ def reference_gate(records: Sequence[Mapping[str, Any]], families: Mapping[str, 
             failed += 1
             kind = str((record.get("failure") or {}).get("type") or "failure")
         row["failures"][kind] = row["failures"].get(kind, 0) + 1
-    return {"reference": REFERENCE_DRIVER, "episodes": len(records), "kept": len(records) - len(excluded),
-            "excluded": excluded, "failed": failed, "errored": errored,
-            "by_scenario": {name: by_scenario[name] for name in sorted(by_scenario)},
-            "excluded_families": sorted(all_families - kept_families)}
+    return ReferenceGate(reference=REFERENCE_DRIVER, episodes=len(records), kept=len(records) - len(excluded),
+                         excluded=tuple(excluded), failed=failed, errored=errored,
+                         by_scenario={name: by_scenario[name] for name in sorted(by_scenario)},
+                         excluded_families=tuple(sorted(all_families - kept_families)))
 
 
-def _reference_step(loop: _Loop, episodes: List[tuple], store, families: Mapping[str, str]) -> Dict[str, Any]:
+def _reference_step(loop: _Loop, episodes: List[tuple], store, families: Mapping[str, str]) -> ReferenceGate:
     """The ``reference`` step: the reference driver on every held-out episode (role ``reference`` in the
     held-out store); :func:`reference_gate`'s record."""
     records = heldout.evaluate_heldout("reference", REFERENCE_DRIVER, episodes, store=store, bank_dir=loop.bank,
@@ -825,9 +829,9 @@ def _reference_step(loop: _Loop, episodes: List[tuple], store, families: Mapping
     return reference_gate(records, families)
 
 
-def _log_reference(loop: _Loop, number: int, gate: Mapping[str, Any]) -> None:
+def _log_reference(loop: _Loop, number: int, gate: ReferenceGate) -> None:
     text = reference_gate_text(gate)
-    loop.log(f"round {number}: {'WARNING: ' if gate.get('excluded') else ''}{text}")
+    loop.log(f"round {number}: {'WARNING: ' if gate.excluded else ''}{text}")
 
 
 def _fine_tune_arms(loop: _Loop, number: int, current: str, round_dir: Path, timed: _Timed) -> tuple:
@@ -835,11 +839,11 @@ def _fine_tune_arms(loop: _Loop, number: int, current: str, round_dir: Path, tim
     from policies.training import resolve_checkpoint
 
     s, split = loop.settings, timed.steps.split
-    excluded = set(split["held_out"]) | set(split.get("held_out_families", []))
+    excluded = set(split.held_out_scenarios) | set(split.held_out_family_names)
     for earlier in loop.state.rounds[:number - 1]:
-        earlier_split = earlier.steps.split or {}
-        excluded.update(earlier_split.get("held_out", []))
-        excluded.update(earlier_split.get("held_out_families", []))
+        earlier_split = earlier.steps.split or SplitRecord()
+        excluded.update(earlier_split.held_out_scenarios)
+        excluded.update(earlier_split.held_out_family_names)
     arm = _Arm(bank=loop.bank, method=s.fine_tune_method, steps=s.fine_tune_steps, seed=s.seed * 1000 + number,
                n_envs=s.n_envs, env_config=loop.env_config, fine_tune_config=loop.fine_tune_config,
                reward=s.fine_tune_reward, learning_rate=s.fine_tune_lr, progress=loop.progress, log=loop.log)
@@ -853,7 +857,7 @@ def _fine_tune_arms(loop: _Loop, number: int, current: str, round_dir: Path, tim
         _round_spec(f"ppo:{model}", folder, loop.out)  # loop.json is a file: only this round's own checkpoint
         return f"{resolve_checkpoint(model)[0]}:{model}"
 
-    new_policy = spec_of(timed.steps.fine_tune["model"], round_dir / "policy")
+    new_policy = spec_of(timed.steps.fine_tune.model, round_dir / "policy")
     loop.state.update(loop.state.round(number).replace(new_policy=new_policy), save=False)
     control_policy = None
     if s.control:
@@ -861,13 +865,13 @@ def _fine_tune_arms(loop: _Loop, number: int, current: str, round_dir: Path, tim
             timed("control", lambda: _fine_tune_arm(current, round_dir / "control", excluded, s.mined_share, arm,
                                                     with_mined=False, label=f"round {number} control"),
                   f"{s.fine_tune_method} {s.fine_tune_steps} steps without the mined scenarios")
-        control_policy = spec_of(timed.steps.control["model"], round_dir / "control")
+        control_policy = spec_of(timed.steps.control.model, round_dir / "control")
         loop.state.update(loop.state.round(number).replace(control_policy=control_policy), save=False)
     return new_policy, control_policy
 
 
 def _after_step(loop: _Loop, policies: Mapping[str, Optional[str]], episodes: List[tuple], store,
-                families: Mapping[str, str]) -> Dict[str, Any]:
+                families: Mapping[str, str]) -> HeldOutComparison:
     """The ``after`` step: start, fine-tuned and control on the held-out episodes, compared pairwise."""
     common = dict(store=store, bank_dir=loop.bank, env_config=loop.env_config,
                   workers=WorkerSettings(workers=loop.workers))
@@ -882,20 +886,19 @@ def _after_step(loop: _Loop, policies: Mapping[str, Optional[str]], episodes: Li
                                  families=families, min_families=s.min_heldout_families, margin=s.margin)
     summary["errored"] = {"fine_tuned": errored_episodes(after),
                           **({"control": errored_episodes(control_records)} if control_records is not None else {})}
-    return summary
+    return HeldOutComparison.from_dict(summary)
 
 
 def _regress_step(loop: _Loop, new_policy: str, current: str, round_dir: Path,
-                  split: Mapping[str, Any]) -> Dict[str, Any]:
+                  split: SplitRecord) -> RegressSummary:
     """The ``regress`` step: the fine-tuned policy against the round's start on the starting bank's scenarios."""
     s = loop.settings
     settings = RegressSettings(bank_dir=loop.bank, scenarios=loop.start_names, episodes=s.regress_episodes,
                                seed=EVAL_SEED_BASE, margin=s.margin, env_config=loop.env_config)
     report = runner.run_regression(new_policy, current, settings, workers=WorkerSettings(workers=loop.workers),
                                    out_dir=round_dir / "regress", progress=loop.progress)
-    summary = _regress_summary(report, round_dir / "regress" / "report.json", split.get("held_out_families", []))
-    summary["errored"] = _regress_errored(report, {"baseline": "start", "candidate": "fine_tuned"})
-    return summary
+    summary = _regress_summary(report, round_dir / "regress" / "report.json", split.held_out_family_names)
+    return summary.replace(errored=_regress_errored(report, {"baseline": "start", "candidate": "fine_tuned"}))
 
 
 _STAGE_NAMES = {"mine": "mining failures", "split": "splitting by family",
@@ -930,10 +933,10 @@ def underpowered(episodes: int, minimum: int, families: Optional[int] = None,
             "`dv2s loop --profile evidence`")
 
 
-def _families_of(kept: Sequence[Mapping[str, Any]], held_out: Sequence[str], bank: Optional[str]) -> Dict[str, str]:
+def _families_of(kept: Sequence[MinedEntry], held_out: Sequence[str], bank: Optional[str]) -> Dict[str, str]:
     """``{held-out scenario: its family}`` (:func:`dv2s_gym.mining.split.family_of`)."""
     wanted = set(held_out)
-    families = {str(e["scenario"]): family_of(e) for e in _with_parents(kept, bank) if e["scenario"] in wanted}
+    families = {str(e.scenario): family_of(e) for e in _with_parents(kept, bank) if e.scenario in wanted}
     return {name: families.get(name, name) for name in held_out}
 
 
@@ -981,23 +984,23 @@ def arm_weights(bank_dir: str, excluded: set, mined_share: float, *,
 
 
 def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, arm: _Arm, *, with_mined: bool,
-                   label: str) -> Dict[str, Any]:
+                   label: str) -> FineTuneArm:
     """Fine-tune ``current`` into ``out`` on the working bank less ``excluded``: the mined scenarios upweighted
     (``with_mined``) or left out (the control arm); everything else identical between the two arms."""
-    weights, common = arm_weights(arm.bank, excluded, mined_share, with_mined=with_mined)
-    common["steps"] = arm.steps
+    weights, facts = arm_weights(arm.bank, excluded, mined_share, with_mined=with_mined)
+    common = dict(scenarios=facts["scenarios"], mined_upweighted=facts["mined_upweighted"], steps=arm.steps,
+                  mined_left_out=facts["mined_left_out"], families=tuple(facts["families"]))
     if arm.method == "dagger":
-        result = _dagger_arm(current, out, weights, arm, label)
-        return {"model": result.pop("model"), "method": "dagger", **common, **result}
+        return FineTuneArm.from_dict(_dagger_arm(current, out, weights, arm, label)).replace(method="dagger", **common)
     from policies.training import fine_tune
 
     path = fine_tune(current, arm.config(out, weights), reward_weights=arm.reward, learning_rate=arm.learning_rate,
                      log=arm.log)
-    return {"model": str(path.resolve()), "method": "ppo", **common, "reward_weights": dict(arm.reward),
-            "env_config": arm.fine_tune_config}
+    return FineTuneArm(model=str(path.resolve()), method="ppo", **common, reward_weights=dict(arm.reward),
+                       env_config=arm.fine_tune_config)
 
 
-def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, label: str) -> Dict[str, Any]:
+def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, label: str) -> FineTuneArm:
     """A fine-tuning arm by DAgger (:func:`policies.imitation.dagger_fine_tune`); a killed one resumes."""
     from policies.imitation import DaggerConfig, dagger_fine_tune
 
@@ -1005,9 +1008,9 @@ def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, l
     path = dagger_fine_tune(current, arm.config(out, weights), DaggerConfig(learning_rate=arm.learning_rate),
                             log=arm.log)
     dagger = read_model_card(path).get("fine_tune") or {}
-    return {"model": str(path.resolve()), "method": "dagger", "reward_weights": None,
-            "env_config": arm.env_config, "reference": dagger.get("reference"), "agreement": dagger.get("agreement"),
-            "resumed": dagger.get("resumed") or []}
+    return FineTuneArm(model=str(path.resolve()), method="dagger", reward_weights=None, env_config=arm.env_config,
+                       reference=dagger.get("reference"), agreement=dagger.get("agreement"),
+                       resumed=tuple(dagger.get("resumed") or []))
 
 
 def heldout_comparison(before: Sequence[Mapping[str, Any]], after: Sequence[Mapping[str, Any]],
@@ -1116,7 +1119,7 @@ def untouched_settings(seeds: int, env_config: Mapping[str, Any], margin: float,
 
 
 def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, settings: Any, out: Path,
-                       workers: int, progress: bool) -> Dict[str, Any]:
+                       workers: int, progress: bool) -> UntouchedComparison:
     """Start, fine-tuned and control on the untouched scenario set (:func:`untouched_settings`: its bank, its
     seeds per scenario, the env config and margin) with ``dv2s regress``: fine-tuned
     against start (``out/vs_start``), then the control against the fine-tuned policy's episodes of that run
@@ -1126,20 +1129,21 @@ def evaluate_untouched(start: str, fine_tuned: str, control: Optional[str], *, s
                                                           workers=WorkerSettings(workers=workers),
                                                           out_dir=out / "vs_start", progress=progress))
     overall = first.overall or ScenarioResult()
-    result: Dict[str, Any] = {"scenarios": list((first.bank.scenarios if first.bank else None) or []),
-                              "seeds": settings.episodes, "policies": {"start": _measures(overall.baseline),
-                                                           "fine_tuned": _measures(overall.candidate)},
-                              "fine_tuned_vs_start": _comparison(first, out / "vs_start" / "report.json"),
-                              "errored": _regress_errored(first, {"baseline": "start", "candidate": "fine_tuned"})}
+    policies = {"start": _measures(overall.baseline), "fine_tuned": _measures(overall.candidate)}
+    result = UntouchedComparison(scenarios=tuple((first.bank.scenarios if first.bank else None) or ()),
+                                 seeds=settings.episodes, policies=policies,
+                                 fine_tuned_vs_start=_comparison(first, out / "vs_start" / "report.json"),
+                                 errored=_regress_errored(first, {"baseline": "start", "candidate": "fine_tuned"}))
     if control is not None:
         # a measurement, not a gate: the fine-tuned policy is the reference whatever its own verdict was
         baseline = BaselineReport(out / "vs_start" / "report.json", role="candidate", accept_failed=True)
         second = RegressReport.from_json(runner.run_regression(control, baseline, settings,
                                                                workers=WorkerSettings(workers=workers),
                                                                out_dir=out / "vs_control", progress=progress))
-        result["policies"]["control"] = _measures(second.overall.candidate if second.overall else None)
-        result["control_vs_fine_tuned"] = _comparison(second, out / "vs_control" / "report.json")
-        result["errored"].update(_regress_errored(second, {"candidate": "control"}))
+        result = result.replace(
+            policies={**policies, "control": _measures(second.overall.candidate if second.overall else None)},
+            control_vs_fine_tuned=_comparison(second, out / "vs_control" / "report.json"),
+            errored={**result.errored, **_regress_errored(second, {"candidate": "control"})})
     return result
 
 
@@ -1150,11 +1154,11 @@ def _measures(summary: Optional[Summary]) -> Dict[str, Any]:
             "collision_rate": summary.rate("collision"), "mean_speed": summary.mean_speed}
 
 
-def _comparison(report: RegressReport, path: Path) -> Dict[str, Any]:
+def _comparison(report: RegressReport, path: Path) -> RegressComparison:
     comparison = (report.overall.comparison if report.overall else None) or PairedComparison()
-    return {"verdict": report.verdict, "reason": comparison.reason, "episodes": comparison.n,
-            "difference": comparison.difference, "p_value": comparison.p_value,
-            "report": str(Path(path).resolve())}
+    return RegressComparison(verdict=report.verdict, reason=comparison.reason, episodes=comparison.n,
+                             difference=comparison.difference, p_value=comparison.p_value,
+                             report=str(Path(path).resolve()))
 
 
 def _lineage(loop: _Loop, rounds: Sequence[RoundRecord], current: str) -> List[RoundRecord]:
@@ -1181,26 +1185,26 @@ def _earlier_sides(rounds: Sequence[RoundRecord]) -> tuple:
     held: set = set()
     tuned: set = set()
     for earlier in rounds:
-        split = earlier.steps.split or {}
-        held.update(split.get("held_out_families", []))
-        tuned.update(split.get("fine_tune_families", []))
+        split = earlier.steps.split or SplitRecord()
+        held.update(split.held_out_family_names)
+        tuned.update(split.fine_tune_family_names)
         for arm in (earlier.steps.fine_tune, earlier.steps.control):
-            tuned.update((arm or {}).get("families", []))
+            tuned.update((arm or FineTuneArm()).families or ())
     return sorted(held), sorted(tuned)
 
 
-def _with_parents(kept: Sequence[Mapping[str, Any]], bank: Optional[str]) -> List[Dict[str, Any]]:
+def _with_parents(kept: Sequence[MinedEntry], bank: Optional[str]) -> List[MinedEntry]:
     """The kept entries with ``parent``: the scenario family their bank provenance goes back to
     (:func:`dv2s_gym.mining.family.scenario_family`, the family their failures were clustered by)."""
-    entries = [dict(e) for e in kept]
+    entries = [MinedEntry.from_dict(e) for e in kept]
     if bank is None:
         return entries
 
+    found = []
     for entry in entries:  # a parent's near-duplicate twins are its family too (scenario_bank.families)
-        family = scenario_family(str(entry.get("parent") or entry["scenario"]), str(bank))
-        if family != entry["scenario"] or entry.get("parent"):
-            entry["parent"] = family
-    return entries
+        family = scenario_family(str(entry.parent or entry.scenario), str(bank))
+        found.append(entry.replace(parent=family) if family != entry.scenario or entry.parent else entry)
+    return found
 
 
 def _log_round(log: Callable[[str], None], number: int, steps: RoundSteps) -> None:
@@ -1222,19 +1226,17 @@ def _log_round(log: Callable[[str], None], number: int, steps: RoundSteps) -> No
             log(line + (f", relative drop {drop:.0%}" if drop is not None else "")
                 + (f", McNemar p vs start = {after.mcnemar_p:.3g}" if after.mcnemar_p is not None else "")
                 + (f", vs control = {versus.mcnemar_p:.3g}" if versus and versus.mcnemar_p is not None else ""))
-    untouched = steps.untouched or {}
+    untouched = steps.untouched
     if untouched:
-        policies = untouched.get("policies") or {}
-
         def share(role: str) -> str:
-            value = ((policies.get(role) or {}).get("failure_rate") or {}).get("value")
+            value = untouched.failure_rate(role)
             return "-" if value is None else f"{value:.2f}"
 
         log(f"round {number}: untouched set failure rate start {share('start')}, control {share('control')}, "
             f"fine-tuned {share('fine_tuned')}; fine-tuned vs start "
-            f"{(untouched.get('fine_tuned_vs_start') or {}).get('verdict')}")
-    regress = steps.regress or {}
-    log(f"round {number}: rest of the bank: {regress.get('verdict')} ({regress.get('reason')})")
+            f"{(untouched.fine_tuned_vs_start or RegressComparison()).verdict}")
+    regress = steps.regress or RegressSummary()
+    log(f"round {number}: rest of the bank: {regress.verdict} ({regress.reason})")
 
 
 def _write(out: Path, state: _State) -> LoopReport:

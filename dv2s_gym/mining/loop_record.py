@@ -6,7 +6,12 @@ policy the next round starts from and why, the seconds of each step (``timings``
 record (:class:`RoundSteps`). The held-out comparison (the ``after`` step) is typed in full
 (:class:`HeldOutComparison`): the held-out counts the verdict's floors read, each arm's failures by type
 (:class:`ArmFailureTypes`) and the fine-tuned policy against the control (:class:`VersusControl`, its paired
-table :class:`ControlTable`). The other steps are JSON objects as their steps make them.
+table :class:`ControlTable`). The other steps are typed too: ``mine`` (:class:`MiningSummary`, its kept scenarios
+each a :class:`MinedEntry`), ``split`` (:class:`SplitRecord`), ``reference`` (:class:`ReferenceGate`), ``before``
+(:class:`HeldOutBefore`), ``fine_tune`` and ``control`` (:class:`FineTuneArm`), ``untouched``
+(:class:`UntouchedComparison`, its comparisons :class:`RegressComparison`) and ``regress``
+(:class:`RegressSummary`). Maps keyed by scenario, policy or status (counts, errored episodes, per-scenario rows)
+stay JSON objects inside them.
 
 Each is a :class:`~scenario_bank.records.JsonRecord`: :meth:`from_dict` reads the JSON object (a
 :class:`~scenario_bank.records.RecordError` names a field of the wrong kind, ``round.steps.after.pairs``),
@@ -18,14 +23,328 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
-from scenario_bank.records import JsonRecord
+from scenario_bank.records import JsonRecord, RecordError
 
 __all__ = ["RoundRecord", "RoundSteps", "HeldOutComparison", "ArmFailureTypes", "VersusControl", "ControlTable",
-           "STEPS"]
+           "MinedEntry", "MiningSummary", "SplitRecord", "ReferenceGate", "HeldOutBefore", "FineTuneArm",
+           "RegressComparison", "UntouchedComparison", "RegressSummary", "STEPS"]
 
 STEPS = ("mine", "split", "reference", "before", "fine_tune", "control", "after", "untouched", "regress")
 """The steps of a round, in the order they run (a round that kept no mined scenario has ``skipped`` after
 ``split`` instead of the rest)."""
+
+
+@dataclass(frozen=True, eq=False)
+class MinedEntry(JsonRecord):
+    """One scenario a round's mining kept (:func:`dv2s_gym.mining.loop.mined_entries`): its ``cluster``, the bank
+    entry (``scenario``) and the failure's ``reproduction`` rate; an exact replay has ``replay`` true, its
+    ``parent`` scenario and, when it leaves parameters at the parent's distribution, ``not_narrowed``
+    (``{parameter: why}``). The loop gives every entry its family as ``parent`` before the split."""
+
+    cluster: str
+    scenario: str
+    reproduction: Optional[float] = None
+    parent: Optional[str] = None
+    replay: Optional[bool] = None
+    not_narrowed: Optional[Mapping[str, Any]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"cluster": "str", "scenario": "str", "reproduction": "number",
+                                        "parent": "str", "replay": "bool", "not_narrowed": "object"}
+    _REQUIRED: ClassVar[Tuple[str, ...]] = ("cluster", "scenario")
+    _WHAT: ClassVar[str] = "mined entry"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        # as the loop writes them: a converted entry's reproduction and an exact replay's parent are always there
+        return frozenset({"reproduction"} | ({"parent"} if self.replay else set()))
+
+
+def _records(cls: type, values: Any, what: str) -> Tuple[Any, ...]:
+    """``values`` (a JSON list) as a tuple of ``cls`` records; a :class:`RecordError` names ``what``."""
+    if not isinstance(values, (list, tuple)):
+        raise RecordError(f"{what} must be a list, not {type(values).__name__}")
+    found = []
+    for number, value in enumerate(values):
+        try:
+            found.append(cls.from_dict(value))
+        except RecordError as error:
+            raise RecordError(f"{what}[{number}]: {error}") from None
+    return tuple(found)
+
+
+@dataclass(frozen=True, eq=False)
+class MiningSummary(JsonRecord):
+    """A round's ``mine`` step: the mining run's counts (``episodes``, ``errors``, ``failures``,
+    ``failures_against_policy``, ``clusters`` and those not converted, not kept or whose scenes the reference
+    driver failed too), ``conversions`` and ``replays`` by status, the rejected conversions' reasons (at most 40,
+    and their count), the ``errored`` episodes, the ``kept`` scenarios (:class:`MinedEntry`) and the run's
+    ``folder``."""
+
+    episodes: Optional[int] = None
+    errors: Optional[int] = None
+    errored: Optional[Mapping[str, Any]] = None
+    failures: Optional[int] = None
+    failures_against_policy: Optional[int] = None
+    clusters: Optional[int] = None
+    conversions: Optional[Mapping[str, int]] = None
+    replays: Optional[Mapping[str, int]] = None
+    rejected_reasons: Optional[Tuple[str, ...]] = None
+    rejected_reason_count: Optional[int] = None
+    clusters_not_converted: Optional[int] = None
+    clusters_not_kept: Optional[int] = None
+    clusters_reference_failed: Optional[int] = None
+    kept: Optional[Tuple[MinedEntry, ...]] = None
+    folder: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "episodes": "int", "errors": "int", "errored": "object", "failures": "int", "failures_against_policy": "int",
+        "clusters": "int", "conversions": "object", "replays": "object", "rejected_reasons": "list",
+        "rejected_reason_count": "int", "clusters_not_converted": "int", "clusters_not_kept": "int",
+        "clusters_reference_failed": "int", "kept": "list", "folder": "str"}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("rejected_reasons",)
+    _WHAT: ClassVar[str] = "mining step"
+
+    @classmethod
+    def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
+        return {"kept": _records(MinedEntry, data.get("kept") or [], "mining step field 'kept'")} \
+            if "kept" in data and data["kept"] is not None else {}
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"clusters", "clusters_not_converted", "clusters_not_kept", "clusters_reference_failed"})
+
+    def to_dict(self) -> Dict[str, Any]:
+        out = super().to_dict()
+        if "kept" in out:
+            out["kept"] = [entry.to_dict() for entry in self.kept]
+        return out
+
+    @property
+    def kept_entries(self) -> Tuple[MinedEntry, ...]:
+        """The kept scenarios (none when not recorded)."""
+        return self.kept or ()
+
+    @property
+    def converted(self) -> Tuple[MinedEntry, ...]:
+        """The kept scenarios converted from a failure (not exact replays)."""
+        return tuple(entry for entry in self.kept_entries if not entry.replay)
+
+    @property
+    def replayed(self) -> Tuple[MinedEntry, ...]:
+        """The kept exact replays."""
+        return tuple(entry for entry in self.kept_entries if entry.replay)
+
+
+@dataclass(frozen=True, eq=False)
+class SplitRecord(JsonRecord):
+    """A round's ``split`` step (:meth:`dv2s_gym.mining.split.FamilySplit.record`): the scenarios, clusters and
+    families to fine-tune on and to hold out, the number of family ``groups`` and the earlier held-out families
+    moved to the fine-tuning side (``moved_to_fine_tune``). A list a loop did not record reads as empty."""
+
+    by: Optional[str] = None
+    fine_tune: Optional[Tuple[str, ...]] = None
+    held_out: Optional[Tuple[str, ...]] = None
+    fine_tune_clusters: Optional[Tuple[str, ...]] = None
+    held_out_clusters: Optional[Tuple[str, ...]] = None
+    fine_tune_families: Optional[Tuple[str, ...]] = None
+    held_out_families: Optional[Tuple[str, ...]] = None
+    groups: Optional[int] = None
+    moved_to_fine_tune: Optional[Tuple[str, ...]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "by": "str", "fine_tune": "strings", "held_out": "strings", "fine_tune_clusters": "strings",
+        "held_out_clusters": "strings", "fine_tune_families": "strings", "held_out_families": "strings",
+        "groups": "int", "moved_to_fine_tune": "strings"}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("fine_tune", "held_out", "fine_tune_clusters", "held_out_clusters",
+                                         "fine_tune_families", "held_out_families", "moved_to_fine_tune")
+    _WHAT: ClassVar[str] = "split"
+
+    @property
+    def held_out_scenarios(self) -> Tuple[str, ...]:
+        """The held-out scenarios (none when not recorded)."""
+        return self.held_out or ()
+
+    @property
+    def fine_tune_scenarios(self) -> Tuple[str, ...]:
+        """The fine-tuning scenarios (none when not recorded)."""
+        return self.fine_tune or ()
+
+    @property
+    def held_out_family_names(self) -> Tuple[str, ...]:
+        """The held-out families (none when not recorded)."""
+        return self.held_out_families or ()
+
+    @property
+    def fine_tune_family_names(self) -> Tuple[str, ...]:
+        """The fine-tuning families (none when not recorded)."""
+        return self.fine_tune_families or ()
+
+
+@dataclass(frozen=True, eq=False)
+class ReferenceGate(JsonRecord):
+    """A round's ``reference`` step (:func:`dv2s_gym.mining.loop.reference_gate`): the ``reference`` driver's
+    held-out ``episodes``, those ``kept`` and those ``excluded`` (``[scenario, seed]``: it ``failed`` or
+    ``errored``), per scenario (``by_scenario``: ``{"episodes", "excluded", "failures": {type: n}}``) and the
+    families whose every episode is left out (``excluded_families``)."""
+
+    reference: Optional[str] = None
+    episodes: Optional[int] = None
+    kept: Optional[int] = None
+    excluded: Optional[Tuple[Any, ...]] = None
+    failed: Optional[int] = None
+    errored: Optional[int] = None
+    by_scenario: Optional[Mapping[str, Any]] = None
+    excluded_families: Optional[Tuple[str, ...]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "reference": "str", "episodes": "int", "kept": "int", "excluded": "list", "failed": "int", "errored": "int",
+        "by_scenario": "object", "excluded_families": "strings"}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("excluded", "excluded_families")
+    _WHAT: ClassVar[str] = "reference gate"
+
+    @property
+    def excluded_episodes(self) -> FrozenSet[Tuple[str, int]]:
+        """The left-out episodes as ``(scenario, seed)``."""
+        return frozenset((str(name), int(seed)) for name, seed in self.excluded or ())
+
+
+@dataclass(frozen=True, eq=False)
+class HeldOutBefore(JsonRecord):
+    """A round's ``before`` step: the held-out ``episodes`` the starting policy ran (those the reference driver
+    passed), whether any were recorded (``done``) and those that ``errored``."""
+
+    episodes: Optional[int] = None
+    done: Optional[bool] = None
+    errored: Optional[Mapping[str, Any]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"episodes": "int", "done": "bool", "errored": "object"}
+    _WHAT: ClassVar[str] = "before step"
+
+
+@dataclass(frozen=True, eq=False)
+class FineTuneArm(JsonRecord):
+    """A round's ``fine_tune`` or ``control`` step: the checkpoint (``model``), the ``method`` (``ppo`` or
+    ``dagger``), the ``scenarios`` in the mix, the mined ones upweighted or left out, the ``steps``, every
+    ``families`` of the mix, the ``reward_weights`` (ppo; ``null`` for dagger) and the fine-tuning
+    ``env_config``; a DAgger arm adds its ``reference``, ``agreement`` and the iterations ``resumed``."""
+
+    model: Optional[str] = None
+    method: Optional[str] = None
+    scenarios: Optional[int] = None
+    mined_upweighted: Optional[int] = None
+    steps: Optional[int] = None
+    mined_left_out: Optional[int] = None
+    families: Optional[Tuple[str, ...]] = None
+    reward_weights: Optional[Mapping[str, float]] = None
+    env_config: Optional[Mapping[str, Any]] = None
+    reference: Optional[str] = None
+    agreement: Optional[Any] = None
+    resumed: Optional[Tuple[Any, ...]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "model": "str", "method": "str", "scenarios": "int", "mined_upweighted": "int", "steps": "int",
+        "mined_left_out": "int", "families": "strings", "reward_weights": "object", "env_config": "object",
+        "reference": "any", "agreement": "any", "resumed": "list"}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("families", "resumed")
+    _WHAT: ClassVar[str] = "fine-tuning arm"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"reward_weights", "reference", "agreement"} if self.method == "dagger" else ())
+
+
+@dataclass(frozen=True, eq=False)
+class RegressComparison(JsonRecord):
+    """One ``dv2s regress`` comparison of the untouched set: its ``verdict`` and ``reason``, the ``episodes``
+    compared, the ``difference`` (``{"value", "low", "high"}``) and ``p_value``, and the ``report`` it wrote."""
+
+    verdict: Optional[str] = None
+    reason: Optional[str] = None
+    episodes: Optional[int] = None
+    difference: Optional[Mapping[str, Any]] = None
+    p_value: Optional[float] = None
+    report: Optional[str] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"verdict": "str", "reason": "str", "episodes": "int",
+                                        "difference": "object", "p_value": "number", "report": "str"}
+    _WHAT: ClassVar[str] = "untouched comparison"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset(self._KINDS)
+
+
+@dataclass(frozen=True, eq=False)
+class UntouchedComparison(JsonRecord):
+    """A round's ``untouched`` step (:func:`dv2s_gym.mining.loop.evaluate_untouched`): the ``scenarios`` and
+    ``seeds`` of the untouched set, each policy's measures (``policies``: ``{"start" | "fine_tuned" | "control":
+    {"episodes", "errors", "failure_rate", "stall_rate", "collision_rate", "mean_speed"}}``), the fine-tuned policy
+    against the start and the control against the fine-tuned one (:class:`RegressComparison`) and the episodes
+    that ``errored`` per policy."""
+
+    scenarios: Optional[Tuple[str, ...]] = None
+    seeds: Optional[int] = None
+    policies: Optional[Mapping[str, Any]] = None
+    fine_tuned_vs_start: Optional[RegressComparison] = None
+    control_vs_fine_tuned: Optional[RegressComparison] = None
+    errored: Optional[Mapping[str, Any]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {"scenarios": "list", "seeds": "int", "policies": "object",
+                                        "fine_tuned_vs_start": "object", "control_vs_fine_tuned": "object",
+                                        "errored": "object"}
+    _NESTED: ClassVar[Dict[str, type]] = {"fine_tuned_vs_start": RegressComparison,
+                                          "control_vs_fine_tuned": RegressComparison}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("scenarios",)
+    _WHAT: ClassVar[str] = "untouched step"
+
+    def failure_rate(self, role: str) -> Optional[float]:
+        """The failure rate of policy ``role`` (``start``, ``fine_tuned``, ``control``) on the set, or ``None``."""
+        return (((self.policies or {}).get(role) or {}).get("failure_rate") or {}).get("value")
+
+
+@dataclass(frozen=True, eq=False)
+class RegressSummary(JsonRecord):
+    """A round's ``regress`` step: the regression test's ``verdict`` and ``reason``, the ``episodes`` compared, the
+    new and old failure rates, the ``difference`` and ``p_value``, the ``regressed`` scenarios, the ``report`` it
+    wrote, the held-out families' parents' own results (``held_out_parents``) and the ``errored`` episodes per
+    policy."""
+
+    verdict: Optional[str] = None
+    reason: Optional[str] = None
+    episodes: Optional[int] = None
+    new_failure_rate: Optional[Mapping[str, Any]] = None
+    old_failure_rate: Optional[Mapping[str, Any]] = None
+    difference: Optional[Mapping[str, Any]] = None
+    p_value: Optional[float] = None
+    regressed: Optional[Tuple[Any, ...]] = None
+    report: Optional[str] = None
+    held_out_parents: Optional[Mapping[str, Any]] = None
+    errored: Optional[Mapping[str, Any]] = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    null_fields: Optional[FrozenSet[str]] = None
+
+    _KINDS: ClassVar[Dict[str, str]] = {
+        "verdict": "str", "reason": "str", "episodes": "int", "new_failure_rate": "object",
+        "old_failure_rate": "object", "difference": "object", "p_value": "number", "regressed": "list",
+        "report": "str", "held_out_parents": "object", "errored": "object"}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("regressed",)
+    _WHAT: ClassVar[str] = "regress step"
+
+    def default_null_fields(self) -> FrozenSet[str]:
+        return frozenset({"verdict", "reason", "episodes", "new_failure_rate", "old_failure_rate", "difference",
+                          "p_value"})
 
 
 @dataclass(frozen=True, eq=False)
@@ -151,23 +470,26 @@ class RoundSteps(JsonRecord):
     """Each finished step's record of a round (:data:`STEPS`; a step not run yet is ``None``), or ``skipped``: why
     a round that kept no mined scenario measured nothing."""
 
-    mine: Optional[Mapping[str, Any]] = None
-    split: Optional[Mapping[str, Any]] = None
+    mine: Optional[MiningSummary] = None
+    split: Optional[SplitRecord] = None
     skipped: Optional[str] = None
-    reference: Optional[Mapping[str, Any]] = None
-    before: Optional[Mapping[str, Any]] = None
-    fine_tune: Optional[Mapping[str, Any]] = None
-    control: Optional[Mapping[str, Any]] = None
+    reference: Optional[ReferenceGate] = None
+    before: Optional[HeldOutBefore] = None
+    fine_tune: Optional[FineTuneArm] = None
+    control: Optional[FineTuneArm] = None
     after: Optional[HeldOutComparison] = None
-    untouched: Optional[Mapping[str, Any]] = None
-    regress: Optional[Mapping[str, Any]] = None
+    untouched: Optional[UntouchedComparison] = None
+    regress: Optional[RegressSummary] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
     _KINDS: ClassVar[Dict[str, str]] = {"mine": "object", "split": "object", "skipped": "str", "reference": "object",
                                         "before": "object", "fine_tune": "object", "control": "object",
                                         "after": "object", "untouched": "object", "regress": "object"}
-    _NESTED: ClassVar[Dict[str, type]] = {"after": HeldOutComparison}
+    _NESTED: ClassVar[Dict[str, type]] = {"mine": MiningSummary, "split": SplitRecord, "reference": ReferenceGate,
+                                          "before": HeldOutBefore, "fine_tune": FineTuneArm, "control": FineTuneArm,
+                                          "after": HeldOutComparison, "untouched": UntouchedComparison,
+                                          "regress": RegressSummary}
     _WHAT: ClassVar[str] = "steps"
 
     def done(self, step: str) -> bool:
@@ -206,7 +528,10 @@ class RoundRecord(JsonRecord):
         return cls.from_dict({"round": number, "steps": {}, "timings": {}})
 
     def with_step(self, step: str, value: Any, seconds: Optional[float] = None) -> "RoundRecord":
-        """A copy with ``step``'s record (a JSON object, or ``skipped``'s reason) and, when given, its ``seconds``."""
+        """A copy with ``step``'s record (its typed record or JSON object, or ``skipped``'s reason) and, when given,
+        its ``seconds``."""
+        # the step is kept as its JSON object reads back (as loop.json holds it, and as a resumed loop reads it)
+        value = value.to_dict() if isinstance(value, JsonRecord) else value
         steps = RoundSteps.from_dict({**self.steps.to_dict(), step: value})
         timings = self.timings if seconds is None else {**self.timings, step: seconds}
         return self.replace(steps=steps, timings=timings)

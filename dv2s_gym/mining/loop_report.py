@@ -100,7 +100,9 @@ import os
 import re
 from dv2s_gym.mining.convert import CONVERSION_DIR, ENTRY_CONVERTED_VIDEO, ENTRY_VIDEO, cluster_slug
 from dv2s_gym.mining.errored import merged_messages, messages_text
-from dv2s_gym.mining.loop_record import HeldOutComparison, RoundRecord, RoundSteps
+from dv2s_gym.mining.loop_record import (
+    HeldOutComparison, MinedEntry, MiningSummary, ReferenceGate, RegressSummary, RoundRecord, RoundSteps, SplitRecord,
+    UntouchedComparison)
 from dv2s_gym.mining.report_text import clip_caption
 from dv2s_gym.mining.loop_verdict import (ACCEPTED, HELDOUT_ALPHA, evidence_floor_note, judge_round,
                                          recommendation)
@@ -164,14 +166,14 @@ def final_vs_start(report: Mapping[str, Any], out: Optional[Path] = None,
     that changed between the rounds, gives ``{"error": reason}`` instead (and the verdict is then NOT ACCEPTED).
     ``folder``: the loop folder the reports are read from (default ``out``; see :func:`_regress_report_path`).
     """
-    tested = [r for r in _rounds(report) if (r.steps.regress or {}).get("report")]
+    tested = [r for r in _rounds(report) if r.steps.regress is not None and r.steps.regress.report]
     if len(tested) < 2:
         return None
     first, last = tested[0], tested[-1]
     try:
         folder = folder if folder is not None else out
-        start = load_report(_regress_report_path(first.steps.regress["report"], folder))
-        final = load_report(_regress_report_path(last.steps.regress["report"], folder))
+        start = load_report(_regress_report_path(first.steps.regress.report, folder))
+        final = load_report(_regress_report_path(last.steps.regress.report, folder))
     except Exception as error:  # noqa: BLE001 - a missing or foreign report is a line of the loop report
         return {"error": f"cannot read the rounds' regression reports: {(str(error).splitlines() or [''])[0]}"}
     start_bank, final_bank = start.bank or BankInfo(), final.bank or BankInfo()
@@ -261,7 +263,8 @@ def _rounds(report: Mapping[str, Any]) -> List[RoundRecord]:
 def _round_row(record: RoundRecord) -> Dict[str, Any]:
     """The cells of a round's line in the summary tables (Markdown and HTML)."""
     steps = record.steps
-    mine, split, regress = (value or {} for value in (steps.mine, steps.split, steps.regress))
+    mine, split = steps.mine, steps.split or SplitRecord()
+    regress = steps.regress or RegressSummary()
     after = steps.after or HeldOutComparison()
     drop = after.relative_drop
     interval = after.relative_drop_interval or [None, None]
@@ -276,19 +279,28 @@ def _round_row(record: RoundRecord) -> Dict[str, Any]:
         drop_text = "not reported: " + ", ".join(short or ["too few held-out episodes"])
     p_value = after.mcnemar_p
     p_control = None if after.vs_control is None else after.vs_control.mcnemar_p
-    untouched = steps.untouched or {}
     return {
         "control": _rate(after.control) if after.control else "-",
         "p_control": "-" if p_control is None else f"{p_control:.3g}",
-        "untouched": _untouched_cell(untouched),
-        "round": record.round, "failures": mine.get("failures", "-"),
-        "against": mine.get("failures_against_policy", "-"), "episodes": mine.get("episodes", "-"),
-        "clusters": mine.get("clusters", "-"), "kept": len({e["scenario"] for e in mine.get("kept", [])}),
-        "split": f"{len(split.get('fine_tune', []))} / {len(split.get('held_out', []))}",
+        "untouched": _untouched_cell(steps.untouched),
+        "round": record.round, "failures": _recorded(mine, "failures"),
+        "against": _recorded(mine, "failures_against_policy"), "episodes": _recorded(mine, "episodes"),
+        "clusters": _recorded(mine, "clusters"), "kept": len({e.scenario for e in (mine.kept_entries if mine is not None else ())}),
+        "split": f"{len(split.fine_tune_scenarios)} / {len(split.held_out_scenarios)}",
         "before": _rate(after.before), "after": _rate(after.after), "drop": drop_text,
         "p": "-" if p_value is None else f"{p_value:.3g}",
-        "verdict": regress.get("verdict") or steps.skipped or "-",
+        "verdict": regress.verdict or steps.skipped or "-",
     }
+
+
+def _recorded(record: Optional[MiningSummary], name: str) -> Any:
+    """Field ``name`` of the mining step's record as recorded (``None`` when recorded as ``null``), ``"-"`` when the
+    step did not record it or did not run."""
+    if record is None:
+        return "-"
+    value = getattr(record, name)
+    nulls = record.default_null_fields() if record.null_fields is None else record.null_fields
+    return "-" if value is None and name not in nulls else value
 
 
 def errored_text(errored: Mapping[str, Mapping[str, Any]]) -> str:
@@ -318,17 +330,16 @@ def errored_by_stage(record: RoundRecord) -> List[tuple]:
     (:func:`dv2s_gym.mining.errored.errored_episodes`' form; a JSON object is read with ``RoundRecord.from_dict``)."""
     steps = RoundRecord.from_dict(record).steps
     found = []
-    mine = steps.mine or {}
-    if mine.get("errored") is not None:
-        found.append(("mining", {"mine": mine["errored"]}))
+    if steps.mine is not None and steps.mine.errored is not None:
+        found.append(("mining", {"mine": steps.mine.errored}))
     held: Dict[str, Any] = {}
-    if (steps.before or {}).get("errored") is not None:
-        held["start"] = steps.before["errored"]
+    if steps.before is not None and steps.before.errored is not None:
+        held["start"] = steps.before.errored
     held.update((steps.after.errored if steps.after is not None else None) or {})
     if held:
         found.append(("held-out", held))
     for step, label in ((steps.untouched, "untouched set"), (steps.regress, "regression test")):
-        errored = (step or {}).get("errored")
+        errored = step.errored if step is not None else None
         if errored:
             found.append((label, errored))
     return found
@@ -364,7 +375,7 @@ def round_summary(record: RoundRecord) -> str:
     if steps.skipped:
         return f"round {row['round']}: skipped: {steps.skipped}"
     errored = _errored_total(record)
-    mined = errored_note((steps.mine or {}).get("errored") or {})
+    mined = errored_note((steps.mine.errored if steps.mine is not None else None) or {})
     return (f"round {row['round']}: {row['failures']} failures mined in {row['episodes']} episodes{mined}, "
             f"{row['kept']} scenarios kept; held-out failure rate start {row['before']}, control {row['control']}, fine-tuned "
             f"{row['after']}; rest of the bank: {row['verdict']}"
@@ -384,21 +395,21 @@ def _share(summary: Optional[Mapping[str, Any]], key: str) -> str:
     return "-" if value is None else f"{value:.2f}"
 
 
-def _untouched_cell(untouched: Mapping[str, Any]) -> str:
+def _untouched_cell(untouched: Optional[UntouchedComparison]) -> str:
     """Failure rates start / control / fine-tuned on the untouched set, one cell."""
     if not untouched:
         return "-"
-    policies = untouched.get("policies") or {}
+    policies = untouched.policies or {}
     return " / ".join(_share(policies.get(role), "failure_rate") for role in ("start", "control", "fine_tuned"))
 
 
-def _untouched_lines(untouched: Mapping[str, Any]) -> List[str]:
+def _untouched_lines(untouched: Optional[UntouchedComparison]) -> List[str]:
     """The untouched set's table (Markdown) and its two comparisons."""
     if not untouched:
         return []
-    policies = untouched.get("policies") or {}
-    lines = [f"- untouched scenario set ({len(untouched.get('scenarios') or [])} scripts written by others for "
-             f"Scenic's CARLA model, never mined or fine-tuned on; {untouched.get('seeds')} seeds each; "
+    policies = untouched.policies or {}
+    lines = [f"- untouched scenario set ({len(untouched.scenarios or ())} scripts written by others for "
+             f"Scenic's CARLA model, never mined or fine-tuned on; {untouched.seeds} seeds each; "
              "dv2s regress statistics):", "",
              "| policy | episodes | failure rate | stall rate | collision rate | mean speed [m/s] |",
              "|---|---|---|---|---|---|"]
@@ -411,12 +422,11 @@ def _untouched_lines(untouched: Mapping[str, Any]) -> List[str]:
                      f"{_summary_rate(row.get('stall_rate'))} | {_summary_rate(row.get('collision_rate'))} | "
                      f"{'-' if speed is None else f'{speed:.1f}'} |")
     lines.append("")
-    for key, label in (("fine_tuned_vs_start", "fine-tuned against start"),
-                       ("control_vs_fine_tuned", "control against fine-tuned")):
-        comparison = untouched.get(key)
+    for comparison, label in ((untouched.fine_tuned_vs_start, "fine-tuned against start"),
+                              (untouched.control_vs_fine_tuned, "control against fine-tuned")):
         if comparison:
-            lines.append(f"- untouched, {label}: **{comparison.get('verdict')}** - {comparison.get('reason')}; "
-                         f"report `{comparison.get('report')}`")
+            lines.append(f"- untouched, {label}: **{comparison.verdict}** - {comparison.reason}; "
+                         f"report `{comparison.report}`")
     return lines
 
 
@@ -432,29 +442,31 @@ def _sources_text(after: Mapping[str, Any]) -> str:
             f"{'' if scenarios == 1 else 's'}{untested})")
 
 
-def reference_gate_text(gate: Mapping[str, Any]) -> str:
-    """The reference step's outcome in one sentence (log and reports)."""
-    if not gate.get("excluded"):
-        return (f"the reference driver {gate.get('reference')} passed all {gate.get('episodes')} held-out episodes; "
+def reference_gate_text(gate: ReferenceGate) -> str:
+    """The reference step's outcome in one sentence (log and reports; a JSON object of one is read as a
+    :class:`~dv2s_gym.mining.loop_record.ReferenceGate`)."""
+    gate = ReferenceGate.from_dict(gate)
+    if not gate.excluded:
+        return (f"the reference driver {gate.reference} passed all {gate.episodes} held-out episodes; "
                 "none left out")
     scenarios = "; ".join(
         f"{name} {row['excluded']}/{row['episodes']} ("
         + ", ".join(f"{kind} {n}" for kind, n in sorted(row["failures"].items())) + ")"
-        for name, row in gate.get("by_scenario", {}).items() if row.get("excluded"))
-    families = gate.get("excluded_families") or []
-    return (f"{len(gate['excluded'])} of {gate.get('episodes')} held-out episodes left out because the reference "
-            f"driver {gate.get('reference')} did not pass them ({gate.get('failed')} failed, {gate.get('errored')} "
+        for name, row in (gate.by_scenario or {}).items() if row.get("excluded"))
+    families = gate.excluded_families or ()
+    return (f"{len(gate.excluded or ())} of {gate.episodes} held-out episodes left out because the reference "
+            f"driver {gate.reference} did not pass them ({gate.failed} failed, {gate.errored} "
             f"errored): {scenarios}"
             + (f"; famil(ies) left out entirely: {', '.join(families)}" if families else ""))
 
 
-def _reference_lines(gate: Mapping[str, Any]) -> List[str]:
+def _reference_lines(gate: Optional[ReferenceGate]) -> List[str]:
     """The reference driver's pass over the held-out episodes: how many it did not pass, left out of every rate
     and test (loop.reference_gate)."""
     if not gate:
         return []
     text = reference_gate_text(gate)
-    return [f"- held-out episodes the reference driver does not pass: " + (f"**{text}**" if gate.get("excluded")
+    return [f"- held-out episodes the reference driver does not pass: " + (f"**{text}**" if gate.excluded
                                                                            else text)]
 
 
@@ -609,88 +621,90 @@ def _rounds_table_lines(report: Mapping[str, Any]) -> List[str]:
     return lines
 
 
-def _mining_lines(mine: Mapping[str, Any], settings: Mapping[str, Any]) -> List[str]:
-    """A round's mining step: what was found, converted and kept, and every reason a conversion was rejected."""
+def _mining_lines(mine: Optional[MiningSummary], settings: Mapping[str, Any]) -> List[str]:
+    """A round's mining step: what was found, converted and kept, and every reason a conversion was rejected (a
+    JSON object of one is read as a :class:`~dv2s_gym.mining.loop_record.MiningSummary`)."""
     if not mine:
         return []
-    lines = [f"- mining ({mine.get('folder')}): {mine.get('episodes')} episodes, {mine.get('failures')} "
-             f"failures ({mine.get('failures_against_policy')} avoidable by the reference driver), "
-             f"{mine.get('clusters')} clusters, conversions {mine.get('conversions')}, "
-             f"exact replays of other clusters {mine.get('replays') or {}}, "
-             f"{sum(1 for e in mine.get('kept') or [] if e.get('replay'))} exact replay entries kept "
-             f"in all, {mine.get('errors')} episode errors"
-             + (f"; **{mine['clusters_not_converted']} clusters not converted** (at most "
-                f"{settings.get('max_conversions')} per round)" if mine.get("clusters_not_converted")
+    mine = MiningSummary.from_dict(mine)
+    lines = [f"- mining ({mine.folder}): {mine.episodes} episodes, {mine.failures} "
+             f"failures ({mine.failures_against_policy} avoidable by the reference driver), "
+             f"{mine.clusters} clusters, conversions {mine.conversions}, "
+             f"exact replays of other clusters {mine.replays or {}}, "
+             f"{len(mine.replayed)} exact replay entries kept "
+             f"in all, {mine.errors} episode errors"
+             + (f"; **{mine.clusters_not_converted} clusters not converted** (at most "
+                f"{settings.get('max_conversions')} per round)" if mine.clusters_not_converted
                 else "")
-             + (f"; **{mine['clusters_not_kept']} clusters skipped**, neither converted nor replayed "
+             + (f"; **{mine.clusters_not_kept} clusters skipped**, neither converted nor replayed "
                 f"(at most {settings.get('max_replays')} exact replays per round"
-                + (f"; {mine['clusters_reference_failed']} of them because the reference driver did not pass any of "
+                + (f"; {mine.clusters_reference_failed} of them because the reference driver did not pass any of "
                    "their failing scenes, so they are neither replayed nor held out"
-                   if mine.get("clusters_reference_failed") else "") + ")"
-                if mine.get("clusters_not_kept") else "")]
-    reasons = mine.get("rejected_reasons") or []
+                   if mine.clusters_reference_failed else "") + ")"
+                if mine.clusters_not_kept else "")]
+    reasons = mine.rejected_reasons or ()
     for reason in reasons:  # every failed check of the conversion judge, each its own reason
         lines.append(f"  - rejected: {reason}")
-    if (mine.get("rejected_reason_count") or 0) > len(reasons):
-        lines.append(f"  - and {mine['rejected_reason_count'] - len(reasons)} more rejection reasons "
-                     f"(conversions.jsonl in {mine.get('folder')})")
-    for entry in mine.get("kept") or []:  # what an exact replay leaves as its parent draws it
-        for name, why in sorted((entry.get("not_narrowed") or {}).items()):
-            lines.append(f"  - exact replay {entry.get('scenario')}: parameter {name} not narrowed around the "
+    if (mine.rejected_reason_count or 0) > len(reasons):
+        lines.append(f"  - and {mine.rejected_reason_count - len(reasons)} more rejection reasons "
+                     f"(conversions.jsonl in {mine.folder})")
+    for entry in mine.kept_entries:  # what an exact replay leaves as its parent draws it
+        for name, why in sorted((entry.not_narrowed or {}).items()):
+            lines.append(f"  - exact replay {entry.scenario}: parameter {name} not narrowed around the "
                          f"failing value: {why}")
     return lines
 
 
-def _split_lines(split: Mapping[str, Any]) -> List[str]:
+def _split_lines(split: Optional[SplitRecord]) -> List[str]:
     """A round's split of the mined scenarios into fine-tuning and held-out families."""
     if not split:
         return []
-    return [f"- split by family ({split.get('groups')} family groups): fine-tune families "
-            f"{', '.join(split.get('fine_tune_families', [])) or 'none'} "
-            f"({', '.join(split.get('fine_tune', [])) or 'no scenario'}); held-out families "
-            f"{', '.join(split.get('held_out_families', [])) or 'none'} "
-            f"({', '.join(split.get('held_out', [])) or 'no scenario'}; their parents are not fine-tuned on either)"]
+    return [f"- split by family ({split.groups} family groups): fine-tune families "
+            f"{', '.join(split.fine_tune_family_names) or 'none'} "
+            f"({', '.join(split.fine_tune_scenarios) or 'no scenario'}); held-out families "
+            f"{', '.join(split.held_out_family_names) or 'none'} "
+            f"({', '.join(split.held_out_scenarios) or 'no scenario'}; their parents are not fine-tuned on either)"]
 
 
 def _fine_tuning_lines(steps: RoundSteps) -> List[str]:
     """A round's fine-tuning (by PPO or DAgger) and its control arm, one line each."""
     lines = []
-    for key, tuned in (("fine_tune", steps.fine_tune or {}), ("control", steps.control or {})):
+    for key, tuned in (("fine_tune", steps.fine_tune), ("control", steps.control)):
         if not tuned:
             continue
         if key == "control":
-            lines.append(f"- control arm: the same fine-tuning ({tuned.get('method')}, {tuned.get('steps')} "
-                         f"steps, same seed) on {tuned.get('scenarios')} scenarios, the "
-                         f"{tuned.get('mined_left_out')} mined scenario(s) left out: `{tuned.get('model')}`")
+            lines.append(f"- control arm: the same fine-tuning ({tuned.method}, {tuned.steps} "
+                         f"steps, same seed) on {tuned.scenarios} scenarios, the "
+                         f"{tuned.mined_left_out} mined scenario(s) left out: `{tuned.model}`")
             continue
-        if tuned.get("method") == "dagger":
-            agreement = tuned.get("agreement") or {}
-            lines.append(f"- fine-tuned by DAgger ({tuned.get('steps')} labelled steps, imitating "
-                         f"`{tuned.get('reference')}` on the policy's own states) on {tuned.get('scenarios')} "
-                         f"scenarios ({tuned.get('mined_upweighted')} mined, upweighted); agreement with the "
+        if tuned.method == "dagger":
+            agreement = tuned.agreement or {}
+            lines.append(f"- fine-tuned by DAgger ({tuned.steps} labelled steps, imitating "
+                         f"`{tuned.reference}` on the policy's own states) on {tuned.scenarios} "
+                         f"scenarios ({tuned.mined_upweighted} mined, upweighted); agreement with the "
                          f"reference on the {agreement.get('states')} labelled states "
                          f"{agreement.get('source')} -> {agreement.get('fine_tuned')}"
                          + "".join(f", resumed from iteration {r.get('from_iteration')}"
                                    + (f" (+{r['steps_into_next']} steps)" if r.get("steps_into_next") else "")
-                                   for r in tuned.get("resumed") or [])
-                         + f": `{tuned.get('model')}`")
+                                   for r in tuned.resumed or ())
+                         + f": `{tuned.model}`")
         else:
-            lines.append(f"- fine-tuned by PPO {tuned.get('steps')} steps on {tuned.get('scenarios')} scenarios "
-                         f"({tuned.get('mined_upweighted')} mined, upweighted), training reward weights "
-                         f"{_weights((tuned.get('env_config') or {}).get('reward_weights'))}: "
-                         f"`{tuned.get('model')}`")
+            lines.append(f"- fine-tuned by PPO {tuned.steps} steps on {tuned.scenarios} scenarios "
+                         f"({tuned.mined_upweighted} mined, upweighted), training reward weights "
+                         f"{_weights((tuned.env_config or {}).get('reward_weights'))}: "
+                         f"`{tuned.model}`")
     return lines
 
 
-def _regression_lines(regress: Mapping[str, Any]) -> List[str]:
+def _regression_lines(regress: Optional[RegressSummary]) -> List[str]:
     """A round's regression test on the starting bank, and the held-out families' parents in it."""
     if not regress:
         return []
-    lines = [f"- regression test on the starting bank ({regress.get('episodes')} paired episodes): "
-             f"**{regress.get('verdict')}** - {regress.get('reason')}; failure rate new "
-             f"{_summary_rate(regress.get('new_failure_rate'))}, old "
-             f"{_summary_rate(regress.get('old_failure_rate'))}; report `{regress.get('report')}`"]
-    for name, row in (regress.get("held_out_parents") or {}).items():
+    lines = [f"- regression test on the starting bank ({regress.episodes} paired episodes): "
+             f"**{regress.verdict}** - {regress.reason}; failure rate new "
+             f"{_summary_rate(regress.new_failure_rate)}, old "
+             f"{_summary_rate(regress.old_failure_rate)}; report `{regress.report}`"]
+    for name, row in (regress.held_out_parents or {}).items():
         lines.append(f"- held-out family's parent `{name}` (never fine-tuned on) in the regression test: "
                      f"failure rate new {_summary_rate(row['new'].get('failure_rate'))}, old "
                      f"{_summary_rate(row['old'].get('failure_rate'))}; stall rate new "
@@ -708,13 +722,13 @@ def _round_lines(record: RoundRecord, settings: Mapping[str, Any]) -> List[str]:
     lines += _errored_lines(record)
     if steps.skipped:
         lines.append(f"- skipped: {steps.skipped}")
-    lines += _mining_lines(steps.mine or {}, settings)
-    lines += _split_lines(steps.split or {})
+    lines += _mining_lines(steps.mine, settings)
+    lines += _split_lines(steps.split)
     lines += _fine_tuning_lines(steps)
-    lines += _reference_lines(steps.reference or {})
+    lines += _reference_lines(steps.reference)
     lines += _heldout_lines(steps.after or {})
-    lines += _untouched_lines(steps.untouched or {})
-    lines += _regression_lines(steps.regress or {})
+    lines += _untouched_lines(steps.untouched)
+    lines += _regression_lines(steps.regress)
     if record.next_policy:
         lines.append(f"- the next round starts from `{record.next_policy}` ({record.next_policy_reason})")
     return lines
@@ -846,7 +860,7 @@ def _round_figures(record: RoundRecord) -> str:
     after = steps.after or HeldOutComparison()
     held = [(label, (rate or {}).get("rate"), (rate or {}).get("low"), (rate or {}).get("high"))
             for label, rate in (("start", after.before), ("control", after.control), ("fine-tuned", after.after))]
-    policies = (steps.untouched or {}).get("policies") or {}
+    policies = (steps.untouched.policies if steps.untouched is not None else None) or {}
     untouched = [(label, ((policies.get(key) or {}).get("failure_rate") or {}).get("value"),
                   ((policies.get(key) or {}).get("failure_rate") or {}).get("low"),
                   ((policies.get(key) or {}).get("failure_rate") or {}).get("high"))
@@ -923,13 +937,13 @@ def round_clips(report: Mapping[str, Any], out: Path) -> Dict[int, Dict[str, Lis
     bank = Path(settings.get("bank_dir") or Path(out) / "bank")
     found: Dict[int, Dict[str, List[Dict[str, str]]]] = {}
     for record in _rounds(report):
-        mine = record.steps.mine or {}
+        mine = record.steps.mine or MiningSummary()
         policy = record.policy or report.get("policy")
-        split = record.steps.split or {}
-        held = set(split.get("held_out") or [])
+        split = record.steps.split or SplitRecord()
+        held = set(split.held_out_scenarios)
         clips: Dict[str, List[Dict[str, str]]] = {}
-        for entry in mine.get("kept") or []:
-            scenario = str(entry["scenario"])
+        for entry in mine.kept_entries:
+            scenario = str(entry.scenario)
             videos = clips.setdefault(f"{scenario} ({'held out' if scenario in held else 'fine-tuned on'})", [])
             for video, label, group, note in _entry_clips(entry, bank / scenario, mine, policy):
                 path = os.path.relpath(video.resolve(), Path(out).resolve())
@@ -960,27 +974,27 @@ def _rejection_note(rejections: Any) -> Optional[str]:
             "keeps the exact replay of the failing scene, so only the failure clip is shown")
 
 
-def _conversion_record(mine: Mapping[str, Any], cluster: Any) -> Dict[str, Any]:
-    """The mining run's conversion record of ``cluster`` (its ``failures/<slug>/conversion/report.json``);
-    ``{}`` when there is none."""
-    if not mine.get("folder") or cluster is None:
+def _conversion_record(mine: MiningSummary, cluster: Any) -> Dict[str, Any]:
+    """The mining run's conversion record of ``cluster`` (its ``failures/<slug>/conversion/report.json``, the
+    conversion's file as written); ``{}`` when there is none."""
+    if not mine.folder or cluster is None:
         return {}
     try:
-        record = json.loads((Path(mine["folder"]) / "failures" / cluster_slug(cluster, None) / CONVERSION_DIR
+        record = json.loads((Path(mine.folder) / "failures" / cluster_slug(cluster, None) / CONVERSION_DIR
                              / "report.json").read_text())
     except (OSError, ValueError):
         return {}
     return record if isinstance(record, dict) else {}
 
 
-def _no_clip_reason(entry: Mapping[str, Any], folder: Path, mine: Mapping[str, Any]) -> str:
+def _no_clip_reason(entry: MinedEntry, folder: Path, mine: MiningSummary) -> str:
     """Why a kept mined scenario shows no clip in the loop report."""
     source = _entry_source(folder) if folder.is_dir() else {}
     rejected = _rejection_note(source.get("converted_rejections")
-                               or _conversion_record(mine, entry.get("cluster")).get("rejections"))
+                               or _conversion_record(mine, entry.cluster).get("rejections"))
     if rejected:
         return ("no clip: " + rejected.split(": the bank keeps", 1)[0] + "; no clip of the failure was found")
-    if entry.get("replay") or source.get("replay"):
+    if entry.replay or source.get("replay"):
         return ("an extra exact replay of a cluster no conversion tried: no clip recorded (only the failures sent "
                 "to conversion are filmed; the entry keeps the failing episode's trace)")
     if not folder.is_dir():
@@ -1007,17 +1021,18 @@ def _own_file(folder: Path, named: Any, default: str) -> Path:
     return folder / relative
 
 
-def _entry_clips(entry: Mapping[str, Any], folder: Path, mine: Mapping[str, Any],
-                 policy: Optional[str]) -> List[tuple]:
+def _entry_clips(entry: MinedEntry, folder: Path, mine: MiningSummary, policy: Optional[str]) -> List[tuple]:
     """``[(video, label, group, note)]`` of one kept mined scenario (:func:`round_clips`); ``policy``: the round's,
-    named in a caption when the clip's own record does not name it."""
-    scenario, cluster = str(entry["scenario"]), entry.get("cluster")
+    named in a caption when the clip's own record does not name it (JSON objects of the entry and the mining step
+    are read as their records)."""
+    entry, mine = MinedEntry.from_dict(entry), MiningSummary.from_dict(mine)
+    scenario, cluster = str(entry.scenario), entry.cluster
     replay_note = ("an exact replay of the failing scene: it has no converted script, so only the failure clip "
                    "is shown")
     found: List[tuple] = []
     if folder.is_dir():
         source = _entry_source(folder)
-        replay = bool(entry.get("replay") or source.get("replay"))
+        replay = bool(entry.replay or source.get("replay"))
         records = [("", source)] + [(f"merged/{n}/", merged) for n, merged in
                                     enumerate(source.get("merged") or [], start=1) if isinstance(merged, Mapping)]
         for prefix, provenance in records:
@@ -1044,14 +1059,14 @@ def _entry_clips(entry: Mapping[str, Any], folder: Path, mine: Mapping[str, Any]
                               else f"failure merged into it ({where})", str(where), None))
         if found:
             return found
-    if mine.get("folder"):  # the bank entry is gone: the mining run's copy
-        run = Path(mine["folder"]) / "failures" / cluster_slug(cluster, None)
+    if mine.folder:  # the bank entry is gone: the mining run's copy
+        run = Path(mine.folder) / "failures" / cluster_slug(cluster, None)
         run_note = ((_rejection_note(_conversion_record(mine, cluster).get("rejections")) or replay_note)
-                    if entry.get("replay") else None)
+                    if entry.replay else None)
         for video in sorted(run.glob("*.webm")) if run.is_dir() else []:
             found.append((video, f"failure of cluster {cluster} (mining run)", "run", run_note))
         converted = run / CONVERSION_DIR / ENTRY_CONVERTED_VIDEO
-        if found and not entry.get("replay") and converted.is_file():
+        if found and not entry.replay and converted.is_file():
             try:
                 conversion = json.loads((run / CONVERSION_DIR / "report.json").read_text())
             except (OSError, ValueError):

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from typing import Any, Dict, Mapping, Optional
 
-from dv2s_gym.mining.loop_record import HeldOutComparison, RoundRecord, RoundSteps
+from dv2s_gym.mining.loop_record import HeldOutComparison, RegressComparison, RegressSummary, RoundRecord, RoundSteps
 from dv2s_gym.mining.loop_settings import DEFAULTS
 
 __all__ = ["ACCEPTED", "REJECTED", "NOT_ACCEPTED", "EXIT_CODES", "CONTROL_ALPHA", "HELDOUT_ALPHA", "HELDOUT_TEST",
@@ -103,9 +103,9 @@ def too_small(record: RoundRecord) -> Optional[str]:
         reasons.append("too few held-out episodes or families for a drop or a test")
     elif _control_below_floor(after):
         reasons.append("too few held-out episodes or families for the test against the control")
-    regress = steps.regress or {}
-    if regress.get("verdict") == "INCONCLUSIVE":
-        reasons.append(f"the regression test on {regress.get('episodes')} paired episodes could not tell")
+    regress = steps.regress or RegressSummary()
+    if regress.verdict == "INCONCLUSIVE":
+        reasons.append(f"the regression test on {regress.episodes} paired episodes could not tell")
     return "; ".join(reasons) or None
 
 
@@ -243,15 +243,16 @@ def judge_round(record: RoundRecord) -> Optional[Dict[str, str]]:
     steps = record.steps
     if not record.fine_tuned:
         return None
-    regress = steps.regress or {}
-    verdict = regress.get("verdict")
+    recorded = bool(steps.regress)  # a regression step with something recorded
+    regress = steps.regress or RegressSummary()
+    verdict = regress.verdict
     after = steps.after or HeldOutComparison()
     tests = _heldout_tests(after)
     regression = "the regression test on the rest of the bank (paired non-inferiority against the round's start)"
     if verdict == "FAIL":
         return {"verdict": REJECTED, "decided_by": "regression",
                 "reason": f"the fine-tuned policy regressed on the rest of the bank: {regression} FAILed "
-                          f"({regress.get('reason')})"}
+                          f"({regress.reason})"}
     for key, label in (("control", "the control (the same fine-tuning without the mined scenarios)"),
                        ("start", "the starting policy")):
         test = tests.get(key)
@@ -259,11 +260,11 @@ def judge_round(record: RoundRecord) -> Optional[Dict[str, str]]:
             return {"verdict": REJECTED, "decided_by": f"heldout_vs_{key}",
                     "reason": f"the fine-tuned policy is significantly worse than {label} on the held-out families "
                               f"({test.get('test')}: {test.get('reason')})"}
-    if not regress:
+    if not recorded:
         return {"verdict": NOT_ACCEPTED, "decided_by": "regression", "reason": "the round has no regression test yet"}
     if verdict != "PASS":
         return {"verdict": NOT_ACCEPTED, "decided_by": "regression",
-                "reason": f"{regression} is {verdict}, so no regression is ruled out ({regress.get('reason')})"}
+                "reason": f"{regression} is {verdict}, so no regression is ruled out ({regress.reason})"}
     missing = [key for key in ("start", "control") if tests.get(key) is None
                and (key == "start" or after.control or after.vs_control is not None)]
     if missing:
@@ -296,18 +297,18 @@ def judge_round(record: RoundRecord) -> Optional[Dict[str, str]]:
     control_note += (f"; no held-out family worse for the fine-tuned policy by more than the margin "
                      f"{100 * margin:+.1f} pp ({FAMILY_RULE})")
     return {"verdict": ACCEPTED, "decided_by": "all",
-            "reason": f"no regression on the rest of the bank ({regression} PASSed: {regress.get('reason')}); on "
+            "reason": f"no regression on the rest of the bank ({regression} PASSed: {regress.reason}); on "
                       f"the held-out families {' and '.join(parts)} ({HELDOUT_TEST}){control_note}"}
 
 
 def _untouched_fail(steps: RoundSteps) -> Optional[str]:
     """Why the untouched scenario set blocks ACCEPTED (the fine-tuned policy FAILed against the start there:
     significantly worse), or ``None``."""
-    versus = (steps.untouched or {}).get("fine_tuned_vs_start") or {}
-    if versus.get("verdict") != "FAIL":
+    versus = (steps.untouched.fine_tuned_vs_start if steps.untouched is not None else None) or RegressComparison()
+    if versus.verdict != "FAIL":
         return None
     return (f"on the untouched scenario set (never mined or fine-tuned on) the fine-tuned policy FAILed against the "
-            f"starting policy ({versus.get('reason')}), so it harms scenes the loop did not touch")
+            f"starting policy ({versus.reason}), so it harms scenes the loop did not touch")
 
 
 def _with_cross_round_check(judged: Dict[str, str], final: Optional[Mapping[str, Any]]) -> Dict[str, str]:

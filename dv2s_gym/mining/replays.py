@@ -23,6 +23,7 @@ from dv2s_gym.mining.cluster import group
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.family import record_family
 from dv2s_gym.mining.jsonl import JsonlAppender, read_rows
+from dv2s_gym.mining.loop_record import MinedEntry
 from dv2s_gym.mining.miner import progress_bar, read_records
 from dv2s_gym.mining.settings import read_run_settings, SETTINGS_FILE
 from scenario_bank.bank import Bank
@@ -107,12 +108,13 @@ def replay_order(groups: Mapping[str, Sequence[EpisodeRecord]]) -> List[Tuple[st
     return order
 
 
-def replay_entries(run_dir: os.PathLike | str) -> List[Dict[str, Any]]:
-    """The exact replay entries a mining run added: ``[{"cluster", "scenario", "parent", "reproduction": None,
-    "replay": True}]`` (with ``"not_narrowed": {parameter: why}`` when the replay leaves some at the parent's
-    distribution), from the conversions' ``replay_entry`` and from ``replays.jsonl``, one per entry."""
+def replay_entries(run_dir: os.PathLike | str) -> List[MinedEntry]:
+    """The exact replay entries a mining run added (:class:`~dv2s_gym.mining.loop_record.MinedEntry`: cluster,
+    scenario, parent, no reproduction, ``replay`` true; ``not_narrowed``: ``{parameter: why}`` when the replay leaves
+    some at the parent's distribution), from the conversions' ``replay_entry`` and from ``replays.jsonl``, one per
+    entry."""
     run_dir = Path(run_dir)
-    found: Dict[str, Dict[str, Any]] = {}
+    found: Dict[str, MinedEntry] = {}
     episodes = None
     for row in read_rows(run_dir / "conversions.jsonl") + read_rows(run_dir / REPLAYS_FILE):
         name = row.get("replay_entry")
@@ -123,8 +125,8 @@ def replay_entries(run_dir: os.PathLike | str) -> List[Dict[str, Any]]:
             if episodes is None:
                 episodes = {r.get("index"): r for r in read_records(run_dir / "episodes.jsonl")}
             parent = (episodes.get(row.get("index")) or {}).get("scenario")
-        found[name] = {"cluster": str(row.get("cluster")), "scenario": name, "parent": parent, "reproduction": None,
-                       "replay": True}
-        if row.get("replay_not_narrowed"):  # parameters the replay leaves at the parent's distribution, with why
-            found[name]["not_narrowed"] = dict(row["replay_not_narrowed"])
+        # not_narrowed: parameters the replay leaves at the parent's distribution, with why
+        found[name] = MinedEntry(cluster=str(row.get("cluster")), scenario=name, parent=parent, reproduction=None,
+                                 replay=True, not_narrowed=dict(row["replay_not_narrowed"])
+                                 if row.get("replay_not_narrowed") else None)
     return [found[name] for name in sorted(found)]

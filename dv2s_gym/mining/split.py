@@ -20,15 +20,17 @@ from typing import Any, Dict, List, Mapping, Sequence, Tuple
 import numpy as np
 
 from dv2s_gym.mining.errors import MiningError
+from dv2s_gym.mining.loop_record import MinedEntry, SplitRecord
 from scenario_bank.families import UnionFind
 
 __all__ = ["split_by_family", "family_of", "family_groups", "FamilyGroup", "FamilySplit"]
 
 
-def family_of(entry: Mapping[str, Any]) -> str:
-    """A mined entry's family: its ``parent`` when known, else the first ``/``-part of its cluster id."""
-    parent = entry.get("parent")
-    return str(parent) if parent else str(entry["cluster"]).split("/")[0]
+def family_of(entry: MinedEntry) -> str:
+    """A mined entry's family: its ``parent`` when known, else the first ``/``-part of its cluster id (a JSON
+    object of one is read as a :class:`~dv2s_gym.mining.loop_record.MinedEntry`)."""
+    entry = MinedEntry.from_dict(entry)
+    return str(entry.parent) if entry.parent else str(entry.cluster).split("/")[0]
 
 
 @dataclass(frozen=True)
@@ -65,32 +67,41 @@ class FamilySplit:
                 "fine_tune_families": list(self.fine_tune_families), "held_out_families": list(self.held_out_families),
                 "groups": self.groups, "moved_to_fine_tune": list(self.moved_to_fine_tune)}
 
+    def record(self) -> SplitRecord:
+        """The split as a loop round records it (its ``split`` step; :meth:`to_dict` is its JSON object)."""
+        return SplitRecord(by="family", fine_tune=self.fine_tune, held_out=self.held_out,
+                           fine_tune_clusters=self.fine_tune_clusters, held_out_clusters=self.held_out_clusters,
+                           fine_tune_families=self.fine_tune_families, held_out_families=self.held_out_families,
+                           groups=self.groups, moved_to_fine_tune=self.moved_to_fine_tune)
 
-def family_groups(entries: Sequence[Mapping[str, Any]]) -> List[FamilyGroup]:
+
+def family_groups(entries: Sequence[MinedEntry]) -> List[FamilyGroup]:
     """Connected groups of mined entries: two entries are in one group when they share a family, a cluster
     or a scenario (a failure merged into another family's scenario ties the two families), sorted by their first
     family."""
+    entries = [MinedEntry.from_dict(entry) for entry in entries]
     sets = UnionFind()
     find, union = sets.find, sets.union
     for entry in entries:
         family = "f:" + family_of(entry)
-        union(family, "c:" + str(entry["cluster"]))
-        union(family, "s:" + str(entry["scenario"]))
+        union(family, "c:" + str(entry.cluster))
+        union(family, "s:" + str(entry.scenario))
     groups: Dict[str, Dict[str, set]] = {}
     for entry in entries:
         group = groups.setdefault(find("f:" + family_of(entry)), {"families": set(), "clusters": set(),
                                                                    "scenarios": set()})
         group["families"].add(family_of(entry))
-        group["clusters"].add(str(entry["cluster"]))
-        group["scenarios"].add(str(entry["scenario"]))
+        group["clusters"].add(str(entry.cluster))
+        group["scenarios"].add(str(entry.scenario))
     result = [FamilyGroup(families=tuple(sorted(g["families"])), clusters=tuple(sorted(g["clusters"])),
                           scenarios=tuple(sorted(g["scenarios"]))) for g in groups.values()]
     return sorted(result, key=lambda g: g.families[0])
 
 
-def split_by_family(entries: Sequence[Mapping[str, Any]], fraction: float = 0.5, seed: int = 0,
+def split_by_family(entries: Sequence[MinedEntry], fraction: float = 0.5, seed: int = 0,
                     held_families: Sequence[str] = (), tuned_families: Sequence[str] = ()) -> FamilySplit:
-    """Split mined entries (``{"cluster", "scenario"}`` and optionally ``"parent"``) by family.
+    """Split mined entries (:class:`~dv2s_gym.mining.loop_record.MinedEntry`: cluster, scenario and optionally
+    parent) by family.
 
     ``fraction`` of the family groups (rounded, at least one and at most all but one when there are two or
     more) go to the held-out part, chosen by a shuffle seeded with ``seed``. A group holding one of
