@@ -22,6 +22,7 @@ import builtins
 import functools
 import re
 import textwrap
+import sys
 from pathlib import Path
 from typing import Dict, List, Optional, Set, Tuple
 
@@ -839,12 +840,56 @@ def _loads_of_bench(tree: ast.AST) -> List[str]:
         names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
             [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else []
         found += [f"imports {n}" for n in names if is_bench(n)]
+        # ``bench`` put on sys.path, then its modules imported under their own names (``import bench_env``)
+        found += [f"imports {n} (a module of bench/)" for n in names if n.split(".")[0] in _bench_top_names()]
+    found += [f"puts bench on sys.path: {line}" for line in _bench_path_edits(tree)]
     names, computed = _loader_uses(tree)
     found += [f"loads {n}" for n in names + _modules_run_by_commands(tree) if is_bench(n)]
     strings = [node.value for node in ast.walk(tree) if isinstance(node, ast.Constant) and isinstance(node.value, str)]
     if any(is_bench(text.partition(":")[0]) for text in strings):
         found += [f"loads a computed name (a string names bench): {line}" for line in computed]
     return found
+
+
+@functools.lru_cache(maxsize=None)
+def _bench_top_names() -> frozenset:
+    """The names bench/'s modules and packages are imported under when bench/ (or a folder of it) is on sys.path:
+    the stems of its modules and of its folders' modules, and its packages."""
+    names = {path.stem for path in (ROOT / "bench").rglob("*.py")
+             if "tests" not in path.relative_to(ROOT / "bench").parts} - {"__init__", "conftest"}
+    names |= {path.name for path in (ROOT / "bench").iterdir()
+              if path.is_dir() and (path / "__init__.py").exists() and path.name != "tests"}
+    return frozenset(names - set(sys.stdlib_module_names) - {name.split(".")[0] for name in _modules()})
+
+
+def _bench_path_edits(tree: ast.AST) -> List[str]:
+    """``"line: code"`` of each edit of ``sys.path`` (``insert``, ``append``, ``extend``, an assignment or ``+=``)
+    whose code names ``bench`` (a string, or a path joined with one)."""
+    def edits_path(node: ast.AST) -> bool:
+        target = node.func.value if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) \
+            and node.func.attr in ("insert", "append", "extend") else \
+            node.target if isinstance(node, ast.AugAssign) else \
+            node.targets[0] if isinstance(node, ast.Assign) and len(node.targets) == 1 else None
+        if isinstance(target, ast.Subscript):
+            target = target.value
+        return target is not None and ast.unparse(target) in ("sys.path", "path")
+
+    found = []
+    for node in ast.walk(tree):
+        if edits_path(node) and any(isinstance(inner, ast.Constant) and isinstance(inner.value, str)
+                                    and "bench" in re.split(r"[/\\]", inner.value) for inner in ast.walk(node)):
+            found.append(f"{node.lineno}: {ast.unparse(node).splitlines()[0]}")
+    return found
+
+
+@pytest.mark.parametrize("planted", [
+    'import sys\nfrom pathlib import Path\nROOT = Path(__file__).parents[1]\nsys.path.insert(0, str(ROOT / "bench"))\n'
+    'import bench_env\n',
+    'import sys\nsys.path.append("bench")\n',
+    'from bench_regress import main\n',
+])
+def test_the_benchmark_check_sees_bench_put_on_sys_path(planted):
+    assert _loads_of_bench(ast.parse(planted)), planted
 
 
 def test_the_benchmark_check_sees_a_benchmark_loaded_by_name():
