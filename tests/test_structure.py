@@ -1173,12 +1173,12 @@ def error_classes(modules: Optional[Dict[str, Path]] = None) -> Dict[str, List[s
 
 
 def errors_outside_the_base(modules: Optional[Dict[str, Path]] = None) -> List[str]:
-    """Public error classes (:func:`error_classes`) that do not derive from :data:`THE_BASE`, save the base itself; a
-    private class is a module's own control flow and never leaves it: a public name bound to it
-    (``Public = _Hidden``) is a public error."""
+    """Error classes (:func:`error_classes`), public or private, that do not derive from :data:`THE_BASE`, save the
+    base itself, and the public names bound to them (``Public = _Hidden``). A private class is raised for a module's
+    own control flow, but one missed ``except`` lets it out: it derives from the base as well."""
     classes, exported = _class_table(modules)
     errors = {q for q, b in classes.items() if any(_derives(base, classes, _is_exception) for base in b)}
-    public = {q: q for q in errors if not q.rpartition(".")[2].startswith("_")}
+    public = {q: q for q in errors}  # a private class raised in its module leaves it when not caught there too
     public.update({name: target for name, target in exported.items() if target in errors})
     return sorted(name for name, q in public.items()
                   if q != THE_BASE and not _derives(q, classes, lambda n, _: n == THE_BASE))
@@ -1293,6 +1293,9 @@ def test_classes_made_by_a_call_name_their_bases():
      "PlantedAliasMetaError"),
     ("import dataclasses\nPlantedDataError = dataclasses.make_dataclass('PlantedDataError', [('code', int)], "
      "bases=(LookupError,))\n", "PlantedDataError"),
+    # a private class raised for the module's own control flow
+    ("class _PlantedRejected(LookupError,):\n    pass\n\n\ndef _planted():\n    raise _PlantedRejected('x')\n",
+     "_PlantedRejected"),
 ])
 def test_the_error_rule_sees_an_error_planted_through_an_alias_or_a_call(tmp_path, planted, name):
     modules = _modules()
@@ -1305,7 +1308,8 @@ def test_the_error_rule_sees_an_error_planted_through_an_alias_or_a_call(tmp_pat
     assert errors_outside_the_base(modules) == sorted([*OUTSIDE_THE_BASE, f"{target}.{name}"])
     under = planted.replace("(_Base)", "(_Base, DV2SError)").replace("(_A)", "(_A, DV2SError)").replace(
         "(_Lookup)", "(DV2SError, _Lookup)").replace("(LookupError,)", "(DV2SError, LookupError)").replace(
-        "(OSError,)", "(OSError, DV2SError)").replace("(_E,)", "(_E, DV2SError)")
+        "(OSError,)", "(OSError, DV2SError)").replace("(_E,)", "(_E, DV2SError)").replace(
+        "(LookupError,):", "(DV2SError, LookupError):")
     assert under != planted
     modules[target] = tmp_path / "under.py"
     modules[target].write_text(source + "\n\n" + under, encoding="utf-8")
@@ -2049,8 +2053,8 @@ def function_level_imports(tree: ast.Module) -> List[tuple]:
 
     found = {}
     for function in ast.walk(tree):
-        if not isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
-            continue
+        if not isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda, ast.ClassDef)):
+            continue  # a class body runs when the module is imported, but an import there is just as hidden
         for node in ast.walk(function):
             if isinstance(node, (ast.Import, ast.ImportFrom)):
                 found[(node.lineno, ast.unparse(node))] = (node, node.lineno, ast.unparse(node))
@@ -2107,6 +2111,18 @@ def test_the_import_rule_sees_an_import_planted_in_a_function(tmp_path, target, 
     modules[target] = copy
     wrong = misplaced_imports(modules, heavy, startup)
     assert [line.rpartition(": ")[2] for line in wrong] == [planted]
+
+
+@pytest.mark.slow
+def test_the_import_rule_sees_an_import_planted_in_a_class_body(tmp_path):
+    modules = _modules()
+    target = "dv2s_gym.regress.report"
+    copy = tmp_path / "planted.py"
+    copy.write_text(modules[target].read_text(encoding="utf-8") + '\n\nclass _Planted:\n    """x"""\n'
+                    "    import json as _json\n", encoding="utf-8")
+    modules[target] = copy
+    wrong = misplaced_imports(modules, heavy_modules(modules), startup_modules())
+    assert [line.rpartition(": ")[2] for line in wrong] == ["import json as _json"]
 
 
 @pytest.mark.slow
