@@ -1,0 +1,39 @@
+"""Path options (``--out``, ``--video``, ``--from``) are checked while the options are read: a folder that cannot be
+made or a missing input file is one line naming the option, the path, the problem and the fix, before any work."""
+
+from __future__ import annotations
+
+import pytest
+
+from cli_helpers import run as run_in_process
+
+
+def run(capsys, *argv):
+    """``(exit code, stdout, stderr)``; an error found while the options are read exits as argparse does."""
+    try:
+        return run_in_process(capsys, *argv)
+    except SystemExit as stop:
+        captured = capsys.readouterr()
+        return stop.code, captured.out, captured.err
+
+
+@pytest.mark.parametrize("argv, option, path", [
+    (["train", "--steps", "100", "--out", "/proc/nope"], "--out", "/proc/nope"),
+    (["run", "highway_cut_in_from_left", "--video", "/proc/nope/x.webm"], "--video", "/proc/nope/x.webm"),
+    (["generate", "a car brakes", "--out", "/proc/nope"], "--out", "/proc/nope"),
+    (["regress", "--policy", "rule", "--out", "/proc/nope"], "--out", "/proc/nope"),
+    (["generate", "--from", "missing_description.txt"], "--from", "missing_description.txt"),
+])
+def test_a_bad_path_option_fails_early_in_one_line(capsys, argv, option, path):
+    code, out, err = run(capsys, *argv)
+    line = err.strip().splitlines()[-1]  # argparse prints the usage line, then the error
+    assert line.startswith("dv2s") and "error: " in line and "Traceback" not in err
+    assert code == 2 and out == "" and "measuring" not in err
+    assert option in line and path in line and "pass " in line and "Errno" not in line
+
+
+def test_an_output_folder_where_a_file_is_is_refused(capsys, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    code, _, err = run(capsys, "generate", "a car brakes", "--out", blocker / "sub")
+    assert code == 2 and "is a file, not a folder" in err.strip().splitlines()[-1]
