@@ -37,3 +37,12 @@ def test_an_output_folder_where_a_file_is_is_refused(capsys, tmp_path):
     blocker.write_text("x")
     code, _, err = run(capsys, "generate", "a car brakes", "--out", blocker / "sub")
     assert code == 2 and "is a file, not a folder" in err.strip().splitlines()[-1]
+
+
+@pytest.mark.parametrize("argument", ["bad/missing.txt", "notes.md", "some/folder/file"])
+def test_a_missing_file_given_as_the_description_suggests_from(capsys, tmp_path, monkeypatch, argument):
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run(capsys, "generate", argument)
+    line = err.strip().splitlines()[-1]
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "--from FILE" in line and argument in line
+    assert not (tmp_path / "out").exists()  # nothing was generated

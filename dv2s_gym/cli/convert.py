@@ -9,7 +9,7 @@ from pathlib import Path
 
 from dv2s_gym.cli.backend_options import sg_option
 from dv2s_gym.cli.errors import UsageError
-from dv2s_gym.cli.inputs import input_file, llm_config, output_folder
+from dv2s_gym.cli.inputs import description_text, input_file, llm_config, output_folder
 from dv2s_gym.cli.output import emit, json_text
 from dv2s_gym.cli.parser import bank_option, llm_options, video_options
 from dv2s_gym.pipeline.stages import describe, Description
@@ -77,7 +77,7 @@ def run_generate(args: argparse.Namespace) -> int:
     if args.from_file:
         text = Path(args.from_file).read_text(encoding="utf-8")
     elif args.description:
-        text = args.description
+        text = description_text(args.description)
     else:
         raise UsageError("give a description in quotes or --from FILE")
     description = Description(text.strip(), elements_from_text(text), backend="user")

@@ -15,7 +15,8 @@ from scenario_bank.bank import Bank, BankError, MAX_JSON_DEPTH, MAX_SIDECAR_BYTE
 from scenario_bank.safe_files import nests_deeper_than, read_regular_file, UnsafeInputError
 
 __all__ = ["CONFIG_EXAMPLE", "WEIGHTS", "WEIGHTS_EXAMPLE", "env_config_option", "json_error", "json_option",
-           "json_value", "llm_config", "open_bank", "read_input_file", "input_file", "output_file", "output_folder"]
+           "json_value", "llm_config", "open_bank", "read_input_file", "input_file", "output_file", "output_folder",
+           "description_text"]
 
 
 def open_bank(args: argparse.Namespace):
@@ -144,4 +145,19 @@ def input_file(text: str) -> str:
         why = "it is a folder" if path.is_dir() else "there is no such file"
         raise argparse.ArgumentTypeError(f"{text}: {why}; pass the path of an existing text file "
                                          "(or give the description itself in quotes, without --from)")
+    return text
+
+
+_PATH_SUFFIXES = (".txt", ".md", ".json")
+
+
+def description_text(text: str) -> str:
+    """The description given as the one positional argument; a missing file given there by mistake (it ends in
+    .txt/.md/.json, or holds a path separator and no space) is a :class:`UsageError` suggesting ``--from FILE``."""
+    looks_like_a_path = text.strip().lower().endswith(_PATH_SUFFIXES) or (
+        (os.sep in text or "/" in text) and not any(c.isspace() for c in text.strip()))
+    if looks_like_a_path and not Path(text).exists():
+        raise UsageError(f"{text!r} looks like a file path, but there is no such file; to read a description from a "
+                         "file pass --from FILE with an existing file, or if it really is the description, put it "
+                         "in quotes with spaces (e.g. 'a car brakes')")
     return text
