@@ -46,3 +46,22 @@ def test_a_missing_file_given_as_the_description_suggests_from(capsys, tmp_path,
     line = err.strip().splitlines()[-1]
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--from FILE" in line and argument in line
     assert not (tmp_path / "out").exists()  # nothing was generated
+
+
+def test_episode_on_a_file_that_is_no_report_says_what_is_expected(capsys, tmp_path):
+    corrupt = tmp_path / "corrupt.json"
+    corrupt.write_text("{not json")
+    code, _, err = run(capsys, "replay", corrupt, "--episode", "x")
+    line = err.strip().splitlines()[-1]
+    assert code == 2 and "is an episode trace" not in line and "dv2s regress" in line and "report.json" in line
+
+
+def test_missing_trace_archive_and_eval_folder_messages_name_the_fix(capsys, tmp_path):
+    code, _, err = run(capsys, "replay", tmp_path / "missing.json")
+    assert code == 2 and "no trace file" in err and "check the path" in err
+    bad = tmp_path / "bad.webm"
+    bad.write_bytes(b"\x1f\x8b\x08")
+    code, _, err = run(capsys, "bank", "--bank", tmp_path / "bank", "import", bad)
+    assert code == 2 and "not a readable bank archive" in err and "dv2s bank export" in err
+    code, _, err = run(capsys, "eval", "sg", tmp_path / "nonexistent")
+    assert code == 2 and "does not exist" in err and "label file" in err
