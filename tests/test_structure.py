@@ -2502,6 +2502,12 @@ BUILT_IN_RAISES: Dict[str, str] = {
                                                                       "geometry (no user input)",
     "scenario_bank.maps.build_maps:junction_arms:ValueError": "the map builder's self-check on its own junction "
                                                               "tables (no user input)",
+    "dv2s_gym.mining.param_meaning:Quantity.over:AssertionError": "an invariant, not an input check: the image was "
+                                                                  "read when the Quantity was made (type narrowing)",
+    "scenario_bank.maps.build_maps:write_maps:AssertionError": "the map builder's self-check that each builder "
+                                                               "names its own map (no user input)",
+    "scenario_bank.jail.zygote:Zygote._receive:AssertionError": "an invariant, not an input check: the socket is "
+                                                                "open once the zygote started (type narrowing)",
     # private functions and methods
     "envs.jail_worker:_Worker._write_files:ValueError": "inside the jailed worker: the error is the answer sent to "
                                                         "the parent (ScenarioCompileError there), never raised in the "
@@ -2554,6 +2560,8 @@ def built_in_raises(modules: Optional[Dict[str, Path]] = None) -> List[str]:
     for module, path in sorted((modules or _modules()).items()):
         tree = _parsed(path)
         bindings = _bindings(list(ast.walk(tree)), classes_made_by_calls(tree), module, path)
+        helpers = {node.name: node for node in tree.body if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))}
+        command_line = ".cli." in f".{module}." or module.endswith("__main__")
 
         def raised(node: ast.AST, seen: frozenset = frozenset()) -> List[str]:
             """What a raised expression may stand for: a class (called or not), an instance bound to a name, or
@@ -2564,6 +2572,13 @@ def built_in_raises(modules: Optional[Dict[str, Path]] = None) -> List[str]:
             table = bindings.get(looked_up.id) if isinstance(looked_up, ast.Name) else looked_up
             if isinstance(table, ast.Dict):
                 return [q for value in table.values for q in raised(value, seen)]
+            if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "getattr" and len(node.args) > 1 \
+                    and ast.unparse(node.args[0]) in _BUILTINS and isinstance(node.args[1], ast.Constant):
+                return [f"builtins.{node.args[1].value}"]  # getattr(builtins, "KeyError")
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in helpers \
+                    and node.func.id not in seen:  # a helper of the module that returns the exception: _err(msg)
+                return [q for back in ast.walk(helpers[node.func.id]) if isinstance(back, ast.Return) and back.value
+                        for q in raised(back.value, seen | {node.func.id})]
             if isinstance(node, ast.Call):
                 return raised(node.func, seen)
             if isinstance(node, ast.Name) and isinstance(bindings.get(node.id), (ast.Call, ast.Subscript)) \
@@ -2580,6 +2595,15 @@ def built_in_raises(modules: Optional[Dict[str, Path]] = None) -> List[str]:
                 else:
                     if isinstance(child, ast.Raise) and child.exc is not None and function is not None:
                         yield function, child
+                    # an assert checks nothing under python -O, and sys.exit("message") outside the command line
+                    # ends the user's program: both are the raise of a bare built-in
+                    if isinstance(child, ast.Assert) and function is not None and not command_line:
+                        yield function, ast.Raise(exc=ast.Name(id="AssertionError"))
+                    if isinstance(child, ast.Call) and ast.unparse(child.func) in ("sys.exit", "exit", "quit") \
+                            and child.args and not (isinstance(child.args[0], ast.Constant)
+                                                    and isinstance(child.args[0].value, int)) \
+                            and function is not None and not command_line:
+                        yield function, ast.Raise(exc=ast.Name(id="SystemExit"))
                     yield from walk(child, function, prefix)
 
         for function, node in walk(tree, None, ""):
@@ -2619,6 +2643,11 @@ def test_product_functions_raise_project_errors():
     ("_ERRORS = {'a': KeyError, 'b': DV2SError}\n\n\ndef planted(x):\n    raise _ERRORS[x]('no')\n", "planted:KeyError"),
     ("_ERRORS = {'a': KeyError}\n\n\ndef planted(x):\n    cls = _ERRORS.get(x, DV2SError)\n    raise cls('no')\n",
      "planted:KeyError"),
+    ("import builtins\n\n\ndef planted(x):\n    raise getattr(builtins, 'KeyError')(x)\n", "planted:KeyError"),
+    ("def _err(message):\n    return ValueError(message)\n\n\ndef planted(x):\n    raise _err(f'bad {x}')\n",
+     "planted:ValueError"),
+    ("def planted(x):\n    assert x > 0, 'x must be positive'\n    return x\n", "planted:AssertionError"),
+    ("import sys\n\n\ndef planted(x):\n    if not x:\n        sys.exit('bad input')\n", "planted:SystemExit"),
 ])
 def test_the_raise_rule_sees_a_built_in_planted_in_a_public_function(tmp_path, planted, raised):
     modules = _modules()
