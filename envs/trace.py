@@ -117,7 +117,8 @@ class EpisodeTrace:
                     with gzip.GzipFile(fileobj=handle) as unzipped:  # streamed: a small bomb stays small
                         raw = unzipped.read(MAX_TRACE_BYTES + 1)
         except FileNotFoundError:
-            raise MissingFileError(f"no trace file {path}") from None
+            raise MissingFileError(f"no trace file {path}; check the path (`dv2s run --trace FILE` and "
+                                       "`dv2s regress` write episode traces)") from None
         except (OSError, EOFError, zlib.error) as error:
             raise TraceFileError(f"{path} is not a dv2s episode trace (corrupt or truncated file: {error}); "
                              "save it again with env.save_trace()") from None

@@ -160,7 +160,8 @@ def _unpack_archive(archive: Path, dest: Path, limits: ArchiveLimits) -> Tuple[D
     except (tarfile.TarError, EOFError, OSError, zlib.error, lzma.LZMAError) as error:
         if isinstance(error, OSError) and error.errno == errno.ENOSPC:
             raise bank_write_error(error, dest) from None
-        raise BankError(f"{archive} is not a readable bank archive: {error}") from None
+        raise BankError(f"{archive} is not a readable bank archive: {error}; pass an archive made by "
+                       "`dv2s bank export`") from None
     if ARCHIVE_HEADER not in sizes:
         return {}, []
     header = load_json_bounded(read_in_folder(dest, ARCHIVE_HEADER, limits.max_sidecar_bytes), MAX_JSON_DEPTH,

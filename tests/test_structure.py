@@ -22,6 +22,7 @@ import builtins
 import functools
 import re
 import textwrap
+import sys
 from pathlib import Path
 from typing import Dict, List, Optional, Set, Tuple
 
@@ -839,12 +840,56 @@ def _loads_of_bench(tree: ast.AST) -> List[str]:
         names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
             [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level else []
         found += [f"imports {n}" for n in names if is_bench(n)]
+        # ``bench`` put on sys.path, then its modules imported under their own names (``import bench_env``)
+        found += [f"imports {n} (a module of bench/)" for n in names if n.split(".")[0] in _bench_top_names()]
+    found += [f"puts bench on sys.path: {line}" for line in _bench_path_edits(tree)]
     names, computed = _loader_uses(tree)
     found += [f"loads {n}" for n in names + _modules_run_by_commands(tree) if is_bench(n)]
     strings = [node.value for node in ast.walk(tree) if isinstance(node, ast.Constant) and isinstance(node.value, str)]
     if any(is_bench(text.partition(":")[0]) for text in strings):
         found += [f"loads a computed name (a string names bench): {line}" for line in computed]
     return found
+
+
+@functools.lru_cache(maxsize=None)
+def _bench_top_names() -> frozenset:
+    """The names bench/'s modules and packages are imported under when bench/ (or a folder of it) is on sys.path:
+    the stems of its modules and of its folders' modules, and its packages."""
+    names = {path.stem for path in (ROOT / "bench").rglob("*.py")
+             if "tests" not in path.relative_to(ROOT / "bench").parts} - {"__init__", "conftest"}
+    names |= {path.name for path in (ROOT / "bench").iterdir()
+              if path.is_dir() and (path / "__init__.py").exists() and path.name != "tests"}
+    return frozenset(names - set(sys.stdlib_module_names) - {name.split(".")[0] for name in _modules()})
+
+
+def _bench_path_edits(tree: ast.AST) -> List[str]:
+    """``"line: code"`` of each edit of ``sys.path`` (``insert``, ``append``, ``extend``, an assignment or ``+=``)
+    whose code names ``bench`` (a string, or a path joined with one)."""
+    def edits_path(node: ast.AST) -> bool:
+        target = node.func.value if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) \
+            and node.func.attr in ("insert", "append", "extend") else \
+            node.target if isinstance(node, ast.AugAssign) else \
+            node.targets[0] if isinstance(node, ast.Assign) and len(node.targets) == 1 else None
+        if isinstance(target, ast.Subscript):
+            target = target.value
+        return target is not None and ast.unparse(target) in ("sys.path", "path")
+
+    found = []
+    for node in ast.walk(tree):
+        if edits_path(node) and any(isinstance(inner, ast.Constant) and isinstance(inner.value, str)
+                                    and "bench" in re.split(r"[/\\]", inner.value) for inner in ast.walk(node)):
+            found.append(f"{node.lineno}: {ast.unparse(node).splitlines()[0]}")
+    return found
+
+
+@pytest.mark.parametrize("planted", [
+    'import sys\nfrom pathlib import Path\nROOT = Path(__file__).parents[1]\nsys.path.insert(0, str(ROOT / "bench"))\n'
+    'import bench_env\n',
+    'import sys\nsys.path.append("bench")\n',
+    'from bench_regress import main\n',
+])
+def test_the_benchmark_check_sees_bench_put_on_sys_path(planted):
+    assert _loads_of_bench(ast.parse(planted)), planted
 
 
 def test_the_benchmark_check_sees_a_benchmark_loaded_by_name():
@@ -1128,12 +1173,12 @@ def error_classes(modules: Optional[Dict[str, Path]] = None) -> Dict[str, List[s
 
 
 def errors_outside_the_base(modules: Optional[Dict[str, Path]] = None) -> List[str]:
-    """Public error classes (:func:`error_classes`) that do not derive from :data:`THE_BASE`, save the base itself; a
-    private class is a module's own control flow and never leaves it: a public name bound to it
-    (``Public = _Hidden``) is a public error."""
+    """Error classes (:func:`error_classes`), public or private, that do not derive from :data:`THE_BASE`, save the
+    base itself, and the public names bound to them (``Public = _Hidden``). A private class is raised for a module's
+    own control flow, but one missed ``except`` lets it out: it derives from the base as well."""
     classes, exported = _class_table(modules)
     errors = {q for q, b in classes.items() if any(_derives(base, classes, _is_exception) for base in b)}
-    public = {q: q for q in errors if not q.rpartition(".")[2].startswith("_")}
+    public = {q: q for q in errors}  # a private class raised in its module leaves it when not caught there too
     public.update({name: target for name, target in exported.items() if target in errors})
     return sorted(name for name, q in public.items()
                   if q != THE_BASE and not _derives(q, classes, lambda n, _: n == THE_BASE))
@@ -1248,6 +1293,9 @@ def test_classes_made_by_a_call_name_their_bases():
      "PlantedAliasMetaError"),
     ("import dataclasses\nPlantedDataError = dataclasses.make_dataclass('PlantedDataError', [('code', int)], "
      "bases=(LookupError,))\n", "PlantedDataError"),
+    # a private class raised for the module's own control flow
+    ("class _PlantedRejected(LookupError,):\n    pass\n\n\ndef _planted():\n    raise _PlantedRejected('x')\n",
+     "_PlantedRejected"),
 ])
 def test_the_error_rule_sees_an_error_planted_through_an_alias_or_a_call(tmp_path, planted, name):
     modules = _modules()
@@ -1260,7 +1308,8 @@ def test_the_error_rule_sees_an_error_planted_through_an_alias_or_a_call(tmp_pat
     assert errors_outside_the_base(modules) == sorted([*OUTSIDE_THE_BASE, f"{target}.{name}"])
     under = planted.replace("(_Base)", "(_Base, DV2SError)").replace("(_A)", "(_A, DV2SError)").replace(
         "(_Lookup)", "(DV2SError, _Lookup)").replace("(LookupError,)", "(DV2SError, LookupError)").replace(
-        "(OSError,)", "(OSError, DV2SError)").replace("(_E,)", "(_E, DV2SError)")
+        "(OSError,)", "(OSError, DV2SError)").replace("(_E,)", "(_E, DV2SError)").replace(
+        "(LookupError,):", "(DV2SError, LookupError):")
     assert under != planted
     modules[target] = tmp_path / "under.py"
     modules[target].write_text(source + "\n\n" + under, encoding="utf-8")
@@ -2004,8 +2053,8 @@ def function_level_imports(tree: ast.Module) -> List[tuple]:
 
     found = {}
     for function in ast.walk(tree):
-        if not isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
-            continue
+        if not isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda, ast.ClassDef)):
+            continue  # a class body runs when the module is imported, but an import there is just as hidden
         for node in ast.walk(function):
             if isinstance(node, (ast.Import, ast.ImportFrom)):
                 found[(node.lineno, ast.unparse(node))] = (node, node.lineno, ast.unparse(node))
@@ -2062,6 +2111,18 @@ def test_the_import_rule_sees_an_import_planted_in_a_function(tmp_path, target, 
     modules[target] = copy
     wrong = misplaced_imports(modules, heavy, startup)
     assert [line.rpartition(": ")[2] for line in wrong] == [planted]
+
+
+@pytest.mark.slow
+def test_the_import_rule_sees_an_import_planted_in_a_class_body(tmp_path):
+    modules = _modules()
+    target = "dv2s_gym.regress.report"
+    copy = tmp_path / "planted.py"
+    copy.write_text(modules[target].read_text(encoding="utf-8") + '\n\nclass _Planted:\n    """x"""\n'
+                    "    import json as _json\n", encoding="utf-8")
+    modules[target] = copy
+    wrong = misplaced_imports(modules, heavy_modules(modules), startup_modules())
+    assert [line.rpartition(": ")[2] for line in wrong] == ["import json as _json"]
 
 
 @pytest.mark.slow
@@ -2274,6 +2335,11 @@ def kind_strings_compared(tree: ast.AST, kinds: frozenset, any_name: bool = Fals
         elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.args
               and node.func.attr in ("get", "pop", "setdefault", "__getitem__") and table(node.func.value)):
             hit = names_kind(node.args[0]) or _is_kind_literal(node.args[0], kinds)
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.args
+              and node.func.attr in ("startswith", "endswith") and names_kind(node.func.value)):
+            # a kind told by a piece of its string: ``str(actor.kind).startswith("cycl")``
+            pieces = [n.value for n in ast.walk(node.args[0]) if isinstance(n, ast.Constant) and isinstance(n.value, str)]
+            hit = any(len(piece) > 1 and piece in str(kind) for piece in pieces for kind in kinds)
         if hit:
             found.append(f"{node.lineno}: {ast.unparse(node).splitlines()[0]}")
     return found
@@ -2304,7 +2370,8 @@ def kinds_spelled_out(files: Dict[str, Path], kinds: frozenset) -> Dict[str, Lis
 
 
 KINDS_BY_ENUM = ("dv2s_gym/pipeline/sg/rules", "dv2s_gym/pipeline/semantics", "dv2s_gym/mining", "dv2s_gym/regress",
-                 "envs", "policies", "scenario_bank")
+                 "envs", "policies", "scenario_bank", "dv2s_gym/cli", "dv2s_gym/pipeline/*.py",
+                 "dv2s_gym/pipeline/sg/blocks", "dv2s_gym/workers", "dv2s_gym/story*.py", "dv2s_gym/demo.py")
 """Where an actor's kind is compared with ``scenario_bank.elements.ActorKind`` only (the bird's-eye analyzer,
 ``dv2s_gym/pipeline/dra/bev``, names the blobs it detects in a vocabulary of its own: colours and kinds)."""
 KINDS_UNDER_ANY_NAME = ("dv2s_gym/mining/monitors.py", "dv2s_gym/pipeline/semantics/trace.py")
@@ -2314,7 +2381,10 @@ KINDS_UNDER_ANY_NAME = ("dv2s_gym/mining/monitors.py", "dv2s_gym/pipeline/semant
 
 def _kind_checked_files() -> Dict[str, Path]:
     """The modules of :data:`KINDS_BY_ENUM`, by their path relative to the repository."""
-    return {str(path.relative_to(ROOT)): path for part in KINDS_BY_ENUM for path in sorted((ROOT / part).rglob("*.py"))}
+    def files(part: str) -> List[Path]:
+        return sorted(ROOT.glob(part)) if part.endswith(".py") else sorted((ROOT / part).rglob("*.py"))
+
+    return {str(path.relative_to(ROOT)): path for part in KINDS_BY_ENUM for path in files(part)}
 
 
 def _all_kinds() -> frozenset:
@@ -2362,6 +2432,9 @@ def test_kinds_and_roles_are_compared_with_their_enums():
     "def _planted(actor):\n    k = actor.kind\n    other = k\n    return other in ('car', 'truck')\n",
     "def _planted(actor):\n    if (k := str(actor.kind)) == 'car':\n        return k\n    return None\n",
     "def _planted(actor):\n    return actor.kind.value == 'car'\n",
+    # a piece of a kind string
+    "def _planted(actor):\n    return str(actor.kind).startswith('cycl')\n",
+    "def _planted(actor):\n    return actor.kind.value.endswith(('trian', 'xyz'))\n",
     # membership in a named collection of kind strings
     "_PLANTED_KINDS = frozenset({'car', 'truck'})\n\n\ndef _planted(actor):\n    return actor.kind in _PLANTED_KINDS\n",
     "_PLANTED_KINDS = ('car', 'truck')\n\n\ndef _planted(actor):\n    return actor.kind in _PLANTED_KINDS + ('bus',)\n",
@@ -2429,6 +2502,12 @@ BUILT_IN_RAISES: Dict[str, str] = {
                                                                       "geometry (no user input)",
     "scenario_bank.maps.build_maps:junction_arms:ValueError": "the map builder's self-check on its own junction "
                                                               "tables (no user input)",
+    "dv2s_gym.mining.param_meaning:Quantity.over:AssertionError": "an invariant, not an input check: the image was "
+                                                                  "read when the Quantity was made (type narrowing)",
+    "scenario_bank.maps.build_maps:write_maps:AssertionError": "the map builder's self-check that each builder "
+                                                               "names its own map (no user input)",
+    "scenario_bank.jail.zygote:Zygote._receive:AssertionError": "an invariant, not an input check: the socket is "
+                                                                "open once the zygote started (type narrowing)",
     # private functions and methods
     "envs.jail_worker:_Worker._write_files:ValueError": "inside the jailed worker: the error is the answer sent to "
                                                         "the parent (ScenarioCompileError there), never raised in the "
@@ -2481,6 +2560,8 @@ def built_in_raises(modules: Optional[Dict[str, Path]] = None) -> List[str]:
     for module, path in sorted((modules or _modules()).items()):
         tree = _parsed(path)
         bindings = _bindings(list(ast.walk(tree)), classes_made_by_calls(tree), module, path)
+        helpers = {node.name: node for node in tree.body if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))}
+        command_line = ".cli." in f".{module}." or module.endswith("__main__")
 
         def raised(node: ast.AST, seen: frozenset = frozenset()) -> List[str]:
             """What a raised expression may stand for: a class (called or not), an instance bound to a name, or
@@ -2491,6 +2572,13 @@ def built_in_raises(modules: Optional[Dict[str, Path]] = None) -> List[str]:
             table = bindings.get(looked_up.id) if isinstance(looked_up, ast.Name) else looked_up
             if isinstance(table, ast.Dict):
                 return [q for value in table.values for q in raised(value, seen)]
+            if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "getattr" and len(node.args) > 1 \
+                    and ast.unparse(node.args[0]) in _BUILTINS and isinstance(node.args[1], ast.Constant):
+                return [f"builtins.{node.args[1].value}"]  # getattr(builtins, "KeyError")
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in helpers \
+                    and node.func.id not in seen:  # a helper of the module that returns the exception: _err(msg)
+                return [q for back in ast.walk(helpers[node.func.id]) if isinstance(back, ast.Return) and back.value
+                        for q in raised(back.value, seen | {node.func.id})]
             if isinstance(node, ast.Call):
                 return raised(node.func, seen)
             if isinstance(node, ast.Name) and isinstance(bindings.get(node.id), (ast.Call, ast.Subscript)) \
@@ -2507,6 +2595,15 @@ def built_in_raises(modules: Optional[Dict[str, Path]] = None) -> List[str]:
                 else:
                     if isinstance(child, ast.Raise) and child.exc is not None and function is not None:
                         yield function, child
+                    # an assert checks nothing under python -O, and sys.exit("message") outside the command line
+                    # ends the user's program: both are the raise of a bare built-in
+                    if isinstance(child, ast.Assert) and function is not None and not command_line:
+                        yield function, ast.Raise(exc=ast.Name(id="AssertionError"))
+                    if isinstance(child, ast.Call) and ast.unparse(child.func) in ("sys.exit", "exit", "quit") \
+                            and child.args and not (isinstance(child.args[0], ast.Constant)
+                                                    and isinstance(child.args[0].value, int)) \
+                            and function is not None and not command_line:
+                        yield function, ast.Raise(exc=ast.Name(id="SystemExit"))
                     yield from walk(child, function, prefix)
 
         for function, node in walk(tree, None, ""):
@@ -2546,6 +2643,11 @@ def test_product_functions_raise_project_errors():
     ("_ERRORS = {'a': KeyError, 'b': DV2SError}\n\n\ndef planted(x):\n    raise _ERRORS[x]('no')\n", "planted:KeyError"),
     ("_ERRORS = {'a': KeyError}\n\n\ndef planted(x):\n    cls = _ERRORS.get(x, DV2SError)\n    raise cls('no')\n",
      "planted:KeyError"),
+    ("import builtins\n\n\ndef planted(x):\n    raise getattr(builtins, 'KeyError')(x)\n", "planted:KeyError"),
+    ("def _err(message):\n    return ValueError(message)\n\n\ndef planted(x):\n    raise _err(f'bad {x}')\n",
+     "planted:ValueError"),
+    ("def planted(x):\n    assert x > 0, 'x must be positive'\n    return x\n", "planted:AssertionError"),
+    ("import sys\n\n\ndef planted(x):\n    if not x:\n        sys.exit('bad input')\n", "planted:SystemExit"),
 ])
 def test_the_raise_rule_sees_a_built_in_planted_in_a_public_function(tmp_path, planted, raised):
     modules = _modules()

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from dv2s_gym.cli.backend_options import sg_option
 from dv2s_gym.cli.errors import UsageError
-from dv2s_gym.cli.inputs import llm_config
+from dv2s_gym.cli.inputs import description_text, input_file, llm_config, output_folder
 from dv2s_gym.cli.output import emit, json_text
 from dv2s_gym.cli.parser import bank_option, llm_options, video_options
 from dv2s_gym.pipeline.stages import describe, Description
@@ -34,9 +34,9 @@ def add_parser(subparsers) -> None:
                               description="Generate a Scenic script from a description (in quotes or --from FILE), "
                               "check it (safety, compile, sample, run) and render a preview.")
     p.add_argument("description", nargs="?")
-    p.add_argument("--from", dest="from_file", help="read the description from this file (e.g. an edited description.txt)")
+    p.add_argument("--from", dest="from_file", type=input_file, help="read the description from this file (e.g. an edited description.txt)")
     sg_option(p)
-    p.add_argument("--out", default="out/generated", help="output folder")
+    p.add_argument("--out", default="out/generated", type=output_folder, help="output folder")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--seconds", type=float, default=10.0, help="simulated seconds of the check run")
     p.add_argument("--json", action="store_true")
@@ -49,7 +49,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("video", help="a video file or a folder of videos")
     video_options(p)
     sg_option(p)
-    p.add_argument("--out", default="out/convert", help="output folder (one subfolder per video in batch mode)")
+    p.add_argument("--out", default="out/convert", type=output_folder, help="output folder (one subfolder per video in batch mode)")
     p.add_argument("--add-to-bank", action="store_true", help="add validated scenarios to the bank with provenance")
     bank_option(p)
     p.add_argument("--jobs", type=int, default=1, help="parallel processes in batch mode")
@@ -77,7 +77,7 @@ def run_generate(args: argparse.Namespace) -> int:
     if args.from_file:
         text = Path(args.from_file).read_text(encoding="utf-8")
     elif args.description:
-        text = args.description
+        text = description_text(args.description)
     else:
         raise UsageError("give a description in quotes or --from FILE")
     description = Description(text.strip(), elements_from_text(text), backend="user")

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import tempfile
 from pathlib import Path
 from typing import Any, Optional, Union
 
@@ -13,7 +15,8 @@ from scenario_bank.bank import Bank, BankError, MAX_JSON_DEPTH, MAX_SIDECAR_BYTE
 from scenario_bank.safe_files import nests_deeper_than, read_regular_file, UnsafeInputError
 
 __all__ = ["CONFIG_EXAMPLE", "WEIGHTS", "WEIGHTS_EXAMPLE", "env_config_option", "json_error", "json_option",
-           "json_value", "llm_config", "open_bank", "read_input_file"]
+           "json_value", "llm_config", "open_bank", "read_input_file", "input_file", "output_file", "output_folder",
+           "description_text"]
 
 
 def open_bank(args: argparse.Namespace):
@@ -96,3 +99,65 @@ def env_config_option(text: Optional[str], what: str = "--config") -> Optional[d
     one (``None`` when not given); every command that takes one reads it here."""
     return json_option(text, what, "a JSON object of DV2S-v0 config overrides (or a .json file holding one)",
                        CONFIG_EXAMPLE, mapping=True)
+
+
+def _cannot_write_in(folder: Path) -> Optional[str]:
+    """Why a folder (or a file) cannot be made at ``folder``, or None: its nearest existing ancestor must be a
+    folder a trial folder can be made (and removed) in, so that the command fails before any work, not after."""
+    place = folder
+    while not place.exists() and place != place.parent:
+        place = place.parent
+    if place.exists() and not place.is_dir():
+        return f"{place} is a file, not a folder"
+    try:
+        os.rmdir(tempfile.mkdtemp(prefix=".dv2s-probe-", dir=place))
+    except OSError as error:
+        return f"cannot create anything in {place} ({error.strerror or error})"
+    return None
+
+
+def output_folder(text: str) -> str:
+    """``--out``: a folder that exists or can be created (checked while the options are read, see
+    :func:`_cannot_write_in`); else an :class:`argparse.ArgumentTypeError` naming the path, the problem and the fix."""
+    path = Path(text)
+    why = f"{text} is a file, not a folder" if path.is_file() else _cannot_write_in(path)
+    if why:
+        raise argparse.ArgumentTypeError(f"{text}: the output folder cannot be made: {why}; "
+                                         "pass a folder in a writable place (e.g. --out out/run)")
+    return text
+
+
+def output_file(text: str) -> str:
+    """``--video``: a file whose folder exists or can be created; else an :class:`argparse.ArgumentTypeError` naming
+    the path, the problem and the fix."""
+    path = Path(text)
+    why = f"{text} is a folder" if path.is_dir() else _cannot_write_in(path.parent)
+    if why:
+        raise argparse.ArgumentTypeError(f"{text}: the output file cannot be written: {why}; "
+                                         "pass a path in a writable folder (e.g. out/episode.webm)")
+    return text
+
+
+def input_file(text: str) -> str:
+    """``--from``: an existing file; else an :class:`argparse.ArgumentTypeError` naming the path and the fix."""
+    path = Path(text)
+    if not path.is_file():
+        why = "it is a folder" if path.is_dir() else "there is no such file"
+        raise argparse.ArgumentTypeError(f"{text}: {why}; pass the path of an existing text file "
+                                         "(or give the description itself in quotes, without --from)")
+    return text
+
+
+_PATH_SUFFIXES = (".txt", ".md", ".json")
+
+
+def description_text(text: str) -> str:
+    """The description given as the one positional argument; a missing file given there by mistake (it ends in
+    .txt/.md/.json, or holds a path separator and no space) is a :class:`UsageError` suggesting ``--from FILE``."""
+    looks_like_a_path = text.strip().lower().endswith(_PATH_SUFFIXES) or (
+        (os.sep in text or "/" in text) and not any(c.isspace() for c in text.strip()))
+    if looks_like_a_path and not Path(text).exists():
+        raise UsageError(f"{text!r} looks like a file path, but there is no such file; to read a description from a "
+                         "file pass --from FILE with an existing file, or if it really is the description, put it "
+                         "in quotes with spaces (e.g. 'a car brakes')")
+    return text

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from dv2s_gym.cli.backend_options import worker_backend_option
-from dv2s_gym.cli.inputs import env_config_option
+from dv2s_gym.cli.inputs import env_config_option, output_folder
 from dv2s_gym.cli.interrupts import episodes_kept_note
 from dv2s_gym.cli.output import json_text
 from dv2s_gym.cli.parser import bank_option
@@ -81,7 +81,7 @@ def add_parser(subparsers) -> None:
                    help="with --sequential: seeds per look (default: a fifth of --episodes)")
     p.add_argument("--config", help="DV2S-v0 config overrides as JSON (or a .json file), e.g. '{\"duration\": 10}' "
                    "(default: none, or the baseline report's)")
-    p.add_argument("--out", default=None, help="output folder (default out/regress)")
+    p.add_argument("--out", default=None, type=output_folder, help="output folder (default out/regress)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print the report JSON instead of the table")
     p.set_defaults(func=run)

@@ -50,8 +50,9 @@ def run(args: argparse.Namespace) -> int:
         folder = Path(args.trace) if Path(args.trace).is_dir() else Path(args.trace).parent
         return _replay_mined(args, folder)
     if args.episode:
-        raise UsageError(f"--episode picks an episode of a regression report; {args.trace} is an episode trace "
-                         "(replay it without --episode)")
+        raise UsageError(f"--episode picks an episode of a regression report, and {args.trace} is not one (a "
+                         "report.json written by `dv2s regress`); pass that report, or replay an episode trace "
+                         "without --episode")
     from envs.replay import replay_trace_file
 
     trace, replayed = replay_trace_file(args.trace, video=args.video)

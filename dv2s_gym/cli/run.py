@@ -6,6 +6,7 @@ import argparse
 from typing import Any, Mapping, Optional
 
 from dv2s_gym.cli.output import json_text
+from dv2s_gym.cli.inputs import output_file
 from dv2s_gym.cli.parser import bank_option
 from scenario_bank.jail.output import printable
 
@@ -19,7 +20,7 @@ def add_parser(subparsers) -> None:
                               "tag:<tag>) and record it as a video; optionally save its trace.")
     p.add_argument("scenario", help="bank name, path to a .scenic file, or tag:<tag>")
     bank_option(p)
-    p.add_argument("--video", default="out/episode.webm", help="video path (.webm VP8; .mp4/.avi also work)")
+    p.add_argument("--video", default="out/episode.webm", type=output_file, help="video path (.webm VP8; .mp4/.avi also work)")
     p.add_argument("--trace", default=None, help="also save the episode trace here (.json or .json.gz)")
     p.add_argument("--seed", type=int, default=0,
                    help="episode seed: it chooses the scene (and the actions of --random); the same seed gives the "

@@ -125,7 +125,7 @@ ENTRY_CONVERTED_VIDEO = "converted.webm"
 PathLike = Union[str, os.PathLike]
 
 
-class _Rejected(Exception):
+class _Rejected(MiningError):
     def __init__(self, stage: str, message: str) -> None:
         super().__init__(f"{stage}: {message}")
         self.stage, self.message = stage, message

@@ -76,7 +76,9 @@ def collect_items(folder: str | Path, *, unlabeled_descriptions: bool = False) -
     """
     folder = Path(folder)
     if not folder.is_dir():
-        raise MissingFileError(f"evaluation folder {str(folder)!r} does not exist")
+        raise MissingFileError(f"evaluation folder {str(folder)!r} does not exist; pass a folder of videos or "
+                               f"descriptions (.txt) each with its label file (<name>{LABEL_SUFFIX}), as "
+                               "dv2s_gym/evalset is")
     items = []
     for label_path in sorted(folder.glob(f"*{LABEL_SUFFIX}")):
         stem = label_path.name[: -len(LABEL_SUFFIX)]
