@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 
 from cli_helpers import run as run_in_process
+from dv2s_gym.cli import build_parser
 
 
 def run(capsys, *argv):
@@ -23,6 +24,10 @@ def run(capsys, *argv):
     (["generate", "a car brakes", "--out", "/proc/nope"], "--out", "/proc/nope"),
     (["regress", "--policy", "rule", "--out", "/proc/nope"], "--out", "/proc/nope"),
     (["generate", "--from", "missing_description.txt"], "--from", "missing_description.txt"),
+    (["mine", "--budget", "1", "--out", "/proc/nope"], "--out", "/proc/nope"),
+    (["loop", "--out", "/proc/nope"], "--out", "/proc/nope"),
+    (["demo", "--out", "/proc/nope"], "--out", "/proc/nope"),
+    (["replay", "trace.json", "--video", "/proc/nope/x.webm"], "--video", "/proc/nope/x.webm"),
 ])
 def test_a_bad_path_option_fails_early_in_one_line(capsys, argv, option, path):
     code, out, err = run(capsys, *argv)
@@ -30,6 +35,16 @@ def test_a_bad_path_option_fails_early_in_one_line(capsys, argv, option, path):
     assert line.startswith("dv2s") and "error: " in line and "Traceback" not in err
     assert code == 2 and out == "" and "measuring" not in err
     assert option in line and path in line and "pass " in line and "Errno" not in line
+
+
+@pytest.mark.parametrize("argv, default", [
+    (["demo"], "out/demo"), (["mine", "--policy", "rule"], None), (["loop"], None), (["replay", "trace.json"], None),
+])
+def test_the_default_of_a_checked_path_option_still_parses(tmp_path, monkeypatch, argv, default):
+    monkeypatch.chdir(tmp_path)
+    args = build_parser().parse_args(argv)
+    assert getattr(args, "out", getattr(args, "video", None)) == default
+    assert list(tmp_path.iterdir()) == []  # checking the option creates nothing
 
 
 def test_an_output_folder_where_a_file_is_is_refused(capsys, tmp_path):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import asdict
 
+from dv2s_gym.cli.inputs import output_folder
 from dv2s_gym.cli.output import json_text
 
 __all__ = ["add_parser", "run"]
@@ -15,7 +16,7 @@ def add_parser(subparsers) -> None:
     demo = subparsers.add_parser("demo", help="run every bank scenario with a rule-based ego; one video each and a table",
                                  description="Run DV2S-v0 episodes of every bank scenario with the rule-based "
                                  "CautiousDriver, write one .webm per episode and print a summary table.")
-    demo.add_argument("--out", default="out/demo", help="folder for the videos (default: out/demo)")
+    demo.add_argument("--out", default="out/demo", type=output_folder, help="folder for the videos (default: out/demo)")
     demo.add_argument("--scenario", action="append", help="only this bank scenario (repeatable)")
     demo.add_argument("--episodes", type=int, default=1, help="episodes per scenario (default: 1)")
     demo.add_argument("--seed", type=int, default=0, help="seed of the first episode (default: 0)")

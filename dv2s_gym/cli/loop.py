@@ -8,7 +8,7 @@ import json
 from typing import Any, List, Mapping, Optional
 
 from dv2s_gym.cli.errors import UsageError
-from dv2s_gym.cli.inputs import json_value
+from dv2s_gym.cli.inputs import json_value, output_folder
 from dv2s_gym.cli.parser import bank_option
 from dv2s_gym.mining.loop_settings import DEFAULT_PROFILE, DEFAULTS, EVIDENCE, FINE_TUNE_METHODS, PROFILES, LoopSettings
 from dv2s_gym.mining.loop_verdict import EVIDENCE_FLOOR as FLOOR, HELDOUT_ALPHA as ALPHA
@@ -127,7 +127,7 @@ def _add_arms_and_run_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, default=None, help="processes for mining and evaluation (default: every core)")
     p.add_argument("--envs", type=int, default=LoopSettings.n_envs,
                    help=f"training environments (default {LoopSettings.n_envs})")
-    p.add_argument("--out", default=None, help="loop folder (default out/loop; rerunning resumes it)")
+    p.add_argument("--out", default=None, type=output_folder, help="loop folder (default out/loop; rerunning resumes it)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 

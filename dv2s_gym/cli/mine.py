@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from dv2s_gym.cli.backend_options import dra_option, sg_option, worker_backend_option
-from dv2s_gym.cli.inputs import env_config_option, json_option, llm_config
+from dv2s_gym.cli.inputs import env_config_option, json_option, llm_config, output_folder
 from dv2s_gym.cli.interrupts import episodes_kept_note
 from dv2s_gym.cli.parser import bank_option, llm_options
 from dv2s_gym.mining.conversion_settings import ConversionSettings
@@ -96,7 +96,7 @@ def add_parser(subparsers) -> None:
                    help="scenes the new scenario is run on to check it reproduces the failure (default 10)")
     p.add_argument("--threshold", type=float, default=0.3,
                    help="reproduction rate a new scenario needs to be kept (default 0.3)")
-    p.add_argument("--out", default=None, help="run folder (default out/mine)")
+    p.add_argument("--out", default=None, type=output_folder, help="run folder (default out/mine)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run)
 

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from dv2s_gym.cli.errors import UsageError
+from dv2s_gym.cli.inputs import output_file
 
 __all__ = ["add_parser", "run"]
 
@@ -31,7 +32,7 @@ def add_parser(subparsers) -> None:
                         help="the policy to re-run (with a mining run, or a report episode re-run from its policy) "
                         "instead of the one the file names; needed for any policy that is not built in "
                         "(module:attribute, a checkpoint): a file's policy spec is loaded only if it is built in")
-    replay.add_argument("--video", help="also write the replayed episode as a video (.webm)")
+    replay.add_argument("--video", type=output_file, help="also write the replayed episode as a video (.webm)")
     replay.add_argument("--from-policy", action="store_true",
                         help="with a report: re-run the policy even when a trace is stored")
     replay.set_defaults(func=run)
