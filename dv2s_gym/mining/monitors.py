@@ -39,7 +39,7 @@ from scenario_bank.plugins import forget_plugin, remember_plugin
 
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "MonitorSettings", "Detector", "DETECTORS",
            "DEFAULT_MONITOR", "register_detector", "unregister_detector", "types_without_detector", "detect_failure",
-           "detect_stall", "robustness", "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
+           "robustness", "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
 
 COLLISION_TYPES = ("rear_end", "struck_from_behind", "side", "head_on", "pedestrian", "obstacle")
 STALL_SPEED = STANDING_SPEED
@@ -254,13 +254,9 @@ def detect_failure(result, trace, settings: MonitorSettings = DEFAULT_MONITOR) -
     return None
 
 
-def detect_stall(trace, settings: MonitorSettings = DEFAULT_MONITOR) -> Optional[Failure]:
+def _stall(trace, settings: MonitorSettings) -> Optional[Failure]:
     """The episode's first stall (the ego stood for the settings' ``stall_seconds`` with a free path ahead), or
     ``None``, whatever else happened in it."""
-    return _stall(trace, settings)
-
-
-def _stall(trace, settings: MonitorSettings) -> Optional[Failure]:
     start = first_stall_step(trace, settings.stall_seconds)
     if start is None:
         return None
