@@ -410,7 +410,7 @@ def _bucket_densities(cont: Any, u: List[float]) -> List[float]:
 
 
 def make_sampler(name: str, space: Any, seed: int, options: Optional[Dict[str, Any]] = None) -> SceneSampler:
-    """The sampler called ``name`` (:data:`SAMPLERS`) over ``space``, seeded.
+    """The sampler called ``name`` (one of :func:`registered_samplers`) over ``space``, seeded.
 
     ``space``: a :class:`~dv2s_gym.mining.space.SceneSpace`, or its VerifAI ``feature_space``
     (then ``split`` gives every scenario the full width of the unit box). ``options``: VerifAI
@@ -477,7 +477,8 @@ _REGISTRY: Dict[str, SamplerRecord] = {
 }
 
 SAMPLERS = tuple(_REGISTRY)
-"""The samplers that ship with dv2s-gym (:func:`registered_samplers`: with those registered since)."""
+"""The names of the samplers that ship with dv2s-gym, in their documented order (``--sampler`` lists them first).
+The names accepted now, plug-in samplers included, are :func:`registered_samplers`: ask it, not this tuple."""
 
 SAMPLER_OPTIONS = {name: record.options for name, record in _REGISTRY.items() if record.options}
 """The options each shipped sampler takes (the others take none)."""

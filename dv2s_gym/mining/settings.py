@@ -54,7 +54,7 @@ class MineSettings:
     budget: int = setting(200, resume=False)
     """Episodes to run in total (at least 1)."""
     sampler: str = "novelty-bandit"
-    """One of :data:`~dv2s_gym.mining.samplers.SAMPLERS` (``novelty-bandit``: broader failures than VerifAI's
+    """One of :func:`~dv2s_gym.mining.samplers.registered_samplers` (``novelty-bandit``: broader failures than VerifAI's
     cross-entropy on the breadth bench, bench/RESULTS.md)."""
     sampler_options: Optional[Mapping[str, Any]] = setting(None, record=lambda options: dict(options or {}) or None)
     """Parameters of an adaptive sampler (VerifAI's ``alpha``, ``buckets``, ``thres``;
