@@ -118,9 +118,14 @@ def test_a_file_where_a_folder_belongs_is_named(tmp_path, capsys, flag):
     a_file = tmp_path / "a_file"
     a_file.write_text("mine\n")
     given = {"--out": tmp_path / "run", "--bank": tmp_path / "bank", flag: a_file}
-    code, _, err = run(capsys, "mine", "--policy", "rule", "--budget", "4", "--out", given["--out"],
-                       "--bank", given["--bank"], "--no-progress")
-    assert code == 2 and f"{flag} {a_file} is a file, not a folder" in one_line_error(err)
+    try:
+        code, _, err = run(capsys, "mine", "--policy", "rule", "--budget", "4", "--out", given["--out"],
+                           "--bank", given["--bank"], "--no-progress")
+    except SystemExit as stop:  # --out is checked while the options are read
+        code, err = stop.code, capsys.readouterr().err
+    lines = err.strip().splitlines()  # "dv2s: error: ..." or, for --out, "dv2s mine: error: argument --out: ..."
+    assert len(lines) == 1 and lines[0].startswith("dv2s") and "error: " in lines[0] and "Traceback" not in err
+    assert code == 2 and flag in lines[0] and f"{a_file} is a file, not a folder" in lines[0]
     assert a_file.read_text() == "mine\n" and not (tmp_path / "run").exists() and not (tmp_path / "bank").exists()
 
 
