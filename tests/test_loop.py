@@ -634,7 +634,8 @@ def test_a_held_out_familys_grandchild_stays_out_of_the_fine_tuning_mix(tmp_path
 
     monkeypatch.setattr(loop_module, "_dagger_arm", fake_dagger)
     arm = loop_module._Arm(bank=str(bank), method="dagger", steps=1, seed=0, n_envs=1, env_config={},
-                           fine_tune_config={}, reward={}, learning_rate=1e-3, progress=False, log=lambda _: None)
+                           fine_tune_config={}, reward={}, learning_rate=1e-3, beta_decay=0.5, progress=False,
+                           log=lambda _: None)
     # the held-out scenario is a replay of the cut-in family whose immediate parent is m_cutin
     excluded = {"m_cutin_replay", "highway_cut_in_from_left"}
     record = loop_module._fine_tune_arm("dv2s-ppo", tmp_path / "arm", excluded, 0.5, arm, with_mined=True, label="x")
@@ -646,6 +647,53 @@ def test_a_held_out_familys_grandchild_stays_out_of_the_fine_tuning_mix(tmp_path
     weights, facts = loop_module.arm_weights(str(bank), excluded, 0.5, with_mined=False)
     assert weights == {"urban_lead_vehicle_stopped": 1.0}
     assert facts["mined_left_out"] == 1 and facts["families"] == ["urban_lead_vehicle_stopped"]
+
+
+def test_dagger_beta_decay_is_a_checked_recorded_setting_both_dagger_arms_use(tmp_path, monkeypatch, capsys):
+    """``dagger_beta_decay`` (``--dagger-beta-decay``): refused outside [0, 1], recorded in ``loop.json``, part of
+    the loop's identity, and the ``beta_decay`` of the DaggerConfig each arm's DAgger fine-tuning is given."""
+    import policies.imitation as imitation
+    from dv2s_gym.cli import build_parser
+    from dv2s_gym.cli.loop import loop_settings
+    from dv2s_gym.mining.loop_settings import LoopSettings
+
+    for bad in (-0.1, 1.5, float("nan"), "0", True):
+        with pytest.raises(LoopError, match="--dagger-beta-decay"):
+            LoopSettings(dagger_beta_decay=bad)
+    assert LoopSettings().dagger_beta_decay == LoopSettings.evidence().dagger_beta_decay == 0.5
+    assert "dagger_beta_decay" in LoopSettings.resume_keys()
+    parse = build_parser().parse_args
+    assert loop_settings(parse(["loop", "--dagger-beta-decay", "0"])).dagger_beta_decay == 0.0
+    assert loop_settings(parse(["loop", "--profile", "evidence"])).dagger_beta_decay == 0.5
+    code, _, err = run(capsys, "loop", "--out", tmp_path / "bad", "--no-progress", "--dagger-beta-decay", "2")
+    assert code == 2 and "--dagger-beta-decay" in one_line_error(err)
+    assert not (tmp_path / "bad").exists()
+
+    _StandIns(monkeypatch)
+    configs = []
+
+    def dagger_fine_tune(policy, config, dagger, *, log):
+        configs.append((Path(config.out).name, dagger))
+        folder = Path(config.out)
+        folder.mkdir(parents=True, exist_ok=True)
+        for name in ("model.zip", "model_card.json"):
+            shutil.copyfile(SHIPPED_CHECKPOINT.parent / name, folder / name)
+        return folder / "model.zip"
+
+    monkeypatch.setattr(imitation, "dagger_fine_tune", dagger_fine_tune)
+    out = tmp_path / "loop"
+    miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
+    settings = {**WIRING, "fine_tune_method": "dagger"}
+    run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, dagger_beta_decay=0.0, **settings)
+    assert sorted(name for name, _ in configs) == ["control", "policy"]
+    assert all(dagger.beta_decay == 0.0 and dagger.learning_rate == 1e-3 for _, dagger in configs)
+    assert json.loads((out / "loop.json").read_text())["settings"]["dagger_beta_decay"] == 0.0
+    with pytest.raises(RunIdentityError, match="dagger_beta_decay: run has 0.0, asked 0.5"):
+        run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, rounds=2, **settings)
+    # the default reaches the arms as DaggerConfig's own default
+    configs.clear()
+    run_loop("dv2s-ppo", out=tmp_path / "default", miner=miner, log=lambda _: None, **settings)
+    assert [dagger.beta_decay for _, dagger in configs] == [0.5, 0.5] == [imitation.DaggerConfig().beta_decay] * 2
 
 
 def test_loop_says_loudly_when_too_few_episodes_are_held_out(tmp_path, monkeypatch):

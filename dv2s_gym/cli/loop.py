@@ -121,6 +121,11 @@ def _add_arms_and_run_arguments(p: argparse.ArgumentParser) -> None:
                    help=_default("fine_tune_method", "ppo: continue PPO on the fine-tuning reward; dagger: imitate "
                                  "the rule-based reference driver on the policy's own states (DAgger; "
                                  "--fine-tune-reward unused)"))
+    p.add_argument("--dagger-beta-decay", type=float, default=None,
+                   help=_default("dagger_beta_decay", "DAgger's beta decay in both arms, in [0, 1]: the reference "
+                                 "driver drives the first DAgger iteration alone and each later iteration i with "
+                                 "probability decay**i, the policy being fine-tuned the rest; 0: the policy drives "
+                                 "every later iteration (--fine-tune-method dagger only)"))
     p.add_argument("--margin", type=float, default=None,
                    help=_default("margin", "the regression test's non-inferiority margin"))
     p.add_argument("--seed", type=int, default=None, help=_default("seed", "seed"))

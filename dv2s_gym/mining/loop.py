@@ -846,7 +846,8 @@ def _fine_tune_arms(loop: _Loop, number: int, current: str, round_dir: Path, tim
         excluded.update(earlier_split.held_out_family_names)
     arm = _Arm(bank=loop.bank, method=s.fine_tune_method, steps=s.fine_tune_steps, seed=s.seed * 1000 + number,
                n_envs=s.n_envs, env_config=loop.env_config, fine_tune_config=loop.fine_tune_config,
-               reward=s.fine_tune_reward, learning_rate=s.fine_tune_lr, progress=loop.progress, log=loop.log)
+               reward=s.fine_tune_reward, learning_rate=s.fine_tune_lr, beta_decay=s.dagger_beta_decay,
+               progress=loop.progress, log=loop.log)
     if not timed.steps.done("fine_tune"):
         timed("fine_tune", lambda: _fine_tune_arm(current, round_dir / "policy", excluded, s.mined_share, arm,
                                                   with_mined=True, label=f"round {number}"),
@@ -953,6 +954,7 @@ class _Arm:
     fine_tune_config: Dict[str, Any]
     reward: Mapping[str, float]
     learning_rate: float
+    beta_decay: float
     progress: bool
     log: Callable[[str], None]
 
@@ -1005,8 +1007,8 @@ def _dagger_arm(current: str, out: Path, weights: Dict[str, float], arm: _Arm, l
     from policies.imitation import DaggerConfig, dagger_fine_tune
 
     # a resumed run says so itself ("DAgger: resumed from ...", after the step's own line naming the arm)
-    path = dagger_fine_tune(current, arm.config(out, weights), DaggerConfig(learning_rate=arm.learning_rate),
-                            log=arm.log)
+    path = dagger_fine_tune(current, arm.config(out, weights), DaggerConfig(learning_rate=arm.learning_rate,
+                                                                             beta_decay=arm.beta_decay), log=arm.log)
     dagger = read_model_card(path).get("fine_tune") or {}
     return FineTuneArm(model=str(path.resolve()), method="dagger", reward_weights=None, env_config=arm.env_config,
                        reference=dagger.get("reference"), agreement=dagger.get("agreement"),

@@ -69,6 +69,10 @@ class LoopSettings:
         default_factory=lambda: {"standing": -0.3})
     """Reward-term weights overriding the policy's own in the fine-tuning env only (``{}``: the policy's reward
     unchanged; ``None``: the default); used by the ``ppo`` method only (imitation has no reward)."""
+    dagger_beta_decay: float = 0.5
+    """DAgger's ``beta_decay`` in both arms (:class:`~policies.dagger_config.DaggerConfig`), in [0, 1]: the reference
+    driver drives the first iteration alone and each later one with probability ``beta_decay ** i``, the policy
+    the rest (0: the policy drives every later iteration); used by the ``dagger`` method only."""
     mined_share: float = 0.5
     """Probability of drawing a mined fine-tuning scenario during fine-tuning, strictly between 0 and 1."""
     control: bool = True
@@ -133,6 +137,7 @@ class LoopSettings:
                      example="a failure-rate difference, e.g. 0.05 for 5 points")
         check_number(LoopError, "--holdout-fraction", self.holdout_fraction, low=0, high=1)
         check_number(LoopError, "--mined-share", self.mined_share, low=0, high=1, interval="()")
+        check_number(LoopError, "--dagger-beta-decay", self.dagger_beta_decay, low=0, high=1)
 
     def replace(self, **changes: Any) -> "LoopSettings":
         """A copy with ``changes`` (checked again)."""
