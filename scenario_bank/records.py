@@ -152,6 +152,11 @@ class JsonRecord(_MappingABC):
         return frozenset()
 
     @classmethod
+    def has_required(cls, data: Mapping[str, Any]) -> bool:
+        """Whether ``data`` holds every field :meth:`from_dict` needs (each present and not ``null``)."""
+        return all(data.get(key) is not None for key in cls._REQUIRED)
+
+    @classmethod
     def from_dict(cls, data: Mapping[str, Any]):
         """The record of ``data`` (a JSON object as the files hold it), every known field checked;
         :class:`RecordError` names a field of the wrong kind or a required one that is missing."""

@@ -146,7 +146,7 @@ def _result(value: Any) -> Any:
     """A paired episode's side: a :class:`RegressEpisode` (a result of a run: it has the record's required fields),
     else the JSON object as given (a report other code made from partial results)."""
     if isinstance(value, Mapping) and not isinstance(value, RegressEpisode) \
-            and all(value.get(key) is not None for key in RegressEpisode._REQUIRED):
+            and RegressEpisode.has_required(value):
         return RegressEpisode.from_dict(value)
     if value is not None and not isinstance(value, Mapping):
         raise RecordError(f"a regression result must be a JSON object, not {type(value).__name__}")
