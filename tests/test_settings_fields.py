@@ -89,6 +89,7 @@ BAD = {
         "fine_tune_lr": ("--fine-tune-lr", [0, -1e-4, NAN, INF, True, "1e-4"]),
         "fine_tune_reward": ("--fine-tune-reward", [0, "x", [1], {"standing": "x"}, {"standing": NAN}]),
         "mined_share": ("--mined-share", SHARE_OPEN),
+        "dagger_beta_decay": ("--dagger-beta-decay", SHARE_CLOSED),
         "control": ("control", BOOL),
         "k_eval": ("--k-eval", COUNT_FROM_1),
         "min_heldout_episodes": ("--min-heldout-episodes", COUNT_FROM_0),
