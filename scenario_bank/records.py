@@ -131,18 +131,28 @@ _CHECKS = {
 }
 
 
+def _items_json(value: Any) -> Any:
+    """The JSON form of an ``_ITEMS`` field: its records as JSON objects (an item that is no record as it is)."""
+    def plain(item: Any) -> Any:
+        return item.to_dict() if isinstance(item, JsonRecord) else item
+    if isinstance(value, Mapping):
+        return {name: plain(item) for name, item in value.items()}
+    return [plain(item) for item in value]
+
+
 class JsonRecord(_MappingABC):
     """What the records share (those of this module, and the other typed records of files the product writes,
     such as a loop's rounds): the JSON form (:meth:`to_dict`), reading from it (:meth:`from_dict`) and
     read-only mapping access to it. Subclasses list their fields' JSON kinds in ``_KINDS`` (a field missing
     from it is the record's ``extra`` or ``null_fields``), the fields :meth:`from_dict` needs in ``_REQUIRED``,
-    the fields nested records fill in ``_NESTED`` and, in ``_ATTRIBUTES``, a JSON key held by an attribute of
+    the fields nested records fill in ``_NESTED``, the lists or objects of records of one type in ``_ITEMS`` and, in ``_ATTRIBUTES``, a JSON key held by an attribute of
     another name (a key that is also one of the record's own attribute names)."""
 
     _KINDS: ClassVar[Dict[str, str]] = {}
     _ATTRIBUTES: ClassVar[Dict[str, str]] = {}
     _REQUIRED: ClassVar[Tuple[str, ...]] = ()
     _NESTED: ClassVar[Dict[str, type]] = {}
+    _ITEMS: ClassVar[Dict[str, type]] = {}
     _LISTS: ClassVar[Tuple[str, ...]] = ()
     _WHAT: ClassVar[str] = "record"
 
@@ -178,6 +188,8 @@ class JsonRecord(_MappingABC):
                 raise RecordError(f"{cls._WHAT} field {key!r} must be {wanted}, not {_shown(value)}")
             if key in cls._NESTED:
                 value = cls._nested(key, value)
+            elif key in cls._ITEMS:
+                value = cls._items(key, value, cls._ITEMS[key].from_dict)
             elif key in cls._LISTS:
                 value = tuple(value)
             values[cls._ATTRIBUTES.get(key, key)] = value
@@ -197,6 +209,8 @@ class JsonRecord(_MappingABC):
                 continue
             if key in cls._NESTED:
                 value = cls._NESTED[key].from_checked(value)
+            elif key in cls._ITEMS:
+                value = cls._items(key, value, cls._ITEMS[key].from_checked)
             elif key in cls._LISTS:
                 value = tuple(value)
             values[cls._ATTRIBUTES.get(key, key)] = value
@@ -217,6 +231,20 @@ class JsonRecord(_MappingABC):
             raise RecordError(f"{cls._WHAT} field {key!r}: {text}") from None
 
     @classmethod
+    def _items(cls, key: str, value: Any, read: Any) -> Any:
+        """The records of field ``key``, a JSON list (a tuple back) or object (a dict back) of records of one type
+        (``_ITEMS``), each read by ``read``; its errors name the item (``episodes[3]``, ``scenarios.name``)."""
+        items = value.items() if isinstance(value, Mapping) else enumerate(value)
+        out = {}
+        for index, item in items:
+            try:
+                out[index] = read(item)
+            except RecordError as error:
+                where = f"{key}.{index}" if isinstance(value, Mapping) else f"{key}[{index}]"
+                raise RecordError(f"{cls._WHAT} field {where!r}: {error}") from None
+        return out if isinstance(value, Mapping) else tuple(out.values())
+
+    @classmethod
     def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
         """Checks of a subclass beyond the fields' kinds; the values they replace."""
         return {}
@@ -233,6 +261,8 @@ class JsonRecord(_MappingABC):
                 continue
             if isinstance(value, JsonRecord):
                 value = value.to_dict()
+            elif key in self._ITEMS:
+                value = _items_json(value)
             elif key in self._LISTS:
                 value = list(value)
             out[key] = value

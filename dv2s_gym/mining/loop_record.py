@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Dict, FrozenSet, Mapping, Optional, Tuple
 
-from scenario_bank.records import JsonRecord, RecordError
+from scenario_bank.records import JsonRecord
 
 __all__ = ["RoundRecord", "RoundSteps", "HeldOutComparison", "ArmFailureTypes", "VersusControl", "ControlTable",
            "MinedEntry", "MiningSummary", "SplitRecord", "ReferenceGate", "HeldOutBefore", "FineTuneArm",
@@ -60,19 +60,6 @@ class MinedEntry(JsonRecord):
         return frozenset({"reproduction"} | ({"parent"} if self.replay else set()))
 
 
-def _records(cls: type, values: Any, what: str) -> Tuple[Any, ...]:
-    """``values`` (a JSON list) as a tuple of ``cls`` records; a :class:`RecordError` names ``what``."""
-    if not isinstance(values, (list, tuple)):
-        raise RecordError(f"{what} must be a list, not {type(values).__name__}")
-    found = []
-    for number, value in enumerate(values):
-        try:
-            found.append(cls.from_dict(value))
-        except RecordError as error:
-            raise RecordError(f"{what}[{number}]: {error}") from None
-    return tuple(found)
-
-
 @dataclass(frozen=True, eq=False)
 class MiningSummary(JsonRecord):
     """A round's ``mine`` step: the mining run's counts (``episodes``, ``errors``, ``failures``,
@@ -104,22 +91,14 @@ class MiningSummary(JsonRecord):
         "clusters": "int", "conversions": "object", "replays": "object", "rejected_reasons": "list",
         "rejected_reason_count": "int", "clusters_not_converted": "int", "clusters_not_kept": "int",
         "clusters_reference_failed": "int", "kept": "list", "folder": "str"}
+    _ITEMS: ClassVar[Dict[str, type]] = {"kept": MinedEntry}
     _LISTS: ClassVar[Tuple[str, ...]] = ("rejected_reasons",)
     _WHAT: ClassVar[str] = "mining step"
 
-    @classmethod
-    def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
-        return {"kept": _records(MinedEntry, data.get("kept") or [], "mining step field 'kept'")} \
-            if "kept" in data and data["kept"] is not None else {}
 
     def default_null_fields(self) -> FrozenSet[str]:
         return frozenset({"clusters", "clusters_not_converted", "clusters_not_kept", "clusters_reference_failed"})
 
-    def to_dict(self) -> Dict[str, Any]:
-        out = super().to_dict()
-        if "kept" in out:
-            out["kept"] = [entry.to_dict() for entry in self.kept]
-        return out
 
     @property
     def kept_entries(self) -> Tuple[MinedEntry, ...]:

@@ -48,23 +48,6 @@ class ReportRecord(JsonRecord):
         """The record of a JSON object of ``report.json`` (or the record itself)."""
         return cls.from_dict(data)
 
-    @classmethod
-    def _records(cls, key: str, data: Mapping[str, Any], read: Any) -> Any:
-        """``read`` applied to the items of the list (or values of the object) ``data[key]``; its errors name the
-        item (``episodes[3].seed``)."""
-        value = data.get(key)
-        if value is None:
-            return None
-        items = value.items() if isinstance(value, Mapping) else enumerate(value)
-        out = {}
-        for index, item in items:
-            try:
-                out[index] = read(item)
-            except RecordError as error:
-                where = f"{key}.{index}" if isinstance(value, Mapping) else f"{key}[{index}]"
-                raise RecordError(f"{cls._WHAT} field {where!r}: {error}") from None
-        return out if isinstance(value, Mapping) else tuple(out.values())
-
 
 @dataclass(frozen=True, eq=False)
 class BankInfo(ReportRecord):
@@ -395,28 +378,13 @@ class RegressReport(ReportRecord):
     _NESTED: ClassVar[Dict[str, type]] = {"bank": BankInfo, "settings": ReportSettings, "candidate": PolicyInfo,
                                           "baseline": PolicyInfo, "overall": ScenarioResult,
                                           "sequential": SequentialOutcome}
-    _LISTS: ClassVar[Tuple[str, ...]] = ("episodes", "regressed", "newly_failing", "errors")
+    _ITEMS: ClassVar[Dict[str, type]] = {"episodes": PairedEpisode, "errors": EpisodeError,
+                                         "scenarios": ScenarioResult}
+    _LISTS: ClassVar[Tuple[str, ...]] = ("regressed", "newly_failing")
     _WHAT: ClassVar[str] = "regression report"
 
     def default_null_fields(self) -> FrozenSet[str]:
         return frozenset({"baseline", "verdict", "sequential", "power", "aggregates"})
-
-    @classmethod
-    def _check_extra(cls, data: Mapping[str, Any]) -> Dict[str, Any]:
-        found = {"episodes": cls._records("episodes", data, PairedEpisode.from_dict),
-                 "errors": cls._records("errors", data, EpisodeError.from_dict),
-                 "scenarios": cls._records("scenarios", data, ScenarioResult.from_dict)}
-        return {key: value for key, value in found.items() if value is not None}
-
-    def to_dict(self) -> Dict[str, Any]:
-        out = super().to_dict()
-        for key in ("episodes", "errors"):
-            if key in out:
-                out[key] = [item.to_dict() if isinstance(item, JsonRecord) else item for item in out[key]]
-        if "scenarios" in out:
-            out["scenarios"] = {name: entry.to_dict() if isinstance(entry, JsonRecord) else entry
-                                for name, entry in out["scenarios"].items()}
-        return out
 
     @property
     def has_baseline(self) -> bool:
