@@ -15,15 +15,16 @@ import errno
 import hashlib
 import json
 import os
+import shutil
 import uuid
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterator, Union
+from typing import Any, Iterable, Iterator, List, Union
 
 from scenario_bank.errors import DV2SError
 
 __all__ = ["AtomicWriteError", "atomic_write_bytes", "atomic_write_text", "atomic_write_json", "atomic_path",
-           "file_sha256"]
+           "staged_folder", "file_sha256"]
 
 PathLike = Union[str, os.PathLike]
 
@@ -71,6 +72,49 @@ def atomic_path(path: PathLike, *, keep_suffix: bool = False) -> Iterator[Path]:
         raise _error(error, path) from None
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def _missing_folders(folder: Path) -> List[Path]:
+    """The folders of ``folder``'s path that do not exist yet, deepest first."""
+    missing = []
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    return missing
+
+
+@contextmanager
+def staged_folder(folder: PathLike, names: Iterable[str]) -> Iterator[Path]:
+    """Yield a hidden temporary folder beside ``folder`` to write a set of files in; on success each of ``names``
+    written there replaces its namesake in ``folder`` and each not written is removed from it (a file of an earlier
+    run that this one did not make is not left to pass as its result); other files in ``folder`` stay.
+
+    If the block raises (a full disk mid-write included), ``folder`` is left exactly as it was (a folder this call
+    had to create is removed again) and the temporary folder is removed; an ``OSError`` comes out as an
+    :class:`AtomicWriteError` naming ``folder``, the problem and the fix.
+    """
+    folder = Path(folder)
+    created = _missing_folders(folder)
+    stage = _temp_name(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        stage.mkdir()
+        yield stage
+        for name in names:
+            if (stage / name).is_file():
+                os.replace(stage / name, folder / name)
+            else:
+                (folder / name).unlink(missing_ok=True)
+    except BaseException as error:
+        shutil.rmtree(stage, ignore_errors=True)
+        for made in created:  # deepest first: each is empty once the one below it is gone
+            if made.is_dir() and not any(made.iterdir()):
+                made.rmdir()
+        if isinstance(error, OSError):  # named by the folder, not the temporary one the file was written in
+            raise _error(error, folder) from None
+        raise
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
 
 
 def atomic_write_bytes(path: PathLike, data: bytes, *, fsync: bool = True) -> Path:

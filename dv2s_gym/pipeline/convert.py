@@ -22,7 +22,7 @@ import datetime
 
 from dv2s_gym.pipeline.llm_config import LLMConfig, LLMConfigLike
 from dv2s_gym.pipeline.sg.openai import classify_failure
-from scenario_bank.atomic import atomic_write_text
+from scenario_bank.atomic import atomic_write_text, staged_folder
 from dv2s_gym.pipeline.stages import Description, Generation, describe, generate
 from dv2s_gym.pipeline.semantics.trace import elements_from_trace
 from envs.recording import VideoWriter
@@ -133,12 +133,22 @@ def _write(folder: Path, name: str, text: str) -> None:
 def generate_to_folder(description: Description, out: Path, *, sg: str = "rules", seed: int = 0,
                        llm_config: LLMConfigLike = None, labels: Optional[Dict[str, Any]] = None,
                        seconds: float = 10.0) -> Dict[str, Any]:
-    """SG + validation for a description; writes the folder's files and returns the report."""
-    out.mkdir(parents=True, exist_ok=True)
-    for stale in ("scenario.scenic", "preview.webm"):  # a failed run must not leave an earlier run's result
-        (out / stale).unlink(missing_ok=True)
-    _write(out, "description.txt", description.text.strip() + "\n")
-    _write(out, "elements.json", json.dumps(description.elements, indent=2) + "\n")
+    """SG + validation for a description; writes the folder's files (:data:`OUTPUT_FILES`) and returns the report.
+
+    The files are written beside ``out`` and moved into it together at the end (:func:`staged_folder`): a run that
+    fails to write (a full disk) leaves ``out`` as it was, and a finished run leaves no file of an earlier one.
+    """
+    with staged_folder(out, OUTPUT_FILES) as stage:
+        _write(stage, "description.txt", description.text.strip() + "\n")
+        _write(stage, "elements.json", json.dumps(description.elements, indent=2) + "\n")
+        report = _generate_in(stage, description, sg=sg, seed=seed, llm_config=llm_config, labels=labels,
+                              seconds=seconds)
+    return report
+
+
+def _generate_in(stage: Path, description: Description, *, sg: str, seed: int, llm_config: LLMConfigLike,
+                 labels: Optional[Dict[str, Any]], seconds: float) -> Dict[str, Any]:
+    """:func:`generate_to_folder`'s work, its files written in ``stage``."""
     start = time.perf_counter()
     report: Dict[str, Any] = {"description": description.as_dict()}
     try:
@@ -147,8 +157,8 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
         report["generation"] = {"error": f"{type(error).__name__}: {error}", "category": classify_failure(error)}
         generation = None
     if generation is not None:
-        _write(out, "scenario.scenic", generation.script)
-        check = check_scenario(generation.script, seed=seed, seconds=seconds, preview=out / "preview.webm")
+        _write(stage, "scenario.scenic", generation.script)
+        check = check_scenario(generation.script, seed=seed, seconds=seconds, preview=stage / "preview.webm")
         if check.ran:
             generation.note_simulated(check.simulated_elements)
         report["generation"] = generation.as_dict()
@@ -158,8 +168,8 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
             if labels is not None:
                 report["e2e_sc"] = e2e_sc(labels, check.simulated_elements)
     report["seconds"] = round(time.perf_counter() - start, 3)
-    report["files"] = [name for name in OUTPUT_FILES if name == "report.json" or (out / name).is_file()]
-    _write(out, "report.json", json.dumps(report, indent=2, default=str) + "\n")
+    report["files"] = [name for name in OUTPUT_FILES if name == "report.json" or (stage / name).is_file()]
+    _write(stage, "report.json", json.dumps(report, indent=2, default=str) + "\n")
     return report
 
 
