@@ -214,3 +214,14 @@ def test_a_worker_without_the_registered_type_says_so(toy_type, monkeypatch):
     monkeypatch.setattr(failures, "failure_table", lambda: FAILURE_TABLE)  # as a process that never registered
     result = _regress_task(monkeypatch, [10.0, 10.0, 4.0], ["collision", TOY])
     assert result.get("failed") is None and "hard_brake is not registered in this worker process" in result["error"]
+
+
+def test_every_collision_type_has_a_label_and_a_kind_reads_as_words():
+    from dv2s_gym.mining.monitors import COLLISION_LABELS, COLLISION_TYPES, kind_label
+
+    assert set(COLLISION_LABELS) == set(COLLISION_TYPES)
+    assert kind_label("collision:head_on") == "head-on collision"
+    assert kind_label("collision:pedestrian") == "collision with a pedestrian"
+    assert kind_label("off_road") == "off road" and kind_label("stall") == "stall"
+    assert kind_label("collision:t_bone") == "collision (t bone)"  # a refinement no table names
+    assert kind_label("wobble") == "wobble"  # a type of a plug-in not loaded now

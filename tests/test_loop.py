@@ -166,6 +166,15 @@ def test_heldout_comparison_reports_no_drop_or_test_below_the_minimum():
     tuned[0]["failure"] = {"type": "stall"}
     kinds = heldout_comparison(start, tuned, control, min_episodes=1)["failure_types"]
     assert kinds == {"start": {"stall": 1, "collision": 1}, "fine_tuned": {"stall": 1}, "control": {}}
+    from dv2s_gym.mining.loop_report import render_markdown
+
+    start[2]["failure"] = {"type": "off_road"}
+    after = heldout_comparison(start, tuned, control, min_episodes=1)
+    record = {"round": 1, "steps": {"after": after}}
+    markdown = render_markdown({"settings": {"policy": "dv2s-ppo"}, "policy": "dv2s-ppo", "rounds": [record]})
+    # most severe first, each type by its label in the failure table
+    assert "- held-out failures by type: start collision 1, off road 1, stall 1; control none; fine-tuned stall 1" \
+        in markdown
 
 
 def test_the_control_test_needs_the_minimums_and_the_floor_on_its_own_pairs():

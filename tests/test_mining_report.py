@@ -479,6 +479,22 @@ def test_the_miner_s_summary_states_the_breadth(run_dir):
             "families with a failure; 5 collisions, 1 stalls") in run.summary()
 
 
+def test_the_miner_s_summary_calls_failure_kinds_by_their_labels(run_dir):
+    from pathlib import Path as _Path
+
+    from dv2s_gym.mining.cluster import cluster_failures
+    from dv2s_gym.mining.miner import MineRun, read_records
+
+    records = read_records(_Path(run_dir) / "episodes.jsonl")
+    settings = json.loads((_Path(run_dir) / "settings.json").read_text())
+    run = MineRun(out=_Path(run_dir), settings=settings, records=records,
+                  clusters=cluster_failures([EpisodeRecord.from_dict(r) for r in records]))
+    failures_line = run.summary().splitlines()[1]
+    assert failures_line.startswith("10 failures (rear-end collision 5, off road 3, ")
+    assert "low_ttc 1" in failures_line and "stall 1" in failures_line
+    assert "collision:" not in failures_line and "off_road" not in failures_line
+
+
 def test_without_a_reference_driver_the_summary_counts_no_behaviour_with_avoidable_failures(run_dir):
     from pathlib import Path as _Path
 

@@ -103,7 +103,7 @@ from dv2s_gym.mining.errored import merged_messages, messages_text
 from dv2s_gym.mining.loop_record import (
     HeldOutComparison, MinedEntry, MiningSummary, ReferenceGate, RegressSummary, RoundRecord, RoundSteps, SplitRecord,
     UntouchedComparison)
-from dv2s_gym.mining.report_text import clip_caption
+from dv2s_gym.mining.report_text import by_type_text, clip_caption
 from dv2s_gym.mining.loop_verdict import (ACCEPTED, HELDOUT_ALPHA, evidence_floor_note, judge_round,
                                          recommendation)
 from dv2s_gym.regress.records import BankInfo, PairedComparison, PairedEpisode, Summary
@@ -493,7 +493,7 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
     kinds = after.get("failure_types") or {}
     if kinds:
         lines.append("- held-out failures by type: " + "; ".join(
-            f"{label} " + (", ".join(f"{name} {count}" for name, count in sorted(kinds[role].items())) or "none")
+            f"{label} {by_type_text(kinds[role])}"
             for role, label in (("start", "start"), ("control", "control"), ("fine_tuned", "fine-tuned"))
             if role in kinds))
     versus = after.get("vs_control") or {}

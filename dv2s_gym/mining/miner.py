@@ -57,7 +57,7 @@ from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import is_novel
 from dv2s_gym.mining.family import record_family, scenario_family
 from dv2s_gym.mining.jsonl import JsonlAppender, read_rows
-from dv2s_gym.mining.monitors import MonitorSettings, types_without_detector
+from dv2s_gym.mining.monitors import MonitorSettings, kind_label, types_without_detector
 from dv2s_gym.mining.report import write_reports
 from dv2s_gym.mining.report_text import error_warning
 from dv2s_gym.mining.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
@@ -154,7 +154,7 @@ class MineRun:
             f"{errors} error{'s' if errors != 1 else ''}{self._errored_scenarios()}, "
             + (f"{restarted} finished after their worker crashed or hung and was replaced, " if restarted else "")
             + f"{self.seconds:.0f} s",
-            f"{len(failures)} failures ({', '.join(f'{k} {n}' for k, n in kinds.most_common()) or 'none'}); "
+            f"{len(failures)} failures ({', '.join(f'{kind_label(k)} {n}' for k, n in kinds.most_common()) or 'none'}); "
             + (f"{len(self.avoidable)} avoidable by {self.settings['reference']}" if self.settings["reference"]
              else "avoidability not checked (no reference driver)"),
             f"{self.distinct_clusters} distinct behaviours"

@@ -34,14 +34,18 @@ from envs.safety_metrics import (DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD, F
                                  MonitorSettings, first_stall_step)
 from scenario_bank.elements import ActorKind
 from scenario_bank.failure_types import (FAILURE_TYPES, FailureTypeError, UnknownDetectorError, attach_detection,
-                                          detach_detection, failure_table, failure_type)
+                                          detach_detection, failure_table, failure_type, type_label)
 from scenario_bank.plugins import forget_plugin, remember_plugin
 
-__all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "MonitorSettings", "Detector", "DETECTORS",
+__all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "COLLISION_LABELS", "kind_label", "MonitorSettings", "Detector", "DETECTORS",
            "DEFAULT_MONITOR", "register_detector", "unregister_detector", "types_without_detector", "detect_failure",
            "robustness", "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
 
 COLLISION_TYPES = ("rear_end", "struck_from_behind", "side", "head_on", "pedestrian", "obstacle")
+COLLISION_LABELS = {"rear_end": "rear-end collision", "struck_from_behind": "collision struck from behind",
+                    "side": "side collision", "head_on": "head-on collision",
+                    "pedestrian": "collision with a pedestrian", "obstacle": "collision with an obstacle"}
+"""What the terminal calls a collision of each of :data:`COLLISION_TYPES` (:func:`kind_label`)."""
 STALL_SPEED = STANDING_SPEED
 """m/s under which the ego counts as standing."""
 _VEHICLES = (ActorKind.CAR, ActorKind.TRUCK, ActorKind.BICYCLE, ActorKind.MOTORCYCLE, None)
@@ -85,6 +89,17 @@ class Failure:
 
 def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def kind_label(kind: str) -> str:
+    """What the terminal calls a failure kind (:attr:`Failure.kind`, ``type`` or ``type:collision_type``): a
+    collision by its type (:data:`COLLISION_LABELS`, ``"rear-end collision"``), any other type by its failure-table
+    label (:func:`~scenario_bank.failure_types.type_label`, ``"off road"``), a refinement no table names after it in
+    words (``"collision (t bone)"``). Reports written as JSON keep the kinds themselves."""
+    name, _, refined = kind.partition(":")
+    if name == "collision" and refined in COLLISION_LABELS:
+        return COLLISION_LABELS[refined]
+    return type_label(name) + (f" ({refined.replace('_', ' ')})" if refined else "")
 
 
 def collision_type(ego: List[float], other: List[float], other_kind: Optional[str]) -> str:
