@@ -23,6 +23,7 @@ def fixed_dra(monkeypatch):
         calls.append((len(clip.frames), camera, question))
         return TEXT, {"model": "fixed-1"}
 
+    monkeypatch.setattr(stages, "_MODEL_FREE", {stage: set(names) for stage, names in stages._MODEL_FREE.items()})
     stages.register_dra("fixed", fixed)
     return calls
 
@@ -79,3 +80,50 @@ def _help(command):
     parser = build_parser()
     sub = next(action for action in parser._actions if action.dest == "command")
     return " ".join(sub.choices[command[0]].format_help().split())  # unwrapped
+
+
+def _model_error(capsys, argv):
+    """The one error line of ``dv2s ARGV`` refused for a model option no chosen backend reads (exit 2)."""
+    try:
+        code = main(argv)
+    except SystemExit as stop:
+        code = stop.code
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
+    return err
+
+
+def test_model_options_for_backends_that_call_no_model_are_refused_before_any_work(capsys, tmp_path):
+    err = _model_error(capsys, ["generate", TEXT, "--model", "gpt-x", "--out", str(tmp_path / "gen")])
+    assert "--model sets the model a backend calls, and --sg rules calls none" in err
+    assert "drop it, or choose a backend that calls a model (--sg openai)" in err
+    assert not (tmp_path / "gen").exists()
+    err = _model_error(capsys, ["describe", str(CLIP), "--api-key", "k", "--base-url", "http://x"])
+    assert "--base-url, --api-key set the model a backend calls, and --dra bev calls none: drop them" in err
+    err = _model_error(capsys, ["convert", str(CLIP), "--model", "m", "--out", str(tmp_path / "c")])
+    assert "--dra bev and --sg rules call none" in err and "(--dra openai or --sg openai)" in err
+
+
+def test_model_options_reach_a_backend_that_calls_a_model(capsys, fixed_dra, monkeypatch):
+    seen = []
+    stages.register_dra("fixed", lambda clip, *, camera, question, llm_config: seen.append(llm_config) or (TEXT, {}),
+                        overwrite=True)  # a plug-in's backend reads the model settings unless it says otherwise
+    assert main(["describe", str(CLIP), "--dra", "fixed", "--model", "m-1", "--max-frames", "2", "--json"]) == 0
+    assert seen[0].model == "m-1"
+    capsys.readouterr()
+    stages.register_dra("fixed", lambda clip, **options: (TEXT, {}), overwrite=True, reads_model=False)
+    err = _model_error(capsys, ["describe", str(CLIP), "--dra", "fixed", "--model", "m-1"])
+    assert "--dra fixed calls none" in err
+    # with one backend that calls a model, the options are for it
+    assert stages.reads_model("SG", "openai") and not stages.reads_model("SG", "rules")
+
+
+@pytest.mark.parametrize("command", [["describe"], ["convert"], ["eval"], ["mine"], ["generate"]])
+def test_the_model_options_are_their_own_group_of_the_help(command):
+    parser = build_parser()
+    sub = next(action for action in parser._actions if action.dest == "command")
+    text = sub.choices[command[0]].format_help()
+    start = text.index("\nmodel endpoint:\n")
+    model, options = text[start:], text[text.index("\noptions:\n"):start]  # the group comes after the options
+    for name in ("--base-url", "--model", "--api-key"):
+        assert name in model and name not in options

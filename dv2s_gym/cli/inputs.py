@@ -11,6 +11,7 @@ from typing import Any, Optional, Union
 
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.pipeline.llm_config import LLMConfig
+from dv2s_gym.pipeline.stages import reads_model
 from scenario_bank.bank import Bank, BankError, MAX_JSON_DEPTH, MAX_SIDECAR_BYTES, UnsafeBankInputError
 from scenario_bank.safe_files import nests_deeper_than, read_regular_file, UnsafeInputError
 
@@ -39,9 +40,21 @@ def read_input_file(path: str, what: str, max_bytes: int) -> bytes:
 
 
 def llm_config(args: argparse.Namespace) -> Optional[LLMConfig]:
-    """The LLM endpoint settings given (``--base-url``, ``--model``, ``--api-key``), or None."""
+    """The model endpoint settings given (``--base-url``, ``--model``, ``--api-key``), or None; a
+    :class:`UsageError` when they are given but none of the command's backends (``--dra``, ``--sg``) calls a
+    model, so they would be ignored."""
     config = {k: getattr(args, k, None) for k in ("base_url", "model", "api_key")}
-    return LLMConfig.of({k: v for k, v in config.items() if v}) if any(config.values()) else None
+    given = [f"--{k.replace('_', '-')}" for k, v in config.items() if v]
+    if not given:
+        return None
+    chosen = [(stage, getattr(args, stage.lower())) for stage in ("DRA", "SG") if getattr(args, stage.lower(), None)]
+    if chosen and not any(reads_model(stage, name) for stage, name in chosen):
+        backends = " and ".join(f"--{stage.lower()} {name}" for stage, name in chosen)
+        raise UsageError(f"{', '.join(given)} set{'s' if len(given) == 1 else ''} the model a backend calls, and "
+                         f"{backends} call{'s' if len(chosen) == 1 else ''} none: drop "
+                         f"{'it' if len(given) == 1 else 'them'}, or choose a backend that calls a model "
+                         f"({' or '.join(f'--{stage.lower()} openai' for stage, _ in chosen)})")
+    return LLMConfig.of({k: v for k, v in config.items() if v})
 
 
 CONFIG_EXAMPLE = "'{\"duration\": 10}'"

@@ -9,7 +9,7 @@ from typing import Callable, List
 from dv2s_gym.cli.backend_options import dra_option
 from dv2s_gym.pipeline.prompts import CAMERA_VIEWPOINTS
 
-__all__ = ["Parser", "bank_command", "bank_option", "llm_options", "video_options"]
+__all__ = ["Parser", "bank_command", "bank_option", "llm_options", "video_options", "MODEL_OPTIONS"]
 
 
 class Parser(argparse.ArgumentParser):
@@ -103,11 +103,19 @@ def bank_command(bank_sub, name: str, help_text: str, func: Callable[[argparse.N
     return p
 
 
+MODEL_OPTIONS = ("--base-url", "--model", "--api-key")
+"""The options of the model a backend calls (:func:`llm_options`)."""
+
+
 def llm_options(p: argparse.ArgumentParser) -> None:
-    """The OpenAI-compatible endpoint's settings."""
-    p.add_argument("--base-url", help="OpenAI-compatible endpoint (default: $DV2S_LLM_BASE_URL)")
-    p.add_argument("--model", help="model name (default: $DV2S_LLM_MODEL)")
-    p.add_argument("--api-key", help="API key (default: $OPENAI_API_KEY)")
+    """The settings of the model endpoint a backend calls (``openai``, or a plug-in's registered with
+    ``reads_model``), in their own group of ``--help``; given with backends that call no model they are refused
+    (:func:`~dv2s_gym.cli.inputs.llm_config`)."""
+    group = p.add_argument_group("model endpoint", "read only by backends that call a model (--dra openai, "
+                                                   "--sg openai, or a plug-in's)")
+    group.add_argument("--base-url", help="OpenAI-compatible endpoint (default: $DV2S_LLM_BASE_URL)")
+    group.add_argument("--model", help="model name (default: $DV2S_LLM_MODEL)")
+    group.add_argument("--api-key", help="API key (default: $OPENAI_API_KEY)")
 
 
 def video_options(p: argparse.ArgumentParser) -> None:

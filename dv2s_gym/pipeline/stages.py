@@ -24,7 +24,7 @@ from scenario_bank.bank import Bank
 from scenario_bank.safety import assert_safe
 
 __all__ = ["Description", "Generation", "describe", "generate", "DRA_BACKENDS", "SG_BACKENDS",
-           "register_dra", "register_sg", "registered_dras", "registered_sgs"]
+           "register_dra", "register_sg", "registered_dras", "registered_sgs", "reads_model"]
 
 @dataclass
 class Description:
@@ -87,24 +87,39 @@ SGBackend = Callable[..., Generation]
 
 _DRA_REGISTRY: Dict[str, DRABackend] = {}
 _SG_REGISTRY: Dict[str, SGBackend] = {}
+_MODEL_FREE: Dict[str, set] = {"DRA": set(), "SG": set()}
+"""Per stage, the backends registered with ``reads_model=False``: they ignore the model settings they are given."""
 
 
 def _register(registry: Dict[str, Callable[..., Any]], stage: str, name: str, backend: Callable[..., Any],
-              overwrite: bool) -> None:
+              overwrite: bool, reads: bool) -> None:
     register_named(registry, name, backend, what=f"{stage} backend", error=PipelineError, overwrite=overwrite)
+    if reads:
+        _MODEL_FREE[stage].discard(name)
+    else:
+        _MODEL_FREE[stage].add(name)
 
 
-def register_dra(name: str, backend: DRABackend, overwrite: bool = False) -> None:
+def register_dra(name: str, backend: DRABackend, overwrite: bool = False, *, reads_model: bool = True) -> None:
     """Make ``describe(video, backend=name)`` call ``backend(clip, camera=..., question=..., llm_config=...)``
-    (see :data:`DRABackend`); the description's elements are read from the text it returns."""
-    _register(_DRA_REGISTRY, "DRA", name, backend, overwrite)
+    (see :data:`DRABackend`); the description's elements are read from the text it returns. ``reads_model``:
+    whether the backend calls a model and so reads the model settings it is given (``llm_config``; the command
+    line's ``--base-url``, ``--model``, ``--api-key``); a command refuses those options for a backend that does not."""
+    _register(_DRA_REGISTRY, "DRA", name, backend, overwrite, reads_model)
 
 
-def register_sg(name: str, backend: SGBackend, overwrite: bool = False) -> None:
+def register_sg(name: str, backend: SGBackend, overwrite: bool = False, *, reads_model: bool = True) -> None:
     """Make ``generate(description, backend=name)`` call
     ``backend(description, seed=..., llm_config=..., max_attempts=...)`` (see :data:`SGBackend`);
-    the script of the :class:`Generation` it returns must pass the safety check."""
-    _register(_SG_REGISTRY, "SG", name, backend, overwrite)
+    the script of the :class:`Generation` it returns must pass the safety check. ``reads_model``: as for
+    :func:`register_dra`."""
+    _register(_SG_REGISTRY, "SG", name, backend, overwrite, reads_model)
+
+
+def reads_model(stage: str, name: str) -> bool:
+    """Whether the ``stage`` (``"DRA"`` or ``"SG"``) backend ``name`` reads model settings: registered with
+    ``reads_model`` true (the default, so a plug-in's backend is given them), or a name not registered."""
+    return name not in _MODEL_FREE[stage]
 
 
 def registered_dras() -> List[str]:
@@ -153,9 +168,9 @@ def _generate_openai(description: str, *, seed: int, llm_config: LLMConfigLike,
                       attempts=result.attempts, model=result.model, context_hash=result.context_hash)
 
 
-register_dra("bev", _describe_bev)
+register_dra("bev", _describe_bev, reads_model=False)
 register_dra("openai", _describe_openai)
-register_sg("rules", _generate_rules)
+register_sg("rules", _generate_rules, reads_model=False)
 register_sg("openai", _generate_openai)
 
 DRA_BACKENDS: Tuple[str, ...] = tuple(_DRA_REGISTRY)
