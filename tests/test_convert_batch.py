@@ -47,7 +47,9 @@ def test_conversion_provenance_reads_the_same_from_the_stages_and_from_their_rep
     # a rule-based script has no model of its own: the description's is recorded
     assert conversion_provenance("bev", "rules", without, description) == {
         "generator": "dra=bev,sg=rules", "model": "vlm-1", "context_hash": "p123", "date": today}
-    assert conversion_provenance("bev", "rules", without.as_dict(), description.as_dict()) == \
+    # read back from a conversion's report, the same
+    assert conversion_provenance("bev", "rules", Generation.from_dict(without.as_dict()),
+                                 Description.from_dict(description.as_dict())) == \
         conversion_provenance("bev", "rules", without, description)
 
 

@@ -233,17 +233,12 @@ def convert_video(video: str | os.PathLike, out: str | os.PathLike,
     return report
 
 
-def _field(record: Any, key: str) -> Any:
-    return record.get(key) if isinstance(record, Mapping) else getattr(record, key, None)
-
-
-def conversion_provenance(dra: str, sg: str, generation: Any, description: Any) -> Dict[str, Any]:
+def conversion_provenance(dra: str, sg: str, generation: Generation, description: Description) -> Dict[str, Any]:
     """The provenance fields every converted bank entry records: the backends (``generator``), the model and
-    prompt context that made the script (from the generation, else the description) and today's date.
-    ``generation`` and ``description`` are :class:`Generation` and :class:`Description` or their report dicts."""
+    prompt context that made the script (from the generation, else the description) and today's date."""
     return {"generator": f"dra={dra},sg={sg}",
-            "model": _field(generation, "model") or _field(description, "model"),
-            "context_hash": _field(generation, "context_hash") or _field(description, "prompt_hash"),
+            "model": generation.model or description.model,
+            "context_hash": generation.context_hash or description.prompt_hash,
             "date": datetime.date.today().isoformat()}
 
 
@@ -254,10 +249,10 @@ def add_converted(bank_dir: Optional[str | os.PathLike], video: str | os.PathLik
     failed was not added."""
     if not report.get("check", {}).get("ok"):
         return f"(not added: {video} failed validation)"
-    description = report["description"]
+    description = Description.from_dict(report["description"])
     provenance = Provenance(kind="generated", video=str(video), seed=seed,
-                            **conversion_provenance(dra, sg, report["generation"], description))
+                            **conversion_provenance(dra, sg, Generation.from_dict(report["generation"]), description))
     script = (Path(out) / "scenario.scenic").read_text(encoding="utf-8")
-    entry = Bank(bank_dir).add(script, Sidecar(description=description["text"], elements=description["elements"],
+    entry = Bank(bank_dir).add(script, Sidecar(description=description.text, elements=description.elements,
                                                tags=("generated",), source=provenance))
     return entry.name

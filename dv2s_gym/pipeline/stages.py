@@ -14,7 +14,7 @@ a backend module is imported only when its backend runs.
 from __future__ import annotations
 
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 from dv2s_gym.pipeline.errors import BackendResultError, PipelineError, UnknownBackendError
@@ -39,6 +39,11 @@ class Description:
 
     def as_dict(self) -> Dict[str, Any]:
         return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "Description":
+        """The description :meth:`as_dict` wrote (a conversion's ``report.json``); keys it does not know are left."""
+        return cls(**{key: data[key] for key in _field_names(cls) if key in data})
 
 
 @dataclass
@@ -76,6 +81,15 @@ class Generation:
         data = asdict(self)
         data["failure_counts"] = self.failure_counts()
         return data
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "Generation":
+        """The generation :meth:`as_dict` wrote (a conversion's ``report.json``); the counts it adds are left."""
+        return cls(**{key: data[key] for key in _field_names(cls) if key in data})
+
+
+def _field_names(record: type) -> List[str]:
+    return [f.name for f in fields(record)]
 
 
 # --------------------------------------------------------------------------- registries
