@@ -669,11 +669,11 @@ def test_dagger_beta_decay_is_a_checked_recorded_setting_both_dagger_arms_use(tm
     for bad in (-0.1, 1.5, float("nan"), "0", True):
         with pytest.raises(LoopError, match="--dagger-beta-decay"):
             LoopSettings(dagger_beta_decay=bad)
-    assert LoopSettings().dagger_beta_decay == LoopSettings.evidence().dagger_beta_decay == 0.5
+    assert LoopSettings().dagger_beta_decay == LoopSettings.evidence().dagger_beta_decay == 0.0
     assert "dagger_beta_decay" in LoopSettings.resume_keys()
     parse = build_parser().parse_args
-    assert loop_settings(parse(["loop", "--dagger-beta-decay", "0"])).dagger_beta_decay == 0.0
-    assert loop_settings(parse(["loop", "--profile", "evidence"])).dagger_beta_decay == 0.5
+    assert loop_settings(parse(["loop", "--dagger-beta-decay", "0.5"])).dagger_beta_decay == 0.5
+    assert loop_settings(parse(["loop", "--profile", "evidence"])).dagger_beta_decay == 0.0
     code, _, err = run(capsys, "loop", "--out", tmp_path / "bad", "--no-progress", "--dagger-beta-decay", "2")
     assert code == 2 and "--dagger-beta-decay" in one_line_error(err)
     assert not (tmp_path / "bad").exists()
@@ -693,16 +693,16 @@ def test_dagger_beta_decay_is_a_checked_recorded_setting_both_dagger_arms_use(tm
     out = tmp_path / "loop"
     miner = FakeMiner(WIRING["scenarios"], failures_per_round=6)
     settings = {**WIRING, "fine_tune_method": "dagger"}
-    run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, dagger_beta_decay=0.0, **settings)
+    run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, dagger_beta_decay=0.5, **settings)
     assert sorted(name for name, _ in configs) == ["control", "policy"]
-    assert all(dagger.beta_decay == 0.0 and dagger.learning_rate == 1e-3 for _, dagger in configs)
-    assert json.loads((out / "loop.json").read_text())["settings"]["dagger_beta_decay"] == 0.0
-    with pytest.raises(RunIdentityError, match="dagger_beta_decay: run has 0.0, asked 0.5"):
+    assert all(dagger.beta_decay == 0.5 and dagger.learning_rate == 1e-3 for _, dagger in configs)
+    assert json.loads((out / "loop.json").read_text())["settings"]["dagger_beta_decay"] == 0.5
+    with pytest.raises(RunIdentityError, match="dagger_beta_decay: run has 0.5, asked 0.0"):
         run_loop("dv2s-ppo", out=out, miner=miner, log=lambda _: None, rounds=2, **settings)
-    # the default reaches the arms as DaggerConfig's own default
+    # the loop's default (0) reaches both arms, not DaggerConfig's own (0.5)
     configs.clear()
     run_loop("dv2s-ppo", out=tmp_path / "default", miner=miner, log=lambda _: None, **settings)
-    assert [dagger.beta_decay for _, dagger in configs] == [0.5, 0.5] == [imitation.DaggerConfig().beta_decay] * 2
+    assert [dagger.beta_decay for _, dagger in configs] == [0.0, 0.0] != [imitation.DaggerConfig().beta_decay] * 2
 
 
 def test_loop_says_loudly_when_too_few_episodes_are_held_out(tmp_path, monkeypatch):

@@ -69,10 +69,12 @@ class LoopSettings:
         default_factory=lambda: {"standing": -0.3})
     """Reward-term weights overriding the policy's own in the fine-tuning env only (``{}``: the policy's reward
     unchanged; ``None``: the default); used by the ``ppo`` method only (imitation has no reward)."""
-    dagger_beta_decay: float = 0.5
+    dagger_beta_decay: float = 0.0
     """DAgger's ``beta_decay`` in both arms (:class:`~policies.dagger_config.DaggerConfig`), in [0, 1]: the reference
     driver drives the first iteration alone and each later one with probability ``beta_decay ** i``, the policy
-    the rest (0: the policy drives every later iteration); used by the ``dagger`` method only."""
+    the rest (0, the default: the policy drives every later iteration, so each arm learns on the states its own
+    driving reaches, the mined scenes' included; 0.5 left the two arms equal in the measured rounds, see
+    ``docs/loop.md``); used by the ``dagger`` method only."""
     mined_share: float = 0.5
     """Probability of drawing a mined fine-tuning scenario during fine-tuning, strictly between 0 and 1."""
     control: bool = True
