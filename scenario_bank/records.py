@@ -309,7 +309,8 @@ class Provenance(JsonRecord):
     entries of one failure and ``merged`` (later failures merged into the entry). ``files`` lists the files the
     entry carries in its folder; ``converted_video`` names the one of them that films the converted script driven
     by the policy that failed (one reproduction episode, described by ``reproduction["clip"]``), written only when
-    there is one. Other keys (``scenic2_rewrites``, links added later) are kept in ``extra``.
+    there is one. An entry whose script was upgraded from Scenic 2 lists what changed (``scenic2_rewrites``) and
+    what to check by hand (``scenic2_notes``). Other keys (links added later) are kept in ``extra``.
 
     ``null_fields``: the fields written as ``null`` when ``None``; by default :data:`PROVENANCE_FIELDS`, and a
     mined entry's :data:`MINED_PROVENANCE_FIELDS` but ``merged``, as a new sidecar writes them.
@@ -341,6 +342,8 @@ class Provenance(JsonRecord):
     converted: Optional[str] = None
     files: Optional[Tuple[str, ...]] = None
     converted_video: Optional[str] = None
+    scenic2_rewrites: Optional[Tuple[str, ...]] = None
+    scenic2_notes: Optional[Tuple[str, ...]] = None
     extra: Mapping[str, Any] = field(default_factory=dict)
     null_fields: Optional[FrozenSet[str]] = None
 
@@ -350,9 +353,9 @@ class Provenance(JsonRecord):
         "failure": "object", "cluster": "str", "reproduction": "object", "e2e_sc": "any", "run": "str",
         "trace": "str", "index": "int", "merged": "objects", "interaction": "object", "judge": "object",
         "replay": "object", "replay_entry": "str", "converted": "str", ENTRY_FILES: "strings",
-        "converted_video": "str",
+        "converted_video": "str", "scenic2_rewrites": "strings", "scenic2_notes": "strings",
     }
-    _LISTS: ClassVar[Tuple[str, ...]] = ("merged", ENTRY_FILES)
+    _LISTS: ClassVar[Tuple[str, ...]] = ("merged", ENTRY_FILES, "scenic2_rewrites", "scenic2_notes")
     _WHAT: ClassVar[str] = "provenance"
 
     @classmethod

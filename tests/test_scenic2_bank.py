@@ -14,13 +14,13 @@ def test_bank_add_upgrades_scenic2_on_request_and_records_the_rewrites(tmp_path)
     entry = bank.add(HIGHWAY_SCENIC2, Sidecar(description="A car ahead on a highway.", name="old"),
                      upgrade_scenic2=True)
     assert "ego = new Car at" in entry.script and "\nnew Car following" in entry.script
-    rewrites = entry.source.extra["scenic2_rewrites"]
+    rewrites = entry.source.scenic2_rewrites
     assert len(rewrites) == 2 and rewrites[0].startswith("line 4: ego = Car at") and "new Car" in rewrites[1]
-    assert any("requireVisible" in n for n in entry.source.extra["scenic2_notes"])
+    assert any("requireVisible" in n for n in entry.source.scenic2_notes)
     reloaded = Bank(tmp_path / "bank").get("old")  # persisted in the sidecar
-    assert reloaded.source.extra["scenic2_rewrites"] == rewrites and reloaded.script == entry.script
+    assert reloaded.source.scenic2_rewrites == rewrites and reloaded.script == entry.script
     sidecar = json.loads((entry.folder / "meta.json").read_text())
-    assert sidecar["source"]["scenic2_rewrites"] == rewrites
+    assert sidecar["source"]["scenic2_rewrites"] == list(rewrites)
 
 
 def test_bank_add_without_the_option_names_the_scenic2_construct_and_the_fix(tmp_path):
@@ -41,13 +41,14 @@ def test_scenic3_script_with_the_option_is_stored_unchanged_without_scenic2_prov
     scenic3 = upgrade_scenic2(HIGHWAY_SCENIC2).source
     entry = Bank(tmp_path / "bank").add(scenic3, Sidecar(description="A car ahead on a highway.", name="new3",
                                                          source={"kind": "hand-written"}), upgrade_scenic2=True)
-    assert entry.script == scenic3 and "scenic2_rewrites" not in entry.source
+    assert entry.script == scenic3 and entry.source.scenic2_rewrites is None
+    assert "scenic2_rewrites" not in json.loads((entry.folder / "meta.json").read_text())["source"]
 
 
 def test_add_with_merge_upgrades_too(tmp_path):
     outcome = Bank(tmp_path / "bank").add(HIGHWAY_SCENIC2, Sidecar(description="A car ahead on a highway.", name="old"),
                                           upgrade_scenic2=True, on_duplicate="merge")
-    assert outcome.entry.source.extra["scenic2_rewrites"] and "new Car" in outcome.entry.script
+    assert outcome.entry.source.scenic2_rewrites and "new Car" in outcome.entry.script
 
 
 @pytest.mark.slow

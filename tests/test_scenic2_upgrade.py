@@ -193,7 +193,7 @@ def test_bank_add_upgrades_and_prints_rewrites(tmp_path, capsys):
     assert "ego = new Car at" in stored and "\nnew Car following" in stored
     from scenario_bank.bank import Bank
 
-    assert Bank(tmp_path / "bank").get("old").source["scenic2_rewrites"] == entry["scenic2_rewrites"]
+    assert list(Bank(tmp_path / "bank").get("old").source.scenic2_rewrites) == entry["scenic2_rewrites"]
 
 
 @pytest.mark.slow

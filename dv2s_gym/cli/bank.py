@@ -142,8 +142,8 @@ def run_add(args: argparse.Namespace) -> int:
     for twin in near_duplicates_of(bank, entry.name):
         print(f"warning: {entry.name} is a near-duplicate of bank entry {twin!r} (same map and elements, overlapping "
               "parameter ranges): mining and dv2s loop count them as one scenario family", file=sys.stderr)
-    rewrites = list(entry.source.extra.get("scenic2_rewrites") or [])
-    for line in [f"scenic2: {r}" for r in rewrites] + [f"scenic2 note: {n}" for n in entry.source.extra.get("scenic2_notes") or []]:
+    rewrites = list(entry.source.scenic2_rewrites or ())
+    for line in [f"scenic2: {r}" for r in rewrites] + [f"scenic2 note: {n}" for n in entry.source.scenic2_notes or ()]:
         print(line, file=sys.stderr)
     summary = dict(entry.summary(), scenic2_rewrites=rewrites)
     emit(args, summary, f"added {entry.name} ({entry.script_path})")
