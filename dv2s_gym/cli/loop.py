@@ -5,13 +5,16 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-from typing import Any, List, Mapping, Optional
+from typing import TYPE_CHECKING, Any, List, Optional
 
 from dv2s_gym.cli.errors import UsageError
 from dv2s_gym.cli.inputs import json_value, output_folder
 from dv2s_gym.cli.parser import bank_option
 from dv2s_gym.mining.loop_settings import DEFAULT_PROFILE, DEFAULTS, EVIDENCE, FINE_TUNE_METHODS, PROFILES, LoopSettings
 from dv2s_gym.mining.loop_verdict import EVIDENCE_FLOOR as FLOOR, HELDOUT_ALPHA as ALPHA
+
+if TYPE_CHECKING:  # the loop itself loads the simulator and torch: not at the command line's start-up
+    from dv2s_gym.mining.loop import LoopReport
 
 __all__ = ["add_parser", "run", "loop_settings"]
 
@@ -143,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
 
     out = args.out or DEFAULT_OUT
     report = run_loop(args.policy, loop_settings(args), out=out, progress=not args.no_progress)
-    print("\n".join(summary_lines({**report.to_json(), "recommendation": report.recommendation}, report.paths)))
+    print("\n".join(summary_lines(report)))
     return int(report.recommendation["exit_code"])
 
 
@@ -181,14 +184,14 @@ def _default(key: str, text: str) -> str:
     return f"{text} (default {shown(DEFAULTS[key])}{evidence})"
 
 
-def summary_lines(report: Mapping[str, Any], paths: Mapping[str, Any]) -> List[str]:
+def summary_lines(report: "LoopReport") -> List[str]:
     """The terminal's summary of a finished loop: one line per round, the verdict, where the reports are."""
     from dv2s_gym.mining.loop_report import round_summary
 
-    lines = [round_summary(record) for record in report.get("rounds") or []]
-    verdict = report.get("recommendation") or {}
+    lines = [round_summary(record) for record in report.rounds]
+    verdict = report.recommendation
     lines += ["", f"verdict: {verdict.get('sentence')}", f"policy to use: {verdict.get('policy')}"]
-    lines += [f"report ({kind}): {paths[kind]}" for kind in ("html", "md", "json") if kind in paths]
+    lines += [f"report ({kind}): {report.paths[kind]}" for kind in ("html", "md", "json") if kind in report.paths]
     return lines
 
 
