@@ -145,8 +145,9 @@ class JsonRecord(_MappingABC):
     such as a loop's rounds): the JSON form (:meth:`to_dict`), reading from it (:meth:`from_dict`) and
     read-only mapping access to it. Subclasses list their fields' JSON kinds in ``_KINDS`` (a field missing
     from it is the record's ``extra`` or ``null_fields``), the fields :meth:`from_dict` needs in ``_REQUIRED``,
-    the fields nested records fill in ``_NESTED``, the lists or objects of records of one type in ``_ITEMS`` and, in ``_ATTRIBUTES``, a JSON key held by an attribute of
-    another name (a key that is also one of the record's own attribute names)."""
+    the fields nested records fill in ``_NESTED``, the lists or objects of records of one type in ``_ITEMS``
+    and, in ``_ATTRIBUTES``, a JSON key held by an attribute of another name (a key that is also one of the
+    record's own attribute names)."""
 
     _KINDS: ClassVar[Dict[str, str]] = {}
     _ATTRIBUTES: ClassVar[Dict[str, str]] = {}

@@ -9,7 +9,7 @@ from typing import Callable, List
 from dv2s_gym.cli.backend_options import dra_option
 from dv2s_gym.pipeline.prompts import CAMERA_VIEWPOINTS
 
-__all__ = ["Parser", "bank_command", "bank_option", "llm_options", "video_options", "MODEL_OPTIONS"]
+__all__ = ["Parser", "bank_command", "bank_option", "llm_options", "video_options"]
 
 
 class Parser(argparse.ArgumentParser):
@@ -101,10 +101,6 @@ def bank_command(bank_sub, name: str, help_text: str, func: Callable[[argparse.N
     p.add_argument("--json", action="store_true", help="print JSON instead of text")
     p.set_defaults(func=func)
     return p
-
-
-MODEL_OPTIONS = ("--base-url", "--model", "--api-key")
-"""The options of the model a backend calls (:func:`llm_options`)."""
 
 
 def llm_options(p: argparse.ArgumentParser) -> None:

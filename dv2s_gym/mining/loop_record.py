@@ -95,10 +95,8 @@ class MiningSummary(JsonRecord):
     _LISTS: ClassVar[Tuple[str, ...]] = ("rejected_reasons",)
     _WHAT: ClassVar[str] = "mining step"
 
-
     def default_null_fields(self) -> FrozenSet[str]:
         return frozenset({"clusters", "clusters_not_converted", "clusters_not_kept", "clusters_reference_failed"})
-
 
     @property
     def kept_entries(self) -> Tuple[MinedEntry, ...]:

@@ -154,7 +154,8 @@ class MineRun:
             f"{errors} error{'s' if errors != 1 else ''}{self._errored_scenarios()}, "
             + (f"{restarted} finished after their worker crashed or hung and was replaced, " if restarted else "")
             + f"{self.seconds:.0f} s",
-            f"{len(failures)} failures ({', '.join(f'{kind_label(k)} {n}' for k, n in kinds.most_common()) or 'none'}); "
+            f"{len(failures)} failures "
+            f"({', '.join(f'{kind_label(k)} {n}' for k, n in kinds.most_common()) or 'none'}); "
             + (f"{len(self.avoidable)} avoidable by {self.settings['reference']}" if self.settings["reference"]
              else "avoidability not checked (no reference driver)"),
             f"{self.distinct_clusters} distinct behaviours"

@@ -37,8 +37,8 @@ from scenario_bank.failure_types import (FAILURE_TYPES, FailureTypeError, Unknow
                                           detach_detection, failure_table, failure_type, type_label)
 from scenario_bank.plugins import forget_plugin, remember_plugin
 
-__all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "COLLISION_LABELS", "kind_label", "MonitorSettings", "Detector", "DETECTORS",
-           "DEFAULT_MONITOR", "register_detector", "unregister_detector", "types_without_detector", "detect_failure",
+__all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "COLLISION_LABELS", "kind_label", "MonitorSettings",
+           "Detector", "DETECTORS", "DEFAULT_MONITOR", "register_detector", "unregister_detector", "types_without_detector", "detect_failure",
            "robustness", "STALL_SPEED", "FREE_PATH", "DEFAULT_TTC_THRESHOLD", "DEFAULT_STALL_SECONDS"]
 
 COLLISION_TYPES = ("rear_end", "struck_from_behind", "side", "head_on", "pedestrian", "obstacle")
