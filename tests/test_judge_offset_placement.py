@@ -1,6 +1,7 @@
 """The conversion judge reads a placement offset in an oriented point's frame (``offset by X @ Y``, ``offset along
-roadDirection by X @ Y``, ``at P offset by X @ Y``): ``Y`` is the distance ahead, ``X`` the distance to the right,
-compared like ``ahead of``/``right of``.
+roadDirection by X @ Y``, ``at P offset by X @ Y``, ``offset by Vector(X, Y)``): ``Y`` is the distance ahead, ``X``
+the distance to the right; ``Y`` runs between the two centres, so it is compared with ``ahead of`` (between faces)
+less half of each length (4.5 m for two cars).
 
 The failure: the ego ran into a slow car ``lead_gap`` = 110 m ahead (ego_speed 25). A converted script that puts the
 slow car about 40 m ahead is another scene and must be rejected at the parameter check, however the placement is
@@ -76,7 +77,7 @@ def test_a_script_that_moves_the_gap_with_an_offset_is_rejected_at_the_parameter
 
 
 KEPT = {
-    "fixed at the failing value": script("offset by 0 @ 110"),
+    "fixed at the failing value, between centres": script("offset by 0 @ 114.5"),
     "the failing parameter itself": script("at ego offset by 0 @ globalParameters.lead_gap",
                                            params="param lead_gap = Range(10, 150)"),
     "a parameter of its own, shifted, holding the value": script(
@@ -93,8 +94,8 @@ def test_a_script_that_keeps_the_gap_with_an_offset_passes_and_the_gap_is_checke
     assert rejections == [], (name, rejections)
     # read, not passed for want of reading it: the gap is compared, or fixed where the judge sees it
     fixed = fixed_quantities(new_script).get(("slow", "Car", "longitudinal"))
-    assert "lead_gap" in parameters["compared"] or (fixed == "110" and not parameters["key_fixed_outside"]), (
-        name, parameters)
+    assert "lead_gap" in parameters["compared"] or (
+        fixed == "(114.5) - 4.5" and not parameters["key_fixed_outside"]), (name, parameters)
 
 
 def test_the_offsets_components_are_read_ahead_and_to_the_right():
@@ -106,7 +107,7 @@ def test_the_offsets_components_are_read_ahead_and_to_the_right():
     assert set(uses["near_gap"]) == {("slow", "Car", "longitudinal")}
     assert set(uses["side"]) == {("slow", "Car", "lateral:right")}
     fixed = fixed_quantities(script("offset by 1.5 @ Range(35, 45)"))
-    assert fixed[("slow", "Car", "longitudinal")] == "Range(35, 45)"
+    assert fixed[("slow", "Car", "longitudinal")] == "(Range(35, 45)) - 4.5"  # between faces: two half cars
     assert fixed[("slow", "Car", "lateral:right")] == "1.5"
 
 
@@ -115,7 +116,8 @@ def test_an_offset_that_is_not_in_an_oriented_points_frame_is_not_read_as_a_dist
     and ``0 @ g - 90`` is ``(0 @ g) - 90`` in Scenic: none of them sets the distance ahead; the same offset from the
     ego is read."""
     from_ego = fixed_quantities(script("at ego offset by 0 @ 40"))
-    assert from_ego[("slow", "Car", "longitudinal")] == "40" and from_ego[("slow", "Car", "lateral:right")] == "0"
+    assert from_ego[("slow", "Car", "longitudinal")] == "(40) - 4.5"  # between faces: less two half cars
+    assert from_ego[("slow", "Car", "lateral:right")] == "0"
     for placement in ("at ego.position offset by 0 @ 40", "offset along 30 deg by 0 @ 40"):
         assert ("slow", "Car", "longitudinal") not in fixed_quantities(script(placement)), placement
     unbracketed = script("at ego offset by 0 @ globalParameters.near_gap - 90", params="param near_gap = Range(30, 50)")

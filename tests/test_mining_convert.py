@@ -746,7 +746,12 @@ def test_the_judge_compares_a_failing_parameter_with_the_generated_one_that_sets
     assert judged["outside"] == ["cut_in_gap", "start_offset"]  # 8 outside 10..15, -6 outside 7..11
     passing = {"reproduction": {"k": 10, "reproduced": 10, "rate": 1.0, "interaction_shown": 10},
                "avoidability": {"reference": "rule", "k": 10, "failed": 0, "avoided_rate": 1.0}}
-    (reason,) = [str(r) for r in _judge({**passing, "parameters": judged}, {}, {"type": "collision"}, 0.3)]
+    unread, reason = [str(r) for r in _judge({**passing, "parameters": judged}, {}, {"type": "collision"}, 0.3)]
+    # with no actor named, every actor's placement is key: the walker to the right of its spot, the new script's
+    # pedestrian to the left of its own
+    assert unread.startswith("parameters: a key quantity (of the failure's interaction) is placed by another quantity "
+                             "or form") and "kerb_offset (the Pedestrian walker's lateral:right" in unread, unread
+    assert "left of pedestrian1Spot by Range(5.5, 6.2), a distance to the left, the other side" in unread, unread
     assert reason.startswith("parameters: the new scenario's ranges do not contain the failing values: cut_in_gap "
                              "(the script's car1_cut_gap: the Car car1's behaviour argument gap (cutter in the "
                              "parent)) = 8 outside 10..15")

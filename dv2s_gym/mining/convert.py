@@ -82,6 +82,7 @@ from dv2s_gym.mining.report_text import not_compared_names_text
 from dv2s_gym.mining.param_meaning import (actor_objects, behaviour_overrides, counterpart_objects, fixed_quantities,
                                            joint_interval, key_uses, object_behaviour_heads, placement_parts,
                                            object_behaviours, meaning_map, name_mismatch, quantity_of, quantity_uses, read_interval,
+                                           lengths_along, placements,
                                            read_support, script_parameters, support_contains, support_hull,
                                            script_objects, support_text, tied_objects)
 from dv2s_gym.mining.settings import read_run_settings
@@ -368,7 +369,9 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     :func:`~dv2s_gym.mining.param_meaning.key_parameters`): the judge requires each of them compared
     (:func:`_judge`); ``"key_fixed_outside"`` those whose key quantity the new script fixes without a parameter away
     from the failing value (:func:`_key_fixed_outside`), ``"key_overridden"`` (when any) those whose key behaviour
-    argument the new script's behaviour assigns anew (:func:`_key_overridden`), and ``"quantities_not_compared"`` (when any) ``{parameter:
+    argument the new script's behaviour assigns anew (:func:`_key_overridden`), ``"key_unread"`` (when any) those
+    whose key actor's placement the new script writes in another quantity or form the judge cannot read
+    (:func:`_key_placement_unread`), and ``"quantities_not_compared"`` (when any) ``{parameter:
     why}`` for a compared parameter's other quantity the judge could not read (:func:`_through_quantities`). A key
     parameter the new script sets by parameters of its own is compared jointly when both scripts' expressions can
     be read so (:func:`_compare_jointly`)."""
@@ -410,14 +413,25 @@ def compare_parameters(failing: Mapping[str, Any], script: str, parent: Optional
     if partly:
         out["quantities_not_compared"] = partly
     if parent is not None:
-        out["key"] = {name: where[0][3] for name, where in keyed.items()}
-        out["key_not_compared"] = _key_set_otherwise(parent, script, keyed, out)
-        _compare_jointly(parent, script, keyed, numeric, out, interaction.get("actor"))
-        out["key_fixed_outside"] = _key_fixed_outside(parent, script, keyed, numeric, interaction.get("actor"))
-        overridden = _key_overridden(parent, script, keyed, numeric, interaction.get("actor"))
-        if overridden:
-            out["key_overridden"] = overridden
+        _check_keys(parent, script, keyed, numeric, out, interaction.get("actor"))
     return out
+
+
+def _check_keys(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
+                numeric: Mapping[str, float], out: Dict[str, Any], actor: Optional[str]) -> None:
+    """:func:`compare_parameters`' checks of the key parameters (``keyed``: ``{name: where it sets a key quantity in
+    the parent}``), into ``out``: ``key``, ``key_not_compared``, the joint comparison, ``key_fixed_outside``, and
+    ``key_unread`` and ``key_overridden`` when any."""
+    out["key"] = {name: where[0][3] for name, where in keyed.items()}
+    out["key_not_compared"] = _key_set_otherwise(parent, script, keyed, out)
+    _compare_jointly(parent, script, keyed, numeric, out, actor)
+    out["key_fixed_outside"] = _key_fixed_outside(parent, script, keyed, numeric, actor)
+    unread = _key_placement_unread(parent, script, keyed, out, actor)
+    if unread:
+        out["key_unread"] = unread
+    overridden = _key_overridden(parent, script, keyed, numeric, actor)
+    if overridden:
+        out["key_overridden"] = overridden
 
 
 FIXED_TOLERANCE = NARROW
@@ -508,19 +522,87 @@ def _key_fixed_outside(parent: str, script: str, keyed: Mapping[str, Sequence[Tu
     old_heads, new_heads = object_behaviour_heads(parent), object_behaviour_heads(script)
     found: Dict[str, str] = {}
     for name, (obj, _, slot), where, words, function, tolerance, target in _key_checks(parent, script, keyed, actor):
-        if name in found or where not in fixed or where in set_by_parameter:
+        value = fixed.get(where) if where not in set_by_parameter else None
+        if value is None and where[2] in _OPPOSITE:
+            value = _flipped(script, where, fixed, set_by_parameter)
+        if name in found or value is None:
             continue
         if slot.startswith("behavior:") and not target and old_heads.get(obj) != new_heads.get(where[0]):
             continue  # another behaviour: its argument of that name may mean something else
-        parts = read_support(fixed[where])
+        parts = read_support(value)
         quantity = function.at(float(numeric[name]))
         if parts is not None and not support_contains(parts, quantity, tolerance=tolerance):
             made = (f", which the parent's {function.text} makes {_exact(quantity)}"
                     if function.text != f"globalParameters.{name}" else "")
-            found[name] = (f"{words}, which the new script fixes at {fixed[where]} without a parameter, while the "
+            found[name] = (f"{words}, which the new script fixes at {value} without a parameter, while the "
                            f"failing {name} = {_exact(float(numeric[name]))}{made} (held within "
                            f"{_exact(round(tolerance, 12))})")
     return found
+
+
+_OPPOSITE = {"longitudinal": "longitudinal:behind", "longitudinal:behind": "longitudinal"}
+"""A distance ahead and a distance behind: each is the other read with its sign flipped (:func:`_flipped`)."""
+
+
+def _flipped(script: str, where: Tuple[str, str, str], fixed: Mapping[Tuple[str, str, str], str],
+             set_by_parameter: Any) -> Optional[str]:
+    """The distance ``where`` (an object's distance ahead or behind) as the new script fixes it in the opposite
+    direction (``ahead of ego by Range(-60, -50)`` for a distance behind): ``-(d) - lengths``, the two forms measuring
+    from opposite faces (:func:`~dv2s_gym.mining.param_meaning.lengths_along`); ``None`` when it is not fixed so or
+    the lengths are not known."""
+    obj, kind, slot = where
+    opposite = (obj, kind, _OPPOSITE[slot])
+    if opposite not in fixed or opposite in set_by_parameter:
+        return None
+    lengths = lengths_along(script, obj)
+    return None if lengths is None else f"-({fixed[opposite]}) - {lengths:.12g}"
+
+
+def _key_placement_unread(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
+                          out: Mapping[str, Any], actor: Optional[str] = None) -> Dict[str, str]:
+    """``{key parameter: its quantity and how the new script places the actor}`` for each key parameter that sets
+    where an actor (not the ego) is, a distance ahead, behind or to a side (the parent's slot), when that actor has a
+    counterpart in the new script (:func:`_counterpart_finder`) whose placement does not give that quantity: not
+    compared, not listed already (``key_not_compared``, ``key_fixed_outside``), and not fixed by the new script in
+    that direction (or, for a distance ahead or behind, the opposite one: :func:`_flipped`). The new script then places
+    the actor by another quantity or form (a vector in the world's frame, an offset along another direction, a
+    distance to the side for one ahead, a distance in the opposite direction set by a parameter of its own), and the
+    failing value cannot be checked: a rejection, whatever share of the parameters was compared."""
+    done = set(out["compared"]) | set(out.get("key_not_compared") or {}) | set(out.get("key_fixed_outside") or {})
+    fixed = fixed_quantities(script)
+    counterpart = _counterpart_finder(parent, script, actor)
+    placed = placements(script)
+    found: Dict[str, str] = {}
+    for name in sorted(set(keyed) - done):
+        for obj, kind, slot, words in keyed[name]:
+            other = counterpart(obj, kind)
+            if obj == "ego" or slot.split(":", 1)[0] not in ("longitudinal", "lateral") or other is None:
+                continue
+            if any((other[0], other[1], s) in fixed for s in {slot, _OPPOSITE.get(slot, slot)}):
+                continue
+            how = "; ".join(placed.get(other[0], [])) or "no placement"
+            found[name] = (f"{words}: the new script places its {other[1]} {other[0]} by {how}, "
+                           f"{_unread_form(placed.get(other[0], []), slot)}")
+            break
+    return found
+
+
+def _unread_form(specifiers: Sequence[str], slot: str) -> str:
+    """Why a placement (``specifiers``) gives no reading of the quantity ``slot``, in words."""
+    text = " ".join(specifiers)
+    if slot.startswith("longitudinal") and re.search(r"\b(left|right) of\b", text):
+        return "a distance to the side, not along the ego's heading"
+    side = {"lateral:left": "right", "lateral:right": "left"}.get(slot)
+    if side and re.search(rf"\b{side} of\b", text):
+        return f"a distance to the {side}, the other side"
+    if re.search(r"\boffset\s+along\b", text):
+        return "an offset along a direction the judge does not read as the reference's heading or the road's"
+    if re.search(r"\.position\b|\bVector\s*\(|\bat\s+\(?\s*\d", text):
+        return ("a point in the world's frame: how far ahead of or beside the ego it lies depends on the ego's "
+                "heading")
+    if re.search(r"\b(ahead of|behind)\b", text):
+        return "a distance in the other direction set by a parameter of its own or a form the judge does not read"
+    return "a placement from which the judge reads no distance in that direction"
 
 
 def _key_overridden(parent: str, script: str, keyed: Mapping[str, Sequence[Tuple[str, str, str, str]]],
@@ -1030,6 +1112,12 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
                                              "to a behaviour must be what the behaviour uses, and the behaviour "
                                              "assigns it anew: " + "; ".join(
                                                  f"{name} ({why})" for name, why in sorted(overridden.items()))))
+    unread = (parameters or {}).get("key_unread") or {}
+    if unread:
+        found.append(_Rejected("parameters", "a key quantity (of the failure's interaction) is placed by another "
+                                             "quantity or form, from which the judge cannot read it, so the failing "
+                                             "value is not checked: " + "; ".join(
+                                                 f"{name} ({why})" for name, why in sorted(unread.items()))))
     unchecked_key = _key_not_compared(parameters)
     if unchecked_key:
         found.append(_Rejected("parameters", unchecked_key))

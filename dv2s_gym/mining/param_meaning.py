@@ -52,7 +52,8 @@ __all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", 
            "script_parameters", "affine_uses", "affine_form", "read_interval", "Affine", "Quantity", "quantity_of",
            "quantity_uses", "read_support", "support_contains", "support_hull", "support_text", "key_parameters", "key_uses", "actor_objects", "counterpart_objects",
            "fixed_quantities", "object_behaviours", "script_objects", "behaviour_overrides", "object_behaviour_heads",
-           "joint_interval", "placement_parts"]
+           "joint_interval", "placement_parts", "DEFAULT_LENGTHS", "object_lengths",
+           "placements", "lengths_along"]
 
 PLACEMENT_KINDS = ("OrientedPoint", "Point")
 """Classes that place actors but are not actors themselves."""
@@ -708,8 +709,9 @@ def _offset_form(text: str) -> Optional[Tuple[str, str, str]]:
     ``at P offset along D by X @ Y`` (from ``P``, a name; in brackets or not). In Scenic 3 ``P offset by X @ Y`` of
     an oriented point ``P`` is ``P``'s local frame: ``Y`` ahead along its heading, ``X`` to its right; ``offset
     along D`` turns the frame to ``D``, read here only when ``D`` is ``roadDirection`` (the road's direction at the
-    reference point) or the reference's own ``heading``/``orientation``. The vector must be ``X @ Y`` as a whole
-    (``0 @ g - 90`` is ``(0 @ g) - 90`` in Scenic: not read). Whether ``P`` is an oriented point (a vector offset by
+    reference point) or the reference's own ``heading``/``orientation``. The vector must be ``X @ Y`` or
+    ``Vector(X, Y)`` (the same offset in Scenic 3.1.1) as a whole (``0 @ g - 90`` is ``(0 @ g) - 90`` in Scenic: not
+    read). Whether ``P`` is an oriented point (a vector offset by
     a vector is a sum in the world's frame) is the caller's to check."""
     text = " ".join(text.split())
     at = re.match(r"^at\s+(.*)$", text, re.S)
@@ -732,11 +734,16 @@ def _offset_form(text: str) -> Optional[Tuple[str, str, str]]:
         vector = rest[2:]
     else:
         return None
-    node = _parse(vector.strip())
-    if not (isinstance(node, ast.BinOp) and isinstance(node.op, ast.MatMult)):
-        return None
     source = vector.strip()
-    lateral, longitudinal = ast.get_source_segment(source, node.left), ast.get_source_segment(source, node.right)
+    node = _parse(source)
+    if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "Vector"
+            and len(node.args) == 2 and not node.keywords):
+        left, right = node.args  # Vector(X, Y) is X @ Y
+    elif isinstance(node, ast.BinOp) and isinstance(node.op, ast.MatMult):
+        left, right = node.left, node.right
+    else:
+        return None
+    lateral, longitudinal = ast.get_source_segment(source, left), ast.get_source_segment(source, right)
     if lateral is None or longitudinal is None:
         return None
     return reference, _unbracketed(lateral), _unbracketed(longitudinal)
@@ -766,6 +773,50 @@ def _step(slots: Sequence[Tuple[str, str]], carried: str, slot: str, value: str,
             if _slot_base(other) == _slot_base(carried):
                 return f"{other} by {' '.join(_value_part(other, expression).split())}"
     return f"{slot} by {' '.join(value.split())}"
+
+
+DEFAULT_LENGTHS: Dict[str, float] = {"Car": 4.5, "NPCCar": 4.5, "Vehicle": 4.5, "Truck": 9.0, "Bus": 12.0,
+                                     "Motorcycle": 2.2, "Bicycle": 1.8, "Pedestrian": 0.75, "Obstacle": 1.0,
+                                     "OrientedPoint": 0.0, "Point": 0.0}
+"""Each class's default length in metres in the model scripts compile against (``envs/scenic_highway/model.scenic``,
+over Scenic 3.1.1's driving model: a ``Car`` is 4.5 m long); a placing point has none."""
+
+
+def _own_length(kind: str, specifiers: Sequence[str]) -> Optional[float]:
+    """The length of an object of class ``kind`` made with ``specifiers``: its ``with length N`` when ``N`` is a
+    number, else its class's :data:`DEFAULT_LENGTHS`; ``None`` when the judge does not know it (a sampled or computed
+    length, a class not listed)."""
+    for specifier in specifiers:
+        found = re.match(r"^with\s+length\s+(.+)$", specifier.strip(), re.S)
+        if found is not None:
+            node = _parse(found.group(1).strip())
+            return float(node.value) if _is_number(node) and isinstance(node, ast.Constant) else None
+    return DEFAULT_LENGTHS.get(kind)
+
+
+def object_lengths(script: str) -> Dict[str, Optional[float]]:
+    """``{object: its length}`` of the objects ``script`` makes at its top level (placing points included, at 0):
+    :func:`_own_length`, ``None`` when the judge does not know it."""
+    lengths: Dict[str, Optional[float]] = {}
+    for statement in _statements(script):
+        found = _OBJECT.match(statement)
+        if found is not None and not statement.startswith(_SKIP):
+            lengths[found.group(1) or f"<{found.group(2)}>"] = _own_length(found.group(2), _split_top(found.group(3)))
+    return lengths
+
+
+def _between_faces(value: str, expression: str, own: Optional[float],
+                   lengths: Mapping[str, Optional[float]]) -> Optional[str]:
+    """An offset's distance ahead (``value``, ``Y`` of ``offset by X @ Y``: between the reference's centre and the
+    object's) as the distance ``ahead of`` measures, between the reference's front and the object's back: ``Y``
+    less half of each length (``own``: the object's; the reference's from ``lengths``), so both forms read as one
+    quantity. ``None`` when a length is not known."""
+    reference = _offset_form(expression)
+    other = lengths.get(reference[0]) if reference is not None else None
+    if own is None or other is None:
+        return None
+    half = (own + other) / 2
+    return value if half == 0 else f"({value}) - {half:.12g}"
 
 
 def _oriented_names(script: str) -> Set[str]:
@@ -876,6 +927,8 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
     numbers: Dict[str, str] = {}  # variable -> its expression, when it is a computation on parameters
     ego_point = _ego_point(script)
     oriented = _oriented_names(script)
+    lengths = object_lengths(script)
+    centred: Set[str] = set()  # placing points offset from an object (see _object_items)
     for statement in _statements(script):
         if statement.startswith(_SKIP):
             continue
@@ -899,34 +952,11 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
                                                for p, s, how, _, t in carried_by(expression)])
             continue
         name, kind, rest = found.group(1) or f"<{found.group(2)}>", found.group(2), found.group(3)
-        items: List[Tuple[str, str, str, frozenset, Optional[Quantity], str]] = []
-        for specifier in _split_top(rest):
-            slots = _slots(specifier, behaviors, oriented)
-            offset = _offset_pair(slots)
-            for index, (slot, expression) in enumerate(slots):
-                value = _value_part(slot, expression, ego_point)
-                here: List[Tuple[str, str, str, Optional[Quantity], str]] = []
-                for p in dict.fromkeys(_PARAM.findall(value if offset else expression)):
-                    if value and _zero_use(value, p):
-                        continue  # times 0: the parameter does not set the quantity (a constant, or others)
-                    quantity = quantity_of(value, p) if value else None
-                    if quantity is None:
-                        here.append((p, slot, _how(value if offset else expression, p), None,
-                                     " ".join(expression.split())))
-                    else:  # a known function of p alone: compared through the interval it produces
-                        here.append((p, slot, "additive", quantity, quantity.text))
-                bases = {_slot_base(s) for s, _ in slots} if offset else {_slot_base(slot)}
-                for p, s, how, quantity, text in (carried_by(expression) if not (offset and index) else []):
-                    if s == "position":
-                        here.append((p, slot, how, quantity, text))
-                    elif value and _slot_base(s) in bases:
-                        # placed along the same direction from the point: the distances add up
-                        here.append((p, s, f"{how} then {_step(slots, s, slot, value, offset)}", None,
-                                     f"{text}, then {' '.join(expression.split())}"))
-                    else:
-                        here.append((p, s, how, quantity, text))
-                items += [(p, s, how, frozenset(q for q, t, _, _, _ in here if t == s), quantity, text)
-                          for p, s, how, quantity, text in here]
+        context = (behaviors, oriented, ego_point, lengths, centred)
+        items = _object_items(kind, _split_top(rest), context, carried_by)
+        if kind in PLACEMENT_KINDS and any(_offset_pair(_slots(spec, behaviors, oriented))
+                                           for spec in _split_top(rest)):
+            centred.add(name)  # its distance ahead, read between faces, leaves out the half length of what it places
         if kind in PLACEMENT_KINDS:
             carried[name] = [(p, s, how, quantity, text) for p, s, how, _, quantity, text in items]
             continue  # handed on to the actor it places
@@ -937,6 +967,82 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
                        for h, q, t in listed):
                 listed.append((how, quantity, text))
     return uses, quantities
+
+
+def _object_items(kind: str, specifiers: Sequence[str], context: Tuple[Any, ...],
+                  carried_by) -> List[Tuple[str, str, str, frozenset, Optional[Quantity], str]]:
+    """``[(parameter, slot, how, the parameters in the same expression, quantity, text)]`` of one ``new`` statement
+    of class ``kind`` (:func:`_read_uses`); ``context``: the script's behaviours, oriented names, the ego's point along
+    its lane, the objects' lengths (:func:`object_lengths`) and the placing points offset from an object
+    (``centred``). An offset's distance ahead is read between faces, as ``ahead of`` measures it
+    (:func:`_between_faces`; a placing point offset from an object has no length, so the actor it places takes off
+    its own half length where it hands the distance on); with a length not known, it is not read."""
+    behaviors, oriented, ego_point, lengths, centred = context
+    own = _own_length(kind, specifiers)
+    items: List[Tuple[str, str, str, frozenset, Optional[Quantity], str]] = []
+    for specifier in specifiers:
+        slots = _slots(specifier, behaviors, oriented)
+        offset = _offset_pair(slots)
+        for index, (slot, expression) in enumerate(slots):
+            value = _value_part(slot, expression, ego_point)
+            measured = (_between_faces(value, expression, own, lengths) if offset and slot == "longitudinal"
+                        else value)
+            here: List[Tuple[str, str, str, Optional[Quantity], str]] = []
+            for p in dict.fromkeys(_PARAM.findall(value if offset else expression)):
+                if value and _zero_use(value, p):
+                    continue  # times 0: the parameter does not set the quantity (a constant, or others)
+                quantity = quantity_of(measured, p) if measured else None
+                if quantity is None:
+                    here.append((p, slot, _how(value if offset else expression, p), None,
+                                 " ".join(expression.split())))
+                else:  # a known function of p alone: compared through the interval it produces
+                    here.append((p, slot, "additive", quantity, quantity.text))
+            bases = {_slot_base(s) for s, _ in slots} if offset else {_slot_base(slot)}
+            from_centred = any(re.search(rf"\b{re.escape(point)}\b", expression) for point in centred)
+            for p, s, how, quantity, text in (carried_by(expression) if not (offset and index) else []):
+                if s == "position":
+                    here.append((p, slot, how, quantity, text))
+                elif value and _slot_base(s) in bases:
+                    # placed along the same direction from the point: the distances add up
+                    here.append((p, s, f"{how} then {_step(slots, s, slot, value, offset)}", None,
+                                 f"{text}, then {' '.join(expression.split())}"))
+                elif s == "longitudinal" and from_centred and quantity is not None:
+                    quantity = quantity_of(f"({quantity.text}) - {own / 2:.12g}", p) if own is not None else None
+                    here.append((p, s, how, quantity, quantity.text if quantity is not None else text))
+                else:
+                    here.append((p, s, how, quantity, text))
+            items += [(p, s, how, frozenset(q for q, t, _, _, _ in here if t == s), quantity, text)
+                      for p, s, how, quantity, text in here]
+    return items
+
+
+def placements(script: str) -> Dict[str, List[str]]:
+    """``{object: its placement specifiers}``: the specifiers of each top-level ``new`` statement that are not ``with``
+    ones (``ahead of ego by 10``, ``at ego.position + Vector(0, 40)``, ``facing 30 deg``), each on one line."""
+    out: Dict[str, List[str]] = {}
+    for statement in _statements(script):
+        found = _OBJECT.match(statement)
+        if found is not None and not statement.startswith(_SKIP):
+            out[found.group(1) or f"<{found.group(2)}>"] = [
+                " ".join(spec.split()) for spec in _split_top(found.group(3))
+                if spec.strip() and not re.match(r"^with\b", spec.strip())]
+    return out
+
+
+def lengths_along(script: str, obj: str) -> Optional[float]:
+    """The length of ``obj`` plus the length of the object its distance ahead or behind is measured from (``ahead of
+    P``, ``behind P``, an offset from ``P``: :func:`_offset_form`): what separates ``ahead of P by d`` from ``behind P
+    by -d - lengths`` (the two measure from opposite faces); ``None`` when it is placed otherwise or a length is not
+    known (:func:`object_lengths`)."""
+    lengths = object_lengths(script)
+    for specifier in placements(script).get(obj, []):
+        form = _offset_form(specifier)
+        found = re.match(r"^(?:ahead of|behind)\s+(\w+)\b", specifier)
+        reference = form[0] if form is not None else found.group(1) if found else None
+        if reference is not None:
+            own, other = lengths.get(obj), lengths.get(reference)
+            return None if own is None or other is None else own + other
+    return None
 
 
 def _zero_use(value: str, param: str) -> bool:
@@ -972,6 +1078,8 @@ def fixed_quantities(script: str) -> Dict[Tuple[str, str, str], str]:
     constants: Dict[str, str] = {}
     ego_point = _ego_point(script)
     oriented = _oriented_names(script)
+    lengths = object_lengths(script)
+    centred: Set[str] = set()  # placing points offset from an object: _object_items
 
     def constant(value: str) -> Optional[str]:
         text = " ".join(value.split())
@@ -1000,6 +1108,7 @@ def fixed_quantities(script: str) -> Dict[Tuple[str, str, str], str]:
                     constants.pop(assign.group(1), None)
             continue
         name, kind, rest = found.group(1) or f"<{found.group(2)}>", found.group(2), found.group(3)
+        own = _own_length(kind, _split_top(rest))
         here: List[Tuple[str, str]] = []
         for specifier in _split_top(rest):
             slots = _slots(specifier, behaviors, oriented)
@@ -1011,17 +1120,30 @@ def fixed_quantities(script: str) -> Dict[Tuple[str, str, str], str]:
                     if re.search(rf"\b{re.escape(point)}\b", expression):
                         if value and any(_slot_base(s) in bases for s, _ in items):
                             continue  # placed along the same direction from the point: the distances add up
-                        here += items
-                if value:
-                    read = constant(value)
-                    if read is not None:
-                        here.append((slot, read))
+                        here += [_less_half(item, own) if point in centred else item for item in items]
+                read = constant(value) if value else None
+                if read is not None and offset and slot == "longitudinal":
+                    read = _between_faces(read, expression, own, lengths)  # as ahead of measures it
+                if read is not None:
+                    here.append((slot, read))
         if kind in PLACEMENT_KINDS:
-            carried[name] = here
+            carried[name] = [item for item in here if item[1] is not None]
+            if any(_offset_pair(_slots(spec, behaviors, oriented)) for spec in _split_top(rest)):
+                centred.add(name)
             continue
         for slot, text in here:
-            fixed.setdefault((name, kind, slot), text)
+            if text is not None:
+                fixed.setdefault((name, kind, slot), text)
     return fixed
+
+
+def _less_half(item: Tuple[str, Optional[str]], own: Optional[float]) -> Tuple[str, Optional[str]]:
+    """A fixed distance ahead a placing point offset from an object hands on (``(slot, value)``), less the half
+    length of the actor it places (``own``; ``None``, not read, when that is not known): :func:`_object_items`."""
+    slot, text = item
+    if slot != "longitudinal" or text is None:
+        return item
+    return (slot, f"({text}) - {own / 2:.12g}" if own is not None else None)
 
 
 def object_behaviours(script: str) -> Dict[str, str]:
