@@ -1142,7 +1142,8 @@ reason (``"key_not_compared"``, :func:`_key_not_compared`). Within the share may
 actors (traffic beside the interaction), and key quantities the new script fixes without a parameter of its own or
 leaves out (a generated script parameterises a scene its own way: the rule-based generator leaves most behaviour
 timings fixed), as long as a fixed key quantity holds the failing value (``"key_fixed_outside"``,
-:func:`_key_fixed_outside`)."""
+:func:`_key_fixed_outside`); a key actor's placement the new script writes in a form the judge cannot read is a
+rejection (``"key_unread"``, :func:`_key_placement_unread`)."""
 
 
 def _key_not_compared(parameters: Optional[Mapping[str, Any]]) -> Optional[str]:
