@@ -163,6 +163,10 @@ class TrainConfig:
         checkpoint_freq / keep_checkpoints: checkpoint every that many steps, keep the newest.
         progress_bar: show a tqdm progress bar on stderr.
         vec_env: ``subproc`` (worker processes) or ``dummy`` (in this process).
+        learning_rate: fine-tuning only (:func:`fine_tune`): a constant learning rate replacing the checkpoint's
+            (``None``: the checkpoint's own). A training run takes its rate from ``hyperparameters``.
+        reward_weights: fine-tuning only (:func:`fine_tune`): overrides of single reward terms of the env config
+            (e.g. ``{"standing": -1.0}``; the other terms keep their weights).
     """
 
     out: str
@@ -188,6 +192,8 @@ class TrainConfig:
     keep_checkpoints: int = 3
     progress_bar: bool = True
     vec_env: str = "subproc"
+    learning_rate: Optional[float] = None
+    reward_weights: Optional[Dict[str, float]] = None
 
     # settings a resumed run must share with the run it continues
     IDENTITY = ("algo", "scenarios", "bank_dir", "seed", "sampler", "weights", "curriculum_floor",
@@ -223,6 +229,10 @@ class TrainConfig:
         check_names(TrainingError, "--baselines", self.baselines, optional=False)
         check_bool(TrainingError, "progress_bar (--no-progress)", self.progress_bar)
         check_choice(TrainingError, "--vec-env", self.vec_env, ("subproc", "dummy"))
+        check_number(TrainingError, "learning_rate", self.learning_rate, low=0, interval="(]", optional=True,
+                     example="e.g. 1e-4")
+        check_mapping(TrainingError, "reward_weights", self.reward_weights, optional=True,
+                      what="a JSON object of reward term weights")
 
     def validate(self) -> None:
         """Raise :class:`TrainingError` for settings that cannot train."""
@@ -319,8 +329,9 @@ class TrainConfig:
         return cls(out=str(out), steps=steps, weights=dict(weights), sampler="weighted", **options)
 
     def to_json(self) -> Dict[str, Any]:
-        """A JSON-safe dict of every field."""
-        return dataclasses.asdict(self)
+        """A JSON-safe dict of every field (the fine-tuning-only ones only when set)."""
+        values = dataclasses.asdict(self)
+        return {k: v for k, v in values.items() if not (k in _FINE_TUNING_ONLY and v is None)}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> "TrainConfig":
@@ -332,6 +343,10 @@ class TrainConfig:
                                 "was the run made by a newer dv2s-gym?")
         return cls(**dict(data))
 
+
+_FINE_TUNING_ONLY = ("learning_rate", "reward_weights")
+"""Fields only :func:`fine_tune` reads; it applies them (the rate saved in the first checkpoint, the reward terms
+in the env config) and trains with them cleared, so :func:`train` refuses a config that sets them."""
 
 _FINE_TUNE_DEFAULTS: Dict[str, Any] = {"env_config": None, "eval_freq": 0, "eval_seeds": 1, "card_seeds": 0,
                                        "baselines": []}
@@ -828,6 +843,11 @@ def train(config: TrainConfig, resume: bool = False, log: Callable[[str], None] 
     Raises :class:`TrainingError` (and the registry's/bank's errors) for bad input.
     """
     config.validate()
+    ignored = [name for name in _FINE_TUNING_ONLY if getattr(config, name) is not None]
+    if ignored:
+        raise TrainingError(f"{' and '.join(ignored)} are fine-tuning settings (fine_tune applies them); to train "
+                            "with another learning rate pass hyperparameters={'learning_rate': ...}, and change the "
+                            "reward with env_config")
     out = Path(config.out)
     if out.exists() and not out.is_dir():
         raise TrainingError(f"--out {out} is a file; choose a folder for the run")
@@ -1093,8 +1113,7 @@ def fine_tune_scenarios(weights: Optional[Mapping[str, float]],
     return weights, list(scenarios)
 
 
-def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, learning_rate: Optional[float] = None,
-              reward_weights: Optional[Mapping[str, float]] = None, log: Callable[[str], None] = print) -> Path:
+def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, log: Callable[[str], None] = print) -> Path:
     """Continue training an SB3 checkpoint on a bank with weighted scenario sampling; returns ``config.out/model.zip``.
 
     ``config`` (:meth:`TrainConfig.fine_tuning`) says what to train on: ``steps`` env steps of fine-tuning (on
@@ -1110,8 +1129,8 @@ def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, learning_rate: Op
     seeds >= :data:`TRAIN_SEED_LOW`, evaluation seeds :data:`EVAL_SEED_BASE`...) are those of
     ``dv2s train``. The card (``model_card.json``, ``README.md``) gets a ``fine_tune`` section naming the
     source checkpoint and its step.
-    ``learning_rate`` (constant) replaces the checkpoint's own for the fine-tuning.
-    ``reward_weights`` overrides single reward terms of that env config (e.g.
+    ``config.learning_rate`` (constant) replaces the checkpoint's own for the fine-tuning.
+    ``config.reward_weights`` overrides single reward terms of that env config (e.g.
     ``{"standing": -1.0}``; the other terms keep their weights): the training env's
     config is recorded as the card's ``env_config`` and the overrides in its
     ``fine_tune`` section. Only training uses it; evaluating the result is up to the caller.
@@ -1123,6 +1142,7 @@ def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, learning_rate: Op
     if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
         raise TrainingError(f"fine-tuning steps must be a positive integer, not {steps!r}")
     out = Path(config.out)
+    learning_rate, reward_weights = config.learning_rate, config.reward_weights
     weights, scenarios = fine_tune_scenarios(config.weights, config.scenarios)
     algorithm, source, source_card = resolve_checkpoint(checkpoint_or_spec)
     env_config = dict(source_card.get("env_config") or {}) if config.env_config is None else config.env_config
@@ -1139,7 +1159,8 @@ def fine_tune(checkpoint_or_spec: str, config: TrainConfig, *, learning_rate: Op
     run_config = dataclasses.replace(
         config, out=str(out), algo=algorithm, scenarios=sorted(scenarios), steps=start_step + steps,
         sampler="weighted", weights={name: weights.get(name, 0.0) for name in sorted(scenarios)},
-        env_config=dict(env_config), hyperparameters=hyperparameters, baselines=list(config.baselines))
+        env_config=dict(env_config), hyperparameters=hyperparameters, baselines=list(config.baselines),
+        learning_rate=None, reward_weights=None)
     run_config.validate()
     if latest_checkpoint(out) is None:
         _first_checkpoint(run_config, source, start_step, learning_rate)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Callable
 
 from policies import imitation, training
 from policies.dagger_config import DaggerConfig
@@ -18,11 +18,9 @@ def _train_config(out: Any, options: dict) -> training.TrainConfig:
                                             **options)
 
 
-def fine_tune(spec: str, *, out: Any, learning_rate: Optional[float] = None, reward_weights: Any = None,
-              log: Callable[[str], None] = print, **options: Any) -> Path:
+def fine_tune(spec: str, *, out: Any, log: Callable[[str], None] = print, **options: Any) -> Path:
     """:func:`policies.training.fine_tune` with the :class:`~policies.training.TrainConfig` fields as keywords."""
-    return training.fine_tune(spec, _train_config(out, options), learning_rate=learning_rate,
-                              reward_weights=reward_weights, log=log)
+    return training.fine_tune(spec, _train_config(out, options), log=log)
 
 
 def dagger_fine_tune(spec: str, *, out: Any, log: Callable[[str], None] = print, **options: Any) -> Path:

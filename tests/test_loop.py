@@ -423,7 +423,8 @@ class _StandIns:
 
         self.fine_tunes, self.evaluations, self.regressions = [], [], []
 
-        def fine_tune(policy, config, *, learning_rate, **options):
+        def fine_tune(policy, config, **options):
+            learning_rate = config.learning_rate
             if kill_in is not None and str(config.out).endswith(kill_in):
                 raise _Kill()
             self.fine_tunes.append({"out": str(config.out), "steps": config.steps, "weights": dict(config.weights),

@@ -65,8 +65,8 @@ def test_fine_tune_trains_with_the_overridden_reward_and_records_it(tmp_path, mo
 
 
 def _stub_fine_tune(calls):
-    def stub(spec, config, *, reward_weights=None, **kwargs):
-        out, env_config = config.out, config.env_config
+    def stub(spec, config, **kwargs):
+        out, env_config, reward_weights = config.out, config.env_config, config.reward_weights
         calls.append({"env_config": env_config, "reward_weights": reward_weights, "training_config":
                       with_reward_weights(env_config, reward_weights)})
         out = Path(out)
@@ -140,3 +140,20 @@ def test_cli_refuses_a_bad_fine_tune_reward_in_one_line(tmp_path, capsys, value,
     code, _, err = run(capsys, "loop", "--out", tmp_path / "loop", "--no-progress", "--fine-tune-reward", value)
     assert code == 2 and needle in one_line_error(err)
     assert not (tmp_path / "loop").exists()
+
+
+@pytest.mark.parametrize("field, value", [("learning_rate", 1e-4), ("reward_weights", {"standing": -1.0})])
+def test_train_refuses_a_fine_tuning_setting_it_would_ignore(tmp_path, field, value):
+    config = training.TrainConfig(out=str(tmp_path / "run"), steps=10, **{field: value})
+    with pytest.raises(TrainingError, match=f"{field}.*fine-tuning settings"):
+        training.train(config, log=lambda _: None)
+    assert not (tmp_path / "run").exists()
+
+
+def test_a_fine_tuning_config_records_its_own_settings_only_when_set(tmp_path):
+    plain = training.TrainConfig.fine_tuning(tmp_path, steps=10, weights={SOURCES[0]: 1.0})
+    assert "learning_rate" not in plain.to_json() and "reward_weights" not in plain.to_json()
+    tuned = training.TrainConfig.fine_tuning(tmp_path, steps=10, weights={SOURCES[0]: 1.0}, learning_rate=1e-4)
+    assert training.TrainConfig.from_json(tuned.to_json()) == tuned
+    with pytest.raises(TrainingError, match="learning_rate"):
+        training.TrainConfig.fine_tuning(tmp_path, steps=10, weights={SOURCES[0]: 1.0}, learning_rate=-1.0)

@@ -31,6 +31,7 @@ sweep arms are paired on the held-out episodes by ``python -m bench.research.loo
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import sys
@@ -112,8 +113,8 @@ def main() -> None:
             extra["learning_rate"] = args.lr
         path = dagger_fine_tune(policy, config, DaggerConfig(**extra), log=fine_tune_log)
     else:
-        path = fine_tune(policy, config, reward_weights=json.loads(args.reward), learning_rate=args.lr,
-                         log=lambda _: None)
+        config = dataclasses.replace(config, reward_weights=json.loads(args.reward) or None, learning_rate=args.lr)
+        path = fine_tune(policy, config, log=lambda _: None)
     t_fine_tune = time.perf_counter() - began
     spec = f"ppo:{path.resolve()}"
     began = time.perf_counter()

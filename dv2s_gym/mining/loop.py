@@ -996,8 +996,9 @@ def _fine_tune_arm(current: str, out: Path, excluded: set, mined_share: float, a
         return FineTuneArm.from_dict(_dagger_arm(current, out, weights, arm, label)).replace(method="dagger", **common)
     from policies.training import fine_tune
 
-    path = fine_tune(current, arm.config(out, weights), reward_weights=arm.reward, learning_rate=arm.learning_rate,
-                     log=arm.log)
+    config = dataclasses.replace(arm.config(out, weights), reward_weights=dict(arm.reward) or None,
+                                 learning_rate=arm.learning_rate)
+    path = fine_tune(current, config, log=arm.log)
     return FineTuneArm(model=str(path.resolve()), method="ppo", **common, reward_weights=dict(arm.reward),
                        env_config=arm.fine_tune_config)
 
