@@ -48,6 +48,7 @@ import os
 import random
 import shutil
 import uuid
+import warnings
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -60,6 +61,7 @@ from scenario_bank.atomic import atomic_path, atomic_write_json, atomic_write_te
 from scenario_bank.cache import keyed_cache_dir
 from scenario_bank.dedup import (NEAR_COPY_LINES, changed_code_lines, content_hash, find_duplicate, find_near_copy,
                                  find_near_duplicate, near_duplicate, param_ranges, semantic_key)
+from scenario_bank.families import near_duplicates_of
 from scenario_bank.entries import (BANK_VERSION, CONTROL_FIX, ENTRY_FILE_KEYS, ENTRY_FILES, MAX_FILE_BYTES,
                                    MAX_JSON_DEPTH, MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, MINED_PROVENANCE_FIELDS, NEW_ENTRY_NAME, SCRIPT, SIDECAR, SIDECAR_VERSION,
                                    SOURCE_KINDS, PathLike, ScenarioEntry, control_character_field, entry_bytes,
@@ -67,6 +69,7 @@ from scenario_bank.entries import (BANK_VERSION, CONTROL_FIX, ENTRY_FILE_KEYS, E
                                    unsafe_input)
 from scenario_bank.records import Provenance, Sidecar
 from scenario_bank.errors import (BankError, BankOptionError, BankVersionError, DuplicateScenarioError, NotABankError,
+                                  NearDuplicateWarning,
                                   ScenarioRejectedError, UnknownScenarioError, UnsafeBankInputError, WrongTypeError,
                                   bank_write_error)
 from scenario_bank.safe_files import (ArchiveLimits, UnsafeInputError, is_entry_name, load_json_bounded,
@@ -413,7 +416,9 @@ class Bank:
         - ``"error"`` (the default): a script byte-for-byte or semantically identical (same elements, map and
           parameter ranges) to an entry is refused (:class:`DuplicateScenarioError`, naming that entry);
           ``name`` is the new entry's name, and a name already taken is refused (:class:`BankError`). Returns
-          the new :class:`ScenarioEntry`.
+          the new :class:`ScenarioEntry`. A new entry that is a near-duplicate of others (same map and elements,
+          overlapping parameter ranges: one scenario family for mining and the loop) is added with a
+          :class:`~scenario_bank.errors.NearDuplicateWarning` naming them.
         - ``"merge"`` (what failure mining uses): a script identical to an entry or a near-duplicate of one
           (:meth:`find_near_duplicate`: same map and elements, overlapping numeric parameter ranges) is not
           added: its provenance (with ``description`` and ``how``) is appended to that entry's
@@ -448,7 +453,11 @@ class Bank:
             self._load(locked=True)
             if on_duplicate == "merge":
                 return self._add_or_merge_locked(script, meta, files, near_copy_of)
-            return self._add_new_locked(script, meta, files, explicit_name=given.name is not None)
+            added = self._add_new_locked(script, meta, files, explicit_name=given.name is not None)
+        twins = near_duplicates_of(self, added.name)
+        if twins:
+            warnings.warn(NearDuplicateWarning(added.name, twins), stacklevel=2)
+        return added
 
     def _add_new_locked(self, script: str, meta: Sidecar, files: Dict[str, Path], *,
                         explicit_name: bool) -> ScenarioEntry:

@@ -15,7 +15,8 @@ from typing import Any, Optional, Sequence
 
 __all__ = ["DV2SError", "BankError", "BankVersionError", "UnsafeBankInputError", "NotABankError",
            "DuplicateScenarioError", "ScenarioRejectedError", "UnknownScenarioError", "BankOptionError",
-           "MissingFileError", "WrongFileError", "SettingError", "WrongTypeError", "bank_write_error"]
+           "MissingFileError", "WrongFileError", "SettingError", "WrongTypeError", "NearDuplicateWarning",
+           "bank_write_error"]
 
 
 class DV2SError(Exception):
@@ -70,6 +71,19 @@ class DuplicateScenarioError(BankError):
     def __init__(self, message: str, existing: str) -> None:
         super().__init__(message)
         self.existing = existing
+
+
+class NearDuplicateWarning(UserWarning):
+    """A warning, not an error: an entry was added whose script is a near-duplicate of other entries (the same map
+    and elements, overlapping parameter ranges; :func:`scenario_bank.dedup.near_duplicate`). Mining and the loop
+    count them as one scenario family. ``name``: the new entry; ``twins``: the entries it is a near-duplicate of."""
+
+    def __init__(self, name: str, twins: Sequence[str]) -> None:
+        super().__init__(f"{name} is a near-duplicate of bank entr{'y' if len(twins) == 1 else 'ies'} "
+                         f"{', '.join(repr(t) for t in twins)} (same map and elements, overlapping parameter ranges): "
+                         "mining and dv2s loop count them as one scenario family")
+        self.name = name
+        self.twins = tuple(twins)
 
 
 class ScenarioRejectedError(BankError, ValueError):

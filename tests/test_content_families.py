@@ -3,10 +3,15 @@ and mining counts them as one family."""
 
 from __future__ import annotations
 
+import warnings
+
+import pytest
+
 from dv2s_gym.mining.family import scenario_family
 from dv2s_gym.mining.loop import _with_parents
 from dv2s_gym.mining.split import family_of, split_by_family
 from scenario_bank.bank import Bank
+from scenario_bank.errors import NearDuplicateWarning
 from scenario_bank.families import content_families
 from cli_helpers import run
 
@@ -65,3 +70,14 @@ def test_bank_add_warns_of_a_near_duplicate_naming_it(tmp_path, capsys):
     assert code == 0
     warnings = [line for line in err.splitlines() if "near-duplicate of bank entry" in line]
     assert len(warnings) == 2 and "one scenario family" in warnings[0]
+
+
+def test_bank_add_in_python_warns_of_a_near_duplicate_naming_it(tmp_path):
+    bank = _bank(tmp_path)
+    with pytest.warns(NearDuplicateWarning) as caught:
+        entry = bank.add(_SCRIPT.format(low=10, high=140), "a stopped car, gap 10 to 140")
+    warning = caught[0].message
+    assert warning.name == entry.name and len(warning.twins) == 2 and "one scenario family" in str(warning)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", NearDuplicateWarning)
+        bank.add(_SCRIPT.format(low=500, high=600), "a stopped car very far ahead")

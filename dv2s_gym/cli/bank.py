@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import warnings
 from typing import Any, List
 
 from dv2s_gym.cli import bank_validate
@@ -15,7 +16,7 @@ from dv2s_gym.cli.output import emit
 from dv2s_gym.cli.parser import bank_command, bank_option
 from scenario_bank.admission import ON_DUPLICATE_OF
 from scenario_bank.bank import MAX_SCRIPT_BYTES, MAX_SIDECAR_BYTES, Provenance, Sidecar
-from scenario_bank.families import near_duplicates_of
+from scenario_bank.errors import NearDuplicateWarning
 
 __all__ = ["add_parser", "run_add", "run_export", "run_import", "run_list", "run_rm", "run_sample", "run_show",
            "run_stats"]
@@ -138,10 +139,17 @@ def run_add(args: argparse.Namespace) -> int:
     fields = Sidecar(description=args.description, name=args.name, elements=elements, tags=tuple(args.tag or ()),
                      map=args.map or "", source=provenance)
     bank = open_bank(args)
-    entry = bank.add(script, fields, upgrade_scenic2=True)
-    for twin in near_duplicates_of(bank, entry.name):
-        print(f"warning: {entry.name} is a near-duplicate of bank entry {twin!r} (same map and elements, overlapping "
-              "parameter ranges): mining and dv2s loop count them as one scenario family", file=sys.stderr)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", NearDuplicateWarning)
+        entry = bank.add(script, fields, upgrade_scenic2=True)
+    for warning in caught:
+        if isinstance(warning.message, NearDuplicateWarning):
+            for twin in warning.message.twins:
+                print(f"warning: {entry.name} is a near-duplicate of bank entry {twin!r} (same map and elements, "
+                      "overlapping parameter ranges): mining and dv2s loop count them as one scenario family",
+                      file=sys.stderr)
+        else:
+            warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
     rewrites = list(entry.source.scenic2_rewrites or ())
     for line in [f"scenic2: {r}" for r in rewrites] + [f"scenic2 note: {n}" for n in entry.source.scenic2_notes or ()]:
         print(line, file=sys.stderr)
