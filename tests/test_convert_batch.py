@@ -11,8 +11,9 @@ import pytest
 
 from dv2s_gym.cli import main
 from dv2s_gym.pipeline.batch_convert import videos_to_convert
-from dv2s_gym.pipeline.convert import add_converted, conversion_provenance
+from dv2s_gym.pipeline.convert import ConvertSettings, add_converted, conversion_provenance, convert_video
 from dv2s_gym.pipeline.stages import Description, Generation
+import scenario_bank.atomic as atomic
 from scenario_bank.bank import Bank
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -79,3 +80,14 @@ def test_converting_a_folder_into_a_bank_adds_each_checked_scenario_with_its_pro
                 "context_hash": report["generation"]["context_hash"], "date": datetime.date.today().isoformat()}
     assert {key: entry.source.get(key) for key in expected} == expected
     assert "generated" in entry.tags
+
+
+def test_a_video_conversion_writes_its_whole_report_in_one_atomic_step(tmp_path, monkeypatch):
+    written = []
+    real = atomic.atomic_write_text
+    monkeypatch.setattr("dv2s_gym.pipeline.convert.atomic_write_text",
+                        lambda path, *a, **k: (written.append(Path(path).name), real(path, *a, **k))[1])
+    report = convert_video(CLIP, tmp_path / "out", ConvertSettings(seconds=2))
+    assert written.count("report.json") == 1  # inside the staged folder, moved into out with the other files
+    on_disk = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert on_disk == json.loads(json.dumps(report, default=str)) and on_disk["seconds_total"] >= on_disk["seconds"]

@@ -132,8 +132,10 @@ def _write(folder: Path, name: str, text: str) -> None:
 
 def generate_to_folder(description: Description, out: Path, *, sg: str = "rules", seed: int = 0,
                        llm_config: LLMConfigLike = None, labels: Optional[Dict[str, Any]] = None,
-                       seconds: float = 10.0) -> Dict[str, Any]:
+                       seconds: float = 10.0, started: Optional[float] = None) -> Dict[str, Any]:
     """SG + validation for a description; writes the folder's files (:data:`OUTPUT_FILES`) and returns the report.
+    ``started``: the :func:`time.perf_counter` at which the whole conversion began (the report's ``seconds_total``
+    counts from it; ``None``: no such field).
 
     The files are written beside ``out`` and moved into it together at the end (:func:`staged_folder`): a run that
     fails to write (a full disk) leaves ``out`` as it was, and a finished run leaves no file of an earlier one.
@@ -142,12 +144,12 @@ def generate_to_folder(description: Description, out: Path, *, sg: str = "rules"
         _write(stage, "description.txt", description.text.strip() + "\n")
         _write(stage, "elements.json", json.dumps(description.elements, indent=2) + "\n")
         report = _generate_in(stage, description, sg=sg, seed=seed, llm_config=llm_config, labels=labels,
-                              seconds=seconds)
+                              seconds=seconds, started=started)
     return report
 
 
 def _generate_in(stage: Path, description: Description, *, sg: str, seed: int, llm_config: LLMConfigLike,
-                 labels: Optional[Dict[str, Any]], seconds: float) -> Dict[str, Any]:
+                 labels: Optional[Dict[str, Any]], seconds: float, started: Optional[float]) -> Dict[str, Any]:
     """:func:`generate_to_folder`'s work, its files written in ``stage``."""
     start = time.perf_counter()
     report: Dict[str, Any] = {"description": description.as_dict()}
@@ -169,6 +171,8 @@ def _generate_in(stage: Path, description: Description, *, sg: str, seed: int, l
                 report["e2e_sc"] = e2e_sc(labels, check.simulated_elements)
     report["seconds"] = round(time.perf_counter() - start, 3)
     report["files"] = [name for name in OUTPUT_FILES if name == "report.json" or (stage / name).is_file()]
+    if started is not None:
+        report["seconds_total"] = round(time.perf_counter() - started, 3)
     _write(stage, "report.json", json.dumps(report, indent=2, default=str) + "\n")
     return report
 
@@ -227,9 +231,7 @@ def convert_video(video: str | os.PathLike, out: str | os.PathLike,
     video, s = Path(video), settings or ConvertSettings()
     description = describe(video, backend=s.dra, camera=s.camera, question=s.question, llm_config=s.llm_config)
     report = generate_to_folder(description, Path(out), sg=s.sg, seed=s.seed, llm_config=s.llm_config,
-                                labels=label_for(video), seconds=s.seconds)
-    report["seconds_total"] = round(time.perf_counter() - start, 3)
-    _write(Path(out), "report.json", json.dumps(report, indent=2, default=str) + "\n")
+                                labels=label_for(video), seconds=s.seconds, started=start)
     return report
 
 
