@@ -43,7 +43,7 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "report.format_summary": "renders the report's JSON object (report.json)",
     "report.markdown": "renders the report's JSON object (report.json)",
     "report.write_reports": "writes the report's JSON object (report.json) and its renderings",
-    "rate.rate_estimates": "takes the run's settings.json (a RunSettings is a read-only mapping over it)",
+    "rate.rate_estimates": "takes the run's settings.json as recorded (RunSettings.values)",
     "loop.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
     "loop.LoopReport.recommendation": "returns report.json's recommendation (loop_verdict.recommendation's JSON object)",
     "loop.reference_gate": "takes the held-out store's rows as read from heldout.jsonl: the file format",

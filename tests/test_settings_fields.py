@@ -158,6 +158,8 @@ BAD = {
         "keep_checkpoints": ("--keep-checkpoints", COUNT_FROM_1),
         "progress_bar": ("--no-progress", BOOL),
         "vec_env": ("--vec-env", ["fork", 0, None]),
+        "learning_rate": ("learning_rate", [0, -1.0, NAN, INF, True, "1e-4"]),
+        "reward_weights": ("reward_weights", MAPPING),
     },
 }
 

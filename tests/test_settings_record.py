@@ -75,7 +75,10 @@ def test_a_run_folder_s_settings_are_read_in_one_place(tmp_path):
               "stall_seconds": None, "scenarios": ["a"]}
     (tmp_path / "settings.json").write_text(json.dumps(values))
     settings = read_run_settings(tmp_path)
-    assert settings == values and dict(settings) == values  # a mapping: code reading a dict keeps working
+    assert dict(settings.values) == values
+    with pytest.raises(TypeError):
+        settings.values["policy"] = "other"  # read-only: the run's record, not a scratch dict
+    assert (settings.scenarios, settings.batch, settings.sampler) == (["a"], None, None)
     assert (settings.policy, settings.bank_dir, settings.env_config) == ("rule", "/b", {"duration": 5})
     assert settings.monitor == MonitorSettings(ttc_threshold=1.5)  # an absent or null monitor setting: the default
     assert settings.path == tmp_path / "settings.json"

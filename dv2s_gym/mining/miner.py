@@ -261,13 +261,13 @@ def _read_settings(out: Path) -> Optional[RunSettings]:
     """The run folder's ``settings.json`` (``None`` when there is none); a damaged one is refused in one line
     naming the file and the fix."""
     saved = read_run_settings(out)
-    if saved is not None and not isinstance(saved.get("scenarios"), list):
+    if saved is not None and saved.scenarios is None:
         raise MiningError(f"{saved.path} is not a mining run's settings (no list of scenarios); restore it, or choose "
                           "another --out (or delete the run folder) to start the run over")
     return saved
 
 
-def _check_resume(saved: Dict[str, Any], settings: Dict[str, Any], out: Path,
+def _check_resume(saved: Mapping[str, Any], settings: Dict[str, Any], out: Path,
                   keys: Sequence[str] = _RESUME_KEYS) -> None:
     check_identity(saved, settings, keys, run=f"{out} holds a mining run", defaults=MineSettings,
                    fix="resume it with the same settings or pass another --out")
@@ -303,12 +303,12 @@ def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[i
     return sampler
 
 
-def _schedule(saved: Optional[Dict[str, Any]], sampler: str, out: Path) -> str:
+def _schedule(saved: Optional[RunSettings], sampler: str, out: Path) -> str:
     """The run's schedule: an adaptive sampler streams with a sliding window, a non-adaptive one runs in chunks;
     a run folder recorded with another schedule is refused."""
     schedule = "window" if is_adaptive(sampler) else "chunks"
-    if saved is not None and saved.get("schedule") != schedule:
-        raise MiningError(f"{out}/settings.json records the schedule {saved.get('schedule')!r}, not {schedule!r} "
+    if saved is not None and saved.schedule != schedule:
+        raise MiningError(f"{out}/settings.json records the schedule {saved.schedule!r}, not {schedule!r} "
                           f"(the {', '.join(SCHEDULES)} schedules are those of the adaptive and the non-adaptive "
                           "samplers); it was not written by this dv2s-gym: pass another --out")
     return schedule
@@ -586,18 +586,18 @@ def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional
     run's checked against the ones asked (its own scenarios and batch when none are asked); written back."""
     settings_path = out / SETTINGS_FILE
     saved = _read_settings(out)
-    batch = settings.batch or (saved["batch"] if saved else DEFAULT_BATCH)  # never the workers: the seed decides the run
+    batch = settings.batch or (saved.batch if saved else DEFAULT_BATCH)  # never the workers: the seed decides the run
     if saved is not None:  # a changed seed, policy, ... is refused before the space is built, not minutes later
-        before_space = _settings(policy, settings, batch, saved["scenarios"], bank_dir, {})
-        _check_resume(saved, before_space, out, [key for key in _RESUME_KEYS if key not in _SPACE_KEYS])
+        before_space = _settings(policy, settings, batch, saved.scenarios, bank_dir, {})
+        _check_resume(saved.values, before_space, out, [key for key in _RESUME_KEYS if key not in _SPACE_KEYS])
         # the same spec naming a changed checkpoint or module is refused, naming what changed
-        check_policy_unchanged(saved, policy, folder=out, run="mining run", error=MiningError)
-    names = saved["scenarios"] if saved and settings.scenarios is None else None
+        check_policy_unchanged(saved.values, policy, folder=out, run="mining run", error=MiningError)
+    names = saved.scenarios if saved and settings.scenarios is None else None
     asked = list(settings.scenarios) if settings.scenarios is not None else None
     space = space_module.SceneSpace(names or asked, bank_dir)
     recorded = _settings(policy, settings, batch, space.scenarios, bank_dir, space.describe())
     if saved is not None:
-        _check_resume(saved, recorded, out)
+        _check_resume(saved.values, recorded, out)
     recorded["schedule"] = _schedule(saved, settings.sampler, out)
     if origin:
         recorded["origin"] = dict(origin)

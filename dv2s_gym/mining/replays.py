@@ -59,7 +59,7 @@ def replay_clusters(run_dir: os.PathLike | str, *, bank_dir: os.PathLike | str,
     if not todo:
         return existing
     bank = Bank(bank_dir)
-    replay = ConversionSettings(policy=settings["policy"], env_config=settings.env_config,
+    replay = ConversionSettings(policy=settings.policy, env_config=settings.env_config,
                                 bank_dir=settings.bank_dir,  # the bank the run mined (the parents')
                                 monitor=settings.monitor)
     appender = JsonlAppender(path)

@@ -423,7 +423,7 @@ def build_report(run_dir: PathLike, *, created: Optional[str] = None) -> Dict[st
     settings, episodes, conversions, skipped = read_run(run_dir)
     failed = [r for r in episodes if r.failed]
     clusters = _cluster_of(episodes) if failed else {}
-    report = build_report_from_records(settings, episodes, conversions, clusters, created=created)
+    report = build_report_from_records(settings.values, episodes, conversions, clusters, created=created)
     report["run_dir"] = str(run_dir)
     report["skipped_lines"] = skipped
     return report

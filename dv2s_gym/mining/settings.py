@@ -6,7 +6,8 @@ import dataclasses
 import json
 import os
 from pathlib import Path
-from typing import Any, Dict, Iterator, Mapping, Optional, Tuple, Type, Union
+from types import MappingProxyType
+from typing import Any, Dict, List, Mapping, Optional, Tuple, Type, Union
 
 from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.errors import MiningError
@@ -143,27 +144,24 @@ class MineSettings:
         return values
 
 
-class RunSettings(Mapping[str, Any]):
-    """A mining run's ``settings.json`` as read back (:func:`read_run_settings`): every recorded value by its key
-    (a read-only mapping: :meth:`MineSettings.recorded` with the policy, the resolved batch, scenarios and bank,
-    the scene space and the schedule) and, typed, those the run's later steps use."""
+class RunSettings:
+    """A mining run's ``settings.json`` as read back (:func:`read_run_settings`), typed where the run's later steps
+    read it (the policy, bank, env config, monitors, scenarios, batch, sampler and seed); :attr:`values` is the file
+    as recorded (:meth:`MineSettings.recorded` with the policy, the resolved batch, scenarios and bank, the scene
+    space and the schedule), which the resume identity check and the report that embeds the file read whole."""
 
     def __init__(self, path: Path, values: Mapping[str, Any]) -> None:
         self.path = path
         """The ``settings.json`` read."""
         self._values = dict(values)
 
-    def __getitem__(self, key: str) -> Any:
-        return self._values[key]
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._values)
-
-    def __len__(self) -> int:
-        return len(self._values)
-
     def __repr__(self) -> str:
         return f"RunSettings({str(self.path)!r}, {self._values!r})"
+
+    @property
+    def values(self) -> Mapping[str, Any]:
+        """Every recorded value by its key, read-only (a data file's content: check a value before use)."""
+        return MappingProxyType(self._values)
 
     @property
     def policy(self) -> Optional[str]:
@@ -185,6 +183,28 @@ class RunSettings(Mapping[str, Any]):
         """The failure monitors' settings the run recorded (``ttc_threshold``, ``stall_seconds``; the monitors'
         defaults for those absent)."""
         return MonitorSettings.from_recorded(self._values)
+
+    @property
+    def scenarios(self) -> Optional[List[str]]:
+        """The scenarios the run mined, in the order of its scene space (``None``: the file lists none, which a
+        run folder's resume refuses)."""
+        scenarios = self._values.get("scenarios")
+        return list(scenarios) if isinstance(scenarios, list) else None
+
+    @property
+    def batch(self) -> Optional[int]:
+        """The scenes the run drew ahead of the outcomes fed back (``None``: not recorded)."""
+        return self._values.get("batch")
+
+    @property
+    def sampler(self) -> Optional[str]:
+        """The sampler the run drew scenes with."""
+        return self._values.get("sampler")
+
+    @property
+    def schedule(self) -> Optional[str]:
+        """How the run fed its sampler (``window`` or ``chunks``; ``None``: not recorded)."""
+        return self._values.get("schedule")
 
 
 def read_run_settings(run_dir: Union[str, os.PathLike], *,
