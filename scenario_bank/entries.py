@@ -62,13 +62,12 @@ def entry_file_name(name: Any) -> str:
     return name
 
 
-def entry_files(source: Mapping[str, Any]) -> List[str]:
+def entry_files(source: Provenance) -> List[str]:
     """The files a sidecar's ``source`` says the entry carries (:data:`ENTRY_FILES` of the source and of its
     ``merged`` records; valid relative names only), in order, without repeats."""
-    records = [source] + [m for m in (source.get("merged") or []) if isinstance(m, Mapping)]
+    lists = [list(source.files or ())] + [m.get(ENTRY_FILES) for m in source.merged or () if isinstance(m, Mapping)]
     out: List[str] = []
-    for record in records:
-        listed = record.get(ENTRY_FILES)
+    for listed in lists:
         for value in listed if isinstance(listed, list) else []:
             if is_entry_file(value) and value not in out:
                 out.append(value)

@@ -746,6 +746,7 @@ def test_the_failure_state_descriptor_and_state_novelty_feedback():
                {"index": 4, "scenario": BRAKES, "failure": failure, "rho": -1.0, "failure_state": None},
                {"index": 5, "scenario": BRAKES, "failure": None, "rho": 3.0}]
     seen: set = set()
+    records = [EpisodeRecord.from_dict({"seed": 0, **r}) for r in records]
     assert [_feedback(r, seen, "state-novelty") for r in records] == [-2.0, 9.0, -1.2, -1.1, -1.0, 3.0]
     assert default_feedback("novelty-bandit") == "state-novelty"
 

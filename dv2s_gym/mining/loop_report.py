@@ -717,7 +717,7 @@ def _round_lines(record: RoundRecord, settings: Mapping[str, Any]) -> List[str]:
     """A round's section: its policies and timings, then each step it ran, then where the next round starts."""
     steps = record.steps
     lines = ["", f"## Round {record.round}", "",
-             f"- policy: `{record.policy}` -> fine-tuned policy `{record.get('new_policy', '-')}`",
+             f"- policy: `{record.policy}` -> fine-tuned policy `{record.new_policy or '-'}`",
              f"- timings: {_seconds(record.timings)}"]
     lines += _errored_lines(record)
     if steps.skipped:

@@ -143,7 +143,7 @@ class MineRun:
         """A few lines for the terminal: episodes, failures, clusters, conversions, and a WARNING line when
         episodes ended in an error."""
         errors = len(self.errors)
-        restarted = sum(1 for r in self.records if r.get("worker_restarts"))
+        restarted = sum(1 for r in self.records if r.worker_restarts)
         failures = self.failures
         kinds = Counter(r["failure"]["kind"] for r in failures)
         kinds_by_type = Counter(r["failure"]["type"] for r in failures)
@@ -440,8 +440,8 @@ _REPEAT = 9.0  # what a repeated failure is fed under "novelty": the robustness 
 def _feedback(record: EpisodeRecord, seen: set, mode: str) -> float:
     """The value fed to the sampler for ``record``; ``seen`` holds the parameter cells (:func:`cell_id`) of the
     failures fed before it (in index order) and is updated."""
-    rho = record.get("rho")
-    if rho is None or record.get("error"):
+    rho = record.rho
+    if rho is None or record.error:
         return 1.0
     if record.get("failure") and mode == "cluster-novelty":
         cluster = ("cluster", cluster_id(record))
@@ -713,8 +713,8 @@ def convert_clusters(run: MineRun, conversion: ConversionSettings, *, bank_dir: 
     converted_episodes = {row.get("index") for row in existing}  # a run converted under older cluster ids
     candidates = []
     for cluster, members in sorted(group(run.records).items()):
-        avoidable = [r for r in members if r.get("avoidable") is not False]
-        if cluster in converted or not avoidable or any(r["index"] in converted_episodes for r in members):
+        avoidable = [r for r in members if r.avoidable is not False]
+        if cluster in converted or not avoidable or any(r.index in converted_episodes for r in members):
             continue
         # a failure whose scene the reference driver passed first: only such a scene gets an exact replay entry
         representative = min(avoidable, key=lambda r: (not reference_passed(r), float(r.get("rho") or 0.0),

@@ -128,8 +128,9 @@ class PolicyInfo(ReportRecord):
 def _result(value: Any) -> Any:
     """A paired episode's side: a :class:`RegressEpisode` (a result of a run: it has the record's required fields),
     else the JSON object as given (a report other code made from partial results)."""
-    if isinstance(value, Mapping) and not isinstance(value, RegressEpisode) \
-            and RegressEpisode.has_required(value):
+    if isinstance(value, RegressEpisode):
+        return value
+    if isinstance(value, Mapping) and RegressEpisode.has_required(value):
         return RegressEpisode.from_dict(value)
     if value is not None and not isinstance(value, Mapping):
         raise RecordError(f"a regression result must be a JSON object, not {type(value).__name__}")
@@ -167,6 +168,8 @@ class PairedEpisode(ReportRecord):
     def errored(self, role: str) -> bool:
         """Whether ``role`` ran this pair and its episode ended in an error."""
         result = self.result(role)
+        if isinstance(result, RegressEpisode):
+            return bool(result.error)
         return result is not None and bool(result.get("error"))
 
     def to_dict(self) -> Dict[str, Any]:
