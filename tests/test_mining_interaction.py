@@ -158,3 +158,48 @@ def test_an_actor_without_a_manoeuvre_is_named_where_it_was_unless_the_descripti
     assert ["car", "right_of", "ego"] in elements_from_text(sentence)["relations"]
     placed = elements_from_text("A car drives in the lane to the right of the ego car.")
     assert interaction_sentence(interaction, known=placed) == ""
+
+
+def _rear_end_into_steady_car(impact_drop: float, brake_before: bool = False) -> EpisodeTrace:
+    """The ego speeds up into a car ahead that cruises at 24.6 m/s (or, with ``brake_before``, brakes from it to
+    14 m/s over the 2 s before the impact); at the impact step the struck car's logged speed falls by
+    ``impact_drop`` m/s and the ego's by as much, then both stand still."""
+    n, impact = 30, 20
+    lead_speeds = _ramp(24.6, 14.0, impact - 10, 10, n) if brake_before else [24.6] * n
+    lead_speeds = lead_speeds[:impact] + [lead_speeds[impact - 1] - impact_drop] + [0.0] * (n - impact - 1)
+    ego_speeds = _ramp(25.0, 35.0, 0, impact, n)[:impact] + [35.0 - impact_drop] + [0.0] * (n - impact - 1)
+    lead_x = 35.0 + sum(v * DT for v in ego_speeds[:impact]) - sum(v * DT for v in lead_speeds[:impact]) - 30.5
+    return _trace({"ego": _drive(0.0, 0.0, ego_speeds), "lead": _drive(lead_x, 0.0, lead_speeds)},
+                  events=[{"kind": "collision", "time": impact * DT, "actors": ["ego", "lead"]}])
+
+
+def test_the_speed_an_impact_takes_away_is_no_braking_of_the_struck_car():
+    from dv2s_gym.mining.behaviour import extract_behaviour
+    from dv2s_gym.mining.interaction import trace_shows_interaction
+    from dv2s_gym.mining.monitors import Failure
+
+    steady = _rear_end_into_steady_car(impact_drop=3.1)
+    failure = {"type": "collision", "with": "lead", "step": 20, "time": 4.0}
+    assert ["car", "brake"] not in elements_from_trace(steady)["actions"]
+    assert "brake" not in failure_interaction(steady, failure).manoeuvres
+    behaviour = extract_behaviour(steady, Failure(type="collision", time=4.0, step=20, with_="lead", with_kind="car"))
+    assert (behaviour.actor_manoeuvre, behaviour.ego_manoeuvre) == ("steady", "keeping_lane")
+    braking = {"failure_type": "collision", "actor": "lead", "kind": "car", "manoeuvres": ["brake"]}
+    assert not trace_shows_interaction(braking, steady)
+    real = _rear_end_into_steady_car(impact_drop=3.1, brake_before=True)
+    assert "brake" in failure_interaction(real, failure).manoeuvres
+    assert trace_shows_interaction(braking, real)
+
+
+def test_the_judge_wants_the_manoeuvre_and_the_collision_from_the_same_actor():
+    from dv2s_gym.mining.interaction import trace_shows_interaction
+
+    n = 30
+    # a car beside the ego brakes hard; another car ahead, cruising, is the one the ego hits
+    trace = _trace({"ego": _drive(0.0, 0.0, [30.0] * n),
+                    "beside": _drive(0.0, LANE, _ramp(30.0, 10.0, 5, 10, n)),
+                    "ahead": _drive(60.0, 0.0, [20.0] * n)},
+                   events=[{"kind": "collision", "time": 5.8, "actors": ["ego", "ahead"]}])
+    braking = {"failure_type": "collision", "actor": "lead", "kind": "car", "manoeuvres": ["brake"]}
+    assert shows_interaction(braking, elements_from_trace(trace))  # the elements mix the two cars
+    assert not trace_shows_interaction(braking, trace)

@@ -10,7 +10,9 @@
                         | "steady" | "none",
      "ego_manoeuvre": "stopped" | "lane_change" | "braking" | "keeping_lane"}
 
-The manoeuvres are read from the :data:`WINDOW_SECONDS` before the failure step:
+The manoeuvres are read from the :data:`WINDOW_SECONDS` before the failure step (for a collision, before the
+impact: the state logged at the collision's step already carries the speed the impact took away, which is no
+braking or stopping of either side):
 
 - the other actor is ``crossing`` when its heading at the failure differs from the ego's by 45 to 135
   degrees, ``oncoming`` beyond 135; else ``stopped`` (below ``STANDING_SPEED`` at the failure),
@@ -177,6 +179,8 @@ def extract_behaviour(trace: Any, failure: Optional[Failure]) -> Optional[Behavi
     steps = max(1, int(round(WINDOW_SECONDS * frequency)))
     step = failure.step
     step = len(states) - 1 if not isinstance(step, int) else max(0, min(len(states) - 1, step))
+    if failure.type == "collision" and step > 0:
+        step -= 1  # the state logged at the impact already carries the speed the collision took away
     ego_path = _window(states, "ego", step, steps)
     other = involved_actor(trace, failure)
     if other:

@@ -22,7 +22,8 @@ conversion record of ``conversions.jsonl``:
 7. ``reproduction``: the same policy drives the new scenario over ``k`` scenes whose seeds derive
    from the record's seed (``numpy.random.SeedSequence([seed, record seed])``); an episode reproduces the
    failure when it fails in the *same failure class* with the *same kind of actor*; each episode also says
-   whether its trace shows the failure's interaction (the actor's kind doing one of its manoeuvres);
+   whether its trace shows the failure's interaction (an actor of the key actor's kind doing one of its
+   manoeuvres and, for a collision, the ego colliding with that actor: :func:`~dv2s_gym.mining.interaction.trace_shows_interaction`);
 8. ``avoidability``: the reference driver (``rule``) drives the same ``k`` scenes; an episode counts as a
    reference failure when it has *any* collision, off-road or stall, whatever its class
    (:func:`reference_failed`), as the miner calls a failure unavoidable when the reference fails in its
@@ -76,7 +77,7 @@ from dv2s_gym.mining.conversion_settings import ConversionSettings
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.exact_replay import NARROW, narrowed_script, replay_name, REPLAY_TAG, replay_versions, run_replay
 from dv2s_gym.mining.interaction import (FailureInteraction, failure_interaction, interaction_sentence, key_actor,
-                                         shows_interaction)
+                                         trace_shows_interaction)
 from dv2s_gym.mining.monitors import MonitorSettings, detect_failure
 from dv2s_gym.mining.report_text import not_compared_names_text
 from dv2s_gym.mining.param_meaning import (actor_objects, behaviour_overrides, counterpart_objects, fixed_quantities,
@@ -289,7 +290,7 @@ def _reproduction_episode(scene_seed: int, result: Any, trace: Any,
                       else trace_actor_kind(trace, actor))
     wanted_kind = (interaction or {}).get("kind")
     same = same_failure_class(source_failure, failure) and (wanted_kind is None or actor_kind == wanted_kind)
-    shown = shows_interaction(interaction, elements_from_trace(trace)) if interaction else None
+    shown = trace_shows_interaction(interaction, trace) if interaction else None
     return {"seed": scene_seed, "failure": failure, "steps": result.steps, "trajectory_hash": result.trajectory_hash,
             "actor_kind": actor_kind, "interaction": shown, "reproduced": same}
 

@@ -33,7 +33,7 @@ from scenario_bank.elements import ActorKind
 from scenario_bank.records import JsonRecord
 
 __all__ = ["MANOEUVRES", "LOOKBACK_S", "FailureInteraction", "key_actor", "actor_manoeuvres", "failure_interaction",
-           "shows_interaction", "interaction_sentence"]
+           "shows_interaction", "trace_shows_interaction", "interaction_sentence"]
 
 MANOEUVRES = ("cut_in", "cross", "merge", "lane_change_left", "lane_change_right", "brake", "stop", "pull_out",
               "drift", "swerve", "turn_left", "turn_right", "u_turn", "reverse", "overtake")
@@ -182,6 +182,31 @@ def shows_interaction(interaction: FailureInteraction, elements: Mapping[str, An
     if wanted & _LANE_CHANGES and actions & _LANE_CHANGES:
         return True
     return bool(wanted & actions)
+
+
+def trace_shows_interaction(interaction: FailureInteraction, trace) -> bool:
+    """Whether an episode's ``trace`` holds the interaction with one actor doing all of it: an actor of the key
+    actor's kind that performs one of its manoeuvres (:func:`actor_manoeuvres`, judged alone with the ego; a lane
+    change in either direction matches a lane change) and, for a collision, is the actor the ego collided with.
+    Stricter than :func:`shows_interaction` on the trace's elements, where one car's manoeuvre and another car's
+    collision together would do. An interaction without a key actor is shown by any trace."""
+    interaction = FailureInteraction.from_dict(interaction)
+    kind = interaction.kind
+    if kind is None:
+        return True
+    names = [name for name in (trace.states[0] if trace.states else {}) if name != "ego"]
+    if interaction.failure_type == "collision":
+        partners = {trace.other_actor(event) for event in trace.events
+                    if event.get("kind") == "collision" and "ego" in event.get("actors", [])}
+        names = [name for name in names if name in partners]
+    wanted = set(interaction.manoeuvres or ())
+    for name in names:
+        if trace_actor_kind(trace, name) != kind:
+            continue
+        done = set(actor_manoeuvres(trace, name))
+        if not wanted or wanted & done or (wanted & _LANE_CHANGES and done & _LANE_CHANGES):
+            return True
+    return False
 
 
 _ARTICLE = {ActorKind.OBSTACLE: "An obstacle", ActorKind.EGO: "The ego vehicle"}

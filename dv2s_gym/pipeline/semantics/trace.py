@@ -11,7 +11,8 @@ Every vehicle (the ego included) is judged by the same rules:
 
 * ``brake`` / ``accelerate``: speed falls / rises by 3 m/s within 2 s; ``stop``: it
   ends below 0.5 m/s after moving, or never moves, or after driving stands still for
-  :data:`STOP_HOLD_S` seconds and drives on (a stop at a stop line).
+  :data:`STOP_HOLD_S` seconds and drives on (a stop at a stop line). All three are read from the steps before the
+  vehicle's first collision: the speed a collision takes away is no braking and no stop of the vehicle.
 * ``lane_change_left|right``: a lane-change event of the env for that actor.
 * ``turn_left|right``: net heading change of at least 55 degrees while moving.
 * ``go_straight``: on a junction road (intersection, T-junction, three-way,
@@ -358,11 +359,11 @@ def _motion_actions(track: np.ndarray, dt: float, kind: str, changes: List[Dict[
     out: Set[str] = set()
     if len(track) < 2:
         return out
-    speed = track[:, 3]
     if kind == ActorKind.PEDESTRIAN:
         return out  # crossing is judged relative to the road/ego in _interactions
     if kind == ActorKind.OBSTACLE:
         return out
+    speed = _before_crash(track, crashed_at, dt)[:, 3]
     window = max(1, int(round(BRAKE_WINDOW / dt)))
     drops = speed[:-window] - speed[window:] if len(speed) > window else np.array([speed[0] - speed[-1]])
     if drops.size and drops.max() >= BRAKE_DROP:
@@ -431,6 +432,14 @@ def _crashed_pulling_out(track: np.ndarray, crashed_at: float, dt: float) -> boo
     travelled = float(np.hypot(*np.diff(before[:, :2], axis=0).T).sum())
     shift = max(abs(_ego_frame(before[0], row)[1]) for row in before)
     return travelled >= PULL_OUT_CRASH_M and shift >= PULL_OUT_CRASH_LATERAL_M
+
+
+def _before_crash(track: np.ndarray, crashed_at: Optional[float], dt: float) -> np.ndarray:
+    """The track before the actor's first collision (the state logged at the collision's step already carries the
+    impact's change of speed); the first state at least."""
+    if crashed_at is None:
+        return track
+    return track[: min(len(track), max(1, int(round(crashed_at / dt))))]
 
 
 def _until_crash(track: np.ndarray, crashed_at: Optional[float], dt: float) -> np.ndarray:
