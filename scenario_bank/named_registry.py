@@ -87,8 +87,7 @@ class Registry(MutableMapping[str, V]):
     def unregister(self, name: str) -> V:
         """Remove the entry called ``name`` and return it; a name not held raises as :meth:`get` does."""
         value = self.get(name)
-        del self._entries[name]
-        self._modules.pop(name, None)
+        del self[name]
         return value
 
     def copy(self) -> "Registry[V]":
@@ -106,9 +105,8 @@ class Registry(MutableMapping[str, V]):
         self.register(name, value, overwrite=True)
 
     def __delitem__(self, name: str) -> None:
-        if name not in self._entries:
-            raise KeyError(name)
-        self.unregister(name)
+        del self._entries[name]
+        self._modules.pop(name, None)
 
     def __contains__(self, name: object) -> bool:
         return name in self._entries
