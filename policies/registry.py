@@ -43,7 +43,7 @@ import numpy as np
 from envs.config_check import observation_in_force
 from envs.errors import DV2SError
 from scenario_bank.extras import extra_of, missing_extra_message
-from scenario_bank.named_registry import register_named
+from scenario_bank.named_registry import Registry
 
 __all__ = [
     "Policy",
@@ -363,18 +363,19 @@ class ActionNoise(Policy):
 
 
 # --------------------------------------------------------------------------- registry
-_REGISTRY: Dict[str, Callable[..., Any]] = {}
+_REGISTRY: Registry[Callable[..., Any]] = Registry("policy", PolicyError,
+                                                  unknown=lambda name, _: _unknown_policy(name))
 
 
 def register_policy(name: str, factory: Callable[..., Any], overwrite: bool = False) -> None:
-    """Make ``load_policy(name)`` call ``factory(**options)``.
+    """Make ``load_policy(name)`` call ``factory(**options)``; a name registered already needs ``overwrite=True``.
 
     The factory returns a :class:`Policy` or a plain callable ``obs -> action``
     (wrapped in :class:`CallablePolicy`).
     """
     if not name or any(ch in name for ch in "?:/\\") or name.endswith(".zip"):
         raise PolicyError(f"policy name {name!r} must not be empty or contain '?', ':', '/' or end in .zip")
-    register_named(_REGISTRY, name, factory, what="policy", error=PolicyError, overwrite=overwrite)
+    _REGISTRY.register(name, factory, overwrite=overwrite, module=_factory_module(factory))
 
 
 def registered_policies() -> List[str]:
@@ -385,9 +386,10 @@ def registered_policies() -> List[str]:
 def registered_policy_module(name: str) -> Optional[str]:
     """The module whose code the policy registered as ``name`` runs (a state driver's class module, else the
     factory's); ``None`` when none is registered by that name or its factory names no module."""
-    factory = _REGISTRY.get(name)
-    if factory is None:
-        return None
+    return _REGISTRY.module(name)
+
+
+def _factory_module(factory: Callable[..., Any]) -> Optional[str]:
     module = getattr(factory, "__module__", None)
     closure = [c.cell_contents for c in (getattr(factory, "__closure__", None) or [])]
     paths = [c for c in closure if isinstance(c, str) and ":" in c]  # a state driver's class path
@@ -502,7 +504,7 @@ def _option_number(name: str, value: Any, cast: type) -> Any:
 
 def _load_base(base: str, options: Dict[str, Any]) -> Policy:
     if base in _REGISTRY:
-        made = _REGISTRY[base](**options)
+        made = _REGISTRY.get(base)(**options)
         return made if isinstance(made, Policy) else CallablePolicy(base, made)
     prefix, sep, rest = base.partition(":")
     if sep and prefix.lower() in SB3_ALGORITHMS:

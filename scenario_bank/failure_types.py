@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple
 
 from scenario_bank.errors import DV2SError
+from scenario_bank.named_registry import Registry
 from scenario_bank.plugins import forget_plugin, remember_plugin
 
 __all__ = ["FailureTypeError", "UnknownDetectorError", "FailureType", "FAILURE_TABLE", "FAILURE_TYPES", "failure_table",
@@ -65,8 +66,10 @@ FAILURE_TABLE: Tuple[FailureType, ...] = (
 FAILURE_TYPES: Tuple[str, ...] = tuple(row.name for row in FAILURE_TABLE)
 """The failure types' names, most severe first."""
 
-_REGISTERED: Dict[str, FailureType] = {}
-"""Rows added at run time (:func:`register_failure_type`), by name."""
+_REGISTERED: Registry[FailureType] = Registry(
+    "failure type", FailureTypeError,
+    unknown=lambda name, _: FailureTypeError(f"failure type {name!r} was not registered at run time"))
+"""Rows added at run time (:func:`register_failure_type`), by name, with the module that registered each."""
 _TABLE: Tuple[FailureType, ...] = FAILURE_TABLE
 _BY_NAME: Dict[str, FailureType] = {row.name: row for row in FAILURE_TABLE}
 
@@ -94,23 +97,27 @@ def severity_order(names: Iterable[str]) -> List[str]:
     return [row.name for row in _TABLE if row.name in names] + sorted(n for n in names if n not in _BY_NAME)
 
 
-def register_failure_type(row: FailureType, module: Optional[str] = None) -> FailureType:
+def register_failure_type(row: FailureType, module: Optional[str] = None, overwrite: bool = False) -> FailureType:
     """Add ``row`` to the table at run time (a plug-in's failure type; the product's own types are rows of
-    :data:`FAILURE_TABLE`); its name and severity must be new. The miner detects it once its monitor registers a
-    detector for it (:func:`dv2s_gym.mining.monitors.register_detector`). Returns ``row``.
+    :data:`FAILURE_TABLE`); its name and severity must be new, unless ``overwrite`` replaces a row registered at
+    run time under its name. The miner detects it once its monitor registers a detector for it
+    (:func:`dv2s_gym.mining.monitors.register_detector`). Returns ``row``.
 
     ``module``: the plug-in module that registers it (default: the caller's), which every worker process imports
     before its first episode so that the registration holds there too (:mod:`scenario_bank.plugins`): register
     at the module's import time, in a module other processes can import (not ``__main__``)."""
-    if row.name in _BY_NAME:
-        raise FailureTypeError(f"failure type {row.name!r} exists already")
+    if row.name in _BY_NAME and not (overwrite and row.name in _REGISTERED):
+        fix = ("; pass overwrite=True to replace it" if row.name in _REGISTERED
+               else " (a row of FAILURE_TABLE, which no registration replaces)")
+        raise FailureTypeError(f"failure type {row.name!r} exists already{fix}")
     if not isinstance(row.severity, int) or isinstance(row.severity, bool) or row.severity < 0:
         raise FailureTypeError(f"failure type {row.name!r}: severity {row.severity!r} is not a whole number >= 0 (0 is the "
                          "most severe, the table's collision; a plug-in's type takes a number after the table's)")
-    if any(other.severity == row.severity for other in _TABLE):
+    if any(other.severity == row.severity for other in _TABLE if other.name != row.name):
         raise FailureTypeError(f"failure type {row.name!r}: severity {row.severity} is taken; choose one no type has")
-    _REGISTERED[row.name] = row
-    remember_plugin(_plugin_name(row.name), module or _caller_module())
+    module = module or _caller_module()
+    _REGISTERED.register(row.name, row, overwrite=overwrite, module=module)
+    remember_plugin(_plugin_name(row.name), module)
     _rebuild()
     return row
 
@@ -128,8 +135,7 @@ def _caller_module() -> Optional[str]:
 
 def unregister_failure_type(name: str) -> None:
     """Remove the failure type ``name`` added by :func:`register_failure_type` (the table's own rows stay)."""
-    if _REGISTERED.pop(name, None) is None:
-        raise FailureTypeError(f"failure type {name!r} was not registered at run time")
+    _REGISTERED.unregister(name)
     forget_plugin(_plugin_name(name))
     _rebuild()
 

@@ -1,23 +1,121 @@
-"""Adding to a table of named plug-ins (policies, samplers, worker backends, pipeline backends): one rule for all.
+"""Tables of named plug-ins (policies, samplers, task kinds, worker and pipeline backends, failure types and their
+detectors): one :class:`Registry` type for all.
 
-Each registry stays a plain module-level ``dict`` of its own (name -> factory or record) in the module that uses
-it; :func:`register_named` is the one way entries are added to such a dict."""
+Each registry is a module-level :class:`Registry` in the module that uses it, and that module's
+``register_x(name_or_object, value..., overwrite=False)`` adds to it. A registry is a mutable mapping of name ->
+entry too, so code that reads a plain ``dict`` of plug-ins (``name in table``, ``table[name]``, ``sorted(table)``)
+reads it unchanged."""
 
 from __future__ import annotations
 
-from typing import Any, Dict, Type
+from typing import (Callable, Dict, Iterator, List, Mapping, MutableMapping, Optional, Sequence, Type, TypeVar,
+                    Union, overload)
 
-__all__ = ["register_named"]
+__all__ = ["Registry"]
+
+V = TypeVar("V")
+D = TypeVar("D")
+UnknownError = Callable[[str, Sequence[str]], Exception]
+"""``unknown(name, known_names) -> error``: the error a registry raises for a name it does not hold."""
+
+_MISSING = object()
 
 
-def register_named(table: Dict[str, Any], name: str, item: Any, *, what: str, error: Type[Exception],
-                   overwrite: bool = False) -> None:
-    """Put ``item`` into ``table`` under ``name``.
+class Registry(MutableMapping[str, V]):
+    """Name -> entry, in the order registered, with the module that registered each entry when one is given.
 
-    ``what`` names the kind in messages (``"sampler"``, ``"worker backend"``); a name that is not a non-empty
-    string, or one already in ``table`` without ``overwrite``, raises ``error`` saying so and how to replace it."""
-    if not isinstance(name, str) or not name:
-        raise error(f"{what} name {name!r} must be a non-empty string")
-    if name in table and not overwrite:
-        raise error(f"a {what} named {name!r} is already registered; pass overwrite=True to replace it")
-    table[name] = item
+    ``what`` names the kind in messages (``"sampler"``, ``"worker backend"``); ``error`` is the project error a
+    clash or an unknown name raises; ``unknown`` (optional) makes the unknown-name error instead, for a registry
+    whose callers word it their own way. ``entries`` are registered first, in their order."""
+
+    def __init__(self, what: str, error: Type[Exception], entries: Optional[Mapping[str, V]] = None, *,
+                 unknown: Optional[UnknownError] = None) -> None:
+        self.what = what
+        self.error = error
+        self._unknown = unknown
+        self._entries: Dict[str, V] = {}
+        self._modules: Dict[str, str] = {}
+        for name, value in (entries or {}).items():
+            self.register(name, value)
+
+    def register(self, name: str, value: V, *, overwrite: bool = False, module: Optional[str] = None) -> V:
+        """Hold ``value`` under ``name`` (registered by ``module``, when given); returns ``value``.
+
+        Raises ``error`` for a name that is not a non-empty string, or one already held without ``overwrite``
+        (saying to pass ``overwrite=True`` to replace it). A replaced entry keeps its place in the order."""
+        if not isinstance(name, str) or not name:
+            raise self.error(f"{self.what} name {name!r} must be a non-empty string")
+        if name in self._entries and not overwrite:
+            raise self.error(f"a {self.what} named {name!r} is already registered; pass overwrite=True to replace it")
+        self._entries[name] = value
+        if module:
+            self._modules[name] = module
+        else:
+            self._modules.pop(name, None)
+        return value
+
+    @overload
+    def get(self, name: str) -> V: ...
+
+    @overload
+    def get(self, name: str, default: D) -> Union[V, D]: ...
+
+    def get(self, name: str, default: object = _MISSING) -> object:
+        """The entry called ``name``; for a name not held, ``default`` when one is given, else ``error`` naming
+        the known names."""
+        if isinstance(name, str) and name in self._entries:
+            return self._entries[name]
+        if default is not _MISSING:
+            return default
+        raise self.unknown_error(name)
+
+    def unknown_error(self, name: object) -> Exception:
+        """The error for ``name``, which this registry does not hold: it lists the names it does."""
+        if self._unknown is not None:
+            return self._unknown(name, self.names())  # type: ignore[arg-type]
+        known = ", ".join(self._entries) or "none is registered"
+        return self.error(f"unknown {self.what} {name!r}: use one of {known}")
+
+    def names(self) -> List[str]:
+        """The names held, in the order registered."""
+        return list(self._entries)
+
+    def module(self, name: str) -> Optional[str]:
+        """The module that registered ``name`` (``None``: not held, or registered without one)."""
+        return self._modules.get(name)
+
+    def unregister(self, name: str) -> V:
+        """Remove the entry called ``name`` and return it; a name not held raises as :meth:`get` does."""
+        value = self.get(name)
+        del self[name]
+        return value
+
+    def copy(self) -> "Registry[V]":
+        """A new registry holding the same entries and modules (a test can register into it and drop it)."""
+        other: Registry[V] = Registry(self.what, self.error, unknown=self._unknown)
+        other._entries = dict(self._entries)
+        other._modules = dict(self._modules)
+        return other
+
+    # the mapping protocol: ``[]`` and ``del`` raise KeyError as a dict does; ``[] =`` replaces
+    def __getitem__(self, name: str) -> V:
+        return self._entries[name]
+
+    def __setitem__(self, name: str, value: V) -> None:
+        self.register(name, value, overwrite=True)
+
+    def __delitem__(self, name: str) -> None:
+        del self._entries[name]
+        self._modules.pop(name, None)
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._entries
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._entries)
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def __repr__(self) -> str:
+        return f"Registry({self.what!r}, {self.names()!r})"

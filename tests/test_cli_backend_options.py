@@ -15,15 +15,14 @@ TEXT = "A car ahead of the ego brakes on a highway."
 @pytest.fixture
 def fixed_dra(monkeypatch):
     """A DRA backend ``fixed`` registered (as a plugin would) before ``main`` runs; the registries restored after."""
-    monkeypatch.setattr(stages, "_DRA_REGISTRY", dict(stages._DRA_REGISTRY))
-    monkeypatch.setattr(stages, "_SG_REGISTRY", dict(stages._SG_REGISTRY))
+    monkeypatch.setattr(stages, "_DRA_REGISTRY", stages._DRA_REGISTRY.copy())
+    monkeypatch.setattr(stages, "_SG_REGISTRY", stages._SG_REGISTRY.copy())
     calls = []
 
     def fixed(clip, *, camera, question, llm_config):
         calls.append((len(clip.frames), camera, question))
         return TEXT, {"model": "fixed-1"}
 
-    monkeypatch.setattr(stages, "_MODEL_FREE", {stage: set(names) for stage, names in stages._MODEL_FREE.items()})
     stages.register_dra("fixed", fixed)
     return calls
 

@@ -62,7 +62,7 @@ def test_the_detector_example_registers_a_type_that_finds_a_hard_brake(plugin):
 
 
 def test_the_policy_example_registers_a_policy_that_keeps_its_lane(plugin, monkeypatch):
-    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    monkeypatch.setattr(registry, "_REGISTRY", registry._REGISTRY.copy())
     plugin("docs_idle_policy", "register_policy")
     assert "idle" in registry.registered_policies()
     assert registry.load_policy("idle").act(np.zeros((3, 5, 5))).tolist() == [IDLE, IDLE, IDLE]

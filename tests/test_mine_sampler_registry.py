@@ -19,7 +19,7 @@ from scenario_bank.records import EpisodeRecord
 @pytest.fixture
 def registry(monkeypatch):
     """The registry as shipped, restored after the test."""
-    monkeypatch.setattr(samplers, "_REGISTRY", dict(samplers._REGISTRY))
+    monkeypatch.setattr(samplers, "_REGISTRY", samplers._REGISTRY.copy())
 
 
 def test_the_shipped_samplers_and_what_each_record_says():

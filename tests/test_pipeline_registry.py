@@ -15,8 +15,8 @@ CLIP = EVALSET_DIR / "highway_lead_vehicle_brakes_seed0.webm"
 @pytest.fixture
 def registries(monkeypatch):
     """The registries as shipped, restored after the test."""
-    monkeypatch.setattr(stages, "_DRA_REGISTRY", dict(stages._DRA_REGISTRY))
-    monkeypatch.setattr(stages, "_SG_REGISTRY", dict(stages._SG_REGISTRY))
+    monkeypatch.setattr(stages, "_DRA_REGISTRY", stages._DRA_REGISTRY.copy())
+    monkeypatch.setattr(stages, "_SG_REGISTRY", stages._SG_REGISTRY.copy())
 
 
 def test_the_shipped_backends_are_registered():
@@ -101,4 +101,4 @@ def test_registering_a_taken_or_empty_name_is_refused(registries):
         stages.register_sg("", lambda description, **options: None)
     replacement = lambda description, **options: stages.Generation("", "rules")  # noqa: E731
     stages.register_sg("rules", replacement, overwrite=True)
-    assert stages._SG_REGISTRY["rules"] is replacement
+    assert stages._SG_REGISTRY["rules"].call is replacement

@@ -1755,12 +1755,6 @@ def test_the_command_line_is_argument_handling_in_small_functions():
     assert not long, long
 
 
-def _public_definitions(tree: ast.Module) -> List[str]:
-    """Names of a module's public top-level functions and classes."""
-    return [node.name for node in tree.body
-            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) and not node.name.startswith("_")]
-
-
 def _declared_all(tree: ast.Module) -> Optional[List[str]]:
     for node in tree.body:
         if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == "__all__" for t in node.targets):
@@ -1769,24 +1763,36 @@ def _declared_all(tree: ast.Module) -> Optional[List[str]]:
     return None
 
 
-def test_the_public_api_check_sees_a_missing_or_wrong_all():
+def _module_gaps(tree: ast.Module) -> List[str]:
+    """What a module lacks of the two every module has: a docstring and an ``__all__``."""
+    gaps = [] if (ast.get_docstring(tree) or "").strip() else ["docstring"]
+    return gaps + (["__all__"] if _declared_all(tree) is None else [])
+
+
+def test_the_public_api_check_sees_a_missing_or_wrong_all_or_docstring():
     assert _declared_all(ast.parse("def f():\n    pass\n")) is None
-    tree = ast.parse('__all__ = ["f", "g"]\ndef f():\n    pass\n')
-    assert _declared_all(tree) == ["f", "g"] and _public_definitions(tree) == ["f"]
+    assert _declared_all(ast.parse('__all__ = ["f", "g"]\ndef f():\n    pass\n')) == ["f", "g"]
+    assert _module_gaps(ast.parse("")) == ["docstring", "__all__"]  # an empty package __init__
+    assert _module_gaps(ast.parse('__all__ = ["f"]\ndef f():\n    pass\n')) == ["docstring"]
+    assert _module_gaps(ast.parse('"""A package with no API of its own."""\n\nimport os\n')) == ["__all__"]
+    assert _module_gaps(ast.parse('"""A package with no API of its own."""\n\n__all__ = []\n')) == []
 
 
 def test_every_module_names_its_public_api():
-    """A module that defines public functions or classes says which are its API in ``__all__``, and every name
-    there exists (a star import or the API docs never meet a missing one)."""
-    missing, dangling = [], {}
+    """Every module, a package's ``__init__`` too, says what it is in its docstring and which names are its API
+    in ``__all__`` (an empty list when it exports none), and every name there exists (a star import or the API
+    docs never meet a missing one)."""
+    missing, undocumented, dangling = [], [], {}
     for package in PACKAGES:
         for path in sorted((ROOT / package).rglob("*.py")):
             tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
-            declared = _declared_all(tree)
-            if declared is None:
-                if _public_definitions(tree) and path.name != "__main__.py":
-                    missing.append(str(path.relative_to(ROOT)))
+            gaps = _module_gaps(tree)
+            if "docstring" in gaps:
+                undocumented.append(str(path.relative_to(ROOT)))
+            if "__all__" in gaps:
+                missing.append(str(path.relative_to(ROOT)))
                 continue
+            declared = _declared_all(tree) or []
             defined = {n for node in ast.walk(tree) for n in _bound_names(node)}
             if "__getattr__" in defined:  # names loaded lazily on first access are checked by importing them
                 continue
@@ -1794,6 +1800,7 @@ def test_every_module_names_its_public_api():
             if absent:
                 dangling[str(path.relative_to(ROOT))] = absent
     assert not missing, f"modules without __all__: {missing}"
+    assert not undocumented, f"modules without a docstring: {undocumented}"
     assert not dangling, f"names in __all__ the module does not define or import: {dangling}"
 
 

@@ -20,7 +20,7 @@ class _Recorded:
 @pytest.fixture
 def table(monkeypatch):
     """The table as shipped, restored after the test."""
-    monkeypatch.setattr(backends, "_FACTORIES", dict(backends._FACTORIES))
+    monkeypatch.setattr(backends, "_FACTORIES", backends._FACTORIES.copy())
 
 
 def test_the_shipped_backends_are_in_the_table():

@@ -4,4 +4,6 @@ import sys
 
 from dv2s_gym.cli import main
 
+__all__ = []
+
 sys.exit(main())

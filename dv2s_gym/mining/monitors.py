@@ -28,13 +28,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Sequence
 
 from envs.safety_metrics import (DEFAULT_STALL_SECONDS, DEFAULT_TTC_THRESHOLD, FREE_PATH, STANDING_SPEED,
                                  MonitorSettings, first_stall_step)
 from scenario_bank.elements import ActorKind
 from scenario_bank.failure_types import (FAILURE_TYPES, FailureTypeError, UnknownDetectorError, attach_detection,
                                           detach_detection, failure_table, failure_type, type_label)
+from scenario_bank.named_registry import Registry
 from scenario_bank.plugins import forget_plugin, remember_plugin
 
 __all__ = ["Failure", "FAILURE_TYPES", "COLLISION_TYPES", "COLLISION_LABELS", "kind_label", "MonitorSettings",
@@ -199,31 +200,39 @@ def _stall_score(result, failure: Failure, settings: MonitorSettings) -> float:
     return -0.5
 
 
-DETECTORS: Dict[str, Detector] = {detector.name: detector for detector in (
+def _no_detector(name: str, known: Sequence[str]) -> UnknownDetectorError:
+    return UnknownDetectorError(f"failure type {name!r} has no detector in this process: register one with "
+                                "dv2s_gym.mining.monitors.register_detector in the plug-in module that registers "
+                                "the type")
+
+
+DETECTORS: Registry[Detector] = Registry("detector", FailureTypeError, {detector.name: detector for detector in (
     Detector("collision", _collision, _collision_score),
     Detector("off_road", _off_road, _off_road_score),
     Detector("low_ttc", _low_ttc, _low_ttc_score),
     Detector("stall", _stall_detect, _stall_score),
-)}
+)}, unknown=_no_detector)
 """Each failure type's detector, by the type's name (every row of the failure table has one, and each detector
 a row); :func:`detect_failure` asks them in the order of :func:`~scenario_bank.failure_types.failure_table`
 (most severe first)."""
 
 
-def register_detector(detector: Detector) -> Detector:
+def register_detector(detector: Detector, overwrite: bool = False) -> Detector:
     """Detect the failure type ``detector.name`` (a row of the failure table, e.g. one added with
     :func:`~scenario_bank.failure_types.register_failure_type`) with ``detector``; :func:`unregister_detector`
     undoes it. ``dv2s regress`` runs it too when its type has a ``result_field``
     (:func:`scenario_bank.failure_types.happened`). The module defining ``detector.detect`` is remembered as a
     plug-in module: every worker process imports it before its first episode, so it must register the detector
-    when it is imported and be importable (not ``__main__``; :mod:`scenario_bank.plugins`). Returns
-    ``detector``."""
+    when it is imported and be importable (not ``__main__``; :mod:`scenario_bank.plugins`). A type with a
+    detector already needs ``overwrite=True``. Returns ``detector``."""
     if failure_type(detector.name) is None:
         raise FailureTypeError(f"no failure type {detector.name!r}: add its row to scenario_bank/failure_types.py first")
-    if detector.name in DETECTORS:
-        raise FailureTypeError(f"failure type {detector.name!r} has a detector already")
-    DETECTORS[detector.name] = detector
-    remember_plugin(_plugin_name(detector.name), getattr(detector.detect, "__module__", None))
+    if detector.name in DETECTORS and not overwrite:
+        raise FailureTypeError(f"failure type {detector.name!r} has a detector already; pass overwrite=True to "
+                               "replace it")
+    module = getattr(detector.detect, "__module__", None)
+    DETECTORS.register(detector.name, detector, overwrite=overwrite, module=module)
+    remember_plugin(_plugin_name(detector.name), module)
     attach_detection(detector.name, lambda result, trace, settings: detector.detect(
         result, trace, MonitorSettings.of(settings)) is not None)
     return detector
@@ -231,7 +240,7 @@ def register_detector(detector: Detector) -> Detector:
 
 def unregister_detector(name: str) -> None:
     """Remove the detector :func:`register_detector` added for ``name``."""
-    DETECTORS.pop(name)
+    DETECTORS.unregister(name)
     detach_detection(name)
     forget_plugin(_plugin_name(name))
 
@@ -247,11 +256,7 @@ def types_without_detector() -> List[str]:
 
 
 def _detector(name: str) -> Detector:
-    detector = DETECTORS.get(name)
-    if detector is None:
-        raise UnknownDetectorError(f"failure type {name!r} has no detector in this process: register one with "
-                       "dv2s_gym.mining.monitors.register_detector in the plug-in module that registers the type")
-    return detector
+    return DETECTORS.get(name)
 
 
 DEFAULT_MONITOR = MonitorSettings()

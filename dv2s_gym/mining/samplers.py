@@ -59,7 +59,7 @@ import numpy as np
 
 from dv2s_gym.mining.checkpoint_mac import seal, unseal
 from dv2s_gym.mining.errors import MiningError
-from scenario_bank.named_registry import register_named
+from scenario_bank.named_registry import Registry
 
 __all__ = ["proposal_density", "scene_proposal", "SAMPLERS", "SAMPLER_OPTIONS", "SPLIT", "SPLIT_DEFAULTS", "NOVELTY",
            "SceneSampler", "SamplerRecord", "default_feedback", "make_sampler", "sampler_params", "is_adaptive",
@@ -111,26 +111,27 @@ SPLIT_DEFAULTS: Dict[str, Any] = {"chooser": "cross-entropy", "params": "halton"
 
 def default_feedback(name: str) -> str:
     """The feedback (:data:`dv2s_gym.mining.miner.FEEDBACKS`) sampler ``name`` gets unless told otherwise."""
-    record = _REGISTRY.get(name)
+    record = _REGISTRY.get(name, None)
     return record.default_feedback if record else "robustness"
 
 
 def is_adaptive(name: str) -> bool:
     """True for samplers whose next draws depend on the outcomes fed back (``cross-entropy``, ``bandit``,
     ``split``, ``novelty-bandit``)."""
-    record = _REGISTRY.get(name)
+    record = _REGISTRY.get(name, None)
     return bool(record and record.adaptive)
 
 
 def is_uniform(name: str) -> bool:
     """True for samplers whose scenes are uniform over the scenarios and their unit boxes (``random``, ``halton``)."""
-    record = _REGISTRY.get(name)
+    record = _REGISTRY.get(name, None)
     return bool(record and record.uniform)
 
 
 def register_sampler(name: str, record: SamplerRecord, overwrite: bool = False) -> None:
-    """Make ``make_sampler(name, ...)`` (and ``--sampler name``) build ``record``'s sampler."""
-    register_named(_REGISTRY, name, record, what="sampler", error=MiningError, overwrite=overwrite)
+    """Make ``make_sampler(name, ...)`` (and ``--sampler name``) build ``record``'s sampler; a name registered
+    already needs ``overwrite=True``."""
+    _REGISTRY.register(name, record, overwrite=overwrite)
 
 
 def registered_samplers() -> List[str]:
@@ -144,7 +145,7 @@ def sampler_params(name: str, options: Optional[Dict[str, Any]] = None):
     Raises :class:`MiningError` for an option the sampler does not take or a value out of range.
     """
     options = dict(options or {})
-    record = _REGISTRY.get(name)
+    record = _REGISTRY.get(name, None)
     allowed = record.options if record else ()
     unknown = sorted(set(options) - set(allowed))
     if unknown:
@@ -416,15 +417,14 @@ def make_sampler(name: str, space: Any, seed: int, options: Optional[Dict[str, A
     (then ``split`` gives every scenario the full width of the unit box). ``options``: VerifAI
     parameters of the adaptive samplers (see the module docstring).
     """
-    if name not in _REGISTRY:
-        raise MiningError(f"unknown sampler {name!r}: use one of {', '.join(_REGISTRY)}")
+    record = _REGISTRY.get(name)
     params = sampler_params(name, options)
     feature_space = getattr(space, "feature_space", space)
     saved_py, saved_np = random.getstate(), np.random.get_state()
     random.seed(seed)
     np.random.seed(seed % (2**32))
     try:  # some samplers draw while they are built
-        inner = _REGISTRY[name].build(space, feature_space, params)
+        inner = record.build(space, feature_space, params)
     finally:
         random.setstate(saved_py)
         np.random.set_state(saved_np)
@@ -462,7 +462,7 @@ def _make_novelty(space: Any, feature_space: Any, params: Dict[str, float]):
     return NoveltyBanditSampler(feature_space, _scenario_dimensions(space, feature_space), **params)
 
 
-_REGISTRY: Dict[str, SamplerRecord] = {
+_REGISTRY: Registry[SamplerRecord] = Registry("sampler", MiningError, {
     "random": SamplerRecord(_verifai("randomSamplerFor", False), uniform=True),
     "halton": SamplerRecord(_verifai("haltonSamplerFor", False), uniform=True),
     "cross-entropy": SamplerRecord(_verifai("crossEntropySamplerFor", True), _verifai_params("ce"),
@@ -474,7 +474,7 @@ _REGISTRY: Dict[str, SamplerRecord] = {
                          default_feedback="novelty", adaptive=True),
     NOVELTY: SamplerRecord(_make_novelty, _novelty_params, ("explore", "prior_new", "prior_old"),
                            default_feedback="state-novelty", adaptive=True),
-}
+})
 
 SAMPLERS = tuple(_REGISTRY)
 """The names of the samplers that ship with dv2s-gym, in their documented order (``--sampler`` lists them first).

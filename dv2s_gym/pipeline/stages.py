@@ -19,12 +19,12 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 from dv2s_gym.pipeline.errors import BackendResultError, PipelineError, UnknownBackendError
 from dv2s_gym.pipeline.llm_config import LLMConfigLike
-from scenario_bank.named_registry import register_named
+from scenario_bank.named_registry import Registry
 from scenario_bank.bank import Bank
 from scenario_bank.safety import assert_safe
 
 __all__ = ["Description", "Generation", "describe", "generate", "DRA_BACKENDS", "SG_BACKENDS",
-           "register_dra", "register_sg", "registered_dras", "registered_sgs", "reads_model"]
+           "register_dra", "register_sg", "registered_dras", "registered_sgs", "reads_model", "StageBackend"]
 
 @dataclass
 class Description:
@@ -99,41 +99,46 @@ DRABackend = Callable[..., Tuple[str, Dict[str, Any]]]
 SGBackend = Callable[..., Generation]
 """``backend(description, *, seed, llm_config, max_attempts) -> Generation``."""
 
-_DRA_REGISTRY: Dict[str, DRABackend] = {}
-_SG_REGISTRY: Dict[str, SGBackend] = {}
-_MODEL_FREE: Dict[str, set] = {"DRA": set(), "SG": set()}
-"""Per stage, the backends registered with ``reads_model=False``: they ignore the model settings they are given."""
+
+@dataclass(frozen=True)
+class StageBackend:
+    """A registered DRA or SG backend: the callable, and whether it calls a model and so reads the model settings
+    it is given (``reads_model``)."""
+
+    call: Callable[..., Any]
+    reads_model: bool = True
 
 
-def _register(registry: Dict[str, Callable[..., Any]], stage: str, name: str, backend: Callable[..., Any],
-              overwrite: bool, reads: bool) -> None:
-    register_named(registry, name, backend, what=f"{stage} backend", error=PipelineError, overwrite=overwrite)
-    if reads:
-        _MODEL_FREE[stage].discard(name)
-    else:
-        _MODEL_FREE[stage].add(name)
+def _unknown_backend(stage: str) -> Callable[[str, List[str]], Exception]:
+    return lambda name, names: UnknownBackendError(f"unknown {stage} backend {name!r}; use one of {tuple(names)}")
+
+
+_DRA_REGISTRY: Registry[StageBackend] = Registry("DRA backend", PipelineError, unknown=_unknown_backend("DRA"))
+_SG_REGISTRY: Registry[StageBackend] = Registry("SG backend", PipelineError, unknown=_unknown_backend("SG"))
 
 
 def register_dra(name: str, backend: DRABackend, overwrite: bool = False, *, reads_model: bool = True) -> None:
     """Make ``describe(video, backend=name)`` call ``backend(clip, camera=..., question=..., llm_config=...)``
-    (see :data:`DRABackend`); the description's elements are read from the text it returns. ``reads_model``:
-    whether the backend calls a model and so reads the model settings it is given (``llm_config``; the command
-    line's ``--base-url``, ``--model``, ``--api-key``); a command refuses those options for a backend that does not."""
-    _register(_DRA_REGISTRY, "DRA", name, backend, overwrite, reads_model)
+    (see :data:`DRABackend`); the description's elements are read from the text it returns. A name registered
+    already needs ``overwrite=True``. ``reads_model``: whether the backend calls a model and so reads the model
+    settings it is given (``llm_config``; the command line's ``--base-url``, ``--model``, ``--api-key``); a
+    command refuses those options for a backend that does not."""
+    _DRA_REGISTRY.register(name, StageBackend(backend, reads_model), overwrite=overwrite)
 
 
 def register_sg(name: str, backend: SGBackend, overwrite: bool = False, *, reads_model: bool = True) -> None:
     """Make ``generate(description, backend=name)`` call
     ``backend(description, seed=..., llm_config=..., max_attempts=...)`` (see :data:`SGBackend`);
-    the script of the :class:`Generation` it returns must pass the safety check. ``reads_model``: as for
-    :func:`register_dra`."""
-    _register(_SG_REGISTRY, "SG", name, backend, overwrite, reads_model)
+    the script of the :class:`Generation` it returns must pass the safety check. ``overwrite`` and
+    ``reads_model``: as for :func:`register_dra`."""
+    _SG_REGISTRY.register(name, StageBackend(backend, reads_model), overwrite=overwrite)
 
 
 def reads_model(stage: str, name: str) -> bool:
     """Whether the ``stage`` (``"DRA"`` or ``"SG"``) backend ``name`` reads model settings: registered with
     ``reads_model`` true (the default, so a plug-in's backend is given them), or a name not registered."""
-    return name not in _MODEL_FREE[stage]
+    entry = {"DRA": _DRA_REGISTRY, "SG": _SG_REGISTRY}[stage].get(name, None)
+    return entry is None or entry.reads_model
 
 
 def registered_dras() -> List[str]:
@@ -210,11 +215,9 @@ def describe(
     from dv2s_gym.pipeline.semantics.text import elements_from_text
     from dv2s_gym.pipeline.video import read_video
 
-    if backend not in _DRA_REGISTRY:
-        raise UnknownBackendError(f"unknown DRA backend {backend!r}; use one of {tuple(_DRA_REGISTRY)}")
+    call = _DRA_REGISTRY.get(backend).call
     clip = read_video(video, fps=fps, max_frames=max_frames, max_pixels=max_pixels)
-    text, provenance = _description_of(backend, _DRA_REGISTRY[backend](clip, camera=camera, question=question,
-                                                                       llm_config=llm_config))
+    text, provenance = _description_of(backend, call(clip, camera=camera, question=question, llm_config=llm_config))
     return Description(text, elements_from_text(text), backend, model=provenance.get("model"),
                        prompt_hash=provenance.get("prompt_hash"), video=str(video))
 
@@ -228,9 +231,8 @@ def generate(
     max_attempts: int = 4,
 ) -> Generation:
     """Turn a description into a Scenic script that passed the safety check."""
-    if backend not in _SG_REGISTRY:
-        raise UnknownBackendError(f"unknown SG backend {backend!r}; use one of {tuple(_SG_REGISTRY)}")
-    generation = _SG_REGISTRY[backend](description, seed=seed, llm_config=llm_config, max_attempts=max_attempts)
+    call = _SG_REGISTRY.get(backend).call
+    generation = call(description, seed=seed, llm_config=llm_config, max_attempts=max_attempts)
     if not isinstance(generation, Generation) or not isinstance(generation.script, str):
         got = (f"a Generation whose script is {_kind(generation.script)}" if isinstance(generation, Generation)
                else _kind(generation))

@@ -11,3 +11,5 @@
 - :mod:`dv2s_gym.workers.ray_pool`: the same on a Ray cluster (``--backend ray``).
 - :mod:`dv2s_gym.workers.errors`: the errors of the pools.
 """
+
+__all__ = []

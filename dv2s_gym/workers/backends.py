@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import importlib
 import inspect
-from typing import Any, Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional, Sequence
 
 from dv2s_gym.registered_names import RegisteredNames
 from dv2s_gym.workers.errors import WorkerError
 from scenario_bank.extras import missing_extra_message
-from scenario_bank.named_registry import register_named
+from scenario_bank.named_registry import Registry
 
 __all__ = ["BACKENDS", "BackendFactory", "register_backend", "registered_backends", "backend_factory", "backend_choices", "get_backend"]
 
@@ -47,7 +47,14 @@ def _ray(*, workers: Optional[int], address: Optional[str], timeout: Optional[fl
     return module.RayBackend(**options)
 
 
-_FACTORIES: Dict[str, BackendFactory] = {"local": _local, "ray": _ray}
+def _unknown_backend(name: str, known: Sequence[str]) -> WorkerError:
+    names = [repr(other) for other in known]
+    choices = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
+    return WorkerError(f"unknown backend {name!r}: use {choices}")
+
+
+_FACTORIES: Registry[BackendFactory] = Registry("worker backend", WorkerError, {"local": _local, "ray": _ray},
+                                                unknown=_unknown_backend)
 
 BACKENDS = tuple(_FACTORIES)
 """The backends that ship with dv2s-gym: a local process pool, or a Ray cluster."""
@@ -55,8 +62,8 @@ BACKENDS = tuple(_FACTORIES)
 
 def register_backend(name: str, factory: BackendFactory, overwrite: bool = False) -> None:
     """Make ``get_backend(name, ...)`` (and ``--backend name``) call ``factory(workers=..., address=..., timeout=...)``,
-    which returns a :class:`~dv2s_gym.workers.base.Backend`."""
-    register_named(_FACTORIES, name, factory, what="worker backend", error=WorkerError, overwrite=overwrite)
+    which returns a :class:`~dv2s_gym.workers.base.Backend`; a name registered already needs ``overwrite=True``."""
+    _FACTORIES.register(name, factory, overwrite=overwrite)
 
 
 def registered_backends() -> List[str]:
@@ -66,11 +73,7 @@ def registered_backends() -> List[str]:
 
 def backend_factory(name: str) -> BackendFactory:
     """The factory of the backend called ``name``; an unknown name is a :class:`WorkerError` naming the known ones."""
-    if name not in _FACTORIES:
-        names = [repr(known) for known in _FACTORIES]
-        choices = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
-        raise WorkerError(f"unknown backend {name!r}: use {choices}")
-    return _FACTORIES[name]
+    return _FACTORIES.get(name)
 
 
 def backend_choices() -> RegisteredNames:

@@ -16,6 +16,7 @@ import sys
 from typing import Any, Callable, Dict, List, Mapping, Sequence
 
 from dv2s_gym.workers.errors import WorkerError
+from scenario_bank.named_registry import Registry
 from scenario_bank.plugins import PluginError, check_plugins, import_plugins
 
 if "numpy" not in sys.modules:  # a fresh worker process (e.g. Ray's): one BLAS/OpenMP thread per worker
@@ -27,35 +28,36 @@ __all__ = ["TaskFunction", "register", "function_for", "task_modules", "worker_p
 TaskFunction = Callable[[Dict[str, Any]], Dict[str, Any]]
 """Runs one task in a worker process and returns its result (a JSON-able dict)."""
 
-_KINDS: Dict[str, TaskFunction] = {}
-
-
 def _name(function: TaskFunction) -> str:
     return f"{function.__module__}.{function.__qualname__}"
 
 
-def register(kind: str, function: TaskFunction) -> TaskFunction:
+def _unknown_kind(kind: object, known: Sequence[str]) -> WorkerError:
+    names = ", ".join(repr(k) for k in sorted(known)) or "none"
+    return WorkerError(f"no task function is registered for kind {kind!r} (registered: {names}); import the "
+                       "module that registers it before running its tasks")
+
+
+_KINDS: Registry[TaskFunction] = Registry("task kind", WorkerError, unknown=_unknown_kind)
+
+
+def register(kind: str, function: TaskFunction, overwrite: bool = False) -> TaskFunction:
     """Make ``function`` run the tasks whose ``"kind"`` is ``kind``; returns ``function``.
 
     ``function`` must be a module-level function (pools ship it by reference). A kind
-    registered with another function is an error.
+    registered with another function is an error unless ``overwrite`` is true; registering the same
+    function again (its module imported twice) is not.
     """
-    existing = _KINDS.get(kind)
-    if existing is not None and _name(existing) != _name(function):
-        raise WorkerError(f"task kind {kind!r} is registered twice ({_name(existing)} and {_name(function)})")
-    _KINDS[kind] = function
-    return function
+    existing = _KINDS.get(kind, None)
+    if existing is not None and _name(existing) != _name(function) and not overwrite:
+        raise WorkerError(f"task kind {kind!r} is registered twice ({_name(existing)} and {_name(function)}); "
+                          "pass overwrite=True to replace it")
+    return _KINDS.register(kind, function, overwrite=True, module=function.__module__)
 
 
 def function_for(task: Mapping[str, Any]) -> TaskFunction:
     """The registered function that runs ``task``."""
-    kind = task.get("kind")
-    try:
-        return _KINDS[kind]
-    except KeyError:
-        known = ", ".join(repr(k) for k in sorted(_KINDS)) or "none"
-        raise WorkerError(f"no task function is registered for kind {kind!r} (registered: {known}); import the "
-                          "module that registers it before running its tasks") from None
+    return _KINDS.get(task.get("kind"))
 
 
 def task_modules() -> List[str]:

@@ -5,3 +5,5 @@
 
 :func:`dv2s_gym.pipeline.stages.describe` picks one by name (:func:`~dv2s_gym.pipeline.stages.register_dra`).
 """
+
+__all__ = []

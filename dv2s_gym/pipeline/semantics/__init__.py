@@ -4,3 +4,5 @@
   :mod:`.lexicon` and road features, absences, speeds and distances in :mod:`.road`;
 * :mod:`.trace`: from what a simulated episode actually did (its trace).
 """
+
+__all__ = []

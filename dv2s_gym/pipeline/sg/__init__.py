@@ -5,3 +5,5 @@
 
 :func:`dv2s_gym.pipeline.stages.generate` picks one by name (:func:`~dv2s_gym.pipeline.stages.register_sg`).
 """
+
+__all__ = []
