@@ -393,7 +393,8 @@ def test_cli_cluster_counts_read_0_as_none_and_all_as_every_cluster(tmp_path, ca
 @pytest.mark.parametrize("argv, needle", [
     (["--policy", "rule"], "stable-baselines3 checkpoint"),
     (["--budget", "0"], "--budget must be an integer >= 1"),
-    (["--holdout-fraction", "2"], "--holdout-fraction must be a number in [0, 1]"),
+    (["--holdout-fraction", "2"], "--holdout-fraction must be a number in (0, 1]"),
+    (["--holdout-fraction", "0"], "a round that holds nothing out can never be judged"),
     (["--sampler", "no-such"], "--sampler must be one of random, halton"),  # it used to start round 1 first
     (["--max-conversions", "-1"], "--max-conversions must be a whole number of clusters (0 or more) or 'all'"),
     (["--max-conversions", "many"], "--max-conversions must be a whole number of clusters (0 or more) or 'all'"),

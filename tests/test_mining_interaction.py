@@ -203,3 +203,16 @@ def test_the_judge_wants_the_manoeuvre_and_the_collision_from_the_same_actor():
     braking = {"failure_type": "collision", "actor": "lead", "kind": "car", "manoeuvres": ["brake"]}
     assert shows_interaction(braking, elements_from_trace(trace))  # the elements mix the two cars
     assert not trace_shows_interaction(braking, trace)
+
+
+def test_a_car_beside_the_ego_does_not_show_a_stall_behind_a_car_in_its_lane():
+    from dv2s_gym.mining.interaction import trace_shows_interaction
+
+    n = 40
+    behind = _trace({"ego": _drive(0.0, 0.0, _ramp(25.0, 0.0, 0, 20, n)), "slow": _drive(40.0, 0.0, [0.0] * n)})
+    interaction = failure_interaction(behind, {"type": "stall", "step": n - 1})
+    assert (interaction.kind, interaction.side) == ("car", "same_lane")
+    assert trace_shows_interaction(interaction, behind)
+    beside = _trace({"ego": _drive(0.0, 0.0, _ramp(25.0, 0.0, 0, 20, n)), "other": _drive(40.0, LANE, [0.0] * n)})
+    assert shows_interaction(interaction, elements_from_trace(beside))  # kind alone: any car anywhere
+    assert not trace_shows_interaction(interaction, beside)

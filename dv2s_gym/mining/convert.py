@@ -67,6 +67,7 @@ import json
 import os
 import re
 import time
+import warnings
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Dict, List, Mapping, Optional, Tuple, Union
@@ -99,7 +100,7 @@ from dv2s_gym.regress.stats import wilson_interval
 from scenario_bank.atomic import atomic_write_text
 from scenario_bank.bank import Bank, DuplicateScenarioError
 from scenario_bank.dedup import param_ranges
-from scenario_bank.errors import WrongTypeError
+from scenario_bank.errors import NearDuplicateWarning, WrongTypeError
 from scenario_bank.records import Provenance, Sidecar
 from policies.evaluation import run_episode
 from policies.registry import load_policy
@@ -1285,7 +1286,9 @@ def _bank_replay(out: Dict[str, Any], record: Mapping[str, Any], bank, parent: A
     try:
         fields = Sidecar(description=description, name=name, elements=parent.elements, map=parent.map,
                          tags=("mined", REPLAY_TAG, source_failure["type"]), source=provenance)
-        entry = bank.add(script, fields, files=files)
+        with warnings.catch_warnings():  # a replay is by construction a near-duplicate of its parent
+            warnings.simplefilter("ignore", NearDuplicateWarning)
+            entry = bank.add(script, fields, files=files)
         out["entry"] = entry.name
     except DuplicateScenarioError as error:
         existing = bank.get(error.existing).source.replay or {}

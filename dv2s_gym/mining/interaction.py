@@ -188,8 +188,10 @@ def trace_shows_interaction(interaction: FailureInteraction, trace) -> bool:
     """Whether an episode's ``trace`` holds the interaction with one actor doing all of it: an actor of the key
     actor's kind that performs one of its manoeuvres (:func:`actor_manoeuvres`, judged alone with the ego; a lane
     change in either direction matches a lane change) and, for a collision, is the actor the ego collided with.
-    Stricter than :func:`shows_interaction` on the trace's elements, where one car's manoeuvre and another car's
-    collision together would do. An interaction without a key actor is shown by any trace."""
+    The actor must also be on the interaction's ``side`` of the ego (same lane, left, right) when first seen in the
+    seconds up to the failure, or the end. Stricter than :func:`shows_interaction` on the trace's elements, where one
+    car's manoeuvre and another car's collision together would do. An interaction without a key actor is shown by
+    any trace."""
     interaction = FailureInteraction.from_dict(interaction)
     kind = interaction.kind
     if kind is None:
@@ -203,10 +205,26 @@ def trace_shows_interaction(interaction: FailureInteraction, trace) -> bool:
     for name in names:
         if trace_actor_kind(trace, name) != kind:
             continue
+        if interaction.side is not None and _side(trace, name) != interaction.side:
+            continue  # a car beside the ego is not the car ahead in its lane that the failure was about
         done = set(actor_manoeuvres(trace, name))
         if not wanted or wanted & done or (wanted & _LANE_CHANGES and done & _LANE_CHANGES):
             return True
     return False
+
+
+def _side(trace, name: str) -> Optional[str]:
+    """Where actor ``name`` was beside the ego when first seen in the :data:`LOOKBACK_S` seconds up to the ego's
+    first failure event (or the episode's end), as :func:`failure_interaction` reads a failure's ``side``."""
+    event = trace.first_failure_event()
+    failure = {"time": float(event.get("time", 0.0))} if event is not None else {}
+    k = _failure_step(trace, failure)
+    first = max(0, k - int(round(LOOKBACK_S * _frequency(trace))))
+    for step in trace.states[first:k + 1]:
+        if "ego" in step and name in step:
+            left = _ego_frame(step["ego"], step[name])[1]
+            return "same_lane" if abs(left) <= _SAME_LANE_M else ("left" if left > 0 else "right")
+    return None
 
 
 _ARTICLE = {ActorKind.OBSTACLE: "An obstacle", ActorKind.EGO: "The ego vehicle"}

@@ -1227,7 +1227,7 @@ def _log_round(log: Callable[[str], None], number: int, steps: RoundSteps) -> No
         else:
             drop, versus = after.relative_drop, after.vs_control
             log(line + (f", relative drop {drop:.0%}" if drop is not None else "")
-                + (f", McNemar p vs start = {after.mcnemar_p:.3g}" if after.mcnemar_p is not None else "")
+                + (f", McNemar p (two-sided) vs start = {after.mcnemar_p:.3g}" if after.mcnemar_p is not None else "")
                 + (f", vs control = {versus.mcnemar_p:.3g}" if versus and versus.mcnemar_p is not None else ""))
     untouched = steps.untouched
     if untouched:

@@ -486,7 +486,7 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
                  + f", fine-tuned {_rate(after.get('after'))}; paired fine-tuned vs start: both failed "
                  f"{table.get('both_fail')}, only start {table.get('before_only')}, only fine-tuned "
                  f"{table.get('after_only')}, neither {table.get('neither')}"
-                 + ("" if after.get("mcnemar_p") is None else f", exact McNemar p = {after['mcnemar_p']:.3g}"))
+                 + ("" if after.get("mcnemar_p") is None else f", exact two-sided McNemar p = {after['mcnemar_p']:.3g}"))
     dependence = _dependence_line(after)
     if dependence:
         lines.append(dependence)
@@ -502,7 +502,7 @@ def _heldout_lines(after: Mapping[str, Any]) -> List[str]:
         lines.append(f"- paired fine-tuned vs control: both failed {table.get('both_fail')}, only control "
                      f"{table.get('control_only')}, only fine-tuned {table.get('fine_tuned_only')}, neither "
                      f"{table.get('neither')}"
-                     + ("" if versus.get("mcnemar_p") is None else f", exact McNemar p = {versus['mcnemar_p']:.3g}")
+                     + ("" if versus.get("mcnemar_p") is None else f", exact two-sided McNemar p = {versus['mcnemar_p']:.3g}")
                      + ("" if versus.get("relative_drop") is None
                         else f", relative drop against the control {versus['relative_drop']:.0%}"))
     elif not after.get("control"):
@@ -605,7 +605,7 @@ def _rounds_table_lines(report: Mapping[str, Any]) -> List[str]:
     """The table of the rounds, one line each, and the final policy against the starting one under it."""
     lines = [
         "| round | failures mined (against the policy) / episodes | clusters | kept | fine-tune / held-out scenarios "
-        "| held-out failure rate start | control | fine-tuned | relative drop | McNemar p vs start | vs control "
+        "| held-out failure rate start | control | fine-tuned | relative drop | two-sided McNemar p vs start | vs control "
         "| untouched failure rate start / control / fine-tuned | rest of the bank |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -889,7 +889,7 @@ def render_html(report: Mapping[str, Any], clips: Optional[Mapping[int, Mapping[
     final_html = f"<p>{escape(final_line).replace('**', '')}</p>" if final_line else ""
     head = ("<tr><th>round</th><th>failures / episodes mined</th><th>clusters</th><th>kept</th>"
             "<th>fine-tune / held-out</th><th>held-out failure rate: start</th><th>control</th><th>fine-tuned</th>"
-            "<th>relative drop</th><th>McNemar p vs start</th><th>vs control</th>"
+            "<th>relative drop</th><th>two-sided McNemar p vs start</th><th>vs control</th>"
             "<th>untouched failure rate start / control / fine-tuned</th><th>rest of the bank</th></tr>")
     markdown = render_markdown(report).splitlines()
     details = []

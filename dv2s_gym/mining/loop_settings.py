@@ -137,7 +137,8 @@ class LoopSettings:
         # regression step only after a round's mining and fine-tuning, and ``margin`` is part of its identity
         check_number(LoopError, "--margin", self.margin, low=0, high=1, interval="[)",
                      example="a failure-rate difference, e.g. 0.05 for 5 points")
-        check_number(LoopError, "--holdout-fraction", self.holdout_fraction, low=0, high=1)
+        check_number(LoopError, "--holdout-fraction", self.holdout_fraction, low=0, high=1, interval="(]",
+                     example="e.g. 0.5: a round that holds nothing out can never be judged")
         check_number(LoopError, "--mined-share", self.mined_share, low=0, high=1, interval="()")
         check_number(LoopError, "--dagger-beta-decay", self.dagger_beta_decay, low=0, high=1)
 
