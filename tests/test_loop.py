@@ -1361,3 +1361,16 @@ def test_an_unknown_loop_scenario_says_what_the_loop_takes(tmp_path, capsys, giv
     else:
         assert "not Scenic files or text" in line and "dv2s bank add" in line
     assert not (tmp_path / "loop" / "loop.json").exists()
+
+
+def test_a_moved_loop_folder_is_named_as_moved_not_as_foreign(tmp_path):
+    out = tmp_path / "here"
+    folder = out / "round_1" / "policy"
+    folder.mkdir(parents=True)
+    (folder / "model.zip").write_bytes(b"checkpoint")
+    with pytest.raises(LoopError, match=r"moved or copied from /data/there, .*move it back there"):
+        loop_module._round_spec("ppo:/data/there/round_1/policy/model.zip", folder, out)
+    with pytest.raises(LoopError, match="not written by this loop as it stands"):
+        loop_module._round_spec("ppo:/data/there/other/model.zip", folder, out)
+    inside = f"ppo:{folder / 'model.zip'}"
+    assert loop_module._round_spec(inside, folder, out) == inside

@@ -280,6 +280,22 @@ def _round_problem(rounds: List[Dict[str, Any]]) -> Optional[str]:
 
 
 # --------------------------------------------------------------------------- helpers
+def _moved_from(path: str, folder: Path, out: Path) -> Optional[Path]:
+    """The loop folder a round's checkpoint ``path`` was written in, when it is ``out`` moved or copied (the same
+    round folder and file under another root, and that file present here); ``None`` otherwise."""
+    try:
+        inner = folder.resolve().relative_to(out.resolve())
+    except ValueError:
+        return None
+    written = Path(path)
+    depth = len(inner.parts) + 1
+    if not path or len(written.parts) <= depth or written.parts[-depth:-1] != inner.parts:
+        return None
+    if not (folder / written.name).is_file():
+        return None
+    return written.parents[len(inner.parts)]
+
+
 def _round_spec(spec: Any, folder: Path, out: Path) -> str:
     """A round's policy spec read back from ``loop.json``: an SB3 checkpoint inside that round's own
     ``folder``, as the loop writes it. A spec naming anything else (code, a checkpoint elsewhere) is refused:
@@ -293,6 +309,12 @@ def _round_spec(spec: Any, folder: Path, out: Path) -> str:
         except (OSError, ValueError):
             inside = False
     if not inside:
+        moved_from = _moved_from(path if sep else "", folder, out)
+        if moved_from is not None:
+            raise LoopError(f"{out / 'loop.json'} names the round policy {text[:200]!r}: this loop folder was moved or "
+                            f"copied from {moved_from}, and a loop resumes only where it was written (loop.json "
+                            "names its checkpoints by their full paths); move it back there to resume it, or choose "
+                            "another --out to start over")
         raise LoopError(f"{out / 'loop.json'} names the round policy {text[:200]!r}, not a checkpoint in {folder}: "
                         "this loop folder was not written by this loop as it stands; choose another --out")
     return text
