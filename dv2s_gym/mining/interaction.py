@@ -77,10 +77,9 @@ def key_actor(trace, failure: Optional[Mapping[str, Any]]) -> Optional[str]:
     if partner is not None and partner in names and row is not None and row.with_actor:
         return partner
     k = _failure_step(trace, failure)
-    first = max(0, k - int(round(LOOKBACK_S * _frequency(trace))))
     ahead: Dict[str, float] = {}
     near: Dict[str, float] = {}
-    for step in trace.states[first:k + 1]:
+    for step in _lookback(trace, k):
         ego = step.get("ego")
         if ego is None:
             continue
@@ -152,14 +151,23 @@ def failure_interaction(trace, failure: Optional[Mapping[str, Any]]) -> FailureI
         failure.get("with_kind") if failure.get("with") == name and failure.get("with_kind")
         else trace_actor_kind(trace, name))
     out = out.replace(kind=kind, manoeuvres=tuple(actor_manoeuvres(trace, name)))
-    k = _failure_step(trace, failure)
-    first = max(0, k - int(round(LOOKBACK_S * _frequency(trace))))
-    for step in trace.states[first:k + 1]:
+    seen = _first_seen(trace, name, _failure_step(trace, failure))
+    return out if seen is None else out.replace(gap_m=round(seen[0], 1), side=seen[1])
+
+
+def _lookback(trace, k: int) -> List[Dict[str, Any]]:
+    """The trace's states of the :data:`LOOKBACK_S` seconds up to step ``k``, ``k`` included."""
+    return trace.states[max(0, k - int(round(LOOKBACK_S * _frequency(trace)))):k + 1]
+
+
+def _first_seen(trace, name: str, k: int) -> Optional[Tuple[float, str]]:
+    """``(distance ahead of the ego, side)`` of actor ``name`` when first seen in :func:`_lookback` up to step ``k``
+    (side: ``"same_lane"``, ``"left"``, ``"right"``); ``None`` when it is not seen there."""
+    for step in _lookback(trace, k):
         if "ego" in step and name in step:
             lon, left = _ego_frame(step["ego"], step[name])
-            side = "same_lane" if abs(left) <= _SAME_LANE_M else ("left" if left > 0 else "right")
-            return out.replace(gap_m=round(lon, 1), side=side)
-    return out
+            return lon, "same_lane" if abs(left) <= _SAME_LANE_M else ("left" if left > 0 else "right")
+    return None
 
 
 def shows_interaction(interaction: FailureInteraction, elements: Mapping[str, Any]) -> bool:
@@ -205,7 +213,7 @@ def trace_shows_interaction(interaction: FailureInteraction, trace) -> bool:
     for name in names:
         if trace_actor_kind(trace, name) != kind:
             continue
-        if interaction.side is not None and _side(trace, name) != interaction.side:
+        if interaction.side is not None and _side_at_failure(trace, name) != interaction.side:
             continue  # a car beside the ego is not the car ahead in its lane that the failure was about
         done = set(actor_manoeuvres(trace, name))
         if not wanted or wanted & done or (wanted & _LANE_CHANGES and done & _LANE_CHANGES):
@@ -213,18 +221,12 @@ def trace_shows_interaction(interaction: FailureInteraction, trace) -> bool:
     return False
 
 
-def _side(trace, name: str) -> Optional[str]:
-    """Where actor ``name`` was beside the ego when first seen in the :data:`LOOKBACK_S` seconds up to the ego's
-    first failure event (or the episode's end), as :func:`failure_interaction` reads a failure's ``side``."""
+def _side_at_failure(trace, name: str) -> Optional[str]:
+    """Where actor ``name`` was beside the ego (:func:`_first_seen`) up to the ego's first failure event, or the
+    episode's end: as :func:`failure_interaction` reads a failure's ``side``."""
     event = trace.first_failure_event()
-    failure = {"time": float(event.get("time", 0.0))} if event is not None else {}
-    k = _failure_step(trace, failure)
-    first = max(0, k - int(round(LOOKBACK_S * _frequency(trace))))
-    for step in trace.states[first:k + 1]:
-        if "ego" in step and name in step:
-            left = _ego_frame(step["ego"], step[name])[1]
-            return "same_lane" if abs(left) <= _SAME_LANE_M else ("left" if left > 0 else "right")
-    return None
+    seen = _first_seen(trace, name, _failure_step(trace, {"time": float(event.get("time", 0.0))} if event else {}))
+    return None if seen is None else seen[1]
 
 
 _ARTICLE = {ActorKind.OBSTACLE: "An obstacle", ActorKind.EGO: "The ego vehicle"}
