@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import errno
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any, List, Optional, Sequence
 
 __all__ = ["DV2SError", "BankError", "BankVersionError", "UnsafeBankInputError", "NotABankError",
            "DuplicateScenarioError", "ScenarioRejectedError", "UnknownScenarioError", "BankOptionError",
@@ -78,12 +78,18 @@ class NearDuplicateWarning(UserWarning):
     and elements, overlapping parameter ranges; :func:`scenario_bank.dedup.near_duplicate`). Mining and the loop
     count them as one scenario family. ``name``: the new entry; ``twins``: the entries it is a near-duplicate of."""
 
+    WHY = ("(same map and elements, overlapping parameter ranges): mining and dv2s loop count them as one scenario "
+           "family")
+
     def __init__(self, name: str, twins: Sequence[str]) -> None:
         super().__init__(f"{name} is a near-duplicate of bank entr{'y' if len(twins) == 1 else 'ies'} "
-                         f"{', '.join(repr(t) for t in twins)} (same map and elements, overlapping parameter ranges): "
-                         "mining and dv2s loop count them as one scenario family")
+                         f"{', '.join(repr(t) for t in twins)} {self.WHY}")
         self.name = name
         self.twins = tuple(twins)
+
+    def per_twin(self) -> List[str]:
+        """The warning as one sentence per twin (what ``dv2s bank add`` prints)."""
+        return [f"{self.name} is a near-duplicate of bank entry {twin!r} {self.WHY}" for twin in self.twins]
 
 
 class ScenarioRejectedError(BankError, ValueError):

@@ -144,10 +144,8 @@ def run_add(args: argparse.Namespace) -> int:
         entry = bank.add(script, fields, upgrade_scenic2=True)
     for warning in caught:
         if isinstance(warning.message, NearDuplicateWarning):
-            for twin in warning.message.twins:
-                print(f"warning: {entry.name} is a near-duplicate of bank entry {twin!r} (same map and elements, "
-                      "overlapping parameter ranges): mining and dv2s loop count them as one scenario family",
-                      file=sys.stderr)
+            for line in warning.message.per_twin():
+                print(f"warning: {line}", file=sys.stderr)
         else:
             warnings.warn_explicit(warning.message, warning.category, warning.filename, warning.lineno)
     rewrites = list(entry.source.scenic2_rewrites or ())
