@@ -1058,6 +1058,17 @@ def _census_text(census: Mapping[str, int]) -> str:
         f" ({', '.join(f'{kind} {n}' for kind, n in census.items())})" if census else "")
 
 
+_KEY_REJECTIONS = (
+    ("key_fixed_outside", "that the new script fixes must hold the failing value, and it does not"),
+    ("key_overridden", "that the new script passes to a behaviour must be what the behaviour uses, and the behaviour "
+                       "assigns it anew"),
+    ("key_unread", "is placed by another quantity or form, from which the judge cannot read it, so the failing value "
+                   "is not checked"),
+)
+"""The key-parameter findings of :func:`compare_parameters` that reject a conversion, each with what is wrong, in the
+order the rejection reasons list them."""
+
+
 def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failure: Mapping[str, Any],
            threshold: float) -> List[_Rejected]:
     """The checks a converted script must pass, each failing one a rejection with its own stage:
@@ -1103,23 +1114,11 @@ def _judge(out: Mapping[str, Any], interaction: Mapping[str, Any], source_failur
         found.append(_Rejected("actors", f"the failure's scene has {_census_text(actors['failure'])}, the new "
                                          f"scenario's {_census_text(actors['script'])}: {', '.join(problems)}"))
     parameters = out.get("parameters")
-    fixed_key = (parameters or {}).get("key_fixed_outside") or {}
-    if fixed_key:
-        found.append(_Rejected("parameters", "a key quantity (of the failure's interaction) that the new script fixes "
-                                             "must hold the failing value, and it does not: " + "; ".join(
-                                                 f"{name} ({why})" for name, why in sorted(fixed_key.items()))))
-    overridden = (parameters or {}).get("key_overridden") or {}
-    if overridden:
-        found.append(_Rejected("parameters", "a key quantity (of the failure's interaction) that the new script passes "
-                                             "to a behaviour must be what the behaviour uses, and the behaviour "
-                                             "assigns it anew: " + "; ".join(
-                                                 f"{name} ({why})" for name, why in sorted(overridden.items()))))
-    unread = (parameters or {}).get("key_unread") or {}
-    if unread:
-        found.append(_Rejected("parameters", "a key quantity (of the failure's interaction) is placed by another "
-                                             "quantity or form, from which the judge cannot read it, so the failing "
-                                             "value is not checked: " + "; ".join(
-                                                 f"{name} ({why})" for name, why in sorted(unread.items()))))
+    for field, problem in _KEY_REJECTIONS:
+        listed = (parameters or {}).get(field) or {}
+        if listed:
+            reasons = "; ".join(f"{name} ({why})" for name, why in sorted(listed.items()))
+            found.append(_Rejected("parameters", f"a key quantity (of the failure's interaction) {problem}: {reasons}"))
     unchecked_key = _key_not_compared(parameters)
     if unchecked_key:
         found.append(_Rejected("parameters", unchecked_key))
