@@ -48,7 +48,7 @@ import ast
 import re
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
-__all__ = ["parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
+__all__ = ["top_statements", "split_top", "parameter_uses", "meaning_map", "PLACEMENT_KINDS", "name_mismatch", "tied_objects",
            "script_parameters", "affine_uses", "affine_form", "read_interval", "Affine", "Quantity", "quantity_of",
            "quantity_uses", "read_support", "support_contains", "support_hull", "support_text", "key_parameters", "key_uses", "actor_objects", "counterpart_objects",
            "fixed_quantities", "object_behaviours", "script_objects", "behaviour_overrides", "object_behaviour_heads",
@@ -515,7 +515,7 @@ _ONCE_OR_MORE = re.compile(r"^for\s+\w+\s+in\s+range\s*\(\s*([1-9]\d*)\s*\)\s*:\
 """A top-level loop over ``range(n)``, ``n`` >= 1: its body runs, so its statements are read as top-level ones."""
 
 
-def _statements(script: str) -> List[str]:
+def top_statements(script: str) -> List[str]:
     """The script's top-level statements: a line at column 0 and the indented or bracketed lines that follow it,
     comments removed. The body of a top-level ``for _ in range(n)`` with ``n`` >= 1 (it runs) is read as top-level
     statements (:data:`_ONCE_OR_MORE`); a loop that may not run, or over anything else, is not."""
@@ -554,7 +554,7 @@ def _statements(script: str) -> List[str]:
     return statements
 
 
-def _split_top(text: str, sep: str = ",") -> List[str]:
+def split_top(text: str, sep: str = ",") -> List[str]:
     """``text`` split at ``sep`` outside brackets and strings."""
     parts, depth, quote, current = [], 0, None, []
     for char in text:
@@ -629,7 +629,7 @@ def _behaviors(script: str) -> Dict[str, List[str]]:
     """``{behaviour name: its argument names}`` of the script's ``behavior`` definitions."""
     found = {}
     for name, formals in _BEHAVIOR.findall(script):
-        found[name] = [f.split("=")[0].strip() for f in _split_top(formals) if f.strip()]
+        found[name] = [f.split("=")[0].strip() for f in split_top(formals) if f.strip()]
     return found
 
 
@@ -643,7 +643,7 @@ def _slots(specifier: str, behaviors: Mapping[str, List[str]],
     if match:
         formals = behaviors.get(match.group(1), [])
         out = []
-        for index, argument in enumerate(_split_top(match.group(2))):
+        for index, argument in enumerate(split_top(match.group(2))):
             keyword = re.match(r"^(\w+)\s*=(?!=)\s*(.*)$", argument, re.S)
             if keyword:
                 out.append((f"behavior:{_norm(keyword.group(1))}", keyword.group(2)))
@@ -752,7 +752,7 @@ def _offset_form(text: str) -> Optional[Tuple[str, str, str]]:
 def _ego_point(script: str) -> Optional[str]:
     """The name the ego is placed at along a lane (``ego = new Car at lane.centerline.pointAlongBy(egoS)``: ``egoS``),
     or ``None``."""
-    for statement in _statements(script):
+    for statement in top_statements(script):
         found = re.match(r"ego\s*=\s*new\s+\w+\s+at\s+.*?pointAlongBy\s*\(\s*(\w+)\s*\)", statement, re.S)
         if found:
             return found.group(1)
@@ -798,10 +798,10 @@ def object_lengths(script: str) -> Dict[str, Optional[float]]:
     """``{object: its length}`` of the objects ``script`` makes at its top level (placing points included, at 0):
     :func:`_own_length`, ``None`` when the judge does not know it."""
     lengths: Dict[str, Optional[float]] = {}
-    for statement in _statements(script):
+    for statement in top_statements(script):
         found = _OBJECT.match(statement)
         if found is not None and not statement.startswith(_SKIP):
-            lengths[found.group(1) or f"<{found.group(2)}>"] = _own_length(found.group(2), _split_top(found.group(3)))
+            lengths[found.group(1) or f"<{found.group(2)}>"] = _own_length(found.group(2), split_top(found.group(3)))
     return lengths
 
 
@@ -822,7 +822,7 @@ def _between_faces(value: str, expression: str, own: Optional[float],
 def _oriented_names(script: str) -> Set[str]:
     """The names of the objects ``script`` makes that are oriented points (any but a ``Point``), and the ego."""
     names = {"ego"}
-    for statement in _statements(script):
+    for statement in top_statements(script):
         found = _OBJECT.match(statement)
         if found is not None and found.group(1) and found.group(2) != "Point" and not statement.startswith(_SKIP):
             names.add(found.group(1))
@@ -929,7 +929,7 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
     oriented = _oriented_names(script)
     lengths = object_lengths(script)
     centred: Set[str] = set()  # placing points offset from an object (see _object_items)
-    for statement in _statements(script):
+    for statement in top_statements(script):
         if statement.startswith(_SKIP):
             continue
         statement = _followed(statement, numbers)
@@ -953,9 +953,9 @@ def _read_uses(script: str) -> Tuple[Dict[str, Set[Use]],
             continue
         name, kind, rest = found.group(1) or f"<{found.group(2)}>", found.group(2), found.group(3)
         context = (behaviors, oriented, ego_point, lengths, centred)
-        items = _object_items(kind, _split_top(rest), context, carried_by)
+        items = _object_items(kind, split_top(rest), context, carried_by)
         if kind in PLACEMENT_KINDS and any(_offset_pair(_slots(spec, behaviors, oriented))
-                                           for spec in _split_top(rest)):
+                                           for spec in split_top(rest)):
             centred.add(name)  # its distance ahead, read between faces, leaves out the half length of what it places
         if kind in PLACEMENT_KINDS:
             carried[name] = [(p, s, how, quantity, text) for p, s, how, _, quantity, text in items]
@@ -1020,11 +1020,11 @@ def placements(script: str) -> Dict[str, List[str]]:
     """``{object: its placement specifiers}``: the specifiers of each top-level ``new`` statement that are not ``with``
     ones (``ahead of ego by 10``, ``at ego.position + Vector(0, 40)``, ``facing 30 deg``), each on one line."""
     out: Dict[str, List[str]] = {}
-    for statement in _statements(script):
+    for statement in top_statements(script):
         found = _OBJECT.match(statement)
         if found is not None and not statement.startswith(_SKIP):
             out[found.group(1) or f"<{found.group(2)}>"] = [
-                " ".join(spec.split()) for spec in _split_top(found.group(3))
+                " ".join(spec.split()) for spec in split_top(found.group(3))
                 if spec.strip() and not re.match(r"^with\b", spec.strip())]
     return out
 
@@ -1094,7 +1094,7 @@ def fixed_quantities(script: str) -> Dict[Tuple[str, str, str], str]:
             text = f"{form[1]:g}"
         return text if text and read_support(text) is not None else None
 
-    for statement in _statements(script):
+    for statement in top_statements(script):
         if statement.startswith(_SKIP):
             continue
         found = _OBJECT.match(statement)
@@ -1108,9 +1108,9 @@ def fixed_quantities(script: str) -> Dict[Tuple[str, str, str], str]:
                     constants.pop(assign.group(1), None)
             continue
         name, kind, rest = found.group(1) or f"<{found.group(2)}>", found.group(2), found.group(3)
-        own = _own_length(kind, _split_top(rest))
+        own = _own_length(kind, split_top(rest))
         here: List[Tuple[str, str]] = []
-        for specifier in _split_top(rest):
+        for specifier in split_top(rest):
             slots = _slots(specifier, behaviors, oriented)
             offset = _offset_pair(slots)
             for index, (slot, expression) in enumerate(slots):
@@ -1128,7 +1128,7 @@ def fixed_quantities(script: str) -> Dict[Tuple[str, str, str], str]:
                     here.append((slot, read))
         if kind in PLACEMENT_KINDS:
             carried[name] = [item for item in here if item[1] is not None]
-            if any(_offset_pair(_slots(spec, behaviors, oriented)) for spec in _split_top(rest)):
+            if any(_offset_pair(_slots(spec, behaviors, oriented)) for spec in split_top(rest)):
                 centred.add(name)
             continue
         for slot, text in here:
@@ -1166,7 +1166,7 @@ def object_behaviours(script: str) -> Dict[str, str]:
                 body.append(following.strip())
         bodies[head.group(1)] = "\n".join(body)
     out: Dict[str, str] = {}
-    for statement in _statements(script):
+    for statement in top_statements(script):
         found = _OBJECT.match(statement)
         if found is None or statement.startswith(_SKIP):
             continue
@@ -1184,7 +1184,7 @@ def object_behaviour_heads(script: str) -> Dict[str, Tuple[str, Tuple[str, ...]]
     (the argument names empty for a behaviour the script does not define)."""
     behaviors = _behaviors(script)
     out: Dict[str, Tuple[str, Tuple[str, ...]]] = {}
-    for statement in _statements(script):
+    for statement in top_statements(script):
         found = _OBJECT.match(statement)
         if found is None or statement.startswith(_SKIP):
             continue
@@ -1206,7 +1206,7 @@ def behaviour_overrides(script: str) -> Dict[Tuple[str, str, str], str]:
         head = _BEHAVIOR.match(line)
         if head is None:
             continue
-        formals = {f.split("=")[0].strip() for f in _split_top(head.group(2)) if f.strip()}
+        formals = {f.split("=")[0].strip() for f in split_top(head.group(2)) if f.strip()}
         found: Dict[str, str] = {}
         for following in lines[index + 1:]:
             if following.strip() and not following[0].isspace():
@@ -1227,7 +1227,7 @@ def behaviour_overrides(script: str) -> Dict[Tuple[str, str, str], str]:
 def script_objects(script: str) -> List[Tuple[str, str]]:
     """``[(object, kind)]`` of the actors ``script`` makes at its top level (placing points left out), in order."""
     objects = []
-    for statement in _statements(script):
+    for statement in top_statements(script):
         if statement.startswith(_SKIP):
             continue
         found = _OBJECT.match(statement)
@@ -1423,7 +1423,7 @@ def actor_objects(script: str) -> Dict[str, str]:
     named "walker": ``walker1``, ``walker2``). Objects made in a loop or a condition are not known here."""
     objects: List[Tuple[str, str]] = []  # (object, label)
     named: List[Optional[str]] = []
-    for statement in _statements(script):
+    for statement in top_statements(script):
         if statement.startswith(_SKIP):
             continue
         found = _OBJECT.match(statement)
