@@ -35,8 +35,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = Parser(prog="dv2s", description="dv2s-gym: turn driving videos into Scenic "
                                     "scenarios and run them as Gymnasium episodes in highway-env.")
     parser.add_argument("--debug", action="store_true", help="on an error, show the full traceback")
-    parser.add_argument("--bank", default=None, help="bank folder (default: the bank shipped with dv2s-gym); "
-                        "also accepted after `bank` and after its subcommand")
+    parser.add_argument("--bank", default=None, help="bank folder of the commands that read a bank (default: the bank "
+                        "shipped with dv2s-gym); also accepted after the command (and after `bank`'s subcommand)")
     subparsers = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for group in COMMAND_GROUPS:
         group.add_parser(subparsers)
