@@ -1672,7 +1672,7 @@ def test_each_bank_scenario_judged_against_itself_compares_every_parameter():
 def test_a_number_beyond_what_floating_point_keeps_makes_the_expression_unread(expression):
     """Scenic computes ``(g + 1e16) - 1e16`` in floating point (6 becomes 6 or 8): the judge does not read it as
     ``g``; the key quantity is then not comparable and the script rejected."""
-    from dv2s_gym.mining.param_meaning import affine_form
+    from dv2s_gym.mining.scenic_values import affine_form
 
     assert affine_form(expression, "g") is None
     compared, rejections = _judged(_CUT_PARENT.replace("param cut_in_gap = Range(5, 11)", "param g = Range(5, 11)")

@@ -2617,7 +2617,7 @@ BUILT_IN_RAISES: Dict[str, str] = {
                                                                       "geometry (no user input)",
     "scenario_bank.maps.build_maps:junction_arms:ValueError": "the map builder's self-check on its own junction "
                                                               "tables (no user input)",
-    "dv2s_gym.mining.param_meaning:Quantity.over:AssertionError": "an invariant, not an input check: the image was "
+    "dv2s_gym.mining.scenic_values:Quantity.over:AssertionError": "an invariant, not an input check: the image was "
                                                                   "read when the Quantity was made (type narrowing)",
     "scenario_bank.maps.build_maps:write_maps:AssertionError": "the map builder's self-check that each builder "
                                                                "names its own map (no user input)",

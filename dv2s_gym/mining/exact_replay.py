@@ -25,7 +25,7 @@ import os
 import re
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import MonitorSettings, detect_failure
-from dv2s_gym.mining.param_meaning import read_support, support_contains, support_text
+from dv2s_gym.mining.scenic_values import read_support, support_contains, support_text
 from dv2s_gym.mining.scene_draws import inline_draws
 from dv2s_gym.regress import identity
 from dv2s_gym.regress.identity import checkpoint_path, installed_version
@@ -53,7 +53,7 @@ def narrowed_script(script: str, params: Mapping[str, Any], narrow: float = NARR
     """``script`` with each parameter of ``params`` narrowed around its failing value; returns the script, the new
     intervals ``{name: [lo, hi]}`` and the parameters left as the parent draws them, with why (``{name: reason}``).
 
-    The parameter's distribution is read by :func:`dv2s_gym.mining.param_meaning.read_support`: one interval of
+    The parameter's distribution is read by :func:`dv2s_gym.mining.scenic_values.read_support`: one interval of
     numbers (``Range(a, b)``, or one offset or scaled by numbers, ``Range(0, 10) + 12``) becomes ``Range(lo, hi)``,
     ``narrow`` of its width on either side of the value; a discrete one (``Uniform(0.3, 1.0)``,
     ``DiscreteRange(1, 3)``, numbers offset or scaled) is fixed at the failing value. Any other (a ``Normal``, an
@@ -131,7 +131,7 @@ def _random(expression: str) -> bool:
 
 
 def support_values(parts) -> list:
-    """The separate values of a discrete :func:`~dv2s_gym.mining.param_meaning.read_support` (no interval)."""
+    """The separate values of a discrete :func:`~dv2s_gym.mining.scenic_values.read_support` (no interval)."""
     values = set()
     for part in parts:
         if part[0] == "points":

@@ -13,7 +13,8 @@ any other. :func:`inline_draws` names each, so the entry's provenance says so.
 from __future__ import annotations
 
 import re
-from dv2s_gym.mining.param_meaning import PLACEMENT_KINDS, split_top, top_statements
+from dv2s_gym.mining.param_meaning import PLACEMENT_KINDS
+from dv2s_gym.mining.scenic_statements import split_top, top_statements
 from typing import Dict, List
 
 __all__ = ["inline_draws", "DRAWS"]
