@@ -15,7 +15,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 from scenario_bank.elements import normalize_elements
 
-__all__ = ["content_hash", "semantic_key", "param_ranges", "near_duplicate", "NEAR_COPY_LINES",
+__all__ = ["content_hash", "names_something", "semantic_key", "param_ranges", "near_duplicate", "NEAR_COPY_LINES",
            "changed_code_lines", "find_duplicate", "find_near_duplicate", "find_near_copy"]
 
 
@@ -27,6 +27,16 @@ def content_hash(script: str) -> str:
 _PARAM = re.compile(r"^\s*param\s+(\w+)\s*=\s*(.+?)\s*$", re.M)
 _RANDOM = re.compile(r"\b(Range|DiscreteRange|Uniform|Discrete|Normal|TruncatedNormal|Options|VerifaiRange|"
                      r"VerifaiDiscreteRange|VerifaiOptions)\s*\(")
+
+
+def names_something(elements: Optional[Mapping[str, Any]]) -> bool:
+    """Whether ``elements`` say what happens in a scene: at least one participant, action or relation. Elements
+    that name nothing (a hand-added script without ``--elements``) tell no two scenes apart, so they make no
+    semantic duplicate (only the scripts' bytes compare) and a near-duplicate only through shared parameters."""
+    if elements is None:
+        return False
+    normal = normalize_elements(elements)
+    return bool(normal.get("participants") or normal.get("actions") or normal.get("relations"))
 
 
 def semantic_key(elements: Mapping[str, Any], map_name: Optional[str], script: str) -> str:
@@ -79,12 +89,16 @@ def param_ranges(script: str) -> Dict[str, Tuple[float, float]]:
 def near_duplicate(elements_a: Mapping[str, Any], map_a: Optional[str], script_a: str,
                    elements_b: Mapping[str, Any], map_b: Optional[str], script_b: str) -> bool:
     """Whether two scenarios are near-duplicates: the same map, the same elements (canonical form) and
-    every numeric parameter both scripts define ranging over overlapping intervals."""
+    every numeric parameter both scripts define ranging over overlapping intervals. Elements that name nothing
+    (:func:`names_something`) need at least one such parameter in common: two scripts without elements or shared
+    parameters are told apart by nothing, so they are not called alike."""
     if map_a != map_b or normalize_elements(elements_a) != normalize_elements(elements_b):
         return False
     ranges_a, ranges_b = param_ranges(script_a), param_ranges(script_b)
-    return all(ranges_a[p][0] <= ranges_b[p][1] and ranges_b[p][0] <= ranges_a[p][1]
-               for p in set(ranges_a) & set(ranges_b))
+    shared = set(ranges_a) & set(ranges_b)
+    if not shared and not names_something(elements_a):
+        return False  # elements that name nothing and no parameter in common: nothing says they are alike
+    return all(ranges_a[p][0] <= ranges_b[p][1] and ranges_b[p][0] <= ranges_a[p][1] for p in shared)
 
 
 NEAR_COPY_LINES = 2
@@ -114,12 +128,12 @@ def find_duplicate(entries: Mapping[str, Any], semantic_keys: Mapping[str, str],
                    elements: Optional[Mapping[str, Any]], map_name: Optional[str]) -> Optional[Tuple[str, str]]:
     """``(name, how)`` of the entry (of ``entries``, name -> entry; ``semantic_keys``, name -> its
     :func:`semantic_key`) byte-for-byte identical to ``script``, or semantically identical when ``elements`` is
-    given; else ``None``."""
+    given and names something (:func:`names_something`); else ``None``."""
     digest = content_hash(script)
     for entry in entries.values():
         if entry.content_hash == digest:
             return entry.name, "byte-for-byte identical"
-    if elements is not None:
+    if names_something(elements):
         key = semantic_key(elements, map_name, script)
         for name, other in semantic_keys.items():
             if other == key:

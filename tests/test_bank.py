@@ -96,6 +96,32 @@ def test_duplicates_are_refused_with_the_existing_name(bank):
 
 
 @pytest.mark.slow
+def test_scripts_whose_elements_name_nothing_compare_by_their_bytes_and_shared_parameters(bank):
+    """A hand-added script without elements says nothing of its scene: two different such scripts on one map are no
+    semantic duplicates whatever their params, and near-duplicates (one family) only through a parameter in common
+    whose ranges overlap; two without any parameter in common are not alike at all."""
+    import warnings
+    from scenario_bank.errors import NearDuplicateWarning
+
+    empty = {"road": None, "participants": [], "actions": [], "relations": []}
+    slow = SCRIPT.replace("param gap = Range(10, 30)\n", "").replace("globalParameters.gap", "Range(10, 30)")
+    bank.add(slow.format(speed=15), Sidecar(description="a slow car ahead", name="slow_car", elements=empty))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", NearDuplicateWarning)
+        assert bank.add(slow.format(speed=0), Sidecar(description="a stopped car", name="stopped_car",
+                                                      elements=empty)).name == "stopped_car"
+    with pytest.raises(DuplicateScenarioError, match="byte-for-byte identical.*slow_car"):
+        bank.add(slow.format(speed=15), Sidecar(description="the same bytes", name="again", elements=empty))
+    # with a parameter in common whose ranges overlap, they are near-duplicates: one scenario family
+    bank.add(script(15), Sidecar(description="a lead at a gap", name="gap_lead", elements=empty))
+    with pytest.warns(NearDuplicateWarning, match="gap_lead"):
+        bank.add(script(5).replace("Range(10, 30)", "Range(20, 40)"),
+                 Sidecar(description="a slower lead at a gap", name="gap_lead_slow", elements=empty))
+    assert bank.add(script(5).replace("Range(10, 30)", "Range(50, 60)"),
+                    Sidecar(description="a slower lead far off", name="gap_far", elements=empty)).name == "gap_far"
+
+
+@pytest.mark.slow
 def test_bad_input_to_add(bank):
     with pytest.raises(BankError, match="description"):
         bank.add(script(), Sidecar(description=" ", name="x"))
