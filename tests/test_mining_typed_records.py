@@ -51,8 +51,9 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "report.markdown": "renders the report's JSON object (report.json)",
     "report.write_reports": "writes the report's JSON object (report.json) and its renderings",
     "rate.rate_estimates": "takes the run's settings.json as recorded (RunSettings.values)",
-    "miner.convert_clusters": "returns the run's conversion records as conversions.jsonl holds them; their format is "
-                              "owned by the conversion (dv2s_gym.mining.convert), which has no typed record for them yet",
+    "miner.convert_clusters": "returns the run's conversion records as conversions.jsonl holds them; their format "
+                              "is owned by the conversion (dv2s_gym.mining.convert), which has no typed record for "
+                              "them yet",
     "loop.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
     "loop.LoopReport.recommendation": "returns report.json's recommendation (loop_verdict.recommendation's JSON object)",
     "loop.reference_gate": "takes the held-out store's rows as read from heldout.jsonl: the file format",

@@ -17,7 +17,8 @@ from scenario_bank.field_checks import (check_bool, check_int, check_mapping, ch
                                         check_number, check_path, check_text)
 from scenario_bank.run_identity import recorded_settings, resume_keys, setting
 
-__all__ = ["DEFAULT_BATCH", "FEEDBACKS", "MineSettings", "RunOrigin", "SETTINGS_FILE", "RunSettings", "read_run_settings"]
+__all__ = ["DEFAULT_BATCH", "FEEDBACKS", "MineSettings", "RunOrigin", "SETTINGS_FILE", "RunSettings",
+           "read_run_settings"]
 
 SETTINGS_FILE = "settings.json"
 """The file of a mining run folder that records what the run mines (:meth:`MineSettings.recorded` and the run's
