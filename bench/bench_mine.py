@@ -86,9 +86,10 @@ def mine_once(policy: str, sampler: str, seed: int, budget: int, workers: int, r
     failures = run.failures
     avoidable = [r for r in failures if r.get("avoidable") is True]
     clusters = set(run.clusters.values())
-    from dv2s_gym.mining.rate import rate_estimates
+    from dv2s_gym.mining.rate import failure_rate
 
-    rate = rate_estimates(run.settings, run.records)
+    rate = failure_rate(run.records, scenarios=list(run.settings.scenarios or ()) or None,
+                        sampler=run.settings.sampler)
     overall = rate.overall if rate.available else None
     avoidable_clusters = {run.clusters[int(r["index"])] for r in avoidable}
     return {

@@ -815,7 +815,9 @@ def test_each_round_mines_with_a_derived_seed_and_tells_the_miner_the_loop_s_own
     _StandIns(monkeypatch)
     miner = FakeMiner(WIRING["scenarios"], failures_per_round=0)
     run_loop("dv2s-ppo", out=tmp_path / "loop", miner=miner, seed=4, log=lambda _: None, **WIRING)
-    assert [(c["seed"], c["origin"]) for c in miner.calls] == [(4001, {"command": "dv2s loop", "seed": 4, "round": 1})]
+    # settings.json records the origin as this JSON object (the reports read it there)
+    assert [(c["seed"], c["origin"].to_json()) for c in miner.calls] == [
+        (4001, {"command": "dv2s loop", "seed": 4, "round": 1})]
 
 
 def test_a_round_policy_read_back_from_loop_json_must_be_that_rounds_own_checkpoint(tmp_path):

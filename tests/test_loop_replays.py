@@ -237,6 +237,7 @@ def test_a_conversion_takes_a_failure_whose_scene_the_reference_driver_passed(tm
     from types import SimpleNamespace
 
     from dv2s_gym.mining import miner
+    from dv2s_gym.mining.settings import MineSettings
 
     def failing(index, actor, rho, reference):
         return dict(_failed(index, "a", actor, rho=rho), reference={"policy": "rule", "failure": reference})
@@ -252,6 +253,6 @@ def test_a_conversion_takes_a_failure_whose_scene_the_reference_driver_passed(tm
     monkeypatch.setattr(miner, "convert_failure", convert)
     monkeypatch.setattr(miner, "_reached_bank", lambda *_: None)
     run = SimpleNamespace(out=tmp_path, records=[EpisodeRecord.from_dict(r) for r in records],
-                          settings={"policy": "keep_lane", "env_config": None})
+                          policy="keep_lane", settings=MineSettings())
     miner.convert_clusters(run, ConversionSettings(), bank_dir=str(tmp_path / "bank"), progress=False)
     assert sorted(taken) == [1, 2]

@@ -7,7 +7,7 @@ import json
 import pytest
 
 import dv2s_gym.mining.space as space_module
-from dv2s_gym.mining.miner import _settings, mine
+from dv2s_gym.mining.miner import _recorded, mine
 from dv2s_gym.mining.settings import MineSettings
 from scenario_bank.run_identity import RunIdentityError
 
@@ -23,7 +23,7 @@ def run_folder(tmp_path, monkeypatch):
     """A run folder whose settings.json a seed-0 run wrote; building a scene space raises :class:`_SpaceBuilt`."""
     out = tmp_path / "run"
     (out / "traces").mkdir(parents=True)
-    recorded = _settings("rule", MineSettings(budget=2, scenarios=SCENARIOS, seed=0), 4, list(SCENARIOS), None, {})
+    recorded = _recorded("rule", MineSettings(budget=2, scenarios=SCENARIOS, seed=0, batch=4), SCENARIOS, {})
     (out / "settings.json").write_text(json.dumps(recorded), encoding="utf-8")
 
     def no_space(*args, **kwargs):

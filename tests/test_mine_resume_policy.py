@@ -10,7 +10,7 @@ import pytest
 
 import dv2s_gym.mining.space as space_module
 from dv2s_gym.mining.errors import MiningError
-from dv2s_gym.mining.miner import _settings, mine
+from dv2s_gym.mining.miner import _recorded, mine
 from dv2s_gym.mining.settings import MineSettings
 from dv2s_gym.regress.identity import RESUME_FINGERPRINT
 from policies.registry import SHIPPED_CHECKPOINT
@@ -25,7 +25,7 @@ class _SpaceBuilt(Exception):
 def _run_folder(tmp_path, policy):
     out = tmp_path / "run"
     (out / "traces").mkdir(parents=True)
-    recorded = _settings(policy, MineSettings(budget=2, scenarios=SCENARIOS), 4, list(SCENARIOS), None, {})
+    recorded = _recorded(policy, MineSettings(budget=2, scenarios=SCENARIOS, batch=4), SCENARIOS, {})
     (out / "settings.json").write_text(json.dumps(recorded), encoding="utf-8")
     return out
 

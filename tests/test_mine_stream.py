@@ -13,6 +13,7 @@ from dv2s_gym.mining.miner import episode_seed, read_records
 from mining_helpers import mine
 from dv2s_gym.mining.samplers import make_sampler
 from dv2s_gym.mining.space import SceneSpace
+from dv2s_gym.mining.settings import DEFAULT_BATCH, MineSettings
 from mining_helpers import mine_killed_after
 from dv2s_gym.mining.window import WindowSchedule
 from dv2s_gym.regress.tasks import KIND
@@ -194,6 +195,10 @@ def test_without_a_batch_one_and_two_workers_write_the_same_episodes(sampler, tm
     settings = [json.loads((out / "settings.json").read_text()) for out in (tmp_path / "one", tmp_path / "two")]
     assert settings[0] == settings[1]
     assert settings[0]["schedule"] == ("window" if sampler == "novelty-bandit" else "chunks")
+    # the run's settings as it ran on them: the batch and scenarios it resolved, as settings.json records them
+    assert one.policy == POLICY and isinstance(one.settings, MineSettings)
+    assert one.settings.batch == DEFAULT_BATCH and one.settings.scenarios == tuple(settings[0]["scenarios"])
+    assert {key: settings[0][key] for key in one.settings.recorded()} == one.settings.recorded()
     assert [r["index"] for r in two.records] == list(range(10))
     lines = [sorted((out / "episodes.jsonl").read_text().splitlines()) for out in (tmp_path / "one", tmp_path / "two")]
     assert lines[0] == lines[1]

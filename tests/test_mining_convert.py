@@ -45,12 +45,11 @@ def make_record(scenario: str, seed: int, params: dict, policy: str = "keep_lane
                 bank_dir: str | None = None) -> dict:
     """The miner's episode record of one scene (its worker runs the episode and the failure monitors)."""
     from dv2s_gym.mining.monitors import MonitorSettings
-    from dv2s_gym.mining.tasks import run_mine_task
+    from dv2s_gym.mining.tasks import MineTask, run_mine_task
 
-    record = run_mine_task({"kind": "mine", "role": "mine", "index": index, "policy": policy, "reference": None,
-                            "scenario": scenario, "seed": seed, "params": params, "env_config": {},
-                            "bank_dir": bank_dir, "trace_dir": None,
-                            "monitor": MonitorSettings(ttc_threshold=1.0, stall_seconds=5.0)})
+    record = run_mine_task(MineTask(index=index, policy=policy, scenario=scenario, seed=seed, params=params,
+                                    bank_dir=bank_dir,
+                                    monitor=MonitorSettings(ttc_threshold=1.0, stall_seconds=5.0)).to_json())
     assert record["error"] is None and record["failure"]["type"] == "collision", record
     return record.to_dict()  # as episodes.jsonl holds it
 

@@ -42,17 +42,16 @@ def user_bank(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def record(user_bank) -> dict:
-    from dv2s_gym.mining.tasks import run_mine_task
+    from dv2s_gym.mining.tasks import MineTask, run_mine_task
 
     env = DV2SEnv(scenario=NAME, bank_dir=str(user_bank))
     try:
         assert env.unwrapped.runs_in_jail  # a user's scenario: simulated in the jail
     finally:
         env.close()
-    record = run_mine_task({"kind": "mine", "role": "mine", "index": 0, "policy": "keep_lane", "reference": None,
-                            "scenario": NAME, "seed": 3, "params": {"ego_speed": 23.0, "van_gap": 60.0},
-                            "env_config": {}, "bank_dir": str(user_bank), "trace_dir": None,
-                            "monitor": MonitorSettings(ttc_threshold=1.0, stall_seconds=5.0)})
+    record = run_mine_task(MineTask(index=0, policy="keep_lane", scenario=NAME, seed=3,
+                                    params={"ego_speed": 23.0, "van_gap": 60.0}, bank_dir=str(user_bank),
+                                    monitor=MonitorSettings(ttc_threshold=1.0, stall_seconds=5.0)).to_json())
     assert record["error"] is None and record["failure"]["type"] == "collision", record
     return record
 

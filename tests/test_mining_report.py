@@ -465,6 +465,16 @@ def test_a_uniform_run_estimates_its_plain_failure_rate(tmp_path):
     assert "importance-weighted" in markdown(report)
 
 
+def _mine_settings(run_dir) -> tuple:
+    """``(policy, MineSettings)`` of the miner's run in ``run_dir``, as its ``settings.json`` records them."""
+    from dv2s_gym.mining.miner import MineSettings
+
+    recorded = json.loads((Path(run_dir) / "settings.json").read_text())
+    return recorded["policy"], MineSettings(sampler=recorded["sampler"], seed=recorded["seed"],
+                                            scenarios=tuple(recorded["scenarios"]), batch=recorded["batch"],
+                                            reference=recorded["reference"])
+
+
 def test_the_miner_s_summary_states_the_breadth(run_dir):
     from pathlib import Path as _Path
 
@@ -472,8 +482,9 @@ def test_the_miner_s_summary_states_the_breadth(run_dir):
     from dv2s_gym.mining.miner import MineRun, read_records
 
     records = read_records(_Path(run_dir) / "episodes.jsonl")
-    settings = json.loads((_Path(run_dir) / "settings.json").read_text())
-    run = MineRun(out=_Path(run_dir), settings=settings, records=records, clusters=cluster_failures([EpisodeRecord.from_dict(r) for r in records]))
+    policy, settings = _mine_settings(run_dir)
+    run = MineRun(out=_Path(run_dir), policy=policy, settings=settings, records=records,
+                  clusters=cluster_failures([EpisodeRecord.from_dict(r) for r in records]))
     # the miner counts a failure of unknown avoidability (the low TTC) as avoidable
     assert ("5 distinct behaviours, 4 with avoidable failures; 5 (scenario family, failure type) pairs, 2 scenario "
             "families with a failure; 5 collisions, 1 stalls") in run.summary()
@@ -486,8 +497,8 @@ def test_the_miner_s_summary_calls_failure_kinds_by_their_labels(run_dir):
     from dv2s_gym.mining.miner import MineRun, read_records
 
     records = read_records(_Path(run_dir) / "episodes.jsonl")
-    settings = json.loads((_Path(run_dir) / "settings.json").read_text())
-    run = MineRun(out=_Path(run_dir), settings=settings, records=records,
+    policy, settings = _mine_settings(run_dir)
+    run = MineRun(out=_Path(run_dir), policy=policy, settings=settings, records=records,
                   clusters=cluster_failures([EpisodeRecord.from_dict(r) for r in records]))
     failures_line = run.summary().splitlines()[1]
     assert failures_line.startswith("10 failures (rear-end collision 5, off road 3, ")
@@ -503,8 +514,8 @@ def test_without_a_reference_driver_the_summary_counts_no_behaviour_with_avoidab
 
     records = [{**r.to_dict(), "avoidable": None, "reference": None}
                for r in read_records(_Path(run_dir) / "episodes.jsonl")]
-    settings = {**json.loads((_Path(run_dir) / "settings.json").read_text()), "reference": None}
-    run = MineRun(out=_Path(run_dir), settings=settings, records=records,
+    policy, settings = _mine_settings(run_dir)
+    run = MineRun(out=_Path(run_dir), policy=policy, settings=settings.replace(reference=None), records=records,
                   clusters=cluster_failures([EpisodeRecord.from_dict(r) for r in records]))
     summary = run.summary()
     assert "avoidability not checked (no reference driver)" in summary
@@ -569,7 +580,7 @@ def test_the_rate_sentence_says_how_many_episodes_and_which_scenarios_were_never
 
 def test_a_run_whose_every_episode_errored_says_so_and_counts_them_as_drawn(tmp_path):
     from dv2s_gym.mining.cluster import cluster_failures
-    from dv2s_gym.mining.miner import MineRun
+    from dv2s_gym.mining.miner import MineRun, MineSettings
 
     out = tmp_path / "broken"
     out.mkdir()
@@ -583,9 +594,11 @@ def test_a_run_whose_every_episode_errored_says_so_and_counts_them_as_drawn(tmp_
     assert "WARNING: all 2 episodes ended in an error: the run measured nothing (e.g. RuntimeError: boom)" in text
     assert "1 of 2 scenarios were drawn (2 episode(s)) but every episode of them ended in an error" in text
     assert "1 of 2 scenarios were never drawn" in text  # B
-    run = MineRun(out=out, settings=settings, records=records, clusters=cluster_failures([EpisodeRecord.from_dict(r) for r in records]))
+    mined = MineSettings(sampler="random", seed=0, scenarios=("A", "B"), reference=None)
+    run = MineRun(out=out, policy="boom", settings=mined, records=records,
+                  clusters=cluster_failures([EpisodeRecord.from_dict(r) for r in records]))
     assert run.all_errored and "WARNING: all 2 episodes ended in an error" in run.summary()
-    partial = MineRun(out=out, settings=settings, clusters={},
+    partial = MineRun(out=out, policy="boom", settings=mined, clusters={},
                       records=records[:1] + [_record(1, "random", "A", 0.5, None, None, None)])
     assert not partial.all_errored and "WARNING: 1 of 2 episodes ended in an error" in partial.summary()
     assert partial.summary().startswith("2 episodes of boom (random sampler), 1 error (A 1), ")

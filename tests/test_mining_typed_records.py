@@ -12,6 +12,11 @@ each record's ``to_dict``. No public function of theirs takes or returns a ``Dic
 ``Mapping[str, Any]`` (or a bare ``dict``) unless :data:`JSON_BOUNDARIES` lists it with the reason: the ones that
 read or write a file format, or take a structure another module owns that has no typed record yet. The modules are
 parsed, not imported.
+
+The miner runs on its typed settings and tasks: :class:`~dv2s_gym.mining.settings.MineSettings` (``MineRun.settings``
+too), :class:`~dv2s_gym.mining.tasks.MineTask` per episode (its JSON object only where a pool ships it) and
+:class:`~dv2s_gym.mining.settings.RunOrigin`; ``settings.json`` is written from them and read back only to check a
+resumed run's identity.
 """
 
 from __future__ import annotations
@@ -23,13 +28,15 @@ import json
 import typing
 from typing import Dict, List
 
+import pytest
+
 from scenario_bank.records import JsonRecord
 
 ROOT = Path(__file__).resolve().parents[1]
 MINING = ROOT / "dv2s_gym" / "mining"
 
 TYPED_MODULES = ("behaviour", "cluster", "family", "rate", "report", "split", "loop", "loop_record", "loop_report",
-                 "loop_verdict")
+                 "loop_verdict", "miner")
 """The mining modules whose functions pass typed records."""
 
 JSON_BOUNDARIES: Dict[str, str] = {
@@ -44,6 +51,9 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "report.markdown": "renders the report's JSON object (report.json)",
     "report.write_reports": "writes the report's JSON object (report.json) and its renderings",
     "rate.rate_estimates": "takes the run's settings.json as recorded (RunSettings.values)",
+    "miner.convert_clusters": "returns the run's conversion records as conversions.jsonl holds them; their format "
+                              "is owned by the conversion (dv2s_gym.mining.convert), which has no typed record for "
+                              "them yet",
     "loop.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
     "loop.LoopReport.recommendation": "returns report.json's recommendation (loop_verdict.recommendation's JSON object)",
     "loop.reference_gate": "takes the held-out store's rows as read from heldout.jsonl: the file format",
@@ -275,3 +285,77 @@ def test_the_failure_interaction_is_a_typed_record_written_as_before():
     read = FailureInteraction.from_dict(recorded)
     assert read.manoeuvres == ("brake",) and read.to_dict() == recorded
     assert interaction_sentence(read) == interaction_sentence(recorded) != ""
+
+
+_KEYED = ("settings", "recorded", "task", "origin")
+"""Names the miner once read by string key: its settings, ``settings.json``'s content, a task and the origin."""
+
+
+def keyed_reads(source: str) -> List[str]:
+    """The string-key reads (``x["key"]``, ``x.get("key")``) of a value named like :data:`_KEYED` in ``source`` (a
+    write, ``x["key"] = ...``, fills a file's JSON object: not a read)."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Subscript) and isinstance(node.ctx, ast.Load):
+            target, key = node.value, node.slice
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get" \
+                and node.args:
+            target, key = node.func.value, node.args[0]
+        else:
+            continue
+        name = ast.unparse(target).split(".")[-1]
+        if name in _KEYED and isinstance(key, ast.Constant) and isinstance(key.value, str):
+            found.append(ast.unparse(node))
+    return found
+
+
+def test_the_keyed_read_check_sees_settings_and_tasks_read_by_key():
+    planted = textwrap.dedent("""
+        def run(self, settings, task, recorded):
+            recorded["schedule"] = "window"
+            return settings["seed"], self.settings.get("reference"), task["index"], record["scenario"], settings.seed
+    """)
+    assert keyed_reads(planted) == ["settings['seed']", "self.settings.get('reference')", "task['index']"]
+
+
+def test_the_miner_reads_its_settings_and_tasks_by_their_fields():
+    """No setting, task field or origin is read by a string key in the miner (settings.json is written whole)."""
+    assert keyed_reads(_source("miner")) == []
+    from dv2s_gym.mining.miner import MineRun
+    from dv2s_gym.mining.settings import MineSettings
+
+    assert typing.get_type_hints(MineRun)["settings"] is MineSettings
+
+
+def test_a_mining_task_reads_back_from_the_json_a_pool_ships():
+    from dv2s_gym.mining.errors import MiningError
+    from dv2s_gym.mining.monitors import MonitorSettings
+    from dv2s_gym.mining.tasks import MINE, MineTask
+
+    task = MineTask(index=3, policy="rule", scenario="s", seed=41, params={"gap": 2.5}, reference="rule",
+                    family="f", env_config={"duration": 3}, bank_dir="bank", trace_dir="traces",
+                    monitor=MonitorSettings(ttc_threshold=1.5, stall_seconds=4.0), failure_types=("collision",))
+    shipped = task.to_json()
+    assert json.loads(json.dumps(shipped)) == shipped  # a plain JSON object, as any pool can ship
+    assert (shipped["kind"], shipped["role"], shipped["id"]) == (MINE, "mine", "s/41")
+    assert MineTask.from_json(shipped) == task
+    with pytest.raises(MiningError, match="needs index, seed"):
+        MineTask.from_json({"policy": "rule", "scenario": "s"})
+
+
+def test_a_run_s_origin_is_recorded_as_the_json_object_the_reports_read(tmp_path):
+    from dv2s_gym.mining.errors import MiningError
+    from dv2s_gym.mining.miner import mine
+    from dv2s_gym.mining.report_text import seed_text
+    from dv2s_gym.mining.settings import MineSettings, RunOrigin
+
+    origin = RunOrigin(command="dv2s loop", seed=4, round=2)
+    assert json.dumps(origin.to_json()) == '{"command": "dv2s loop", "seed": 4, "round": 2}'
+    assert RunOrigin.from_json(origin.to_json()) == origin
+    assert seed_text({"seed": 4002, "origin": origin.to_json()}) == \
+        "seed 4002 (derived by dv2s loop from its seed 4, round 2)"
+    with pytest.raises(MiningError, match="origin round"):
+        RunOrigin(command="dv2s loop", seed=4, round=0)
+    with pytest.raises(MiningError, match="origin must be a RunOrigin"):
+        mine("rule", MineSettings(budget=1), out=tmp_path / "run", origin={"command": "dv2s loop"})
+    assert not (tmp_path / "run").exists()

@@ -83,7 +83,7 @@ from dv2s_gym.mining.loop_report import errored_note, errored_text, reference_ga
 from dv2s_gym.mining.loop_settings import DEFAULTS, FINE_TUNE_METHODS, METHOD_LEARNING_RATES, LoopError, LoopSettings
 from dv2s_gym.mining.loop_verdict import (
     EVIDENCE_FLOOR, evidence_floor_note, HELDOUT_ALPHA, heldout_worse, recommendation)
-from dv2s_gym.mining.miner import MineSettings
+from dv2s_gym.mining.miner import MineSettings, RunOrigin
 from dv2s_gym.mining.replays import reference_passed, replay_clusters, replay_entries, REPLAYS_FILE
 from dv2s_gym.mining.split import family_of, split_by_family
 from dv2s_gym.progress_lines import log_line
@@ -680,7 +680,7 @@ def _mine_step(loop: _Loop, number: int, current: str, round_dir: Path) -> Minin
                                      bank_dir=loop.bank, seed=s.seed * 1000 + number, env_config=loop.env_config,
                                      convert=True, max_conversions=s.max_conversions),
                out=str(round_dir / "mine"), workers=WorkerSettings(workers=loop.workers), progress=loop.progress,
-               origin={"command": "dv2s loop", "seed": s.seed, "round": number})
+               origin=RunOrigin(command="dv2s loop", seed=s.seed, round=number))
     if s.max_replays != 0 and (round_dir / "mine" / "settings.json").is_file():  # a miner's run folder
         replay_clusters(round_dir / "mine", bank_dir=loop.bank, max_replays=s.max_replays, progress=loop.progress)
     return _mining_summary(round_dir / "mine").replace(kept=tuple(mined_entries(round_dir / "mine")),

@@ -57,12 +57,13 @@ from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.failure_state import is_novel
 from dv2s_gym.mining.family import record_family, scenario_family
 from dv2s_gym.mining.jsonl import JsonlAppender, read_rows
-from dv2s_gym.mining.monitors import MonitorSettings, kind_label, types_without_detector
+from dv2s_gym.mining.monitors import kind_label, types_without_detector
 from dv2s_gym.mining.report import write_reports
 from dv2s_gym.mining.report_text import error_warning
 from dv2s_gym.mining.samplers import SceneSampler, is_adaptive, make_sampler, sampler_params, scene_proposal
-from dv2s_gym.mining.settings import DEFAULT_BATCH, FEEDBACKS, MineSettings, read_run_settings, RunSettings, SETTINGS_FILE
-from dv2s_gym.mining.tasks import MINE
+from dv2s_gym.mining.settings import (DEFAULT_BATCH, FEEDBACKS, MineSettings, read_run_settings, RunOrigin,
+                                      RunSettings, SETTINGS_FILE)
+from dv2s_gym.mining.tasks import MineTask
 from dv2s_gym.mining.window import SCHEDULES, WindowSchedule
 from dv2s_gym.mining.write_errors import from_os_error, is_write_failure, run_write_error
 from dv2s_gym.workers import backends
@@ -79,8 +80,8 @@ from scenario_bank.run_identity import check_identity
 from dv2s_gym.regress.identity import RESUME_FINGERPRINT, check_policy_unchanged, resume_fingerprint
 from policies.registry import load_policy
 
-__all__ = ["MineRun", "MineSettings", "WorkerSettings", "FEEDBACKS", "mine", "read_records", "episode_seed",
-           "SETTINGS_VERSION"]
+__all__ = ["MineRun", "MineSettings", "RunOrigin", "WorkerSettings", "FEEDBACKS", "mine", "read_records",
+           "episode_seed", "SETTINGS_VERSION"]
 
 SETTINGS_VERSION = 1
 LOOKAHEAD_CHUNKS = 16
@@ -94,12 +95,14 @@ before building it, which takes minutes on a loaded machine."""
 
 @dataclass
 class MineRun:
-    """What a mining run found (the run folder holds everything, this is a summary): its ``records``
+    """What a mining run found (the run folder holds everything, this is a summary): the ``policy`` mined, the
+    run's ``settings`` (its batch, scenarios and bank as the run resolved them), its ``records``
     (:class:`~scenario_bank.records.EpisodeRecord`, given as records or their JSON objects), the behaviour
     cluster of each failure by index, the conversions and the reports written."""
 
     out: Path
-    settings: Dict[str, Any]
+    policy: str
+    settings: MineSettings
     records: List[EpisodeRecord]
     clusters: Dict[int, str]
     conversions: List[Dict[str, Any]] = field(default_factory=list)
@@ -150,17 +153,17 @@ class MineRun:
         avoidable_clusters = {self.clusters[int(r["index"])] for r in self.avoidable}
         status = Counter(c.get("status") for c in self.conversions)
         lines = [
-            f"{len(self.records)} episodes of {self.settings['policy']} ({self.settings['sampler']} sampler), "
+            f"{len(self.records)} episodes of {self.policy} ({self.settings.sampler} sampler), "
             f"{errors} error{'s' if errors != 1 else ''}{self._errored_scenarios()}, "
             + (f"{restarted} finished after their worker crashed or hung and was replaced, " if restarted else "")
             + f"{self.seconds:.0f} s",
             f"{len(failures)} failures "
             f"({', '.join(f'{kind_label(k)} {n}' for k, n in kinds.most_common()) or 'none'}); "
-            + (f"{len(self.avoidable)} avoidable by {self.settings['reference']}" if self.settings["reference"]
+            + (f"{len(self.avoidable)} avoidable by {self.settings.reference}" if self.settings.reference
              else "avoidability not checked (no reference driver)"),
             f"{self.distinct_clusters} distinct behaviours"
             # without a reference driver no failure is known to be avoidable: no count of them
-            + (f", {len(avoidable_clusters)} with avoidable failures" if self.settings["reference"] else "") + "; "
+            + (f", {len(avoidable_clusters)} with avoidable failures" if self.settings.reference else "") + "; "
             f"{len({(record_family(r), r['failure']['kind']) for r in failures})} (scenario family, failure type) "
             f"pairs, {len({record_family(r) for r in failures})} scenario families with a failure; "
             f"{kinds_by_type.get('collision', 0)} collisions, {kinds_by_type.get('stall', 0)} stalls",
@@ -232,7 +235,7 @@ class _Recorder:
         self.found = {cluster_id(r) for r in counted}
         self.failed = len(counted)
 
-    def add(self, result: Dict[str, Any], task: Dict[str, Any], spec) -> None:
+    def add(self, result: Dict[str, Any], task: MineTask, spec) -> None:
         problem = result.get("write_error")
         if problem:  # the episode's trace could not be written: stop before recording it, a resume reruns it
             raise run_write_error(problem.get("path"), problem.get("errno"), problem.get("strerror"))
@@ -247,14 +250,41 @@ class _Recorder:
             self.bar.set_postfix(failures=self.failed, clusters=len(self.found))
 
 
-def _settings(policy: str, settings: MineSettings, batch: int, scenarios: List[str], bank_dir: Optional[str],
+def _recorded(policy: str, settings: MineSettings, scenarios: Sequence[str],
               space_description: Dict[str, Any]) -> Dict[str, Any]:
-    """The run's ``settings.json``: :meth:`MineSettings.recorded` with the policy and the resolved batch, scenarios
-    and bank (the keys :data:`_RESUME_KEYS` name are its identity) and the policy's fingerprint
+    """The run's ``settings.json``: :meth:`MineSettings.recorded` (with the run's resolved batch and bank) with the
+    policy, the ``scenarios`` (the keys :data:`_RESUME_KEYS` name are its identity) and the policy's fingerprint
     (:func:`~dv2s_gym.regress.identity.resume_fingerprint`: a resume with a changed checkpoint or module is refused)."""
     return {"schema": "dv2s-mine", "version": SETTINGS_VERSION, "policy": policy, **settings.recorded(),
-            "batch": int(batch), "scenarios": scenarios, "bank_dir": bank_dir, "space": space_description,
+            "batch": int(settings.batch), "scenarios": list(scenarios), "space": space_description,
             RESUME_FINGERPRINT: resume_fingerprint(policy)}
+
+
+@dataclass(frozen=True)
+class _Mining:
+    """A run being mined: its folder, policy, settings (batch, scenarios and bank as resolved), schedule
+    (:data:`~dv2s_gym.mining.window.SCHEDULES`) and scene space."""
+
+    out: Path
+    policy: str
+    settings: MineSettings
+    schedule: str
+    space: Any
+
+    def new_sampler(self) -> SceneSampler:
+        """A fresh sampler of the run (nothing drawn or fed)."""
+        options = self.settings.sampler_options
+        return make_sampler(self.settings.sampler, self.space, self.settings.seed, dict(options) if options else None)
+
+    def task(self, index: int, spec) -> MineTask:
+        """The worker's task of episode ``index`` on the scene ``spec``."""
+        settings = self.settings
+        seed = episode_seed(settings.seed, index)
+        return MineTask(index=index, policy=self.policy, scenario=spec.scenario, seed=seed, params=spec.params,
+                        reference=settings.reference, family=scenario_family(str(spec.scenario), settings.bank_dir),
+                        env_config=settings.env_config, bank_dir=settings.bank_dir,
+                        trace_dir=str(self.out / "traces"), monitor=settings.monitor,
+                        failure_types=tuple(row.name for row in failure_table()))
 
 
 def _read_settings(out: Path) -> Optional[RunSettings]:
@@ -273,10 +303,10 @@ def _check_resume(saved: Mapping[str, Any], settings: Dict[str, Any], out: Path,
                    fix="resume it with the same settings or pass another --out")
 
 
-def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[int, EpisodeRecord],
-                     batch: int) -> SceneSampler:
+def _restore_sampler(mining: _Mining, records: Dict[int, EpisodeRecord]) -> SceneSampler:
     """The sampler after every complete chunk already in ``records``: from its checkpoint when that is
     current, else rebuilt by drawing the chunks again and feeding their recorded outcomes."""
+    out, space, batch = mining.out, mining.space, mining.settings.batch
     complete = 0
     while all(i in records for i in range(complete * batch, (complete + 1) * batch)):
         complete += 1
@@ -288,8 +318,7 @@ def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[i
             sampler = None
         if sampler is not None and sampler.fed == complete * batch:
             return sampler
-    sampler = make_sampler(settings["sampler"], space, settings["seed"],
-                           settings.get("sampler_options") or None)
+    sampler = mining.new_sampler()
     seen: set = set()
     for chunk in range(complete):
         drawn = sampler.draw(batch)
@@ -299,7 +328,7 @@ def _restore_sampler(out: Path, settings: Dict[str, Any], space, records: Dict[i
             if spec.scenario != records[index]["scenario"] or spec.params != records[index]["params"]:
                 raise MiningError(f"{out}: episode {index} in episodes.jsonl does not match the sampler's draw "
                                   "(the run was made by another version); pass another --out")
-            sampler.feed(point, info, _feedback(records[index], seen, settings.get("feedback", "robustness")))
+            sampler.feed(point, info, _feedback(records[index], seen, mining.settings.feedback))
     return sampler
 
 
@@ -314,11 +343,11 @@ def _schedule(saved: Optional[RunSettings], sampler: str, out: Path) -> str:
     return schedule
 
 
-def _restore_window(out: Path, settings: Dict[str, Any], space, records: Dict[int, EpisodeRecord], batch: int,
-                    budget: int) -> WindowSchedule:
+def _restore_window(mining: _Mining, records: Dict[int, EpisodeRecord]) -> WindowSchedule:
     """The window schedule after feeding every recorded outcome it can: from its checkpoint when that is
     usable, else from a fresh sampler; either way the remaining recorded outcomes are fed in the schedule's
     order, so the state is the one an uninterrupted run had at that point."""
+    out, batch, budget = mining.out, mining.settings.batch, mining.settings.budget
     window = None
     checkpoint = out / "sampler.pkl"
     if checkpoint.is_file():
@@ -329,10 +358,9 @@ def _restore_window(out: Path, settings: Dict[str, Any], space, records: Dict[in
         if window is not None and (window.window != batch or any(i not in records for i in range(window.fed))):
             window = None  # another window, or ahead of the records: rebuild
     if window is None:
-        window = WindowSchedule(make_sampler(settings["sampler"], space, settings["seed"],
-                                             settings.get("sampler_options") or None), batch)
-    mode = settings.get("feedback", "robustness")
-    window.advance(records, budget, lambda record, seen: _feedback(record, seen, mode), _matcher(out, space))
+        window = WindowSchedule(mining.new_sampler(), batch)
+    mode = mining.settings.feedback
+    window.advance(records, budget, lambda record, seen: _feedback(record, seen, mode), _matcher(out, mining.space))
     return window
 
 
@@ -345,18 +373,17 @@ def _matcher(out: Path, space) -> Any:
     return check
 
 
-def _run_chunks(scene_sampler: SceneSampler, pool, space, settings: Dict[str, Any], out: Path,
-                recorder: "_Recorder", budget: int, batch: int) -> None:
+def _run_chunks(mining: _Mining, scene_sampler: SceneSampler, pool, recorder: "_Recorder") -> None:
     """Run the episodes of a chunk-scheduled run: draw ``batch`` scenes, run them, feed their outcomes in
     index order, draw the next chunk. An adaptive sampler draws a chunk only once it has been fed the last
     one's outcomes; a non-adaptive one learns nothing from them, so several whole chunks go to the workers
     at once (the same draws, without idle workers at the end of every chunk)."""
-    done, sampler = recorder.done, settings["sampler"]
-    mode = settings.get("feedback", "robustness")
+    done, out, space = recorder.done, mining.out, mining.space
+    budget, batch, mode = mining.settings.budget, mining.settings.batch, mining.settings.feedback
     seen: set = set()
     for i in range(scene_sampler.fed):  # what the feedback had seen when the sampler was last fed
         _feedback(done[i], seen, mode)
-    lookahead = 1 if is_adaptive(sampler) else LOOKAHEAD_CHUNKS
+    lookahead = 1 if is_adaptive(mining.settings.sampler) else LOOKAHEAD_CHUNKS
     chunk = scene_sampler.fed // batch
     while chunk * batch < budget:
         count = max(1, min(lookahead, budget // batch - chunk))
@@ -365,15 +392,14 @@ def _run_chunks(scene_sampler: SceneSampler, pool, space, settings: Dict[str, An
         indices = range(first, first + count * batch)
         pairs = [pair for drawn in draws for pair in drawn]
         specs = {i: _with_proposal(space.decode(point), scene_sampler.proposal(i)) for i, (point, _) in zip(indices, pairs)}
-        tasks = [_task(i, specs[i], settings["policy"], settings["reference"], settings, out) for i in indices
-                 if i not in done and i < budget]
-        by_id = {t["id"]: t for t in tasks}
+        tasks = [mining.task(i, specs[i]) for i in indices if i not in done and i < budget]
+        by_id = {t.id: t for t in tasks}
 
         def handle(result: Dict[str, Any]) -> None:
             task = by_id[result["id"]]
-            recorder.add(result, task, specs[task["index"]])
+            recorder.add(result, task, specs[task.index])
 
-        pool.run(tasks, handle)
+        pool.run([task.to_json() for task in tasks], handle)
         if all(i in done for i in indices):
             for i, (point, info) in zip(indices, pairs):
                 scene_sampler.feed(point, info, _feedback(done[i], seen, mode))
@@ -381,18 +407,16 @@ def _run_chunks(scene_sampler: SceneSampler, pool, space, settings: Dict[str, An
         chunk += count
 
 
-def _run_window(window: WindowSchedule, pool, space, settings: Dict[str, Any], out: Path,
-                recorder: "_Recorder", budget: int) -> None:
+def _run_window(mining: _Mining, window: WindowSchedule, pool, recorder: "_Recorder") -> None:
     """Run the episodes of a window-scheduled run: a streaming backend gets each new draw as soon as the
     outcome that allows it has been fed (the workers never wait for a chunk's last episode); any other
     backend runs the window's outstanding scenes, call after call (the same draws and records, with an
     idle tail per call)."""
-    mode = settings.get("feedback", "robustness")
-    policy, reference = settings["policy"], settings["reference"]
+    mode, budget, out = mining.settings.feedback, mining.settings.budget, mining.out
     done = recorder.done
-    check = _matcher(out, space)
+    check = _matcher(out, mining.space)
     specs: Dict[int, Any] = {}
-    by_id: Dict[str, Dict[str, Any]] = {}
+    by_id: Dict[str, MineTask] = {}
     last_saved = [window.fed]
 
     def tasks_for(indices: Sequence[int]) -> List[Dict[str, Any]]:
@@ -400,15 +424,15 @@ def _run_window(window: WindowSchedule, pool, space, settings: Dict[str, Any], o
         for i in indices:
             if i >= budget or i in done:
                 continue
-            specs[i] = _with_proposal(space.decode(window.pending[i][0]), window.sampler.proposal(i))
-            task = _task(i, specs[i], policy, reference, settings, out)
-            by_id[task["id"]] = task
-            tasks.append(task)
+            specs[i] = _with_proposal(mining.space.decode(window.pending[i][0]), window.sampler.proposal(i))
+            task = mining.task(i, specs[i])
+            by_id[task.id] = task
+            tasks.append(task.to_json())
         return tasks
 
     def handle(result: Dict[str, Any]) -> None:
         task = by_id.pop(result["id"])
-        recorder.add(result, task, specs.pop(task["index"]))
+        recorder.add(result, task, specs.pop(task.index))
 
     def more() -> List[Dict[str, Any]]:
         new = window.advance(done, budget, lambda record, seen: _feedback(record, seen, mode), check)
@@ -465,7 +489,7 @@ def _feedback(record: EpisodeRecord, seen: set, mode: str) -> float:
 
 
 def mine(policy: str, settings: MineSettings, *, out: os.PathLike | str, workers: Optional[WorkerSettings] = None,
-         progress: bool = True, reports: bool = True, origin: Optional[Mapping[str, Any]] = None) -> MineRun:
+         progress: bool = True, reports: bool = True, origin: Optional[RunOrigin] = None) -> MineRun:
     """Mine ``policy``'s failures over ``settings.budget`` episodes; resumable (same ``out``).
 
     Args:
@@ -479,11 +503,13 @@ def mine(policy: str, settings: MineSettings, *, out: os.PathLike | str, workers
             replaced and the episode retried once.
         progress: progress bars on stderr.
         reports: write report.json, report.md and report.html at the end.
-        origin: what started this run, shown beside the seed in its reports: ``dv2s loop`` passes
-            ``{"command": "dv2s loop", "seed": S, "round": R}`` because it mines each round with a seed
-            derived from its own. Not a setting: a resumed run may be given another.
+        origin: what started this run (:class:`~dv2s_gym.mining.settings.RunOrigin`), shown beside the seed in its
+            reports: ``dv2s loop`` passes ``RunOrigin("dv2s loop", seed=S, round=R)`` because it mines each round
+            with a seed derived from its own. Not a setting: a resumed run may be given another.
     """
     started = time.perf_counter()
+    if origin is not None and not isinstance(origin, RunOrigin):
+        raise MiningError(f"origin must be a RunOrigin (the command, its seed and round), not {origin!r}")
     _check_can_mine(policy, settings)
     out = Path(out)
     for flag, folder in (("--out", out), ("--bank", Path(settings.bank_dir) if settings.bank_dir else None)):
@@ -556,7 +582,7 @@ def _remove_if_empty(out: Path) -> None:
 
 
 def _mine_in(out: Path, started: float, policy: str, settings: MineSettings, workers: WorkerSettings,
-             progress: bool, reports: bool, origin: Optional[Mapping[str, Any]]) -> MineRun:
+             progress: bool, reports: bool, origin: Optional[RunOrigin]) -> MineRun:
     """The body of :func:`mine` once the input is checked and the run folder exists."""
     bank_dir = str(Path(settings.bank_dir).resolve()) if settings.bank_dir else None
     if settings.convert:
@@ -564,11 +590,12 @@ def _mine_in(out: Path, started: float, policy: str, settings: MineSettings, wor
     n_workers = int(workers.workers) if workers.workers else (
         1 if workers.backend == "local" and default_workers() < 2 else default_workers())
     with _run_lock(out):
-        recorded, space = _open_run(out, policy, settings, bank_dir, origin)
+        mining = _open_run(out, policy, settings.replace(bank_dir=bank_dir), origin)
         done = {int(r["index"]): r for r in read_records(out / "episodes.jsonl")}
-        _run_episodes(out, recorded, space, done, workers, n_workers, progress)
+        _run_episodes(mining, done, workers, n_workers, progress)
         records = [done[i] for i in sorted(done) if i < settings.budget]
-        run = MineRun(out=out, settings=recorded, records=records, clusters=cluster_failures(records))
+        run = MineRun(out=out, policy=policy, settings=mining.settings, records=records,
+                      clusters=cluster_failures(records))
         if settings.convert:
             run.conversions = convert_clusters(run, settings.conversion, bank_dir=bank_dir, progress=progress,
                                                max_conversions=settings.max_conversions)
@@ -580,41 +607,42 @@ def _mine_in(out: Path, started: float, policy: str, settings: MineSettings, wor
     return run
 
 
-def _open_run(out: Path, policy: str, settings: MineSettings, bank_dir: Optional[str],
-              origin: Optional[Mapping[str, Any]]) -> tuple:
-    """``(settings.json's content, the scene space)`` of the run in ``out``: a new run's settings, or a resumed
-    run's checked against the ones asked (its own scenarios and batch when none are asked); written back."""
-    settings_path = out / SETTINGS_FILE
+def _open_run(out: Path, policy: str, settings: MineSettings, origin: Optional[RunOrigin]) -> _Mining:
+    """The run in ``out`` (``settings.bank_dir`` resolved): a new run's settings, or a resumed run's checked against
+    the ones asked (its own scenarios and batch when none are asked); ``settings.json`` written (back)."""
     saved = _read_settings(out)
     batch = settings.batch or (saved.batch if saved else DEFAULT_BATCH)  # never the workers: the seed decides the run
+    settings = settings.replace(batch=int(batch))
     if saved is not None:  # a changed seed, policy, ... is refused before the space is built, not minutes later
-        before_space = _settings(policy, settings, batch, saved.scenarios, bank_dir, {})
+        before_space = _recorded(policy, settings, saved.scenarios, {})
         _check_resume(saved.values, before_space, out, [key for key in _RESUME_KEYS if key not in _SPACE_KEYS])
         # the same spec naming a changed checkpoint or module is refused, naming what changed
         check_policy_unchanged(saved.values, policy, folder=out, run="mining run", error=MiningError)
     names = saved.scenarios if saved and settings.scenarios is None else None
     asked = list(settings.scenarios) if settings.scenarios is not None else None
-    space = space_module.SceneSpace(names or asked, bank_dir)
-    recorded = _settings(policy, settings, batch, space.scenarios, bank_dir, space.describe())
+    space = space_module.SceneSpace(names or asked, settings.bank_dir)
+    recorded = _recorded(policy, settings, space.scenarios, space.describe())
     if saved is not None:
         _check_resume(saved.values, recorded, out)
-    recorded["schedule"] = _schedule(saved, settings.sampler, out)
-    if origin:
-        recorded["origin"] = dict(origin)
-    atomic_write_json(settings_path, recorded)
-    return recorded, space
+    schedule = _schedule(saved, settings.sampler, out)
+    recorded["schedule"] = schedule
+    if origin is not None:
+        recorded["origin"] = origin.to_json()
+    atomic_write_json(out / SETTINGS_FILE, recorded)
+    return _Mining(out=out, policy=policy, settings=settings.replace(scenarios=tuple(space.scenarios)),
+                   schedule=schedule, space=space)
 
 
-def _run_episodes(out: Path, settings: Dict[str, Any], space, done: Dict[int, EpisodeRecord],
-                  workers: WorkerSettings, n_workers: int, progress: bool) -> None:
+def _run_episodes(mining: _Mining, done: Dict[int, EpisodeRecord], workers: WorkerSettings, n_workers: int,
+                  progress: bool) -> None:
     """Run the episodes of the run's budget not in ``done`` (recorded into it), on its schedule."""
-    budget, batch = settings["budget"], settings["batch"]
+    budget = mining.settings.budget
     window, scene_sampler = None, None
-    if settings["schedule"] == "window":
-        window = _restore_window(out, settings, space, done, batch, budget)
+    if mining.schedule == "window":
+        window = _restore_window(mining, done)
     else:
-        scene_sampler = _restore_sampler(out, settings, space, done, batch)
-    appender = JsonlAppender(out / "episodes.jsonl")
+        scene_sampler = _restore_sampler(mining, done)
+    appender = JsonlAppender(mining.out / "episodes.jsonl")
     bar = progress_bar(progress, budget, len([i for i in done if i < budget]))
     try:
         pool = backends.get_backend(workers.backend, workers=n_workers, address=workers.address,
@@ -624,28 +652,15 @@ def _run_episodes(out: Path, settings: Dict[str, Any], space, done: Dict[int, Ep
         raise MiningError(str(error)) from None
     try:
         with pool:
-            recorder = _Recorder(appender, done, settings["sampler"], out, bar)
+            recorder = _Recorder(appender, done, mining.settings.sampler, mining.out, bar)
             if window is not None:
-                _run_window(window, pool, space, settings, out, recorder, budget)
+                _run_window(mining, window, pool, recorder)
             else:
-                _run_chunks(scene_sampler, pool, space, settings, out, recorder, budget, batch)
+                _run_chunks(mining, scene_sampler, pool, recorder)
     finally:
         appender.close()
         if bar is not None:
             bar.close()
-
-
-def _task(index: int, spec, policy: str, reference: Optional[str], settings: Dict[str, Any],
-          out: Path) -> Dict[str, Any]:
-    seed = episode_seed(settings["seed"], index)
-    return {
-        "kind": MINE, "role": "mine", "index": index, "id": f"{spec.scenario}/{seed}", "policy": policy,
-        "reference": reference, "scenario": spec.scenario, "seed": seed, "params": spec.params,
-        "family": scenario_family(str(spec.scenario), settings["bank_dir"]), "env_config": settings["env_config"], "bank_dir": settings["bank_dir"],
-        "trace_dir": str(out / "traces"),
-        "monitor": MonitorSettings.from_recorded(settings),
-        "failure_types": [row.name for row in failure_table()],
-    }
 
 
 def _with_proposal(spec, proposal: Optional[Dict[str, Any]]):
@@ -655,16 +670,16 @@ def _with_proposal(spec, proposal: Optional[Dict[str, Any]]):
     return spec
 
 
-def _complete(result: Dict[str, Any], task: Dict[str, Any], spec, sampler: str, out: Path) -> EpisodeRecord:
+def _complete(result: Dict[str, Any], task: MineTask, spec, sampler: str, out: Path) -> EpisodeRecord:
     """The episode record from a worker's result (or a backend's error result for a crashed or hung worker)."""
     taken = {k: v for k, v in result.items()
              if k in ("policy", "scenario", "seed", "result", "failure", "rho", "reference", "avoidable", "trace",
                       "error", "family")}
     trace = taken.get("trace")
     return EpisodeRecord.from_dict({
-        "index": task["index"], "policy": task["policy"], "scenario": task["scenario"], "seed": task["seed"],
-        "params": task["params"], "result": None, "failure": None, "rho": None, "reference": None,
-        "avoidable": None, "trace": None, "error": None, "family": task.get("family") or task["scenario"],
+        "index": task.index, "policy": task.policy, "scenario": task.scenario, "seed": task.seed,
+        "params": task.params, "result": None, "failure": None, "rho": None, "reference": None,
+        "avoidable": None, "trace": None, "error": None, "family": task.family or task.scenario,
         **taken,
         "behaviour": result.get("behaviour"), "failure_state": result.get("failure_state"),
         # a worker crashed or hung on this episode, then a new one finished it
@@ -724,7 +739,7 @@ def convert_clusters(run: MineRun, conversion: ConversionSettings, *, bank_dir: 
     room = None if max_conversions is None else max(0, int(max_conversions) - len(existing))
     todo = [(cluster, record) for _, cluster, record in candidates][:room]
     bank = Bank(bank_dir)
-    conversion = conversion.replace(policy=run.settings["policy"], env_config=run.settings["env_config"])
+    conversion = conversion.replace(policy=run.policy, env_config=run.settings.env_config)
     appender = JsonlAppender(path)
     bar = progress_bar(progress, len(todo), 0, desc="converting")
     try:

@@ -17,7 +17,8 @@ from scenario_bank.field_checks import (check_bool, check_int, check_mapping, ch
                                         check_number, check_path, check_text)
 from scenario_bank.run_identity import recorded_settings, resume_keys, setting
 
-__all__ = ["DEFAULT_BATCH", "FEEDBACKS", "MineSettings", "SETTINGS_FILE", "RunSettings", "read_run_settings"]
+__all__ = ["DEFAULT_BATCH", "FEEDBACKS", "MineSettings", "RunOrigin", "SETTINGS_FILE", "RunSettings",
+           "read_run_settings"]
 
 SETTINGS_FILE = "settings.json"
 """The file of a mining run folder that records what the run mines (:meth:`MineSettings.recorded` and the run's
@@ -137,11 +138,44 @@ class MineSettings:
         the miner records the resolved ``batch``, ``scenarios`` and ``bank_dir`` over these)."""
         return recorded_settings(self)
 
+    @property
+    def monitor(self) -> MonitorSettings:
+        """The failure monitors' settings (``ttc_threshold``, ``stall_seconds``)."""
+        return MonitorSettings(ttc_threshold=float(self.ttc_threshold), stall_seconds=float(self.stall_seconds))
+
     def options(self) -> Dict[str, Any]:
         """The settings as keyword arguments of :class:`MineSettings` (``scenarios`` as a list)."""
         values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         values["scenarios"] = list(self.scenarios) if self.scenarios is not None else None
         return values
+
+
+@dataclasses.dataclass(frozen=True)
+class RunOrigin:
+    """What started a mining run when another command derived its seed (``dv2s loop`` mines round ``round`` of a
+    loop seeded ``seed``); ``settings.json`` records it as ``"origin"`` and the reports name it beside the run's own
+    seed. Not a setting: a resumed run may be given another."""
+
+    command: str
+    """The command that started the run (e.g. ``"dv2s loop"``)."""
+    seed: Optional[int] = None
+    """That command's own seed."""
+    round: Optional[int] = None
+    """The command's round the run is part of."""
+
+    def __post_init__(self) -> None:
+        check_text(MiningError, "origin command", self.command, what="the name of the command that started the run")
+        check_int(MiningError, "origin seed", self.seed, low=0, optional=True, none_means="not derived from one")
+        check_int(MiningError, "origin round", self.round, low=1, optional=True, none_means="no round")
+
+    def to_json(self) -> Dict[str, Any]:
+        """The ``"origin"`` object of ``settings.json``."""
+        return {"command": self.command, "seed": self.seed, "round": self.round}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> "RunOrigin":
+        """The origin an ``"origin"`` object records (checked as when made)."""
+        return cls(command=data.get("command"), seed=data.get("seed"), round=data.get("round"))
 
 
 class RunSettings:

@@ -3,18 +3,13 @@ failure-mining episode, task kind ``"mine"``) and :func:`heldout_task` (one epis
 held-out evaluation, kind ``"heldout"``, see :mod:`dv2s_gym.mining.heldout`), both registered with
 :mod:`dv2s_gym.workers.tasks` when this module is imported.
 
-A mining task is a plain dict (shipped to a pool of :mod:`dv2s_gym.workers`, local or Ray):
-
-- ``kind``: ``"mine"`` (:data:`MINE`); ``role``: ``"mine"``; ``index``: the episode's index in the run;
-- ``policy``: policy spec; ``reference``: the reference driver's spec (``None``: no
-  avoidability check);
-- ``scenario``, ``seed``, ``params``: the scene (see :mod:`dv2s_gym.mining.space`);
-- ``env_config``, ``bank_dir``; ``trace_dir``: the folder for a failed episode's trace
-  (``<index>.json.gz``; the Ray pool swaps in a local folder and ships the file back);
-- ``monitor``: the monitors' settings (a :class:`~dv2s_gym.mining.monitors.MonitorSettings`);
-- ``failure_types``: the failure types the miner detects (its table with the plug-ins' rows): a worker process
-  that does not detect one of them (a plug-in module that registers later than when it is imported) records an
-  error for the episode rather than missing the type.
+A mining task is a :class:`MineTask` (the episode's scene and what the worker needs to run and judge it); a pool of
+:mod:`dv2s_gym.workers` (local or Ray) ships its JSON object (:meth:`MineTask.to_json`, read back with
+:meth:`MineTask.from_json` in the worker): ``kind`` (:data:`MINE`), ``role`` (``"mine"``) and ``id`` beside the
+record's fields. ``trace_dir`` is the folder for a failed episode's trace (``<index>.json.gz``; the Ray pool swaps in
+a local folder and ships the file back); ``failure_types`` are the failure types the miner detects (its table with
+the plug-ins' rows): a worker process that does not detect one of them (a plug-in module that registers later than
+when it is imported) records an error for the episode rather than missing the type.
 
 When the failed episode's trace cannot be written (a full disk...), the result is no finished episode: it carries
 ``write_error`` (:func:`~dv2s_gym.mining.write_errors.write_failure`) and the miner stops before recording it.
@@ -27,9 +22,11 @@ driver's episode on the same scene run here, so a record is complete when it arr
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import traceback
-from typing import Any, Dict, Mapping, Optional
+from dataclasses import dataclass
+from typing import Any, ClassVar, Dict, Mapping, Optional, Tuple
 
 from dv2s_gym.mining.behaviour import extract_behaviour
 from dv2s_gym.mining.failure_state import failure_state
@@ -37,18 +34,72 @@ from dv2s_gym.mining.write_errors import write_failure
 from dv2s_gym.mining.errors import MiningError
 from dv2s_gym.mining.monitors import (DEFAULT_MONITOR, MonitorSettings, detect_failure, robustness,
                                       types_without_detector)
-from dv2s_gym.workers.tasks import register
+from dv2s_gym.workers.tasks import register, task_id
 from policies import worker_cache
 from policies.evaluation import run_episode
 from scenario_bank.failure_types import failure_table, failure_type
 from scenario_bank.records import EpisodeRecord, HeldOutEpisode
 
-__all__ = ["MINE", "HELDOUT", "run_mine_task", "heldout_task", "reference_avoids", "trace_name"]
+__all__ = ["MINE", "HELDOUT", "MineTask", "run_mine_task", "heldout_task", "reference_avoids", "trace_name"]
 
 MINE = "mine"
 """The ``"kind"`` of a failure-mining task."""
 HELDOUT = "heldout"
 """The ``"kind"`` of a task of the loop's held-out evaluation."""
+
+
+@dataclass(frozen=True)
+class MineTask:
+    """One failure-mining episode for a worker: the scene (``index`` in the run, ``scenario``, env ``seed``,
+    sampled ``params``, the scenario's ``family``), the ``policy`` and the ``reference`` driver that decides
+    avoidability (``None``: no check), the env (``env_config``, ``bank_dir``: ``None`` for the shipped bank), the
+    folder of failed episodes' traces (``trace_dir``; ``None``: keep none), the ``monitor`` settings and the
+    ``failure_types`` the miner detects."""
+
+    index: int
+    policy: str
+    scenario: str
+    seed: int
+    params: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    reference: Optional[str] = None
+    family: Optional[str] = None
+    env_config: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    bank_dir: Optional[str] = None
+    trace_dir: Optional[str] = None
+    monitor: MonitorSettings = DEFAULT_MONITOR
+    failure_types: Tuple[str, ...] = ()
+
+    kind: ClassVar[str] = MINE
+    """Which registered function runs the task (:mod:`dv2s_gym.workers.tasks`)."""
+    role: ClassVar[str] = "mine"
+    """The episode's role in results and error results."""
+
+    @property
+    def id(self) -> str:
+        """The episode's id in results: ``"<scenario>/<seed>"``."""
+        return task_id(self.scenario, self.seed)
+
+    def to_json(self) -> Dict[str, Any]:
+        """The task as a pool ships it (a plain JSON object; :meth:`from_json` reads it back)."""
+        return {"kind": self.kind, "role": self.role, "index": self.index, "id": self.id, "policy": self.policy,
+                "reference": self.reference, "scenario": self.scenario, "seed": self.seed, "params": self.params,
+                "family": self.family, "env_config": self.env_config, "bank_dir": self.bank_dir,
+                "trace_dir": self.trace_dir, "monitor": dataclasses.asdict(self.monitor),
+                "failure_types": list(self.failure_types)}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> "MineTask":
+        """The task a JSON object holds (:meth:`to_json`'s; the optional fields may be left out); one without an
+        episode's ``index``, ``policy``, ``scenario`` or ``seed`` is a :class:`MiningError` naming what is missing."""
+        missing = [key for key in ("index", "policy", "scenario", "seed") if data.get(key) is None]
+        if missing:
+            raise MiningError(f"a mining task needs {', '.join(missing)}; make it with MineTask(...).to_json()")
+        return cls(index=int(data["index"]), policy=data["policy"], scenario=data["scenario"],
+                   seed=int(data["seed"]), params=dict(data.get("params") or {}), reference=data.get("reference"),
+                   family=data.get("family"), env_config=dict(data.get("env_config") or {}),
+                   bank_dir=data.get("bank_dir"), trace_dir=data.get("trace_dir"),
+                   monitor=MonitorSettings.of(data.get("monitor")),
+                   failure_types=tuple(data.get("failure_types") or ()))
 
 
 def trace_name(index: int) -> str:
@@ -73,12 +124,12 @@ def _severity(name: str) -> int:
     return row.severity
 
 
-def _episode(task: Dict[str, Any], spec: str):
+def _episode(task: MineTask, spec: str):
     env_key = None
     try:
-        env_key, env = worker_cache.env_for(task.get("bank_dir"), task.get("env_config"))
+        env_key, env = worker_cache.env_for(task.bank_dir, task.env_config)
         policy = worker_cache.policy_for(spec, env_key, env)
-        return run_episode(env, policy, task["scenario"], int(task["seed"]), params=task.get("params") or None)
+        return run_episode(env, policy, task.scenario, task.seed, params=task.params or None)
     except Exception:
         if env_key is not None:
             worker_cache.drop_env(env_key)
@@ -90,44 +141,38 @@ _MINE_NULLS = frozenset({"policy", "params", "result", "failure", "rho", "refere
 ``failure_state`` are there only for a failure."""
 
 
-def run_mine_task(task: Dict[str, Any]) -> EpisodeRecord:
-    """Run the policy (and, if it failed, the reference driver) on the task's scene; the episode record (without
-    the sampler fields, the miner's; ``role`` and ``id`` and, when the trace could not be written, ``write_error``
-    in its ``extra``)."""
-    scene: Dict[str, Any] = {"index": int(task["index"]), "policy": task["policy"], "scenario": task["scenario"],
-                             "seed": int(task["seed"]), "params": dict(task.get("params") or {})}
-    extra: Dict[str, Any] = {"role": "mine", "id": f"{task['scenario']}/{int(task['seed'])}"}
+def run_mine_task(task: Mapping[str, Any]) -> EpisodeRecord:
+    """Run the policy (and, if it failed, the reference driver) on the scene of ``task`` (a :class:`MineTask`'s JSON
+    object); the episode record (without the sampler fields, the miner's; ``role`` and ``id`` and, when the trace
+    could not be written, ``write_error`` in its ``extra``)."""
+    mine = MineTask.from_json(task)
+    scene: Dict[str, Any] = {"index": mine.index, "policy": mine.policy, "scenario": mine.scenario,
+                             "seed": mine.seed, "params": dict(mine.params)}
+    extra: Dict[str, Any] = {"role": mine.role, "id": mine.id}
     outcome: Dict[str, Any] = {}
     nulls = _MINE_NULLS
-    monitor: MonitorSettings = task.get("monitor") or DEFAULT_MONITOR
     try:
-        _check_detects(task.get("failure_types") or ())
-        result, trace = _episode(task, task["policy"])
-        failure = detect_failure(result, trace, monitor)
+        _check_detects(mine.failure_types)
+        result, trace = _episode(mine, mine.policy)
+        failure = detect_failure(result, trace, mine.monitor)
         outcome["result"] = result.to_json()
         outcome["failure"] = failure.to_json() if failure else None
-        outcome["rho"] = robustness(result, failure, monitor)
+        outcome["rho"] = robustness(result, failure, mine.monitor)
         if failure is not None:
             nulls = nulls | {"behaviour", "failure_state"}
             behaviour = extract_behaviour(trace, failure)
             outcome["behaviour"] = behaviour.to_dict() if behaviour is not None else None
             outcome["failure_state"] = failure_state(trace, outcome["failure"])
-            if task.get("trace_dir"):
-                path = os.path.join(task["trace_dir"], trace_name(int(task["index"])))
+            if mine.trace_dir:
+                path = os.path.join(mine.trace_dir, trace_name(mine.index))
                 try:
                     trace.save(path)
                 except OSError as error:  # the run's own file, not the episode: the miner stops, a resume reruns it
                     extra["write_error"] = write_failure(error, path)
                     return _mine_record(scene, outcome, extra, nulls)
                 outcome["trace"] = path
-            if task.get("reference"):
-                ref_result, ref_trace = _episode(task, task["reference"])
-                ref_failure = detect_failure(ref_result, ref_trace, monitor)
-                outcome["reference"] = {
-                    "policy": task["reference"], "failure": ref_failure.to_json() if ref_failure else None,
-                    "trajectory_hash": ref_result.trajectory_hash, "collided": ref_result.collided,
-                    "min_ttc": ref_result.to_json()["min_ttc"],
-                }
+            if mine.reference:
+                outcome["reference"] = _reference_outcome(mine)
                 outcome["avoidable"] = reference_avoids(outcome["failure"], outcome["reference"]["failure"])
     except Exception as error:  # reported in the record, never dropped
         message = " ".join(f"{type(error).__name__}: {error}".split())
@@ -135,6 +180,15 @@ def run_mine_task(task: Dict[str, Any]) -> EpisodeRecord:
             message += "\n" + traceback.format_exc()
         outcome["error"] = message
     return _mine_record(scene, outcome, extra, nulls)
+
+
+def _reference_outcome(task: MineTask) -> Dict[str, Any]:
+    """The reference driver's episode on the task's scene, as the record's ``reference``."""
+    ref_result, ref_trace = _episode(task, task.reference)
+    ref_failure = detect_failure(ref_result, ref_trace, task.monitor)
+    return {"policy": task.reference, "failure": ref_failure.to_json() if ref_failure else None,
+            "trajectory_hash": ref_result.trajectory_hash, "collided": ref_result.collided,
+            "min_ttc": ref_result.to_json()["min_ttc"]}
 
 
 def _check_detects(names) -> None:
