@@ -415,6 +415,7 @@ register_policy("idm", _state_driver("idm", "policies.baselines:IDMEgo"))
 register_policy("keep_lane", _state_driver("keep_lane", "policies.baselines:KeepLaneEgo"))
 register_policy("random", lambda seed=0: RandomPolicy("random", seed=int(seed)))
 register_policy("dv2s-ppo", _shipped)
+_REGISTRY.mark_built_in()
 
 
 BUILTIN_POLICIES = ("rule", "idm", "keep_lane", "random", "dv2s-ppo")

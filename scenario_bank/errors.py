@@ -15,7 +15,7 @@ from typing import Any, List, Optional, Sequence
 
 __all__ = ["DV2SError", "BankError", "BankVersionError", "UnsafeBankInputError", "NotABankError",
            "DuplicateScenarioError", "ScenarioRejectedError", "UnknownScenarioError", "BankOptionError",
-           "MissingFileError", "WrongFileError", "SettingError", "WrongTypeError", "NearDuplicateWarning",
+           "MissingFileError", "WrongFileError", "SettingError", "WrongTypeError", "NearDuplicateWarning", "BuiltInReplacedWarning",
            "bank_write_error"]
 
 
@@ -90,6 +90,20 @@ class NearDuplicateWarning(UserWarning):
     def per_twin(self) -> List[str]:
         """The warning as one sentence per twin (what ``dv2s bank add`` prints)."""
         return [f"{self.name} is a near-duplicate of bank entry {twin!r} {self.WHY}" for twin in self.twins]
+
+
+class BuiltInReplacedWarning(UserWarning):
+    """A warning, not an error: a plug-in replaced or removed one of dv2s-gym's own entries in a registry (a
+    policy, a failure detector, a backend), so what runs under that name is no longer the product's. ``what``:
+    the kind of entry; ``name``: its name; ``module``: the module that replaced it (``None``: removed, or not
+    known)."""
+
+    def __init__(self, what: str, name: str, module: Optional[str], removed: bool = False) -> None:
+        by = f" by {module}" if module else ""
+        done = "removed" if removed else f"replaced{by}"
+        super().__init__(f"the built-in {what} {name!r} was {done}: what runs as {name!r} is not dv2s-gym's own; "
+                         "register yours under another name to keep both")
+        self.what, self.name, self.module = what, name, module
 
 
 class ScenarioRejectedError(BankError, ValueError):

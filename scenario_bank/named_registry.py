@@ -8,6 +8,8 @@ reads it unchanged."""
 
 from __future__ import annotations
 
+import warnings
+from scenario_bank.errors import BuiltInReplacedWarning
 from typing import (Callable, Dict, Iterator, List, Mapping, MutableMapping, Optional, Sequence, Type, TypeVar,
                     Union, overload)
 
@@ -26,7 +28,10 @@ class Registry(MutableMapping[str, V]):
 
     ``what`` names the kind in messages (``"sampler"``, ``"worker backend"``); ``error`` is the project error a
     clash or an unknown name raises; ``unknown`` (optional) makes the unknown-name error instead, for a registry
-    whose callers word it their own way. ``entries`` are registered first, in their order."""
+    whose callers word it their own way. ``entries`` are registered first, in their order, and are built in
+    (:meth:`mark_built_in`): replacing or removing one issues a
+    :class:`~scenario_bank.errors.BuiltInReplacedWarning`, so a plug-in cannot swap the product's own entry
+    (the collision detector, the reference driver) without a word."""
 
     def __init__(self, what: str, error: Type[Exception], entries: Optional[Mapping[str, V]] = None, *,
                  unknown: Optional[UnknownError] = None) -> None:
@@ -35,8 +40,19 @@ class Registry(MutableMapping[str, V]):
         self._unknown = unknown
         self._entries: Dict[str, V] = {}
         self._modules: Dict[str, str] = {}
+        self._built_in: set = set()
         for name, value in (entries or {}).items():
             self.register(name, value)
+        self.mark_built_in()
+
+    def mark_built_in(self) -> None:
+        """Every entry held now is one of the product's own (a module that registers its entries by calls
+        marks them once it has)."""
+        self._built_in = set(self._entries)
+
+    def is_built_in(self, name: str) -> bool:
+        """Whether ``name`` is one of the product's own entries (:meth:`mark_built_in`)."""
+        return name in self._built_in
 
     def register(self, name: str, value: V, *, overwrite: bool = False, module: Optional[str] = None) -> V:
         """Hold ``value`` under ``name`` (registered by ``module``, when given); returns ``value``.
@@ -47,6 +63,9 @@ class Registry(MutableMapping[str, V]):
             raise self.error(f"{self.what} name {name!r} must be a non-empty string")
         if name in self._entries and not overwrite:
             raise self.error(f"a {self.what} named {name!r} is already registered; pass overwrite=True to replace it")
+        if name in self._built_in:
+            warnings.warn(BuiltInReplacedWarning(self.what, name, module), stacklevel=3)
+            self._built_in.discard(name)
         self._entries[name] = value
         if module:
             self._modules[name] = module
@@ -95,6 +114,7 @@ class Registry(MutableMapping[str, V]):
         other: Registry[V] = Registry(self.what, self.error, unknown=self._unknown)
         other._entries = dict(self._entries)
         other._modules = dict(self._modules)
+        other._built_in = set(self._built_in)
         return other
 
     # the mapping protocol: ``[]`` and ``del`` raise KeyError as a dict does; ``[] =`` replaces
@@ -107,6 +127,9 @@ class Registry(MutableMapping[str, V]):
     def __delitem__(self, name: str) -> None:
         del self._entries[name]
         self._modules.pop(name, None)
+        if name in self._built_in:
+            warnings.warn(BuiltInReplacedWarning(self.what, name, None, removed=True), stacklevel=3)
+            self._built_in.discard(name)
 
     def __contains__(self, name: object) -> bool:
         return name in self._entries

@@ -15,7 +15,7 @@ from dv2s_gym.workers.errors import WorkerError
 from policies import registry as policies
 from policies.registry import PolicyError
 from scenario_bank import failure_types
-from scenario_bank.errors import DV2SError
+from scenario_bank.errors import BuiltInReplacedWarning, DV2SError
 from scenario_bank.failure_types import FailureType, FailureTypeError
 from scenario_bank.named_registry import Registry
 from scenario_bank.plugins import plugin_modules
@@ -164,3 +164,50 @@ def test_a_failure_type_and_its_detector_are_replaced_only_with_overwrite():
             monitors.unregister_detector("registry_probe")
         failure_types.unregister_failure_type("registry_probe")
     assert failure_types.failure_type("registry_probe") is None and "my_probe_plugins" not in plugin_modules()
+
+
+def test_replacing_or_removing_a_built_in_entry_warns_naming_it():
+    table = _registry()
+    table.register("three", 3)
+    with pytest.warns(BuiltInReplacedWarning, match=r"the built-in widget 'one' was replaced by my_plugins"):
+        table.register("one", 10, overwrite=True, module="my_plugins")
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", BuiltInReplacedWarning)
+        table.register("three", 30, overwrite=True)  # a plug-in's own entry: no warning
+        table.register("one", 11, overwrite=True)  # replaced already: said once
+        table.unregister("three")
+    with pytest.warns(BuiltInReplacedWarning, match=r"the built-in widget 'two' was removed"):
+        table.unregister("two")
+    assert not table.is_built_in("one") and not table.is_built_in("two")
+
+
+@pytest.mark.parametrize("read, name", [
+    (lambda: policies._REGISTRY, "rule"), (lambda: monitors.DETECTORS, "collision"),
+    (lambda: stages._SG_REGISTRY, "rules"), (lambda: stages._DRA_REGISTRY, "bev"),
+    (lambda: samplers._REGISTRY, "random"), (lambda: backends._FACTORIES, "local")])
+def test_the_product_registries_hold_their_own_entries_as_built_in(read, name):
+    table = read().copy()
+    assert table.is_built_in(name)
+    with pytest.warns(BuiltInReplacedWarning, match=f"'{name}' was replaced"):
+        table.register(name, table[name], overwrite=True)
+
+
+def test_dv2s_says_when_a_plugin_replaces_the_collision_detector(tmp_path):
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    (tmp_path / "noop_collision.py").write_text(
+        "from dv2s_gym.mining.monitors import DETECTORS, Detector, register_detector\n"
+        "register_detector(Detector('collision', lambda result, trace, settings: None, "
+        "DETECTORS['collision'].score), overwrite=True)\n")
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "DV2S_PLUGINS": "noop_collision",
+           "PYTHONPATH": os.pathsep.join([str(tmp_path), str(root), os.environ.get("PYTHONPATH", "")])}
+    done = subprocess.run([sys.executable, "-m", "dv2s_gym.cli", "bank", "stats"], env=env, capture_output=True,
+                          text=True, timeout=300, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    assert ("dv2s: warning: the built-in detector 'collision' was replaced by noop_collision: what runs as "
+            "'collision' is not dv2s-gym's own" in done.stderr)

@@ -1386,6 +1386,8 @@ OUTSIDE_THE_BASE: Dict[str, str] = {
                                            "issues, never raised: nothing catches it",
     "envs.errors.Interrupted": "Ctrl-C (a KeyboardInterrupt, not an Exception): it stops the run like Ctrl-C and "
                                "carries the note on how to resume; the command line prints the note",
+    "scenario_bank.errors.BuiltInReplacedWarning": "a warning (warnings.warn) a registry issues when a plug-in "
+                                                   "replaces or removes a built-in entry, not an error raised",
     "scenario_bank.errors.NearDuplicateWarning": "a warning (warnings.warn) Bank.add issues for an entry it added "
                                                  "beside its near-duplicates, never raised: the add succeeded",
 }

@@ -15,13 +15,14 @@ import argparse
 import atexit
 import os
 import sys
+import warnings
 from typing import List, Optional
 
 from dv2s_gym.cli import (bank, convert, demo, evaluate, loop, maps, mine, regress, replay, run, train)
 from dv2s_gym.cli.errors import UsageError, missing_extra, report_error
 from dv2s_gym.cli.interrupts import SigintFlag, report_interrupted
 from dv2s_gym.cli.parser import Parser
-from scenario_bank.errors import DV2SError
+from scenario_bank.errors import BuiltInReplacedWarning, DV2SError
 from scenario_bank.plugins import PluginError, load_plugins_from_environment
 
 __all__ = ["main", "build_parser"]
@@ -78,7 +79,14 @@ def _exit_at_once(code: int) -> None:
 
 def _main(argv: Optional[List[str]]) -> int:
     try:
-        load_plugins_from_environment()  # before parsing: a plug-in's sampler or backend is a choice of its flag
+        with warnings.catch_warnings(record=True) as replaced:
+            warnings.simplefilter("always", BuiltInReplacedWarning)
+            load_plugins_from_environment()  # before parsing: a plug-in's sampler or backend is a choice of its flag
+        for caught in replaced:  # a plug-in that swaps a built-in entry says so, once, before any work
+            if issubclass(caught.category, BuiltInReplacedWarning):
+                print(f"dv2s: warning: {caught.message}", file=sys.stderr)
+            else:
+                warnings.warn_explicit(caught.message, caught.category, caught.filename, caught.lineno)
     except PluginError as error:
         given = sys.argv[1:] if argv is None else argv
         return report_error(argparse.Namespace(debug="--debug" in given), error, explained=True)

@@ -191,6 +191,8 @@ register_dra("bev", _describe_bev, reads_model=False)
 register_dra("openai", _describe_openai)
 register_sg("rules", _generate_rules, reads_model=False)
 register_sg("openai", _generate_openai)
+_DRA_REGISTRY.mark_built_in()
+_SG_REGISTRY.mark_built_in()
 
 DRA_BACKENDS: Tuple[str, ...] = tuple(_DRA_REGISTRY)
 """The Driving Record Analyzer backends that ship with dv2s-gym, in the order registered above (the order
