@@ -52,6 +52,8 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "loop.untouched_settings": "takes the policy's env config, a JSON object of its model card",
     "loop_record.HeldOutComparison.held_out_test": "returns one recorded held-out test (loop_verdict.heldout_worse's "
                                                    "JSON object in the after step's significantly_worse)",
+    "loop_record.RoundRecord.with_cross_round_check": "takes the cross-round check as report.json records it in a "
+                                                      "round (loop_report.final_vs_start's JSON object)",
     "loop_verdict.family_harm": "returns the held-out families' harm check as loop.json records it in a held-out test",
     "loop_verdict.heldout_worse": "returns a held-out test as loop.json records it (significantly_worse)",
     "loop_verdict.recommendation": "takes the body of report.json and returns its recommendation object",

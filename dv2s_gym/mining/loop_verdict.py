@@ -357,7 +357,7 @@ def recommendation(report: Mapping[str, Any]) -> Dict[str, Any]:
         # the cross-round check on this round's policy: the report's own for the last round, else the one
         # recorded with the round (the check over the rounds up to it)
         final = (report.get("final_vs_start") if index == len(judged_rounds) - 1 and "final_vs_start" in report
-                 else record.extra.get("final_vs_start"))
+                 else record.final_vs_start)
         judged = _with_cross_round_check(judged, final)
         judged_rounds[index] = (record, judged)
         if judged["verdict"] == ACCEPTED:
