@@ -160,8 +160,8 @@ def test_the_cross_round_check_reads_a_moved_loop_folder_from_any_working_direct
     unread = final_vs_start(body)
     assert "cannot read" in unread["error"]
     verdict = recommendation({**body, "final_vs_start": unread})
-    assert verdict["verdict"] == "NOT ACCEPTED" and verdict["exit_code"] == 3 and verdict["policy"] == "p1"
-    assert "could not run" in verdict["reason"]
+    assert verdict.verdict == "NOT ACCEPTED" and verdict.exit_code == 3 and verdict.policy == "p1"
+    assert "could not run" in verdict.reason
 
 
 def test_the_loop_records_regression_report_paths_that_do_not_depend_on_the_working_directory(tmp_path, monkeypatch):

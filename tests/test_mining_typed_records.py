@@ -45,7 +45,6 @@ JSON_BOUNDARIES: Dict[str, str] = {
     "report.write_reports": "writes the report's JSON object (report.json) and its renderings",
     "rate.rate_estimates": "takes the run's settings.json as recorded (RunSettings.values)",
     "loop.LoopReport.to_json": "returns the body of report.json, built at the point it is written",
-    "loop.LoopReport.recommendation": "returns report.json's recommendation (loop_verdict.recommendation's JSON object)",
     "loop.reference_gate": "takes the held-out store's rows as read from heldout.jsonl: the file format",
     "loop.heldout_comparison": "takes the held-out store's rows (heldout.jsonl) and returns the after step's JSON "
                                "object, which the loop reads as a HeldOutComparison",
@@ -56,7 +55,7 @@ JSON_BOUNDARIES: Dict[str, str] = {
                                                       "round (loop_report.final_vs_start's JSON object)",
     "loop_verdict.family_harm": "returns the held-out families' harm check as loop.json records it in a held-out test",
     "loop_verdict.heldout_worse": "returns a held-out test as loop.json records it (significantly_worse)",
-    "loop_verdict.recommendation": "takes the body of report.json and returns its recommendation object",
+    "loop_verdict.recommendation": "takes the body of report.json (and returns its typed Recommendation)",
     "loop_report.final_vs_start": "takes the body of report.json and returns its final_vs_start object",
     "loop_report.with_cross_round_checks": "takes and returns the body of report.json",
     "loop_report.errored_text": "takes errored episodes per policy (dv2s_gym.mining.errored.errored_episodes' JSON "
